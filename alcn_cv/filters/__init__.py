@@ -1,0 +1,31 @@
+"""Filtering operations: ALCN's Gaussian mixture.
+
+:mod:`~alcn_cv.filters.gaussian_mixture` (NumPy/OpenCV) imports no torch; the differentiable
+:func:`gaussian_mixture2d` and :class:`GaussianMixture2d` (kornia) load torch on first use.
+"""
+
+from alcn_cv.filters.gaussian_mixture import (
+    alcn_filter,
+    gaussian_blur_stack,
+    gaussian_kernel1d,
+    gaussian_sigmas,
+    kernel_radius,
+)
+
+__all__ = [
+    "GaussianMixture2d",
+    "alcn_filter",
+    "gaussian_blur_stack",
+    "gaussian_kernel1d",
+    "gaussian_mixture2d",
+    "gaussian_sigmas",
+    "kernel_radius",
+]
+
+
+def __getattr__(name: str):
+    if name in ("GaussianMixture2d", "gaussian_mixture2d"):
+        from alcn_cv.filters import kornia_mixture
+
+        return getattr(kornia_mixture, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

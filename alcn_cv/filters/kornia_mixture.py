@@ -1,0 +1,109 @@
+"""Differentiable form of ALCN's Gaussian mixture, on kornia's Gaussian filtering.
+
+Same definition as :mod:`alcn_cv.filters.gaussian_mixture` (kernels, truncation, reflect-101
+borders), so both agree to 1e-5; this one lets gradients flow to the weights (and thus to the
+Normalizer) during the joint training of Eq. 2.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from kornia.filters import filter2d_separable, get_gaussian_kernel1d
+from torch import nn
+
+from alcn_cv.errors import InputError
+from alcn_cv.filters.gaussian_mixture import TRUNCATE, check_sigmas, gaussian_sigmas, kernel_radius
+
+__all__ = ["GaussianMixture2d", "gaussian_mixture2d"]
+
+
+def _kernel_bank(sigmas: Sequence[float], device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """``(N, K)`` kornia Gaussian kernels, zero-padded to the widest one (``K`` odd)."""
+    radii = [kernel_radius(s) for s in sigmas]
+    width = 2 * max(radii) + 1
+    bank = torch.zeros(len(sigmas), width, device=device, dtype=dtype)
+    for i, (s, r) in enumerate(zip(sigmas, radii)):
+        k = get_gaussian_kernel1d(2 * r + 1, s, device=device, dtype=dtype)
+        offset = (width - (2 * r + 1)) // 2
+        bank[i, offset : offset + 2 * r + 1] = k[0]
+    return bank
+
+
+def _blur_channels(x: torch.Tensor, bank: torch.Tensor) -> torch.Tensor:
+    """Blur channel ``i`` of ``x`` ``(B, N, H, W)`` with kernel ``bank[i]`` (reflect-101)."""
+    b, n, h, w = x.shape
+    radius = bank.shape[1] // 2
+    if min(h, w) <= radius:
+        raise InputError(
+            f"image {h}x{w} is too small for sigma {radius / TRUNCATE:.1f} (kernel radius {radius}); "
+            f"it needs at least {radius + 1} pixels per side"
+        )
+    kernels = bank.repeat(b, 1)
+    out = filter2d_separable(x.reshape(b * n, 1, h, w), kernels, kernels, border_type="reflect")
+    return out.reshape(b, n, h, w)
+
+
+def gaussian_mixture2d(image: torch.Tensor, weights: torch.Tensor, sigmas: Sequence[float] | None = None) -> torch.Tensor:
+    """Differentiable ALCN Gaussian mixture on kornia's Gaussian filtering.
+
+    Args:
+        image: ``(B, 1, H, W)`` float tensor, intensities nominally in [0, 1].
+        weights: ``(B, N)`` -- one weight vector per image (Eq. 1), or ``(B, N, H, W)`` --
+            per-pixel maps (Eq. 3).
+        sigmas: ``N`` standard deviations in pixels; default :func:`gaussian_sigmas` of ``N``.
+
+    Returns:
+        ``(B, 1, H, W)`` normalized image, same dtype and device as ``image``.
+    """
+    if image.ndim != 4 or image.shape[1] != 1:
+        raise InputError(f"image must have shape (B, 1, H, W), got {tuple(image.shape)}")
+    if weights.ndim not in (2, 4) or weights.shape[0] != image.shape[0]:
+        raise InputError(f"weights must have shape (B, N) or (B, N, H, W), got {tuple(weights.shape)}")
+    n = weights.shape[1]
+    sigmas = gaussian_sigmas(n) if sigmas is None else check_sigmas(sigmas)
+    if len(sigmas) != n:
+        raise InputError(f"{n} weights for {len(sigmas)} sigmas")
+    bank = _kernel_bank(sigmas, image.device, image.dtype)
+    return _mix(image, weights, bank)
+
+
+def _mix(image: torch.Tensor, weights: torch.Tensor, bank: torch.Tensor) -> torch.Tensor:
+    b, _, h, w = image.shape
+    n = bank.shape[0]
+    if weights.ndim == 2:  # Eq. 1: blur the image with every kernel once, then weigh.
+        blurred = _blur_channels(image.expand(b, n, h, w), bank)
+        return torch.einsum("bnhw,bn->bhw", blurred, weights).unsqueeze(1)
+    if weights.shape[2:] != image.shape[2:]:
+        raise InputError(f"weight maps {tuple(weights.shape[2:])} do not match the image {(h, w)}")
+    return _blur_channels(weights * image, bank).sum(dim=1, keepdim=True)  # Eq. 3
+
+
+class GaussianMixture2d(nn.Module):
+    """Module form of :func:`gaussian_mixture2d`, with the kernel bank built once.
+
+    Args:
+        sigmas: standard deviations in pixels; default :func:`gaussian_sigmas` ``(i / 2, i = 1..10)``.
+
+    Shape:
+        - image: ``(B, 1, H, W)``; weights: ``(B, N)`` or ``(B, N, H, W)``
+        - output: ``(B, 1, H, W)``
+    """
+
+    def __init__(self, sigmas: Sequence[float] | None = None) -> None:
+        super().__init__()
+        self.sigmas = gaussian_sigmas() if sigmas is None else check_sigmas(sigmas)
+        self.register_buffer("bank", _kernel_bank(self.sigmas, torch.device("cpu"), torch.float32), persistent=False)
+
+    @property
+    def num_kernels(self) -> int:
+        return len(self.sigmas)
+
+    def forward(self, image: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+        if weights.shape[1] != self.num_kernels:
+            raise InputError(f"{weights.shape[1]} weights for {self.num_kernels} kernels")
+        return _mix(image, weights, self.bank.to(image.dtype))
+
+    def extra_repr(self) -> str:
+        return f"sigmas={self.sigmas}"

@@ -1,0 +1,175 @@
+"""The Normalizer network of ALCN (Rad, Roth & Lepetit, BMVC 2017, Sec. 3.1, 3.3 and 4.2).
+
+It looks at a 48x48 window and predicts the N weights of the Gaussian mixture
+(:mod:`alcn_cv.filters.gaussian_mixture`). Architecture of Sec. 4.2: 20 convolutions 5x5 +
+2x2 max-pooling, 50 convolutions 5x5 + 2x2 max-pooling, a fully connected layer of 1024, and
+N outputs, with tanh activations. The fully connected layer is stored as a 9x9 convolution so
+the same parameters run fully-convolutionally over a whole image (Sec. 3.3): the
+convolutions are shared between overlapping windows and the output has a stride of 4 pixels.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.weight_file import NormalizerFile
+
+__all__ = ["Normalizer", "reflect101_pad"]
+
+WINDOW = 48
+STRIDE = 4
+_ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
+
+
+def reflect101_pad(x: torch.Tensor, top: int, bottom: int, left: int, right: int) -> torch.Tensor:
+    """Pad the last two dims with reflect-101 (``cv2.BORDER_REFLECT_101``), for any pad size.
+
+    Unlike ``F.pad(mode="reflect")`` this also works when a pad exceeds the image size
+    (the reflection repeats, as in OpenCV).
+    """
+
+    def index(n: int, before: int, after: int) -> torch.Tensor:
+        i = torch.arange(-before, n + after, device=x.device)
+        if n == 1:
+            return torch.zeros_like(i)
+        period = 2 * (n - 1)
+        i = torch.remainder(i, period)
+        return torch.where(i >= n, period - i, i)
+
+    h, w = x.shape[-2:]
+    x = x.index_select(-2, index(h, top, bottom))
+    return x.index_select(-1, index(w, left, right))
+
+
+class Normalizer(nn.Module):
+    """Predicts the Gaussian-mixture weights of ALCN from an image window.
+
+    Args:
+        num_kernels: N, the number of Gaussian kernels (weights predicted per window).
+        channels: widths of the two convolution layers (paper: 20 and 50).
+        hidden: width of the fully connected layer (paper: 1024).
+        output_scale: fixed factor on the outputs. tanh features and small initial weights
+            give outputs near 0; the mixture needs weights of order 1-10 to reach a useful
+            output range, which a fixed scale gives without slowing training.
+        init_weights: optional N weights the untrained network predicts for every window
+            (the bias of the last layer, with its weights at zero), e.g. a DoG.
+        activation: ``"tanh"`` (the paper's) or ``"relu"``.
+
+    Shape:
+        - :meth:`forward`: ``(B, 1, 48, 48)`` -> ``(B, N)``
+        - :meth:`dense`: ``(B, 1, H, W)`` -> ``(B, N, H, W)``
+
+    Inputs are grayscale intensities in [0, 1], float32.
+    """
+
+    window = WINDOW
+    stride = STRIDE
+
+    def __init__(
+        self,
+        num_kernels: int = 10,
+        channels: tuple[int, int] = (20, 50),
+        hidden: int = 1024,
+        output_scale: float = 1.0,
+        init_weights: Sequence[float] | None = None,
+        activation: str = "tanh",
+    ) -> None:
+        super().__init__()
+        if activation not in _ACTIVATIONS:
+            raise InputError(f"activation must be one of {', '.join(_ACTIVATIONS)}, got {activation!r}")
+        c1, c2 = channels
+        act = _ACTIVATIONS[activation]
+        self.features = nn.Sequential(
+            nn.Conv2d(1, c1, 5),
+            act(),
+            nn.MaxPool2d(2),
+            nn.Conv2d(c1, c2, 5),
+            act(),
+            nn.MaxPool2d(2),
+        )
+        self.activation = act()
+        # The fully connected layer over the 9x9x50 features, as a convolution (Sec. 3.3).
+        self.fc = nn.Conv2d(c2, hidden, 9)
+        self.head = nn.Conv2d(hidden, num_kernels, 1)
+        self.output_scale = float(output_scale)
+        self.config = {
+            "num_kernels": num_kernels,
+            "channels": [c1, c2],
+            "hidden": hidden,
+            "output_scale": self.output_scale,
+            "init_weights": None if init_weights is None else [float(w) for w in init_weights],
+            "activation": activation,
+        }
+        if init_weights is not None:
+            if len(init_weights) != num_kernels:
+                raise InputError(f"init_weights has {len(init_weights)} values for {num_kernels} kernels")
+            with torch.no_grad():
+                self.head.weight.zero_()
+                self.head.bias.copy_(torch.as_tensor(init_weights, dtype=torch.float32) / self.output_scale)
+
+    @property
+    def num_kernels(self) -> int:
+        return self.head.out_channels
+
+    def _weights(self, x: torch.Tensor) -> torch.Tensor:
+        return self.output_scale * self.head(self.activation(self.fc(self.features(x))))
+
+    def forward(self, windows: torch.Tensor) -> torch.Tensor:
+        """Weights for each ``(B, 1, 48, 48)`` window -> ``(B, N)``."""
+        if windows.ndim != 4 or windows.shape[1:] != (1, WINDOW, WINDOW):
+            raise InputError(f"windows must have shape (B, 1, {WINDOW}, {WINDOW}), got {tuple(windows.shape)}")
+        return self._weights(windows).flatten(1)
+
+    def dense(self, image: torch.Tensor) -> torch.Tensor:
+        """Per-pixel weight maps F_k over a whole image (Eq. 3).
+
+        The map at pixel ``(y, x)`` is the output for the 48x48 window covering rows
+        ``y-24 .. y+23`` and columns ``x-24 .. x+23`` (reflect-101 outside the image). The
+        network is evaluated on a grid of stride 4 and bilinearly interpolated in between;
+        on the grid (``y`` and ``x`` multiples of 4) it equals :meth:`forward` exactly.
+
+        Args:
+            image: ``(B, 1, H, W)`` float tensor, any H, W >= 1.
+
+        Returns:
+            ``(B, N, H, W)`` weight maps.
+        """
+        if image.ndim != 4 or image.shape[1] != 1:
+            raise InputError(f"image must have shape (B, 1, H, W), got {tuple(image.shape)}")
+        grid = self.dense_grid(image)
+        h, w = image.shape[-2:]
+        size = (STRIDE * (grid.shape[-2] - 1) + 1, STRIDE * (grid.shape[-1] - 1) + 1)
+        return F.interpolate(grid, size=size, mode="bilinear", align_corners=True)[..., :h, :w]
+
+    def dense_grid(self, image: torch.Tensor) -> torch.Tensor:
+        """The network's output on the stride-4 grid: ``(B, N, ceil((H-1)/4)+1, ceil((W-1)/4)+1)``;
+        grid point ``(i, j)`` is the window centred on pixel ``(4i, 4j)``."""
+        h, w = image.shape[-2:]
+        gh, gw = math.ceil((h - 1) / STRIDE) + 1, math.ceil((w - 1) / STRIDE) + 1
+        half = WINDOW // 2
+        padded = reflect101_pad(image, half, STRIDE * (gh - 1) + half - h, half, STRIDE * (gw - 1) + half - w)
+        return self._weights(padded)
+
+    @classmethod
+    def from_file(cls, weight_file: NormalizerFile) -> Normalizer:
+        """Build the network described by a weight file and load its arrays."""
+        try:
+            net = cls(**weight_file.meta["config"])
+            net.load_state_dict({k: torch.from_numpy(np.array(v)) for k, v in weight_file.arrays.items()})
+        except (TypeError, RuntimeError) as exc:
+            raise WeightFileError(f"weights do not fit the Normalizer they describe: {exc}") from None
+        return net.eval()
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """The parameters as float32 arrays, for :func:`alcn_cv.weight_file.save_normalizer_file`."""
+        return {k: v.detach().cpu().numpy().astype(np.float32) for k, v in self.state_dict().items()}
+
+    def extra_repr(self) -> str:
+        return f"output_scale={self.output_scale}, activation={self.config['activation']!r}"

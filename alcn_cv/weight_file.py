@@ -1,0 +1,102 @@
+"""The Normalizer weight file: a ``.npz`` of the network's arrays plus a JSON header.
+
+NumPy-only on purpose: the header (architecture, sigmas, working scale, output range, whether
+the weights are trained) is readable without torch, and loading never unpickles code.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from alcn_cv.errors import WeightFileError
+
+__all__ = ["DEFAULT_WEIGHTS", "FORMAT", "VERSION", "NormalizerFile", "load_normalizer_file", "save_normalizer_file"]
+
+FORMAT = "alcn-cv/normalizer"
+VERSION = 1
+DEFAULT_WEIGHTS = Path(__file__).parent / "weights" / "alcn_normalizer.npz"
+_META_KEY = "__meta__"
+_REQUIRED = {
+    "config": dict,
+    "sigmas": list,
+    "working_scale": (int, float),
+    "output_range": list,
+    "trained": bool,
+}
+
+
+@dataclass
+class NormalizerFile:
+    """Contents of a weight file.
+
+    Attributes:
+        arrays: the Normalizer's ``state_dict`` as float32 arrays.
+        meta: the header: ``config`` (``Normalizer`` arguments), ``sigmas`` (pixels at the
+            working scale), ``working_scale`` (factor from input to working resolution),
+            ``output_range`` (``[lo, hi]`` raw responses mapped to the output range),
+            ``trained`` (False for an untrained initialisation), and free-form provenance.
+    """
+
+    arrays: dict[str, np.ndarray]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> Path:
+    """Write a weight file atomically (temporary name, then rename)."""
+    path = Path(path)
+    meta = {"format": FORMAT, "version": VERSION, **meta}
+    _check_meta(meta, path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, **{k: np.asarray(v, np.float32) for k, v in arrays.items()}, **{_META_KEY: np.array(json.dumps(meta))})
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def load_normalizer_file(path: str | Path | None = None) -> NormalizerFile:
+    """Read and check a weight file (default: the one shipped in the package).
+
+    Raises:
+        WeightFileError: missing, corrupt, of another format, or of an incompatible version.
+    """
+    path = DEFAULT_WEIGHTS if path is None else Path(path)
+    if not path.is_file():
+        raise WeightFileError(f"weight file not found: {path}")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if _META_KEY not in data.files:
+                raise WeightFileError(f"{path} is not an alcn-cv weight file (no header)")
+            meta = json.loads(str(data[_META_KEY]))
+            arrays = {k: data[k] for k in data.files if k != _META_KEY}
+    except (OSError, ValueError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+        if isinstance(exc, WeightFileError):
+            raise
+        raise WeightFileError(f"weight file {path} is corrupt or unreadable: {exc}") from None
+    _check_meta(meta, path)
+    return NormalizerFile(arrays=arrays, meta=meta)
+
+
+def _check_meta(meta: dict[str, Any], path: Path) -> None:
+    if meta.get("format") != FORMAT:
+        raise WeightFileError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}")
+    if meta.get("version") != VERSION:
+        raise WeightFileError(f"{path}: weight file version {meta.get('version')}, this alcn-cv reads version {VERSION}")
+    for key, kind in _REQUIRED.items():
+        if not isinstance(meta.get(key), kind):
+            raise WeightFileError(f"{path}: header field {key!r} missing or of the wrong type")
+    lo, hi = meta["output_range"]
+    if not hi > lo:
+        raise WeightFileError(f"{path}: output_range {meta['output_range']} is empty")

@@ -1,0 +1,158 @@
+"""The OpenCV-style contract of every registered normalization, and ALCN's own API."""
+
+import logging
+
+import cv2
+import numpy as np
+import pytest
+
+import alcn_cv
+from alcn_cv import InputError, WeightFileError
+from alcn_cv.weight_file import DEFAULT_WEIGHTS
+
+METHODS = alcn_cv.available()
+
+
+@pytest.fixture(scope="module")
+def frames():
+    rng = np.random.default_rng(0)
+    base = cv2.GaussianBlur(rng.random((60, 80), dtype=np.float32), (0, 0), 3)
+    gray = cv2.normalize(base, None, 0.05, 0.95, cv2.NORM_MINMAX)
+    bgr = np.dstack([gray, 0.6 * gray + 0.2, 1 - 0.8 * gray]).astype(np.float32)
+    return gray, bgr
+
+
+@pytest.fixture(scope="module")
+def methods():
+    return {name: alcn_cv.create(name) for name in METHODS}
+
+
+def test_registry():
+    assert {"none", "alcn"} <= set(METHODS)
+    assert isinstance(alcn_cv.createALCN(), alcn_cv.ALCN)
+    with pytest.raises(InputError, match="unknown normalization"):
+        alcn_cv.create("nope")
+    with pytest.raises(InputError, match="bad parameters"):
+        alcn_cv.create("none", strength=3)
+
+
+@pytest.mark.parametrize("name", METHODS)
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+@pytest.mark.parametrize("layout", ["gray", "gray1", "bgr"])
+def test_shape_and_dtype_are_kept(methods, frames, name, dtype, layout):
+    gray, bgr = frames
+    img = {"gray": gray, "gray1": gray[..., None], "bgr": bgr}[layout]
+    if dtype != np.float32:
+        img = np.rint(img * np.iinfo(dtype).max).astype(dtype)
+    out = methods[name].apply(img)
+    assert out.shape == img.shape and out.dtype == img.dtype
+    if dtype == np.float32:
+        assert 0 <= out.min() and out.max() <= 1
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_float_output_on_request_and_fixed_mapping(methods, frames, name):
+    gray, _ = frames
+    method = methods[name]
+    img8 = np.rint(gray * 255).astype(np.uint8)
+    as_float = method.apply(img8, out_dtype=np.float32)
+    assert as_float.dtype == np.float32
+    expected = method.to_unit(method.normalize(img8.astype(np.float32) / 255))
+    np.testing.assert_allclose(as_float, expected, atol=1e-6)
+    np.testing.assert_array_equal(method.apply(img8), np.rint(expected * 255).astype(np.uint8))
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_colour_keeps_chroma(methods, frames, name):
+    _, bgr = frames
+    out = methods[name].apply(bgr)
+    lab_in, lab_out = cv2.cvtColor(bgr, cv2.COLOR_BGR2Lab), cv2.cvtColor(out, cv2.COLOR_BGR2Lab)
+    # a and b survive up to gamut clipping of the new lightness
+    unclipped = (out > 0.01).all(axis=2) & (out < 0.99).all(axis=2)
+    assert unclipped.mean() > 0.3
+    np.testing.assert_allclose(lab_out[unclipped][:, 1:], lab_in[unclipped][:, 1:], atol=1.5)
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_callers_array_untouched(methods, frames, name):
+    gray, bgr = frames
+    for img in (gray, bgr, np.rint(bgr * 255).astype(np.uint8)):
+        before = img.copy()
+        methods[name].apply(img)
+        np.testing.assert_array_equal(img, before)
+
+
+BAD = {
+    "not an array": [[0.1, 0.2]],
+    "empty": np.zeros((0, 5), np.uint8),
+    "4 channels": np.zeros((8, 8, 4), np.uint8),
+    "2 channels": np.zeros((8, 8, 2), np.uint8),
+    "4 dims": np.zeros((2, 8, 8, 3), np.uint8),
+    "1 dim": np.zeros(8, np.uint8),
+    "float64": np.zeros((8, 8)),
+    "int32": np.zeros((8, 8), np.int32),
+    "nan": np.full((8, 8), np.nan, np.float32),
+    "inf": np.full((8, 8), np.inf, np.float32),
+    "0..255 float": np.full((8, 8), 200, np.float32),
+}
+
+
+@pytest.mark.parametrize("name", METHODS)
+@pytest.mark.parametrize("case", BAD)
+def test_bad_input_is_a_clear_error(methods, name, case):
+    with pytest.raises(InputError):
+        methods[name].apply(BAD[case])
+
+
+def test_bad_input_messages(methods):
+    alcn = methods["alcn"]
+    with pytest.raises(InputError, match="BGRA"):
+        alcn.apply(BAD["4 channels"])
+    with pytest.raises(InputError, match="NaN"):
+        alcn.apply(BAD["nan"])
+    with pytest.raises(InputError, match="divide by 255"):
+        alcn.apply(BAD["0..255 float"])
+    with pytest.raises(InputError, match="out_dtype"):
+        alcn.apply(np.zeros((8, 8), np.uint8), out_dtype=np.int16)
+
+
+def test_alcn_backends_agree(methods, frames):
+    gray, _ = frames
+    fast = methods["alcn"].normalize(gray)
+    torch_cpu = alcn_cv.createALCN(backend="torch").normalize(gray)
+    np.testing.assert_allclose(fast, torch_cpu, atol=1e-4)
+
+
+def test_alcn_is_eq3_with_scaled_sigmas(methods, frames):
+    gray, _ = frames
+    alcn = methods["alcn"]
+    maps = alcn.weight_maps(gray)
+    assert maps.shape == (len(alcn.sigmas),) + gray.shape
+    expected = alcn_cv.alcn_filter(gray, maps, sigmas=[s / alcn.scale for s in alcn.sigmas])
+    np.testing.assert_allclose(alcn.normalize(gray), expected, atol=1e-6)
+
+
+def test_alcn_parameters():
+    with pytest.raises(InputError, match="backend"):
+        alcn_cv.createALCN(backend="vulkan")
+    with pytest.raises(InputError, match="scale"):
+        alcn_cv.createALCN(scale=0)
+    with pytest.raises(WeightFileError, match="not found"):
+        alcn_cv.createALCN(weights="/nonexistent/weights.npz")
+    assert alcn_cv.createALCN(scale=1.0).scale == 1.0
+
+
+def test_shipped_weights_say_what_they_are(caplog):
+    alcn = alcn_cv.createALCN()
+    assert alcn.weights_path == DEFAULT_WEIGHTS
+    with caplog.at_level(logging.WARNING):
+        alcn_cv.createALCN()
+    assert ("UNTRAINED" in caplog.text) == (not alcn.trained)
+
+
+def test_import_does_not_load_torch():
+    import subprocess
+    import sys
+
+    code = "import sys, alcn_cv; alcn_cv.create('none'); assert 'torch' not in sys.modules, 'torch imported'"
+    subprocess.run([sys.executable, "-c", code], check=True)

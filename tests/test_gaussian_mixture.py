@@ -1,0 +1,116 @@
+"""The Gaussian mixture (Eq. 1 and Eq. 3): OpenCV and kornia versions against scipy."""
+
+import numpy as np
+import pytest
+import scipy.ndimage as ndi
+import torch
+
+from alcn_cv import InputError, alcn_filter, gaussian_sigmas
+from alcn_cv.filters import GaussianMixture2d, gaussian_blur_stack, gaussian_kernel1d, gaussian_mixture2d, kernel_radius
+
+SIGMAS = gaussian_sigmas()
+
+
+def reference(image: np.ndarray, weights: np.ndarray, sigmas=SIGMAS) -> np.ndarray:
+    """Independent computation with scipy (float64, 'mirror' = reflect-101, truncate 3)."""
+    img = image.astype(np.float64)
+    if weights.ndim == 1:
+        return sum(w * ndi.gaussian_filter(img, s, mode="mirror", truncate=3.0) for w, s in zip(weights, sigmas))
+    return sum(ndi.gaussian_filter(f * img, s, mode="mirror", truncate=3.0) for f, s in zip(weights, sigmas))
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(0)
+
+
+def test_basis_is_the_papers():
+    assert SIGMAS == tuple(i / 2 for i in range(1, 11))
+    assert gaussian_sigmas(4, 1.0) == (1.0, 2.0, 3.0, 4.0)
+    for s in SIGMAS:
+        k = gaussian_kernel1d(s)
+        assert len(k) == 2 * kernel_radius(s) + 1 and abs(k.sum() - 1) < 1e-12
+
+
+@pytest.mark.parametrize("shape", [(48, 48), (37, 61), (120, 90)])
+def test_eq1_matches_scipy(rng, shape):
+    image = rng.random(shape, dtype=np.float32)
+    weights = rng.normal(size=10)
+    np.testing.assert_allclose(alcn_filter(image, weights), reference(image, weights), atol=1e-5)
+
+
+@pytest.mark.parametrize("shape", [(48, 48), (53, 70)])
+def test_eq3_matches_scipy(rng, shape):
+    image = rng.random(shape, dtype=np.float32)
+    maps = rng.normal(size=(10,) + shape).astype(np.float32)
+    np.testing.assert_allclose(alcn_filter(image, maps), reference(image, maps), atol=1e-4)
+
+
+def test_constant_maps_equal_eq1(rng):
+    image = rng.random((40, 50), dtype=np.float32)
+    w = rng.normal(size=10)
+    maps = np.broadcast_to(w[:, None, None], (10, 40, 50))
+    np.testing.assert_allclose(alcn_filter(image, maps), alcn_filter(image, w), atol=1e-5)
+
+
+def test_blur_stack_matches_scipy(rng):
+    image = rng.random((33, 45), dtype=np.float32)
+    stack = gaussian_blur_stack(image, SIGMAS)
+    for s, b in zip(SIGMAS, stack):
+        np.testing.assert_allclose(b, ndi.gaussian_filter(image.astype(np.float64), s, mode="mirror", truncate=3.0), atol=1e-6)
+
+
+@pytest.mark.parametrize("per_pixel", [False, True])
+def test_kornia_matches_opencv_and_scipy(rng, per_pixel):
+    images = rng.random((3, 1, 50, 64), dtype=np.float32)
+    weights = rng.normal(size=(3, 10, 50, 64) if per_pixel else (3, 10)).astype(np.float32)
+    out = gaussian_mixture2d(torch.from_numpy(images), torch.from_numpy(weights)).numpy()
+    module = GaussianMixture2d()(torch.from_numpy(images), torch.from_numpy(weights)).numpy()
+    np.testing.assert_array_equal(out, module)
+    for b in range(3):
+        fast = alcn_filter(images[b, 0], weights[b])
+        np.testing.assert_allclose(out[b, 0], fast, atol=1e-4)
+        np.testing.assert_allclose(out[b, 0], reference(images[b, 0], weights[b].astype(np.float64)), atol=1e-4)
+
+
+def test_gradients_reach_weights_and_image():
+    image = torch.rand(1, 1, 17, 18, dtype=torch.float64, requires_grad=True)
+    weights = torch.randn(1, 10, 17, 18, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda i, w: gaussian_mixture2d(i, w[:, :, 8, 8]), (image, weights), fast_mode=True)
+    assert torch.autograd.gradcheck(lambda i, w: gaussian_mixture2d(i, w), (image, weights), fast_mode=True)
+
+
+def test_custom_sigmas(rng):
+    image = rng.random((40, 40), dtype=np.float32)
+    w = np.array([1.0, -1.0])
+    np.testing.assert_allclose(alcn_filter(image, w, sigmas=(0.7, 2.2)), reference(image, w, (0.7, 2.2)), atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    "image, weights",
+    [
+        (np.zeros((0, 4), np.float32), np.ones(10)),
+        (np.zeros((8, 8), np.float64), np.ones(10)),
+        (np.zeros((8, 8, 3), np.float32), np.ones(10)),
+        (np.zeros((8, 8), np.float32), np.ones((10, 4, 4))),
+        (np.zeros((8, 8), np.float32), np.array([np.nan] * 10)),
+        (np.zeros((8, 8), np.float32), np.ones((2, 2))),
+    ],
+)
+def test_bad_input(image, weights):
+    with pytest.raises(InputError):
+        alcn_filter(image, weights)
+
+
+def test_torch_too_small_image_is_a_clear_error():
+    with pytest.raises(InputError, match="too small"):
+        gaussian_mixture2d(torch.rand(1, 1, 10, 10), torch.rand(1, 10))
+
+
+def test_caller_array_untouched(rng):
+    image = rng.random((30, 30), dtype=np.float32)
+    maps = rng.normal(size=(10, 30, 30)).astype(np.float32)
+    before = image.copy(), maps.copy()
+    alcn_filter(image, maps)
+    np.testing.assert_array_equal(image, before[0])
+    np.testing.assert_array_equal(maps, before[1])
