@@ -1,0 +1,688 @@
+"""The few-shot detection benchmark of ALCN (Rad, Roth & Lepetit, BMVC 2017, Sec. 4.3, Fig. 5).
+
+For every method and for 1 and 10 real training images per object:
+
+1. **Training windows.** The first ``n`` training images of each object (COCO ``train.json``),
+   resized to the working scale (``cv2.INTER_AREA``), give the paper's simple synthetic images
+   (:func:`alcn_cv.data.synthetic.augment`: background replaced, small affine changes of
+   intensity, noise, small geometric jitter) and background windows
+   (:func:`~alcn_cv.data.synthetic.sample_negatives`), 64x64 each. They are drawn once per
+   ``n`` with a fixed seed, so every method trains on the same windows.
+2. **Normalization.** Each window is normalized with the method (``normalize`` on the 64x64
+   window, ALCN with ``scale=1``: the window is already at the working scale) and its 32x32
+   centre kept. Global methods (``ns``, ``he``, ``whitening``, ...) therefore see the window at
+   training time and the whole image at test time, as a user would apply them.
+3. **Input policy**, the same for every method: ``raw`` -- a fixed affine map, the training
+   windows' mean and standard deviation (one scalar each, so all methods reach the detector
+   with unit variance, without changing the method's response); ``standardize`` -- each 32x32
+   window to zero mean and unit variance (per-window standardization).
+4. **Detector.** The same network (:class:`alcn_cv.nets.Detector`, Sec. 4.2) trained in the
+   same way (:func:`alcn_cv.train.stage2.train_detector`: Adam, same epochs, batch, rate and
+   seed). The deep baselines of Sec. 4.3.1 train their own networks on the same windows
+   without normalization: ``cnn`` (the plain CNN of :mod:`alcn_cv.nets.plain` whose depth and
+   width, from a small sweep, scores best on relit held-out training windows), ``resnet20``
+   and ``resnet56`` (:mod:`alcn_cv.nets.resnet`).
+5. **Test.** Every test image is resized to the working scale, normalized whole, and every
+   32x32 window at stride 4 is scored (``dense``; with ``standardize`` each window is
+   standardized and scored alone). Per object: a fixed-size square box (``box_size`` at the
+   working scale) centred on each window, greedy non-maximum suppression, and the PASCAL
+   criterion (IoU >= 0.8) against fixed-size boxes of the same size centred on the ground
+   truth. Precision-recall over all test images, and its area (AUC, PASCAL VOC average
+   precision).
+
+DoG, SLCN and DLCN are tuned on the training windows first (:mod:`alcn_cv.bench.tuning`,
+``--no-tune`` keeps their defaults). Outputs: ``detect.json`` (every number, PR curves,
+settings, tuned parameters, timings, machine), ``detect.md`` (AUC tables) and
+``pr_<object>_<n>real.png`` (precision-recall, all methods).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import cv2
+import numpy as np
+from tqdm.auto import tqdm
+
+from alcn_cv.bench import tuning
+from alcn_cv.bench.metrics import match_detections, nms, pr_auc, precision_recall
+from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json, write_text
+from alcn_cv.data.manifest import read_json
+from alcn_cv.enhance.base import Normalization
+from alcn_cv.enhance.registry import available, create
+from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.formats.coco import CocoDataset, load_coco
+
+if TYPE_CHECKING:
+    import torch
+    from torch import nn
+
+__all__ = ["DEEP_BASELINES", "POLICIES", "DetectData", "DetectSettings", "default_methods", "load_data", "main"]
+
+logger = logging.getLogger(__name__)
+
+#: Deep baselines (own networks, no normalization) of Sec. 4.3.1.
+DEEP_BASELINES = ("cnn", "resnet20", "resnet56")
+POLICIES = ("raw", "standardize")
+WINDOW = 64
+CROP = 32
+STRIDE = 4
+_BATCH = 1024
+
+
+def default_methods() -> list[str]:
+    """Every registered normalization, then the deep baselines."""
+    return list(available()) + list(DEEP_BASELINES)
+
+
+@dataclass
+class DetectSettings:
+    """Settings of a benchmark run (all recorded in ``detect.json``).
+
+    Attributes:
+        methods: registered normalization names and/or :data:`DEEP_BASELINES`.
+        real_images: numbers of real training images per object.
+        policies: detector input policies (:data:`POLICIES`).
+        positives_per_object: synthetic object windows per object.
+        negatives_ratio: background windows per object window.
+        epochs, batch_size, lr, seed: detector training (the same for every method).
+        tune: tune DoG, SLCN and DLCN on the training windows.
+        cnn_sweep: ``(depth, width)`` of the plain CNNs tried for ``cnn``.
+        nms_iou: IoU above which non-maximum suppression removes a box.
+        match_iou: PASCAL criterion (the paper: 0.8).
+        max_detections: boxes kept per object and image after suppression.
+        max_test_images: use only the first test images (``None``: all).
+        threads: torch threads (``None``: torch's default).
+        device: torch device.
+    """
+
+    methods: list[str] = field(default_factory=default_methods)
+    real_images: list[int] = field(default_factory=lambda: [1, 10])
+    policies: list[str] = field(default_factory=lambda: list(POLICIES))
+    positives_per_object: int = 300
+    negatives_ratio: float = 2.0
+    epochs: int = 6
+    batch_size: int = 64
+    lr: float = 1e-3
+    seed: int = 0
+    tune: bool = True
+    cnn_sweep: list[tuple[int, int]] = field(default_factory=lambda: [(1, 32), (2, 32), (3, 32)])
+    nms_iou: float = 0.3
+    match_iou: float = 0.8
+    max_detections: int = 20
+    max_test_images: int | None = None
+    threads: int | None = None
+    device: str = "cpu"
+
+    def check(self) -> None:
+        known = set(available()) | set(DEEP_BASELINES)
+        unknown = [m for m in self.methods if m not in known]
+        if unknown or not self.methods:
+            raise InputError(f"unknown or no method(s) {unknown}; available: {', '.join(sorted(known))}")
+        if not self.real_images or min(self.real_images) < 1:
+            raise InputError(f"real_images must be positive integers, got {self.real_images}")
+        bad = [p for p in self.policies if p not in POLICIES]
+        if bad or not self.policies:
+            raise InputError(f"unknown or no policy {bad}; choose from {', '.join(POLICIES)}")
+        if self.positives_per_object < 1 or self.negatives_ratio < 0 or self.epochs < 1 or self.batch_size < 1:
+            raise InputError("positives_per_object, epochs and batch_size must be >= 1 and negatives_ratio >= 0")
+        if not 0 <= self.nms_iou < 1 or not 0 < self.match_iou <= 1:
+            raise InputError(f"need 0 <= nms_iou < 1 and 0 < match_iou <= 1, got {self.nms_iou}, {self.match_iou}")
+        if not self.cnn_sweep:
+            raise InputError("cnn_sweep needs at least one (depth, width)")
+
+
+@dataclass
+class DetectData:
+    """A COCO detection benchmark: training and test sets and their working scale."""
+
+    root: Path
+    train: CocoDataset
+    test: CocoDataset
+    working_scale: float
+    box_size: float
+
+    @property
+    def categories(self) -> list[int]:
+        return sorted(c.id for c in self.test.categories)
+
+    def name(self, category: int) -> str:
+        return self.test.category(category).name
+
+
+def load_data(data_dir: str | os.PathLike, working_scale: float | None = None, box_size: float | None = None) -> DetectData:
+    """Read ``train.json``, ``test.json`` and (when present) ``manifest.json`` of a benchmark folder.
+
+    Args:
+        data_dir: the folder (the data engine's ``alcn data detect`` output, or any COCO set
+            laid out the same way).
+        working_scale, box_size: override (or, without a manifest, give) the scale to the
+            detector's resolution and the side of the fixed-size boxes at that scale.
+
+    Raises:
+        DatasetError: missing or malformed files, no working scale or box size, test categories
+            that the training set lacks.
+    """
+    root = Path(data_dir)
+    manifest_path = root / "manifest.json"
+    manifest = read_json(manifest_path) if manifest_path.is_file() else {}
+    if not isinstance(manifest, dict):
+        raise DatasetError(f"{manifest_path}: expected a JSON object")
+    scale = working_scale if working_scale is not None else manifest.get("working_scale")
+    box = box_size if box_size is not None else manifest.get("box_size")
+    if scale is None or box is None:
+        raise DatasetError(f"{manifest_path}: fields 'working_scale' and 'box_size' are needed "
+                           "(or pass --working-scale and --box-size)")
+    scale, box = float(scale), float(box)
+    if not 0 < scale <= 4 or not box > 0:
+        raise DatasetError(f"{manifest_path}: working_scale {scale} must be in (0, 4] and box_size {box} positive")
+    train = load_coco(root / "train.json")
+    test = load_coco(root / "test.json")
+    train_ids = {c.id for c in train.categories}
+    missing = [c.name for c in test.categories if c.id not in train_ids]
+    if missing:
+        raise DatasetError(f"{root / 'train.json'}: field categories: no training category for {missing}")
+    return DetectData(root, train, test, scale, box)
+
+
+def _working_gray(ds: CocoDataset, image: Any, scale: float) -> tuple[np.ndarray, float, float]:
+    """The image in grayscale at the working scale (uint8) and the actual x and y factors."""
+    gray = cv2.cvtColor(ds.read_image(image), cv2.COLOR_BGR2GRAY)
+    h, w = gray.shape
+    size = (max(CROP, round(w * scale)), max(CROP, round(h * scale)))
+    interp = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
+    return cv2.resize(gray, size, interpolation=interp), size[0] / w, size[1] / h
+
+
+@dataclass
+class TrainingSet:
+    windows: np.ndarray  # (n, 64, 64) uint8
+    labels: np.ndarray  # (n,) int64
+    val_windows: np.ndarray  # relit held-out windows (float32 in [0, 1]) for model selection
+    val_labels: np.ndarray
+    images_used: dict[str, int]
+
+
+def training_set(data: DetectData, n_real: int, settings: DetectSettings) -> TrainingSet:
+    """The synthetic training windows from the first ``n_real`` images of each object (see the module docstring)."""
+    from alcn_cv.data.synthetic import augment, sample_negatives
+
+    rng = np.random.default_rng([settings.seed, n_real])
+    windows, labels, val_windows, val_labels = [], [], [], []
+    sources, boxes, used = [], [], {}
+    images = {im.id: im for im in data.train.images}
+    for label, cat in enumerate(data.categories, start=1):
+        anns = sorted((a for a in data.train.annotations if a.category_id == cat), key=lambda a: (a.image_id, a.id))
+        chosen, seen = [], set()
+        for a in anns:
+            if a.image_id not in seen:
+                seen.add(a.image_id)
+                chosen.append(a)
+            if len(chosen) == n_real:
+                break
+        if not chosen:
+            raise DatasetError(f"{data.train.path}: no training image of category {data.name(cat)!r}")
+        used[data.name(cat)] = len(chosen)
+        per_image = -(-settings.positives_per_object // len(chosen))
+        n_val = max(1, per_image // 4)
+        pos, val = [], []
+        for a in chosen:
+            gray, sx, sy = _working_gray(data.train, images[a.image_id], data.working_scale)
+            box = a.bbox * np.array([sx, sy, sx, sy])
+            sources.append(gray)
+            boxes.append(box)
+            w = augment(gray, box, per_image + n_val, rng, extent=None)
+            pos.append(w[:per_image])
+            val.append(w[per_image:])
+        windows.append(np.concatenate(pos)[: settings.positives_per_object])
+        labels.append(np.full(len(windows[-1]), label))
+        val_windows.append(np.concatenate(val))
+        val_labels.append(np.full(len(val_windows[-1]), label))
+    n_pos = sum(len(w) for w in windows)
+    n_neg = int(round(settings.negatives_ratio * n_pos))
+    n_val_neg = int(round(settings.negatives_ratio * sum(len(w) for w in val_windows)))
+    neg = sample_negatives(sources, boxes, n_neg + n_val_neg, rng, extent=None)
+    windows.append(neg[:n_neg])
+    labels.append(np.zeros(n_neg))
+    val_windows.append(neg[n_neg:])
+    val_labels.append(np.zeros(n_val_neg))
+    val = np.concatenate(val_windows).astype(np.float32) / np.float32(255)
+    return TrainingSet(
+        np.concatenate(windows), np.concatenate(labels).astype(np.int64),
+        tuning.relight(val, np.random.default_rng([settings.seed, n_real, 1])), np.concatenate(val_labels).astype(np.int64),
+        used,
+    )
+
+
+def normalize_windows(norm: Normalization, windows: np.ndarray) -> np.ndarray:
+    """Normalize every ``(S, S)`` window (uint8 or float32 in [0, 1]) and keep its 32x32 centre.
+
+    Returns:
+        ``(n, 32, 32)`` float32.
+    """
+    scale = np.float32(1 / 255) if windows.dtype == np.uint8 else np.float32(1)
+    return np.stack([tuning.centre_windows(norm.normalize(w.astype(np.float32) * scale)[None])[0] for w in windows])
+
+
+class InputPolicy:
+    """The detector's input policy (see the module docstring), fitted on the training windows."""
+
+    def __init__(self, name: str, train_windows: np.ndarray) -> None:
+        self.name = name
+        self.mean = float(train_windows.mean())
+        self.std = float(train_windows.std()) or 1.0
+
+    def windows(self, windows: np.ndarray) -> np.ndarray:
+        if self.name == "standardize":
+            return tuning.standardize_windows(windows)
+        return ((windows - np.float32(self.mean)) / np.float32(self.std)).astype(np.float32)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name} if self.name == "standardize" else {"name": self.name, "mean": self.mean, "std": self.std}
+
+
+def score_maps(net: nn.Module, image: np.ndarray, policy: InputPolicy, device: str = "cpu") -> np.ndarray:
+    """Class probabilities of every 32x32 window at stride 4 of a normalized image.
+
+    Args:
+        net: a window classifier with ``forward`` on ``(B, 1, 32, 32)`` and ``dense``.
+        image: ``(H, W)`` float32 normalized image at the working scale (``H, W >= 32``).
+        policy: the input policy the network was trained with.
+
+    Returns:
+        ``(C, (H-32)//4+1, (W-32)//4+1)`` float32 softmax probabilities; entry ``(c, i, j)``
+        is class ``c`` for the window with top-left corner ``(4j, 4i)`` (x, y).
+    """
+    import torch
+    import torch.nn.functional as F
+
+    x = torch.from_numpy(np.ascontiguousarray(image))[None, None].to(device)
+    hd, wd = (image.shape[0] - CROP) // STRIDE + 1, (image.shape[1] - CROP) // STRIDE + 1
+    with torch.inference_mode():
+        if policy.name == "raw":
+            logits = net.dense((x - policy.mean) / policy.std)[0]
+        else:
+            win = F.unfold(x, CROP, stride=STRIDE)[0].T.reshape(-1, 1, CROP, CROP)
+            mean = win.mean((2, 3), keepdim=True)
+            std = win.std((2, 3), keepdim=True, unbiased=False)
+            win = (win - mean) / (std + 1e-6)
+            logits = torch.cat([net(win[i : i + _BATCH]) for i in range(0, len(win), _BATCH)]).T.reshape(-1, hd, wd)
+        return F.softmax(logits[:, :hd, :wd], dim=0).cpu().numpy()
+
+
+def fixed_boxes(centres: np.ndarray, side_x: float, side_y: float) -> np.ndarray:
+    """Boxes ``[x, y, w, h]`` of a fixed size centred on ``(n, 2)`` centres (pixel-edge coordinates)."""
+    centres = np.asarray(centres, np.float64).reshape(-1, 2)
+    return np.column_stack([centres[:, 0] - side_x / 2, centres[:, 1] - side_y / 2,
+                            np.full(len(centres), side_x), np.full(len(centres), side_y)])
+
+
+def detect_in_image(
+    probs: np.ndarray, label: int, sx: float, sy: float, box_size: float, nms_iou: float, max_detections: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Fixed-size detections of one class in one image, after non-maximum suppression.
+
+    Args:
+        probs: output of :func:`score_maps`.
+        label: the class.
+        sx, sy: working-scale factors in x and y.
+        box_size: box side at the working scale.
+
+    Returns:
+        ``(boxes (k, 4) in full-resolution pixels, scores (k,))``.
+    """
+    p = probs[label]
+    flat = p.reshape(-1)
+    top = np.argsort(-flat, kind="stable")[: max(10 * max_detections, 200)]
+    i, j = np.unravel_index(top, p.shape)
+    centres = np.column_stack([(STRIDE * j + CROP / 2) / sx, (STRIDE * i + CROP / 2) / sy])
+    boxes = fixed_boxes(centres, box_size / sx, box_size / sy)
+    keep = nms(boxes, flat[top], nms_iou, max_detections)
+    return boxes[keep], flat[top][keep]
+
+
+def _make_net(method: str, num_classes: int, config: tuple[int, int] | None = None) -> nn.Module:
+    if method == "cnn":
+        from alcn_cv.nets.plain import PlainCNN
+
+        depth, width = config or (2, 32)
+        return PlainCNN(num_classes, depth=depth, width=width)
+    if method in ("resnet20", "resnet56"):
+        from alcn_cv.nets import resnet
+
+        return getattr(resnet, method)(num_classes)
+    from alcn_cv.nets import Detector
+
+    return Detector(num_classes)
+
+
+def _create_normalization(method: str, params: dict[str, Any]) -> Normalization:
+    if method in DEEP_BASELINES:
+        return create("none")
+    if method == "alcn":
+        return create("alcn", scale=1.0, **params)  # windows and test images are already at the working scale
+    return create(method, **params)
+
+
+def _train(
+    method: str, train: np.ndarray, labels: np.ndarray, num_classes: int, settings: DetectSettings,
+    val: tuple[np.ndarray, np.ndarray], config: tuple[int, int] | None = None,
+) -> nn.Module:
+    from alcn_cv.train.stage2 import train_detector
+
+    net = _make_net(method, num_classes, config)
+    return train_detector(
+        train, labels, num_classes, epochs=settings.epochs, batch_size=settings.batch_size, lr=settings.lr,
+        seed=settings.seed, val=val, progress=False, net=net, device=settings.device,
+    )
+
+
+def _train_cnn_sweep(
+    train: np.ndarray, labels: np.ndarray, num_classes: int, settings: DetectSettings, val: tuple[np.ndarray, np.ndarray]
+) -> tuple[nn.Module, dict[str, Any]]:
+    from alcn_cv.train.stage2 import evaluate_detector
+
+    best, sweep = None, []
+    for depth, width in settings.cnn_sweep:
+        net = _train("cnn", train, labels, num_classes, settings, val, (depth, width))
+        loss, acc = evaluate_detector(net, *val)
+        sweep.append({"depth": depth, "width": width, "val_loss": loss, "val_acc": acc})
+        if best is None or (acc, -loss) > (best[1]["val_acc"], -best[1]["val_loss"]):
+            best = (net, sweep[-1])
+    assert best is not None
+    return best[0], {"sweep": sweep, "chosen": {"depth": best[1]["depth"], "width": best[1]["width"]}}
+
+
+def _evaluate(
+    data: DetectData, test_images: list[tuple[int, np.ndarray, float, float]], net: nn.Module,
+    policy: InputPolicy, settings: DetectSettings,
+) -> dict[str, Any]:
+    probs = [score_maps(net, normalized, policy, settings.device) for _, normalized, _, _ in test_images]
+    per_object = {}
+    for label, cat in enumerate(data.categories, start=1):
+        scores, tps, n_gt = [], [], 0
+        for (image_id, _, sx, sy), p in zip(test_images, probs):
+            gt = [a for a in data.test.annotations_for(image_id) if a.category_id == cat]
+            n_gt += len(gt)
+            boxes, s = detect_in_image(p, label, sx, sy, data.box_size, settings.nms_iou, settings.max_detections)
+            gt_centres = np.array([[a.bbox[0] + a.bbox[2] / 2, a.bbox[1] + a.bbox[3] / 2] for a in gt]).reshape(-1, 2)
+            gt_boxes = fixed_boxes(gt_centres, data.box_size / sx, data.box_size / sy)
+            scores.append(s)
+            tps.append(match_detections(boxes, s, gt_boxes, settings.match_iou))
+        scores_all, tp_all = np.concatenate(scores), np.concatenate(tps)
+        if n_gt == 0:
+            per_object[data.name(cat)] = {"auc": None, "num_gt": 0}
+            continue
+        precision, recall = precision_recall(scores_all, tp_all, n_gt)
+        step = max(1, len(precision) // 300)
+        per_object[data.name(cat)] = {
+            "auc": pr_auc(precision, recall),
+            "num_gt": n_gt,
+            "num_detections": int(len(scores_all)),
+            "max_recall": float(recall[-1]) if len(recall) else 0.0,
+            "pr": {"precision": precision[::step].round(4).tolist(), "recall": recall[::step].round(4).tolist()},
+        }
+    return per_object
+
+
+def _plot_pr(results: dict[str, Any], data: DetectData, out: Path, settings: DetectSettings) -> list[str]:
+    written = []
+    for cat in data.categories:
+        name = data.name(cat)
+        for n_real in settings.real_images:
+            plt, fig, axes = new_figure(1, len(settings.policies), figsize=(5.2 * len(settings.policies), 4.6))
+            for ax, policy in zip(axes[0], settings.policies):
+                cmap = plt.get_cmap("tab20")
+                for k, method in enumerate(settings.methods):
+                    run = results.get(f"{method}|{n_real}|{policy}", {})
+                    obj = run.get("objects", {}).get(name)
+                    if not obj or obj.get("auc") is None:
+                        continue
+                    style = "-" if k < 10 else "--"
+                    lw = 2.4 if method == "alcn" else 1.2
+                    ax.plot(obj["pr"]["recall"], obj["pr"]["precision"], style, color=cmap(k % 20), lw=lw,
+                            label=f"{method} ({obj['auc']:.3f})")
+                ax.set_xlim(0, 1)
+                ax.set_ylim(0, 1.02)
+                ax.set_xlabel("recall")
+                ax.set_ylabel("precision")
+                ax.set_title(f"{name}, {n_real} real image(s), input {policy}", fontsize=10)
+                ax.grid(alpha=0.3)
+                ax.legend(fontsize=7, loc="upper right")
+            fig.tight_layout()
+            path = out / f"pr_{name}_{n_real}real.png"
+            save_figure(plt, fig, path)
+            written.append(path.name)
+    return written
+
+
+def _markdown(result: dict[str, Any], data: DetectData, settings: DetectSettings) -> str:
+    names = [data.name(c) for c in data.categories]
+    lines = [
+        f"# Detection benchmark ({data.root.name})\n",
+        f"{len(result['test_images'])} test images at working scale {data.working_scale} (box {data.box_size} px); "
+        f"PASCAL IoU >= {settings.match_iou} with fixed-size boxes; AUC = area under precision-recall. "
+        f"Same detector and training for every normalization ({settings.epochs} epochs, batch {settings.batch_size}, "
+        f"lr {settings.lr}, {settings.positives_per_object} object windows per object, "
+        f"{settings.negatives_ratio}x background windows). Total time {result['seconds']:.0f} s.\n",
+    ]
+    alcn_note = result.get("alcn_trained")
+    if alcn_note is False:
+        lines.append("**The `alcn` row used UNTRAINED Normalizer weights** (the shipped file's `trained` flag is false).\n")
+    for n_real in settings.real_images:
+        for policy in settings.policies:
+            rows = []
+            for method in settings.methods:
+                run = result["runs"].get(f"{method}|{n_real}|{policy}", {})
+                if "error" in run:
+                    rows.append([method] + ["failed"] * (len(names) + 1))
+                    continue
+                aucs = [run["objects"][n]["auc"] for n in names]
+                valid = [a for a in aucs if a is not None]
+                rows.append([method] + aucs + [float(np.mean(valid)) if valid else None])
+            lines.append(f"\n## {n_real} real image(s) per object, input policy `{policy}`\n")
+            lines.append(markdown_table(["method"] + names + ["mean"], rows))
+    failures = [f"- `{k}`: {v['error']}" for k, v in result["runs"].items() if "error" in v]
+    if failures:
+        lines.append("\n## Failures\n\n" + "\n".join(failures) + "\n")
+    if result.get("tuned"):
+        lines.append("\n## Tuned parameters (relit 1-NN accuracy on the training windows)\n")
+        for n_real, tuned in result["tuned"].items():
+            for m, t in tuned.items():
+                best = max(t["trials"], key=lambda x: x["score"])
+                lines.append(f"- {n_real} real: `{m}` {t['params']} ({best['score']:.3f})")
+        lines.append("")
+    if result.get("cnn"):
+        lines.append("\n## Plain CNN sweep (chosen by accuracy on relit held-out training windows)\n")
+        for key, c in result["cnn"].items():
+            lines.append(f"- {key}: chosen depth {c['chosen']['depth']} width {c['chosen']['width']}; "
+                         + ", ".join(f"{s['depth']}x{s['width']}: {s['val_acc']:.3f}" for s in c["sweep"]))
+        lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+def main(
+    data_dir: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    settings: DetectSettings | None = None,
+    working_scale: float | None = None,
+    box_size: float | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run the detection benchmark (see the module docstring) and write its outputs.
+
+    Args:
+        data_dir: benchmark folder (``train.json``, ``test.json``, ``manifest.json``).
+        out_dir: output folder (created).
+        settings: the run's settings; default :class:`DetectSettings`.
+        working_scale, box_size: see :func:`load_data`.
+        progress: progress bar across runs.
+
+    Returns:
+        The dictionary written to ``detect.json``. A method that fails is recorded with its
+        error and the run continues.
+    """
+    import torch
+
+    settings = settings or DetectSettings()
+    settings.check()
+    if settings.threads:
+        torch.set_num_threads(settings.threads)
+    start = time.perf_counter()
+    data = load_data(data_dir, working_scale, box_size)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    num_classes = len(data.categories) + 1
+    test_meta = data.test.images[: settings.max_test_images] if settings.max_test_images else data.test.images
+    logger.info("reading %d test images", len(test_meta))
+    test_gray = []
+    for im in test_meta:
+        gray, sx, sy = _working_gray(data.test, im, data.working_scale)
+        test_gray.append((im.id, gray.astype(np.float32) / np.float32(255), sx, sy))
+
+    sets = {n: training_set(data, n, settings) for n in settings.real_images}
+    tuned: dict[int, dict[str, Any]] = {}
+    if settings.tune:
+        to_tune = [m for m in tuning.GRIDS if m in settings.methods]
+        for n, ts in sets.items():
+            if to_tune:
+                tuned[n] = tuning.tune_all(ts.windows, ts.labels, settings.seed, to_tune)
+
+    runs: dict[str, Any] = {}
+    cnn_info: dict[str, Any] = {}
+    alcn_trained = None
+    total = len(settings.methods) * len(settings.real_images) * len(settings.policies)
+    bar = tqdm(total=total, desc="detect benchmark", unit="run", disable=not progress)
+    for method in settings.methods:
+        cache: dict[str, list[tuple[int, np.ndarray, float, float]]] = {}
+        for n_real in settings.real_images:
+            params = tuned.get(n_real, {}).get(method, {}).get("params", {})
+            ts = sets[n_real]
+            for policy_name in settings.policies:
+                key = f"{method}|{n_real}|{policy_name}"
+                bar.set_postfix(run=key)
+                t0 = time.perf_counter()
+                try:
+                    norm = _create_normalization(method, params)
+                    if method == "alcn":
+                        alcn_trained = bool(getattr(norm, "trained", False))
+                    train = normalize_windows(norm, ts.windows)
+                    policy = InputPolicy(policy_name, train)
+                    val = (policy.windows(normalize_windows(norm, ts.val_windows)), ts.val_labels)
+                    t_norm = time.perf_counter() - t0
+                    if method == "cnn":
+                        net, cnn_info[f"{n_real}|{policy_name}"] = _train_cnn_sweep(
+                            policy.windows(train), ts.labels, num_classes, settings, val)
+                    else:
+                        net = _train(method, policy.windows(train), ts.labels, num_classes, settings, val)
+                    t_train = time.perf_counter() - t0 - t_norm
+                    cache_key = repr(sorted(params.items()))
+                    if cache_key not in cache:
+                        cache[cache_key] = [(i, norm.normalize(g), sx, sy) for i, g, sx, sy in test_gray]
+                    objects = _evaluate(data, cache[cache_key], net, policy, settings)
+                    from alcn_cv.train.stage2 import evaluate_detector
+
+                    runs[key] = {
+                        "method": method, "real_images": n_real, "policy": policy.to_dict(), "params": params,
+                        "images_used": ts.images_used, "objects": objects,
+                        "val_relit_acc": evaluate_detector(net, *val)[1],
+                        "seconds": {"normalize_train": t_norm, "train": t_train, "total": time.perf_counter() - t0},
+                    }
+                except Exception as exc:  # one method failing is reported, not the end of the run
+                    logger.exception("run %s failed", key)
+                    runs[key] = {"method": method, "real_images": n_real, "policy": policy_name,
+                                 "error": f"{type(exc).__name__}: {exc}"}
+                bar.update()
+    bar.close()
+
+    settings_dict = asdict(settings)
+    result = {
+        "benchmark": "detect",
+        "data": str(data.root.resolve()),
+        "working_scale": data.working_scale,
+        "box_size": data.box_size,
+        "test_images": [m.id for m in test_meta],
+        "settings": settings_dict,
+        "tuned": {str(k): v for k, v in tuned.items()},
+        "cnn": cnn_info,
+        "alcn_trained": alcn_trained,
+        "machine": machine(),
+        "runs": runs,
+        "seconds": time.perf_counter() - start,
+    }
+    result["figures"] = _plot_pr(runs, data, out, settings)
+    result["seconds"] = time.perf_counter() - start
+    write_json(out / "detect.json", result)
+    write_text(out / "detect.md", _markdown(result, data, settings))
+    logger.info("detection benchmark written to %s in %.0f s", out, result["seconds"])
+    return result
+
+
+def _list(kind: type) -> Any:
+    def parse(text: str) -> list:
+        try:
+            return [kind(v) for v in text.split(",") if v.strip()]
+        except ValueError:
+            raise InputError(f"expected a comma-separated list of {kind.__name__}, got {text!r}") from None
+
+    return parse
+
+
+def _sweep(text: str) -> list[tuple[int, int]]:
+    try:
+        return [tuple(int(v) for v in item.lower().split("x")) for item in text.split(",") if item.strip()]  # type: ignore[misc]
+    except ValueError:
+        raise InputError(f"--cnn-sweep expects DEPTHxWIDTH,... (e.g. 1x32,2x32), got {text!r}") from None
+
+
+def add_cli(subparsers: Any) -> None:
+    """Add ``alcn bench detect`` to the ``bench`` sub-subcommands."""
+    d = DetectSettings()
+    p = subparsers.add_parser(
+        "detect",
+        help="few-shot detection benchmark: every normalization with the same detector (AUC, PR curves)",
+        description="For each method, train the same detector on windows normalized by it, built from 1 and 10 real "
+        "images per object (simple synthetic images), run it on every window of every test image, and score with "
+        "the PASCAL criterion (IoU 0.8, fixed-size boxes). Writes detect.md, detect.json and PR curves (PNG).",
+    )
+    p.add_argument("--data", required=True, type=Path, help="benchmark folder: train.json, test.json, manifest.json "
+                   "(e.g. from `alcn data detect`)")
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--methods", type=_list(str), default=d.methods,
+                   help=f"comma-separated methods (default: all: {','.join(d.methods)})")
+    p.add_argument("--real-images", type=_list(int), default=d.real_images, help="real training images per object (default 1,10)")
+    p.add_argument("--policy", type=_list(str), default=d.policies, dest="policies",
+                   help="detector input policies: raw, standardize (default both)")
+    p.add_argument("--positives", type=int, default=d.positives_per_object, help="synthetic windows per object (default %(default)s)")
+    p.add_argument("--negatives-ratio", type=float, default=d.negatives_ratio, help="background windows per object window (default %(default)s)")
+    p.add_argument("--epochs", type=int, default=d.epochs, help="detector training epochs (default %(default)s)")
+    p.add_argument("--batch-size", type=int, default=d.batch_size, help="default %(default)s")
+    p.add_argument("--lr", type=float, default=d.lr, help="Adam learning rate (default %(default)s)")
+    p.add_argument("--seed", type=int, default=d.seed, help="default %(default)s")
+    p.add_argument("--no-tune", dest="tune", action="store_false", help="keep the default parameters of DoG, SLCN, DLCN")
+    p.add_argument("--cnn-sweep", type=_sweep, default=d.cnn_sweep, help="plain CNNs tried, DEPTHxWIDTH,... (default 1x32,2x32,3x32)")
+    p.add_argument("--nms-iou", type=float, default=d.nms_iou, help="default %(default)s")
+    p.add_argument("--match-iou", type=float, default=d.match_iou, help="PASCAL criterion (default %(default)s)")
+    p.add_argument("--max-test-images", type=int, default=None, help="only the first N test images (default: all)")
+    p.add_argument("--working-scale", type=float, default=None, help="override the manifest's working_scale")
+    p.add_argument("--box-size", type=float, default=None, help="override the manifest's box_size (pixels at the working scale)")
+    p.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's choice)")
+    p.add_argument("--device", default="cpu", help="torch device (default cpu)")
+    p.set_defaults(func=_run_cli)
+
+
+def _run_cli(args: Any) -> int:
+    settings = DetectSettings(
+        methods=args.methods, real_images=args.real_images, policies=args.policies, positives_per_object=args.positives,
+        negatives_ratio=args.negatives_ratio, epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
+        tune=args.tune, cnn_sweep=args.cnn_sweep, nms_iou=args.nms_iou, match_iou=args.match_iou,
+        max_test_images=args.max_test_images, threads=args.threads, device=args.device,
+    )
+    result = main(args.data, args.out, settings, args.working_scale, args.box_size)
+    print((Path(args.out) / "detect.md").read_text(encoding="utf-8"))
+    return 1 if all("error" in r for r in result["runs"].values()) else 0

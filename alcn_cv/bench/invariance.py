@@ -1,0 +1,313 @@
+"""Invariance of the normalizations on real photographs under different lights (issue 5, Sec. 4).
+
+For every object of a photometric-stereo set (the same view under several directional lights,
+with an object mask), each method normalizes every photograph; the benchmark reports
+
+* **agreement**: the mean, over all pairs of lights, of the normalized cross-correlation of
+  the two normalized images inside the (eroded) object mask. 1 means the method removed the
+  change of light entirely (as seen inside the mask);
+* **detail**: how much fine structure the normalized images keep, scale-free:
+  ``sqrt(mean |grad n|^2) / std(n)`` inside the mask (forward differences), averaged over the
+  lights. A method that flattens the image (blurs it, or maps it to a constant) scores low;
+  note that noise scores high, so read it beside the agreement.
+
+Expected layout (``../shared/data/psm``): one folder per object ``NAME/`` holding
+``NAME.0.png`` ... ``NAME.{k-1}.png`` and ``NAME.mask.png``.
+
+Outputs in ``out_dir``: ``invariance.json`` (every number, the settings and the machine),
+``invariance.md`` (the table) and ``invariance_<object>.png`` (the object under every light for
+every method, each shown through the method's fixed output mapping, as ``apply`` gives it).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import time
+from dataclasses import dataclass
+from itertools import combinations
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from tqdm.auto import tqdm
+
+from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json, write_text
+from alcn_cv.enhance.base import Normalization
+from alcn_cv.enhance.registry import available, create
+from alcn_cv.errors import DatasetError, InputError
+
+__all__ = ["PhotometricObject", "agreement", "detail", "load_objects", "main"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PhotometricObject:
+    """One object of a photometric-stereo set.
+
+    Attributes:
+        name: the object's name.
+        images: ``(k, H, W)`` float32 grayscale intensities in [0, 1], one per light.
+        mask: ``(H, W)`` bool, the object's pixels.
+    """
+
+    name: str
+    images: np.ndarray
+    mask: np.ndarray
+
+
+def _read_gray(path: Path) -> np.ndarray:
+    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise DatasetError(f"{path}: cannot read the image")
+    return img
+
+
+def load_objects(data_dir: str | os.PathLike, scale: float = 1.0) -> list[PhotometricObject]:
+    """Read every object of a photometric-stereo folder (see the module docstring).
+
+    Args:
+        data_dir: the folder holding one sub-folder per object.
+        scale: resize factor applied to images and masks (``cv2.INTER_AREA``).
+
+    Raises:
+        DatasetError: no object found, an unreadable image, or images of different sizes.
+    """
+    root = Path(data_dir)
+    if not root.is_dir():
+        raise DatasetError(f"{root}: not a folder")
+    if not 0 < scale <= 1:
+        raise InputError(f"scale must be in (0, 1], got {scale}")
+    objects = []
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        mask_path = folder / f"{folder.name}.mask.png"
+        pattern = re.compile(rf"{re.escape(folder.name)}\.(\d+)\.png$")
+        shots = sorted(
+            ((int(m.group(1)), p) for p in folder.iterdir() if (m := pattern.match(p.name))), key=lambda t: t[0]
+        )
+        if not shots or not mask_path.is_file():
+            logger.debug("skipping %s: no %s.<i>.png images or no mask", folder, folder.name)
+            continue
+        images = [_read_gray(p) for _, p in shots]
+        mask = _read_gray(mask_path) > 127
+        if any(img.shape != mask.shape for img in images):
+            raise DatasetError(f"{folder}: images and mask {folder.name}.mask.png differ in size")
+        if scale != 1:
+            size = (max(1, round(mask.shape[1] * scale)), max(1, round(mask.shape[0] * scale)))
+            images = [cv2.resize(img, size, interpolation=cv2.INTER_AREA) for img in images]
+            mask = cv2.resize(mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
+        stack = np.stack(images).astype(np.float32) / np.float32(255)
+        objects.append(PhotometricObject(folder.name, stack, mask))
+    if not objects:
+        raise DatasetError(f"{root}: no object folder with NAME/NAME.<i>.png and NAME/NAME.mask.png")
+    return objects
+
+
+def _masked_zero_mean(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    v = img[mask].astype(np.float64)
+    return v - v.mean()
+
+
+def agreement(normalized: np.ndarray, mask: np.ndarray) -> float:
+    """Mean pairwise normalized cross-correlation inside ``mask``.
+
+    Args:
+        normalized: ``(k, H, W)`` normalized images of one view under ``k >= 2`` lights.
+        mask: ``(H, W)`` bool.
+
+    Returns:
+        In [-1, 1]; a pair where either image is constant inside the mask counts as 0.
+    """
+    vs = [_masked_zero_mean(n, mask) for n in normalized]
+    norms = [float(np.linalg.norm(v)) for v in vs]
+    scores = []
+    for i, j in combinations(range(len(vs)), 2):
+        denom = norms[i] * norms[j]
+        scores.append(float(vs[i] @ vs[j] / denom) if denom > 1e-12 else 0.0)
+    return float(np.mean(scores))
+
+
+def detail(normalized: np.ndarray, mask: np.ndarray) -> float:
+    """Scale-free fine-structure measure ``sqrt(mean |grad n|^2) / std(n)`` inside ``mask``, mean over images.
+
+    Gradients are forward differences, counted where both pixels are in the mask. A constant
+    image scores 0.
+    """
+    both_x = mask[:, :-1] & mask[:, 1:]
+    both_y = mask[:-1, :] & mask[1:, :]
+    scores = []
+    for n in normalized.astype(np.float64):
+        std = n[mask].std()
+        if std <= 1e-12:
+            scores.append(0.0)
+            continue
+        energy = np.concatenate([np.diff(n, axis=1)[both_x], np.diff(n, axis=0)[both_y]]) ** 2
+        scores.append(float(np.sqrt(energy.mean()) / std))
+    return float(np.mean(scores))
+
+
+def _create(name: str) -> Normalization:
+    if name == "alcn":
+        from alcn_cv.enhance.alcn import createALCN
+
+        return createALCN()
+    return create(name)
+
+
+def _figure(obj: PhotometricObject, results: dict[str, np.ndarray], norms: dict[str, Normalization], path: Path) -> Path:
+    names = list(results)
+    k = len(obj.images)
+    h, w = obj.mask.shape
+    cell = 1.3
+    plt, fig, axes = new_figure(len(names), k, figsize=(cell * k * w / h + 1.2, cell * len(names) + 0.6))
+    for r, name in enumerate(names):
+        for c in range(k):
+            ax = axes[r, c]
+            ax.imshow(norms[name].to_unit(results[name][c]), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if r == 0:
+                ax.set_title(f"light {c}", fontsize=8)
+            if c == 0:
+                ax.set_ylabel(name, fontsize=9, rotation=0, ha="right", va="center")
+    fig.suptitle(f"{obj.name}: every method under every light (fixed output mapping of apply())", fontsize=10)
+    fig.subplots_adjust(left=0.07, right=0.995, top=0.93, bottom=0.01, wspace=0.03, hspace=0.05)
+    return save_figure(plt, fig, path, dpi=80)
+
+
+def main(
+    data_dir: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    methods: list[str] | None = None,
+    scale: float = 1.0,
+    erode: int = 5,
+    figure_object: str | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run the invariance benchmark and write its table, JSON and figure.
+
+    Args:
+        data_dir: photometric-stereo folder (see the module docstring), e.g. ``../shared/data/psm``.
+        out_dir: output folder (created).
+        methods: registered normalization names; default every available one.
+        scale: resize factor applied to the photographs first.
+        erode: pixels removed from the mask's border (so that border effects of the
+            background edge do not count).
+        figure_object: the object shown in the figure; default the first one. ``"all"``: one figure each.
+        progress: show a progress bar.
+
+    Returns:
+        The results dictionary also written to ``invariance.json``.
+    """
+    methods = list(available()) if methods is None else list(methods)
+    unknown = [m for m in methods if m not in available()]
+    if unknown:
+        raise InputError(f"unknown method(s) {', '.join(unknown)}; available: {', '.join(available())}")
+    objects = load_objects(data_dir, scale)
+    if figure_object not in (None, "all") and figure_object not in [o.name for o in objects]:
+        raise InputError(f"no object {figure_object!r}; objects: {', '.join(o.name for o in objects)}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * erode + 1, 2 * erode + 1))
+    masks = {o.name: cv2.erode(o.mask.astype(np.uint8), kernel) > 0 if erode else o.mask for o in objects}
+    shown = {o.name for o in objects} if figure_object == "all" else {figure_object or objects[0].name}
+
+    rows: dict[str, dict[str, Any]] = {}
+    norms: dict[str, Normalization] = {}
+    shown_results: dict[str, dict[str, np.ndarray]] = {name: {} for name in shown}
+    bar = tqdm(methods, desc="invariance", unit="method", disable=not progress)
+    for name in bar:
+        bar.set_postfix(method=name)
+        row: dict[str, Any] = {"objects": {}}
+        try:
+            norm = _create(name)
+            norms[name] = norm
+            if name == "alcn":
+                row["trained"] = bool(getattr(norm, "trained", False))
+            start = time.perf_counter()
+            for obj in objects:
+                normalized = np.stack([norm.normalize(img) for img in obj.images])
+                row["objects"][obj.name] = {
+                    "agreement": agreement(normalized, masks[obj.name]),
+                    "detail": detail(normalized, masks[obj.name]),
+                }
+                if obj.name in shown:
+                    shown_results[obj.name][name] = normalized
+            row["seconds_per_image"] = (time.perf_counter() - start) / sum(len(o.images) for o in objects)
+            row["agreement"] = float(np.mean([v["agreement"] for v in row["objects"].values()]))
+            row["detail"] = float(np.mean([v["detail"] for v in row["objects"].values()]))
+        except Exception as exc:  # one method failing is reported, not the end of the run
+            logger.exception("method %s failed", name)
+            row = {"objects": {}, "error": f"{type(exc).__name__}: {exc}"}
+        rows[name] = row
+
+    object_names = [o.name for o in objects]
+    result = {
+        "benchmark": "invariance",
+        "data": str(Path(data_dir).resolve()),
+        "settings": {"methods": methods, "scale": scale, "erode": erode, "lights": {o.name: len(o.images) for o in objects}},
+        "metrics": {
+            "agreement": "mean pairwise normalized cross-correlation inside the eroded object mask",
+            "detail": "sqrt(mean |forward-difference gradient|^2) / std inside the mask, mean over lights",
+        },
+        "machine": machine(),
+        "methods": rows,
+    }
+    write_json(out / "invariance.json", result)
+
+    headers = ["method"] + [f"agreement {o}" for o in object_names] + ["agreement (mean)", "detail (mean)", "ms/image"]
+    table = []
+    for name, row in rows.items():
+        label = name + (" (untrained weights)" if row.get("trained") is False else "")
+        if "error" in row:
+            table.append([label] + [None] * (len(object_names) + 3))
+            continue
+        table.append(
+            [label]
+            + [row["objects"][o]["agreement"] for o in object_names]
+            + [row["agreement"], row["detail"], f"{1000 * row['seconds_per_image']:.1f}"]
+        )
+    failures = [f"- `{n}` failed: {r['error']}" for n, r in rows.items() if "error" in r]
+    text = (
+        f"# Invariance on real photographs ({Path(data_dir).name})\n\n"
+        f"Per object, every method normalizes its photographs under {', '.join(f'{o.name}: {len(o.images)}' for o in objects)} "
+        f"lights (scale {scale}, mask eroded by {erode} px). **agreement**: {result['metrics']['agreement']} "
+        f"(1 = light removed). **detail**: {result['metrics']['detail']} (low = flattened; noise is high).\n\n"
+        + markdown_table(headers, table)
+        + ("\n" + "\n".join(failures) + "\n" if failures else "")
+    )
+    write_text(out / "invariance.md", text)
+    for obj in objects:
+        if obj.name in shown and shown_results[obj.name]:
+            _figure(obj, shown_results[obj.name], norms, out / f"invariance_{obj.name}.png")
+    logger.info("invariance benchmark written to %s", out)
+    return result
+
+
+def add_cli(subparsers: Any) -> None:
+    """Add ``alcn bench invariance`` to the ``bench`` sub-subcommands."""
+    p = subparsers.add_parser(
+        "invariance",
+        help="agreement of normalized real photographs under different lights",
+        description="For each object of a photometric-stereo folder, normalize its photographs under every "
+        "light with each method and report their agreement inside the object mask (mean pairwise normalized "
+        "cross-correlation) beside the detail they keep; writes invariance.md, invariance.json and a figure.",
+    )
+    p.add_argument("--data", required=True, type=Path, help="folder of NAME/NAME.<i>.png + NAME.mask.png (e.g. ../shared/data/psm)")
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=None,
+                   help="comma-separated normalization names (default: all available)")
+    p.add_argument("--scale", type=float, default=1.0, help="resize the photographs by this factor first (default 1)")
+    p.add_argument("--erode", type=int, default=5, help="pixels removed from the mask border (default 5)")
+    p.add_argument("--figure-object", default=None, help="object shown in the figure (default: the first; 'all': every one)")
+    p.set_defaults(func=_run_cli)
+
+
+def _run_cli(args: Any) -> int:
+    result = main(args.data, args.out, args.methods, args.scale, args.erode, args.figure_object)
+    failed = [n for n, r in result["methods"].items() if "error" in r]
+    print((Path(args.out) / "invariance.md").read_text(encoding="utf-8"))
+    return 1 if failed and len(failed) == len(result["methods"]) else 0

@@ -1,0 +1,131 @@
+"""``alcn data``: generate the data engine's datasets, preview them, compare with real images."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["add_parser"]
+
+
+def _phos(args: argparse.Namespace) -> int:
+    from alcn_cv.data import phos
+
+    t = time.perf_counter()
+    out = phos.generate(args.out, args.n, args.seed, n_objects=args.objects, object_seed=args.object_seed,
+                        lighting=args.lighting, background_fraction=args.background_fraction,
+                        overwrite=args.overwrite, progress=True)
+    logger.info("wrote %d windows to %s in %.1f s", args.n, out, time.perf_counter() - t)
+    return 0
+
+
+def _detect(args: argparse.Namespace) -> int:
+    from alcn_cv.data import detect
+
+    t = time.perf_counter()
+    out = detect.generate(args.out, seed=args.seed, size=args.size, object_seed=args.object_seed,
+                          n_test=args.n_test, n_train=args.n_train, width=args.width, height=args.height,
+                          overwrite=args.overwrite)
+    logger.info("wrote the detection benchmark to %s in %.1f s", out, time.perf_counter() - t)
+    return 0
+
+
+def _pose(args: argparse.Namespace) -> int:
+    from alcn_cv.data import pose
+
+    t = time.perf_counter()
+    out = pose.generate(args.out, seed=args.seed, size=args.size, n_frames=args.frames, n_test=args.n_test,
+                        clutter=not args.no_clutter, overwrite=args.overwrite)
+    logger.info("wrote the pose sequences to %s in %.1f s", out, time.perf_counter() - t)
+    return 0
+
+
+def _preview(args: argparse.Namespace) -> int:
+    from alcn_cv.data.preview import preview
+
+    out = preview(args.dataset, args.out, n=args.n)
+    logger.info("wrote %s", out)
+    return 0
+
+
+def _compare_psm(args: argparse.Namespace) -> int:
+    from alcn_cv.data.stats import compare_psm
+    from alcn_cv.shared_data import shared_data_dir
+
+    psm = Path(args.psm) if args.psm else shared_data_dir() / "psm"
+    compare_psm(psm, args.out, seed=args.seed)
+    print((Path(args.out) / "psm_comparison.md").read_text(), end="")
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    """Add the ``data`` subcommand and its sub-subcommands to the ``alcn`` parser."""
+    p = subparsers.add_parser(
+        "data", help="generate training data, the detection benchmark and pose sequences",
+        description="The illumination data engine: rendered Normalizer training windows (Phos-like), an "
+        "ALCN-2D-like detection benchmark (COCO) and Box/Duck-like pose sequences (BOP + COLMAP), all "
+        "deterministic for a seed.",
+    )
+    sub = p.add_subparsers(dest="data_command", metavar="DATA_COMMAND", required=True)
+
+    q = sub.add_parser("phos", help="64x64 Normalizer training windows (windows.npz + manifest.json)",
+                       description="Render labelled 64x64 grayscale windows of textured relief objects under "
+                       "many lightings (Phos-like), plus background windows.")
+    q.add_argument("--out", required=True, help="output folder")
+    q.add_argument("-n", type=int, default=100_000, help="number of windows (default 100000)")
+    q.add_argument("--seed", type=int, default=0, help="seed of the windows")
+    q.add_argument("--objects", type=int, default=100, help="number of catalogue objects (labels 1..N)")
+    q.add_argument("--object-seed", type=int, default=0, help="seed of the object catalogue")
+    q.add_argument("--lighting", default="random",
+                   help="'random' or comma-separated families: ambient,dark,bright,side,shadow,spot,point,"
+                   "colour,mixed")
+    q.add_argument("--background-fraction", type=float, default=0.35, help="fraction of background windows")
+    q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    q.set_defaults(func=_phos)
+
+    q = sub.add_parser("detect", help="ALCN-2D-like detection benchmark (COCO train.json/test.json)",
+                       description="Render 3 objects (matte, velvet-like, specular): training images under one "
+                       "lighting and test images with clutter under varied lighting, in COCO format.")
+    q.add_argument("--out", required=True, help="output folder")
+    q.add_argument("--size", default="default", choices=["default", "small"], help="preset size")
+    q.add_argument("--seed", type=int, default=0, help="seed of the images")
+    q.add_argument("--object-seed", type=int, default=0, help="seed of the three objects")
+    q.add_argument("--n-test", type=int, default=None, help="number of test images (default: the size's)")
+    q.add_argument("--n-train", type=int, default=None, help="training images per object (default: 10)")
+    q.add_argument("--width", type=int, default=None, help="image width (default 1280)")
+    q.add_argument("--height", type=int, default=None, help="image height (default 800)")
+    q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    q.set_defaults(func=_detect)
+
+    q = sub.add_parser("pose", help="box and duck pose sequences (BOP layout + COLMAP model)",
+                       description="Render a registered training sequence and 8 test sequences (#1 training "
+                       "lighting, #2-#4 mild, #5-#8 drastic changes) of a textured box and a duck.")
+    q.add_argument("--out", required=True, help="dataset root")
+    q.add_argument("--size", default="default", choices=["default", "small"], help="preset size")
+    q.add_argument("--seed", type=int, default=0, help="seed")
+    q.add_argument("--frames", type=int, default=None, help="frames per sequence (default 60)")
+    q.add_argument("--n-test", type=int, default=None, help="number of test sequences (default 8)")
+    q.add_argument("--no-clutter", action="store_true", help="no clutter on the table")
+    q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    q.set_defaults(func=_pose)
+
+    q = sub.add_parser("preview", help="contact sheet of a dataset with its ground truth drawn",
+                       description="Write a PNG contact sheet of a data-engine folder, a COCO JSON file or a "
+                       "BOP scene folder, with boxes, projected model boxes or labels drawn.")
+    q.add_argument("dataset", help="dataset folder, COCO .json file or BOP scene folder")
+    q.add_argument("--out", required=True, help="output PNG")
+    q.add_argument("-n", type=int, default=16, help="about how many samples to show")
+    q.set_defaults(func=_preview)
+
+    q = sub.add_parser("compare-psm", help="intensity statistics of renderings vs. the real PSM photographs",
+                       description="Compare mean, contrast, dynamic range, saturation, local contrast and "
+                       "across-light changes of rendered images with ../shared/data/psm; writes a figure and a "
+                       "table.")
+    q.add_argument("--psm", default=None, help="PSM folder (default: <shared data>/psm)")
+    q.add_argument("--out", required=True, help="output folder")
+    q.add_argument("--seed", type=int, default=0, help="seed of the renderings")
+    q.set_defaults(func=_compare_psm)

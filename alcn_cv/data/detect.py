@@ -1,0 +1,272 @@
+"""An ALCN-2D-like detection benchmark (issue 3, §2b; paper Sec. 4.3, Fig. 4).
+
+The paper's ALCN-2D has three objects (matte, velvet-like and specular), ten training images
+per object under one lighting, and test images with and without the objects, under very
+different lightings and light colours, with distractors and clutter. This module renders such
+a set and writes it in COCO format::
+
+    DIR/manifest.json          generator version, seed, parameters, working_scale, box_size
+    DIR/train.json             COCO: n_train images per object, one constant lighting
+    DIR/test.json              COCO: test images (1280x800 by default), 0..K objects each
+    DIR/images/train/*.png     BGR
+    DIR/images/test/*.png
+
+``working_scale`` is the factor by which to resize the images so that the objects are about
+36 px (the detector's window is 48x48 at the working scale, its centre 32x32); ``box_size`` is
+the side, in working-scale pixels, of the fixed-size square boxes of the PASCAL criterion.
+COCO boxes are the tight boxes of each object's visible silhouette at full resolution. Each
+test image's lighting family and parameters are stored in its ``lighting`` field.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from alcn_cv.data.manifest import atomic_output_dir, make_manifest, write_json
+from alcn_cv.data.objects import ReliefObject, background_surface, make_object, paste, to_surface
+from alcn_cv.data.render import LIGHT_FAMILIES, Lighting, Material, directional, render_surfaces, sample_lighting
+from alcn_cv.data.textures import photo_crop, procedural_texture
+from alcn_cv.errors import InputError
+from alcn_cv.formats.coco import write_coco
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["DetectConfig", "SIZES", "OBJECTS", "benchmark_objects", "generate", "main"]
+
+
+@dataclass(frozen=True)
+class DetectConfig:
+    """Size parameters of the benchmark.
+
+    Attributes:
+        width, height: image size in pixels.
+        n_train: training images per object.
+        n_test: test images.
+        object_px: object extent in full-resolution pixels.
+        box_px: object extent (and box side) at the working scale.
+        canonical: resolution of the objects' canonical textures.
+    """
+
+    width: int = 1280
+    height: int = 800
+    n_train: int = 10
+    n_test: int = 120
+    object_px: float = 144.0
+    box_px: float = 36.0
+    canonical: int = 192
+
+    @property
+    def working_scale(self) -> float:
+        return self.box_px / self.object_px
+
+
+#: Named sizes: ``default`` (minutes on 2 cores) and ``small`` (seconds, for tests).
+SIZES: dict[str, DetectConfig] = {
+    "default": DetectConfig(),
+    "small": DetectConfig(width=320, height=200, n_train=3, n_test=4, object_px=72.0, canonical=96),
+}
+
+#: The benchmark's objects: (name, material family, shape).
+OBJECTS: tuple[tuple[str, str, str], ...] = (
+    ("matte_box", "matte", "box"),
+    ("velvet_toy", "velvet", "blob"),
+    ("specular_can", "metal", "cylinder"),
+)
+
+
+# A glossy metallic finish whose texture stays visible (printed tin): strong, tight, tinted highlights.
+_SPECULAR = Material("metal", diffuse=0.55, specular=0.8, shininess=120.0, metallic=0.5)
+
+
+def benchmark_objects(object_seed: int, canonical: int) -> list[ReliefObject]:
+    """The objects of :data:`OBJECTS`, deterministic for ``object_seed`` (distinct from Phos')."""
+    out = []
+    for k, (_, mat, shape) in enumerate(OBJECTS):
+        rng = np.random.default_rng([object_seed, 7919, k])
+        material = _SPECULAR if mat == "metal" else mat
+        out.append(make_object(rng, canonical, shape=shape, material=material, relief=rng.uniform(0.12, 0.2)))
+    return out
+
+
+def training_lighting() -> Lighting:
+    """The constant training lighting: white light from 70 degrees elevation, moderate ambient."""
+    return Lighting("ambient", [directional(45.0, 70.0, (0.85, 0.85, 0.85))], np.full(3, 0.25, np.float32),
+                    gain=1.0, gamma=2.2, shot_noise=5e-4, read_noise=1e-3)
+
+
+def _ground(rng: np.random.Generator, h: int, w: int):
+    tex = photo_crop(rng, (h, w)) if rng.random() < 0.6 else procedural_texture(rng, (h, w))
+    return background_surface(rng, h, w, tex, relief=2.0)
+
+
+def _tight_box(cov: np.ndarray) -> list[float] | None:
+    ys, xs = np.nonzero(cov > 0.5)
+    if len(xs) == 0:
+        return None
+    return [float(xs.min()), float(ys.min()), float(xs.max() - xs.min() + 1), float(ys.max() - ys.min() + 1)]
+
+
+def _render(rng, surf, lighting: Lighting, cfg: DetectConfig) -> np.ndarray:
+    scale = 2 if max(cfg.width, cfg.height) > 400 else 1
+    return render_surfaces(
+        to_surface([surf]), [lighting], rng, camera_height=1.5 * max(cfg.width, cfg.height),
+        shadow_steps=24, shadow_scale=scale,
+    )[0]
+
+
+def _train_image(rng, obj: ReliefObject, cfg: DetectConfig):
+    h, w = cfg.height, cfg.width
+    surf = _ground(rng, h, w)
+    centre = (w / 2 + rng.uniform(-0.1, 0.1) * w, h / 2 + rng.uniform(-0.1, 0.1) * h)
+    scale = cfg.object_px / (0.92 * obj.size) * rng.uniform(0.92, 1.08)
+    cov = paste(*surf, obj, centre, scale, rng.uniform(-10, 10))
+    return _render(rng, surf, training_lighting(), cfg), _tight_box(cov), float(cov.sum())
+
+
+def _free(boxes: list[tuple[float, float, float]], x: float, y: float, r: float) -> bool:
+    return all((x - bx) ** 2 + (y - by) ** 2 > (r + br) ** 2 for bx, by, br in boxes)
+
+
+def _test_image(rng, objs: list[ReliefObject], cfg: DetectConfig, p_object: float):
+    h, w = cfg.height, cfg.width
+    surf = _ground(rng, h, w)
+    obj_scale = cfg.object_px / (0.92 * objs[0].size)
+    taken: list[tuple[float, float, float]] = []
+    r_obj = cfg.object_px * 0.6
+    # Clutter: flat printed patches and relief distractors, away from the objects' places.
+    placements = []
+    for k in range(len(objs)):
+        if rng.random() < p_object:
+            for _ in range(30):
+                x, y = rng.uniform(r_obj, w - r_obj), rng.uniform(r_obj, h - r_obj)
+                if _free(taken, x, y, r_obj):
+                    taken.append((x, y, r_obj))
+                    placements.append((k, x, y))
+                    break
+    for _ in range(int(rng.integers(3, 9))):
+        patch = make_object(rng, 64, shape="slab", relief=0.01)
+        s = cfg.object_px / 58.0 * rng.uniform(0.5, 1.6)
+        x, y = rng.uniform(0, w), rng.uniform(0, h)
+        if _free(taken, x, y, 0.5 * s * 64):
+            paste(*surf, patch, (x, y), s, rng.uniform(0, 360))
+    for _ in range(int(rng.integers(3, 11))):
+        dist = make_object(rng, 96)
+        s = cfg.object_px / 88.0 * rng.uniform(0.6, 1.4)
+        x, y = rng.uniform(0, w), rng.uniform(0, h)
+        if _free(taken, x, y, 0.5 * s * 96):
+            taken.append((x, y, 0.5 * s * 96))
+            paste(*surf, dist, (x, y), s, rng.uniform(0, 360))
+    anns = []
+    for k, x, y in placements:
+        cov = paste(*surf, objs[k], (x, y), obj_scale * rng.uniform(0.9, 1.1), rng.uniform(-10, 10),
+                    tilt=(rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05)))
+        box = _tight_box(cov)
+        if box is not None:
+            anns.append((k + 1, box, float(cov.sum())))
+    family = LIGHT_FAMILIES[int(rng.integers(len(LIGHT_FAMILIES)))]
+    lighting = sample_lighting(rng, family, w, h, relief=float(np.percentile(surf[1], 99)))
+    return _render(rng, surf, lighting, cfg), anns, lighting
+
+
+def generate(
+    out_dir: str | os.PathLike,
+    *,
+    seed: int = 0,
+    size: str = "default",
+    object_seed: int = 0,
+    n_test: int | None = None,
+    n_train: int | None = None,
+    width: int | None = None,
+    height: int | None = None,
+    p_object: float = 0.5,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> Path:
+    """Render the detection benchmark into ``out_dir`` (atomically).
+
+    Args:
+        out_dir: output folder.
+        seed: seed of the images (deterministic: same seed and parameters, same bytes).
+        size: a key of :data:`SIZES` giving the defaults of the size parameters.
+        object_seed: seed of the three objects.
+        n_test, n_train, width, height: override the size's values (objects keep their size in
+            pixels, so the working scale does not change).
+        p_object: probability that each object appears in a test image.
+        overwrite: replace an existing folder.
+        progress: show a progress bar.
+
+    Returns:
+        The output folder.
+    """
+    if size not in SIZES:
+        raise InputError(f"unknown size {size!r}; known: {sorted(SIZES)}")
+    base = SIZES[size]
+    cfg = DetectConfig(
+        width=width or base.width, height=height or base.height,
+        n_train=base.n_train if n_train is None else n_train, n_test=base.n_test if n_test is None else n_test,
+        object_px=base.object_px, box_px=base.box_px, canonical=base.canonical,
+    )
+    if cfg.width < 2 * cfg.object_px or cfg.height < 2 * cfg.object_px or cfg.n_train < 1 or cfg.n_test < 0:
+        raise InputError(f"images must be at least twice the object size ({cfg.object_px} px), with n_train >= 1: "
+                         f"got {cfg.width}x{cfg.height}, n_train={cfg.n_train}")
+    objs = benchmark_objects(object_seed, cfg.canonical)
+    cats = [{"id": k + 1, "name": name, "supercategory": "object", "material": mat}
+            for k, (name, mat, _) in enumerate(OBJECTS)]
+    total = len(objs) * cfg.n_train + cfg.n_test
+    bar = tqdm(total=total, desc="detect images", unit="img", disable=not progress)
+    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+        (tmp / "images" / "train").mkdir(parents=True)
+        (tmp / "images" / "test").mkdir(parents=True)
+        images, anns = [], []
+        for k, obj in enumerate(objs):
+            for j in range(cfg.n_train):
+                rng = np.random.default_rng([seed, 1, k, j])
+                img, box, area = _train_image(rng, obj, cfg)
+                name = f"images/train/{OBJECTS[k][0]}_{j:02d}.png"
+                cv2.imwrite(str(tmp / name), img)
+                iid = len(images) + 1
+                images.append({"id": iid, "file_name": name, "width": cfg.width, "height": cfg.height,
+                               "lighting": training_lighting().describe()})
+                anns.append({"id": len(anns) + 1, "image_id": iid, "category_id": k + 1, "bbox": box,
+                             "area": round(area, 2), "iscrowd": 0})
+                bar.update()
+        info = {"description": "alcn-cv ALCN-2D-like detection benchmark, training images", "seed": seed}
+        write_coco(tmp / "train.json", images, anns, cats, info)
+        images, anns = [], []
+        for j in range(cfg.n_test):
+            rng = np.random.default_rng([seed, 2, j])
+            img, objs_here, lighting = _test_image(rng, objs, cfg, p_object)
+            name = f"images/test/{j:05d}.png"
+            cv2.imwrite(str(tmp / name), img)
+            iid = j + 1
+            images.append({"id": iid, "file_name": name, "width": cfg.width, "height": cfg.height,
+                           "light_family": lighting.family, "lighting": lighting.describe()})
+            for cat, box, area in objs_here:
+                anns.append({"id": len(anns) + 1, "image_id": iid, "category_id": cat, "bbox": box,
+                             "area": round(area, 2), "iscrowd": 0})
+            bar.update()
+        info = {"description": "alcn-cv ALCN-2D-like detection benchmark, test images", "seed": seed}
+        write_coco(tmp / "test.json", images, anns, cats, info)
+        bar.close()
+        params = {"size": size, "object_seed": object_seed, "width": cfg.width, "height": cfg.height,
+                  "n_train": cfg.n_train, "n_test": cfg.n_test, "object_px": cfg.object_px, "p_object": p_object}
+        write_json(tmp / "manifest.json", make_manifest(
+            "detect", seed, params,
+            working_scale=cfg.working_scale, box_size=cfg.box_px, window=48, detector_window=32,
+            objects=[{"id": k + 1, "name": n, "material": m, "shape": s} for k, (n, m, s) in enumerate(OBJECTS)],
+            light_families=list(LIGHT_FAMILIES), files={"train": "train.json", "test": "test.json"},
+            bbox_convention="COCO [x, y, w, h]: tight box of the visible silhouette, full-resolution pixels",
+        ))
+    return Path(out_dir)
+
+
+def main(out_dir: str | os.PathLike, **kwargs) -> Path:
+    """Pipeline entry point (hloc style): see :func:`generate`."""
+    return generate(out_dir, **kwargs)

@@ -1,0 +1,151 @@
+"""Manifests, atomic output folders and deterministic files of the data engine.
+
+Every dataset folder holds a ``manifest.json``::
+
+    {"generator": "alcn_cv.data", "generator_version": "1", "kind": "phos" | "detect" | "pose",
+     "seed": 0, "parameters": {...}, ...}
+
+It holds no time stamp or timing, so that the same seed and parameters give byte-identical
+folders. Folders are written under a temporary name beside the target and renamed when
+complete, so a half-written dataset is never mistaken for a complete one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import logging
+import os
+import shutil
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from alcn_cv.errors import DatasetError
+
+logger = logging.getLogger(__name__)
+
+__all__ = [
+    "GENERATOR",
+    "GENERATOR_VERSION",
+    "make_manifest",
+    "read_manifest",
+    "read_json",
+    "write_json",
+    "atomic_output_dir",
+    "save_npz",
+]
+
+GENERATOR = "alcn_cv.data"
+#: Bumped whenever the same seed and parameters would give different data.
+GENERATOR_VERSION = "1"
+
+
+def make_manifest(kind: str, seed: int, parameters: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    """The manifest dictionary of a dataset of ``kind`` (extra keys are added at top level)."""
+    return {
+        "generator": GENERATOR,
+        "generator_version": GENERATOR_VERSION,
+        "kind": kind,
+        "seed": int(seed),
+        "parameters": parameters,
+        **extra,
+    }
+
+
+def write_json(path: str | os.PathLike, obj: Any, *, indent: int | None = 1) -> Path:
+    """Write JSON atomically (temporary file in the same folder, then rename)."""
+    path = Path(path)
+    text = json.dumps(obj, indent=indent, sort_keys=False, allow_nan=False) + "\n"
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_json(path: str | os.PathLike) -> Any:
+    """Read a JSON file; a missing, empty, truncated or malformed file raises DatasetError."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"{path}: cannot read ({exc})") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"{path}: malformed or truncated JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+
+
+def read_manifest(folder: str | os.PathLike, kind: str | None = None) -> dict[str, Any]:
+    """Read and check ``folder/manifest.json`` (and its ``kind`` when given)."""
+    path = Path(folder) / "manifest.json"
+    man = read_json(path)
+    if not isinstance(man, dict):
+        raise DatasetError(f"{path}: expected a JSON object")
+    for key in ("generator_version", "kind", "seed", "parameters"):
+        if key not in man:
+            raise DatasetError(f"{path}: missing field {key!r}")
+    if kind is not None and man["kind"] != kind:
+        raise DatasetError(f"{path}: field 'kind' is {man['kind']!r}, expected {kind!r}")
+    return man
+
+
+@contextlib.contextmanager
+def atomic_output_dir(out_dir: str | os.PathLike, *, overwrite: bool = False) -> Iterator[Path]:
+    """Yield a temporary folder that becomes ``out_dir`` when the block completes.
+
+    On error the temporary folder is removed and ``out_dir`` is left as it was. With
+    ``overwrite``, an existing ``out_dir`` is replaced; otherwise it is an error.
+    """
+    out = Path(out_dir)
+    if out.exists() and not overwrite:
+        raise FileExistsError(f"{out} exists; pass overwrite=True (--overwrite) to replace it")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
+    try:
+        yield tmp
+        if out.exists():
+            old = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".old"))
+            os.replace(out, old / "d")
+            os.replace(tmp, out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> Path:
+    """Write a compressed ``.npz`` that :func:`numpy.load` reads, byte-identical for equal arrays.
+
+    :func:`numpy.savez_compressed` stamps the current time into the zip entries; this writer
+    uses a fixed date so that the same data always gives the same file.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=6) as zf:
+            for name, arr in arrays.items():
+                buf = io.BytesIO()
+                np.lib.format.write_array(buf, np.ascontiguousarray(arr), allow_pickle=False)
+                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+                info.compress_type = zipfile.ZIP_DEFLATED
+                zf.writestr(info, buf.getvalue())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

@@ -1,0 +1,165 @@
+"""Contact sheets of datasets with their ground truth drawn (``alcn data preview``).
+
+Accepted inputs: a folder written by the data engine (its ``manifest.json`` says ``phos``,
+``detect`` or ``pose``), a COCO JSON file, or a BOP scene folder (``scene_camera.json``). Boxes are
+drawn for COCO, the projected 3D bounding box of each model for BOP (models read from the
+dataset's ``models/``), and the label and lighting family for Phos windows.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from alcn_cv.data.manifest import read_manifest
+from alcn_cv.errors import DatasetError
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["preview", "grid", "draw_model_box", "main"]
+
+_COLOURS = [(0, 255, 0), (255, 128, 0), (0, 128, 255), (255, 0, 255), (0, 255, 255), (255, 255, 0)]
+
+
+def grid(tiles: list[np.ndarray], cols: int, pad: int = 2) -> np.ndarray:
+    """Arrange equally sized BGR tiles in a grid with ``pad`` pixels of gray between them."""
+    if not tiles:
+        raise DatasetError("nothing to preview: the dataset has no images")
+    h, w = tiles[0].shape[:2]
+    rows = (len(tiles) + cols - 1) // cols
+    out = np.full((rows * (h + pad) + pad, cols * (w + pad) + pad, 3), 64, np.uint8)
+    for i, t in enumerate(tiles):
+        r, c = divmod(i, cols)
+        t = cv2.cvtColor(t, cv2.COLOR_GRAY2BGR) if t.ndim == 2 else t
+        out[pad + r * (h + pad) : pad + r * (h + pad) + h, pad + c * (w + pad) : pad + c * (w + pad) + w] = t
+    return out
+
+
+def _label(img: np.ndarray, text: str, org=(4, 14), scale: float = 0.45) -> None:
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 3, cv2.LINE_AA)
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1, cv2.LINE_AA)
+
+
+def _phos(folder: Path, n: int) -> np.ndarray:
+    from alcn_cv.data.phos import load
+
+    batch = load(folder)
+    idx = np.linspace(0, len(batch) - 1, min(n, len(batch))).astype(int)
+    tiles = []
+    for i in idx:
+        t = cv2.cvtColor(cv2.resize(batch.windows[i], (128, 128), interpolation=cv2.INTER_NEAREST), cv2.COLOR_GRAY2BGR)
+        cv2.rectangle(t, (32, 32), (95, 95), (0, 200, 255), 1)  # the detector's 32x32 centre
+        _label(t, f"{batch.labels[i]}" if batch.labels[i] else "bg")
+        _label(t, batch.light_families[batch.light_ids[i]], (4, 122), 0.4)
+        tiles.append(t)
+    return grid(tiles, 8)
+
+
+def _coco(paths: list[Path], n: int, thumb: int = 400) -> np.ndarray:
+    from alcn_cv.formats.coco import load_coco
+
+    tiles = []
+    for path in paths:
+        ds = load_coco(path)
+        names = {c.id: c.name for c in ds.categories}
+        take = ds.images[:: max(1, len(ds.images) // max(1, n // len(paths)))][: max(1, n // len(paths))]
+        for im in take:
+            img = ds.read_image(im)
+            s = thumb / max(img.shape[:2])
+            small = cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
+            for a in ds.annotations_for(im.id):
+                x, y, w, h = a.bbox * s
+                col = _COLOURS[(a.category_id - 1) % len(_COLOURS)]
+                cv2.rectangle(small, (int(round(x)), int(round(y))), (int(round(x + w)), int(round(y + h))), col, 2)
+                _label(small, names.get(a.category_id, str(a.category_id)), (int(x), max(12, int(y) - 4)), 0.4)
+            _label(small, f"{path.stem} {im.extra.get('light_family', '')}".strip())
+            th, tw = thumb * img.shape[0] // max(img.shape[:2]), thumb * img.shape[1] // max(img.shape[:2])
+            tiles.append(cv2.resize(small, (tw, th)))
+    return grid(tiles, 4)
+
+
+def draw_model_box(img: np.ndarray, corners: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
+                   colour=(0, 255, 0), thickness: int = 2) -> None:
+    """Draw the 12 edges of a 3D box (corners (8, 3) in the order of ``itertools.product``)."""
+    pts, _ = cv2.projectPoints(corners.astype(np.float64), cv2.Rodrigues(R)[0], t.astype(np.float64), K, None)
+    p = pts.reshape(-1, 2)
+    for i in range(8):
+        for b in (1, 2, 4):
+            j = i ^ b
+            if j > i:
+                a = tuple(int(round(v * 16)) for v in p[i])
+                c = tuple(int(round(v * 16)) for v in p[j])
+                cv2.line(img, a, c, colour, thickness, cv2.LINE_AA, 4)
+
+
+def _box_corners(vertices: np.ndarray) -> np.ndarray:
+    lo, hi = vertices.min(0), vertices.max(0)
+    return np.array([[(lo, hi)[a][0], (lo, hi)[b][1], (lo, hi)[c][2]] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
+
+
+def _bop(scene_dirs: list[Path], models_dir: Path | None, per_scene: int) -> np.ndarray:
+    from alcn_cv.formats.bop import load_scene, read_ply
+
+    corners: dict[int, np.ndarray] = {}
+    tiles = []
+    for d in scene_dirs:
+        scene = load_scene(d)
+        take = scene.frames[:: max(1, len(scene.frames) // per_scene)][:per_scene]
+        for f in take:
+            img = cv2.imread(str(f.rgb_path), cv2.IMREAD_COLOR)
+            if img is None:
+                raise DatasetError(f"{d / 'scene_camera.json'}: field {f.im_id}: cannot read {f.rgb_path}")
+            for o in f.objects:
+                if o.obj_id not in corners:
+                    ply = models_dir / f"obj_{o.obj_id:06d}.ply" if models_dir else None
+                    if ply is None or not ply.exists():
+                        continue
+                    corners[o.obj_id] = _box_corners(read_ply(ply).vertices)
+                draw_model_box(img, corners[o.obj_id], f.K, o.R, o.t, _COLOURS[(o.obj_id - 1) % len(_COLOURS)])
+            _label(img, f"{d.parent.name}/{d.name} #{f.im_id}", scale=0.6, org=(6, 20))
+            s = 320 / img.shape[1]
+            tiles.append(cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_AREA))
+    return grid(tiles, 3 if per_scene == 1 else per_scene)
+
+
+def preview(dataset: str | os.PathLike, out_png: str | os.PathLike, *, n: int = 16) -> Path:
+    """Write a contact sheet of ``dataset`` with its ground truth drawn to ``out_png``.
+
+    Args:
+        dataset: a data-engine folder, a COCO JSON file, or a BOP scene folder.
+        out_png: output PNG.
+        n: about how many samples to show.
+    """
+    src = Path(dataset)
+    if src.is_file() and src.suffix == ".json":
+        sheet = _coco([src], n)
+    elif (src / "scene_camera.json").exists():
+        models = src.parent.parent / "models"
+        sheet = _bop([src], models if models.is_dir() else None, max(1, n))
+    elif (src / "manifest.json").exists():
+        kind = read_manifest(src)["kind"]
+        if kind == "phos":
+            sheet = _phos(src, max(n, 32))
+        elif kind == "detect":
+            sheet = _coco([src / "train.json", src / "test.json"], n)
+        elif kind == "pose":
+            scenes = sorted(p for p in src.glob("*/*") if (p / "scene_camera.json").exists())
+            sheet = _bop(scenes, src / "models", 1)
+        else:
+            raise DatasetError(f"{src / 'manifest.json'}: field kind: unknown dataset kind {kind!r}")
+    else:
+        raise DatasetError(f"{src}: not a dataset (no manifest.json, scene_camera.json, and not a .json file)")
+    out = Path(out_png)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(out), sheet):
+        raise OSError(f"cannot write {out}")
+    return out
+
+
+def main(dataset: str | os.PathLike, out_png: str | os.PathLike, **kwargs) -> Path:
+    """Pipeline entry point (hloc style): see :func:`preview`."""
+    return preview(dataset, out_png, **kwargs)

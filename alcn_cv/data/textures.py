@@ -1,0 +1,248 @@
+"""Textures for albedos and backgrounds: procedural patterns and real photographs.
+
+Photographs come from :mod:`skimage.data`, which ships them inside the installed package
+(nothing is downloaded). Every function takes a :class:`numpy.random.Generator` and is
+deterministic for its state. Textures are float32 RGB arrays of shape (H, W, 3) with values in
+[0, 1], in *linear* reflectance (albedo), not gamma-encoded: photographs are linearised with
+gamma 2.2 so that the renderer's lighting multiplies reflectances, not display values.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+
+import cv2
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+__all__ = [
+    "PHOTO_NAMES",
+    "PROCEDURAL_KINDS",
+    "photos",
+    "fractal_noise",
+    "procedural_texture",
+    "photo_crop",
+    "random_texture",
+    "colour_jitter",
+]
+
+#: Photographs of :mod:`skimage.data` that are shipped with scikit-image (no download).
+PHOTO_NAMES: tuple[str, ...] = (
+    "astronaut",
+    "camera",
+    "coffee",
+    "chelsea",
+    "rocket",
+    "brick",
+    "grass",
+    "gravel",
+    "moon",
+    "coins",
+    "clock",
+    "page",
+    "text",
+    "hubble_deep_field",
+    "immunohistochemistry",
+    "retina",
+    "colorwheel",
+    "cell",
+)
+
+#: Kinds of procedural textures :func:`procedural_texture` draws from.
+PROCEDURAL_KINDS: tuple[str, ...] = ("noise", "stripes", "checker", "cells", "print", "wood", "marble", "blobs")
+
+
+@functools.lru_cache(maxsize=1)
+def photos() -> tuple[np.ndarray, ...]:
+    """The photographs of :data:`PHOTO_NAMES` as linear float32 RGB (H, W, 3) in [0, 1].
+
+    Grayscale photographs are replicated to three channels. Cached after the first call.
+    """
+    import skimage.data
+
+    out = []
+    for name in PHOTO_NAMES:
+        img = np.asarray(getattr(skimage.data, name)())
+        if img.dtype != np.uint8:
+            img = cv2.normalize(img.astype(np.float32), None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+        if img.ndim == 2:
+            img = np.repeat(img[..., None], 3, axis=2)
+        img = img[..., :3]
+        lin = (img.astype(np.float32) / 255.0) ** 2.2
+        out.append(np.ascontiguousarray(lin))
+    return tuple(out)
+
+
+def fractal_noise(
+    rng: np.random.Generator, shape: tuple[int, int], *, base: int = 4, octaves: int = 5, persistence: float = 0.55
+) -> np.ndarray:
+    """Smooth fractal (1/f-like) noise, float32 (H, W) rescaled to [0, 1].
+
+    Sum of ``octaves`` layers of uniform noise on grids of ``base * 2**o`` cells, upsampled
+    bicubically, with amplitudes ``persistence**o``.
+    """
+    h, w = shape
+    acc = np.zeros((h, w), np.float32)
+    amp = 1.0
+    for o in range(octaves):
+        cells = base * 2**o
+        gh = max(2, int(round(cells * h / max(h, w))))
+        gw = max(2, int(round(cells * w / max(h, w))))
+        grid = rng.random((gh, gw), dtype=np.float32)
+        acc += amp * cv2.resize(grid, (w, h), interpolation=cv2.INTER_CUBIC)
+        amp *= persistence
+        if cells >= max(h, w):
+            break
+    return cv2.normalize(acc, None, 0.0, 1.0, cv2.NORM_MINMAX)
+
+
+def _palette(rng: np.random.Generator, n: int) -> np.ndarray:
+    """``n`` random RGB colours (n, 3) in [0.02, 0.95], varied in hue and value."""
+    hsv = np.stack(
+        [rng.uniform(0, 180, n), rng.uniform(0, 255, n), rng.uniform(30, 250, n)], axis=1
+    ).astype(np.float32)
+    rgb = cv2.cvtColor(hsv[None].astype(np.uint8), cv2.COLOR_HSV2RGB)[0].astype(np.float32) / 255.0
+    return np.clip(rgb**2.2, 0.02, 0.95)
+
+
+def _map_palette(t: np.ndarray, colours: np.ndarray) -> np.ndarray:
+    """Map scalar field ``t`` in [0, 1] through a piecewise-linear colour ramp."""
+    xs = np.linspace(0.0, 1.0, len(colours))
+    return np.stack([np.interp(t, xs, colours[:, c]) for c in range(3)], axis=-1).astype(np.float32)
+
+
+def procedural_texture(rng: np.random.Generator, size: int | tuple[int, int], kind: str | None = None) -> np.ndarray:
+    """A procedural texture, float32 (H, W, 3) linear RGB in [0, 1].
+
+    Args:
+        rng: random generator.
+        size: side or (height, width) in pixels.
+        kind: one of :data:`PROCEDURAL_KINDS`, random when None.
+    """
+    h, w = (size, size) if isinstance(size, int) else size
+    kind = kind or str(rng.choice(PROCEDURAL_KINDS))
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    colours = _palette(rng, int(rng.integers(2, 5)))
+    if kind == "noise":
+        t = fractal_noise(rng, (h, w), base=int(rng.integers(2, 8)), persistence=float(rng.uniform(0.4, 0.7)))
+        return _map_palette(t, colours)
+    if kind == "stripes":
+        ang = rng.uniform(0, np.pi)
+        period = rng.uniform(4, 24)
+        warp = fractal_noise(rng, (h, w), base=3) * rng.uniform(0, 12)
+        phase = (xx * np.cos(ang) + yy * np.sin(ang) + warp) / period
+        t = 0.5 + 0.5 * np.sin(2 * np.pi * phase)
+        if rng.random() < 0.5:
+            t = (t > 0.5).astype(np.float32)
+        return _map_palette(t, colours)
+    if kind == "checker":
+        cell = rng.uniform(4, 20)
+        ang = rng.uniform(0, np.pi / 2)
+        u = (xx * np.cos(ang) + yy * np.sin(ang)) / cell
+        v = (-xx * np.sin(ang) + yy * np.cos(ang)) / cell
+        t = ((np.floor(u) + np.floor(v)) % 2).astype(np.float32)
+        return _map_palette(t, colours[:2])
+    if kind == "cells":
+        n = int(rng.integers(8, 60))
+        pts = rng.uniform(0, 1, (n, 2)) * (w, h)
+        labels = np.zeros((h, w), np.int32)
+        best = np.full((h, w), np.inf, np.float32)
+        for i, (px, py) in enumerate(pts):
+            d = (xx - px) ** 2 + (yy - py) ** 2
+            closer = d < best
+            best[closer] = d[closer]
+            labels[closer] = i
+        cols = _palette(rng, n)
+        img = cols[labels]
+        edges = cv2.morphologyEx(labels.astype(np.float32), cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)) > 0
+        img[edges] *= rng.uniform(0.1, 0.6)
+        return img.astype(np.float32)
+    if kind == "print":
+        # OpenCV draws text on 8-bit images only: draw gamma-encoded, then linearise.
+        enc = lambda c: tuple(float(v) for v in 255.0 * c ** (1 / 2.2))  # noqa: E731
+        canvas = np.empty((h, w, 3), np.uint8)
+        canvas[:] = np.round(enc(colours[0]))
+        for _ in range(int(rng.integers(3, 12))):
+            col = enc(_palette(rng, 1)[0])
+            choice = rng.integers(0, 3)
+            p1 = (int(rng.integers(0, w)), int(rng.integers(0, h)))
+            if choice == 0:
+                text = "".join(chr(int(c)) for c in rng.integers(65, 91, int(rng.integers(1, 6))))
+                cv2.putText(canvas, text, p1, int(rng.integers(0, 8)), rng.uniform(0.3, 2.0) * h / 64, col,
+                            int(rng.integers(1, 4)), cv2.LINE_AA)
+            elif choice == 1:
+                p2 = (int(rng.integers(0, w)), int(rng.integers(0, h)))
+                cv2.rectangle(canvas, p1, p2, col, -1 if rng.random() < 0.6 else int(rng.integers(1, 4)), cv2.LINE_AA)
+            else:
+                cv2.circle(canvas, p1, int(rng.integers(2, max(3, h // 3))), col, -1 if rng.random() < 0.6 else 2,
+                           cv2.LINE_AA)
+        return (canvas.astype(np.float32) / 255.0) ** 2.2
+    if kind == "wood":
+        cx, cy = rng.uniform(-w, 2 * w), rng.uniform(-h, 2 * h)
+        r = np.sqrt((xx - cx) ** 2 + ((yy - cy) * rng.uniform(0.2, 1.0)) ** 2)
+        r += fractal_noise(rng, (h, w), base=4) * rng.uniform(2, 10)
+        t = 0.5 + 0.5 * np.sin(r / rng.uniform(1.5, 6.0))
+        return _map_palette(t**1.5, colours[:2])
+    if kind == "marble":
+        n = fractal_noise(rng, (h, w), base=3, octaves=6)
+        ang = rng.uniform(0, np.pi)
+        t = 0.5 + 0.5 * np.sin((xx * np.cos(ang) + yy * np.sin(ang)) / rng.uniform(6, 20) + 8 * n)
+        return _map_palette(t, colours)
+    if kind == "blobs":
+        t = fractal_noise(rng, (h, w), base=int(rng.integers(3, 10)), persistence=0.3)
+        t = (t > rng.uniform(0.35, 0.65)).astype(np.float32)
+        t = cv2.GaussianBlur(t, (0, 0), 0.7)
+        return _map_palette(t, colours[:2])
+    raise ValueError(f"unknown procedural texture kind {kind!r}; known: {PROCEDURAL_KINDS}")
+
+
+def colour_jitter(rng: np.random.Generator, img: np.ndarray, strength: float = 1.0) -> np.ndarray:
+    """Random per-channel gains, saturation change and occasional inversion (float32 RGB)."""
+    gains = np.exp(rng.normal(0, 0.25 * strength, 3)).astype(np.float32)
+    out = img * gains
+    grey = out.mean(axis=2, keepdims=True)
+    sat = np.float32(rng.uniform(1 - 0.8 * strength, 1 + 0.6 * strength))
+    out = grey + sat * (out - grey)
+    if rng.random() < 0.15 * strength:
+        out = 1.0 - out
+    return np.clip(out, 0.0, 1.0).astype(np.float32)
+
+
+def photo_crop(
+    rng: np.random.Generator, size: int | tuple[int, int], *, indices: tuple[int, ...] | None = None
+) -> np.ndarray:
+    """A random crop of a random :func:`photos` photograph, float32 (H, W, 3) linear RGB.
+
+    The crop has random scale (0.25x to 1.5x, more for outputs larger than the photograph), rotation by multiples of 90 degrees and flips.
+
+    Args:
+        rng: random generator.
+        size: side or (height, width) of the output.
+        indices: restrict to these photographs (indices into :data:`PHOTO_NAMES`).
+    """
+    h, w = (size, size) if isinstance(size, int) else size
+    pool = photos()
+    idx = int(rng.choice(indices)) if indices else int(rng.integers(len(pool)))
+    img = pool[idx]
+    # Outputs larger than the photograph magnify a random part of it (between 1x and 3x the
+    # smallest magnification that fits), so large scenes still get varied crops.
+    lo = max(0.25, h / img.shape[0], w / img.shape[1])
+    hi = max(1.5, 3.0 * lo)
+    scale = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+    ch, cw = min(img.shape[0], int(h / scale) + 1), min(img.shape[1], int(w / scale) + 1)
+    y0 = int(rng.integers(0, img.shape[0] - ch + 1))
+    x0 = int(rng.integers(0, img.shape[1] - cw + 1))
+    crop = cv2.resize(img[y0 : y0 + ch, x0 : x0 + cw], (w, h), interpolation=cv2.INTER_AREA)
+    crop = np.rot90(crop, int(rng.integers(4))) if h == w else crop
+    if rng.random() < 0.5:
+        crop = crop[:, ::-1]
+    return np.ascontiguousarray(crop, dtype=np.float32)
+
+
+def random_texture(rng: np.random.Generator, size: int | tuple[int, int], *, p_photo: float = 0.5) -> np.ndarray:
+    """A photograph crop (probability ``p_photo``) or a procedural texture, colour-jittered."""
+    if rng.random() < p_photo:
+        return colour_jitter(rng, photo_crop(rng, size), 0.6)
+    return procedural_texture(rng, size)

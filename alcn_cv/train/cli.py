@@ -1,0 +1,151 @@
+"""Command line of the training stage: ``alcn train``, ``alcn train-detector`` and ``alcn export``.
+
+``alcn train`` trains the Normalizer jointly with a detector (Eq. 2) or, with
+``--method dog|none``, the same detector on a fixed filter, for comparison;
+``alcn train-detector`` is the paper's second stage, a new detector for new objects from a few
+real images on the frozen Normalizer; ``alcn export`` writes the Normalizer as ONNX for the
+torch-free OpenCV runtime. torch is imported only when a command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+__all__ = ["add_parser"]
+
+logger = logging.getLogger(__name__)
+
+# Command-line flags that override configuration keys: flag -> key.
+_FLAGS = {
+    "epochs": "optim.epochs",
+    "batch_size": "optim.batch_size",
+    "lr": "optim.lr",
+    "normalizer_lr": "optim.normalizer_lr",
+    "seed": "seed",
+    "device": "run.device",
+    "workers": "run.workers",
+    "threads": "run.threads",
+    "n_train": "data.n_train",
+    "data": "data.path",
+    "val_data": "data.val_path",
+    "method": "model.method",
+}
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``train``, ``train-detector`` and ``export`` to the ``alcn`` command."""
+    p = subparsers.add_parser(
+        "train", help="train the ALCN Normalizer jointly with a detector (Eq. 2)",
+        description="Train ALCN's Normalizer jointly with a detector on Phos-like rendered windows (Eq. 2 of "
+        "Rad et al. 2017), validating on held-out lightings. With --method dog or none, train the same detector "
+        "on a fixed DoG or on raw windows instead, for comparison. Writes checkpoint.pt, train.log, "
+        "history.json, curves.png and alcn_normalizer.npz into --out. Multi-process: run under torchrun.",
+    )
+    p.add_argument("--config", default="default",
+                   help="preset (default, paper) or TOML file; see alcn_cv.train.config for the schema")
+    p.add_argument("--out", type=Path, default=Path("runs/alcn"), help="run folder (default: runs/alcn)")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override any configuration key, e.g. --set optim.lr=3e-4 (repeatable)")
+    p.add_argument("--epochs", type=int, help="optim.epochs")
+    p.add_argument("--batch-size", type=int, help="optim.batch_size")
+    p.add_argument("--lr", type=float, help="optim.lr (the detector's learning rate)")
+    p.add_argument("--normalizer-lr", type=float, help="optim.normalizer_lr")
+    p.add_argument("--seed", type=int, help="seed")
+    p.add_argument("--device", choices=("cpu", "cuda"), help="run.device")
+    p.add_argument("--workers", type=int, help="run.workers (processes rendering windows)")
+    p.add_argument("--threads", type=int, help="run.threads (torch threads, 0 = default)")
+    p.add_argument("--n-train", type=int, help="data.n_train (windows rendered for training)")
+    p.add_argument("--data", help="data.path: a folder written by `alcn data phos` (training windows)")
+    p.add_argument("--val-data", help="data.val_path: a folder of validation windows")
+    p.add_argument("--method", choices=("alcn", "dog", "none"), help="model.method")
+    p.add_argument("--print-config", action="store_true", help="print the effective configuration as TOML and exit")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=_train)
+
+    d = subparsers.add_parser(
+        "train-detector", help="train a detector for new objects from a few images (second stage)",
+        description="The second stage of ALCN: from a few real images of new objects (one folder per object, "
+        "images showing the object; an optional *.mask.png beside an image marks it), make the paper's simple "
+        "synthetic images, normalize them with the frozen Normalizer (or another method) and train a new "
+        "detector. Writes detector.pt (torch state and configuration) into --out.",
+    )
+    d.add_argument("images", type=Path, help="folder with one sub-folder of images per object")
+    d.add_argument("--out", type=Path, required=True, help="output folder")
+    d.add_argument("--method", default="alcn", help="normalization applied to the windows (any registered name)")
+    d.add_argument("--weights", type=Path, help="Normalizer weight file for --method alcn (default: shipped)")
+    d.add_argument("--per-image", type=int, default=300, help="synthetic windows per real image (default 300)")
+    d.add_argument("--negatives", type=int, default=0,
+                   help="background windows (default: as many as all positive windows)")
+    d.add_argument("--extent", type=float, default=40.0, help="object size in window pixels (default 40)")
+    d.add_argument("--epochs", type=int, default=15)
+    d.add_argument("--batch-size", type=int, default=64)
+    d.add_argument("--lr", type=float, default=1e-3)
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--no-progress", action="store_true", help="no progress bars")
+    d.set_defaults(func=_train_detector)
+
+    e = subparsers.add_parser(
+        "export", help="export the Normalizer to ONNX (for the torch-free OpenCV runtime)",
+        description="Export the Normalizer of a weight file as a fully-convolutional ONNX model with dynamic "
+        "image size, run by cv2.dnn in alcn_cv.train.opencv_runtime (no torch needed).",
+    )
+    e.add_argument("--onnx", type=Path, required=True, help="output .onnx path")
+    e.add_argument("--weights", type=Path, help="Normalizer weight file (.npz; default: the shipped one)")
+    e.set_defaults(func=_export)
+
+
+def _overrides(args: argparse.Namespace) -> list[str | dict]:
+    """The flags as nested dicts, then the ``--set`` items (applied last)."""
+    items: list[str | dict] = []
+    for flag, key in _FLAGS.items():
+        value = getattr(args, flag)
+        if value is not None:
+            node: dict = {}
+            item = node
+            *tables, last = key.split(".")
+            for t in tables:
+                node = node.setdefault(t, {})
+            node[last] = value
+            items.append(item)
+    return items + list(args.set)
+
+
+def _train(args: argparse.Namespace) -> int:
+    from alcn_cv.train.config import dump_toml, load_config
+
+    cfg = load_config(args.config, _overrides(args))
+    if args.print_config:
+        sys.stdout.write(dump_toml(cfg))
+        return 0
+    from alcn_cv.train import distributed
+    from alcn_cv.train.trainer import train
+
+    try:
+        result = train(cfg, args.out, resume=args.resume, progress=not args.no_progress)
+    finally:
+        distributed.shutdown()
+    if result.status == "interrupted":
+        print(f"interrupted; continue with: alcn train --resume --out {args.out} ...", file=sys.stderr)
+        return 130
+    return 0
+
+
+def _train_detector(args: argparse.Namespace) -> int:
+    from alcn_cv.train.stage2 import main
+
+    main(args.images, args.out, method=args.method, weights=args.weights, per_image=args.per_image,
+         negatives=args.negatives, extent=args.extent, epochs=args.epochs, batch_size=args.batch_size, lr=args.lr,
+         seed=args.seed, progress=not args.no_progress)
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from alcn_cv.train.export import export_onnx
+
+    path = export_onnx(args.onnx, args.weights)
+    print(path)
+    return 0

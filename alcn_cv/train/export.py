@@ -1,0 +1,116 @@
+"""Export the Normalizer to ONNX, for the torch-free OpenCV runtime (:mod:`alcn_cv.train.opencv_runtime`).
+
+The exported graph is the Normalizer's fully-convolutional part (Sec. 3.3): it maps an image
+that is *already padded* by reflect-101 to the mixture weights on the stride-4 grid::
+
+    input  "image":   (B, 1, 4 * (gh - 1) + 48, 4 * (gw - 1) + 48) float32, intensities in [0, 1]
+    output "weights": (B, N, gh, gw) float32
+
+Both spatial sizes are dynamic. Grid point ``(i, j)`` is the window of the *unpadded* image
+centred on pixel ``(4i, 4j)``, exactly as :meth:`alcn_cv.nets.Normalizer.dense_grid`, which pads
+by 24 pixels on the top and left and ``4 * (gh - 1) + 24 - H`` on the bottom (the same on the
+right); the padding stays outside the graph so that the graph has no data-dependent indexing
+and every ONNX runtime (``cv2.dnn`` included) runs it.
+
+The weight file's header (sigmas, working scale, output range, trained) is stored in the ONNX
+model's ``metadata_props`` under the key ``alcn_cv``, so the ``.onnx`` describes itself.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import os
+import tempfile
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from alcn_cv.errors import InputError
+from alcn_cv.nets.normalizer import WINDOW, Normalizer
+from alcn_cv.weight_file import load_normalizer_file
+
+__all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx", "main"]
+
+logger = logging.getLogger(__name__)
+
+#: The ONNX file shipped beside the default weights.
+DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
+#: ONNX opset of the export (read by OpenCV 4.x and 5.x).
+OPSET = 17
+METADATA_KEY = "alcn_cv"
+
+
+class _DenseGrid(nn.Module):
+    """The Normalizer on a padded image, without the padding (see the module docstring)."""
+
+    def __init__(self, net: Normalizer) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, padded: torch.Tensor) -> torch.Tensor:
+        return self.net._weights(padded)
+
+
+def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
+    """Write the Normalizer of a weight file as an ONNX model (atomically).
+
+    Args:
+        out: the ``.onnx`` path to write.
+        weights: a Normalizer weight file (``.npz``); default: the one shipped in the package.
+
+    Returns:
+        The written path.
+
+    Raises:
+        WeightFileError: missing or corrupt weight file.
+        InputError: ``out`` is not a ``.onnx`` path.
+    """
+    out = Path(out)
+    if out.suffix != ".onnx":
+        raise InputError(f"the ONNX output must end in .onnx, got {out}")
+    weight_file = load_normalizer_file(weights)
+    net = Normalizer.from_file(weight_file).eval()
+    example = torch.rand(1, 1, WINDOW + 4 * 3, WINDOW + 4 * 5)
+    buffer = io.BytesIO()
+    with torch.no_grad():
+        torch.onnx.export(
+            _DenseGrid(net), (example,), buffer, input_names=["image"], output_names=["weights"],
+            dynamic_axes={"image": {0: "batch", 2: "height", 3: "width"},
+                          "weights": {0: "batch", 2: "grid_height", 3: "grid_width"}},
+            opset_version=OPSET, dynamo=False,
+        )
+    data = _with_metadata(buffer.getvalue(), weight_file.meta)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=out.name, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    logger.info("Normalizer exported to %s (%d kB)", out, len(data) // 1024)
+    return out
+
+
+def _with_metadata(model_bytes: bytes, meta: dict) -> bytes:
+    """Add the weight file's header to the model's ``metadata_props`` (needs the ``onnx`` package)."""
+    try:
+        import onnx
+    except ImportError:
+        logger.warning("the onnx package is not installed: the ONNX file holds no alcn_cv metadata")
+        return model_bytes
+    model = onnx.load_from_string(model_bytes)
+    header = {k: v for k, v in meta.items() if k != "training"}
+    entry = model.metadata_props.add()
+    entry.key, entry.value = METADATA_KEY, json.dumps(header)
+    onnx.checker.check_model(model)
+    return model.SerializeToString()
+
+
+def main(out: str | Path, weights: str | Path | None = None) -> Path:
+    """Pipeline entry point (hloc style): export ``weights`` to ``out``."""
+    return export_onnx(out, weights)

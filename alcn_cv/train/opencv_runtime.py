@@ -1,0 +1,107 @@
+"""The Normalizer without torch: the exported ONNX model run by OpenCV's DNN module.
+
+An OpenCV application can use ALCN with only OpenCV and NumPy installed: the Normalizer
+exported by ``alcn export --onnx`` (:mod:`alcn_cv.train.export`) runs through
+``cv2.dnn.readNetFromONNX``, and the Gaussian mixture is :func:`alcn_cv.alcn_filter` (OpenCV).
+This module imports neither torch nor :mod:`alcn_cv.nets`.
+
+:meth:`OpenCVNormalizer.dense_grid` and :meth:`OpenCVNormalizer.dense` return what
+:meth:`alcn_cv.nets.Normalizer.dense_grid` and :meth:`~alcn_cv.nets.Normalizer.dense` return
+for the same weights (to float rounding): the image is padded here by reflect-101
+(``cv2.BORDER_REFLECT_101``) exactly as the torch network pads it, and the grid is upsampled
+bilinearly with the grid points on the pixels ``4i`` (``align_corners=True``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from alcn_cv.errors import InputError, WeightFileError
+
+__all__ = ["DEFAULT_ONNX", "OpenCVNormalizer"]
+
+logger = logging.getLogger(__name__)
+
+#: The ONNX model shipped beside the default weight file (the shipped weights, exported).
+DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
+# The Normalizer's window and output stride (``Normalizer.window`` and ``Normalizer.stride``;
+# a test checks they agree; importing alcn_cv.nets here would import torch).
+WINDOW = 48
+STRIDE = 4
+
+
+def _interpolation_matrix(n: int, grid: int) -> np.ndarray:
+    """``(n, grid)`` float32 matrix of linear interpolation from grid points ``4i`` to pixels ``0..n-1``."""
+    pos = np.arange(n, dtype=np.float64) / STRIDE
+    lo = np.minimum(np.floor(pos).astype(int), grid - 1)
+    hi = np.minimum(lo + 1, grid - 1)
+    frac = pos - lo
+    m = np.zeros((n, grid), np.float64)
+    m[np.arange(n), lo] += 1 - frac
+    m[np.arange(n), hi] += frac
+    return m.astype(np.float32)
+
+
+class OpenCVNormalizer:
+    """The ALCN Normalizer run by ``cv2.dnn`` from its ONNX export.
+
+    Args:
+        onnx_path: the ``.onnx`` file written by :func:`alcn_cv.train.export.export_onnx`;
+            default: the model shipped with the package (the shipped weights).
+
+    Raises:
+        WeightFileError: the file is missing or OpenCV cannot read it.
+    """
+
+    window = WINDOW
+    stride = STRIDE
+
+    def __init__(self, onnx_path: str | Path | None = None) -> None:
+        self.path = Path(onnx_path) if onnx_path is not None else DEFAULT_ONNX
+        if not self.path.is_file():
+            raise WeightFileError(f"ONNX model not found: {self.path} (write one with `alcn export --onnx PATH`)")
+        try:
+            self.net = cv2.dnn.readNetFromONNX(str(self.path))
+        except cv2.error as exc:
+            raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}: {str(exc).strip()}") from None
+
+    def dense_grid(self, image: np.ndarray) -> np.ndarray:
+        """The Normalizer's output on the stride-4 grid.
+
+        Args:
+            image: ``(H, W)`` float32 intensities in [0, 1] (at the working scale).
+
+        Returns:
+            ``(N, ceil((H-1)/4)+1, ceil((W-1)/4)+1)`` float32; grid point ``(i, j)`` is the
+            prediction for the 48x48 window centred on pixel ``(4i, 4j)``.
+        """
+        if not isinstance(image, np.ndarray) or image.ndim != 2 or image.size == 0:
+            raise InputError(f"image must be a non-empty HxW array, got shape {getattr(image, 'shape', None)}")
+        if image.dtype != np.float32:
+            raise InputError(f"image must be float32 intensities in [0, 1], got {image.dtype}")
+        if not np.isfinite(image).all():
+            raise InputError("image contains NaN or inf")
+        h, w = image.shape
+        gh, gw = math.ceil((h - 1) / STRIDE) + 1, math.ceil((w - 1) / STRIDE) + 1
+        half = WINDOW // 2
+        padded = cv2.copyMakeBorder(image, half, STRIDE * (gh - 1) + half - h, half, STRIDE * (gw - 1) + half - w,
+                                    cv2.BORDER_REFLECT_101)
+        self.net.setInput(padded[None, None])
+        out = self.net.forward()
+        return np.ascontiguousarray(out[0], dtype=np.float32)
+
+    def dense(self, image: np.ndarray) -> np.ndarray:
+        """Per-pixel weight maps F_k (Eq. 3): :meth:`dense_grid` upsampled bilinearly to ``(N, H, W)``."""
+        grid = self.dense_grid(image)
+        h, w = image.shape
+        ay = _interpolation_matrix(h, grid.shape[1])
+        ax = _interpolation_matrix(w, grid.shape[2])
+        return np.matmul(ay, np.matmul(grid, ax.T))
+
+    def __repr__(self) -> str:
+        return f"OpenCVNormalizer({self.path.name!r})"

@@ -1,0 +1,312 @@
+"""The second stage of ALCN (Rad, Roth & Lepetit, BMVC 2017, Sec. 3.2 and 4.3).
+
+Once the Normalizer has been trained jointly with a detector on many objects (the first stage,
+:mod:`alcn_cv.train.trainer`), it is frozen; for *new* objects, seen in a few images under one
+lighting, a *new* detector is trained on the Normalizer's outputs. :func:`train_detector` is
+that training step, on windows already normalized by the caller (ALCN, a baseline, or none),
+so every method of a benchmark trains the same detector in the same way.
+
+:func:`main` is the user-facing second stage (``alcn train-detector``): from a few real images
+of new objects it makes the paper's simple synthetic images (:mod:`alcn_cv.data.synthetic`),
+normalizes them with the frozen Normalizer (or any registered normalization), applies the
+per-window standardization the Normalizer was trained with, and trains a new detector.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+from tqdm.auto import tqdm
+
+from alcn_cv.errors import InputError
+from alcn_cv.nets.detector import INPUT, Detector
+
+__all__ = ["NonFiniteLossError", "evaluate_detector", "main", "normalize_windows", "object_windows", "train_detector"]
+
+logger = logging.getLogger(__name__)
+
+_EVAL_BATCH = 1024
+
+
+class NonFiniteLossError(RuntimeError):
+    """The training loss became NaN or inf."""
+
+
+def _check_windows(windows: object, labels: object, num_classes: int, what: str) -> tuple[torch.Tensor, torch.Tensor]:
+    if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.shape[1:] != (INPUT, INPUT):
+        raise InputError(f"{what} windows must be an (n, {INPUT}, {INPUT}) array, got {getattr(windows, 'shape', None)}")
+    if windows.dtype != np.float32:
+        raise InputError(f"{what} windows must be float32, got {windows.dtype}")
+    if len(windows) == 0:
+        raise InputError(f"{what} windows are empty")
+    if not np.isfinite(windows).all():
+        raise InputError(f"{what} windows contain NaN or inf")
+    if not isinstance(labels, np.ndarray) or labels.shape != (len(windows),) or not np.issubdtype(labels.dtype, np.integer):
+        raise InputError(f"{what} labels must be an integer array of shape ({len(windows)},), got "
+                         f"{getattr(labels, 'dtype', None)} {getattr(labels, 'shape', None)}")
+    if labels.min() < 0 or labels.max() >= num_classes:
+        raise InputError(f"{what} labels must be in [0, {num_classes - 1}], got [{labels.min()}, {labels.max()}]")
+    return torch.from_numpy(windows).unsqueeze(1), torch.from_numpy(labels.astype(np.int64))
+
+
+@torch.no_grad()
+def evaluate_detector(net: nn.Module, windows: np.ndarray, labels: np.ndarray) -> tuple[float, float]:
+    """Mean cross-entropy and accuracy of a detector on normalized windows.
+
+    Args:
+        net: the detector (its mode is restored afterwards).
+        windows: ``(n, 32, 32)`` float32 normalized windows.
+        labels: ``(n,)`` int64, 0 = background, 1..K = objects.
+
+    Returns:
+        ``(loss, accuracy)``, accuracy in [0, 1].
+    """
+    num_classes = getattr(net, "num_classes", int(labels.max()) + 1)
+    x, y = _check_windows(windows, labels, num_classes, "validation")
+    device = next(net.parameters()).device
+    was_training = net.training
+    net.eval()
+    loss, correct = 0.0, 0
+    for i in range(0, len(x), _EVAL_BATCH):
+        xb, yb = x[i : i + _EVAL_BATCH].to(device), y[i : i + _EVAL_BATCH].to(device)
+        logits = net(xb)
+        loss += float(F.cross_entropy(logits, yb, reduction="sum"))
+        correct += int((logits.argmax(1) == yb).sum())
+    net.train(was_training)
+    return loss / len(x), correct / len(x)
+
+
+def train_detector(
+    windows: np.ndarray,
+    labels: np.ndarray,
+    num_classes: int,
+    *,
+    epochs: int,
+    batch_size: int,
+    lr: float,
+    seed: int,
+    val: tuple[np.ndarray, np.ndarray] | None = None,
+    progress: bool = True,
+    net: nn.Module | None = None,
+    weight_decay: float = 0.0,
+    device: str = "cpu",
+) -> nn.Module:
+    """Train a detector on normalized windows (the paper's second stage, Normalizer frozen).
+
+    Minimises the cross-entropy (negative log-likelihood of the labels) with Adam over shuffled
+    mini-batches. Deterministic for a ``seed`` on the CPU: the initial weights (when ``net`` is
+    None), the shuffling and dropout all draw from generators seeded by it, and the global
+    torch random state is left as it was.
+
+    Args:
+        windows: ``(n, 32, 32)`` float32, the 32x32 centres of the windows *after*
+            normalization and whatever input policy the caller applies (for example per-window
+            standardization); the same policy must be applied at test time.
+        labels: ``(n,)`` int64, 0 = background, 1..K = objects.
+        num_classes: K + 1.
+        epochs: passes over the data (>= 1).
+        batch_size: windows per step (>= 1).
+        lr: Adam learning rate (> 0).
+        seed: random seed.
+        val: optional ``(windows, labels)`` in the same format; loss and accuracy on it are
+            logged after every epoch.
+        progress: show a tqdm bar with the loss and accuracy.
+        net: the network to train (modified in place); default ``Detector(num_classes)``
+            initialised from ``seed``. It must map ``(B, 1, 32, 32)`` to ``(B, num_classes)``.
+        weight_decay: Adam's L2 penalty.
+        device: torch device to train on.
+
+    Returns:
+        The trained network, in eval mode.
+
+    Raises:
+        InputError: malformed windows or labels, or a non-positive setting.
+    """
+    if epochs < 1 or batch_size < 1 or not lr > 0:
+        raise InputError(f"need epochs >= 1, batch_size >= 1 and lr > 0, got {epochs}, {batch_size}, {lr}")
+    x, y = _check_windows(windows, labels, num_classes, "training")
+    if val is not None:
+        _check_windows(val[0], val[1], num_classes, "validation")
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        if net is None:
+            net = Detector(num_classes)
+        net.to(device).train()
+        optimiser = torch.optim.Adam(net.parameters(), lr=lr, weight_decay=weight_decay)
+        order = torch.Generator().manual_seed(seed)
+        bar = tqdm(range(epochs), desc="detector", unit="epoch", disable=not progress, leave=False)
+        for epoch in bar:
+            perm = torch.randperm(len(x), generator=order)
+            total, correct = 0.0, 0
+            for i in range(0, len(x), batch_size):
+                idx = perm[i : i + batch_size]
+                xb, yb = x[idx].to(device), y[idx].to(device)
+                logits = net(xb)
+                loss = F.cross_entropy(logits, yb)
+                if not torch.isfinite(loss):
+                    raise NonFiniteLossError(f"detector loss is {float(loss)} at epoch {epoch + 1}; lower lr ({lr})")
+                optimiser.zero_grad(set_to_none=True)
+                loss.backward()
+                optimiser.step()
+                total += loss.item() * len(idx)
+                correct += int((logits.argmax(1) == yb).sum())
+            stats = {"loss": total / len(x), "acc": correct / len(x)}
+            if val is not None:
+                stats["val_loss"], stats["val_acc"] = evaluate_detector(net, *val)
+                net.train()
+            bar.set_postfix({k: f"{v:.3f}" for k, v in stats.items()})
+            logger.debug("detector epoch %d/%d: %s", epoch + 1, epochs, stats)
+    if val is not None:
+        logger.info("detector: val_loss %.4f, val_acc %.4f", stats["val_loss"], stats["val_acc"])
+    return net.eval()
+
+
+def standardize_windows(x: np.ndarray, eps: float = 1e-4) -> np.ndarray:
+    """Per-window standardization of ``(n, h, w)``: zero mean, unit variance per window."""
+    mean = x.mean(axis=(1, 2), keepdims=True)
+    return ((x - mean) / (x.std(axis=(1, 2), keepdims=True) + eps)).astype(np.float32)
+
+
+def normalize_windows(windows: np.ndarray, normalization, policy: str = "standardize") -> np.ndarray:
+    """Normalize 64x64 windows and keep the detector's centre 32x32.
+
+    Args:
+        windows: ``(n, 64, 64)`` uint8 windows (at the Normalizer's working resolution).
+        normalization: an object with ``normalize(gray_float32) -> float32`` (any
+            :func:`alcn_cv.create` result; for ALCN create it with ``scale=1`` since the
+            windows are already at the working resolution).
+        policy: ``"standardize"`` (per-window standardization, as the shipped Normalizer was
+            trained) or ``"raw"``.
+
+    Returns:
+        ``(n, 32, 32)`` float32 detector inputs.
+    """
+    if windows.ndim != 3 or windows.shape[1:] != (64, 64) or windows.dtype != np.uint8:
+        raise InputError(f"windows must be uint8 (n, 64, 64), got {windows.dtype} {windows.shape}")
+    c = (64 - INPUT) // 2
+    out = np.stack([normalization.normalize(w.astype(np.float32) / np.float32(255))[c : c + INPUT, c : c + INPUT]
+                    for w in windows]) if len(windows) else np.zeros((0, INPUT, INPUT), np.float32)
+    return standardize_windows(out) if policy == "standardize" else out.astype(np.float32)
+
+
+def _read_objects(folder: Path) -> list[tuple[str, list[tuple[np.ndarray, object]]]]:
+    """``[(object name, [(gray image, mask or box), ...]), ...]`` from one sub-folder per object."""
+    from alcn_cv.io import list_images, read_image
+
+    if not folder.is_dir():
+        raise InputError(f"not a folder: {folder}")
+    objects = []
+    for sub in sorted(p for p in folder.iterdir() if p.is_dir()):
+        items = []
+        for path in list_images(sub):
+            if path.name.endswith(".mask.png"):
+                continue
+            image = read_image(path)
+            mask_path = path.with_name(path.stem + ".mask.png")
+            if mask_path.is_file():
+                mask = read_image(mask_path)
+                mask = mask if mask.ndim == 2 else mask[..., 0]
+                if mask.shape != image.shape[:2]:
+                    raise InputError(f"{mask_path}: mask {mask.shape} does not match the image {image.shape[:2]}")
+                items.append((image, mask > 0))
+            else:
+                items.append((image, [0, 0, image.shape[1], image.shape[0]]))
+        if items:
+            objects.append((sub.name, items))
+    if not objects:
+        raise InputError(f"{folder} holds no sub-folder with images (one sub-folder per object)")
+    return objects
+
+
+def object_windows(
+    objects: list[tuple[str, list[tuple[np.ndarray, object]]]],
+    per_image: int,
+    negatives: int,
+    extent: float,
+    seed: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Synthetic training windows (paper Sec. 4.1) for objects given as ``(name, [(image, mask or box)])``.
+
+    Returns:
+        ``(windows (n, 64, 64) uint8, labels (n,) int64)``; label ``k`` is the k-th object (from
+        1), 0 background; ``negatives`` (0: as many as the positives) background windows.
+    """
+    from alcn_cv.data.synthetic import augment, sample_negatives
+
+    rng = np.random.default_rng(seed)
+    parts, labels = [], []
+    for k, (_, items) in enumerate(objects, start=1):
+        for image, mask_or_box in items:
+            parts.append(augment(image, mask_or_box, per_image, rng, extent=extent))
+            labels.append(np.full(per_image, k, np.int64))
+    n_neg = negatives or sum(len(p) for p in parts)
+    images = [im for _, items in objects for im, _ in items]
+    boxes = [mb for _, items in objects for _, mb in items]
+    parts.append(sample_negatives(images, boxes, n_neg, rng, extent=extent))
+    labels.append(np.zeros(n_neg, np.int64))
+    return np.concatenate(parts), np.concatenate(labels)
+
+
+def main(
+    images: str | Path,
+    out: str | Path,
+    *,
+    method: str = "alcn",
+    weights: str | Path | None = None,
+    per_image: int = 300,
+    negatives: int = 0,
+    extent: float = 40.0,
+    epochs: int = 15,
+    batch_size: int = 64,
+    lr: float = 1e-3,
+    seed: int = 0,
+    progress: bool = True,
+) -> Path:
+    """The second stage from image files (``alcn train-detector``).
+
+    Args:
+        images: a folder with one sub-folder per new object holding its real images (the whole
+            image is the object unless ``NAME.mask.png`` beside ``NAME.*`` marks it).
+        out: output folder; ``detector.pt`` holds ``{"state_dict", "config", "classes",
+            "method", "policy"}``.
+        method: the normalization (``"alcn"`` uses the Normalizer ``weights``, default shipped).
+        per_image, negatives, extent: see :func:`object_windows`.
+        epochs, batch_size, lr, seed: see :func:`train_detector`.
+
+    Returns:
+        The path of ``detector.pt``.
+    """
+    import alcn_cv
+
+    objects = _read_objects(Path(images))
+    windows, labels = object_windows(objects, per_image, negatives, extent, seed)
+    params: dict = {"weights": weights, "scale": 1.0} if method == "alcn" else {}
+    x = normalize_windows(windows, alcn_cv.create(method, **params))
+    logger.info("%d objects, %d windows (%d background), method %s", len(objects), len(x), int((labels == 0).sum()),
+                method)
+    net = train_detector(x, labels, len(objects) + 1, epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
+                         progress=progress)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "detector.pt"
+    state = {"state_dict": net.state_dict(), "config": net.config, "classes": ["background"] + [n for n, _ in objects],
+             "method": method, "policy": "standardize"}
+    fd, tmp = tempfile.mkstemp(dir=out, prefix="detector.pt", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            torch.save(state, f)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    (out / "classes.json").write_text(json.dumps(state["classes"], indent=1))
+    logger.info("detector written to %s", path)
+    return path

@@ -1,0 +1,283 @@
+"""Calibration targets: chessboards and ChArUco boards, their detection, and printable images.
+
+A :class:`BoardSpec` describes a target in millimetres. Its detector returns, for one image,
+the detected image points and the matching 3D points of the board frame (x right, y down
+along the printed board, z = 0 on the board; units mm):
+
+- ``chessboard``: ``cols x rows`` **inner corners** (OpenCV's ``patternSize``); detection with
+  ``cv2.findChessboardCorners`` + ``cv2.cornerSubPix`` (11x11 window, as OpenCV's calibration
+  sample). The whole board, with its white border, must be visible. (The sector-based
+  ``findChessboardCornersSB`` is not used: it also reports part of a larger board, which
+  would hide a board definition that does not match the images.)
+- ``charuco``: ``cols x rows`` **squares** with ArUco markers in the white squares
+  (Garrido-Jurado et al., Pattern Recognition 2014); detection with OpenCV 5's
+  ``cv2.aruco.CharucoDetector`` and ``CharucoBoard.matchImagePoints``. Partial views work.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from alcn_cv.errors import InputError
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["BoardSpec", "Detection", "write_board_image", "suggest_chessboard_size"]
+
+_KINDS = ("chessboard", "charuco")
+_SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
+
+
+@dataclass(frozen=True)
+class Detection:
+    """A board found in one image.
+
+    Attributes:
+        image_points: float32 (N, 2) pixel coordinates, OpenCV convention (pixel centre (0, 0)).
+        object_points: float32 (N, 3) the same points in the board frame, mm (z = 0).
+        ids: int32 (N,) corner ids (chessboard: row-major index; ChArUco: the board's ids).
+        num_markers: ArUco markers seen (0 for chessboards).
+    """
+
+    image_points: np.ndarray
+    object_points: np.ndarray
+    ids: np.ndarray
+    num_markers: int = 0
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    """A planar calibration target.
+
+    Attributes:
+        kind: ``"chessboard"`` or ``"charuco"``.
+        cols, rows: chessboard: inner corners per row and per column (``patternSize``);
+            ChArUco: squares along x and along y.
+        square: side of a square, mm.
+        marker: ChArUco only: side of an ArUco marker, mm (< ``square``).
+        dictionary: ChArUco only: name of a predefined ArUco dictionary (``cv2.aruco.DICT_*``).
+        legacy: ChArUco only: boards printed by OpenCV < 4.6 with an even number of rows
+            (``CharucoBoard.setLegacyPattern``).
+    """
+
+    kind: str = "charuco"
+    cols: int = 7
+    rows: int = 5
+    square: float = 35.0
+    marker: float = 26.0
+    dictionary: str = "DICT_5X5_100"
+    legacy: bool = False
+
+    def __post_init__(self) -> None:
+        if self.kind not in _KINDS:
+            raise InputError(f"board kind must be one of {_KINDS}, got {self.kind!r}")
+        minimum = 2 if self.kind == "chessboard" else 3
+        if int(self.cols) < minimum or int(self.rows) < minimum:
+            raise InputError(f"a {self.kind} needs at least {minimum}x{minimum} "
+                             f"{'inner corners' if self.kind == 'chessboard' else 'squares'}, "
+                             f"got {self.cols}x{self.rows}")
+        if not self.square > 0:
+            raise InputError(f"square size must be positive (mm), got {self.square}")
+        if self.kind == "charuco":
+            if not 0 < self.marker < self.square:
+                raise InputError(f"marker size must be in (0, square={self.square}) mm, got {self.marker}")
+            if not hasattr(cv2.aruco, self.dictionary):
+                raise InputError(f"unknown ArUco dictionary {self.dictionary!r} (e.g. DICT_5X5_100)")
+            needed = (self.cols * self.rows) // 2
+            size = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary)).bytesList.shape[0]
+            if needed > size:
+                raise InputError(f"a {self.cols}x{self.rows} ChArUco board needs {needed} markers but "
+                                 f"{self.dictionary} has {size}; choose a larger dictionary")
+
+    # -- geometry ---------------------------------------------------------------------
+    @property
+    def num_corners(self) -> int:
+        """Number of corners of the whole board."""
+        if self.kind == "chessboard":
+            return self.cols * self.rows
+        return (self.cols - 1) * (self.rows - 1)
+
+    @property
+    def size_mm(self) -> tuple[float, float]:
+        """(width, height) of the checkered area in mm (chessboard: one square beyond the
+        outer inner corners on every side)."""
+        n = (self.cols + 1, self.rows + 1) if self.kind == "chessboard" else (self.cols, self.rows)
+        return n[0] * self.square, n[1] * self.square
+
+    def corners_3d(self) -> np.ndarray:
+        """float32 (num_corners, 3) all corners in the board frame (mm), in id order."""
+        if self.kind == "charuco":
+            return np.asarray(self.charuco_board().getChessboardCorners(), np.float32).reshape(-1, 3)
+        grid = np.mgrid[0 : self.cols, 0 : self.rows].T.reshape(-1, 2)
+        return np.c_[(grid + 1) * self.square, np.zeros(len(grid))].astype(np.float32)
+
+    def charuco_board(self) -> cv2.aruco.CharucoBoard:
+        """The OpenCV board (ChArUco only); units mm, origin at the board's top-left corner."""
+        if self.kind != "charuco":
+            raise InputError("charuco_board() needs a ChArUco board spec")
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+        board = cv2.aruco.CharucoBoard((self.cols, self.rows), float(self.square), float(self.marker), dictionary)
+        board.setLegacyPattern(bool(self.legacy))
+        return board
+
+    def describe(self) -> str:
+        """A short human-readable description, used in messages."""
+        if self.kind == "chessboard":
+            return f"{self.cols}x{self.rows} chessboard (inner corners, {self.square:g} mm squares)"
+        return (f"{self.cols}x{self.rows} ChArUco board ({self.square:g} mm squares, {self.marker:g} mm markers, "
+                f"{self.dictionary}{', legacy' if self.legacy else ''})")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    # -- detection --------------------------------------------------------------------
+    def detector(self) -> "BoardDetector":
+        """A reusable detector for this board (builds the ArUco detector once)."""
+        return BoardDetector(self)
+
+
+class BoardDetector:
+    """Detects one :class:`BoardSpec` in images. Call it with a gray or BGR uint8 image."""
+
+    def __init__(self, spec: BoardSpec, min_charuco_corners: int = 6) -> None:
+        self.spec = spec
+        self.min_charuco_corners = int(min_charuco_corners)
+        self._object = spec.corners_3d()
+        if spec.kind == "charuco":
+            self._board = spec.charuco_board()
+            params = cv2.aruco.DetectorParameters()
+            params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
+            self._detector = cv2.aruco.CharucoDetector(self._board, cv2.aruco.CharucoParameters(), params)
+            self._valid_ids = set(int(i) for i in np.asarray(self._board.getIds()).ravel())
+        self.last_num_markers = 0
+        self.last_foreign_markers = 0
+
+    def __call__(self, image: np.ndarray) -> Detection | None:
+        gray = _to_gray(image)
+        if self.spec.kind == "chessboard":
+            return self._chessboard(gray)
+        return self._charuco(gray)
+
+    def _chessboard(self, gray: np.ndarray) -> Detection | None:
+        size = (self.spec.cols, self.spec.rows)
+        flags = cv2.CALIB_CB_ADAPTIVE_THRESH + cv2.CALIB_CB_NORMALIZE_IMAGE + cv2.CALIB_CB_FAST_CHECK
+        found, corners = cv2.findChessboardCorners(gray, size, flags=flags)
+        if not found:
+            return None
+        corners = cv2.cornerSubPix(gray, corners, (11, 11), (-1, -1), _SUBPIX_CRITERIA)
+        pts = np.asarray(corners, np.float32).reshape(-1, 2)
+        return Detection(pts, self._object.copy(), np.arange(len(pts), dtype=np.int32))
+
+    def _charuco(self, gray: np.ndarray) -> Detection | None:
+        corners, ids, marker_corners, marker_ids = self._detector.detectBoard(gray)
+        seen = [] if marker_ids is None else [int(i) for i in np.asarray(marker_ids).ravel()]
+        self.last_num_markers = len(seen)
+        self.last_foreign_markers = sum(i not in self._valid_ids for i in seen)
+        if ids is None or len(ids) < self.min_charuco_corners:
+            return None
+        ids = np.asarray(ids, np.int32).ravel()
+        if self._board.checkCharucoCornersCollinear(ids):
+            return None
+        obj, img = self._board.matchImagePoints(corners, ids)
+        return Detection(np.asarray(img, np.float32).reshape(-1, 2), np.asarray(obj, np.float32).reshape(-1, 3),
+                         ids, len(seen))
+
+
+def _to_gray(image: np.ndarray) -> np.ndarray:
+    image = np.asarray(image)
+    if image.dtype != np.uint8:
+        raise InputError(f"board detection needs a uint8 image, got {image.dtype}")
+    if image.ndim == 2:
+        return image
+    if image.ndim == 3 and image.shape[2] == 3:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    raise InputError(f"expected a gray HxW or BGR HxWx3 image, got shape {image.shape}")
+
+
+def suggest_chessboard_size(image: np.ndarray, max_side: int = 14) -> tuple[int, int] | None:
+    """Find the inner-corner count of a chessboard seen in ``image`` by trying sizes.
+
+    Used to explain a failed detection ("you said 8x6, the image holds a 9x6 board"). Tries
+    every size from large to small with the fast check; returns ``(cols, rows)`` or None.
+    """
+    gray = _to_gray(image)
+    scale = min(1.0, 640.0 / max(gray.shape))
+    if scale < 1:
+        gray = cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH + cv2.CALIB_CB_NORMALIZE_IMAGE + cv2.CALIB_CB_FAST_CHECK
+    sizes = sorted(((c, r) for c in range(3, max_side + 1) for r in range(3, c + 1)), key=lambda s: -s[0] * s[1])
+    for c, r in sizes:
+        if cv2.findChessboardCorners(gray, (c, r), flags=flags)[0]:
+            return c, r
+    return None
+
+
+def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, margin_mm: float = 10.0) -> dict:
+    """Write a printable image of the board and a JSON of its dimensions beside it.
+
+    The PNG carries its DPI so that printing at 100 % scale gives squares of exactly
+    ``spec.square`` mm; measure a printed square and pass the measured size to
+    calibration if the printer scaled it.
+
+    Args:
+        spec: the board.
+        path: output ``.png``; ``<path>.json`` (same stem) gets the dimensions.
+        dpi: print resolution, dots per inch.
+        margin_mm: white margin around the board, mm.
+
+    Returns:
+        The dimensions written to the JSON (board spec, pixel and mm sizes, DPI).
+    """
+    from PIL import Image
+
+    if dpi < 72:
+        raise InputError(f"dpi must be at least 72, got {dpi}")
+    path = Path(path)
+    if path.suffix.lower() != ".png":
+        raise InputError(f"board image must be a .png, got {path.name}")
+    px_per_mm = dpi / 25.4
+    square_px = int(round(spec.square * px_per_mm))
+    margin_px = int(round(margin_mm * px_per_mm))
+    n = (spec.cols + 1, spec.rows + 1) if spec.kind == "chessboard" else (spec.cols, spec.rows)
+    size = (n[0] * square_px, n[1] * square_px)
+    if spec.kind == "charuco":
+        board_img = spec.charuco_board().generateImage(size, marginSize=0, borderBits=1)
+    else:
+        yy, xx = np.mgrid[0 : size[1], 0 : size[0]]
+        board_img = np.where(((xx // square_px) + (yy // square_px)) % 2 == 0, 0, 255).astype(np.uint8)
+    image = cv2.copyMakeBorder(board_img, margin_px, margin_px, margin_px, margin_px, cv2.BORDER_CONSTANT, value=255)
+    # Label outside the board so that a printed sheet says what it is.
+    label = f"{spec.describe()} - print at 100% ({dpi} dpi)"
+    font_scale = max(0.4, margin_px / 60.0)
+    cv2.putText(image, label, (margin_px, image.shape[0] - max(4, margin_px // 4)), cv2.FONT_HERSHEY_SIMPLEX,
+                font_scale, 0, max(1, int(font_scale * 1.5)), cv2.LINE_AA)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    Image.fromarray(image).save(tmp, format="PNG", dpi=(dpi, dpi))
+    os.replace(tmp, path)
+    true_square = square_px / px_per_mm
+    info = {
+        "board": spec.to_dict(),
+        "dpi": dpi,
+        "image_size_px": [int(image.shape[1]), int(image.shape[0])],
+        "image_size_mm": [image.shape[1] / px_per_mm, image.shape[0] / px_per_mm],
+        "square_px": square_px,
+        "square_mm_printed": true_square,
+        "marker_mm_printed": spec.marker * true_square / spec.square if spec.kind == "charuco" else None,
+        "board_size_mm": [size[0] / px_per_mm, size[1] / px_per_mm],
+    }
+    json_path = path.with_suffix(".json")
+    tmp = json_path.with_name(f".{json_path.name}.tmp")
+    tmp.write_text(json.dumps(info, indent=2))
+    os.replace(tmp, json_path)
+    if abs(true_square - spec.square) > 2e-3 * spec.square:  # beyond what printers hold anyway
+        logger.warning("at %d dpi a square is %d px = %.3f mm instead of %.3f mm; calibrate with --square %.3f",
+                       dpi, square_px, true_square, spec.square, true_square)
+    return info

@@ -1,0 +1,509 @@
+"""Camera calibration from images or a video of a chessboard or ChArUco board.
+
+Zhang, "A flexible new technique for camera calibration", TPAMI 2000, as implemented by
+``cv2.calibrateCamera`` (pinhole model with OpenCV's radial-tangential distortion
+``k1, k2, p1, p2, k3``). From a video, frames are chosen for board coverage and spread of
+poses (:func:`select_views`) rather than taking every frame.
+
+Outputs of :func:`main` in ``out_dir``:
+
+- ``camera.yaml``: OpenCV FileStorage with ``camera_matrix`` (3x3), ``distortion_coefficients``
+  (1x5), ``image_width``, ``image_height``, ``rms``; read it with :func:`load_calibration`.
+- ``colmap/cameras.txt`` (+ empty ``images.txt``/``points3D.txt``): the same camera in COLMAP's
+  convention (principal point + 0.5).
+- ``views.json``: per-view reprojection errors and the views used.
+- ``calibration.png``: board coverage and per-view errors (:mod:`calib.report`).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from alcn_cv.data.manifest import write_json
+from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.formats.colmap import ColmapCamera, camera_from_opencv, write_text_model
+
+from .board import BoardSpec, Detection, suggest_chessboard_size
+
+logger = logging.getLogger(__name__)
+
+__all__ = [
+    "View",
+    "Calibration",
+    "IMAGE_EXTENSIONS",
+    "list_images",
+    "detect_in_images",
+    "detect_in_video",
+    "select_views",
+    "calibrate",
+    "save_calibration",
+    "load_calibration",
+    "main",
+]
+
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
+VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
+#: RMS reprojection error (px) above which a calibration is reported as poor.
+POOR_RMS_PX = 1.0
+#: Fewest views accepted, and fewest views recommended.
+MIN_VIEWS = 3
+RECOMMENDED_VIEWS = 10
+
+
+@dataclass
+class View:
+    """One image in which the board was found: its name and the detection."""
+
+    name: str
+    detection: Detection
+    sharpness: float = 0.0
+
+
+@dataclass
+class Calibration:
+    """Result of a calibration.
+
+    Attributes:
+        K: float64 (3, 3) camera matrix, OpenCV pixel convention.
+        dist: float64 (5,) ``k1, k2, p1, p2, k3``.
+        image_size: (width, height) px.
+        rms: overall RMS reprojection error, px.
+        view_names: the views used.
+        view_errors: float64 (V,) per-view RMS reprojection error, px.
+        rvecs, tvecs: per-view board poses (board -> camera; tvec in the board's unit, mm).
+        board: the target used.
+        image_points: per-view detected points, for the report.
+    """
+
+    K: np.ndarray
+    dist: np.ndarray
+    image_size: tuple[int, int]
+    rms: float
+    view_names: list[str] = field(default_factory=list)
+    view_errors: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rvecs: list[np.ndarray] = field(default_factory=list)
+    tvecs: list[np.ndarray] = field(default_factory=list)
+    board: BoardSpec | None = None
+    image_points: list[np.ndarray] = field(default_factory=list)
+
+    def colmap_camera(self, camera_id: int = 1) -> ColmapCamera:
+        """The same camera as a COLMAP camera (``OPENCV`` or ``FULL_OPENCV`` model)."""
+        return camera_from_opencv(self.K, self.dist, *self.image_size, camera_id=camera_id)
+
+
+def list_images(folder: str | os.PathLike) -> list[Path]:
+    """Image files of a folder (sorted by name)."""
+    root = Path(folder)
+    if not root.is_dir():
+        raise InputError(f"{root}: not a folder")
+    files = sorted(p for p in root.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS and p.is_file())
+    if not files:
+        raise InputError(f"{root}: no images ({', '.join(IMAGE_EXTENSIONS)}) in this folder")
+    return files
+
+
+def _sharpness(gray: np.ndarray) -> float:
+    """Variance of the Laplacian (higher is sharper)."""
+    return float(cv2.Laplacian(gray, cv2.CV_64F).var())
+
+
+def _explain_no_board(board: BoardSpec, sample: np.ndarray | None, n_images: int, foreign: int, markers: int) -> str:
+    """Message for 'board not found anywhere', with a diagnosis when one is possible."""
+    msg = f"no {board.describe()} found in any of {n_images} image(s)."
+    if board.kind == "chessboard" and sample is not None:
+        guess = suggest_chessboard_size(sample)
+        if guess is not None and set(guess) != {board.cols, board.rows}:
+            return (msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard: the board definition does "
+                    f"not match the images; pass --cols {guess[0]} --rows {guess[1]} (inner corners, not squares).")
+        return msg + (" Check --cols/--rows (inner corners, i.e. squares minus one), that the whole board is "
+                      "visible, in focus and well lit.")
+    if foreign:
+        return (msg + f" {foreign} ArUco marker(s) were seen whose ids are not on this board: the board definition "
+                "does not match the images; check --cols/--rows (squares), --dictionary and --legacy.")
+    if markers:
+        return (msg + f" {markers} ArUco marker(s) of the board were seen but no ChArUco corner could be placed "
+                "between them: the board layout does not match the images; check --cols/--rows (squares, "
+                "not inner corners) and --legacy.")
+    return msg + (" Check --board, --dictionary, --cols/--rows (squares) and --legacy, and that the board is "
+                  "visible, in focus and well lit.")
+
+
+def _check_chessboard_size(board: BoardSpec, samples: Sequence[tuple[str, np.ndarray]],
+                           missed: tuple[str, np.ndarray] | None, num_found: int) -> None:
+    """The chessboard detector also finds part of a larger board: check on a few images
+    where the board was found that it does not extend by a row or a column; and when the
+    board was found in too few images, whether the others hold a board of another size."""
+    if board.kind != "chessboard":
+        return
+    if missed is not None and num_found < MIN_VIEWS:
+        guess = suggest_chessboard_size(missed[1])
+        if guess is not None and set(guess) != {board.cols, board.rows}:
+            raise InputError(f"the {board.describe()} was found in only {num_found} image(s) and {missed[0]} holds a "
+                             f"{guess[0]}x{guess[1]} chessboard: the board definition does not match the images; "
+                             f"pass --cols {guess[0]} --rows {guess[1]} (inner corners, not squares)")
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH + cv2.CALIB_CB_NORMALIZE_IMAGE + cv2.CALIB_CB_FAST_CHECK
+    for name, gray in samples:
+        for size in ((board.cols + 1, board.rows), (board.cols, board.rows + 1)):
+            if cv2.findChessboardCorners(gray, size, flags=flags)[0]:
+                guess = suggest_chessboard_size(gray) or size
+                raise InputError(f"{name} holds a {guess[0]}x{guess[1]} chessboard, larger than the {board.cols}x"
+                                 f"{board.rows} given: the board definition does not match the images; pass --cols "
+                                 f"{guess[0]} --rows {guess[1]} (inner corners of the whole board)")
+
+
+def _read_gray(path: Path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        raise InputError(f"{path}: cannot read this image (corrupt or unsupported format)")
+    return image
+
+
+def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tuple[list[View], tuple[int, int]]:
+    """Detect the board in every image.
+
+    Returns:
+        The views where the board was found (name = file name) and the common image size
+        ``(width, height)``.
+
+    Raises:
+        InputError: unreadable image, images of different sizes, or the board found in none.
+    """
+    paths = [Path(p) for p in paths]
+    if not paths:
+        raise InputError("no images given")
+    detector = board.detector()
+    views: list[View] = []
+    sizes: dict[tuple[int, int], list[str]] = {}
+    first = None
+    foreign = markers = 0
+    samples: list[tuple[str, np.ndarray]] = []
+    missed = None
+    for path in tqdm(paths, desc="detecting board", unit="image", disable=len(paths) < 20):
+        gray = _read_gray(path)
+        first = gray if first is None else first
+        sizes.setdefault((gray.shape[1], gray.shape[0]), []).append(path.name)
+        det = detector(gray)
+        foreign += detector.last_foreign_markers
+        markers += detector.last_num_markers
+        if det is None:
+            logger.info("%s: board not found", path.name)
+            missed = missed or (path.name, gray)
+            continue
+        if len(samples) < 3:
+            samples.append((path.name, gray))
+        views.append(View(path.name, det, _sharpness(gray)))
+    if len(sizes) > 1:
+        listing = "; ".join(f"{w}x{h}: {', '.join(names[:3])}{' ...' if len(names) > 3 else ''}"
+                            for (w, h), names in sizes.items())
+        raise InputError(f"images have different sizes ({listing}); calibrate each camera/resolution separately "
+                         "or resize them all to one size first")
+    if not views:
+        raise InputError(_explain_no_board(board, first, len(paths), foreign, markers))
+    _check_chessboard_size(board, samples, missed, len(views))
+    logger.info("board found in %d of %d images", len(views), len(paths))
+    return views, next(iter(sizes))
+
+
+def _video_frames(path: Path, step: int) -> Iterator[tuple[int, np.ndarray]]:
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise InputError(f"{path}: cannot open this video")
+    try:
+        index = 0
+        while True:
+            ok = cap.grab()
+            if not ok:
+                break
+            if index % step == 0:
+                ok, frame = cap.retrieve()
+                if not ok:
+                    break
+                yield index, frame
+            index += 1
+    finally:
+        cap.release()
+
+
+def video_frame_count(path: str | os.PathLike) -> int:
+    """Number of frames a video reports (0 when unknown)."""
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise InputError(f"{path}: cannot open this video")
+    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    cap.release()
+    return max(n, 0)
+
+
+def detect_in_video(path: str | os.PathLike, board: BoardSpec, max_candidates: int = 150) -> tuple[list[View], tuple[int, int]]:
+    """Detect the board in evenly spaced frames of a video (at most ``max_candidates``
+    frames are examined). View names are ``frame_000123``."""
+    path = Path(path)
+    total = video_frame_count(path)
+    step = max(1, -(-total // max_candidates)) if total else 1
+    detector = board.detector()
+    views: list[View] = []
+    size = None
+    first = None
+    foreign = markers = 0
+    n = 0
+    samples: list[tuple[str, np.ndarray]] = []
+    missed = None
+    for index, frame in tqdm(_video_frames(path, step), total=-(-total // step) if total else None,
+                             desc="detecting board", unit="frame"):
+        gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+        first = gray if first is None else first
+        size = (gray.shape[1], gray.shape[0])
+        n += 1
+        det = detector(gray)
+        foreign += detector.last_foreign_markers
+        markers += detector.last_num_markers
+        if det is None:
+            missed = missed or (f"frame {index}", gray)
+        else:
+            if len(samples) < 3:
+                samples.append((f"frame {index}", gray))
+            views.append(View(f"frame_{index:06d}", det, _sharpness(gray)))
+    if n == 0:
+        raise InputError(f"{path}: the video has no readable frame")
+    if not views:
+        raise InputError(_explain_no_board(board, first, n, foreign, markers))
+    _check_chessboard_size(board, samples, missed, len(views))
+    logger.info("board found in %d of %d examined frames", len(views), n)
+    return views, size
+
+
+def _view_features(view: View, image_size: tuple[int, int]) -> np.ndarray:
+    """Pose descriptor of a view for diversity: board centre and apparent size in the image
+    (normalized), and the board's tilt from a homography-based pose with a rough camera."""
+    w, h = image_size
+    pts = view.detection.image_points
+    obj = view.detection.object_points
+    centre = pts.mean(axis=0) / np.array([w, h])
+    extent = np.sqrt(cv2.contourArea(cv2.convexHull(pts)) / (w * h))
+    f = float(max(w, h))
+    K = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
+    tilt = np.zeros(2)
+    if len(pts) >= 4:
+        ok, rvec, _ = cv2.solvePnP(obj, pts, K, None, flags=cv2.SOLVEPNP_IPPE)
+        if ok:
+            normal = cv2.Rodrigues(rvec)[0][:, 2]  # board z axis in the camera frame
+            tilt = normal[:2]  # 0 when the board faces the camera
+    return np.r_[centre, extent, tilt]
+
+
+def select_views(views: Sequence[View], image_size: tuple[int, int], max_views: int = 30,
+                 min_coverage: float = 0.5, board: BoardSpec | None = None) -> list[View]:
+    """Choose views for board coverage and spread of poses.
+
+    Views showing fewer than ``min_coverage`` of the board's corners and the blurriest third
+    (variance of the Laplacian) are discarded; then views are picked greedily by farthest-point
+    sampling on (board centre, apparent size, tilt), starting with the view that covers most
+    of the image, so that the chosen set spans the image and many orientations.
+
+    Returns:
+        At most ``max_views`` views, in their original order.
+    """
+    views = list(views)
+    if len(views) <= max_views:
+        return views
+    if board is not None:
+        full = board.num_corners
+        kept = [v for v in views if len(v.detection.ids) >= min_coverage * full]
+        views = kept if len(kept) >= max_views else views
+    if len(views) > max_views:
+        sharp = np.array([v.sharpness for v in views])
+        threshold = np.quantile(sharp, 1 / 3)
+        kept = [v for v, s in zip(views, sharp) if s >= threshold]
+        views = kept if len(kept) >= max_views else views
+    feats = np.array([_view_features(v, image_size) for v in views])
+    weights = np.array([1.0, 1.0, 1.0, 1.5, 1.5])
+    feats = feats * weights
+    chosen = [int(np.argmax(feats[:, 2]))]
+    dist = np.linalg.norm(feats - feats[chosen[0]], axis=1)
+    while len(chosen) < max_views:
+        nxt = int(np.argmax(dist))
+        chosen.append(nxt)
+        dist = np.minimum(dist, np.linalg.norm(feats - feats[nxt], axis=1))
+    chosen.sort()
+    logger.info("selected %d of %d views for pose spread and coverage", len(chosen), len(views))
+    return [views[i] for i in chosen]
+
+
+def calibrate(views: Sequence[View], image_size: tuple[int, int], board: BoardSpec | None = None,
+              flags: int = 0, min_views: int = MIN_VIEWS) -> Calibration:
+    """Run ``cv2.calibrateCamera`` on the detected views and measure per-view errors.
+
+    Args:
+        views: detections (each with at least 4 points for chessboards, 6 for ChArUco).
+        image_size: (width, height) px.
+        board: recorded in the result.
+        flags: ``cv2.CALIB_*`` flags (e.g. ``cv2.CALIB_FIX_K3``).
+        min_views: fewest views accepted.
+
+    Raises:
+        InputError: fewer than ``min_views`` views.
+    Warns (logging): RMS above :data:`POOR_RMS_PX`, or fewer than :data:`RECOMMENDED_VIEWS` views.
+    """
+    views = list(views)
+    if len(views) < min_views:
+        raise InputError(f"only {len(views)} view(s) with the board; calibration needs at least {min_views} "
+                         f"(about {RECOMMENDED_VIEWS}-20 recommended): take more images of the board at different "
+                         "positions and tilts")
+    if len(views) < RECOMMENDED_VIEWS:
+        logger.warning("only %d views: the calibration may be unreliable (about %d-20 recommended)",
+                       len(views), RECOMMENDED_VIEWS)
+    obj = [v.detection.object_points.reshape(-1, 1, 3).astype(np.float32) for v in views]
+    img = [v.detection.image_points.reshape(-1, 1, 2).astype(np.float32) for v in views]
+    criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-9)
+    try:
+        rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(obj, img, tuple(image_size), None, None,
+                                                        flags=flags, criteria=criteria)
+    except cv2.error as exc:
+        raise InputError(f"calibration failed in OpenCV ({exc.err}); the views may be degenerate (all "
+                         "fronto-parallel, or too few points): add views with the board tilted") from exc
+    errors = []
+    for o, i, r, t in zip(obj, img, rvecs, tvecs):
+        proj, _ = cv2.projectPoints(o, r, t, K, dist)
+        errors.append(float(np.sqrt(np.mean(np.sum((proj - i).reshape(-1, 2) ** 2, axis=1)))))
+    result = Calibration(K, np.asarray(dist, np.float64).ravel(), (int(image_size[0]), int(image_size[1])),
+                         float(rms), [v.name for v in views], np.array(errors),
+                         [np.asarray(r).ravel() for r in rvecs], [np.asarray(t).ravel() for t in tvecs],
+                         board, [v.detection.image_points for v in views])
+    if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise InputError("calibration diverged (non-finite or negative focal length); add more varied views")
+    if rms > POOR_RMS_PX:
+        worst = sorted(zip(errors, result.view_names), reverse=True)[:3]
+        logger.warning("poor calibration: RMS reprojection error %.3f px > %.1f px; worst views: %s. Check the "
+                       "--square size, remove blurred views, or check that the board is flat",
+                       rms, POOR_RMS_PX, ", ".join(f"{n} ({e:.2f} px)" for e, n in worst))
+    logger.info("calibrated %dx%d camera from %d views: RMS %.3f px, fx %.2f fy %.2f cx %.2f cy %.2f",
+                image_size[0], image_size[1], len(views), rms, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
+    return result
+
+
+def save_calibration(calib: Calibration, out_dir: str | os.PathLike, report: bool = True) -> dict[str, Path]:
+    """Write ``camera.yaml``, ``colmap/``, ``views.json`` and (optionally) ``calibration.png``.
+
+    Returns:
+        Paths of the written files by kind.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    yaml_path = write_camera_yaml(out / "camera.yaml", calib.K, calib.dist, calib.image_size, rms=calib.rms)
+    colmap_dir = write_text_model(out / "colmap", [calib.colmap_camera()], [])
+    info = {
+        "image_size": list(calib.image_size),
+        "rms_px": calib.rms,
+        "camera_matrix": calib.K.tolist(),
+        "distortion_coefficients": calib.dist.tolist(),
+        "board": calib.board.to_dict() if calib.board else None,
+        "views": [
+            {"name": n, "rms_px": float(e), "num_points": int(len(p)), "rvec": r.tolist(), "tvec": t.tolist()}
+            for n, e, p, r, t in zip(calib.view_names, calib.view_errors, calib.image_points, calib.rvecs, calib.tvecs)
+        ],
+    }
+    json_path = write_json(out / "views.json", info)
+    paths = {"yaml": yaml_path, "colmap": colmap_dir, "views": json_path}
+    if report:
+        from .report import plot_calibration
+
+        paths["report"] = plot_calibration(calib, out / "calibration.png")
+    return paths
+
+
+def write_camera_yaml(path: str | os.PathLike, K: np.ndarray, dist: np.ndarray, image_size: tuple[int, int],
+                      rms: float | None = None) -> Path:
+    """Write intrinsics as OpenCV FileStorage YAML (``camera_matrix``, ``distortion_coefficients``,
+    ``image_width``, ``image_height`` and optionally ``rms``), atomically."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")  # FileStorage picks the format from the suffix
+    fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
+    fs.write("image_width", int(image_size[0]))
+    fs.write("image_height", int(image_size[1]))
+    fs.write("camera_matrix", np.asarray(K, np.float64))
+    fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
+    if rms is not None:
+        fs.write("rms", float(rms))
+    fs.release()
+    os.replace(tmp, path)
+    return path
+
+
+def load_calibration(path: str | os.PathLike) -> Calibration:
+    """Read intrinsics from an OpenCV FileStorage YAML/XML/JSON written by :func:`save_calibration`
+    (or OpenCV's calibration sample: ``camera_matrix``, ``distortion_coefficients``,
+    ``image_width``, ``image_height``).
+
+    Raises:
+        DatasetError: missing or corrupt file, or a missing/invalid field (named).
+    """
+    path = Path(path)
+    hint = "re-create it with `alcn calib camera`"
+    if not path.is_file():
+        raise DatasetError(f"{path}: calibration file not found; {hint}")
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        ok = fs.isOpened()
+    except cv2.error as exc:
+        raise DatasetError(f"{path}: not a valid OpenCV FileStorage file ({exc.err.strip()}); {hint}") from exc
+    if not ok:
+        raise DatasetError(f"{path}: cannot be opened as an OpenCV FileStorage file; {hint}")
+    try:
+        K = fs.getNode("camera_matrix").mat()
+        dist = fs.getNode("distortion_coefficients").mat()
+        width = fs.getNode("image_width").real()
+        height = fs.getNode("image_height").real()
+        rms_node = fs.getNode("rms")
+        rms = rms_node.real() if not rms_node.empty() else float("nan")
+    finally:
+        fs.release()
+    if K is None or np.asarray(K).shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise DatasetError(f"{path}: field camera_matrix is missing or not a valid 3x3 camera matrix; {hint}")
+    dist = np.zeros(5) if dist is None else np.asarray(dist, np.float64).ravel()
+    if dist.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(dist)):
+        raise DatasetError(f"{path}: field distortion_coefficients must hold 4, 5, 8, 12 or 14 finite numbers; {hint}")
+    if not (width > 0 and height > 0):
+        raise DatasetError(f"{path}: fields image_width/image_height are missing or not positive; {hint}")
+    return Calibration(np.asarray(K, np.float64), dist, (int(width), int(height)), rms)
+
+
+def _is_video(path: Path) -> bool:
+    return path.is_file() and path.suffix.lower() in VIDEO_EXTENSIONS
+
+
+def main(source: str | os.PathLike, out_dir: str | os.PathLike, board: BoardSpec, max_views: int = 30,
+         flags: int = 0, report: bool = True) -> Calibration:
+    """Calibrate from a folder of images or a video and write the outputs into ``out_dir``.
+
+    Args:
+        source: a folder of images, or a video file (frames are selected by coverage and
+            pose spread).
+        out_dir: output folder (see the module docstring).
+        board: the target.
+        max_views: most views used (the selection keeps coverage and pose spread).
+        flags: ``cv2.CALIB_*`` flags.
+        report: also write ``calibration.png``.
+    """
+    source = Path(source)
+    if source.is_dir():
+        views, size = detect_in_images(list_images(source), board)
+    elif _is_video(source):
+        views, size = detect_in_video(source, board)
+    elif source.is_file():
+        raise InputError(f"{source}: expected a folder of images or a video ({', '.join(VIDEO_EXTENSIONS)})")
+    else:
+        raise InputError(f"{source}: no such file or folder")
+    views = select_views(views, size, max_views=max_views, board=board)
+    calib = calibrate(views, size, board=board, flags=flags)
+    paths = save_calibration(calib, out_dir, report=report)
+    logger.info("wrote %s", ", ".join(str(p) for p in paths.values()))
+    return calib

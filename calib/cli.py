@@ -1,0 +1,188 @@
+"""``alcn calib``: camera calibration, printable boards, registration of training sequences,
+and undistortion."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from alcn_cv.errors import InputError
+
+logger = logging.getLogger(__name__)
+
+_BOARD_DEFAULTS = {"chessboard": {"square": 25.0}, "charuco": {"cols": 7, "rows": 5, "square": 35.0, "marker": 26.0}}
+
+
+def _add_board_args(p: argparse.ArgumentParser, default_kind: str = "charuco", kinds=("chessboard", "charuco")) -> None:
+    g = p.add_argument_group("board")
+    g.add_argument("--board", choices=kinds, default=default_kind, help=f"target type (default {default_kind})")
+    g.add_argument("--cols", type=int, help="chessboard: inner corners per row; ChArUco: squares along x (default 7)")
+    g.add_argument("--rows", type=int, help="chessboard: inner corners per column; ChArUco: squares along y (default 5)")
+    g.add_argument("--square", type=float, help="square side in mm as printed (default: ChArUco 35, chessboard 25; "
+                                                "it sets the units of poses, not the intrinsics)")
+    g.add_argument("--marker", type=float, help="ChArUco marker side in mm (default 26)")
+    g.add_argument("--dictionary", default="DICT_5X5_100", help="ChArUco ArUco dictionary (default DICT_5X5_100)")
+    g.add_argument("--legacy", action="store_true", help="ChArUco board printed by OpenCV < 4.6 (even row count)")
+
+
+def _board_from_args(args: argparse.Namespace):
+    from .board import BoardSpec
+
+    defaults = _BOARD_DEFAULTS[args.board]
+    if args.board == "chessboard" and (args.cols is None or args.rows is None):
+        raise InputError("a chessboard needs --cols and --rows (inner corners, e.g. --cols 9 --rows 6 for a 10x7-square board)")
+    return BoardSpec(
+        kind=args.board,
+        cols=args.cols if args.cols is not None else defaults["cols"],
+        rows=args.rows if args.rows is not None else defaults["rows"],
+        square=args.square if args.square is not None else defaults["square"],
+        marker=args.marker if args.marker is not None else _BOARD_DEFAULTS["charuco"]["marker"],
+        dictionary=args.dictionary,
+        legacy=args.legacy,
+    )
+
+
+def _camera(args: argparse.Namespace) -> int:
+    from .camera import main
+
+    flags = (cv2.CALIB_FIX_K3 if args.fix_k3 else 0) | (cv2.CALIB_ZERO_TANGENT_DIST if args.zero_tangent else 0)
+    calib = main(args.images or args.video, args.out, _board_from_args(args), max_views=args.max_views, flags=flags,
+                 report=not args.no_report)
+    K, d = calib.K, calib.dist
+    print(f"RMS {calib.rms:.3f} px over {len(calib.view_names)} views; fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} "
+          f"cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}; dist {np.array2string(d, precision=4)}; written to {args.out}")
+    return 0
+
+
+def _board(args: argparse.Namespace) -> int:
+    from .board import write_board_image
+
+    info = write_board_image(_board_from_args(args), args.out, dpi=args.dpi, margin_mm=args.margin)
+    w, h = info["image_size_mm"]
+    print(f"{args.out}: {info['image_size_px'][0]}x{info['image_size_px'][1]} px = {w:.1f} x {h:.1f} mm at "
+          f"{info['dpi']} dpi; squares {info['square_mm_printed']:.3f} mm"
+          + (f", markers {info['marker_mm_printed']:.3f} mm" if info["marker_mm_printed"] else "")
+          + f"; print at 100% scale and measure a square. Dimensions in {Path(args.out).with_suffix('.json')}")
+    return 0
+
+
+def _load_reference(path: Path, unit: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Known poses ``{image name: (R_w2c, t_w2c in mm)}`` from a Middlebury ``*_par.txt``
+    (metres) or a COLMAP model folder (in ``unit``)."""
+    from alcn_cv.formats.colmap import read_model
+    from alcn_cv.formats.middlebury import read_middlebury
+
+    if path.is_file() and path.name.endswith("_par.txt"):
+        return {v.name: (v.R_w2c, v.t_w2c * 1000.0) for v in read_middlebury(path, check_images=False)}
+    if path.is_dir():
+        scale = {"mm": 1.0, "cm": 10.0, "m": 1000.0}[unit]
+        return {im.name: (im.R_w2c, im.t_w2c * scale) for im in read_model(path).images.values()}
+    raise InputError(f"{path}: --reference must be a Middlebury *_par.txt or a COLMAP model folder")
+
+
+def _register(args: argparse.Namespace) -> int:
+    from .camera import load_calibration
+    from .register import register_charuco, register_colmap
+
+    calib = load_calibration(args.calib) if args.calib else None
+    if args.method == "board":
+        if calib is None:
+            raise InputError("--method board needs --calib camera.yaml (from `alcn calib camera`)")
+        reg = register_charuco(args.source, args.out, calib, _board_from_args(args), step=args.step,
+                               max_frames=args.max_frames, min_points=args.min_corners, max_rms_px=args.max_rms,
+                               overwrite=args.overwrite)
+    else:
+        known = None
+        if args.known_distance:
+            a, b, mm = args.known_distance
+            try:
+                known = (a, b, float(mm))
+            except ValueError:
+                raise InputError(f"--known-distance: {mm!r} is not a number of millimetres") from None
+        reference = _load_reference(Path(args.reference), args.reference_unit) if args.reference else None
+        reg = register_colmap(args.source, args.out, calib, known_distance=known, reference=reference,
+                              step=args.step, max_frames=args.max_frames, max_features=args.max_features,
+                              num_threads=args.threads, overwrite=args.overwrite)
+    print(f"registered {len(reg.registered)} of {len(reg.frames)} frames ({reg.units}); dropped {len(reg.dropped)} "
+          f"(reasons in {Path(args.out) / 'registration.json'}); BOP: {Path(args.out) / 'scene_camera.json'}, "
+          f"COLMAP: {Path(args.out) / 'colmap'} (images in rgb/)")
+    return 0
+
+
+def _undistort(args: argparse.Namespace) -> int:
+    from .camera import load_calibration
+    from .undistort import main
+
+    yaml_path = main(args.source, args.output, load_calibration(args.calib), alpha=args.alpha, keep_K=args.keep_K)
+    print(f"undistorted {args.source} -> {args.output}; camera of the output: {yaml_path}")
+    return 0
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``alcn calib`` and its subcommands."""
+    calib = subparsers.add_parser(
+        "calib", help="camera calibration, boards, registration of training sequences, undistortion",
+        description="Calibrate a camera from a chessboard or ChArUco board, print a board, register a training "
+                    "sequence (poses in mm, BOP + COLMAP output) for `alcn pose build`, and undistort images/videos.")
+    sub = calib.add_subparsers(dest="calib_command", metavar="SUBCOMMAND", required=True)
+
+    p = sub.add_parser("camera", help="calibrate intrinsics and distortion from images or a video of a board",
+                       description="Detect the board, choose views (from a video: by coverage and pose spread), run "
+                                   "cv2.calibrateCamera, and write camera.yaml (OpenCV FileStorage), colmap/cameras.txt, "
+                                   "views.json (per-view errors) and calibration.png into --out.")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--images", help="folder of images of the board")
+    src.add_argument("--video", help="video of the board")
+    p.add_argument("--out", required=True, help="output folder")
+    _add_board_args(p)
+    p.add_argument("--max-views", type=int, default=30, help="most views used (default 30)")
+    p.add_argument("--fix-k3", action="store_true", help="fix k3 = 0 (few or central views)")
+    p.add_argument("--zero-tangent", action="store_true", help="fix p1 = p2 = 0")
+    p.add_argument("--no-report", action="store_true", help="do not write calibration.png")
+    p.set_defaults(func=_camera)
+
+    p = sub.add_parser("board", help="write a printable board image (PNG with its DPI) and its dimensions (JSON)",
+                       description="Write a board to print at 100%% scale, and <out>.json with its dimensions.")
+    p.add_argument("--out", required=True, help="output .png")
+    _add_board_args(p)
+    p.add_argument("--dpi", type=int, default=300, help="print resolution (default 300)")
+    p.add_argument("--margin", type=float, default=10.0, help="white margin in mm (default 10)")
+    p.set_defaults(func=_board)
+
+    p = sub.add_parser("register", help="register a training sequence: a pose per frame, in mm (BOP + COLMAP)",
+                       description="With a ChArUco board in view (--method board): per-frame solvePnP on the board "
+                                   "corners, unreliable frames dropped and reported. Without (--method sfm): pycolmap "
+                                   "incremental reconstruction, then a similarity to mm from --known-distance or "
+                                   "--reference. Writes rgb/, scene_camera.json, colmap/, registration.json/.png.")
+    p.add_argument("source", help="folder of images or a video")
+    p.add_argument("--out", required=True, help="output folder (must not exist unless --overwrite)")
+    p.add_argument("--method", choices=("board", "sfm"), default="board", help="board (ChArUco) or sfm (pycolmap)")
+    p.add_argument("--calib", help="camera.yaml from `alcn calib camera` (required for board; optional for sfm)")
+    _add_board_args(p, kinds=("charuco",))
+    p.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
+    p.add_argument("--max-frames", type=int, help="use at most this many frames")
+    p.add_argument("--min-corners", type=int, default=8, help="board: fewest corners for a pose (default 8)")
+    p.add_argument("--max-rms", type=float, default=1.0, help="board: largest RMS reprojection error, px (default 1)")
+    p.add_argument("--known-distance", nargs=3, metavar=("FRAME_A", "FRAME_B", "MM"),
+                   help="sfm: distance in mm between the centres of two input frames (file names or frame_000123)")
+    p.add_argument("--reference", help="sfm: known poses to align to: a Middlebury *_par.txt or a COLMAP model folder")
+    p.add_argument("--reference-unit", choices=("mm", "cm", "m"), default="mm",
+                   help="sfm: units of a COLMAP --reference (default mm)")
+    p.add_argument("--max-features", type=int, default=4096, help="sfm: SIFT features per image (default 4096)")
+    p.add_argument("--threads", type=int, default=-1, help="sfm: threads (default all)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    p.set_defaults(func=_register)
+
+    p = sub.add_parser("undistort", help="undistort an image, a folder of images or a video",
+                       description="Remove lens distortion; writes the pinhole camera of the output as YAML beside it.")
+    p.add_argument("source", help="image, folder of images, or video")
+    p.add_argument("output", help="output image, folder, or video (.mp4/.avi)")
+    p.add_argument("--calib", required=True, help="camera.yaml from `alcn calib camera`")
+    p.add_argument("--alpha", type=float, default=0.0,
+                   help="0: crop to valid pixels; 1: keep all source pixels (default 0)")
+    p.add_argument("--keep-K", action="store_true", help="keep the input camera matrix as the output's")
+    p.set_defaults(func=_undistort)

@@ -1,0 +1,125 @@
+"""Figures for calibration and registration (matplotlib, Agg backend, PNG)."""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .camera import Calibration
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["plot_calibration", "plot_registration"]
+
+
+def _figure(ncols: int, width: float = 13.0, height: float = 5.0):
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, ncols, figsize=(width, height), gridspec_kw={"width_ratios": [1.2] + [1] * (ncols - 1)})
+    return plt, fig, axes
+
+
+def _save(plt, fig, path: str | os.PathLike) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp.png")
+    fig.tight_layout()
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path
+
+
+def plot_calibration(calib: "Calibration", path: str | os.PathLike) -> Path:
+    """Board coverage (every detected corner of every view over the image frame, each view's
+    outline) and per-view RMS reprojection errors with the overall RMS.
+
+    Returns:
+        ``path``.
+    """
+    import cv2
+
+    plt, fig, (ax0, ax1) = _figure(2)
+    w, h = calib.image_size
+    cmap = plt.get_cmap("viridis")
+    n = max(len(calib.image_points), 1)
+    for k, pts in enumerate(calib.image_points):
+        colour = cmap(k / max(n - 1, 1))
+        hull = cv2.convexHull(pts.astype(np.float32)).reshape(-1, 2)
+        ax0.fill(hull[:, 0], hull[:, 1], color=colour, alpha=0.08)
+        ax0.plot(*np.vstack([hull, hull[:1]]).T, color=colour, lw=0.8)
+        ax0.scatter(pts[:, 0], pts[:, 1], s=4, color=colour)
+    ax0.add_patch(plt.Rectangle((0, 0), w, h, fill=False, ec="k", lw=1.5))
+    ax0.set_xlim(-0.02 * w, 1.02 * w)
+    ax0.set_ylim(1.02 * h, -0.02 * h)
+    ax0.set_aspect("equal")
+    K = calib.K
+    ax0.plot(K[0, 2], K[1, 2], "r+", ms=14, mew=2, label="principal point")
+    ax0.legend(loc="lower right", fontsize=8)
+    # Fraction of a 8x6 grid of image cells that hold at least one corner.
+    all_pts = np.vstack(calib.image_points) if calib.image_points else np.zeros((0, 2))
+    cells = np.unique(np.floor(all_pts / [w / 8, h / 6]).clip(0, [7, 5]).astype(int), axis=0)
+    ax0.set_title(f"board coverage: {len(calib.image_points)} views, {len(cells)}/48 image cells covered")
+    ax0.set_xlabel("x (px)")
+    ax0.set_ylabel("y (px)")
+
+    errors = np.asarray(calib.view_errors)
+    order = np.arange(len(errors))
+    colours = ["tab:red" if e > max(2 * calib.rms, 1.0) else "tab:blue" for e in errors]
+    ax1.bar(order, errors, color=colours)
+    ax1.axhline(calib.rms, color="k", ls="--", label=f"overall RMS {calib.rms:.3f} px")
+    ax1.set_xticks(order)
+    ax1.set_xticklabels(calib.view_names, rotation=60, ha="right", fontsize=7)
+    ax1.set_ylabel("RMS reprojection error (px)")
+    d = calib.dist
+    ax1.set_title(f"fx {K[0, 0]:.2f}  fy {K[1, 1]:.2f}  cx {K[0, 2]:.2f}  cy {K[1, 2]:.2f}\n"
+                  f"k1 {d[0]:.3f}  k2 {d[1]:.3f}  p1 {d[2]:.4f}  p2 {d[3]:.4f}" + (f"  k3 {d[4]:.3f}" if len(d) > 4 else ""),
+                  fontsize=10)
+    ax1.legend(fontsize=8)
+    return _save(plt, fig, path)
+
+
+def plot_registration(names: Sequence[str], errors: Sequence[float], kept: Sequence[bool],
+                      centers: np.ndarray, path: str | os.PathLike, title: str = "") -> Path:
+    """Per-frame reprojection errors (dropped frames in red) and the registered camera
+    centres seen from above (world x-y plane).
+
+    Args:
+        names: frame names.
+        errors: per-frame RMS reprojection error (px; NaN where no pose was found).
+        kept: whether each frame was registered.
+        centers: float (K, 3) centres of the kept frames, world units.
+        path: output PNG.
+    """
+    plt, fig, (ax0, ax1) = _figure(2, height=4.5)
+    errors = np.asarray(errors, float)
+    kept = np.asarray(kept, bool)
+    x = np.arange(len(errors))
+    shown = np.nan_to_num(errors, nan=0.0)
+    ax0.bar(x[kept], shown[kept], color="tab:blue", label="registered")
+    ax0.bar(x[~kept], shown[~kept], color="tab:red", label="dropped")
+    ax0.set_xlabel("frame")
+    ax0.set_ylabel("RMS reprojection error (px)")
+    ax0.set_title(title or f"{kept.sum()} of {len(kept)} frames registered")
+    if len(names) <= 40:
+        ax0.set_xticks(x)
+        ax0.set_xticklabels(names, rotation=60, ha="right", fontsize=7)
+    ax0.legend(fontsize=8)
+    centers = np.asarray(centers, float).reshape(-1, 3)
+    if len(centers):
+        ax1.plot(centers[:, 0], centers[:, 1], "-o", ms=3)
+        ax1.plot([0], [0], "k+", ms=12, label="world origin")
+        ax1.set_aspect("equal", adjustable="datalim")
+        ax1.legend(fontsize=8)
+    ax1.set_title("camera centres (world x-y)")
+    ax1.set_xlabel("x")
+    ax1.set_ylabel("y")
+    return _save(plt, fig, path)

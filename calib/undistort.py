@@ -1,0 +1,148 @@
+"""Undistortion of images, folders of images and videos with a calibration.
+
+The output camera is the pinhole ``new_K`` of ``cv2.getOptimalNewCameraMatrix`` with the
+given ``alpha`` (0: only valid pixels, cropped; 1: every source pixel kept, black borders),
+or the input K with ``keep_K``. It is written beside the output as ``camera.yaml`` (zero
+distortion), so that the undistorted images have a calibration of their own.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from alcn_cv.errors import InputError
+
+from .camera import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, Calibration, list_images, video_frame_count, write_camera_yaml
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["Undistorter", "main"]
+
+
+class Undistorter:
+    """Remaps frames of one calibrated camera to a pinhole camera without distortion.
+
+    Args:
+        calib: intrinsics and distortion; frames must have ``calib.image_size``.
+        alpha: free scaling of ``cv2.getOptimalNewCameraMatrix`` in [0, 1].
+        keep_K: use the input K as the output camera (ignores ``alpha``).
+    """
+
+    def __init__(self, calib: Calibration, alpha: float = 0.0, keep_K: bool = False) -> None:
+        if not 0.0 <= alpha <= 1.0:
+            raise InputError(f"alpha must be in [0, 1], got {alpha}")
+        self.size = tuple(int(v) for v in calib.image_size)
+        K = np.asarray(calib.K, float)
+        dist = np.asarray(calib.dist, float)
+        if keep_K:
+            self.new_K = K.copy()
+        else:
+            self.new_K, _ = cv2.getOptimalNewCameraMatrix(K, dist, self.size, alpha, self.size)
+        # With K kept and no distortion the remap is the identity: skip it (exact, and faster).
+        self.identity = bool(keep_K and not np.any(dist))
+        if not self.identity:
+            self.map1, self.map2 = cv2.initUndistortRectifyMap(K, dist, None, self.new_K, self.size, cv2.CV_32FC1)
+
+    def __call__(self, image: np.ndarray, name: str = "image") -> np.ndarray:
+        """Undistort one image (any channels and dtype OpenCV remaps); same shape out."""
+        if image.shape[1::-1] != self.size:
+            raise InputError(f"{name} is {image.shape[1]}x{image.shape[0]} but the calibration is for "
+                             f"{self.size[0]}x{self.size[1]}; calibrate at this resolution")
+        if self.identity:
+            return image
+        return cv2.remap(image, self.map1, self.map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+
+
+def _undistort_video(src: Path, dst: Path, undistort: Undistorter) -> int:
+    cap = cv2.VideoCapture(str(src))
+    if not cap.isOpened():
+        raise InputError(f"{src}: cannot open this video")
+    fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
+    total = video_frame_count(src) or None
+    tmp = dst.with_name(f".{dst.stem}.tmp{dst.suffix}")
+    writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), fps, undistort.size)
+    if not writer.isOpened():
+        cap.release()
+        raise InputError(f"{dst}: cannot write a video there (use an .mp4 or .avi name)")
+    n = 0
+    try:
+        with tqdm(total=total, desc="undistorting", unit="frame") as bar:
+            while True:
+                ok, frame = cap.read()
+                if not ok:
+                    break
+                writer.write(undistort(frame, f"{src.name} frame {n}"))
+                n += 1
+                bar.update(1)
+    except BaseException:
+        writer.release()
+        tmp.unlink(missing_ok=True)
+        raise
+    finally:
+        cap.release()
+    writer.release()
+    if n == 0:
+        tmp.unlink(missing_ok=True)
+        raise InputError(f"{src}: the video has no readable frame")
+    os.replace(tmp, dst)
+    return n
+
+
+def main(source: str | os.PathLike, output: str | os.PathLike, calib: Calibration, alpha: float = 0.0,
+         keep_K: bool = False) -> Path:
+    """Undistort an image, a folder of images or a video.
+
+    Args:
+        source: image file, folder of images, or video.
+        output: for an image: output image path; for a folder: output folder (same file
+            names); for a video: output video path (``.mp4``/``.avi``).
+        calib: calibration of the camera.
+        alpha, keep_K: output camera (see :class:`Undistorter`).
+
+    Returns:
+        The path of the output camera YAML (``camera.yaml`` in the output folder, or
+        ``<output stem>.camera.yaml`` beside an output file).
+    """
+    source, output = Path(source), Path(output)
+    undistort = Undistorter(calib, alpha, keep_K)
+    suffix = source.suffix.lower()
+    if source.is_dir():
+        files = list_images(source)
+        output.mkdir(parents=True, exist_ok=True)
+        for path in tqdm(files, desc="undistorting", unit="image", disable=len(files) < 10):
+            image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+            if image is None:
+                raise InputError(f"{path}: cannot read this image (corrupt or unsupported format)")
+            _write_image(output / path.name, undistort(image, path.name))
+        yaml_path = output / "camera.yaml"
+    elif source.is_file() and suffix in VIDEO_EXTENSIONS:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        n = _undistort_video(source, output, undistort)
+        logger.info("undistorted %d frames to %s", n, output)
+        yaml_path = output.with_name(f"{output.stem}.camera.yaml")
+    elif source.is_file() and suffix in IMAGE_EXTENSIONS:
+        image = cv2.imread(str(source), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise InputError(f"{source}: cannot read this image (corrupt or unsupported format)")
+        output.parent.mkdir(parents=True, exist_ok=True)
+        _write_image(output, undistort(image, source.name))
+        yaml_path = output.with_name(f"{output.stem}.camera.yaml")
+    elif source.exists():
+        raise InputError(f"{source}: expected an image, a folder of images or a video")
+    else:
+        raise InputError(f"{source}: no such file or folder")
+    write_camera_yaml(yaml_path, undistort.new_K, np.zeros(5), undistort.size)
+    return yaml_path
+
+
+def _write_image(path: Path, image: np.ndarray) -> None:
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    if not cv2.imwrite(str(tmp), image):
+        raise InputError(f"{path}: cannot write an image there (unknown extension?)")
+    os.replace(tmp, path)

@@ -1,0 +1,587 @@
+"""``alcn pose build``: a part model (:mod:`pose.model`) from a training sequence.
+
+Pipeline (hloc-style: OpenCV features imported into a COLMAP database, pycolmap for geometry):
+
+1. Features: OpenCV keypoints/descriptors (ORB by default, SIFT, AKAZE) on the *normalized*
+   training images (the same normalizer and feature as at tracking time), optionally inside a
+   mask; written into a pycolmap :class:`pycolmap.Database` (keypoints in COLMAP's pixel
+   convention, top-left pixel centre at (0.5, 0.5)).
+2. Matching: brute force + Lowe's ratio test on every pair (or the ``window`` nearest frames of
+   a video), then pycolmap's two-view geometric verification (``pycolmap.verify_matches``).
+3. Geometry:
+
+   * registered sequence (known poses: BOP scene, COLMAP model, Middlebury ``_par.txt``):
+     ``pycolmap.triangulate_points`` with the poses held fixed (the bundle adjustment refines
+     the points only);
+   * unregistered video with a known object size: ``pycolmap.incremental_mapping`` first, then
+     the reconstruction is scaled by the box fit (step 4).
+
+4. open3d: statistical outlier removal, RANSAC removal of the support plane (when it extends
+   beyond the object), DBSCAN (largest cluster = the object), minimal oriented bounding box:
+   the box's size, frame and 8 corners. With a known box (a cuboid ``.ply``) its true size
+   replaces the fitted one and the fit's error is reported.
+5. Each kept 3D point gets one descriptor, the medoid of its track's descriptors (the one
+   closest to all others), so the ratio test at tracking time compares distinct points.
+
+Outputs: ``<out>.npz`` + ``<out>.ply`` (:mod:`pose.model`) and ``<out>_cameras.png`` (the
+points, the box and the training cameras).
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from alcn_cv import io
+from alcn_cv.errors import DatasetError, InputError
+from pose import model as part_model
+from pose.model import PartModel, box_corners, read_box_corners
+from pose.parts import create_feature, descriptor_norm, get_normalizer, match_descriptors, to_gray
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class View:
+    """One training image.
+
+    Attributes:
+        name: file name relative to ``image_dir``.
+        K: (3, 3) OpenCV intrinsics; ``dist`` OpenCV distortion or ``None``.
+        R_w2c, t_w2c: world-to-camera pose (``None`` for an unregistered image).
+    """
+
+    name: str
+    K: np.ndarray
+    dist: np.ndarray | None = None
+    R_w2c: np.ndarray | None = None
+    t_w2c: np.ndarray | None = None
+
+
+@dataclass
+class Sequence:
+    """Training images in one folder, their cameras, and the unit of the world frame."""
+
+    image_dir: Path
+    views: list[View]
+    units: str
+    size: tuple[int, int] = (0, 0)
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def registered(self) -> bool:
+        return all(v.R_w2c is not None for v in self.views)
+
+
+# --------------------------------------------------------------------------------------------
+# Inputs
+# --------------------------------------------------------------------------------------------
+
+
+def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: int | None = None) -> Sequence:
+    """Read a registered training sequence.
+
+    Args:
+        path: a BOP scene folder (``scene_camera.json``, ``scene_gt.json``, ``rgb/``), a COLMAP
+            model folder (``cameras.txt``/``images.txt`` or ``.bin``), or a Middlebury set
+            (``*_par.txt``).
+        images: image folder of a COLMAP model (default: ``<path>/../images`` then ``<path>/images``).
+        obj_id: BOP object whose pose defines the world (default: the first annotated); used
+            when ``scene_camera.json`` gives no world-to-camera poses.
+
+    Raises:
+        DatasetError: the folder is none of these, or an image has no pose.
+    """
+    path = Path(path)
+    if (path / "scene_camera.json").is_file():
+        from alcn_cv.formats import bop
+
+        scene = bop.load_scene(path)
+        views = []
+        for fr in scene.frames:
+            if fr.R_w2c is not None:
+                R, t = fr.R_w2c, fr.t_w2c
+            elif fr.objects:
+                o = fr.objects[0] if obj_id is None else fr.pose(obj_id)
+                R, t = o.R, o.t
+            else:
+                raise DatasetError(f"{path / 'scene_gt.json'}: image {fr.im_id} has no pose (field 'cam_R_m2c')")
+            views.append(View(str(fr.rgb_path.relative_to(fr.rgb_path.parent)), fr.K, None, R, np.ravel(t)))
+        return Sequence(scene.frames[0].rgb_path.parent, views, "mm", info={"format": "bop", "path": str(path)})
+    if any(path.glob("*_par.txt")):
+        from alcn_cv.formats.middlebury import read_middlebury
+
+        mv = read_middlebury(path)
+        return Sequence(path, [View(v.name, v.K, None, v.R_w2c, v.t_w2c) for v in mv], "m",
+                        info={"format": "middlebury", "path": str(path)})
+    if (path / "cameras.txt").is_file() or (path / "cameras.bin").is_file():
+        from alcn_cv.formats.colmap import read_model
+
+        cm = read_model(path)
+        image_dir = Path(images) if images else next(
+            (p for p in (path.parent / "images", path / "images", path.parent / "rgb") if p.is_dir()), None)
+        if image_dir is None:
+            raise DatasetError(f"{path}: no image folder found beside the COLMAP model; pass --images")
+        views = []
+        for im in sorted(cm.images.values(), key=lambda i: i.name):
+            K, dist = cm.cameras[im.camera_id].to_opencv()
+            views.append(View(im.name, K, dist if np.any(dist) else None, im.R_w2c, im.t_w2c))
+        units = "mm" if (path / "cameras.txt").is_file() and "mm" in (path / "cameras.txt").read_text()[:500] else "m"
+        return Sequence(image_dir, views, units, info={"format": "colmap", "path": str(path)})
+    raise DatasetError(f"{path}: not a BOP scene (scene_camera.json), a COLMAP model (cameras.txt/.bin) "
+                       "or a Middlebury set (*_par.txt)")
+
+
+def video_sequence(video: str | Path, K: np.ndarray, work_dir: str | Path, *, step: int = 5,
+                   max_frames: int = 80, dist: np.ndarray | None = None) -> Sequence:
+    """An unregistered sequence: every ``step``-th frame of ``video`` (at most ``max_frames``)
+    written as PNG into ``work_dir/images``."""
+    image_dir = Path(work_dir) / "images"
+    image_dir.mkdir(parents=True, exist_ok=True)
+    views = []
+    with io.VideoReader(video) as reader:
+        for i, frame in enumerate(reader):
+            if i % step or len(views) >= max_frames:
+                continue
+            name = f"{i:06d}.png"
+            io.write_image(image_dir / name, frame)
+            views.append(View(name, np.asarray(K, np.float64), dist))
+    if len(views) < 3:
+        raise DatasetError(f"{video}: only {len(views)} frames read; at least 3 are needed")
+    return Sequence(image_dir, views, "", info={"format": "video", "path": str(video), "step": step})
+
+
+def motion_masks(frames: list[np.ndarray], threshold: float = 25.0, dilate: int = 25) -> list[np.ndarray]:
+    """Masks (uint8 0/255) of what moves in a video taken by a static camera.
+
+    The background is the per-pixel median of ``frames``; a pixel belongs to the moving object
+    where it differs from it by more than ``threshold`` (grey levels), after a morphological
+    closing and a dilation of ``dilate`` pixels. Used for hand-held objects in front of a fixed
+    camera (e.g. the cookie-box video), whose static background would otherwise dominate the
+    reconstruction.
+    """
+    grays = np.stack([to_gray(f) for f in frames]).astype(np.int16)
+    bg = np.median(grays, axis=0)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (dilate, dilate))
+    masks = []
+    for g in grays:
+        m = (np.abs(g - bg) > threshold).astype(np.uint8) * 255
+        m = cv2.morphologyEx(m, cv2.MORPH_OPEN, np.ones((5, 5), np.uint8))
+        masks.append(cv2.dilate(cv2.morphologyEx(m, cv2.MORPH_CLOSE, kernel), kernel))
+    return masks
+
+
+# --------------------------------------------------------------------------------------------
+# Features, matches, COLMAP database
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Features:
+    keypoints: np.ndarray  # (N, 2) float32, OpenCV pixel convention
+    descriptors: np.ndarray  # (N, D)
+    colors: np.ndarray  # (N, 3) uint8 RGB
+
+
+def extract_features(seq: Sequence, feature: str = "ORB", n_features: int = 4000, normalizer: str = "none",
+                     masks: dict[str, np.ndarray] | None = None) -> dict[str, Features]:
+    """Features of every view of ``seq`` on its normalized grayscale image."""
+    det = create_feature(feature, n_features)
+    norm = get_normalizer(normalizer)
+    out = {}
+    for v in tqdm(seq.views, desc="features", unit="img", leave=False):
+        img = io.read_image(seq.image_dir / v.name)
+        if img.dtype != np.uint8:
+            img = (img >> 8).astype(np.uint8)
+        bgr = img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+        seq.size = (bgr.shape[1], bgr.shape[0])
+        kps, desc = det.detectAndCompute(norm.apply(to_gray(bgr)), None if masks is None else masks.get(v.name))
+        pts = np.array([k.pt for k in kps], np.float32).reshape(-1, 2)
+        if desc is None:
+            desc = np.zeros((0, det.descriptorSize()), np.uint8 if det.descriptorType() == cv2.CV_8U else np.float32)
+        ij = np.clip(np.round(pts).astype(int), 0, [bgr.shape[1] - 1, bgr.shape[0] - 1])
+        out[v.name] = Features(pts, desc, bgr[ij[:, 1], ij[:, 0], ::-1].copy())
+    logger.info("%s: %.0f keypoints per image on average", feature,
+                np.mean([len(f.keypoints) for f in out.values()]))
+    return out
+
+
+def image_pairs(n: int, window: int | None = None) -> list[tuple[int, int]]:
+    """All pairs ``i < j`` of ``n`` images, or only those with ``j - i <= window``."""
+    return [(i, j) for i in range(n) for j in range(i + 1, n) if window is None or j - i <= window]
+
+
+def write_database(db_path: Path, seq: Sequence, feats: dict[str, Features], pairs: list[tuple[int, int]],
+                   norm: int, ratio: float = 0.8) -> Path:
+    """Create the COLMAP database: cameras (known intrinsics), images, keypoints, raw matches;
+    writes the pairs file and runs pycolmap's geometric verification. Returns the pairs file."""
+    import pycolmap
+
+    from alcn_cv.formats.colmap import camera_from_opencv
+
+    pycolmap.Database.open(db_path).close()
+    pycolmap.import_images(db_path, seq.image_dir, pycolmap.CameraMode.PER_IMAGE,
+                           image_names=[v.name for v in seq.views])
+    db = pycolmap.Database.open(db_path)
+    try:
+        ids = {im.name: im for im in db.read_all_images()}
+        for v in seq.views:
+            im = ids[v.name]
+            cam = db.read_camera(im.camera_id)
+            cc = camera_from_opencv(v.K, v.dist, cam.width, cam.height, im.camera_id)
+            cam.model, cam.params = cc.model, cc.params
+            db.update_camera(cam)
+            db.write_keypoints(im.image_id, feats[v.name].keypoints + 0.5)  # COLMAP pixel convention
+        lines = []
+        for i, j in tqdm(pairs, desc="match", unit="pair", leave=False):
+            a, b = seq.views[i].name, seq.views[j].name
+            m = match_descriptors(feats[a].descriptors, feats[b].descriptors, norm, ratio)
+            db.write_matches(ids[a].image_id, ids[b].image_id, m.astype(np.uint32))
+            lines.append(f"{a} {b}")
+    finally:
+        db.close()
+    pairs_path = db_path.with_name("pairs.txt")
+    pairs_path.write_text("\n".join(lines) + "\n")
+    opts = pycolmap.TwoViewGeometryOptions()
+    opts.filter_stationary_matches = True  # a static background seen by a static camera
+    pycolmap.verify_matches(db_path, pairs_path, opts)
+    return pairs_path
+
+
+def triangulate_fixed_poses(seq: Sequence, db_path: Path, out_dir: Path):
+    """Triangulate with the known poses held fixed; returns a ``pycolmap.Reconstruction``."""
+    import pycolmap
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        rec = pycolmap.Reconstruction()
+        for im in db.read_all_images():
+            v = next(v for v in seq.views if v.name == im.name)
+            rec.add_camera_with_trivial_rig(db.read_camera(im.camera_id))
+            pose = pycolmap.Rigid3d(np.hstack([v.R_w2c, np.reshape(v.t_w2c, (3, 1))]))
+            rec.add_image_with_trivial_frame(pycolmap.Image(name=im.name, camera_id=im.camera_id,
+                                                            image_id=im.image_id), pose)
+    finally:
+        db.close()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    opts = pycolmap.IncrementalPipelineOptions()
+    opts.min_num_matches = 8
+    return pycolmap.triangulate_points(rec, db_path, seq.image_dir, out_dir, options=opts)
+
+
+def reconstruct_incremental(seq: Sequence, db_path: Path, out_dir: Path):
+    """pycolmap incremental mapping with the intrinsics fixed; returns the largest reconstruction
+    and updates the views' poses (unknown scale)."""
+    import pycolmap
+
+    opts = pycolmap.IncrementalPipelineOptions()
+    opts.ba_refine_focal_length = False
+    opts.ba_refine_principal_point = False
+    opts.ba_refine_extra_params = False
+    opts.min_num_matches = 12
+    opts.num_threads = 2
+    out_dir.mkdir(parents=True, exist_ok=True)
+    recs = pycolmap.incremental_mapping(db_path, seq.image_dir, out_dir, opts)
+    if not recs:
+        raise DatasetError(f"{seq.info.get('path')}: pycolmap registered no image pair (too little texture, "
+                           "motion or overlap)")
+    rec = max(recs.values(), key=lambda r: r.num_reg_images())
+    logger.info("incremental mapping: %d of %d images registered, %d points", rec.num_reg_images(),
+                len(seq.views), rec.num_points3D())
+    return rec
+
+
+def _medoid(desc: np.ndarray, norm: int) -> np.ndarray:
+    if len(desc) <= 2:
+        return desc[0]
+    from scipy.spatial.distance import cdist
+
+    if norm == cv2.NORM_HAMMING:
+        bits = np.unpackbits(desc, axis=1)
+        d = cdist(bits, bits, "hamming")
+    else:
+        d = cdist(desc.astype(np.float64), desc.astype(np.float64))
+    return desc[int(np.argmin(d.sum(1)))]
+
+
+def collect_points(rec, feats: dict[str, Features], norm: int, min_track: int = 2
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """3D points ``(N, 3)``, medoid descriptors ``(N, D)``, track lengths ``(N,)`` and RGB colours
+    ``(N, 3)`` of a reconstruction whose keypoints are those of ``feats``."""
+    names = {iid: im.name for iid, im in rec.images.items()}
+    xyz, desc, tl, rgb = [], [], [], []
+    for p in rec.points3D.values():
+        els = p.track.elements
+        if len(els) < min_track:
+            continue
+        d = np.stack([feats[names[e.image_id]].descriptors[e.point2D_idx] for e in els])
+        c = np.stack([feats[names[e.image_id]].colors[e.point2D_idx] for e in els])
+        xyz.append(p.xyz)
+        desc.append(_medoid(d, norm))
+        tl.append(len(els))
+        rgb.append(np.median(c, 0))
+    if not xyz:
+        raise DatasetError("no 3D point was triangulated (too little texture or overlap between the training "
+                           "images, or wrong poses)")
+    return np.array(xyz), np.stack(desc), np.array(tl, np.int32), np.array(rgb, np.uint8)
+
+
+# --------------------------------------------------------------------------------------------
+# Box fit (open3d)
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class BoxFit:
+    """An oriented box around the object's points.
+
+    Attributes:
+        corners: (8, 3) world-frame corners, in the order of :func:`pose.model.box_corners` in the
+            box frame ``x_world = R @ x_box + origin``.
+        size: (3,) edge lengths along the box frame's axes (world units).
+        R, origin: box frame (columns of R are its axes; origin = corner 0).
+        keep: bool mask of the points kept as the object.
+        stats: fit statistics (counts, fitted size, known size, error).
+    """
+
+    corners: np.ndarray
+    size: np.ndarray
+    R: np.ndarray
+    origin: np.ndarray
+    keep: np.ndarray
+    stats: dict[str, Any]
+
+
+def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_free: bool = False,
+            plane_threshold: float | None = None, seed: int = 0) -> BoxFit:
+    """Fit the object's box to a sparse point cloud with open3d.
+
+    Args:
+        points: ``(N, 3)`` world points.
+        known_size: the true edge lengths (any order) or ``None``; matched to the fitted edges by
+            sorted length.
+        scale_free: the points have an unknown scale (incremental reconstruction): the known
+            size fixes it; ``stats["scale"]`` is the factor that brings the points to its units.
+        plane_threshold: RANSAC distance for the support plane (default: 1% of the cloud's extent).
+
+    Raises:
+        DatasetError: too few points, or a degenerate box (a flat or empty cluster).
+    """
+    import open3d as o3d
+
+    pts = np.asarray(points, np.float64)
+    if len(pts) < 10:
+        raise DatasetError(f"only {len(pts)} 3D points; the box fit needs at least 10")
+    o3d.utility.random.seed(seed)
+    idx = np.arange(len(pts))
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    pcd, kept = pcd.remove_statistical_outlier(nb_neighbors=min(20, len(pts) - 1), std_ratio=2.0)
+    idx = idx[np.asarray(kept)]
+    stats: dict[str, Any] = {"points": len(pts), "after_outlier_removal": len(idx)}
+    cur = pts[idx]
+    extent = float(np.linalg.norm(np.percentile(cur, 95, 0) - np.percentile(cur, 5, 0)))
+    # support plane: the largest plane, removed only when it reaches well beyond the rest
+    if len(cur) > 30:
+        thr = plane_threshold or 0.01 * extent
+        _, inl = pcd.segment_plane(distance_threshold=thr, ransac_n=3, num_iterations=500)
+        inl = np.asarray(inl, np.int64)
+        rest = np.setdiff1d(np.arange(len(cur)), inl)
+        if len(rest) >= 10 and len(inl) > 0.2 * len(cur):
+            spread = lambda a: float(np.linalg.norm(np.percentile(a, 90, 0) - np.percentile(a, 10, 0)))  # noqa: E731
+            if spread(cur[inl]) > 1.5 * spread(cur[rest]):
+                idx, cur = idx[rest], cur[rest]
+                stats["support_plane_points"] = int(len(inl))
+    # the object: largest DBSCAN cluster
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cur))
+    nn = np.asarray(pcd.compute_nearest_neighbor_distance())
+    eps = float(max(4.0 * np.median(nn), 1e-9))
+    labels = np.asarray(pcd.cluster_dbscan(eps=eps, min_points=4))
+    if labels.max() >= 0:
+        best = np.bincount(labels[labels >= 0]).argmax()
+        idx, cur = idx[labels == best], cur[labels == best]
+    stats["object_points"] = len(idx)
+    if len(cur) < 8:
+        raise DatasetError(f"degenerate box fit: the object cluster has only {len(cur)} points")
+    obb = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cur)).get_minimal_oriented_bounding_box()
+    R, ext, center = np.asarray(obb.R).copy(), np.asarray(obb.extent).copy(), np.asarray(obb.center).copy()
+    if np.linalg.det(R) < 0:
+        R[:, 2] *= -1
+    if ext.min() <= 1e-6 * max(ext.max(), 1e-12):
+        raise DatasetError(f"degenerate box fit: the object's points span a flat box {ext}")
+    stats["fitted_size"] = ext.tolist()
+    size = ext
+    if known_size is not None:
+        known = np.sort(np.asarray(known_size, np.float64).ravel())
+        order = np.argsort(ext)  # fitted axes from shortest to longest
+        matched = np.empty(3)
+        matched[order] = known
+        if scale_free:
+            s = float(np.median(matched / ext))
+            stats["scale"] = s
+            ext, center = ext * s, center * s
+            idx_pts = pts * s
+        else:
+            idx_pts = pts
+        rel = (ext - matched) / matched
+        stats.update(known_size=matched.tolist(), size_error=(ext - matched).tolist(),
+                     relative_size_error=rel.tolist(), mean_abs_relative_size_error=float(np.abs(rel).mean()))
+        size = matched
+        pts = idx_pts
+    origin = center - R @ (size / 2)
+    corners = box_corners(size) @ R.T + origin
+    keep = np.zeros(len(points), bool)
+    keep[idx] = True
+    logger.info("box fit: %d of %d points on the object, size %s", len(idx), len(points), np.round(size, 4).tolist())
+    return BoxFit(corners, size, R, origin, keep, stats)
+
+
+# --------------------------------------------------------------------------------------------
+# Picture of the model
+# --------------------------------------------------------------------------------------------
+
+
+def plot_model(model: PartModel, camera_centers: np.ndarray, path: str | Path) -> Path:
+    """A PNG of the points, the box and the training cameras' centres (object frame)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pose.model import BOX_EDGES
+
+    fig = plt.figure(figsize=(7, 6))
+    ax = fig.add_subplot(projection="3d")
+    p = model.points3d
+    ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=1, c=model.colors / 255.0)
+    for i, j in BOX_EDGES:
+        ax.plot(*np.stack([model.corners[i], model.corners[j]]).T, color="tab:blue")
+    c = np.asarray(camera_centers).reshape(-1, 3)
+    if len(c):
+        ax.scatter(c[:, 0], c[:, 1], c[:, 2], marker="^", color="tab:red", label="training cameras")
+        ax.legend(loc="upper right")
+    allp = np.vstack([p, model.corners, c])
+    mid, r = (allp.max(0) + allp.min(0)) / 2, (allp.max(0) - allp.min(0)).max() / 2
+    ax.set(xlim=(mid[0] - r, mid[0] + r), ylim=(mid[1] - r, mid[1] + r), zlim=(mid[2] - r, mid[2] + r),
+           xlabel=f"x ({model.units})", ylabel="y", zlabel="z",
+           title=f"{len(p)} points, box {np.round(model.box_size, 2).tolist()} {model.units}")
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# Entry point
+# --------------------------------------------------------------------------------------------
+
+
+def build(seq: Sequence, *, feature: str = "ORB", n_features: int = 4000, normalizer: str = "none",
+          box_ply: str | Path | None = None, box_size: np.ndarray | None = None, box_units: str | None = None,
+          masks: dict[str, np.ndarray] | None = None, window: int | None = None, ratio: float = 0.8,
+          work_dir: str | Path | None = None, world_is_object: bool = True) -> tuple[PartModel, np.ndarray]:
+    """Build a part model from a sequence; returns it and the training cameras' centres (object frame).
+
+    For a registered sequence the object frame is the sequence's world frame (BOP: the object's
+    model frame), and the box is fitted in it. For an unregistered one it is the fitted box's
+    frame (origin at a corner, axes along its edges), scaled to the known size.
+    """
+    if len(seq.views) < 2:
+        raise DatasetError(f"{seq.info.get('path')}: {len(seq.views)} training image(s); at least 2 are needed")
+    known = None
+    if box_ply is not None:
+        corners_ply = read_box_corners(box_ply)
+        known = np.linalg.norm(corners_ply[[4, 2, 1]] - corners_ply[0], axis=1)
+    elif box_size is not None:
+        known = np.asarray(box_size, np.float64)
+    if not seq.registered and known is None:
+        raise InputError("an unregistered sequence needs the object's size (a box .ply or box_size) for its scale")
+    units = seq.units or box_units or "mm"
+    if known is not None and box_units and seq.units and box_units != seq.units:
+        known = known * part_model.unit_scale(box_units, seq.units)
+    norm = descriptor_norm(feature)
+    tmp = Path(tempfile.mkdtemp(prefix="alcn_pose_build_", dir=work_dir))
+    try:
+        feats = extract_features(seq, feature, n_features, normalizer, masks)
+        write_database(tmp / "database.db", seq, feats, image_pairs(len(seq.views), window), norm, ratio)
+        if seq.registered:
+            rec = triangulate_fixed_poses(seq, tmp / "database.db", tmp / "sparse")
+        else:
+            rec = reconstruct_incremental(seq, tmp / "database.db", tmp / "sparse")
+        xyz, desc, tl, rgb = collect_points(rec, feats, norm)
+        centers = np.array([im.projection_center() for im in rec.images.values() if im.has_pose])
+        reg = {im.name: im.cam_from_world().matrix() for im in rec.images.values() if im.has_pose}
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    logger.info("%d 3D points (mean track %.1f) from %d images", len(xyz), tl.mean(), len(reg))
+    fit = fit_box(xyz, known, scale_free=not seq.registered)
+    keep = fit.keep
+    if seq.registered and world_is_object:
+        pts, corners, cams = xyz, fit.corners, centers
+    else:  # object frame = box frame
+        s = fit.stats.get("scale", 1.0)
+        pts = (xyz * s - fit.origin) @ fit.R
+        cams = (centers * s - fit.origin) @ fit.R
+        corners = box_corners(fit.size)
+        for v in seq.views:
+            if v.name in reg:
+                T = reg[v.name]
+                v.R_w2c = T[:, :3] @ fit.R
+                v.t_w2c = T[:, :3] @ fit.origin + T[:, 3] * s
+    model = PartModel(corners=corners, points3d=pts[keep], descriptors=desc[keep], track_length=tl[keep],
+                      colors=rgb[keep], units=units, feature=feature.upper(), normalizer=normalizer,
+                      source=str(seq.info.get("path", "")), box_fit=_jsonable(fit.stats),
+                      extra={"registered_images": len(reg), "training_images": len(seq.views),
+                             "triangulated_points": int(len(xyz))})
+    return model, cams
+
+
+def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: (v.tolist() if isinstance(v, np.ndarray) else float(v) if isinstance(v, np.floating) else
+                int(v) if isinstance(v, np.integer) else v) for k, v in d.items()}
+
+
+def main(input_path: str | Path, output: str | Path, *, images: str | Path | None = None,
+         K: np.ndarray | None = None, video_step: int = 5, max_frames: int = 80, motion_mask: bool = False,
+         feature: str = "ORB", n_features: int = 4000, normalizer: str = "none", box_ply: str | Path | None = None,
+         box_size: tuple[float, float, float] | None = None, box_units: str | None = None) -> Path:
+    """Build a part model from ``input_path`` and write ``output`` (.npz, .ply, _cameras.png).
+
+    ``input_path``: a registered sequence (see :func:`load_sequence`) or a video file (unregistered:
+    needs ``K`` and the box size; ``motion_mask`` keeps only what moves, for a static camera).
+    """
+    input_path, output = Path(input_path), Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="alcn_pose_frames_", dir=output.parent) as work:
+        if input_path.is_file() and io.is_video(input_path):
+            if K is None:
+                raise InputError("building from a video needs the intrinsics (--K fx fy cx cy)")
+            seq = video_sequence(input_path, K, work, step=video_step, max_frames=max_frames)
+            masks = None
+            if motion_mask:
+                frames = [io.read_image(seq.image_dir / v.name) for v in seq.views]
+                masks = dict(zip((v.name for v in seq.views), motion_masks(frames)))
+            units = box_units or "cm"
+            model, cams = build(seq, feature=feature, n_features=n_features, normalizer=normalizer,
+                                box_ply=box_ply, box_size=box_size, box_units=units, masks=masks,
+                                window=8, work_dir=work)
+        else:
+            seq = load_sequence(input_path, images)
+            model, cams = build(seq, feature=feature, n_features=n_features, normalizer=normalizer,
+                                box_ply=box_ply, box_size=box_size, box_units=box_units, work_dir=work)
+    path = part_model.save(model, output)
+    plot_model(model, cams, path.with_name(path.stem + "_cameras.png"))
+    if "mean_abs_relative_size_error" in model.box_fit:
+        logger.info("box fit error vs the known size: %.1f%% (per axis %s)",
+                    100 * model.box_fit["mean_abs_relative_size_error"],
+                    np.round(model.box_fit["size_error"], 3).tolist())
+    return path

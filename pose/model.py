@@ -1,0 +1,266 @@
+"""The part model: what ``alcn pose build`` writes and ``alcn pose track`` reads.
+
+A part model describes one rigid box-like object in its own *object frame*:
+
+* the box: its size ``(3,)`` along the frame's axes and its 8 corners ``(8, 3)``; the corners
+  are the *parts* the learned detector looks for (the Box experiment of Rad et al., BMVC 2017,
+  Sec. 4.4, with the part-based method of Crivellaro et al., ICCV 2015);
+* the sparse 3D points triangulated from the training sequence, each with one descriptor
+  (the classical detector matches image features to them) and its track length;
+* the units of every length (``"mm"``, ``"cm"`` or ``"m"``).
+
+File format (version :data:`FORMAT_VERSION`)
+-------------------------------------------
+One ``.npz`` archive (``numpy.savez``, no pickles) holding the arrays below and a JSON header
+stored as a 0-d unicode array under the key ``header``:
+
+=================  ============  =========  ==================================================
+key                shape         dtype      meaning
+=================  ============  =========  ==================================================
+``header``         ()            str        JSON: ``format``, ``version``, ``units``, ``feature``
+                                            (OpenCV detector name), ``normalizer``, ``source``,
+                                            ``box_fit`` (fit statistics), ``extra``
+``corners``        (8, 3)        float64    box corners in the object frame, in the order of
+                                            :func:`box_corners`
+``box_size``       (3,)          float64    edge lengths along x, y, z
+``points3d``       (N, 3)        float32    triangulated points in the object frame
+``descriptors``    (N, D)        uint8/f32  one descriptor per point (binary for ORB/AKAZE)
+``track_length``   (N,)          int32      number of training images that saw each point
+``colors``         (N, 3)        uint8      RGB colour of each point (for the PLY)
+=================  ============  =========  ==================================================
+
+:func:`save` also writes the point cloud beside the archive as ``<stem>.ply`` (for MeshLab,
+open3d, CloudCompare). Files are written atomically (temporary name, then rename).
+Reading an archive of another version raises :class:`~alcn_cv.errors.WeightFileError`
+naming both versions.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from alcn_cv.errors import DatasetError, InputError, WeightFileError
+from alcn_cv.formats import bop
+
+logger = logging.getLogger(__name__)
+
+FORMAT_NAME = "alcn-part-model"
+FORMAT_VERSION = 1
+UNITS = ("mm", "cm", "m")
+_UNIT_IN_M = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+
+
+def unit_scale(src: str, dst: str) -> float:
+    """Factor that converts a length in ``src`` units into ``dst`` units (``"mm"``, ``"cm"``, ``"m"``)."""
+    for u in (src, dst):
+        if u not in _UNIT_IN_M:
+            raise InputError(f"unknown unit {u!r}; expected one of {UNITS}")
+    return _UNIT_IN_M[src] / _UNIT_IN_M[dst]
+
+
+def box_corners(size: np.ndarray, origin: np.ndarray | None = None) -> np.ndarray:
+    """The 8 corners ``(8, 3)`` float64 of an axis-aligned box ``[origin, origin + size]``.
+
+    Order: corner ``i`` has ``x = origin_x + size_x`` if bit 2 of ``i`` is set (else ``origin_x``),
+    ``y`` likewise from bit 1 and ``z`` from bit 0.
+    """
+    size = np.asarray(size, dtype=np.float64).reshape(3)
+    origin = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64).reshape(3)
+    bits = np.array([[(i >> 2) & 1, (i >> 1) & 1, i & 1] for i in range(8)], dtype=np.float64)
+    return origin + bits * size
+
+
+# The 12 edges of a box as pairs of corner indices in the order of :func:`box_corners`.
+BOX_EDGES: tuple[tuple[int, int], ...] = tuple(
+    (i, j) for i in range(8) for j in range(i + 1, 8) if bin(i ^ j).count("1") == 1
+)
+
+
+@dataclass
+class PartModel:
+    """A box-shaped object's parts and sparse 3D points in its object frame (see module doc)."""
+
+    corners: np.ndarray
+    points3d: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))
+    track_length: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    units: str = "mm"
+    feature: str = "ORB"
+    normalizer: str = "none"
+    source: str = ""
+    box_fit: dict[str, Any] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.corners = np.asarray(self.corners, dtype=np.float64)
+        if self.corners.shape != (8, 3) or not np.isfinite(self.corners).all():
+            raise InputError(f"corners must be a finite (8, 3) array, got shape {self.corners.shape}")
+        self.points3d = np.asarray(self.points3d, dtype=np.float32).reshape(-1, 3)
+        n = len(self.points3d)
+        if len(self.descriptors) != n:
+            raise InputError(f"{len(self.descriptors)} descriptors for {n} points")
+        if self.track_length is None:
+            self.track_length = np.ones(n, np.int32)
+        self.track_length = np.asarray(self.track_length, dtype=np.int32).reshape(n)
+        if self.colors is None:
+            self.colors = np.full((n, 3), 200, np.uint8)
+        self.colors = np.asarray(self.colors, dtype=np.uint8).reshape(n, 3)
+        if self.units not in UNITS:
+            raise InputError(f"unknown unit {self.units!r}; expected one of {UNITS}")
+
+    @property
+    def parts(self) -> np.ndarray:
+        """The parts' 3D positions ``(8, 3)``: the box corners."""
+        return self.corners
+
+    @property
+    def box_size(self) -> np.ndarray:
+        """Edge lengths ``(3,)`` of the box (distances from corner 0 to corners 4, 2, 1)."""
+        return np.linalg.norm(self.corners[[4, 2, 1]] - self.corners[0], axis=1)
+
+    @property
+    def diameter(self) -> float:
+        """Largest distance between two corners (the box's diagonal), in :attr:`units`."""
+        d = self.corners[:, None] - self.corners[None]
+        return float(np.sqrt((d**2).sum(-1)).max())
+
+    def scaled_to(self, units: str) -> "PartModel":
+        """A copy with every length converted to ``units``."""
+        s = unit_scale(self.units, units)
+        return PartModel(
+            corners=self.corners * s, points3d=self.points3d * s, descriptors=self.descriptors,
+            track_length=self.track_length, colors=self.colors, units=units, feature=self.feature,
+            normalizer=self.normalizer, source=self.source, box_fit=dict(self.box_fit), extra=dict(self.extra),
+        )
+
+    def header(self) -> dict[str, Any]:
+        return {
+            "format": FORMAT_NAME, "version": FORMAT_VERSION, "units": self.units, "feature": self.feature,
+            "normalizer": self.normalizer, "source": self.source, "box_fit": self.box_fit, "extra": self.extra,
+        }
+
+
+def _atomic_write_bytes(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_point_cloud(path: str | Path, points: np.ndarray, colors: np.ndarray | None = None) -> Path:
+    """Write a coloured point cloud ``(N, 3)`` (RGB ``(N, 3)`` uint8) as a binary PLY, atomically."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    return bop.write_ply(path, bop.PlyModel(vertices=pts, faces=np.zeros((0, 3), np.int64),
+                                            colors=None if colors is None else np.asarray(colors, np.uint8)))
+
+
+def read_box_corners(path: str | Path) -> np.ndarray:
+    """The 8 corners ``(8, 3)`` (order of :func:`box_corners`) of the axis-aligned bounding box of
+    a PLY mesh's vertices, in the file's units (a cuboid such as ``cookie_box/box.ply``, a BOP model)."""
+    verts = bop.read_ply(path, unit_check=False).vertices
+    if len(verts) == 0:
+        raise DatasetError(f"{path}: field 'vertex': no vertices")
+    lo, hi = verts.min(0), verts.max(0)
+    if np.any(hi - lo <= 0):
+        raise DatasetError(f"{path}: field 'vertex': the vertices span a flat or empty box {hi - lo}")
+    return box_corners(hi - lo, lo)
+
+
+def save(model: PartModel, path: str | Path) -> Path:
+    """Write ``model`` to ``path`` (``.npz``) and its point cloud to ``<stem>.ply`` beside it."""
+    path = Path(path)
+    if path.suffix != ".npz":
+        path = path.with_suffix(".npz")
+    buf = io.BytesIO()
+    np.savez(
+        buf, header=np.array(json.dumps(model.header())), corners=model.corners, box_size=model.box_size,
+        points3d=model.points3d, descriptors=model.descriptors, track_length=model.track_length,
+        colors=model.colors,
+    )
+    _atomic_write_bytes(path, buf.getvalue())
+    write_point_cloud(path.with_suffix(".ply"), model.points3d, model.colors)
+    logger.info("wrote part model %s (%d points, box %s %s)", path, len(model.points3d),
+                np.round(model.box_size, 3).tolist(), model.units)
+    return path
+
+
+def load(path: str | Path) -> PartModel:
+    """Read a part model written by :func:`save`.
+
+    Raises:
+        WeightFileError: missing or corrupt file, another format, or another version.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise WeightFileError(f"{path}: part model not found")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError) as exc:
+        raise WeightFileError(f"{path}: not a readable part model archive ({exc})") from exc
+    try:
+        header = json.loads(str(arrays.pop("header")))
+    except (KeyError, json.JSONDecodeError) as exc:
+        raise WeightFileError(f"{path}: field 'header' missing or not JSON") from exc
+    if header.get("format") != FORMAT_NAME:
+        raise WeightFileError(f"{path}: field 'format' is {header.get('format')!r}, expected {FORMAT_NAME!r}")
+    if header.get("version") != FORMAT_VERSION:
+        raise WeightFileError(
+            f"{path}: part model format version {header.get('version')} but this alcn-cv reads version "
+            f"{FORMAT_VERSION}; rebuild it with `alcn pose build`"
+        )
+    try:
+        return PartModel(
+            corners=arrays["corners"], points3d=arrays["points3d"], descriptors=arrays["descriptors"],
+            track_length=arrays["track_length"], colors=arrays["colors"], units=header["units"],
+            feature=header["feature"], normalizer=header.get("normalizer", "none"),
+            source=header.get("source", ""), box_fit=header.get("box_fit", {}), extra=header.get("extra", {}),
+        )
+    except KeyError as exc:
+        raise WeightFileError(f"{path}: field {exc.args[0]!r} missing") from exc
+    except InputError as exc:
+        raise WeightFileError(f"{path}: {exc}") from exc
+
+
+def from_opencv_tutorial(yml_path: str | Path, box_ply: str | Path | None = None, units: str = "cm") -> PartModel:
+    """A part model from the ORB model of OpenCV's real-time pose tutorial (``cookies_ORB.yml``).
+
+    The YAML holds ``points_3d`` (N x 1, 3 float channels) and ``descriptors`` (N x 32 uint8, ORB);
+    its lengths are centimetres. The box comes from ``box_ply`` (a cuboid mesh such as
+    ``../shared/data/cookie_box/box.ply``); without it, from the points' bounding box.
+    """
+    yml_path = Path(yml_path)
+    if not yml_path.is_file():
+        raise DatasetError(f"{yml_path}: file not found")
+    fs = cv2.FileStorage(str(yml_path), cv2.FILE_STORAGE_READ)
+    try:
+        pts, desc = fs.getNode("points_3d").mat(), fs.getNode("descriptors").mat()
+    finally:
+        fs.release()
+    if pts is None or desc is None:
+        raise DatasetError(f"{yml_path}: field 'points_3d' or 'descriptors' missing")
+    pts = pts.reshape(-1, 3).astype(np.float32)
+    if len(pts) != len(desc):
+        raise DatasetError(f"{yml_path}: field 'descriptors' has {len(desc)} rows for {len(pts)} points_3d")
+    if box_ply is not None:
+        corners = read_box_corners(box_ply)
+    else:
+        corners = box_corners(pts.max(0) - pts.min(0), pts.min(0))
+    return PartModel(corners=corners, points3d=pts, descriptors=desc, units=units, feature="ORB",
+                     source=str(yml_path))

@@ -1,0 +1,137 @@
+"""Part detectors: image -> 2D-3D correspondences for the pose solver, after a normalizer.
+
+Both detectors first normalize the image with ``alcn_cv.create(name)`` (``"none"``, ``"dog"``,
+``"alcn"`` or any registered name), as in Sec. 4.4 of Rad, Roth & Lepetit, "ALCN: Meta-Learning
+for Contrast Normalization Applied to Robust 3D Pose Estimation", BMVC 2017:
+
+* :class:`FeaturePartDetector` (classical): OpenCV keypoints and descriptors (ORB by default,
+  SIFT or AKAZE on request) on the normalized image, matched to the descriptors of the part
+  model's 3D points (brute force, Lowe's ratio test).
+* :class:`CornerPartDetector` (learned, :mod:`pose.learned`): a small CNN on normalized windows
+  that finds the box corners, run through ``cv2.dnn`` (ONNX), so tracking needs no torch.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Protocol
+
+import cv2
+import numpy as np
+
+from alcn_cv.errors import InputError
+from pose.model import PartModel
+
+logger = logging.getLogger(__name__)
+
+FEATURES = ("ORB", "SIFT", "AKAZE")
+
+
+class Normalizer(Protocol):
+    def apply(self, img: np.ndarray) -> np.ndarray: ...
+
+
+def get_normalizer(name: str) -> Normalizer:
+    """The normalizer registered under ``name`` (``alcn_cv.create``)."""
+    import alcn_cv
+
+    return alcn_cv.create(name)
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    """A uint8 grayscale copy of a BGR or gray uint8 image."""
+    if not isinstance(image, np.ndarray) or image.size == 0:
+        raise InputError("image must be a non-empty numpy array")
+    if image.dtype != np.uint8:
+        raise InputError(f"image must be uint8, got {image.dtype}")
+    if image.ndim == 2:
+        return image
+    if image.ndim == 3 and image.shape[2] == 3:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    raise InputError(f"image must be HxW or HxWx3, got shape {image.shape}")
+
+
+def create_feature(name: str, n_features: int = 1000) -> cv2.Feature2D:
+    """An OpenCV keypoint detector + descriptor: ``"ORB"``, ``"SIFT"`` or ``"AKAZE"``."""
+    name = name.upper()
+    if name == "ORB":
+        return cv2.ORB_create(nfeatures=n_features, scaleFactor=1.2, nlevels=8, fastThreshold=10)
+    if name == "SIFT":
+        return cv2.SIFT_create(nfeatures=n_features)
+    if name == "AKAZE":
+        return cv2.AKAZE_create(threshold=5e-4)
+    raise InputError(f"unknown feature {name!r}; choose one of {FEATURES}")
+
+
+def descriptor_norm(name: str) -> int:
+    """The OpenCV norm that compares descriptors of feature ``name``."""
+    return cv2.NORM_L2 if name.upper() == "SIFT" else cv2.NORM_HAMMING
+
+
+def match_descriptors(query: np.ndarray, train: np.ndarray, norm: int, ratio: float = 0.8) -> np.ndarray:
+    """Lowe's ratio-test matches ``(M, 2)`` int64 of (query index, train index)."""
+    if len(query) < 1 or len(train) < 2:
+        return np.zeros((0, 2), np.int64)
+    knn = cv2.BFMatcher(norm).knnMatch(query, train, k=2)
+    pairs = [(m[0].queryIdx, m[0].trainIdx) for m in knn if len(m) == 2 and m[0].distance < ratio * m[1].distance]
+    return np.array(pairs, np.int64).reshape(-1, 2)
+
+
+@dataclass
+class Correspondences:
+    """2D-3D correspondences found in one image.
+
+    Attributes:
+        object_points: ``(M, 3)`` float32, the model's units.
+        image_points: ``(M, 2)`` float32 pixels.
+        keypoints: number of keypoints detected in the image.
+    """
+
+    object_points: np.ndarray
+    image_points: np.ndarray
+    keypoints: int = 0
+
+
+class FeaturePartDetector:
+    """Classical part detector: features of the normalized image matched to the model's 3D points.
+
+    Args:
+        model: the part model (its ``feature`` names the OpenCV feature used to build it).
+        normalizer: name given to ``alcn_cv.create``.
+        n_features: keypoints per image.
+        ratio: Lowe's ratio-test threshold.
+    """
+
+    def __init__(self, model: PartModel, normalizer: str = "none", *, n_features: int = 1000,
+                 ratio: float = 0.8) -> None:
+        if len(model.points3d) < 4:
+            raise InputError(f"the part model has {len(model.points3d)} 3D points; at least 4 are needed")
+        self.model = model
+        self.normalizer_name = normalizer
+        self.normalizer = get_normalizer(normalizer)
+        self.feature = create_feature(model.feature, n_features)
+        self.norm = descriptor_norm(model.feature)
+        self.ratio = ratio
+        self._matcher = cv2.BFMatcher(self.norm)
+        self._matcher.add([model.descriptors])
+        self._matcher.train()
+
+    def normalize(self, image: np.ndarray) -> np.ndarray:
+        """The normalized grayscale uint8 image the features are computed on."""
+        return self.normalizer.apply(to_gray(image))
+
+    def detect(self, image: np.ndarray) -> Correspondences:
+        """Correspondences between ``image`` (BGR or gray uint8) and the model's 3D points."""
+        gray = self.normalize(image)
+        kps, desc = self.feature.detectAndCompute(gray, None)
+        if desc is None or len(kps) == 0:
+            return Correspondences(np.zeros((0, 3), np.float32), np.zeros((0, 2), np.float32), 0)
+        knn = self._matcher.knnMatch(desc, k=2)
+        q, t = [], []
+        for m in knn:
+            if len(m) == 2 and m[0].distance < self.ratio * m[1].distance:
+                q.append(m[0].queryIdx)
+                t.append(m[0].trainIdx)
+        pts2d = np.array([kps[i].pt for i in q], np.float32).reshape(-1, 2)
+        return Correspondences(self.model.points3d[np.array(t, np.int64)], pts2d, len(kps))

@@ -1,0 +1,62 @@
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image
+
+from alcn_cv.errors import InputError
+from calib.board import BoardSpec, suggest_chessboard_size, write_board_image
+
+
+def test_printable_charuco_board_is_detected_whole(tmp_path):
+    spec = BoardSpec(cols=5, rows=4, square=30.0, marker=22.0)
+    info = write_board_image(spec, tmp_path / "board.png", dpi=150)
+    assert not list(tmp_path.glob(".*tmp*"))
+    meta = json.loads((tmp_path / "board.json").read_text())
+    assert meta["board"]["cols"] == 5 and meta["dpi"] == 150
+    with Image.open(tmp_path / "board.png") as im:
+        assert im.info["dpi"] == pytest.approx((150, 150), abs=0.05)  # PNG stores pixels per metre
+        assert im.size == tuple(info["image_size_px"])
+    # The printed square is the requested one to within one pixel at this DPI.
+    assert abs(info["square_mm_printed"] - 30.0) <= 25.4 / 150
+    image = cv2.imread(str(tmp_path / "board.png"), cv2.IMREAD_GRAYSCALE)
+    det = spec.detector()(image)
+    assert det is not None and len(det.ids) == spec.num_corners
+    # Corner spacing in the image is the square in pixels: a consistent homography board -> image.
+    H, _ = cv2.findHomography(det.object_points[:, :2], det.image_points)
+    proj = cv2.perspectiveTransform(det.object_points[None, :, :2], H)[0]
+    assert np.abs(proj - det.image_points).max() < 0.5
+    assert H[0, 0] == pytest.approx(info["square_px"] / 30.0, rel=1e-2)
+
+
+def test_printable_chessboard(tmp_path):
+    spec = BoardSpec("chessboard", 6, 4, 20.0)
+    write_board_image(spec, tmp_path / "cb.png", dpi=100)
+    image = cv2.imread(str(tmp_path / "cb.png"), cv2.IMREAD_GRAYSCALE)
+    det = spec.detector()(image)
+    assert det is not None and len(det.image_points) == 24
+    assert suggest_chessboard_size(image) == (6, 4)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(kind="aruco"), "kind"),
+        (dict(cols=2, rows=5), "at least"),
+        (dict(marker=40.0), "marker size"),
+        (dict(dictionary="DICT_NOPE"), "dictionary"),
+        (dict(cols=20, rows=20, dictionary="DICT_4X4_50"), "needs 200 markers"),
+        (dict(square=0.0), "square"),
+    ],
+)
+def test_bad_board_specs(kwargs, match):
+    with pytest.raises(InputError, match=match):
+        BoardSpec(**kwargs)
+
+
+def test_board_image_needs_png(tmp_path):
+    with pytest.raises(InputError, match=".png"):
+        write_board_image(BoardSpec(), tmp_path / "b.jpg")

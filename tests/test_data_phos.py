@@ -1,0 +1,111 @@
+"""Tests of the Phos-like Normalizer training windows."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from alcn_cv.data import phos
+from alcn_cv.data.render import LIGHT_FAMILIES
+from alcn_cv.errors import DatasetError, InputError
+
+
+@pytest.fixture(scope="module")
+def batch():
+    return phos.render_windows(300, seed=3, n_objects=12)
+
+
+def test_shapes_dtypes_and_labels(batch):
+    assert batch.windows.shape == (300, 64, 64) and batch.windows.dtype == np.uint8
+    for a in (batch.labels, batch.light_ids, batch.kinds):
+        assert a.shape == (300,) and a.dtype == np.int64
+    assert batch.labels.min() >= 0 and batch.labels.max() <= 12
+    assert set(np.unique(batch.light_ids)) <= set(range(len(LIGHT_FAMILIES)))
+    obj = batch.labels > 0
+    assert 0.45 < obj.mean() < 0.85  # background_fraction 0.35
+    assert (batch.kinds[obj] == 0).all() and (batch.kinds[~obj] > 0).all()
+    # Object windows: centred within 3 px, extent in the requested range.
+    assert np.abs(batch.offsets[obj]).max() <= 3.0
+    assert ((batch.extents[obj] >= 34) & (batch.extents[obj] <= 46)).all()
+    # Off-centre negatives keep their object out of the centre.
+    off = batch.kinds == 3
+    assert (np.hypot(*batch.offsets[off].T) >= 14).all()
+    assert np.isnan(batch.offsets[batch.kinds == 1]).all()
+
+
+def test_windows_are_varied(batch):
+    w = batch.windows.reshape(len(batch), -1).astype(np.float32)
+    means = w.mean(1)
+    assert means.min() < 40 and means.max() > 180  # dark and bright lightings
+    assert (w.std(1) > 2).mean() > 0.95  # hardly any flat window
+    assert (batch.windows == 255).any(axis=(1, 2)).mean() > 0.05  # some saturation
+
+
+def test_deterministic_and_prefix_stable(batch):
+    again = phos.render_windows(300, seed=3, n_objects=12)
+    assert np.array_equal(again.windows, batch.windows) and np.array_equal(again.labels, batch.labels)
+    first = phos.render_windows(40, seed=3, n_objects=12)
+    assert np.array_equal(first.windows, batch.windows[:40])
+    other = phos.render_windows(40, seed=4, n_objects=12)
+    assert not np.array_equal(other.windows, first.windows)
+
+
+def test_lighting_selection_and_subset():
+    b = phos.render_windows(20, seed=0, n_objects=4, lighting="side,dark")
+    assert set(np.unique(b.light_ids)) <= {LIGHT_FAMILIES.index("side"), LIGHT_FAMILIES.index("dark")}
+    s = b.subset(b.labels > 0)
+    assert len(s) == int((b.labels > 0).sum()) and s.windows.shape[1:] == (64, 64)
+    with pytest.raises(InputError):
+        phos.render_windows(4, seed=0, lighting="sunset")
+    with pytest.raises(InputError):
+        phos.render_windows(4, seed=0, background_fraction=2.0)
+    assert len(phos.render_windows(0, seed=0, n_objects=2)) == 0
+
+
+def test_generate_load_roundtrip_bytes_identical(tmp_path):
+    a = phos.generate(tmp_path / "a", 70, 5, n_objects=6, progress=False)
+    b = phos.generate(tmp_path / "b", 70, 5, n_objects=6, progress=False)
+    for name in ("windows.npz", "manifest.json"):
+        assert (a / name).read_bytes() == (b / name).read_bytes()
+    loaded = phos.load(a)
+    ref = phos.render_windows(70, 5, n_objects=6)
+    assert np.array_equal(loaded.windows, ref.windows) and np.array_equal(loaded.light_ids, ref.light_ids)
+    assert loaded.n_objects == 6 and loaded.light_families == LIGHT_FAMILIES
+    man = json.loads((a / "manifest.json").read_text())
+    assert man["kind"] == "phos" and man["seed"] == 5 and man["parameters"]["n"] == 70
+    with pytest.raises(FileExistsError):
+        phos.generate(a, 5, 5, n_objects=6, progress=False)
+    assert not list(tmp_path.glob(".*tmp"))  # nothing half-written left behind
+
+
+def test_load_errors_name_the_file_and_field(tmp_path):
+    d = phos.generate(tmp_path / "d", 10, 0, n_objects=3, progress=False)
+    npz = d / "windows.npz"
+    data = npz.read_bytes()
+    npz.write_bytes(data[: len(data) // 2])
+    with pytest.raises(DatasetError, match="windows.npz"):
+        phos.load(d)
+    npz.write_bytes(data)
+    man = json.loads((d / "manifest.json").read_text())
+    del man["seed"]
+    (d / "manifest.json").write_text(json.dumps(man))
+    with pytest.raises(DatasetError, match="manifest.json.*seed"):
+        phos.load(d)
+    man["seed"] = 0
+    man["parameters"]["n_objects"] = 1
+    (d / "manifest.json").write_text(json.dumps(man))
+    loaded_labels = np.load(npz)["labels"]
+    if loaded_labels.max() > 1:
+        with pytest.raises(DatasetError, match="labels"):
+            phos.load(d)
+    (d / "manifest.json").write_text("{ truncated")
+    with pytest.raises(DatasetError, match="malformed or truncated"):
+        phos.load(d)
+    with zipfile.ZipFile(npz, "w") as z:
+        z.writestr("labels.npy", b"")
+    (d / "manifest.json").write_text(json.dumps({**man, "parameters": {"n_objects": 3}}))
+    with pytest.raises(DatasetError, match="windows.npz"):
+        phos.load(d)

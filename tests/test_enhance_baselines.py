@@ -1,0 +1,228 @@
+"""The classical baselines of issue 5: the apply() contract, and each against an independent computation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+import alcn_cv
+from alcn_cv.errors import InputError
+
+CLASSICAL = ["ns", "dog", "slcn", "dlcn", "lrn", "whitening", "he", "clahe", "intrinsic", "sqi"]
+
+
+def _scene(h: int = 40, w: int = 52, seed: int = 0) -> np.ndarray:
+    """A textured float32 image in [0.05, 0.95] with edges and a smooth shading ramp."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w]
+    texture = ndimage.gaussian_filter(rng.random((h, w)), 1.5)
+    texture = (texture - texture.min()) / (np.ptp(texture) + 1e-9)
+    blocks = ((x // 13 + y // 11) % 2).astype(np.float64)
+    shading = 0.4 + 0.6 * x / w
+    img = shading * (0.3 + 0.4 * blocks + 0.3 * texture)
+    return np.clip(img, 0.05, 0.95).astype(np.float32)
+
+
+def test_all_registered():
+    assert set(CLASSICAL) <= set(alcn_cv.available())
+
+
+@pytest.mark.parametrize("name", CLASSICAL)
+@pytest.mark.parametrize("kind", ["gray_u8", "gray_u16", "gray_f32", "gray_hw1", "bgr_u8", "bgr_f32"])
+def test_apply_contract(name, kind):
+    gray = _scene()
+    rgb = np.stack([gray, gray[::-1], gray[:, ::-1]], -1)
+    img = {
+        "gray_u8": np.rint(gray * 255).astype(np.uint8),
+        "gray_u16": np.rint(gray * 65535).astype(np.uint16),
+        "gray_f32": gray,
+        "gray_hw1": np.rint(gray * 255).astype(np.uint8)[..., None],
+        "bgr_u8": np.rint(rgb * 255).astype(np.uint8),
+        "bgr_f32": rgb.astype(np.float32),
+    }[kind]
+    before = img.copy()
+    out = alcn_cv.create(name).apply(img)
+    assert out.shape == img.shape and out.dtype == img.dtype
+    np.testing.assert_array_equal(img, before)  # the caller's array is untouched
+    if out.dtype == np.float32:
+        assert np.isfinite(out).all() and out.min() >= 0 and out.max() <= 1
+    assert np.ptp(out.astype(np.float64)) > 0  # not a blank image
+    f32 = alcn_cv.create(name).apply(img, out_dtype=np.float32)
+    assert f32.dtype == np.float32 and f32.shape == img.shape
+
+
+@pytest.mark.parametrize("name", CLASSICAL)
+def test_small_and_flat_images(name):
+    norm = alcn_cv.create(name)
+    for img in (np.full((9, 11), 0.5, np.float32), np.zeros((1, 1), np.float32), _scene(3, 4)):
+        out = norm.normalize(img)
+        assert out.shape == img.shape and out.dtype == np.float32 and np.isfinite(out).all()
+
+
+@pytest.mark.parametrize("name", CLASSICAL)
+@pytest.mark.parametrize(
+    "bad",
+    [
+        np.zeros((0, 5), np.uint8),
+        np.zeros((8, 8, 2), np.uint8),
+        np.zeros((8, 8, 4), np.uint8),
+        np.zeros((8, 8), np.int32),
+        np.full((8, 8), np.nan, np.float32),
+        np.full((8, 8), 200.0, np.float32),
+        np.zeros((2, 8, 8, 1), np.uint8),
+    ],
+    ids=["empty", "2ch", "4ch", "int32", "nan", "float_255", "4d"],
+)
+def test_bad_input(name, bad):
+    with pytest.raises(InputError):
+        alcn_cv.create(name).apply(bad)
+
+
+@pytest.mark.parametrize(
+    ("name", "params"),
+    [
+        ("dog", {"sigma1": 2.0, "sigma2": 1.0}),
+        ("dog", {"sigma1": -1.0}),
+        ("slcn", {"sigma": 0}),
+        ("dlcn", {"eps": float("nan")}),
+        ("lrn", {"size": 4}),
+        ("clahe", {"tileGridSize": (0, 8)}),
+        ("sqi", {"sigmas": ()}),
+        ("intrinsic", {"threshold": -1}),
+        ("he", {"unknown": 1}),
+    ],
+)
+def test_bad_parameters(name, params):
+    with pytest.raises(InputError):
+        alcn_cv.create(name, **params)
+
+
+def _mirror_gauss(img: np.ndarray, sigma: float) -> np.ndarray:
+    """scipy's Gaussian with the project's kernel convention: truncate 3, reflect-101 ("mirror")."""
+    return ndimage.gaussian_filter(img.astype(np.float64), sigma, mode="mirror", truncate=3.0)
+
+
+def test_dog_matches_skimage():
+    from skimage.filters import difference_of_gaussians
+
+    img = _scene()
+    ref = difference_of_gaussians(img.astype(np.float64), 0.7, 2.3, mode="mirror", truncate=3.0)
+    out = alcn_cv.create("dog", sigma1=0.7, sigma2=2.3).normalize(img)
+    np.testing.assert_allclose(out, ref, atol=1e-5)
+
+
+def test_slcn_dlcn_match_scipy():
+    img = _scene()
+    sigma = 1.7
+    v = img - _mirror_gauss(img, sigma)
+    np.testing.assert_allclose(alcn_cv.create("slcn", sigma=sigma).normalize(img), v, atol=1e-5)
+    s = np.sqrt(_mirror_gauss(v * v, sigma))
+    ref = v / np.maximum(s, s.mean())
+    np.testing.assert_allclose(alcn_cv.create("dlcn", sigma=sigma).normalize(img), ref, atol=1e-4)
+
+
+def test_dlcn_and_ns_remove_a_gain():
+    img = _scene()
+    for name in ("ns", "dlcn", "whitening"):
+        norm = alcn_cv.create(name)
+        np.testing.assert_allclose(norm.normalize(img * np.float32(0.3)), norm.normalize(img), atol=2e-3)
+
+
+def test_ns_standardizes():
+    out = alcn_cv.create("ns").normalize(_scene())
+    assert abs(out.mean()) < 1e-5 and abs(out.std() - 1) < 1e-2
+
+
+def test_lrn_matches_torch_across_one_axis():
+    torch = pytest.importorskip("torch")
+    size, alpha, beta, k = 5, 0.8, 0.75, 0.02
+    row = _scene(1, 60, seed=3)[0]
+    img = np.repeat(row[None], 30, axis=0)  # constant along y: the 5x5 sum is 5 times the 1D sum along x
+    out = alcn_cv.create("lrn", size=size, alpha=alpha, beta=beta, k=k).normalize(img)
+    a = torch.from_numpy((row - row.mean()).astype(np.float32)).reshape(1, -1, 1, 1)  # x as channels
+    ref = torch.nn.LocalResponseNorm(size, alpha=alpha, beta=beta, k=k)(a).reshape(-1).numpy()
+    r = size // 2
+    np.testing.assert_allclose(out[15, r:-r], ref[r:-r], rtol=1e-4, atol=1e-6)
+
+
+def test_whitening_gain_follows_the_filter():
+    h, w = 64, 256
+    f1, f2 = 8 / w, 64 / w  # cycles per pixel
+    x = np.arange(w)
+    img = np.repeat((0.5 + 0.2 * np.sin(2 * np.pi * f1 * x) + 0.2 * np.sin(2 * np.pi * f2 * x))[None], h, 0)
+    f0 = 0.3
+    out = alcn_cv.create("whitening", f0=f0).normalize(img.astype(np.float32))[h // 2, w // 4 : 3 * w // 4]
+    xs = x[w // 4 : 3 * w // 4]
+    basis = np.stack([np.sin(2 * np.pi * f * xs + p) for f in (f1, f2) for p in (0, np.pi / 2)], 1)
+    coef = np.linalg.lstsq(basis, out, rcond=None)[0]
+    amp1, amp2 = np.hypot(coef[0], coef[1]), np.hypot(coef[2], coef[3])
+
+    def gain(f):
+        return f * np.exp(-((f / f0) ** 4))
+
+    assert amp2 / amp1 == pytest.approx(gain(f2) / gain(f1), rel=0.05)
+
+
+def test_he_flattens_the_histogram():
+    rng = np.random.default_rng(1)
+    img = (rng.random((64, 64)) ** 3).astype(np.float32)  # dark-skewed
+    out = alcn_cv.create("he").normalize(img)
+    order = np.argsort(img, axis=None)
+    assert np.all(np.diff(out.reshape(-1)[order]) >= 0)  # monotone
+    counts, _ = np.histogram(out, bins=4, range=(0, 1))
+    assert counts.min() > 0.2 * out.size
+
+
+def test_clahe_is_opencv():
+    import cv2
+
+    img8 = np.rint(_scene() * 255).astype(np.uint8)
+    ref = cv2.createCLAHE(clipLimit=3.0, tileGridSize=(2, 3)).apply(img8)
+    out = alcn_cv.create("clahe", clipLimit=3.0, tileGridSize=(2, 3)).apply(img8)
+    np.testing.assert_array_equal(out, ref)
+
+
+def test_sqi_unweighted_matches_scipy():
+    img = _scene()
+    eps = 0.01
+    ref = np.mean([np.log(img + eps) - np.log(_mirror_gauss(img, s) + eps) for s in (1.0, 2.5)], axis=0)
+    out = alcn_cv.create("sqi", sigmas=(1.0, 2.5), weighted=False).normalize(img)
+    np.testing.assert_allclose(out, ref, atol=1e-4)
+
+
+def test_sqi_weighted_matches_direct_computation():
+    img = _scene(14, 17, seed=5)
+    sigma, eps = 1.0, 0.01
+    r = 3
+    g1 = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma) ** 2)
+    g1 /= g1.sum()
+    g = np.outer(g1, g1)
+    padded = np.pad(img.astype(np.float64), r, mode="reflect")  # numpy "reflect" is reflect-101
+    ref = np.empty(img.shape)
+    for i in range(img.shape[0]):
+        for j in range(img.shape[1]):
+            win = padded[i : i + 2 * r + 1, j : j + 2 * r + 1]
+            tau = (g * win).sum()
+            side = win <= tau if (win <= tau).sum() * 2 >= win.size else win > tau
+            smooth = (g * win * side).sum() / (g * side).sum()
+            ref[i, j] = np.log(img[i, j] + eps) - np.log(smooth + eps)
+    out = alcn_cv.create("sqi", sigmas=(sigma,), eps=eps).normalize(img)
+    np.testing.assert_allclose(out, ref, atol=1e-4)
+
+
+def test_intrinsic_recovers_reflectance_under_smooth_shading():
+    h, w = 48, 64
+    y, x = np.mgrid[0:h, 0:w]
+    reflectance = np.where((x // 16 + y // 12) % 2 == 0, 0.8, 0.3)
+    shading = 0.5 + 0.4 * (x / w)  # gradient in log well below the threshold
+    img = (reflectance * shading).astype(np.float32)
+    eps = 1e-6
+    out = alcn_cv.create("intrinsic", threshold=0.1, eps=eps).normalize(img)
+    ref = np.log(reflectance)
+    ref -= ref.mean()
+    np.testing.assert_allclose(out, ref, atol=2e-2)
+    # with no threshold every gradient is kept: the log image itself, zero-mean
+    keep_all = alcn_cv.create("intrinsic", threshold=0.0, eps=0.01).normalize(img)
+    log = np.log(img.astype(np.float64) + 0.01)
+    np.testing.assert_allclose(keep_all, log - log.mean(), atol=1e-4)

@@ -1,0 +1,61 @@
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from alcn_cv.errors import DatasetError
+from alcn_cv.formats.middlebury import read_middlebury
+
+_LINE = (
+    "a.png 1520.4 0 302.32 0 1525.9 246.87 0 0 1 "
+    "1 0 0 0 1 0 0 0 1 0.01 -0.02 0.6"
+)
+
+
+def test_reads_synthetic_file(tmp_path):
+    (tmp_path / "x_par.txt").write_text(f"1\n{_LINE}\n")
+    (tmp_path / "a.png").write_bytes(b"")
+    (view,) = read_middlebury(tmp_path)
+    assert view.name == "a.png" and view.path == tmp_path / "a.png"
+    np.testing.assert_allclose(view.K[0], [1520.4, 0, 302.32])
+    np.testing.assert_allclose(view.t_w2c, [0.01, -0.02, 0.6])
+    np.testing.assert_allclose(view.center, [-0.01, 0.02, -0.6])
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("2\n" + _LINE + "\n", "header says 2"),
+        ("x\n" + _LINE + "\n", "number of images"),
+        ("1\n" + _LINE.replace("0.6", "abc") + "\n", "field K/R/t"),
+        ("1\n" + _LINE.rsplit(" ", 1)[0] + "\n", "22 fields"),
+        ("1\n" + _LINE.replace(" 1 0 0 0 1 0 0 0 1 ", " 2 0 0 0 1 0 0 0 1 ") + "\n", "not a rotation"),
+        ("1\n" + _LINE.replace("a.png", "b.png") + "\n", "b.png not found"),
+    ],
+)
+def test_malformed(tmp_path, text, match):
+    (tmp_path / "x_par.txt").write_text(text)
+    (tmp_path / "a.png").write_bytes(b"")
+    with pytest.raises(DatasetError, match=match):
+        read_middlebury(tmp_path / "x_par.txt")
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize("name", ["templeSparseRing", "dinoSparseRing"])
+def test_real_sets(shared_data, name):
+    views = read_middlebury(shared_data / "middlebury" / name)
+    assert len(views) == 16
+    for v in views:
+        np.testing.assert_allclose(v.R_w2c @ v.R_w2c.T, np.eye(3), atol=1e-4)
+    # The centre of the object's bounding box (given in the README) lies in front of every
+    # camera and projects inside the 640x480 image.
+    readme = (shared_data / "middlebury" / name / "README.txt").read_text()
+    corners = np.array(re.findall(r"\(([-\d.]+) ([-\d.]+) ([-\d.]+)\)", readme), dtype=float)
+    centre = corners.mean(axis=0)
+    for v in views:
+        x = v.P @ np.r_[centre, 1.0]
+        assert x[2] > 0
+        u, w = x[:2] / x[2]
+        assert 0 < u < 640 and 0 < w < 480

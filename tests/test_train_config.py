@@ -1,0 +1,62 @@
+"""The training configuration schema (alcn_cv.train.config)."""
+
+from __future__ import annotations
+
+import pytest
+
+from alcn_cv.errors import InputError
+from alcn_cv.train.config import PRESETS, TrainConfig, dump_toml, load_config
+
+
+def test_defaults_and_presets():
+    cfg = load_config()
+    assert cfg == TrainConfig()
+    assert not set(cfg.data.train_lighting) & set(cfg.data.val_lighting)
+    paper = load_config("paper")
+    assert paper.data.n_train == 500_000 and paper.run.device == "cuda"
+    assert set(PRESETS) == {"default", "paper"}
+
+
+def test_toml_file_overrides_and_round_trip(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text('seed = 3\n[optim]\nlr = 1\nepochs = 2\n[model]\nmethod = "dog"\n')
+    cfg = load_config(path, ["optim.batch_size=16", {"run": {"threads": 2}}, "data.train_lighting=['ambient']"])
+    assert (cfg.seed, cfg.optim.lr, cfg.optim.epochs, cfg.model.method) == (3, 1.0, 2, "dog")
+    assert isinstance(cfg.optim.lr, float)
+    assert (cfg.optim.batch_size, cfg.run.threads, cfg.data.train_lighting) == (16, 2, ["ambient"])
+    again = tmp_path / "again.toml"
+    again.write_text(dump_toml(cfg))
+    assert load_config(again) == cfg
+
+
+@pytest.mark.parametrize(
+    "values, key",
+    [
+        ({"optim": {"lrr": 1e-3}}, "optim.lrr"),
+        ({"bogus": 1}, "bogus"),
+        ({"optim": {"epochs": "ten"}}, "optim.epochs"),
+        ({"optim": {"epochs": 2.5}}, "optim.epochs"),
+        ({"model": {"channels": [20]}}, "model.channels"),
+        ({"model": {"method": "clahe"}}, "model.method"),
+        ({"optim": {"lr": -1.0}}, "optim.lr"),
+        ({"data": {"path": "/nonexistent/phos"}}, "data.path"),
+        ({"data": {"val_lighting": ["ambient"]}}, "data.val_lighting"),
+        ({"data": {"train_lighting": ["moonlight"]}}, "data.train_lighting"),
+        ({"model": {"dog": [0.5, 0.7]}}, "model.dog"),
+        ({"optim": 3}, "optim"),
+    ],
+)
+def test_errors_name_the_key(values, key):
+    with pytest.raises(InputError, match=key.replace(".", r"\.")):
+        load_config(values)
+
+
+def test_bad_toml_and_unknown_preset(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("seed = = 3")
+    with pytest.raises(InputError, match="invalid TOML"):
+        load_config(bad)
+    with pytest.raises(InputError, match="neither a preset"):
+        load_config("nonexistent-preset")
+    with pytest.raises(InputError, match="KEY=VALUE"):
+        load_config(None, ["optim.lr"])

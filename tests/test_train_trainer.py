@@ -1,0 +1,133 @@
+"""Joint training (Eq. 2): checkpoints, exact resume, faults, outputs (alcn_cv.train.trainer)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from alcn_cv.data import phos
+from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.train import trainer
+from alcn_cv.train.stage2 import NonFiniteLossError
+from alcn_cv.weight_file import load_normalizer_file
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("phos")
+    train_dir = phos.generate(root / "train", 96, 0, n_objects=3, lighting="ambient,bright", progress=False)
+    val_dir = phos.generate(root / "val", 48, 1, n_objects=3, lighting="side", progress=False)
+    return str(train_dir), str(val_dir)
+
+
+def _config(data, **model):
+    return {
+        "data": {"path": data[0], "val_path": data[1], "gain_jitter": [0.7, 1.4]},
+        "model": {"channels": [4, 8], "hidden": 16, "detector_channels": [4, 8], "detector_hidden": 16, **model},
+        "optim": {"epochs": 2, "batch_size": 16, "warmup_steps": 2},
+        "run": {"threads": 1, "log_every": 2},
+    }
+
+
+def _weights(path):
+    return trainer.load_checkpoint(path)["model"]
+
+
+def test_train_outputs_and_gradients_reach_the_normalizer(data, tmp_path):
+    cfg = _config(data)
+    result = trainer.train(cfg, tmp_path, progress=False)
+    assert result.status == "done" and len(result.history) == 2
+    assert set(result.val_by_family) == {"side"}
+    for name in ("checkpoint.pt", "train.log", "history.json", "curves.png", "config.toml", "alcn_normalizer.npz"):
+        assert (tmp_path / name).is_file(), name
+    assert "held-out val" in (tmp_path / "train.log").read_text()
+    # The Normalizer moved away from its DoG initialisation: gradients went through the mixture.
+    init = torch.tensor(trainer.dog_weights(10, 0.5, [0.5, 1.5]))
+    with torch.no_grad():
+        x = torch.rand(4, 1, 64, 64)
+        assert not torch.allclose(result.model.weights(x), init.expand(4, -1))
+    wf = load_normalizer_file(result.weights)
+    assert wf.meta["trained"] is True and wf.meta["working_scale"] == 0.5
+    assert wf.meta["output_range"][0] < 0 < wf.meta["output_range"][1]
+    assert wf.meta["detector_input"] == "standardize"
+
+
+def test_resume_equals_uninterrupted_run(data, tmp_path, monkeypatch):
+    cfg = _config(data, detector_dropout=0.3)  # dropout: the random state must be restored too
+    full = trainer.train(cfg, tmp_path / "full", progress=False)
+
+    def interrupt(step):
+        if step == 8:  # mid-way through the second epoch (6 steps per epoch)
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(trainer, "_on_step", interrupt)
+    part = trainer.train(cfg, tmp_path / "part", progress=False)
+    assert part.status == "interrupted" and len(part.history) == 1
+    monkeypatch.undo()
+    resumed = trainer.train(cfg, tmp_path / "part", resume=True, progress=False)
+    assert resumed.status == "done"
+    a, b = _weights(tmp_path / "full" / "checkpoint.pt"), _weights(tmp_path / "part" / "checkpoint.pt")
+    for k in a:
+        assert torch.equal(a[k], b[k]), k
+    assert resumed.history[-1]["val_loss"] == full.history[-1]["val_loss"]
+
+
+def test_nan_loss_stops_and_keeps_last_good_checkpoint(data, tmp_path, monkeypatch):
+    def poison(step):
+        if step == 7:
+            with torch.no_grad():
+                next(iter(poisoned[0].parameters())).fill_(float("nan"))
+
+    poisoned = []
+    original = trainer.JointModel.__init__
+
+    def init(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        poisoned.append(self)
+
+    monkeypatch.setattr(trainer.JointModel, "__init__", init)
+    monkeypatch.setattr(trainer, "_on_step", poison)
+    with pytest.raises(NonFiniteLossError, match="last good checkpoint"):
+        trainer.train(_config(data), tmp_path, progress=False)
+    ckpt = trainer.load_checkpoint(tmp_path / "checkpoint.pt")
+    assert ckpt["epoch"] == 1 and all(torch.isfinite(v).all() for v in ckpt["model"].values() if v.is_floating_point())
+    assert "loss is nan" in (tmp_path / "train.log").read_text()
+
+
+def test_bad_checkpoints(data, tmp_path):
+    cfg = _config(data, method="dog")
+    with pytest.raises(WeightFileError, match="not found"):
+        trainer.train(cfg, tmp_path, resume=True, progress=False)
+    trainer.train({**cfg, "optim": {**cfg["optim"], "epochs": 1}}, tmp_path, progress=False)
+    path = tmp_path / "checkpoint.pt"
+    with pytest.raises(WeightFileError, match="optim.epochs"):
+        trainer.train(cfg, tmp_path, resume=True, progress=False)
+    ckpt = torch.load(path, weights_only=True)
+    ckpt["version"] = 99
+    torch.save(ckpt, path)
+    with pytest.raises(WeightFileError, match="version 99.*torch"):
+        trainer.load_checkpoint(path)
+    path.write_bytes(b"PK\x03\x04 truncated")
+    with pytest.raises(WeightFileError, match="corrupt"):
+        trainer.load_checkpoint(path)
+
+
+def test_baselines_and_policy(data, tmp_path):
+    cfg = _config(data, method="none", detector_input="raw")
+    result = trainer.train({**cfg, "optim": {**cfg["optim"], "epochs": 1}}, tmp_path, progress=False)
+    assert result.weights is None and 0 <= result.val_accuracy <= 1
+    model = trainer.JointModel(trainer.load_config(_config(data)).model, 4)
+    x = torch.rand(3, 1, 64, 64)
+    z = model.normalized(x)
+    assert z.shape == (3, 1, 32, 32)
+    np.testing.assert_allclose(z.mean(dim=(2, 3)).detach(), 0, atol=1e-5)
+
+
+def test_validation_must_hold_lightings_out(data, tmp_path):
+    cfg = _config(data)
+    cfg["data"]["val_path"] = data[0]
+    cfg["data"]["path"] = data[0]
+    # Given folders are trusted for their lightings only when they differ.
+    with pytest.raises(InputError, match="hold some lightings out"):
+        trainer.train(cfg, tmp_path, progress=False)
