@@ -16,7 +16,6 @@ along the printed board, z = 0 on the board; units mm):
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 from dataclasses import asdict, dataclass
@@ -25,6 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from alcn_cv.data.manifest import write_json
 from alcn_cv.errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -201,21 +201,46 @@ def _to_gray(image: np.ndarray) -> np.ndarray:
     raise InputError(f"expected a gray HxW or BGR HxWx3 image, got shape {image.shape}")
 
 
-def suggest_chessboard_size(image: np.ndarray, max_side: int = 14) -> tuple[int, int] | None:
+def suggest_chessboard_size(image: np.ndarray, near: tuple[int, int] | None = None,
+                            max_side: int = 12) -> tuple[int, int] | None:
     """Find the inner-corner count of a chessboard seen in ``image`` by trying sizes.
 
-    Used to explain a failed detection ("you said 8x6, the image holds a 9x6 board"). Tries
-    every size from large to small with the fast check; returns ``(cols, rows)`` or None.
+    Used to explain a failed or partial detection ("you said 8x6, the image holds a 9x6
+    board"). Only sizes within 2 of ``near`` (or of its transpose) are tried, from the largest
+    (every size up to ``max_side`` without ``near``: slow, about 0.1 s per size on 640x480);
+    the detector also finds part of a larger board, so a size found is then grown by a row or
+    a column while the larger board is found too. The detector finds parts of boards
+    unreliably, so a result smaller than the true board is possible. Returns ``(cols, rows)``
+    or None.
     """
     gray = _to_gray(image)
     scale = min(1.0, 640.0 / max(gray.shape))
     if scale < 1:
         gray = cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH + cv2.CALIB_CB_NORMALIZE_IMAGE + cv2.CALIB_CB_FAST_CHECK
-    sizes = sorted(((c, r) for c in range(3, max_side + 1) for r in range(3, c + 1)), key=lambda s: -s[0] * s[1])
-    for c, r in sizes:
-        if cv2.findChessboardCorners(gray, (c, r), flags=flags)[0]:
-            return c, r
+    tried: dict[tuple[int, int], bool] = {}
+
+    def found(size: tuple[int, int]) -> bool:
+        if size not in tried:
+            tried[size] = bool(cv2.findChessboardCorners(gray, size, flags=flags)[0])
+        return tried[size]
+
+    everything = [(c, r) for c in range(3, max_side + 1) for r in range(3, max_side + 1)]
+    if near is None:
+        candidates, ref = everything, (0, 0)
+    else:
+        ref = tuple(near)
+        candidates = [s for s in everything
+                      if min(abs(s[0] - b[0]) + abs(s[1] - b[1]) for b in (ref, ref[::-1])) <= 2]
+    # Largest first; among equal areas, the orientation closest to the one given.
+    for size in sorted(candidates, key=lambda s: (-s[0] * s[1], abs(s[0] - ref[0]) + abs(s[1] - ref[1]))):
+        if found(size):
+            while True:
+                bigger = [b for b in ((size[0] + 1, size[1]), (size[0], size[1] + 1)) if max(b) <= max_side]
+                grown = next((b for b in bigger if found(b)), None)
+                if grown is None:
+                    return size
+                size = grown
     return None
 
 
@@ -273,10 +298,7 @@ def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, 
         "marker_mm_printed": spec.marker * true_square / spec.square if spec.kind == "charuco" else None,
         "board_size_mm": [size[0] / px_per_mm, size[1] / px_per_mm],
     }
-    json_path = path.with_suffix(".json")
-    tmp = json_path.with_name(f".{json_path.name}.tmp")
-    tmp.write_text(json.dumps(info, indent=2))
-    os.replace(tmp, json_path)
+    write_json(path.with_suffix(".json"), info, indent=2)
     if abs(true_square - spec.square) > 2e-3 * spec.square:  # beyond what printers hold anyway
         logger.warning("at %d dpi a square is %d px = %.3f mm instead of %.3f mm; calibrate with --square %.3f",
                        dpi, square_px, true_square, spec.square, true_square)

@@ -115,12 +115,22 @@ def _sharpness(gray: np.ndarray) -> float:
     return float(cv2.Laplacian(gray, cv2.CV_64F).var())
 
 
+def _larger_board(board: BoardSpec, gray: np.ndarray) -> tuple[int, int] | None:
+    """A chessboard size seen in ``gray`` that is larger than the one given (the board
+    definition then does not match), or None. Smaller finds are not trusted: the detector
+    also finds parts of boards."""
+    guess = suggest_chessboard_size(gray, near=(board.cols, board.rows))
+    if guess is None or guess[0] * guess[1] <= board.cols * board.rows:
+        return None
+    return guess
+
+
 def _explain_no_board(board: BoardSpec, sample: np.ndarray | None, n_images: int, foreign: int, markers: int) -> str:
     """Message for 'board not found anywhere', with a diagnosis when one is possible."""
     msg = f"no {board.describe()} found in any of {n_images} image(s)."
     if board.kind == "chessboard" and sample is not None:
-        guess = suggest_chessboard_size(sample)
-        if guess is not None and set(guess) != {board.cols, board.rows}:
+        guess = _larger_board(board, sample)
+        if guess is not None:
             return (msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard: the board definition does "
                     f"not match the images; pass --cols {guess[0]} --rows {guess[1]} (inner corners, not squares).")
         return msg + (" Check --cols/--rows (inner corners, i.e. squares minus one), that the whole board is "
@@ -144,7 +154,7 @@ def _check_chessboard_size(board: BoardSpec, samples: Sequence[tuple[str, np.nda
     if board.kind != "chessboard":
         return
     if missed is not None and num_found < MIN_VIEWS:
-        guess = suggest_chessboard_size(missed[1])
+        guess = suggest_chessboard_size(missed[1], near=(board.cols, board.rows))
         if guess is not None and set(guess) != {board.cols, board.rows}:
             raise InputError(f"the {board.describe()} was found in only {num_found} image(s) and {missed[0]} holds a "
                              f"{guess[0]}x{guess[1]} chessboard: the board definition does not match the images; "
@@ -153,7 +163,7 @@ def _check_chessboard_size(board: BoardSpec, samples: Sequence[tuple[str, np.nda
     for name, gray in samples:
         for size in ((board.cols + 1, board.rows), (board.cols, board.rows + 1)):
             if cv2.findChessboardCorners(gray, size, flags=flags)[0]:
-                guess = suggest_chessboard_size(gray) or size
+                guess = suggest_chessboard_size(gray, near=(board.cols, board.rows)) or size
                 raise InputError(f"{name} holds a {guess[0]}x{guess[1]} chessboard, larger than the {board.cols}x"
                                  f"{board.rows} given: the board definition does not match the images; pass --cols "
                                  f"{guess[0]} --rows {guess[1]} (inner corners of the whole board)")
@@ -453,8 +463,9 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
         ok = fs.isOpened()
-    except cv2.error as exc:
-        raise DatasetError(f"{path}: not a valid OpenCV FileStorage file ({exc.err.strip()}); {hint}") from exc
+    except (cv2.error, SystemError) as exc:  # OpenCV's parser errors surface as either
+        detail = getattr(exc, "err", None) or str(exc.__cause__ or exc)
+        raise DatasetError(f"{path}: not a valid OpenCV FileStorage file ({detail.strip()}); {hint}") from exc
     if not ok:
         raise DatasetError(f"{path}: cannot be opened as an OpenCV FileStorage file; {hint}")
     try:

@@ -18,10 +18,11 @@ Output (both paths), in ``out_dir``:
 
 - ``rgb/000000.png ...``: the registered frames (undistorted with the same K when the
   calibration has distortion, so that the pinhole ``cam_K`` holds exactly);
-- ``scene_camera.json``: BOP ``cam_K``, ``cam_R_w2c``, ``cam_t_w2c`` (mm) per image id;
-- ``colmap/``: COLMAP text model (``PINHOLE`` camera, poses in mm, image names relative to
-  ``rgb/``; ``points3D.txt`` holds the SfM points on the COLMAP path and is empty on the
-  ChArUco path) — what ``alcn pose build`` reads;
+- ``scene_camera.json``: BOP ``cam_K``, ``cam_R_w2c``, ``cam_t_w2c`` (mm) per image id, and an
+  empty ``scene_gt.json`` (no objects annotated), written by :mod:`alcn_cv.formats.bop`;
+- ``colmap/``: COLMAP text model (``PINHOLE`` camera, poses in mm with a ``# Units: mm``
+  header, image names relative to ``rgb/``; ``points3D.txt`` holds the SfM points on the
+  COLMAP path and is empty on the ChArUco path) — what ``alcn pose build`` reads;
 - ``registration.json``: every input frame with its status, error and output id;
 - ``registration.png``: per-frame errors and camera centres.
 
@@ -44,11 +45,13 @@ from tqdm import tqdm
 
 from alcn_cv.data.manifest import atomic_output_dir, write_json
 from alcn_cv.errors import InputError
+from alcn_cv.formats import bop
+from alcn_cv.formats.bop import BopFrame
 from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, model_from_pycolmap, write_text_model
 
 from .board import BoardSpec, Detection
 from .camera import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, Calibration, list_images, video_frame_count
-from .conventions import bop_camera_entry, write_scene_camera
+from .conventions import colmap_from_bop_frames
 from .undistort import Undistorter
 
 logger = logging.getLogger(__name__)
@@ -207,21 +210,20 @@ def board_pose(detection: Detection, K: np.ndarray, dist: np.ndarray | None, min
 
 
 def _write_outputs(tmp: Path, reg: Registration, points3d=None, images: Sequence[ColmapImage] | None = None) -> None:
-    """scene_camera.json, colmap/, registration.json and registration.png of a registration."""
+    """scene_camera.json (+ empty scene_gt.json), colmap/, registration.json and registration.png."""
     from .report import plot_registration
 
-    K = reg.K
     kept = reg.registered
-    write_scene_camera(tmp / "scene_camera.json",
-                       {f.image_id: bop_camera_entry(K, f.R_w2c, f.t_w2c) for f in kept})
-    camera = camera_from_opencv(K, None, *reg.image_size)
-    if images is None:
-        images = [ColmapImage(f.image_id + 1, f"{f.image_id:06d}.png", 1, f.R_w2c, f.t_w2c) for f in kept]
-    write_text_model(tmp / "colmap", [camera], images, points3d)
+    frames = [BopFrame(f.image_id, tmp / "rgb" / f"{f.image_id:06d}.png", reg.K, 1.0, [], f.R_w2c, f.t_w2c)
+              for f in kept]
+    bop.write_scene(tmp, frames)
+    cameras, bop_images = colmap_from_bop_frames(frames, reg.image_size)
+    units = reg.units if reg.units != "arbitrary" else None
+    write_text_model(tmp / "colmap", cameras, bop_images if images is None else images, points3d, units=units)
     write_json(tmp / "registration.json", {
         "units": reg.units,
         "image_size": list(reg.image_size),
-        "cam_K": K.reshape(-1).tolist(),
+        "cam_K": reg.K.reshape(-1).tolist(),
         "colmap_image_path": "rgb",
         "num_frames": len(reg.frames),
         "num_registered": len(kept),

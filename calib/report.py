@@ -90,7 +90,7 @@ def plot_calibration(calib: "Calibration", path: str | os.PathLike) -> Path:
 def plot_registration(names: Sequence[str], errors: Sequence[float], kept: Sequence[bool],
                       centers: np.ndarray, path: str | os.PathLike, title: str = "") -> Path:
     """Per-frame reprojection errors (dropped frames in red) and the registered camera
-    centres seen from above (world x-y plane).
+    centres projected on their two main axes (world units).
 
     Args:
         names: frame names.
@@ -105,7 +105,9 @@ def plot_registration(names: Sequence[str], errors: Sequence[float], kept: Seque
     x = np.arange(len(errors))
     shown = np.nan_to_num(errors, nan=0.0)
     ax0.bar(x[kept], shown[kept], color="tab:blue", label="registered")
-    ax0.bar(x[~kept], shown[~kept], color="tab:red", label="dropped")
+    if (~kept).any():
+        ax0.bar(x[~kept], shown[~kept], color="tab:red")
+        ax0.plot(x[~kept], np.zeros((~kept).sum()), "rx", ms=8, mew=2, label="dropped (bar: error of the pose tried)")
     ax0.set_xlabel("frame")
     ax0.set_ylabel("RMS reprojection error (px)")
     ax0.set_title(title or f"{kept.sum()} of {len(kept)} frames registered")
@@ -115,11 +117,19 @@ def plot_registration(names: Sequence[str], errors: Sequence[float], kept: Seque
     ax0.legend(fontsize=8)
     centers = np.asarray(centers, float).reshape(-1, 3)
     if len(centers):
-        ax1.plot(centers[:, 0], centers[:, 1], "-o", ms=3)
-        ax1.plot([0], [0], "k+", ms=12, label="world origin")
+        # Seen along the direction in which the centres spread least (a ring looks like a ring).
+        mean = centers.mean(axis=0)
+        axes = np.linalg.svd(centers - mean)[2] if len(centers) > 2 else np.eye(3)
+        uv = (centers - mean) @ axes[:2].T
+        origin = (-mean) @ axes[:2].T
+        ax1.plot(uv[:, 0], uv[:, 1], "o", ms=4, label="camera centres (labels: frame index)")
+        if len(uv) <= 40:
+            for k, (u, v) in zip(np.flatnonzero(kept), uv):
+                ax1.annotate(str(k), (u, v), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        ax1.plot(*origin, "k+", ms=12, label="world origin")
         ax1.set_aspect("equal", adjustable="datalim")
         ax1.legend(fontsize=8)
-    ax1.set_title("camera centres (world x-y)")
-    ax1.set_xlabel("x")
-    ax1.set_ylabel("y")
+    ax1.set_title("camera centres on their two main axes")
+    ax1.set_xlabel("first axis")
+    ax1.set_ylabel("second axis")
     return _save(plt, fig, path)

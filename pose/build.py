@@ -94,8 +94,8 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
             model folder (``cameras.txt``/``images.txt`` or ``.bin``), or a Middlebury set
             (``*_par.txt``).
         images: image folder of a COLMAP model (default: ``<path>/../images`` then ``<path>/images``).
-        obj_id: BOP object whose pose defines the world (default: the first annotated); used
-            when ``scene_camera.json`` gives no world-to-camera poses.
+        obj_id: BOP object whose model frame becomes the world (default: the first annotated in
+            ``scene_gt.json``); without annotations, ``scene_camera.json``'s ``cam_R_w2c`` is used.
 
     Raises:
         DatasetError: the folder is none of these, or an image has no pose.
@@ -107,14 +107,14 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
         scene = bop.load_scene(path)
         views = []
         for fr in scene.frames:
-            if fr.R_w2c is not None:
-                R, t = fr.R_w2c, fr.t_w2c
-            elif fr.objects:
+            if fr.objects:  # world = the object's model frame (the object is static in a training sequence)
                 o = fr.objects[0] if obj_id is None else fr.pose(obj_id)
                 R, t = o.R, o.t
+            elif fr.R_w2c is not None:
+                R, t = fr.R_w2c, fr.t_w2c
             else:
                 raise DatasetError(f"{path / 'scene_gt.json'}: image {fr.im_id} has no pose (field 'cam_R_m2c')")
-            views.append(View(str(fr.rgb_path.relative_to(fr.rgb_path.parent)), fr.K, None, R, np.ravel(t)))
+            views.append(View(fr.rgb_path.name, fr.K, None, R, np.ravel(t)))
         return Sequence(scene.frames[0].rgb_path.parent, views, "mm", info={"format": "bop", "path": str(path)})
     if any(path.glob("*_par.txt")):
         from alcn_cv.formats.middlebury import read_middlebury
@@ -159,12 +159,13 @@ def video_sequence(video: str | Path, K: np.ndarray, work_dir: str | Path, *, st
     return Sequence(image_dir, views, "", info={"format": "video", "path": str(video), "step": step})
 
 
-def motion_masks(frames: list[np.ndarray], threshold: float = 25.0, dilate: int = 25) -> list[np.ndarray]:
+def motion_masks(frames: list[np.ndarray], threshold: float = 25.0, dilate: int = 25,
+                 min_area: float = 0.005) -> list[np.ndarray]:
     """Masks (uint8 0/255) of what moves in a video taken by a static camera.
 
     The background is the per-pixel median of ``frames``; a pixel belongs to the moving object
-    where it differs from it by more than ``threshold`` (grey levels), after a morphological
-    closing and a dilation of ``dilate`` pixels. Used for hand-held objects in front of a fixed
+    inside the convex hull of the regions (larger than ``min_area`` of the image) that differ from
+    it by more than ``threshold`` grey levels, dilated by ``dilate`` pixels. Used for hand-held objects in front of a fixed
     camera (e.g. the cookie-box video), whose static background would otherwise dominate the
     reconstruction.
     """
@@ -175,7 +176,12 @@ def motion_masks(frames: list[np.ndarray], threshold: float = 25.0, dilate: int 
     for g in grays:
         m = (np.abs(g - bg) > threshold).astype(np.uint8) * 255
         m = cv2.morphologyEx(m, cv2.MORPH_OPEN, np.ones((5, 5), np.uint8))
-        masks.append(cv2.dilate(cv2.morphologyEx(m, cv2.MORPH_CLOSE, kernel), kernel))
+        contours, _ = cv2.findContours(m, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        big = [c for c in contours if cv2.contourArea(c) > min_area * m.size]
+        filled = np.zeros_like(m)
+        if big:  # what moves, with the holes where it resembles the background: hull of the moving regions
+            cv2.fillConvexPoly(filled, cv2.convexHull(np.concatenate(big)), 255)
+        masks.append(cv2.dilate(filled, kernel))
     return masks
 
 
@@ -228,7 +234,8 @@ def write_database(db_path: Path, seq: Sequence, feats: dict[str, Features], pai
     from alcn_cv.formats.colmap import camera_from_opencv
 
     pycolmap.Database.open(db_path).close()
-    pycolmap.import_images(db_path, seq.image_dir, pycolmap.CameraMode.PER_IMAGE,
+    same = all(np.array_equal(v.K, seq.views[0].K) for v in seq.views) and seq.info.get("format") == "video"
+    pycolmap.import_images(db_path, seq.image_dir, pycolmap.CameraMode.SINGLE if same else pycolmap.CameraMode.PER_IMAGE,
                            image_names=[v.name for v in seq.views])
     db = pycolmap.Database.open(db_path)
     try:
@@ -277,13 +284,15 @@ def triangulate_fixed_poses(seq: Sequence, db_path: Path, out_dir: Path):
     return pycolmap.triangulate_points(rec, db_path, seq.image_dir, out_dir, options=opts)
 
 
-def reconstruct_incremental(seq: Sequence, db_path: Path, out_dir: Path):
-    """pycolmap incremental mapping with the intrinsics fixed; returns the largest reconstruction
-    and updates the views' poses (unknown scale)."""
+def reconstruct_incremental(seq: Sequence, db_path: Path, out_dir: Path, refine_focal: bool = False):
+    """pycolmap incremental mapping; returns the largest reconstruction (unknown scale).
+
+    The intrinsics are held fixed, except the focal length with ``refine_focal`` (self-calibration
+    in the bundle adjustment, for a video whose focal length is only roughly known)."""
     import pycolmap
 
     opts = pycolmap.IncrementalPipelineOptions()
-    opts.ba_refine_focal_length = False
+    opts.ba_refine_focal_length = refine_focal
     opts.ba_refine_principal_point = False
     opts.ba_refine_extra_params = False
     opts.min_num_matches = 12
@@ -361,7 +370,7 @@ class BoxFit:
 
 
 def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_free: bool = False,
-            plane_threshold: float | None = None, seed: int = 0) -> BoxFit:
+            plane_threshold: float | None = None, trim: float = 2.0, seed: int = 0) -> BoxFit:
     """Fit the object's box to a sparse point cloud with open3d.
 
     Args:
@@ -370,7 +379,9 @@ def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_f
             sorted length.
         scale_free: the points have an unknown scale (incremental reconstruction): the known
             size fixes it; ``stats["scale"]`` is the factor that brings the points to its units.
-        plane_threshold: RANSAC distance for the support plane (default: 1% of the cloud's extent).
+        plane_threshold: RANSAC distance for the support plane (default: 0.5% of the cloud's extent).
+        trim: percentile of the object's points left outside the box on each side of each axis
+            (the axes are those of open3d's minimal oriented bounding box).
 
     Raises:
         DatasetError: too few points, or a degenerate box (a flat or empty cluster).
@@ -386,12 +397,13 @@ def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_f
     pcd, kept = pcd.remove_statistical_outlier(nb_neighbors=min(20, len(pts) - 1), std_ratio=2.0)
     idx = idx[np.asarray(kept)]
     stats: dict[str, Any] = {"points": len(pts), "after_outlier_removal": len(idx)}
+    support = None
     cur = pts[idx]
     extent = float(np.linalg.norm(np.percentile(cur, 95, 0) - np.percentile(cur, 5, 0)))
     # support plane: the largest plane, removed only when it reaches well beyond the rest
     if len(cur) > 30:
-        thr = plane_threshold or 0.01 * extent
-        _, inl = pcd.segment_plane(distance_threshold=thr, ransac_n=3, num_iterations=500)
+        thr = plane_threshold or 0.005 * extent
+        plane, inl = pcd.segment_plane(distance_threshold=thr, ransac_n=3, num_iterations=500)
         inl = np.asarray(inl, np.int64)
         rest = np.setdiff1d(np.arange(len(cur)), inl)
         if len(rest) >= 10 and len(inl) > 0.2 * len(cur):
@@ -399,6 +411,7 @@ def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_f
             if spread(cur[inl]) > 1.5 * spread(cur[rest]):
                 idx, cur = idx[rest], cur[rest]
                 stats["support_plane_points"] = int(len(inl))
+                support = np.asarray(plane, np.float64)
     # the object: largest DBSCAN cluster
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cur))
     nn = np.asarray(pcd.compute_nearest_neighbor_distance())
@@ -410,10 +423,21 @@ def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_f
     stats["object_points"] = len(idx)
     if len(cur) < 8:
         raise DatasetError(f"degenerate box fit: the object cluster has only {len(cur)} points")
-    obb = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cur)).get_minimal_oriented_bounding_box()
-    R, ext, center = np.asarray(obb.R).copy(), np.asarray(obb.extent).copy(), np.asarray(obb.center).copy()
+    sv = np.linalg.svd(cur - cur.mean(0), compute_uv=False)
+    if sv[2] <= 1e-3 * sv[0]:
+        raise DatasetError(f"degenerate box fit: the object's {len(cur)} points are flat or collinear "
+                           f"(singular values {np.round(sv, 6).tolist()})")
+    try:
+        obb = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cur)).get_minimal_oriented_bounding_box()
+    except RuntimeError as exc:  # Qhull on nearly degenerate input
+        raise DatasetError(f"degenerate box fit: {str(exc).splitlines()[0]}") from exc
+    R, center = np.asarray(obb.R).copy(), np.asarray(obb.center).copy()
     if np.linalg.det(R) < 0:
         R[:, 2] *= -1
+    # robust extents along the box axes: stray points (a hand, the background) must not inflate the box
+    coords = (cur - center) @ R
+    lo, hi = np.percentile(coords, trim, axis=0), np.percentile(coords, 100 - trim, axis=0)
+    ext, center = hi - lo, center + R @ ((lo + hi) / 2)
     if ext.min() <= 1e-6 * max(ext.max(), 1e-12):
         raise DatasetError(f"degenerate box fit: the object's points span a flat box {ext}")
     stats["fitted_size"] = ext.tolist()
@@ -427,14 +451,17 @@ def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_f
             s = float(np.median(matched / ext))
             stats["scale"] = s
             ext, center = ext * s, center * s
-            idx_pts = pts * s
-        else:
-            idx_pts = pts
         rel = (ext - matched) / matched
         stats.update(known_size=matched.tolist(), size_error=(ext - matched).tolist(),
                      relative_size_error=rel.tolist(), mean_abs_relative_size_error=float(np.abs(rel).mean()))
         size = matched
-        pts = idx_pts
+        if support is not None and not scale_free:
+            # the box stands on the support plane: move it along the plane's normal to touch it
+            n, d = support[:3] / np.linalg.norm(support[:3]), support[3] / np.linalg.norm(support[:3])
+            if np.dot(n, center) + d < 0:
+                n, d = -n, -d
+            half = 0.5 * np.abs(R.T @ n) @ size  # half-extent of the box along n
+            center = center + (half - (np.dot(n, center) + d)) * n
     origin = center - R @ (size / 2)
     corners = box_corners(size) @ R.T + origin
     keep = np.zeros(len(points), bool)
@@ -488,60 +515,87 @@ def plot_model(model: PartModel, camera_centers: np.ndarray, path: str | Path) -
 def build(seq: Sequence, *, feature: str = "ORB", n_features: int = 4000, normalizer: str = "none",
           box_ply: str | Path | None = None, box_size: np.ndarray | None = None, box_units: str | None = None,
           masks: dict[str, np.ndarray] | None = None, window: int | None = None, ratio: float = 0.8,
-          work_dir: str | Path | None = None, world_is_object: bool = True) -> tuple[PartModel, np.ndarray]:
+          work_dir: str | Path | None = None, world_is_object: bool = True, refine_focal: bool = False
+          ) -> tuple[PartModel, np.ndarray]:
     """Build a part model from a sequence; returns it and the training cameras' centres (object frame).
 
     For a registered sequence the object frame is the sequence's world frame (BOP: the object's
-    model frame), and the box is fitted in it. For an unregistered one it is the fitted box's
-    frame (origin at a corner, axes along its edges), scaled to the known size.
+    model frame), and the box is fitted in it; when ``box_ply`` is given it is taken to be in that
+    frame (a BOP model), its corners are the model's and the fit's error against it is reported.
+    For an unregistered sequence the object frame is the fitted box's frame (origin at a
+    corner, axes along its edges), scaled to the known size.
     """
     if len(seq.views) < 2:
         raise DatasetError(f"{seq.info.get('path')}: {len(seq.views)} training image(s); at least 2 are needed")
-    known = None
+    known, known_corners = None, None
     if box_ply is not None:
-        corners_ply = read_box_corners(box_ply)
-        known = np.linalg.norm(corners_ply[[4, 2, 1]] - corners_ply[0], axis=1)
+        known_corners = read_box_corners(box_ply)
+        known = np.linalg.norm(known_corners[[4, 2, 1]] - known_corners[0], axis=1)
     elif box_size is not None:
         known = np.asarray(box_size, np.float64)
-    if not seq.registered and known is None:
+    registered = seq.registered
+    if not registered and known is None:
         raise InputError("an unregistered sequence needs the object's size (a box .ply or box_size) for its scale")
     units = seq.units or box_units or "mm"
     if known is not None and box_units and seq.units and box_units != seq.units:
         known = known * part_model.unit_scale(box_units, seq.units)
+        known_corners = None if known_corners is None else known_corners * part_model.unit_scale(box_units, seq.units)
     norm = descriptor_norm(feature)
     tmp = Path(tempfile.mkdtemp(prefix="alcn_pose_build_", dir=work_dir))
     try:
         feats = extract_features(seq, feature, n_features, normalizer, masks)
         write_database(tmp / "database.db", seq, feats, image_pairs(len(seq.views), window), norm, ratio)
-        if seq.registered:
+        if registered:
             rec = triangulate_fixed_poses(seq, tmp / "database.db", tmp / "sparse")
         else:
-            rec = reconstruct_incremental(seq, tmp / "database.db", tmp / "sparse")
+            rec = reconstruct_incremental(seq, tmp / "database.db", tmp / "sparse", refine_focal)
         xyz, desc, tl, rgb = collect_points(rec, feats, norm)
+        cams_K = [rec.cameras[im.camera_id].calibration_matrix() for im in rec.images.values() if im.has_pose]
         centers = np.array([im.projection_center() for im in rec.images.values() if im.has_pose])
         reg = {im.name: im.cam_from_world().matrix() for im in rec.images.values() if im.has_pose}
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     logger.info("%d 3D points (mean track %.1f) from %d images", len(xyz), tl.mean(), len(reg))
-    fit = fit_box(xyz, known, scale_free=not seq.registered)
-    keep = fit.keep
-    if seq.registered and world_is_object:
-        pts, corners, cams = xyz, fit.corners, centers
-    else:  # object frame = box frame
-        s = fit.stats.get("scale", 1.0)
-        pts = (xyz * s - fit.origin) @ fit.R
-        cams = (centers * s - fit.origin) @ fit.R
-        corners = box_corners(fit.size)
-        for v in seq.views:
-            if v.name in reg:
-                T = reg[v.name]
-                v.R_w2c = T[:, :3] @ fit.R
-                v.t_w2c = T[:, :3] @ fit.origin + T[:, 3] * s
+    if registered and world_is_object and known_corners is not None:
+        # the box is known in the world (= object) frame: keep the points near it, fit it for the report
+        lo, hi = known_corners.min(0), known_corners.max(0)
+        margin = 0.05 * np.linalg.norm(hi - lo)
+        near = np.all((xyz >= lo - margin) & (xyz <= hi + margin), axis=1)
+        if near.sum() < 10:
+            raise DatasetError(f"only {int(near.sum())} triangulated points lie on the known box; check that the "
+                               "sequence's poses are those of this object")
+        fit = fit_box(xyz[near], known)
+        fit.stats["corner_error"] = float(np.mean(np.min(np.linalg.norm(
+            fit.corners[:, None] - known_corners[None], axis=2), axis=1)))
+        keep = near.copy()
+        keep[near] = fit.keep
+        pts, corners, cams = xyz, known_corners, centers
+    else:
+        fit = fit_box(xyz, known, scale_free=not registered)
+        keep = fit.keep
+        if registered and world_is_object:
+            pts, corners, cams = xyz, fit.corners, centers
+        else:  # object frame = box frame
+            s = fit.stats.get("scale", 1.0)
+            pts = (xyz * s - fit.origin) @ fit.R
+            cams = (centers * s - fit.origin) @ fit.R
+            corners = box_corners(fit.size)
+            for v in seq.views:
+                if v.name in reg:
+                    T = reg[v.name]
+                    v.R_w2c = T[:, :3] @ fit.R
+                    v.t_w2c = T[:, :3] @ fit.origin + T[:, 3] * s
     model = PartModel(corners=corners, points3d=pts[keep], descriptors=desc[keep], track_length=tl[keep],
                       colors=rgb[keep], units=units, feature=feature.upper(), normalizer=normalizer,
                       source=str(seq.info.get("path", "")), box_fit=_jsonable(fit.stats),
                       extra={"registered_images": len(reg), "training_images": len(seq.views),
                              "triangulated_points": int(len(xyz))})
+    if refine_focal and not registered:
+        K = np.mean(cams_K, axis=0)
+        K[:2, 2] -= 0.5  # COLMAP -> OpenCV pixel convention
+        model.extra["K"] = K.tolist()
+        logger.info("focal length refined by the bundle adjustment: fx %.1f fy %.1f (given %.1f %.1f)",
+                    K[0, 0], K[1, 1], seq.views[0].K[0, 0], seq.views[0].K[1, 1])
     return model, cams
 
 
@@ -553,11 +607,14 @@ def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
 def main(input_path: str | Path, output: str | Path, *, images: str | Path | None = None,
          K: np.ndarray | None = None, video_step: int = 5, max_frames: int = 80, motion_mask: bool = False,
          feature: str = "ORB", n_features: int = 4000, normalizer: str = "none", box_ply: str | Path | None = None,
-         box_size: tuple[float, float, float] | None = None, box_units: str | None = None) -> Path:
+         box_size: tuple[float, float, float] | None = None, box_units: str | None = None,
+         refine_focal: bool = False) -> Path:
     """Build a part model from ``input_path`` and write ``output`` (.npz, .ply, _cameras.png).
 
     ``input_path``: a registered sequence (see :func:`load_sequence`) or a video file (unregistered:
-    needs ``K`` and the box size; ``motion_mask`` keeps only what moves, for a static camera).
+    needs ``K`` and the box size; ``motion_mask`` keeps only what moves, for a static camera;
+    ``refine_focal`` lets the bundle adjustment refine the focal length, stored in the model's
+    ``extra["K"]`` for tracking).
     """
     input_path, output = Path(input_path), Path(output)
     output.parent.mkdir(parents=True, exist_ok=True)
@@ -573,7 +630,7 @@ def main(input_path: str | Path, output: str | Path, *, images: str | Path | Non
             units = box_units or "cm"
             model, cams = build(seq, feature=feature, n_features=n_features, normalizer=normalizer,
                                 box_ply=box_ply, box_size=box_size, box_units=units, masks=masks,
-                                window=8, work_dir=work)
+                                window=8, work_dir=work, refine_focal=refine_focal)
         else:
             seq = load_sequence(input_path, images)
             model, cams = build(seq, feature=feature, n_features=n_features, normalizer=normalizer,

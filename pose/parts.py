@@ -57,10 +57,10 @@ def create_feature(name: str, n_features: int = 1000) -> cv2.Feature2D:
     name = name.upper()
     if name == "ORB":
         return cv2.ORB_create(nfeatures=n_features, scaleFactor=1.2, nlevels=8, fastThreshold=10)
-    if name == "SIFT":
-        return cv2.SIFT_create(nfeatures=n_features)
-    if name == "AKAZE":
-        return cv2.AKAZE_create(threshold=5e-4)
+    if name == "SIFT":  # a low contrast threshold: weakly textured objects (Middlebury's temple)
+        return cv2.SIFT_create(nfeatures=n_features, contrastThreshold=0.02)
+    if name == "AKAZE":  # OpenCV 5 moved AKAZE to the contrib module xfeatures2d
+        return cv2.xfeatures2d.AKAZE_create(threshold=5e-4)
     raise InputError(f"unknown feature {name!r}; choose one of {FEATURES}")
 
 
@@ -101,10 +101,12 @@ class FeaturePartDetector:
         normalizer: name given to ``alcn_cv.create``.
         n_features: keypoints per image.
         ratio: Lowe's ratio-test threshold.
+        search_radius: guided matching window (pixels) around the prior pose's projections.
+        min_guided: fewer guided matches than this: match globally instead.
     """
 
-    def __init__(self, model: PartModel, normalizer: str = "none", *, n_features: int = 1000,
-                 ratio: float = 0.8) -> None:
+    def __init__(self, model: PartModel, normalizer: str = "none", *, n_features: int = 2000,
+                 ratio: float = 0.8, search_radius: float = 40.0, min_guided: int = 20) -> None:
         if len(model.points3d) < 4:
             raise InputError(f"the part model has {len(model.points3d)} 3D points; at least 4 are needed")
         self.model = model
@@ -113,6 +115,9 @@ class FeaturePartDetector:
         self.feature = create_feature(model.feature, n_features)
         self.norm = descriptor_norm(model.feature)
         self.ratio = ratio
+        self.search_radius, self.min_guided = search_radius, min_guided
+        # a match without a second candidate nearby: accept only a close descriptor
+        self.max_lone_distance = 50.0 if self.norm == cv2.NORM_HAMMING else 250.0
         self._matcher = cv2.BFMatcher(self.norm)
         self._matcher.add([model.descriptors])
         self._matcher.train()
@@ -121,17 +126,52 @@ class FeaturePartDetector:
         """The normalized grayscale uint8 image the features are computed on."""
         return self.normalizer.apply(to_gray(image))
 
-    def detect(self, image: np.ndarray) -> Correspondences:
-        """Correspondences between ``image`` (BGR or gray uint8) and the model's 3D points."""
+    def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+               ) -> Correspondences:
+        """Correspondences between ``image`` (BGR or gray uint8) and the model's 3D points.
+
+        Args:
+            image: the frame.
+            prior: ``(rvec, tvec, K)`` of the previous frame, or ``None``. With a prior, a keypoint
+                is matched only to model points that project within :attr:`search_radius` pixels
+                of it (guided matching); when that yields fewer than :attr:`min_guided` matches,
+                the global matching runs instead.
+        """
         gray = self.normalize(image)
         kps, desc = self.feature.detectAndCompute(gray, None)
         if desc is None or len(kps) == 0:
             return Correspondences(np.zeros((0, 3), np.float32), np.zeros((0, 2), np.float32), 0)
-        knn = self._matcher.knnMatch(desc, k=2)
-        q, t = [], []
-        for m in knn:
+        pts2d = np.array([k.pt for k in kps], np.float32)
+        pairs = None
+        if prior is not None:
+            pairs = self._guided(pts2d, desc, prior)
+            if len(pairs) < self.min_guided:
+                pairs = None
+        if pairs is None:
+            pairs = self._ratio_pairs(self._matcher.knnMatch(desc, k=2))
+        return Correspondences(self.model.points3d[pairs[:, 1]], pts2d[pairs[:, 0]], len(kps))
+
+    def _ratio_pairs(self, knn) -> np.ndarray:
+        pairs = [(m[0].queryIdx, m[0].trainIdx) for m in knn
+                 if len(m) == 2 and m[0].distance < self.ratio * m[1].distance]
+        return np.array(pairs, np.int64).reshape(-1, 2)
+
+    def _guided(self, pts2d: np.ndarray, desc: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray]
+                ) -> np.ndarray:
+        rvec, tvec, K = prior
+        R = cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
+        cam = self.model.points3d @ R.T + np.ravel(tvec)
+        front = np.flatnonzero(cam[:, 2] > 0)
+        if len(front) < 2:
+            return np.zeros((0, 2), np.int64)
+        uv = cam[front, :2] / cam[front, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+        d2 = ((pts2d[:, None, :] - uv[None].astype(np.float32)) ** 2).sum(-1)
+        mask = (d2 < self.search_radius**2).astype(np.uint8)
+        knn = cv2.BFMatcher(self.norm).knnMatch(desc, self.model.descriptors[front], k=2, mask=mask)
+        pairs = []
+        for m in knn:  # ratio test among the candidates near each keypoint; a lone candidate must be close
             if len(m) == 2 and m[0].distance < self.ratio * m[1].distance:
-                q.append(m[0].queryIdx)
-                t.append(m[0].trainIdx)
-        pts2d = np.array([kps[i].pt for i in q], np.float32).reshape(-1, 2)
-        return Correspondences(self.model.points3d[np.array(t, np.int64)], pts2d, len(kps))
+                pairs.append((m[0].queryIdx, front[m[0].trainIdx]))
+            elif len(m) == 1 and m[0].distance < self.max_lone_distance:
+                pairs.append((m[0].queryIdx, front[m[0].trainIdx]))
+        return np.array(pairs, np.int64).reshape(-1, 2)

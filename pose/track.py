@@ -145,14 +145,15 @@ def track(frames: Iterator[tuple[str, np.ndarray]], detector: FeaturePartDetecto
     """
     for i, (name, frame) in enumerate(tqdm(frames, total=total, desc="track", unit="frame", leave=False)):
         t0 = time.perf_counter()
-        corr = detector.detect(frame)
+        prior = None if tracker.prior is None else (*tracker.prior, tracker.solver.K)
+        corr = detector.detect(frame, prior)
         est = tracker.update(i, corr.object_points, corr.image_points)
         yield FrameResult(name, est, time.perf_counter() - t0, corr.keypoints), frame
 
 
 def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.ndarray, *,
-         normalizer: str = "none", overlay: str | Path | None = None, method: str = "usac_magsac",
-         n_features: int = 1000, min_inliers: int = 12, reprojection_error: float = 6.0,
+         normalizer: str = "none", overlay: str | Path | None = None, method: str = "usac_default",
+         n_features: int = 2000, min_inliers: int = 12, reprojection_error: float = 4.0,
          dist: np.ndarray | None = None) -> dict:
     """Track the part model ``model_path`` through ``source`` and write ``output`` (scene_gt JSON).
 
@@ -184,6 +185,7 @@ def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.n
         if writer is not None:
             writer.close()
     output = Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
     write_json(output, scene_gt)
     tracked = sum(bool(v) for v in scene_gt.values())
     summary = {"frames": len(scene_gt), "tracked": tracked, "fps": len(times) / max(sum(times), 1e-9),

@@ -38,7 +38,7 @@ def test_printable_chessboard(tmp_path):
     image = cv2.imread(str(tmp_path / "cb.png"), cv2.IMREAD_GRAYSCALE)
     det = spec.detector()(image)
     assert det is not None and len(det.image_points) == 24
-    assert suggest_chessboard_size(image) == (6, 4)
+    assert suggest_chessboard_size(image, near=(5, 4)) == (6, 4)  # one column too few given
 
 
 @pytest.mark.parametrize(

@@ -28,11 +28,11 @@ def _small() -> Detector:
 
 
 def test_learns_and_is_deterministic():
-    x, y = _toy(300, 0)
-    xv, yv = _toy(200, 1)
+    x, y = _toy(160, 0)
+    xv, yv = _toy(100, 1)
     state = torch.get_rng_state()
     nets = [
-        train_detector(x, y, 3, epochs=4, batch_size=32, lr=3e-3, seed=5, val=(xv, yv), progress=False, net=None)
+        train_detector(x, y, 3, epochs=3, batch_size=32, lr=3e-3, seed=5, val=(xv, yv), progress=False, net=None)
         for _ in range(2)
     ]
     assert torch.equal(state, torch.get_rng_state())  # the global random state is untouched

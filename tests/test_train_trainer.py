@@ -26,6 +26,7 @@ def _config(data, **model):
         "data": {"path": data[0], "val_path": data[1], "gain_jitter": [0.7, 1.4]},
         "model": {"channels": [4, 8], "hidden": 16, "detector_channels": [4, 8], "detector_hidden": 16, **model},
         "optim": {"epochs": 2, "batch_size": 16, "warmup_steps": 2},
+        "fewshot": {"enabled": False},
         "run": {"threads": 1, "log_every": 2},
     }
 
@@ -36,12 +37,17 @@ def _weights(path):
 
 def test_train_outputs_and_gradients_reach_the_normalizer(data, tmp_path):
     cfg = _config(data)
+    cfg["fewshot"] = {"n_objects": 2, "per_image": 8, "n_test": 40, "epochs": 1, "dog": [[0.5, 1.5]]}
     result = trainer.train(cfg, tmp_path, progress=False)
+    assert set(result.fewshot) == {"alcn", "dog 0.5/1.5", "none"}
+    assert 0 <= result.fewshot["alcn"]["auc"] <= 1
     assert result.status == "done" and len(result.history) == 2
     assert set(result.val_by_family) == {"side"}
-    for name in ("checkpoint.pt", "train.log", "history.json", "curves.png", "config.toml", "alcn_normalizer.npz"):
+    for name in ("checkpoint.pt", "train.log", "history.json", "curves.png", "config.toml", "alcn_normalizer.npz",
+                 "fewshot.json", "summary.md"):
         assert (tmp_path / name).is_file(), name
     assert "held-out val" in (tmp_path / "train.log").read_text()
+    assert "| dog 0.5/1.5 |" in (tmp_path / "summary.md").read_text()
     # The Normalizer moved away from its DoG initialisation: gradients went through the mixture.
     init = torch.tensor(trainer.dog_weights(10, 0.5, [0.5, 1.5]))
     with torch.no_grad():
@@ -128,6 +134,37 @@ def test_validation_must_hold_lightings_out(data, tmp_path):
     cfg = _config(data)
     cfg["data"]["val_path"] = data[0]
     cfg["data"]["path"] = data[0]
-    # Given folders are trusted for their lightings only when they differ.
     with pytest.raises(InputError, match="hold some lightings out"):
         trainer.train(cfg, tmp_path, progress=False)
+
+
+def test_centre_mixture_equals_kornia_mixture():
+    from alcn_cv.filters.kornia_mixture import gaussian_mixture2d
+
+    x, w = torch.rand(3, 1, 64, 64), torch.randn(3, 10)
+    centre = trainer.CentreMixture(tuple(0.5 * i for i in range(1, 11)))
+    np.testing.assert_allclose(centre(x, w), gaussian_mixture2d(x, w)[..., 16:48, 16:48], atol=1e-5)
+
+
+def test_meta_objective_trains_the_normalizer_only_on_other_lightings(data):
+    cfg = trainer.load_config(_config(data))
+    model = trainer.JointModel(cfg.model, 4)
+    x, y = torch.rand(6, 1, 64, 64), torch.tensor([0, 1, 2, 3, 1, 2])
+    anchor = torch.tensor([True, True, True, False, False, False])
+    logits = model(x, anchor)
+    torch.testing.assert_close(logits, model(x))  # same values, different gradients
+    F = torch.nn.functional
+    F.cross_entropy(logits[~anchor], y[~anchor]).backward()
+    assert all(p.grad is None or not p.grad.any() for p in model.detector.parameters())
+    assert model.normalizer.head.weight.grad.abs().sum() > 0
+
+
+def test_meta_objective_renders_anchor_windows(tmp_path):
+    cfg = {"data": {"n_train": 24, "n_val": 8, "n_objects": 2, "train_lighting": ["ambient", "bright"]},
+           "model": {"channels": [4, 8], "hidden": 16, "detector_channels": [4, 8], "detector_hidden": 16},
+           "optim": {"objective": "meta", "epochs": 1, "batch_size": 8},
+           "fewshot": {"enabled": False}, "run": {"threads": 1}}
+    result = trainer.train(cfg, tmp_path, progress=False)
+    assert result.status == "done"
+    with np.load(next(tmp_path.glob("windows-*.npz"))) as z:
+        assert np.bincount(z["train_light_ids"], minlength=3)[[0, 2]].tolist() == [12, 12]

@@ -15,6 +15,7 @@ __all__ = ["BENCHMARKS", "add_parser"]
 BENCHMARKS = (
     "alcn_cv.bench.detect",
     "alcn_cv.bench.invariance",
+    "alcn_cv.bench.speed",
 )
 
 

@@ -9,13 +9,17 @@ For every method and for 1 and 10 real training images per object:
    (:func:`~alcn_cv.data.synthetic.sample_negatives`), 64x64 each. They are drawn once per
    ``n`` with a fixed seed, so every method trains on the same windows.
 2. **Normalization.** Each window is normalized with the method (``normalize`` on the 64x64
-   window, ALCN with ``scale=1``: the window is already at the working scale) and its 32x32
-   centre kept. Global methods (``ns``, ``he``, ``whitening``, ...) therefore see the window at
+   window; ALCN with ``scale=1``, the window being already at the working scale, and Eq. 1 as in
+   the paper's second stage, see :func:`normalize_windows`) and its 32x32 centre kept. Global methods (``ns``, ``he``, ``whitening``, ...) therefore see the window at
    training time and the whole image at test time, as a user would apply them.
 3. **Input policy**, the same for every method: ``raw`` -- a fixed affine map, the training
    windows' mean and standard deviation (one scalar each, so all methods reach the detector
    with unit variance, without changing the method's response); ``standardize`` -- each 32x32
-   window to zero mean and unit variance (per-window standardization).
+   window to zero mean and unit variance (per-window standardization; at test time every
+   window is standardized and scored alone, about 10 times the cost of ``raw``); ``local`` --
+   every pixel standardized by the mean and deviation of the 31x31 box around it
+   (:func:`local_standardize`, an image operation, so the detector still runs densely; close
+   to ``standardize`` at the window's centre).
 4. **Detector.** The same network (:class:`alcn_cv.nets.Detector`, Sec. 4.2) trained in the
    same way (:func:`alcn_cv.train.stage2.train_detector`: Adam, same epochs, batch, rate and
    seed). The deep baselines of Sec. 4.3.1 train their own networks on the same windows
@@ -53,9 +57,11 @@ from alcn_cv.bench import tuning
 from alcn_cv.bench.metrics import match_detections, nms, pr_auc, precision_recall
 from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json, write_text
 from alcn_cv.data.manifest import read_json
+from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, create
 from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.filters.gaussian_mixture import alcn_filter
 from alcn_cv.formats.coco import CocoDataset, load_coco
 
 if TYPE_CHECKING:
@@ -68,10 +74,11 @@ logger = logging.getLogger(__name__)
 
 #: Deep baselines (own networks, no normalization) of Sec. 4.3.1.
 DEEP_BASELINES = ("cnn", "resnet20", "resnet56")
-POLICIES = ("raw", "standardize")
+POLICIES = ("raw", "standardize", "local")
 WINDOW = 64
 CROP = 32
 STRIDE = 4
+LOCAL_BOX = 31
 _BATCH = 1024
 
 
@@ -103,7 +110,7 @@ class DetectSettings:
 
     methods: list[str] = field(default_factory=default_methods)
     real_images: list[int] = field(default_factory=lambda: [1, 10])
-    policies: list[str] = field(default_factory=lambda: list(POLICIES))
+    policies: list[str] = field(default_factory=lambda: ["raw", "standardize"])
     positives_per_object: int = 300
     negatives_ratio: float = 2.0
     epochs: int = 6
@@ -260,30 +267,88 @@ def training_set(data: DetectData, n_real: int, settings: DetectSettings) -> Tra
 
 
 def normalize_windows(norm: Normalization, windows: np.ndarray) -> np.ndarray:
-    """Normalize every ``(S, S)`` window (uint8 or float32 in [0, 1]) and keep its 32x32 centre.
+    """Normalize every ``(S, S)`` window (uint8 or float32 in [0, 1]).
+
+    ALCN uses Eq. 1 on training windows, as in the paper's second stage: one weight vector per
+    window, predicted by the Normalizer from the window's central 48x48, then the Gaussian
+    mixture over the window (test images use Eq. 3, per-pixel weights, through ``normalize``).
 
     Returns:
-        ``(n, 32, 32)`` float32.
+        ``(n, S, S)`` float32 (the caller crops the centre, see :meth:`InputPolicy.windows`).
     """
     scale = np.float32(1 / 255) if windows.dtype == np.uint8 else np.float32(1)
-    return np.stack([tuning.centre_windows(norm.normalize(w.astype(np.float32) * scale)[None])[0] for w in windows])
+    unit = windows.astype(np.float32) * scale
+    if isinstance(norm, ALCN):
+        import torch
+
+        from alcn_cv.nets.normalizer import WINDOW as NORMALIZER_WINDOW
+
+        x = torch.from_numpy(np.ascontiguousarray(tuning.centre_windows(unit, NORMALIZER_WINDOW)))[:, None]
+        with torch.inference_mode():
+            weights = torch.cat([norm.net(x[i : i + _BATCH]) for i in range(0, len(x), _BATCH)]).numpy()
+        out = [alcn_filter(w, wt, norm.full_res_sigmas) for w, wt in zip(unit, weights)]
+    else:
+        out = [norm.normalize(w) for w in unit]
+    return np.stack(out)
+
+
+def local_standardize(image: np.ndarray, size: int = LOCAL_BOX, eps: float = 1e-6) -> np.ndarray:
+    """Standardize every pixel by the mean and standard deviation of the ``size x size`` box around it.
+
+    Box filters with reflect-101 borders. An image operation, so a detector runs densely on
+    its output; close to per-window standardization at a window's centre.
+
+    Args:
+        image: ``(H, W)`` float32.
+        size: odd box side in pixels (default 31, the detector window's size made odd).
+        eps: added to the standard deviation.
+
+    Returns:
+        ``(H, W)`` float32.
+    """
+    box = (size, size)
+    mean = cv2.boxFilter(image, cv2.CV_32F, box, borderType=cv2.BORDER_REFLECT_101)
+    sq = cv2.boxFilter(image * image, cv2.CV_32F, box, borderType=cv2.BORDER_REFLECT_101)
+    std = np.sqrt(np.maximum(sq - mean * mean, 0.0))
+    return ((image - mean) / (std + np.float32(eps))).astype(np.float32)
 
 
 class InputPolicy:
-    """The detector's input policy (see the module docstring), fitted on the training windows."""
+    """The detector's input policy (:data:`POLICIES`, see the module docstring).
+
+    Args:
+        name: ``raw``, ``standardize`` or ``local``.
+        train_windows: ``(n, S, S)`` normalized training windows (``raw`` fits its mean and
+            standard deviation on their 32x32 centres).
+    """
 
     def __init__(self, name: str, train_windows: np.ndarray) -> None:
+        if name not in POLICIES:
+            raise InputError(f"unknown input policy {name!r}; choose from {', '.join(POLICIES)}")
         self.name = name
-        self.mean = float(train_windows.mean())
-        self.std = float(train_windows.std()) or 1.0
+        centres = tuning.centre_windows(train_windows, CROP)
+        self.mean = float(centres.mean())
+        self.std = float(centres.std()) or 1.0
 
     def windows(self, windows: np.ndarray) -> np.ndarray:
+        """``(n, S, S)`` normalized windows -> ``(n, 32, 32)`` detector inputs."""
+        if self.name == "local":
+            return tuning.centre_windows(np.stack([local_standardize(w) for w in windows]), CROP)
+        centres = tuning.centre_windows(windows, CROP)
         if self.name == "standardize":
-            return tuning.standardize_windows(windows)
-        return ((windows - np.float32(self.mean)) / np.float32(self.std)).astype(np.float32)
+            return tuning.standardize_windows(centres)
+        return ((centres - np.float32(self.mean)) / np.float32(self.std)).astype(np.float32)
+
+    def image(self, image: np.ndarray) -> np.ndarray:
+        """A whole normalized image -> the detector's dense input (``raw`` and ``local``)."""
+        if self.name == "local":
+            return local_standardize(image)
+        if self.name == "raw":
+            return ((image - np.float32(self.mean)) / np.float32(self.std)).astype(np.float32)
+        raise InputError("per-window standardization has no whole-image form; score windows one by one")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name} if self.name == "standardize" else {"name": self.name, "mean": self.mean, "std": self.std}
+        return {"name": self.name, "mean": self.mean, "std": self.std} if self.name == "raw" else {"name": self.name}
 
 
 def score_maps(net: nn.Module, image: np.ndarray, policy: InputPolicy, device: str = "cpu") -> np.ndarray:
@@ -301,18 +366,41 @@ def score_maps(net: nn.Module, image: np.ndarray, policy: InputPolicy, device: s
     import torch
     import torch.nn.functional as F
 
-    x = torch.from_numpy(np.ascontiguousarray(image))[None, None].to(device)
     hd, wd = (image.shape[0] - CROP) // STRIDE + 1, (image.shape[1] - CROP) // STRIDE + 1
     with torch.inference_mode():
-        if policy.name == "raw":
-            logits = net.dense((x - policy.mean) / policy.std)[0]
+        if policy.name != "standardize":
+            logits = net.dense(torch.from_numpy(policy.image(image))[None, None].to(device))[0]
         else:
+            x = torch.from_numpy(np.ascontiguousarray(image))[None, None].to(device)
             win = F.unfold(x, CROP, stride=STRIDE)[0].T.reshape(-1, 1, CROP, CROP)
             mean = win.mean((2, 3), keepdim=True)
             std = win.std((2, 3), keepdim=True, unbiased=False)
             win = (win - mean) / (std + 1e-6)
             logits = torch.cat([net(win[i : i + _BATCH]) for i in range(0, len(win), _BATCH)]).T.reshape(-1, hd, wd)
         return F.softmax(logits[:, :hd, :wd], dim=0).cpu().numpy()
+
+
+def _all_score_maps(net: nn.Module, images: list[np.ndarray], policy: InputPolicy, device: str, batch: int = 8) -> list[np.ndarray]:
+    """:func:`score_maps` of many images; dense policies run images of equal size in batches."""
+    if policy.name == "standardize":
+        return [score_maps(net, img, policy, device) for img in images]
+    import torch
+    import torch.nn.functional as F
+
+    out: list[np.ndarray | None] = [None] * len(images)
+    by_shape: dict[tuple[int, ...], list[int]] = {}
+    for k, img in enumerate(images):
+        by_shape.setdefault(img.shape, []).append(k)
+    for (h, w), ids in by_shape.items():
+        hd, wd = (h - CROP) // STRIDE + 1, (w - CROP) // STRIDE + 1
+        for i in range(0, len(ids), batch):
+            chunk = ids[i : i + batch]
+            x = torch.from_numpy(np.stack([policy.image(images[k]) for k in chunk]))[:, None].to(device)
+            with torch.inference_mode():
+                p = F.softmax(net.dense(x)[:, :, :hd, :wd], dim=1).cpu().numpy()
+            for k, pk in zip(chunk, p):
+                out[k] = pk
+    return out  # type: ignore[return-value]
 
 
 def fixed_boxes(centres: np.ndarray, side_x: float, side_y: float) -> np.ndarray:
@@ -402,7 +490,7 @@ def _evaluate(
     data: DetectData, test_images: list[tuple[int, np.ndarray, float, float]], net: nn.Module,
     policy: InputPolicy, settings: DetectSettings,
 ) -> dict[str, Any]:
-    probs = [score_maps(net, normalized, policy, settings.device) for _, normalized, _, _ in test_images]
+    probs = _all_score_maps(net, [img for _, img, _, _ in test_images], policy, settings.device)
     per_object = {}
     for label, cat in enumerate(data.categories, start=1):
         scores, tps, n_gt = [], [], 0
@@ -453,7 +541,8 @@ def _plot_pr(results: dict[str, Any], data: DetectData, out: Path, settings: Det
                 ax.set_ylabel("precision")
                 ax.set_title(f"{name}, {n_real} real image(s), input {policy}", fontsize=10)
                 ax.grid(alpha=0.3)
-                ax.legend(fontsize=7, loc="upper right")
+                if ax.get_legend_handles_labels()[0]:
+                    ax.legend(fontsize=7, loc="upper right")
             fig.tight_layout()
             path = out / f"pr_{name}_{n_real}real.png"
             save_figure(plt, fig, path)
@@ -553,51 +642,60 @@ def main(
             if to_tune:
                 tuned[n] = tuning.tune_all(ts.windows, ts.labels, settings.seed, to_tune)
 
+    from alcn_cv.train.stage2 import evaluate_detector
+
     runs: dict[str, Any] = {}
     cnn_info: dict[str, Any] = {}
     alcn_trained = None
     total = len(settings.methods) * len(settings.real_images) * len(settings.policies)
     bar = tqdm(total=total, desc="detect benchmark", unit="run", disable=not progress)
     for method in settings.methods:
-        cache: dict[str, list[tuple[int, np.ndarray, float, float]]] = {}
+        test_cache: dict[str, list[tuple[int, np.ndarray, float, float]]] = {}
         for n_real in settings.real_images:
             params = tuned.get(n_real, {}).get(method, {}).get("params", {})
             ts = sets[n_real]
+            normalized: tuple[Normalization, np.ndarray, np.ndarray, float] | Exception | None = None
             for policy_name in settings.policies:
                 key = f"{method}|{n_real}|{policy_name}"
                 bar.set_postfix(run=key)
                 t0 = time.perf_counter()
                 try:
-                    norm = _create_normalization(method, params)
+                    if normalized is None:  # once per method and training set, shared by the policies
+                        try:
+                            norm = _create_normalization(method, params)
+                            normalized = (norm, normalize_windows(norm, ts.windows),
+                                          normalize_windows(norm, ts.val_windows), time.perf_counter() - t0)
+                        except Exception as exc:
+                            normalized = exc
+                    if isinstance(normalized, Exception):
+                        raise normalized
+                    norm, train_windows, val_windows, t_norm = normalized
                     if method == "alcn":
                         alcn_trained = bool(getattr(norm, "trained", False))
-                    train = normalize_windows(norm, ts.windows)
-                    policy = InputPolicy(policy_name, train)
-                    val = (policy.windows(normalize_windows(norm, ts.val_windows)), ts.val_labels)
-                    t_norm = time.perf_counter() - t0
+                    policy = InputPolicy(policy_name, train_windows)
+                    train, val = policy.windows(train_windows), (policy.windows(val_windows), ts.val_labels)
+                    t1 = time.perf_counter()
                     if method == "cnn":
-                        net, cnn_info[f"{n_real}|{policy_name}"] = _train_cnn_sweep(
-                            policy.windows(train), ts.labels, num_classes, settings, val)
+                        net, cnn_info[f"{n_real}|{policy_name}"] = _train_cnn_sweep(train, ts.labels, num_classes, settings, val)
                     else:
-                        net = _train(method, policy.windows(train), ts.labels, num_classes, settings, val)
-                    t_train = time.perf_counter() - t0 - t_norm
+                        net = _train(method, train, ts.labels, num_classes, settings, val)
+                    t_train = time.perf_counter() - t1
                     cache_key = repr(sorted(params.items()))
-                    if cache_key not in cache:
-                        cache[cache_key] = [(i, norm.normalize(g), sx, sy) for i, g, sx, sy in test_gray]
-                    objects = _evaluate(data, cache[cache_key], net, policy, settings)
-                    from alcn_cv.train.stage2 import evaluate_detector
-
+                    if cache_key not in test_cache:
+                        test_cache[cache_key] = [(i, norm.normalize(g), sx, sy) for i, g, sx, sy in test_gray]
                     runs[key] = {
                         "method": method, "real_images": n_real, "policy": policy.to_dict(), "params": params,
-                        "images_used": ts.images_used, "objects": objects,
+                        "images_used": ts.images_used,
+                        "objects": _evaluate(data, test_cache[cache_key], net, policy, settings),
                         "val_relit_acc": evaluate_detector(net, *val)[1],
                         "seconds": {"normalize_train": t_norm, "train": t_train, "total": time.perf_counter() - t0},
                     }
                 except Exception as exc:  # one method failing is reported, not the end of the run
-                    logger.exception("run %s failed", key)
+                    logger.error("run %s failed: %s: %s", key, type(exc).__name__, exc, exc_info=logger.isEnabledFor(logging.DEBUG))
                     runs[key] = {"method": method, "real_images": n_real, "policy": policy_name,
                                  "error": f"{type(exc).__name__}: {exc}"}
                 bar.update()
+                write_json(out / "detect.partial.json", {"runs": runs, "tuned": {str(k): v for k, v in tuned.items()}})
     bar.close()
 
     settings_dict = asdict(settings)
@@ -619,6 +717,7 @@ def main(
     result["seconds"] = time.perf_counter() - start
     write_json(out / "detect.json", result)
     write_text(out / "detect.md", _markdown(result, data, settings))
+    (out / "detect.partial.json").unlink(missing_ok=True)
     logger.info("detection benchmark written to %s in %.0f s", out, result["seconds"])
     return result
 
@@ -640,6 +739,17 @@ def _sweep(text: str) -> list[tuple[int, int]]:
         raise InputError(f"--cnn-sweep expects DEPTHxWIDTH,... (e.g. 1x32,2x32), got {text!r}") from None
 
 
+def presets() -> dict[str, DetectSettings]:
+    """Named settings: ``default`` (the benchmark) and ``small`` (a quick end-to-end check, for
+    ``make demo`` and tests: fewer windows and epochs, one plain CNN, no ResNet-56)."""
+    return {
+        "default": DetectSettings(),
+        "small": DetectSettings(
+            methods=list(available()) + ["cnn", "resnet20"], positives_per_object=30, epochs=2, cnn_sweep=[(1, 16)]
+        ),
+    }
+
+
 def add_cli(subparsers: Any) -> None:
     """Add ``alcn bench detect`` to the ``bench`` sub-subcommands."""
     d = DetectSettings()
@@ -648,41 +758,43 @@ def add_cli(subparsers: Any) -> None:
         help="few-shot detection benchmark: every normalization with the same detector (AUC, PR curves)",
         description="For each method, train the same detector on windows normalized by it, built from 1 and 10 real "
         "images per object (simple synthetic images), run it on every window of every test image, and score with "
-        "the PASCAL criterion (IoU 0.8, fixed-size boxes). Writes detect.md, detect.json and PR curves (PNG).",
+        "the PASCAL criterion (IoU 0.8, fixed-size boxes). Writes detect.md, detect.json and PR curves (PNG). "
+        "--size picks a preset; the other options override it.",
     )
     p.add_argument("--data", required=True, type=Path, help="benchmark folder: train.json, test.json, manifest.json "
                    "(e.g. from `alcn data detect`)")
     p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument("--methods", type=_list(str), default=d.methods,
-                   help=f"comma-separated methods (default: all: {','.join(d.methods)})")
-    p.add_argument("--real-images", type=_list(int), default=d.real_images, help="real training images per object (default 1,10)")
-    p.add_argument("--policy", type=_list(str), default=d.policies, dest="policies",
-                   help="detector input policies: raw, standardize (default both)")
-    p.add_argument("--positives", type=int, default=d.positives_per_object, help="synthetic windows per object (default %(default)s)")
-    p.add_argument("--negatives-ratio", type=float, default=d.negatives_ratio, help="background windows per object window (default %(default)s)")
-    p.add_argument("--epochs", type=int, default=d.epochs, help="detector training epochs (default %(default)s)")
-    p.add_argument("--batch-size", type=int, default=d.batch_size, help="default %(default)s")
-    p.add_argument("--lr", type=float, default=d.lr, help="Adam learning rate (default %(default)s)")
-    p.add_argument("--seed", type=int, default=d.seed, help="default %(default)s")
-    p.add_argument("--no-tune", dest="tune", action="store_false", help="keep the default parameters of DoG, SLCN, DLCN")
-    p.add_argument("--cnn-sweep", type=_sweep, default=d.cnn_sweep, help="plain CNNs tried, DEPTHxWIDTH,... (default 1x32,2x32,3x32)")
-    p.add_argument("--nms-iou", type=float, default=d.nms_iou, help="default %(default)s")
-    p.add_argument("--match-iou", type=float, default=d.match_iou, help="PASCAL criterion (default %(default)s)")
-    p.add_argument("--max-test-images", type=int, default=None, help="only the first N test images (default: all)")
+    p.add_argument("--size", choices=("default", "small"), default="default",
+                   help="preset: default (the benchmark) or small (a quick end-to-end run)")
+    p.add_argument("--methods", type=_list(str), help=f"comma-separated methods (default: all: {','.join(d.methods)})")
+    p.add_argument("--real-images", type=_list(int), help="real training images per object (default 1,10)")
+    p.add_argument("--policy", type=_list(str), dest="policies",
+                   help="detector input policies: raw, standardize, local (default raw,standardize)")
+    p.add_argument("--positives", type=int, dest="positives_per_object",
+                   help=f"synthetic windows per object (default {d.positives_per_object})")
+    p.add_argument("--negatives-ratio", type=float, help=f"background windows per object window (default {d.negatives_ratio})")
+    p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
+    p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
+    p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
+    p.add_argument("--seed", type=int, help=f"default {d.seed}")
+    p.add_argument("--no-tune", dest="tune", action="store_const", const=False, help="keep the default parameters of DoG, SLCN, DLCN")
+    p.add_argument("--cnn-sweep", type=_sweep, help="plain CNNs tried, DEPTHxWIDTH,... (default 1x32,2x32,3x32)")
+    p.add_argument("--nms-iou", type=float, help=f"default {d.nms_iou}")
+    p.add_argument("--match-iou", type=float, help=f"PASCAL criterion (default {d.match_iou})")
+    p.add_argument("--max-test-images", type=int, help="only the first N test images (default: all)")
     p.add_argument("--working-scale", type=float, default=None, help="override the manifest's working_scale")
     p.add_argument("--box-size", type=float, default=None, help="override the manifest's box_size (pixels at the working scale)")
-    p.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's choice)")
-    p.add_argument("--device", default="cpu", help="torch device (default cpu)")
+    p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
+    p.add_argument("--device", help="torch device (default cpu)")
     p.set_defaults(func=_run_cli)
 
 
 def _run_cli(args: Any) -> int:
-    settings = DetectSettings(
-        methods=args.methods, real_images=args.real_images, policies=args.policies, positives_per_object=args.positives,
-        negatives_ratio=args.negatives_ratio, epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
-        tune=args.tune, cnn_sweep=args.cnn_sweep, nms_iou=args.nms_iou, match_iou=args.match_iou,
-        max_test_images=args.max_test_images, threads=args.threads, device=args.device,
-    )
+    settings = presets()[args.size]
+    for name in DetectSettings.__dataclass_fields__:
+        value = getattr(args, name, None)
+        if value is not None:
+            setattr(settings, name, value)
     result = main(args.data, args.out, settings, args.working_scale, args.box_size)
     print((Path(args.out) / "detect.md").read_text(encoding="utf-8"))
     return 1 if all("error" in r for r in result["runs"].values()) else 0

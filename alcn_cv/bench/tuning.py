@@ -36,12 +36,12 @@ logger = logging.getLogger(__name__)
 GRIDS: dict[str, list[dict[str, float]]] = {
     "dog": [
         {"sigma1": s1, "sigma2": s2}
-        for s1 in (0.5, 1.0, 1.5)
-        for s2 in (1.5, 2.0, 3.0, 4.0, 6.0)
+        for s1 in (0.5, 1.0, 1.5, 2.0)
+        for s2 in (1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0)
         if s2 > s1
     ],
-    "slcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 6.0)],
-    "dlcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 6.0)],
+    "slcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0)],
+    "dlcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0)],
 }
 
 CROP = 32

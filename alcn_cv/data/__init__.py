@@ -1,1 +1,21 @@
-"""Illumination data engine (issue 3): rendered training windows, a detection benchmark and pose sequences."""
+"""The illumination data engine (issue 3): rendered data under the lightings of the paper's Fig. 1 and 4.
+
+Modules:
+
+- :mod:`~alcn_cv.data.render`: lights (directional, point, spot; coloured), materials (matte,
+  plastic, velvet-like, metal), vectorised shading, height-field shadows, hard shadow shapes and
+  the camera (exposure, noise, saturation, gamma, motion blur); lighting families.
+- :mod:`~alcn_cv.data.textures`: procedural textures and photographs of :mod:`skimage.data`.
+- :mod:`~alcn_cv.data.objects`: textured relief objects and their placement on 2.5D surfaces.
+- :mod:`~alcn_cv.data.phos`: the Normalizer's Phos-like 64x64 training windows.
+- :mod:`~alcn_cv.data.synthetic`: the paper's simple synthetic images from a few real images.
+- :mod:`~alcn_cv.data.detect`: an ALCN-2D-like detection benchmark in COCO format.
+- :mod:`~alcn_cv.data.raster`, :mod:`~alcn_cv.data.pose`: box and duck pose sequences in the BOP
+  layout, with a COLMAP model of the training sequence.
+- :mod:`~alcn_cv.data.preview`, :mod:`~alcn_cv.data.stats`: contact sheets; statistics beside the
+  real PSM photographs.
+- :mod:`~alcn_cv.data.manifest`: manifests, atomic folders, deterministic files.
+
+Every generator is deterministic for its seed (byte-identical output) and writes a
+``manifest.json``. The command line is ``alcn data phos|detect|pose|preview|compare-psm``.
+"""

@@ -18,7 +18,7 @@ def _phos(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     out = phos.generate(args.out, args.n, args.seed, n_objects=args.objects, object_seed=args.object_seed,
                         lighting=args.lighting, background_fraction=args.background_fraction,
-                        overwrite=args.overwrite, progress=True)
+                        overwrite=args.overwrite, progress=True, workers=args.workers)
     logger.info("wrote %d windows to %s in %.1f s", args.n, out, time.perf_counter() - t)
     return 0
 
@@ -29,7 +29,7 @@ def _detect(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     out = detect.generate(args.out, seed=args.seed, size=args.size, object_seed=args.object_seed,
                           n_test=args.n_test, n_train=args.n_train, width=args.width, height=args.height,
-                          overwrite=args.overwrite)
+                          overwrite=args.overwrite, workers=args.workers)
     logger.info("wrote the detection benchmark to %s in %.1f s", out, time.perf_counter() - t)
     return 0
 
@@ -39,7 +39,7 @@ def _pose(args: argparse.Namespace) -> int:
 
     t = time.perf_counter()
     out = pose.generate(args.out, seed=args.seed, size=args.size, n_frames=args.frames, n_test=args.n_test,
-                        clutter=not args.no_clutter, overwrite=args.overwrite)
+                        clutter=not args.no_clutter, overwrite=args.overwrite, workers=args.workers)
     logger.info("wrote the pose sequences to %s in %.1f s", out, time.perf_counter() - t)
     return 0
 
@@ -85,6 +85,8 @@ def add_parser(subparsers) -> None:
                    "colour,mixed")
     q.add_argument("--background-fraction", type=float, default=0.35, help="fraction of background windows")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    q.add_argument("--workers", type=int, default=1,
+                   help="worker processes (default 1; the output does not depend on it)")
     q.set_defaults(func=_phos)
 
     q = sub.add_parser("detect", help="ALCN-2D-like detection benchmark (COCO train.json/test.json)",
@@ -99,6 +101,8 @@ def add_parser(subparsers) -> None:
     q.add_argument("--width", type=int, default=None, help="image width (default 1280)")
     q.add_argument("--height", type=int, default=None, help="image height (default 800)")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    q.add_argument("--workers", type=int, default=1,
+                   help="worker processes (default 1; the output does not depend on it)")
     q.set_defaults(func=_detect)
 
     q = sub.add_parser("pose", help="box and duck pose sequences (BOP layout + COLMAP model)",
@@ -111,6 +115,8 @@ def add_parser(subparsers) -> None:
     q.add_argument("--n-test", type=int, default=None, help="number of test sequences (default 8)")
     q.add_argument("--no-clutter", action="store_true", help="no clutter on the table")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    q.add_argument("--workers", type=int, default=1,
+                   help="worker processes (default 1; the output does not depend on it)")
     q.set_defaults(func=_pose)
 
     q = sub.add_parser("preview", help="contact sheet of a dataset with its ground truth drawn",

@@ -20,6 +20,7 @@ test image's lighting family and parameters are stored in its ``lighting`` field
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 from dataclasses import dataclass
@@ -27,10 +28,10 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest, write_json
 from alcn_cv.data.objects import ReliefObject, background_surface, make_object, paste, to_surface
+from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.render import LIGHT_FAMILIES, Lighting, Material, directional, render_surfaces, sample_lighting
 from alcn_cv.data.textures import photo_crop, procedural_texture
 from alcn_cv.errors import InputError
@@ -175,6 +176,25 @@ def _test_image(rng, objs: list[ReliefObject], cfg: DetectConfig, p_object: floa
     return _render(rng, surf, lighting, cfg), anns, lighting
 
 
+@functools.lru_cache(maxsize=2)
+def _objects(object_seed: int, canonical: int) -> tuple[ReliefObject, ...]:
+    return tuple(benchmark_objects(object_seed, canonical))
+
+
+def _image_job(job: tuple) -> tuple[list, dict]:
+    """Render one image and write it; return its objects (category, box, area) and lighting."""
+    split, k, j, path, _, seed, object_seed, cfg, p_object = job
+    objs = _objects(object_seed, cfg.canonical)
+    if split == "train":
+        img, box, area = _train_image(np.random.default_rng([seed, 1, k, j]), objs[k], cfg)
+        found, lighting = [(k + 1, box, area)], training_lighting()
+    else:
+        img, found, lighting = _test_image(np.random.default_rng([seed, 2, j]), list(objs), cfg, p_object)
+    if not cv2.imwrite(path, img):
+        raise OSError(f"cannot write {path}")
+    return found, lighting.describe()
+
+
 def generate(
     out_dir: str | os.PathLike,
     *,
@@ -188,6 +208,7 @@ def generate(
     p_object: float = 0.5,
     overwrite: bool = False,
     progress: bool = True,
+    workers: int = 1,
 ) -> Path:
     """Render the detection benchmark into ``out_dir`` (atomically).
 
@@ -201,6 +222,7 @@ def generate(
         p_object: probability that each object appears in a test image.
         overwrite: replace an existing folder.
         progress: show a progress bar.
+        workers: worker processes (the output does not depend on it).
 
     Returns:
         The output folder.
@@ -216,45 +238,32 @@ def generate(
     if cfg.width < 2 * cfg.object_px or cfg.height < 2 * cfg.object_px or cfg.n_train < 1 or cfg.n_test < 0:
         raise InputError(f"images must be at least twice the object size ({cfg.object_px} px), with n_train >= 1: "
                          f"got {cfg.width}x{cfg.height}, n_train={cfg.n_train}")
-    objs = benchmark_objects(object_seed, cfg.canonical)
     cats = [{"id": k + 1, "name": name, "supercategory": "object", "material": mat}
             for k, (name, mat, _) in enumerate(OBJECTS)]
-    total = len(objs) * cfg.n_train + cfg.n_test
-    bar = tqdm(total=total, desc="detect images", unit="img", disable=not progress)
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         (tmp / "images" / "train").mkdir(parents=True)
         (tmp / "images" / "test").mkdir(parents=True)
-        images, anns = [], []
-        for k, obj in enumerate(objs):
-            for j in range(cfg.n_train):
-                rng = np.random.default_rng([seed, 1, k, j])
-                img, box, area = _train_image(rng, obj, cfg)
-                name = f"images/train/{OBJECTS[k][0]}_{j:02d}.png"
-                cv2.imwrite(str(tmp / name), img)
+        jobs = [("train", k, j, f"images/train/{OBJECTS[k][0]}_{j:02d}.png")
+                for k in range(len(OBJECTS)) for j in range(cfg.n_train)]
+        jobs += [("test", 0, j, f"images/test/{j:05d}.png") for j in range(cfg.n_test)]
+        jobs = [(split, k, j, str(tmp / name), name, seed, object_seed, cfg, p_object) for split, k, j, name in jobs]
+        results = list(parallel_map(_image_job, jobs, workers=workers, desc="detect images", unit="img",
+                                    progress=progress))
+        for split in ("train", "test"):
+            images, anns = [], []
+            for job, (objs_here, lighting) in zip(jobs, results):
+                if job[0] != split:
+                    continue
                 iid = len(images) + 1
-                images.append({"id": iid, "file_name": name, "width": cfg.width, "height": cfg.height,
-                               "lighting": training_lighting().describe()})
-                anns.append({"id": len(anns) + 1, "image_id": iid, "category_id": k + 1, "bbox": box,
-                             "area": round(area, 2), "iscrowd": 0})
-                bar.update()
-        info = {"description": "alcn-cv ALCN-2D-like detection benchmark, training images", "seed": seed}
-        write_coco(tmp / "train.json", images, anns, cats, info)
-        images, anns = [], []
-        for j in range(cfg.n_test):
-            rng = np.random.default_rng([seed, 2, j])
-            img, objs_here, lighting = _test_image(rng, objs, cfg, p_object)
-            name = f"images/test/{j:05d}.png"
-            cv2.imwrite(str(tmp / name), img)
-            iid = j + 1
-            images.append({"id": iid, "file_name": name, "width": cfg.width, "height": cfg.height,
-                           "light_family": lighting.family, "lighting": lighting.describe()})
-            for cat, box, area in objs_here:
-                anns.append({"id": len(anns) + 1, "image_id": iid, "category_id": cat, "bbox": box,
-                             "area": round(area, 2), "iscrowd": 0})
-            bar.update()
-        info = {"description": "alcn-cv ALCN-2D-like detection benchmark, test images", "seed": seed}
-        write_coco(tmp / "test.json", images, anns, cats, info)
-        bar.close()
+                entry = {"id": iid, "file_name": job[4], "width": cfg.width, "height": cfg.height}
+                if split == "test":
+                    entry["light_family"] = lighting["family"]
+                images.append({**entry, "lighting": lighting})
+                for cat, box, area in objs_here:
+                    anns.append({"id": len(anns) + 1, "image_id": iid, "category_id": cat, "bbox": box,
+                                 "area": round(area, 2), "iscrowd": 0})
+            info = {"description": f"alcn-cv ALCN-2D-like detection benchmark, {split} images", "seed": seed}
+            write_coco(tmp / f"{split}.json", images, anns, cats, info)
         params = {"size": size, "object_seed": object_seed, "width": cfg.width, "height": cfg.height,
                   "n_train": cfg.n_train, "n_test": cfg.n_test, "object_px": cfg.object_px, "p_object": p_object}
         write_json(tmp / "manifest.json", make_manifest(

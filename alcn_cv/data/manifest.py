@@ -13,7 +13,6 @@ complete, so a half-written dataset is never mistaken for a complete one.
 from __future__ import annotations
 
 import contextlib
-import io
 import json
 import logging
 import os
@@ -36,6 +35,7 @@ __all__ = [
     "read_manifest",
     "read_json",
     "write_json",
+    "atomic_write",
     "atomic_output_dir",
     "save_npz",
 ]
@@ -57,19 +57,23 @@ def make_manifest(kind: str, seed: int, parameters: dict[str, Any], **extra: Any
     }
 
 
-def write_json(path: str | os.PathLike, obj: Any, *, indent: int | None = 1) -> Path:
-    """Write JSON atomically (temporary file in the same folder, then rename)."""
+def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same folder, then rename it."""
     path = Path(path)
-    text = json.dumps(obj, indent=indent, sort_keys=False, allow_nan=False) + "\n"
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data.encode("utf-8") if isinstance(data, str) else data)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def write_json(path: str | os.PathLike, obj: Any, *, indent: int | None = 1) -> Path:
+    """Write JSON atomically (temporary file in the same folder, then rename)."""
+    return atomic_write(path, json.dumps(obj, indent=indent, allow_nan=False) + "\n")
 
 
 def read_json(path: str | os.PathLike) -> Any:
@@ -84,7 +88,9 @@ def read_json(path: str | os.PathLike) -> Any:
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:
-        raise DatasetError(f"{path}: malformed or truncated JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+        raise DatasetError(
+            f"{path}: malformed or truncated JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
+        ) from None
 
 
 def read_manifest(folder: str | os.PathLike, kind: str | None = None) -> dict[str, Any]:
@@ -139,11 +145,10 @@ def save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> Path:
     try:
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=6) as zf:
             for name, arr in arrays.items():
-                buf = io.BytesIO()
-                np.lib.format.write_array(buf, np.ascontiguousarray(arr), allow_pickle=False)
                 info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
                 info.compress_type = zipfile.ZIP_DEFLATED
-                zf.writestr(info, buf.getvalue())
+                with zf.open(info, "w", force_zip64=True) as f:  # streamed: no copy in memory
+                    np.lib.format.write_array(f, np.ascontiguousarray(arr), allow_pickle=False)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -9,6 +9,7 @@ map gives self-shading and a cast shadow on whatever it stands on.
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass
 
@@ -56,6 +57,11 @@ class ReliefObject:
     @property
     def size(self) -> int:
         return self.albedo.shape[0]
+
+    @functools.cached_property
+    def packed(self) -> np.ndarray:
+        """Albedo and height stacked (S, S, 4) for one warp."""
+        return np.dstack([self.albedo, self.height])
 
 
 def _silhouette(rng: np.random.Generator, s: int, shape: str) -> np.ndarray:
@@ -215,8 +221,7 @@ def paste(
     Mr = M.copy()
     Mr[:, 2] -= (x0, y0)
     size = (x1 - x0, y1 - y0)
-    packed = np.dstack([obj.albedo, obj.height * scale])
-    warped = cv2.warpAffine(packed, Mr, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    warped = cv2.warpAffine(obj.packed, Mr, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
     a = cv2.warpAffine(obj.mask, Mr, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
     sl = (slice(y0, y1), slice(x0, x1))
     a3 = a[..., None]
@@ -224,7 +229,7 @@ def paste(
     base = height[sl]
     # The object stands on the ground: it rests on the local mean height under it.
     rest = float((base * a).sum() / max(a.sum(), 1e-6))
-    height[sl] = base * (1 - a) + (rest + warped[..., 3]) * a
+    height[sl] = base * (1 - a) + (rest + warped[..., 3] * scale) * a
     material[sl] = material[sl] * (1 - a3) + obj.material.vector() * a3
     cov[sl] = a
     return cov

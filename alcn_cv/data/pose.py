@@ -7,7 +7,7 @@ Table 1, #1 the training lighting, #2-#4 mild changes and #5-#8 drastic ones (gr
 with long shadows, a spot in the dark, coloured lights with a window-frame shadow, over-exposure
 with a point light and blinds). Layout (BOP, millimetres, OpenCV intrinsics)::
 
-    ROOT/manifest.json
+    ROOT/manifest.json, ROOT/camera.json (BOP: fx, fy, cx, cy, width, height)
     ROOT/models/obj_000001.ply (+ obj_000001.png texture), obj_000002.ply, models_info.json
     ROOT/train/000001/{rgb/000000.png, mask_visib/, scene_camera.json, scene_gt.json,
                        scene_gt_info.json, colmap/{cameras,images,points3D}.txt}
@@ -29,14 +29,22 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest, write_json
+from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.raster import Mesh, Scene, SceneObject, box_mesh, ellipsoid_mesh, look_at, merge_meshes, render_frame
 from alcn_cv.data.render import Light, Lighting, Material, directional
 from alcn_cv.data.textures import colour_jitter, photo_crop, procedural_texture, random_texture
 from alcn_cv.errors import InputError
-from alcn_cv.formats.bop import BopFrame, BopObjectPose, PlyModel, models_info, write_ply, write_scene
+from alcn_cv.formats.bop import (
+    BopFrame,
+    BopObjectPose,
+    PlyModel,
+    models_info,
+    write_camera,
+    write_ply,
+    write_scene,
+)
 from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, write_text_model
 
 logger = logging.getLogger(__name__)
@@ -209,7 +217,9 @@ def sequence_lighting(index: int, rng: np.random.Generator) -> Lighting:
                     np.full(3, 0.2, np.float32), gain=j(2.5, 3.5), shadow_shape="blinds", **noise)
 
 
-def _write_sequence(seq_dir: Path, scene: Scene, poses, lighting: Lighting, cfg: PoseConfig, seed_key, bar) -> list[BopFrame]:
+def _write_sequence(
+    seq_dir: Path, scene: Scene, poses, lighting: Lighting, cfg: PoseConfig, seed_key: tuple
+) -> list[BopFrame]:
     (seq_dir / "rgb").mkdir(parents=True)
     (seq_dir / "mask_visib").mkdir()
     frames, info = [], {}
@@ -231,7 +241,6 @@ def _write_sequence(seq_dir: Path, scene: Scene, poses, lighting: Lighting, cfg:
             inf.append({"bbox_visib": box, "px_count_visib": int(len(xs))})
         info[str(f)] = inf
         frames.append(BopFrame(f, seq_dir / "rgb" / f"{f:06d}.png", K, 1.0, objs, R, t))
-        bar.update()
     write_scene(seq_dir, frames)
     write_json(seq_dir / "scene_gt_info.json", info, indent=None)
     return frames
@@ -259,6 +268,23 @@ def _write_models(models_dir: Path, scene: Scene) -> None:
     write_json(models_dir / "models_info.json", models_info(plys))
 
 
+def _sequence_job(job: tuple) -> tuple[list[BopFrame], dict]:
+    """Render sequence ``k`` (0: training, also writing the models) into the dataset root."""
+    k, root, seed, cfg, clutter = job
+    root = Path(root)
+    scene = make_scene(seed, k, clutter=clutter, texel=cfg.texel, table_px=cfg.table_px)
+    if k == 0:
+        _write_models(root / "models", scene)
+        poses = trajectory(cfg.n_frames, np.random.default_rng([seed, 20]), span_deg=330.0)
+        light = _train_lighting()
+        frames = _write_sequence(root / "train" / "000001", scene, poses, light, cfg, (seed, 30))
+    else:
+        light = sequence_lighting(k, np.random.default_rng([seed, 40, k]))
+        poses = trajectory(cfg.n_frames, np.random.default_rng([seed, 50, k]))
+        frames = _write_sequence(root / "test" / f"{k:06d}", scene, poses, light, cfg, (seed, 60, k))
+    return frames, light.describe()
+
+
 def generate(
     out_dir: str | os.PathLike,
     *,
@@ -269,6 +295,7 @@ def generate(
     clutter: bool = True,
     overwrite: bool = False,
     progress: bool = True,
+    workers: int = 1,
 ) -> Path:
     """Render the training and test sequences into ``out_dir`` (BOP layout, atomically).
 
@@ -281,6 +308,7 @@ def generate(
         clutter: put clutter on the table.
         overwrite: replace an existing folder.
         progress: show a progress bar.
+        workers: worker processes, one sequence each (the output does not depend on it).
     """
     if size not in SIZES:
         raise InputError(f"unknown size {size!r}; known: {sorted(SIZES)}")
@@ -289,29 +317,23 @@ def generate(
                               n_test=base.n_test if n_test is None else n_test)
     if cfg.n_frames < 1 or not 0 <= cfg.n_test <= len(SEQUENCE_KINDS):
         raise InputError(f"need n_frames >= 1 and 0 <= n_test <= {len(SEQUENCE_KINDS)}")
-    bar = tqdm(total=cfg.n_frames * (1 + cfg.n_test), desc="pose frames", unit="frame", disable=not progress)
     sequences = []
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
-        train_scene = make_scene(seed, 0, clutter=clutter, texel=cfg.texel, table_px=cfg.table_px)
-        _write_models(tmp / "models", train_scene)
-        poses = trajectory(cfg.n_frames, np.random.default_rng([seed, 20]), span_deg=330.0)
-        light = _train_lighting()
-        seq = tmp / "train" / "000001"
-        frames = _write_sequence(seq, train_scene, poses, light, cfg, (seed, 30), bar)
-        cam = camera_from_opencv(cfg.K, None, cfg.width, cfg.height, camera_id=1)
-        images = [ColmapImage(f.im_id + 1, f.rgb_path.name, 1, f.R_w2c, f.t_w2c) for f in frames]
-        write_text_model(seq / "colmap", [cam], images)
-        sequences.append({"split": "train", "scene_id": 1, "kind": "train", "lighting": light.describe()})
-        for k in range(1, cfg.n_test + 1):
-            scene = make_scene(seed, k, clutter=clutter, texel=cfg.texel, table_px=cfg.table_px)
-            lrng = np.random.default_rng([seed, 40, k])
-            light = sequence_lighting(k, lrng)
-            poses = trajectory(cfg.n_frames, np.random.default_rng([seed, 50, k]))
-            _write_sequence(tmp / "test" / f"{k:06d}", scene, poses, light, cfg, (seed, 60, k), bar)
-            sequences.append({"split": "test", "scene_id": k, "kind": SEQUENCE_KINDS[k - 1],
-                              "change": "none" if k == 1 else ("mild" if k <= 4 else "drastic"),
-                              "lighting": light.describe()})
-        bar.close()
+        write_camera(tmp, cfg.K, cfg.width, cfg.height)
+        jobs = [(k, str(tmp), seed, cfg, clutter) for k in range(cfg.n_test + 1)]
+        results = parallel_map(_sequence_job, jobs, workers=workers, desc="pose sequences", unit="seq",
+                               progress=progress)
+        for k, (frames, light) in enumerate(results):
+            if k == 0:
+                seq = tmp / "train" / "000001"
+                cam = camera_from_opencv(cfg.K, None, cfg.width, cfg.height, camera_id=1)
+                images = [ColmapImage(f.im_id + 1, f.rgb_path.name, 1, f.R_w2c, f.t_w2c) for f in frames]
+                write_text_model(seq / "colmap", [cam], images)
+                sequences.append({"split": "train", "scene_id": 1, "kind": "train", "lighting": light})
+            else:
+                sequences.append({"split": "test", "scene_id": k, "kind": SEQUENCE_KINDS[k - 1],
+                                  "change": "none" if k == 1 else ("mild" if k <= 4 else "drastic"),
+                                  "lighting": light})
         write_json(tmp / "manifest.json", make_manifest(
             "pose", seed, {"size": size, "width": cfg.width, "height": cfg.height, "focal": cfg.focal,
                            "n_frames": cfg.n_frames, "n_test": cfg.n_test, "clutter": clutter},

@@ -375,6 +375,29 @@ def _lookup_shadow(kind, proj, scale, zb, P: np.ndarray, bias: float) -> np.ndar
     return vis / len(taps)
 
 
+def _sample_mipmapped(tex: np.ndarray, mapx: np.ndarray, mapy: np.ndarray, levels: int = 6) -> np.ndarray:
+    """Sample a (mirrored, repeating) texture with trilinear mip-mapping (no aliasing far away).
+
+    The level of detail is log2 of the texture footprint of one pixel (texels per pixel, from
+    the finite differences of the sampling maps).
+    """
+    fx = np.maximum(np.abs(np.diff(mapx, axis=1, append=mapx[:, -1:])),
+                    np.abs(np.diff(mapy, axis=1, append=mapy[:, -1:])))
+    fy = np.maximum(np.abs(np.diff(mapx, axis=0, append=mapx[-1:])), np.abs(np.diff(mapy, axis=0, append=mapy[-1:])))
+    lod = np.clip(np.log2(np.maximum(np.maximum(fx, fy), 1e-6)), 0, levels - 1)
+    out = np.zeros(mapx.shape + (3,), np.float32)
+    level = tex
+    for k in range(levels):
+        w = np.clip(1.0 - np.abs(lod - k), 0.0, 1.0)
+        if w.any():
+            s = 2.0**k
+            smp = cv2.remap(level, (mapx + 0.5) / s - 0.5, (mapy + 0.5) / s - 0.5, cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_REFLECT_101)
+            out += w[..., None] * smp
+        level = cv2.pyrDown(level)
+    return out
+
+
 def render_frame(
     scene: Scene,
     K: np.ndarray,
@@ -431,7 +454,7 @@ def render_frame(
     tex = scene.table
     mapx = (P[..., 0] / scene.table_mm_per_px + tex.shape[1] / 2).astype(np.float32)
     mapy = (-P[..., 1] / scene.table_mm_per_px + tex.shape[0] / 2).astype(np.float32)
-    albedo[:] = cv2.remap(tex, mapx, mapy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
+    albedo[:] = _sample_mipmapped(tex, mapx, mapy)
     albedo[~hit] = scene.wall
     obj_id = np.where(hit, 0, -1).astype(np.int64)
     model_xyz = np.full((height, width, 3), np.nan)
@@ -480,7 +503,8 @@ def render_frame(
     vis = np.ones((1, max(1, len(lighting.lights)), height, width), np.float32)
     maps = _shadow_maps(verts, faces, lighting.lights, extent, shadow_res)
     for i, (kind, proj, scale, zb) in enumerate(maps):
-        vis[0, i] = _lookup_shadow(kind, proj, scale, zb, P, bias=1.5)
+        # Normal-offset lookup (1.5 shadow-map texels along the normal) against shadow acne.
+        vis[0, i] = _lookup_shadow(kind, proj, scale, zb, P + N * (3.0 * extent / shadow_res), bias=1.5)
     if lighting.shadow_shape is not None and lighting.lights:
         # A world-fixed hard shadow pattern (window frame, blinds...) on light 0.
         gob = shadow_shape(np.random.default_rng(gobo_seed), (512, 512), lighting.shadow_shape, penumbra=1.5)

@@ -21,7 +21,8 @@ shadow visibility)::
 ``flatten`` and ``sheen`` give a velvet-like look (a soft, flat fall-off and bright rims and
 grazing light, neither Lambertian nor specular; after Koenderink & Pont's and Ashikhmin's
 velvet models); metals have strong, tight, albedo-tinted highlights. Point and spot lights fall
-off as ``1 / (1 + (d / range)**2)``; spots have a smooth cone. The camera model applies an
+off as ``1 / (1 + (d / range)**2)``; spots have a smooth cone. Height fields also get an
+ambient-occlusion term (crevices receive less ambient light). The camera model applies an
 exposure gain, signal-dependent sensor noise (shot + read noise, in linear units), clipping
 (saturation), a gamma curve, optional motion blur and 8-bit quantisation.
 
@@ -36,7 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
 import cv2
@@ -235,7 +236,6 @@ class Lighting:
     gradient: tuple[float, float] = (0.0, 0.0)
     shadow_shape: str | None = None
     motion_blur: tuple[float, float] | None = None
-    extra: dict = field(default_factory=dict)
 
     def describe(self) -> dict:
         """A JSON-serialisable summary (family, light kinds and directions, gain ...)."""
@@ -291,8 +291,8 @@ def sample_lighting(
         width, height: scene size in pixels (point and spot lights are placed relative to it).
         centre: point of interest (x, y) that spots and point lights aim around; the scene
             centre when None.
-        relief: typical height of the relief in pixels (only used to scale nothing but the
-            distance of point lights; kept for reproducible scaling).
+        relief: height of the relief in pixels; point and spot lights are raised by it so that
+            they stay above the tallest object.
 
     Returns:
         A :class:`Lighting`. Intensities are scaled so that a white Lambertian surface facing
@@ -369,7 +369,7 @@ def sample_lighting(
             ga = rng.uniform(0, 2 * np.pi)
             gradient = (float(g * np.cos(ga)), float(g * np.sin(ga)))
     if rng.random() < 0.05:
-        blur = (float(rng.uniform(2, 8)), float(rng.uniform(0, 180)))
+        blur = (float(rng.uniform(1.5, 5.0)), float(rng.uniform(0, 180)))
     return Lighting(
         family=family,
         lights=lights,
@@ -579,55 +579,70 @@ def shade(
     any_metal = bool(np.any(metal > 0))
     shp = (-1, 1, 1)
     for li in range(lights.pos.shape[1]):
-        col = lights.colour[:, li]
-        if not np.any(col > 0):
+        active = np.any(lights.colour[:, li] > 0, axis=1)
+        if not active.any():
             continue
-        w = lights.w[:, li].reshape(shp)
-        lx = lights.pos[:, li, 0].reshape(shp) - w * px
-        ly = lights.pos[:, li, 1].reshape(shp) - w * py
-        lz = lights.pos[:, li, 2].reshape(shp) - w * pz
+        # Shade only the items that have a light in this slot (slots 2 and 3 are often empty).
+        sel = slice(None) if active.all() else np.nonzero(active)[0]
+
+        def g(a):
+            return a if a.shape[0] == 1 else a[sel]
+
+        Px, Py, Pz, Nx, Ny, Nz, Vx, Vy, Vz = (g(a) for a in (px, py, pz, nx, ny, nz, vx, vy, vz))
+        Kd, Ks, Shin, Sheen, Flat, Metal, Rim = (g(a) for a in (kd, ks, shin, sheen, flat, metal, rim))
+        Alb = [g(a) for a in alb]
+        col = lights.colour[sel, li]
+        w = lights.w[sel, li].reshape(shp)
+        lx = lights.pos[sel, li, 0].reshape(shp) - w * Px
+        ly = lights.pos[sel, li, 1].reshape(shp) - w * Py
+        lz = lights.pos[sel, li, 2].reshape(shp) - w * Pz
         d2 = lx * lx + ly * ly + lz * lz
         inv = 1.0 / np.sqrt(d2)
         lx *= inv
         ly *= inv
         lz *= inv
         factor = None
-        if np.any(lights.inv_range2[:, li] > 0):
-            factor = 1.0 / (1.0 + d2 * lights.inv_range2[:, li].reshape(shp))
-        if np.any(lights.cos_outer[:, li] > -1.0):
-            sd = lights.spot_dir[:, li]
+        if np.any(lights.inv_range2[sel, li] > 0):
+            factor = 1.0 / (1.0 + d2 * lights.inv_range2[sel, li].reshape(shp))
+        if np.any(lights.cos_outer[sel, li] > -1.0):
+            sd = lights.spot_dir[sel, li]
             cos_a = -(lx * sd[:, 0].reshape(shp) + ly * sd[:, 1].reshape(shp) + lz * sd[:, 2].reshape(shp))
-            co = lights.cos_outer[:, li].reshape(shp)
-            ci = lights.cos_inner[:, li].reshape(shp)
+            co = lights.cos_outer[sel, li].reshape(shp)
+            ci = lights.cos_inner[sel, li].reshape(shp)
             t = np.clip((cos_a - co) / np.maximum(ci - co, 1e-6), 0.0, 1.0)
             cone = t * t * (3.0 - 2.0 * t)
             factor = cone if factor is None else factor * cone
         if visibility is not None:
-            factor = visibility[:, li] if factor is None else factor * visibility[:, li]
-        nl = np.maximum(nx * lx + ny * ly + nz * lz, 0.0)
+            vis = visibility[sel, li]
+            factor = vis if factor is None else factor * vis
+        nl = np.maximum(Nx * lx + Ny * ly + Nz * lz, 0.0)
         snl = np.sqrt(nl)
-        diff = kd * (nl + flat * (snl - nl))
+        diff = Kd * (nl + Flat * (snl - nl))
         spec = sh = None
         if any_spec or any_sheen:
-            hx, hy, hz = lx + vx, ly + vy, lz + vz
+            hx, hy, hz = lx + Vx, ly + Vy, lz + Vz
             hinv = 1.0 / (np.sqrt(hx * hx + hy * hy + hz * hz) + 1e-12)
             lit = nl > 0
         if any_spec:
-            nh = np.clip((nx * hx + ny * hy + nz * hz) * hinv, 0.0, 1.0)
-            spec = ks * (shin + 8.0) / 16.0 * np.power(nh, shin) * lit
+            nh = np.clip((Nx * hx + Ny * hy + Nz * hz) * hinv, 0.0, 1.0)
+            spec = Ks * (Shin + 8.0) / 16.0 * np.power(nh, Shin) * lit
         if any_sheen:
             lh = np.clip((lx * hx + ly * hy + lz * hz) * hinv, 0.0, 1.0)
-            g = 1.0 - lh
-            g2 = g * g
-            sh = sheen * (snl * rim + g2 * g2 * g * lit)
+            gl = 1.0 - lh
+            gl2 = gl * gl
+            sh = Sheen * (snl * Rim + gl2 * gl2 * gl * lit)
         for c in range(3):
-            term = alb[c] * diff
+            term = Alb[c] * diff
             if spec is not None:
-                term += (spec * (1.0 - metal + metal * alb[c])) if any_metal else spec
+                term += (spec * (1.0 - Metal + Metal * Alb[c])) if any_metal else spec
             if sh is not None:
-                term += sh * (0.5 + 0.5 * alb[c])
+                term += sh * (0.5 + 0.5 * Alb[c])
             scale = col[:, c].reshape(shp)
-            out[c] += (term * scale) if factor is None else term * (factor * scale)
+            contrib = (term * scale) if factor is None else term * (factor * scale)
+            if isinstance(sel, slice):
+                out[c] += contrib
+            else:
+                out[c][sel] += contrib
     return np.stack(out, axis=-1).astype(np.float32, copy=False)
 
 
@@ -711,6 +726,9 @@ def render_surfaces(
     b, h, w = surface.height.shape
     if len(lightings) != b:
         raise InputError(f"need one lighting per batch item: {len(lightings)} for {b}")
+    # Independent streams for the shadow shapes and the noise: item i's output does not depend
+    # on the batch size (the first m items of a batch equal a batch of those m items).
+    shape_rng, noise_rng = rng.spawn(2)
     lights = LightArrays.pack([lt.lights for lt in lightings])
     cam = None if camera_height is None else (w / 2.0, h / 2.0, float(camera_height))
     P, N, V = heightfield_geometry(surface.height, cam)
@@ -726,7 +744,7 @@ def render_surfaces(
         vis = heightfield_shadows(surface.height, lights, steps=shadow_steps)
     for i, lt in enumerate(lightings):
         if lt.shadow_shape is not None:
-            vis[i, 0] *= shadow_shape(rng, (h, w), lt.shadow_shape, penumbra=max(0.6, 0.006 * max(h, w)))
+            vis[i, 0] *= shadow_shape(shape_rng, (h, w), lt.shadow_shape, penumbra=max(0.6, 0.006 * max(h, w)))
     # Ambient occlusion: crevices (below the local mean height) receive less ambient light.
     ao = np.empty((b, h, w), np.float32)
     sig = 3.0 if max(h, w) <= 128 else 6.0
@@ -737,5 +755,5 @@ def render_surfaces(
     rad = shade(P, N, V, surface.albedo, surface.material, lights, ambient, vis, ao)
     if gray:
         rad = rad[..., 0] * 0.299 + rad[..., 1] * 0.587 + rad[..., 2] * 0.114
-        return expose(rad, lightings, rng)
-    return expose(rad[..., ::-1].copy(), lightings, rng)
+        return expose(rad, lightings, noise_rng)
+    return expose(rad[..., ::-1].copy(), lightings, noise_rng)

@@ -2,8 +2,9 @@
 
 The real set is ``../shared/data/psm``: objects photographed under 12 known directional lights
 (``lights.txt``), with a mask per object. The data engine renders relief objects under (a) the
-same 12 light directions and (b) 12 lightings drawn from its lighting families, and the same
-statistics are computed inside the objects' masks:
+same 12 light directions, with their textures and materials and (b) with a plain matte albedo
+like the plaster-like PSM objects, and (c) under 12 lightings drawn from its lighting families;
+the same statistics are computed inside the objects' masks:
 
 - per image: mean, standard deviation, dynamic range (99th - 1st percentile), fraction
   saturated (>= 254/255), fraction black (<= 2/255), and the distribution of local contrast
@@ -26,7 +27,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.data.manifest import write_json
+from alcn_cv.data.manifest import atomic_write, write_json
 from alcn_cv.data.objects import make_object, paste, to_surface
 from alcn_cv.data.render import LIGHT_FAMILIES, Lighting, Light, render_surfaces, sample_lighting
 from alcn_cv.errors import DatasetError
@@ -119,7 +120,9 @@ def load_psm(psm_dir: str | os.PathLike):
     return objects, lights
 
 
-def render_like_psm(lights: np.ndarray | None, n_objects: int = 4, seed: int = 0, size: int = 256):
+def render_like_psm(
+    lights: np.ndarray | None, n_objects: int = 4, seed: int = 0, size: int = 256, *, plain: bool = False
+):
     """Render ``n_objects`` relief objects on black under 12 lightings.
 
     Args:
@@ -127,6 +130,8 @@ def render_like_psm(lights: np.ndarray | None, n_objects: int = 4, seed: int = 0
             camera): white directional lights with no ambient light, gain 1, gamma 2.2. None:
             ``L = 12`` lightings drawn from :data:`LIGHT_FAMILIES` in turn.
         n_objects, seed, size: objects, their seed, image side.
+        plain: give the objects a uniform matte albedo (0.5) instead of their textures and
+            materials, like the plaster-like PSM objects, to isolate the effect of the lighting.
 
     Returns:
         ``{name: (images, mask)}`` as :func:`load_psm`.
@@ -136,7 +141,9 @@ def render_like_psm(lights: np.ndarray | None, n_objects: int = 4, seed: int = 0
     count = 12 if lights is None else len(lights)
     for k in range(n_objects):
         rng = np.random.default_rng([seed, 31, k])
-        obj = make_object(rng, 192, shape=shapes[k % len(shapes)], relief=0.3)
+        obj = make_object(rng, 192, shape=shapes[k % len(shapes)], relief=0.3, material="matte" if plain else None)
+        if plain:
+            obj.albedo[:] = 0.5
         alb = np.zeros((size, size, 3), np.float32)
         hgt = np.zeros((size, size), np.float32)
         mat = np.zeros((size, size, 6), np.float32)
@@ -174,13 +181,13 @@ def _figure(path: Path, sets: dict[str, dict], stats: dict[str, dict]) -> None:
             ax.set_xticks([])
             ax.set_yticks([])
             if c == 0:
-                ax.set_ylabel(name, fontsize=8)
+                ax.set_ylabel(name.replace(" ", "\n", 2), fontsize=7)
     keys = ["mean", "std", "dynamic_range", "saturated", "local_contrast_median", "across_lights_pairwise_ncc"]
     for i, k in enumerate(keys):
         ax = fig.add_subplot(gs[len(names), 2 * i : 2 * i + 2])
         m = [stats[n][k]["mean"] for n in names]
         s = [stats[n][k]["std"] for n in names]
-        ax.bar(range(len(names)), m, yerr=s, color=["tab:gray", "tab:blue", "tab:orange"][: len(names)])
+        ax.bar(range(len(names)), m, yerr=s, color=["tab:gray", "tab:blue", "tab:green", "tab:orange"][: len(names)])
         ax.set_xticks(range(len(names)))
         ax.set_xticklabels([n.replace(" ", "\n") for n in names], fontsize=7)
         ax.set_title(k, fontsize=9)
@@ -200,6 +207,7 @@ def compare_psm(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed:
     sets = {
         "real psm": real,
         "engine psm lights": render_like_psm(lights, seed=seed),
+        "engine psm lights plain albedo": render_like_psm(lights, seed=seed, plain=True),
         "engine light families": render_like_psm(None, seed=seed),
     }
     stats = {name: set_stats(objs) for name, objs in sets.items()}
@@ -211,7 +219,7 @@ def compare_psm(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed:
     for r in rows:
         lines.append(f"| {r} | " + " | ".join(f"{stats[n][r]['mean']:.3f} ± {stats[n][r]['std']:.3f}"
                                               for n in sets) + " |")
-    (out / "psm_comparison.md").write_text("\n".join(lines) + "\n")
+    atomic_write(out / "psm_comparison.md", "\n".join(lines) + "\n")
     _figure(out / "psm_comparison.png", sets, stats)
     logger.info("wrote %s", out / "psm_comparison.png")
     return stats

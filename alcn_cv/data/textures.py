@@ -215,7 +215,8 @@ def photo_crop(
 ) -> np.ndarray:
     """A random crop of a random :func:`photos` photograph, float32 (H, W, 3) linear RGB.
 
-    The crop has random scale (0.25x to 1.5x, more for outputs larger than the photograph), rotation by multiples of 90 degrees and flips.
+    The crop has random scale (0.25x to 1.5x, more for outputs larger than the photograph),
+    rotation by multiples of 90 degrees and flips.
 
     Args:
         rng: random generator.
@@ -234,7 +235,8 @@ def photo_crop(
     ch, cw = min(img.shape[0], int(h / scale) + 1), min(img.shape[1], int(w / scale) + 1)
     y0 = int(rng.integers(0, img.shape[0] - ch + 1))
     x0 = int(rng.integers(0, img.shape[1] - cw + 1))
-    crop = cv2.resize(img[y0 : y0 + ch, x0 : x0 + cw], (w, h), interpolation=cv2.INTER_AREA)
+    interp = cv2.INTER_AREA if scale < 1 else cv2.INTER_CUBIC
+    crop = np.clip(cv2.resize(img[y0 : y0 + ch, x0 : x0 + cw], (w, h), interpolation=interp), 0.0, 1.0)
     crop = np.rot90(crop, int(rng.integers(4))) if h == w else crop
     if rng.random() < 0.5:
         crop = crop[:, ::-1]

@@ -10,6 +10,8 @@ resolution and the Gaussian mixture of Eq. 3 is applied there with the sigmas sc
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,7 +21,7 @@ import numpy as np
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
-from alcn_cv.filters.gaussian_mixture import alcn_filter
+from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, pyramid_mixture
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 
 if TYPE_CHECKING:
@@ -30,6 +32,11 @@ __all__ = ["ALCN", "createALCN"]
 logger = logging.getLogger(__name__)
 
 BACKENDS = ("fast", "torch")
+MIXTURES = ("exact", "pyramid")
+#: ``mixture="pyramid"`` samples the maps exactly this many times per grid cell (at least).
+MAP_STEP_PER_CELL = 4
+#: The weight files shipped in the package, by ``model`` name.
+MODELS = {"paper": DEFAULT_WEIGHTS, "lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_lite.npz")}
 
 
 @register
@@ -38,7 +45,11 @@ class ALCN(Normalization):
 
     Args:
         weights: a Normalizer weight file (``.npz``, see :mod:`alcn_cv.weight_file`); default:
-            the file shipped in the package, ``alcn_cv/weights/alcn_normalizer.npz``.
+            the file shipped in the package for ``model``.
+        model: which shipped Normalizer to use when ``weights`` is not given: ``"paper"``
+            (default; the paper's architecture, ``alcn_cv/weights/alcn_normalizer.npz``) or
+            ``"lite"`` (:class:`~alcn_cv.nets.lite.LiteNormalizer` distilled from it,
+            ``alcn_normalizer_lite.npz``, a few hundred times cheaper; see its model card).
         scale: working scale, the factor from the input resolution to the one the Normalizer
             sees (its 48x48 window and sigmas are in working-scale pixels). Default: the
             weight file's ``working_scale`` (0.5 for the shipped file: a 640x480 frame is
@@ -46,6 +57,22 @@ class ALCN(Normalization):
         backend: ``"fast"`` (Normalizer in torch on the CPU, Gaussian mixture in OpenCV) or
             ``"torch"`` (everything in torch/kornia, on ``device``).
         device: torch device for ``backend="torch"`` (``"cpu"`` or ``"cuda"``).
+        grid_stride: spacing, in working-scale pixels, of the windows the Normalizer is
+            evaluated on (a multiple of the network's stride); the weight maps are interpolated
+            bilinearly in between. Default: the network's own stride (4 for the paper's, 8 for
+            the lite one). The paper's network at 8, 16, 32 is 4, 16, 64 times cheaper in its
+            fully connected layer (not in its convolutions) and has smoother maps.
+        mixture: ``"exact"`` (default): Eq. 3 at the input resolution; ``"pyramid"`` (fast path
+            only): the blurs of sigma >= 2 pixels on a Gaussian pyramid and the maps sampled
+            directly from the grid at each level
+            (:func:`alcn_cv.filters.gaussian_mixture.pyramid_mixture`), about 5 times cheaper.
+        threads: torch's intra-op threads while the Normalizer runs (restored after); default:
+            torch's setting. 1 is the fastest for the lite Normalizer and on a loaded machine,
+            where the threads of small convolutions wait for each other.
+
+    The exact output is the default. The real-time configuration is
+    ``createALCN(model="lite", mixture="pyramid")``; ``alcn bench speed`` measures every
+    variant's time and its difference from the exact output.
     """
 
     name = "alcn"
@@ -56,12 +83,26 @@ class ALCN(Normalization):
         scale: float | None = None,
         backend: str = "fast",
         device: str = "cpu",
+        grid_stride: int | None = None,
+        mixture: str = "exact",
+        model: str = "paper",
+        threads: int | None = None,
     ) -> None:
         if backend not in BACKENDS:
             raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
-        weight_file = load_normalizer_file(weights)
+        if model not in MODELS:
+            raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+        if mixture not in MIXTURES:
+            raise InputError(f"unknown mixture {mixture!r}; choose one of {', '.join(MIXTURES)}")
+        if mixture == "pyramid" and backend == "torch":
+            raise InputError("mixture='pyramid' runs in OpenCV: use it with backend='fast'")
+        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+            raise InputError(f"threads must be a positive integer or None, got {threads!r}")
+        self.mixture = mixture
+        self.threads = threads
+        self.weights_path = Path(weights) if weights is not None else MODELS[model]
+        weight_file = load_normalizer_file(self.weights_path)
         meta = weight_file.meta
-        self.weights_path = Path(weights) if weights is not None else DEFAULT_WEIGHTS
         self.sigmas = tuple(float(s) for s in meta["sigmas"])
         self.scale = float(meta["working_scale"] if scale is None else scale)
         if not 0 < self.scale <= 4:
@@ -75,32 +116,84 @@ class ALCN(Normalization):
 
         import torch  # deferred: importing alcn_cv must not need torch
 
-        from alcn_cv.nets.normalizer import Normalizer
+        from alcn_cv.nets.lite import normalizer_from_file
 
         if backend == "torch" and device.startswith("cuda") and not torch.cuda.is_available():
             raise InputError("device 'cuda' requested but torch sees no CUDA device")
-        self.net = Normalizer.from_file(weight_file).to(device if backend == "torch" else "cpu")
+        self.net = normalizer_from_file(weight_file).to(device if backend == "torch" else "cpu")
         if len(self.sigmas) != self.net.num_kernels:
             raise InputError(f"weight file has {len(self.sigmas)} sigmas for {self.net.num_kernels} outputs")
+        stride = self.net.stride
+        self.grid_stride = stride if grid_stride is None else grid_stride
+        if isinstance(self.grid_stride, bool) or not isinstance(self.grid_stride, int) or self.grid_stride < stride or self.grid_stride % stride:
+            raise InputError(f"grid_stride must be a positive multiple of {stride} for this network, got {grid_stride!r}")
+        _check_teacher(meta, self.weights_path)
 
     @property
     def full_res_sigmas(self) -> tuple[float, ...]:
         """The mixture's sigmas in input pixels: ``sigma_k / scale``."""
         return tuple(s / self.scale for s in self.sigmas)
 
+    def _working_shape(self, shape: tuple[int, int]) -> tuple[int, int]:
+        h, w = shape
+        if self.scale == 1:
+            return h, w
+        return max(1, round(h * self.scale)), max(1, round(w * self.scale))
+
     def _working_image(self, gray: np.ndarray) -> np.ndarray:
         if self.scale == 1:
             return gray
-        h, w = gray.shape
-        size = (max(1, round(w * self.scale)), max(1, round(h * self.scale)))
-        return cv2.resize(gray, size, interpolation=cv2.INTER_AREA if self.scale < 1 else cv2.INTER_LINEAR)
+        h, w = self._working_shape(gray.shape)
+        return cv2.resize(gray, (w, h), interpolation=cv2.INTER_AREA if self.scale < 1 else cv2.INTER_LINEAR)
 
     def _dense(self, gray: np.ndarray) -> torch.Tensor:
         import torch
 
         small = torch.from_numpy(self._working_image(gray)).to(next(self.net.parameters()).device)
-        with torch.inference_mode():
-            return self.net.dense(small[None, None])[0]
+        with torch.inference_mode(), _torch_threads(self.threads):
+            return self.net.dense(small[None, None], self.grid_stride)[0]
+
+    def weight_grid(self, gray: np.ndarray) -> np.ndarray:
+        """The Normalizer's output on its grid: the network part of :meth:`normalize`.
+
+        Args:
+            gray: ``(H, W)`` float32 intensities in [0, 1].
+
+        Returns:
+            ``(N, gh, gw)`` float32; point ``(i, j)`` is the prediction for the 48x48 window
+            centred on working-scale pixel ``(g*i, g*j)``, ``g = grid_stride``.
+        """
+        import torch
+
+        small = torch.from_numpy(self._working_image(gray)).to(next(self.net.parameters()).device)
+        with torch.inference_mode(), _torch_threads(self.threads):
+            return self.net.dense_grid(small[None, None], self.grid_stride)[0].cpu().numpy()
+
+    def _grid_maps_at(
+        self, grid: np.ndarray, ratios: tuple[float, float], level: int, ks: list[int], shape: tuple[int, int]
+    ) -> list[np.ndarray]:
+        # Pixel x of pyramid level L is input pixel 2**L * x (cv2.pyrDown), i.e. working pixel
+        # (2**L * x + 0.5) * r - 0.5 with r = working / input size (cv2.resize), i.e. grid
+        # coordinate that / grid_stride. The maps are interpolated bilinearly from the grid onto
+        # every f-th pixel (cv2.warpAffine, small), then onto every pixel by cv2.resize
+        # (x = f * u + (f - 1) / 2, its pixel-centre convention), several times cheaper than
+        # warping every pixel. The two differ only between samples that straddle a grid point,
+        # by a fraction of the maps' change there; f, a power of 2, is at most a quarter of the
+        # grid's spacing at this level (covered by the error bounds in tests/test_fast_alcn.py).
+        g = self.grid_stride
+        (ry, rx), step = ratios, 2.0**level
+        ax, bx = step * rx / g, (0.5 * rx - 0.5) / g
+        ay, by = step * ry / g, (0.5 * ry - 0.5) / g
+        f = 2 ** max(0, int(np.floor(np.log2(1.0 / (MAP_STEP_PER_CELL * max(ax, ay))))))
+        to_grid = np.array([[ax * f, 0.0, ax * (f - 1) / 2 + bx], [0.0, ay * f, ay * (f - 1) / 2 + by]])
+        h, w = shape
+        coarse = (w, h) if f == 1 else (-(-w // f) + 1, -(-h // f) + 1)
+        flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+        maps = []
+        for k in ks:
+            small = cv2.warpAffine(grid[k], to_grid, coarse, flags=flags, borderMode=cv2.BORDER_REPLICATE)
+            maps.append(small if f == 1 else cv2.resize(small, None, fx=f, fy=f, interpolation=cv2.INTER_LINEAR)[:h, :w])
+        return maps
 
     def weight_maps(self, gray: np.ndarray) -> np.ndarray:
         """The per-pixel mixture weights F_k at the input resolution.
@@ -118,6 +211,14 @@ class ALCN(Normalization):
         return np.stack([cv2.resize(m, (w, h), interpolation=cv2.INTER_LINEAR) for m in maps])
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
+        if self.mixture == "pyramid":
+            grid = self.weight_grid(gray)
+            h, w = gray.shape
+            small_h, small_w = self._working_shape(gray.shape)
+            ratios = (small_h / h, small_w / w)
+            return pyramid_mixture(
+                gray, self.full_res_sigmas, lambda *args: self._grid_maps_at(grid, ratios, *args), PYRAMID_MIN_SIGMA
+            )
         if self.backend == "fast":
             return alcn_filter(gray, self.weight_maps(gray), self.full_res_sigmas)
         import torch
@@ -126,7 +227,7 @@ class ALCN(Normalization):
         from alcn_cv.filters.kornia_mixture import gaussian_mixture2d
 
         maps = self._dense(gray)[None]
-        with torch.inference_mode():
+        with torch.inference_mode(), _torch_threads(self.threads):
             image = torch.from_numpy(gray).to(maps.device)[None, None]
             if maps.shape[-2:] != image.shape[-2:]:
                 maps = F.interpolate(maps, size=image.shape[-2:], mode="bilinear", align_corners=False)
@@ -135,7 +236,37 @@ class ALCN(Normalization):
     def __repr__(self) -> str:
         return (
             f"ALCN(weights={self.weights_path.name!r}, scale={self.scale}, backend={self.backend!r}, "
-            f"trained={self.trained})"
+            f"grid_stride={self.grid_stride}, mixture={self.mixture!r}, threads={self.threads}, trained={self.trained})"
+        )
+
+
+@contextmanager
+def _torch_threads(threads: int | None) -> Iterator[None]:
+    """Run the block with ``threads`` torch intra-op threads (no change for None)."""
+    if threads is None:
+        yield
+        return
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def _check_teacher(meta: dict, path: Path) -> None:
+    """Warn when a distilled (lite) weight file's teacher is not the paper-model file shipped now."""
+    teacher = meta.get("teacher")
+    if not isinstance(teacher, dict) or path != MODELS["lite"]:
+        return
+    import hashlib
+
+    if hashlib.sha256(DEFAULT_WEIGHTS.read_bytes()).hexdigest() != teacher.get("sha256"):
+        logger.warning(
+            "%s was distilled from another version of %s than the one installed: re-distil it "
+            "(see its model card)", path.name, DEFAULT_WEIGHTS.name,
         )
 
 

@@ -29,7 +29,8 @@ Two implementations that agree to 1e-5:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
@@ -39,9 +40,16 @@ from alcn_cv.errors import InputError
 DEFAULT_NUM_KERNELS = 10
 DEFAULT_SIGMA_STEP = 0.5
 TRUNCATE = 3.0
+#: Smallest residual sigma (in pixels of its level) :func:`pyramid_plan` blurs with; a sampled
+#: Gaussian narrower than about one pixel is a poor Gaussian.
+PYRAMID_MIN_SIGMA = 1.0
 
 __all__ = [
+    "PYRAMID_MIN_SIGMA",
     "alcn_filter",
+    "alcn_filter_pyramid",
+    "pyramid_mixture",
+    "pyramid_plan",
     "check_sigmas",
     "gaussian_blur_stack",
     "gaussian_kernel1d",
@@ -105,6 +113,23 @@ def gaussian_blur_stack(image: np.ndarray, sigmas: Sequence[float]) -> np.ndarra
     return out
 
 
+def _check_mixture(
+    image: np.ndarray, weights: np.ndarray, sigmas: Sequence[float] | None
+) -> tuple[np.ndarray, np.ndarray, tuple[float, ...]]:
+    image = _check_plane(image)
+    weights = np.asarray(weights)
+    if weights.ndim not in (1, 3) or weights.shape[0] == 0:
+        raise InputError(f"weights must have shape (N,) or (N, H, W), got {weights.shape}")
+    if weights.ndim == 3 and weights.shape[1:] != image.shape:
+        raise InputError(f"weight maps {weights.shape[1:]} do not match the image {image.shape}")
+    if not np.isfinite(weights).all():
+        raise InputError("weights contain NaN or inf")
+    sigmas = gaussian_sigmas(weights.shape[0]) if sigmas is None else check_sigmas(sigmas)
+    if len(sigmas) != weights.shape[0]:
+        raise InputError(f"{weights.shape[0]} weights for {len(sigmas)} sigmas")
+    return image, weights, sigmas
+
+
 def alcn_filter(image: np.ndarray, weights: np.ndarray, sigmas: Sequence[float] | None = None) -> np.ndarray:
     """ALCN's Gaussian mixture on NumPy arrays (OpenCV filtering, reflect-101 borders).
 
@@ -123,18 +148,7 @@ def alcn_filter(image: np.ndarray, weights: np.ndarray, sigmas: Sequence[float] 
         >>> alcn_filter(img, dog).shape
         (64, 64)
     """
-    image = _check_plane(image)
-    weights = np.asarray(weights)
-    if weights.ndim not in (1, 3) or weights.shape[0] == 0:
-        raise InputError(f"weights must have shape (N,) or (N, H, W), got {weights.shape}")
-    if weights.ndim == 3 and weights.shape[1:] != image.shape:
-        raise InputError(f"weight maps {weights.shape[1:]} do not match the image {image.shape}")
-    if not np.isfinite(weights).all():
-        raise InputError("weights contain NaN or inf")
-    sigmas = gaussian_sigmas(weights.shape[0]) if sigmas is None else check_sigmas(sigmas)
-    if len(sigmas) != weights.shape[0]:
-        raise InputError(f"{weights.shape[0]} weights for {len(sigmas)} sigmas")
-
+    image, weights, sigmas = _check_mixture(image, weights, sigmas)
     out = np.zeros(image.shape, np.float32)
     blurred = np.empty(image.shape, np.float32)
     for i, s in enumerate(sigmas):
@@ -149,3 +163,173 @@ def alcn_filter(image: np.ndarray, weights: np.ndarray, sigmas: Sequence[float] 
             cv2.sepFilter2D(product, cv2.CV_32F, k, k, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
             cv2.add(out, blurred, dst=out)
     return out
+
+
+# --- The pyramid approximation of Eq. 3 (fast path) ------------------------------------------
+#
+# A blur of sigma >= 2 does not need every pixel: G_sigma * P equals, up to the non-Gaussian
+# shape of the pyramid kernels, pyrUp^L(G_sigma' * pyrDown^L(P)). cv2.pyrDown and cv2.pyrUp
+# both filter with the 5-tap binomial (1, 4, 6, 4, 1) / 16, of variance 1 pixel^2 at the finer
+# level, so L levels down and up add ``2 * (4**L - 1) / 3`` fine pixels^2 and the residual blur
+# at level L is ``sigma'^2 = (sigma^2 - 2 * (4**L - 1) / 3) / 4**L``. Kernels on the same level
+# are summed there and the levels are added coarse to fine (one pyrUp per level, Horner
+# style), so the cost is that of the finest level's few small kernels plus a fraction for the
+# rest. The product F_k o I is formed at each kernel's level from the level's image and the
+# maps sampled at that level, which assumes the maps vary little within a pyramid footprint
+# (Eq. 3's maps are interpolated from a grid of at least 4 working pixels).
+# Level pixel x_L sits on pixel 2**L * x_L of the input (cv2.pyrDown's convention).
+
+
+def _pyramid_variance(level: int) -> float:
+    return 2.0 * (4.0**level - 1.0) / 3.0
+
+
+def pyramid_plan(
+    sigmas: Sequence[float], min_sigma: float = PYRAMID_MIN_SIGMA, max_level: int | None = None
+) -> tuple[tuple[int, float], ...]:
+    """Where :func:`pyramid_mixture` computes each blur.
+
+    Args:
+        sigmas: standard deviations in input pixels.
+        min_sigma: smallest residual sigma allowed at a level (its pixels).
+        max_level: coarsest level allowed (0 = input resolution); default: no limit.
+
+    Returns:
+        For each sigma, ``(level, residual sigma in that level's pixels)``: the coarsest level
+        whose residual sigma is still at least ``min_sigma`` (level 0 with the sigma itself
+        when none is).
+    """
+    sigmas = check_sigmas(sigmas)
+    if not min_sigma > 0:
+        raise InputError(f"min_sigma must be positive, got {min_sigma}")
+    plan = []
+    for sigma in sigmas:
+        level = 0
+        while max_level is None or level < max_level:
+            nxt = level + 1
+            residual2 = (sigma * sigma - _pyramid_variance(nxt)) / 4.0**nxt
+            if residual2 < min_sigma * min_sigma:
+                break
+            level = nxt
+        plan.append((level, math.sqrt((sigma * sigma - _pyramid_variance(level)) / 4.0**level)))
+    return tuple(plan)
+
+
+def _max_pyramid_level(shape: tuple[int, int], min_size: int = 8) -> int:
+    """The coarsest pyramid level whose smaller side keeps at least ``min_size`` pixels."""
+    return max(0, int(math.floor(math.log2(max(1, min(shape)) / min_size))))
+
+
+#: ``weights_at(level, kernel indices, (h, w))`` -> the kernels' maps (or scalars) at that level.
+WeightsAtLevel = Callable[[int, Sequence[int], tuple[int, int]], Sequence]
+
+
+def pyramid_mixture(
+    image: np.ndarray, sigmas: Sequence[float], weights_at: WeightsAtLevel, min_sigma: float = PYRAMID_MIN_SIGMA
+) -> np.ndarray:
+    """Eq. 3 with the wide blurs on a Gaussian pyramid (approximate; see :func:`alcn_filter_pyramid`).
+
+    Args:
+        image: ``(H, W)`` float32.
+        sigmas: the mixture's standard deviations, in input pixels.
+        weights_at: ``weights_at(level, ks, (h, w))`` returns the weights of kernels ``ks`` at
+            pyramid level ``level`` of size ``(h, w)``: a ``(len(ks), h, w)`` float32 array of
+            maps sampled on that level's pixels (pixel ``x`` of level ``L`` is input pixel
+            ``2**L * x``; the levels extend beyond the input's bottom and right edges, where
+            the maps are expected to continue smoothly), or ``len(ks)`` scalars.
+        min_sigma: see :func:`pyramid_plan`.
+
+    Returns:
+        ``(H, W)`` float32.
+    """
+    image = _check_plane(image)
+    plan = pyramid_plan(sigmas, min_sigma, _max_pyramid_level(image.shape))
+    top = max(level for level, _ in plan)
+    height, width = image.shape
+    image = _pad_to_pyramid(image, top, _pyramid_margin(sigmas, top))
+    levels = [image]
+    for _ in range(top):
+        levels.append(cv2.pyrDown(levels[-1], borderType=cv2.BORDER_REFLECT_101))
+    acc: np.ndarray | None = None
+    for level in range(top, -1, -1):
+        img = levels[level]
+        h, w = img.shape
+        if acc is not None:
+            acc = cv2.pyrUp(acc, dstsize=(w, h), borderType=cv2.BORDER_REFLECT_101)
+        ks = [k for k, (lv, _) in enumerate(plan) if lv == level]
+        if not ks:
+            continue
+        if acc is None:
+            acc = np.zeros((h, w), np.float32)
+        product = np.empty((h, w), np.float32)
+        blurred = np.empty((h, w), np.float32)
+        for k, weight in zip(ks, weights_at(level, ks, (h, w))):
+            kernel = gaussian_kernel1d(plan[k][1])
+            if np.ndim(weight) == 0:
+                if weight == 0:
+                    continue
+                cv2.sepFilter2D(img, cv2.CV_32F, kernel, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
+                cv2.scaleAdd(blurred, float(weight), acc, dst=acc)
+            else:
+                cv2.multiply(img, weight, dst=product)
+                cv2.sepFilter2D(product, cv2.CV_32F, kernel, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
+                cv2.add(acc, blurred, dst=acc)
+    assert acc is not None  # every plan has at least one kernel
+    return acc[:height, :width]
+
+
+def _pyramid_margin(sigmas: Sequence[float], top: int) -> int:
+    """Rows and columns added beyond the bottom and right edges (see :func:`_pad_to_pyramid`)."""
+    return 0 if top == 0 else int(math.ceil(TRUNCATE * max(sigmas))) + 2**top
+
+
+def _pad_to_pyramid(plane: np.ndarray, top: int, margin: int) -> np.ndarray:
+    """Extend the bottom and right by reflect-101, by at least ``margin`` and up to a size
+    ``2**top * m + 1``.
+
+    The top and left edges need nothing: pixel 0 lies on every level, so the levels'
+    reflect-101 borders mirror about the input's. At the far edges they would mirror about
+    another pixel; the margin moves that border out of the blurs' reach, where the extension
+    holds the input's own reflection, as the exact filter sees it.
+    """
+    if top == 0:
+        return plane
+    h, w = plane.shape
+    step = 2**top
+    bottom, right = margin + (-(h - 1 + margin) % step), margin + (-(w - 1 + margin) % step)
+    return cv2.copyMakeBorder(plane, 0, bottom, 0, right, cv2.BORDER_REFLECT_101)
+
+
+def alcn_filter_pyramid(
+    image: np.ndarray, weights: np.ndarray, sigmas: Sequence[float] | None = None, min_sigma: float = PYRAMID_MIN_SIGMA
+) -> np.ndarray:
+    """A fast approximation of :func:`alcn_filter`: the blurs of sigma >= about 2 pixels are
+    computed on a Gaussian pyramid (``cv2.pyrDown`` / ``cv2.pyrUp``).
+
+    Same arguments and result as :func:`alcn_filter`; the maps of Eq. 3 are reduced to each
+    level with ``cv2.pyrDown``. The approximation is exact in the limit of smooth maps and
+    Gaussian pyramid kernels; its error against :func:`alcn_filter` is measured by
+    ``alcn bench speed`` and bounded in ``tests/test_fast_alcn.py`` (largest near the image's
+    bottom and right borders, where the pyramid's reflection is off by a pixel).
+
+    Args:
+        min_sigma: smallest residual sigma at a coarse level (see :func:`pyramid_plan`);
+            larger is more accurate and slower.
+    """
+    image, weights, sigmas = _check_mixture(image, weights, sigmas)
+    if weights.ndim == 1:
+        return pyramid_mixture(image, sigmas, lambda level, ks, shape: [float(weights[k]) for k in ks], min_sigma)
+
+    top = max(level for level, _ in pyramid_plan(sigmas, min_sigma, _max_pyramid_level(image.shape)))
+    margin = _pyramid_margin(sigmas, top)
+
+    def maps_at(level: int, ks: Sequence[int], shape: tuple[int, int]) -> list[np.ndarray]:
+        out = []
+        for k in ks:
+            m = _pad_to_pyramid(weights[k].astype(np.float32, copy=False), top, margin)
+            for _ in range(level):
+                m = cv2.pyrDown(m, borderType=cv2.BORDER_REFLECT_101)
+            out.append(m)
+        return out
+
+    return pyramid_mixture(image, sigmas, maps_at, min_sigma)

@@ -44,8 +44,11 @@ def validate_json(obj: Any, name: str, file: str | os.PathLike) -> None:
         DatasetError: ``"<file>: field <path>: <reason>"`` for the first violation (the most
             deeply nested one, which is the most specific).
     """
-    import jsonschema
-
+    try:
+        import jsonschema
+    except ModuleNotFoundError as exc:  # a runtime dependency of alcn-cv; say how to get it
+        raise ModuleNotFoundError("validating COCO and BOP files needs the 'jsonschema' package "
+                                  "(pip install 'jsonschema>=4.20')") from exc
     validator = jsonschema.Draft202012Validator(schema(name))
     errors = list(validator.iter_errors(obj))
     if errors:

@@ -3,7 +3,8 @@
 A scene folder holds ``scene_camera.json`` (per image id: ``cam_K`` row-major 3x3, ``depth_scale``,
 optionally the camera pose ``cam_R_w2c``/``cam_t_w2c``), ``scene_gt.json`` (per image id: a list
 of ``{"obj_id", "cam_R_m2c", "cam_t_m2c"}`` model-to-camera poses) and ``rgb/<im_id:06d>.png``.
-Models are ``models/obj_<obj_id:06d>.ply``. **Units are millimetres** (translations and model
+Models are ``models/obj_<obj_id:06d>.ply`` and the dataset root's ``camera.json`` gives the image
+size. **Units are millimetres** (translations and model
 vertices); the intrinsics follow OpenCV's convention (pixel centres at integer coordinates,
 top-left pixel centre at (0, 0)), so ``x = K (R X + t)`` gives OpenCV pixel coordinates.
 
@@ -17,15 +18,15 @@ from __future__ import annotations
 
 import logging
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from alcn_cv.data.manifest import read_json, write_json
+from alcn_cv.data.manifest import atomic_write, read_json, write_json
 from alcn_cv.errors import DatasetError
 from alcn_cv.formats import validate_json
 
@@ -38,6 +39,7 @@ __all__ = [
     "PlyModel",
     "load_scene",
     "write_scene",
+    "write_camera",
     "read_ply",
     "write_ply",
     "models_info",
@@ -114,13 +116,15 @@ def load_scene(scene_dir: str | os.PathLike, *, check_images: bool = False) -> B
 
     Args:
         scene_dir: folder with ``scene_camera.json``, ``rgb/`` and optionally ``scene_gt.json``.
-        check_images: also read every image and check that it exists and that its size is
-            consistent with the principal point (inside the image).
+        check_images: also read every image and check that it exists, that its size is the
+            dataset's (``camera.json`` two folders up, when present) and that the principal point
+            lies inside it.
 
     Raises:
         DatasetError: missing, truncated or malformed files; a field violating the schema; a
             non-rotation; translations that look like metres rather than millimetres (wrong
-            unit); ground truth for images without a camera; missing images.
+            unit); ground truth for images without a camera; with ``check_images``, missing
+            images or images of the wrong size.
     """
     root = Path(scene_dir)
     cam_file = root / "scene_camera.json"
@@ -160,17 +164,33 @@ def load_scene(scene_dir: str | os.PathLike, *, check_images: bool = False) -> B
         frames.append(BopFrame(int(key), rgb, K, float(c["depth_scale"]) if "depth_scale" in c else None,
                                objects, R_w2c, t_w2c))
     if check_images:
-        import cv2
-
+        # BOP keeps the image size in the dataset's camera.json (two levels up), when present.
+        size = None
+        cam_json = root.parent.parent / "camera.json"
+        if cam_json.exists():
+            cj = read_json(cam_json)
+            if not isinstance(cj, dict) or not all(isinstance(cj.get(k), int) for k in ("width", "height")):
+                raise DatasetError(f"{cam_json}: fields width and height must be integers")
+            size = (cj["width"], cj["height"])
         for f in frames:
             img = cv2.imread(str(f.rgb_path), cv2.IMREAD_UNCHANGED)
             if img is None:
                 raise DatasetError(f"{cam_file}: field {f.im_id}: image {f.rgb_path} missing or unreadable")
             h, w = img.shape[:2]
+            if size is not None and (w, h) != size:
+                raise DatasetError(f"{cam_json}: fields width/height: {size[0]}x{size[1]} but {f.rgb_path} is {w}x{h}")
             if not (0 <= f.K[0, 2] < w and 0 <= f.K[1, 2] < h):
                 raise DatasetError(f"{cam_file}: field {f.im_id}.cam_K: principal point outside the "
                                    f"{w}x{h} image {f.rgb_path}")
     return BopScene(root, frames)
+
+
+def write_camera(root: str | os.PathLike, K: np.ndarray, width: int, height: int, depth_scale: float = 1.0) -> Path:
+    """Write a BOP dataset's ``camera.json`` (fx, fy, cx, cy, width, height, depth_scale) atomically."""
+    path = Path(root) / "camera.json"
+    write_json(path, {"cx": float(K[0, 2]), "cy": float(K[1, 2]), "depth_scale": float(depth_scale),
+                      "fx": float(K[0, 0]), "fy": float(K[1, 1]), "height": int(height), "width": int(width)})
+    return path
 
 
 def _flat(a: np.ndarray) -> list[float]:
@@ -371,15 +391,7 @@ def write_ply(path: str | os.PathLike, model: PlyModel, *, binary: bool = True) 
             rows.append(" ".join(f"{float(c[r]):.6g}" if t == "float" else str(int(c[r])) for _, t, c in props))
         rows += [f"3 {a} {b} {c}" for a, b, c in model.faces]
         payload = ("\n".join(rows) + "\n").encode("ascii")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(head + payload)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return atomic_write(path, head + payload)
 
 
 def models_info(models: dict[int, PlyModel]) -> dict[str, dict[str, float]]:

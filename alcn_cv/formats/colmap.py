@@ -251,6 +251,7 @@ class ColmapModel:
     cameras: dict[int, ColmapCamera]
     images: dict[int, ColmapImage]
     points3d: dict[int, ColmapPoint3D]
+    units: str | None = None  #: from a ``# Units: ...`` header line (written by this module), else None
 
     def image_by_name(self, name: str) -> ColmapImage:
         """Return the image called ``name``; KeyError when absent."""
@@ -280,6 +281,7 @@ def write_text_model(
     cameras: Iterable[ColmapCamera],
     images: Iterable[ColmapImage],
     points3d: Iterable[ColmapPoint3D] | None = None,
+    units: str | None = None,
 ) -> Path:
     """Write a COLMAP text model (``cameras.txt``, ``images.txt``, ``points3D.txt``).
 
@@ -291,6 +293,8 @@ def write_text_model(
     Args:
         path: output folder (created if needed).
         cameras, images, points3d: the model. Every image's ``camera_id`` must exist.
+        units: unit of translations and points (e.g. ``"mm"``), recorded as a ``# Units: mm``
+            comment in every file (COLMAP ignores comments; :func:`read_model` returns it).
 
     Returns:
         The output folder.
@@ -310,10 +314,14 @@ def write_text_model(
         if image.camera_id not in cam_ids:
             raise InputError(f"image {image.name!r} refers to camera_id {image.camera_id}, which is not given")
 
+    unit_line = [f"# Units: {units}"] if units else []
+    if units and (not units.strip() or any(c.isspace() for c in units)):
+        raise InputError(f"units must be one word such as 'mm', got {units!r}")
     lines = [
         "# Camera list with one line of data per camera:",
         "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]",
         f"# Number of cameras: {len(cameras)}",
+        *unit_line,
     ]
     for c in cameras:
         lines.append(" ".join([str(c.camera_id), c.model, str(c.width), str(c.height), *map(_fmt, c.params)]))
@@ -326,6 +334,7 @@ def write_text_model(
         "#   POINTS2D[] as (X, Y, POINT3D_ID)",
         f"# Number of images: {len(images)}, mean observations per image: "
         f"{n_obs / max(len(images), 1):g}",
+        *unit_line,
     ]
     for i in images:
         lines.append(
@@ -340,6 +349,7 @@ def write_text_model(
         "# 3D point list with one line of data per point:",
         "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)",
         f"# Number of points: {len(points3d)}",
+        *unit_line,
     ]
     for p in points3d:
         track = " ".join(f"{int(a)} {int(b)}" for a, b in p.track)
@@ -466,7 +476,13 @@ def read_text_model(path: str | os.PathLike) -> ColmapModel:
                 f"{root / 'images.txt'}: image {image.name!r} field CAMERA_ID={image.camera_id} "
                 f"is not in cameras.txt"
             )
-    return ColmapModel(cameras, images, points)
+    units = None
+    for line in (root / "images.txt").read_text(encoding="utf-8").splitlines():
+        if not line.startswith("#"):
+            break
+        if line.startswith("# Units:"):
+            units = line.split(":", 1)[1].strip() or None
+    return ColmapModel(cameras, images, points, units)
 
 
 def model_from_pycolmap(rec) -> ColmapModel:

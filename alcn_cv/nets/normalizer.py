@@ -44,6 +44,8 @@ def reflect101_pad(x: torch.Tensor, top: int, bottom: int, left: int, right: int
         return torch.where(i >= n, period - i, i)
 
     h, w = x.shape[-2:]
+    if max(top, bottom) < h and max(left, right) < w and x.ndim in (3, 4):
+        return F.pad(x, (left, right, top, bottom), mode="reflect")  # the same, one pass
     x = x.index_select(-2, index(h, top, bottom))
     return x.index_select(-1, index(w, left, right))
 
@@ -118,8 +120,12 @@ class Normalizer(nn.Module):
     def num_kernels(self) -> int:
         return self.head.out_channels
 
-    def _weights(self, x: torch.Tensor) -> torch.Tensor:
-        return self.output_scale * self.head(self.activation(self.fc(self.features(x))))
+    def _weights(self, x: torch.Tensor, fc_stride: int = 1) -> torch.Tensor:
+        # fc_stride > 1 evaluates the fully connected layer (a 9x9 convolution over the pooled
+        # features) only on every fc_stride-th window: the output grid is coarser and the
+        # layer's cost, which dominates, drops by fc_stride**2.
+        hidden = F.conv2d(self.features(x), self.fc.weight, self.fc.bias, stride=fc_stride)
+        return self.output_scale * self.head(self.activation(hidden))
 
     def forward(self, windows: torch.Tensor) -> torch.Tensor:
         """Weights for each ``(B, 1, 48, 48)`` window -> ``(B, N)``."""
@@ -127,35 +133,45 @@ class Normalizer(nn.Module):
             raise InputError(f"windows must have shape (B, 1, {WINDOW}, {WINDOW}), got {tuple(windows.shape)}")
         return self._weights(windows).flatten(1)
 
-    def dense(self, image: torch.Tensor) -> torch.Tensor:
+    def dense(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
         """Per-pixel weight maps F_k over a whole image (Eq. 3).
 
         The map at pixel ``(y, x)`` is the output for the 48x48 window covering rows
         ``y-24 .. y+23`` and columns ``x-24 .. x+23`` (reflect-101 outside the image). The
-        network is evaluated on a grid of stride 4 and bilinearly interpolated in between;
-        on the grid (``y`` and ``x`` multiples of 4) it equals :meth:`forward` exactly.
+        network is evaluated on a grid of stride ``grid_stride`` (default: the network's own
+        output stride, :attr:`stride`, 4) and bilinearly interpolated in between; on the grid
+        (``y`` and ``x`` multiples of ``grid_stride``) it equals :meth:`forward` exactly.
 
         Args:
             image: ``(B, 1, H, W)`` float tensor, any H, W >= 1.
+            grid_stride: spacing of the evaluated windows in pixels, a multiple of
+                :attr:`stride`. A coarser grid costs ``(stride / grid_stride) ** 2`` of the fully
+                connected layer (the convolutions before it are shared by overlapping windows
+                and cost the same) and interpolates the maps over longer distances.
 
         Returns:
             ``(B, N, H, W)`` weight maps.
         """
         if image.ndim != 4 or image.shape[1] != 1:
             raise InputError(f"image must have shape (B, 1, H, W), got {tuple(image.shape)}")
-        grid = self.dense_grid(image)
+        grid_stride = self.stride if grid_stride is None else grid_stride
+        grid = self.dense_grid(image, grid_stride)
         h, w = image.shape[-2:]
-        size = (STRIDE * (grid.shape[-2] - 1) + 1, STRIDE * (grid.shape[-1] - 1) + 1)
+        size = (grid_stride * (grid.shape[-2] - 1) + 1, grid_stride * (grid.shape[-1] - 1) + 1)
         return F.interpolate(grid, size=size, mode="bilinear", align_corners=True)[..., :h, :w]
 
-    def dense_grid(self, image: torch.Tensor) -> torch.Tensor:
-        """The network's output on the stride-4 grid: ``(B, N, ceil((H-1)/4)+1, ceil((W-1)/4)+1)``;
-        grid point ``(i, j)`` is the window centred on pixel ``(4i, 4j)``."""
+    def dense_grid(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
+        """The network's output on a grid of stride ``grid_stride`` (a multiple of :attr:`stride`,
+        default :attr:`stride`): ``(B, N, ceil((H-1)/g)+1, ceil((W-1)/g)+1)`` with
+        ``g = grid_stride``; grid point ``(i, j)`` is the window centred on pixel ``(g*i, g*j)``."""
+        grid_stride = self.stride if grid_stride is None else grid_stride
+        if isinstance(grid_stride, bool) or not isinstance(grid_stride, int) or grid_stride < self.stride or grid_stride % self.stride:
+            raise InputError(f"grid_stride must be a positive multiple of {self.stride}, got {grid_stride!r}")
         h, w = image.shape[-2:]
-        gh, gw = math.ceil((h - 1) / STRIDE) + 1, math.ceil((w - 1) / STRIDE) + 1
+        gh, gw = math.ceil((h - 1) / grid_stride) + 1, math.ceil((w - 1) / grid_stride) + 1
         half = WINDOW // 2
-        padded = reflect101_pad(image, half, STRIDE * (gh - 1) + half - h, half, STRIDE * (gw - 1) + half - w)
-        return self._weights(padded)
+        padded = reflect101_pad(image, half, grid_stride * (gh - 1) + half - h, half, grid_stride * (gw - 1) + half - w)
+        return self._weights(padded, grid_stride // self.stride)
 
     @classmethod
     def from_file(cls, weight_file: NormalizerFile) -> Normalizer:

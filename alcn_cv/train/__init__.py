@@ -2,17 +2,30 @@
 detector (Eq. 2, :mod:`~alcn_cv.train.trainer`), the second stage that trains a new detector on
 a frozen Normalizer (:mod:`~alcn_cv.train.stage2`), ONNX export and the torch-free OpenCV runtime.
 
-Importing this package does not import torch; the names below load their module on first use.
+Example::
+
+    import alcn_cv.train
+    result = alcn_cv.train.train("default", "runs/alcn")      # or a TOML path, a dict, a TrainConfig
+    result.val_by_family, result.fewshot, result.weights
+
+Importing this package does not import torch; the names below load their module on first use
+(:class:`OpenCVNormalizer` never needs torch).
 """
 
 from __future__ import annotations
 
 import importlib
 
-__all__ = ["train_detector"]
+__all__ = ["OpenCVNormalizer", "TrainConfig", "TrainResult", "export_onnx", "load_config", "train", "train_detector"]
 
 _LAZY = {
+    "train": "alcn_cv.train.trainer",
+    "TrainResult": "alcn_cv.train.trainer",
+    "TrainConfig": "alcn_cv.train.config",
+    "load_config": "alcn_cv.train.config",
     "train_detector": "alcn_cv.train.stage2",
+    "export_onnx": "alcn_cv.train.export",
+    "OpenCVNormalizer": "alcn_cv.train.opencv_runtime",
 }
 
 

@@ -23,6 +23,7 @@ import json
 import logging
 import os
 import tempfile
+import warnings
 from pathlib import Path
 
 import torch
@@ -75,7 +76,10 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
     net = Normalizer.from_file(weight_file).eval()
     example = torch.rand(1, 1, WINDOW + 4 * 3, WINDOW + 4 * 5)
     buffer = io.BytesIO()
-    with torch.no_grad():
+    with torch.no_grad(), warnings.catch_warnings():
+        # dynamo=False: the TorchScript exporter needs no onnxscript and handles this plain
+        # convolutional graph; torch deprecates it in favour of the dynamo exporter.
+        warnings.simplefilter("ignore", DeprecationWarning)
         torch.onnx.export(
             _DenseGrid(net), (example,), buffer, input_names=["image"], output_names=["weights"],
             dynamic_axes={"image": {0: "batch", 2: "height", 3: "width"},
@@ -88,6 +92,7 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, 0o644)
         os.replace(tmp, out)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

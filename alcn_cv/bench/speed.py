@@ -1,0 +1,573 @@
+"""Speed of ALCN against the classical normalizations (issue 8): ``alcn bench speed``.
+
+One run times every method on the same frames, side by side: ``none``, ``clahe``, ``dog`` and
+ALCN -- its exact fast path (the default of :func:`alcn_cv.createALCN`), its approximate
+variants (coarser Normalizer grid, pyramid mixture), and its other backends (OpenCV DNN when
+``backend="opencv"`` exists, torch on the CPU, torch on CUDA where present) -- on 640x480,
+1280x800 and 1920x1080 frames, grayscale and BGR colour, through the OpenCV-style
+``apply(uint8 frame)``.
+
+For every case: median and interquartile range of the wall time over repeated runs after a
+warm-up, frames per second, and the **ratio to** ``dog`` **measured in the same run** (the
+number least sensitive to the load of a shared machine, hence the first column); for ALCN the
+split between the Normalizer network (:meth:`~alcn_cv.ALCN.weight_grid`) and the rest of
+``normalize`` (map interpolation and the Gaussian mixture); the peak memory of one call (the
+peak of NumPy's allocations traced by :mod:`tracemalloc`, and the process' peak resident set
+from ``/proc/self/status`` after resetting it). Every approximate ALCN variant is compared
+with the exact Eq. 3 output of the same weights on the same frames (largest and mean absolute
+difference of the raw response, also relative to the width of the output range). A video
+test runs ALCN over a generated 1920x1080 video and records the resident memory after every
+frame (it must stay flat).
+
+Outputs in ``out_dir``: ``speed.json`` (every number, the settings, the machine and its load
+before and after), ``speed.md`` (the tables) and ``speed.png`` (time against pixel count for
+every method, log-log).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+import tracemalloc
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from tqdm.auto import tqdm
+
+from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json, write_text
+from alcn_cv.enhance.alcn import ALCN, BACKENDS
+from alcn_cv.enhance.base import Normalization
+from alcn_cv.enhance.registry import create
+from alcn_cv.errors import InputError
+
+__all__ = ["SIZES", "Method", "default_methods", "main", "synthetic_frame", "time_calls"]
+
+logger = logging.getLogger(__name__)
+
+#: Frame sizes (width, height) of the benchmark.
+SIZES: tuple[tuple[int, int], ...] = ((640, 480), (1280, 800), (1920, 1080))
+QUICK_SIZES: tuple[tuple[int, int], ...] = ((64, 48), (96, 72))
+COLOURS = ("gray", "bgr")
+#: The approximate ALCN variants timed beside the exact one: label -> createALCN parameters.
+#: ``model: "lite"`` variants use the distilled Normalizer (their own weight file).
+ALCN_VARIANTS: dict[str, dict[str, Any]] = {
+    "alcn pyramid": {"mixture": "pyramid"},
+    "alcn grid16": {"grid_stride": 16},
+    "alcn grid16 pyramid": {"grid_stride": 16, "mixture": "pyramid"},
+    "alcn grid32 pyramid": {"grid_stride": 32, "mixture": "pyramid"},
+    "alcn lite": {"model": "lite"},
+    "alcn lite pyramid": {"model": "lite", "mixture": "pyramid"},
+}
+REFERENCE = "dog"
+
+
+@dataclass
+class Method:
+    """A timed method: a label, how to build it, and whether it is an ALCN variant."""
+
+    label: str
+    factory: Callable[[], Normalization]
+    params: dict[str, Any] = field(default_factory=dict)
+    alcn: bool = False
+
+
+def _alcn(label: str, weights: str | os.PathLike | None, **params: Any) -> Method:
+    return Method(label, lambda: ALCN(weights=weights, **params), dict(params), alcn=True)
+
+
+def default_methods(
+    weights: str | os.PathLike | None = None, lite_weights: str | os.PathLike | None = None, cuda: bool | None = None
+) -> list[Method]:
+    """The methods of the benchmark: ``none``, ``clahe``, ``dog``, ALCN's exact fast path, its
+    approximate variants (:data:`ALCN_VARIANTS`; the ``lite`` ones with ``lite_weights``), and
+    its other backends that this installation has (``opencv`` when registered, ``torch`` on the
+    CPU, and on CUDA when torch sees a GPU or ``cuda`` is True)."""
+    methods = [Method(name, lambda name=name: create(name)) for name in ("none", "clahe", REFERENCE)]
+    methods.append(_alcn("alcn", weights))
+    methods += [_alcn(label, lite_weights if params.get("model") == "lite" else weights, **params)
+                for label, params in ALCN_VARIANTS.items()]
+    if "opencv" in BACKENDS:
+        methods.append(_alcn("alcn opencv", weights, backend="opencv"))
+    methods.append(_alcn("alcn torch cpu", weights, backend="torch", device="cpu"))
+    if cuda is None:
+        import torch
+
+        cuda = torch.cuda.is_available()
+    if cuda:
+        methods.append(_alcn("alcn torch cuda", weights, backend="torch", device="cuda"))
+    return methods
+
+
+def synthetic_frame(width: int, height: int, colour: bool, seed: int = 0, t: float = 0.0) -> np.ndarray:
+    """A reproducible textured frame under uneven light: uint8 ``(H, W)`` or BGR ``(H, W, 3)``.
+
+    Multi-scale noise texture and a few flat shapes (edges), lit by a light gradient and a soft
+    shadow; ``t`` (seconds) moves the light and shifts the texture, for video.
+    """
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:height, 0:width].astype(np.float32)
+    texture = np.zeros((height, width), np.float32)
+    for octave in range(5):
+        cell = 2 ** (octave + 1)
+        small = rng.random((height // cell + 2, width // cell + 2), dtype=np.float32)
+        texture += cv2.resize(small, (width + cell, height + cell), interpolation=cv2.INTER_CUBIC)[:height, :width] / (octave + 1)
+    texture = cv2.normalize(texture, None, 0.15, 0.85, cv2.NORM_MINMAX)
+    for _ in range(6):
+        cx, cy, r = rng.uniform(0, width), rng.uniform(0, height), rng.uniform(0.05, 0.2) * min(width, height)
+        cv2.circle(texture, (int(cx), int(cy)), int(r), float(rng.uniform(0.1, 0.9)), -1)
+    shift = np.float32([[1, 0, 8 * t], [0, 1, 4 * t]])
+    texture = cv2.warpAffine(texture, shift, (width, height), borderMode=cv2.BORDER_REFLECT_101)
+    light = 0.25 + 1.2 * np.exp(-(((x / width - 0.3 - 0.1 * np.sin(t)) ** 2) + (y / height - 0.4) ** 2) / 0.15)
+    shadow = 1.0 - 0.6 / (1.0 + np.exp(-(x - 0.7 * width - 0.05 * width * np.cos(t)) / (0.01 * width + 1)))
+    gray = np.clip(texture * light * shadow, 0, 1)
+    if not colour:
+        return np.rint(gray * 255).astype(np.uint8)
+    bgr = np.dstack([gray, np.clip(0.8 * gray + 0.1, 0, 1), np.clip(gray * gray * 1.2, 0, 1)])
+    return np.rint(bgr * 255).astype(np.uint8)
+
+
+def time_calls(fn: Callable[[], Any], warmup: int, min_repeats: int, max_repeats: int, budget_s: float) -> np.ndarray:
+    """Wall times (seconds) of ``fn()``: ``warmup`` untimed calls, then at least ``min_repeats``
+    and at most ``max_repeats`` timed ones, stopping after ``budget_s`` seconds once the minimum
+    is reached."""
+    for _ in range(warmup):
+        fn()
+    times: list[float] = []
+    start = time.perf_counter()
+    while len(times) < max_repeats and (len(times) < min_repeats or time.perf_counter() - start < budget_s):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return np.array(times)
+
+
+def _time_rounds(
+    calls: dict[str, Callable[[], Any]], min_repeats: int, max_repeats: int, budget_s: float
+) -> dict[str, np.ndarray]:
+    """Wall times (seconds) of several functions timed in rounds, one call of each per round:
+    each gets at least ``min_repeats`` and at most ``max_repeats`` runs and stops after
+    ``budget_s`` seconds of its own once it has the minimum (see :func:`time_calls`)."""
+    times: dict[str, list[float]] = {label: [] for label in calls}
+
+    def done(label: str) -> bool:
+        t = times[label]
+        return len(t) >= max_repeats or (len(t) >= min_repeats and sum(t) >= budget_s)
+
+    while not all(done(label) for label in calls):
+        for label, fn in calls.items():
+            if not done(label):
+                t0 = time.perf_counter()
+                fn()
+                times[label].append(time.perf_counter() - t0)
+    return {label: np.array(t) for label, t in times.items()}
+
+
+def _stats(times: np.ndarray) -> dict[str, float]:
+    q1, median, q3 = np.percentile(times * 1e3, [25, 50, 75])
+    return {"median_ms": float(median), "iqr_ms": float(q3 - q1), "q1_ms": float(q1), "q3_ms": float(q3),
+            "min_ms": float(times.min() * 1e3), "fps": float(1e3 / median), "repeats": int(len(times))}
+
+
+def _rss_kb(field_name: str = "VmRSS") -> int | None:
+    """A memory field of ``/proc/self/status`` in kB (None where there is no /proc)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith(field_name + ":"):
+                    return int(line.split()[1])
+    except OSError:
+        return None
+    return None
+
+
+def _reset_peak_rss() -> bool:
+    """Reset the process' peak resident set (VmHWM) to its current size (Linux >= 4.0)."""
+    try:
+        with open("/proc/self/clear_refs", "w", encoding="ascii") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def peak_memory(fn: Callable[[], Any]) -> dict[str, float | None]:
+    """Memory of one call of ``fn``: ``traced_peak_mb``, the peak of the Python/NumPy allocations
+    made during the call (tracemalloc; OpenCV's and torch's own buffers are not traced);
+    ``rss_before_mb``, the process' resident set before the call; ``rss_peak_mb``, its peak
+    resident set during the call; ``rss_added_mb``, the difference (None where /proc or the
+    reset of the peak is unavailable)."""
+    before = _rss_kb()
+    can_reset = _reset_peak_rss()
+    tracemalloc.start()
+    try:
+        fn()
+        _, traced_peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    peak = _rss_kb("VmHWM") if can_reset else None
+    return {
+        "traced_peak_mb": traced_peak / 2**20,
+        "rss_before_mb": None if before is None else before / 1024,
+        "rss_peak_mb": None if peak is None else peak / 1024,
+        "rss_added_mb": None if peak is None or before is None else max(0.0, (peak - before) / 1024),
+    }
+
+
+def _split(norm: ALCN, gray: np.ndarray) -> tuple[dict[str, float], np.ndarray, np.ndarray]:
+    """One timed run of the Normalizer network (:meth:`ALCN.weight_grid`) and of the whole
+    ``normalize``; the rest of ``normalize`` is map interpolation and the mixture.
+
+    Returns:
+        The times (ms), the network's grid and the normalized image.
+    """
+    t0 = time.perf_counter()
+    grid = norm.weight_grid(gray)
+    t1 = time.perf_counter()
+    out = norm.normalize(gray)
+    t2 = time.perf_counter()
+    network, total = (t1 - t0) * 1e3, (t2 - t1) * 1e3
+    times = {"network_ms": network, "mixture_ms": max(0.0, total - network), "normalize_ms": total}
+    return times, grid, out
+
+
+def _to_gray(frame: np.ndarray) -> np.ndarray:
+    """The float32 intensities ALCN's ``normalize`` sees for a uint8 frame (gray: the frame;
+    colour: CIE L / 100, as :meth:`Normalization.apply` does)."""
+    unit = frame.astype(np.float32) / np.float32(255)
+    if frame.ndim == 2:
+        return unit
+    return np.ascontiguousarray(cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)[..., 0]) / np.float32(100)
+
+
+def video_memory(norm: Normalization, size: tuple[int, int], frames: int, budget_s: float, colour: bool = False) -> dict[str, Any]:
+    """Resident memory while ``norm`` normalizes a generated video frame after frame.
+
+    Frames are :func:`synthetic_frame` with the light moving; the loop stops after ``frames``
+    frames or ``budget_s`` seconds (at least 2 frames). Returns the RSS after every frame (MB),
+    its first, last and largest value, the growth per frame (least-squares slope over the
+    second half, kB per frame) and the frames run.
+    """
+    width, height = size
+    base = [synthetic_frame(width, height, colour, seed=1, t=0.1 * i) for i in range(4)]
+    rss: list[float] = []
+    times: list[float] = []
+    start = time.perf_counter()
+    for i in range(frames):
+        frame = base[i % len(base)]
+        t0 = time.perf_counter()
+        norm.apply(frame)
+        times.append(time.perf_counter() - t0)
+        value = _rss_kb()
+        rss.append(float("nan") if value is None else value / 1024)
+        if i >= 1 and time.perf_counter() - start > budget_s:
+            break
+    arr = np.array(rss)
+    half = arr[len(arr) // 2 :]
+    slope = float(np.polyfit(np.arange(len(half)), half, 1)[0] * 1024) if len(half) >= 2 and np.isfinite(half).all() else None
+    return {
+        "size": [width, height],
+        "colour": colour,
+        "frames": len(rss),
+        "median_frame_ms": float(np.median(times) * 1e3),
+        "rss_mb": [round(v, 2) for v in rss],
+        "rss_first_mb": float(arr[0]),
+        "rss_last_mb": float(arr[-1]),
+        "rss_max_mb": float(np.nanmax(arr)),
+        "growth_kb_per_frame": slope,
+    }
+
+
+def _accuracy(approx: np.ndarray, exact: np.ndarray, output_range: Sequence[float]) -> dict[str, float]:
+    diff = np.abs(approx.astype(np.float64) - exact)
+    span = float(output_range[1] - output_range[0])
+    return {"max_abs": float(diff.max()), "mean_abs": float(diff.mean()), "max_rel_range": float(diff.max() / span),
+            "mean_rel_range": float(diff.mean() / span), "exact_std": float(exact.std())}
+
+
+def main(
+    out_dir: str | os.PathLike,
+    sizes: Sequence[tuple[int, int]] = SIZES,
+    colours: Sequence[str] = COLOURS,
+    methods: Sequence[str] | None = None,
+    weights: str | os.PathLike | None = None,
+    lite_weights: str | os.PathLike | None = None,
+    image: str | os.PathLike | None = None,
+    warmup: int = 1,
+    min_repeats: int = 3,
+    max_repeats: int = 15,
+    budget_s: float = 10.0,
+    video_frames: int = 100,
+    video_budget_s: float = 180.0,
+    video_methods: Sequence[str] | None = None,
+    threads: int | None = None,
+    quick: bool = False,
+) -> dict[str, Any]:
+    """Run the speed benchmark and write ``speed.json``, ``speed.md`` and ``speed.png`` into ``out_dir``.
+
+    Args:
+        out_dir: output folder (created).
+        sizes: frame sizes ``(width, height)``.
+        colours: ``"gray"`` and/or ``"bgr"``.
+        methods: labels of :func:`default_methods` to run (default: all; ``dog`` is always
+            run, it is the reference of the ratios).
+        weights: Normalizer weight file of the paper-model ALCN variants (default: the shipped one).
+        lite_weights: weight file of the ``lite`` variants (default: the shipped lite one).
+        image: an image file resized to every size instead of :func:`synthetic_frame`.
+        warmup, min_repeats, max_repeats, budget_s: see :func:`time_calls` (per case).
+        video_frames, video_budget_s: the video-memory test (1920x1080 grayscale; 0 frames: skip).
+        video_methods: labels run in the video test (default: ``alcn`` and the fastest variant).
+        threads: OpenCV and torch threads (default: their defaults).
+        quick: tiny frames, 2 repeats, no warm-up, a 3-frame video of tiny frames: for tests.
+
+    Returns:
+        The contents of ``speed.json``.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if quick:
+        sizes, warmup, min_repeats, max_repeats, budget_s = QUICK_SIZES, 0, 2, 2, 0.0
+        video_frames, video_budget_s = min(video_frames, 3), min(video_budget_s, 10.0)
+    bad = [c for c in colours if c not in COLOURS]
+    if bad or not colours:
+        raise InputError(f"colours must be among {COLOURS}, got {list(colours)}")
+    import torch
+
+    if threads is not None:
+        cv2.setNumThreads(threads)
+        torch.set_num_threads(threads)
+    all_methods = default_methods(weights, lite_weights)
+    labels = [m.label for m in all_methods]
+    if methods is not None:
+        unknown = [m for m in methods if m not in labels]
+        if unknown:
+            raise InputError(f"unknown method(s) {unknown}; available: {', '.join(labels)}")
+        keep = set(methods) | {REFERENCE}
+        all_methods = [m for m in all_methods if m.label in keep]
+    machine_before = machine()
+
+    source = None
+    if image is not None:
+        source = cv2.imread(str(image), cv2.IMREAD_COLOR)
+        if source is None:
+            raise InputError(f"cannot read image {image}")
+
+    def frame_for(width: int, height: int, colour: str) -> np.ndarray:
+        if source is None:
+            return synthetic_frame(width, height, colour == "bgr")
+        resized = cv2.resize(source, (width, height), interpolation=cv2.INTER_AREA)
+        return resized if colour == "bgr" else cv2.cvtColor(resized, cv2.COLOR_BGR2GRAY)
+
+    built: dict[str, Normalization] = {}
+    rows: list[dict[str, Any]] = []
+    accuracy: list[dict[str, Any]] = []
+    errors: dict[str, str] = {}
+    cases = [(w, h, c) for (w, h) in sizes for c in colours]
+    progress = tqdm(total=len(cases) * len(all_methods), desc="speed", unit="case")
+    for width, height, colour in cases:
+        frame = frame_for(width, height, colour)
+        gray = _to_gray(frame)
+        exact_out: np.ndarray | None = None
+        map_std = float("nan")
+        # Build and warm up every method, then time them in rounds (one call of each method per
+        # round) so that all of them see the same load of a shared machine.
+        ready: dict[str, tuple[Method, Normalization]] = {}
+        for method in all_methods:
+            if method.label in errors:
+                continue
+            try:
+                norm = built.get(method.label) or built.setdefault(method.label, method.factory())
+                for _ in range(warmup):
+                    norm.apply(frame)
+            except Exception as exc:  # a backend this machine cannot run: report it, go on
+                logger.warning("%s failed: %s", method.label, exc)
+                errors[method.label] = f"{type(exc).__name__}: {exc}"
+                continue
+            ready[method.label] = (method, norm)
+        times = _time_rounds({label: (lambda norm=norm: norm.apply(frame)) for label, (_, norm) in ready.items()},
+                             min_repeats, max_repeats, budget_s)
+        case_rows = []
+        for label, (method, norm) in ready.items():
+            progress.set_postfix_str(f"{label} {width}x{height} {colour}")
+            progress.update()
+            row: dict[str, Any] = {"method": label, "params": method.params, "width": width, "height": height,
+                                   "pixels": width * height, "colour": colour, **_stats(times[label])}
+            if isinstance(norm, ALCN):
+                split, grid, result = _split(norm, gray)
+                row.update(split)
+                if colour == "gray":
+                    result = result.astype(np.float64)
+                    if label == "alcn":
+                        exact_out = result
+                        # How much the weight maps vary over the frame: coarser grids cost nothing
+                        # in accuracy when they are constant (an untrained Normalizer).
+                        map_std = float(grid.std(axis=(1, 2)).mean())
+                    elif exact_out is not None:
+                        accuracy.append({"method": label, "params": method.params, "width": width,
+                                         "height": height, "exact_map_std": map_std,
+                                         **_accuracy(result, exact_out, norm.output_range)})
+            row.update(peak_memory(lambda: norm.apply(frame)))
+            case_rows.append(row)
+        reference = next((r["median_ms"] for r in case_rows if r["method"] == REFERENCE), None)
+        for row in case_rows:
+            row["ratio_to_dog"] = None if reference is None else row["median_ms"] / reference
+        rows += case_rows
+    progress.close()
+
+    video: list[dict[str, Any]] = []
+    if video_frames > 0:
+        alcn_labels = [m.label for m in all_methods if m.alcn and m.label not in errors]
+        if video_methods is None:
+            gray_1080 = [r for r in rows if r["method"] in alcn_labels and r["colour"] == "gray"]
+            fastest = min(gray_1080, key=lambda r: (-r["pixels"], r["median_ms"]))["method"] if gray_1080 else None
+            video_methods = [label for label in dict.fromkeys(["alcn", fastest]) if label in alcn_labels]
+        video_size = QUICK_SIZES[-1] if quick else SIZES[-1]
+        for label in video_methods:
+            if label not in built:
+                built[label] = next(m for m in all_methods if m.label == label).factory()
+            logger.info("video memory: %s on %dx%d", label, *video_size)
+            video.append({"method": label, **video_memory(built[label], video_size, video_frames, video_budget_s)})
+
+    result = {
+        "settings": {"sizes": [list(s) for s in sizes], "colours": list(colours), "warmup": warmup,
+                     "min_repeats": min_repeats, "max_repeats": max_repeats, "budget_s": budget_s,
+                     "weights": str(weights) if weights is not None else None,
+                     "lite_weights": str(lite_weights) if lite_weights is not None else None,
+                     "frames": str(image) if image is not None else "synthetic_frame(seed=0)",
+                     "opencv_threads": cv2.getNumThreads(), "torch_threads": torch.get_num_threads(), "quick": quick},
+        "machine_before": machine_before,
+        "machine_after": machine(),
+        "reference": REFERENCE,
+        "rows": rows,
+        "accuracy": accuracy,
+        "video": video,
+        "errors": errors,
+    }
+    write_json(out / "speed.json", result)
+    write_text(out / "speed.md", _markdown(result))
+    _plot(result, out / "speed.png")
+    return result
+
+
+def _markdown(result: dict[str, Any]) -> str:
+    before, after = result["machine_before"], result["machine_after"]
+    lines = [
+        "# ALCN speed benchmark",
+        "",
+        f"Machine: {before.get('cpu_model', before.get('processor'))}, {before.get('cpus_available', before.get('cpu_count'))} "
+        f"CPUs available; load average (1, 5, 15 min) {before.get('load_average_1_5_15')} before, "
+        f"{after.get('load_average_1_5_15')} after; OpenCV {before['opencv']} ({result['settings']['opencv_threads']} threads), "
+        f"torch {after.get('torch')} ({result['settings']['torch_threads']} threads), CUDA: {after.get('cuda')}.",
+        f"Frames: {result['settings']['frames']}. Times: `apply(uint8 frame)`, median and interquartile range over "
+        f"{result['settings']['min_repeats']}-{result['settings']['max_repeats']} runs after {result['settings']['warmup']} "
+        "warm-up, the methods timed in turns (one call each per round); `x dog` is the ratio of medians to `dog` in "
+        "the same run. ALCN's network / mixture split is one run of "
+        "`normalize` on the frame's intensities (network: `weight_grid`; mixture: the rest, map interpolation and "
+        "Eq. 3); the memory columns are of one more `apply`.",
+        "",
+        "## Time",
+        "",
+    ]
+    headers = ["size", "colour", "method", "x dog", "median ms", "IQR ms", "fps", "network ms", "mixture ms",
+               "traced peak MB", "RSS peak MB", "RSS added MB", "runs"]
+    table = [[f"{r['width']}x{r['height']}", r["colour"], r["method"], r["ratio_to_dog"], r["median_ms"], r["iqr_ms"],
+              r["fps"], r.get("network_ms"), r.get("mixture_ms"), r["traced_peak_mb"], r["rss_peak_mb"], r["rss_added_mb"], r["repeats"]]
+             for r in result["rows"]]
+    lines.append(markdown_table(headers, table, digits=2))
+    if result["accuracy"]:
+        lines += ["## Accuracy of the approximations and backends", "",
+                  "Raw response (`normalize`) of each ALCN variant and backend against the exact Eq. 3 of the fast "
+                  "path (`alcn`, same weights, same grayscale frame); relative: divided by the width of the output "
+                  "range.", ""]
+        lines.append(markdown_table(
+            ["size", "method", "max abs", "mean abs", "max / range", "mean / range", "std of exact",
+             "spatial std of the maps"],
+            [[f"{a['width']}x{a['height']}", a["method"], a["max_abs"], a["mean_abs"], a["max_rel_range"],
+              a["mean_rel_range"], a["exact_std"], a["exact_map_std"]] for a in result["accuracy"]], digits=5))
+    if result["video"]:
+        lines += ["", "## Memory over a video", "",
+                  "Resident set (RSS) of the process after each frame of a generated video (`apply` on uint8 frames).", ""]
+        lines.append(markdown_table(
+            ["method", "size", "frames", "ms / frame", "RSS first MB", "RSS last MB", "RSS max MB", "growth kB / frame"],
+            [[v["method"], "x".join(map(str, v["size"])), v["frames"], v["median_frame_ms"], v["rss_first_mb"],
+              v["rss_last_mb"], v["rss_max_mb"], v["growth_kb_per_frame"]] for v in result["video"]], digits=1))
+    if result["errors"]:
+        lines += ["", "## Not run", ""] + [f"- `{k}`: {v}" for k, v in result["errors"].items()]
+    return "\n".join(lines) + "\n"
+
+
+def _plot(result: dict[str, Any], path: Path) -> None:
+    plt, fig, axes = new_figure(figsize=(8, 5.5))
+    ax = axes[0, 0]
+    colours = {}
+    for r in result["rows"]:
+        colours.setdefault(r["method"], f"C{len(colours) % 10}")
+    for method, colour in colours.items():
+        for kind, style in (("gray", "-o"), ("bgr", "--s")):
+            pts = sorted((r["pixels"], r["median_ms"]) for r in result["rows"] if r["method"] == method and r["colour"] == kind)
+            if pts:
+                ax.plot(*zip(*pts), style, color=colour, label=f"{method} ({kind})", markersize=4)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("pixels per frame")
+    ax.set_ylabel("median time per frame (ms)")
+    ax.set_title("apply(): time against frame size (solid: grayscale, dashed: BGR)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    save_figure(plt, fig, path)
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise InputError(f"a size is WIDTHxHEIGHT, got {text!r}") from None
+    return w, h
+
+
+def add_cli(subparsers: Any) -> None:
+    """Add ``alcn bench speed`` to the ``bench`` sub-subcommands."""
+    p = subparsers.add_parser(
+        "speed",
+        help="time ALCN (every backend and fast variant) against none, CLAHE and DoG",
+        description="Time apply() of none, clahe, dog and every ALCN backend and approximate variant on the same "
+        "frames (640x480, 1280x800, 1920x1080, gray and BGR): median, IQR, fps, ratio to dog in the same run, "
+        "ALCN's network/mixture split, peak memory, the approximations' difference from the exact Eq. 3, and "
+        "memory over a 1920x1080 video. Writes speed.md, speed.json and speed.png.",
+    )
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--quick", action="store_true", help="tiny frames and few repeats (seconds; for tests)")
+    p.add_argument("--sizes", type=lambda s: [_size(v) for v in s.split(",") if v], default=list(SIZES),
+                   help="comma-separated WIDTHxHEIGHT (default 640x480,1280x800,1920x1080)")
+    p.add_argument("--colours", type=lambda s: [v for v in s.split(",") if v], default=list(COLOURS),
+                   help="gray and/or bgr (default both)")
+    p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=None,
+                   help="comma-separated labels to run (default all; dog always runs). Labels: none, clahe, dog, alcn, "
+                   + ", ".join(f"'{v}'" for v in ALCN_VARIANTS) + ", 'alcn opencv', 'alcn torch cpu', 'alcn torch cuda'")
+    p.add_argument("--weights", type=Path, default=None, help="Normalizer weight file (default: the shipped one)")
+    p.add_argument("--lite-weights", type=Path, default=None,
+                   help="weight file of the 'alcn lite' variants (default: the shipped alcn_normalizer_lite.npz)")
+    p.add_argument("--image", type=Path, default=None, help="time on this image resized to each size (default: synthetic frames)")
+    p.add_argument("--warmup", type=int, default=1, help="untimed runs per case (default 1)")
+    p.add_argument("--repeats", type=int, default=15, help="at most this many timed runs per case (default 15)")
+    p.add_argument("--min-repeats", type=int, default=3, help="at least this many timed runs per case (default 3)")
+    p.add_argument("--budget", type=float, default=10.0, help="seconds per case before stopping at --min-repeats (default 10)")
+    p.add_argument("--video-frames", type=int, default=100, help="frames of the 1920x1080 video-memory test (0: skip; default 100)")
+    p.add_argument("--video-budget", type=float, default=180.0, help="seconds per method of the video test (default 180)")
+    p.add_argument("--video-methods", type=lambda s: [m for m in s.split(",") if m], default=None,
+                   help="labels run in the video test (default: alcn and the fastest ALCN variant)")
+    p.add_argument("--threads", type=int, default=None, help="OpenCV and torch threads (default: theirs)")
+    p.set_defaults(func=_run_cli)
+
+
+def _run_cli(args: Any) -> int:
+    result = main(args.out, args.sizes, args.colours, args.methods, args.weights, args.lite_weights, args.image, args.warmup,
+                  args.min_repeats, args.repeats, args.budget, args.video_frames, args.video_budget,
+                  args.video_methods, args.threads, args.quick)
+    print((Path(args.out) / "speed.md").read_text(encoding="utf-8"))
+    return 0 if result["rows"] else 1

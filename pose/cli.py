@@ -1,0 +1,114 @@
+"""``alcn pose build|track|eval``: the 3D pose pipeline on the command line."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+
+def _intrinsics(values: list[float] | None) -> np.ndarray | None:
+    from pose.solver import camera_matrix
+
+    return None if values is None else camera_matrix(*values)
+
+
+def _build(args: argparse.Namespace) -> int:
+    from pose import build
+
+    build.main(args.input, args.output, images=args.images, K=_intrinsics(args.K), video_step=args.video_step,
+               max_frames=args.max_frames, motion_mask=args.motion_mask, feature=args.feature,
+               n_features=args.n_features, normalizer=args.normalizer, box_ply=args.box_ply,
+               box_size=args.box_size, box_units=args.box_units, refine_focal=args.refine_focal)
+    return 0
+
+
+def _track(args: argparse.Namespace) -> int:
+    from pose import track
+
+    K, dist = _intrinsics(args.K), None
+    if K is None:
+        from calib.camera import load_calibration
+
+        calibration = load_calibration(args.camera)
+        K, dist = calibration.K, calibration.dist
+    summary = track.main(args.model, args.input, args.output, K, normalizer=args.normalizer, overlay=args.overlay,
+                         method=args.method, n_features=args.n_features, min_inliers=args.min_inliers,
+                         reprojection_error=args.reprojection_error, dist=dist)
+    print(f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps -> {args.output}")
+    return 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from pose import evaluate
+
+    if args.middlebury:
+        evaluate.middlebury_main(args.middlebury, args.out, normalizers=args.normalizers, feature=args.feature)
+    if args.data:
+        evaluate.main(args.data, args.out, normalizers=args.normalizers, feature=args.feature)
+    if not (args.middlebury or args.data):
+        raise ValueError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
+    return 0
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``pose`` with ``build``, ``track`` and ``eval`` to the ``alcn`` command."""
+    from pose.solver import METHODS
+
+    p = subparsers.add_parser("pose", help="3D box pose: build a part model, track it, evaluate",
+                              description="Part-based 3D pose of a box after contrast normalization "
+                              "(Rad, Roth & Lepetit, BMVC 2017, Sec. 4.4).")
+    sub = p.add_subparsers(dest="pose_command", metavar="STEP", required=True)
+
+    b = sub.add_parser("build", help="part model from a registered sequence or a video",
+                       description="Triangulate features of the training images (pycolmap, known poses held "
+                       "fixed; or incremental reconstruction for an unregistered video), fit the box (open3d) "
+                       "and write MODEL.npz, MODEL.ply and MODEL_cameras.png.")
+    b.add_argument("input", help="BOP scene folder, COLMAP model folder, Middlebury set, or a video file")
+    b.add_argument("output", help="part model to write (.npz)")
+    b.add_argument("--images", help="image folder of a COLMAP model")
+    b.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"),
+                   help="intrinsics of a video (OpenCV convention)")
+    b.add_argument("--video-step", type=int, default=5, help="use every N-th frame of a video (default 5)")
+    b.add_argument("--max-frames", type=int, default=80, help="at most this many video frames (default 80)")
+    b.add_argument("--motion-mask", action="store_true",
+                   help="static camera, moving object: keep features on what moves")
+    b.add_argument("--feature", default="ORB", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default ORB)")
+    b.add_argument("--n-features", type=int, default=4000, help="keypoints per training image (default 4000)")
+    b.add_argument("--normalizer", default="none", help="normalizer applied first (alcn_cv.available())")
+    b.add_argument("--box-ply", help="cuboid .ply of the box: its true size")
+    b.add_argument("--box-size", nargs=3, type=float, metavar=("X", "Y", "Z"), help="the box's true size")
+    b.add_argument("--box-units", choices=["mm", "cm", "m"], help="units of --box-ply/--box-size")
+    b.add_argument("--refine-focal", action="store_true",
+                   help="video: refine the focal length in the bundle adjustment (stored in the model)")
+    b.set_defaults(func=_build)
+
+    t = sub.add_parser("track", help="pose of the box in every frame of a video or image folder",
+                       description="Writes BOP scene_gt-style JSON (OUTPUT) and OUTPUT_info.json; with --overlay "
+                       "a video (.mp4/.avi) or PNG folder with the box drawn.")
+    t.add_argument("model", help="part model (.npz) from `alcn pose build`")
+    t.add_argument("input", help="video file or image folder")
+    t.add_argument("output", help="poses (.json)")
+    cam = t.add_mutually_exclusive_group(required=True)
+    cam.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics")
+    cam.add_argument("--camera", help="OpenCV FileStorage YAML from `alcn calib camera`")
+    t.add_argument("--normalizer", default="none", help="normalizer applied first (default none)")
+    t.add_argument("--overlay", help="write the overlay here (.mp4/.avi or a folder)")
+    t.add_argument("--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant")
+    t.add_argument("--n-features", type=int, default=2000, help="keypoints per frame (default 2000)")
+    t.add_argument("--min-inliers", type=int, default=12, help="fewer inliers: frame lost (default 12)")
+    t.add_argument("--reprojection-error", type=float, default=4.0, help="inlier threshold, px (default 4)")
+    t.set_defaults(func=_track)
+
+    e = sub.add_parser("eval", help="Table-1-style report and Middlebury errors",
+                       description="BB8 2D projection < 5 px, ADD < 10%% of the diameter, 5 cm / 5 deg.")
+    e.add_argument("--data", help="pose data set from `alcn data pose` (train/, test/, models/)")
+    e.add_argument("--middlebury", nargs="+", help="Middlebury sets (e.g. ../shared/data/middlebury/templeSparseRing)")
+    e.add_argument("--normalizers", nargs="+", default=["none", "dog", "alcn"], help="rows of the table")
+    e.add_argument("--feature", default="ORB", choices=["ORB", "SIFT", "AKAZE"])
+    e.add_argument("--out", type=Path, required=True, help="report folder")
+    e.set_defaults(func=_eval)

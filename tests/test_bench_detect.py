@@ -1,0 +1,140 @@
+"""The detection benchmark: its pieces against direct computations, and a tiny end-to-end run."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from alcn_cv.bench import detect as D  # noqa: E402
+from alcn_cv.cli import main as cli_main  # noqa: E402
+from alcn_cv.errors import DatasetError, InputError  # noqa: E402
+from alcn_cv.nets import Detector  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def small_data(tmp_path_factory):
+    from alcn_cv.data.detect import generate
+
+    out = tmp_path_factory.mktemp("bench") / "detect_small"
+    generate(out, size="small", n_test=2, progress=False)
+    return out
+
+
+def test_local_standardize_matches_direct():
+    rng = np.random.default_rng(0)
+    img = rng.random((40, 45)).astype(np.float32)
+    out = D.local_standardize(img, size=5)
+    padded = np.pad(img.astype(np.float64), 2, mode="reflect")  # numpy "reflect" = reflect-101
+    for y, x in [(0, 0), (10, 20), (39, 44), (20, 1)]:
+        box = padded[y : y + 5, x : x + 5]
+        assert out[y, x] == pytest.approx((img[y, x] - box.mean()) / (box.std() + 1e-6), rel=1e-3, abs=1e-3)
+
+
+@pytest.mark.parametrize("policy", ["raw", "standardize", "local"])
+def test_score_maps_equal_window_scores(policy):
+    torch.manual_seed(0)
+    net = Detector(3, hidden=16).eval()
+    rng = np.random.default_rng(1)
+    image = rng.random((48, 56)).astype(np.float32)
+    pol = D.InputPolicy(policy, rng.random((10, 64, 64)).astype(np.float32))
+    probs = D.score_maps(net, image, pol)
+    assert probs.shape == (3, 5, 7)
+    np.testing.assert_allclose(probs.sum(0), 1, atol=1e-5)
+    dense_input = None if policy == "standardize" else pol.image(image)
+    for i, j in [(0, 0), (2, 3), (4, 6)]:
+        window = image[4 * i : 4 * i + 32, 4 * j : 4 * j + 32]
+        if policy == "standardize":
+            x = (window - window.mean()) / (window.std() + 1e-6)
+        else:
+            x = dense_input[4 * i : 4 * i + 32, 4 * j : 4 * j + 32]
+        with torch.no_grad():
+            ref = torch.softmax(net(torch.from_numpy(np.ascontiguousarray(x, np.float32))[None, None]), 1)[0].numpy()
+        np.testing.assert_allclose(probs[:, i, j], ref, atol=1e-5)
+
+
+def test_detect_in_image_places_fixed_boxes():
+    probs = np.zeros((2, 10, 12), np.float32)
+    probs[1, 3, 5] = 0.9  # window with top-left (x=20, y=12) at the working scale
+    probs[1, 3, 6] = 0.8  # its neighbour, suppressed
+    probs[1, 8, 1] = 0.5
+    boxes, scores = D.detect_in_image(probs, 1, sx=0.5, sy=0.25, box_size=36, nms_iou=0.3, max_detections=2)
+    np.testing.assert_allclose(scores, [0.9, 0.5])
+    # centre (20 + 16, 12 + 16) at the working scale -> (72, 112) at full resolution; 72 x 144 box
+    np.testing.assert_allclose(boxes[0], [72 - 36, 112 - 72, 72, 144])
+
+
+def test_input_policy():
+    rng = np.random.default_rng(2)
+    windows = (3 + 2 * rng.standard_normal((20, 64, 64))).astype(np.float32)
+    raw = D.InputPolicy("raw", windows).windows(windows)
+    assert raw.shape == (20, 32, 32) and abs(raw.mean()) < 1e-3 and abs(raw.std() - 1) < 1e-3
+    std = D.InputPolicy("standardize", windows).windows(windows)
+    np.testing.assert_allclose(std.mean((1, 2)), 0, atol=1e-4)
+    with pytest.raises(InputError):
+        D.InputPolicy("standardize", windows).image(windows[0])
+    with pytest.raises(InputError):
+        D.InputPolicy("whiten", windows)
+
+
+def test_training_set_is_shared_and_labelled(small_data):
+    data = D.load_data(small_data)
+    settings = D.DetectSettings(positives_per_object=12, negatives_ratio=1.0)
+    a = D.training_set(data, 1, settings)
+    b = D.training_set(data, 1, settings)
+    np.testing.assert_array_equal(a.windows, b.windows)  # every method trains on the same windows
+    assert a.windows.shape == (72, 64, 64) and a.windows.dtype == np.uint8
+    assert np.bincount(a.labels).tolist() == [36, 12, 12, 12]
+    assert a.images_used == {"matte_box": 1, "velvet_toy": 1, "specular_can": 1}
+    assert D.training_set(data, 10, settings).images_used["matte_box"] == 3  # all the small set has
+
+
+def test_end_to_end_small(small_data, tmp_path, monkeypatch):
+    out = tmp_path / "out"
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("boom")
+
+    real_create = D._create_normalization
+    monkeypatch.setattr(D, "_create_normalization", lambda m, p: broken() if m == "he" else real_create(m, p))
+    settings = D.DetectSettings(methods=["none", "dog", "he"], real_images=[1], policies=["raw", "local"],
+                                positives_per_object=8, epochs=1, batch_size=32, threads=1)
+    result = D.main(small_data, out, settings, progress=False)
+    assert (out / "detect.md").is_file() and (out / "detect.json").is_file()
+    assert not (out / "detect.partial.json").exists()
+    assert sorted(p.name for p in out.glob("pr_*.png")) == sorted(
+        f"pr_{n}_1real.png" for n in ("matte_box", "velvet_toy", "specular_can"))
+    saved = json.loads((out / "detect.json").read_text())
+    assert saved["runs"]["he|1|raw"]["error"] == "RuntimeError: boom"  # reported, the run went on
+    for key in ("none|1|raw", "dog|1|local"):
+        for obj in saved["runs"][key]["objects"].values():
+            assert obj["auc"] is None or 0 <= obj["auc"] <= 1
+    assert "dog" in saved["tuned"]["1"]
+    assert "failed" in (out / "detect.md").read_text()
+    assert result["machine"]["cpu_count"] >= 1
+
+
+def test_cli_and_bad_input(small_data, tmp_path):
+    assert cli_main(["bench", "detect", "--data", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert cli_main(["bench", "detect", "--data", str(small_data), "--out", str(tmp_path / "o"),
+                     "--methods", "none,nonexistent"]) == 2
+    with pytest.raises(DatasetError):
+        D.load_data(tmp_path)
+    with pytest.raises(SystemExit):
+        cli_main(["bench", "--help"])
+
+
+@pytest.mark.parametrize("policy", ["raw", "local"])
+def test_batched_score_maps_equal_single(policy):
+    torch.manual_seed(0)
+    net = Detector(3, hidden=16).eval()
+    rng = np.random.default_rng(4)
+    images = [rng.random((40, 44)).astype(np.float32), rng.random((36, 40)).astype(np.float32),
+              rng.random((40, 44)).astype(np.float32)]
+    pol = D.InputPolicy(policy, rng.random((4, 64, 64)).astype(np.float32))
+    batched = D._all_score_maps(net, images, pol, "cpu", batch=2)
+    for img, p in zip(images, batched):
+        np.testing.assert_allclose(p, D.score_maps(net, img, pol), atol=1e-5)

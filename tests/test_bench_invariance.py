@@ -1,0 +1,74 @@
+"""The invariance benchmark on photographs under several lights."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.bench import invariance
+from alcn_cv.cli import main as cli_main
+from alcn_cv.errors import DatasetError, InputError
+
+
+def test_agreement_and_detail_by_hand():
+    mask = np.ones((4, 4), bool)
+    a = np.arange(16, dtype=np.float32).reshape(4, 4)
+    stack = np.stack([a, 2 * a + 1, -a])
+    # pairs: (a, 2a+1) -> 1, (a, -a) -> -1, (2a+1, -a) -> -1
+    assert invariance.agreement(stack, mask) == pytest.approx(-1 / 3)
+    assert invariance.agreement(np.stack([a, np.zeros_like(a)]), mask) == 0.0  # constant image
+    # gradient of a: 1 along x (12 pairs), 4 along y (12 pairs); std of 0..15 = sqrt(255/12)
+    expected = np.sqrt((12 * 1 + 12 * 16) / 24) / np.sqrt(255 / 12)
+    assert invariance.detail(a[None], mask) == pytest.approx(expected)
+    assert invariance.detail(np.zeros((1, 4, 4)), mask) == 0.0
+
+
+def _fake_set(root, n_lights=3):
+    rng = np.random.default_rng(0)
+    folder = root / "ball"
+    folder.mkdir(parents=True)
+    y, x = np.mgrid[0:40, 0:50]
+    mask = (x - 25) ** 2 + (y - 20) ** 2 < 15**2
+    albedo = 0.5 + 0.4 * (((x // 4) + (y // 4)) % 2)
+    for i in range(n_lights):
+        shading = 0.3 + 0.6 * (x / 50 if i % 2 else y / 40)
+        img = np.where(mask, albedo * shading, 0.05) + 0.01 * rng.standard_normal(mask.shape)
+        cv2.imwrite(str(folder / f"ball.{i}.png"), np.rint(np.clip(img, 0, 1) * 255).astype(np.uint8))
+    cv2.imwrite(str(folder / "ball.mask.png"), mask.astype(np.uint8) * 255)
+    (root / "notes").mkdir()  # folders that are not objects are skipped
+    return root
+
+
+def test_main_writes_table_json_and_figure(tmp_path):
+    data = _fake_set(tmp_path / "psm")
+    result = invariance.main(data, tmp_path / "out", ["none", "dlcn", "clahe"], erode=2, progress=False)
+    saved = json.loads((tmp_path / "out" / "invariance.json").read_text())
+    assert saved["methods"].keys() == {"none", "dlcn", "clahe"}
+    assert (tmp_path / "out" / "invariance_ball.png").is_file()
+    assert "| dlcn |" in (tmp_path / "out" / "invariance.md").read_text()
+    for row in result["methods"].values():
+        assert -1 <= row["agreement"] <= 1 and row["detail"] > 0
+    # a checkerboard albedo under two gradient directions: DLCN removes the shading, raw does not
+    assert result["methods"]["dlcn"]["agreement"] > result["methods"]["none"]["agreement"]
+
+
+def test_bad_input(tmp_path):
+    with pytest.raises(DatasetError):
+        invariance.load_objects(tmp_path)
+    data = _fake_set(tmp_path / "psm")
+    with pytest.raises(InputError):
+        invariance.main(data, tmp_path / "o", ["nonexistent"])
+    with pytest.raises(InputError):
+        invariance.main(data, tmp_path / "o", ["none"], figure_object="cat")
+    assert cli_main(["bench", "invariance", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
+
+
+@pytest.mark.shared_data
+def test_real_photographs(shared_data, tmp_path):
+    result = invariance.main(shared_data / "psm", tmp_path, ["none", "dog"], scale=0.25, progress=False)
+    assert set(result["methods"]["none"]["objects"]) == {"buddha", "cat", "horse", "owl"}
+    assert result["settings"]["lights"]["cat"] == 12
+    assert result["methods"]["dog"]["detail"] > result["methods"]["none"]["detail"]

@@ -1,0 +1,58 @@
+"""The deep baselines of the detection benchmark: plain CNN and CIFAR-style ResNets."""
+
+from __future__ import annotations
+
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from alcn_cv.errors import InputError  # noqa: E402
+from alcn_cv.nets.plain import PlainCNN  # noqa: E402
+from alcn_cv.nets.resnet import CifarResNet, resnet20, resnet56  # noqa: E402
+
+
+@pytest.mark.parametrize("depth", [1, 2, 3, 4])
+def test_plain_cnn_dense_equals_windows(depth):
+    torch.manual_seed(0)
+    net = PlainCNN(3, depth=depth, width=4, hidden=8).eval()
+    image = torch.rand(1, 1, 44, 52)
+    with torch.no_grad():
+        dense = net.dense(image)
+        assert dense.shape == (1, 3, (44 - 32) // 4 + 1, (52 - 32) // 4 + 1)
+        for i in range(dense.shape[2]):
+            for j in range(dense.shape[3]):
+                window = image[..., 4 * i : 4 * i + 32, 4 * j : 4 * j + 32]
+                torch.testing.assert_close(net(window)[0], dense[0, :, i, j], atol=1e-5, rtol=1e-5)
+
+
+def test_resnet_depths_and_shapes():
+    def convs(net):
+        return sum(isinstance(m, torch.nn.Conv2d) and m.kernel_size == (3, 3) for m in net.modules())
+
+    # 6n + 2 weighted layers: 6n + 1 3x3 convolutions plus the linear layer
+    assert convs(resnet20(2)) + 1 == 20
+    assert convs(resnet56(2)) + 1 == 56
+    net = resnet20(4).eval()
+    with torch.no_grad():
+        assert net(torch.zeros(3, 1, 32, 32)).shape == (3, 4)
+        assert net.dense(torch.zeros(1, 1, 64, 72)).shape == (1, 4, 9, 11)
+
+
+def test_resnet_dense_matches_window_inside():
+    """On a 32x32 image (a single window) the dense score is the window score."""
+    torch.manual_seed(1)
+    net = CifarResNet(2, blocks=1).eval()
+    image = torch.rand(1, 1, 32, 32)
+    with torch.no_grad():
+        torch.testing.assert_close(net.dense(image)[0, :, 0, 0], net(image)[0], atol=1e-5, rtol=1e-5)
+
+
+def test_bad_arguments():
+    with pytest.raises(InputError):
+        PlainCNN(1)
+    with pytest.raises(InputError):
+        PlainCNN(3, depth=5)
+    with pytest.raises(InputError):
+        CifarResNet(3, blocks=0)
+    with pytest.raises(InputError):
+        resnet20(3)(torch.zeros(1, 1, 28, 28))

@@ -1,0 +1,101 @@
+"""``alcn bench speed`` (issue 8): the report is written and well formed (no timing assertions)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from alcn_cv import InputError
+from alcn_cv.bench import speed
+
+METHODS = ["none", "clahe", "alcn", "alcn grid16 pyramid", "alcn torch cpu"]
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("speed")
+    result = speed.main(out, methods=METHODS, video_frames=2, quick=True)
+    return out, result
+
+
+def test_files_are_written(report):
+    out, result = report
+    assert json.loads((out / "speed.json").read_text()) == result
+    assert (out / "speed.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    md = (out / "speed.md").read_text()
+    assert "| x dog |" in md and "## Accuracy" in md and "## Memory over a video" in md
+    for label in METHODS + ["dog"]:
+        assert f"| {label} |" in md
+    assert not result["errors"]
+    assert "load_average_1_5_15" in result["machine_before"]
+
+
+def test_every_case_has_every_method_and_its_ratio_to_dog(report):
+    _, result = report
+    rows = result["rows"]
+    cases = {(r["width"], r["height"], r["colour"]) for r in rows}
+    assert cases == {(w, h, c) for w, h in speed.QUICK_SIZES for c in speed.COLOURS}
+    for case in cases:
+        in_case = {r["method"]: r for r in rows if (r["width"], r["height"], r["colour"]) == case}
+        assert set(in_case) == set(METHODS) | {"dog"}
+        assert in_case["dog"]["ratio_to_dog"] == 1.0
+        for r in in_case.values():
+            assert r["median_ms"] > 0 and r["iqr_ms"] >= 0 and r["repeats"] == 2
+            np.testing.assert_allclose(r["ratio_to_dog"], r["median_ms"] / in_case["dog"]["median_ms"])
+            np.testing.assert_allclose(r["fps"], 1e3 / r["median_ms"])
+            assert r["traced_peak_mb"] >= 0
+            assert ("network_ms" in r) == r["method"].startswith("alcn")
+
+
+def test_accuracy_is_measured_against_the_exact_path(report):
+    _, result = report
+    acc = {(a["method"], a["width"]) for a in result["accuracy"]}
+    assert acc == {(m, w) for m in ("alcn grid16 pyramid", "alcn torch cpu") for w, _ in speed.QUICK_SIZES}
+    for a in result["accuracy"]:
+        assert 0 <= a["mean_abs"] <= a["max_abs"] and np.isfinite(a["max_rel_range"])
+        if a["method"] == "alcn torch cpu":
+            assert a["max_abs"] < 1e-4  # the torch backend computes the exact Eq. 3 too
+
+
+def test_video_memory_is_recorded(report):
+    _, result = report
+    assert [v["method"] for v in result["video"]] == ["alcn", "alcn grid16 pyramid"]  # default and fastest
+    for v in result["video"]:
+        assert v["frames"] == 2 and len(v["rss_mb"]) == 2 and v["rss_max_mb"] >= v["rss_first_mb"] > 0
+
+
+def test_time_calls_counts():
+    calls = []
+    times = speed.time_calls(lambda: calls.append(1), warmup=2, min_repeats=3, max_repeats=5, budget_s=0.0)
+    assert len(times) == 3 and len(calls) == 5
+    times = speed.time_calls(lambda: None, warmup=0, min_repeats=1, max_repeats=4, budget_s=60.0)
+    assert len(times) == 4
+    order = []
+    rounds = speed._time_rounds({"a": lambda: order.append("a"), "b": lambda: order.append("b")}, 2, 3, 0.0)
+    assert order == ["a", "b", "a", "b"] and [len(t) for t in rounds.values()] == [2, 2]  # in turns
+
+
+def test_synthetic_frames():
+    gray, bgr = speed.synthetic_frame(64, 48, False), speed.synthetic_frame(64, 48, True)
+    assert gray.shape == (48, 64) and bgr.shape == (48, 64, 3) and gray.dtype == bgr.dtype == np.uint8
+    assert gray.std() > 10
+    np.testing.assert_array_equal(gray, speed.synthetic_frame(64, 48, False))
+    assert not np.array_equal(gray, speed.synthetic_frame(64, 48, False, t=1.0))
+
+
+def test_bad_arguments(tmp_path):
+    with pytest.raises(InputError, match="unknown method"):
+        speed.main(tmp_path, methods=["alcn turbo"], quick=True)
+    with pytest.raises(InputError, match="colours"):
+        speed.main(tmp_path, colours=["rgba"], quick=True)
+
+
+def test_cli_is_registered(tmp_path):
+    import argparse
+
+    from alcn_cv.bench import cli
+
+    parser = argparse.ArgumentParser()
+    cli.add_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["bench", "speed", "--out", str(tmp_path), "--quick", "--sizes", "64x48", "--methods", "none"])
+    assert args.func is speed._run_cli and args.quick and args.sizes == [(64, 48)] and args.methods == ["none"]

@@ -1,0 +1,160 @@
+from __future__ import annotations
+
+import json
+import logging
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.data.board_scene import make_board_scene
+from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.formats.colmap import read_model
+from calib.board import BoardSpec
+from calib.camera import View, calibrate, detect_in_images, load_calibration, main, select_views
+
+REFERENCE = {"fx": 536.07, "fy": 536.02, "cx": 342.37, "cy": 235.54}  # ../shared/data/README.md
+DIST = np.array([-0.12, 0.03, 0.0005, -0.0004, 0.0])
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """12 views of the default ChArUco board through a lens with radial distortion."""
+    return make_board_scene(12, seed=7, dist=DIST)
+
+
+@pytest.fixture(scope="module")
+def scene_dir(scene, tmp_path_factory):
+    root = tmp_path_factory.mktemp("charuco")
+    for i, image in enumerate(scene.images):
+        cv2.imwrite(str(root / f"view{i:02d}.png"), image)
+    return root
+
+
+@pytest.mark.shared_data
+def test_chessboard_matches_opencv_reference(shared_data, tmp_path):
+    calib = main(shared_data / "chessboard", tmp_path, BoardSpec("chessboard", 9, 6, 25.0))
+    K = calib.K
+    for name, value in zip(("fx", "fy", "cx", "cy"), (K[0, 0], K[1, 1], K[0, 2], K[1, 2])):
+        assert value == pytest.approx(REFERENCE[name], rel=0.01), name
+    assert calib.rms < 0.5
+    assert len(calib.view_names) == 13
+
+    fs = cv2.FileStorage(str(tmp_path / "camera.yaml"), cv2.FILE_STORAGE_READ)
+    np.testing.assert_allclose(fs.getNode("camera_matrix").mat(), K)
+    assert fs.getNode("distortion_coefficients").mat().size == 5
+    assert fs.getNode("image_width").real() == 640
+    fs.release()
+    loaded = load_calibration(tmp_path / "camera.yaml")
+    np.testing.assert_allclose(loaded.dist, calib.dist)
+
+    model = read_model(tmp_path / "colmap")
+    K_colmap, dist_colmap = model.cameras[1].to_opencv()
+    np.testing.assert_allclose(K_colmap, K, atol=1e-9)
+    assert model.cameras[1].params[2] == pytest.approx(K[0, 2] + 0.5)
+    np.testing.assert_allclose(dist_colmap[:5], calib.dist, atol=1e-12)
+
+    views = json.loads((tmp_path / "views.json").read_text())
+    assert len(views["views"]) == 13
+    errors = np.array([v["rms_px"] for v in views["views"]])
+    n = np.array([v["num_points"] for v in views["views"]])
+    assert np.sqrt(np.sum(errors**2 * n) / n.sum()) == pytest.approx(calib.rms, rel=1e-3)
+    png = cv2.imread(str(tmp_path / "calibration.png"))
+    assert png is not None and png.shape[0] > 300
+
+
+def test_charuco_calibration_recovers_camera(scene, scene_dir, tmp_path):
+    calib = main(scene_dir, tmp_path, BoardSpec(), flags=cv2.CALIB_FIX_K3)
+    K = scene.K
+    np.testing.assert_allclose(np.diag(calib.K)[:2], np.diag(K)[:2], rtol=0.01)
+    np.testing.assert_allclose(calib.K[:2, 2], K[:2, 2], atol=0.01 * 640)
+    assert calib.rms < 0.3
+    assert calib.dist[0] < -0.05  # barrel distortion found
+
+
+def test_video_frames_are_selected_for_pose_spread(scene, tmp_path):
+    """A video showing every pose twice: the selection keeps distinct poses, not repeats."""
+    path = tmp_path / "board.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (640, 480))
+    order = list(range(12)) * 2
+    for i in order:
+        writer.write(scene.images[i])
+    writer.release()
+    calib = main(path, tmp_path / "out", BoardSpec(), max_views=8, flags=cv2.CALIB_FIX_K3, report=False)
+    poses = [order[int(name.split("_")[1])] for name in calib.view_names]
+    assert len(poses) == 8 and len(set(poses)) == 8
+    np.testing.assert_allclose(np.diag(calib.K)[:2], np.diag(scene.K)[:2], rtol=0.02)
+
+
+def test_select_views_prefers_coverage_and_spread(scene):
+    detector = BoardSpec().detector()
+    views = [View(f"v{i}", detector(im), 1.0) for i, im in enumerate(scene.images)]
+    views = views + [View(v.name + "_copy", v.detection, 1.0) for v in views]
+    chosen = select_views(views, (640, 480), max_views=6)
+    names = [v.name.removesuffix("_copy") for v in chosen]
+    assert len(set(names)) == 6
+
+
+def test_images_of_different_sizes(scene, tmp_path):
+    cv2.imwrite(str(tmp_path / "a.png"), scene.images[0])
+    cv2.imwrite(str(tmp_path / "b.png"), cv2.resize(scene.images[1], (320, 240)))
+    with pytest.raises(InputError, match="different sizes"):
+        main(tmp_path, tmp_path / "out", BoardSpec())
+
+
+def test_no_board_anywhere(tmp_path):
+    rng = np.random.default_rng(0)
+    for i in range(3):
+        cv2.imwrite(str(tmp_path / f"{i}.png"), rng.integers(0, 256, (120, 160), dtype=np.uint8))
+    with pytest.raises(InputError, match="no 7x5 ChArUco board .* found in any of 3"):
+        main(tmp_path, tmp_path / "out", BoardSpec())
+    with pytest.raises(InputError, match="no 9x6 chessboard"):
+        main(tmp_path, tmp_path / "out", BoardSpec("chessboard", 9, 6))
+    assert not (tmp_path / "out").exists()
+
+
+def test_too_few_views(scene_dir, tmp_path):
+    paths = sorted(scene_dir.iterdir())[:2]
+    views, size = detect_in_images(paths, BoardSpec())
+    with pytest.raises(InputError, match="only 2 view"):
+        calibrate(views, size)
+
+
+def test_board_definition_does_not_match(scene_dir, tmp_path):
+    with pytest.raises(InputError, match="does not match"):
+        main(scene_dir, tmp_path, BoardSpec(cols=6, rows=5))
+    with pytest.raises(InputError, match="layout does not match"):
+        main(scene_dir, tmp_path, BoardSpec(cols=9, rows=7))
+
+
+@pytest.mark.shared_data
+def test_chessboard_size_mismatch_names_the_right_size(shared_data, tmp_path):
+    for cols, rows in ((8, 6), (9, 5)):
+        with pytest.raises(InputError, match="does not match.*--cols 9 --rows 6"):
+            main(shared_data / "chessboard", tmp_path, BoardSpec("chessboard", cols, rows))
+
+
+def test_corrupt_or_incomplete_yaml(tmp_path):
+    bad = tmp_path / "camera.yaml"
+    bad.write_text("%YAML:1.0\ncamera_matrix: [1, 2\n  oops: }\n")
+    with pytest.raises(DatasetError, match="calib camera"):
+        load_calibration(bad)
+    bad.write_text("%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\n")
+    with pytest.raises(DatasetError, match="camera_matrix"):
+        load_calibration(bad)
+    with pytest.raises(DatasetError, match="not found"):
+        load_calibration(tmp_path / "missing.yaml")
+
+
+def test_poor_rms_warns(scene, caplog):
+    detector = BoardSpec().detector()
+    rng = np.random.default_rng(1)
+    views = []
+    for i, image in enumerate(scene.images):
+        det = detector(image)
+        noisy = det.image_points + rng.normal(0, 2.0, det.image_points.shape).astype(np.float32)
+        views.append(View(str(i), type(det)(noisy, det.object_points, det.ids)))
+    with caplog.at_level(logging.WARNING, logger="calib.camera"):
+        calib = calibrate(views, (640, 480))
+    assert calib.rms > 1.0
+    assert any("poor calibration" in r.message for r in caplog.records)

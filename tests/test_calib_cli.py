@@ -1,0 +1,94 @@
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.cli import main as alcn
+from alcn_cv.data.board_scene import make_board_scene
+from calib.camera import write_camera_yaml
+
+
+def test_calib_help(capsys):
+    with pytest.raises(SystemExit) as exc:
+        alcn(["calib", "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for sub in ("camera", "board", "register", "undistort"):
+        assert sub in out
+
+
+def test_board_command(tmp_path, capsys):
+    assert alcn(["calib", "board", "--out", str(tmp_path / "b.png"), "--dpi", "100", "--cols", "5", "--rows", "4"]) == 0
+    assert "print at 100%" in capsys.readouterr().out
+    info = json.loads((tmp_path / "b.json").read_text())
+    assert info["board"]["cols"] == 5 and cv2.imread(str(tmp_path / "b.png")) is not None
+
+
+@pytest.mark.shared_data
+def test_camera_command_on_real_chessboard(shared_data, tmp_path, capsys):
+    rc = alcn(["calib", "camera", "--images", str(shared_data / "chessboard"), "--board", "chessboard",
+               "--cols", "9", "--rows", "6", "--square", "25", "--out", str(tmp_path), "--no-report"])
+    assert rc == 0
+    assert "RMS 0.409 px over 13 views" in capsys.readouterr().out
+    assert (tmp_path / "camera.yaml").is_file() and (tmp_path / "colmap" / "cameras.txt").is_file()
+
+
+def test_register_and_undistort_commands(tmp_path, capsys):
+    scene = make_board_scene(3, seed=2)
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for i, image in enumerate(scene.images):
+        cv2.imwrite(str(frames / f"{i}.png"), image)
+    write_camera_yaml(tmp_path / "camera.yaml", scene.K, np.zeros(5), (640, 480))
+    rc = alcn(["calib", "register", str(frames), "--calib", str(tmp_path / "camera.yaml"), "--out", str(tmp_path / "reg")])
+    assert rc == 0
+    assert "registered 3 of 3 frames (mm)" in capsys.readouterr().out
+    rc = alcn(["calib", "undistort", str(frames / "0.png"), str(tmp_path / "u.png"), "--calib", str(tmp_path / "camera.yaml")])
+    assert rc == 0 and (tmp_path / "u.camera.yaml").is_file()
+
+
+def test_bad_input_gives_one_line_error(tmp_path, capsys):
+    (tmp_path / "camera.yaml").write_text("not: [valid\n")
+    rc = alcn(["calib", "undistort", str(tmp_path), str(tmp_path / "o"), "--calib", str(tmp_path / "camera.yaml")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "calib camera" in err and "Traceback" not in err
+    rc = alcn(["calib", "camera", "--images", str(tmp_path), "--board", "chessboard", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--cols and --rows" in err
+    rc = alcn(["calib", "register", str(tmp_path), "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--calib" in err
+
+
+@pytest.mark.shared_data
+def test_register_sfm_with_known_distance(shared_data, tmp_path, capsys):
+    """6 consecutive Middlebury views, no board: SfM, scaled by one known camera distance."""
+    from scipy.spatial.transform import Rotation
+
+    from alcn_cv.formats.middlebury import read_middlebury
+    from alcn_cv.formats import bop
+
+    views = read_middlebury(shared_data / "middlebury" / "templeSparseRing")[5:11]
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for v in views:
+        (frames / v.name).symlink_to(v.path.resolve())
+    write_camera_yaml(tmp_path / "camera.yaml", views[0].K, np.zeros(5), (640, 480))
+    a, b = views[0], views[-1]
+    mm = np.linalg.norm(a.center - b.center) * 1000.0
+    rc = alcn(["calib", "register", str(frames), "--method", "sfm", "--calib", str(tmp_path / "camera.yaml"),
+               "--known-distance", a.name, b.name, f"{mm:.3f}", "--threads", "2", "--out", str(tmp_path / "reg")])
+    assert rc == 0
+    assert "registered 6 of 6 frames (mm)" in capsys.readouterr().out
+    est = [(f.R_w2c, f.t_w2c) for f in bop.load_scene(tmp_path / "reg").frames]
+    assert len(est) == 6
+    for i in range(6):
+        for j in range(i + 1, 6):
+            rel = est[i][0] @ est[j][0].T @ (views[i].R_w2c @ views[j].R_w2c.T).T
+            assert np.degrees(Rotation.from_matrix(rel).magnitude()) < 2.0
+            d_est = np.linalg.norm(-est[i][0].T @ est[i][1] + est[j][0].T @ est[j][1])
+            d_gt = np.linalg.norm(views[i].center - views[j].center) * 1000.0
+            assert d_est == pytest.approx(d_gt, rel=0.02)

@@ -1,0 +1,182 @@
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pycolmap
+import pytest
+from scipy.spatial.transform import Rotation
+
+from alcn_cv.data.board_scene import make_board_scene
+from alcn_cv.errors import InputError
+from alcn_cv.formats import bop
+from alcn_cv.formats.colmap import read_model
+from alcn_cv.formats.middlebury import read_middlebury
+from calib.board import BoardSpec
+from calib.camera import Calibration
+from calib.register import register_charuco, register_colmap, similarity_from_poses
+
+DIST = np.array([-0.1, 0.02, 0.0, 0.0, 0.0])
+
+
+def _angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
+    return float(np.degrees(Rotation.from_matrix(Ra @ Rb.T).magnitude()))
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_board_scene(8, seed=11, dist=DIST)
+
+
+@pytest.fixture(scope="module")
+def frames(scene, tmp_path_factory):
+    """The 8 rendered views, plus a frame without the board between them."""
+    root = tmp_path_factory.mktemp("frames")
+    for i, image in enumerate(scene.images):
+        cv2.imwrite(str(root / f"f{2 * i:03d}.png"), image)
+    blank = np.full_like(scene.images[0], 128)
+    cv2.imwrite(str(root / "f005.png"), blank)
+    return root
+
+
+def test_charuco_registration_recovers_rendered_poses(scene, frames, tmp_path):
+    calib = Calibration(scene.K, DIST, (640, 480), 0.0)
+    reg = register_charuco(frames, tmp_path / "reg", calib, BoardSpec())
+    assert [f.name for f in reg.dropped] == ["f005.png"]
+    assert reg.dropped[0].status == "board not found"
+    assert len(reg.registered) == 8
+    for f in reg.registered:
+        i = int(f.name[1:4]) // 2
+        R, t = scene.R_w2c[i], scene.t_w2c[i]
+        assert _angle_deg(f.R_w2c, R) < 1.0
+        assert np.linalg.norm(-f.R_w2c.T @ f.t_w2c + R.T @ t) < 0.01 * np.linalg.norm(t)
+
+    out = tmp_path / "reg"
+    scene_out = bop.load_scene(out, check_images=True)
+    model = read_model(out / "colmap")
+    assert model.units == "mm"
+    assert [f.im_id for f in scene_out.frames] == list(range(8))
+    assert sorted(p.name for p in (out / "rgb").iterdir()) == [f"{i:06d}.png" for i in range(8)]
+    for f in reg.registered:
+        fr = scene_out.frame(f.image_id)
+        K, R, t = fr.K, fr.R_w2c, fr.t_w2c
+        np.testing.assert_allclose(K, scene.K)
+        np.testing.assert_allclose(R, f.R_w2c, atol=1e-12)
+        im = model.image_by_name(f"{f.image_id:06d}.png")
+        np.testing.assert_allclose(im.R_w2c, R, atol=1e-9)
+        np.testing.assert_allclose(im.t_w2c, t, atol=1e-6)
+    np.testing.assert_allclose(model.cameras[1].to_opencv()[0], scene.K, atol=1e-9)
+    assert pycolmap.Reconstruction(str(out / "colmap")).num_images() == 8
+
+    # The written frames are undistorted: the board projects with K alone onto its corners.
+    detector = BoardSpec().detector()
+    K, R, t = scene_out.frames[0].K, scene_out.frames[0].R_w2c, scene_out.frames[0].t_w2c
+    det = detector(cv2.imread(str(out / "rgb" / "000000.png")))
+    proj, _ = cv2.projectPoints(det.object_points, cv2.Rodrigues(R)[0], t, K, None)
+    assert np.abs(proj.reshape(-1, 2) - det.image_points).max() < 0.5
+
+    report = json.loads((out / "registration.json").read_text())
+    assert report["num_frames"] == 9 and report["num_registered"] == 8 and report["units"] == "mm"
+    assert {fr["name"]: fr["status"] for fr in report["frames"]}["f005.png"] == "board not found"
+    assert cv2.imread(str(out / "registration.png")) is not None
+
+
+def test_charuco_registration_bad_input(scene, frames, tmp_path):
+    calib = Calibration(scene.K, DIST, (640, 480), 0.0)
+    with pytest.raises(InputError, match="ChArUco"):
+        register_charuco(frames, tmp_path / "a", calib, BoardSpec("chessboard", 9, 6))
+    small = Calibration(scene.K, DIST, (320, 240), 0.0)
+    with pytest.raises(InputError, match="calibration is for 320x240"):
+        register_charuco(frames, tmp_path / "b", small, BoardSpec())
+    with pytest.raises(InputError, match="only 0 of 9 frames registered.*board not found"):
+        register_charuco(frames, tmp_path / "c", calib, BoardSpec(dictionary="DICT_4X4_50"))
+    for name in ("a", "b", "c"):
+        assert not (tmp_path / name).exists()  # nothing half-written
+    register_charuco(frames, tmp_path / "d", calib, BoardSpec(), max_frames=3)
+    with pytest.raises(FileExistsError):
+        register_charuco(frames, tmp_path / "d", calib, BoardSpec())
+
+
+def test_similarity_from_poses_recovers_transform():
+    rng = np.random.default_rng(0)
+    R_src = Rotation.random(5, random_state=1).as_matrix()
+    C_src = rng.normal(size=(5, 3))
+    s, R, t = 250.0, Rotation.random(random_state=2).as_matrix(), np.array([10.0, -3.0, 7.0])
+    R_dst = R_src @ R.T
+    C_dst = s * C_src @ R.T + t
+    s2, R2, t2 = similarity_from_poses(R_src, C_src, R_dst, C_dst)
+    assert s2 == pytest.approx(s)
+    np.testing.assert_allclose(R2, R, atol=1e-12)
+    np.testing.assert_allclose(t2, t, atol=1e-9)
+    with pytest.raises(InputError, match="at least 2"):
+        similarity_from_poses(R_src[:1], C_src[:1], R_dst[:1], C_dst[:1])
+
+
+@pytest.mark.shared_data
+def test_colmap_registration_of_middlebury_temple(shared_data, tmp_path):
+    views = read_middlebury(shared_data / "middlebury" / "templeSparseRing")
+    calib = Calibration(views[0].K, np.zeros(5), (640, 480), 0.0)
+    reference = {v.name: (v.R_w2c, v.t_w2c * 1000.0) for v in views}
+    reg = register_colmap(views[0].path.parent, tmp_path / "reg", calib, reference=reference, num_threads=2)
+    gt = {v.name: v for v in views}
+    kept = reg.registered
+    assert len(kept) >= 10, [f"{f.name}: {f.status}" for f in reg.dropped]
+    # Relative rotations need no alignment.
+    for a in kept:
+        for b in kept:
+            rel_est = a.R_w2c @ b.R_w2c.T
+            rel_gt = gt[a.name].R_w2c @ gt[b.name].R_w2c.T
+            assert _angle_deg(rel_est, rel_gt) < 2.0, (a.name, b.name)
+    # After the similarity to the given poses: absolute rotations and centres (mm).
+    radius = np.median([np.linalg.norm(v.center) for v in views]) * 1000.0
+    for f in kept:
+        v = gt[f.name]
+        assert _angle_deg(f.R_w2c, v.R_w2c) < 2.0
+        assert np.linalg.norm(-f.R_w2c.T @ f.t_w2c - v.center * 1000.0) < 0.02 * radius
+    model = read_model(tmp_path / "reg" / "colmap")
+    assert len(model.points3d) > 200 and len(model.images) == len(kept)
+    assert len(bop.load_scene(tmp_path / "reg", check_images=True)) == len(kept)
+    assert len(list((tmp_path / "reg" / "rgb").iterdir())) == len(kept)
+
+
+def test_charuco_registration_from_video(scene, tmp_path):
+    path = tmp_path / "seq.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (640, 480))
+    for image in scene.images:
+        writer.write(image)
+    writer.release()
+    calib = Calibration(scene.K, DIST, (640, 480), 0.0)
+    reg = register_charuco(path, tmp_path / "reg", calib, BoardSpec(), step=2)
+    assert [f.name for f in reg.frames] == ["frame_000000", "frame_000002", "frame_000004", "frame_000006"]
+    for f in reg.registered:
+        i = int(f.name.split("_")[1])
+        assert _angle_deg(f.R_w2c, scene.R_w2c[i]) < 1.0
+
+
+def test_board_pose_rejects_unreliable_frames():
+    """Far, nearly fronto-parallel views are ambiguous; outliers and few corners are refused."""
+    from calib.board import Detection
+    from calib.register import board_pose
+
+    K = np.array([[600.0, 0, 320], [0, 600, 240], [0, 0, 1]])
+    obj = BoardSpec().corners_3d()
+    rng = np.random.default_rng(3)
+
+    def detection(R, t, noise, n=None):
+        uv, _ = cv2.projectPoints(obj, cv2.Rodrigues(R)[0], t, K, None)
+        uv = uv.reshape(-1, 2) + rng.normal(0, noise, (len(obj), 2))
+        k = n or len(obj)
+        return Detection(uv[:k].astype(np.float32), obj[:k], np.arange(k, dtype=np.int32))
+
+    R_near = Rotation.from_euler("x", 180 + 35, degrees=True).as_matrix()
+    good = board_pose(detection(R_near, np.array([-100.0, -60, 450]), 0.05), K, None)
+    assert good.status == "ok" and good.rms_px < 0.2
+    R_far = Rotation.from_euler("xy", [181.5, 1.0], degrees=True).as_matrix()
+    far = [board_pose(detection(R_far, np.array([-120.0, -90, 2500]), 0.3), K, None) for _ in range(10)]
+    assert sum("ambiguous" in f.status for f in far) >= 5
+    outlier = detection(R_near, np.array([-100.0, -60, 450]), 0.05)
+    outlier.image_points[3] += 25.0
+    assert "reprojection error" in board_pose(outlier, K, None).status
+    few = board_pose(detection(R_near, np.array([-100.0, -60, 450]), 0.05, n=6), K, None)
+    assert few.status.startswith("too few board corners")

@@ -1,0 +1,75 @@
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.data.board_scene import make_board_scene
+from alcn_cv.errors import InputError
+from calib.board import BoardSpec
+from calib.camera import Calibration, load_calibration
+from calib.undistort import Undistorter, main
+
+DIST = np.array([-0.15, 0.03, 0.0, 0.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_board_scene(2, seed=3, dist=DIST)
+
+
+def test_undistorted_board_projects_with_pinhole_camera(scene, tmp_path):
+    calib = Calibration(scene.K, DIST, (640, 480), 0.0)
+    src = tmp_path / "in.png"
+    cv2.imwrite(str(src), scene.images[0])
+    yaml_path = main(src, tmp_path / "out.png", calib, alpha=0.0)
+    new = load_calibration(yaml_path)
+    assert not np.any(new.dist)
+    image = cv2.imread(str(tmp_path / "out.png"))
+    det = BoardSpec().detector()(image)
+    proj, _ = cv2.projectPoints(det.object_points, cv2.Rodrigues(scene.R_w2c[0])[0], scene.t_w2c[0], new.K, None)
+    err = np.abs(proj.reshape(-1, 2) - det.image_points).max()
+    assert err < 0.5
+    # Without undistortion the same check fails: the test can tell.
+    det0 = BoardSpec().detector()(scene.images[0])
+    proj0, _ = cv2.projectPoints(det0.object_points, cv2.Rodrigues(scene.R_w2c[0])[0], scene.t_w2c[0], scene.K, None)
+    assert np.abs(proj0.reshape(-1, 2) - det0.image_points).max() > 4 * err
+
+
+def test_folder_and_video(scene, tmp_path):
+    calib = Calibration(scene.K, DIST, (640, 480), 0.0)
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for i, im in enumerate(scene.images):
+        cv2.imwrite(str(folder / f"{i}.png"), im)
+    main(folder, tmp_path / "und", calib, keep_K=True)
+    assert sorted(p.name for p in (tmp_path / "und").iterdir()) == ["0.png", "1.png", "camera.yaml"]
+    np.testing.assert_allclose(load_calibration(tmp_path / "und" / "camera.yaml").K, scene.K)
+
+    video = tmp_path / "v.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 5, (640, 480))
+    for _ in range(3):
+        for im in scene.images:
+            writer.write(im)
+    writer.release()
+    main(video, tmp_path / "v_und.avi", calib, alpha=1.0)
+    cap = cv2.VideoCapture(str(tmp_path / "v_und.avi"))
+    n = 0
+    while cap.read()[0]:
+        n += 1
+    cap.release()
+    assert n == 6
+    assert (tmp_path / "v_und.camera.yaml").is_file()
+
+
+def test_bad_input(scene, tmp_path):
+    calib = Calibration(scene.K, DIST, (640, 480), 0.0)
+    with pytest.raises(InputError, match="calibration is for 640x480"):
+        Undistorter(calib)(np.zeros((240, 320, 3), np.uint8))
+    with pytest.raises(InputError, match="alpha"):
+        Undistorter(calib, alpha=2.0)
+    with pytest.raises(InputError, match="no such file"):
+        main(tmp_path / "missing.png", tmp_path / "o.png", calib)
+    (tmp_path / "bad.png").write_bytes(b"not a png")
+    with pytest.raises(InputError, match="cannot read"):
+        main(tmp_path / "bad.png", tmp_path / "o.png", calib)

@@ -1,0 +1,86 @@
+"""Tests of the ALCN-2D-like detection benchmark generator."""
+
+from __future__ import annotations
+
+import json
+
+import jsonschema
+import numpy as np
+import pytest
+
+from alcn_cv.data import detect
+from alcn_cv.errors import InputError
+from alcn_cv.formats import schema
+from alcn_cv.formats.coco import load_coco
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory):
+    return detect.generate(tmp_path_factory.mktemp("det") / "small", size="small", seed=1, n_test=5, progress=False)
+
+
+def test_layout_manifest_and_schema(bench):
+    man = json.loads((bench / "manifest.json").read_text())
+    jsonschema.validate(man, schema("manifest"))
+    assert man["kind"] == "detect" and man["seed"] == 1
+    assert man["box_size"] == 36 and man["working_scale"] == pytest.approx(0.5)
+    assert {o["material"] for o in man["objects"]} == {"matte", "velvet", "metal"}
+    for name in ("train.json", "test.json"):
+        jsonschema.validate(json.loads((bench / name).read_text()), schema("coco"))
+
+
+def test_loader_reads_what_the_generator_writes(bench):
+    train = load_coco(bench / "train.json", check_images=True)
+    test = load_coco(bench / "test.json", check_images=True)
+    assert len(train.categories) == 3 and len(train.images) == 3 * 3
+    counts = np.bincount([a.category_id for a in train.annotations], minlength=4)[1:]
+    assert (counts == 3).all()  # n_train images per object, one object each
+    assert len(test.images) == 5
+    man = json.loads((bench / "manifest.json").read_text())
+    for ds in (train, test):
+        for im in ds.images:
+            img = ds.read_image(im)
+            assert img.shape == (200, 320, 3)
+            for a in ds.annotations_for(im.id):
+                side = max(a.bbox[2], a.bbox[3]) * man["working_scale"]
+                assert 25 <= side <= 50  # about box_size at the working scale
+    families = {im.extra["light_family"] for im in test.images}
+    assert len(families) >= 2
+    # Training images share one lighting.
+    assert len({json.dumps(im.extra["lighting"]) for im in train.images}) == 1
+
+
+def test_same_seed_gives_identical_bytes(bench, tmp_path):
+    again = detect.generate(tmp_path / "again", size="small", seed=1, n_test=5, progress=False)
+    files = sorted(p.relative_to(bench) for p in bench.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(again) for p in again.rglob("*") if p.is_file())
+    for f in files:
+        assert (bench / f).read_bytes() == (again / f).read_bytes(), f
+
+
+def test_bad_arguments(tmp_path):
+    with pytest.raises(InputError):
+        detect.generate(tmp_path / "x", size="huge")
+    with pytest.raises(InputError):
+        detect.generate(tmp_path / "x", size="small", width=100, progress=False)
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_failed_run_leaves_nothing_behind(tmp_path, monkeypatch):
+    calls = []
+
+    def fail(*args, **kwargs):
+        calls.append(1)
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(detect, "_test_image", fail)
+    with pytest.raises(RuntimeError, match="disk full"):
+        detect.generate(tmp_path / "out", size="small", n_train=1, progress=False)
+    assert calls and list(tmp_path.iterdir()) == []
+
+
+def test_workers_do_not_change_the_output(bench, tmp_path):
+    two = detect.generate(tmp_path / "two", size="small", seed=1, n_test=5, progress=False, workers=2)
+    files = sorted(p.relative_to(bench) for p in bench.rglob("*") if p.is_file())
+    for f in files:
+        assert (bench / f).read_bytes() == (two / f).read_bytes(), f

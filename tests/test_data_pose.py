@@ -1,0 +1,117 @@
+"""Tests of the pose sequences (BOP layout + COLMAP export)."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import jsonschema
+import numpy as np
+import pytest
+from scipy.spatial import ConvexHull
+
+from alcn_cv.data import pose
+from alcn_cv.formats import schema
+from alcn_cv.formats.bop import load_scene, read_ply
+from alcn_cv.formats.colmap import read_text_model
+
+
+@pytest.fixture(scope="module")
+def plain(tmp_path_factory):
+    """Small sequences without clutter: the duck is the only possible occluder of the box."""
+    return pose.generate(tmp_path_factory.mktemp("pose") / "plain", size="small", n_frames=2, clutter=False,
+                         progress=False)
+
+
+def _scenes(root):
+    return sorted(p for p in root.glob("*/*") if (p / "scene_camera.json").exists())
+
+
+def test_layout_and_schemas(plain):
+    scenes = _scenes(plain)
+    assert [s.relative_to(plain).as_posix() for s in scenes] == (
+        ["test/%06d" % k for k in range(1, 9)] + ["train/000001"])
+    for s in scenes:
+        jsonschema.validate(json.loads((s / "scene_camera.json").read_text()), schema("bop_scene_camera"))
+        jsonschema.validate(json.loads((s / "scene_gt.json").read_text()), schema("bop_scene_gt"))
+        scene = load_scene(s, check_images=True)
+        assert len(scene) == 2
+        for f in scene.frames:
+            assert {o.obj_id for o in f.objects} == {1, 2}
+            assert cv2.imread(str(f.rgb_path)).shape == (240, 320, 3)
+    man = json.loads((plain / "manifest.json").read_text())
+    jsonschema.validate(man, schema("manifest"))
+    assert json.loads((plain / "camera.json").read_text())["width"] == 320
+    assert [s["change"] for s in man["sequences"][1:]] == ["none"] + ["mild"] * 3 + ["drastic"] * 4
+    box = read_ply(plain / "models" / "obj_000001.ply")
+    np.testing.assert_allclose(np.ptp(box.vertices, axis=0), pose.BOX_SIZE_MM)
+    assert box.texture_file == "obj_000001.png" and (plain / "models" / box.texture_file).exists()
+    duck = read_ply(plain / "models" / "obj_000002.ply")
+    assert duck.colors is not None and 80 < np.ptp(duck.vertices, axis=0).max() < 200
+
+
+def _signed_distance(hull: np.ndarray, h: int, w: int) -> np.ndarray:
+    """Distance of every pixel centre to a convex polygon's edges' lines, positive inside."""
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    p = hull.reshape(-1, 2)
+    area = np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
+    if area < 0:
+        p = p[::-1]
+    sd = np.full((h, w), np.inf)
+    for a, b in zip(p, np.roll(p, -1, axis=0)):
+        e = b - a
+        n = np.array([-e[1], e[0]]) / np.linalg.norm(e)  # inward for this orientation in image coords
+        sd = np.minimum(sd, (xx - a[0]) * n[0] + (yy - a[1]) * n[1])
+    return sd
+
+
+def test_gt_pose_projects_box_corners_onto_the_drawn_pixels(plain):
+    """The box's silhouette is the hull of its projected corners to within 0.5 px."""
+    verts = read_ply(plain / "models" / "obj_000001.ply").vertices
+    corners = np.unique(verts, axis=0)
+    assert len(corners) == 8
+    checked = 0
+    for s in _scenes(plain):
+        for f in load_scene(s).frames:
+            gt = f.pose(1)
+            pts, _ = cv2.projectPoints(corners, cv2.Rodrigues(gt.R)[0], gt.t, f.K, None)
+            pts = pts.reshape(-1, 2)
+            hull = pts[ConvexHull(pts).vertices]
+            box = cv2.imread(str(s / "mask_visib" / f"{f.im_id:06d}_000000.png"), cv2.IMREAD_GRAYSCALE) > 0
+            duck = cv2.imread(str(s / "mask_visib" / f"{f.im_id:06d}_000001.png"), cv2.IMREAD_GRAYSCALE) > 0
+            sd = _signed_distance(hull, *box.shape)
+            assert not box[sd < -0.5].any()  # nothing drawn more than 0.5 px outside
+            missing = (sd > 0.5) & ~box
+            assert not (missing & ~duck).any()  # everything 0.5 px inside drawn, unless the duck hides it
+            checked += 1
+    assert checked == 18
+
+
+def test_world_poses_and_colmap_export(plain):
+    train = load_scene(plain / "train" / "000001")
+    m2w = []
+    for f in train.frames:
+        o = f.pose(1)
+        m2w.append((f.R_w2c.T @ o.R, f.R_w2c.T @ (o.t - f.t_w2c)))
+    for R, t in m2w[1:]:  # the box does not move in the world
+        np.testing.assert_allclose(R, m2w[0][0], atol=1e-9)
+        np.testing.assert_allclose(t, m2w[0][1], atol=1e-6)
+    model = read_text_model(plain / "train" / "000001" / "colmap")
+    assert len(model.points3d) == 0 and len(model.images) == len(train)
+    K, dist = model.cameras[1].to_opencv()
+    np.testing.assert_allclose(K, train.frames[0].K, atol=1e-9)
+    assert not np.any(dist)
+    for f in train.frames:
+        im = model.image_by_name(f"{f.im_id:06d}.png")
+        np.testing.assert_allclose(im.R_w2c, f.R_w2c, atol=1e-9)
+        np.testing.assert_allclose(im.t_w2c, f.t_w2c, atol=1e-6)
+        assert (plain / "train" / "000001" / "rgb" / im.name).exists()
+
+
+def test_same_seed_gives_identical_bytes(tmp_path):
+    a = pose.generate(tmp_path / "a", size="small", n_frames=2, n_test=1, seed=3, progress=False)
+    b = pose.generate(tmp_path / "b", size="small", n_frames=2, n_test=1, seed=3, progress=False, workers=2)
+    files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
+    for f in files:
+        assert (a / f).read_bytes() == (b / f).read_bytes(), f

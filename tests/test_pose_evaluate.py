@@ -1,0 +1,23 @@
+"""pose.evaluate: report writing and the data-set check."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from alcn_cv.errors import DatasetError
+from pose import evaluate
+
+
+def test_report_table_and_plot(tmp_path):
+    table = {"none / orb": {"#1": 100.0, "#2": 12.5}, "alcn / orb": {"#1": 100.0, "#2": float("nan")}}
+    md = evaluate.markdown_table(table, ["#1", "#2"])
+    assert "| none / orb | 100.0 | 12.5 |" in md and "| alcn / orb | 100.0 | - |" in md
+    png = evaluate.plot_table(table, ["#1", "#2"], tmp_path / "t.png", "test")
+    assert png.stat().st_size > 1000
+    assert evaluate._nan_to_none({"a": [1.0, np.nan], "b": np.float32(2)}) == {"a": [1.0, None], "b": 2.0}
+
+
+def test_missing_dataset(tmp_path):
+    with pytest.raises(DatasetError, match="train/000001"):
+        evaluate.main(tmp_path, tmp_path / "out", normalizers=["none"])

@@ -1,0 +1,76 @@
+"""pose.model: the part-model file format."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from alcn_cv.errors import InputError, WeightFileError
+from pose import model as pm
+
+
+def _model(n=50):
+    rng = np.random.default_rng(0)
+    return pm.PartModel(corners=pm.box_corners([140, 95, 55]), points3d=rng.uniform(0, 100, (n, 3)),
+                        descriptors=rng.integers(0, 256, (n, 32), dtype=np.uint8), units="mm",
+                        box_fit={"object_points": n})
+
+
+def test_box_corners_and_edges():
+    c = pm.box_corners([2, 3, 4], [1, 1, 1])
+    assert c.shape == (8, 3)
+    assert np.allclose(c.min(0), 1) and np.allclose(c.max(0), [3, 4, 5])
+    assert len(pm.BOX_EDGES) == 12
+    m = pm.PartModel(corners=c)
+    assert np.allclose(m.box_size, [2, 3, 4])
+    assert m.diameter == pytest.approx(np.sqrt(4 + 9 + 16))
+
+
+def test_roundtrip_writes_ply(tmp_path):
+    m = _model()
+    path = pm.save(m, tmp_path / "box")
+    assert path.suffix == ".npz" and path.with_suffix(".ply").is_file()
+    back = pm.load(path)
+    assert np.allclose(back.corners, m.corners)
+    assert np.array_equal(back.descriptors, m.descriptors)
+    assert np.allclose(back.points3d, m.points3d, atol=1e-4)
+    assert back.units == "mm" and back.box_fit == {"object_points": 50}
+    assert back.scaled_to("cm").box_size == pytest.approx([14, 9.5, 5.5])
+    ply = path.with_suffix(".ply").read_bytes()
+    assert ply.startswith(b"ply") and b"element vertex 50" in ply
+
+
+def test_other_version_and_corrupt_files(tmp_path):
+    path = pm.save(_model(), tmp_path / "m.npz")
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    header = json.loads(str(arrays["header"]))
+    header["version"] = pm.FORMAT_VERSION + 1
+    arrays["header"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "v2.npz", **arrays)
+    with pytest.raises(WeightFileError, match=rf"version {pm.FORMAT_VERSION + 1}.*version {pm.FORMAT_VERSION}"):
+        pm.load(tmp_path / "v2.npz")
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(WeightFileError):
+        pm.load(tmp_path / "bad.npz")
+    with pytest.raises(WeightFileError, match="not found"):
+        pm.load(tmp_path / "missing.npz")
+
+
+def test_bad_models():
+    with pytest.raises(InputError):
+        pm.PartModel(corners=np.zeros((4, 3)))
+    with pytest.raises(InputError):
+        pm.PartModel(corners=pm.box_corners([1, 1, 1]), points3d=np.zeros((3, 3)),
+                     descriptors=np.zeros((2, 32), np.uint8))
+    with pytest.raises(InputError):
+        pm.PartModel(corners=pm.box_corners([1, 1, 1]), units="inch")
+
+
+def test_opencv_tutorial_model(shared_data):
+    box = shared_data / "cookie_box"
+    m = pm.from_opencv_tutorial(box / "cookies_ORB.yml", box / "box.ply")
+    assert len(m.points3d) == 1921 and m.descriptors.shape == (1921, 32) and m.units == "cm"
+    assert sorted(np.round(m.box_size, 1)) == [7.5, 18.9, 25.8]

@@ -1,0 +1,54 @@
+"""`alcn train`, `alcn train-detector` and `alcn export` on the command line."""
+
+from __future__ import annotations
+
+import tomllib
+
+import cv2
+import numpy as np
+import torch
+
+from alcn_cv.cli import main
+from alcn_cv.train.opencv_runtime import OpenCVNormalizer
+
+
+def test_print_config_applies_flags_and_set(capsys):
+    assert main(["train", "--print-config", "--epochs", "2", "--method", "dog", "--set", "optim.lr=3e-4"]) == 0
+    cfg = tomllib.loads(capsys.readouterr().out)
+    assert (cfg["optim"]["epochs"], cfg["model"]["method"], cfg["optim"]["lr"]) == (2, "dog", 3e-4)
+
+
+def test_config_errors_are_one_line_and_name_the_key(capsys, tmp_path):
+    assert main(["train", "--print-config", "--set", "optim.lrr=1"]) == 2
+    err = capsys.readouterr().err
+    assert "optim.lrr" in err and err.count("\n") == 1
+    assert main(["train", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "run")]) == 2
+    assert "data.path" in capsys.readouterr().err
+
+
+def test_export(tmp_path, capsys):
+    out = tmp_path / "n.onnx"
+    assert main(["export", "--onnx", str(out)]) == 0
+    assert OpenCVNormalizer(out).dense_grid(np.zeros((9, 9), np.float32)).shape == (10, 3, 3)
+    assert main(["export", "--onnx", str(tmp_path / "n.txt")]) == 2
+
+
+def test_train_detector_from_a_few_images(tmp_path):
+    rng = np.random.default_rng(0)
+    for name in ("square", "disc"):
+        (tmp_path / "images" / name).mkdir(parents=True)
+        img = (rng.random((60, 60)) * 60 + 40).astype(np.uint8)
+        if name == "square":
+            img[15:45, 15:45] = 220
+        else:
+            cv2.circle(img, (30, 30), 15, 230, -1)
+        cv2.imwrite(str(tmp_path / "images" / name / "a.png"), img)
+    mask = np.zeros((60, 60), np.uint8)
+    mask[10:50, 10:50] = 255
+    cv2.imwrite(str(tmp_path / "images" / "disc" / "a.mask.png"), mask)
+    args = ["train-detector", str(tmp_path / "images"), "--out", str(tmp_path / "det"), "--method", "dog",
+            "--per-image", "12", "--epochs", "1", "--no-progress"]
+    assert main(args) == 0
+    state = torch.load(tmp_path / "det" / "detector.pt", weights_only=True)
+    assert state["classes"] == ["background", "disc", "square"] and state["method"] == "dog"
+    assert main(["train-detector", str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 2

@@ -1,0 +1,113 @@
+"""ONNX export and the torch-free OpenCV runtime (alcn_cv.train.export, alcn_cv.train.opencv_runtime)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from alcn_cv.enhance.alcn import ALCN
+from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.filters.gaussian_mixture import alcn_filter
+from alcn_cv.nets import Normalizer
+from alcn_cv.train import opencv_runtime
+from alcn_cv.train.export import DEFAULT_ONNX, export_onnx
+from alcn_cv.train.opencv_runtime import OpenCVNormalizer
+from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file, save_normalizer_file
+
+
+@pytest.fixture(scope="module")
+def random_weights(tmp_path_factory):
+    """A Normalizer whose outputs vary from window to window (the placeholder's are constant)."""
+    torch.manual_seed(0)
+    net = Normalizer(output_scale=2.0)
+    with torch.no_grad():
+        net.head.weight.normal_(0, 0.05)
+    path = tmp_path_factory.mktemp("w") / "random.npz"
+    meta = {"config": net.config, "sigmas": [0.5 * i for i in range(1, 11)], "working_scale": 0.5,
+            "output_range": [-0.2, 0.2], "trained": False}
+    save_normalizer_file(path, net.state_arrays(), meta)
+    onnx_path = export_onnx(path.with_suffix(".onnx"), path)
+    return path, onnx_path, net.eval()
+
+
+def _images(shared_data, n=3):
+    paths = sorted((shared_data / "psm").glob("*/*.0.png"))[:n]
+    assert paths
+    return [cv2.resize(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), None, fx=0.3, fy=0.3).astype(np.float32) / 255
+            for p in paths]
+
+
+def test_window_and_stride_match_the_network():
+    assert (opencv_runtime.WINDOW, opencv_runtime.STRIDE) == (Normalizer.window, Normalizer.stride)
+
+
+@pytest.mark.shared_data
+def test_torch_onnx_opencv_and_fast_path_agree(shared_data, random_weights):
+    path, onnx_path, net = random_weights
+    ocv = OpenCVNormalizer(onnx_path)
+    alcn = ALCN(weights=path, scale=1.0)
+    for image in _images(shared_data):
+        with torch.no_grad():
+            t = torch.from_numpy(image)[None, None]
+            grid_torch, dense_torch = net.dense_grid(t)[0].numpy(), net.dense(t)[0].numpy()
+        assert np.ptp(grid_torch[0]) > 1e-3  # a non-trivial test: the weights vary over the image
+        np.testing.assert_allclose(ocv.dense_grid(image), grid_torch, atol=1e-4)
+        dense = ocv.dense(image)
+        np.testing.assert_allclose(dense, dense_torch, atol=1e-4)
+        # The full normalization: OpenCV runtime + OpenCV mixture vs. the library's fast path.
+        np.testing.assert_allclose(alcn_filter(image, dense, alcn.full_res_sigmas), alcn.normalize(image), atol=1e-4)
+
+
+def test_shipped_onnx_matches_shipped_weights():
+    net = Normalizer.from_file(load_normalizer_file(DEFAULT_WEIGHTS))
+    image = np.random.default_rng(0).random((61, 83), dtype=np.float32)
+    with torch.no_grad():
+        ref = net.dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
+    np.testing.assert_allclose(OpenCVNormalizer(DEFAULT_ONNX).dense_grid(image), ref, atol=1e-4)
+    assert OpenCVNormalizer().path == DEFAULT_ONNX
+
+
+def test_runs_where_torch_cannot_be_imported(random_weights):
+    _, onnx_path, net = random_weights
+    image = np.random.default_rng(1).random((50, 70), dtype=np.float32)
+    with torch.no_grad():
+        ref = net.dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
+    code = textwrap.dedent(f"""
+        import sys, importlib.abc
+        class Block(importlib.abc.MetaPathFinder):
+            def find_spec(self, name, path=None, target=None):
+                if name == "torch" or name.startswith("torch.") or name == "kornia":
+                    raise ImportError("torch is blocked in this test")
+        sys.meta_path.insert(0, Block())
+        import numpy as np
+        from alcn_cv.train.opencv_runtime import OpenCVNormalizer
+        image = np.random.default_rng(1).random((50, 70), dtype=np.float32)
+        grid = OpenCVNormalizer({str(onnx_path)!r}).dense_grid(image)
+        assert "torch" not in sys.modules
+        np.save(sys.argv[1], grid)
+    """)
+    out = onnx_path.parent / "grid.npy"
+    subprocess.run([sys.executable, "-c", code, str(out)], check=True, timeout=120)
+    np.testing.assert_allclose(np.load(out), ref, atol=1e-4)
+
+
+def test_bad_files_and_inputs(tmp_path, random_weights):
+    with pytest.raises(WeightFileError, match="not found"):
+        OpenCVNormalizer(tmp_path / "missing.onnx")
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(b"not an onnx model")
+    with pytest.raises(WeightFileError, match="cannot read"):
+        OpenCVNormalizer(bad)
+    with pytest.raises(InputError, match=".onnx"):
+        export_onnx(tmp_path / "x.pt", random_weights[0])
+    ocv = OpenCVNormalizer(random_weights[1])
+    with pytest.raises(InputError, match="float32"):
+        ocv.dense_grid(np.zeros((20, 20), np.uint8))
+    with pytest.raises(InputError, match="HxW"):
+        ocv.dense_grid(np.zeros((20, 20, 3), np.float32))
