@@ -33,20 +33,28 @@ from pose.solver import PoseSolver, PoseTracker, camera_matrix
 K_TUTORIAL = camera_matrix(640 * 55 / 22.3, 480 * 55 / 14.9, 320.0, 240.0)
 
 
+def frames(video: Path, max_frames: int | None):
+    """``(index, frame)`` of the first ``max_frames`` frames (all when ``None``)."""
+    for name, frame in track.iter_frames(video):
+        if max_frames is not None and int(name) >= max_frames:
+            return
+        yield int(name), frame
+
+
 def registered_build(video: Path, ref: part_model.PartModel, K: np.ndarray, normalizer: str, path: Path,
-                     step: int = 10) -> None:
+                     step: int = 10, max_frames: int | None = None) -> None:
     """A model on ``normalizer``-normalized images of the original video, in the reference model's frame:
     the frames are registered by tracking the reference model, then triangulated with these poses fixed."""
     tracker, det = PoseTracker(PoseSolver(K, min_inliers=30)), FeaturePartDetector(ref, "none")
     with tempfile.TemporaryDirectory(dir=path.parent) as work:
         views = []
-        for name, frame in track.iter_frames(video):
+        for i, frame in frames(video, max_frames):
             prior = None if tracker.prior is None else (*tracker.prior, K)
             c = det.detect(frame, prior)
-            est = tracker.update(int(name), c.object_points, c.image_points)
-            if est.ok and int(name) % step == 0:
-                io.write_image(Path(work) / f"{int(name):06d}.png", frame)
-                views.append(build.View(f"{int(name):06d}.png", K, None, est.R, est.tvec.ravel()))
+            est = tracker.update(i, c.object_points, c.image_points)
+            if est.ok and i % step == 0:
+                io.write_image(Path(work) / f"{i:06d}.png", frame)
+                views.append(build.View(f"{i:06d}.png", K, None, est.R, est.tvec.ravel()))
         seq = build.Sequence(Path(work), views, ref.units, info={"format": "registered video", "path": str(video)})
         model, _ = build.build(seq, feature=ref.feature, n_features=3000, normalizer=normalizer, work_dir=work)
     model.corners = ref.corners  # same object frame as the reference
@@ -59,6 +67,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("out/cookie_box_relit"))
     ap.add_argument("--methods", nargs="+", default=["none", "alcn"])
     ap.add_argument("--data", type=Path, default=shared_data_dir() / "cookie_box")
+    ap.add_argument("--max-frames", type=int, help="only the first N frames (default: all)")
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
     args.out.mkdir(parents=True, exist_ok=True)
@@ -73,7 +82,7 @@ def main() -> None:
     for name in args.methods:
         path = args.out / f"model_{name}.npz"
         if name != "none" and not path.is_file():
-            registered_build(video, ref, K, name, path)
+            registered_build(video, ref, K, name, path, max_frames=args.max_frames)
         if name != "none":
             models[name] = part_model.load(path)
     detectors = {n: FeaturePartDetector(models[n], n) for n in args.methods}
@@ -83,8 +92,8 @@ def main() -> None:
     both = track.OverlayWriter(args.out / "relit_overlay.mp4")
     side = track.OverlayWriter(args.out / "relit_side_by_side.mp4")
     agree = {n: [] for n in args.methods}
-    for name, frame in track.iter_frames(video):
-        i = int(name)
+    for i, frame in frames(video, args.max_frames):
+        name = str(i)
         relit = evaluate.relight(frame, seed=i // 30)
         c = ref_det.detect(frame)
         gt = ref_tracker.update(i, c.object_points, c.image_points)

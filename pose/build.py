@@ -163,11 +163,11 @@ def motion_masks(frames: list[np.ndarray], threshold: float = 25.0, dilate: int 
                  min_area: float = 0.005) -> list[np.ndarray]:
     """Masks (uint8 0/255) of what moves in a video taken by a static camera.
 
-    The background is the per-pixel median of ``frames``; a pixel belongs to the moving object
-    inside the convex hull of the regions (larger than ``min_area`` of the image) that differ from
-    it by more than ``threshold`` grey levels, dilated by ``dilate`` pixels. Used for hand-held objects in front of a fixed
-    camera (e.g. the cookie-box video), whose static background would otherwise dominate the
-    reconstruction.
+    The background is the per-pixel median of ``frames``; the mask is the convex hull of the
+    regions (larger than ``min_area`` of the image) that differ from it by more than
+    ``threshold`` grey levels, dilated by ``dilate`` pixels. Used for hand-held objects in front
+    of a fixed camera (e.g. the cookie-box video), whose static background would otherwise
+    dominate the reconstruction.
     """
     grays = np.stack([to_gray(f) for f in frames]).astype(np.int16)
     bg = np.median(grays, axis=0)
@@ -235,7 +235,8 @@ def write_database(db_path: Path, seq: Sequence, feats: dict[str, Features], pai
 
     pycolmap.Database.open(db_path).close()
     same = all(np.array_equal(v.K, seq.views[0].K) for v in seq.views) and seq.info.get("format") == "video"
-    pycolmap.import_images(db_path, seq.image_dir, pycolmap.CameraMode.SINGLE if same else pycolmap.CameraMode.PER_IMAGE,
+    mode = pycolmap.CameraMode.SINGLE if same else pycolmap.CameraMode.PER_IMAGE
+    pycolmap.import_images(db_path, seq.image_dir, mode,
                            image_names=[v.name for v in seq.views])
     db = pycolmap.Database.open(db_path)
     try:
@@ -437,7 +438,9 @@ def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_f
     # robust extents along the box axes: stray points (a hand, the background) must not inflate the box
     coords = (cur - center) @ R
     lo, hi = np.percentile(coords, trim, axis=0), np.percentile(coords, 100 - trim, axis=0)
-    ext, center = hi - lo, center + R @ ((lo + hi) / 2)
+    mid = (lo + hi) / 2
+    center, coords, lo, hi = center + R @ mid, coords - mid, lo - mid, hi - mid
+    ext = hi - lo
     if ext.min() <= 1e-6 * max(ext.max(), 1e-12):
         raise DatasetError(f"degenerate box fit: the object's points span a flat box {ext}")
     stats["fitted_size"] = ext.tolist()
@@ -447,10 +450,20 @@ def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_f
         order = np.argsort(ext)  # fitted axes from shortest to longest
         matched = np.empty(3)
         matched[order] = known
+        s = 1.0
         if scale_free:
             s = float(np.median(matched / ext))
             stats["scale"] = s
             ext, center = ext * s, center * s
+        # an axis shorter than the true box (only some faces carry points): keep the box flush with
+        # the cloud's denser end, where a face lies, and let it extend away from it
+        c = coords * s
+        lo_s, hi_s = lo * s, hi * s
+        for k in np.flatnonzero(matched > ext):
+            near = 0.1 * matched[k]
+            at_lo, at_hi = np.sum(c[:, k] < lo_s[k] + near), np.sum(c[:, k] > hi_s[k] - near)
+            shift = (matched[k] - ext[k]) / 2 * (1 if at_lo >= at_hi else -1)
+            center = center + shift * R[:, k]
         rel = (ext - matched) / matched
         stats.update(known_size=matched.tolist(), size_error=(ext - matched).tolist(),
                      relative_size_error=rel.tolist(), mean_abs_relative_size_error=float(np.abs(rel).mean()))
@@ -572,7 +585,9 @@ def build(seq: Sequence, *, feature: str = "ORB", n_features: int = 4000, normal
         pts, corners, cams = xyz, known_corners, centers
     else:
         fit = fit_box(xyz, known, scale_free=not registered)
-        keep = fit.keep
+        # registered: every point triangulated with the known poses is kept (the object need not be a
+        # box, e.g. Middlebury's temple); unregistered: only the object's cluster moves with it
+        keep = np.ones(len(xyz), bool) if registered else fit.keep
         if registered and world_is_object:
             pts, corners, cams = xyz, fit.corners, centers
         else:  # object frame = box frame

@@ -27,7 +27,7 @@ from alcn_cv import io
 from alcn_cv.data.manifest import write_json
 from alcn_cv.errors import DatasetError, InputError
 from pose import model as part_model
-from pose.model import BOX_EDGES, PartModel
+from pose.model import BOX_EDGES
 from pose.parts import FeaturePartDetector
 from pose.solver import PoseEstimate, PoseSolver, PoseTracker, project
 

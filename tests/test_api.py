@@ -156,3 +156,52 @@ def test_import_does_not_load_torch():
 
     code = "import sys, alcn_cv; alcn_cv.create('none'); assert 'torch' not in sys.modules, 'torch imported'"
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.fixture(scope="module")
+def random_head_weights(tmp_path_factory):
+    """A weight file whose maps vary over the image, and its ONNX export beside it."""
+    import torch
+
+    from alcn_cv.nets import Normalizer
+    from alcn_cv.train.export import export_onnx
+    from alcn_cv.weight_file import save_normalizer_file
+
+    torch.manual_seed(3)
+    net = Normalizer(output_scale=2.0)
+    folder = tmp_path_factory.mktemp("weights")
+    meta = {"config": net.config, "sigmas": list(alcn_cv.gaussian_sigmas()), "working_scale": 0.5,
+            "output_range": [-1.0, 1.0], "trained": False}
+    path = save_normalizer_file(folder / "random.npz", net.state_arrays(), meta)
+    export_onnx(path.with_suffix(".onnx"), path)
+    return path
+
+
+def test_alcn_opencv_backend_agrees(random_head_weights, frames):
+    gray, _ = frames
+    fast = alcn_cv.createALCN(weights=random_head_weights)
+    opencv = alcn_cv.createALCN(weights=random_head_weights, backend="opencv")
+    assert np.ptp(fast.weight_maps(gray), axis=(1, 2)).max() > 1e-3  # maps really vary
+    np.testing.assert_allclose(opencv.normalize(gray), fast.normalize(gray), atol=1e-4)
+    np.testing.assert_allclose(opencv.weight_grid(gray), fast.weight_grid(gray), atol=1e-4)
+    with pytest.raises(InputError, match="grid_stride"):
+        alcn_cv.createALCN(weights=random_head_weights, backend="opencv", grid_stride=8)
+
+
+def test_alcn_opencv_backend_runs_without_torch(random_head_weights):
+    import subprocess
+    import sys
+
+    code = f"""
+import sys
+class Block:
+    def find_spec(self, name, path=None, target=None):
+        if name == "torch" or name.startswith("torch.") or name == "kornia" or name.startswith("kornia."):
+            raise ImportError("torch is blocked")
+sys.meta_path.insert(0, Block())
+import numpy as np, alcn_cv
+alcn = alcn_cv.createALCN(weights={str(random_head_weights)!r}, backend="opencv")
+out = alcn.apply((np.random.rand(48, 64) * 255).astype(np.uint8))
+assert out.shape == (48, 64) and out.dtype == np.uint8 and "torch" not in sys.modules
+"""
+    subprocess.run([sys.executable, "-c", code], check=True)

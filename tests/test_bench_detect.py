@@ -101,7 +101,7 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     real_create = D._create_normalization
     monkeypatch.setattr(D, "_create_normalization", lambda m, p: broken() if m == "he" else real_create(m, p))
     settings = D.DetectSettings(methods=["none", "dog", "he"], real_images=[1], policies=["raw", "local"],
-                                positives_per_object=8, epochs=1, batch_size=32, threads=1)
+                                positives_per_object=8, epochs=1, batch_size=32, threads=1, tune=True)
     result = D.main(small_data, out, settings, progress=False)
     assert (out / "detect.md").is_file() and (out / "detect.json").is_file()
     assert not (out / "detect.partial.json").exists()

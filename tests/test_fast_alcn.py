@@ -9,7 +9,7 @@ import torch
 
 import alcn_cv
 from alcn_cv import InputError
-from alcn_cv.filters.gaussian_mixture import alcn_filter, alcn_filter_pyramid, pyramid_plan
+from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, alcn_filter_pyramid, pyramid_plan
 from alcn_cv.nets import Normalizer
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
@@ -45,11 +45,12 @@ def _alcn(weights, **params):
 
 def test_pyramid_plan_keeps_every_sigma():
     for level, residual in pyramid_plan(FULL_RES_SIGMAS):
-        assert residual >= 1.0 or level == 0
+        assert residual >= PYRAMID_MIN_SIGMA or level == 0
     # residual^2 * 4^L plus the variance of L pyrDown + L pyrUp steps gives back sigma^2
     for sigma, (level, residual) in zip(FULL_RES_SIGMAS, pyramid_plan(FULL_RES_SIGMAS)):
         np.testing.assert_allclose(residual**2 * 4**level + 2 * (4**level - 1) / 3, sigma**2)
-    assert [lv for lv, _ in pyramid_plan(FULL_RES_SIGMAS)] == [0, 0, 1, 1, 1, 2, 2, 2, 2, 2]
+    assert [lv for lv, _ in pyramid_plan(FULL_RES_SIGMAS)] == [0, 1, 1, 1, 2, 2, 2, 2, 3, 3]
+    assert [lv for lv, _ in pyramid_plan(FULL_RES_SIGMAS, min_sigma=1.0)] == [0, 0, 1, 1, 1, 2, 2, 2, 2, 2]
     assert all(lv == 0 for lv, _ in pyramid_plan(FULL_RES_SIGMAS, max_level=0))
     with pytest.raises(InputError):
         pyramid_plan(FULL_RES_SIGMAS, min_sigma=0)
@@ -64,7 +65,7 @@ def test_pyramid_keeps_constants():
 def test_pyramid_eq1_error_bound(image):
     dog = np.array([1, 0, -1, 0, 0, 0, 0, 0, 0, 0], np.float64)
     ones = np.ones(10)
-    for weights, max_bound, mean_bound in [(dog, 1.5e-3, 2e-4), (ones, 5e-3, 1.1e-3)]:
+    for weights, max_bound, mean_bound in [(dog, 1.5e-3, 2e-4), (ones, 9.5e-3, 2e-3)]:
         exact = alcn_filter(image, weights, FULL_RES_SIGMAS)
         diff = np.abs(alcn_filter_pyramid(image, weights, FULL_RES_SIGMAS) - exact)
         assert diff.max() <= max_bound and diff.mean() <= mean_bound, (diff.max(), diff.mean())
@@ -77,7 +78,7 @@ def test_pyramid_eq3_error_bound(image):
     exact = alcn_filter(image, maps, FULL_RES_SIGMAS)
     diff = np.abs(alcn_filter_pyramid(image, maps, FULL_RES_SIGMAS) - exact)
     assert exact.std() > 0.1
-    assert diff.max() <= 0.015 and diff.mean() <= 2.1e-3, (diff.max(), diff.mean())
+    assert diff.max() <= 0.042 and diff.mean() <= 6e-3, (diff.max(), diff.mean())
 
 
 def test_coarse_grid_is_the_fine_grid_subsampled():
@@ -103,7 +104,7 @@ def test_coarse_grid_is_the_fine_grid_subsampled():
 @pytest.mark.parametrize(
     "params, max_bound, mean_bound",
     [
-        ({"mixture": "pyramid"}, 0.032, 8e-4),
+        ({"mixture": "pyramid"}, 0.03, 1.4e-3),
         ({"grid_stride": 16}, 0.11, 0.022),
         ({"grid_stride": 16, "mixture": "pyramid"}, 0.12, 0.022),
     ],

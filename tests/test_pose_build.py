@@ -22,7 +22,8 @@ def _box_surface(rng, size=(140.0, 95.0, 55.0), n=600):
     p[face == 3, 1] = 0
     p[face == 4, 1] = size[1]
     plane = np.c_[rng.uniform(-400, 500, (700, 2)), np.zeros(700)]
-    plane = plane[~((plane[:, 0] > -5) & (plane[:, 0] < size[0] + 5) & (plane[:, 1] > -5) & (plane[:, 1] < size[1] + 5))]
+    under = (plane[:, 0] > -5) & (plane[:, 0] < size[0] + 5) & (plane[:, 1] > -5) & (plane[:, 1] < size[1] + 5)
+    plane = plane[~under]
     far = rng.uniform(-2000, 2000, (8, 3))
     return np.vstack([p, plane, far])
 

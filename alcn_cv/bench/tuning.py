@@ -13,8 +13,17 @@ applied to the training windows (nothing from the test set is used):
    references (cosine similarity): a query's own unrelit window is excluded, so the score
    rewards settings under which *other* windows of the same class stay closest.
 
-It is quick (no network is trained), deterministic for a seed, and agrees with the detection
-benchmark on which settings fail (e.g. a too small surround for DoG).
+The detection benchmark also asks for localization (IoU 0.8 with 36-pixel boxes leaves about
+4 pixels), so every object window also gives a *shifted* copy, 6 to 10 pixels off centre,
+labelled background (:func:`shifted_negatives`), meant to penalize settings that keep only
+coarse structure (large sigmas).
+
+It is quick (no network is trained) and deterministic for a seed. It is only a proxy, and
+on the data engine's default benchmark it misled: it preferred coarse settings (DoG 1.5/12
+with a wider grid, then 2/5 within the grid below; SLCN and DLCN at the largest sigma), and
+DoG 0.5/1.5 scored 0.04-0.16 higher in mean AUC than those, for 1 and 10 real images and
+both input policies. The benchmark therefore runs it only on request (``alcn bench detect
+--tune``).
 """
 
 from __future__ import annotations
@@ -32,16 +41,19 @@ __all__ = ["GRIDS", "centre_windows", "relight", "standardize_windows", "tune", 
 
 logger = logging.getLogger(__name__)
 
-#: The searched settings of each method.
+#: The searched settings of each method. Kernels stay within the context that the benchmark's
+#: 64x64 training windows give around the detector's 32x32 input (16 pixels; a Gaussian reaches
+#: 3 sigma): a larger kernel sees reflected window borders at training time and the real
+#: surroundings at test time, which the window-level score cannot see but the detector pays for.
 GRIDS: dict[str, list[dict[str, float]]] = {
     "dog": [
         {"sigma1": s1, "sigma2": s2}
         for s1 in (0.5, 1.0, 1.5, 2.0)
-        for s2 in (1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0)
+        for s2 in (1.5, 2.0, 3.0, 4.0, 5.0)
         if s2 > s1
     ],
-    "slcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0)],
-    "dlcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0)],
+    "slcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)],
+    "dlcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)],
 }
 
 CROP = 32
@@ -94,6 +106,30 @@ def relight(windows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return (np.rint(np.clip(out, 0, 1) * 255) / 255).astype(np.float32)
 
 
+def shifted_negatives(windows: np.ndarray, labels: np.ndarray, rng: np.random.Generator,
+                      shift: tuple[int, int] = (6, 10)) -> tuple[np.ndarray, np.ndarray]:
+    """Object windows moved off centre, as background: the localization negatives of the search.
+
+    Args:
+        windows: ``(n, S, S)`` windows (``S >= 32 + 2 * shift[1]`` keeps the shifted 32x32
+            centre inside the window; borders wrap otherwise).
+        labels: ``(n,)``, 0 = background.
+        rng: random generator.
+        shift: the larger of the x and y offsets is drawn in this range (pixels).
+
+    Returns:
+        ``(windows, labels)`` with every object window appended once, shifted, labelled 0.
+    """
+    objects = windows[labels > 0]
+    moved = np.empty_like(objects)
+    for k, w in enumerate(objects):
+        size = int(rng.integers(shift[0], shift[1] + 1))
+        big, small = size * int(rng.choice([-1, 1])), int(rng.integers(-size, size + 1))
+        dy, dx = (big, small) if rng.random() < 0.5 else (small, big)
+        moved[k] = np.roll(w, (dy, dx), axis=(0, 1))
+    return np.concatenate([windows, moved]), np.concatenate([labels, np.zeros(len(moved), labels.dtype)])
+
+
 def _score(method: str, params: dict[str, Any], references: np.ndarray, queries: np.ndarray, labels: np.ndarray) -> float:
     norm = create(method, **params)
 
@@ -133,6 +169,7 @@ def tune(
         windows = windows.astype(np.float32) / np.float32(255)
     if windows.ndim != 3 or windows.shape[1] < CROP or windows.shape[2] < CROP or len(windows) != len(labels):
         raise InputError(f"windows must be (n, S>={CROP}, S>={CROP}) with one label each, got {windows.shape}")
+    windows, labels = shifted_negatives(windows, np.asarray(labels), rng)
     queries = relight(windows, rng)
     trials = []
     for params in grid:

@@ -31,7 +31,7 @@ __all__ = ["ALCN", "createALCN"]
 
 logger = logging.getLogger(__name__)
 
-BACKENDS = ("fast", "torch")
+BACKENDS = ("fast", "torch", "opencv")
 MIXTURES = ("exact", "pyramid")
 #: ``mixture="pyramid"`` samples the maps exactly this many times per grid cell (at least).
 MAP_STEP_PER_CELL = 4
@@ -54,8 +54,11 @@ class ALCN(Normalization):
             sees (its 48x48 window and sigmas are in working-scale pixels). Default: the
             weight file's ``working_scale`` (0.5 for the shipped file: a 640x480 frame is
             seen at 320x240, where a 48-pixel window spans 15% of the width).
-        backend: ``"fast"`` (Normalizer in torch on the CPU, Gaussian mixture in OpenCV) or
-            ``"torch"`` (everything in torch/kornia, on ``device``).
+        backend: ``"fast"`` (Normalizer in torch on the CPU, Gaussian mixture in OpenCV),
+            ``"torch"`` (everything in torch/kornia, on ``device``), or ``"opencv"`` (no torch at
+            all: the Normalizer exported to ONNX -- the ``.onnx`` file beside the weight file, see
+            ``alcn export`` -- run by ``cv2.dnn``, the mixture in OpenCV; ``grid_stride`` at the
+            network's stride).
         device: torch device for ``backend="torch"`` (``"cpu"`` or ``"cuda"``).
         grid_stride: spacing, in working-scale pixels, of the windows the Normalizer is
             evaluated on (a multiple of the network's stride); the weight maps are interpolated
@@ -65,7 +68,7 @@ class ALCN(Normalization):
         mixture: ``"exact"`` (default): Eq. 3 at the input resolution; ``"pyramid"`` (fast path
             only): the blurs of sigma >= 2 pixels on a Gaussian pyramid and the maps sampled
             directly from the grid at each level
-            (:func:`alcn_cv.filters.gaussian_mixture.pyramid_mixture`), about 5 times cheaper.
+            (:func:`alcn_cv.filters.gaussian_mixture.pyramid_mixture`), 5 to 10 times cheaper.
         threads: torch's intra-op threads while the Normalizer runs (restored after); default:
             torch's setting. 1 is the fastest for the lite Normalizer and on a loaded machine,
             where the threads of small convolutions wait for each other.
@@ -95,7 +98,7 @@ class ALCN(Normalization):
         if mixture not in MIXTURES:
             raise InputError(f"unknown mixture {mixture!r}; choose one of {', '.join(MIXTURES)}")
         if mixture == "pyramid" and backend == "torch":
-            raise InputError("mixture='pyramid' runs in OpenCV: use it with backend='fast'")
+            raise InputError("mixture='pyramid' runs in OpenCV: use it with backend='fast' or 'opencv'")
         if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
             raise InputError(f"threads must be a positive integer or None, got {threads!r}")
         self.mixture = mixture
@@ -113,6 +116,9 @@ class ALCN(Normalization):
             logger.warning("%s holds UNTRAINED Normalizer weights (%s)", self.weights_path.name, meta.get("description", ""))
         self.backend = backend
         self.device = device
+        if backend == "opencv":
+            self._init_opencv(meta, grid_stride)
+            return
 
         import torch  # deferred: importing alcn_cv must not need torch
 
@@ -128,6 +134,16 @@ class ALCN(Normalization):
         if isinstance(self.grid_stride, bool) or not isinstance(self.grid_stride, int) or self.grid_stride < stride or self.grid_stride % stride:
             raise InputError(f"grid_stride must be a positive multiple of {stride} for this network, got {grid_stride!r}")
         _check_teacher(meta, self.weights_path)
+
+    def _init_opencv(self, meta: dict, grid_stride: int | None) -> None:
+        from alcn_cv.train.opencv_runtime import OpenCVNormalizer
+
+        self.net = OpenCVNormalizer(self.weights_path.with_suffix(".onnx"))
+        self.grid_stride = self.net.stride if grid_stride is None else grid_stride
+        if self.grid_stride != self.net.stride:
+            raise InputError(f"backend='opencv' evaluates the Normalizer at its stride {self.net.stride}, got grid_stride={grid_stride}")
+        if len(self.sigmas) != meta["config"].get("num_kernels", len(self.sigmas)):
+            raise InputError(f"weight file has {len(self.sigmas)} sigmas for {meta['config']['num_kernels']} outputs")
 
     @property
     def full_res_sigmas(self) -> tuple[float, ...]:
@@ -163,6 +179,8 @@ class ALCN(Normalization):
             ``(N, gh, gw)`` float32; point ``(i, j)`` is the prediction for the 48x48 window
             centred on working-scale pixel ``(g*i, g*j)``, ``g = grid_stride``.
         """
+        if self.backend == "opencv":
+            return self.net.dense_grid(self._working_image(gray))
         import torch
 
         small = torch.from_numpy(self._working_image(gray)).to(next(self.net.parameters()).device)
@@ -204,7 +222,10 @@ class ALCN(Normalization):
         Returns:
             ``(N, H, W)`` float32.
         """
-        maps = self._dense(gray).cpu().numpy()
+        if self.backend == "opencv":
+            maps = self.net.dense(self._working_image(gray))
+        else:
+            maps = self._dense(gray).cpu().numpy()
         h, w = gray.shape
         if maps.shape[1:] == (h, w):
             return maps
@@ -219,7 +240,7 @@ class ALCN(Normalization):
             return pyramid_mixture(
                 gray, self.full_res_sigmas, lambda *args: self._grid_maps_at(grid, ratios, *args), PYRAMID_MIN_SIGMA
             )
-        if self.backend == "fast":
+        if self.backend in ("fast", "opencv"):
             return alcn_filter(gray, self.weight_maps(gray), self.full_res_sigmas)
         import torch
         import torch.nn.functional as F
