@@ -134,8 +134,8 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
         for im in sorted(cm.images.values(), key=lambda i: i.name):
             K, dist = cm.cameras[im.camera_id].to_opencv()
             views.append(View(im.name, K, dist if np.any(dist) else None, im.R_w2c, im.t_w2c))
-        units = "mm" if (path / "cameras.txt").is_file() and "mm" in (path / "cameras.txt").read_text()[:500] else "m"
-        return Sequence(image_dir, views, units, info={"format": "colmap", "path": str(path)})
+        # A model without a "# Units:" line (e.g. written by COLMAP itself) is taken as metres.
+        return Sequence(image_dir, views, cm.units or "m", info={"format": "colmap", "path": str(path)})
     raise DatasetError(f"{path}: not a BOP scene (scene_camera.json), a COLMAP model (cameras.txt/.bin) "
                        "or a Middlebury set (*_par.txt)")
 

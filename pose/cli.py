@@ -99,7 +99,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     t.add_argument("--normalizer", default="none", help="normalizer applied first (default none)")
     t.add_argument("--overlay", help="write the overlay here (.mp4/.avi or a folder)")
     t.add_argument("--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant")
-    t.add_argument("--n-features", type=int, default=2000, help="keypoints per frame (default 2000)")
+    t.add_argument("--n-features", type=int, default=1000, help="keypoints per frame (default 1000)")
     t.add_argument("--min-inliers", type=int, default=12, help="fewer inliers: frame lost (default 12)")
     t.add_argument("--reprojection-error", type=float, default=4.0, help="inlier threshold, px (default 4)")
     t.set_defaults(func=_track)

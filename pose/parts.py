@@ -106,7 +106,7 @@ class FeaturePartDetector:
     """
 
     def __init__(self, model: PartModel, normalizer: str = "none", *, n_features: int = 2000,
-                 ratio: float = 0.8, search_radius: float = 40.0, min_guided: int = 20) -> None:
+                 ratio: float = 0.8, search_radius: float = 20.0, min_guided: int = 20) -> None:
         if len(model.points3d) < 4:
             raise InputError(f"the part model has {len(model.points3d)} 3D points; at least 4 are needed")
         self.model = model
@@ -165,13 +165,24 @@ class FeaturePartDetector:
         if len(front) < 2:
             return np.zeros((0, 2), np.int64)
         uv = cam[front, :2] / cam[front, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
-        d2 = ((pts2d[:, None, :] - uv[None].astype(np.float32)) ** 2).sum(-1)
-        mask = (d2 < self.search_radius**2).astype(np.uint8)
-        knn = cv2.BFMatcher(self.norm).knnMatch(desc, self.model.descriptors[front], k=2, mask=mask)
-        pairs = []
-        for m in knn:  # ratio test among the candidates near each keypoint; a lone candidate must be close
-            if len(m) == 2 and m[0].distance < self.ratio * m[1].distance:
-                pairs.append((m[0].queryIdx, front[m[0].trainIdx]))
-            elif len(m) == 1 and m[0].distance < self.max_lone_distance:
-                pairs.append((m[0].queryIdx, front[m[0].trainIdx]))
-        return np.array(pairs, np.int64).reshape(-1, 2)
+        from scipy.spatial import cKDTree
+
+        # candidate (keypoint, model point) pairs within the search radius, via a k-d tree
+        near = cKDTree(uv).query_ball_point(pts2d, self.search_radius)
+        kp = np.repeat(np.arange(len(near)), [len(c) for c in near])
+        if len(kp) == 0:
+            return np.zeros((0, 2), np.int64)
+        mp = front[np.concatenate([np.asarray(c, np.int64) for c in near])]
+        if self.norm == cv2.NORM_HAMMING:
+            dist = np.bitwise_count(desc[kp] ^ self.model.descriptors[mp]).sum(1).astype(np.float32)
+        else:
+            dist = np.linalg.norm(desc[kp].astype(np.float32) - self.model.descriptors[mp], axis=1)
+        order = np.lexsort((dist, kp))  # by keypoint, then distance
+        kp, mp, dist = kp[order], mp[order], dist[order]
+        first = np.r_[True, kp[1:] != kp[:-1]]
+        i1 = np.flatnonzero(first)
+        has2 = np.r_[i1[1:], len(kp)] - i1 > 1  # a second candidate exists
+        d2 = np.where(has2, dist[np.minimum(i1 + 1, len(kp) - 1)], np.inf)
+        # ratio test among the candidates near each keypoint; a lone candidate must be close
+        ok = np.where(has2, dist[i1] < self.ratio * d2, dist[i1] < self.max_lone_distance)
+        return np.stack([kp[i1][ok], mp[i1][ok]], 1).astype(np.int64)

@@ -153,7 +153,7 @@ def track(frames: Iterator[tuple[str, np.ndarray]], detector: FeaturePartDetecto
 
 def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.ndarray, *,
          normalizer: str = "none", overlay: str | Path | None = None, method: str = "usac_default",
-         n_features: int = 2000, min_inliers: int = 12, reprojection_error: float = 4.0,
+         n_features: int = 1000, min_inliers: int = 12, reprojection_error: float = 4.0,
          dist: np.ndarray | None = None) -> dict:
     """Track the part model ``model_path`` through ``source`` and write ``output`` (scene_gt JSON).
 

@@ -328,7 +328,7 @@ def generate(
                 seq = tmp / "train" / "000001"
                 cam = camera_from_opencv(cfg.K, None, cfg.width, cfg.height, camera_id=1)
                 images = [ColmapImage(f.im_id + 1, f.rgb_path.name, 1, f.R_w2c, f.t_w2c) for f in frames]
-                write_text_model(seq / "colmap", [cam], images)
+                write_text_model(seq / "colmap", [cam], images, units="mm")
                 sequences.append({"split": "train", "scene_id": 1, "kind": "train", "lighting": light})
             else:
                 sequences.append({"split": "test", "scene_id": k, "kind": SEQUENCE_KINDS[k - 1],
