@@ -1,4 +1,4 @@
-"""``alcn pose build|track|eval``: the 3D pose pipeline on the command line."""
+"""``alcn pose build|track|eval|train-corners``: the 3D pose pipeline on the command line."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ def _track(args: argparse.Namespace) -> int:
         K, dist = calibration.K, calibration.dist
     summary = track.main(args.model, args.input, args.output, K, normalizer=args.normalizer, overlay=args.overlay,
                          method=args.method, n_features=args.n_features, min_inliers=args.min_inliers,
-                         reprojection_error=args.reprojection_error, dist=dist)
+                         reprojection_error=args.reprojection_error, dist=dist, detector=args.detector)
     print(f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps -> {args.output}")
     return 0
 
@@ -49,14 +49,24 @@ def _eval(args: argparse.Namespace) -> int:
     if args.middlebury:
         evaluate.middlebury_main(args.middlebury, args.out, normalizers=args.normalizers, feature=args.feature)
     if args.data:
-        evaluate.main(args.data, args.out, normalizers=args.normalizers, feature=args.feature)
+        evaluate.main(args.data, args.out, normalizers=args.normalizers, feature=args.feature,
+                      detectors=args.detectors, corner_kw={"epochs": args.corner_epochs})
     if not (args.middlebury or args.data):
         raise ValueError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
     return 0
 
 
+def _train_corners(args: argparse.Namespace) -> int:
+    from pose import corners
+
+    path = corners.main(args.input, args.output, box_ply=args.box_ply, model=args.model, normalizer=args.normalizer,
+                        scale=args.scale, epochs=args.epochs, rounds=args.rounds, seed=args.seed)
+    print(f"corner detector ({args.normalizer}) -> {path}")
+    return 0
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``pose`` with ``build``, ``track`` and ``eval`` to the ``alcn`` command."""
+    """Add ``pose`` with ``build``, ``track``, ``eval`` and ``train-corners`` to the ``alcn`` command."""
     from pose.solver import METHODS
 
     p = subparsers.add_parser("pose", help="3D box pose: build a part model, track it, evaluate",
@@ -90,17 +100,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     t = sub.add_parser("track", help="pose of the box in every frame of a video or image folder",
                        description="Writes BOP scene_gt-style JSON (OUTPUT) and OUTPUT_info.json; with --overlay "
                        "a video (.mp4/.avi) or PNG folder with the box drawn.")
-    t.add_argument("model", help="part model (.npz) from `alcn pose build`")
+    t.add_argument("model", help="part model (.npz) from `alcn pose build`, or with --detector corners a corner "
+                   "detector (.onnx) from `alcn pose train-corners`")
     t.add_argument("input", help="video file or image folder")
     t.add_argument("output", help="poses (.json)")
     cam = t.add_mutually_exclusive_group(required=True)
     cam.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics")
     cam.add_argument("--camera", help="OpenCV FileStorage YAML from `alcn calib camera`")
-    t.add_argument("--normalizer", default="none", help="normalizer applied first (default none)")
+    t.add_argument("--detector", default="features", choices=["features", "corners"],
+                   help="features: OpenCV features matched to the part model; corners: the corner CNN (cv2.dnn)")
+    t.add_argument("--normalizer", help="normalizer applied first (default none; a corner detector's own)")
     t.add_argument("--overlay", help="write the overlay here (.mp4/.avi or a folder)")
     t.add_argument("--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant")
     t.add_argument("--n-features", type=int, default=1000, help="keypoints per frame (default 1000)")
-    t.add_argument("--min-inliers", type=int, default=12, help="fewer inliers: frame lost (default 12)")
+    t.add_argument("--min-inliers", type=int, help="fewer inliers: frame lost (default 12; 5 with corners)")
     t.add_argument("--reprojection-error", type=float, default=4.0, help="inlier threshold, px (default 4)")
     t.set_defaults(func=_track)
 
@@ -110,5 +123,24 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument("--middlebury", nargs="+", help="Middlebury sets (e.g. ../shared/data/middlebury/templeSparseRing)")
     e.add_argument("--normalizers", nargs="+", default=["none", "dog", "alcn"], help="rows of the table")
     e.add_argument("--feature", default="ORB", choices=["ORB", "SIFT", "AKAZE"])
+    e.add_argument("--detectors", nargs="+", default=["features"], choices=["features", "corners"],
+                   help="part detectors, each giving rows (corners: trained on the training sequence first)")
+    e.add_argument("--corner-epochs", type=int, default=4, help="corner CNN epochs per round (default 4)")
     e.add_argument("--out", type=Path, required=True, help="report folder")
     e.set_defaults(func=_eval)
+
+    c = sub.add_parser("train-corners", help="train the corner CNN on a registered sequence, export ONNX",
+                       description="Windows around the box corners projected by the known poses (plus the data "
+                       "engine's synthetic augmentation and hard negatives) after the normalizer; the network is "
+                       "written as ONNX for `alcn pose track --detector corners` (cv2.dnn, no torch).")
+    c.add_argument("input", help="registered training sequence (BOP scene folder, COLMAP model, Middlebury set)")
+    c.add_argument("output", help="corner detector to write (.onnx)")
+    box = c.add_mutually_exclusive_group(required=True)
+    box.add_argument("--box-ply", help="cuboid .ply of the box in the object frame (mm; BOP models/obj_000001.ply)")
+    box.add_argument("--model", help="part model (.npz) whose box corners to use")
+    c.add_argument("--normalizer", default="none", help="normalizer applied first (default none)")
+    c.add_argument("--scale", type=float, default=0.5, help="downscaling of the frames (default 0.5)")
+    c.add_argument("--epochs", type=int, default=4, help="epochs per round (default 4)")
+    c.add_argument("--rounds", type=int, default=2, help="training rounds with hard-negative mining (default 2)")
+    c.add_argument("--seed", type=int, default=0)
+    c.set_defaults(func=_train_corners)

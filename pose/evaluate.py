@@ -28,12 +28,13 @@ import cv2
 import numpy as np
 
 from alcn_cv.data.manifest import write_json
-from alcn_cv.errors import DatasetError
+from alcn_cv.errors import DatasetError, InputError
 from pose import build as build_mod
 from pose.model import PartModel, read_box_corners, unit_scale
 from pose.model import save as save_model
 from pose.parts import FeaturePartDetector
 from pose.solver import PoseSolver, PoseTracker, project
+from pose.track import MIN_INLIERS
 
 logger = logging.getLogger(__name__)
 
@@ -107,26 +108,26 @@ def summarize(scores: list[PoseScore], diameter: float) -> dict[str, float]:
 # --------------------------------------------------------------------------------------------
 
 
-def evaluate_sequence(model: PartModel, scene_dir: Path, normalizer: str, obj_id: int, vertices: np.ndarray,
-                      feature_kw: dict[str, Any]) -> tuple[list[PoseScore], float]:
-    """Track ``model`` through a BOP test scene and score every frame; returns scores and fps."""
+def evaluate_sequence(detector, scene_dir: Path, obj_id: int, vertices: np.ndarray, units: str,
+                      min_inliers: int = 12) -> tuple[list[PoseScore], float]:
+    """Track with ``detector`` (a part detector of :mod:`pose.parts` or :mod:`pose.corners`)
+    through a BOP test scene and score every frame; returns scores and fps."""
     from alcn_cv import io
     from alcn_cv.formats import bop
 
     scene = bop.load_scene(scene_dir)
-    det = FeaturePartDetector(model, normalizer, **feature_kw)
     tracker = None
     scores, t_total = [], 0.0
     for fr in scene.frames:
         if tracker is None:
-            tracker = PoseTracker(PoseSolver(fr.K))
+            tracker = PoseTracker(PoseSolver(fr.K, min_inliers=min_inliers))
         img = io.read_image(fr.rgb_path)
         t0 = time.perf_counter()
-        corr = det.detect(img, None if tracker.prior is None else (*tracker.prior, fr.K))
+        corr = detector.detect(img, None if tracker.prior is None else (*tracker.prior, fr.K))
         est = tracker.update(fr.im_id, corr.object_points, corr.image_points)
         t_total += time.perf_counter() - t0
         gt = fr.pose(obj_id)
-        scores.append(score(vertices, fr.K, model.units, (est.R, est.tvec) if est.ok else None, (gt.R, gt.t)))
+        scores.append(score(vertices, fr.K, units, (est.R, est.tvec) if est.ok else None, (gt.R, gt.t)))
     return scores, len(scene.frames) / max(t_total, 1e-9)
 
 
@@ -160,12 +161,16 @@ def markdown_table(table: dict[str, dict[str, float]], columns: list[str]) -> st
 
 def main(data_dir: str | Path, out_dir: str | Path, *,
          normalizers: list[str] | tuple[str, ...] = ("none", "dog", "alcn"),
-         feature: str = "ORB", obj_id: int = 1, n_features: int = 2000) -> dict[str, Any]:
+         feature: str = "ORB", obj_id: int = 1, n_features: int = 2000,
+         detectors: list[str] | tuple[str, ...] = ("features",), corner_kw: dict[str, Any] | None = None
+         ) -> dict[str, Any]:
     """Table-1-style evaluation on a pose data set (``train/000001``, ``test/0000NN``, ``models/``).
 
-    For each normalizer: a part model is built from the training sequence on normalized images,
-    then tracked through every test sequence. Writes ``table1.md``, ``table1.json``,
-    ``table1.png`` (and the models) into ``out_dir``.
+    For each detector (``"features"``: :class:`pose.parts.FeaturePartDetector`, ``"corners"``:
+    :class:`pose.corners.CornerDetector`) and normalizer: a part model is built, or the corner
+    detector trained (:func:`pose.corners.train_corners` with ``corner_kw``), from the training
+    sequence on normalized images, then tracked through every test sequence. Writes
+    ``table1.md``, ``table1.json``, ``table1.png`` (and the models) into ``out_dir``.
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -180,18 +185,34 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
     columns = [f"#{int(p.name)}" for p in tests]
     table: dict[str, dict[str, float]] = {}
     details: dict[str, Any] = {}
-    for name in normalizers:
-        seq = build_mod.load_sequence(train, obj_id=obj_id)
-        model, _ = build_mod.build(seq, feature=feature, normalizer=name, box_ply=model_ply, work_dir=out_dir)
-        save_model(model, out_dir / f"model_{name}.npz")
-        row = f"{name} / {feature.lower()} features"
-        table[row], details[row] = {}, {"model_points": len(model.points3d), "box_fit": model.box_fit, "sequences": {}}
-        for col, scene_dir in zip(columns, tests):
-            scores, fps = evaluate_sequence(model, scene_dir, name, obj_id, corners, {"n_features": n_features})
-            s = summarize(scores, diameter)
-            table[row][col] = s["proj2d"]
-            details[row]["sequences"][col] = {**s, "fps": fps, "frames": len(scores)}
-            logger.info("%s %s: %.1f%% correct (2D proj.), %.1f%% tracked", row, col, s["proj2d"], s["tracked"])
+    unknown = set(detectors) - {"features", "corners"}
+    if unknown:
+        raise InputError(f"unknown detectors {sorted(unknown)}; choose 'features' and/or 'corners'")
+    for det_name in detectors:
+        for name in normalizers:
+            if det_name == "features":
+                seq = build_mod.load_sequence(train, obj_id=obj_id)
+                model, _ = build_mod.build(seq, feature=feature, normalizer=name, box_ply=model_ply, work_dir=out_dir)
+                save_model(model, out_dir / f"model_{name}.npz")
+                det, units = FeaturePartDetector(model, name, n_features=n_features), model.units
+                row = f"{name} / {feature.lower()} features"
+                info = {"model_points": len(model.points3d), "box_fit": model.box_fit}
+            else:
+                from pose.corners import CornerDetector, train_corners
+
+                t0 = time.perf_counter()
+                net = train_corners(train, corners, out_dir / f"corners_{name}.onnx", normalizer=name, obj_id=obj_id,
+                                    progress=False, **(corner_kw or {}))
+                det, units = CornerDetector(net), "mm"  # the BOP model's units
+                row = f"{name} / corner CNN"
+                info = {"training_seconds": time.perf_counter() - t0, "detector": str(net)}
+            table[row], details[row] = {}, {**info, "sequences": {}}
+            for col, scene_dir in zip(columns, tests):
+                scores, fps = evaluate_sequence(det, scene_dir, obj_id, corners, units, MIN_INLIERS[det_name])
+                s = summarize(scores, diameter)
+                table[row][col] = s["proj2d"]
+                details[row]["sequences"][col] = {**s, "fps": fps, "frames": len(scores)}
+                logger.info("%s %s: %.1f%% correct (2D proj.), %.1f%% tracked", row, col, s["proj2d"], s["tracked"])
     md = ("# Pose under light changes (Table 1 style)\n\n"
           f"Data: `{data_dir}`; cells: % of frames with 2D projection error < {PROJ_PX:g} px "
           f"(ADD < {ADD_FRACTION:g} d and 5 cm / 5 deg in table1.json).\n\n" + markdown_table(table, columns))

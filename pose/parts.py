@@ -7,7 +7,7 @@ for Contrast Normalization Applied to Robust 3D Pose Estimation", BMVC 2017:
 * :class:`FeaturePartDetector` (classical): OpenCV keypoints and descriptors (ORB by default,
   SIFT or AKAZE on request) on the normalized image, matched to the descriptors of the part
   model's 3D points (brute force, Lowe's ratio test).
-* :class:`CornerPartDetector` (learned, :mod:`pose.learned`): a small CNN on normalized windows
+* :class:`pose.corners.CornerDetector` (learned): a small CNN on normalized windows
   that finds the box corners, run through ``cv2.dnn`` (ONNX), so tracking needs no torch.
 """
 

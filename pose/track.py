@@ -1,7 +1,9 @@
 """``alcn pose track``: the box's pose in every frame of a video or image folder.
 
-Each frame is normalized, its parts are detected (:mod:`pose.parts`) and the pose solved
-(:mod:`pose.solver`) with the previous frame's pose as prior. Output:
+Each frame is normalized, its parts are detected (``detector="features"``: :mod:`pose.parts`
+with a part model; ``detector="corners"``: the corner CNN of :mod:`pose.corners`, whose ONNX
+file replaces the part model) and the pose solved (:mod:`pose.solver`) with the previous
+frame's pose as prior. Output:
 
 * poses per frame as BOP ``scene_gt``-style JSON: ``{"<frame>": [{"obj_id": 1, "cam_R_m2c": [9 floats],
   "cam_t_m2c": [3 floats]}]}`` (the model's units; a lost frame has an empty list), plus a
@@ -18,6 +20,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import cv2
 import numpy as np
@@ -28,7 +31,7 @@ from alcn_cv.data.manifest import write_json
 from alcn_cv.errors import DatasetError, InputError
 from pose import model as part_model
 from pose.model import BOX_EDGES
-from pose.parts import FeaturePartDetector
+from pose.parts import Correspondences, FeaturePartDetector
 from pose.solver import PoseEstimate, PoseSolver, PoseTracker, project
 
 logger = logging.getLogger(__name__)
@@ -137,7 +140,16 @@ def pose_to_bop(est: PoseEstimate, obj_id: int = 1) -> list[dict]:
     return [{"obj_id": obj_id, "cam_R_m2c": est.R.ravel().tolist(), "cam_t_m2c": est.tvec.ravel().tolist()}]
 
 
-def track(frames: Iterator[tuple[str, np.ndarray]], detector: FeaturePartDetector, tracker: PoseTracker,
+class PartDetector(Protocol):
+    def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+               ) -> Correspondences: ...
+
+
+#: fewer inliers than this loses a frame, per detector (the corner detector has at most 7 parts)
+MIN_INLIERS = {"features": 12, "corners": 5}
+
+
+def track(frames: Iterator[tuple[str, np.ndarray]], detector: PartDetector, tracker: PoseTracker,
           total: int | None = None) -> Iterator[tuple[FrameResult, np.ndarray]]:
     """Track the model through ``frames``; yields each frame's result and the frame itself.
 
@@ -152,23 +164,44 @@ def track(frames: Iterator[tuple[str, np.ndarray]], detector: FeaturePartDetecto
 
 
 def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.ndarray, *,
-         normalizer: str = "none", overlay: str | Path | None = None, method: str = "usac_default",
-         n_features: int = 1000, min_inliers: int = 12, reprojection_error: float = 4.0,
-         dist: np.ndarray | None = None) -> dict:
-    """Track the part model ``model_path`` through ``source`` and write ``output`` (scene_gt JSON).
+         normalizer: str | None = None, overlay: str | Path | None = None, method: str = "usac_default",
+         n_features: int = 1000, min_inliers: int | None = None, reprojection_error: float = 4.0,
+         dist: np.ndarray | None = None, detector: str = "features") -> dict:
+    """Track the box through ``source`` and write ``output`` (scene_gt JSON).
+
+    Args:
+        model_path: ``detector="features"``: a part model (``.npz``, ``alcn pose build``);
+            ``detector="corners"``: a corner detector (``.onnx``, ``alcn pose train-corners``).
+        normalizer: the normalizer applied first (default ``"none"``; a corner detector uses the
+            one it was trained with, and another name is an error).
+        min_inliers: default :data:`MIN_INLIERS` of the detector.
 
     Returns:
         A summary dict: frames, tracked frames, fps, events, output paths.
     """
-    model = part_model.load(model_path)
-    detector = FeaturePartDetector(model, normalizer, n_features=n_features)
+    if detector == "features":
+        model = part_model.load(model_path)
+        normalizer = normalizer or "none"
+        det: PartDetector = FeaturePartDetector(model, normalizer, n_features=n_features)
+        corners, units = model.corners, model.units
+    elif detector == "corners":
+        from pose.corners import CornerDetector
+
+        det = CornerDetector(model_path)
+        if normalizer not in (None, det.normalizer_name):
+            raise InputError(f"{model_path} was trained after the normalizer {det.normalizer_name!r}, "
+                             f"not {normalizer!r}")
+        normalizer, corners, units = det.normalizer_name, det.corners, det.units
+    else:
+        raise InputError(f"unknown detector {detector!r}; choose 'features' or 'corners'")
+    min_inliers = MIN_INLIERS[detector] if min_inliers is None else min_inliers
     tracker = PoseTracker(PoseSolver(K, dist, method=method, min_inliers=min_inliers,
                                      reprojection_error=reprojection_error))
     writer = OverlayWriter(overlay) if overlay is not None else None
     scene_gt, info = {}, {}
     times = []
     try:
-        for res, frame in track(iter_frames(source), detector, tracker, count_frames(source)):
+        for res, frame in track(iter_frames(source), det, tracker, count_frames(source)):
             scene_gt[res.name] = pose_to_bop(res.estimate)
             info[res.name] = {"inliers": len(res.estimate.inliers), "matches": res.estimate.num_matches,
                               "keypoints": res.keypoints, "seconds": res.seconds,
@@ -178,7 +211,7 @@ def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.n
             if writer is not None:
                 vis = frame.copy()
                 if res.estimate.ok:
-                    draw_box(vis, model.corners, res.estimate.rvec, res.estimate.tvec, K, color_for(normalizer),
+                    draw_box(vis, corners, res.estimate.rvec, res.estimate.tvec, K, color_for(normalizer),
                              dist=dist)
                 writer.write(res.name, vis)
     finally:
@@ -189,7 +222,7 @@ def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.n
     write_json(output, scene_gt)
     tracked = sum(bool(v) for v in scene_gt.values())
     summary = {"frames": len(scene_gt), "tracked": tracked, "fps": len(times) / max(sum(times), 1e-9),
-               "normalizer": normalizer, "model": str(model_path), "units": model.units,
+               "normalizer": normalizer, "detector": detector, "model": str(model_path), "units": units,
                "events": [{"frame": f, "event": e, "reason": r} for f, e, r in tracker.events]}
     write_json(output.with_name(output.stem + "_info.json"), {"summary": summary, "frames": info})
     logger.info("tracked %d of %d frames at %.1f fps -> %s", tracked, len(scene_gt), summary["fps"], output)

@@ -19,7 +19,7 @@ def test_single_process_helpers():
 
 
 def test_two_cpu_processes_hold_equal_weights(tmp_path):
-    train_dir = phos.generate(tmp_path / "train", 64, 0, n_objects=2, lighting="ambient", progress=False)
+    train_dir = phos.generate(tmp_path / "train", 64, 0, n_objects=2, lighting="ambient,bright", progress=False)
     val_dir = phos.generate(tmp_path / "val", 16, 1, n_objects=2, lighting="side", progress=False)
     script = tmp_path / "run.py"
     script.write_text(textwrap.dedent(f"""

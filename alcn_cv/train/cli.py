@@ -10,13 +10,10 @@ torch-free OpenCV runtime. torch is imported only when a command runs.
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 from pathlib import Path
 
 __all__ = ["add_parser"]
-
-logger = logging.getLogger(__name__)
 
 # Command-line flags that override configuration keys: flag -> key.
 _FLAGS = {

@@ -31,7 +31,8 @@ effective configuration as TOML, a complete, commented-free starting point.
     ``channels`` (list of 2 ints), ``hidden`` (int), ``activation`` (``"tanh"``, the paper's, or
     ``"relu"``): the Normalizer; the paper's is ``[20, 50]``, 1024 (the ``paper`` preset), the
     default ``[10, 20]``, 256 is five times cheaper (it predicts 10 numbers per window), which
-    is what lets it train in 30 minutes on 2 shared CPU cores and run faster in ``apply``. ``output_scale`` (float): fixed factor on its outputs.
+    is what lets it train in 30 minutes on 2 shared CPU cores and run faster in ``apply``.
+    ``output_scale`` (float): fixed factor on its outputs.
     ``init`` (``"dog"`` or ``"random"``): start the Normalizer at the DoG below (the last
     layer's weights at zero, its bias the DoG) or with every window's weights near zero.
     ``dog`` (list of 2 floats): sigmas (pixels, in the basis) of the DoG ``G_a - G_b`` used
@@ -95,7 +96,8 @@ class DataConfig:
     seed: int = -1
     n_objects: int = 100
     object_seed: int = 0
-    train_lighting: list[str] = field(default_factory=lambda: ["ambient", "bright", "shadow", "point", "colour", "mixed"])
+    train_lighting: list[str] = field(
+        default_factory=lambda: ["ambient", "bright", "shadow", "point", "colour", "mixed"])
     val_lighting: list[str] = field(default_factory=lambda: ["dark", "side", "spot"])
     background_fraction: float = 0.35
     gain_jitter: list[float] = field(default_factory=lambda: [0.5, 2.0])
@@ -216,14 +218,16 @@ def _coerce(key: str, value: Any, default: Any) -> Any:
     elif isinstance(default, int):
         ok = isinstance(value, int) and not isinstance(value, bool)
     elif isinstance(default, list):
-        ok = isinstance(value, list) and len(value) == len(default) if key not in _FREE_LISTS else isinstance(value, list)
+        free = key in _FREE_LISTS
+        ok = isinstance(value, list) and (free or len(value) == len(default))
         if ok and default:
             value = [_coerce(f"{key}[{i}]" if isinstance(default[0], list) else key, v, default[0])
                      for i, v in enumerate(value)]
     else:
         ok = isinstance(value, type(default))
     if not ok:
-        what = f"a list of {len(default)}" if isinstance(default, list) and key not in _FREE_LISTS else _type_name(type(default))
+        fixed_list = isinstance(default, list) and key not in _FREE_LISTS
+        what = f"a list of {len(default)}" if fixed_list else _type_name(type(default))
         raise InputError(f"config key {key!r} must be {what}, got {value!r}")
     return value
 

@@ -31,14 +31,13 @@ from torch import nn
 
 from alcn_cv.errors import InputError
 from alcn_cv.nets.normalizer import WINDOW, Normalizer
+from alcn_cv.train.opencv_runtime import DEFAULT_ONNX
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx", "main"]
 
 logger = logging.getLogger(__name__)
 
-#: The ONNX file shipped beside the default weights.
-DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
 #: ONNX opset of the export (read by OpenCV 4.x and 5.x).
 OPSET = 17
 METADATA_KEY = "alcn_cv"

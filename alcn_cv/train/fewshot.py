@@ -97,7 +97,8 @@ def make_fewshot_data(setup: FewShotSetup) -> tuple[np.ndarray, np.ndarray, Phos
 
 @torch.no_grad()
 def _apply(method: Method, windows: np.ndarray) -> np.ndarray:
-    out = [method(torch.from_numpy(windows[i : i + 512]).unsqueeze(1).float() / 255.0) for i in range(0, len(windows), 512)]
+    out = [method(torch.from_numpy(windows[i : i + 512]).unsqueeze(1).float() / 255.0)
+           for i in range(0, len(windows), 512)]
     return torch.cat(out)[:, 0].numpy().astype(np.float32)
 
 

@@ -14,7 +14,6 @@ bilinearly with the grid points on the pixels ``4i`` (``align_corners=True``).
 
 from __future__ import annotations
 
-import logging
 import math
 from pathlib import Path
 
@@ -24,8 +23,6 @@ import numpy as np
 from alcn_cv.errors import InputError, WeightFileError
 
 __all__ = ["DEFAULT_ONNX", "OpenCVNormalizer"]
-
-logger = logging.getLogger(__name__)
 
 #: The ONNX model shipped beside the default weight file (the shipped weights, exported).
 DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"

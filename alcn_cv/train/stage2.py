@@ -42,14 +42,16 @@ class NonFiniteLossError(RuntimeError):
 
 def _check_windows(windows: object, labels: object, num_classes: int, what: str) -> tuple[torch.Tensor, torch.Tensor]:
     if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.shape[1:] != (INPUT, INPUT):
-        raise InputError(f"{what} windows must be an (n, {INPUT}, {INPUT}) array, got {getattr(windows, 'shape', None)}")
+        shape = getattr(windows, "shape", None)
+        raise InputError(f"{what} windows must be an (n, {INPUT}, {INPUT}) array, got {shape}")
     if windows.dtype != np.float32:
         raise InputError(f"{what} windows must be float32, got {windows.dtype}")
     if len(windows) == 0:
         raise InputError(f"{what} windows are empty")
     if not np.isfinite(windows).all():
         raise InputError(f"{what} windows contain NaN or inf")
-    if not isinstance(labels, np.ndarray) or labels.shape != (len(windows),) or not np.issubdtype(labels.dtype, np.integer):
+    if (not isinstance(labels, np.ndarray) or labels.shape != (len(windows),)
+            or not np.issubdtype(labels.dtype, np.integer)):
         raise InputError(f"{what} labels must be an integer array of shape ({len(windows)},), got "
                          f"{getattr(labels, 'dtype', None)} {getattr(labels, 'shape', None)}")
     if labels.min() < 0 or labels.max() >= num_classes:

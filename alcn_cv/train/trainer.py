@@ -467,7 +467,9 @@ def _plot(history: list[dict[str, Any]], path: Path) -> None:
 
 
 @torch.no_grad()
-def measure_output_range(model: JointModel, windows: np.ndarray, percentiles: tuple[float, float] = (0.5, 99.5)) -> list[float]:
+def measure_output_range(
+    model: JointModel, windows: np.ndarray, percentiles: tuple[float, float] = (0.5, 99.5)
+) -> list[float]:
     """Range of raw mixture responses (before the detector input policy) on training windows."""
     values = []
     for i in range(0, len(windows), 512):
@@ -492,7 +494,7 @@ def _export(model: JointModel, cfg: TrainConfig, train_set: PhosBatch, result: T
         "output_range": measure_output_range(model, sample),
         "trained": True,
         "detector_input": cfg.model.detector_input,
-        "description": f"trained jointly with a detector (Eq. 2) by `alcn train`, seed {cfg.seed}, "
+        "description": f"trained with a detector by `alcn train` (objective {cfg.optim.objective!r}), seed {cfg.seed}, "
                        f"{len(train_set)} windows of {train_set.n_objects} objects, {seconds / 60:.1f} min",
         "training": {"config": cfg.to_dict(), "versions": _versions(), "val_accuracy": result.val_accuracy,
                      "val_by_family": result.val_by_family, "fewshot": result.fewshot, "seconds": round(seconds, 1),
@@ -503,7 +505,8 @@ def _export(model: JointModel, cfg: TrainConfig, train_set: PhosBatch, result: T
 
 def _machine() -> str:
     load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
-    return (f"{platform.machine()} {platform.system()}, {os.cpu_count()} cores, torch threads {torch.get_num_threads()}, "
+    return (f"{platform.machine()} {platform.system()}, {os.cpu_count()} cores, "
+            f"torch threads {torch.get_num_threads()}, "
             f"load average {load[0]:.1f}/{load[1]:.1f}/{load[2]:.1f} (1/5/15 min)")
 
 
@@ -520,7 +523,8 @@ def _summary(cfg: TrainConfig, result: TrainResult, machine_start: str) -> str:
              "|---|---|---|" + "---|" * len(result.val_by_family)]
     for h in result.history:
         lines.append(f"| {h['epoch']} | {h['train_acc']:.4f} | {h['val_acc']:.4f} | "
-                     + " | ".join(f"{h['val_by_family'].get(f, float('nan')):.4f}" for f in result.val_by_family) + " |")
+                     + " | ".join(f"{h['val_by_family'].get(f, float('nan')):.4f}" for f in result.val_by_family)
+                     + " |")
     if result.fewshot:
         families = list(next(iter(result.fewshot.values()))["by_family"])
         lines += ["", "## Few-shot validation (stage 2: new objects, 1 image under one light; same detector and "
@@ -637,7 +641,8 @@ def train(
                 while epoch < cfg.optim.epochs:
                     perm, gains = _epoch_plan(cfg, epoch, len(train_set))
                     mine = perm[:n][rank::world]
-                    bar = tqdm(total=steps_per_epoch, initial=step_in_epoch, desc=f"epoch {epoch + 1}/{cfg.optim.epochs}",
+                    bar = tqdm(total=steps_per_epoch, initial=step_in_epoch,
+                               desc=f"epoch {epoch + 1}/{cfg.optim.epochs}",
                                disable=not (progress and distributed.is_main()), leave=False)
                     while step_in_epoch < steps_per_epoch:
                         idx = mine[step_in_epoch * batch : (step_in_epoch + 1) * batch]
@@ -652,8 +657,9 @@ def train(
                         if not torch.isfinite(loss):
                             kept = (f"the last good checkpoint is {ckpt_path}" if ckpt_path.is_file()
                                     else "no checkpoint was written yet")
-                            raise NonFiniteLossError(f"loss is {loss.item()} at epoch {epoch + 1}, step "
-                                                     f"{step_in_epoch + 1}; training stopped, {kept} (try a lower optim.lr)")
+                            raise NonFiniteLossError(
+                                f"loss is {loss.item()} at epoch {epoch + 1}, step {step_in_epoch + 1}; "
+                                f"training stopped, {kept} (try a lower optim.lr)")
                         optimizer.zero_grad(set_to_none=True)
                         loss.backward()
                         if cfg.optim.grad_clip:
