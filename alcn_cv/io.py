@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Iterator
+import tempfile
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from alcn_cv.errors import InputError
 
-__all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "VideoReader", "is_video", "list_images", "read_image", "write_image", "open_video_writer"]
+__all__ = ["IMAGE_SUFFIXES", "atomic_write", "map_video", "to_gray", "VIDEO_SUFFIXES", "VideoReader", "is_video", "list_images", "read_image", "write_image", "open_video_writer"]
 
 logger = logging.getLogger(__name__)
 
@@ -26,11 +28,18 @@ def is_video(path: str | Path) -> bool:
 
 
 def list_images(folder: str | Path) -> list[Path]:
-    """Image files directly inside ``folder``, sorted by name."""
+    """Image files directly inside ``folder``, sorted by name.
+
+    Raises:
+        InputError: ``folder`` is not a folder or holds no image.
+    """
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(f"not a folder: {folder}")
-    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+    if not files:
+        raise InputError(f"{folder}: no images ({', '.join(sorted(IMAGE_SUFFIXES))}) in this folder")
+    return files
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -54,6 +63,34 @@ def read_image(path: str | Path) -> np.ndarray:
     if img.dtype not in (np.uint8, np.uint16):
         raise InputError(f"{path}: unsupported pixel type {img.dtype} (8- or 16-bit images only)")
     return img
+
+
+def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
+    """Write ``data`` (text as UTF-8) to ``path`` through a temporary file in the same folder,
+    then rename it, so that a reader never sees a half-written file."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data.encode("utf-8") if isinstance(data, str) else data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    """A uint8 ``HxW`` grayscale image from a gray or BGR uint8 one (the gray input itself, not a copy)."""
+    if not isinstance(image, np.ndarray) or image.size == 0:
+        raise InputError("image must be a non-empty numpy array")
+    if image.dtype != np.uint8:
+        raise InputError(f"image must be uint8, got {image.dtype}")
+    if image.ndim == 2:
+        return image
+    if image.ndim == 3 and image.shape[2] == 3:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    raise InputError(f"image must be HxW or HxWx3, got shape {image.shape}")
 
 
 def write_image(path: str | Path, img: np.ndarray) -> Path:
@@ -116,3 +153,40 @@ def open_video_writer(path: str | Path, fps: float, size: tuple[int, int], color
     if not writer.isOpened():
         raise OSError(f"cannot write video {path} (unsupported extension or codec)")
     return writer
+
+
+def map_video(src: str | Path, dst: str | Path, fn: Callable[[np.ndarray], np.ndarray], desc: str | None = None) -> int:
+    """Write ``fn(frame)`` for every frame of the video ``src`` into the video ``dst``.
+
+    The output is written under a temporary name and renamed when complete; its frame size and
+    colour follow ``fn``'s first output, its frame rate the input's. A progress bar shows the
+    frames.
+
+    Returns:
+        The number of frames written.
+
+    Raises:
+        InputError: ``src`` cannot be opened or holds no decodable frame.
+    """
+    src, dst = Path(src), Path(dst)
+    tmp = dst.with_name(f".{dst.stem}.tmp{dst.suffix}")
+    writer = None
+    count = 0
+    try:
+        with VideoReader(src) as video:
+            for frame in tqdm(video, total=len(video) or None, desc=desc or src.name, unit="frame"):
+                out = fn(frame)
+                if writer is None:
+                    writer = open_video_writer(tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3)
+                writer.write(out)
+                count += 1
+    except BaseException:
+        if writer is not None:
+            writer.release()
+        tmp.unlink(missing_ok=True)
+        raise
+    if writer is None:
+        raise InputError(f"no frame could be decoded from {src}")
+    writer.release()
+    os.replace(tmp, dst)
+    return count

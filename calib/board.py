@@ -26,6 +26,7 @@ import numpy as np
 
 from alcn_cv.data.manifest import write_json
 from alcn_cv.errors import InputError
+from alcn_cv.io import to_gray
 
 logger = logging.getLogger(__name__)
 
@@ -160,7 +161,7 @@ class BoardDetector:
         self.last_foreign_markers = 0
 
     def __call__(self, image: np.ndarray) -> Detection | None:
-        gray = _to_gray(image)
+        gray = to_gray(image)
         if self.spec.kind == "chessboard":
             return self._chessboard(gray)
         return self._charuco(gray)
@@ -190,17 +191,6 @@ class BoardDetector:
                          ids, len(seen))
 
 
-def _to_gray(image: np.ndarray) -> np.ndarray:
-    image = np.asarray(image)
-    if image.dtype != np.uint8:
-        raise InputError(f"board detection needs a uint8 image, got {image.dtype}")
-    if image.ndim == 2:
-        return image
-    if image.ndim == 3 and image.shape[2] == 3:
-        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    raise InputError(f"expected a gray HxW or BGR HxWx3 image, got shape {image.shape}")
-
-
 def suggest_chessboard_size(image: np.ndarray, near: tuple[int, int] | None = None,
                             max_side: int = 12) -> tuple[int, int] | None:
     """Find the inner-corner count of a chessboard seen in ``image`` by trying sizes.
@@ -213,7 +203,7 @@ def suggest_chessboard_size(image: np.ndarray, near: tuple[int, int] | None = No
     unreliably, so a result smaller than the true board is possible. Returns ``(cols, rows)``
     or None.
     """
-    gray = _to_gray(image)
+    gray = to_gray(image)
     scale = min(1.0, 640.0 / max(gray.shape))
     if scale < 1:
         gray = cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)

@@ -29,6 +29,7 @@ from tqdm import tqdm
 
 from alcn_cv.data.manifest import write_json
 from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.io import VIDEO_SUFFIXES, is_video, list_images
 from alcn_cv.formats.colmap import ColmapCamera, camera_from_opencv, write_text_model
 
 from .board import BoardSpec, Detection, suggest_chessboard_size
@@ -38,8 +39,6 @@ logger = logging.getLogger(__name__)
 __all__ = [
     "View",
     "Calibration",
-    "IMAGE_EXTENSIONS",
-    "list_images",
     "detect_in_images",
     "detect_in_video",
     "select_views",
@@ -49,8 +48,6 @@ __all__ = [
     "main",
 ]
 
-IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
-VIDEO_EXTENSIONS = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
 #: RMS reprojection error (px) above which a calibration is reported as poor.
 POOR_RMS_PX = 1.0
 #: Fewest views accepted, and fewest views recommended.
@@ -97,17 +94,6 @@ class Calibration:
     def colmap_camera(self, camera_id: int = 1) -> ColmapCamera:
         """The same camera as a COLMAP camera (``OPENCV`` or ``FULL_OPENCV`` model)."""
         return camera_from_opencv(self.K, self.dist, *self.image_size, camera_id=camera_id)
-
-
-def list_images(folder: str | os.PathLike) -> list[Path]:
-    """Image files of a folder (sorted by name)."""
-    root = Path(folder)
-    if not root.is_dir():
-        raise InputError(f"{root}: not a folder")
-    files = sorted(p for p in root.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS and p.is_file())
-    if not files:
-        raise InputError(f"{root}: no images ({', '.join(IMAGE_EXTENSIONS)}) in this folder")
-    return files
 
 
 def _sharpness(gray: np.ndarray) -> float:
@@ -488,7 +474,7 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
 
 
 def _is_video(path: Path) -> bool:
-    return path.is_file() and path.suffix.lower() in VIDEO_EXTENSIONS
+    return path.is_file() and is_video(path)
 
 
 def main(source: str | os.PathLike, out_dir: str | os.PathLike, board: BoardSpec, max_views: int = 30,
@@ -510,7 +496,7 @@ def main(source: str | os.PathLike, out_dir: str | os.PathLike, board: BoardSpec
     elif _is_video(source):
         views, size = detect_in_video(source, board)
     elif source.is_file():
-        raise InputError(f"{source}: expected a folder of images or a video ({', '.join(VIDEO_EXTENSIONS)})")
+        raise InputError(f"{source}: expected a folder of images or a video ({', '.join(sorted(VIDEO_SUFFIXES))})")
     else:
         raise InputError(f"{source}: no such file or folder")
     views = select_views(views, size, max_views=max_views, board=board)

@@ -48,9 +48,10 @@ from alcn_cv.errors import InputError
 from alcn_cv.formats import bop
 from alcn_cv.formats.bop import BopFrame
 from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, model_from_pycolmap, write_text_model
+from alcn_cv.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, is_video, list_images
 
 from .board import BoardSpec, Detection
-from .camera import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, Calibration, list_images, video_frame_count
+from .camera import Calibration, video_frame_count
 from .conventions import colmap_from_bop_frames
 from .undistort import Undistorter
 
@@ -131,7 +132,7 @@ def iter_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None
                 raise InputError(f"{path}: cannot read this image (corrupt or unsupported format)")
             count += 1
             yield path.name, image
-    elif source.is_file() and source.suffix.lower() in VIDEO_EXTENSIONS:
+    elif source.is_file() and is_video(source):
         cap = cv2.VideoCapture(str(source))
         if not cap.isOpened():
             raise InputError(f"{source}: cannot open this video")
@@ -152,8 +153,8 @@ def iter_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None
         if count == 0:
             raise InputError(f"{source}: the video has no readable frame")
     elif source.exists():
-        raise InputError(f"{source}: expected a folder of images ({', '.join(IMAGE_EXTENSIONS)}) or a video "
-                         f"({', '.join(VIDEO_EXTENSIONS)})")
+        raise InputError(f"{source}: expected a folder of images ({', '.join(sorted(IMAGE_SUFFIXES))}) or a video "
+                         f"({', '.join(sorted(VIDEO_SUFFIXES))})")
     else:
         raise InputError(f"{source}: no such file or folder")
 

@@ -18,7 +18,9 @@ from tqdm import tqdm
 
 from alcn_cv.errors import InputError
 
-from .camera import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, Calibration, list_images, video_frame_count, write_camera_yaml
+from alcn_cv.io import IMAGE_SUFFIXES, is_video, list_images, map_video, read_image, write_image
+
+from .camera import Calibration, write_camera_yaml
 
 logger = logging.getLogger(__name__)
 
@@ -59,41 +61,6 @@ class Undistorter:
         return cv2.remap(image, self.map1, self.map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
 
 
-def _undistort_video(src: Path, dst: Path, undistort: Undistorter) -> int:
-    cap = cv2.VideoCapture(str(src))
-    if not cap.isOpened():
-        raise InputError(f"{src}: cannot open this video")
-    fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
-    total = video_frame_count(src) or None
-    tmp = dst.with_name(f".{dst.stem}.tmp{dst.suffix}")
-    writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), fps, undistort.size)
-    if not writer.isOpened():
-        cap.release()
-        raise InputError(f"{dst}: cannot write a video there (use an .mp4 or .avi name)")
-    n = 0
-    try:
-        with tqdm(total=total, desc="undistorting", unit="frame") as bar:
-            while True:
-                ok, frame = cap.read()
-                if not ok:
-                    break
-                writer.write(undistort(frame, f"{src.name} frame {n}"))
-                n += 1
-                bar.update(1)
-    except BaseException:
-        writer.release()
-        tmp.unlink(missing_ok=True)
-        raise
-    finally:
-        cap.release()
-    writer.release()
-    if n == 0:
-        tmp.unlink(missing_ok=True)
-        raise InputError(f"{src}: the video has no readable frame")
-    os.replace(tmp, dst)
-    return n
-
-
 def main(source: str | os.PathLike, output: str | os.PathLike, calib: Calibration, alpha: float = 0.0,
          keep_K: bool = False) -> Path:
     """Undistort an image, a folder of images or a video.
@@ -116,22 +83,15 @@ def main(source: str | os.PathLike, output: str | os.PathLike, calib: Calibratio
         files = list_images(source)
         output.mkdir(parents=True, exist_ok=True)
         for path in tqdm(files, desc="undistorting", unit="image", disable=len(files) < 10):
-            image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-            if image is None:
-                raise InputError(f"{path}: cannot read this image (corrupt or unsupported format)")
-            _write_image(output / path.name, undistort(image, path.name))
+            write_image(output / path.name, undistort(read_image(path), path.name))
         yaml_path = output / "camera.yaml"
-    elif source.is_file() and suffix in VIDEO_EXTENSIONS:
+    elif source.is_file() and is_video(source):
         output.parent.mkdir(parents=True, exist_ok=True)
-        n = _undistort_video(source, output, undistort)
+        n = map_video(source, output, lambda frame: undistort(frame, source.name), desc="undistorting")
         logger.info("undistorted %d frames to %s", n, output)
         yaml_path = output.with_name(f"{output.stem}.camera.yaml")
-    elif source.is_file() and suffix in IMAGE_EXTENSIONS:
-        image = cv2.imread(str(source), cv2.IMREAD_UNCHANGED)
-        if image is None:
-            raise InputError(f"{source}: cannot read this image (corrupt or unsupported format)")
-        output.parent.mkdir(parents=True, exist_ok=True)
-        _write_image(output, undistort(image, source.name))
+    elif source.is_file() and suffix in IMAGE_SUFFIXES:
+        write_image(output, undistort(read_image(source), source.name))
         yaml_path = output.with_name(f"{output.stem}.camera.yaml")
     elif source.exists():
         raise InputError(f"{source}: expected an image, a folder of images or a video")
@@ -141,8 +101,3 @@ def main(source: str | os.PathLike, output: str | os.PathLike, calib: Calibratio
     return yaml_path
 
 
-def _write_image(path: Path, image: np.ndarray) -> None:
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    if not cv2.imwrite(str(tmp), image):
-        raise InputError(f"{path}: cannot write an image there (unknown extension?)")
-    os.replace(tmp, path)

@@ -30,7 +30,7 @@ import numpy as np
 from alcn_cv.data.manifest import write_json
 from alcn_cv.errors import DatasetError, InputError
 from pose import build as build_mod
-from pose.model import PartModel, read_box_corners, unit_scale
+from pose.model import read_box_corners, unit_scale
 from pose.model import save as save_model
 from pose.parts import FeaturePartDetector
 from pose.solver import PoseSolver, PoseTracker, project

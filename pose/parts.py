@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import InputError
+from alcn_cv.io import to_gray
 from pose.model import PartModel
 
 logger = logging.getLogger(__name__)
@@ -37,19 +38,6 @@ def get_normalizer(name: str) -> Normalizer:
     import alcn_cv
 
     return alcn_cv.create(name)
-
-
-def to_gray(image: np.ndarray) -> np.ndarray:
-    """A uint8 grayscale copy of a BGR or gray uint8 image."""
-    if not isinstance(image, np.ndarray) or image.size == 0:
-        raise InputError("image must be a non-empty numpy array")
-    if image.dtype != np.uint8:
-        raise InputError(f"image must be uint8, got {image.dtype}")
-    if image.ndim == 2:
-        return image
-    if image.ndim == 3 and image.shape[2] == 3:
-        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    raise InputError(f"image must be HxW or HxWx3, got shape {image.shape}")
 
 
 def create_feature(name: str, n_features: int = 1000) -> cv2.Feature2D:

@@ -66,7 +66,10 @@ def iter_frames(source: str | Path) -> Iterator[tuple[str, np.ndarray]]:
     """
     source = Path(source)
     if source.is_dir():
-        files = io.list_images(source)
+        try:
+            files = io.list_images(source)
+        except InputError:  # no image in the folder
+            files = []
         if not files:
             raise DatasetError(f"{source}: no images in the folder")
         for p in files:
@@ -91,7 +94,10 @@ def count_frames(source: str | Path) -> int | None:
     """Number of frames of a video or images of a folder (``None`` when unknown)."""
     source = Path(source)
     if source.is_dir():
-        return len(io.list_images(source))
+        try:
+            return len(io.list_images(source))
+        except InputError:  # no image: iter_frames says so
+            return None
     if not source.is_file():
         return None
     with io.VideoReader(source) as video:

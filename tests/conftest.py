@@ -18,3 +18,28 @@ def shared_data() -> Path:
     if not (root / "README.md").is_file():
         pytest.skip(f"real data not found at {root} (set {ENV_VAR} to its folder)")
     return root
+
+
+_BLOCK_TORCH = """
+import importlib.abc, sys
+class _BlockTorch(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in ("torch", "kornia"):
+            raise ImportError(f"{name} is blocked in this test")
+sys.meta_path.insert(0, _BlockTorch())
+"""
+
+
+@pytest.fixture(scope="session")
+def run_without_torch():
+    """Run Python ``code`` (with ``args`` as sys.argv[1:]) in a fresh interpreter where importing
+    torch or kornia fails; fails the test if it errors or if torch got imported anyway."""
+    import subprocess
+    import sys
+    import textwrap
+
+    def run(code: str, *args: str) -> None:
+        script = _BLOCK_TORCH + textwrap.dedent(code) + "\nassert 'torch' not in sys.modules\n"
+        subprocess.run([sys.executable, "-c", script, *map(str, args)], check=True, timeout=120)
+
+    return run

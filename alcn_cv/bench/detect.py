@@ -60,7 +60,8 @@ from tqdm.auto import tqdm
 
 from alcn_cv.bench import tuning
 from alcn_cv.bench.metrics import match_detections, nms, pr_auc, precision_recall
-from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json, write_text
+from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json
+from alcn_cv.io import atomic_write
 from alcn_cv.data.manifest import read_json
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
@@ -70,7 +71,6 @@ from alcn_cv.filters.gaussian_mixture import alcn_filter
 from alcn_cv.formats.coco import CocoDataset, load_coco
 
 if TYPE_CHECKING:
-    import torch
     from torch import nn
 
 __all__ = ["DEEP_BASELINES", "POLICIES", "DetectData", "DetectSettings", "default_methods", "load_data", "main"]
@@ -721,7 +721,7 @@ def main(
     result["figures"] = _plot_pr(runs, data, out, settings)
     result["seconds"] = time.perf_counter() - start
     write_json(out / "detect.json", result)
-    write_text(out / "detect.md", _markdown(result, data, settings))
+    atomic_write(out / "detect.md", _markdown(result, data, settings))
     (out / "detect.partial.json").unlink(missing_ok=True)
     logger.info("detection benchmark written to %s in %.0f s", out, result["seconds"])
     return result

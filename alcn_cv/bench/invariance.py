@@ -34,7 +34,8 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json, write_text
+from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json
+from alcn_cv.io import atomic_write
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, create
 from alcn_cv.errors import DatasetError, InputError
@@ -279,7 +280,7 @@ def main(
         + markdown_table(headers, table)
         + ("\n" + "\n".join(failures) + "\n" if failures else "")
     )
-    write_text(out / "invariance.md", text)
+    atomic_write(out / "invariance.md", text)
     for obj in objects:
         if obj.name in shown and shown_results[obj.name]:
             _figure(obj, shown_results[obj.name], norms, out / f"invariance_{obj.name}.png")

@@ -5,28 +5,13 @@ from __future__ import annotations
 import os
 import platform
 import sys
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from alcn_cv.data.manifest import write_json
 
-__all__ = ["machine", "markdown_table", "new_figure", "save_figure", "write_json", "write_text"]
-
-
-def write_text(path: str | os.PathLike, text: str) -> Path:
-    """Write a text file atomically (temporary file in the same folder, then rename)."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+__all__ = ["machine", "markdown_table", "new_figure", "save_figure", "write_json"]
 
 
 def _cell(value: Any, digits: int) -> str:

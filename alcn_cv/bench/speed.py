@@ -39,7 +39,8 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json, write_text
+from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json
+from alcn_cv.io import atomic_write
 from alcn_cv.enhance.alcn import ALCN, BACKENDS
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import create
@@ -453,7 +454,7 @@ def main(
         "errors": errors,
     }
     write_json(out / "speed.json", result)
-    write_text(out / "speed.md", _markdown(result))
+    atomic_write(out / "speed.md", _markdown(result))
     _plot(result, out / "speed.png")
     return result
 

@@ -5,14 +5,14 @@ from __future__ import annotations
 import argparse
 import ast
 import logging
-import os
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.enhance import Normalization, available, create
+from alcn_cv.enhance import available, create
 from alcn_cv.errors import InputError
-from alcn_cv.io import VideoReader, is_video, list_images, open_video_writer, read_image, write_image
+from alcn_cv.io import is_video, list_images, map_video, read_image, write_image
 
 logger = logging.getLogger(__name__)
 
@@ -31,53 +31,27 @@ def parse_params(items: list[str]) -> dict[str, object]:
     return params
 
 
-def normalize_video(method: Normalization, src: Path, dst: Path, gray: bool = False) -> int:
-    """Normalize every frame of ``src`` into ``dst``; returns the number of frames."""
-    import cv2
-
-    with VideoReader(src) as video:
-        tmp = dst.with_name(f".{dst.stem}.tmp{dst.suffix}")
-        writer = open_video_writer(tmp, video.fps, video.size, color=not gray)
-        count = 0
-        try:
-            for frame in tqdm(video, total=len(video) or None, desc=f"normalize {src.name}", unit="frame"):
-                if gray:
-                    frame = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-                writer.write(method.apply(frame))
-                count += 1
-        finally:
-            writer.release()
-    if count == 0:
-        tmp.unlink(missing_ok=True)
-        raise InputError(f"no frame could be decoded from {src}")
-    os.replace(tmp, dst)
-    return count
-
-
 def main(src: Path, dst: Path, method: str = "alcn", params: dict[str, object] | None = None, gray: bool = False) -> None:
     """Normalize ``src`` (image, folder of images, or video) into ``dst`` with ``method``."""
     import cv2
 
     normalizer = create(method, **(params or {}))
 
-    def load(path: Path):
-        img = read_image(path)
+    def load_frame(img: np.ndarray) -> np.ndarray:
         return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if gray and img.ndim == 3 else img
 
     if src.is_dir():
         images = list_images(src)
-        if not images:
-            raise InputError(f"no images in {src}")
         for path in tqdm(images, desc=f"normalize {src.name}", unit="image"):
-            write_image(dst / path.name, normalizer.apply(load(path)))
+            write_image(dst / path.name, normalizer.apply(load_frame(read_image(path))))
         logger.info("wrote %d images to %s", len(images), dst)
     elif is_video(src):
         if not is_video(dst):
             raise InputError(f"the output of a video must be a video file (.mp4, .avi, ...), got {dst}")
-        frames = normalize_video(normalizer, src, dst, gray)
+        frames = map_video(src, dst, lambda frame: normalizer.apply(load_frame(frame)), desc=f"normalize {src.name}")
         logger.info("wrote %d frames to %s", frames, dst)
     else:
-        write_image(dst, normalizer.apply(load(src)))
+        write_image(dst, normalizer.apply(load_frame(read_image(src))))
         logger.info("wrote %s", dst)
 
 

@@ -25,6 +25,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from alcn_cv.errors import DatasetError
+from alcn_cv.io import atomic_write
 
 logger = logging.getLogger(__name__)
 
@@ -55,20 +56,6 @@ def make_manifest(kind: str, seed: int, parameters: dict[str, Any], **extra: Any
         "parameters": parameters,
         **extra,
     }
-
-
-def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in the same folder, then rename it."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data.encode("utf-8") if isinstance(data, str) else data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def write_json(path: str | os.PathLike, obj: Any, *, indent: int | None = 1) -> Path:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import logging
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -29,6 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.io import atomic_write
 
 logger = logging.getLogger(__name__)
 
@@ -265,17 +265,6 @@ def _fmt(x: float) -> str:
     return repr(float(x))
 
 
-def _atomic_write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_text_model(
     path: str | os.PathLike,
     cameras: Iterable[ColmapCamera],
@@ -325,7 +314,7 @@ def write_text_model(
     ]
     for c in cameras:
         lines.append(" ".join([str(c.camera_id), c.model, str(c.width), str(c.height), *map(_fmt, c.params)]))
-    _atomic_write_text(out / "cameras.txt", "\n".join(lines) + "\n")
+    atomic_write(out / "cameras.txt", "\n".join(lines) + "\n")
 
     n_obs = sum(len(i.points2d) for i in images)
     lines = [
@@ -343,7 +332,7 @@ def write_text_model(
         lines.append(
             " ".join(f"{_fmt(x)} {_fmt(y)} {int(pid)}" for (x, y), pid in zip(i.points2d, i.point3d_ids))
         )
-    _atomic_write_text(out / "images.txt", "\n".join(lines) + "\n")
+    atomic_write(out / "images.txt", "\n".join(lines) + "\n")
 
     lines = [
         "# 3D point list with one line of data per point:",
@@ -354,7 +343,7 @@ def write_text_model(
     for p in points3d:
         track = " ".join(f"{int(a)} {int(b)}" for a, b in p.track)
         lines.append(" ".join([str(p.point3d_id), *map(_fmt, p.xyz), *map(str, p.rgb), _fmt(p.error), track]).rstrip())
-    _atomic_write_text(out / "points3D.txt", "\n".join(lines) + "\n")
+    atomic_write(out / "points3D.txt", "\n".join(lines) + "\n")
     logger.debug("wrote COLMAP text model (%d cameras, %d images, %d points) to %s",
                  len(cameras), len(images), len(points3d), out)
     return out

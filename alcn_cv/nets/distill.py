@@ -208,7 +208,7 @@ def main(
 
 
 def _write_card(path: Path, name: str, record: dict[str, Any], trained: bool, command: str) -> None:
-    from alcn_cv.bench.report import write_text
+    from alcn_cv.io import atomic_write
 
     v, s = record["validation"], record["settings"]
     constant_note = (
@@ -250,7 +250,7 @@ ALCN warns when the installed teacher differs from this one: then re-run the com
 
 Speed and the difference from the exact ALCN output on whole frames: `alcn bench speed` (rows `alcn lite ...`).
 """
-    write_text(path, text)
+    atomic_write(path, text)
 
 
 def add_cli(subparsers: Any) -> None:
