@@ -6,9 +6,8 @@ the weights are trained) is readable without torch, and loading never unpickles 
 
 from __future__ import annotations
 
+import io
 import json
-import os
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from alcn_cv.errors import WeightFileError
+from alcn_cv.io import atomic_write
 
 __all__ = ["DEFAULT_WEIGHTS", "FORMAT", "VERSION", "NormalizerFile", "load_normalizer_file", "save_normalizer_file"]
 
@@ -55,14 +55,9 @@ def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: 
     meta = {"format": FORMAT, "version": VERSION, **meta}
     _check_meta(meta, path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **{k: np.asarray(v, np.float32) for k, v in arrays.items()}, **{_META_KEY: np.array(json.dumps(meta))})
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    buffer = io.BytesIO()
+    np.savez(buffer, **{k: np.asarray(v, np.float32) for k, v in arrays.items()}, **{_META_KEY: np.array(json.dumps(meta))})
+    atomic_write(path, buffer.getvalue())
     return path
 
 

@@ -40,7 +40,13 @@ def test_two_cpu_processes_hold_equal_weights(tmp_path):
         distributed.shutdown()
     """))
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    # The launch itself (rendezvous on a free local port, under a loaded CI machine) failed once
+    # in about a dozen runs without a trace of our code in it: relaunch once. What is tested,
+    # equal replicas after training, is asserted on the run that completes.
+    for _ in range(2):
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        if proc.returncode == 0 or "alcn_cv" in proc.stderr:
+            break
     assert proc.returncode == 0, proc.stderr[-3000:]
     a, b = np.load(tmp_path / "rank0.npy"), np.load(tmp_path / "rank1.npy")
     np.testing.assert_array_equal(a, b)

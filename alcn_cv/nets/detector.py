@@ -14,12 +14,38 @@ from torch import nn
 
 from alcn_cv.errors import InputError
 
-__all__ = ["Detector"]
+__all__ = ["Detector", "WindowClassifier"]
 
 INPUT = 32
 
 
-class Detector(nn.Module):
+class WindowClassifier(nn.Module):
+    """Base of the 32x32 window classifiers: ``features`` then ``classifier``, both convolutional
+    without padding, so :meth:`dense` scores every window of an image at stride 4 exactly as
+    :meth:`forward` scores one. Subclasses build the two ``nn.Sequential`` (the last layer of
+    ``classifier`` a 1x1 convolution to the classes)."""
+
+    input_size = INPUT
+    stride = 4
+    features: nn.Sequential
+    classifier: nn.Sequential
+
+    @property
+    def num_classes(self) -> int:
+        return self.classifier[-1].out_channels
+
+    def forward(self, windows: torch.Tensor) -> torch.Tensor:
+        if windows.ndim != 4 or windows.shape[1:] != (1, INPUT, INPUT):
+            raise InputError(f"windows must have shape (B, 1, {INPUT}, {INPUT}), got {tuple(windows.shape)}")
+        return self.classifier(self.features(windows)).flatten(1)
+
+    def dense(self, image: torch.Tensor) -> torch.Tensor:
+        if image.ndim != 4 or image.shape[1] != 1 or min(image.shape[-2:]) < INPUT:
+            raise InputError(f"image must have shape (B, 1, H>={INPUT}, W>={INPUT}), got {tuple(image.shape)}")
+        return self.classifier(self.features(image))
+
+
+class Detector(WindowClassifier):
     """Window classifier: background vs. objects.
 
     Args:
@@ -33,9 +59,6 @@ class Detector(nn.Module):
         - :meth:`dense`: ``(B, 1, H, W)`` -> ``(B, num_classes, (H-32)//4+1, (W-32)//4+1)`` logits,
           entry ``(i, j)`` scoring the 32x32 window with top-left corner ``(4i, 4j)``.
     """
-
-    input_size = INPUT
-    stride = 4
 
     def __init__(
         self, num_classes: int, channels: tuple[int, int] = (20, 50), hidden: int = 1024, dropout: float = 0.0
@@ -60,16 +83,3 @@ class Detector(nn.Module):
             nn.Conv2d(hidden, num_classes, 1),
         )
 
-    @property
-    def num_classes(self) -> int:
-        return self.classifier[-1].out_channels
-
-    def forward(self, windows: torch.Tensor) -> torch.Tensor:
-        if windows.ndim != 4 or windows.shape[1:] != (1, INPUT, INPUT):
-            raise InputError(f"windows must have shape (B, 1, {INPUT}, {INPUT}), got {tuple(windows.shape)}")
-        return self.classifier(self.features(windows)).flatten(1)
-
-    def dense(self, image: torch.Tensor) -> torch.Tensor:
-        if image.ndim != 4 or image.shape[1] != 1 or min(image.shape[-2:]) < INPUT:
-            raise InputError(f"image must have shape (B, 1, H>={INPUT}, W>={INPUT}), got {tuple(image.shape)}")
-        return self.classifier(self.features(image))

@@ -10,15 +10,12 @@ network runs fully-convolutionally over a whole image exactly as on each 32x32 w
 
 from __future__ import annotations
 
-import torch
 from torch import nn
 
 from alcn_cv.errors import InputError
+from alcn_cv.nets.detector import INPUT, WindowClassifier
 
 __all__ = ["PlainCNN"]
-
-INPUT = 32
-
 
 def _feature_size(depth: int) -> int:
     size = INPUT
@@ -27,7 +24,7 @@ def _feature_size(depth: int) -> int:
     return size
 
 
-class PlainCNN(nn.Module):
+class PlainCNN(WindowClassifier):
     """Plain convolutional window classifier.
 
     Args:
@@ -40,9 +37,6 @@ class PlainCNN(nn.Module):
         - :meth:`forward`: ``(B, 1, 32, 32)`` -> ``(B, num_classes)`` logits
         - :meth:`dense`: ``(B, 1, H, W)`` -> ``(B, num_classes, (H-32)//4+1, (W-32)//4+1)``
     """
-
-    input_size = INPUT
-    stride = 4
 
     def __init__(self, num_classes: int, depth: int = 2, width: int = 32, hidden: int = 256) -> None:
         super().__init__()
@@ -64,17 +58,3 @@ class PlainCNN(nn.Module):
         self.classifier = nn.Sequential(
             nn.Conv2d(channels, hidden, f), nn.ReLU(inplace=True), nn.Conv2d(hidden, num_classes, 1)
         )
-
-    @property
-    def num_classes(self) -> int:
-        return self.classifier[-1].out_channels
-
-    def forward(self, windows: torch.Tensor) -> torch.Tensor:
-        if windows.ndim != 4 or windows.shape[1:] != (1, INPUT, INPUT):
-            raise InputError(f"windows must have shape (B, 1, {INPUT}, {INPUT}), got {tuple(windows.shape)}")
-        return self.classifier(self.features(windows)).flatten(1)
-
-    def dense(self, image: torch.Tensor) -> torch.Tensor:
-        if image.ndim != 4 or image.shape[1] != 1 or min(image.shape[-2:]) < INPUT:
-            raise InputError(f"image must have shape (B, 1, H>={INPUT}, W>={INPUT}), got {tuple(image.shape)}")
-        return self.classifier(self.features(image))
