@@ -63,11 +63,12 @@ def check_image(img: object) -> np.ndarray:
 
 
 def check_gray(gray: object) -> np.ndarray:
-    """Validate a float32 ``HxW`` intensity image for :meth:`Normalization.normalize`."""
+    """Validate a float32 ``HxW`` intensity image (the input of :meth:`Normalization.normalize`
+    and of the Normalizer runtimes)."""
     if not isinstance(gray, np.ndarray) or gray.ndim != 2 or gray.size == 0:
-        raise InputError(f"normalize() takes a non-empty HxW array, got shape {getattr(gray, 'shape', None)}")
+        raise InputError(f"image must be a non-empty HxW array, got shape {getattr(gray, 'shape', None)}")
     if gray.dtype != np.float32:
-        raise InputError(f"normalize() takes float32 intensities in [0, 1], got {gray.dtype}")
+        raise InputError(f"image must be float32 intensities in [0, 1], got {gray.dtype}")
     if not np.isfinite(gray).all():
         raise InputError("image contains NaN or inf")
     return gray

@@ -20,7 +20,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.enhance.base import check_gray
+from alcn_cv.errors import WeightFileError
 
 __all__ = ["DEFAULT_ONNX", "OpenCVNormalizer"]
 
@@ -77,13 +78,7 @@ class OpenCVNormalizer:
             ``(N, ceil((H-1)/4)+1, ceil((W-1)/4)+1)`` float32; grid point ``(i, j)`` is the
             prediction for the 48x48 window centred on pixel ``(4i, 4j)``.
         """
-        if not isinstance(image, np.ndarray) or image.ndim != 2 or image.size == 0:
-            raise InputError(f"image must be a non-empty HxW array, got shape {getattr(image, 'shape', None)}")
-        if image.dtype != np.float32:
-            raise InputError(f"image must be float32 intensities in [0, 1], got {image.dtype}")
-        if not np.isfinite(image).all():
-            raise InputError("image contains NaN or inf")
-        h, w = image.shape
+        h, w = check_gray(image).shape
         gh, gw = math.ceil((h - 1) / STRIDE) + 1, math.ceil((w - 1) / STRIDE) + 1
         half = WINDOW // 2
         padded = cv2.copyMakeBorder(image, half, STRIDE * (gh - 1) + half - h, half, STRIDE * (gw - 1) + half - w,
