@@ -8,7 +8,7 @@ import pytest
 
 import alcn_cv
 from alcn_cv import InputError, WeightFileError
-from alcn_cv.weight_file import DEFAULT_WEIGHTS
+from alcn_cv.enhance.alcn import MODELS
 
 METHODS = alcn_cv.available()
 
@@ -119,13 +119,15 @@ def test_bad_input_messages(methods):
 def test_alcn_backends_agree(methods, frames):
     gray, _ = frames
     fast = methods["alcn"].normalize(gray)
-    torch_cpu = alcn_cv.createALCN(backend="torch").normalize(gray)
-    np.testing.assert_allclose(fast, torch_cpu, atol=1e-4)
+    # the default fast path uses the pyramid mixture, which torch lacks: compare exact with exact
+    exact = alcn_cv.createALCN(mixture="exact").normalize(gray)
+    np.testing.assert_allclose(exact, alcn_cv.createALCN(backend="torch").normalize(gray), atol=1e-4)
+    assert np.abs(fast - exact).mean() < 0.02 * np.ptp(exact)
 
 
 def test_alcn_is_eq3_with_scaled_sigmas(methods, frames):
     gray, _ = frames
-    alcn = methods["alcn"]
+    alcn = alcn_cv.createALCN(mixture="exact")
     maps = alcn.weight_maps(gray)
     assert maps.shape == (len(alcn.sigmas),) + gray.shape
     expected = alcn_cv.alcn_filter(gray, maps, sigmas=[s / alcn.scale for s in alcn.sigmas])
@@ -143,11 +145,12 @@ def test_alcn_parameters():
 
 
 def test_shipped_weights_say_what_they_are(caplog):
-    alcn = alcn_cv.createALCN()
-    assert alcn.weights_path == DEFAULT_WEIGHTS
-    with caplog.at_level(logging.WARNING):
-        alcn_cv.createALCN()
-    assert ("UNTRAINED" in caplog.text) == (not alcn.trained)
+    for model in ("lite", "paper"):
+        alcn = alcn_cv.createALCN(model=model)
+        assert alcn.weights_path == MODELS[model] and alcn.trained
+        with caplog.at_level(logging.WARNING):
+            alcn_cv.createALCN(model=model)
+        assert "UNTRAINED" not in caplog.text and "re-distil" not in caplog.text
 
 
 def test_import_does_not_load_torch(run_without_torch):
@@ -181,8 +184,8 @@ def random_head_weights(tmp_path_factory):
 
 def test_alcn_opencv_backend_agrees(random_head_weights, frames):
     gray, _ = frames
-    fast = alcn_cv.createALCN(weights=random_head_weights)
-    opencv = alcn_cv.createALCN(weights=random_head_weights, backend="opencv")
+    fast = alcn_cv.createALCN(weights=random_head_weights, mixture="exact")
+    opencv = alcn_cv.createALCN(weights=random_head_weights, backend="opencv", mixture="exact")
     assert np.ptp(fast.weight_maps(gray), axis=(1, 2)).max() > 1e-3  # maps really vary
     np.testing.assert_allclose(opencv.normalize(gray), fast.normalize(gray), atol=1e-4)
     np.testing.assert_allclose(opencv.weight_grid(gray), fast.weight_grid(gray), atol=1e-4)

@@ -108,11 +108,13 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     assert sorted(p.name for p in out.glob("pr_*.png")) == sorted(
         f"pr_{n}_1real.png" for n in ("matte_box", "velvet_toy", "specular_can"))
     saved = json.loads((out / "detect.json").read_text())
-    assert saved["runs"]["he|1|raw"]["error"] == "RuntimeError: boom"  # reported, the run went on
-    for key in ("none|1|raw", "dog|1|local"):
+    assert saved["runs"]["he|1|raw|0"]["error"] == "RuntimeError: boom"  # reported, the run went on
+    for key in ("none|1|raw|0", "dog|1|local|0"):
         for obj in saved["runs"][key]["objects"].values():
             assert obj["auc"] is None or 0 <= obj["auc"] <= 1
     assert "dog" in saved["tuned"]["1"]
+    assert "error" in saved["summary"]["he|1|raw"]
+    assert saved["summary"]["dog|1|local"]["seeds"] == [0]
     assert "failed" in (out / "detect.md").read_text()
     assert result["machine"]["cpu_count"] >= 1
 
@@ -138,3 +140,27 @@ def test_batched_score_maps_equal_single(policy):
     batched = D._all_score_maps(net, images, pol, "cpu", batch=2)
     for img, p in zip(images, batched):
         np.testing.assert_allclose(p, D.score_maps(net, img, pol), atol=1e-5)
+
+
+def test_method_specs_and_seeds():
+    norm = D._create_normalization("alcn:model=lite:mixture=pyramid", {})
+    assert (norm.mixture, norm.scale, norm.net.stride) == ("pyramid", 1.0, 8)
+    assert D._create_normalization("dog:sigma2=2.5", {"sigma1": 1.0}).sigma2 == 2.5
+    D.DetectSettings(methods=["alcn", "alcn:model=lite"], seeds=[0, 1]).check()
+    for bad in (dict(methods=["nope:x=1"]), dict(methods=["cnn:depth=2"]), dict(methods=["dog", "dog"]),
+                dict(seeds=[]), dict(seeds=[1, 1])):
+        with pytest.raises(InputError):
+            D.DetectSettings(**bad).check()
+
+
+def test_summarize_over_seeds():
+    settings = D.DetectSettings(methods=["dog"], real_images=[1], policies=["local"], seeds=[0, 1, 2])
+    objects = lambda a, b: {"a": {"auc": a}, "b": {"auc": b}}  # noqa: E731
+    runs = {D.run_key("dog", 1, "local", 0): {"objects": objects(0.2, 0.4)},
+            D.run_key("dog", 1, "local", 1): {"objects": objects(0.4, None)},
+            D.run_key("dog", 1, "local", 2): {"error": "RuntimeError: boom"}}
+    cell = D.summarize(runs, settings, ["a", "b"])["dog|1|local"]
+    assert cell["seeds"] == [0, 1] and cell["failed_seeds"] == [2]
+    assert cell["objects"]["a"]["mean"] == pytest.approx(0.3) and cell["objects"]["a"]["std"] == pytest.approx(0.1)
+    assert cell["objects"]["b"]["values"] == [0.4]
+    assert cell["mean"]["values"] == pytest.approx([0.3, 0.4])

@@ -40,7 +40,8 @@ def random_weights(tmp_path_factory):
 
 
 def _alcn(weights, **params):
-    return alcn_cv.createALCN(weights=weights, **params)
+    """ALCN with the exact mixture unless asked otherwise (the reference of every approximation)."""
+    return alcn_cv.createALCN(weights=weights, **{"mixture": "exact", **params})
 
 
 def test_pyramid_plan_keeps_every_sigma():
@@ -255,10 +256,19 @@ def test_model_names():
     assert lite.weights_path == MODELS["lite"] and lite.apply(np.zeros((48, 64), np.uint8)).shape == (48, 64)
 
 
+def test_default_is_the_real_time_configuration():
+    from alcn_cv.enhance.alcn import MODELS
+
+    default = alcn_cv.createALCN()
+    assert (default.weights_path, default.mixture, default.grid_stride) == (MODELS["lite"], "pyramid", 8)
+    assert alcn_cv.createALCN(backend="torch").mixture == "exact"  # no pyramid in torch
+    assert alcn_cv.createALCN(backend="opencv").mixture == "pyramid"
+
+
 def test_threads_are_restored(image):
     before = torch.get_num_threads()
-    alcn = _alcn(None, threads=1, grid_stride=16)
-    np.testing.assert_allclose(alcn.normalize(image), _alcn(None, grid_stride=16).normalize(image), atol=1e-6)
+    alcn = _alcn(None, model="paper", threads=1, grid_stride=16)
+    np.testing.assert_allclose(alcn.normalize(image), _alcn(None, model="paper", grid_stride=16).normalize(image), atol=1e-6)
     assert torch.get_num_threads() == before
     with pytest.raises(InputError, match="threads"):
         alcn_cv.createALCN(threads=0)

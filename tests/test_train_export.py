@@ -8,14 +8,15 @@ import numpy as np
 import pytest
 import torch
 
-from alcn_cv.enhance.alcn import ALCN
+from alcn_cv.enhance.alcn import ALCN, MODELS
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import alcn_filter
 from alcn_cv.nets import Normalizer
+from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.train import opencv_runtime
 from alcn_cv.train.export import DEFAULT_ONNX, export_onnx
 from alcn_cv.train.opencv_runtime import OpenCVNormalizer
-from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file, save_normalizer_file
+from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 
 @pytest.fixture(scope="module")
@@ -40,15 +41,36 @@ def _images(shared_data, n=3):
             for p in paths]
 
 
-def test_window_and_stride_match_the_network():
-    assert (opencv_runtime.WINDOW, opencv_runtime.STRIDE) == (Normalizer.window, Normalizer.stride)
+def test_window_matches_the_network():
+    assert opencv_runtime.WINDOW == Normalizer.window == LiteNormalizer.window
+
+
+def test_lite_normalizer_exports_and_runs_in_opencv(tmp_path):
+    torch.manual_seed(1)
+    net = LiteNormalizer(output_scale=2.0)
+    path = tmp_path / "lite.npz"
+    meta = {"config": net.config, "architecture": "lite", "sigmas": [0.5 * i for i in range(1, 11)],
+            "working_scale": 1.0, "output_range": [-0.2, 0.2], "trained": False}
+    save_normalizer_file(path, net.state_arrays(), meta)
+    ocv = OpenCVNormalizer(export_onnx(path.with_suffix(".onnx"), path))
+    assert ocv.stride == net.stride == 8
+    image = np.random.default_rng(2).random((75, 98), dtype=np.float32)
+    with torch.no_grad():
+        t = torch.from_numpy(image)[None, None]
+        grid, dense = net.eval().dense_grid(t)[0].numpy(), net.dense(t)[0].numpy()
+    assert np.ptp(grid[0]) > 1e-3
+    np.testing.assert_allclose(ocv.dense_grid(image), grid, atol=1e-4)
+    np.testing.assert_allclose(ocv.dense(image), dense, atol=1e-4)
+    for mixture in ("exact", "pyramid"):
+        fast = ALCN(weights=path, mixture=mixture).normalize(image)
+        np.testing.assert_allclose(ALCN(weights=path, backend="opencv", mixture=mixture).normalize(image), fast, atol=1e-4)
 
 
 @pytest.mark.shared_data
 def test_torch_onnx_opencv_and_fast_path_agree(shared_data, random_weights):
     path, onnx_path, net = random_weights
     ocv = OpenCVNormalizer(onnx_path)
-    alcn = ALCN(weights=path, scale=1.0)
+    alcn = ALCN(weights=path, scale=1.0, mixture="exact")
     for image in _images(shared_data):
         with torch.no_grad():
             t = torch.from_numpy(image)[None, None]
@@ -61,13 +83,17 @@ def test_torch_onnx_opencv_and_fast_path_agree(shared_data, random_weights):
         np.testing.assert_allclose(alcn_filter(image, dense, alcn.full_res_sigmas), alcn.normalize(image), atol=1e-4)
 
 
-def test_shipped_onnx_matches_shipped_weights():
-    net = Normalizer.from_file(load_normalizer_file(DEFAULT_WEIGHTS))
+@pytest.mark.parametrize("model", MODELS)
+def test_shipped_onnx_matches_shipped_weights(model):
+    weights = MODELS[model]
+    net = normalizer_from_file(load_normalizer_file(weights))
     image = np.random.default_rng(0).random((61, 83), dtype=np.float32)
     with torch.no_grad():
         ref = net.dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
-    np.testing.assert_allclose(OpenCVNormalizer(DEFAULT_ONNX).dense_grid(image), ref, atol=1e-4)
-    assert OpenCVNormalizer().path == DEFAULT_ONNX
+    ocv = OpenCVNormalizer(weights.with_suffix(".onnx"))
+    assert ocv.stride == net.stride
+    np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-4)
+    assert OpenCVNormalizer().path == DEFAULT_ONNX == MODELS["paper"].with_suffix(".onnx")
 
 
 def test_runs_where_torch_cannot_be_imported(random_weights, run_without_torch):

@@ -36,6 +36,12 @@ For every method and for 1 and 10 real training images per object:
    truth. Precision-recall over all test images, and its area (AUC, PASCAL VOC average
    precision).
 
+A method may carry parameters, ``NAME:KEY=VALUE[:KEY=VALUE...]`` (``alcn:model=lite:mixture=pyramid``
+compares the real-time ALCN with the exact one, ``dog:sigma2=2``), and every run may be repeated
+over several seeds (``--seeds 0,1,2``): a single seed's AUC moves by several hundredths with the
+training windows and the detector's initialisation, so differences between methods are only
+read against the spread over seeds.
+
 With ``--tune``, DoG, SLCN and DLCN are first tuned on the training windows
 (:mod:`alcn_cv.bench.tuning`); by default they keep their defaults, because on the data
 engine's benchmark the tuned settings scored lower than the defaults (see the tuning module).
@@ -65,7 +71,7 @@ from alcn_cv.io import atomic_write
 from alcn_cv.data.manifest import read_json
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import available, create
+from alcn_cv.enhance.registry import available, create, parse_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.filters.gaussian_mixture import alcn_filter
 from alcn_cv.formats.coco import CocoDataset, load_coco
@@ -88,8 +94,9 @@ _BATCH = 1024
 
 
 def default_methods() -> list[str]:
-    """Every registered normalization, then the deep baselines."""
-    return list(available()) + list(DEEP_BASELINES)
+    """Every registered normalization, then the deep baselines but ResNet-56, which alone would
+    take most of the default run's half-hour budget on 2 CPU cores (``--methods`` adds it)."""
+    return list(available()) + [m for m in DEEP_BASELINES if m != "resnet56"]
 
 
 @dataclass
@@ -97,12 +104,16 @@ class DetectSettings:
     """Settings of a benchmark run (all recorded in ``detect.json``).
 
     Attributes:
-        methods: registered normalization names and/or :data:`DEEP_BASELINES`.
+        methods: registered normalization names, each optionally with parameters
+            (``NAME[:KEY=VALUE...]``, e.g. ``alcn:model=lite:mixture=pyramid``), and/or
+            :data:`DEEP_BASELINES`.
         real_images: numbers of real training images per object.
         policies: detector input policies (:data:`POLICIES`).
         positives_per_object: synthetic object windows per object.
         negatives_ratio: background windows per object window.
-        epochs, batch_size, lr, seed: detector training (the same for every method).
+        epochs, batch_size, lr: detector training (the same for every method).
+        seeds: one repetition of every run per seed (training windows, detector
+            initialisation and batch order); the tables give the mean and spread over seeds.
         tune: tune DoG, SLCN and DLCN on the training windows (:mod:`alcn_cv.bench.tuning`).
         cnn_sweep: ``(depth, width)`` of the plain CNNs tried for ``cnn``.
         nms_iou: IoU above which non-maximum suppression removes a box.
@@ -115,13 +126,13 @@ class DetectSettings:
 
     methods: list[str] = field(default_factory=default_methods)
     real_images: list[int] = field(default_factory=lambda: [1, 10])
-    policies: list[str] = field(default_factory=lambda: ["raw", "standardize"])
+    policies: list[str] = field(default_factory=lambda: ["local"])
     positives_per_object: int = 300
     negatives_ratio: float = 2.0
     epochs: int = 6
     batch_size: int = 64
     lr: float = 1e-3
-    seed: int = 0
+    seeds: list[int] = field(default_factory=lambda: [0])
     tune: bool = False
     cnn_sweep: list[tuple[int, int]] = field(default_factory=lambda: [(1, 32), (2, 32), (3, 32)])
     nms_iou: float = 0.3
@@ -133,9 +144,16 @@ class DetectSettings:
 
     def check(self) -> None:
         known = set(available()) | set(DEEP_BASELINES)
-        unknown = [m for m in self.methods if m not in known]
+        specs = [parse_spec(m) for m in self.methods]
+        unknown = [m for m, (name, _) in zip(self.methods, specs) if name not in known]
         if unknown or not self.methods:
             raise InputError(f"unknown or no method(s) {unknown}; available: {', '.join(sorted(known))}")
+        if any(name in DEEP_BASELINES and params for name, params in specs):
+            raise InputError(f"the deep baselines {', '.join(DEEP_BASELINES)} take no parameters")
+        if len(set(self.methods)) != len(self.methods):
+            raise InputError(f"a method is listed twice: {self.methods}")
+        if not self.seeds or len(set(self.seeds)) != len(self.seeds):
+            raise InputError(f"seeds must be distinct and at least one, got {self.seeds}")
         if not self.real_images or min(self.real_images) < 1:
             raise InputError(f"real_images must be positive integers, got {self.real_images}")
         bad = [p for p in self.policies if p not in POLICIES]
@@ -220,11 +238,11 @@ class TrainingSet:
     images_used: dict[str, int]
 
 
-def training_set(data: DetectData, n_real: int, settings: DetectSettings) -> TrainingSet:
+def training_set(data: DetectData, n_real: int, settings: DetectSettings, seed: int = 0) -> TrainingSet:
     """The synthetic training windows from the first ``n_real`` images of each object (see the module docstring)."""
     from alcn_cv.data.synthetic import augment, sample_negatives
 
-    rng = np.random.default_rng([settings.seed, n_real])
+    rng = np.random.default_rng([seed, n_real])
     windows, labels, val_windows, val_labels = [], [], [], []
     sources, boxes, used = [], [], {}
     images = {im.id: im for im in data.train.images}
@@ -266,7 +284,7 @@ def training_set(data: DetectData, n_real: int, settings: DetectSettings) -> Tra
     val = np.concatenate(val_windows).astype(np.float32) / np.float32(255)
     return TrainingSet(
         np.concatenate(windows), np.concatenate(labels).astype(np.int64),
-        tuning.relight(val, np.random.default_rng([settings.seed, n_real, 1])), np.concatenate(val_labels).astype(np.int64),
+        tuning.relight(val, np.random.default_rng([seed, n_real, 1])), np.concatenate(val_labels).astype(np.int64),
         used,
     )
 
@@ -455,15 +473,18 @@ def _make_net(method: str, num_classes: int, config: tuple[int, int] | None = No
 
 
 def _create_normalization(method: str, params: dict[str, Any]) -> Normalization:
-    if method in DEEP_BASELINES:
+    """``method`` is a spec (``NAME[:KEY=VALUE...]``); ``params`` (tuned ones) are added to its own."""
+    name, own = parse_spec(method)
+    params = {**own, **params}
+    if name in DEEP_BASELINES:
         return create("none")
-    if method == "alcn":
-        return create("alcn", scale=1.0, **params)  # windows and test images are already at the working scale
-    return create(method, **params)
+    if name == "alcn":
+        params.setdefault("scale", 1.0)  # windows and test images are already at the working scale
+    return create(name, **params)
 
 
 def _train(
-    method: str, train: np.ndarray, labels: np.ndarray, num_classes: int, settings: DetectSettings,
+    method: str, train: np.ndarray, labels: np.ndarray, num_classes: int, settings: DetectSettings, seed: int,
     val: tuple[np.ndarray, np.ndarray], config: tuple[int, int] | None = None,
 ) -> nn.Module:
     from alcn_cv.train.stage2 import train_detector
@@ -471,18 +492,19 @@ def _train(
     net = _make_net(method, num_classes, config)
     return train_detector(
         train, labels, num_classes, epochs=settings.epochs, batch_size=settings.batch_size, lr=settings.lr,
-        seed=settings.seed, val=val, progress=False, net=net, device=settings.device,
+        seed=seed, val=val, progress=False, net=net, device=settings.device,
     )
 
 
 def _train_cnn_sweep(
-    train: np.ndarray, labels: np.ndarray, num_classes: int, settings: DetectSettings, val: tuple[np.ndarray, np.ndarray]
+    train: np.ndarray, labels: np.ndarray, num_classes: int, settings: DetectSettings, seed: int,
+    val: tuple[np.ndarray, np.ndarray],
 ) -> tuple[nn.Module, dict[str, Any]]:
     from alcn_cv.train.stage2 import evaluate_detector
 
     best, sweep = None, []
     for depth, width in settings.cnn_sweep:
-        net = _train("cnn", train, labels, num_classes, settings, val, (depth, width))
+        net = _train("cnn", train, labels, num_classes, settings, seed, val, (depth, width))
         loss, acc = evaluate_detector(net, *val)
         sweep.append({"depth": depth, "width": width, "val_loss": loss, "val_acc": acc})
         if best is None or (acc, -loss) > (best[1]["val_acc"], -best[1]["val_loss"]):
@@ -523,6 +545,44 @@ def _evaluate(
     return per_object
 
 
+def run_key(method: str, n_real: int, policy: str, seed: int) -> str:
+    """Key of one run in ``detect.json``'s ``runs``."""
+    return f"{method}|{n_real}|{policy}|{seed}"
+
+
+def _spread(values: list[float]) -> dict[str, Any]:
+    return {"mean": float(np.mean(values)), "std": float(np.std(values)), "values": values}
+
+
+def summarize(runs: dict[str, Any], settings: DetectSettings, names: list[str]) -> dict[str, Any]:
+    """AUC per object and its mean over objects, as mean and standard deviation over the seeds.
+
+    Returns:
+        ``{"METHOD|N|POLICY": {"seeds": [...], "failed_seeds": [...], "objects": {name: {"mean",
+        "std", "values"}}, "mean": {...}}}``; a cell whose every seed failed holds ``error``.
+    """
+    summary: dict[str, Any] = {}
+    for method in settings.methods:
+        for n_real in settings.real_images:
+            for policy in settings.policies:
+                seeded = [(seed, runs.get(run_key(method, n_real, policy, seed), {"error": "not run"})) for seed in settings.seeds]
+                done = [(seed, r) for seed, r in seeded if "error" not in r]
+                cell: dict[str, Any] = {"seeds": [seed for seed, _ in done],
+                                        "failed_seeds": [seed for seed, r in seeded if "error" in r]}
+                if not done:
+                    cell["error"] = seeded[0][1]["error"]
+                else:
+                    cell["objects"] = {}
+                    for name in names:
+                        aucs = [r["objects"][name]["auc"] for _, r in done if r["objects"][name]["auc"] is not None]
+                        cell["objects"][name] = _spread(aucs) if aucs else None
+                    means = [float(np.mean(v)) for v in
+                             ([o["auc"] for o in r["objects"].values() if o["auc"] is not None] for _, r in done) if v]
+                    cell["mean"] = _spread(means) if means else None
+                summary[f"{method}|{n_real}|{policy}"] = cell
+    return summary
+
+
 def _plot_pr(results: dict[str, Any], data: DetectData, out: Path, settings: DetectSettings) -> list[str]:
     written = []
     for cat in data.categories:
@@ -532,7 +592,7 @@ def _plot_pr(results: dict[str, Any], data: DetectData, out: Path, settings: Det
             for ax, policy in zip(axes[0], settings.policies):
                 cmap = plt.get_cmap("tab20")
                 for k, method in enumerate(settings.methods):
-                    run = results.get(f"{method}|{n_real}|{policy}", {})
+                    run = results.get(run_key(method, n_real, policy, settings.seeds[0]), {})
                     obj = run.get("objects", {}).get(name)
                     if not obj or obj.get("auc") is None:
                         continue
@@ -544,7 +604,7 @@ def _plot_pr(results: dict[str, Any], data: DetectData, out: Path, settings: Det
                 ax.set_ylim(0, 1.02)
                 ax.set_xlabel("recall")
                 ax.set_ylabel("precision")
-                ax.set_title(f"{name}, {n_real} real image(s), input {policy}", fontsize=10)
+                ax.set_title(f"{name}, {n_real} real image(s), input {policy}, seed {settings.seeds[0]}", fontsize=10)
                 ax.grid(alpha=0.3)
                 if ax.get_legend_handles_labels()[0]:
                     ax.legend(fontsize=7, loc="upper right")
@@ -568,17 +628,26 @@ def _markdown(result: dict[str, Any], data: DetectData, settings: DetectSettings
     alcn_note = result.get("alcn_trained")
     if alcn_note is False:
         lines.append("**The `alcn` row used UNTRAINED Normalizer weights** (the shipped file's `trained` flag is false).\n")
+    seeds = settings.seeds
+    if len(seeds) > 1:
+        lines.append(f"Every cell: mean +- standard deviation over {len(seeds)} seeds ({', '.join(map(str, seeds))}); "
+                     "a seed draws other training windows, detector initialisation and batch order.\n")
+
+    def cell(spread: dict[str, Any] | None) -> str | None:
+        if spread is None:
+            return None
+        return f"{spread['mean']:.3f}" + (f" +- {spread['std']:.3f}" if len(spread["values"]) > 1 else "")
+
     for n_real in settings.real_images:
         for policy in settings.policies:
             rows = []
             for method in settings.methods:
-                run = result["runs"].get(f"{method}|{n_real}|{policy}", {})
-                if "error" in run:
+                summary = result["summary"][f"{method}|{n_real}|{policy}"]
+                if "error" in summary:
                     rows.append([method] + ["failed"] * (len(names) + 1))
                     continue
-                aucs = [run["objects"][n]["auc"] for n in names]
-                valid = [a for a in aucs if a is not None]
-                rows.append([method] + aucs + [float(np.mean(valid)) if valid else None])
+                failed = f" ({len(summary['failed_seeds'])} seed(s) failed)" if summary["failed_seeds"] else ""
+                rows.append([method + failed] + [cell(summary["objects"][n]) for n in names] + [cell(summary["mean"])])
             lines.append(f"\n## {n_real} real image(s) per object, input policy `{policy}`\n")
             lines.append(markdown_table(["method"] + names + ["mean"], rows))
     failures = [f"- `{k}`: {v['error']}" for k, v in result["runs"].items() if "error" in v]
@@ -639,29 +708,36 @@ def main(
         gray, sx, sy = _working_gray(data.test, im, data.working_scale)
         test_gray.append((im.id, gray.astype(np.float32) / np.float32(255), sx, sy))
 
-    sets = {n: training_set(data, n, settings) for n in settings.real_images}
+    sets: dict[tuple[int, int], TrainingSet] = {}
+
+    def training(seed: int, n_real: int) -> TrainingSet:
+        if (seed, n_real) not in sets:
+            sets[seed, n_real] = training_set(data, n_real, settings, seed)
+        return sets[seed, n_real]
+
     tuned: dict[int, dict[str, Any]] = {}
-    if settings.tune:
+    if settings.tune:  # on the first seed's windows; the chosen parameters serve every seed
         to_tune = [m for m in tuning.GRIDS if m in settings.methods]
-        for n, ts in sets.items():
+        for n in settings.real_images:
             if to_tune:
-                tuned[n] = tuning.tune_all(ts.windows, ts.labels, settings.seed, to_tune)
+                ts = training(settings.seeds[0], n)
+                tuned[n] = tuning.tune_all(ts.windows, ts.labels, settings.seeds[0], to_tune)
 
     from alcn_cv.train.stage2 import evaluate_detector
 
     runs: dict[str, Any] = {}
     cnn_info: dict[str, Any] = {}
     alcn_trained = None
-    total = len(settings.methods) * len(settings.real_images) * len(settings.policies)
+    total = len(settings.methods) * len(settings.seeds) * len(settings.real_images) * len(settings.policies)
     bar = tqdm(total=total, desc="detect benchmark", unit="run", disable=not progress)
     for method in settings.methods:
-        test_cache: dict[str, list[tuple[int, np.ndarray, float, float]]] = {}
-        for n_real in settings.real_images:
+        test_cache: dict[str, list[tuple[int, np.ndarray, float, float]]] = {}  # test images do not depend on the seed
+        for seed, n_real in ((seed, n) for seed in settings.seeds for n in settings.real_images):
             params = tuned.get(n_real, {}).get(method, {}).get("params", {})
-            ts = sets[n_real]
+            ts = training(seed, n_real)
             normalized: tuple[Normalization, np.ndarray, np.ndarray, float] | Exception | None = None
             for policy_name in settings.policies:
-                key = f"{method}|{n_real}|{policy_name}"
+                key = run_key(method, n_real, policy_name, seed)
                 bar.set_postfix(run=key)
                 t0 = time.perf_counter()
                 try:
@@ -675,29 +751,30 @@ def main(
                     if isinstance(normalized, Exception):
                         raise normalized
                     norm, train_windows, val_windows, t_norm = normalized
-                    if method == "alcn":
-                        alcn_trained = bool(getattr(norm, "trained", False))
+                    if isinstance(norm, ALCN):
+                        alcn_trained = norm.trained if alcn_trained is None else alcn_trained and norm.trained
                     policy = InputPolicy(policy_name, train_windows)
                     train, val = policy.windows(train_windows), (policy.windows(val_windows), ts.val_labels)
                     t1 = time.perf_counter()
                     if method == "cnn":
-                        net, cnn_info[f"{n_real}|{policy_name}"] = _train_cnn_sweep(train, ts.labels, num_classes, settings, val)
+                        net, cnn_info[f"{n_real}|{policy_name}|{seed}"] = _train_cnn_sweep(
+                            train, ts.labels, num_classes, settings, seed, val)
                     else:
-                        net = _train(method, train, ts.labels, num_classes, settings, val)
+                        net = _train(method, train, ts.labels, num_classes, settings, seed, val)
                     t_train = time.perf_counter() - t1
                     cache_key = repr(sorted(params.items()))
                     if cache_key not in test_cache:
                         test_cache[cache_key] = [(i, norm.normalize(g), sx, sy) for i, g, sx, sy in test_gray]
                     runs[key] = {
-                        "method": method, "real_images": n_real, "policy": policy.to_dict(), "params": params,
-                        "images_used": ts.images_used,
+                        "method": method, "real_images": n_real, "policy": policy.to_dict(), "seed": seed,
+                        "params": params, "images_used": ts.images_used,
                         "objects": _evaluate(data, test_cache[cache_key], net, policy, settings),
                         "val_relit_acc": evaluate_detector(net, *val)[1],
                         "seconds": {"normalize_train": t_norm, "train": t_train, "total": time.perf_counter() - t0},
                     }
                 except Exception as exc:  # one method failing is reported, not the end of the run
                     logger.error("run %s failed: %s: %s", key, type(exc).__name__, exc, exc_info=logger.isEnabledFor(logging.DEBUG))
-                    runs[key] = {"method": method, "real_images": n_real, "policy": policy_name,
+                    runs[key] = {"method": method, "real_images": n_real, "policy": policy_name, "seed": seed,
                                  "error": f"{type(exc).__name__}: {exc}"}
                 bar.update()
                 write_json(out / "detect.partial.json", {"runs": runs, "tuned": {str(k): v for k, v in tuned.items()}})
@@ -716,6 +793,7 @@ def main(
         "alcn_trained": alcn_trained,
         "machine": machine(),
         "runs": runs,
+        "summary": summarize(runs, settings, [data.name(c) for c in data.categories]),
         "seconds": time.perf_counter() - start,
     }
     result["figures"] = _plot_pr(runs, data, out, settings)
@@ -771,17 +849,19 @@ def add_cli(subparsers: Any) -> None:
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--size", choices=("default", "small"), default="default",
                    help="preset: default (the benchmark) or small (a quick end-to-end run)")
-    p.add_argument("--methods", type=_list(str), help=f"comma-separated methods (default: all: {','.join(d.methods)})")
+    p.add_argument("--methods", type=_list(str), help="comma-separated methods, each NAME or NAME:KEY=VALUE[:KEY=VALUE...] "
+                   f"(e.g. alcn:model=lite:mixture=pyramid; default: all: {','.join(d.methods)})")
     p.add_argument("--real-images", type=_list(int), help="real training images per object (default 1,10)")
     p.add_argument("--policy", type=_list(str), dest="policies",
-                   help="detector input policies: raw, standardize, local (default raw,standardize)")
+                   help=f"detector input policies: raw, standardize, local (default {','.join(d.policies)})")
     p.add_argument("--positives", type=int, dest="positives_per_object",
                    help=f"synthetic windows per object (default {d.positives_per_object})")
     p.add_argument("--negatives-ratio", type=float, help=f"background windows per object window (default {d.negatives_ratio})")
     p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
     p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
     p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
-    p.add_argument("--seed", type=int, help=f"default {d.seed}")
+    p.add_argument("--seeds", type=_list(int), help="repeat every run with each of these seeds and report mean +- "
+                   "standard deviation (default 0)")
     p.add_argument("--tune", dest="tune", action="store_const", const=True,
                    help="tune DoG, SLCN and DLCN on the training windows first (default: their defaults)")
     p.add_argument("--cnn-sweep", type=_sweep, help="plain CNNs tried, DEPTHxWIDTH,... (default 1x32,2x32,3x32)")

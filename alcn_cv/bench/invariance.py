@@ -37,7 +37,7 @@ from tqdm.auto import tqdm
 from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json
 from alcn_cv.io import atomic_write
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import available, create
+from alcn_cv.enhance.registry import available, create, parse_spec
 from alcn_cv.errors import DatasetError, InputError
 
 __all__ = ["PhotometricObject", "agreement", "detail", "load_objects", "main"]
@@ -150,14 +150,6 @@ def detail(normalized: np.ndarray, mask: np.ndarray) -> float:
     return float(np.mean(scores))
 
 
-def _create(name: str) -> Normalization:
-    if name == "alcn":
-        from alcn_cv.enhance.alcn import createALCN
-
-        return createALCN()
-    return create(name)
-
-
 def _figure(obj: PhotometricObject, results: dict[str, np.ndarray], norms: dict[str, Normalization], path: Path) -> Path:
     names = list(results)
     k = len(obj.images)
@@ -193,7 +185,9 @@ def main(
     Args:
         data_dir: photometric-stereo folder (see the module docstring), e.g. ``../shared/data/psm``.
         out_dir: output folder (created).
-        methods: registered normalization names; default every available one.
+        methods: registered normalization names, each optionally with parameters
+            (``NAME[:KEY=VALUE...]``, e.g. ``alcn:model=paper:mixture=exact``); default every
+            available one.
         scale: resize factor applied to the photographs first.
         erode: pixels removed from the mask's border (so that border effects of the
             background edge do not count).
@@ -204,7 +198,7 @@ def main(
         The results dictionary also written to ``invariance.json``.
     """
     methods = list(available()) if methods is None else list(methods)
-    unknown = [m for m in methods if m not in available()]
+    unknown = [m for m in methods if parse_spec(m)[0] not in available()]
     if unknown:
         raise InputError(f"unknown method(s) {', '.join(unknown)}; available: {', '.join(available())}")
     objects = load_objects(data_dir, scale)
@@ -224,10 +218,11 @@ def main(
         bar.set_postfix(method=name)
         row: dict[str, Any] = {"objects": {}}
         try:
-            norm = _create(name)
+            spec_name, params = parse_spec(name)
+            norm = create(spec_name, **params)
             norms[name] = norm
-            if name == "alcn":
-                row["trained"] = bool(getattr(norm, "trained", False))
+            if hasattr(norm, "trained"):
+                row["trained"] = bool(norm.trained)
             start = time.perf_counter()
             for obj in objects:
                 normalized = np.stack([norm.normalize(img) for img in obj.images])
@@ -300,7 +295,8 @@ def add_cli(subparsers: Any) -> None:
     p.add_argument("--data", required=True, type=Path, help="folder of NAME/NAME.<i>.png + NAME.mask.png (e.g. ../shared/data/psm)")
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=None,
-                   help="comma-separated normalization names (default: all available)")
+                   help="comma-separated normalization names, each NAME or NAME:KEY=VALUE[:KEY=VALUE...] "
+                   "(default: all available)")
     p.add_argument("--scale", type=float, default=1.0, help="resize the photographs by this factor first (default 1)")
     p.add_argument("--erode", type=int, default=5, help="pixels removed from the mask border (default 5)")
     p.add_argument("--figure-object", default=None, help="object shown in the figure (default: the first; 'all': every one)")

@@ -1,9 +1,10 @@
 """Speed of ALCN against the classical normalizations (issue 8): ``alcn bench speed``.
 
 One run times every method on the same frames, side by side: ``none``, ``clahe``, ``dog`` and
-ALCN -- its exact fast path (the default of :func:`alcn_cv.createALCN`), its approximate
-variants (coarser Normalizer grid, pyramid mixture), and its other backends (OpenCV DNN when
-``backend="opencv"`` exists, torch on the CPU, torch on CUDA where present) -- on 640x480,
+ALCN -- the default of :func:`alcn_cv.createALCN` (``alcn``: the lite Normalizer and the pyramid
+mixture), the paper's Normalizer with the exact Eq. 3 (``alcn exact``), the approximations in
+between (coarser Normalizer grid, pyramid mixture, lite Normalizer), and the other backends
+(OpenCV DNN, torch on the CPU, torch on CUDA where present) -- on 640x480,
 1280x800 and 1920x1080 frames, grayscale and BGR colour, through the OpenCV-style
 ``apply(uint8 frame)``.
 
@@ -15,7 +16,9 @@ split between the Normalizer network (:meth:`~alcn_cv.ALCN.weight_grid`) and the
 peak of NumPy's allocations traced by :mod:`tracemalloc`, and the process' peak resident set
 from ``/proc/self/status`` after resetting it). Every approximate ALCN variant is compared
 with the exact Eq. 3 output of the same weights on the same frames (largest and mean absolute
-difference of the raw response, also relative to the width of the output range). A video
+difference of the raw response, also relative to the width of the output range). The detection
+accuracy of the default against the exact one is measured by ``alcn bench detect --methods
+alcn,alcn:model=paper:mixture=exact``. A video
 test runs ALCN over a generated 1920x1080 video and records the resident memory after every
 frame (it must stay flat).
 
@@ -54,15 +57,19 @@ logger = logging.getLogger(__name__)
 SIZES: tuple[tuple[int, int], ...] = ((640, 480), (1280, 800), (1920, 1080))
 QUICK_SIZES: tuple[tuple[int, int], ...] = ((64, 48), (96, 72))
 COLOURS = ("gray", "bgr")
-#: The approximate ALCN variants timed beside the exact one: label -> createALCN parameters.
-#: ``model: "lite"`` variants use the distilled Normalizer (their own weight file).
+#: The exact ALCN: the paper's Normalizer and Eq. 3, the reference of the accuracy table.
+EXACT = "alcn exact"
+#: The ALCN configurations timed (fast backend): label -> createALCN parameters. ``alcn`` is the
+#: default (the lite Normalizer with the pyramid mixture); ``model: "lite"`` ones use the
+#: distilled Normalizer's weight file, the others the paper's.
 ALCN_VARIANTS: dict[str, dict[str, Any]] = {
-    "alcn pyramid": {"mixture": "pyramid"},
-    "alcn grid16": {"grid_stride": 16},
-    "alcn grid16 pyramid": {"grid_stride": 16, "mixture": "pyramid"},
-    "alcn grid32 pyramid": {"grid_stride": 32, "mixture": "pyramid"},
-    "alcn lite": {"model": "lite"},
-    "alcn lite pyramid": {"model": "lite", "mixture": "pyramid"},
+    "alcn": {},
+    EXACT: {"model": "paper", "mixture": "exact"},
+    "alcn pyramid": {"model": "paper", "mixture": "pyramid"},
+    "alcn grid16": {"model": "paper", "mixture": "exact", "grid_stride": 16},
+    "alcn grid16 pyramid": {"model": "paper", "mixture": "pyramid", "grid_stride": 16},
+    "alcn grid32 pyramid": {"model": "paper", "mixture": "pyramid", "grid_stride": 32},
+    "alcn lite": {"model": "lite", "mixture": "exact"},
 }
 REFERENCE = "dog"
 
@@ -84,23 +91,22 @@ def _alcn(label: str, weights: str | os.PathLike | None, **params: Any) -> Metho
 def default_methods(
     weights: str | os.PathLike | None = None, lite_weights: str | os.PathLike | None = None, cuda: bool | None = None
 ) -> list[Method]:
-    """The methods of the benchmark: ``none``, ``clahe``, ``dog``, ALCN's exact fast path, its
-    approximate variants (:data:`ALCN_VARIANTS`; the ``lite`` ones with ``lite_weights``), and
-    its other backends that this installation has (``opencv`` when registered, ``torch`` on the
-    CPU, and on CUDA when torch sees a GPU or ``cuda`` is True)."""
+    """The methods of the benchmark: ``none``, ``clahe``, ``dog``, the ALCN configurations of
+    :data:`ALCN_VARIANTS` (the paper's Normalizer from ``weights``, the lite one from
+    ``lite_weights``), and the default ALCN on the other backends that this installation has
+    (``opencv``, ``torch`` on the CPU, and on CUDA when torch sees a GPU or ``cuda`` is True)."""
     methods = [Method(name, lambda name=name: create(name)) for name in ("none", "clahe", REFERENCE)]
-    methods.append(_alcn("alcn", weights))
-    methods += [_alcn(label, lite_weights if params.get("model") == "lite" else weights, **params)
+    methods += [_alcn(label, weights if params.get("model") == "paper" else lite_weights, **params)
                 for label, params in ALCN_VARIANTS.items()]
     if "opencv" in BACKENDS:
-        methods.append(_alcn("alcn opencv", weights, backend="opencv"))
-    methods.append(_alcn("alcn torch cpu", weights, backend="torch", device="cpu"))
+        methods.append(_alcn("alcn opencv", lite_weights, backend="opencv"))
+    methods.append(_alcn("alcn torch cpu", lite_weights, backend="torch", device="cpu"))
     if cuda is None:
         import torch
 
         cuda = torch.cuda.is_available()
     if cuda:
-        methods.append(_alcn("alcn torch cuda", weights, backend="torch", device="cuda"))
+        methods.append(_alcn("alcn torch cuda", lite_weights, backend="torch", device="cuda"))
     return methods
 
 
@@ -377,7 +383,7 @@ def main(
     for width, height, colour in cases:
         frame = frame_for(width, height, colour)
         gray = _to_gray(frame)
-        exact_out: np.ndarray | None = None
+        outputs: dict[str, np.ndarray] = {}
         map_std = float("nan")
         # Build and warm up every method, then time them in rounds (one call of each method per
         # round) so that all of them see the same load of a shared machine.
@@ -406,18 +412,18 @@ def main(
                 split, grid, result = _split(norm, gray, min_repeats, budget_s)
                 row.update(split)
                 if colour == "gray":
-                    result = result.astype(np.float64)
-                    if label == "alcn":
-                        exact_out = result
+                    outputs[label] = result.astype(np.float64)
+                    if label == EXACT:
                         # How much the weight maps vary over the frame: coarser grids cost nothing
                         # in accuracy when they are constant (an untrained Normalizer).
                         map_std = float(grid.std(axis=(1, 2)).mean())
-                    elif exact_out is not None:
-                        accuracy.append({"method": label, "params": method.params, "width": width,
-                                         "height": height, "exact_map_std": map_std,
-                                         **_accuracy(result, exact_out, norm.output_range)})
             row.update(peak_memory(lambda: norm.apply(frame)))
             case_rows.append(row)
+        if EXACT in outputs:
+            exact_norm = ready[EXACT][1]
+            accuracy += [{"method": label, "params": ready[label][0].params, "width": width, "height": height,
+                          "exact_map_std": map_std, **_accuracy(out, outputs[EXACT], exact_norm.output_range)}
+                         for label, out in outputs.items() if label != EXACT]
         reference = next((r["median_ms"] for r in case_rows if r["method"] == REFERENCE), None)
         for row in case_rows:
             row["ratio_to_dog"] = None if reference is None else row["median_ms"] / reference
@@ -486,9 +492,9 @@ def _markdown(result: dict[str, Any]) -> str:
     lines.append(markdown_table(headers, table, digits=2))
     if result["accuracy"]:
         lines += ["## Accuracy of the approximations and backends", "",
-                  "Raw response (`normalize`) of each ALCN variant and backend against the exact Eq. 3 of the fast "
-                  "path (`alcn`, same weights, same grayscale frame); relative: divided by the width of the output "
-                  "range.", ""]
+                  f"Raw response (`normalize`) of each ALCN configuration and backend against `{EXACT}` (the "
+                  "paper's Normalizer and the exact Eq. 3, same grayscale frame); relative: divided by the width of "
+                  "the exact output range.", ""]
         lines.append(markdown_table(
             ["size", "method", "max abs", "mean abs", "max / range", "mean / range", "std of exact",
              "spatial std of the maps"],
@@ -553,11 +559,12 @@ def add_cli(subparsers: Any) -> None:
     p.add_argument("--colours", type=lambda s: [v for v in s.split(",") if v], default=list(COLOURS),
                    help="gray and/or bgr (default both)")
     p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=None,
-                   help="comma-separated labels to run (default all; dog always runs). Labels: none, clahe, dog, alcn, "
+                   help="comma-separated labels to run (default all; dog always runs). Labels: none, clahe, dog, "
                    + ", ".join(f"'{v}'" for v in ALCN_VARIANTS) + ", 'alcn opencv', 'alcn torch cpu', 'alcn torch cuda'")
-    p.add_argument("--weights", type=Path, default=None, help="Normalizer weight file (default: the shipped one)")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="weight file of the paper-model variants (default: the shipped alcn_normalizer.npz)")
     p.add_argument("--lite-weights", type=Path, default=None,
-                   help="weight file of the 'alcn lite' variants (default: the shipped alcn_normalizer_lite.npz)")
+                   help="weight file of the default and 'alcn lite' variants (default: the shipped alcn_normalizer_lite.npz)")
     p.add_argument("--image", type=Path, default=None, help="time on this image resized to each size (default: synthetic frames)")
     p.add_argument("--warmup", type=int, default=1, help="untimed runs per case (default 1)")
     p.add_argument("--repeats", type=int, default=15, help="at most this many timed runs per case (default 15)")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import ast
 import logging
 from pathlib import Path
 
@@ -11,24 +10,11 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv.enhance import available, create
+from alcn_cv.enhance.registry import parse_params
 from alcn_cv.errors import InputError
 from alcn_cv.io import is_video, list_images, map_video, read_image, write_image
 
 logger = logging.getLogger(__name__)
-
-
-def parse_params(items: list[str]) -> dict[str, object]:
-    """``["clipLimit=2", "backend=torch"]`` -> ``{"clipLimit": 2, "backend": "torch"}``."""
-    params: dict[str, object] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.isidentifier():
-            raise InputError(f"bad parameter {item!r}; expected NAME=VALUE")
-        try:
-            params[key] = ast.literal_eval(value)
-        except (ValueError, SyntaxError):
-            params[key] = value
-    return params
 
 
 def main(src: Path, dst: Path, method: str = "alcn", params: dict[str, object] | None = None, gray: bool = False) -> None:

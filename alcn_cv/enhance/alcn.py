@@ -5,6 +5,11 @@ The Normalizer runs fully-convolutionally at the *working scale* (the resolution
 resolution and the Gaussian mixture of Eq. 3 is applied there with the sigmas scaled by
 ``1 / working_scale``, so the output keeps the input's size and detail:
 ``ALCN(I) = sum_k G_{sigma_k / s} * (F_k(I) o I)``.
+
+The default is the real-time configuration (issue 8): the lite Normalizer distilled from the
+paper's, and the large blurs on a Gaussian pyramid. ``createALCN(model="paper", mixture="exact")``
+is the paper's network with Eq. 3 computed exactly, hundreds of times slower; ``alcn bench speed``
+measures both and their difference, ``alcn bench detect`` their detection accuracy.
 """
 
 from __future__ import annotations
@@ -46,10 +51,11 @@ class ALCN(Normalization):
     Args:
         weights: a Normalizer weight file (``.npz``, see :mod:`alcn_cv.weight_file`); default:
             the file shipped in the package for ``model``.
-        model: which shipped Normalizer to use when ``weights`` is not given: ``"paper"``
-            (default; the paper's architecture, ``alcn_cv/weights/alcn_normalizer.npz``) or
-            ``"lite"`` (:class:`~alcn_cv.nets.lite.LiteNormalizer` distilled from it,
-            ``alcn_normalizer_lite.npz``, a few hundred times cheaper; see its model card).
+        model: which shipped Normalizer to use when ``weights`` is not given: ``"lite"``
+            (default; :class:`~alcn_cv.nets.lite.LiteNormalizer` distilled from the paper's,
+            ``alcn_cv/weights/alcn_normalizer_lite.npz``, a few hundred times cheaper; see its
+            model card) or ``"paper"`` (the paper's architecture, trained jointly with a
+            detector, ``alcn_normalizer.npz``; see ``MODEL_CARD.md``).
         scale: working scale, the factor from the input resolution to the one the Normalizer
             sees (its 48x48 window and sigmas are in working-scale pixels). Default: the
             weight file's ``working_scale`` (0.5 for the shipped file: a 640x480 frame is
@@ -65,17 +71,18 @@ class ALCN(Normalization):
             bilinearly in between. Default: the network's own stride (4 for the paper's, 8 for
             the lite one). The paper's network at 8, 16, 32 is 4, 16, 64 times cheaper in its
             fully connected layer (not in its convolutions) and has smoother maps.
-        mixture: ``"exact"`` (default): Eq. 3 at the input resolution; ``"pyramid"`` (fast path
-            only): the blurs of sigma >= 2 pixels on a Gaussian pyramid and the maps sampled
-            directly from the grid at each level
+        mixture: ``"exact"``: Eq. 3 at the input resolution; ``"pyramid"`` (``fast`` and
+            ``opencv`` backends): the blurs of sigma >= 2 pixels on a Gaussian pyramid and the
+            maps sampled directly from the grid at each level
             (:func:`alcn_cv.filters.gaussian_mixture.pyramid_mixture`), 5 to 10 times cheaper.
+            Default: ``"pyramid"``, except ``"exact"`` with ``backend="torch"``.
         threads: torch's intra-op threads while the Normalizer runs (restored after); default:
             torch's setting. 1 is the fastest for the lite Normalizer and on a loaded machine,
             where the threads of small convolutions wait for each other.
 
-    The exact output is the default. The real-time configuration is
-    ``createALCN(model="lite", mixture="pyramid")``; ``alcn bench speed`` measures every
-    variant's time and its difference from the exact output.
+    The default, ``model="lite"`` with ``mixture="pyramid"``, is the real-time configuration;
+    ``model="paper", mixture="exact"`` is the exact Eq. 3 with the paper's network.
+    ``alcn bench speed`` measures every variant's time and its difference from the exact output.
     """
 
     name = "alcn"
@@ -87,14 +94,16 @@ class ALCN(Normalization):
         backend: str = "fast",
         device: str = "cpu",
         grid_stride: int | None = None,
-        mixture: str = "exact",
-        model: str = "paper",
+        mixture: str | None = None,
+        model: str = "lite",
         threads: int | None = None,
     ) -> None:
         if backend not in BACKENDS:
             raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
         if model not in MODELS:
             raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+        if mixture is None:
+            mixture = "exact" if backend == "torch" else "pyramid"
         if mixture not in MIXTURES:
             raise InputError(f"unknown mixture {mixture!r}; choose one of {', '.join(MIXTURES)}")
         if mixture == "pyramid" and backend == "torch":

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import ast
 from collections.abc import Callable
 from typing import TypeVar
 
 from alcn_cv.enhance.base import Normalization, NoNormalization
 from alcn_cv.errors import InputError
 
-__all__ = ["available", "create", "register"]
+__all__ = ["available", "create", "parse_params", "parse_spec", "register"]
 
 _REGISTRY: dict[str, type[Normalization]] = {}
 N = TypeVar("N", bound=type[Normalization])
@@ -43,6 +44,29 @@ def create(name: str, **params: object) -> Normalization:
         return cls(**params)
     except TypeError as exc:
         raise InputError(f"bad parameters for {name!r}: {exc}") from None
+
+
+def parse_params(items: list[str]) -> dict[str, object]:
+    """``["clipLimit=2", "backend=torch"]`` -> ``{"clipLimit": 2, "backend": "torch"}`` (Python literals, else strings)."""
+    params: dict[str, object] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.isidentifier():
+            raise InputError(f"bad parameter {item!r}; expected NAME=VALUE")
+        try:
+            params[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            params[key] = value
+    return params
+
+
+def parse_spec(spec: str) -> tuple[str, dict[str, object]]:
+    """A method with parameters, ``NAME[:KEY=VALUE...]``: ``"alcn:model=lite:mixture=pyramid"`` ->
+    ``("alcn", {"model": "lite", "mixture": "pyramid"})``. The name is not checked here."""
+    name, *items = spec.strip().split(":")
+    if not name:
+        raise InputError(f"bad method {spec!r}; expected NAME[:KEY=VALUE...]")
+    return name, parse_params(items)
 
 
 register(NoNormalization)

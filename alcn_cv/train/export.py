@@ -1,14 +1,15 @@
 """Export the Normalizer to ONNX, for the torch-free OpenCV runtime (:mod:`alcn_cv.train.opencv_runtime`).
 
 The exported graph is the Normalizer's fully-convolutional part (Sec. 3.3): it maps an image
-that is *already padded* by reflect-101 to the mixture weights on the stride-4 grid::
+that is *already padded* by reflect-101 to the mixture weights on its grid of stride ``s``
+(4 for the paper's Normalizer, 8 for the lite one)::
 
-    input  "image":   (B, 1, 4 * (gh - 1) + 48, 4 * (gw - 1) + 48) float32, intensities in [0, 1]
+    input  "image":   (B, 1, s * (gh - 1) + 48, s * (gw - 1) + 48) float32, intensities in [0, 1]
     output "weights": (B, N, gh, gw) float32
 
 Both spatial sizes are dynamic. Grid point ``(i, j)`` is the window of the *unpadded* image
-centred on pixel ``(4i, 4j)``, exactly as :meth:`alcn_cv.nets.Normalizer.dense_grid`, which pads
-by 24 pixels on the top and left and ``4 * (gh - 1) + 24 - H`` on the bottom (the same on the
+centred on pixel ``(s*i, s*j)``, exactly as :meth:`alcn_cv.nets.Normalizer.dense_grid`, which pads
+by 24 pixels on the top and left and ``s * (gh - 1) + 24 - H`` on the bottom (the same on the
 right); the padding stays outside the graph so that the graph has no data-dependent indexing
 and every ONNX runtime (``cv2.dnn`` included) runs it.
 
@@ -30,6 +31,7 @@ import torch
 from torch import nn
 
 from alcn_cv.errors import InputError
+from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW, Normalizer
 from alcn_cv.train.opencv_runtime import DEFAULT_ONNX
 from alcn_cv.weight_file import load_normalizer_file
@@ -72,8 +74,8 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
     if out.suffix != ".onnx":
         raise InputError(f"the ONNX output must end in .onnx, got {out}")
     weight_file = load_normalizer_file(weights)
-    net = Normalizer.from_file(weight_file).eval()
-    example = torch.rand(1, 1, WINDOW + 4 * 3, WINDOW + 4 * 5)
+    net = normalizer_from_file(weight_file).eval()
+    example = torch.rand(1, 1, WINDOW + net.stride * 3, WINDOW + net.stride * 5)
     buffer = io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():
         # dynamo=False: the TorchScript exporter needs no onnxscript and handles this plain

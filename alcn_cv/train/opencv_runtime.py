@@ -9,7 +9,9 @@ This module imports neither torch nor :mod:`alcn_cv.nets`.
 :meth:`alcn_cv.nets.Normalizer.dense_grid` and :meth:`~alcn_cv.nets.Normalizer.dense` return
 for the same weights (to float rounding): the image is padded here by reflect-101
 (``cv2.BORDER_REFLECT_101``) exactly as the torch network pads it, and the grid is upsampled
-bilinearly with the grid points on the pixels ``4i`` (``align_corners=True``).
+bilinearly with the grid points on the pixels ``s*i`` (``align_corners=True``), ``s`` the
+network's output stride (4 for the paper's Normalizer, 8 for the lite one; read from the model
+itself by running it once on a probe image).
 """
 
 from __future__ import annotations
@@ -27,15 +29,16 @@ __all__ = ["DEFAULT_ONNX", "OpenCVNormalizer"]
 
 #: The ONNX model shipped beside the default weight file (the shipped weights, exported).
 DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
-# The Normalizer's window and output stride (``Normalizer.window`` and ``Normalizer.stride``;
-# a test checks they agree; importing alcn_cv.nets here would import torch).
+# The Normalizer's window (``Normalizer.window``; a test checks they agree; importing
+# alcn_cv.nets here would import torch).
 WINDOW = 48
-STRIDE = 4
+# Grid points of the probe run that measures the model's output stride.
+_PROBE_POINTS = 3
 
 
-def _interpolation_matrix(n: int, grid: int) -> np.ndarray:
-    """``(n, grid)`` float32 matrix of linear interpolation from grid points ``4i`` to pixels ``0..n-1``."""
-    pos = np.arange(n, dtype=np.float64) / STRIDE
+def _interpolation_matrix(n: int, grid: int, stride: int) -> np.ndarray:
+    """``(n, grid)`` float32 matrix of linear interpolation from grid points ``stride*i`` to pixels ``0..n-1``."""
+    pos = np.arange(n, dtype=np.float64) / stride
     lo = np.minimum(np.floor(pos).astype(int), grid - 1)
     hi = np.minimum(lo + 1, grid - 1)
     frac = pos - lo
@@ -57,7 +60,6 @@ class OpenCVNormalizer:
     """
 
     window = WINDOW
-    stride = STRIDE
 
     def __init__(self, onnx_path: str | Path | None = None) -> None:
         self.path = Path(onnx_path) if onnx_path is not None else DEFAULT_ONNX
@@ -67,21 +69,32 @@ class OpenCVNormalizer:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
             raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}: {str(exc).strip()}") from None
+        self.stride = self._output_stride()
+
+    def _output_stride(self) -> int:
+        # A (48 + 8k)-pixel input gives 1 + 8k / stride grid points for the strides 1, 2, 4, 8.
+        side = WINDOW + 8 * (_PROBE_POINTS - 1)
+        self.net.setInput(np.zeros((1, 1, side, side), np.float32))
+        points = self.net.forward().shape[-1]
+        if points < 2 or (side - WINDOW) % (points - 1):
+            raise WeightFileError(f"{self.path}: not a Normalizer export (a {side}-pixel probe gave {points} grid points)")
+        return (side - WINDOW) // (points - 1)
 
     def dense_grid(self, image: np.ndarray) -> np.ndarray:
-        """The Normalizer's output on the stride-4 grid.
+        """The Normalizer's output on its grid (stride :attr:`stride`).
 
         Args:
             image: ``(H, W)`` float32 intensities in [0, 1] (at the working scale).
 
         Returns:
-            ``(N, ceil((H-1)/4)+1, ceil((W-1)/4)+1)`` float32; grid point ``(i, j)`` is the
-            prediction for the 48x48 window centred on pixel ``(4i, 4j)``.
+            ``(N, ceil((H-1)/s)+1, ceil((W-1)/s)+1)`` float32 with ``s = stride``; grid point
+            ``(i, j)`` is the prediction for the 48x48 window centred on pixel ``(s*i, s*j)``.
         """
         h, w = check_gray(image).shape
-        gh, gw = math.ceil((h - 1) / STRIDE) + 1, math.ceil((w - 1) / STRIDE) + 1
+        s = self.stride
+        gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
         half = WINDOW // 2
-        padded = cv2.copyMakeBorder(image, half, STRIDE * (gh - 1) + half - h, half, STRIDE * (gw - 1) + half - w,
+        padded = cv2.copyMakeBorder(image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w,
                                     cv2.BORDER_REFLECT_101)
         self.net.setInput(padded[None, None])
         out = self.net.forward()
@@ -91,9 +104,9 @@ class OpenCVNormalizer:
         """Per-pixel weight maps F_k (Eq. 3): :meth:`dense_grid` upsampled bilinearly to ``(N, H, W)``."""
         grid = self.dense_grid(image)
         h, w = image.shape
-        ay = _interpolation_matrix(h, grid.shape[1])
-        ax = _interpolation_matrix(w, grid.shape[2])
+        ay = _interpolation_matrix(h, grid.shape[1], self.stride)
+        ax = _interpolation_matrix(w, grid.shape[2], self.stride)
         return np.matmul(ay, np.matmul(grid, ax.T))
 
     def __repr__(self) -> str:
-        return f"OpenCVNormalizer({self.path.name!r})"
+        return f"OpenCVNormalizer({self.path.name!r}, stride={self.stride})"
