@@ -164,3 +164,18 @@ def test_summarize_over_seeds():
     assert cell["objects"]["a"]["mean"] == pytest.approx(0.3) and cell["objects"]["a"]["std"] == pytest.approx(0.1)
     assert cell["objects"]["b"]["values"] == [0.4]
     assert cell["mean"]["values"] == pytest.approx([0.3, 0.4])
+
+
+def test_training_is_reproducible_whatever_ran_before(small_data):
+    data = D.load_data(small_data)
+    settings = D.DetectSettings(positives_per_object=6, epochs=1, batch_size=16)
+    ts = D.training_set(data, 1, settings, seed=3)
+    windows = ts.windows[:, 16:48, 16:48].astype(np.float32) / 255
+
+    def weights():
+        net = D._train("none", windows, ts.labels, 4, settings, 3, (windows[:4], ts.labels[:4]))
+        return torch.cat([p.detach().flatten() for p in net.parameters()])
+
+    first = weights()
+    torch.rand(100)  # other work drawing from the global generator in between
+    np.testing.assert_array_equal(weights().numpy(), first.numpy())

@@ -487,9 +487,13 @@ def _train(
     method: str, train: np.ndarray, labels: np.ndarray, num_classes: int, settings: DetectSettings, seed: int,
     val: tuple[np.ndarray, np.ndarray], config: tuple[int, int] | None = None,
 ) -> nn.Module:
+    import torch
+
     from alcn_cv.train.stage2 import train_detector
 
-    net = _make_net(method, num_classes, config)
+    with torch.random.fork_rng(devices=[]):  # the seed, not the runs before, sets the initial weights
+        torch.manual_seed(seed)
+        net = _make_net(method, num_classes, config)
     return train_detector(
         train, labels, num_classes, epochs=settings.epochs, batch_size=settings.batch_size, lr=settings.lr,
         seed=seed, val=val, progress=False, net=net, device=settings.device,
