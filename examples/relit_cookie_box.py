@@ -1,6 +1,6 @@
 """Track the cookie box on a synthetically relit copy of its video, with and without ALCN.
 
-    .venv/bin/python examples/relit_cookie_box.py [--out out/cookie_box_relit] [--methods none alcn]
+    .venv/bin/python examples/relit_cookie_box.py [--out out/cookie_box_relit] [--methods none alcn:model=lite]
 
 Each frame of ``../shared/data/cookie_box/box.mp4`` is relit (``pose.evaluate.relight``: a strong
 light gradient whose side changes every 30 frames, darkening and a gamma change). For each
@@ -65,7 +65,8 @@ def registered_build(video: Path, ref: part_model.PartModel, K: np.ndarray, norm
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("out/cookie_box_relit"))
-    ap.add_argument("--methods", nargs="+", default=["none", "alcn"])
+    ap.add_argument("--methods", nargs="+", default=["none", "alcn:model=lite:mixture=pyramid"],
+                    help="normalizers (NAME[:KEY=VALUE...]; default: none and the real-time ALCN)")
     ap.add_argument("--data", type=Path, default=shared_data_dir() / "cookie_box")
     ap.add_argument("--max-frames", type=int, help="only the first N frames (default: all)")
     args = ap.parse_args()
@@ -80,7 +81,7 @@ def main() -> None:
     K = np.asarray(ref.extra.get("K", K_TUTORIAL))  # the focal length refined when building
     models = {"none": ref}
     for name in args.methods:
-        path = args.out / f"model_{name}.npz"
+        path = args.out / f"model_{evaluate.file_stem(name)}.npz"
         if name != "none" and not path.is_file():
             registered_build(video, ref, K, name, path, max_frames=args.max_frames)
         if name != "none":

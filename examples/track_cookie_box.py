@@ -53,7 +53,9 @@ def contact_sheet(video: Path, out: Path, frames: tuple[int, ...] = (0, 60, 120,
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("out/cookie_box"))
-    ap.add_argument("--normalizer", default="none", help="normalizer before the features (alcn_cv.available())")
+    ap.add_argument("--normalizer", default="none",
+                    help="normalizer before the features, NAME[:KEY=VALUE...] (alcn_cv.available(); the real-time "
+                    "ALCN: alcn:model=lite:mixture=pyramid)")
     ap.add_argument("--data", type=Path, default=shared_data_dir() / "cookie_box")
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")

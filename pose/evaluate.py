@@ -19,6 +19,7 @@ their images alone, also after a synthetic light change.
 from __future__ import annotations
 
 import logging
+import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,7 +35,7 @@ from pose.model import read_box_corners, unit_scale
 from pose.model import save as save_model
 from pose.parts import FeaturePartDetector
 from pose.solver import PoseSolver, PoseTracker, project
-from pose.track import MIN_INLIERS
+from pose.track import MIN_INLIERS, RANSAC_ITERATIONS
 
 logger = logging.getLogger(__name__)
 
@@ -109,9 +110,12 @@ def summarize(scores: list[PoseScore], diameter: float) -> dict[str, float]:
 
 
 def evaluate_sequence(detector, scene_dir: Path, obj_id: int, vertices: np.ndarray, units: str,
-                      min_inliers: int = 12) -> tuple[list[PoseScore], float]:
+                      min_inliers: int = 12, outline: np.ndarray | None = None, iterations: int = 500
+                      ) -> tuple[list[PoseScore], float]:
     """Track with ``detector`` (a part detector of :mod:`pose.parts` or :mod:`pose.corners`)
-    through a BOP test scene and score every frame; returns scores and fps."""
+    through a BOP test scene and score every frame; returns scores and fps. ``outline``: the
+    detector's box corners for :class:`pose.solver.PoseSolver` (its coverage check);
+    ``iterations``: its RANSAC iterations."""
     from alcn_cv import io
     from alcn_cv.formats import bop
 
@@ -120,7 +124,7 @@ def evaluate_sequence(detector, scene_dir: Path, obj_id: int, vertices: np.ndarr
     scores, t_total = [], 0.0
     for fr in scene.frames:
         if tracker is None:
-            tracker = PoseTracker(PoseSolver(fr.K, min_inliers=min_inliers))
+            tracker = PoseTracker(PoseSolver(fr.K, min_inliers=min_inliers, iterations=iterations, outline=outline))
         img = io.read_image(fr.rgb_path)
         t0 = time.perf_counter()
         corr = detector.detect(img, None if tracker.prior is None else (*tracker.prior, fr.K))
@@ -129,6 +133,11 @@ def evaluate_sequence(detector, scene_dir: Path, obj_id: int, vertices: np.ndarr
         gt = fr.pose(obj_id)
         scores.append(score(vertices, fr.K, units, (est.R, est.tvec) if est.ok else None, (gt.R, gt.t)))
     return scores, len(scene.frames) / max(t_total, 1e-9)
+
+
+def file_stem(spec: str) -> str:
+    """A file-name-safe form of a normalizer spec: ``"alcn:model=lite"`` -> ``"alcn_model-lite"``."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", spec.replace("=", "-"))
 
 
 def plot_table(table: dict[str, dict[str, float]], columns: list[str], path: Path, title: str) -> Path:
@@ -161,7 +170,7 @@ def markdown_table(table: dict[str, dict[str, float]], columns: list[str]) -> st
 
 def main(data_dir: str | Path, out_dir: str | Path, *,
          normalizers: list[str] | tuple[str, ...] = ("none", "dog", "alcn"),
-         feature: str = "ORB", obj_id: int = 1, n_features: int = 2000,
+         feature: str = "SIFT", obj_id: int = 1, n_features: int = 2000,
          detectors: list[str] | tuple[str, ...] = ("features",), corner_kw: dict[str, Any] | None = None
          ) -> dict[str, Any]:
     """Table-1-style evaluation on a pose data set (``train/000001``, ``test/0000NN``, ``models/``).
@@ -193,22 +202,25 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
             if det_name == "features":
                 seq = build_mod.load_sequence(train, obj_id=obj_id)
                 model, _ = build_mod.build(seq, feature=feature, normalizer=name, box_ply=model_ply, work_dir=out_dir)
-                save_model(model, out_dir / f"model_{name}.npz")
+                save_model(model, out_dir / f"model_{file_stem(name)}.npz")
                 det, units = FeaturePartDetector(model, name, n_features=n_features), model.units
+                outline = model.corners
                 row = f"{name} / {feature.lower()} features"
                 info = {"model_points": len(model.points3d), "box_fit": model.box_fit}
             else:
                 from pose.corners import CornerDetector, train_corners
 
                 t0 = time.perf_counter()
-                net = train_corners(train, corners, out_dir / f"corners_{name}.onnx", normalizer=name, obj_id=obj_id,
-                                    progress=False, **(corner_kw or {}))
+                net = train_corners(train, corners, out_dir / f"corners_{file_stem(name)}.onnx", normalizer=name,
+                                    obj_id=obj_id, progress=False, **(corner_kw or {}))
                 det, units = CornerDetector(net), "mm"  # the BOP model's units
+                outline = det.corners
                 row = f"{name} / corner CNN"
                 info = {"training_seconds": time.perf_counter() - t0, "detector": str(net)}
             table[row], details[row] = {}, {**info, "sequences": {}}
             for col, scene_dir in zip(columns, tests):
-                scores, fps = evaluate_sequence(det, scene_dir, obj_id, corners, units, MIN_INLIERS[det_name])
+                scores, fps = evaluate_sequence(det, scene_dir, obj_id, corners, units, MIN_INLIERS[det_name],
+                                                outline, RANSAC_ITERATIONS[det_name])
                 s = summarize(scores, diameter)
                 table[row][col] = s["proj2d"]
                 details[row]["sequences"][col] = {**s, "fps": fps, "frames": len(scores)}

@@ -33,11 +33,15 @@ class Normalizer(Protocol):
     def apply(self, img: np.ndarray) -> np.ndarray: ...
 
 
-def get_normalizer(name: str) -> Normalizer:
-    """The normalizer registered under ``name`` (``alcn_cv.create``)."""
+def get_normalizer(spec: str) -> Normalizer:
+    """The normalizer ``spec``: a registered name with optional parameters, ``NAME[:KEY=VALUE...]``
+    (:func:`alcn_cv.enhance.registry.parse_spec`), e.g. ``"alcn:model=lite:mixture=pyramid"``
+    (the real-time ALCN), given to ``alcn_cv.create``."""
     import alcn_cv
+    from alcn_cv.enhance.registry import parse_spec
 
-    return alcn_cv.create(name)
+    name, params = parse_spec(spec)
+    return alcn_cv.create(name, **params)
 
 
 def create_feature(name: str, n_features: int = 1000) -> cv2.Feature2D:
@@ -86,7 +90,7 @@ class FeaturePartDetector:
 
     Args:
         model: the part model (its ``feature`` names the OpenCV feature used to build it).
-        normalizer: name given to ``alcn_cv.create``.
+        normalizer: a normalizer for :func:`get_normalizer` (name and optional parameters).
         n_features: keypoints per image.
         ratio: Lowe's ratio-test threshold.
         search_radius: guided matching window (pixels) around the prior pose's projections.

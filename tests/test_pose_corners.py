@@ -64,7 +64,9 @@ def test_visibility_of_a_box_seen_from_above():
 def test_dataset_labels_are_the_projected_corners(posedata):
     seq = load_sequence(posedata / "train" / "000001", obj_id=1)
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
-    data = pc.build_dataset(seq, corners, "none", scale=1.0, negatives_per_frame=30, augment_per_corner=2)
+    data = pc.build_dataset(seq, corners, "none", scale=1.0, negatives_per_frame=30, augment_per_corner=2,
+                            backgrounds=0)
+    assert len(data.normalized) == len(seq.views)
     assert data.windows.shape[1:] == (32, 32) and data.windows.dtype == np.float32
     assert np.isfinite(data.windows).all()
     assert set(np.unique(data.labels)) > {0} and data.labels.max() <= 8
@@ -84,6 +86,28 @@ def test_dataset_labels_are_the_projected_corners(posedata):
                                    atol=1e-5)
 
 
+def test_copies_with_new_backgrounds(posedata):
+    seq = load_sequence(posedata / "train" / "000001", obj_id=1)
+    corners = read_box_corners(posedata / "models" / "obj_000001.ply")
+    data = pc.build_dataset(seq, corners, "none", scale=1.0, negatives_per_frame=10, augment_per_corner=0,
+                            backgrounds=2)
+    assert len(data.normalized) == 3 * len(seq.views) and len(data.visible) == len(data.normalized)
+    first = seq.views[0]
+    mask = cv2.imread(str(posedata / "train" / "000001" / "mask_visib" / f"{first.name[:-4]}_000000.png"), 0)
+    assert mask is not None and mask.shape == data.normalized[0].shape
+    # the view's frames: the original, then its two copies (same corners, same object pixels)
+    np.testing.assert_array_equal(data.visible[1], data.visible[0])
+    inside, outside = mask == 255, mask == 0
+    for copy in data.normalized[1:3]:
+        assert np.abs(copy - data.normalized[0])[outside].mean() > 0.1 * data.normalized[0].std()
+    gray = pc.to_gray(cv2.imread(str(seq.image_dir / first.name)))
+    composite = pc.replace_background(gray, mask, np.random.default_rng(0))
+    np.testing.assert_array_equal(composite[inside], gray[inside])
+    assert np.abs(composite[outside].astype(int) - gray[outside]).mean() > 5
+    pos = (data.labels > 0) & np.isin(data.frames, [1, 2])
+    assert pos.any() and set(data.labels[pos]) == set(data.labels[(data.labels > 0) & (data.frames == 0)])
+
+
 def test_onnx_matches_torch(random_net):
     net, path = random_net
     det = pc.CornerDetector(path)
@@ -97,6 +121,23 @@ def test_onnx_matches_torch(random_net):
     assert det.corners.shape == (8, 3) and det.scale == 0.5 and det.normalizer_name == "none"
 
 
+def test_finer_score_grid_scores_the_windows_it_names(random_net):
+    net, path = random_net
+    frame = np.random.default_rng(3).integers(0, 256, (120, 160), dtype=np.uint8)
+    coarse = pc.CornerDetector(path, subdivide=1).scores(frame)
+    fine = pc.CornerDetector(path, subdivide=2).scores(frame)
+    assert fine.shape == (9, 2 * coarse.shape[1], 2 * coarse.shape[2])
+    np.testing.assert_allclose(fine[:, ::2, ::2], coarse, atol=1e-5)
+    normalized = pc.CornerDetector(path).normalize(frame)
+    for i, j in [(9, 11), (10, 13), (17, 20)]:  # grid point (i, j): window centred on (2j - 0.5, 2i - 0.5)
+        window = normalized[2 * i - 16 : 2 * i + 16, 2 * j - 16 : 2 * j + 16]
+        with torch.no_grad():
+            ref = torch.softmax(net.dense(torch.from_numpy(np.ascontiguousarray(window))[None, None]), 1)
+        np.testing.assert_allclose(fine[:, i, j], ref[0, :, 0, 0].numpy(), atol=1e-4)
+    with pytest.raises(InputError, match="subdivide"):
+        pc.CornerDetector(path, subdivide=3)
+
+
 def test_runs_where_torch_cannot_be_imported(random_net, run_without_torch):
     _, path = random_net
     frame = np.random.default_rng(2).integers(0, 256, (120, 160, 3), dtype=np.uint8)
@@ -108,8 +149,21 @@ def test_runs_where_torch_cannot_be_imported(random_net, run_without_torch):
         frame = np.random.default_rng(2).integers(0, 256, (120, 160, 3), dtype=np.uint8)
         np.save(sys.argv[1], CornerDetector({str(path)!r}, min_score=0.0).detect(frame).image_points)
     """, out)
-    assert len(ref.image_points) == 16  # top_k=2 candidates for each of the 8 corners
+    assert len(ref.image_points) == 32  # top_k=4 candidates for each of the 8 corners
     np.testing.assert_allclose(np.load(out), ref.image_points, atol=1e-3)
+
+
+def test_alcn_runs_at_the_detector_resolution_torch_free_where_it_can(tmp_path):
+    import shutil
+
+    from alcn_cv.enhance.alcn import MODELS
+
+    paper = pc.normalizer_for("alcn:model=paper")
+    assert paper.scale == 1.0 and paper.backend == "opencv"
+    assert pc.normalizer_for("alcn:model=paper:backend=fast").backend == "fast"
+    weights = shutil.copy(MODELS["lite"], tmp_path / "lite.npz")  # weights without an ONNX twin
+    lite = pc.normalizer_for(f"alcn:weights={weights}:mixture=pyramid")
+    assert lite.scale == 1.0 and lite.backend == "fast" and lite.mixture == "pyramid"
 
 
 def test_bad_files(tmp_path, random_net):
@@ -138,7 +192,8 @@ def test_train_then_track_end_to_end(posedata, tmp_path):
     train = posedata / "train" / "000001"
     onnx = tmp_path / "corners.onnx"
     args = parser.parse_args(["pose", "train-corners", str(train), str(onnx), "--box-ply",
-                              str(posedata / "models" / "obj_000001.ply"), "--scale", "1", "--epochs", "6"])
+                              str(posedata / "models" / "obj_000001.ply"), "--scale", "1", "--epochs", "4",
+                              "--rounds", "1"])
     assert args.func(args) == 0
     meta = pc.read_metadata(onnx)
     assert meta["normalizer"] == "none" and meta["fit"]["train_accuracy"] > 0.9
@@ -166,7 +221,7 @@ def test_table1_rows_of_the_corner_detector(posedata, tmp_path):
     with pytest.raises(InputError, match="unknown detectors"):
         evaluate.main(posedata, tmp_path, normalizers=["none"], detectors=["cnn"])
     result = evaluate.main(posedata, tmp_path, normalizers=["none"], detectors=["corners"],
-                           corner_kw={"scale": 1.0, "epochs": 6})
+                           corner_kw={"scale": 1.0, "epochs": 2, "rounds": 1})
     row = result["table"]["none / corner CNN"]
     assert list(row) == ["#1"] and 0.0 <= row["#1"] <= 100.0
     assert (tmp_path / "corners_none.onnx").is_file() and "none / corner CNN" in (tmp_path / "table1.md").read_text()

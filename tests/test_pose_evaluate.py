@@ -21,3 +21,21 @@ def test_report_table_and_plot(tmp_path):
 def test_missing_dataset(tmp_path):
     with pytest.raises(DatasetError, match="train/000001"):
         evaluate.main(tmp_path, tmp_path / "out", normalizers=["none"])
+
+
+def test_normalizer_specs_name_parameters_and_files():
+    from pose.parts import get_normalizer
+
+    fast = get_normalizer("alcn:model=lite:mixture=pyramid")
+    assert fast.mixture == "pyramid" and fast.weights_path.name == "alcn_normalizer_lite.npz"
+    assert get_normalizer("alcn:model=paper:mixture=exact").weights_path.name == "alcn_normalizer.npz"
+    assert evaluate.file_stem("alcn:model=lite:mixture=pyramid") == "alcn_model-lite_mixture-pyramid"
+    assert evaluate.file_stem("none") == "none"
+
+
+def test_overlay_colours_follow_the_paper_for_specs_too():
+    from pose.track import COLORS, OTHER_COLOR, color_for
+
+    assert color_for("alcn:model=lite:mixture=pyramid") == color_for("alcn") == COLORS["alcn"]
+    assert color_for("none") == COLORS["none"] != COLORS["alcn"]
+    assert color_for("clahe:clipLimit=2") == OTHER_COLOR

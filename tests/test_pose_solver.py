@@ -85,3 +85,75 @@ def test_metrics():
     lost = score(v, K, "mm", None, (R, t))
     res = summarize([s, lost], diameter=141.4)
     assert res["tracked"] == 50.0 and res["5cm5deg"] == 50.0 and res["add"] == 0.0
+
+
+def _face(rng, distance, noise=0.0, n=60):
+    """Points on the top face of a 140 x 95 x 55 box seen from ``distance`` at 50 degrees from
+    its normal: the two poses of a plane under weak perspective (Collins & Bartoli, IJCV 2014)."""
+    pts = np.c_[rng.uniform(-70, 70, n), rng.uniform(-47, 47, n), np.full(n, 27.5)]
+    R = cv2.Rodrigues(np.array([np.radians(140.0), 0, 0]))[0] @ cv2.Rodrigues(np.array([0, 0, 0.5]))[0]
+    rvec, tvec = cv2.Rodrigues(R)[0], np.array([[20.0], [-10.0], [float(distance)]])
+    return pts, project(pts, rvec, tvec, K) + rng.normal(0, noise, (n, 2)), rvec, tvec
+
+
+def _other_minimum(solver, pts, uv, rvec):
+    """The planar alternative of the true pose, refined: the wrong local minimum."""
+    R = cv2.Rodrigues(rvec)[0]
+    alts = solver._planar_alternatives(pts, uv, np.arange(len(pts)))
+    r, t = max(alts, key=lambda a: rotation_error_deg(cv2.Rodrigues(a[0])[0], R))
+    r, t, inl = solver._refine(pts, uv, r, t)
+    assert rotation_error_deg(cv2.Rodrigues(r)[0], R) > 45
+    return r, t, inl
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_planar_alternatives_contain_the_true_pose(seed):
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-50, 50, (30, 2))
+    rot = cv2.Rodrigues(rng.normal(0, 1, 3))[0]  # a plane in any orientation of the object frame
+    pts = np.c_[pts, np.zeros(30)] @ rot.T + rng.uniform(-20, 20, 3)
+    rvec, tvec = np.array([[0.4], [0.3], [-0.2]]), np.array([[5.0], [0.0], [500.0]])
+    uv = project(pts, rvec, tvec, K)
+    alts = PoseSolver(K)._planar_alternatives(pts, uv, np.arange(30))
+    assert len(alts) == 2
+    best = min(alts, key=lambda a: rotation_error_deg(cv2.Rodrigues(a[0])[0], cv2.Rodrigues(rvec)[0]))
+    assert rotation_error_deg(cv2.Rodrigues(best[0])[0], cv2.Rodrigues(rvec)[0]) < 1e-4
+    assert np.allclose(best[1], tvec, atol=1e-3)
+
+
+def test_a_prior_in_the_wrong_planar_minimum_does_not_trap_the_solver():
+    rng = np.random.default_rng(3)
+    pts, uv, rvec, tvec = _face(rng, 900.0)
+    solver = PoseSolver(K)
+    wrong = _other_minimum(solver, pts, uv, rvec)
+    assert len(wrong[2]) == len(pts)  # every point is an inlier of the wrong pose (< 4 px)
+    est = solver.solve(pts, uv, prior=wrong[:2])
+    assert est.ok and rotation_error_deg(est.R, cv2.Rodrigues(rvec)[0]) < 0.1
+    assert np.linalg.norm(est.tvec - tvec) < 1.0
+
+
+def test_the_prior_decides_between_poses_the_matches_cannot_tell_apart():
+    rng = np.random.default_rng(4)
+    pts, uv, rvec, tvec = _face(rng, 2000.0, noise=1.0)
+    solver = PoseSolver(K, ambiguity_tolerance=0.5)
+    wrong = _other_minimum(solver, pts, uv, rvec)
+    R = cv2.Rodrigues(rvec)[0]
+    near_true = solver.solve(pts, uv, prior=(cv2.Rodrigues(R @ cv2.Rodrigues(np.array([0.03, 0, 0]))[0])[0], tvec))
+    assert near_true.ok and rotation_error_deg(near_true.R, R) < 5
+    near_wrong = solver.solve(pts, uv, prior=wrong[:2])
+    assert near_wrong.ok and rotation_error_deg(near_wrong.R, R) > 45
+
+
+def test_parts_in_a_small_part_of_the_object_leave_the_frame_lost():
+    rng = np.random.default_rng(5)
+    pts, uv, rvec, tvec = _scene(rng, outliers=0.0)
+    box = np.array([[x, y, z] for x in (-50, 50) for y in (-40, 40) for z in (-30, 30)], float)
+    corner = (pts[:, 0] > 20) & (pts[:, 1] > 20)  # 9% of the box's extent
+    assert PoseSolver(K, outline=box).solve(pts, uv).ok
+    est = PoseSolver(K, outline=box).solve(pts[corner], uv[corner])
+    assert not est.ok and "cover" in est.reason
+    assert PoseSolver(K, outline=box, min_coverage=0.0).solve(pts[corner], uv[corner]).ok
+    with pytest.raises(InputError, match="min_coverage"):
+        PoseSolver(K, outline=box, min_coverage=1.0)
+    with pytest.raises(InputError, match="ambiguity_tolerance"):
+        PoseSolver(K, ambiguity_tolerance=-0.1)
