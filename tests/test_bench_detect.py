@@ -179,3 +179,20 @@ def test_training_is_reproducible_whatever_ran_before(small_data):
     first = weights()
     torch.rand(100)  # other work drawing from the global generator in between
     np.testing.assert_array_equal(weights().numpy(), first.numpy())
+
+
+def test_resnets_train_with_context_under_dense_policies(small_data):
+    data = D.load_data(small_data)
+    settings = D.DetectSettings(positives_per_object=4, epochs=1, batch_size=16)
+    ts = D.training_set(data, 1, settings)
+    windows = ts.windows.astype(np.float32) / 255
+    policy = D.InputPolicy("local", windows)
+    assert D._context("resnet20", "local") == D.RESNET_CONTEXT == 16 and D._context("resnet20", "standardize") == 0
+    assert D._context("cnn", "local") == 0
+    inputs = policy.windows(windows, 32 + 2 * D.RESNET_CONTEXT)
+    assert inputs.shape == (len(windows), 64, 64)
+    np.testing.assert_array_equal(inputs[:, 16:48, 16:48], policy.windows(windows))
+    net = D._train("resnet20", inputs, ts.labels, 4, settings, 0, (inputs[:4], ts.labels[:4]))
+    assert net.context == 16
+    with pytest.raises(InputError, match="context"):
+        D.InputPolicy("standardize", windows).windows(windows, 64)

@@ -47,6 +47,26 @@ def test_resnet_dense_matches_window_inside():
         torch.testing.assert_close(net.dense(image)[0, :, 0, 0], net(image)[0], atol=1e-5, rtol=1e-5)
 
 
+def test_resnet_with_context_classifies_the_centre_as_dense_pools_it():
+    """Trained with context, forward on a 64x64 input scores its central 32x32 window exactly as
+    the dense run over that input scores the window at (16, 16); the context changes the score."""
+    torch.manual_seed(2)
+    net = CifarResNet(3, blocks=1, context=16).eval()
+    assert net.input_size == 64 and net.config["context"] == 16
+    image = torch.rand(2, 1, 64, 64)
+    with torch.no_grad():
+        dense = net.dense(image)
+        assert dense.shape == (2, 3, 9, 9)
+        torch.testing.assert_close(dense[:, :, 4, 4], net(image), atol=1e-5, rtol=1e-5)
+        other = image.clone()
+        other[..., :8, :] = 0  # outside the centre 32x32
+        assert not torch.allclose(net(other), net(image))
+    with pytest.raises(InputError, match="64"):
+        net(torch.zeros(1, 1, 32, 32))
+    with pytest.raises(InputError, match="multiple of 4"):
+        CifarResNet(3, context=6)
+
+
 def test_bad_arguments():
     with pytest.raises(InputError):
         PlainCNN(1)

@@ -25,9 +25,12 @@ For every method and for 1 and 10 real training images per object:
    seed). The deep baselines of Sec. 4.3.1 train their own networks on the same windows
    without normalization: ``cnn`` (the plain CNN of :mod:`alcn_cv.nets.plain` whose depth and
    width, from a small sweep, scores best on relit held-out training windows), ``resnet20``
-   and ``resnet56`` (:mod:`alcn_cv.nets.resnet`). The ResNets' padded convolutions make their
-   dense evaluation an approximation of scoring each window alone (they see the image around
-   the window instead of zeros); the Detector and the plain CNN are exact.
+   and ``resnet56`` (:mod:`alcn_cv.nets.resnet`). The Detector and the plain CNN have valid
+   convolutions: their dense scores equal scoring every window alone. The ResNets' padded
+   convolutions see the image around a window in a dense run, so with the dense input
+   policies they are trained on the 32x32 windows with :data:`RESNET_CONTEXT` pixels of their
+   surroundings and classify from the central 32x32's feature cells, which is what their dense
+   run pools (see :mod:`alcn_cv.nets.resnet`).
 5. **Test.** Every test image is resized to the working scale, normalized whole, and every
    32x32 window at stride 4 is scored (``dense``; with ``standardize`` each window is
    standardized and scored alone). Per object: a fixed-size square box (``box_size`` at the
@@ -90,6 +93,9 @@ WINDOW = 64
 CROP = 32
 STRIDE = 4
 LOCAL_BOX = 31
+#: Pixels of surroundings around the 32x32 window in the ResNets' training inputs (dense policies):
+#: the whole 64x64 training window.
+RESNET_CONTEXT = (WINDOW - CROP) // 2
 _BATCH = 1024
 
 
@@ -353,11 +359,14 @@ class InputPolicy:
         self.mean = float(centres.mean())
         self.std = float(centres.std()) or 1.0
 
-    def windows(self, windows: np.ndarray) -> np.ndarray:
-        """``(n, S, S)`` normalized windows -> ``(n, 32, 32)`` detector inputs."""
+    def windows(self, windows: np.ndarray, size: int = CROP) -> np.ndarray:
+        """``(n, S, S)`` normalized windows -> ``(n, size, size)`` detector inputs (their centres;
+        ``size`` larger than 32 only with the dense policies, for networks that take context)."""
         if self.name == "local":
-            return tuning.centre_windows(np.stack([local_standardize(w) for w in windows]), CROP)
-        centres = tuning.centre_windows(windows, CROP)
+            return tuning.centre_windows(np.stack([local_standardize(w) for w in windows]), size)
+        if self.name == "standardize" and size != CROP:
+            raise InputError("per-window standardization scores bare 32x32 windows; it takes no context")
+        centres = tuning.centre_windows(windows, size)
         if self.name == "standardize":
             return tuning.standardize_windows(centres)
         return ((centres - np.float32(self.mean)) / np.float32(self.std)).astype(np.float32)
@@ -457,7 +466,12 @@ def detect_in_image(
     return boxes[keep], flat[top][keep]
 
 
-def _make_net(method: str, num_classes: int, config: tuple[int, int] | None = None) -> nn.Module:
+def _context(method: str, policy: str) -> int:
+    """Pixels of surroundings the method's network takes around a window under ``policy``."""
+    return RESNET_CONTEXT if method in ("resnet20", "resnet56") and policy != "standardize" else 0
+
+
+def _make_net(method: str, num_classes: int, config: tuple[int, int] | None = None, context: int = 0) -> nn.Module:
     if method == "cnn":
         from alcn_cv.nets.plain import PlainCNN
 
@@ -466,7 +480,7 @@ def _make_net(method: str, num_classes: int, config: tuple[int, int] | None = No
     if method in ("resnet20", "resnet56"):
         from alcn_cv.nets import resnet
 
-        return getattr(resnet, method)(num_classes)
+        return getattr(resnet, method)(num_classes, context=context)
     from alcn_cv.nets import Detector
 
     return Detector(num_classes)
@@ -493,7 +507,7 @@ def _train(
 
     with torch.random.fork_rng(devices=[]):  # the seed, not the runs before, sets the initial weights
         torch.manual_seed(seed)
-        net = _make_net(method, num_classes, config)
+        net = _make_net(method, num_classes, config, context=(train.shape[-1] - CROP) // 2)
     return train_detector(
         train, labels, num_classes, epochs=settings.epochs, batch_size=settings.batch_size, lr=settings.lr,
         seed=seed, val=val, progress=False, net=net, device=settings.device,
@@ -758,7 +772,8 @@ def main(
                     if isinstance(norm, ALCN):
                         alcn_trained = norm.trained if alcn_trained is None else alcn_trained and norm.trained
                     policy = InputPolicy(policy_name, train_windows)
-                    train, val = policy.windows(train_windows), (policy.windows(val_windows), ts.val_labels)
+                    size = CROP + 2 * _context(method, policy_name)
+                    train, val = policy.windows(train_windows, size), (policy.windows(val_windows, size), ts.val_labels)
                     t1 = time.perf_counter()
                     if method == "cnn":
                         net, cnn_info[f"{n_real}|{policy_name}|{seed}"] = _train_cnn_sweep(

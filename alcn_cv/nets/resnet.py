@@ -9,9 +9,13 @@ average pooling and a linear layer. ResNet-20: ``n = 3``; ResNet-56: ``n = 9``.
 
 :meth:`CifarResNet.dense` runs it over a whole image: the convolutions over the image, then an
 8x8 average pooling with stride 1 of the final (1/4-resolution) feature map, which is the
-global average of each 32x32 window at stride 4. It differs from running every window alone
-near the window borders: there the padded convolutions see the image around the window instead
-of zeros.
+global average of each 32x32 window at stride 4. Run on a bare 32x32 window, the padded
+convolutions see zeros around it where the dense run sees the image, so a network trained on
+bare windows scores whole images badly. With ``context=c`` the network is trained on windows
+with ``c`` pixels of their surroundings (``32 + 2c`` square) and classifies from the feature
+cells of the central 32x32 only, exactly what :meth:`~CifarResNet.dense` pools: training and
+dense scoring then differ only where a cell's receptive field reaches more than ``c`` pixels
+beyond the window.
 """
 
 from __future__ import annotations
@@ -51,21 +55,28 @@ class CifarResNet(nn.Module):
         num_classes: background + objects (>= 2).
         blocks: basic blocks per stage (``n``; 3 gives ResNet-20, 9 ResNet-56).
         in_channels: input channels (1 for grayscale).
+        context: pixels of surroundings on each side of the 32x32 window in the inputs of
+            :meth:`forward` (a multiple of 4; 0: the plain CIFAR network), see the module's
+            docstring.
 
     Shape:
-        - :meth:`forward`: ``(B, 1, 32, 32)`` -> ``(B, num_classes)`` logits
+        - :meth:`forward`: ``(B, 1, S, S)`` -> ``(B, num_classes)`` logits, ``S = 32 + 2 * context``
+          (:attr:`input_size`)
         - :meth:`dense`: ``(B, 1, H, W)`` -> ``(B, num_classes, H//4-7, W//4-7)`` for H, W
           multiples of 4 (entry ``(i, j)`` scores the window with top-left corner ``(4i, 4j)``).
     """
 
-    input_size = INPUT
     stride = 4
 
-    def __init__(self, num_classes: int, blocks: int = 3, in_channels: int = 1) -> None:
+    def __init__(self, num_classes: int, blocks: int = 3, in_channels: int = 1, context: int = 0) -> None:
         super().__init__()
         if num_classes < 2 or blocks < 1:
             raise InputError(f"need num_classes >= 2 and blocks >= 1, got {num_classes} and {blocks}")
-        self.config = {"num_classes": num_classes, "blocks": blocks, "in_channels": in_channels}
+        if context < 0 or context % self.stride:
+            raise InputError(f"context must be a non-negative multiple of {self.stride}, got {context}")
+        self.context = context
+        self.input_size = INPUT + 2 * context
+        self.config = {"num_classes": num_classes, "blocks": blocks, "in_channels": in_channels, "context": context}
         self.stem = nn.Sequential(nn.Conv2d(in_channels, 16, 3, 1, 1, bias=False), nn.BatchNorm2d(16), nn.ReLU(inplace=True))
         layers: list[nn.Module] = []
         cin = 16
@@ -84,9 +95,11 @@ class CifarResNet(nn.Module):
         return self.fc.out_features
 
     def forward(self, windows: torch.Tensor) -> torch.Tensor:
-        if windows.ndim != 4 or windows.shape[1:] != (1, INPUT, INPUT):
-            raise InputError(f"windows must have shape (B, 1, {INPUT}, {INPUT}), got {tuple(windows.shape)}")
-        return self.fc(self.stages(self.stem(windows)).mean((2, 3)))
+        size = self.input_size
+        if windows.ndim != 4 or windows.shape[1:] != (1, size, size):
+            raise InputError(f"windows must have shape (B, 1, {size}, {size}), got {tuple(windows.shape)}")
+        c, cells = self.context // self.stride, INPUT // self.stride
+        return self.fc(self.stages(self.stem(windows))[..., c : c + cells, c : c + cells].mean((2, 3)))
 
     def dense(self, image: torch.Tensor) -> torch.Tensor:
         if image.ndim != 4 or image.shape[1] != 1 or min(image.shape[-2:]) < INPUT:
@@ -97,11 +110,11 @@ class CifarResNet(nn.Module):
         return torch.einsum("bchw,kc->bkhw", features, self.fc.weight) + self.fc.bias[None, :, None, None]
 
 
-def resnet20(num_classes: int) -> CifarResNet:
+def resnet20(num_classes: int, context: int = 0) -> CifarResNet:
     """ResNet-20 (CIFAR-style, 0.27M parameters)."""
-    return CifarResNet(num_classes, blocks=3)
+    return CifarResNet(num_classes, blocks=3, context=context)
 
 
-def resnet56(num_classes: int) -> CifarResNet:
+def resnet56(num_classes: int, context: int = 0) -> CifarResNet:
     """ResNet-56 (CIFAR-style, 0.85M parameters)."""
-    return CifarResNet(num_classes, blocks=9)
+    return CifarResNet(num_classes, blocks=9, context=context)

@@ -40,10 +40,12 @@ class NonFiniteLossError(RuntimeError):
     """The training loss became NaN or inf."""
 
 
-def _check_windows(windows: object, labels: object, num_classes: int, what: str) -> tuple[torch.Tensor, torch.Tensor]:
-    if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.shape[1:] != (INPUT, INPUT):
+def _check_windows(
+    windows: object, labels: object, num_classes: int, what: str, size: int = INPUT
+) -> tuple[torch.Tensor, torch.Tensor]:
+    if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.shape[1:] != (size, size):
         shape = getattr(windows, "shape", None)
-        raise InputError(f"{what} windows must be an (n, {INPUT}, {INPUT}) array, got {shape}")
+        raise InputError(f"{what} windows must be an (n, {size}, {size}) array, got {shape}")
     if windows.dtype != np.float32:
         raise InputError(f"{what} windows must be float32, got {windows.dtype}")
     if len(windows) == 0:
@@ -65,14 +67,14 @@ def evaluate_detector(net: nn.Module, windows: np.ndarray, labels: np.ndarray) -
 
     Args:
         net: the detector (its mode is restored afterwards).
-        windows: ``(n, 32, 32)`` float32 normalized windows.
+        windows: ``(n, S, S)`` float32 normalized windows, ``S`` the network's ``input_size``.
         labels: ``(n,)`` int64, 0 = background, 1..K = objects.
 
     Returns:
         ``(loss, accuracy)``, accuracy in [0, 1].
     """
     num_classes = getattr(net, "num_classes", int(labels.max()) + 1)
-    x, y = _check_windows(windows, labels, num_classes, "validation")
+    x, y = _check_windows(windows, labels, num_classes, "validation", getattr(net, "input_size", INPUT))
     device = next(net.parameters()).device
     was_training = net.training
     net.eval()
@@ -109,9 +111,10 @@ def train_detector(
     torch random state is left as it was.
 
     Args:
-        windows: ``(n, 32, 32)`` float32, the 32x32 centres of the windows *after*
+        windows: ``(n, S, S)`` float32, the ``S x S`` centres of the windows *after*
             normalization and whatever input policy the caller applies (for example per-window
-            standardization); the same policy must be applied at test time.
+            standardization); the same policy must be applied at test time. ``S`` is the
+            network's ``input_size`` (32 for the Detector).
         labels: ``(n,)`` int64, 0 = background, 1..K = objects.
         num_classes: K + 1.
         epochs: passes over the data (>= 1).
@@ -122,7 +125,7 @@ def train_detector(
             logged after every epoch.
         progress: show a tqdm bar with the loss and accuracy.
         net: the network to train (modified in place); default ``Detector(num_classes)``
-            initialised from ``seed``. It must map ``(B, 1, 32, 32)`` to ``(B, num_classes)``.
+            initialised from ``seed``. It must map ``(B, 1, S, S)`` to ``(B, num_classes)``.
         weight_decay: Adam's L2 penalty.
         device: torch device to train on.
 
@@ -134,9 +137,10 @@ def train_detector(
     """
     if epochs < 1 or batch_size < 1 or not lr > 0:
         raise InputError(f"need epochs >= 1, batch_size >= 1 and lr > 0, got {epochs}, {batch_size}, {lr}")
-    x, y = _check_windows(windows, labels, num_classes, "training")
+    size = getattr(net, "input_size", INPUT)
+    x, y = _check_windows(windows, labels, num_classes, "training", size)
     if val is not None:
-        _check_windows(val[0], val[1], num_classes, "validation")
+        _check_windows(val[0], val[1], num_classes, "validation", size)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         if net is None:
