@@ -194,11 +194,11 @@ def _read_mask(path: Path, shape: tuple[int, int]) -> np.ndarray | None:
 
 def replace_background(gray: np.ndarray, mask: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """``gray`` uint8 with the pixels outside ``mask`` (uint8, 255 = object; intermediate
-    values blend) replaced by a random texture (:func:`alcn_cv.data.textures.random_texture`,
+    values blend) replaced by a random texture (:func:`alcn_cv.data.textures.display_texture`,
     gamma-encoded like a photograph)."""
-    from alcn_cv.data.textures import random_texture
+    from alcn_cv.data.textures import display_texture
 
-    texture = cv2.cvtColor(np.ascontiguousarray(random_texture(rng, gray.shape) ** (1 / 2.2)), cv2.COLOR_RGB2GRAY)
+    texture = display_texture(rng, gray.shape, gray=True)
     alpha = mask.astype(np.float32) / np.float32(255)
     out = alpha * gray.astype(np.float32) + (1 - alpha) * np.float32(255) * texture
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)

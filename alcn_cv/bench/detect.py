@@ -88,6 +88,7 @@ logger = logging.getLogger(__name__)
 
 #: Deep baselines (own networks, no normalization) of Sec. 4.3.1.
 DEEP_BASELINES = ("cnn", "resnet20", "resnet56")
+RESNETS = ("resnet20", "resnet56")
 POLICIES = ("raw", "standardize", "local")
 WINDOW = 64
 CROP = 32
@@ -468,7 +469,7 @@ def detect_in_image(
 
 def _context(method: str, policy: str) -> int:
     """Pixels of surroundings the method's network takes around a window under ``policy``."""
-    return RESNET_CONTEXT if method in ("resnet20", "resnet56") and policy != "standardize" else 0
+    return RESNET_CONTEXT if method in RESNETS and policy != "standardize" else 0
 
 
 def _make_net(method: str, num_classes: int, config: tuple[int, int] | None = None, context: int = 0) -> nn.Module:
@@ -477,7 +478,7 @@ def _make_net(method: str, num_classes: int, config: tuple[int, int] | None = No
 
         depth, width = config or (2, 32)
         return PlainCNN(num_classes, depth=depth, width=width)
-    if method in ("resnet20", "resnet56"):
+    if method in RESNETS:
         from alcn_cv.nets import resnet
 
         return getattr(resnet, method)(num_classes, context=context)

@@ -18,7 +18,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from alcn_cv.data.textures import random_texture
+from alcn_cv.data.textures import display_texture
 from alcn_cv.errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -93,9 +93,7 @@ def _background(rng: np.random.Generator, gray: bool, backgrounds: Sequence[np.n
         ch, cw = min(h, int(WINDOW / s) + 1), min(w, int(WINDOW / s) + 1)
         y0, x0 = int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1))
         return cv2.resize(src[y0 : y0 + ch, x0 : x0 + cw], (WINDOW, WINDOW), interpolation=cv2.INTER_LINEAR)
-    tex = random_texture(rng, WINDOW, p_photo=0.6) ** (1 / 2.2)  # display values, like a photograph
-    tex = np.ascontiguousarray(tex[..., ::-1])
-    return cv2.cvtColor(tex, cv2.COLOR_BGR2GRAY) if gray else tex
+    return display_texture(rng, WINDOW, p_photo=0.6, gray=gray)
 
 
 def augment(

@@ -18,6 +18,7 @@ import numpy as np
 logger = logging.getLogger(__name__)
 
 __all__ = [
+    "display_texture",
     "PHOTO_NAMES",
     "PROCEDURAL_KINDS",
     "photos",
@@ -248,3 +249,12 @@ def random_texture(rng: np.random.Generator, size: int | tuple[int, int], *, p_p
     if rng.random() < p_photo:
         return colour_jitter(rng, photo_crop(rng, size), 0.6)
     return procedural_texture(rng, size)
+
+
+def display_texture(
+    rng: np.random.Generator, size: int | tuple[int, int], *, p_photo: float = 0.5, gray: bool = False
+) -> np.ndarray:
+    """:func:`random_texture` gamma-encoded (1/2.2) to display values, as a photograph stores
+    them: float32 in [0, 1], ``(h, w)`` luma with ``gray``, else BGR ``(h, w, 3)``."""
+    bgr = np.ascontiguousarray(random_texture(rng, size, p_photo=p_photo)[..., ::-1] ** (1 / 2.2), dtype=np.float32)
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY) if gray else bgr
