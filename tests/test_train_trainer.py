@@ -138,12 +138,31 @@ def test_validation_must_hold_lightings_out(data, tmp_path):
         trainer.train(cfg, tmp_path, progress=False)
 
 
+def test_dense_mixture_starts_as_eq1_and_learns_weights_that_vary_inside_a_window(data, tmp_path):
+    cfg = trainer.load_config(_config(data, mixture="dense"))
+    model = trainer.JointModel(cfg.model, 4)
+    x = torch.rand(2, 1, 64, 64)
+    with torch.no_grad():
+        dense = model.response(x)
+        model.dense_mixture = False  # untrained, the Normalizer predicts the DoG everywhere: Eq. 3 = Eq. 1
+        np.testing.assert_allclose(dense, model.response(x), atol=1e-5)
+    result = trainer.train(_config(data, mixture="dense"), tmp_path, progress=False)
+    assert result.status == "done"
+    with torch.no_grad():
+        maps = result.model.normalizer.dense(x, trainer.DENSE_GRID_STRIDE)
+    assert maps.shape == (2, 10, 64, 64)
+    assert float(maps.std(dim=(2, 3)).max()) > 1e-4  # per-pixel weights: gradients reached the maps
+    assert load_normalizer_file(result.weights).meta["training"]["config"]["model"]["mixture"] == "dense"
+
+
 def test_centre_mixture_equals_kornia_mixture():
     from alcn_cv.filters.kornia_mixture import gaussian_mixture2d
 
     x, w = torch.rand(3, 1, 64, 64), torch.randn(3, 10)
     centre = trainer.CentreMixture(tuple(0.5 * i for i in range(1, 11)))
     np.testing.assert_allclose(centre(x, w), gaussian_mixture2d(x, w)[..., 16:48, 16:48], atol=1e-5)
+    maps = torch.randn(3, 10, 64, 64)  # Eq. 3: per-pixel weights
+    np.testing.assert_allclose(centre.dense(x, maps), gaussian_mixture2d(x, maps)[..., 16:48, 16:48], atol=1e-5)
 
 
 def test_meta_objective_trains_the_normalizer_only_on_other_lightings(data):

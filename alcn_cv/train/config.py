@@ -42,6 +42,11 @@ effective configuration as TOML, a complete, commented-free starting point.
     every method alike: per-window standardization (zero mean, unit variance over the 32x32) or
     the raw mixture output. ``working_scale`` (float): the scale recorded in the exported weight
     file, the factor from a camera frame to the resolution at which the 48x48 window applies.
+    ``mixture`` (``"window"`` or ``"dense"``): how the Normalizer's weights filter a training
+    window: ``"window"`` -- Eq. 1, one weight vector for the window (the paper's training);
+    ``"dense"`` -- Eq. 3 as at inference: the Normalizer runs fully-convolutionally over the
+    window and its per-pixel weight maps multiply the image before the blurs, so the weights
+    may vary inside a window (e.g. across a shadow edge). A dense step costs about 6 times a window step.
 
 ``[optim]``
     ``objective``: ``"joint"`` -- Eq. 2, the detector and the Normalizer minimise the loss on
@@ -120,6 +125,7 @@ class ModelConfig:
     detector_hidden: int = 512
     detector_dropout: float = 0.0
     detector_input: str = "standardize"
+    mixture: str = "window"
     working_scale: float = 0.5
 
 
@@ -197,6 +203,7 @@ _CHOICES = {
     "model.activation": ("tanh", "relu"),
     "model.init": ("dog", "random"),
     "model.detector_input": ("standardize", "raw"),
+    "model.mixture": ("window", "dense"),
     "optim.optimizer": ("adam", "sgd"),
     "optim.objective": ("joint", "meta"),
     "optim.schedule": ("cosine", "step", "constant"),

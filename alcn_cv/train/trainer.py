@@ -15,6 +15,11 @@ Each 64x64 training window (:mod:`alcn_cv.data.phos`) is used as in the paper: t
 sees its centre 48x48, the mixture filters the whole 64x64 and the detector gets the centre
 32x32 (free of border effects for sigmas up to 5), after the detector input policy
 (``model.detector_input``, per-window standardization by default).
+With ``model.mixture = "dense"`` the window is filtered by Eq. 3 instead, as at inference: the
+Normalizer runs fully-convolutionally over the 64x64 window (:meth:`Normalizer.dense`, windows
+every :data:`DENSE_GRID_STRIDE` pixels, reflect-101 beyond the window) and its per-pixel weight
+maps multiply the image before the blurs (:meth:`CentreMixture.dense`), so the weights can change
+inside a window, across a shadow edge for example. Eq. 1 cannot learn that; a dense step costs ~6x a window step.
 
 The default objective (``optim.objective = "meta"``) rehearses the paper's second stage inside
 the first: the detector learns from windows under one *anchor* lighting only (as a new detector
@@ -77,6 +82,9 @@ CHECKPOINT_VERSION = 1
 _NORMALIZER_CROP = (WINDOW - Normalizer.window) // 2  # 8: the Normalizer sees the centre 48x48
 _DETECTOR_CROP = (WINDOW - INPUT) // 2  # 16: the detector sees the centre 32x32
 _STD_EPS = 1e-4
+#: Spacing of the windows whose weights the Normalizer predicts in ``model.mixture = "dense"``
+#: training; the maps are interpolated in between, as the default runtime does at its stride 8.
+DENSE_GRID_STRIDE = 8
 _PART = 4096  # windows rendered per part (parts are independent of the worker count)
 _ARRAYS = ("windows", "labels", "light_ids", "kinds", "offsets", "extents")
 
@@ -134,6 +142,17 @@ class CentreMixture(nn.Module):
             blurs = self.blurs(windows)
         return torch.einsum("bnhw,bn->bhw", blurs, weights).unsqueeze(1)
 
+    def dense(self, windows: torch.Tensor, maps: torch.Tensor) -> torch.Tensor:
+        """Eq. 3 on the centre: ``sum_i G_i * (F_i o I)`` with per-pixel weight maps.
+
+        Shape:
+            windows ``(B, 1, H, W)``, maps ``(B, N, H, W)`` -> ``(B, 1, size, size)``
+        """
+        if windows.shape[-2:] != (self.window, self.window) or maps.shape[-2:] != windows.shape[-2:]:
+            raise InputError(f"windows and maps must be {self.window}x{self.window}, got "
+                             f"{tuple(windows.shape[-2:])} and {tuple(maps.shape[-2:])}")
+        return (self.bands @ (maps * windows) @ self.bands.transpose(1, 2)).sum(1, keepdim=True)
+
 
 class JointModel(nn.Module):
     """Normalizer (or a fixed filter) + Gaussian mixture + detector input policy + detector.
@@ -150,6 +169,7 @@ class JointModel(nn.Module):
         super().__init__()
         self.method = cfg.method
         self.policy = cfg.detector_input
+        self.dense_mixture = cfg.mixture == "dense"
         sigmas = gaussian_sigmas(cfg.num_kernels, cfg.sigma_step)
         dog = dog_weights(cfg.num_kernels, cfg.sigma_step, cfg.dog)
         self.mixture = CentreMixture(sigmas)
@@ -172,11 +192,16 @@ class JointModel(nn.Module):
     def normalized(self, windows: torch.Tensor) -> torch.Tensor:
         """The detector's input ``(B, 1, 32, 32)``: mixture output (or raw) centre, after the policy."""
         c = _DETECTOR_CROP
-        if self.method == "none":
-            out = windows[..., c : c + INPUT, c : c + INPUT]
-        else:
-            out = self.mixture(windows, self.weights(windows))
+        out = windows[..., c : c + INPUT, c : c + INPUT] if self.method == "none" else self.response(windows)
         return standardize(out) if self.policy == "standardize" else out
+
+    def response(self, windows: torch.Tensor) -> torch.Tensor:
+        """The raw mixture output ``(B, 1, 32, 32)`` on the centre (before the input policy):
+        Eq. 1 with one weight vector per window, or Eq. 3 with the Normalizer's per-pixel maps
+        (``model.mixture = "dense"``)."""
+        if self.dense_mixture and self.normalizer is not None:
+            return self.mixture.dense(windows, self.normalizer.dense(windows, DENSE_GRID_STRIDE))
+        return self.mixture(windows, self.weights(windows))
 
     def forward(self, windows: torch.Tensor, anchor: torch.Tensor | None = None) -> torch.Tensor:
         """Logits ``(B, num_classes)``. With a boolean ``anchor`` mask (the ``"meta"`` objective),
@@ -474,7 +499,7 @@ def measure_output_range(
     values = []
     for i in range(0, len(windows), 512):
         x = torch.from_numpy(windows[i : i + 512]).unsqueeze(1).float() / 255.0
-        values.append(model.mixture(x, model.weights(x)).flatten().numpy())
+        values.append(model.response(x).flatten().numpy())
     lo, hi = np.percentile(np.concatenate(values), percentiles)
     return [float(lo), float(hi)]
 
