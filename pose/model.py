@@ -5,8 +5,8 @@ A part model describes one rigid box-like object in its own *object frame*:
 * the box: its size ``(3,)`` along the frame's axes and its 8 corners ``(8, 3)``; the corners
   are the *parts* the learned detector looks for (the Box experiment of Rad et al., BMVC 2017,
   Sec. 4.4, with the part-based method of Crivellaro et al., ICCV 2015);
-* the sparse 3D points triangulated from the training sequence, each with one descriptor
-  (the classical detector matches image features to them) and its track length;
+* the sparse 3D points triangulated from the training sequence, each with one or more
+  descriptors (the classical detector matches image features to them) and its track length;
 * the units of every length (``"mm"``, ``"cm"`` or ``"m"``).
 
 File format (version :data:`FORMAT_VERSION`)
@@ -14,25 +14,29 @@ File format (version :data:`FORMAT_VERSION`)
 One ``.npz`` archive (``numpy.savez``, no pickles) holding the arrays below and a JSON header
 stored as a 0-d unicode array under the key ``header``:
 
-=================  ============  =========  ==================================================
-key                shape         dtype      meaning
-=================  ============  =========  ==================================================
-``header``         ()            str        JSON: ``format``, ``version``, ``units``, ``feature``
-                                            (OpenCV detector name), ``normalizer``, ``source``,
-                                            ``box_fit`` (fit statistics), ``extra``
-``corners``        (8, 3)        float64    box corners in the object frame, in the order of
-                                            :func:`box_corners`
-``box_size``       (3,)          float64    edge lengths along x, y, z
-``points3d``       (N, 3)        float32    triangulated points in the object frame
-``descriptors``    (N, D)        uint8/f32  one descriptor per point (binary for ORB/AKAZE)
-``track_length``   (N,)          int32      number of training images that saw each point
-``colors``         (N, 3)        uint8      RGB colour of each point (for the PLY)
-=================  ============  =========  ==================================================
+====================  ============  =========  ===============================================
+key                   shape         dtype      meaning
+====================  ============  =========  ===============================================
+``header``            ()            str        JSON: ``format``, ``version``, ``units``,
+                                               ``feature`` (OpenCV detector name),
+                                               ``normalizer``, ``source``, ``box_fit`` (fit
+                                               statistics), ``extra``
+``corners``           (8, 3)        float64    box corners in the object frame, in the order
+                                               of :func:`box_corners`
+``box_size``          (3,)          float64    edge lengths along x, y, z
+``points3d``          (N, 3)        float32    triangulated points in the object frame
+``descriptors``       (M, D)        uint8/f32  descriptors (binary for ORB/AKAZE); a point
+                                               may have several (seen from several views)
+``descriptor_point``  (M,)          int32      the point (row of ``points3d``) each describes
+``track_length``      (N,)          int32      number of training images that saw each point
+``colors``            (N, 3)        uint8      RGB colour of each point (for the PLY)
+====================  ============  =========  ===============================================
 
 :func:`save` also writes the point cloud beside the archive as ``<stem>.ply`` (for MeshLab,
 open3d, CloudCompare). Files are written atomically (temporary name, then rename).
-Reading an archive of another version raises :class:`~alcn_cv.errors.WeightFileError`
-naming both versions.
+Version 1 had one descriptor per point and no ``descriptor_point``; it is still read. Reading
+an archive of another version raises :class:`~alcn_cv.errors.WeightFileError` naming both
+versions.
 """
 
 from __future__ import annotations
@@ -55,7 +59,8 @@ from alcn_cv.formats import bop
 logger = logging.getLogger(__name__)
 
 FORMAT_NAME = "alcn-part-model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READABLE_VERSIONS = (1, 2)
 UNITS = ("mm", "cm", "m")
 _UNIT_IN_M = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 
@@ -93,6 +98,7 @@ class PartModel:
     corners: np.ndarray
     points3d: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))
+    descriptor_point: np.ndarray | None = None
     track_length: np.ndarray | None = None
     colors: np.ndarray | None = None
     units: str = "mm"
@@ -108,8 +114,17 @@ class PartModel:
             raise InputError(f"corners must be a finite (8, 3) array, got shape {self.corners.shape}")
         self.points3d = np.asarray(self.points3d, dtype=np.float32).reshape(-1, 3)
         n = len(self.points3d)
-        if len(self.descriptors) != n:
-            raise InputError(f"{len(self.descriptors)} descriptors for {n} points")
+        if self.descriptor_point is None:  # one descriptor per point
+            if len(self.descriptors) != n:
+                raise InputError(f"{len(self.descriptors)} descriptors for {n} points")
+            self.descriptor_point = np.arange(n, dtype=np.int32)
+        self.descriptor_point = np.asarray(self.descriptor_point, dtype=np.int32).reshape(-1)
+        if len(self.descriptor_point) != len(self.descriptors):
+            raise InputError(f"{len(self.descriptors)} descriptors but {len(self.descriptor_point)} descriptor_point "
+                             "entries")
+        if len(self.descriptor_point) and (self.descriptor_point.min() < 0 or self.descriptor_point.max() >= n):
+            raise InputError(f"descriptor_point must index the {n} points, got values in "
+                             f"[{self.descriptor_point.min()}, {self.descriptor_point.max()}]")
         if self.track_length is None:
             self.track_length = np.ones(n, np.int32)
         self.track_length = np.asarray(self.track_length, dtype=np.int32).reshape(n)
@@ -140,7 +155,8 @@ class PartModel:
         s = unit_scale(self.units, units)
         return PartModel(
             corners=self.corners * s, points3d=self.points3d * s, descriptors=self.descriptors,
-            track_length=self.track_length, colors=self.colors, units=units, feature=self.feature,
+            descriptor_point=self.descriptor_point, track_length=self.track_length, colors=self.colors, units=units,
+            feature=self.feature,
             normalizer=self.normalizer, source=self.source, box_fit=dict(self.box_fit), extra=dict(self.extra),
         )
 
@@ -190,7 +206,8 @@ def save(model: PartModel, path: str | Path) -> Path:
     buf = io.BytesIO()
     np.savez(
         buf, header=np.array(json.dumps(model.header())), corners=model.corners, box_size=model.box_size,
-        points3d=model.points3d, descriptors=model.descriptors, track_length=model.track_length,
+        points3d=model.points3d, descriptors=model.descriptors, descriptor_point=model.descriptor_point,
+        track_length=model.track_length,
         colors=model.colors,
     )
     _atomic_write_bytes(path, buf.getvalue())
@@ -220,14 +237,15 @@ def load(path: str | Path) -> PartModel:
         raise WeightFileError(f"{path}: field 'header' missing or not JSON") from exc
     if header.get("format") != FORMAT_NAME:
         raise WeightFileError(f"{path}: field 'format' is {header.get('format')!r}, expected {FORMAT_NAME!r}")
-    if header.get("version") != FORMAT_VERSION:
+    if header.get("version") not in READABLE_VERSIONS:
         raise WeightFileError(
-            f"{path}: part model format version {header.get('version')} but this alcn-cv reads version "
-            f"{FORMAT_VERSION}; rebuild it with `alcn pose build`"
+            f"{path}: part model format version {header.get('version')} but this alcn-cv reads versions "
+            f"{', '.join(map(str, READABLE_VERSIONS))}; rebuild it with `alcn pose build`"
         )
     try:
         return PartModel(
             corners=arrays["corners"], points3d=arrays["points3d"], descriptors=arrays["descriptors"],
+            descriptor_point=arrays["descriptor_point"] if header["version"] >= 2 else None,
             track_length=arrays["track_length"], colors=arrays["colors"], units=header["units"],
             feature=header["feature"], normalizer=header.get("normalizer", "none"),
             source=header.get("source", ""), box_fit=header.get("box_fit", {}), extra=header.get("extra", {}),

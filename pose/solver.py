@@ -1,10 +1,11 @@
 """The pose solver: 2D-3D part correspondences -> object pose, robust to wrong matches.
 
 ``cv2.solvePnPRansac`` gives a first pose and its inliers; ``cv2.solvePnPRefineLM`` then
-minimises the reprojection error of the inliers (Levenberg-Marquardt). With a video, the previous
-frame's pose is a prior: the correspondences that agree with it are refined directly, and the
-full RANSAC runs only when too few do. A frame with too few inliers is reported *lost* (no pose)
-rather than given a wrong one; :class:`PoseTracker` logs when tracking is lost and recovered.
+minimises the reprojection error of the inliers (Levenberg-Marquardt). With a video, the pose
+predicted from the previous frames (:class:`PoseTracker`) is a prior: the correspondences that
+agree with it are refined directly, and the full RANSAC runs only when too few do. A frame with
+too few inliers is reported *lost* (no pose) rather than given a wrong one; :class:`PoseTracker`
+logs when tracking is lost and recovered.
 Measured on the data engine's sequences: refining from the prior alone kept wrong local minima
 (10-14 px errors with half the matches as inliers) after large inter-frame motions, hence the
 competition with RANSAC below a high inlier ratio.
@@ -302,28 +303,59 @@ class PoseSolver:
 
 
 class PoseTracker:
-    """Frame-to-frame use of a :class:`PoseSolver`: previous pose as prior, lost/recovered events.
+    """Frame-to-frame use of a :class:`PoseSolver`: a predicted pose as prior, lost/recovered events.
+
+    The prior for the next frame is predicted from the last two accepted poses at constant
+    velocity (rotation vector and translation per frame, as in the motion model of ORB-SLAM, Mur-
+    Artal et al., T-RO 2015), or is the last pose when only one is known. It also survives up to
+    ``coast`` lost frames after the last accepted pose, so that the detector keeps searching
+    around the predicted pose (guided matching, with a much higher share of correct matches than
+    matching the whole frame) instead of falling back to the whole frame at once.
+
+    Measured on the data engine's sequences #1-#8 (SIFT, the same part models; % correct poses):
+    the previous pose as prior gave ALCN lite 96.7 90.0 100 100 96.7 96.7 80.0 50.0 and no
+    normalization 93.3 86.7 90.0 100 93.3 80.0 63.3 13.3; the constant-velocity prediction
+    100 96.7 100 100 96.7 100 96.7 76.7 and 93.3 93.3 100 100 100 80.0 83.3 10.0; coasting 3 lost
+    frames changed only #7 without normalization (83.3 -> 93.3).
 
     ``events`` collects ``(frame_index, "lost" | "recovered", reason)`` tuples, also logged.
     """
 
-    def __init__(self, solver: PoseSolver) -> None:
+    def __init__(self, solver: PoseSolver, coast: int = 3) -> None:
         self.solver = solver
-        self.prior: tuple[np.ndarray, np.ndarray] | None = None
+        self.coast = coast
         self.events: list[tuple[int, str, str]] = []
+        self._poses: list[tuple[int, np.ndarray, np.ndarray]] = []  # the last two accepted (frame, rvec, tvec)
+        self._frame: int | None = None  # the last frame given to update
         self._lost = True
         self._started = False
 
+    @property
+    def prior(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(rvec, tvec)`` predicted for the frame after the last update, or ``None``."""
+        if not self._poses or self._frame is None or self._frame - self._poses[-1][0] > self.coast:
+            return None
+        f1, r1, t1 = self._poses[-1]
+        if len(self._poses) < 2:
+            return r1, t1
+        f0, r0, t0 = self._poses[0]
+        steps = (self._frame + 1 - f1) / (f1 - f0)  # in units of the last inter-pose interval
+        R0, R1 = cv2.Rodrigues(r0)[0], cv2.Rodrigues(r1)[0]
+        w = cv2.Rodrigues(R1 @ R0.T)[0] * steps
+        return cv2.Rodrigues(cv2.Rodrigues(w)[0] @ R1)[0], t1 + (t1 - t0) * steps
+
     def update(self, frame_index: int, object_points: np.ndarray, image_points: np.ndarray) -> PoseEstimate:
         est = self.solver.solve(object_points, image_points, self.prior)
+        self._frame = frame_index
         if est.ok:
-            self.prior = (est.rvec, est.tvec)
+            self._poses = (self._poses + [(frame_index, est.rvec, est.tvec)])[-2:]
             if self._lost and self._started:
                 self.events.append((frame_index, "recovered", ""))
                 logger.info("frame %d: tracking recovered (%d inliers)", frame_index, len(est.inliers))
             self._lost = False
         else:
-            self.prior = None
+            if self._poses and frame_index - self._poses[-1][0] > self.coast:
+                self._poses = []  # lost for too long: the next pose starts a new motion
             if not self._lost:
                 self.events.append((frame_index, "lost", est.reason))
                 logger.info("frame %d: tracking lost (%s)", frame_index, est.reason)

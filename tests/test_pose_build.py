@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -49,6 +50,58 @@ def test_fit_box_removes_plane_and_outliers():
     assert fit2.stats["scale"] == pytest.approx(100, rel=0.05)
 
 
+def _lid(rng, n=1500, noise=0.8):
+    """A 140 x 95 x 55 box seen from above: points on its lid (z = 55) only, with noise."""
+    return np.c_[rng.uniform(0, 140, n), rng.uniform(0, 95, n), 55 + rng.normal(0, noise, n)]
+
+
+def test_fit_box_lid_only_extends_away_from_the_cameras():
+    """Only the lid was reconstructed: the known height must hang below it (away from the
+    cameras, here above the box), whichever way the noise leans."""
+    rng = np.random.default_rng(3)
+    lid = _lid(rng)
+    above = np.array([[70.0, 40.0, 600.0], [0.0, -300.0, 500.0]])
+    for cams, z in ((above, (0.0, 55.0)), (above * [1, 1, -1] + [0, 0, 110], (55.0, 110.0))):
+        fit = build.fit_box(lid, known_size=[55, 140, 95], viewpoints=cams)
+        assert (fit.corners[:, 2].min(), fit.corners[:, 2].max()) == pytest.approx(z, abs=1.5)
+        assert np.ptp(fit.corners[:, 0]) == pytest.approx(140, abs=3) and np.ptp(fit.corners[:, 1]) == \
+            pytest.approx(95, abs=3)
+
+
+def test_fit_box_frame_from_the_lid_when_a_side_is_badly_triangulated():
+    """A side face folded 40 degrees towards the lid (a flattened reconstruction) tilts the
+    minimal bounding box; the frame of the best-seen face stays aligned with the box."""
+    rng = np.random.default_rng(4)
+    lid = _lid(rng, 2000, 0.3)
+    s = rng.uniform(0, 1, (500, 2))
+    a = np.radians(40)
+    side = np.c_[s[:, 0] * 140, -s[:, 1] * 55 * np.cos(a), 55 - s[:, 1] * 55 * np.sin(a)]
+    fit = build.fit_box(np.vstack([lid, side]), known_size=[140, 95, 55], viewpoints=np.array([[70, -200, 500.0]]))
+    axes = np.abs(fit.R)
+    assert axes.max(0) == pytest.approx(1, abs=np.sin(np.radians(2)))  # each axis along x, y or z
+    assert sorted(fit.size) == [55, 95, 140]
+    assert fit.size[np.argmax(axes[2])] == 55  # the height is the lid's normal
+
+
+def test_match_known_size_by_the_face_aspect():
+    # a 25.8 x 18.9 lid seen in full, its 7.5 height only in part (2 of 7.5): sorting the three
+    # lengths would give 7.5 to the lid's shorter edge's partner; the aspect ratio decides
+    matched, s = build.match_known_size([4.0, 2.93, 0.3], [18.9, 25.8, 7.5], scale_free=True)
+    assert matched.tolist() == [25.8, 18.9, 7.5] and s == pytest.approx(6.45, rel=0.01)
+    matched, s = build.match_known_size([95.0, 55.0, 139.0], [140, 95, 55])
+    assert matched.tolist() == [95, 55, 140] and s == 1.0
+
+
+def test_representatives_medoid_then_farthest():
+    d = np.array([[0.0, 0], [1, 0], [0, 1], [10, 10], [0.5, 0.5]], np.float32)
+    idx = build.representatives(d, cv2.NORM_L2, 2)
+    assert idx[0] == 4 and idx[1] == 3  # the medoid, then the most different view
+    assert len(build.representatives(d, cv2.NORM_L2, 8)) == 5
+    assert build.representatives(d[:1], cv2.NORM_L2, 8).tolist() == [0]
+    bits = np.array([[0], [1], [255]], np.uint8)
+    assert build.representatives(bits, cv2.NORM_HAMMING, 1).tolist() == [1]
+
+
 def test_fit_box_degenerate():
     with pytest.raises(DatasetError):
         build.fit_box(np.zeros((5, 3)))
@@ -91,6 +144,10 @@ def test_triangulation_with_fixed_poses_on_middlebury(shared_data, tmp_path):
     lo, hi = np.array([-0.073568, 0.021728, -0.012445]), np.array([0.028855, 0.181892, 0.062736])
     inside = np.all((model.points3d > lo - 0.01) & (model.points3d < hi + 0.01), axis=1)
     assert inside.mean() > 0.9
+    # seeded RANSAC and mapping: the same model every time
+    again, _ = build.build(seq, feature="SIFT", n_features=4000, work_dir=tmp_path)
+    np.testing.assert_array_equal(again.points3d, model.points3d)
+    np.testing.assert_array_equal(again.corners, model.corners)
     path = pm.save(model, tmp_path / "temple.npz")
     build.plot_model(model, cams, tmp_path / "temple_cameras.png")
     assert (tmp_path / "temple_cameras.png").stat().st_size > 1000 and path.is_file()

@@ -50,13 +50,41 @@ def test_other_version_and_corrupt_files(tmp_path):
     header["version"] = pm.FORMAT_VERSION + 1
     arrays["header"] = np.array(json.dumps(header))
     np.savez(tmp_path / "v2.npz", **arrays)
-    with pytest.raises(WeightFileError, match=rf"version {pm.FORMAT_VERSION + 1}.*version {pm.FORMAT_VERSION}"):
+    with pytest.raises(WeightFileError, match=rf"version {pm.FORMAT_VERSION + 1}.*versions 1, 2"):
         pm.load(tmp_path / "v2.npz")
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
     with pytest.raises(WeightFileError):
         pm.load(tmp_path / "bad.npz")
     with pytest.raises(WeightFileError, match="not found"):
         pm.load(tmp_path / "missing.npz")
+
+
+def test_several_descriptors_per_point_and_version_1(tmp_path):
+    rng = np.random.default_rng(1)
+    owner = np.array([0, 0, 1, 2, 2, 2], np.int32)
+    m = pm.PartModel(corners=pm.box_corners([1, 1, 1]), points3d=rng.uniform(0, 1, (3, 3)),
+                     descriptors=rng.integers(0, 256, (6, 32), dtype=np.uint8), descriptor_point=owner)
+    back = pm.load(pm.save(m, tmp_path / "m.npz"))
+    assert np.array_equal(back.descriptor_point, owner) and np.array_equal(back.descriptors, m.descriptors)
+    assert np.array_equal(back.scaled_to("cm").descriptor_point, owner)
+    # a version-1 file (one descriptor per point, no descriptor_point) is still read
+    path = pm.save(_model(), tmp_path / "v1.npz")
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files if k != "descriptor_point"}
+    header = json.loads(str(arrays["header"]))
+    header["version"] = 1
+    arrays["header"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "v1.npz", **arrays)
+    assert np.array_equal(pm.load(tmp_path / "v1.npz").descriptor_point, np.arange(50))
+    del arrays["descriptors"]
+    header["version"] = 2
+    arrays["header"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "v2.npz", **arrays)
+    with pytest.raises(WeightFileError, match="descriptor"):
+        pm.load(tmp_path / "v2.npz")
+    with pytest.raises(InputError, match="index the 3 points"):
+        pm.PartModel(corners=pm.box_corners([1, 1, 1]), points3d=np.zeros((3, 3)),
+                     descriptors=np.zeros((2, 32), np.uint8), descriptor_point=[0, 3])
 
 
 def test_bad_models():

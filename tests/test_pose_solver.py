@@ -63,6 +63,39 @@ def test_prior_is_used_and_tracker_logs_lost_and_recovered():
     assert [e[0] for e in tracker.events] == [2, 3]
 
 
+def test_tracker_predicts_at_constant_velocity_and_coasts():
+    rng = np.random.default_rng(3)
+    pts = rng.uniform([-50, -40, -30], [50, 40, 30], size=(150, 3))
+    step_r, step_t = np.array([0.0, 0.05, 0.02]), np.array([4.0, -2.0, 5.0])
+
+    def pose(i):
+        return np.array([[0.3], [-0.4], [0.2]]) + i * step_r[:, None], np.array([[10.0], [-5.0], [400.0]]) + \
+            i * step_t[:, None]
+
+    def uv(i):
+        return project(pts, *pose(i), K)
+
+    for coast, prior_after_loss in ((3, True), (0, False)):
+        tracker = PoseTracker(PoseSolver(K), coast=coast)
+        assert tracker.prior is None
+        assert tracker.update(0, pts, uv(0)).ok and tracker.update(1, pts, uv(1)).ok
+        r, t = tracker.prior  # predicted for frame 2, not frame 1's pose
+        assert rotation_error_deg(cv2.Rodrigues(r)[0], cv2.Rodrigues(pose(2)[0])[0]) < 0.2
+        assert np.linalg.norm(t - pose(2)[1]) < 0.5
+        assert not tracker.update(2, pts[:3], uv(2)[:3]).ok  # lost: the prediction goes on for frame 3
+        assert (tracker.prior is not None) == prior_after_loss
+        if prior_after_loss:
+            assert np.linalg.norm(tracker.prior[1] - pose(3)[1]) < 0.5
+            assert tracker.update(3, pts, uv(3)).ok
+    tracker = PoseTracker(PoseSolver(K), coast=1)
+    tracker.update(0, pts, uv(0))
+    for i in (1, 2):  # lost for longer than it may coast: no prior, and no stale velocity later
+        tracker.update(i, pts[:3], uv(i)[:3])
+    assert tracker.prior is None
+    tracker.update(3, pts, uv(3))
+    assert np.allclose(tracker.prior[1], tracker._poses[-1][2])
+
+
 def test_bad_arguments():
     with pytest.raises(InputError):
         PoseSolver(np.eye(2))

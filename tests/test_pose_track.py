@@ -90,6 +90,46 @@ def test_detector_runs_after_any_normalizer():
             assert len(corr.image_points) == len(corr.object_points) > 20
 
 
+def test_ratio_test_compares_distinct_points():
+    """Each point described twice (the same descriptor): a plain 2-NN ratio test would reject every
+    match (the runner-up is the same point); the detector compares the closest other point."""
+    tex = _texture(2)
+    one = _planar_model(tex)
+    n = len(one.points3d)
+    two = pm.PartModel(corners=one.corners, points3d=one.points3d, descriptors=np.vstack([one.descriptors] * 2),
+                       descriptor_point=np.r_[np.arange(n), np.arange(n)], units="mm")
+    r, t = _poses(1)[0]
+    img = _render(tex, r, t)
+    single = FeaturePartDetector(one, n_features=500).detect(img)
+    double = FeaturePartDetector(two, n_features=500)
+    glob = double.detect(img)
+    assert len(glob.object_points) >= 0.9 * len(single.object_points) > 20
+    prior = (r, t, K)  # guided matching around the prior
+    single_guided = FeaturePartDetector(one, n_features=500).detect(img, prior)
+    assert len(double.detect(img, prior).object_points) >= 0.9 * len(single_guided.object_points) > 20
+
+
+def test_keypoints_in_predicted_region_with_a_prior():
+    """With a prior pose only the object's predicted region is searched (n_features there);
+    without one, all keypoints of the frame."""
+    tex = _texture(3)
+    model = _planar_model(tex)
+    r, t = _poses(1)[0][0], np.array([[-30.0], [-30.0], [600.0]])
+    img = _render(tex, r, t)
+    yy, xx = np.mgrid[:SIZE[1], :SIZE[0]]
+    clutter = np.where(((xx + yy // 2) // 5 + yy // 5) % 2, 188, 68).astype(np.uint8)  # a fine checkerboard floor
+    img = np.where(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)[..., None] == 90, clutter[..., None], img)
+    det = FeaturePartDetector(model, n_features=150, min_guided=5)
+    full = det.detect(img)
+    assert full.keypoints > 150  # all keypoints without a prior
+    tracked = det.detect(img, (r, t, K))
+    region = det._region(img.shape, (r, t, K))
+    uv = np.round(tracked.image_points).astype(int)
+    assert tracked.keypoints == 150 and len(uv) >= 5  # the cap applies inside the region, not before it
+    assert region[uv[:, 1], uv[:, 0]].all()
+    assert (region > 0).mean() < 0.8  # the region is not the whole frame
+
+
 def test_bad_sources(tmp_path):
     with pytest.raises(DatasetError):
         list(track.iter_frames(tmp_path / "nope.mp4"))
