@@ -203,12 +203,9 @@ class FeaturePartDetector:
         """uint8 mask of the object's predicted region: the convex hull of the box's corners
         projected with the prior pose, grown by :attr:`search_radius`; ``None`` when the box is
         not in front of the camera or misses the image."""
-        rvec, tvec, K = prior
-        R = cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
-        cam = self.model.corners @ R.T + np.ravel(tvec)
-        if np.any(cam[:, 2] <= 0):
+        front, uv = _project_in_front(self.model.corners, prior)
+        if len(front) < len(self.model.corners):
             return None
-        uv = cam[:, :2] / cam[:, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
         uv = np.clip(uv, -4 * max(shape[:2]), 5 * max(shape[:2]))  # corners near the camera plane: no overflow
         mask = np.zeros(shape[:2], np.uint8)
         cv2.fillConvexPoly(mask, cv2.convexHull(np.round(uv).astype(np.int32)), 255)
@@ -234,13 +231,9 @@ class FeaturePartDetector:
 
     def _guided(self, pts2d: np.ndarray, desc: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray]
                 ) -> np.ndarray:
-        rvec, tvec, K = prior
-        R = cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
-        cam = self.model.points3d @ R.T + np.ravel(tvec)
-        front = np.flatnonzero(cam[:, 2] > 0)
+        front, uv = _project_in_front(self.model.points3d, prior)
         if len(front) < 2:
             return np.zeros((0, 2), np.int64)
-        uv = cam[front, :2] / cam[front, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
         from scipy.spatial import cKDTree
 
         # candidate (keypoint, model point) pairs: the max_candidates points projected nearest to each
@@ -291,6 +284,16 @@ class FeaturePartDetector:
             else:
                 out[a:a + chunk] = np.sqrt(np.maximum(((q - m) ** 2).sum(1), 0))
         return out
+
+
+def _project_in_front(points: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray]
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the points ``(N, 3)`` in front of the camera of ``prior = (rvec, tvec, K)`` and
+    their pixels ``(n, 2)`` (pinhole, no distortion: the search regions are tens of pixels wide)."""
+    rvec, tvec, K = prior
+    cam = points @ cv2.Rodrigues(np.asarray(rvec, np.float64))[0].T + np.ravel(tvec)
+    front = np.flatnonzero(cam[:, 2] > 0)
+    return front, cam[front, :2] / cam[front, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
 
 
 def _as_words(desc: np.ndarray) -> np.ndarray:
