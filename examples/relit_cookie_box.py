@@ -49,9 +49,7 @@ def registered_build(video: Path, ref: part_model.PartModel, K: np.ndarray, norm
     with tempfile.TemporaryDirectory(dir=path.parent) as work:
         views = []
         for i, frame in frames(video, max_frames):
-            prior = None if tracker.prior is None else (*tracker.prior, K)
-            c = det.detect(frame, prior)
-            est = tracker.update(i, c.object_points, c.image_points)
+            est, _ = tracker.step(i, frame, det)
             if est.ok and i % step == 0:
                 io.write_image(Path(work) / f"{i:06d}.png", frame)
                 views.append(build.View(f"{i:06d}.png", K, None, est.R, est.tvec.ravel()))

@@ -46,10 +46,11 @@ def _track(args: argparse.Namespace) -> int:
 def _eval(args: argparse.Namespace) -> int:
     from pose import evaluate
 
+    normalizers = args.normalizers or evaluate.DEFAULT_NORMALIZERS
     if args.middlebury:
-        evaluate.middlebury_main(args.middlebury, args.out, normalizers=args.normalizers, feature=args.feature)
+        evaluate.middlebury_main(args.middlebury, args.out, normalizers=normalizers, feature=args.feature)
     if args.data:
-        evaluate.main(args.data, args.out, normalizers=args.normalizers, feature=args.feature,
+        evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature,
                       detectors=args.detectors, corner_kw={"epochs": args.corner_epochs})
     if not (args.middlebury or args.data):
         raise ValueError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
@@ -121,7 +122,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                        description="BB8 2D projection < 5 px, ADD < 10%% of the diameter, 5 cm / 5 deg.")
     e.add_argument("--data", help="pose data set from `alcn data pose` (train/, test/, models/)")
     e.add_argument("--middlebury", nargs="+", help="Middlebury sets (e.g. ../shared/data/middlebury/templeSparseRing)")
-    e.add_argument("--normalizers", nargs="+", default=["none", "dog", "alcn"], help="rows of the table")
+    e.add_argument("--normalizers", nargs="+",
+                   help="rows of the table, NAME[:KEY=VALUE...] (default: none dog:sigma1=1:sigma2=2 alcn, "
+                   "the DoG tuned for pose at 640x480)")
     e.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"],
                    help="feature of the classical detector (default SIFT: on the data engine's sequences it "
                    "gave more correct poses than ORB, and with ALCN far more; `track` uses ORB for speed)")

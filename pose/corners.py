@@ -521,6 +521,8 @@ class CornerDetector:
         normalizer_name, scale, input_mean, input_std: from the file.
     """
 
+    uses_prior = False
+
     def __init__(self, onnx_path: str | Path, *, top_k: int = 4, min_score: float = 0.1, subdivide: int = 2) -> None:
         self.path = Path(onnx_path)
         self.meta = read_metadata(self.path)
@@ -601,11 +603,11 @@ class CornerDetector:
             out.append((from_scaled(xy, self.scale), np.asarray(sc, np.float64)))
         return out
 
-    def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-               ) -> Correspondences:
+    def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
+               search_scale: float = 1.0) -> Correspondences:
         """Corner candidates of ``image`` as 2D-3D correspondences.
 
-        ``prior`` is not used: the solver takes the previous pose into account (gating the
+        ``prior`` and ``search_scale`` are not used: the solver takes the previous pose into account (gating the
         candidates by it gave no clear gain on the data engine's sequences and lost frames
         after large motions)."""
         obj, img = [], []

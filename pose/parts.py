@@ -90,6 +90,17 @@ class Correspondences:
     keypoints: int = 0
 
 
+class PartDetector(Protocol):
+    """What the pose tracker needs of a part detector (:class:`FeaturePartDetector`,
+    :class:`pose.corners.CornerDetector`): correspondences in an image, optionally searched
+    around a prior pose ``(rvec, tvec, K)`` (when :attr:`uses_prior`)."""
+
+    uses_prior: bool
+
+    def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
+               search_scale: float = 1.0) -> Correspondences: ...
+
+
 class FeaturePartDetector:
     """Classical part detector: features of the normalized image matched to the model's 3D points.
 
@@ -115,11 +126,17 @@ class FeaturePartDetector:
             3 of 240 frames (ALCN lite, SIFT) and none without normalization; 32 lost 27 frames
             (fewer competitors in the ratio test let wrong matches through).
         min_guided: fewer guided matches than this: match globally instead.
+        cross_check: keep a global match only when the keypoint is also the nearest of one of
+            the point's descriptors among the image's keypoints (mutual nearest neighbours). For
+            a small model in a large image: on Middlebury's temple (a 102-point model, 8000
+            keypoints per view) it raised the share of correct matches from 3-7% to 8-25%.
     """
+
+    uses_prior = True
 
     def __init__(self, model: PartModel, normalizer: str = "none", *, n_features: int = 2000,
                  n_features_global: int = 0, ratio: float = 0.8, search_radius: float = 20.0,
-                 max_candidates: int = 64, min_guided: int = 20) -> None:
+                 max_candidates: int = 64, min_guided: int = 20, cross_check: bool = False) -> None:
         if len(model.points3d) < 4:
             raise InputError(f"the part model has {len(model.points3d)} 3D points; at least 4 are needed")
         self.model = model
@@ -130,6 +147,7 @@ class FeaturePartDetector:
         self.norm = descriptor_norm(model.feature)
         self.ratio = ratio
         self.search_radius, self.max_candidates, self.min_guided = search_radius, max_candidates, min_guided
+        self.cross_check = cross_check
         # a match without a second candidate nearby: accept only a close descriptor
         self.max_lone_distance = 50.0 if self.norm == cv2.NORM_HAMMING else 250.0
         self._matcher = cv2.BFMatcher(self.norm)
@@ -147,8 +165,8 @@ class FeaturePartDetector:
         """The normalized grayscale uint8 image the features are computed on."""
         return self.normalizer.apply(to_gray(image))
 
-    def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-               ) -> Correspondences:
+    def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
+               search_scale: float = 1.0) -> Correspondences:
         """Correspondences between ``image`` (BGR or gray uint8) and the model's 3D points.
 
         Args:
@@ -158,13 +176,16 @@ class FeaturePartDetector:
                 model points that project within :attr:`search_radius` pixels of it (guided
                 matching); when that yields fewer than :attr:`min_guided` matches, the global
                 detection and matching run instead.
+            search_scale: multiplies :attr:`search_radius` (the tracker widens the search when
+                its prediction is uncertain).
         """
         gray = self.normalize(image)
         if prior is not None:
-            region = self._region(gray.shape, prior)
+            radius = self.search_radius * search_scale
+            region = self._region(gray.shape, prior, radius)
             if region is not None:
                 pts2d, desc, n = self._detect(gray, region, self.n_features)
-                pairs = self._guided(pts2d, desc, prior) if n else np.zeros((0, 2), np.int64)
+                pairs = self._guided(pts2d, desc, prior, radius) if n else np.zeros((0, 2), np.int64)
                 if len(pairs) >= self.min_guided:
                     return Correspondences(self.model.points3d[pairs[:, 1]], pts2d[pairs[:, 0]], n)
         pts2d, desc, n = self._detect(gray, None, self.n_features_global)
@@ -199,9 +220,10 @@ class FeaturePartDetector:
             return np.zeros((0, 2), np.float32), None, 0
         return np.array([k.pt for k in kps], np.float32) + np.float32([x0, y0]), desc, len(kps)
 
-    def _region(self, shape: tuple[int, ...], prior: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray | None:
+    def _region(self, shape: tuple[int, ...], prior: tuple[np.ndarray, np.ndarray, np.ndarray], radius: float
+                ) -> np.ndarray | None:
         """uint8 mask of the object's predicted region: the convex hull of the box's corners
-        projected with the prior pose, grown by :attr:`search_radius`; ``None`` when the box is
+        projected with the prior pose, grown by ``radius`` pixels; ``None`` when the box is
         not in front of the camera or misses the image."""
         front, uv = _project_in_front(self.model.corners, prior)
         if len(front) < len(self.model.corners):
@@ -209,13 +231,14 @@ class FeaturePartDetector:
         uv = np.clip(uv, -4 * max(shape[:2]), 5 * max(shape[:2]))  # corners near the camera plane: no overflow
         mask = np.zeros(shape[:2], np.uint8)
         cv2.fillConvexPoly(mask, cv2.convexHull(np.round(uv).astype(np.int32)), 255)
-        r = int(np.ceil(self.search_radius))
+        r = int(np.ceil(radius))
         mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
         return mask if mask.any() else None
 
     def _global(self, desc: np.ndarray) -> np.ndarray:
         """(keypoint, model point) pairs by Lowe's ratio test between the closest descriptor and
-        the closest one of *another* point (a point may have several descriptors)."""
+        the closest one of *another* point (a point may have several descriptors); with
+        :attr:`cross_check`, only mutual nearest neighbours."""
         k = min(int(self._count.max()) + 1, len(self.model.descriptors))
         knn = self._matcher.knnMatch(desc, k=k)
         idx = np.zeros((len(knn), k), np.int64)
@@ -227,10 +250,15 @@ class FeaturePartDetector:
         other = (owner != owner[:, :1]) & np.isfinite(dist)
         d2 = np.where(other.any(1), dist[np.arange(len(knn)), np.argmax(other, axis=1)], np.inf)
         ok = dist[:, 0] < self.ratio * d2
-        return np.stack([np.flatnonzero(ok), owner[ok, 0]], 1).astype(np.int64)
+        pairs = np.stack([np.flatnonzero(ok), owner[ok, 0]], 1).astype(np.int64)
+        if self.cross_check and len(pairs):
+            nearest = np.array([m.trainIdx for m in cv2.BFMatcher(self.norm).match(self.model.descriptors, desc)])
+            mutual = np.unique(self.model.descriptor_point * len(desc) + nearest)  # (point, keypoint) codes
+            pairs = pairs[np.isin(pairs[:, 1] * len(desc) + pairs[:, 0], mutual)]
+        return pairs
 
-    def _guided(self, pts2d: np.ndarray, desc: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray]
-                ) -> np.ndarray:
+    def _guided(self, pts2d: np.ndarray, desc: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray],
+                radius: float) -> np.ndarray:
         front, uv = _project_in_front(self.model.points3d, prior)
         if len(front) < 2:
             return np.zeros((0, 2), np.int64)
@@ -239,7 +267,7 @@ class FeaturePartDetector:
         # candidate (keypoint, model point) pairs: the max_candidates points projected nearest to each
         # keypoint within the search radius (k-d tree), grouped by keypoint
         k = min(self.max_candidates, len(uv))
-        dist, idx = cKDTree(uv).query(pts2d, k=k, distance_upper_bound=self.search_radius)
+        dist, idx = cKDTree(uv).query(pts2d, k=k, distance_upper_bound=radius)
         dist, idx = dist.reshape(len(pts2d), k), idx.reshape(len(pts2d), k)
         found = np.isfinite(dist)
         kp = np.nonzero(found)[0]

@@ -96,6 +96,60 @@ def test_tracker_predicts_at_constant_velocity_and_coasts():
     assert np.allclose(tracker.prior[1], tracker._poses[-1][2])
 
 
+def test_fewer_inliers_suffice_only_near_the_predicted_pose():
+    """10 correct matches among outliers: lost without a prior or with a prior far from the pose,
+    accepted when the pose agrees with the prior (min_inliers_near_prior)."""
+    rng = np.random.default_rng(4)
+    pts, uv, rvec, tvec = _scene(rng, n=10, outliers=0.0, noise=0.3)
+    pts = np.r_[pts, rng.uniform(-50, 50, (30, 3))]
+    uv = np.r_[uv, rng.uniform([0, 0], [640, 480], (30, 2))]
+    solver = PoseSolver(K, min_inliers=12, min_inliers_near_prior=8, iterations=2000)
+    assert not solver.solve(pts, uv).ok
+    near = (rvec + 0.02, tvec + np.array([[3.0], [-2.0], [5.0]]))
+    est = solver.solve(pts, uv, near)
+    assert est.ok, est.reason
+    assert rotation_error_deg(est.R, cv2.Rodrigues(rvec)[0]) < 1.0
+    far = (rvec + np.array([[0.0], [0.5], [0.0]]), tvec + np.array([[60.0], [0.0], [0.0]]))
+    est = solver.solve(pts, uv, far)
+    assert not est.ok and "need 12" in est.reason
+    with pytest.raises(InputError):
+        PoseSolver(K, min_inliers=12, min_inliers_near_prior=13)
+
+
+class _RecordingDetector:
+    """A part detector whose guided search (with a prior) finds only wrong matches."""
+
+    uses_prior = True
+
+    def __init__(self, pts, uv):
+        self.pts, self.uv, self.calls = pts, uv, []
+
+    def detect(self, image, prior=None, *, search_scale=1.0):
+        from pose.parts import Correspondences
+
+        self.calls.append((prior is not None, search_scale))
+        if prior is None:
+            return Correspondences(self.pts, self.uv)
+        return Correspondences(self.pts, self.uv[::-1].copy())
+
+
+def test_tracker_searches_wider_without_velocity_and_retries_the_whole_frame():
+    rng = np.random.default_rng(5)
+    pts, uv, *_ = _scene(rng, outliers=0.1)
+    det = _RecordingDetector(pts, uv)
+    tracker = PoseTracker(PoseSolver(K), wide_search=2.5)
+    est, _ = tracker.step(0, None, det)
+    assert est.ok and det.calls == [(False, 2.5)]
+    det.calls.clear()
+    est, corr = tracker.step(1, None, det)  # one known pose: wide guided search, wrong matches, then the whole frame
+    assert est.ok and det.calls == [(True, 2.5), (False, 1.0)] and np.array_equal(corr.image_points, uv)
+    det.calls.clear()
+    tracker.step(2, None, det)  # two consecutive poses: the usual window
+    assert det.calls[0] == (True, 1.0)
+    assert not tracker.update(3, pts[:3], uv[:3]).ok
+    assert tracker.search_scale == 2.5  # extrapolated over a lost frame
+
+
 def test_bad_arguments():
     with pytest.raises(InputError):
         PoseSolver(np.eye(2))

@@ -13,7 +13,7 @@ from pose import model as pm
 from pose import track
 from pose.evaluate import rotation_error_deg
 from pose.parts import FeaturePartDetector, create_feature
-from pose.solver import camera_matrix
+from pose.solver import camera_matrix, project
 
 K = camera_matrix(500.0, 500.0, 159.5, 119.5)
 SIZE = (320, 240)
@@ -109,6 +109,33 @@ def test_ratio_test_compares_distinct_points():
     assert len(double.detect(img, prior).object_points) >= 0.9 * len(single_guided.object_points) > 20
 
 
+def test_cross_check_keeps_mutual_nearest_neighbours():
+    """A model with as many decoy points as real ones (descriptors of another texture at random
+    positions): the mutual check keeps a strict subset of the matches, with a higher share of
+    correct ones."""
+    tex = _texture(4)
+    real = _planar_model(tex)
+    decoy = _planar_model(_texture(5))
+    rng = np.random.default_rng(0)
+    n = len(real.points3d)
+    model = pm.PartModel(corners=real.corners,
+                         points3d=np.vstack([real.points3d, rng.uniform(-60, 60, decoy.points3d.shape)]).astype(np.float32),
+                         descriptors=np.vstack([real.descriptors, decoy.descriptors]),
+                         descriptor_point=np.r_[real.descriptor_point, decoy.descriptor_point + n], units="mm")
+    r, t = _poses(1)[0]
+    img = _render(tex, r, t)
+
+    def pairs_and_correct(corr):
+        err = np.linalg.norm(project(corr.object_points, r, t, K) - corr.image_points, axis=1)
+        pairs = {(tuple(np.round(a, 2)), tuple(np.round(b, 2))) for a, b in zip(corr.image_points, corr.object_points)}
+        return pairs, float(np.mean(err < 3))
+
+    plain, plain_ok = pairs_and_correct(FeaturePartDetector(model, n_features=500).detect(img))
+    mutual, mutual_ok = pairs_and_correct(FeaturePartDetector(model, n_features=500, cross_check=True).detect(img))
+    assert 20 < len(mutual) < len(plain) and mutual <= plain
+    assert mutual_ok > plain_ok
+
+
 def test_keypoints_in_predicted_region_with_a_prior():
     """With a prior pose only the object's predicted region is searched (n_features there);
     without one, all keypoints of the frame."""
@@ -123,7 +150,7 @@ def test_keypoints_in_predicted_region_with_a_prior():
     full = det.detect(img)
     assert full.keypoints > 150  # all keypoints without a prior
     tracked = det.detect(img, (r, t, K))
-    region = det._region(img.shape, (r, t, K))
+    region = det._region(img.shape, (r, t, K), det.search_radius)
     uv = np.round(tracked.image_points).astype(int)
     assert tracked.keypoints == 150 and len(uv) >= 5  # the cap applies inside the region, not before it
     assert region[uv[:, 1], uv[:, 0]].all()
