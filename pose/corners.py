@@ -607,9 +607,9 @@ class CornerDetector:
                search_scale: float = 1.0) -> Correspondences:
         """Corner candidates of ``image`` as 2D-3D correspondences.
 
-        ``prior`` and ``search_scale`` are not used: the solver takes the previous pose into account (gating the
-        candidates by it gave no clear gain on the data engine's sequences and lost frames
-        after large motions)."""
+        ``prior`` and ``search_scale`` are not used: the solver takes the previous pose into
+        account (gating the candidates by it gave no clear gain on the data engine's sequences
+        and lost frames after large motions)."""
         obj, img = [], []
         for k, (xy, _) in enumerate(self.peaks(image)):
             obj.extend([self.corners[k]] * len(xy))

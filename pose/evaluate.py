@@ -123,7 +123,8 @@ def evaluate_sequence(detector, scene_dir: Path, obj_id: int, vertices: np.ndarr
     """Track with ``detector`` (a part detector of :mod:`pose.parts` or :mod:`pose.corners`)
     through a BOP test scene and score every frame; returns scores and fps. ``outline``: the
     detector's box corners for :class:`pose.solver.PoseSolver` (its coverage check);
-    ``iterations``: its RANSAC iterations."""
+    ``iterations``, ``min_inliers_near_prior``: its RANSAC iterations and the inliers a pose near
+    the tracker's prediction needs."""
     from alcn_cv import io
     from alcn_cv.formats import bop
 

@@ -118,8 +118,8 @@ def test_cross_check_keeps_mutual_nearest_neighbours():
     decoy = _planar_model(_texture(5))
     rng = np.random.default_rng(0)
     n = len(real.points3d)
-    model = pm.PartModel(corners=real.corners,
-                         points3d=np.vstack([real.points3d, rng.uniform(-60, 60, decoy.points3d.shape)]).astype(np.float32),
+    decoys = rng.uniform(-60, 60, decoy.points3d.shape)
+    model = pm.PartModel(corners=real.corners, points3d=np.vstack([real.points3d, decoys]).astype(np.float32),
                          descriptors=np.vstack([real.descriptors, decoy.descriptors]),
                          descriptor_point=np.r_[real.descriptor_point, decoy.descriptor_point + n], units="mm")
     r, t = _poses(1)[0]
