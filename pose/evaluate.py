@@ -34,7 +34,7 @@ from pose import build as build_mod
 from pose.model import read_box_corners, unit_scale
 from pose.model import save as save_model
 from pose.parts import FeaturePartDetector
-from pose.solver import PoseSolver, PoseTracker, project
+from pose.solver import PoseSolver, PoseTracker, project, rotation_error_deg
 from pose.track import MIN_INLIERS, MIN_INLIERS_NEAR_PRIOR, RANSAC_ITERATIONS
 
 logger = logging.getLogger(__name__)
@@ -42,12 +42,6 @@ logger = logging.getLogger(__name__)
 PROJ_PX = 5.0
 ADD_FRACTION = 0.1
 DEG, CM = 5.0, 5.0
-
-
-def rotation_error_deg(R: np.ndarray, R_gt: np.ndarray) -> float:
-    """Angle (degrees) of ``R @ R_gt.T``."""
-    c = (np.trace(np.asarray(R) @ np.asarray(R_gt).T) - 1) / 2
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
 def projection_error(vertices: np.ndarray, R: np.ndarray, t: np.ndarray, R_gt: np.ndarray, t_gt: np.ndarray,

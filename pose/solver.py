@@ -102,6 +102,12 @@ def camera_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
+def rotation_error_deg(R: np.ndarray, R_gt: np.ndarray) -> float:
+    """Angle (degrees) of ``R @ R_gt.T``."""
+    c = (np.trace(np.asarray(R) @ np.asarray(R_gt).T) - 1) / 2
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
 def project(points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray,
             dist: np.ndarray | None = None) -> np.ndarray:
     """Project object points ``(N, 3)`` to pixels ``(N, 2)`` float64."""
@@ -246,15 +252,14 @@ class PoseSolver:
             return candidates[int(np.argmin(costs))]
         R0 = cv2.Rodrigues(np.asarray(prior[0], np.float64))[0]
         near = np.flatnonzero(costs <= (1 + self.ambiguity_tolerance) * costs.min())
-        angle = [np.arccos(np.clip((np.trace(cv2.Rodrigues(candidates[i][0])[0] @ R0.T) - 1) / 2, -1, 1)) for i in near]
+        angle = [rotation_error_deg(cv2.Rodrigues(candidates[i][0])[0], R0) for i in near]
         return candidates[int(near[int(np.argmin(angle))])]
 
     def _is_near(self, rvec: np.ndarray, tvec: np.ndarray, prior: tuple[np.ndarray, np.ndarray] | None) -> bool:
         """Whether the pose is within :attr:`near_prior` of ``prior``."""
         if prior is None or not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
             return False
-        R = cv2.Rodrigues(rvec)[0] @ cv2.Rodrigues(prior[0])[0].T
-        angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
+        angle = rotation_error_deg(cv2.Rodrigues(rvec)[0], cv2.Rodrigues(prior[0])[0])
         shift = np.linalg.norm(tvec.ravel() - prior[1].ravel())
         return bool(angle < self.near_prior[0] and shift < self.near_prior[1] * np.linalg.norm(prior[1]))
 
