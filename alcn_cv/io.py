@@ -2,19 +2,38 @@
 
 from __future__ import annotations
 
+import contextlib
+import json
 import logging
 import os
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import IO, Any
 
 import cv2
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.errors import InputError
+from alcn_cv.errors import DatasetError, InputError
 
-__all__ = ["IMAGE_SUFFIXES", "atomic_write", "map_video", "to_gray", "VIDEO_SUFFIXES", "VideoReader", "is_video", "list_images", "read_image", "write_image", "open_video_writer"]
+__all__ = [
+    "IMAGE_SUFFIXES",
+    "VIDEO_SUFFIXES",
+    "VideoReader",
+    "atomic_path",
+    "atomic_write",
+    "is_video",
+    "iter_frames",
+    "list_images",
+    "map_video",
+    "open_video_writer",
+    "read_image",
+    "read_json",
+    "to_gray",
+    "write_image",
+    "write_json",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -30,7 +49,7 @@ def is_video(path: str | Path) -> bool:
 
 
 def list_images(folder: str | Path) -> list[Path]:
-    """Image files directly inside ``folder``, sorted by name.
+    """Image files directly inside ``folder``, sorted by name; hidden files (``.name``) are skipped.
 
     Raises:
         InputError: ``folder`` is not a folder or holds no image.
@@ -38,7 +57,10 @@ def list_images(folder: str | Path) -> list[Path]:
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(f"not a folder: {folder}")
-    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+    # Hidden files are skipped: among them the temporary files of an interrupted atomic write.
+    files = sorted(
+        p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".") and p.is_file()
+    )
     if not files:
         raise InputError(f"{folder}: no images ({', '.join(sorted(IMAGE_SUFFIXES))}) in this folder")
     return files
@@ -67,20 +89,64 @@ def read_image(path: str | Path) -> np.ndarray:
     return img
 
 
-def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
-    """Write ``data`` (text as UTF-8) to ``path`` through a temporary file in the same folder,
-    then rename it, so that a reader never sees a half-written file."""
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path`` (same suffix) that becomes ``path`` when the block ends.
+
+    The one atomic writer of the package: whatever writes the temporary file (``cv2.imwrite``,
+    ``torch.save``, a zip writer), a reader never sees a half-written ``path``. On an error or an
+    interrupt the temporary file is removed and ``path`` is left as it was. The file gets the
+    usual permissions (``0666`` less the umask), the folder is created when missing.
+    """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}")
+    os.close(fd)
+    tmp = Path(name)
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data.encode("utf-8") if isinstance(data, str) else data)
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; give the usual permissions
+        yield tmp
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
+
+
+def atomic_write(path: str | os.PathLike, data: bytes | str | Callable[[IO[bytes]], object]) -> Path:
+    """Write ``data`` to ``path`` atomically (:func:`atomic_path`).
+
+    Args:
+        data: bytes, text (written as UTF-8), or a function that writes into a binary file object.
+    """
+    path = Path(path)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        if callable(data):
+            data(f)
+        else:
+            f.write(data.encode("utf-8") if isinstance(data, str) else data)
     return path
+
+
+def write_json(path: str | os.PathLike, obj: Any, *, indent: int | None = 1) -> Path:
+    """Write ``obj`` as JSON atomically; NaN and infinity are refused (they are not JSON)."""
+    return atomic_write(path, json.dumps(obj, indent=indent, allow_nan=False) + "\n")
+
+
+def read_json(path: str | os.PathLike) -> Any:
+    """Read a JSON file; a missing, empty, truncated or malformed file raises DatasetError."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"{path}: cannot read ({exc})") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise DatasetError(
+            f"{path}: malformed or truncated JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
+        ) from None
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -97,14 +163,11 @@ def to_gray(image: np.ndarray) -> np.ndarray:
 
 
 def write_image(path: str | Path, img: np.ndarray) -> Path:
-    """Write an image atomically (temporary name, then rename), creating the folder."""
+    """Write an image atomically (:func:`atomic_path`), creating the folder."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    if not cv2.imwrite(str(tmp), img):
-        tmp.unlink(missing_ok=True)
-        raise OSError(f"cannot write image {path} (unsupported extension or folder not writable)")
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), img):
+            raise OSError(f"cannot write image {path} (unsupported extension or folder not writable)")
     return path
 
 
@@ -147,6 +210,59 @@ class VideoReader:
         self.close()
 
 
+def iter_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None = None) -> Iterator[tuple[str, np.ndarray]]:
+    """``(name, BGR uint8 frame)`` for every ``step``-th frame of a video file or image of a folder.
+
+    The one frame iterator of the package. Images of a folder are read in name order (16-bit
+    images are reduced to 8 bits, grayscale ones converted to BGR) and named by their stem;
+    video frames are named ``frame_000000``, ``frame_000001``, ... by their index in the video.
+
+    Args:
+        source: a video file (:data:`VIDEO_SUFFIXES`) or a folder of images.
+        step: keep every ``step``-th frame (frames in between are skipped without decoding).
+        max_frames: stop after this many frames.
+
+    Raises:
+        InputError: no such file or folder, a folder without images, a video that cannot be
+            opened or holds no decodable frame, ``step < 1``.
+    """
+    source = Path(source)
+    if isinstance(step, bool) or not isinstance(step, int) or step < 1:
+        raise InputError(f"step must be a positive integer, got {step!r}")
+    if max_frames is not None and max_frames < 1:
+        raise InputError(f"max_frames must be a positive integer or None, got {max_frames!r}")
+    count = 0
+    if source.is_dir():
+        for path in list_images(source)[::step]:
+            if max_frames is not None and count >= max_frames:
+                return
+            img = read_image(path)
+            if img.dtype != np.uint8:
+                img = (img >> 8).astype(np.uint8)
+            count += 1
+            yield path.stem, img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+        return
+    if not source.exists():
+        raise InputError(f"no such video or folder: {source}")
+    if not is_video(source):
+        raise InputError(f"{source}: not a video ({', '.join(sorted(VIDEO_SUFFIXES))}) or a folder of images")
+    with VideoReader(source) as video:
+        cap = video._cap
+        index = 0
+        while max_frames is None or count < max_frames:
+            if not cap.grab():
+                break
+            if index % step == 0:
+                ok, frame = cap.retrieve()
+                if not ok:
+                    break
+                count += 1
+                yield f"frame_{index:06d}", frame
+            index += 1
+    if count == 0:
+        raise InputError(f"{source}: the video holds no decodable frame")
+
+
 def open_video_writer(path: str | Path, fps: float, size: tuple[int, int], color: bool = True) -> cv2.VideoWriter:
     """A ``cv2.VideoWriter`` for ``path`` (codec from the extension: MJPG for .avi/.mkv, else mp4v)."""
     path = Path(path)
@@ -172,24 +288,20 @@ def map_video(src: str | Path, dst: str | Path, fn: Callable[[np.ndarray], np.nd
         InputError: ``src`` cannot be opened or holds no decodable frame.
     """
     src, dst = Path(src), Path(dst)
-    tmp = dst.with_name(f".{dst.stem}.tmp{dst.suffix}")
     writer = None
     count = 0
-    try:
-        with VideoReader(src) as video:
-            for frame in tqdm(video, total=len(video) or None, desc=desc or src.name, unit="frame"):
-                out = fn(frame)
-                if writer is None:
-                    writer = open_video_writer(tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3)
-                writer.write(out)
-                count += 1
-    except BaseException:
-        if writer is not None:
-            writer.release()
-        tmp.unlink(missing_ok=True)
-        raise
-    if writer is None:
-        raise InputError(f"no frame could be decoded from {src}")
-    writer.release()
-    os.replace(tmp, dst)
+    with atomic_path(dst) as tmp:
+        try:
+            with VideoReader(src) as video:
+                for frame in tqdm(video, total=len(video) or None, desc=desc or src.name, unit="frame"):
+                    out = fn(frame)
+                    if writer is None:
+                        writer = open_video_writer(tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3)
+                    writer.write(out)
+                    count += 1
+        finally:
+            if writer is not None:
+                writer.release()
+        if writer is None:
+            raise InputError(f"no frame could be decoded from {src}")
     return count

@@ -24,7 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.data.manifest import write_json
+from alcn_cv.io import write_json
 from alcn_cv.errors import InputError
 from alcn_cv.io import to_gray
 

@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.data.manifest import write_json
+from alcn_cv.io import write_json
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import VIDEO_SUFFIXES, is_video, list_images
 from alcn_cv.formats.colmap import ColmapCamera, camera_from_opencv, write_text_model

@@ -43,7 +43,8 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.data.manifest import atomic_output_dir, write_json
+from alcn_cv.io import write_json
+from alcn_cv.data.manifest import atomic_output_dir
 from alcn_cv.errors import InputError
 from alcn_cv.formats import bop
 from alcn_cv.formats.bop import BopFrame

@@ -352,7 +352,7 @@ def export_onnx(net, out: str | Path, meta: dict[str, Any]) -> Path:
 
     import torch
 
-    from alcn_cv.data.manifest import atomic_write
+    from alcn_cv.io import atomic_write
     from alcn_cv.train.export import OPSET, _with_metadata
 
     class _Dense(torch.nn.Module):

@@ -28,7 +28,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from alcn_cv.data.manifest import write_json
+from alcn_cv.io import write_json
 from alcn_cv.errors import DatasetError, InputError
 from pose import build as build_mod
 from pose.model import read_box_corners, unit_scale

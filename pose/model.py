@@ -44,8 +44,6 @@ from __future__ import annotations
 import io
 import json
 import logging
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -55,6 +53,7 @@ import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.formats import bop
+from alcn_cv.io import atomic_write
 
 logger = logging.getLogger(__name__)
 
@@ -167,18 +166,6 @@ class PartModel:
         }
 
 
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_point_cloud(path: str | Path, points: np.ndarray, colors: np.ndarray | None = None) -> Path:
     """Write a coloured point cloud ``(N, 3)`` (RGB ``(N, 3)`` uint8) as a binary PLY, atomically."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -210,7 +197,7 @@ def save(model: PartModel, path: str | Path) -> Path:
         track_length=model.track_length,
         colors=model.colors,
     )
-    _atomic_write_bytes(path, buf.getvalue())
+    atomic_write(path, buf.getvalue())
     write_point_cloud(path.with_suffix(".ply"), model.points3d, model.colors)
     logger.info("wrote part model %s (%d points, box %s %s)", path, len(model.points3d),
                 np.round(model.box_size, 3).tolist(), model.units)

@@ -26,7 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv import io
-from alcn_cv.data.manifest import write_json
+from alcn_cv.io import write_json
 from alcn_cv.errors import DatasetError, InputError
 from pose import model as part_model
 from pose.model import BOX_EDGES

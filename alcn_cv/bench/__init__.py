@@ -5,7 +5,7 @@
   (``alcn bench invariance``);
 * :mod:`~alcn_cv.bench.tuning` -- parameter search for DoG, SLCN and DLCN on training windows;
 * :mod:`~alcn_cv.bench.metrics` -- non-maximum suppression, PASCAL matching, precision-recall, AUC;
-* :mod:`~alcn_cv.bench.report` -- Markdown tables, machine description, figures.
+* :mod:`~alcn_cv.report` -- Markdown tables, machine description, figures.
 
 Importing this package does not import torch.
 """

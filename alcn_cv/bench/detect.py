@@ -69,9 +69,9 @@ from tqdm.auto import tqdm
 
 from alcn_cv.bench import tuning
 from alcn_cv.bench.metrics import match_detections, nms, pr_auc, precision_recall
-from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json
+from alcn_cv.report import machine, markdown_table, new_figure, save_figure, write_json
 from alcn_cv.io import atomic_write
-from alcn_cv.data.manifest import read_json
+from alcn_cv.io import read_json
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, create, parse_spec

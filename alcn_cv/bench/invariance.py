@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.report import machine, markdown_table, new_figure, save_figure, write_json
+from alcn_cv.report import machine, markdown_table, new_figure, save_figure, write_json
 from alcn_cv.io import atomic_write
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, create, parse_spec

@@ -29,7 +29,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.data.manifest import atomic_output_dir, make_manifest, write_json
+from alcn_cv.io import write_json
+from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.objects import ReliefObject, background_surface, make_object, paste, to_surface
 from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.render import LIGHT_FAMILIES, Lighting, Material, directional, render_surfaces, sample_lighting

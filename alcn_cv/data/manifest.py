@@ -13,7 +13,6 @@ complete, so a half-written dataset is never mistaken for a complete one.
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import os
 import shutil
@@ -25,7 +24,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from alcn_cv.errors import DatasetError
-from alcn_cv.io import atomic_write
+from alcn_cv.io import atomic_path, read_json
 
 logger = logging.getLogger(__name__)
 
@@ -34,9 +33,6 @@ __all__ = [
     "GENERATOR_VERSION",
     "make_manifest",
     "read_manifest",
-    "read_json",
-    "write_json",
-    "atomic_write",
     "atomic_output_dir",
     "save_npz",
 ]
@@ -56,28 +52,6 @@ def make_manifest(kind: str, seed: int, parameters: dict[str, Any], **extra: Any
         "parameters": parameters,
         **extra,
     }
-
-
-def write_json(path: str | os.PathLike, obj: Any, *, indent: int | None = 1) -> Path:
-    """Write JSON atomically (temporary file in the same folder, then rename)."""
-    return atomic_write(path, json.dumps(obj, indent=indent, allow_nan=False) + "\n")
-
-
-def read_json(path: str | os.PathLike) -> Any:
-    """Read a JSON file; a missing, empty, truncated or malformed file raises DatasetError."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"{path}: cannot read ({exc})") from None
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise DatasetError(
-            f"{path}: malformed or truncated JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
-        ) from None
 
 
 def read_manifest(folder: str | os.PathLike, kind: str | None = None) -> dict[str, Any]:
@@ -127,17 +101,10 @@ def save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> Path:
     uses a fixed date so that the same data always gives the same file.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=6) as zf:
-            for name, arr in arrays.items():
-                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-                info.compress_type = zipfile.ZIP_DEFLATED
-                with zf.open(info, "w", force_zip64=True) as f:  # streamed: no copy in memory
-                    np.lib.format.write_array(f, np.ascontiguousarray(arr), allow_pickle=False)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=6) as zf:
+        for name, arr in arrays.items():
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            with zf.open(info, "w", force_zip64=True) as f:  # streamed: no copy in memory
+                np.lib.format.write_array(f, np.ascontiguousarray(arr), allow_pickle=False)
     return path

@@ -38,7 +38,8 @@ from typing import Sequence
 
 import numpy as np
 
-from alcn_cv.data.manifest import atomic_output_dir, make_manifest, read_manifest, save_npz, write_json
+from alcn_cv.io import write_json
+from alcn_cv.data.manifest import atomic_output_dir, make_manifest, read_manifest, save_npz
 from alcn_cv.data.objects import ReliefObject, background_surface, make_catalog, make_object, paste, to_surface
 from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.render import LIGHT_FAMILIES, render_surfaces, sample_lighting

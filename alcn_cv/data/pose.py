@@ -30,7 +30,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.data.manifest import atomic_output_dir, make_manifest, write_json
+from alcn_cv.io import write_json
+from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.raster import Mesh, Scene, SceneObject, box_mesh, ellipsoid_mesh, look_at, merge_meshes, render_frame
 from alcn_cv.data.render import Light, Lighting, Material, directional

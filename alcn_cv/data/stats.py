@@ -27,7 +27,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.data.manifest import atomic_write, write_json
+from alcn_cv.io import atomic_write, write_json
 from alcn_cv.data.objects import make_object, paste, to_surface
 from alcn_cv.data.render import LIGHT_FAMILIES, Lighting, Light, render_surfaces, sample_lighting
 from alcn_cv.errors import DatasetError

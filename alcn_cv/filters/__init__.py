@@ -1,4 +1,4 @@
-"""Filtering operations: ALCN's Gaussian mixture.
+"""Filtering operations: ALCN's Gaussian mixture and per-window standardization.
 
 :mod:`~alcn_cv.filters.gaussian_mixture` (NumPy/OpenCV) imports no torch; the differentiable
 :func:`gaussian_mixture2d` and :class:`GaussianMixture2d` (kornia) load torch on first use.
@@ -11,6 +11,7 @@ from alcn_cv.filters.gaussian_mixture import (
     gaussian_sigmas,
     kernel_radius,
 )
+from alcn_cv.filters.standardize import standardize_windows
 
 __all__ = [
     "GaussianMixture2d",
@@ -20,6 +21,7 @@ __all__ = [
     "gaussian_mixture2d",
     "gaussian_sigmas",
     "kernel_radius",
+    "standardize_windows",
 ]
 
 

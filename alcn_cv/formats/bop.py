@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from alcn_cv.data.manifest import atomic_write, read_json, write_json
+from alcn_cv.io import atomic_write, read_json, write_json
 from alcn_cv.errors import DatasetError
 from alcn_cv.formats import validate_json
 

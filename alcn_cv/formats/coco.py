@@ -22,7 +22,7 @@ from typing import Any, Iterable
 import cv2
 import numpy as np
 
-from alcn_cv.data.manifest import read_json, write_json
+from alcn_cv.io import read_json, write_json
 from alcn_cv.errors import DatasetError
 from alcn_cv.formats import validate_json
 

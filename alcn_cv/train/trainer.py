@@ -51,7 +51,6 @@ import math
 import os
 import platform
 import signal
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -66,6 +65,7 @@ from tqdm.auto import tqdm
 from alcn_cv.data.phos import WINDOW, PhosBatch, load, render_windows
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, gaussian_sigmas, kernel_radius
+from alcn_cv.io import atomic_write
 from alcn_cv.nets.detector import INPUT, Detector
 from alcn_cv.nets.normalizer import Normalizer
 from alcn_cv.train import distributed
@@ -308,7 +308,7 @@ def _load_data(cfg: TrainConfig, out_dir: Path, progress: bool) -> tuple[PhosBat
                   for k in _ARRAYS}
         meta = {"n_objects": train_set.n_objects, "object_seed": train_set.object_seed,
                 "train_seed": train_set.seed, "val_seed": val_set.seed}
-        _atomic(cache, lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
+        atomic_write(cache, lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
     return train_set, val_set
 
 
@@ -325,19 +325,6 @@ def _check_sets(train_set: PhosBatch, val_set: PhosBatch, cfg: TrainConfig) -> i
 
 
 # ---------------------------------------------------------------------------------- checkpoint
-
-
-def _atomic(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _versions() -> dict[str, str]:
@@ -487,7 +474,7 @@ def _plot(history: list[dict[str, Any]], path: Path) -> None:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
-    _atomic(path, lambda f: fig.savefig(f, format="png", dpi=100))
+    atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=100))
     plt.close(fig)
 
 
@@ -657,7 +644,7 @@ def train(
                      "sums": sums, "history": history, "model": model.state_dict(),
                      "optimizer": optimizer.state_dict(), "rng": torch.get_rng_state(),
                      "elapsed": time.perf_counter() - start}
-            _atomic(ckpt_path, lambda f: torch.save(state, f))
+            atomic_write(ckpt_path, lambda f: torch.save(state, f))
 
         result = TrainResult(out, "done", history, model=model)
         model.train()
@@ -711,7 +698,7 @@ def train(
                     epoch, step_in_epoch, sums = epoch + 1, 0, [0.0, 0, 0]
                     save("epoch")
                     if distributed.is_main():
-                        _atomic(out / "history.json", lambda f: f.write(json.dumps(history, indent=1).encode()))
+                        atomic_write(out / "history.json", lambda f: f.write(json.dumps(history, indent=1).encode()))
                         _plot(history, out / "curves.png")
         except KeyboardInterrupt:
             save("interrupted")
@@ -731,12 +718,12 @@ def train(
             total = history[-1]["seconds"] if history else time.perf_counter() - start
             if cfg.fewshot.enabled:
                 result.fewshot = _fewshot(model, cfg, progress)
-                _atomic(out / "fewshot.json", lambda f: f.write(json.dumps(result.fewshot, indent=1).encode()))
+                atomic_write(out / "fewshot.json", lambda f: f.write(json.dumps(result.fewshot, indent=1).encode()))
             result.weights = _export(model, cfg, train_set, result, total)
             logger.info("Normalizer weights written to %s", result.weights)
         result.seconds = time.perf_counter() - start
         if distributed.is_main():
-            _atomic(out / "summary.md", lambda f: f.write(_summary(cfg, result, machine_start).encode()))
+            atomic_write(out / "summary.md", lambda f: f.write(_summary(cfg, result, machine_start).encode()))
         logger.info("%s run %s in %.1f min: held-out validation accuracy %.4f", cfg.model.method, result.status,
                     result.seconds / 60, result.val_accuracy)
     return result

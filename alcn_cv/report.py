@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from alcn_cv.data.manifest import write_json
+from alcn_cv.io import atomic_path, write_json
 
 __all__ = ["machine", "markdown_table", "new_figure", "save_figure", "write_json"]
 
@@ -76,8 +76,7 @@ def new_figure(nrows: int = 1, ncols: int = 1, **kwargs: Any):
 def save_figure(plt: Any, fig: Any, path: str | os.PathLike, dpi: int = 100) -> Path:
     """Save a figure as PNG atomically and close it."""
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=dpi)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=dpi)
     plt.close(fig)
-    os.replace(tmp, path)
     return path
