@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from alcn_cv.enhance.base import Normalization
+from alcn_cv.enhance.base import Normalization, _unit_windows
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, pyramid_mixture
@@ -40,6 +40,8 @@ BACKENDS = ("fast", "torch", "opencv")
 MIXTURES = ("exact", "pyramid")
 #: ``mixture="pyramid"`` samples the maps exactly this many times per grid cell (at least).
 MAP_STEP_PER_CELL = 4
+#: Windows per Normalizer call in :meth:`ALCN.window_weights` (bounds the memory of a batch).
+_WINDOW_BATCH = 512
 #: The weight files shipped in the package, by ``model`` name.
 MODELS = {"paper": DEFAULT_WEIGHTS, "lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_lite.npz")}
 
@@ -195,6 +197,60 @@ class ALCN(Normalization):
         small = torch.from_numpy(self._working_image(gray)).to(next(self.net.parameters()).device)
         with torch.inference_mode(), _torch_threads(self.threads):
             return self.net.dense_grid(small[None, None], self.grid_stride)[0].cpu().numpy()
+
+    def window_weights(self, windows: np.ndarray) -> np.ndarray:
+        """Eq. 1's weights: the Normalizer's prediction for each 48x48 window, one vector each.
+
+        Args:
+            windows: ``(n, 48, 48)`` float32 intensities in [0, 1], at the working scale.
+
+        Returns:
+            ``(n, N)`` float32, the weights of the N Gaussian kernels (sigmas :attr:`sigmas`,
+            in working-scale pixels).
+        """
+        from alcn_cv.nets.normalizer import WINDOW
+
+        if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.shape[1:] != (WINDOW, WINDOW):
+            raise InputError(f"windows must be (n, {WINDOW}, {WINDOW}), got {getattr(windows, 'shape', type(windows))}")
+        windows = np.ascontiguousarray(windows, dtype=np.float32)
+        if self.backend == "opencv":
+            # The grid point at the window's centre sees exactly the window (no padding reaches it).
+            c = (WINDOW // 2) // self.net.stride
+            return np.stack([self.net.dense_grid(w)[:, c, c] for w in windows])
+        import torch
+
+        device = next(self.net.parameters()).device
+        x = torch.from_numpy(windows)[:, None]
+        with torch.inference_mode(), _torch_threads(self.threads):
+            return torch.cat([self.net(x[i : i + _WINDOW_BATCH].to(device)).cpu() for i in range(0, len(x), _WINDOW_BATCH)]).numpy()
+
+    def normalize_windows(self, windows: np.ndarray) -> np.ndarray:
+        """Eq. 1 on every window: one weight vector, predicted from the window's central 48x48
+        (at the working scale), then the Gaussian mixture over the whole window.
+
+        The paper's second stage trains its detector on windows normalized this way; whole
+        images use Eq. 3 (per-pixel weights, :meth:`normalize`).
+
+        Args:
+            windows: ``(n, S, S)`` uint8, or float32 intensities in [0, 1], ``S >= 48``, at the
+                input resolution (the Normalizer sees them resized by :attr:`scale`; use
+                ``scale=1`` for windows already at the working resolution).
+
+        Returns:
+            ``(n, S, S)`` float32.
+        """
+        from alcn_cv.nets.normalizer import WINDOW
+
+        unit = _unit_windows(windows)
+        centre = unit
+        if self.scale != 1:
+            side = max(1, round(unit.shape[1] * self.scale))
+            centre = np.stack([cv2.resize(w, (side, side), interpolation=cv2.INTER_AREA if self.scale < 1 else cv2.INTER_LINEAR) for w in unit])
+        if centre.shape[1] < WINDOW:
+            raise InputError(f"windows must be at least {WINDOW} px at the working scale, got {centre.shape[1]}")
+        o = (centre.shape[1] - WINDOW) // 2
+        weights = self.window_weights(centre[:, o : o + WINDOW, o : o + WINDOW])
+        return np.stack([alcn_filter(w, wt, self.full_res_sigmas) for w, wt in zip(unit, weights)])
 
     def _grid_maps_at(
         self, grid: np.ndarray, ratios: tuple[float, float], level: int, ks: list[int], shape: tuple[int, int]

@@ -74,6 +74,17 @@ def check_gray(gray: object) -> np.ndarray:
     return gray
 
 
+def _unit_windows(windows: np.ndarray) -> np.ndarray:
+    """``(n, S, S)`` uint8 or float32 windows as float32 intensities in [0, 1]."""
+    if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.size == 0:
+        raise InputError(f"windows must be a non-empty (n, S, S) array, got {getattr(windows, 'shape', type(windows))}")
+    if windows.dtype == np.uint8:
+        return windows.astype(np.float32) * np.float32(1 / 255)
+    if windows.dtype != np.float32:
+        raise InputError(f"windows must be uint8 or float32, got {windows.dtype}")
+    return windows
+
+
 def _to_unit_float(img: np.ndarray) -> np.ndarray:
     if img.dtype == np.float32:
         return np.clip(img, 0.0, 1.0)  # a copy: the caller's array stays untouched
@@ -105,6 +116,21 @@ class Normalization:
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         raise NotImplementedError
+
+    def normalize_windows(self, windows: np.ndarray) -> np.ndarray:
+        """The raw response of every window of a batch, each normalized on its own.
+
+        What a detector trained on windows sees (the paper's second stage); a method whose
+        response depends on the window as a whole overrides it (ALCN: Eq. 1, one weight vector
+        per window).
+
+        Args:
+            windows: ``(n, S, S)`` uint8, or float32 intensities in [0, 1].
+
+        Returns:
+            ``(n, S, S)`` float32, unbounded.
+        """
+        return np.stack([self.normalize(w) for w in _unit_windows(windows)])
 
     def to_unit(self, response: np.ndarray) -> np.ndarray:
         """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""

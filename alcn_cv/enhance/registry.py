@@ -9,7 +9,7 @@ from typing import TypeVar
 from alcn_cv.enhance.base import Normalization, NoNormalization
 from alcn_cv.errors import InputError
 
-__all__ = ["available", "create", "parse_params", "parse_spec", "register"]
+__all__ = ["available", "create", "from_spec", "parse_params", "parse_spec", "register"]
 
 _REGISTRY: dict[str, type[Normalization]] = {}
 N = TypeVar("N", bound=type[Normalization])
@@ -67,6 +67,18 @@ def parse_spec(spec: str) -> tuple[str, dict[str, object]]:
     if not name:
         raise InputError(f"bad method {spec!r}; expected NAME[:KEY=VALUE...]")
     return name, parse_params(items)
+
+
+def from_spec(spec: str, **defaults: object) -> Normalization:
+    """The normalization a spec ``NAME[:KEY=VALUE...]`` names (:func:`parse_spec`), e.g.
+    ``from_spec("alcn:model=lite:mixture=pyramid")``; ``defaults`` fill parameters the spec
+    does not give.
+
+    Raises:
+        InputError: bad spec, unknown name or parameters.
+    """
+    name, params = parse_spec(spec)
+    return create(name, **{**defaults, **params})
 
 
 register(NoNormalization)
