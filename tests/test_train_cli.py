@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from alcn_cv.cli import main
-from alcn_cv.train.opencv_runtime import OpenCVNormalizer
+from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
 
 
 def test_print_config_applies_flags_and_set(capsys):

@@ -1,4 +1,4 @@
-"""ONNX export and the torch-free OpenCV runtime (alcn_cv.train.export, alcn_cv.train.opencv_runtime)."""
+"""ONNX export and the torch-free OpenCV runtime (alcn_cv.train.export, alcn_cv.nets.opencv_runtime)."""
 
 from __future__ import annotations
 
@@ -13,9 +13,9 @@ from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import alcn_filter
 from alcn_cv.nets import Normalizer
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
-from alcn_cv.train import opencv_runtime
+from alcn_cv.nets import opencv_runtime
 from alcn_cv.train.export import DEFAULT_ONNX, export_onnx
-from alcn_cv.train.opencv_runtime import OpenCVNormalizer
+from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 
@@ -104,7 +104,7 @@ def test_runs_where_torch_cannot_be_imported(random_weights, run_without_torch):
     out = onnx_path.parent / "grid.npy"
     run_without_torch(f"""
         import numpy as np
-        from alcn_cv.train.opencv_runtime import OpenCVNormalizer
+        from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
         image = np.random.default_rng(1).random((50, 70), dtype=np.float32)
         np.save(sys.argv[1], OpenCVNormalizer({str(onnx_path)!r}).dense_grid(image))
     """, out)

@@ -23,7 +23,8 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from alcn_cv.enhance.base import Normalization, _unit_windows
+from alcn_cv.checks import unit_windows
+from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, pyramid_mixture
@@ -147,7 +148,7 @@ class ALCN(Normalization):
         _check_teacher(meta, self.weights_path)
 
     def _init_opencv(self, meta: dict, grid_stride: int | None) -> None:
-        from alcn_cv.train.opencv_runtime import OpenCVNormalizer
+        from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
 
         self.net = OpenCVNormalizer(self.weights_path.with_suffix(".onnx"))
         self.grid_stride = self.net.stride if grid_stride is None else grid_stride
@@ -241,7 +242,7 @@ class ALCN(Normalization):
         """
         from alcn_cv.nets.normalizer import WINDOW
 
-        unit = _unit_windows(windows)
+        unit = unit_windows(windows)
         centre = unit
         if self.scale != 1:
             side = max(1, round(unit.shape[1] * self.scale))

@@ -1,6 +1,28 @@
-"""The networks of ALCN: the Normalizer (predicts mixture weights) and the Detector."""
+"""The networks of ALCN: the Normalizer (predicts mixture weights) and its runtimes, the Detector.
 
-from alcn_cv.nets.detector import Detector
-from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
+* :mod:`~alcn_cv.nets.normalizer` -- the paper's Normalizer (torch); :mod:`~alcn_cv.nets.lite` --
+  the real-time Normalizer and the loader of weight files; :mod:`~alcn_cv.nets.opencv_runtime` --
+  both run by ``cv2.dnn`` from their ONNX export, without torch.
+* :mod:`~alcn_cv.nets.detector` -- the Detector trained jointly with the Normalizer (Eq. 2).
 
-__all__ = ["Detector", "Normalizer", "reflect101_pad"]
+Importing this package does not import torch; the names below load their module on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__all__ = ["Detector", "Normalizer", "OpenCVNormalizer", "reflect101_pad"]
+
+_LAZY = {
+    "Detector": "alcn_cv.nets.detector",
+    "Normalizer": "alcn_cv.nets.normalizer",
+    "reflect101_pad": "alcn_cv.nets.normalizer",
+    "OpenCVNormalizer": "alcn_cv.nets.opencv_runtime",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,6 +1,7 @@
 """Training of ALCN (Rad, Roth & Lepetit, BMVC 2017): the joint training of the Normalizer with a
 detector (Eq. 2, :mod:`~alcn_cv.train.trainer`), the second stage that trains a new detector on
-a frozen Normalizer (:mod:`~alcn_cv.train.stage2`), ONNX export and the torch-free OpenCV runtime.
+a frozen Normalizer (:mod:`~alcn_cv.train.stage2`) and the ONNX export read by the torch-free OpenCV
+runtime (:mod:`alcn_cv.nets.opencv_runtime`).
 
 Example::
 
@@ -8,15 +9,14 @@ Example::
     result = alcn_cv.train.train("default", "runs/alcn")      # or a TOML path, a dict, a TrainConfig
     result.val_by_family, result.fewshot, result.weights
 
-Importing this package does not import torch; the names below load their module on first use
-(:class:`OpenCVNormalizer` never needs torch).
+Importing this package does not import torch; the names below load their module on first use.
 """
 
 from __future__ import annotations
 
 import importlib
 
-__all__ = ["OpenCVNormalizer", "TrainConfig", "TrainResult", "export_onnx", "load_config", "train", "train_detector"]
+__all__ = ["TrainConfig", "TrainResult", "export_onnx", "load_config", "train", "train_detector"]
 
 _LAZY = {
     "train": "alcn_cv.train.trainer",
@@ -25,7 +25,6 @@ _LAZY = {
     "load_config": "alcn_cv.train.config",
     "train_detector": "alcn_cv.train.stage2",
     "export_onnx": "alcn_cv.train.export",
-    "OpenCVNormalizer": "alcn_cv.train.opencv_runtime",
 }
 
 

@@ -88,7 +88,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     e = subparsers.add_parser(
         "export", help="export the Normalizer to ONNX (for the torch-free OpenCV runtime)",
         description="Export the Normalizer of a weight file as a fully-convolutional ONNX model with dynamic "
-        "image size, run by cv2.dnn in alcn_cv.train.opencv_runtime (no torch needed).",
+        "image size, run by cv2.dnn in alcn_cv.nets.opencv_runtime (no torch needed).",
     )
     e.add_argument("--onnx", type=Path, required=True, help="output .onnx path")
     e.add_argument("--weights", type=Path, help="Normalizer weight file (.npz; default: the shipped one)")

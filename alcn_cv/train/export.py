@@ -1,4 +1,4 @@
-"""Export the Normalizer to ONNX, for the torch-free OpenCV runtime (:mod:`alcn_cv.train.opencv_runtime`).
+"""Export the Normalizer to ONNX, for the torch-free OpenCV runtime (:mod:`alcn_cv.nets.opencv_runtime`).
 
 The exported graph is the Normalizer's fully-convolutional part (Sec. 3.3): it maps an image
 that is *already padded* by reflect-101 to the mixture weights on its grid of stride ``s``
@@ -33,7 +33,7 @@ from torch import nn
 from alcn_cv.errors import InputError
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW, Normalizer
-from alcn_cv.train.opencv_runtime import DEFAULT_ONNX
+from alcn_cv.nets.opencv_runtime import DEFAULT_ONNX
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx", "main"]

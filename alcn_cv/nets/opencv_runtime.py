@@ -22,7 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.enhance.base import check_gray
+from alcn_cv.checks import check_gray
 from alcn_cv.errors import WeightFileError
 
 __all__ = ["DEFAULT_ONNX", "OpenCVNormalizer"]

@@ -1,0 +1,74 @@
+"""The runtime's input contract: validation of images, intensity images and batches of windows.
+
+Every normalization's :meth:`~alcn_cv.enhance.base.Normalization.apply` and the Normalizer
+runtimes check their input here, so a bad array ends in one :class:`~alcn_cv.errors.InputError`
+that names the problem.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from alcn_cv.errors import InputError
+
+__all__ = ["FULL_SCALE", "SUPPORTED_DTYPES", "check_gray", "check_image", "unit_windows"]
+
+SUPPORTED_DTYPES = (np.uint8, np.uint16, np.float32)
+FULL_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
+# float32 intensities are expected in [0, 1]; tolerate rounding just outside.
+_FLOAT_TOLERANCE = 1e-3
+
+
+def check_image(img: object) -> np.ndarray:
+    """Validate an image for :meth:`Normalization.apply` and return it as an ndarray.
+
+    Raises:
+        InputError: not an array, empty, wrong number of dimensions or channels, unsupported
+            dtype, NaN/inf or out-of-range values in a float image.
+    """
+    if not isinstance(img, np.ndarray):
+        raise InputError(f"image must be a numpy array, got {type(img).__name__}")
+    if img.size == 0:
+        raise InputError(f"image is empty (shape {img.shape})")
+    if img.ndim == 3 and img.shape[2] in (2, 4):
+        hint = " (BGRA: convert with cv2.cvtColor(img, cv2.COLOR_BGRA2BGR))" if img.shape[2] == 4 else ""
+        raise InputError(f"image has {img.shape[2]} channels; expected 1 (grayscale) or 3 (BGR){hint}")
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 3)):
+        raise InputError(f"image must be HxW, HxWx1 or HxWx3, got shape {img.shape}")
+    if img.dtype not in SUPPORTED_DTYPES:
+        raise InputError(f"unsupported dtype {img.dtype}; use uint8, uint16 or float32 (intensities in [0, 1])")
+    if img.dtype == np.float32:
+        if not np.isfinite(img).all():
+            raise InputError("float32 image contains NaN or inf")
+        lo, hi = float(img.min()), float(img.max())
+        if lo < -_FLOAT_TOLERANCE or hi > 1 + _FLOAT_TOLERANCE:
+            raise InputError(
+                f"float32 intensities must be in [0, 1], got [{lo:.4g}, {hi:.4g}]"
+                + (" (divide by 255 first)" if hi <= 255 else "")
+            )
+    return img
+
+
+def check_gray(gray: object) -> np.ndarray:
+    """Validate a float32 ``HxW`` intensity image (the input of :meth:`Normalization.normalize`
+    and of the Normalizer runtimes)."""
+    if not isinstance(gray, np.ndarray) or gray.ndim != 2 or gray.size == 0:
+        raise InputError(f"image must be a non-empty HxW array, got shape {getattr(gray, 'shape', None)}")
+    if gray.dtype != np.float32:
+        raise InputError(f"image must be float32 intensities in [0, 1], got {gray.dtype}")
+    if not np.isfinite(gray).all():
+        raise InputError("image contains NaN or inf")
+    return gray
+
+
+def unit_windows(windows: np.ndarray) -> np.ndarray:
+    """``(n, S, S)`` uint8 or float32 windows as float32 intensities in [0, 1]."""
+    if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.size == 0:
+        raise InputError(f"windows must be a non-empty (n, S, S) array, got {getattr(windows, 'shape', type(windows))}")
+    if windows.dtype == np.uint8:
+        return windows.astype(np.float32) * np.float32(1 / 255)
+    if windows.dtype != np.float32:
+        raise InputError(f"windows must be uint8 or float32, got {windows.dtype}")
+    return windows
+
+
