@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml .ci/constraints.txt .ci/system-deps.sh
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	# torch first, pinned: the CPU build on these machines; unpinned pulls CUDA.
 	$(BIN)/pip install -q --disable-pip-version-check -c .ci/constraints.txt torch
-	$(BIN)/pip install -q --disable-pip-version-check -c .ci/constraints.txt -e ".[dev]"
+	$(BIN)/pip install -q --disable-pip-version-check -c .ci/constraints.txt -e ".[all,dev]"
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -7,12 +7,16 @@ The OpenCV-style API::
     out = alcn_cv.create("dog").apply(frame)          # any registered normalization
     alcn_cv.available()                               # their names
 
-Importing this package does not import torch; the networks (:mod:`alcn_cv.nets`) and the
-differentiable mixture (:mod:`alcn_cv.filters.kornia_mixture`) load it when used.
+The base install (``pip install alcn-cv``: NumPy, OpenCV, SciPy) runs all of this: without
+torch, ``createALCN()`` runs the shipped Normalizer by ``cv2.dnn``. Importing this package does
+not import torch; the networks (:mod:`alcn_cv.nets`) and the differentiable mixture
+(:mod:`alcn_cv.filters.kornia_mixture`) load it when used. Where a package of an extra is
+missing, ``ALCN``, :mod:`alcn_cv.nets` and the ``alcn`` command raise or print one line naming
+the extra to install (:class:`MissingDependencyError`).
 """
 
 from alcn_cv.enhance import ALCN, Normalization, available, create, createALCN, register
-from alcn_cv.errors import ALCNError, DatasetError, InputError, WeightFileError
+from alcn_cv.errors import ALCNError, DatasetError, InputError, MissingDependencyError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import alcn_filter, gaussian_sigmas
 
 __version__ = "0.1.0"
@@ -22,6 +26,7 @@ __all__ = [
     "ALCNError",
     "DatasetError",
     "InputError",
+    "MissingDependencyError",
     "Normalization",
     "WeightFileError",
     "alcn_filter",

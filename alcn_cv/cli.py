@@ -1,30 +1,55 @@
 """The ``alcn`` command: one subcommand per pipeline stage.
 
-Each stage module exposes ``add_parser(subparsers)``, which adds its subcommand and
-sets ``func`` (called with the parsed ``argparse.Namespace``) as the default.
-Errors from bad input end the command with a one-line message and exit code 2; a
-traceback is printed only with ``--debug``.
+The subcommands are the entry points of the group ``alcn_cv.commands`` (declared in
+``pyproject.toml``, discovered with :func:`importlib.metadata.entry_points`, listed by name):
+each names an ``add_parser(subparsers)`` function, which adds its subcommand and sets
+``func`` (called with the parsed ``argparse.Namespace``) as the default. A subcommand whose
+module needs an extra that is not installed is still listed; running it prints the one line
+that names the extra. Errors from bad input end the command with a one-line message and exit
+code 2; a traceback is printed only with ``--debug``.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import sys
+from importlib import metadata
+
+from alcn_cv.errors import MissingDependencyError, missing_extra
 
 logger = logging.getLogger("alcn_cv")
 
-# Modules that contribute subcommands, in the order ``alcn --help`` lists them.
-_STAGES = (
-    "alcn_cv.commands.normalize",
-    "alcn_cv.commands.demo",
-    "alcn_cv.data.cli",
-    "alcn_cv.train.cli",
-    "alcn_cv.bench.cli",
-    "pose.cli",
-    "calib.cli",
-)
+#: The entry-point group of the subcommands.
+COMMANDS_GROUP = "alcn_cv.commands"
+
+
+def _add_unavailable(subparsers: argparse._SubParsersAction, name: str, error: MissingDependencyError) -> None:
+    """List ``name``, whose module needs a package not installed here; running it prints ``error``."""
+
+    def fail(args: argparse.Namespace) -> int:
+        print(error, file=sys.stderr)
+        return 2
+
+    parser = subparsers.add_parser(name, help=f"(needs the [{error.extra}] extra, not installed)", description=str(error), add_help=False)
+    parser.add_argument("arguments", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+    parser.set_defaults(func=fail)
+
+
+def _add_commands(subparsers: argparse._SubParsersAction) -> None:
+    for entry in sorted(metadata.entry_points(group=COMMANDS_GROUP), key=lambda e: e.name):
+        try:
+            add_parser = entry.load()
+        except ModuleNotFoundError as exc:
+            if exc.name and (entry.module + ".").startswith(exc.name + "."):  # its own package is not in this build
+                logger.debug("alcn %s: %s is not installed", entry.name, exc.name)
+                continue
+            error = missing_extra(exc, f"alcn {entry.name}", preferred=entry.name)
+            if error is None:
+                raise
+            _add_unavailable(subparsers, entry.name, error)
+            continue
+        add_parser(subparsers)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -36,14 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="print full tracebacks on errors")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in _STAGES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:  # a stage not installed in this build
-            if exc.name != name:
-                raise
-            continue
-        module.add_parser(subparsers)
+    _add_commands(subparsers)
     return parser
 
 
@@ -60,6 +78,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("alcn: interrupted", file=sys.stderr)
         return 130
+    except ModuleNotFoundError as exc:  # a package of an extra, imported when the command runs
+        error = missing_extra(exc, f"alcn {args.command}", preferred=args.command)
+        if args.debug or error is None:
+            raise
+        print(error, file=sys.stderr)
+        return 2
     except (ValueError, TypeError, OSError, RuntimeError) as exc:
         if args.debug:
             raise

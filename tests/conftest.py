@@ -1,6 +1,9 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import textwrap
 from pathlib import Path
 
 import pytest
@@ -20,26 +23,46 @@ def shared_data() -> Path:
     return root
 
 
-_BLOCK_TORCH = """
+#: The packages of the extras (import names), missing where only the base install is.
+OPTIONAL_MODULES = ("torch", "kornia", "onnx", "matplotlib", "skimage", "PIL", "jsonschema", "pycolmap", "open3d")
+
+_BLOCK = """
 import importlib.abc, sys
-class _BlockTorch(importlib.abc.MetaPathFinder):
+class _Block(importlib.abc.MetaPathFinder):
+    # Imports of these fail as they do where the package is not installed.
     def find_spec(self, name, path=None, target=None):
-        if name.split(".")[0] in ("torch", "kornia"):
-            raise ImportError(f"{name} is blocked in this test")
-sys.meta_path.insert(0, _BlockTorch())
+        if name.split(".")[0] in {blocked!r}:
+            raise ModuleNotFoundError(f"No module named {{name!r}} (blocked in this test)", name=name)
+sys.meta_path.insert(0, _Block())
 """
 
 
 @pytest.fixture(scope="session")
-def run_without_torch():
+def extras_modules() -> tuple[str, ...]:
+    """The import names of the packages the extras install (absent from the base install)."""
+    return OPTIONAL_MODULES
+
+
+@pytest.fixture(scope="session")
+def run_python():
+    """Run Python ``code`` (with ``args`` as sys.argv[1:]) in a fresh interpreter where importing
+    any of ``blocked`` (default: the packages of every extra) fails as if it were not installed;
+    returns the finished process (text output)."""
+
+    def run(code: str, *args: str, blocked: tuple[str, ...] = OPTIONAL_MODULES) -> subprocess.CompletedProcess:
+        script = _BLOCK.format(blocked=tuple(blocked)) + textwrap.dedent(code)
+        return subprocess.run([sys.executable, "-c", script, *map(str, args)], capture_output=True, text=True, timeout=120)
+
+    return run
+
+
+@pytest.fixture(scope="session")
+def run_without_torch(run_python):
     """Run Python ``code`` (with ``args`` as sys.argv[1:]) in a fresh interpreter where importing
     torch or kornia fails; fails the test if it errors or if torch got imported anyway."""
-    import subprocess
-    import sys
-    import textwrap
 
     def run(code: str, *args: str) -> None:
-        script = _BLOCK_TORCH + textwrap.dedent(code) + "\nassert 'torch' not in sys.modules\n"
-        subprocess.run([sys.executable, "-c", script, *map(str, args)], check=True, timeout=120)
+        proc = run_python(textwrap.dedent(code) + "\nassert 'torch' not in sys.modules\n", *args, blocked=("torch", "kornia"))
+        assert proc.returncode == 0, proc.stdout + proc.stderr
 
     return run

@@ -163,6 +163,35 @@ def test_import_does_not_load_torch(run_without_torch):
     """)
 
 
+def test_backend_follows_what_is_installed(run_python):
+    """createALCN() runs the Normalizer in torch when torch is installed, else by cv2.dnn (the
+    shipped ONNX); asking for torch where it is missing names the extra to install."""
+    assert alcn_cv.createALCN().backend == "fast"
+    proc = run_python("""
+        import sys, numpy as np, alcn_cv
+        from alcn_cv.errors import ALCNError, MissingDependencyError
+        alcn = alcn_cv.createALCN()
+        assert alcn.backend == "opencv" and "backend='opencv'" in repr(alcn), repr(alcn)
+        assert alcn.apply((np.random.rand(48, 64) * 255).astype(np.uint8)).shape == (48, 64)
+        for backend in ("fast", "torch"):
+            try:
+                alcn_cv.createALCN(backend=backend)
+            except MissingDependencyError as exc:
+                assert isinstance(exc, ImportError) and isinstance(exc, ALCNError)
+                print(exc)
+        try:
+            from alcn_cv.nets import Normalizer
+        except MissingDependencyError as exc:
+            print(exc)
+        assert "torch" not in sys.modules
+    """)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert len(lines) == 3 and all('pip install "alcn-cv[train]"' in line for line in lines), lines
+    assert lines[0].startswith("ALCN(backend='fast'): needs the [train] extra")
+    assert lines[2].startswith("alcn_cv.nets.Normalizer: needs the [train] extra")
+
+
 @pytest.fixture(scope="module")
 def random_head_weights(tmp_path_factory):
     """A weight file whose maps vary over the image, and its ONNX export beside it."""

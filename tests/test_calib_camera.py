@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from alcn_cv.data.board_scene import make_board_scene
+from board_scene import make_board_scene
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats.colmap import read_model
 from calib.board import BoardSpec

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from alcn_cv.cli import main as alcn
-from alcn_cv.data.board_scene import make_board_scene
+from board_scene import make_board_scene
 from calib.camera import write_camera_yaml
 
 

@@ -8,7 +8,7 @@ import pycolmap
 import pytest
 from scipy.spatial.transform import Rotation
 
-from alcn_cv.data.board_scene import make_board_scene
+from board_scene import make_board_scene
 from alcn_cv.errors import InputError
 from alcn_cv.formats import bop
 from alcn_cv.formats.colmap import read_model

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from alcn_cv.data.board_scene import make_board_scene
+from board_scene import make_board_scene
 from alcn_cv.errors import InputError
 from calib.board import BoardSpec
 from calib.camera import Calibration, load_calibration

@@ -6,7 +6,7 @@ resolution and the Gaussian mixture of Eq. 3 is applied there with the sigmas sc
 ``1 / working_scale``, so the output keeps the input's size and detail:
 ``ALCN(I) = sum_k G_{sigma_k / s} * (F_k(I) o I)``.
 
-The default is the real-time configuration (issue 8): the lite Normalizer distilled from the
+The default is the real-time configuration: the lite Normalizer distilled from the
 paper's, and the large blurs on a Gaussian pyramid. ``createALCN(model="paper", mixture="exact")``
 is the paper's network with Eq. 3 computed exactly, hundreds of times slower; ``alcn bench speed``
 measures both and their difference, ``alcn bench detect`` their detection accuracy.
@@ -26,7 +26,7 @@ import numpy as np
 from alcn_cv.checks import unit_windows
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
-from alcn_cv.errors import InputError
+from alcn_cv.errors import InputError, is_installed, require
 from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, pyramid_mixture
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 
@@ -63,7 +63,8 @@ class ALCN(Normalization):
             sees (its 48x48 window and sigmas are in working-scale pixels). Default: the
             weight file's ``working_scale`` (0.5 for the shipped file: a 640x480 frame is
             seen at 320x240, where a 48-pixel window spans 15% of the width).
-        backend: ``"fast"`` (Normalizer in torch on the CPU, Gaussian mixture in OpenCV),
+        backend: ``None`` (default): ``"fast"`` when torch is installed, else ``"opencv"``;
+            ``"fast"`` (Normalizer in torch on the CPU, Gaussian mixture in OpenCV),
             ``"torch"`` (everything in torch/kornia, on ``device``), or ``"opencv"`` (no torch at
             all: the Normalizer exported to ONNX -- the ``.onnx`` file beside the weight file, see
             ``alcn export`` -- run by ``cv2.dnn``, the mixture in OpenCV; ``grid_stride`` at the
@@ -94,13 +95,15 @@ class ALCN(Normalization):
         self,
         weights: str | Path | None = None,
         scale: float | None = None,
-        backend: str = "fast",
+        backend: str | None = None,
         device: str = "cpu",
         grid_stride: int | None = None,
         mixture: str | None = None,
         model: str = "lite",
         threads: int | None = None,
     ) -> None:
+        if backend is None:
+            backend = "fast" if is_installed("torch") else "opencv"
         if backend not in BACKENDS:
             raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
         if model not in MODELS:
@@ -132,6 +135,7 @@ class ALCN(Normalization):
             self._init_opencv(meta, grid_stride)
             return
 
+        require("torch", *(("kornia",) if backend == "torch" else ()), what=f"ALCN(backend={backend!r})")
         import torch  # deferred: importing alcn_cv must not need torch
 
         from alcn_cv.nets.lite import normalizer_from_file

@@ -5,12 +5,15 @@
   both run by ``cv2.dnn`` from their ONNX export, without torch.
 * :mod:`~alcn_cv.nets.detector` -- the Detector trained jointly with the Normalizer (Eq. 2).
 
-Importing this package does not import torch; the names below load their module on first use.
+Importing this package does not import torch; the names below load their module on first use
+(without torch, those that need it raise :class:`~alcn_cv.errors.MissingDependencyError`).
 """
 
 from __future__ import annotations
 
 import importlib
+
+from alcn_cv.errors import missing_extra
 
 __all__ = ["Detector", "Normalizer", "OpenCVNormalizer", "reflect101_pad"]
 
@@ -24,5 +27,12 @@ _LAZY = {
 
 def __getattr__(name: str):
     if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
+        try:
+            module = importlib.import_module(_LAZY[name])
+        except ModuleNotFoundError as exc:
+            error = missing_extra(exc, f"alcn_cv.nets.{name}")
+            if error is None:
+                raise
+            raise error from exc
+        return getattr(module, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

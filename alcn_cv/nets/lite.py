@@ -1,4 +1,4 @@
-"""A light Normalizer for real-time ALCN, distilled from the paper's (issue 8).
+"""A light Normalizer for real-time ALCN, distilled from the paper's.
 
 The paper's Normalizer (:class:`~alcn_cv.nets.Normalizer`) spends about 13 M multiply-adds per
 48x48 window; run densely over a 640x400 working image (a 1280x800 frame) that is several

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .textures import random_texture
+from alcn_cv.data.textures import random_texture
 
 logger = logging.getLogger(__name__)
 
