@@ -7,9 +7,12 @@ also derives from ``ImportError`` (a package of an optional extra is not install
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import re
+import tomllib
 from importlib import metadata
+from pathlib import Path
 
 __all__ = [
     "ALCNError",
@@ -17,6 +20,7 @@ __all__ = [
     "InputError",
     "MissingDependencyError",
     "WeightFileError",
+    "checkout_project",
     "extra_providing",
     "is_installed",
     "missing_dependency",
@@ -59,22 +63,43 @@ def _normalized(name: str) -> str:
     return re.sub(r"[-_.]+", "-", name).lower()
 
 
-def _extras_requirements() -> dict[str, set[str]]:
-    """Each extra of this distribution and the distributions it installs (extras within it expanded)."""
+@functools.cache
+def checkout_project() -> dict:
+    """The ``[project]`` table of the checkout's ``pyproject.toml`` when alcn_cv runs from a
+    checkout (the installed metadata may be older than it); ``{}`` for an installed copy."""
+    path = Path(__file__).resolve().parents[1] / "pyproject.toml"
+    if not path.is_file():
+        return {}
+    project = tomllib.loads(path.read_text()).get("project", {})
+    return project if project.get("name") == DISTRIBUTION else {}
+
+
+def _extras_table() -> dict[str, list[str]]:
+    """Each extra's requirements, from the checkout or else from the installed metadata."""
+    if checkout_project():
+        return checkout_project().get("optional-dependencies", {})
     try:
         requirements = metadata.requires(DISTRIBUTION) or []
-    except metadata.PackageNotFoundError:  # running from a source tree that was never installed
+    except metadata.PackageNotFoundError:
         return {}
-    direct: dict[str, set[str]] = {}
+    table: dict[str, list[str]] = {}
     for requirement in requirements:
         marker = re.search(r"""extra\s*==\s*["']([\w.-]+)["']""", requirement)
-        name = re.match(r"\s*([A-Za-z0-9][\w.-]*)(?:\[([^\]]*)\])?", requirement)
-        if marker and name:
-            entry = _normalized(name.group(1))
-            if entry == DISTRIBUTION and name.group(2):  # "alcn-cv[train,data]": an extra of extras
-                direct.setdefault(marker.group(1), set()).update(f"[{e.strip()}]" for e in name.group(2).split(","))
-            else:
-                direct.setdefault(marker.group(1), set()).add(entry)
+        if marker:
+            table.setdefault(marker.group(1), []).append(requirement)
+    return table
+
+
+def _extras_requirements() -> dict[str, set[str]]:
+    """Each extra and the distributions it installs (``alcn-cv[a,b]`` within it expanded)."""
+    direct: dict[str, set[str]] = {}
+    for extra, requirements in _extras_table().items():
+        for requirement in requirements:
+            name = re.match(r"\s*([A-Za-z0-9][\w.-]*)(?:\[([^\]]*)\])?", requirement)
+            if name and _normalized(name.group(1)) == DISTRIBUTION:
+                direct.setdefault(extra, set()).update(f"[{e.strip()}]" for e in (name.group(2) or "").split(",") if e.strip())
+            elif name:
+                direct.setdefault(extra, set()).add(_normalized(name.group(1)))
 
     def expand(extra: str, seen: frozenset[str] = frozenset()) -> set[str]:
         found: set[str] = set()
@@ -92,7 +117,7 @@ def _extras_requirements() -> dict[str, set[str]]:
 def extra_providing(module: str, preferred: str | None = None) -> str | None:
     """The extra of alcn-cv that installs the package of ``module`` (an import name).
 
-    Read from the installed metadata (``Requires-Dist``). ``preferred`` (for instance the
+    Read from the checkout's ``pyproject.toml`` or else the installed metadata. ``preferred`` (for instance the
     command that failed) wins when it installs the package; otherwise the extra that
     installs the fewest packages. None when no extra installs it or alcn-cv is not installed.
     """
