@@ -86,7 +86,7 @@ def _load_reference(path: Path, unit: str) -> dict[str, tuple[np.ndarray, np.nda
 
 def _register(args: argparse.Namespace) -> int:
     from .camera import load_calibration
-    from .register import register_charuco, register_colmap
+    from .register import SfmSettings, register_charuco, register_colmap
 
     calib = load_calibration(args.calib) if args.calib else None
     if args.method == "board":
@@ -104,9 +104,10 @@ def _register(args: argparse.Namespace) -> int:
             except ValueError:
                 raise InputError(f"--known-distance: {mm!r} is not a number of millimetres") from None
         reference = _load_reference(Path(args.reference), args.reference_unit) if args.reference else None
+        settings = SfmSettings(step=args.step, max_frames=args.max_frames, max_features=args.max_features,
+                               num_threads=args.threads)
         reg = register_colmap(args.source, args.out, calib, known_distance=known, reference=reference,
-                              step=args.step, max_frames=args.max_frames, max_features=args.max_features,
-                              num_threads=args.threads, overwrite=args.overwrite)
+                              settings=settings, overwrite=args.overwrite)
     print(f"registered {len(reg.registered)} of {len(reg.frames)} frames ({reg.units}); dropped {len(reg.dropped)} "
           f"(reasons in {Path(args.out) / 'registration.json'}); BOP: {Path(args.out) / 'scene_camera.json'}, "
           f"COLMAP: {Path(args.out) / 'colmap'} (images in rgb/)")
