@@ -52,6 +52,8 @@ POOR_RMS_PX = 1.0
 #: Fewest views accepted, and fewest views recommended.
 MIN_VIEWS = 3
 RECOMMENDED_VIEWS = 10
+#: Chessboard sizes near OpenCV's sample board (9x6 inner corners) are tried when no ChArUco marker is seen.
+_COMMON_CHESSBOARD = (9, 6)
 
 
 @dataclass
@@ -127,6 +129,11 @@ def _explain_no_board(board: BoardSpec, sample: np.ndarray | None, n_images: int
         return (msg + f" {markers} ArUco marker(s) of the board were seen but no ChArUco corner could be placed "
                 "between them: the board layout does not match the images; check --cols/--rows (squares, "
                 "not inner corners) and --legacy.")
+    # No marker at all: perhaps the images show a chessboard (as the example images do).
+    guess = suggest_chessboard_size(sample, near=_COMMON_CHESSBOARD) if sample is not None else None
+    if guess is not None:
+        return (msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard: pass --board chessboard "
+                f"--cols {guess[0]} --rows {guess[1]} (inner corners) and its --square size in mm.")
     return msg + (" Check --board, --dictionary, --cols/--rows (squares) and --legacy, and that the board is "
                   "visible, in focus and well lit.")
 
