@@ -48,7 +48,7 @@ from alcn_cv.errors import DatasetError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["WINDOW", "KIND_NAMES", "PhosBatch", "render_windows", "generate", "load", "main"]
+__all__ = ["WINDOW", "KIND_NAMES", "PhosBatch", "render_windows", "generate", "load"]
 
 #: Side of the rendered windows in pixels.
 WINDOW = 64
@@ -307,9 +307,4 @@ def load(out_dir: str | os.PathLike) -> PhosBatch:
         arrays["extents"].astype(np.float32), k_obj, int(man["parameters"].get("object_seed", 0)),
         int(man["seed"]), fams,
     )
-
-
-def main(out_dir: str | os.PathLike, n: int = 100_000, seed: int = 0, **params) -> Path:
-    """Pipeline entry point (hloc style): generate the windows into ``out_dir``."""
-    return generate(out_dir, n, seed, **params)
 
