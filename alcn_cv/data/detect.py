@@ -1,4 +1,4 @@
-"""An ALCN-2D-like detection benchmark (issue 3, §2b; paper Sec. 4.3, Fig. 4).
+"""An ALCN-2D-like detection benchmark (paper Sec. 4.3, Fig. 4).
 
 The paper's ALCN-2D has three objects (matte, velvet-like and specular), ten training images
 per object under one lighting, and test images with and without the objects, under very
@@ -32,7 +32,8 @@ import numpy as np
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.objects import ReliefObject, background_surface, make_object, paste, to_surface
 from alcn_cv.data.parallel import parallel_map
-from alcn_cv.data.render import LIGHT_FAMILIES, Lighting, Material, directional, render_surfaces, sample_lighting
+from alcn_cv.data.lighting import LIGHT_FAMILIES, Lighting, directional, sample_lighting
+from alcn_cv.data.render import Material, render_surfaces
 from alcn_cv.data.textures import photo_crop, procedural_texture
 from alcn_cv.errors import InputError
 from alcn_cv.formats.coco import write_coco

@@ -1,4 +1,4 @@
-"""Box- and Duck-like pose sequences in the BOP layout (issue 3, §2c; paper Sec. 4.4, Table 1).
+"""Box- and Duck-like pose sequences in the BOP layout (paper Sec. 4.4, Table 1).
 
 A textured box (object 1, like the paper's Box dataset) and a duck built from ellipsoids
 (object 2, like ALCN-Duck) stand on a cluttered table. A camera moves along an orbit around
@@ -34,7 +34,8 @@ from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.raster import (
     Mesh, Scene, SceneObject, ShadowSettings, box_mesh, ellipsoid_mesh, look_at, merge_meshes, render_frame,
 )
-from alcn_cv.data.render import Light, Lighting, Material, directional
+from alcn_cv.data.lighting import Light, Lighting, directional
+from alcn_cv.data.render import Material
 from alcn_cv.data.textures import colour_jitter, photo_crop, procedural_texture, random_texture
 from alcn_cv.errors import InputError
 from alcn_cv.formats.bop import (

@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from alcn_cv.data.render import MATERIAL_FIELDS, LightArrays, Lighting, Material, expose, shade, shadow_shape
+from alcn_cv.data.lighting import LightArrays, Lighting, shadow_shape
+from alcn_cv.data.render import MATERIAL_FIELDS, Material, expose, shade
 from alcn_cv.errors import InputError
 
 logger = logging.getLogger(__name__)

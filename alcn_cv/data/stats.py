@@ -29,7 +29,8 @@ import numpy as np
 
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.data.objects import make_object, paste, to_surface
-from alcn_cv.data.render import LIGHT_FAMILIES, Lighting, Light, render_surfaces, sample_lighting
+from alcn_cv.data.lighting import LIGHT_FAMILIES, Light, Lighting, sample_lighting
+from alcn_cv.data.render import render_surfaces
 from alcn_cv.errors import DatasetError
 
 logger = logging.getLogger(__name__)
