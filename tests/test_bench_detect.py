@@ -224,3 +224,21 @@ def test_pr_curves_stop_at_the_last_true_positive_and_ties_are_grouped():
         "none": ["none"], "dlcn": ["dlcn", "whitening"], "alcn": ["alcn"]}
     styles = plots.method_styles(["none", "alcn", "ns", "dog", "slcn", "dlcn", "lrn", "whitening"])
     assert styles["none"][0] != styles["alcn"][0] and styles["dlcn"][0] != styles["whitening"][0]
+
+
+def test_report_gives_mean_and_spread_over_seeds():
+    from dataclasses import asdict
+
+    from alcn_cv.bench.detect_report import detect_command, detect_markdown
+    from alcn_cv.report import machine
+
+    settings = S.DetectSettings(methods=["dog"], real_images=[1], policies=["raw"], seeds=[0, 1])
+    runs = {S.run_key("dog", 1, "raw", 0): {"objects": {"a": {"auc": 0.2}}},
+            S.run_key("dog", 1, "raw", 1): {"objects": {"a": {"auc": 0.4}}}}
+    result = {"settings": asdict(settings), "summary": D.summarize(runs, settings, ["a"]), "runs": runs,
+              "machine": machine(), "command": detect_command("d", "o", settings), "data": "/d", "test_images": [1],
+              "working_scale": 0.5, "box_size": 36.0, "seconds": 1.0}
+    md = detect_markdown(result, ["a"])
+    assert md.startswith("# Few-shot detection benchmark") and "(data)" not in md.splitlines()[0]
+    assert "| dog | 0.300 ± 0.100 | 0.300 ± 0.100 |" in md and "2 (0, 1)" in md
+    assert "--seeds 0,1" in md and "`raw`: the normalized windows" in md
