@@ -100,7 +100,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--param", "-p", action="append", default=[], metavar="NAME=VALUE",
         help="parameter of the method, repeatable (e.g. -p scale=0.25, -p backend=torch)",
     )
-    parser.add_argument("--gray", action="store_true", help="convert to grayscale before normalizing")
+    parser.add_argument("--gray", action="store_true", help="convert to grayscale before normalizing (an alpha channel is kept)")
     parser.add_argument("--list", action="store_true", help="list the methods, each with one line and its reference, and exit")
     parser.add_argument(
         "--allow-partial", action="store_true",

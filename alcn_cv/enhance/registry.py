@@ -62,10 +62,11 @@ def create(name: str, **params: object) -> Normalization:
         raise InputError(f"bad parameters for {name!r} ({', '.join(f'{k}={v!r}' for k, v in params.items())}): {exc}") from None
 
 
-# What a value must be for the types of an ``__init__`` annotation (numpy scalars count as numbers).
+# What a value must be for the types of an ``__init__`` annotation: numpy scalars count as
+# numbers, and a float where an integer is expected is left to the constructor (``size=9.0``).
 _ACCEPTED: dict[type, tuple[type, ...]] = {
     float: (numbers.Real,),
-    int: (numbers.Integral,),
+    int: (numbers.Real,),
     bool: (bool, numbers.Integral),
     tuple: (tuple, list),
     list: (list, tuple),
