@@ -19,15 +19,14 @@ from __future__ import annotations
 
 import importlib
 
-__all__ = ["JointModel", "TrainConfig", "TrainResult", "distill", "export_onnx", "load_checkpoint", "load_config",
-           "train", "train_detector"]
+__all__ = ["JointModel", "TrainConfig", "TrainResult", "export_onnx", "load_checkpoint", "load_config", "train",
+           "train_detector"]
 
 _LAZY = {
     "train": "alcn_cv.train.trainer",
     "TrainResult": "alcn_cv.train.trainer",
     "JointModel": "alcn_cv.train.models",
     "load_checkpoint": "alcn_cv.train.checkpoint",
-    "distill": "alcn_cv.train.distill",
     "TrainConfig": "alcn_cv.train.config",
     "load_config": "alcn_cv.train.config",
     "train_detector": "alcn_cv.train.stage2",
