@@ -22,6 +22,10 @@ _FLOAT_TOLERANCE = 1e-3
 def check_image(img: object) -> np.ndarray:
     """Validate an image for :meth:`Normalization.apply` and return it as an ndarray.
 
+    Accepts ``HxW``, ``HxWx1``, ``HxWx2`` (grayscale and alpha), BGR ``HxWx3`` and BGRA ``HxWx4``
+    of a supported dtype in any byte order; a non-native byte order (e.g. big-endian ``>u2``)
+    is returned converted to the native one.
+
     Raises:
         InputError: not an array, empty, wrong number of dimensions or channels, unsupported
             dtype, NaN/inf or out-of-range values in a float image.
@@ -30,13 +34,13 @@ def check_image(img: object) -> np.ndarray:
         raise InputError(f"image must be a numpy array, got {type(img).__name__}")
     if img.size == 0:
         raise InputError(f"image is empty (shape {img.shape})")
-    if img.ndim == 3 and img.shape[2] in (2, 4):
-        hint = " (BGRA: convert with cv2.cvtColor(img, cv2.COLOR_BGRA2BGR))" if img.shape[2] == 4 else ""
-        raise InputError(f"image has {img.shape[2]} channels; expected 1 (grayscale) or 3 (BGR){hint}")
-    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 3)):
-        raise InputError(f"image must be HxW, HxWx1 or HxWx3, got shape {img.shape}")
-    if img.dtype not in SUPPORTED_DTYPES:
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 2, 3, 4)):
+        raise InputError(f"image must be HxW, HxWx1, HxWx2 (gray, alpha), HxWx3 (BGR) or HxWx4 (BGRA), got shape {img.shape}")
+    native = img.dtype.newbyteorder("=")
+    if native not in SUPPORTED_DTYPES:
         raise InputError(f"unsupported dtype {img.dtype}; use uint8, uint16 or float32 (intensities in [0, 1])")
+    if img.dtype != native:  # byte order is a storage detail, not a pixel type
+        img = img.astype(native)
     if img.dtype == np.float32:
         if not np.isfinite(img).all():
             raise InputError("float32 image contains NaN or inf")

@@ -26,6 +26,7 @@ __all__ = [
     "is_video",
     "iter_frames",
     "list_images",
+    "make_folder",
     "map_video",
     "open_video_writer",
     "read_image",
@@ -66,22 +67,54 @@ def list_images(folder: str | Path) -> list[Path]:
     return files
 
 
-def read_image(path: str | Path) -> np.ndarray:
-    """Read an image as OpenCV does, keeping 16-bit depth; an alpha channel is dropped.
+def _jpeg_is_complete(data: bytes) -> bool:
+    """Whether a JPEG stream reaches its end-of-image marker (``FF D9``).
+
+    libjpeg decodes a truncated file with the missing rows grey and only prints a warning, so
+    the structure is checked here: the marker segments are skipped by their length up to the
+    first scan (so an EXIF thumbnail's own ``FF D9`` does not count), then the entropy-coded
+    data, in which ``FF`` is always followed by ``00`` or a marker, is searched for ``FF D9``
+    (ITU-T T.81, Annex B).
+    """
+    pos = 2  # after SOI
+    while pos + 4 <= len(data):
+        if data[pos] != 0xFF:
+            return False
+        marker = data[pos + 1]
+        if marker == 0xFF:  # fill byte
+            pos += 1
+            continue
+        if marker == 0xDA:  # start of scan: the rest is entropy-coded data and markers
+            return data.find(b"\xff\xd9", pos) >= 0
+        pos += 2 + int.from_bytes(data[pos + 2 : pos + 4], "big")
+    return False
+
+
+def read_image(path: str | Path, alpha: bool = False) -> np.ndarray:
+    """Read an image as OpenCV does, keeping 16-bit depth.
+
+    Args:
+        alpha: keep an alpha channel (``HxWx4`` BGRA); by default it is dropped.
 
     Returns:
-        ``HxW`` grayscale or ``HxWx3`` BGR, uint8 or uint16.
+        ``HxW`` grayscale, ``HxWx3`` BGR or, with ``alpha``, ``HxWx4`` BGRA; uint8 or uint16.
 
     Raises:
-        InputError: the file is missing, unreadable or corrupt.
+        InputError: the file is missing, unreadable, corrupt or truncated.
     """
     path = Path(path)
     if not path.is_file():
         raise InputError(f"image not found: {path}")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read image {path}: {exc.strerror}") from None
+    if data[:2] == b"\xff\xd8" and not _jpeg_is_complete(data):
+        raise InputError(f"{path}: truncated or corrupt JPEG (no end-of-image marker)")
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
     if img is None or img.size == 0:
-        raise InputError(f"cannot read image {path}: corrupt or unsupported format")
-    if img.ndim == 3 and img.shape[2] == 4:
+        raise InputError(f"cannot read image {path}: corrupt, truncated or unsupported format")
+    if img.ndim == 3 and img.shape[2] == 4 and not alpha:
         logger.debug("dropping the alpha channel of %s", path)
         img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
     if img.dtype not in (np.uint8, np.uint16):
@@ -99,7 +132,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     usual permissions (``0666`` less the umask), the folder is created when missing.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(path.parent)
     fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}")
     os.close(fd)
     tmp = Path(name)
@@ -110,6 +143,22 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def make_folder(folder: str | os.PathLike) -> Path:
+    """Create ``folder`` and its parents when missing.
+
+    Raises:
+        InputError: ``folder`` or one of its parents exists as a file (named in the message).
+    """
+    folder = Path(folder)
+    for existing in (folder, *folder.parents):
+        if existing.exists():
+            if not existing.is_dir():
+                raise InputError(f"cannot create the folder {folder}: {existing} is a file")
+            break
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
 
 
 def atomic_write(path: str | os.PathLike, data: bytes | str | Callable[[IO[bytes]], object]) -> Path:
@@ -163,11 +212,27 @@ def to_gray(image: np.ndarray) -> np.ndarray:
 
 
 def write_image(path: str | Path, img: np.ndarray) -> Path:
-    """Write an image atomically (:func:`atomic_path`), creating the folder."""
+    """Write an image atomically (:func:`atomic_path`), creating the folder.
+
+    A grayscale image with alpha (``HxWx2``, which OpenCV cannot encode) is written as BGRA.
+
+    Raises:
+        InputError: ``path`` has no image extension (:data:`IMAGE_SUFFIXES`) or lies under a file.
+        OSError: the image cannot be encoded in that format or the folder is not writable.
+    """
     path = Path(path)
+    if path.suffix.lower() not in IMAGE_SUFFIXES:
+        kind = "a folder" if path.is_dir() else "a video" if is_video(path) else "not an image file name"
+        raise InputError(f"cannot write an image to {path} ({kind}); use one of {', '.join(sorted(IMAGE_SUFFIXES))}")
+    if img.ndim == 3 and img.shape[2] == 2:
+        img = np.dstack([cv2.cvtColor(img[..., 0], cv2.COLOR_GRAY2BGR), img[..., 1]])
     with atomic_path(path) as tmp:
-        if not cv2.imwrite(str(tmp), img):
-            raise OSError(f"cannot write image {path} (unsupported extension or folder not writable)")
+        try:
+            written = cv2.imwrite(str(tmp), img)
+        except cv2.error as exc:
+            raise OSError(f"cannot write image {path}: {exc.err}") from None
+        if not written:
+            raise OSError(f"cannot write image {path} (format or folder not writable)")
     return path
 
 
@@ -236,7 +301,7 @@ def iter_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None
         for path in list_images(source)[::step]:
             if max_frames is not None and count >= max_frames:
                 return
-            img = read_image(path)
+            img = read_image(path)  # without alpha
             if img.dtype != np.uint8:
                 img = (img >> 8).astype(np.uint8)
             count += 1
@@ -266,7 +331,7 @@ def iter_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None
 def open_video_writer(path: str | Path, fps: float, size: tuple[int, int], color: bool = True) -> cv2.VideoWriter:
     """A ``cv2.VideoWriter`` for ``path`` (codec from the extension: MJPG for .avi/.mkv, else mp4v)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(path.parent)
     fourcc = cv2.VideoWriter_fourcc(*_FOURCC.get(path.suffix.lower(), "mp4v"))
     writer = cv2.VideoWriter(str(path), fourcc, fps, size, color)
     if not writer.isOpened():
@@ -274,18 +339,30 @@ def open_video_writer(path: str | Path, fps: float, size: tuple[int, int], color
     return writer
 
 
-def map_video(src: str | Path, dst: str | Path, fn: Callable[[np.ndarray], np.ndarray], desc: str | None = None) -> int:
+def map_video(
+    src: str | Path,
+    dst: str | Path,
+    fn: Callable[[np.ndarray], np.ndarray],
+    desc: str | None = None,
+    allow_partial: bool = False,
+) -> int:
     """Write ``fn(frame)`` for every frame of the video ``src`` into the video ``dst``.
 
     The output is written under a temporary name and renamed when complete; its frame size and
     colour follow ``fn``'s first output, its frame rate the input's. A progress bar shows the
     frames.
 
+    Args:
+        allow_partial: accept a video that ends more than one frame before the frame count of
+            its header (a truncated file), with a warning; by default it is an error and ``dst``
+            is not written.
+
     Returns:
         The number of frames written.
 
     Raises:
-        InputError: ``src`` cannot be opened or holds no decodable frame.
+        InputError: ``src`` cannot be opened, holds no decodable frame, or (without
+            ``allow_partial``) fewer frames than its header says.
     """
     src, dst = Path(src), Path(dst)
     writer = None
@@ -304,4 +381,11 @@ def map_video(src: str | Path, dst: str | Path, fn: Callable[[np.ndarray], np.nd
                 writer.release()
         if writer is None:
             raise InputError(f"no frame could be decoded from {src}")
+        # A header's count is often one frame too high (the shared cookie_box/box.mp4 says 456,
+        # FFmpeg decodes 455): a shortfall of one frame is not taken for truncation.
+        if count < video.frame_count - 1:
+            message = f"{src}: decoded {count} of {video.frame_count} frames (truncated or corrupt video)"
+            if not allow_partial:
+                raise InputError(f"{message}; nothing written (--allow-partial keeps the decoded frames)")
+            logger.warning("%s; wrote the %d decoded frames", message, count)
     return count

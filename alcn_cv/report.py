@@ -1,9 +1,10 @@
-"""Writing benchmark results: Markdown tables, atomic text files and figures, the machine."""
+"""Writing benchmark results: Markdown tables, figures, the machine and the command of a run."""
 
 from __future__ import annotations
 
 import os
 import platform
+import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -11,7 +12,7 @@ from typing import Any
 
 from alcn_cv.io import atomic_path, write_json
 
-__all__ = ["machine", "markdown_table", "new_figure", "save_figure", "write_json"]
+__all__ = ["command_line", "describe_machine", "machine", "markdown_table", "new_figure", "save_figure", "write_json"]
 
 
 def _cell(value: Any, digits: int) -> str:
@@ -60,6 +61,32 @@ def machine() -> dict[str, Any]:
         info["torch_threads"] = torch.get_num_threads()
         info["cuda"] = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
     return info
+
+
+def describe_machine(info: dict[str, Any]) -> str:
+    """One line of :func:`machine`'s description, for a report: CPU, cores, load, versions."""
+    cpu = info.get("cpu_model", info.get("processor"))
+    cpus = info.get("cpus_available", info.get("cpu_count"))
+    parts = [f"{cpu}, {cpus} CPUs available"]
+    if "load_average_1_5_15" in info:
+        parts.append(f"load average (1, 5, 15 min) {', '.join(map(str, info['load_average_1_5_15']))}")
+    versions = f"Python {info.get('python')}, NumPy {info.get('numpy')}, OpenCV {info.get('opencv')}"
+    if info.get("torch"):
+        versions += f", torch {info['torch']} ({info.get('torch_threads')} threads), CUDA: {info.get('cuda') or 'none'}"
+    return "; ".join(parts + [versions, info.get("platform", "")]).rstrip("; ")
+
+
+def command_line(words: Sequence[str], options: dict[str, Any]) -> str:
+    """A shell command line: ``words`` then ``--option value`` for every option (None and
+    False left out, True as a bare flag, lists joined by commas), quoted for a POSIX shell."""
+    args = [str(w) for w in words]
+    for flag, value in options.items():
+        if value is None or value is False:
+            continue
+        args.append(flag)
+        if value is not True:
+            args.append(",".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value))
+    return shlex.join(args)
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, **kwargs: Any):

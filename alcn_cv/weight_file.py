@@ -54,7 +54,7 @@ def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: 
     path = Path(path)
     meta = {"format": FORMAT, "version": VERSION, **meta}
     _check_meta(meta, path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    _check_arrays(arrays, path)
     buffer = io.BytesIO()
     np.savez(buffer, **{k: np.asarray(v, np.float32) for k, v in arrays.items()}, **{_META_KEY: np.array(json.dumps(meta))})
     atomic_write(path, buffer.getvalue())
@@ -65,26 +65,44 @@ def load_normalizer_file(path: str | Path | None = None) -> NormalizerFile:
     """Read and check a weight file (default: the one shipped in the package).
 
     Raises:
-        WeightFileError: missing, corrupt, of another format, or of an incompatible version.
+        WeightFileError: missing, empty, not a ``.npz`` archive, corrupt, of another format or of
+            an incompatible version, or holding NaN or infinite weights.
     """
     path = DEFAULT_WEIGHTS if path is None else Path(path)
     if not path.is_file():
         raise WeightFileError(f"weight file not found: {path}")
+    if path.stat().st_size == 0:
+        raise WeightFileError(f"weight file {path} is empty")
+    if not zipfile.is_zipfile(path):
+        raise WeightFileError(f"weight file {path} is not a .npz archive")
     try:
         with np.load(path, allow_pickle=False) as data:
             if _META_KEY not in data.files:
                 raise WeightFileError(f"{path} is not an alcn-cv weight file (no header)")
             meta = json.loads(str(data[_META_KEY]))
             arrays = {k: data[k] for k in data.files if k != _META_KEY}
-    except (OSError, ValueError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
-        if isinstance(exc, WeightFileError):
-            raise
-        raise WeightFileError(f"weight file {path} is corrupt or unreadable: {exc}") from None
+    except WeightFileError:
+        raise
+    except (OSError, EOFError, ValueError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+        raise WeightFileError(f"weight file {path} is corrupt or truncated: {exc}") from None
     _check_meta(meta, path)
+    _check_arrays(arrays, path)
     return NormalizerFile(arrays=arrays, meta=meta)
 
 
+def _check_arrays(arrays: dict[str, np.ndarray], path: Path) -> None:
+    """Every weight array is numeric and finite: NaN weights would make every output NaN."""
+    for key, value in arrays.items():
+        value = np.asarray(value)
+        if not (np.issubdtype(value.dtype, np.floating) or np.issubdtype(value.dtype, np.integer)):
+            raise WeightFileError(f"{path}: array {key!r} has the non-numeric type {value.dtype}")
+        if not np.isfinite(value).all():
+            raise WeightFileError(f"{path}: array {key!r} holds NaN or infinite values (a diverged training?)")
+
+
 def _check_meta(meta: dict[str, Any], path: Path) -> None:
+    if not isinstance(meta, dict):
+        raise WeightFileError(f"{path}: the header is not a JSON object")
     if meta.get("format") != FORMAT:
         raise WeightFileError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}")
     if meta.get("version") != VERSION:
@@ -92,6 +110,11 @@ def _check_meta(meta: dict[str, Any], path: Path) -> None:
     for key, kind in _REQUIRED.items():
         if not isinstance(meta.get(key), kind):
             raise WeightFileError(f"{path}: header field {key!r} missing or of the wrong type")
+    numbers = [*meta["sigmas"], meta["working_scale"], *meta["output_range"]]
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in numbers):
+        raise WeightFileError(f"{path}: sigmas, working_scale and output_range must be finite numbers")
+    if len(meta["output_range"]) != 2:
+        raise WeightFileError(f"{path}: output_range must be [lo, hi], got {meta['output_range']}")
     lo, hi = meta["output_range"]
     if not hi > lo:
         raise WeightFileError(f"{path}: output_range {meta['output_range']} is empty")

@@ -1,4 +1,4 @@
-"""Camera calibration and registration of training sequences for :mod:`pose` (issue 7).
+"""Camera calibration and registration of training sequences for :mod:`pose`.
 
 - :mod:`calib.board`: chessboard and ChArUco targets, detection, printable board images.
 - :mod:`calib.camera`: ``cv2.calibrateCamera`` from images or a video (frame selection by

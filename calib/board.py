@@ -24,9 +24,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.io import write_json
 from alcn_cv.errors import InputError
-from alcn_cv.io import to_gray
+from alcn_cv.io import atomic_path, to_gray, write_json
 
 logger = logging.getLogger(__name__)
 
@@ -273,10 +272,8 @@ def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, 
     font_scale = max(0.4, margin_px / 60.0)
     cv2.putText(image, label, (margin_px, image.shape[0] - max(4, margin_px // 4)), cv2.FONT_HERSHEY_SIMPLEX,
                 font_scale, 0, max(1, int(font_scale * 1.5)), cv2.LINE_AA)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    Image.fromarray(image).save(tmp, format="PNG", dpi=(dpi, dpi))
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        Image.fromarray(image).save(tmp, format="PNG", dpi=(dpi, dpi))
     true_square = square_px / px_per_mm
     info = {
         "board": spec.to_dict(),

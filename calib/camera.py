@@ -21,23 +21,22 @@ import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Sequence
 
 import cv2
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.io import write_json
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import VIDEO_SUFFIXES, is_video, list_images
 from alcn_cv.formats.colmap import ColmapCamera, camera_from_opencv, write_text_model
+from alcn_cv.io import VIDEO_SUFFIXES, VideoReader, atomic_path, is_video, iter_frames, list_images, write_json
 
 from .board import BoardSpec, Detection, suggest_chessboard_size
 
 logger = logging.getLogger(__name__)
 
 __all__ = [
-    "View",
+    "BoardView",
     "Calibration",
     "detect_in_images",
     "detect_in_video",
@@ -53,11 +52,13 @@ POOR_RMS_PX = 1.0
 #: Fewest views accepted, and fewest views recommended.
 MIN_VIEWS = 3
 RECOMMENDED_VIEWS = 10
+#: Chessboard sizes near OpenCV's sample board (9x6 inner corners) are tried when no ChArUco marker is seen.
+_COMMON_CHESSBOARD = (9, 6)
 
 
 @dataclass
-class View:
-    """One image in which the board was found: its name and the detection."""
+class BoardView:
+    """One image in which the board was found: its name, the detection and its sharpness."""
 
     name: str
     detection: Detection
@@ -128,6 +129,11 @@ def _explain_no_board(board: BoardSpec, sample: np.ndarray | None, n_images: int
         return (msg + f" {markers} ArUco marker(s) of the board were seen but no ChArUco corner could be placed "
                 "between them: the board layout does not match the images; check --cols/--rows (squares, "
                 "not inner corners) and --legacy.")
+    # No marker at all: perhaps the images show a chessboard (as the example images do).
+    guess = suggest_chessboard_size(sample, near=_COMMON_CHESSBOARD) if sample is not None else None
+    if guess is not None:
+        return (msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard: pass --board chessboard "
+                f"--cols {guess[0]} --rows {guess[1]} (inner corners) and its --square size in mm.")
     return msg + (" Check --board, --dictionary, --cols/--rows (squares) and --legacy, and that the board is "
                   "visible, in focus and well lit.")
 
@@ -162,7 +168,7 @@ def _read_gray(path: Path) -> np.ndarray:
     return image
 
 
-def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tuple[list[View], tuple[int, int]]:
+def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tuple[list[BoardView], tuple[int, int]]:
     """Detect the board in every image.
 
     Returns:
@@ -176,7 +182,7 @@ def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tu
     if not paths:
         raise InputError("no images given")
     detector = board.detector()
-    views: list[View] = []
+    views: list[BoardView] = []
     sizes: dict[tuple[int, int], list[str]] = {}
     first = None
     foreign = markers = 0
@@ -195,7 +201,7 @@ def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tu
             continue
         if len(samples) < 3:
             samples.append((path.name, gray))
-        views.append(View(path.name, det, _sharpness(gray)))
+        views.append(BoardView(path.name, det, _sharpness(gray)))
     if len(sizes) > 1:
         listing = "; ".join(f"{w}x{h}: {', '.join(names[:3])}{' ...' if len(names) > 3 else ''}"
                             for (w, h), names in sizes.items())
@@ -208,52 +214,23 @@ def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tu
     return views, next(iter(sizes))
 
 
-def _video_frames(path: Path, step: int) -> Iterator[tuple[int, np.ndarray]]:
-    cap = cv2.VideoCapture(str(path))
-    if not cap.isOpened():
-        raise InputError(f"{path}: cannot open this video")
-    try:
-        index = 0
-        while True:
-            ok = cap.grab()
-            if not ok:
-                break
-            if index % step == 0:
-                ok, frame = cap.retrieve()
-                if not ok:
-                    break
-                yield index, frame
-            index += 1
-    finally:
-        cap.release()
-
-
-def video_frame_count(path: str | os.PathLike) -> int:
-    """Number of frames a video reports (0 when unknown)."""
-    cap = cv2.VideoCapture(str(path))
-    if not cap.isOpened():
-        raise InputError(f"{path}: cannot open this video")
-    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-    cap.release()
-    return max(n, 0)
-
-
-def detect_in_video(path: str | os.PathLike, board: BoardSpec, max_candidates: int = 150) -> tuple[list[View], tuple[int, int]]:
+def detect_in_video(path: str | os.PathLike, board: BoardSpec, max_candidates: int = 150) -> tuple[list[BoardView], tuple[int, int]]:
     """Detect the board in evenly spaced frames of a video (at most ``max_candidates``
     frames are examined). View names are ``frame_000123``."""
     path = Path(path)
-    total = video_frame_count(path)
+    with VideoReader(path) as video:
+        total = max(len(video), 0)
     step = max(1, -(-total // max_candidates)) if total else 1
     detector = board.detector()
-    views: list[View] = []
+    views: list[BoardView] = []
     size = None
     first = None
     foreign = markers = 0
     n = 0
     samples: list[tuple[str, np.ndarray]] = []
     missed = None
-    for index, frame in tqdm(_video_frames(path, step), total=-(-total // step) if total else None,
-                             desc="detecting board", unit="frame"):
+    for name, frame in tqdm(iter_frames(path, step), total=-(-total // step) if total else None,
+                            desc="detecting board", unit="frame"):
         gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
         first = gray if first is None else first
         size = (gray.shape[1], gray.shape[0])
@@ -262,13 +239,11 @@ def detect_in_video(path: str | os.PathLike, board: BoardSpec, max_candidates: i
         foreign += detector.last_foreign_markers
         markers += detector.last_num_markers
         if det is None:
-            missed = missed or (f"frame {index}", gray)
+            missed = missed or (name, gray)
         else:
             if len(samples) < 3:
-                samples.append((f"frame {index}", gray))
-            views.append(View(f"frame_{index:06d}", det, _sharpness(gray)))
-    if n == 0:
-        raise InputError(f"{path}: the video has no readable frame")
+                samples.append((name, gray))
+            views.append(BoardView(name, det, _sharpness(gray)))
     if not views:
         raise InputError(_explain_no_board(board, first, n, foreign, markers))
     _check_chessboard_size(board, samples, missed, len(views))
@@ -276,7 +251,7 @@ def detect_in_video(path: str | os.PathLike, board: BoardSpec, max_candidates: i
     return views, size
 
 
-def _view_features(view: View, image_size: tuple[int, int]) -> np.ndarray:
+def _view_features(view: BoardView, image_size: tuple[int, int]) -> np.ndarray:
     """Pose descriptor of a view for diversity: board centre and apparent size in the image
     (normalized), and the board's tilt from a homography-based pose with a rough camera."""
     w, h = image_size
@@ -295,8 +270,8 @@ def _view_features(view: View, image_size: tuple[int, int]) -> np.ndarray:
     return np.r_[centre, extent, tilt]
 
 
-def select_views(views: Sequence[View], image_size: tuple[int, int], max_views: int = 30,
-                 min_coverage: float = 0.5, board: BoardSpec | None = None) -> list[View]:
+def select_views(views: Sequence[BoardView], image_size: tuple[int, int], max_views: int = 30,
+                 min_coverage: float = 0.5, board: BoardSpec | None = None) -> list[BoardView]:
     """Choose views for board coverage and spread of poses.
 
     Views showing fewer than ``min_coverage`` of the board's corners and the blurriest third
@@ -333,7 +308,7 @@ def select_views(views: Sequence[View], image_size: tuple[int, int], max_views: 
     return [views[i] for i in chosen]
 
 
-def calibrate(views: Sequence[View], image_size: tuple[int, int], board: BoardSpec | None = None,
+def calibrate(views: Sequence[BoardView], image_size: tuple[int, int], board: BoardSpec | None = None,
               flags: int = 0, min_views: int = MIN_VIEWS) -> Calibration:
     """Run ``cv2.calibrateCamera`` on the detected views and measure per-view errors.
 
@@ -420,17 +395,15 @@ def write_camera_yaml(path: str | os.PathLike, K: np.ndarray, dist: np.ndarray, 
     """Write intrinsics as OpenCV FileStorage YAML (``camera_matrix``, ``distortion_coefficients``,
     ``image_width``, ``image_height`` and optionally ``rms``), atomically."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")  # FileStorage picks the format from the suffix
-    fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
-    fs.write("image_width", int(image_size[0]))
-    fs.write("image_height", int(image_size[1]))
-    fs.write("camera_matrix", np.asarray(K, np.float64))
-    fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
-    if rms is not None:
-        fs.write("rms", float(rms))
-    fs.release()
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:  # the temporary name keeps the suffix: FileStorage picks the format from it
+        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
+        fs.write("image_width", int(image_size[0]))
+        fs.write("image_height", int(image_size[1]))
+        fs.write("camera_matrix", np.asarray(K, np.float64))
+        fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
+        if rms is not None:
+            fs.write("rms", float(rms))
+        fs.release()
     return path
 
 

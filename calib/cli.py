@@ -17,14 +17,27 @@ logger = logging.getLogger(__name__)
 _BOARD_DEFAULTS = {"chessboard": {"square": 25.0}, "charuco": {"cols": 7, "rows": 5, "square": 35.0, "marker": 26.0}}
 
 
-def _add_board_args(p: argparse.ArgumentParser, default_kind: str = "charuco", kinds=("chessboard", "charuco")) -> None:
+def _add_board_args(p: argparse.ArgumentParser, with_chessboard: bool = True) -> None:
+    """The board options (default a ChArUco board); ``with_chessboard=False``: ChArUco boards only,
+    and the help says nothing of chessboards."""
+    charuco, chess = _BOARD_DEFAULTS["charuco"], _BOARD_DEFAULTS["chessboard"]
     g = p.add_argument_group("board")
-    g.add_argument("--board", choices=kinds, default=default_kind, help=f"target type (default {default_kind})")
-    g.add_argument("--cols", type=int, help="chessboard: inner corners per row; ChArUco: squares along x (default 7)")
-    g.add_argument("--rows", type=int, help="chessboard: inner corners per column; ChArUco: squares along y (default 5)")
-    g.add_argument("--square", type=float, help="square side in mm as printed (default: ChArUco 35, chessboard 25; "
-                                                "it sets the units of poses, not the intrinsics)")
-    g.add_argument("--marker", type=float, help="ChArUco marker side in mm (default 26)")
+    if with_chessboard:
+        g.add_argument("--board", choices=("chessboard", "charuco"), default="charuco",
+                       help="target type (default charuco)")
+    else:
+        g.add_argument("--board", choices=("charuco",), default="charuco",
+                       help="target type: ChArUco only (a chessboard's pose is ambiguous under a half turn)")
+    either = (lambda chessboard, aruco: f"chessboard: {chessboard}; ChArUco: {aruco}") if with_chessboard else (
+        lambda chessboard, aruco: aruco)
+    g.add_argument("--cols", type=int, help=either("inner corners per row (required)",
+                                                   f"squares along x (default {charuco['cols']})"))
+    g.add_argument("--rows", type=int, help=either("inner corners per column (required)",
+                                                   f"squares along y (default {charuco['rows']})"))
+    g.add_argument("--square", type=float,
+                   help="square side in mm as printed (default " + either(f"{chess['square']:g}", f"{charuco['square']:g}")
+                        + "; it sets the units of poses, not the intrinsics)")
+    g.add_argument("--marker", type=float, help=f"ChArUco marker side in mm (default {charuco['marker']:g})")
     g.add_argument("--dictionary", default="DICT_5X5_100", help="ChArUco ArUco dictionary (default DICT_5X5_100)")
     g.add_argument("--legacy", action="store_true", help="ChArUco board printed by OpenCV < 4.6 (even row count)")
 
@@ -86,7 +99,7 @@ def _load_reference(path: Path, unit: str) -> dict[str, tuple[np.ndarray, np.nda
 
 def _register(args: argparse.Namespace) -> int:
     from .camera import load_calibration
-    from .register import register_charuco, register_colmap
+    from .register import SfmSettings, register_charuco, register_colmap
 
     calib = load_calibration(args.calib) if args.calib else None
     if args.method == "board":
@@ -104,9 +117,10 @@ def _register(args: argparse.Namespace) -> int:
             except ValueError:
                 raise InputError(f"--known-distance: {mm!r} is not a number of millimetres") from None
         reference = _load_reference(Path(args.reference), args.reference_unit) if args.reference else None
+        settings = SfmSettings(step=args.step, max_frames=args.max_frames, max_features=args.max_features,
+                               num_threads=args.threads)
         reg = register_colmap(args.source, args.out, calib, known_distance=known, reference=reference,
-                              step=args.step, max_frames=args.max_frames, max_features=args.max_features,
-                              num_threads=args.threads, overwrite=args.overwrite)
+                              settings=settings, overwrite=args.overwrite)
     print(f"registered {len(reg.registered)} of {len(reg.frames)} frames ({reg.units}); dropped {len(reg.dropped)} "
           f"(reasons in {Path(args.out) / 'registration.json'}); BOP: {Path(args.out) / 'scene_camera.json'}, "
           f"COLMAP: {Path(args.out) / 'colmap'} (images in rgb/)")
@@ -133,7 +147,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = sub.add_parser("camera", help="calibrate intrinsics and distortion from images or a video of a board",
                        description="Detect the board, choose views (from a video: by coverage and pose spread), run "
                                    "cv2.calibrateCamera, and write camera.yaml (OpenCV FileStorage), colmap/cameras.txt, "
-                                   "views.json (per-view errors) and calibration.png into --out.")
+                                   "views.json (per-view errors) and calibration.png into --out. The default board is "
+                                   "ChArUco; the example images in ../shared/data/chessboard show a chessboard: "
+                                   "--board chessboard --cols 9 --rows 6 --square 25.")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--images", help="folder of images of the board")
     src.add_argument("--video", help="video of the board")
@@ -146,7 +162,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_camera)
 
     p = sub.add_parser("board", help="write a printable board image (PNG with its DPI) and its dimensions (JSON)",
-                       description="Write a board to print at 100%% scale, and <out>.json with its dimensions.")
+                       description="Write a board to print at 100% scale, and <out>.json with its dimensions.")
     p.add_argument("--out", required=True, help="output .png")
     _add_board_args(p)
     p.add_argument("--dpi", type=int, default=300, help="print resolution (default 300)")
@@ -160,15 +176,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                                    "--reference. Writes rgb/, scene_camera.json, colmap/, registration.json/.png.")
     p.add_argument("source", help="folder of images or a video")
     p.add_argument("--out", required=True, help="output folder (must not exist unless --overwrite)")
-    p.add_argument("--method", choices=("board", "sfm"), default="board", help="board (ChArUco) or sfm (pycolmap)")
+    p.add_argument("--method", choices=("board", "sfm"), default="board",
+                   help="board (a ChArUco board in view) or sfm (pycolmap, no board) (default board)")
     p.add_argument("--calib", help="camera.yaml from `alcn calib camera` (required for board; optional for sfm)")
-    _add_board_args(p, kinds=("charuco",))
+    _add_board_args(p, with_chessboard=False)
     p.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
     p.add_argument("--max-frames", type=int, help="use at most this many frames")
     p.add_argument("--min-corners", type=int, default=8, help="board: fewest corners for a pose (default 8)")
     p.add_argument("--max-rms", type=float, default=1.0, help="board: largest RMS reprojection error, px (default 1)")
     p.add_argument("--known-distance", nargs=3, metavar=("FRAME_A", "FRAME_B", "MM"),
-                   help="sfm: distance in mm between the centres of two input frames (file names or frame_000123)")
+                   help="sfm: distance in mm between the centres of two input frames (image file names or "
+                        "stems; frame_000123 for a video)")
     p.add_argument("--reference", help="sfm: known poses to align to: a Middlebury *_par.txt or a COLMAP model folder")
     p.add_argument("--reference-unit", choices=("mm", "cm", "m"), default="mm",
                    help="sfm: units of a COLMAP --reference (default mm)")

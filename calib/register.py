@@ -43,26 +43,26 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.io import write_json
 from alcn_cv.data.manifest import atomic_output_dir
 from alcn_cv.errors import InputError
 from alcn_cv.formats import bop
 from alcn_cv.formats.bop import BopFrame
-from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, model_from_pycolmap, write_text_model
-from alcn_cv.io import IMAGE_SUFFIXES, VIDEO_SUFFIXES, is_video, list_images
+from alcn_cv.formats.colmap import (ColmapImage, ColmapModel, ColmapPoint3D, camera_from_opencv, model_from_pycolmap,
+                                    write_text_model)
+from alcn_cv.io import VideoReader, iter_frames, list_images, write_image, write_json
 
 from .board import BoardSpec, Detection
-from .camera import Calibration, video_frame_count
+from .camera import Calibration
 from .conventions import colmap_from_bop_frames
 from .undistort import Undistorter
 
 logger = logging.getLogger(__name__)
 
 __all__ = [
-    "FrameResult",
+    "FrameRegistration",
     "Registration",
+    "SfmSettings",
     "board_pose",
-    "iter_frames",
     "register_charuco",
     "register_colmap",
     "similarity_from_poses",
@@ -74,11 +74,12 @@ MIN_REGISTERED = 2
 
 
 @dataclass
-class FrameResult:
-    """What happened to one input frame.
+class FrameRegistration:
+    """What happened to one input frame of a registration: its pose, or why it was dropped.
 
     Attributes:
-        name: input name (file name, or ``frame_000123`` for videos).
+        name: input name, as :func:`alcn_cv.io.iter_frames` names it (the file stem, or
+            ``frame_000123`` for videos).
         status: ``"ok"`` or the reason the frame was dropped.
         rms_px: RMS reprojection error of the pose (board corners or SfM points), px; NaN
             when no pose was estimated.
@@ -102,69 +103,27 @@ class Registration:
 
     K: np.ndarray
     image_size: tuple[int, int]
-    frames: list[FrameResult] = field(default_factory=list)
+    frames: list[FrameRegistration] = field(default_factory=list)
     units: str = "mm"
     out_dir: Path | None = None
 
     @property
-    def registered(self) -> list[FrameResult]:
+    def registered(self) -> list[FrameRegistration]:
         return [f for f in self.frames if f.status == "ok"]
 
     @property
-    def dropped(self) -> list[FrameResult]:
+    def dropped(self) -> list[FrameRegistration]:
         return [f for f in self.frames if f.status != "ok"]
 
 
 # -- input frames ------------------------------------------------------------------------
 
-def iter_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None = None) -> Iterator[tuple[str, np.ndarray]]:
-    """Yield ``(name, BGR uint8 image)`` from a folder of images or a video, every ``step``-th
-    frame, at most ``max_frames``."""
-    source = Path(source)
-    if step < 1:
-        raise InputError(f"step must be >= 1, got {step}")
-    count = 0
-    if source.is_dir():
-        for path in list_images(source)[::step]:
-            if max_frames is not None and count >= max_frames:
-                return
-            image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-            if image is None:
-                raise InputError(f"{path}: cannot read this image (corrupt or unsupported format)")
-            count += 1
-            yield path.name, image
-    elif source.is_file() and is_video(source):
-        cap = cv2.VideoCapture(str(source))
-        if not cap.isOpened():
-            raise InputError(f"{source}: cannot open this video")
-        try:
-            index = 0
-            while max_frames is None or count < max_frames:
-                if not cap.grab():
-                    break
-                if index % step == 0:
-                    ok, frame = cap.retrieve()
-                    if not ok:
-                        break
-                    count += 1
-                    yield f"frame_{index:06d}", frame
-                index += 1
-        finally:
-            cap.release()
-        if count == 0:
-            raise InputError(f"{source}: the video has no readable frame")
-    elif source.exists():
-        raise InputError(f"{source}: expected a folder of images ({', '.join(sorted(IMAGE_SUFFIXES))}) or a video "
-                         f"({', '.join(sorted(VIDEO_SUFFIXES))})")
-    else:
-        raise InputError(f"{source}: no such file or folder")
-
-
 def _num_frames(source: Path, step: int, max_frames: int | None) -> int | None:
     if source.is_dir():
         n = -(-len(list_images(source)) // step)
     else:
-        total = video_frame_count(source)
+        with VideoReader(source) as video:
+            total = max(len(video), 0)
         n = -(-total // step) if total else None
     return n if max_frames is None or n is None else min(n, max_frames)
 
@@ -172,7 +131,7 @@ def _num_frames(source: Path, step: int, max_frames: int | None) -> int | None:
 # -- ChArUco path ------------------------------------------------------------------------
 
 def board_pose(detection: Detection, K: np.ndarray, dist: np.ndarray | None, min_points: int = 8,
-               max_rms_px: float = 1.0, min_ambiguity_ratio: float = 1.5) -> FrameResult:
+               max_rms_px: float = 1.0, min_ambiguity_ratio: float = 1.5) -> FrameRegistration:
     """Pose of the board (board -> camera, board units) from one detection.
 
     Args:
@@ -185,30 +144,30 @@ def board_pose(detection: Detection, K: np.ndarray, dist: np.ndarray | None, min
             fronto-parallel or small board) and rejected.
 
     Returns:
-        A :class:`FrameResult` with status ``"ok"`` and the pose, or the reason for rejection.
+        A :class:`FrameRegistration` with status ``"ok"`` and the pose, or the reason for rejection.
     """
     obj = detection.object_points.astype(np.float64)
     img = detection.image_points.astype(np.float64)
     n = len(obj)
     if n < min_points:
-        return FrameResult("", f"too few board corners ({n} < {min_points})", num_points=n)
+        return FrameRegistration("", f"too few board corners ({n} < {min_points})", num_points=n)
     ok, rvecs, tvecs, errors = cv2.solvePnPGeneric(obj, img, K, dist, flags=cv2.SOLVEPNP_IPPE)
     if not ok or not len(rvecs):
-        return FrameResult("", "solvePnP failed", num_points=n)
+        return FrameRegistration("", "solvePnP failed", num_points=n)
     rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, dist, rvecs[0], tvecs[0])
     proj, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
     rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1))))
     R = cv2.Rodrigues(rvec)[0]
     t = tvec.reshape(3)
     if t[2] <= 0:
-        return FrameResult("", "board behind the camera", rms, n)
+        return FrameRegistration("", "board behind the camera", rms, n)
     if rms > max_rms_px:
-        return FrameResult("", f"reprojection error {rms:.2f} px > {max_rms_px:g} px", rms, n)
+        return FrameRegistration("", f"reprojection error {rms:.2f} px > {max_rms_px:g} px", rms, n)
     errors = np.asarray(errors, float).ravel()
     if len(errors) > 1 and errors[1] < min_ambiguity_ratio * max(errors[0], 1e-3):
-        return FrameResult("", f"ambiguous planar pose (second solution error {errors[1]:.2f} px vs "
+        return FrameRegistration("", f"ambiguous planar pose (second solution error {errors[1]:.2f} px vs "
                                f"{errors[0]:.2f} px)", rms, n)
-    return FrameResult("", "ok", rms, n, R_w2c=R, t_w2c=t)
+    return FrameRegistration("", "ok", rms, n, R_w2c=R, t_w2c=t)
 
 
 def _write_outputs(tmp: Path, reg: Registration, points3d=None, images: Sequence[ColmapImage] | None = None) -> None:
@@ -289,14 +248,13 @@ def register_charuco(source: str | os.PathLike, out_dir: str | os.PathLike, cali
             if det is None:
                 foreign = detector.last_foreign_markers
                 reason = "board not found" + (f" ({foreign} markers not on this board)" if foreign else "")
-                reg.frames.append(FrameResult(name, reason))
+                reg.frames.append(FrameRegistration(name, reason))
                 continue
             result = board_pose(det, K, None, min_points=min_points, max_rms_px=max_rms_px)
             result.name = name
             if result.status == "ok":
                 result.image_id = len(reg.registered)
-                if not cv2.imwrite(str(tmp / "rgb" / f"{result.image_id:06d}.png"), image):
-                    raise OSError(f"cannot write {tmp / 'rgb'}")
+                write_image(tmp / "rgb" / f"{result.image_id:06d}.png", image)
             else:
                 logger.info("%s dropped: %s", name, result.status)
             reg.frames.append(result)
@@ -370,12 +328,186 @@ def _quiet_colmap() -> Iterator[None]:
         pycolmap.logging.minloglevel = old
 
 
+@dataclass(frozen=True)
+class SfmSettings:
+    """Settings of the reconstruction of :func:`register_colmap`.
+
+    Attributes:
+        step, max_frames: use every ``step``-th input frame, at most ``max_frames``.
+        max_features: SIFT features per image.
+        num_threads: threads for pycolmap (-1: all).
+        seed: random seed of the reconstruction.
+    """
+
+    step: int = 1
+    max_frames: int | None = None
+    max_features: int = 4096
+    num_threads: int = -1
+    seed: int = 0
+
+
+@dataclass
+class _SfmFrames:
+    """The input frames written for SfM: input names and output names (``000000.png`` ...), in input order."""
+
+    names: list[str]
+    out_names: list[str]
+    size: tuple[int, int]
+
+    def output_name(self, name: str) -> str | None:
+        """The output image of the input frame ``name`` (a file name is accepted for its stem), or None."""
+        to_out = dict(zip(self.names, self.out_names))
+        return to_out.get(name, to_out.get(Path(name).stem))
+
+
+def _write_sfm_frames(source: Path, rgb: Path, calib: Calibration | None, settings: SfmSettings) -> _SfmFrames:
+    """Undistort (with a calibration) and write the input frames to ``rgb/``; all must have one size."""
+    undistort = Undistorter(calib, keep_K=True) if calib is not None else None
+    names: list[str] = []
+    size = None
+    frames = iter_frames(source, settings.step, settings.max_frames)
+    for name, image in tqdm(frames, total=_num_frames(source, settings.step, settings.max_frames),
+                            desc="preparing frames", unit="frame"):
+        if undistort is not None:
+            image = undistort(image, name)
+        if size is None:
+            size = (image.shape[1], image.shape[0])
+        elif size != (image.shape[1], image.shape[0]):
+            raise InputError(f"{name} is {image.shape[1]}x{image.shape[0]} but earlier frames are "
+                             f"{size[0]}x{size[1]}; all frames must have one size")
+        write_image(rgb / f"{len(names):06d}.png", image)
+        names.append(name)
+    if len(names) < 3:
+        raise InputError(f"only {len(names)} frame(s); SfM needs at least 3 overlapping views")
+    return _SfmFrames(names, [f"{i:06d}.png" for i in range(len(names))], size)
+
+
+def _reconstruct(frames: _SfmFrames, rgb: Path, work: Path, calib: Calibration | None,
+                 settings: SfmSettings) -> ColmapModel:
+    """pycolmap SIFT extraction, exhaustive matching and incremental mapping; the largest model.
+
+    With a calibration the shared ``PINHOLE`` camera is held fixed; without, it is estimated.
+    """
+    import pycolmap
+
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = "PINHOLE"
+    if calib is not None:
+        cam = camera_from_opencv(calib.K, None, *frames.size)
+        reader.camera_params = ",".join(repr(float(p)) for p in cam.params)
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.sift.max_num_features = int(settings.max_features)
+    extraction.num_threads = int(settings.num_threads)
+    extraction.use_gpu = False
+    db = work / "database.db"
+    pycolmap.set_random_seed(int(settings.seed))
+    n = len(frames.names)
+    logger.info("extracting SIFT features from %d frames", n)
+    pycolmap.extract_features(db, rgb, image_names=frames.out_names, camera_mode=pycolmap.CameraMode.SINGLE,
+                              reader_options=reader, extraction_options=extraction, device=pycolmap.Device.cpu)
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = int(settings.num_threads)
+    matching.use_gpu = False
+    logger.info("matching %d pairs", n * (n - 1) // 2)
+    pycolmap.match_exhaustive(db, matching_options=matching, device=pycolmap.Device.cpu)
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = int(settings.num_threads)
+    options.random_seed = int(settings.seed)
+    options.multiple_models = False
+    options.min_model_size = 3
+    options.extract_colors = True
+    if calib is not None:
+        options.ba_refine_focal_length = False
+        options.ba_refine_principal_point = False
+        options.ba_refine_extra_params = False
+        options.mapper.abs_pose_refine_focal_length = False
+        options.mapper.abs_pose_refine_extra_params = False
+    logger.info("incremental reconstruction")
+    recs = pycolmap.incremental_mapping(db, rgb, work / "sparse", options=options)
+    if not recs:
+        raise InputError(f"pycolmap found no reconstruction in {n} frames: the frames need more "
+                         "overlap and texture (or use a ChArUco board and --method board)")
+    model = model_from_pycolmap(max(recs.values(), key=lambda r: r.num_reg_images()))
+    if len(model.cameras) != 1:
+        raise InputError("the reconstruction has several cameras; expected one shared camera")
+    return model
+
+
+def _scale_to_mm(model: ColmapModel, frames: _SfmFrames, known_distance: tuple[str, str, float] | None,
+                 reference: dict[str, tuple[np.ndarray, np.ndarray]] | None) -> None:
+    """Bring the model to millimetres, in place: a similarity to reference poses, or a scale from a
+    known distance between two camera centres; without either the units stay arbitrary (warned)."""
+    by_out = {im.name: im for im in model.images.values()}
+
+    def image_of(name: str) -> ColmapImage:
+        out = frames.output_name(name)
+        if out is None:
+            raise InputError(f"{name!r} is not an input frame (known: {', '.join(frames.names[:5])} ...)")
+        image = by_out.get(out)
+        if image is None:
+            raise InputError(f"frame {name!r} was not registered by SfM; choose another frame as reference")
+        return image
+
+    if reference:
+        known = [n for n in reference if frames.output_name(n) in by_out]
+        if len(known) < 2:
+            raise InputError(f"only {len(known)} reference frame(s) were registered by SfM; the alignment "
+                             "needs 2 (give more reference poses)")
+        R_ref = np.array([reference[n][0] for n in known], float)
+        C_ref = np.array([-np.asarray(reference[n][0], float).T @ np.asarray(reference[n][1], float).reshape(3)
+                          for n in known])
+        s, R, t = similarity_from_poses(np.array([image_of(n).R_w2c for n in known]),
+                                        np.array([image_of(n).center for n in known]), R_ref, C_ref)
+        _apply_similarity(model, s, R, t)
+    elif known_distance:
+        a, b, mm = known_distance
+        d = np.linalg.norm(image_of(a).center - image_of(b).center)
+        if d < 1e-9 or not mm > 0:
+            raise InputError(f"frames {a} and {b} have the same centre, or the distance {mm} is not positive")
+        _apply_similarity(model, float(mm) / d, np.eye(3), np.zeros(3))
+    else:
+        logger.warning("no known length given: poses are in the arbitrary units of the reconstruction; pass "
+                       "--known-distance (or --reference) for millimetres")
+
+
+def _renumber_registered(model: ColmapModel, frames: _SfmFrames, rgb: Path, reg: Registration,
+                         ) -> tuple[list[ColmapPoint3D], list[ColmapImage]]:
+    """Record every frame in ``reg`` and keep output ids contiguous: registered images are renamed
+    in input order, the others removed; returns the model's points and images with the new ids."""
+    K = reg.K
+    by_out = {im.name: im for im in model.images.values()}
+    new_id = {}
+    for name, old in zip(frames.names, frames.out_names):
+        image = by_out.get(old)
+        if image is None:
+            reg.frames.append(FrameRegistration(name, "not registered by SfM"))
+            (rgb / old).unlink()
+            continue
+        image_id = len(new_id)
+        new_id[image.image_id] = image_id
+        obs = image.point3d_ids >= 0
+        rms = _sfm_rms(model, image, K)
+        reg.frames.append(FrameRegistration(name, "ok", rms, int(obs.sum()), image_id, image.R_w2c, image.t_w2c))
+        if old != f"{image_id:06d}.png":
+            os.replace(rgb / old, rgb / f"{image_id:06d}.png")
+    images = []
+    for im in model.images.values():
+        images.append(ColmapImage(new_id[im.image_id] + 1, f"{new_id[im.image_id]:06d}.png", 1, im.R_w2c,
+                                  im.t_w2c, im.points2d, im.point3d_ids))
+    points = list(model.points3d.values())
+    for p in points:
+        p.track = np.array([(new_id[i] + 1, k) for i, k in p.track], dtype=np.int64).reshape(-1, 2)
+    return points, images
+
+
 def register_colmap(source: str | os.PathLike, out_dir: str | os.PathLike, calib: Calibration | None = None,
                     known_distance: tuple[str, str, float] | None = None,
                     reference: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
-                    step: int = 1, max_frames: int | None = None, max_features: int = 4096,
-                    num_threads: int = -1, seed: int = 0, overwrite: bool = False) -> Registration:
+                    settings: SfmSettings = SfmSettings(), overwrite: bool = False) -> Registration:
     """Register a sequence without a board: pycolmap SfM, then a similarity to millimetres.
+
+    The steps: write the (undistorted) frames, reconstruct (:func:`_reconstruct`), scale to
+    millimetres (:func:`_scale_to_mm`), renumber the registered frames and write the outputs.
 
     Args:
         source: folder of images or a video.
@@ -384,14 +516,12 @@ def register_colmap(source: str | os.PathLike, out_dir: str | os.PathLike, calib
             shared ``PINHOLE`` camera is estimated (principal point at the image centre) —
             calibrate first if the lens distorts.
         known_distance: ``(name_a, name_b, mm)``: the distance between the centres of two
-            input frames (names as in the input: file names or ``frame_000123``). Sets the scale.
+            input frames (names as :func:`alcn_cv.io.iter_frames` gives them, ``frame_000123``
+            for videos; a file name with its suffix is accepted too). Sets the scale.
         reference: ``{input name: (R_w2c (3, 3), t_w2c (3,) in mm)}`` known poses of at least
-            2 frames: a full similarity (:func:`similarity_from_poses`) puts the model in
-            that world frame, in mm.
-        step, max_frames: frame sampling.
-        max_features: SIFT features per image.
-        num_threads: threads for pycolmap (-1: all).
-        seed: random seed of the reconstruction.
+            2 frames (names as for ``known_distance``): a full similarity
+            (:func:`similarity_from_poses`) puts the model in that world frame, in mm.
+        settings: frame sampling and reconstruction settings.
         overwrite: replace an existing ``out_dir``.
 
     Without ``known_distance`` or ``reference`` the units stay arbitrary (warned and
@@ -400,136 +530,19 @@ def register_colmap(source: str | os.PathLike, out_dir: str | os.PathLike, calib
     Raises:
         InputError: fewer than 3 frames, no reconstruction, or a reference naming unknown frames.
     """
-    import pycolmap
-
     source = Path(source)
-    reg_units = "mm" if (known_distance or reference) else "arbitrary"
+    units = "mm" if (known_distance or reference) else "arbitrary"
     with (atomic_output_dir(out_dir, overwrite=overwrite) as tmp, tempfile.TemporaryDirectory() as work,
           _quiet_colmap()):
-        work = Path(work)
         rgb = tmp / "rgb"
         rgb.mkdir()
-        names: list[str] = []
-        undistort = Undistorter(calib, keep_K=True) if calib is not None else None
-        size = None
-        for name, image in tqdm(iter_frames(source, step, max_frames), total=_num_frames(source, step, max_frames),
-                                desc="preparing frames", unit="frame"):
-            if undistort is not None:
-                image = undistort(image, name)
-            if size is None:
-                size = (image.shape[1], image.shape[0])
-            elif size != (image.shape[1], image.shape[0]):
-                raise InputError(f"{name} is {image.shape[1]}x{image.shape[0]} but earlier frames are "
-                                 f"{size[0]}x{size[1]}; all frames must have one size")
-            cv2.imwrite(str(rgb / f"{len(names):06d}.png"), image)
-            names.append(name)
-        if len(names) < 3:
-            raise InputError(f"only {len(names)} frame(s); SfM needs at least 3 overlapping views")
-        out_names = [f"{i:06d}.png" for i in range(len(names))]
-        w, h = size
-        reader = pycolmap.ImageReaderOptions()
-        if calib is not None:
-            cam = camera_from_opencv(calib.K, None, w, h)
-            reader.camera_model = "PINHOLE"
-            reader.camera_params = ",".join(repr(float(p)) for p in cam.params)
-        else:
-            reader.camera_model = "PINHOLE"
-        extraction = pycolmap.FeatureExtractionOptions()
-        extraction.sift.max_num_features = int(max_features)
-        extraction.num_threads = int(num_threads)
-        extraction.use_gpu = False
-        db = work / "database.db"
-        pycolmap.set_random_seed(int(seed))
-        logger.info("extracting SIFT features from %d frames", len(names))
-        pycolmap.extract_features(db, rgb, image_names=out_names, camera_mode=pycolmap.CameraMode.SINGLE,
-                                  reader_options=reader, extraction_options=extraction, device=pycolmap.Device.cpu)
-        matching = pycolmap.FeatureMatchingOptions()
-        matching.num_threads = int(num_threads)
-        matching.use_gpu = False
-        logger.info("matching %d pairs", len(names) * (len(names) - 1) // 2)
-        pycolmap.match_exhaustive(db, matching_options=matching, device=pycolmap.Device.cpu)
-        options = pycolmap.IncrementalPipelineOptions()
-        options.num_threads = int(num_threads)
-        options.random_seed = int(seed)
-        options.multiple_models = False
-        options.min_model_size = 3
-        options.extract_colors = True
-        if calib is not None:
-            options.ba_refine_focal_length = False
-            options.ba_refine_principal_point = False
-            options.ba_refine_extra_params = False
-            options.mapper.abs_pose_refine_focal_length = False
-            options.mapper.abs_pose_refine_extra_params = False
-        logger.info("incremental reconstruction")
-        recs = pycolmap.incremental_mapping(db, rgb, work / "sparse", options=options)
-        if not recs:
-            raise InputError(f"pycolmap found no reconstruction in {len(names)} frames: the frames need more "
-                             "overlap and texture (or use a ChArUco board and --board charuco)")
-        rec = max(recs.values(), key=lambda r: r.num_reg_images())
-        model = model_from_pycolmap(rec)
-        (camera,) = model.cameras.values() if len(model.cameras) == 1 else (None,)
-        if camera is None:
-            raise InputError("the reconstruction has several cameras; expected one shared camera")
+        frames = _write_sfm_frames(source, rgb, calib, settings)
+        model = _reconstruct(frames, rgb, Path(work), calib, settings)
+        _scale_to_mm(model, frames, known_distance, reference)
+        (camera,) = model.cameras.values()
         K, _ = camera.to_opencv()
-
-        by_out = {im.name: im for im in model.images.values()}
-        to_out = dict(zip(names, out_names))
-
-        def image_of(name: str) -> ColmapImage:
-            if name not in to_out:
-                raise InputError(f"{name!r} is not an input frame (known: {', '.join(names[:5])} ...)")
-            image = by_out.get(to_out[name])
-            if image is None:
-                raise InputError(f"frame {name!r} was not registered by SfM; choose another frame as reference")
-            return image
-
-        def center_of(name: str) -> np.ndarray:
-            return image_of(name).center
-
-        if reference:
-            known = [n for n in reference if to_out.get(n) in by_out]
-            if len(known) < 2:
-                raise InputError(f"only {len(known)} reference frame(s) were registered by SfM; the alignment "
-                                 "needs 2 (give more reference poses)")
-            R_ref = np.array([reference[n][0] for n in known], float)
-            C_ref = np.array([-np.asarray(reference[n][0], float).T @ np.asarray(reference[n][1], float).reshape(3)
-                              for n in known])
-            s, R, t = similarity_from_poses(np.array([image_of(n).R_w2c for n in known]),
-                                            np.array([center_of(n) for n in known]), R_ref, C_ref)
-            _apply_similarity(model, s, R, t)
-        elif known_distance:
-            a, b, mm = known_distance
-            d = np.linalg.norm(center_of(a) - center_of(b))
-            if d < 1e-9 or not mm > 0:
-                raise InputError(f"frames {a} and {b} have the same centre, or the distance {mm} is not positive")
-            _apply_similarity(model, float(mm) / d, np.eye(3), np.zeros(3))
-        else:
-            logger.warning("no known length given: poses are in the arbitrary units of the reconstruction; pass "
-                           "--known-distance (or --reference) for millimetres")
-
-        reg = Registration(K, (w, h), units=reg_units)
-        # Keep output ids contiguous: rename registered images in input order.
-        new_id = {}
-        for name, old in zip(names, out_names):
-            image = by_out.get(old)
-            if image is None:
-                reg.frames.append(FrameResult(name, "not registered by SfM"))
-                (rgb / old).unlink()
-                continue
-            image_id = len(new_id)
-            new_id[image.image_id] = image_id
-            obs = image.point3d_ids >= 0
-            rms = _sfm_rms(model, image, K)
-            reg.frames.append(FrameResult(name, "ok", rms, int(obs.sum()), image_id, image.R_w2c, image.t_w2c))
-            if old != f"{image_id:06d}.png":
-                os.replace(rgb / old, rgb / f"{image_id:06d}.png")
-        images = []
-        for im in model.images.values():
-            images.append(ColmapImage(new_id[im.image_id] + 1, f"{new_id[im.image_id]:06d}.png", 1, im.R_w2c,
-                                      im.t_w2c, im.points2d, im.point3d_ids))
-        points = list(model.points3d.values())
-        for p in points:
-            p.track = np.array([(new_id[i] + 1, k) for i, k in p.track], dtype=np.int64).reshape(-1, 2)
+        reg = Registration(K, frames.size, units=units)
+        points, images = _renumber_registered(model, frames, rgb, reg)
         _check_enough(reg, "The frames need more overlap and texture.")
         _write_outputs(tmp, reg, points, images)
     reg.out_dir = Path(out_dir)

@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
+from alcn_cv.report import new_figure, save_figure
+
 if TYPE_CHECKING:
     from .camera import Calibration
 
@@ -18,24 +20,15 @@ __all__ = ["plot_calibration", "plot_registration"]
 
 
 def _figure(ncols: int, width: float = 13.0, height: float = 5.0):
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, ncols, figsize=(width, height), gridspec_kw={"width_ratios": [1.2] + [1] * (ncols - 1)})
-    return plt, fig, axes
+    """``(plt, fig, axes)``: one row of ``ncols`` axes, the first a little wider."""
+    plt, fig, axes = new_figure(1, ncols, figsize=(width, height),
+                                gridspec_kw={"width_ratios": [1.2] + [1] * (ncols - 1)})
+    return plt, fig, axes[0]
 
 
 def _save(plt, fig, path: str | os.PathLike) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp.png")
     fig.tight_layout()
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    return save_figure(plt, fig, path)
 
 
 def plot_calibration(calib: "Calibration", path: str | os.PathLike) -> Path:

@@ -17,7 +17,6 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv.errors import InputError
-
 from alcn_cv.io import IMAGE_SUFFIXES, is_video, list_images, map_video, read_image, write_image
 
 from .camera import Calibration, write_camera_yaml

@@ -10,6 +10,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from alcn_cv.bench import detect as D  # noqa: E402
+from alcn_cv.bench import detect_data, policies  # noqa: E402
+from alcn_cv.bench import detect_settings as S  # noqa: E402
 from alcn_cv.cli import main as cli_main  # noqa: E402
 from alcn_cv.errors import DatasetError, InputError  # noqa: E402
 from alcn_cv.nets import Detector  # noqa: E402
@@ -27,7 +29,7 @@ def small_data(tmp_path_factory):
 def test_local_standardize_matches_direct():
     rng = np.random.default_rng(0)
     img = rng.random((40, 45)).astype(np.float32)
-    out = D.local_standardize(img, size=5)
+    out = policies.local_standardize(img, size=5)
     padded = np.pad(img.astype(np.float64), 2, mode="reflect")  # numpy "reflect" = reflect-101
     for y, x in [(0, 0), (10, 20), (39, 44), (20, 1)]:
         box = padded[y : y + 5, x : x + 5]
@@ -40,7 +42,7 @@ def test_score_maps_equal_window_scores(policy):
     net = Detector(3, hidden=16).eval()
     rng = np.random.default_rng(1)
     image = rng.random((48, 56)).astype(np.float32)
-    pol = D.InputPolicy(policy, rng.random((10, 64, 64)).astype(np.float32))
+    pol = policies.InputPolicy(policy, rng.random((10, 64, 64)).astype(np.float32))
     probs = D.score_maps(net, image, pol)
     assert probs.shape == (3, 5, 7)
     np.testing.assert_allclose(probs.sum(0), 1, atol=1e-5)
@@ -70,26 +72,26 @@ def test_detect_in_image_places_fixed_boxes():
 def test_input_policy():
     rng = np.random.default_rng(2)
     windows = (3 + 2 * rng.standard_normal((20, 64, 64))).astype(np.float32)
-    raw = D.InputPolicy("raw", windows).windows(windows)
+    raw = policies.InputPolicy("raw", windows).windows(windows)
     assert raw.shape == (20, 32, 32) and abs(raw.mean()) < 1e-3 and abs(raw.std() - 1) < 1e-3
-    std = D.InputPolicy("standardize", windows).windows(windows)
+    std = policies.InputPolicy("standardize", windows).windows(windows)
     np.testing.assert_allclose(std.mean((1, 2)), 0, atol=1e-4)
     with pytest.raises(InputError):
-        D.InputPolicy("standardize", windows).image(windows[0])
+        policies.InputPolicy("standardize", windows).image(windows[0])
     with pytest.raises(InputError):
-        D.InputPolicy("whiten", windows)
+        policies.InputPolicy("whiten", windows)
 
 
 def test_training_set_is_shared_and_labelled(small_data):
-    data = D.load_data(small_data)
-    settings = D.DetectSettings(positives_per_object=12, negatives_ratio=1.0)
-    a = D.training_set(data, 1, settings)
-    b = D.training_set(data, 1, settings)
+    data = detect_data.load_data(small_data)
+    settings = S.DetectSettings(positives_per_object=12, negatives_ratio=1.0)
+    a = detect_data.training_set(data, 1, settings)
+    b = detect_data.training_set(data, 1, settings)
     np.testing.assert_array_equal(a.windows, b.windows)  # every method trains on the same windows
     assert a.windows.shape == (72, 64, 64) and a.windows.dtype == np.uint8
     assert np.bincount(a.labels).tolist() == [36, 12, 12, 12]
     assert a.images_used == {"matte_box": 1, "velvet_toy": 1, "specular_can": 1}
-    assert D.training_set(data, 10, settings).images_used["matte_box"] == 3  # all the small set has
+    assert detect_data.training_set(data, 10, settings).images_used["matte_box"] == 3  # all the small set has
 
 
 def test_end_to_end_small(small_data, tmp_path, monkeypatch):
@@ -100,7 +102,7 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
 
     real_create = D._create_normalization
     monkeypatch.setattr(D, "_create_normalization", lambda m, p: broken() if m == "he" else real_create(m, p))
-    settings = D.DetectSettings(methods=["none", "dog", "he"], real_images=[1], policies=["raw", "local"],
+    settings = S.DetectSettings(methods=["none", "dog", "he"], real_images=[1], policies=["raw", "local"],
                                 positives_per_object=8, epochs=1, batch_size=32, threads=1, tune=True)
     result = D.main(small_data, out, settings, progress=False)
     assert (out / "detect.md").is_file() and (out / "detect.json").is_file()
@@ -124,7 +126,7 @@ def test_cli_and_bad_input(small_data, tmp_path):
     assert cli_main(["bench", "detect", "--data", str(small_data), "--out", str(tmp_path / "o"),
                      "--methods", "none,nonexistent"]) == 2
     with pytest.raises(DatasetError):
-        D.load_data(tmp_path)
+        detect_data.load_data(tmp_path)
     with pytest.raises(SystemExit):
         cli_main(["bench", "--help"])
 
@@ -136,7 +138,7 @@ def test_batched_score_maps_equal_single(policy):
     rng = np.random.default_rng(4)
     images = [rng.random((40, 44)).astype(np.float32), rng.random((36, 40)).astype(np.float32),
               rng.random((40, 44)).astype(np.float32)]
-    pol = D.InputPolicy(policy, rng.random((4, 64, 64)).astype(np.float32))
+    pol = policies.InputPolicy(policy, rng.random((4, 64, 64)).astype(np.float32))
     batched = D._all_score_maps(net, images, pol, "cpu", batch=2)
     for img, p in zip(images, batched):
         np.testing.assert_allclose(p, D.score_maps(net, img, pol), atol=1e-5)
@@ -146,19 +148,19 @@ def test_method_specs_and_seeds():
     norm = D._create_normalization("alcn:model=lite:mixture=pyramid", {})
     assert (norm.mixture, norm.scale, norm.net.stride) == ("pyramid", 1.0, 8)
     assert D._create_normalization("dog:sigma2=2.5", {"sigma1": 1.0}).sigma2 == 2.5
-    D.DetectSettings(methods=["alcn", "alcn:model=lite"], seeds=[0, 1]).check()
+    S.DetectSettings(methods=["alcn", "alcn:model=lite"], seeds=[0, 1]).check()
     for bad in (dict(methods=["nope:x=1"]), dict(methods=["cnn:depth=2"]), dict(methods=["dog", "dog"]),
                 dict(seeds=[]), dict(seeds=[1, 1])):
         with pytest.raises(InputError):
-            D.DetectSettings(**bad).check()
+            S.DetectSettings(**bad).check()
 
 
 def test_summarize_over_seeds():
-    settings = D.DetectSettings(methods=["dog"], real_images=[1], policies=["local"], seeds=[0, 1, 2])
+    settings = S.DetectSettings(methods=["dog"], real_images=[1], policies=["local"], seeds=[0, 1, 2])
     objects = lambda a, b: {"a": {"auc": a}, "b": {"auc": b}}  # noqa: E731
-    runs = {D.run_key("dog", 1, "local", 0): {"objects": objects(0.2, 0.4)},
-            D.run_key("dog", 1, "local", 1): {"objects": objects(0.4, None)},
-            D.run_key("dog", 1, "local", 2): {"error": "RuntimeError: boom"}}
+    runs = {S.run_key("dog", 1, "local", 0): {"objects": objects(0.2, 0.4)},
+            S.run_key("dog", 1, "local", 1): {"objects": objects(0.4, None)},
+            S.run_key("dog", 1, "local", 2): {"error": "RuntimeError: boom"}}
     cell = D.summarize(runs, settings, ["a", "b"])["dog|1|local"]
     assert cell["seeds"] == [0, 1] and cell["failed_seeds"] == [2]
     assert cell["objects"]["a"]["mean"] == pytest.approx(0.3) and cell["objects"]["a"]["std"] == pytest.approx(0.1)
@@ -167,9 +169,9 @@ def test_summarize_over_seeds():
 
 
 def test_training_is_reproducible_whatever_ran_before(small_data):
-    data = D.load_data(small_data)
-    settings = D.DetectSettings(positives_per_object=6, epochs=1, batch_size=16)
-    ts = D.training_set(data, 1, settings, seed=3)
+    data = detect_data.load_data(small_data)
+    settings = S.DetectSettings(positives_per_object=6, epochs=1, batch_size=16)
+    ts = detect_data.training_set(data, 1, settings, seed=3)
     windows = ts.windows[:, 16:48, 16:48].astype(np.float32) / 255
 
     def weights():
@@ -182,17 +184,61 @@ def test_training_is_reproducible_whatever_ran_before(small_data):
 
 
 def test_resnets_train_with_context_under_dense_policies(small_data):
-    data = D.load_data(small_data)
-    settings = D.DetectSettings(positives_per_object=4, epochs=1, batch_size=16)
-    ts = D.training_set(data, 1, settings)
+    data = detect_data.load_data(small_data)
+    settings = S.DetectSettings(positives_per_object=4, epochs=1, batch_size=16)
+    ts = detect_data.training_set(data, 1, settings)
     windows = ts.windows.astype(np.float32) / 255
-    policy = D.InputPolicy("local", windows)
-    assert D._context("resnet20", "local") == D.RESNET_CONTEXT == 16 and D._context("resnet20", "standardize") == 0
+    policy = policies.InputPolicy("local", windows)
+    assert D._context("resnet20", "local") == S.RESNET_CONTEXT == 16 and D._context("resnet20", "standardize") == 0
     assert D._context("cnn", "local") == 0
-    inputs = policy.windows(windows, 32 + 2 * D.RESNET_CONTEXT)
+    inputs = policy.windows(windows, 32 + 2 * S.RESNET_CONTEXT)
     assert inputs.shape == (len(windows), 64, 64)
     np.testing.assert_array_equal(inputs[:, 16:48, 16:48], policy.windows(windows))
     net = D._train("resnet20", inputs, ts.labels, 4, settings, 0, (inputs[:4], ts.labels[:4]))
     assert net.context == 16
     with pytest.raises(InputError, match="context"):
-        D.InputPolicy("standardize", windows).windows(windows, 64)
+        policies.InputPolicy("standardize", windows).windows(windows, 64)
+
+
+def test_alcn_opencv_backend_runs_end_to_end(small_data, tmp_path):
+    """The cv2.dnn backend normalizes the training windows through ALCN.normalize_windows (it
+    once failed with "'OpenCVNormalizer' object is not callable")."""
+    settings = S.DetectSettings(methods=["alcn:backend=opencv"], real_images=[1], policies=["local"],
+                                positives_per_object=4, negatives_ratio=0.5, epochs=1, batch_size=16, threads=1,
+                                max_test_images=1)
+    result = D.main(small_data, tmp_path / "out", settings, progress=False)
+    run = result["runs"][S.run_key("alcn:backend=opencv", 1, "local", 0)]
+    assert "error" not in run, run.get("error")
+    md = (tmp_path / "out" / "detect.md").read_text()
+    assert "**Machine:**" in md and "alcn bench detect" in md and "`local`" in md and "no spread" in md
+
+
+def test_pr_curves_stop_at_the_last_true_positive_and_ties_are_grouped():
+    from alcn_cv.bench import plots
+
+    recall, precision = plots.trim_pr_curve([0.2, 0.5, 0.5, 0.8, 0.8, 0.8], [1.0, 0.9, 0.6, 0.7, 0.3, 0.03])
+    np.testing.assert_array_equal(recall, [0.2, 0.5, 0.5, 0.8])
+    np.testing.assert_array_equal(precision, [1.0, 0.9, 0.6, 0.7])
+    same = ([0.1, 0.4], [1.0, 0.5])
+    assert plots._ties({"none": ([0.2], [1.0]), "dlcn": same, "alcn": ([0.3], [0.9]), "whitening": same}) == {
+        "none": ["none"], "dlcn": ["dlcn", "whitening"], "alcn": ["alcn"]}
+    styles = plots.method_styles(["none", "alcn", "ns", "dog", "slcn", "dlcn", "lrn", "whitening"])
+    assert styles["none"][0] != styles["alcn"][0] and styles["dlcn"][0] != styles["whitening"][0]
+
+
+def test_report_gives_mean_and_spread_over_seeds():
+    from dataclasses import asdict
+
+    from alcn_cv.bench.detect_report import detect_command, detect_markdown
+    from alcn_cv.report import machine
+
+    settings = S.DetectSettings(methods=["dog"], real_images=[1], policies=["raw"], seeds=[0, 1])
+    runs = {S.run_key("dog", 1, "raw", 0): {"objects": {"a": {"auc": 0.2}}},
+            S.run_key("dog", 1, "raw", 1): {"objects": {"a": {"auc": 0.4}}}}
+    result = {"settings": asdict(settings), "summary": D.summarize(runs, settings, ["a"]), "runs": runs,
+              "machine": machine(), "command": detect_command("d", "o", settings), "data": "/d", "test_images": [1],
+              "working_scale": 0.5, "box_size": 36.0, "seconds": 1.0}
+    md = detect_markdown(result, ["a"])
+    assert md.startswith("# Few-shot detection benchmark") and "(data)" not in md.splitlines()[0]
+    assert "| dog | 0.300 ± 0.100 | 0.300 ± 0.100 |" in md and "2 (0, 1)" in md
+    assert "--seeds 0,1" in md and "`raw`: the normalized windows" in md

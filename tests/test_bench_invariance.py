@@ -75,3 +75,11 @@ def test_real_photographs(shared_data, tmp_path):
     assert set(result["methods"]["none"]["objects"]) == {"buddha", "cat", "horse", "owl"}
     assert result["settings"]["lights"]["cat"] == 12
     assert result["methods"]["dog"]["detail"] > result["methods"]["none"]["detail"]
+
+
+def test_report_states_machine_command_and_settings(tmp_path):
+    _fake_set(tmp_path / "data")
+    invariance.main(tmp_path / "data", tmp_path / "out", methods=["none", "dog:sigma2=2"], progress=False)
+    md = (tmp_path / "out" / "invariance.md").read_text()
+    assert "**Machine:**" in md and "**Settings:**" in md
+    assert "alcn bench invariance --data" in md and "--methods none,dog:sigma2=2" in md

@@ -11,7 +11,7 @@ from board_scene import make_board_scene
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats.colmap import read_model
 from calib.board import BoardSpec
-from calib.camera import View, calibrate, detect_in_images, load_calibration, main, select_views
+from calib.camera import BoardView, calibrate, detect_in_images, load_calibration, main, select_views
 
 REFERENCE = {"fx": 536.07, "fy": 536.02, "cx": 342.37, "cy": 235.54}  # ../shared/data/README.md
 DIST = np.array([-0.12, 0.03, 0.0005, -0.0004, 0.0])
@@ -88,8 +88,8 @@ def test_video_frames_are_selected_for_pose_spread(scene, tmp_path):
 
 def test_select_views_prefers_coverage_and_spread(scene):
     detector = BoardSpec().detector()
-    views = [View(f"v{i}", detector(im), 1.0) for i, im in enumerate(scene.images)]
-    views = views + [View(v.name + "_copy", v.detection, 1.0) for v in views]
+    views = [BoardView(f"v{i}", detector(im), 1.0) for i, im in enumerate(scene.images)]
+    views = views + [BoardView(v.name + "_copy", v.detection, 1.0) for v in views]
     chosen = select_views(views, (640, 480), max_views=6)
     names = [v.name.removesuffix("_copy") for v in chosen]
     assert len(set(names)) == 6
@@ -153,7 +153,7 @@ def test_poor_rms_warns(scene, caplog):
     for i, image in enumerate(scene.images):
         det = detector(image)
         noisy = det.image_points + rng.normal(0, 2.0, det.image_points.shape).astype(np.float32)
-        views.append(View(str(i), type(det)(noisy, det.object_points, det.ids)))
+        views.append(BoardView(str(i), type(det)(noisy, det.object_points, det.ids)))
     with caplog.at_level(logging.WARNING, logger="calib.camera"):
         calib = calibrate(views, (640, 480))
     assert calib.rms > 1.0

@@ -92,3 +92,35 @@ def test_register_sfm_with_known_distance(shared_data, tmp_path, capsys):
             d_est = np.linalg.norm(-est[i][0].T @ est[i][1] + est[j][0].T @ est[j][1])
             d_gt = np.linalg.norm(views[i].center - views[j].center) * 1000.0
             assert d_est == pytest.approx(d_gt, rel=0.02)
+
+
+def _help(capsys, *args: str) -> str:
+    with pytest.raises(SystemExit) as exc:
+        alcn([*args, "--help"])
+    assert exc.value.code == 0
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_help_texts_have_no_literal_percent_escapes(capsys):
+    for sub in ("camera", "board", "register", "undistort"):
+        assert "%%" not in _help(capsys, "calib", sub), sub
+    assert "print at 100% scale" in _help(capsys, "calib", "board")
+
+
+def test_register_help_describes_only_the_boards_it_accepts(capsys):
+    text = _help(capsys, "calib", "register")
+    assert "{charuco}" in text and "inner corners" not in text and "chessboard:" not in text
+    assert "squares along x (default 7)" in text
+
+
+def test_camera_help_gives_the_chessboard_example(capsys):
+    assert "--board chessboard --cols 9 --rows 6 --square 25" in _help(capsys, "calib", "camera")
+
+
+@pytest.mark.shared_data
+def test_default_charuco_board_on_chessboard_images_names_the_chessboard(shared_data, tmp_path, capsys):
+    """The example images are a chessboard: with the default board the error says what to pass."""
+    rc = alcn(["calib", "camera", "--images", str(shared_data / "chessboard"), "--out", str(tmp_path), "--no-report"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err
+    assert "--board chessboard --cols 9 --rows 6" in err

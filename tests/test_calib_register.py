@@ -15,7 +15,7 @@ from alcn_cv.formats.colmap import read_model
 from alcn_cv.formats.middlebury import read_middlebury
 from calib.board import BoardSpec
 from calib.camera import Calibration
-from calib.register import register_charuco, register_colmap, similarity_from_poses
+from calib.register import SfmSettings, register_charuco, register_colmap, similarity_from_poses
 
 DIST = np.array([-0.1, 0.02, 0.0, 0.0, 0.0])
 
@@ -43,7 +43,7 @@ def frames(scene, tmp_path_factory):
 def test_charuco_registration_recovers_rendered_poses(scene, frames, tmp_path):
     calib = Calibration(scene.K, DIST, (640, 480), 0.0)
     reg = register_charuco(frames, tmp_path / "reg", calib, BoardSpec())
-    assert [f.name for f in reg.dropped] == ["f005.png"]
+    assert [f.name for f in reg.dropped] == ["f005"]  # frames are named by their file stem
     assert reg.dropped[0].status == "board not found"
     assert len(reg.registered) == 8
     for f in reg.registered:
@@ -78,7 +78,7 @@ def test_charuco_registration_recovers_rendered_poses(scene, frames, tmp_path):
 
     report = json.loads((out / "registration.json").read_text())
     assert report["num_frames"] == 9 and report["num_registered"] == 8 and report["units"] == "mm"
-    assert {fr["name"]: fr["status"] for fr in report["frames"]}["f005.png"] == "board not found"
+    assert {fr["name"]: fr["status"] for fr in report["frames"]}["f005"] == "board not found"
     assert cv2.imread(str(out / "registration.png")) is not None
 
 
@@ -118,8 +118,9 @@ def test_colmap_registration_of_middlebury_temple(shared_data, tmp_path):
     views = read_middlebury(shared_data / "middlebury" / "templeSparseRing")
     calib = Calibration(views[0].K, np.zeros(5), (640, 480), 0.0)
     reference = {v.name: (v.R_w2c, v.t_w2c * 1000.0) for v in views}
-    reg = register_colmap(views[0].path.parent, tmp_path / "reg", calib, reference=reference, num_threads=2)
-    gt = {v.name: v for v in views}
+    reg = register_colmap(views[0].path.parent, tmp_path / "reg", calib, reference=reference,
+                          settings=SfmSettings(num_threads=2))
+    gt = {v.path.stem: v for v in views}  # registered frames are named by their file stem
     kept = reg.registered
     assert len(kept) >= 10, [f"{f.name}: {f.status}" for f in reg.dropped]
     # Relative rotations need no alignment.

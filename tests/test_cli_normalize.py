@@ -84,3 +84,22 @@ def test_every_subcommand_has_help():
     assert {"normalize", "demo", "data", "train", "export", "bench", "pose", "calib"} <= set(commands)
     for name, sub in commands.items():
         assert sub.format_help().strip(), name
+
+
+def test_alpha_is_kept(tmp_path, frame):
+    alpha = np.tile(np.linspace(0, 255, frame.shape[1]).astype(np.uint8), (frame.shape[0], 1))
+    cv2.imwrite(str(tmp_path / "rgba.png"), np.dstack([frame, alpha]))
+    for flags, channels in (([], 4), (["--gray"], 4)):
+        assert main(["normalize", str(tmp_path / "rgba.png"), str(tmp_path / "out.png"), "-m", "clahe", *flags]) == 0
+        out = cv2.imread(str(tmp_path / "out.png"), cv2.IMREAD_UNCHANGED)
+        assert out.shape == frame.shape[:2] + (channels,)
+        np.testing.assert_array_equal(out[..., 3], alpha)
+
+
+def test_list_explains_every_method(capsys):
+    from alcn_cv.enhance import available
+
+    assert main(["normalize", "--list"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert [line.split()[0] for line in lines] == available()
+    assert any("Jarrett" in line for line in lines if line.startswith("dlcn"))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from alcn_cv.data import phos
-from alcn_cv.data.render import LIGHT_FAMILIES
+from alcn_cv.data.lighting import LIGHT_FAMILIES
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats import schema
 

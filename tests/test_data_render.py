@@ -5,21 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from alcn_cv.data.lighting import LIGHT_FAMILIES, Light, LightArrays, Lighting, directional, sample_lighting, shadow_shape
 from alcn_cv.data.render import (
-    LIGHT_FAMILIES,
     MATERIALS,
-    Light,
-    LightArrays,
-    Lighting,
     Surface,
-    directional,
     expose,
     heightfield_geometry,
     heightfield_shadows,
     render_surfaces,
-    sample_lighting,
     shade,
-    shadow_shape,
 )
 from alcn_cv.errors import InputError
 

@@ -7,6 +7,7 @@ import pytest
 from scipy import ndimage
 
 import alcn_cv
+from alcn_cv.enhance.base import NoNormalization
 from alcn_cv.errors import InputError
 
 CLASSICAL = ["ns", "dog", "slcn", "dlcn", "lrn", "whitening", "he", "clahe", "intrinsic", "sqi"]
@@ -65,14 +66,13 @@ def test_small_and_flat_images(name):
     "bad",
     [
         np.zeros((0, 5), np.uint8),
-        np.zeros((8, 8, 2), np.uint8),
-        np.zeros((8, 8, 4), np.uint8),
+        np.zeros((8, 8, 5), np.uint8),
         np.zeros((8, 8), np.int32),
         np.full((8, 8), np.nan, np.float32),
         np.full((8, 8), 200.0, np.float32),
         np.zeros((2, 8, 8, 1), np.uint8),
     ],
-    ids=["empty", "2ch", "4ch", "int32", "nan", "float_255", "4d"],
+    ids=["empty", "5ch", "int32", "nan", "float_255", "4d"],
 )
 def test_bad_input(name, bad):
     with pytest.raises(InputError):
@@ -226,3 +226,79 @@ def test_intrinsic_recovers_reflectance_under_smooth_shading():
     keep_all = alcn_cv.create("intrinsic", threshold=0.0, eps=0.01).normalize(img)
     log = np.log(img.astype(np.float64) + 0.01)
     np.testing.assert_allclose(keep_all, log - log.mean(), atol=1e-4)
+
+
+@pytest.mark.parametrize("name", CLASSICAL)
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+@pytest.mark.parametrize("colour", ["bgra", "gray_alpha"])
+def test_alpha_is_passed_through(name, dtype, colour):
+    gray = _scene()
+    colours = np.stack([gray, gray[::-1], gray[:, ::-1]], -1) if colour == "bgra" else gray[..., None]
+    alpha = np.linspace(0, 1, gray.size, dtype=np.float32).reshape(gray.shape)
+    unit = np.dstack([colours, alpha])
+    img = unit if dtype == np.float32 else np.rint(unit * np.iinfo(dtype).max).astype(dtype)
+    before = img.copy()
+    norm = alcn_cv.create(name)
+    out = norm.apply(img)
+    assert out.shape == img.shape and out.dtype == img.dtype
+    np.testing.assert_array_equal(out[..., -1], img[..., -1])
+    np.testing.assert_array_equal(out[..., :-1], norm.apply(img[..., :-1]))
+    np.testing.assert_array_equal(img, before)
+    as_float = norm.apply(img, out_dtype=np.float32)
+    np.testing.assert_allclose(as_float[..., -1], alpha, atol=1e-6 if dtype == np.float32 else 0.5 / np.iinfo(dtype).max)
+
+
+@pytest.mark.parametrize("name", CLASSICAL)
+def test_non_native_byte_order_is_accepted(name):
+    img = np.rint(_scene() * 65535).astype(np.uint16)
+    swapped = img.astype(img.dtype.newbyteorder("S"))  # same values, other byte order
+    out = alcn_cv.create(name).apply(swapped)
+    assert out.dtype == np.uint16 and out.dtype.isnative
+    np.testing.assert_array_equal(out, alcn_cv.create(name).apply(img))
+
+
+def test_small_images_warn_once(caplog):
+    class Windowed(NoNormalization):
+        name = "windowed-test"
+        min_size = 48
+
+    norm = Windowed()
+    with caplog.at_level("WARNING", logger="alcn_cv.enhance.base"):
+        for side in (1, 3, 47, 47):
+            assert norm.apply(np.zeros((side, side), np.uint8)).shape == (side, side)
+        Windowed().apply(np.zeros((48, 48), np.uint8))
+    warnings = [r for r in caplog.records if "smaller than" in r.getMessage()]
+    assert len(warnings) == 1 and "48 px window" in warnings[0].getMessage()
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="alcn_cv.enhance.base"):
+        alcn_cv.create("dog").apply(np.zeros((3, 3), np.uint8))  # no window: no warning
+    assert not caplog.records
+
+
+@pytest.mark.parametrize(
+    ("name", "params", "message"),
+    [
+        ("alcn", {"scale": "abc"}, "'alcn': scale='abc' must be a number"),
+        ("dog", {"sigma1": "x"}, "'dog': sigma1='x' must be a number"),
+        ("slcn", {"sgma": 1.0}, "'slcn': no parameter 'sgma'; its parameters: sigma"),
+        ("he", {"clipLimit": 2.0}, "'he': no parameter 'clipLimit'"),
+        ("sqi", {"weighted": "yes"}, "'sqi': weighted='yes' must be True or False"),
+    ],
+)
+def test_parameter_errors_name_the_method_and_the_parameter(name, params, message):
+    with pytest.raises(InputError, match=message):
+        alcn_cv.create(name, **params)
+
+
+def test_parameters_of_the_right_kind_pass():
+    assert alcn_cv.create("clahe", clipLimit=np.float32(3), tileGridSize=[4, 4]).tileGridSize == (4, 4)
+    assert alcn_cv.create("sqi", sigmas=[1, 2]).sigmas == (1.0, 2.0)
+
+
+def test_every_method_is_described():
+    from alcn_cv.enhance.registry import describe
+
+    for name in alcn_cv.available():
+        summary, reference = describe(name)
+        assert summary and "\n" not in summary, name
+        assert reference or name in ("none", "alcn"), name

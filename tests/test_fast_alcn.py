@@ -212,7 +212,7 @@ def test_unknown_architecture_is_a_weight_file_error(tmp_path):
 def test_distill_writes_a_student_closer_than_its_start(tmp_path):
     import hashlib
 
-    from alcn_cv.nets import distill
+    from alcn_cv.train import distill
 
     torch.manual_seed(2)
     teacher = Normalizer(hidden=16, output_scale=3.0).eval()
@@ -232,7 +232,7 @@ def test_distill_writes_a_student_closer_than_its_start(tmp_path):
 
 
 def test_distill_copies_a_constant_teacher_exactly(tmp_path):
-    from alcn_cv.nets import distill
+    from alcn_cv.train import distill
 
     dog = [1.0, 0.0, -1.0] + [0.0] * 7
     teacher = Normalizer(hidden=16, init_weights=dog)

@@ -1,4 +1,4 @@
-"""`alcn train`, `alcn train-detector` and `alcn export` on the command line."""
+"""`alcn train`, `alcn train-detector`, `alcn distill` and `alcn export` on the command line."""
 
 from __future__ import annotations
 
@@ -6,10 +6,12 @@ import tomllib
 
 import cv2
 import numpy as np
+import pytest
 import torch
 
 from alcn_cv.cli import main
 from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
+from alcn_cv.weight_file import load_normalizer_file
 
 
 def test_print_config_applies_flags_and_set(capsys):
@@ -52,3 +54,16 @@ def test_train_detector_from_a_few_images(tmp_path):
     state = torch.load(tmp_path / "det" / "detector.pt", weights_only=True)
     assert state["classes"] == ["background", "disc", "square"] and state["method"] == "dog"
     assert main(["train-detector", str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 2
+
+
+def test_distill_help_and_a_tiny_run(tmp_path, capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["distill", "--help"])
+    assert done.value.code == 0 and "--teacher" in capsys.readouterr().out
+    out = tmp_path / "lite.npz"
+    threads = torch.get_num_threads()
+    args = ["--windows", "16", "--val", "8", "--epochs", "1", "--batch", "8", "--objects", "2"]
+    assert main(["distill", "--out", str(out), *args, "--no-progress"]) == 0
+    assert capsys.readouterr().out.strip() == str(out) and torch.get_num_threads() == threads
+    assert load_normalizer_file(out).meta["architecture"] == "lite"
+    assert f"Command: `alcn distill --out {out} {' '.join(args)}`" in out.with_suffix(".md").read_text()

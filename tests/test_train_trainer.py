@@ -1,4 +1,4 @@
-"""Joint training (Eq. 2): checkpoints, exact resume, faults, outputs (alcn_cv.train.trainer)."""
+"""Joint training (Eq. 2): checkpoints, exact resume, faults, outputs (alcn_cv.train.trainer and its stages)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,9 @@ import torch
 from alcn_cv.data import phos
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.train import trainer
+from alcn_cv.train.checkpoint import load_checkpoint
+from alcn_cv.train.config import load_config
+from alcn_cv.train.models import DENSE_GRID_STRIDE, CentreMixture, JointModel, dog_weights
 from alcn_cv.train.stage2 import NonFiniteLossError
 from alcn_cv.weight_file import load_normalizer_file
 
@@ -32,7 +35,7 @@ def _config(data, **model):
 
 
 def _weights(path):
-    return trainer.load_checkpoint(path)["model"]
+    return load_checkpoint(path)["model"]
 
 
 def test_train_outputs_and_gradients_reach_the_normalizer(data, tmp_path):
@@ -49,7 +52,7 @@ def test_train_outputs_and_gradients_reach_the_normalizer(data, tmp_path):
     assert "held-out val" in (tmp_path / "train.log").read_text()
     assert "| dog 0.5/1.5 |" in (tmp_path / "summary.md").read_text()
     # The Normalizer moved away from its DoG initialisation: gradients went through the mixture.
-    init = torch.tensor(trainer.dog_weights(10, 0.5, [0.5, 1.5]))
+    init = torch.tensor(dog_weights(10, 0.5, [0.5, 1.5]))
     with torch.no_grad():
         x = torch.rand(4, 1, 64, 64)
         assert not torch.allclose(result.model.weights(x), init.expand(4, -1))
@@ -86,17 +89,17 @@ def test_nan_loss_stops_and_keeps_last_good_checkpoint(data, tmp_path, monkeypat
                 next(iter(poisoned[0].parameters())).fill_(float("nan"))
 
     poisoned = []
-    original = trainer.JointModel.__init__
+    original = JointModel.__init__
 
     def init(self, *args, **kwargs):
         original(self, *args, **kwargs)
         poisoned.append(self)
 
-    monkeypatch.setattr(trainer.JointModel, "__init__", init)
+    monkeypatch.setattr(JointModel, "__init__", init)
     monkeypatch.setattr(trainer, "_on_step", poison)
     with pytest.raises(NonFiniteLossError, match="last good checkpoint"):
         trainer.train(_config(data), tmp_path, progress=False)
-    ckpt = trainer.load_checkpoint(tmp_path / "checkpoint.pt")
+    ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
     assert ckpt["epoch"] == 1 and all(torch.isfinite(v).all() for v in ckpt["model"].values() if v.is_floating_point())
     assert "loss is nan" in (tmp_path / "train.log").read_text()
 
@@ -113,17 +116,17 @@ def test_bad_checkpoints(data, tmp_path):
     ckpt["version"] = 99
     torch.save(ckpt, path)
     with pytest.raises(WeightFileError, match="version 99.*torch"):
-        trainer.load_checkpoint(path)
+        load_checkpoint(path)
     path.write_bytes(b"PK\x03\x04 truncated")
     with pytest.raises(WeightFileError, match="corrupt"):
-        trainer.load_checkpoint(path)
+        load_checkpoint(path)
 
 
 def test_baselines_and_policy(data, tmp_path):
     cfg = _config(data, method="none", detector_input="raw")
     result = trainer.train({**cfg, "optim": {**cfg["optim"], "epochs": 1}}, tmp_path, progress=False)
     assert result.weights is None and 0 <= result.val_accuracy <= 1
-    model = trainer.JointModel(trainer.load_config(_config(data)).model, 4)
+    model = JointModel(load_config(_config(data)).model, 4)
     x = torch.rand(3, 1, 64, 64)
     z = model.normalized(x)
     assert z.shape == (3, 1, 32, 32)
@@ -139,8 +142,8 @@ def test_validation_must_hold_lightings_out(data, tmp_path):
 
 
 def test_dense_mixture_starts_as_eq1_and_learns_weights_that_vary_inside_a_window(data, tmp_path):
-    cfg = trainer.load_config(_config(data, mixture="dense"))
-    model = trainer.JointModel(cfg.model, 4)
+    cfg = load_config(_config(data, mixture="dense"))
+    model = JointModel(cfg.model, 4)
     x = torch.rand(2, 1, 64, 64)
     with torch.no_grad():
         dense = model.response(x)
@@ -149,7 +152,7 @@ def test_dense_mixture_starts_as_eq1_and_learns_weights_that_vary_inside_a_windo
     result = trainer.train(_config(data, mixture="dense"), tmp_path, progress=False)
     assert result.status == "done"
     with torch.no_grad():
-        maps = result.model.normalizer.dense(x, trainer.DENSE_GRID_STRIDE)
+        maps = result.model.normalizer.dense(x, DENSE_GRID_STRIDE)
     assert maps.shape == (2, 10, 64, 64)
     assert float(maps.std(dim=(2, 3)).max()) > 1e-4  # per-pixel weights: gradients reached the maps
     assert load_normalizer_file(result.weights).meta["training"]["config"]["model"]["mixture"] == "dense"
@@ -159,15 +162,15 @@ def test_centre_mixture_equals_kornia_mixture():
     from alcn_cv.filters.kornia_mixture import gaussian_mixture2d
 
     x, w = torch.rand(3, 1, 64, 64), torch.randn(3, 10)
-    centre = trainer.CentreMixture(tuple(0.5 * i for i in range(1, 11)))
+    centre = CentreMixture(tuple(0.5 * i for i in range(1, 11)))
     np.testing.assert_allclose(centre(x, w), gaussian_mixture2d(x, w)[..., 16:48, 16:48], atol=1e-5)
     maps = torch.randn(3, 10, 64, 64)  # Eq. 3: per-pixel weights
     np.testing.assert_allclose(centre.dense(x, maps), gaussian_mixture2d(x, maps)[..., 16:48, 16:48], atol=1e-5)
 
 
 def test_meta_objective_trains_the_normalizer_only_on_other_lightings(data):
-    cfg = trainer.load_config(_config(data))
-    model = trainer.JointModel(cfg.model, 4)
+    cfg = load_config(_config(data))
+    model = JointModel(cfg.model, 4)
     x, y = torch.rand(6, 1, 64, 64), torch.tensor([0, 1, 2, 3, 1, 2])
     anchor = torch.tensor([True, True, True, False, False, False])
     logits = model(x, anchor)

@@ -1,11 +1,18 @@
 """Benchmarks of ALCN against the classical normalizations (Rad, Roth & Lepetit, BMVC 2017, Sec. 4.3).
 
-* :mod:`~alcn_cv.bench.detect` -- the few-shot detection benchmark (``alcn bench detect``);
+* :mod:`~alcn_cv.bench.detect` -- the few-shot detection benchmark (``alcn bench detect``): its
+  protocol and run; :mod:`~alcn_cv.bench.detect_settings` (settings, presets),
+  :mod:`~alcn_cv.bench.detect_data` (data sets and training windows),
+  :mod:`~alcn_cv.bench.policies` (the detector's input policies),
+  :mod:`~alcn_cv.bench.detect_report` (``detect.md``);
 * :mod:`~alcn_cv.bench.invariance` -- agreement of normalized real photographs under 12 lights
   (``alcn bench invariance``);
+* :mod:`~alcn_cv.bench.speed` -- time and memory of every method and ALCN variant (``alcn bench speed``);
 * :mod:`~alcn_cv.bench.tuning` -- parameter search for DoG, SLCN and DLCN on training windows;
 * :mod:`~alcn_cv.bench.metrics` -- non-maximum suppression, PASCAL matching, precision-recall, AUC;
-* :mod:`~alcn_cv.report` -- Markdown tables, machine description, figures.
+* :mod:`~alcn_cv.bench.plots` -- the figures (precision-recall curves, time against frame size);
+* :mod:`~alcn_cv.bench.cli` -- the ``alcn bench`` command;
+* :mod:`~alcn_cv.report` -- Markdown tables, machine description, command line, figures.
 
 Importing this package does not import torch.
 """

@@ -1,31 +1,187 @@
-"""``alcn bench``: the benchmarks, one sub-subcommand each.
+"""``alcn bench``: the benchmarks, one sub-subcommand each (detect, invariance, speed).
 
-Every module listed in :data:`BENCHMARKS` exposes ``add_cli(subparsers)``, which adds its
-sub-subcommand and sets ``func`` to a handler returning an exit code. Adding a benchmark is
-adding its module to the tuple.
+Each ``_add_<benchmark>`` adds its sub-subcommand and sets ``func`` to a handler returning an
+exit code; the handler turns the options into the benchmark's settings (a preset, then every
+option given) and runs its ``main``. Adding a benchmark is adding its function to
+:data:`BENCHMARKS`.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
+import dataclasses
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from alcn_cv.bench import detect, invariance, speed
+from alcn_cv.bench.detect_settings import POLICIES, DetectSettings, presets
+from alcn_cv.errors import InputError
 
 __all__ = ["BENCHMARKS", "add_parser"]
 
-BENCHMARKS = (
-    "alcn_cv.bench.detect",
-    "alcn_cv.bench.invariance",
-    "alcn_cv.bench.speed",
-)
+
+def _list(kind: type) -> Callable[[str], list]:
+    def parse(text: str) -> list:
+        try:
+            return [kind(v) for v in text.split(",") if v.strip()]
+        except ValueError:
+            raise InputError(f"expected a comma-separated list of {kind.__name__}, got {text!r}") from None
+
+    return parse
+
+
+def _sweep(text: str) -> list[tuple[int, int]]:
+    try:
+        return [tuple(int(v) for v in item.lower().split("x")) for item in text.split(",") if item.strip()]  # type: ignore[misc]
+    except ValueError:
+        raise InputError(f"--cnn-sweep expects DEPTHxWIDTH,... (e.g. 1x32,2x32), got {text!r}") from None
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise InputError(f"a size is WIDTHxHEIGHT, got {text!r}") from None
+    return w, h
+
+
+def _override(settings: Any, args: argparse.Namespace) -> Any:
+    """The settings with every field that the command line gave replaced."""
+    given = {f.name: getattr(args, f.name) for f in dataclasses.fields(settings) if getattr(args, f.name, None) is not None}
+    return dataclasses.replace(settings, **given)
+
+
+def _add_detect(subparsers: argparse._SubParsersAction) -> None:
+    d = DetectSettings()
+    p = subparsers.add_parser(
+        "detect",
+        help="few-shot detection benchmark: every normalization with the same detector (AUC, PR curves)",
+        description="For each method, train the same detector on windows normalized by it, built from 1 and 10 real "
+        "images per object (simple synthetic images), run it on every window of every test image, and score with "
+        "the PASCAL criterion (IoU 0.8, fixed-size boxes). Writes detect.md, detect.json and PR curves (PNG). "
+        "--size picks a preset; the other options override it.",
+    )
+    p.add_argument("--data", required=True, type=Path, help="benchmark folder: train.json, test.json, manifest.json "
+                   "(e.g. from `alcn data detect`)")
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--size", choices=("default", "small"), default="default",
+                   help="preset: default (the benchmark) or small (a quick end-to-end run)")
+    p.add_argument("--methods", type=_list(str), help="comma-separated methods, each NAME or NAME:KEY=VALUE[:KEY=VALUE...] "
+                   f"(e.g. alcn:model=lite:mixture=pyramid; default: all: {','.join(d.methods)})")
+    p.add_argument("--real-images", type=_list(int), help="real training images per object (default 1,10)")
+    p.add_argument("--policy", type=_list(str), dest="policies",
+                   help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(d.policies)})")
+    p.add_argument("--positives", type=int, dest="positives_per_object",
+                   help=f"synthetic windows per object (default {d.positives_per_object})")
+    p.add_argument("--negatives-ratio", type=float, help=f"background windows per object window (default {d.negatives_ratio})")
+    p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
+    p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
+    p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
+    p.add_argument("--seeds", type=_list(int), help="repeat every run with each of these seeds and report mean +- "
+                   "standard deviation (default 0)")
+    p.add_argument("--tune", dest="tune", action="store_const", const=True,
+                   help="tune DoG, SLCN and DLCN on the training windows first (default: their defaults)")
+    p.add_argument("--cnn-sweep", type=_sweep, help="plain CNNs tried, DEPTHxWIDTH,... (default 1x32,2x32,3x32)")
+    p.add_argument("--nms-iou", type=float, help=f"default {d.nms_iou}")
+    p.add_argument("--match-iou", type=float, help=f"PASCAL criterion (default {d.match_iou})")
+    p.add_argument("--max-test-images", type=int, help="only the first N test images (default: all)")
+    p.add_argument("--working-scale", type=float, default=None, help="override the manifest's working_scale")
+    p.add_argument("--box-size", type=float, default=None, help="override the manifest's box_size (pixels at the working scale)")
+    p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
+    p.add_argument("--device", help="torch device (default cpu)")
+    p.set_defaults(func=_run_detect)
+
+
+def _run_detect(args: argparse.Namespace) -> int:
+    settings = _override(presets()[args.size], args)
+    result = detect.main(args.data, args.out, settings, args.working_scale, args.box_size)
+    print((Path(args.out) / "detect.md").read_text(encoding="utf-8"))
+    return 1 if all("error" in r for r in result["runs"].values()) else 0
+
+
+def _add_invariance(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "invariance",
+        help="agreement of normalized real photographs under different lights",
+        description="For each object of a photometric-stereo folder, normalize its photographs under every "
+        "light with each method and report their agreement inside the object mask (mean pairwise normalized "
+        "cross-correlation) beside the detail they keep; writes invariance.md, invariance.json and a figure.",
+    )
+    p.add_argument("--data", required=True, type=Path, help="folder of NAME/NAME.<i>.png + NAME.mask.png (e.g. ../shared/data/psm)")
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--methods", type=_list(str), default=None,
+                   help="comma-separated normalization names, each NAME or NAME:KEY=VALUE[:KEY=VALUE...] "
+                   "(default: all available)")
+    p.add_argument("--scale", type=float, default=1.0, help="resize the photographs by this factor first (default 1)")
+    p.add_argument("--erode", type=int, default=5, help="pixels removed from the mask border (default 5)")
+    p.add_argument("--figure-object", default=None, help="object shown in the figure (default: the first; 'all': every one)")
+    p.set_defaults(func=_run_invariance)
+
+
+def _run_invariance(args: argparse.Namespace) -> int:
+    result = invariance.main(args.data, args.out, args.methods, args.scale, args.erode, args.figure_object)
+    failed = [n for n, r in result["methods"].items() if "error" in r]
+    print((Path(args.out) / "invariance.md").read_text(encoding="utf-8"))
+    return 1 if failed and len(failed) == len(result["methods"]) else 0
+
+
+def _add_speed(subparsers: argparse._SubParsersAction) -> None:
+    d = speed.SpeedSettings()
+    p = subparsers.add_parser(
+        "speed",
+        help="time ALCN (every backend and fast variant) against none, CLAHE and DoG",
+        description="Time apply() of none, clahe, dog and every ALCN backend and approximate variant on the same "
+        "frames (640x480, 1280x800, 1920x1080, gray and BGR): median, IQR, fps, ratio to dog in the same run, "
+        "ALCN's network/mixture split, peak memory, the approximations' difference from the exact Eq. 3, and "
+        "memory over a 1920x1080 video. Writes speed.md, speed.json and speed.png. --quick picks the quick "
+        "preset; the other options override it.",
+    )
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--quick", action="store_true", help="preset: tiny frames and few repeats (seconds; for tests)")
+    p.add_argument("--sizes", type=lambda s: [_size(v) for v in s.split(",") if v],
+                   help="comma-separated WIDTHxHEIGHT (default " + ",".join(f"{w}x{h}" for w, h in d.sizes) + ")")
+    p.add_argument("--colours", type=_list(str), help="gray and/or bgr (default both)")
+    p.add_argument("--methods", type=_list(str),
+                   help="comma-separated labels to run (default all; dog always runs). Labels: none, clahe, dog, "
+                   + ", ".join(f"'{v}'" for v in speed.ALCN_VARIANTS) + ", 'alcn opencv', 'alcn torch cpu', 'alcn torch cuda'")
+    p.add_argument("--weights", help="weight file of the paper-model variants (default: the shipped alcn_normalizer.npz)")
+    p.add_argument("--lite-weights",
+                   help="weight file of the default and 'alcn lite' variants (default: the shipped alcn_normalizer_lite.npz)")
+    p.add_argument("--image", help="time on this image resized to each size (default: synthetic frames)")
+    p.add_argument("--warmup", type=int, help=f"untimed runs per case (default {d.warmup})")
+    p.add_argument("--repeats", type=int, dest="max_repeats", help=f"at most this many timed runs per case (default {d.max_repeats})")
+    p.add_argument("--min-repeats", type=int, help=f"at least this many timed runs per case (default {d.min_repeats})")
+    p.add_argument("--budget", type=float, dest="budget_s",
+                   help=f"seconds per case before stopping at --min-repeats (default {d.budget_s:g})")
+    p.add_argument("--video-frames", type=int, help=f"frames of the video-memory test (0: skip; default {d.video_frames})")
+    p.add_argument("--video-size", type=_size, help="frame size of the video-memory test (default "
+                   + "x".join(map(str, d.video_size)) + ")")
+    p.add_argument("--video-budget", type=float, dest="video_budget_s",
+                   help=f"seconds per method of the video test (default {d.video_budget_s:g})")
+    p.add_argument("--video-methods", type=_list(str),
+                   help="labels run in the video test (default: alcn and the fastest ALCN variant)")
+    p.add_argument("--threads", type=int, help="OpenCV and torch threads (default: theirs)")
+    p.set_defaults(func=_run_speed)
+
+
+def _run_speed(args: argparse.Namespace) -> int:
+    settings = _override(speed.presets()["quick" if args.quick else "default"], args)
+    result = speed.main(args.out, settings)
+    print((Path(args.out) / "speed.md").read_text(encoding="utf-8"))
+    return 0 if result["rows"] else 1
+
+
+BENCHMARKS = (_add_detect, _add_invariance, _add_speed)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``bench`` subcommand and its sub-subcommands to the ``alcn`` command."""
     parser = subparsers.add_parser(
         "bench",
-        help="benchmarks: detection from few images, invariance on real photographs",
+        help="benchmarks: detection from few images, invariance on real photographs, speed",
         description="Benchmarks comparing ALCN with the classical normalizations (Rad et al. 2017, Sec. 4.3).",
     )
     benches = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True)
-    for name in BENCHMARKS:
-        importlib.import_module(name).add_cli(benches)
+    for add in BENCHMARKS:
+        add(benches)

@@ -1,4 +1,4 @@
-"""Invariance of the normalizations on real photographs under different lights (issue 5, Sec. 4).
+"""Invariance of the normalizations on real photographs under different lights (Rad et al. 2017, Sec. 4).
 
 For every object of a photometric-stereo set (the same view under several directional lights,
 with an object mask), each method normalizes every photograph; the benchmark reports
@@ -34,10 +34,10 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.report import machine, markdown_table, new_figure, save_figure, write_json
-from alcn_cv.io import atomic_write
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import available, create, parse_spec
+from alcn_cv.enhance.registry import available, from_spec, parse_spec
+from alcn_cv.io import atomic_write, write_json
+from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
 from alcn_cv.errors import DatasetError, InputError
 
 __all__ = ["PhotometricObject", "agreement", "detail", "load_objects", "main"]
@@ -218,8 +218,7 @@ def main(
         bar.set_postfix(method=name)
         row: dict[str, Any] = {"objects": {}}
         try:
-            spec_name, params = parse_spec(name)
-            norm = create(spec_name, **params)
+            norm = from_spec(name)
             norms[name] = norm
             if hasattr(norm, "trained"):
                 row["trained"] = bool(norm.trained)
@@ -241,9 +240,12 @@ def main(
         rows[name] = row
 
     object_names = [o.name for o in objects]
+    command = command_line(["alcn", "bench", "invariance", "--data", data_dir, "--out", out_dir], {
+        "--methods": methods, "--scale": scale, "--erode": erode, "--figure-object": figure_object})
     result = {
         "benchmark": "invariance",
         "data": str(Path(data_dir).resolve()),
+        "command": command,
         "settings": {"methods": methods, "scale": scale, "erode": erode, "lights": {o.name: len(o.images) for o in objects}},
         "metrics": {
             "agreement": "mean pairwise normalized cross-correlation inside the eroded object mask",
@@ -268,7 +270,11 @@ def main(
         )
     failures = [f"- `{n}` failed: {r['error']}" for n, r in rows.items() if "error" in r]
     text = (
-        f"# Invariance on real photographs ({Path(data_dir).name})\n\n"
+        f"# Invariance of the normalizations on real photographs under different lights\n\n"
+        f"- **Machine:** {describe_machine(result['machine'])}\n"
+        f"- **Command:** `{command}`\n"
+        f"- **Data:** `{result['data']}`\n"
+        f"- **Settings:** scale {scale}, mask eroded by {erode} px, methods {', '.join(methods)}\n\n"
         f"Per object, every method normalizes its photographs under {', '.join(f'{o.name}: {len(o.images)}' for o in objects)} "
         f"lights (scale {scale}, mask eroded by {erode} px). **agreement**: {result['metrics']['agreement']} "
         f"(1 = light removed). **detail**: {result['metrics']['detail']} (low = flattened; noise is high).\n\n"
@@ -281,30 +287,3 @@ def main(
             _figure(obj, shown_results[obj.name], norms, out / f"invariance_{obj.name}.png")
     logger.info("invariance benchmark written to %s", out)
     return result
-
-
-def add_cli(subparsers: Any) -> None:
-    """Add ``alcn bench invariance`` to the ``bench`` sub-subcommands."""
-    p = subparsers.add_parser(
-        "invariance",
-        help="agreement of normalized real photographs under different lights",
-        description="For each object of a photometric-stereo folder, normalize its photographs under every "
-        "light with each method and report their agreement inside the object mask (mean pairwise normalized "
-        "cross-correlation) beside the detail they keep; writes invariance.md, invariance.json and a figure.",
-    )
-    p.add_argument("--data", required=True, type=Path, help="folder of NAME/NAME.<i>.png + NAME.mask.png (e.g. ../shared/data/psm)")
-    p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=None,
-                   help="comma-separated normalization names, each NAME or NAME:KEY=VALUE[:KEY=VALUE...] "
-                   "(default: all available)")
-    p.add_argument("--scale", type=float, default=1.0, help="resize the photographs by this factor first (default 1)")
-    p.add_argument("--erode", type=int, default=5, help="pixels removed from the mask border (default 5)")
-    p.add_argument("--figure-object", default=None, help="object shown in the figure (default: the first; 'all': every one)")
-    p.set_defaults(func=_run_cli)
-
-
-def _run_cli(args: Any) -> int:
-    result = main(args.data, args.out, args.methods, args.scale, args.erode, args.figure_object)
-    failed = [n for n, r in result["methods"].items() if "error" in r]
-    print((Path(args.out) / "invariance.md").read_text(encoding="utf-8"))
-    return 1 if failed and len(failed) == len(result["methods"]) else 0

@@ -1,4 +1,4 @@
-"""Speed of ALCN against the classical normalizations (issue 8): ``alcn bench speed``.
+"""Speed of ALCN against the classical normalizations: ``alcn bench speed``.
 
 One run times every method on the same frames, side by side: ``none``, ``clahe``, ``dog`` and
 ALCN -- the default of :func:`alcn_cv.createALCN` (``alcn``: the lite Normalizer and the pyramid
@@ -22,9 +22,9 @@ alcn,alcn:model=paper:mixture=exact``. A video
 test runs ALCN over a generated 1920x1080 video and records the resident memory after every
 frame (it must stay flat).
 
-Outputs in ``out_dir``: ``speed.json`` (every number, the settings, the machine and its load
-before and after), ``speed.md`` (the tables) and ``speed.png`` (time against pixel count for
-every method, log-log).
+Outputs in ``out_dir``: ``speed.json`` (every number, the settings, the command, the machine and
+its load before and after), ``speed.md`` (machine, command, settings and the tables) and
+``speed.png`` (time against pixel count for every method, log-log, :mod:`alcn_cv.bench.plots`).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ import os
 import time
 import tracemalloc
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -42,14 +42,15 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.report import machine, markdown_table, new_figure, save_figure, write_json
-from alcn_cv.io import atomic_write
+from alcn_cv.bench.plots import plot_speed
+from alcn_cv.io import atomic_write, write_json
+from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 from alcn_cv.enhance.alcn import ALCN, BACKENDS
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
 
-__all__ = ["SIZES", "Method", "default_methods", "main", "synthetic_frame", "time_calls"]
+__all__ = ["SIZES", "Method", "SpeedSettings", "default_methods", "main", "presets", "synthetic_frame", "time_calls"]
 
 logger = logging.getLogger(__name__)
 
@@ -301,28 +302,11 @@ def _accuracy(approx: np.ndarray, exact: np.ndarray, output_range: Sequence[floa
             "mean_rel_range": float(diff.mean() / span), "exact_std": float(exact.std())}
 
 
-def main(
-    out_dir: str | os.PathLike,
-    sizes: Sequence[tuple[int, int]] = SIZES,
-    colours: Sequence[str] = COLOURS,
-    methods: Sequence[str] | None = None,
-    weights: str | os.PathLike | None = None,
-    lite_weights: str | os.PathLike | None = None,
-    image: str | os.PathLike | None = None,
-    warmup: int = 1,
-    min_repeats: int = 3,
-    max_repeats: int = 15,
-    budget_s: float = 10.0,
-    video_frames: int = 100,
-    video_budget_s: float = 180.0,
-    video_methods: Sequence[str] | None = None,
-    threads: int | None = None,
-    quick: bool = False,
-) -> dict[str, Any]:
-    """Run the speed benchmark and write ``speed.json``, ``speed.md`` and ``speed.png`` into ``out_dir``.
+@dataclass
+class SpeedSettings:
+    """Settings of a speed benchmark run (all recorded in ``speed.json``).
 
-    Args:
-        out_dir: output folder (created).
+    Attributes:
         sizes: frame sizes ``(width, height)``.
         colours: ``"gray"`` and/or ``"bgr"``.
         methods: labels of :func:`default_methods` to run (default: all; ``dog`` is always
@@ -331,126 +315,210 @@ def main(
         lite_weights: weight file of the ``lite`` variants (default: the shipped lite one).
         image: an image file resized to every size instead of :func:`synthetic_frame`.
         warmup, min_repeats, max_repeats, budget_s: see :func:`time_calls` (per case).
-        video_frames, video_budget_s: the video-memory test (1920x1080 grayscale; 0 frames: skip).
+        video_frames, video_budget_s: the video-memory test (grayscale; 0 frames: skip).
+        video_size: frame size ``(width, height)`` of the video-memory test.
         video_methods: labels run in the video test (default: ``alcn`` and the fastest variant).
         threads: OpenCV and torch threads (default: their defaults).
-        quick: tiny frames, 2 repeats, no warm-up, a 3-frame video of tiny frames: for tests.
+    """
+
+    sizes: list[tuple[int, int]] = field(default_factory=lambda: list(SIZES))
+    colours: list[str] = field(default_factory=lambda: list(COLOURS))
+    methods: list[str] | None = None
+    weights: str | None = None
+    lite_weights: str | None = None
+    image: str | None = None
+    warmup: int = 1
+    min_repeats: int = 3
+    max_repeats: int = 15
+    budget_s: float = 10.0
+    video_frames: int = 100
+    video_budget_s: float = 180.0
+    video_size: tuple[int, int] = SIZES[-1]
+    video_methods: list[str] | None = None
+    threads: int | None = None
+
+    def check(self) -> None:
+        """Raise :class:`~alcn_cv.errors.InputError` on an unknown colour."""
+        bad = [c for c in self.colours if c not in COLOURS]
+        if bad or not self.colours:
+            raise InputError(f"colours must be among {COLOURS}, got {list(self.colours)}")
+
+
+def presets() -> dict[str, SpeedSettings]:
+    """Named settings: ``default`` (the benchmark) and ``quick`` (tiny frames, 2 repeats, no
+    warm-up, a 3-frame video of tiny frames: seconds, for tests)."""
+    return {
+        "default": SpeedSettings(),
+        "quick": SpeedSettings(sizes=list(QUICK_SIZES), warmup=0, min_repeats=2, max_repeats=2, budget_s=0.0,
+                               video_frames=3, video_budget_s=10.0, video_size=QUICK_SIZES[-1]),
+    }
+
+
+def speed_command(out_dir: str | os.PathLike, settings: SpeedSettings) -> str:
+    """The ``alcn bench speed`` command line that runs these settings."""
+    return command_line(["alcn", "bench", "speed", "--out", out_dir], {
+        "--sizes": [f"{w}x{h}" for w, h in settings.sizes], "--colours": settings.colours,
+        "--methods": settings.methods, "--weights": settings.weights, "--lite-weights": settings.lite_weights,
+        "--image": settings.image, "--warmup": settings.warmup, "--min-repeats": settings.min_repeats,
+        "--repeats": settings.max_repeats, "--budget": settings.budget_s, "--video-frames": settings.video_frames,
+        "--video-budget": settings.video_budget_s, "--video-size": "x".join(map(str, settings.video_size)),
+        "--video-methods": settings.video_methods, "--threads": settings.threads,
+    })
+
+
+def _select_methods(settings: SpeedSettings) -> list[Method]:
+    """The methods of :func:`default_methods` that the settings name, and ``dog``."""
+    methods = default_methods(settings.weights, settings.lite_weights)
+    if settings.methods is None:
+        return methods
+    labels = [m.label for m in methods]
+    unknown = [m for m in settings.methods if m not in labels]
+    if unknown:
+        raise InputError(f"unknown method(s) {unknown}; available: {', '.join(labels)}")
+    keep = set(settings.methods) | {REFERENCE}
+    return [m for m in methods if m.label in keep]
+
+
+def _frame_source(image: str | os.PathLike | None) -> Callable[[int, int, str], np.ndarray]:
+    """``frame(width, height, colour)``: the image resized, or :func:`synthetic_frame`."""
+    if image is None:
+        return lambda width, height, colour: synthetic_frame(width, height, colour == "bgr")
+    source = cv2.imread(str(image), cv2.IMREAD_COLOR)
+    if source is None:
+        raise InputError(f"cannot read image {image}")
+
+    def frame(width: int, height: int, colour: str) -> np.ndarray:
+        resized = cv2.resize(source, (width, height), interpolation=cv2.INTER_AREA)
+        return resized if colour == "bgr" else cv2.cvtColor(resized, cv2.COLOR_BGR2GRAY)
+
+    return frame
+
+
+def _ready(methods: list[Method], built: dict[str, Normalization], errors: dict[str, str], frame: np.ndarray,
+           warmup: int) -> dict[str, tuple[Method, Normalization]]:
+    """Build (once) and warm up every method on the frame; a method that fails is recorded in
+    ``errors`` and left out from then on."""
+    ready: dict[str, tuple[Method, Normalization]] = {}
+    for method in methods:
+        if method.label in errors:
+            continue
+        try:
+            norm = built.get(method.label) or built.setdefault(method.label, method.factory())
+            for _ in range(warmup):
+                norm.apply(frame)
+        except Exception as exc:  # a backend this machine cannot run: report it, go on
+            logger.warning("%s failed: %s", method.label, exc)
+            errors[method.label] = f"{type(exc).__name__}: {exc}"
+            continue
+        ready[method.label] = (method, norm)
+    return ready
+
+
+def _time_case(
+    ready: dict[str, tuple[Method, Normalization]], frame: np.ndarray, colour: str, settings: SpeedSettings,
+    progress: tqdm,
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The timing rows of one frame size and colour, and the accuracy rows of the ALCN
+    variants against the exact one (grayscale frames only)."""
+    height, width = frame.shape[:2]
+    gray = _to_gray(frame)
+    # The methods are timed in rounds (one call of each per round) so that all of them see the
+    # same load of a shared machine.
+    times = _time_rounds({label: (lambda norm=norm: norm.apply(frame)) for label, (_, norm) in ready.items()},
+                         settings.min_repeats, settings.max_repeats, settings.budget_s)
+    rows, outputs, map_std = [], {}, float("nan")
+    for label, (method, norm) in ready.items():
+        progress.set_postfix_str(f"{label} {width}x{height} {colour}")
+        progress.update()
+        row: dict[str, Any] = {"method": label, "params": method.params, "width": width, "height": height,
+                               "pixels": width * height, "colour": colour, **_stats(times[label])}
+        if isinstance(norm, ALCN):
+            split, grid, result = _split(norm, gray, settings.min_repeats, settings.budget_s)
+            row.update(split)
+            if colour == "gray":
+                outputs[label] = result.astype(np.float64)
+                if label == EXACT:
+                    # How much the weight maps vary over the frame: coarser grids cost nothing
+                    # in accuracy when they are constant (an untrained Normalizer).
+                    map_std = float(grid.std(axis=(1, 2)).mean())
+        row.update(peak_memory(lambda: norm.apply(frame)))
+        rows.append(row)
+    accuracy = []
+    if EXACT in outputs:
+        exact_norm = ready[EXACT][1]
+        accuracy = [{"method": label, "params": ready[label][0].params, "width": width, "height": height,
+                     "exact_map_std": map_std, **_accuracy(out, outputs[EXACT], exact_norm.output_range)}
+                    for label, out in outputs.items() if label != EXACT]
+    reference = next((r["median_ms"] for r in rows if r["method"] == REFERENCE), None)
+    for row in rows:
+        row["ratio_to_dog"] = None if reference is None else row["median_ms"] / reference
+    return rows, accuracy
+
+
+def _video_test(methods: list[Method], built: dict[str, Normalization], errors: dict[str, str],
+                rows: list[dict[str, Any]], settings: SpeedSettings) -> list[dict[str, Any]]:
+    """Memory over a generated video of the chosen ALCN variants (default: ``alcn`` and the
+    fastest variant on the largest grayscale frames)."""
+    if settings.video_frames <= 0:
+        return []
+    alcn_labels = [m.label for m in methods if m.alcn and m.label not in errors]
+    video_methods = settings.video_methods
+    if video_methods is None:
+        gray = [r for r in rows if r["method"] in alcn_labels and r["colour"] == "gray"]
+        fastest = min(gray, key=lambda r: (-r["pixels"], r["median_ms"]))["method"] if gray else None
+        video_methods = [label for label in dict.fromkeys(["alcn", fastest]) if label in alcn_labels]
+    video = []
+    for label in video_methods:
+        if label not in built:
+            built[label] = next(m for m in methods if m.label == label).factory()
+        logger.info("video memory: %s on %dx%d", label, *settings.video_size)
+        video.append({"method": label, **video_memory(built[label], settings.video_size, settings.video_frames,
+                                                       settings.video_budget_s)})
+    return video
+
+
+def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> dict[str, Any]:
+    """Run the speed benchmark and write ``speed.json``, ``speed.md`` and ``speed.png`` into ``out_dir``.
+
+    Args:
+        out_dir: output folder (created).
+        settings: the run's settings; default :class:`SpeedSettings` (see :func:`presets`).
 
     Returns:
         The contents of ``speed.json``.
     """
+    settings = settings or SpeedSettings()
+    settings.check()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    if quick:
-        sizes, warmup, min_repeats, max_repeats, budget_s = QUICK_SIZES, 0, 2, 2, 0.0
-        video_frames, video_budget_s = min(video_frames, 3), min(video_budget_s, 10.0)
-    bad = [c for c in colours if c not in COLOURS]
-    if bad or not colours:
-        raise InputError(f"colours must be among {COLOURS}, got {list(colours)}")
     import torch
 
-    if threads is not None:
-        cv2.setNumThreads(threads)
-        torch.set_num_threads(threads)
-    all_methods = default_methods(weights, lite_weights)
-    labels = [m.label for m in all_methods]
-    if methods is not None:
-        unknown = [m for m in methods if m not in labels]
-        if unknown:
-            raise InputError(f"unknown method(s) {unknown}; available: {', '.join(labels)}")
-        keep = set(methods) | {REFERENCE}
-        all_methods = [m for m in all_methods if m.label in keep]
+    if settings.threads is not None:
+        cv2.setNumThreads(settings.threads)
+        torch.set_num_threads(settings.threads)
+    methods = _select_methods(settings)
     machine_before = machine()
-
-    source = None
-    if image is not None:
-        source = cv2.imread(str(image), cv2.IMREAD_COLOR)
-        if source is None:
-            raise InputError(f"cannot read image {image}")
-
-    def frame_for(width: int, height: int, colour: str) -> np.ndarray:
-        if source is None:
-            return synthetic_frame(width, height, colour == "bgr")
-        resized = cv2.resize(source, (width, height), interpolation=cv2.INTER_AREA)
-        return resized if colour == "bgr" else cv2.cvtColor(resized, cv2.COLOR_BGR2GRAY)
+    frame_for = _frame_source(settings.image)
 
     built: dict[str, Normalization] = {}
     rows: list[dict[str, Any]] = []
     accuracy: list[dict[str, Any]] = []
     errors: dict[str, str] = {}
-    cases = [(w, h, c) for (w, h) in sizes for c in colours]
-    progress = tqdm(total=len(cases) * len(all_methods), desc="speed", unit="case")
-    for width, height, colour in cases:
-        frame = frame_for(width, height, colour)
-        gray = _to_gray(frame)
-        outputs: dict[str, np.ndarray] = {}
-        map_std = float("nan")
-        # Build and warm up every method, then time them in rounds (one call of each method per
-        # round) so that all of them see the same load of a shared machine.
-        ready: dict[str, tuple[Method, Normalization]] = {}
-        for method in all_methods:
-            if method.label in errors:
-                continue
-            try:
-                norm = built.get(method.label) or built.setdefault(method.label, method.factory())
-                for _ in range(warmup):
-                    norm.apply(frame)
-            except Exception as exc:  # a backend this machine cannot run: report it, go on
-                logger.warning("%s failed: %s", method.label, exc)
-                errors[method.label] = f"{type(exc).__name__}: {exc}"
-                continue
-            ready[method.label] = (method, norm)
-        times = _time_rounds({label: (lambda norm=norm: norm.apply(frame)) for label, (_, norm) in ready.items()},
-                             min_repeats, max_repeats, budget_s)
-        case_rows = []
-        for label, (method, norm) in ready.items():
-            progress.set_postfix_str(f"{label} {width}x{height} {colour}")
-            progress.update()
-            row: dict[str, Any] = {"method": label, "params": method.params, "width": width, "height": height,
-                                   "pixels": width * height, "colour": colour, **_stats(times[label])}
-            if isinstance(norm, ALCN):
-                split, grid, result = _split(norm, gray, min_repeats, budget_s)
-                row.update(split)
-                if colour == "gray":
-                    outputs[label] = result.astype(np.float64)
-                    if label == EXACT:
-                        # How much the weight maps vary over the frame: coarser grids cost nothing
-                        # in accuracy when they are constant (an untrained Normalizer).
-                        map_std = float(grid.std(axis=(1, 2)).mean())
-            row.update(peak_memory(lambda: norm.apply(frame)))
-            case_rows.append(row)
-        if EXACT in outputs:
-            exact_norm = ready[EXACT][1]
-            accuracy += [{"method": label, "params": ready[label][0].params, "width": width, "height": height,
-                          "exact_map_std": map_std, **_accuracy(out, outputs[EXACT], exact_norm.output_range)}
-                         for label, out in outputs.items() if label != EXACT]
-        reference = next((r["median_ms"] for r in case_rows if r["method"] == REFERENCE), None)
-        for row in case_rows:
-            row["ratio_to_dog"] = None if reference is None else row["median_ms"] / reference
-        rows += case_rows
-    progress.close()
-
-    video: list[dict[str, Any]] = []
-    if video_frames > 0:
-        alcn_labels = [m.label for m in all_methods if m.alcn and m.label not in errors]
-        if video_methods is None:
-            gray_1080 = [r for r in rows if r["method"] in alcn_labels and r["colour"] == "gray"]
-            fastest = min(gray_1080, key=lambda r: (-r["pixels"], r["median_ms"]))["method"] if gray_1080 else None
-            video_methods = [label for label in dict.fromkeys(["alcn", fastest]) if label in alcn_labels]
-        video_size = QUICK_SIZES[-1] if quick else SIZES[-1]
-        for label in video_methods:
-            if label not in built:
-                built[label] = next(m for m in all_methods if m.label == label).factory()
-            logger.info("video memory: %s on %dx%d", label, *video_size)
-            video.append({"method": label, **video_memory(built[label], video_size, video_frames, video_budget_s)})
+    cases = [(w, h, c) for (w, h) in settings.sizes for c in settings.colours]
+    with tqdm(total=len(cases) * len(methods), desc="speed", unit="case") as progress:
+        for width, height, colour in cases:
+            frame = frame_for(width, height, colour)
+            ready = _ready(methods, built, errors, frame, settings.warmup)
+            case_rows, case_accuracy = _time_case(ready, frame, colour, settings, progress)
+            rows += case_rows
+            accuracy += case_accuracy
+    video = _video_test(methods, built, errors, rows, settings)
 
     result = {
-        "settings": {"sizes": [list(s) for s in sizes], "colours": list(colours), "warmup": warmup,
-                     "min_repeats": min_repeats, "max_repeats": max_repeats, "budget_s": budget_s,
-                     "weights": str(weights) if weights is not None else None,
-                     "lite_weights": str(lite_weights) if lite_weights is not None else None,
-                     "frames": str(image) if image is not None else "synthetic_frame(seed=0)",
-                     "opencv_threads": cv2.getNumThreads(), "torch_threads": torch.get_num_threads(), "quick": quick},
+        "command": speed_command(out_dir, settings),
+        "settings": {**asdict(settings), "sizes": [list(size) for size in settings.sizes],
+                     "video_size": list(settings.video_size), "frames": settings.image or "synthetic_frame(seed=0)",
+                     "opencv_threads": cv2.getNumThreads(), "torch_threads": torch.get_num_threads()},
         "machine_before": machine_before,
         "machine_after": machine(),
         "reference": REFERENCE,
@@ -461,19 +529,25 @@ def main(
     }
     write_json(out / "speed.json", result)
     atomic_write(out / "speed.md", _markdown(result))
-    _plot(result, out / "speed.png")
+    plot_speed(result, out / "speed.png")
     return result
 
 
 def _markdown(result: dict[str, Any]) -> str:
     before, after = result["machine_before"], result["machine_after"]
     lines = [
-        "# ALCN speed benchmark",
+        "# Speed of ALCN against the classical normalizations",
         "",
-        f"Machine: {before.get('cpu_model', before.get('processor'))}, {before.get('cpus_available', before.get('cpu_count'))} "
-        f"CPUs available; load average (1, 5, 15 min) {before.get('load_average_1_5_15')} before, "
-        f"{after.get('load_average_1_5_15')} after; OpenCV {before['opencv']} ({result['settings']['opencv_threads']} threads), "
-        f"torch {after.get('torch')} ({result['settings']['torch_threads']} threads), CUDA: {after.get('cuda')}.",
+        f"- **Machine:** {describe_machine(before)}; load average after the run "
+        f"{', '.join(map(str, after.get('load_average_1_5_15', [])))}; OpenCV threads "
+        f"{result['settings']['opencv_threads']}.",
+        f"- **Command:** `{result['command']}`",
+        f"- **Settings:** sizes {', '.join(f'{w}x{h}' for w, h in result['settings']['sizes'])}; colours "
+        f"{', '.join(result['settings']['colours'])}; time budget {result['settings']['budget_s']} s per case; "
+        f"video test {result['settings']['video_frames']} frames of "
+        f"{'x'.join(map(str, result['settings']['video_size']))}; weights "
+        f"{result['settings']['weights'] or 'shipped'} (paper model), {result['settings']['lite_weights'] or 'shipped'} (lite).",
+        "",
         f"Frames: {result['settings']['frames']}. Times: `apply(uint8 frame)`, median and interquartile range over "
         f"{result['settings']['min_repeats']}-{result['settings']['max_repeats']} runs after {result['settings']['warmup']} "
         "warm-up, the methods timed in turns (one call each per round); `x dog` is the ratio of medians to `dog` in "
@@ -510,77 +584,3 @@ def _markdown(result: dict[str, Any]) -> str:
     if result["errors"]:
         lines += ["", "## Not run", ""] + [f"- `{k}`: {v}" for k, v in result["errors"].items()]
     return "\n".join(lines) + "\n"
-
-
-def _plot(result: dict[str, Any], path: Path) -> None:
-    plt, fig, axes = new_figure(figsize=(8, 5.5))
-    ax = axes[0, 0]
-    colours = {}
-    for r in result["rows"]:
-        colours.setdefault(r["method"], f"C{len(colours) % 10}")
-    for method, colour in colours.items():
-        for kind, style in (("gray", "-o"), ("bgr", "--s")):
-            pts = sorted((r["pixels"], r["median_ms"]) for r in result["rows"] if r["method"] == method and r["colour"] == kind)
-            if pts:
-                ax.plot(*zip(*pts), style, color=colour, label=f"{method} ({kind})", markersize=4)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("pixels per frame")
-    ax.set_ylabel("median time per frame (ms)")
-    ax.set_title("apply(): time against frame size (solid: grayscale, dashed: BGR)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    save_figure(plt, fig, path)
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise InputError(f"a size is WIDTHxHEIGHT, got {text!r}") from None
-    return w, h
-
-
-def add_cli(subparsers: Any) -> None:
-    """Add ``alcn bench speed`` to the ``bench`` sub-subcommands."""
-    p = subparsers.add_parser(
-        "speed",
-        help="time ALCN (every backend and fast variant) against none, CLAHE and DoG",
-        description="Time apply() of none, clahe, dog and every ALCN backend and approximate variant on the same "
-        "frames (640x480, 1280x800, 1920x1080, gray and BGR): median, IQR, fps, ratio to dog in the same run, "
-        "ALCN's network/mixture split, peak memory, the approximations' difference from the exact Eq. 3, and "
-        "memory over a 1920x1080 video. Writes speed.md, speed.json and speed.png.",
-    )
-    p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument("--quick", action="store_true", help="tiny frames and few repeats (seconds; for tests)")
-    p.add_argument("--sizes", type=lambda s: [_size(v) for v in s.split(",") if v], default=list(SIZES),
-                   help="comma-separated WIDTHxHEIGHT (default 640x480,1280x800,1920x1080)")
-    p.add_argument("--colours", type=lambda s: [v for v in s.split(",") if v], default=list(COLOURS),
-                   help="gray and/or bgr (default both)")
-    p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=None,
-                   help="comma-separated labels to run (default all; dog always runs). Labels: none, clahe, dog, "
-                   + ", ".join(f"'{v}'" for v in ALCN_VARIANTS) + ", 'alcn opencv', 'alcn torch cpu', 'alcn torch cuda'")
-    p.add_argument("--weights", type=Path, default=None,
-                   help="weight file of the paper-model variants (default: the shipped alcn_normalizer.npz)")
-    p.add_argument("--lite-weights", type=Path, default=None,
-                   help="weight file of the default and 'alcn lite' variants (default: the shipped alcn_normalizer_lite.npz)")
-    p.add_argument("--image", type=Path, default=None, help="time on this image resized to each size (default: synthetic frames)")
-    p.add_argument("--warmup", type=int, default=1, help="untimed runs per case (default 1)")
-    p.add_argument("--repeats", type=int, default=15, help="at most this many timed runs per case (default 15)")
-    p.add_argument("--min-repeats", type=int, default=3, help="at least this many timed runs per case (default 3)")
-    p.add_argument("--budget", type=float, default=10.0, help="seconds per case before stopping at --min-repeats (default 10)")
-    p.add_argument("--video-frames", type=int, default=100, help="frames of the 1920x1080 video-memory test (0: skip; default 100)")
-    p.add_argument("--video-budget", type=float, default=180.0, help="seconds per method of the video test (default 180)")
-    p.add_argument("--video-methods", type=lambda s: [m for m in s.split(",") if m], default=None,
-                   help="labels run in the video test (default: alcn and the fastest ALCN variant)")
-    p.add_argument("--threads", type=int, default=None, help="OpenCV and torch threads (default: theirs)")
-    p.set_defaults(func=_run_cli)
-
-
-def _run_cli(args: Any) -> int:
-    result = main(args.out, args.sizes, args.colours, args.methods, args.weights, args.lite_weights, args.image, args.warmup,
-                  args.min_repeats, args.repeats, args.budget, args.video_frames, args.video_budget,
-                  args.video_methods, args.threads, args.quick)
-    print((Path(args.out) / "speed.md").read_text(encoding="utf-8"))
-    return 0 if result["rows"] else 1

@@ -37,8 +37,9 @@ import numpy as np
 
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
+from alcn_cv.filters.standardize import standardize_windows
 
-__all__ = ["GRIDS", "centre_windows", "relight", "standardize_windows", "tune", "tune_all"]
+__all__ = ["GRIDS", "STANDARDIZE_EPS", "centre_windows", "relight", "tune", "tune_all"]
 
 logger = logging.getLogger(__name__)
 
@@ -58,6 +59,9 @@ GRIDS: dict[str, list[dict[str, float]]] = {
 }
 
 CROP = 32
+#: Added to the standard deviation by the per-window standardizations of the benchmark
+#: (the features here, the detector's ``standardize`` and ``local`` input policies).
+STANDARDIZE_EPS = 1e-6
 
 
 def centre_windows(windows: np.ndarray, size: int = CROP) -> np.ndarray:
@@ -65,22 +69,6 @@ def centre_windows(windows: np.ndarray, size: int = CROP) -> np.ndarray:
     s = windows.shape[-1]
     o = (s - size) // 2
     return windows[:, o : o + size, o : o + size]
-
-
-def standardize_windows(windows: np.ndarray, eps: float = 1e-6) -> np.ndarray:
-    """Per-window standardization: zero mean and unit variance over each ``(H, W)`` window.
-
-    Args:
-        windows: ``(n, H, W)`` float.
-        eps: added to the standard deviation.
-
-    Returns:
-        ``(n, H, W)`` float32.
-    """
-    w = windows.astype(np.float32, copy=False)
-    mean = w.mean(axis=(1, 2), keepdims=True)
-    std = w.std(axis=(1, 2), keepdims=True)
-    return ((w - mean) / (std + np.float32(eps))).astype(np.float32)
 
 
 def relight(windows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -135,8 +123,8 @@ def _score(method: str, params: dict[str, Any], references: np.ndarray, queries:
     norm = create(method, **params)
 
     def features(windows: np.ndarray) -> np.ndarray:
-        out = np.stack([norm.normalize(w) for w in windows])
-        f = standardize_windows(centre_windows(out)).reshape(len(out), -1)
+        out = norm.normalize_windows(windows)
+        f = standardize_windows(centre_windows(out), eps=STANDARDIZE_EPS).reshape(len(out), -1)
         return f / (np.linalg.norm(f, axis=1, keepdims=True) + 1e-12)
 
     sim = features(queries) @ features(references).T

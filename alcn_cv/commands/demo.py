@@ -15,13 +15,20 @@ from __future__ import annotations
 
 import argparse
 import logging
+import re
+import textwrap
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 from tqdm import tqdm
 
 from alcn_cv.enhance import available, create
+
+if TYPE_CHECKING:
+    from alcn_cv.enhance.base import Normalization
+    from alcn_cv.formats.coco import CocoImage
 
 logger = logging.getLogger(__name__)
 
@@ -30,24 +37,38 @@ logger = logging.getLogger(__name__)
 DEMO_BENCH_METHODS = ("none", "alcn", "dog", "clahe", "dlcn", "whitening")
 
 
+def method_title(method: Normalization) -> str:
+    """The method's registered name and its full name (the first words of its class docstring),
+    e.g. ``"dog: Difference of Gaussians"``."""
+    doc = (type(method).__doc__ or "").strip().splitlines()
+    full = re.split(r" \(|:|,|\.", doc[0], maxsplit=1)[0].strip() if doc else ""
+    return f"{method.name}: {full}" if full else method.name
+
+
+def image_label(index: int, image: CocoImage) -> str:
+    """A row title: the test image's number, its lighting family and exposure gain (two images
+    of the same family differ in their number and gain)."""
+    lighting = image.extra.get("lighting", {})
+    gain = f", gain {lighting['gain']:.2f}" if "gain" in lighting else ""
+    return f"test image {index + 1}\n{image.extra.get('light_family', '?')} light{gain}"
+
+
 def normalization_grid(images: list[np.ndarray], labels: list[str], methods: list[str], path: Path, **params) -> Path:
     """Write a PNG grid: one row per image, one column per normalization method.
 
     Args:
         images: BGR uint8 images.
-        labels: a row title per image (e.g. its lighting).
-        methods: registered method names; ``params[name]`` gives a method's parameters.
+        labels: a distinct row title per image (e.g. its number and lighting).
+        methods: registered method names; ``params[name]`` gives a method's parameters. The
+            column titles give each name and the method's full name.
         path: the PNG to write.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from alcn_cv.report import new_figure, save_figure
 
     h, w = images[0].shape[:2]
     cell = 2.2
-    fig, axes = plt.subplots(len(images), len(methods), figsize=(cell * len(methods), cell * h / w * len(images) + 0.4),
-                             squeeze=False)
+    height = cell * h / w * len(images) + 1.0
+    plt, fig, axes = new_figure(len(images), len(methods), figsize=(cell * len(methods) + 0.6, height))
     for j, name in enumerate(tqdm(methods, desc="normalize", unit="method")):
         method = create(name, **params.get(name, {}))
         for i, img in enumerate(images):
@@ -57,14 +78,14 @@ def normalization_grid(images: list[np.ndarray], labels: list[str], methods: lis
             ax.set_xticks([])
             ax.set_yticks([])
             if i == 0:
-                ax.set_title(name, fontsize=10)
+                ax.set_title(textwrap.fill(method_title(method), 24), fontsize=8)
             if j == 0:
-                ax.set_ylabel(labels[i], fontsize=9)
-    fig.tight_layout(pad=0.3)
+                ax.set_ylabel(labels[i], fontsize=8)
+    fig.suptitle("Rows: test images under different lights; columns: every normalization, as apply() gives it",
+                 fontsize=10)
+    fig.tight_layout(pad=0.3, rect=(0, 0, 1, 1 - 0.35 / height))  # room for the title line
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(plt, fig, path, dpi=110)
 
 
 def main(out_dir: Path, seed: int = 0) -> Path:
@@ -78,14 +99,15 @@ def main(out_dir: Path, seed: int = 0) -> Path:
     detect.generate(data_dir, seed=seed, size="small", n_test=6, width=480, height=300, p_object=1.0, overwrite=True)
     test = load_coco(data_dir / "test.json")
     images = [test.read_image(im) for im in test.images]
-    labels = [f"{im.extra.get('light_family', '?')} light" for im in test.images]
+    labels = [image_label(k, im) for k, im in enumerate(test.images)]
     scale = float(read_manifest(data_dir, "detect")["working_scale"])
     grid = normalization_grid(images, labels, available(), out_dir / "normalized.png", alcn={"scale": scale})
     logger.info("wrote %s", grid)
 
     from alcn_cv.bench import detect as bench
+    from alcn_cv.bench.detect_settings import presets
 
-    settings = bench.presets()["small"]
+    settings = presets()["small"]
     settings.methods = [m for m in DEMO_BENCH_METHODS if m in available()]
     settings.real_images = [1, 3]
     settings.policies = ["local"]

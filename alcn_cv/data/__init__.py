@@ -1,10 +1,11 @@
-"""The illumination data engine (issue 3): rendered data under the lightings of the paper's Fig. 1 and 4.
+"""The illumination data engine: rendered data under the lightings of the paper's Fig. 1 and 4.
 
 Modules:
 
-- :mod:`~alcn_cv.data.render`: lights (directional, point, spot; coloured), materials (matte,
-  plastic, velvet-like, metal), vectorised shading, height-field shadows, hard shadow shapes and
-  the camera (exposure, noise, saturation, gamma, motion blur); lighting families.
+- :mod:`~alcn_cv.data.lighting`: lights (directional, point, spot; coloured), lighting families
+  and their sampling, hard shadow shapes.
+- :mod:`~alcn_cv.data.render`: materials (matte, plastic, velvet-like, metal), vectorised
+  shading, height-field shadows and the camera (exposure, noise, saturation, gamma, motion blur).
 - :mod:`~alcn_cv.data.textures`: procedural textures and photographs of :mod:`skimage.data`.
 - :mod:`~alcn_cv.data.objects`: textured relief objects and their placement on 2.5D surfaces.
 - :mod:`~alcn_cv.data.phos`: the Normalizer's Phos-like 64x64 training windows.

@@ -77,13 +77,13 @@ def add_parser(subparsers) -> None:
                        "many lightings (Phos-like), plus background windows.")
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("-n", type=int, default=100_000, help="number of windows (default 100000)")
-    q.add_argument("--seed", type=int, default=0, help="seed of the windows")
-    q.add_argument("--objects", type=int, default=100, help="number of catalogue objects (labels 1..N)")
-    q.add_argument("--object-seed", type=int, default=0, help="seed of the object catalogue")
+    q.add_argument("--seed", type=int, default=0, help="seed of the windows (default 0)")
+    q.add_argument("--objects", type=int, default=100, help="number of catalogue objects (labels 1..N; default 100)")
+    q.add_argument("--object-seed", type=int, default=0, help="seed of the object catalogue (default 0)")
     q.add_argument("--lighting", default="random",
                    help="'random' or comma-separated families: ambient,dark,bright,side,shadow,spot,point,"
-                   "colour,mixed")
-    q.add_argument("--background-fraction", type=float, default=0.35, help="fraction of background windows")
+                   "colour,mixed (default random)")
+    q.add_argument("--background-fraction", type=float, default=0.35, help="fraction of background windows (default 0.35)")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     q.add_argument("--workers", type=int, default=1,
                    help="worker processes (default 1; the output does not depend on it)")
@@ -93,13 +93,14 @@ def add_parser(subparsers) -> None:
                        description="Render 3 objects (matte, velvet-like, specular): training images under one "
                        "lighting and test images with clutter under varied lighting, in COCO format.")
     q.add_argument("--out", required=True, help="output folder")
-    q.add_argument("--size", default="default", choices=["default", "small"], help="preset size")
-    q.add_argument("--seed", type=int, default=0, help="seed of the images")
-    q.add_argument("--object-seed", type=int, default=0, help="seed of the three objects")
-    q.add_argument("--n-test", type=int, default=None, help="number of test images (default: the size's)")
-    q.add_argument("--n-train", type=int, default=None, help="training images per object (default: 10)")
-    q.add_argument("--width", type=int, default=None, help="image width (default 1280)")
-    q.add_argument("--height", type=int, default=None, help="image height (default 800)")
+    q.add_argument("--size", default="default", choices=["default", "small"],
+                   help="preset size (default: default; small renders in seconds, for tests)")
+    q.add_argument("--seed", type=int, default=0, help="seed of the images (default 0)")
+    q.add_argument("--object-seed", type=int, default=0, help="seed of the three objects (default 0)")
+    q.add_argument("--n-test", type=int, default=None, help="number of test images (default: 120; small 4)")
+    q.add_argument("--n-train", type=int, default=None, help="training images per object (default: 10; small 3)")
+    q.add_argument("--width", type=int, default=None, help="image width (default: 1280; small 320)")
+    q.add_argument("--height", type=int, default=None, help="image height (default: 800; small 200)")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     q.add_argument("--workers", type=int, default=1,
                    help="worker processes (default 1; the output does not depend on it)")
@@ -109,9 +110,10 @@ def add_parser(subparsers) -> None:
                        description="Render a registered training sequence and 8 test sequences (#1 training "
                        "lighting, #2-#4 mild, #5-#8 drastic changes) of a textured box and a duck.")
     q.add_argument("--out", required=True, help="dataset root")
-    q.add_argument("--size", default="default", choices=["default", "small"], help="preset size")
-    q.add_argument("--seed", type=int, default=0, help="seed")
-    q.add_argument("--frames", type=int, default=None, help="frames per sequence (default 60)")
+    q.add_argument("--size", default="default", choices=["default", "small"],
+                   help="preset size (default: default; small renders in seconds, for tests)")
+    q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    q.add_argument("--frames", type=int, default=None, help="frames per sequence (default: 60; small 3)")
     q.add_argument("--n-test", type=int, default=None, help="number of test sequences (default 8)")
     q.add_argument("--no-clutter", action="store_true", help="no clutter on the table")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
@@ -124,7 +126,7 @@ def add_parser(subparsers) -> None:
                        "BOP scene folder, with boxes, projected model boxes or labels drawn.")
     q.add_argument("dataset", help="dataset folder, COCO .json file or BOP scene folder")
     q.add_argument("--out", required=True, help="output PNG")
-    q.add_argument("-n", type=int, default=16, help="about how many samples to show")
+    q.add_argument("-n", type=int, default=16, help="about how many samples to show (default 16)")
     q.set_defaults(func=_preview)
 
     q = sub.add_parser("compare-psm", help="intensity statistics of renderings vs. the real PSM photographs",
@@ -133,5 +135,5 @@ def add_parser(subparsers) -> None:
                        "table.")
     q.add_argument("--psm", default=None, help="PSM folder (default: <shared data>/psm)")
     q.add_argument("--out", required=True, help="output folder")
-    q.add_argument("--seed", type=int, default=0, help="seed of the renderings")
+    q.add_argument("--seed", type=int, default=0, help="seed of the renderings (default 0)")
     q.set_defaults(func=_compare_psm)

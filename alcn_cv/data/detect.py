@@ -1,4 +1,4 @@
-"""An ALCN-2D-like detection benchmark (issue 3, §2b; paper Sec. 4.3, Fig. 4).
+"""An ALCN-2D-like detection benchmark (paper Sec. 4.3, Fig. 4).
 
 The paper's ALCN-2D has three objects (matte, velvet-like and specular), ten training images
 per object under one lighting, and test images with and without the objects, under very
@@ -29,18 +29,19 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.io import write_json
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.objects import ReliefObject, background_surface, make_object, paste, to_surface
 from alcn_cv.data.parallel import parallel_map
-from alcn_cv.data.render import LIGHT_FAMILIES, Lighting, Material, directional, render_surfaces, sample_lighting
+from alcn_cv.data.lighting import LIGHT_FAMILIES, Lighting, directional, sample_lighting
+from alcn_cv.data.render import Material, render_surfaces
 from alcn_cv.data.textures import photo_crop, procedural_texture
 from alcn_cv.errors import InputError
 from alcn_cv.formats.coco import write_coco
+from alcn_cv.io import write_image, write_json
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DetectConfig", "SIZES", "OBJECTS", "benchmark_objects", "generate", "main"]
+__all__ = ["DetectConfig", "SIZES", "OBJECTS", "benchmark_objects", "generate"]
 
 
 @dataclass(frozen=True)
@@ -191,8 +192,7 @@ def _image_job(job: tuple) -> tuple[list, dict]:
         found, lighting = [(k + 1, box, area)], training_lighting()
     else:
         img, found, lighting = _test_image(np.random.default_rng([seed, 2, j]), list(objs), cfg, p_object)
-    if not cv2.imwrite(path, img):
-        raise OSError(f"cannot write {path}")
+    write_image(path, img)
     return found, lighting.describe()
 
 
@@ -276,7 +276,3 @@ def generate(
         ))
     return Path(out_dir)
 
-
-def main(out_dir: str | os.PathLike, **kwargs) -> Path:
-    """Pipeline entry point (hloc style): see :func:`generate`."""
-    return generate(out_dir, **kwargs)

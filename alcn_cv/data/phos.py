@@ -1,4 +1,4 @@
-"""Phos-like training windows for the Normalizer (issue 3, §2a; paper Sec. 4.1).
+"""Phos-like training windows for the Normalizer (paper Sec. 4.1).
 
 The paper trains the Normalizer jointly with a detector on Phos: real objects photographed
 under many lightings. Here the objects are rendered: ``n_objects`` textured relief objects
@@ -42,13 +42,14 @@ from alcn_cv.io import write_json
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest, read_manifest, save_npz
 from alcn_cv.data.objects import ReliefObject, background_surface, make_catalog, make_object, paste, to_surface
 from alcn_cv.data.parallel import parallel_map
-from alcn_cv.data.render import LIGHT_FAMILIES, render_surfaces, sample_lighting
+from alcn_cv.data.lighting import LIGHT_FAMILIES, sample_lighting
+from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import DatasetError, InputError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["WINDOW", "KIND_NAMES", "PhosBatch", "render_windows", "generate", "load", "main"]
+__all__ = ["WINDOW", "KIND_NAMES", "PhosBatch", "render_windows", "generate", "load"]
 
 #: Side of the rendered windows in pixels.
 WINDOW = 64
@@ -307,9 +308,4 @@ def load(out_dir: str | os.PathLike) -> PhosBatch:
         arrays["extents"].astype(np.float32), k_obj, int(man["parameters"].get("object_seed", 0)),
         int(man["seed"]), fams,
     )
-
-
-def main(out_dir: str | os.PathLike, n: int = 100_000, seed: int = 0, **params) -> Path:
-    """Pipeline entry point (hloc style): generate the windows into ``out_dir``."""
-    return generate(out_dir, n, seed, **params)
 

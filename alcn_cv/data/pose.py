@@ -1,4 +1,4 @@
-"""Box- and Duck-like pose sequences in the BOP layout (issue 3, §2c; paper Sec. 4.4, Table 1).
+"""Box- and Duck-like pose sequences in the BOP layout (paper Sec. 4.4, Table 1).
 
 A textured box (object 1, like the paper's Box dataset) and a duck built from ellipsoids
 (object 2, like ALCN-Duck) stand on a cluttered table. A camera moves along an orbit around
@@ -27,14 +27,15 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from alcn_cv.io import write_json
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.parallel import parallel_map
-from alcn_cv.data.raster import Mesh, Scene, SceneObject, box_mesh, ellipsoid_mesh, look_at, merge_meshes, render_frame
-from alcn_cv.data.render import Light, Lighting, Material, directional
+from alcn_cv.data.raster import (
+    Mesh, Scene, SceneObject, ShadowSettings, box_mesh, ellipsoid_mesh, look_at, merge_meshes, render_frame,
+)
+from alcn_cv.data.lighting import Light, Lighting, directional
+from alcn_cv.data.render import Material
 from alcn_cv.data.textures import colour_jitter, photo_crop, procedural_texture, random_texture
 from alcn_cv.errors import InputError
 from alcn_cv.formats.bop import (
@@ -47,11 +48,12 @@ from alcn_cv.formats.bop import (
     write_scene,
 )
 from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, write_text_model
+from alcn_cv.io import write_image, write_json
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["PoseConfig", "SIZES", "BOX_SIZE_MM", "make_box", "make_duck", "make_scene", "sequence_lighting",
-           "trajectory", "generate", "main"]
+           "trajectory", "generate"]
 
 #: The box's size (x, y, z) in mm.
 BOX_SIZE_MM = (140.0, 95.0, 55.0)
@@ -228,14 +230,14 @@ def _write_sequence(
     placed = [o for o in scene.objects if o.obj_id > 0]
     for f, (R, t) in enumerate(poses):
         rng = np.random.default_rng([*seed_key, f])
-        img, buf = render_frame(scene, K, R, t, cfg.width, cfg.height, lighting, rng, gobo_seed=seed_key[0],
-                                shadow_res=cfg.shadow_res)
-        cv2.imwrite(str(seq_dir / "rgb" / f"{f:06d}.png"), img)
+        img, buf = render_frame(scene, K, R, t, cfg.width, cfg.height, lighting, rng,
+                                ShadowSettings(res=cfg.shadow_res, gobo_seed=seed_key[0]))
+        write_image(seq_dir / "rgb" / f"{f:06d}.png", img)
         objs, inf = [], []
         for k, o in enumerate(placed):
             objs.append(BopObjectPose(o.obj_id, R @ o.R, R @ o.t + t))
             m = (buf.obj_id == o.obj_id).astype(np.uint8) * 255
-            cv2.imwrite(str(seq_dir / "mask_visib" / f"{f:06d}_{k:06d}.png"), m)
+            write_image(seq_dir / "mask_visib" / f"{f:06d}_{k:06d}.png", m)
             ys, xs = np.nonzero(m)
             box = [int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)] \
                 if len(xs) else [-1, -1, 0, 0]
@@ -259,7 +261,7 @@ def _write_models(models_dir: Path, scene: Scene) -> None:
             h, w = m.texture.shape[:2]
             tc = np.stack([(m.uv[:, 0] + 0.5) / w, 1.0 - (m.uv[:, 1] + 0.5) / h], 1)
             enc = np.rint(np.clip(m.texture, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)[..., ::-1]
-            cv2.imwrite(str(models_dir / f"{name}.png"), enc)
+            write_image(models_dir / f"{name}.png", enc)
             ply = PlyModel(m.vertices, m.faces, None, None, tc, f"{name}.png")
         else:
             cols = np.rint(np.clip(m.colors, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)
@@ -344,7 +346,3 @@ def generate(
         ))
     return Path(out_dir)
 
-
-def main(out_dir: str | os.PathLike, **kwargs) -> Path:
-    """Pipeline entry point (hloc style): see :func:`generate`."""
-    return generate(out_dir, **kwargs)

@@ -17,10 +17,11 @@ import numpy as np
 
 from alcn_cv.data.manifest import read_manifest
 from alcn_cv.errors import DatasetError
+from alcn_cv.io import write_image
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["preview", "grid", "draw_model_box", "main"]
+__all__ = ["preview", "grid", "draw_model_box"]
 
 _COLOURS = [(0, 255, 0), (255, 128, 0), (0, 128, 255), (255, 0, 255), (0, 255, 255), (255, 255, 0)]
 
@@ -156,13 +157,5 @@ def preview(dataset: str | os.PathLike, out_png: str | os.PathLike, *, n: int = 
             raise DatasetError(f"{src / 'manifest.json'}: field kind: unknown dataset kind {kind!r}")
     else:
         raise DatasetError(f"{src}: not a dataset (no manifest.json, scene_camera.json, and not a .json file)")
-    out = Path(out_png)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(out), sheet):
-        raise OSError(f"cannot write {out}")
-    return out
+    return write_image(out_png, sheet)
 
-
-def main(dataset: str | os.PathLike, out_png: str | os.PathLike, **kwargs) -> Path:
-    """Pipeline entry point (hloc style): see :func:`preview`."""
-    return preview(dataset, out_png, **kwargs)

@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from alcn_cv.data.render import MATERIAL_FIELDS, LightArrays, Lighting, Material, expose, shade, shadow_shape
+from alcn_cv.data.lighting import LightArrays, Lighting, shadow_shape
+from alcn_cv.data.render import MATERIAL_FIELDS, Material, expose, shade
 from alcn_cv.errors import InputError
 
 logger = logging.getLogger(__name__)
@@ -36,6 +37,7 @@ __all__ = [
     "SceneObject",
     "Scene",
     "FrameBuffers",
+    "ShadowSettings",
     "render_frame",
 ]
 
@@ -398,42 +400,41 @@ def _sample_mipmapped(tex: np.ndarray, mapx: np.ndarray, mapy: np.ndarray, level
     return out
 
 
-def render_frame(
-    scene: Scene,
-    K: np.ndarray,
-    R_w2c: np.ndarray,
-    t_w2c: np.ndarray,
-    width: int,
-    height: int,
-    lighting: Lighting,
-    rng: np.random.Generator,
-    *,
-    gobo_seed: int = 0,
-    shadow_res: int = 1024,
-) -> tuple[np.ndarray, FrameBuffers]:
-    """Render one BGR uint8 frame of ``scene`` seen by an OpenCV pinhole camera.
+@dataclass(frozen=True)
+class ShadowSettings:
+    """How :func:`render_frame` casts shadows.
 
-    Args:
-        scene: the table-top scene.
-        K: float64 (3, 3) intrinsics (OpenCV convention, no distortion).
-        R_w2c, t_w2c: camera pose (mm).
-        width, height: image size.
-        lighting: lights in world coordinates (mm) and the camera's response.
-        rng: random generator (sensor noise).
-        gobo_seed: seed of the hard shadow shape (``lighting.shadow_shape``), fixed in the world
+    Attributes:
+        res: side of the shadow maps in pixels.
+        gobo_seed: seed of the hard shadow shape (``Lighting.shadow_shape``), fixed in the world
             so that it stays put from frame to frame.
-        shadow_res: side of the shadow maps in pixels.
+    """
+
+    res: int = 1024
+    gobo_seed: int = 0
+
+
+@dataclass
+class _GBuffer:
+    """Per-pixel inputs of the shader: world point, unit normal, linear RGB albedo, material
+    parameters (:data:`MATERIAL_FIELDS`), and the object id and model point of each pixel."""
+
+    P: np.ndarray
+    N: np.ndarray
+    albedo: np.ndarray
+    material: np.ndarray
+    obj_id: np.ndarray
+    model_xyz: np.ndarray
+
+
+def _table_gbuffer(scene: Scene, K: np.ndarray, R_w2c: np.ndarray, t_w2c: np.ndarray, width: int,
+                   height: int) -> tuple[_GBuffer, np.ndarray, np.ndarray]:
+    """Intersect each pixel's ray with the table ``z = 0`` and shade it as table (or wall beyond).
 
     Returns:
-        ``(image, buffers)``: uint8 (H, W, 3) BGR and the :class:`FrameBuffers`.
+        The G-buffer, the camera centre (3,) and the camera z of the table point per pixel
+        (inf where the ray misses the table).
     """
-    verts, faces, owner = scene.world_meshes()
-    cam = verts @ R_w2c.T + t_w2c
-    z = cam[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xy = np.stack([K[0, 0] * cam[:, 0] / z + K[0, 2], K[1, 1] * cam[:, 1] / z + K[1, 2]], 1)
-    zbuf, tri, bary = rasterize(xy, z, faces, width, height, perspective=True)
-    # The table: intersect each pixel's ray with z = 0.
     vv, uu = np.mgrid[0:height, 0:width].astype(np.float64)
     ray_c = np.stack([(uu - K[0, 2]) / K[0, 0], (vv - K[1, 2]) / K[1, 1], np.ones_like(uu)], -1)
     ray_w = ray_c @ R_w2c  # = R^T d
@@ -442,9 +443,6 @@ def render_frame(
         s = -C[2] / ray_w[..., 2]
     hit = (ray_w[..., 2] < 0) & (s > 0)
     s_table = np.where(hit, s, np.inf)  # camera z of the table point (ray_c z = 1)
-    on_obj = tri >= 0
-    on_obj &= zbuf <= s_table
-    # G-buffer.
     P = C + ray_w * np.where(hit, s, 0.0)[..., None]
     N = np.zeros((height, width, 3))
     N[..., 2] = 1.0
@@ -458,63 +456,117 @@ def render_frame(
     albedo[~hit] = scene.wall
     obj_id = np.where(hit, 0, -1).astype(np.int64)
     model_xyz = np.full((height, width, 3), np.nan)
+    return _GBuffer(P, N, albedo, material, obj_id, model_xyz), C, s_table
+
+
+def _draw_objects(gb: _GBuffer, scene: Scene, verts: np.ndarray, faces: np.ndarray, owner: np.ndarray,
+                  on_obj: np.ndarray, tri: np.ndarray, bary: np.ndarray) -> None:
+    """Overwrite the G-buffer where an object is in front of the table: position, normal,
+    albedo (texture or vertex colours), material, object id and model point."""
     fidx = np.nonzero(on_obj.reshape(-1))[0]
-    if len(fidx):
-        t_sel = tri.reshape(-1)[fidx]
-        b = bary.reshape(-1, 3)[fidx]
-        own = owner[t_sel]
-        fv = faces[t_sel]
-        Pw = (verts[fv] * b[..., None]).sum(1)
-        P.reshape(-1, 3)[fidx] = Pw
-        # Per object: normals, albedo, material, model coordinates.
-        first_face = np.cumsum([0] + [len(o.mesh.faces) for o in scene.objects])
-        Nf = N.reshape(-1, 3)
-        Af = albedo.reshape(-1, 3)
-        Mf = material.reshape(-1, len(MATERIAL_FIELDS))
-        Xf = model_xyz.reshape(-1, 3)
-        Of = obj_id.reshape(-1)
-        for k, o in enumerate(scene.objects):
-            m = own == k
-            if not m.any():
-                continue
-            pix = fidx[m]
-            lf = t_sel[m] - first_face[k]
-            lv = o.mesh.faces[lf]  # local vertex ids (n, 3)
-            bk = b[m]
-            Xf[pix] = (o.mesh.vertices[lv] * bk[..., None]).sum(1)
-            if o.mesh.normals is not None:
-                n_loc = (o.mesh.normals[lv] * bk[..., None]).sum(1)
-            else:
-                v3 = o.mesh.vertices[lv]
-                n_loc = np.cross(v3[:, 1] - v3[:, 0], v3[:, 2] - v3[:, 0])
-            n_w = n_loc @ o.R.T
-            Nf[pix] = n_w / np.linalg.norm(n_w, axis=1, keepdims=True)
-            if o.mesh.texture is not None:
-                uv = (o.mesh.uv[lv] * bk[..., None].astype(np.float32)).sum(1).astype(np.float32)
-                Af[pix] = cv2.remap(o.mesh.texture, uv[:, :1], uv[:, 1:], cv2.INTER_LINEAR,
-                                    borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3)
-            else:
-                Af[pix] = (o.mesh.colors[lv] * bk[..., None]).sum(1)
-            Mf[pix] = o.mesh.material.vector()
-            Of[pix] = o.obj_id
-    depth = np.where(on_obj, zbuf, s_table)
-    # Shadows.
+    if not len(fidx):
+        return
+    t_sel = tri.reshape(-1)[fidx]
+    b = bary.reshape(-1, 3)[fidx]
+    own = owner[t_sel]
+    fv = faces[t_sel]
+    gb.P.reshape(-1, 3)[fidx] = (verts[fv] * b[..., None]).sum(1)
+    first_face = np.cumsum([0] + [len(o.mesh.faces) for o in scene.objects])
+    Nf = gb.N.reshape(-1, 3)
+    Af = gb.albedo.reshape(-1, 3)
+    Mf = gb.material.reshape(-1, len(MATERIAL_FIELDS))
+    Xf = gb.model_xyz.reshape(-1, 3)
+    Of = gb.obj_id.reshape(-1)
+    for k, o in enumerate(scene.objects):
+        m = own == k
+        if not m.any():
+            continue
+        pix = fidx[m]
+        lf = t_sel[m] - first_face[k]
+        lv = o.mesh.faces[lf]  # local vertex ids (n, 3)
+        bk = b[m]
+        Xf[pix] = (o.mesh.vertices[lv] * bk[..., None]).sum(1)
+        if o.mesh.normals is not None:
+            n_loc = (o.mesh.normals[lv] * bk[..., None]).sum(1)
+        else:
+            v3 = o.mesh.vertices[lv]
+            n_loc = np.cross(v3[:, 1] - v3[:, 0], v3[:, 2] - v3[:, 0])
+        n_w = n_loc @ o.R.T
+        Nf[pix] = n_w / np.linalg.norm(n_w, axis=1, keepdims=True)
+        if o.mesh.texture is not None:
+            uv = (o.mesh.uv[lv] * bk[..., None].astype(np.float32)).sum(1).astype(np.float32)
+            Af[pix] = cv2.remap(o.mesh.texture, uv[:, :1], uv[:, 1:], cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3)
+        else:
+            Af[pix] = (o.mesh.colors[lv] * bk[..., None]).sum(1)
+        Mf[pix] = o.mesh.material.vector()
+        Of[pix] = o.obj_id
+
+
+def _shadow_visibility(gb: _GBuffer, verts: np.ndarray, faces: np.ndarray, lighting: Lighting,
+                       shadows: ShadowSettings) -> np.ndarray:
+    """float32 (1, L, H, W) visibility of each light from each pixel: shadow maps, and the
+    world-fixed hard shadow pattern (window frame, blinds...) on light 0."""
+    height, width = gb.obj_id.shape
     extent = float(np.max(np.abs(verts[:, :2]))) * 1.3 + 50 if len(verts) else 500.0
     vis = np.ones((1, max(1, len(lighting.lights)), height, width), np.float32)
-    maps = _shadow_maps(verts, faces, lighting.lights, extent, shadow_res)
+    maps = _shadow_maps(verts, faces, lighting.lights, extent, shadows.res)
     for i, (kind, proj, scale, zb) in enumerate(maps):
         # Normal-offset lookup (1.5 shadow-map texels along the normal) against shadow acne.
-        vis[0, i] = _lookup_shadow(kind, proj, scale, zb, P + N * (3.0 * extent / shadow_res), bias=1.5)
+        vis[0, i] = _lookup_shadow(kind, proj, scale, zb, gb.P + gb.N * (3.0 * extent / shadows.res), bias=1.5)
     if lighting.shadow_shape is not None and lighting.lights:
-        # A world-fixed hard shadow pattern (window frame, blinds...) on light 0.
-        gob = shadow_shape(np.random.default_rng(gobo_seed), (512, 512), lighting.shadow_shape, penumbra=1.5)
-        gx = (P[..., 0] / 800.0 * 512 + 256).astype(np.float32)
-        gy = (P[..., 1] / 800.0 * 512 + 256).astype(np.float32)
+        gob = shadow_shape(np.random.default_rng(shadows.gobo_seed), (512, 512), lighting.shadow_shape, penumbra=1.5)
+        gx = (gb.P[..., 0] / 800.0 * 512 + 256).astype(np.float32)
+        gy = (gb.P[..., 1] / 800.0 * 512 + 256).astype(np.float32)
         vis[0, 0] *= cv2.remap(gob, gx, gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
-    V = C - P
+    return vis
+
+
+def render_frame(
+    scene: Scene,
+    K: np.ndarray,
+    R_w2c: np.ndarray,
+    t_w2c: np.ndarray,
+    width: int,
+    height: int,
+    lighting: Lighting,
+    rng: np.random.Generator,
+    shadows: ShadowSettings = ShadowSettings(),
+) -> tuple[np.ndarray, FrameBuffers]:
+    """Render one BGR uint8 frame of ``scene`` seen by an OpenCV pinhole camera.
+
+    The steps: rasterise the objects, intersect the table (:func:`_table_gbuffer`), draw the
+    visible objects into the G-buffer (:func:`_draw_objects`), light visibility
+    (:func:`_shadow_visibility`), then :func:`~alcn_cv.data.render.shade` and
+    :func:`~alcn_cv.data.render.expose`.
+
+    Args:
+        scene: the table-top scene.
+        K: float64 (3, 3) intrinsics (OpenCV convention, no distortion).
+        R_w2c, t_w2c: camera pose (mm).
+        width, height: image size.
+        lighting: lights in world coordinates (mm) and the camera's response.
+        rng: random generator (sensor noise).
+        shadows: shadow-map resolution and the seed of the hard shadow shape.
+
+    Returns:
+        ``(image, buffers)``: uint8 (H, W, 3) BGR and the :class:`FrameBuffers`.
+    """
+    verts, faces, owner = scene.world_meshes()
+    cam = verts @ R_w2c.T + t_w2c
+    z = cam[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xy = np.stack([K[0, 0] * cam[:, 0] / z + K[0, 2], K[1, 1] * cam[:, 1] / z + K[1, 2]], 1)
+    zbuf, tri, bary = rasterize(xy, z, faces, width, height, perspective=True)
+    gb, C, s_table = _table_gbuffer(scene, K, R_w2c, t_w2c, width, height)
+    on_obj = (tri >= 0) & (zbuf <= s_table)
+    _draw_objects(gb, scene, verts, faces, owner, on_obj, tri, bary)
+    depth = np.where(on_obj, zbuf, s_table)
+    vis = _shadow_visibility(gb, verts, faces, lighting, shadows)
+    V = C - gb.P
     V /= np.linalg.norm(V, axis=-1, keepdims=True) + 1e-12
     lights = LightArrays.pack([lighting.lights])
-    rad = shade(P[None].astype(np.float32), N[None].astype(np.float32), V[None].astype(np.float32),
-                albedo[None], material[None], lights, lighting.ambient[None], vis)
+    rad = shade(gb.P[None].astype(np.float32), gb.N[None].astype(np.float32), V[None].astype(np.float32),
+                gb.albedo[None], gb.material[None], lights, lighting.ambient[None], vis)
     img = expose(rad[..., ::-1].copy(), [lighting], rng)[0]
-    return img, FrameBuffers(depth, obj_id, model_xyz)
+    return img, FrameBuffers(depth, gb.obj_id, gb.model_xyz)

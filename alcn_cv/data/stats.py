@@ -29,12 +29,13 @@ import numpy as np
 
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.data.objects import make_object, paste, to_surface
-from alcn_cv.data.render import LIGHT_FAMILIES, Lighting, Light, render_surfaces, sample_lighting
+from alcn_cv.data.lighting import LIGHT_FAMILIES, Light, Lighting, sample_lighting
+from alcn_cv.data.render import render_surfaces
 from alcn_cv.errors import DatasetError
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["STAT_NAMES", "image_stats", "set_stats", "load_psm", "render_like_psm", "compare_psm", "main"]
+__all__ = ["STAT_NAMES", "image_stats", "set_stats", "load_psm", "render_like_psm", "compare_psm"]
 
 STAT_NAMES = ("mean", "std", "dynamic_range", "saturated", "black", "local_contrast_median", "local_contrast_p90")
 
@@ -223,9 +224,4 @@ def compare_psm(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed:
     _figure(out / "psm_comparison.png", sets, stats)
     logger.info("wrote %s", out / "psm_comparison.png")
     return stats
-
-
-def main(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, **kwargs) -> dict:
-    """Pipeline entry point (hloc style): see :func:`compare_psm`."""
-    return compare_psm(psm_dir, out_dir, **kwargs)
 

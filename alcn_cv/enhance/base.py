@@ -3,12 +3,13 @@
 A normalization object has two entry points:
 
 * :meth:`Normalization.apply` -- the image API an OpenCV app calls: grayscale ``HxW`` (or
-  ``HxWx1``) or BGR ``HxWx3``; ``uint8``, ``uint16`` or ``float32`` (float intensities in
-  [0, 1]). The output has the input's shape and, unless ``out_dtype`` says otherwise, its
-  dtype. Colour images are normalized on the L channel of CIE Lab, keeping a and b (Rad et al.
-  2017, Sec. 4.4). The raw response is mapped to the output range through a *fixed* linear map
-  (:attr:`Normalization.output_range` -> [0, 1], clipped), never a per-frame min/max, so the
-  frames of a video stay consistent.
+  ``HxWx1``), BGR ``HxWx3``, or either with an alpha channel (``HxWx2``, BGRA ``HxWx4``);
+  ``uint8``, ``uint16`` or ``float32`` (float intensities in [0, 1]). The output has the
+  input's shape and, unless ``out_dtype`` says otherwise, its dtype. Colour images are
+  normalized on the L channel of CIE Lab, keeping a and b (Rad et al. 2017, Sec. 4.4); an
+  alpha channel is passed through unchanged. The raw response is mapped to the output range
+  through a *fixed* linear map (:attr:`Normalization.output_range` -> [0, 1], clipped), never
+  a per-frame min/max, so the frames of a video stay consistent.
 * :meth:`Normalization.normalize` -- the raw response on a float32 ``HxW`` intensity image in
   [0, 1], for detectors and benchmarks that want unclipped values.
 
@@ -17,6 +18,7 @@ The caller's array is never modified.
 
 from __future__ import annotations
 
+import logging
 from typing import ClassVar
 
 import cv2
@@ -27,10 +29,21 @@ from alcn_cv.errors import InputError
 
 __all__ = ["Normalization", "NoNormalization", "check_image", "check_gray"]
 
+logger = logging.getLogger(__name__)
+#: The classes that already warned about an image smaller than their window (once per process).
+_WARNED_SMALL: set[type] = set()
+
+
 def _to_unit_float(img: np.ndarray) -> np.ndarray:
     if img.dtype == np.float32:
         return np.clip(img, 0.0, 1.0)  # a copy: the caller's array stays untouched
     return img.astype(np.float32) * np.float32(1.0 / FULL_SCALE[img.dtype])
+
+
+def _from_unit_float(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    if dtype == np.float32:
+        return unit.astype(np.float32, copy=False)
+    return np.rint(unit * FULL_SCALE[dtype]).astype(dtype)
 
 
 class Normalization:
@@ -38,11 +51,26 @@ class Normalization:
 
     Subclasses set :attr:`name` (the registry key), implement :meth:`_normalize` and set
     :attr:`output_range`, the range of raw responses that :meth:`apply` maps linearly onto the
-    full output range (values outside are clipped).
+    full output range (values outside are clipped). :attr:`summary` and :attr:`reference`
+    describe the method in ``alcn normalize --list`` (default: the first line of the class
+    docstring, and no reference); a method that looks at a window of the image sets
+    :attr:`min_size`, its side in input pixels.
     """
 
     name: ClassVar[str] = ""
+    #: One line saying what the method does (default: the class docstring's first line).
+    summary: ClassVar[str] = ""
+    #: The publication the method follows.
+    reference: ClassVar[str] = ""
+    #: The side, in input pixels, of the window the method looks at (0: none).
+    min_size: ClassVar[int] = 0
     output_range: tuple[float, float] = (0.0, 1.0)
+
+    @classmethod
+    def describe(cls) -> tuple[str, str]:
+        """``(summary, reference)``: :attr:`summary` or the docstring's first line, and :attr:`reference`."""
+        summary = cls.summary or (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
+        return " ".join(summary.split()), cls.reference
 
     def normalize(self, gray: np.ndarray) -> np.ndarray:
         """Raw normalized response.
@@ -53,7 +81,15 @@ class Normalization:
         Returns:
             ``(H, W)`` float32, unbounded (see :attr:`output_range` for the typical range).
         """
-        out = self._normalize(check_gray(gray))
+        gray = check_gray(gray)
+        if min(gray.shape) < self.min_size and type(self) not in _WARNED_SMALL:
+            _WARNED_SMALL.add(type(self))
+            logger.warning(
+                "%s: image of %dx%d px is smaller than the method's %d px window; the window is "
+                "completed by mirroring the image at its borders (warned once)",
+                self.name, gray.shape[1], gray.shape[0], self.min_size,
+            )
+        out = self._normalize(gray)
         return np.asarray(out, dtype=np.float32)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
@@ -83,17 +119,31 @@ class Normalization:
         """Normalize an image, OpenCV style.
 
         Args:
-            img: ``HxW``, ``HxWx1`` or BGR ``HxWx3``; uint8, uint16 or float32 in [0, 1].
+            img: ``HxW``, ``HxWx1``, ``HxWx2`` (gray and alpha), BGR ``HxWx3`` or BGRA ``HxWx4``;
+                uint8, uint16 or float32 in [0, 1], in any byte order.
             out_dtype: ``None`` (the input's dtype), ``np.uint8``, ``np.uint16`` or ``np.float32``
                 (values in [0, 1]).
 
         Returns:
-            An array of the input's shape and the requested dtype.
+            An array of the input's shape and the requested dtype (native byte order). The
+            colour (or gray) channels are normalized; an alpha channel is passed through
+            unchanged (converted to ``out_dtype`` when that differs).
+
+        Images smaller than :attr:`min_size` (the method's window; 0 for the pixel-wise and
+        whole-image methods) are normalized all the same: the window is completed by
+        mirroring the image at its borders (reflect-101), so the result is valid but reflects
+        less of the scene; a warning is logged once per method.
+
+        Raises:
+            InputError: the image breaks this contract (:func:`alcn_cv.checks.check_image`).
         """
         img = check_image(img)
         out_dtype = np.dtype(img.dtype if out_dtype is None else out_dtype)
         if out_dtype not in SUPPORTED_DTYPES:
             raise InputError(f"unsupported out_dtype {out_dtype}; use uint8, uint16 or float32")
+        alpha = None
+        if img.ndim == 3 and img.shape[2] in (2, 4):
+            img, alpha = img[..., :-1], img[..., -1]
         unit = _to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
             lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
@@ -102,9 +152,12 @@ class Normalization:
         else:
             result = self.to_unit(self.normalize(np.ascontiguousarray(unit.reshape(img.shape[:2]))))
             result = result.reshape(img.shape)
-        if out_dtype == np.float32:
-            return result.astype(np.float32, copy=False)
-        return np.rint(result * FULL_SCALE[out_dtype]).astype(out_dtype)
+        result = _from_unit_float(result, out_dtype)
+        if alpha is None:
+            return result
+        if alpha.dtype != out_dtype:
+            alpha = _from_unit_float(_to_unit_float(alpha), out_dtype)
+        return np.concatenate([result, alpha[..., None]], axis=2)  # a new array: the input's alpha is not shared
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"
@@ -114,6 +167,7 @@ class NoNormalization(Normalization):
     """The identity: the input intensities unchanged (the ``"none"`` baseline)."""
 
     name = "none"
+    summary = "no normalization: the input intensities unchanged (the baseline)"
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         return gray.copy()

@@ -34,6 +34,8 @@ class HistogramEqualization(Normalization):
     """
 
     name = "he"
+    summary = "global histogram equalization (cv2.equalizeHist)"
+    reference = "Gonzalez & Woods, Digital Image Processing, Sec. 3.3"
     output_range = (0.0, 1.0)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
@@ -54,6 +56,8 @@ class CLAHE(Normalization):
     """
 
     name = "clahe"
+    summary = "contrast-limited adaptive histogram equalization (cv2.createCLAHE)"
+    reference = "Zuiderveld, Graphics Gems IV, 1994"
     output_range = (0.0, 1.0)
 
     def __init__(self, clipLimit: float = 2.0, tileGridSize: tuple[int, int] = (8, 8)) -> None:  # noqa: N803 -- OpenCV names

@@ -55,6 +55,8 @@ class Standardization(Normalization):
     """
 
     name = "ns"
+    summary = "standardization: zero mean and unit variance over the whole image"
+    reference = "LeCun, Bottou, Orr & Mueller, Efficient BackProp, 1998"
     output_range = (-3.0, 3.0)
 
     def __init__(self, eps: float = 1e-6) -> None:
@@ -83,6 +85,8 @@ class DifferenceOfGaussians(Normalization):
     """
 
     name = "dog"
+    summary = "difference of Gaussians G_sigma1 * I - G_sigma2 * I, a band-pass filter"
+    reference = "Marr & Hildreth, Theory of edge detection, Proc. R. Soc. Lond. B 1980"
     output_range = (-0.1, 0.1)
 
     def __init__(self, sigma1: float = 0.5, sigma2: float = 1.5) -> None:
@@ -109,6 +113,8 @@ class SubtractiveLCN(Normalization):
     """
 
     name = "slcn"
+    summary = "subtractive local contrast normalization: the image minus its Gaussian local mean"
+    reference = "Jarrett, Kavukcuoglu, Ranzato & LeCun, ICCV 2009"
     output_range = (-0.1, 0.1)
 
     def __init__(self, sigma: float = 2.0) -> None:
@@ -132,6 +138,8 @@ class DivisiveLCN(Normalization):
     """
 
     name = "dlcn"
+    summary = "divisive local contrast normalization: slcn divided by the local standard deviation"
+    reference = "Jarrett, Kavukcuoglu, Ranzato & LeCun, ICCV 2009"
     output_range = (-3.0, 3.0)
 
     def __init__(self, sigma: float = 2.0, eps: float = 1e-3) -> None:
@@ -167,6 +175,8 @@ class LocalResponseNormalization(Normalization):
     """
 
     name = "lrn"
+    summary = "local response normalization: divided by the energy of a size x size neighbourhood"
+    reference = "Krizhevsky, Sutskever & Hinton, NIPS 2012, Sec. 3.3"
     output_range = (-2.0, 2.0)
 
     def __init__(self, size: int = 9, alpha: float = 1.0, beta: float = 0.75, k: float = 0.01) -> None:
@@ -202,6 +212,8 @@ class Whitening(Normalization):
     """
 
     name = "whitening"
+    summary = "spectral whitening: the 1/f amplitude spectrum of natural images flattened"
+    reference = "Olshausen & Field, Vision Research 1997"
     output_range = (-3.0, 3.0)
 
     def __init__(self, f0: float = 0.4, eps: float = 1e-6) -> None:

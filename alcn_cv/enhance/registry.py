@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import ast
+import inspect
+import numbers
+import types
+import typing
 from collections.abc import Callable
+from pathlib import Path
 from typing import TypeVar
 
 from alcn_cv.enhance.base import Normalization, NoNormalization
-from alcn_cv.errors import InputError
+from alcn_cv.errors import ALCNError, InputError
 
-__all__ = ["available", "create", "from_spec", "parse_params", "parse_spec", "register"]
+__all__ = ["available", "create", "describe", "from_spec", "parse_params", "parse_spec", "register"]
 
 _REGISTRY: dict[str, type[Normalization]] = {}
 N = TypeVar("N", bound=type[Normalization])
@@ -30,20 +35,81 @@ def available() -> list[str]:
     return list(_REGISTRY)
 
 
+def describe(name: str) -> tuple[str, str]:
+    """``(summary, reference)`` of the normalization registered as ``name`` (one line each)."""
+    if name not in _REGISTRY:
+        raise InputError(f"unknown normalization {name!r}; available: {', '.join(available())}")
+    return _REGISTRY[name].describe()
+
+
 def create(name: str, **params: object) -> Normalization:
     """Create the normalization registered as ``name`` with its parameters.
 
     Raises:
-        InputError: unknown name or parameters.
+        InputError: unknown name, a parameter the method does not have, or a value of the wrong
+            type or out of range (the message names the method and the parameter).
     """
     try:
         cls: Callable[..., Normalization] = _REGISTRY[name]
     except KeyError:
         raise InputError(f"unknown normalization {name!r}; available: {', '.join(available())}") from None
+    _check_params(name, _REGISTRY[name], params)
     try:
         return cls(**params)
-    except TypeError as exc:
-        raise InputError(f"bad parameters for {name!r}: {exc}") from None
+    except ALCNError:
+        raise
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"bad parameters for {name!r} ({', '.join(f'{k}={v!r}' for k, v in params.items())}): {exc}") from None
+
+
+# What a value must be for the types of an ``__init__`` annotation: numpy scalars count as
+# numbers, and a float where an integer is expected is left to the constructor (``size=9.0``).
+_ACCEPTED: dict[type, tuple[type, ...]] = {
+    float: (numbers.Real,),
+    int: (numbers.Real,),
+    bool: (bool, numbers.Integral),
+    tuple: (tuple, list),
+    list: (list, tuple),
+}
+_TYPE_NAMES = {float: "a number", int: "an integer", bool: "True or False", str: "a string", type(None): "None", Path: "a path"}
+
+
+def _check_params(name: str, cls: type[Normalization], params: dict[str, object]) -> None:
+    """Check parameter names and types against ``cls.__init__``, so that ``-p scale=abc`` says
+    which parameter of which method is wrong rather than what ``float()`` thinks of ``'abc'``."""
+    no_init = cls.__init__ is object.__init__  # whose signature is (*args, **kwargs)
+    signature = inspect.signature(cls.__init__)
+    accepted = [] if no_init else [
+        p.name for p in list(signature.parameters.values())[1:] if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+    ]
+    if no_init or not any(p.kind == p.VAR_KEYWORD for p in signature.parameters.values()):
+        for key in params:
+            if key not in accepted:
+                raise InputError(f"bad parameters for {name!r}: no parameter {key!r}; its parameters: {', '.join(accepted) or 'none'}")
+    try:
+        hints = typing.get_type_hints(cls.__init__)
+    except (NameError, TypeError):  # an annotation only a type checker can resolve: leave it to the constructor
+        return
+    for key, value in params.items():
+        kinds = _annotation_types(hints.get(key))
+        if kinds and not isinstance(value, tuple(t for kind in kinds for t in _ACCEPTED.get(kind, (kind,)))):
+            expected = " or ".join(_TYPE_NAMES.get(kind, kind.__name__) for kind in kinds)
+            raise InputError(f"bad parameters for {name!r}: {key}={value!r} must be {expected}")
+
+
+def _annotation_types(hint: object) -> tuple[type, ...]:
+    """The classes an annotation allows (``float | None`` -> ``(float, NoneType)``); empty when it
+    cannot be checked with ``isinstance`` (no annotation, ``Any``, a type variable)."""
+    if hint is None:
+        return ()
+    union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+    kinds = []
+    for arg in typing.get_args(hint) if union else (hint,):
+        kind = typing.get_origin(arg) or arg
+        if not isinstance(kind, type):
+            return ()
+        kinds.append(kind)
+    return tuple(kinds)
 
 
 def parse_params(items: list[str]) -> dict[str, object]:

@@ -67,6 +67,8 @@ class IntrinsicImage(Normalization):
     """
 
     name = "intrinsic"
+    summary = "intrinsic image (Retinex): small log-gradients taken as shading and removed"
+    reference = "Land & McCann, JOSA 1971; Grosse, Johnson, Adelson & Freeman, ICCV 2009"
     output_range = (-2.0, 2.0)
 
     def __init__(self, threshold: float = 0.1, eps: float = 0.01) -> None:
@@ -137,6 +139,8 @@ class SelfQuotientImage(Normalization):
     """
 
     name = "sqi"
+    summary = "self-quotient image: the log of the image over its edge-preserving smoothing, multi-scale"
+    reference = "Wang, Li & Wang, ICIP 2004"
     output_range = (-1.0, 1.0)
 
     def __init__(self, sigmas: Sequence[float] = (1.0, 2.0, 4.0), eps: float = 0.01, weighted: bool = True) -> None:

@@ -7,24 +7,24 @@
 - :mod:`alcn_cv.formats.middlebury`: Middlebury multi-view stereo camera files.
 
 :func:`validate_json` checks a parsed JSON document against one of the JSON schemas shipped in
-``alcn_cv/data/schemas`` (with the ``jsonschema`` package) and raises
+``alcn_cv/formats/schemas`` (with the ``jsonschema`` package) and raises
 :class:`~alcn_cv.errors.DatasetError` naming the file and the offending field.
 """
 
 from __future__ import annotations
 
 import functools
-import json
 import os
 from pathlib import Path
 from typing import Any
 
 from alcn_cv.errors import DatasetError
+from alcn_cv.io import read_json
 
 __all__ = ["SCHEMA_DIR", "schema", "validate_json"]
 
 #: Folder of the JSON schemas (``<name>.schema.json``).
-SCHEMA_DIR = Path(__file__).resolve().parents[1] / "data" / "schemas"
+SCHEMA_DIR = Path(__file__).resolve().parent / "schemas"
 
 
 @functools.lru_cache(maxsize=None)
@@ -34,7 +34,7 @@ def schema(name: str) -> dict[str, Any]:
     if not path.is_file():
         known = sorted(p.name.removesuffix(".schema.json") for p in SCHEMA_DIR.glob("*.schema.json"))
         raise ValueError(f"unknown schema {name!r}; known: {known}")
-    return json.loads(path.read_text(encoding="utf-8"))
+    return read_json(path)
 
 
 def validate_json(obj: Any, name: str, file: str | os.PathLike) -> None:

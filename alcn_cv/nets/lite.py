@@ -18,7 +18,7 @@ conv 3x3, c2 (stride s)     1x1        receptive field 48
 conv 1x1, N                 1x1        the weights
 ==========================  =========  ==================
 
-with tanh activations. It is trained by :mod:`alcn_cv.nets.distill` to reproduce a teacher's
+with tanh activations. It is trained by :mod:`alcn_cv.train.distill` to reproduce a teacher's
 weights on the data engine's windows; its weight file says so (``architecture: "lite"`` and
 the teacher's checksum in the header).
 """

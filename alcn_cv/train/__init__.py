@@ -1,7 +1,10 @@
 """Training of ALCN (Rad, Roth & Lepetit, BMVC 2017): the joint training of the Normalizer with a
-detector (Eq. 2, :mod:`~alcn_cv.train.trainer`), the second stage that trains a new detector on
-a frozen Normalizer (:mod:`~alcn_cv.train.stage2`) and the ONNX export read by the torch-free OpenCV
-runtime (:mod:`alcn_cv.nets.opencv_runtime`).
+detector (Eq. 2, :mod:`~alcn_cv.train.trainer`, its stages in :mod:`~alcn_cv.train.windows`,
+:mod:`~alcn_cv.train.models`, :mod:`~alcn_cv.train.checkpoint`, :mod:`~alcn_cv.train.fewshot` and
+:mod:`~alcn_cv.train.summary`), the second stage that trains a new detector on a frozen Normalizer
+(:mod:`~alcn_cv.train.stage2`), the distillation of the light Normalizer
+(:mod:`~alcn_cv.train.distill`) and the ONNX export read by the torch-free OpenCV runtime
+(:mod:`alcn_cv.nets.opencv_runtime`).
 
 Example::
 
@@ -16,11 +19,14 @@ from __future__ import annotations
 
 import importlib
 
-__all__ = ["TrainConfig", "TrainResult", "export_onnx", "load_config", "train", "train_detector"]
+__all__ = ["JointModel", "TrainConfig", "TrainResult", "export_onnx", "load_checkpoint", "load_config", "train",
+           "train_detector"]
 
 _LAZY = {
     "train": "alcn_cv.train.trainer",
     "TrainResult": "alcn_cv.train.trainer",
+    "JointModel": "alcn_cv.train.models",
+    "load_checkpoint": "alcn_cv.train.checkpoint",
     "TrainConfig": "alcn_cv.train.config",
     "load_config": "alcn_cv.train.config",
     "train_detector": "alcn_cv.train.stage2",

@@ -1,15 +1,18 @@
-"""Command line of the training stage: ``alcn train``, ``alcn train-detector`` and ``alcn export``.
+"""Command line of the training stage: ``alcn train``, ``alcn train-detector``, ``alcn distill`` and ``alcn export``.
 
 ``alcn train`` trains the Normalizer jointly with a detector (Eq. 2) or, with
 ``--method dog|none``, the same detector on a fixed filter, for comparison;
 ``alcn train-detector`` is the paper's second stage, a new detector for new objects from a few
-real images on the frozen Normalizer; ``alcn export`` writes the Normalizer as ONNX for the
-torch-free OpenCV runtime. torch is imported only when a command runs.
+real images on the frozen Normalizer; ``alcn distill`` distils the light real-time Normalizer
+from a trained one (:mod:`alcn_cv.train.distill`); ``alcn export`` writes a Normalizer as ONNX
+for the torch-free OpenCV runtime. torch is imported only when a command runs.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
+import shlex
 import sys
 from pathlib import Path
 
@@ -32,8 +35,12 @@ _FLAGS = {
 }
 
 
+# The options of ``alcn distill`` that its model card records when they differ from the defaults.
+_DISTILL_OPTIONS = ("teacher", "windows", "val", "epochs", "batch", "lr", "channels", "objects", "seed", "threads")
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``train``, ``train-detector`` and ``export`` to the ``alcn`` command."""
+    """Add ``train``, ``train-detector``, ``distill`` and ``export`` to the ``alcn`` command."""
     p = subparsers.add_parser(
         "train", help="train the ALCN Normalizer jointly with a detector (Eq. 2)",
         description="Train ALCN's Normalizer jointly with a detector on Phos-like rendered windows (Eq. 2 of "
@@ -84,6 +91,29 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--no-progress", action="store_true", help="no progress bars")
     d.set_defaults(func=_train_detector)
+
+    s = subparsers.add_parser(
+        "distill", help="distil the light real-time Normalizer from a trained one",
+        description="Train a LiteNormalizer to reproduce a Normalizer's mixture weights on rendered windows "
+        "(alcn_cv.train.distill); writes the weight file and its model card (.md beside it), which records this "
+        "command. The shipped alcn_normalizer_lite.npz is "
+        "`alcn distill --out alcn_cv/weights/alcn_normalizer_lite.npz`.",
+    )
+    s.add_argument("--out", required=True, type=Path, help="weight file to write (.npz; the card is .md beside it)")
+    s.add_argument("--teacher", type=Path, default=None, help="teacher weight file (default: the shipped one)")
+    s.add_argument("--windows", type=int, default=20000, help="training windows (default 20000)")
+    s.add_argument("--val", type=int, default=2000, help="validation windows (default 2000)")
+    s.add_argument("--epochs", type=int, default=30, help="epochs (default 30)")
+    s.add_argument("--batch", type=int, default=256, help="batch size (default 256)")
+    s.add_argument("--lr", type=float, default=3e-3, help="Adam learning rate (default 3e-3)")
+    s.add_argument("--channels", type=lambda v: tuple(int(c) for c in v.split(",")), default=(8, 16),
+                   help="the student's widths c1,c2 (default 8,16)")
+    s.add_argument("--objects", type=int, default=100, help="objects in the rendered windows (default 100)")
+    s.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    s.add_argument("--threads", type=int, default=1,
+                   help="torch and OpenCV threads (default 1, as the shipped file was made; 0: the libraries' default)")
+    s.add_argument("--no-progress", action="store_true", help="no progress bars")
+    s.set_defaults(func=functools.partial(_distill, parser=s))
 
     e = subparsers.add_parser(
         "export", help="export the Normalizer to ONNX (for the torch-free OpenCV runtime)",
@@ -137,6 +167,32 @@ def _train_detector(args: argparse.Namespace) -> int:
     main(args.images, args.out, method=args.method, weights=args.weights, per_image=args.per_image,
          negatives=args.negatives, extent=args.extent, epochs=args.epochs, batch_size=args.batch_size, lr=args.lr,
          seed=args.seed, progress=not args.no_progress)
+    return 0
+
+
+def _distill(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    import cv2
+    import torch
+
+    from alcn_cv.train.distill import main
+
+    words = ["alcn", "distill", "--out", str(args.out)]
+    for name in _DISTILL_OPTIONS:
+        value = getattr(args, name)
+        if value != parser.get_default(name):
+            words += [f"--{name}", ",".join(map(str, value)) if isinstance(value, tuple) else str(value)]
+    previous = torch.get_num_threads(), cv2.getNumThreads()
+    if args.threads:
+        torch.set_num_threads(args.threads)
+        cv2.setNumThreads(args.threads)
+    try:
+        path = main(args.out, args.teacher, shlex.join(words), n_windows=args.windows, n_val=args.val,
+                    epochs=args.epochs, batch_size=args.batch, lr=args.lr, channels=args.channels,
+                    n_objects=args.objects, seed=args.seed, progress=not args.no_progress)
+    finally:
+        torch.set_num_threads(previous[0])
+        cv2.setNumThreads(previous[1])
+    print(path)
     return 0
 
 

@@ -15,7 +15,7 @@ effective configuration as TOML, a complete, commented-free starting point.
     ``seed`` (int, -1 = the run's ``seed``): seed of the rendered training windows (validation
     uses ``seed + 1_000_003``). ``n_objects`` (int), ``object_seed`` (int): the object catalogue
     (labels 1..n_objects). ``train_lighting``, ``val_lighting`` (list of str): lighting families
-    (:data:`alcn_cv.data.render.LIGHT_FAMILIES`) of the training and the *held-out* validation
+    (:data:`alcn_cv.data.lighting.LIGHT_FAMILIES`) of the training and the *held-out* validation
     windows; they must not overlap -- validation under the training light says nothing about
     robustness. ``background_fraction`` (float): fraction of background windows.
     ``gain_jitter`` (list of 2 floats): range of a random log-uniform intensity gain applied to
@@ -86,7 +86,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from alcn_cv.data.render import LIGHT_FAMILIES
+from alcn_cv.data.lighting import LIGHT_FAMILIES
 from alcn_cv.errors import InputError
 
 __all__ = ["PRESETS", "TrainConfig", "dump_toml", "load_config"]

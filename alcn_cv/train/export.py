@@ -22,8 +22,6 @@ from __future__ import annotations
 import io
 import json
 import logging
-import os
-import tempfile
 import warnings
 from pathlib import Path
 
@@ -31,12 +29,13 @@ import torch
 from torch import nn
 
 from alcn_cv.errors import InputError
+from alcn_cv.io import atomic_write
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW, Normalizer
 from alcn_cv.nets.opencv_runtime import DEFAULT_ONNX
 from alcn_cv.weight_file import load_normalizer_file
 
-__all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx", "main"]
+__all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx"]
 
 logger = logging.getLogger(__name__)
 
@@ -88,16 +87,7 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
             opset_version=OPSET, dynamo=False,
         )
     data = _with_metadata(buffer.getvalue(), weight_file.meta)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=out.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(out, data)
     logger.info("Normalizer exported to %s (%d kB)", out, len(data) // 1024)
     return out
 
@@ -116,7 +106,3 @@ def _with_metadata(model_bytes: bytes, meta: dict) -> bytes:
     onnx.checker.check_model(model)
     return model.SerializeToString()
 
-
-def main(out: str | Path, weights: str | Path | None = None) -> Path:
-    """Pipeline entry point (hloc style): export ``weights`` to ``out``."""
-    return export_onnx(out, weights)

@@ -26,8 +26,11 @@ import torch
 
 from alcn_cv.data.phos import PhosBatch, render_windows
 from alcn_cv.data.synthetic import augment, sample_negatives
+from alcn_cv.filters.standardize import standardize_windows
+from alcn_cv.train.models import CentreMixture, JointModel, dog_weights
+from alcn_cv.train.stage2 import STANDARDIZE_EPS, train_detector
 
-__all__ = ["FewShotSetup", "auc", "fewshot_validation", "make_fewshot_data"]
+__all__ = ["FewShotSetup", "auc", "fewshot_validation", "make_fewshot_data", "standard_methods"]
 
 logger = logging.getLogger(__name__)
 
@@ -120,8 +123,6 @@ def fewshot_validation(
     Returns:
         name -> ``{"accuracy", "auc", "by_family": {family: {"accuracy", "auc"}}}``.
     """
-    from alcn_cv.train.stage2 import train_detector
-
     setup = setup or FewShotSetup()
     train_x, train_y, test = data if data is not None else make_fewshot_data(setup)
     results = {}
@@ -144,12 +145,10 @@ def fewshot_validation(
     return results
 
 
-def standard_methods(model, dog_pairs: Sequence[Sequence[float]], num_kernels: int, step: float,
+def standard_methods(model: JointModel | None, dog_pairs: Sequence[Sequence[float]], num_kernels: int, step: float,
                      policy: str) -> dict[str, Method]:
     """The trained model's normalization (``"alcn"``), DoGs ``"dog a/b"`` and ``"none"``, all under ``policy``."""
-    from alcn_cv.train.trainer import CentreMixture, dog_weights, standardize
-
-    finish = standardize if policy == "standardize" else (lambda z: z)
+    finish = (lambda z: standardize_windows(z, STANDARDIZE_EPS)) if policy == "standardize" else (lambda z: z)
     mixture = model.mixture if model is not None else CentreMixture(
         tuple((i + 1) * step for i in range(num_kernels)))
     methods: dict[str, Method] = {}

@@ -14,10 +14,7 @@ per-window standardization the Normalizer was trained with, and trains a new det
 
 from __future__ import annotations
 
-import json
 import logging
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -27,11 +24,18 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from alcn_cv.errors import InputError
+from alcn_cv.filters.standardize import standardize_windows
+from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.detector import INPUT, Detector
 
-__all__ = ["NonFiniteLossError", "evaluate_detector", "main", "normalize_windows", "object_windows", "train_detector"]
+__all__ = ["STANDARDIZE_EPS", "NonFiniteLossError", "evaluate_detector", "main", "normalize_windows", "object_windows",
+           "train_detector"]
 
 logger = logging.getLogger(__name__)
+
+#: ``eps`` of the detector input's per-window standardization, in both stages (the shipped
+#: Normalizer was trained with it).
+STANDARDIZE_EPS = 1e-4
 
 _EVAL_BATCH = 1024
 
@@ -175,12 +179,6 @@ def train_detector(
     return net.eval()
 
 
-def standardize_windows(x: np.ndarray, eps: float = 1e-4) -> np.ndarray:
-    """Per-window standardization of ``(n, h, w)``: zero mean, unit variance per window."""
-    mean = x.mean(axis=(1, 2), keepdims=True)
-    return ((x - mean) / (x.std(axis=(1, 2), keepdims=True) + eps)).astype(np.float32)
-
-
 def normalize_windows(windows: np.ndarray, normalization, policy: str = "standardize") -> np.ndarray:
     """Normalize 64x64 windows and keep the detector's centre 32x32.
 
@@ -200,7 +198,7 @@ def normalize_windows(windows: np.ndarray, normalization, policy: str = "standar
     c = (64 - INPUT) // 2
     out = np.stack([normalization.normalize(w.astype(np.float32) / np.float32(255))[c : c + INPUT, c : c + INPUT]
                     for w in windows]) if len(windows) else np.zeros((0, INPUT, INPUT), np.float32)
-    return standardize_windows(out) if policy == "standardize" else out.astype(np.float32)
+    return standardize_windows(out, STANDARDIZE_EPS) if policy == "standardize" else out.astype(np.float32)
 
 
 def _read_objects(folder: Path) -> list[tuple[str, list[tuple[np.ndarray, object]]]]:
@@ -301,18 +299,10 @@ def main(
     net = train_detector(x, labels, len(objects) + 1, epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
                          progress=progress)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     path = out / "detector.pt"
     state = {"state_dict": net.state_dict(), "config": net.config, "classes": ["background"] + [n for n, _ in objects],
              "method": method, "policy": "standardize"}
-    fd, tmp = tempfile.mkstemp(dir=out, prefix="detector.pt", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(state, f)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    (out / "classes.json").write_text(json.dumps(state["classes"], indent=1))
+    atomic_write(path, lambda f: torch.save(state, f))
+    write_json(out / "classes.json", state["classes"])
     logger.info("detector written to %s", path)
     return path

@@ -1,4 +1,4 @@
-"""Distil a :class:`~alcn_cv.nets.lite.LiteNormalizer` from a Normalizer (issue 8).
+"""Distil a :class:`~alcn_cv.nets.lite.LiteNormalizer` from a Normalizer (``alcn distill``).
 
 The student learns to predict the teacher's mixture weights on the data engine's windows
 (:func:`alcn_cv.data.phos.render_windows`, the Normalizer's own training distribution). Both
@@ -21,18 +21,15 @@ warns when the installed teacher differs), and the validation fidelity; a model 
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import logging
 import os
-import platform
 import shlex
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import torch
 from tqdm.auto import tqdm
@@ -40,7 +37,9 @@ from tqdm.auto import tqdm
 from alcn_cv.data.phos import render_windows
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
+from alcn_cv.io import atomic_write
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
+from alcn_cv.train.summary import describe_machine
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file, save_normalizer_file
 
 __all__ = ["distill", "main", "output_gram"]
@@ -208,8 +207,6 @@ def main(
 
 
 def _write_card(path: Path, name: str, record: dict[str, Any], trained: bool, command: str) -> None:
-    from alcn_cv.io import atomic_write
-
     v, s = record["validation"], record["settings"]
     constant_note = (
         "\n- The teacher predicts the same weights for every window, so the student is those weights (its bias) "
@@ -235,7 +232,7 @@ ALCN warns when the installed teacher differs from this one: then re-run the com
   window's blurs) plus {s['weight_decay_w']} x the plain weight error. Adam, lr {s['lr']}, cosine schedule,
   {s['epochs']} epochs, batch {s['batch_size']}, seed {s['seed']}.{constant_note}
 - Time: {record['seconds']['total']} s ({record['seconds']['data_and_targets']} s rendering and teacher targets) on
-  {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs shared with other jobs.
+  {describe_machine()}.
 
 ## Fidelity to the teacher (validation windows)
 
@@ -252,44 +249,3 @@ Speed and the difference from the exact ALCN output on whole frames: `alcn bench
 """
     atomic_write(path, text)
 
-
-def add_cli(subparsers: Any) -> None:
-    """Add a ``distill`` sub-subcommand (for ``alcn train``'s sub-subcommands)."""
-    p = subparsers.add_parser(
-        "distill",
-        help="distil a light real-time Normalizer from a trained one",
-        description="Train a LiteNormalizer to reproduce a Normalizer's mixture weights on rendered windows; "
-        "writes the weight file and its model card (.md).",
-    )
-    _arguments(p)
-    p.set_defaults(func=_run_cli)
-
-
-def _arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", required=True, type=Path, help="weight file to write (.npz; the card is .md beside it)")
-    p.add_argument("--teacher", type=Path, default=None, help="teacher weight file (default: the shipped one)")
-    p.add_argument("--windows", type=int, default=20000, help="training windows (default 20000)")
-    p.add_argument("--val", type=int, default=2000, help="validation windows (default 2000)")
-    p.add_argument("--epochs", type=int, default=30, help="epochs (default 30)")
-    p.add_argument("--batch", type=int, default=256, help="batch size (default 256)")
-    p.add_argument("--lr", type=float, default=3e-3, help="Adam learning rate (default 3e-3)")
-    p.add_argument("--channels", type=lambda s: tuple(int(v) for v in s.split(",")), default=(8, 16),
-                   help="the student's widths c1,c2 (default 8,16)")
-    p.add_argument("--objects", type=int, default=100, help="objects in the rendered windows (default 100)")
-    p.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-
-
-def _run_cli(args: Any, command: str | None = None) -> int:
-    path = main(args.out, args.teacher, command, n_windows=args.windows, n_val=args.val, epochs=args.epochs,
-                batch_size=args.batch, lr=args.lr, channels=args.channels, n_objects=args.objects, seed=args.seed)
-    print(path.with_suffix(".md").read_text(encoding="utf-8"))
-    return 0
-
-
-if __name__ == "__main__":
-    parser = argparse.ArgumentParser(prog="python -m alcn_cv.nets.distill", description=__doc__.splitlines()[0])
-    _arguments(parser)
-    logging.basicConfig(level=logging.INFO)
-    cv2.setNumThreads(1)
-    torch.set_num_threads(1)
-    sys.exit(_run_cli(parser.parse_args(), " ".join(["python -m alcn_cv.nets.distill"] + [shlex.quote(a) for a in sys.argv[1:]])))

@@ -1,0 +1,110 @@
+"""``detect.md``, the report of the detection benchmark: machine, command, settings, input
+policies, and the AUC tables (mean and spread over seeds)."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from alcn_cv.bench.detect_settings import POLICY_DESCRIPTIONS, DetectSettings
+from alcn_cv.report import command_line, describe_machine, markdown_table
+
+__all__ = ["detect_command", "detect_markdown"]
+
+
+def detect_command(
+    data_dir: str | os.PathLike, out_dir: str | os.PathLike, settings: DetectSettings,
+    working_scale: float | None = None, box_size: float | None = None,
+) -> str:
+    """The ``alcn bench detect`` command line that runs these settings (``max_detections`` and
+    the preset aside, every setting spelled out)."""
+    return command_line(["alcn", "bench", "detect", "--data", data_dir, "--out", out_dir], {
+        "--methods": settings.methods, "--real-images": settings.real_images, "--policy": settings.policies,
+        "--positives": settings.positives_per_object, "--negatives-ratio": settings.negatives_ratio,
+        "--epochs": settings.epochs, "--batch-size": settings.batch_size, "--lr": settings.lr,
+        "--seeds": settings.seeds, "--tune": settings.tune,
+        "--cnn-sweep": [f"{d}x{w}" for d, w in settings.cnn_sweep],
+        "--nms-iou": settings.nms_iou, "--match-iou": settings.match_iou,
+        "--max-test-images": settings.max_test_images, "--working-scale": working_scale, "--box-size": box_size,
+        "--threads": settings.threads, "--device": settings.device,
+    })
+
+
+def _cell(spread: dict[str, Any] | None) -> str | None:
+    if spread is None:
+        return None
+    return f"{spread['mean']:.3f}" + (f" ± {spread['std']:.3f}" if len(spread["values"]) > 1 else "")
+
+
+def _header(result: dict[str, Any], settings: DetectSettings) -> list[str]:
+    seeds = settings.seeds
+    lines = [
+        "# Few-shot detection benchmark: ALCN against the other normalizations\n",
+        "ALCN against the classical normalizations and deep baselines (Rad, Roth & Lepetit, BMVC 2017, Sec. 4.3): "
+        "for every method the same detector is trained on the same synthetic windows, normalized by the method, "
+        "and scored on every window of the test images. AUC = area under the precision-recall curve (PASCAL VOC "
+        f"average precision), PASCAL criterion IoU >= {settings.match_iou} with fixed-size boxes.\n",
+        f"- **Machine:** {describe_machine(result['machine'])}",
+        f"- **Command:** `{result['command']}`",
+        f"- **Data:** `{result['data']}`, {len(result['test_images'])} test images at working scale "
+        f"{result['working_scale']} (boxes of {result['box_size']} px)",
+        f"- **Settings:** real training images per object {settings.real_images}; "
+        f"{settings.positives_per_object} synthetic object windows per object and {settings.negatives_ratio}x "
+        f"background windows; detector training {settings.epochs} epochs, batch {settings.batch_size}, "
+        f"Adam lr {settings.lr}, device {settings.device}; non-maximum suppression IoU {settings.nms_iou}, "
+        f"{settings.max_detections} detections per object and image; "
+        f"{'DoG, SLCN and DLCN tuned on the training windows' if settings.tune else 'every method with its defaults'}; "
+        f"plain CNN sweep {', '.join(f'{d}x{w}' for d, w in settings.cnn_sweep)} (depth x width). "
+        f"Total time {result['seconds']:.0f} s.",
+        "- **Input policies** (how the normalized windows reach the detector; the same for every method):",
+    ]
+    lines += [f"  - `{name}`{'' if name in settings.policies else ' (not run here)'}: {text}."
+              for name, text in POLICY_DESCRIPTIONS.items()]
+    if len(seeds) > 1:
+        lines.append(f"- **Seeds:** {len(seeds)} ({', '.join(map(str, seeds))}); every cell is the mean ± standard "
+                     "deviation over the seeds (a seed draws other training windows, detector initialisation and "
+                     "batch order).")
+    else:
+        lines.append(f"- **Seeds:** one ({seeds[0]}), so there is no spread: a single seed's AUC moves by several "
+                     "hundredths with the training windows and the detector's initialisation; read small "
+                     "differences with care, or rerun with `--seeds 0,1,2`.")
+    lines.append("")
+    if result.get("alcn_trained") is False:
+        lines.append("**The `alcn` row used UNTRAINED Normalizer weights** (the shipped file's `trained` flag is false).\n")
+    return lines
+
+
+def detect_markdown(result: dict[str, Any], names: list[str]) -> str:
+    """The Markdown report of a benchmark result (the contents of ``detect.json``), one column per
+    object of ``names``."""
+    settings = DetectSettings(**result["settings"])
+    lines = _header(result, settings)
+    for n_real in settings.real_images:
+        for policy in settings.policies:
+            rows = []
+            for method in settings.methods:
+                summary = result["summary"][f"{method}|{n_real}|{policy}"]
+                if "error" in summary:
+                    rows.append([method] + ["failed"] * (len(names) + 1))
+                    continue
+                failed = f" ({len(summary['failed_seeds'])} seed(s) failed)" if summary["failed_seeds"] else ""
+                rows.append([method + failed] + [_cell(summary["objects"][n]) for n in names] + [_cell(summary["mean"])])
+            lines.append(f"\n## {n_real} real image(s) per object, input policy `{policy}`\n")
+            lines.append(markdown_table(["method"] + names + ["mean"], rows))
+    failures = [f"- `{k}`: {v['error']}" for k, v in result["runs"].items() if "error" in v]
+    if failures:
+        lines.append("\n## Failures\n\n" + "\n".join(failures) + "\n")
+    if result.get("tuned"):
+        lines.append("\n## Tuned parameters (relit 1-NN accuracy on the training windows)\n")
+        for n_real, tuned in result["tuned"].items():
+            for m, t in tuned.items():
+                best = max(t["trials"], key=lambda x: x["score"])
+                lines.append(f"- {n_real} real: `{m}` {t['params']} ({best['score']:.3f})")
+        lines.append("")
+    if result.get("cnn"):
+        lines.append("\n## Plain CNN sweep (chosen by accuracy on relit held-out training windows)\n")
+        for key, c in result["cnn"].items():
+            lines.append(f"- {key}: chosen depth {c['chosen']['depth']} width {c['chosen']['width']}; "
+                         + ", ".join(f"{s['depth']}x{s['width']}: {s['val_acc']:.3f}" for s in c["sweep"]))
+        lines.append("")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,155 @@
+"""What a training run saves: its checkpoint, and the trained Normalizer's weight file.
+
+The checkpoint (``checkpoint.pt``, written atomically after every epoch and on Ctrl-C) holds
+the model, the optimizer, the torch random state and the :class:`TrainState`, so that a run
+resumed from it ends with the same weights as an uninterrupted one. The weight file
+(``alcn_normalizer.npz``, :mod:`alcn_cv.weight_file`) holds the Normalizer with ``trained = True``
+and the record of its training.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+
+from alcn_cv.data.phos import PhosBatch
+from alcn_cv.errors import WeightFileError
+from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
+from alcn_cv.io import atomic_write
+from alcn_cv.report import machine
+from alcn_cv.train.config import TrainConfig
+from alcn_cv.train.models import JointModel, measure_output_range
+from alcn_cv.weight_file import save_normalizer_file
+
+if TYPE_CHECKING:
+    from alcn_cv.train.trainer import TrainResult
+
+__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "TrainState", "load_checkpoint", "restore_checkpoint",
+           "save_checkpoint", "versions", "write_normalizer_file"]
+
+CHECKPOINT_FORMAT = "alcn-cv/checkpoint"
+CHECKPOINT_VERSION = 1
+
+
+@dataclass
+class TrainState:
+    """Where a run is.
+
+    Attributes:
+        history: one dict per finished epoch.
+        epoch: the current epoch (0-based; equals the number of finished epochs).
+        step_in_epoch: optimisation steps done in the current epoch.
+        sums: the current epoch's running ``[loss sum, correct windows, windows]``.
+        start: the :func:`time.perf_counter` origin of the run's clock (moved back by the time
+            already spent when resuming).
+    """
+
+    history: list[dict[str, Any]] = field(default_factory=list)
+    epoch: int = 0
+    step_in_epoch: int = 0
+    sums: list[float] = field(default_factory=lambda: [0.0, 0, 0])
+    start: float = field(default_factory=time.perf_counter)
+
+    def elapsed(self) -> float:
+        """Seconds of the run so far (across resumptions)."""
+        return time.perf_counter() - self.start
+
+
+def versions() -> dict[str, str]:
+    """The versions that write a checkpoint or weight file."""
+    import alcn_cv
+
+    return {"alcn_cv": str(alcn_cv.__version__), "torch": str(torch.__version__)}
+
+
+def save_checkpoint(path: Path, cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optimizer,
+                    state: TrainState, status: str) -> None:
+    """Write the checkpoint atomically (``status``: ``"epoch"`` or ``"interrupted"``)."""
+    ckpt = {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "versions": versions(),
+            "config": cfg.to_dict(), "status": status, "epoch": state.epoch, "step_in_epoch": state.step_in_epoch,
+            "sums": state.sums, "history": state.history, "model": model.state_dict(),
+            "optimizer": optimizer.state_dict(), "rng": torch.get_rng_state(), "elapsed": state.elapsed()}
+    atomic_write(path, lambda f: torch.save(ckpt, f))
+
+
+def load_checkpoint(path: str | Path, cfg: TrainConfig | None = None) -> dict[str, Any]:
+    """Read a training checkpoint and check that it fits ``cfg``.
+
+    Raises:
+        WeightFileError: missing, corrupt, of another format or version (the message gives the
+            versions that wrote it and this one), or written for another model configuration.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise WeightFileError(f"checkpoint not found: {path}")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many kinds for a damaged zip or pickle
+        raise WeightFileError(f"checkpoint {path} is corrupt or unreadable ({type(exc).__name__}: {exc})") from None
+    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
+        raise WeightFileError(f"{path} is not an alcn-cv training checkpoint")
+    if ckpt.get("version") != CHECKPOINT_VERSION:
+        raise WeightFileError(
+            f"{path}: checkpoint version {ckpt.get('version')} written by {ckpt.get('versions')}; this alcn-cv "
+            f"({versions()}) reads version {CHECKPOINT_VERSION}"
+        )
+    if cfg is not None:
+        saved = ckpt["config"]
+        now = cfg.to_dict()
+        diff = [f"{t}.{k}" for t in ("model", "data") for k in now[t] if saved[t].get(k) != now[t][k]]
+        diff += [k for k in ("seed",) if saved[k] != now[k]]
+        diff += [f"optim.{k}" for k in now["optim"] if saved["optim"].get(k) != now["optim"][k]]
+        if diff:
+            raise WeightFileError(
+                f"checkpoint {path} was written with another configuration (differs in {', '.join(diff)}; "
+                f"written by {ckpt.get('versions')}); start a new run folder or use its configuration"
+            )
+    return ckpt
+
+
+def restore_checkpoint(ckpt: dict[str, Any], model: JointModel, optimizer: torch.optim.Optimizer,
+                       start: float) -> TrainState:
+    """Load a checkpoint read by :func:`load_checkpoint` into the model, the optimizer and torch's
+    random state; return the run's state, its clock (started at ``start``) moved back by the time
+    the checkpoint records."""
+    model.load_state_dict(ckpt["model"])
+    optimizer.load_state_dict(ckpt["optimizer"])
+    torch.set_rng_state(ckpt["rng"])
+    return TrainState(ckpt["history"], ckpt["epoch"], ckpt["step_in_epoch"], ckpt["sums"], start - ckpt["elapsed"])
+
+
+def write_normalizer_file(model: JointModel, cfg: TrainConfig, train_set: PhosBatch, result: TrainResult,
+                          seconds: float) -> Path:
+    """Write the trained Normalizer as ``alcn_normalizer.npz`` in the run folder.
+
+    The header gets the output range measured on up to 4000 training windows (drawn with
+    ``cfg.seed``), the detector input policy and the record of the training (configuration,
+    versions, validation, few-shot validation, time, machine).
+    """
+    if model.normalizer is None:
+        raise ValueError(f"model.method {cfg.model.method!r} has no Normalizer to write")
+    rng = np.random.default_rng(cfg.seed)
+    sample = train_set.windows[rng.choice(len(train_set), min(len(train_set), 4000), replace=False)]
+    model.eval()
+    net = model.normalizer
+    config = dict(net.config)
+    config["init_weights"] = None  # the arrays hold the trained weights
+    meta = {
+        "config": config,
+        "sigmas": list(gaussian_sigmas(cfg.model.num_kernels, cfg.model.sigma_step)),
+        "working_scale": cfg.model.working_scale,
+        "output_range": measure_output_range(model, sample),
+        "trained": True,
+        "detector_input": cfg.model.detector_input,
+        "description": f"trained with a detector by `alcn train` (objective {cfg.optim.objective!r}), seed {cfg.seed}, "
+                       f"{len(train_set)} windows of {train_set.n_objects} objects, {seconds / 60:.1f} min",
+        "training": {"config": cfg.to_dict(), "versions": versions(), "val_accuracy": result.val_accuracy,
+                     "val_by_family": result.val_by_family, "fewshot": result.fewshot, "seconds": round(seconds, 1),
+                     "machine": machine()},
+    }
+    return save_normalizer_file(result.out_dir / "alcn_normalizer.npz", net.state_arrays(), meta)

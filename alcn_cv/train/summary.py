@@ -1,0 +1,77 @@
+"""The human-readable outputs of a training run: ``curves.png`` and ``summary.md``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from alcn_cv.report import machine, new_figure, save_figure
+from alcn_cv.train.checkpoint import versions
+from alcn_cv.train.config import TrainConfig
+
+if TYPE_CHECKING:
+    from alcn_cv.train.trainer import TrainResult
+
+__all__ = ["describe_machine", "plot_curves", "summary_markdown"]
+
+
+def describe_machine(info: dict[str, Any] | None = None) -> str:
+    """One line of :func:`alcn_cv.report.machine` (default: now): CPU, cores, torch threads, GPU, load."""
+    info = machine() if info is None else info
+    parts = [f"{info.get('cpu_model') or info['processor']}, {info['cpu_count']} cores"]
+    if info.get("cpus_available", info["cpu_count"]) != info["cpu_count"]:
+        parts.append(f"{info['cpus_available']} available")
+    if "torch_threads" in info:
+        parts.append(f"torch threads {info['torch_threads']}")
+    if info.get("cuda"):
+        parts.append(f"CUDA {info['cuda']}")
+    if "load_average_1_5_15" in info:
+        parts.append("load average {:.1f}/{:.1f}/{:.1f} (1/5/15 min)".format(*info["load_average_1_5_15"]))
+    return ", ".join(parts)
+
+
+def plot_curves(history: list[dict[str, Any]], path: Path) -> None:
+    """Loss and accuracy per epoch, training and held-out validation (per lighting family too)."""
+    plt, fig, axes = new_figure(1, 2, figsize=(10, 4))
+    ax1, ax2 = axes[0]
+    epochs = [h["epoch"] for h in history]
+    ax1.plot(epochs, [h["train_loss"] for h in history], "o-", label="training")
+    ax1.plot(epochs, [h["val_loss"] for h in history], "o-", label="validation (held-out lightings)")
+    ax1.set(xlabel="epoch", ylabel="cross-entropy", title="loss")
+    ax2.plot(epochs, [h["train_acc"] for h in history], "o-", label="training")
+    ax2.plot(epochs, [h["val_acc"] for h in history], "o-", lw=2, label="validation, all held-out")
+    for fam in history[-1]["val_by_family"]:
+        ax2.plot(epochs, [h["val_by_family"][fam] for h in history], "--", label=f"validation, {fam}")
+    ax2.set(xlabel="epoch", ylabel="accuracy", title="accuracy", ylim=(0, 1))
+    for ax in (ax1, ax2):
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    save_figure(plt, fig, path, dpi=100)
+
+
+def summary_markdown(cfg: TrainConfig, result: TrainResult, machine_start: dict[str, Any]) -> str:
+    """A Markdown summary of a run: settings, time, machine, held-out and few-shot validation."""
+    lines = [f"# `alcn train` run: {cfg.model.method}", "",
+             f"- status: {result.status}; {len(result.history)} epoch(s); training "
+             f"{result.history[-1]['seconds'] / 60 if result.history else 0:.1f} min, whole run (data, training, "
+             f"few-shot validation, export) {result.seconds / 60:.1f} min",
+             f"- machine at start: {describe_machine(machine_start)}", f"- machine at end: {describe_machine()}",
+             f"- versions: {versions()}", f"- seed {cfg.seed}; configuration: `config.toml` in this folder", "",
+             "## Held-out lightings (stage 1: the training objects, lighting families never trained on)", "",
+             "| epoch | train acc | held-out acc | " + " | ".join(result.val_by_family) + " |",
+             "|---|---|---|" + "---|" * len(result.val_by_family)]
+    for h in result.history:
+        lines.append(f"| {h['epoch']} | {h['train_acc']:.4f} | {h['val_acc']:.4f} | "
+                     + " | ".join(f"{h['val_by_family'].get(f, float('nan')):.4f}" for f in result.val_by_family)
+                     + " |")
+    if result.fewshot:
+        families = list(next(iter(result.fewshot.values()))["by_family"])
+        lines += ["", "## Few-shot validation (stage 2: new objects, 1 image under one light; same detector and "
+                  f"input policy `{cfg.model.detector_input}` for every method)", "",
+                  "AUC object vs. background (accuracy over background + objects in brackets)", "",
+                  "| method | all | " + " | ".join(families) + " |", "|---|---|" + "---|" * len(families)]
+        for name, r in result.fewshot.items():
+            lines.append(f"| {name} | {r['auc']:.4f} ({r['accuracy']:.3f}) | "
+                         + " | ".join(f"{r['by_family'][f]['auc']:.4f}" for f in families) + " |")
+    return "\n".join(lines) + "\n"

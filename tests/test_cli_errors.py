@@ -1,0 +1,132 @@
+"""``alcn normalize`` on bad files, paths and flags: exit status 2, one line that names the
+problem, no traceback, and no output that looks complete."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Callable
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.cli import main
+from alcn_cv.enhance.alcn import MODELS
+
+
+def _image(path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(0)
+    cv2.imwrite(str(path), cv2.GaussianBlur((rng.random((60, 80, 3)) * 255).astype(np.uint8), (0, 0), 2))
+    return path
+
+
+def _truncated(path: Path, fraction: float = 0.5) -> Path:
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * fraction)])
+    return path
+
+
+def _video(path: Path, frames: int = 20) -> Path:
+    img = cv2.imread(str(_image(path.with_suffix(".png"))))
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (80, 60))
+    for i in range(frames):
+        writer.write(np.roll(img, 3 * i, axis=1))
+    writer.release()
+    return path
+
+
+def _weights(path: Path, poison: float) -> Path:
+    with np.load(MODELS["lite"]) as data:
+        arrays = {k: data[k] for k in data.files}
+    key = next(k for k in arrays if k != "__meta__")
+    arrays[key] = arrays[key].copy()
+    arrays[key].flat[0] = poison
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    path.write_bytes(buffer.getvalue())
+    return path
+
+
+def _empty(path: Path) -> Path:
+    path.write_bytes(b"")
+    return path
+
+
+def _file(path: Path) -> Path:
+    path.write_text("not a folder")
+    return path
+
+
+# (arguments from tmp_path, words the message must hold, output that must not exist)
+Case = tuple[Callable[[Path], list[str]], list[str], str]
+CASES: dict[str, Case] = {
+    "image to a name without extension": (
+        lambda t: [_image(t / "in.png"), t / "out" / "noext"], ["noext", "image file"], "out/noext"),
+    "image to a video name": (lambda t: [_image(t / "in.png"), t / "out" / "x.mp4"], ["x.mp4", "image file"], "out/x.mp4"),
+    "image under a file": (lambda t: [_image(t / "in.png"), _file(t / "blocker") / "x.png"], ["blocker is a file"], "blocker/x.png"),
+    "folder to a file": (
+        lambda t: [_image(t / "dir" / "a.png").parent, _file(t / "blocker")], ["blocker is a file"], "blocker/a.png"),
+    "truncated JPEG": (lambda t: [_truncated(_image(t / "cut.jpg")), t / "out.png"], ["cut.jpg", "truncated"], "out.png"),
+    "truncated PNG": (lambda t: [_truncated(_image(t / "cut.png")), t / "out.png"], ["cut.png"], "out.png"),
+    "truncated video": (
+        lambda t: [_truncated(_video(t / "v.avi"), 0.6), t / "out.avi", "-m", "none"], ["v.avi", "of 20 frames"], "out.avi"),
+    "empty weight file": (
+        lambda t: [_image(t / "in.png"), t / "out.png", "-p", f"weights={_empty(t / 'w.npz')}"], ["w.npz", "empty"], "out.png"),
+    "random bytes weight file": (
+        lambda t: [_image(t / "in.png"), t / "out.png", "-p", f"weights={_truncated(_image(t / 'w.png'), 1.0)}"],
+        ["w.png", "not a .npz"], "out.png"),
+    "NaN weights": (
+        lambda t: [_image(t / "in.png"), t / "out.png", "-p", f"weights={_weights(t / 'nan.npz', np.nan)}"],
+        ["nan.npz", "NaN"], "out.png"),
+    "inf weights": (
+        lambda t: [_image(t / "in.png"), t / "out.png", "-p", f"weights={_weights(t / 'inf.npz', np.inf)}"],
+        ["inf.npz", "infinite"], "out.png"),
+    "parameter not a number": (lambda t: [_image(t / "in.png"), t / "out.png", "-p", "scale=abc"], ["'alcn'", "scale='abc'"], "out.png"),
+    "unknown parameter": (lambda t: [_image(t / "in.png"), t / "out.png", "-m", "dog", "-p", "sigma=2"], ["'dog'", "sigma1"], "out.png"),
+    "no input": (lambda t: [], ["INPUT"], "out.png"),
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, case):
+    make_args, words, output = CASES[case]
+    args = ["normalize", *map(str, make_args(tmp_path))]
+    capsys.readouterr()
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    errors = [line for line in err.splitlines() if "error" in line.lower()]
+    assert len(errors) == 1 and errors[0].startswith("alcn normalize: error:"), err
+    for word in words:
+        assert word in errors[0], (word, errors[0])
+    assert not (tmp_path / output).exists()
+    assert not [p for p in tmp_path.rglob(".*") if "tmp" in p.name], "temporary file left behind"
+
+
+def test_partial_video_on_request(tmp_path, capsys):
+    src = _truncated(_video(tmp_path / "v.avi"), 0.6)
+    assert main(["normalize", str(src), str(tmp_path / "out.avi"), "-m", "none", "--allow-partial"]) == 0
+    assert (tmp_path / "out.avi").is_file()
+
+
+def test_interrupted_folder_leaves_no_temporary_file(tmp_path, monkeypatch, capsys):
+    for name in ("a.png", "b.png", "c.png"):
+        _image(tmp_path / "in" / name)
+    imwrite = cv2.imwrite
+    calls = []
+
+    def interrupted_imwrite(path: str, img: np.ndarray) -> bool:
+        calls.append(path)
+        ok = imwrite(path, img)  # the temporary file is complete when the interrupt comes
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return ok
+
+    monkeypatch.setattr(cv2, "imwrite", interrupted_imwrite)
+    assert main(["normalize", str(tmp_path / "in"), str(tmp_path / "out"), "-m", "none"]) == 130
+    monkeypatch.undo()
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["a.png"]  # no hidden .b.*.tmp.png
+    assert main(["normalize", str(tmp_path / "out"), str(tmp_path / "again"), "-m", "none"]) == 0
+    assert sorted(p.name for p in (tmp_path / "again").iterdir()) == ["a.png"]

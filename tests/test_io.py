@@ -1,0 +1,132 @@
+"""alcn_cv.io: truncated images and videos, output paths under a file, alpha, interrupted writes."""
+
+from __future__ import annotations
+
+import logging
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.errors import InputError
+from alcn_cv.io import atomic_path, list_images, make_folder, map_video, read_image, write_image
+
+
+@pytest.fixture
+def image() -> np.ndarray:
+    rng = np.random.default_rng(0)
+    return cv2.GaussianBlur((rng.random((120, 160, 3)) * 255).astype(np.uint8), (0, 0), 2)
+
+
+def _truncate(path, fraction=0.5):
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * fraction)])
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".jpg", ".png"])
+def test_truncated_image_is_an_error_naming_the_file(tmp_path, image, suffix):
+    path = tmp_path / f"cut{suffix}"
+    cv2.imwrite(str(path), image)
+    assert read_image(path).shape == image.shape
+    _truncate(path)
+    with pytest.raises(InputError, match="cut" + suffix):
+        read_image(path)
+
+
+def test_truncated_jpeg_with_a_thumbnail_end_marker(tmp_path, image):
+    """An EXIF thumbnail holds its own end-of-image marker before the main image's scan: it
+    must not make a truncated file pass."""
+    ok, encoded = cv2.imencode(".jpg", image)
+    data = encoded.tobytes()
+    payload = b"Exif\x00\x00" + b"\xff\xd8 thumbnail \xff\xd9"
+    app1 = b"\xff\xe1" + (len(payload) + 2).to_bytes(2, "big") + payload
+    full = data[:2] + app1 + data[2:]
+    path = tmp_path / "thumb.jpg"
+    path.write_bytes(full)
+    assert read_image(path).shape == image.shape
+    path.write_bytes(full[: len(full) // 2])
+    with pytest.raises(InputError, match="truncated"):
+        read_image(path)
+
+
+def test_empty_image_file(tmp_path):
+    (tmp_path / "empty.png").write_bytes(b"")
+    with pytest.raises(InputError, match="empty.png"):
+        read_image(tmp_path / "empty.png")
+
+
+def test_alpha_is_kept_on_request(tmp_path, image):
+    bgra = np.dstack([image, np.arange(image.size // 3, dtype=np.uint32).reshape(image.shape[:2]).astype(np.uint8)])
+    cv2.imwrite(str(tmp_path / "a.png"), bgra)
+    np.testing.assert_array_equal(read_image(tmp_path / "a.png", alpha=True), bgra)
+    assert read_image(tmp_path / "a.png").shape == image.shape
+
+
+def test_gray_and_alpha_are_written_as_bgra(tmp_path, image):
+    gray_alpha = np.dstack([image[..., 0], image[..., 1]])
+    written = cv2.imread(str(write_image(tmp_path / "ga.png", gray_alpha)), cv2.IMREAD_UNCHANGED)
+    assert written.shape == image.shape[:2] + (4,)
+    np.testing.assert_array_equal(written[..., 2], image[..., 0])
+    np.testing.assert_array_equal(written[..., 3], image[..., 1])
+
+
+@pytest.mark.parametrize("name", ["noext", "x.mp4", "x.txt"])
+def test_write_image_needs_an_image_extension(tmp_path, image, name):
+    with pytest.raises(InputError, match=name):
+        write_image(tmp_path / name, image)
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_parent_that_is_a_file_is_named(tmp_path, image):
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(InputError, match=r"file is a file") as info:
+        write_image(tmp_path / "file" / "sub" / "x.png", image)
+    assert str(tmp_path / "file") in str(info.value)
+    with pytest.raises(InputError, match="is a file"):
+        make_folder(tmp_path / "file")
+    assert make_folder(tmp_path / "new" / "deeper").is_dir()
+
+
+def test_interrupt_leaves_no_temporary_file_and_temporary_files_are_no_inputs(tmp_path, image):
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_path(tmp_path / "out.png") as tmp:
+            cv2.imwrite(str(tmp), image)  # a complete image under the temporary name
+            raise KeyboardInterrupt
+    assert not list(tmp_path.iterdir())
+    cv2.imwrite(str(tmp_path / ".out.abc.tmp.png"), image)  # left by an older version
+    cv2.imwrite(str(tmp_path / "real.png"), image)
+    assert [p.name for p in list_images(tmp_path)] == ["real.png"]
+
+
+def _video(path, frames: int, image: np.ndarray):
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, image.shape[1::-1])
+    for i in range(frames):
+        writer.write(np.roll(image, 4 * i, axis=1))
+    writer.release()
+    return path
+
+
+def test_truncated_video_is_an_error_unless_partial_is_allowed(tmp_path, image, caplog):
+    src = _truncate(_video(tmp_path / "in.avi", 20, image), 0.6)
+    dst = tmp_path / "out.avi"
+    with pytest.raises(InputError, match=r"decoded \d+ of 20 frames"):
+        map_video(src, dst, lambda frame: frame)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.avi"]  # no output that looks complete
+    with caplog.at_level(logging.WARNING, logger="alcn_cv.io"):
+        count = map_video(src, dst, lambda frame: frame, allow_partial=True)
+    assert 0 < count < 20 and dst.is_file()
+    assert f"decoded {count} of 20 frames" in caplog.text
+
+
+def test_complete_video(tmp_path, image):
+    src = _video(tmp_path / "in.avi", 6, image)
+    assert map_video(src, tmp_path / "out.avi", lambda frame: frame) == 6
+
+
+def test_a_header_one_frame_too_high_is_no_truncation(shared_data, tmp_path):
+    """cookie_box/box.mp4's header says 456 frames, FFmpeg decodes 455: not a truncated video."""
+    src = shared_data / "cookie_box" / "box.mp4"
+    if not src.is_file():
+        pytest.skip(f"{src} not found")
+    assert map_video(src, tmp_path / "out.avi", lambda frame: frame[::8, ::8]) >= 455
