@@ -1,8 +1,8 @@
 """The ``alcn`` command: one subcommand per pipeline stage.
 
 The subcommands are the entry points of the group ``alcn_cv.commands`` (declared in
-``pyproject.toml``; discovered with :func:`importlib.metadata.entry_points`, and read from the
-checkout's ``pyproject.toml`` when run from one; listed by name): each names an ``add_parser(subparsers)`` function, which adds its subcommand and sets
+``pyproject.toml``, discovered with :func:`importlib.metadata.entry_points`, listed by name):
+each names an ``add_parser(subparsers)`` function, which adds its subcommand and sets
 ``func`` (called with the parsed ``argparse.Namespace``) as the default. A subcommand whose
 module needs an extra that is not installed is still listed; running it prints the one line
 that names the extra. Errors from bad input end the command with a one-line message and exit
@@ -16,7 +16,8 @@ import logging
 import sys
 from importlib import metadata
 
-from alcn_cv.errors import MissingDependencyError, checkout_project, missing_extra
+from alcn_cv.errors import MissingDependencyError
+from alcn_cv.extras import missing_extra
 
 logger = logging.getLogger("alcn_cv")
 
@@ -37,12 +38,8 @@ def _add_unavailable(subparsers: argparse._SubParsersAction, name: str, error: M
 
 
 def command_entry_points() -> list[metadata.EntryPoint]:
-    """The subcommands' entry points, by name: the installed ones, and those of the checkout
-    alcn_cv runs from (which win: the installed metadata may be older than the checkout)."""
-    found = {entry.name: entry for entry in metadata.entry_points(group=COMMANDS_GROUP)}
-    for name, value in checkout_project().get("entry-points", {}).get(COMMANDS_GROUP, {}).items():
-        found[name] = metadata.EntryPoint(name, value, COMMANDS_GROUP)
-    return [found[name] for name in sorted(found)]
+    """The subcommands' entry points (installed metadata), by name."""
+    return sorted(metadata.entry_points(group=COMMANDS_GROUP), key=lambda entry: entry.name)
 
 
 def _add_commands(subparsers: argparse._SubParsersAction) -> None:

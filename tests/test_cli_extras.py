@@ -5,7 +5,8 @@ import pytest
 
 from alcn_cv.cli import main
 from alcn_cv.commands import normalize
-from alcn_cv.errors import MissingDependencyError, extra_providing, missing_dependency
+from alcn_cv.errors import MissingDependencyError
+from alcn_cv.extras import extra_providing, missing_dependency
 
 ALCN = "import sys; from alcn_cv.cli import main; sys.exit(main(sys.argv[1:]))"
 

@@ -24,6 +24,7 @@ RUNTIME = (
     "alcn_cv/checks.py",
     "alcn_cv/cli.py",
     "alcn_cv/errors.py",
+    "alcn_cv/extras.py",
     "alcn_cv/io.py",
     "alcn_cv/weight_file.py",
     "alcn_cv/enhance/",

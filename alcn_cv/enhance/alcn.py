@@ -26,7 +26,8 @@ import numpy as np
 from alcn_cv.checks import unit_windows
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
-from alcn_cv.errors import InputError, is_installed, require
+from alcn_cv.errors import InputError
+from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, pyramid_mixture
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 

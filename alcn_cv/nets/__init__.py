@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import importlib
 
-from alcn_cv.errors import missing_extra
+from alcn_cv.extras import missing_extra
 
 __all__ = ["Detector", "Normalizer", "OpenCVNormalizer", "reflect101_pad"]
 

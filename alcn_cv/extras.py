@@ -1,0 +1,125 @@
+"""Optional extras: which extra of alcn-cv installs a package, and the one-line error naming it.
+
+The base install (NumPy, OpenCV, SciPy, tqdm) runs every normalization; training, the data
+engine, benchmarks and pose need extras (``pip install "alcn-cv[train]"``, ...). A command or
+function that needs a package that is not installed raises
+:class:`~alcn_cv.errors.MissingDependencyError`, whose message names the extra, read from the
+installed metadata of the distribution.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+from importlib import metadata
+
+from alcn_cv.errors import MissingDependencyError
+
+__all__ = ["extra_providing", "is_installed", "missing_dependency", "missing_extra", "require"]
+
+DISTRIBUTION = "alcn-cv"
+
+#: Import names whose distributions are named otherwise (the others are named as they import).
+_DISTRIBUTIONS_OF = {"skimage": ("scikit-image",), "PIL": ("pillow",), "open3d": ("open3d", "open3d-cpu")}
+#: Extras that only gather others, or tools for developers: never the one to name.
+_GATHERING_EXTRAS = ("all", "dev")
+
+
+def _normalized(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def _extras_table() -> dict[str, list[str]]:
+    """Each extra's requirements, from the installed metadata of alcn-cv."""
+    try:
+        requirements = metadata.requires(DISTRIBUTION) or []
+    except metadata.PackageNotFoundError:
+        return {}
+    table: dict[str, list[str]] = {}
+    for requirement in requirements:
+        marker = re.search(r"""extra\s*==\s*["']([\w.-]+)["']""", requirement)
+        if marker:
+            table.setdefault(marker.group(1), []).append(requirement)
+    return table
+
+
+def _extras_requirements() -> dict[str, set[str]]:
+    """Each extra and the distributions it installs (``alcn-cv[a,b]`` within it expanded)."""
+    direct: dict[str, set[str]] = {}
+    for extra, requirements in _extras_table().items():
+        for requirement in requirements:
+            name = re.match(r"\s*([A-Za-z0-9][\w.-]*)(?:\[([^\]]*)\])?", requirement)
+            if name and _normalized(name.group(1)) == DISTRIBUTION:
+                direct.setdefault(extra, set()).update(f"[{e.strip()}]" for e in (name.group(2) or "").split(",") if e.strip())
+            elif name:
+                direct.setdefault(extra, set()).add(_normalized(name.group(1)))
+
+    def expand(extra: str, seen: frozenset[str] = frozenset()) -> set[str]:
+        found: set[str] = set()
+        for entry in direct.get(extra, ()):
+            if entry.startswith("["):
+                if entry[1:-1] not in seen:
+                    found |= expand(entry[1:-1], seen | {extra})
+            else:
+                found.add(entry)
+        return found
+
+    return {extra: expand(extra) for extra in direct}
+
+
+def extra_providing(module: str, preferred: str | None = None) -> str | None:
+    """The extra of alcn-cv that installs the package of ``module`` (an import name).
+
+    Read from the installed metadata. ``preferred`` (for instance the command that failed) wins when it installs the package; otherwise the extra that
+    installs the fewest packages. None when no extra installs it or alcn-cv is not installed.
+    """
+    top = module.split(".")[0]
+    wanted = {_normalized(name) for name in _DISTRIBUTIONS_OF.get(top, (top,))}
+    candidates = {
+        extra: dists for extra, dists in _extras_requirements().items() if wanted & dists and extra not in _GATHERING_EXTRAS
+    }
+    if not candidates:
+        return None
+    if preferred in candidates:
+        return preferred
+    return min(candidates, key=lambda extra: (len(candidates[extra]), extra))
+
+
+def missing_dependency(module: str, what: str, preferred: str | None = None) -> MissingDependencyError:
+    """The error for ``what`` (a command or function) needing ``module``, which is not installed.
+
+    Its message is one line naming the extra to install, e.g.
+    ``alcn train: needs the [train] extra: pip install "alcn-cv[train]"``.
+    """
+    extra = extra_providing(module, preferred)
+    top = module.split(".")[0]
+    if extra is None:
+        return MissingDependencyError(f"{what}: needs {top}, which is not installed: pip install {_DISTRIBUTIONS_OF.get(top, (top,))[0]}")
+    error = MissingDependencyError(
+        f'{what}: needs the [{extra}] extra ({top} is not installed): pip install "{DISTRIBUTION}[{extra}]"'
+    )
+    error.extra = extra
+    return error
+
+
+def is_installed(module: str) -> bool:
+    """Whether ``module`` can be imported (found on the path), without importing it."""
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):  # a parent package missing or blocked, or a broken spec
+        return False
+
+
+def require(*modules: str, what: str, preferred: str | None = None) -> None:
+    """Raise :func:`missing_dependency`'s error for the first of ``modules`` not installed."""
+    for module in modules:
+        if not is_installed(module):
+            raise missing_dependency(module, what, preferred)
+
+
+def missing_extra(exc: ModuleNotFoundError, what: str, preferred: str | None = None) -> MissingDependencyError | None:
+    """:func:`missing_dependency`'s error for the module ``exc`` did not find, when an extra of
+    alcn-cv installs that module; None otherwise (a module of no extra missing is a bug)."""
+    if exc.name is None or extra_providing(exc.name) is None:
+        return None
+    return missing_dependency(exc.name, what, preferred)
