@@ -228,3 +228,14 @@ def test_alcn_opencv_backend_runs_without_torch(random_head_weights, run_without
         out = alcn.apply((np.random.rand(48, 64) * 255).astype(np.uint8))
         assert out.shape == (48, 64) and out.dtype == np.uint8
     """)
+
+
+def test_alcn_window_in_input_pixels_and_small_images(caplog, monkeypatch):
+    from alcn_cv.enhance import base
+
+    monkeypatch.setattr(base, "_WARNED_SMALL", set())
+    assert alcn_cv.createALCN(scale=0.5).min_size == 96 and alcn_cv.createALCN(scale=1.0).min_size == 48
+    with caplog.at_level("WARNING", logger="alcn_cv.enhance.base"):
+        out = alcn_cv.createALCN().apply(np.full((47, 47), 128, np.uint8))
+    assert out.shape == (47, 47)
+    assert any("96 px window" in r.getMessage() for r in caplog.records)

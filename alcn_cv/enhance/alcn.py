@@ -15,6 +15,7 @@ measures both and their difference, ``alcn bench detect`` their detection accura
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -29,6 +30,7 @@ from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, pyramid_mixture
+from alcn_cv.nets.opencv_runtime import WINDOW
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 
 if TYPE_CHECKING:
@@ -91,6 +93,8 @@ class ALCN(Normalization):
     """
 
     name = "alcn"
+    summary = "Adaptive Local Contrast Normalization: a CNN predicts per-pixel weights of 10 Gaussian kernels (Eq. 3)"
+    reference = "Rad, Roth & Lepetit, BMVC 2017"
 
     def __init__(
         self,
@@ -163,6 +167,12 @@ class ALCN(Normalization):
             raise InputError(f"weight file has {len(self.sigmas)} sigmas for {meta['config']['num_kernels']} outputs")
 
     @property
+    def min_size(self) -> int:  # type: ignore[override] -- the window's side depends on the scale
+        """The Normalizer's 48-pixel window in input pixels: ``ceil(48 / scale)``; smaller images
+        are mirrored at their borders to fill it (a one-time warning says so)."""
+        return math.ceil(WINDOW / self.scale)
+
+    @property
     def full_res_sigmas(self) -> tuple[float, ...]:
         """The mixture's sigmas in input pixels: ``sigma_k / scale``."""
         return tuple(s / self.scale for s in self.sigmas)
@@ -214,8 +224,6 @@ class ALCN(Normalization):
             ``(n, N)`` float32, the weights of the N Gaussian kernels (sigmas :attr:`sigmas`,
             in working-scale pixels).
         """
-        from alcn_cv.nets.normalizer import WINDOW
-
         if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.shape[1:] != (WINDOW, WINDOW):
             raise InputError(f"windows must be (n, {WINDOW}, {WINDOW}), got {getattr(windows, 'shape', type(windows))}")
         windows = np.ascontiguousarray(windows, dtype=np.float32)
@@ -245,8 +253,6 @@ class ALCN(Normalization):
         Returns:
             ``(n, S, S)`` float32.
         """
-        from alcn_cv.nets.normalizer import WINDOW
-
         unit = unit_windows(windows)
         centre = unit
         if self.scale != 1:
