@@ -71,7 +71,6 @@ class BoxFit:
     stats: dict[str, Any]
 
 
-
 def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_free: bool = False,
             viewpoints: np.ndarray | None = None, settings: BoxFitSettings | None = None) -> BoxFit:
     """Fit the object's box to a sparse point cloud with open3d.
@@ -170,7 +169,7 @@ def _spread(points: np.ndarray) -> float:
 
 
 def largest_cluster(points: np.ndarray, min_points: int = 4) -> np.ndarray:
-    """Bool mask of the largest DBSCAN cluster of ``points`` (all ``False`` but none: all kept).
+    """Bool mask of the largest DBSCAN cluster of ``points`` (all ``True`` when DBSCAN finds no cluster).
 
     eps from the k-distance graph (k = ``min_points``; Ester et al. 1996, Schubert et al. 2017):
     the distance within which 99% of the points have k neighbours, so a sparsely textured face

@@ -75,8 +75,9 @@ def _eval(args: argparse.Namespace) -> int:
 def _train_corners(args: argparse.Namespace) -> int:
     from pose import corner_train
 
-    path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model, normalizer=args.normalizer,
-                        scale=args.scale, epochs=args.epochs, rounds=args.rounds, seed=args.seed)
+    path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
+                             normalizer=args.normalizer, scale=args.scale, epochs=args.epochs, rounds=args.rounds,
+                             seed=args.seed)
     print(f"corner detector ({args.normalizer}) -> {path}")
     return 0
 
@@ -117,8 +118,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     t = sub.add_parser("track", help="pose of the box in every frame of a video or image folder",
                        description="Writes BOP scene_gt-style JSON (OUTPUT) and OUTPUT_info.json; with --overlay "
-                       "a video (.mp4/.avi) or PNG folder with the box drawn. The camera is the one stored in the part model "
-                       "(`alcn pose build` from a video, refined with --refine-focal) unless --K or --camera is given.")
+                       "a video (.mp4/.avi) or PNG folder with the box drawn. The camera is the one stored in the "
+                       "part model (`alcn pose build` from a video, refined with --refine-focal) unless --K or "
+                       "--camera is given.")
     t.add_argument("model", help="part model (.npz) from `alcn pose build`, or with --detector corners a corner "
                    "detector (.onnx) from `alcn pose train-corners`")
     t.add_argument("input", help="video file or image folder")

@@ -113,12 +113,6 @@ def from_scaled(uv: np.ndarray, scale: float) -> np.ndarray:
     return (np.asarray(uv, np.float64) + 0.5) / scale - 0.5
 
 
-
-# --------------------------------------------------------------------------------------------
-# inference (cv2.dnn, no torch)
-# --------------------------------------------------------------------------------------------
-
-
 def read_metadata(path: str | Path) -> dict[str, Any]:
     """The ``alcn_cv`` metadata of a corner-detector ONNX file.
 

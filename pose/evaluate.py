@@ -212,12 +212,15 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
                 table[row][col] = s["proj2d"]
                 details[row]["sequences"][col] = {**s, "fps": fps, "frames": len(scores)}
                 logger.info("%s %s: %.1f%% correct (2D proj.), %.1f%% tracked", row, col, s["proj2d"], s["tracked"])
+    host = machine()
     md = ("# Pose under light changes (Table 1 style)\n\n"
           f"Data: `{data_dir}`; cells: % of frames with 2D projection error < {PROJ_PX:g} px "
-          f"(ADD < {ADD_FRACTION:g} d and 5 cm / 5 deg in table1.json).\n\n" + table_markdown(table, columns))
+          f"(ADD < {ADD_FRACTION:g} d and 5 cm / 5 deg in table1.json). Machine: "
+          f"{host.get('cpu_model', host['processor'])}, {host['cpu_count']} cores.\n\n"
+          + table_markdown(table, columns))
     atomic_write(out_dir / "table1.md", md)
     write_json(out_dir / "table1.json", _nan_to_none({
-        "data": str(data_dir), "machine": machine(), "columns": columns, "table": table, "details": details,
+        "data": str(data_dir), "machine": host, "columns": columns, "table": table, "details": details,
         "metrics": {"proj2d_px": PROJ_PX, "add": ADD_FRACTION, "deg": DEG, "cm": CM}}))
     plot_table(table, columns, out_dir / "table1.png", "Correct poses (2D projection < 5 px)")
     return {"table": table, "details": details}

@@ -50,11 +50,6 @@ class TrainingSequence:
         return all(v.R_w2c is not None for v in self.views)
 
 
-# --------------------------------------------------------------------------------------------
-# Inputs
-# --------------------------------------------------------------------------------------------
-
-
 def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: int | None = None) -> TrainingSequence:
     """Read a registered training sequence.
 

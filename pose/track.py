@@ -29,6 +29,7 @@ from tqdm import tqdm
 from alcn_cv import io
 from alcn_cv.errors import InputError
 from alcn_cv.io import write_json
+from alcn_cv.report import machine
 from pose import model as part_model
 from pose.model import BOX_EDGES
 from pose.parts import FeaturePartDetector, PartDetector
@@ -249,6 +250,6 @@ def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.n
     summary = {"frames": len(scene_gt), "tracked": tracked, "fps": len(times) / max(sum(times), 1e-9),
                "normalizer": normalizer, "detector": detector, "model": str(model_path), "units": units,
                "events": [{"frame": f, "event": e, "reason": r} for f, e, r in tracker.events]}
-    write_json(output.with_name(output.stem + "_info.json"), {"summary": summary, "frames": info})
+    write_json(output.with_name(output.stem + "_info.json"), {"summary": summary, "machine": machine(), "frames": info})
     logger.info("tracked %d of %d frames at %.1f fps -> %s", tracked, len(scene_gt), summary["fps"], output)
     return summary
