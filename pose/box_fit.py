@@ -13,8 +13,10 @@ points (two thirds of the lid), and the box then grew from the wrong end of its 
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import logging
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -93,12 +95,32 @@ def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_f
     Raises:
         DatasetError: too few points, or a degenerate box (a flat or empty cluster).
     """
-    import open3d as o3d
-
     settings = settings or BoxFitSettings()
     pts = np.asarray(points, np.float64)
     if len(pts) < 10:
         raise DatasetError(f"only {len(pts)} 3D points; the box fit needs at least 10")
+    with _one_open3d_thread():
+        return _fit_box(pts, known_size, scale_free, viewpoints, settings)
+
+
+@contextlib.contextmanager
+def _one_open3d_thread() -> Iterator[None]:
+    """open3d limited to one thread: its RANSAC draws its samples from one seeded generator, in
+    the order the threads run (with two threads the cookie-box fit varied from run to run)."""
+    import open3d as o3d
+
+    before = o3d.utility.get_max_threads()
+    o3d.utility.set_max_threads(1)
+    try:
+        yield
+    finally:
+        o3d.utility.set_max_threads(before)
+
+
+def _fit_box(pts: np.ndarray, known_size: np.ndarray | None, scale_free: bool, viewpoints: np.ndarray | None,
+             settings: BoxFitSettings) -> BoxFit:
+    import open3d as o3d
+
     o3d.utility.random.seed(settings.seed)
     idx = remove_outliers(pts, settings)
     stats: dict[str, Any] = {"points": len(pts), "after_outlier_removal": len(idx)}
@@ -127,9 +149,9 @@ def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_f
                                        stats)
     origin = center - R @ (size / 2)
     corners = box_corners(size) @ R.T + origin
-    keep = np.zeros(len(points), bool)
+    keep = np.zeros(len(pts), bool)
     keep[idx] = True
-    logger.info("box fit: %d of %d points on the object, size %s", len(idx), len(points), np.round(size, 4).tolist())
+    logger.info("box fit: %d of %d points on the object, size %s", len(idx), len(pts), np.round(size, 4).tolist())
     return BoxFit(corners, size, R, origin, keep, stats)
 
 

@@ -94,7 +94,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b = sub.add_parser("build", help="part model from a registered sequence or a video",
                        description="Triangulate features of the training images (pycolmap, known poses held "
                        "fixed; or incremental reconstruction for an unregistered video), fit the box (open3d) "
-                       "and write MODEL.npz, MODEL.ply and MODEL_cameras.png.")
+                       "and write MODEL.npz, MODEL.ply and MODEL_cameras.png. pycolmap's log is shown with "
+                       "`alcn --verbose`.")
     b.add_argument("input", help="BOP scene folder, COLMAP model folder, Middlebury set, or a video file")
     b.add_argument("output", help="part model to write (.npz)")
     b.add_argument("--images", help="image folder of a COLMAP model")
