@@ -15,8 +15,8 @@ import time
 
 import numpy as np
 
+from alcn_cv import io
 from pose import model as part_model
-from pose import track
 from pose.parts import FeaturePartDetector
 from pose.solver import METHODS, PoseSolver, PoseTracker, camera_matrix
 
@@ -32,7 +32,7 @@ def main() -> None:
     model = part_model.load(args.model)
     K = np.asarray(model.extra["K"]) if "K" in model.extra else camera_matrix(*args.K)
     det = FeaturePartDetector(model, args.normalizer)
-    corr = [det.detect(f) for _, f in zip(range(args.max_frames), (f for _, f in track.iter_frames(args.video)))]
+    corr = [det.detect(f) for _, f in zip(range(args.max_frames), (f for _, f in io.iter_frames(args.video)))]
     print(f"{'method':18s} {'prior':5s} {'ms':>6s} {'posed':>9s} {'inliers':>8s} {'err px':>7s} {'jump':>7s}")
     for name in sorted(METHODS):
         for use_prior in (False, True):

@@ -28,6 +28,7 @@ from alcn_cv.shared_data import shared_data_dir
 from pose import build, evaluate, track
 from pose import model as part_model
 from pose.parts import FeaturePartDetector
+from pose.sequence import TrainingSequence, TrainingView
 from pose.solver import PoseSolver, PoseTracker, camera_matrix
 
 K_TUTORIAL = camera_matrix(640 * 55 / 22.3, 480 * 55 / 14.9, 320.0, 240.0)
@@ -35,10 +36,8 @@ K_TUTORIAL = camera_matrix(640 * 55 / 22.3, 480 * 55 / 14.9, 320.0, 240.0)
 
 def frames(video: Path, max_frames: int | None):
     """``(index, frame)`` of the first ``max_frames`` frames (all when ``None``)."""
-    for name, frame in track.iter_frames(video):
-        if max_frames is not None and int(name) >= max_frames:
-            return
-        yield int(name), frame
+    for i, (_, frame) in enumerate(io.iter_frames(video, max_frames=max_frames)):
+        yield i, frame
 
 
 def registered_build(video: Path, ref: part_model.PartModel, K: np.ndarray, normalizer: str, path: Path,
@@ -52,8 +51,8 @@ def registered_build(video: Path, ref: part_model.PartModel, K: np.ndarray, norm
             est, _ = tracker.step(i, frame, det)
             if est.ok and i % step == 0:
                 io.write_image(Path(work) / f"{i:06d}.png", frame)
-                views.append(build.View(f"{i:06d}.png", K, None, est.R, est.tvec.ravel()))
-        seq = build.Sequence(Path(work), views, ref.units, info={"format": "registered video", "path": str(video)})
+                views.append(TrainingView(f"{i:06d}.png", K, None, est.R, est.tvec.ravel()))
+        seq = TrainingSequence(Path(work), views, ref.units, info={"format": "registered video", "path": str(video)})
         model, _ = build.build(seq, feature=ref.feature, n_features=3000, normalizer=normalizer, work_dir=work)
     model.corners = ref.corners  # same object frame as the reference
     model.extra["K"] = K.tolist()

@@ -1,4 +1,4 @@
-"""Build a part model of the cookie box from its video and track it (issue 6, examples/).
+"""Build a part model of the cookie box from its video and track it.
 
     .venv/bin/python examples/track_cookie_box.py [--out out/cookie_box] [--normalizer none]
 
@@ -11,7 +11,7 @@ real-time pose tutorial (fx = 640*55/22.3, fy = 480*55/14.9, cx = 320, cy = 240)
    bundle adjustment (to fx ~690 px: with the tutorial's fx = 1578 px held fixed, the box's front
    side is folded into the plane of its lid and the fit is 8.5% off instead of 2%), open3d box
    fit (frame from the lid, the best-seen face) scaled to box.ply's size.
-2. ``alcn pose track`` on every frame with the refined intrinsics: poses as JSON and an overlay
+2. ``alcn pose track`` on every frame with the refined intrinsics (stored in the model): poses as JSON and an overlay
    video with the box drawn.
 3. A contact sheet PNG of a few overlay frames, to check that the box sits on the object.
 """
@@ -67,10 +67,10 @@ def main() -> None:
         build.main(video, model_path, K=K, video_step=10, max_frames=46, motion_mask=True, feature="ORB",
                    n_features=3000, normalizer=args.normalizer, box_ply=args.data / "box.ply", box_units="cm",
                    refine_focal=True)
-    K_track = np.asarray(part_model.load(model_path).extra.get("K", K))
-    print(f"intrinsics used for tracking: fx {K_track[0, 0]:.1f} fy {K_track[1, 1]:.1f} "
+    K_track = np.asarray(part_model.load(model_path).extra["K"])
+    print(f"intrinsics used for tracking (stored in the model): fx {K_track[0, 0]:.1f} fy {K_track[1, 1]:.1f} "
           f"(tutorial: {K[0, 0]:.1f} {K[1, 1]:.1f})")
-    summary = track.main(model_path, video, args.out / "poses.json", K_track, normalizer=args.normalizer,
+    summary = track.main(model_path, video, args.out / "poses.json", normalizer=args.normalizer,
                          overlay=args.out / "overlay.mp4")
     sheet = contact_sheet(args.out / "overlay.mp4", args.out / "overlay_sheet.png")
     print(f"tracked {summary['tracked']}/{summary['frames']} frames at {summary['fps']:.1f} fps; "

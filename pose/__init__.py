@@ -4,10 +4,15 @@ The pipeline of Sec. 4.4 of Rad, Roth & Lepetit, "ALCN: Meta-Learning for Contra
 Normalization Applied to Robust 3D Pose Estimation", BMVC 2017, one module per stage:
 
 * :mod:`pose.model`: the part-model file format;
-* :mod:`pose.build`: ``alcn pose build``, part model from a training sequence (pycolmap, open3d);
-* :mod:`pose.parts`: part detectors run after a normalizer (``alcn_cv.create(name)``);
-* :mod:`pose.corners`: ``alcn pose train-corners``, the learned box-corner detector (CNN,
-  exported to ONNX and run by ``cv2.dnn``);
+* :mod:`pose.sequence`: training sequences (registered, or the frames of a video);
+* :mod:`pose.triangulate`: features, matches and 3D points (pycolmap);
+* :mod:`pose.box_fit`: the object's box from its 3D points (open3d);
+* :mod:`pose.plots`: figures (the model and its cameras, the Table-1 bars);
+* :mod:`pose.build`: ``alcn pose build``, part model from a training sequence (the stages above);
+* :mod:`pose.parts`: part detectors run after a normalization (:func:`alcn_cv.enhance.registry.from_spec`);
+* :mod:`pose.corners`: the learned box-corner detector run by ``cv2.dnn`` (ONNX);
+  :mod:`pose.corner_data` its training windows, :mod:`pose.corner_train` ``alcn pose
+  train-corners`` (torch, export to ONNX);
 * :mod:`pose.solver`: PnP + RANSAC + LM refinement, tracking with a prior, lost/recovered;
 * :mod:`pose.track`: ``alcn pose track``, poses per frame and overlays;
 * :mod:`pose.evaluate`: ``alcn pose eval``, Table-1-style report and Middlebury errors;

@@ -27,15 +27,30 @@ def _build(args: argparse.Namespace) -> int:
     return 0
 
 
+def _camera(path: str | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """``(K, dist)`` of a calibration file from ``alcn calib camera`` (``None, None`` without one)."""
+    if path is None:
+        return None, None
+    import cv2
+
+    from alcn_cv.errors import DatasetError
+    from calib.camera import load_calibration
+
+    try:
+        calibration = load_calibration(path)
+    except cv2.error:  # OpenCV reads any JSON; a field that is not a matrix fails its assertions
+        raise DatasetError(f"{path}: not a camera calibration; --camera takes the camera.yaml written by "
+                           "`alcn calib camera` (an OpenCV FileStorage with the matrices camera_matrix and "
+                           "distortion_coefficients), not its views.json") from None
+    return calibration.K, calibration.dist
+
+
 def _track(args: argparse.Namespace) -> int:
     from pose import track
 
     K, dist = _intrinsics(args.K), None
     if K is None:
-        from calib.camera import load_calibration
-
-        calibration = load_calibration(args.camera)
-        K, dist = calibration.K, calibration.dist
+        K, dist = _camera(args.camera)
     summary = track.main(args.model, args.input, args.output, K, normalizer=args.normalizer, overlay=args.overlay,
                          method=args.method, n_features=args.n_features, min_inliers=args.min_inliers,
                          reprojection_error=args.reprojection_error, dist=dist, detector=args.detector)
@@ -58,10 +73,11 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _train_corners(args: argparse.Namespace) -> int:
-    from pose import corners
+    from pose import corner_train
 
-    path = corners.main(args.input, args.output, box_ply=args.box_ply, model=args.model, normalizer=args.normalizer,
-                        scale=args.scale, epochs=args.epochs, rounds=args.rounds, seed=args.seed)
+    path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
+                             normalizer=args.normalizer, scale=args.scale, epochs=args.epochs, rounds=args.rounds,
+                             seed=args.seed)
     print(f"corner detector ({args.normalizer}) -> {path}")
     return 0
 
@@ -78,7 +94,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b = sub.add_parser("build", help="part model from a registered sequence or a video",
                        description="Triangulate features of the training images (pycolmap, known poses held "
                        "fixed; or incremental reconstruction for an unregistered video), fit the box (open3d) "
-                       "and write MODEL.npz, MODEL.ply and MODEL_cameras.png.")
+                       "and write MODEL.npz, MODEL.ply and MODEL_cameras.png. pycolmap's log is shown with "
+                       "`alcn --verbose`.")
     b.add_argument("input", help="BOP scene folder, COLMAP model folder, Middlebury set, or a video file")
     b.add_argument("output", help="part model to write (.npz)")
     b.add_argument("--images", help="image folder of a COLMAP model")
@@ -93,21 +110,27 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument("--normalizer", default="none", help="normalizer applied first (alcn_cv.available())")
     b.add_argument("--box-ply", help="cuboid .ply of the box: its true size")
     b.add_argument("--box-size", nargs=3, type=float, metavar=("X", "Y", "Z"), help="the box's true size")
-    b.add_argument("--box-units", choices=["mm", "cm", "m"], help="units of --box-ply/--box-size")
+    b.add_argument("--box-units", choices=["mm", "cm", "m"],
+                   help="units of --box-ply/--box-size (default: cm for a video, the sequence's units otherwise)")
     b.add_argument("--refine-focal", action="store_true",
-                   help="video: refine the focal length in the bundle adjustment (stored in the model)")
+                   help="video: refine the focal length in the bundle adjustment (stored in the model, used by "
+                   "`alcn pose track`)")
     b.set_defaults(func=_build)
 
     t = sub.add_parser("track", help="pose of the box in every frame of a video or image folder",
                        description="Writes BOP scene_gt-style JSON (OUTPUT) and OUTPUT_info.json; with --overlay "
-                       "a video (.mp4/.avi) or PNG folder with the box drawn.")
+                       "a video (.mp4/.avi) or PNG folder with the box drawn. The camera is the one stored in the "
+                       "part model (`alcn pose build` from a video, refined with --refine-focal) unless --K or "
+                       "--camera is given.")
     t.add_argument("model", help="part model (.npz) from `alcn pose build`, or with --detector corners a corner "
                    "detector (.onnx) from `alcn pose train-corners`")
     t.add_argument("input", help="video file or image folder")
     t.add_argument("output", help="poses (.json)")
-    cam = t.add_mutually_exclusive_group(required=True)
-    cam.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics")
-    cam.add_argument("--camera", help="OpenCV FileStorage YAML from `alcn calib camera`")
+    cam = t.add_mutually_exclusive_group()
+    cam.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"),
+                     help="intrinsics (default: the camera stored in the part model by `alcn pose build`)")
+    cam.add_argument("--camera", help="camera.yaml from `alcn calib camera` (OpenCV FileStorage; default: the camera "
+                     "stored in the part model)")
     t.add_argument("--detector", default="features", choices=["features", "corners"],
                    help="features: OpenCV features matched to the part model; corners: the corner CNN (cv2.dnn)")
     t.add_argument("--normalizer", help="normalizer applied first (default none; a corner detector's own)")
@@ -119,7 +142,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     t.set_defaults(func=_track)
 
     e = sub.add_parser("eval", help="Table-1-style report and Middlebury errors",
-                       description="BB8 2D projection < 5 px, ADD < 10%% of the diameter, 5 cm / 5 deg.")
+                       description="BB8 2D projection < 5 px, ADD < 10% of the diameter, 5 cm / 5 deg.")
     e.add_argument("--data", help="pose data set from `alcn data pose` (train/, test/, models/)")
     e.add_argument("--middlebury", nargs="+", help="Middlebury sets (e.g. ../shared/data/middlebury/templeSparseRing)")
     e.add_argument("--normalizers", nargs="+",

@@ -28,12 +28,15 @@ from typing import Any
 import cv2
 import numpy as np
 
-from alcn_cv.io import write_json
+from alcn_cv.io import atomic_write, write_json
+from alcn_cv.report import machine, markdown_table
 from alcn_cv.errors import DatasetError, InputError
-from pose import build as build_mod
+from pose.build import build as build_model
 from pose.model import read_box_corners, unit_scale
 from pose.model import save as save_model
 from pose.parts import FeaturePartDetector
+from pose.plots import plot_table
+from pose.sequence import load_sequence
 from pose.solver import PoseSolver, PoseTracker, project, rotation_error_deg
 from pose.track import MIN_INLIERS, MIN_INLIERS_NEAR_PRIOR, RANSAC_ITERATIONS
 
@@ -143,32 +146,12 @@ def file_stem(spec: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", spec.replace("=", "-"))
 
 
-def plot_table(table: dict[str, dict[str, float]], columns: list[str], path: Path, title: str) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4))
-    x = np.arange(len(columns))
-    w = 0.8 / max(len(table), 1)
-    for k, (row, vals) in enumerate(table.items()):
-        ax.bar(x + (k - (len(table) - 1) / 2) * w, [vals.get(c, np.nan) for c in columns], w, label=row)
-    ax.set(xticks=x, xticklabels=columns, ylabel="% correct poses", ylim=(0, 105), title=title)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
-    return path
-
-
-def markdown_table(table: dict[str, dict[str, float]], columns: list[str]) -> str:
-    head = "| | " + " | ".join(columns) + " |\n|---|" + "---|" * len(columns) + "\n"
-    rows = "".join(f"| {r} | " + " | ".join("-" if np.isnan(v.get(c, np.nan)) else f"{v[c]:.1f}" for c in columns)
-                   + " |\n" for r, v in table.items())
-    return head + rows
+def table_markdown(table: dict[str, dict[str, float]], columns: list[str]) -> str:
+    """The Table-1-style report as Markdown: one row per ``table`` key, percentages with one
+    decimal, ``-`` where a column is missing or NaN."""
+    rows = [[row, *(None if np.isnan(vals.get(c, np.nan)) else float(vals[c]) for c in columns)]
+            for row, vals in table.items()]
+    return markdown_table(["", *columns], rows, digits=1)
 
 
 def main(data_dir: str | Path, out_dir: str | Path, *,
@@ -203,15 +186,16 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
     for det_name in detectors:
         for name in normalizers:
             if det_name == "features":
-                seq = build_mod.load_sequence(train, obj_id=obj_id)
-                model, _ = build_mod.build(seq, feature=feature, normalizer=name, box_ply=model_ply, work_dir=out_dir)
+                seq = load_sequence(train, obj_id=obj_id)
+                model, _ = build_model(seq, feature=feature, normalizer=name, box_ply=model_ply, work_dir=out_dir)
                 save_model(model, out_dir / f"model_{file_stem(name)}.npz")
                 det, units = FeaturePartDetector(model, name, n_features=n_features), model.units
                 outline = model.corners
                 row = f"{name} / {feature.lower()} features"
                 info = {"model_points": len(model.points3d), "box_fit": model.box_fit}
             else:
-                from pose.corners import CornerDetector, train_corners
+                from pose.corner_train import train_corners
+                from pose.corners import CornerDetector
 
                 t0 = time.perf_counter()
                 net = train_corners(train, corners, out_dir / f"corners_{file_stem(name)}.onnx", normalizer=name,
@@ -228,12 +212,15 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
                 table[row][col] = s["proj2d"]
                 details[row]["sequences"][col] = {**s, "fps": fps, "frames": len(scores)}
                 logger.info("%s %s: %.1f%% correct (2D proj.), %.1f%% tracked", row, col, s["proj2d"], s["tracked"])
+    host = machine()
     md = ("# Pose under light changes (Table 1 style)\n\n"
           f"Data: `{data_dir}`; cells: % of frames with 2D projection error < {PROJ_PX:g} px "
-          f"(ADD < {ADD_FRACTION:g} d and 5 cm / 5 deg in table1.json).\n\n" + markdown_table(table, columns))
-    (out_dir / "table1.md").write_text(md)
+          f"(ADD < {ADD_FRACTION:g} d and 5 cm / 5 deg in table1.json). Machine: "
+          f"{host.get('cpu_model', host['processor'])}, {host['cpu_count']} cores.\n\n"
+          + table_markdown(table, columns))
+    atomic_write(out_dir / "table1.md", md)
     write_json(out_dir / "table1.json", _nan_to_none({
-        "data": str(data_dir), "columns": columns, "table": table, "details": details,
+        "data": str(data_dir), "machine": host, "columns": columns, "table": table, "details": details,
         "metrics": {"proj2d_px": PROJ_PX, "add": ADD_FRACTION, "deg": DEG, "cm": CM}}))
     plot_table(table, columns, out_dir / "table1.png", "Correct poses (2D projection < 5 px)")
     return {"table": table, "details": details}
@@ -293,10 +280,10 @@ def middlebury_main(sets: list[str | Path], out_dir: str | Path, *,
         train_names = {v.name for v in views[0::2]}
         tests = views[1::2]
         for name in normalizers:
-            seq = build_mod.load_sequence(set_dir)
+            seq = load_sequence(set_dir)
             seq.views = [v for v in seq.views if v.name in train_names]
-            model, _ = build_mod.build(seq, feature=feature, n_features=n_features, normalizer=name,
-                                       ratio=ratio, work_dir=out_dir)
+            model, _ = build_model(seq, feature=feature, n_features=n_features, normalizer=name,
+                                   ratio=ratio, work_dir=out_dir)
             det = FeaturePartDetector(model, name, n_features=n_features, ratio=ratio, cross_check=True)
             for light in ("original", "relit"):
                 errs = []
@@ -322,8 +309,8 @@ def middlebury_main(sets: list[str | Path], out_dir: str | Path, *,
                              f"{med[1]:.1f} | {med[2]:.1f} |")
                 logger.info("%s: %d/%d posed, median rot %.2f deg, trans %.1f mm", key, len(e), len(tests),
                             med[0], med[1])
-    (out_dir / "middlebury.md").write_text("\n".join(lines) + "\n")
-    write_json(out_dir / "middlebury.json", _nan_to_none(results))
+    atomic_write(out_dir / "middlebury.md", "\n".join(lines) + "\n")
+    write_json(out_dir / "middlebury.json", _nan_to_none({**results, "machine": machine()}))
     return results
 
 

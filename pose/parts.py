@@ -1,7 +1,8 @@
-"""Part detectors: image -> 2D-3D correspondences for the pose solver, after a normalizer.
+"""Part detectors: image -> 2D-3D correspondences for the pose solver, after a normalization.
 
-Both detectors first normalize the image with ``alcn_cv.create(name)`` (``"none"``, ``"dog"``,
-``"alcn"`` or any registered name), as in Sec. 4.4 of Rad, Roth & Lepetit, "ALCN: Meta-Learning
+Both detectors first normalize the image with a normalization built from its spec
+(:func:`alcn_cv.enhance.registry.from_spec`: ``"none"``, ``"dog"``, ``"alcn"`` or any registered
+name, with optional ``:KEY=VALUE`` parameters), as in Sec. 4.4 of Rad, Roth & Lepetit, "ALCN: Meta-Learning
 for Contrast Normalization Applied to Robust 3D Pose Estimation", BMVC 2017:
 
 * :class:`FeaturePartDetector` (classical): OpenCV keypoints and descriptors (ORB by default,
@@ -20,6 +21,7 @@ from typing import Protocol
 import cv2
 import numpy as np
 
+from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import to_gray
 from pose.model import PartModel
@@ -27,21 +29,6 @@ from pose.model import PartModel
 logger = logging.getLogger(__name__)
 
 FEATURES = ("ORB", "SIFT", "AKAZE")
-
-
-class Normalizer(Protocol):
-    def apply(self, img: np.ndarray) -> np.ndarray: ...
-
-
-def get_normalizer(spec: str) -> Normalizer:
-    """The normalizer ``spec``: a registered name with optional parameters, ``NAME[:KEY=VALUE...]``
-    (:func:`alcn_cv.enhance.registry.parse_spec`), e.g. ``"alcn:model=lite:mixture=pyramid"``
-    (the real-time ALCN), given to ``alcn_cv.create``."""
-    import alcn_cv
-    from alcn_cv.enhance.registry import parse_spec
-
-    name, params = parse_spec(spec)
-    return alcn_cv.create(name, **params)
 
 
 #: ORB needs a cap on its keypoints; "all of them" (``n_features=0``) means this many.
@@ -114,7 +101,8 @@ class FeaturePartDetector:
 
     Args:
         model: the part model (its ``feature`` names the OpenCV feature used to build it).
-        normalizer: a normalizer for :func:`get_normalizer` (name and optional parameters).
+        normalizer: the normalization applied first, ``NAME[:KEY=VALUE...]``
+            (:func:`alcn_cv.enhance.registry.from_spec`), e.g. ``"alcn:model=lite:mixture=pyramid"``.
         n_features: the strongest keypoints kept inside the predicted region (with a prior pose).
         n_features_global: the strongest keypoints kept without a prior (0: all).
         ratio: Lowe's ratio-test threshold.
@@ -141,7 +129,7 @@ class FeaturePartDetector:
             raise InputError(f"the part model has {len(model.points3d)} 3D points; at least 4 are needed")
         self.model = model
         self.normalizer_name = normalizer
-        self.normalizer = get_normalizer(normalizer)
+        self.normalization = from_spec(normalizer)
         self.feature = create_feature(model.feature, 0)
         self.n_features, self.n_features_global = n_features, n_features_global
         self.norm = descriptor_norm(model.feature)
@@ -163,7 +151,7 @@ class FeaturePartDetector:
 
     def normalize(self, image: np.ndarray) -> np.ndarray:
         """The normalized grayscale uint8 image the features are computed on."""
-        return self.normalizer.apply(to_gray(image))
+        return self.normalization.apply(to_gray(image))
 
     def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
                search_scale: float = 1.0) -> Correspondences:

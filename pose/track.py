@@ -15,6 +15,7 @@ frame's pose as prior. Output:
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from collections.abc import Iterator
@@ -26,8 +27,9 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv import io
+from alcn_cv.errors import InputError
 from alcn_cv.io import write_json
-from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.report import machine
 from pose import model as part_model
 from pose.model import BOX_EDGES
 from pose.parts import FeaturePartDetector, PartDetector
@@ -59,45 +61,13 @@ def draw_box(image: np.ndarray, corners: np.ndarray, rvec: np.ndarray, tvec: np.
     return image
 
 
-def iter_frames(source: str | Path) -> Iterator[tuple[str, np.ndarray]]:
-    """``(name, BGR uint8 frame)`` for every frame of a video file or every image of a folder (sorted).
-
-    Raises:
-        DatasetError: no such file or folder, a video that cannot be opened, a folder without images.
-    """
-    source = Path(source)
-    if source.is_dir():
-        try:
-            files = io.list_images(source)
-        except InputError:  # no image in the folder
-            files = []
-        if not files:
-            raise DatasetError(f"{source}: no images in the folder")
-        for p in files:
-            img = io.read_image(p)
-            if img.dtype != np.uint8:
-                img = (img >> 8).astype(np.uint8)
-            yield p.stem, img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-        return
-    try:
-        video = io.VideoReader(source)
-    except InputError as exc:
-        raise DatasetError(f"{source}: cannot open the video ({exc})") from exc
-    n = 0
-    with video:
-        for n, frame in enumerate(video, 1):
-            yield str(n - 1), frame
-    if n == 0:
-        raise DatasetError(f"{source}: the video holds no readable frame")
-
-
 def count_frames(source: str | Path) -> int | None:
     """Number of frames of a video or images of a folder (``None`` when unknown)."""
     source = Path(source)
     if source.is_dir():
         try:
             return len(io.list_images(source))
-        except InputError:  # no image: iter_frames says so
+        except InputError:  # no image: alcn_cv.io.iter_frames says so
             return None
     if not source.is_file():
         return None
@@ -106,34 +76,45 @@ def count_frames(source: str | Path) -> int | None:
 
 
 class OverlayWriter:
-    """Writes overlay frames to a video (``.mp4``, ``.avi``, ...) or to a folder of PNGs.
+    """Writes overlay frames to a video (``.mp4``, ``.avi``, ...) or to a folder of PNGs named by frame.
 
-    A video is written under a temporary name and renamed when closed.
+    A video is written under a temporary name (:func:`alcn_cv.io.atomic_path`) and renamed by
+    :meth:`close`; used as a context manager, a video unfinished by an error is removed.
     """
 
     def __init__(self, path: str | Path, fps: float = 30.0) -> None:
         self.path = Path(path)
         self.fps = fps
         self._video: cv2.VideoWriter | None = None
-        self._tmp = self.path.with_name(f".{self.path.stem}.tmp{self.path.suffix}")
+        self._stack = contextlib.ExitStack()
 
     def write(self, name: str, frame: np.ndarray) -> None:
         if io.is_video(self.path):
             if self._video is None:
-                self._video = io.open_video_writer(self._tmp, self.fps, frame.shape[1::-1])
+                tmp = self._stack.enter_context(io.atomic_path(self.path))
+                self._video = io.open_video_writer(tmp, self.fps, frame.shape[1::-1])
+                self._stack.callback(self._video.release)  # runs before the rename
             self._video.write(frame)
         else:
             io.write_image(self.path / f"{name}.png", frame)
 
     def close(self) -> None:
-        if self._video is not None:
-            self._video.release()
-            self._tmp.replace(self.path)
-            self._video = None
+        """Finish the video: :attr:`path` appears complete."""
+        self._stack.close()
+        self._video = None
+
+    def __enter__(self) -> OverlayWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stack.__exit__(*exc)
+        self._video = None
 
 
 @dataclass
-class FrameResult:
+class TrackedFrame:
+    """The pose found in one frame, the time it took and the keypoints detected."""
+
     name: str
     estimate: PoseEstimate
     seconds: float
@@ -166,7 +147,7 @@ RANSAC_ITERATIONS = {"features": 5000, "corners": 5000}
 
 
 def track(frames: Iterator[tuple[str, np.ndarray]], detector: PartDetector, tracker: PoseTracker,
-          total: int | None = None) -> Iterator[tuple[FrameResult, np.ndarray]]:
+          total: int | None = None) -> Iterator[tuple[TrackedFrame, np.ndarray]]:
     """Track the model through ``frames``; yields each frame's result and the frame itself.
 
     ``tracker.events`` collects the lost/recovered events.
@@ -174,20 +155,50 @@ def track(frames: Iterator[tuple[str, np.ndarray]], detector: PartDetector, trac
     for i, (name, frame) in enumerate(tqdm(frames, total=total, desc="track", unit="frame", leave=False)):
         t0 = time.perf_counter()
         est, corr = tracker.step(i, frame, detector)
-        yield FrameResult(name, est, time.perf_counter() - t0, corr.keypoints), frame
+        yield TrackedFrame(name, est, time.perf_counter() - t0, corr.keypoints), frame
 
 
-def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.ndarray, *,
+def camera_matrix_for(model_K: np.ndarray | None, K: np.ndarray | None, model_path: str | Path,
+                      rtol: float = 0.02) -> np.ndarray:
+    """The intrinsics to track with: ``K`` when given, else those stored in the model (``model_K``,
+    e.g. the focal length refined by ``alcn pose build --refine-focal``).
+
+    Warns when both are given and an entry differs by more than ``rtol`` (the drawn box would
+    take the wrong shape).
+
+    Raises:
+        InputError: neither is there.
+    """
+    if K is None:
+        if model_K is None:
+            raise InputError(f"{model_path} stores no camera: give the intrinsics (--K FX FY CX CY or "
+                             "--camera camera.yaml from `alcn calib camera`)")
+        K = np.asarray(model_K, np.float64)
+        logger.info("camera of the model: fx %.1f fy %.1f cx %.1f cy %.1f", K[0, 0], K[1, 1], K[0, 2], K[1, 2])
+        return K
+    K = np.asarray(K, np.float64)
+    if model_K is not None and not np.allclose(K, model_K, rtol=rtol, atol=1e-6):
+        m = np.asarray(model_K, np.float64)
+        logger.warning("the given intrinsics (fx %.1f fy %.1f cx %.1f cy %.1f) differ from those %s was built with "
+                       "(fx %.1f fy %.1f cx %.1f cy %.1f); leave out --K/--camera to track with the model's",
+                       K[0, 0], K[1, 1], K[0, 2], K[1, 2], model_path, m[0, 0], m[1, 1], m[0, 2], m[1, 2])
+    return K
+
+
+def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.ndarray | None = None, *,
          normalizer: str | None = None, overlay: str | Path | None = None, method: str = "usac_default",
          n_features: int = 1000, min_inliers: int | None = None, reprojection_error: float = 4.0,
          dist: np.ndarray | None = None, detector: str = "features") -> dict:
-    """Track the box through ``source`` and write ``output`` (scene_gt JSON).
+    """Track the box through ``source`` and write ``output`` (scene_gt JSON, keyed by the frame
+    names of :func:`alcn_cv.io.iter_frames`: ``frame_000000``, ... for a video, the file stems for a
+    folder; the overlay PNGs are named alike).
 
     Args:
         model_path: ``detector="features"``: a part model (``.npz``, ``alcn pose build``);
             ``detector="corners"``: a corner detector (``.onnx``, ``alcn pose train-corners``).
         normalizer: the normalizer applied first (default ``"none"``; a corner detector uses the
             one it was trained with, and another name is an error).
+        K: ``(3, 3)`` intrinsics; default: those stored in the part model (:func:`camera_matrix_for`).
         min_inliers: default :data:`MIN_INLIERS` of the detector.
 
     Returns:
@@ -198,6 +209,7 @@ def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.n
         normalizer = normalizer or "none"
         det: PartDetector = FeaturePartDetector(model, normalizer, n_features=n_features)
         corners, units = model.corners, model.units
+        model_K = model.extra.get("K")
     elif detector == "corners":
         from pose.corners import CornerDetector
 
@@ -206,18 +218,19 @@ def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.n
             raise InputError(f"{model_path} was trained after the normalizer {det.normalizer_name!r}, "
                              f"not {normalizer!r}")
         normalizer, corners, units = det.normalizer_name, det.corners, det.units
+        model_K = None
     else:
         raise InputError(f"unknown detector {detector!r}; choose 'features' or 'corners'")
+    K = camera_matrix_for(model_K, K, model_path)
     min_inliers = MIN_INLIERS[detector] if min_inliers is None else min_inliers
     tracker = PoseTracker(PoseSolver(K, dist, method=method, min_inliers=min_inliers,
                                      min_inliers_near_prior=min(MIN_INLIERS_NEAR_PRIOR[detector], min_inliers),
                                      reprojection_error=reprojection_error, iterations=RANSAC_ITERATIONS[detector],
                                      outline=corners))
-    writer = OverlayWriter(overlay) if overlay is not None else None
     scene_gt, info = {}, {}
     times = []
-    try:
-        for res, frame in track(iter_frames(source), det, tracker, count_frames(source)):
+    with OverlayWriter(overlay) if overlay is not None else contextlib.nullcontext() as writer:
+        for res, frame in track(io.iter_frames(source), det, tracker, count_frames(source)):
             scene_gt[res.name] = pose_to_bop(res.estimate)
             info[res.name] = {"inliers": len(res.estimate.inliers), "matches": res.estimate.num_matches,
                               "keypoints": res.keypoints, "seconds": res.seconds,
@@ -230,9 +243,6 @@ def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.n
                     draw_box(vis, corners, res.estimate.rvec, res.estimate.tvec, K, color_for(normalizer),
                              dist=dist)
                 writer.write(res.name, vis)
-    finally:
-        if writer is not None:
-            writer.close()
     output = Path(output)
     output.parent.mkdir(parents=True, exist_ok=True)
     write_json(output, scene_gt)
@@ -240,6 +250,6 @@ def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.n
     summary = {"frames": len(scene_gt), "tracked": tracked, "fps": len(times) / max(sum(times), 1e-9),
                "normalizer": normalizer, "detector": detector, "model": str(model_path), "units": units,
                "events": [{"frame": f, "event": e, "reason": r} for f, e, r in tracker.events]}
-    write_json(output.with_name(output.stem + "_info.json"), {"summary": summary, "frames": info})
+    write_json(output.with_name(output.stem + "_info.json"), {"summary": summary, "machine": machine(), "frames": info})
     logger.info("tracked %d of %d frames at %.1f fps -> %s", tracked, len(scene_gt), summary["fps"], output)
     return summary

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from alcn_cv.errors import DatasetError, InputError
-from pose import build
+from pose import box_fit, build, sequence, triangulate
 from pose import model as pm
+from pose import plots
 from pose.evaluate import relight
 
 
@@ -35,7 +36,7 @@ def test_fit_box_removes_plane_and_outliers():
     a = np.radians(30)
     R = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
     world = pts @ R.T + [10, 20, 30]
-    fit = build.fit_box(world, known_size=[55, 140, 95])
+    fit = box_fit.fit_box(world, known_size=[55, 140, 95])
     assert fit.stats.get("support_plane_points", 0) > 300
     # the points within the plane's RANSAC band are lost with it: the fitted height is a bit short
     assert sorted(fit.stats["fitted_size"]) == pytest.approx([55, 95, 140], abs=7.0)
@@ -46,7 +47,7 @@ def test_fit_box_removes_plane_and_outliers():
     d = np.linalg.norm(fit.corners[:, None] - true[None], axis=2).min(1)
     assert d.max() < 8.0
     # scale-free: an unknown scale is fixed by the known size
-    fit2 = build.fit_box(world * 0.01, known_size=[55, 140, 95], scale_free=True)
+    fit2 = box_fit.fit_box(world * 0.01, known_size=[55, 140, 95], scale_free=True)
     assert fit2.stats["scale"] == pytest.approx(100, rel=0.05)
 
 
@@ -62,7 +63,7 @@ def test_fit_box_lid_only_extends_away_from_the_cameras():
     lid = _lid(rng)
     above = np.array([[70.0, 40.0, 600.0], [0.0, -300.0, 500.0]])
     for cams, z in ((above, (0.0, 55.0)), (above * [1, 1, -1] + [0, 0, 110], (55.0, 110.0))):
-        fit = build.fit_box(lid, known_size=[55, 140, 95], viewpoints=cams)
+        fit = box_fit.fit_box(lid, known_size=[55, 140, 95], viewpoints=cams)
         assert (fit.corners[:, 2].min(), fit.corners[:, 2].max()) == pytest.approx(z, abs=1.5)
         assert np.ptp(fit.corners[:, 0]) == pytest.approx(140, abs=3) and np.ptp(fit.corners[:, 1]) == \
             pytest.approx(95, abs=3)
@@ -76,7 +77,7 @@ def test_fit_box_frame_from_the_lid_when_a_side_is_badly_triangulated():
     s = rng.uniform(0, 1, (500, 2))
     a = np.radians(40)
     side = np.c_[s[:, 0] * 140, -s[:, 1] * 55 * np.cos(a), 55 - s[:, 1] * 55 * np.sin(a)]
-    fit = build.fit_box(np.vstack([lid, side]), known_size=[140, 95, 55], viewpoints=np.array([[70, -200, 500.0]]))
+    fit = box_fit.fit_box(np.vstack([lid, side]), known_size=[140, 95, 55], viewpoints=np.array([[70, -200, 500.0]]))
     axes = np.abs(fit.R)
     assert axes.max(0) == pytest.approx(1, abs=np.sin(np.radians(2)))  # each axis along x, y or z
     assert sorted(fit.size) == [55, 95, 140]
@@ -86,34 +87,34 @@ def test_fit_box_frame_from_the_lid_when_a_side_is_badly_triangulated():
 def test_match_known_size_by_the_face_aspect():
     # a 25.8 x 18.9 lid seen in full, its 7.5 height only in part (2 of 7.5): sorting the three
     # lengths would give 7.5 to the lid's shorter edge's partner; the aspect ratio decides
-    matched, s = build.match_known_size([4.0, 2.93, 0.3], [18.9, 25.8, 7.5], scale_free=True)
+    matched, s = box_fit.match_known_size([4.0, 2.93, 0.3], [18.9, 25.8, 7.5], scale_free=True)
     assert matched.tolist() == [25.8, 18.9, 7.5] and s == pytest.approx(6.45, rel=0.01)
-    matched, s = build.match_known_size([95.0, 55.0, 139.0], [140, 95, 55])
+    matched, s = box_fit.match_known_size([95.0, 55.0, 139.0], [140, 95, 55])
     assert matched.tolist() == [95, 55, 140] and s == 1.0
 
 
 def test_representatives_medoid_then_farthest():
     d = np.array([[0.0, 0], [1, 0], [0, 1], [10, 10], [0.5, 0.5]], np.float32)
-    idx = build.representatives(d, cv2.NORM_L2, 2)
+    idx = triangulate.representatives(d, cv2.NORM_L2, 2)
     assert idx[0] == 4 and idx[1] == 3  # the medoid, then the most different view
-    assert len(build.representatives(d, cv2.NORM_L2, 8)) == 5
-    assert build.representatives(d[:1], cv2.NORM_L2, 8).tolist() == [0]
+    assert len(triangulate.representatives(d, cv2.NORM_L2, 8)) == 5
+    assert triangulate.representatives(d[:1], cv2.NORM_L2, 8).tolist() == [0]
     bits = np.array([[0], [1], [255]], np.uint8)
-    assert build.representatives(bits, cv2.NORM_HAMMING, 1).tolist() == [1]
+    assert triangulate.representatives(bits, cv2.NORM_HAMMING, 1).tolist() == [1]
 
 
 def test_fit_box_degenerate():
     with pytest.raises(DatasetError):
-        build.fit_box(np.zeros((5, 3)))
+        box_fit.fit_box(np.zeros((5, 3)))
     rng = np.random.default_rng(1)
     flat = np.c_[rng.uniform(0, 10, (200, 2)), np.zeros(200)]
     with pytest.raises(DatasetError, match="flat"):
-        build.fit_box(flat)
+        box_fit.fit_box(flat)
 
 
 def test_image_pairs_and_relight():
-    assert build.image_pairs(4) == [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-    assert build.image_pairs(4, window=1) == [(0, 1), (1, 2), (2, 3)]
+    assert triangulate.image_pairs(4) == [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    assert triangulate.image_pairs(4, window=1) == [(0, 1), (1, 2), (2, 3)]
     img = np.full((20, 30, 3), 128, np.uint8)
     out = relight(img)
     assert out.shape == img.shape and out.dtype == np.uint8 and out.std() > 5
@@ -121,7 +122,7 @@ def test_image_pairs_and_relight():
 
 def test_bad_inputs(tmp_path):
     with pytest.raises(DatasetError, match="not a BOP scene"):
-        build.load_sequence(tmp_path)
+        sequence.load_sequence(tmp_path)
     with pytest.raises(InputError, match="intrinsics"):
         build.main(tmp_path / "v.mp4", tmp_path / "m.npz") if (tmp_path / "v.mp4").write_bytes(b"x") else None
 
@@ -131,7 +132,7 @@ def test_triangulation_with_fixed_poses_on_middlebury(shared_data, tmp_path):
     from alcn_cv.formats.middlebury import read_middlebury
 
     src = shared_data / "middlebury" / "templeSparseRing"
-    seq = build.load_sequence(src)
+    seq = sequence.load_sequence(src)
     assert seq.registered and seq.units == "m" and len(seq.views) == 16
     views = {v.name: v for v in read_middlebury(src)}
     seq.views = seq.views[:8]  # 8 consecutive views 22.5 deg apart
@@ -149,5 +150,17 @@ def test_triangulation_with_fixed_poses_on_middlebury(shared_data, tmp_path):
     np.testing.assert_array_equal(again.points3d, model.points3d)
     np.testing.assert_array_equal(again.corners, model.corners)
     path = pm.save(model, tmp_path / "temple.npz")
-    build.plot_model(model, cams, tmp_path / "temple_cameras.png")
+    plots.plot_model(model, cams, tmp_path / "temple_cameras.png")
     assert (tmp_path / "temple_cameras.png").stat().st_size > 1000 and path.is_file()
+
+
+def test_pycolmap_log_goes_to_the_logger(tmp_path, capfd, caplog):
+    """pycolmap (glog) wrote about 400 lines to stderr per build; they go to the logger (debug) instead."""
+    import pycolmap
+
+    (tmp_path / "images").mkdir()
+    with caplog.at_level("DEBUG", logger="pose.triangulate"), triangulate.pycolmap_log():
+        pycolmap.Database.open(tmp_path / "db.db").close()
+        pycolmap.incremental_mapping(tmp_path / "db.db", tmp_path / "images", tmp_path)
+    assert "pycolmap: " in caplog.text and "Loading database" in caplog.text
+    assert "Loading database" not in capfd.readouterr().err

@@ -22,3 +22,28 @@ def test_errors_are_one_line(tmp_path, capsys):
                  "--K", "500", "500", "320", "240"]) == 2
     assert "part model not found" in capsys.readouterr().err
     assert main(["pose", "eval", "--out", str(tmp_path / "r")]) == 2
+
+
+def test_camera_that_is_not_a_calibration_is_one_line(tmp_path, capsys):
+    """`--camera views.json` (what `alcn calib camera` writes beside camera.yaml) was a cv2.error traceback."""
+    import json
+
+    views = tmp_path / "views.json"
+    views.write_text(json.dumps({"image_size": [640, 480], "camera_matrix": [[500, 0, 320], [0, 500, 240], [0, 0, 1]],
+                                 "distortion_coefficients": [0, 0, 0, 0, 0], "views": []}))
+    code = main(["pose", "track", str(tmp_path / "m.npz"), str(tmp_path), str(tmp_path / "p.json"),
+                 "--camera", str(views)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err
+    assert "not a camera calibration" in err and "camera.yaml" in err
+
+
+def test_help_texts(capsys):
+    with pytest.raises(SystemExit):
+        main(["pose", "eval", "--help"])
+    out = capsys.readouterr().out
+    assert "10% of the diameter" in out and "%%" not in out
+    with pytest.raises(SystemExit):
+        main(["pose", "build", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "--box-size (default: cm for a video" in out

@@ -11,9 +11,10 @@ import torch
 
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.nets.detector import Detector
+from pose import corner_data, corner_train
 from pose import corners as pc
 from pose import track
-from pose.build import load_sequence
+from pose.sequence import load_sequence
 from pose.cli import add_parser
 from pose.evaluate import projection_error
 from pose.model import box_corners, read_box_corners
@@ -37,7 +38,7 @@ def random_net(tmp_path_factory):
             "input_mean": 0.5, "input_std": 0.25,
             "corners": box_corners([140, 95, 55]).tolist(), "units": "mm", "window": pc.WINDOW,
             "stride": pc.STRIDE, "pad": pc.PAD}
-    path = pc.export_onnx(net, tmp_path_factory.mktemp("onnx") / "c.onnx", meta)
+    path = corner_train.export_onnx(net, tmp_path_factory.mktemp("onnx") / "c.onnx", meta)
     return net, path
 
 
@@ -50,28 +51,28 @@ def test_visibility_of_a_box_seen_from_above():
     K = camera_matrix(500, 500, 319.5, 239.5)
     R = np.diag([1.0, -1.0, -1.0])  # camera on the +z side of the box, looking down -z
     t = np.array([0.0, 0.0, 600.0])
-    uv, vis = pc.corner_visibility(corners, R, t, K, (480, 640))
+    uv, vis = corner_data.corner_visibility(corners, R, t, K, (480, 640))
     np.testing.assert_array_equal(vis, [False, True] * 4)  # the top face (z bit set) only
     assert np.allclose(uv[1], [319.5 - 500 * 50 / 580, 239.5 + 500 * 30 / 580])
     mask = np.zeros((480, 640), np.uint8)  # an occluder hides everything but corner 7
     mask[int(uv[7, 1]) - 1 : int(uv[7, 1]) + 2, int(uv[7, 0]) - 1 : int(uv[7, 0]) + 2] = 255
-    _, vis = pc.corner_visibility(corners, R, t, K, (480, 640), mask)
+    _, vis = corner_data.corner_visibility(corners, R, t, K, (480, 640), mask)
     assert np.flatnonzero(vis).tolist() == [7]
-    _, vis = pc.corner_visibility(corners, R, t + [2000, 0, 0], K, (480, 640))  # out of the image
+    _, vis = corner_data.corner_visibility(corners, R, t + [2000, 0, 0], K, (480, 640))  # out of the image
     assert not vis.any()
 
 
 def test_dataset_labels_are_the_projected_corners(posedata):
     seq = load_sequence(posedata / "train" / "000001", obj_id=1)
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
-    data = pc.build_dataset(seq, corners, "none", scale=1.0, negatives_per_frame=30, augment_per_corner=2,
+    data = corner_data.build_dataset(seq, corners, "none", scale=1.0, negatives_per_frame=30, augment_per_corner=2,
                             backgrounds=0)
     assert len(data.normalized) == len(seq.views)
     assert data.windows.shape[1:] == (32, 32) and data.windows.dtype == np.float32
     assert np.isfinite(data.windows).all()
     assert set(np.unique(data.labels)) > {0} and data.labels.max() <= 8
     for f, view in enumerate(seq.views):
-        uv, vis = pc.corner_visibility(corners, view.R_w2c, view.t_w2c, view.K, (240, 320))
+        uv, vis = corner_data.corner_visibility(corners, view.R_w2c, view.t_w2c, view.K, (240, 320))
         sel = (data.frames == f) & ~data.augmented
         pos = sel & (data.labels > 0)
         d = np.linalg.norm(data.centers[pos] - uv[data.labels[pos] - 1], axis=1)
@@ -89,7 +90,7 @@ def test_dataset_labels_are_the_projected_corners(posedata):
 def test_copies_with_new_backgrounds(posedata):
     seq = load_sequence(posedata / "train" / "000001", obj_id=1)
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
-    data = pc.build_dataset(seq, corners, "none", scale=1.0, negatives_per_frame=10, augment_per_corner=0,
+    data = corner_data.build_dataset(seq, corners, "none", scale=1.0, negatives_per_frame=10, augment_per_corner=0,
                             backgrounds=2)
     assert len(data.normalized) == 3 * len(seq.views) and len(data.visible) == len(data.normalized)
     first = seq.views[0]
@@ -101,7 +102,7 @@ def test_copies_with_new_backgrounds(posedata):
     for copy in data.normalized[1:3]:
         assert np.abs(copy - data.normalized[0])[outside].mean() > 0.1 * data.normalized[0].std()
     gray = pc.to_gray(cv2.imread(str(seq.image_dir / first.name)))
-    composite = pc.replace_background(gray, mask, np.random.default_rng(0))
+    composite = corner_data.replace_background(gray, mask, np.random.default_rng(0))
     np.testing.assert_array_equal(composite[inside], gray[inside])
     assert np.abs(composite[outside].astype(int) - gray[outside]).mean() > 5
     pos = (data.labels > 0) & np.isin(data.frames, [1, 2])
@@ -158,11 +159,11 @@ def test_alcn_runs_at_the_detector_resolution_torch_free_where_it_can(tmp_path):
 
     from alcn_cv.enhance.alcn import MODELS
 
-    paper = pc.normalizer_for("alcn:model=paper")
+    paper = pc.normalization_for("alcn:model=paper")
     assert paper.scale == 1.0 and paper.backend == "opencv"
-    assert pc.normalizer_for("alcn:model=paper:backend=fast").backend == "fast"
+    assert pc.normalization_for("alcn:model=paper:backend=fast").backend == "fast"
     weights = shutil.copy(MODELS["lite"], tmp_path / "lite.npz")  # weights without an ONNX twin
-    lite = pc.normalizer_for(f"alcn:weights={weights}:mixture=pyramid")
+    lite = pc.normalization_for(f"alcn:weights={weights}:mixture=pyramid")
     assert lite.scale == 1.0 and lite.backend == "fast" and lite.mixture == "pyramid"
 
 
@@ -176,9 +177,9 @@ def test_bad_files(tmp_path, random_net):
     with pytest.raises(InputError, match="top_k"):
         pc.CornerDetector(random_net[1], top_k=0)
     with pytest.raises(InputError, match=r"\.onnx"):
-        pc.export_onnx(random_net[0], tmp_path / "x.pt", {})
+        corner_train.export_onnx(random_net[0], tmp_path / "x.pt", {})
     with pytest.raises(InputError, match="box_ply"):
-        pc.main(tmp_path, tmp_path / "c.onnx")
+        corner_train.main(tmp_path, tmp_path / "c.onnx")
     with pytest.raises(InputError, match="trained after the normalizer 'none'"):
         track.main(random_net[1], tmp_path, tmp_path / "p.json", np.eye(3), normalizer="alcn", detector="corners")
 

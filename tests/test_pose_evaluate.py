@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from alcn_cv.errors import DatasetError
-from pose import evaluate
+from pose import evaluate, plots
 
 
 def test_report_table_and_plot(tmp_path):
     table = {"none / orb": {"#1": 100.0, "#2": 12.5}, "alcn / orb": {"#1": 100.0, "#2": float("nan")}}
-    md = evaluate.markdown_table(table, ["#1", "#2"])
+    md = evaluate.table_markdown(table, ["#1", "#2"])
     assert "| none / orb | 100.0 | 12.5 |" in md and "| alcn / orb | 100.0 | - |" in md
-    png = evaluate.plot_table(table, ["#1", "#2"], tmp_path / "t.png", "test")
+    png = plots.plot_table(table, ["#1", "#2"], tmp_path / "t.png", "test")
     assert png.stat().st_size > 1000
     assert evaluate._nan_to_none({"a": [1.0, np.nan], "b": np.float32(2)}) == {"a": [1.0, None], "b": 2.0}
 
@@ -24,11 +24,11 @@ def test_missing_dataset(tmp_path):
 
 
 def test_normalizer_specs_name_parameters_and_files():
-    from pose.parts import get_normalizer
+    from alcn_cv.enhance.registry import from_spec
 
-    fast = get_normalizer("alcn:model=lite:mixture=pyramid")
+    fast = from_spec("alcn:model=lite:mixture=pyramid")
     assert fast.mixture == "pyramid" and fast.weights_path.name == "alcn_normalizer_lite.npz"
-    assert get_normalizer("alcn:model=paper:mixture=exact").weights_path.name == "alcn_normalizer.npz"
+    assert from_spec("alcn:model=paper:mixture=exact").weights_path.name == "alcn_normalizer.npz"
     assert evaluate.file_stem("alcn:model=lite:mixture=pyramid") == "alcn_model-lite_mixture-pyramid"
     assert evaluate.file_stem("none") == "none"
 

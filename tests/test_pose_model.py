@@ -102,3 +102,15 @@ def test_opencv_tutorial_model(shared_data):
     m = pm.from_opencv_tutorial(box / "cookies_ORB.yml", box / "box.ply")
     assert len(m.points3d) == 1921 and m.descriptors.shape == (1921, 32) and m.units == "cm"
     assert sorted(np.round(m.box_size, 1)) == [7.5, 18.9, 25.8]
+
+
+def test_files_have_normal_permissions(tmp_path):
+    """model.npz was written with mode 0600 (the temporary file's): others could not read it."""
+    import os
+
+    umask = os.umask(0)
+    os.umask(umask)
+    path = pm.save(_model(), tmp_path / "box.npz")
+    for p in (path, path.with_suffix(".ply")):
+        assert p.stat().st_mode & 0o777 == 0o666 & ~umask
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary file left

@@ -8,7 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from alcn_cv.errors import DatasetError
+from alcn_cv import io
+from alcn_cv.errors import InputError
 from pose import model as pm
 from pose import track
 from pose.evaluate import rotation_error_deg
@@ -76,6 +77,32 @@ def test_track_folder_writes_bop_json_and_overlay(tmp_path):
     assert gt[f"{len(poses):04d}"] == []
     assert (tmp_path / "out" / "poses_info.json").is_file()
     assert len(list((tmp_path / "ov").glob("*.png"))) == len(poses) + 1
+
+
+def test_track_video_names_frames_in_order_and_uses_the_model_camera(tmp_path, caplog):
+    """A video's overlay frames were named 0.png, 1.png, 10.png, ...; `track` needed --K although the
+    model stores the camera it was built with (`pose build` from a video, --refine-focal)."""
+    tex = _texture()
+    model = _planar_model(tex)
+    model.extra["K"] = K.tolist()
+    pm.save(model, tmp_path / "m.npz")
+    video = tmp_path / "v.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, SIZE)
+    poses = _poses(3) * 4  # 12 frames: names past 10 sort in frame order only when zero-padded
+    for r, t in poses:
+        writer.write(_render(tex, r, t))
+    writer.release()
+    summary = track.main(tmp_path / "m.npz", video, tmp_path / "poses.json", overlay=tmp_path / "ov", n_features=800)
+    assert summary["frames"] == len(poses) and summary["tracked"] >= len(poses) - 1
+    names = [p.stem for p in sorted((tmp_path / "ov").glob("*.png"))]
+    assert names == list(json.loads((tmp_path / "poses.json").read_text())) == [f"frame_{i:06d}" for i in range(12)]
+    with caplog.at_level("WARNING", logger="pose.track"):
+        track.main(tmp_path / "m.npz", video, tmp_path / "poses2.json", 1.5 * K, n_features=800)
+    assert "differ from those" in caplog.text
+    del model.extra["K"]
+    pm.save(model, tmp_path / "m.npz")
+    with pytest.raises(InputError, match="stores no camera"):
+        track.main(tmp_path / "m.npz", video, tmp_path / "poses3.json")
 
 
 def test_detector_runs_after_any_normalizer():
@@ -158,11 +185,11 @@ def test_keypoints_in_predicted_region_with_a_prior():
 
 
 def test_bad_sources(tmp_path):
-    with pytest.raises(DatasetError):
-        list(track.iter_frames(tmp_path / "nope.mp4"))
+    with pytest.raises(InputError):
+        list(io.iter_frames(tmp_path / "nope.mp4"))
     (tmp_path / "broken.mp4").write_bytes(b"\x00" * 100)
-    with pytest.raises(DatasetError):
-        list(track.iter_frames(tmp_path / "broken.mp4"))
+    with pytest.raises(InputError):
+        list(io.iter_frames(tmp_path / "broken.mp4"))
     (tmp_path / "empty").mkdir()
-    with pytest.raises(DatasetError):
-        list(track.iter_frames(tmp_path / "empty"))
+    with pytest.raises(InputError):
+        list(io.iter_frames(tmp_path / "empty"))
