@@ -63,8 +63,10 @@ def machine() -> dict[str, Any]:
     return info
 
 
-def describe_machine(info: dict[str, Any]) -> str:
-    """One line of :func:`machine`'s description, for a report: CPU, cores, load, versions."""
+def describe_machine(info: dict[str, Any] | None = None) -> str:
+    """One line of :func:`machine`'s description (default: the machine now), for a report: CPU,
+    cores, load, versions."""
+    info = machine() if info is None else info
     cpu = info.get("cpu_model", info.get("processor"))
     cpus = info.get("cpus_available", info.get("cpu_count"))
     parts = [f"{cpu}, {cpus} CPUs available"]

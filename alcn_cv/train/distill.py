@@ -39,7 +39,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
 from alcn_cv.io import atomic_write
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
-from alcn_cv.train.summary import describe_machine
+from alcn_cv.report import describe_machine
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file, save_normalizer_file
 
 __all__ = ["distill", "main", "output_gram"]

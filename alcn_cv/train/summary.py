@@ -5,29 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from alcn_cv.report import machine, new_figure, save_figure
+from alcn_cv.report import describe_machine, machine, new_figure, save_figure
 from alcn_cv.train.checkpoint import versions
 from alcn_cv.train.config import TrainConfig
 
 if TYPE_CHECKING:
     from alcn_cv.train.trainer import TrainResult
 
-__all__ = ["describe_machine", "plot_curves", "summary_markdown"]
-
-
-def describe_machine(info: dict[str, Any] | None = None) -> str:
-    """One line of :func:`alcn_cv.report.machine` (default: now): CPU, cores, torch threads, GPU, load."""
-    info = machine() if info is None else info
-    parts = [f"{info.get('cpu_model') or info['processor']}, {info['cpu_count']} cores"]
-    if info.get("cpus_available", info["cpu_count"]) != info["cpu_count"]:
-        parts.append(f"{info['cpus_available']} available")
-    if "torch_threads" in info:
-        parts.append(f"torch threads {info['torch_threads']}")
-    if info.get("cuda"):
-        parts.append(f"CUDA {info['cuda']}")
-    if "load_average_1_5_15" in info:
-        parts.append("load average {:.1f}/{:.1f}/{:.1f} (1/5/15 min)".format(*info["load_average_1_5_15"]))
-    return ", ".join(parts)
+__all__ = ["plot_curves", "summary_markdown"]
 
 
 def plot_curves(history: list[dict[str, Any]], path: Path) -> None:
@@ -56,7 +41,7 @@ def summary_markdown(cfg: TrainConfig, result: TrainResult, machine_start: dict[
              f"- status: {result.status}; {len(result.history)} epoch(s); training "
              f"{result.history[-1]['seconds'] / 60 if result.history else 0:.1f} min, whole run (data, training, "
              f"few-shot validation, export) {result.seconds / 60:.1f} min",
-             f"- machine at start: {describe_machine(machine_start)}", f"- machine at end: {describe_machine()}",
+             f"- machine at start: {describe_machine(machine_start)}", f"- machine at end: {describe_machine(machine())}",
              f"- versions: {versions()}", f"- seed {cfg.seed}; configuration: `config.toml` in this folder", "",
              "## Held-out lightings (stage 1: the training objects, lighting families never trained on)", "",
              "| epoch | train acc | held-out acc | " + " | ".join(result.val_by_family) + " |",
