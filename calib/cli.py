@@ -27,7 +27,7 @@ def _add_board_args(p: argparse.ArgumentParser, with_chessboard: bool = True) ->
                        help="target type (default charuco)")
     else:
         g.add_argument("--board", choices=("charuco",), default="charuco",
-                       help="target type: ChArUco only (a chessboard's pose is ambiguous under a half turn)")
+                       help="target type: ChArUco only, the default (a chessboard's pose is ambiguous under a half turn)")
     either = (lambda chessboard, aruco: f"chessboard: {chessboard}; ChArUco: {aruco}") if with_chessboard else (
         lambda chessboard, aruco: aruco)
     g.add_argument("--cols", type=int, help=either("inner corners per row (required)",

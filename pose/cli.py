@@ -107,7 +107,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="static camera, moving object: keep features on what moves")
     b.add_argument("--feature", default="ORB", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default ORB)")
     b.add_argument("--n-features", type=int, default=4000, help="keypoints per training image (default 4000)")
-    b.add_argument("--normalizer", default="none", help="normalizer applied first (alcn_cv.available())")
+    b.add_argument("--normalizer", default="none", help="normalizer applied first, a spec NAME[:KEY=VALUE...] (default none)")
     b.add_argument("--box-ply", help="cuboid .ply of the box: its true size")
     b.add_argument("--box-size", nargs=3, type=float, metavar=("X", "Y", "Z"), help="the box's true size")
     b.add_argument("--box-units", choices=["mm", "cm", "m"],
@@ -132,10 +132,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     cam.add_argument("--camera", help="camera.yaml from `alcn calib camera` (OpenCV FileStorage; default: the camera "
                      "stored in the part model)")
     t.add_argument("--detector", default="features", choices=["features", "corners"],
-                   help="features: OpenCV features matched to the part model; corners: the corner CNN (cv2.dnn)")
+                   help="features (default): OpenCV features matched to the part model; corners: the corner CNN (cv2.dnn)")
     t.add_argument("--normalizer", help="normalizer applied first (default none; a corner detector's own)")
     t.add_argument("--overlay", help="write the overlay here (.mp4/.avi or a folder)")
-    t.add_argument("--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant")
+    t.add_argument("--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant (default usac_default)")
     t.add_argument("--n-features", type=int, default=1000, help="keypoints per frame (default 1000)")
     t.add_argument("--min-inliers", type=int, help="fewer inliers: frame lost (default 12; 5 with corners)")
     t.add_argument("--reprojection-error", type=float, default=4.0, help="inlier threshold, px (default 4)")
@@ -152,7 +152,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="feature of the classical detector (default SIFT: on the data engine's sequences it "
                    "gave more correct poses than ORB, and with ALCN far more; `track` uses ORB for speed)")
     e.add_argument("--detectors", nargs="+", default=["features"], choices=["features", "corners"],
-                   help="part detectors, each giving rows (corners: trained on the training sequence first)")
+                   help="part detectors, each giving rows (default features; corners: trained on the training sequence first)")
     e.add_argument("--corner-epochs", type=int, default=6, help="corner CNN epochs per round (default 6)")
     e.add_argument("--out", type=Path, required=True, help="report folder")
     e.set_defaults(func=_eval)

@@ -1,0 +1,38 @@
+"""Every ``alcn`` command's ``--help`` states the default of every option that has one."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+
+from alcn_cv.cli import build_parser
+
+
+def _commands(parser: argparse.ArgumentParser, prefix: str = "alcn") -> dict[str, argparse.ArgumentParser]:
+    found = {prefix: parser}
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                found |= _commands(sub, f"{prefix} {name}")
+    return found
+
+
+COMMANDS = _commands(build_parser())
+
+
+def _has_default(action: argparse.Action) -> bool:
+    return action.default not in (None, False, [], argparse.SUPPRESS) and action.help != argparse.SUPPRESS
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_help_states_every_default(command):
+    parser = COMMANDS[command]
+    missing = [a.option_strings[-1] for a in parser._actions
+               if a.option_strings and _has_default(a) and "default" not in (a.help or "")]
+    assert not missing, f"{command}: no default in the help of {missing}"
+
+
+def test_help_has_no_literal_percent_escapes():
+    for command, parser in COMMANDS.items():
+        assert "%%" not in parser.format_help(), command
