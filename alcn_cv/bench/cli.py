@@ -1,4 +1,4 @@
-"""``alcn bench``: the benchmarks, one sub-subcommand each (detect, invariance, speed).
+"""``alcn bench``: the benchmarks, one sub-subcommand each (detect, invariance, relight, speed).
 
 Each ``_add_<benchmark>`` adds its sub-subcommand and sets ``func`` to a handler returning an
 exit code; the handler turns the options into the benchmark's settings (a preset, then every
@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from alcn_cv.bench import detect, invariance, speed
+from alcn_cv.bench import detect, invariance, relight, speed
 from alcn_cv.bench.detect_settings import POLICIES, DetectSettings, presets
 from alcn_cv.errors import InputError
 
@@ -172,7 +172,7 @@ def _run_speed(args: argparse.Namespace) -> int:
     return 0 if result["rows"] else 1
 
 
-BENCHMARKS = (_add_detect, _add_invariance, _add_speed)
+BENCHMARKS = (_add_detect, _add_invariance, relight.add_cli, _add_speed)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:

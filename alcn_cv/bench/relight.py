@@ -1,0 +1,539 @@
+"""``alcn bench relight``: the normalizations on real changes of light, with a fixed camera.
+
+Every method normalizes whole grayscale frames through its own ``apply`` (uint8 in, float32
+out, the method's fixed output map), once per scene; the normalized frames are then reused by
+every protocol and seed. Scenes are registered multi-illumination sets
+(:mod:`alcn_cv.bench.relight_data`): the outdoor webcams of TILDE (Verdie et al., CVPR 2015)
+and photometric-stereo objects. Per scene and seed, ``gallery`` frames are drawn and each is
+paired with every other frame of the scene (at most ``max_pairs`` pairs, drawn at random).
+
+* **identification** (%): ``patches`` textured ``patch x patch`` locations of the gallery frame
+  (drawn among the more textured half of a half-overlapping grid, by gradient energy of the
+  raw frame) are identified in the other frame by normalized cross-correlation against the
+  patches at all the same locations (chance ``1 / patches``).
+* **matching** (%, ORB and SIFT): keypoints on the normalized frames (``apply``'s uint8
+  output), Lowe's ratio test, a match is correct when its keypoints are within ``match_px``
+  (the frames are registered); score = correct matches / the smaller keypoint count
+  (Mikolajczyk & Schmid, PAMI 2005's matching score).
+* **pose** (%, ORB and SIFT): a RANSAC homography (``cv2.findHomography``, ``ransac_px``) from
+  the ratio-test matches; a success when it moves each corner of the frame less than
+  ``pose_px`` (the identity is the truth): the 2D-projection criterion of Rad et al., BMVC
+  2017, Sec. 5, on real light.
+
+Parameters of DoG, SLCN, DLCN, Tan-Triggs and DoG + local standardization are tuned on the
+training scenes only, each over a grid of the same size (:data:`TUNING_GRIDS`), scored by
+identification on a subsample; the report holds both the default and the tuned rows. With
+``leave_one_out``, each scene is evaluated with the parameters tuned on the others.
+
+A spec ending in ``+lstd`` (``dog+lstd``) is the method followed by a per-pixel local
+standardization (:class:`LocallyStandardized`, the detection benchmark's
+:func:`~alcn_cv.bench.policies.local_standardize`).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shlex
+import sys
+import time
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from tqdm.auto import tqdm
+
+from alcn_cv.bench.policies import LOCAL_BOX, local_standardize
+from alcn_cv.bench.relight_data import Scene, load_scenes, select_scenes
+from alcn_cv.bench.relight_report import write_report
+from alcn_cv.enhance.base import Normalization
+from alcn_cv.enhance.registry import from_spec, parse_spec
+from alcn_cv.errors import InputError
+from alcn_cv.report import machine
+from alcn_cv.shared_data import shared_data_dir
+
+__all__ = [
+    "DEFAULT_METHODS",
+    "METRICS",
+    "TUNING_GRIDS",
+    "LocallyStandardized",
+    "Settings",
+    "build_method",
+    "evaluate_scene",
+    "identification",
+    "main",
+    "patch_locations",
+    "plan_pairs",
+    "tune",
+]
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_METHODS = ("none", "clahe", "dog", "slcn", "dlcn", "sqi", "tantriggs", "dog+lstd", "alcn")
+DEFAULT_TRAIN = ("courbevoie", "frankfurt", "panorama")
+DEFAULT_TEST = ("mexico", "psm")
+DEFAULT_LEAVE_ONE_OUT = ("courbevoie", "frankfurt", "mexico", "panorama")
+DETECTORS = ("orb", "sift")
+#: Every reported number, in percent.
+METRICS = ("identification", "matching_orb", "matching_sift", "pose_orb", "pose_sift")
+LSTD = "+lstd"
+
+_DOG_GRID = [(0.5, 1.5), (0.5, 3.0), (1.0, 2.0), (1.0, 3.0), (1.0, 4.0), (1.5, 3.0), (2.0, 4.0), (2.0, 6.0)]
+_LCN_GRID = [2.0, 1.0, 1.5, 3.0, 4.0, 6.0, 8.0, 12.0]
+#: Settings searched per tuned method, the same number (8) for each; the default comes first, so
+#: a tie keeps it.
+TUNING_GRIDS: dict[str, list[dict[str, float]]] = {
+    "dog": [{"sigma1": a, "sigma2": b} for a, b in _DOG_GRID],
+    "slcn": [{"sigma": s} for s in _LCN_GRID],
+    "dlcn": [{"sigma": s} for s in _LCN_GRID],
+    "tantriggs": [
+        {"gamma": g, "sigma0": a, "sigma1": b}
+        for g, a, b in [(0.2, 1.0, 2.0), (0.1, 1.0, 2.0), (0.4, 1.0, 2.0), (0.2, 0.5, 1.5),
+                        (0.2, 0.5, 2.0), (0.2, 1.0, 3.0), (0.2, 1.5, 3.0), (0.2, 2.0, 4.0)]
+    ],
+    "dog+lstd": [{"sigma1": a, "sigma2": b} for a, b in _DOG_GRID],
+}
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The protocols' parameters (see the module docstring)."""
+
+    patch: int = 32
+    patches: int = 300
+    gallery: int = 3
+    max_pairs: int | None = 30
+    keypoints: int = 1000
+    ratio: float = 0.8
+    match_px: float = 3.0
+    ransac_px: float = 3.0
+    pose_px: float = 5.0
+    keypoint_protocols: bool = True
+
+    def check(self) -> Settings:
+        if self.patch < 4 or self.patches < 2 or self.gallery < 1 or self.keypoints < 4:
+            raise InputError("need patch >= 4, patches >= 2, gallery >= 1 and keypoints >= 4")
+        if self.max_pairs is not None and self.max_pairs < 1:
+            raise InputError(f"max_pairs must be positive, got {self.max_pairs}")
+        if not 0 < self.ratio <= 1:
+            raise InputError(f"ratio must be in (0, 1], got {self.ratio}")
+        return self
+
+
+class LocallyStandardized(Normalization):
+    """A normalization followed by a per-pixel local standardization of its raw response.
+
+    Each pixel is standardized by the mean and standard deviation of the ``size x size`` box
+    around it (:func:`alcn_cv.bench.policies.local_standardize`, the detection benchmark's
+    ``local`` input policy), so a detector that needs it gets it through ``apply`` as every
+    other method.
+
+    Args:
+        inner: the normalization applied first.
+        size: the box side (odd, pixels).
+    """
+
+    output_range = (-3.0, 3.0)
+
+    def __init__(self, inner: Normalization, size: int = LOCAL_BOX) -> None:
+        self.inner = inner
+        self.size = int(size)
+        self.name = f"{inner.name}{LSTD}"
+
+    def _normalize(self, gray: np.ndarray) -> np.ndarray:
+        return local_standardize(self.inner.normalize(gray), self.size)
+
+
+def build_method(spec: str) -> Normalization:
+    """The normalization of a spec ``NAME[:KEY=VALUE...][+lstd]`` (:func:`~alcn_cv.enhance.registry.from_spec`)."""
+    if spec.endswith(LSTD):
+        return LocallyStandardized(from_spec(spec[: -len(LSTD)]))
+    return from_spec(spec)
+
+
+def _spec(method: str, params: dict[str, float]) -> str:
+    base = method[: -len(LSTD)] if method.endswith(LSTD) else method
+    text = base + "".join(f":{k}={v}" for k, v in params.items())
+    return text + (LSTD if method.endswith(LSTD) else "")
+
+
+# ---------------------------------------------------------------------------------------------
+# Protocols
+
+
+@dataclass(frozen=True)
+class PairPlan:
+    """What one seed draws for a scene: gallery frames, their patch locations, the frame pairs."""
+
+    gallery: tuple[int, ...]
+    locations: dict[int, np.ndarray]
+    pairs: tuple[tuple[int, int], ...]
+
+
+def patch_locations(frame: np.ndarray, size: int, count: int, rng: np.random.Generator) -> np.ndarray:
+    """``count`` textured ``size x size`` patch locations of a frame.
+
+    Candidates lie on a grid of stride ``size // 2``; the more textured half (gradient energy,
+    the sum of squared Sobel derivatives over the patch, at least the median and non-zero)
+    is kept and ``count`` of them are drawn without replacement (all when fewer).
+
+    Returns:
+        ``(n, 2)`` int64 top-left corners ``(y, x)``, ``n <= count``.
+    """
+    g = frame.astype(np.float32)
+    energy = cv2.Sobel(g, cv2.CV_32F, 1, 0) ** 2 + cv2.Sobel(g, cv2.CV_32F, 0, 1) ** 2
+    integral = cv2.integral(energy, sdepth=cv2.CV_64F)
+    h, w = frame.shape
+    if h < size or w < size:
+        raise InputError(f"frames of {w}x{h} are smaller than the {size}x{size} patches")
+    stride = max(1, size // 2)
+    ys, xs = np.meshgrid(np.arange(0, h - size + 1, stride), np.arange(0, w - size + 1, stride), indexing="ij")
+    ys, xs = ys.ravel(), xs.ravel()
+    sums = integral[ys + size, xs + size] - integral[ys, xs + size] - integral[ys + size, xs] + integral[ys, xs]
+    keep = np.flatnonzero((sums >= np.median(sums)) & (sums > 0))
+    chosen = np.sort(rng.choice(keep, size=min(count, len(keep)), replace=False))
+    return np.stack([ys[chosen], xs[chosen]], axis=1).astype(np.int64)
+
+
+def _patch_vectors(image: np.ndarray, locations: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-mean, unit-norm patch vectors ``(n, size^2)`` and whether each had any contrast."""
+    offsets = np.arange(size)
+    rows = locations[:, 0, None, None] + offsets[None, :, None]
+    cols = locations[:, 1, None, None] + offsets[None, None, :]
+    vectors = image[rows, cols].reshape(len(locations), -1).astype(np.float32)
+    vectors -= vectors.mean(axis=1, keepdims=True)
+    norms = np.linalg.norm(vectors, axis=1)
+    valid = norms > 1e-6
+    vectors[valid] /= norms[valid, None]
+    vectors[~valid] = 0.0
+    return vectors, valid
+
+
+def identification(gallery: np.ndarray, query: np.ndarray, locations: np.ndarray, size: int) -> float:
+    """Fraction of the gallery's patches whose best normalized cross-correlation in ``query``,
+    over the patches at all ``locations``, is at their own location (a patch without any
+    contrast counts as not identified)."""
+    a, valid = _patch_vectors(gallery, locations, size)
+    b, _ = _patch_vectors(query, locations, size)
+    best = np.argmax(a @ b.T, axis=1)
+    return float(np.mean((best == np.arange(len(locations))) & valid))
+
+
+def plan_pairs(scene: Scene, seed: int, settings: Settings) -> PairPlan:
+    """The gallery frames, their patch locations and the frame pairs of one seed (the same for every method)."""
+    rng = np.random.default_rng([seed, zlib.crc32(scene.name.encode())])
+    n = len(scene.frames)
+    gallery = tuple(sorted(int(i) for i in rng.choice(n, size=min(settings.gallery, n), replace=False)))
+    locations = {g: patch_locations(scene.frames[g], settings.patch, settings.patches, rng) for g in gallery}
+    pairs = [(g, f) for g in gallery for f in range(n) if f != g]
+    if settings.max_pairs is not None and len(pairs) > settings.max_pairs:
+        pick = np.sort(rng.choice(len(pairs), size=settings.max_pairs, replace=False))
+        pairs = [pairs[i] for i in pick]
+    return PairPlan(gallery, locations, tuple(pairs))
+
+
+def _detector(kind: str, n: int) -> tuple[Any, int]:
+    if kind == "orb":
+        return cv2.ORB_create(nfeatures=n), cv2.NORM_HAMMING
+    return cv2.SIFT_create(nfeatures=n), cv2.NORM_L2
+
+
+def _ratio_matches(d1: np.ndarray | None, d2: np.ndarray | None, norm: int, ratio: float) -> list[tuple[int, int]]:
+    if d1 is None or d2 is None or len(d1) < 1 or len(d2) < 2:
+        return []
+    knn = cv2.BFMatcher(norm).knnMatch(d1, d2, k=2)
+    return [(m[0].queryIdx, m[0].trainIdx) for m in knn if len(m) == 2 and m[0].distance < ratio * m[1].distance]
+
+
+def _keypoint_scores(
+    kp1: tuple[np.ndarray, np.ndarray | None], kp2: tuple[np.ndarray, np.ndarray | None], norm: int,
+    shape: tuple[int, int], settings: Settings,
+) -> tuple[float, float]:
+    """(matching score, pose success) of a frame pair from its keypoints ``(points, descriptors)``."""
+    (p1, d1), (p2, d2) = kp1, kp2
+    matches = _ratio_matches(d1, d2, norm, settings.ratio)
+    if not matches:
+        return 0.0, 0.0
+    idx = np.array(matches)
+    src, dst = p1[idx[:, 0]], p2[idx[:, 1]]
+    correct = np.count_nonzero(np.linalg.norm(src - dst, axis=1) <= settings.match_px)
+    score = correct / min(len(p1), len(p2))
+    if len(matches) < 4:
+        return score, 0.0
+    homography, _ = cv2.findHomography(src, dst, cv2.RANSAC, settings.ransac_px)
+    if homography is None:
+        return score, 0.0
+    h, w = shape
+    corners = np.array([[[0, 0]], [[w - 1, 0]], [[w - 1, h - 1]], [[0, h - 1]]], np.float64)
+    moved = cv2.perspectiveTransform(corners, homography) - corners
+    return score, float(np.linalg.norm(moved, axis=2).max() < settings.pose_px)
+
+
+def evaluate_scene(
+    norm: Normalization, scene: Scene, plans: Sequence[PairPlan], settings: Settings
+) -> dict[str, Any]:
+    """Every protocol on one scene for one method, one value per plan (seed) and metric.
+
+    The frames are normalized once (``apply``, float32) and reused by every plan; keypoints are
+    detected once per frame.
+
+    Returns:
+        ``{"metrics": {metric: [percent per plan]}, "ms_per_frame": float}``.
+    """
+    start = time.perf_counter()
+    normalized = [norm.apply(frame, out_dtype=np.float32) for frame in scene.frames]
+    ms_per_frame = 1000 * (time.perf_counter() - start) / len(normalized)
+    detectors = {k: _detector(k, settings.keypoints) for k in DETECTORS} if settings.keypoint_protocols else {}
+    keypoints: dict[tuple[str, int], tuple[np.ndarray, np.ndarray | None]] = {}
+
+    def features(kind: str, i: int) -> tuple[np.ndarray, np.ndarray | None]:
+        if (kind, i) not in keypoints:
+            frame = np.rint(normalized[i] * np.float32(255)).astype(np.uint8)  # apply()'s uint8 output
+            kps, desc = detectors[kind][0].detectAndCompute(frame, None)
+            keypoints[kind, i] = (np.array([k.pt for k in kps], np.float32).reshape(-1, 2), desc)
+        return keypoints[kind, i]
+
+    metrics: dict[str, list[float]] = {m: [] for m in METRICS if settings.keypoint_protocols or m == "identification"}
+    for plan in plans:
+        values: dict[str, list[float]] = {m: [] for m in metrics}
+        for g, f in plan.pairs:
+            values["identification"].append(identification(normalized[g], normalized[f], plan.locations[g], settings.patch))
+            for kind, (_, kind_norm) in detectors.items():
+                score, success = _keypoint_scores(features(kind, g), features(kind, f), kind_norm, scene.frames.shape[1:], settings)
+                values[f"matching_{kind}"].append(score)
+                values[f"pose_{kind}"].append(success)
+        for m, v in values.items():
+            metrics[m].append(100.0 * float(np.mean(v)))
+    return {"metrics": metrics, "ms_per_frame": ms_per_frame}
+
+
+# ---------------------------------------------------------------------------------------------
+# Tuning
+
+
+def _subsample(scene: Scene, frames: int) -> Scene:
+    keep = np.unique(np.linspace(0, len(scene.frames) - 1, min(frames, len(scene.frames))).round().astype(int))
+    return Scene(scene.name, scene.group, scene.frames[keep], tuple(scene.files[i] for i in keep))
+
+
+def tune(
+    method: str, scenes: Sequence[Scene], settings: Settings, seed: int = 0, frames: int = 8,
+    progress: Callable[[], None] | None = None,
+) -> dict[str, Any]:
+    """Choose ``method``'s setting among :data:`TUNING_GRIDS` by identification on ``scenes``.
+
+    Each setting is scored by the mean identification (%) over the scenes, each subsampled to
+    ``frames`` evenly spaced frames, for one ``seed``; the first best setting wins.
+
+    Returns:
+        ``{"chosen": spec, "scores": {spec: percent}}``.
+    """
+    small = [_subsample(s, frames) for s in scenes]
+    fast = replace(settings, keypoint_protocols=False)
+    plans = {s.name: plan_pairs(s, seed, fast) for s in small}
+    scores: dict[str, float] = {}
+    for params in TUNING_GRIDS[method]:
+        spec = _spec(method, params)
+        norm = build_method(spec)
+        scores[spec] = float(np.mean([evaluate_scene(norm, s, [plans[s.name]], fast)["metrics"]["identification"][0] for s in small]))
+        if progress is not None:
+            progress()
+    chosen = max(scores, key=lambda k: scores[k])  # the first of equal maxima
+    logger.info("%s tuned on %s: %s (%.1f%%)", method, ", ".join(s.name for s in scenes), chosen, scores[chosen])
+    return {"chosen": chosen, "scores": scores}
+
+
+# ---------------------------------------------------------------------------------------------
+# The benchmark
+
+
+def _check_methods(methods: Sequence[str]) -> None:
+    for spec in methods:
+        build_method(spec)  # raises InputError on an unknown name or bad parameters
+    if len(set(methods)) != len(methods):
+        raise InputError("a method is listed twice")
+
+
+def _summary(values: Sequence[float]) -> dict[str, Any]:
+    return {"seeds": [float(v) for v in values], "mean": float(np.mean(values)), "std": float(np.std(values))}
+
+
+def main(
+    out_dir: str | os.PathLike,
+    data: Sequence[str | os.PathLike] | None = None,
+    methods: Sequence[str] = DEFAULT_METHODS,
+    train_scenes: Sequence[str] = DEFAULT_TRAIN,
+    test_scenes: Sequence[str] = DEFAULT_TEST,
+    leave_one_out: Sequence[str] | None = None,
+    seeds: Sequence[int] = (0, 1, 2),
+    settings: Settings = Settings(),
+    max_frames: int | None = 20,
+    tuning: bool = True,
+    tune_frames: int = 8,
+    progress: bool = True,
+    command: str | None = None,
+) -> dict[str, Any]:
+    """Run the benchmark and write ``relight.md``, ``relight.json`` and ``relight.png`` into ``out_dir``.
+
+    Args:
+        out_dir: output folder (created).
+        data: roots of registered multi-illumination sets (default: the shared ``webcam`` and ``psm``).
+        methods: specs ``NAME[:KEY=VALUE...]`` (:func:`~alcn_cv.enhance.registry.from_spec`),
+            optionally ending in ``+lstd`` (:class:`LocallyStandardized`).
+        train_scenes: scenes (or data-set names) the parameters are tuned on.
+        test_scenes: scenes (or data-set names) evaluated only.
+        leave_one_out: if given, ignore the split: each of these scenes is evaluated with the
+            parameters tuned on the others.
+        seeds: one run per seed (gallery frames, patch locations and pairs change); the report
+            gives the mean and the standard deviation over seeds.
+        settings: the protocols' parameters.
+        max_frames: at most this many frames per scene, evenly spaced (``None``: all).
+        tuning: tune the methods of :data:`TUNING_GRIDS` that ``methods`` lists and add their rows.
+        tune_frames: frames per training scene the tuning scores on.
+        progress: show progress bars.
+        command: the command line, for the report.
+
+    Returns:
+        The results also written to ``relight.json``.
+    """
+    start = time.perf_counter()
+    settings = settings.check()
+    methods = list(methods)
+    _check_methods(methods)
+    if not seeds:
+        raise InputError("give at least one seed")
+    roots = [Path(p) for p in data] if data else [shared_data_dir() / "webcam", shared_data_dir() / "psm"]
+    scenes = load_scenes(roots, max_frames)
+    if leave_one_out is not None:
+        evaluated = select_scenes(scenes, leave_one_out or DEFAULT_LEAVE_ONE_OUT)
+        if len(evaluated) < 2:
+            raise InputError("leave-one-out needs at least two scenes")
+        folds = {s.name: [o for o in evaluated if o is not s] for s in evaluated}
+        test, train = evaluated, []
+    else:
+        train, test = select_scenes(scenes, train_scenes), select_scenes(scenes, test_scenes)
+        if {s.name for s in train} & {s.name for s in test}:
+            raise InputError("a scene is both a training and a test scene")
+        evaluated = test + train
+        folds = {"all": train}
+    tuned = [m for m in methods if m in TUNING_GRIDS] if tuning else []
+    if tuned and not all(folds.values()):
+        raise InputError("tuning needs training scenes (or --no-tune)")
+
+    bar = tqdm(total=len(folds) * sum(len(TUNING_GRIDS[m]) for m in tuned),
+               desc="relight tuning", unit="setting", disable=not progress or not tuned)
+    tuning_result: dict[str, dict[str, Any]] = {m: {} for m in tuned}
+    for fold, fold_train in folds.items():
+        for m in tuned:
+            tuning_result[m][fold] = tune(m, fold_train, settings, seed=min(seeds), frames=tune_frames, progress=bar.update)
+    bar.close()
+
+    rows: dict[str, dict[str, str]] = {m: {s.name: m for s in evaluated} for m in methods}
+    for m in tuned:
+        rows[f"{m} (tuned)"] = {s.name: tuning_result[m][s.name if leave_one_out is not None else "all"]["chosen"] for s in evaluated}
+
+    plans = {s.name: [plan_pairs(s, seed, settings) for seed in seeds] for s in evaluated}
+    jobs = [(s, spec) for s in evaluated for spec in dict.fromkeys(r[s.name] for r in rows.values())]
+    cache: dict[tuple[str, str], dict[str, Any]] = {}
+    for scene, spec in tqdm(jobs, desc="relight", unit="method x scene", disable=not progress):
+        try:
+            cache[scene.name, spec] = evaluate_scene(build_method(spec), scene, plans[scene.name], settings)
+        except Exception as exc:  # one method failing is reported, not the end of the run
+            logger.exception("%s failed on %s", spec, scene.name)
+            cache[scene.name, spec] = {"error": f"{type(exc).__name__}: {exc}"}
+
+    method_results: dict[str, Any] = {}
+    for label, specs in rows.items():
+        per_scene = {name: cache[name, spec] for name, spec in specs.items()}
+        errors = {n: r["error"] for n, r in per_scene.items() if "error" in r}
+        entry: dict[str, Any] = {"specs": specs, "tuned": label.endswith("(tuned)")}
+        if errors:
+            entry["errors"] = errors
+        ok = {n: r for n, r in per_scene.items() if "error" not in r}
+        entry["scenes"] = {n: {"ms_per_frame": r["ms_per_frame"], **{m: _summary(v) for m, v in r["metrics"].items()}}
+                           for n, r in ok.items()}
+        for key, group in (("mean_test", test), ("mean_train", train)):
+            names = [s.name for s in group]
+            if names and all(n in ok for n in names):
+                metrics = ok[names[0]]["metrics"]
+                entry[key] = {m: _summary(np.mean([ok[n]["metrics"][m] for n in names], axis=0)) for m in metrics}
+        method_results[label] = entry
+
+    result = {
+        "benchmark": "relight",
+        "command": command,
+        "data": [str(r.resolve()) for r in roots],
+        "split": {
+            "mode": "leave-one-out" if leave_one_out is not None else "train/test",
+            "train": [s.name for s in train],
+            "test": [s.name for s in test],
+        },
+        "scenes": {s.name: {"group": s.group, "frames": len(s.frames), "size": [int(s.frames.shape[2]), int(s.frames.shape[1])],
+                            "files": list(s.files)} for s in evaluated},
+        "settings": {**asdict(settings), "seeds": list(seeds), "max_frames": max_frames, "methods": methods,
+                     "tuning": tuning, "tune_frames": tune_frames, "tune_seed": min(seeds),
+                     "tuning_grids": {m: [_spec(m, p) for p in TUNING_GRIDS[m]] for m in tuned}},
+        "metrics": {
+            "identification": "% of gallery patches whose best NCC match among all sampled locations is their own",
+            "matching": "% correct ratio-test matches (within match_px) per min(#keypoints), ORB and SIFT",
+            "pose": "% of pairs whose RANSAC homography moves every frame corner less than pose_px",
+        },
+        "tuning": tuning_result,
+        "machine": machine(),
+        "methods": method_results,
+        "seconds": time.perf_counter() - start,
+    }
+    write_report(result, Path(out_dir))
+    logger.info("relight benchmark written to %s in %.0f s", out_dir, result["seconds"])
+    return result
+
+
+def add_cli(subparsers: Any) -> None:
+    """Add ``alcn bench relight`` to the ``bench`` sub-subcommands."""
+    p = subparsers.add_parser(
+        "relight",
+        help="patch identification, keypoint matching and pose on real changes of light (fixed cameras)",
+        description="Normalize the registered frames of fixed-camera scenes under different light with each "
+        "method's apply(), then score patch identification (NCC), ORB/SIFT matching and RANSAC-homography pose "
+        "between frames; DoG, SLCN, DLCN, Tan-Triggs and DoG+lstd are tuned on the training scenes only. Writes "
+        "relight.md, relight.json and relight.png.",
+    )
+    d = Settings()
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--data", nargs="+", type=Path, default=None,
+                   help="roots of multi-illumination sets (default: ../shared/data/webcam and ../shared/data/psm)")
+    p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=list(DEFAULT_METHODS),
+                   help=f"comma-separated specs NAME[:KEY=VALUE...][+lstd] (default: {','.join(DEFAULT_METHODS)})")
+    p.add_argument("--train-scenes", nargs="+", default=list(DEFAULT_TRAIN),
+                   help=f"scenes or data sets to tune on (default: {' '.join(DEFAULT_TRAIN)})")
+    p.add_argument("--test-scenes", nargs="+", default=list(DEFAULT_TEST),
+                   help=f"scenes or data sets evaluated only (default: {' '.join(DEFAULT_TEST)})")
+    p.add_argument("--leave-one-out", nargs="*", default=None, metavar="SCENE",
+                   help="evaluate each scene with parameters tuned on the others, instead of the split "
+                   f"(no scene given: {' '.join(DEFAULT_LEAVE_ONE_OUT)})")
+    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
+    p.add_argument("--max-frames", type=int, default=20, help="frames per scene, evenly spaced (default 20; 0: all)")
+    p.add_argument("--patch", type=int, default=d.patch, help=f"patch side in pixels (default {d.patch})")
+    p.add_argument("--patches", type=int, default=d.patches, help=f"patch locations per gallery frame (default {d.patches})")
+    p.add_argument("--gallery", type=int, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})")
+    p.add_argument("--max-pairs", type=int, default=d.max_pairs,
+                   help=f"frame pairs per scene and seed, drawn at random (default {d.max_pairs}; 0: all)")
+    p.add_argument("--keypoints", type=int, default=d.keypoints, help=f"ORB/SIFT keypoints per frame (default {d.keypoints})")
+    p.add_argument("--no-keypoints", action="store_true", help="identification only (skip matching and pose)")
+    p.add_argument("--no-tune", action="store_true", help="default parameters only")
+    p.add_argument("--tune-frames", type=int, default=8, help="frames per training scene the tuning scores on (default 8)")
+    p.set_defaults(func=_run_cli)
+
+
+def _run_cli(args: Any) -> int:
+    settings = Settings(patch=args.patch, patches=args.patches, gallery=args.gallery, max_pairs=args.max_pairs or None,
+                        keypoints=args.keypoints, keypoint_protocols=not args.no_keypoints)
+    result = main(args.out, args.data, args.methods, args.train_scenes, args.test_scenes, args.leave_one_out, args.seeds,
+                  settings, args.max_frames or None, not args.no_tune, args.tune_frames,
+                  command=shlex.join(["alcn", *sys.argv[1:]]))
+    print((Path(args.out) / "relight.md").read_text(encoding="utf-8"))
+    return 1 if all("errors" in r for r in result["methods"].values()) else 0

@@ -1,0 +1,141 @@
+"""The report of ``alcn bench relight``: ``relight.md``, ``relight.json`` and ``relight.png``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from alcn_cv.io import atomic_write
+from alcn_cv.report import markdown_table, new_figure, save_figure, write_json
+
+__all__ = ["write_report"]
+
+_TITLES = {
+    "identification": "Patch identification (%)",
+    "matching_orb": "Keypoint matching score, ORB (%)",
+    "matching_sift": "Keypoint matching score, SIFT (%)",
+    "pose_orb": "Real-light pose, ORB homography (% of pairs)",
+    "pose_sift": "Real-light pose, SIFT homography (% of pairs)",
+}
+_SHORT = {"identification": "identification", "matching_orb": "matching ORB", "matching_sift": "matching SIFT",
+          "pose_orb": "pose ORB", "pose_sift": "pose SIFT"}
+
+
+def _cell(summary: dict[str, Any] | None) -> str | None:
+    if summary is None:
+        return None
+    return f"{summary['mean']:.1f} ± {summary['std']:.1f}"
+
+
+def _metrics(result: dict[str, Any]) -> list[str]:
+    return [m for m in _TITLES if any(m in s for r in result["methods"].values() for s in r["scenes"].values())]
+
+
+def _summary_table(result: dict[str, Any], metrics: list[str]) -> str:
+    rows = []
+    for label, r in result["methods"].items():
+        test = r.get("mean_test", {})
+        ms = [s["ms_per_frame"] for n, s in r["scenes"].items() if n in result["split"]["test"]]
+        rows.append([label] + [_cell(test.get(m)) for m in metrics] + [f"{np.mean(ms):.0f}" if ms else None])
+    return markdown_table(["method"] + [_SHORT[m] for m in metrics] + ["ms/frame"], rows)
+
+
+def _metric_table(result: dict[str, Any], metric: str) -> str:
+    test, train = result["split"]["test"], result["split"]["train"]
+    mean_test = "**mean (held out)**" if result["split"]["mode"] == "leave-one-out" else "**mean (test)**"
+    headers = ["method"] + test + [mean_test] + ([f"{n} (train)" for n in train] + ["mean (train)"] if train else [])
+    rows = []
+    for label, r in result["methods"].items():
+        scenes = r["scenes"]
+        row = [label] + [_cell(scenes.get(n, {}).get(metric)) for n in test] + [_cell(r.get("mean_test", {}).get(metric))]
+        if train:
+            row += [_cell(scenes.get(n, {}).get(metric)) for n in train] + [_cell(r.get("mean_train", {}).get(metric))]
+        rows.append(row)
+    return markdown_table(headers, rows)
+
+
+def _tuning_text(result: dict[str, Any]) -> str:
+    if not result["tuning"]:
+        return "No tuning (default parameters only).\n"
+    loo = result["split"]["mode"] == "leave-one-out"
+    rows = []
+    for method, folds in result["tuning"].items():
+        for fold, t in folds.items():
+            best = t["scores"][t["chosen"]]
+            rows.append([method] + ([f"all but {fold}"] if loo else []) + [f"`{t['chosen']}`", f"{best:.1f}",
+                        f"{min(t['scores'].values()):.1f}-{max(t['scores'].values()):.1f}"])
+    s = result["settings"]
+    text = (
+        f"Each method's {len(next(iter(s['tuning_grids'].values())))} settings (`relight.json`: settings.tuning_grids) "
+        f"scored by identification on {s['tune_frames']} evenly spaced frames of each training scene (seed "
+        f"{s['tune_seed']}); the first best setting is chosen.\n\n"
+    )
+    return text + markdown_table(["method"] + (["tuned on"] if loo else []) + ["chosen", "identification %", "range over grid"], rows)
+
+
+def _figure(result: dict[str, Any], path: Path) -> Path:
+    labels = [k for k, r in result["methods"].items() if "mean_test" in r]
+    panels = [("identification", ["identification"]), ("matching score", ["matching_orb", "matching_sift"]),
+              ("pose success", ["pose_orb", "pose_sift"])]
+    panels = [(t, [m for m in ms if any(m in result["methods"][k]["mean_test"] for k in labels)]) for t, ms in panels]
+    panels = [(t, ms) for t, ms in panels if ms]
+    plt, fig, axes = new_figure(1, len(panels), figsize=(5.5 * len(panels), 4.8))
+    x = np.arange(len(labels))
+    for ax, (title, metrics) in zip(axes[0], panels):
+        width = 0.8 / len(metrics)
+        for j, m in enumerate(metrics):
+            means = [result["methods"][k]["mean_test"][m]["mean"] for k in labels]
+            stds = [result["methods"][k]["mean_test"][m]["std"] for k in labels]
+            ax.bar(x + (j - (len(metrics) - 1) / 2) * width, means, width, yerr=stds, capsize=2,
+                   label=_SHORT[m].split()[-1] if len(metrics) > 1 else None)
+        ax.set_xticks(x)
+        ax.set_xticklabels(labels, rotation=60, ha="right", fontsize=8)
+        ax.set_ylabel("%")
+        ax.set_title(f"{title} (mean over test scenes)", fontsize=10)
+        ax.grid(axis="y", alpha=0.3)
+        if len(metrics) > 1:
+            ax.legend(fontsize=8)
+    fig.suptitle(f"alcn bench relight: test scenes {', '.join(result['split']['test'])}; "
+                 f"error bars: std over seeds {result['settings']['seeds']}", fontsize=10)
+    fig.tight_layout()
+    return save_figure(plt, fig, path, dpi=90)
+
+
+def write_report(result: dict[str, Any], out: Path) -> None:
+    """Write ``relight.json`` (everything), ``relight.md`` (the tables) and ``relight.png`` (bars) into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "relight.json", result)
+    metrics = _metrics(result)
+    s, split, mach = result["settings"], result["split"], result["machine"]
+    scenes = ", ".join(f"{n} ({v['group']}, {v['frames']} frames {v['size'][0]}x{v['size'][1]})" for n, v in result["scenes"].items())
+    failures = [f"- `{label}` failed on {scene}: {err}" for label, r in result["methods"].items()
+                for scene, err in r.get("errors", {}).items()]
+    text = [
+        "# Normalizations on real changes of light (`alcn bench relight`)\n",
+        f"Command: `{result['command'] or 'alcn_cv.bench.relight.main(...)'}`; wall time {result['seconds'] / 60:.1f} min.  ",
+        f"Machine: {mach.get('cpu_model', mach['processor'])}, {mach.get('cpus_available', mach['cpu_count'])} cores, "
+        f"load {mach.get('load_average_1_5_15')}, Python {mach['python']}, NumPy {mach['numpy']}, OpenCV {mach['opencv']}.\n",
+        f"Split: {split['mode']}; test {', '.join(split['test'])}"
+        + (f"; train (tuning) {', '.join(split['train'])}" if split["train"] else "") + ".  ",
+        f"Scenes: {scenes}.\n",
+        f"Every method normalizes whole grayscale frames through its own `apply()` (uint8 in, float32 out); "
+        f"{s['gallery']} gallery frames per scene and seed, each paired with the other frames (at most "
+        f"{s['max_pairs'] or 'all'} pairs per scene and seed). Identification: {s['patches']} textured "
+        f"{s['patch']}x{s['patch']} patch locations, NCC over all of them (chance {100 / s['patches']:.2f}%). "
+        f"Keypoints: {s['keypoints']} per frame on apply()'s uint8 output, ratio test {s['ratio']}, correct within "
+        f"{s['match_px']} px; pose: RANSAC homography ({s['ransac_px']} px), success when every corner moves less "
+        f"than {s['pose_px']} px. Cells: mean ± standard deviation over seeds {s['seeds']} (the seed draws the "
+        f"gallery frames, patch locations and pairs).\n",
+        "## Summary (mean over test scenes)\n",
+        _summary_table(result, metrics),
+    ]
+    for m in metrics:
+        text += [f"## {_TITLES[m]}\n", _metric_table(result, m)]
+    text += ["## Tuning (training scenes only)\n", _tuning_text(result)]
+    if failures:
+        text += ["## Failures\n", "\n".join(failures) + "\n"]
+    atomic_write(out / "relight.md", "\n".join(text))
+    if any("mean_test" in r for r in result["methods"].values()):
+        _figure(result, out / "relight.png")
