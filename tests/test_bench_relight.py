@@ -152,3 +152,12 @@ def test_real_photometric_stereo(shared_data, tmp_path):
     for label in ("none", "dog"):
         assert 100 / 60 < result["methods"][label]["mean_test"]["identification"]["mean"] <= 100  # above chance
     assert (tmp_path / "relight.md").is_file() and (tmp_path / "relight.png").is_file()
+
+
+@pytest.mark.parametrize("method", list(relight.TUNING_GRIDS))
+def test_tuning_grids_have_one_size_and_start_at_the_default(method):
+    grid = relight.TUNING_GRIDS[method]
+    assert len(grid) == 8 and len({tuple(p.items()) for p in grid}) == 8
+    first, default = relight.build_method(relight._spec(method, grid[0])), relight.build_method(method)
+    inner = (lambda n: vars(n.inner)) if method.endswith("+lstd") else vars
+    assert inner(first) == inner(default)

@@ -301,9 +301,11 @@ def evaluate_scene(
     for plan in plans:
         values: dict[str, list[float]] = {m: [] for m in metrics}
         for g, f in plan.pairs:
-            values["identification"].append(identification(normalized[g], normalized[f], plan.locations[g], settings.patch))
+            locations = plan.locations[g]
+            values["identification"].append(identification(normalized[g], normalized[f], locations, settings.patch))
             for kind, (_, kind_norm) in detectors.items():
-                score, success = _keypoint_scores(features(kind, g), features(kind, f), kind_norm, scene.frames.shape[1:], settings)
+                pair = features(kind, g), features(kind, f)
+                score, success = _keypoint_scores(*pair, kind_norm, scene.frames.shape[1:], settings)
                 values[f"matching_{kind}"].append(score)
                 values[f"pose_{kind}"].append(success)
         for m, v in values.items():
@@ -339,7 +341,8 @@ def tune(
     for params in TUNING_GRIDS[method]:
         spec = _spec(method, params)
         norm = build_method(spec)
-        scores[spec] = float(np.mean([evaluate_scene(norm, s, [plans[s.name]], fast)["metrics"]["identification"][0] for s in small]))
+        per_scene = [evaluate_scene(norm, s, [plans[s.name]], fast)["metrics"]["identification"][0] for s in small]
+        scores[spec] = float(np.mean(per_scene))
         if progress is not None:
             progress()
     chosen = max(scores, key=lambda k: scores[k])  # the first of equal maxima
@@ -434,7 +437,8 @@ def main(
 
     rows: dict[str, dict[str, str]] = {m: {s.name: m for s in evaluated} for m in methods}
     for m in tuned:
-        rows[f"{m} (tuned)"] = {s.name: tuning_result[m][s.name if leave_one_out is not None else "all"]["chosen"] for s in evaluated}
+        fold_of = {s.name: s.name if leave_one_out is not None else "all" for s in evaluated}
+        rows[f"{m} (tuned)"] = {name: tuning_result[m][fold]["chosen"] for name, fold in fold_of.items()}
 
     plans = {s.name: [plan_pairs(s, seed, settings) for seed in seeds] for s in evaluated}
     jobs = [(s, spec) for s in evaluated for spec in dict.fromkeys(r[s.name] for r in rows.values())]
@@ -472,8 +476,11 @@ def main(
             "train": [s.name for s in train],
             "test": [s.name for s in test],
         },
-        "scenes": {s.name: {"group": s.group, "frames": len(s.frames), "size": [int(s.frames.shape[2]), int(s.frames.shape[1])],
-                            "files": list(s.files)} for s in evaluated},
+        "scenes": {
+            s.name: {"group": s.group, "frames": len(s.frames), "size": [int(s.frames.shape[2]), int(s.frames.shape[1])],
+                     "files": list(s.files)}
+            for s in evaluated
+        },
         "settings": {**asdict(settings), "seeds": list(seeds), "max_frames": max_frames, "methods": methods,
                      "tuning": tuning, "tune_frames": tune_frames, "tune_seed": min(seeds),
                      "tuning_grids": {m: [_spec(m, p) for p in TUNING_GRIDS[m]] for m in tuned}},
@@ -522,7 +529,8 @@ def add_cli(subparsers: Any) -> None:
     p.add_argument("--gallery", type=int, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})")
     p.add_argument("--max-pairs", type=int, default=d.max_pairs,
                    help=f"frame pairs per scene and seed, drawn at random (default {d.max_pairs}; 0: all)")
-    p.add_argument("--keypoints", type=int, default=d.keypoints, help=f"ORB/SIFT keypoints per frame (default {d.keypoints})")
+    p.add_argument("--keypoints", type=int, default=d.keypoints,
+                   help=f"ORB/SIFT keypoints per frame (default {d.keypoints})")
     p.add_argument("--no-keypoints", action="store_true", help="identification only (skip matching and pose)")
     p.add_argument("--no-tune", action="store_true", help="default parameters only")
     p.add_argument("--tune-frames", type=int, default=8, help="frames per training scene the tuning scores on (default 8)")

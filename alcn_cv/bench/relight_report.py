@@ -63,16 +63,17 @@ def _tuning_text(result: dict[str, Any]) -> str:
     rows = []
     for method, folds in result["tuning"].items():
         for fold, t in folds.items():
-            best = t["scores"][t["chosen"]]
-            rows.append([method] + ([f"all but {fold}"] if loo else []) + [f"`{t['chosen']}`", f"{best:.1f}",
-                        f"{min(t['scores'].values()):.1f}-{max(t['scores'].values()):.1f}"])
+            scores = list(t["scores"].values())  # the grid's first setting is the default
+            rows.append([method] + ([f"all but {fold}"] if loo else []) + [f"`{t['chosen']}`", f"{t['scores'][t['chosen']]:.1f}",
+                        f"{scores[0]:.1f}", f"{min(scores):.1f}-{max(scores):.1f}"])
     s = result["settings"]
     text = (
         f"Each method's {len(next(iter(s['tuning_grids'].values())))} settings (`relight.json`: settings.tuning_grids) "
         f"scored by identification on {s['tune_frames']} evenly spaced frames of each training scene (seed "
         f"{s['tune_seed']}); the first best setting is chosen.\n\n"
     )
-    return text + markdown_table(["method"] + (["tuned on"] if loo else []) + ["chosen", "identification %", "range over grid"], rows)
+    headers = ["method"] + (["tuned on"] if loo else []) + ["chosen", "identification %", "default's %", "range over grid"]
+    return text + markdown_table(headers, rows)
 
 
 def _figure(result: dict[str, Any], path: Path) -> Path:
