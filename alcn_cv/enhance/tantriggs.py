@@ -88,5 +88,8 @@ class TanTriggs(Normalization):
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         corrected = np.power(np.maximum(gray, 0.0), np.float32(self.gamma))
+        # The DoG ignores a constant; removing the mean first keeps the float32 rounding of the
+        # blurs small beside the band-passed signal, which the equalization scales up.
+        corrected -= np.float32(corrected.mean())
         centre, surround = gaussian_blur_stack(corrected, (self.sigma0, self.sigma1))
         return contrast_equalize(centre - surround, self.alpha, self.tau)
