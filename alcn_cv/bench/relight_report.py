@@ -125,10 +125,11 @@ def write_report(result: dict[str, Any], out: Path) -> None:
         f"{s['gallery']} gallery frames per scene and seed, each paired with the other frames (at most "
         f"{s['max_pairs'] or 'all'} pairs per scene and seed). Identification: {s['patches']} textured "
         f"{s['patch']}x{s['patch']} patch locations, NCC over all of them (chance {100 / s['patches']:.2f}%). "
-        f"Keypoints: {s['keypoints']} per frame on apply()'s uint8 output, ratio test {s['ratio']}, correct within "
-        f"{s['match_px']} px; pose: RANSAC homography ({s['ransac_px']} px), success when every corner moves less "
-        f"than {s['pose_px']} px. Cells: mean ± standard deviation over seeds {s['seeds']} (the seed draws the "
-        f"gallery frames, patch locations and pairs).\n",
+        + (f"Keypoints: {s['keypoints']} per frame on apply()'s uint8 output, ratio test {s['ratio']}, correct within "
+           f"{s['match_px']} px; pose: RANSAC homography ({s['ransac_px']} px), success when every corner moves less "
+           f"than {s['pose_px']} px. " if s["keypoint_protocols"] else "Identification only (no keypoint protocols). ")
+        + f"Cells: mean ± standard deviation over seeds {s['seeds']} (the seed draws the gallery frames, patch "
+        "locations and pairs).\n",
         "## Summary (mean over test scenes)\n",
         _summary_table(result, metrics),
     ]
