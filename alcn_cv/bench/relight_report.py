@@ -38,7 +38,7 @@ def _summary_table(result: dict[str, Any], metrics: list[str]) -> str:
     for label, r in result["methods"].items():
         test = r.get("mean_test", {})
         ms = [s["ms_per_frame"] for n, s in r["scenes"].items() if n in result["split"]["test"]]
-        rows.append([label] + [_cell(test.get(m)) for m in metrics] + [f"{np.mean(ms):.0f}" if ms else None])
+        rows.append([label] + [_cell(test.get(m)) for m in metrics] + [f"{np.mean(ms):.1f}" if ms else None])
     return markdown_table(["method"] + [_SHORT[m] for m in metrics] + ["ms/frame"], rows)
 
 
