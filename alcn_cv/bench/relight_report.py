@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from alcn_cv.io import atomic_write
-from alcn_cv.report import markdown_table, new_figure, save_figure, write_json
+from alcn_cv.report import describe_machine, markdown_table, new_figure, save_figure, write_json
 
 __all__ = ["write_report"]
 
@@ -109,15 +109,14 @@ def write_report(result: dict[str, Any], out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "relight.json", result)
     metrics = _metrics(result)
-    s, split, mach = result["settings"], result["split"], result["machine"]
+    s, split = result["settings"], result["split"]
     scenes = ", ".join(f"{n} ({v['group']}, {v['frames']} frames {v['size'][0]}x{v['size'][1]})" for n, v in result["scenes"].items())
     failures = [f"- `{label}` failed on {scene}: {err}" for label, r in result["methods"].items()
                 for scene, err in r.get("errors", {}).items()]
     text = [
         "# Normalizations on real changes of light (`alcn bench relight`)\n",
         f"Command: `{result['command'] or 'alcn_cv.bench.relight.main(...)'}`; wall time {result['seconds'] / 60:.1f} min.  ",
-        f"Machine: {mach.get('cpu_model', mach['processor'])}, {mach.get('cpus_available', mach['cpu_count'])} cores, "
-        f"load {mach.get('load_average_1_5_15')}, Python {mach['python']}, NumPy {mach['numpy']}, OpenCV {mach['opencv']}.\n",
+        f"Machine: {describe_machine(result['machine'])}.\n",
         f"Split: {split['mode']}; test {', '.join(split['test'])}"
         + (f"; train (tuning) {', '.join(split['train'])}" if split["train"] else "") + ".  ",
         f"Scenes: {scenes}.\n",

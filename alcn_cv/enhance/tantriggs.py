@@ -75,6 +75,8 @@ class TanTriggs(Normalization):
     """
 
     name = "tantriggs"
+    summary = "gamma correction, difference of Gaussians, then contrast equalization with a final tanh"
+    reference = "Tan & Triggs, IEEE TIP 2010"
 
     def __init__(self, gamma: float = 0.2, sigma0: float = 1.0, sigma1: float = 2.0, alpha: float = 0.1, tau: float = 10.0) -> None:
         self.gamma = _positive("gamma", gamma)
