@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import shlex
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -172,14 +174,61 @@ def _run_speed(args: argparse.Namespace) -> int:
     return 0 if result["rows"] else 1
 
 
-BENCHMARKS = (_add_detect, _add_invariance, relight.add_cli, _add_speed)
+def _add_relight(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "relight",
+        help="patch identification, keypoint matching and pose on real changes of light (fixed cameras)",
+        description="Normalize the registered frames of fixed-camera scenes under different light with each "
+        "method's apply(), then score patch identification (NCC), ORB/SIFT matching and RANSAC-homography pose "
+        "between frames; DoG, SLCN, DLCN, Tan-Triggs and DoG+lstd are tuned on the training scenes only. Writes "
+        "relight.md, relight.json and relight.png.",
+    )
+    d = relight.Settings()
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("--data", nargs="+", type=Path, default=None,
+                   help="roots of multi-illumination sets (default: ../shared/data/webcam and ../shared/data/psm)")
+    p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=list(relight.DEFAULT_METHODS),
+                   help=f"comma-separated specs NAME[:KEY=VALUE...][+lstd] (default: {','.join(relight.DEFAULT_METHODS)})")
+    p.add_argument("--train-scenes", nargs="+", default=list(relight.DEFAULT_TRAIN),
+                   help=f"scenes or data sets to tune on (default: {' '.join(relight.DEFAULT_TRAIN)})")
+    p.add_argument("--test-scenes", nargs="+", default=list(relight.DEFAULT_TEST),
+                   help=f"scenes or data sets evaluated only (default: {' '.join(relight.DEFAULT_TEST)})")
+    p.add_argument("--leave-one-out", nargs="*", default=None, metavar="SCENE",
+                   help="evaluate each scene with parameters tuned on the others, instead of the split "
+                   f"(no scene given: {' '.join(relight.DEFAULT_LEAVE_ONE_OUT)})")
+    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
+    p.add_argument("--max-frames", type=int, default=20, help="frames per scene, evenly spaced (default 20; 0: all)")
+    p.add_argument("--patch", type=int, default=d.patch, help=f"patch side in pixels (default {d.patch})")
+    p.add_argument("--patches", type=int, default=d.patches, help=f"patch locations per gallery frame (default {d.patches})")
+    p.add_argument("--gallery", type=int, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})")
+    p.add_argument("--max-pairs", type=int, default=d.max_pairs,
+                   help=f"frame pairs per scene and seed, drawn at random (default {d.max_pairs}; 0: all)")
+    p.add_argument("--keypoints", type=int, default=d.keypoints,
+                   help=f"ORB/SIFT keypoints per frame (default {d.keypoints})")
+    p.add_argument("--no-keypoints", action="store_true", help="identification only (skip matching and pose)")
+    p.add_argument("--no-tune", action="store_true", help="default parameters only")
+    p.add_argument("--tune-frames", type=int, default=8, help="frames per training scene the tuning scores on (default 8)")
+    p.set_defaults(func=_run_relight)
+
+
+def _run_relight(args: argparse.Namespace) -> int:
+    settings = relight.Settings(patch=args.patch, patches=args.patches, gallery=args.gallery, max_pairs=args.max_pairs or None,
+                        keypoints=args.keypoints, keypoint_protocols=not args.no_keypoints)
+    result = relight.main(args.out, args.data, args.methods, args.train_scenes, args.test_scenes, args.leave_one_out, args.seeds,
+                  settings, args.max_frames or None, not args.no_tune, args.tune_frames,
+                  command=shlex.join(["alcn", *sys.argv[1:]]))
+    print((Path(args.out) / "relight.md").read_text(encoding="utf-8"))
+    return 1 if all("errors" in r for r in result["methods"].values()) else 0
+
+
+BENCHMARKS = (_add_detect, _add_invariance, _add_relight, _add_speed)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``bench`` subcommand and its sub-subcommands to the ``alcn`` command."""
     parser = subparsers.add_parser(
         "bench",
-        help="benchmarks: detection from few images, invariance on real photographs, speed",
+        help="benchmarks: detection from few images, invariance and identification under real light, speed",
         description="Benchmarks comparing ALCN with the classical normalizations (Rad et al. 2017, Sec. 4.3).",
     )
     benches = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True)

@@ -34,8 +34,6 @@ from __future__ import annotations
 
 import logging
 import os
-import shlex
-import sys
 import time
 import zlib
 from collections.abc import Callable, Sequence
@@ -51,7 +49,7 @@ from alcn_cv.bench.policies import LOCAL_BOX, local_standardize
 from alcn_cv.bench.relight_data import Scene, load_scenes, select_scenes
 from alcn_cv.bench.relight_report import write_report
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import from_spec, parse_spec
+from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import InputError
 from alcn_cv.report import machine
 from alcn_cv.shared_data import shared_data_dir
@@ -497,51 +495,3 @@ def main(
     write_report(result, Path(out_dir))
     logger.info("relight benchmark written to %s in %.0f s", out_dir, result["seconds"])
     return result
-
-
-def add_cli(subparsers: Any) -> None:
-    """Add ``alcn bench relight`` to the ``bench`` sub-subcommands."""
-    p = subparsers.add_parser(
-        "relight",
-        help="patch identification, keypoint matching and pose on real changes of light (fixed cameras)",
-        description="Normalize the registered frames of fixed-camera scenes under different light with each "
-        "method's apply(), then score patch identification (NCC), ORB/SIFT matching and RANSAC-homography pose "
-        "between frames; DoG, SLCN, DLCN, Tan-Triggs and DoG+lstd are tuned on the training scenes only. Writes "
-        "relight.md, relight.json and relight.png.",
-    )
-    d = Settings()
-    p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument("--data", nargs="+", type=Path, default=None,
-                   help="roots of multi-illumination sets (default: ../shared/data/webcam and ../shared/data/psm)")
-    p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=list(DEFAULT_METHODS),
-                   help=f"comma-separated specs NAME[:KEY=VALUE...][+lstd] (default: {','.join(DEFAULT_METHODS)})")
-    p.add_argument("--train-scenes", nargs="+", default=list(DEFAULT_TRAIN),
-                   help=f"scenes or data sets to tune on (default: {' '.join(DEFAULT_TRAIN)})")
-    p.add_argument("--test-scenes", nargs="+", default=list(DEFAULT_TEST),
-                   help=f"scenes or data sets evaluated only (default: {' '.join(DEFAULT_TEST)})")
-    p.add_argument("--leave-one-out", nargs="*", default=None, metavar="SCENE",
-                   help="evaluate each scene with parameters tuned on the others, instead of the split "
-                   f"(no scene given: {' '.join(DEFAULT_LEAVE_ONE_OUT)})")
-    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
-    p.add_argument("--max-frames", type=int, default=20, help="frames per scene, evenly spaced (default 20; 0: all)")
-    p.add_argument("--patch", type=int, default=d.patch, help=f"patch side in pixels (default {d.patch})")
-    p.add_argument("--patches", type=int, default=d.patches, help=f"patch locations per gallery frame (default {d.patches})")
-    p.add_argument("--gallery", type=int, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})")
-    p.add_argument("--max-pairs", type=int, default=d.max_pairs,
-                   help=f"frame pairs per scene and seed, drawn at random (default {d.max_pairs}; 0: all)")
-    p.add_argument("--keypoints", type=int, default=d.keypoints,
-                   help=f"ORB/SIFT keypoints per frame (default {d.keypoints})")
-    p.add_argument("--no-keypoints", action="store_true", help="identification only (skip matching and pose)")
-    p.add_argument("--no-tune", action="store_true", help="default parameters only")
-    p.add_argument("--tune-frames", type=int, default=8, help="frames per training scene the tuning scores on (default 8)")
-    p.set_defaults(func=_run_cli)
-
-
-def _run_cli(args: Any) -> int:
-    settings = Settings(patch=args.patch, patches=args.patches, gallery=args.gallery, max_pairs=args.max_pairs or None,
-                        keypoints=args.keypoints, keypoint_protocols=not args.no_keypoints)
-    result = main(args.out, args.data, args.methods, args.train_scenes, args.test_scenes, args.leave_one_out, args.seeds,
-                  settings, args.max_frames or None, not args.no_tune, args.tune_frames,
-                  command=shlex.join(["alcn", *sys.argv[1:]]))
-    print((Path(args.out) / "relight.md").read_text(encoding="utf-8"))
-    return 1 if all("errors" in r for r in result["methods"].values()) else 0

@@ -26,7 +26,6 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
