@@ -19,7 +19,7 @@ def _lit_texture(h=72, w=88, seed=0):
 
 
 def test_shapes_follow_alcn_grid_convention():
-    net = GainNormalizer()
+    net = GainNormalizer(num_kernels=10, sigma_step=0.5)
     image = torch.rand(2, 1, 37, 53)
     assert net.dense_grid(image).shape == (2, 10, 6, 8)  # ceil(36/8)+1, ceil(52/8)+1
     assert net.dense_grid(image, 16).shape == (2, 10, 4, 5)
@@ -46,13 +46,14 @@ def test_bad_inputs_are_rejected():
     with pytest.raises(InputError):
         net.dense_grid(torch.rand(1, 1, 16, 16), 12)
     with pytest.raises(InputError):
-        GainNormalizer(num_kernels=2)  # the DoG 1/2 needs sigma 2 in the basis
+        GainNormalizer(num_kernels=2, sigma_step=0.5)  # the DoG 1/2 needs sigma 2 in the basis
     with pytest.raises(InputError):
         dog_weights((0.5, 1.0))
 
 
-def test_untrained_model_is_weber_gain_then_dog():
-    net = GainNormalizer().eval()
+@pytest.mark.parametrize("num_kernels, sigma_step", [(2, 1.0), (10, 0.5)])
+def test_untrained_model_is_weber_gain_then_dog(num_kernels, sigma_step):
+    net = GainNormalizer(num_kernels=num_kernels, sigma_step=sigma_step).eval()
     image = _lit_texture()
     with torch.no_grad():
         _, local = net.features(image)

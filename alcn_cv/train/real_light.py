@@ -347,6 +347,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name in ("temperature", "lr"):
         parser.add_argument(f"--{name}", type=float, default=getattr(defaults, name))
     parser.add_argument("--channels", type=int, default=16, help="width of the network's convolutions")
+    parser.add_argument("--num-kernels", type=int, default=2, help="Gaussian kernels of the mixture")
+    parser.add_argument("--sigma-step", type=float, default=1.0, help="the kernels' sigmas are k * step, k = 1..N")
     parser.add_argument("--dilations", type=int, nargs="+", default=[1, 2, 4], help="one 3x3 convolution per dilation")
     parser.add_argument("--sharpness", action="store_true", help="feed the network each cell's finest-scale energy too")
     args = parser.parse_args(argv)
@@ -354,7 +356,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     cfg = RealLightConfig(
         scenes=[str(s) for s in args.scenes],
         **{k: getattr(args, k) for k in ("steps", "locations", "crop", "patch", "min_distance", "seed", "save_every", "temperature", "lr")},
-        net={"channels": args.channels, "dilations": list(args.dilations), "sharpness": args.sharpness},
+        net={"channels": args.channels, "dilations": list(args.dilations), "sharpness": args.sharpness,
+             "num_kernels": args.num_kernels, "sigma_step": args.sigma_step},
     )
     path = train_real_light(cfg, args.out)
     logger.info("weights: %s", path)
