@@ -1,0 +1,294 @@
+r"""A gain-adaptive Normalizer for ALCN's Eq. 3, run on a coarse grid.
+
+ALCN normalizes an image with per-pixel weights F_k predicted by a network (Rad, Roth &
+Lepetit, BMVC 2017, Eq. 3)::
+
+    ALCN(I) = sum_k G_{sigma_k} * (F_k o I)
+
+:class:`GainNormalizer` separates what the light changes from what it does not: it predicts a
+per-pixel log-gain ``g`` and kernel weights ``w_k`` and forms ``F_k = exp(g) * w_k``, so a gain
+over two orders of magnitude is one additive step in ``g``. The network sees log intensities
+(the log of a pixel, of a local mean, of a wider context mean and of the local contrast), all
+computed on a grid of stride :attr:`~GainNormalizer.stride` (8 pixels by default), so it costs
+a small fraction of the full-resolution mixture; the maps are interpolated bilinearly in
+between, as ALCN does with the paper's network (:meth:`~alcn_cv.nets.Normalizer.dense`).
+
+The log-gain is the network's output minus ``log(m + eps)``, ``m`` the local mean
+(``sigma = mean_sigma``), and the last layer starts at zero weights with the bias of a DoG:
+the untrained model is the hand-made member of ALCN's family "Weber gain ``I / m``, then DoG
+``G_1 - G_2``" (the best of the hand-made gains on real light), so training starts from it.
+
+The response is then equalized by ``tanh(x / tau)`` (:func:`contrast_equalization`, the last
+step of Tan & Triggs, "Enhanced local texture feature sets for face recognition under difficult
+lighting conditions", TIP 2010), with ``tau`` learned: large responses at strong shadow and
+specular edges are compressed so they do not dominate a window. It is part of the method, so
+``ALCN.apply`` alone delivers the invariance; the output lies in (-1, 1).
+
+Shapes and ranges (``B`` images, ``N`` kernels, ``g`` the grid stride):
+
+* input: ``(B, 1, H, W)`` float32 intensities in [0, 1] at the working scale;
+* :meth:`~GainNormalizer.dense_grid`: ``(B, N, ceil((H-1)/g)+1, ceil((W-1)/g)+1)`` float32 maps
+  F_k, grid point ``(i, j)`` at pixel ``(g*i, g*j)`` (ALCN's grid convention);
+* :meth:`~GainNormalizer.dense`: ``(B, N, H, W)``; :meth:`~GainNormalizer.response`:
+  ``(B, 1, H, W)`` (Eq. 3, unbounded); :meth:`~GainNormalizer.forward`: ``(B, 1, H, W)`` in (-1, 1).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from alcn_cv.errors import InputError
+from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, gaussian_sigmas
+from alcn_cv.filters.kornia_mixture import GaussianMixture2d
+from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
+
+__all__ = ["GainNormalizer", "contrast_equalization", "dog_weights", "ARCHITECTURE"]
+
+#: The ``architecture`` field of a gain Normalizer's weight file.
+ARCHITECTURE = "gain"
+#: The untrained model's band-pass: ``G_1 - G_2`` (pixels at the working scale).
+DOG_SIGMAS = (1.0, 2.0)
+_INPUT_FEATURES = 4
+
+
+def dog_weights(sigmas: Sequence[float], sigma1: float = DOG_SIGMAS[0], sigma2: float = DOG_SIGMAS[1]) -> list[float]:
+    """The mixture weights of ``G_sigma1 - G_sigma2`` over the basis ``sigmas`` (both must be in it)."""
+    sigmas = [float(s) for s in sigmas]
+    if sigma1 not in sigmas or sigma2 not in sigmas:
+        raise InputError(f"the DoG sigmas {sigma1} and {sigma2} must be in the basis {sigmas}")
+    weights = [0.0] * len(sigmas)
+    weights[sigmas.index(sigma1)] = 1.0
+    weights[sigmas.index(sigma2)] = -1.0
+    return weights
+
+
+def contrast_equalization(response: np.ndarray | torch.Tensor, tau: float | torch.Tensor) -> np.ndarray | torch.Tensor:
+    """``tanh(response / tau)``: compresses responses larger than ``tau`` (Tan & Triggs, TIP 2010).
+
+    Args:
+        response: the mixture's response, any shape, numpy float32 or a torch tensor.
+        tau: the scale above which responses saturate (> 0).
+
+    Returns:
+        The same type and shape, in (-1, 1).
+    """
+    if isinstance(response, torch.Tensor):
+        return torch.tanh(response / tau)
+    return np.tanh(response / np.float32(tau)).astype(np.float32, copy=False)
+
+
+def _blur(x: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Separable Gaussian blur (the kernels of :mod:`alcn_cv.filters.gaussian_mixture`), reflect-101,
+    for any image size (the reflection repeats on images smaller than the kernel)."""
+    kernel = torch.as_tensor(gaussian_kernel1d(sigma), dtype=x.dtype, device=x.device)
+    r = kernel.numel() // 2
+    b, c, h, w = x.shape
+    x = reflect101_pad(x.reshape(b * c, 1, h, w), r, r, r, r)
+    x = F.conv2d(x, kernel.view(1, 1, -1, 1))
+    x = F.conv2d(x, kernel.view(1, 1, 1, -1))
+    return x.reshape(b, c, h, w)
+
+
+class GainNormalizer(nn.Module):
+    """Predicts F_k = exp(g) * w_k on a coarse grid (see the module's docstring).
+
+    Args:
+        num_kernels: N, the Gaussian kernels of the mixture. Default 2 (sigmas 1 and 2, the DoG's
+            own): on unseen real scenes it identified better than the paper's 10 (``k / 2``) after
+            the same training, and its mixture costs a third.
+        sigma_step: the mixture's sigmas are ``k * sigma_step``, ``k = 1..N`` (working pixels).
+        stride: the grid's spacing in working pixels (the network's own resolution).
+        channels: width of the hidden convolutions.
+        dilations: one 3x3 convolution per entry, with that dilation (on the grid).
+        mean_sigma: sigma of the local mean ``m`` of the Weber gain (working pixels).
+        context_sigma: sigma of the wider mean fed to the network (working pixels).
+        eps: added to intensities before every log (intensity units).
+        tau: initial scale of the final :func:`contrast_equalization` (learned).
+        init_weights: the N weights of the untrained model; default :func:`dog_weights`.
+        sharpness: also feed the log of each cell's root-mean-square pixel difference (its
+            finest-scale energy; against the cell's standard deviation it tells sharp texture
+            from blur and noise, which decides the best band).
+    """
+
+    def __init__(
+        self,
+        num_kernels: int = 2,
+        sigma_step: float = 1.0,
+        stride: int = 8,
+        channels: int = 16,
+        dilations: Sequence[int] = (1, 2, 4),
+        mean_sigma: float = 8.0,
+        context_sigma: float = 32.0,
+        eps: float = 0.01,
+        tau: float = 0.5,
+        init_weights: Sequence[float] | None = None,
+        sharpness: bool = False,
+    ) -> None:
+        super().__init__()
+        if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
+            raise InputError(f"stride must be a positive integer, got {stride!r}")
+        if not (eps > 0 and tau > 0 and mean_sigma > 0 and context_sigma > 0):
+            raise InputError("eps, tau, mean_sigma and context_sigma must be positive")
+        self.sigmas = gaussian_sigmas(num_kernels, sigma_step)
+        init_weights = dog_weights(self.sigmas) if init_weights is None else [float(w) for w in init_weights]
+        if len(init_weights) != num_kernels:
+            raise InputError(f"init_weights has {len(init_weights)} values for {num_kernels} kernels")
+        self.stride = stride
+        self.eps = float(eps)
+        self.mean_sigma = float(mean_sigma)
+        self.context_sigma = float(context_sigma)
+        self.dilations = tuple(int(d) for d in dilations)
+        self.sharpness = bool(sharpness)
+        layers: list[nn.Module] = []
+        width = _INPUT_FEATURES + self.sharpness
+        for dilation in self.dilations:
+            layers.append(nn.Conv2d(width, channels, 3, dilation=dilation))
+            width = channels
+        self.convs = nn.ModuleList(layers)
+        # Output 0 is the log-gain's correction, outputs 1..N the kernel weights w_k.
+        self.head = nn.Conv2d(width, 1 + num_kernels, 1)
+        with torch.no_grad():
+            self.head.weight.zero_()
+            self.head.bias.copy_(torch.tensor([0.0] + init_weights))
+        self.log_tau = nn.Parameter(torch.tensor(math.log(tau)))
+        self.mixture = GaussianMixture2d(self.sigmas)
+        self.config: dict[str, Any] = {
+            "num_kernels": num_kernels,
+            "sigma_step": float(sigma_step),
+            "stride": stride,
+            "channels": channels,
+            "dilations": list(self.dilations),
+            "mean_sigma": self.mean_sigma,
+            "context_sigma": self.context_sigma,
+            "eps": self.eps,
+            "tau": float(tau),
+            "init_weights": init_weights,
+            "sharpness": self.sharpness,
+        }
+
+    @property
+    def num_kernels(self) -> int:
+        return len(self.sigmas)
+
+    @property
+    def tau(self) -> torch.Tensor:
+        """The equalization's scale ``tau`` (a 0-d tensor)."""
+        return self.log_tau.exp()
+
+    def tau_value(self) -> float:
+        """``tau`` as a float (for headers and logs)."""
+        return float(self.log_tau.detach().exp())
+
+    def _grid_shape(self, h: int, w: int, grid_stride: int) -> tuple[int, int]:
+        return math.ceil((h - 1) / grid_stride) + 1, math.ceil((w - 1) / grid_stride) + 1
+
+    def _cells(self, image: torch.Tensor) -> torch.Tensor:
+        """``(B, 1, gh, gw)`` means of each cell of side :attr:`stride` centred on a grid point."""
+        s = self.stride
+        h, w = image.shape[-2:]
+        gh, gw = self._grid_shape(h, w, s)
+        before = s // 2
+        return F.avg_pool2d(reflect101_pad(image, before, s * gh - before - h, before, s * gw - before - w), s)
+
+    def features(self, image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The network's input on the grid of :attr:`stride` and the Weber mean.
+
+        Returns:
+            ``(B, 4, gh, gw)`` features (log of the cell's mean, of the local mean ``m``, of the
+            context mean, and of the cell's standard deviation; a fifth with ``sharpness``) and
+            ``(B, 1, gh, gw)`` ``m``.
+        """
+        if image.ndim != 4 or image.shape[1] != 1:
+            raise InputError(f"image must have shape (B, 1, H, W), got {tuple(image.shape)}")
+        mean, square = self._cells(image), self._cells(image * image)
+        # The blurs of the grid stand for blurs of the image: sigma in cells = sigma / stride.
+        local = _blur(mean, self.mean_sigma / self.stride)
+        context = _blur(mean, self.context_sigma / self.stride)
+        std = (square - mean * mean).clamp_min(0.0).sqrt()
+        eps = self.eps
+        feats = [(mean + eps).log(), (local + eps).log(), (context + eps).log(), (std + eps).log()]
+        if self.sharpness:
+            dx = F.pad(image[..., :, 1:] - image[..., :, :-1], (0, 1))
+            dy = F.pad(image[..., 1:, :] - image[..., :-1, :], (0, 0, 0, 1))
+            feats.append((self._cells(0.5 * (dx * dx + dy * dy)).sqrt() + eps).log())
+        return torch.cat(feats, dim=1), local
+
+    def log_gain_and_weights(self, image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``g`` ``(B, 1, gh, gw)`` and ``w_k`` ``(B, N, gh, gw)`` on the grid of :attr:`stride`."""
+        x, local = self.features(image)
+        for conv, d in zip(self.convs, self.dilations):
+            x = F.relu(conv(reflect101_pad(x, d, d, d, d)))
+        out = self.head(x)
+        return out[:, :1] - (local + self.eps).log(), out[:, 1:]
+
+    def dense_grid(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
+        """The maps F_k on a grid of stride ``grid_stride`` (a multiple of :attr:`stride`).
+
+        Args:
+            image: ``(B, 1, H, W)`` float32 intensities in [0, 1].
+            grid_stride: default :attr:`stride`; a multiple keeps every ``grid_stride / stride``-th
+                point of the network's grid (the network always runs at its own stride).
+
+        Returns:
+            ``(B, N, ceil((H-1)/g)+1, ceil((W-1)/g)+1)``, point ``(i, j)`` at pixel ``(g*i, g*j)``.
+        """
+        grid_stride = self.stride if grid_stride is None else grid_stride
+        if isinstance(grid_stride, bool) or not isinstance(grid_stride, int) or grid_stride < self.stride or grid_stride % self.stride:
+            raise InputError(f"grid_stride must be a positive multiple of {self.stride}, got {grid_stride!r}")
+        step = grid_stride // self.stride
+        if step > 1:  # extend the image so the network's grid reaches the last point of the coarser one
+            h, w = image.shape[-2:]
+            gh, gw = self._grid_shape(h, w, grid_stride)
+            image = reflect101_pad(image, 0, grid_stride * (gh - 1) + 1 - h, 0, grid_stride * (gw - 1) + 1 - w)
+        log_gain, weights = self.log_gain_and_weights(image)
+        maps = log_gain.exp() * weights
+        return maps[..., ::step, ::step] if step > 1 else maps
+
+    def dense(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
+        """Per-pixel maps F_k ``(B, N, H, W)``: :meth:`dense_grid` interpolated bilinearly (exact on the grid)."""
+        grid_stride = self.stride if grid_stride is None else grid_stride
+        grid = self.dense_grid(image, grid_stride)
+        h, w = image.shape[-2:]
+        size = (grid_stride * (grid.shape[-2] - 1) + 1, grid_stride * (grid.shape[-1] - 1) + 1)
+        return F.interpolate(grid, size=size, mode="bilinear", align_corners=True)[..., :h, :w]
+
+    def response(self, image: torch.Tensor, maps: torch.Tensor | None = None) -> torch.Tensor:
+        """Eq. 3, ``sum_k G_{sigma_k} * (F_k o I)`` ``(B, 1, H, W)``, unbounded (maps: default :meth:`dense`)."""
+        return self.mixture(image, self.dense(image) if maps is None else maps)
+
+    def equalize(self, response: torch.Tensor) -> torch.Tensor:
+        """The final :func:`contrast_equalization` with the learned ``tau``: into (-1, 1)."""
+        return contrast_equalization(response, self.tau)
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        """The whole normalization, ``tanh(ALCN(I) / tau)``: ``(B, 1, H, W)`` -> ``(B, 1, H, W)`` in (-1, 1)."""
+        return self.equalize(self.response(image))
+
+    #: Build the network a weight file describes (``architecture: "gain"``) and load its arrays.
+    from_file = classmethod(Normalizer.from_file.__func__)
+    #: The parameters as float32 arrays, for :func:`alcn_cv.weight_file.save_normalizer_file`.
+    state_arrays = Normalizer.state_arrays
+
+    def file_meta(self, trained: bool, **provenance: Any) -> dict[str, Any]:
+        """The weight file's header: ``architecture``, ``config``, ``sigmas``, ``working_scale`` 1,
+        ``output_range`` ``[-1, 1]`` (the equalized output) and the equalization's ``tau``."""
+        return {
+            "architecture": ARCHITECTURE,
+            "config": self.config,
+            "sigmas": list(self.sigmas),
+            "working_scale": 1.0,
+            "output_range": [-1.0, 1.0],
+            "trained": bool(trained),
+            "equalization": {"kind": "tanh", "tau": self.tau_value()},
+            **provenance,
+        }
+
+    def extra_repr(self) -> str:
+        return f"stride={self.stride}, dilations={self.dilations}, tau={self.tau_value():.3g}"

@@ -1,0 +1,370 @@
+r"""Training the gain Normalizer on real light changes (registered photographs of fixed cameras).
+
+ALCN's Eq. 2 needs labels; on a registered multi-illumination set (one folder of frames per
+scene, the camera fixed, the light changing: the ``webcam`` layout) a textured location is an
+"object", its index the label, seen under every frame's light. A step draws a scene, two of its
+frames and ``locations`` textured locations (at least ``min_distance`` apart), crops ``crop x
+crop`` windows around them in both frames, normalizes them with
+:class:`~alcn_cv.nets.gain.GainNormalizer` (its maps on the grid of its stride, interpolated,
+Eq. 3 at full resolution on the centre, the equalization) and classifies each central
+``patch x patch`` of one frame among the locations of the other by normalized cross-correlation
+(zero mean, unit norm, cosine over a temperature, symmetric cross-entropy). This is the task of
+patch identification under a change of light, made differentiable.
+
+The network sees the whole crop, which holds its receptive field; the mixture runs only where
+the central ``patch`` needs it (:class:`CentreDenseMixture`: ``patch`` plus the widest kernel's
+radius on every side, so no border rule is involved), with the same result as the whole
+normalization there.
+
+Outputs in the run folder: ``train.log``, ``history.json``, ``checkpoint.pt`` (atomic, every
+``save_every`` steps), ``gain_normalizer_step{N}.npz`` at those steps and
+``gain_normalizer.npz`` (:mod:`alcn_cv.weight_file`, ``architecture: "gain"``) at the end.
+
+Command (the real scenes are for academic research only, see ``shared/data/README.md``)::
+
+    python -m alcn_cv.train.real_light --scenes DATA/webcam/courbevoie DATA/webcam/frankfurt \
+        DATA/webcam/panorama --out runs/gain --steps 2400 --seed 0
+
+(2400 steps: 3 to 9 minutes on 2 CPU cores, one thread, depending on the machine's load.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import logging
+import platform
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+from tqdm import tqdm
+
+from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.io import atomic_write, list_images, read_image, to_gray, write_json
+from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, kernel_radius
+from alcn_cv.nets.gain import GainNormalizer
+from alcn_cv.weight_file import save_normalizer_file
+
+__all__ = [
+    "CentreDenseMixture",
+    "RealLightConfig",
+    "RegisteredScene",
+    "identification_loss",
+    "load_scene",
+    "pair_loss",
+    "sample_locations",
+    "textured_locations",
+    "train_real_light",
+]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class RealLightConfig:
+    """Settings of :func:`train_real_light` (defaults: the recipe of the shipped weights).
+
+    Attributes:
+        scenes: folders of registered frames, one per scene.
+        steps: optimisation steps; each sees 2 frames x ``locations`` crops of one scene.
+        locations: textured locations (classes) per step.
+        crop: side of the window the network sees (pixels).
+        patch: side of the identified centre (pixels).
+        min_distance: smallest distance between two locations of a step (pixels, Chebyshev).
+        temperature: of the softmax over cosine similarities.
+        lr: Adam's learning rate.
+        seed: seeds numpy and torch (data draws and initialisation).
+        save_every: steps between checkpoints and intermediate weight files.
+        net: :class:`~alcn_cv.nets.gain.GainNormalizer` arguments.
+    """
+
+    scenes: list[str] = field(default_factory=list)
+    steps: int = 2400
+    locations: int = 48
+    crop: int = 160
+    patch: int = 32
+    min_distance: int = 24
+    temperature: float = 0.05
+    lr: float = 1e-3
+    seed: int = 0
+    save_every: int = 100
+    net: dict = field(default_factory=dict)
+
+
+@dataclass
+class RegisteredScene:
+    """A registered scene: ``frames`` ``(T, H, W)`` float32 in [0, 1], reflect-101 padded by
+    ``pad`` on every side, and ``candidates`` ``(K, 2)`` textured centres ``(y, x)`` in padded
+    coordinates."""
+
+    name: str
+    frames: np.ndarray
+    candidates: np.ndarray
+    pad: int
+
+
+def textured_locations(frames: np.ndarray, patch: int, step: int = 4, quantile: float = 0.5) -> np.ndarray:
+    """Centres ``(K, 2)`` ``(y, x)`` of the ``patch x patch`` windows of a grid of ``step`` whose
+    texture (the median over frames of the window's gradient energy, robust to what moves) is at
+    least the ``quantile`` of all windows'.
+
+    Args:
+        frames: ``(T, H, W)`` float32.
+    """
+    if frames.ndim != 3:
+        raise InputError(f"frames must be (T, H, W), got {frames.shape}")
+    t, h, w = frames.shape
+    if min(h, w) < patch:
+        raise InputError(f"frames of {w}x{h} are smaller than the {patch}x{patch} patches")
+    half = patch // 2
+    ys, xs = np.meshgrid(np.arange(half, h - half + 1, step), np.arange(half, w - half + 1, step), indexing="ij")
+    energies = []
+    for frame in frames:
+        energy = cv2.Sobel(frame, cv2.CV_32F, 1, 0) ** 2 + cv2.Sobel(frame, cv2.CV_32F, 0, 1) ** 2
+        energies.append(cv2.boxFilter(energy, -1, (patch, patch), normalize=True)[ys, xs])
+    score = np.median(np.stack(energies), axis=0).ravel()
+    keep = (score >= np.quantile(score, quantile)) & (score > 0)
+    return np.stack([ys.ravel()[keep], xs.ravel()[keep]], axis=1)
+
+
+def sample_locations(candidates: np.ndarray, count: int, min_distance: int, rng: np.random.Generator) -> np.ndarray:
+    """Up to ``count`` candidates in random order, each at least ``min_distance`` (Chebyshev)
+    from those drawn before it: ``(n, 2)``."""
+    chosen: list[np.ndarray] = []
+    for i in rng.permutation(len(candidates)):
+        c = candidates[i]
+        if all(np.abs(c - o).max() >= min_distance for o in chosen):
+            chosen.append(c)
+            if len(chosen) == count:
+                break
+    return np.stack(chosen) if chosen else np.zeros((0, 2), np.int64)
+
+
+def load_scene(folder: str | Path, pad: int, patch: int) -> RegisteredScene:
+    """Read a folder of registered frames (grayscale, [0, 1]) and its textured locations.
+
+    Raises:
+        DatasetError: fewer than two frames, or frames of different sizes.
+    """
+    folder = Path(folder)
+    files = list_images(folder) if folder.is_dir() else []
+    if len(files) < 2:
+        raise DatasetError(f"{folder}: a registered scene needs at least 2 frames, found {len(files)}")
+    frames = [to_gray(read_image(f)) for f in files]
+    if len({f.shape for f in frames}) != 1:
+        raise DatasetError(f"{folder}: frames of different sizes; the frames of a scene must be registered")
+    stack = np.stack(frames).astype(np.float32) / np.float32(255)
+    candidates = textured_locations(stack, patch) + pad
+    padded = np.stack([cv2.copyMakeBorder(f, pad, pad, pad, pad, cv2.BORDER_REFLECT_101) for f in stack])
+    return RegisteredScene(folder.name, padded, candidates, pad)
+
+
+def _crops(frame: np.ndarray, centres: np.ndarray, size: int) -> torch.Tensor:
+    half = size // 2
+    return torch.from_numpy(np.stack([frame[y - half : y - half + size, x - half : x - half + size] for y, x in centres]))[:, None]
+
+
+def identification_loss(a: torch.Tensor, b: torch.Tensor, temperature: float) -> torch.Tensor:
+    """Symmetric cross-entropy of identifying each patch of ``a`` among those of ``b`` (and back)
+    by cosine similarity of the zero-mean patches (normalized cross-correlation).
+
+    Args:
+        a, b: ``(n, 1, P, P)``, patch ``i`` of ``a`` and of ``b`` at the same location.
+        temperature: the softmax's temperature.
+
+    Returns:
+        A scalar tensor.
+    """
+    va = a.flatten(1)
+    vb = b.flatten(1)
+    va = F.normalize(va - va.mean(1, keepdim=True), dim=1, eps=1e-6)
+    vb = F.normalize(vb - vb.mean(1, keepdim=True), dim=1, eps=1e-6)
+    logits = va @ vb.T / temperature
+    target = torch.arange(len(va), device=va.device)
+    return 0.5 * (F.cross_entropy(logits, target) + F.cross_entropy(logits.T, target))
+
+
+class CentreDenseMixture(nn.Module):
+    """Eq. 3 on the centre of a crop, from the maps on the grid of the network's stride.
+
+    The maps are interpolated bilinearly from the grid (as :meth:`GainNormalizer.dense`) onto
+    the ``size + 2 * radius`` pixels around the centre, multiply the image there, and the
+    kernels (:func:`~alcn_cv.filters.gaussian_mixture.gaussian_kernel1d`, zero-padded to the
+    widest, ``radius`` its half-width) blur that product with every tap inside it, as banded
+    matrices (two batched matrix products each: far cheaper on a CPU than depthwise
+    convolutions). Equal to the centre of :meth:`GainNormalizer.response` on the crop.
+
+    Args:
+        sigmas: the mixture's sigmas (pixels).
+        crop: side of the crops (pixels).
+        size: side of the centre (pixels).
+        stride: the grid's stride; ``(crop - 2 * size) / 2`` and ``2 * size`` must be multiples of it.
+
+    Shape:
+        crops ``(B, 1, crop, crop)``, grid ``(B, N, gh, gw)`` (on the whole crop) -> ``(B, 1, size, size)``.
+    """
+
+    def __init__(self, sigmas: Sequence[float], crop: int, size: int, stride: int) -> None:
+        super().__init__()
+        self.radius = max(kernel_radius(s) for s in sigmas)
+        lo = (crop - 2 * size) // 2
+        if lo < 0 or lo % stride or (2 * size) % stride or self.radius > size // 2:
+            raise InputError(f"crop {crop}, centre {size} and stride {stride} do not fit: (crop - 2 * size) / 2 and 2 * size must be multiples of the stride, the widest kernel within size / 2")
+        side = size + 2 * self.radius
+        self.first = lo + size // 2 - self.radius  # first pixel of the region around the centre
+        self.side, self.size, self.crop = side, size, crop
+        cells = 2 * size // stride
+        self.cells = slice(lo // stride, lo // stride + cells + 1)
+        # Bilinear weights (align_corners) from the grid points of the central 2 * size onto the region.
+        pixels = np.arange(side) + (size // 2 - self.radius)
+        position = pixels / stride
+        left = np.minimum(np.floor(position).astype(int), cells - 1)
+        frac = position - left
+        interp = np.zeros((side, cells + 1), np.float32)
+        interp[np.arange(side), left] = 1 - frac
+        interp[np.arange(side), left + 1] += frac
+        bands = np.zeros((len(sigmas), size, side), np.float32)
+        for i, s in enumerate(sigmas):
+            k = gaussian_kernel1d(s)
+            r = len(k) // 2
+            for y in range(size):
+                bands[i, y, self.radius + y - r : self.radius + y + r + 1] = k
+        self.register_buffer("interp", torch.from_numpy(interp), persistent=False)
+        self.register_buffer("bands", torch.from_numpy(bands), persistent=False)
+
+    def forward(self, crops: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
+        if crops.shape[-2:] != (self.crop, self.crop):
+            raise InputError(f"crops must be {self.crop}x{self.crop}, got {tuple(crops.shape[-2:])}")
+        maps = self.interp @ grid[..., self.cells, self.cells] @ self.interp.T
+        region = crops[..., self.first : self.first + self.side, self.first : self.first + self.side]
+        return (self.bands @ (maps * region) @ self.bands.transpose(1, 2)).sum(1, keepdim=True)
+
+
+@functools.lru_cache(maxsize=4)
+def _centre_mixture(sigmas: tuple[float, ...], crop: int, size: int, stride: int) -> CentreDenseMixture:
+    return CentreDenseMixture(sigmas, crop, size, stride)
+
+
+def _normalized_centres(net: GainNormalizer, mixture: CentreDenseMixture, crops: torch.Tensor) -> torch.Tensor:
+    """The network's output on the centre of each crop: the network on the whole crop, Eq. 3
+    and the equalization on the centre (:class:`CentreDenseMixture`)."""
+    return net.equalize(mixture(crops, net.dense_grid(crops)))
+
+
+def pair_loss(
+    net: GainNormalizer, scene: RegisteredScene, frames: tuple[int, int], centres: np.ndarray, cfg: RealLightConfig
+) -> torch.Tensor:
+    """The objective on one pair of frames of a scene: :func:`identification_loss` of the
+    normalized centres of the crops around ``centres`` ``(n, 2)`` (padded coordinates)."""
+    fa, fb = frames
+    crops = torch.cat([_crops(scene.frames[fa], centres, cfg.crop), _crops(scene.frames[fb], centres, cfg.crop)])
+    outputs = _normalized_centres(net, _centre_mixture(net.sigmas, cfg.crop, cfg.patch, net.stride), crops)
+    return identification_loss(outputs[: len(centres)], outputs[len(centres) :], cfg.temperature)
+
+
+def _save_weights(net: GainNormalizer, path: Path, cfg: RealLightConfig, step: int, seconds: float) -> Path:
+    meta = net.file_meta(
+        trained=step > 0,
+        description="gain Normalizer trained on registered real scenes (identification objective)",
+        training={"command": "python -m alcn_cv.train.real_light", "config": asdict(cfg), "step": step,
+                  "seconds": round(seconds, 1), "machine": platform.platform(), "threads": torch.get_num_threads()},
+    )
+    return save_normalizer_file(path, net.state_arrays(), meta)
+
+
+def train_real_light(cfg: RealLightConfig, out: str | Path) -> Path:
+    """Train a :class:`~alcn_cv.nets.gain.GainNormalizer` on registered scenes (see the module).
+
+    Returns:
+        The final weight file ``out/gain_normalizer.npz``.
+    """
+    if not cfg.scenes:
+        raise InputError("no scenes given")
+    if cfg.crop < 2 * cfg.patch or cfg.locations < 2 or cfg.steps < 1:
+        raise InputError("need crop >= 2 * patch, locations >= 2 and steps >= 1")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    handler = logging.FileHandler(out / "train.log")
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+    logger.addHandler(handler)
+    try:
+        return _train(cfg, out)
+    finally:
+        logger.removeHandler(handler)
+        handler.close()
+
+
+def _train(cfg: RealLightConfig, out: Path) -> Path:
+    rng = np.random.default_rng(cfg.seed)
+    torch.manual_seed(cfg.seed)
+    net = GainNormalizer(**cfg.net)
+    if max(kernel_radius(s) for s in net.sigmas) > cfg.patch // 2:
+        raise InputError(f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2")
+    scenes = [load_scene(s, cfg.crop // 2, cfg.patch) for s in cfg.scenes]
+    for scene in scenes:
+        logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
+    history: list[dict] = []
+    start = time.perf_counter()
+    net.train()
+    bar = tqdm(range(1, cfg.steps + 1), desc="real-light", unit="step")
+    for step in bar:
+        scene = scenes[rng.integers(len(scenes))]
+        fa, fb = rng.choice(len(scene.frames), 2, replace=False)
+        centres = sample_locations(scene.candidates, cfg.locations, cfg.min_distance, rng)
+        loss = pair_loss(net, scene, (fa, fb), centres, cfg)
+        opt.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
+        opt.step()
+        history.append({"step": step, "scene": scene.name, "loss": loss.item()})
+        bar.set_postfix(loss=f"{loss.item():.3f}")
+        if step % cfg.save_every == 0 or step == cfg.steps:
+            seconds = time.perf_counter() - start
+            recent = np.mean([h["loss"] for h in history[-cfg.save_every :]])
+            logger.info("step %d: mean loss %.4f over the last %d steps, %.0f s", step, recent, cfg.save_every, seconds)
+            _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds)
+            state = {"net": net.state_dict(), "opt": opt.state_dict(), "step": step, "config": asdict(cfg)}
+            atomic_write(out / "checkpoint.pt", lambda f: torch.save(state, f))
+            write_json(out / "history.json", history)
+    seconds = time.perf_counter() - start
+    logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
+    return _save_weights(net.eval(), out / "gain_normalizer.npz", cfg, cfg.steps, seconds)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="Train the gain Normalizer on registered real scenes.")
+    parser.add_argument("--scenes", nargs="+", required=True, help="folders of registered frames, one per scene")
+    parser.add_argument("--out", required=True, help="run folder")
+    defaults = RealLightConfig()
+    for name in ("steps", "locations", "crop", "patch", "min_distance", "seed", "save_every"):
+        parser.add_argument(f"--{name.replace('_', '-')}", type=int, default=getattr(defaults, name))
+    for name in ("temperature", "lr"):
+        parser.add_argument(f"--{name}", type=float, default=getattr(defaults, name))
+    parser.add_argument("--channels", type=int, default=16, help="width of the network's convolutions")
+    parser.add_argument("--num-kernels", type=int, default=2, help="Gaussian kernels of the mixture")
+    parser.add_argument("--sigma-step", type=float, default=1.0, help="the kernels' sigmas are k * step, k = 1..N")
+    parser.add_argument("--dilations", type=int, nargs="+", default=[1, 2, 4], help="one 3x3 convolution per dilation")
+    parser.add_argument("--sharpness", action="store_true", help="feed the network each cell's finest-scale energy too")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
+    cfg = RealLightConfig(
+        scenes=[str(s) for s in args.scenes],
+        **{k: getattr(args, k) for k in ("steps", "locations", "crop", "patch", "min_distance", "seed", "save_every", "temperature", "lr")},
+        net={"channels": args.channels, "dilations": list(args.dilations), "sharpness": args.sharpness,
+             "num_kernels": args.num_kernels, "sigma_step": args.sigma_step},
+    )
+    path = train_real_light(cfg, args.out)
+    logger.info("weights: %s", path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,112 @@
+"""The gain Normalizer (alcn_cv.nets.gain): shapes, its untrained form, gradients, weight files."""
+
+import numpy as np
+import pytest
+import torch
+
+from alcn_cv.errors import InputError
+from alcn_cv.filters import gaussian_blur_stack
+from alcn_cv.nets.gain import ARCHITECTURE, GainNormalizer, contrast_equalization, dog_weights
+from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
+
+
+def _lit_texture(h=72, w=88, seed=0):
+    """A fine texture under a smooth light falling off by 10x across the image: (1, 1, h, w)."""
+    rng = np.random.default_rng(seed)
+    texture = 0.5 + 0.4 * rng.random((h, w))
+    light = np.exp(np.linspace(0.0, np.log(0.1), w))[None, :] * np.ones((h, 1))
+    return torch.from_numpy((texture * light).astype(np.float32))[None, None]
+
+
+def test_shapes_follow_alcn_grid_convention():
+    net = GainNormalizer(num_kernels=10, sigma_step=0.5)
+    image = torch.rand(2, 1, 37, 53)
+    assert net.dense_grid(image).shape == (2, 10, 6, 8)  # ceil(36/8)+1, ceil(52/8)+1
+    assert net.dense_grid(image, 16).shape == (2, 10, 4, 5)
+    fits = torch.rand(1, 1, 33, 49)  # both grids end on the last pixel: the coarse one is every other point
+    torch.testing.assert_close(net.dense_grid(fits, 16), net.dense_grid(fits)[..., ::2, ::2])
+    assert net.dense(image).shape == (2, 10, 37, 53)
+    out = net(image)
+    assert out.shape == (2, 1, 37, 53) and out.abs().max() < 1
+    assert GainNormalizer(sharpness=True).features(image)[0].shape == (2, 5, 6, 8)
+    tiny = net.dense_grid(torch.rand(1, 1, 3, 2))  # smaller than the cells and the blurs
+    assert tiny.shape == (1, 10, 2, 2) and torch.isfinite(tiny).all()
+
+
+def test_maps_on_the_grid_equal_dense_there():
+    net = GainNormalizer()
+    image = torch.rand(1, 1, 33, 41)
+    torch.testing.assert_close(net.dense(image)[..., ::8, ::8], net.dense_grid(image))
+
+
+def test_bad_inputs_are_rejected():
+    net = GainNormalizer()
+    with pytest.raises(InputError):
+        net.dense_grid(torch.rand(1, 2, 16, 16))
+    with pytest.raises(InputError):
+        net.dense_grid(torch.rand(1, 1, 16, 16), 12)
+    with pytest.raises(InputError):
+        GainNormalizer(num_kernels=2, sigma_step=0.5)  # the DoG 1/2 needs sigma 2 in the basis
+    with pytest.raises(InputError):
+        dog_weights((0.5, 1.0))
+
+
+@pytest.mark.parametrize("num_kernels, sigma_step", [(2, 1.0), (10, 0.5)])
+def test_untrained_model_is_weber_gain_then_dog(num_kernels, sigma_step):
+    net = GainNormalizer(num_kernels=num_kernels, sigma_step=sigma_step).eval()
+    image = _lit_texture()
+    with torch.no_grad():
+        _, local = net.features(image)
+        grid = net.dense_grid(image)
+        response = net.response(image)[0, 0].numpy()
+    expected_grid = torch.tensor(dog_weights(net.sigmas))[None, :, None, None] / (local + net.eps)
+    torch.testing.assert_close(grid, expected_grid)
+    # Direct: the Weber gain 1 / (m + eps), m interpolated like the maps, then the DoG 1/2 of alcn_cv.filters.
+    h, w = image.shape[-2:]
+    gain = torch.nn.functional.interpolate(1 / (local + net.eps), size=(8 * (grid.shape[-2] - 1) + 1, 8 * (grid.shape[-1] - 1) + 1),
+                                           mode="bilinear", align_corners=True)[0, 0, :h, :w].numpy()
+    centre, surround = gaussian_blur_stack(np.ascontiguousarray(image[0, 0].numpy() * gain), (1.0, 2.0))
+    np.testing.assert_allclose(response, centre - surround, atol=1e-5)
+
+
+def test_local_mean_of_a_constant_image_is_the_constant():
+    net = GainNormalizer()
+    _, local = net.features(torch.full((1, 1, 40, 56), 0.3))
+    torch.testing.assert_close(local, torch.full_like(local, 0.3))
+
+
+def test_untrained_response_ignores_the_light_strength():
+    net = GainNormalizer(eps=1e-6).eval()
+    image = _lit_texture()
+    with torch.no_grad():
+        torch.testing.assert_close(net(0.05 * image), net(image), atol=1e-4, rtol=1e-4)
+
+
+def test_gradients_reach_every_parameter():
+    net = GainNormalizer()
+    with torch.no_grad():
+        net.head.weight.normal_(0.0, 0.01)  # a zero last layer blocks the gradient to the layers below it
+    net(_lit_texture()).square().mean().backward()
+    for name, p in net.named_parameters():
+        assert p.grad is not None and torch.isfinite(p.grad).all() and p.grad.abs().sum() > 0, name
+
+
+def test_weight_file_round_trip(tmp_path):
+    net = GainNormalizer(channels=8, dilations=(1, 2))
+    with torch.no_grad():
+        for p in net.parameters():
+            p.add_(0.01 * torch.randn_like(p))
+    path = save_normalizer_file(tmp_path / "gain.npz", net.state_arrays(), net.file_meta(trained=True))
+    weight_file = load_normalizer_file(path)
+    assert weight_file.meta["architecture"] == ARCHITECTURE and weight_file.meta["output_range"] == [-1.0, 1.0]
+    loaded = GainNormalizer.from_file(weight_file)
+    image = _lit_texture()
+    with torch.no_grad():
+        torch.testing.assert_close(loaded(image), net(image))
+
+
+def test_contrast_equalization_numpy_and_torch_agree():
+    x = np.linspace(-5, 5, 11, dtype=np.float32)
+    out = contrast_equalization(x, 2.0)
+    assert out.dtype == np.float32 and np.all(np.abs(out) < 1)
+    np.testing.assert_allclose(out, contrast_equalization(torch.from_numpy(x), 2.0).numpy(), atol=1e-6)

@@ -1,0 +1,97 @@
+"""Training the gain Normalizer on registered real scenes (alcn_cv.train.real_light), on a tiny synthetic set."""
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from alcn_cv.errors import DatasetError
+from alcn_cv.nets.gain import GainNormalizer
+from alcn_cv.train.real_light import (
+    CentreDenseMixture,
+    RealLightConfig,
+    _normalized_centres,
+    identification_loss,
+    load_scene,
+    pair_loss,
+    sample_locations,
+    textured_locations,
+    train_real_light,
+)
+from alcn_cv.weight_file import load_normalizer_file
+
+CROP, PATCH = 96, 32
+
+
+def _write_scene(folder, frames=3, h=120, w=136, seed=0):
+    """A registered scene: one texture under a different uneven light, gamma and noise in each frame."""
+    rng = np.random.default_rng(seed)
+    texture = cv2.GaussianBlur(rng.random((h, w)).astype(np.float32), (0, 0), 1.5)
+    texture = (texture - texture.min()) / (texture.max() - texture.min())
+    folder.mkdir(parents=True)
+    yy, xx = np.mgrid[0:h, 0:w] / max(h, w)
+    for i in range(frames):
+        light = np.exp(rng.uniform(-1.5, 0.0) + rng.uniform(-1.5, 1.5) * xx + rng.uniform(-1.0, 1.0) * yy)
+        frame = (0.3 + 0.4 * texture) ** rng.uniform(0.6, 1.6) * light
+        frame = np.clip(frame * (1 + 0.3 * rng.standard_normal((h, w))), 0, 1)
+        cv2.imwrite(str(folder / f"{i:02d}.png"), np.rint(255 * frame).astype(np.uint8))
+    return folder
+
+
+def test_textured_locations_and_sampling():
+    frames = np.zeros((2, 64, 80), np.float32)
+    frames[:, 20:44, 40:70] = np.random.default_rng(0).random((24, 30))
+    centres = textured_locations(frames, 16, step=4)
+    assert len(centres) and (centres[:, 0] >= 8).all() and (centres[:, 1] <= 72).all()
+    picked = sample_locations(centres, 50, 12, np.random.default_rng(0))
+    assert 1 < len(picked) <= 50
+    gaps = np.abs(picked[:, None] - picked[None]).max(-1) + 1000 * np.eye(len(picked))
+    assert gaps.min() >= 12
+
+
+def test_load_scene_rejects_a_single_frame(tmp_path):
+    folder = tmp_path / "one"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "a.png"), np.zeros((40, 40), np.uint8))
+    with pytest.raises(DatasetError):
+        load_scene(folder, 8, 16)
+
+
+def test_identification_loss_prefers_matching_patches():
+    a = torch.randn(16, 1, 8, 8)
+    assert identification_loss(a, a * 3 + 1, 0.05) < 1e-3  # NCC ignores gain and offset
+    assert identification_loss(a, torch.randn(16, 1, 8, 8), 0.05) > 1.0
+
+
+def test_centre_mixture_equals_the_whole_normalization():
+    net = GainNormalizer(stride=8)
+    with torch.no_grad():
+        net.head.weight.normal_(0.0, 0.05)
+    crops = torch.rand(3, 1, CROP, CROP)
+    centre = _normalized_centres(net, CentreDenseMixture(net.sigmas, CROP, PATCH, 8), crops)
+    lo = (CROP - PATCH) // 2
+    with torch.no_grad():
+        torch.testing.assert_close(centre, net(crops)[..., lo : lo + PATCH, lo : lo + PATCH], atol=1e-5, rtol=1e-4)
+
+
+def test_three_steps_lower_the_loss(tmp_path):
+    torch.set_num_threads(1)
+    scene_dir = _write_scene(tmp_path / "scene")
+    cfg = RealLightConfig(scenes=[str(scene_dir)], steps=3, locations=16, crop=CROP, patch=PATCH,
+                          min_distance=8, temperature=0.5, lr=0.02, seed=0, save_every=3, net={"channels": 8})
+    path = train_real_light(cfg, tmp_path / "run")
+    weight_file = load_normalizer_file(path)
+    assert weight_file.meta["trained"] and weight_file.meta["architecture"] == "gain"
+    assert (tmp_path / "run" / "checkpoint.pt").is_file() and (tmp_path / "run" / "history.json").is_file()
+    trained = GainNormalizer.from_file(weight_file)
+    untrained = GainNormalizer(**weight_file.meta["config"])  # the zero last layer: Weber gain + DoG 1/2
+    scene = load_scene(scene_dir, CROP // 2, PATCH)
+    rng = np.random.default_rng(1)
+    losses = {"untrained": 0.0, "trained": 0.0}
+    with torch.no_grad():
+        for _ in range(4):
+            centres = sample_locations(scene.candidates, 16, 8, rng)
+            pair = tuple(rng.choice(len(scene.frames), 2, replace=False))
+            losses["untrained"] += float(pair_loss(untrained, scene, pair, centres, cfg))
+            losses["trained"] += float(pair_loss(trained, scene, pair, centres, cfg))
+    assert losses["trained"] < losses["untrained"]
