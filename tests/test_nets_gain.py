@@ -110,3 +110,25 @@ def test_contrast_equalization_numpy_and_torch_agree():
     out = contrast_equalization(x, 2.0)
     assert out.dtype == np.float32 and np.all(np.abs(out) < 1)
     np.testing.assert_allclose(out, contrast_equalization(torch.from_numpy(x), 2.0).numpy(), atol=1e-6)
+
+
+def test_shipped_gain_model_through_create_alcn():
+    """``createALCN(model="gain")``: the shipped weights, the exact mixture equal to the torch
+    model's equalized output, outputs in (-1, 1) whatever the light's strength, and a clear
+    error for the cv2.dnn backend, which has no export of it."""
+    import alcn_cv
+
+    alcn = alcn_cv.createALCN(model="gain", mixture="exact")
+    assert alcn.trained and alcn.equalization_tau is not None and alcn.output_range == (-1.0, 1.0)
+    image = _lit_texture(96, 120)
+    out = alcn.normalize(image[0, 0].numpy())
+    with torch.inference_mode():
+        expected = alcn.net(image)[0, 0].numpy()
+    np.testing.assert_allclose(out, expected, atol=2e-3)
+    assert np.abs(out).max() < 1
+    darker = alcn.normalize(image[0, 0].numpy() * 0.2)
+    assert np.corrcoef(out.ravel(), darker.ravel())[0, 1] > 0.95  # the gain follows the light
+    windows = alcn.normalize_windows(np.clip(image[0, :, :64, :64].numpy(), 0, 1))
+    assert windows.shape == (1, 64, 64) and np.abs(windows).max() < 1
+    with pytest.raises(InputError, match="backend='fast'"):
+        alcn_cv.createALCN(model="gain", backend="opencv")

@@ -47,7 +47,11 @@ MAP_STEP_PER_CELL = 4
 #: Windows per Normalizer call in :meth:`ALCN.window_weights` (bounds the memory of a batch).
 _WINDOW_BATCH = 512
 #: The weight files shipped in the package, by ``model`` name.
-MODELS = {"paper": DEFAULT_WEIGHTS, "lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_lite.npz")}
+MODELS = {
+    "paper": DEFAULT_WEIGHTS,
+    "lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_lite.npz"),
+    "gain": DEFAULT_WEIGHTS.with_name("alcn_normalizer_gain.npz"),
+}
 
 
 @register
@@ -61,7 +65,11 @@ class ALCN(Normalization):
             (default; :class:`~alcn_cv.nets.lite.LiteNormalizer` distilled from the paper's,
             ``alcn_cv/weights/alcn_normalizer_lite.npz``, a few hundred times cheaper; see its
             model card) or ``"paper"`` (the paper's architecture, trained jointly with a
-            detector, ``alcn_normalizer.npz``; see ``MODEL_CARD.md``).
+            detector, ``alcn_normalizer.npz``; see ``MODEL_CARD.md``) or ``"gain"`` (the
+            gain-adaptive Normalizer of :mod:`alcn_cv.nets.gain`, F_k = exp(g) w_k then a
+            contrast equalization ``tanh(x / tau)``, trained on real photographs of outdoor
+            scenes under changing daylight by ``alcn train-real-light``;
+            ``alcn_normalizer_gain.npz``, card ``alcn_normalizer_gain.md``; torch backends only).
         scale: working scale, the factor from the input resolution to the one the Normalizer
             sees (its 48x48 window and sigmas are in working-scale pixels). Default: the
             weight file's ``working_scale`` (0.5 for the shipped file: a 640x480 frame is
@@ -131,12 +139,20 @@ class ALCN(Normalization):
         if not 0 < self.scale <= 4:
             raise InputError(f"scale must be in (0, 4], got {self.scale}")
         self.output_range = tuple(float(v) for v in meta["output_range"])
+        #: ``tau`` of the final contrast equalization ``tanh(x / tau)`` that is part of the
+        #: gain Normalizer's method (:mod:`alcn_cv.nets.gain`); None for the others.
+        self.equalization_tau = float(meta["equalization"]["tau"]) if "equalization" in meta else None
         self.trained = bool(meta["trained"])
         if not self.trained:
             logger.warning("%s holds UNTRAINED Normalizer weights (%s)", self.weights_path.name, meta.get("description", ""))
         self.backend = backend
         self.device = device
         if backend == "opencv":
+            if meta.get("architecture") == "gain":
+                raise InputError(
+                    f"{self.weights_path.name}: the gain Normalizer has no ONNX export for backend='opencv' yet; "
+                    "use backend='fast' (needs the [train] extra)"
+                )
             self._init_opencv(meta, grid_stride)
             return
 
@@ -235,8 +251,11 @@ class ALCN(Normalization):
 
         device = next(self.net.parameters()).device
         x = torch.from_numpy(windows)[:, None]
+        c = (WINDOW // 2) // self.net.stride  # the grid point at the window's centre, as above
         with torch.inference_mode(), _torch_threads(self.threads):
-            return torch.cat([self.net(x[i : i + _WINDOW_BATCH].to(device)).cpu() for i in range(0, len(x), _WINDOW_BATCH)]).numpy()
+            return torch.cat(
+                [self.net.dense_grid(x[i : i + _WINDOW_BATCH].to(device))[:, :, c, c].cpu() for i in range(0, len(x), _WINDOW_BATCH)]
+            ).numpy()
 
     def normalize_windows(self, windows: np.ndarray) -> np.ndarray:
         """Eq. 1 on every window: one weight vector, predicted from the window's central 48x48
@@ -262,7 +281,7 @@ class ALCN(Normalization):
             raise InputError(f"windows must be at least {WINDOW} px at the working scale, got {centre.shape[1]}")
         o = (centre.shape[1] - WINDOW) // 2
         weights = self.window_weights(centre[:, o : o + WINDOW, o : o + WINDOW])
-        return np.stack([alcn_filter(w, wt, self.full_res_sigmas) for w, wt in zip(unit, weights)])
+        return self._equalize(np.stack([alcn_filter(w, wt, self.full_res_sigmas) for w, wt in zip(unit, weights)]))
 
     def _grid_maps_at(
         self, grid: np.ndarray, ratios: tuple[float, float], level: int, ks: list[int], shape: tuple[int, int]
@@ -308,7 +327,17 @@ class ALCN(Normalization):
             return maps
         return np.stack([cv2.resize(m, (w, h), interpolation=cv2.INTER_LINEAR) for m in maps])
 
+    def _equalize(self, response: np.ndarray) -> np.ndarray:
+        """The method's final contrast equalization, when it has one (the gain Normalizer)."""
+        if self.equalization_tau is None:
+            return response
+        return np.tanh(response * np.float32(1.0 / self.equalization_tau))
+
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
+        return self._equalize(self._mixture(gray))
+
+    def _mixture(self, gray: np.ndarray) -> np.ndarray:
+        """Eq. 3 with the Normalizer's maps: the raw response before any equalization."""
         if self.mixture == "pyramid":
             grid = self.weight_grid(gray)
             h, w = gray.shape

@@ -93,18 +93,24 @@ class LiteNormalizer(Normalizer):
         return self.output_scale * self.head(self.activation(hidden))
 
 
-#: Network classes by the ``architecture`` field of a weight file's header.
+#: Network classes by the ``architecture`` field of a weight file's header; ``"gain"`` is
+#: :class:`~alcn_cv.nets.gain.GainNormalizer`, imported when a file asks for it (it needs kornia).
 ARCHITECTURES: dict[str, type[Normalizer]] = {"paper": Normalizer, "lite": LiteNormalizer}
 
 
 def normalizer_from_file(weight_file: NormalizerFile) -> Normalizer:
     """The network a weight file describes: its header's ``architecture`` (``"paper"`` when
-    absent, :class:`~alcn_cv.nets.Normalizer`; ``"lite"``, :class:`LiteNormalizer`), loaded.
+    absent, :class:`~alcn_cv.nets.Normalizer`; ``"lite"``, :class:`LiteNormalizer`; ``"gain"``,
+    :class:`~alcn_cv.nets.gain.GainNormalizer`), loaded.
 
     Raises:
         WeightFileError: unknown architecture, or arrays that do not fit it.
     """
     name = weight_file.meta.get("architecture", "paper")
+    if name == "gain":
+        from alcn_cv.nets.gain import GainNormalizer
+
+        return GainNormalizer.from_file(weight_file)
     if name not in ARCHITECTURES:
-        raise WeightFileError(f"unknown Normalizer architecture {name!r} (known: {', '.join(ARCHITECTURES)})")
+        raise WeightFileError(f"unknown Normalizer architecture {name!r} (known: {', '.join(ARCHITECTURES)}, gain)")
     return ARCHITECTURES[name].from_file(weight_file)

@@ -16,6 +16,9 @@ import shlex
 import sys
 from pathlib import Path
 
+from alcn_cv.shared_data import shared_data_dir
+from alcn_cv.train.config import RealLightConfig
+
 __all__ = ["add_parser"]
 
 # Command-line flags that override configuration keys: flag -> key.
@@ -115,6 +118,35 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     s.add_argument("--no-progress", action="store_true", help="no progress bars")
     s.set_defaults(func=functools.partial(_distill, parser=s))
 
+    r = subparsers.add_parser(
+        "train-real-light", help="train the gain Normalizer on registered real scenes (identification objective)",
+        description="Train the gain-adaptive Normalizer (alcn_cv.nets.gain: F_k = exp(g) w_k, then tanh(x / tau)) "
+        "on fixed-camera scenes under changing light: each textured location is a class seen under every "
+        "frame's light (alcn_cv.train.real_light). Writes OUT/gain_normalizer.npz, checkpoints, train.log and "
+        "history.json. The shipped alcn_normalizer_gain.npz is this command with its defaults; the webcam "
+        "scenes are for academic research only.",
+    )
+    defaults = RealLightConfig()
+    r.add_argument("--scenes", nargs="+", type=Path, default=None,
+                   help="folders of registered frames, one per scene (default: the courbevoie, frankfurt and "
+                   "panorama scenes of the shared webcam data)")
+    r.add_argument("--out", type=Path, default=Path("runs/gain"), help="run folder (default: runs/gain)")
+    for name, kind, what in (("steps", int, "optimisation steps"), ("locations", int, "textured locations per step"),
+                             ("crop", int, "side of the crops the network sees"), ("patch", int, "side of the identified centre"),
+                             ("min_distance", int, "least distance between a step's locations"),
+                             ("temperature", float, "of the softmax over similarities"), ("lr", float, "Adam learning rate"),
+                             ("seed", int, "seed"), ("save_every", int, "steps between checkpoints")):
+        r.add_argument(f"--{name.replace('_', '-')}", type=kind, default=getattr(defaults, name),
+                       help=f"{what} (default {getattr(defaults, name)})")
+    r.add_argument("--channels", type=int, default=16, help="width of the network's convolutions (default 16)")
+    r.add_argument("--num-kernels", type=int, default=2, help="Gaussian kernels of the mixture (default 2)")
+    r.add_argument("--sigma-step", type=float, default=1.0, help="the kernels' sigmas are k * step, k = 1..N (default 1)")
+    r.add_argument("--dilations", type=int, nargs="+", default=[1, 2, 4], help="one 3x3 convolution per dilation (default 1 2 4)")
+    r.add_argument("--sharpness", action="store_true", help="feed the network each cell's finest-scale energy too")
+    r.add_argument("--threads", type=int, default=1,
+                   help="torch threads (default 1, as the shipped file was made; 0: torch's default)")
+    r.set_defaults(func=_train_real_light)
+
     e = subparsers.add_parser(
         "export", help="export the Normalizer to ONNX (for the torch-free OpenCV runtime)",
         description="Export the Normalizer of a weight file as a fully-convolutional ONNX model with dynamic "
@@ -193,6 +225,29 @@ def _distill(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         torch.set_num_threads(previous[0])
         cv2.setNumThreads(previous[1])
     print(path)
+    return 0
+
+
+def _train_real_light(args: argparse.Namespace) -> int:
+    import torch
+
+    from alcn_cv.train.real_light import train_real_light
+
+    scenes = args.scenes or [shared_data_dir() / "webcam" / name for name in ("courbevoie", "frankfurt", "panorama")]
+    names = ("steps", "locations", "crop", "patch", "min_distance", "temperature", "lr", "seed", "save_every")
+    cfg = RealLightConfig(
+        scenes=[str(s) for s in scenes], **{k: getattr(args, k) for k in names},
+        net={"channels": args.channels, "dilations": list(args.dilations), "sharpness": args.sharpness,
+             "num_kernels": args.num_kernels, "sigma_step": args.sigma_step},
+        command=shlex.join(["alcn", *sys.argv[1:]]),
+    )
+    previous = torch.get_num_threads()
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    try:
+        print(train_real_light(cfg, args.out))
+    finally:
+        torch.set_num_threads(previous)
     return 0
 
 

@@ -89,7 +89,7 @@ from typing import Any
 from alcn_cv.data.lighting import LIGHT_FAMILIES
 from alcn_cv.errors import InputError
 
-__all__ = ["PRESETS", "TrainConfig", "dump_toml", "load_config"]
+__all__ = ["PRESETS", "RealLightConfig", "TrainConfig", "dump_toml", "load_config"]
 
 
 @dataclass
@@ -401,3 +401,36 @@ def dump_toml(cfg: TrainConfig) -> str:
         if isinstance(values, dict):
             lines += ["", f"[{table}]"] + [f"{k} = {_toml_value(v)}" for k, v in values.items()]
     return "\n".join(lines) + "\n"
+
+
+@dataclass
+class RealLightConfig:
+    """Settings of :func:`train_real_light` (defaults: the recipe of the shipped weights).
+
+    Attributes:
+        scenes: folders of registered frames, one per scene.
+        steps: optimisation steps; each sees 2 frames x ``locations`` crops of one scene.
+        locations: textured locations (classes) per step.
+        crop: side of the window the network sees (pixels).
+        patch: side of the identified centre (pixels).
+        min_distance: smallest distance between two locations of a step (pixels, Chebyshev).
+        temperature: of the softmax over cosine similarities.
+        lr: Adam's learning rate.
+        seed: seeds numpy and torch (data draws and initialisation).
+        save_every: steps between checkpoints and intermediate weight files.
+        net: :class:`~alcn_cv.nets.gain.GainNormalizer` arguments.
+        command: the command line that ran the training, recorded in the weight file.
+    """
+
+    scenes: list[str] = field(default_factory=list)
+    steps: int = 2400
+    locations: int = 48
+    crop: int = 160
+    patch: int = 32
+    min_distance: int = 24
+    temperature: float = 0.05
+    lr: float = 1e-3
+    seed: int = 0
+    save_every: int = 100
+    net: dict = field(default_factory=dict)
+    command: str = ""

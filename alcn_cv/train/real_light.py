@@ -22,21 +22,18 @@ Outputs in the run folder: ``train.log``, ``history.json``, ``checkpoint.pt`` (a
 
 Command (the real scenes are for academic research only, see ``shared/data/README.md``)::
 
-    python -m alcn_cv.train.real_light --scenes DATA/webcam/courbevoie DATA/webcam/frankfurt \
-        DATA/webcam/panorama --out runs/gain --steps 2400 --seed 0
+    alcn train-real-light --out runs/gain      # courbevoie, frankfurt, panorama; 2400 steps, seed 0
 
 (2400 steps: 3 to 9 minutes on 2 CPU cores, one thread, depending on the machine's load.)
 """
 
 from __future__ import annotations
 
-import argparse
 import functools
 import logging
-import platform
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import cv2
@@ -50,6 +47,8 @@ from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, list_images, read_image, to_gray, write_json
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, kernel_radius
 from alcn_cv.nets.gain import GainNormalizer
+from alcn_cv.report import machine
+from alcn_cv.train.config import RealLightConfig
 from alcn_cv.weight_file import save_normalizer_file
 
 __all__ = [
@@ -65,37 +64,6 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass
-class RealLightConfig:
-    """Settings of :func:`train_real_light` (defaults: the recipe of the shipped weights).
-
-    Attributes:
-        scenes: folders of registered frames, one per scene.
-        steps: optimisation steps; each sees 2 frames x ``locations`` crops of one scene.
-        locations: textured locations (classes) per step.
-        crop: side of the window the network sees (pixels).
-        patch: side of the identified centre (pixels).
-        min_distance: smallest distance between two locations of a step (pixels, Chebyshev).
-        temperature: of the softmax over cosine similarities.
-        lr: Adam's learning rate.
-        seed: seeds numpy and torch (data draws and initialisation).
-        save_every: steps between checkpoints and intermediate weight files.
-        net: :class:`~alcn_cv.nets.gain.GainNormalizer` arguments.
-    """
-
-    scenes: list[str] = field(default_factory=list)
-    steps: int = 2400
-    locations: int = 48
-    crop: int = 160
-    patch: int = 32
-    min_distance: int = 24
-    temperature: float = 0.05
-    lr: float = 1e-3
-    seed: int = 0
-    save_every: int = 100
-    net: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -273,8 +241,8 @@ def _save_weights(net: GainNormalizer, path: Path, cfg: RealLightConfig, step: i
     meta = net.file_meta(
         trained=step > 0,
         description="gain Normalizer trained on registered real scenes (identification objective)",
-        training={"command": "python -m alcn_cv.train.real_light", "config": asdict(cfg), "step": step,
-                  "seconds": round(seconds, 1), "machine": platform.platform(), "threads": torch.get_num_threads()},
+        training={"command": cfg.command, "config": asdict(cfg), "step": step, "seconds": round(seconds, 1),
+                  "machine": machine()},
     )
     return save_normalizer_file(path, net.state_arrays(), meta)
 
@@ -337,34 +305,3 @@ def _train(cfg: RealLightConfig, out: Path) -> Path:
     seconds = time.perf_counter() - start
     logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
     return _save_weights(net.eval(), out / "gain_normalizer.npz", cfg, cfg.steps, seconds)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="Train the gain Normalizer on registered real scenes.")
-    parser.add_argument("--scenes", nargs="+", required=True, help="folders of registered frames, one per scene")
-    parser.add_argument("--out", required=True, help="run folder")
-    defaults = RealLightConfig()
-    for name in ("steps", "locations", "crop", "patch", "min_distance", "seed", "save_every"):
-        parser.add_argument(f"--{name.replace('_', '-')}", type=int, default=getattr(defaults, name))
-    for name in ("temperature", "lr"):
-        parser.add_argument(f"--{name}", type=float, default=getattr(defaults, name))
-    parser.add_argument("--channels", type=int, default=16, help="width of the network's convolutions")
-    parser.add_argument("--num-kernels", type=int, default=2, help="Gaussian kernels of the mixture")
-    parser.add_argument("--sigma-step", type=float, default=1.0, help="the kernels' sigmas are k * step, k = 1..N")
-    parser.add_argument("--dilations", type=int, nargs="+", default=[1, 2, 4], help="one 3x3 convolution per dilation")
-    parser.add_argument("--sharpness", action="store_true", help="feed the network each cell's finest-scale energy too")
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
-    cfg = RealLightConfig(
-        scenes=[str(s) for s in args.scenes],
-        **{k: getattr(args, k) for k in ("steps", "locations", "crop", "patch", "min_distance", "seed", "save_every", "temperature", "lr")},
-        net={"channels": args.channels, "dilations": list(args.dilations), "sharpness": args.sharpness,
-             "num_kernels": args.num_kernels, "sigma_step": args.sigma_step},
-    )
-    path = train_real_light(cfg, args.out)
-    logger.info("weights: %s", path)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
