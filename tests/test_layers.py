@@ -32,6 +32,7 @@ RUNTIME = (
     "alcn_cv/nets/__init__.py",
     "alcn_cv/nets/normalizer.py",
     "alcn_cv/nets/lite.py",
+    "alcn_cv/nets/gain.py",
     "alcn_cv/nets/opencv_runtime.py",
     "alcn_cv/commands/__init__.py",
     "alcn_cv/commands/normalize.py",
