@@ -255,11 +255,19 @@ class VideoReader:
         self.frame_count = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT))
         self.size = (int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
 
+    def frames(self, step: int = 1) -> Iterator[tuple[int, np.ndarray]]:
+        """``(index, frame)`` for every ``step``-th frame; the frames between are grabbed, not decoded."""
+        index = 0
+        while self._cap.grab():
+            if index % step == 0:
+                ok, frame = self._cap.retrieve()
+                if not ok:
+                    return
+                yield index, frame
+            index += 1
+
     def __iter__(self) -> Iterator[np.ndarray]:
-        while True:
-            ok, frame = self._cap.read()
-            if not ok:
-                return
+        for _, frame in self.frames():
             yield frame
 
     def __len__(self) -> int:
@@ -312,18 +320,11 @@ def iter_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None
     if not is_video(source):
         raise InputError(f"{source}: not a video ({', '.join(sorted(VIDEO_SUFFIXES))}) or a folder of images")
     with VideoReader(source) as video:
-        cap = video._cap
-        index = 0
-        while max_frames is None or count < max_frames:
-            if not cap.grab():
+        for index, frame in video.frames(step):
+            count += 1
+            yield f"frame_{index:06d}", frame
+            if max_frames is not None and count >= max_frames:
                 break
-            if index % step == 0:
-                ok, frame = cap.retrieve()
-                if not ok:
-                    break
-                count += 1
-                yield f"frame_{index:06d}", frame
-            index += 1
     if count == 0:
         raise InputError(f"{source}: the video holds no decodable frame")
 
