@@ -27,7 +27,7 @@ import numpy as np
 from alcn_cv.checks import FULL_SCALE, SUPPORTED_DTYPES, unit_windows, check_gray, check_image
 from alcn_cv.errors import InputError
 
-__all__ = ["Normalization", "NoNormalization", "check_image", "check_gray"]
+__all__ = ["Normalization", "NoNormalization"]
 
 logger = logging.getLogger(__name__)
 #: The classes that already warned about an image smaller than their window (once per process).
