@@ -83,7 +83,7 @@ def test_torch_onnx_opencv_and_fast_path_agree(shared_data, random_weights):
         np.testing.assert_allclose(alcn_filter(image, dense, alcn.full_res_sigmas), alcn.normalize(image), atol=1e-4)
 
 
-@pytest.mark.parametrize("model", ["paper", "lite"])  # the gain model has no ONNX export yet
+@pytest.mark.parametrize("model", ["paper", "lite", "gain"])
 def test_shipped_onnx_matches_shipped_weights(model):
     weights = MODELS[model]
     net = normalizer_from_file(load_normalizer_file(weights))
@@ -94,6 +94,67 @@ def test_shipped_onnx_matches_shipped_weights(model):
     assert ocv.stride == net.stride
     np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-4)
     assert OpenCVNormalizer().path == DEFAULT_ONNX == MODELS["paper"].with_suffix(".onnx")
+
+
+def _webcam_frame(shared_data):
+    path = sorted((shared_data / "webcam" / "mexico").glob("*.jpg"))[0]
+    return cv2.imread(str(path), cv2.IMREAD_GRAYSCALE).astype(np.float32) / 255
+
+
+def test_gain_onnx_takes_the_raw_image(shared_data):
+    """The gain export pads inside its graph (any size, even below its reflections' reach) and
+    equals the torch model on a real frame; its runtime passes the image as it is."""
+    net = normalizer_from_file(load_normalizer_file(MODELS["gain"]))
+    ocv = OpenCVNormalizer(MODELS["gain"].with_suffix(".onnx"))
+    assert ocv.raw_input and ocv.stride == net.stride == 8
+    assert not OpenCVNormalizer(MODELS["lite"].with_suffix(".onnx")).raw_input
+    rng = np.random.default_rng(2)
+    for image in [_webcam_frame(shared_data), *(rng.random(shape, dtype=np.float32) for shape in [(48, 48), (5, 9), (1, 1), (17, 130)])]:
+        with torch.no_grad():
+            ref = net.dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
+        np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-4, rtol=0)
+
+
+def test_gain_export_with_sharpness(tmp_path):
+    """A gain Normalizer with the fifth (sharpness) feature and a non-trivial head exports too."""
+    from alcn_cv.nets.gain import GainNormalizer
+
+    torch.manual_seed(0)
+    net = GainNormalizer(sharpness=True)
+    with torch.no_grad():
+        net.head.weight.normal_(0, 0.1)
+    path = save_normalizer_file(tmp_path / "gain.npz", net.state_arrays(), net.file_meta(trained=False))
+    ocv = OpenCVNormalizer(export_onnx(tmp_path / "gain.onnx", path))
+    image = np.random.default_rng(3).random((70, 93), dtype=np.float32)
+    with torch.no_grad():
+        ref = net.eval().dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
+    np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-4, rtol=0)
+
+
+@pytest.mark.parametrize("mixture", ["pyramid", "exact"])
+def test_gain_model_through_opencv_backend(shared_data, mixture):
+    """``createALCN(model="gain", backend="opencv")``: the fast backend's output (equalization
+    included) and its Eq. 1 window weights."""
+    image = cv2.resize(_webcam_frame(shared_data), (203, 151), interpolation=cv2.INTER_AREA)
+    ocv = ALCN(model="gain", backend="opencv", mixture=mixture)
+    fast = ALCN(model="gain", backend="fast", mixture=mixture)
+    out = ocv.normalize(image)
+    assert np.abs(out).max() < 1
+    np.testing.assert_allclose(out, fast.normalize(image), atol=1e-4, rtol=0)
+    windows = np.stack([image[:48, :48], image[50:98, 100:148]])
+    np.testing.assert_allclose(ocv.window_weights(windows), fast.window_weights(windows), atol=1e-4, rtol=0)
+
+
+def test_gain_model_runs_where_torch_cannot_be_imported(tmp_path, run_without_torch):
+    image = np.random.default_rng(4).random((66, 90), dtype=np.float32)
+    out = tmp_path / "gain.npy"
+    run_without_torch("""
+        import numpy as np
+        import alcn_cv
+        image = np.random.default_rng(4).random((66, 90), dtype=np.float32)
+        np.save(sys.argv[1], alcn_cv.createALCN(model="gain", backend="opencv").normalize(image))
+    """, out)
+    np.testing.assert_allclose(np.load(out), ALCN(model="gain", backend="fast").normalize(image), atol=1e-4, rtol=0)
 
 
 def test_runs_where_torch_cannot_be_imported(random_weights, run_without_torch):

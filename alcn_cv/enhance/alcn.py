@@ -69,7 +69,7 @@ class ALCN(Normalization):
             gain-adaptive Normalizer of :mod:`alcn_cv.nets.gain`, F_k = exp(g) w_k then a
             contrast equalization ``tanh(x / tau)``, trained on real photographs of outdoor
             scenes under changing daylight by ``alcn train-real-light``;
-            ``alcn_normalizer_gain.npz``, card ``alcn_normalizer_gain.md``; torch backends only).
+            ``alcn_normalizer_gain.npz``, card ``alcn_normalizer_gain.md``).
         scale: working scale, the factor from the input resolution to the one the Normalizer
             sees (its 48x48 window and sigmas are in working-scale pixels). Default: the
             weight file's ``working_scale`` (0.5 for the shipped file: a 640x480 frame is
@@ -148,11 +148,6 @@ class ALCN(Normalization):
         self.backend = backend
         self.device = device
         if backend == "opencv":
-            if meta.get("architecture") == "gain":
-                raise InputError(
-                    f"{self.weights_path.name}: the gain Normalizer has no ONNX export for backend='opencv' yet; "
-                    "use backend='fast' (needs the [train] extra)"
-                )
             self._init_opencv(meta, grid_stride)
             return
 

@@ -84,16 +84,38 @@ def contrast_equalization(response: np.ndarray | torch.Tensor, tau: float | torc
     return np.tanh(response / np.float32(tau)).astype(np.float32, copy=False)
 
 
+def _reflect101_index(x: torch.Tensor, dim: int, before: int, after: int) -> torch.Tensor:
+    """Indices of dim ``dim`` (-2 or -1) of ``x`` padded by reflect-101, for any pad size (the
+    reflection repeats, as :func:`~alcn_cv.nets.normalizer.reflect101_pad`).
+
+    The size is read from the data, in float32, so that the ONNX export
+    (:mod:`alcn_cv.train.export`) computes the indices for every input size with ops ``cv2.dnn``
+    runs (it has no integer arithmetic); float32 is exact for these small integers.
+    """
+    line = x[0, 0, :, 0] if dim == -2 else x[0, 0, 0, :]
+    positions = (line * 0 + 1).cumsum(0) - 1  # 0..n-1; the inputs are finite
+    last = positions[-1:]  # n - 1
+    i = torch.cat([torch.arange(-before, 0, dtype=x.dtype, device=x.device), positions,
+                   last + 1 + torch.arange(0, after, dtype=x.dtype, device=x.device)])
+    period = torch.clamp(2 * last, min=1)
+    i = i - torch.floor(i / period) * period
+    return (last - (last - i).abs()).long()
+
+
+def _reflect101_pad(x: torch.Tensor, pad: int) -> torch.Tensor:
+    """Pad the last two dims of ``(B, C, H, W)`` by ``pad`` with reflect-101, for any size (see
+    :func:`_reflect101_index`; the grids padded here are small)."""
+    x = x.index_select(-2, _reflect101_index(x, -2, pad, pad))
+    return x.index_select(-1, _reflect101_index(x, -1, pad, pad))
+
+
 def _blur(x: torch.Tensor, sigma: float) -> torch.Tensor:
-    """Separable Gaussian blur (the kernels of :mod:`alcn_cv.filters.gaussian_mixture`), reflect-101,
-    for any image size (the reflection repeats on images smaller than the kernel)."""
+    """Separable Gaussian blur of a ``(B, 1, H, W)`` map (the kernels of
+    :mod:`alcn_cv.filters.gaussian_mixture`), reflect-101, for any image size (the reflection
+    repeats on images smaller than the kernel)."""
     kernel = torch.as_tensor(gaussian_kernel1d(sigma), dtype=x.dtype, device=x.device)
-    r = kernel.numel() // 2
-    b, c, h, w = x.shape
-    x = reflect101_pad(x.reshape(b * c, 1, h, w), r, r, r, r)
-    x = F.conv2d(x, kernel.view(1, 1, -1, 1))
-    x = F.conv2d(x, kernel.view(1, 1, 1, -1))
-    return x.reshape(b, c, h, w)
+    x = _reflect101_pad(x, kernel.numel() // 2)
+    return F.conv2d(F.conv2d(x, kernel.view(1, 1, -1, 1)), kernel.view(1, 1, 1, -1))
 
 
 class GainNormalizer(nn.Module):
@@ -192,10 +214,11 @@ class GainNormalizer(nn.Module):
     def _cells(self, image: torch.Tensor) -> torch.Tensor:
         """``(B, 1, gh, gw)`` means of each cell of side :attr:`stride` centred on a grid point."""
         s = self.stride
-        h, w = image.shape[-2:]
-        gh, gw = self._grid_shape(h, w, s)
         before = s // 2
-        return F.avg_pool2d(reflect101_pad(image, before, s * gh - before - h, before, s * gw - before - w), s)
+        # H + 2s - 2 pixels hold exactly ceil((H-1)/s)+1 cells (the pooling drops the rest), so
+        # the pads do not depend on the size and the ONNX export keeps the size dynamic.
+        after = 2 * s - 2 - before
+        return F.avg_pool2d(reflect101_pad(image, before, after, before, after), s)
 
     def features(self, image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The network's input on the grid of :attr:`stride` and the Weber mean.
@@ -224,7 +247,7 @@ class GainNormalizer(nn.Module):
         """``g`` ``(B, 1, gh, gw)`` and ``w_k`` ``(B, N, gh, gw)`` on the grid of :attr:`stride`."""
         x, local = self.features(image)
         for conv, d in zip(self.convs, self.dilations):
-            x = F.relu(conv(reflect101_pad(x, d, d, d, d)))
+            x = F.relu(conv(_reflect101_pad(x, d)))
         out = self.head(x)
         return out[:, :1] - (local + self.eps).log(), out[:, 1:]
 

@@ -10,8 +10,10 @@ This module imports neither torch nor :mod:`alcn_cv.nets`.
 for the same weights (to float rounding): the image is padded here by reflect-101
 (``cv2.BORDER_REFLECT_101``) exactly as the torch network pads it, and the grid is upsampled
 bilinearly with the grid points on the pixels ``s*i`` (``align_corners=True``), ``s`` the
-network's output stride (4 for the paper's Normalizer, 8 for the lite one; read from the model
-itself by running it once on a probe image).
+network's output stride (4 for the paper's Normalizer, 8 for the lite and the gain ones). The
+gain Normalizer's export (:mod:`alcn_cv.nets.gain`) takes the image itself and pads inside the
+graph. Both the kind of input and the stride are read from the model by running it on probe
+images: a padded-input graph gives one grid point for a 48-pixel input (its window).
 """
 
 from __future__ import annotations
@@ -69,16 +71,26 @@ class OpenCVNormalizer:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
             raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}: {str(exc).strip()}") from None
+        #: True when the graph takes the image unpadded (the gain Normalizer's export).
+        self.raw_input = self._grid_points(WINDOW) > 1
         self.stride = self._output_stride()
 
-    def _output_stride(self) -> int:
-        # A (48 + 8k)-pixel input gives 1 + 8k / stride grid points for the strides 1, 2, 4, 8.
-        side = WINDOW + 8 * (_PROBE_POINTS - 1)
+    def _grid_points(self, side: int) -> int:
         self.net.setInput(np.zeros((1, 1, side, side), np.float32))
-        points = self.net.forward().shape[-1]
-        if points < 2 or (side - WINDOW) % (points - 1):
+        return self.net.forward().shape[-1]
+
+    def _output_stride(self) -> int:
+        # Padded input: a (48 + 8k)-pixel input gives 1 + 8k / stride grid points for the
+        # strides 1, 2, 4, 8. Raw input: (1 + 48) pixels give 1 + 48 / stride points.
+        if self.raw_input:
+            extent, side = WINDOW, WINDOW + 1
+        else:
+            extent = 8 * (_PROBE_POINTS - 1)
+            side = WINDOW + extent
+        points = self._grid_points(side)
+        if points < 2 or extent % (points - 1):
             raise WeightFileError(f"{self.path}: not a Normalizer export (a {side}-pixel probe gave {points} grid points)")
-        return (side - WINDOW) // (points - 1)
+        return extent // (points - 1)
 
     def dense_grid(self, image: np.ndarray) -> np.ndarray:
         """The Normalizer's output on its grid (stride :attr:`stride`).
@@ -92,11 +104,14 @@ class OpenCVNormalizer:
         """
         h, w = check_gray(image).shape
         s = self.stride
-        gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
-        half = WINDOW // 2
-        padded = cv2.copyMakeBorder(image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w,
-                                    cv2.BORDER_REFLECT_101)
-        self.net.setInput(padded[None, None])
+        if self.raw_input:
+            self.net.setInput(np.ascontiguousarray(image, dtype=np.float32)[None, None])
+        else:
+            gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
+            half = WINDOW // 2
+            padded = cv2.copyMakeBorder(image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w,
+                                        cv2.BORDER_REFLECT_101)
+            self.net.setInput(padded[None, None])
         out = self.net.forward()
         return np.ascontiguousarray(out[0], dtype=np.float32)
 
@@ -109,4 +124,4 @@ class OpenCVNormalizer:
         return np.matmul(ay, np.matmul(grid, ax.T))
 
     def __repr__(self) -> str:
-        return f"OpenCVNormalizer({self.path.name!r}, stride={self.stride})"
+        return f"OpenCVNormalizer({self.path.name!r}, stride={self.stride}, raw_input={self.raw_input})"
