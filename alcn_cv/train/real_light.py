@@ -45,9 +45,10 @@ from tqdm import tqdm
 
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, list_images, read_image, to_gray, write_json
-from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, kernel_radius
+from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.report import machine
+from alcn_cv.train.models import CentreMixture
 from alcn_cv.train.config import RealLightConfig
 from alcn_cv.weight_file import save_normalizer_file
 
@@ -163,11 +164,10 @@ class CentreDenseMixture(nn.Module):
     """Eq. 3 on the centre of a crop, from the maps on the grid of the network's stride.
 
     The maps are interpolated bilinearly from the grid (as :meth:`GainNormalizer.dense`) onto
-    the ``size + 2 * radius`` pixels around the centre, multiply the image there, and the
-    kernels (:func:`~alcn_cv.filters.gaussian_mixture.gaussian_kernel1d`, zero-padded to the
-    widest, ``radius`` its half-width) blur that product with every tap inside it, as banded
-    matrices (two batched matrix products each: far cheaper on a CPU than depthwise
-    convolutions). Equal to the centre of :meth:`GainNormalizer.response` on the crop.
+    the ``size + 2 * radius`` pixels around the centre (``radius`` the widest kernel's
+    half-width), and Eq. 3 on that region's centre is :meth:`alcn_cv.train.models.CentreMixture.dense`
+    (banded matrices: far cheaper on a CPU than depthwise convolutions). Equal to the centre of
+    :meth:`GainNormalizer.response` on the crop.
 
     Args:
         sigmas: the mixture's sigmas (pixels).
@@ -198,21 +198,15 @@ class CentreDenseMixture(nn.Module):
         interp = np.zeros((side, cells + 1), np.float32)
         interp[np.arange(side), left] = 1 - frac
         interp[np.arange(side), left + 1] += frac
-        bands = np.zeros((len(sigmas), size, side), np.float32)
-        for i, s in enumerate(sigmas):
-            k = gaussian_kernel1d(s)
-            r = len(k) // 2
-            for y in range(size):
-                bands[i, y, self.radius + y - r : self.radius + y + r + 1] = k
         self.register_buffer("interp", torch.from_numpy(interp), persistent=False)
-        self.register_buffer("bands", torch.from_numpy(bands), persistent=False)
+        self.mixture = CentreMixture(tuple(sigmas), window=side, size=size)
 
     def forward(self, crops: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
         if crops.shape[-2:] != (self.crop, self.crop):
             raise InputError(f"crops must be {self.crop}x{self.crop}, got {tuple(crops.shape[-2:])}")
         maps = self.interp @ grid[..., self.cells, self.cells] @ self.interp.T
         region = crops[..., self.first : self.first + self.side, self.first : self.first + self.side]
-        return (self.bands @ (maps * region) @ self.bands.transpose(1, 2)).sum(1, keepdim=True)
+        return self.mixture.dense(region, maps)
 
 
 @functools.lru_cache(maxsize=4)
