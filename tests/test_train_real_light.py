@@ -11,6 +11,8 @@ from alcn_cv.train.real_light import (
     CentreDenseMixture,
     RealLightConfig,
     _normalized_centres,
+    anywhere_locations,
+    consistency_loss,
     identification_loss,
     load_scene,
     pair_loss,
@@ -61,6 +63,43 @@ def test_identification_loss_prefers_matching_patches():
     a = torch.randn(16, 1, 8, 8)
     assert identification_loss(a, a * 3 + 1, 0.05) < 1e-3  # NCC ignores gain and offset
     assert identification_loss(a, torch.randn(16, 1, 8, 8), 0.05) > 1.0
+
+
+def test_consistency_loss_is_zero_when_equal_and_scale_free():
+    a = torch.randn(8, 1, 8, 8)
+    assert float(consistency_loss(a, a)) == 0.0
+    b = torch.randn(8, 1, 8, 8)
+    assert float(consistency_loss(a, b)) == pytest.approx(float(consistency_loss(10 * a, 10 * b)), rel=1e-5)
+    assert 0.5 < float(consistency_loss(a, b)) < 1.5  # unrelated outputs: about 1
+    # Unlike identification, it sees a gain between the frames.
+    assert float(consistency_loss(a, 3 * a)) == pytest.approx(0.4) and identification_loss(a, 3 * a, 0.05) < 1e-3
+
+
+def test_anywhere_locations_stay_in_the_frame(tmp_path):
+    scene = load_scene(_write_scene(tmp_path / "scene"), CROP // 2, PATCH)
+    centres = anywhere_locations(scene, 500, np.random.default_rng(0))
+    _, h, w = scene.frames.shape
+    assert centres.shape == (500, 2)
+    assert centres.min() >= scene.pad and (centres[:, 0] < h - scene.pad).all() and (centres[:, 1] < w - scene.pad).all()
+
+
+def test_pair_loss_adds_the_weighted_consistency(tmp_path):
+    scene = load_scene(_write_scene(tmp_path / "scene"), CROP // 2, PATCH)
+    net = GainNormalizer(channels=8)
+    rng = np.random.default_rng(0)
+    centres = sample_locations(scene.candidates, 8, 8, rng)
+    anywhere = anywhere_locations(scene, 4, rng)
+    base = RealLightConfig(crop=CROP, patch=PATCH, temperature=0.5)
+    weighted = RealLightConfig(crop=CROP, patch=PATCH, temperature=0.5, consistency=2.0)
+    with torch.no_grad():
+        plain = float(pair_loss(net, scene, (0, 1), centres, base, anywhere))
+        both = float(pair_loss(net, scene, (0, 1), centres, weighted, anywhere))
+        every = np.concatenate([centres, anywhere])
+        outputs = [_normalized_centres(net, CentreDenseMixture(net.sigmas, CROP, PATCH, 8),
+                                       torch.from_numpy(np.stack([scene.frames[f][y - CROP // 2 : y + CROP // 2, x - CROP // 2 : x + CROP // 2]
+                                                                  for y, x in every]))[:, None]) for f in (0, 1)]
+    assert plain == pytest.approx(float(pair_loss(net, scene, (0, 1), centres, base)), rel=1e-5)  # identification only
+    assert both == pytest.approx(plain + 2.0 * float(consistency_loss(*outputs)), rel=1e-4)
 
 
 def test_centre_mixture_equals_the_whole_normalization():

@@ -130,11 +130,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     r.add_argument("--scenes", nargs="+", type=Path, default=None,
                    help="folders of registered frames, one per scene (default: the courbevoie, frankfurt and "
                    "panorama scenes of the shared webcam data)")
+    r.add_argument("--rendered", type=Path, default=None,
+                   help="a folder of rendered registered scenes (`alcn data relight-scenes`), each subfolder a scene "
+                   "(default: none)")
+    r.add_argument("--rendered-fraction", type=float, default=defaults.rendered_fraction,
+                   help=f"share of the steps on a rendered scene (default {defaults.rendered_fraction})")
     r.add_argument("--out", type=Path, default=Path("runs/gain"), help="run folder (default: runs/gain)")
     for name, kind, what in (("steps", int, "optimisation steps"), ("locations", int, "textured locations per step"),
                              ("crop", int, "side of the crops the network sees"), ("patch", int, "side of the identified centre"),
                              ("min_distance", int, "least distance between a step's locations"),
-                             ("temperature", float, "of the softmax over similarities"), ("lr", float, "Adam learning rate"),
+                             ("temperature", float, "of the softmax over similarities"),
+                             ("consistency", float, "weight of the term asking for the same output under both lights"),
+                             ("anywhere", int, "locations per step drawn anywhere, for that term only"),
+                             ("lr", float, "Adam learning rate"),
                              ("seed", int, "seed"), ("save_every", int, "steps between checkpoints")):
         r.add_argument(f"--{name.replace('_', '-')}", type=kind, default=getattr(defaults, name),
                        help=f"{what} (default {getattr(defaults, name)})")
@@ -143,6 +151,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     r.add_argument("--sigma-step", type=float, default=1.0, help="the kernels' sigmas are k * step, k = 1..N (default 1)")
     r.add_argument("--dilations", type=int, nargs="+", default=[1, 2, 4], help="one 3x3 convolution per dilation (default 1 2 4)")
     r.add_argument("--sharpness", action="store_true", help="feed the network each cell's finest-scale energy too")
+    r.add_argument("--eps", type=float, default=0.01,
+                   help="added to intensities in [0, 1] before every log: the gain's noise floor (default 0.01)")
     r.add_argument("--threads", type=int, default=1,
                    help="torch threads (default 1, as the shipped file was made; 0: torch's default)")
     r.set_defaults(func=_train_real_light)
@@ -234,11 +244,14 @@ def _train_real_light(args: argparse.Namespace) -> int:
     from alcn_cv.train.real_light import train_real_light
 
     scenes = args.scenes or [shared_data_dir() / "webcam" / name for name in ("courbevoie", "frankfurt", "panorama")]
-    names = ("steps", "locations", "crop", "patch", "min_distance", "temperature", "lr", "seed", "save_every")
+    names = ("steps", "locations", "crop", "patch", "min_distance", "temperature", "consistency", "anywhere", "lr", "seed",
+             "save_every")
+    rendered = sorted(str(p) for p in args.rendered.iterdir() if p.is_dir()) if args.rendered else []
     cfg = RealLightConfig(
-        scenes=[str(s) for s in scenes], **{k: getattr(args, k) for k in names},
+        scenes=[str(s) for s in scenes], rendered=rendered, rendered_fraction=args.rendered_fraction,
+        **{k: getattr(args, k) for k in names},
         net={"channels": args.channels, "dilations": list(args.dilations), "sharpness": args.sharpness,
-             "num_kernels": args.num_kernels, "sigma_step": args.sigma_step},
+             "num_kernels": args.num_kernels, "sigma_step": args.sigma_step, "eps": args.eps},
         command=shlex.join(["alcn", *sys.argv[1:]]),
     )
     previous = torch.get_num_threads()

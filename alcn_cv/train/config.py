@@ -409,12 +409,19 @@ class RealLightConfig:
 
     Attributes:
         scenes: folders of registered frames, one per scene.
+        rendered: folders of rendered registered scenes (``alcn data relight-scenes``), drawn
+            apart from ``scenes`` so that their number does not set their share.
+        rendered_fraction: the share of steps that draw a rendered scene (0 when none).
         steps: optimisation steps; each sees 2 frames x ``locations`` crops of one scene.
         locations: textured locations (classes) per step.
         crop: side of the window the network sees (pixels).
         patch: side of the identified centre (pixels).
         min_distance: smallest distance between two locations of a step (pixels, Chebyshev).
         temperature: of the softmax over cosine similarities.
+        consistency: weight of :func:`~alcn_cv.train.real_light.consistency_loss` (the output the
+            same under both lights, on the textured and on ``anywhere`` other locations).
+        anywhere: locations per step drawn anywhere in the frame (flat, dark and noisy regions
+            too) for the consistency term only.
         lr: Adam's learning rate.
         seed: seeds numpy and torch (data draws and initialisation).
         save_every: steps between checkpoints and intermediate weight files.
@@ -423,12 +430,16 @@ class RealLightConfig:
     """
 
     scenes: list[str] = field(default_factory=list)
+    rendered: list[str] = field(default_factory=list)
+    rendered_fraction: float = 0.0
     steps: int = 2400
     locations: int = 48
     crop: int = 160
     patch: int = 32
     min_distance: int = 24
     temperature: float = 0.05
+    consistency: float = 0.0
+    anywhere: int = 0
     lr: float = 1e-3
     seed: int = 0
     save_every: int = 100

@@ -55,7 +55,9 @@ from alcn_cv.weight_file import save_normalizer_file
 __all__ = [
     "CentreDenseMixture",
     "RealLightConfig",
+    "consistency_loss",
     "RegisteredScene",
+    "anywhere_locations",
     "identification_loss",
     "load_scene",
     "pair_loss",
@@ -160,6 +162,26 @@ def identification_loss(a: torch.Tensor, b: torch.Tensor, temperature: float) ->
     return 0.5 * (F.cross_entropy(logits, target) + F.cross_entropy(logits.T, target))
 
 
+def consistency_loss(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """How much the output changes with the light, relative to its energy:
+    ``sum (a - b)^2 / sum (a^2 + b^2)`` over all the patches together.
+
+    Identification compares each patch after removing its mean and scale, so it does not care
+    what a normalization does to flat, dark or noisy regions, nor to the contrast of one region
+    against another; a keypoint detector or a detector's score does, as they compare responses
+    across the image. This term asks for the same output under both lights in absolute terms
+    (0 when equal, about 1 when unrelated, scale-free so a weaker output does not lower it): an
+    output that amplifies noise, or shadow edges, is inconsistent between the frames.
+
+    Args:
+        a, b: ``(n, 1, P, P)``, the same locations under two lights.
+
+    Returns:
+        A scalar tensor in [0, 2].
+    """
+    return (a - b).square().sum() / (a.square().sum() + b.square().sum()).clamp_min(1e-12)
+
+
 class CentreDenseMixture(nn.Module):
     """Eq. 3 on the centre of a crop, from the maps on the grid of the network's stride.
 
@@ -220,15 +242,31 @@ def _normalized_centres(net: GainNormalizer, mixture: CentreDenseMixture, crops:
     return net.equalize(mixture(crops, net.dense_grid(crops)))
 
 
+def anywhere_locations(scene: RegisteredScene, count: int, rng: np.random.Generator) -> np.ndarray:
+    """``(count, 2)`` centres ``(y, x)`` drawn uniformly over the frame (padded coordinates)."""
+    _, h, w = scene.frames.shape
+    p = scene.pad
+    return np.stack([rng.integers(p, h - p, count), rng.integers(p, w - p, count)], axis=1)
+
+
 def pair_loss(
-    net: GainNormalizer, scene: RegisteredScene, frames: tuple[int, int], centres: np.ndarray, cfg: RealLightConfig
+    net: GainNormalizer, scene: RegisteredScene, frames: tuple[int, int], centres: np.ndarray, cfg: RealLightConfig,
+    anywhere: np.ndarray | None = None,
 ) -> torch.Tensor:
     """The objective on one pair of frames of a scene: :func:`identification_loss` of the
-    normalized centres of the crops around ``centres`` ``(n, 2)`` (padded coordinates)."""
+    normalized centres of the crops around the textured ``centres`` ``(n, 2)`` (padded
+    coordinates), plus ``cfg.consistency`` times :func:`consistency_loss` over those and the
+    ``anywhere`` ``(m, 2)`` locations."""
     fa, fb = frames
-    crops = torch.cat([_crops(scene.frames[fa], centres, cfg.crop), _crops(scene.frames[fb], centres, cfg.crop)])
+    every = centres if anywhere is None or not len(anywhere) else np.concatenate([centres, anywhere])
+    crops = torch.cat([_crops(scene.frames[fa], every, cfg.crop), _crops(scene.frames[fb], every, cfg.crop)])
     outputs = _normalized_centres(net, _centre_mixture(net.sigmas, cfg.crop, cfg.patch, net.stride), crops)
-    return identification_loss(outputs[: len(centres)], outputs[len(centres) :], cfg.temperature)
+    a, b = outputs[: len(every)], outputs[len(every) :]
+    n = len(centres)
+    loss = identification_loss(a[:n], b[:n], cfg.temperature)
+    if cfg.consistency:
+        loss = loss + cfg.consistency * consistency_loss(a, b)
+    return loss
 
 
 def _save_weights(net: GainNormalizer, path: Path, cfg: RealLightConfig, step: int, seconds: float) -> Path:
@@ -249,6 +287,8 @@ def train_real_light(cfg: RealLightConfig, out: str | Path) -> Path:
     """
     if not cfg.scenes:
         raise InputError("no scenes given")
+    if not 0 <= cfg.rendered_fraction < 1 or (cfg.rendered_fraction > 0 and not cfg.rendered):
+        raise InputError(f"rendered_fraction must be in [0, 1) and needs rendered scenes, got {cfg.rendered_fraction}")
     if cfg.crop < 2 * cfg.patch or cfg.locations < 2 or cfg.steps < 1:
         raise InputError("need crop >= 2 * patch, locations >= 2 and steps >= 1")
     out = Path(out)
@@ -270,7 +310,8 @@ def _train(cfg: RealLightConfig, out: Path) -> Path:
     if max(kernel_radius(s) for s in net.sigmas) > cfg.patch // 2:
         raise InputError(f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2")
     scenes = [load_scene(s, cfg.crop // 2, cfg.patch) for s in cfg.scenes]
-    for scene in scenes:
+    rendered = [load_scene(s, cfg.crop // 2, cfg.patch) for s in cfg.rendered]
+    for scene in scenes + rendered:
         logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     history: list[dict] = []
@@ -278,10 +319,12 @@ def _train(cfg: RealLightConfig, out: Path) -> Path:
     net.train()
     bar = tqdm(range(1, cfg.steps + 1), desc="real-light", unit="step")
     for step in bar:
-        scene = scenes[rng.integers(len(scenes))]
+        group = rendered if rendered and rng.random() < cfg.rendered_fraction else scenes
+        scene = group[rng.integers(len(group))]
         fa, fb = rng.choice(len(scene.frames), 2, replace=False)
         centres = sample_locations(scene.candidates, cfg.locations, cfg.min_distance, rng)
-        loss = pair_loss(net, scene, (fa, fb), centres, cfg)
+        anywhere = anywhere_locations(scene, cfg.anywhere, rng) if cfg.anywhere else None
+        loss = pair_loss(net, scene, (fa, fb), centres, cfg, anywhere)
         opt.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)

@@ -1,0 +1,108 @@
+"""Rendered registered scenes: one fixed view of a relief scene under many lights.
+
+The real multi-illumination sets that train the gain Normalizer (:mod:`alcn_cv.train.real_light`,
+the ``webcam`` layout: one folder per scene, frames of a fixed camera under other light) are
+outdoor scenes under daylight. Directional light on relief (grazing sun, lamps, spots, cast
+shadows: the paper's Phos and its objects, faces) is rare there, and no such real set can be
+downloaded at run time, so the data engine renders it: a textured, uneven ground with relief
+objects (:mod:`alcn_cv.data.objects`) seen from above, lit by ``frames`` lightings drawn from
+:data:`~alcn_cv.data.lighting.LIGHT_FAMILIES`. Every frame of a scene shows the same geometry
+and albedo, so the frames are registered exactly, as the trainer's layout requires.
+
+Output (``generate``): ``out/scene_000/frame_00.png`` ... (grayscale PNG) and ``manifest.json``
+(kind ``relight_scenes``, the parameters and the light family of every frame). Scene ``i``
+draws from ``numpy.random.default_rng([seed, i])``: the output does not depend on ``workers``,
+and the first scenes of a larger run equal those of a smaller one.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from alcn_cv.data.lighting import LIGHT_FAMILIES, sample_lighting
+from alcn_cv.data.manifest import atomic_output_dir, make_manifest
+from alcn_cv.data.objects import background_surface, make_object, paste, to_surface
+from alcn_cv.data.parallel import parallel_map
+from alcn_cv.data.render import render_surfaces
+from alcn_cv.data.textures import random_texture
+from alcn_cv.errors import InputError
+from alcn_cv.io import write_json
+
+__all__ = ["KIND", "generate", "render_scene"]
+
+logger = logging.getLogger(__name__)
+
+#: The ``kind`` of the manifest.
+KIND = "relight_scenes"
+#: Light families of the frames: every family but ``colour`` (the frames are grayscale).
+FAMILIES: tuple[str, ...] = tuple(f for f in LIGHT_FAMILIES if f != "colour")
+_CANONICAL = 96
+
+
+def render_scene(
+    rng: np.random.Generator, size: int, frames: int, objects: tuple[int, int] = (3, 7),
+    families: Sequence[str] = FAMILIES,
+) -> tuple[np.ndarray, list[str]]:
+    """One scene of ``size x size`` pixels under ``frames`` lightings.
+
+    Args:
+        rng: the scene's generator (geometry, albedo, lights, noise).
+        size: side of the frames (pixels).
+        frames: number of lightings (frames).
+        objects: least and most relief objects on the ground.
+        families: light families, drawn uniformly for each frame.
+
+    Returns:
+        ``(frames, size, size)`` uint8 grayscale frames and the family of each.
+    """
+    if size < 32 or frames < 2 or not 1 <= objects[0] <= objects[1]:
+        raise InputError(f"need size >= 32, frames >= 2 and 1 <= objects[0] <= objects[1]; got {size}, {frames}, {objects}")
+    albedo, height, material = background_surface(rng, size, size, random_texture(rng, size, p_photo=0.6))
+    for _ in range(int(rng.integers(objects[0], objects[1] + 1))):
+        extent = rng.uniform(0.15, 0.4) * size
+        paste(albedo, height, material, make_object(rng, _CANONICAL), tuple(rng.uniform(0.1, 0.9, 2) * size),
+              extent / (0.92 * _CANONICAL), rng.uniform(0, 360))
+    names = [str(families[int(i)]) for i in rng.integers(len(families), size=frames)]
+    relief = float(height.max())
+    lightings = [sample_lighting(rng, name, size, size, relief=relief) for name in names]
+    surface = to_surface([(albedo, height, material)] * frames)
+    return render_surfaces(surface, lightings, rng, gray=True, shadow_steps=12, shadow_scale=2), names
+
+
+def _scene_job(job: tuple[int, int, int, int]) -> tuple[np.ndarray, list[str]]:
+    seed, index, size, frames = job
+    return render_scene(np.random.default_rng([seed, index]), size, frames)
+
+
+def generate(
+    out_dir: str | os.PathLike, scenes: int = 24, frames: int = 12, size: int = 320, seed: int = 0, *,
+    overwrite: bool = False, workers: int = 1, progress: bool = True,
+) -> Path:
+    """Render ``scenes`` registered scenes into ``out_dir`` (written atomically; see the module).
+
+    Returns:
+        The output folder; each ``scene_NNN`` is a folder the real-light trainer reads
+        (``alcn train-real-light --scenes``). Cost: about 1 s of CPU per 320x320 frame.
+    """
+    if scenes < 1:
+        raise InputError(f"need at least one scene, got {scenes}")
+    jobs = [(int(seed), i, int(size), int(frames)) for i in range(scenes)]
+    rendered = parallel_map(_scene_job, jobs, workers=workers, desc="relight scenes", unit="scene", progress=progress)
+    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+        lights = {}
+        for i, (stack, names) in enumerate(rendered):
+            folder = tmp / f"scene_{i:03d}"
+            folder.mkdir()
+            for j, frame in enumerate(stack):
+                cv2.imwrite(str(folder / f"frame_{j:02d}.png"), frame)
+            lights[folder.name] = names
+        write_json(tmp / "manifest.json", make_manifest(
+            KIND, seed, {"scenes": scenes, "frames": frames, "size": size, "families": list(FAMILIES)}, lights=lights))
+    logger.info("wrote %d scenes of %d frames (%dx%d) to %s", scenes, frames, size, size, out_dir)
+    return Path(out_dir)
