@@ -82,6 +82,47 @@ def _train_corners(args: argparse.Namespace) -> int:
     return 0
 
 
+def _relight(args: argparse.Namespace) -> int:
+    import shlex
+    import sys
+
+    from pose import planar
+
+    planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizers, detector=args.detector,
+                feature=args.feature, target_fraction=args.target_fraction, hfov=args.hfov,
+                max_frames=args.max_frames, command=shlex.join(["alcn", *sys.argv[1:]]))
+    print((Path(args.out) / "relight_pose.md").read_text(encoding="utf-8"))
+    return 0
+
+
+def _add_relight(sub: argparse._SubParsersAction) -> None:
+    from pose import planar
+
+    r = sub.add_parser("relight", help="pose of a planar target under real light (fixed webcams): real-light Table 1",
+                       description="Per scene of fixed outdoor cameras (the camera did not move, the light changes): "
+                       "a textured rectangle of the reference frame (median brightness) is the target, its part "
+                       "model is built from that frame after each normalizer (assumed pinhole camera), and its pose "
+                       "is estimated in every other frame with the box's pipeline (part detector + PoseSolver). "
+                       "Truth: the reference pose. Writes OUT/relight_pose.md, .json, .png and OUT/targets.png. "
+                       "The Webcam frames are for academic research only (cite TILDE and AMOS).")
+    r.add_argument("--out", type=Path, required=True, help="report folder")
+    r.add_argument("--data", help="folder of scenes, one sub-folder of registered frames each (default: "
+                   "$ALCN_SHARED_DATA/webcam, else ../shared/data/webcam)")
+    r.add_argument("--scenes", nargs="+", help="scene names (default: every scene of --data)")
+    r.add_argument("--normalizers", nargs="+", default=list(planar.DEFAULT_NORMALIZERS),
+                   help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZERS) + ")")
+    r.add_argument("--detector", default="features", choices=sorted(planar.DETECTORS),
+                   help="part detector (default features: OpenCV features matched to the target's descriptors)")
+    r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
+    r.add_argument("--target-fraction", type=float, default=planar.DEFAULT_TARGET_FRACTION,
+                   help="target side as a fraction of the frame's width and height; the window with the most "
+                   f"keypoints of the reference frame is chosen (default {planar.DEFAULT_TARGET_FRACTION:g})")
+    r.add_argument("--hfov", type=float, default=planar.DEFAULT_HFOV,
+                   help=f"assumed horizontal field of view, degrees (default {planar.DEFAULT_HFOV:g})")
+    r.add_argument("--max-frames", type=int, help="at most this many frames per scene, evenly spaced (default all)")
+    r.set_defaults(func=_relight)
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval`` and ``train-corners`` to the ``alcn`` command."""
     from pose.solver import METHODS
@@ -172,3 +213,4 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--rounds", type=int, default=2, help="training rounds with hard-negative mining (default 2)")
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(func=_train_corners)
+    _add_relight(sub)
