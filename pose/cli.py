@@ -123,6 +123,42 @@ def _add_relight(sub: argparse._SubParsersAction) -> None:
     r.set_defaults(func=_relight)
 
 
+def _overlay_error(args: argparse.Namespace) -> int:
+    import shlex
+    import sys
+
+    from pose import overlay
+
+    settings = overlay.EdgeSettings(max_distance=args.max_distance, max_angle=args.max_angle)
+    overlay.main(args.video, [tuple(r) for r in args.run], args.out, settings=settings,
+                 command=shlex.join(["alcn", *sys.argv[1:]]))
+    print((Path(args.out) / "overlay_error.md").read_text(encoding="utf-8"))
+    return 0
+
+
+def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
+    from pose.overlay import EdgeSettings
+
+    d = EdgeSettings()
+    o = sub.add_parser("overlay-error", help="how far the drawn box is from the object's edges, per frame",
+                       description="For every frame posed by `alcn pose track`: the mean distance (px) from "
+                       "samples of the box's visible projected edges to the nearest image edge parallel to them "
+                       "(Canny, gradient direction), no ground truth needed. Writes OUT/overlay_error.md, .json "
+                       "(per frame, per box edge) and .png (the error over the video, one line per run).")
+    o.add_argument("video", help="the video (or image folder) that was tracked")
+    o.add_argument("--run", nargs=3, action="append", required=True, metavar=("LABEL", "MODEL", "POSES"),
+                   help="a run to measure: its label, its part model (.npz, with the camera stored by `alcn pose "
+                   "build`) and its poses (.json from `alcn pose track`); repeat to compare runs")
+    o.add_argument("--out", type=Path, required=True, help="report folder")
+    o.add_argument("--max-distance", type=float, default=d.max_distance,
+                   help=f"search range along each edge's normal, px; no image edge within it counts as this "
+                   f"(default {d.max_distance:g})")
+    o.add_argument("--max-angle", type=float, default=d.max_angle,
+                   help=f"largest angle between an image edge's gradient and the drawn edge's normal, degrees "
+                   f"(default {d.max_angle:g})")
+    o.set_defaults(func=_overlay_error)
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval`` and ``train-corners`` to the ``alcn`` command."""
     from pose.solver import METHODS
@@ -214,3 +250,4 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(func=_train_corners)
     _add_relight(sub)
+    _add_overlay_error(sub)
