@@ -131,7 +131,7 @@ def _overlay_error(args: argparse.Namespace) -> int:
 
     settings = overlay.EdgeSettings(max_distance=args.max_distance, max_angle=args.max_angle)
     overlay.main(args.video, [tuple(r) for r in args.run], args.out, settings=settings,
-                 command=shlex.join(["alcn", *sys.argv[1:]]))
+                 command=shlex.join(["alcn", *sys.argv[1:]]), show=args.show)
     print((Path(args.out) / "overlay_error.md").read_text(encoding="utf-8"))
     return 0
 
@@ -156,6 +156,9 @@ def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
     o.add_argument("--max-angle", type=float, default=d.max_angle,
                    help=f"largest angle between an image edge's gradient and the drawn edge's normal, degrees "
                    f"(default {d.max_angle:g})")
+    o.add_argument("--show", nargs="*", default=["frame_000300"],
+                   help="frames drawn in OUT/overlay_frames.png with every run's box, besides the first run's two "
+                   "worst (default frame_000300)")
     o.set_defaults(func=_overlay_error)
 
 

@@ -165,24 +165,31 @@ def frame_error(gray: np.ndarray, corners: np.ndarray, rvec: np.ndarray, tvec: n
     return FrameError(float(err.mean()), float(found.mean()), per_edge)
 
 
+def _camera_and_poses(model_path: str | Path, poses_path: str | Path
+                      ) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """The box corners, the camera stored in the part model and the ``(rvec, tvec)`` of every posed frame."""
+    model = part_model.load(model_path)
+    if "K" not in model.extra:
+        raise DatasetError(f"{model_path}: stores no camera (build it from a video with `alcn pose build`)")
+    poses = {}
+    for name, entry in read_json(poses_path).items():
+        if entry:
+            R = np.asarray(entry[0]["cam_R_m2c"], np.float64).reshape(3, 3)
+            poses[name] = (cv2.Rodrigues(R)[0], np.asarray(entry[0]["cam_t_m2c"], np.float64).reshape(3, 1))
+    return model.corners, np.asarray(model.extra["K"], np.float64), poses
+
+
 def measure(model_path: str | Path, poses_path: str | Path, video: str | Path,
             settings: EdgeSettings | None = None) -> dict[str, FrameError]:
     """:class:`FrameError` of every frame of ``video`` posed in ``poses_path`` (``alcn pose track``'s
     JSON) with the box and camera of ``model_path`` (the camera stored by ``alcn pose build``)."""
-    model = part_model.load(model_path)
-    if "K" not in model.extra:
-        raise DatasetError(f"{model_path}: stores no camera (build it from a video with `alcn pose build`)")
-    K = np.asarray(model.extra["K"], np.float64)
-    poses = read_json(poses_path)
+    corners, K, poses = _camera_and_poses(model_path, poses_path)
     out = {}
     for name, frame in tqdm(io.iter_frames(video), desc="overlay error", unit="frame", leave=False):
-        entry = poses.get(name) or []
-        if not entry:
+        if name not in poses:
             out[name] = FrameError(float("nan"), 0.0, {})
             continue
-        R = np.asarray(entry[0]["cam_R_m2c"], np.float64).reshape(3, 3)
-        t = np.asarray(entry[0]["cam_t_m2c"], np.float64)
-        out[name] = frame_error(to_gray(frame), model.corners, cv2.Rodrigues(R)[0], t, K, settings)
+        out[name] = frame_error(to_gray(frame), corners, *poses[name], K, settings)
     return out
 
 
@@ -221,10 +228,34 @@ def plot_errors(runs: dict[str, dict[str, FrameError]], path: str | Path, max_di
     return save_figure(plt, fig, path, dpi=110)
 
 
+def plot_frames(video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], names: Sequence[str],
+                path: str | Path) -> Path:
+    """The frames ``names`` of ``video`` with each run's box drawn in its own colour, side by side."""
+    from pose.track import draw_box
+
+    colors = [(0, 0, 255), (255, 120, 0), (0, 200, 0), (0, 220, 255)]
+    loaded = [(label, *_camera_and_poses(m, p)) for label, m, p in runs]
+    wanted, tiles = set(names), {}
+    for name, frame in io.iter_frames(video):
+        if name in wanted:
+            vis = frame.copy()
+            for k, (label, corners, K, poses) in enumerate(loaded):
+                if name in poses:
+                    draw_box(vis, corners, *poses[name], K, colors[k % len(colors)], thickness=1)
+                cv2.putText(vis, label, (8, 20 + 18 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.55, colors[k % len(colors)], 2)
+            cv2.putText(vis, name, (8, vis.shape[0] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 2)
+            tiles[name] = vis
+    io.write_image(path, np.hstack([tiles[n] for n in names if n in tiles]))
+    return Path(path)
+
+
 def main(video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], out_dir: str | Path, *,
-         settings: EdgeSettings | None = None, command: str = "") -> dict[str, Any]:
+         settings: EdgeSettings | None = None, command: str = "", show: Sequence[str] = ("frame_000300",)
+         ) -> dict[str, Any]:
     """Measure every run ``(label, model, poses)`` on ``video``; writes ``overlay_error.md``,
-    ``overlay_error.json`` and ``overlay_error.png`` into ``out_dir``."""
+    ``overlay_error.json``, ``overlay_error.png`` (the error over the video) and
+    ``overlay_frames.png`` (the frames ``show`` and the first run's two worst with every run's
+    box) into ``out_dir``."""
     settings = settings or EdgeSettings()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -255,6 +286,8 @@ def main(video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], 
                                        for n, e in errors[label].items()}}
                  for label, m, p in runs}})
     plot_errors(errors, out_dir / "overlay_error.png", settings.max_distance)
+    worst = [n for n, _ in next(iter(summary.values())).get("worst", [])[:2]]
+    plot_frames(video, runs, list(dict.fromkeys([*show, *worst])), out_dir / "overlay_frames.png")
     for label, s in summary.items():
         logger.info("%s: mean %.2f px, median %.2f px over %d frames", label, s.get("mean_px", np.nan),
                     s.get("median_px", np.nan), s.get("frames", 0))
