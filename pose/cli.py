@@ -89,7 +89,7 @@ def _relight(args: argparse.Namespace) -> int:
     from pose import planar
 
     planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizers, detector=args.detector,
-                feature=args.feature, target_fraction=args.target_fraction, hfov=args.hfov,
+                feature=args.feature, n_features=args.n_features, target_fraction=args.target_fraction, hfov=args.hfov,
                 max_frames=args.max_frames, command=shlex.join(["alcn", *sys.argv[1:]]))
     print((Path(args.out) / "relight_pose.md").read_text(encoding="utf-8"))
     return 0
@@ -114,6 +114,9 @@ def _add_relight(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--detector", default="features", choices=sorted(planar.DETECTORS),
                    help="part detector (default features: OpenCV features matched to the target's descriptors)")
     r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
+    r.add_argument("--n-features", type=int, default=0,
+                   help="the strongest keypoints kept per frame (default 0: all; the target's model keeps all of "
+                   "the reference frame's)")
     r.add_argument("--target-fraction", type=float, default=planar.DEFAULT_TARGET_FRACTION,
                    help="target side as a fraction of the frame's width and height; the window with the most "
                    f"keypoints of the reference frame is chosen (default {planar.DEFAULT_TARGET_FRACTION:g})")

@@ -188,9 +188,9 @@ def feature_detector(target: PlanarTarget, normalizer: str, n_features: int = 0)
     return FeaturePartDetector(target.model, normalizer, n_features_global=n_features)
 
 
-#: Part detectors by name: ``(target, normalizer) -> PartDetector``. A learned detector is added
-#: here as a factory that trains (or loads) it for the target's reference frame.
-DETECTORS: dict[str, Callable[[PlanarTarget, str], PartDetector]] = {"features": feature_detector}
+#: Part detectors by name: ``(target, normalizer, n_features) -> PartDetector``. A learned detector
+#: is added here as a factory that trains (or loads) it for the target's reference frame.
+DETECTORS: dict[str, Callable[[PlanarTarget, str, int], PartDetector]] = {"features": feature_detector}
 
 
 @dataclass
@@ -206,11 +206,12 @@ class FrameResult:
 
 
 def evaluate_scene(scene: Scene, normalizer: str, *, detector: str = "features", feature: str = "SIFT",
-                   reference: int | None = None, region: tuple[int, int, int, int] | None = None,
+                   n_features: int = 0, reference: int | None = None, region: tuple[int, int, int, int] | None = None,
                    target_fraction: float = DEFAULT_TARGET_FRACTION, hfov: float = DEFAULT_HFOV
                    ) -> tuple[PlanarTarget, list[FrameResult]]:
     """Build the target in the scene's reference frame after ``normalizer`` and pose it in every
-    other frame; returns the target and one :class:`FrameResult` per other frame.
+    other frame; returns the target and one :class:`FrameResult` per other frame. ``n_features``:
+    the strongest keypoints kept per frame (0: all).
 
     ``reference`` (default :func:`reference_index`) and ``region`` (default
     :func:`select_region` on the raw reference frame, so every normalizer gets the same target)."""
@@ -222,7 +223,7 @@ def evaluate_scene(scene: Scene, normalizer: str, *, detector: str = "features",
     K = pinhole_camera(w, h, hfov)
     region = region or select_region(frames[ref], target_fraction, feature)
     target = build_target(frames[ref], region, K, normalizer, feature=feature, reference=scene.files[ref])
-    det = DETECTORS[detector](target, normalizer)
+    det = DETECTORS[detector](target, normalizer, n_features)
     solver = PoseSolver(K, min_inliers=MIN_INLIERS[detector], iterations=RANSAC_ITERATIONS[detector],
                         min_inliers_near_prior=MIN_INLIERS_NEAR_PRIOR[detector], outline=target.model.corners)
     truth = (cv2.Rodrigues(target.rvec)[0], target.tvec)
@@ -263,7 +264,7 @@ def plot_targets(scenes: Sequence[Scene], targets: dict[str, PlanarTarget], path
 
 def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequence[str] | None = None,
          normalizers: Sequence[str] = DEFAULT_NORMALIZERS, detector: str = "features", feature: str = "SIFT",
-         target_fraction: float = DEFAULT_TARGET_FRACTION, hfov: float = DEFAULT_HFOV,
+         n_features: int = 0, target_fraction: float = DEFAULT_TARGET_FRACTION, hfov: float = DEFAULT_HFOV,
          max_frames: int | None = None, command: str = "") -> dict[str, Any]:
     """The real-light Table 1: per scene of ``data`` (default ``<shared data>/webcam``) and
     normalizer, the % of frames whose target pose is correct. Writes ``relight_pose.md``,
@@ -285,15 +286,16 @@ def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequenc
     runs = [(name, s) for name in normalizers for s in chosen]
     for name, scene in tqdm(runs, desc="relight pose", unit="scene", leave=False):
         row = f"{name} / {feature.lower()} {detector}"
-        target, frames = evaluate_scene(scene, name, detector=detector, feature=feature, region=regions[scene.name],
-                                        hfov=hfov)
+        target, frames = evaluate_scene(scene, name, detector=detector, feature=feature, n_features=n_features,
+                                        region=regions[scene.name], hfov=hfov)
         targets.setdefault(scene.name, target)
         proj = [f.proj_px for f in frames]
         pct = _percent(proj)
         table.setdefault(row, {})[scene.name] = pct
         details.setdefault(row, {})[scene.name] = {
             "reference": target.reference, "region": list(target.region), "parts": len(target.model.points3d),
-            "frames": len(frames), "correct_pct": pct, "all_corners_within_pct": _percent([f.max_corner_px for f in frames]),
+            "frames": len(frames), "correct_pct": pct,
+            "all_corners_within_pct": _percent([f.max_corner_px for f in frames]),
             "posed_pct": 100.0 * float(np.mean([p is not None for p in proj])) if frames else float("nan"),
             "median_error_px": float(np.median([p for p in proj if p is not None])) if any(p is not None for p in proj)
             else None,
@@ -303,6 +305,7 @@ def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequenc
     for row, vals in table.items():
         vals["mean"] = float(np.mean([vals[c] for c in columns]))
     host = machine()
+    keypoints = "every keypoint" if not n_features else f"the {n_features} strongest keypoints"
     K_note = f"pinhole camera, {hfov:g} deg horizontal field of view, principal point at the centre"
     md = ("# Pose of a planar target under real light (Table 1 on fixed webcams)\n\n"
           f"Command: `{command}`\n\nMachine: {describe_machine(host)}\n\n"
@@ -311,7 +314,8 @@ def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequenc
           f"{target_fraction:g} x the frame's width and height in its reference frame (median brightness; "
           "`targets.png`), its part model from that frame alone after each normalizer "
           f"({feature} keypoints, {K_note}), its pose in every other frame by the box's pipeline "
-          "(`pose.parts.FeaturePartDetector` on every keypoint, `pose.solver.PoseSolver`); truth: the reference "
+          f"(`pose.parts.FeaturePartDetector` on {keypoints} of each frame, `pose.solver.PoseSolver`); "
+          "truth: the reference "
           f"pose (the camera did not move). Cells: % of frames whose target corners reproject within {PROJ_PX:g} px "
           "on average (lost frames count as wrong); the JSON also gives the share with every corner within "
           f"{PROJ_PX:g} px, the median error and the time per frame.\n\n"
@@ -320,8 +324,10 @@ def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequenc
     atomic_write(out_dir / "relight_pose.md", md)
     write_json(out_dir / "relight_pose.json", _nan_to_none({
         "command": command, "machine": host, "data": str(root), "columns": columns, "table": table,
-        "details": details, "settings": {"feature": feature, "detector": detector, "target_fraction": target_fraction,
-                                         "hfov_deg": hfov, "proj2d_px": PROJ_PX, "max_frames": max_frames}}))
+        "details": details,
+        "settings": {"feature": feature, "n_features": n_features, "detector": detector,
+                     "target_fraction": target_fraction, "hfov_deg": hfov, "proj2d_px": PROJ_PX,
+                     "max_frames": max_frames}}))
     plot_table(table, columns + ["mean"], out_dir / "relight_pose.png",
                f"Planar target on fixed webcams: correct poses (< {PROJ_PX:g} px)")
     plot_targets(chosen, targets, out_dir / "targets.png")
@@ -336,5 +342,6 @@ def _details_markdown(details: dict[str, Any], columns: list[str]) -> str:
             d = per_scene[c]
             med = "-" if d["median_error_px"] is None else f"{d['median_error_px']:.2f}"
             lines.append(f"| {row} | {c} | {d['reference']} | {tuple(d['region'])} | {d['parts']} | "
-                         f"{d['posed_pct']:.1f} | {d['all_corners_within_pct']:.1f} | {med} | {d['ms_per_frame']:.0f} |")
+                         f"{d['posed_pct']:.1f} | {d['all_corners_within_pct']:.1f} | {med} | "
+                         f"{d['ms_per_frame']:.0f} |")
     return "\n".join(lines) + "\n"
