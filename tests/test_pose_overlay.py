@@ -95,3 +95,17 @@ def test_face_frame_normal_of_a_noisy_lid():
     assert tilt < 1.0
     assert center[2] == pytest.approx(55, abs=0.5)
     assert on_face[:1500].mean() > 0.9 and on_face[1500:].mean() < 0.15
+
+
+def test_image_edges_of_a_yellow_box_on_white_need_colour():
+    """The cookie box is yellow on a white tablecloth: hardly a grey-level edge, a strong blue-channel one."""
+    img = np.full((120, 160, 3), (235, 240, 240), np.uint8)
+    img[40:80, 50:110] = (40, 215, 245)  # BGR yellow
+    s = overlay.EdgeSettings()
+    colour, angle = overlay.image_edges(img, s)
+    grey, _ = overlay.image_edges(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY), s)
+    assert colour[38:42, 60:100].any(axis=0).all()  # the top edge, all along
+    assert not grey.any()
+    # the top edge's gradient is vertical
+    rows = colour[38:42, 60:100]
+    assert np.allclose(np.abs(np.sin(angle[38:42, 60:100][rows])), 1, atol=0.1)
