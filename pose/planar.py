@@ -101,8 +101,8 @@ def select_region(gray: np.ndarray, fraction: float = DEFAULT_TARGET_FRACTION, f
     margin = 8
     kps = create_feature(feature, 0).detect(from_spec(normalizer).apply(gray), None)
     count = np.zeros((h + 1, w + 1), np.float64)
-    for k in kps:
-        count[int(min(k.pt[1], h - 1)) + 1, int(min(k.pt[0], w - 1)) + 1] += 1
+    pts = np.array([k.pt for k in kps], np.float64).reshape(-1, 2).astype(int)
+    np.add.at(count, (np.minimum(pts[:, 1], h - 1) + 1, np.minimum(pts[:, 0], w - 1) + 1), 1)
     integral = count.cumsum(0).cumsum(1)
     best, best_n = (margin, margin), -1.0
     xs = np.unique(np.linspace(margin, max(w - tw - margin, margin), 21).astype(int))
@@ -256,7 +256,7 @@ def plot_targets(scenes: Sequence[Scene], targets: dict[str, PlanarTarget], path
         x, y, w, h = t.region
         ax.add_patch(plt.Rectangle((x - 0.5, y - 0.5), w, h, fill=False, color="tab:orange", lw=2))
         ax.set_title(f"{scene.name}: reference {t.reference}, target {w}x{h} px, {len(t.model.points3d)} parts "
-                     "(none)", fontsize=9)
+                     f"({t.model.normalizer})", fontsize=9)
         ax.axis("off")
     fig.tight_layout()
     return save_figure(plt, fig, path, dpi=90)
