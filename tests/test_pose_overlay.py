@@ -109,3 +109,17 @@ def test_image_edges_of_a_yellow_box_on_white_need_colour():
     # the top edge's gradient is vertical
     rows = colour[38:42, 60:100]
     assert np.allclose(np.abs(np.sin(angle[38:42, 60:100][rows])), 1, atol=0.1)
+
+
+def test_known_box_flush_with_the_lid_when_points_rise_above_it():
+    """The lid (z = 55), a side down to the bottom and a hand's points up to 20 above the lid: the
+    points span more than the box's height, yet the box must hang from the lid (it was centred on
+    the points' extent, 10 higher)."""
+    rng = np.random.default_rng(5)
+    lid = np.c_[rng.uniform(0, 140, 2000), rng.uniform(0, 95, 2000), 55 + rng.normal(0, 0.5, 2000)]
+    s = rng.uniform(0, 1, (1500, 2))
+    front = np.c_[s[:, 0] * 140, rng.normal(0, 0.5, 1500), s[:, 1] * 55]
+    hand = np.c_[rng.uniform(0, 30, 500), rng.uniform(0, 25, 500), rng.uniform(55, 75, 500)]
+    cams = np.array([[70.0, -150.0, 400.0], [20.0, -100.0, 300.0]])
+    fit = box_fit.fit_box(np.vstack([lid, front, hand]), known_size=[140, 95, 55], viewpoints=cams)
+    assert (fit.corners[:, 2].min(), fit.corners[:, 2].max()) == pytest.approx((0.0, 55.0), abs=1.0)
