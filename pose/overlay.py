@@ -217,7 +217,10 @@ def summarize(errors: dict[str, FrameError], worst: int = 5) -> dict[str, Any]:
         if v:
             per_edge[f"{i}-{j}"] = {"mean_signed_px": float(np.mean(v)), "mean_abs_px": float(np.mean(np.abs(v))),
                                    "frames": len(v)}
+    # the box's systematic misplacement: how far each edge is off on average, whatever the texture
+    bias = [abs(e["mean_signed_px"]) for e in per_edge.values()]
     return {"frames": len(values), "mean_px": float(values.mean()), "median_px": float(np.median(values)),
+            "edge_bias_px": float(np.mean(bias)) if bias else float("nan"),
             "p90_px": float(np.percentile(values, 90)),
             "found": float(np.mean([errors[n].found for n in names])),
             "matched_px": float(np.nanmean([errors[n].matched_px for n in names])),
@@ -274,7 +277,7 @@ def main(video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], 
     summary = {label: summarize(e) for label, e in errors.items()}
     host = machine()
     rows = [[label, s.get("frames"), s.get("mean_px"), s.get("median_px"), s.get("p90_px"), s.get("found"),
-             s.get("matched_px"),
+             s.get("matched_px"), s.get("edge_bias_px"),
              ", ".join(f"{n} ({v:.1f})" for n, v in s.get("worst", [])[:3])] for label, s in summary.items()]
     edge_rows = [[f"{i}-{j}", *(summary[label].get("edges", {}).get(f"{i}-{j}", {}).get("mean_signed_px")
                                 for label in errors)] for i, j in BOX_EDGES]
@@ -284,10 +287,12 @@ def main(video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], 
           f"(Canny on the colour frame blurred by sigma {settings.blur:g}, thresholds {settings.canny[0]:g}/"
           f"{settings.canny[1]:g}; gradient within {settings.max_angle:g} deg of the drawn edge's normal; none "
           f"within {settings.max_distance:g} px counts as {settings.max_distance:g}); `found`: share of the samples "
-          "with an image edge in range, `mean of found`: their mean distance alone. Texture edges parallel to the "
-          "box's, the hand and motion blur give the measure a floor of several pixels.\n\n"
+          "with an image edge in range, `mean of found`: their mean distance alone; `edge bias`: the mean over the "
+          "box's edges of the absolute value of each edge's mean signed offset (the box's systematic misplacement, "
+          "which the texture's random matches average out of). Texture edges parallel to the box's, the hand and "
+          "motion blur give the per-frame distances a floor of several pixels.\n\n"
           + markdown_table(["run", "frames", "mean (px)", "median (px)", "90th pct (px)", "found", "mean of found (px)",
-                            "worst frames"],
+                            "edge bias (px)", "worst frames"],
                            rows, digits=2)
           + "\n\nMean signed offset of each box edge (px, along the normal of the projected edge; corners "
           "numbered as in `pose.model.box_corners`):\n\n"
