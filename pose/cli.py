@@ -82,6 +82,89 @@ def _train_corners(args: argparse.Namespace) -> int:
     return 0
 
 
+def _relight(args: argparse.Namespace) -> int:
+    import shlex
+    import sys
+
+    from pose import planar
+
+    planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizers, detector=args.detector,
+                feature=args.feature, n_features=args.n_features, target_fraction=args.target_fraction, hfov=args.hfov,
+                max_frames=args.max_frames, command=shlex.join(["alcn", *sys.argv[1:]]))
+    print((Path(args.out) / "relight_pose.md").read_text(encoding="utf-8"))
+    return 0
+
+
+def _add_relight(sub: argparse._SubParsersAction) -> None:
+    from pose import planar
+
+    r = sub.add_parser("relight", help="pose of a planar target under real light (fixed webcams): real-light Table 1",
+                       description="Per scene of fixed outdoor cameras (the camera did not move, the light changes): "
+                       "a textured rectangle of the reference frame (median brightness) is the target, its part "
+                       "model is built from that frame after each normalizer (assumed pinhole camera), and its pose "
+                       "is estimated in every other frame with the box's pipeline (part detector + PoseSolver). "
+                       "Truth: the reference pose. Writes OUT/relight_pose.md, .json, .png and OUT/targets.png. "
+                       "The Webcam frames are for academic research only (cite TILDE and AMOS).")
+    r.add_argument("--out", type=Path, required=True, help="report folder")
+    r.add_argument("--data", help="folder of scenes, one sub-folder of registered frames each (default: "
+                   "$ALCN_SHARED_DATA/webcam, else ../shared/data/webcam)")
+    r.add_argument("--scenes", nargs="+", help="scene names (default: every scene of --data)")
+    r.add_argument("--normalizers", nargs="+", default=list(planar.DEFAULT_NORMALIZERS),
+                   help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZERS) + ")")
+    r.add_argument("--detector", default="features", choices=sorted(planar.DETECTORS),
+                   help="part detector (default features: OpenCV features matched to the target's descriptors)")
+    r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
+    r.add_argument("--n-features", type=int, default=0,
+                   help="the strongest keypoints kept per frame (default 0: all; the target's model keeps all of "
+                   "the reference frame's)")
+    r.add_argument("--target-fraction", type=float, default=planar.DEFAULT_TARGET_FRACTION,
+                   help="target side as a fraction of the frame's width and height; the window with the most "
+                   f"keypoints of the reference frame is chosen (default {planar.DEFAULT_TARGET_FRACTION:g})")
+    r.add_argument("--hfov", type=float, default=planar.DEFAULT_HFOV,
+                   help=f"assumed horizontal field of view, degrees (default {planar.DEFAULT_HFOV:g})")
+    r.add_argument("--max-frames", type=int, help="at most this many frames per scene, evenly spaced (default all)")
+    r.set_defaults(func=_relight)
+
+
+def _overlay_error(args: argparse.Namespace) -> int:
+    import shlex
+    import sys
+
+    from pose import overlay
+
+    settings = overlay.EdgeSettings(max_distance=args.max_distance, max_angle=args.max_angle)
+    overlay.main(args.video, [tuple(r) for r in args.run], args.out, settings=settings,
+                 command=shlex.join(["alcn", *sys.argv[1:]]), show=args.show)
+    print((Path(args.out) / "overlay_error.md").read_text(encoding="utf-8"))
+    return 0
+
+
+def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
+    from pose.overlay import EdgeSettings
+
+    d = EdgeSettings()
+    o = sub.add_parser("overlay-error", help="how far the drawn box is from the object's edges, per frame",
+                       description="For every frame posed by `alcn pose track`: the mean distance (px) from "
+                       "samples of the box's visible projected edges to the nearest image edge parallel to them "
+                       "(Canny, gradient direction), no ground truth needed. Writes OUT/overlay_error.md, .json "
+                       "(per frame, per box edge) and .png (the error over the video, one line per run).")
+    o.add_argument("video", help="the video (or image folder) that was tracked")
+    o.add_argument("--run", nargs=3, action="append", required=True, metavar=("LABEL", "MODEL", "POSES"),
+                   help="a run to measure: its label, its part model (.npz, with the camera stored by `alcn pose "
+                   "build`) and its poses (.json from `alcn pose track`); repeat to compare runs")
+    o.add_argument("--out", type=Path, required=True, help="report folder")
+    o.add_argument("--max-distance", type=float, default=d.max_distance,
+                   help=f"search range along each edge's normal, px; no image edge within it counts as this "
+                   f"(default {d.max_distance:g})")
+    o.add_argument("--max-angle", type=float, default=d.max_angle,
+                   help=f"largest angle between an image edge's gradient and the drawn edge's normal, degrees "
+                   f"(default {d.max_angle:g})")
+    o.add_argument("--show", nargs="*", default=["frame_000300"],
+                   help="frames drawn in OUT/overlay_frames.png with every run's box, besides the first run's two "
+                   "worst (default frame_000300)")
+    o.set_defaults(func=_overlay_error)
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval`` and ``train-corners`` to the ``alcn`` command."""
     from pose.solver import METHODS
@@ -172,3 +255,5 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--rounds", type=int, default=2, help="training rounds with hard-negative mining (default 2)")
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(func=_train_corners)
+    _add_relight(sub)
+    _add_overlay_error(sub)
