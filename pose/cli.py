@@ -179,10 +179,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    "gave more correct poses than ORB, and with ALCN far more; `track` uses ORB for speed)")
     e.add_argument("--detectors", nargs="+", default=["features"], choices=["features", "corners"],
                    help="part detectors, each giving rows (default features; corners: trained on the training sequence first)")
-    e.add_argument("--corner-iterations", type=int, default=1500,
-                   help="corner CNN training steps (default 1500)")
-    e.add_argument("--corner-copies", type=int, default=7,
-                   help="augmented copies of each training view for the corner CNN (default 7)")
+    e.add_argument("--corner-iterations", type=int, default=1000,
+                   help="corner CNN training steps (default 1000)")
+    e.add_argument("--corner-copies", type=int, default=11,
+                   help="augmented copies of each training view for the corner CNN (default 11)")
     e.add_argument("--seeds", type=int, default=1,
                    help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)")
     e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
@@ -200,9 +200,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     box.add_argument("--model", help="part model (.npz) whose box corners to use")
     c.add_argument("--normalizer", default="none", help="normalizer applied first (default none)")
     c.add_argument("--scale", type=float, default=0.5, help="downscaling of the frames (default 0.5)")
-    c.add_argument("--iterations", type=int, default=1500, help="training steps (default 1500)")
-    c.add_argument("--copies", type=int, default=7,
-                   help="augmented copies (homography, background, intensity) of each view (default 7)")
+    c.add_argument("--iterations", type=int, default=1000, help="training steps (default 1000)")
+    c.add_argument("--copies", type=int, default=11,
+                   help="augmented copies (homography, background, intensity) of each view (default 11)")
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(func=_train_corners)
 

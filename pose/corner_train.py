@@ -131,8 +131,8 @@ def fit(net, frames: CornerFrames, *, iterations: int = 1500, batch_size: int = 
 
 def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path, *, normalizer: str = "none",
                   units: str = "mm", obj_id: int | None = None, scale: float = 0.5,
-                  channels: tuple[int, int] = (16, 32), hidden: int = 64, iterations: int = 1500,
-                  batch_size: int = 16, lr: float = 2e-3, seed: int = 0, progress: bool = True,
+                  channels: tuple[int, int] = (16, 32), hidden: int = 64, iterations: int = 1000,
+                  batch_size: int = 16, cells: int = 12, lr: float = 3e-3, seed: int = 0, progress: bool = True,
                   **frames_kw: Any) -> Path:
     """Train the corner detector on a registered sequence and export it to ``out`` (``.onnx``).
 
@@ -144,7 +144,8 @@ def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path
         normalizer: the normalizer applied first (stored in the file; tracking uses the same).
         scale: downscaling of the frames (stored in the file).
         channels, hidden: widths of :class:`pose.corner_net.CornerNet`.
-        iterations, batch_size, lr, seed: see :func:`fit`.
+        iterations, batch_size, cells, lr, seed: see :func:`fit` (``cells``: the crops' side in
+            output cells).
         **frames_kw: see :func:`pose.corner_data.build_frames` (``copies``, ...).
 
     Returns:
@@ -169,7 +170,7 @@ def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         net = CornerNet(channels, hidden)
-        cells = min(16, *frames.labels.shape[1:])
+        cells = min(cells, *frames.labels.shape[1:])
         fit_info = fit(net, frames, iterations=iterations, batch_size=batch_size, cells=cells, lr=lr, seed=seed,
                        progress=progress)
     meta = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "normalizer": normalizer, "scale": scale,
@@ -177,7 +178,7 @@ def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path
             "corners": corners.tolist(), "units": units, "window": WINDOW, "stride": STRIDE, "pad": PAD,
             "config": net.config, "source": str(sequence_dir),
             "fit": {"frames": len(frames.labels), "views": len(seq.views), "iterations": iterations,
-                    "batch_size": batch_size, "seed": seed, "data_seconds": t1 - t0,
+                    "batch_size": batch_size, "cells": cells, "lr": lr, "seed": seed, "data_seconds": t1 - t0,
                     "train_seconds": time.perf_counter() - t1, **fit_info}}
     path = export_onnx(net, out, meta)
     logger.info("corner detector (%s): %d frames in %.1f s, training %.1f s, final loss %.3f", normalizer,
