@@ -103,7 +103,8 @@ def _bench_corners(args: argparse.Namespace) -> int:
                           max_frames=args.max_frames, repeats=args.repeats, threads=args.threads)
     print(f"{r['fps']:.1f} fps at {r['size'][0]}x{r['size'][1]} ({r['normalizer']} in front; normalize "
           f"{r['ms']['normalize']:.1f} ms, network {r['ms']['network']:.1f} ms, peaks + pose "
-          f"{r['ms']['peaks_and_pose']:.1f} ms; torch imported: {r['torch_imported']}; load "
+          f"{r['ms']['peaks_and_pose']:.1f} ms; CPU {r['cpu_ms_per_frame']:.1f} ms per frame; torch imported: "
+          f"{r['torch_imported']}; load "
           f"{r['machine'].get('load_average_1_5_15')})")
     return 0
 

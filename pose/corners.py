@@ -215,6 +215,18 @@ class CornerDetector:
         self._cache = (image, prob, votes)
         return prob, votes
 
+    def positions(self, prob: np.ndarray, votes: np.ndarray) -> np.ndarray:
+        """``(8, gh, gw, 2)``: per corner and cell, the score-weighted mean of the positions voted
+        for by the cell's 3x3 neighbourhood (downscaled pixels), with box filters."""
+        out = np.empty_like(votes)
+        for k in range(NUM_CORNERS):
+            p = prob[k + 1].astype(np.float64)
+            den = cv2.boxFilter(p, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+            for c in range(2):
+                num = cv2.boxFilter(p * votes[k, ..., c], -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+                out[k, ..., c] = num / np.maximum(den, 1e-12)
+        return out
+
     def peaks(self, image: np.ndarray, predicted: np.ndarray | None = None, radius: float | None = None
               ) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per corner, ``(xy (m, 2) float64 full-image pixels, scores (m,))``, best first.
@@ -223,14 +235,14 @@ class CornerDetector:
         ``(8, 2)`` full-image pixels: the ``gated_top_k`` above ``gated_min_score`` within
         ``radius`` pixels of the corner's prediction."""
         prob, votes = self.maps(image)
-        local_max = prob >= np.stack([cv2.dilate(p, np.ones((3, 3), np.uint8)) for p in prob])
+        where = self.positions(prob, votes)
         out = []
         for k in range(NUM_CORNERS):
-            p, v = prob[k + 1], votes[k]
-            candidates = local_max[k + 1] & (p >= (self.min_score if predicted is None else self.gated_min_score))
+            p = prob[k + 1]
+            candidates = (p >= cv2.dilate(p, np.ones((3, 3), np.uint8))) & (
+                p >= (self.min_score if predicted is None else self.gated_min_score))
             ii, jj = np.nonzero(candidates)
-            xy = np.asarray([_vote(p, v, i, j) for i, j in zip(ii, jj)], np.float64).reshape(-1, 2)
-            xy, sc = from_scaled(xy, self.scale), p[ii, jj].astype(np.float64)
+            xy, sc = from_scaled(where[k, ii, jj], self.scale), p[ii, jj].astype(np.float64)
             keep = self.top_k
             if predicted is not None:
                 near = np.linalg.norm(xy - predicted[k], axis=1) <= radius
@@ -255,9 +267,3 @@ class CornerDetector:
         return Correspondences(np.asarray(obj, np.float32).reshape(-1, 3), np.asarray(img, np.float32).reshape(-1, 2),
                                len(img))
 
-
-def _vote(prob: np.ndarray, votes: np.ndarray, i: int, j: int) -> np.ndarray:
-    """The score-weighted mean of the positions voted for by the 3x3 cells around ``(i, j)``."""
-    i0, i1, j0, j1 = max(i - 1, 0), min(i + 2, prob.shape[0]), max(j - 1, 0), min(j + 2, prob.shape[1])
-    w = prob[i0:i1, j0:j1, None]
-    return (w * votes[i0:i1, j0:j1]).sum((0, 1)) / w.sum()

@@ -109,7 +109,7 @@ def _fake_maps(shape: tuple[int, int], peaks: dict[int, list[tuple[float, float,
 def test_peaks_are_placed_finer_than_the_stride(random_net, monkeypatch):
     det = pc.CornerDetector(random_net[1])
     shape = pc.grid_shape(120, 160)
-    truth = {0: [(37.3, 21.7, 0.9)], 4: [(101.9, 80.2, 0.6)], 7: [(12.6, 90.1, 0.15)]}
+    truth = {0: [(37.3, 21.7, 0.9)], 4: [(101.9, 80.2, 0.6)], 7: [(12.6, 90.1, 0.03)]}
     monkeypatch.setattr(det, "maps", lambda image: _fake_maps(shape, truth))
     peaks = det.peaks(None)
     for k in range(8):
