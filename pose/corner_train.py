@@ -7,6 +7,18 @@ cross-entropy of the cells' labels (corner cells weighted by ``corner_weight``, 
 between ``pos_radius`` and ``neg_radius`` of a corner ignored) plus the smooth L1 loss of the
 offsets. Every background cell of a crop is a negative, the hard ones near the box included, so
 no hard-negative mining is needed.
+
+Measured on the data engine's sequences (30 frames each, no normalization, % of poses within
+5 px on #1 / #3; 2-core CPU shared with other jobs, load 8-11): 16/32/64 channels without batch
+normalization, 1500 steps: 6.7 / 0 (the network scored the right corner highest at only 13% of
+the visible corners of #1); with it, 1000 steps: 36.7 / 0; 1500 steps on 12 copies per view
+instead of 8 (milder homographies, new backgrounds 80% instead of 50%): 53.3 / 46.7; the same
+network with 5 candidates per corner above 0.05 in the whole frame (instead of 3 above 0.2) and
+4 inliers for a pose near the prediction: 86.7 / 43.3; crops of 12x12 cells, lr 3e-3, 1200
+steps (155 s): 80.0 / 66.7; wider (24/48 channels, 128; 640 s, half the speed): 60.0 / 86.7.
+Once the box is found, the poses are within 1-3 px; what is lost is the first frames (no four
+right corners among the candidates of the whole frame) and views where two or three corners
+are missed (about 25-45% of the visible corners of #1 score below 0.2 where they are).
 """
 
 from __future__ import annotations
@@ -109,7 +121,7 @@ def corner_loss(out, labels, offsets, owner, corner_weight: float = 2.0, offset_
 def fit(net, frames: CornerFrames, *, iterations: int = 1500, batch_size: int = 16, cells: int = 16,
         lr: float = 2e-3, seed: int = 0, progress: bool = True, **loss_kw: Any) -> dict[str, float]:
     """Train ``net`` on crops of ``frames`` (Adam, the learning rate divided by 10 for the last
-    quarter); returns the mean loss of the first 10 and of the last 100 steps. Deterministic for a ``seed`` on the CPU."""
+    quarter); returns the mean loss of the first 10 steps and of the last quarter (at most 100). Deterministic for a ``seed`` on the CPU."""
     import torch
 
     rng = np.random.default_rng(seed)
@@ -124,9 +136,10 @@ def fit(net, frames: CornerFrames, *, iterations: int = 1500, batch_size: int = 
         loss.backward()
         optimiser.step()
         schedule.step()
-        losses.append(float(loss))
+        losses.append(loss.item())
     net.eval()
-    return {"first_loss": float(np.mean(losses[:10])), "final_loss": float(np.mean(losses[-100:]))}
+    return {"first_loss": float(np.mean(losses[:10])),
+            "final_loss": float(np.mean(losses[-max(1, min(100, iterations // 4)):]))}
 
 
 def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path, *, normalizer: str = "none",

@@ -30,7 +30,7 @@ Measured on the data engine's sequences (30 frames each, no normalization): the 
 design (a window classifier trained on crops around the 30 training views, hard-negative mining,
 a score grid of step 2 with centroid refinement, no gating) found only 60% of the visible
 corners of #1 among its 4 candidates within 5 px (71% within 10 px; the best candidate 43%),
-too few for PnP: 0-47% correct poses. See :mod:`pose.corner_train` for the current numbers.
+too few for PnP: 0-47% correct poses. :mod:`pose.corner_train` has the numbers of this design.
 """
 
 from __future__ import annotations
