@@ -193,7 +193,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     c = sub.add_parser("train-corners", help="train the corner CNN on a registered sequence, export ONNX",
                        description="Dense training on the views of the sequence and augmented copies of them "
                        "(homographies, new backgrounds, intensity changes), normalized, labelled with the box "
-                       "corners projected by the known poses and their sub-stride offsets; the network is written as ONNX for `alcn pose track --detector corners` (cv2.dnn, no torch).")
+                       "corners projected by the known poses and their sub-stride offsets; the network is written as "
+                       "ONNX for `alcn pose track --detector corners` (cv2.dnn, no torch).")
     c.add_argument("input", help="registered training sequence (BOP scene folder, COLMAP model, Middlebury set)")
     c.add_argument("output", help="corner detector to write (.onnx)")
     box = c.add_mutually_exclusive_group(required=True)

@@ -249,7 +249,8 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
     std = float(np.sqrt(np.mean([im.var() for im in originals]))) + 1e-6
     padded = np.stack([cv2.copyMakeBorder((im - mean) / std, PAD, PAD, PAD, PAD, cv2.BORDER_REFLECT_101)
                        for im in images]).astype(np.float32)
-    frames = CornerFrames(padded, np.stack(labels), np.stack(offsets), np.stack(owners), visible, np.asarray(views), mean, std)
+    frames = CornerFrames(padded, np.stack(labels), np.stack(offsets), np.stack(owners), visible, np.asarray(views),
+                          mean, std)
     logger.info("corner frames: %d (%d views x %d), %d corner cells", len(images), len(sequence.views), copies + 1,
                 int((frames.labels > 0).sum()))
     return frames

@@ -121,7 +121,8 @@ def corner_loss(out, labels, offsets, owner, corner_weight: float = 2.0, offset_
 def fit(net, frames: CornerFrames, *, iterations: int = 1500, batch_size: int = 16, cells: int = 16,
         lr: float = 2e-3, seed: int = 0, progress: bool = True, **loss_kw: Any) -> dict[str, float]:
     """Train ``net`` on crops of ``frames`` (Adam, the learning rate divided by 10 for the last
-    quarter); returns the mean loss of the first 10 steps and of the last quarter (at most 100). Deterministic for a ``seed`` on the CPU."""
+    quarter); returns the mean loss of the first 10 steps and of the last quarter (at most 100).
+    Deterministic for a ``seed`` on the CPU."""
     import torch
 
     rng = np.random.default_rng(seed)

@@ -278,6 +278,7 @@ def test_table1_rows_of_the_corner_detector(posedata, tmp_path):
     assert list(row) == ["#1"] and 0.0 <= row["#1"] <= 100.0 and "#1" in result["spread"]["none / corner CNN"]
     assert (tmp_path / "corners_none_seed1.onnx").is_file()
     md = (tmp_path / "table1.md").read_text()
-    assert "none / corner CNN" in md and "±" in md and "alcn pose eval ..." in md and (tmp_path / "table1.png").is_file()
+    assert "none / corner CNN" in md and "±" in md and "alcn pose eval ..." in md
+    assert (tmp_path / "table1.png").is_file()
     details = result["details"]["none / corner CNN"]
     assert len(details["seeds"]) == 2 and details["seeds"][0]["sequences"]["#1"]["frames"] == 4
