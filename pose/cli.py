@@ -1,4 +1,4 @@
-"""``alcn pose build|track|eval|train-corners``: the 3D pose pipeline on the command line."""
+"""``alcn pose build|track|eval|train-corners|bench-corners``: the 3D pose pipeline on the command line."""
 
 from __future__ import annotations
 
@@ -65,19 +65,28 @@ def _eval(args: argparse.Namespace) -> int:
     if args.middlebury:
         evaluate.middlebury_main(args.middlebury, args.out, normalizers=normalizers, feature=args.feature)
     if args.data:
-        evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature,
-                      detectors=args.detectors, corner_kw={"epochs": args.corner_epochs})
+        corner_kw = {"iterations": args.corner_iterations, "copies": args.corner_copies}
+        evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature, detectors=args.detectors,
+                      corner_kw=corner_kw, seeds=args.seeds, sequences=args.sequences, command=_command())
     if not (args.middlebury or args.data):
         raise ValueError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
     return 0
+
+
+def _command() -> str:
+    """The command line as typed, for the reports."""
+    import shlex
+    import sys
+
+    return shlex.join(["alcn", *sys.argv[1:]])
 
 
 def _train_corners(args: argparse.Namespace) -> int:
     from pose import corner_train
 
     path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
-                             normalizer=args.normalizer, scale=args.scale, epochs=args.epochs, rounds=args.rounds,
-                             seed=args.seed)
+                             normalizer=args.normalizer, scale=args.scale, iterations=args.iterations,
+                             copies=args.copies, seed=args.seed)
     print(f"corner detector ({args.normalizer}) -> {path}")
     return 0
 
@@ -165,8 +174,26 @@ def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
     o.set_defaults(func=_overlay_error)
 
 
+def _bench_corners(args: argparse.Namespace) -> int:
+    from pose import corner_bench
+
+    K = _intrinsics(args.K)
+    if K is None:
+        K, _ = _camera(args.camera)
+    if K is None:
+        raise ValueError("give the intrinsics of the frames: --K FX FY CX CY or --camera camera.yaml")
+    r = corner_bench.main(args.detector, args.input, K, args.out, command=_command(), size=tuple(args.size),
+                          max_frames=args.max_frames, repeats=args.repeats, threads=args.threads)
+    print(f"{r['fps']:.1f} fps at {r['size'][0]}x{r['size'][1]} ({r['normalizer']} in front; normalize "
+          f"{r['ms']['normalize']:.1f} ms, network {r['ms']['network']:.1f} ms, peaks + pose "
+          f"{r['ms']['peaks_and_pose']:.1f} ms; CPU {r['cpu_ms_per_frame']:.1f} ms per frame; torch imported: "
+          f"{r['torch_imported']}; load "
+          f"{r['machine'].get('load_average_1_5_15')})")
+    return 0
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``pose`` with ``build``, ``track``, ``eval`` and ``train-corners`` to the ``alcn`` command."""
+    """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``relight`` and ``overlay-error`` to ``alcn``."""
     from pose.solver import METHODS
 
     p = subparsers.add_parser("pose", help="3D box pose: build a part model, track it, evaluate",
@@ -236,14 +263,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    "gave more correct poses than ORB, and with ALCN far more; `track` uses ORB for speed)")
     e.add_argument("--detectors", nargs="+", default=["features"], choices=["features", "corners"],
                    help="part detectors, each giving rows (default features; corners: trained on the training sequence first)")
-    e.add_argument("--corner-epochs", type=int, default=6, help="corner CNN epochs per round (default 6)")
+    e.add_argument("--corner-iterations", type=int, default=1000,
+                   help="corner CNN training steps (default 1000)")
+    e.add_argument("--corner-copies", type=int, default=11,
+                   help="augmented copies of each training view for the corner CNN (default 11)")
+    e.add_argument("--seeds", type=int, default=1,
+                   help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)")
+    e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
     e.add_argument("--out", type=Path, required=True, help="report folder")
     e.set_defaults(func=_eval)
 
     c = sub.add_parser("train-corners", help="train the corner CNN on a registered sequence, export ONNX",
-                       description="Windows around the box corners projected by the known poses (plus the data "
-                       "engine's synthetic augmentation and hard negatives) after the normalizer; the network is "
-                       "written as ONNX for `alcn pose track --detector corners` (cv2.dnn, no torch).")
+                       description="Dense training on the views of the sequence and augmented copies of them "
+                       "(homographies, new backgrounds, intensity changes), normalized, labelled with the box "
+                       "corners projected by the known poses and their sub-stride offsets; the network is written as "
+                       "ONNX for `alcn pose track --detector corners` (cv2.dnn, no torch).")
     c.add_argument("input", help="registered training sequence (BOP scene folder, COLMAP model, Middlebury set)")
     c.add_argument("output", help="corner detector to write (.onnx)")
     box = c.add_mutually_exclusive_group(required=True)
@@ -251,9 +285,27 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     box.add_argument("--model", help="part model (.npz) whose box corners to use")
     c.add_argument("--normalizer", default="none", help="normalizer applied first (default none)")
     c.add_argument("--scale", type=float, default=0.5, help="downscaling of the frames (default 0.5)")
-    c.add_argument("--epochs", type=int, default=6, help="epochs per round (default 6)")
-    c.add_argument("--rounds", type=int, default=2, help="training rounds with hard-negative mining (default 2)")
+    c.add_argument("--iterations", type=int, default=1000, help="training steps (default 1000)")
+    c.add_argument("--copies", type=int, default=11,
+                   help="augmented copies (homography, background, intensity) of each view (default 11)")
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(func=_train_corners)
+
+    bc = sub.add_parser("bench-corners", help="frames per second of the corner detector (cv2.dnn, no torch)",
+                        description="Tracks with the corner detector through the frames of a video or image folder "
+                        "resized to --size and reports the time of normalization, network, peaks and pose, the "
+                        "frames per second and the machine's load; with --out as Markdown and JSON.")
+    bc.add_argument("detector", help="corner detector (.onnx) from `alcn pose train-corners`")
+    bc.add_argument("input", help="video file or image folder (e.g. DATA/test/000001/rgb of `alcn data pose`)")
+    bcam = bc.add_mutually_exclusive_group(required=True)
+    bcam.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics of the frames")
+    bcam.add_argument("--camera", help="camera.yaml from `alcn calib camera`")
+    bc.add_argument("--size", nargs=2, type=int, default=[640, 480], metavar=("W", "H"),
+                    help="frame size (default 640 480)")
+    bc.add_argument("--max-frames", type=int, default=60, help="frames used (default 60)")
+    bc.add_argument("--repeats", type=int, default=2, help="passes over them (default 2)")
+    bc.add_argument("--threads", type=int, help="OpenCV threads (default OpenCV's)")
+    bc.add_argument("--out", type=Path, help="write bench_corners.md and .json here")
+    bc.set_defaults(func=_bench_corners)
     _add_relight(sub)
     _add_overlay_error(sub)
