@@ -37,13 +37,25 @@ _WARNED_SMALL: set[type] = set()
 def _to_unit_float(img: np.ndarray) -> np.ndarray:
     if img.dtype == np.float32:
         return np.clip(img, 0.0, 1.0)  # a copy: the caller's array stays untouched
-    return img.astype(np.float32) * np.float32(1.0 / FULL_SCALE[img.dtype])
+    unit = img.astype(np.float32)
+    unit *= np.float32(1.0 / FULL_SCALE[img.dtype])
+    return unit
 
 
-def _from_unit_float(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
+def _unit_in_place_to(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """float32 intensities clipped to [0, 1] and converted to ``dtype`` (``rint(unit * full
+    scale)`` for the integer types), with ``unit`` as scratch space. For uint8 it is one OpenCV
+    pass after the lower clip: ``cv2.convertScaleAbs`` rounds half to even and saturates, as
+    ``np.rint`` after the clip does, bit for bit."""
+    if dtype == np.uint8 and unit.ndim == 2:
+        np.maximum(unit, 0.0, out=unit)
+        return cv2.convertScaleAbs(unit, alpha=FULL_SCALE[dtype])
+    np.clip(unit, 0.0, 1.0, out=unit)
     if dtype == np.float32:
-        return unit.astype(np.float32, copy=False)
-    return np.rint(unit * FULL_SCALE[dtype]).astype(dtype)
+        return np.ascontiguousarray(unit)
+    unit *= FULL_SCALE[dtype]
+    np.rint(unit, out=unit)
+    return unit.astype(dtype)
 
 
 class Normalization:
@@ -81,7 +93,10 @@ class Normalization:
         Returns:
             ``(H, W)`` float32, unbounded (see :attr:`output_range` for the typical range).
         """
-        gray = check_gray(gray)
+        return self._normalize_checked(check_gray(gray))
+
+    def _normalize_checked(self, gray: np.ndarray) -> np.ndarray:
+        """:meth:`normalize` on an image already known to be a finite float32 ``HxW`` one."""
         if min(gray.shape) < self.min_size and type(self) not in _WARNED_SMALL:
             _WARNED_SMALL.add(type(self))
             logger.warning(
@@ -115,6 +130,14 @@ class Normalization:
         lo, hi = self.output_range
         return np.clip((response - lo) * np.float32(1.0 / (hi - lo)), 0.0, 1.0).astype(np.float32, copy=False)
 
+    def _response_to(self, response: np.ndarray, dtype: np.dtype) -> np.ndarray:
+        """:meth:`to_unit` then the conversion to ``dtype``, computed in place in ``response``
+        (a float32 array :meth:`apply` owns)."""
+        lo, hi = self.output_range
+        response -= lo
+        response *= np.float32(1.0 / (hi - lo))
+        return _unit_in_place_to(response, dtype)
+
     def apply(self, img: np.ndarray, out_dtype: type | np.dtype | str | None = None) -> np.ndarray:
         """Normalize an image, OpenCV style.
 
@@ -147,16 +170,18 @@ class Normalization:
         unit = _to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
             lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
-            lab[..., 0] = 100.0 * self.to_unit(self.normalize(np.ascontiguousarray(lab[..., 0]) / np.float32(100)))
-            result = np.clip(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR), 0.0, 1.0)
+            lab[..., 0] = 100.0 * self.to_unit(self._normalize_checked(np.ascontiguousarray(lab[..., 0]) / np.float32(100)))
+            result = _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR), out_dtype)
         else:
-            result = self.to_unit(self.normalize(np.ascontiguousarray(unit.reshape(img.shape[:2]))))
-            result = result.reshape(img.shape)
-        result = _from_unit_float(result, out_dtype)
+            gray = unit.reshape(img.shape[:2])
+            response = self._normalize_checked(gray)
+            if np.may_share_memory(response, gray):  # a method may answer with its input
+                response = response.copy()
+            result = self._response_to(response, out_dtype).reshape(img.shape)
         if alpha is None:
             return result
         if alpha.dtype != out_dtype:
-            alpha = _from_unit_float(_to_unit_float(alpha), out_dtype)
+            alpha = _unit_in_place_to(_to_unit_float(alpha), out_dtype)
         return np.concatenate([result, alpha[..., None]], axis=2)  # a new array: the input's alpha is not shared
 
     def __repr__(self) -> str:
