@@ -293,9 +293,15 @@ class ALCN(Normalization):
         (ry, rx), step = ratios, 2.0**level
         ax, bx = step * rx / g, (0.5 * rx - 0.5) / g
         ay, by = step * ry / g, (0.5 * ry - 0.5) / g
+        h, w = shape
+        along_y, along_x = _integer_zoom(ay, by), _integer_zoom(ax, bx)
+        if along_y and along_x and grid.shape[1] * along_y[0] >= along_y[1] + h and grid.shape[2] * along_x[0] >= along_x[1] + w:
+            # The level's pixels fall on a zoom of the grid by an integer factor: one cv2.resize,
+            # the exact bilinear interpolation (at level 0 of a frame of even size, usually).
+            (zy, oy), (zx, ox) = along_y, along_x
+            return [cv2.resize(grid[k], None, fx=zx, fy=zy, interpolation=cv2.INTER_LINEAR)[oy : oy + h, ox : ox + w] for k in ks]
         f = 2 ** max(0, int(np.floor(np.log2(1.0 / (MAP_STEP_PER_CELL * max(ax, ay))))))
         to_grid = np.array([[ax * f, 0.0, ax * (f - 1) / 2 + bx], [0.0, ay * f, ay * (f - 1) / 2 + by]])
-        h, w = shape
         coarse = (w, h) if f == 1 else (-(-w // f) + 1, -(-h // f) + 1)
         flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
         maps = []
@@ -360,6 +366,17 @@ class ALCN(Normalization):
             f"ALCN(weights={self.weights_path.name!r}, scale={self.scale}, backend={self.backend!r}, "
             f"grid_stride={self.grid_stride}, mixture={self.mixture!r}, threads={self.threads}, trained={self.trained})"
         )
+
+
+def _integer_zoom(step: float, offset: float) -> tuple[int, int] | None:
+    """``(z, o)`` when pixel ``x`` at grid coordinate ``step * x + offset`` is pixel ``x + o``
+    of the grid zoomed ``z`` times by ``cv2.resize`` (which puts pixel ``x`` at
+    ``(x + 0.5) / z - 0.5``), ``z`` and ``o >= 0`` integers; else None."""
+    zoom = 1.0 / step
+    shift = (offset + 0.5 - 0.5 * step) * zoom
+    if abs(zoom - round(zoom)) > 1e-9 or abs(shift - round(shift)) > 1e-6 or round(shift) < 0 or round(zoom) < 2:
+        return None
+    return round(zoom), round(shift)
 
 
 @contextmanager

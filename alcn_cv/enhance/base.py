@@ -47,7 +47,7 @@ def _unit_in_place_to(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
     scale)`` for the integer types), with ``unit`` as scratch space. For uint8 it is one OpenCV
     pass after the lower clip: ``cv2.convertScaleAbs`` rounds half to even and saturates, as
     ``np.rint`` after the clip does, bit for bit."""
-    if dtype == np.uint8 and unit.ndim == 2:
+    if dtype == np.uint8 and (unit.ndim == 2 or unit.shape[2] in (3, 4)):
         np.maximum(unit, 0.0, out=unit)
         return cv2.convertScaleAbs(unit, alpha=FULL_SCALE[dtype])
     np.clip(unit, 0.0, 1.0, out=unit)
@@ -170,8 +170,12 @@ class Normalization:
         unit = _to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
             lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
-            lab[..., 0] = 100.0 * self.to_unit(self._normalize_checked(np.ascontiguousarray(lab[..., 0]) / np.float32(100)))
-            result = _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR), out_dtype)
+            lightness = np.divide(lab[..., 0], np.float32(100))
+            response = self._normalize_checked(lightness)
+            if np.may_share_memory(response, lightness):
+                response = response.copy()
+            np.multiply(self._response_to(response, np.dtype(np.float32)), 100.0, out=lab[..., 0])
+            result = _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
         else:
             gray = unit.reshape(img.shape[:2])
             response = self._normalize_checked(gray)
