@@ -29,7 +29,7 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
-from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, pyramid_mixture
+from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, kernel_radius, pyramid_mixture, pyramid_plan
 from alcn_cv.nets.opencv_runtime import WINDOW
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 
@@ -91,9 +91,11 @@ class ALCN(Normalization):
             maps sampled directly from the grid at each level
             (:func:`alcn_cv.filters.gaussian_mixture.pyramid_mixture`), 5 to 10 times cheaper.
             Default: ``"pyramid"``, except ``"exact"`` with ``backend="torch"``.
-        threads: torch's intra-op threads while the Normalizer runs (restored after); default:
-            torch's setting. 1 is the fastest for the lite Normalizer and on a loaded machine,
-            where the threads of small convolutions wait for each other.
+        threads: torch's intra-op threads while the Normalizer runs (restored after); default 1:
+            the fastest for the light Normalizers and on a loaded machine, where the threads of
+            small convolutions wait for each other, and it leaves no torch (OpenMP) threads
+            spinning to slow the OpenCV calls that follow, the mixture's and the application's.
+            None: torch's own setting.
 
     The default, ``model="lite"`` with ``mixture="pyramid"``, is the real-time configuration;
     ``model="paper", mixture="exact"`` is the exact Eq. 3 with the paper's network.
@@ -113,7 +115,7 @@ class ALCN(Normalization):
         grid_stride: int | None = None,
         mixture: str | None = None,
         model: str = "lite",
-        threads: int | None = None,
+        threads: int | None = 1,
     ) -> None:
         if backend is None:
             backend = "fast" if is_installed("torch") else "opencv"
@@ -143,6 +145,7 @@ class ALCN(Normalization):
         #: gain Normalizer's method (:mod:`alcn_cv.nets.gain`); None for the others.
         self.equalization_tau = float(meta["equalization"]["tau"]) if "equalization" in meta else None
         self.trained = bool(meta["trained"])
+        self._network_reach = _network_reach(meta)
         if not self.trained:
             logger.warning("%s holds UNTRAINED Normalizer weights (%s)", self.weights_path.name, meta.get("description", ""))
         self.backend = backend
@@ -328,6 +331,20 @@ class ALCN(Normalization):
             return maps
         return np.stack([cv2.resize(m, (w, h), interpolation=cv2.INTER_LINEAR) for m in maps])
 
+    def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
+        # A strip gives the whole image's output when it starts on a grid row (and so on a row
+        # of every pyramid level) and its working image is the whole one's rows (an integer
+        # zoom from the working scale); its halo covers the Normalizer's windows around the
+        # grid points its maps interpolate, and the mixture's blurs and pyramid filters.
+        zoom = 1.0 / self.scale
+        if abs(zoom - round(zoom)) > 1e-9 or abs(shape[0] * self.scale - round(shape[0] * self.scale)) > 1e-9:
+            return None
+        zoom = round(zoom)
+        top = max(level for level, _ in pyramid_plan(self.full_res_sigmas, PYRAMID_MIN_SIGMA)) if self.mixture == "pyramid" else 0
+        step = math.lcm(zoom * self.grid_stride, 2**top)
+        reach = zoom * (self._network_reach + self.grid_stride) + kernel_radius(max(self.full_res_sigmas)) + 2 ** (top + 2)
+        return -(-reach // step) * step, step
+
     def _equalize(self, response: np.ndarray) -> np.ndarray:
         """The method's final contrast equalization, when it has one (the gain Normalizer)."""
         if self.equalization_tau is None:
@@ -368,6 +385,18 @@ class ALCN(Normalization):
         )
 
 
+def _network_reach(meta: dict) -> int:
+    """How far from a grid point, in working pixels, the Normalizer a weight file describes
+    looks: half its 48-pixel window, or for the gain Normalizer (:mod:`alcn_cv.nets.gain`) its
+    cells, the reach of its context blur on them and of its dilated convolutions."""
+    if meta.get("architecture") != "gain":
+        return WINDOW // 2
+    config = meta["config"]
+    stride = int(config["stride"])
+    blur = max(float(config["mean_sigma"]), float(config["context_sigma"])) / stride
+    return stride * (1 + kernel_radius(blur) + sum(int(d) for d in config["dilations"]))
+
+
 def _integer_zoom(step: float, offset: float) -> tuple[int, int] | None:
     """``(z, o)`` when pixel ``x`` at grid coordinate ``step * x + offset`` is pixel ``x + o``
     of the grid zoomed ``z`` times by ``cv2.resize`` (which puts pixel ``x`` at
@@ -382,12 +411,12 @@ def _integer_zoom(step: float, offset: float) -> tuple[int, int] | None:
 @contextmanager
 def _torch_threads(threads: int | None) -> Iterator[None]:
     """Run the block with ``threads`` torch intra-op threads (no change for None)."""
-    if threads is None:
-        yield
-        return
     import torch
 
     before = torch.get_num_threads()
+    if threads is None or threads == before:
+        yield
+        return
     torch.set_num_threads(threads)
     try:
         yield

@@ -30,6 +30,9 @@ from alcn_cv.errors import InputError
 __all__ = ["Normalization", "NoNormalization"]
 
 logger = logging.getLogger(__name__)
+#: Images of more pixels are normalized in horizontal strips by the methods that allow it
+#: (:meth:`Normalization._tiling`): the peak memory stays a small multiple of a strip's.
+TILE_PIXELS = 2**24
 #: The classes that already warned about an image smaller than their window (once per process).
 _WARNED_SMALL: set[type] = set()
 
@@ -167,6 +170,21 @@ class Normalization:
         alpha = None
         if img.ndim == 3 and img.shape[2] in (2, 4):
             img, alpha = img[..., :-1], img[..., -1]
+        strips = self._strips(img.shape[:2])
+        if strips is None:
+            result = self._apply_colour(img, out_dtype)
+        else:  # a large image: strip by strip, each with the rows around it that its output sees
+            result = np.empty(img.shape, out_dtype)
+            for start, stop, lo, hi in strips:
+                result[start:stop] = self._apply_colour(img[lo:hi], out_dtype)[start - lo : stop - lo]
+        if alpha is None:
+            return result
+        if alpha.dtype != out_dtype:
+            alpha = _unit_in_place_to(_to_unit_float(alpha), out_dtype)
+        return np.concatenate([result, alpha[..., None]], axis=2)  # a new array: the input's alpha is not shared
+
+    def _apply_colour(self, img: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
+        """:meth:`apply` on a valid gray or BGR image without alpha."""
         unit = _to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
             lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
@@ -175,18 +193,33 @@ class Normalization:
             if np.may_share_memory(response, lightness):
                 response = response.copy()
             np.multiply(self._response_to(response, np.dtype(np.float32)), 100.0, out=lab[..., 0])
-            result = _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
-        else:
-            gray = unit.reshape(img.shape[:2])
-            response = self._normalize_checked(gray)
-            if np.may_share_memory(response, gray):  # a method may answer with its input
-                response = response.copy()
-            result = self._response_to(response, out_dtype).reshape(img.shape)
-        if alpha is None:
-            return result
-        if alpha.dtype != out_dtype:
-            alpha = _unit_in_place_to(_to_unit_float(alpha), out_dtype)
-        return np.concatenate([result, alpha[..., None]], axis=2)  # a new array: the input's alpha is not shared
+            return _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
+        gray = unit.reshape(img.shape[:2])
+        response = self._normalize_checked(gray)
+        if np.may_share_memory(response, gray):  # a method may answer with its input
+            response = response.copy()
+        return self._response_to(response, out_dtype).reshape(img.shape)
+
+    def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
+        """How :meth:`apply` may cut an image of ``shape`` into horizontal strips: ``(halo,
+        step)``, the rows a strip's output depends on above and below it, and the multiple of
+        rows at which strips may start (so that the result equals the whole image's); None
+        (the default) for a method that needs the whole image at once."""
+        return None
+
+    def _strips(self, shape: tuple[int, int]) -> list[tuple[int, int, int, int]] | None:
+        """``(start, stop, lo, hi)`` for each strip of a large image: output rows
+        ``start:stop`` computed from input rows ``lo:hi``; None to process it whole."""
+        height, width = shape
+        layout = self._tiling(shape) if height * width > TILE_PIXELS else None
+        if layout is None:
+            return None
+        halo, step = layout
+        rows = max(step, TILE_PIXELS // 2 // width // step * step)
+        if rows >= height:
+            return None
+        return [(start, min(start + rows, height), max(0, start - halo), min(height, start + rows + halo))
+                for start in range(0, height, rows)]
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"
