@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from alcn_cv.checks import unit_windows
+from alcn_cv.checks import FULL_SCALE, SUPPORTED_DTYPES, check_image, unit_windows
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
@@ -377,6 +377,71 @@ class ALCN(Normalization):
             if maps.shape[-2:] != image.shape[-2:]:
                 maps = F.interpolate(maps, size=image.shape[-2:], mode="bilinear", align_corners=False)
             return gaussian_mixture2d(image, maps, self.full_res_sigmas)[0, 0].cpu().numpy()
+
+    def apply_batch(self, frames: np.ndarray, out_dtype: type | np.dtype | str | None = None, half: bool = False) -> np.ndarray:
+        """:meth:`apply` on a batch of grayscale frames of one size, in one pass of the Normalizer
+        and of the exact Eq. 3 on :attr:`device` (``backend="torch"``): the GPU path.
+
+        The frames are sent to the device as they are (uint8: a quarter of the float traffic)
+        and converted there. The working image is the frames averaged over blocks of
+        ``1 / scale`` pixels, which is what ``cv2.INTER_AREA`` gives when the frame's sides
+        are multiples of ``1 / scale`` (then the outputs equal :meth:`apply`'s to float
+        rounding); other sizes are resized by torch's area interpolation.
+
+        Args:
+            frames: ``(B, H, W)`` uint8, uint16, or float32 intensities in [0, 1].
+            out_dtype: as in :meth:`apply` (default: the frames' dtype).
+            half: run the Normalizer and the mixture in float16 under ``torch.autocast`` (for
+                CUDA; on the CPU it is slow and only checks the path).
+
+        Returns:
+            ``(B, H, W)`` of ``out_dtype``.
+        """
+        if self.backend != "torch":
+            raise InputError(f"apply_batch runs on backend='torch' (device 'cpu' or 'cuda'), not {self.backend!r}")
+        if not isinstance(frames, np.ndarray) or frames.ndim != 3 or frames.size == 0:
+            raise InputError(f"frames must be a non-empty (B, H, W) array, got {getattr(frames, 'shape', type(frames))}")
+        for frame in frames[:1]:
+            check_image(frame)  # the dtype; a float batch's range is checked as a whole below
+        if frames.dtype == np.float32:
+            check_image(frames.reshape(-1, frames.shape[-1]))
+        out_dtype = np.dtype(frames.dtype if out_dtype is None else out_dtype)
+        if out_dtype not in SUPPORTED_DTYPES:
+            raise InputError(f"unsupported out_dtype {out_dtype}; use uint8, uint16 or float32")
+        import torch
+
+        from alcn_cv.filters.kornia_mixture import gaussian_mixture2d
+
+        device = next(self.net.parameters()).device
+        lo, hi = self.output_range
+        with torch.inference_mode(), _torch_threads(self.threads):
+            x = torch.from_numpy(np.ascontiguousarray(frames).astype(frames.dtype.newbyteorder("="), copy=False)).to(device)
+            x = x.clamp(0, 1) if frames.dtype == np.float32 else x.float() * (1.0 / FULL_SCALE[frames.dtype])
+            x = x[:, None]
+            with torch.autocast(device.type, torch.float16, enabled=half):  # the network; Eq. 3 in float32
+                maps = self.net.dense(self._working_batch(x), self.grid_stride).float()
+            maps = torch.nn.functional.interpolate(maps, size=x.shape[-2:], mode="bilinear", align_corners=False)
+            response = gaussian_mixture2d(x, maps, self.full_res_sigmas)
+            if self.equalization_tau is not None:
+                response = torch.tanh(response / self.equalization_tau)
+            unit = ((response[:, 0] - lo) * (1.0 / (hi - lo))).clamp(0, 1)
+            if out_dtype != np.float32:
+                unit = torch.round(unit * FULL_SCALE[out_dtype]).to(torch.int32)
+            return unit.cpu().numpy().astype(out_dtype)
+
+    def _working_batch(self, x: torch.Tensor) -> torch.Tensor:
+        """A ``(B, 1, H, W)`` batch at the working scale (see :meth:`apply_batch`)."""
+        import torch.nn.functional as F
+
+        if self.scale == 1:
+            return x
+        size = self._working_shape(tuple(x.shape[-2:]))
+        zoom = 1.0 / self.scale
+        if zoom == round(zoom) and x.shape[-2] % round(zoom) == 0 and x.shape[-1] % round(zoom) == 0:
+            return F.avg_pool2d(x, round(zoom))  # cv2.INTER_AREA's blocks
+        if self.scale < 1:
+            return F.interpolate(x, size=size, mode="area")
+        return F.interpolate(x, size=size, mode="bilinear", align_corners=False)
 
     def __repr__(self) -> str:
         return (
