@@ -38,22 +38,30 @@ _WARNED_SMALL: set[type] = set()
 
 
 def _to_unit_float(img: np.ndarray) -> np.ndarray:
+    # A new C-ordered array whatever the input's layout: the caller's stays untouched and the
+    # OpenCV calls that follow may write into this one.
     if img.dtype == np.float32:
-        return np.clip(img, 0.0, 1.0)  # a copy: the caller's array stays untouched
-    unit = img.astype(np.float32)
+        return np.clip(img, 0.0, 1.0, out=np.empty(img.shape, np.float32))
+    unit = img.astype(np.float32, order="C")
     unit *= np.float32(1.0 / FULL_SCALE[img.dtype])
     return unit
 
 
 def _unit_in_place_to(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
     """float32 intensities clipped to [0, 1] and converted to ``dtype`` (``rint(unit * full
-    scale)`` for the integer types), with ``unit`` as scratch space. For uint8 it is one OpenCV
-    pass after the lower clip: ``cv2.convertScaleAbs`` rounds half to even and saturates, as
-    ``np.rint`` after the clip does, bit for bit."""
-    if dtype == np.uint8 and (unit.ndim == 2 or unit.shape[2] in (3, 4)):
-        np.maximum(unit, 0.0, out=unit)
-        return cv2.convertScaleAbs(unit, alpha=FULL_SCALE[dtype])
-    np.clip(unit, 0.0, 1.0, out=unit)
+    scale)`` for the integer types), with ``unit`` as scratch space. An image of up to four
+    channels takes OpenCV passes: for uint8 the lower clip, then ``cv2.convertScaleAbs``, which
+    rounds half to even and saturates as ``np.rint`` after the clip does, bit for bit."""
+    if unit.ndim == 3 and unit.shape[2] > 4:
+        np.clip(unit, 0.0, 1.0, out=unit)
+    else:
+        cv2.max(unit, 0.0, dst=unit)
+        if dtype == np.uint8:
+            return cv2.convertScaleAbs(unit, alpha=FULL_SCALE[dtype])
+        if unit.ndim == 2:
+            cv2.min(unit, 1.0, dst=unit)
+        else:  # a scalar is (v, 0, 0, 0) to OpenCV: 0 suits the lower clip of every channel, 1 not
+            np.minimum(unit, 1.0, out=unit)
     if dtype == np.float32:
         return np.ascontiguousarray(unit)
     unit *= FULL_SCALE[dtype]
@@ -130,16 +138,20 @@ class Normalization:
 
     def to_unit(self, response: np.ndarray) -> np.ndarray:
         """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""
+        return _unit_in_place_to(self._unclipped_unit(response), np.dtype(np.float32))
+
+    def _unclipped_unit(self, response: np.ndarray) -> np.ndarray:
+        """``(response - lo) / (hi - lo)`` as a new float32 array: one ``cv2.addWeighted`` pass
+        for a float32 plane (its single rounding of ``response * a + b``)."""
         lo, hi = self.output_range
-        return np.clip((response - lo) * np.float32(1.0 / (hi - lo)), 0.0, 1.0).astype(np.float32, copy=False)
+        scale = 1.0 / (hi - lo)
+        if isinstance(response, np.ndarray) and response.dtype == np.float32 and response.ndim == 2:
+            return cv2.addWeighted(response, scale, response, 0.0, -lo * scale)
+        return ((np.asarray(response) - lo) * np.float32(scale)).astype(np.float32)
 
     def _response_to(self, response: np.ndarray, dtype: np.dtype) -> np.ndarray:
-        """:meth:`to_unit` then the conversion to ``dtype``, computed in place in ``response``
-        (a float32 array :meth:`apply` owns)."""
-        lo, hi = self.output_range
-        response -= lo
-        response *= np.float32(1.0 / (hi - lo))
-        return _unit_in_place_to(response, dtype)
+        """:meth:`to_unit` then the conversion to ``dtype`` (the same values, fewer passes)."""
+        return _unit_in_place_to(self._unclipped_unit(response), dtype)
 
     def apply(self, img: np.ndarray, out_dtype: type | np.dtype | str | None = None) -> np.ndarray:
         """Normalize an image, OpenCV style.
@@ -189,16 +201,10 @@ class Normalization:
         if img.ndim == 3 and img.shape[2] == 3:
             lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
             lightness = np.divide(lab[..., 0], np.float32(100))
-            response = self._normalize_checked(lightness)
-            if np.may_share_memory(response, lightness):
-                response = response.copy()
-            np.multiply(self._response_to(response, np.dtype(np.float32)), 100.0, out=lab[..., 0])
+            unit_lightness = self._response_to(self._normalize_checked(lightness), np.dtype(np.float32))
+            np.multiply(unit_lightness, 100.0, out=lab[..., 0])
             return _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
-        gray = unit.reshape(img.shape[:2])
-        response = self._normalize_checked(gray)
-        if np.may_share_memory(response, gray):  # a method may answer with its input
-            response = response.copy()
-        return self._response_to(response, out_dtype).reshape(img.shape)
+        return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
 
     def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
         """How :meth:`apply` may cut an image of ``shape`` into horizontal strips: ``(halo,
