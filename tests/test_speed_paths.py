@@ -136,3 +136,31 @@ def test_video_pipeline_error_leaves_nothing(tmp_path):
     with pytest.raises(RuntimeError, match="boom"):
         map_video(tmp_path / "in.avi", tmp_path / "out.avi", failing)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.avi"]
+
+
+@pytest.mark.parametrize("name", ["he", "clahe"])
+def test_uint8_shortcut_equals_the_float_path(monkeypatch, name):
+    method = from_spec(name)
+    frame = synthetic_frame(200, 150, False, seed=7)
+    direct = method.apply(frame)
+    monkeypatch.setattr(method, "_apply_gray_uint8", lambda gray8: None)
+    np.testing.assert_array_equal(direct, method.apply(frame))
+
+
+def test_histogram_conversions_are_the_numpy_ones():
+    from alcn_cv.enhance.histogram import _to_uint8, _to_unit
+
+    values = np.random.default_rng(0).random((60, 256), dtype=np.float32) * 1.2 - 0.1
+    values[0] = (np.arange(256) + 0.5) / 255  # ties
+    np.testing.assert_array_equal(_to_uint8(values), np.rint(np.clip(values, 0, 1) * 255).astype(np.uint8))
+    gray8 = np.arange(256, dtype=np.uint8).reshape(16, 16)
+    np.testing.assert_array_equal(_to_unit(gray8), gray8.astype(np.float32) * np.float32(1 / 255))
+
+
+def test_output_map_is_the_numpy_one():
+    method = from_spec("dog")
+    response = np.random.default_rng(1).normal(0, 0.08, (120, 160)).astype(np.float32)
+    unit = np.clip((response.astype(np.float64) + 0.1) * 5, 0, 1)
+    np.testing.assert_allclose(method.to_unit(response), unit, atol=1e-6)
+    np.testing.assert_array_equal(method._response_to(response.copy(), np.dtype(np.uint8)),
+                                  np.rint(method.to_unit(response) * 255).astype(np.uint8))

@@ -550,7 +550,11 @@ def _contract_overhead(frame: np.ndarray, repeats: int) -> list[dict[str, Any]]:
     rows = []
     for name in available():
         method = create(name)
-        t = _medians({"apply": lambda: method.apply(frame), "own": lambda: method._normalize(gray)}, repeats)
+        calls = {"apply": lambda: method.apply(frame), "own": lambda: method._normalize(gray)}
+        for fn in calls.values():
+            fn()
+        times = _time_rounds(calls, 3, repeats, 2.0)  # at most about 2 s each: sqi takes seconds
+        t = {label: float(np.median(v) * 1e3) for label, v in times.items()}
         rows.append({"method": name, "apply_ms": t["apply"], "own_ms": t["own"],
                      "overhead": t["apply"] / t["own"] - 1 if t["own"] > 0 else None})
     return rows
@@ -638,21 +642,24 @@ def _normalize_video(settings: SpeedSettings, work: Path) -> dict[str, Any]:
             "normalize_fps": len(frames) / whole_s}
 
 
-def _batched(frame: np.ndarray, repeats: int) -> dict[str, Any]:
-    """The batched torch path (:meth:`ALCN.apply_batch`) on the CPU, and on CUDA when torch sees a
-    GPU: ms per frame in batches of 4, and the float16 network's difference from float32."""
+def _batched(frame: np.ndarray, small: np.ndarray, repeats: int) -> dict[str, Any]:
+    """The batched torch path (:meth:`ALCN.apply_batch`, the exact Eq. 3): on CUDA when torch sees
+    a GPU (batches of 16 frames), and on the CPU (2 small frames: there it only checks the
+    path); ms per frame, and the float16 network's difference from float32."""
     import torch
 
-    batch = np.stack([frame] * 4)
     result: dict[str, Any] = {"cuda_available": torch.cuda.is_available()}
-    for device in ("cpu", "cuda") if torch.cuda.is_available() else ("cpu",):
+    cases = [("cpu", np.stack([small] * 2), 2)]
+    if torch.cuda.is_available():
+        cases.append(("cuda", np.stack([frame] * 16), repeats))
+    for device, batch, rounds in cases:
         norm = ALCN(backend="torch", device=device)
         full = norm.apply_batch(batch, out_dtype=np.float32)
         half = norm.apply_batch(batch, out_dtype=np.float32, half=True)
-        t = _medians({"float32": lambda: norm.apply_batch(batch), "float16": lambda: norm.apply_batch(batch, half=True)},
-                     max(2, repeats // 4))
-        result[device] = {"ms_per_frame": t["float32"] / len(batch), "ms_per_frame_half": t["float16"] / len(batch),
-                          "fps": 4e3 / t["float32"], "half_max_abs": float(np.abs(half - full).max())}
+        t = _medians({"float32": lambda: norm.apply_batch(batch), "float16": lambda: norm.apply_batch(batch, half=True)}, rounds)
+        result[device] = {"size": [batch.shape[2], batch.shape[1]], "batch": len(batch),
+                          "ms_per_frame": t["float32"] / len(batch), "ms_per_frame_half": t["float16"] / len(batch),
+                          "fps": 1e3 * len(batch) / t["float32"], "half_max_abs": float(np.abs(half - full).max())}
     return result
 
 
@@ -676,7 +683,7 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     threads = [_after_apply(gray, repeats, 1), _after_apply(gray, repeats, None)]
     memory = _large_memory(settings.large_size)
     video = _normalize_video(settings, work)
-    batched = _batched(gray, repeats)
+    batched = _batched(gray, small, repeats)
     ratio, gain_ratio = t["alcn gray"] / t["dog raw"], t["alcn gain gray"] / t["dog raw"]
     fps = 1e3 / t["alcn gray small"]
     colour = t["alcn bgr"] / t["alcn gray"]
@@ -699,8 +706,9 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
         _target("alcn normalize video / max(decode+encode, apply)", video["normalize_s"] / video["bound_s"], "about 1",
                 video["normalize_s"] <= 1.1 * video["sequential_s"] and video["normalize_s"] <= 1.25 * video["bound_s"],
                 f"sequential: {video['sequential_s'] / video['bound_s']:.2f}"),
-        _target("batched torch path, ms per frame (CPU)", batched["cpu"]["ms_per_frame"], "GPU: 2000 fps on an H100",
-                None, "no CUDA device in this run" if not batched["cuda_available"] else f"CUDA fps {batched['cuda']['fps']:.0f}"),
+        _target(f"batched torch path, {size} frames per second on CUDA", batched["cuda"]["fps"] if batched["cuda_available"] else None,
+                ">= 2000 on an H100", batched["cuda"]["fps"] >= 2000 if batched["cuda_available"] else None,
+                "no CUDA device in this run: path tested on the CPU" if not batched["cuda_available"] else ""),
     ]
     return {"times_ms": t, "summary": summary, "stages": stages, "profile": profile, "contract": contract,
             "threads": threads, "memory": memory, "video": video, "batched": batched}
@@ -851,8 +859,9 @@ def _targets_markdown(t: dict[str, Any]) -> list[str]:
                                 digits=2))
     b = t["batched"]
     lines += ["", "### Batched torch path (`ALCN.apply_batch`, batches of 4)", ""]
-    lines.append(markdown_table(["device", "ms per frame", "ms per frame float16", "fps", "float16 max abs diff"],
-                                [[d, b[d]["ms_per_frame"], b[d]["ms_per_frame_half"], b[d]["fps"], b[d]["half_max_abs"]]
+    lines.append(markdown_table(["device", "frames", "ms per frame", "ms per frame float16", "fps", "float16 max abs diff"],
+                                [[d, f"{b[d]['batch']} x {b[d]['size'][0]}x{b[d]['size'][1]}", b[d]["ms_per_frame"],
+                                  b[d]["ms_per_frame_half"], b[d]["fps"], b[d]["half_max_abs"]]
                                  for d in ("cpu", "cuda") if d in b], digits=4))
     if not b["cuda_available"]:
         lines += ["", "No CUDA device in this run: the CUDA path is tested on the CPU only (the CUDA test skips)."]

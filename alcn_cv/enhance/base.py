@@ -197,6 +197,10 @@ class Normalization:
 
     def _apply_colour(self, img: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
         """:meth:`apply` on a valid gray or BGR image without alpha."""
+        if img.dtype == np.uint8 and out_dtype == np.uint8 and (img.ndim == 2 or img.shape[2] == 1):
+            direct = self._apply_gray_uint8(img.reshape(img.shape[:2]))
+            if direct is not None:
+                return direct.reshape(img.shape)
         unit = _to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
             lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
@@ -205,6 +209,12 @@ class Normalization:
             np.multiply(unit_lightness, 100.0, out=lab[..., 0])
             return _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
         return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
+
+    def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray | None:
+        """:meth:`apply`'s result for a uint8 ``HxW`` image and uint8 output, computed without the
+        float round trip by a method that works on 8-bit images (the same values); None (the
+        default): take the float path."""
+        return None
 
     def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
         """How :meth:`apply` may cut an image of ``shape`` into horizontal strips: ``(halo,
