@@ -54,14 +54,11 @@ def _unit_in_place_to(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
     rounds half to even and saturates as ``np.rint`` after the clip does, bit for bit."""
     if unit.ndim == 3 and unit.shape[2] > 4:
         np.clip(unit, 0.0, 1.0, out=unit)
-    else:
-        cv2.max(unit, 0.0, dst=unit)
+    else:  # cv2.threshold: no scalar that OpenCV could take for an array
+        cv2.threshold(unit, 0.0, 0.0, cv2.THRESH_TOZERO, dst=unit)
         if dtype == np.uint8:
             return cv2.convertScaleAbs(unit, alpha=FULL_SCALE[dtype])
-        if unit.ndim == 2:
-            cv2.min(unit, 1.0, dst=unit)
-        else:  # a scalar is (v, 0, 0, 0) to OpenCV: 0 suits the lower clip of every channel, 1 not
-            np.minimum(unit, 1.0, out=unit)
+        cv2.threshold(unit, 1.0, 0.0, cv2.THRESH_TRUNC, dst=unit)
     if dtype == np.float32:
         return np.ascontiguousarray(unit)
     unit *= FULL_SCALE[dtype]

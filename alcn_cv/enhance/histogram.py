@@ -19,7 +19,7 @@ __all__ = ["CLAHE", "HistogramEqualization"]
 def _to_uint8(gray: np.ndarray) -> np.ndarray:
     # rint(clip(gray, 0, 1) * 255) in two OpenCV passes: convertScaleAbs rounds half to even
     # and saturates, bit for bit the same once the negatives are gone
-    return cv2.convertScaleAbs(cv2.max(gray, 0.0), alpha=255.0)
+    return cv2.convertScaleAbs(cv2.threshold(gray, 0.0, 0.0, cv2.THRESH_TOZERO)[1], alpha=255.0)
 
 
 def _to_unit(gray8: np.ndarray) -> np.ndarray:
