@@ -29,6 +29,7 @@ Two implementations that agree to 1e-5:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 
@@ -78,6 +79,14 @@ def gaussian_kernel1d(sigma: float) -> np.ndarray:
     x = np.arange(-r, r + 1, dtype=np.float64)
     k = np.exp(-0.5 * (x / sigma) ** 2)
     return k / k.sum()
+
+
+@functools.lru_cache(maxsize=256)
+def _cached_kernel(sigma: float) -> np.ndarray:
+    """:func:`gaussian_kernel1d`, computed once per sigma (read-only)."""
+    kernel = gaussian_kernel1d(sigma)
+    kernel.flags.writeable = False
+    return kernel
 
 
 def check_sigmas(sigmas: Sequence[float]) -> tuple[float, ...]:
@@ -154,7 +163,7 @@ def alcn_filter(image: np.ndarray, weights: np.ndarray, sigmas: Sequence[float] 
     out = np.zeros(image.shape, np.float32)
     blurred = np.empty(image.shape, np.float32)
     for i, s in enumerate(sigmas):
-        k = gaussian_kernel1d(s)
+        k = _cached_kernel(s)
         if weights.ndim == 1:
             if weights[i] == 0:
                 continue
@@ -272,7 +281,7 @@ def pyramid_mixture(
         product = np.empty((h, w), np.float32)
         blurred = np.empty((h, w), np.float32)
         for k, weight in zip(ks, weights_at(level, ks, (h, w))):
-            kernel = gaussian_kernel1d(plan[k][1])
+            kernel = _cached_kernel(plan[k][1])
             if np.ndim(weight) == 0:
                 if weight == 0:
                     continue
