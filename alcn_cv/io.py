@@ -352,7 +352,8 @@ def map_video(
 
     The output is written under a temporary name and renamed when complete; its frame size and
     colour follow ``fn``'s first output, its frame rate the input's. A progress bar shows the
-    frames.
+    frames. Decoding, ``fn`` and encoding overlap: the next frame is decoded and the previous
+    one encoded in two threads while ``fn`` runs, the frames in order.
 
     Args:
         allow_partial: accept a video that ends more than one frame before the frame count of

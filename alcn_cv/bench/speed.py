@@ -22,6 +22,14 @@ alcn,alcn:model=paper:mixture=exact``. A video
 test runs ALCN over a generated 1920x1080 video and records the resident memory after every
 frame (it must stay flat).
 
+The **targets** (:func:`targets`) come first in the report, each with its measured value: the
+default ALCN and the gain one against a raw OpenCV DoG (:func:`raw_dog`) at 1280x800 and the
+default's frame rate at 640x480, BGR against gray, the cost of the ``apply`` contract over each
+method's own computation, the peak memory on an 8000x8000 image, an application's OpenCV calls
+right after ``apply``, ``alcn normalize`` on the cookie-box video against its decoding and
+encoding alone, and the batched torch path (CUDA when present); with where the default's time
+goes (its stages, and a profile).
+
 Outputs in ``out_dir``: ``speed.json`` (every number, the settings, the command, the machine and
 its load before and after), ``speed.md`` (machine, command, settings and the tables) and
 ``speed.png`` (time against pixel count for every method, log-log, :mod:`alcn_cv.bench.plots`).

@@ -13,7 +13,10 @@ A normalization object has two entry points:
 * :meth:`Normalization.normalize` -- the raw response on a float32 ``HxW`` intensity image in
   [0, 1], for detectors and benchmarks that want unclipped values.
 
-The caller's array is never modified.
+The caller's array is never modified. An image of more than :data:`TILE_PIXELS` pixels is
+normalized in horizontal strips, each with the rows around it that its output depends on, by
+the methods whose output is local (:meth:`Normalization._tiling`; ALCN, ``dog``, ``slcn``): the
+result is the whole image's and the memory a strip's.
 """
 
 from __future__ import annotations
