@@ -307,14 +307,10 @@ class ALCN(Normalization):
         to_grid = np.array([[ax * f, 0.0, ax * (f - 1) / 2 + bx], [0.0, ay * f, ay * (f - 1) / 2 + by]])
         coarse = (w, h) if f == 1 else (-(-w // f) + 1, -(-h // f) + 1)
         flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-        maps: list[np.ndarray] = []
-        for i in range(0, len(ks), 4):  # up to four maps per call, as the channels of one image
-            chunk = ks[i : i + 4]
-            stack = grid[chunk[0]] if len(chunk) == 1 else cv2.merge([grid[k] for k in chunk])
-            small = cv2.warpAffine(stack, to_grid, coarse, flags=flags, borderMode=cv2.BORDER_REPLICATE)
-            if f > 1:
-                small = cv2.resize(small, None, fx=f, fy=f, interpolation=cv2.INTER_LINEAR)[:h, :w]
-            maps += [small] if len(chunk) == 1 else cv2.split(small)
+        maps = []
+        for k in ks:
+            small = cv2.warpAffine(grid[k], to_grid, coarse, flags=flags, borderMode=cv2.BORDER_REPLICATE)
+            maps.append(small if f == 1 else cv2.resize(small, None, fx=f, fy=f, interpolation=cv2.INTER_LINEAR)[:h, :w])
         return maps
 
     def weight_maps(self, gray: np.ndarray) -> np.ndarray:
