@@ -89,7 +89,7 @@ def test_pair_loss_adds_the_weighted_consistency(tmp_path):
     rng = np.random.default_rng(0)
     centres = sample_locations(scene.candidates, 8, 8, rng)
     anywhere = anywhere_locations(scene, 4, rng)
-    base = RealLightConfig(crop=CROP, patch=PATCH, temperature=0.5)
+    base = RealLightConfig(crop=CROP, patch=PATCH, temperature=0.5, consistency=0.0)
     weighted = RealLightConfig(crop=CROP, patch=PATCH, temperature=0.5, consistency=2.0)
     with torch.no_grad():
         plain = float(pair_loss(net, scene, (0, 1), centres, base, anywhere))
