@@ -1,5 +1,7 @@
 """The gain Normalizer (alcn_cv.nets.gain): shapes, its untrained form, gradients, weight files."""
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -82,8 +84,9 @@ def test_untrained_response_ignores_the_light_strength():
         torch.testing.assert_close(net(0.05 * image), net(image), atol=1e-4, rtol=1e-4)
 
 
-def test_gradients_reach_every_parameter():
-    net = GainNormalizer()
+@pytest.mark.parametrize("learn_floor", [False, True])
+def test_gradients_reach_every_parameter(learn_floor):
+    net = GainNormalizer(learn_floor=learn_floor)
     with torch.no_grad():
         net.head.weight.normal_(0.0, 0.01)  # a zero last layer blocks the gradient to the layers below it
     net(_lit_texture()).square().mean().backward()
@@ -91,8 +94,19 @@ def test_gradients_reach_every_parameter():
         assert p.grad is not None and torch.isfinite(p.grad).all() and p.grad.abs().sum() > 0, name
 
 
-def test_weight_file_round_trip(tmp_path):
-    net = GainNormalizer(channels=8, dilations=(1, 2))
+def test_learned_floor_starts_at_eps_and_limits_the_gain_in_the_dark():
+    net = GainNormalizer(learn_floor=True, eps=0.01)
+    plain = GainNormalizer(eps=0.01)
+    dark = _lit_texture() * 0.05
+    with torch.no_grad():
+        torch.testing.assert_close(net(dark), plain(dark))  # the same model until trained
+        net.log_floor.fill_(math.log(0.1))
+        assert net.response(dark).abs().mean() < 0.5 * plain.response(dark).abs().mean()
+
+
+@pytest.mark.parametrize("learn_floor", [False, True])
+def test_weight_file_round_trip(tmp_path, learn_floor):
+    net = GainNormalizer(channels=8, dilations=(1, 2), learn_floor=learn_floor)
     with torch.no_grad():
         for p in net.parameters():
             p.add_(0.01 * torch.randn_like(p))

@@ -137,6 +137,9 @@ class GainNormalizer(nn.Module):
         sharpness: also feed the log of each cell's root-mean-square pixel difference (its
             finest-scale energy; against the cell's standard deviation it tells sharp texture
             from blur and noise, which decides the best band).
+        learn_floor: learn the Weber gain's floor, ``1 / (m + floor)``, starting at ``eps``
+            (otherwise the floor is ``eps``): how dark a region may be before the gain stops
+            following it and would amplify mostly noise.
     """
 
     def __init__(
@@ -152,6 +155,7 @@ class GainNormalizer(nn.Module):
         tau: float = 0.5,
         init_weights: Sequence[float] | None = None,
         sharpness: bool = False,
+        learn_floor: bool = False,
     ) -> None:
         super().__init__()
         if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
@@ -180,6 +184,9 @@ class GainNormalizer(nn.Module):
             self.head.weight.zero_()
             self.head.bias.copy_(torch.tensor([0.0] + init_weights))
         self.log_tau = nn.Parameter(torch.tensor(math.log(tau)))
+        self.learn_floor = bool(learn_floor)
+        if self.learn_floor:
+            self.log_floor = nn.Parameter(torch.tensor(math.log(eps)))
         self.mixture = GaussianMixture2d(self.sigmas)
         self.config: dict[str, Any] = {
             "num_kernels": num_kernels,
@@ -193,6 +200,7 @@ class GainNormalizer(nn.Module):
             "tau": float(tau),
             "init_weights": init_weights,
             "sharpness": self.sharpness,
+            "learn_floor": self.learn_floor,
         }
 
     @property
@@ -249,7 +257,8 @@ class GainNormalizer(nn.Module):
         for conv, d in zip(self.convs, self.dilations):
             x = F.relu(conv(_reflect101_pad(x, d)))
         out = self.head(x)
-        return out[:, :1] - (local + self.eps).log(), out[:, 1:]
+        floor = self.log_floor.exp() if self.learn_floor else self.eps
+        return out[:, :1] - (local + floor).log(), out[:, 1:]
 
     def dense_grid(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
         """The maps F_k on a grid of stride ``grid_stride`` (a multiple of :attr:`stride`).

@@ -151,6 +151,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     r.add_argument("--sigma-step", type=float, default=1.0, help="the kernels' sigmas are k * step, k = 1..N (default 1)")
     r.add_argument("--dilations", type=int, nargs="+", default=[1, 2, 4], help="one 3x3 convolution per dilation (default 1 2 4)")
     r.add_argument("--sharpness", action="store_true", help="feed the network each cell's finest-scale energy too")
+    r.add_argument("--learn-floor", action="store_true",
+                   help="learn the Weber gain's floor (1 / (m + floor)), starting at --eps")
     r.add_argument("--eps", type=float, default=0.01,
                    help="added to intensities in [0, 1] before every log: the gain's noise floor (default 0.01)")
     r.add_argument("--threads", type=int, default=1,
@@ -251,7 +253,8 @@ def _train_real_light(args: argparse.Namespace) -> int:
         scenes=[str(s) for s in scenes], rendered=rendered, rendered_fraction=args.rendered_fraction,
         **{k: getattr(args, k) for k in names},
         net={"channels": args.channels, "dilations": list(args.dilations), "sharpness": args.sharpness,
-             "num_kernels": args.num_kernels, "sigma_step": args.sigma_step, "eps": args.eps},
+             "num_kernels": args.num_kernels, "sigma_step": args.sigma_step, "eps": args.eps,
+             "learn_floor": args.learn_floor},
         command=shlex.join(["alcn", *sys.argv[1:]]),
     )
     previous = torch.get_num_threads()
