@@ -245,7 +245,7 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
         rows = []
         for policy, variants in result["alcn_vs_dog"].items():
             for variant, draws in variants.items():
-                cells = ["-" if r["above"] is None else f"{r['margin']:+.3f} {'✓' if r['above'] else '✗'}" for r in draws]
+                cells = ["-" if r["above"] is None else f"{r['margin']:+.4f} {'✓' if r['above'] else '✗'}" for r in draws]
                 rows.append([variant, policy] + cells + [f"{sum(bool(r['above']) for r in draws)}/{len(draws)}"])
         lines += [markdown_table(["ALCN", "policy"] + [f"draw {d}" for d in range(s["draws"])] + ["above"], rows), ""]
     errors = [f"- `{m}` ({p}, draw {r['draw']}): {r['error']}" for p, bm in result["runs"].items()
