@@ -42,10 +42,11 @@ def check_image(img: object) -> np.ndarray:
     if img.dtype != native:  # byte order is a storage detail, not a pixel type
         img = img.astype(native)
     if img.dtype == np.float32:
-        if not np.isfinite(img).all():
-            raise InputError("float32 image contains NaN or inf")
+        # min and max see NaN (it propagates) and inf (out of range) without a boolean copy
         lo, hi = float(img.min()), float(img.max())
-        if lo < -_FLOAT_TOLERANCE or hi > 1 + _FLOAT_TOLERANCE:
+        if not (-_FLOAT_TOLERANCE <= lo and hi <= 1 + _FLOAT_TOLERANCE):
+            if not np.isfinite(img).all():
+                raise InputError("float32 image contains NaN or inf")
             raise InputError(
                 f"float32 intensities must be in [0, 1], got [{lo:.4g}, {hi:.4g}]"
                 + (" (divide by 255 first)" if hi <= 255 else "")

@@ -8,6 +8,7 @@ import logging
 import os
 import tempfile
 from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import IO, Any
 
@@ -351,7 +352,8 @@ def map_video(
 
     The output is written under a temporary name and renamed when complete; its frame size and
     colour follow ``fn``'s first output, its frame rate the input's. A progress bar shows the
-    frames.
+    frames. Decoding, ``fn`` and encoding overlap: the next frame is decoded and the previous
+    one encoded in two threads while ``fn`` runs, the frames in order.
 
     Args:
         allow_partial: accept a video that ends more than one frame before the frame count of
@@ -370,13 +372,25 @@ def map_video(
     count = 0
     with atomic_path(dst) as tmp:
         try:
-            with VideoReader(src) as video:
-                for frame in tqdm(video, total=len(video) or None, desc=desc or src.name, unit="frame"):
-                    out = fn(frame)
-                    if writer is None:
-                        writer = open_video_writer(tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3)
-                    writer.write(out)
-                    count += 1
+            # Decoding, fn and encoding overlap: the next frame is decoded and the previous one
+            # encoded in two threads while fn runs (OpenCV releases the GIL in both), in order.
+            with VideoReader(src) as video, ThreadPoolExecutor(1) as reading, ThreadPoolExecutor(1) as writing:
+                frames = iter(video)
+                ahead = reading.submit(next, frames, None)
+                written = None
+                with tqdm(total=len(video) or None, desc=desc or src.name, unit="frame") as progress:
+                    while (frame := ahead.result()) is not None:
+                        ahead = reading.submit(next, frames, None)
+                        out = fn(frame)
+                        if writer is None:
+                            writer = open_video_writer(tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3)
+                        if written is not None:
+                            written.result()  # one frame in the encoder at a time; its error surfaces here
+                        written = writing.submit(writer.write, out)
+                        count += 1
+                        progress.update()
+                if written is not None:
+                    written.result()
         finally:
             if writer is not None:
                 writer.release()

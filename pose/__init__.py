@@ -11,10 +11,13 @@ Normalization Applied to Robust 3D Pose Estimation", BMVC 2017, one module per s
 * :mod:`pose.build`: ``alcn pose build``, part model from a training sequence (the stages above);
 * :mod:`pose.parts`: part detectors run after a normalization (:func:`alcn_cv.enhance.registry.from_spec`);
 * :mod:`pose.corners`: the learned box-corner detector run by ``cv2.dnn`` (ONNX);
-  :mod:`pose.corner_data` its training windows, :mod:`pose.corner_train` ``alcn pose
-  train-corners`` (torch, export to ONNX);
+  :mod:`pose.corner_data` its labelled training frames, :mod:`pose.corner_net` its network and
+  :mod:`pose.corner_train` ``alcn pose train-corners`` (torch, export to ONNX),
+  :mod:`pose.corner_bench` ``alcn pose bench-corners`` (its speed, torch-free);
 * :mod:`pose.solver`: PnP + RANSAC + LM refinement, tracking with a prior, lost/recovered;
 * :mod:`pose.track`: ``alcn pose track``, poses per frame and overlays;
 * :mod:`pose.evaluate`: ``alcn pose eval``, Table-1-style report and Middlebury errors;
+* :mod:`pose.planar`: ``alcn pose relight``, a planar target's pose on fixed webcams under real light;
+* :mod:`pose.overlay`: ``alcn pose overlay-error``, the drawn box's distance to the image's edges;
 * :mod:`pose.cli`: the ``alcn pose`` command.
 """

@@ -1,4 +1,4 @@
-"""``alcn pose build|track|eval|train-corners``: the 3D pose pipeline on the command line."""
+"""``alcn pose build|track|eval|train-corners|bench-corners``: the 3D pose pipeline on the command line."""
 
 from __future__ import annotations
 
@@ -65,25 +65,135 @@ def _eval(args: argparse.Namespace) -> int:
     if args.middlebury:
         evaluate.middlebury_main(args.middlebury, args.out, normalizers=normalizers, feature=args.feature)
     if args.data:
-        evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature,
-                      detectors=args.detectors, corner_kw={"epochs": args.corner_epochs})
+        corner_kw = {"iterations": args.corner_iterations, "copies": args.corner_copies}
+        evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature, detectors=args.detectors,
+                      corner_kw=corner_kw, seeds=args.seeds, sequences=args.sequences, command=_command())
     if not (args.middlebury or args.data):
         raise ValueError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
     return 0
+
+
+def _command() -> str:
+    """The command line as typed, for the reports."""
+    import shlex
+    import sys
+
+    return shlex.join(["alcn", *sys.argv[1:]])
 
 
 def _train_corners(args: argparse.Namespace) -> int:
     from pose import corner_train
 
     path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
-                             normalizer=args.normalizer, scale=args.scale, epochs=args.epochs, rounds=args.rounds,
-                             seed=args.seed)
+                             normalizer=args.normalizer, scale=args.scale, iterations=args.iterations,
+                             copies=args.copies, seed=args.seed)
     print(f"corner detector ({args.normalizer}) -> {path}")
     return 0
 
 
+def _relight(args: argparse.Namespace) -> int:
+    import shlex
+    import sys
+
+    from pose import planar
+
+    planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizers, detector=args.detector,
+                feature=args.feature, n_features=args.n_features, target_fraction=args.target_fraction, hfov=args.hfov,
+                max_frames=args.max_frames, command=shlex.join(["alcn", *sys.argv[1:]]))
+    print((Path(args.out) / "relight_pose.md").read_text(encoding="utf-8"))
+    return 0
+
+
+def _add_relight(sub: argparse._SubParsersAction) -> None:
+    from pose import planar
+
+    r = sub.add_parser("relight", help="pose of a planar target under real light (fixed webcams): real-light Table 1",
+                       description="Per scene of fixed outdoor cameras (the camera did not move, the light changes): "
+                       "a textured rectangle of the reference frame (median brightness) is the target, its part "
+                       "model is built from that frame after each normalizer (assumed pinhole camera), and its pose "
+                       "is estimated in every other frame with the box's pipeline (part detector + PoseSolver). "
+                       "Truth: the reference pose. Writes OUT/relight_pose.md, .json, .png and OUT/targets.png. "
+                       "The Webcam frames are for academic research only (cite TILDE and AMOS).")
+    r.add_argument("--out", type=Path, required=True, help="report folder")
+    r.add_argument("--data", help="folder of scenes, one sub-folder of registered frames each (default: "
+                   "$ALCN_SHARED_DATA/webcam, else ../shared/data/webcam)")
+    r.add_argument("--scenes", nargs="+", help="scene names (default: every scene of --data)")
+    r.add_argument("--normalizers", nargs="+", default=list(planar.DEFAULT_NORMALIZERS),
+                   help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZERS) + ")")
+    r.add_argument("--detector", default="features", choices=sorted(planar.DETECTORS),
+                   help="part detector (default features: OpenCV features matched to the target's descriptors)")
+    r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
+    r.add_argument("--n-features", type=int, default=0,
+                   help="the strongest keypoints kept per frame (default 0: all; the target's model keeps all of "
+                   "the reference frame's)")
+    r.add_argument("--target-fraction", type=float, default=planar.DEFAULT_TARGET_FRACTION,
+                   help="target side as a fraction of the frame's width and height; the window with the most "
+                   f"keypoints of the reference frame is chosen (default {planar.DEFAULT_TARGET_FRACTION:g})")
+    r.add_argument("--hfov", type=float, default=planar.DEFAULT_HFOV,
+                   help=f"assumed horizontal field of view, degrees (default {planar.DEFAULT_HFOV:g})")
+    r.add_argument("--max-frames", type=int, help="at most this many frames per scene, evenly spaced (default all)")
+    r.set_defaults(func=_relight)
+
+
+def _overlay_error(args: argparse.Namespace) -> int:
+    import shlex
+    import sys
+
+    from pose import overlay
+
+    settings = overlay.EdgeSettings(max_distance=args.max_distance, max_angle=args.max_angle)
+    overlay.main(args.video, [tuple(r) for r in args.run], args.out, settings=settings,
+                 command=shlex.join(["alcn", *sys.argv[1:]]), show=args.show)
+    print((Path(args.out) / "overlay_error.md").read_text(encoding="utf-8"))
+    return 0
+
+
+def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
+    from pose.overlay import EdgeSettings
+
+    d = EdgeSettings()
+    o = sub.add_parser("overlay-error", help="how far the drawn box is from the object's edges, per frame",
+                       description="For every frame posed by `alcn pose track`: the mean distance (px) from "
+                       "samples of the box's visible projected edges to the nearest image edge parallel to them "
+                       "(Canny, gradient direction), no ground truth needed. Writes OUT/overlay_error.md, .json "
+                       "(per frame, per box edge) and .png (the error over the video, one line per run).")
+    o.add_argument("video", help="the video (or image folder) that was tracked")
+    o.add_argument("--run", nargs=3, action="append", required=True, metavar=("LABEL", "MODEL", "POSES"),
+                   help="a run to measure: its label, its part model (.npz, with the camera stored by `alcn pose "
+                   "build`) and its poses (.json from `alcn pose track`); repeat to compare runs")
+    o.add_argument("--out", type=Path, required=True, help="report folder")
+    o.add_argument("--max-distance", type=float, default=d.max_distance,
+                   help=f"search range along each edge's normal, px; no image edge within it counts as this "
+                   f"(default {d.max_distance:g})")
+    o.add_argument("--max-angle", type=float, default=d.max_angle,
+                   help=f"largest angle between an image edge's gradient and the drawn edge's normal, degrees "
+                   f"(default {d.max_angle:g})")
+    o.add_argument("--show", nargs="*", default=["frame_000300"],
+                   help="frames drawn in OUT/overlay_frames.png with every run's box, besides the first run's two "
+                   "worst (default frame_000300)")
+    o.set_defaults(func=_overlay_error)
+
+
+def _bench_corners(args: argparse.Namespace) -> int:
+    from pose import corner_bench
+
+    K = _intrinsics(args.K)
+    if K is None:
+        K, _ = _camera(args.camera)
+    if K is None:
+        raise ValueError("give the intrinsics of the frames: --K FX FY CX CY or --camera camera.yaml")
+    r = corner_bench.main(args.detector, args.input, K, args.out, command=_command(), size=tuple(args.size),
+                          max_frames=args.max_frames, repeats=args.repeats, threads=args.threads)
+    print(f"{r['fps']:.1f} fps at {r['size'][0]}x{r['size'][1]} ({r['normalizer']} in front; normalize "
+          f"{r['ms']['normalize']:.1f} ms, network {r['ms']['network']:.1f} ms, peaks + pose "
+          f"{r['ms']['peaks_and_pose']:.1f} ms; CPU {r['cpu_ms_per_frame']:.1f} ms per frame; torch imported: "
+          f"{r['torch_imported']}; load "
+          f"{r['machine'].get('load_average_1_5_15')})")
+    return 0
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``pose`` with ``build``, ``track``, ``eval`` and ``train-corners`` to the ``alcn`` command."""
+    """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``relight`` and ``overlay-error`` to ``alcn``."""
     from pose.solver import METHODS
 
     p = subparsers.add_parser("pose", help="3D box pose: build a part model, track it, evaluate",
@@ -153,14 +263,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    "gave more correct poses than ORB, and with ALCN far more; `track` uses ORB for speed)")
     e.add_argument("--detectors", nargs="+", default=["features"], choices=["features", "corners"],
                    help="part detectors, each giving rows (default features; corners: trained on the training sequence first)")
-    e.add_argument("--corner-epochs", type=int, default=6, help="corner CNN epochs per round (default 6)")
+    e.add_argument("--corner-iterations", type=int, default=1000,
+                   help="corner CNN training steps (default 1000)")
+    e.add_argument("--corner-copies", type=int, default=11,
+                   help="augmented copies of each training view for the corner CNN (default 11)")
+    e.add_argument("--seeds", type=int, default=1,
+                   help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)")
+    e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
     e.add_argument("--out", type=Path, required=True, help="report folder")
     e.set_defaults(func=_eval)
 
     c = sub.add_parser("train-corners", help="train the corner CNN on a registered sequence, export ONNX",
-                       description="Windows around the box corners projected by the known poses (plus the data "
-                       "engine's synthetic augmentation and hard negatives) after the normalizer; the network is "
-                       "written as ONNX for `alcn pose track --detector corners` (cv2.dnn, no torch).")
+                       description="Dense training on the views of the sequence and augmented copies of them "
+                       "(homographies, new backgrounds, intensity changes), normalized, labelled with the box "
+                       "corners projected by the known poses and their sub-stride offsets; the network is written as "
+                       "ONNX for `alcn pose track --detector corners` (cv2.dnn, no torch).")
     c.add_argument("input", help="registered training sequence (BOP scene folder, COLMAP model, Middlebury set)")
     c.add_argument("output", help="corner detector to write (.onnx)")
     box = c.add_mutually_exclusive_group(required=True)
@@ -168,7 +285,27 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     box.add_argument("--model", help="part model (.npz) whose box corners to use")
     c.add_argument("--normalizer", default="none", help="normalizer applied first (default none)")
     c.add_argument("--scale", type=float, default=0.5, help="downscaling of the frames (default 0.5)")
-    c.add_argument("--epochs", type=int, default=6, help="epochs per round (default 6)")
-    c.add_argument("--rounds", type=int, default=2, help="training rounds with hard-negative mining (default 2)")
+    c.add_argument("--iterations", type=int, default=1000, help="training steps (default 1000)")
+    c.add_argument("--copies", type=int, default=11,
+                   help="augmented copies (homography, background, intensity) of each view (default 11)")
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(func=_train_corners)
+
+    bc = sub.add_parser("bench-corners", help="frames per second of the corner detector (cv2.dnn, no torch)",
+                        description="Tracks with the corner detector through the frames of a video or image folder "
+                        "resized to --size and reports the time of normalization, network, peaks and pose, the "
+                        "frames per second and the machine's load; with --out as Markdown and JSON.")
+    bc.add_argument("detector", help="corner detector (.onnx) from `alcn pose train-corners`")
+    bc.add_argument("input", help="video file or image folder (e.g. DATA/test/000001/rgb of `alcn data pose`)")
+    bcam = bc.add_mutually_exclusive_group(required=True)
+    bcam.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics of the frames")
+    bcam.add_argument("--camera", help="camera.yaml from `alcn calib camera`")
+    bc.add_argument("--size", nargs=2, type=int, default=[640, 480], metavar=("W", "H"),
+                    help="frame size (default 640 480)")
+    bc.add_argument("--max-frames", type=int, default=60, help="frames used (default 60)")
+    bc.add_argument("--repeats", type=int, default=2, help="passes over them (default 2)")
+    bc.add_argument("--threads", type=int, help="OpenCV threads (default OpenCV's)")
+    bc.add_argument("--out", type=Path, help="write bench_corners.md and .json here")
+    bc.set_defaults(func=_bench_corners)
+    _add_relight(sub)
+    _add_overlay_error(sub)

@@ -3,44 +3,36 @@
 The Box experiment of Rad, Roth & Lepetit (BMVC 2017, Sec. 4.4) detects the corners of a box
 with the part-based method of Crivellaro et al. ("A Novel Representation of Parts for Accurate
 3D Object Detection and Tracking in Monocular Images", ICCV 2015) after contrast normalization.
-This module is that detector, kept small:
+This module is that detector, kept small and real-time:
 
-* **Training data** (:func:`pose.corner_data.build_dataset`): every frame of a registered training sequence is
-  downscaled by ``scale`` and normalized (the normalizer at the downscaled resolution, so a
-  32x32 window sees 32/``scale`` input pixels around a corner). The box corners are projected
-  with the known poses; a corner is *visible* when it is in front of the camera, inside the
-  image, on a face turned towards the camera and, where the BOP ``mask_visib`` is there, not
-  hidden by clutter. Windows centred within ``pos_radius`` pixels of visible corner ``k`` are
-  class ``k + 1``; windows centred farther than ``neg_radius`` from every visible corner
-  (on the object and elsewhere) are background (class 0). Besides these crops of the
-  normalized frames and of copies of them with the background (outside the BOP
-  ``mask_visib``) replaced by random textures, the data engine's simple synthetic augmentation
-  (:func:`alcn_cv.data.synthetic.augment`: intensity changes ``a I + b``, noise, small
-  rotations and scalings) makes more windows around the same points from the *raw* frame,
-  normalized afterwards (:func:`alcn_cv.train.stage2.normalize_windows`), so that the
-  detector sees the normalizer's output under other lights.
-* **Network**: the paper's :class:`alcn_cv.nets.Detector` (its fully connected layer as a
-  convolution) with 9 classes, trained by :func:`alcn_cv.train.stage2.train_detector`.
-* **Export** (:func:`pose.corner_train.export_onnx`): the dense network (``(1, 1, H, W)`` -> ``(1, 9, gh, gw)``
-  logits at stride 4) as ONNX, with the corners, units, scale and normalizer in its
-  ``metadata_props`` (key ``alcn_cv``), so the ``.onnx`` file is the whole detector.
-* **Inference** (:class:`CornerDetector`): ``cv2.dnn`` runs the ONNX model on the padded,
-  normalized frame (no torch import), by default also on the frame shifted by half the
-  stride, for a score grid of step 2 (``subdivide``); per corner class, the local maxima of
-  the softmax score (non-maximum suppression over one stride) above ``min_score`` are kept,
-  the ``top_k`` best, each refined to sub-grid precision by the score-weighted centroid of
-  its 3x3 neighbourhood. The candidates are the 2D-3D correspondences handed to
-  :class:`pose.solver.PoseSolver` (RANSAC, 5000 iterations since few of the candidates are
-  right, chooses among them; fewer than ``min_inliers`` consistent corners: the frame is lost).
+* **Training data** (:func:`pose.corner_data.build_frames`): every view of a registered
+  training sequence, downscaled by ``scale``, and copies of it warped by random homographies
+  (viewpoints between and around the training views), with new backgrounds and intensity
+  changes; each normalized whole and labelled on the network's output grid: the cells whose
+  window centre is within 4 pixels of a visible corner are that corner's, with the corner's
+  offset from the centre as a regression target; far cells are background.
+* **Network** (:class:`pose.corner_net.CornerNet`): the geometry of the paper's detector
+  (:class:`alcn_cv.nets.Detector`, a 32x32 window per output cell at stride 4) with 9 class
+  logits and 8 sub-stride offsets per cell, trained densely on crops of the frames
+  (:func:`pose.corner_train.train_corners`).
+* **Export** (:func:`pose.corner_train.export_onnx`): ONNX (``(1, 1, H, W)`` -> ``(1, 25, gh, gw)``)
+  with the corners, units, scale and normalizer in its ``metadata_props`` (key ``alcn_cv``),
+  so the ``.onnx`` file is the whole detector.
+* **Inference** (:class:`CornerDetector`): ``cv2.dnn`` runs it once on the padded, normalized
+  frame (no torch import); per corner, the local maxima of its softmax score above
+  ``min_score``, the ``top_k`` best, each placed at the score-weighted mean of the positions
+  its 3x3 neighbourhood's offsets vote for. With the pose predicted from the previous frames,
+  only candidates within ``gate`` pixels of the corner's predicted projection are kept
+  (:meth:`CornerDetector.detect`); the tracker searches the whole frame again when that gives no
+  pose. The candidates are the 2D-3D correspondences of :class:`pose.solver.PoseSolver`.
 
-Measured on the data engine's sequences #1-#8 (no normalization, % correct poses by the 2D
-projection metric, 2-core CPU shared with other jobs): the first version (channels 16/32, 4
-epochs, score grid step 4, 2 candidates above 0.3 per corner, no new backgrounds) 6.7 0 0 0 0 0
-0 0; with new backgrounds 10.0 0 0 26.7 0 0 0 0; plus channels 32/64, 6 epochs and the step-2
-grid 26.7 3.3 13.3 33.3 0 3.3 3.3 0; plus 4 candidates above 0.1 per corner and 5000 instead
-of 500 RANSAC iterations 40.0 0 20.0 40.0 0 3.3 6.7 0 (3.8 frames per second). Its recall
-stays low (40-50% of the visible corners within 5 px on #1, #3, #6): 30 training views are too
-few.
+Measured on the data engine's sequences (30 frames each, no normalization): the previous
+design (a window classifier trained on crops around the 30 training views, hard-negative mining,
+a score grid of step 2 with centroid refinement, no gating) found only 60% of the visible
+corners of #1 among its 4 candidates within 5 px (71% within 10 px; the best candidate 43%),
+too few for PnP: 0-47% correct poses. :mod:`pose.corner_train` has the numbers of this design;
+with ALCN in front it runs at 29.1 fps at 640x480 (``alcn pose bench-corners``, cv2.dnn with
+2 threads, no torch; normalization 3.6 ms, network 23.1 ms, peaks and pose 7.7 ms; load 1.7).
 """
 
 from __future__ import annotations
@@ -63,7 +55,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["CornerDetector", "normalization_for", "read_metadata"]
 
 FORMAT_NAME = "alcn-corner-detector"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 METADATA_KEY = "alcn_cv"
 NUM_CORNERS = 8
 # alcn_cv.nets.Detector's input window and output stride (a test checks they agree; importing
@@ -92,6 +84,17 @@ def normalization_for(spec: str) -> Normalization:
         except WeightFileError as exc:
             logger.info("ALCN through its default backend: %s", exc)
     return from_spec(spec, scale=1.0)
+
+
+def grid_shape(height: int, width: int) -> tuple[int, int]:
+    """The network's output grid for a ``height x width`` frame padded by :data:`PAD`."""
+    return (height + 2 * PAD - WINDOW) // STRIDE + 1, (width + 2 * PAD - WINDOW) // STRIDE + 1
+
+
+def grid_centres(shape: tuple[int, int]) -> np.ndarray:
+    """``(gh, gw, 2)`` float64: the window centre (x, y, pixels of the unpadded frame) of every grid cell."""
+    gy, gx = np.mgrid[: shape[0], : shape[1]].astype(np.float64)
+    return np.stack([gx, gy], -1) * STRIDE + (WINDOW / 2 - 0.5 - PAD)
 
 
 def downscale(gray: np.ndarray, scale: float) -> np.ndarray:
@@ -147,29 +150,32 @@ class CornerDetector:
     Same interface as :class:`pose.parts.FeaturePartDetector` (``detect(image, prior)``).
 
     Args:
-        onnx_path: a file written by :func:`train_corners` (``alcn pose train-corners``).
-        top_k: candidates kept per corner (RANSAC picks among them).
-        min_score: lowest softmax score of a candidate.
-        subdivide: the score grid's step is the network's stride (4 downscaled pixels) divided
-            by this (1, 2 or 4; the network runs ``subdivide**2`` times).
+        onnx_path: a file written by :func:`pose.corner_train.train_corners` (``alcn pose train-corners``).
+        top_k: candidates kept per corner in the whole frame (RANSAC picks among them).
+        min_score: lowest softmax score of a candidate in the whole frame.
+        gate: with a prior pose, candidates farther than this (pixels of the full frame, times
+            the tracker's ``search_scale``) from the corner's predicted projection are dropped.
+        gated_top_k, gated_min_score: ``top_k`` and ``min_score`` inside the gates (scoring a
+            gate's cells by their probability of being any corner, ``1 - p(background)``, instead
+            of the gate's corner lost 20% of the poses of the data engine's #3).
 
     Attributes:
         corners: ``(8, 3)`` float64 box corners (object frame, :attr:`units`).
         normalizer_name, scale, input_mean, input_std: from the file.
     """
 
-    uses_prior = False
+    uses_prior = True
 
-    def __init__(self, onnx_path: str | Path, *, top_k: int = 4, min_score: float = 0.1, subdivide: int = 2) -> None:
+    def __init__(self, onnx_path: str | Path, *, top_k: int = 5, min_score: float = 0.05, gate: float = 20.0,
+                 gated_top_k: int = 2, gated_min_score: float = 0.02) -> None:
         self.path = Path(onnx_path)
         self.meta = read_metadata(self.path)
         if self.meta["window"] != WINDOW or self.meta["stride"] != STRIDE or self.meta["pad"] != PAD:
             raise WeightFileError(f"{self.path}: window/stride/pad {self.meta['window']}/{self.meta['stride']}/"
                                   f"{self.meta['pad']}, expected {WINDOW}/{STRIDE}/{PAD}")
-        if top_k < 1 or not 0 <= min_score < 1:
-            raise InputError(f"need top_k >= 1 and min_score in [0, 1), got {top_k}, {min_score}")
-        if subdivide not in (1, 2, 4):
-            raise InputError(f"subdivide must be 1, 2 or 4 (a divisor of the stride {STRIDE}), got {subdivide}")
+        if min(top_k, gated_top_k) < 1 or not (0 <= min_score < 1 and 0 <= gated_min_score < 1) or gate <= 0:
+            raise InputError(f"need top_k, gated_top_k >= 1, min_score, gated_min_score in [0, 1) and gate > 0, "
+                             f"got {top_k}, {gated_top_k}, {min_score}, {gated_min_score}, {gate}")
         try:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
@@ -180,7 +186,9 @@ class CornerDetector:
         self.normalizer_name = str(self.meta["normalizer"])
         self.input_mean, self.input_std = float(self.meta["input_mean"]), float(self.meta["input_std"])
         self.normalization = normalization_for(self.normalizer_name)
-        self.top_k, self.min_score, self.subdivide = top_k, min_score, subdivide
+        self.top_k, self.min_score, self.gate = top_k, min_score, gate
+        self.gated_top_k, self.gated_min_score = gated_top_k, gated_min_score
+        self._cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def normalize(self, image: np.ndarray) -> np.ndarray:
         """The downscaled, normalized, standardized float32 frame the network sees."""
@@ -188,68 +196,73 @@ class CornerDetector:
         normed = self.normalization.normalize(small.astype(np.float32) / np.float32(255))
         return (normed - np.float32(self.input_mean)) / np.float32(self.input_std)
 
-    def logits(self, normalized: np.ndarray) -> np.ndarray:
-        """``(9, gh, gw)`` logits; grid point ``(i, j)`` scores the window centred on downscaled
-        pixel ``(4j - 0.5, 4i - 0.5)`` (x, y)."""
+    def outputs(self, normalized: np.ndarray) -> np.ndarray:
+        """``(25, gh, gw)``: 9 logits (background, the corners) then the 8 corners' offsets
+        ``(dx, dy)`` in strides; cell ``(i, j)`` is the window centred on :func:`grid_centres`."""
         padded = cv2.copyMakeBorder(np.ascontiguousarray(normalized, np.float32), PAD, PAD, PAD, PAD,
                                     cv2.BORDER_REFLECT_101)
         self.net.setInput(padded[None, None])
         return np.ascontiguousarray(self.net.forward()[0], np.float32)
 
-    def scores(self, image: np.ndarray) -> np.ndarray:
-        """``(9, gh * s, gw * s)`` softmax scores of a BGR or gray uint8 frame (class 0:
-        background), ``s`` = :attr:`subdivide`; grid point ``(i, j)`` scores the window centred
-        on downscaled pixel ``(j, i) * STRIDE / s - 0.5``. The network runs on the ``s * s``
-        frames shifted by multiples of ``STRIDE / s`` pixels."""
-        normalized = self.normalize(image)
-        step = STRIDE // self.subdivide
-        out = None
-        for dy in range(self.subdivide):
-            for dx in range(self.subdivide):
-                z = self.logits(normalized[dy * step:, dx * step:])
-                e = np.exp(z - z.max(0, keepdims=True))
-                p = e / e.sum(0, keepdims=True)
-                if out is None:  # the unshifted frame has the most grid points
-                    out = np.zeros((p.shape[0], p.shape[1] * self.subdivide, p.shape[2] * self.subdivide), np.float32)
-                    out[0] = 1.0  # background where a shifted frame has no grid point (last row / column)
-                view = out[:, dy::self.subdivide, dx::self.subdivide]
-                h, w = min(view.shape[1], p.shape[1]), min(view.shape[2], p.shape[2])
-                view[:, :h, :w] = p[:, :h, :w]
-        return out
+    def maps(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Softmax scores ``(9, gh, gw)`` (class 0: background) and per corner the position each
+        cell votes for ``(8, gh, gw, 2)`` (x, y, downscaled pixels) of a BGR or gray uint8 frame.
+        The last frame's are kept, so the tracker's second search of a frame costs nothing."""
+        if self._cache is not None and self._cache[0] is image:
+            return self._cache[1], self._cache[2]
+        out = self.outputs(self.normalize(image))
+        z = out[: NUM_CORNERS + 1]
+        e = np.exp(z - z.max(0, keepdims=True))
+        prob = e / e.sum(0, keepdims=True)
+        off = out[NUM_CORNERS + 1:].reshape(NUM_CORNERS, 2, *z.shape[1:]).transpose(0, 2, 3, 1)
+        votes = grid_centres(z.shape[1:])[None] + STRIDE * off.astype(np.float64)
+        self._cache = (image, prob, votes)
+        return prob, votes
 
-    def peaks(self, image: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per corner, ``(xy (m, 2) float64 full-image pixels, scores (m,))``, best first, ``m <= top_k``."""
-        prob = self.scores(image)
+    def peaks(self, image: np.ndarray, predicted: np.ndarray | None = None, radius: float | None = None
+              ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per corner, ``(xy (m, 2) float64 full-image pixels, scores (m,))``, best first.
+
+        Without ``predicted``: the ``top_k`` local maxima above ``min_score``; with ``predicted``
+        ``(8, 2)`` full-image pixels: the ``gated_top_k`` above ``gated_min_score`` within
+        ``radius`` pixels of the corner's prediction."""
+        prob, votes = self.maps(image)
         out = []
-        offset = WINDOW / 2 - 0.5 - PAD  # window centre of grid point 0
-        step = STRIDE / self.subdivide
-        nms = np.ones((2 * self.subdivide + 1,) * 2, np.uint8)  # one network stride around a peak
-        for k in range(1, NUM_CORNERS + 1):
-            p = prob[k]
-            local_max = (p >= cv2.dilate(p, nms)) & (p >= self.min_score)
-            ii, jj = np.nonzero(local_max)
-            order = np.argsort(-p[ii, jj])[: self.top_k]
-            xy, sc = [], []
-            for i, j in zip(ii[order], jj[order]):
-                i0, i1, j0, j1 = max(i - 1, 0), min(i + 2, p.shape[0]), max(j - 1, 0), min(j + 2, p.shape[1])
-                w = p[i0:i1, j0:j1]
-                gy, gx = np.mgrid[i0:i1, j0:j1]
-                xy.append([(w * gx).sum() / w.sum(), (w * gy).sum() / w.sum()])
-                sc.append(p[i, j])
-            xy = np.asarray(xy, np.float64).reshape(-1, 2) * step + offset
-            out.append((from_scaled(xy, self.scale), np.asarray(sc, np.float64)))
+        for k in range(NUM_CORNERS):
+            p, where = prob[k + 1], vote_positions(prob[k + 1], votes[k])
+            candidates = (p >= cv2.dilate(p, np.ones((3, 3), np.uint8))) & (
+                p >= (self.min_score if predicted is None else self.gated_min_score))
+            ii, jj = np.nonzero(candidates)
+            xy, sc = from_scaled(where[ii, jj], self.scale), p[ii, jj].astype(np.float64)
+            keep = self.top_k
+            if predicted is not None:
+                near = np.linalg.norm(xy - predicted[k], axis=1) <= radius
+                xy, sc, keep = xy[near], sc[near], self.gated_top_k
+            order = np.argsort(-sc, kind="stable")[:keep]
+            out.append((xy[order], sc[order]))
         return out
 
     def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
                search_scale: float = 1.0) -> Correspondences:
-        """Corner candidates of ``image`` as 2D-3D correspondences.
-
-        ``prior`` and ``search_scale`` are not used: the solver takes the previous pose into
-        account (gating the candidates by it gave no clear gain on the data engine's sequences
-        and lost frames after large motions)."""
+        """Corner candidates of ``image`` as 2D-3D correspondences; with ``prior = (rvec, tvec, K)``
+        only those within ``gate * search_scale`` pixels of the corner's projection by it."""
+        predicted = None
+        if prior is not None:
+            rvec, tvec, K = prior
+            predicted = cv2.projectPoints(self.corners, np.asarray(rvec, np.float64), np.asarray(tvec, np.float64),
+                                          np.asarray(K, np.float64), None)[0].reshape(-1, 2)
         obj, img = [], []
-        for k, (xy, _) in enumerate(self.peaks(image)):
+        for k, (xy, _) in enumerate(self.peaks(image, predicted, self.gate * search_scale)):
             obj.extend([self.corners[k]] * len(xy))
             img.extend(xy)
         return Correspondences(np.asarray(obj, np.float32).reshape(-1, 3), np.asarray(img, np.float32).reshape(-1, 2),
                                len(img))
+
+
+def vote_positions(score: np.ndarray, votes: np.ndarray) -> np.ndarray:
+    """``(gh, gw, 2)``: per cell, the ``score``-weighted mean of the positions ``votes (gh, gw, 2)``
+    of its 3x3 neighbourhood (box filters)."""
+    p = score.astype(np.float64)
+    den = np.maximum(cv2.boxFilter(p, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT), 1e-12)
+    return np.stack([cv2.boxFilter(p * votes[..., c], -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+                     / den for c in range(2)], -1)

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.io import atomic_write, write_json
-from alcn_cv.report import machine, markdown_table
+from alcn_cv.report import describe_machine, machine, markdown_table
 from alcn_cv.errors import DatasetError, InputError
 from pose.build import build as build_model
 from pose.model import read_box_corners, unit_scale
@@ -146,84 +146,114 @@ def file_stem(spec: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", spec.replace("=", "-"))
 
 
-def table_markdown(table: dict[str, dict[str, float]], columns: list[str]) -> str:
+def table_markdown(table: dict[str, dict[str, float]], columns: list[str],
+                   spread: dict[str, dict[str, float]] | None = None) -> str:
     """The Table-1-style report as Markdown: one row per ``table`` key, percentages with one
-    decimal, ``-`` where a column is missing or NaN."""
-    rows = [[row, *(None if np.isnan(vals.get(c, np.nan)) else float(vals[c]) for c in columns)]
-            for row, vals in table.items()]
-    return markdown_table(["", *columns], rows, digits=1)
+    decimal (``mean ± spread`` where ``spread`` has the cell), ``-`` where a column is missing or NaN."""
+    def cell(row: str, c: str) -> Any:
+        value = table[row].get(c, np.nan)
+        if value is None or np.isnan(value):
+            return None
+        dev = (spread or {}).get(row, {}).get(c)
+        return float(value) if dev is None else f"{value:.1f} ± {dev:.1f}"
+
+    return markdown_table(["", *columns], [[row, *(cell(row, c) for c in columns)] for row in table], digits=1)
 
 
 def main(data_dir: str | Path, out_dir: str | Path, *,
          normalizers: list[str] | tuple[str, ...] = DEFAULT_NORMALIZERS,
          feature: str = "SIFT", obj_id: int = 1, n_features: int = 2000,
-         detectors: list[str] | tuple[str, ...] = ("features",), corner_kw: dict[str, Any] | None = None
-         ) -> dict[str, Any]:
+         detectors: list[str] | tuple[str, ...] = ("features",), corner_kw: dict[str, Any] | None = None,
+         seeds: int = 1, sequences: list[int] | None = None, command: str | None = None) -> dict[str, Any]:
     """Table-1-style evaluation on a pose data set (``train/000001``, ``test/0000NN``, ``models/``).
 
     For each detector (``"features"``: :class:`pose.parts.FeaturePartDetector`, ``"corners"``:
     :class:`pose.corners.CornerDetector`) and normalizer: a part model is built, or the corner
-    detector trained (:func:`pose.corners.train_corners` with ``corner_kw``), from the training
-    sequence on normalized images, then tracked through every test sequence. Writes
-    ``table1.md``, ``table1.json``, ``table1.png`` (and the models) into ``out_dir``.
+    detector trained ``seeds`` times (:func:`pose.corner_train.train_corners` with ``corner_kw``
+    and seeds 0, 1, ...; a cell is then the mean over the seeds, its spread their standard
+    deviation), from the training sequence on normalized images, then tracked through every test
+    sequence (or those numbered in ``sequences``). Writes ``table1.md`` (with the machine and
+    ``command``), ``table1.json``, ``table1.png`` (and the models) into ``out_dir``.
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     train = data_dir / "train" / "000001"
     tests = sorted(p for p in (data_dir / "test").glob("[0-9]*") if p.is_dir()) if (data_dir / "test").is_dir() else []
+    if sequences:
+        tests = [p for p in tests if int(p.name) in set(sequences)]
     model_ply = data_dir / "models" / f"obj_{obj_id:06d}.ply"
     if not train.is_dir() or not tests or not model_ply.is_file():
-        raise DatasetError(f"{data_dir}: expected train/000001, test/0000NN and models/obj_{obj_id:06d}.ply "
-                           "(`alcn data pose`)")
+        raise DatasetError(f"{data_dir}: expected train/000001, test/0000NN (those of --sequences) and "
+                           f"models/obj_{obj_id:06d}.ply (`alcn data pose`)")
+    if seeds < 1:
+        raise InputError(f"seeds must be >= 1, got {seeds}")
     corners = read_box_corners(model_ply)
     diameter = float(np.linalg.norm(corners.max(0) - corners.min(0)))
     columns = [f"#{int(p.name)}" for p in tests]
     table: dict[str, dict[str, float]] = {}
+    spread: dict[str, dict[str, float]] = {}
     details: dict[str, Any] = {}
     unknown = set(detectors) - {"features", "corners"}
     if unknown:
         raise InputError(f"unknown detectors {sorted(unknown)}; choose 'features' and/or 'corners'")
+    t_start = time.perf_counter()
     for det_name in detectors:
         for name in normalizers:
+            runs = []  # per seed: (detector, units, outline, info)
             if det_name == "features":
                 seq = load_sequence(train, obj_id=obj_id)
                 model, _ = build_model(seq, feature=feature, normalizer=name, box_ply=model_ply, work_dir=out_dir)
                 save_model(model, out_dir / f"model_{file_stem(name)}.npz")
-                det, units = FeaturePartDetector(model, name, n_features=n_features), model.units
-                outline = model.corners
                 row = f"{name} / {feature.lower()} features"
-                info = {"model_points": len(model.points3d), "box_fit": model.box_fit}
+                runs.append((FeaturePartDetector(model, name, n_features=n_features), model.units, model.corners,
+                             {"model_points": len(model.points3d), "box_fit": model.box_fit}))
             else:
                 from pose.corner_train import train_corners
                 from pose.corners import CornerDetector
 
-                t0 = time.perf_counter()
-                net = train_corners(train, corners, out_dir / f"corners_{file_stem(name)}.onnx", normalizer=name,
-                                    obj_id=obj_id, progress=False, **(corner_kw or {}))
-                det, units = CornerDetector(net), "mm"  # the BOP model's units
-                outline = det.corners
                 row = f"{name} / corner CNN"
-                info = {"training_seconds": time.perf_counter() - t0, "detector": str(net)}
-            table[row], details[row] = {}, {**info, "sequences": {}}
-            for col, scene_dir in zip(columns, tests):
-                scores, fps = evaluate_sequence(det, scene_dir, obj_id, corners, units, MIN_INLIERS[det_name],
-                                                outline, RANSAC_ITERATIONS[det_name], MIN_INLIERS_NEAR_PRIOR[det_name])
-                s = summarize(scores, diameter)
-                table[row][col] = s["proj2d"]
-                details[row]["sequences"][col] = {**s, "fps": fps, "frames": len(scores)}
-                logger.info("%s %s: %.1f%% correct (2D proj.), %.1f%% tracked", row, col, s["proj2d"], s["tracked"])
+                for seed in range(seeds):
+                    t0 = time.perf_counter()
+                    suffix = f"_seed{seed}" if seeds > 1 else ""
+                    net = train_corners(train, corners, out_dir / f"corners_{file_stem(name)}{suffix}.onnx",
+                                        normalizer=name, obj_id=obj_id, progress=False,
+                                        **{"seed": seed, **(corner_kw or {})})
+                    det = CornerDetector(net)
+                    runs.append((det, "mm", det.corners,  # the BOP model's units
+                                 {"training_seconds": time.perf_counter() - t0, "detector": str(net)}))
+            per_run = []
+            for det, units, outline, info in runs:
+                result = {**info, "sequences": {}}
+                for col, scene_dir in zip(columns, tests):
+                    scores, fps = evaluate_sequence(det, scene_dir, obj_id, corners, units, MIN_INLIERS[det_name],
+                                                    outline, RANSAC_ITERATIONS[det_name],
+                                                    MIN_INLIERS_NEAR_PRIOR[det_name])
+                    s = summarize(scores, diameter)
+                    result["sequences"][col] = {**s, "fps": fps, "frames": len(scores)}
+                    logger.info("%s %s: %.1f%% correct (2D proj.), %.1f%% tracked", row, col, s["proj2d"],
+                                s["tracked"])
+                per_run.append(result)
+            values = {c: [r["sequences"][c]["proj2d"] for r in per_run] for c in columns}
+            table[row] = {c: float(np.mean(v)) for c, v in values.items()}
+            if len(per_run) > 1:
+                spread[row] = {c: float(np.std(v)) for c, v in values.items()}
+            details[row] = per_run[0] if len(per_run) == 1 else {"seeds": per_run, "proj2d_per_seed": values,
+                                                                 "proj2d_std": spread[row]}
     host = machine()
     md = ("# Pose under light changes (Table 1 style)\n\n"
           f"Data: `{data_dir}`; cells: % of frames with 2D projection error < {PROJ_PX:g} px "
-          f"(ADD < {ADD_FRACTION:g} d and 5 cm / 5 deg in table1.json). Machine: "
-          f"{host.get('cpu_model', host['processor'])}, {host['cpu_count']} cores.\n\n"
-          + table_markdown(table, columns))
+          f"(ADD < {ADD_FRACTION:g} d and 5 cm / 5 deg in table1.json)"
+          + (f"; corner CNN rows: mean ± standard deviation over {seeds} training seeds" if seeds > 1 else "")
+          + f".\n\nMachine: {describe_machine(host)}. Wall time: {time.perf_counter() - t_start:.0f} s."
+          + (f"\n\nCommand: `{command}`" if command else "") + "\n\n"
+          + table_markdown(table, columns, spread))
     atomic_write(out_dir / "table1.md", md)
     write_json(out_dir / "table1.json", _nan_to_none({
-        "data": str(data_dir), "machine": host, "columns": columns, "table": table, "details": details,
+        "data": str(data_dir), "machine": host, "command": command, "columns": columns, "table": table,
+        "spread": spread, "seeds": seeds, "details": details,
         "metrics": {"proj2d_px": PROJ_PX, "add": ADD_FRACTION, "deg": DEG, "cm": CM}}))
-    plot_table(table, columns, out_dir / "table1.png", "Correct poses (2D projection < 5 px)")
-    return {"table": table, "details": details}
+    plot_table(table, columns, out_dir / "table1.png", "Correct poses (2D projection < 5 px)", spread)
+    return {"table": table, "spread": spread, "details": details}
 
 
 # --------------------------------------------------------------------------------------------

@@ -35,14 +35,18 @@ def plot_model(model: PartModel, camera_centers: np.ndarray, path: str | Path) -
     return save_figure(plt, fig, path, dpi=110)
 
 
-def plot_table(table: dict[str, dict[str, float]], columns: list[str], path: str | Path, title: str) -> Path:
-    """Bar chart of a Table-1-style report: one group of bars per column (sequence), one bar per row."""
+def plot_table(table: dict[str, dict[str, float]], columns: list[str], path: str | Path, title: str,
+               spread: dict[str, dict[str, float]] | None = None) -> Path:
+    """Bar chart of a Table-1-style report: one group of bars per column (sequence), one bar per
+    row, with error bars where ``spread`` has the row."""
     plt, fig, axes = new_figure(figsize=(8, 4))
     ax = axes[0, 0]
     x = np.arange(len(columns))
     w = 0.8 / max(len(table), 1)
     for k, (row, vals) in enumerate(table.items()):
-        ax.bar(x + (k - (len(table) - 1) / 2) * w, [vals.get(c, np.nan) for c in columns], w, label=row)
+        err = [(spread or {}).get(row, {}).get(c, np.nan) for c in columns]
+        ax.bar(x + (k - (len(table) - 1) / 2) * w, [vals.get(c, np.nan) for c in columns], w, label=row,
+               yerr=None if np.isnan(err).all() else err, capsize=2)
     ax.set(xticks=x, xticklabels=columns, ylabel="% correct poses", ylim=(0, 105), title=title)
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -135,7 +135,7 @@ MIN_INLIERS = {"features": 12, "corners": 5}
 #: 10 near the prediction (5 deg, 5% of the distance) raised #8, the overexposed one, from
 #: 56.7 to 76.7% correct poses and changed nothing else, with or without normalization; 8 inliers
 #: anywhere also gave 80.0 on #8 but let wrong poses through on #1 without normalization (93.3 -> 80.0).
-MIN_INLIERS_NEAR_PRIOR = {"features": 10, "corners": 5}
+MIN_INLIERS_NEAR_PRIOR = {"features": 10, "corners": 4}
 #: RANSAC iterations per detector (a cap: USAC stops once confident). The corner detector's
 #: candidates are few but mostly wrong (up to 4 per corner): on the data engine's sequences #1-#8
 #: (no normalization) 5000 iterations raised the sum over the sequences of the % of correct poses

@@ -111,3 +111,19 @@ def test_report_states_machine_command_and_settings(report):
     md = (out / "speed.md").read_text()
     assert "**Machine:**" in md and "**Settings:**" in md and f"`{result['command']}`" in md
     assert result["command"].startswith("alcn bench speed --out ") and "--sizes 64x48,96x72" in result["command"]
+
+
+def test_targets_are_reported(report):
+    out, result = report
+    targets = result["targets"]
+    assert len(targets["summary"]) == 9
+    for row in targets["summary"]:
+        assert set(row) == {"target", "measured", "goal", "met", "note"}
+    assert {r["method"] for r in targets["contract"]} == set(__import__("alcn_cv").available())
+    assert [r["threads"] for r in targets["threads"]] == [1, None] and all(r["torch_threads_kept"] for r in targets["threads"])
+    assert {r["method"] for r in targets["memory"]} == {"alcn", "dog"}
+    assert targets["video"]["frames"] >= 2 and targets["video"]["normalize_s"] > 0
+    assert "cpu" in targets["batched"] and targets["batched"]["cpu"]["half_max_abs"] < 0.05
+    assert {"network_ms", "mixture_ms", "contract_ms", "apply_ms"} <= set(targets["stages"]["alcn"]) and targets["profile"]
+    md = (out / "speed.md").read_text()
+    assert md.index("## Targets") < md.index("## Time") and "Where the time goes" in md

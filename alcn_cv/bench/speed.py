@@ -22,6 +22,14 @@ alcn,alcn:model=paper:mixture=exact``. A video
 test runs ALCN over a generated 1920x1080 video and records the resident memory after every
 frame (it must stay flat).
 
+The **targets** (:func:`targets`) come first in the report, each with its measured value: the
+default ALCN and the gain one against a raw OpenCV DoG (:func:`raw_dog`) at 1280x800 and the
+default's frame rate at 640x480, BGR against gray, the cost of the ``apply`` contract over each
+method's own computation, the peak memory on an 8000x8000 image, an application's OpenCV calls
+right after ``apply``, ``alcn normalize`` on the cookie-box video against its decoding and
+encoding alone, and the batched torch path (CUDA when present); with where the default's time
+goes (its stages, and a profile).
+
 Outputs in ``out_dir``: ``speed.json`` (every number, the settings, the command, the machine and
 its load before and after), ``speed.md`` (machine, command, settings and the tables) and
 ``speed.png`` (time against pixel count for every method, log-log, :mod:`alcn_cv.bench.plots`).
@@ -31,6 +39,7 @@ from __future__ import annotations
 
 import logging
 import os
+import tempfile
 import time
 import tracemalloc
 from collections.abc import Callable, Sequence
@@ -316,6 +325,13 @@ class SpeedSettings:
         image: an image file resized to every size instead of :func:`synthetic_frame`.
         warmup, min_repeats, max_repeats, budget_s: see :func:`time_calls` (per case).
         video_frames, video_budget_s: the video-memory test (grayscale; 0 frames: skip).
+        target_size, fps_size, target_repeats: frame sizes and timed rounds of the targets
+            (:func:`targets`: the default against a raw DoG, BGR against gray, the overhead of
+            ``apply``, the OpenCV calls after ``apply``, the batched torch path).
+        large_size: the large grayscale image of the peak-memory target.
+        normalize_video, normalize_video_frames: the video of the ``alcn normalize`` target
+            (default: the shared cookie-box video when present, else a generated one of
+            ``normalize_video_frames`` frames of ``fps_size``).
         video_size: frame size ``(width, height)`` of the video-memory test.
         video_methods: labels run in the video test (default: ``alcn`` and the fastest variant).
         threads: OpenCV and torch threads (default: their defaults).
@@ -336,6 +352,12 @@ class SpeedSettings:
     video_size: tuple[int, int] = SIZES[-1]
     video_methods: list[str] | None = None
     threads: int | None = None
+    target_size: tuple[int, int] = (1280, 800)
+    fps_size: tuple[int, int] = (640, 480)
+    target_repeats: int = 31
+    large_size: tuple[int, int] = (8000, 8000)
+    normalize_video: str | None = None
+    normalize_video_frames: int = 0
 
     def check(self) -> None:
         """Raise :class:`~alcn_cv.errors.InputError` on an unknown colour."""
@@ -350,7 +372,9 @@ def presets() -> dict[str, SpeedSettings]:
     return {
         "default": SpeedSettings(),
         "quick": SpeedSettings(sizes=list(QUICK_SIZES), warmup=0, min_repeats=2, max_repeats=2, budget_s=0.0,
-                               video_frames=3, video_budget_s=10.0, video_size=QUICK_SIZES[-1]),
+                               video_frames=3, video_budget_s=10.0, video_size=QUICK_SIZES[-1],
+                               target_size=QUICK_SIZES[-1], fps_size=QUICK_SIZES[0], target_repeats=2,
+                               large_size=(256, 192), normalize_video="generated", normalize_video_frames=4),
     }
 
 
@@ -477,6 +501,234 @@ def _video_test(methods: list[Method], built: dict[str, Normalization], errors: 
     return video
 
 
+# --- The targets: ratios taken in one run, the methods timed in turns ------------------------
+
+
+def raw_dog(frame: np.ndarray) -> np.ndarray:
+    """The reference of the targets: a raw OpenCV DoG (uint8 to float32, two ``cv2.GaussianBlur``
+    of sigma 0.5 and 1.5, subtract), what an application would write by hand."""
+    unit = frame.astype(np.float32) * np.float32(1 / 255)
+    return cv2.GaussianBlur(unit, (0, 0), 0.5) - cv2.GaussianBlur(unit, (0, 0), 1.5)
+
+
+def _medians(calls: dict[str, Callable[[], Any]], repeats: int) -> dict[str, float]:
+    """Median milliseconds of each call, timed in turns (one call of each per round) after one warm-up."""
+    for fn in calls.values():
+        fn()
+    return {label: float(np.median(t) * 1e3) for label, t in _time_rounds(calls, repeats, repeats, 0.0).items()}
+
+
+def _target(name: str, measured: float | None, goal: str, met: bool | None, note: str = "") -> dict[str, Any]:
+    return {"target": name, "measured": measured, "goal": goal, "met": met, "note": note}
+
+
+def _profile(norm: ALCN, frame: np.ndarray, calls: int) -> list[dict[str, Any]]:
+    """The functions where ``apply`` spends its time (cProfile, own time per call), largest first."""
+    import cProfile
+    import pstats
+
+    profiler = cProfile.Profile()
+    profiler.enable()
+    for _ in range(calls):
+        norm.apply(frame)
+    profiler.disable()
+    stats = pstats.Stats(profiler).stats  # type: ignore[attr-defined]
+    rows = [{"function": f"{Path(file).name}:{line}({fn})" if file != "~" else fn, "calls_per_apply": nc / calls,
+             "own_ms_per_apply": tt * 1e3 / calls} for (file, line, fn), (_, nc, tt, _, _) in stats.items()]
+    return sorted(rows, key=lambda r: -r["own_ms_per_apply"])[:12]
+
+
+def _stages(norm: ALCN, frame: np.ndarray, repeats: int) -> dict[str, float]:
+    """Median ms of ALCN's stages on a gray uint8 frame, timed in turns: the Normalizer network
+    (``weight_grid``, with the working-scale resize), the mixture (``normalize`` minus the
+    network), the ``apply`` contract (``apply`` minus ``normalize``)."""
+    gray = frame.astype(np.float32) / np.float32(255)
+    t = _medians({"network": lambda: norm.weight_grid(gray), "normalize": lambda: norm.normalize(gray),
+                  "apply": lambda: norm.apply(frame)}, repeats)
+    return {"network_ms": t["network"], "mixture_ms": max(0.0, t["normalize"] - t["network"]),
+            "contract_ms": max(0.0, t["apply"] - t["normalize"]), "apply_ms": t["apply"]}
+
+
+def _contract_overhead(frame: np.ndarray, repeats: int) -> list[dict[str, Any]]:
+    """For every registered method: ``apply(uint8 frame)`` against the method's own computation
+    (``_normalize`` on the float32 intensities), timed in turns."""
+    from alcn_cv.enhance.registry import available
+
+    gray = frame.astype(np.float32) / np.float32(255)
+    rows = []
+    for name in available():
+        method = create(name)
+        calls = {"apply": lambda: method.apply(frame), "own": lambda: method._normalize(gray)}
+        for fn in calls.values():
+            fn()
+        times = _time_rounds(calls, 3, repeats, 2.0)  # at most about 2 s each: sqi takes seconds
+        t = {label: float(np.median(v) * 1e3) for label, v in times.items()}
+        fastest = {label: float(v.min() * 1e3) for label, v in times.items()}
+        # The fastest runs are the least disturbed by a shared machine's load: the overhead is
+        # taken from them, the medians are reported beside.
+        rows.append({"method": name, "apply_ms": t["apply"], "own_ms": t["own"], "apply_min_ms": fastest["apply"],
+                     "own_min_ms": fastest["own"], "overhead": fastest["apply"] / fastest["own"] - 1 if fastest["own"] > 0 else None,
+                     "overhead_of_medians": t["apply"] / t["own"] - 1 if t["own"] > 0 else None})
+    return rows
+
+
+def _after_apply(frame: np.ndarray, repeats: int, threads: int | None) -> dict[str, Any]:
+    """An application's own OpenCV calls (a Gaussian blur and Canny on the frame) timed right after
+    ``apply`` and right after themselves, in turns, with the Normalizer on ``threads`` torch threads."""
+    import torch
+
+    norm = ALCN(threads=threads)
+    before_threads = torch.get_num_threads()
+
+    def app() -> None:
+        cv2.GaussianBlur(frame, (0, 0), 2.0)
+        cv2.Canny(frame, 50, 150)
+
+    after, alone, applied = [], [], []
+    norm.apply(frame)
+    app()
+    for _ in range(repeats):
+        app()
+        t0 = time.perf_counter()
+        app()
+        alone.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        norm.apply(frame)
+        applied.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        app()
+        after.append(time.perf_counter() - t0)
+    alone_ms, after_ms = float(np.median(alone) * 1e3), float(np.median(after) * 1e3)
+    return {"threads": threads, "app_ms": alone_ms, "app_after_apply_ms": after_ms, "ratio": after_ms / alone_ms,
+            "apply_ms": float(np.median(applied) * 1e3), "torch_threads_kept": torch.get_num_threads() == before_threads}
+
+
+def _large_memory(size: tuple[int, int]) -> list[dict[str, Any]]:
+    """Peak memory of ``apply`` on a large grayscale uint8 image (a synthetic frame tiled), for the
+    default ALCN and the DoG, against the image's float32 size."""
+    width, height = size
+    tile = synthetic_frame(min(width, 1280), min(height, 800), False)
+    image = np.ascontiguousarray(np.tile(tile, (-(-height // tile.shape[0]), -(-width // tile.shape[1])))[:height, :width])
+    float_mb = image.size * 4 / 2**20
+    rows = []
+    for label, norm in (("alcn", ALCN()), ("dog", create("dog"))):
+        t0 = time.perf_counter()
+        memory = peak_memory(lambda: norm.apply(image))
+        added = memory["rss_added_mb"]
+        rows.append({"method": label, "size": [width, height], "seconds": time.perf_counter() - t0, "float32_mb": float_mb,
+                     **memory, "added_per_float32": None if added is None else added / float_mb,
+                     "strips": len(norm._strips(image.shape) or [])})
+    return rows
+
+
+def _normalize_video(settings: SpeedSettings, work: Path) -> dict[str, Any]:
+    """``alcn normalize`` on a video (:func:`alcn_cv.io.map_video` with the default's ``apply``, what
+    the command runs) against its decoding and encoding alone and ``apply`` alone."""
+    from alcn_cv.io import VideoReader, map_video, open_video_writer
+
+    source = settings.normalize_video
+    shared = Path(os.environ.get("ALCN_SHARED_DATA", "/work/shared/data")) / "cookie_box" / "box.mp4"
+    if source is None and shared.is_file():
+        source = str(shared)
+    if source is None or source == "generated":
+        width, height = settings.fps_size
+        source = str(work / "generated.avi")
+        writer = open_video_writer(source, 30.0, (width, height))
+        for i in range(max(2, settings.normalize_video_frames)):
+            writer.write(synthetic_frame(width, height, True, seed=1, t=0.1 * i))
+        writer.release()
+    with VideoReader(source) as video:
+        frames = list(video)
+    norm = ALCN()
+    t0 = time.perf_counter()
+    map_video(source, work / "copy.mp4", lambda frame: frame, desc="decode+encode")
+    codec_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for frame in frames:
+        norm.apply(frame)
+    apply_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    map_video(source, work / "normalized.mp4", create("alcn").apply, desc="alcn normalize")  # what the command runs
+    whole_s = time.perf_counter() - t0
+    return {"video": source, "frames": len(frames), "size": [frames[0].shape[1], frames[0].shape[0]],
+            "decode_encode_s": codec_s, "apply_s": apply_s, "normalize_s": whole_s,
+            "sequential_s": codec_s + apply_s, "bound_s": max(codec_s, apply_s),
+            "normalize_fps": len(frames) / whole_s}
+
+
+def _batched(frame: np.ndarray, small: np.ndarray, repeats: int) -> dict[str, Any]:
+    """The batched torch path (:meth:`ALCN.apply_batch`, the exact Eq. 3): on CUDA when torch sees
+    a GPU (batches of 16 frames), and on the CPU (2 small frames: there it only checks the
+    path); ms per frame, and the float16 network's difference from float32."""
+    import torch
+
+    result: dict[str, Any] = {"cuda_available": torch.cuda.is_available()}
+    cases = [("cpu", np.stack([small] * 2), 2)]
+    if torch.cuda.is_available():
+        cases.append(("cuda", np.stack([frame] * 16), repeats))
+    for device, batch, rounds in cases:
+        norm = ALCN(backend="torch", device=device)
+        full = norm.apply_batch(batch, out_dtype=np.float32)
+        half = norm.apply_batch(batch, out_dtype=np.float32, half=True)
+        t = _medians({"float32": lambda: norm.apply_batch(batch), "float16": lambda: norm.apply_batch(batch, half=True)}, rounds)
+        result[device] = {"size": [batch.shape[2], batch.shape[1]], "batch": len(batch),
+                          "ms_per_frame": t["float32"] / len(batch), "ms_per_frame_half": t["float16"] / len(batch),
+                          "fps": 1e3 * len(batch) / t["float32"], "half_max_abs": float(np.abs(half - full).max())}
+    return result
+
+
+def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
+    """Every target of the real-time work, measured in this run (ratios of medians of methods
+    timed in turns, so that they see the same load)."""
+    width, height = settings.target_size
+    gray, bgr = synthetic_frame(width, height, False), synthetic_frame(width, height, True)
+    small = synthetic_frame(*settings.fps_size, False)
+    default, gain = ALCN(), ALCN(model="gain")
+    repeats = settings.target_repeats
+    logger.info("targets: ratios at %dx%d", width, height)
+    t = _medians({"dog raw": lambda: raw_dog(gray), "alcn gray": lambda: default.apply(gray),
+                  "alcn bgr": lambda: default.apply(bgr), "alcn gain gray": lambda: gain.apply(gray),
+                  "alcn gain bgr": lambda: gain.apply(bgr), "dog raw small": lambda: raw_dog(small),
+                  "alcn gray small": lambda: default.apply(small)}, repeats)
+    logger.info("targets: stages, contract, threads, memory, video, batches")
+    stages = {"alcn": _stages(default, gray, repeats), "alcn gain": _stages(gain, gray, repeats)}
+    profile = _profile(default, gray, repeats)
+    contract = _contract_overhead(gray, max(3, repeats // 2))
+    threads = [_after_apply(gray, repeats, 1), _after_apply(gray, repeats, None)]
+    memory = _large_memory(settings.large_size)
+    video = _normalize_video(settings, work)
+    batched = _batched(gray, small, repeats)
+    ratio, gain_ratio = t["alcn gray"] / t["dog raw"], t["alcn gain gray"] / t["dog raw"]
+    fps = 1e3 / t["alcn gray small"]
+    colour = t["alcn bgr"] / t["alcn gray"]
+    worst = max((r for r in contract if r["method"] != "none" and r["overhead"] is not None), key=lambda r: r["overhead"])
+    alcn_memory = next(r for r in memory if r["method"] == "alcn")
+    size = f"{width}x{height}"
+    summary = [
+        _target(f"default ALCN / raw DoG, {size} gray", ratio, "<= 2 (stretch 1.5)", ratio <= 2,
+                f"{t['alcn gray']:.2f} ms against {t['dog raw']:.2f} ms"),
+        _target(f"gain ALCN / raw DoG, {size} gray", gain_ratio, "(measured)", None, f"{t['alcn gain gray']:.2f} ms"),
+        _target("default ALCN fps, {}x{} gray".format(*settings.fps_size), fps, ">= 200", fps >= 200),
+        _target(f"BGR / gray, {size}", colour, "<= 1.3", colour <= 1.3, f"gain model: {t['alcn gain bgr'] / t['alcn gain gray']:.2f}"),
+        _target("apply() overhead over the method's own computation (worst method but none)", worst["overhead"],
+                "<= 0.2", worst["overhead"] <= 0.2, worst["method"]),
+        _target("peak memory added / float32 image, {}x{} gray".format(*settings.large_size),
+                alcn_memory["added_per_float32"], "<= 3", None if alcn_memory["added_per_float32"] is None
+                else alcn_memory["added_per_float32"] <= 3, f"{alcn_memory['strips']} strips"),
+        _target("OpenCV calls after apply / alone", threads[0]["ratio"], "about 1", threads[0]["ratio"] <= 1.1,
+                f"torch's threads: {threads[1]['ratio']:.2f}, apply {threads[1]['apply_ms']:.1f} ms against "
+                f"{threads[0]['apply_ms']:.1f} ms"),
+        _target("alcn normalize video / (decode+encode + apply, in sequence)", video["normalize_s"] / video["sequential_s"],
+                "< 1: decoding and encoding hidden", video["normalize_s"] < video["sequential_s"],
+                f"bound max(decode+encode, apply): {video['bound_s'] / video['sequential_s']:.2f}"),
+        _target(f"batched torch path, {size} frames per second on CUDA", batched["cuda"]["fps"] if batched["cuda_available"] else None,
+                ">= 2000 on an H100", batched["cuda"]["fps"] >= 2000 if batched["cuda_available"] else None,
+                "no CUDA device in this run: path tested on the CPU" if not batched["cuda_available"] else ""),
+    ]
+    return {"times_ms": t, "summary": summary, "stages": stages, "profile": profile, "contract": contract,
+            "threads": threads, "memory": memory, "video": video, "batched": batched}
+
+
 def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> dict[str, Any]:
     """Run the speed benchmark and write ``speed.json``, ``speed.md`` and ``speed.png`` into ``out_dir``.
 
@@ -513,11 +765,15 @@ def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> d
             rows += case_rows
             accuracy += case_accuracy
     video = _video_test(methods, built, errors, rows, settings)
+    with tempfile.TemporaryDirectory() as work:
+        target_results = targets(settings, Path(work))
 
     result = {
         "command": speed_command(out_dir, settings),
         "settings": {**asdict(settings), "sizes": [list(size) for size in settings.sizes],
-                     "video_size": list(settings.video_size), "frames": settings.image or "synthetic_frame(seed=0)",
+                     "video_size": list(settings.video_size),
+                     "target_size": list(settings.target_size), "fps_size": list(settings.fps_size),
+                     "large_size": list(settings.large_size), "frames": settings.image or "synthetic_frame(seed=0)",
                      "opencv_threads": cv2.getNumThreads(), "torch_threads": torch.get_num_threads()},
         "machine_before": machine_before,
         "machine_after": machine(),
@@ -525,6 +781,7 @@ def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> d
         "rows": rows,
         "accuracy": accuracy,
         "video": video,
+        "targets": target_results,
         "errors": errors,
     }
     write_json(out / "speed.json", result)
@@ -555,9 +812,8 @@ def _markdown(result: dict[str, Any]) -> str:
         "the frame's intensities (network: `weight_grid`; mixture: the rest, map interpolation and Eq. 3); the "
         "memory columns are of one more `apply`.",
         "",
-        "## Time",
-        "",
     ]
+    lines += _targets_markdown(result["targets"]) + ["## Time", ""]
     headers = ["size", "colour", "method", "x dog", "median ms", "IQR ms", "fps", "network ms", "mixture ms",
                "traced peak MB", "RSS peak MB", "RSS added MB", "runs"]
     table = [[f"{r['width']}x{r['height']}", r["colour"], r["method"], r["ratio_to_dog"], r["median_ms"], r["iqr_ms"],
@@ -584,3 +840,46 @@ def _markdown(result: dict[str, Any]) -> str:
     if result["errors"]:
         lines += ["", "## Not run", ""] + [f"- `{k}`: {v}" for k, v in result["errors"].items()]
     return "\n".join(lines) + "\n"
+
+
+def _targets_markdown(t: dict[str, Any]) -> list[str]:
+    """The targets' section of ``speed.md``."""
+    yes_no = {True: "met", False: "missed", None: "-"}
+    lines = ["## Targets", "", "Ratios of medians of calls timed in turns in this run (see `speed.json` for every time).", ""]
+    lines.append(markdown_table(["target", "measured", "goal", "", "note"],
+                                [[r["target"], r["measured"], r["goal"], yes_no[r["met"]], r["note"]] for r in t["summary"]],
+                                digits=2))
+    lines += ["", "### Where the time goes (ms, medians in turns; frame of the first target)", ""]
+    lines.append(markdown_table(["model", "network", "mixture", "apply contract", "apply"],
+                                [[m, s["network_ms"], s["mixture_ms"], s["contract_ms"], s["apply_ms"]] for m, s in t["stages"].items()],
+                                digits=2))
+    lines += ["", "Profile of the default's `apply` (cProfile, own time per call, with its overhead):", ""]
+    lines.append(markdown_table(["function", "calls per apply", "own ms per apply"],
+                                [[p["function"], p["calls_per_apply"], p["own_ms_per_apply"]] for p in t["profile"]], digits=2))
+    lines += ["", "### apply() against each method's own computation (`_normalize` on float32 intensities)", "",
+              "Overhead from the fastest runs of each (the least disturbed by the load); medians beside.", ""]
+    lines.append(markdown_table(["method", "apply ms", "own ms", "apply min ms", "own min ms", "overhead", "of medians"],
+                                [[r["method"], r["apply_ms"], r["own_ms"], r["apply_min_ms"], r["own_min_ms"], r["overhead"],
+                                  r["overhead_of_medians"]] for r in t["contract"]], digits=3))
+    lines += ["", "### An application's OpenCV calls (GaussianBlur + Canny) alone and right after apply", ""]
+    lines.append(markdown_table(["Normalizer torch threads", "alone ms", "after apply ms", "ratio", "apply ms", "torch threads kept"],
+                                [[r["threads"] or "torch's", r["app_ms"], r["app_after_apply_ms"], r["ratio"], r["apply_ms"],
+                                  r["torch_threads_kept"]] for r in t["threads"]], digits=2))
+    lines += ["", "### Peak memory on a large grayscale image", ""]
+    lines.append(markdown_table(["method", "size", "s", "float32 image MB", "RSS added MB", "added / float32", "strips"],
+                                [[r["method"], "x".join(map(str, r["size"])), r["seconds"], r["float32_mb"], r["rss_added_mb"],
+                                  r["added_per_float32"], r["strips"]] for r in t["memory"]], digits=2))
+    v = t["video"]
+    lines += ["", f"### `alcn normalize` on {Path(v['video']).name} ({v['frames']} frames of {'x'.join(map(str, v['size']))})", ""]
+    lines.append(markdown_table(["decode+encode s", "apply alone s", "sequential sum s", "alcn normalize s", "fps"],
+                                [[v["decode_encode_s"], v["apply_s"], v["sequential_s"], v["normalize_s"], v["normalize_fps"]]],
+                                digits=2))
+    b = t["batched"]
+    lines += ["", "### Batched torch path (`ALCN.apply_batch`, batches of 4)", ""]
+    lines.append(markdown_table(["device", "frames", "ms per frame", "ms per frame float16", "fps", "float16 max abs diff"],
+                                [[d, f"{b[d]['batch']} x {b[d]['size'][0]}x{b[d]['size'][1]}", b[d]["ms_per_frame"],
+                                  b[d]["ms_per_frame_half"], b[d]["fps"], b[d]["half_max_abs"]]
+                                 for d in ("cpu", "cuda") if d in b], digits=4))
+    if not b["cuda_available"]:
+        lines += ["", "No CUDA device in this run: the CUDA path is tested on the CPU only (the CUDA test skips)."]
+    return lines + [""]

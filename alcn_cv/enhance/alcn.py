@@ -24,12 +24,12 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from alcn_cv.checks import unit_windows
+from alcn_cv.checks import FULL_SCALE, SUPPORTED_DTYPES, check_image, unit_windows
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
-from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, pyramid_mixture
+from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, kernel_radius, pyramid_mixture, pyramid_plan
 from alcn_cv.nets.opencv_runtime import WINDOW
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 
@@ -91,9 +91,11 @@ class ALCN(Normalization):
             maps sampled directly from the grid at each level
             (:func:`alcn_cv.filters.gaussian_mixture.pyramid_mixture`), 5 to 10 times cheaper.
             Default: ``"pyramid"``, except ``"exact"`` with ``backend="torch"``.
-        threads: torch's intra-op threads while the Normalizer runs (restored after); default:
-            torch's setting. 1 is the fastest for the lite Normalizer and on a loaded machine,
-            where the threads of small convolutions wait for each other.
+        threads: torch's intra-op threads while the Normalizer runs (restored after); default 1:
+            the fastest for the light Normalizers and on a loaded machine, where the threads of
+            small convolutions wait for each other, and it leaves no torch (OpenMP) threads
+            spinning to slow the OpenCV calls that follow, the mixture's and the application's.
+            None: torch's own setting.
 
     The default, ``model="lite"`` with ``mixture="pyramid"``, is the real-time configuration;
     ``model="paper", mixture="exact"`` is the exact Eq. 3 with the paper's network.
@@ -113,7 +115,7 @@ class ALCN(Normalization):
         grid_stride: int | None = None,
         mixture: str | None = None,
         model: str = "lite",
-        threads: int | None = None,
+        threads: int | None = 1,
     ) -> None:
         if backend is None:
             backend = "fast" if is_installed("torch") else "opencv"
@@ -143,6 +145,7 @@ class ALCN(Normalization):
         #: gain Normalizer's method (:mod:`alcn_cv.nets.gain`); None for the others.
         self.equalization_tau = float(meta["equalization"]["tau"]) if "equalization" in meta else None
         self.trained = bool(meta["trained"])
+        self._network_reach = _network_reach(meta)
         if not self.trained:
             logger.warning("%s holds UNTRAINED Normalizer weights (%s)", self.weights_path.name, meta.get("description", ""))
         self.backend = backend
@@ -293,9 +296,15 @@ class ALCN(Normalization):
         (ry, rx), step = ratios, 2.0**level
         ax, bx = step * rx / g, (0.5 * rx - 0.5) / g
         ay, by = step * ry / g, (0.5 * ry - 0.5) / g
+        h, w = shape
+        along_y, along_x = _integer_zoom(ay, by), _integer_zoom(ax, bx)
+        if along_y and along_x and grid.shape[1] * along_y[0] >= along_y[1] + h and grid.shape[2] * along_x[0] >= along_x[1] + w:
+            # The level's pixels fall on a zoom of the grid by an integer factor: one cv2.resize,
+            # the exact bilinear interpolation (at level 0 of a frame of even size, usually).
+            (zy, oy), (zx, ox) = along_y, along_x
+            return [cv2.resize(grid[k], None, fx=zx, fy=zy, interpolation=cv2.INTER_LINEAR)[oy : oy + h, ox : ox + w] for k in ks]
         f = 2 ** max(0, int(np.floor(np.log2(1.0 / (MAP_STEP_PER_CELL * max(ax, ay))))))
         to_grid = np.array([[ax * f, 0.0, ax * (f - 1) / 2 + bx], [0.0, ay * f, ay * (f - 1) / 2 + by]])
-        h, w = shape
         coarse = (w, h) if f == 1 else (-(-w // f) + 1, -(-h // f) + 1)
         flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
         maps = []
@@ -321,6 +330,20 @@ class ALCN(Normalization):
         if maps.shape[1:] == (h, w):
             return maps
         return np.stack([cv2.resize(m, (w, h), interpolation=cv2.INTER_LINEAR) for m in maps])
+
+    def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
+        # A strip gives the whole image's output when it starts on a grid row (and so on a row
+        # of every pyramid level) and its working image is the whole one's rows (an integer
+        # zoom from the working scale); its halo covers the Normalizer's windows around the
+        # grid points its maps interpolate, and the mixture's blurs and pyramid filters.
+        zoom = 1.0 / self.scale
+        if abs(zoom - round(zoom)) > 1e-9 or abs(shape[0] * self.scale - round(shape[0] * self.scale)) > 1e-9:
+            return None
+        zoom = round(zoom)
+        top = max(level for level, _ in pyramid_plan(self.full_res_sigmas, PYRAMID_MIN_SIGMA)) if self.mixture == "pyramid" else 0
+        step = math.lcm(zoom * self.grid_stride, 2**top)
+        reach = zoom * (self._network_reach + self.grid_stride) + kernel_radius(max(self.full_res_sigmas)) + 2 ** (top + 2)
+        return -(-reach // step) * step, step
 
     def _equalize(self, response: np.ndarray) -> np.ndarray:
         """The method's final contrast equalization, when it has one (the gain Normalizer)."""
@@ -355,6 +378,71 @@ class ALCN(Normalization):
                 maps = F.interpolate(maps, size=image.shape[-2:], mode="bilinear", align_corners=False)
             return gaussian_mixture2d(image, maps, self.full_res_sigmas)[0, 0].cpu().numpy()
 
+    def apply_batch(self, frames: np.ndarray, out_dtype: type | np.dtype | str | None = None, half: bool = False) -> np.ndarray:
+        """:meth:`apply` on a batch of grayscale frames of one size, in one pass of the Normalizer
+        and of the exact Eq. 3 on :attr:`device` (``backend="torch"``): the GPU path.
+
+        The frames are sent to the device as they are (uint8: a quarter of the float traffic)
+        and converted there. The working image is the frames averaged over blocks of
+        ``1 / scale`` pixels, which is what ``cv2.INTER_AREA`` gives when the frame's sides
+        are multiples of ``1 / scale`` (then the outputs equal :meth:`apply`'s to float
+        rounding); other sizes are resized by torch's area interpolation.
+
+        Args:
+            frames: ``(B, H, W)`` uint8, uint16, or float32 intensities in [0, 1].
+            out_dtype: as in :meth:`apply` (default: the frames' dtype).
+            half: run the Normalizer and the mixture in float16 under ``torch.autocast`` (for
+                CUDA; on the CPU it is slow and only checks the path).
+
+        Returns:
+            ``(B, H, W)`` of ``out_dtype``.
+        """
+        if self.backend != "torch":
+            raise InputError(f"apply_batch runs on backend='torch' (device 'cpu' or 'cuda'), not {self.backend!r}")
+        if not isinstance(frames, np.ndarray) or frames.ndim != 3 or frames.size == 0:
+            raise InputError(f"frames must be a non-empty (B, H, W) array, got {getattr(frames, 'shape', type(frames))}")
+        for frame in frames[:1]:
+            check_image(frame)  # the dtype; a float batch's range is checked as a whole below
+        if frames.dtype == np.float32:
+            check_image(frames.reshape(-1, frames.shape[-1]))
+        out_dtype = np.dtype(frames.dtype if out_dtype is None else out_dtype)
+        if out_dtype not in SUPPORTED_DTYPES:
+            raise InputError(f"unsupported out_dtype {out_dtype}; use uint8, uint16 or float32")
+        import torch
+
+        from alcn_cv.filters.kornia_mixture import gaussian_mixture2d
+
+        device = next(self.net.parameters()).device
+        lo, hi = self.output_range
+        with torch.inference_mode(), _torch_threads(self.threads):
+            x = torch.from_numpy(np.ascontiguousarray(frames).astype(frames.dtype.newbyteorder("="), copy=False)).to(device)
+            x = x.clamp(0, 1) if frames.dtype == np.float32 else x.float() * (1.0 / FULL_SCALE[frames.dtype])
+            x = x[:, None]
+            with torch.autocast(device.type, torch.float16, enabled=half):  # the network; Eq. 3 in float32
+                maps = self.net.dense(self._working_batch(x), self.grid_stride).float()
+            maps = torch.nn.functional.interpolate(maps, size=x.shape[-2:], mode="bilinear", align_corners=False)
+            response = gaussian_mixture2d(x, maps, self.full_res_sigmas)
+            if self.equalization_tau is not None:
+                response = torch.tanh(response / self.equalization_tau)
+            unit = ((response[:, 0] - lo) * (1.0 / (hi - lo))).clamp(0, 1)
+            if out_dtype != np.float32:
+                unit = torch.round(unit * FULL_SCALE[out_dtype]).to(torch.int32)
+            return unit.cpu().numpy().astype(out_dtype)
+
+    def _working_batch(self, x: torch.Tensor) -> torch.Tensor:
+        """A ``(B, 1, H, W)`` batch at the working scale (see :meth:`apply_batch`)."""
+        import torch.nn.functional as F
+
+        if self.scale == 1:
+            return x
+        size = self._working_shape(tuple(x.shape[-2:]))
+        zoom = 1.0 / self.scale
+        if zoom == round(zoom) and x.shape[-2] % round(zoom) == 0 and x.shape[-1] % round(zoom) == 0:
+            return F.avg_pool2d(x, round(zoom))  # cv2.INTER_AREA's blocks
+        if self.scale < 1:
+            return F.interpolate(x, size=size, mode="area")
+        return F.interpolate(x, size=size, mode="bilinear", align_corners=False)
+
     def __repr__(self) -> str:
         return (
             f"ALCN(weights={self.weights_path.name!r}, scale={self.scale}, backend={self.backend!r}, "
@@ -362,15 +450,38 @@ class ALCN(Normalization):
         )
 
 
+def _network_reach(meta: dict) -> int:
+    """How far from a grid point, in working pixels, the Normalizer a weight file describes
+    looks: half its 48-pixel window, or for the gain Normalizer (:mod:`alcn_cv.nets.gain`) its
+    cells, the reach of its context blur on them and of its dilated convolutions."""
+    if meta.get("architecture") != "gain":
+        return WINDOW // 2
+    config = meta["config"]
+    stride = int(config["stride"])
+    blur = max(float(config["mean_sigma"]), float(config["context_sigma"])) / stride
+    return stride * (1 + kernel_radius(blur) + sum(int(d) for d in config["dilations"]))
+
+
+def _integer_zoom(step: float, offset: float) -> tuple[int, int] | None:
+    """``(z, o)`` when pixel ``x`` at grid coordinate ``step * x + offset`` is pixel ``x + o``
+    of the grid zoomed ``z`` times by ``cv2.resize`` (which puts pixel ``x`` at
+    ``(x + 0.5) / z - 0.5``), ``z`` and ``o >= 0`` integers; else None."""
+    zoom = 1.0 / step
+    shift = (offset + 0.5 - 0.5 * step) * zoom
+    if abs(zoom - round(zoom)) > 1e-9 or abs(shift - round(shift)) > 1e-6 or round(shift) < 0 or round(zoom) < 2:
+        return None
+    return round(zoom), round(shift)
+
+
 @contextmanager
 def _torch_threads(threads: int | None) -> Iterator[None]:
     """Run the block with ``threads`` torch intra-op threads (no change for None)."""
-    if threads is None:
-        yield
-        return
     import torch
 
     before = torch.get_num_threads()
+    if threads is None or threads == before:
+        yield
+        return
     torch.set_num_threads(threads)
     try:
         yield

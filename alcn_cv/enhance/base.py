@@ -13,7 +13,10 @@ A normalization object has two entry points:
 * :meth:`Normalization.normalize` -- the raw response on a float32 ``HxW`` intensity image in
   [0, 1], for detectors and benchmarks that want unclipped values.
 
-The caller's array is never modified.
+The caller's array is never modified. An image of more than :data:`TILE_PIXELS` pixels is
+normalized in horizontal strips, each with the rows around it that its output depends on, by
+the methods whose output is local (:meth:`Normalization._tiling`; ALCN, ``dog``, ``slcn``): the
+result is the whole image's and the memory a strip's.
 """
 
 from __future__ import annotations
@@ -30,20 +33,40 @@ from alcn_cv.errors import InputError
 __all__ = ["Normalization", "NoNormalization"]
 
 logger = logging.getLogger(__name__)
+#: Images of more pixels are normalized in horizontal strips by the methods that allow it
+#: (:meth:`Normalization._tiling`): the peak memory stays a small multiple of a strip's.
+TILE_PIXELS = 2**24
 #: The classes that already warned about an image smaller than their window (once per process).
 _WARNED_SMALL: set[type] = set()
 
 
 def _to_unit_float(img: np.ndarray) -> np.ndarray:
+    # A new C-ordered array whatever the input's layout: the caller's stays untouched and the
+    # OpenCV calls that follow may write into this one.
     if img.dtype == np.float32:
-        return np.clip(img, 0.0, 1.0)  # a copy: the caller's array stays untouched
-    return img.astype(np.float32) * np.float32(1.0 / FULL_SCALE[img.dtype])
+        return np.clip(img, 0.0, 1.0, out=np.empty(img.shape, np.float32))
+    unit = img.astype(np.float32, order="C")
+    unit *= np.float32(1.0 / FULL_SCALE[img.dtype])
+    return unit
 
 
-def _from_unit_float(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
+def _unit_in_place_to(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """float32 intensities clipped to [0, 1] and converted to ``dtype`` (``rint(unit * full
+    scale)`` for the integer types), with ``unit`` as scratch space. An image of up to four
+    channels takes OpenCV passes: for uint8 the lower clip, then ``cv2.convertScaleAbs``, which
+    rounds half to even and saturates as ``np.rint`` after the clip does, bit for bit."""
+    if unit.ndim == 3 and unit.shape[2] > 4:
+        np.clip(unit, 0.0, 1.0, out=unit)
+    else:  # cv2.threshold: no scalar that OpenCV could take for an array
+        cv2.threshold(unit, 0.0, 0.0, cv2.THRESH_TOZERO, dst=unit)
+        if dtype == np.uint8:
+            return cv2.convertScaleAbs(unit, alpha=FULL_SCALE[dtype])
+        cv2.threshold(unit, 1.0, 0.0, cv2.THRESH_TRUNC, dst=unit)
     if dtype == np.float32:
-        return unit.astype(np.float32, copy=False)
-    return np.rint(unit * FULL_SCALE[dtype]).astype(dtype)
+        return np.ascontiguousarray(unit)
+    unit *= FULL_SCALE[dtype]
+    np.rint(unit, out=unit)
+    return unit.astype(dtype)
 
 
 class Normalization:
@@ -81,7 +104,10 @@ class Normalization:
         Returns:
             ``(H, W)`` float32, unbounded (see :attr:`output_range` for the typical range).
         """
-        gray = check_gray(gray)
+        return self._normalize_checked(check_gray(gray))
+
+    def _normalize_checked(self, gray: np.ndarray) -> np.ndarray:
+        """:meth:`normalize` on an image already known to be a finite float32 ``HxW`` one."""
         if min(gray.shape) < self.min_size and type(self) not in _WARNED_SMALL:
             _WARNED_SMALL.add(type(self))
             logger.warning(
@@ -112,8 +138,20 @@ class Normalization:
 
     def to_unit(self, response: np.ndarray) -> np.ndarray:
         """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""
+        return _unit_in_place_to(self._unclipped_unit(response), np.dtype(np.float32))
+
+    def _unclipped_unit(self, response: np.ndarray) -> np.ndarray:
+        """``(response - lo) / (hi - lo)`` as a new float32 array: one ``cv2.addWeighted`` pass
+        for a float32 plane (its single rounding of ``response * a + b``)."""
         lo, hi = self.output_range
-        return np.clip((response - lo) * np.float32(1.0 / (hi - lo)), 0.0, 1.0).astype(np.float32, copy=False)
+        scale = 1.0 / (hi - lo)
+        if isinstance(response, np.ndarray) and response.dtype == np.float32 and response.ndim == 2:
+            return cv2.addWeighted(response, scale, response, 0.0, -lo * scale)
+        return ((np.asarray(response) - lo) * np.float32(scale)).astype(np.float32)
+
+    def _response_to(self, response: np.ndarray, dtype: np.dtype) -> np.ndarray:
+        """:meth:`to_unit` then the conversion to ``dtype`` (the same values, fewer passes)."""
+        return _unit_in_place_to(self._unclipped_unit(response), dtype)
 
     def apply(self, img: np.ndarray, out_dtype: type | np.dtype | str | None = None) -> np.ndarray:
         """Normalize an image, OpenCV style.
@@ -144,20 +182,60 @@ class Normalization:
         alpha = None
         if img.ndim == 3 and img.shape[2] in (2, 4):
             img, alpha = img[..., :-1], img[..., -1]
-        unit = _to_unit_float(img)
-        if img.ndim == 3 and img.shape[2] == 3:
-            lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
-            lab[..., 0] = 100.0 * self.to_unit(self.normalize(np.ascontiguousarray(lab[..., 0]) / np.float32(100)))
-            result = np.clip(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR), 0.0, 1.0)
-        else:
-            result = self.to_unit(self.normalize(np.ascontiguousarray(unit.reshape(img.shape[:2]))))
-            result = result.reshape(img.shape)
-        result = _from_unit_float(result, out_dtype)
+        strips = self._strips(img.shape[:2])
+        if strips is None:
+            result = self._apply_colour(img, out_dtype)
+        else:  # a large image: strip by strip, each with the rows around it that its output sees
+            result = np.empty(img.shape, out_dtype)
+            for start, stop, lo, hi in strips:
+                result[start:stop] = self._apply_colour(img[lo:hi], out_dtype)[start - lo : stop - lo]
         if alpha is None:
             return result
         if alpha.dtype != out_dtype:
-            alpha = _from_unit_float(_to_unit_float(alpha), out_dtype)
+            alpha = _unit_in_place_to(_to_unit_float(alpha), out_dtype)
         return np.concatenate([result, alpha[..., None]], axis=2)  # a new array: the input's alpha is not shared
+
+    def _apply_colour(self, img: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
+        """:meth:`apply` on a valid gray or BGR image without alpha."""
+        if img.dtype == np.uint8 and out_dtype == np.uint8 and (img.ndim == 2 or img.shape[2] == 1):
+            direct = self._apply_gray_uint8(img.reshape(img.shape[:2]))
+            if direct is not None:
+                return direct.reshape(img.shape)
+        unit = _to_unit_float(img)
+        if img.ndim == 3 and img.shape[2] == 3:
+            lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
+            lightness = np.divide(lab[..., 0], np.float32(100))
+            unit_lightness = self._response_to(self._normalize_checked(lightness), np.dtype(np.float32))
+            np.multiply(unit_lightness, 100.0, out=lab[..., 0])
+            return _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
+        return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
+
+    def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray | None:
+        """:meth:`apply`'s result for a uint8 ``HxW`` image and uint8 output, computed without the
+        float round trip by a method that works on 8-bit images (the same values); None (the
+        default): take the float path."""
+        return None
+
+    def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
+        """How :meth:`apply` may cut an image of ``shape`` into horizontal strips: ``(halo,
+        step)``, the rows a strip's output depends on above and below it, and the multiple of
+        rows at which strips may start (so that the result equals the whole image's); None
+        (the default) for a method that needs the whole image at once."""
+        return None
+
+    def _strips(self, shape: tuple[int, int]) -> list[tuple[int, int, int, int]] | None:
+        """``(start, stop, lo, hi)`` for each strip of a large image: output rows
+        ``start:stop`` computed from input rows ``lo:hi``; None to process it whole."""
+        height, width = shape
+        layout = self._tiling(shape) if height * width > TILE_PIXELS else None
+        if layout is None:
+            return None
+        halo, step = layout
+        rows = max(step, TILE_PIXELS // 2 // width // step * step)
+        if rows >= height:
+            return None
+        return [(start, min(start + rows, height), max(0, start - halo), min(height, start + rows + halo))
+                for start in range(0, height, rows)]
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"

@@ -17,11 +17,14 @@ __all__ = ["CLAHE", "HistogramEqualization"]
 
 
 def _to_uint8(gray: np.ndarray) -> np.ndarray:
-    return np.rint(np.clip(gray, 0.0, 1.0) * 255.0).astype(np.uint8)
+    # rint(clip(gray, 0, 1) * 255) in two OpenCV passes: convertScaleAbs rounds half to even
+    # and saturates, bit for bit the same once the negatives are gone
+    return cv2.convertScaleAbs(cv2.threshold(gray, 0.0, 0.0, cv2.THRESH_TOZERO)[1], alpha=255.0)
 
 
 def _to_unit(gray8: np.ndarray) -> np.ndarray:
-    return gray8.astype(np.float32) * np.float32(1.0 / 255.0)
+    # gray8 * float32(1 / 255) in one pass (addWeighted multiplies in float32, adds exact zeros)
+    return cv2.addWeighted(gray8, float(np.float32(1.0 / 255.0)), gray8, 0.0, 0.0, dtype=cv2.CV_32F)
 
 
 @register
@@ -40,6 +43,9 @@ class HistogramEqualization(Normalization):
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         return _to_unit(cv2.equalizeHist(_to_uint8(gray)))
+
+    def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray:
+        return cv2.equalizeHist(gray8)  # output_range (0, 1): the fixed map is the identity
 
 
 @register
@@ -72,3 +78,6 @@ class CLAHE(Normalization):
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         return _to_unit(self._clahe.apply(_to_uint8(gray)))
+
+    def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray:
+        return self._clahe.apply(gray8)  # output_range (0, 1): the fixed map is the identity

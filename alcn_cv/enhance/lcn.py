@@ -20,7 +20,7 @@ import numpy as np
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
-from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
+from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack, kernel_radius
 
 __all__ = [
     "DifferenceOfGaussians",
@@ -99,6 +99,9 @@ class DifferenceOfGaussians(Normalization):
         centre, surround = gaussian_blur_stack(gray, (self.sigma1, self.sigma2))
         return centre - surround
 
+    def _tiling(self, shape: tuple[int, int]) -> tuple[int, int]:
+        return kernel_radius(self.sigma2), 1
+
 
 @register
 class SubtractiveLCN(Normalization):
@@ -122,6 +125,9 @@ class SubtractiveLCN(Normalization):
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         return gray - _blur(gray, self.sigma)
+
+    def _tiling(self, shape: tuple[int, int]) -> tuple[int, int]:
+        return kernel_radius(self.sigma), 1
 
 
 @register

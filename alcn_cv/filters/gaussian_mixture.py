@@ -29,6 +29,7 @@ Two implementations that agree to 1e-5:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 
@@ -78,6 +79,14 @@ def gaussian_kernel1d(sigma: float) -> np.ndarray:
     x = np.arange(-r, r + 1, dtype=np.float64)
     k = np.exp(-0.5 * (x / sigma) ** 2)
     return k / k.sum()
+
+
+@functools.lru_cache(maxsize=256)
+def _cached_kernel(sigma: float) -> np.ndarray:
+    """:func:`gaussian_kernel1d`, computed once per sigma (read-only)."""
+    kernel = gaussian_kernel1d(sigma)
+    kernel.flags.writeable = False
+    return kernel
 
 
 def check_sigmas(sigmas: Sequence[float]) -> tuple[float, ...]:
@@ -154,7 +163,7 @@ def alcn_filter(image: np.ndarray, weights: np.ndarray, sigmas: Sequence[float] 
     out = np.zeros(image.shape, np.float32)
     blurred = np.empty(image.shape, np.float32)
     for i, s in enumerate(sigmas):
-        k = gaussian_kernel1d(s)
+        k = _cached_kernel(s)
         if weights.ndim == 1:
             if weights[i] == 0:
                 continue
@@ -237,8 +246,8 @@ def pyramid_mixture(
         weights_at: ``weights_at(level, ks, (h, w))`` returns the weights of kernels ``ks`` at
             pyramid level ``level`` of size ``(h, w)``: a ``(len(ks), h, w)`` float32 array of
             maps sampled on that level's pixels (pixel ``x`` of level ``L`` is input pixel
-            ``2**L * x``; the levels extend beyond the input's bottom and right edges, where
-            the maps are expected to continue smoothly), or ``len(ks)`` scalars.
+            ``2**L * x``; the coarser levels extend beyond the input's bottom and right edges,
+            where the maps are expected to continue smoothly), or ``len(ks)`` scalars.
         min_sigma: see :func:`pyramid_plan`.
 
     Returns:
@@ -248,35 +257,47 @@ def pyramid_mixture(
     plan = pyramid_plan(sigmas, min_sigma, _max_pyramid_level(image.shape))
     top = max(level for level, _ in plan)
     height, width = image.shape
-    image = _pad_to_pyramid(image, top, _pyramid_margin(sigmas, top))
-    levels = [image]
+    levels = [_pad_to_pyramid(image, top, _pyramid_margin(sigmas, top))]
     for _ in range(top):
         levels.append(cv2.pyrDown(levels[-1], borderType=cv2.BORDER_REFLECT_101))
+    # Level 0 is the largest: it runs only as far beyond the input as its own blurs reach (the
+    # padded plane there, so the result is that of the whole level), and the coarser sum is
+    # brought up only that far (pyrUp's output rows 2i and 2i+1 read input rows i-1 to i+1).
+    if top > 0:
+        reach = max((kernel_radius(residual) for level, residual in plan if level == 0), default=0)
+        levels[0] = levels[0][: height + reach, : width + reach]
     acc: np.ndarray | None = None
     for level in range(top, -1, -1):
         img = levels[level]
         h, w = img.shape
         if acc is not None:
-            acc = cv2.pyrUp(acc, dstsize=(w, h), borderType=cv2.BORDER_REFLECT_101)
+            if level == 0:
+                acc = acc[: h // 2 + 2, : w // 2 + 2]
+            up = (2 * acc.shape[1], 2 * acc.shape[0]) if level == 0 else (w, h)
+            acc = cv2.pyrUp(acc, dstsize=up, borderType=cv2.BORDER_REFLECT_101)[:h, :w]
         ks = [k for k, (lv, _) in enumerate(plan) if lv == level]
         if not ks:
             continue
-        if acc is None:
-            acc = np.zeros((h, w), np.float32)
         product = np.empty((h, w), np.float32)
         blurred = np.empty((h, w), np.float32)
         for k, weight in zip(ks, weights_at(level, ks, (h, w))):
-            kernel = gaussian_kernel1d(plan[k][1])
+            kernel = _cached_kernel(plan[k][1])
             if np.ndim(weight) == 0:
                 if weight == 0:
                     continue
                 cv2.sepFilter2D(img, cv2.CV_32F, kernel, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
+                if acc is None:
+                    acc = np.zeros((h, w), np.float32)
                 cv2.scaleAdd(blurred, float(weight), acc, dst=acc)
             else:
                 cv2.multiply(img, weight, dst=product)
+                if acc is None:  # the first blur is the sum so far
+                    acc = cv2.sepFilter2D(product, cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101)
+                    continue
                 cv2.sepFilter2D(product, cv2.CV_32F, kernel, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
                 cv2.add(acc, blurred, dst=acc)
-    assert acc is not None  # every plan has at least one kernel
+    if acc is None:  # every weight was zero
+        return np.zeros((height, width), np.float32)
     return acc[:height, :width]
 
 
@@ -331,7 +352,7 @@ def alcn_filter_pyramid(
             m = _pad_to_pyramid(weights[k].astype(np.float32, copy=False), top, margin)
             for _ in range(level):
                 m = cv2.pyrDown(m, borderType=cv2.BORDER_REFLECT_101)
-            out.append(m)
+            out.append(m[: shape[0], : shape[1]])  # level 0 covers less than the padding
         return out
 
     return pyramid_mixture(image, sigmas, maps_at, min_sigma)

@@ -438,8 +438,8 @@ class RealLightConfig:
     patch: int = 32
     min_distance: int = 24
     temperature: float = 0.05
-    consistency: float = 0.0
-    anywhere: int = 0
+    consistency: float = 1.0
+    anywhere: int = 24
     lr: float = 1e-3
     seed: int = 0
     save_every: int = 100

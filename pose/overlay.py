@@ -1,0 +1,313 @@
+"""``alcn pose overlay-error``: how far the drawn box sits from the object's edges in the image.
+
+A tracked pose can reproject the model's points within a pixel and still draw the box tens of
+pixels off the object, when the box itself is misplaced in the model (:mod:`pose.box_fit`).
+This measures the drawn box against the image, with no ground truth:
+
+1. the box's *visible* edges under the pose: those of a face turned towards the camera
+   (:func:`visible_edges`), projected and sampled every ``step`` pixels, the ends (``trim``)
+   left out (corners are where the hand holds the box and where the edges of two faces meet);
+2. the image's edges: Canny on the blurred colour frame, each edge pixel with the direction of
+   its gradient (Sobel; :func:`image_edges`);
+3. for each sample, the signed distance along the projected edge's normal to the nearest image
+   edge pixel whose gradient is within ``max_angle`` degrees of that normal (an edge parallel to
+   the drawn one; texture edges across it do not count), searched up to ``max_distance``
+   pixels; a sample with none counts as ``max_distance`` (:func:`edge_offsets`).
+
+A frame's error is the mean absolute distance over its samples (:func:`frame_error`); the
+report (:func:`main`) gives per run (a part model and its poses, e.g. before and after a change
+of the box fit) the mean, median and worst frames, a plot over the video, and the mean signed
+offset of each of the 12 box edges (which edges are off, and in which direction).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from alcn_cv import io
+from alcn_cv.errors import DatasetError
+from alcn_cv.io import atomic_write, read_json, write_json
+from alcn_cv.report import describe_machine, machine, markdown_table, new_figure, save_figure
+from pose import model as part_model
+from pose.model import BOX_EDGES
+from pose.solver import project
+
+logger = logging.getLogger(__name__)
+
+#: The 6 faces of a box as (corner indices, outward axis, sign) in the order of
+#: :func:`pose.model.box_corners` (corner ``i``: x from bit 2, y from bit 1, z from bit 0).
+BOX_FACES: tuple[tuple[tuple[int, ...], int, int], ...] = tuple(
+    (tuple(i for i in range(8) if (i >> (2 - axis)) & 1 == side), axis, 1 if side else -1)
+    for axis in range(3) for side in (0, 1))
+
+
+@dataclass
+class EdgeSettings:
+    """Settings of :func:`edge_offsets`.
+
+    Attributes:
+        step: distance between samples along a projected edge, pixels.
+        trim: fraction of each edge left out at each end.
+        max_distance: search range along the normal, pixels; a sample without an image edge
+            in range counts as this.
+        max_angle: largest angle (degrees) between an image edge's gradient and the drawn
+            edge's normal.
+        canny: Canny's low and high thresholds; ``blur``: Gaussian sigma before it.
+    """
+
+    step: float = 3.0
+    trim: float = 0.1
+    max_distance: float = 40.0
+    max_angle: float = 20.0
+    canny: tuple[float, float] = (40.0, 100.0)
+    blur: float = 1.5
+
+
+def visible_edges(corners: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> list[tuple[int, int]]:
+    """The edges (pairs of :data:`pose.model.BOX_EDGES`) of a face turned towards the camera.
+
+    ``corners`` ``(8, 3)`` must be an axis-aligned box in the order of
+    :func:`pose.model.box_corners`; ``rvec, tvec`` the object-to-camera pose."""
+    R = cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
+    cam = np.asarray(corners, np.float64) @ R.T + np.ravel(tvec)
+    front = set()
+    for idx, axis, sign in BOX_FACES:
+        normal = sign * R[:, axis]
+        if normal @ cam[list(idx)].mean(0) < 0:  # the camera is on the outer side of the face
+            front.add(frozenset(idx))
+    return [(i, j) for i, j in BOX_EDGES if any({i, j} <= face for face in front)]
+
+
+def image_edges(image: np.ndarray, settings: EdgeSettings) -> tuple[np.ndarray, np.ndarray]:
+    """Canny edge mask ``(H, W)`` bool and the gradient direction ``(H, W)`` (radians) of ``image``
+    (grey or BGR uint8). A colour image's edges are Canny's on its three channels (the channel of
+    the strongest gradient at each pixel; its direction likewise): the yellow cookie box on the
+    white tablecloth has almost no grey-level edge (measured on frame 300: its bottom and left
+    outline missing from the grey Canny, present in the colour one)."""
+    g = cv2.GaussianBlur(image, (0, 0), settings.blur) if settings.blur > 0 else image
+    edges = cv2.Canny(g, *settings.canny, L2gradient=True) > 0
+    gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3).reshape(*g.shape[:2], -1)
+    gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3).reshape(*g.shape[:2], -1)
+    strongest = np.argmax(gx**2 + gy**2, axis=2)[..., None]
+    gx, gy = np.take_along_axis(gx, strongest, 2)[..., 0], np.take_along_axis(gy, strongest, 2)[..., 0]
+    return edges, np.arctan2(gy, gx)
+
+
+def edge_offsets(edges: np.ndarray, angle: np.ndarray, a: np.ndarray, b: np.ndarray,
+                 settings: EdgeSettings) -> np.ndarray:
+    """Signed distances (pixels, along the normal ``(-dy, dx)`` of ``b - a``) from samples of the
+    segment ``a -> b`` to the nearest image edge parallel to it; NaN where none is within
+    ``settings.max_distance`` or the sample is outside the image. Empty for a segment shorter
+    than two steps."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    length = float(np.linalg.norm(b - a))
+    n_samples = int(length * (1 - 2 * settings.trim) / settings.step)
+    if n_samples < 2:
+        return np.zeros(0)
+    d = (b - a) / length
+    normal = np.array([-d[1], d[0]])
+    t = np.linspace(settings.trim, 1 - settings.trim, n_samples)
+    samples = a + t[:, None] * (b - a)
+    r = int(np.ceil(settings.max_distance))
+    offsets = np.arange(-r, r + 1, dtype=np.float64)
+    pts = np.rint(samples[:, None, :] + offsets[None, :, None] * normal).astype(np.int64)
+    h, w = edges.shape
+    inside = (pts[..., 0] >= 0) & (pts[..., 0] < w) & (pts[..., 1] >= 0) & (pts[..., 1] < h)
+    x, y = np.clip(pts[..., 0], 0, w - 1), np.clip(pts[..., 1], 0, h - 1)
+    normal_angle = np.arctan2(normal[1], normal[0])
+    # the gradient may point either way across the edge (dark-to-bright or bright-to-dark)
+    diff = np.abs(np.angle(np.exp(2j * (angle[y, x] - normal_angle)))) / 2
+    hit = inside & edges[y, x] & (diff <= np.radians(settings.max_angle))
+    dist = np.where(hit, np.abs(offsets)[None, :], np.inf)
+    nearest = np.argmin(dist, axis=1)
+    out = offsets[nearest]
+    out[~np.isfinite(dist[np.arange(n_samples), nearest])] = np.nan
+    out[~inside[:, r]] = np.nan  # the sample itself is off the image: no measurement
+    return out
+
+
+@dataclass
+class FrameError:
+    """The drawn box against one frame's edges.
+
+    Attributes:
+        mean_px: mean absolute distance over the samples (a sample without an image edge in
+            range counts as ``max_distance``); NaN without a pose or a visible edge.
+        found: share of the samples with an image edge in range.
+        matched_px: mean absolute distance over those samples only.
+        edges: per visible box edge ``(i, j)``, the mean signed offset (pixels, NaN when none found).
+    """
+
+    mean_px: float
+    found: float
+    matched_px: float
+    edges: dict[tuple[int, int], float]
+
+
+def frame_error(image: np.ndarray, corners: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray,
+                settings: EdgeSettings | None = None, dist: np.ndarray | None = None) -> FrameError:
+    """How far the box ``corners (8, 3)`` drawn with the pose ``rvec, tvec`` is from the edges of
+    ``image`` (grey or BGR uint8, :func:`image_edges`)."""
+    settings = settings or EdgeSettings()
+    edges, angle = image_edges(image, settings)
+    uv = project(corners, rvec, tvec, K, dist)
+    per_edge, values = {}, []
+    for i, j in visible_edges(corners, rvec, tvec):
+        off = edge_offsets(edges, angle, uv[i], uv[j], settings)
+        if len(off) == 0:
+            continue
+        per_edge[(i, j)] = float(np.nanmean(off)) if np.any(~np.isnan(off)) else float("nan")
+        values.append(off)
+    if not values:
+        return FrameError(float("nan"), 0.0, float("nan"), {})
+    allv = np.concatenate(values)
+    found = ~np.isnan(allv)
+    err = np.where(found, np.abs(allv), settings.max_distance)
+    matched = float(err[found].mean()) if found.any() else float("nan")
+    return FrameError(float(err.mean()), float(found.mean()), matched, per_edge)
+
+
+def _camera_and_poses(model_path: str | Path, poses_path: str | Path
+                      ) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """The box corners, the camera stored in the part model and the ``(rvec, tvec)`` of every posed frame."""
+    model = part_model.load(model_path)
+    if "K" not in model.extra:
+        raise DatasetError(f"{model_path}: stores no camera (build it from a video with `alcn pose build`)")
+    poses = {}
+    for name, entry in read_json(poses_path).items():
+        if entry:
+            R = np.asarray(entry[0]["cam_R_m2c"], np.float64).reshape(3, 3)
+            poses[name] = (cv2.Rodrigues(R)[0], np.asarray(entry[0]["cam_t_m2c"], np.float64).reshape(3, 1))
+    return model.corners, np.asarray(model.extra["K"], np.float64), poses
+
+
+def measure(model_path: str | Path, poses_path: str | Path, video: str | Path,
+            settings: EdgeSettings | None = None) -> dict[str, FrameError]:
+    """:class:`FrameError` of every frame of ``video`` posed in ``poses_path`` (``alcn pose track``'s
+    JSON) with the box and camera of ``model_path`` (the camera stored by ``alcn pose build``)."""
+    corners, K, poses = _camera_and_poses(model_path, poses_path)
+    out = {}
+    for name, frame in tqdm(io.iter_frames(video), desc="overlay error", unit="frame", leave=False):
+        if name not in poses:
+            out[name] = FrameError(float("nan"), 0.0, float("nan"), {})
+            continue
+        out[name] = frame_error(frame, corners, *poses[name], K, settings)
+    return out
+
+
+def summarize(errors: dict[str, FrameError], worst: int = 5) -> dict[str, Any]:
+    """Mean, median, 90th percentile and worst frames of a run's :class:`FrameError`s, and the mean
+    signed offset of each box edge over the frames where it was visible."""
+    names = [n for n, e in errors.items() if np.isfinite(e.mean_px)]
+    values = np.array([errors[n].mean_px for n in names])
+    if len(values) == 0:
+        return {"frames": 0}
+    order = np.argsort(-values)[:worst]
+    per_edge = {}
+    for i, j in BOX_EDGES:
+        v = [e.edges[(i, j)] for e in errors.values() if np.isfinite(e.edges.get((i, j), np.nan))]
+        if v:
+            per_edge[f"{i}-{j}"] = {"mean_signed_px": float(np.mean(v)), "mean_abs_px": float(np.mean(np.abs(v))),
+                                   "frames": len(v)}
+    # the box's systematic misplacement: how far each edge is off on average, whatever the texture
+    bias = [abs(e["mean_signed_px"]) for e in per_edge.values()]
+    return {"frames": len(values), "mean_px": float(values.mean()), "median_px": float(np.median(values)),
+            "edge_bias_px": float(np.mean(bias)) if bias else float("nan"),
+            "p90_px": float(np.percentile(values, 90)),
+            "found": float(np.mean([errors[n].found for n in names])),
+            "matched_px": float(np.nanmean([errors[n].matched_px for n in names])),
+            "worst": [[names[k], float(values[k])] for k in order], "edges": per_edge}
+
+
+def plot_errors(runs: dict[str, dict[str, FrameError]], path: str | Path, max_distance: float) -> Path:
+    """Per-frame error of each run over the video."""
+    plt, fig, axes = new_figure(figsize=(10, 3.5))
+    ax = axes[0, 0]
+    for label, errors in runs.items():
+        v = np.array([e.mean_px for e in errors.values()])
+        ax.plot(np.arange(len(v)), v, lw=1, label=f"{label} (mean {np.nanmean(v):.1f} px)")
+    ax.set(xlabel="frame", ylabel="mean distance to image edges (px)", ylim=(0, max_distance),
+           title="Drawn box vs. the image's edges (visible box edges, Canny, oriented)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return save_figure(plt, fig, path, dpi=110)
+
+
+def plot_frames(video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], names: Sequence[str],
+                path: str | Path) -> Path:
+    """The frames ``names`` of ``video`` with each run's box drawn in its own colour, side by side."""
+    from pose.track import draw_box
+
+    colors = [(0, 0, 255), (255, 120, 0), (0, 200, 0), (0, 220, 255)]
+    loaded = [(label, *_camera_and_poses(m, p)) for label, m, p in runs]
+    wanted, tiles = set(names), {}
+    for name, frame in io.iter_frames(video):
+        if name in wanted:
+            vis = frame.copy()
+            for k, (label, corners, K, poses) in enumerate(loaded):
+                if name in poses:
+                    draw_box(vis, corners, *poses[name], K, colors[k % len(colors)], thickness=1)
+                cv2.putText(vis, label, (8, 20 + 18 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.55, colors[k % len(colors)], 2)
+            cv2.putText(vis, name, (8, vis.shape[0] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 2)
+            tiles[name] = vis
+    io.write_image(path, np.hstack([tiles[n] for n in names if n in tiles]))
+    return Path(path)
+
+
+def main(video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], out_dir: str | Path, *,
+         settings: EdgeSettings | None = None, command: str = "", show: Sequence[str] = ("frame_000300",)
+         ) -> dict[str, Any]:
+    """Measure every run ``(label, model, poses)`` on ``video``; writes ``overlay_error.md``,
+    ``overlay_error.json``, ``overlay_error.png`` (the error over the video) and
+    ``overlay_frames.png`` (the frames ``show`` and the first run's two worst with every run's
+    box) into ``out_dir``."""
+    settings = settings or EdgeSettings()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    errors = {label: measure(model, poses, video, settings) for label, model, poses in runs}
+    summary = {label: summarize(e) for label, e in errors.items()}
+    host = machine()
+    rows = [[label, s.get("frames"), s.get("mean_px"), s.get("median_px"), s.get("p90_px"), s.get("found"),
+             s.get("matched_px"), s.get("edge_bias_px"),
+             ", ".join(f"{n} ({v:.1f})" for n, v in s.get("worst", [])[:3])] for label, s in summary.items()]
+    edge_rows = [[f"{i}-{j}", *(summary[label].get("edges", {}).get(f"{i}-{j}", {}).get("mean_signed_px")
+                                for label in errors)] for i, j in BOX_EDGES]
+    md = ("# The drawn box against the image's edges\n\n"
+          f"Command: `{command}`\n\nMachine: {describe_machine(host)}\n\nVideo: `{video}`. Per frame: the mean "
+          "distance (px) from samples of the box's visible projected edges to the nearest parallel image edge "
+          f"(Canny on the colour frame blurred by sigma {settings.blur:g}, thresholds {settings.canny[0]:g}/"
+          f"{settings.canny[1]:g}; gradient within {settings.max_angle:g} deg of the drawn edge's normal; none "
+          f"within {settings.max_distance:g} px counts as {settings.max_distance:g}); `found`: share of the samples "
+          "with an image edge in range, `mean of found`: their mean distance alone; `edge bias`: the mean over the "
+          "box's edges of the absolute value of each edge's mean signed offset (the box's systematic misplacement, "
+          "which the texture's random matches average out of). Texture edges parallel to the box's, the hand and "
+          "motion blur give the per-frame distances a floor of several pixels.\n\n"
+          + markdown_table(["run", "frames", "mean (px)", "median (px)", "90th pct (px)", "found", "mean of found (px)",
+                            "edge bias (px)", "worst frames"],
+                           rows, digits=2)
+          + "\n\nMean signed offset of each box edge (px, along the normal of the projected edge; corners "
+          "numbered as in `pose.model.box_corners`):\n\n"
+          + markdown_table(["edge", *errors], edge_rows, digits=1) + "\n")
+    atomic_write(out_dir / "overlay_error.md", md)
+    write_json(out_dir / "overlay_error.json", {
+        "command": command, "machine": host, "video": str(video), "settings": vars(settings),
+        "runs": {label: {"model": str(m), "poses": str(p), **summary[label],
+                         "per_frame": {n: (None if not np.isfinite(e.mean_px) else e.mean_px)
+                                       for n, e in errors[label].items()}}
+                 for label, m, p in runs}})
+    plot_errors(errors, out_dir / "overlay_error.png", settings.max_distance)
+    worst = [n for n, _ in next(iter(summary.values())).get("worst", [])[:2]]
+    plot_frames(video, runs, list(dict.fromkeys([*show, *worst])), out_dir / "overlay_frames.png")
+    for label, s in summary.items():
+        logger.info("%s: mean %.2f px, median %.2f px over %d frames", label, s.get("mean_px", np.nan),
+                    s.get("median_px", np.nan), s.get("frames", 0))
+    return summary

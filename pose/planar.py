@@ -1,0 +1,347 @@
+"""``alcn pose relight``: pose of a planar target under real light changes (a real-light Table 1).
+
+Rendered light is not real light. The frames of a fixed outdoor camera (the Webcam data set of
+Verdie et al., "TILDE: A Temporally Invariant Learned DEtector", CVPR 2015) are taken at other
+times of day and seasons with the camera unmoved, so they give real light changes with a known
+truth. For each scene:
+
+1. a *reference frame* (default: the one of median mean brightness, a typical daylight frame)
+   and in it a textured rectangle, the *target* (default: the window of
+   ``target_fraction`` of the frame's width and height holding the most keypoints of the
+   reference frame itself, :func:`select_region`);
+2. the target's part model (:class:`pose.model.PartModel`): an assumed pinhole camera
+   (:func:`pinhole_camera`, ``hfov`` degrees), the target a fronto-parallel plane at depth ``f``
+   so that one object unit (``mm``) is one reference pixel, its 4 corners the box's (a flat box),
+   the keypoints of the *normalized* reference frame inside it back-projected on the plane, one
+   descriptor each (:func:`build_target`). The classical pipeline's triangulation over
+   several views (:mod:`pose.build`) has nothing to add here: every frame is seen from the
+   same viewpoint, and training views under other lights would defeat the experiment
+   (Table 1 trains under one light);
+3. in every other frame of the scene, the pose of the target by the box's pipeline: the part
+   detector (:class:`pose.parts.FeaturePartDetector`, every keypoint of the frame, no prior:
+   the frames are not a video) and :class:`pose.solver.PoseSolver` with the settings of
+   ``alcn pose eval`` (:data:`pose.track.MIN_INLIERS`, :data:`pose.track.RANSAC_ITERATIONS`,
+   the target's corners as the outline);
+4. the truth is the reference pose; a pose is correct when the target's corners reproject
+   within 5 px of their reference positions on average (:func:`pose.evaluate.score`, the 2D
+   projection metric of ``alcn pose eval``; the JSON also has the share with *every* corner
+   within 5 px). A lost frame counts as wrong.
+
+The part detector is a factory of :data:`DETECTORS` (``"features"``, the classical detector);
+a learned detector plugs in there as a function ``(target, normalizer) -> PartDetector`` (see
+:class:`pose.parts.PartDetector`) that trains or loads it for the target's reference frame,
+with the target's 4 corners as its parts.
+
+The Webcam frames are for academic research only (cite TILDE and AMOS).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from alcn_cv.bench.relight_data import Scene, load_scene_folder, select_scenes
+from alcn_cv.enhance.registry import from_spec
+from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.io import atomic_write, to_gray, write_json
+from alcn_cv.report import describe_machine, machine, new_figure, save_figure
+from alcn_cv.shared_data import shared_data_dir
+from pose.evaluate import PROJ_PX, _nan_to_none, score, table_markdown
+from pose.model import PartModel, box_corners
+from pose.parts import FeaturePartDetector, PartDetector, create_feature
+from pose.plots import plot_table
+from pose.solver import PoseSolver, project
+from pose.track import MIN_INLIERS, MIN_INLIERS_NEAR_PRIOR, RANSAC_ITERATIONS
+
+logger = logging.getLogger(__name__)
+
+#: The rows of the real-light table: no normalization, the DoG tuned for pose (as ``alcn pose
+#: eval``), DLCN and Tan-Triggs (the strongest classical methods of ``alcn bench relight``), the
+#: default ALCN and the gain-adaptive Normalizer trained on real webcam frames.
+DEFAULT_NORMALIZERS = ("none", "dog:sigma1=1:sigma2=2", "dlcn", "tantriggs", "alcn", "alcn:model=gain")
+#: Assumed horizontal field of view (degrees) of the webcams, whose intrinsics are unknown.
+DEFAULT_HFOV = 60.0
+#: Side of the target as a fraction of the frame's width and height.
+DEFAULT_TARGET_FRACTION = 0.5
+
+
+def pinhole_camera(width: int, height: int, hfov_deg: float = DEFAULT_HFOV) -> np.ndarray:
+    """Intrinsics ``(3, 3)`` of a pinhole camera with square pixels, the principal point at the
+    image centre (OpenCV convention) and a horizontal field of view of ``hfov_deg`` degrees."""
+    if not 0 < hfov_deg < 180:
+        raise InputError(f"hfov must be in (0, 180) degrees, got {hfov_deg}")
+    f = 0.5 * width / np.tan(np.radians(hfov_deg) / 2)
+    return np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
+
+
+def reference_index(frames: np.ndarray) -> int:
+    """The frame of median mean brightness among ``frames (n, H, W)``: a typical daylight frame,
+    neither night nor glare."""
+    means = frames.reshape(len(frames), -1).mean(1)
+    return int(np.argsort(means)[len(means) // 2])
+
+
+def select_region(gray: np.ndarray, fraction: float = DEFAULT_TARGET_FRACTION, feature: str = "SIFT",
+                  normalizer: str = "none") -> tuple[int, int, int, int]:
+    """``(x, y, w, h)``: the window of ``fraction`` of the image's width and height that holds the
+    most keypoints of ``gray`` (uint8, after ``normalizer``), searched on a grid of 1/20 of the
+    image, 8 px from the borders (where a descriptor has no room)."""
+    if not 0 < fraction <= 1:
+        raise InputError(f"the target fraction must be in (0, 1], got {fraction}")
+    h, w = gray.shape[:2]
+    tw, th = max(int(round(fraction * w)), 16), max(int(round(fraction * h)), 16)
+    margin = 8
+    kps = create_feature(feature, 0).detect(from_spec(normalizer).apply(gray), None)
+    count = np.zeros((h + 1, w + 1), np.float64)
+    pts = np.array([k.pt for k in kps], np.float64).reshape(-1, 2).astype(int)
+    np.add.at(count, (np.minimum(pts[:, 1], h - 1) + 1, np.minimum(pts[:, 0], w - 1) + 1), 1)
+    integral = count.cumsum(0).cumsum(1)
+    best, best_n = (margin, margin), -1.0
+    xs = np.unique(np.linspace(margin, max(w - tw - margin, margin), 21).astype(int))
+    ys = np.unique(np.linspace(margin, max(h - th - margin, margin), 21).astype(int))
+    for y in ys:
+        for x in xs:
+            x1, y1 = min(x + tw, w), min(y + th, h)
+            n = integral[y1, x1] - integral[y, x1] - integral[y1, x] + integral[y, x]
+            if n > best_n:
+                best, best_n = (int(x), int(y)), n
+    return best[0], best[1], min(tw, w - best[0]), min(th, h - best[1])
+
+
+@dataclass
+class PlanarTarget:
+    """A planar target in a reference frame and its part model.
+
+    Attributes:
+        model: the part model (object frame: the plane ``z = 0``, origin at the region's top-left
+            corner, ``mm`` = reference pixels; a flat box whose 4 distinct corners are the target's).
+        K: the assumed intrinsics.
+        rvec, tvec: the reference pose (object to camera), the truth of every frame of the scene.
+        region: ``(x, y, w, h)`` of the target in the reference frame.
+        reference: the reference frame's name.
+    """
+
+    model: PartModel
+    K: np.ndarray
+    rvec: np.ndarray
+    tvec: np.ndarray
+    region: tuple[int, int, int, int]
+    reference: str = ""
+
+    @property
+    def corners(self) -> np.ndarray:
+        """The target's 4 corners ``(4, 3)`` in the object frame (the flat box's distinct corners)."""
+        return np.unique(self.model.corners, axis=0)
+
+    def image_corners(self) -> np.ndarray:
+        """The 4 corners ``(4, 2)`` projected with the reference pose (pixels)."""
+        return project(self.corners, self.rvec, self.tvec, self.K)
+
+
+def build_target(image: np.ndarray, region: tuple[int, int, int, int], K: np.ndarray, normalizer: str = "none", *,
+                 feature: str = "SIFT", n_features: int = 0, reference: str = "") -> PlanarTarget:
+    """The part model of the rectangle ``region = (x, y, w, h)`` of ``image`` (BGR or gray uint8).
+
+    The keypoints of the normalized image (the same normalization and feature as the part
+    detector's, :meth:`pose.parts.FeaturePartDetector.normalize`) inside the region are
+    back-projected onto the fronto-parallel plane at depth ``K[0, 0]`` (object units: ``mm``, one
+    per reference pixel), one descriptor per point.
+
+    Raises:
+        DatasetError: fewer than 4 keypoints in the region.
+    """
+    x, y, w, h = (int(v) for v in region)
+    gray = to_gray(image)
+    if w <= 0 or h <= 0 or x < 0 or y < 0 or x + w > gray.shape[1] or y + h > gray.shape[0]:
+        raise InputError(f"region {region} is not inside the {gray.shape[1]}x{gray.shape[0]} image")
+    K = np.asarray(K, np.float64)
+    mask = np.zeros(gray.shape, np.uint8)
+    mask[y:y + h, x:x + w] = 255
+    det = create_feature(feature, n_features)
+    kps, desc = det.detectAndCompute(from_spec(normalizer).apply(gray), mask)
+    if desc is None or len(kps) < 4:
+        raise DatasetError(f"only {len(kps)} {feature} keypoints in the target region {region}; choose a textured one")
+    uv = np.array([k.pt for k in kps], np.float64)
+    depth = K[0, 0]
+    # object frame: x right, y down, z away from the camera; 1 unit = 1 reference pixel at the plane
+    points = np.c_[(uv - [x, y]) * [depth / K[0, 0], depth / K[1, 1]], np.zeros(len(uv))]
+    rvec = np.zeros((3, 1))
+    tvec = np.array([[(x - K[0, 2]) * depth / K[0, 0]], [(y - K[1, 2]) * depth / K[1, 1]], [depth]])
+    size = np.array([w * depth / K[0, 0], h * depth / K[1, 1], 0.0])
+    model = PartModel(corners=box_corners(size), points3d=points.astype(np.float32), descriptors=desc, units="mm",
+                      feature=feature.upper(), normalizer=normalizer, source=reference,
+                      extra={"K": K.tolist(), "region": [x, y, w, h], "planar": True})
+    return PlanarTarget(model, K, rvec, tvec, (x, y, w, h), reference)
+
+
+def feature_detector(target: PlanarTarget, normalizer: str, n_features: int = 0) -> PartDetector:
+    """The classical part detector of the target: every keypoint of a frame (``n_features=0``)
+    matched to the target's descriptors (:class:`pose.parts.FeaturePartDetector`)."""
+    return FeaturePartDetector(target.model, normalizer, n_features_global=n_features)
+
+
+#: Part detectors by name: ``(target, normalizer, n_features) -> PartDetector``. A learned detector
+#: is added here as a factory that trains (or loads) it for the target's reference frame.
+DETECTORS: dict[str, Callable[[PlanarTarget, str, int], PartDetector]] = {"features": feature_detector}
+
+
+@dataclass
+class FrameResult:
+    """The pose of the target in one frame against the reference pose."""
+
+    name: str
+    proj_px: float | None
+    max_corner_px: float | None
+    inliers: int
+    matches: int
+    seconds: float
+
+
+def evaluate_scene(scene: Scene, normalizer: str, *, detector: str = "features", feature: str = "SIFT",
+                   n_features: int = 0, reference: int | None = None, region: tuple[int, int, int, int] | None = None,
+                   target_fraction: float = DEFAULT_TARGET_FRACTION, hfov: float = DEFAULT_HFOV
+                   ) -> tuple[PlanarTarget, list[FrameResult]]:
+    """Build the target in the scene's reference frame after ``normalizer`` and pose it in every
+    other frame; returns the target and one :class:`FrameResult` per other frame. ``n_features``:
+    the strongest keypoints kept per frame (0: all).
+
+    ``reference`` (default :func:`reference_index`) and ``region`` (default
+    :func:`select_region` on the raw reference frame, so every normalizer gets the same target)."""
+    if detector not in DETECTORS:
+        raise InputError(f"unknown detector {detector!r}; choose one of {sorted(DETECTORS)}")
+    frames = scene.frames
+    ref = reference_index(frames) if reference is None else reference
+    h, w = frames.shape[1:3]
+    K = pinhole_camera(w, h, hfov)
+    region = region or select_region(frames[ref], target_fraction, feature)
+    target = build_target(frames[ref], region, K, normalizer, feature=feature, reference=scene.files[ref])
+    det = DETECTORS[detector](target, normalizer, n_features)
+    solver = PoseSolver(K, min_inliers=MIN_INLIERS[detector], iterations=RANSAC_ITERATIONS[detector],
+                        min_inliers_near_prior=MIN_INLIERS_NEAR_PRIOR[detector], outline=target.model.corners)
+    truth = (cv2.Rodrigues(target.rvec)[0], target.tvec)
+    ref_uv = target.image_corners()
+    results = []
+    for i in range(len(frames)):
+        if i == ref:
+            continue
+        t0 = time.perf_counter()
+        corr = det.detect(frames[i])
+        est = solver.solve(corr.object_points, corr.image_points)
+        seconds = time.perf_counter() - t0
+        s = score(target.corners, K, "mm", (est.R, est.tvec) if est.ok else None, truth)
+        worst = (float(np.linalg.norm(project(target.corners, est.rvec, est.tvec, K) - ref_uv, axis=1).max())
+                 if est.ok else None)
+        results.append(FrameResult(scene.files[i], s.proj_px, worst, len(est.inliers), est.num_matches, seconds))
+    return target, results
+
+
+def _percent(values: Sequence[float | None]) -> float:
+    return 100.0 * float(np.mean([v is not None and v < PROJ_PX for v in values])) if values else float("nan")
+
+
+def plot_targets(scenes: Sequence[Scene], targets: dict[str, PlanarTarget], path: str | Path) -> Path:
+    """A PNG of each scene's reference frame with its target's rectangle."""
+    plt, fig, axes = new_figure(len(scenes), 1, figsize=(8, 2.6 * len(scenes)))
+    for ax, scene in zip(axes[:, 0], scenes):
+        t = targets[scene.name]
+        ax.imshow(scene.frames[scene.files.index(t.reference)], cmap="gray")
+        x, y, w, h = t.region
+        ax.add_patch(plt.Rectangle((x - 0.5, y - 0.5), w, h, fill=False, color="tab:orange", lw=2))
+        ax.set_title(f"{scene.name}: reference {t.reference}, target {w}x{h} px, {len(t.model.points3d)} parts "
+                     f"({t.model.normalizer})", fontsize=9)
+        ax.axis("off")
+    fig.tight_layout()
+    return save_figure(plt, fig, path, dpi=90)
+
+
+def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequence[str] | None = None,
+         normalizers: Sequence[str] = DEFAULT_NORMALIZERS, detector: str = "features", feature: str = "SIFT",
+         n_features: int = 0, target_fraction: float = DEFAULT_TARGET_FRACTION, hfov: float = DEFAULT_HFOV,
+         max_frames: int | None = None, command: str = "") -> dict[str, Any]:
+    """The real-light Table 1: per scene of ``data`` (default ``<shared data>/webcam``) and
+    normalizer, the % of frames whose target pose is correct. Writes ``relight_pose.md``,
+    ``relight_pose.json``, ``relight_pose.png`` and ``targets.png`` into ``out_dir``."""
+    root = Path(data) if data is not None else shared_data_dir() / "webcam"
+    if not root.is_dir():
+        raise DatasetError(f"{root}: no such folder (the webcam scenes; set ALCN_SHARED_DATA or give --data)")
+    all_scenes = load_scene_folder(root, max_frames)
+    chosen = select_scenes(all_scenes, scenes) if scenes else all_scenes
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name in normalizers:  # a bad spec fails now, not after minutes of work
+        from_spec(name)
+    columns = [s.name for s in chosen]
+    table: dict[str, dict[str, float]] = {}
+    details: dict[str, Any] = {}
+    targets: dict[str, PlanarTarget] = {}
+    regions = {s.name: select_region(s.frames[reference_index(s.frames)], target_fraction, feature) for s in chosen}
+    runs = [(name, s) for name in normalizers for s in chosen]
+    for name, scene in tqdm(runs, desc="relight pose", unit="scene", leave=False):
+        row = f"{name} / {feature.lower()} {detector}"
+        target, frames = evaluate_scene(scene, name, detector=detector, feature=feature, n_features=n_features,
+                                        region=regions[scene.name], hfov=hfov)
+        targets.setdefault(scene.name, target)
+        proj = [f.proj_px for f in frames]
+        pct = _percent(proj)
+        table.setdefault(row, {})[scene.name] = pct
+        details.setdefault(row, {})[scene.name] = {
+            "reference": target.reference, "region": list(target.region), "parts": len(target.model.points3d),
+            "frames": len(frames), "correct_pct": pct,
+            "all_corners_within_pct": _percent([f.max_corner_px for f in frames]),
+            "posed_pct": 100.0 * float(np.mean([p is not None for p in proj])) if frames else float("nan"),
+            "median_error_px": float(np.median([p for p in proj if p is not None])) if any(p is not None for p in proj)
+            else None,
+            "ms_per_frame": 1000.0 * float(np.mean([f.seconds for f in frames])) if frames else None,
+            "per_frame": [vars(f) for f in frames]}
+        logger.info("%s %s: %.1f%% correct (%d frames)", row, scene.name, pct, len(frames))
+    for row, vals in table.items():
+        vals["mean"] = float(np.mean([vals[c] for c in columns]))
+    host = machine()
+    keypoints = "every keypoint" if not n_features else f"the {n_features} strongest keypoints"
+    K_note = f"pinhole camera, {hfov:g} deg horizontal field of view, principal point at the centre"
+    md = ("# Pose of a planar target under real light (Table 1 on fixed webcams)\n\n"
+          f"Command: `{command}`\n\nMachine: {describe_machine(host)}\n\n"
+          f"Data: `{root}` (Webcam data set of TILDE, Verdie et al., CVPR 2015, from AMOS; academic research use "
+          "only). Per scene, a target of "
+          f"{target_fraction:g} x the frame's width and height in its reference frame (median brightness; "
+          "`targets.png`), its part model from that frame alone after each normalizer "
+          f"({feature} keypoints, {K_note}), its pose in every other frame by the box's pipeline "
+          f"(`pose.parts.FeaturePartDetector` on {keypoints} of each frame, `pose.solver.PoseSolver`); "
+          "truth: the reference "
+          f"pose (the camera did not move). Cells: % of frames whose target corners reproject within {PROJ_PX:g} px "
+          "on average (lost frames count as wrong); the JSON also gives the share with every corner within "
+          f"{PROJ_PX:g} px, the median error and the time per frame.\n\n"
+          + table_markdown(table, columns + ["mean"])
+          + "\n\n" + _details_markdown(details, columns))
+    atomic_write(out_dir / "relight_pose.md", md)
+    write_json(out_dir / "relight_pose.json", _nan_to_none({
+        "command": command, "machine": host, "data": str(root), "columns": columns, "table": table,
+        "details": details,
+        "settings": {"feature": feature, "n_features": n_features, "detector": detector,
+                     "target_fraction": target_fraction, "hfov_deg": hfov, "proj2d_px": PROJ_PX,
+                     "max_frames": max_frames}}))
+    plot_table(table, columns + ["mean"], out_dir / "relight_pose.png",
+               f"Planar target on fixed webcams: correct poses (< {PROJ_PX:g} px)")
+    plot_targets(chosen, targets, out_dir / "targets.png")
+    return {"table": table, "details": details}
+
+
+def _details_markdown(details: dict[str, Any], columns: list[str]) -> str:
+    lines = ["| row | scene | reference | target (x, y, w, h) | parts | posed % | all 4 corners < 5 px % | "
+             "median err (px) | ms/frame |", "|---|---|---|---|---|---|---|---|---|"]
+    for row, per_scene in details.items():
+        for c in columns:
+            d = per_scene[c]
+            med = "-" if d["median_error_px"] is None else f"{d['median_error_px']:.2f}"
+            lines.append(f"| {row} | {c} | {d['reference']} | {tuple(d['region'])} | {d['parts']} | "
+                         f"{d['posed_pct']:.1f} | {d['all_corners_within_pct']:.1f} | {med} | "
+                         f"{d['ms_per_frame']:.0f} |")
+    return "\n".join(lines) + "\n"

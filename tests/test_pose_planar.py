@@ -1,0 +1,91 @@
+"""pose.planar: a planar target's part model from one frame, posed under light changes (``alcn pose relight``)."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.errors import DatasetError, InputError
+from pose import planar
+from pose.solver import PoseSolver, project
+
+
+def _texture(seed: int = 0, size: tuple[int, int] = (360, 480)) -> np.ndarray:
+    """A grey frame: a flat left third, blobs of random texture elsewhere."""
+    rng = np.random.default_rng(seed)
+    img = cv2.GaussianBlur(rng.uniform(0, 255, size).astype(np.float32), (0, 0), 2.5)
+    img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX)
+    img[:, : size[1] // 3] = 128
+    return img.astype(np.uint8)
+
+
+def _solve(target: planar.PlanarTarget, image: np.ndarray, normalizer: str = "none"):
+    det = planar.feature_detector(target, normalizer)
+    corr = det.detect(image)
+    return PoseSolver(target.K, min_inliers=12, iterations=2000, outline=target.model.corners).solve(
+        corr.object_points, corr.image_points)
+
+
+def test_pinhole_camera_and_reference():
+    K = planar.pinhole_camera(640, 480, 90.0)
+    assert K[0, 0] == pytest.approx(320.0) and K[1, 1] == K[0, 0]
+    assert (K[0, 2], K[1, 2]) == (319.5, 239.5)
+    with pytest.raises(InputError):
+        planar.pinhole_camera(640, 480, 180.0)
+    frames = np.stack([np.full((4, 4), v, np.uint8) for v in (10, 200, 90, 120, 30)])
+    assert planar.reference_index(frames) == 2  # median brightness
+
+
+def test_select_region_avoids_the_flat_part():
+    img = _texture()
+    x, y, w, h = planar.select_region(img, 0.5)
+    assert (w, h) == (240, 180)
+    assert x >= img.shape[1] // 3 - 20  # the textured two thirds, not the flat third
+
+
+def test_target_posed_under_a_light_change_and_a_camera_rotation():
+    img = _texture(1)
+    K = planar.pinhole_camera(img.shape[1], img.shape[0])
+    target = planar.build_target(img, (200, 90, 220, 180), K)
+    assert target.model.units == "mm" and len(target.model.points3d) > 50
+    assert np.allclose(target.image_corners(), [[200, 90], [200, 270], [420, 90], [420, 270]], atol=1e-6)
+    # the same view under another light (gain and gamma): the reference pose
+    relit = np.clip(255 * (0.6 * img / 255.0) ** 1.4, 0, 255).astype(np.uint8)
+    est = _solve(target, relit)
+    assert est.ok
+    assert np.abs(project(target.corners, est.rvec, est.tvec, K) - target.image_corners()).max() < 1.0
+    # the camera turned by 4 and 3 degrees: the image moves by the homography K R K^-1 and the pose by R
+    R = cv2.Rodrigues(np.radians([3.0, 4.0, 0.0]))[0]
+    warped = cv2.warpPerspective(img, K @ R @ np.linalg.inv(K), img.shape[::-1], flags=cv2.INTER_LINEAR)
+    est = _solve(target, warped)
+    truth = project(target.corners, cv2.Rodrigues(R)[0], R @ target.tvec, K)
+    assert est.ok
+    assert np.abs(project(target.corners, est.rvec, est.tvec, K) - truth).max() < 1.0
+    assert np.abs(truth - target.image_corners()).max() > 20  # the test can fail: the corners moved
+
+
+def test_build_target_bad_region():
+    img = _texture()
+    K = planar.pinhole_camera(img.shape[1], img.shape[0])
+    with pytest.raises(InputError):
+        planar.build_target(img, (400, 300, 200, 200), K)
+    with pytest.raises(DatasetError, match="keypoints"):
+        planar.build_target(img, (10, 10, 60, 60), K)  # the flat third
+
+
+def test_relight_on_a_webcam_scene(shared_data, tmp_path):
+    """Smoke test on real frames: 3 frames of one scene, no normalization."""
+    root = shared_data / "webcam"
+    if not (root / "mexico").is_dir():
+        pytest.skip(f"the webcam scenes are not in {root}")
+    result = planar.main(tmp_path, root, scenes=["mexico"], normalizers=["none"], max_frames=3, command="test")
+    row = "none / sift features"
+    assert set(result["table"][row]) == {"mexico", "mean"}
+    assert 0 <= result["table"][row]["mexico"] <= 100
+    for name in ("relight_pose.md", "relight_pose.json", "relight_pose.png", "targets.png"):
+        assert (tmp_path / name).is_file()
+    report = json.loads((tmp_path / "relight_pose.json").read_text())
+    assert report["command"] == "test" and len(report["details"][row]["mexico"]["per_frame"]) == 2

@@ -1,0 +1,166 @@
+"""The fast paths of ``apply`` and of ALCN give the results of the plain ones: strips of a large
+image, the lite Normalizer's NumPy tanh, the level-0 maps by one resize, the torch thread
+setting, the batched torch path, and the video pipeline's order and errors."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+import alcn_cv  # noqa: E402
+from alcn_cv.bench.speed import synthetic_frame  # noqa: E402
+from alcn_cv.enhance import base  # noqa: E402
+from alcn_cv.enhance.alcn import _integer_zoom  # noqa: E402
+from alcn_cv.enhance.registry import from_spec  # noqa: E402
+from alcn_cv.errors import InputError  # noqa: E402
+from alcn_cv.io import map_video, open_video_writer  # noqa: E402
+
+
+@pytest.mark.parametrize("spec", ["alcn", "alcn:model=gain", "alcn:model=paper:grid_stride=16", "dog", "slcn"])
+@pytest.mark.parametrize("colour", [False, True])
+def test_strips_give_the_whole_image(monkeypatch, spec, colour):
+    method = from_spec(spec)
+    frame = synthetic_frame(300, 416, colour, seed=4)
+    whole = method.apply(frame, out_dtype=np.float32)
+    monkeypatch.setattr(base, "TILE_PIXELS", 20_000)
+    assert len(method._strips(frame.shape[:2])) > 3
+    np.testing.assert_allclose(method.apply(frame, out_dtype=np.float32), whole, atol=1e-4)
+    np.testing.assert_array_equal(np.abs(method.apply(frame).astype(int) - np.rint(whole * 255)) <= 1, True)
+
+
+def test_whole_image_methods_and_odd_working_sizes_are_not_cut(monkeypatch):
+    monkeypatch.setattr(base, "TILE_PIXELS", 20_000)
+    assert from_spec("ns")._strips((416, 300)) is None
+    assert from_spec("alcn")._strips((417, 300)) is None  # 417 rows have no whole working image
+    assert from_spec("alcn")._strips((16, 300)) is None  # small images stay whole (below the limit)
+    monkeypatch.setattr(base, "TILE_PIXELS", 10**9)
+    assert from_spec("alcn")._strips((416, 300)) is None
+
+
+def test_lite_inference_tanh_equals_torch():
+    alcn = alcn_cv.createALCN()
+    image = torch.from_numpy(synthetic_frame(200, 160, False).astype(np.float32) / 255)[None, None]
+    with torch.inference_mode():
+        fast = alcn.net.dense_grid(image)
+    reference = alcn.net.dense_grid(image).detach()  # gradients on: torch's own layers
+    torch.testing.assert_close(fast, reference, atol=1e-6, rtol=0)
+
+
+def test_level0_maps_are_the_exact_bilinear_interpolation():
+    alcn = alcn_cv.createALCN()
+    gray = synthetic_frame(320, 240, False).astype(np.float32) / 255
+    grid = alcn.weight_grid(gray)
+    assert _integer_zoom(1 / 16, -1 / 32) == (16, 7)
+    assert _integer_zoom(1 / 8, -1 / 32) is None  # level 1: a quarter-pixel shift
+    maps = alcn._grid_maps_at(grid, (0.5, 0.5), 0, [0, 3], (243, 323))
+    to_grid = np.array([[1 / 16, 0, -1 / 32], [0, 1 / 16, -1 / 32]])
+    for k, m in zip([0, 3], maps):
+        exact = cv2.warpAffine(grid[k], to_grid, (323, 243), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                               borderMode=cv2.BORDER_REPLICATE)
+        np.testing.assert_allclose(m, exact, atol=1e-6)
+
+
+def test_normalizer_threads_default_to_one_and_are_restored():
+    before = torch.get_num_threads()
+    alcn = alcn_cv.createALCN()
+    assert alcn.threads == 1
+    alcn.apply(synthetic_frame(96, 72, False))
+    assert torch.get_num_threads() == before
+    assert alcn_cv.createALCN(threads=None).threads is None
+
+
+@pytest.mark.parametrize("model", ["lite", "gain"])
+def test_batched_torch_path_equals_apply(model):
+    alcn = alcn_cv.createALCN(model=model, backend="torch")
+    frames = np.stack([synthetic_frame(160, 96, False, seed=i) for i in range(3)])
+    single = np.stack([alcn.apply(f, out_dtype=np.float32) for f in frames])
+    batch = alcn.apply_batch(frames, out_dtype=np.float32)
+    assert batch.shape == frames.shape and batch.dtype == np.float32
+    np.testing.assert_allclose(batch, single, atol=1e-5)
+    as_uint8 = alcn.apply_batch(frames)
+    assert as_uint8.dtype == np.uint8
+    assert np.abs(as_uint8.astype(int) - np.stack([alcn.apply(f) for f in frames])).max() <= 1
+    # float16 on the CPU only checks the path: its error is reported by ``alcn bench speed``
+    np.testing.assert_allclose(alcn.apply_batch(frames, out_dtype=np.float32, half=True), batch, atol=2e-2)
+
+
+def test_batched_path_errors():
+    with pytest.raises(InputError, match="backend='torch'"):
+        alcn_cv.createALCN().apply_batch(np.zeros((2, 64, 64), np.uint8))
+    alcn = alcn_cv.createALCN(backend="torch")
+    with pytest.raises(InputError, match=r"\(B, H, W\)"):
+        alcn.apply_batch(np.zeros((64, 64), np.uint8))
+    with pytest.raises(InputError, match=r"\[0, 1\]"):
+        alcn.apply_batch(np.full((2, 64, 64), 2.0, np.float32))
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device: the CUDA path is checked on a GPU machine")
+def test_cuda_agrees_with_the_cpu():
+    frames = np.stack([synthetic_frame(320, 240, False, seed=i) for i in range(4)])
+    cpu = alcn_cv.createALCN(backend="torch").apply_batch(frames, out_dtype=np.float32)
+    cuda = alcn_cv.createALCN(backend="torch", device="cuda")
+    np.testing.assert_allclose(cuda.apply_batch(frames, out_dtype=np.float32), cpu, atol=1e-3)
+
+
+def _video(path, frames: int) -> None:
+    writer = open_video_writer(path, 10.0, (64, 48), color=True)
+    for i in range(frames):
+        writer.write(np.full((48, 64, 3), 10 + 20 * i, np.uint8))
+    writer.release()
+
+
+def test_video_pipeline_keeps_the_order(tmp_path):
+    _video(tmp_path / "in.avi", 8)
+    assert map_video(tmp_path / "in.avi", tmp_path / "out.avi", lambda frame: 255 - frame) == 8
+    cap = cv2.VideoCapture(str(tmp_path / "out.avi"))
+    means = []
+    while (frame := cap.read()[1]) is not None:
+        means.append(frame.mean())
+    cap.release()
+    np.testing.assert_allclose(means, [245 - 20 * i for i in range(8)], atol=3)
+
+
+def test_video_pipeline_error_leaves_nothing(tmp_path):
+    _video(tmp_path / "in.avi", 6)
+    calls = []
+
+    def failing(frame: np.ndarray) -> np.ndarray:
+        calls.append(1)
+        if len(calls) == 4:
+            raise RuntimeError("boom")
+        return frame
+
+    with pytest.raises(RuntimeError, match="boom"):
+        map_video(tmp_path / "in.avi", tmp_path / "out.avi", failing)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.avi"]
+
+
+@pytest.mark.parametrize("name", ["he", "clahe"])
+def test_uint8_shortcut_equals_the_float_path(monkeypatch, name):
+    method = from_spec(name)
+    frame = synthetic_frame(200, 150, False, seed=7)
+    direct = method.apply(frame)
+    monkeypatch.setattr(method, "_apply_gray_uint8", lambda gray8: None)
+    np.testing.assert_array_equal(direct, method.apply(frame))
+
+
+def test_histogram_conversions_are_the_numpy_ones():
+    from alcn_cv.enhance.histogram import _to_uint8, _to_unit
+
+    values = np.random.default_rng(0).random((60, 256), dtype=np.float32) * 1.2 - 0.1
+    values[0] = (np.arange(256) + 0.5) / 255  # ties
+    np.testing.assert_array_equal(_to_uint8(values), np.rint(np.clip(values, 0, 1) * 255).astype(np.uint8))
+    gray8 = np.arange(256, dtype=np.uint8).reshape(16, 16)
+    np.testing.assert_array_equal(_to_unit(gray8), gray8.astype(np.float32) * np.float32(1 / 255))
+
+
+def test_output_map_is_the_numpy_one():
+    method = from_spec("dog")
+    response = np.random.default_rng(1).normal(0, 0.08, (120, 160)).astype(np.float32)
+    unit = np.clip((response.astype(np.float64) + 0.1) * 5, 0, 1)
+    np.testing.assert_allclose(method.to_unit(response), unit, atol=1e-6)
+    np.testing.assert_array_equal(method._response_to(response.copy(), np.dtype(np.uint8)),
+                                  np.rint(method.to_unit(response) * 255).astype(np.uint8))
