@@ -100,8 +100,8 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("boom")
 
-    real_create = D._create_normalization
-    monkeypatch.setattr(D, "_create_normalization", lambda m, p: broken() if m == "he" else real_create(m, p))
+    real_create = D.create_normalization
+    monkeypatch.setattr(D, "create_normalization", lambda m, p: broken() if m == "he" else real_create(m, p))
     settings = S.DetectSettings(methods=["none", "dog", "he"], real_images=[1], policies=["raw", "local"],
                                 positives_per_object=8, epochs=1, batch_size=32, threads=1, tune=True)
     result = D.main(small_data, out, settings, progress=False)
@@ -118,6 +118,7 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     assert "error" in saved["summary"]["he|1|raw"]
     assert saved["summary"]["dog|1|local"]["seeds"] == [0]
     assert "failed" in (out / "detect.md").read_text()
+    assert [round(v, 4) for v in saved["window_agreement"]["dog"].values()] == [1.0]  # DoG looks no further than a window
     assert result["machine"]["cpu_count"] >= 1
 
 
@@ -145,9 +146,9 @@ def test_batched_score_maps_equal_single(policy):
 
 
 def test_method_specs_and_seeds():
-    norm = D._create_normalization("alcn:model=lite:mixture=pyramid", {})
+    norm = D.create_normalization("alcn:model=lite:mixture=pyramid", {})
     assert (norm.mixture, norm.scale, norm.net.stride) == ("pyramid", 1.0, 8)
-    assert D._create_normalization("dog:sigma2=2.5", {"sigma1": 1.0}).sigma2 == 2.5
+    assert D.create_normalization("dog:sigma2=2.5", {"sigma1": 1.0}).sigma2 == 2.5
     S.DetectSettings(methods=["alcn", "alcn:model=lite"], seeds=[0, 1]).check()
     for bad in (dict(methods=["nope:x=1"]), dict(methods=["cnn:depth=2"]), dict(methods=["dog", "dog"]),
                 dict(seeds=[]), dict(seeds=[1, 1])):

@@ -33,6 +33,12 @@ For every method and for 1 and 10 real training images per object:
    truth. Precision-recall over all test images, and its area (AUC, PASCAL VOC average
    precision).
 
+Training windows are normalized alone, test images whole: a method that looks further than the
+64x64 window (a wide context, a global statistic) gives the detector another response at test
+than at training, whatever the input policy. ``detect.json``'s ``window_agreement`` measures it
+per method (:func:`window_agreement`: 1 for DoG, lower for methods with a wide context), and the
+report shows it beside the AUCs.
+
 A method may carry parameters, ``NAME:KEY=VALUE[:KEY=VALUE...]`` (``alcn:model=lite:mixture=pyramid``
 compares the real-time ALCN with the exact one, ``dog:sigma2=2``), and every run may be repeated
 over several seeds (``--seeds 0,1,2``): a single seed's AUC moves by several hundredths with the
@@ -64,7 +70,7 @@ from alcn_cv.bench import tuning
 from alcn_cv.bench.detect_data import DetectData, ScaledImage, TrainingSet, load_data, read_test_images, training_set
 from alcn_cv.bench.detect_report import detect_command, detect_markdown
 from alcn_cv.bench.detect_settings import (
-    CROP, DEEP_BASELINES, RESNET_CONTEXT, RESNETS, STRIDE, DetectSettings, run_key,
+    CROP, DEEP_BASELINES, RESNET_CONTEXT, RESNETS, STRIDE, WINDOW, DetectSettings, run_key,
 )
 from alcn_cv.bench.metrics import match_detections, nms, pr_auc, precision_recall
 from alcn_cv.bench.plots import plot_pr_curves
@@ -79,11 +85,13 @@ from alcn_cv.report import machine
 if TYPE_CHECKING:
     from torch import nn
 
-__all__ = ["detect_in_image", "fixed_boxes", "main", "score_maps", "summarize"]
+__all__ = ["create_normalization", "detect_in_image", "fixed_boxes", "main", "score_maps", "summarize", "window_agreement"]
 
 logger = logging.getLogger(__name__)
 
 _BATCH = 1024
+#: Windows drawn from the test images for :func:`window_agreement`.
+AGREEMENT_WINDOWS = 200
 
 
 def score_maps(net: nn.Module, image: np.ndarray, policy: InputPolicy, device: str = "cpu") -> np.ndarray:
@@ -187,7 +195,7 @@ def _make_net(method: str, num_classes: int, config: tuple[int, int] | None = No
     return Detector(num_classes)
 
 
-def _create_normalization(method: str, params: dict[str, Any]) -> Normalization:
+def create_normalization(method: str, params: dict[str, Any]) -> Normalization:
     """``method`` is a spec (``NAME[:KEY=VALUE...]``); ``params`` (tuned ones) fill what it does not give."""
     name, _ = parse_spec(method)
     if name in DEEP_BASELINES:
@@ -195,6 +203,45 @@ def _create_normalization(method: str, params: dict[str, Any]) -> Normalization:
     if name == "alcn":  # windows and test images are already at the working scale
         params = {"scale": 1.0, **params}
     return from_spec(method, **params)
+
+
+def window_agreement(
+    norm: Normalization, images: list[np.ndarray], normalized: list[np.ndarray], count: int = AGREEMENT_WINDOWS,
+    seed: int = 0,
+) -> float | None:
+    """How closely what the detector trains on matches what it is tested on, for one method.
+
+    The detector trains on 64x64 windows normalized alone
+    (:meth:`~alcn_cv.enhance.base.Normalization.normalize_windows`) and is tested on whole
+    normalized images: a method that looks further than the window (a wide context, a global
+    statistic) gives the window's centre another response than the same pixels get in the whole
+    image. Both input policies pass that difference on to the detector.
+
+    Args:
+        norm: the method.
+        images: ``(H, W)`` float32 test images at the working scale (each at least 64x64).
+        normalized: ``norm.normalize`` of each image.
+        count: windows drawn at random (uniformly over images and positions).
+        seed: their seed.
+
+    Returns:
+        The Pearson correlation, pooled over every pixel of the 32x32 centres, between the
+        windows normalized alone and the same pixels of the normalized images (1: the same);
+        None without an image of 64x64 or more.
+    """
+    usable = [k for k, im in enumerate(images) if min(im.shape) >= WINDOW]
+    if not usable:
+        return None
+    rng = np.random.default_rng(seed)
+    o = (WINDOW - CROP) // 2
+    windows, references = [], []
+    for k in rng.choice(usable, count):
+        h, w = images[k].shape
+        y, x = int(rng.integers(0, h - WINDOW + 1)), int(rng.integers(0, w - WINDOW + 1))
+        windows.append(images[k][y : y + WINDOW, x : x + WINDOW])
+        references.append(normalized[k][y + o : y + o + CROP, x + o : x + o + CROP])
+    alone = norm.normalize_windows(np.stack(windows))[:, o : o + CROP, o : o + CROP]
+    return float(np.corrcoef(alone.ravel(), np.stack(references).ravel())[0, 1])
 
 
 def _train(
@@ -308,6 +355,7 @@ class _Run:
     tuned: dict[int, dict[str, Any]] = field(default_factory=dict)
     runs: dict[str, Any] = field(default_factory=dict)
     cnn: dict[str, Any] = field(default_factory=dict)
+    agreement: dict[str, dict[str, float | None]] = field(default_factory=dict)
     alcn_trained: bool | None = None
 
     def training(self, seed: int, n_real: int) -> TrainingSet:
@@ -332,7 +380,7 @@ def _normalize_training(
 ) -> tuple[Normalization, np.ndarray, np.ndarray, float]:
     """The method, its training and validation windows normalized, and the seconds it took."""
     t0 = time.perf_counter()
-    norm = _create_normalization(method, params)
+    norm = create_normalization(method, params)
     return norm, norm.normalize_windows(ts.windows), norm.normalize_windows(ts.val_windows), time.perf_counter() - t0
 
 
@@ -361,6 +409,8 @@ def _train_and_score(
     cache_key = repr(sorted(params.items()))
     if cache_key not in test_cache:  # test images do not depend on the seed
         test_cache[cache_key] = [ScaledImage(t.id, norm.normalize(t.image), t.sx, t.sy) for t in state.test_images]
+        state.agreement.setdefault(method, {})[cache_key] = window_agreement(
+            norm, [t.image for t in state.test_images], [t.image for t in test_cache[cache_key]])
     return {
         "method": method, "real_images": n_real, "policy": policy.to_dict(), "seed": seed,
         "params": params, "images_used": ts.images_used,
@@ -409,6 +459,7 @@ def _result(state: _Run, command: str, seconds: float) -> dict[str, Any]:
         "settings": asdict(settings),
         "tuned": {str(k): v for k, v in state.tuned.items()},
         "cnn": state.cnn,
+        "window_agreement": state.agreement,
         "alcn_trained": state.alcn_trained,
         "machine": machine(),
         "runs": state.runs,

@@ -91,6 +91,16 @@ def detect_markdown(result: dict[str, Any], names: list[str]) -> str:
                 rows.append([method + failed] + [_cell(summary["objects"][n]) for n in names] + [_cell(summary["mean"])])
             lines.append(f"\n## {n_real} real image(s) per object, input policy `{policy}`\n")
             lines.append(markdown_table(["method"] + names + ["mean"], rows))
+    agreement = result.get("window_agreement") or {}
+    if agreement:
+        lines.append("\n## Training windows against test images\n")
+        lines.append("Correlation between the 32x32 centres of 64x64 test-image windows normalized alone (what the "
+                     "detector trains on) and the same pixels of the normalized whole image (what it is tested on), "
+                     "200 random windows; 1 = the same, lower = the detector is tested on another response than it "
+                     "learnt (methods with a context wider than the window).\n")
+        lines.append(markdown_table(["method", "agreement"], [
+            [m, ", ".join("-" if v is None else f"{v:.3f}" for v in by_params.values())] for m, by_params in agreement.items()
+        ]))
     failures = [f"- `{k}`: {v['error']}" for k, v in result["runs"].items() if "error" in v]
     if failures:
         lines.append("\n## Failures\n\n" + "\n".join(failures) + "\n")

@@ -13,6 +13,12 @@ exactly that, for every method with the same detector and the same input policy:
 4. test on rendered windows of the same objects and of background under held-out lighting
    families: accuracy (background + objects) and the ROC AUC of object vs. background
    (score ``1 - p(background)``), overall and per family.
+
+Steps 3 and 4 are :func:`score_inputs`, the same for every method. :func:`fewshot_validation`
+runs them on the methods built inside the trainer (:func:`standard_methods`); ``alcn bench
+fewshot`` (:mod:`alcn_cv.bench.fewshot`) on any registered normalization spec, through
+:meth:`~alcn_cv.enhance.base.Normalization.normalize_windows` and the detection benchmark's
+input policies.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.train.models import CentreMixture, JointModel, dog_weights
 from alcn_cv.train.stage2 import STANDARDIZE_EPS, train_detector
 
-__all__ = ["FewShotSetup", "auc", "fewshot_validation", "make_fewshot_data", "standard_methods"]
+__all__ = ["FewShotSetup", "auc", "fewshot_validation", "make_fewshot_data", "score_inputs", "standard_methods"]
 
 logger = logging.getLogger(__name__)
 
@@ -105,6 +111,44 @@ def _apply(method: Method, windows: np.ndarray) -> np.ndarray:
     return torch.cat(out)[:, 0].numpy().astype(np.float32)
 
 
+def score_inputs(
+    name: str, train_inputs: np.ndarray, train_labels: np.ndarray, test_inputs: np.ndarray, test: PhosBatch,
+    setup: FewShotSetup, progress: bool = False,
+) -> dict:
+    """Train a fresh detector on one method's detector inputs and test it (steps 3 and 4 above).
+
+    Every method goes through this one function: same detector, training and scores.
+
+    Args:
+        name: the method's name (for the log).
+        train_inputs: ``(n, 32, 32)`` float32 detector inputs of the training windows (normalized
+            and under the input policy).
+        train_labels: ``(n,)`` int64, 0 = background, 1..K = objects.
+        test_inputs: ``(m, 32, 32)`` float32 detector inputs of ``test.windows``, made the same way.
+        test: the test windows' labels and lighting families.
+        setup: the settings.
+        progress: progress bar of the detector training.
+
+    Returns:
+        ``{"accuracy", "auc", "by_family": {family: {"accuracy", "auc"}}}``.
+    """
+    net = train_detector(train_inputs, train_labels, setup.n_objects + 1, epochs=setup.epochs,
+                         batch_size=setup.batch_size, lr=setup.lr, seed=setup.seed, progress=progress)
+    x = torch.from_numpy(np.ascontiguousarray(test_inputs, dtype=np.float32)).unsqueeze(1)
+    with torch.no_grad():
+        prob = torch.cat([torch.softmax(net(x[i : i + 512]), 1) for i in range(0, len(x), 512)]).numpy()
+    correct = prob.argmax(1) == test.labels
+    score = 1.0 - prob[:, 0]
+    entry = {"accuracy": float(correct.mean()), "auc": auc(score, test.labels > 0), "by_family": {}}
+    for f in np.unique(test.light_ids):
+        m = test.light_ids == f
+        entry["by_family"][test.light_families[f]] = {"accuracy": float(correct[m].mean()),
+                                                     "auc": auc(score[m], test.labels[m] > 0)}
+    logger.info("few-shot %s: accuracy %.4f, AUC %.4f (%s)", name, entry["accuracy"], entry["auc"],
+                ", ".join(f"{k} {v['auc']:.3f}" for k, v in entry["by_family"].items()))
+    return entry
+
+
 def fewshot_validation(
     methods: dict[str, Method],
     setup: FewShotSetup | None = None,
@@ -112,6 +156,10 @@ def fewshot_validation(
     progress: bool = False,
 ) -> dict[str, dict]:
     """Train one detector per method on the few-shot windows and test it under held-out lightings.
+
+    The methods built inside the trainer (its Normalizer, DoGs of its mixture, none);
+    ``alcn bench fewshot`` (:mod:`alcn_cv.bench.fewshot`) runs the same validation on any
+    registered normalization through :meth:`~alcn_cv.enhance.base.Normalization.normalize_windows`.
 
     Args:
         methods: name -> function mapping ``(B, 1, 64, 64)`` windows in [0, 1] to the detector's
@@ -121,28 +169,12 @@ def fewshot_validation(
         progress: progress bars of the detector training.
 
     Returns:
-        name -> ``{"accuracy", "auc", "by_family": {family: {"accuracy", "auc"}}}``.
+        name -> :func:`score_inputs`'s result.
     """
     setup = setup or FewShotSetup()
     train_x, train_y, test = data if data is not None else make_fewshot_data(setup)
-    results = {}
-    for name, method in methods.items():
-        net = train_detector(_apply(method, train_x), train_y, setup.n_objects + 1, epochs=setup.epochs,
-                             batch_size=setup.batch_size, lr=setup.lr, seed=setup.seed, progress=progress)
-        x = torch.from_numpy(_apply(method, test.windows)).unsqueeze(1)
-        with torch.no_grad():
-            prob = torch.cat([torch.softmax(net(x[i : i + 512]), 1) for i in range(0, len(x), 512)]).numpy()
-        correct = prob.argmax(1) == test.labels
-        score = 1.0 - prob[:, 0]
-        entry = {"accuracy": float(correct.mean()), "auc": auc(score, test.labels > 0), "by_family": {}}
-        for f in np.unique(test.light_ids):
-            m = test.light_ids == f
-            entry["by_family"][test.light_families[f]] = {"accuracy": float(correct[m].mean()),
-                                                         "auc": auc(score[m], test.labels[m] > 0)}
-        results[name] = entry
-        logger.info("few-shot %s: accuracy %.4f, AUC %.4f (%s)", name, entry["accuracy"], entry["auc"],
-                    ", ".join(f"{k} {v['auc']:.3f}" for k, v in entry["by_family"].items()))
-    return results
+    return {name: score_inputs(name, _apply(method, train_x), train_y, _apply(method, test.windows), test, setup, progress)
+            for name, method in methods.items()}
 
 
 def standard_methods(model: JointModel | None, dog_pairs: Sequence[Sequence[float]], num_kernels: int, step: float,

@@ -1,0 +1,321 @@
+"""``alcn bench fewshot``: the few-shot validation (:mod:`alcn_cv.train.fewshot`) on any registered normalization.
+
+The validation asks whether a detector trained from one image under one light of a *new*
+object still works under other lights once the windows are normalized (Rad, Roth & Lepetit,
+BMVC 2017, Sec. 4.3, at the window level). Here every method is a registered normalization
+spec (``NAME[:KEY=VALUE...]``, e.g. ``alcn:model=gain`` or ``alcn:weights=FILE.npz``) and
+reaches the detector the same way:
+
+1. **Windows** (:func:`alcn_cv.train.fewshot.make_fewshot_data`): the paper's simple synthetic
+   images of ``objects`` rendered objects (``real_images`` images each, training-like light)
+   and background windows; test windows of the same objects and background under held-out
+   lighting families. 64x64 each, drawn once per draw and shared by every method.
+2. **Normalization** through the runtime's public window API,
+   :meth:`~alcn_cv.enhance.base.Normalization.normalize_windows` (ALCN: Eq. 1, one weight
+   vector per window from its centre 48x48), on training and test windows alike; the windows
+   are at the working scale, so ALCN runs with ``scale=1``
+   (:func:`alcn_cv.bench.detect.create_normalization`, as in ``alcn bench detect``).
+3. **Input policy** (:class:`alcn_cv.bench.policies.InputPolicy`, the detection benchmark's),
+   the same for every method: ``raw`` (one affine map fitted on the training windows),
+   ``local`` (31x31 local standardization) or ``standardize`` (each 32x32 window alone).
+4. **Detector** (:func:`alcn_cv.train.fewshot.score_inputs`): the same network and training for
+   every method; accuracy (background + objects) and the ROC AUC of object vs. background on
+   the test windows, overall and per lighting family.
+
+A *draw* is one repetition with its own objects (catalogue seed ``object_seed + draw``),
+windows and detector initialisation (seed ``draw``). The report says, per draw and policy,
+whether each ALCN variant's AUC is above the best DoG's.
+
+Outputs: ``fewshot.json`` (every number, settings, machine, command), ``fewshot.md`` and
+``fewshot.png`` (AUC per method, one point per draw).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from alcn_cv.bench.detect import create_normalization
+from alcn_cv.bench.detect_settings import POLICIES, POLICY_DESCRIPTIONS
+from alcn_cv.bench.policies import InputPolicy
+from alcn_cv.enhance.registry import available, parse_spec
+from alcn_cv.errors import InputError
+from alcn_cv.io import atomic_write, write_json
+from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
+from alcn_cv.train.fewshot import FewShotSetup, make_fewshot_data, score_inputs
+
+__all__ = ["DEFAULT_METHODS", "FewShotSettings", "compare_to_dog", "fewshot_command", "fewshot_markdown", "main"]
+
+logger = logging.getLogger(__name__)
+
+#: The methods compared by default.
+DEFAULT_METHODS = ("none", "dog", "dlcn", "tantriggs", "alcn", "alcn:model=gain")
+_SETUP = FewShotSetup()
+
+
+@dataclass
+class FewShotSettings:
+    """Settings of ``alcn bench fewshot`` (all recorded in ``fewshot.json``).
+
+    Attributes:
+        methods: registered normalization specs ``NAME[:KEY=VALUE...]``.
+        policies: detector input policies (:data:`~alcn_cv.bench.detect_settings.POLICIES`).
+        draws: repetitions, each with its own objects, windows and detector initialisation.
+        objects: new objects per draw.
+        object_seed: catalogue seed of draw 0 (draw ``d`` uses ``object_seed + d``).
+        real_images: reference images per object.
+        per_image: synthetic training windows per reference image (as many background windows).
+        test_windows: test windows per draw (half background).
+        test_lighting: lighting families of the test windows.
+        epochs, batch_size, lr: detector training (the same for every method).
+        threads: torch threads (``None``: torch's default).
+    """
+
+    methods: list[str] = field(default_factory=lambda: list(DEFAULT_METHODS))
+    policies: list[str] = field(default_factory=lambda: ["raw", "local"])
+    draws: int = 3
+    objects: int = _SETUP.n_objects
+    object_seed: int = _SETUP.object_seed
+    real_images: int = _SETUP.real_images
+    per_image: int = _SETUP.per_image
+    test_windows: int = _SETUP.n_test
+    test_lighting: list[str] = field(default_factory=lambda: list(_SETUP.test_lighting))
+    epochs: int = _SETUP.epochs
+    batch_size: int = _SETUP.batch_size
+    lr: float = _SETUP.lr
+    threads: int | None = None
+
+    def check(self) -> FewShotSettings:
+        """Raise :class:`~alcn_cv.errors.InputError` on an unknown method or policy, or a value out of range."""
+        unknown = [m for m in self.methods if parse_spec(m)[0] not in available()]
+        if unknown or not self.methods:
+            raise InputError(f"unknown or no method(s) {unknown}; available: {', '.join(available())}")
+        if len(set(self.methods)) != len(self.methods):
+            raise InputError(f"a method is listed twice: {self.methods}")
+        bad = [p for p in self.policies if p not in POLICIES]
+        if bad or not self.policies:
+            raise InputError(f"unknown or no policy {bad}; choose from {', '.join(POLICIES)}")
+        if min(self.draws, self.objects, self.real_images, self.per_image, self.test_windows, self.epochs,
+               self.batch_size) < 1 or not self.lr > 0:
+            raise InputError("draws, objects, real_images, per_image, test_windows, epochs and batch_size must be "
+                             ">= 1 and lr > 0")
+        return self
+
+    def setup(self, draw: int) -> FewShotSetup:
+        """The few-shot setup of one draw."""
+        return FewShotSetup(n_objects=self.objects, object_seed=self.object_seed + draw, real_images=self.real_images,
+                            per_image=self.per_image, n_test=self.test_windows, test_lighting=tuple(self.test_lighting),
+                            epochs=self.epochs, batch_size=self.batch_size, lr=self.lr, seed=draw)
+
+
+def _is(spec: str, name: str) -> bool:
+    return parse_spec(spec)[0] == name
+
+
+def compare_to_dog(runs: dict[str, Any], settings: FewShotSettings) -> dict[str, Any]:
+    """Per policy, ALCN variant and draw: its AUC against the best DoG's (every ``dog`` spec run).
+
+    Returns:
+        ``{policy: {variant: [{"draw", "auc", "dog", "dog_auc", "margin", "above"}, ...]}}``;
+        empty without a DoG or an ALCN among the methods.
+    """
+    dogs = [m for m in settings.methods if _is(m, "dog")]
+    variants = [m for m in settings.methods if _is(m, "alcn")]
+    out: dict[str, Any] = {}
+    for policy in settings.policies:
+        out[policy] = {}
+        for variant in variants:
+            rows = []
+            for draw in range(settings.draws):
+                done = [(runs[policy][m][draw]["auc"], m) for m in dogs if runs[policy][m][draw].get("auc") is not None]
+                mine = runs[policy][variant][draw]
+                if not done or mine.get("auc") is None:
+                    rows.append({"draw": draw, "above": None})
+                    continue
+                dog_auc, dog = max(done)
+                rows.append({"draw": draw, "auc": mine["auc"], "dog": dog, "dog_auc": dog_auc,
+                             "margin": mine["auc"] - dog_auc, "above": bool(mine["auc"] > dog_auc)})
+            out[policy][variant] = rows
+    return out if dogs and variants else {}
+
+
+def _finite(value: Any) -> Any:
+    """``value`` with every NaN (an AUC without positives or negatives) as None, for JSON."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    return None if isinstance(value, float) and not np.isfinite(value) else value
+
+
+def _run_draw(settings: FewShotSettings, draw: int, runs: dict[str, Any], bar: tqdm) -> None:
+    """Every method and policy on one draw's windows; a failing method is recorded with its error."""
+    setup = settings.setup(draw)
+    train_x, train_y, test = make_fewshot_data(setup)
+    for method in settings.methods:
+        t0 = time.perf_counter()
+        try:
+            norm = create_normalization(method, {})
+            train_n, test_n = norm.normalize_windows(train_x), norm.normalize_windows(test.windows)
+            normalize_s = time.perf_counter() - t0
+        except Exception as exc:  # one method failing is reported, not the end of the run
+            logger.error("few-shot %s, draw %d: %s: %s", method, draw, type(exc).__name__, exc)
+            for policy in settings.policies:
+                runs[policy][method].append({"draw": draw, "error": f"{type(exc).__name__}: {exc}"})
+                bar.update()
+            continue
+        for policy_name in settings.policies:
+            bar.set_postfix(run=f"{method}|{policy_name}|{draw}")
+            t1 = time.perf_counter()
+            try:
+                policy = InputPolicy(policy_name, train_n)
+                entry = _finite(score_inputs(f"{method} ({policy_name}, draw {draw})", policy.windows(train_n), train_y,
+                                             policy.windows(test_n), test, setup))
+                entry.update(draw=draw, policy=policy.to_dict(),
+                             seconds={"normalize": normalize_s, "train_and_test": time.perf_counter() - t1})
+            except Exception as exc:
+                logger.error("few-shot %s, %s, draw %d: %s: %s", method, policy_name, draw, type(exc).__name__, exc)
+                entry = {"draw": draw, "error": f"{type(exc).__name__}: {exc}"}
+            runs[policy_name][method].append(entry)
+            bar.update()
+
+
+def _spread(values: list[float]) -> dict[str, Any] | None:
+    return {"mean": float(np.mean(values)), "std": float(np.std(values)), "values": values} if values else None
+
+
+def _summary(runs: dict[str, Any]) -> dict[str, Any]:
+    return {policy: {method: {metric: _spread([r[metric] for r in draws if r.get(metric) is not None])
+                              for metric in ("auc", "accuracy")}
+                     for method, draws in by_method.items()} for policy, by_method in runs.items()}
+
+
+def fewshot_command(out_dir: str | os.PathLike, settings: FewShotSettings) -> str:
+    """The ``alcn bench fewshot`` command line that runs these settings (every setting spelled out)."""
+    return command_line(["alcn", "bench", "fewshot", "--out", out_dir], {
+        "--methods": settings.methods, "--policy": settings.policies, "--draws": settings.draws,
+        "--objects": settings.objects, "--object-seed": settings.object_seed, "--real-images": settings.real_images,
+        "--per-image": settings.per_image, "--test-windows": settings.test_windows,
+        "--test-lighting": settings.test_lighting, "--epochs": settings.epochs, "--batch-size": settings.batch_size,
+        "--lr": settings.lr, "--threads": settings.threads,
+    })
+
+
+def _cell(spread: dict[str, Any] | None) -> str | None:
+    return None if spread is None else f"{spread['mean']:.3f} ± {spread['std']:.3f}"
+
+
+def fewshot_markdown(result: dict[str, Any]) -> str:
+    """``fewshot.md``: machine, command, settings, policies, AUC per draw and ALCN against DoG."""
+    s = result["settings"]
+    lines = [
+        "# Few-shot validation: every normalization with the same detector\n",
+        "A detector is trained from the simple synthetic images of new rendered objects seen in "
+        f"{s['real_images']} image(s) each under one light, and tested on windows of the same objects and background "
+        f"under held-out lighting ({', '.join(s['test_lighting'])}). Every method normalizes training and test windows "
+        "through `Normalization.normalize_windows` (ALCN: Eq. 1), then the same input policy and the same detector "
+        "(Rad, Roth & Lepetit, BMVC 2017, Sec. 4.3). AUC = ROC AUC of object vs. background (score 1 - p(background)); "
+        "accuracy over background and objects.\n",
+        f"- **Machine:** {describe_machine(result['machine'])}",
+        f"- **Command:** `{result['command']}`",
+        f"- **Settings:** {s['draws']} draws (draw d: objects of catalogue seed {s['object_seed']} + d, windows and "
+        f"detector seed d); {s['objects']} objects, {s['per_image']} synthetic windows per image and as many background "
+        f"windows; {s['test_windows']} test windows; detector {s['epochs']} epochs, batch {s['batch_size']}, Adam lr "
+        f"{s['lr']}. Total time {result['seconds']:.0f} s.",
+        "- **Input policies** (the same for every method):",
+        *[f"  - `{p}`: {POLICY_DESCRIPTIONS[p]}" for p in s["policies"]],
+        "",
+    ]
+    for policy, by_method in result["runs"].items():
+        lines.append(f"## AUC, policy `{policy}`\n")
+        rows = []
+        for method, draws in by_method.items():
+            summary = result["summary"][policy][method]
+            rows.append([method] + ["failed" if "error" in r else r["auc"] for r in draws]
+                        + [_cell(summary["auc"]), _cell(summary["accuracy"])])
+        lines += [markdown_table(["method"] + [f"draw {d}" for d in range(s["draws"])] + ["AUC mean ± std",
+                                                                                           "accuracy mean ± std"], rows), ""]
+    if result["alcn_vs_dog"]:
+        lines.append("## ALCN against the best DoG, per draw (AUC margin; ✓ above, ✗ not)\n")
+        rows = []
+        for policy, variants in result["alcn_vs_dog"].items():
+            for variant, draws in variants.items():
+                cells = ["-" if r["above"] is None else f"{r['margin']:+.4f} {'✓' if r['above'] else '✗'}" for r in draws]
+                rows.append([variant, policy] + cells + [f"{sum(bool(r['above']) for r in draws)}/{len(draws)}"])
+        lines += [markdown_table(["ALCN", "policy"] + [f"draw {d}" for d in range(s["draws"])] + ["above"], rows), ""]
+    errors = [f"- `{m}` ({p}, draw {r['draw']}): {r['error']}" for p, bm in result["runs"].items()
+              for m, draws in bm.items() for r in draws if "error" in r]
+    if errors:
+        lines += ["## Failed runs\n", *errors, ""]
+    return "\n".join(lines)
+
+
+def _figure(result: dict[str, Any], path: Path) -> Path:
+    """AUC per method: the mean over draws as a bar, every draw as a point; one panel per policy."""
+    policies = list(result["runs"])
+    plt, fig, axes = new_figure(1, len(policies), figsize=(5.5 * len(policies), 4.5))
+    lowest = min([r["auc"] for bm in result["runs"].values() for d in bm.values() for r in d if r.get("auc") is not None],
+                 default=0.5)
+    for ax, policy in zip(axes[0], policies):
+        by_method = result["runs"][policy]
+        methods = list(by_method)
+        for i, method in enumerate(methods):
+            values = [r["auc"] for r in by_method[method] if r.get("auc") is not None]
+            if values:
+                ax.bar(i, np.mean(values), color="tab:orange" if _is(method, "alcn") else "tab:blue", alpha=0.6)
+                ax.plot([i] * len(values), values, "k.", markersize=5)
+        ax.set_xticks(range(len(methods)))
+        ax.set_xticklabels(methods, rotation=35, ha="right", fontsize=8)
+        ax.set_ylabel("ROC AUC, object vs. background")
+        ax.set_title(f"policy {policy}")
+        ax.set_ylim(min(0.5, lowest - 0.02), 1.0)
+        ax.grid(axis="y", alpha=0.3)
+    fig.suptitle("Few-shot validation (bars: mean over draws; points: draws)")
+    fig.tight_layout()
+    return save_figure(plt, fig, path)
+
+
+def main(
+    out_dir: str | os.PathLike, settings: FewShotSettings | None = None, command: str | None = None, progress: bool = True,
+) -> dict[str, Any]:
+    """Run the few-shot validation on registered normalizations (see the module docstring) and write its report.
+
+    Args:
+        out_dir: output folder (created).
+        settings: default :class:`FewShotSettings`.
+        command: the command line to record (default: the one that runs ``settings``).
+        progress: progress bar across runs.
+
+    Returns:
+        The dictionary written to ``fewshot.json``: ``runs`` (policy -> method -> one result of
+        :func:`~alcn_cv.train.fewshot.score_inputs` per draw, or its ``error``), ``summary``
+        (mean and spread over draws), ``alcn_vs_dog`` (:func:`compare_to_dog`).
+    """
+    import torch
+
+    settings = (settings or FewShotSettings()).check()
+    if settings.threads:
+        torch.set_num_threads(settings.threads)
+    start = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    runs: dict[str, Any] = {p: {m: [] for m in settings.methods} for p in settings.policies}
+    total = settings.draws * len(settings.methods) * len(settings.policies)
+    with tqdm(total=total, desc="few-shot validation", unit="run", disable=not progress) as bar:
+        for draw in range(settings.draws):
+            _run_draw(settings, draw, runs, bar)
+    result = {
+        "benchmark": "fewshot", "command": command or fewshot_command(out_dir, settings), "settings": asdict(settings),
+        "machine": machine(), "runs": runs, "summary": _summary(runs), "alcn_vs_dog": compare_to_dog(runs, settings),
+    }
+    result["seconds"] = time.perf_counter() - start
+    result["figure"] = str(_figure(result, out / "fewshot.png"))
+    write_json(out / "fewshot.json", result)
+    atomic_write(out / "fewshot.md", fewshot_markdown(result))
+    logger.info("few-shot validation written to %s in %.0f s", out, result["seconds"])
+    return result

@@ -1,0 +1,99 @@
+"""``alcn bench fewshot``: every registered normalization reaches the same detector the same way."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from alcn_cv.bench import fewshot as B  # noqa: E402
+from alcn_cv.bench.detect import create_normalization  # noqa: E402
+from alcn_cv.bench.policies import InputPolicy  # noqa: E402
+from alcn_cv.cli import main as cli_main  # noqa: E402
+from alcn_cv.data.phos import PhosBatch  # noqa: E402
+from alcn_cv.errors import InputError  # noqa: E402
+from alcn_cv.train import fewshot as F  # noqa: E402
+
+
+def _tiny_data(setup):
+    rng = np.random.default_rng(setup.seed)
+    n, m = 24, 16
+    test = PhosBatch(windows=rng.integers(0, 256, (m, 64, 64), dtype=np.uint8), labels=np.arange(m) % 3,
+                     light_ids=np.arange(m) % 2, kinds=np.zeros(m, np.int64), offsets=np.zeros((m, 2), np.float32),
+                     extents=np.zeros(m, np.float32), n_objects=2, object_seed=setup.object_seed, seed=setup.seed,
+                     light_families=["dark", "side"])
+    return rng.integers(0, 256, (n, 64, 64), dtype=np.uint8), np.arange(n) % 3, test
+
+
+@pytest.mark.parametrize("policy", ["raw", "local"])
+def test_every_spec_reaches_the_detector_through_normalize_windows(policy, monkeypatch):
+    seen = {}
+
+    def record(name, train_inputs, train_labels, test_inputs, test, setup, progress=False):
+        seen[name.split(" ")[0]] = (train_inputs, test_inputs, setup)
+        return {"accuracy": 0.5, "auc": 0.5, "by_family": {}}
+
+    monkeypatch.setattr(B, "make_fewshot_data", _tiny_data)
+    monkeypatch.setattr(B, "score_inputs", record)
+    settings = B.FewShotSettings(methods=["none", "dog", "alcn:model=gain"], policies=[policy], draws=1, objects=2)
+    runs = {policy: {m: [] for m in settings.methods}}
+    B._run_draw(settings, 0, runs, B.tqdm(disable=True))
+    train_x, _, test = _tiny_data(settings.setup(0))
+    for method in settings.methods:
+        norm = create_normalization(method, {})
+        train_n, test_n = norm.normalize_windows(train_x), norm.normalize_windows(test.windows)
+        pol = InputPolicy(policy, train_n)
+        train_inputs, test_inputs, setup = seen[method]
+        np.testing.assert_allclose(train_inputs, pol.windows(train_n), atol=1e-6)
+        np.testing.assert_allclose(test_inputs, pol.windows(test_n), atol=1e-6)
+        assert train_inputs.shape[1:] == (32, 32) and (setup.seed, setup.n_objects) == (0, 2)
+    assert create_normalization("alcn:model=gain", {}).scale == 1.0
+
+
+def test_draws_differ_and_settings_check():
+    s = B.FewShotSettings(draws=2)
+    assert (s.setup(1).seed, s.setup(1).object_seed) == (1, s.object_seed + 1)
+    for bad in (dict(methods=["nope"]), dict(methods=["dog", "dog"]), dict(policies=["sideways"]), dict(draws=0),
+                dict(methods=[])):
+        with pytest.raises(InputError):
+            B.FewShotSettings(**bad).check()
+
+
+def test_compare_to_dog_takes_the_best_dog_per_draw():
+    settings = B.FewShotSettings(methods=["dog", "dog:sigma1=1:sigma2=2", "alcn"], policies=["raw"], draws=3)
+    runs = {"raw": {"dog": [{"auc": 0.7}, {"auc": 0.8}, {"auc": 0.6}],
+                    "dog:sigma1=1:sigma2=2": [{"auc": 0.75}, {"error": "x"}, {"auc": 0.5}],
+                    "alcn": [{"auc": 0.74}, {"auc": 0.81}, {"error": "y"}]}}
+    rows = B.compare_to_dog(runs, settings)["raw"]["alcn"]
+    assert [r["above"] for r in rows] == [False, True, None]
+    assert rows[0]["dog"] == "dog:sigma1=1:sigma2=2" and rows[0]["margin"] == pytest.approx(-0.01)
+    assert B.compare_to_dog(runs, B.FewShotSettings(methods=["dog"], policies=["raw"], draws=3)) == {}
+
+
+def test_fewshot_validation_is_score_inputs_of_each_method():
+    setup = F.FewShotSetup(n_objects=2, epochs=1, seed=0)
+    data = _tiny_data(setup)
+    none = lambda x: x[..., 16:48, 16:48]  # noqa: E731
+    result = F.fewshot_validation({"none": none}, setup, data)
+    train_x, train_y, test = data
+    centre = lambda w: np.ascontiguousarray(w[:, 16:48, 16:48], np.float32) / np.float32(255)  # noqa: E731
+    assert result["none"] == F.score_inputs("none", centre(train_x), train_y, centre(test.windows), test, setup)
+
+
+def test_cli_end_to_end(tmp_path):
+    out = tmp_path / "fs"
+    code = cli_main(["bench", "fewshot", "--out", str(out), "--methods", "none,dog,alcn", "--policy", "raw",
+                     "--draws", "1", "--objects", "2", "--per-image", "6", "--test-windows", "30", "--epochs", "1",
+                     "--threads", "1"])
+    assert code == 0
+    saved = json.loads((out / "fewshot.json").read_text())
+    assert set(saved["runs"]["raw"]) == {"none", "dog", "alcn"}
+    assert 0 <= saved["runs"]["raw"]["alcn"][0]["auc"] <= 1
+    assert saved["alcn_vs_dog"]["raw"]["alcn"][0]["above"] in (True, False)
+    text = (out / "fewshot.md").read_text()
+    assert "ALCN against the best DoG" in text and "--draws 1" in text
+    assert (out / "fewshot.png").stat().st_size > 0
+    assert cli_main(["bench", "fewshot", "--out", str(out), "--methods", "nope"]) == 2
