@@ -148,3 +148,12 @@ def test_shipped_gain_model_through_create_alcn():
     assert windows.shape == (1, 64, 64) and np.abs(windows).max() < 1
     fast = alcn_cv.createALCN(model="gain", backend="fast").normalize(image[0, 0].numpy())
     np.testing.assert_allclose(alcn_cv.createALCN(model="gain", backend="opencv").normalize(image[0, 0].numpy()), fast, atol=1e-4, rtol=0)
+
+
+def test_gain_windows_are_normalized_as_small_images_and_the_lite_ones_by_eq1():
+    import alcn_cv
+
+    windows = np.clip(_lit_texture(64, 64)[0].numpy().repeat(2, axis=0) * np.array([1.0, 0.3], np.float32)[:, None, None], 0, 1)
+    gain = alcn_cv.createALCN(model="gain")
+    assert gain.per_pixel and not alcn_cv.createALCN(model="lite").per_pixel
+    np.testing.assert_array_equal(gain.normalize_windows(windows), np.stack([gain.normalize(w) for w in windows]))
