@@ -5,6 +5,8 @@
   :mod:`~alcn_cv.bench.detect_data` (data sets and training windows),
   :mod:`~alcn_cv.bench.policies` (the detector's input policies),
   :mod:`~alcn_cv.bench.detect_report` (``detect.md``);
+* :mod:`~alcn_cv.bench.fewshot` -- the few-shot validation of any registered method
+  (``alcn bench fewshot``);
 * :mod:`~alcn_cv.bench.invariance` -- agreement of normalized real photographs under 12 lights
   (``alcn bench invariance``);
 * :mod:`~alcn_cv.bench.relight` -- patch identification, keypoint matching and homography pose
