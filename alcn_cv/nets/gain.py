@@ -220,7 +220,7 @@ class GainNormalizer(nn.Module):
         return math.ceil((h - 1) / grid_stride) + 1, math.ceil((w - 1) / grid_stride) + 1
 
     def _cells(self, image: torch.Tensor) -> torch.Tensor:
-        """``(B, 1, gh, gw)`` means of each cell of side :attr:`stride` centred on a grid point."""
+        """``(B, C, gh, gw)`` means of each cell of side :attr:`stride` centred on a grid point."""
         s = self.stride
         before = s // 2
         # H + 2s - 2 pixels hold exactly ceil((H-1)/s)+1 cells (the pooling drops the rest), so
@@ -238,7 +238,8 @@ class GainNormalizer(nn.Module):
         """
         if image.ndim != 4 or image.shape[1] != 1:
             raise InputError(f"image must have shape (B, 1, H, W), got {tuple(image.shape)}")
-        mean, square = self._cells(image), self._cells(image * image)
+        # One padding and one pooling for both statistics (the full-resolution passes dominate).
+        mean, square = self._cells(torch.cat([image, image * image], dim=1)).split(1, dim=1)
         # The blurs of the grid stand for blurs of the image: sigma in cells = sigma / stride.
         local = _blur(mean, self.mean_sigma / self.stride)
         context = _blur(mean, self.context_sigma / self.stride)
