@@ -402,8 +402,8 @@ class ALCN(Normalization):
         Args:
             frames: ``(B, H, W)`` uint8, uint16, or float32 intensities in [0, 1].
             out_dtype: as in :meth:`apply` (default: the frames' dtype).
-            half: run the Normalizer and the mixture in float16 under ``torch.autocast`` (for
-                CUDA; on the CPU it is slow and only checks the path).
+            half: run the Normalizer in float16 under ``torch.autocast`` (for CUDA; on the CPU
+                it is slow and only checks the path); Eq. 3 stays in float32.
 
         Returns:
             ``(B, H, W)`` of ``out_dtype``.
@@ -412,8 +412,7 @@ class ALCN(Normalization):
             raise InputError(f"apply_batch runs on backend='torch' (device 'cpu' or 'cuda'), not {self.backend!r}")
         if not isinstance(frames, np.ndarray) or frames.ndim != 3 or frames.size == 0:
             raise InputError(f"frames must be a non-empty (B, H, W) array, got {getattr(frames, 'shape', type(frames))}")
-        for frame in frames[:1]:
-            check_image(frame)  # the dtype; a float batch's range is checked as a whole below
+        check_image(frames[0])  # the dtype; a float batch's range is checked as a whole below
         if frames.dtype == np.float32:
             check_image(frames.reshape(-1, frames.shape[-1]))
         out_dtype = np.dtype(frames.dtype if out_dtype is None else out_dtype)
@@ -422,6 +421,7 @@ class ALCN(Normalization):
         import torch
 
         from alcn_cv.filters.kornia_mixture import gaussian_mixture2d
+        from alcn_cv.nets.gain import contrast_equalization
 
         device = next(self.net.parameters()).device
         lo, hi = self.output_range
@@ -434,7 +434,7 @@ class ALCN(Normalization):
             maps = torch.nn.functional.interpolate(maps, size=x.shape[-2:], mode="bilinear", align_corners=False)
             response = gaussian_mixture2d(x, maps, self.full_res_sigmas)
             if self.equalization_tau is not None:
-                response = torch.tanh(response / self.equalization_tau)
+                response = contrast_equalization(response, self.equalization_tau)
             unit = ((response[:, 0] - lo) * (1.0 / (hi - lo))).clamp(0, 1)
             if out_dtype != np.float32:
                 unit = torch.round(unit * FULL_SCALE[out_dtype]).to(torch.int32)

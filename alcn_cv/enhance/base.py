@@ -138,7 +138,7 @@ class Normalization:
 
     def to_unit(self, response: np.ndarray) -> np.ndarray:
         """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""
-        return _unit_in_place_to(self._unclipped_unit(response), np.dtype(np.float32))
+        return self._response_to(response, np.dtype(np.float32))
 
     def _unclipped_unit(self, response: np.ndarray) -> np.ndarray:
         """``(response - lo) / (hi - lo)`` as a new float32 array: one ``cv2.addWeighted`` pass
@@ -205,7 +205,7 @@ class Normalization:
         if img.ndim == 3 and img.shape[2] == 3:
             lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
             lightness = np.divide(lab[..., 0], np.float32(100))
-            unit_lightness = self._response_to(self._normalize_checked(lightness), np.dtype(np.float32))
+            unit_lightness = self.to_unit(self._normalize_checked(lightness))
             np.multiply(unit_lightness, 100.0, out=lab[..., 0])
             return _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
         return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
