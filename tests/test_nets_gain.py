@@ -8,6 +8,7 @@ import torch
 
 from alcn_cv.errors import InputError
 from alcn_cv.filters import gaussian_blur_stack
+from alcn_cv.filters.divisive import divisive_normalization
 from alcn_cv.nets.gain import ARCHITECTURE, GainNormalizer, contrast_equalization, dog_weights
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
@@ -157,3 +158,40 @@ def test_gain_windows_are_normalized_as_small_images_and_the_lite_ones_by_eq1():
     gain = alcn_cv.createALCN(model="gain")
     assert gain.per_pixel and not alcn_cv.createALCN(model="lite").per_pixel
     np.testing.assert_array_equal(gain.normalize_windows(windows), np.stack([gain.normalize(w) for w in windows]))
+
+
+def test_divisive_gain_numpy_and_torch_agree_and_ignore_the_light_strength():
+    rng = np.random.default_rng(3)
+    image = gaussian_blur_stack(rng.random((75, 93)).astype(np.float32), (1.5,))[0]
+    net = GainNormalizer(gain="divisive", floor_scale=0.5)
+    with torch.no_grad():
+        response = net.response(torch.from_numpy(image)[None, None])
+        divided = net.divide(response)[0, 0].numpy()
+        darker = net.divide(net.response(torch.from_numpy(0.1 * image)[None, None]))[0, 0].numpy()
+    np.testing.assert_allclose(divisive_normalization(response[0, 0].numpy(), 8, 0.5), divided, atol=1e-5)
+    np.testing.assert_allclose(darker, divided, atol=1e-4)  # untrained: exactly gain-invariant up to eps
+    assert np.abs(divided).max() > 0.5  # a normalized response, not a vanishing one
+
+
+def test_divisive_floor_keeps_a_flat_region_flat():
+    image = np.full((64, 128), 0.5, np.float32)
+    image[:, :64] += 0.2 * np.random.default_rng(0).standard_normal((64, 64)).astype(np.float32)
+    image[:, 64:] += 0.002 * np.random.default_rng(1).standard_normal((64, 64)).astype(np.float32)
+    net = GainNormalizer(gain="divisive")
+    with torch.no_grad():
+        out = net(torch.from_numpy(image)[None, None])[0, 0].numpy()
+    assert out[8:-8, 80:-8].std() < 0.1 * out[8:-8, 8:56].std()  # without the floor: about equal
+
+
+def test_divisive_weight_file_round_trip_through_create_alcn(tmp_path):
+    from alcn_cv.enhance.alcn import ALCN
+
+    net = GainNormalizer(gain="divisive", floor_scale=0.8, tau=2.0)
+    path = save_normalizer_file(tmp_path / "d.npz", net.state_arrays(), net.file_meta(trained=True))
+    assert load_normalizer_file(path).meta["divisive"] == {"stride": 8, "scale": pytest.approx(0.8)}
+    image = gaussian_blur_stack(np.random.default_rng(4).random((90, 110)).astype(np.float32), (1.0,))[0]
+    with torch.no_grad():
+        expected = net(torch.from_numpy(image)[None, None])[0, 0].numpy()
+    alcn = ALCN(weights=path, backend="torch")
+    np.testing.assert_allclose(alcn.normalize(image), expected, atol=1e-5)
+    assert alcn._tiling((9000, 9000)) is None  # the floor is a mean over the whole image

@@ -30,6 +30,7 @@ from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, kernel_radius, pyramid_mixture, pyramid_plan
+from alcn_cv.filters.divisive import divisive_normalization
 from alcn_cv.nets.opencv_runtime import WINDOW
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 
@@ -144,6 +145,12 @@ class ALCN(Normalization):
         #: ``tau`` of the final contrast equalization ``tanh(x / tau)`` that is part of the
         #: gain Normalizer's method (:mod:`alcn_cv.nets.gain`); None for the others.
         self.equalization_tau = float(meta["equalization"]["tau"]) if "equalization" in meta else None
+        #: ``(stride, scale)`` of the gain Normalizer's divisive normalization of the response
+        #: (:func:`alcn_cv.nets.gain.divisive_normalization`, before the equalization; the stride
+        #: in input pixels), or None.
+        self.divisive = (
+            (max(1, round(meta["divisive"]["stride"] / self.scale)), float(meta["divisive"]["scale"])) if "divisive" in meta else None
+        )
         #: True for a Normalizer designed for Eq. 3 only (the gain Normalizer: per-pixel gain and
         #: weights on its own grid), whose windows are normalized as small images, not by Eq. 1.
         self.per_pixel = meta.get("architecture") == "gain"
@@ -290,7 +297,7 @@ class ALCN(Normalization):
             raise InputError(f"windows must be at least {WINDOW} px at the working scale, got {centre.shape[1]}")
         o = (centre.shape[1] - WINDOW) // 2
         weights = self.window_weights(centre[:, o : o + WINDOW, o : o + WINDOW])
-        return self._equalize(np.stack([alcn_filter(w, wt, self.full_res_sigmas) for w, wt in zip(unit, weights)]))
+        return self._finish(np.stack([alcn_filter(w, wt, self.full_res_sigmas) for w, wt in zip(unit, weights)]))
 
     def _grid_maps_at(
         self, grid: np.ndarray, ratios: tuple[float, float], level: int, ks: list[int], shape: tuple[int, int]
@@ -343,6 +350,8 @@ class ALCN(Normalization):
         return np.stack([cv2.resize(m, (w, h), interpolation=cv2.INTER_LINEAR) for m in maps])
 
     def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
+        if self.divisive is not None:
+            return None  # the divisive floor is a mean over the whole image
         # A strip gives the whole image's output when it starts on a grid row (and so on a row
         # of every pyramid level) and its working image is the whole one's rows (an integer
         # zoom from the working scale); its halo covers the Normalizer's windows around the
@@ -356,14 +365,17 @@ class ALCN(Normalization):
         reach = zoom * (self._network_reach + self.grid_stride) + kernel_radius(max(self.full_res_sigmas)) + 2 ** (top + 2)
         return -(-reach // step) * step, step
 
-    def _equalize(self, response: np.ndarray) -> np.ndarray:
-        """The method's final contrast equalization, when it has one (the gain Normalizer)."""
+    def _finish(self, response: np.ndarray) -> np.ndarray:
+        """The method's last steps after Eq. 3, when it has them (the gain Normalizer): the
+        divisive normalization, then the contrast equalization (:mod:`alcn_cv.nets.gain`)."""
+        if self.divisive is not None:
+            response = divisive_normalization(response, *self.divisive)
         if self.equalization_tau is None:
             return response
         return np.tanh(response * np.float32(1.0 / self.equalization_tau))
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
-        return self._equalize(self._mixture(gray))
+        return self._finish(self._mixture(gray))
 
     def _mixture(self, gray: np.ndarray) -> np.ndarray:
         """Eq. 3 with the Normalizer's maps: the raw response before any equalization."""
@@ -433,6 +445,8 @@ class ALCN(Normalization):
                 maps = self.net.dense(self._working_batch(x), self.grid_stride).float()
             maps = torch.nn.functional.interpolate(maps, size=x.shape[-2:], mode="bilinear", align_corners=False)
             response = gaussian_mixture2d(x, maps, self.full_res_sigmas)
+            if self.divisive is not None:
+                response = self.net.divide(response)
             if self.equalization_tau is not None:
                 response = contrast_equalization(response, self.equalization_tau)
             unit = ((response[:, 0] - lo) * (1.0 / (hi - lo))).clamp(0, 1)

@@ -18,6 +18,18 @@ The log-gain is the network's output minus ``log(m + eps)``, ``m`` the local mea
 the untrained model is the hand-made member of ALCN's family "Weber gain ``I / m``, then DoG
 ``G_1 - G_2``" (the best of the hand-made gains on real light), so training starts from it.
 
+With ``gain="divisive"`` the log-gain's fixed part is not the Weber ``-log(m + eps)`` but the
+divisive normalization of the band-passed image (Jarrett et al., ICCV 2009: DLCN; here of the
+mixture's own response): the response ``r`` is divided by ``sqrt(e^2 + (c * mean(e))^2)``, ``e``
+the root-mean-square of ``r`` over the grid's cells and ``mean(e)`` its mean over the image
+(:func:`alcn_cv.filters.divisive.divisive_normalization`), ``c`` learned. It is applied to the response of Eq. 3 rather
+than inside it (the per-window form of the paper's Eq. 1, weights outside the blurs): the divisor
+follows the response it divides, it is smooth at the scale of the grid (8 pixels) where the
+kernels are 1 to 2 pixels wide, and it makes the output invariant to the light's strength exactly,
+while flat regions stay flat (the floor is relative to the whole image's contrast). The network's
+own log-gain correction stays inside Eq. 3. Untrained, this is "DoG ``G_1 - G_2``, then divisive
+normalization on the grid", the best hand-made member of the family on real light.
+
 The response is then equalized by ``tanh(x / tau)`` (:func:`contrast_equalization`, the last
 step of Tan & Triggs, "Enhanced local texture feature sets for face recognition under difficult
 lighting conditions", TIP 2010), with ``tau`` learned: large responses at strong shadow and
@@ -49,13 +61,15 @@ from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, gaussian_sigmas
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
 
-__all__ = ["GainNormalizer", "contrast_equalization", "dog_weights", "ARCHITECTURE"]
+__all__ = ["GainNormalizer", "GAINS", "contrast_equalization", "dog_weights", "ARCHITECTURE"]
 
 #: The ``architecture`` field of a gain Normalizer's weight file.
 ARCHITECTURE = "gain"
 #: The untrained model's band-pass: ``G_1 - G_2`` (pixels at the working scale).
 DOG_SIGMAS = (1.0, 2.0)
 _INPUT_FEATURES = 4
+#: The fixed part of the log-gain: the Weber gain ``1 / (m + eps)`` or the divisive normalization.
+GAINS = ("weber", "divisive")
 
 
 def dog_weights(sigmas: Sequence[float], sigma1: float = DOG_SIGMAS[0], sigma2: float = DOG_SIGMAS[1]) -> list[float]:
@@ -82,6 +96,15 @@ def contrast_equalization(response: np.ndarray | torch.Tensor, tau: float | torc
     if isinstance(response, torch.Tensor):
         return torch.tanh(response / tau)
     return np.tanh(response / np.float32(tau)).astype(np.float32, copy=False)
+
+
+def _cell_rms(response: torch.Tensor, stride: int) -> torch.Tensor:
+    """Root-mean-square of a ``(B, 1, H, W)`` response over the cells of side ``stride``
+    centred on the grid points (:func:`alcn_cv.filters.divisive.cell_rms` in torch)."""
+    before = stride // 2
+    after = 2 * stride - 2 - before
+    # The floor keeps the square root differentiable where a cell is exactly flat.
+    return F.avg_pool2d(reflect101_pad(response * response, before, after, before, after), stride).clamp_min(1e-12).sqrt()
 
 
 def _reflect101_index(x: torch.Tensor, dim: int, before: int, after: int) -> torch.Tensor:
@@ -140,6 +163,12 @@ class GainNormalizer(nn.Module):
         learn_floor: learn the Weber gain's floor, ``1 / (m + floor)``, starting at ``eps``
             (otherwise the floor is ``eps``): how dark a region may be before the gain stops
             following it and would amplify mostly noise.
+        gain: the log-gain's fixed part (:data:`GAINS`): ``"weber"``, ``-log(m + eps)`` inside
+            Eq. 3, or ``"divisive"``, the divisive normalization of Eq. 3's response on the
+            grid of :attr:`stride` (the network's log-gain then only corrects it, inside Eq. 3,
+            and the kernel weights sum to zero: a band-pass).
+        floor_scale: initial ``c`` of the divisive floor ``c * mean(e)`` (``gain="divisive"``).
+        learn_scales: learn ``tau`` and ``c`` (otherwise they keep their initial values).
     """
 
     def __init__(
@@ -156,12 +185,17 @@ class GainNormalizer(nn.Module):
         init_weights: Sequence[float] | None = None,
         sharpness: bool = False,
         learn_floor: bool = False,
+        gain: str = "weber",
+        floor_scale: float = 1.0,
+        learn_scales: bool = True,
     ) -> None:
         super().__init__()
         if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
             raise InputError(f"stride must be a positive integer, got {stride!r}")
-        if not (eps > 0 and tau > 0 and mean_sigma > 0 and context_sigma > 0):
-            raise InputError("eps, tau, mean_sigma and context_sigma must be positive")
+        if not (eps > 0 and tau > 0 and mean_sigma > 0 and context_sigma > 0 and floor_scale > 0):
+            raise InputError("eps, tau, mean_sigma, context_sigma and floor_scale must be positive")
+        if gain not in GAINS:
+            raise InputError(f"unknown gain {gain!r}; choose one of {', '.join(GAINS)}")
         self.sigmas = gaussian_sigmas(num_kernels, sigma_step)
         init_weights = dog_weights(self.sigmas) if init_weights is None else [float(w) for w in init_weights]
         if len(init_weights) != num_kernels:
@@ -183,10 +217,13 @@ class GainNormalizer(nn.Module):
         with torch.no_grad():
             self.head.weight.zero_()
             self.head.bias.copy_(torch.tensor([0.0] + init_weights))
-        self.log_tau = nn.Parameter(torch.tensor(math.log(tau)))
+        self.log_tau = nn.Parameter(torch.tensor(math.log(tau)), requires_grad=learn_scales)
         self.learn_floor = bool(learn_floor)
         if self.learn_floor:
             self.log_floor = nn.Parameter(torch.tensor(math.log(eps)))
+        self.gain = gain
+        if gain == "divisive":
+            self.log_floor_scale = nn.Parameter(torch.tensor(math.log(floor_scale)), requires_grad=learn_scales)
         self.mixture = GaussianMixture2d(self.sigmas)
         self.config: dict[str, Any] = {
             "num_kernels": num_kernels,
@@ -201,6 +238,9 @@ class GainNormalizer(nn.Module):
             "init_weights": init_weights,
             "sharpness": self.sharpness,
             "learn_floor": self.learn_floor,
+            "gain": gain,
+            "floor_scale": float(floor_scale),
+            "learn_scales": bool(learn_scales),
         }
 
     @property
@@ -215,6 +255,11 @@ class GainNormalizer(nn.Module):
     def tau_value(self) -> float:
         """``tau`` as a float (for headers and logs)."""
         return float(self.log_tau.detach().exp())
+
+    @property
+    def floor_scale(self) -> torch.Tensor | None:
+        """``c`` of the divisive floor (a 0-d tensor), None for the Weber gain."""
+        return self.log_floor_scale.exp() if self.gain == "divisive" else None
 
     def _grid_shape(self, h: int, w: int, grid_stride: int) -> tuple[int, int]:
         return math.ceil((h - 1) / grid_stride) + 1, math.ceil((w - 1) / grid_stride) + 1
@@ -258,6 +303,11 @@ class GainNormalizer(nn.Module):
         for conv, d in zip(self.convs, self.dilations):
             x = F.relu(conv(_reflect101_pad(x, d)))
         out = self.head(x)
+        if self.gain == "divisive":  # the fixed part divides the response (:meth:`divide`)
+            weights = out[:, 1:]
+            # A band-pass, as the DoG: weights summing to zero, so the response does not follow
+            # the local mean (which the division would turn into structure in flat regions).
+            return out[:, :1], weights - weights.mean(dim=1, keepdim=True)
         floor = self.log_floor.exp() if self.learn_floor else self.eps
         return out[:, :1] - (local + floor).log(), out[:, 1:]
 
@@ -296,13 +346,29 @@ class GainNormalizer(nn.Module):
         """Eq. 3, ``sum_k G_{sigma_k} * (F_k o I)`` ``(B, 1, H, W)``, unbounded (maps: default :meth:`dense`)."""
         return self.mixture(image, self.dense(image) if maps is None else maps)
 
+    def divide(self, response: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
+        """:func:`~alcn_cv.filters.divisive.divisive_normalization` (in torch) of the response
+        ``(B, 1, H, W)`` on the grid of :attr:`stride` with the learned ``c`` (``gain="divisive"``;
+        the response unchanged otherwise). ``floor``: ``(B, 1, 1, 1)``, overrides ``c * mean(e)``
+        over each image (training estimates the whole frame's mean from crops)."""
+        if self.gain != "divisive":
+            return response
+        e = _cell_rms(response, self.stride)
+        if floor is None:
+            floor = self.floor_scale * e.mean(dim=(-2, -1), keepdim=True)
+        inverse = (e * e + floor * floor).clamp_min(1e-12).rsqrt()
+        h, w = response.shape[-2:]
+        size = (self.stride * (inverse.shape[-2] - 1) + 1, self.stride * (inverse.shape[-1] - 1) + 1)
+        return response * F.interpolate(inverse, size=size, mode="bilinear", align_corners=True)[..., :h, :w]
+
     def equalize(self, response: torch.Tensor) -> torch.Tensor:
         """The final :func:`contrast_equalization` with the learned ``tau``: into (-1, 1)."""
         return contrast_equalization(response, self.tau)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        """The whole normalization, ``tanh(ALCN(I) / tau)``: ``(B, 1, H, W)`` -> ``(B, 1, H, W)`` in (-1, 1)."""
-        return self.equalize(self.response(image))
+        """The whole normalization, ``tanh(ALCN(I) / tau)`` (divided first with ``gain="divisive"``):
+        ``(B, 1, H, W)`` -> ``(B, 1, H, W)`` in (-1, 1)."""
+        return self.equalize(self.divide(self.response(image)))
 
     #: Build the network a weight file describes (``architecture: "gain"``) and load its arrays.
     from_file = classmethod(Normalizer.from_file.__func__)
@@ -311,7 +377,9 @@ class GainNormalizer(nn.Module):
 
     def file_meta(self, trained: bool, **provenance: Any) -> dict[str, Any]:
         """The weight file's header: ``architecture``, ``config``, ``sigmas``, ``working_scale`` 1,
-        ``output_range`` ``[-1, 1]`` (the equalized output) and the equalization's ``tau``."""
+        ``output_range`` ``[-1, 1]`` (the equalized output), the equalization's ``tau`` and, with
+        ``gain="divisive"``, the divisive normalization's ``stride`` and ``scale``."""
+        divisive = {"divisive": {"stride": self.stride, "scale": float(self.floor_scale.detach())}} if self.gain == "divisive" else {}
         return {
             "architecture": ARCHITECTURE,
             "config": self.config,
@@ -320,6 +388,7 @@ class GainNormalizer(nn.Module):
             "output_range": [-1.0, 1.0],
             "trained": bool(trained),
             "equalization": {"kind": "tanh", "tau": self.tau_value()},
+            **divisive,
             **provenance,
         }
 

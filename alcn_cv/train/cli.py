@@ -153,6 +153,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     r.add_argument("--sharpness", action="store_true", help="feed the network each cell's finest-scale energy too")
     r.add_argument("--learn-floor", action="store_true",
                    help="learn the Weber gain's floor (1 / (m + floor)), starting at --eps")
+    r.add_argument("--gain", choices=("weber", "divisive"), default="divisive",
+                   help="the log-gain's fixed part: the Weber gain 1 / (m + eps) inside Eq. 3, or the divisive "
+                        "normalization of Eq. 3's response on the grid, floored by c times its image mean (default divisive)")
+    r.add_argument("--floor-scale", type=float, default=1.0,
+                   help="c of the divisive floor (--gain divisive; default 1)")
+    r.add_argument("--learn-scales", action="store_true",
+                   help="learn tau and the divisive floor's c (otherwise they keep the values given)")
+    r.add_argument("--tau", type=float, default=3.0,
+                   help="scale of the final tanh(x / tau) (default 3)")
     r.add_argument("--eps", type=float, default=0.01,
                    help="added to intensities in [0, 1] before every log: the gain's noise floor (default 0.01)")
     r.add_argument("--threads", type=int, default=1,
@@ -254,7 +263,8 @@ def _train_real_light(args: argparse.Namespace) -> int:
         **{k: getattr(args, k) for k in names},
         net={"channels": args.channels, "dilations": list(args.dilations), "sharpness": args.sharpness,
              "num_kernels": args.num_kernels, "sigma_step": args.sigma_step, "eps": args.eps,
-             "learn_floor": args.learn_floor},
+             "learn_floor": args.learn_floor, "gain": args.gain, "floor_scale": args.floor_scale, "tau": args.tau,
+             "learn_scales": args.learn_scales},
         command=shlex.join(["alcn", *sys.argv[1:]]),
     )
     previous = torch.get_num_threads()

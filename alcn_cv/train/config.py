@@ -432,7 +432,7 @@ class RealLightConfig:
     scenes: list[str] = field(default_factory=list)
     rendered: list[str] = field(default_factory=list)
     rendered_fraction: float = 0.0
-    steps: int = 2400
+    steps: int = 300
     locations: int = 48
     crop: int = 160
     patch: int = 32

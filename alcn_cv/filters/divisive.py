@@ -1,0 +1,55 @@
+"""Divisive normalization on a grid: the gain Normalizer's last step before its equalization.
+
+After Jarrett et al., ICCV 2009 (DLCN: the response divided by its local standard deviation,
+floored by the image's mean of it), computed on a coarse grid so that it costs two
+full-resolution passes (the squared response averaged over cells, the divisor interpolated
+back): ``response / sqrt(e^2 + f^2)`` with ``e`` the root-mean-square of the response over the
+cells of side ``stride`` centred on the grid points ``(stride*i, stride*j)`` and ``f = scale *
+mean(e)``. Invariant to a gain of the whole response; a flat region of a contrasted image stays
+flat. The torch form, differentiable, is :meth:`alcn_cv.nets.gain.GainNormalizer.divide`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+__all__ = ["cell_rms", "divisive_normalization"]
+
+
+def cell_rms(response: np.ndarray, stride: int) -> np.ndarray:
+    """``(ceil((H-1)/s)+1, ceil((W-1)/s)+1)`` float32: the root-mean-square of ``response``
+    ``(H, W)`` over the cells of side ``s = stride`` centred on the grid points (reflect-101
+    beyond the borders)."""
+    before = stride // 2
+    after = 2 * stride - 2 - before  # H + 2s - 2 rows hold exactly ceil((H-1)/s)+1 cells
+    h, w = response.shape
+    gh, gw = math.ceil((h - 1) / stride) + 1, math.ceil((w - 1) / stride) + 1
+    padded = cv2.copyMakeBorder(response * response, before, after, before, after, cv2.BORDER_REFLECT_101)
+    cells = cv2.resize(padded[: gh * stride, : gw * stride], (gw, gh), interpolation=cv2.INTER_AREA)
+    return np.sqrt(np.maximum(cells, 0.0))
+
+
+def divisive_normalization(response: np.ndarray, stride: int, scale: float, floor: float | None = None) -> np.ndarray:
+    """``response / sqrt(e^2 + f^2)`` (see the module), the divisor interpolated bilinearly
+    between the grid points.
+
+    Args:
+        response: ``(H, W)`` float32, unbounded.
+        stride: the grid's spacing in pixels (>= 1).
+        scale: ``c`` in ``f = c * mean(e)`` (> 0).
+        floor: ``f`` itself, overriding ``c * mean(e)``.
+
+    Returns:
+        ``(H, W)`` float32.
+    """
+    e = cell_rms(response, stride)
+    f = scale * float(e.mean()) if floor is None else floor
+    inverse = (1.0 / np.sqrt(np.maximum(e * e + np.float32(f * f), np.float32(1e-12)))).astype(np.float32)
+    h, w = response.shape
+    # Grid point (i, j) sits at pixel (s*i, s*j): pixel x reads the grid at x / s (align corners).
+    upsampled = cv2.warpAffine(inverse, np.float32([[1.0 / stride, 0, 0], [0, 1.0 / stride, 0]]), (w, h),
+                               flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    return (response * upsampled).astype(np.float32, copy=False)
