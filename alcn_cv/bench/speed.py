@@ -52,6 +52,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from alcn_cv.bench.plots import plot_speed
+from alcn_cv.checks import FULL_SCALE
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 from alcn_cv.enhance.alcn import ALCN, BACKENDS
@@ -59,7 +60,8 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
 
-__all__ = ["SIZES", "Method", "SpeedSettings", "default_methods", "main", "presets", "synthetic_frame", "time_calls"]
+__all__ = ["SIZES", "Method", "SpeedSettings", "default_methods", "lab_round_trip", "main", "presets", "synthetic_frame",
+           "time_calls"]
 
 logger = logging.getLogger(__name__)
 
@@ -511,6 +513,19 @@ def raw_dog(frame: np.ndarray) -> np.ndarray:
     return cv2.GaussianBlur(unit, (0, 0), 0.5) - cv2.GaussianBlur(unit, (0, 0), 1.5)
 
 
+def lab_round_trip(method: Normalization, img: np.ndarray, out_dtype: np.dtype | None = None) -> np.ndarray:
+    """The reference of ``apply``'s colour path, written plainly: a BGR image to float CIE Lab,
+    L / 100 normalized (:meth:`Normalization.normalize`) and mapped to [0, 1] (``to_unit``), times
+    100 back into L, Lab to BGR, clipped and converted with NumPy (``rint`` for integer types)."""
+    out_dtype = np.dtype(img.dtype if out_dtype is None else out_dtype)
+    unit = img.astype(np.float32) * np.float32(1 / FULL_SCALE[img.dtype]) if img.dtype != np.float32 else img.copy()
+    lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)
+    lightness = np.ascontiguousarray(lab[..., 0]) / np.float32(100)
+    lab[..., 0] = method.to_unit(method.normalize(lightness)) * 100.0
+    bgr = np.clip(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR), 0, 1)
+    return bgr if out_dtype == np.float32 else np.rint(bgr * FULL_SCALE[out_dtype]).astype(out_dtype)
+
+
 def _medians(calls: dict[str, Callable[[], Any]], repeats: int) -> dict[str, float]:
     """Median milliseconds of each call, timed in turns (one call of each per round) after one warm-up."""
     for fn in calls.values():
@@ -701,6 +716,7 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     ratio, gain_ratio = t["alcn gray"] / t["dog raw"], t["alcn gain gray"] / t["dog raw"]
     fps = 1e3 / t["alcn gray small"]
     colour = t["alcn bgr"] / t["alcn gray"]
+    colour_levels = max(int(np.abs(norm.apply(bgr).astype(np.int16) - lab_round_trip(norm, bgr)).max()) for norm in (default, gain))
     worst = max((r for r in contract if r["method"] != "none" and r["overhead"] is not None), key=lambda r: r["overhead"])
     alcn_memory = next(r for r in memory if r["method"] == "alcn")
     size = f"{width}x{height}"
@@ -710,6 +726,8 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
         _target(f"gain ALCN / raw DoG, {size} gray", gain_ratio, "(measured)", None, f"{t['alcn gain gray']:.2f} ms"),
         _target("default ALCN fps, {}x{} gray".format(*settings.fps_size), fps, ">= 200", fps >= 200),
         _target(f"BGR / gray, {size}", colour, "<= 1.3", colour <= 1.3, f"gain model: {t['alcn gain bgr'] / t['alcn gain gray']:.2f}"),
+        _target(f"BGR output against the float Lab round trip, {size}: largest difference (levels)", colour_levels,
+                "<= 1", colour_levels <= 1, "default and gain models, uint8"),
         _target("apply() overhead over the method's own computation (worst method but none)", worst["overhead"],
                 "<= 0.2", worst["overhead"] <= 0.2, worst["method"]),
         _target("peak memory added / float32 image, {}x{} gray".format(*settings.large_size),

@@ -36,6 +36,8 @@ logger = logging.getLogger(__name__)
 #: Images of more pixels are normalized in horizontal strips by the methods that allow it
 #: (:meth:`Normalization._tiling`): the peak memory stays a small multiple of a strip's.
 TILE_PIXELS = 2**24
+#: ``cv2.transform`` matrix of the L channel of a float Lab image, divided by 100: intensities in [0, 1].
+_LIGHTNESS_OF_LAB = np.float32([[0.01, 0.0, 0.0]])
 #: The classes that already warned about an image smaller than their window (once per process).
 _WARNED_SMALL: set[type] = set()
 
@@ -203,12 +205,27 @@ class Normalization:
                 return direct.reshape(img.shape)
         unit = _to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
-            lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
-            lightness = np.divide(lab[..., 0], np.float32(100))
-            unit_lightness = self.to_unit(self._normalize_checked(lightness))
-            np.multiply(unit_lightness, 100.0, out=lab[..., 0])
-            return _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
+            return self._apply_bgr(unit, out_dtype)
         return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
+
+    def _apply_bgr(self, unit: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
+        """:meth:`apply` on BGR intensities in [0, 1] (``unit``, used as scratch space): the
+        L channel of CIE Lab normalized, a and b kept. OpenCV passes throughout: L / 100 in one
+        ``cv2.transform``, the response mapped to [0, 100] by ``cv2.addWeighted`` and two
+        thresholds and put back by ``cv2.insertChannel``, and a uint8 result rounded and
+        saturated by one more ``cv2.addWeighted``."""
+        lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
+        response = self._normalize_checked(cv2.transform(lab, _LIGHTNESS_OF_LAB))
+        lo, hi = self.output_range
+        scale = 100.0 / (hi - lo)
+        lightness = cv2.addWeighted(response, scale, response, 0.0, -lo * scale)
+        cv2.threshold(lightness, 0.0, 0.0, cv2.THRESH_TOZERO, dst=lightness)
+        cv2.threshold(lightness, 100.0, 0.0, cv2.THRESH_TRUNC, dst=lightness)
+        cv2.insertChannel(lightness, lab, 0)
+        bgr = cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit)
+        if out_dtype == np.uint8:  # rint and saturation in one pass (np.rint(clip(x) * 255), bit for bit)
+            return cv2.addWeighted(bgr, FULL_SCALE[out_dtype], bgr, 0.0, 0.0, dtype=cv2.CV_8U)
+        return _unit_in_place_to(bgr, out_dtype)
 
     def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray | None:
         """:meth:`apply`'s result for a uint8 ``HxW`` image and uint8 output, computed without the
