@@ -212,8 +212,8 @@ class Normalization:
         """:meth:`apply` on BGR intensities in [0, 1] (``unit``, used as scratch space): the
         L channel of CIE Lab normalized, a and b kept. OpenCV passes throughout: L / 100 in one
         ``cv2.transform``, the response mapped to [0, 100] by ``cv2.addWeighted`` and two
-        thresholds and put back by ``cv2.insertChannel``, and a uint8 result rounded and
-        saturated by one more ``cv2.addWeighted``."""
+        thresholds, and put back by ``cv2.insertChannel`` (the two Lab conversions remain the
+        bulk of the cost: about one gray ``apply`` of the default ALCN)."""
         lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
         response = self._normalize_checked(cv2.transform(lab, _LIGHTNESS_OF_LAB))
         lo, hi = self.output_range
@@ -222,10 +222,7 @@ class Normalization:
         cv2.threshold(lightness, 0.0, 0.0, cv2.THRESH_TOZERO, dst=lightness)
         cv2.threshold(lightness, 100.0, 0.0, cv2.THRESH_TRUNC, dst=lightness)
         cv2.insertChannel(lightness, lab, 0)
-        bgr = cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit)
-        if out_dtype == np.uint8:  # rint and saturation in one pass (np.rint(clip(x) * 255), bit for bit)
-            return cv2.addWeighted(bgr, FULL_SCALE[out_dtype], bgr, 0.0, 0.0, dtype=cv2.CV_8U)
-        return _unit_in_place_to(bgr, out_dtype)
+        return _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
 
     def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray | None:
         """:meth:`apply`'s result for a uint8 ``HxW`` image and uint8 output, computed without the
