@@ -99,7 +99,11 @@ class ALCN(Normalization):
             ``opencv`` backends): the blurs of sigma >= 2 pixels on a Gaussian pyramid and the
             maps sampled directly from the grid at each level
             (:func:`alcn_cv.filters.gaussian_mixture.pyramid_mixture`), 5 to 10 times cheaper.
-            Default: ``"pyramid"``, except ``"exact"`` with ``backend="torch"``.
+            Default: ``"pyramid"``, except ``"exact"`` with ``backend="torch"`` and for the gain
+            Normalizer: its Weber gain makes the pyramid's error large (0.24 of its [-1, 1]
+            output on ``alcn bench speed``'s frame), and its exact Eq. 3 runs from its grid in
+            OpenCV (:func:`~alcn_cv.filters.gaussian_mixture.alcn_filter_grid`, within 1e-5 of
+            the torch model's output).
         threads: torch's intra-op threads while the Normalizer runs (restored after); default 1:
             the fastest for the light Normalizers and on a loaded machine, where the threads of
             small convolutions wait for each other, and it leaves no torch (OpenMP) threads

@@ -22,6 +22,7 @@ result is the whole image's and the memory a strip's.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import ClassVar
 
 import cv2
@@ -38,6 +39,8 @@ logger = logging.getLogger(__name__)
 TILE_PIXELS = 2**24
 #: ``cv2.transform`` matrix of the L channel of a float Lab image, divided by 100: intensities in [0, 1].
 _LIGHTNESS_OF_LAB = np.float32([[0.01, 0.0, 0.0]])
+#: The 256 intensities of a uint8 image as :meth:`Normalization.apply`'s float path sees them.
+_UINT8_LEVELS = np.arange(256, dtype=np.uint8).astype(np.float32).reshape(1, 256) * np.float32(1.0 / FULL_SCALE[np.dtype(np.uint8)])
 #: The classes that already warned about an image smaller than their window (once per process).
 _WARNED_SMALL: set[type] = set()
 
@@ -110,15 +113,19 @@ class Normalization:
 
     def _normalize_checked(self, gray: np.ndarray) -> np.ndarray:
         """:meth:`normalize` on an image already known to be a finite float32 ``HxW`` one."""
-        if min(gray.shape) < self.min_size and type(self) not in _WARNED_SMALL:
+        self._warn_if_small(gray.shape)
+        out = self._normalize(gray)
+        return np.asarray(out, dtype=np.float32)
+
+    def _warn_if_small(self, shape: tuple[int, ...]) -> None:
+        """Log, once per class, that an image is smaller than the method's window."""
+        if min(shape[:2]) < self.min_size and type(self) not in _WARNED_SMALL:
             _WARNED_SMALL.add(type(self))
             logger.warning(
                 "%s: image of %dx%d px is smaller than the method's %d px window; the window is "
                 "completed by mirroring the image at its borders (warned once)",
-                self.name, gray.shape[1], gray.shape[0], self.min_size,
+                self.name, shape[1], shape[0], self.min_size,
             )
-        out = self._normalize(gray)
-        return np.asarray(out, dtype=np.float32)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         raise NotImplementedError
@@ -202,6 +209,7 @@ class Normalization:
         if img.dtype == np.uint8 and out_dtype == np.uint8 and (img.ndim == 2 or img.shape[2] == 1):
             direct = self._apply_gray_uint8(img.reshape(img.shape[:2]))
             if direct is not None:
+                self._warn_if_small(img.shape)
                 return direct.reshape(img.shape)
         unit = _to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
@@ -229,6 +237,13 @@ class Normalization:
         float round trip by a method that works on 8-bit images (the same values); None (the
         default): take the float path."""
         return None
+
+    def _lookup_uint8(self, gray8: np.ndarray, response_of: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """:meth:`_apply_gray_uint8` for a method whose response is a function of each pixel's
+        intensity alone (given statistics of the image): ``response_of`` on the 256 intensities
+        as the float path sees them, mapped to uint8 as it maps them (the same float operations
+        on the same values), then one ``cv2.LUT`` pass over the image."""
+        return cv2.LUT(gray8, self._response_to(response_of(_UINT8_LEVELS), np.dtype(np.uint8)))
 
     def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
         """How :meth:`apply` may cut an image of ``shape`` into horizontal strips: ``(halo,
@@ -263,3 +278,6 @@ class NoNormalization(Normalization):
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         return gray.copy()
+
+    def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray:
+        return gray8.copy()  # rint(255 * (v / 255)) is v for every uint8 v: the float path's result
