@@ -259,14 +259,15 @@ class ALCN(Normalization):
         the full-resolution work in OpenCV and only the convolutions in torch.
 
         The cells' means of the image and of its square are pooled by torch's ``avg_pool2d``
-        (the network's own, so the statistics are the same numbers) from one reflect-101 border
-        of OpenCV; the blurs, the features and the gain are computed on the grid in OpenCV and
-        NumPy (the same kernels and borders, to float rounding).
+        (the network's own: the same numbers, which matters where a cell is flat and its
+        deviation is rounding) from one reflect-101 border of OpenCV. The blurs, features and
+        gain are computed on the grid in OpenCV and NumPy (the same kernels and borders, to
+        float rounding), and the convolutions run on channels-last tensors that share memory
+        with height x width x channels arrays: oneDNN's dilated convolutions are twice as fast
+        on that layout, and OpenCV and NumPy do its borders and ReLUs (torch is slow on it).
         """
         import torch
         import torch.nn.functional as F
-
-        from alcn_cv.nets.normalizer import reflect101_pad
 
         net, s = self.net, self.net.stride
         h, w = small.shape
@@ -279,12 +280,12 @@ class ALCN(Normalization):
             local = _grid_blur(mean, net.mean_sigma / s)
             context = _grid_blur(mean, net.context_sigma / s)
             std = np.sqrt(np.maximum(square - mean * mean, np.float32(0)))
-            features = np.log(np.stack([mean, local, context, std]) + np.float32(net.eps))
-            # channels-last: oneDNN's dilated convolutions twice as fast on this layout (same sums)
-            x = torch.from_numpy(features)[None].contiguous(memory_format=torch.channels_last)
+            x = np.log(np.stack([mean, local, context, std], axis=-1) + np.float32(net.eps))  # (gh, gw, 4)
             for conv, dilation in zip(net.convs, net.dilations):
-                x = F.relu(conv(reflect101_pad(x, dilation, dilation, dilation, dilation)))
-            out = net.head(x)[0].numpy()
+                x = cv2.copyMakeBorder(x, dilation, dilation, dilation, dilation, cv2.BORDER_REFLECT_101)
+                x = conv(_channels_last(x))[0].permute(1, 2, 0).numpy()
+                np.maximum(x, np.float32(0), out=x)
+            out = net.head(_channels_last(x))[0].numpy()
             floor = float(net.log_floor.exp()) if net.learn_floor else net.eps
         return np.exp(out[:1] - np.log(local + np.float32(floor))) * out[1:]
 
@@ -539,6 +540,14 @@ def _network_reach(meta: dict) -> int:
     stride = int(config["stride"])
     blur = max(float(config["mean_sigma"]), float(config["context_sigma"])) / stride
     return stride * (1 + kernel_radius(blur) + sum(int(d) for d in config["dilations"]))
+
+
+def _channels_last(hwc: np.ndarray) -> torch.Tensor:
+    """A ``(1, C, H, W)`` channels-last tensor sharing the memory of a C-ordered ``(H, W, C)`` array
+    (the batch stride spelled out: torch takes a zero one for another layout)."""
+    import torch
+
+    return torch.from_numpy(hwc.reshape((1,) + hwc.shape)).permute(0, 3, 1, 2)
 
 
 def _grid_blur(grid: np.ndarray, sigma: float) -> np.ndarray:

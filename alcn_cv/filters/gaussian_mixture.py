@@ -198,8 +198,20 @@ def upsample_grid(grid: np.ndarray, stride: int, shape: tuple[int, int]) -> np.n
         ``(h, w)`` float32.
     """
     h, w = shape
-    rows = _upsample_rows(np.ascontiguousarray(grid.T, dtype=np.float32), stride, w).T  # along x: (gh, w), small
-    return _upsample_rows(np.ascontiguousarray(rows), stride, h)
+    return _upsample_rows(_upsample_columns(grid.astype(np.float32, copy=False), stride, w), stride, h)
+
+
+def _upsample_columns(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
+    """``grid`` ``(g, m)`` interpolated linearly along its second axis onto ``n`` columns, column
+    ``c`` at grid coordinate ``c / stride`` (NumPy: the grid is small)."""
+    cells = min(grid.shape[1] - 1, -(-n // stride))
+    out = np.empty((len(grid), cells * stride + 1), np.float32)
+    phases = np.arange(stride, dtype=np.float32) / np.float32(stride)
+    body = out[:, :-1].reshape(len(grid), cells, stride)
+    np.multiply((grid[:, 1 : cells + 1] - grid[:, :cells])[:, :, None], phases, out=body)
+    body += grid[:, :cells, None]
+    out[:, -1] = grid[:, cells]
+    return out[:, :n]
 
 
 def _upsample_rows(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
