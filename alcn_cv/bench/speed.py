@@ -23,8 +23,10 @@ test runs ALCN over a generated 1920x1080 video and records the resident memory 
 frame (it must stay flat).
 
 The **targets** (:func:`targets`) come first in the report, each with its measured value: the
-default ALCN and the gain one against a raw OpenCV DoG (:func:`raw_dog`) at 1280x800 and the
-default's frame rate at 640x480, BGR against gray, the cost of the ``apply`` contract over each
+default ALCN and the gain one against a raw OpenCV DoG (:func:`raw_dog`) at 1280x800 (the gain
+one with its difference from its torch model) and the default's frame rate at 640x480, BGR
+against gray and its difference from the plain float Lab round trip (:func:`lab_round_trip`,
+within one level), the cost of the ``apply`` contract over each
 method's own computation, the peak memory on an 8000x8000 image, an application's OpenCV calls
 right after ``apply``, ``alcn normalize`` on the cookie-box video against its decoding and
 encoding alone, and the batched torch path (CUDA when present); with where the default's time

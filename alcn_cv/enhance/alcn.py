@@ -189,8 +189,8 @@ class ALCN(Normalization):
         if isinstance(self.grid_stride, bool) or not isinstance(self.grid_stride, int) or self.grid_stride < stride or self.grid_stride % stride:
             raise InputError(f"grid_stride must be a positive multiple of {stride} for this network, got {grid_stride!r}")
         _check_teacher(meta, self.weights_path)
-        #: The gain Normalizer's cells pooled by OpenCV (:meth:`_gain_grid`): for its network's own
-        #: grid, without the finest-scale feature (``sharpness``, computed from the whole image).
+        #: The gain Normalizer's grid computed by :meth:`_gain_grid` (OpenCV at full resolution):
+        #: on its network's own grid, without the finest-scale feature (``sharpness``).
         self._pooled_cells = self.per_pixel and self.grid_stride == stride and not meta["config"].get("sharpness", False)
 
     def _init_opencv(self, meta: dict, grid_stride: int | None) -> None:
