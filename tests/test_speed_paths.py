@@ -147,6 +147,18 @@ def test_uint8_shortcut_equals_the_float_path(monkeypatch, name):
     np.testing.assert_array_equal(direct, method.apply(frame))
 
 
+@pytest.mark.parametrize("name", ["none", "ns"])
+def test_uint8_lookup_equals_the_float_path_on_every_level(monkeypatch, name):
+    method = from_spec(name)
+    rng = np.random.default_rng(3)
+    frames = [np.arange(256, dtype=np.uint8).reshape(16, 16), rng.integers(0, 256, (123, 77), dtype=np.uint8),
+              synthetic_frame(200, 150, False, seed=8), np.full((9, 11), 200, np.uint8)]
+    direct = [method.apply(frame) for frame in frames]
+    monkeypatch.setattr(method, "_apply_gray_uint8", lambda gray8: None)
+    for frame, result in zip(frames, direct):
+        np.testing.assert_array_equal(result, method.apply(frame))
+
+
 def test_histogram_conversions_are_the_numpy_ones():
     from alcn_cv.enhance.histogram import _to_uint8, _to_unit
 

@@ -23,8 +23,10 @@ test runs ALCN over a generated 1920x1080 video and records the resident memory 
 frame (it must stay flat).
 
 The **targets** (:func:`targets`) come first in the report, each with its measured value: the
-default ALCN and the gain one against a raw OpenCV DoG (:func:`raw_dog`) at 1280x800 and the
-default's frame rate at 640x480, BGR against gray, the cost of the ``apply`` contract over each
+default ALCN and the gain one against a raw OpenCV DoG (:func:`raw_dog`) at 1280x800 (the gain
+one with its difference from its torch model) and the default's frame rate at 640x480, BGR
+against gray and its difference from the plain float Lab round trip (:func:`lab_round_trip`,
+within one level), the cost of the ``apply`` contract over each
 method's own computation, the peak memory on an 8000x8000 image, an application's OpenCV calls
 right after ``apply``, ``alcn normalize`` on the cookie-box video against its decoding and
 encoding alone, and the batched torch path (CUDA when present); with where the default's time
@@ -52,6 +54,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from alcn_cv.bench.plots import plot_speed
+from alcn_cv.checks import FULL_SCALE
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 from alcn_cv.enhance.alcn import ALCN, BACKENDS
@@ -59,7 +62,8 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
 
-__all__ = ["SIZES", "Method", "SpeedSettings", "default_methods", "main", "presets", "synthetic_frame", "time_calls"]
+__all__ = ["SIZES", "Method", "SpeedSettings", "default_methods", "lab_round_trip", "main", "presets", "synthetic_frame",
+           "time_calls"]
 
 logger = logging.getLogger(__name__)
 
@@ -511,6 +515,19 @@ def raw_dog(frame: np.ndarray) -> np.ndarray:
     return cv2.GaussianBlur(unit, (0, 0), 0.5) - cv2.GaussianBlur(unit, (0, 0), 1.5)
 
 
+def lab_round_trip(method: Normalization, img: np.ndarray, out_dtype: np.dtype | None = None) -> np.ndarray:
+    """The reference of ``apply``'s colour path, written plainly: a BGR image to float CIE Lab,
+    L / 100 normalized (:meth:`Normalization.normalize`) and mapped to [0, 1] (``to_unit``), times
+    100 back into L, Lab to BGR, clipped and converted with NumPy (``rint`` for integer types)."""
+    out_dtype = np.dtype(img.dtype if out_dtype is None else out_dtype)
+    unit = img.astype(np.float32) * np.float32(1 / FULL_SCALE[img.dtype]) if img.dtype != np.float32 else img.copy()
+    lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)
+    lightness = np.ascontiguousarray(lab[..., 0]) / np.float32(100)
+    lab[..., 0] = method.to_unit(method.normalize(lightness)) * 100.0
+    bgr = np.clip(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR), 0, 1)
+    return bgr if out_dtype == np.float32 else np.rint(bgr * FULL_SCALE[out_dtype]).astype(out_dtype)
+
+
 def _medians(calls: dict[str, Callable[[], Any]], repeats: int) -> dict[str, float]:
     """Median milliseconds of each call, timed in turns (one call of each per round) after one warm-up."""
     for fn in calls.values():
@@ -677,6 +694,21 @@ def _batched(frame: np.ndarray, small: np.ndarray, repeats: int) -> dict[str, An
     return result
 
 
+def _gain_error(gain: ALCN, frame: np.ndarray) -> float:
+    """Largest difference of the gain ALCN's ``normalize`` from its torch model's output
+    (:meth:`GainNormalizer.forward <alcn_cv.nets.gain.GainNormalizer.forward>`) on a uint8 frame."""
+    import torch
+
+    from alcn_cv.nets.lite import normalizer_from_file
+    from alcn_cv.weight_file import load_normalizer_file
+
+    model = normalizer_from_file(load_normalizer_file(gain.weights_path))
+    gray = frame.astype(np.float32) / np.float32(255)
+    with torch.inference_mode():
+        expected = model(torch.from_numpy(gray)[None, None])[0, 0].numpy()
+    return float(np.abs(gain.normalize(gray) - expected).max())
+
+
 def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     """Every target of the real-time work, measured in this run (ratios of medians of methods
     timed in turns, so that they see the same load)."""
@@ -701,15 +733,20 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     ratio, gain_ratio = t["alcn gray"] / t["dog raw"], t["alcn gain gray"] / t["dog raw"]
     fps = 1e3 / t["alcn gray small"]
     colour = t["alcn bgr"] / t["alcn gray"]
+    gain_error = _gain_error(gain, gray)
+    colour_levels = max(int(np.abs(norm.apply(bgr).astype(np.int16) - lab_round_trip(norm, bgr)).max()) for norm in (default, gain))
     worst = max((r for r in contract if r["method"] != "none" and r["overhead"] is not None), key=lambda r: r["overhead"])
     alcn_memory = next(r for r in memory if r["method"] == "alcn")
     size = f"{width}x{height}"
     summary = [
         _target(f"default ALCN / raw DoG, {size} gray", ratio, "<= 2 (stretch 1.5)", ratio <= 2,
                 f"{t['alcn gray']:.2f} ms against {t['dog raw']:.2f} ms"),
-        _target(f"gain ALCN / raw DoG, {size} gray", gain_ratio, "(measured)", None, f"{t['alcn gain gray']:.2f} ms"),
+        _target(f"gain Normalizer (alcn:model=gain) / raw DoG, {size} gray", gain_ratio, "<= 4", gain_ratio <= 4,
+                f"{t['alcn gain gray']:.2f} ms; largest difference from the torch model's output: {gain_error:.1e}"),
         _target("default ALCN fps, {}x{} gray".format(*settings.fps_size), fps, ">= 200", fps >= 200),
         _target(f"BGR / gray, {size}", colour, "<= 1.3", colour <= 1.3, f"gain model: {t['alcn gain bgr'] / t['alcn gain gray']:.2f}"),
+        _target(f"BGR output against the float Lab round trip, {size}: largest difference (levels)", colour_levels,
+                "<= 1", colour_levels <= 1, "default and gain models, uint8"),
         _target("apply() overhead over the method's own computation (worst method but none)", worst["overhead"],
                 "<= 0.2", worst["overhead"] <= 0.2, worst["method"]),
         _target("peak memory added / float32 image, {}x{} gray".format(*settings.large_size),

@@ -29,8 +29,17 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
-from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, kernel_radius, pyramid_mixture, pyramid_plan
 from alcn_cv.filters.divisive import divisive_normalization
+from alcn_cv.filters.gaussian_mixture import (
+    PYRAMID_MIN_SIGMA,
+    alcn_filter,
+    alcn_filter_grid,
+    gaussian_kernel1d,
+    kernel_radius,
+    pyramid_mixture,
+    pyramid_plan,
+    upsample_grid,
+)
 from alcn_cv.nets.opencv_runtime import WINDOW
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 
@@ -91,7 +100,11 @@ class ALCN(Normalization):
             ``opencv`` backends): the blurs of sigma >= 2 pixels on a Gaussian pyramid and the
             maps sampled directly from the grid at each level
             (:func:`alcn_cv.filters.gaussian_mixture.pyramid_mixture`), 5 to 10 times cheaper.
-            Default: ``"pyramid"``, except ``"exact"`` with ``backend="torch"``.
+            Default: ``"pyramid"``, except ``"exact"`` with ``backend="torch"`` and for the gain
+            Normalizer: its Weber gain makes the pyramid's error large (0.24 of its [-1, 1]
+            output on ``alcn bench speed``'s frame), and its exact Eq. 3 runs from its grid in
+            OpenCV (:func:`~alcn_cv.filters.gaussian_mixture.alcn_filter_grid`, within 1e-5 of
+            the torch model's output).
         threads: torch's intra-op threads while the Normalizer runs (restored after); default 1:
             the fastest for the light Normalizers and on a loaded machine, where the threads of
             small convolutions wait for each other, and it leaves no torch (OpenMP) threads
@@ -124,19 +137,19 @@ class ALCN(Normalization):
             raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
         if model not in MODELS:
             raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
-        if mixture is None:
-            mixture = "exact" if backend == "torch" else "pyramid"
-        if mixture not in MIXTURES:
+        if mixture is not None and mixture not in MIXTURES:
             raise InputError(f"unknown mixture {mixture!r}; choose one of {', '.join(MIXTURES)}")
-        if mixture == "pyramid" and backend == "torch":
-            raise InputError("mixture='pyramid' runs in OpenCV: use it with backend='fast' or 'opencv'")
         if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
             raise InputError(f"threads must be a positive integer or None, got {threads!r}")
-        self.mixture = mixture
         self.threads = threads
         self.weights_path = Path(weights) if weights is not None else MODELS[model]
         weight_file = load_normalizer_file(self.weights_path)
         meta = weight_file.meta
+        if mixture is None:
+            mixture = "exact" if backend == "torch" or meta.get("architecture") == "gain" else "pyramid"
+        if mixture == "pyramid" and backend == "torch":
+            raise InputError("mixture='pyramid' runs in OpenCV: use it with backend='fast' or 'opencv'")
+        self.mixture = mixture
         self.sigmas = tuple(float(s) for s in meta["sigmas"])
         self.scale = float(meta["working_scale"] if scale is None else scale)
         if not 0 < self.scale <= 4:
@@ -160,6 +173,10 @@ class ALCN(Normalization):
             logger.warning("%s holds UNTRAINED Normalizer weights (%s)", self.weights_path.name, meta.get("description", ""))
         self.backend = backend
         self.device = device
+        #: Eq. 3 exact from the gain Normalizer's grid in OpenCV (:func:`alcn_filter_grid`), its
+        #: maps interpolated as :meth:`GainNormalizer.dense <alcn_cv.nets.gain.GainNormalizer.dense>`
+        #: does, without the full-resolution maps of :meth:`weight_maps`.
+        self._maps_on_grid = self.per_pixel and self.scale == 1 and mixture == "exact" and backend in ("fast", "opencv")
         if backend == "opencv":
             self._init_opencv(meta, grid_stride)
             return
@@ -179,11 +196,15 @@ class ALCN(Normalization):
         if isinstance(self.grid_stride, bool) or not isinstance(self.grid_stride, int) or self.grid_stride < stride or self.grid_stride % stride:
             raise InputError(f"grid_stride must be a positive multiple of {stride} for this network, got {grid_stride!r}")
         _check_teacher(meta, self.weights_path)
+        #: The gain Normalizer's grid computed by :meth:`_gain_grid` (OpenCV at full resolution):
+        #: on its network's own grid, without the finest-scale feature (``sharpness``).
+        self._pooled_cells = self.per_pixel and self.grid_stride == stride and not meta["config"].get("sharpness", False)
 
     def _init_opencv(self, meta: dict, grid_stride: int | None) -> None:
         from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
 
         self.net = OpenCVNormalizer(self.weights_path.with_suffix(".onnx"))
+        self._pooled_cells = False
         self.grid_stride = self.net.stride if grid_stride is None else grid_stride
         if self.grid_stride != self.net.stride:
             raise InputError(f"backend='opencv' evaluates the Normalizer at its stride {self.net.stride}, got grid_stride={grid_stride}")
@@ -232,11 +253,47 @@ class ALCN(Normalization):
         """
         if self.backend == "opencv":
             return self.net.dense_grid(self._working_image(gray))
+        if self._pooled_cells and self.backend == "fast":
+            return self._gain_grid(self._working_image(gray))
         import torch
 
         small = torch.from_numpy(self._working_image(gray)).to(next(self.net.parameters()).device)
         with torch.inference_mode(), _torch_threads(self.threads):
             return self.net.dense_grid(small[None, None], self.grid_stride)[0].cpu().numpy()
+
+    def _gain_grid(self, small: np.ndarray) -> np.ndarray:
+        """:meth:`GainNormalizer.dense_grid <alcn_cv.nets.gain.GainNormalizer.dense_grid>` with
+        the full-resolution work in OpenCV and only the convolutions in torch.
+
+        The cells' means of the image and of its square are pooled by torch's ``avg_pool2d``
+        (the network's own: the same numbers, which matters where a cell is flat and its
+        deviation is rounding) from one reflect-101 border of OpenCV. The blurs, features and
+        gain are computed on the grid in OpenCV and NumPy (the same kernels and borders, to
+        float rounding), and the convolutions run on channels-last tensors that share memory
+        with height x width x channels arrays: oneDNN's dilated convolutions are twice as fast
+        on that layout, and OpenCV and NumPy do its borders and ReLUs (torch is slow on it).
+        """
+        import torch
+        import torch.nn.functional as F
+
+        net, s = self.net, self.net.stride
+        h, w = small.shape
+        gh, gw = -(-(h - 1) // s) + 1, -(-(w - 1) // s) + 1
+        before = s // 2  # cell (i, j) spans pixels s*i - s/2 .. s*i + s/2 - 1, as in GainNormalizer._cells
+        padded = cv2.copyMakeBorder(small, before, s * gh - h - before, before, s * gw - w - before, cv2.BORDER_REFLECT_101)
+        with torch.inference_mode(), _torch_threads(self.threads):
+            mean, square = (F.avg_pool2d(torch.from_numpy(plane)[None, None], s)[0, 0].numpy()
+                            for plane in (padded, cv2.multiply(padded, padded)))
+            local = _grid_blur(mean, net.mean_sigma / s)
+            context = _grid_blur(mean, net.context_sigma / s)
+            std = np.sqrt(np.maximum(square - mean * mean, np.float32(0)))
+            x = np.log(np.stack([mean, local, context, std], axis=-1) + np.float32(net.eps))  # (gh, gw, 4)
+            for conv, dilation in zip(net.convs, net.dilations):
+                x = cv2.copyMakeBorder(x, dilation, dilation, dilation, dilation, cv2.BORDER_REFLECT_101)
+                x = conv(_channels_last(x))[0].permute(1, 2, 0).numpy()
+                np.maximum(x, np.float32(0), out=x)
+            log_gain, weights = net.gain_and_weights(net.head(_channels_last(x)), torch.from_numpy(local)[None, None])
+            return (log_gain.exp() * weights)[0].numpy()
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
         """Eq. 1's weights: the Normalizer's prediction for each 48x48 window, one vector each.
@@ -340,11 +397,14 @@ class ALCN(Normalization):
         Returns:
             ``(N, H, W)`` float32.
         """
+        h, w = gray.shape
+        if self.per_pixel and self.scale == 1 and self.backend in ("fast", "opencv"):
+            grid = self.weight_grid(gray)  # the gain Normalizer's grid, interpolated as GainNormalizer.dense does
+            return np.stack([upsample_grid(m, self.grid_stride, (h, w)) for m in grid])
         if self.backend == "opencv":
             maps = self.net.dense(self._working_image(gray))
         else:
             maps = self._dense(gray).cpu().numpy()
-        h, w = gray.shape
         if maps.shape[1:] == (h, w):
             return maps
         return np.stack([cv2.resize(m, (w, h), interpolation=cv2.INTER_LINEAR) for m in maps])
@@ -372,9 +432,17 @@ class ALCN(Normalization):
             response = divisive_normalization(response, *self.divisive)
         if self.equalization_tau is None:
             return response
-        return np.tanh(response * np.float32(1.0 / self.equalization_tau))
+        response = np.multiply(response, np.float32(1.0 / self.equalization_tau), dtype=np.float32)
+        return np.tanh(response, out=response)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
+        if self._maps_on_grid and self.equalization_tau is not None:
+            grid = self.weight_grid(gray)
+            if self.divisive is not None:  # the division would cancel a scale folded into the maps
+                return self._finish(alcn_filter_grid(gray, grid, self.grid_stride, self.full_res_sigmas))
+            # 1 / tau folded into the grid's maps (Eq. 3 is linear in them), tanh in place
+            response = alcn_filter_grid(gray, grid * np.float32(1.0 / self.equalization_tau), self.grid_stride, self.full_res_sigmas)
+            return np.tanh(response, out=response)
         return self._finish(self._mixture(gray))
 
     def _mixture(self, gray: np.ndarray) -> np.ndarray:
@@ -387,6 +455,8 @@ class ALCN(Normalization):
             return pyramid_mixture(
                 gray, self.full_res_sigmas, lambda *args: self._grid_maps_at(grid, ratios, *args), PYRAMID_MIN_SIGMA
             )
+        if self._maps_on_grid:
+            return alcn_filter_grid(gray, self.weight_grid(gray), self.grid_stride, self.full_res_sigmas)
         if self.backend in ("fast", "opencv"):
             return alcn_filter(gray, self.weight_maps(gray), self.full_res_sigmas)
         import torch
@@ -485,6 +555,21 @@ def _network_reach(meta: dict) -> int:
     stride = int(config["stride"])
     blur = max(float(config["mean_sigma"]), float(config["context_sigma"])) / stride
     return stride * (1 + kernel_radius(blur) + sum(int(d) for d in config["dilations"]))
+
+
+def _channels_last(hwc: np.ndarray) -> torch.Tensor:
+    """A ``(1, C, H, W)`` channels-last tensor sharing the memory of a C-ordered ``(H, W, C)`` array
+    (the batch stride spelled out: torch takes a zero one for another layout)."""
+    import torch
+
+    return torch.from_numpy(hwc.reshape((1,) + hwc.shape)).permute(0, 3, 1, 2)
+
+
+def _grid_blur(grid: np.ndarray, sigma: float) -> np.ndarray:
+    """The Gaussian blur of the gain Normalizer on its grid (:func:`alcn_cv.nets.gain._blur`: the
+    kernel of :func:`gaussian_kernel1d`, reflect-101, repeated on grids smaller than the kernel)."""
+    kernel = gaussian_kernel1d(sigma)
+    return cv2.sepFilter2D(grid, cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101)
 
 
 def _integer_zoom(step: float, offset: float) -> tuple[int, int] | None:

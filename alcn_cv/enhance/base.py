@@ -22,6 +22,7 @@ result is the whole image's and the memory a strip's.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import ClassVar
 
 import cv2
@@ -36,6 +37,10 @@ logger = logging.getLogger(__name__)
 #: Images of more pixels are normalized in horizontal strips by the methods that allow it
 #: (:meth:`Normalization._tiling`): the peak memory stays a small multiple of a strip's.
 TILE_PIXELS = 2**24
+#: ``cv2.transform`` matrix of the L channel of a float Lab image, divided by 100: intensities in [0, 1].
+_LIGHTNESS_OF_LAB = np.float32([[0.01, 0.0, 0.0]])
+#: The 256 intensities of a uint8 image as :meth:`Normalization.apply`'s float path sees them.
+_UINT8_LEVELS = np.arange(256, dtype=np.uint8).astype(np.float32).reshape(1, 256) * np.float32(1.0 / FULL_SCALE[np.dtype(np.uint8)])
 #: The classes that already warned about an image smaller than their window (once per process).
 _WARNED_SMALL: set[type] = set()
 
@@ -108,15 +113,19 @@ class Normalization:
 
     def _normalize_checked(self, gray: np.ndarray) -> np.ndarray:
         """:meth:`normalize` on an image already known to be a finite float32 ``HxW`` one."""
-        if min(gray.shape) < self.min_size and type(self) not in _WARNED_SMALL:
+        self._warn_if_small(gray.shape)
+        out = self._normalize(gray)
+        return np.asarray(out, dtype=np.float32)
+
+    def _warn_if_small(self, shape: tuple[int, ...]) -> None:
+        """Log, once per class, that an image is smaller than the method's window."""
+        if min(shape[:2]) < self.min_size and type(self) not in _WARNED_SMALL:
             _WARNED_SMALL.add(type(self))
             logger.warning(
                 "%s: image of %dx%d px is smaller than the method's %d px window; the window is "
                 "completed by mirroring the image at its borders (warned once)",
-                self.name, gray.shape[1], gray.shape[0], self.min_size,
+                self.name, shape[1], shape[0], self.min_size,
             )
-        out = self._normalize(gray)
-        return np.asarray(out, dtype=np.float32)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         raise NotImplementedError
@@ -200,21 +209,41 @@ class Normalization:
         if img.dtype == np.uint8 and out_dtype == np.uint8 and (img.ndim == 2 or img.shape[2] == 1):
             direct = self._apply_gray_uint8(img.reshape(img.shape[:2]))
             if direct is not None:
+                self._warn_if_small(img.shape)
                 return direct.reshape(img.shape)
         unit = _to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
-            lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
-            lightness = np.divide(lab[..., 0], np.float32(100))
-            unit_lightness = self.to_unit(self._normalize_checked(lightness))
-            np.multiply(unit_lightness, 100.0, out=lab[..., 0])
-            return _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
+            return self._apply_bgr(unit, out_dtype)
         return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
+
+    def _apply_bgr(self, unit: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
+        """:meth:`apply` on BGR intensities in [0, 1] (``unit``, used as scratch space): the
+        L channel of CIE Lab normalized, a and b kept. OpenCV passes throughout: L / 100 in one
+        ``cv2.transform``, the response mapped to [0, 100] by ``cv2.addWeighted`` and two
+        thresholds, and put back by ``cv2.insertChannel`` (the two Lab conversions remain the
+        bulk of the cost: about one gray ``apply`` of the default ALCN)."""
+        lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
+        response = self._normalize_checked(cv2.transform(lab, _LIGHTNESS_OF_LAB))
+        lo, hi = self.output_range
+        scale = 100.0 / (hi - lo)
+        lightness = cv2.addWeighted(response, scale, response, 0.0, -lo * scale)
+        cv2.threshold(lightness, 0.0, 0.0, cv2.THRESH_TOZERO, dst=lightness)
+        cv2.threshold(lightness, 100.0, 0.0, cv2.THRESH_TRUNC, dst=lightness)
+        cv2.insertChannel(lightness, lab, 0)
+        return _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
 
     def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray | None:
         """:meth:`apply`'s result for a uint8 ``HxW`` image and uint8 output, computed without the
         float round trip by a method that works on 8-bit images (the same values); None (the
         default): take the float path."""
         return None
+
+    def _lookup_uint8(self, gray8: np.ndarray, response_of: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """:meth:`_apply_gray_uint8` for a method whose response is a function of each pixel's
+        intensity alone (given statistics of the image): ``response_of`` on the 256 intensities
+        as the float path sees them, mapped to uint8 as it maps them (the same float operations
+        on the same values), then one ``cv2.LUT`` pass over the image."""
+        return cv2.LUT(gray8, self._response_to(response_of(_UINT8_LEVELS), np.dtype(np.uint8)))
 
     def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
         """How :meth:`apply` may cut an image of ``shape`` into horizontal strips: ``(halo,
@@ -249,3 +278,6 @@ class NoNormalization(Normalization):
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         return gray.copy()
+
+    def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray:
+        return gray8.copy()  # rint(255 * (v / 255)) is v for every uint8 v: the float path's result

@@ -17,7 +17,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from alcn_cv.enhance.base import Normalization
+from alcn_cv.enhance.base import Normalization, _to_unit_float
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack, kernel_radius
@@ -63,8 +63,16 @@ class Standardization(Normalization):
         self.eps = _positive("eps", eps)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
-        mean, std = cv2.meanStdDev(gray)
+        return self._standardize(gray, cv2.meanStdDev(gray))
+
+    def _standardize(self, gray: np.ndarray, mean_std: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        mean, std = mean_std
         return (gray - np.float32(mean[0, 0])) / np.float32(std[0, 0] + self.eps)
+
+    def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray:
+        # a function of the intensity given the image's mean and deviation: one lookup
+        mean_std = cv2.meanStdDev(_to_unit_float(gray8))
+        return self._lookup_uint8(gray8, lambda levels: self._standardize(levels, mean_std))
 
 
 @register

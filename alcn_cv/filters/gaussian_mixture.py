@@ -50,6 +50,7 @@ PYRAMID_MIN_SIGMA = 0.7
 __all__ = [
     "PYRAMID_MIN_SIGMA",
     "alcn_filter",
+    "alcn_filter_grid",
     "alcn_filter_pyramid",
     "pyramid_mixture",
     "pyramid_plan",
@@ -58,6 +59,7 @@ __all__ = [
     "gaussian_kernel1d",
     "gaussian_sigmas",
     "kernel_radius",
+    "upsample_grid",
 ]
 
 
@@ -173,6 +175,89 @@ def alcn_filter(image: np.ndarray, weights: np.ndarray, sigmas: Sequence[float] 
             product = cv2.multiply(image, weights[i].astype(np.float32, copy=False))
             cv2.sepFilter2D(product, cv2.CV_32F, k, k, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
             cv2.add(out, blurred, dst=out)
+    return out
+
+
+def upsample_grid(grid: np.ndarray, stride: int, shape: tuple[int, int]) -> np.ndarray:
+    """A map given on a grid interpolated bilinearly onto every pixel.
+
+    Grid point ``(i, j)`` lies on pixel ``(stride * i, stride * j)``, as on the grids of ALCN's
+    Normalizers: the result is ``torch.nn.functional.interpolate(grid, size=stride * (g - 1) + 1,
+    mode="bilinear", align_corners=True)`` cropped to ``shape`` (to float rounding). Along x on the
+    grid's rows (small), then along y: one ``cv2.addWeighted`` per phase of the rows within a
+    grid cell, each writing its rows in place, so the output is written once -- several times
+    cheaper than ``cv2.warpAffine`` onto every pixel, and exact for every stride (``cv2.resize``
+    puts its samples half a pixel off these points).
+
+    Args:
+        grid: ``(gh, gw)`` float32, ``stride * (gh - 1) >= h - 1`` and ``stride * (gw - 1) >= w - 1``.
+        stride: the grid's spacing in pixels.
+        shape: ``(h, w)`` of the output.
+
+    Returns:
+        ``(h, w)`` float32.
+    """
+    h, w = shape
+    return _upsample_rows(_upsample_columns(grid.astype(np.float32, copy=False), stride, w), stride, h)
+
+
+def _upsample_columns(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
+    """``grid`` ``(g, m)`` interpolated linearly along its second axis onto ``n`` columns, column
+    ``c`` at grid coordinate ``c / stride`` (NumPy: the grid is small)."""
+    cells = min(grid.shape[1] - 1, -(-n // stride))
+    out = np.empty((len(grid), cells * stride + 1), np.float32)
+    phases = np.arange(stride, dtype=np.float32) / np.float32(stride)
+    body = out[:, :-1].reshape(len(grid), cells, stride)
+    np.multiply((grid[:, 1 : cells + 1] - grid[:, :cells])[:, :, None], phases, out=body)
+    body += grid[:, :cells, None]
+    out[:, -1] = grid[:, cells]
+    return out[:, :n]
+
+
+def _upsample_rows(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
+    """``grid`` ``(g, m)`` interpolated linearly along its first axis onto ``n`` rows, row ``r`` at
+    grid coordinate ``r / stride``."""
+    m = grid.shape[1]
+    cells = min(len(grid) - 1, -(-n // stride))
+    out = np.empty((cells * stride + 1, m), np.float32)
+    # Row stride * i + p of the output is column block p of row i of this view.
+    blocks = out[:-1].reshape(cells, stride * m)
+    above, below = grid[:cells], grid[1 : cells + 1]
+    for phase in range(stride if cells else 0):
+        t = phase / stride
+        cv2.addWeighted(above, 1.0 - t, below, t, 0.0, dst=blocks[:, phase * m : (phase + 1) * m])
+    out[-1] = grid[cells]
+    return out[:n]
+
+
+def alcn_filter_grid(image: np.ndarray, grid: np.ndarray, stride: int, sigmas: Sequence[float]) -> np.ndarray:
+    """Eq. 3 with maps given on a grid: :func:`alcn_filter` of the maps :func:`upsample_grid`
+    interpolates, in fewer passes (one map at a time, multiplied by the image in place).
+
+    Args:
+        image: ``(H, W)`` float32.
+        grid: ``(N, gh, gw)`` float32 maps, point ``(i, j)`` on pixel ``(stride * i, stride * j)``.
+        stride: the grid's spacing in pixels.
+        sigmas: the ``N`` standard deviations, in pixels.
+
+    Returns:
+        ``(H, W)`` float32.
+    """
+    image = _check_plane(image)
+    sigmas = check_sigmas(sigmas)
+    if grid.ndim != 3 or len(grid) != len(sigmas):
+        raise InputError(f"need one grid map per sigma, got {grid.shape} for {len(sigmas)} sigmas")
+    out: np.ndarray | None = None
+    blurred = np.empty(image.shape, np.float32)
+    for k, sigma in enumerate(sigmas):
+        product = upsample_grid(grid[k], stride, image.shape)
+        cv2.multiply(image, product, dst=product)
+        kernel = _cached_kernel(sigma)
+        if out is None:
+            out = cv2.sepFilter2D(product, cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101)
+            continue
+        cv2.sepFilter2D(product, cv2.CV_32F, kernel, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
+        cv2.add(out, blurred, dst=out)
     return out
 
 

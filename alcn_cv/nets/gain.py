@@ -302,14 +302,19 @@ class GainNormalizer(nn.Module):
         x, local = self.features(image)
         for conv, d in zip(self.convs, self.dilations):
             x = F.relu(conv(_reflect101_pad(x, d)))
-        out = self.head(x)
+        return self.gain_and_weights(self.head(x), local)
+
+    def gain_and_weights(self, head: torch.Tensor, local: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The head's output ``(B, 1 + N, gh, gw)`` as ``g`` ``(B, 1, gh, gw)`` and ``w_k``
+        ``(B, N, gh, gw)``, given the local mean ``m`` ``(B, 1, gh, gw)`` of the Weber gain (the
+        step shared with the OpenCV runtime of :class:`~alcn_cv.enhance.alcn.ALCN`)."""
         if self.gain == "divisive":  # the fixed part divides the response (:meth:`divide`)
-            weights = out[:, 1:]
+            weights = head[:, 1:]
             # A band-pass, as the DoG: weights summing to zero, so the response does not follow
             # the local mean (which the division would turn into structure in flat regions).
-            return out[:, :1], weights - weights.mean(dim=1, keepdim=True)
+            return head[:, :1], weights - weights.mean(dim=1, keepdim=True)
         floor = self.log_floor.exp() if self.learn_floor else self.eps
-        return out[:, :1] - (local + floor).log(), out[:, 1:]
+        return head[:, :1] - (local + floor).log(), head[:, 1:]
 
     def dense_grid(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
         """The maps F_k on a grid of stride ``grid_stride`` (a multiple of :attr:`stride`).
