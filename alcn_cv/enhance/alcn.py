@@ -76,8 +76,10 @@ class ALCN(Normalization):
             ``alcn_cv/weights/alcn_normalizer_lite.npz``, a few hundred times cheaper; see its
             model card) or ``"paper"`` (the paper's architecture, trained jointly with a
             detector, ``alcn_normalizer.npz``; see ``MODEL_CARD.md``) or ``"gain"`` (the
-            gain-adaptive Normalizer of :mod:`alcn_cv.nets.gain`, F_k = exp(g) w_k then a
-            contrast equalization ``tanh(x / tau)``, trained on real photographs of outdoor
+            gain-adaptive Normalizer of :mod:`alcn_cv.nets.gain`, F_k = exp(g) w_k, the
+            response divided on a grid by its local energy
+            (:func:`~alcn_cv.filters.divisive.divisive_normalization`), then a contrast
+            equalization ``tanh(x / tau)``; trained on real photographs of outdoor
             scenes under changing daylight by ``alcn train-real-light``;
             ``alcn_normalizer_gain.npz``, card ``alcn_normalizer_gain.md``).
         scale: working scale, the factor from the input resolution to the one the Normalizer
