@@ -16,7 +16,12 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["cell_rms", "divisive_normalization"]
+__all__ = ["ABSOLUTE_FLOOR", "cell_rms", "divisive_normalization"]
+
+#: Added (squared) to every divisor, in intensity units ([0, 1]): a 40th of an 8-bit level, far
+#: below any real texture, so that a flat image's response, float rounding only, stays near zero
+#: instead of being divided up to order one (and differently by each runtime).
+ABSOLUTE_FLOOR = 1e-4
 
 
 def cell_rms(response: np.ndarray, stride: int) -> np.ndarray:
@@ -33,8 +38,8 @@ def cell_rms(response: np.ndarray, stride: int) -> np.ndarray:
 
 
 def divisive_normalization(response: np.ndarray, stride: int, scale: float, floor: float | None = None) -> np.ndarray:
-    """``response / sqrt(e^2 + f^2)`` (see the module), the divisor interpolated bilinearly
-    between the grid points.
+    """``response / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` (see the module), the divisor
+    interpolated bilinearly between the grid points.
 
     Args:
         response: ``(H, W)`` float32, unbounded.
@@ -47,7 +52,7 @@ def divisive_normalization(response: np.ndarray, stride: int, scale: float, floo
     """
     e = cell_rms(response, stride)
     f = scale * float(e.mean()) if floor is None else floor
-    inverse = (1.0 / np.sqrt(np.maximum(e * e + np.float32(f * f), np.float32(1e-12)))).astype(np.float32)
+    inverse = (1.0 / np.sqrt(e * e + np.float32(f * f + ABSOLUTE_FLOOR**2))).astype(np.float32)
     h, w = response.shape
     # Grid point (i, j) sits at pixel (s*i, s*j): pixel x reads the grid at x / s (align corners).
     upsampled = cv2.warpAffine(inverse, np.float32([[1.0 / stride, 0, 0], [0, 1.0 / stride, 0]]), (w, h),

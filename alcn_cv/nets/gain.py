@@ -57,6 +57,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from alcn_cv.errors import InputError
+from alcn_cv.filters.divisive import ABSOLUTE_FLOOR
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, gaussian_sigmas
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
@@ -361,7 +362,7 @@ class GainNormalizer(nn.Module):
         e = _cell_rms(response, self.stride)
         if floor is None:
             floor = self.floor_scale * e.mean(dim=(-2, -1), keepdim=True)
-        inverse = (e * e + floor * floor).clamp_min(1e-12).rsqrt()
+        inverse = (e * e + floor * floor + ABSOLUTE_FLOOR**2).rsqrt()
         h, w = response.shape[-2:]
         size = (self.stride * (inverse.shape[-2] - 1) + 1, self.stride * (inverse.shape[-1] - 1) + 1)
         return response * F.interpolate(inverse, size=size, mode="bilinear", align_corners=True)[..., :h, :w]
