@@ -97,7 +97,7 @@ def _relight(args: argparse.Namespace) -> int:
 
     from pose import planar
 
-    planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizers, detector=args.detector,
+    planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizers, detectors=args.detector,
                 feature=args.feature, n_features=args.n_features, target_fraction=args.target_fraction, hfov=args.hfov,
                 max_frames=args.max_frames, command=shlex.join(["alcn", *sys.argv[1:]]))
     print((Path(args.out) / "relight_pose.md").read_text(encoding="utf-8"))
@@ -120,8 +120,10 @@ def _add_relight(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--scenes", nargs="+", help="scene names (default: every scene of --data)")
     r.add_argument("--normalizers", nargs="+", default=list(planar.DEFAULT_NORMALIZERS),
                    help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZERS) + ")")
-    r.add_argument("--detector", default="features", choices=sorted(planar.DETECTORS),
-                   help="part detector (default features: OpenCV features matched to the target's descriptors)")
+    r.add_argument("--detector", nargs="+", default=["features"], choices=sorted(planar.DETECTORS),
+                   help="part detectors, each giving rows (default features: OpenCV features matched to the target's "
+                   "descriptors; corners: the corner CNN trained on the reference frame for the target's corners and "
+                   "side middles)")
     r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
     r.add_argument("--n-features", type=int, default=0,
                    help="the strongest keypoints kept per frame (default 0: all; the target's model keeps all of "

@@ -30,20 +30,25 @@ class CornerNet(nn.Module):
     Args:
         channels: widths of the two convolutions.
         hidden: width of the fully connected layer (a 5x5 convolution).
+        mixing: fully connected layers of that width after it (1x1 convolutions: the window and
+            the stride unchanged, little time at the output's resolution).
     """
 
     input_size = WINDOW
     stride = STRIDE
 
-    def __init__(self, channels: tuple[int, int] = (16, 32), hidden: int = 64) -> None:
+    def __init__(self, channels: tuple[int, int] = (16, 32), hidden: int = 64, mixing: int = 0) -> None:
         super().__init__()
         c1, c2 = channels
-        self.config = {"channels": [c1, c2], "hidden": hidden}
-        self.features = nn.Sequential(
+        self.config = {"channels": [c1, c2], "hidden": hidden, "mixing": mixing}
+        layers = [
             nn.Conv2d(1, c1, 5), nn.BatchNorm2d(c1), nn.ReLU(inplace=True), nn.MaxPool2d(2),
             nn.Conv2d(c1, c2, 5), nn.BatchNorm2d(c2), nn.ReLU(inplace=True), nn.MaxPool2d(2),
             nn.Conv2d(c2, hidden, 5), nn.BatchNorm2d(hidden), nn.ReLU(inplace=True),
-        )
+        ]
+        for _ in range(mixing):
+            layers += [nn.Conv2d(hidden, hidden, 1), nn.BatchNorm2d(hidden), nn.ReLU(inplace=True)]
+        self.features = nn.Sequential(*layers)
         self.head = nn.Conv2d(hidden, NUM_CORNERS + 1 + 2 * NUM_CORNERS, 1)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:

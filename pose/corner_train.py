@@ -36,7 +36,7 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv.errors import InputError
-from pose.corner_data import CornerFrames, build_frames
+from pose.corner_data import CornerFrames, build_frames, build_image_frames
 from pose.corners import FORMAT_NAME, FORMAT_VERSION, NUM_CORNERS, PAD, STRIDE, WINDOW
 
 logger = logging.getLogger(__name__)
@@ -149,7 +149,7 @@ def fit(net, frames: CornerFrames, *, iterations: int = 1500, batch_size: int = 
 
 def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path, *, normalizer: str = "none",
                   units: str = "mm", obj_id: int | None = None, scale: float = 0.5,
-                  channels: tuple[int, int] = (16, 32), hidden: int = 64, iterations: int = 1000,
+                  channels: tuple[int, int] = (16, 32), hidden: int = 64, mixing: int = 0, iterations: int = 1000,
                   batch_size: int = 16, cells: int = 12, lr: float = 3e-3, seed: int = 0, progress: bool = True,
                   **frames_kw: Any) -> Path:
     """Train the corner detector on a registered sequence and export it to ``out`` (``.onnx``).
@@ -161,7 +161,7 @@ def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path
         out: the ``.onnx`` file to write.
         normalizer: the normalizer applied first (stored in the file; tracking uses the same).
         scale: downscaling of the frames (stored in the file).
-        channels, hidden: widths of :class:`pose.corner_net.CornerNet`.
+        channels, hidden, mixing: :class:`pose.corner_net.CornerNet`'s.
         iterations, batch_size, cells, lr, seed: see :func:`fit` (``cells``: the crops' side in
             output cells).
         **frames_kw: see :func:`pose.corner_data.build_frames` (``copies``, ...).
@@ -169,9 +169,6 @@ def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path
     Returns:
         The written path.
     """
-    import torch
-
-    from pose.corner_net import CornerNet
     from pose.sequence import load_sequence
 
     corners = np.asarray(corners, np.float64)
@@ -184,24 +181,63 @@ def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path
     t0 = time.perf_counter()
     seq = load_sequence(sequence_dir, obj_id=obj_id)
     frames = build_frames(seq, corners, normalizer, scale=scale, seed=seed, **frames_kw)
+    return fit_and_export(frames, corners, out, normalizer=normalizer, units=units, scale=scale,
+                          source=str(sequence_dir), data_seconds=time.perf_counter() - t0, views=len(seq.views),
+                          channels=channels, hidden=hidden, mixing=mixing, iterations=iterations,
+                          batch_size=batch_size, cells=cells, lr=lr, seed=seed, progress=progress)
+
+
+def fit_and_export(frames: CornerFrames, corners: np.ndarray, out: str | Path, *, normalizer: str, units: str,
+                   scale: float, source: str, data_seconds: float, views: int, channels: tuple[int, int] = (16, 32),
+                   hidden: int = 64, mixing: int = 0, iterations: int = 1000, batch_size: int = 16, cells: int = 12,
+                   lr: float = 3e-3, seed: int = 0, progress: bool = True) -> Path:
+    """Train a :class:`pose.corner_net.CornerNet` on ``frames`` (:func:`fit`) and export it with
+    its metadata (:func:`export_onnx`); the arguments as :func:`train_corners`'s."""
+    import torch
+
+    from pose.corner_net import CornerNet
+
     t1 = time.perf_counter()
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
-        net = CornerNet(channels, hidden)
+        net = CornerNet(channels, hidden, mixing)
         cells = min(cells, *frames.labels.shape[1:])
         fit_info = fit(net, frames, iterations=iterations, batch_size=batch_size, cells=cells, lr=lr, seed=seed,
                        progress=progress)
     meta = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "normalizer": normalizer, "scale": scale,
             "input_mean": frames.input_mean, "input_std": frames.input_std,
-            "corners": corners.tolist(), "units": units, "window": WINDOW, "stride": STRIDE, "pad": PAD,
-            "config": net.config, "source": str(sequence_dir),
-            "fit": {"frames": len(frames.labels), "views": len(seq.views), "iterations": iterations,
-                    "batch_size": batch_size, "cells": cells, "lr": lr, "seed": seed, "data_seconds": t1 - t0,
+            "corners": np.asarray(corners, np.float64).tolist(), "units": units, "window": WINDOW, "stride": STRIDE,
+            "pad": PAD, "config": net.config, "source": source,
+            "fit": {"frames": len(frames.labels), "views": views, "iterations": iterations,
+                    "batch_size": batch_size, "cells": cells, "lr": lr, "seed": seed, "data_seconds": data_seconds,
                     "train_seconds": time.perf_counter() - t1, **fit_info}}
     path = export_onnx(net, out, meta)
     logger.info("corner detector (%s): %d frames in %.1f s, training %.1f s, final loss %.3f", normalizer,
-                len(frames.labels), t1 - t0, time.perf_counter() - t1, fit_info["final_loss"])
+                len(frames.labels), data_seconds, time.perf_counter() - t1, fit_info["final_loss"])
     return path
+
+
+def train_image_corners(gray: np.ndarray, uv: np.ndarray, parts: np.ndarray, out: str | Path, *,
+                        normalizer: str = "none", units: str = "mm", scale: float = 0.5, source: str = "",
+                        copies: int = 59, seed: int = 0, progress: bool = True, **fit_kw: Any) -> Path:
+    """Train the detector of 8 parts of one image (a planar target's, :mod:`pose.planar`) and export it.
+
+    Args:
+        gray: the training image, uint8.
+        uv: ``(8, 2)`` the parts' pixels in it.
+        parts: ``(8, 3)`` the parts in the object frame (``units``).
+        out: the ``.onnx`` file to write.
+        normalizer, scale, seed: as :func:`train_corners`'s.
+        copies: augmented copies of the image (:func:`pose.corner_data.build_image_frames`).
+        **fit_kw: :func:`fit_and_export`'s ``iterations``, ``channels``, ...
+    """
+    parts = np.asarray(parts, np.float64)
+    if parts.shape != (NUM_CORNERS, 3) or not np.isfinite(parts).all():
+        raise InputError(f"parts must be a finite ({NUM_CORNERS}, 3) array, got shape {parts.shape}")
+    t0 = time.perf_counter()
+    frames = build_image_frames(gray, uv, normalizer, scale=scale, copies=copies, seed=seed)
+    return fit_and_export(frames, parts, out, normalizer=normalizer, units=units, scale=scale, source=source,
+                          data_seconds=time.perf_counter() - t0, views=1, seed=seed, progress=progress, **fit_kw)
 
 
 def main(sequence_dir: str | Path, out: str | Path, *, box_ply: str | Path | None = None,
