@@ -29,6 +29,11 @@ from pose.sequence import TrainingSequence
 
 logger = logging.getLogger(__name__)
 
+#: Augmented copies of each training view, and the share of them seen from a nearby viewpoint
+#: (:func:`novel_view`); see :mod:`pose.corner_train` for the measurements.
+COPIES = 11
+NOVEL_VIEWS = 0.6
+
 
 def corner_visibility(corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, shape: tuple[int, int],
                       mask: np.ndarray | None = None, mask_tolerance: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -332,9 +337,9 @@ def _stack_frames(per_view: list[list[tuple[np.ndarray, ...]]]) -> CornerFrames:
 
 
 def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: str = "none", *, scale: float = 0.5,
-                 copies: int = 11, backgrounds: float = 0.8, intensity_scale: tuple[float, float] = (0.4, 1.6),
+                 copies: int = COPIES, backgrounds: float = 0.8, intensity_scale: tuple[float, float] = (0.4, 1.6),
                  intensity_offset: float = 0.2, noise: float = 0.03, pos_radius: float = 4.0,
-                 neg_radius: float = 7.0, novel_views: float = 0.0, seed: int = 0) -> CornerFrames:
+                 neg_radius: float = 7.0, novel_views: float = NOVEL_VIEWS, seed: int = 0) -> CornerFrames:
     """The labelled training frames of a registered sequence (:func:`pose.sequence.load_sequence`).
 
     Args:

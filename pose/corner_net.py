@@ -25,7 +25,9 @@ class CornerNet(nn.Module):
     training: on the data engine's sequence #1 (no normalization, 30 training views x 8 frames)
     the correct poses rose from 6.7% (1500 steps without it) to 36.7% (1000 steps with it). Wider
     layers (24/48, 128) fit better (87% vs 44% of the training corners score highest at their
-    place) but cost 4 times the training and half the speed.
+    place) but cost 4 times the training and half the speed; a fully connected layer of 128 and
+    one more (``mixing=1``, the default) fit as well (96% after 2000 steps) for 1.4 times the
+    network's time (29 against 21 ms at 640x480 through ``cv2.dnn``, 2 threads, loaded machine).
 
     Args:
         channels: widths of the two convolutions.
@@ -37,7 +39,7 @@ class CornerNet(nn.Module):
     input_size = WINDOW
     stride = STRIDE
 
-    def __init__(self, channels: tuple[int, int] = (16, 32), hidden: int = 64, mixing: int = 0) -> None:
+    def __init__(self, channels: tuple[int, int] = (16, 32), hidden: int = 128, mixing: int = 1) -> None:
         super().__init__()
         c1, c2 = channels
         self.config = {"channels": [c1, c2], "hidden": hidden, "mixing": mixing}

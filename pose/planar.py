@@ -204,7 +204,7 @@ def target_parts(target: PlanarTarget) -> tuple[np.ndarray, np.ndarray]:
 
 #: Training of the target's corner detector (:func:`pose.corner_train.train_image_corners`):
 #: ``copies`` augmented copies of the reference frame and ``iterations`` steps; the rest as the box's.
-CORNER_TRAINING = {"copies": 59, "iterations": 1000, "hidden": 128, "mixing": 1}
+CORNER_TRAINING = {"copies": 59, "iterations": 1000}
 
 
 def corner_detector(target: PlanarTarget, normalizer: str, n_features: int = 0,

@@ -297,7 +297,7 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     assert args.func(args) == 0
     meta = pc.read_metadata(onnx)
     assert meta["normalizer"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
-    assert meta["config"] == {"channels": [16, 32], "hidden": 64}
+    assert meta["config"] == {"channels": [16, 32], "hidden": 128, "mixing": 1}
 
 
 def test_track_and_bench_the_corner_detector(posedata, random_net, tmp_path):
