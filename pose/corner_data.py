@@ -1,6 +1,8 @@
 """Training frames of the corner detector (:mod:`pose.corners`), from a registered sequence.
 
-Every view of the training sequence is downscaled, then copied with the data engine's kinds of
+Every view of the training sequence is downscaled, then copied; a share of the copies first sees
+the box from a nearby viewpoint (:func:`novel_view`: each face warped by its own plane's
+homography, the table by its plane's), then every copy gets the data engine's kinds of
 augmentation applied to the whole frame: a random homography (in-plane rotation, scaling,
 perspective and shift: the viewpoints between and around the training views), the background
 (outside the BOP ``mask_visib``) replaced by the data engine's random textures

@@ -32,6 +32,10 @@ or ``"corners"``, the learned corner detector of the box (:mod:`pose.corners`) t
 target from the reference frame alone, as the box's is from its training sequence under one
 light (:func:`corner_detector`): its 8 parts are the target's 4 corners and the middles of its
 4 sides (:func:`target_parts`; 4 parts would leave PnP nothing to check a pose with).
+Measured (every frame of the 4 scenes, 1000 steps on 60 copies of the reference frame, 2.5-7
+min per training on the loaded 2-core machine): it finds the 8 parts in the reference frame but
+2-5 of them under other lights without normalization, and poses 15.1% of the frames on average
+(DoG 24.9, ALCN 28.3, the gain ALCN 29.7), far below the SIFT parts (95-100%).
 
 The Webcam frames are for academic research only (cite TILDE and AMOS).
 """
