@@ -65,7 +65,8 @@ def _eval(args: argparse.Namespace) -> int:
     if args.middlebury:
         evaluate.middlebury_main(args.middlebury, args.out, normalizers=normalizers, feature=args.feature)
     if args.data:
-        corner_kw = {"iterations": args.corner_iterations, "copies": args.corner_copies}
+        corner_kw = {"iterations": args.corner_iterations, "copies": args.corner_copies,
+                     "novel_views": args.corner_novel_views}
         evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature, detectors=args.detectors,
                       corner_kw=corner_kw, seeds=args.seeds, sequences=args.sequences, command=_command())
     if not (args.middlebury or args.data):
@@ -86,7 +87,7 @@ def _train_corners(args: argparse.Namespace) -> int:
 
     path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
                              normalizer=args.normalizer, scale=args.scale, iterations=args.iterations,
-                             copies=args.copies, seed=args.seed)
+                             copies=args.copies, novel_views=args.novel_views, seed=args.seed)
     print(f"corner detector ({args.normalizer}) -> {path}")
     return 0
 
@@ -97,7 +98,7 @@ def _relight(args: argparse.Namespace) -> int:
 
     from pose import planar
 
-    planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizers, detector=args.detector,
+    planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizers, detectors=args.detector,
                 feature=args.feature, n_features=args.n_features, target_fraction=args.target_fraction, hfov=args.hfov,
                 max_frames=args.max_frames, command=shlex.join(["alcn", *sys.argv[1:]]))
     print((Path(args.out) / "relight_pose.md").read_text(encoding="utf-8"))
@@ -120,8 +121,10 @@ def _add_relight(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--scenes", nargs="+", help="scene names (default: every scene of --data)")
     r.add_argument("--normalizers", nargs="+", default=list(planar.DEFAULT_NORMALIZERS),
                    help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZERS) + ")")
-    r.add_argument("--detector", default="features", choices=sorted(planar.DETECTORS),
-                   help="part detector (default features: OpenCV features matched to the target's descriptors)")
+    r.add_argument("--detector", nargs="+", default=["features"], choices=sorted(planar.DETECTORS),
+                   help="part detectors, each giving rows (default features: OpenCV features matched to the target's "
+                   "descriptors; corners: the corner CNN trained on the reference frame for the target's corners and "
+                   "side middles)")
     r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
     r.add_argument("--n-features", type=int, default=0,
                    help="the strongest keypoints kept per frame (default 0: all; the target's model keeps all of "
@@ -194,6 +197,8 @@ def _bench_corners(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``relight`` and ``overlay-error`` to ``alcn``."""
+    from pose.corner_data import COPIES, NOVEL_VIEWS
+    from pose.corner_train import ITERATIONS
     from pose.solver import METHODS
 
     p = subparsers.add_parser("pose", help="3D box pose: build a part model, track it, evaluate",
@@ -263,10 +268,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    "gave more correct poses than ORB, and with ALCN far more; `track` uses ORB for speed)")
     e.add_argument("--detectors", nargs="+", default=["features"], choices=["features", "corners"],
                    help="part detectors, each giving rows (default features; corners: trained on the training sequence first)")
-    e.add_argument("--corner-iterations", type=int, default=1000,
-                   help="corner CNN training steps (default 1000)")
-    e.add_argument("--corner-copies", type=int, default=11,
-                   help="augmented copies of each training view for the corner CNN (default 11)")
+    e.add_argument("--corner-iterations", type=int, default=ITERATIONS,
+                   help=f"corner CNN training steps (default {ITERATIONS})")
+    e.add_argument("--corner-copies", type=int, default=COPIES,
+                   help=f"augmented copies of each training view for the corner CNN (default {COPIES})")
+    e.add_argument("--corner-novel-views", type=float, default=NOVEL_VIEWS,
+                   help="share of the copies that see the box from a nearby viewpoint (each face warped by its "
+                   f"plane's homography; default {NOVEL_VIEWS:g})")
     e.add_argument("--seeds", type=int, default=1,
                    help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)")
     e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
@@ -285,9 +293,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     box.add_argument("--model", help="part model (.npz) whose box corners to use")
     c.add_argument("--normalizer", default="none", help="normalizer applied first (default none)")
     c.add_argument("--scale", type=float, default=0.5, help="downscaling of the frames (default 0.5)")
-    c.add_argument("--iterations", type=int, default=1000, help="training steps (default 1000)")
-    c.add_argument("--copies", type=int, default=11,
-                   help="augmented copies (homography, background, intensity) of each view (default 11)")
+    c.add_argument("--iterations", type=int, default=ITERATIONS, help=f"training steps (default {ITERATIONS})")
+    c.add_argument("--copies", type=int, default=COPIES,
+                   help=f"augmented copies (viewpoint, homography, background, intensity) of each view (default {COPIES})")
+    c.add_argument("--novel-views", type=float, default=NOVEL_VIEWS,
+                   help="share of the copies that see the box from a nearby viewpoint (each face warped by its "
+                   f"plane's homography; default {NOVEL_VIEWS:g})")
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(func=_train_corners)
 

@@ -1,6 +1,8 @@
 """Training frames of the corner detector (:mod:`pose.corners`), from a registered sequence.
 
-Every view of the training sequence is downscaled, then copied with the data engine's kinds of
+Every view of the training sequence is downscaled, then copied; a share of the copies first sees
+the box from a nearby viewpoint (:func:`novel_view`: each face warped by its own plane's
+homography, the table by its plane's), then every copy gets the data engine's kinds of
 augmentation applied to the whole frame: a random homography (in-plane rotation, scaling,
 perspective and shift: the viewpoints between and around the training views), the background
 (outside the BOP ``mask_visib``) replaced by the data engine's random textures
@@ -15,6 +17,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -27,6 +30,11 @@ from pose.parts import to_gray
 from pose.sequence import TrainingSequence
 
 logger = logging.getLogger(__name__)
+
+#: Augmented copies of each training view, and the share of them seen from a nearby viewpoint
+#: (:func:`novel_view`); see :mod:`pose.corner_train` for the measurements.
+COPIES = 11
+NOVEL_VIEWS = 0.6
 
 
 def corner_visibility(corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, shape: tuple[int, int],
@@ -143,6 +151,103 @@ def random_homography(rng: np.random.Generator, shape: tuple[int, int], *, max_r
     return A @ P
 
 
+#: The 6 faces of a box as its corners in turn around each (:func:`pose.model.box_corners` order:
+#: bit 2 of a corner's index is x, bit 1 y, bit 0 z), with the axis and side of each face.
+BOX_FACES = tuple((axis, side, tuple(np.array(quad) + (side << (2 - axis))))
+                  for axis, quad in ((0, (0, 1, 3, 2)), (1, (0, 1, 5, 4)), (2, (0, 2, 6, 4))) for side in (0, 1))
+
+
+def _box_coordinates(corners: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The camera centre in box coordinates (0..1 inside the box along each of its edges)."""
+    axes = np.stack([corners[4] - corners[0], corners[2] - corners[0], corners[1] - corners[0]], 1)
+    return np.linalg.solve(axes, -R.T @ t - corners[0])
+
+
+def facing_faces(corners: np.ndarray, R: np.ndarray, t: np.ndarray) -> list[tuple[int, ...]]:
+    """The faces of :data:`BOX_FACES` (their corner quads) turned towards the camera of pose ``R, t``."""
+    a = _box_coordinates(corners, R, t)
+    return [quad for axis, side, quad in BOX_FACES if (a[axis] > 1 if side else a[axis] < 0)]
+
+
+def _project(points: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray) -> np.ndarray:
+    cam = points @ R.T + t
+    return cam[:, :2] / cam[:, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking the direction ``a`` to ``b``."""
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    angle = np.arctan2(np.linalg.norm(axis), a @ b)
+    return cv2.Rodrigues(axis / max(np.linalg.norm(axis), 1e-12) * angle)[0]
+
+
+def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray,
+               rng: np.random.Generator, *, azimuth_deg: float = 8.0, elevation_deg: float = 20.0,
+               elevation_range: tuple[float, float] = (20.0, 70.0), distance: tuple[float, float] = (0.85, 1.2),
+               min_stretch: float = 0.35, tries: int = 8
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The box of a registered view seen from a nearby viewpoint: each face of the box warped by
+    its own plane's homography, the rest (the table) by the homography of the plane of the box's
+    bottom face. Exact for a box and a table with Lambertian surfaces under the view's light (a
+    face keeps its shading), as a homography of the whole frame is not.
+
+    The camera turns about the box's centre by up to ``azimuth_deg`` about the box's z axis (up)
+    and ``elevation_deg`` in elevation (kept within ``elevation_range`` above the bottom face's
+    plane), its distance scaled within ``distance``. A viewpoint is kept only when every face it
+    sees is seen in the view at least ``min_stretch`` as large (a face seen edge-on has no
+    texture to give); ``None`` after ``tries`` refusals.
+
+    Args:
+        image: the view, uint8 ``(H, W)``.
+        corners: ``(8, 3)`` box corners (:func:`pose.model.box_corners` order, z up).
+        R, t: the view's object-to-camera pose; ``K``: its intrinsics.
+
+    Returns:
+        ``(image, mask, uv, visible)``: the new view, the box's pixels in it (uint8, 255), its
+        corners ``(8, 2)`` and which of them are visible (:func:`corner_visibility`).
+    """
+    corners = np.asarray(corners, np.float64)
+    h, w = image.shape
+    centre = corners.mean(0)
+    eye = -R.T @ t - centre
+    radius = np.linalg.norm(eye)
+    elevation = np.degrees(np.arcsin(np.clip(eye[2] / radius, -1, 1)))
+    seen = {quad: cv2.contourArea(_project(corners[list(quad)], R, t, K).astype(np.float32))
+            for quad in facing_faces(corners, R, t)}
+    for _ in range(tries):
+        new_elevation = np.clip(elevation + rng.uniform(-elevation_deg, elevation_deg), *elevation_range)
+        azimuth = np.arctan2(eye[1], eye[0]) + np.radians(rng.uniform(-azimuth_deg, azimuth_deg))
+        e = np.radians(new_elevation)
+        eye2 = radius * rng.uniform(*distance) * np.array([np.cos(e) * np.cos(azimuth), np.cos(e) * np.sin(azimuth),
+                                                           np.sin(e)])
+        # the camera rig turned about the box's centre: the box stays where it was in the frame
+        R2 = R @ _rotation_between(eye, eye2).T
+        t2 = -R2 @ (eye2 + centre)
+        faces = facing_faces(corners, R2, t2)
+        areas = [cv2.contourArea(_project(corners[list(q)], R2, t2, K).astype(np.float32)) for q in faces]
+        if all(q in seen and seen[q] >= min_stretch * a for q, a in zip(faces, areas)):
+            break
+    else:
+        return None
+    bottom = corners[corners[:, 2] <= corners[:, 2].min() + 1e-9]  # the table's plane: the bottom face's
+    plane = bottom.mean(0) + 4 * (bottom[[0, 1, 3, 2]] - bottom.mean(0))
+    H = cv2.getPerspectiveTransform(_project(plane, R, t, K).astype(np.float32),
+                                    _project(plane, R2, t2, K).astype(np.float32))
+    out = cv2.warpPerspective(image, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
+    mask = np.zeros((h, w), np.uint8)
+    for quad in faces:
+        src, dst = (_project(corners[list(quad)], *pose, K).astype(np.float32) for pose in ((R, t), (R2, t2)))
+        face = cv2.warpPerspective(image, cv2.getPerspectiveTransform(src, dst), (w, h), flags=cv2.INTER_LINEAR,
+                                   borderMode=cv2.BORDER_REFLECT_101)
+        inside = cv2.fillConvexPoly(np.zeros((h, w), np.uint8), np.round(dst * 16).astype(np.int32), 255,
+                                    cv2.LINE_AA, 4)
+        out[inside > 0] = face[inside > 0]
+        mask |= inside
+    uv, visible = corner_visibility(corners, R2, t2, K, (h, w))
+    return out, mask, uv, visible
+
+
 def _transform(H: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return cv2.perspectiveTransform(np.asarray(uv, np.float64).reshape(-1, 1, 2), H).reshape(-1, 2)
 
@@ -181,10 +286,62 @@ class CornerFrames:
     input_std: float
 
 
+def _view_frames(small: np.ndarray, small_mask: np.ndarray | None, uv: np.ndarray, visible: np.ndarray, norm,
+                 rng: np.random.Generator, *, copies: int, backgrounds: float, intensity_scale: tuple[float, float],
+                 intensity_offset: float, noise: float, pos_radius: float, neg_radius: float,
+                 box: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None, novel_views: float = 0.0,
+                 **homography_kw: Any) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """One downscaled view ``small`` (uint8) and its ``copies`` augmented copies, each normalized by
+    ``norm`` and labelled: ``(image, labels, offsets, owner, visible corners (m, 3))`` per frame
+    (:func:`build_frames`'s arguments; ``uv (8, 2)`` the corners in ``small``'s pixels; ``box``:
+    ``(corners, R, t, K)`` of the view at ``small``'s scale, for :func:`novel_view`)."""
+    h, w = small.shape
+    out = []
+    for c in range(copies + 1):
+        image, m, xy, vis = small, small_mask, uv, visible
+        if c:
+            view = novel_view(small, *box, rng) if box is not None and rng.random() < novel_views else None
+            if view is not None:
+                image, m, xy, vis = view
+            H = random_homography(rng, (h, w), **homography_kw)
+            image = cv2.warpPerspective(image, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
+            xy = _transform(H, xy)
+            if m is not None:
+                m = cv2.warpPerspective(m, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+                if rng.random() < backgrounds:
+                    image = replace_background(image, m, rng)
+            image = _intensity_noise(image, rng, intensity_scale, intensity_offset, noise)
+        inside = (xy[:, 0] >= 0) & (xy[:, 0] <= w - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= h - 1)
+        shown = vis & inside
+        normed = norm.normalize(image.astype(np.float32) / np.float32(255))
+        lab, off, own = label_grid(xy[shown], np.flatnonzero(shown), xy[inside & ~vis], grid_shape(h, w),
+                                   pos_radius=pos_radius, neg_radius=neg_radius)
+        out.append((normed.astype(np.float32), lab, off, own,
+                    np.concatenate([xy[shown], np.flatnonzero(shown)[:, None]], 1)))
+    return out
+
+
+def _stack_frames(per_view: list[list[tuple[np.ndarray, ...]]]) -> CornerFrames:
+    """:class:`CornerFrames` of the frames of :func:`_view_frames` per view, standardized by one
+    fixed affine map for every input (the normalizers' output ranges differ widely), from the
+    views themselves (each list's first frame)."""
+    if not any((f[1] > 0).any() for frames in per_view for f in frames):
+        raise InputError("no box corner is visible in any training image")
+    originals = [frames[0][0] for frames in per_view]
+    mean = float(np.mean([im.mean() for im in originals]))
+    std = float(np.sqrt(np.mean([im.var() for im in originals]))) + 1e-6
+    flat = [(v, f) for v, frames in enumerate(per_view) for f in frames]
+    padded = np.stack([cv2.copyMakeBorder((f[0] - mean) / std, PAD, PAD, PAD, PAD, cv2.BORDER_REFLECT_101)
+                       for _, f in flat]).astype(np.float32)
+    return CornerFrames(padded, np.stack([f[1] for _, f in flat]), np.stack([f[2] for _, f in flat]),
+                        np.stack([f[3] for _, f in flat]), [f[4] for _, f in flat], np.array([v for v, _ in flat]),
+                        mean, std)
+
+
 def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: str = "none", *, scale: float = 0.5,
-                 copies: int = 11, backgrounds: float = 0.8, intensity_scale: tuple[float, float] = (0.4, 1.6),
+                 copies: int = COPIES, backgrounds: float = 0.8, intensity_scale: tuple[float, float] = (0.4, 1.6),
                  intensity_offset: float = 0.2, noise: float = 0.03, pos_radius: float = 4.0,
-                 neg_radius: float = 7.0, seed: int = 0) -> CornerFrames:
+                 neg_radius: float = 7.0, novel_views: float = NOVEL_VIEWS, seed: int = 0) -> CornerFrames:
     """The labelled training frames of a registered sequence (:func:`pose.sequence.load_sequence`).
 
     Args:
@@ -197,6 +354,8 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
         backgrounds: probability that a copy gets a new background (where the view has a mask).
         intensity_scale, intensity_offset, noise: the intensity change of a copy.
         pos_radius, neg_radius: see :func:`label_grid` (downscaled pixels).
+        novel_views: probability that a copy first sees the box from a nearby viewpoint
+            (:func:`novel_view`) before its homography.
         seed: random seed.
 
     Raises:
@@ -209,48 +368,46 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
     norm = normalization_for(normalizer)
     rng = np.random.default_rng(seed)
     mask_dir = sequence.image_dir.parent / "mask_visib"
-    images, labels, offsets, owners, visible, views = [], [], [], [], [], []
-    for v, view in enumerate(sequence.views):
+    per_view = []
+    for view in sequence.views:
         gray = to_gray(io.read_image(sequence.image_dir / view.name))
         mask = _read_mask(mask_dir / f"{Path(view.name).stem}_000000.png", gray.shape)
         uv, vis = corner_visibility(corners, view.R_w2c, view.t_w2c, view.K, gray.shape, mask)
         small = downscale(gray, scale)
-        small_mask = None if mask is None else downscale(mask, scale)
-        suv = to_scaled(uv, scale)
-        h, w = small.shape
-        for c in range(copies + 1):
-            image, m, xy = small, small_mask, suv
-            if c:
-                H = random_homography(rng, (h, w))
-                image = cv2.warpPerspective(small, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
-                xy = _transform(H, suv)
-                if m is not None:
-                    m = cv2.warpPerspective(m, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-                    if rng.random() < backgrounds:
-                        image = replace_background(image, m, rng)
-                image = _intensity_noise(image, rng, intensity_scale, intensity_offset, noise)
-            inside = (xy[:, 0] >= 0) & (xy[:, 0] <= w - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= h - 1)
-            shown = vis & inside
-            normed = norm.normalize(image.astype(np.float32) / np.float32(255))
-            lab, off, own = label_grid(xy[shown], np.flatnonzero(shown), xy[inside & ~vis], grid_shape(h, w),
-                                  pos_radius=pos_radius, neg_radius=neg_radius)
-            images.append(normed.astype(np.float32))
-            labels.append(lab)
-            offsets.append(off)
-            owners.append(own)
-            visible.append(np.concatenate([xy[shown], np.flatnonzero(shown)[:, None]], 1))
-            views.append(v)
-    if not any((lab > 0).any() for lab in labels):
-        raise InputError("no box corner is visible in any training image")
-    # one fixed affine map for every input (the normalizers' output ranges differ widely), from
-    # the views themselves
-    originals = images[:: copies + 1]
-    mean = float(np.mean([im.mean() for im in originals]))
-    std = float(np.sqrt(np.mean([im.var() for im in originals]))) + 1e-6
-    padded = np.stack([cv2.copyMakeBorder((im - mean) / std, PAD, PAD, PAD, PAD, cv2.BORDER_REFLECT_101)
-                       for im in images]).astype(np.float32)
-    frames = CornerFrames(padded, np.stack(labels), np.stack(offsets), np.stack(owners), visible, np.asarray(views),
-                          mean, std)
-    logger.info("corner frames: %d (%d views x %d), %d corner cells", len(images), len(sequence.views), copies + 1,
+        K = np.asarray(view.K, np.float64).copy()  # of the downscaled frame (:func:`pose.corners.to_scaled`)
+        K[:2] *= scale
+        K[:2, 2] += 0.5 * scale - 0.5
+        per_view.append(_view_frames(small, None if mask is None else downscale(mask, scale), to_scaled(uv, scale),
+                                     vis, norm, rng, copies=copies, backgrounds=backgrounds,
+                                     intensity_scale=intensity_scale, intensity_offset=intensity_offset, noise=noise,
+                                     pos_radius=pos_radius, neg_radius=neg_radius, novel_views=novel_views,
+                                     box=(corners, view.R_w2c, view.t_w2c, K)))
+    frames = _stack_frames(per_view)
+    logger.info("corner frames: %d (%d views x %d), %d corner cells", len(frames.labels), len(sequence.views),
+                copies + 1, int((frames.labels > 0).sum()))
+    return frames
+
+
+def build_image_frames(gray: np.ndarray, uv: np.ndarray, normalizer: str = "none", *, scale: float = 0.5,
+                       copies: int = 59, intensity_scale: tuple[float, float] = (0.4, 1.6),
+                       intensity_offset: float = 0.2, noise: float = 0.03, pos_radius: float = 4.0,
+                       neg_radius: float = 7.0, seed: int = 0, **homography_kw: Any) -> CornerFrames:
+    """The labelled training frames of one image whose 8 parts are at ``uv (8, 2)`` (pixels of
+    ``gray``, uint8): the image and ``copies`` copies of it warped by :func:`random_homography`
+    (``homography_kw``) with an intensity change and noise, as :func:`build_frames` makes of
+    each view of a sequence (without new backgrounds: the parts' surroundings are the target's).
+
+    Raises:
+        InputError: ``uv`` is not ``(8, 2)`` or no part is inside the image.
+    """
+    uv = np.asarray(uv, np.float64)
+    if uv.shape != (NUM_CORNERS, 2) or not np.isfinite(uv).all():
+        raise InputError(f"need the {NUM_CORNERS} parts' pixels as a finite ({NUM_CORNERS}, 2) array, got {uv.shape}")
+    frames = _stack_frames([_view_frames(
+        downscale(gray, scale), None, to_scaled(uv, scale), np.ones(NUM_CORNERS, bool), normalization_for(normalizer),
+        np.random.default_rng(seed), copies=copies, backgrounds=0.0, intensity_scale=intensity_scale,
+        intensity_offset=intensity_offset, noise=noise, pos_radius=pos_radius, neg_radius=neg_radius,
+        **homography_kw)])
+    logger.info("corner frames: %d (1 image x %d), %d part cells", len(frames.labels), copies + 1,
                 int((frames.labels > 0).sum()))
     return frames

@@ -6,9 +6,9 @@ with the part-based method of Crivellaro et al. ("A Novel Representation of Part
 This module is that detector, kept small and real-time:
 
 * **Training data** (:func:`pose.corner_data.build_frames`): every view of a registered
-  training sequence, downscaled by ``scale``, and copies of it warped by random homographies
-  (viewpoints between and around the training views), with new backgrounds and intensity
-  changes; each normalized whole and labelled on the network's output grid: the cells whose
+  training sequence, downscaled by ``scale``, and copies of it seen from nearby viewpoints (each
+  face of the box warped by its own plane's homography) and warped by random homographies, with
+  new backgrounds and intensity changes; each normalized whole and labelled on the network's output grid: the cells whose
   window centre is within 4 pixels of a visible corner are that corner's, with the corner's
   offset from the centre as a regression target; far cells are background.
 * **Network** (:class:`pose.corner_net.CornerNet`): the geometry of the paper's detector
@@ -31,8 +31,9 @@ design (a window classifier trained on crops around the 30 training views, hard-
 a score grid of step 2 with centroid refinement, no gating) found only 60% of the visible
 corners of #1 among its 4 candidates within 5 px (71% within 10 px; the best candidate 43%),
 too few for PnP: 0-47% correct poses. :mod:`pose.corner_train` has the numbers of this design;
-with ALCN in front it runs at 29.1 fps at 640x480 (``alcn pose bench-corners``, cv2.dnn with
-2 threads, no torch; normalization 3.6 ms, network 23.1 ms, peaks and pose 7.7 ms; load 1.7).
+with ALCN in front it runs at 23.2-27.5 fps at 640x480 (``alcn pose bench-corners``, cv2.dnn with
+2 threads, no torch; normalization 3.5 ms, network 31-32 ms, peaks and pose 2-7 ms; load 4.5;
+the former 16/32/64 network 29.4 fps in the same minute).
 """
 
 from __future__ import annotations

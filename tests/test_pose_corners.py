@@ -169,6 +169,60 @@ def test_build_frames_labels_follow_the_corners(posedata):
     assert np.abs(frames.images[1] - frames.images[0]).mean() > 0.1
 
 
+def test_novel_view_moves_each_face_with_its_plane(posedata):
+    from alcn_cv import io
+
+    seq = load_sequence(posedata / "train" / "000001", obj_id=1)
+    corners = read_box_corners(posedata / "models" / "obj_000001.ply")
+    view = seq.views[0]
+    gray = cv2.cvtColor(io.read_image(seq.image_dir / view.name), cv2.COLOR_BGR2GRAY)
+    R, t, K = view.R_w2c, view.t_w2c, view.K
+    uv, vis = corner_data.corner_visibility(corners, R, t, K, gray.shape)
+    # no motion: the same frame and corners
+    same, mask, uv0, vis0 = corner_data.novel_view(gray, corners, R, t, K, np.random.default_rng(0), azimuth_deg=0,
+                                                   elevation_deg=0, distance=(1, 1))
+    np.testing.assert_allclose(uv0, uv, atol=1e-6)
+    assert (vis0 == vis).all() and mask.any()
+    assert np.abs(same.astype(int) - gray)[cv2.erode(mask, np.ones((3, 3), np.uint8)) > 0].mean() < 2
+    # another viewpoint: a pixel of every face it sees comes from that face's plane in the view
+    img2, mask2, uv2, _ = corner_data.novel_view(gray, corners, R, t, K, np.random.default_rng(1))
+    assert np.abs(uv2 - uv).max() > 1
+    checked = 0
+    for quad in corner_data.facing_faces(corners, R, t):
+        q1, q2 = uv[list(quad)].astype(np.float32), uv2[list(quad)].astype(np.float32)
+        if cv2.contourArea(q1, oriented=True) * cv2.contourArea(q2, oriented=True) <= 0:
+            continue  # turned away in the new view
+        x2, y2 = np.round(q2.mean(0)).astype(int)
+        x1, y1 = cv2.perspectiveTransform(np.array([[[x2, y2]]], np.float32), cv2.getPerspectiveTransform(q2, q1))[0, 0]
+        expected = cv2.getRectSubPix(gray.astype(np.float32), (1, 1), (float(x1), float(y1)))[0, 0]
+        assert mask2[y2, x2] and abs(float(img2[y2, x2]) - expected) < 3
+        checked += 1
+    assert checked >= 2
+
+
+def test_build_image_frames_labels_follow_the_parts():
+    rng = np.random.default_rng(0)
+    gray = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.float32), (0, 0), 2).astype(np.uint8)
+    uv = np.array([[20, 15], [80, 15], [140, 15], [140, 60], [140, 100], [80, 100], [20, 100], [20, 60]], float)
+    frames = corner_data.build_image_frames(gray, uv, "none", scale=1.0, copies=3)
+    assert frames.images.shape == (4, 120 + 2 * pc.PAD, 160 + 2 * pc.PAD) and frames.view.tolist() == [0] * 4
+    np.testing.assert_allclose(frames.corners[0][:, :2], uv)
+    assert frames.corners[0][:, 2].tolist() == list(range(8))
+    centres = pc.grid_centres(frames.labels.shape[1:])
+    for f in range(4):
+        for x, y, k in frames.corners[f]:
+            assert ((frames.labels[f] == k + 1) & (np.linalg.norm(centres - [x, y], axis=2) <= 4.0)).any()
+    with pytest.raises(InputError):
+        corner_data.build_image_frames(gray, uv[:4])
+
+
+def test_mixing_layers_keep_the_geometry():
+    net = CornerNet(channels=(4, 8), hidden=16, mixing=2).eval()
+    with torch.no_grad():
+        assert net(torch.zeros(1, 1, 32 + 8, 32 + 12)).shape == (1, 25, 3, 4)
+    assert net.config == {"channels": [4, 8], "hidden": 16, "mixing": 2}
+
+
 def test_onnx_matches_torch(random_net):
     net, path = random_net
     det = pc.CornerDetector(path)
@@ -243,7 +297,7 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     assert args.func(args) == 0
     meta = pc.read_metadata(onnx)
     assert meta["normalizer"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
-    assert meta["config"] == {"channels": [16, 32], "hidden": 64}
+    assert meta["config"] == {"channels": [16, 32], "hidden": 128, "mixing": 1}
 
 
 def test_track_and_bench_the_corner_detector(posedata, random_net, tmp_path):

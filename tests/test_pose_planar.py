@@ -76,12 +76,46 @@ def test_build_target_bad_region():
         planar.build_target(img, (10, 10, 60, 60), K)  # the flat third
 
 
-def test_relight_on_a_webcam_scene(shared_data, tmp_path):
-    """Smoke test on real frames: 3 frames of one scene, no normalization."""
+def test_target_parts_are_its_corners_and_side_middles():
+    img = _texture(1)
+    K = planar.pinhole_camera(img.shape[1], img.shape[0])
+    target = planar.build_target(img, (200, 90, 220, 180), K)
+    parts, uv = planar.target_parts(target)
+    assert parts.shape == (8, 3) and np.all(parts[:, 2] == 0)
+    np.testing.assert_allclose(uv, [[200, 90], [310, 90], [420, 90], [420, 180], [420, 270], [310, 270], [200, 270],
+                                    [200, 180]], atol=1e-6)
+    assert {tuple(p) for p in uv[::2].round(6)} == {tuple(p) for p in target.image_corners().round(6)}
+
+
+def test_corner_detector_is_trained_on_the_reference_frame(tmp_path, monkeypatch):
+    monkeypatch.setitem(planar.CORNER_TRAINING, "iterations", 3)
+    monkeypatch.setitem(planar.CORNER_TRAINING, "copies", 1)
+    img = _texture(1)
+    K = planar.pinhole_camera(img.shape[1], img.shape[0])
+    target = planar.build_target(img, (200, 90, 220, 180), K, reference="ref.png")
+    det = planar.DETECTORS["corners"](target, "none", 0, tmp_path)
+    np.testing.assert_allclose(det.corners, planar.target_parts(target)[0])
+    assert det.path == tmp_path / "corners_ref_none.onnx" and det.meta["source"] == "ref.png"
+    assert det.meta["fit"]["views"] == 1 and det.meta["fit"]["frames"] == 2
+    corr = det.detect(img)
+    assert corr.object_points.shape[1] == 3 and len(corr.object_points) == len(corr.image_points)
+    target.image = None
+    with pytest.raises(InputError, match="reference image"):
+        planar.corner_detector(target, "none")
+
+
+def test_relight_on_a_webcam_scene(shared_data, tmp_path, monkeypatch):
+    """Smoke test on real frames: 3 frames of one scene, no normalization, both detectors (a few
+    training steps of the learned one)."""
     root = shared_data / "webcam"
     if not (root / "mexico").is_dir():
         pytest.skip(f"the webcam scenes are not in {root}")
-    result = planar.main(tmp_path, root, scenes=["mexico"], normalizers=["none"], max_frames=3, command="test")
+    monkeypatch.setitem(planar.CORNER_TRAINING, "iterations", 3)
+    monkeypatch.setitem(planar.CORNER_TRAINING, "copies", 1)
+    result = planar.main(tmp_path, root, scenes=["mexico"], normalizers=["none"], detectors=["features", "corners"],
+                         max_frames=3, command="test")
+    assert set(result["table"]) == {"none / sift features", "none / corner CNN"}
+    assert len(list(tmp_path.glob("corners_*_none.onnx"))) == 1
     row = "none / sift features"
     assert set(result["table"][row]) == {"mexico", "mean"}
     assert 0 <= result["table"][row]["mexico"] <= 100
