@@ -75,8 +75,11 @@ def test_upsample_grid_is_torch_align_corners(stride, shape):
     np.testing.assert_allclose(upsample_grid(grid, stride, shape), expected.numpy(), atol=1e-4, rtol=0)
 
 
-def test_alcn_filter_grid_is_alcn_filter_of_the_upsampled_maps():
+@pytest.mark.parametrize("proportional", [False, True])
+def test_alcn_filter_grid_is_alcn_filter_of_the_upsampled_maps(proportional):
     image = np.random.default_rng(1).random((50, 70), dtype=np.float32)
     grid = np.random.default_rng(2).normal(size=(2, 8, 10)).astype(np.float32)
+    if proportional:  # a band-pass of two kernels (F_2 = -F_1): one shared product
+        grid[1] = -grid[0]
     maps = np.stack([upsample_grid(m, 8, image.shape) for m in grid])
     np.testing.assert_allclose(alcn_filter_grid(image, grid, 8, (1.0, 2.0)), alcn_filter(image, maps, (1.0, 2.0)), atol=1e-6)

@@ -16,6 +16,8 @@ import math
 import cv2
 import numpy as np
 
+from alcn_cv.filters.gaussian_mixture import upsample_grid
+
 __all__ = ["ABSOLUTE_FLOOR", "cell_rms", "divisive_normalization"]
 
 #: Added (squared) to every divisor, in intensity units ([0, 1]): a 40th of an 8-bit level, far
@@ -53,8 +55,5 @@ def divisive_normalization(response: np.ndarray, stride: int, scale: float, floo
     e = cell_rms(response, stride)
     f = scale * float(e.mean()) if floor is None else floor
     inverse = (1.0 / np.sqrt(e * e + np.float32(f * f + ABSOLUTE_FLOOR**2))).astype(np.float32)
-    h, w = response.shape
-    # Grid point (i, j) sits at pixel (s*i, s*j): pixel x reads the grid at x / s (align corners).
-    upsampled = cv2.warpAffine(inverse, np.float32([[1.0 / stride, 0, 0], [0, 1.0 / stride, 0]]), (w, h),
-                               flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
-    return (response * upsampled).astype(np.float32, copy=False)
+    upsampled = upsample_grid(inverse, stride, response.shape)
+    return cv2.multiply(response, upsampled, dst=upsampled)

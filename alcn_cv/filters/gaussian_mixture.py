@@ -230,6 +230,19 @@ def _upsample_rows(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
     return out[:n]
 
 
+def _proportional(grid: np.ndarray) -> np.ndarray | None:
+    """``s`` with ``grid[k] = s_k * grid[0]`` for every map (to float rounding), or None: the
+    maps of a band-pass of two kernels (``F_2 = -F_1``, the gain Normalizer's) share one product."""
+    first = grid[0].astype(np.float64)
+    norm = float((first * first).sum())
+    if len(grid) < 2 or norm == 0.0:
+        return None
+    scales = np.array([float((m.astype(np.float64) * first).sum()) / norm for m in grid])
+    if not all(np.allclose(m, s * first, rtol=0, atol=1e-6 * np.abs(first).max()) for m, s in zip(grid, scales)):
+        return None
+    return scales
+
+
 def alcn_filter_grid(image: np.ndarray, grid: np.ndarray, stride: int, sigmas: Sequence[float]) -> np.ndarray:
     """Eq. 3 with maps given on a grid: :func:`alcn_filter` of the maps :func:`upsample_grid`
     interpolates, in fewer passes (one map at a time, multiplied by the image in place).
@@ -247,6 +260,17 @@ def alcn_filter_grid(image: np.ndarray, grid: np.ndarray, stride: int, sigmas: S
     sigmas = check_sigmas(sigmas)
     if grid.ndim != 3 or len(grid) != len(sigmas):
         raise InputError(f"need one grid map per sigma, got {grid.shape} for {len(sigmas)} sigmas")
+    scales = _proportional(grid)
+    if scales is not None:  # one product for every kernel: sum_k G_k * (s_k F o I)
+        product = upsample_grid(grid[0], stride, image.shape)
+        cv2.multiply(image, product, dst=product)
+        out = np.zeros(image.shape, np.float32)
+        blurred = np.empty(image.shape, np.float32)
+        for scale, sigma in zip(scales, sigmas):
+            kernel = _cached_kernel(sigma)
+            cv2.sepFilter2D(product, cv2.CV_32F, kernel, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
+            cv2.scaleAdd(blurred, float(scale), out, dst=out)
+        return out
     out: np.ndarray | None = None
     blurred = np.empty(image.shape, np.float32)
     for k, sigma in enumerate(sigmas):
