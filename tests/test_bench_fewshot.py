@@ -36,8 +36,8 @@ def test_every_spec_reaches_the_detector_through_normalize_windows(policy, monke
         seen[name.split(" ")[0]] = (train_inputs, test_inputs, setup)
         return {"accuracy": 0.5, "auc": 0.5, "by_family": {}}
 
-    monkeypatch.setattr(B, "make_fewshot_data", _tiny_data)
-    monkeypatch.setattr(B, "score_inputs", record)
+    monkeypatch.setattr(F, "make_fewshot_data", _tiny_data)
+    monkeypatch.setattr(F, "score_inputs", record)
     settings = B.FewShotSettings(methods=["none", "dog", "alcn:model=gain"], policies=[policy], draws=1, objects=2)
     runs = {policy: {m: [] for m in settings.methods}}
     B._run_draw(settings, 0, runs, B.tqdm(disable=True))

@@ -36,3 +36,14 @@ def test_help_states_every_default(command):
 def test_help_has_no_literal_percent_escapes():
     for command, parser in COMMANDS.items():
         assert "%%" not in parser.format_help(), command
+
+
+def test_building_the_command_line_does_not_import_torch():
+    """`alcn pose bench-corners` and the other torch-free commands start without torch (an app's
+    pose tracker runs through cv2.dnn): only a command that needs torch imports it when it runs."""
+    import subprocess
+    import sys
+
+    code = "import sys, alcn_cv.cli as c; c.build_parser(); print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"

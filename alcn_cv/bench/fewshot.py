@@ -49,7 +49,7 @@ from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
-from alcn_cv.train.fewshot import FewShotSetup, make_fewshot_data, score_inputs
+from alcn_cv.train.config import FewShotSetup
 
 __all__ = ["DEFAULT_METHODS", "FewShotSettings", "compare_to_dog", "fewshot_command", "fewshot_markdown", "main"]
 
@@ -155,6 +155,8 @@ def _finite(value: Any) -> Any:
 
 def _run_draw(settings: FewShotSettings, draw: int, runs: dict[str, Any], bar: tqdm) -> None:
     """Every method and policy on one draw's windows; a failing method is recorded with its error."""
+    from alcn_cv.train.fewshot import make_fewshot_data, score_inputs  # torch: only when a draw runs
+
     setup = settings.setup(draw)
     train_x, train_y, test = make_fewshot_data(setup)
     for method in settings.methods:

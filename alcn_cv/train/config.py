@@ -89,7 +89,24 @@ from typing import Any
 from alcn_cv.data.lighting import LIGHT_FAMILIES
 from alcn_cv.errors import InputError
 
-__all__ = ["PRESETS", "RealLightConfig", "TrainConfig", "dump_toml", "load_config"]
+__all__ = ["PRESETS", "FewShotSetup", "RealLightConfig", "TrainConfig", "dump_toml", "load_config"]
+
+
+@dataclass
+class FewShotSetup:
+    """Settings of the few-shot validation (:mod:`alcn_cv.train.fewshot`; here, without torch,
+    so that ``alcn bench fewshot`` builds its command line without importing it)."""
+
+    n_objects: int = 5
+    object_seed: int = 424242
+    real_images: int = 1
+    per_image: int = 200
+    n_test: int = 2000
+    test_lighting: tuple[str, ...] = ("dark", "side", "spot", "shadow", "mixed")
+    epochs: int = 8
+    batch_size: int = 64
+    lr: float = 1e-3
+    seed: int = 0
 
 
 @dataclass

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -33,6 +32,7 @@ import torch
 from alcn_cv.data.phos import PhosBatch, render_windows
 from alcn_cv.data.synthetic import augment, sample_negatives
 from alcn_cv.filters.standardize import standardize_windows
+from alcn_cv.train.config import FewShotSetup
 from alcn_cv.train.models import CentreMixture, JointModel, dog_weights
 from alcn_cv.train.stage2 import STANDARDIZE_EPS, train_detector
 
@@ -42,22 +42,6 @@ logger = logging.getLogger(__name__)
 
 #: A method: ``(B, 1, 64, 64)`` float windows in [0, 1] -> ``(B, 1, 32, 32)`` detector inputs.
 Method = Callable[[torch.Tensor], torch.Tensor]
-
-
-@dataclass
-class FewShotSetup:
-    """Settings of the few-shot validation (see the module docstring)."""
-
-    n_objects: int = 5
-    object_seed: int = 424242
-    real_images: int = 1
-    per_image: int = 200
-    n_test: int = 2000
-    test_lighting: tuple[str, ...] = ("dark", "side", "spot", "shadow", "mixed")
-    epochs: int = 8
-    batch_size: int = 64
-    lr: float = 1e-3
-    seed: int = 0
 
 
 def auc(scores: np.ndarray, positive: np.ndarray) -> float:
