@@ -161,7 +161,7 @@ class ALCN(Normalization):
         #: gain Normalizer's method (:mod:`alcn_cv.nets.gain`); None for the others.
         self.equalization_tau = float(meta["equalization"]["tau"]) if "equalization" in meta else None
         #: ``(stride, scale)`` of the gain Normalizer's divisive normalization of the response
-        #: (:func:`alcn_cv.nets.gain.divisive_normalization`, before the equalization; the stride
+        #: (:func:`alcn_cv.filters.divisive.divisive_normalization`, before the equalization; the stride
         #: in input pixels), or None.
         self.divisive = (
             (max(1, round(meta["divisive"]["stride"] / self.scale)), float(meta["divisive"]["scale"])) if "divisive" in meta else None

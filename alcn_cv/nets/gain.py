@@ -22,8 +22,8 @@ With ``gain="divisive"`` the log-gain's fixed part is not the Weber ``-log(m + e
 divisive normalization of the band-passed image (Jarrett et al., ICCV 2009: DLCN; here of the
 mixture's own response): the response ``r`` is divided by ``sqrt(e^2 + (c * mean(e))^2)``, ``e``
 the root-mean-square of ``r`` over the grid's cells and ``mean(e)`` its mean over the image
-(:func:`alcn_cv.filters.divisive.divisive_normalization`), ``c`` learned. It is applied to the response of Eq. 3 rather
-than inside it (the per-window form of the paper's Eq. 1, weights outside the blurs): the divisor
+(:func:`alcn_cv.filters.divisive.divisive_normalization`; ``c`` learned with ``learn_scales``).
+It is applied to the response of Eq. 3 rather than inside it (the per-window form of the paper's Eq. 1, weights outside the blurs): the divisor
 follows the response it divides, it is smooth at the scale of the grid (8 pixels) where the
 kernels are 1 to 2 pixels wide, and it makes the output invariant to the light's strength exactly,
 while flat regions stay flat (the floor is relative to the whole image's contrast). The network's
@@ -359,13 +359,18 @@ class GainNormalizer(nn.Module):
         over each image (training estimates the whole frame's mean from crops)."""
         if self.gain != "divisive":
             return response
-        e = _cell_rms(response, self.stride)
-        if floor is None:
-            floor = self.floor_scale * e.mean(dim=(-2, -1), keepdim=True)
-        inverse = (e * e + floor * floor + ABSOLUTE_FLOOR**2).rsqrt()
+        inverse = self.inverse_divisor(_cell_rms(response, self.stride), floor)
         h, w = response.shape[-2:]
         size = (self.stride * (inverse.shape[-2] - 1) + 1, self.stride * (inverse.shape[-1] - 1) + 1)
         return response * F.interpolate(inverse, size=size, mode="bilinear", align_corners=True)[..., :h, :w]
+
+    def inverse_divisor(self, energy: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
+        """``1 / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` on the grid, from the cells' energy ``e``
+        ``(B, 1, gh, gw)``; ``f = c * mean(e)`` over each image unless ``floor`` ``(B, 1, 1, 1)``
+        is given (``gain="divisive"``)."""
+        if floor is None:
+            floor = self.floor_scale * energy.mean(dim=(-2, -1), keepdim=True)
+        return (energy * energy + floor * floor + ABSOLUTE_FLOOR**2).rsqrt()
 
     def equalize(self, response: torch.Tensor) -> torch.Tensor:
         """The final :func:`contrast_equalization` with the learned ``tau``: into (-1, 1)."""

@@ -47,7 +47,6 @@ from tqdm import tqdm
 
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, list_images, read_image, to_gray, write_json
-from alcn_cv.filters.divisive import ABSOLUTE_FLOOR
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.report import machine
@@ -263,8 +262,7 @@ def _normalized_centres(
     floor = torch.empty(len(crops), 1, 1, 1, dtype=crops.dtype)
     for rows, sample in frames or [(slice(None), slice(None))]:
         floor[rows] = net.floor_scale * energy[sample].mean()
-    inverse = (energy * energy + floor * floor + ABSOLUTE_FLOOR**2).rsqrt()
-    inverse = F.interpolate(inverse, size=(patch + 1, patch + 1), mode="bilinear", align_corners=True)[..., :patch, :patch]
+    inverse = F.interpolate(net.inverse_divisor(energy, floor), size=(patch + 1, patch + 1), mode="bilinear", align_corners=True)[..., :patch, :patch]
     half = s // 2
     return net.equalize(response[..., half : half + patch, half : half + patch] * inverse)
 
