@@ -14,7 +14,10 @@ paired with every other frame of the scene (at most ``max_pairs`` pairs, drawn a
 * **matching** (%, ORB and SIFT): keypoints on the normalized frames (``apply``'s uint8
   output), Lowe's ratio test, a match is correct when its keypoints are within ``match_px``
   (the frames are registered); score = correct matches / the smaller keypoint count
-  (Mikolajczyk & Schmid, PAMI 2005's matching score).
+  (Mikolajczyk & Schmid, PAMI 2005's matching score). The score divides by the keypoint count,
+  so a method that finds keypoints in more of the frame scores lower for the same quality of
+  match; the report also gives the mean number of **correct matches** per pair (a count), which
+  does not.
 * **pose** (%, ORB and SIFT): a RANSAC homography (``cv2.findHomography``, ``ransac_px``) from
   the ratio-test matches; a success when it moves each corner of the frame less than
   ``pose_px`` (the identity is the truth): the 2D-projection criterion of Rad et al., BMVC
@@ -56,6 +59,7 @@ from alcn_cv.shared_data import shared_data_dir
 
 __all__ = [
     "DEFAULT_METHODS",
+    "COUNT_METRICS",
     "METRICS",
     "TUNING_GRIDS",
     "LocallyStandardized",
@@ -76,8 +80,10 @@ DEFAULT_TRAIN = ("courbevoie", "frankfurt", "panorama")
 DEFAULT_TEST = ("mexico", "psm")
 DEFAULT_LEAVE_ONE_OUT = ("courbevoie", "frankfurt", "mexico", "panorama")
 DETECTORS = ("orb", "sift")
-#: Every reported number, in percent.
-METRICS = ("identification", "matching_orb", "matching_sift", "pose_orb", "pose_sift")
+#: Every reported number: percentages, except :data:`COUNT_METRICS`.
+METRICS = ("identification", "matching_orb", "matching_sift", "pose_orb", "pose_sift", "correct_orb", "correct_sift")
+#: Reported as a mean count per frame pair, not in percent.
+COUNT_METRICS = ("correct_orb", "correct_sift")
 LSTD = "+lstd"
 
 _DOG_GRID = [(0.5, 1.5), (0.5, 3.0), (1.0, 2.0), (1.0, 3.0), (1.0, 4.0), (1.5, 3.0), (2.0, 4.0), (2.0, 6.0)]
@@ -250,25 +256,26 @@ def _ratio_matches(d1: np.ndarray | None, d2: np.ndarray | None, norm: int, rati
 def _keypoint_scores(
     kp1: tuple[np.ndarray, np.ndarray | None], kp2: tuple[np.ndarray, np.ndarray | None], norm: int,
     shape: tuple[int, int], settings: Settings,
-) -> tuple[float, float]:
-    """(matching score, pose success) of a frame pair from its keypoints ``(points, descriptors)``."""
+) -> tuple[float, float, int]:
+    """(matching score, pose success, correct matches) of a frame pair from its keypoints
+    ``(points, descriptors)``."""
     (p1, d1), (p2, d2) = kp1, kp2
     matches = _ratio_matches(d1, d2, norm, settings.ratio)
     if not matches:
-        return 0.0, 0.0
+        return 0.0, 0.0, 0
     idx = np.array(matches)
     src, dst = p1[idx[:, 0]], p2[idx[:, 1]]
     correct = np.count_nonzero(np.linalg.norm(src - dst, axis=1) <= settings.match_px)
     score = correct / min(len(p1), len(p2))
     if len(matches) < 4:
-        return score, 0.0
+        return score, 0.0, correct
     homography, _ = cv2.findHomography(src, dst, cv2.RANSAC, settings.ransac_px)
     if homography is None:
-        return score, 0.0
+        return score, 0.0, correct
     h, w = shape
     corners = np.array([[[0, 0]], [[w - 1, 0]], [[w - 1, h - 1]], [[0, h - 1]]], np.float64)
     moved = cv2.perspectiveTransform(corners, homography) - corners
-    return score, float(np.linalg.norm(moved, axis=2).max() < settings.pose_px)
+    return score, float(np.linalg.norm(moved, axis=2).max() < settings.pose_px), correct
 
 
 def evaluate_scene(
@@ -303,11 +310,12 @@ def evaluate_scene(
             values["identification"].append(identification(normalized[g], normalized[f], locations, settings.patch))
             for kind, (_, kind_norm) in detectors.items():
                 pair = features(kind, g), features(kind, f)
-                score, success = _keypoint_scores(*pair, kind_norm, scene.frames.shape[1:], settings)
+                score, success, correct = _keypoint_scores(*pair, kind_norm, scene.frames.shape[1:], settings)
                 values[f"matching_{kind}"].append(score)
                 values[f"pose_{kind}"].append(success)
+                values[f"correct_{kind}"].append(correct)
         for m, v in values.items():
-            metrics[m].append(100.0 * float(np.mean(v)))
+            metrics[m].append((1.0 if m in COUNT_METRICS else 100.0) * float(np.mean(v)))
     return {"metrics": metrics, "ms_per_frame": ms_per_frame}
 
 
@@ -486,6 +494,7 @@ def main(
             "identification": "% of gallery patches whose best NCC match among all sampled locations is their own",
             "matching": "% correct ratio-test matches (within match_px) per min(#keypoints), ORB and SIFT",
             "pose": "% of pairs whose RANSAC homography moves every frame corner less than pose_px",
+            "correct": "mean count of correct ratio-test matches (within match_px) per pair, ORB and SIFT",
         },
         "tuning": tuning_result,
         "machine": machine(),

@@ -18,9 +18,11 @@ _TITLES = {
     "matching_sift": "Keypoint matching score, SIFT (%)",
     "pose_orb": "Real-light pose, ORB homography (% of pairs)",
     "pose_sift": "Real-light pose, SIFT homography (% of pairs)",
+    "correct_orb": "Correct ORB matches per frame pair (count; the matching score's numerator)",
+    "correct_sift": "Correct SIFT matches per frame pair (count; the matching score's numerator)",
 }
 _SHORT = {"identification": "identification", "matching_orb": "matching ORB", "matching_sift": "matching SIFT",
-          "pose_orb": "pose ORB", "pose_sift": "pose SIFT"}
+          "pose_orb": "pose ORB", "pose_sift": "pose SIFT", "correct_orb": "correct ORB", "correct_sift": "correct SIFT"}
 
 
 def _cell(summary: dict[str, Any] | None) -> str | None:
@@ -78,13 +80,14 @@ def _tuning_text(result: dict[str, Any]) -> str:
 
 def _figure(result: dict[str, Any], path: Path) -> Path:
     labels = [k for k, r in result["methods"].items() if "mean_test" in r]
-    panels = [("identification", ["identification"]), ("matching score", ["matching_orb", "matching_sift"]),
-              ("pose success", ["pose_orb", "pose_sift"])]
-    panels = [(t, [m for m in ms if any(m in result["methods"][k]["mean_test"] for k in labels)]) for t, ms in panels]
-    panels = [(t, ms) for t, ms in panels if ms]
+    panels = [("identification", ["identification"], "%"), ("matching score", ["matching_orb", "matching_sift"], "%"),
+              ("pose success", ["pose_orb", "pose_sift"], "%"),
+              ("correct matches per pair", ["correct_orb", "correct_sift"], "count")]
+    panels = [(t, [m for m in ms if any(m in result["methods"][k]["mean_test"] for k in labels)], unit) for t, ms, unit in panels]
+    panels = [(t, ms, unit) for t, ms, unit in panels if ms]
     plt, fig, axes = new_figure(1, len(panels), figsize=(5.5 * len(panels), 4.8))
     x = np.arange(len(labels))
-    for ax, (title, metrics) in zip(axes[0], panels):
+    for ax, (title, metrics, unit) in zip(axes[0], panels):
         width = 0.8 / len(metrics)
         for j, m in enumerate(metrics):
             means = [result["methods"][k]["mean_test"][m]["mean"] for k in labels]
@@ -93,7 +96,7 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
                    label=_SHORT[m].split()[-1] if len(metrics) > 1 else None)
         ax.set_xticks(x)
         ax.set_xticklabels(labels, rotation=60, ha="right", fontsize=8)
-        ax.set_ylabel("%")
+        ax.set_ylabel(unit)
         ax.set_title(f"{title} (mean over test scenes)", fontsize=10)
         ax.grid(axis="y", alpha=0.3)
         if len(metrics) > 1:
