@@ -211,18 +211,28 @@ class Normalization:
             if direct is not None:
                 self._warn_if_small(img.shape)
                 return direct.reshape(img.shape)
-        unit = _to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
-            return self._apply_bgr(unit, out_dtype)
+            # uint8: one cv2.LUT pass of the 256 levels, the same float32 values as _to_unit_float
+            return self._apply_bgr(cv2.LUT(img, _UINT8_LEVELS) if img.dtype == np.uint8 else _to_unit_float(img), out_dtype)
+        unit = _to_unit_float(img)
         return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
 
     def _apply_bgr(self, unit: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
         """:meth:`apply` on BGR intensities in [0, 1] (``unit``, used as scratch space): the
-        L channel of CIE Lab normalized, a and b kept. OpenCV passes throughout: L / 100 in one
+        L channel of CIE Lab normalized, a and b kept.
+
+        OpenCV passes throughout, the two Lab conversions in place in ``unit``: L / 100 in one
         ``cv2.transform``, the response mapped to [0, 100] by ``cv2.addWeighted`` and two
-        thresholds, and put back by ``cv2.insertChannel`` (the two Lab conversions remain the
-        bulk of the cost: about one gray ``apply`` of the default ALCN)."""
-        lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)  # float input: L in [0, 100]
+        thresholds and put back by ``cv2.insertChannel``; ``cv2.COLOR_Lab2BGR`` clips linear RGB
+        to [0, 1] before its gamma curve (``Lab2RGBfloat`` in OpenCV's ``color_lab.cpp``), so a
+        uint8 output is one ``cv2.convertScaleAbs``. The two float conversions are most of the
+        cost and stay: OpenCV's float ``BGR2Lab`` interpolates a fixed-point table (its L is up
+        to 0.2 off the CIE formula, which a normalization amplifies to several levels), its
+        8-bit conversions quantize L to 100/255 and a, b to units (many levels off the float
+        path), and ``COLOR_Lab2LBGR`` followed by the sRGB curve in OpenCV passes (a fit on square
+        roots, within 0.1 level) measured no faster than ``Lab2BGR``'s fused spline (``alcn bench
+        speed`` measures the BGR / gray ratio)."""
+        lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab, dst=unit)  # float input: L in [0, 100]
         response = self._normalize_checked(cv2.transform(lab, _LIGHTNESS_OF_LAB))
         lo, hi = self.output_range
         scale = 100.0 / (hi - lo)
@@ -230,7 +240,10 @@ class Normalization:
         cv2.threshold(lightness, 0.0, 0.0, cv2.THRESH_TOZERO, dst=lightness)
         cv2.threshold(lightness, 100.0, 0.0, cv2.THRESH_TRUNC, dst=lightness)
         cv2.insertChannel(lightness, lab, 0)
-        return _unit_in_place_to(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=unit), out_dtype)
+        bgr = cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=lab)
+        if out_dtype == np.uint8:
+            return cv2.convertScaleAbs(bgr, alpha=FULL_SCALE[out_dtype])
+        return _unit_in_place_to(bgr, out_dtype)
 
     def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray | None:
         """:meth:`apply`'s result for a uint8 ``HxW`` image and uint8 output, computed without the
