@@ -50,6 +50,8 @@ def _to_unit_float(img: np.ndarray) -> np.ndarray:
     # OpenCV calls that follow may write into this one.
     if img.dtype == np.float32:
         return np.clip(img, 0.0, 1.0, out=np.empty(img.shape, np.float32))
+    if img.dtype == np.uint8:
+        return cv2.LUT(img, _UINT8_LEVELS)  # one pass, the same values as the two below
     unit = img.astype(np.float32, order="C")
     unit *= np.float32(1.0 / FULL_SCALE[img.dtype])
     return unit
@@ -211,10 +213,9 @@ class Normalization:
             if direct is not None:
                 self._warn_if_small(img.shape)
                 return direct.reshape(img.shape)
-        if img.ndim == 3 and img.shape[2] == 3:
-            # uint8: one cv2.LUT pass of the 256 levels, the same float32 values as _to_unit_float
-            return self._apply_bgr(cv2.LUT(img, _UINT8_LEVELS) if img.dtype == np.uint8 else _to_unit_float(img), out_dtype)
         unit = _to_unit_float(img)
+        if img.ndim == 3 and img.shape[2] == 3:
+            return self._apply_bgr(unit, out_dtype)
         return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
 
     def _apply_bgr(self, unit: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
