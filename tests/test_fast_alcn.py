@@ -281,7 +281,7 @@ def test_a_stale_lite_file_is_reported(tmp_path, monkeypatch, caplog):
 
     other_teacher = tmp_path / "other.npz"
     other_teacher.write_bytes(b"not the teacher the lite file was distilled from")
-    monkeypatch.setattr(alcn_module, "DEFAULT_WEIGHTS", other_teacher)
+    monkeypatch.setitem(alcn_module.MODELS, "paper", other_teacher)
     with caplog.at_level(logging.WARNING, logger="alcn_cv.enhance.alcn"):
         alcn_cv.createALCN(model="lite")
     assert "re-distil" in caplog.text

@@ -61,7 +61,10 @@ MODELS = {
     "paper": DEFAULT_WEIGHTS,
     "lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_lite.npz"),
     "gain": DEFAULT_WEIGHTS.with_name("alcn_normalizer_gain.npz"),
+    "gain-lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_gain_lite.npz"),
 }
+#: The distilled models and the model each was distilled from (ALCN warns when that file changed).
+TEACHERS = {"lite": "paper", "gain-lite": "gain"}
 
 
 @register
@@ -81,7 +84,9 @@ class ALCN(Normalization):
             (:func:`~alcn_cv.filters.divisive.divisive_normalization`), then a contrast
             equalization ``tanh(x / tau)``; trained on real photographs of outdoor
             scenes under changing daylight by ``alcn train-real-light``;
-            ``alcn_normalizer_gain.npz``, card ``alcn_normalizer_gain.md``).
+            ``alcn_normalizer_gain.npz``, card ``alcn_normalizer_gain.md``) or ``"gain-lite"``
+            (the same method with a smaller network distilled from it by ``alcn distill``,
+            ``alcn_normalizer_gain_lite.npz``, card ``alcn_normalizer_gain_lite.md``).
         scale: working scale, the factor from the input resolution to the one the Normalizer
             sees (its 48x48 window and sigmas are in working-scale pixels). Default: the
             weight file's ``working_scale`` (0.5 for the shipped file: a 640x480 frame is
@@ -602,16 +607,18 @@ def _torch_threads(threads: int | None) -> Iterator[None]:
 
 
 def _check_teacher(meta: dict, path: Path) -> None:
-    """Warn when a distilled (lite) weight file's teacher is not the paper-model file shipped now."""
+    """Warn when a shipped distilled weight file's teacher (:data:`TEACHERS`) is not the file shipped now."""
     teacher = meta.get("teacher")
-    if not isinstance(teacher, dict) or path != MODELS["lite"]:
+    model = next((name for name in TEACHERS if MODELS[name] == path), None)
+    if not isinstance(teacher, dict) or model is None:
         return
     import hashlib
 
-    if hashlib.sha256(DEFAULT_WEIGHTS.read_bytes()).hexdigest() != teacher.get("sha256"):
+    teacher_path = MODELS[TEACHERS[model]]
+    if hashlib.sha256(teacher_path.read_bytes()).hexdigest() != teacher.get("sha256"):
         logger.warning(
             "%s was distilled from another version of %s than the one installed: re-distil it "
-            "(see its model card)", path.name, DEFAULT_WEIGHTS.name,
+            "(see its model card)", path.name, teacher_path.name,
         )
 
 

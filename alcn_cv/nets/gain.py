@@ -301,9 +301,15 @@ class GainNormalizer(nn.Module):
     def log_gain_and_weights(self, image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``g`` ``(B, 1, gh, gw)`` and ``w_k`` ``(B, N, gh, gw)`` on the grid of :attr:`stride`."""
         x, local = self.features(image)
+        return self.gain_and_weights(self.head(self.trunk(x)), local)
+
+    def trunk(self, features: torch.Tensor) -> torch.Tensor:
+        """The hidden dilated convolutions (reflect-101 borders, ReLU) on the grid's
+        :meth:`features` ``(B, 4, gh, gw)`` -> ``(B, channels, gh, gw)``: the input of the head."""
+        x = features
         for conv, d in zip(self.convs, self.dilations):
             x = F.relu(conv(_reflect101_pad(x, d)))
-        return self.gain_and_weights(self.head(x), local)
+        return x
 
     def gain_and_weights(self, head: torch.Tensor, local: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The head's output ``(B, 1 + N, gh, gw)`` as ``g`` ``(B, 1, gh, gw)`` and ``w_k``
