@@ -434,12 +434,14 @@ class ALCN(Normalization):
 
     def _finish(self, response: np.ndarray) -> np.ndarray:
         """The method's last steps after Eq. 3, when it has them (the gain Normalizer): the
-        divisive normalization, then the contrast equalization (:mod:`alcn_cv.nets.gain`)."""
+        divisive normalization, then the contrast equalization (:mod:`alcn_cv.nets.gain`).
+        ``response`` (float32, the caller's own) is overwritten by the equalization."""
         if self.divisive is not None:
             response = divisive_normalization(response, *self.divisive)
         if self.equalization_tau is None:
             return response
-        response = np.multiply(response, np.float32(1.0 / self.equalization_tau), dtype=np.float32)
+        # in place: one full-resolution array fewer to allocate and write
+        np.multiply(response, np.float32(1.0 / self.equalization_tau), out=response)
         return np.tanh(response, out=response)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
