@@ -111,3 +111,27 @@ def test_shipped_gain_lite_model_equals_its_torch_model(backend):
         expected = reference(torch.from_numpy(gray)[None, None])[0, 0].numpy()
     np.testing.assert_allclose(alcn.normalize(gray), expected, atol=1e-5 if backend == "fast" else 1e-3, rtol=0)
 
+
+
+@pytest.mark.parametrize("model", ["gain", "gain-lite"])
+def test_grid_head_in_cv2_dnn_equals_torch_and_small_grids_fall_back(model):
+    alcn = ALCN(model=model)
+    net = alcn.net
+    for shape in [(1, 4, 101, 161), (1, 4, 6, 7), (1, 4, 4, 30), (1, 4, 1, 1)]:
+        features = np.random.default_rng(0).normal(size=shape).astype(np.float32)
+        with torch.inference_mode():
+            expected = net.head(net.trunk(torch.from_numpy(features))).numpy()
+            got = alcn._grid_head(features).numpy()
+        np.testing.assert_allclose(got, expected, atol=2e-6, rtol=0)
+    assert alcn._head_network is not None  # built for the grids larger than the largest dilation (4)
+
+
+def test_gain_alcn_pickles_after_use():
+    import copy
+    import pickle
+
+    alcn = ALCN(model="gain-lite")
+    frame = synthetic_frame(200, 120, False)
+    out = alcn.apply(frame)
+    for clone in (pickle.loads(pickle.dumps(alcn)), copy.deepcopy(alcn)):
+        np.testing.assert_array_equal(clone.apply(frame), out)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -206,8 +207,8 @@ class ALCN(Normalization):
         #: The gain Normalizer's grid computed by :meth:`_gain_grid` (OpenCV at full resolution):
         #: on its network's own grid, without the finest-scale feature (``sharpness``).
         self._pooled_cells = self.per_pixel and self.grid_stride == stride and not meta["config"].get("sharpness", False)
-        #: :func:`_grid_head_network`, built on first use.
-        self._head_network: cv2.dnn.Net | None = None
+        #: :func:`_grid_head_network` and the lock that serializes its calls, built on first use.
+        self._head_network: tuple[cv2.dnn.Net, threading.Lock] | None = None
 
     def _init_opencv(self, meta: dict, grid_stride: int | None) -> None:
         from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
@@ -309,9 +310,15 @@ class ALCN(Normalization):
         if min(features.shape[-2:]) <= max(self.net.dilations):
             return self.net.head(self.net.trunk(torch.from_numpy(features)))
         if self._head_network is None:
-            self._head_network = _grid_head_network(self.net)
-        self._head_network.setInput(features)
-        return torch.from_numpy(self._head_network.forward())
+            self._head_network = _grid_head_network(self.net), threading.Lock()
+        network, lock = self._head_network
+        with lock:  # one cv2.dnn.Net holds one input at a time; the torch path was thread-safe
+            network.setInput(features)
+            return torch.from_numpy(network.forward())
+
+    def __getstate__(self) -> dict:
+        # neither a cv2.dnn.Net nor a lock can be pickled: the copy builds its own on first use
+        return {**self.__dict__, "_head_network": None}
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
         """Eq. 1's weights: the Normalizer's prediction for each 48x48 window, one vector each.
