@@ -135,3 +135,13 @@ def test_gain_alcn_pickles_after_use():
     out = alcn.apply(frame)
     for clone in (pickle.loads(pickle.dumps(alcn)), copy.deepcopy(alcn)):
         np.testing.assert_array_equal(clone.apply(frame), out)
+
+
+def test_grid_head_runs_in_torch_without_onnx(monkeypatch):
+    from alcn_cv.enhance import alcn as alcn_module
+
+    frame = synthetic_frame(200, 120, False)
+    expected = ALCN(model="gain-lite").apply(frame)
+    monkeypatch.setattr(alcn_module, "is_installed", lambda name: name != "onnx")
+    alcn = ALCN(model="gain-lite")
+    assert np.abs(alcn.apply(frame).astype(int) - expected).max() <= 1 and alcn._head_network is None
