@@ -9,7 +9,7 @@ import pytest
 from alcn_cv import InputError
 from alcn_cv.bench import speed
 
-METHODS = ["none", "clahe", "alcn", "alcn exact", "alcn grid16 pyramid", "alcn lite", "alcn torch cpu"]
+METHODS = ["none", "clahe", "alcn", "alcn exact", "alcn grid16 pyramid", "alcn lite", "alcn torch cpu", "alcn gain-lite"]
 
 
 @pytest.fixture(scope="module")
@@ -116,7 +116,7 @@ def test_report_states_machine_command_and_settings(report):
 def test_targets_are_reported(report):
     out, result = report
     targets = result["targets"]
-    assert len(targets["summary"]) == 10  # with the BGR output against the Lab round trip
+    assert len(targets["summary"]) == 11  # with the BGR output against the Lab round trip and the gain-lite model
     for row in targets["summary"]:
         assert set(row) == {"target", "measured", "goal", "met", "note"}
     assert {r["method"] for r in targets["contract"]} == set(__import__("alcn_cv").available())

@@ -274,14 +274,15 @@ def test_threads_are_restored(image):
         alcn_cv.createALCN(threads=0)
 
 
-def test_a_stale_lite_file_is_reported(tmp_path, monkeypatch, caplog):
+@pytest.mark.parametrize(("model", "teacher"), [("lite", "paper"), ("gain-lite", "gain")])
+def test_a_stale_lite_file_is_reported(tmp_path, monkeypatch, caplog, model, teacher):
     import logging
 
     from alcn_cv.enhance import alcn as alcn_module
 
     other_teacher = tmp_path / "other.npz"
     other_teacher.write_bytes(b"not the teacher the lite file was distilled from")
-    monkeypatch.setattr(alcn_module, "DEFAULT_WEIGHTS", other_teacher)
+    monkeypatch.setitem(alcn_module.MODELS, teacher, other_teacher)
     with caplog.at_level(logging.WARNING, logger="alcn_cv.enhance.alcn"):
-        alcn_cv.createALCN(model="lite")
+        alcn_cv.createALCN(model=model)
     assert "re-distil" in caplog.text

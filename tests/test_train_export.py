@@ -83,7 +83,7 @@ def test_torch_onnx_opencv_and_fast_path_agree(shared_data, random_weights):
         np.testing.assert_allclose(alcn_filter(image, dense, alcn.full_res_sigmas), alcn.normalize(image), atol=1e-4)
 
 
-@pytest.mark.parametrize("model", ["paper", "lite", "gain"])
+@pytest.mark.parametrize("model", ["paper", "lite", "gain", "gain-lite"])
 def test_shipped_onnx_matches_shipped_weights(model):
     weights = MODELS[model]
     net = normalizer_from_file(load_normalizer_file(weights))

@@ -23,8 +23,8 @@ test runs ALCN over a generated 1920x1080 video and records the resident memory 
 frame (it must stay flat).
 
 The **targets** (:func:`targets`) come first in the report, each with its measured value: the
-default ALCN and the gain one against a raw OpenCV DoG (:func:`raw_dog`) at 1280x800 (the gain
-one with its difference from its torch model) and the default's frame rate at 640x480, BGR
+default ALCN, the gain one and its lite variant against a raw OpenCV DoG (:func:`raw_dog`) at
+1280x800 (the gain ones with their difference from their torch model) and the default's frame rate at 640x480, BGR
 against gray and its difference from the plain float Lab round trip (:func:`lab_round_trip`,
 within one level), the cost of the ``apply`` contract over each
 method's own computation, the peak memory on an 8000x8000 image, an application's OpenCV calls
@@ -85,6 +85,9 @@ ALCN_VARIANTS: dict[str, dict[str, Any]] = {
     "alcn grid32 pyramid": {"model": "paper", "mixture": "pyramid", "grid_stride": 32},
     "alcn lite": {"model": "lite", "mixture": "exact"},
 }
+#: The gain Normalizers (:mod:`alcn_cv.nets.gain`), their own method: timed beside the others, not
+#: compared with the exact paper ALCN (their difference from their torch model is a target).
+GAIN_VARIANTS: dict[str, dict[str, Any]] = {"alcn gain": {"model": "gain"}, "alcn gain-lite": {"model": "gain-lite"}}
 REFERENCE = "dog"
 
 
@@ -107,11 +110,12 @@ def default_methods(
 ) -> list[Method]:
     """The methods of the benchmark: ``none``, ``clahe``, ``dog``, the ALCN configurations of
     :data:`ALCN_VARIANTS` (the paper's Normalizer from ``weights``, the lite one from
-    ``lite_weights``), and the default ALCN on the other backends that this installation has
+    ``lite_weights``) and of :data:`GAIN_VARIANTS` (shipped weights), and the default ALCN on the other backends that this installation has
     (``opencv``, ``torch`` on the CPU, and on CUDA when torch sees a GPU or ``cuda`` is True)."""
     methods = [Method(name, lambda name=name: create(name)) for name in ("none", "clahe", REFERENCE)]
     methods += [_alcn(label, weights if params.get("model") == "paper" else lite_weights, **params)
                 for label, params in ALCN_VARIANTS.items()]
+    methods += [_alcn(label, None, **params) for label, params in GAIN_VARIANTS.items()]
     if "opencv" in BACKENDS:
         methods.append(_alcn("alcn opencv", lite_weights, backend="opencv"))
     methods.append(_alcn("alcn torch cpu", lite_weights, backend="torch", device="cpu"))
@@ -463,7 +467,7 @@ def _time_case(
         if isinstance(norm, ALCN):
             split, grid, result = _split(norm, gray, settings.min_repeats, settings.budget_s)
             row.update(split)
-            if colour == "gray":
+            if colour == "gray" and label not in GAIN_VARIANTS:
                 outputs[label] = result.astype(np.float64)
                 if label == EXACT:
                     # How much the weight maps vary over the frame: coarser grids cost nothing
@@ -695,7 +699,7 @@ def _batched(frame: np.ndarray, small: np.ndarray, repeats: int) -> dict[str, An
 
 
 def _gain_error(gain: ALCN, frame: np.ndarray) -> float:
-    """Largest difference of the gain ALCN's ``normalize`` from its torch model's output
+    """Largest difference of a gain ALCN's ``normalize`` from its torch model's output
     (:meth:`GainNormalizer.forward <alcn_cv.nets.gain.GainNormalizer.forward>`) on a uint8 frame."""
     import torch
 
@@ -715,25 +719,27 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     width, height = settings.target_size
     gray, bgr = synthetic_frame(width, height, False), synthetic_frame(width, height, True)
     small = synthetic_frame(*settings.fps_size, False)
-    default, gain = ALCN(), ALCN(model="gain")
+    default, gain, gain_lite = ALCN(), ALCN(model="gain"), ALCN(model="gain-lite")
     repeats = settings.target_repeats
     logger.info("targets: ratios at %dx%d", width, height)
     t = _medians({"dog raw": lambda: raw_dog(gray), "alcn gray": lambda: default.apply(gray),
                   "alcn bgr": lambda: default.apply(bgr), "alcn gain gray": lambda: gain.apply(gray),
-                  "alcn gain bgr": lambda: gain.apply(bgr), "dog raw small": lambda: raw_dog(small),
+                  "alcn gain bgr": lambda: gain.apply(bgr), "alcn gain-lite gray": lambda: gain_lite.apply(gray),
+                  "dog raw small": lambda: raw_dog(small),
                   "alcn gray small": lambda: default.apply(small)}, repeats)
     logger.info("targets: stages, contract, threads, memory, video, batches")
-    stages = {"alcn": _stages(default, gray, repeats), "alcn gain": _stages(gain, gray, repeats)}
+    stages = {"alcn": _stages(default, gray, repeats), "alcn gain": _stages(gain, gray, repeats),
+              "alcn gain-lite": _stages(gain_lite, gray, repeats)}
     profile = _profile(default, gray, repeats)
     contract = _contract_overhead(gray, max(3, repeats // 2))
     threads = [_after_apply(gray, repeats, 1), _after_apply(gray, repeats, None)]
     memory = _large_memory(settings.large_size)
     video = _normalize_video(settings, work)
     batched = _batched(gray, small, repeats)
-    ratio, gain_ratio = t["alcn gray"] / t["dog raw"], t["alcn gain gray"] / t["dog raw"]
+    ratio, gain_ratio, gain_lite_ratio = (t[f"alcn{m} gray"] / t["dog raw"] for m in ("", " gain", " gain-lite"))
     fps = 1e3 / t["alcn gray small"]
     colour = t["alcn bgr"] / t["alcn gray"]
-    gain_error = _gain_error(gain, gray)
+    gain_error, gain_lite_error = _gain_error(gain, gray), _gain_error(gain_lite, gray)
     colour_levels = max(int(np.abs(norm.apply(bgr).astype(np.int16) - lab_round_trip(norm, bgr)).max()) for norm in (default, gain))
     worst = max((r for r in contract if r["method"] != "none" and r["overhead"] is not None), key=lambda r: r["overhead"])
     alcn_memory = next(r for r in memory if r["method"] == "alcn")
@@ -743,6 +749,8 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
                 f"{t['alcn gray']:.2f} ms against {t['dog raw']:.2f} ms"),
         _target(f"gain Normalizer (alcn:model=gain) / raw DoG, {size} gray", gain_ratio, "<= 4", gain_ratio <= 4,
                 f"{t['alcn gain gray']:.2f} ms; largest difference from the torch model's output: {gain_error:.1e}"),
+        _target(f"its lite variant (alcn:model=gain-lite) / raw DoG, {size} gray", gain_lite_ratio, "<= 4", gain_lite_ratio <= 4,
+                f"{t['alcn gain-lite gray']:.2f} ms; largest difference from the torch model's output: {gain_lite_error:.1e}"),
         _target("default ALCN fps, {}x{} gray".format(*settings.fps_size), fps, ">= 200", fps >= 200),
         _target(f"BGR / gray, {size}", colour, "<= 1.3", colour <= 1.3, f"gain model: {t['alcn gain bgr'] / t['alcn gain gray']:.2f}"),
         _target(f"BGR output against the float Lab round trip, {size}: largest difference (levels)", colour_levels,

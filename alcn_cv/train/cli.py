@@ -39,7 +39,8 @@ _FLAGS = {
 
 
 # The options of ``alcn distill`` that its model card records when they differ from the defaults.
-_DISTILL_OPTIONS = ("teacher", "windows", "val", "epochs", "batch", "lr", "channels", "objects", "seed", "threads")
+_DISTILL_OPTIONS = ("teacher", "windows", "val", "epochs", "batch", "lr", "channels", "objects", "seed", "threads",
+                    "dilations", "scenes", "rendered")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -97,21 +98,30 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     s = subparsers.add_parser(
         "distill", help="distil the light real-time Normalizer from a trained one",
-        description="Train a LiteNormalizer to reproduce a Normalizer's mixture weights on rendered windows "
-        "(alcn_cv.train.distill); writes the weight file and its model card (.md beside it), which records this "
-        "command. The shipped alcn_normalizer_lite.npz is "
-        "`alcn distill --out alcn_cv/weights/alcn_normalizer_lite.npz`.",
+        description="Train a LiteNormalizer to reproduce a Normalizer's mixture weights on rendered windows, or, "
+        "from a gain Normalizer, a smaller gain Normalizer to reproduce its maps on the frames of the real "
+        "training scenes and rendered ones (alcn_cv.train.distill); writes the weight file and its model card "
+        "(.md beside it), which records this command, and for a gain student its ONNX export. The shipped "
+        "alcn_normalizer_lite.npz is `alcn distill --out alcn_cv/weights/alcn_normalizer_lite.npz`, "
+        "alcn_normalizer_gain_lite.npz `alcn distill --teacher alcn_cv/weights/alcn_normalizer_gain.npz "
+        "--out alcn_cv/weights/alcn_normalizer_gain_lite.npz` (academic research only, as the webcam frames).",
     )
     s.add_argument("--out", required=True, type=Path, help="weight file to write (.npz; the card is .md beside it)")
     s.add_argument("--teacher", type=Path, default=None, help="teacher weight file (default: the shipped one)")
-    s.add_argument("--windows", type=int, default=20000, help="training windows (default 20000)")
-    s.add_argument("--val", type=int, default=2000, help="validation windows (default 2000)")
-    s.add_argument("--epochs", type=int, default=30, help="epochs (default 30)")
-    s.add_argument("--batch", type=int, default=256, help="batch size (default 256)")
+    s.add_argument("--windows", type=int, default=20000, help="training windows (default 20000; lite student)")
+    s.add_argument("--val", type=int, default=2000, help="validation windows (default 2000; lite student)")
+    s.add_argument("--epochs", type=int, default=None, help="epochs (default 30, 60 for a gain teacher)")
+    s.add_argument("--batch", type=int, default=256, help="batch size (default 256; lite student)")
     s.add_argument("--lr", type=float, default=3e-3, help="Adam learning rate (default 3e-3)")
-    s.add_argument("--channels", type=lambda v: tuple(int(c) for c in v.split(",")), default=(8, 16),
-                   help="the student's widths c1,c2 (default 8,16)")
-    s.add_argument("--objects", type=int, default=100, help="objects in the rendered windows (default 100)")
+    s.add_argument("--channels", type=lambda v: tuple(int(c) for c in v.split(",")), default=None,
+                   help="the student's widths: c1,c2 (default 8,16), or for a gain teacher its hidden width (default 8)")
+    s.add_argument("--objects", type=int, default=100, help="objects in the rendered windows (default 100; lite student)")
+    s.add_argument("--dilations", type=lambda v: tuple(int(c) for c in v.split(",")), default=None,
+                   help="gain teacher: the student's dilated convolutions (default 1,2,4)")
+    s.add_argument("--scenes", type=Path, nargs="+", default=None,
+                   help="gain teacher: folders of registered frames (default: courbevoie frankfurt panorama of the "
+                   "shared webcam data; never the test scenes)")
+    s.add_argument("--rendered", type=int, default=6, help="gain teacher: rendered registered scenes added (default 6)")
     s.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     s.add_argument("--threads", type=int, default=1,
                    help="torch and OpenCV threads (default 1, as the shipped file was made; 0: the libraries' default)")
@@ -229,20 +239,31 @@ def _distill(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     import torch
 
     from alcn_cv.train.distill import main
+    from alcn_cv.weight_file import load_normalizer_file
 
     words = ["alcn", "distill", "--out", str(args.out)]
     for name in _DISTILL_OPTIONS:
         value = getattr(args, name)
         if value != parser.get_default(name):
-            words += [f"--{name}", ",".join(map(str, value)) if isinstance(value, tuple) else str(value)]
+            if isinstance(value, list):
+                words += [f"--{name}", *map(str, value)]
+            else:
+                words += [f"--{name}", ",".join(map(str, value)) if isinstance(value, tuple) else str(value)]
     previous = torch.get_num_threads(), cv2.getNumThreads()
     if args.threads:
         torch.set_num_threads(args.threads)
         cv2.setNumThreads(args.threads)
     try:
-        path = main(args.out, args.teacher, shlex.join(words), n_windows=args.windows, n_val=args.val,
-                    epochs=args.epochs, batch_size=args.batch, lr=args.lr, channels=args.channels,
-                    n_objects=args.objects, seed=args.seed, progress=not args.no_progress)
+        if args.teacher is not None and load_normalizer_file(args.teacher).meta.get("architecture") == "gain":
+            gain_student = {"channels": args.channels[0]} if args.channels else {}
+            gain_student.update({"dilations": args.dilations} if args.dilations else {})
+            gain_student.update({"epochs": args.epochs} if args.epochs else {})
+            path = main(args.out, args.teacher, shlex.join(words), scenes=args.scenes, rendered=args.rendered, lr=args.lr,
+                        seed=args.seed, progress=not args.no_progress, **gain_student)
+        else:
+            path = main(args.out, args.teacher, shlex.join(words), n_windows=args.windows, n_val=args.val,
+                        epochs=args.epochs or 30, batch_size=args.batch, lr=args.lr, channels=args.channels or (8, 16),
+                        n_objects=args.objects, seed=args.seed, progress=not args.no_progress)
     finally:
         torch.set_num_threads(previous[0])
         cv2.setNumThreads(previous[1])

@@ -1,4 +1,8 @@
-"""Distil a :class:`~alcn_cv.nets.lite.LiteNormalizer` from a Normalizer (``alcn distill``).
+"""Distil a light Normalizer from a trained one (``alcn distill``).
+
+From the paper's Normalizer (or any but the gain one), the student is a
+:class:`~alcn_cv.nets.lite.LiteNormalizer` (below); from a gain Normalizer
+(:mod:`alcn_cv.nets.gain`) it is a smaller gain Normalizer (:func:`distill_gain`, at the end).
 
 The student learns to predict the teacher's mixture weights on the data engine's windows
 (:func:`alcn_cv.data.phos.render_windows`, the Normalizer's own training distribution). Both
@@ -27,6 +31,8 @@ import os
 import shlex
 import sys
 import time
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,14 +41,16 @@ import torch
 from tqdm.auto import tqdm
 
 from alcn_cv.data.phos import render_windows
-from alcn_cv.errors import InputError
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
-from alcn_cv.io import atomic_write
+from alcn_cv.io import atomic_write, list_images, read_image, to_gray
+from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.report import describe_machine
+from alcn_cv.shared_data import shared_data_dir
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file, save_normalizer_file
 
-__all__ = ["distill", "main", "output_gram"]
+__all__ = ["GAIN_SCENES", "distill", "distill_gain", "main", "output_gram"]
 
 logger = logging.getLogger(__name__)
 
@@ -178,18 +186,23 @@ def main(
     command: str | None = None,
     **params: Any,
 ) -> Path:
-    """Distil a student (:func:`distill`) and write its weight file and model card.
+    """Distil a student (:func:`distill`, or :func:`distill_gain` for a gain teacher) and write
+    its weight file and model card (and for a gain student its ONNX export, ``.onnx`` beside it).
 
     Args:
         out_path: the ``.npz`` to write (the card is the same name with ``.md``).
         teacher: the teacher's weight file (default: the shipped paper-model file).
         command: the command line recorded in the card (default: this process').
-        params: passed to :func:`distill`.
+        params: passed to :func:`distill` or :func:`distill_gain`.
 
     Returns:
         The weight file's path.
     """
     out_path = Path(out_path)
+    command = command or " ".join(shlex.quote(a) for a in sys.argv)
+    teacher_path = Path(teacher) if teacher is not None else DEFAULT_WEIGHTS
+    if load_normalizer_file(teacher_path).meta.get("architecture") == "gain":
+        return _main_gain(out_path, teacher_path, command, **params)
     student, record = distill(teacher, **params)
     teacher_meta = load_normalizer_file(teacher).meta
     meta = {k: v for k, v in teacher_meta.items() if k not in ("format", "version", "config", "description", "training")}
@@ -201,7 +214,6 @@ def main(
         description=f"LiteNormalizer distilled from {record['teacher']['file']} ({record['teacher']['description']})",
     )
     save_normalizer_file(out_path, student.state_arrays(), meta)
-    command = command or " ".join(shlex.quote(a) for a in sys.argv)
     _write_card(out_path.with_suffix(".md"), out_path.name, record, bool(meta["trained"]), command)
     return out_path
 
@@ -249,3 +261,247 @@ Speed and the difference from the exact ALCN output on whole frames: `alcn bench
 """
     atomic_write(path, text)
 
+
+
+# --- The gain Normalizer's lite variant ----------------------------------------------------------
+
+#: The training scenes of the gain Normalizer (``../shared/data/webcam``); ``mexico`` and the psm
+#: objects are the test set and are never read here.
+GAIN_SCENES = ("courbevoie", "frankfurt", "panorama")
+#: The student of a gain teacher: hidden width and dilations (the teacher's: 16, (1, 2, 4)).
+GAIN_STUDENT = {"channels": 8, "dilations": (1, 2, 4)}
+#: Every ``_GAIN_VAL_EVERY``-th frame of each real scene is held out for validation.
+_GAIN_VAL_EVERY = 5
+#: Side and frames of the rendered registered scenes (:func:`alcn_cv.data.relight_scenes.render_scene`).
+_RENDERED_SIZE, _RENDERED_FRAMES = 256, 4
+
+
+@dataclass
+class _GridSample:
+    """One frame's network input on the gain Normalizer's grid and the teacher's output there."""
+
+    features: torch.Tensor  # (1, 4, gh, gw)
+    local: torch.Tensor  # (1, 1, gh, gw), the local mean m of the Weber gain
+    maps: torch.Tensor  # (1, N, gh, gw), the teacher's F_k = exp(g) w_k
+    energy: float  # mean of sum_k F_k^2 over the grid: the scale of the relative error
+
+
+def _gain_frames(scenes: Sequence[str | os.PathLike], rendered: int, seed: int, progress: bool) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Training and validation frames, ``(H, W)`` float32 in [0, 1]: the frames of the real
+    scenes (every :data:`_GAIN_VAL_EVERY`-th held out) and of ``rendered`` rendered scenes
+    (the last one held out when there are two or more)."""
+    from alcn_cv.data.relight_scenes import render_scene
+
+    train: list[np.ndarray] = []
+    val: list[np.ndarray] = []
+    for folder in scenes:
+        files = list_images(folder) if Path(folder).is_dir() else []
+        if len(files) < 2:
+            raise DatasetError(f"{folder}: a registered scene needs at least 2 frames, found {len(files)}")
+        for i, file in enumerate(files):
+            frame = to_gray(read_image(file)).astype(np.float32) * np.float32(1 / 255)
+            (val if i % _GAIN_VAL_EVERY == _GAIN_VAL_EVERY - 1 else train).append(frame)
+    for i in tqdm(range(rendered), desc="render scenes", unit="scene", disable=not progress):
+        stack, _ = render_scene(np.random.default_rng([seed, i]), _RENDERED_SIZE, _RENDERED_FRAMES)
+        (val if i == rendered - 1 and rendered > 1 else train).extend(stack.astype(np.float32) * np.float32(1 / 255))
+    return train, val
+
+
+def _relit(frame: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The frame under another light's strength (a gain of 0.3 to 1.5, clipped as a camera
+    would) and mirrored half of the time: the changes the teacher's log features must follow."""
+    out = np.clip(frame * np.float32(np.exp(rng.uniform(np.log(0.3), np.log(1.5)))), 0, 1)
+    return np.ascontiguousarray(out[:, ::-1]) if rng.random() < 0.5 else out
+
+
+def _grid_sample(teacher: GainNormalizer, frame: np.ndarray) -> _GridSample:
+    with torch.no_grad():  # not inference tensors: the loss saves the targets for its backward pass
+        features, local = teacher.features(torch.from_numpy(frame)[None, None])
+        log_gain, weights = teacher.gain_and_weights(teacher.head(teacher.trunk(features)), local)
+        maps = log_gain.exp() * weights
+    return _GridSample(features, local, maps, float(maps.pow(2).sum(1).mean()) + 1e-12)
+
+
+def _maps_error(student: GainNormalizer, sample: _GridSample) -> torch.Tensor:
+    """The squared error of the student's maps F_k on the grid, relative to the teacher's mean
+    squared map, after the common scale that fits them best: the divisive step that follows the
+    maps cancels a scale of the whole frame's maps (its floor is relative to the frame's mean
+    energy), so only their shape over the frame is the teacher's to copy."""
+    log_gain, weights = student.gain_and_weights(student.head(student.trunk(sample.features)), sample.local)
+    maps = log_gain.exp() * weights
+    scale = (maps * sample.maps).sum() / maps.pow(2).sum().clamp_min(1e-30)
+    return (scale * maps - sample.maps).pow(2).sum(1).mean() / sample.energy
+
+
+def _output_fidelity(teacher: GainNormalizer, student: GainNormalizer, frames: list[np.ndarray]) -> dict[str, float]:
+    """The whole normalization (:meth:`GainNormalizer.forward`, output in (-1, 1)) of the student
+    against the teacher's on validation frames: RMS and largest differences, and the RMS of the
+    teacher's output."""
+    squared, total, count, worst, p99 = 0.0, 0.0, 0, 0.0, []
+    with torch.inference_mode():
+        for frame in frames:
+            x = torch.from_numpy(frame)[None, None]
+            expected, got = teacher(x), student(x)
+            d = (got - expected).abs()
+            squared += float(d.pow(2).sum())
+            total += float(expected.pow(2).sum())
+            count += d.numel()
+            worst = max(worst, float(d.max()))
+            p99.append(float(torch.quantile(d.flatten()[:: max(1, d.numel() // 100000)], 0.99)))
+    return {"output_rmse": (squared / count) ** 0.5, "output_rms_teacher": (total / count) ** 0.5,
+            "output_max_abs_error": worst, "output_p99_abs_error": float(np.mean(p99))}
+
+
+def distill_gain(
+    teacher: str | os.PathLike,
+    scenes: Sequence[str | os.PathLike] | None = None,
+    rendered: int = 6,
+    seed: int = 0,
+    epochs: int = 60,
+    lr: float = 3e-3,
+    channels: int = GAIN_STUDENT["channels"],
+    dilations: Sequence[int] = GAIN_STUDENT["dilations"],
+    progress: bool = True,
+) -> tuple[GainNormalizer, dict[str, Any]]:
+    """Train a smaller :class:`~alcn_cv.nets.gain.GainNormalizer` to reproduce a gain teacher's maps.
+
+    The student has the teacher's features, kernels, divisive step and ``tau`` (copied, fixed)
+    and fewer or narrower convolutions; it learns the teacher's maps F_k on its grid
+    (:func:`_maps_error`) on the frames of the real training scenes, each also under another
+    light's strength (:func:`_relit`, drawn anew every epoch), and of rendered registered scenes.
+
+    Args:
+        teacher: the gain teacher's weight file.
+        scenes: folders of registered frames (default: :data:`GAIN_SCENES` of the shared
+            ``webcam`` data; never the test scenes).
+        rendered: rendered registered scenes added to the data (256x256, 4 lights each).
+        seed: seeds the student's initialisation, the relighting and the rendering.
+        epochs, lr: Adam over every training frame once per epoch, cosine schedule.
+        channels, dilations: the student's hidden width and its dilated 3x3 convolutions.
+
+    Returns:
+        The student (eval mode) and a record of the run (settings, time, fidelity).
+    """
+    if epochs < 1 or rendered < 0 or channels < 1 or not dilations:
+        raise InputError("epochs and channels must be >= 1, rendered >= 0, and dilations non-empty")
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    teacher_path = Path(teacher)
+    teacher_file = load_normalizer_file(teacher_path)
+    if teacher_file.meta.get("architecture") != "gain":
+        raise InputError(f"{teacher_path} is not a gain Normalizer")
+    teacher_net = normalizer_from_file(teacher_file).eval()
+    scenes = [shared_data_dir() / "webcam" / name for name in GAIN_SCENES] if scenes is None else list(scenes)
+    start = time.perf_counter()
+    train_frames, val_frames = _gain_frames(scenes, rendered, seed, progress)
+    if not val_frames:
+        raise DatasetError(f"no validation frames: a scene needs {_GAIN_VAL_EVERY} frames or more, or use 2 rendered scenes or more")
+    base = [_grid_sample(teacher_net, f) for f in train_frames]
+    val_samples = [_grid_sample(teacher_net, f) for f in val_frames]
+    prepared = time.perf_counter() - start
+
+    config = {**teacher_net.config, "channels": int(channels), "dilations": [int(d) for d in dilations], "learn_scales": False}
+    student = GainNormalizer(**config)
+    with torch.no_grad():  # the teacher's fixed steps: tau and the divisive floor's scale
+        student.log_tau.copy_(teacher_net.log_tau)
+        if teacher_net.gain == "divisive":
+            student.log_floor_scale.copy_(teacher_net.log_floor_scale)
+
+    def val_error() -> float:
+        with torch.inference_mode():
+            return float(np.mean([float(_maps_error(student, s)) for s in val_samples]))
+
+    initial = {"maps_relative_error": val_error(), **_output_fidelity(teacher_net, student, val_frames)}
+    parameters = [p for p in student.parameters() if p.requires_grad]
+    optimiser = torch.optim.Adam(parameters, lr=lr)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, epochs * 2 * len(base))
+    bar = tqdm(range(epochs), desc="distil gain", unit="epoch", disable=not progress)
+    for _ in bar:
+        # every frame as it is and under a light drawn for this epoch, in a seeded order
+        samples = base + [_grid_sample(teacher_net, _relit(f, rng)) for f in train_frames]
+        student.train()
+        for i in rng.permutation(len(samples)):
+            loss = _maps_error(student, samples[i])
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            schedule.step()
+        student.eval()
+        bar.set_postfix(val_maps_error=f"{val_error():.2e}")
+    validation = {"maps_relative_error": val_error(), **_output_fidelity(teacher_net, student, val_frames)}
+    record = {
+        "teacher": {"file": teacher_path.name, "sha256": hashlib.sha256(teacher_path.read_bytes()).hexdigest(),
+                    "description": teacher_file.meta.get("description", "")},
+        "settings": {"scenes": [Path(s).name for s in scenes], "rendered": rendered, "seed": seed, "epochs": epochs,
+                     "lr": lr, "channels": int(channels), "dilations": [int(d) for d in dilations],
+                     "frames": {"train": len(train_frames), "validation": len(val_frames)}},
+        "seconds": {"data_and_targets": round(prepared, 1), "total": round(time.perf_counter() - start, 1)},
+        "validation": validation,
+        "validation_initial": initial,
+        "parameters": {"student": sum(p.numel() for p in student.parameters()),
+                       "teacher": sum(p.numel() for p in teacher_net.parameters())},
+    }
+    return student, record
+
+
+def _main_gain(out_path: Path, teacher_path: Path, command: str, **params: Any) -> Path:
+    """:func:`main` for a gain teacher: the weight file, its ONNX export and its card."""
+    from alcn_cv.train.export import export_onnx
+
+    student, record = distill_gain(teacher_path, **params)
+    trained = bool(load_normalizer_file(teacher_path).meta["trained"])
+    meta = student.file_meta(
+        trained, teacher=record["teacher"],
+        distillation={k: record[k] for k in ("settings", "seconds", "validation", "validation_initial", "parameters")},
+        description=f"gain Normalizer distilled from {record['teacher']['file']} "
+        f"({record['settings']['channels']} channels, dilations {record['settings']['dilations']})",
+    )
+    save_normalizer_file(out_path, student.state_arrays(), meta)
+    export_onnx(out_path.with_suffix(".onnx"), out_path)
+    _write_gain_card(out_path.with_suffix(".md"), out_path.name, record, trained, command)
+    return out_path
+
+
+def _write_gain_card(path: Path, name: str, record: dict[str, Any], trained: bool, command: str) -> None:
+    v, start, s = record["validation"], record["validation_initial"], record["settings"]
+    teacher = record["teacher"]
+    text = f"""# Model card: `{name}` (the gain Normalizer's lite variant)
+
+`alcn_cv.createALCN(model="gain-lite")`. A smaller gain-adaptive Normalizer (`alcn_cv.nets.gain.GainNormalizer`,
+{s['channels']} channels, dilations {s['dilations']}; {record['parameters']['student']} parameters against the
+teacher's {record['parameters']['teacher']}) distilled from `{teacher['file']}` (SHA-256 `{teacher['sha256'][:16]}...`:
+{teacher['description'] or 'the gain Normalizer'}). Same features, kernels, divisive step and `tau` as the teacher
+(copied, fixed); only the network on the grid is smaller. It is only as good as the teacher.
+{"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}
+`{Path(name).with_suffix('.onnx').name}` is the same network for the torch-free `backend="opencv"`
+(written by the same command through `alcn export`). ALCN warns when the installed teacher differs from this one.
+**Distilled on frames of the "Webcam" data set (Verdie, Yi, Fua & Lepetit, TILDE, CVPR 2015; AMOS, Jacobs,
+Roman & Pless, CVPR 2007), like its teacher: these weights are for academic research only, as those photographs are.**
+
+## How it was made
+
+- Command: `{command}`
+- Data: the frames of the training scenes {', '.join(s['scenes'])} (`../shared/data/webcam`; every
+  {_GAIN_VAL_EVERY}th frame held out for validation; `mexico` and the psm objects, the test set, never read) and
+  {s['rendered']} rendered registered scenes ({_RENDERED_SIZE}x{_RENDERED_SIZE}, {_RENDERED_FRAMES} lights each,
+  `alcn_cv.data.relight_scenes.render_scene`, the last held out): {s['frames']['train']} training and
+  {s['frames']['validation']} validation frames, grayscale; each training frame also under another light's
+  strength every epoch (a gain of 0.3 to 1.5, clipped, mirrored half of the time).
+- Targets: the teacher's maps `F_k = exp(g) w_k` on its stride-8 grid (the features are the same, computed
+  once). Loss: their squared error relative to the teacher's mean squared map on the frame, after the common
+  scale that fits them best (the divisive step that follows cancels a scale of the whole frame's maps). Adam, lr {s['lr']}, cosine schedule, {s['epochs']} epochs of one frame
+  per step, seed {s['seed']}.
+- Time: {record['seconds']['total']} s ({record['seconds']['data_and_targets']} s reading, rendering and teacher
+  targets) on {describe_machine()}.
+
+## Fidelity to the teacher (validation frames, the whole normalization, output in (-1, 1))
+
+| measure | this student | its start (DoG + divisive, untrained) |
+|---|---|---|
+| relative squared error of the maps on the grid (after the best common scale) | {v['maps_relative_error']:.3g} | {start['maps_relative_error']:.3g} |
+| RMS difference from the teacher's output | {v['output_rmse']:.3g} | {start['output_rmse']:.3g} |
+| 99th percentile of the absolute difference | {v['output_p99_abs_error']:.3g} | {start['output_p99_abs_error']:.3g} |
+| largest absolute difference | {v['output_max_abs_error']:.3g} | {start['output_max_abs_error']:.3g} |
+| RMS of the teacher's output | {v['output_rms_teacher']:.3g} | |
+"""
+    atomic_write(path, text)

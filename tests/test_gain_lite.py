@@ -1,0 +1,147 @@
+"""The gain Normalizer's lite variant: ``alcn distill`` from a gain teacher, and the shipped
+``createALCN(model="gain-lite")`` against its torch model."""
+
+from __future__ import annotations
+
+import hashlib
+
+import cv2
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+import alcn_cv  # noqa: E402
+from alcn_cv.bench.speed import synthetic_frame  # noqa: E402
+from alcn_cv.cli import main as cli  # noqa: E402
+from alcn_cv.enhance.alcn import MODELS, ALCN  # noqa: E402
+from alcn_cv.nets.gain import GainNormalizer  # noqa: E402
+from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file  # noqa: E402
+
+
+def _scenes(root, count=2, frames=5, shape=(96, 128)):
+    """Small registered scenes: one textured view under several light strengths."""
+    rng = np.random.default_rng(0)
+    folders = []
+    for i in range(count):
+        view = cv2.GaussianBlur(rng.random(shape).astype(np.float32), (0, 0), 1.5)
+        view = (view - view.min()) / (view.max() - view.min())
+        folder = root / f"scene{i}"
+        folder.mkdir()
+        for j in range(frames):
+            cv2.imwrite(str(folder / f"f{j}.png"), np.clip(view * (80 + 60 * j) + 10, 0, 255).astype(np.uint8))
+        folders.append(folder)
+    return folders
+
+
+def _teacher(path):
+    """A gain teacher whose maps vary over the image (random perturbation of the DoG start)."""
+    torch.manual_seed(1)
+    net = GainNormalizer(gain="divisive", tau=3.0)
+    with torch.no_grad():
+        for p in net.parameters():
+            if p.requires_grad:
+                p.add_(0.2 * torch.randn_like(p))
+    return save_normalizer_file(path, net.state_arrays(), net.file_meta(trained=True, description="a test teacher")), net
+
+
+def test_distill_from_a_gain_teacher_writes_a_smaller_gain_student(tmp_path):
+    from alcn_cv.train import distill
+
+    teacher_path, teacher = _teacher(tmp_path / "teacher.npz")
+    scenes = _scenes(tmp_path)
+    out = distill.main(tmp_path / "student.npz", teacher_path, "test", scenes=scenes, rendered=0, epochs=25, progress=False)
+    header = load_normalizer_file(out).meta
+    assert header["architecture"] == "gain" and header["config"]["channels"] == 8 and header["trained"] is True
+    assert header["teacher"]["sha256"] == hashlib.sha256(teacher_path.read_bytes()).hexdigest()
+    assert header["equalization"]["tau"] == pytest.approx(teacher.tau_value())
+    assert header["divisive"]["scale"] == pytest.approx(float(teacher.floor_scale.detach()))
+    fit = header["distillation"]
+    assert fit["validation"]["maps_relative_error"] < fit["validation_initial"]["maps_relative_error"]
+    assert fit["settings"]["frames"] == {"train": 8, "validation": 2}  # every 5th frame of each scene held out
+    card = out.with_suffix(".md").read_text()
+    assert "Command: `test`" in card and "teacher.npz" in card and "academic research only" in card
+    # the student runs through ALCN on every backend, its ONNX export included
+    gray = synthetic_frame(160, 120, False).astype(np.float32) / np.float32(255)
+    fast, opencv = ALCN(weights=out), ALCN(weights=out, backend="opencv")
+    with torch.inference_mode():
+        expected = fast.net(torch.from_numpy(gray)[None, None])[0, 0].numpy()
+    np.testing.assert_allclose(fast.normalize(gray), expected, atol=1e-5, rtol=0)
+    np.testing.assert_allclose(opencv.normalize(gray), expected, atol=1e-4, rtol=0)
+
+
+def test_distill_gain_is_seeded_and_rejects_other_teachers(tmp_path):
+    from alcn_cv.train import distill
+
+    teacher_path, _ = _teacher(tmp_path / "teacher.npz")
+    scenes = _scenes(tmp_path, count=1)
+    (tmp_path / "short").mkdir()
+    runs = [distill.distill_gain(teacher_path, scenes, rendered=1, epochs=2, progress=False)[0] for _ in range(2)]
+    for a, b in zip(runs[0].state_arrays().values(), runs[1].state_arrays().values()):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(alcn_cv.errors.InputError, match="not a gain"):
+        distill.distill_gain(MODELS["lite"], scenes, progress=False)
+    with pytest.raises(alcn_cv.errors.DatasetError, match="validation"):
+        distill.distill_gain(teacher_path, _scenes(tmp_path / "short", count=1, frames=3), rendered=0, progress=False)
+
+
+def test_distill_command_from_a_gain_teacher(tmp_path, capsys):
+    teacher_path, _ = _teacher(tmp_path / "teacher.npz")
+    scenes = _scenes(tmp_path, count=1)
+    out = tmp_path / "gain_lite.npz"
+    args = ["--teacher", str(teacher_path), "--epochs", "1", "--channels", "4", "--dilations", "1,2", "--scenes",
+            str(scenes[0]), "--rendered", "0"]
+    assert cli(["distill", "--out", str(out), *args, "--no-progress"]) == 0
+    assert capsys.readouterr().out.strip() == str(out) and out.with_suffix(".onnx").is_file()
+    config = load_normalizer_file(out).meta["config"]
+    assert (config["channels"], config["dilations"]) == (4, [1, 2])
+    assert f"Command: `alcn distill --out {out} {' '.join(args)}`" in out.with_suffix(".md").read_text()
+
+
+@pytest.mark.parametrize("backend", ["fast", "opencv"])
+def test_shipped_gain_lite_model_equals_its_torch_model(backend):
+    alcn = alcn_cv.createALCN(model="gain-lite", backend=backend)
+    assert alcn.weights_path == MODELS["gain-lite"] and alcn.trained and alcn.mixture == "exact"
+    header = load_normalizer_file(MODELS["gain-lite"]).meta
+    assert header["config"]["channels"] < load_normalizer_file(MODELS["gain"]).meta["config"]["channels"]
+    assert "academic research only" in MODELS["gain-lite"].with_suffix(".md").read_text()
+    reference = ALCN(model="gain-lite").net
+    gray = synthetic_frame(320, 200, False, seed=5).astype(np.float32) / np.float32(255)
+    with torch.inference_mode():
+        expected = reference(torch.from_numpy(gray)[None, None])[0, 0].numpy()
+    np.testing.assert_allclose(alcn.normalize(gray), expected, atol=1e-5 if backend == "fast" else 1e-3, rtol=0)
+
+
+
+@pytest.mark.parametrize("model", ["gain", "gain-lite"])
+def test_grid_head_in_cv2_dnn_equals_torch_and_small_grids_fall_back(model):
+    alcn = ALCN(model=model)
+    net = alcn.net
+    for shape in [(1, 4, 101, 161), (1, 4, 6, 7), (1, 4, 4, 30), (1, 4, 1, 1)]:
+        features = np.random.default_rng(0).normal(size=shape).astype(np.float32)
+        with torch.inference_mode():
+            expected = net.head(net.trunk(torch.from_numpy(features))).numpy()
+            got = alcn._grid_head(features).numpy()
+        np.testing.assert_allclose(got, expected, atol=2e-6, rtol=0)
+    assert alcn._head_network is not None  # built for the grids larger than the largest dilation (4)
+
+
+def test_gain_alcn_pickles_after_use():
+    import copy
+    import pickle
+
+    alcn = ALCN(model="gain-lite")
+    frame = synthetic_frame(200, 120, False)
+    out = alcn.apply(frame)
+    for clone in (pickle.loads(pickle.dumps(alcn)), copy.deepcopy(alcn)):
+        np.testing.assert_array_equal(clone.apply(frame), out)
+
+
+def test_grid_head_runs_in_torch_without_onnx(monkeypatch):
+    from alcn_cv.enhance import alcn as alcn_module
+
+    frame = synthetic_frame(200, 120, False)
+    expected = ALCN(model="gain-lite").apply(frame)
+    monkeypatch.setattr(alcn_module, "is_installed", lambda name: name != "onnx")
+    alcn = ALCN(model="gain-lite")
+    assert np.abs(alcn.apply(frame).astype(int) - expected).max() <= 1 and alcn._head_network is None
