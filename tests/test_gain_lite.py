@@ -112,20 +112,6 @@ def test_shipped_gain_lite_model_equals_its_torch_model(backend):
     np.testing.assert_allclose(alcn.normalize(gray), expected, atol=1e-5 if backend == "fast" else 1e-3, rtol=0)
 
 
-
-@pytest.mark.parametrize("model", ["gain", "gain-lite"])
-def test_grid_head_in_cv2_dnn_equals_torch_and_small_grids_fall_back(model):
-    alcn = ALCN(model=model)
-    net = alcn.net
-    for shape in [(1, 4, 101, 161), (1, 4, 6, 7), (1, 4, 4, 30), (1, 4, 1, 1)]:
-        features = np.random.default_rng(0).normal(size=shape).astype(np.float32)
-        with torch.inference_mode():
-            expected = net.head(net.trunk(torch.from_numpy(features))).numpy()
-            got = alcn._grid_head(features).numpy()
-        np.testing.assert_allclose(got, expected, atol=2e-6, rtol=0)
-    assert alcn._head_network is not None  # built for the grids larger than the largest dilation (4)
-
-
 def test_gain_alcn_pickles_after_use():
     import copy
     import pickle
@@ -135,13 +121,3 @@ def test_gain_alcn_pickles_after_use():
     out = alcn.apply(frame)
     for clone in (pickle.loads(pickle.dumps(alcn)), copy.deepcopy(alcn)):
         np.testing.assert_array_equal(clone.apply(frame), out)
-
-
-def test_grid_head_runs_in_torch_without_onnx(monkeypatch):
-    from alcn_cv.enhance import alcn as alcn_module
-
-    frame = synthetic_frame(200, 120, False)
-    expected = ALCN(model="gain-lite").apply(frame)
-    monkeypatch.setattr(alcn_module, "is_installed", lambda name: name != "onnx")
-    alcn = ALCN(model="gain-lite")
-    assert np.abs(alcn.apply(frame).astype(int) - expected).max() <= 1 and alcn._head_network is None

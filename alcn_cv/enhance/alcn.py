@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import logging
 import math
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -207,10 +206,6 @@ class ALCN(Normalization):
         #: The gain Normalizer's grid computed by :meth:`_gain_grid` (OpenCV at full resolution):
         #: on its network's own grid, without the finest-scale feature (``sharpness``).
         self._pooled_cells = self.per_pixel and self.grid_stride == stride and not meta["config"].get("sharpness", False)
-        #: :func:`_grid_head_network` and the lock that serializes its calls, built on first use
-        #: when the ONNX exporter can run (it needs the ``onnx`` package: the ``train`` extra).
-        self._head_network: tuple[cv2.dnn.Net, threading.Lock] | None = None
-        self._head_in_dnn = self._pooled_cells and is_installed("onnx")
 
     def _init_opencv(self, meta: dict, grid_stride: int | None) -> None:
         from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
@@ -275,14 +270,17 @@ class ALCN(Normalization):
 
     def _gain_grid(self, small: np.ndarray) -> np.ndarray:
         """:meth:`GainNormalizer.dense_grid <alcn_cv.nets.gain.GainNormalizer.dense_grid>` with
-        the full-resolution work in OpenCV and the convolutions in ``cv2.dnn`` (:meth:`_grid_head`).
+        the full-resolution work in OpenCV and only the convolutions in torch.
 
         The cells' means of the image and of its square are pooled by torch's ``avg_pool2d``
         (the network's own: the same numbers, which matters where a cell is flat and its
         deviation is rounding; ``cv2.resize`` with ``INTER_AREA`` sums in another order and moved
         the output by up to 0.07 on real frames with flat sky) from one reflect-101 border of
         OpenCV. The blurs, features and gain are computed on the grid in OpenCV and NumPy (the
-        same kernels and borders, to float rounding).
+        same kernels and borders, to float rounding), and the convolutions run on channels-last
+        tensors that share memory with height x width x channels arrays: oneDNN's dilated
+        convolutions are twice as fast on that layout, and OpenCV and NumPy do its borders and
+        ReLUs (torch is slow on it).
         """
         import torch
         import torch.nn.functional as F
@@ -298,30 +296,13 @@ class ALCN(Normalization):
             local = _grid_blur(mean, net.mean_sigma / s)
             context = _grid_blur(mean, net.context_sigma / s)
             std = np.sqrt(np.maximum(square - mean * mean, np.float32(0)))
-            features = np.log(np.stack([mean, local, context, std])[None] + np.float32(net.eps))  # (1, 4, gh, gw)
-            log_gain, weights = net.gain_and_weights(self._grid_head(features), torch.from_numpy(local)[None, None])
+            x = np.log(np.stack([mean, local, context, std], axis=-1) + np.float32(net.eps))  # (gh, gw, 4)
+            for conv, dilation in zip(net.convs, net.dilations):
+                x = cv2.copyMakeBorder(x, dilation, dilation, dilation, dilation, cv2.BORDER_REFLECT_101)
+                x = conv(_channels_last(x))[0].permute(1, 2, 0).numpy()
+                np.maximum(x, np.float32(0), out=x)
+            log_gain, weights = net.gain_and_weights(net.head(_channels_last(x)), torch.from_numpy(local)[None, None])
             return (log_gain.exp() * weights)[0].numpy()
-
-    def _grid_head(self, features: np.ndarray) -> torch.Tensor:
-        """The gain Normalizer's convolutions and head on its grid's ``(1, 4, gh, gw)`` features:
-        in ``cv2.dnn`` (:func:`_grid_head_network`; on a 1280x800 frame's grid 30 to 45% faster
-        than torch's small convolutions alone, measured on the loaded 2-core VM, within 3e-7 of
-        them) when ``onnx`` is installed and the grid is larger than the largest dilation (the
-        ONNX reflect padding's limit), else in torch."""
-        import torch
-
-        if not self._head_in_dnn or min(features.shape[-2:]) <= max(self.net.dilations):
-            return self.net.head(self.net.trunk(torch.from_numpy(features)))
-        if self._head_network is None:
-            self._head_network = _grid_head_network(self.net), threading.Lock()
-        network, lock = self._head_network
-        with lock:  # one cv2.dnn.Net holds one input at a time; the torch path was thread-safe
-            network.setInput(features)
-            return torch.from_numpy(network.forward())
-
-    def __getstate__(self) -> dict:
-        # neither a cv2.dnn.Net nor a lock can be pickled: the copy builds its own on first use
-        return {**self.__dict__, "_head_network": None}
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
         """Eq. 1's weights: the Normalizer's prediction for each 48x48 window, one vector each.
@@ -587,34 +568,12 @@ def _network_reach(meta: dict) -> int:
     return stride * (1 + kernel_radius(blur) + sum(int(d) for d in config["dilations"]))
 
 
-def _grid_head_network(net: torch.nn.Module) -> cv2.dnn.Net:
-    """``net.head(net.trunk(features))`` of a gain Normalizer as a ``cv2.dnn`` network: exported to
-    ONNX in memory (a fraction of a second, once per ALCN), its reflect-101 borders by ONNX ``Pad``
-    (``F.pad(mode="reflect")``), both spatial sizes dynamic."""
-    import io
-    import warnings
-
+def _channels_last(hwc: np.ndarray) -> torch.Tensor:
+    """A ``(1, C, H, W)`` channels-last tensor sharing the memory of a C-ordered ``(H, W, C)`` array
+    (the batch stride spelled out: torch takes a zero one for another layout)."""
     import torch
-    import torch.nn.functional as F
 
-    class GridHead(torch.nn.Module):
-        def __init__(self) -> None:
-            super().__init__()
-            self.net = net
-
-        def forward(self, features: torch.Tensor) -> torch.Tensor:
-            return self.net.head(self.net.trunk(features, pad=lambda x, d: F.pad(x, (d, d, d, d), mode="reflect")))
-
-    buffer = io.BytesIO()
-    # (ALCN calls this inside its inference mode, which the exporter's tracing cannot run in)
-    with torch.inference_mode(False), torch.no_grad(), warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the TorchScript exporter's deprecation notice
-        torch.onnx.export(
-            GridHead(), (torch.zeros(1, net.convs[0].in_channels, 16, 16),), buffer, input_names=["features"],
-            output_names=["head"], dynamic_axes={"features": {2: "height", 3: "width"}, "head": {2: "height", 3: "width"}},
-            opset_version=17, dynamo=False,
-        )
-    return cv2.dnn.readNetFromONNX(np.frombuffer(buffer.getvalue(), np.uint8))
+    return torch.from_numpy(hwc.reshape((1,) + hwc.shape)).permute(0, 3, 1, 2)
 
 
 def _grid_blur(grid: np.ndarray, sigma: float) -> np.ndarray:

@@ -50,8 +50,6 @@ def _to_unit_float(img: np.ndarray) -> np.ndarray:
     # OpenCV calls that follow may write into this one.
     if img.dtype == np.float32:
         return np.clip(img, 0.0, 1.0, out=np.empty(img.shape, np.float32))
-    if img.dtype == np.uint8:
-        return cv2.LUT(img, _UINT8_LEVELS)  # one pass, the same values as the two below
     unit = img.astype(np.float32, order="C")
     unit *= np.float32(1.0 / FULL_SCALE[img.dtype])
     return unit

@@ -48,7 +48,7 @@ Shapes and ranges (``B`` images, ``N`` kernels, ``g`` the grid stride):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -303,16 +303,12 @@ class GainNormalizer(nn.Module):
         x, local = self.features(image)
         return self.gain_and_weights(self.head(self.trunk(x)), local)
 
-    def trunk(self, features: torch.Tensor, pad: Callable[[torch.Tensor, int], torch.Tensor] = _reflect101_pad) -> torch.Tensor:
+    def trunk(self, features: torch.Tensor) -> torch.Tensor:
         """The hidden dilated convolutions (reflect-101 borders, ReLU) on the grid's
-        :meth:`features` ``(B, 4, gh, gw)`` -> ``(B, channels, gh, gw)``: the input of the head.
-
-        ``pad(x, d)`` pads the last two dims by ``d`` with reflect-101; the default holds for
-        every size (an ONNX export with ``F.pad(..., mode="reflect")`` runs faster in ``cv2.dnn``,
-        for grids larger than the largest dilation)."""
+        :meth:`features` ``(B, 4, gh, gw)`` -> ``(B, channels, gh, gw)``: the input of the head."""
         x = features
         for conv, d in zip(self.convs, self.dilations):
-            x = F.relu(conv(pad(x, d)))
+            x = F.relu(conv(_reflect101_pad(x, d)))
         return x
 
     def gain_and_weights(self, head: torch.Tensor, local: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
