@@ -96,7 +96,7 @@ def test_pair_loss_adds_the_weighted_consistency(tmp_path):
         every = np.concatenate([centres, anywhere])
         outputs = [_normalized_centres(net, torch.from_numpy(np.stack([scene.frames[f][y - CROP // 2 : y + CROP // 2, x - CROP // 2 : x + CROP // 2]
                                                                        for y, x in every]))[:, None], PATCH) for f in (0, 1)]
-    assert plain == pytest.approx(float(pair_loss(net, scene, (0, 1), centres, base)), rel=1e-5)  # identification only
+    assert plain == pytest.approx(pair_loss(net, scene, (0, 1), centres, base).item(), rel=1e-5)  # identification only
     assert both == pytest.approx(plain + 2.0 * float(consistency_loss(*outputs)), rel=1e-4)
 
 
