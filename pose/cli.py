@@ -1,4 +1,4 @@
-"""``alcn pose build|track|eval|train-corners|bench-corners|corner-recall|...``: the 3D pose pipeline on the command line."""
+"""``alcn pose build|track|eval|train-corners|bench-corners``: the 3D pose pipeline on the command line."""
 
 from __future__ import annotations
 
@@ -202,8 +202,9 @@ def _corner_recall(args: argparse.Namespace) -> int:
     for background in args.background:
         r = corner_bench.corner_recall(args.detector, args.scene, obj_id=args.obj_id, background=background)
         print(f"{args.scene} ({background} background): {r['visible']} visible corners in {r['frames']} frames; "
-              f"found as the best candidate {100 * r['best']:.0f}%, among the candidates {100 * r['candidates']:.0f}%, "
-              f"in the gates of the true pose {100 * r['gated']:.0f}%; background scored higher {100 * r['background_wins']:.0f}%")
+              f"found as the best candidate {100 * r['best']:.0f}%, among the candidates "
+              f"{100 * r['candidates']:.0f}%, in the gates of the true pose {100 * r['gated']:.0f}%; background "
+              f"scored higher {100 * r['background_wins']:.0f}%")
         if args.out is not None:
             write_json(args.out / f"corner_recall_{background}.json", r)
     return 0
@@ -340,7 +341,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "candidates of the whole frame, and within the gates of the true pose; with --background grey "
                         "also with everything but the object replaced by grey (the table and clutter removed).")
     cr.add_argument("detector", help="corner detector (.onnx) from `alcn pose train-corners`")
-    cr.add_argument("scene", type=Path, help="BOP scene folder with scene_gt.json and mask_visib/ (e.g. DATA/test/000001)")
+    cr.add_argument("scene", type=Path,
+                    help="BOP scene folder with scene_gt.json and mask_visib/ (e.g. DATA/test/000001)")
     cr.add_argument("--obj-id", type=int, default=1, help="the box's object id (default 1)")
     cr.add_argument("--background", nargs="+", default=["keep"], choices=["keep", "grey"],
                     help="keep the frames as they are and/or grey everything but the object (default keep)")
