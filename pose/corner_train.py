@@ -59,12 +59,11 @@ The network is not background-invariant: random-texture backgrounds, as 80% of t
 take its training views down to 64 / 79 / 84%. Tried on that scene, one seed each, none finding
 more than 49% of #1's corners among the candidates nor more than the 43.3% of the poses: 8 sets of
 fresh copies drawn in turn (8 times the backgrounds; 22 / 43 / 66%, 30.0% of the poses), the
-same with new backgrounds on every copy (25 / 46 / 70, 20.0), 4000 steps (31 / 45 / 66, 6.7), a
-corner weight of 4 (26 / 39 / 64, 16.7), an intensity change of the background alone (a table as
-bright as the box) on half or all of the copies (27 / 49 / 66, 3.3; 25 / 44 / 64, 6.7), wider
-layers with 4 sets of copies (24/48 channels: 21 / 43 / 63, 0; a fully connected layer of 256:
-25 / 47 / 65, 20.0);
-10 candidates per corner above 0.02 find 50% but pose 13.3%.
+same with new backgrounds on every copy (25 / 46 / 70, 20.0) or with 4000 steps (31 / 45 / 66,
+6.7), a corner weight of 4 (26 / 39 / 64, 16.7), an intensity change of the background alone (a
+table as bright as the box) on half or all of the copies (27 / 49 / 66, 3.3; 25 / 44 / 64, 6.7),
+wider layers with 4 sets of copies (24/48 channels: 21 / 43 / 63, 0; a fully connected layer of
+256: 25 / 47 / 65, 20.0); 10 candidates per corner above 0.02 find 50% but pose 13.3%.
 """
 
 from __future__ import annotations
