@@ -195,8 +195,24 @@ def _bench_corners(args: argparse.Namespace) -> int:
     return 0
 
 
+def _corner_recall(args: argparse.Namespace) -> int:
+    from alcn_cv.io import write_json
+    from pose import corner_bench
+
+    for background in args.background:
+        r = corner_bench.corner_recall(args.detector, args.scene, obj_id=args.obj_id, background=background)
+        print(f"{args.scene} ({background} background): {r['visible']} visible corners in {r['frames']} frames; "
+              f"found as the best candidate {100 * r['best']:.0f}%, among the candidates "
+              f"{100 * r['candidates']:.0f}%, in the gates of the true pose {100 * r['gated']:.0f}%; background "
+              f"scored higher {100 * r['background_wins']:.0f}%")
+        if args.out is not None:
+            write_json(args.out / f"corner_recall_{background}.json", r)
+    return 0
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``relight`` and ``overlay-error`` to ``alcn``."""
+    """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``corner-recall``,
+    ``relight`` and ``overlay-error`` to ``alcn``."""
     from pose.corner_data import COPIES, NOVEL_VIEWS
     from pose.corner_train import ITERATIONS
     from pose.solver import METHODS
@@ -318,5 +334,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     bc.add_argument("--threads", type=int, help="OpenCV threads (default OpenCV's)")
     bc.add_argument("--out", type=Path, help="write bench_corners.md and .json here")
     bc.set_defaults(func=_bench_corners)
+
+    cr = sub.add_parser("corner-recall", help="corners the corner detector finds in a rendered scene, before PnP",
+                        description="Compares the corner detector's candidates with the true corners of a BOP scene "
+                        "(`alcn data pose`): the share of visible corners found as the best candidate, among the "
+                        "candidates of the whole frame, and within the gates of the true pose; with --background grey "
+                        "also with everything but the object replaced by grey (the table and clutter removed).")
+    cr.add_argument("detector", help="corner detector (.onnx) from `alcn pose train-corners`")
+    cr.add_argument("scene", type=Path,
+                    help="BOP scene folder with scene_gt.json and mask_visib/ (e.g. DATA/test/000001)")
+    cr.add_argument("--obj-id", type=int, default=1, help="the box's object id (default 1)")
+    cr.add_argument("--background", nargs="+", default=["keep"], choices=["keep", "grey"],
+                    help="keep the frames as they are and/or grey everything but the object (default keep)")
+    cr.add_argument("--out", type=Path, help="write corner_recall_<background>.json here")
+    cr.set_defaults(func=_corner_recall)
     _add_relight(sub)
     _add_overlay_error(sub)

@@ -1,10 +1,14 @@
-"""``alcn pose bench-corners``: frames per second of the corner detector, torch-free.
+"""``alcn pose bench-corners`` and ``alcn pose corner-recall``: the corner detector's speed and recall.
 
-Times :class:`pose.corners.CornerDetector` (normalization, ``cv2.dnn`` network, peaks) and the pose
-solver over the frames of a video or image folder, in a tracking loop as ``alcn pose track`` runs
-it, and reports the stages, the frames per second (wall clock), the CPU time per frame (all threads;
-on a machine shared with other jobs the wall clock also counts their share), the machine's load and
-whether torch was imported.
+:func:`benchmark` times :class:`pose.corners.CornerDetector` (normalization, ``cv2.dnn`` network,
+peaks) and the pose solver over the frames of a video or image folder, in a tracking loop as
+``alcn pose track`` runs it, and reports the stages, the frames per second (wall clock), the CPU
+time per frame (all threads; on a machine shared with other jobs the wall clock also counts their
+share), the machine's load and whether torch was imported.
+
+:func:`corner_recall` measures the detections against the true corners of a BOP scene before
+PnP, optionally with everything but the object replaced by grey: the measurement that tells a
+detector that misses corners (recall) from one that places them badly or a solver that fails.
 """
 
 from __future__ import annotations
@@ -105,3 +109,71 @@ def main(onnx_path: str | Path, source: str | Path, K: np.ndarray, out: str | Pa
         atomic_write(out / "bench_corners.md", md)
         write_json(out / "bench_corners.json", {**result, "command": command})
     return result
+
+
+def corner_recall(onnx_path: str | Path, scene_dir: str | Path, *, obj_id: int = 1, background: str = "keep",
+                  radius: float = 5.0, gate: float = 20.0) -> dict[str, Any]:
+    """Recall of the corner detector on a BOP scene (``alcn data pose``), frame by frame.
+
+    A visible corner (:func:`pose.corner_data.corner_visibility` with the scene's ``mask_visib``)
+    is found when a candidate of its own lies within ``radius`` pixels of its true projection:
+    the best candidate of the whole frame (``best``), any of the ``top_k`` (``candidates``, what
+    the tracker's first search gets), any of the ``gated_top_k`` within ``gate`` pixels of the
+    true projection (``gated``, what tracking with a right prior gets). ``background_wins`` is
+    the share of visible corners where the background class outscores the corner's at the
+    corner's best cell nearby.
+
+    Args:
+        onnx_path: a corner detector (``alcn pose train-corners``).
+        scene_dir: a BOP scene with ``scene_gt.json`` and ``mask_visib/``.
+        background: ``"keep"``, or ``"grey"``: the pixels outside the object's mask set to 128,
+            which removes the table and the clutter from the frames and keeps the object's views.
+
+    Returns:
+        ``{"frames", "visible", "best", "candidates", "gated", "background_wins", "per_corner"
+        (corner index -> share found among the candidates), "per_frame" (dicts)}``; shares in [0, 1].
+
+    Raises:
+        InputError: an unknown ``background`` or a frame without the object's mask.
+    """
+    from alcn_cv.formats import bop
+    from pose.corner_data import corner_visibility
+    from pose.corners import NUM_CORNERS, STRIDE, CornerDetector, to_scaled
+    from pose.parts import to_gray
+
+    if background not in ("keep", "grey"):
+        raise InputError(f"background must be 'keep' or 'grey', got {background!r}")
+    det = CornerDetector(onnx_path)
+    scene_dir = Path(scene_dir)
+    per_frame, found = [], {k: [] for k in range(NUM_CORNERS)}
+    for fr in bop.load_scene(scene_dir).frames:
+        index = [o.obj_id for o in fr.objects].index(obj_id)
+        mask = cv2.imread(str(scene_dir / "mask_visib" / f"{fr.im_id:06d}_{index:06d}.png"), cv2.IMREAD_GRAYSCALE)
+        if mask is None:
+            raise InputError(f"{scene_dir}: no mask_visib of object {obj_id} in frame {fr.im_id}")
+        image = to_gray(io.read_image(fr.rgb_path))
+        if background == "grey":
+            image = np.where(mask > 0, image, np.uint8(128))
+        pose = fr.pose(obj_id)
+        uv, visible = corner_visibility(det.corners, pose.R, pose.t, fr.K, image.shape, mask)
+        whole, gated = det.peaks(image), det.peaks(image, uv, gate)
+        prob, _ = det.maps(image)
+        row = {"frame": fr.im_id, "visible": int(visible.sum()), "best": 0, "candidates": 0, "gated": 0,
+               "background_wins": 0}
+        for k in np.flatnonzero(visible):
+            hits = np.linalg.norm(whole[k][0] - uv[k], axis=1) <= radius
+            row["best"] += bool(hits[:1].any())
+            row["candidates"] += bool(hits.any())
+            row["gated"] += bool((np.linalg.norm(gated[k][0] - uv[k], axis=1) <= radius).any())
+            found[k].append(bool(hits.any()))
+            j, i = np.round((to_scaled(uv[k], det.scale) + 0.5) / STRIDE).astype(int)  # the nearest cell's centre
+            cells = prob[:, max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].reshape(NUM_CORNERS + 1, -1)
+            if cells.size:
+                at = cells[:, cells[k + 1].argmax()]
+                row["background_wins"] += bool(at[0] > at[k + 1])
+        per_frame.append(row)
+    n = max(sum(r["visible"] for r in per_frame), 1)
+    shares = {key: sum(r[key] for r in per_frame) / n for key in ("best", "candidates", "gated", "background_wins")}
+    return {"detector": str(onnx_path), "scene": str(scene_dir), "background": background, "frames": len(per_frame),
+            "visible": sum(r["visible"] for r in per_frame), **shares,
+            "per_corner": {k: float(np.mean(v)) for k, v in found.items() if v}, "per_frame": per_frame}

@@ -321,6 +321,25 @@ def test_track_and_bench_the_corner_detector(posedata, random_net, tmp_path):
     assert bench["cpu_ms_per_frame"] > 0 and "fps" in (tmp_path / "bench" / "bench_corners.md").read_text()
 
 
+def test_corner_recall_against_the_true_corners(posedata, random_net, tmp_path, capsys):
+    """`alcn pose corner-recall`: shares of the visible corners, as they are and on a grey background."""
+    from pose import corner_bench
+
+    scene = posedata / "test" / "000001"
+    r = corner_bench.corner_recall(random_net[1], scene)
+    assert r["frames"] == 4 and r["visible"] == sum(f["visible"] for f in r["per_frame"]) > 0
+    assert 0 <= r["best"] <= r["candidates"] <= 1 and 0 <= r["gated"] <= 1 and 0 <= r["background_wins"] <= 1
+    assert set(r["per_corner"]) <= set(range(8))
+    with pytest.raises(InputError, match="background"):
+        corner_bench.corner_recall(random_net[1], scene, background="black")
+    args = _parser().parse_args(["pose", "corner-recall", str(random_net[1]), str(scene), "--background", "keep",
+                                 "grey", "--out", str(tmp_path)])
+    assert args.func(args) == 0
+    assert "grey background" in capsys.readouterr().out
+    grey = json.loads((tmp_path / "corner_recall_grey.json").read_text())
+    assert grey["background"] == "grey" and grey["visible"] == r["visible"]
+
+
 def test_table1_rows_of_the_corner_detector(posedata, tmp_path):
     from pose import evaluate
 
