@@ -51,7 +51,8 @@ def test_gain_model_on_a_photograph(shared_data):
 
 
 @pytest.mark.parametrize("config", [{"sharpness": True}, {"learn_floor": True, "stride": 4, "dilations": (1, 2)},
-                                    {"gain": "divisive", "num_kernels": 4, "tau": 3.0}])
+                                    {"gain": "divisive", "num_kernels": 4, "tau": 3.0},
+                                    {"gain": "divisive", "divisive_sigma": 2.0, "tau": 3.0}])
 def test_other_gain_configurations_equal_the_torch_model(tmp_path, config):
     torch.manual_seed(0)
     net = GainNormalizer(**config)

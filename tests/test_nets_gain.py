@@ -195,3 +195,44 @@ def test_divisive_weight_file_round_trip_through_create_alcn(tmp_path):
     alcn = ALCN(weights=path, backend="torch")
     np.testing.assert_allclose(alcn.normalize(image), expected, atol=1e-5)
     assert alcn._tiling((9000, 9000)) is None  # the floor is a mean over the whole image
+
+
+def test_per_pixel_divisive_numpy_and_torch_agree_and_ignore_the_light_strength():
+    rng = np.random.default_rng(5)
+    image = gaussian_blur_stack(rng.random((75, 93)).astype(np.float32), (1.5,))[0]
+    net = GainNormalizer(gain="divisive", floor_scale=0.5, divisive_sigma=2.0)
+    with torch.no_grad():
+        response = net.response(torch.from_numpy(image)[None, None])
+        divided = net.divide(response)[0, 0].numpy()
+        brighter = net.divide(10.0 * response)[0, 0].numpy()
+        darker = net.divide(net.response(torch.from_numpy(0.1 * image)[None, None]))[0, 0].numpy()
+    np.testing.assert_allclose(divisive_normalization(response[0, 0].numpy(), 8, 0.5, sigma=2.0), divided, atol=1e-5)
+    np.testing.assert_allclose(brighter, divided, atol=1e-3)  # a gain of the response: exact but for the absolute floor
+    np.testing.assert_allclose(darker, divided, atol=1e-2)
+    assert np.abs(divided).max() > 0.5
+    # the energy is per pixel: an edge of the response is divided by its own neighbourhood, not its cell's
+    assert not np.allclose(divided, divisive_normalization(response[0, 0].numpy(), 8, 0.5), atol=1e-2)
+
+
+def test_per_pixel_divisive_needs_the_divisive_gain():
+    for bad in ({"divisive_sigma": 2.0}, {"gain": "divisive", "divisive_sigma": 0.0}):
+        with pytest.raises(InputError):
+            GainNormalizer(**bad)
+    assert "divisive_sigma" not in GainNormalizer(gain="divisive").config  # the earlier headers, unchanged
+
+
+def test_per_pixel_divisive_weight_file_round_trip_through_create_alcn(tmp_path):
+    from alcn_cv.enhance.alcn import ALCN
+
+    net = GainNormalizer(gain="divisive", floor_scale=0.8, tau=2.0, divisive_sigma=2.0)
+    path = save_normalizer_file(tmp_path / "d.npz", net.state_arrays(), net.file_meta(trained=True))
+    weight_file = load_normalizer_file(path)
+    assert weight_file.meta["divisive"] == {"stride": 8, "scale": pytest.approx(0.8), "sigma": 2.0}
+    assert GainNormalizer.from_file(weight_file).divisive_sigma == 2.0
+    image = gaussian_blur_stack(np.random.default_rng(4).random((90, 110)).astype(np.float32), (1.0,))[0]
+    with torch.no_grad():
+        expected = net(torch.from_numpy(image)[None, None])[0, 0].numpy()
+    for backend in ("torch", "fast"):
+        np.testing.assert_allclose(ALCN(weights=path, backend=backend).normalize(image), expected, atol=1e-4)
+    assert ALCN(weights=path, scale=0.5).divisive == {"stride": 16, "scale": pytest.approx(0.8), "sigma": 4.0}
+    assert ALCN(model="gain").divisive["sigma"] is None  # the shipped file divides on the grid

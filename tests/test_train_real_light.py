@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from alcn_cv.errors import DatasetError
-from alcn_cv.nets.gain import GainNormalizer
+from alcn_cv.nets.gain import GainNormalizer, gaussian_energy
 from alcn_cv.train.real_light import (
     RealLightConfig,
     _normalized_centres,
@@ -129,6 +129,35 @@ def test_divisive_centres_equal_the_whole_normalization_with_the_crops_floor():
         lo = (CROP - PATCH) // 2
         expected = net.equalize(net.divide(response, floor))[..., lo : lo + PATCH, lo : lo + PATCH]
     torch.testing.assert_close(centre, expected, atol=1e-5, rtol=1e-4)
+
+
+def test_per_pixel_divisive_centres_equal_the_whole_normalization_with_the_crops_floor():
+    """The training path of the per-pixel divisive energy: the response on the Gaussian's reach
+    around the centre, the floor from the centres of the crops drawn for it."""
+    net = GainNormalizer(stride=8, gain="divisive", floor_scale=0.7, divisive_sigma=2.0)
+    with torch.no_grad():
+        net.head.weight.normal_(0.0, 0.05)
+    crops = torch.rand(4, 1, CROP, CROP) * torch.tensor([1.0, 0.2, 0.5, 0.05]).view(4, 1, 1, 1)
+    lo = (CROP - PATCH) // 2
+    centre_of = (..., slice(lo, lo + PATCH), slice(lo, lo + PATCH))
+    with torch.no_grad():
+        centre = _normalized_centres(net, crops, PATCH, [(slice(0, 2), slice(1, 2)), (slice(2, 4), slice(2, 4))])
+        response = net.response(crops)
+        energy = gaussian_energy(response, 2.0)[centre_of]
+        floor = 0.7 * torch.stack([energy[1].mean(), energy[1].mean(), energy[2:].mean(), energy[2:].mean()]).view(4, 1, 1, 1)
+        expected = net.equalize(net.divide(response, floor))[centre_of]
+    torch.testing.assert_close(centre, expected, atol=1e-5, rtol=1e-4)
+
+
+def test_cli_passes_the_divisive_sigma(tmp_path, monkeypatch):
+    import alcn_cv.train.real_light as real_light
+    from alcn_cv.cli import main
+
+    configs = []
+    monkeypatch.setattr(real_light, "train_real_light", lambda cfg, out: configs.append(cfg) or out)
+    common = ["train-real-light", "--scenes", str(tmp_path), "--out", str(tmp_path / "run")]
+    assert main([*common, "--divisive-sigma", "2"]) == 0 and main(common) == 0
+    assert configs[0].net["divisive_sigma"] == 2.0 and "divisive_sigma" not in configs[1].net
 
 
 def test_three_steps_lower_the_loss(tmp_path):

@@ -165,12 +165,10 @@ class ALCN(Normalization):
         #: ``tau`` of the final contrast equalization ``tanh(x / tau)`` that is part of the
         #: gain Normalizer's method (:mod:`alcn_cv.nets.gain`); None for the others.
         self.equalization_tau = float(meta["equalization"]["tau"]) if "equalization" in meta else None
-        #: ``(stride, scale)`` of the gain Normalizer's divisive normalization of the response
-        #: (:func:`alcn_cv.filters.divisive.divisive_normalization`, before the equalization; the stride
-        #: in input pixels), or None.
-        self.divisive = (
-            (max(1, round(meta["divisive"]["stride"] / self.scale)), float(meta["divisive"]["scale"])) if "divisive" in meta else None
-        )
+        #: The arguments ``stride``, ``scale`` and ``sigma`` of the gain Normalizer's divisive
+        #: normalization of the response (:func:`alcn_cv.filters.divisive.divisive_normalization`,
+        #: before the equalization; stride and sigma in input pixels), or None.
+        self.divisive = _divisive_arguments(meta["divisive"], self.scale) if "divisive" in meta else None
         #: True for a Normalizer designed for Eq. 3 only (the gain Normalizer: per-pixel gain and
         #: weights on its own grid), whose windows are normalized as small images, not by Eq. 1.
         self.per_pixel = meta.get("architecture") == "gain"
@@ -439,7 +437,7 @@ class ALCN(Normalization):
         divisive normalization, then the contrast equalization (:mod:`alcn_cv.nets.gain`).
         ``response`` (float32, the caller's own) is overwritten by the equalization."""
         if self.divisive is not None:
-            response = divisive_normalization(response, *self.divisive)
+            response = divisive_normalization(response, **self.divisive)
         if self.equalization_tau is None:
             return response
         # in place: one full-resolution array fewer to allocate and write
@@ -554,6 +552,18 @@ class ALCN(Normalization):
             f"ALCN(weights={self.weights_path.name!r}, scale={self.scale}, backend={self.backend!r}, "
             f"grid_stride={self.grid_stride}, mixture={self.mixture!r}, threads={self.threads}, trained={self.trained})"
         )
+
+
+def _divisive_arguments(divisive: dict, scale: float) -> dict[str, int | float | None]:
+    """The keyword arguments of :func:`~alcn_cv.filters.divisive.divisive_normalization` at the
+    input's resolution from a weight file's ``divisive`` header (its stride and sigma in working
+    pixels; a file without ``sigma`` divides on the grid)."""
+    sigma = divisive.get("sigma")
+    return {
+        "stride": max(1, round(divisive["stride"] / scale)),
+        "scale": float(divisive["scale"]),
+        "sigma": None if sigma is None else float(sigma) / scale,
+    }
 
 
 def _network_reach(meta: dict) -> int:

@@ -7,6 +7,10 @@ back): ``response / sqrt(e^2 + f^2)`` with ``e`` the root-mean-square of the res
 cells of side ``stride`` centred on the grid points ``(stride*i, stride*j)`` and ``f = scale *
 mean(e)``. Invariant to a gain of the whole response; a flat region of a contrasted image stays
 flat. The torch form, differentiable, is :meth:`alcn_cv.nets.gain.GainNormalizer.divide`.
+
+With ``sigma`` the energy is per pixel instead, ``e = sqrt(G_sigma * r^2)`` (:func:`gaussian_energy`,
+the local standard deviation of DLCN itself with a Gaussian window, no grid): it follows the
+response's edges at the scale of the kernels, not of the cells.
 """
 
 from __future__ import annotations
@@ -16,9 +20,9 @@ import math
 import cv2
 import numpy as np
 
-from alcn_cv.filters.gaussian_mixture import upsample_grid
+from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, upsample_grid
 
-__all__ = ["ABSOLUTE_FLOOR", "cell_rms", "divisive_normalization"]
+__all__ = ["ABSOLUTE_FLOOR", "cell_rms", "divisive_normalization", "gaussian_energy"]
 
 #: Added (squared) to every divisor, in intensity units ([0, 1]): a 40th of an 8-bit level, far
 #: below any real texture, so that a flat image's response, float rounding only, stays near zero
@@ -39,21 +43,35 @@ def cell_rms(response: np.ndarray, stride: int) -> np.ndarray:
     return np.sqrt(np.maximum(cells, 0.0))
 
 
-def divisive_normalization(response: np.ndarray, stride: int, scale: float, floor: float | None = None) -> np.ndarray:
-    """``response / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` (see the module), the divisor
-    interpolated bilinearly between the grid points.
+def gaussian_energy(response: np.ndarray, sigma: float) -> np.ndarray:
+    """``(H, W)`` float32: ``sqrt(G_sigma * response^2)``, the kernel of
+    :func:`~alcn_cv.filters.gaussian_mixture.gaussian_kernel1d`, reflect-101 beyond the borders."""
+    kernel = gaussian_kernel1d(sigma)
+    energy = cv2.sepFilter2D(response * response, cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101)
+    return np.sqrt(np.maximum(energy, 0.0, out=energy), out=energy)
+
+
+def divisive_normalization(
+    response: np.ndarray, stride: int, scale: float, floor: float | None = None, sigma: float | None = None
+) -> np.ndarray:
+    """``response / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` (see the module): ``e`` on the grid,
+    the divisor interpolated bilinearly between the grid points, or per pixel with ``sigma``.
 
     Args:
         response: ``(H, W)`` float32, unbounded.
-        stride: the grid's spacing in pixels (>= 1).
+        stride: the grid's spacing in pixels (>= 1; unused with ``sigma``).
         scale: ``c`` in ``f = c * mean(e)`` (> 0).
         floor: ``f`` itself, overriding ``c * mean(e)``.
+        sigma: the Gaussian window of a per-pixel energy :func:`gaussian_energy` (pixels), instead
+            of the grid's cells.
 
     Returns:
         ``(H, W)`` float32.
     """
-    e = cell_rms(response, stride)
+    e = cell_rms(response, stride) if sigma is None else gaussian_energy(response, sigma)
     f = scale * float(e.mean()) if floor is None else floor
     inverse = (1.0 / np.sqrt(e * e + np.float32(f * f + ABSOLUTE_FLOOR**2))).astype(np.float32)
+    if sigma is not None:
+        return cv2.multiply(response, inverse, dst=inverse)
     upsampled = upsample_grid(inverse, stride, response.shape)
     return cv2.multiply(response, upsampled, dst=upsampled)

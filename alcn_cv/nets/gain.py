@@ -28,7 +28,9 @@ follows the response it divides, it is smooth at the scale of the grid (8 pixels
 kernels are 1 to 2 pixels wide, and it makes the output invariant to the light's strength exactly,
 while flat regions stay flat (the floor is relative to the whole image's contrast). The network's
 own log-gain correction stays inside Eq. 3. Untrained, this is "DoG ``G_1 - G_2``, then divisive
-normalization on the grid", the best hand-made member of the family on real light.
+normalization on the grid", the best hand-made member of the family on real light. With
+``divisive_sigma`` the energy is per pixel, ``e = sqrt(G_sigma * r^2)`` (DLCN's own Gaussian-weighted
+local standard deviation): the divisor follows the response's edges at the scale of its kernels.
 
 The response is then equalized by ``tanh(x / tau)`` (:func:`contrast_equalization`, the last
 step of Tan & Triggs, "Enhanced local texture feature sets for face recognition under difficult
@@ -62,7 +64,7 @@ from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, gaussian_sigmas
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
 
-__all__ = ["GainNormalizer", "GAINS", "contrast_equalization", "dog_weights", "ARCHITECTURE"]
+__all__ = ["GainNormalizer", "GAINS", "contrast_equalization", "dog_weights", "gaussian_energy", "ARCHITECTURE"]
 
 #: The ``architecture`` field of a gain Normalizer's weight file.
 ARCHITECTURE = "gain"
@@ -133,13 +135,22 @@ def _reflect101_pad(x: torch.Tensor, pad: int) -> torch.Tensor:
     return x.index_select(-1, _reflect101_index(x, -1, pad, pad))
 
 
-def _blur(x: torch.Tensor, sigma: float) -> torch.Tensor:
+def _blur(x: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tensor:
     """Separable Gaussian blur of a ``(B, 1, H, W)`` map (the kernels of
     :mod:`alcn_cv.filters.gaussian_mixture`), reflect-101, for any image size (the reflection
-    repeats on images smaller than the kernel)."""
+    repeats on images smaller than the kernel). ``pad=False``: only where the kernel lies inside,
+    ``(B, 1, H - 2r, W - 2r)`` with ``r`` the kernel's radius."""
     kernel = torch.as_tensor(gaussian_kernel1d(sigma), dtype=x.dtype, device=x.device)
-    x = _reflect101_pad(x, kernel.numel() // 2)
+    if pad:
+        x = _reflect101_pad(x, kernel.numel() // 2)
     return F.conv2d(F.conv2d(x, kernel.view(1, 1, -1, 1)), kernel.view(1, 1, 1, -1))
+
+
+def gaussian_energy(response: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tensor:
+    """``sqrt(G_sigma * response^2)`` of a ``(B, 1, H, W)`` response, per pixel
+    (:func:`alcn_cv.filters.divisive.gaussian_energy` in torch); ``pad`` as :func:`_blur`."""
+    # The floor keeps the square root differentiable where the response is exactly flat.
+    return _blur(response * response, sigma, pad).clamp_min(1e-12).sqrt()
 
 
 class GainNormalizer(nn.Module):
@@ -169,6 +180,9 @@ class GainNormalizer(nn.Module):
             grid of :attr:`stride` (the network's log-gain then only corrects it, inside Eq. 3,
             and the kernel weights sum to zero: a band-pass).
         floor_scale: initial ``c`` of the divisive floor ``c * mean(e)`` (``gain="divisive"``).
+        divisive_sigma: the divisive normalization's energy per pixel, ``e = sqrt(G_sigma * r^2)``
+            with this sigma (working pixels), instead of the root-mean-square over the grid's cells
+            (``gain="divisive"``; None: the cells).
         learn_scales: learn ``tau`` and ``c`` (otherwise they keep their initial values).
     """
 
@@ -189,6 +203,7 @@ class GainNormalizer(nn.Module):
         gain: str = "weber",
         floor_scale: float = 1.0,
         learn_scales: bool = True,
+        divisive_sigma: float | None = None,
     ) -> None:
         super().__init__()
         if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
@@ -197,6 +212,8 @@ class GainNormalizer(nn.Module):
             raise InputError("eps, tau, mean_sigma, context_sigma and floor_scale must be positive")
         if gain not in GAINS:
             raise InputError(f"unknown gain {gain!r}; choose one of {', '.join(GAINS)}")
+        if divisive_sigma is not None and (gain != "divisive" or not divisive_sigma > 0):
+            raise InputError(f"divisive_sigma must be positive and needs gain='divisive', got {divisive_sigma!r} with {gain!r}")
         self.sigmas = gaussian_sigmas(num_kernels, sigma_step)
         init_weights = dog_weights(self.sigmas) if init_weights is None else [float(w) for w in init_weights]
         if len(init_weights) != num_kernels:
@@ -223,6 +240,8 @@ class GainNormalizer(nn.Module):
         if self.learn_floor:
             self.log_floor = nn.Parameter(torch.tensor(math.log(eps)))
         self.gain = gain
+        #: The per-pixel energy's sigma of the divisive normalization (working pixels), or None (the cells).
+        self.divisive_sigma = None if divisive_sigma is None else float(divisive_sigma)
         if gain == "divisive":
             self.log_floor_scale = nn.Parameter(torch.tensor(math.log(floor_scale)), requires_grad=learn_scales)
         self.mixture = GaussianMixture2d(self.sigmas)
@@ -243,6 +262,8 @@ class GainNormalizer(nn.Module):
             "floor_scale": float(floor_scale),
             "learn_scales": bool(learn_scales),
         }
+        if self.divisive_sigma is not None:  # absent by default: the earlier files' headers stay as they were
+            self.config["divisive_sigma"] = self.divisive_sigma
 
     @property
     def num_kernels(self) -> int:
@@ -360,20 +381,23 @@ class GainNormalizer(nn.Module):
 
     def divide(self, response: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
         """:func:`~alcn_cv.filters.divisive.divisive_normalization` (in torch) of the response
-        ``(B, 1, H, W)`` on the grid of :attr:`stride` with the learned ``c`` (``gain="divisive"``;
-        the response unchanged otherwise). ``floor``: ``(B, 1, 1, 1)``, overrides ``c * mean(e)``
-        over each image (training estimates the whole frame's mean from crops)."""
+        ``(B, 1, H, W)`` on the grid of :attr:`stride` (per pixel with :attr:`divisive_sigma`) with
+        the learned ``c`` (``gain="divisive"``; the response unchanged otherwise). ``floor``:
+        ``(B, 1, 1, 1)``, overrides ``c * mean(e)`` over each image (training estimates the whole
+        frame's mean from crops)."""
         if self.gain != "divisive":
             return response
+        if self.divisive_sigma is not None:
+            return response * self.inverse_divisor(gaussian_energy(response, self.divisive_sigma), floor)
         inverse = self.inverse_divisor(_cell_rms(response, self.stride), floor)
         h, w = response.shape[-2:]
         size = (self.stride * (inverse.shape[-2] - 1) + 1, self.stride * (inverse.shape[-1] - 1) + 1)
         return response * F.interpolate(inverse, size=size, mode="bilinear", align_corners=True)[..., :h, :w]
 
     def inverse_divisor(self, energy: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
-        """``1 / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` on the grid, from the cells' energy ``e``
-        ``(B, 1, gh, gw)``; ``f = c * mean(e)`` over each image unless ``floor`` ``(B, 1, 1, 1)``
-        is given (``gain="divisive"``)."""
+        """``1 / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` from the energy ``e`` ``(B, 1, h, w)`` (the
+        cells' on the grid, or per pixel); ``f = c * mean(e)`` over each image unless ``floor``
+        ``(B, 1, 1, 1)`` is given (``gain="divisive"``)."""
         if floor is None:
             floor = self.floor_scale * energy.mean(dim=(-2, -1), keepdim=True)
         return (energy * energy + floor * floor + ABSOLUTE_FLOOR**2).rsqrt()
@@ -395,8 +419,12 @@ class GainNormalizer(nn.Module):
     def file_meta(self, trained: bool, **provenance: Any) -> dict[str, Any]:
         """The weight file's header: ``architecture``, ``config``, ``sigmas``, ``working_scale`` 1,
         ``output_range`` ``[-1, 1]`` (the equalized output), the equalization's ``tau`` and, with
-        ``gain="divisive"``, the divisive normalization's ``stride`` and ``scale``."""
-        divisive = {"divisive": {"stride": self.stride, "scale": float(self.floor_scale.detach())}} if self.gain == "divisive" else {}
+        ``gain="divisive"``, the divisive normalization's ``stride`` and ``scale`` (and ``sigma``,
+        :attr:`divisive_sigma`, when set)."""
+        divisive = {}
+        if self.gain == "divisive":
+            sigma = {} if self.divisive_sigma is None else {"sigma": self.divisive_sigma}
+            divisive = {"divisive": {"stride": self.stride, "scale": float(self.floor_scale.detach()), **sigma}}
         return {
             "architecture": ARCHITECTURE,
             "config": self.config,

@@ -169,6 +169,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "normalization of Eq. 3's response on the grid, floored by c times its image mean (default divisive)")
     r.add_argument("--floor-scale", type=float, default=1.0,
                    help="c of the divisive floor (--gain divisive; default 1)")
+    r.add_argument("--divisive-sigma", type=float, default=None,
+                   help="divide by a per-pixel energy sqrt(G_sigma * r^2), this sigma in working pixels, instead of "
+                        "the grid's cells (--gain divisive; default: the cells)")
     r.add_argument("--learn-scales", action="store_true",
                    help="learn tau and the divisive floor's c (otherwise they keep the values given)")
     r.add_argument("--tau", type=float, default=3.0,
@@ -286,7 +289,8 @@ def _train_real_light(args: argparse.Namespace) -> int:
         net={"channels": args.channels, "dilations": list(args.dilations), "sharpness": args.sharpness,
              "num_kernels": args.num_kernels, "sigma_step": args.sigma_step, "eps": args.eps,
              "learn_floor": args.learn_floor, "gain": args.gain, "floor_scale": args.floor_scale, "tau": args.tau,
-             "learn_scales": args.learn_scales},
+             "learn_scales": args.learn_scales,
+             **({} if args.divisive_sigma is None else {"divisive_sigma": args.divisive_sigma})},
         command=shlex.join(["alcn", *sys.argv[1:]]),
     )
     previous = torch.get_num_threads()

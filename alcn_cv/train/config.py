@@ -442,7 +442,8 @@ class RealLightConfig:
         lr: Adam's learning rate.
         seed: seeds numpy and torch (data draws and initialisation).
         save_every: steps between checkpoints and intermediate weight files.
-        net: :class:`~alcn_cv.nets.gain.GainNormalizer` arguments.
+        net: :class:`~alcn_cv.nets.gain.GainNormalizer` arguments (``divisive_sigma`` among them:
+            the divisive normalization's per-pixel energy, absent for the grid's cells).
         command: the command line that ran the training, recorded in the weight file.
     """
 

@@ -48,7 +48,7 @@ from tqdm import tqdm
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, list_images, read_image, to_gray, write_json
 from alcn_cv.filters.gaussian_mixture import kernel_radius
-from alcn_cv.nets.gain import GainNormalizer
+from alcn_cv.nets.gain import GainNormalizer, gaussian_energy
 from alcn_cv.report import machine
 from alcn_cv.train.models import CentreMixture
 from alcn_cv.train.config import RealLightConfig
@@ -246,9 +246,10 @@ def _normalized_centres(
     divisive normalization (``gain="divisive"``) and the equalization.
 
     The divisive normalization needs the response on the cells around the centre's grid points
-    (half a cell more on every side) and the mean cell energy of the whole frame, which the
-    crops of each frame drawn anywhere estimate: ``frames`` holds, per frame, the slice of its
-    crops and the slice of those drawn anywhere (all of its crops when none is given).
+    (half a cell more on every side; with ``divisive_sigma``, the Gaussian's radius or more) and
+    the mean energy of the whole frame, which the centres of the crops of each frame drawn
+    anywhere estimate: ``frames`` holds, per frame, the slice of its crops and the slice of those
+    drawn anywhere (all of its crops when none is given).
     """
     grid = net.dense_grid(crops)
     crop = crops.shape[-1]
@@ -257,14 +258,24 @@ def _normalized_centres(
     s = net.stride
     if patch % (2 * s) or (crop - patch) % (2 * s):
         raise InputError(f"the divisive gain needs patch and (crop - patch) / 2 multiples of the stride {s}")
-    response = _centre_mixture(net.sigmas, crop, patch + s, s)(crops, grid)  # the cells around the centre
-    energy = F.avg_pool2d(response * response, s).clamp_min(1e-12).sqrt()  # differentiable where flat
+    if net.divisive_sigma is not None:
+        radius = kernel_radius(net.divisive_sigma)
+        step = s // 2 if s % 2 == 0 else s  # the centre mixture's side needs 2 * margin a multiple of s
+        margin = -(-radius // step) * step
+        response = _centre_mixture(net.sigmas, crop, patch + 2 * margin, s)(crops, grid)
+        trim = margin - radius
+        energy = gaussian_energy(response, net.divisive_sigma, pad=False)[..., trim : trim + patch, trim : trim + patch]
+    else:
+        margin = s // 2
+        response = _centre_mixture(net.sigmas, crop, patch + s, s)(crops, grid)  # the cells around the centre
+        energy = F.avg_pool2d(response * response, s).clamp_min(1e-12).sqrt()  # differentiable where flat
     floor = torch.empty(len(crops), 1, 1, 1, dtype=crops.dtype)
     for rows, sample in frames or [(slice(None), slice(None))]:
         floor[rows] = net.floor_scale * energy[sample].mean()
-    inverse = F.interpolate(net.inverse_divisor(energy, floor), size=(patch + 1, patch + 1), mode="bilinear", align_corners=True)[..., :patch, :patch]
-    half = s // 2
-    return net.equalize(response[..., half : half + patch, half : half + patch] * inverse)
+    inverse = net.inverse_divisor(energy, floor)
+    if net.divisive_sigma is None:
+        inverse = F.interpolate(inverse, size=(patch + 1, patch + 1), mode="bilinear", align_corners=True)[..., :patch, :patch]
+    return net.equalize(response[..., margin : margin + patch, margin : margin + patch] * inverse)
 
 
 def anywhere_locations(scene: RegisteredScene, count: int, rng: np.random.Generator) -> np.ndarray:
