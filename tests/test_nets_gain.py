@@ -235,4 +235,7 @@ def test_per_pixel_divisive_weight_file_round_trip_through_create_alcn(tmp_path)
     for backend in ("torch", "fast"):
         np.testing.assert_allclose(ALCN(weights=path, backend=backend).normalize(image), expected, atol=1e-4)
     assert ALCN(weights=path, scale=0.5).divisive == {"stride": 16, "scale": pytest.approx(0.8), "sigma": 4.0}
-    assert ALCN(model="gain").divisive["sigma"] is None  # the shipped file divides on the grid
+    grid = GainNormalizer(gain="divisive", floor_scale=0.8)  # a file without the option divides on the grid
+    grid_path = save_normalizer_file(tmp_path / "g.npz", grid.state_arrays(), grid.file_meta(trained=True))
+    assert ALCN(weights=grid_path).divisive["sigma"] is None
+    assert ALCN(model="gain").divisive["sigma"] == 2.0  # the shipped file: the per-pixel energy

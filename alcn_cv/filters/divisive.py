@@ -43,12 +43,17 @@ def cell_rms(response: np.ndarray, stride: int) -> np.ndarray:
     return np.sqrt(np.maximum(cells, 0.0))
 
 
+def _blurred_square(response: np.ndarray, sigma: float) -> np.ndarray:
+    """``G_sigma * response^2``, clipped at 0 (float rounding), reflect-101 beyond the borders."""
+    kernel = gaussian_kernel1d(sigma)
+    energy = cv2.sepFilter2D(cv2.multiply(response, response), cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101)
+    return np.maximum(energy, 0.0, out=energy)
+
+
 def gaussian_energy(response: np.ndarray, sigma: float) -> np.ndarray:
     """``(H, W)`` float32: ``sqrt(G_sigma * response^2)``, the kernel of
     :func:`~alcn_cv.filters.gaussian_mixture.gaussian_kernel1d`, reflect-101 beyond the borders."""
-    kernel = gaussian_kernel1d(sigma)
-    energy = cv2.sepFilter2D(response * response, cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101)
-    return np.sqrt(np.maximum(energy, 0.0, out=energy), out=energy)
+    return cv2.sqrt(_blurred_square(response, sigma))
 
 
 def divisive_normalization(
@@ -68,10 +73,14 @@ def divisive_normalization(
     Returns:
         ``(H, W)`` float32.
     """
-    e = cell_rms(response, stride) if sigma is None else gaussian_energy(response, sigma)
+    if sigma is not None:
+        # e^2 is the blurred square itself: OpenCV passes on it, no square root squared again
+        squared = _blurred_square(response, sigma)
+        f = scale * float(cv2.mean(cv2.sqrt(squared))[0]) if floor is None else floor
+        divisor = cv2.sqrt(cv2.add(squared, f * f + ABSOLUTE_FLOOR**2, dst=squared), dst=squared)
+        return cv2.divide(response, divisor, dst=divisor)
+    e = cell_rms(response, stride)
     f = scale * float(e.mean()) if floor is None else floor
     inverse = (1.0 / np.sqrt(e * e + np.float32(f * f + ABSOLUTE_FLOOR**2))).astype(np.float32)
-    if sigma is not None:
-        return cv2.multiply(response, inverse, dst=inverse)
     upsampled = upsample_grid(inverse, stride, response.shape)
     return cv2.multiply(response, upsampled, dst=upsampled)

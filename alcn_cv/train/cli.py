@@ -131,10 +131,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     r = subparsers.add_parser(
         "train-real-light", help="train the gain Normalizer on registered real scenes (identification objective)",
         description="Train the gain-adaptive Normalizer (alcn_cv.nets.gain: F_k = exp(g) w_k, the response divided "
-        "on a grid by its local energy, then tanh(x / tau)) "
+        "by its local energy, on a grid or per pixel, then tanh(x / tau)) "
         "on fixed-camera scenes under changing light: each textured location is a class seen under every "
         "frame's light (alcn_cv.train.real_light). Writes OUT/gain_normalizer.npz, checkpoints, train.log and "
-        "history.json. The shipped alcn_normalizer_gain.npz is this command with its defaults; the webcam "
+        "history.json. The shipped alcn_normalizer_gain.npz is this command with --divisive-sigma 2; the webcam "
         "scenes are for academic research only.",
     )
     defaults = RealLightConfig()

@@ -22,7 +22,7 @@ Outputs in the run folder: ``train.log``, ``history.json``, ``checkpoint.pt`` (a
 
 Command (the real scenes are for academic research only, see ``shared/data/README.md``)::
 
-    alcn train-real-light --out runs/gain      # courbevoie, frankfurt, panorama; 300 steps, seed 0
+    alcn train-real-light --out runs/gain --divisive-sigma 2   # courbevoie, frankfurt, panorama; 300 steps, seed 0
 
 (300 steps: 1 to 3 minutes on 2 CPU cores, one thread, depending on the machine's load. Longer
 training lowers the identification loss on the training scenes but not the identification on
