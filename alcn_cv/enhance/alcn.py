@@ -80,7 +80,7 @@ class ALCN(Normalization):
             model card) or ``"paper"`` (the paper's architecture, trained jointly with a
             detector, ``alcn_normalizer.npz``; see ``MODEL_CARD.md``) or ``"gain"`` (the
             gain-adaptive Normalizer of :mod:`alcn_cv.nets.gain`, F_k = exp(g) w_k, the
-            response divided on a grid by its local energy
+            response divided by its local energy (per pixel, a Gaussian of sigma 2)
             (:func:`~alcn_cv.filters.divisive.divisive_normalization`), then a contrast
             equalization ``tanh(x / tau)``; trained on real photographs of outdoor
             scenes under changing daylight by ``alcn train-real-light``;
