@@ -56,6 +56,7 @@ from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import InputError
 from alcn_cv.report import machine
 from alcn_cv.shared_data import shared_data_dir
+from alcn_cv.train.config import REAL_LIGHT_SCENES
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -76,7 +77,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 DEFAULT_METHODS = ("none", "clahe", "dog", "slcn", "dlcn", "sqi", "tantriggs", "dog+lstd", "alcn")
-DEFAULT_TRAIN = ("courbevoie", "frankfurt", "panorama")
+DEFAULT_TRAIN = REAL_LIGHT_SCENES  # the gain Normalizer's training scenes
 DEFAULT_TEST = ("mexico", "psm")
 DEFAULT_LEAVE_ONE_OUT = ("courbevoie", "frankfurt", "mexico", "panorama")
 DETECTORS = ("orb", "sift")

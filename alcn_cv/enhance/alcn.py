@@ -178,10 +178,11 @@ class ALCN(Normalization):
             logger.warning("%s holds UNTRAINED Normalizer weights (%s)", self.weights_path.name, meta.get("description", ""))
         self.backend = backend
         self.device = device
-        #: Eq. 3 exact from the gain Normalizer's grid in OpenCV (:func:`alcn_filter_grid`), its
-        #: maps interpolated as :meth:`GainNormalizer.dense <alcn_cv.nets.gain.GainNormalizer.dense>`
-        #: does, without the full-resolution maps of :meth:`weight_maps`.
-        self._maps_on_grid = self.per_pixel and self.scale == 1 and mixture == "exact" and backend in ("fast", "opencv")
+        #: The gain Normalizer's maps interpolated from its grid in OpenCV as
+        #: :meth:`GainNormalizer.dense <alcn_cv.nets.gain.GainNormalizer.dense>` does (:meth:`weight_maps`).
+        self._grid_interpolated = self.per_pixel and self.scale == 1 and backend in ("fast", "opencv")
+        #: Eq. 3 exact from that grid (:func:`alcn_filter_grid`), without the full-resolution maps.
+        self._maps_on_grid = self._grid_interpolated and mixture == "exact"
         if backend == "opencv":
             self._init_opencv(meta, grid_stride)
             return
@@ -405,8 +406,8 @@ class ALCN(Normalization):
             ``(N, H, W)`` float32.
         """
         h, w = gray.shape
-        if self.per_pixel and self.scale == 1 and self.backend in ("fast", "opencv"):
-            grid = self.weight_grid(gray)  # the gain Normalizer's grid, interpolated as GainNormalizer.dense does
+        if self._grid_interpolated:
+            grid = self.weight_grid(gray)
             return np.stack([upsample_grid(m, self.grid_stride, (h, w)) for m in grid])
         if self.backend == "opencv":
             maps = self.net.dense(self._working_image(gray))
@@ -445,12 +446,11 @@ class ALCN(Normalization):
         return np.tanh(response, out=response)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
-        if self._maps_on_grid and self.equalization_tau is not None:
-            grid = self.weight_grid(gray)
-            if self.divisive is not None:  # the division would cancel a scale folded into the maps
-                return self._finish(alcn_filter_grid(gray, grid, self.grid_stride, self.full_res_sigmas))
-            # 1 / tau folded into the grid's maps (Eq. 3 is linear in them), tanh in place
-            response = alcn_filter_grid(gray, grid * np.float32(1.0 / self.equalization_tau), self.grid_stride, self.full_res_sigmas)
+        # Without a division (which would cancel it), 1 / tau folds into the grid's maps: Eq. 3 is
+        # linear in them, and the tanh runs in place.
+        if self._maps_on_grid and self.equalization_tau is not None and self.divisive is None:
+            grid = self.weight_grid(gray) * np.float32(1.0 / self.equalization_tau)
+            response = alcn_filter_grid(gray, grid, self.grid_stride, self.full_res_sigmas)
             return np.tanh(response, out=response)
         return self._finish(self._mixture(gray))
 

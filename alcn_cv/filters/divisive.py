@@ -1,4 +1,4 @@
-"""Divisive normalization on a grid: the gain Normalizer's last step before its equalization.
+"""Divisive normalization, on a grid or per pixel: the gain Normalizer's last step before its equalization.
 
 After Jarrett et al., ICCV 2009 (DLCN: the response divided by its local standard deviation,
 floored by the image's mean of it), computed on a coarse grid so that it costs two

@@ -64,7 +64,7 @@ from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, gaussian_sigmas
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
 
-__all__ = ["GainNormalizer", "GAINS", "contrast_equalization", "dog_weights", "gaussian_energy", "ARCHITECTURE"]
+__all__ = ["GainNormalizer", "GAINS", "cell_rms", "contrast_equalization", "dog_weights", "gaussian_energy", "ARCHITECTURE"]
 
 #: The ``architecture`` field of a gain Normalizer's weight file.
 ARCHITECTURE = "gain"
@@ -101,13 +101,18 @@ def contrast_equalization(response: np.ndarray | torch.Tensor, tau: float | torc
     return np.tanh(response / np.float32(tau)).astype(np.float32, copy=False)
 
 
-def _cell_rms(response: torch.Tensor, stride: int) -> torch.Tensor:
+def cell_rms(response: torch.Tensor, stride: int, pad: bool = True) -> torch.Tensor:
     """Root-mean-square of a ``(B, 1, H, W)`` response over the cells of side ``stride``
-    centred on the grid points (:func:`alcn_cv.filters.divisive.cell_rms` in torch)."""
-    before = stride // 2
-    after = 2 * stride - 2 - before
+    centred on the grid points (:func:`alcn_cv.filters.divisive.cell_rms` in torch).
+    ``pad=False``: the response already spans whole cells (half a cell around the grid points),
+    ``(B, 1, H / stride, W / stride)``."""
+    squared = response * response
+    if pad:
+        before = stride // 2
+        after = 2 * stride - 2 - before
+        squared = reflect101_pad(squared, before, after, before, after)
     # The floor keeps the square root differentiable where a cell is exactly flat.
-    return F.avg_pool2d(reflect101_pad(response * response, before, after, before, after), stride).clamp_min(1e-12).sqrt()
+    return F.avg_pool2d(squared, stride).clamp_min(1e-12).sqrt()
 
 
 def _reflect101_index(x: torch.Tensor, dim: int, before: int, after: int) -> torch.Tensor:
@@ -389,7 +394,7 @@ class GainNormalizer(nn.Module):
             return response
         if self.divisive_sigma is not None:
             return response * self.inverse_divisor(gaussian_energy(response, self.divisive_sigma), floor)
-        inverse = self.inverse_divisor(_cell_rms(response, self.stride), floor)
+        inverse = self.inverse_divisor(cell_rms(response, self.stride), floor)
         h, w = response.shape[-2:]
         size = (self.stride * (inverse.shape[-2] - 1) + 1, self.stride * (inverse.shape[-1] - 1) + 1)
         return response * F.interpolate(inverse, size=size, mode="bilinear", align_corners=True)[..., :h, :w]

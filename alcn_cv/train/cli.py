@@ -16,8 +16,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from alcn_cv.shared_data import shared_data_dir
-from alcn_cv.train.config import RealLightConfig
+from alcn_cv.train.config import RealLightConfig, real_light_scene_dirs
 
 __all__ = ["add_parser"]
 
@@ -279,7 +278,7 @@ def _train_real_light(args: argparse.Namespace) -> int:
 
     from alcn_cv.train.real_light import train_real_light
 
-    scenes = args.scenes or [shared_data_dir() / "webcam" / name for name in ("courbevoie", "frankfurt", "panorama")]
+    scenes = args.scenes or real_light_scene_dirs()
     names = ("steps", "locations", "crop", "patch", "min_distance", "temperature", "consistency", "anywhere", "lr", "seed",
              "save_every")
     rendered = sorted(str(p) for p in args.rendered.iterdir() if p.is_dir()) if args.rendered else []

@@ -89,7 +89,8 @@ from typing import Any
 from alcn_cv.data.lighting import LIGHT_FAMILIES
 from alcn_cv.errors import InputError
 
-__all__ = ["PRESETS", "FewShotSetup", "RealLightConfig", "TrainConfig", "dump_toml", "load_config"]
+__all__ = ["PRESETS", "REAL_LIGHT_SCENES", "FewShotSetup", "RealLightConfig", "TrainConfig", "dump_toml", "load_config",
+           "real_light_scene_dirs"]
 
 
 @dataclass
@@ -418,6 +419,18 @@ def dump_toml(cfg: TrainConfig) -> str:
         if isinstance(values, dict):
             lines += ["", f"[{table}]"] + [f"{k} = {_toml_value(v)}" for k, v in values.items()]
     return "\n".join(lines) + "\n"
+
+
+#: The real training scenes of the gain Normalizer (``webcam`` of the shared data); ``mexico`` and
+#: the psm objects are the test set (``alcn bench relight``'s split).
+REAL_LIGHT_SCENES = ("courbevoie", "frankfurt", "panorama")
+
+
+def real_light_scene_dirs() -> list[Path]:
+    """The folders of :data:`REAL_LIGHT_SCENES` in the shared data."""
+    from alcn_cv.shared_data import shared_data_dir
+
+    return [shared_data_dir() / "webcam" / name for name in REAL_LIGHT_SCENES]
 
 
 @dataclass

@@ -43,14 +43,15 @@ from tqdm.auto import tqdm
 from alcn_cv.data.phos import render_windows
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
-from alcn_cv.io import atomic_write, list_images, read_image, to_gray
+from alcn_cv.io import atomic_write
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.report import describe_machine
-from alcn_cv.shared_data import shared_data_dir
+from alcn_cv.train.config import real_light_scene_dirs
+from alcn_cv.train.real_light import read_registered_frames
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file, save_normalizer_file
 
-__all__ = ["GAIN_SCENES", "distill", "distill_gain", "main", "output_gram"]
+__all__ = ["distill", "distill_gain", "main", "output_gram"]
 
 logger = logging.getLogger(__name__)
 
@@ -265,9 +266,6 @@ Speed and the difference from the exact ALCN output on whole frames: `alcn bench
 
 # --- The gain Normalizer's lite variant ----------------------------------------------------------
 
-#: The training scenes of the gain Normalizer (``../shared/data/webcam``); ``mexico`` and the psm
-#: objects are the test set and are never read here.
-GAIN_SCENES = ("courbevoie", "frankfurt", "panorama")
 #: The student of a gain teacher: hidden width and dilations (the teacher's: 16, (1, 2, 4)).
 GAIN_STUDENT = {"channels": 8, "dilations": (1, 2, 4)}
 #: Every ``_GAIN_VAL_EVERY``-th frame of each real scene is held out for validation.
@@ -295,11 +293,7 @@ def _gain_frames(scenes: Sequence[str | os.PathLike], rendered: int, seed: int, 
     train: list[np.ndarray] = []
     val: list[np.ndarray] = []
     for folder in scenes:
-        files = list_images(folder) if Path(folder).is_dir() else []
-        if len(files) < 2:
-            raise DatasetError(f"{folder}: a registered scene needs at least 2 frames, found {len(files)}")
-        for i, file in enumerate(files):
-            frame = to_gray(read_image(file)).astype(np.float32) * np.float32(1 / 255)
+        for i, frame in enumerate(read_registered_frames(folder)):
             (val if i % _GAIN_VAL_EVERY == _GAIN_VAL_EVERY - 1 else train).append(frame)
     for i in tqdm(range(rendered), desc="render scenes", unit="scene", disable=not progress):
         stack, _ = render_scene(np.random.default_rng([seed, i]), _RENDERED_SIZE, _RENDERED_FRAMES)
@@ -372,8 +366,8 @@ def distill_gain(
 
     Args:
         teacher: the gain teacher's weight file.
-        scenes: folders of registered frames (default: :data:`GAIN_SCENES` of the shared
-            ``webcam`` data; never the test scenes).
+        scenes: folders of registered frames (default: :data:`~alcn_cv.train.config.REAL_LIGHT_SCENES` of the
+            shared ``webcam`` data; never the test scenes).
         rendered: rendered registered scenes added to the data (256x256, 4 lights each).
         seed: seeds the student's initialisation, the relighting and the rendering.
         epochs, lr: Adam over every training frame once per epoch, cosine schedule.
@@ -391,7 +385,7 @@ def distill_gain(
     if teacher_file.meta.get("architecture") != "gain":
         raise InputError(f"{teacher_path} is not a gain Normalizer")
     teacher_net = normalizer_from_file(teacher_file).eval()
-    scenes = [shared_data_dir() / "webcam" / name for name in GAIN_SCENES] if scenes is None else list(scenes)
+    scenes = real_light_scene_dirs() if scenes is None else list(scenes)
     start = time.perf_counter()
     train_frames, val_frames = _gain_frames(scenes, rendered, seed, progress)
     if not val_frames:

@@ -48,7 +48,7 @@ from tqdm import tqdm
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, list_images, read_image, to_gray, write_json
 from alcn_cv.filters.gaussian_mixture import kernel_radius
-from alcn_cv.nets.gain import GainNormalizer, gaussian_energy
+from alcn_cv.nets.gain import GainNormalizer, cell_rms, gaussian_energy
 from alcn_cv.report import machine
 from alcn_cv.train.models import CentreMixture
 from alcn_cv.train.config import RealLightConfig
@@ -62,6 +62,7 @@ __all__ = [
     "anywhere_locations",
     "identification_loss",
     "load_scene",
+    "read_registered_frames",
     "pair_loss",
     "sample_locations",
     "textured_locations",
@@ -120,8 +121,8 @@ def sample_locations(candidates: np.ndarray, count: int, min_distance: int, rng:
     return np.stack(chosen) if chosen else np.zeros((0, 2), np.int64)
 
 
-def load_scene(folder: str | Path, pad: int, patch: int) -> RegisteredScene:
-    """Read a folder of registered frames (grayscale, [0, 1]) and its textured locations.
+def read_registered_frames(folder: str | Path) -> np.ndarray:
+    """The frames of a folder of registered frames: ``(n, H, W)`` float32 grayscale in [0, 1].
 
     Raises:
         DatasetError: fewer than two frames, or frames of different sizes.
@@ -133,7 +134,14 @@ def load_scene(folder: str | Path, pad: int, patch: int) -> RegisteredScene:
     frames = [to_gray(read_image(f)) for f in files]
     if len({f.shape for f in frames}) != 1:
         raise DatasetError(f"{folder}: frames of different sizes; the frames of a scene must be registered")
-    stack = np.stack(frames).astype(np.float32) / np.float32(255)
+    return np.stack(frames).astype(np.float32) / np.float32(255)
+
+
+def load_scene(folder: str | Path, pad: int, patch: int) -> RegisteredScene:
+    """Read a folder of registered frames (grayscale, [0, 1], :func:`read_registered_frames`)
+    and its textured locations."""
+    folder = Path(folder)
+    stack = read_registered_frames(folder)
     candidates = textured_locations(stack, patch) + pad
     padded = np.stack([cv2.copyMakeBorder(f, pad, pad, pad, pad, cv2.BORDER_REFLECT_101) for f in stack])
     return RegisteredScene(folder.name, padded, candidates, pad)
@@ -268,7 +276,7 @@ def _normalized_centres(
     else:
         margin = s // 2
         response = _centre_mixture(net.sigmas, crop, patch + s, s)(crops, grid)  # the cells around the centre
-        energy = F.avg_pool2d(response * response, s).clamp_min(1e-12).sqrt()  # differentiable where flat
+        energy = cell_rms(response, s, pad=False)
     floor = torch.empty(len(crops), 1, 1, 1, dtype=crops.dtype)
     for rows, sample in frames or [(slice(None), slice(None))]:
         floor[rows] = net.floor_scale * energy[sample].mean()
