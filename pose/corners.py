@@ -72,8 +72,8 @@ def normalization_for(spec: str) -> Normalization:
     resolution.
 
     ALCN runs at working scale 1 on the downscaled frame; without a ``backend`` in ``spec``,
-    through its torch-free ``cv2.dnn`` backend where its weights have an ONNX twin (the
-    paper's model), else ALCN's default backend (the lite model). Every other name is built as
+    through its torch-free ``cv2.dnn`` backend where its weights have an ONNX twin (every
+    shipped model has one), else ALCN's default backend. Every other name is built as
     ``from_spec(spec)``.
     """
     name, params = parse_spec(spec)

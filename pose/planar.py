@@ -70,8 +70,9 @@ logger = logging.getLogger(__name__)
 
 #: The rows of the real-light table: no normalization, the DoG tuned for pose (as ``alcn pose
 #: eval``), DLCN and Tan-Triggs (the strongest classical methods of ``alcn bench relight``), the
-#: default ALCN and the gain-adaptive Normalizer trained on real webcam frames.
-DEFAULT_NORMALIZERS = ("none", "dog:sigma1=1:sigma2=2", "dlcn", "tantriggs", "alcn", "alcn:model=gain")
+#: default ALCN (the gain-adaptive Normalizer trained on real webcam frames) and the lite one distilled
+#: from the paper's, trained on rendered data.
+DEFAULT_NORMALIZERS = ("none", "dog:sigma1=1:sigma2=2", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
 #: Assumed horizontal field of view (degrees) of the webcams, whose intrinsics are unknown.
 DEFAULT_HFOV = 60.0
 #: Side of the target as a fraction of the frame's width and height.

@@ -9,7 +9,7 @@ import pytest
 from alcn_cv import InputError
 from alcn_cv.bench import speed
 
-METHODS = ["none", "clahe", "alcn", "alcn exact", "alcn grid16 pyramid", "alcn lite", "alcn torch cpu", "alcn gain-lite"]
+METHODS = ["none", "clahe", "alcn", "alcn exact", "alcn grid16 pyramid", "alcn lite", "alcn lite exact", "alcn torch cpu", "alcn gain-lite"]
 
 
 @pytest.fixture(scope="module")
@@ -51,14 +51,14 @@ def test_every_case_has_every_method_and_its_ratio_to_dog(report):
 def test_accuracy_is_measured_against_the_exact_path(report):
     _, result = report
     acc = {(a["method"], a["width"]) for a in result["accuracy"]}
-    others = ("alcn", "alcn grid16 pyramid", "alcn lite", "alcn torch cpu")
+    others = ("alcn grid16 pyramid", "alcn lite", "alcn lite exact")  # the paper family; the gain ones are their own method
     assert acc == {(m, w) for m in others for w, _ in speed.QUICK_SIZES}
     by_case = {(a["method"], a["width"]): a for a in result["accuracy"]}
     for a in result["accuracy"]:
         assert 0 <= a["mean_abs"] <= a["max_abs"] and np.isfinite(a["max_rel_range"])
     for w, _ in speed.QUICK_SIZES:
-        # the torch backend runs the default's lite Normalizer with the exact Eq. 3: as "alcn lite"
-        np.testing.assert_allclose(by_case["alcn torch cpu", w]["max_abs"], by_case["alcn lite", w]["max_abs"], atol=1e-4)
+        # the pyramid adds its error to the distillation's
+        assert by_case["alcn lite", w]["max_abs"] >= by_case["alcn lite exact", w]["max_abs"] - 1e-3
 
 
 def test_video_memory_is_recorded(report):
@@ -116,7 +116,7 @@ def test_report_states_machine_command_and_settings(report):
 def test_targets_are_reported(report):
     out, result = report
     targets = result["targets"]
-    assert len(targets["summary"]) == 11  # with the BGR output against the Lab round trip and the gain-lite model
+    assert len(targets["summary"]) == 12  # the default against 2 and 4 DoGs, its lite variant, the lite paper-family ALCN, ...
     for row in targets["summary"]:
         assert set(row) == {"target", "measured", "goal", "met", "note"}
     assert {r["method"] for r in targets["contract"]} == set(__import__("alcn_cv").available())

@@ -12,7 +12,7 @@ from alcn_cv.enhance.registry import available, from_spec
 from alcn_cv.io import iter_frames
 
 #: Every registered method (they all share the colour path), and the gain Normalizer.
-METHODS = [*available(), "alcn:model=gain"]
+METHODS = [*available(), "alcn:model=lite"]
 
 
 def _saturated_hues() -> np.ndarray:
@@ -54,7 +54,7 @@ def test_colour_within_one_level_on_a_photograph(shared_data):
     if photo is None:
         pytest.skip("the cookie-box photograph is not in the shared data")
     photo = cv2.resize(photo, (480, 360), interpolation=cv2.INTER_AREA)
-    for name in ("alcn", "alcn:model=gain"):
+    for name in ("alcn", "alcn:model=lite"):
         method = from_spec(name)
         diff = np.abs(method.apply(photo).astype(int) - lab_round_trip(method, photo, np.dtype(np.uint8)))
         assert diff.max() <= 1, name
@@ -73,7 +73,7 @@ def _real_frames(root) -> list[tuple[str, np.ndarray]]:
     return frames
 
 
-@pytest.mark.parametrize("name", ["alcn", "alcn:model=gain", "dog", "clahe"])
+@pytest.mark.parametrize("name", ["alcn", "alcn:model=lite", "dog", "clahe"])
 def test_colour_within_one_level_on_real_frames(shared_data, name):
     frames = _real_frames(shared_data)
     if not frames:

@@ -256,13 +256,16 @@ def test_model_names():
     assert lite.weights_path == MODELS["lite"] and lite.apply(np.zeros((48, 64), np.uint8)).shape == (48, 64)
 
 
-def test_default_is_the_real_time_configuration():
+def test_default_is_the_gain_normalizer_and_lite_the_pyramid():
     from alcn_cv.enhance.alcn import MODELS
 
     default = alcn_cv.createALCN()
-    assert (default.weights_path, default.mixture, default.grid_stride) == (MODELS["lite"], "pyramid", 8)
-    assert alcn_cv.createALCN(backend="torch").mixture == "exact"  # no pyramid in torch
-    assert alcn_cv.createALCN(backend="opencv").mixture == "pyramid"
+    assert (default.weights_path, default.mixture, default.grid_stride, default.scale) == (MODELS["gain"], "exact", 8, 1.0)
+    assert alcn_cv.createALCN(backend="opencv").mixture == "exact"
+    lite = alcn_cv.createALCN(model="lite")
+    assert (lite.weights_path, lite.mixture, lite.grid_stride) == (MODELS["lite"], "pyramid", 8)
+    assert alcn_cv.createALCN(model="lite", backend="torch").mixture == "exact"  # no pyramid in torch
+    assert alcn_cv.createALCN(model="lite", backend="opencv").mixture == "pyramid"
 
 
 def test_threads_are_restored(image):

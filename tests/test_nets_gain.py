@@ -194,7 +194,7 @@ def test_divisive_weight_file_round_trip_through_create_alcn(tmp_path):
         expected = net(torch.from_numpy(image)[None, None])[0, 0].numpy()
     alcn = ALCN(weights=path, backend="torch")
     np.testing.assert_allclose(alcn.normalize(image), expected, atol=1e-5)
-    assert alcn._tiling((9000, 9000)) is None  # the floor is a mean over the whole image
+    assert alcn._tiling((9000, 9000)) is None  # the floor is a mean over the whole image's cells
 
 
 def test_per_pixel_divisive_numpy_and_torch_agree_and_ignore_the_light_strength():

@@ -19,7 +19,7 @@ from alcn_cv.errors import InputError  # noqa: E402
 from alcn_cv.io import map_video, open_video_writer  # noqa: E402
 
 
-@pytest.mark.parametrize("spec", ["alcn", "alcn:model=paper:grid_stride=16", "dog", "slcn"])
+@pytest.mark.parametrize("spec", ["alcn", "alcn:model=lite", "alcn:model=paper:grid_stride=16", "dog", "slcn"])
 @pytest.mark.parametrize("colour", [False, True])
 def test_strips_give_the_whole_image(monkeypatch, spec, colour):
     method = from_spec(spec)
@@ -34,15 +34,14 @@ def test_strips_give_the_whole_image(monkeypatch, spec, colour):
 def test_whole_image_methods_and_odd_working_sizes_are_not_cut(monkeypatch):
     monkeypatch.setattr(base, "TILE_PIXELS", 20_000)
     assert from_spec("ns")._strips((416, 300)) is None
-    assert from_spec("alcn:model=gain")._strips((416, 300)) is None  # its divisive floor is an image mean
-    assert from_spec("alcn")._strips((417, 300)) is None  # 417 rows have no whole working image
+    assert from_spec("alcn:model=lite")._strips((417, 300)) is None  # 417 rows have no whole working image at scale 0.5
     assert from_spec("alcn")._strips((16, 300)) is None  # small images stay whole (below the limit)
     monkeypatch.setattr(base, "TILE_PIXELS", 10**9)
     assert from_spec("alcn")._strips((416, 300)) is None
 
 
 def test_lite_inference_tanh_equals_torch():
-    alcn = alcn_cv.createALCN()
+    alcn = alcn_cv.createALCN(model="lite")
     image = torch.from_numpy(synthetic_frame(200, 160, False).astype(np.float32) / 255)[None, None]
     with torch.inference_mode():
         fast = alcn.net.dense_grid(image)
@@ -51,7 +50,7 @@ def test_lite_inference_tanh_equals_torch():
 
 
 def test_level0_maps_are_the_exact_bilinear_interpolation():
-    alcn = alcn_cv.createALCN()
+    alcn = alcn_cv.createALCN(model="lite")
     gray = synthetic_frame(320, 240, False).astype(np.float32) / 255
     grid = alcn.weight_grid(gray)
     assert _integer_zoom(1 / 16, -1 / 32) == (16, 7)

@@ -185,10 +185,11 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--colours", type=_list(str), help="gray and/or bgr (default both)")
     p.add_argument("--methods", type=_list(str),
                    help="comma-separated labels to run (default all; dog always runs). Labels: none, clahe, dog, "
-                   + ", ".join(f"'{v}'" for v in [*speed.ALCN_VARIANTS, *speed.GAIN_VARIANTS]) + ", 'alcn opencv', 'alcn torch cpu', 'alcn torch cuda'")
+                   + ", ".join(f"'{v}'" for v in [*speed.GAIN_VARIANTS, *speed.ALCN_VARIANTS]) + ", 'alcn opencv', 'alcn torch cpu', 'alcn torch cuda' "
+                   "('alcn': the default, the gain Normalizer; the last three: the default on those backends)")
     p.add_argument("--weights", help="weight file of the paper-model variants (default: the shipped alcn_normalizer.npz)")
     p.add_argument("--lite-weights",
-                   help="weight file of the default and 'alcn lite' variants (default: the shipped alcn_normalizer_lite.npz)")
+                   help="weight file of the 'alcn lite' variants (default: the shipped alcn_normalizer_lite.npz)")
     p.add_argument("--image", help="time on this image resized to each size (default: synthetic frames)")
     p.add_argument("--warmup", type=int, help=f"untimed runs per case (default {d.warmup})")
     p.add_argument("--repeats", type=int, dest="max_repeats", help=f"at most this many timed runs per case (default {d.max_repeats})")

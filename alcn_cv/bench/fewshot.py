@@ -56,7 +56,7 @@ __all__ = ["DEFAULT_METHODS", "FewShotSettings", "compare_to_dog", "fewshot_comm
 logger = logging.getLogger(__name__)
 
 #: The methods compared by default.
-DEFAULT_METHODS = ("none", "dog", "dlcn", "tantriggs", "alcn", "alcn:model=gain")
+DEFAULT_METHODS = ("none", "dog", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
 _SETUP = FewShotSetup()
 
 

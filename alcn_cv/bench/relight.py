@@ -76,7 +76,7 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-DEFAULT_METHODS = ("none", "clahe", "dog", "slcn", "dlcn", "sqi", "tantriggs", "dog+lstd", "alcn")
+DEFAULT_METHODS = ("none", "clahe", "dog", "slcn", "dlcn", "sqi", "tantriggs", "dog+lstd", "alcn", "alcn:model=lite")
 DEFAULT_TRAIN = REAL_LIGHT_SCENES  # the gain Normalizer's training scenes
 DEFAULT_TEST = ("mexico", "psm")
 DEFAULT_LEAVE_ONE_OUT = ("courbevoie", "frankfurt", "mexico", "panorama")

@@ -6,10 +6,15 @@ resolution and the Gaussian mixture of Eq. 3 is applied there with the sigmas sc
 ``1 / working_scale``, so the output keeps the input's size and detail:
 ``ALCN(I) = sum_k G_{sigma_k / s} * (F_k(I) o I)``.
 
-The default is the real-time configuration: the lite Normalizer distilled from the
-paper's, and the large blurs on a Gaussian pyramid. ``createALCN(model="paper", mixture="exact")``
-is the paper's network with Eq. 3 computed exactly, hundreds of times slower; ``alcn bench speed``
-measures both and their difference, ``alcn bench detect`` their detection accuracy.
+The default is the gain-adaptive Normalizer (:mod:`alcn_cv.nets.gain`, ``model="gain"``), trained on
+real photographs under changing daylight: its exact Eq. 3 runs from its grid in OpenCV at the
+input resolution, then the response is divided by its local energy and equalized. Its weights
+are trained on the webcam frames of Verdie et al. and AMOS, **for academic research only** (see
+its model card); ``model="lite"``, the paper's family trained on rendered data (the lite
+Normalizer distilled from the paper's, the large blurs on a Gaussian pyramid), has no such
+restriction. ``createALCN(model="paper", mixture="exact")`` is the paper's network with Eq. 3
+computed exactly, hundreds of times slower; ``alcn bench speed`` measures them all,
+``alcn bench relight`` and ``alcn bench detect`` their accuracy.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import logging
 import math
 from collections.abc import Iterator
 from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -29,7 +35,7 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
-from alcn_cv.filters.divisive import divisive_normalization
+from alcn_cv.filters.divisive import divisive_normalization, gaussian_energy
 from alcn_cv.filters.gaussian_mixture import (
     PYRAMID_MIN_SIGMA,
     alcn_filter,
@@ -65,6 +71,9 @@ MODELS = {
 }
 #: The distilled models and the model each was distilled from (ALCN warns when that file changed).
 TEACHERS = {"lite": "paper", "gain-lite": "gain"}
+#: The divisive floor ``f`` of the whole image while its strips are normalized (None: each
+#: call computes it from its own image); a context variable, so threads do not share it.
+_DIVISIVE_FLOOR: ContextVar[float | None] = ContextVar("alcn_divisive_floor", default=None)
 
 
 @register
@@ -74,23 +83,26 @@ class ALCN(Normalization):
     Args:
         weights: a Normalizer weight file (``.npz``, see :mod:`alcn_cv.weight_file`); default:
             the file shipped in the package for ``model``.
-        model: which shipped Normalizer to use when ``weights`` is not given: ``"lite"``
-            (default; :class:`~alcn_cv.nets.lite.LiteNormalizer` distilled from the paper's,
-            ``alcn_cv/weights/alcn_normalizer_lite.npz``, a few hundred times cheaper; see its
-            model card) or ``"paper"`` (the paper's architecture, trained jointly with a
-            detector, ``alcn_normalizer.npz``; see ``MODEL_CARD.md``) or ``"gain"`` (the
-            gain-adaptive Normalizer of :mod:`alcn_cv.nets.gain`, F_k = exp(g) w_k, the
-            response divided by its local energy (per pixel, a Gaussian of sigma 2)
+        model: which shipped Normalizer to use when ``weights`` is not given: ``"gain"``
+            (default; the gain-adaptive Normalizer of :mod:`alcn_cv.nets.gain`, F_k = exp(g) w_k,
+            the response divided by its local energy (per pixel, a Gaussian of sigma 2)
             (:func:`~alcn_cv.filters.divisive.divisive_normalization`), then a contrast
-            equalization ``tanh(x / tau)``; trained on real photographs of outdoor
-            scenes under changing daylight by ``alcn train-real-light``;
-            ``alcn_normalizer_gain.npz``, card ``alcn_normalizer_gain.md``) or ``"gain-lite"``
-            (the same method with a smaller network distilled from it by ``alcn distill``,
-            ``alcn_normalizer_gain_lite.npz``, card ``alcn_normalizer_gain_lite.md``).
+            equalization ``tanh(x / tau)``; trained on real photographs of outdoor scenes under
+            changing daylight by ``alcn train-real-light``, first on real light changes;
+            ``alcn_normalizer_gain.npz``, card ``alcn_normalizer_gain.md``; **its training
+            photographs are for academic research only**, and so are its weights) or
+            ``"gain-lite"`` (the same method with a smaller network distilled from it by ``alcn
+            distill``, ``alcn_normalizer_gain_lite.npz``, card ``alcn_normalizer_gain_lite.md``;
+            academic research only too) or ``"lite"`` (:class:`~alcn_cv.nets.lite.LiteNormalizer`
+            distilled from the paper's, trained on rendered data only,
+            ``alcn_cv/weights/alcn_normalizer_lite.npz``, a few hundred times cheaper than the
+            paper's; see its model card) or ``"paper"`` (the paper's architecture, trained jointly
+            with a detector, ``alcn_normalizer.npz``; see ``MODEL_CARD.md``).
         scale: working scale, the factor from the input resolution to the one the Normalizer
             sees (its 48x48 window and sigmas are in working-scale pixels). Default: the
-            weight file's ``working_scale`` (0.5 for the shipped file: a 640x480 frame is
-            seen at 320x240, where a 48-pixel window spans 15% of the width).
+            weight file's ``working_scale`` (1 for the gain Normalizers; 0.5 for the paper's
+            and the lite one: a 640x480 frame is seen at 320x240, where a 48-pixel window
+            spans 15% of the width).
         backend: ``None`` (default): ``"fast"`` when torch is installed, else ``"opencv"``;
             ``"fast"`` (Normalizer in torch on the CPU, Gaussian mixture in OpenCV),
             ``"torch"`` (everything in torch/kornia, on ``device``), or ``"opencv"`` (no torch at
@@ -101,7 +113,7 @@ class ALCN(Normalization):
         grid_stride: spacing, in working-scale pixels, of the windows the Normalizer is
             evaluated on (a multiple of the network's stride); the weight maps are interpolated
             bilinearly in between. Default: the network's own stride (4 for the paper's, 8 for
-            the lite one). The paper's network at 8, 16, 32 is 4, 16, 64 times cheaper in its
+            the lite and gain ones). The paper's network at 8, 16, 32 is 4, 16, 64 times cheaper in its
             fully connected layer (not in its convolutions) and has smoother maps.
         mixture: ``"exact"``: Eq. 3 at the input resolution; ``"pyramid"`` (``fast`` and
             ``opencv`` backends): the blurs of sigma >= 2 pixels on a Gaussian pyramid and the
@@ -118,13 +130,15 @@ class ALCN(Normalization):
             spinning to slow the OpenCV calls that follow, the mixture's and the application's.
             None: torch's own setting.
 
-    The default, ``model="lite"`` with ``mixture="pyramid"``, is the real-time configuration;
-    ``model="paper", mixture="exact"`` is the exact Eq. 3 with the paper's network.
+    The default, ``model="gain"`` (exact Eq. 3, divisive normalization, equalization), is the
+    method first on real light changes (``alcn bench relight``); ``model="lite"`` with
+    ``mixture="pyramid"`` is the paper family's real-time configuration and ``model="paper",
+    mixture="exact"`` its exact Eq. 3 with the paper's network.
     ``alcn bench speed`` measures every variant's time and its difference from the exact output.
     """
 
     name = "alcn"
-    summary = "Adaptive Local Contrast Normalization: a CNN predicts per-pixel weights of 10 Gaussian kernels (Eq. 3)"
+    summary = "Adaptive Local Contrast Normalization: a CNN predicts per-pixel weights of Gaussian kernels (Eq. 3)"
     reference = "Rad, Roth & Lepetit, BMVC 2017"
 
     def __init__(
@@ -135,7 +149,7 @@ class ALCN(Normalization):
         device: str = "cpu",
         grid_stride: int | None = None,
         mixture: str | None = None,
-        model: str = "lite",
+        model: str = "gain",
         threads: int | None = 1,
     ) -> None:
         if backend is None:
@@ -417,9 +431,26 @@ class ALCN(Normalization):
             return maps
         return np.stack([cv2.resize(m, (w, h), interpolation=cv2.INTER_LINEAR) for m in maps])
 
+    @contextmanager
+    def _strip_context(self, img: np.ndarray, strips: list[tuple[int, int, int, int]]) -> Iterator[None]:
+        # The divisive floor is a mean of the energy over the whole image: a first pass over the
+        # strips sums it (Eq. 3 and the energy computed twice, the memory still a strip's).
+        if self.divisive is None:
+            yield
+            return
+        total = 0.0
+        for start, stop, lo, hi in strips:
+            energy = gaussian_energy(self._mixture(self._intensity(img[lo:hi])), self.divisive["sigma"])
+            total += float(energy[start - lo : stop - lo].sum(dtype=np.float64))
+        token = _DIVISIVE_FLOOR.set(self.divisive["scale"] * total / (img.shape[0] * img.shape[1]))
+        try:
+            yield
+        finally:
+            _DIVISIVE_FLOOR.reset(token)
+
     def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
-        if self.divisive is not None:
-            return None  # the divisive floor is a mean over the whole image
+        if self.divisive is not None and self.divisive["sigma"] is None:
+            return None  # the floor of a division on the grid is a mean over the whole image's cells
         # A strip gives the whole image's output when it starts on a grid row (and so on a row
         # of every pyramid level) and its working image is the whole one's rows (an integer
         # zoom from the working scale); its halo covers the Normalizer's windows around the
@@ -431,19 +462,21 @@ class ALCN(Normalization):
         top = max(level for level, _ in pyramid_plan(self.full_res_sigmas, PYRAMID_MIN_SIGMA)) if self.mixture == "pyramid" else 0
         step = math.lcm(zoom * self.grid_stride, 2**top)
         reach = zoom * (self._network_reach + self.grid_stride) + kernel_radius(max(self.full_res_sigmas)) + 2 ** (top + 2)
+        if self.divisive is not None:  # the energy's Gaussian
+            reach += kernel_radius(self.divisive["sigma"])
         return -(-reach // step) * step, step
 
     def _finish(self, response: np.ndarray) -> np.ndarray:
         """The method's last steps after Eq. 3, when it has them (the gain Normalizer): the
         divisive normalization, then the contrast equalization (:mod:`alcn_cv.nets.gain`).
         ``response`` (float32, the caller's own) is overwritten by the equalization."""
+        # 1 / tau folds into the division; without one, the multiplication is in place
+        inverse_tau = 1.0 if self.equalization_tau is None else 1.0 / self.equalization_tau
         if self.divisive is not None:
-            response = divisive_normalization(response, **self.divisive)
-        if self.equalization_tau is None:
-            return response
-        # in place: one full-resolution array fewer to allocate and write
-        np.multiply(response, np.float32(1.0 / self.equalization_tau), out=response)
-        return np.tanh(response, out=response)
+            response = divisive_normalization(response, **self.divisive, floor=_DIVISIVE_FLOOR.get(), multiplier=inverse_tau)
+        elif inverse_tau != 1.0:
+            np.multiply(response, np.float32(inverse_tau), out=response)
+        return response if self.equalization_tau is None else np.tanh(response, out=response)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         # Without a division (which would cancel it), 1 / tau folds into the grid's maps: Eq. 3 is

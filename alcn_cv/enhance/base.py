@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from typing import ClassVar
 
 import cv2
@@ -196,8 +197,9 @@ class Normalization:
             result = self._apply_colour(img, out_dtype)
         else:  # a large image: strip by strip, each with the rows around it that its output sees
             result = np.empty(img.shape, out_dtype)
-            for start, stop, lo, hi in strips:
-                result[start:stop] = self._apply_colour(img[lo:hi], out_dtype)[start - lo : stop - lo]
+            with self._strip_context(img, strips):
+                for start, stop, lo, hi in strips:
+                    result[start:stop] = self._apply_colour(img[lo:hi], out_dtype)[start - lo : stop - lo]
         if alpha is None:
             return result
         if alpha.dtype != out_dtype:
@@ -256,6 +258,20 @@ class Normalization:
         as the float path sees them, mapped to uint8 as it maps them (the same float operations
         on the same values), then one ``cv2.LUT`` pass over the image."""
         return cv2.LUT(gray8, self._response_to(response_of(_UINT8_LEVELS), np.dtype(np.uint8)))
+
+    def _intensity(self, img: np.ndarray) -> np.ndarray:
+        """The float32 ``HxW`` plane :meth:`apply` normalizes for a valid gray or BGR image
+        without alpha: its intensities in [0, 1], or a BGR image's CIE L / 100 (as :meth:`_apply_bgr`)."""
+        unit = _to_unit_float(img)
+        if unit.ndim == 3 and unit.shape[2] == 3:
+            return cv2.transform(cv2.cvtColor(unit, cv2.COLOR_BGR2Lab, dst=unit), _LIGHTNESS_OF_LAB)
+        return unit.reshape(img.shape[:2])
+
+    def _strip_context(self, img: np.ndarray, strips: list[tuple[int, int, int, int]]) -> AbstractContextManager:
+        """The context :meth:`apply` normalizes the strips of a large image in (:meth:`_strips`):
+        a method whose output depends on a statistic of the whole image (ALCN's divisive floor)
+        computes it here from the strips first; by default none is needed."""
+        return nullcontext()
 
     def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
         """How :meth:`apply` may cut an image of ``shape`` into horizontal strips: ``(halo,

@@ -44,10 +44,10 @@ def cell_rms(response: np.ndarray, stride: int) -> np.ndarray:
 
 
 def _blurred_square(response: np.ndarray, sigma: float) -> np.ndarray:
-    """``G_sigma * response^2``, clipped at 0 (float rounding), reflect-101 beyond the borders."""
+    """``G_sigma * response^2``, reflect-101 beyond the borders. Never negative, float rounding
+    included: every term of the blur is a positive weight times a square, so no clip is needed."""
     kernel = gaussian_kernel1d(sigma)
-    energy = cv2.sepFilter2D(cv2.multiply(response, response), cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101)
-    return np.maximum(energy, 0.0, out=energy)
+    return cv2.sepFilter2D(cv2.multiply(response, response), cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101)
 
 
 def gaussian_energy(response: np.ndarray, sigma: float) -> np.ndarray:
@@ -57,18 +57,26 @@ def gaussian_energy(response: np.ndarray, sigma: float) -> np.ndarray:
 
 
 def divisive_normalization(
-    response: np.ndarray, stride: int, scale: float, floor: float | None = None, sigma: float | None = None
+    response: np.ndarray,
+    stride: int,
+    scale: float,
+    floor: float | None = None,
+    sigma: float | None = None,
+    multiplier: float = 1.0,
 ) -> np.ndarray:
-    """``response / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` (see the module): ``e`` on the grid,
-    the divisor interpolated bilinearly between the grid points, or per pixel with ``sigma``.
+    """``multiplier * response / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` (see the module): ``e`` on
+    the grid, the divisor interpolated bilinearly between the grid points, or per pixel with ``sigma``.
 
     Args:
         response: ``(H, W)`` float32, unbounded.
         stride: the grid's spacing in pixels (>= 1; unused with ``sigma``).
         scale: ``c`` in ``f = c * mean(e)`` (> 0).
-        floor: ``f`` itself, overriding ``c * mean(e)``.
+        floor: ``f`` itself, overriding ``c * mean(e)`` (an image normalized in strips passes
+            ``c`` times the mean of :func:`gaussian_energy` over the whole image).
         sigma: the Gaussian window of a per-pixel energy :func:`gaussian_energy` (pixels), instead
             of the grid's cells.
+        multiplier: a factor of the result, folded into its division (the gain Normalizer's
+            ``1 / tau``): no pass of its own.
 
     Returns:
         ``(H, W)`` float32.
@@ -78,9 +86,9 @@ def divisive_normalization(
         squared = _blurred_square(response, sigma)
         f = scale * float(cv2.mean(cv2.sqrt(squared))[0]) if floor is None else floor
         divisor = cv2.sqrt(cv2.add(squared, f * f + ABSOLUTE_FLOOR**2, dst=squared), dst=squared)
-        return cv2.divide(response, divisor, dst=divisor)
+        return cv2.divide(response, divisor, dst=divisor, scale=multiplier)
     e = cell_rms(response, stride)
     f = scale * float(e.mean()) if floor is None else floor
-    inverse = (1.0 / np.sqrt(e * e + np.float32(f * f + ABSOLUTE_FLOOR**2))).astype(np.float32)
+    inverse = (multiplier / np.sqrt(e * e + np.float32(f * f + ABSOLUTE_FLOOR**2))).astype(np.float32)
     upsampled = upsample_grid(inverse, stride, response.shape)
     return cv2.multiply(response, upsampled, dst=upsampled)

@@ -264,12 +264,15 @@ def alcn_filter_grid(image: np.ndarray, grid: np.ndarray, stride: int, sigmas: S
     if scales is not None:  # one product for every kernel: sum_k G_k * (s_k F o I)
         product = upsample_grid(grid[0], stride, image.shape)
         cv2.multiply(image, product, dst=product)
-        out = np.zeros(image.shape, np.float32)
-        blurred = np.empty(image.shape, np.float32)
+        # s_k folded into each blur's row kernel: no pass to scale, and the first blur is the output
+        out, blurred = None, None
         for scale, sigma in zip(scales, sigmas):
             kernel = _cached_kernel(sigma)
-            cv2.sepFilter2D(product, cv2.CV_32F, kernel, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
-            cv2.scaleAdd(blurred, float(scale), out, dst=out)
+            blurred = cv2.sepFilter2D(product, cv2.CV_32F, kernel * scale, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
+            if out is None:
+                out, blurred = blurred, None
+            else:
+                cv2.add(out, blurred, dst=out)
         return out
     out: np.ndarray | None = None
     blurred = np.empty(image.shape, np.float32)
