@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from alcn_cv import io
+from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import DatasetError, InputError
 from pose import model as part_model
 from pose.box_fit import fit_box
@@ -127,7 +128,7 @@ def build(seq: TrainingSequence, *, feature: str = "ORB", n_features: int = 4000
     kept_desc = keep[desc_point]
     model = PartModel(corners=corners, points3d=pts[keep], descriptors=desc[kept_desc],
                       descriptor_point=index[desc_point[kept_desc]], track_length=tl[keep], colors=rgb[keep],
-                      units=units, feature=feature.upper(), normalizer=normalizer,
+                      units=units, feature=feature.upper(), normalizer=pin_default_model(normalizer),
                       source=str(seq.info.get("path", "")), box_fit=_jsonable(fit.stats),
                       extra={"registered_images": len(reg), "training_images": len(seq.views),
                              "triangulated_points": int(len(xyz))})

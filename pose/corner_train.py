@@ -81,6 +81,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import InputError
 from pose.corner_data import CornerFrames, build_frames, build_image_frames
 from pose.corners import FORMAT_NAME, FORMAT_VERSION, NUM_CORNERS, PAD, STRIDE, WINDOW
@@ -255,7 +256,7 @@ def fit_and_export(frames: CornerFrames, corners: np.ndarray, out: str | Path, *
         cells = min(cells, *frames.labels.shape[1:])
         fit_info = fit(net, frames, iterations=iterations, batch_size=batch_size, cells=cells, lr=lr, seed=seed,
                        progress=progress)
-    meta = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "normalizer": normalizer, "scale": scale,
+    meta = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "normalizer": pin_default_model(normalizer), "scale": scale,
             "input_mean": frames.input_mean, "input_std": frames.input_std,
             "corners": np.asarray(corners, np.float64).tolist(), "units": units, "window": WINDOW, "stride": STRIDE,
             "pad": PAD, "config": net.config, "source": source,

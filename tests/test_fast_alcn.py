@@ -289,3 +289,12 @@ def test_a_stale_lite_file_is_reported(tmp_path, monkeypatch, caplog, model, tea
     with caplog.at_level(logging.WARNING, logger="alcn_cv.enhance.alcn"):
         alcn_cv.createALCN(model=model)
     assert "re-distil" in caplog.text
+
+
+def test_files_record_the_default_model_by_name():
+    from alcn_cv.enhance.alcn import DEFAULT_MODEL, pin_default_model
+
+    assert pin_default_model("alcn") == f"alcn:model={DEFAULT_MODEL}" and alcn_cv.createALCN().weights_path.stem.endswith(DEFAULT_MODEL)
+    assert pin_default_model("alcn:threads=1") == f"alcn:threads=1:model={DEFAULT_MODEL}"
+    for spec in ("alcn:model=lite", "alcn:weights=w.npz", "dog", "dog:sigma1=1"):
+        assert pin_default_model(spec) == spec

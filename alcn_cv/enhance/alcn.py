@@ -32,7 +32,7 @@ import numpy as np
 
 from alcn_cv.checks import FULL_SCALE, SUPPORTED_DTYPES, check_image, unit_windows
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import register
+from alcn_cv.enhance.registry import parse_spec, register
 from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.divisive import divisive_normalization, gaussian_energy
@@ -52,7 +52,7 @@ from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["ALCN", "createALCN"]
+__all__ = ["ALCN", "createALCN", "pin_default_model"]
 
 logger = logging.getLogger(__name__)
 
@@ -69,6 +69,8 @@ MODELS = {
     "gain": DEFAULT_WEIGHTS.with_name("alcn_normalizer_gain.npz"),
     "gain-lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_gain_lite.npz"),
 }
+#: The shipped Normalizer of :func:`createALCN` when neither ``model`` nor ``weights`` is given.
+DEFAULT_MODEL = "gain"
 #: The distilled models and the model each was distilled from (ALCN warns when that file changed).
 TEACHERS = {"lite": "paper", "gain-lite": "gain"}
 #: The divisive floor ``f`` of the whole image while its strips are normalized (None: each
@@ -149,7 +151,7 @@ class ALCN(Normalization):
         device: str = "cpu",
         grid_stride: int | None = None,
         mixture: str | None = None,
-        model: str = "gain",
+        model: str = DEFAULT_MODEL,
         threads: int | None = 1,
     ) -> None:
         if backend is None:
@@ -667,6 +669,17 @@ def _check_teacher(meta: dict, path: Path) -> None:
             "%s was distilled from another version of %s than the one installed: re-distil it "
             "(see its model card)", path.name, teacher_path.name,
         )
+
+
+def pin_default_model(spec: str) -> str:
+    """``spec`` (``NAME[:KEY=VALUE...]``) with ALCN's default model named: ``"alcn"`` ->
+    ``"alcn:model=gain"``; other specs unchanged. For files that record the normalization they
+    were made with (pose models, corner detectors): a later change of the default does not change
+    what they mean (the default was ``"lite"`` until 2026-11-24)."""
+    name, params = parse_spec(spec)
+    if name != ALCN.name or "model" in params or "weights" in params:
+        return spec
+    return f"{spec}:model={DEFAULT_MODEL}"
 
 
 def createALCN(**params: object) -> ALCN:  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE

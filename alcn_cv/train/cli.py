@@ -157,6 +157,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         r.add_argument(f"--{name.replace('_', '-')}", type=kind, default=getattr(defaults, name),
                        help=f"{what} (default {getattr(defaults, name)})")
     r.add_argument("--channels", type=int, default=16, help="width of the network's convolutions (default 16)")
+    r.add_argument("--stride", type=int, default=8, help="spacing of the network's grid, in pixels (default 8)")
     r.add_argument("--num-kernels", type=int, default=2, help="Gaussian kernels of the mixture (default 2)")
     r.add_argument("--sigma-step", type=float, default=1.0, help="the kernels' sigmas are k * step, k = 1..N (default 1)")
     r.add_argument("--dilations", type=int, nargs="+", default=[1, 2, 4], help="one 3x3 convolution per dilation (default 1 2 4)")
@@ -285,7 +286,7 @@ def _train_real_light(args: argparse.Namespace) -> int:
     cfg = RealLightConfig(
         scenes=[str(s) for s in scenes], rendered=rendered, rendered_fraction=args.rendered_fraction,
         **{k: getattr(args, k) for k in names},
-        net={"channels": args.channels, "dilations": list(args.dilations), "sharpness": args.sharpness,
+        net={"channels": args.channels, "stride": args.stride, "dilations": list(args.dilations), "sharpness": args.sharpness,
              "num_kernels": args.num_kernels, "sigma_step": args.sigma_step, "eps": args.eps,
              "learn_floor": args.learn_floor, "gain": args.gain, "floor_scale": args.floor_scale, "tau": args.tau,
              "learn_scales": args.learn_scales,
