@@ -56,6 +56,14 @@ def _to_unit_float(img: np.ndarray) -> np.ndarray:
     return unit
 
 
+def _lab_and_lightness(unit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CIE Lab of float BGR intensities in [0, 1], computed in place in ``unit`` (L in [0, 100]),
+    and its L / 100 as a float32 ``HxW`` plane in [0, 1]: what :meth:`Normalization.apply`
+    normalizes for a colour image."""
+    lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab, dst=unit)
+    return lab, cv2.transform(lab, _LIGHTNESS_OF_LAB)
+
+
 def _unit_in_place_to(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
     """float32 intensities clipped to [0, 1] and converted to ``dtype`` (``rint(unit * full
     scale)`` for the integer types), with ``unit`` as scratch space. An image of up to four
@@ -233,8 +241,8 @@ class Normalization:
         path), and ``COLOR_Lab2LBGR`` followed by the sRGB curve in OpenCV passes (a fit on square
         roots, within 0.1 level) measured no faster than ``Lab2BGR``'s fused spline (``alcn bench
         speed`` measures the BGR / gray ratio)."""
-        lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab, dst=unit)  # float input: L in [0, 100]
-        response = self._normalize_checked(cv2.transform(lab, _LIGHTNESS_OF_LAB))
+        lab, lightness = _lab_and_lightness(unit)
+        response = self._normalize_checked(lightness)
         lo, hi = self.output_range
         scale = 100.0 / (hi - lo)
         lightness = cv2.addWeighted(response, scale, response, 0.0, -lo * scale)
@@ -264,7 +272,7 @@ class Normalization:
         without alpha: its intensities in [0, 1], or a BGR image's CIE L / 100 (as :meth:`_apply_bgr`)."""
         unit = _to_unit_float(img)
         if unit.ndim == 3 and unit.shape[2] == 3:
-            return cv2.transform(cv2.cvtColor(unit, cv2.COLOR_BGR2Lab, dst=unit), _LIGHTNESS_OF_LAB)
+            return _lab_and_lightness(unit)[1]
         return unit.reshape(img.shape[:2])
 
     def _strip_context(self, img: np.ndarray, strips: list[tuple[int, int, int, int]]) -> AbstractContextManager:
