@@ -118,8 +118,10 @@ def test_colmap_registration_of_middlebury_temple(shared_data, tmp_path):
     views = read_middlebury(shared_data / "middlebury" / "templeSparseRing")
     calib = Calibration(views[0].K, np.zeros(5), (640, 480), 0.0)
     reference = {v.name: (v.R_w2c, v.t_w2c * 1000.0) for v in views}
+    # One thread: COLMAP's multi-threaded matching and mapping are not deterministic, and on a
+    # fresh-clone CI run beside another test worker they once registered only 5 of 16 views.
     reg = register_colmap(views[0].path.parent, tmp_path / "reg", calib, reference=reference,
-                          settings=SfmSettings(num_threads=2))
+                          settings=SfmSettings(num_threads=1))
     gt = {v.path.stem: v for v in views}  # registered frames are named by their file stem
     kept = reg.registered
     assert len(kept) >= 10, [f"{f.name}: {f.status}" for f in reg.dropped]
