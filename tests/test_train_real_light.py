@@ -149,15 +149,16 @@ def test_per_pixel_divisive_centres_equal_the_whole_normalization_with_the_crops
     torch.testing.assert_close(centre, expected, atol=1e-5, rtol=1e-4)
 
 
-def test_cli_passes_the_divisive_sigma(tmp_path, monkeypatch):
+def test_cli_passes_the_divisive_sigma_and_the_stride(tmp_path, monkeypatch):
     import alcn_cv.train.real_light as real_light
     from alcn_cv.cli import main
 
     configs = []
     monkeypatch.setattr(real_light, "train_real_light", lambda cfg, out: configs.append(cfg) or out)
     common = ["train-real-light", "--scenes", str(tmp_path), "--out", str(tmp_path / "run")]
-    assert main([*common, "--divisive-sigma", "2"]) == 0 and main(common) == 0
+    assert main([*common, "--divisive-sigma", "2", "--stride", "16"]) == 0 and main(common) == 0
     assert configs[0].net["divisive_sigma"] == 2.0 and "divisive_sigma" not in configs[1].net
+    assert (configs[0].net["stride"], configs[1].net["stride"]) == (16, 8)
 
 
 def test_three_steps_lower_the_loss(tmp_path):
