@@ -66,7 +66,8 @@ def _eval(args: argparse.Namespace) -> int:
         evaluate.middlebury_main(args.middlebury, args.out, normalizers=normalizers, feature=args.feature)
     if args.data:
         corner_kw = {"iterations": args.corner_iterations, "copies": args.corner_copies,
-                     "novel_views": args.corner_novel_views}
+                     "novel_views": args.corner_novel_views, "divisions": args.corner_divisions,
+                     "scale": args.corner_scale}
         evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature, detectors=args.detectors,
                       corner_kw=corner_kw, seeds=args.seeds, sequences=args.sequences, command=_command())
     if not (args.middlebury or args.data):
@@ -87,7 +88,8 @@ def _train_corners(args: argparse.Namespace) -> int:
 
     path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
                              normalizer=args.normalizer, scale=args.scale, iterations=args.iterations,
-                             copies=args.copies, novel_views=args.novel_views, seed=args.seed)
+                             copies=args.copies, novel_views=args.novel_views, divisions=args.divisions,
+                             seed=args.seed)
     print(f"corner detector ({args.normalizer}) -> {path}")
     return 0
 
@@ -201,7 +203,7 @@ def _corner_recall(args: argparse.Namespace) -> int:
 
     for background in args.background:
         r = corner_bench.corner_recall(args.detector, args.scene, obj_id=args.obj_id, background=background)
-        print(f"{args.scene} ({background} background): {r['visible']} visible corners in {r['frames']} frames; "
+        print(f"{args.scene} ({background} background): {r['visible']} visible parts in {r['frames']} frames; "
               f"found as the best candidate {100 * r['best']:.0f}%, among the candidates "
               f"{100 * r['candidates']:.0f}%, in the gates of the true pose {100 * r['gated']:.0f}%; background "
               f"scored higher {100 * r['background_wins']:.0f}%")
@@ -213,7 +215,7 @@ def _corner_recall(args: argparse.Namespace) -> int:
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``corner-recall``,
     ``relight`` and ``overlay-error`` to ``alcn``."""
-    from pose.corner_data import COPIES, NOVEL_VIEWS
+    from pose.corner_data import COPIES, DIVISIONS, NOVEL_VIEWS, SCALE
     from pose.corner_train import ITERATIONS
     from pose.solver import METHODS
 
@@ -291,6 +293,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument("--corner-novel-views", type=float, default=NOVEL_VIEWS,
                    help="share of the copies that see the box from a nearby viewpoint (each face warped by its "
                    f"plane's homography; default {NOVEL_VIEWS:g})")
+    e.add_argument("--corner-scale", type=float, default=SCALE,
+                   help=f"downscaling of the frames for the corner CNN (default {SCALE:g})")
+    e.add_argument("--corner-divisions", type=int, default=DIVISIONS,
+                   help="steps per box edge of the corner CNN's parts (default "
+                   f"{DIVISIONS}: the corners, the edges' middles and the faces' centres; 1: the 8 corners)")
     e.add_argument("--seeds", type=int, default=1,
                    help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)")
     e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
@@ -299,8 +306,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     c = sub.add_parser("train-corners", help="train the corner CNN on a registered sequence, export ONNX",
                        description="Dense training on the views of the sequence and augmented copies of them "
-                       "(homographies, new backgrounds, intensity changes), normalized, labelled with the box "
-                       "corners projected by the known poses and their sub-stride offsets; the network is written as "
+                       "(homographies, new backgrounds, intensity changes), normalized, labelled with the box's "
+                       "parts (corners, edge middles, face centres) projected by the known poses and their sub-stride "
+                       "offsets; the network is written as "
                        "ONNX for `alcn pose track --detector corners` (cv2.dnn, no torch).")
     c.add_argument("input", help="registered training sequence (BOP scene folder, COLMAP model, Middlebury set)")
     c.add_argument("output", help="corner detector to write (.onnx)")
@@ -308,13 +316,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     box.add_argument("--box-ply", help="cuboid .ply of the box in the object frame (mm; BOP models/obj_000001.ply)")
     box.add_argument("--model", help="part model (.npz) whose box corners to use")
     c.add_argument("--normalizer", default="none", help="normalizer applied first (default none)")
-    c.add_argument("--scale", type=float, default=0.5, help="downscaling of the frames (default 0.5)")
+    c.add_argument("--scale", type=float, default=SCALE, help=f"downscaling of the frames (default {SCALE:g})")
     c.add_argument("--iterations", type=int, default=ITERATIONS, help=f"training steps (default {ITERATIONS})")
     c.add_argument("--copies", type=int, default=COPIES,
                    help=f"augmented copies (viewpoint, homography, background, intensity) of each view (default {COPIES})")
     c.add_argument("--novel-views", type=float, default=NOVEL_VIEWS,
                    help="share of the copies that see the box from a nearby viewpoint (each face warped by its "
                    f"plane's homography; default {NOVEL_VIEWS:g})")
+    c.add_argument("--divisions", type=int, default=DIVISIONS,
+                   help="steps per box edge of the parts found (default "
+                   f"{DIVISIONS}: the corners, the edges' middles and the faces' centres; 1: the 8 corners)")
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(func=_train_corners)
 
@@ -335,9 +346,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     bc.add_argument("--out", type=Path, help="write bench_corners.md and .json here")
     bc.set_defaults(func=_bench_corners)
 
-    cr = sub.add_parser("corner-recall", help="corners the corner detector finds in a rendered scene, before PnP",
+    cr = sub.add_parser("corner-recall", help="parts the corner detector finds in a rendered scene, before PnP",
                         description="Compares the corner detector's candidates with the true corners of a BOP scene "
-                        "(`alcn data pose`): the share of visible corners found as the best candidate, among the "
+                        "(`alcn data pose`): the share of visible parts (corners, edge middles, face centres) found as the best candidate, among the "
                         "candidates of the whole frame, and within the gates of the true pose; with --background grey "
                         "also with everything but the object replaced by grey (the table and clutter removed).")
     cr.add_argument("detector", help="corner detector (.onnx) from `alcn pose train-corners`")

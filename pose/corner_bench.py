@@ -115,13 +115,13 @@ def corner_recall(onnx_path: str | Path, scene_dir: str | Path, *, obj_id: int =
                   radius: float = 5.0, gate: float = 20.0) -> dict[str, Any]:
     """Recall of the corner detector on a BOP scene (``alcn data pose``), frame by frame.
 
-    A visible corner (:func:`pose.corner_data.corner_visibility` with the scene's ``mask_visib``)
+    A visible part (:func:`pose.corner_data.part_visibility` with the scene's ``mask_visib``)
     is found when a candidate of its own lies within ``radius`` pixels of its true projection:
     the best candidate of the whole frame (``best``), any of the ``top_k`` (``candidates``, what
     the tracker's first search gets), any of the ``gated_top_k`` within ``gate`` pixels of the
     true projection (``gated``, what tracking with a right prior gets). ``background_wins`` is
-    the share of visible corners where the background class outscores the corner's at the
-    corner's best cell nearby.
+    the share of visible parts where the background class outscores the part's at the
+    part's best cell nearby.
 
     Args:
         onnx_path: a corner detector (``alcn pose train-corners``).
@@ -130,22 +130,23 @@ def corner_recall(onnx_path: str | Path, scene_dir: str | Path, *, obj_id: int =
             which removes the table and the clutter from the frames and keeps the object's views.
 
     Returns:
-        ``{"frames", "visible", "best", "candidates", "gated", "background_wins", "per_corner"
-        (corner index -> share found among the candidates), "per_frame" (dicts)}``; shares in [0, 1].
+        ``{"frames", "visible", "best", "candidates", "gated", "background_wins", "per_part"
+        (part index -> share found among the candidates), "per_frame" (dicts)}``; shares in [0, 1].
 
     Raises:
         InputError: an unknown ``background`` or a frame without the object's mask.
     """
     from alcn_cv.formats import bop
-    from pose.corner_data import corner_visibility
-    from pose.corners import NUM_CORNERS, STRIDE, CornerDetector, to_scaled
+    from pose.corner_data import part_visibility
+    from pose.corners import STRIDE, CornerDetector, to_scaled
     from pose.parts import to_gray
 
     if background not in ("keep", "grey"):
         raise InputError(f"background must be 'keep' or 'grey', got {background!r}")
     det = CornerDetector(onnx_path)
     scene_dir = Path(scene_dir)
-    per_frame, found = [], {k: [] for k in range(NUM_CORNERS)}
+    n = len(det.parts)
+    per_frame, found = [], {k: [] for k in range(n)}
     for fr in bop.load_scene(scene_dir).frames:
         index = [o.obj_id for o in fr.objects].index(obj_id)
         mask = cv2.imread(str(scene_dir / "mask_visib" / f"{fr.im_id:06d}_{index:06d}.png"), cv2.IMREAD_GRAYSCALE)
@@ -155,7 +156,7 @@ def corner_recall(onnx_path: str | Path, scene_dir: str | Path, *, obj_id: int =
         if background == "grey":
             image = np.where(mask > 0, image, np.uint8(128))
         pose = fr.pose(obj_id)
-        uv, visible = corner_visibility(det.corners, pose.R, pose.t, fr.K, image.shape, mask)
+        uv, visible = part_visibility(det.corners, pose.R, pose.t, fr.K, image.shape, mask, parts=det.parts)
         whole, gated = det.peaks(image), det.peaks(image, uv, gate)
         prob, _ = det.maps(image)
         row = {"frame": fr.im_id, "visible": int(visible.sum()), "best": 0, "candidates": 0, "gated": 0,
@@ -167,13 +168,13 @@ def corner_recall(onnx_path: str | Path, scene_dir: str | Path, *, obj_id: int =
             row["gated"] += bool((np.linalg.norm(gated[k][0] - uv[k], axis=1) <= radius).any())
             found[k].append(bool(hits.any()))
             j, i = np.round((to_scaled(uv[k], det.scale) + 0.5) / STRIDE).astype(int)  # the nearest cell's centre
-            cells = prob[:, max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].reshape(NUM_CORNERS + 1, -1)
+            cells = prob[:, max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].reshape(n + 1, -1)
             if cells.size:
                 at = cells[:, cells[k + 1].argmax()]
                 row["background_wins"] += bool(at[0] > at[k + 1])
         per_frame.append(row)
-    n = max(sum(r["visible"] for r in per_frame), 1)
-    shares = {key: sum(r[key] for r in per_frame) / n for key in ("best", "candidates", "gated", "background_wins")}
+    total = max(sum(r["visible"] for r in per_frame), 1)
+    shares = {key: sum(r[key] for r in per_frame) / total for key in ("best", "candidates", "gated", "background_wins")}
     return {"detector": str(onnx_path), "scene": str(scene_dir), "background": background, "frames": len(per_frame),
             "visible": sum(r["visible"] for r in per_frame), **shares,
-            "per_corner": {k: float(np.mean(v)) for k, v in found.items() if v}, "per_frame": per_frame}
+            "per_part": {k: float(np.mean(v)) for k, v in found.items() if v}, "per_frame": per_frame}

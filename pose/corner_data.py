@@ -7,8 +7,8 @@ augmentation applied to the whole frame: a random homography (in-plane rotation,
 perspective and shift: the viewpoints between and around the training views), the background
 (outside the BOP ``mask_visib``) replaced by the data engine's random textures
 (:func:`alcn_cv.data.textures.display_texture`), and an intensity change ``a I + b`` with noise
-(the ranges of :func:`alcn_cv.data.synthetic.augment`'s). The box corners follow the homography.
-Each frame is normalized whole, as at test time, and labelled on the network's output grid
+(the ranges of :func:`alcn_cv.data.synthetic.augment`'s). The box's parts (:func:`box_parts`:
+its corners, the middles of its edges and the centres of its faces) follow the homography. Each frame is normalized whole, as at test time, and labelled on the network's output grid
 (:func:`label_grid`).
 """
 
@@ -35,39 +35,78 @@ logger = logging.getLogger(__name__)
 #: (:func:`novel_view`); see :mod:`pose.corner_train` for the measurements.
 COPIES = 11
 NOVEL_VIEWS = 0.6
+#: Steps per box edge of the detector's parts (:func:`box_parts`: 2 is the corners, the edges'
+#: middles and the faces' centres).
+DIVISIONS = 2
+#: Downscaling of a sequence's frames before normalization and detection: a 32x32 window is 43
+#: pixels of a 640x480 frame (see :mod:`pose.corner_train` for 0.5 against 0.75).
+SCALE = 0.75
 
 
-def corner_visibility(corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, shape: tuple[int, int],
-                      mask: np.ndarray | None = None, mask_tolerance: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """Projections of the box corners and which of them are visible.
+def box_parts(corners: np.ndarray, divisions: int = DIVISIONS) -> np.ndarray:
+    """The parts of the box the learned detector finds: the points of its surface at
+    ``divisions`` equal steps along every edge, the 8 corners first (in their order), then the
+    rest in lattice order.
+
+    ``divisions=1`` gives the 8 corners; ``2`` (the default) adds the middles of the 12 edges and
+    the centres of the 6 faces (26 parts): a face centre's window shows the box's own texture
+    more than a corner's, which is three quarters background (see :mod:`pose.corner_train`).
 
     Args:
-        corners: ``(8, 3)`` corners in the order of :func:`pose.model.box_corners` (corner ``i``
-            is at the far end of the x edge when bit 2 of ``i`` is set, y: bit 1, z: bit 0); any
-            parallelepiped in that order.
+        corners: ``(8, 3)`` box corners (:func:`pose.model.box_corners` order: bit 2 of a
+            corner's index is x, bit 1 y, bit 0 z); any parallelepiped in that order.
+        divisions: steps per edge, at least 1.
+
+    Returns:
+        ``(n, 3)`` float64, ``n = (d + 1)^3 - (d - 1)^3``.
+    """
+    if divisions < 1:
+        raise InputError(f"divisions must be >= 1, got {divisions}")
+    corners = np.asarray(corners, np.float64).reshape(NUM_CORNERS, 3)
+    steps = np.stack(np.meshgrid(*[np.arange(divisions + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    on_surface = ((steps == 0) | (steps == divisions)).any(1)
+    is_corner = ((steps == 0) | (steps == divisions)).all(1)
+    abc = steps[on_surface][np.argsort(~is_corner[on_surface], kind="stable")] / divisions
+    return corners[0] + abc @ _box_axes(corners).T
+
+
+def _box_axes(corners: np.ndarray) -> np.ndarray:
+    """``(3, 3)``: the box's x, y and z edges as columns."""
+    return np.stack([corners[4] - corners[0], corners[2] - corners[0], corners[1] - corners[0]], 1)
+
+
+def part_visibility(corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, shape: tuple[int, int],
+                    mask: np.ndarray | None = None, mask_tolerance: int = 3, parts: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Projections of points on the box's surface and which of them are visible.
+
+    Args:
+        corners: ``(8, 3)`` box corners (:func:`box_parts`' order).
         R, t: object-to-camera pose (``x_cam = R x + t``).
         K: ``(3, 3)`` intrinsics.
         shape: ``(H, W)`` of the image.
-        mask: optional ``(H, W)`` visible-object mask (BOP ``mask_visib``); a corner farther
+        mask: optional ``(H, W)`` visible-object mask (BOP ``mask_visib``); a point farther
             than ``mask_tolerance`` pixels from it is hidden by something else.
+        parts: ``(n, 3)`` points on the box's surface (:func:`box_parts`); default the corners.
 
     Returns:
-        ``uv (8, 2)`` float64 pixels and ``visible (8,)`` bool: in front of the camera, inside
+        ``uv (n, 2)`` float64 pixels and ``visible (n,)`` bool: in front of the camera, inside
         the image, on at least one face turned towards the camera, and on the mask.
     """
     corners = np.asarray(corners, np.float64).reshape(NUM_CORNERS, 3)
+    parts = corners if parts is None else np.asarray(parts, np.float64).reshape(-1, 3)
     R, t = np.asarray(R, np.float64).reshape(3, 3), np.asarray(t, np.float64).reshape(3)
-    cam = corners @ R.T + t
+    cam = parts @ R.T + t
     z = np.maximum(cam[:, 2], 1e-9)
     uv = np.stack([K[0, 0] * cam[:, 0] / z + K[0, 2], K[1, 1] * cam[:, 1] / z + K[1, 2]], 1)
     h, w = shape
     visible = (cam[:, 2] > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
-    # box coordinates of the camera centre: a face is turned towards the camera when the centre
-    # lies beyond its plane
-    axes = np.stack([corners[4] - corners[0], corners[2] - corners[0], corners[1] - corners[0]], 1)
-    a = np.linalg.solve(axes, -R.T @ t - corners[0])
-    bits = (np.arange(NUM_CORNERS)[:, None] >> np.array([2, 1, 0])) & 1
-    visible &= np.where(bits == 1, a > 1, a < 0).any(1)
+    # in box coordinates (0..1 along each edge) a face is turned towards the camera when the
+    # camera centre lies beyond its plane; a part is on the faces where its coordinate is 0 or 1
+    eye = _box_coordinates(corners, R, t)
+    abc = np.linalg.solve(_box_axes(corners), (parts - corners[0]).T).T
+    tol = 1e-6
+    visible &= ((np.abs(abc) < tol) & (eye < 0) | (np.abs(abc - 1) < tol) & (eye > 1)).any(1)
     if mask is not None:
         near = cv2.dilate((mask > 0).astype(np.uint8), np.ones((2 * mask_tolerance + 1,) * 2, np.uint8))
         ij = np.clip(np.round(uv).astype(int), 0, [w - 1, h - 1])
@@ -99,21 +138,21 @@ def label_grid(uv: np.ndarray, classes: np.ndarray, hidden: np.ndarray, shape: t
     """Targets of the network's output grid for one frame.
 
     Args:
-        uv: ``(m, 2)`` visible corners (pixels of the frame the network sees).
-        classes: ``(m,)`` their corner indices (0..7).
-        hidden: ``(p, 2)`` corners inside the frame but not visible.
+        uv: ``(m, 2)`` visible parts (pixels of the frame the network sees).
+        classes: ``(m,)`` their part indices (:func:`box_parts` order).
+        hidden: ``(p, 2)`` parts inside the frame but not visible.
         shape: ``(gh, gw)`` of the grid (:func:`pose.corners.grid_centres`).
-        pos_radius: a cell whose window centre is within this of a visible corner is that
-            corner's (the nearest); with the stride of 4 every corner has at least one cell.
-        neg_radius: cells between ``pos_radius`` and this from a corner (visible or hidden) are
+        pos_radius: a cell whose window centre is within this of a visible part is that
+            part's (the nearest); with the stride of 4 every part has at least one cell.
+        neg_radius: cells between ``pos_radius`` and this from a part (visible or hidden) are
             ignored; the rest is background.
 
     Returns:
-        ``labels (gh, gw)`` int64 (-1 ignored, 0 background, ``k + 1`` corner ``k``),
-        ``offsets (2, gh, gw)`` float32, the nearest visible corner minus the window centre in
+        ``labels (gh, gw)`` int64 (-1 ignored, 0 background, ``k + 1`` part ``k``),
+        ``offsets (2, gh, gw)`` float32, the nearest visible part minus the window centre in
         strides, for the cells within ``neg_radius`` of it (0 elsewhere; the neighbours of a
-        peak vote for the corner's position too, :meth:`pose.corners.CornerDetector.peaks`), and
-        ``owner (gh, gw)`` int64, the index of that corner (-1: no offset target).
+        peak vote for the part's position too, :meth:`pose.corners.CornerDetector.peaks`), and
+        ``owner (gh, gw)`` int64, the index of that part (-1: no offset target).
     """
     centres = grid_centres(shape)
     labels = np.zeros(shape, np.int64)
@@ -159,8 +198,7 @@ BOX_FACES = tuple((axis, side, tuple(np.array(quad) + (side << (2 - axis))))
 
 def _box_coordinates(corners: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """The camera centre in box coordinates (0..1 inside the box along each of its edges)."""
-    axes = np.stack([corners[4] - corners[0], corners[2] - corners[0], corners[1] - corners[0]], 1)
-    return np.linalg.solve(axes, -R.T @ t - corners[0])
+    return np.linalg.solve(_box_axes(corners), -R.T @ t - corners[0])
 
 
 def facing_faces(corners: np.ndarray, R: np.ndarray, t: np.ndarray) -> list[tuple[int, ...]]:
@@ -185,7 +223,7 @@ def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray,
                rng: np.random.Generator, *, azimuth_deg: float = 8.0, elevation_deg: float = 20.0,
                elevation_range: tuple[float, float] = (20.0, 70.0), distance: tuple[float, float] = (0.85, 1.2),
-               min_stretch: float = 0.35, tries: int = 8
+               min_stretch: float = 0.35, tries: int = 8, parts: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The box of a registered view seen from a nearby viewpoint: each face of the box warped by
     its own plane's homography, the rest (the table) by the homography of the plane of the box's
@@ -202,10 +240,11 @@ def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndar
         image: the view, uint8 ``(H, W)``.
         corners: ``(8, 3)`` box corners (:func:`pose.model.box_corners` order, z up).
         R, t: the view's object-to-camera pose; ``K``: its intrinsics.
+        parts: ``(n, 3)`` points of the box's surface to project (:func:`box_parts`; default the corners).
 
     Returns:
-        ``(image, mask, uv, visible)``: the new view, the box's pixels in it (uint8, 255), its
-        corners ``(8, 2)`` and which of them are visible (:func:`corner_visibility`).
+        ``(image, mask, uv, visible)``: the new view, the box's pixels in it (uint8, 255), the
+        parts' pixels ``(n, 2)`` and which of them are visible (:func:`part_visibility`).
     """
     corners = np.asarray(corners, np.float64)
     h, w = image.shape
@@ -244,7 +283,7 @@ def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndar
                                     cv2.LINE_AA, 4)
         out[inside > 0] = face[inside > 0]
         mask |= inside
-    uv, visible = corner_visibility(corners, R2, t2, K, (h, w))
+    uv, visible = part_visibility(corners, R2, t2, K, (h, w), parts=parts)
     return out, mask, uv, visible
 
 
@@ -268,11 +307,11 @@ class CornerFrames:
     Attributes:
         images: ``(n, h + 2 PAD, w + 2 PAD)`` float32 normalized frames standardized by
             ``(x - input_mean) / input_std`` (constants over the frames) and padded
-            (``BORDER_REFLECT_101``) as :meth:`pose.corners.CornerDetector.logits` pads.
+            (``BORDER_REFLECT_101``) as :meth:`pose.corners.CornerDetector.outputs` pads.
         labels: ``(n, gh, gw)`` int64 grid labels (:func:`label_grid`).
         offsets: ``(n, 2, gh, gw)`` float32 offset targets and ``owner`` ``(n, gh, gw)`` int64
-            their corners (:func:`label_grid`).
-        corners: per frame, ``(m, 3)`` visible corners: x, y (pixels of the downscaled frame), index.
+            their parts (:func:`label_grid`).
+        corners: per frame, ``(m, 3)`` visible parts: x, y (pixels of the downscaled frame), index.
         view: ``(n,)`` the training view each frame comes from.
     """
 
@@ -289,18 +328,19 @@ class CornerFrames:
 def _view_frames(small: np.ndarray, small_mask: np.ndarray | None, uv: np.ndarray, visible: np.ndarray, norm,
                  rng: np.random.Generator, *, copies: int, backgrounds: float, intensity_scale: tuple[float, float],
                  intensity_offset: float, noise: float, pos_radius: float, neg_radius: float,
-                 box: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None, novel_views: float = 0.0,
+                 box: tuple[np.ndarray, ...] | None = None, novel_views: float = 0.0,
                  **homography_kw: Any) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
     """One downscaled view ``small`` (uint8) and its ``copies`` augmented copies, each normalized by
-    ``norm`` and labelled: ``(image, labels, offsets, owner, visible corners (m, 3))`` per frame
-    (:func:`build_frames`'s arguments; ``uv (8, 2)`` the corners in ``small``'s pixels; ``box``:
-    ``(corners, R, t, K)`` of the view at ``small``'s scale, for :func:`novel_view`)."""
+    ``norm`` and labelled: ``(image, labels, offsets, owner, visible parts (m, 3))`` per frame
+    (:func:`build_frames`'s arguments; ``uv (n, 2)`` the parts in ``small``'s pixels; ``box``:
+    ``(corners, R, t, K, parts)`` of the view at ``small``'s scale, for :func:`novel_view`)."""
     h, w = small.shape
     out = []
     for c in range(copies + 1):
         image, m, xy, vis = small, small_mask, uv, visible
         if c:
-            view = novel_view(small, *box, rng) if box is not None and rng.random() < novel_views else None
+            view = (novel_view(small, *box[:4], rng, parts=box[4]) if box is not None and rng.random() < novel_views
+                    else None)
             if view is not None:
                 image, m, xy, vis = view
             H = random_homography(rng, (h, w), **homography_kw)
@@ -326,7 +366,7 @@ def _stack_frames(per_view: list[list[tuple[np.ndarray, ...]]]) -> CornerFrames:
     fixed affine map for every input (the normalizers' output ranges differ widely), from the
     views themselves (each list's first frame)."""
     if not any((f[1] > 0).any() for frames in per_view for f in frames):
-        raise InputError("no box corner is visible in any training image")
+        raise InputError("no part of the box is visible in any training image")
     originals = [frames[0][0] for frames in per_view]
     mean = float(np.mean([im.mean() for im in originals]))
     std = float(np.sqrt(np.mean([im.var() for im in originals]))) + 1e-6
@@ -338,10 +378,11 @@ def _stack_frames(per_view: list[list[tuple[np.ndarray, ...]]]) -> CornerFrames:
                         mean, std)
 
 
-def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: str = "none", *, scale: float = 0.5,
+def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: str = "none", *, scale: float = SCALE,
                  copies: int = COPIES, backgrounds: float = 0.8, intensity_scale: tuple[float, float] = (0.4, 1.6),
                  intensity_offset: float = 0.2, noise: float = 0.03, pos_radius: float = 4.0,
-                 neg_radius: float = 7.0, novel_views: float = NOVEL_VIEWS, seed: int = 0) -> CornerFrames:
+                 neg_radius: float = 7.0, novel_views: float = NOVEL_VIEWS, divisions: int = DIVISIONS,
+                 seed: int = 0) -> CornerFrames:
     """The labelled training frames of a registered sequence (:func:`pose.sequence.load_sequence`).
 
     Args:
@@ -356,10 +397,11 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
         pos_radius, neg_radius: see :func:`label_grid` (downscaled pixels).
         novel_views: probability that a copy first sees the box from a nearby viewpoint
             (:func:`novel_view`) before its homography.
+        divisions: the parts labelled, :func:`box_parts` ``(corners, divisions)``.
         seed: random seed.
 
     Raises:
-        InputError: an unregistered sequence, or no visible corner in any view.
+        InputError: an unregistered sequence, or no visible part in any view.
     """
     from alcn_cv import io
 
@@ -368,11 +410,12 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
     norm = normalization_for(normalizer)
     rng = np.random.default_rng(seed)
     mask_dir = sequence.image_dir.parent / "mask_visib"
+    parts = box_parts(corners, divisions)
     per_view = []
     for view in sequence.views:
         gray = to_gray(io.read_image(sequence.image_dir / view.name))
         mask = _read_mask(mask_dir / f"{Path(view.name).stem}_000000.png", gray.shape)
-        uv, vis = corner_visibility(corners, view.R_w2c, view.t_w2c, view.K, gray.shape, mask)
+        uv, vis = part_visibility(corners, view.R_w2c, view.t_w2c, view.K, gray.shape, mask, parts=parts)
         small = downscale(gray, scale)
         K = np.asarray(view.K, np.float64).copy()  # of the downscaled frame (:func:`pose.corners.to_scaled`)
         K[:2] *= scale
@@ -381,10 +424,10 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
                                      vis, norm, rng, copies=copies, backgrounds=backgrounds,
                                      intensity_scale=intensity_scale, intensity_offset=intensity_offset, noise=noise,
                                      pos_radius=pos_radius, neg_radius=neg_radius, novel_views=novel_views,
-                                     box=(corners, view.R_w2c, view.t_w2c, K)))
+                                     box=(corners, view.R_w2c, view.t_w2c, K, parts)))
     frames = _stack_frames(per_view)
-    logger.info("corner frames: %d (%d views x %d), %d corner cells", len(frames.labels), len(sequence.views),
-                copies + 1, int((frames.labels > 0).sum()))
+    logger.info("corner frames: %d (%d views x %d), %d parts, %d part cells", len(frames.labels),
+                len(sequence.views), copies + 1, len(parts), int((frames.labels > 0).sum()))
     return frames
 
 
@@ -392,19 +435,19 @@ def build_image_frames(gray: np.ndarray, uv: np.ndarray, normalizer: str = "none
                        copies: int = 59, intensity_scale: tuple[float, float] = (0.4, 1.6),
                        intensity_offset: float = 0.2, noise: float = 0.03, pos_radius: float = 4.0,
                        neg_radius: float = 7.0, seed: int = 0, **homography_kw: Any) -> CornerFrames:
-    """The labelled training frames of one image whose 8 parts are at ``uv (8, 2)`` (pixels of
+    """The labelled training frames of one image whose parts are at ``uv (n, 2)`` (pixels of
     ``gray``, uint8): the image and ``copies`` copies of it warped by :func:`random_homography`
     (``homography_kw``) with an intensity change and noise, as :func:`build_frames` makes of
     each view of a sequence (without new backgrounds: the parts' surroundings are the target's).
 
     Raises:
-        InputError: ``uv`` is not ``(8, 2)`` or no part is inside the image.
+        InputError: ``uv`` is not ``(n, 2)`` or no part is inside the image.
     """
     uv = np.asarray(uv, np.float64)
-    if uv.shape != (NUM_CORNERS, 2) or not np.isfinite(uv).all():
-        raise InputError(f"need the {NUM_CORNERS} parts' pixels as a finite ({NUM_CORNERS}, 2) array, got {uv.shape}")
+    if uv.ndim != 2 or uv.shape[1] != 2 or not len(uv) or not np.isfinite(uv).all():
+        raise InputError(f"need the parts' pixels as a finite (n, 2) array, got {uv.shape}")
     frames = _stack_frames([_view_frames(
-        downscale(gray, scale), None, to_scaled(uv, scale), np.ones(NUM_CORNERS, bool), normalization_for(normalizer),
+        downscale(gray, scale), None, to_scaled(uv, scale), np.ones(len(uv), bool), normalization_for(normalizer),
         np.random.default_rng(seed), copies=copies, backgrounds=0.0, intensity_scale=intensity_scale,
         intensity_offset=intensity_offset, noise=noise, pos_radius=pos_radius, neg_radius=neg_radius,
         **homography_kw)])

@@ -1,39 +1,42 @@
-"""Learned part detector: a CNN that finds the 8 box corners in normalized images.
+"""Learned part detector: a CNN that finds the box's corners, edge middles and face centres in normalized images.
 
 The Box experiment of Rad, Roth & Lepetit (BMVC 2017, Sec. 4.4) detects the corners of a box
 with the part-based method of Crivellaro et al. ("A Novel Representation of Parts for Accurate
 3D Object Detection and Tracking in Monocular Images", ICCV 2015) after contrast normalization.
-This module is that detector, kept small and real-time:
+This module is that detector, kept small and real-time. Its parts are the points of the box's
+surface at half steps along its edges (:func:`pose.corner_data.box_parts`: 8 corners, 12 edge
+middles, 6 face centres), where the paper's are the 8 corners (``divisions=1`` here): a face
+centre's window shows mostly the box's own texture, a corner's mostly the table.
 
 * **Training data** (:func:`pose.corner_data.build_frames`): every view of a registered
   training sequence, downscaled by ``scale``, and copies of it seen from nearby viewpoints (each
   face of the box warped by its own plane's homography) and warped by random homographies, with
   new backgrounds and intensity changes; each normalized whole and labelled on the network's output grid: the cells whose
-  window centre is within 4 pixels of a visible corner are that corner's, with the corner's
+  window centre is within 4 pixels of a visible part are that part's, with the part's
   offset from the centre as a regression target; far cells are background.
 * **Network** (:class:`pose.corner_net.CornerNet`): the geometry of the paper's detector
-  (:class:`alcn_cv.nets.Detector`, a 32x32 window per output cell at stride 4) with 9 class
-  logits and 8 sub-stride offsets per cell, trained densely on crops of the frames
+  (:class:`alcn_cv.nets.Detector`, a 32x32 window per output cell at stride 4) with ``1 + n``
+  class logits and ``n`` sub-stride offsets per cell, trained densely on crops of the frames
   (:func:`pose.corner_train.train_corners`).
-* **Export** (:func:`pose.corner_train.export_onnx`): ONNX (``(1, 1, H, W)`` -> ``(1, 25, gh, gw)``)
-  with the corners, units, scale and normalizer in its ``metadata_props`` (key ``alcn_cv``),
+* **Export** (:func:`pose.corner_train.export_onnx`): ONNX (``(1, 1, H, W)`` -> ``(1, 3n + 1, gh, gw)``)
+  with the parts, the box corners, units, scale and normalizer in its ``metadata_props`` (key ``alcn_cv``),
   so the ``.onnx`` file is the whole detector.
 * **Inference** (:class:`CornerDetector`): ``cv2.dnn`` runs it once on the padded, normalized
-  frame (no torch import); per corner, the local maxima of its softmax score above
+  frame (no torch import); per part, the local maxima of its softmax score above
   ``min_score``, the ``top_k`` best, each placed at the score-weighted mean of the positions
   its 3x3 neighbourhood's offsets vote for. With the pose predicted from the previous frames,
-  only candidates within ``gate`` pixels of the corner's predicted projection are kept
+  only candidates within ``gate`` pixels of the part's predicted projection are kept
   (:meth:`CornerDetector.detect`); the tracker searches the whole frame again when that gives no
   pose. The candidates are the 2D-3D correspondences of :class:`pose.solver.PoseSolver`.
 
-Measured on the data engine's sequences (30 frames each, no normalization): the previous
+Measured on the data engine's sequences (30 frames each, no normalization): the first
 design (a window classifier trained on crops around the 30 training views, hard-negative mining,
 a score grid of step 2 with centroid refinement, no gating) found only 60% of the visible
 corners of #1 among its 4 candidates within 5 px (71% within 10 px; the best candidate 43%),
-too few for PnP: 0-47% correct poses. :mod:`pose.corner_train` has the numbers of this design;
-with ALCN in front it runs at 23.2-27.5 fps at 640x480 (``alcn pose bench-corners``, cv2.dnn with
-2 threads, no torch; normalization 3.5 ms, network 31-32 ms, peaks and pose 2-7 ms; load 4.5;
-the former 16/32/64 network 29.4 fps in the same minute).
+too few for PnP: 0-47% correct poses. :mod:`pose.corner_train` has the numbers of this design.
+With the gain ALCN in front it runs at 15.7 fps at 640x480 (``alcn pose bench-corners``, cv2.dnn
+with 2 threads, no torch, load 1.8; normalization 4.4 ms, network 34.6 ms at scale 0.75, peaks and
+pose 24.8 ms for 26 parts); the 8 corners at scale 0.5 ran at 44 fps (network 15.9 ms).
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["CornerDetector", "normalization_for", "read_metadata"]
 
 FORMAT_NAME = "alcn-corner-detector"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 METADATA_KEY = "alcn_cv"
 NUM_CORNERS = 8
 # alcn_cv.nets.Detector's input window and output stride (a test checks they agree; importing
@@ -152,16 +155,17 @@ class CornerDetector:
 
     Args:
         onnx_path: a file written by :func:`pose.corner_train.train_corners` (``alcn pose train-corners``).
-        top_k: candidates kept per corner in the whole frame (RANSAC picks among them).
+        top_k: candidates kept per part in the whole frame (RANSAC picks among them).
         min_score: lowest softmax score of a candidate in the whole frame.
         gate: with a prior pose, candidates farther than this (pixels of the full frame, times
-            the tracker's ``search_scale``) from the corner's predicted projection are dropped.
+            the tracker's ``search_scale``) from the part's predicted projection are dropped.
         gated_top_k, gated_min_score: ``top_k`` and ``min_score`` inside the gates (scoring a
-            gate's cells by their probability of being any corner, ``1 - p(background)``, instead
-            of the gate's corner lost 20% of the poses of the data engine's #3).
+            gate's cells by their probability of being any part, ``1 - p(background)``, instead
+            of the gate's part lost 20% of the poses of the data engine's #3).
 
     Attributes:
-        corners: ``(8, 3)`` float64 box corners (object frame, :attr:`units`).
+        parts: ``(n, 3)`` float64 the parts found (object frame, :attr:`units`).
+        corners: ``(8, 3)`` float64 box corners (the outline of :class:`pose.solver.PoseSolver`).
         normalizer_name, scale, input_mean, input_std: from the file.
     """
 
@@ -181,7 +185,11 @@ class CornerDetector:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
             raise WeightFileError(f"OpenCV cannot read {self.path}: {str(exc).strip()}") from None
-        self.corners = np.asarray(self.meta["corners"], np.float64)
+        self.parts = np.asarray(self.meta["parts"], np.float64).reshape(-1, 3)
+        self.corners = np.asarray(self.meta["corners"], np.float64).reshape(NUM_CORNERS, 3)
+        if self.meta["config"].get("num_parts") != len(self.parts):
+            raise WeightFileError(f"{self.path}: {len(self.parts)} parts but a network for "
+                                  f"{self.meta['config'].get('num_parts')}")
         self.units = str(self.meta["units"])
         self.scale = float(self.meta["scale"])
         self.normalizer_name = str(self.meta["normalizer"])
@@ -198,43 +206,44 @@ class CornerDetector:
         return (normed - np.float32(self.input_mean)) / np.float32(self.input_std)
 
     def outputs(self, normalized: np.ndarray) -> np.ndarray:
-        """``(25, gh, gw)``: 9 logits (background, the corners) then the 8 corners' offsets
-        ``(dx, dy)`` in strides; cell ``(i, j)`` is the window centred on :func:`grid_centres`."""
+        """``(3n + 1, gh, gw)``: ``1 + n`` logits (background, the parts) then the ``n`` parts'
+        offsets ``(dx, dy)`` in strides; cell ``(i, j)`` is the window centred on :func:`grid_centres`."""
         padded = cv2.copyMakeBorder(np.ascontiguousarray(normalized, np.float32), PAD, PAD, PAD, PAD,
                                     cv2.BORDER_REFLECT_101)
         self.net.setInput(padded[None, None])
         return np.ascontiguousarray(self.net.forward()[0], np.float32)
 
     def maps(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Softmax scores ``(9, gh, gw)`` (class 0: background) and per corner the position each
-        cell votes for ``(8, gh, gw, 2)`` (x, y, downscaled pixels) of a BGR or gray uint8 frame.
+        """Softmax scores ``(1 + n, gh, gw)`` (class 0: background) and per part the position each
+        cell votes for ``(n, gh, gw, 2)`` (x, y, downscaled pixels) of a BGR or gray uint8 frame.
         The last frame's are kept, so the tracker's second search of a frame costs nothing."""
         if self._cache is not None and self._cache[0] is image:
             return self._cache[1], self._cache[2]
         out = self.outputs(self.normalize(image))
-        z = out[: NUM_CORNERS + 1]
+        n = len(self.parts)
+        z = out[: n + 1]
         e = np.exp(z - z.max(0, keepdims=True))
         prob = e / e.sum(0, keepdims=True)
-        off = out[NUM_CORNERS + 1:].reshape(NUM_CORNERS, 2, *z.shape[1:]).transpose(0, 2, 3, 1)
+        off = out[n + 1:].reshape(n, 2, *z.shape[1:]).transpose(0, 2, 3, 1)
         votes = grid_centres(z.shape[1:])[None] + STRIDE * off.astype(np.float64)
         self._cache = (image, prob, votes)
         return prob, votes
 
     def peaks(self, image: np.ndarray, predicted: np.ndarray | None = None, radius: float | None = None
               ) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per corner, ``(xy (m, 2) float64 full-image pixels, scores (m,))``, best first.
+        """Per part, ``(xy (m, 2) float64 full-image pixels, scores (m,))``, best first.
 
         Without ``predicted``: the ``top_k`` local maxima above ``min_score``; with ``predicted``
-        ``(8, 2)`` full-image pixels: the ``gated_top_k`` above ``gated_min_score`` within
-        ``radius`` pixels of the corner's prediction."""
+        ``(n, 2)`` full-image pixels: the ``gated_top_k`` above ``gated_min_score`` within
+        ``radius`` pixels of the part's prediction."""
         prob, votes = self.maps(image)
         out = []
-        for k in range(NUM_CORNERS):
-            p, where = prob[k + 1], vote_positions(prob[k + 1], votes[k])
+        for k in range(len(self.parts)):
+            p = prob[k + 1]
             candidates = (p >= cv2.dilate(p, np.ones((3, 3), np.uint8))) & (
                 p >= (self.min_score if predicted is None else self.gated_min_score))
             ii, jj = np.nonzero(candidates)
-            xy, sc = from_scaled(where[ii, jj], self.scale), p[ii, jj].astype(np.float64)
+            xy, sc = from_scaled(vote_positions(p, votes[k], ii, jj), self.scale), p[ii, jj].astype(np.float64)
             keep = self.top_k
             if predicted is not None:
                 near = np.linalg.norm(xy - predicted[k], axis=1) <= radius
@@ -245,25 +254,31 @@ class CornerDetector:
 
     def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
                search_scale: float = 1.0) -> Correspondences:
-        """Corner candidates of ``image`` as 2D-3D correspondences; with ``prior = (rvec, tvec, K)``
-        only those within ``gate * search_scale`` pixels of the corner's projection by it."""
+        """Part candidates of ``image`` as 2D-3D correspondences; with ``prior = (rvec, tvec, K)``
+        only those within ``gate * search_scale`` pixels of the part's projection by it."""
         predicted = None
         if prior is not None:
             rvec, tvec, K = prior
-            predicted = cv2.projectPoints(self.corners, np.asarray(rvec, np.float64), np.asarray(tvec, np.float64),
+            predicted = cv2.projectPoints(self.parts, np.asarray(rvec, np.float64), np.asarray(tvec, np.float64),
                                           np.asarray(K, np.float64), None)[0].reshape(-1, 2)
         obj, img = [], []
         for k, (xy, _) in enumerate(self.peaks(image, predicted, self.gate * search_scale)):
-            obj.extend([self.corners[k]] * len(xy))
+            obj.extend([self.parts[k]] * len(xy))
             img.extend(xy)
         return Correspondences(np.asarray(obj, np.float32).reshape(-1, 3), np.asarray(img, np.float32).reshape(-1, 2),
                                len(img))
 
 
-def vote_positions(score: np.ndarray, votes: np.ndarray) -> np.ndarray:
-    """``(gh, gw, 2)``: per cell, the ``score``-weighted mean of the positions ``votes (gh, gw, 2)``
-    of its 3x3 neighbourhood (box filters)."""
-    p = score.astype(np.float64)
-    den = np.maximum(cv2.boxFilter(p, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT), 1e-12)
-    return np.stack([cv2.boxFilter(p * votes[..., c], -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
-                     / den for c in range(2)], -1)
+def vote_positions(score: np.ndarray, votes: np.ndarray, ii: np.ndarray, jj: np.ndarray) -> np.ndarray:
+    """``(m, 2)``: at the cells ``(ii, jj)`` (``(m,)`` each), the ``score (gh, gw)``-weighted mean
+    of the positions ``votes (gh, gw, 2)`` of the cell's 3x3 neighbourhood (only the candidates'
+    neighbourhoods: the whole grid's box filters cost 26 parts 2.8 ms a frame)."""
+    p = np.pad(score.astype(np.float64), 1)
+    v = np.pad(votes, ((1, 1), (1, 1), (0, 0)))
+    num, den = np.zeros((len(ii), 2)), np.full(len(ii), 1e-12)
+    for di in range(3):
+        for dj in range(3):
+            w = p[ii + di, jj + dj]
+            num += w[:, None] * v[ii + di, jj + dj]
+            den += w
+    return num / den[:, None]

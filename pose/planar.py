@@ -228,7 +228,7 @@ def corner_detector(target: PlanarTarget, normalizer: str, n_features: int = 0,
     parts, uv = target_parts(target)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(work_dir or tmp) / f"corners_{Path(target.reference).stem}_{file_stem(normalizer)}.onnx"
-        train_image_corners(target.image, uv, parts, path, normalizer=normalizer, source=target.reference,
+        train_image_corners(target.image, uv, parts, target.model.corners, path, normalizer=normalizer, source=target.reference,
                             progress=False, **CORNER_TRAINING)
         return CornerDetector(path)
 

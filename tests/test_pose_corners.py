@@ -32,12 +32,13 @@ def posedata(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def random_net(tmp_path_factory):
+    """A detector of the 8 box corners (``divisions=1``), untrained."""
     torch.manual_seed(0)
-    net = CornerNet(channels=(4, 8), hidden=16).eval()
+    net = CornerNet(8, channels=(4, 8), hidden=16).eval()
+    corners = box_corners([140, 95, 55]).tolist()
     meta = {"format": pc.FORMAT_NAME, "version": pc.FORMAT_VERSION, "normalizer": "none", "scale": 0.5,
-            "input_mean": 0.5, "input_std": 0.25,
-            "corners": box_corners([140, 95, 55]).tolist(), "units": "mm", "window": pc.WINDOW,
-            "stride": pc.STRIDE, "pad": pc.PAD}
+            "input_mean": 0.5, "input_std": 0.25, "parts": corners, "corners": corners, "units": "mm",
+            "window": pc.WINDOW, "stride": pc.STRIDE, "pad": pc.PAD, "config": net.config}
     path = corner_train.export_onnx(net, tmp_path_factory.mktemp("onnx") / "c.onnx", meta)
     return net, path
 
@@ -45,9 +46,9 @@ def random_net(tmp_path_factory):
 def test_constants_match_the_detector():
     assert (pc.WINDOW, pc.STRIDE) == (Detector.input_size, Detector.stride) == (CornerNet.input_size, CornerNet.stride)
     net = CornerNet(channels=(4, 8), hidden=16).eval()
-    with torch.no_grad():  # one output cell per 32x32 window, one more per 4 pixels
-        assert net(torch.zeros(1, 1, 32, 32)).shape == (1, 25, 1, 1)
-        assert net(torch.zeros(1, 1, 32 + 8, 32 + 12)).shape == (1, 25, 3, 4)
+    with torch.no_grad():  # one output cell per 32x32 window, one more per 4 pixels; 1 + 26 logits, 26 offsets
+        assert net(torch.zeros(1, 1, 32, 32)).shape == (1, 79, 1, 1)
+        assert net(torch.zeros(1, 1, 32 + 8, 32 + 12)).shape == (1, 79, 3, 4)
     assert pc.grid_shape(240, 320) == (61, 81)
     np.testing.assert_allclose(pc.grid_centres((2, 3))[1, 2], [7.5, 3.5])
 
@@ -57,15 +58,38 @@ def test_visibility_of_a_box_seen_from_above():
     K = camera_matrix(500, 500, 319.5, 239.5)
     R = np.diag([1.0, -1.0, -1.0])  # camera on the +z side of the box, looking down -z
     t = np.array([0.0, 0.0, 600.0])
-    uv, vis = corner_data.corner_visibility(corners, R, t, K, (480, 640))
+    uv, vis = corner_data.part_visibility(corners, R, t, K, (480, 640))
     np.testing.assert_array_equal(vis, [False, True] * 4)  # the top face (z bit set) only
     assert np.allclose(uv[1], [319.5 - 500 * 50 / 580, 239.5 + 500 * 30 / 580])
     mask = np.zeros((480, 640), np.uint8)  # an occluder hides everything but corner 7
     mask[int(uv[7, 1]) - 1 : int(uv[7, 1]) + 2, int(uv[7, 0]) - 1 : int(uv[7, 0]) + 2] = 255
-    _, vis = corner_data.corner_visibility(corners, R, t, K, (480, 640), mask)
+    _, vis = corner_data.part_visibility(corners, R, t, K, (480, 640), mask)
     assert np.flatnonzero(vis).tolist() == [7]
-    _, vis = corner_data.corner_visibility(corners, R, t + [2000, 0, 0], K, (480, 640))  # out of the image
+    _, vis = corner_data.part_visibility(corners, R, t + [2000, 0, 0], K, (480, 640))  # out of the image
     assert not vis.any()
+    # the 26 parts: the 9 of the top face (z = 20) are seen; the side faces are edge-on, the bottom turned away
+    parts = corner_data.box_parts(corners)
+    uv, vis = corner_data.part_visibility(corners, R, t, K, (480, 640), parts=parts)
+    np.testing.assert_array_equal(vis, parts[:, 2] == 20)
+    np.testing.assert_allclose(uv[vis].mean(0), [319.5, 239.5], atol=1e-9)
+    # the camera turned towards the -x side: that face's 9 parts show as well (15 in all)
+    R2 = cv2.Rodrigues(np.array([0.0, -0.5, 0.0]))[0] @ R
+    _, vis2 = corner_data.part_visibility(corners, R2, t, K, (480, 640), parts=parts)
+    np.testing.assert_array_equal(vis2, (parts[:, 2] == 20) | (parts[:, 0] == -50))
+    assert vis2.sum() == 15
+
+
+def test_box_parts_are_the_surface_lattice():
+    corners = box_corners([100, 60, 40], [-50, -30, -20])
+    np.testing.assert_array_equal(corner_data.box_parts(corners, 1), corners)
+    parts = corner_data.box_parts(corners, 2)
+    assert parts.shape == (26, 3) and len(np.unique(parts, axis=0)) == 26
+    np.testing.assert_array_equal(parts[:8], corners)  # the corners keep their indices
+    on_faces = (np.abs(np.abs(parts) - [50, 30, 20]) < 1e-9).sum(1)
+    assert sorted(on_faces.tolist()) == [1] * 6 + [2] * 12 + [3] * 8  # face centres, edge middles, corners
+    assert len(corner_data.box_parts(corners, 3)) == 4 ** 3 - 2 ** 3
+    with pytest.raises(InputError, match="divisions"):
+        corner_data.box_parts(corners, 0)
 
 
 def test_label_grid_offsets_point_at_the_corner():
@@ -121,6 +145,17 @@ def test_peaks_are_placed_finer_than_the_stride(random_net, monkeypatch):
             assert len(xy) == 0
 
 
+def test_vote_positions_are_the_weighted_mean_of_the_neighbourhood():
+    rng = np.random.default_rng(0)
+    score, votes = rng.random((6, 7)).astype(np.float32), rng.random((6, 7, 2)) * 50
+    ii, jj = np.array([0, 2, 5]), np.array([0, 3, 6])  # a corner, an inner cell, the opposite corner
+    for i, j, got in zip(ii, jj, pc.vote_positions(score, votes, ii, jj)):
+        rows, cols = slice(max(i - 1, 0), i + 2), slice(max(j - 1, 0), j + 2)
+        w = score[rows, cols].astype(np.float64)
+        np.testing.assert_allclose(got, (w[..., None] * votes[rows, cols]).sum((0, 1)) / w.sum(), rtol=1e-9)
+    assert pc.vote_positions(score, votes, ii[:0], jj[:0]).shape == (0, 2)
+
+
 def test_candidates_are_gated_by_the_predicted_pose(random_net, monkeypatch):
     det = pc.CornerDetector(random_net[1], top_k=3, gate=20.0)
     shape = pc.grid_shape(120, 160)
@@ -148,6 +183,7 @@ def test_build_frames_labels_follow_the_corners(posedata):
     seq = load_sequence(posedata / "train" / "000001", obj_id=1)
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
     frames = corner_data.build_frames(seq, corners, "none", scale=1.0, copies=2)
+    parts = corner_data.box_parts(corners)
     n = 3 * len(seq.views)
     assert frames.images.shape == (n, 240 + 2 * pc.PAD, 320 + 2 * pc.PAD) and frames.images.dtype == np.float32
     assert frames.labels.shape == frames.owner.shape == (n, 61, 81) and frames.offsets.shape == (n, 2, 61, 81)
@@ -157,10 +193,11 @@ def test_build_frames_labels_follow_the_corners(posedata):
         visible = frames.corners[f]
         if f % 3 == 0:  # the view itself: the projected visible corners
             view = seq.views[f // 3]
-            uv, vis = corner_data.corner_visibility(corners, view.R_w2c, view.t_w2c, view.K, (240, 320))
+            uv, vis = corner_data.part_visibility(corners, view.R_w2c, view.t_w2c, view.K, (240, 320), parts=parts)
             assert sorted(visible[:, 2].astype(int)) == sorted(np.flatnonzero(vis))
             np.testing.assert_allclose(visible[:, :2], uv[visible[:, 2].astype(int)])
-        for x, y, k in visible:  # every visible corner has its cells, whose votes hit it
+            assert vis[8:].any()  # parts besides the corners
+        for x, y, k in visible:  # every visible part has its cells, whose votes hit it
             cells = (frames.labels[f] == k + 1) & (np.linalg.norm(centres - [x, y], axis=2) <= 4.0)
             assert cells.any()
             np.testing.assert_allclose(centres[cells] + pc.STRIDE * frames.offsets[f][:, cells].T,
@@ -177,7 +214,7 @@ def test_novel_view_moves_each_face_with_its_plane(posedata):
     view = seq.views[0]
     gray = cv2.cvtColor(io.read_image(seq.image_dir / view.name), cv2.COLOR_BGR2GRAY)
     R, t, K = view.R_w2c, view.t_w2c, view.K
-    uv, vis = corner_data.corner_visibility(corners, R, t, K, gray.shape)
+    uv, vis = corner_data.part_visibility(corners, R, t, K, gray.shape)
     # no motion: the same frame and corners
     same, mask, uv0, vis0 = corner_data.novel_view(gray, corners, R, t, K, np.random.default_rng(0), azimuth_deg=0,
                                                    elevation_deg=0, distance=(1, 1))
@@ -212,15 +249,18 @@ def test_build_image_frames_labels_follow_the_parts():
     for f in range(4):
         for x, y, k in frames.corners[f]:
             assert ((frames.labels[f] == k + 1) & (np.linalg.norm(centres - [x, y], axis=2) <= 4.0)).any()
-    with pytest.raises(InputError):
-        corner_data.build_image_frames(gray, uv[:4])
+    assert corner_data.build_image_frames(gray, uv[:4], "none", scale=1.0, copies=0).corners[0][:, 2].tolist() == [
+        0, 1, 2, 3]  # any number of parts
+    for bad in (uv[:, :1], uv[:0], np.full((8, 2), np.nan)):
+        with pytest.raises(InputError, match="parts' pixels"):
+            corner_data.build_image_frames(gray, bad)
 
 
 def test_mixing_layers_keep_the_geometry():
     net = CornerNet(channels=(4, 8), hidden=16, mixing=2).eval()
     with torch.no_grad():
-        assert net(torch.zeros(1, 1, 32 + 8, 32 + 12)).shape == (1, 25, 3, 4)
-    assert net.config == {"channels": [4, 8], "hidden": 16, "mixing": 2}
+        assert net(torch.zeros(1, 1, 32 + 8, 32 + 12)).shape == (1, 79, 3, 4)
+    assert net.config == {"num_parts": 26, "channels": [4, 8], "hidden": 16, "mixing": 2}
 
 
 def test_onnx_matches_torch(random_net):
@@ -277,6 +317,10 @@ def test_bad_files(tmp_path, random_net):
         corner_train.export_onnx(random_net[0], tmp_path / "x.pt", {})
     with pytest.raises(InputError, match="box_ply"):
         corner_train.main(tmp_path, tmp_path / "c.onnx")
+    wrong = corner_train.export_onnx(random_net[0], tmp_path / "wrong.onnx", {
+        **pc.read_metadata(random_net[1]), "parts": box_corners([1, 2, 3]).tolist() * 2})  # 16 parts, 8 outputs
+    with pytest.raises(WeightFileError, match="16 parts but a network for 8"):
+        pc.CornerDetector(wrong)
     with pytest.raises(InputError, match="trained after the normalizer 'none'"):
         track.main(random_net[1], tmp_path, tmp_path / "p.json", np.eye(3), normalizer="alcn", detector="corners")
 
@@ -297,7 +341,17 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     assert args.func(args) == 0
     meta = pc.read_metadata(onnx)
     assert meta["normalizer"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
-    assert meta["config"] == {"channels": [16, 32], "hidden": 128, "mixing": 1}
+    assert meta["config"] == {"num_parts": 26, "channels": [16, 32], "hidden": 128, "mixing": 1}
+    corners = read_box_corners(posedata / "models" / "obj_000001.ply")
+    np.testing.assert_allclose(meta["parts"], corner_data.box_parts(corners))
+    det = pc.CornerDetector(onnx)
+    assert det.parts.shape == (26, 3) and det.outputs(np.zeros((40, 48), np.float32)).shape == (79, 11, 13)
+    # the 8 corners only
+    args = _parser().parse_args(["pose", "train-corners", str(posedata / "train" / "000001"), str(onnx), "--box-ply",
+                                 str(posedata / "models" / "obj_000001.ply"), "--iterations", "2", "--copies", "0",
+                                 "--divisions", "1"])
+    assert args.func(args) == 0
+    np.testing.assert_allclose(pc.read_metadata(onnx)["parts"], corners)
 
 
 def test_track_and_bench_the_corner_detector(posedata, random_net, tmp_path):
@@ -329,7 +383,7 @@ def test_corner_recall_against_the_true_corners(posedata, random_net, tmp_path, 
     r = corner_bench.corner_recall(random_net[1], scene)
     assert r["frames"] == 4 and r["visible"] == sum(f["visible"] for f in r["per_frame"]) > 0
     assert 0 <= r["best"] <= r["candidates"] <= 1 and 0 <= r["gated"] <= 1 and 0 <= r["background_wins"] <= 1
-    assert set(r["per_corner"]) <= set(range(8))
+    assert set(r["per_part"]) <= set(range(8))
     with pytest.raises(InputError, match="background"):
         corner_bench.corner_recall(random_net[1], scene, background="black")
     args = _parser().parse_args(["pose", "corner-recall", str(random_net[1]), str(scene), "--background", "keep",

@@ -94,7 +94,8 @@ def test_corner_detector_is_trained_on_the_reference_frame(tmp_path, monkeypatch
     K = planar.pinhole_camera(img.shape[1], img.shape[0])
     target = planar.build_target(img, (200, 90, 220, 180), K, reference="ref.png")
     det = planar.DETECTORS["corners"](target, "none", 0, tmp_path)
-    np.testing.assert_allclose(det.corners, planar.target_parts(target)[0])
+    np.testing.assert_allclose(det.parts, planar.target_parts(target)[0])
+    np.testing.assert_allclose(det.corners, target.model.corners)
     assert det.path == tmp_path / "corners_ref_none.onnx" and det.meta["source"] == "ref.png"
     assert det.meta["fit"]["views"] == 1 and det.meta["fit"]["frames"] == 2
     corr = det.detect(img)
