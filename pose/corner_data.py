@@ -8,7 +8,8 @@ perspective and shift: the viewpoints between and around the training views), th
 (outside the BOP ``mask_visib``) replaced by the data engine's random textures
 (:func:`alcn_cv.data.textures.display_texture`), and an intensity change ``a I + b`` with noise
 (the ranges of :func:`alcn_cv.data.synthetic.augment`'s). The box's parts (:func:`box_parts`:
-its corners, the middles of its edges and the centres of its faces) follow the homography. Each frame is normalized whole, as at test time, and labelled on the network's output grid
+its corners, the middles of its edges and the centres of its faces) follow the homography. Each
+frame is normalized whole, as at test time, and labelled on the network's output grid
 (:func:`label_grid`).
 """
 
@@ -64,9 +65,10 @@ def box_parts(corners: np.ndarray, divisions: int = DIVISIONS) -> np.ndarray:
         raise InputError(f"divisions must be >= 1, got {divisions}")
     corners = np.asarray(corners, np.float64).reshape(NUM_CORNERS, 3)
     steps = np.stack(np.meshgrid(*[np.arange(divisions + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    on_surface = ((steps == 0) | (steps == divisions)).any(1)
-    is_corner = ((steps == 0) | (steps == divisions)).all(1)
-    abc = steps[on_surface][np.argsort(~is_corner[on_surface], kind="stable")] / divisions
+    on_face = (steps == 0) | (steps == divisions)  # per axis: on one of its two faces
+    surface = steps[on_face.any(1)]
+    corner_first = np.argsort(~on_face[on_face.any(1)].all(1), kind="stable")
+    abc = surface[corner_first] / divisions
     return corners[0] + abc @ _box_axes(corners).T
 
 
