@@ -215,7 +215,8 @@ def _corner_recall(args: argparse.Namespace) -> int:
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``corner-recall``,
     ``relight`` and ``overlay-error`` to ``alcn``."""
-    from pose.corner_data import COPIES, DIVISIONS, NOVEL_VIEWS, SCALE
+    from pose.box import DIVISIONS
+    from pose.corner_data import COPIES, NOVEL_VIEWS, SCALE
     from pose.corner_train import ITERATIONS
     from pose.solver import METHODS
 

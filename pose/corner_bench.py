@@ -115,7 +115,7 @@ def corner_recall(onnx_path: str | Path, scene_dir: str | Path, *, obj_id: int =
                   radius: float = 5.0, gate: float = 20.0) -> dict[str, Any]:
     """Recall of the corner detector on a BOP scene (``alcn data pose``), frame by frame.
 
-    A visible part (:func:`pose.corner_data.part_visibility` with the scene's ``mask_visib``)
+    A visible part (:func:`pose.box.part_visibility` with the scene's ``mask_visib``)
     is found when a candidate of its own lies within ``radius`` pixels of its true projection:
     the best candidate of the whole frame (``best``), any of the ``top_k`` (``candidates``, what
     the tracker's first search gets), any of the ``gated_top_k`` within ``gate`` pixels of the
@@ -137,7 +137,7 @@ def corner_recall(onnx_path: str | Path, scene_dir: str | Path, *, obj_id: int =
         InputError: an unknown ``background`` or a frame without the object's mask.
     """
     from alcn_cv.formats import bop
-    from pose.corner_data import part_visibility
+    from pose.box import part_visibility
     from pose.corners import STRIDE, CornerDetector, to_scaled
     from pose.parts import to_gray
 

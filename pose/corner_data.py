@@ -7,7 +7,7 @@ augmentation applied to the whole frame: a random homography (in-plane rotation,
 perspective and shift: the viewpoints between and around the training views), the background
 (outside the BOP ``mask_visib``) replaced by the data engine's random textures
 (:func:`alcn_cv.data.textures.display_texture`), and an intensity change ``a I + b`` with noise
-(the ranges of :func:`alcn_cv.data.synthetic.augment`'s). The box's parts (:func:`box_parts`:
+(the ranges of :func:`alcn_cv.data.synthetic.augment`'s). The box's parts (:func:`pose.box.box_parts`:
 its corners, the middles of its edges and the centres of its faces) follow the homography. Each
 frame is normalized whole, as at test time, and labelled on the network's output grid
 (:func:`label_grid`).
@@ -24,9 +24,8 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import InputError
-from pose.corners import (
-    NUM_CORNERS, PAD, STRIDE, downscale, grid_centres, grid_shape, normalization_for, to_scaled,
-)
+from pose.box import DIVISIONS, box_parts, facing_faces, part_visibility
+from pose.corners import PAD, STRIDE, downscale, grid_centres, grid_shape, normalization_for, to_scaled
 from pose.parts import to_gray
 from pose.sequence import TrainingSequence
 
@@ -36,84 +35,9 @@ logger = logging.getLogger(__name__)
 #: (:func:`novel_view`); see :mod:`pose.corner_train` for the measurements.
 COPIES = 11
 NOVEL_VIEWS = 0.6
-#: Steps per box edge of the detector's parts (:func:`box_parts`: 2 is the corners, the edges'
-#: middles and the faces' centres).
-DIVISIONS = 2
 #: Downscaling of a sequence's frames before normalization and detection: a 32x32 window is 43
 #: pixels of a 640x480 frame (see :mod:`pose.corner_train` for 0.5 against 0.75).
 SCALE = 0.75
-
-
-def box_parts(corners: np.ndarray, divisions: int = DIVISIONS) -> np.ndarray:
-    """The parts of the box the learned detector finds: the points of its surface at
-    ``divisions`` equal steps along every edge, the 8 corners first (in their order), then the
-    rest in lattice order.
-
-    ``divisions=1`` gives the 8 corners; ``2`` (the default) adds the middles of the 12 edges and
-    the centres of the 6 faces (26 parts): a face centre's window shows the box's own texture
-    more than a corner's, which is three quarters background (see :mod:`pose.corner_train`).
-
-    Args:
-        corners: ``(8, 3)`` box corners (:func:`pose.model.box_corners` order: bit 2 of a
-            corner's index is x, bit 1 y, bit 0 z); any parallelepiped in that order.
-        divisions: steps per edge, at least 1.
-
-    Returns:
-        ``(n, 3)`` float64, ``n = (d + 1)^3 - (d - 1)^3``.
-    """
-    if divisions < 1:
-        raise InputError(f"divisions must be >= 1, got {divisions}")
-    corners = np.asarray(corners, np.float64).reshape(NUM_CORNERS, 3)
-    steps = np.stack(np.meshgrid(*[np.arange(divisions + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    on_face = (steps == 0) | (steps == divisions)  # per axis: on one of its two faces
-    surface = steps[on_face.any(1)]
-    corner_first = np.argsort(~on_face[on_face.any(1)].all(1), kind="stable")
-    abc = surface[corner_first] / divisions
-    return corners[0] + abc @ _box_axes(corners).T
-
-
-def _box_axes(corners: np.ndarray) -> np.ndarray:
-    """``(3, 3)``: the box's x, y and z edges as columns."""
-    return np.stack([corners[4] - corners[0], corners[2] - corners[0], corners[1] - corners[0]], 1)
-
-
-def part_visibility(corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, shape: tuple[int, int],
-                    mask: np.ndarray | None = None, mask_tolerance: int = 3, parts: np.ndarray | None = None
-                    ) -> tuple[np.ndarray, np.ndarray]:
-    """Projections of points on the box's surface and which of them are visible.
-
-    Args:
-        corners: ``(8, 3)`` box corners (:func:`box_parts`' order).
-        R, t: object-to-camera pose (``x_cam = R x + t``).
-        K: ``(3, 3)`` intrinsics.
-        shape: ``(H, W)`` of the image.
-        mask: optional ``(H, W)`` visible-object mask (BOP ``mask_visib``); a point farther
-            than ``mask_tolerance`` pixels from it is hidden by something else.
-        parts: ``(n, 3)`` points on the box's surface (:func:`box_parts`); default the corners.
-
-    Returns:
-        ``uv (n, 2)`` float64 pixels and ``visible (n,)`` bool: in front of the camera, inside
-        the image, on at least one face turned towards the camera, and on the mask.
-    """
-    corners = np.asarray(corners, np.float64).reshape(NUM_CORNERS, 3)
-    parts = corners if parts is None else np.asarray(parts, np.float64).reshape(-1, 3)
-    R, t = np.asarray(R, np.float64).reshape(3, 3), np.asarray(t, np.float64).reshape(3)
-    cam = parts @ R.T + t
-    z = np.maximum(cam[:, 2], 1e-9)
-    uv = np.stack([K[0, 0] * cam[:, 0] / z + K[0, 2], K[1, 1] * cam[:, 1] / z + K[1, 2]], 1)
-    h, w = shape
-    visible = (cam[:, 2] > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
-    # in box coordinates (0..1 along each edge) a face is turned towards the camera when the
-    # camera centre lies beyond its plane; a part is on the faces where its coordinate is 0 or 1
-    eye = _box_coordinates(corners, R, t)
-    abc = np.linalg.solve(_box_axes(corners), (parts - corners[0]).T).T
-    tol = 1e-6
-    visible &= ((np.abs(abc) < tol) & (eye < 0) | (np.abs(abc - 1) < tol) & (eye > 1)).any(1)
-    if mask is not None:
-        near = cv2.dilate((mask > 0).astype(np.uint8), np.ones((2 * mask_tolerance + 1,) * 2, np.uint8))
-        ij = np.clip(np.round(uv).astype(int), 0, [w - 1, h - 1])
-        visible &= near[ij[:, 1], ij[:, 0]] > 0
-    return uv, visible
 
 
 def _read_mask(path: Path, shape: tuple[int, int]) -> np.ndarray | None:
@@ -141,7 +65,7 @@ def label_grid(uv: np.ndarray, classes: np.ndarray, hidden: np.ndarray, shape: t
 
     Args:
         uv: ``(m, 2)`` visible parts (pixels of the frame the network sees).
-        classes: ``(m,)`` their part indices (:func:`box_parts` order).
+        classes: ``(m,)`` their part indices (:func:`pose.box.box_parts` order).
         hidden: ``(p, 2)`` parts inside the frame but not visible.
         shape: ``(gh, gw)`` of the grid (:func:`pose.corners.grid_centres`).
         pos_radius: a cell whose window centre is within this of a visible part is that
@@ -192,23 +116,6 @@ def random_homography(rng: np.random.Generator, shape: tuple[int, int], *, max_r
     return A @ P
 
 
-#: The 6 faces of a box as its corners in turn around each (:func:`pose.model.box_corners` order:
-#: bit 2 of a corner's index is x, bit 1 y, bit 0 z), with the axis and side of each face.
-BOX_FACES = tuple((axis, side, tuple(np.array(quad) + (side << (2 - axis))))
-                  for axis, quad in ((0, (0, 1, 3, 2)), (1, (0, 1, 5, 4)), (2, (0, 2, 6, 4))) for side in (0, 1))
-
-
-def _box_coordinates(corners: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """The camera centre in box coordinates (0..1 inside the box along each of its edges)."""
-    return np.linalg.solve(_box_axes(corners), -R.T @ t - corners[0])
-
-
-def facing_faces(corners: np.ndarray, R: np.ndarray, t: np.ndarray) -> list[tuple[int, ...]]:
-    """The faces of :data:`BOX_FACES` (their corner quads) turned towards the camera of pose ``R, t``."""
-    a = _box_coordinates(corners, R, t)
-    return [quad for axis, side, quad in BOX_FACES if (a[axis] > 1 if side else a[axis] < 0)]
-
-
 def _project(points: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray) -> np.ndarray:
     cam = points @ R.T + t
     return cam[:, :2] / cam[:, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
@@ -242,11 +149,11 @@ def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndar
         image: the view, uint8 ``(H, W)``.
         corners: ``(8, 3)`` box corners (:func:`pose.model.box_corners` order, z up).
         R, t: the view's object-to-camera pose; ``K``: its intrinsics.
-        parts: ``(n, 3)`` points of the box's surface to project (:func:`box_parts`; default the corners).
+        parts: ``(n, 3)`` points of the box's surface to project (:func:`pose.box.box_parts`; default the corners).
 
     Returns:
         ``(image, mask, uv, visible)``: the new view, the box's pixels in it (uint8, 255), the
-        parts' pixels ``(n, 2)`` and which of them are visible (:func:`part_visibility`).
+        parts' pixels ``(n, 2)`` and which of them are visible (:func:`pose.box.part_visibility`).
     """
     corners = np.asarray(corners, np.float64)
     h, w = image.shape
@@ -399,7 +306,7 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
         pos_radius, neg_radius: see :func:`label_grid` (downscaled pixels).
         novel_views: probability that a copy first sees the box from a nearby viewpoint
             (:func:`novel_view`) before its homography.
-        divisions: the parts labelled, :func:`box_parts` ``(corners, divisions)``.
+        divisions: the parts labelled, :func:`pose.box.box_parts` ``(corners, divisions)``.
         seed: random seed.
 
     Raises:

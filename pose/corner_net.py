@@ -3,7 +3,7 @@
 Same geometry as :class:`alcn_cv.nets.Detector` (two 5x5 convolutions with 2x2 max-pooling, then
 the fully connected layer as a 5x5 convolution; no padding), so one output cell scores the 32x32
 window whose top-left corner is 4 times its index: per cell, ``1 + n`` class logits (background,
-the ``n`` parts of the box: :func:`pose.corner_data.box_parts`) and, per part, its offset
+the ``n`` parts of the box: :func:`pose.box.box_parts`) and, per part, its offset
 ``(dx, dy)`` from the window's centre in units of the stride (4 pixels of the downscaled frame).
 The offsets place a part finer than the stride, as the offset head of CenterNet (Zhou et al., "Objects as Points", 2019) does.
 """

@@ -9,7 +9,7 @@ offsets. Every background cell of a crop is a negative, the hard ones near the b
 no hard-negative mining is needed.
 
 The parts and the scale (the defaults, ``divisions=2``, ``scale=0.75``): the network finds the
-26 points of the box's surface lattice (:func:`pose.corner_data.box_parts`: corners, edge middles,
+26 points of the box's surface lattice (:func:`pose.box.box_parts`: corners, edge middles,
 face centres) in frames downscaled to 0.75, where the design measured below found the 8 corners at
 0.5. On #1 of ``alcn data pose --frames 30`` (no normalization, seed 0) the 26 parts at 0.5 were
 found among the candidates at 76% of the visible ones (face centres 80-100%, corners 37-100%: a
@@ -99,8 +99,9 @@ from tqdm import tqdm
 
 from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import InputError
-from pose.corner_data import DIVISIONS, SCALE, CornerFrames, box_parts, build_frames, build_image_frames
-from pose.corners import FORMAT_NAME, FORMAT_VERSION, NUM_CORNERS, PAD, STRIDE, WINDOW
+from pose.box import DIVISIONS, NUM_CORNERS, box_parts
+from pose.corner_data import SCALE, CornerFrames, build_frames, build_image_frames
+from pose.corners import FORMAT_NAME, FORMAT_VERSION, PAD, STRIDE, WINDOW
 
 logger = logging.getLogger(__name__)
 
@@ -232,7 +233,7 @@ def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path
         channels, hidden, mixing: :class:`pose.corner_net.CornerNet`'s.
         iterations, batch_size, cells, lr, seed: see :func:`fit` (``cells``: the crops' side in
             output cells).
-        divisions: the parts found, :func:`pose.corner_data.box_parts` ``(corners, divisions)``.
+        divisions: the parts found, :func:`pose.box.box_parts` ``(corners, divisions)``.
         **frames_kw: see :func:`pose.corner_data.build_frames` (``copies``, ...).
 
     Returns:

@@ -4,7 +4,7 @@ The Box experiment of Rad, Roth & Lepetit (BMVC 2017, Sec. 4.4) detects the corn
 with the part-based method of Crivellaro et al. ("A Novel Representation of Parts for Accurate
 3D Object Detection and Tracking in Monocular Images", ICCV 2015) after contrast normalization.
 This module is that detector, kept small and real-time. Its parts are the points of the box's
-surface at half steps along its edges (:func:`pose.corner_data.box_parts`: 8 corners, 12 edge
+surface at half steps along its edges (:func:`pose.box.box_parts`: 8 corners, 12 edge
 middles, 6 face centres), where the paper's are the 8 corners (``divisions=1`` here): a face
 centre's window shows mostly the box's own texture, a corner's mostly the table.
 
@@ -52,6 +52,7 @@ import numpy as np
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.errors import InputError, WeightFileError
+from pose.box import NUM_CORNERS, part_visibility
 from pose.parts import Correspondences, to_gray
 
 logger = logging.getLogger(__name__)
@@ -61,12 +62,13 @@ __all__ = ["CornerDetector", "normalization_for", "read_metadata"]
 FORMAT_NAME = "alcn-corner-detector"
 FORMAT_VERSION = 3
 METADATA_KEY = "alcn_cv"
-NUM_CORNERS = 8
 # alcn_cv.nets.Detector's input window and output stride (a test checks they agree; importing
 # alcn_cv.nets here would import torch, which the tracking path must not need).
 WINDOW = 32
 STRIDE = 4
 PAD = WINDOW // 2
+#: The lowest :meth:`CornerDetector.support` of a pose the tracker keeps (see the class).
+MIN_SUPPORT = 0.15
 
 
 def normalization_for(spec: str) -> Normalization:
@@ -162,6 +164,7 @@ class CornerDetector:
         gated_top_k, gated_min_score: ``top_k`` and ``min_score`` inside the gates (scoring a
             gate's cells by their probability of being any part, ``1 - p(background)``, instead
             of the gate's part lost 20% of the poses of the data engine's #3).
+        min_support: the lowest :meth:`support` of a pose that :meth:`verify` keeps.
 
     Attributes:
         parts: ``(n, 3)`` float64 the parts found (object frame, :attr:`units`).
@@ -172,7 +175,7 @@ class CornerDetector:
     uses_prior = True
 
     def __init__(self, onnx_path: str | Path, *, top_k: int = 5, min_score: float = 0.05, gate: float = 20.0,
-                 gated_top_k: int = 2, gated_min_score: float = 0.02) -> None:
+                 gated_top_k: int = 2, gated_min_score: float = 0.02, min_support: float = MIN_SUPPORT) -> None:
         self.path = Path(onnx_path)
         self.meta = read_metadata(self.path)
         if self.meta["window"] != WINDOW or self.meta["stride"] != STRIDE or self.meta["pad"] != PAD:
@@ -181,6 +184,8 @@ class CornerDetector:
         if min(top_k, gated_top_k) < 1 or not (0 <= min_score < 1 and 0 <= gated_min_score < 1) or gate <= 0:
             raise InputError(f"need top_k, gated_top_k >= 1, min_score, gated_min_score in [0, 1) and gate > 0, "
                              f"got {top_k}, {gated_top_k}, {min_score}, {gated_min_score}, {gate}")
+        if not 0 <= min_support < 1:
+            raise InputError(f"min_support must be in [0, 1), got {min_support}")
         try:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
@@ -197,6 +202,7 @@ class CornerDetector:
         self.normalization = normalization_for(self.normalizer_name)
         self.top_k, self.min_score, self.gate = top_k, min_score, gate
         self.gated_top_k, self.gated_min_score = gated_top_k, gated_min_score
+        self.min_support = min_support
         self._cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def normalize(self, image: np.ndarray) -> np.ndarray:
@@ -251,6 +257,28 @@ class CornerDetector:
             order = np.argsort(-sc, kind="stable")[:keep]
             out.append((xy[order], sc[order]))
         return out
+
+    def support(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> float:
+        """How much the network's scores of ``image`` agree with the pose ``(rvec, tvec)`` (``K``:
+        the intrinsics of ``image``): the mean, over the parts the pose shows
+        (:func:`pose.box.part_visibility`), of each part's best score among the 3x3 cells around
+        its projection; 0 when it shows none. In ``[0, 1]``."""
+        R = cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
+        uv, visible = part_visibility(self.corners, R, tvec, np.asarray(K, np.float64), image.shape[:2],
+                                      parts=self.parts)
+        if not visible.any():
+            return 0.0
+        prob, _ = self.maps(image)
+        gh, gw = prob.shape[1:]
+        ij = np.rint((to_scaled(uv[visible], self.scale) - grid_centres((1, 1))[0, 0]) / STRIDE).astype(int)
+        j, i = np.clip(ij[:, 0], 0, gw - 1), np.clip(ij[:, 1], 0, gh - 1)
+        return float(np.mean([prob[k + 1, max(a - 1, 0):a + 2, max(b - 1, 0):b + 2].max()
+                              for k, a, b in zip(np.flatnonzero(visible), i, j)]))
+
+    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> str:
+        """``""`` when the pose's :meth:`support` is at least :attr:`min_support`, else why not."""
+        s = self.support(image, rvec, tvec, K)
+        return "" if s >= self.min_support else f"support {s:.2f} of the network's scores (need {self.min_support})"
 
     def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
                search_scale: float = 1.0) -> Correspondences:

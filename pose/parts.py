@@ -80,12 +80,15 @@ class Correspondences:
 class PartDetector(Protocol):
     """What the pose tracker needs of a part detector (:class:`FeaturePartDetector`,
     :class:`pose.corners.CornerDetector`): correspondences in an image, optionally searched
-    around a prior pose ``(rvec, tvec, K)`` (when :attr:`uses_prior`)."""
+    around a prior pose ``(rvec, tvec, K)`` (when :attr:`uses_prior`), and a last word on a pose
+    solved from them (:meth:`verify`: ``""`` to keep it, else why not)."""
 
     uses_prior: bool
 
     def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
                search_scale: float = 1.0) -> Correspondences: ...
+
+    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> str: ...
 
 
 class FeaturePartDetector:
@@ -152,6 +155,11 @@ class FeaturePartDetector:
     def normalize(self, image: np.ndarray) -> np.ndarray:
         """The normalized grayscale uint8 image the features are computed on."""
         return self.normalization.apply(to_gray(image))
+
+    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> str:
+        """``""``: every pose the solver accepts is kept (its inliers, each a descriptor match,
+        are the evidence)."""
+        return ""
 
     def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
                search_scale: float = 1.0) -> Correspondences:

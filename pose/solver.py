@@ -400,7 +400,8 @@ class PoseTracker:
 
     def step(self, frame_index: int, image: np.ndarray, detector: PartDetector
              ) -> tuple[PoseEstimate, Correspondences]:
-        """Detect the parts of ``image`` around the predicted pose, solve, and record the frame.
+        """Detect the parts of ``image`` around the predicted pose, solve, let the detector verify
+        the pose (:meth:`pose.parts.PartDetector.verify`), and record the frame.
 
         When the guided search around the prediction gives no pose, the whole frame is searched
         again before the frame is declared lost: after a single known pose (no velocity yet) or
@@ -414,11 +415,20 @@ class PoseTracker:
         prior = self.prior
         corr = detector.detect(image, None if prior is None else (*prior, self.solver.K),
                                search_scale=self.search_scale)
-        est = self.solver.solve(corr.object_points, corr.image_points, prior)
+        est = self._verified(self.solver.solve(corr.object_points, corr.image_points, prior), image, detector)
         if not est.ok and prior is not None and detector.uses_prior:
             corr = detector.detect(image, None)
-            est = self.solver.solve(corr.object_points, corr.image_points, prior)
+            est = self._verified(self.solver.solve(corr.object_points, corr.image_points, prior), image, detector)
         return self._record(frame_index, est), corr
+
+    def _verified(self, est: PoseEstimate, image: np.ndarray, detector: PartDetector) -> PoseEstimate:
+        """``est``, or a lost frame when the detector rejects its pose (``detector.verify``): a
+        wrong pose kept would also become the next frame's prior."""
+        if est.ok:
+            why = detector.verify(image, est.rvec, est.tvec, self.solver.K)
+            if why:
+                return PoseEstimate(False, num_matches=est.num_matches, inliers=est.inliers, reason=why)
+        return est
 
     def _record(self, frame_index: int, est: PoseEstimate) -> PoseEstimate:
         self._frame = frame_index

@@ -11,7 +11,7 @@ import torch
 
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.nets.detector import Detector
-from pose import corner_data, corner_train
+from pose import box, corner_data, corner_train
 from pose import corners as pc
 from pose import track
 from pose.cli import add_parser
@@ -51,45 +51,6 @@ def test_constants_match_the_detector():
         assert net(torch.zeros(1, 1, 32 + 8, 32 + 12)).shape == (1, 79, 3, 4)
     assert pc.grid_shape(240, 320) == (61, 81)
     np.testing.assert_allclose(pc.grid_centres((2, 3))[1, 2], [7.5, 3.5])
-
-
-def test_visibility_of_a_box_seen_from_above():
-    corners = box_corners([100, 60, 40], [-50, -30, -20])
-    K = camera_matrix(500, 500, 319.5, 239.5)
-    R = np.diag([1.0, -1.0, -1.0])  # camera on the +z side of the box, looking down -z
-    t = np.array([0.0, 0.0, 600.0])
-    uv, vis = corner_data.part_visibility(corners, R, t, K, (480, 640))
-    np.testing.assert_array_equal(vis, [False, True] * 4)  # the top face (z bit set) only
-    assert np.allclose(uv[1], [319.5 - 500 * 50 / 580, 239.5 + 500 * 30 / 580])
-    mask = np.zeros((480, 640), np.uint8)  # an occluder hides everything but corner 7
-    mask[int(uv[7, 1]) - 1 : int(uv[7, 1]) + 2, int(uv[7, 0]) - 1 : int(uv[7, 0]) + 2] = 255
-    _, vis = corner_data.part_visibility(corners, R, t, K, (480, 640), mask)
-    assert np.flatnonzero(vis).tolist() == [7]
-    _, vis = corner_data.part_visibility(corners, R, t + [2000, 0, 0], K, (480, 640))  # out of the image
-    assert not vis.any()
-    # the 26 parts: the 9 of the top face (z = 20) are seen; the side faces are edge-on, the bottom turned away
-    parts = corner_data.box_parts(corners)
-    uv, vis = corner_data.part_visibility(corners, R, t, K, (480, 640), parts=parts)
-    np.testing.assert_array_equal(vis, parts[:, 2] == 20)
-    np.testing.assert_allclose(uv[vis].mean(0), [319.5, 239.5], atol=1e-9)
-    # the camera turned towards the -x side: that face's 9 parts show as well (15 in all)
-    R2 = cv2.Rodrigues(np.array([0.0, -0.5, 0.0]))[0] @ R
-    _, vis2 = corner_data.part_visibility(corners, R2, t, K, (480, 640), parts=parts)
-    np.testing.assert_array_equal(vis2, (parts[:, 2] == 20) | (parts[:, 0] == -50))
-    assert vis2.sum() == 15
-
-
-def test_box_parts_are_the_surface_lattice():
-    corners = box_corners([100, 60, 40], [-50, -30, -20])
-    np.testing.assert_array_equal(corner_data.box_parts(corners, 1), corners)
-    parts = corner_data.box_parts(corners, 2)
-    assert parts.shape == (26, 3) and len(np.unique(parts, axis=0)) == 26
-    np.testing.assert_array_equal(parts[:8], corners)  # the corners keep their indices
-    on_faces = (np.abs(np.abs(parts) - [50, 30, 20]) < 1e-9).sum(1)
-    assert sorted(on_faces.tolist()) == [1] * 6 + [2] * 12 + [3] * 8  # face centres, edge middles, corners
-    assert len(corner_data.box_parts(corners, 3)) == 4 ** 3 - 2 ** 3
-    with pytest.raises(InputError, match="divisions"):
-        corner_data.box_parts(corners, 0)
 
 
 def test_label_grid_offsets_point_at_the_corner():
@@ -179,11 +140,33 @@ def test_candidates_are_gated_by_the_predicted_pose(random_net, monkeypatch):
     assert det.detect(None).keypoints == 2
 
 
+def test_support_is_the_score_where_the_pose_shows_its_parts(random_net, monkeypatch):
+    det = pc.CornerDetector(random_net[1], min_support=0.5)
+    image = np.zeros((240, 320), np.uint8)  # 120x160 at the detector's scale of 0.5
+    K = camera_matrix(300, 300, 159.5, 119.5)
+    rvec = cv2.Rodrigues(np.diag([1.0, -1.0, -1.0]))[0]  # looking down at the top face: corners 1, 3, 5, 7
+    tvec = np.array([-70.0, 47.5, 800.0])
+    uv = cv2.projectPoints(det.corners, rvec, tvec, K, None)[0].reshape(-1, 2)
+    top = {k: [(*pc.to_scaled(uv[k], det.scale), 0.8)] for k in (1, 3, 5, 7)}
+    shape = pc.grid_shape(120, 160)
+    monkeypatch.setattr(det, "maps", lambda image: _fake_maps(shape, top))
+    assert det.support(image, rvec, tvec, K) == pytest.approx(0.8)  # the hidden bottom corners do not count
+    assert det.verify(image, rvec, tvec, K) == ""
+    shifted = tvec + [30.0, 0.0, 0.0]  # 11 px of the full frame: the 3x3 cells reach the blobs' centres or edges
+    assert 0.4 <= det.support(image, rvec, shifted, K) < 0.8
+    far = tvec + [120.0, 0.0, 0.0]  # 45 px
+    assert det.support(image, rvec, far, K) == 0.0
+    assert "support 0.00" in det.verify(image, rvec, far, K)
+    assert det.support(image, rvec, tvec + [0.0, 0.0, -2000.0], K) == 0.0  # behind the camera: nothing shown
+    with pytest.raises(InputError, match="min_support"):
+        pc.CornerDetector(random_net[1], min_support=1.0)
+
+
 def test_build_frames_labels_follow_the_corners(posedata):
     seq = load_sequence(posedata / "train" / "000001", obj_id=1)
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
     frames = corner_data.build_frames(seq, corners, "none", scale=1.0, copies=2)
-    parts = corner_data.box_parts(corners)
+    parts = box.box_parts(corners)
     n = 3 * len(seq.views)
     assert frames.images.shape == (n, 240 + 2 * pc.PAD, 320 + 2 * pc.PAD) and frames.images.dtype == np.float32
     assert frames.labels.shape == frames.owner.shape == (n, 61, 81) and frames.offsets.shape == (n, 2, 61, 81)
@@ -193,7 +176,7 @@ def test_build_frames_labels_follow_the_corners(posedata):
         visible = frames.corners[f]
         if f % 3 == 0:  # the view itself: the projected visible corners
             view = seq.views[f // 3]
-            uv, vis = corner_data.part_visibility(corners, view.R_w2c, view.t_w2c, view.K, (240, 320), parts=parts)
+            uv, vis = box.part_visibility(corners, view.R_w2c, view.t_w2c, view.K, (240, 320), parts=parts)
             assert sorted(visible[:, 2].astype(int)) == sorted(np.flatnonzero(vis))
             np.testing.assert_allclose(visible[:, :2], uv[visible[:, 2].astype(int)])
             assert vis[8:].any()  # parts besides the corners
@@ -214,7 +197,7 @@ def test_novel_view_moves_each_face_with_its_plane(posedata):
     view = seq.views[0]
     gray = cv2.cvtColor(io.read_image(seq.image_dir / view.name), cv2.COLOR_BGR2GRAY)
     R, t, K = view.R_w2c, view.t_w2c, view.K
-    uv, vis = corner_data.part_visibility(corners, R, t, K, gray.shape)
+    uv, vis = box.part_visibility(corners, R, t, K, gray.shape)
     # no motion: the same frame and corners
     same, mask, uv0, vis0 = corner_data.novel_view(gray, corners, R, t, K, np.random.default_rng(0), azimuth_deg=0,
                                                    elevation_deg=0, distance=(1, 1))
@@ -225,7 +208,7 @@ def test_novel_view_moves_each_face_with_its_plane(posedata):
     img2, mask2, uv2, _ = corner_data.novel_view(gray, corners, R, t, K, np.random.default_rng(1))
     assert np.abs(uv2 - uv).max() > 1
     checked = 0
-    for quad in corner_data.facing_faces(corners, R, t):
+    for quad in box.facing_faces(corners, R, t):
         q1, q2 = uv[list(quad)].astype(np.float32), uv2[list(quad)].astype(np.float32)
         if cv2.contourArea(q1, oriented=True) * cv2.contourArea(q2, oriented=True) <= 0:
             continue  # turned away in the new view
@@ -343,7 +326,7 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     assert meta["normalizer"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
     assert meta["config"] == {"num_parts": 26, "channels": [16, 32], "hidden": 128, "mixing": 1}
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
-    np.testing.assert_allclose(meta["parts"], corner_data.box_parts(corners))
+    np.testing.assert_allclose(meta["parts"], box.box_parts(corners))
     det = pc.CornerDetector(onnx)
     assert det.parts.shape == (26, 3) and det.outputs(np.zeros((40, 48), np.float32)).shape == (79, 11, 13)
     # the 8 corners only

@@ -124,6 +124,9 @@ class _RecordingDetector:
     def __init__(self, pts, uv):
         self.pts, self.uv, self.calls = pts, uv, []
 
+    def verify(self, image, rvec, tvec, K):
+        return ""
+
     def detect(self, image, prior=None, *, search_scale=1.0):
         from pose.parts import Correspondences
 
@@ -148,6 +151,25 @@ def test_tracker_searches_wider_without_velocity_and_retries_the_whole_frame():
     assert det.calls[0] == (True, 1.0)
     assert not tracker.update(3, pts[:3], uv[:3]).ok
     assert tracker.search_scale == 2.5  # extrapolated over a lost frame
+
+
+class _RejectingDetector(_RecordingDetector):
+    """A part detector that finds the right matches and rejects every pose but the first."""
+
+    def verify(self, image, rvec, tvec, K):
+        return "" if len(self.calls) == 1 else "rejected"
+
+
+def test_a_pose_the_detector_rejects_is_a_lost_frame_and_no_prior():
+    rng = np.random.default_rng(6)
+    pts, uv, *_ = _scene(rng, outliers=0.1)
+    det = _RejectingDetector(pts, uv)
+    tracker = PoseTracker(PoseSolver(K))
+    assert tracker.step(0, None, det)[0].ok
+    est, _ = tracker.step(1, None, det)  # the guided search and the whole frame both give the pose: rejected
+    assert not est.ok and est.reason == "rejected" and len(det.calls) == 3
+    assert tracker.events[-1] == (1, "lost", "rejected")
+    assert [f for f, _, _ in tracker._poses] == [0]  # the rejected pose is not the next prior's
 
 
 def test_bad_arguments():
