@@ -28,15 +28,20 @@ centre's window shows mostly the box's own texture, a corner's mostly the table.
   only candidates within ``gate`` pixels of the part's predicted projection are kept
   (:meth:`CornerDetector.detect`); the tracker searches the whole frame again when that gives no
   pose. The candidates are the 2D-3D correspondences of :class:`pose.solver.PoseSolver`.
+* **Verification** (:meth:`CornerDetector.verify`): a pose the solver accepts is kept only when
+  the network scores the parts it shows highly enough where it shows them
+  (:meth:`CornerDetector.support`); a wrong pose from 5 chance inliers among the 130 candidates
+  of a whole frame does not survive it, and is not the next frame's prior (see :data:`MIN_SUPPORT`).
 
 Measured on the data engine's sequences (30 frames each, no normalization): the first
 design (a window classifier trained on crops around the 30 training views, hard-negative mining,
 a score grid of step 2 with centroid refinement, no gating) found only 60% of the visible
 corners of #1 among its 4 candidates within 5 px (71% within 10 px; the best candidate 43%),
 too few for PnP: 0-47% correct poses. :mod:`pose.corner_train` has the numbers of this design.
-With the gain ALCN in front it runs at 15.7 fps at 640x480 (``alcn pose bench-corners``, cv2.dnn
-with 2 threads, no torch, load 1.8; normalization 4.4 ms, network 34.6 ms at scale 0.75, peaks and
-pose 24.8 ms for 26 parts); the 8 corners at scale 0.5 ran at 44 fps (network 15.9 ms).
+With the gain ALCN in front it runs at 19.1 fps at 640x480 (``alcn pose bench-corners``, cv2.dnn
+with 2 threads, no torch, load 0.3; normalization 4.3 ms, network 33.8 ms at scale 0.75, peaks,
+pose and verification 14.4 ms for 26 parts; 15.7 fps before the verification, at load 1.8); the 8
+corners at scale 0.5 ran at 44 fps (network 15.9 ms).
 """
 
 from __future__ import annotations
@@ -67,7 +72,13 @@ METADATA_KEY = "alcn_cv"
 WINDOW = 32
 STRIDE = 4
 PAD = WINDOW // 2
-#: The lowest :meth:`CornerDetector.support` of a pose the tracker keeps (see the class).
+#: The lowest :meth:`CornerDetector.support` of a pose the tracker keeps. Measured with the
+#: networks of ``runs/table1_v6`` (seeds 0 and 1, no normalization and the gain ALCN; the sum over
+#: #1-#8 of the mean % of correct poses): without the check 551, with 0.10 608, 0.15 639, 0.20 611,
+#: 0.25 589; on #1 of the held-out scene (``alcn data pose --seed 1``, its 6 networks of
+#: ``runs/heldout_v6``) 52.2 -> 67.2% (0.20: 60.0). Of the accepted poses of #1, #2, #3, #5 and #8
+#: (seed 0, no normalization, no check) the wrong ones scored 0.02-0.40 (most below 0.2), the
+#: right ones 0.18-0.88 (most above 0.3).
 MIN_SUPPORT = 0.15
 
 

@@ -35,7 +35,9 @@ light (:func:`corner_detector`): its 8 parts are the target's 4 corners and the 
 Measured (every frame of the 4 scenes, 1000 steps on 60 copies of the reference frame, 2.5-7
 min per training on the loaded 2-core machine): it finds the 8 parts in the reference frame but
 2-5 of them under other lights without normalization, and poses 15.1% of the frames on average
-(DoG 24.9, ALCN 28.3, the gain ALCN 29.7), far below the SIFT parts (95-100%).
+(DoG 24.9, ALCN 28.3, the gain ALCN 29.7), far below the SIFT parts (95-100%). With each pose
+verified by the network's scores (:meth:`pose.corners.CornerDetector.verify`; 30 s per training
+on the idle machine): none 16.1%, the default gain ALCN 27.4% (``runs/posereal_corners_v7``).
 
 The Webcam frames are for academic research only (cite TILDE and AMOS).
 """
