@@ -115,6 +115,7 @@ def part_visibility(corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.nda
         visible &= near[ij[:, 1], ij[:, 0]] > 0
     return uv, visible
 
+
 #: The 6 faces of a box as its corners in turn around each (:func:`pose.model.box_corners` order:
 #: bit 2 of a corner's index is x, bit 1 y, bit 0 z), with the axis and side of each face.
 BOX_FACES = tuple((axis, side, tuple(np.array(quad) + (side << (2 - axis))))
