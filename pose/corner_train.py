@@ -38,7 +38,8 @@ directional light changes a Lambertian face) and a cast shadow on half of them (
 0.3-0.8 of the light): none 640 / 560 and ALCN 670 / 630 for seeds 0 / 1, against 613 / 633 and
 663 / 647 without (ALCN's #5 83.3 then 40.0); after a rejected pose, RANSAC again without its
 inliers (up to 3 times): 63.9; 8 candidates per part in the whole frame: 60.0; candidates of the
-whole frame at a second scale (0.6) too, for the close views: 66.7.
+whole frame at a second scale (0.6) too, for the close views: 66.7; a first pose from 4 inliers
+instead of 5 (verified as the others): 61.7, and 637.5 over #1-#8 (seeds 0 and 1) against 639.
 
 The 8-corner design before it, measured on the data engine's sequences (30 frames each, no
 normalization, % of poses within 5 px on #1 / #3; 2-core CPU shared with other jobs, load 8-11):
