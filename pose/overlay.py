@@ -37,17 +37,11 @@ from alcn_cv.errors import DatasetError
 from alcn_cv.io import atomic_write, read_json, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, new_figure, save_figure
 from pose import model as part_model
+from pose.box import facing_faces
 from pose.model import BOX_EDGES
 from pose.solver import project
 
 logger = logging.getLogger(__name__)
-
-#: The 6 faces of a box as (corner indices, outward axis, sign) in the order of
-#: :func:`pose.model.box_corners` (corner ``i``: x from bit 2, y from bit 1, z from bit 0).
-BOX_FACES: tuple[tuple[tuple[int, ...], int, int], ...] = tuple(
-    (tuple(i for i in range(8) if (i >> (2 - axis)) & 1 == side), axis, 1 if side else -1)
-    for axis in range(3) for side in (0, 1))
-
 
 @dataclass
 class EdgeSettings:
@@ -74,15 +68,10 @@ class EdgeSettings:
 def visible_edges(corners: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> list[tuple[int, int]]:
     """The edges (pairs of :data:`pose.model.BOX_EDGES`) of a face turned towards the camera.
 
-    ``corners`` ``(8, 3)`` must be an axis-aligned box in the order of
-    :func:`pose.model.box_corners`; ``rvec, tvec`` the object-to-camera pose."""
+    ``corners`` ``(8, 3)``: a box in the order of :func:`pose.model.box_corners` (its faces:
+    :func:`pose.box.facing_faces`); ``rvec, tvec`` the object-to-camera pose."""
     R = cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
-    cam = np.asarray(corners, np.float64) @ R.T + np.ravel(tvec)
-    front = set()
-    for idx, axis, sign in BOX_FACES:
-        normal = sign * R[:, axis]
-        if normal @ cam[list(idx)].mean(0) < 0:  # the camera is on the outer side of the face
-            front.add(frozenset(idx))
+    front = [set(quad) for quad in facing_faces(np.asarray(corners, np.float64), R, np.ravel(tvec))]
     return [(i, j) for i, j in BOX_EDGES if any({i, j} <= face for face in front)]
 
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from pose import box_fit, overlay
+from pose.box import facing_faces
 from pose.model import box_corners
 from pose.solver import camera_matrix, project
 
@@ -25,13 +26,10 @@ def _render(corners: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> np.ndarr
     on a dark background (a convex box: those faces do not overlap)."""
     img = np.full((480, 640), 40, np.uint8)
     uv = project(corners, rvec, tvec, K)
-    R = cv2.Rodrigues(rvec)[0]
-    cam = corners @ R.T + tvec.ravel()
     levels = iter((110, 180, 250))
-    for idx, axis, sign in overlay.BOX_FACES:
-        if sign * R[:, axis] @ cam[list(idx)].mean(0) < 0:
-            hull = cv2.convexHull(np.round(uv[list(idx)] * 16).astype(np.int32))
-            cv2.fillConvexPoly(img, hull, next(levels), cv2.LINE_AA, 4)
+    for quad in facing_faces(corners, cv2.Rodrigues(rvec)[0], tvec.ravel()):
+        hull = cv2.convexHull(np.round(uv[list(quad)] * 16).astype(np.int32))
+        cv2.fillConvexPoly(img, hull, next(levels), cv2.LINE_AA, 4)
     return img
 
 
