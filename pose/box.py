@@ -15,7 +15,7 @@ import numpy as np
 from alcn_cv.errors import InputError
 
 __all__ = ["BOX_FACES", "DIVISIONS", "NUM_CORNERS", "box_axes", "box_coordinates", "box_parts", "facing_faces",
-           "flat_axes", "part_visibility"]
+           "flat_axes", "part_visibility", "parts_per_face"]
 
 NUM_CORNERS = 8
 #: Steps per box edge of the detector's parts (:func:`box_parts`: 2 is the corners, the edges'
@@ -78,11 +78,13 @@ def _edge_vectors(corners: np.ndarray) -> np.ndarray:
 def part_visibility(corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, shape: tuple[int, int],
                     mask: np.ndarray | None = None, mask_tolerance: int = 3, parts: np.ndarray | None = None
                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Projections of points on the box's surface and which of them are visible.
+    """Projections of points on the box's surface and which of them are visible, for one pose
+    or a batch of ``b`` poses.
 
     Args:
         corners: ``(8, 3)`` box corners (:func:`box_parts`' order).
-        R, t: object-to-camera pose (``x_cam = R x + t``).
+        R, t: object-to-camera pose (``x_cam = R x + t``): ``(3, 3)`` and ``(3,)``, or a batch
+            ``(b, 3, 3)`` and ``(b, 3)``.
         K: ``(3, 3)`` intrinsics.
         shape: ``(H, W)`` of the image.
         mask: optional ``(H, W)`` visible-object mask (BOP ``mask_visib``); a point farther
@@ -90,30 +92,47 @@ def part_visibility(corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.nda
         parts: ``(n, 3)`` points on the box's surface (:func:`box_parts`); default the corners.
 
     Returns:
-        ``uv (n, 2)`` float64 pixels and ``visible (n,)`` bool: in front of the camera, inside
-        the image, on at least one face turned towards the camera, and on the mask.
+        ``uv (n, 2)`` float64 pixels and ``visible (n,)`` bool (``(b, n, 2)`` and ``(b, n)`` for a
+        batch): in front of the camera, inside the image, on at least one face turned towards the
+        camera, and on the mask.
     """
     corners = np.asarray(corners, np.float64).reshape(NUM_CORNERS, 3)
     parts = corners if parts is None else np.asarray(parts, np.float64).reshape(-1, 3)
-    R, t = np.asarray(R, np.float64).reshape(3, 3), np.asarray(t, np.float64).reshape(3)
-    cam = parts @ R.T + t
-    z = np.maximum(cam[:, 2], 1e-9)
-    uv = np.stack([K[0, 0] * cam[:, 0] / z + K[0, 2], K[1, 1] * cam[:, 1] / z + K[1, 2]], 1)
+    R, t = np.asarray(R, np.float64), np.asarray(t, np.float64)
+    batch = R.shape[:-2]
+    R, t = R.reshape(*batch, 3, 3), t.reshape(*batch, 3)
+    cam = np.einsum("...ij,nj->...ni", R, parts) + t[..., None, :]
+    z = np.maximum(cam[..., 2], 1e-9)
+    uv = np.stack([K[0, 0] * cam[..., 0] / z + K[0, 2], K[1, 1] * cam[..., 1] / z + K[1, 2]], -1)
     h, w = shape
-    visible = (cam[:, 2] > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
+    visible = (cam[..., 2] > 0) & (uv[..., 0] >= 0) & (uv[..., 0] <= w - 1) & (uv[..., 1] >= 0) & (uv[..., 1] <= h - 1)
     # in box coordinates (0..1 along each edge) a face is turned towards the camera when the
     # camera centre lies beyond its plane; a part is on the faces where its coordinate is 0 or 1
     # (both faces of a flat box's edge of length 0: one plane, seen from either side)
-    eye = box_coordinates(corners, R, t)
-    abc = np.linalg.solve(box_axes(corners), (parts - corners[0]).T).T
-    tol = 1e-6
-    on_low, on_high = np.abs(abc) < tol, (np.abs(abc - 1) < tol) | flat_axes(corners)
-    visible &= (on_low & (eye < 0) | on_high & (eye > 1)).any(1)
+    eye = box_coordinates(corners, R, t)[..., None, :]
+    on_low, on_high = _on_faces(corners, parts)
+    visible &= (on_low & (eye < 0) | on_high & (eye > 1)).any(-1)
     if mask is not None:
         near = cv2.dilate((mask > 0).astype(np.uint8), np.ones((2 * mask_tolerance + 1,) * 2, np.uint8))
         ij = np.clip(np.round(uv).astype(int), 0, [w - 1, h - 1])
-        visible &= near[ij[:, 1], ij[:, 0]] > 0
+        visible &= near[ij[..., 1], ij[..., 0]] > 0
     return uv, visible
+
+
+def parts_per_face(corners: np.ndarray, parts: np.ndarray) -> int:
+    """How many of ``parts`` (``(n, 3)``, on the surface of the box ``corners``) lie on its
+    fullest face: ``(d + 1)^2`` for :func:`box_parts` with ``d`` divisions."""
+    on_low, on_high = _on_faces(np.asarray(corners, np.float64).reshape(NUM_CORNERS, 3),
+                                np.asarray(parts, np.float64).reshape(-1, 3))
+    return int(max(on_low.sum(0).max(), on_high.sum(0).max()))
+
+
+def _on_faces(corners: np.ndarray, parts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(n, 3)`` bool twice: whether each part lies on the box's face at coordinate 0, and at
+    coordinate 1, of each axis (both for the edge of length 0 of a flat box)."""
+    abc = np.linalg.solve(box_axes(corners), (parts - corners[0]).T).T
+    tol = 1e-6
+    return np.abs(abc) < tol, (np.abs(abc - 1) < tol) | flat_axes(corners)
 
 
 #: The 6 faces of a box as its corners in turn around each (:func:`pose.model.box_corners` order:
@@ -123,8 +142,11 @@ BOX_FACES = tuple((axis, side, tuple(np.array(quad) + (side << (2 - axis))))
 
 
 def box_coordinates(corners: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """The camera centre in box coordinates (0..1 inside the box along each of its edges)."""
-    return np.linalg.solve(box_axes(corners), -R.T @ t - corners[0])
+    """The camera centre in box coordinates (0..1 inside the box along each of its edges):
+    ``(3,)`` for a pose ``R (3, 3), t (3,)``, ``(b, 3)`` for a batch ``(b, 3, 3), (b, 3)``."""
+    R, t = np.asarray(R, np.float64), np.asarray(t, np.float64)
+    eye = -np.einsum("...ji,...j->...i", R, t.reshape(*R.shape[:-2], 3))  # -R^T t
+    return (eye - corners[0]) @ np.linalg.inv(box_axes(corners)).T
 
 
 def facing_faces(corners: np.ndarray, R: np.ndarray, t: np.ndarray) -> list[tuple[int, ...]]:

@@ -32,6 +32,12 @@ centre's window shows mostly the box's own texture, a corner's mostly the table.
   the network scores the parts it shows highly enough where it shows them
   (:meth:`CornerDetector.support`); a wrong pose from 5 chance inliers among the 130 candidates
   of a whole frame does not survive it, and is not the next frame's prior (see :data:`MIN_SUPPORT`).
+* **Proposals** (:meth:`CornerDetector.propose`): for a frame where RANSAC over the candidates
+  gives no pose that survives, poses from thousands of P3P triples of the whole frame's
+  candidates are scored by that same support, every part they show counted; the best, when it
+  stands out (:data:`MAX_RIVAL_RATIO`), is searched around as a prediction and verified again.
+  Lost frames under strong light changes are mostly frames where a few right candidates hide
+  among 130, too few for RANSAC's consensus but enough for a triple.
 
 Measured on the data engine's sequences (30 frames each, no normalization): the first
 design (a window classifier trained on crops around the 30 training views, hard-negative mining,
@@ -41,7 +47,9 @@ too few for PnP: 0-47% correct poses. :mod:`pose.corner_train` has the numbers o
 With the gain ALCN in front it runs at 19.1 fps at 640x480 (``alcn pose bench-corners``, cv2.dnn
 with 2 threads, no torch, load 0.3; normalization 4.3 ms, network 33.8 ms at scale 0.75, peaks,
 pose and verification 14.4 ms for 26 parts; 15.7 fps before the verification, at load 1.8); the 8
-corners at scale 0.5 ran at 44 fps (network 15.9 ms).
+corners at scale 0.5 ran at 44 fps (network 15.9 ms). With the proposals (``runs/bench_corners_v8``,
+load 1.0): 18.1 fps on #1 (peaks, pose, verification 17.7 ms; no frame lost, none proposed), 10.4
+fps on #5 where 22 of the 30 frames are lost (56.2 ms: each lost frame pays for a proposal).
 """
 
 from __future__ import annotations
@@ -57,7 +65,7 @@ import numpy as np
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.errors import InputError, WeightFileError
-from pose.box import NUM_CORNERS, part_visibility
+from pose.box import NUM_CORNERS, part_visibility, parts_per_face
 from pose.parts import Correspondences, to_gray
 
 logger = logging.getLogger(__name__)
@@ -80,6 +88,14 @@ PAD = WINDOW // 2
 #: (seed 0, no normalization, no check) the wrong ones scored 0.02-0.40 (most below 0.2), the
 #: right ones 0.18-0.88 (most above 0.3).
 MIN_SUPPORT = 0.15
+#: :meth:`CornerDetector.propose`: candidate triples drawn, and the lowest support of the pose it
+#: proposes (measured below, in :mod:`pose.corner_train`).
+PROPOSALS = 2000
+MIN_PROPOSAL_SUPPORT = 0.3
+#: A proposed pose is unique when every pose whose parts project farther than ``RIVAL_DISTANCE``
+#: pixels (mean, full frame) from its own scores at most ``MAX_RIVAL_RATIO`` of its support.
+RIVAL_DISTANCE = 20.0
+MAX_RIVAL_RATIO = 0.85
 
 
 def normalization_for(spec: str) -> Normalization:
@@ -176,6 +192,8 @@ class CornerDetector:
             gate's cells by their probability of being any part, ``1 - p(background)``, instead
             of the gate's part lost 20% of the poses of the data engine's #3).
         min_support: the lowest :meth:`support` of a pose that :meth:`verify` keeps.
+        proposals, min_proposal_support: how many candidate triples :meth:`propose` draws (0: it
+            proposes nothing), and the lowest support of the pose it proposes.
 
     Attributes:
         parts: ``(n, 3)`` float64 the parts found (object frame, :attr:`units`).
@@ -186,7 +204,8 @@ class CornerDetector:
     uses_prior = True
 
     def __init__(self, onnx_path: str | Path, *, top_k: int = 5, min_score: float = 0.05, gate: float = 20.0,
-                 gated_top_k: int = 2, gated_min_score: float = 0.02, min_support: float = MIN_SUPPORT) -> None:
+                 gated_top_k: int = 2, gated_min_score: float = 0.02, min_support: float = MIN_SUPPORT,
+                 proposals: int = PROPOSALS, min_proposal_support: float = MIN_PROPOSAL_SUPPORT) -> None:
         self.path = Path(onnx_path)
         self.meta = read_metadata(self.path)
         if self.meta["window"] != WINDOW or self.meta["stride"] != STRIDE or self.meta["pad"] != PAD:
@@ -195,8 +214,9 @@ class CornerDetector:
         if min(top_k, gated_top_k) < 1 or not (0 <= min_score < 1 and 0 <= gated_min_score < 1) or gate <= 0:
             raise InputError(f"need top_k, gated_top_k >= 1, min_score, gated_min_score in [0, 1) and gate > 0, "
                              f"got {top_k}, {gated_top_k}, {min_score}, {gated_min_score}, {gate}")
-        if not 0 <= min_support < 1:
-            raise InputError(f"min_support must be in [0, 1), got {min_support}")
+        if not (0 <= min_support < 1 and 0 <= min_proposal_support < 1) or proposals < 0:
+            raise InputError(f"need min_support and min_proposal_support in [0, 1) and proposals >= 0, got "
+                             f"{min_support}, {min_proposal_support} and {proposals}")
         try:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
@@ -214,7 +234,11 @@ class CornerDetector:
         self.top_k, self.min_score, self.gate = top_k, min_score, gate
         self.gated_top_k, self.gated_min_score = gated_top_k, gated_min_score
         self.min_support = min_support
+        self.proposals, self.min_proposal_support = proposals, min_proposal_support
+        self._face_parts = parts_per_face(self.corners, self.parts)
+        self._rng = np.random.default_rng(0)  # the proposals' draws: the same results on every run
         self._cache: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._pooled: tuple[np.ndarray, np.ndarray] | None = None
 
     def normalize(self, image: np.ndarray) -> np.ndarray:
         """The downscaled, normalized, standardized float32 frame the network sees."""
@@ -275,21 +299,95 @@ class CornerDetector:
         (:func:`pose.box.part_visibility`), of each part's best score among the 3x3 cells around
         its projection; 0 when it shows none. In ``[0, 1]``."""
         R = cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
-        uv, visible = part_visibility(self.corners, R, tvec, np.asarray(K, np.float64), image.shape[:2],
-                                      parts=self.parts)
-        if not visible.any():
-            return 0.0
-        prob, _ = self.maps(image)
-        gh, gw = prob.shape[1:]
-        ij = np.rint((to_scaled(uv[visible], self.scale) - grid_centres((1, 1))[0, 0]) / STRIDE).astype(int)
-        j, i = np.clip(ij[:, 0], 0, gw - 1), np.clip(ij[:, 1], 0, gh - 1)
-        return float(np.mean([prob[k + 1, max(a - 1, 0):a + 2, max(b - 1, 0):b + 2].max()
-                              for k, a, b in zip(np.flatnonzero(visible), i, j)]))
+        return float(self._supports(image, R[None], np.asarray(tvec, np.float64).reshape(1, 3), K)[0][0])
 
-    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> str:
-        """``""`` when the pose's :meth:`support` is at least :attr:`min_support`, else why not."""
+    def _supports(self, image: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`support` of ``b`` poses ``R (b, 3, 3)``, ``t (b, 3)`` at once, ``(b,)`` the
+        number of distinct grid cells the parts each pose shows fall in, and ``(b, n, 2)`` the
+        parts' projections."""
+        uv, visible = part_visibility(self.corners, R, t, np.asarray(K, np.float64), image.shape[:2],
+                                      parts=self.parts)
+        pooled = self._pooled_scores(image)
+        gh, gw = pooled.shape[1:]
+        ij = np.rint((to_scaled(uv, self.scale) - grid_centres((1, 1))[0, 0]) / STRIDE).astype(int)
+        j, i = np.clip(ij[..., 0], 0, gw - 1), np.clip(ij[..., 1], 0, gh - 1)
+        scores = np.where(visible, pooled[np.arange(len(self.parts)), i, j], 0.0)
+        shown = visible.sum(1)
+        # the hidden parts all get cell -1, counted once and taken off
+        cells = np.sort(np.where(visible, i * gw + j, -1), 1)
+        distinct = 1 + (np.diff(cells, axis=1) != 0).sum(1) - (~visible).any(1)
+        return scores.sum(1) / np.maximum(shown, 1), distinct, uv
+
+    def _pooled_scores(self, image: np.ndarray) -> np.ndarray:
+        """``(n, gh, gw)``: each part's best score among the 3x3 cells around every cell (kept
+        for the last frame's maps)."""
+        prob, _ = self.maps(image)
+        if self._pooled is None or self._pooled[0] is not prob:
+            kernel = np.ones((3, 3), np.uint8)
+            self._pooled = (prob, np.stack([cv2.dilate(p, kernel) for p in prob[1:]]))
+        return self._pooled[1]
+
+    def propose(self, image: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """A pose of the box in ``image`` found by the network's scores alone, for a frame where
+        RANSAC over the candidates found none (``None`` when none scores well enough).
+
+        Draws :attr:`proposals` triples of the whole frame's candidates (:meth:`peaks`), three
+        different parts each, parts and candidates in proportion to their scores; each triple's
+        P3P poses (AP3P, up to 4) are scored by :meth:`support`, which looks at every part the pose
+        shows, not only at the candidates. Of the poses whose parts fall in at least as many grid
+        cells as a face has parts (a far, tiny box would otherwise score its few cells), the best
+        is returned when its support is at least :attr:`min_proposal_support` and no pose
+        elsewhere in the image comes near it (:data:`MAX_RIVAL_RATIO`): in a cluttered frame
+        where the network sees no box, thousands of draws find several poses of about equal
+        support, none of them right.
+
+        Returns:
+            ``(rvec, tvec)``, ``(3, 1)`` float64 each, or ``None``.
+        """
+        if self.proposals == 0:
+            return None
+        peaks = self.peaks(image)
+        parts = np.array([k for k, (xy, _) in enumerate(peaks) if len(xy)], np.int64)
+        if len(parts) < 3:
+            return None
+        found = [peaks[k] for k in parts]
+        xy = np.zeros((len(found), self.top_k, 2))
+        cumulative = np.ones((len(found), self.top_k))  # beyond a part's last candidate: never drawn
+        for a, (p, sc) in enumerate(found):
+            xy[a, : len(p)] = p
+            cumulative[a, : len(sc)] = np.cumsum(sc) / sc.sum()
+        # three parts per triple without repeats, each in proportion to its best score (Gumbel top-k)
+        best = np.array([sc[0] for _, sc in found])
+        keys = np.log(best) + self._rng.gumbel(size=(self.proposals, len(found)))
+        picks = np.argsort(-keys, 1)[:, :3]
+        drawn = (cumulative[picks] < self._rng.random((self.proposals, 3, 1))).sum(-1)
+        image_points, object_points = xy[picks, drawn], self.parts[parts[picks]]
+        K = np.asarray(K, np.float64)
+        R, t = [], []
+        for obj, img in zip(object_points, image_points):
+            _, rvecs, tvecs = cv2.solveP3P(obj, img, K, None, flags=cv2.SOLVEPNP_AP3P)
+            R.extend(cv2.Rodrigues(r)[0] for r in rvecs)
+            t.extend(tv.reshape(3) for tv in tvecs)
+        if not R:
+            return None
+        support, cells, uv = self._supports(image, np.array(R), np.array(t), K)
+        support[cells < self._face_parts] = 0.0
+        b = int(np.argmax(support))
+        elsewhere = np.linalg.norm(uv - uv[b], axis=-1).mean(-1) > RIVAL_DISTANCE
+        rival = support[elsewhere].max(initial=0.0)
+        if support[b] < self.min_proposal_support or rival > MAX_RIVAL_RATIO * support[b]:
+            return None
+        return cv2.Rodrigues(R[b])[0], t[b].reshape(3, 1).copy()
+
+    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, *,
+               proposed: bool = False) -> str:
+        """``""`` when the pose's :meth:`support` is at least :attr:`min_support` (at least
+        :attr:`min_proposal_support` for a pose ``proposed`` by :meth:`propose`: chosen among
+        thousands for its support, it is held to the bar it was proposed at), else why not."""
         s = self.support(image, rvec, tvec, K)
-        return "" if s >= self.min_support else f"support {s:.2f} of the network's scores (need {self.min_support})"
+        need = self.min_proposal_support if proposed else self.min_support
+        return "" if s >= need else f"support {s:.2f} of the network's scores (need {need})"
 
     def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
                search_scale: float = 1.0) -> Correspondences:

@@ -80,15 +80,20 @@ class Correspondences:
 class PartDetector(Protocol):
     """What the pose tracker needs of a part detector (:class:`FeaturePartDetector`,
     :class:`pose.corners.CornerDetector`): correspondences in an image, optionally searched
-    around a prior pose ``(rvec, tvec, K)`` (when :attr:`uses_prior`), and a last word on a pose
-    solved from them (:meth:`verify`: ``""`` to keep it, else why not)."""
+    around a prior pose ``(rvec, tvec, K)`` (when :attr:`uses_prior`), a last word on a pose
+    solved from them (:meth:`verify`: ``""`` to keep it, else why not), and, for a frame where
+    no pose came of them, a pose of its own to search around (:meth:`propose`, or ``None``; the
+    pose solved around it is verified with ``proposed=True``)."""
 
     uses_prior: bool
 
     def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
                search_scale: float = 1.0) -> Correspondences: ...
 
-    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> str: ...
+    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, *,
+               proposed: bool = False) -> str: ...
+
+    def propose(self, image: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None: ...
 
 
 class FeaturePartDetector:
@@ -156,10 +161,16 @@ class FeaturePartDetector:
         """The normalized grayscale uint8 image the features are computed on."""
         return self.normalization.apply(to_gray(image))
 
-    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> str:
+    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, *,
+               proposed: bool = False) -> str:
         """``""``: every pose the solver accepts is kept (its inliers, each a descriptor match,
         are the evidence)."""
         return ""
+
+    def propose(self, image: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """``None``: RANSAC over the descriptor matches of the whole frame is this detector's
+        whole search."""
+        return None
 
     def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
                search_scale: float = 1.0) -> Correspondences:

@@ -409,6 +409,11 @@ class PoseTracker:
         frame at the start of the data engine's sequence #8 against a 20 px window; the guided
         matches there were all wrong).
 
+        When that gives no pose either, the detector may propose one from its own evidence
+        (:meth:`pose.parts.PartDetector.propose`; the learned detector's scores where a pose
+        shows the parts, :meth:`pose.corners.CornerDetector.propose`): its parts are searched
+        around it as around a prediction, and the pose solved from them is verified as proposed.
+
         Returns:
             The estimate and the correspondences it was solved from.
         """
@@ -419,13 +424,22 @@ class PoseTracker:
         if not est.ok and prior is not None and detector.uses_prior:
             corr = detector.detect(image, None)
             est = self._verified(self.solver.solve(corr.object_points, corr.image_points, prior), image, detector)
+        if not est.ok:
+            proposal = detector.propose(image, self.solver.K)
+            if proposal is not None:  # searched around as around a prior, solved, verified as any pose
+                near = detector.detect(image, (*proposal, self.solver.K))
+                found = self._verified(self.solver.solve(near.object_points, near.image_points, proposal), image,
+                                       detector, proposed=True)
+                if found.ok:
+                    est, corr = found, near
         return self._record(frame_index, est), corr
 
-    def _verified(self, est: PoseEstimate, image: np.ndarray, detector: PartDetector) -> PoseEstimate:
+    def _verified(self, est: PoseEstimate, image: np.ndarray, detector: PartDetector, *, proposed: bool = False
+                  ) -> PoseEstimate:
         """``est``, or a lost frame when the detector rejects its pose (``detector.verify``): a
         wrong pose kept would also become the next frame's prior."""
         if est.ok:
-            why = detector.verify(image, est.rvec, est.tvec, self.solver.K)
+            why = detector.verify(image, est.rvec, est.tvec, self.solver.K, proposed=proposed)
             if why:
                 return PoseEstimate(False, num_matches=est.num_matches, inliers=est.inliers, reason=why)
         return est

@@ -63,3 +63,30 @@ def test_a_flat_box_is_seen_from_either_side():
     for R, t in (above, below):
         _, vis = box.part_visibility(corners, R, t, K, (480, 640), parts=parts)
         assert vis.all()
+    # the box_parts lattice of a flat box: 26 points (9 distinct) of its one plane, all on both its faces
+    assert box.parts_per_face(corners, parts) == len(parts)
+
+
+def test_visibility_of_a_batch_of_poses_is_that_of_each():
+    corners = box_corners([100, 60, 40], [-50, -30, -20])
+    parts = box.box_parts(corners)
+    K = camera_matrix(500, 500, 319.5, 239.5)
+    rng = np.random.default_rng(3)
+    R = np.stack([cv2.Rodrigues(rng.normal(0, 1.5, 3))[0] for _ in range(40)])
+    t = np.column_stack([rng.normal(0, 150, (40, 2)), rng.uniform(-100, 900, 40)])  # some behind the camera
+    mask = np.zeros((480, 640), np.uint8)
+    mask[100:300, 200:500] = 255
+    uv, vis = box.part_visibility(corners, R, t, K, (480, 640), mask, parts=parts)
+    assert uv.shape == (40, 26, 2) and vis.shape == (40, 26) and 0 < vis.sum() < vis.size
+    for b in range(40):
+        uv1, vis1 = box.part_visibility(corners, R[b], t[b], K, (480, 640), mask, parts=parts)
+        np.testing.assert_array_equal(vis[b], vis1)
+        np.testing.assert_allclose(uv[b], uv1)
+    np.testing.assert_allclose(box.box_coordinates(corners, R, t)[7], box.box_coordinates(corners, R[7], t[7]))
+
+
+def test_parts_per_face():
+    corners = box_corners([100, 60, 40], [-50, -30, -20])
+    assert box.parts_per_face(corners, corners) == 4
+    assert box.parts_per_face(corners, box.box_parts(corners)) == 9
+    assert box.parts_per_face(corners, box.box_parts(corners, 3)) == 16

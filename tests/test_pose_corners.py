@@ -18,7 +18,7 @@ from pose.cli import add_parser
 from pose.corner_net import CornerNet
 from pose.model import box_corners, read_box_corners
 from pose.sequence import load_sequence
-from pose.solver import camera_matrix
+from pose.solver import camera_matrix, rotation_error_deg
 
 
 @pytest.fixture(scope="module")
@@ -160,6 +160,38 @@ def test_support_is_the_score_where_the_pose_shows_its_parts(random_net, monkeyp
     assert det.support(image, rvec, tvec + [0.0, 0.0, -2000.0], K) == 0.0  # behind the camera: nothing shown
     with pytest.raises(InputError, match="min_support"):
         pc.CornerDetector(random_net[1], min_support=1.0)
+
+
+def test_propose_finds_the_pose_the_scores_show_and_only_a_unique_one(random_net, monkeypatch):
+    det = pc.CornerDetector(random_net[1])
+    image = np.zeros((240, 320), np.uint8)  # 120x160 at the detector's scale of 0.5
+    K = camera_matrix(300, 300, 159.5, 119.5)
+    R = cv2.Rodrigues(np.array([0.5, -0.4, 0.0]))[0] @ np.diag([1.0, -1.0, -1.0])  # the top and two sides
+    tvec = np.array([-70.0, 47.5, 800.0])
+    uv, vis = box.part_visibility(det.corners, R, tvec, K, image.shape)
+    assert vis.sum() == 7
+    shape = pc.grid_shape(120, 160)
+
+    def blobs(score, shift=None):
+        out = {k: [(*pc.to_scaled(uv[k], det.scale), score)] for k in np.flatnonzero(vis)}
+        if shift is not None:  # the same box again, elsewhere
+            for k in out:
+                out[k].append((*pc.to_scaled(uv[k] + shift, det.scale), score))
+        return _fake_maps(shape, out)
+
+    monkeypatch.setattr(det, "maps", lambda image: blobs(0.8))
+    rvec, t = det.propose(image, K)
+    np.testing.assert_allclose(t.ravel(), tvec, atol=2.0)
+    assert rotation_error_deg(cv2.Rodrigues(rvec)[0], R) < 1.0
+    assert det.verify(image, rvec, t, K, proposed=True) == ""
+    monkeypatch.setattr(det, "maps", lambda image: blobs(0.2))  # the pose, shown too weakly
+    assert det.propose(image, K) is None
+    monkeypatch.setattr(det, "maps", lambda image: blobs(0.8, shift=[0.0, 80.0]))  # two boxes: no unique pose
+    assert det.propose(image, K) is None
+    monkeypatch.setattr(det, "maps", lambda image: blobs(0.8))
+    assert pc.CornerDetector(random_net[1], proposals=0).propose(image, K) is None
+    with pytest.raises(InputError, match="proposals"):
+        pc.CornerDetector(random_net[1], proposals=-1)
 
 
 def test_build_frames_labels_follow_the_corners(posedata):

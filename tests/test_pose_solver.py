@@ -124,8 +124,11 @@ class _RecordingDetector:
     def __init__(self, pts, uv):
         self.pts, self.uv, self.calls = pts, uv, []
 
-    def verify(self, image, rvec, tvec, K):
+    def verify(self, image, rvec, tvec, K, *, proposed=False):
         return ""
+
+    def propose(self, image, K):
+        return None
 
     def detect(self, image, prior=None, *, search_scale=1.0):
         from pose.parts import Correspondences
@@ -156,7 +159,7 @@ def test_tracker_searches_wider_without_velocity_and_retries_the_whole_frame():
 class _RejectingDetector(_RecordingDetector):
     """A part detector that finds the right matches and rejects every pose but the first."""
 
-    def verify(self, image, rvec, tvec, K):
+    def verify(self, image, rvec, tvec, K, *, proposed=False):
         return "" if len(self.calls) == 1 else "rejected"
 
 
@@ -266,3 +269,43 @@ def test_parts_in_a_small_part_of_the_object_leave_the_frame_lost():
         PoseSolver(K, outline=box, min_coverage=1.0)
     with pytest.raises(InputError, match="ambiguity_tolerance"):
         PoseSolver(K, ambiguity_tolerance=-0.1)
+
+
+class _ProposingDetector(_RecordingDetector):
+    """A part detector whose candidates give no pose in the whole frame but the right ones
+    around the pose it proposes (``proposal``; ``None``: it proposes nothing)."""
+
+    def __init__(self, pts, uv, proposal, support_of_proposed=1.0):
+        super().__init__(pts, uv)
+        self.proposal, self.verified = proposal, []
+        self.support_of_proposed = support_of_proposed
+
+    def detect(self, image, prior=None, *, search_scale=1.0):
+        from pose.parts import Correspondences
+
+        self.calls.append((prior is not None, search_scale))
+        return Correspondences(self.pts, self.uv) if prior is not None else Correspondences(self.pts[:3], self.uv[:3])
+
+    def propose(self, image, K):
+        return self.proposal
+
+    def verify(self, image, rvec, tvec, K, *, proposed=False):
+        self.verified.append(proposed)
+        return "" if not proposed or self.support_of_proposed >= 0.5 else "weak"
+
+
+def test_a_lost_frame_is_searched_around_the_detectors_proposal():
+    rng = np.random.default_rng(7)
+    pts, uv, rvec, tvec = _scene(rng, outliers=0.1)
+    near = (rvec + 0.02, tvec + 3.0)  # what the detector's own search found: close, not exact
+    det = _ProposingDetector(pts, uv, near)
+    tracker = PoseTracker(PoseSolver(K))
+    est, corr = tracker.step(0, None, det)
+    assert est.ok and rotation_error_deg(est.R, cv2.Rodrigues(rvec)[0]) < 0.5 and len(corr.image_points) == len(pts)
+    assert det.calls == [(False, 2.5), (True, 1.0)] and det.verified == [True]  # verified as proposed
+    det = _ProposingDetector(pts, uv, near, support_of_proposed=0.2)  # rejected: the frame stays lost
+    est, corr = PoseTracker(PoseSolver(K)).step(0, None, det)
+    assert not est.ok and len(corr.image_points) == 3
+    det = _ProposingDetector(pts, uv, None)  # nothing proposed: lost, no second search
+    est, _ = PoseTracker(PoseSolver(K)).step(0, None, det)
+    assert not est.ok and det.calls == [(False, 2.5)] and det.verified == []
