@@ -356,7 +356,7 @@ class CornerDetector:
         cumulative = np.ones((len(found), self.top_k))  # beyond a part's last candidate: never drawn
         for a, (p, sc) in enumerate(found):
             xy[a, : len(p)] = p
-            cumulative[a, : len(sc)] = np.cumsum(sc) / sc.sum()
+            cumulative[a, : len(sc) - 1] = np.cumsum(sc)[:-1] / sc.sum()  # the last stays 1: no draw passes it
         # three parts per triple without repeats, each in proportion to its best score (Gumbel top-k)
         best = np.array([sc[0] for _, sc in found])
         keys = np.log(best) + self._rng.gumbel(size=(self.proposals, len(found)))
