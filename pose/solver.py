@@ -426,7 +426,7 @@ class PoseTracker:
             est = self._verified(self.solver.solve(corr.object_points, corr.image_points, prior), image, detector)
         if not est.ok:
             proposal = detector.propose(image, self.solver.K)
-            if proposal is not None:  # searched around as around a prior, solved, verified as any pose
+            if proposal is not None:  # searched around as around a prior, solved, verified as proposed
                 near = detector.detect(image, (*proposal, self.solver.K))
                 found = self._verified(self.solver.solve(near.object_points, near.image_points, proposal), image,
                                        detector, proposed=True)
