@@ -115,3 +115,24 @@ def test_same_seed_gives_identical_bytes(tmp_path):
     assert files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
     for f in files:
         assert (a / f).read_bytes() == (b / f).read_bytes(), f
+
+
+def test_training_light_control_changes_only_the_test_lighting(tmp_path):
+    kw = dict(size="small", n_frames=2, n_test=5, seed=3, clutter=False, progress=False)
+    lit = pose.generate(tmp_path / "lit", **kw)
+    control = pose.generate(tmp_path / "control", training_light=True, **kw)
+    man = json.loads((control / "manifest.json").read_text())
+    assert man["parameters"]["training_light"] is True
+    assert [s["change"] for s in man["sequences"][1:]] == ["none"] * 5
+    assert all(s["lighting"] == man["sequences"][0]["lighting"] for s in man["sequences"])
+    for rel in ["train/000001", "test/000001"]:  # under the training light in both: the same bytes
+        for f in sorted((lit / rel).rglob("*.png")):
+            assert f.read_bytes() == (control / f.relative_to(lit)).read_bytes(), f
+    # #5 (a grazing light): the same poses and masks, other pixels
+    a, b = load_scene(lit / "test" / "000005"), load_scene(control / "test" / "000005")
+    for fa, fb in zip(a.frames, b.frames):
+        np.testing.assert_array_equal(fa.pose(1).R, fb.pose(1).R)
+        np.testing.assert_array_equal(fa.pose(1).t, fb.pose(1).t)
+        assert np.abs(cv2.imread(str(fa.rgb_path)).astype(int) - cv2.imread(str(fb.rgb_path))).mean() > 10
+    masks = sorted((lit / "test" / "000005" / "mask_visib").glob("*.png"))
+    assert masks and all(m.read_bytes() == (control / m.relative_to(lit)).read_bytes() for m in masks)

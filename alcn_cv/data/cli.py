@@ -39,7 +39,8 @@ def _pose(args: argparse.Namespace) -> int:
 
     t = time.perf_counter()
     out = pose.generate(args.out, seed=args.seed, size=args.size, n_frames=args.frames, n_test=args.n_test,
-                        clutter=not args.no_clutter, overwrite=args.overwrite, workers=args.workers)
+                        clutter=not args.no_clutter, training_light=args.training_light, overwrite=args.overwrite,
+                        workers=args.workers)
     logger.info("wrote the pose sequences to %s in %.1f s", out, time.perf_counter() - t)
     return 0
 
@@ -126,6 +127,10 @@ def add_parser(subparsers) -> None:
     q.add_argument("--frames", type=int, default=None, help="frames per sequence (default: 60; small 3)")
     q.add_argument("--n-test", type=int, default=None, help="number of test sequences (default 8)")
     q.add_argument("--no-clutter", action="store_true", help="no clutter on the table")
+    q.add_argument("--training-light", action="store_true",
+                   help="render every test sequence under the training lighting: the control of the same seed's "
+                   "dataset (same scenes, trajectories and noise), to tell what the light costs a method from what "
+                   "the scene and viewpoints do")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     q.add_argument("--workers", type=int, default=1,
                    help="worker processes (default 1; the output does not depend on it)")

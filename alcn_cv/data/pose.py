@@ -273,7 +273,7 @@ def _write_models(models_dir: Path, scene: Scene) -> None:
 
 def _sequence_job(job: tuple) -> tuple[list[BopFrame], dict]:
     """Render sequence ``k`` (0: training, also writing the models) into the dataset root."""
-    k, root, seed, cfg, clutter = job
+    k, root, seed, cfg, clutter, training_light = job
     root = Path(root)
     scene = make_scene(seed, k, clutter=clutter, texel=cfg.texel, table_px=cfg.table_px)
     if k == 0:
@@ -282,7 +282,7 @@ def _sequence_job(job: tuple) -> tuple[list[BopFrame], dict]:
         light = _train_lighting()
         frames = _write_sequence(root / "train" / "000001", scene, poses, light, cfg, (seed, 30))
     else:
-        light = sequence_lighting(k, np.random.default_rng([seed, 40, k]))
+        light = _train_lighting() if training_light else sequence_lighting(k, np.random.default_rng([seed, 40, k]))
         poses = trajectory(cfg.n_frames, np.random.default_rng([seed, 50, k]))
         frames = _write_sequence(root / "test" / f"{k:06d}", scene, poses, light, cfg, (seed, 60, k))
     return frames, light.describe()
@@ -296,6 +296,7 @@ def generate(
     n_frames: int | None = None,
     n_test: int | None = None,
     clutter: bool = True,
+    training_light: bool = False,
     overwrite: bool = False,
     progress: bool = True,
     workers: int = 1,
@@ -309,6 +310,9 @@ def generate(
         n_frames: frames per sequence (default: the size's).
         n_test: number of test sequences (default 8; #k uses lighting ``SEQUENCE_KINDS[k-1]``).
         clutter: put clutter on the table.
+        training_light: render every test sequence under the training lighting: the control of
+            the same seed's dataset (the same scenes, trajectories and noise), so that what a
+            method loses from the control to the dataset is what the light changes cost it.
         overwrite: replace an existing folder.
         progress: show a progress bar.
         workers: worker processes, one sequence each (the output does not depend on it).
@@ -323,7 +327,7 @@ def generate(
     sequences = []
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         write_camera(tmp, cfg.K, cfg.width, cfg.height)
-        jobs = [(k, str(tmp), seed, cfg, clutter) for k in range(cfg.n_test + 1)]
+        jobs = [(k, str(tmp), seed, cfg, clutter, training_light) for k in range(cfg.n_test + 1)]
         results = parallel_map(_sequence_job, jobs, workers=workers, desc="pose sequences", unit="seq",
                                progress=progress)
         for k, (frames, light) in enumerate(results):
@@ -335,11 +339,12 @@ def generate(
                 sequences.append({"split": "train", "scene_id": 1, "kind": "train", "lighting": light})
             else:
                 sequences.append({"split": "test", "scene_id": k, "kind": SEQUENCE_KINDS[k - 1],
-                                  "change": "none" if k == 1 else ("mild" if k <= 4 else "drastic"),
+                                  "change": "none" if k == 1 or training_light else ("mild" if k <= 4 else "drastic"),
                                   "lighting": light})
         write_json(tmp / "manifest.json", make_manifest(
             "pose", seed, {"size": size, "width": cfg.width, "height": cfg.height, "focal": cfg.focal,
-                           "n_frames": cfg.n_frames, "n_test": cfg.n_test, "clutter": clutter},
+                           "n_frames": cfg.n_frames, "n_test": cfg.n_test, "clutter": clutter,
+                           "training_light": training_light},
             units="mm", camera_convention="OpenCV pinhole, pixel centre (0, 0); COLMAP model: cx + 0.5",
             objects=[{"obj_id": 1, "name": "box", "size_mm": list(BOX_SIZE_MM)}, {"obj_id": 2, "name": "duck"}],
             sequences=sequences, colmap={"train/000001": "train/000001/colmap (images relative to rgb/)"},
