@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -67,7 +68,7 @@ def _eval(args: argparse.Namespace) -> int:
     if args.data:
         corner_kw = {"iterations": args.corner_iterations, "copies": args.corner_copies,
                      "novel_views": args.corner_novel_views, "divisions": args.corner_divisions,
-                     "scale": args.corner_scale}
+                     "scale": args.corner_scale, **_one_light(args.corner_no_intensity)}
         evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature, detectors=args.detectors,
                       corner_kw=corner_kw, seeds=args.seeds, sequences=args.sequences, command=_command())
     if not (args.middlebury or args.data):
@@ -83,13 +84,19 @@ def _command() -> str:
     return shlex.join(["alcn", *sys.argv[1:]])
 
 
+def _one_light(no_intensity: bool) -> dict[str, Any]:
+    """The corner CNN's training options of ``--no-intensity``: copies that keep their view's
+    intensities (:func:`pose.corner_data.build_frames` without its ``a I + b``)."""
+    return {"intensity_scale": (1.0, 1.0), "intensity_offset": 0.0} if no_intensity else {}
+
+
 def _train_corners(args: argparse.Namespace) -> int:
     from pose import corner_train
 
     path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
                              normalizer=args.normalizer, scale=args.scale, iterations=args.iterations,
                              copies=args.copies, novel_views=args.novel_views, divisions=args.divisions,
-                             seed=args.seed)
+                             seed=args.seed, **_one_light(args.no_intensity))
     print(f"corner detector ({args.normalizer}) -> {path}")
     return 0
 
@@ -299,6 +306,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument("--corner-divisions", type=int, default=DIVISIONS,
                    help="steps per box edge of the corner CNN's parts (default "
                    f"{DIVISIONS}: the corners, the edges' middles and the faces' centres; 1: the 8 corners)")
+    e.add_argument("--corner-no-intensity", action="store_true",
+                   help="train the corner CNN on copies that keep their view's intensities (no a I + b): the "
+                   "detector learns under the training light alone, as the paper's, and the normalizer in front "
+                   "is its only invariance to the light")
     e.add_argument("--seeds", type=int, default=1,
                    help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)")
     e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
@@ -327,6 +338,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--divisions", type=int, default=DIVISIONS,
                    help="steps per box edge of the parts found (default "
                    f"{DIVISIONS}: the corners, the edges' middles and the faces' centres; 1: the 8 corners)")
+    c.add_argument("--no-intensity", action="store_true",
+                   help="copies keep their view's intensities (no a I + b): the network learns under the training "
+                   "light alone, and the normalizer is its only invariance to the light")
     c.add_argument("--seed", type=int, default=0)
     c.set_defaults(func=_train_corners)
 

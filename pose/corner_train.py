@@ -60,6 +60,22 @@ networks posed the same frames: there the true pose of the lost first frames sco
 the pose searched around the proposal verified at 0.15 as the others, ALCN seed 0 fell from 53.3
 to 40.0% of that scene's #1. A proposal costs about 50 ms, on lost frames only.
 
+Tried after the proposals, not kept: each face the view shows, and the rest of the frame, relit
+by a gain of its own on half of the copies (log-uniform in 1/8-4, in linear light, then clipped:
+#5's grazing light darkens the faces turned away from it to about a tenth and burns out those it
+faces). Sums over #1-#8 for seeds 0 / 1 / 2: none 670.0 / 606.7 / 726.7 and ALCN 686.7 / 656.7 /
+590.0 (without: 650.0 / 646.7 / 706.7 and 670.0 / 670.0 / 663.3), ALCN's #1 86.7% with seed 2; the
+held-out scene none 73.3 / 43.3 / 80.0 and ALCN 40.0 / 56.7 / 50.0% (without: 56.7 / 66.7 / 90.0
+and 53.3 / 60.0 / 76.7). The parts of #5 found among the candidates hardly moved (ALCN seed 0, as
+the best candidate / among them: 19 / 32% against 13 / 25%).
+
+The intensity change of the copies (``a I + b``, :func:`pose.corner_data.build_frames`) is what
+makes the network without normalization robust: trained without it (``--no-intensity``, 3 seeds,
+``runs/nointensity``) it poses 31.1, 0 and 13.3% of #4, #5 and #8 (98.9 and 90.0 / 63.3 / 73.3
+with it), while the networks behind ALCN, the DoG or Tan-Triggs keep most of theirs (ALCN 93.3 /
+34.4 / 53.3); the README's Table 1 has every row, and the same sequences under the training light
+(``alcn data pose --training-light``).
+
 The 8-corner design before it, measured on the data engine's sequences (30 frames each, no
 normalization, % of poses within 5 px on #1 / #3; 2-core CPU shared with other jobs, load 8-11):
 16/32/64 channels without batch
@@ -231,7 +247,8 @@ def fit(net, frames: CornerFrames, *, iterations: int = 1500, batch_size: int = 
         lr: float = 2e-3, seed: int = 0, progress: bool = True, **loss_kw: Any) -> dict[str, float]:
     """Train ``net`` on crops of ``frames`` (Adam, the learning rate divided by 10 for the last
     quarter); returns the mean loss of the first 10 steps and of the last quarter (at most 100).
-    Deterministic for a ``seed`` on the CPU."""
+    Deterministic for a ``seed`` and a number of torch threads on the CPU (other threads sum in
+    another order)."""
     import torch
 
     rng = np.random.default_rng(seed)

@@ -83,9 +83,12 @@ class PartDetector(Protocol):
     around a prior pose ``(rvec, tvec, K)`` (when :attr:`uses_prior`), a last word on a pose
     solved from them (:meth:`verify`: ``""`` to keep it, else why not), and, for a frame where
     no pose came of them, a pose of its own to search around (:meth:`propose`, or ``None``; the
-    pose solved around it is verified with ``proposed=True``)."""
+    pose solved around it is verified with ``proposed=True``). With a :attr:`refine_search_scale`
+    above 0 the tracker searches the parts of a frame again around the frame's own verified pose,
+    in gates of that share of a prediction's, and solves again."""
 
     uses_prior: bool
+    refine_search_scale: float
 
     def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
                search_scale: float = 1.0) -> Correspondences: ...
@@ -129,6 +132,9 @@ class FeaturePartDetector:
     """
 
     uses_prior = True
+    #: No second search around a frame's own pose: guided matching already matches every keypoint
+    #: of the predicted region, and a second one would detect and describe them again.
+    refine_search_scale = 0.0
 
     def __init__(self, model: PartModel, normalizer: str = "none", *, n_features: int = 2000,
                  n_features_global: int = 0, ratio: float = 0.8, search_radius: float = 20.0,

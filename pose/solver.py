@@ -414,6 +414,11 @@ class PoseTracker:
         shows the parts, :meth:`pose.corners.CornerDetector.propose`): its parts are searched
         around it as around a prediction, and the pose solved from them is verified as proposed.
 
+        A verified pose is refined when the detector asks for it
+        (:attr:`pose.parts.PartDetector.refine_search_scale`): the parts are searched again around
+        the frame's own pose, in narrower gates, and the pose solved from them replaces it when
+        verified.
+
         Returns:
             The estimate and the correspondences it was solved from.
         """
@@ -432,6 +437,12 @@ class PoseTracker:
                                        detector, proposed=True)
                 if found.ok:
                     est, corr = found, near
+        if est.ok and detector.refine_search_scale > 0:
+            pose = (est.rvec, est.tvec)
+            near = detector.detect(image, (*pose, self.solver.K), search_scale=detector.refine_search_scale)
+            refined = self._verified(self.solver.solve(near.object_points, near.image_points, pose), image, detector)
+            if refined.ok:
+                est, corr = refined, near
         return self._record(frame_index, est), corr
 
     def _verified(self, est: PoseEstimate, image: np.ndarray, detector: PartDetector, *, proposed: bool = False

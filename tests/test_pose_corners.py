@@ -192,6 +192,8 @@ def test_propose_finds_the_pose_the_scores_show_and_only_a_unique_one(random_net
     assert pc.CornerDetector(random_net[1], proposals=0).propose(image, K) is None
     with pytest.raises(InputError, match="proposals"):
         pc.CornerDetector(random_net[1], proposals=-1)
+    with pytest.raises(InputError, match="refine_search_scale"):
+        pc.CornerDetector(random_net[1], refine_search_scale=-0.5)
 
 
 def test_build_frames_labels_follow_the_corners(posedata):
@@ -367,6 +369,35 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
                                  "--divisions", "1"])
     assert args.func(args) == 0
     np.testing.assert_allclose(pc.read_metadata(onnx)["parts"], corners)
+
+
+def test_no_intensity_trains_on_the_views_own_intensities(posedata, tmp_path, monkeypatch):
+    """`--no-intensity` / `--corner-no-intensity`: the copies keep their view's intensities."""
+    calls = []
+    monkeypatch.setattr(corner_train, "train_corners", lambda *a, **kw: calls.append(kw) or tmp_path / "c.onnx")
+    common = [str(posedata / "train" / "000001"), str(tmp_path / "c.onnx"), "--box-ply",
+              str(posedata / "models" / "obj_000001.ply")]
+    for extra in ([], ["--no-intensity"]):
+        args = _parser().parse_args(["pose", "train-corners", *common, *extra])
+        assert args.func(args) == 0
+    assert "intensity_scale" not in calls[0]
+    assert calls[1]["intensity_scale"] == (1.0, 1.0) and calls[1]["intensity_offset"] == 0.0
+    from pose import evaluate
+
+    seen = []
+    monkeypatch.setattr(evaluate, "main", lambda *a, **kw: seen.append(kw["corner_kw"]))
+    args = _parser().parse_args(["pose", "eval", "--data", str(posedata), "--out", str(tmp_path / "t"),
+                                 "--detectors", "corners", "--corner-no-intensity"])
+    assert args.func(args) == 0 and seen[0]["intensity_scale"] == (1.0, 1.0) and seen[0]["intensity_offset"] == 0.0
+    # what it changes: a copy differs from its view by the warp alone
+    seq = load_sequence(posedata / "train" / "000001", obj_id=1)
+    corners = read_box_corners(posedata / "models" / "obj_000001.ply")
+    frames = corner_data.build_frames(seq, corners, "none", scale=1.0, copies=3, backgrounds=0.0, noise=0.0,
+                                      novel_views=0.0, intensity_scale=(1.0, 1.0), intensity_offset=0.0)
+    changed = corner_data.build_frames(seq, corners, "none", scale=1.0, copies=3, backgrounds=0.0, noise=0.0,
+                                       novel_views=0.0)
+    shifts = [[abs(f.images[c].mean() - f.images[0].mean()) for c in (1, 2, 3)] for f in (frames, changed)]
+    assert max(shifts[0]) < 0.3 * max(shifts[1])
 
 
 def test_track_and_bench_the_corner_detector(posedata, random_net, tmp_path):

@@ -120,6 +120,7 @@ class _RecordingDetector:
     """A part detector whose guided search (with a prior) finds only wrong matches."""
 
     uses_prior = True
+    refine_search_scale = 0.0
 
     def __init__(self, pts, uv):
         self.pts, self.uv, self.calls = pts, uv, []
@@ -309,3 +310,43 @@ def test_a_lost_frame_is_searched_around_the_detectors_proposal():
     det = _ProposingDetector(pts, uv, None)  # nothing proposed: lost, no second search
     est, _ = PoseTracker(PoseSolver(K)).step(0, None, det)
     assert not est.ok and det.calls == [(False, 2.5)] and det.verified == []
+
+
+class _RefiningDetector(_RecordingDetector):
+    """A part detector whose whole frame gives a few matches, 3 px off, and whose search around a
+    frame's own pose (``search_scale == 0.5``) gives many exact ones."""
+
+    refine_search_scale = 0.5
+
+    def __init__(self, pts, exact, rough, reject_refined=False):
+        super().__init__(pts, exact)
+        self.rough, self.reject_refined = rough, reject_refined
+
+    def detect(self, image, prior=None, *, search_scale=1.0):
+        from pose.parts import Correspondences
+
+        self.calls.append((prior is not None, search_scale))
+        if prior is not None and search_scale == 0.5:
+            return Correspondences(self.pts, self.uv)
+        return Correspondences(self.pts[:20], self.rough[:20])
+
+    def verify(self, image, rvec, tvec, K, *, proposed=False):
+        return "rejected" if self.reject_refined and self.calls[-1] == (True, 0.5) else ""
+
+
+def test_a_verified_pose_is_refined_around_itself():
+    rng = np.random.default_rng(8)
+    pts, exact, rvec, tvec = _scene(rng, outliers=0.0, noise=0.0)
+    rough = exact + rng.normal(0, 3.0, exact.shape)
+    R = cv2.Rodrigues(rvec)[0]
+    unrefined, corr = PoseTracker(PoseSolver(K, min_inliers=8, reprojection_error=12.0)).step(
+        0, None, _RefiningDetector(pts, exact, rough, reject_refined=True))  # the refined pose is rejected: kept
+    assert unrefined.ok and len(corr.image_points) == 20
+    det = _RefiningDetector(pts, exact, rough)
+    est, corr = PoseTracker(PoseSolver(K, min_inliers=8, reprojection_error=12.0)).step(0, None, det)
+    assert det.calls == [(False, 2.5), (True, 0.5)] and len(corr.image_points) == len(pts)
+    assert rotation_error_deg(est.R, R) < 0.01 < rotation_error_deg(unrefined.R, R)
+    det = _RefiningDetector(pts, exact, rough)
+    det.refine_search_scale = 0.0  # a detector that asks for no refinement: one search
+    PoseTracker(PoseSolver(K, min_inliers=8, reprojection_error=12.0)).step(0, None, det)
+    assert det.calls == [(False, 2.5)]
