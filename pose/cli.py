@@ -68,7 +68,7 @@ def _eval(args: argparse.Namespace) -> int:
     if args.data:
         corner_kw = {"iterations": args.corner_iterations, "copies": args.corner_copies,
                      "novel_views": args.corner_novel_views, "divisions": args.corner_divisions,
-                     "scale": args.corner_scale, **_one_light(args.corner_no_intensity)}
+                     "scale": args.corner_scale, **_no_intensity_kw(args.corner_no_intensity)}
         evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature, detectors=args.detectors,
                       corner_kw=corner_kw, seeds=args.seeds, sequences=args.sequences, command=_command())
     if not (args.middlebury or args.data):
@@ -84,7 +84,7 @@ def _command() -> str:
     return shlex.join(["alcn", *sys.argv[1:]])
 
 
-def _one_light(no_intensity: bool) -> dict[str, Any]:
+def _no_intensity_kw(no_intensity: bool) -> dict[str, Any]:
     """The corner CNN's training options of ``--no-intensity``: copies that keep their view's
     intensities (:func:`pose.corner_data.build_frames` without its ``a I + b``)."""
     return {"intensity_scale": (1.0, 1.0), "intensity_offset": 0.0} if no_intensity else {}
@@ -96,7 +96,7 @@ def _train_corners(args: argparse.Namespace) -> int:
     path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
                              normalizer=args.normalizer, scale=args.scale, iterations=args.iterations,
                              copies=args.copies, novel_views=args.novel_views, divisions=args.divisions,
-                             seed=args.seed, **_one_light(args.no_intensity))
+                             seed=args.seed, **_no_intensity_kw(args.no_intensity))
     print(f"corner detector ({args.normalizer}) -> {path}")
     return 0
 
