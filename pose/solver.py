@@ -438,9 +438,9 @@ class PoseTracker:
                 if found.ok:
                     est, corr = found, near
         if est.ok and detector.refine_search_scale > 0:
-            pose = (est.rvec, est.tvec)
-            near = detector.detect(image, (*pose, self.solver.K), search_scale=detector.refine_search_scale)
-            refined = self._verified(self.solver.solve(near.object_points, near.image_points, pose), image, detector)
+            solved = (est.rvec, est.tvec)
+            near = detector.detect(image, (*solved, self.solver.K), search_scale=detector.refine_search_scale)
+            refined = self._verified(self.solver.solve(near.object_points, near.image_points, solved), image, detector)
             if refined.ok:
                 est, corr = refined, near
         return self._record(frame_index, est), corr
