@@ -423,27 +423,30 @@ class PoseTracker:
             The estimate and the correspondences it was solved from.
         """
         prior = self.prior
-        corr = detector.detect(image, None if prior is None else (*prior, self.solver.K),
-                               search_scale=self.search_scale)
-        est = self._verified(self.solver.solve(corr.object_points, corr.image_points, prior), image, detector)
+        est, corr = self._search(image, detector, prior, prior, search_scale=self.search_scale)
         if not est.ok and prior is not None and detector.uses_prior:
-            corr = detector.detect(image, None)
-            est = self._verified(self.solver.solve(corr.object_points, corr.image_points, prior), image, detector)
+            est, corr = self._search(image, detector, None, prior)
         if not est.ok:
             proposal = detector.propose(image, self.solver.K)
-            if proposal is not None:  # searched around as around a prior, solved, verified as proposed
-                near = detector.detect(image, (*proposal, self.solver.K))
-                found = self._verified(self.solver.solve(near.object_points, near.image_points, proposal), image,
-                                       detector, proposed=True)
+            if proposal is not None:
+                found, near = self._search(image, detector, proposal, proposal, proposed=True)
                 if found.ok:
                     est, corr = found, near
         if est.ok and detector.refine_search_scale > 0:
             solved = (est.rvec, est.tvec)
-            near = detector.detect(image, (*solved, self.solver.K), search_scale=detector.refine_search_scale)
-            refined = self._verified(self.solver.solve(near.object_points, near.image_points, solved), image, detector)
+            refined, near = self._search(image, detector, solved, solved, search_scale=detector.refine_search_scale)
             if refined.ok:
                 est, corr = refined, near
         return self._record(frame_index, est), corr
+
+    def _search(self, image: np.ndarray, detector: PartDetector, around: tuple[np.ndarray, np.ndarray] | None,
+                prior: tuple[np.ndarray, np.ndarray] | None, *, search_scale: float = 1.0, proposed: bool = False
+                ) -> tuple[PoseEstimate, Correspondences]:
+        """Detect the parts of ``image`` around the pose ``around`` (the whole frame for ``None``;
+        gates ``search_scale`` times the usual), solve with ``prior``, and verify (:meth:`_verified`)."""
+        corr = detector.detect(image, None if around is None else (*around, self.solver.K), search_scale=search_scale)
+        est = self.solver.solve(corr.object_points, corr.image_points, prior)
+        return self._verified(est, image, detector, proposed=proposed), corr
 
     def _verified(self, est: PoseEstimate, image: np.ndarray, detector: PartDetector, *, proposed: bool = False
                   ) -> PoseEstimate:
