@@ -11,6 +11,7 @@ import pytest
 from scipy.spatial import ConvexHull
 
 from alcn_cv.data import pose
+from alcn_cv.errors import InputError
 from alcn_cv.formats import schema
 from alcn_cv.formats.bop import load_scene, read_ply
 from alcn_cv.formats.colmap import read_text_model
@@ -35,7 +36,7 @@ def test_layout_and_schemas(plain):
         jsonschema.validate(json.loads((s / "scene_camera.json").read_text()), schema("bop_scene_camera"))
         jsonschema.validate(json.loads((s / "scene_gt.json").read_text()), schema("bop_scene_gt"))
         scene = load_scene(s, check_images=True)
-        assert len(scene) == 2
+        assert len(scene) == (2 * len(pose.TRAIN_SWEEPS) if s.parent.name == "train" else 2)  # 2 views a loop
         for f in scene.frames:
             assert {o.obj_id for o in f.objects} == {1, 2}
             assert cv2.imread(str(f.rgb_path)).shape == (240, 320, 3)
@@ -84,7 +85,7 @@ def test_gt_pose_projects_box_corners_onto_the_drawn_pixels(plain):
             missing = (sd > 0.5) & ~box
             assert not (missing & ~duck).any()  # everything 0.5 px inside drawn, unless the duck hides it
             checked += 1
-    assert checked == 18
+    assert checked == 8 * 2 + 2 * len(pose.TRAIN_SWEEPS)
 
 
 def test_world_poses_and_colmap_export(plain):
@@ -136,3 +137,39 @@ def test_training_light_control_changes_only_the_test_lighting(tmp_path):
         assert np.abs(cv2.imread(str(fa.rgb_path)).astype(int) - cv2.imread(str(fb.rgb_path))).mean() > 10
     masks = sorted((lit / "test" / "000005" / "mask_visib").glob("*.png"))
     assert masks and all(m.read_bytes() == (control / m.relative_to(lit)).read_bytes() for m in masks)
+
+
+def _elevations_deg(poses) -> np.ndarray:
+    eyes = np.array([-R.T @ t for R, t in poses])
+    return np.degrees(np.arcsin(eyes[:, 2] / np.linalg.norm(eyes, axis=1)))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_three_sweeps_see_every_stretch_of_azimuth_from_high_and_low(seed):
+    """Every 11 consecutive views (about 120 deg of the 330 deg loop) span nearly the 30-60 deg band."""
+    def narrowest_span(cycles):
+        el = _elevations_deg(pose.trajectory(30, np.random.default_rng([seed, 20]), span_deg=330.0,
+                                             elevation_cycles=cycles))
+        return min(np.ptp(el[i:i + 11]) for i in range(len(el) - 10))
+
+    assert narrowest_span(3) > 25.0
+    assert narrowest_span(1) < 12.0  # one sweep: a stretch of azimuth is seen from one height only
+
+
+def test_training_loops_change_only_the_training_sequence(tmp_path):
+    kw = dict(size="small", n_frames=4, n_test=1, seed=3, clutter=False, progress=False)
+    one = pose.generate(tmp_path / "one", train_sweeps=(1,), **kw)
+    default = pose.generate(tmp_path / "default", **kw)
+    assert json.loads((default / "manifest.json").read_text())["parameters"]["train_sweeps"] == \
+        list(pose.TRAIN_SWEEPS) == [1, 3]
+    for f in sorted((one / "test").rglob("*.png")) + sorted((one / "test").rglob("*.json")):
+        assert f.read_bytes() == (default / f.relative_to(one)).read_bytes(), f
+    a, b = load_scene(one / "train" / "000001"), load_scene(default / "train" / "000001")
+    assert len(a.frames) == 4 and len(b.frames) == 8
+    for fa, fb in zip(a.frames, b.frames):  # the first loop is the single loop
+        np.testing.assert_array_equal(fa.R_w2c, fb.R_w2c)
+    np.testing.assert_allclose(b.frames[4].R_w2c, b.frames[0].R_w2c)  # the second starts where it starts
+    assert not np.allclose(b.frames[5].R_w2c, b.frames[1].R_w2c)  # and then rises and falls faster
+    assert len(read_text_model(default / "train" / "000001" / "colmap").images) == 8
+    with pytest.raises(InputError, match="train_sweeps"):
+        pose.generate(tmp_path / "bad", train_sweeps=(1, -1), **kw)

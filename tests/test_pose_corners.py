@@ -27,7 +27,7 @@ def posedata(tmp_path_factory):
     from alcn_cv.data import pose
 
     return pose.generate(tmp_path_factory.mktemp("corners") / "data", size="small", n_frames=4, n_test=1,
-                         clutter=False, progress=False)
+                         clutter=False, train_sweeps=(1,), progress=False)
 
 
 @pytest.fixture(scope="module")

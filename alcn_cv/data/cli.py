@@ -39,7 +39,8 @@ def _pose(args: argparse.Namespace) -> int:
 
     t = time.perf_counter()
     out = pose.generate(args.out, seed=args.seed, size=args.size, n_frames=args.frames, n_test=args.n_test,
-                        clutter=not args.no_clutter, training_light=args.training_light, overwrite=args.overwrite,
+                        clutter=not args.no_clutter, training_light=args.training_light,
+                        train_sweeps=args.train_sweeps or pose.TRAIN_SWEEPS, overwrite=args.overwrite,
                         workers=args.workers)
     logger.info("wrote the pose sequences to %s in %.1f s", out, time.perf_counter() - t)
     return 0
@@ -124,13 +125,19 @@ def add_parser(subparsers) -> None:
     q.add_argument("--size", default="default", choices=["default", "small"],
                    help="preset size (default: default; small renders in seconds, for tests)")
     q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    q.add_argument("--frames", type=int, default=None, help="frames per sequence (default: 60; small 3)")
+    q.add_argument("--frames", type=int, default=None,
+                   help="frames per test sequence and per loop of the training sequence (default: 60; small 3)")
     q.add_argument("--n-test", type=int, default=None, help="number of test sequences (default 8)")
     q.add_argument("--no-clutter", action="store_true", help="no clutter on the table")
     q.add_argument("--training-light", action="store_true",
                    help="render every test sequence under the training lighting: the control of the same seed's "
                    "dataset (same scenes, trajectories and noise), to tell what the light costs a method from what "
                    "the scene and viewpoints do")
+    q.add_argument("--train-sweeps", type=float, nargs="+", default=None, metavar="N",
+                   help="the training sequence's loops around the box, --frames views each, by the up-and-down sweeps "
+                   "of their elevation (30-60 deg) (default: 1 3, once as the test trajectories, then three times so "
+                   "that every stretch of azimuth is seen from high and low; 1: the single loop of datasets made "
+                   "before 2026-11-24); the test sequences do not depend on it")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     q.add_argument("--workers", type=int, default=1,
                    help="worker processes (default 1; the output does not depend on it)")

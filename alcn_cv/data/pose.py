@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,7 +54,7 @@ from alcn_cv.io import write_image, write_json
 logger = logging.getLogger(__name__)
 
 __all__ = ["PoseConfig", "SIZES", "BOX_SIZE_MM", "make_box", "make_duck", "make_scene", "sequence_lighting",
-           "trajectory", "generate"]
+           "trajectory", "TRAIN_SWEEPS", "generate"]
 
 #: The box's size (x, y, z) in mm.
 BOX_SIZE_MM = (140.0, 95.0, 55.0)
@@ -160,8 +161,19 @@ def make_scene(seed: int, clutter_seed: int, *, clutter: bool = True, texel: int
                  wall=tuple(float(c) for c in crng.uniform(0.05, 0.4, 3)))
 
 
-def trajectory(n: int, rng: np.random.Generator, *, span_deg: float | None = None):
-    """Camera poses of an orbit around the objects: n (R_w2c, t_w2c) pairs (mm)."""
+#: Elevation sweeps of the training sequence's loops around the objects: the camera circles them
+#: once with its elevation going up and down once, as the test trajectories do, then again with
+#: it going up and down three times, so that every stretch of azimuth is seen from high and low
+#: too (``pose/corner_train.py`` has the measurements).
+TRAIN_SWEEPS = (1, 3)
+
+
+def trajectory(n: int, rng: np.random.Generator, *, span_deg: float | None = None, elevation_cycles: float = 1.0):
+    """Camera poses of an orbit around the objects: n (R_w2c, t_w2c) pairs (mm).
+
+    The camera turns by ``span_deg`` (random in 120-300 deg when None) at 520-680 mm from the
+    objects, its elevation going ``elevation_cycles`` times up and down between 30 and 60 deg.
+    """
     a0 = rng.uniform(0, 360)
     span = span_deg if span_deg is not None else rng.uniform(120, 300)
     ph1, ph2 = rng.uniform(0, 2 * np.pi, 2)
@@ -169,7 +181,7 @@ def trajectory(n: int, rng: np.random.Generator, *, span_deg: float | None = Non
     for f in range(n):
         s = f / max(n - 1, 1)
         az = np.deg2rad(a0 + span * s)
-        el = np.deg2rad(45 + 15 * np.sin(2 * np.pi * s + ph1))
+        el = np.deg2rad(45 + 15 * np.sin(2 * np.pi * elevation_cycles * s + ph1))
         d = 600 + 80 * np.sin(2 * np.pi * 1.5 * s + ph2)
         eye = np.array([d * np.cos(el) * np.cos(az), d * np.cos(el) * np.sin(az), d * np.sin(el)])
         target = np.array([15 * np.sin(6 * s + ph1), 15 * np.cos(5 * s + ph2), 35.0])
@@ -273,12 +285,14 @@ def _write_models(models_dir: Path, scene: Scene) -> None:
 
 def _sequence_job(job: tuple) -> tuple[list[BopFrame], dict]:
     """Render sequence ``k`` (0: training, also writing the models) into the dataset root."""
-    k, root, seed, cfg, clutter, training_light = job
+    k, root, seed, cfg, clutter, training_light, train_sweeps = job
     root = Path(root)
     scene = make_scene(seed, k, clutter=clutter, texel=cfg.texel, table_px=cfg.table_px)
     if k == 0:
         _write_models(root / "models", scene)
-        poses = trajectory(cfg.n_frames, np.random.default_rng([seed, 20]), span_deg=330.0)
+        poses = [camera_pose for cycles in train_sweeps  # every loop starts where the first does
+                 for camera_pose in trajectory(cfg.n_frames, np.random.default_rng([seed, 20]), span_deg=330.0,
+                                        elevation_cycles=cycles)]
         light = _train_lighting()
         frames = _write_sequence(root / "train" / "000001", scene, poses, light, cfg, (seed, 30))
     else:
@@ -297,6 +311,7 @@ def generate(
     n_test: int | None = None,
     clutter: bool = True,
     training_light: bool = False,
+    train_sweeps: Sequence[float] = TRAIN_SWEEPS,
     overwrite: bool = False,
     progress: bool = True,
     workers: int = 1,
@@ -307,12 +322,16 @@ def generate(
         out_dir: dataset root.
         seed: seed of everything (same seed and parameters give the same bytes).
         size: a key of :data:`SIZES`.
-        n_frames: frames per sequence (default: the size's).
+        n_frames: frames per test sequence and per loop of the training sequence (default: the size's).
         n_test: number of test sequences (default 8; #k uses lighting ``SEQUENCE_KINDS[k-1]``).
         clutter: put clutter on the table.
         training_light: render every test sequence under the training lighting: the control of
             the same seed's dataset (the same scenes, trajectories and noise), so that what a
             method loses from the control to the dataset is what the light changes cost it.
+        train_sweeps: the training sequence's loops around the objects, ``n_frames`` views each,
+            by the up-and-down sweeps of their elevation (:data:`TRAIN_SWEEPS`; ``(1,)``: the
+            one loop of the datasets made before 2026-11-24). The test sequences do not depend
+            on it.
         overwrite: replace an existing folder.
         progress: show a progress bar.
         workers: worker processes, one sequence each (the output does not depend on it).
@@ -324,10 +343,13 @@ def generate(
                               n_test=base.n_test if n_test is None else n_test)
     if cfg.n_frames < 1 or not 0 <= cfg.n_test <= len(SEQUENCE_KINDS):
         raise InputError(f"need n_frames >= 1 and 0 <= n_test <= {len(SEQUENCE_KINDS)}")
+    train_sweeps = tuple(float(c) for c in train_sweeps)
+    if not train_sweeps or not all(c >= 0 for c in train_sweeps):
+        raise InputError(f"train_sweeps must be one or more numbers >= 0, got {train_sweeps}")
     sequences = []
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         write_camera(tmp, cfg.K, cfg.width, cfg.height)
-        jobs = [(k, str(tmp), seed, cfg, clutter, training_light) for k in range(cfg.n_test + 1)]
+        jobs = [(k, str(tmp), seed, cfg, clutter, training_light, train_sweeps) for k in range(cfg.n_test + 1)]
         results = parallel_map(_sequence_job, jobs, workers=workers, desc="pose sequences", unit="seq",
                                progress=progress)
         for k, (frames, light) in enumerate(results):
@@ -344,7 +366,7 @@ def generate(
         write_json(tmp / "manifest.json", make_manifest(
             "pose", seed, {"size": size, "width": cfg.width, "height": cfg.height, "focal": cfg.focal,
                            "n_frames": cfg.n_frames, "n_test": cfg.n_test, "clutter": clutter,
-                           "training_light": training_light},
+                           "training_light": training_light, "train_sweeps": list(train_sweeps)},
             units="mm", camera_convention="OpenCV pinhole, pixel centre (0, 0); COLMAP model: cx + 0.5",
             objects=[{"obj_id": 1, "name": "box", "size_mm": list(BOX_SIZE_MM)}, {"obj_id": 2, "name": "duck"}],
             sequences=sequences, colmap={"train/000001": "train/000001/colmap (images relative to rgb/)"},
