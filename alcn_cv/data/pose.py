@@ -292,7 +292,7 @@ def _sequence_job(job: tuple) -> tuple[list[BopFrame], dict]:
         _write_models(root / "models", scene)
         poses = [camera_pose for cycles in train_sweeps  # every loop starts where the first does
                  for camera_pose in trajectory(cfg.n_frames, np.random.default_rng([seed, 20]), span_deg=330.0,
-                                        elevation_cycles=cycles)]
+                                               elevation_cycles=cycles)]
         light = _train_lighting()
         frames = _write_sequence(root / "train" / "000001", scene, poses, light, cfg, (seed, 30))
     else:
