@@ -124,6 +124,26 @@ channels, dilated 3x3 convolutions at 2 and 4 cells, so a cell sees about 80 ins
 pixels; crops of 16 cells), ALCN then none, seeds 0 / 1: 676.7 / 640.0 and 700.0 / 663.3 lit, held-out (seed 0) 46.7 and
 73.3%, parts 52.2 / 61.6 / 39.0 and 56.1 / 67.0 / 37.2% (seed 0).
 
+Not kept (two loops, ``runs/joint``, seeds 0-2, one torch thread): the gain Normalizer trained
+jointly with the network, as the paper trains ALCN with its detector (Eq. 2). Each crop is
+normalized by :class:`~alcn_cv.nets.gain.GainNormalizer` from its intensities 48 pixels around
+it, with the divisive floor of its whole frame. The Normalizer starts from the shipped file and
+learns at a tenth of the network's rate (3e-4). 2000 steps take 6.5-8 min a network, against
+2.6-3.6 min with the Normalizer frozen on the same crops. Lit / training light sums over #1-#8:
+jointly 716.7 / 750.0, 703.3 / 743.3, 740.0 / 753.3 (mean 720.0 / 748.9, #5 45.6); frozen
+690.0 / 763.3, 763.3 / 716.7, 676.7 / 746.7 (710.0 / 742.2, #5 43.3). Held-out #1: 66.7, 96.7,
+76.7 and 66.7, 96.7, 66.7%. Without normalization the same data give 721.1 / 765.6, held-out
+76.7%. The joint networks beat the frozen ones by less than the seeds' spread, and not
+without normalization.
+Not kept either, the same networks re-evaluated (``runs/table1_v9``): a last refinement of
+each pose under a Cauchy loss of scale 1.5 px (``scipy.optimize.least_squares`` on RANSAC's
+inliers). It targets the frames posed 5-7 px off: there one or two inliers lie 9-11 px from
+the truth, while the parts found within 4 px of it give 1-2.5 px. It fixed two such frames of
+the held-out scene (none, seed 2: 83.3 -> 90.0%). Lit sums of none, seeds 0-2, and ALCN, seed
+0: 720.0, 690.0, 716.7, 716.7 against 746.7, 700.0, 716.7, 720.0 without it. A pose a few
+pixels different gates the next frames elsewhere, and that decided more frames than the
+refinement did.
+
 The intensity change of the copies (``a I + b``, :func:`pose.corner_data.build_frames`) is what
 makes the network without normalization robust: trained without it (``--no-intensity``, 3 seeds,
 ``runs/nointensity``) it poses 31.1, 0 and 13.3% of #4, #5 and #8 (98.9 and 90.0 / 63.3 / 73.3
