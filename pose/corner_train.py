@@ -143,12 +143,17 @@ the held-out scene (none, seed 2: 83.3 -> 90.0%). Lit sums of none, seeds 0-2, a
 0: 720.0, 690.0, 716.7, 716.7 against 746.7, 700.0, 716.7, 720.0 without it. A pose a few
 pixels different gates the next frames elsewhere, and that decided more frames than the
 refinement did.
+Nor twice the copies per view (23 instead of 11, ``runs/copies``; 3.3-4.4 min a network). Held-out
+#1 without normalization: 86.7, 86.7, 83.3% against 86.7, 60.0, 83.3. With ALCN: 73.3, 73.3,
+66.7% against 60.0, 90.0, 80.0. Seed 0, lit / training light: none 743.3 / 756.7 against 746.7 /
+763.3, ALCN 733.3 / 770.0 against 720.0 / 750.0.
 
 The intensity change of the copies (``a I + b``, :func:`pose.corner_data.build_frames`) is what
 makes the network without normalization robust: trained without it (``--no-intensity``, 3 seeds,
 ``runs/nointensity``) it poses 31.1, 0 and 13.3% of #4, #5 and #8 (98.9 and 90.0 / 63.3 / 73.3
 with it), while the networks behind ALCN, the DoG or Tan-Triggs keep most of theirs (ALCN 93.3 /
-34.4 / 53.3); the README's Table 1 has every row, and the same sequences under the training light
+34.4 / 53.3); with two loops (``runs/table1_v10/ni``) none 38.9 / 0 / 37.8 and ALCN 98.9 / 46.7 /
+77.8. The README's Table 1 has every row, and the same sequences under the training light
 (``alcn data pose --training-light``).
 
 The 8-corner design before it, measured on the data engine's sequences (30 frames each, no
