@@ -133,9 +133,9 @@ learns at a tenth of the network's rate (3e-4). 2000 steps take 6.5-8 min a netw
 jointly 716.7 / 750.0, 703.3 / 743.3, 740.0 / 753.3 (mean 720.0 / 748.9, #5 45.6); frozen
 690.0 / 763.3, 763.3 / 716.7, 676.7 / 746.7 (710.0 / 742.2, #5 43.3). Held-out #1: 66.7, 96.7,
 76.7 and 66.7, 96.7, 66.7%. Without normalization the same data give 721.1 / 765.6, held-out
-76.7%. The joint networks beat the frozen ones by less than the seeds' spread, and not
-without normalization.
-Not kept either, the same networks re-evaluated (``runs/table1_v9``): a last refinement of
+76.7%. The joint networks beat the frozen ones by less than the seeds' spread, and do not beat
+the networks without normalization.
+Not kept either, the networks of ``runs/table1_v9`` re-evaluated (``runs/robust``): a last refinement of
 each pose under a Cauchy loss of scale 1.5 px (``scipy.optimize.least_squares`` on RANSAC's
 inliers). It targets the frames posed 5-7 px off: there one or two inliers lie 9-11 px from
 the truth, while the parts found within 4 px of it give 1-2.5 px. It fixed two such frames of
