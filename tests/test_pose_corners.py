@@ -354,10 +354,12 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     """`alcn pose train-corners`: a few steps on four frames."""
     onnx = tmp_path / "corners.onnx"
     args = _parser().parse_args(["pose", "train-corners", str(posedata / "train" / "000001"), str(onnx), "--box-ply",
-                                 str(posedata / "models" / "obj_000001.ply"), "--iterations", "12", "--copies", "0"])
+                                 str(posedata / "models" / "obj_000001.ply"), "--iterations", "12", "--copies", "0",
+                                 "--batch-size", "24", "--device", "cpu"])
     assert args.func(args) == 0
     meta = pc.read_metadata(onnx)
     assert meta["normalizer"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
+    assert meta["fit"]["batch_size"] == 24 and meta["fit"]["iterations"] == 12
     assert meta["config"] == {"num_parts": 26, "channels": [16, 32], "hidden": 128, "mixing": 1}
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
     np.testing.assert_allclose(meta["parts"], box.box_parts(corners))
@@ -369,6 +371,14 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
                                  "--divisions", "1"])
     assert args.func(args) == 0
     np.testing.assert_allclose(pc.read_metadata(onnx)["parts"], corners)
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the error where torch sees no CUDA device")
+def test_training_on_cuda_without_one_is_a_clear_error(posedata):
+    frames = corner_data.build_frames(load_sequence(posedata / "train" / "000001"),
+                                      read_box_corners(posedata / "models" / "obj_000001.ply"), copies=0)
+    with pytest.raises(InputError, match="no CUDA device"):
+        corner_train.fit(CornerNet(), frames, iterations=1, batch_size=2, cells=4, device="cuda", progress=False)
 
 
 def test_no_intensity_trains_on_the_views_own_intensities(posedata, tmp_path, monkeypatch):
