@@ -96,8 +96,8 @@ def _train_corners(args: argparse.Namespace) -> int:
 
     path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
                              normalizer=args.normalizer, scale=args.scale, iterations=args.iterations,
-                             batch_size=args.batch_size, device=args.device, copies=args.copies, novel_views=args.novel_views, divisions=args.divisions,
-                             seed=args.seed, **_no_intensity_kw(args.no_intensity))
+                             batch_size=args.batch_size, device=args.device, copies=args.copies,
+                             novel_views=args.novel_views, divisions=args.divisions, seed=args.seed, **_no_intensity_kw(args.no_intensity))
     print(f"corner detector ({args.normalizer}) -> {path}")
     return 0
 

@@ -34,6 +34,7 @@ RUNTIME = (
     "alcn_cv/nets/lite.py",
     "alcn_cv/nets/gain.py",
     "alcn_cv/nets/opencv_runtime.py",
+    "alcn_cv/nets/device.py",
     "alcn_cv/commands/__init__.py",
     "alcn_cv/commands/normalize.py",
 )

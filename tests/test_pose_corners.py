@@ -359,7 +359,7 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     assert args.func(args) == 0
     meta = pc.read_metadata(onnx)
     assert meta["normalizer"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
-    assert meta["fit"]["batch_size"] == 24 and meta["fit"]["iterations"] == 12
+    assert meta["fit"]["batch_size"] == 24 and meta["fit"]["iterations"] == 12 and meta["fit"]["device"] == "cpu"
     assert meta["config"] == {"num_parts": 26, "channels": [16, 32], "hidden": 128, "mixing": 1}
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
     np.testing.assert_allclose(meta["parts"], box.box_parts(corners))

@@ -204,13 +204,10 @@ class ALCN(Normalization):
             return
 
         require("torch", *(("kornia",) if backend == "torch" else ()), what=f"ALCN(backend={backend!r})")
-        import torch  # deferred: importing alcn_cv must not need torch
-
+        from alcn_cv.nets.device import torch_device  # deferred: importing alcn_cv must not need torch
         from alcn_cv.nets.lite import normalizer_from_file
 
-        if backend == "torch" and device.startswith("cuda") and not torch.cuda.is_available():
-            raise InputError("device 'cuda' requested but torch sees no CUDA device")
-        self.net = normalizer_from_file(weight_file).to(device if backend == "torch" else "cpu")
+        self.net = normalizer_from_file(weight_file).to(torch_device(device) if backend == "torch" else "cpu")
         if len(self.sigmas) != self.net.num_kernels:
             raise InputError(f"weight file has {len(self.sigmas)} sigmas for {self.net.num_kernels} outputs")
         stride = self.net.stride

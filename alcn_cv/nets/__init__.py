@@ -4,6 +4,7 @@
   the real-time Normalizer and the loader of weight files; :mod:`~alcn_cv.nets.opencv_runtime` --
   both run by ``cv2.dnn`` from their ONNX export, without torch.
 * :mod:`~alcn_cv.nets.detector` -- the Detector trained jointly with the Normalizer (Eq. 2).
+* :mod:`~alcn_cv.nets.device` -- the torch device a network runs or trains on.
 
 Importing this package does not import torch; the names below load their module on first use
 (without torch, those that need it raise :class:`~alcn_cv.errors.MissingDependencyError`).

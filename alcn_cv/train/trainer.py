@@ -49,6 +49,7 @@ from tqdm.auto import tqdm
 from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write
+from alcn_cv.nets.device import torch_device
 from alcn_cv.report import machine
 from alcn_cv.train import distributed
 from alcn_cv.train.checkpoint import (TrainState, load_checkpoint, restore_checkpoint, save_checkpoint,
@@ -160,9 +161,7 @@ def _prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[dict[str, A
         (out / "config.toml").write_text(dump_toml(cfg))
     if cfg.run.threads:
         torch.set_num_threads(cfg.run.threads)
-    device = torch.device(cfg.run.device)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise InputError("config key 'run.device' is 'cuda' but torch sees no CUDA device")
+    device = torch_device(cfg.run.device, "config key 'run.device'")
     if distributed.world_size() > 1 and device.type == "cuda":
         device = torch.device("cuda", distributed.local_rank())
     return ckpt, device
