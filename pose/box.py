@@ -14,8 +14,8 @@ import numpy as np
 
 from alcn_cv.errors import InputError
 
-__all__ = ["BOX_FACES", "DIVISIONS", "NUM_CORNERS", "box_axes", "box_coordinates", "box_parts", "facing_faces",
-           "flat_axes", "part_visibility", "parts_per_face"]
+__all__ = ["BOX_FACES", "DIVISIONS", "NUM_CORNERS", "box_axes", "box_coordinates", "box_parts", "edge_directions",
+           "facing_faces", "flat_axes", "part_visibility", "parts_per_face"]
 
 NUM_CORNERS = 8
 #: Steps per box edge of the detector's parts (:func:`box_parts`: 2 is the corners, the edges'
@@ -49,6 +49,23 @@ def box_parts(corners: np.ndarray, divisions: int = DIVISIONS) -> np.ndarray:
     corner_first = np.argsort(~on_face[on_face.any(1)].all(1), kind="stable")
     abc = surface[corner_first] / divisions
     return corners[0] + abc @ _edge_vectors(corners).T
+
+
+def edge_directions(corners: np.ndarray, parts: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` float64: for each of ``parts`` (``(n, 3)``, on the surface of the box ``corners``)
+    inside one of the box's edges (a middle of :func:`box_parts`), that edge's unit direction;
+    zeros for the corners and the points inside a face.
+
+    A detector finds a corner or a face's centre equally well in every direction, but the middle
+    of an edge only across the edge: along it the image shows the same straight contour
+    (:class:`pose.solver.PoseSolver` weighs its reprojection error accordingly).
+    """
+    corners = np.asarray(corners, np.float64).reshape(NUM_CORNERS, 3)
+    on_low, on_high = _on_faces(corners, np.asarray(parts, np.float64).reshape(-1, 3))
+    on = on_low | on_high  # inside an edge: on the faces of two axes, free along the third
+    edges = _edge_vectors(corners)  # the free axis is never a flat box's edge of length 0: always "on"
+    unit = edges / np.maximum(np.linalg.norm(edges, axis=0), 1e-300)
+    return np.where((on.sum(1) == 2)[:, None], unit.T[np.argmin(on, 1)], 0.0)
 
 
 def box_axes(corners: np.ndarray) -> np.ndarray:

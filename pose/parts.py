@@ -70,11 +70,16 @@ class Correspondences:
         object_points: ``(M, 3)`` float32, the model's units.
         image_points: ``(M, 2)`` float32 pixels.
         keypoints: number of keypoints detected in the image.
+        directions: ``(M, 3)`` float32 unit vectors of the object frame along which an image
+            point was found less precisely than across (the edge a part lies in the middle of,
+            :func:`pose.box.edge_directions`), zeros where it is equally precise in every direction;
+            ``None``: all are.
     """
 
     object_points: np.ndarray
     image_points: np.ndarray
     keypoints: int = 0
+    directions: np.ndarray | None = None
 
 
 class PartDetector(Protocol):

@@ -289,7 +289,7 @@ def evaluate_scene(scene: Scene, normalizer: str, *, detector: str = "features",
             continue
         t0 = time.perf_counter()
         corr = det.detect(frames[i])
-        est = solver.solve(corr.object_points, corr.image_points)
+        est = solver.solve(corr.object_points, corr.image_points, directions=corr.directions)
         seconds = time.perf_counter() - t0
         s = score(target.corners, K, "mm", (est.R, est.tvec) if est.ok else None, truth)
         worst = (float(np.linalg.norm(project(target.corners, est.rvec, est.tvec, K) - ref_uv, axis=1).max())

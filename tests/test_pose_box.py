@@ -90,3 +90,19 @@ def test_parts_per_face():
     assert box.parts_per_face(corners, corners) == 4
     assert box.parts_per_face(corners, box.box_parts(corners)) == 9
     assert box.parts_per_face(corners, box.box_parts(corners, 3)) == 16
+
+
+@pytest.mark.parametrize("size", [[100, 60, 40], [100, 60, 0]])
+def test_edge_directions_are_those_of_the_edges_the_middles_lie_on(size):
+    corners = box_corners(size, [-50, -30, -20])
+    parts = box.box_parts(corners, 3)
+    d = box.edge_directions(corners, parts)
+    assert d.shape == parts.shape
+    np.testing.assert_array_equal(d[:8], 0)  # the corners
+    on_edge = np.linalg.norm(d, axis=1) > 0
+    np.testing.assert_allclose(np.linalg.norm(d[on_edge], axis=1), 1)
+    for k in np.flatnonzero(on_edge):  # the part lies between the two corners of the edge along d
+        ends = corners[np.abs(np.cross(corners - parts[k], d[k])).max(1) < 1e-9]
+        assert len(ends) >= 2 and np.ptp((ends - parts[k]) @ d[k]) > 0
+    # 2 points inside each of the 12 edges (of the 4 edges of a flat box's plane), none inside a face
+    assert len(np.unique(parts[on_edge], axis=0)) == (24 if size[2] else 8)

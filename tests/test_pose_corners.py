@@ -137,6 +137,7 @@ def test_candidates_are_gated_by_the_predicted_pose(random_net, monkeypatch):
     monkeypatch.setattr(det, "maps", lambda image: _fake_maps(shape, {2: [(*target, 0.3), (120.0, 30.0, 0.9)]}))
     corr = det.detect(None, (rvec, tvec, K))
     assert corr.keypoints == 1 and np.allclose(corr.object_points[0], det.corners[2])
+    np.testing.assert_array_equal(corr.directions, box.edge_directions(det.corners, det.parts)[[2]])
     assert det.detect(None).keypoints == 2
 
 
