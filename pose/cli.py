@@ -134,7 +134,8 @@ def _add_relight(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--detector", nargs="+", default=["features"], choices=sorted(planar.DETECTORS),
                    help="part detectors, each giving rows (default features: OpenCV features matched to the target's "
                    "descriptors; corners: the corner CNN trained on the reference frame for the target's corners and "
-                   "side middles)")
+                   "side middles, one network per scene and normalizer: about 8 min each on 2 CPU cores, "
+                   "trained on the GPU where torch sees one)")
     r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
     r.add_argument("--n-features", type=int, default=0,
                    help="the strongest keypoints kept per frame (default 0: all; the target's model keeps all of "
