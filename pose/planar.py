@@ -38,7 +38,8 @@ min per training on the loaded 2-core machine): it finds the 8 parts in the refe
 (DoG 24.9, ALCN 28.3, the gain ALCN 29.7), far below the SIFT parts (95-100%). With each pose
 verified by the network's scores (:meth:`pose.corners.CornerDetector.verify`; 30 s per training
 on the idle machine): none 16.1%, the default gain ALCN 27.4% (``runs/posereal_corners_v7``).
-With the box's longer training (:data:`CORNER_TRAINING`): none 23.8%, the gain ALCN 39.1%.
+With the box's longer training (:data:`CORNER_TRAINING`): none 23.8%, the DoG 1/2 30.0%, the
+gain ALCN 39.1%.
 
 The Webcam frames are for academic research only (cite TILDE and AMOS).
 """
