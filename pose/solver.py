@@ -314,18 +314,17 @@ class PoseSolver:
         much less precisely along the edge than across it."""
         p = np.concatenate([np.ravel(rvec), np.ravel(tvec)]).astype(np.float64)
         step = 1e-3 * np.linalg.norm(p[3:])  # a small length in the object's units at its distance
+        sliding = directions.any(1)
+        ahead_points = obj[sliding] + step * directions[sliding]
 
         def whitened(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             uv, jac = cv2.projectPoints(obj, p[:3], p[3:], self.K, self.dist)
             uv, jac = uv.reshape(-1, 2), jac[:, :6].reshape(-1, 2, 6)
-            ahead = cv2.projectPoints(obj + step * directions, p[:3], p[3:], self.K, self.dist)[0].reshape(-1, 2)
-            along = ahead - uv
-            length = np.linalg.norm(along, axis=1, keepdims=True)
-            along = np.where(length > 0, along / np.maximum(length, 1e-300), 0.0)
-            across = np.stack([-along[:, 1], along[:, 0]], 1)
+            along = cv2.projectPoints(ahead_points, p[:3], p[3:], self.K, self.dist)[0].reshape(-1, 2) - uv[sliding]
+            along /= np.maximum(np.linalg.norm(along, axis=1, keepdims=True), 1e-300)
             # rows: across, along / sigma; a point without direction keeps the identity
-            w = np.stack([across, along / self.along_sigma], 1)
-            w[length[:, 0] == 0] = np.eye(2)
+            w = np.tile(np.eye(2), (len(obj), 1, 1))
+            w[sliding] = np.stack([np.stack([-along[:, 1], along[:, 0]], 1), along / self.along_sigma], 1)
             return np.einsum("nij,nj->ni", w, uv - img).ravel(), np.einsum("nij,njk->nik", w, jac).reshape(-1, 6)
 
         r, jac = whitened(p)
@@ -354,8 +353,8 @@ class PoseSolver:
             image_points: ``(N, 2)`` pixels.
             prior: ``(rvec, tvec)`` of the previous frame, or ``None``.
             directions: ``(N, 3)`` object-frame unit vectors along which an image point is less
-                precise (:attr:`pose.parts.Correspondences.directions`), or ``None``: the pose
-                found is then refined once more on its inliers with the errors along those
+                precise (:attr:`pose.parts.Correspondences.directions`), or ``None``. With them,
+                the pose found is refined once more on its inliers with the errors along those
                 directions weighed down (see :attr:`along_sigma`).
 
         Returns:
@@ -365,12 +364,13 @@ class PoseSolver:
         img = np.ascontiguousarray(image_points, dtype=np.float64).reshape(-1, 2)
         if len(obj) != len(img):
             raise InputError(f"{len(obj)} object points but {len(img)} image points")
+        if directions is not None:
+            directions = np.asarray(directions, np.float64).reshape(-1, 3)
+            if len(directions) != len(obj):
+                raise InputError(f"{len(obj)} object points but {len(directions)} directions")
         est = self._solve(obj, img, prior)
         if directions is None or not est.ok:
             return est
-        directions = np.asarray(directions, np.float64).reshape(-1, 3)
-        if len(directions) != len(obj):
-            raise InputError(f"{len(obj)} object points but {len(directions)} directions")
         inl = est.inliers
         if not directions[inl].any():
             return est

@@ -200,6 +200,7 @@ def test_errors_along_the_directions_weigh_less():
     parts = box_parts(corners, 3)
     directions = edge_directions(corners, parts)
     rng = np.random.default_rng(0)
+    solver = PoseSolver(K, min_inliers=8, along_sigma=8.0, reprojection_error=8.0)
     plain, weighed = [], []
     for _ in range(20):
         rvec, tvec = rng.normal(0, 0.5, (3, 1)), np.array([[0.0], [0.0], [500.0]]) + rng.normal(0, 20, (3, 1))
@@ -207,7 +208,6 @@ def test_errors_along_the_directions_weigh_less():
         ahead = project(parts + directions, rvec, tvec, K) - uv
         along = ahead / np.maximum(np.linalg.norm(ahead, axis=1, keepdims=True), 1e-12)
         uv = uv + rng.normal(0, 0.3, uv.shape) + rng.normal(0, 2.4, (len(uv), 1)) * along
-        solver = PoseSolver(K, min_inliers=8, along_sigma=8.0, reprojection_error=8.0)
         for out, dirs in ((plain, None), (weighed, directions)):
             est = solver.solve(parts, uv, directions=dirs)
             assert est.ok, est.reason
