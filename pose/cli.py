@@ -68,7 +68,8 @@ def _eval(args: argparse.Namespace) -> int:
     if args.data:
         corner_kw = {"iterations": args.corner_iterations, "batch_size": args.corner_batch_size,
                      "device": args.corner_device, "copies": args.corner_copies,
-                     "novel_views": args.corner_novel_views, "divisions": args.corner_divisions,
+                     "novel_views": args.corner_novel_views, "novel_distance": tuple(args.corner_novel_distance),
+                     "divisions": args.corner_divisions,
                      "scale": args.corner_scale, **_no_intensity_kw(args.corner_no_intensity)}
         evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature, detectors=args.detectors,
                       corner_kw=corner_kw, seeds=args.seeds, sequences=args.sequences, command=_command())
@@ -97,7 +98,8 @@ def _train_corners(args: argparse.Namespace) -> int:
     path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
                              normalizer=args.normalizer, scale=args.scale, iterations=args.iterations,
                              batch_size=args.batch_size, device=args.device, copies=args.copies,
-                             novel_views=args.novel_views, divisions=args.divisions, seed=args.seed, **_no_intensity_kw(args.no_intensity))
+                             novel_views=args.novel_views, novel_distance=tuple(args.novel_distance),
+                             divisions=args.divisions, seed=args.seed, **_no_intensity_kw(args.no_intensity))
     print(f"corner detector ({args.normalizer}) -> {path}")
     return 0
 
@@ -225,9 +227,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``corner-recall``,
     ``relight`` and ``overlay-error`` to ``alcn``."""
     from pose.box import DIVISIONS
-    from pose.corner_data import COPIES, NOVEL_VIEWS, SCALE
+    from pose.corner_data import COPIES, NOVEL_DISTANCE, NOVEL_VIEWS, SCALE
     from pose.corner_train import BATCH_SIZE, ITERATIONS
     from pose.solver import METHODS
+
+    novel_distance_help = ("the nearby viewpoints' camera distance, a factor of their view's (default "
+                           f"{NOVEL_DISTANCE[0]:g} {NOVEL_DISTANCE[1]:g}: nearer than the training views, as test "
+                           "views come)")
 
     p = subparsers.add_parser("pose", help="3D box pose: build a part model, track it, evaluate",
                               description="Part-based 3D pose of a box after contrast normalization "
@@ -307,6 +313,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument("--corner-novel-views", type=float, default=NOVEL_VIEWS,
                    help="share of the copies that see the box from a nearby viewpoint (each face warped by its "
                    f"plane's homography; default {NOVEL_VIEWS:g})")
+    e.add_argument("--corner-novel-distance", type=float, nargs=2, default=NOVEL_DISTANCE, metavar=("LOW", "HIGH"),
+                   help=novel_distance_help)
     e.add_argument("--corner-scale", type=float, default=SCALE,
                    help=f"downscaling of the frames for the corner CNN (default {SCALE:g})")
     e.add_argument("--corner-divisions", type=int, default=DIVISIONS,
@@ -345,6 +353,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--novel-views", type=float, default=NOVEL_VIEWS,
                    help="share of the copies that see the box from a nearby viewpoint (each face warped by its "
                    f"plane's homography; default {NOVEL_VIEWS:g})")
+    c.add_argument("--novel-distance", type=float, nargs=2, default=NOVEL_DISTANCE, metavar=("LOW", "HIGH"),
+                   help=novel_distance_help)
     c.add_argument("--divisions", type=int, default=DIVISIONS,
                    help="steps per box edge of the parts found (default "
                    f"{DIVISIONS}: the corners, the edges' middles and the faces' centres; 1: the 8 corners)")

@@ -35,6 +35,10 @@ logger = logging.getLogger(__name__)
 #: (:func:`novel_view`); see :mod:`pose.corner_train` for the measurements.
 COPIES = 11
 NOVEL_VIEWS = 0.6
+#: The novel views' camera distance, as a factor of their view's: down to 0.7 because test
+#: trajectories come nearer than every training view (the held-out scene's #1 down to 0.72 of
+#: the training views in its directions); see :mod:`pose.corner_train` for the measurements.
+NOVEL_DISTANCE = (0.7, 1.2)
 #: Downscaling of a sequence's frames before normalization and detection: a 32x32 window is 43
 #: pixels of a 640x480 frame (see :mod:`pose.corner_train` for 0.5 against 0.75).
 SCALE = 0.75
@@ -238,7 +242,8 @@ def _view_frames(small: np.ndarray, small_mask: np.ndarray | None, uv: np.ndarra
                  rng: np.random.Generator, *, copies: int, backgrounds: float, intensity_scale: tuple[float, float],
                  intensity_offset: float, noise: float, pos_radius: float, neg_radius: float,
                  box: tuple[np.ndarray, ...] | None = None, novel_views: float = 0.0,
-                 **homography_kw: Any) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+                 novel_distance: tuple[float, float] = NOVEL_DISTANCE, **homography_kw: Any
+                 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
     """One downscaled view ``small`` (uint8) and its ``copies`` augmented copies, each normalized by
     ``norm`` and labelled: ``(image, labels, offsets, owner, visible parts (m, 3))`` per frame
     (:func:`build_frames`'s arguments; ``uv (n, 2)`` the parts in ``small``'s pixels; ``box``:
@@ -248,8 +253,8 @@ def _view_frames(small: np.ndarray, small_mask: np.ndarray | None, uv: np.ndarra
     for c in range(copies + 1):
         image, m, xy, vis = small, small_mask, uv, visible
         if c:
-            view = (novel_view(small, *box[:4], rng, parts=box[4]) if box is not None and rng.random() < novel_views
-                    else None)
+            view = (novel_view(small, *box[:4], rng, distance=novel_distance, parts=box[4])
+                    if box is not None and rng.random() < novel_views else None)
             if view is not None:
                 image, m, xy, vis = view
             H = random_homography(rng, (h, w), **homography_kw)
@@ -290,7 +295,8 @@ def _stack_frames(per_view: list[list[tuple[np.ndarray, ...]]]) -> CornerFrames:
 def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: str = "none", *, scale: float = SCALE,
                  copies: int = COPIES, backgrounds: float = 0.8, intensity_scale: tuple[float, float] = (0.4, 1.6),
                  intensity_offset: float = 0.2, noise: float = 0.03, pos_radius: float = 4.0,
-                 neg_radius: float = 7.0, novel_views: float = NOVEL_VIEWS, divisions: int = DIVISIONS,
+                 neg_radius: float = 7.0, novel_views: float = NOVEL_VIEWS,
+                 novel_distance: tuple[float, float] = NOVEL_DISTANCE, divisions: int = DIVISIONS,
                  seed: int = 0) -> CornerFrames:
     """The labelled training frames of a registered sequence (:func:`pose.sequence.load_sequence`).
 
@@ -306,16 +312,20 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
         pos_radius, neg_radius: see :func:`label_grid` (downscaled pixels).
         novel_views: probability that a copy first sees the box from a nearby viewpoint
             (:func:`novel_view`) before its homography.
+        novel_distance: ``(low, high)`` the novel views' camera distance, a factor of their view's.
         divisions: the parts labelled, :func:`pose.box.box_parts` ``(corners, divisions)``.
         seed: random seed.
 
     Raises:
-        InputError: an unregistered sequence, or no visible part in any view.
+        InputError: an unregistered sequence, ``novel_distance`` not ``0 < low <= high``, or no
+            visible part in any view.
     """
     from alcn_cv import io
 
     if not sequence.registered:
         raise InputError("the training sequence must be registered (a pose for every image)")
+    if not 0 < novel_distance[0] <= novel_distance[1]:
+        raise InputError(f"novel_distance must be (low, high) with 0 < low <= high, got {novel_distance}")
     norm = normalization_for(normalizer)
     rng = np.random.default_rng(seed)
     mask_dir = sequence.image_dir.parent / "mask_visib"
@@ -333,7 +343,7 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
                                      vis, norm, rng, copies=copies, backgrounds=backgrounds,
                                      intensity_scale=intensity_scale, intensity_offset=intensity_offset, noise=noise,
                                      pos_radius=pos_radius, neg_radius=neg_radius, novel_views=novel_views,
-                                     box=(corners, view.R_w2c, view.t_w2c, K, parts)))
+                                     novel_distance=novel_distance, box=(corners, view.R_w2c, view.t_w2c, K, parts)))
     frames = _stack_frames(per_view)
     logger.info("corner frames: %d (%d views x %d), %d parts, %d part cells", len(frames.labels),
                 len(sequence.views), copies + 1, len(parts), int((frames.labels > 0).sum()))

@@ -411,6 +411,35 @@ def test_no_intensity_trains_on_the_views_own_intensities(posedata, tmp_path, mo
     assert max(shifts[0]) < 0.3 * max(shifts[1])
 
 
+def test_novel_distance_brings_the_novel_views_nearer(posedata, tmp_path, monkeypatch):
+    """``novel_distance`` (``--novel-distance``, ``--corner-novel-distance``): the novel views'
+    camera distance, so that the network sees the box larger than in any training view."""
+    seq = load_sequence(posedata / "train" / "000001", obj_id=1)
+    corners = read_box_corners(posedata / "models" / "obj_000001.ply")
+
+    def box_size(distance):  # mean spread of the visible parts over the copies, pixels
+        frames = corner_data.build_frames(seq, corners, "none", scale=1.0, copies=6, backgrounds=0.0, noise=0.0,
+                                          novel_views=1.0, novel_distance=distance, seed=3)
+        return np.mean([np.ptp(c[:, :2], 0).max() for c in frames.corners if len(c) >= 4])
+
+    assert box_size((0.7, 0.7)) > 1.2 * box_size((1.2, 1.2))
+    with pytest.raises(InputError, match="novel_distance"):
+        corner_data.build_frames(seq, corners, novel_distance=(1.2, 0.7))
+    calls = []
+    monkeypatch.setattr(corner_train, "train_corners", lambda *a, **kw: calls.append(kw) or tmp_path / "c.onnx")
+    args = _parser().parse_args(["pose", "train-corners", str(posedata / "train" / "000001"), str(tmp_path / "c.onnx"),
+                                 "--box-ply", str(posedata / "models" / "obj_000001.ply"), "--novel-distance", "0.6",
+                                 "1.1"])
+    assert args.func(args) == 0 and calls[0]["novel_distance"] == (0.6, 1.1)
+    from pose import evaluate
+
+    seen = []
+    monkeypatch.setattr(evaluate, "main", lambda *a, **kw: seen.append(kw["corner_kw"]))
+    args = _parser().parse_args(["pose", "eval", "--data", str(posedata), "--out", str(tmp_path / "t"),
+                                 "--detectors", "corners"])
+    assert args.func(args) == 0 and seen[0]["novel_distance"] == corner_data.NOVEL_DISTANCE
+
+
 def test_track_and_bench_the_corner_detector(posedata, random_net, tmp_path):
     """`alcn pose track --detector corners` and `alcn pose bench-corners` (torch-free speed)."""
     train = posedata / "train" / "000001"
