@@ -34,7 +34,10 @@ distance the network sees the box as large as there. One torch thread per networ
 4, 5 and 6 of seed 0 posed 8-22 px off, frames 1 and 2 of seed 1); seed 0 on the first scene's
 #1-#8: 790.0 against 773.3 lit (#5 93.3, #8 96.7) and 796.7 either way under the training light.
 With the gain ALCN in front the held-out #1 went from 66.7 / 90.0 / 96.7 to 96.7 / 86.7 / 96.7%
-(mean 84.4 -> 93.3): seed 0 no longer lost its first 10 frames.
+(mean 84.4 -> 93.3): seed 0 no longer lost its first 10 frames. The first scene's Table 1 retrained
+with it (3 seeds, ``runs/s14/lit``, README): none 774.4 lit over #1-#8, the gain ALCN 743.3 with
+75.6% on #5, against 767.8 and 755.6 (80.0 on #5) for the H100's networks with 0.85-1.2 (another
+network at each seed): differences within the spread of single networks (723.3-790.0).
 
 The parts and the scale (the defaults, ``divisions=2``, ``scale=0.75``): the network finds the
 26 points of the box's surface lattice (:func:`pose.box.box_parts`: corners, edge middles,
