@@ -135,7 +135,7 @@ def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray,
                rng: np.random.Generator, *, azimuth_deg: float = 8.0, elevation_deg: float = 20.0,
-               elevation_range: tuple[float, float] = (20.0, 70.0), distance: tuple[float, float] = (0.85, 1.2),
+               elevation_range: tuple[float, float] = (20.0, 70.0), distance: tuple[float, float] = NOVEL_DISTANCE,
                min_stretch: float = 0.35, tries: int = 8, parts: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The box of a registered view seen from a nearby viewpoint: each face of the box warped by
