@@ -382,24 +382,37 @@ def test_training_on_cuda_without_one_is_a_clear_error(posedata):
         corner_train.fit(CornerNet(), frames, iterations=1, batch_size=2, cells=4, device="cuda", progress=False)
 
 
-def test_no_intensity_trains_on_the_views_own_intensities(posedata, tmp_path, monkeypatch):
-    """`--no-intensity` / `--corner-no-intensity`: the copies keep their view's intensities."""
+def _train_corners_kwargs(posedata, tmp_path, monkeypatch, *extras: list[str]) -> list[dict]:
+    """What `alcn pose train-corners` with each list of ``extras`` passes to ``train_corners``."""
     calls = []
     monkeypatch.setattr(corner_train, "train_corners", lambda *a, **kw: calls.append(kw) or tmp_path / "c.onnx")
     common = [str(posedata / "train" / "000001"), str(tmp_path / "c.onnx"), "--box-ply",
               str(posedata / "models" / "obj_000001.ply")]
-    for extra in ([], ["--no-intensity"]):
+    for extra in extras:
         args = _parser().parse_args(["pose", "train-corners", *common, *extra])
         assert args.func(args) == 0
-    assert "intensity_scale" not in calls[0]
-    assert calls[1]["intensity_scale"] == (1.0, 1.0) and calls[1]["intensity_offset"] == 0.0
+    return calls
+
+
+def _eval_corner_kw(posedata, tmp_path, monkeypatch, *extra: str) -> dict:
+    """The corner CNN's training options that `alcn pose eval --detectors corners` with ``extra`` passes on."""
     from pose import evaluate
 
     seen = []
     monkeypatch.setattr(evaluate, "main", lambda *a, **kw: seen.append(kw["corner_kw"]))
     args = _parser().parse_args(["pose", "eval", "--data", str(posedata), "--out", str(tmp_path / "t"),
-                                 "--detectors", "corners", "--corner-no-intensity"])
-    assert args.func(args) == 0 and seen[0]["intensity_scale"] == (1.0, 1.0) and seen[0]["intensity_offset"] == 0.0
+                                 "--detectors", "corners", *extra])
+    assert args.func(args) == 0
+    return seen[0]
+
+
+def test_no_intensity_trains_on_the_views_own_intensities(posedata, tmp_path, monkeypatch):
+    """`--no-intensity` / `--corner-no-intensity`: the copies keep their view's intensities."""
+    calls = _train_corners_kwargs(posedata, tmp_path, monkeypatch, [], ["--no-intensity"])
+    assert "intensity_scale" not in calls[0]
+    assert calls[1]["intensity_scale"] == (1.0, 1.0) and calls[1]["intensity_offset"] == 0.0
+    seen = _eval_corner_kw(posedata, tmp_path, monkeypatch, "--corner-no-intensity")
+    assert seen["intensity_scale"] == (1.0, 1.0) and seen["intensity_offset"] == 0.0
     # what it changes: a copy differs from its view by the warp alone
     seq = load_sequence(posedata / "train" / "000001", obj_id=1)
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
@@ -425,19 +438,42 @@ def test_novel_distance_brings_the_novel_views_nearer(posedata, tmp_path, monkey
     assert box_size((0.7, 0.7)) > 1.2 * box_size((1.2, 1.2))
     with pytest.raises(InputError, match="novel_distance"):
         corner_data.build_frames(seq, corners, novel_distance=(1.2, 0.7))
-    calls = []
-    monkeypatch.setattr(corner_train, "train_corners", lambda *a, **kw: calls.append(kw) or tmp_path / "c.onnx")
-    args = _parser().parse_args(["pose", "train-corners", str(posedata / "train" / "000001"), str(tmp_path / "c.onnx"),
-                                 "--box-ply", str(posedata / "models" / "obj_000001.ply"), "--novel-distance", "0.6",
-                                 "1.1"])
-    assert args.func(args) == 0 and calls[0]["novel_distance"] == (0.6, 1.1)
-    from pose import evaluate
+    calls = _train_corners_kwargs(posedata, tmp_path, monkeypatch, ["--novel-distance", "0.6", "1.1"])
+    assert calls[0]["novel_distance"] == (0.6, 1.1)
+    assert _eval_corner_kw(posedata, tmp_path, monkeypatch)["novel_distance"] == corner_data.NOVEL_DISTANCE
 
-    seen = []
-    monkeypatch.setattr(evaluate, "main", lambda *a, **kw: seen.append(kw["corner_kw"]))
-    args = _parser().parse_args(["pose", "eval", "--data", str(posedata), "--out", str(tmp_path / "t"),
-                                 "--detectors", "corners"])
-    assert args.func(args) == 0 and seen[0]["novel_distance"] == corner_data.NOVEL_DISTANCE
+
+def test_jitter_varies_each_crop_after_the_normalizer(posedata, tmp_path, monkeypatch):
+    """:func:`pose.corner_train.jitter_crops` (``jitter``, ``--jitter``, ``--corner-jitter``):
+    each crop gets its own contrast, gain ramp, offset and noise within the bounds, in place."""
+    rng = np.random.default_rng(0)
+    crops = rng.normal(size=(64, 1, 40, 40)).astype(np.float32)
+    jittered = corner_train.jitter_crops(crops.copy(), np.random.default_rng(1), noise=0.0)
+    assert jittered.dtype == np.float32 and jittered.shape == crops.shape
+    gain = jittered - jittered.mean((2, 3), keepdims=True)  # without noise: the gain field times the crop
+    ratio = np.median(np.abs(gain) / (np.abs(crops - crops.mean((2, 3), keepdims=True)) + 1e-3), axis=(2, 3))
+    assert ratio.min() < 0.85 and ratio.max() > 1.15  # contrasts differ from crop to crop
+    assert ratio.min() > 1 / 1.5 / np.exp(0.8) and ratio.max() < 1.5 * np.exp(0.8)  # and stay within the bounds
+    left, right = (np.abs(jittered[:, 0, :, :8]).mean((1, 2)) / np.abs(crops[:, 0, :, :8]).mean((1, 2)),
+                   np.abs(jittered[:, 0, :, -8:]).mean((1, 2)) / np.abs(crops[:, 0, :, -8:]).mean((1, 2)))
+    assert np.abs(np.log(right / left)).max() > 0.3  # a gain ramp across some crops
+    same = crops.copy()
+    corner_train.jitter_crops(same, np.random.default_rng(1), contrast=1.0, ramp=0.0, offset=0.0, noise=0.0)
+    np.testing.assert_allclose(same, crops, atol=1e-6)
+    calls = _train_corners_kwargs(posedata, tmp_path, monkeypatch, [], ["--jitter"])
+    assert calls[0]["jitter"] is False and calls[1]["jitter"] is True
+    assert _eval_corner_kw(posedata, tmp_path, monkeypatch)["jitter"] is False
+    assert _eval_corner_kw(posedata, tmp_path, monkeypatch, "--corner-jitter")["jitter"] is True
+    # what fit does with it: the same crops, jittered or not, and the choice in the file
+    frames = corner_data.build_frames(load_sequence(posedata / "train" / "000001"),
+                                      read_box_corners(posedata / "models" / "obj_000001.ply"), copies=0)
+    drawn = []
+    monkeypatch.setattr(corner_train, "jitter_crops", lambda images, rng: drawn.append(images.copy()) or images)
+    for jitter in (True, False):
+        info = corner_train.fit(CornerNet(), frames, iterations=2, batch_size=2, cells=4, device="cpu",
+                                progress=False, jitter=jitter)
+        assert info["jitter"] is jitter
+    assert len(drawn) == 2
 
 
 def test_track_and_bench_the_corner_detector(posedata, random_net, tmp_path):
