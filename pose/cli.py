@@ -239,7 +239,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     jitter_help = ("jitter each training crop after the normalizer (contrast, gain ramp, offset, noise): "
                    "behind ALCN the intensity copies normalize to nearly one input, and the jitter gives the "
-                   "network their variety back (on the rendered Table 1 it helps ALCN, not none nor the DoG)")
+                   "network their variety back (on the rendered Table 1 it helps ALCN, not none, the DoG nor "
+                   "Tan-Triggs)")
     p = subparsers.add_parser("pose", help="3D box pose: build a part model, track it, evaluate",
                               description="Part-based 3D pose of a box after contrast normalization "
                               "(Rad, Roth & Lepetit, BMVC 2017, Sec. 4.4).")
