@@ -401,8 +401,8 @@ def fit(net, frames: CornerFrames, *, iterations: int = ITERATIONS, batch_size: 
     """Train ``net`` on crops of ``frames`` (Adam, the learning rate divided by 10 for the last
     quarter) on ``device`` (a torch device; ``None``: CUDA where torch sees it, else the CPU),
     each crop jittered by :func:`jitter_crops` where ``jitter``, then leave it on the CPU; returns
-    the mean loss of the first 10 steps and of the last quarter (at most 100), the device and
-    ``jitter``. Deterministic for a ``seed`` and a number of torch threads on the CPU (other
+    the mean loss of the first 10 steps and of the last quarter (at most 100) and the device.
+    Deterministic for a ``seed`` and a number of torch threads on the CPU (other
     threads, and a GPU, sum in another order and give another network)."""
     import torch
 
@@ -429,8 +429,7 @@ def fit(net, frames: CornerFrames, *, iterations: int = ITERATIONS, batch_size: 
         losses.append(loss.item())
     net.to("cpu").eval()
     return {"first_loss": float(np.mean(losses[:10])),
-            "final_loss": float(np.mean(losses[-max(1, min(100, iterations // 4)):])), "device": str(device),
-            "jitter": jitter}
+            "final_loss": float(np.mean(losses[-max(1, min(100, iterations // 4)):])), "device": str(device)}
 
 
 def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path, *, normalizer: str = "none",
@@ -502,7 +501,8 @@ def fit_and_export(frames: CornerFrames, parts: np.ndarray, corners: np.ndarray,
             "units": units, "window": WINDOW, "stride": STRIDE,
             "pad": PAD, "config": net.config, "source": source,
             "fit": {"frames": len(frames.labels), "views": views, "iterations": iterations,
-                    "batch_size": batch_size, "cells": cells, "lr": lr, "seed": seed, "data_seconds": data_seconds,
+                    "batch_size": batch_size, "cells": cells, "lr": lr, "seed": seed, "jitter": jitter,
+                    "data_seconds": data_seconds,
                     "train_seconds": time.perf_counter() - t1, **fit_info}}
     path = export_onnx(net, out, meta)
     logger.info("corner detector (%s): %d frames in %.1f s, training %.1f s on %s, final loss %.3f", normalizer,
