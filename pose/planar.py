@@ -57,12 +57,11 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.bench.relight_data import Scene, load_scene_folder, select_scenes
+from alcn_cv.data.scenes import Scene, load_scene_folder, select_scenes, shared_root
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, to_gray, write_json
 from alcn_cv.report import describe_machine, machine, new_figure, save_figure
-from alcn_cv.shared_data import shared_data_dir
 from pose.evaluate import PROJ_PX, _nan_to_none, score, table_markdown
 from pose.model import PartModel, box_corners
 from pose.parts import FeaturePartDetector, PartDetector, create_feature
@@ -328,7 +327,7 @@ def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequenc
     :data:`DETECTORS` and normalizer, the % of frames whose target pose is correct. Writes
     ``relight_pose.md``, ``relight_pose.json``, ``relight_pose.png`` and ``targets.png`` (and the
     learned detectors, ``corners_<reference>_<normalizer>.onnx``) into ``out_dir``."""
-    root = Path(data) if data is not None else shared_data_dir() / "webcam"
+    root = Path(data) if data is not None else shared_root("webcam")
     if not root.is_dir():
         raise DatasetError(f"{root}: no such folder (the webcam scenes; set ALCN_SHARED_DATA or give --data)")
     all_scenes = load_scene_folder(root, max_frames)

@@ -1,4 +1,4 @@
-"""The benchmark on real changes of light: loader, protocols, tuning, report."""
+"""The benchmark on real changes of light: protocols, tuning, report."""
 
 from __future__ import annotations
 
@@ -7,71 +7,18 @@ import json
 import cv2
 import numpy as np
 import pytest
-from scipy import ndimage
+from scene_sets import lit, make_sets, texture
 
 from alcn_cv.bench import relight
-from alcn_cv.bench.relight_data import Scene, load_scene_folder, load_scenes, select_scenes
 from alcn_cv.cli import main as cli_main
-from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.data.scenes import Scene
+from alcn_cv.errors import InputError
 
 SMALL = relight.Settings(patch=16, patches=40, gallery=2, max_pairs=4, keypoints=300)
 
 
-def _texture(h: int = 120, w: int = 160, seed: int = 0) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    t = ndimage.gaussian_filter(rng.random((h, w)), 1.5)
-    return (t - t.min()) / np.ptp(t)
-
-
-def _lit(texture: np.ndarray) -> list[np.ndarray]:
-    """The texture under three lights: a gain, another gain, a brightness gradient."""
-    h, w = texture.shape
-    ramp = np.linspace(0.3, 1.0, w)[None, :]
-    lights = [0.9 * np.ones((h, w)), 0.35 * np.ones((h, w)), ramp * np.ones((h, w))]
-    return [np.rint(np.clip((0.15 + 0.8 * texture) * light, 0, 1) * 255).astype(np.uint8) for light in lights]
-
-
-def _make_sets(root):
-    """A webcam-style folder of two scenes and a photometric-stereo folder with a mask."""
-    for name, seed in (("street", 0), ("square", 1)):
-        folder = root / "webcam" / name
-        folder.mkdir(parents=True)
-        for i, frame in enumerate(_lit(_texture(seed=seed))):
-            cv2.imwrite(str(folder / f"2013010{i}_1200.png"), frame)
-    psm = root / "psm" / "ball"
-    psm.mkdir(parents=True)
-    frames = _lit(_texture(100, 130, seed=2))
-    for i in (0, 1, 2, 10):  # NAME.10 sorts after NAME.2
-        cv2.imwrite(str(psm / f"ball.{i}.png"), frames[i % 3])
-    cv2.imwrite(str(psm / "ball.mask.png"), np.full((100, 130), 255, np.uint8))
-    (root / "psm" / "notes").mkdir()  # a folder without frames is no scene
-    return root
-
-
-def test_loader_layouts(tmp_path):
-    root = _make_sets(tmp_path)
-    webcam = load_scene_folder(root / "webcam")
-    assert [s.name for s in webcam] == ["square", "street"] and webcam[0].group == "webcam"
-    assert webcam[0].frames.shape == (3, 120, 160) and webcam[0].frames.dtype == np.uint8
-    (ball,) = load_scene_folder(root / "psm")
-    assert ball.name == "ball" and ball.files == ("ball.0.png", "ball.1.png", "ball.2.png", "ball.10.png")  # no mask
-    (flat,) = load_scene_folder(root / "psm" / "ball")  # the same files in the root itself, grouped by NAME
-    assert flat.name == "ball" and len(flat.frames) == 4
-    assert load_scene_folder(root / "psm", max_frames=2)[0].files == ("ball.0.png", "ball.10.png")  # evenly spaced
-    scenes = load_scenes([root / "webcam", root / "psm"])
-    assert [s.name for s in select_scenes(scenes, ["psm", "street"])] == ["ball", "street"]
-    with pytest.raises(InputError):
-        select_scenes(scenes, ["mexico"])
-    with pytest.raises(DatasetError):
-        load_scenes([root / "psm", root / "psm"])  # duplicate names
-    with pytest.raises(DatasetError):
-        load_scene_folder(root / "psm" / "notes")
-    with pytest.raises(DatasetError):
-        load_scene_folder(tmp_path / "missing")
-
-
 def test_protocols_on_identical_frames():
-    frame = _lit(_texture())[0]
+    frame = lit(texture())[0]
     scene = Scene("same", "test", np.stack([frame] * 3), ("a", "b", "c"))
     plan = relight.plan_pairs(scene, 0, SMALL)
     assert len(plan.gallery) == 2 and len(plan.pairs) == 4 and all(g != f for g, f in plan.pairs)
@@ -94,7 +41,7 @@ def test_protocols_on_identical_frames():
 
 def test_textured_locations_avoid_flat_regions():
     frame = np.zeros((64, 128), np.uint8)
-    frame[:, 64:] = np.rint(_texture(64, 64) * 255)
+    frame[:, 64:] = np.rint(texture(64, 64) * 255)
     locs = relight.patch_locations(frame, 16, 100, np.random.default_rng(0))
     assert (locs[:, 1] >= 64 - 16).all()  # only patches overlapping the texture
 
@@ -102,14 +49,14 @@ def test_textured_locations_avoid_flat_regions():
 def test_local_standardization_composite():
     norm = relight.build_method("dog:sigma2=3.0+lstd")
     assert isinstance(norm, relight.LocallyStandardized) and norm.inner.sigma2 == 3.0
-    out = norm.apply(_lit(_texture())[2], out_dtype=np.float32)
+    out = norm.apply(lit(texture())[2], out_dtype=np.float32)
     assert out.dtype == np.float32 and 0 <= out.min() and out.max() <= 1
     with pytest.raises(InputError):
         relight.build_method("nonexistent+lstd")
 
 
 def test_main_writes_the_report(tmp_path):
-    root = _make_sets(tmp_path / "data")
+    root = make_sets(tmp_path / "data")
     result = relight.main(tmp_path / "out", [root / "webcam", root / "psm"], ["none", "dog", "dog+lstd"],
                           train_scenes=["square"], test_scenes=["street", "psm"], seeds=[0, 1], settings=SMALL,
                           tune_frames=3, progress=False)
@@ -131,7 +78,7 @@ def test_main_writes_the_report(tmp_path):
 
 
 def test_leave_one_out_and_cli(tmp_path):
-    root = _make_sets(tmp_path / "data")
+    root = make_sets(tmp_path / "data")
     args = ["bench", "relight", "--out", str(tmp_path / "loo"), "--data", str(root / "webcam"), str(root / "psm"),
             "--methods", "none,slcn", "--leave-one-out", "street", "square", "ball", "--seeds", "3",
             "--patch", "16", "--patches", "30", "--max-pairs", "3", "--no-keypoints", "--tune-frames", "3"]

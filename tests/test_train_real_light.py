@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from alcn_cv.errors import DatasetError
+from alcn_cv.data.scenes import read_scene
 from alcn_cv.nets.gain import GainNormalizer, gaussian_energy
 from alcn_cv.train.real_light import (
     RealLightConfig,
@@ -13,11 +13,11 @@ from alcn_cv.train.real_light import (
     anywhere_locations,
     consistency_loss,
     identification_loss,
-    load_scene,
     pair_loss,
     sample_locations,
     textured_locations,
     train_real_light,
+    training_scene,
 )
 from alcn_cv.weight_file import load_normalizer_file
 
@@ -50,14 +50,6 @@ def test_textured_locations_and_sampling():
     assert gaps.min() >= 12
 
 
-def test_load_scene_rejects_a_single_frame(tmp_path):
-    folder = tmp_path / "one"
-    folder.mkdir()
-    cv2.imwrite(str(folder / "a.png"), np.zeros((40, 40), np.uint8))
-    with pytest.raises(DatasetError):
-        load_scene(folder, 8, 16)
-
-
 def test_identification_loss_prefers_matching_patches():
     a = torch.randn(16, 1, 8, 8)
     assert identification_loss(a, a * 3 + 1, 0.05) < 1e-3  # NCC ignores gain and offset
@@ -75,7 +67,7 @@ def test_consistency_loss_is_zero_when_equal_and_scale_free():
 
 
 def test_anywhere_locations_stay_in_the_frame(tmp_path):
-    scene = load_scene(_write_scene(tmp_path / "scene"), CROP // 2, PATCH)
+    scene = training_scene(read_scene(_write_scene(tmp_path / "scene")), CROP // 2, PATCH)
     centres = anywhere_locations(scene, 500, np.random.default_rng(0))
     _, h, w = scene.frames.shape
     assert centres.shape == (500, 2)
@@ -83,7 +75,7 @@ def test_anywhere_locations_stay_in_the_frame(tmp_path):
 
 
 def test_pair_loss_adds_the_weighted_consistency(tmp_path):
-    scene = load_scene(_write_scene(tmp_path / "scene"), CROP // 2, PATCH)
+    scene = training_scene(read_scene(_write_scene(tmp_path / "scene")), CROP // 2, PATCH)
     net = GainNormalizer(channels=8)
     rng = np.random.default_rng(0)
     centres = sample_locations(scene.candidates, 8, 8, rng)
@@ -172,7 +164,7 @@ def test_three_steps_lower_the_loss(tmp_path):
     assert (tmp_path / "run" / "checkpoint.pt").is_file() and (tmp_path / "run" / "history.json").is_file()
     trained = GainNormalizer.from_file(weight_file)
     untrained = GainNormalizer(**weight_file.meta["config"])  # the zero last layer: Weber gain + DoG 1/2
-    scene = load_scene(scene_dir, CROP // 2, PATCH)
+    scene = training_scene(read_scene(scene_dir), CROP // 2, PATCH)
     rng = np.random.default_rng(1)
     losses = {"untrained": 0.0, "trained": 0.0}
     with torch.no_grad():

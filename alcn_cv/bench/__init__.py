@@ -10,8 +10,8 @@
 * :mod:`~alcn_cv.bench.invariance` -- agreement of normalized real photographs under 12 lights
   (``alcn bench invariance``);
 * :mod:`~alcn_cv.bench.relight` -- patch identification, keypoint matching and homography pose
-  between frames of fixed cameras under real light changes (``alcn bench relight``);
-  :mod:`~alcn_cv.bench.relight_data` (registered multi-illumination sets: webcam, Phos, psm),
+  between frames of fixed cameras under real light changes (``alcn bench relight``) on the scenes of
+  :mod:`~alcn_cv.data.scenes`;
   :mod:`~alcn_cv.bench.relight_report` (``relight.md``, ``.json``, ``.png``);
 * :mod:`~alcn_cv.bench.speed` -- time and memory of every method and ALCN variant (``alcn bench speed``);
 * :mod:`~alcn_cv.bench.tuning` -- parameter search for DoG, SLCN and DLCN on training windows;

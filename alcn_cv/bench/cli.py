@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from alcn_cv.bench import detect, fewshot, invariance, relight, speed
+from alcn_cv.data import scenes
 from alcn_cv.bench.detect_settings import POLICIES, DetectSettings, presets
 from alcn_cv.errors import InputError
 
@@ -229,10 +230,10 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
                    help="roots of multi-illumination sets (default: ../shared/data/webcam and ../shared/data/psm)")
     p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=list(relight.DEFAULT_METHODS),
                    help=f"comma-separated specs NAME[:KEY=VALUE...][+lstd] (default: {','.join(relight.DEFAULT_METHODS)})")
-    p.add_argument("--train-scenes", nargs="+", default=list(relight.DEFAULT_TRAIN),
-                   help=f"scenes or data sets to tune on (default: {' '.join(relight.DEFAULT_TRAIN)})")
-    p.add_argument("--test-scenes", nargs="+", default=list(relight.DEFAULT_TEST),
-                   help=f"scenes or data sets evaluated only (default: {' '.join(relight.DEFAULT_TEST)})")
+    p.add_argument("--train-scenes", nargs="+", default=list(scenes.TRAIN_SCENES),
+                   help=f"scenes or data sets to tune on (default: {' '.join(scenes.TRAIN_SCENES)})")
+    p.add_argument("--test-scenes", nargs="+", default=list(scenes.TEST_SCENES),
+                   help=f"scenes or data sets evaluated only (default: {' '.join(scenes.TEST_SCENES)})")
     p.add_argument("--leave-one-out", nargs="*", default=None, metavar="SCENE",
                    help="evaluate each scene with parameters tuned on the others, instead of the split "
                    f"(no scene given: {' '.join(relight.DEFAULT_LEAVE_ONE_OUT)})")

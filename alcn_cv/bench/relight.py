@@ -3,7 +3,7 @@
 Every method normalizes whole grayscale frames through its own ``apply`` (uint8 in, float32
 out, the method's fixed output map), once per scene; the normalized frames are then reused by
 every protocol and seed. Scenes are registered multi-illumination sets
-(:mod:`alcn_cv.bench.relight_data`): the outdoor webcams of TILDE (Verdie et al., CVPR 2015)
+(:mod:`alcn_cv.data.scenes`): the outdoor webcams of TILDE (Verdie et al., CVPR 2015)
 and photometric-stereo objects. Per scene and seed, ``gallery`` frames are drawn and each is
 paired with every other frame of the scene (at most ``max_pairs`` pairs, drawn at random).
 
@@ -49,14 +49,12 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from alcn_cv.bench.policies import LOCAL_BOX, local_standardize
-from alcn_cv.bench.relight_data import Scene, load_scenes, select_scenes
 from alcn_cv.bench.relight_report import write_report
+from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, select_scenes, shared_root
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import InputError
 from alcn_cv.report import machine
-from alcn_cv.shared_data import shared_data_dir
-from alcn_cv.train.config import REAL_LIGHT_SCENES
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -77,8 +75,6 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 DEFAULT_METHODS = ("none", "clahe", "dog", "slcn", "dlcn", "sqi", "tantriggs", "dog+lstd", "alcn", "alcn:model=lite")
-DEFAULT_TRAIN = REAL_LIGHT_SCENES  # the gain Normalizer's training scenes
-DEFAULT_TEST = ("mexico", "psm")
 DEFAULT_LEAVE_ONE_OUT = ("courbevoie", "frankfurt", "mexico", "panorama")
 DETECTORS = ("orb", "sift")
 #: Every reported number: percentages, except :data:`COUNT_METRICS`.
@@ -376,8 +372,8 @@ def main(
     out_dir: str | os.PathLike,
     data: Sequence[str | os.PathLike] | None = None,
     methods: Sequence[str] = DEFAULT_METHODS,
-    train_scenes: Sequence[str] = DEFAULT_TRAIN,
-    test_scenes: Sequence[str] = DEFAULT_TEST,
+    train_scenes: Sequence[str] = TRAIN_SCENES,
+    test_scenes: Sequence[str] = TEST_SCENES,
     leave_one_out: Sequence[str] | None = None,
     seeds: Sequence[int] = (0, 1, 2),
     settings: Settings = Settings(),
@@ -416,7 +412,7 @@ def main(
     _check_methods(methods)
     if not seeds:
         raise InputError("give at least one seed")
-    roots = [Path(p) for p in data] if data else [shared_data_dir() / "webcam", shared_data_dir() / "psm"]
+    roots = [Path(p) for p in data] if data else [shared_root("webcam"), shared_root("psm")]
     scenes = load_scenes(roots, max_frames)
     if leave_one_out is not None:
         evaluated = select_scenes(scenes, leave_one_out or DEFAULT_LEAVE_ONE_OUT)

@@ -13,10 +13,13 @@ Modules:
 - :mod:`~alcn_cv.data.detect`: an ALCN-2D-like detection benchmark in COCO format.
 - :mod:`~alcn_cv.data.raster`, :mod:`~alcn_cv.data.pose`: box and duck pose sequences in the BOP
   layout, with a COLMAP model of the training sequence.
+- :mod:`~alcn_cv.data.relief_scenes`: rendered registered scenes, one view under many lights.
+- :mod:`~alcn_cv.data.scenes`: the loader of registered multi-light scenes (real and rendered),
+  their split and terms.
 - :mod:`~alcn_cv.data.preview`, :mod:`~alcn_cv.data.stats`: contact sheets; statistics beside the
   real PSM photographs.
 - :mod:`~alcn_cv.data.manifest`: manifests, atomic folders, deterministic files.
 
 Every generator is deterministic for its seed (byte-identical output) and writes a
-``manifest.json``. The command line is ``alcn data phos|detect|pose|preview|compare-psm``.
+``manifest.json``. The command line is ``alcn data phos|detect|pose|scenes|preview|compare-psm``.
 """

@@ -46,13 +46,13 @@ def _pose(args: argparse.Namespace) -> int:
     return 0
 
 
-def _relight_scenes(args: argparse.Namespace) -> int:
-    from alcn_cv.data import relight_scenes
+def _scenes(args: argparse.Namespace) -> int:
+    from alcn_cv.data import relief_scenes
 
     t = time.perf_counter()
-    out = relight_scenes.generate(args.out, scenes=args.scenes, frames=args.frames, size=args.size, seed=args.seed,
-                                  overwrite=args.overwrite, workers=args.workers)
-    logger.info("wrote the relight scenes to %s in %.1f s", out, time.perf_counter() - t)
+    out = relief_scenes.generate(args.out, scenes=args.scenes, frames=args.frames, size=args.size, seed=args.seed,
+                                 overwrite=args.overwrite, workers=args.workers)
+    logger.info("wrote the rendered scenes to %s in %.1f s", out, time.perf_counter() - t)
     return 0
 
 
@@ -143,10 +143,10 @@ def add_parser(subparsers) -> None:
                    help="worker processes (default 1; the output does not depend on it)")
     q.set_defaults(func=_pose)
 
-    q = sub.add_parser("relight-scenes", help="registered scenes under many lights, to train the gain Normalizer",
+    q = sub.add_parser("scenes", help="registered scenes under many lights, to train the gain Normalizer",
                        description="Render fixed views of textured relief scenes, each under many lightings "
                        "(directional, spot, point, cast shadows, dark, over-exposed), one folder of registered "
-                       "grayscale frames per scene: the layout `alcn train-real-light --scenes` reads.")
+                       "grayscale frames per scene: the layout `alcn train-real-light --rendered` reads.")
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("--scenes", type=int, default=24, help="number of scenes (default 24)")
     q.add_argument("--frames", type=int, default=12, help="lightings (frames) per scene (default 12)")
@@ -155,7 +155,7 @@ def add_parser(subparsers) -> None:
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     q.add_argument("--workers", type=int, default=1,
                    help="worker processes (default 1; the output does not depend on it)")
-    q.set_defaults(func=_relight_scenes)
+    q.set_defaults(func=_scenes)
 
     q = sub.add_parser("preview", help="contact sheet of a dataset with its ground truth drawn",
                        description="Write a PNG contact sheet of a data-engine folder, a COCO JSON file or a "

@@ -16,7 +16,8 @@ import shlex
 import sys
 from pathlib import Path
 
-from alcn_cv.train.config import RealLightConfig, real_light_scene_dirs
+from alcn_cv.data.scenes import train_scene_dirs
+from alcn_cv.train.config import RealLightConfig
 
 __all__ = ["add_parser"]
 
@@ -141,7 +142,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="folders of registered frames, one per scene (default: the courbevoie, frankfurt and "
                    "panorama scenes of the shared webcam data)")
     r.add_argument("--rendered", type=Path, default=None,
-                   help="a folder of rendered registered scenes (`alcn data relight-scenes`), each subfolder a scene "
+                   help="a folder of rendered registered scenes (`alcn data scenes`), each subfolder a scene "
                    "(default: none)")
     r.add_argument("--rendered-fraction", type=float, default=defaults.rendered_fraction,
                    help=f"share of the steps on a rendered scene (default {defaults.rendered_fraction})")
@@ -279,7 +280,7 @@ def _train_real_light(args: argparse.Namespace) -> int:
 
     from alcn_cv.train.real_light import train_real_light
 
-    scenes = args.scenes or real_light_scene_dirs()
+    scenes = args.scenes or train_scene_dirs()
     names = ("steps", "locations", "crop", "patch", "min_distance", "temperature", "consistency", "anywhere", "lr", "seed",
              "save_every")
     rendered = sorted(str(p) for p in args.rendered.iterdir() if p.is_dir()) if args.rendered else []

@@ -89,8 +89,7 @@ from typing import Any
 from alcn_cv.data.lighting import LIGHT_FAMILIES
 from alcn_cv.errors import InputError
 
-__all__ = ["PRESETS", "REAL_LIGHT_SCENES", "FewShotSetup", "RealLightConfig", "TrainConfig", "dump_toml", "load_config",
-           "real_light_scene_dirs"]
+__all__ = ["PRESETS", "FewShotSetup", "RealLightConfig", "TrainConfig", "dump_toml", "load_config"]
 
 
 @dataclass
@@ -421,25 +420,13 @@ def dump_toml(cfg: TrainConfig) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: The real training scenes of the gain Normalizer (``webcam`` of the shared data); ``mexico`` and
-#: the psm objects are the test set (``alcn bench relight``'s split).
-REAL_LIGHT_SCENES = ("courbevoie", "frankfurt", "panorama")
-
-
-def real_light_scene_dirs() -> list[Path]:
-    """The folders of :data:`REAL_LIGHT_SCENES` in the shared data."""
-    from alcn_cv.shared_data import shared_data_dir
-
-    return [shared_data_dir() / "webcam" / name for name in REAL_LIGHT_SCENES]
-
-
 @dataclass
 class RealLightConfig:
     """Settings of :func:`train_real_light` (defaults: the recipe of the shipped weights).
 
     Attributes:
         scenes: folders of registered frames, one per scene.
-        rendered: folders of rendered registered scenes (``alcn data relight-scenes``), drawn
+        rendered: folders of rendered registered scenes (``alcn data scenes``), drawn
             apart from ``scenes`` so that their number does not set their share.
         rendered_fraction: the share of steps that draw a rendered scene (0 when none).
         steps: optimisation steps; each sees 2 frames x ``locations`` crops of one scene.

@@ -41,14 +41,13 @@ import torch
 from tqdm.auto import tqdm
 
 from alcn_cv.data.phos import render_windows
+from alcn_cv.data.scenes import read_scene, train_scene_dirs
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
 from alcn_cv.io import atomic_write
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.report import describe_machine
-from alcn_cv.train.config import real_light_scene_dirs
-from alcn_cv.train.real_light import read_registered_frames
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file, save_normalizer_file
 
 __all__ = ["distill", "distill_gain", "main", "output_gram"]
@@ -270,7 +269,7 @@ Speed and the difference from the exact ALCN output on whole frames: `alcn bench
 GAIN_STUDENT = {"channels": 8, "dilations": (1, 2, 4)}
 #: Every ``_GAIN_VAL_EVERY``-th frame of each real scene is held out for validation.
 _GAIN_VAL_EVERY = 5
-#: Side and frames of the rendered registered scenes (:func:`alcn_cv.data.relight_scenes.render_scene`).
+#: Side and frames of the rendered registered scenes (:func:`alcn_cv.data.relief_scenes.render_scene`).
 _RENDERED_SIZE, _RENDERED_FRAMES = 256, 4
 
 
@@ -288,12 +287,12 @@ def _gain_frames(scenes: Sequence[str | os.PathLike], rendered: int, seed: int, 
     """Training and validation frames, ``(H, W)`` float32 in [0, 1]: the frames of the real
     scenes (every :data:`_GAIN_VAL_EVERY`-th held out) and of ``rendered`` rendered scenes
     (the last one held out when there are two or more)."""
-    from alcn_cv.data.relight_scenes import render_scene
+    from alcn_cv.data.relief_scenes import render_scene
 
     train: list[np.ndarray] = []
     val: list[np.ndarray] = []
     for folder in scenes:
-        for i, frame in enumerate(read_registered_frames(folder)):
+        for i, frame in enumerate(read_scene(folder).unit_frames()):
             (val if i % _GAIN_VAL_EVERY == _GAIN_VAL_EVERY - 1 else train).append(frame)
     for i in tqdm(range(rendered), desc="render scenes", unit="scene", disable=not progress):
         stack, _ = render_scene(np.random.default_rng([seed, i]), _RENDERED_SIZE, _RENDERED_FRAMES)
@@ -366,7 +365,7 @@ def distill_gain(
 
     Args:
         teacher: the gain teacher's weight file.
-        scenes: folders of registered frames (default: :data:`~alcn_cv.train.config.REAL_LIGHT_SCENES` of the
+        scenes: folders of registered frames (default: :data:`~alcn_cv.data.scenes.TRAIN_SCENES` of the
             shared ``webcam`` data; never the test scenes).
         rendered: rendered registered scenes added to the data (256x256, 4 lights each).
         seed: seeds the student's initialisation, the relighting and the rendering.
@@ -385,7 +384,7 @@ def distill_gain(
     if teacher_file.meta.get("architecture") != "gain":
         raise InputError(f"{teacher_path} is not a gain Normalizer")
     teacher_net = normalizer_from_file(teacher_file).eval()
-    scenes = real_light_scene_dirs() if scenes is None else list(scenes)
+    scenes = train_scene_dirs() if scenes is None else list(scenes)
     start = time.perf_counter()
     train_frames, val_frames = _gain_frames(scenes, rendered, seed, progress)
     if not val_frames:
@@ -478,7 +477,7 @@ Roman & Pless, CVPR 2007), like its teacher: these weights are for academic rese
 - Data: the frames of the training scenes {', '.join(s['scenes'])} (`../shared/data/webcam`; every
   {_GAIN_VAL_EVERY}th frame held out for validation; `mexico` and the psm objects, the test set, never read) and
   {s['rendered']} rendered registered scenes ({_RENDERED_SIZE}x{_RENDERED_SIZE}, {_RENDERED_FRAMES} lights each,
-  `alcn_cv.data.relight_scenes.render_scene`, the last held out): {s['frames']['train']} training and
+  `alcn_cv.data.relief_scenes.render_scene`, the last held out): {s['frames']['train']} training and
   {s['frames']['validation']} validation frames, grayscale; each training frame also under another light's
   strength every epoch (a gain of 0.3 to 1.5, clipped, mirrored half of the time).
 - Targets: the teacher's maps `F_k = exp(g) w_k` on its stride-8 grid (the features are the same, computed

@@ -45,8 +45,9 @@ import torch.nn.functional as F
 from torch import nn
 from tqdm import tqdm
 
-from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, list_images, read_image, to_gray, write_json
+from alcn_cv.data.scenes import Scene, read_scene
+from alcn_cv.errors import InputError
+from alcn_cv.io import atomic_write, write_json
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.nets.gain import GainNormalizer, cell_rms, gaussian_energy
 from alcn_cv.report import machine
@@ -58,25 +59,24 @@ __all__ = [
     "CentreDenseMixture",
     "RealLightConfig",
     "consistency_loss",
-    "RegisteredScene",
+    "TrainingScene",
     "anywhere_locations",
     "identification_loss",
-    "load_scene",
-    "read_registered_frames",
     "pair_loss",
     "sample_locations",
     "textured_locations",
     "train_real_light",
+    "training_scene",
 ]
 
 logger = logging.getLogger(__name__)
 
 
 @dataclass
-class RegisteredScene:
-    """A registered scene: ``frames`` ``(T, H, W)`` float32 in [0, 1], reflect-101 padded by
-    ``pad`` on every side, and ``candidates`` ``(K, 2)`` textured centres ``(y, x)`` in padded
-    coordinates."""
+class TrainingScene:
+    """A scene (:class:`alcn_cv.data.scenes.Scene`) ready for training: ``frames`` ``(T, H, W)``
+    float32 in [0, 1], reflect-101 padded by ``pad`` on every side, and ``candidates`` ``(K, 2)``
+    textured centres ``(y, x)`` in padded coordinates."""
 
     name: str
     frames: np.ndarray
@@ -121,30 +121,12 @@ def sample_locations(candidates: np.ndarray, count: int, min_distance: int, rng:
     return np.stack(chosen) if chosen else np.zeros((0, 2), np.int64)
 
 
-def read_registered_frames(folder: str | Path) -> np.ndarray:
-    """The frames of a folder of registered frames: ``(n, H, W)`` float32 grayscale in [0, 1].
-
-    Raises:
-        DatasetError: fewer than two frames, or frames of different sizes.
-    """
-    folder = Path(folder)
-    files = list_images(folder) if folder.is_dir() else []
-    if len(files) < 2:
-        raise DatasetError(f"{folder}: a registered scene needs at least 2 frames, found {len(files)}")
-    frames = [to_gray(read_image(f)) for f in files]
-    if len({f.shape for f in frames}) != 1:
-        raise DatasetError(f"{folder}: frames of different sizes; the frames of a scene must be registered")
-    return np.stack(frames).astype(np.float32) / np.float32(255)
-
-
-def load_scene(folder: str | Path, pad: int, patch: int) -> RegisteredScene:
-    """Read a folder of registered frames (grayscale, [0, 1], :func:`read_registered_frames`)
-    and its textured locations."""
-    folder = Path(folder)
-    stack = read_registered_frames(folder)
+def training_scene(scene: Scene, pad: int, patch: int) -> TrainingScene:
+    """The scene's frames in [0, 1], reflect-101 padded by ``pad``, and its textured locations."""
+    stack = scene.unit_frames()
     candidates = textured_locations(stack, patch) + pad
     padded = np.stack([cv2.copyMakeBorder(f, pad, pad, pad, pad, cv2.BORDER_REFLECT_101) for f in stack])
-    return RegisteredScene(folder.name, padded, candidates, pad)
+    return TrainingScene(scene.name, padded, candidates, pad)
 
 
 def _crops(frame: np.ndarray, centres: np.ndarray, size: int) -> torch.Tensor:
@@ -286,7 +268,7 @@ def _normalized_centres(
     return net.equalize(response[..., margin : margin + patch, margin : margin + patch] * inverse)
 
 
-def anywhere_locations(scene: RegisteredScene, count: int, rng: np.random.Generator) -> np.ndarray:
+def anywhere_locations(scene: TrainingScene, count: int, rng: np.random.Generator) -> np.ndarray:
     """``(count, 2)`` centres ``(y, x)`` drawn uniformly over the frame (padded coordinates)."""
     _, h, w = scene.frames.shape
     p = scene.pad
@@ -294,7 +276,7 @@ def anywhere_locations(scene: RegisteredScene, count: int, rng: np.random.Genera
 
 
 def pair_loss(
-    net: GainNormalizer, scene: RegisteredScene, frames: tuple[int, int], centres: np.ndarray, cfg: RealLightConfig,
+    net: GainNormalizer, scene: TrainingScene, frames: tuple[int, int], centres: np.ndarray, cfg: RealLightConfig,
     anywhere: np.ndarray | None = None,
 ) -> torch.Tensor:
     """The objective on one pair of frames of a scene: :func:`identification_loss` of the
@@ -354,8 +336,8 @@ def _train(cfg: RealLightConfig, out: Path) -> Path:
     net = GainNormalizer(**cfg.net)
     if max(kernel_radius(s) for s in net.sigmas) > cfg.patch // 2:
         raise InputError(f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2")
-    scenes = [load_scene(s, cfg.crop // 2, cfg.patch) for s in cfg.scenes]
-    rendered = [load_scene(s, cfg.crop // 2, cfg.patch) for s in cfg.rendered]
+    scenes = [training_scene(read_scene(s), cfg.crop // 2, cfg.patch) for s in cfg.scenes]
+    rendered = [training_scene(read_scene(s), cfg.crop // 2, cfg.patch) for s in cfg.rendered]
     for scene in scenes + rendered:
         logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)

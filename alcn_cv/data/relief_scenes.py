@@ -1,7 +1,7 @@
-"""Rendered registered scenes: one fixed view of a relief scene under many lights.
+"""Rendered registered scenes (``alcn data scenes``): one fixed view of a relief scene under many lights.
 
-The real multi-illumination sets that train the gain Normalizer (:mod:`alcn_cv.train.real_light`,
-the ``webcam`` layout: one folder per scene, frames of a fixed camera under other light) are
+The real multi-light scenes that train the gain Normalizer (:mod:`alcn_cv.data.scenes`, the
+``webcam`` layout: one folder per scene, frames of a fixed camera under other light) are
 outdoor scenes under daylight. Directional light on relief (grazing sun, lamps, spots, cast
 shadows: the paper's Phos and its objects, faces) is rare there, and no such real set can be
 downloaded at run time, so the data engine renders it: a textured, uneven ground with relief
@@ -10,7 +10,7 @@ objects (:mod:`alcn_cv.data.objects`) seen from above, lit by ``frames`` lightin
 and albedo, so the frames are registered exactly, as the trainer's layout requires.
 
 Output (``generate``): ``out/scene_000/frame_00.png`` ... (grayscale PNG) and ``manifest.json``
-(kind ``relight_scenes``, the parameters and the light family of every frame). Scene ``i``
+(kind ``relief_scenes``, the parameters and the light family of every frame). Scene ``i``
 draws from ``numpy.random.default_rng([seed, i])``: the output does not depend on ``workers``,
 and the first scenes of a larger run equal those of a smaller one.
 """
@@ -39,7 +39,7 @@ __all__ = ["KIND", "generate", "render_scene"]
 logger = logging.getLogger(__name__)
 
 #: The ``kind`` of the manifest.
-KIND = "relight_scenes"
+KIND = "relief_scenes"
 #: Light families of the frames: every family but ``colour`` (the frames are grayscale).
 FAMILIES: tuple[str, ...] = tuple(f for f in LIGHT_FAMILIES if f != "colour")
 _CANONICAL = 96
@@ -87,13 +87,13 @@ def generate(
     """Render ``scenes`` registered scenes into ``out_dir`` (written atomically; see the module).
 
     Returns:
-        The output folder; each ``scene_NNN`` is a folder the real-light trainer reads
-        (``alcn train-real-light --scenes``). Cost: about 1 s of CPU per 320x320 frame.
+        The output folder; each ``scene_NNN`` is a scene of :func:`alcn_cv.data.scenes.read_scene`
+        (``alcn train-real-light --rendered``). Cost: about 1 s of CPU per 320x320 frame.
     """
     if scenes < 1:
         raise InputError(f"need at least one scene, got {scenes}")
     jobs = [(int(seed), i, int(size), int(frames)) for i in range(scenes)]
-    rendered = parallel_map(_scene_job, jobs, workers=workers, desc="relight scenes", unit="scene", progress=progress)
+    rendered = parallel_map(_scene_job, jobs, workers=workers, desc="relief scenes", unit="scene", progress=progress)
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         lights = {}
         for i, (stack, names) in enumerate(rendered):

@@ -1,0 +1,219 @@
+"""Registered multi-light scenes: one fixed view, many lights; the one loader of ``alcn bench
+relight``, of the gain Normalizer's trainer (:mod:`alcn_cv.train.real_light`) and of the planar
+targets of ``alcn pose``.
+
+A *scene* is a set of frames of one fixed view under different light, registered (the camera
+did not move), so a pixel is the same point of the scene in every frame. The data sets:
+
+* ``webcam`` (``../shared/data/webcam``): 4 fixed outdoor cameras, one folder per scene,
+  ``<root>/<scene>/*.jpg``. Terms: academic research use only; cite TILDE (Verdie et al., CVPR
+  2015) and AMOS (Jacobs et al., CVPR 2007).
+* ``psm`` (``../shared/data/psm``): 4 photometric-stereo objects, ``NAME.0.png`` ..
+  ``NAME.11.png`` per object (one folder per object, or all in one folder), ``NAME.mask.png``
+  (a mask, not a frame) skipped. Terms: research use, citing S. Seitz (U. Washington).
+* the rendered scenes of ``alcn data scenes`` (:mod:`alcn_cv.data.relief_scenes`):
+  ``<root>/scene_NNN/frame_NN.png``.
+* Phos-like folders: one folder per object holding its photographs under different light.
+
+The split: the gain Normalizer trains on :data:`TRAIN_SCENES`; :data:`TEST_SCENES` are never
+trained or tuned on.
+
+A folder's images named ``NAME.<index>.<ext>`` form the scene ``NAME`` (ordered by index); its
+other images form the scene named after the folder (ordered by name). Frames are read with
+:func:`alcn_cv.io.read_image` as uint8 grayscale (16-bit images rounded to 8 bits).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.io import IMAGE_SUFFIXES, list_images, read_image
+from alcn_cv.shared_data import shared_data_dir
+
+__all__ = [
+    "TEST_SCENES",
+    "TRAIN_SCENES",
+    "Scene",
+    "load_scene_folder",
+    "load_scenes",
+    "read_scene",
+    "select_scenes",
+    "shared_root",
+    "train_scene_dirs",
+]
+
+logger = logging.getLogger(__name__)
+
+#: The gain Normalizer's training scenes (``webcam``); the benchmark tunes parameters on them.
+TRAIN_SCENES = ("courbevoie", "frankfurt", "panorama")
+#: Scenes and data sets never trained or tuned on.
+TEST_SCENES = ("mexico", "psm")
+
+_INDEXED = re.compile(r"^(?P<name>.+)\.(?P<index>\d+)$")
+_MASK = re.compile(r"\.mask$", re.IGNORECASE)
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """The frames of one fixed view under different light.
+
+    Attributes:
+        name: the scene's name (its folder, or ``NAME`` of ``NAME.<i>.png``).
+        group: the data set it was read from (the name of its root folder: ``webcam``, ``psm``).
+        frames: ``(n, H, W)`` uint8 grayscale frames, registered.
+        files: the file name of each frame.
+    """
+
+    name: str
+    group: str
+    frames: np.ndarray
+    files: tuple[str, ...]
+
+    def unit_frames(self) -> np.ndarray:
+        """The frames as ``(n, H, W)`` float32 in [0, 1] (``frames / 255``)."""
+        return self.frames.astype(np.float32) / np.float32(255)
+
+
+def shared_root(name: str) -> Path:
+    """The folder of the shared data set ``name`` (``webcam``, ``psm``); it may not exist."""
+    return shared_data_dir() / name
+
+
+def train_scene_dirs() -> list[Path]:
+    """The folders of :data:`TRAIN_SCENES` in the shared ``webcam`` data."""
+    return [shared_root("webcam") / name for name in TRAIN_SCENES]
+
+
+def _gray_u8(path: Path) -> np.ndarray:
+    img = read_image(path)
+    if img.dtype == np.uint16:
+        img = np.rint(img / np.float32(257.0)).astype(np.uint8)
+    return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+
+
+def _evenly_spaced(n: int, max_frames: int | None) -> list[int]:
+    """``max_frames`` indices spread over ``range(n)`` (all of them when there are fewer)."""
+    if max_frames is None or n <= max_frames:
+        return list(range(n))
+    return sorted({int(round(v)) for v in np.linspace(0, n - 1, max_frames)})
+
+
+def _group_files(folder: Path) -> dict[str, list[Path]]:
+    """The frames of ``folder`` by scene: ``NAME.<i>.<ext>`` by ``NAME`` (masks skipped), the rest by the folder."""
+    try:
+        files = list_images(folder)
+    except InputError:
+        return {}
+    indexed: dict[str, list[tuple[int, Path]]] = {}
+    plain: list[Path] = []
+    for path in files:
+        if _MASK.search(path.stem):
+            continue
+        m = _INDEXED.match(path.stem)
+        if m:
+            indexed.setdefault(m.group("name"), []).append((int(m.group("index")), path))
+        else:
+            plain.append(path)
+    groups = {name: [p for _, p in sorted(items)] for name, items in sorted(indexed.items())}
+    if plain:
+        groups.setdefault(folder.name, []).extend(plain)
+    return groups
+
+
+def _check_max_frames(max_frames: int | None) -> None:
+    if max_frames is not None and max_frames < 2:
+        raise InputError(f"max_frames must be at least 2, got {max_frames}")
+
+
+def _read(folder: Path, name: str, group: str, paths: list[Path], max_frames: int | None) -> Scene:
+    paths = [paths[i] for i in _evenly_spaced(len(paths), max_frames)]
+    frames = [_gray_u8(p) for p in paths]
+    if any(f.shape != frames[0].shape for f in frames):
+        raise DatasetError(f"{folder}: the frames of scene {name!r} differ in size (not registered)")
+    return Scene(name, group, np.stack(frames), tuple(p.name for p in paths))
+
+
+def read_scene(folder: str | os.PathLike, max_frames: int | None = None) -> Scene:
+    """The one scene of ``folder``'s own images (subfolders are not read), with at most
+    ``max_frames`` frames evenly spaced over its ordered files; its group is the parent folder's name.
+
+    Raises:
+        DatasetError: ``folder`` is not a folder, holds fewer than two frames or several scenes,
+            or its frames differ in size.
+    """
+    folder = Path(folder)
+    _check_max_frames(max_frames)
+    groups = _group_files(folder) if folder.is_dir() else {}
+    if len(groups) > 1:
+        raise DatasetError(f"{folder}: holds the frames of several scenes ({', '.join(groups)}); give one scene's folder")
+    name, paths = next(iter(groups.items()), (folder.name, []))
+    if len(paths) < 2:
+        raise DatasetError(f"{folder}: a registered scene needs at least 2 frames, found {len(paths)}")
+    return _read(folder, name, folder.parent.name, paths, max_frames)
+
+
+def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) -> list[Scene]:
+    """Every scene under ``root`` (its own images and those of its subfolders; see the module),
+    each with at most ``max_frames`` frames, evenly spaced over its ordered files.
+
+    Raises:
+        DatasetError: ``root`` is not a folder, holds no scene of at least two frames, or a
+            scene's frames differ in size.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise DatasetError(f"{root}: not a folder")
+    _check_max_frames(max_frames)
+    folders = [root] + sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
+    scenes = []
+    for folder in folders:
+        for name, paths in _group_files(folder).items():
+            if len(paths) < 2:
+                logger.debug("skipping %s/%s: fewer than two frames", folder, name)
+                continue
+            scenes.append(_read(folder, name, root.name, paths, max_frames))
+    if not scenes:
+        raise DatasetError(
+            f"{root}: no scene (a folder of at least two frames, or NAME.<i>{'|'.join(sorted(IMAGE_SUFFIXES))})"
+        )
+    return scenes
+
+
+def load_scenes(roots: Sequence[str | os.PathLike], max_frames: int | None = None) -> list[Scene]:
+    """The scenes of several roots (:func:`load_scene_folder`); scene names must be unique.
+
+    Raises:
+        DatasetError: as :func:`load_scene_folder`, or two scenes with the same name.
+    """
+    scenes = [s for root in roots for s in load_scene_folder(root, max_frames)]
+    seen: set[str] = set()
+    for scene in scenes:
+        if scene.name in seen:
+            raise DatasetError(f"two scenes named {scene.name!r}; give roots whose scene names differ")
+        seen.add(scene.name)
+    return scenes
+
+
+def select_scenes(scenes: Sequence[Scene], tokens: Sequence[str]) -> list[Scene]:
+    """The scenes named by ``tokens``, each a scene name or a data set's name (all its scenes), in order.
+
+    Raises:
+        InputError: a token names no scene and no data set.
+    """
+    chosen: list[Scene] = []
+    for token in tokens:
+        hits = [s for s in scenes if token in (s.name, s.group)]
+        if not hits:
+            names = ", ".join(sorted({s.name for s in scenes} | {s.group for s in scenes}))
+            raise InputError(f"no scene or data set {token!r}; available: {names}")
+        chosen += [s for s in hits if all(s is not c for c in chosen)]
+    return chosen

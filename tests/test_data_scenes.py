@@ -1,0 +1,100 @@
+"""The loader of registered multi-light scenes (alcn_cv.data.scenes)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from scene_sets import make_sets
+
+from alcn_cv.data.scenes import (
+    TEST_SCENES,
+    TRAIN_SCENES,
+    load_scene_folder,
+    load_scenes,
+    read_scene,
+    select_scenes,
+    train_scene_dirs,
+)
+from alcn_cv.errors import DatasetError, InputError
+
+
+def test_loader_layouts(tmp_path):
+    root = make_sets(tmp_path)
+    webcam = load_scene_folder(root / "webcam")
+    assert [s.name for s in webcam] == ["square", "street"] and webcam[0].group == "webcam"
+    assert webcam[0].frames.shape == (3, 120, 160) and webcam[0].frames.dtype == np.uint8
+    (ball,) = load_scene_folder(root / "psm")
+    assert ball.name == "ball" and ball.files == ("ball.0.png", "ball.1.png", "ball.2.png", "ball.10.png")  # no mask
+    (flat,) = load_scene_folder(root / "psm" / "ball")  # the same files in the root itself, grouped by NAME
+    assert flat.name == "ball" and len(flat.frames) == 4
+    assert load_scene_folder(root / "psm", max_frames=2)[0].files == ("ball.0.png", "ball.10.png")  # evenly spaced
+    scenes = load_scenes([root / "webcam", root / "psm"])
+    assert [s.name for s in select_scenes(scenes, ["psm", "street"])] == ["ball", "street"]
+    with pytest.raises(InputError):
+        select_scenes(scenes, ["mexico"])
+    with pytest.raises(DatasetError):
+        load_scenes([root / "psm", root / "psm"])  # duplicate names
+    with pytest.raises(DatasetError):
+        load_scene_folder(root / "psm" / "notes")
+    with pytest.raises(DatasetError):
+        load_scene_folder(tmp_path / "missing")
+
+
+def test_read_scene_is_the_scene_of_one_folder(tmp_path):
+    root = make_sets(tmp_path)
+    street = read_scene(root / "webcam" / "street")
+    (same,) = select_scenes(load_scene_folder(root / "webcam"), ["street"])
+    assert (street.name, street.group, street.files) == (same.name, same.group, same.files)
+    np.testing.assert_array_equal(street.frames, same.frames)
+    ball = read_scene(root / "psm" / "ball")
+    assert ball.name == "ball" and ball.group == "psm" and len(ball.frames) == 4  # the mask is no frame
+    single = tmp_path / "single"
+    single.mkdir()
+    cv2.imwrite(str(single / "a.png"), np.zeros((40, 40), np.uint8))
+    mixed = tmp_path / "mixed"  # the frames of two objects in one folder
+    mixed.mkdir()
+    for name in ("cat.0", "cat.1", "owl.0", "owl.1"):
+        cv2.imwrite(str(mixed / f"{name}.png"), np.zeros((8, 8), np.uint8))
+    for folder in (single, mixed, root / "psm" / "notes", tmp_path / "missing", root / "psm"):
+        with pytest.raises(DatasetError):
+            read_scene(folder)
+    with pytest.raises(InputError):
+        read_scene(root / "webcam" / "street", max_frames=1)
+
+
+def test_unit_frames_are_every_image_in_name_order_over_255(tmp_path):
+    """The trainer's frames: each image of the folder, grayscale, in name order, divided by 255."""
+    folder = tmp_path / "scene_000"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 256, (20, 24, 3), dtype=np.uint8) for _ in range(3)]
+    for i, image in enumerate(images):
+        cv2.imwrite(str(folder / f"frame_{i:02d}.png"), image)
+    unit = read_scene(folder).unit_frames()
+    expected = np.stack([cv2.cvtColor(im, cv2.COLOR_BGR2GRAY) for im in images]).astype(np.float32) / np.float32(255)
+    assert unit.dtype == np.float32
+    np.testing.assert_array_equal(unit, expected)
+
+
+def test_sixteen_bit_frames_are_rounded_to_eight(tmp_path):
+    folder = tmp_path / "deep"
+    folder.mkdir()
+    for i, level in enumerate((257 * 10, 257 * 200 + 100)):
+        cv2.imwrite(str(folder / f"{i}.png"), np.full((8, 8), level, np.uint16))
+    assert read_scene(folder).frames[:, 0, 0].tolist() == [10, 200]
+
+
+def test_the_split_is_disjoint_and_on_the_shared_webcams():
+    assert not set(TRAIN_SCENES) & set(TEST_SCENES)
+    dirs = train_scene_dirs()
+    assert [d.name for d in dirs] == list(TRAIN_SCENES) and all(d.parent.name == "webcam" for d in dirs)
+
+
+@pytest.mark.shared_data
+def test_shared_scenes(shared_data):
+    scenes = load_scenes([shared_data / "webcam", shared_data / "psm"], max_frames=3)
+    names = {s.name for s in scenes}
+    assert set(TRAIN_SCENES) <= names and "mexico" in names
+    assert {s.name for s in select_scenes(scenes, ["psm"])} == {"buddha", "cat", "horse", "owl"}
+    assert all(len(s.frames) == 3 and s.frames.dtype == np.uint8 for s in scenes)
