@@ -11,12 +11,24 @@ import numpy as np
 
 from alcn_cv.errors import InputError
 
-__all__ = ["FULL_SCALE", "SUPPORTED_DTYPES", "check_gray", "check_image", "unit_windows"]
+__all__ = ["FULL_SCALE", "SUPPORTED_DTYPES", "check_gray", "check_image", "check_positive", "unit_windows"]
 
 SUPPORTED_DTYPES = (np.uint8, np.uint16, np.float32)
 FULL_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
 # float32 intensities are expected in [0, 1]; tolerate rounding just outside.
 _FLOAT_TOLERANCE = 1e-3
+
+
+def check_positive(name: str, value: float) -> float:
+    """``value`` as a float, checked positive and finite (a method's parameter called ``name``).
+
+    Raises:
+        InputError: ``value`` is zero, negative, infinite or NaN.
+    """
+    value = float(value)
+    if not np.isfinite(value) or value <= 0:
+        raise InputError(f"{name} must be positive and finite, got {value}")
+    return value
 
 
 def check_image(img: object) -> np.ndarray:

@@ -10,9 +10,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from alcn_cv.io import atomic_path, write_json
 
-__all__ = ["command_line", "describe_machine", "machine", "markdown_table", "new_figure", "save_figure", "write_json"]
+__all__ = ["command_line", "describe_machine", "machine", "markdown_table", "nan_to_none", "new_figure", "save_figure",
+           "write_json"]
 
 
 def _cell(value: Any, digits: int) -> str:
@@ -21,6 +24,18 @@ def _cell(value: Any, digits: int) -> str:
     if isinstance(value, float):
         return f"{value:.{digits}f}"
     return str(value).replace("|", "\\|")
+
+
+def nan_to_none(obj: Any) -> Any:
+    """``obj`` with every NaN or infinity (a metric with nothing to measure) as None, for JSON;
+    dicts and lists are copied recursively, NumPy floats become floats."""
+    if isinstance(obj, dict):
+        return {k: nan_to_none(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [nan_to_none(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return None if not np.isfinite(obj) else float(obj)
+    return obj
 
 
 def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]], digits: int = 3) -> str:

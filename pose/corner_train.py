@@ -306,7 +306,7 @@ def export_onnx(net, out: str | Path, meta: dict[str, Any]) -> Path:
     import torch
 
     from alcn_cv.io import atomic_write
-    from alcn_cv.train.export import OPSET, _with_metadata
+    from alcn_cv.train.export import OPSET, with_metadata
 
     out = Path(out)
     if out.suffix != ".onnx":
@@ -318,7 +318,7 @@ def export_onnx(net, out: str | Path, meta: dict[str, Any]) -> Path:
                           input_names=["image"], output_names=["outputs"],
                           dynamic_axes={"image": {2: "height", 3: "width"}, "outputs": {2: "gh", 3: "gw"}},
                           opset_version=OPSET, dynamo=False)
-    data = _with_metadata(buffer.getvalue(), meta)
+    data = with_metadata(buffer.getvalue(), meta)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, data)
     logger.info("corner detector written to %s (%d kB)", out, len(data) // 1024)

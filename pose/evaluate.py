@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.io import atomic_write, write_json
-from alcn_cv.report import describe_machine, machine, markdown_table
+from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none
 from alcn_cv.errors import DatasetError, InputError
 from pose.build import build as build_model
 from pose.model import read_box_corners, unit_scale
@@ -248,7 +248,7 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
           + (f"\n\nCommand: `{command}`" if command else "") + "\n\n"
           + table_markdown(table, columns, spread))
     atomic_write(out_dir / "table1.md", md)
-    write_json(out_dir / "table1.json", _nan_to_none({
+    write_json(out_dir / "table1.json", nan_to_none({
         "data": str(data_dir), "machine": host, "command": command, "columns": columns, "table": table,
         "spread": spread, "seeds": seeds, "details": details,
         "metrics": {"proj2d_px": PROJ_PX, "add": ADD_FRACTION, "deg": DEG, "cm": CM}}))
@@ -340,15 +340,5 @@ def middlebury_main(sets: list[str | Path], out_dir: str | Path, *,
                 logger.info("%s: %d/%d posed, median rot %.2f deg, trans %.1f mm", key, len(e), len(tests),
                             med[0], med[1])
     atomic_write(out_dir / "middlebury.md", "\n".join(lines) + "\n")
-    write_json(out_dir / "middlebury.json", _nan_to_none({**results, "machine": machine()}))
+    write_json(out_dir / "middlebury.json", nan_to_none({**results, "machine": machine()}))
     return results
-
-
-def _nan_to_none(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {k: _nan_to_none(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_nan_to_none(v) for v in obj]
-    if isinstance(obj, (float, np.floating)):
-        return None if not np.isfinite(obj) else float(obj)
-    return obj

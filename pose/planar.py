@@ -61,8 +61,8 @@ from alcn_cv.data.scenes import Scene, load_scene_folder, select_scenes, shared_
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, to_gray, write_json
-from alcn_cv.report import describe_machine, machine, new_figure, save_figure
-from pose.evaluate import PROJ_PX, _nan_to_none, score, table_markdown
+from alcn_cv.report import describe_machine, machine, nan_to_none, new_figure, save_figure
+from pose.evaluate import PROJ_PX, score, table_markdown
 from pose.model import PartModel, box_corners
 from pose.parts import FeaturePartDetector, PartDetector, create_feature
 from pose.plots import plot_table
@@ -386,7 +386,7 @@ def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequenc
           + table_markdown(table, columns + ["mean"])
           + "\n\n" + _details_markdown(details, columns))
     atomic_write(out_dir / "relight_pose.md", md)
-    write_json(out_dir / "relight_pose.json", _nan_to_none({
+    write_json(out_dir / "relight_pose.json", nan_to_none({
         "command": command, "machine": host, "data": str(root), "columns": columns, "table": table,
         "details": details,
         "settings": {"feature": feature, "n_features": n_features, "detectors": list(detectors),

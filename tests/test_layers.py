@@ -1,5 +1,6 @@
 """The layers point one way: the runtime never imports the lab, ``alcn_cv`` never names ``pose``
-or ``calib``, and no files or subpackages import each other.
+or ``calib``, no files or subpackages import each other, and no module uses another's private
+names (a name shared between modules is public in its owner).
 
 Imports are read with :mod:`ast` from every file (module level and inside functions; the
 ``if TYPE_CHECKING:`` blocks, for annotations only, are skipped).
@@ -184,3 +185,61 @@ def test_the_reader_sees_every_kind_of_import(tmp_path):
     path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import torch\ndef f():\n    from . import x\n")
     tree = _syntax_tree(path)
     assert [type(n).__name__ for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))] == ["ImportFrom", "ImportFrom"]
+
+
+#: Besides the packages, the examples and the tests' shared helpers (not the test files, which
+#: may test their own module's private functions).
+OTHER_FILES = sorted(
+    [*(ROOT / "examples").glob("*.py"), *(p for p in (ROOT / "tests").glob("*.py") if not p.name.startswith("test_"))]
+)
+
+
+def _private_uses(path: Path, module: str) -> list[str]:
+    """The private names (``_name``, not ``__dunder__``) of other modules of the packages that the
+    file at ``path`` imports (``from m import _f``) or reaches through an imported module (``m._f``)."""
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    tree = _syntax_tree(path)
+    modules: dict[str, str] = {}  # local name -> module of the packages
+    found = []
+
+    def private(name: str) -> bool:
+        return name.startswith("_") and not name.startswith("__")
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name in MODULES:
+                    modules[alias.asname or alias.name] = alias.name
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parent = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(parent + ([base] if base else []))
+            for alias in node.names:
+                if f"{base}.{alias.name}" in MODULES:
+                    modules[alias.asname or alias.name] = f"{base}.{alias.name}"
+                elif base in MODULES and base != module and private(alias.name):
+                    found.append(f"from {base} import {alias.name} (line {node.lineno})")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and private(node.attr) and isinstance(node.value, ast.Name):
+            target = modules.get(node.value.id)
+            if target and target != module:
+                found.append(f"{target}.{node.attr} (line {node.lineno})")
+    return found
+
+
+@pytest.mark.parametrize(
+    "path", [*(MODULES[m] for m in sorted(MODULES)), *OTHER_FILES], ids=lambda p: p.relative_to(ROOT).as_posix()
+)
+def test_no_module_uses_another_modules_private_names(path):
+    module = next((m for m, p in MODULES.items() if p == path), path.stem)
+    uses = _private_uses(path, module)
+    assert not uses, f"{path.relative_to(ROOT)} uses private names of other modules: {uses}"
+
+
+def test_the_private_name_check_sees_both_forms(tmp_path):
+    path = tmp_path / "user.py"
+    path.write_text("from alcn_cv.enhance.lcn import _blur, DivisiveLCN\nfrom alcn_cv.enhance import lcn\nlcn._blur\n"
+                    "from alcn_cv import io as files\nfiles._jpeg_is_complete(b'')\nlcn.__name__\n")
+    assert _private_uses(path, "user") == ["from alcn_cv.enhance.lcn import _blur (line 1)",
+                                           "alcn_cv.enhance.lcn._blur (line 3)", "alcn_cv.io._jpeg_is_complete (line 5)"]

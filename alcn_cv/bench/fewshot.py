@@ -48,7 +48,7 @@ from alcn_cv.bench.policies import InputPolicy
 from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, write_json
-from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
+from alcn_cv.report import command_line, describe_machine, machine, markdown_table, nan_to_none, new_figure, save_figure
 from alcn_cv.train.config import FewShotSetup
 
 __all__ = ["DEFAULT_METHODS", "FewShotSettings", "compare_to_dog", "fewshot_command", "fewshot_markdown", "main"]
@@ -146,13 +146,6 @@ def compare_to_dog(runs: dict[str, Any], settings: FewShotSettings) -> dict[str,
     return out if dogs and variants else {}
 
 
-def _finite(value: Any) -> Any:
-    """``value`` with every NaN (an AUC without positives or negatives) as None, for JSON."""
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    return None if isinstance(value, float) and not np.isfinite(value) else value
-
-
 def _run_draw(settings: FewShotSettings, draw: int, runs: dict[str, Any], bar: tqdm) -> None:
     """Every method and policy on one draw's windows; a failing method is recorded with its error."""
     from alcn_cv.train.fewshot import make_fewshot_data, score_inputs  # torch: only when a draw runs
@@ -176,8 +169,8 @@ def _run_draw(settings: FewShotSettings, draw: int, runs: dict[str, Any], bar: t
             t1 = time.perf_counter()
             try:
                 policy = InputPolicy(policy_name, train_n)
-                entry = _finite(score_inputs(f"{method} ({policy_name}, draw {draw})", policy.windows(train_n), train_y,
-                                             policy.windows(test_n), test, setup))
+                entry = nan_to_none(score_inputs(f"{method} ({policy_name}, draw {draw})", policy.windows(train_n), train_y,
+                                                 policy.windows(test_n), test, setup))
                 entry.update(draw=draw, policy=policy.to_dict(),
                              seconds={"normalize": normalize_s, "train_and_test": time.perf_counter() - t1})
             except Exception as exc:

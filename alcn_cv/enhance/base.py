@@ -46,7 +46,7 @@ _UINT8_LEVELS = np.arange(256, dtype=np.uint8).astype(np.float32).reshape(1, 256
 _WARNED_SMALL: set[type] = set()
 
 
-def _to_unit_float(img: np.ndarray) -> np.ndarray:
+def to_unit_float(img: np.ndarray) -> np.ndarray:
     # A new C-ordered array whatever the input's layout: the caller's stays untouched and the
     # OpenCV calls that follow may write into this one.
     if img.dtype == np.float32:
@@ -211,7 +211,7 @@ class Normalization:
         if alpha is None:
             return result
         if alpha.dtype != out_dtype:
-            alpha = _unit_in_place_to(_to_unit_float(alpha), out_dtype)
+            alpha = _unit_in_place_to(to_unit_float(alpha), out_dtype)
         return np.concatenate([result, alpha[..., None]], axis=2)  # a new array: the input's alpha is not shared
 
     def _apply_colour(self, img: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
@@ -221,7 +221,7 @@ class Normalization:
             if direct is not None:
                 self._warn_if_small(img.shape)
                 return direct.reshape(img.shape)
-        unit = _to_unit_float(img)
+        unit = to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
             return self._apply_bgr(unit, out_dtype)
         return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
@@ -270,7 +270,7 @@ class Normalization:
     def _intensity(self, img: np.ndarray) -> np.ndarray:
         """The float32 ``HxW`` plane :meth:`apply` normalizes for a valid gray or BGR image
         without alpha: its intensities in [0, 1], or a BGR image's CIE L / 100 (as :meth:`_apply_bgr`)."""
-        unit = _to_unit_float(img)
+        unit = to_unit_float(img)
         if unit.ndim == 3 and unit.shape[2] == 3:
             return _lab_and_lightness(unit)[1]
         return unit.reshape(img.shape[:2])

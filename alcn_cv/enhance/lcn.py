@@ -17,7 +17,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from alcn_cv.enhance.base import Normalization, _to_unit_float
+from alcn_cv.checks import check_positive
+from alcn_cv.enhance.base import Normalization, to_unit_float
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack, kernel_radius
@@ -30,13 +31,6 @@ __all__ = [
     "SubtractiveLCN",
     "Whitening",
 ]
-
-
-def _positive(name: str, value: float) -> float:
-    value = float(value)
-    if not np.isfinite(value) or value <= 0:
-        raise InputError(f"{name} must be positive and finite, got {value}")
-    return value
 
 
 def _blur(gray: np.ndarray, sigma: float) -> np.ndarray:
@@ -60,7 +54,7 @@ class Standardization(Normalization):
     output_range = (-3.0, 3.0)
 
     def __init__(self, eps: float = 1e-6) -> None:
-        self.eps = _positive("eps", eps)
+        self.eps = check_positive("eps", eps)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         return self._standardize(gray, cv2.meanStdDev(gray))
@@ -71,7 +65,7 @@ class Standardization(Normalization):
 
     def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray:
         # a function of the intensity given the image's mean and deviation: one lookup
-        mean_std = cv2.meanStdDev(_to_unit_float(gray8))
+        mean_std = cv2.meanStdDev(to_unit_float(gray8))
         return self._lookup_uint8(gray8, lambda levels: self._standardize(levels, mean_std))
 
 
@@ -98,8 +92,8 @@ class DifferenceOfGaussians(Normalization):
     output_range = (-0.1, 0.1)
 
     def __init__(self, sigma1: float = 0.5, sigma2: float = 1.5) -> None:
-        self.sigma1 = _positive("sigma1", sigma1)
-        self.sigma2 = _positive("sigma2", sigma2)
+        self.sigma1 = check_positive("sigma1", sigma1)
+        self.sigma2 = check_positive("sigma2", sigma2)
         if self.sigma2 <= self.sigma1:
             raise InputError(f"sigma2 must be larger than sigma1, got {self.sigma1} and {self.sigma2}")
 
@@ -129,7 +123,7 @@ class SubtractiveLCN(Normalization):
     output_range = (-0.1, 0.1)
 
     def __init__(self, sigma: float = 2.0) -> None:
-        self.sigma = _positive("sigma", sigma)
+        self.sigma = check_positive("sigma", sigma)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         return gray - _blur(gray, self.sigma)
@@ -157,8 +151,8 @@ class DivisiveLCN(Normalization):
     output_range = (-3.0, 3.0)
 
     def __init__(self, sigma: float = 2.0, eps: float = 1e-3) -> None:
-        self.sigma = _positive("sigma", sigma)
-        self.eps = _positive("eps", eps)
+        self.sigma = check_positive("sigma", sigma)
+        self.eps = check_positive("eps", eps)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         v = gray - _blur(gray, self.sigma)
@@ -197,9 +191,9 @@ class LocalResponseNormalization(Normalization):
         if int(size) != size or size < 1 or size % 2 == 0:
             raise InputError(f"size must be a positive odd integer, got {size}")
         self.size = int(size)
-        self.alpha = _positive("alpha", alpha)
-        self.beta = _positive("beta", beta)
-        self.k = _positive("k", k)
+        self.alpha = check_positive("alpha", alpha)
+        self.beta = check_positive("beta", beta)
+        self.k = check_positive("k", k)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         a = gray - np.float32(gray.mean())
@@ -231,8 +225,8 @@ class Whitening(Normalization):
     output_range = (-3.0, 3.0)
 
     def __init__(self, f0: float = 0.4, eps: float = 1e-6) -> None:
-        self.f0 = _positive("f0", f0)
-        self.eps = _positive("eps", eps)
+        self.f0 = check_positive("f0", f0)
+        self.eps = check_positive("eps", eps)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         h, w = gray.shape

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from alcn_cv.checks import check_positive
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.lcn import _positive
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
@@ -79,13 +79,13 @@ class TanTriggs(Normalization):
     reference = "Tan & Triggs, IEEE TIP 2010"
 
     def __init__(self, gamma: float = 0.2, sigma0: float = 1.0, sigma1: float = 2.0, alpha: float = 0.1, tau: float = 10.0) -> None:
-        self.gamma = _positive("gamma", gamma)
-        self.sigma0 = _positive("sigma0", sigma0)
-        self.sigma1 = _positive("sigma1", sigma1)
+        self.gamma = check_positive("gamma", gamma)
+        self.sigma0 = check_positive("sigma0", sigma0)
+        self.sigma1 = check_positive("sigma1", sigma1)
         if self.sigma1 <= self.sigma0:
             raise InputError(f"sigma1 must be larger than sigma0, got {self.sigma0} and {self.sigma1}")
-        self.alpha = _positive("alpha", alpha)
-        self.tau = _positive("tau", tau)
+        self.alpha = check_positive("alpha", alpha)
+        self.tau = check_positive("tau", tau)
         self.output_range = (-self.tau, self.tau)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:

@@ -31,7 +31,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from alcn_cv.errors import InputError, WeightFileError
-from alcn_cv.nets.normalizer import _ACTIVATIONS, Normalizer
+from alcn_cv.nets.normalizer import ACTIVATIONS, Normalizer
 from alcn_cv.weight_file import NormalizerFile
 
 __all__ = ["ARCHITECTURES", "LiteNormalizer", "normalizer_from_file"]
@@ -64,10 +64,10 @@ class LiteNormalizer(Normalizer):
         activation: str = "tanh",
     ) -> None:
         nn.Module.__init__(self)
-        if activation not in _ACTIVATIONS:
-            raise InputError(f"activation must be one of {', '.join(_ACTIVATIONS)}, got {activation!r}")
+        if activation not in ACTIVATIONS:
+            raise InputError(f"activation must be one of {', '.join(ACTIVATIONS)}, got {activation!r}")
         c1, c2 = channels
-        act = _ACTIVATIONS[activation]
+        act = ACTIVATIONS[activation]
         self.features = nn.Sequential(
             nn.Conv2d(1, c1, 4, stride=4),
             act(),

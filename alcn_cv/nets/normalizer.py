@@ -25,7 +25,7 @@ __all__ = ["Normalizer", "reflect101_pad"]
 
 WINDOW = 48
 STRIDE = 4
-_ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
+ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
 
 
 def reflect101_pad(x: torch.Tensor, top: int, bottom: int, left: int, right: int) -> torch.Tensor:
@@ -84,10 +84,10 @@ class Normalizer(nn.Module):
         activation: str = "tanh",
     ) -> None:
         super().__init__()
-        if activation not in _ACTIVATIONS:
-            raise InputError(f"activation must be one of {', '.join(_ACTIVATIONS)}, got {activation!r}")
+        if activation not in ACTIVATIONS:
+            raise InputError(f"activation must be one of {', '.join(ACTIVATIONS)}, got {activation!r}")
         c1, c2 = channels
-        act = _ACTIVATIONS[activation]
+        act = ACTIVATIONS[activation]
         self.features = nn.Sequential(
             nn.Conv2d(1, c1, 5),
             act(),

@@ -104,13 +104,13 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
                           "weights": {0: "batch", 2: "grid_height", 3: "grid_width"}},
             opset_version=OPSET, dynamo=False,
         )
-    data = _with_metadata(buffer.getvalue(), weight_file.meta)
+    data = with_metadata(buffer.getvalue(), weight_file.meta)
     atomic_write(out, data)
     logger.info("Normalizer exported to %s (%d kB)", out, len(data) // 1024)
     return out
 
 
-def _with_metadata(model_bytes: bytes, meta: dict) -> bytes:
+def with_metadata(model_bytes: bytes, meta: dict) -> bytes:
     """Add the weight file's header to the model's ``metadata_props`` (needs the ``onnx`` package)."""
     try:
         import onnx
