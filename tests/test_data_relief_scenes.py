@@ -5,7 +5,7 @@ import pytest
 
 from alcn_cv.data.manifest import read_manifest
 from alcn_cv.data.relief_scenes import KIND, generate, render_scene
-from alcn_cv.data.scenes import read_scene
+from alcn_cv.data.scenes import load_scene_folder
 from alcn_cv.errors import InputError
 from alcn_cv.train.real_light import training_scene
 
@@ -31,7 +31,9 @@ def test_generate_writes_folders_the_trainer_reads(tmp_path):
     out = generate(tmp_path / "scenes", scenes=2, frames=3, size=96, seed=5, progress=False)
     manifest = read_manifest(out, KIND)
     assert sorted(manifest["lights"]) == ["scene_000", "scene_001"]
-    scene = training_scene(read_scene(out / "scene_001"), 48, 32)
+    scenes = load_scene_folder(out)
+    assert [s.name for s in scenes] == ["scene_000", "scene_001"]
+    scene = training_scene(scenes[1], 48, 32)
     assert scene.frames.shape == (3, 96 + 96, 96 + 96) and len(scene.candidates) > 0
     # Scene i depends on (seed, i) only: a run of one scene gives the same first scene.
     one = generate(tmp_path / "one", scenes=1, frames=3, size=96, seed=5, progress=False)

@@ -12,9 +12,9 @@ from alcn_cv.data.scenes import (
     TRAIN_SCENES,
     load_scene_folder,
     load_scenes,
-    read_scene,
+    scene_dirs,
     select_scenes,
-    train_scene_dirs,
+    shared_root,
 )
 from alcn_cv.errors import DatasetError, InputError
 
@@ -41,26 +41,22 @@ def test_loader_layouts(tmp_path):
         load_scene_folder(tmp_path / "missing")
 
 
-def test_read_scene_is_the_scene_of_one_folder(tmp_path):
+def test_a_scene_folder_and_a_folder_of_scenes(tmp_path):
+    """The trainer's entries: one scene's folder (its own frames), or a folder of scene folders."""
     root = make_sets(tmp_path)
-    street = read_scene(root / "webcam" / "street")
+    (street,) = load_scene_folder(root / "webcam" / "street")
     (same,) = select_scenes(load_scene_folder(root / "webcam"), ["street"])
-    assert (street.name, street.group, street.files) == (same.name, same.group, same.files)
+    assert (street.name, street.files) == (same.name, same.files)
     np.testing.assert_array_equal(street.frames, same.frames)
-    ball = read_scene(root / "psm" / "ball")
-    assert ball.name == "ball" and ball.group == "psm" and len(ball.frames) == 4  # the mask is no frame
+    (root / "webcam" / "manifest.json").write_text("{}")  # what `alcn data scenes` writes beside the scenes
+    assert [s.name for s in load_scene_folder(root / "webcam")] == ["square", "street"]
     single = tmp_path / "single"
     single.mkdir()
     cv2.imwrite(str(single / "a.png"), np.zeros((40, 40), np.uint8))
-    mixed = tmp_path / "mixed"  # the frames of two objects in one folder
-    mixed.mkdir()
-    for name in ("cat.0", "cat.1", "owl.0", "owl.1"):
-        cv2.imwrite(str(mixed / f"{name}.png"), np.zeros((8, 8), np.uint8))
-    for folder in (single, mixed, root / "psm" / "notes", tmp_path / "missing", root / "psm"):
-        with pytest.raises(DatasetError):
-            read_scene(folder)
+    with pytest.raises(DatasetError):
+        load_scene_folder(single)
     with pytest.raises(InputError):
-        read_scene(root / "webcam" / "street", max_frames=1)
+        load_scene_folder(root / "webcam", max_frames=1)
 
 
 def test_unit_frames_are_every_image_in_name_order_over_255(tmp_path):
@@ -71,7 +67,8 @@ def test_unit_frames_are_every_image_in_name_order_over_255(tmp_path):
     images = [rng.integers(0, 256, (20, 24, 3), dtype=np.uint8) for _ in range(3)]
     for i, image in enumerate(images):
         cv2.imwrite(str(folder / f"frame_{i:02d}.png"), image)
-    unit = read_scene(folder).unit_frames()
+    (scene,) = load_scene_folder(folder)
+    unit = scene.unit_frames()
     expected = np.stack([cv2.cvtColor(im, cv2.COLOR_BGR2GRAY) for im in images]).astype(np.float32) / np.float32(255)
     assert unit.dtype == np.float32
     np.testing.assert_array_equal(unit, expected)
@@ -82,13 +79,14 @@ def test_sixteen_bit_frames_are_rounded_to_eight(tmp_path):
     folder.mkdir()
     for i, level in enumerate((257 * 10, 257 * 200 + 100)):
         cv2.imwrite(str(folder / f"{i}.png"), np.full((8, 8), level, np.uint16))
-    assert read_scene(folder).frames[:, 0, 0].tolist() == [10, 200]
+    assert load_scene_folder(folder)[0].frames[:, 0, 0].tolist() == [10, 200]
 
 
-def test_the_split_is_disjoint_and_on_the_shared_webcams():
+def test_scene_dirs_are_folders_or_shared_webcam_scenes(tmp_path):
     assert not set(TRAIN_SCENES) & set(TEST_SCENES)
-    dirs = train_scene_dirs()
-    assert [d.name for d in dirs] == list(TRAIN_SCENES) and all(d.parent.name == "webcam" for d in dirs)
+    dirs = scene_dirs()
+    assert [d.name for d in dirs] == list(TRAIN_SCENES) and all(d.parent == shared_root("webcam") for d in dirs)
+    assert scene_dirs([tmp_path, "mexico"]) == [tmp_path, shared_root("webcam") / "mexico"]
 
 
 @pytest.mark.shared_data

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from alcn_cv.data.scenes import read_scene
+from alcn_cv.data.scenes import load_scene_folder
 from alcn_cv.nets.gain import GainNormalizer, gaussian_energy
 from alcn_cv.train.real_light import (
     RealLightConfig,
@@ -67,7 +67,7 @@ def test_consistency_loss_is_zero_when_equal_and_scale_free():
 
 
 def test_anywhere_locations_stay_in_the_frame(tmp_path):
-    scene = training_scene(read_scene(_write_scene(tmp_path / "scene")), CROP // 2, PATCH)
+    scene = training_scene(load_scene_folder(_write_scene(tmp_path / "scene"))[0], CROP // 2, PATCH)
     centres = anywhere_locations(scene, 500, np.random.default_rng(0))
     _, h, w = scene.frames.shape
     assert centres.shape == (500, 2)
@@ -75,7 +75,7 @@ def test_anywhere_locations_stay_in_the_frame(tmp_path):
 
 
 def test_pair_loss_adds_the_weighted_consistency(tmp_path):
-    scene = training_scene(read_scene(_write_scene(tmp_path / "scene")), CROP // 2, PATCH)
+    scene = training_scene(load_scene_folder(_write_scene(tmp_path / "scene"))[0], CROP // 2, PATCH)
     net = GainNormalizer(channels=8)
     rng = np.random.default_rng(0)
     centres = sample_locations(scene.candidates, 8, 8, rng)
@@ -164,7 +164,7 @@ def test_three_steps_lower_the_loss(tmp_path):
     assert (tmp_path / "run" / "checkpoint.pt").is_file() and (tmp_path / "run" / "history.json").is_file()
     trained = GainNormalizer.from_file(weight_file)
     untrained = GainNormalizer(**weight_file.meta["config"])  # the zero last layer: Weber gain + DoG 1/2
-    scene = training_scene(read_scene(scene_dir), CROP // 2, PATCH)
+    scene = training_scene(load_scene_folder(scene_dir)[0], CROP // 2, PATCH)
     rng = np.random.default_rng(1)
     losses = {"untrained": 0.0, "trained": 0.0}
     with torch.no_grad():

@@ -87,8 +87,8 @@ def generate(
     """Render ``scenes`` registered scenes into ``out_dir`` (written atomically; see the module).
 
     Returns:
-        The output folder; each ``scene_NNN`` is a scene of :func:`alcn_cv.data.scenes.read_scene`
-        (``alcn train-real-light --rendered``). Cost: about 1 s of CPU per 320x320 frame.
+        The output folder: a folder of scenes, ``scene_NNN`` (:func:`alcn_cv.data.scenes.load_scene_folder`;
+        ``alcn train-real-light --rendered``). Cost: about 1 s of CPU per 320x320 frame.
     """
     if scenes < 1:
         raise InputError(f"need at least one scene, got {scenes}")

@@ -45,10 +45,9 @@ __all__ = [
     "Scene",
     "load_scene_folder",
     "load_scenes",
-    "read_scene",
+    "scene_dirs",
     "select_scenes",
     "shared_root",
-    "train_scene_dirs",
 ]
 
 logger = logging.getLogger(__name__)
@@ -88,9 +87,10 @@ def shared_root(name: str) -> Path:
     return shared_data_dir() / name
 
 
-def train_scene_dirs() -> list[Path]:
-    """The folders of :data:`TRAIN_SCENES` in the shared ``webcam`` data."""
-    return [shared_root("webcam") / name for name in TRAIN_SCENES]
+def scene_dirs(entries: Sequence[str | os.PathLike] = TRAIN_SCENES) -> list[Path]:
+    """The folders of ``entries`` (default: the training scenes): each an existing folder, else
+    the name of a scene of the shared ``webcam`` data."""
+    return [Path(e) if Path(e).is_dir() else shared_root("webcam") / e for e in entries]
 
 
 def _gray_u8(path: Path) -> np.ndarray:
@@ -129,38 +129,6 @@ def _group_files(folder: Path) -> dict[str, list[Path]]:
     return groups
 
 
-def _check_max_frames(max_frames: int | None) -> None:
-    if max_frames is not None and max_frames < 2:
-        raise InputError(f"max_frames must be at least 2, got {max_frames}")
-
-
-def _read(folder: Path, name: str, group: str, paths: list[Path], max_frames: int | None) -> Scene:
-    paths = [paths[i] for i in _evenly_spaced(len(paths), max_frames)]
-    frames = [_gray_u8(p) for p in paths]
-    if any(f.shape != frames[0].shape for f in frames):
-        raise DatasetError(f"{folder}: the frames of scene {name!r} differ in size (not registered)")
-    return Scene(name, group, np.stack(frames), tuple(p.name for p in paths))
-
-
-def read_scene(folder: str | os.PathLike, max_frames: int | None = None) -> Scene:
-    """The one scene of ``folder``'s own images (subfolders are not read), with at most
-    ``max_frames`` frames evenly spaced over its ordered files; its group is the parent folder's name.
-
-    Raises:
-        DatasetError: ``folder`` is not a folder, holds fewer than two frames or several scenes,
-            or its frames differ in size.
-    """
-    folder = Path(folder)
-    _check_max_frames(max_frames)
-    groups = _group_files(folder) if folder.is_dir() else {}
-    if len(groups) > 1:
-        raise DatasetError(f"{folder}: holds the frames of several scenes ({', '.join(groups)}); give one scene's folder")
-    name, paths = next(iter(groups.items()), (folder.name, []))
-    if len(paths) < 2:
-        raise DatasetError(f"{folder}: a registered scene needs at least 2 frames, found {len(paths)}")
-    return _read(folder, name, folder.parent.name, paths, max_frames)
-
-
 def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) -> list[Scene]:
     """Every scene under ``root`` (its own images and those of its subfolders; see the module),
     each with at most ``max_frames`` frames, evenly spaced over its ordered files.
@@ -172,7 +140,8 @@ def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) ->
     root = Path(root)
     if not root.is_dir():
         raise DatasetError(f"{root}: not a folder")
-    _check_max_frames(max_frames)
+    if max_frames is not None and max_frames < 2:
+        raise InputError(f"max_frames must be at least 2, got {max_frames}")
     folders = [root] + sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
     scenes = []
     for folder in folders:
@@ -180,7 +149,11 @@ def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) ->
             if len(paths) < 2:
                 logger.debug("skipping %s/%s: fewer than two frames", folder, name)
                 continue
-            scenes.append(_read(folder, name, root.name, paths, max_frames))
+            paths = [paths[i] for i in _evenly_spaced(len(paths), max_frames)]
+            frames = [_gray_u8(p) for p in paths]
+            if any(f.shape != frames[0].shape for f in frames):
+                raise DatasetError(f"{folder}: the frames of scene {name!r} differ in size (not registered)")
+            scenes.append(Scene(name, root.name, np.stack(frames), tuple(p.name for p in paths)))
     if not scenes:
         raise DatasetError(
             f"{root}: no scene (a folder of at least two frames, or NAME.<i>{'|'.join(sorted(IMAGE_SUFFIXES))})"

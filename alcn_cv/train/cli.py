@@ -16,7 +16,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from alcn_cv.data.scenes import train_scene_dirs
+from alcn_cv.data.scenes import scene_dirs
 from alcn_cv.train.config import RealLightConfig
 
 __all__ = ["add_parser"]
@@ -280,7 +280,7 @@ def _train_real_light(args: argparse.Namespace) -> int:
 
     from alcn_cv.train.real_light import train_real_light
 
-    scenes = args.scenes or train_scene_dirs()
+    scenes = args.scenes or scene_dirs()
     names = ("steps", "locations", "crop", "patch", "min_distance", "temperature", "consistency", "anywhere", "lr", "seed",
              "save_every")
     rendered = sorted(str(p) for p in args.rendered.iterdir() if p.is_dir()) if args.rendered else []

@@ -41,7 +41,7 @@ import torch
 from tqdm.auto import tqdm
 
 from alcn_cv.data.phos import render_windows
-from alcn_cv.data.scenes import read_scene, train_scene_dirs
+from alcn_cv.data.scenes import load_scenes, scene_dirs
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
 from alcn_cv.io import atomic_write
@@ -291,8 +291,8 @@ def _gain_frames(scenes: Sequence[str | os.PathLike], rendered: int, seed: int, 
 
     train: list[np.ndarray] = []
     val: list[np.ndarray] = []
-    for folder in scenes:
-        for i, frame in enumerate(read_scene(folder).unit_frames()):
+    for scene in load_scenes(scenes):
+        for i, frame in enumerate(scene.unit_frames()):
             (val if i % _GAIN_VAL_EVERY == _GAIN_VAL_EVERY - 1 else train).append(frame)
     for i in tqdm(range(rendered), desc="render scenes", unit="scene", disable=not progress):
         stack, _ = render_scene(np.random.default_rng([seed, i]), _RENDERED_SIZE, _RENDERED_FRAMES)
@@ -384,7 +384,7 @@ def distill_gain(
     if teacher_file.meta.get("architecture") != "gain":
         raise InputError(f"{teacher_path} is not a gain Normalizer")
     teacher_net = normalizer_from_file(teacher_file).eval()
-    scenes = train_scene_dirs() if scenes is None else list(scenes)
+    scenes = scene_dirs() if scenes is None else list(scenes)
     start = time.perf_counter()
     train_frames, val_frames = _gain_frames(scenes, rendered, seed, progress)
     if not val_frames:

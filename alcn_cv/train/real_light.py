@@ -45,7 +45,7 @@ import torch.nn.functional as F
 from torch import nn
 from tqdm import tqdm
 
-from alcn_cv.data.scenes import Scene, read_scene
+from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.filters.gaussian_mixture import kernel_radius
@@ -336,8 +336,8 @@ def _train(cfg: RealLightConfig, out: Path) -> Path:
     net = GainNormalizer(**cfg.net)
     if max(kernel_radius(s) for s in net.sigmas) > cfg.patch // 2:
         raise InputError(f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2")
-    scenes = [training_scene(read_scene(s), cfg.crop // 2, cfg.patch) for s in cfg.scenes]
-    rendered = [training_scene(read_scene(s), cfg.crop // 2, cfg.patch) for s in cfg.rendered]
+    scenes = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(scene_dirs(cfg.scenes))]
+    rendered = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(cfg.rendered)]
     for scene in scenes + rendered:
         logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
