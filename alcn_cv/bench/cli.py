@@ -12,7 +12,7 @@ import argparse
 import dataclasses
 import shlex
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +32,13 @@ def _list(kind: type) -> Callable[[str], list]:
             raise InputError(f"expected a comma-separated list of {kind.__name__}, got {text!r}") from None
 
     return parse
+
+
+def _methods_help(default: Sequence[str] | None, suffix: str = "") -> str:
+    """The help of a benchmark's ``--methods``: normalizations given as spec strings."""
+    shown = ",".join(default) if default else "every registered normalization"
+    return (f"comma-separated normalizations, each NAME[:KEY=VALUE...]{suffix}, e.g. alcn:model=lite "
+            f"(`alcn normalize --list` lists the names; default: {shown})")
 
 
 def _sweep(text: str) -> list[tuple[int, int]]:
@@ -70,8 +77,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--size", choices=("default", "small"), default="default",
                    help="preset: default (the benchmark) or small (a quick end-to-end run)")
-    p.add_argument("--methods", type=_list(str), help="comma-separated methods, each NAME or NAME:KEY=VALUE[:KEY=VALUE...] "
-                   f"(e.g. alcn:model=lite:mixture=pyramid; default: all: {','.join(d.methods)})")
+    p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
     p.add_argument("--real-images", type=_list(int), help="real training images per object (default 1,10)")
     p.add_argument("--policy", type=_list(str), dest="policies",
                    help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(d.policies)})")
@@ -115,8 +121,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         "Writes fewshot.md, fewshot.json and fewshot.png.",
     )
     p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument("--methods", type=_list(str), help="comma-separated registered normalization specs, each NAME or "
-                   f"NAME:KEY=VALUE[:KEY=VALUE...] (e.g. alcn:weights=FILE.npz; default: {','.join(d.methods)})")
+    p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
     p.add_argument("--policy", type=_list(str), dest="policies",
                    help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(d.policies)})")
     p.add_argument("--draws", type=int, help=f"repetitions with new objects, windows and detector seed (default {d.draws})")
@@ -152,9 +157,7 @@ def _add_invariance(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--data", required=True, type=Path, help="folder of NAME/NAME.<i>.png + NAME.mask.png (e.g. ../shared/data/psm)")
     p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument("--methods", type=_list(str), default=None,
-                   help="comma-separated normalization names, each NAME or NAME:KEY=VALUE[:KEY=VALUE...] "
-                   "(default: all available)")
+    p.add_argument("--methods", type=_list(str), default=None, help=_methods_help(None))
     p.add_argument("--scale", type=float, default=1.0, help="resize the photographs by this factor first (default 1)")
     p.add_argument("--erode", type=int, default=5, help="pixels removed from the mask border (default 5)")
     p.add_argument("--figure-object", default=None, help="object shown in the figure (default: the first; 'all': every one)")
@@ -228,8 +231,8 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--data", nargs="+", type=Path, default=None,
                    help="roots of multi-illumination sets (default: ../shared/data/webcam and ../shared/data/psm)")
-    p.add_argument("--methods", type=lambda s: [m for m in s.split(",") if m], default=list(relight.DEFAULT_METHODS),
-                   help=f"comma-separated specs NAME[:KEY=VALUE...][+lstd] (default: {','.join(relight.DEFAULT_METHODS)})")
+    p.add_argument("--methods", type=_list(str), default=list(relight.DEFAULT_METHODS),
+                   help=_methods_help(relight.DEFAULT_METHODS, "[+lstd] (+lstd: followed by a local standardization)"))
     p.add_argument("--train-scenes", nargs="+", default=list(scenes.TRAIN_SCENES),
                    help=f"scenes or data sets to tune on (default: {' '.join(scenes.TRAIN_SCENES)})")
     p.add_argument("--test-scenes", nargs="+", default=list(scenes.TEST_SCENES),

@@ -40,7 +40,7 @@ def main(
             raise InputError(f"the output of a video must be a video file (.mp4, .avi, ...), got {dst}")
     elif dst.suffix.lower() not in IMAGE_SUFFIXES:
         raise InputError(f"the output of an image must be an image file ({', '.join(sorted(IMAGE_SUFFIXES))}), got {dst}")
-    normalizer = create(method, **(params or {}))
+    normalization = create(method, **(params or {}))
 
     def load_frame(img: np.ndarray) -> np.ndarray:
         if not gray or img.ndim == 2:
@@ -53,15 +53,15 @@ def main(
         images = list_images(src)
         make_folder(dst)
         for path in tqdm(images, desc=f"normalize {src.name}", unit="image"):
-            write_image(dst / path.name, normalizer.apply(load_frame(read_image(path, alpha=True))))
+            write_image(dst / path.name, normalization.apply(load_frame(read_image(path, alpha=True))))
         logger.info("wrote %d images to %s", len(images), dst)
     elif is_video(src):
         frames = map_video(
-            src, dst, lambda frame: normalizer.apply(load_frame(frame)), desc=f"normalize {src.name}", allow_partial=allow_partial
+            src, dst, lambda frame: normalization.apply(load_frame(frame)), desc=f"normalize {src.name}", allow_partial=allow_partial
         )
         logger.info("wrote %d frames to %s", frames, dst)
     else:
-        write_image(dst, normalizer.apply(load_frame(read_image(src, alpha=True))))
+        write_image(dst, normalization.apply(load_frame(read_image(src, alpha=True))))
         logger.info("wrote %s", dst)
 
 
