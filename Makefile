@@ -1,4 +1,4 @@
-# Two commands for a fresh machine: `make demo` and `make test`.
+# Two commands for a fresh machine: `make demo` and `make test` (lint, then the tests).
 # Both create or refresh the local virtual environment first (idempotent: a stamp
 # file tracks pyproject.toml, so nothing is reinstalled when nothing changed).
 PYTHON ?= python3
@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 DEMO_OUT ?= demo_out
 PYTEST_ARGS ?=
 
-.PHONY: demo test env clean
+.PHONY: demo test lint format env clean
 
 env: $(STAMP)
 
@@ -23,8 +23,19 @@ $(STAMP): pyproject.toml .ci/constraints.txt .ci/system-deps.sh
 demo: $(STAMP)
 	$(BIN)/alcn demo --out $(DEMO_OUT)
 
-test: $(STAMP)
+# The linter, the formatter's check and the runtime's type hints (pyproject.toml [tool.ruff], [tool.mypy]).
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/mypy
+
+# Apply the linter's safe fixes and the formatter.
+format: $(STAMP)
+	$(BIN)/ruff check --fix .
+	$(BIN)/ruff format .
+
+test: lint
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
 clean:
-	rm -rf $(VENV) $(DEMO_OUT) .pytest_cache build *.egg-info
+	rm -rf $(VENV) $(DEMO_OUT) .pytest_cache .ruff_cache .mypy_cache build *.egg-info

@@ -47,7 +47,9 @@ def check_image(img: object) -> np.ndarray:
     if img.size == 0:
         raise InputError(f"image is empty (shape {img.shape})")
     if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 2, 3, 4)):
-        raise InputError(f"image must be HxW, HxWx1, HxWx2 (gray, alpha), HxWx3 (BGR) or HxWx4 (BGRA), got shape {img.shape}")
+        raise InputError(
+            f"image must be HxW, HxWx1, HxWx2 (gray, alpha), HxWx3 (BGR) or HxWx4 (BGRA), got shape {img.shape}"
+        )
     native = img.dtype.newbyteorder("=")
     if native not in SUPPORTED_DTYPES:
         raise InputError(f"unsupported dtype {img.dtype}; use uint8, uint16 or float32 (intensities in [0, 1])")
@@ -56,7 +58,7 @@ def check_image(img: object) -> np.ndarray:
     if img.dtype == np.float32:
         # min and max see NaN (it propagates) and inf (out of range) without a boolean copy
         lo, hi = float(img.min()), float(img.max())
-        if not (-_FLOAT_TOLERANCE <= lo and hi <= 1 + _FLOAT_TOLERANCE):
+        if not (lo >= -_FLOAT_TOLERANCE and hi <= 1 + _FLOAT_TOLERANCE):
             if not np.isfinite(img).all():
                 raise InputError("float32 image contains NaN or inf")
             raise InputError(
@@ -87,5 +89,3 @@ def unit_windows(windows: np.ndarray) -> np.ndarray:
     if windows.dtype != np.float32:
         raise InputError(f"windows must be uint8 or float32, got {windows.dtype}")
     return windows
-
-

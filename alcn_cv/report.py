@@ -14,8 +14,16 @@ import numpy as np
 
 from alcn_cv.io import atomic_path, write_json
 
-__all__ = ["command_line", "describe_machine", "machine", "markdown_table", "nan_to_none", "new_figure", "save_figure",
-           "write_json"]
+__all__ = [
+    "command_line",
+    "describe_machine",
+    "machine",
+    "markdown_table",
+    "nan_to_none",
+    "new_figure",
+    "save_figure",
+    "write_json",
+]
 
 
 def _cell(value: Any, digits: int) -> str:

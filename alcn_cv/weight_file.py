@@ -24,7 +24,7 @@ FORMAT = "alcn-cv/normalizer"
 VERSION = 1
 DEFAULT_WEIGHTS = Path(__file__).parent / "weights" / "alcn_normalizer.npz"
 _META_KEY = "__meta__"
-_REQUIRED = {
+_REQUIRED: dict[str, type | tuple[type, ...]] = {
     "config": dict,
     "sigmas": list,
     "working_scale": (int, float),
@@ -56,7 +56,11 @@ def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: 
     _check_meta(meta, path)
     _check_arrays(arrays, path)
     buffer = io.BytesIO()
-    np.savez(buffer, **{k: np.asarray(v, np.float32) for k, v in arrays.items()}, **{_META_KEY: np.array(json.dumps(meta))})
+    stored: dict[str, Any] = {
+        **{k: np.asarray(v, np.float32) for k, v in arrays.items()},
+        _META_KEY: np.array(json.dumps(meta)),
+    }
+    np.savez(buffer, **stored)
     atomic_write(path, buffer.getvalue())
     return path
 
@@ -106,7 +110,9 @@ def _check_meta(meta: dict[str, Any], path: Path) -> None:
     if meta.get("format") != FORMAT:
         raise WeightFileError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}")
     if meta.get("version") != VERSION:
-        raise WeightFileError(f"{path}: weight file version {meta.get('version')}, this alcn-cv reads version {VERSION}")
+        raise WeightFileError(
+            f"{path}: weight file version {meta.get('version')}, this alcn-cv reads version {VERSION}"
+        )
     for key, kind in _REQUIRED.items():
         if not isinstance(meta.get(key), kind):
             raise WeightFileError(f"{path}: header field {key!r} missing or of the wrong type")

@@ -7,12 +7,12 @@ import json
 import cv2
 import numpy as np
 import pytest
-from scene_sets import lit, make_sets, texture
 
 from alcn_cv.bench import relight
 from alcn_cv.cli import main as cli_main
 from alcn_cv.data.scenes import Scene
 from alcn_cv.errors import InputError
+from scene_sets import lit, make_sets, texture
 
 SMALL = relight.Settings(patch=16, patches=40, gallery=2, max_pairs=4, keypoints=300)
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from scene_sets import make_sets
 
 from alcn_cv.data.scenes import (
     TEST_SCENES,
@@ -17,6 +16,7 @@ from alcn_cv.data.scenes import (
     shared_root,
 )
 from alcn_cv.errors import DatasetError, InputError
+from scene_sets import make_sets
 
 
 def test_loader_layouts(tmp_path):

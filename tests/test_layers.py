@@ -182,9 +182,14 @@ def test_the_reader_sees_every_kind_of_import(tmp_path):
     assert "alcn_cv.enhance.lcn" in GRAPH["alcn_cv.enhance"]  # from alcn_cv.enhance import lcn
     assert "calib.board" in GRAPH["calib.camera"]  # from .board import BoardSpec
     path = tmp_path / "typed.py"
-    path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import torch\ndef f():\n    from . import x\n")
+    path.write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import torch\ndef f():\n    from . import x\n"
+    )
     tree = _syntax_tree(path)
-    assert [type(n).__name__ for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))] == ["ImportFrom", "ImportFrom"]
+    assert [type(n).__name__ for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))] == [
+        "ImportFrom",
+        "ImportFrom",
+    ]
 
 
 #: Besides the packages, the examples and the tests' shared helpers (not the test files, which
@@ -239,7 +244,12 @@ def test_no_module_uses_another_modules_private_names(path):
 
 def test_the_private_name_check_sees_both_forms(tmp_path):
     path = tmp_path / "user.py"
-    path.write_text("from alcn_cv.enhance.lcn import _blur, DivisiveLCN\nfrom alcn_cv.enhance import lcn\nlcn._blur\n"
-                    "from alcn_cv import io as files\nfiles._jpeg_is_complete(b'')\nlcn.__name__\n")
-    assert _private_uses(path, "user") == ["from alcn_cv.enhance.lcn import _blur (line 1)",
-                                           "alcn_cv.enhance.lcn._blur (line 3)", "alcn_cv.io._jpeg_is_complete (line 5)"]
+    path.write_text(
+        "from alcn_cv.enhance.lcn import _blur, DivisiveLCN\nfrom alcn_cv.enhance import lcn\nlcn._blur\n"
+        "from alcn_cv import io as files\nfiles._jpeg_is_complete(b'')\nlcn.__name__\n"
+    )
+    assert _private_uses(path, "user") == [
+        "from alcn_cv.enhance.lcn import _blur (line 1)",
+        "alcn_cv.enhance.lcn._blur (line 3)",
+        "alcn_cv.io._jpeg_is_complete (line 5)",
+    ]

@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from alcn_cv.bench import detect, fewshot, invariance, relight, speed
-from alcn_cv.data import scenes
 from alcn_cv.bench.detect_settings import POLICIES, DetectSettings, presets
+from alcn_cv.data import scenes
 from alcn_cv.errors import InputError
 
 __all__ = ["BENCHMARKS", "add_parser"]
@@ -37,8 +37,10 @@ def _list(kind: type) -> Callable[[str], list]:
 def _methods_help(default: Sequence[str] | None, suffix: str = "") -> str:
     """The help of a benchmark's ``--methods``: normalizations given as spec strings."""
     shown = ",".join(default) if default else "every registered normalization"
-    return (f"comma-separated normalizations, each NAME[:KEY=VALUE...]{suffix}, e.g. alcn:model=lite "
-            f"(`alcn normalize --list` lists the names; default: {shown})")
+    return (
+        f"comma-separated normalizations, each NAME[:KEY=VALUE...]{suffix}, e.g. alcn:model=lite "
+        f"(`alcn normalize --list` lists the names; default: {shown})"
+    )
 
 
 def _sweep(text: str) -> list[tuple[int, int]]:
@@ -58,7 +60,9 @@ def _size(text: str) -> tuple[int, int]:
 
 def _override(settings: Any, args: argparse.Namespace) -> Any:
     """The settings with every field that the command line gave replaced."""
-    given = {f.name: getattr(args, f.name) for f in dataclasses.fields(settings) if getattr(args, f.name, None) is not None}
+    given = {
+        f.name: getattr(args, f.name) for f in dataclasses.fields(settings) if getattr(args, f.name, None) is not None
+    }
     return dataclasses.replace(settings, **given)
 
 
@@ -72,31 +76,59 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         "the PASCAL criterion (IoU 0.8, fixed-size boxes). Writes detect.md, detect.json and PR curves (PNG). "
         "--size picks a preset; the other options override it.",
     )
-    p.add_argument("--data", required=True, type=Path, help="benchmark folder: train.json, test.json, manifest.json "
-                   "(e.g. from `alcn data detect`)")
+    p.add_argument(
+        "--data",
+        required=True,
+        type=Path,
+        help="benchmark folder: train.json, test.json, manifest.json (e.g. from `alcn data detect`)",
+    )
     p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument("--size", choices=("default", "small"), default="default",
-                   help="preset: default (the benchmark) or small (a quick end-to-end run)")
+    p.add_argument(
+        "--size",
+        choices=("default", "small"),
+        default="default",
+        help="preset: default (the benchmark) or small (a quick end-to-end run)",
+    )
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
     p.add_argument("--real-images", type=_list(int), help="real training images per object (default 1,10)")
-    p.add_argument("--policy", type=_list(str), dest="policies",
-                   help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(d.policies)})")
-    p.add_argument("--positives", type=int, dest="positives_per_object",
-                   help=f"synthetic windows per object (default {d.positives_per_object})")
-    p.add_argument("--negatives-ratio", type=float, help=f"background windows per object window (default {d.negatives_ratio})")
+    p.add_argument(
+        "--policy",
+        type=_list(str),
+        dest="policies",
+        help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(d.policies)})",
+    )
+    p.add_argument(
+        "--positives",
+        type=int,
+        dest="positives_per_object",
+        help=f"synthetic windows per object (default {d.positives_per_object})",
+    )
+    p.add_argument(
+        "--negatives-ratio", type=float, help=f"background windows per object window (default {d.negatives_ratio})"
+    )
     p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
     p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
     p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
-    p.add_argument("--seeds", type=_list(int), help="repeat every run with each of these seeds and report mean +- "
-                   "standard deviation (default 0)")
-    p.add_argument("--tune", dest="tune", action="store_const", const=True,
-                   help="tune DoG, SLCN and DLCN on the training windows first (default: their defaults)")
+    p.add_argument(
+        "--seeds",
+        type=_list(int),
+        help="repeat every run with each of these seeds and report mean +- standard deviation (default 0)",
+    )
+    p.add_argument(
+        "--tune",
+        dest="tune",
+        action="store_const",
+        const=True,
+        help="tune DoG, SLCN and DLCN on the training windows first (default: their defaults)",
+    )
     p.add_argument("--cnn-sweep", type=_sweep, help="plain CNNs tried, DEPTHxWIDTH,... (default 1x32,2x32,3x32)")
     p.add_argument("--nms-iou", type=float, help=f"default {d.nms_iou}")
     p.add_argument("--match-iou", type=float, help=f"PASCAL criterion (default {d.match_iou})")
     p.add_argument("--max-test-images", type=int, help="only the first N test images (default: all)")
     p.add_argument("--working-scale", type=float, default=None, help="override the manifest's working_scale")
-    p.add_argument("--box-size", type=float, default=None, help="override the manifest's box_size (pixels at the working scale)")
+    p.add_argument(
+        "--box-size", type=float, default=None, help="override the manifest's box_size (pixels at the working scale)"
+    )
     p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
     p.add_argument("--device", help="torch device (default cpu)")
     p.set_defaults(func=_run_detect)
@@ -122,16 +154,29 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
-    p.add_argument("--policy", type=_list(str), dest="policies",
-                   help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(d.policies)})")
-    p.add_argument("--draws", type=int, help=f"repetitions with new objects, windows and detector seed (default {d.draws})")
+    p.add_argument(
+        "--policy",
+        type=_list(str),
+        dest="policies",
+        help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(d.policies)})",
+    )
+    p.add_argument(
+        "--draws", type=int, help=f"repetitions with new objects, windows and detector seed (default {d.draws})"
+    )
     p.add_argument("--objects", type=int, help=f"new objects per draw (default {d.objects})")
-    p.add_argument("--object-seed", type=int, help=f"catalogue seed of draw 0; draw d uses it + d (default {d.object_seed})")
+    p.add_argument(
+        "--object-seed", type=int, help=f"catalogue seed of draw 0; draw d uses it + d (default {d.object_seed})"
+    )
     p.add_argument("--real-images", type=int, help=f"reference images per object (default {d.real_images})")
     p.add_argument("--per-image", type=int, help=f"synthetic windows per reference image (default {d.per_image})")
-    p.add_argument("--test-windows", type=int, help=f"test windows per draw, half background (default {d.test_windows})")
-    p.add_argument("--test-lighting", type=_list(str), help=f"lighting families of the test windows (default "
-                   f"{','.join(d.test_lighting)})")
+    p.add_argument(
+        "--test-windows", type=int, help=f"test windows per draw, half background (default {d.test_windows})"
+    )
+    p.add_argument(
+        "--test-lighting",
+        type=_list(str),
+        help=f"lighting families of the test windows (default {','.join(d.test_lighting)})",
+    )
     p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
     p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
     p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
@@ -155,12 +200,16 @@ def _add_invariance(subparsers: argparse._SubParsersAction) -> None:
         "light with each method and report their agreement inside the object mask (mean pairwise normalized "
         "cross-correlation) beside the detail they keep; writes invariance.md, invariance.json and a figure.",
     )
-    p.add_argument("--data", required=True, type=Path, help="folder of NAME/NAME.<i>.png + NAME.mask.png (e.g. ../shared/data/psm)")
+    p.add_argument(
+        "--data", required=True, type=Path, help="folder of NAME/NAME.<i>.png + NAME.mask.png (e.g. ../shared/data/psm)"
+    )
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--methods", type=_list(str), default=None, help=_methods_help(None))
     p.add_argument("--scale", type=float, default=1.0, help="resize the photographs by this factor first (default 1)")
     p.add_argument("--erode", type=int, default=5, help="pixels removed from the mask border (default 5)")
-    p.add_argument("--figure-object", default=None, help="object shown in the figure (default: the first; 'all': every one)")
+    p.add_argument(
+        "--figure-object", default=None, help="object shown in the figure (default: the first; 'all': every one)"
+    )
     p.set_defaults(func=_run_invariance)
 
 
@@ -184,29 +233,60 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--quick", action="store_true", help="preset: tiny frames and few repeats (seconds; for tests)")
-    p.add_argument("--sizes", type=lambda s: [_size(v) for v in s.split(",") if v],
-                   help="comma-separated WIDTHxHEIGHT (default " + ",".join(f"{w}x{h}" for w, h in d.sizes) + ")")
+    p.add_argument(
+        "--sizes",
+        type=lambda s: [_size(v) for v in s.split(",") if v],
+        help="comma-separated WIDTHxHEIGHT (default " + ",".join(f"{w}x{h}" for w, h in d.sizes) + ")",
+    )
     p.add_argument("--colours", type=_list(str), help="gray and/or bgr (default both)")
-    p.add_argument("--methods", type=_list(str),
-                   help="comma-separated labels to run (default all; dog always runs). Labels: none, clahe, dog, "
-                   + ", ".join(f"'{v}'" for v in [*speed.GAIN_VARIANTS, *speed.ALCN_VARIANTS]) + ", 'alcn opencv', 'alcn torch cpu', 'alcn torch cuda' "
-                   "('alcn': the default, the gain Normalizer; the last three: the default on those backends)")
-    p.add_argument("--weights", help="weight file of the paper-model variants (default: the shipped alcn_normalizer.npz)")
-    p.add_argument("--lite-weights",
-                   help="weight file of the 'alcn lite' variants (default: the shipped alcn_normalizer_lite.npz)")
+    p.add_argument(
+        "--methods",
+        type=_list(str),
+        help="comma-separated labels to run (default all; dog always runs). Labels: none, clahe, dog, "
+        + ", ".join(f"'{v}'" for v in [*speed.GAIN_VARIANTS, *speed.ALCN_VARIANTS])
+        + ", 'alcn opencv', 'alcn torch cpu', 'alcn torch cuda' "
+        "('alcn': the default, the gain Normalizer; the last three: the default on those backends)",
+    )
+    p.add_argument(
+        "--weights", help="weight file of the paper-model variants (default: the shipped alcn_normalizer.npz)"
+    )
+    p.add_argument(
+        "--lite-weights", help="weight file of the 'alcn lite' variants (default: the shipped alcn_normalizer_lite.npz)"
+    )
     p.add_argument("--image", help="time on this image resized to each size (default: synthetic frames)")
     p.add_argument("--warmup", type=int, help=f"untimed runs per case (default {d.warmup})")
-    p.add_argument("--repeats", type=int, dest="max_repeats", help=f"at most this many timed runs per case (default {d.max_repeats})")
+    p.add_argument(
+        "--repeats",
+        type=int,
+        dest="max_repeats",
+        help=f"at most this many timed runs per case (default {d.max_repeats})",
+    )
     p.add_argument("--min-repeats", type=int, help=f"at least this many timed runs per case (default {d.min_repeats})")
-    p.add_argument("--budget", type=float, dest="budget_s",
-                   help=f"seconds per case before stopping at --min-repeats (default {d.budget_s:g})")
-    p.add_argument("--video-frames", type=int, help=f"frames of the video-memory test (0: skip; default {d.video_frames})")
-    p.add_argument("--video-size", type=_size, help="frame size of the video-memory test (default "
-                   + "x".join(map(str, d.video_size)) + ")")
-    p.add_argument("--video-budget", type=float, dest="video_budget_s",
-                   help=f"seconds per method of the video test (default {d.video_budget_s:g})")
-    p.add_argument("--video-methods", type=_list(str),
-                   help="labels run in the video test (default: alcn and the fastest ALCN variant)")
+    p.add_argument(
+        "--budget",
+        type=float,
+        dest="budget_s",
+        help=f"seconds per case before stopping at --min-repeats (default {d.budget_s:g})",
+    )
+    p.add_argument(
+        "--video-frames", type=int, help=f"frames of the video-memory test (0: skip; default {d.video_frames})"
+    )
+    p.add_argument(
+        "--video-size",
+        type=_size,
+        help="frame size of the video-memory test (default " + "x".join(map(str, d.video_size)) + ")",
+    )
+    p.add_argument(
+        "--video-budget",
+        type=float,
+        dest="video_budget_s",
+        help=f"seconds per method of the video test (default {d.video_budget_s:g})",
+    )
+    p.add_argument(
+        "--video-methods",
+        type=_list(str),
+        help="labels run in the video test (default: alcn and the fastest ALCN variant)",
+    )
     p.add_argument("--threads", type=int, help="OpenCV and torch threads (default: theirs)")
     p.set_defaults(func=_run_speed)
 
@@ -229,38 +309,88 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
     )
     d = relight.Settings()
     p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument("--data", nargs="+", type=Path, default=None,
-                   help="roots of multi-illumination sets (default: ../shared/data/webcam and ../shared/data/psm)")
-    p.add_argument("--methods", type=_list(str), default=list(relight.DEFAULT_METHODS),
-                   help=_methods_help(relight.DEFAULT_METHODS, "[+lstd] (+lstd: followed by a local standardization)"))
-    p.add_argument("--train-scenes", nargs="+", default=list(scenes.TRAIN_SCENES),
-                   help=f"scenes or data sets to tune on (default: {' '.join(scenes.TRAIN_SCENES)})")
-    p.add_argument("--test-scenes", nargs="+", default=list(scenes.TEST_SCENES),
-                   help=f"scenes or data sets evaluated only (default: {' '.join(scenes.TEST_SCENES)})")
-    p.add_argument("--leave-one-out", nargs="*", default=None, metavar="SCENE",
-                   help="evaluate each scene with parameters tuned on the others, instead of the split "
-                   f"(no scene given: {' '.join(relight.DEFAULT_LEAVE_ONE_OUT)})")
+    p.add_argument(
+        "--data",
+        nargs="+",
+        type=Path,
+        default=None,
+        help="roots of multi-illumination sets (default: ../shared/data/webcam and ../shared/data/psm)",
+    )
+    p.add_argument(
+        "--methods",
+        type=_list(str),
+        default=list(relight.DEFAULT_METHODS),
+        help=_methods_help(relight.DEFAULT_METHODS, "[+lstd] (+lstd: followed by a local standardization)"),
+    )
+    p.add_argument(
+        "--train-scenes",
+        nargs="+",
+        default=list(scenes.TRAIN_SCENES),
+        help=f"scenes or data sets to tune on (default: {' '.join(scenes.TRAIN_SCENES)})",
+    )
+    p.add_argument(
+        "--test-scenes",
+        nargs="+",
+        default=list(scenes.TEST_SCENES),
+        help=f"scenes or data sets evaluated only (default: {' '.join(scenes.TEST_SCENES)})",
+    )
+    p.add_argument(
+        "--leave-one-out",
+        nargs="*",
+        default=None,
+        metavar="SCENE",
+        help="evaluate each scene with parameters tuned on the others, instead of the split "
+        f"(no scene given: {' '.join(relight.DEFAULT_LEAVE_ONE_OUT)})",
+    )
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
     p.add_argument("--max-frames", type=int, default=20, help="frames per scene, evenly spaced (default 20; 0: all)")
     p.add_argument("--patch", type=int, default=d.patch, help=f"patch side in pixels (default {d.patch})")
-    p.add_argument("--patches", type=int, default=d.patches, help=f"patch locations per gallery frame (default {d.patches})")
-    p.add_argument("--gallery", type=int, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})")
-    p.add_argument("--max-pairs", type=int, default=d.max_pairs,
-                   help=f"frame pairs per scene and seed, drawn at random (default {d.max_pairs}; 0: all)")
-    p.add_argument("--keypoints", type=int, default=d.keypoints,
-                   help=f"ORB/SIFT keypoints per frame (default {d.keypoints})")
+    p.add_argument(
+        "--patches", type=int, default=d.patches, help=f"patch locations per gallery frame (default {d.patches})"
+    )
+    p.add_argument(
+        "--gallery", type=int, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})"
+    )
+    p.add_argument(
+        "--max-pairs",
+        type=int,
+        default=d.max_pairs,
+        help=f"frame pairs per scene and seed, drawn at random (default {d.max_pairs}; 0: all)",
+    )
+    p.add_argument(
+        "--keypoints", type=int, default=d.keypoints, help=f"ORB/SIFT keypoints per frame (default {d.keypoints})"
+    )
     p.add_argument("--no-keypoints", action="store_true", help="identification only (skip matching and pose)")
     p.add_argument("--no-tune", action="store_true", help="default parameters only")
-    p.add_argument("--tune-frames", type=int, default=8, help="frames per training scene the tuning scores on (default 8)")
+    p.add_argument(
+        "--tune-frames", type=int, default=8, help="frames per training scene the tuning scores on (default 8)"
+    )
     p.set_defaults(func=_run_relight)
 
 
 def _run_relight(args: argparse.Namespace) -> int:
-    settings = relight.Settings(patch=args.patch, patches=args.patches, gallery=args.gallery, max_pairs=args.max_pairs or None,
-                        keypoints=args.keypoints, keypoint_protocols=not args.no_keypoints)
-    result = relight.main(args.out, args.data, args.methods, args.train_scenes, args.test_scenes, args.leave_one_out, args.seeds,
-                  settings, args.max_frames or None, not args.no_tune, args.tune_frames,
-                  command=shlex.join(["alcn", *sys.argv[1:]]))
+    settings = relight.Settings(
+        patch=args.patch,
+        patches=args.patches,
+        gallery=args.gallery,
+        max_pairs=args.max_pairs or None,
+        keypoints=args.keypoints,
+        keypoint_protocols=not args.no_keypoints,
+    )
+    result = relight.main(
+        args.out,
+        args.data,
+        args.methods,
+        args.train_scenes,
+        args.test_scenes,
+        args.leave_one_out,
+        args.seeds,
+        settings,
+        args.max_frames or None,
+        not args.no_tune,
+        args.tune_frames,
+        command=shlex.join(["alcn", *sys.argv[1:]]),
+    )
     print((Path(args.out) / "relight.md").read_text(encoding="utf-8"))
     return 1 if all("errors" in r for r in result["methods"].values()) else 0
 
@@ -272,7 +402,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``bench`` subcommand and its sub-subcommands to the ``alcn`` command."""
     parser = subparsers.add_parser(
         "bench",
-        help="benchmarks: detection from few images, few-shot validation, invariance and identification under real light, speed",
+        help="benchmarks: detection from few images, few-shot validation, invariance and identification under "
+        "real light, speed",
         description="Benchmarks comparing ALCN with the classical normalizations (Rad et al. 2017, Sec. 4.3).",
     )
     benches = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True)

@@ -16,9 +16,18 @@ def _phos(args: argparse.Namespace) -> int:
     from alcn_cv.data import phos
 
     t = time.perf_counter()
-    out = phos.generate(args.out, args.n, args.seed, n_objects=args.objects, object_seed=args.object_seed,
-                        lighting=args.lighting, background_fraction=args.background_fraction,
-                        overwrite=args.overwrite, progress=True, workers=args.workers)
+    out = phos.generate(
+        args.out,
+        args.n,
+        args.seed,
+        n_objects=args.objects,
+        object_seed=args.object_seed,
+        lighting=args.lighting,
+        background_fraction=args.background_fraction,
+        overwrite=args.overwrite,
+        progress=True,
+        workers=args.workers,
+    )
     logger.info("wrote %d windows to %s in %.1f s", args.n, out, time.perf_counter() - t)
     return 0
 
@@ -27,9 +36,18 @@ def _detect(args: argparse.Namespace) -> int:
     from alcn_cv.data import detect
 
     t = time.perf_counter()
-    out = detect.generate(args.out, seed=args.seed, size=args.size, object_seed=args.object_seed,
-                          n_test=args.n_test, n_train=args.n_train, width=args.width, height=args.height,
-                          overwrite=args.overwrite, workers=args.workers)
+    out = detect.generate(
+        args.out,
+        seed=args.seed,
+        size=args.size,
+        object_seed=args.object_seed,
+        n_test=args.n_test,
+        n_train=args.n_train,
+        width=args.width,
+        height=args.height,
+        overwrite=args.overwrite,
+        workers=args.workers,
+    )
     logger.info("wrote the detection benchmark to %s in %.1f s", out, time.perf_counter() - t)
     return 0
 
@@ -38,10 +56,18 @@ def _pose(args: argparse.Namespace) -> int:
     from alcn_cv.data import pose
 
     t = time.perf_counter()
-    out = pose.generate(args.out, seed=args.seed, size=args.size, n_frames=args.frames, n_test=args.n_test,
-                        clutter=not args.no_clutter, training_light=args.training_light,
-                        train_sweeps=args.train_sweeps or pose.TRAIN_SWEEPS, overwrite=args.overwrite,
-                        workers=args.workers)
+    out = pose.generate(
+        args.out,
+        seed=args.seed,
+        size=args.size,
+        n_frames=args.frames,
+        n_test=args.n_test,
+        clutter=not args.no_clutter,
+        training_light=args.training_light,
+        train_sweeps=args.train_sweeps or pose.TRAIN_SWEEPS,
+        overwrite=args.overwrite,
+        workers=args.workers,
+    )
     logger.info("wrote the pose sequences to %s in %.1f s", out, time.perf_counter() - t)
     return 0
 
@@ -50,8 +76,15 @@ def _scenes(args: argparse.Namespace) -> int:
     from alcn_cv.data import relief_scenes
 
     t = time.perf_counter()
-    out = relief_scenes.generate(args.out, scenes=args.scenes, frames=args.frames, size=args.size, seed=args.seed,
-                                 overwrite=args.overwrite, workers=args.workers)
+    out = relief_scenes.generate(
+        args.out,
+        scenes=args.scenes,
+        frames=args.frames,
+        size=args.size,
+        seed=args.seed,
+        overwrite=args.overwrite,
+        workers=args.workers,
+    )
     logger.info("wrote the rendered scenes to %s in %.1f s", out, time.perf_counter() - t)
     return 0
 
@@ -77,36 +110,53 @@ def _compare_psm(args: argparse.Namespace) -> int:
 def add_parser(subparsers) -> None:
     """Add the ``data`` subcommand and its sub-subcommands to the ``alcn`` parser."""
     p = subparsers.add_parser(
-        "data", help="generate training data, the detection benchmark and pose sequences",
+        "data",
+        help="generate training data, the detection benchmark and pose sequences",
         description="The illumination data engine: rendered Normalizer training windows (Phos-like), an "
         "ALCN-2D-like detection benchmark (COCO) and Box/Duck-like pose sequences (BOP + COLMAP), all "
         "deterministic for a seed.",
     )
     sub = p.add_subparsers(dest="data_command", metavar="DATA_COMMAND", required=True)
 
-    q = sub.add_parser("phos", help="64x64 Normalizer training windows (windows.npz + manifest.json)",
-                       description="Render labelled 64x64 grayscale windows of textured relief objects under "
-                       "many lightings (Phos-like), plus background windows.")
+    q = sub.add_parser(
+        "phos",
+        help="64x64 Normalizer training windows (windows.npz + manifest.json)",
+        description="Render labelled 64x64 grayscale windows of textured relief objects under "
+        "many lightings (Phos-like), plus background windows.",
+    )
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("-n", type=int, default=100_000, help="number of windows (default 100000)")
     q.add_argument("--seed", type=int, default=0, help="seed of the windows (default 0)")
     q.add_argument("--objects", type=int, default=100, help="number of catalogue objects (labels 1..N; default 100)")
     q.add_argument("--object-seed", type=int, default=0, help="seed of the object catalogue (default 0)")
-    q.add_argument("--lighting", default="random",
-                   help="'random' or comma-separated families: ambient,dark,bright,side,shadow,spot,point,"
-                   "colour,mixed (default random)")
-    q.add_argument("--background-fraction", type=float, default=0.35, help="fraction of background windows (default 0.35)")
+    q.add_argument(
+        "--lighting",
+        default="random",
+        help="'random' or comma-separated families: ambient,dark,bright,side,shadow,spot,point,"
+        "colour,mixed (default random)",
+    )
+    q.add_argument(
+        "--background-fraction", type=float, default=0.35, help="fraction of background windows (default 0.35)"
+    )
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    q.add_argument("--workers", type=int, default=1,
-                   help="worker processes (default 1; the output does not depend on it)")
+    q.add_argument(
+        "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
+    )
     q.set_defaults(func=_phos)
 
-    q = sub.add_parser("detect", help="ALCN-2D-like detection benchmark (COCO train.json/test.json)",
-                       description="Render 3 objects (matte, velvet-like, specular): training images under one "
-                       "lighting and test images with clutter under varied lighting, in COCO format.")
+    q = sub.add_parser(
+        "detect",
+        help="ALCN-2D-like detection benchmark (COCO train.json/test.json)",
+        description="Render 3 objects (matte, velvet-like, specular): training images under one "
+        "lighting and test images with clutter under varied lighting, in COCO format.",
+    )
     q.add_argument("--out", required=True, help="output folder")
-    q.add_argument("--size", default="default", choices=["default", "small"],
-                   help="preset size (default: default; small renders in seconds, for tests)")
+    q.add_argument(
+        "--size",
+        default="default",
+        choices=["default", "small"],
+        help="preset size (default: default; small renders in seconds, for tests)",
+    )
     q.add_argument("--seed", type=int, default=0, help="seed of the images (default 0)")
     q.add_argument("--object-seed", type=int, default=0, help="seed of the three objects (default 0)")
     q.add_argument("--n-test", type=int, default=None, help="number of test images (default: 120; small 4)")
@@ -114,61 +164,93 @@ def add_parser(subparsers) -> None:
     q.add_argument("--width", type=int, default=None, help="image width (default: 1280; small 320)")
     q.add_argument("--height", type=int, default=None, help="image height (default: 800; small 200)")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    q.add_argument("--workers", type=int, default=1,
-                   help="worker processes (default 1; the output does not depend on it)")
+    q.add_argument(
+        "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
+    )
     q.set_defaults(func=_detect)
 
-    q = sub.add_parser("pose", help="box and duck pose sequences (BOP layout + COLMAP model)",
-                       description="Render a registered training sequence and 8 test sequences (#1 training "
-                       "lighting, #2-#4 mild, #5-#8 drastic changes) of a textured box and a duck.")
+    q = sub.add_parser(
+        "pose",
+        help="box and duck pose sequences (BOP layout + COLMAP model)",
+        description="Render a registered training sequence and 8 test sequences (#1 training "
+        "lighting, #2-#4 mild, #5-#8 drastic changes) of a textured box and a duck.",
+    )
     q.add_argument("--out", required=True, help="dataset root")
-    q.add_argument("--size", default="default", choices=["default", "small"],
-                   help="preset size (default: default; small renders in seconds, for tests)")
+    q.add_argument(
+        "--size",
+        default="default",
+        choices=["default", "small"],
+        help="preset size (default: default; small renders in seconds, for tests)",
+    )
     q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    q.add_argument("--frames", type=int, default=None,
-                   help="frames per test sequence and per loop of the training sequence (default: 60; small 3)")
+    q.add_argument(
+        "--frames",
+        type=int,
+        default=None,
+        help="frames per test sequence and per loop of the training sequence (default: 60; small 3)",
+    )
     q.add_argument("--n-test", type=int, default=None, help="number of test sequences (default 8)")
     q.add_argument("--no-clutter", action="store_true", help="no clutter on the table")
-    q.add_argument("--training-light", action="store_true",
-                   help="render every test sequence under the training lighting: the control of the same seed's "
-                   "dataset (same scenes, trajectories and noise), to tell what the light costs a method from what "
-                   "the scene and viewpoints do")
-    q.add_argument("--train-sweeps", type=float, nargs="+", default=None, metavar="N",
-                   help="the training sequence's loops around the box, --frames views each, by the up-and-down sweeps "
-                   "of their elevation (30-60 deg) (default: 1 3, once as the test trajectories, then three times so "
-                   "that every stretch of azimuth is seen from high and low; 1: the single loop of datasets made "
-                   "before 2026-11-24); the test sequences do not depend on it")
+    q.add_argument(
+        "--training-light",
+        action="store_true",
+        help="render every test sequence under the training lighting: the control of the same seed's "
+        "dataset (same scenes, trajectories and noise), to tell what the light costs a method from what "
+        "the scene and viewpoints do",
+    )
+    q.add_argument(
+        "--train-sweeps",
+        type=float,
+        nargs="+",
+        default=None,
+        metavar="N",
+        help="the training sequence's loops around the box, --frames views each, by the up-and-down sweeps "
+        "of their elevation (30-60 deg) (default: 1 3, once as the test trajectories, then three times so "
+        "that every stretch of azimuth is seen from high and low; 1: the single loop of datasets made "
+        "before 2026-11-24); the test sequences do not depend on it",
+    )
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    q.add_argument("--workers", type=int, default=1,
-                   help="worker processes (default 1; the output does not depend on it)")
+    q.add_argument(
+        "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
+    )
     q.set_defaults(func=_pose)
 
-    q = sub.add_parser("scenes", help="registered scenes under many lights, to train the gain Normalizer",
-                       description="Render fixed views of textured relief scenes, each under many lightings "
-                       "(directional, spot, point, cast shadows, dark, over-exposed), one folder of registered "
-                       "grayscale frames per scene: the layout `alcn train-real-light --rendered` reads.")
+    q = sub.add_parser(
+        "scenes",
+        help="registered scenes under many lights, to train the gain Normalizer",
+        description="Render fixed views of textured relief scenes, each under many lightings "
+        "(directional, spot, point, cast shadows, dark, over-exposed), one folder of registered "
+        "grayscale frames per scene: the layout `alcn train-real-light --rendered` reads.",
+    )
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("--scenes", type=int, default=24, help="number of scenes (default 24)")
     q.add_argument("--frames", type=int, default=12, help="lightings (frames) per scene (default 12)")
     q.add_argument("--size", type=int, default=320, help="side of the square frames in pixels (default 320)")
     q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    q.add_argument("--workers", type=int, default=1,
-                   help="worker processes (default 1; the output does not depend on it)")
+    q.add_argument(
+        "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
+    )
     q.set_defaults(func=_scenes)
 
-    q = sub.add_parser("preview", help="contact sheet of a dataset with its ground truth drawn",
-                       description="Write a PNG contact sheet of a data-engine folder, a COCO JSON file or a "
-                       "BOP scene folder, with boxes, projected model boxes or labels drawn.")
+    q = sub.add_parser(
+        "preview",
+        help="contact sheet of a dataset with its ground truth drawn",
+        description="Write a PNG contact sheet of a data-engine folder, a COCO JSON file or a "
+        "BOP scene folder, with boxes, projected model boxes or labels drawn.",
+    )
     q.add_argument("dataset", help="dataset folder, COCO .json file or BOP scene folder")
     q.add_argument("--out", required=True, help="output PNG")
     q.add_argument("-n", type=int, default=16, help="about how many samples to show (default 16)")
     q.set_defaults(func=_preview)
 
-    q = sub.add_parser("compare-psm", help="intensity statistics of renderings vs. the real PSM photographs",
-                       description="Compare mean, contrast, dynamic range, saturation, local contrast and "
-                       "across-light changes of rendered images with ../shared/data/psm; writes a figure and a "
-                       "table.")
+    q = sub.add_parser(
+        "compare-psm",
+        help="intensity statistics of renderings vs. the real PSM photographs",
+        description="Compare mean, contrast, dynamic range, saturation, local contrast and "
+        "across-light changes of rendered images with ../shared/data/psm; writes a figure and a "
+        "table.",
+    )
     q.add_argument("--psm", default=None, help="PSM folder (default: <shared data>/psm)")
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("--seed", type=int, default=0, help="seed of the renderings (default 0)")

@@ -46,7 +46,10 @@ _CANONICAL = 96
 
 
 def render_scene(
-    rng: np.random.Generator, size: int, frames: int, objects: tuple[int, int] = (3, 7),
+    rng: np.random.Generator,
+    size: int,
+    frames: int,
+    objects: tuple[int, int] = (3, 7),
     families: Sequence[str] = FAMILIES,
 ) -> tuple[np.ndarray, list[str]]:
     """One scene of ``size x size`` pixels under ``frames`` lightings.
@@ -62,12 +65,21 @@ def render_scene(
         ``(frames, size, size)`` uint8 grayscale frames and the family of each.
     """
     if size < 32 or frames < 2 or not 1 <= objects[0] <= objects[1]:
-        raise InputError(f"need size >= 32, frames >= 2 and 1 <= objects[0] <= objects[1]; got {size}, {frames}, {objects}")
+        raise InputError(
+            f"need size >= 32, frames >= 2 and 1 <= objects[0] <= objects[1]; got {size}, {frames}, {objects}"
+        )
     albedo, height, material = background_surface(rng, size, size, random_texture(rng, size, p_photo=0.6))
     for _ in range(int(rng.integers(objects[0], objects[1] + 1))):
         extent = rng.uniform(0.15, 0.4) * size
-        paste(albedo, height, material, make_object(rng, _CANONICAL), tuple(rng.uniform(0.1, 0.9, 2) * size),
-              extent / (0.92 * _CANONICAL), rng.uniform(0, 360))
+        paste(
+            albedo,
+            height,
+            material,
+            make_object(rng, _CANONICAL),
+            tuple(rng.uniform(0.1, 0.9, 2) * size),
+            extent / (0.92 * _CANONICAL),
+            rng.uniform(0, 360),
+        )
     names = [str(families[int(i)]) for i in rng.integers(len(families), size=frames)]
     relief = float(height.max())
     lightings = [sample_lighting(rng, name, size, size, relief=relief) for name in names]
@@ -81,8 +93,15 @@ def _scene_job(job: tuple[int, int, int, int]) -> tuple[np.ndarray, list[str]]:
 
 
 def generate(
-    out_dir: str | os.PathLike, scenes: int = 24, frames: int = 12, size: int = 320, seed: int = 0, *,
-    overwrite: bool = False, workers: int = 1, progress: bool = True,
+    out_dir: str | os.PathLike,
+    scenes: int = 24,
+    frames: int = 12,
+    size: int = 320,
+    seed: int = 0,
+    *,
+    overwrite: bool = False,
+    workers: int = 1,
+    progress: bool = True,
 ) -> Path:
     """Render ``scenes`` registered scenes into ``out_dir`` (written atomically; see the module).
 
@@ -102,7 +121,14 @@ def generate(
             for j, frame in enumerate(stack):
                 cv2.imwrite(str(folder / f"frame_{j:02d}.png"), frame)
             lights[folder.name] = names
-        write_json(tmp / "manifest.json", make_manifest(
-            KIND, seed, {"scenes": scenes, "frames": frames, "size": size, "families": list(FAMILIES)}, lights=lights))
+        write_json(
+            tmp / "manifest.json",
+            make_manifest(
+                KIND,
+                seed,
+                {"scenes": scenes, "frames": frames, "size": size, "families": list(FAMILIES)},
+                lights=lights,
+            ),
+        )
     logger.info("wrote %d scenes of %d frames (%dx%d) to %s", scenes, frames, size, size, out_dir)
     return Path(out_dir)
