@@ -10,7 +10,7 @@ torch = pytest.importorskip("torch")
 import cv2  # noqa: E402
 import torch.nn.functional as F  # noqa: E402
 
-from alcn_cv.bench.speed import synthetic_frame  # noqa: E402
+from alcn_cv.data.frames import synthetic_frame  # noqa: E402
 from alcn_cv.enhance.alcn import ALCN  # noqa: E402
 from alcn_cv.filters.gaussian_mixture import alcn_filter, alcn_filter_grid, upsample_grid  # noqa: E402
 from alcn_cv.nets.gain import GainNormalizer  # noqa: E402

@@ -80,14 +80,6 @@ def test_time_calls_counts():
     assert order == ["a", "b", "a", "b"] and [len(t) for t in rounds.values()] == [2, 2]  # in turns
 
 
-def test_synthetic_frames():
-    gray, bgr = speed.synthetic_frame(64, 48, False), speed.synthetic_frame(64, 48, True)
-    assert gray.shape == (48, 64) and bgr.shape == (48, 64, 3) and gray.dtype == bgr.dtype == np.uint8
-    assert gray.std() > 10
-    np.testing.assert_array_equal(gray, speed.synthetic_frame(64, 48, False))
-    assert not np.array_equal(gray, speed.synthetic_frame(64, 48, False, t=1.0))
-
-
 def test_bad_arguments(tmp_path):
     with pytest.raises(InputError, match="unknown method"):
         speed.main(tmp_path, dataclasses.replace(speed.presets()["quick"], methods=["alcn turbo"]))

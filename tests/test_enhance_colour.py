@@ -7,7 +7,8 @@ import cv2
 import numpy as np
 import pytest
 
-from alcn_cv.bench.speed import lab_round_trip, synthetic_frame
+from alcn_cv.bench.speed import lab_round_trip
+from alcn_cv.data.frames import synthetic_frame
 from alcn_cv.enhance.registry import available, from_spec
 from alcn_cv.io import iter_frames
 

@@ -12,7 +12,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 import alcn_cv  # noqa: E402
-from alcn_cv.bench.speed import synthetic_frame  # noqa: E402
+from alcn_cv.data.frames import synthetic_frame  # noqa: E402
 from alcn_cv.cli import main as cli  # noqa: E402
 from alcn_cv.enhance.alcn import MODELS, ALCN  # noqa: E402
 from alcn_cv.nets.gain import GainNormalizer  # noqa: E402

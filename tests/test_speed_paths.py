@@ -11,7 +11,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 import alcn_cv  # noqa: E402
-from alcn_cv.bench.speed import synthetic_frame  # noqa: E402
+from alcn_cv.data.frames import synthetic_frame  # noqa: E402
 from alcn_cv.enhance import base  # noqa: E402
 from alcn_cv.enhance.alcn import _integer_zoom  # noqa: E402
 from alcn_cv.enhance.registry import from_spec  # noqa: E402
