@@ -314,7 +314,7 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         nargs="+",
         type=Path,
         default=None,
-        help="roots of multi-illumination sets (default: ../shared/data/webcam and ../shared/data/psm)",
+        help="folders of registered multi-light scenes (default: ../shared/data/webcam and ../shared/data/psm)",
     )
     p.add_argument(
         "--methods",

@@ -2,7 +2,7 @@
 
 Every method normalizes whole grayscale frames through its own ``apply`` (uint8 in, float32
 out, the method's fixed output map), once per scene; the normalized frames are then reused by
-every protocol and seed. Scenes are registered multi-illumination sets
+every protocol and seed. Scenes are registered multi-light scenes
 (:mod:`alcn_cv.data.scenes`): the outdoor webcams of TILDE (Verdie et al., CVPR 2015)
 and photometric-stereo objects. Per scene and seed, ``gallery`` frames are drawn and each is
 paired with every other frame of the scene (at most ``max_pairs`` pairs, drawn at random).
@@ -387,7 +387,7 @@ def main(
 
     Args:
         out_dir: output folder (created).
-        data: roots of registered multi-illumination sets (default: the shared ``webcam`` and ``psm``).
+        data: folders of registered multi-light scenes (default: the shared ``webcam`` and ``psm``).
         methods: specs ``NAME[:KEY=VALUE...]`` (:func:`~alcn_cv.enhance.registry.from_spec`),
             optionally ending in ``+lstd`` (:class:`LocallyStandardized`).
         train_scenes: scenes (or data-set names) the parameters are tuned on.
