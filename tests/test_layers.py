@@ -68,6 +68,15 @@ def _syntax_tree(path: Path) -> ast.Module:
     return tree
 
 
+def _from_module(node: ast.ImportFrom, package: str) -> str:
+    """The absolute name of the module of ``from MODULE import ...`` in ``package`` (relative ones resolved)."""
+    base = node.module or ""
+    if not node.level:
+        return base
+    parent = package.split(".")[: len(package.split(".")) - node.level + 1]
+    return ".".join(parent + ([base] if base else []))
+
+
 def _imported_names(module: str) -> set[str]:
     """The absolute names ``module`` imports: ``from a.b import c`` gives ``a.b.c`` when that is a
     module of the packages, else ``a.b``."""
@@ -78,10 +87,7 @@ def _imported_names(module: str) -> set[str]:
         if isinstance(node, ast.Import):
             names.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parent = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join(parent + ([base] if base else []))
+            base = _from_module(node, package)
             for alias in node.names:
                 names.add(f"{base}.{alias.name}" if f"{base}.{alias.name}" in MODULES else base)
     return names
@@ -216,10 +222,7 @@ def _private_uses(path: Path, module: str) -> list[str]:
                 if alias.name in MODULES:
                     modules[alias.asname or alias.name] = alias.name
         elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parent = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join(parent + ([base] if base else []))
+            base = _from_module(node, package)
             for alias in node.names:
                 if f"{base}.{alias.name}" in MODULES:
                     modules[alias.asname or alias.name] = f"{base}.{alias.name}"

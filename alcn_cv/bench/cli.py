@@ -43,6 +43,16 @@ def _methods_help(default: Sequence[str] | None, suffix: str = "") -> str:
     )
 
 
+def _add_policies(p: argparse.ArgumentParser, default: Sequence[str]) -> None:
+    """The ``--policy`` option of the benchmarks that train a detector."""
+    p.add_argument(
+        "--policy",
+        type=_list(str),
+        dest="policies",
+        help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(default)})",
+    )
+
+
 def _sweep(text: str) -> list[tuple[int, int]]:
     try:
         return [tuple(int(v) for v in item.lower().split("x")) for item in text.split(",") if item.strip()]  # type: ignore[misc]
@@ -91,12 +101,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
     p.add_argument("--real-images", type=_list(int), help="real training images per object (default 1,10)")
-    p.add_argument(
-        "--policy",
-        type=_list(str),
-        dest="policies",
-        help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(d.policies)})",
-    )
+    _add_policies(p, d.policies)
     p.add_argument(
         "--positives",
         type=int,
@@ -154,12 +159,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
-    p.add_argument(
-        "--policy",
-        type=_list(str),
-        dest="policies",
-        help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(d.policies)})",
-    )
+    _add_policies(p, d.policies)
     p.add_argument(
         "--draws", type=int, help=f"repetitions with new objects, windows and detector seed (default {d.draws})"
     )
