@@ -31,7 +31,7 @@ def _scenes(root):
 def test_layout_and_schemas(plain):
     scenes = _scenes(plain)
     assert [s.relative_to(plain).as_posix() for s in scenes] == (
-        ["test/%06d" % k for k in range(1, 9)] + ["train/000001"])
+        [f"test/{k:06d}" for k in range(1, 9)] + ["train/000001"])
     for s in scenes:
         jsonschema.validate(json.loads((s / "scene_camera.json").read_text()), schema("bop_scene_camera"))
         jsonschema.validate(json.loads((s / "scene_gt.json").read_text()), schema("bop_scene_gt"))

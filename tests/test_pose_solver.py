@@ -46,7 +46,7 @@ def test_too_few_or_random_matches_are_lost_not_wrong():
     uv = rng.uniform([0, 0], [640, 480], (60, 2))
     assert not solver.solve(pts, uv).ok
     with pytest.raises(InputError):
-        est.R
+        _ = est.R
 
 
 def test_prior_is_used_and_tracker_logs_lost_and_recovered():

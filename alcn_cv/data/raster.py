@@ -150,7 +150,7 @@ def merge_meshes(meshes: list[Mesh]) -> Mesh:
                 np.concatenate(cols), None, meshes[0].material)
 
 
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.0])):
+def look_at(eye: np.ndarray, target: np.ndarray, up: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 1.0)):
     """World-to-camera pose of an OpenCV camera (x right, y down, z forward) at ``eye``.
 
     Returns:

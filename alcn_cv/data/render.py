@@ -266,7 +266,7 @@ def shade(
         # Shade only the items that have a light in this slot (slots 2 and 3 are often empty).
         sel = slice(None) if active.all() else np.nonzero(active)[0]
 
-        def g(a):
+        def g(a, sel=sel):
             return a if a.shape[0] == 1 else a[sel]
 
         Px, Py, Pz, Nx, Ny, Nz, Vx, Vy, Vz = (g(a) for a in (px, py, pz, nx, ny, nz, vx, vy, vz))
