@@ -219,9 +219,9 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
         f"- **Machine:** {describe_machine(result['machine'])}",
         f"- **Command:** `{result['command']}`",
         f"- **Settings:** {s['draws']} draws (draw d: objects of catalogue seed {s['object_seed']} + d, windows and "
-        f"detector seed d); {s['objects']} objects, {s['per_image']} synthetic windows per image and as many background "
-        f"windows; {s['test_windows']} test windows; detector {s['epochs']} epochs, batch {s['batch_size']}, Adam lr "
-        f"{s['lr']}. Total time {result['seconds']:.0f} s.",
+        f"detector seed d); {s['objects']} objects, {s['per_image']} synthetic windows per image and as many "
+        f"background windows; {s['test_windows']} test windows; detector {s['epochs']} epochs, batch "
+        f"{s['batch_size']}, Adam lr {s['lr']}. Total time {result['seconds']:.0f} s.",
         "- **Input policies** (the same for every method):",
         *[f"  - `{p}`: {POLICY_DESCRIPTIONS[p]}" for p in s["policies"]],
         "",

@@ -118,7 +118,8 @@ def write_report(result: dict[str, Any], out: Path) -> None:
                 for scene, err in r.get("errors", {}).items()]
     text = [
         "# Normalizations on real changes of light (`alcn bench relight`)\n",
-        f"Command: `{result['command'] or 'alcn_cv.bench.relight.main(...)'}`; wall time {result['seconds'] / 60:.1f} min.  ",
+        f"Command: `{result['command'] or 'alcn_cv.bench.relight.main(...)'}`; "
+        f"wall time {result['seconds'] / 60:.1f} min.  ",
         f"Machine: {describe_machine(result['machine'])}.\n",
         f"Split: {split['mode']}; test {', '.join(split['test'])}"
         + (f"; train (tuning) {', '.join(split['train'])}" if split["train"] else "") + ".  ",
