@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ast
 import re
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -17,28 +18,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("alcn_cv", "pose", "calib")
 
-#: What an OpenCV app imports: the apply() contract and the methods, the Gaussian mixture, the
-#: Normalizer networks and runtimes, the weight file, io, errors, the command line and
-#: ``alcn normalize`` (files, or folders for every file in them).
-RUNTIME = (
-    "alcn_cv/__init__.py",
-    "alcn_cv/checks.py",
-    "alcn_cv/cli.py",
-    "alcn_cv/errors.py",
-    "alcn_cv/extras.py",
-    "alcn_cv/io.py",
-    "alcn_cv/weight_file.py",
-    "alcn_cv/enhance/",
-    "alcn_cv/filters/",
-    "alcn_cv/nets/__init__.py",
-    "alcn_cv/nets/normalizer.py",
-    "alcn_cv/nets/lite.py",
-    "alcn_cv/nets/gain.py",
-    "alcn_cv/nets/opencv_runtime.py",
-    "alcn_cv/nets/device.py",
-    "alcn_cv/commands/__init__.py",
-    "alcn_cv/commands/normalize.py",
-)
+#: The runtime, what an OpenCV app imports: the files of pyproject.toml's ``[tool.mypy]`` (files,
+#: or folders for every file in them).
+RUNTIME = tuple(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["mypy"]["files"])
 
 
 def _module_files() -> dict[str, Path]:
