@@ -21,6 +21,14 @@ trained or tuned on.
 A folder's images named ``NAME.<index>.<ext>`` form the scene ``NAME`` (ordered by index); its
 other images form the scene named after the folder (ordered by name). Frames are read with
 :func:`alcn_cv.io.read_image` as uint8 grayscale (16-bit images rounded to 8 bits).
+
+Example (with the shared data)::
+
+    from alcn_cv.data.scenes import load_scenes, scene_dirs, select_scenes, shared_root
+
+    train = load_scenes(scene_dirs())  # TRAIN_SCENES, as the trainer reads them
+    test = select_scenes(load_scenes([shared_root("webcam"), shared_root("psm")]), ["mexico", "psm"])
+    frames = test[0].unit_frames()  # (n, H, W) float32 in [0, 1]
 """
 
 from __future__ import annotations
