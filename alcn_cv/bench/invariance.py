@@ -276,7 +276,8 @@ def main(
         f"- **Data:** `{result['data']}`\n"
         f"- **Settings:** scale {scale}, mask eroded by {erode} px, methods {', '.join(methods)}\n\n"
         f"Per object, every method normalizes its photographs under "
-        f"{', '.join(f'{o.name}: {len(o.images)}' for o in objects)} lights (scale {scale}, mask eroded by {erode} px). **agreement**: {result['metrics']['agreement']} "
+        f"{', '.join(f'{o.name}: {len(o.images)}' for o in objects)} lights (scale {scale}, mask eroded by "
+        f"{erode} px). **agreement**: {result['metrics']['agreement']} "
         f"(1 = light removed). **detail**: {result['metrics']['detail']} (low = flattened; noise is high).\n\n"
         + markdown_table(headers, table)
         + ("\n" + "\n".join(failures) + "\n" if failures else "")
