@@ -1,8 +1,14 @@
-"""The training configuration: one TOML schema, presets, and command-line overrides.
+"""The training configurations, their named presets (hloc's ``confs``) and ``--set`` overrides.
 
-A configuration file is TOML (read with :mod:`tomllib`) with the tables below; every key is
-optional and defaults to the ``default`` preset. ``alcn train --print-config`` writes the
-effective configuration as TOML, a complete, commented-free starting point.
+Each training command has one configuration class whose defaults are the recipe of its shipped
+weight file, and a dict of named presets: :data:`TRAIN_CONFS` (``alcn train --conf paper``,
+``alcn_normalizer.npz``), :data:`REAL_LIGHT_CONFS` (``alcn train-real-light --conf gain``,
+``alcn_normalizer_gain.npz``) and :data:`DISTILL_CONFS` (``alcn distill --conf lite|gain-lite``).
+:func:`with_settings` applies ``KEY=VALUE`` overrides (dotted keys, values read as TOML and
+checked against the field's type) to any of them. The module imports no torch.
+
+The keys of :class:`TrainConfig` (also readable from a TOML file with the tables below;
+``alcn train --print-config`` writes the effective configuration as TOML):
 
 ``seed`` (int)
     Seed of everything random in a run: network initialisation, shuffling, augmentation and,
@@ -29,9 +35,8 @@ effective configuration as TOML, a complete, commented-free starting point.
     raw windows, the comparison that tells whether the learned Normalizer helps.
     ``num_kernels`` (int), ``sigma_step`` (float): the Gaussian basis, ``sigma_i = i * step``.
     ``channels`` (list of 2 ints), ``hidden`` (int), ``activation`` (``"tanh"``, the paper's, or
-    ``"relu"``): the Normalizer; the paper's is ``[20, 50]``, 1024 (the ``paper`` preset), the
-    default ``[10, 20]``, 256 is five times cheaper (it predicts 10 numbers per window), which
-    is what lets it train in 30 minutes on 2 shared CPU cores and run faster in ``apply``.
+    ``"relu"``): the Normalizer; ``[10, 20]``, 256 (the shipped file) is five times cheaper than
+    the paper's ``[20, 50]``, 1024 (the ``paper-full`` preset), so that it trains on a CPU.
     ``output_scale`` (float): fixed factor on its outputs.
     ``init`` (``"dog"`` or ``"random"``): start the Normalizer at the DoG below (the last
     layer's weights at zero, its bias the DoG) or with every window's weights near zero.
@@ -84,13 +89,15 @@ import dataclasses
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from collections.abc import Sequence
+from typing import Any, TypeVar
 
 from alcn_cv.data.lighting import LIGHT_FAMILIES
 from alcn_cv.errors import InputError
 
-__all__ = ["PRESETS", "REAL_LIGHT_SCENES", "FewShotSetup", "RealLightConfig", "TrainConfig", "dump_toml", "load_config",
-           "real_light_scene_dirs"]
+__all__ = ["DISTILL_CONFS", "REAL_LIGHT_CONFS", "REAL_LIGHT_SCENES", "TRAIN_CONFS", "FewShotSetup", "GainDistillConfig",
+           "LiteDistillConfig", "RealLightConfig", "TrainConfig", "dump_toml", "load_config", "preset",
+           "real_light_scene_dirs", "with_settings"]
 
 
 @dataclass
@@ -203,11 +210,12 @@ class TrainConfig:
         return self.seed if self.data.seed < 0 else self.data.seed
 
 
-#: Named configurations (overrides of the defaults). ``default``: about 30 minutes on 2 CPU
-#: cores; ``paper``: the paper's scale (500,000 windows, the paper's Normalizer), for a GPU.
-PRESETS: dict[str, dict[str, Any]] = {
-    "default": {},
-    "paper": {
+#: ``alcn train`` presets, as overrides of :class:`TrainConfig`'s defaults. ``paper``: the recipe of
+#: the shipped ``alcn_normalizer.npz`` (the defaults; about 30 minutes on 2 CPU cores);
+#: ``paper-full``: the paper's widths and data scale (Sec. 4.2), for a GPU (no shipped file).
+TRAIN_CONFS: dict[str, dict[str, Any]] = {
+    "paper": {},
+    "paper-full": {
         "data": {"n_train": 500_000, "n_val": 20_000},
         "model": {"channels": [20, 50], "hidden": 1024, "detector_hidden": 1024},
         "fewshot": {"n_test": 10_000, "dog": [[0.5, 1.0], [0.5, 1.5], [0.5, 2.5], [1.0, 2.0], [1.0, 3.0]]},
@@ -227,14 +235,18 @@ _CHOICES = {
     "optim.schedule": ("cosine", "step", "constant"),
     "run.device": ("cpu", "cuda"),
 }
+#: Lists of a fixed length (the others take any length).
+_PAIRS = ("model.channels", "model.dog", "model.detector_channels", "data.gain_jitter")
 
 
-def _type_name(kind: Any) -> str:
-    return getattr(kind, "__name__", str(kind))
+def _type_name(value: Any) -> str:
+    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "a list",
+            tuple: "a list", dict: "a table"}.get(type(value), type(value).__name__)
 
 
 def _coerce(key: str, value: Any, default: Any) -> Any:
-    """Check ``value`` against the type of ``default``; ints are accepted for floats."""
+    """``value`` checked against the type of ``default`` (ints are accepted for floats, lists for
+    tuples; list items against the default's first item)."""
     if isinstance(default, bool):
         ok = isinstance(value, bool)
     elif isinstance(default, float):
@@ -242,41 +254,88 @@ def _coerce(key: str, value: Any, default: Any) -> Any:
         value = float(value) if ok else value
     elif isinstance(default, int):
         ok = isinstance(value, int) and not isinstance(value, bool)
-    elif isinstance(default, list):
-        free = key in _FREE_LISTS
-        ok = isinstance(value, list) and (free or len(value) == len(default))
+    elif isinstance(default, (list, tuple)):
+        ok = isinstance(value, (list, tuple))
         if ok and default:
-            value = [_coerce(f"{key}[{i}]" if isinstance(default[0], list) else key, v, default[0])
-                     for i, v in enumerate(value)]
+            value = [_coerce(key, v, default[0]) for v in value]
+        if ok:
+            value = type(default)(value)
     else:
         ok = isinstance(value, type(default))
     if not ok:
-        fixed_list = isinstance(default, list) and key not in _FREE_LISTS
-        what = f"a list of {len(default)}" if fixed_list else _type_name(type(default))
-        raise InputError(f"config key {key!r} must be {what}, got {value!r}")
+        raise InputError(f"config key {key!r} must be {_type_name(default)}, got {value!r}")
     return value
 
 
-_FREE_LISTS = {"data.train_lighting", "data.val_lighting", "fewshot.test_lighting", "fewshot.dog"}
-
-
 def _merge(obj: Any, values: dict[str, Any], prefix: str = "") -> None:
+    """Set the keys of ``values`` on the dataclass or dict ``obj`` (nested tables recursively)."""
     if not isinstance(values, dict):
         raise InputError(f"config key {prefix.rstrip('.')!r} must be a table, got {values!r}")
-    names = {f.name for f in dataclasses.fields(obj)}
+    names = set(obj) if isinstance(obj, dict) else {f.name for f in dataclasses.fields(obj)}
     for key, value in values.items():
         full = prefix + key
         if key not in names:
             raise InputError(f"unknown config key {full!r}; known keys here: {', '.join(sorted(names))}")
-        current = getattr(obj, key)
-        if dataclasses.is_dataclass(current):
+        current = obj[key] if isinstance(obj, dict) else getattr(obj, key)
+        if dataclasses.is_dataclass(current) or isinstance(current, dict):
             _merge(current, value, full + ".")
+        elif isinstance(obj, dict):
+            obj[key] = _coerce(full, value, current)
         else:
             setattr(obj, key, _coerce(full, value, current))
 
 
+def _parse_setting(item: str) -> dict[str, Any]:
+    """``"optim.lr=3e-4"`` -> ``{"optim": {"lr": 0.0003}}`` (the value is read as TOML, or a bare string)."""
+    if "=" not in item:
+        raise InputError(f"setting {item!r} must be KEY=VALUE, e.g. optim.lr=3e-4")
+    key, text = (s.strip() for s in item.split("=", 1))
+    try:
+        value = tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text
+    out: dict[str, Any] = {}
+    node = out
+    parts = key.split(".")
+    for p in parts[:-1]:
+        node = node.setdefault(p, {})
+    node[parts[-1]] = value
+    return out
+
+
+ConfigT = TypeVar("ConfigT")
+
+
+def with_settings(cfg: ConfigT, settings: Sequence[str | dict[str, Any]] = ()) -> ConfigT:
+    """A copy of the dataclass ``cfg`` with ``settings`` applied in order.
+
+    Args:
+        cfg: a configuration dataclass (nested dataclasses and dicts are tables).
+        settings: ``"KEY=VALUE"`` strings (``--set``; dotted keys, the value read as TOML, else as
+            a string) or nested dicts.
+
+    Raises:
+        InputError: an unknown key or a value of the wrong type, the key named in one line.
+    """
+    cfg = copy.deepcopy(cfg)
+    for item in settings:
+        _merge(cfg, item if isinstance(item, dict) else _parse_setting(item))
+    return cfg
+
+
+def preset(confs: dict[str, ConfigT], name: str, settings: Sequence[str | dict[str, Any]] = ()) -> ConfigT:
+    """The preset ``confs[name]`` with :func:`with_settings` applied (``InputError`` naming the
+    presets for an unknown name)."""
+    if name not in confs:
+        raise InputError(f"unknown preset {name!r}; choose one of {', '.join(confs)}")
+    return with_settings(confs[name], settings)
+
+
 def _check(cfg: TrainConfig) -> None:
     flat = _flatten(cfg.to_dict())
+    for key in _PAIRS:
+        if len(flat[key]) != 2:
+            raise InputError(f"config key {key!r} must be a list of 2, got {flat[key]!r}")
     for key, choices in _CHOICES.items():
         if flat[key] not in choices:
             raise InputError(f"config key {key!r} must be one of {', '.join(choices)}, got {flat[key]!r}")
@@ -342,24 +401,6 @@ def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def _parse_override(item: str) -> dict[str, Any]:
-    """``"optim.lr=3e-4"`` -> ``{"optim": {"lr": 0.0003}}`` (the value is read as TOML, or a bare string)."""
-    if "=" not in item:
-        raise InputError(f"override {item!r} must be KEY=VALUE, e.g. optim.lr=3e-4")
-    key, text = (s.strip() for s in item.split("=", 1))
-    try:
-        value = tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = text
-    out: dict[str, Any] = {}
-    node = out
-    parts = key.split(".")
-    for p in parts[:-1]:
-        node = node.setdefault(p, {})
-    node[parts[-1]] = value
-    return out
-
-
 def load_config(
     source: str | Path | dict[str, Any] | TrainConfig | None = None,
     overrides: list[str | dict[str, Any]] | dict[str, Any] | None = None,
@@ -367,7 +408,7 @@ def load_config(
     """Build and check a configuration.
 
     Args:
-        source: a preset name of :data:`PRESETS` (default ``"default"``), a path to a TOML
+        source: a preset name of :data:`TRAIN_CONFS` (default ``"paper"``), a path to a TOML
             file (applied over the defaults), a dict of the same shape, or a :class:`TrainConfig`.
         overrides: applied last, in order: ``"optim.lr=3e-4"`` strings (command-line ``--set``)
             and nested dicts (``{"optim": {"lr": 3e-4}}``), or one nested dict.
@@ -381,22 +422,18 @@ def load_config(
         cfg = copy.deepcopy(source)
     elif isinstance(source, dict):
         _merge(cfg, source)
-    elif source is None or str(source) in PRESETS:
-        _merge(cfg, copy.deepcopy(PRESETS[str(source or "default")]))
+    elif source is None or str(source) in TRAIN_CONFS:
+        _merge(cfg, copy.deepcopy(TRAIN_CONFS[str(source or "paper")]))
     else:
         path = Path(source)
         if not path.is_file():
-            raise InputError(f"config {source!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
+            raise InputError(f"config {source!r} is neither a preset ({', '.join(TRAIN_CONFS)}) nor a TOML file")
         try:
             values = tomllib.loads(path.read_text())
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise InputError(f"config file {path}: invalid TOML: {exc}") from None
         _merge(cfg, values)
-    if isinstance(overrides, dict):
-        _merge(cfg, overrides)
-    else:
-        for item in overrides or []:
-            _merge(cfg, item if isinstance(item, dict) else _parse_override(item))
+    cfg = with_settings(cfg, [overrides] if isinstance(overrides, dict) else overrides or [])
     _check(cfg)
     return cfg
 
@@ -411,9 +448,10 @@ def _toml_value(v: Any) -> str:
     return repr(v)
 
 
-def dump_toml(cfg: TrainConfig) -> str:
-    """The configuration as TOML text that :func:`load_config` reads back to the same values."""
-    d = cfg.to_dict()
+def dump_toml(cfg: Any) -> str:
+    """A configuration dataclass as TOML text (:func:`load_config` reads a :class:`TrainConfig`'s
+    back to the same values)."""
+    d = dataclasses.asdict(cfg)
     lines = [f"{k} = {_toml_value(v)}" for k, v in d.items() if not isinstance(v, dict)]
     for table, values in d.items():
         if isinstance(values, dict):
@@ -426,21 +464,29 @@ def dump_toml(cfg: TrainConfig) -> str:
 REAL_LIGHT_SCENES = ("courbevoie", "frankfurt", "panorama")
 
 
-def real_light_scene_dirs() -> list[Path]:
-    """The folders of :data:`REAL_LIGHT_SCENES` in the shared data."""
+def real_light_scene_dirs(scenes: Sequence[str] = REAL_LIGHT_SCENES) -> list[Path]:
+    """The folders of ``scenes``: each an existing folder, or else the name of a scene in the
+    shared data's ``webcam`` folder."""
     from alcn_cv.shared_data import shared_data_dir
 
-    return [shared_data_dir() / "webcam" / name for name in REAL_LIGHT_SCENES]
+    return [Path(s) if Path(s).is_dir() else shared_data_dir() / "webcam" / s for s in scenes]
+
+
+def _gain_network() -> dict[str, Any]:
+    """The shipped gain Normalizer's :class:`~alcn_cv.nets.gain.GainNormalizer` arguments."""
+    return {"channels": 16, "stride": 8, "dilations": [1, 2, 4], "num_kernels": 2, "sigma_step": 1.0, "eps": 0.01,
+            "gain": "divisive", "floor_scale": 1.0, "divisive_sigma": 2.0, "tau": 3.0, "learn_scales": False}
 
 
 @dataclass
 class RealLightConfig:
-    """Settings of :func:`train_real_light` (defaults: the recipe of the shipped weights).
+    """Settings of :func:`~alcn_cv.train.real_light.train_real_light`; the defaults are the
+    ``gain`` preset, the recipe of the shipped ``alcn_normalizer_gain.npz``.
 
     Attributes:
-        scenes: folders of registered frames, one per scene.
-        rendered: folders of rendered registered scenes (``alcn data relight-scenes``), drawn
-            apart from ``scenes`` so that their number does not set their share.
+        scenes: registered scenes: folders of frames, or names of scenes of the shared ``webcam`` data.
+        rendered: folders of rendered registered scenes (``alcn data relight-scenes``; a folder
+            without images stands for its sub-folders), drawn apart from ``scenes``.
         rendered_fraction: the share of steps that draw a rendered scene (0 when none).
         steps: optimisation steps; each sees 2 frames x ``locations`` crops of one scene.
         locations: textured locations (classes) per step.
@@ -448,19 +494,15 @@ class RealLightConfig:
         patch: side of the identified centre (pixels).
         min_distance: smallest distance between two locations of a step (pixels, Chebyshev).
         temperature: of the softmax over cosine similarities.
-        consistency: weight of :func:`~alcn_cv.train.real_light.consistency_loss` (the output the
-            same under both lights, on the textured and on ``anywhere`` other locations).
-        anywhere: locations per step drawn anywhere in the frame (flat, dark and noisy regions
-            too) for the consistency term only.
+        consistency: weight of :func:`~alcn_cv.train.real_light.consistency_loss`.
+        anywhere: locations per step drawn anywhere in the frame, for the consistency term only.
         lr: Adam's learning rate.
         seed: seeds numpy and torch (data draws and initialisation).
         save_every: steps between checkpoints and intermediate weight files.
-        net: :class:`~alcn_cv.nets.gain.GainNormalizer` arguments (``divisive_sigma`` among them:
-            the divisive normalization's per-pixel energy, absent for the grid's cells).
-        command: the command line that ran the training, recorded in the weight file.
+        net: :class:`~alcn_cv.nets.gain.GainNormalizer` arguments (``--set net.channels=8``).
     """
 
-    scenes: list[str] = field(default_factory=list)
+    scenes: list[str] = field(default_factory=lambda: list(REAL_LIGHT_SCENES))
     rendered: list[str] = field(default_factory=list)
     rendered_fraction: float = 0.0
     steps: int = 300
@@ -474,5 +516,66 @@ class RealLightConfig:
     lr: float = 1e-3
     seed: int = 0
     save_every: int = 100
-    net: dict = field(default_factory=dict)
-    command: str = ""
+    net: dict[str, Any] = field(default_factory=_gain_network)
+
+
+#: ``alcn train-real-light`` presets: ``gain`` makes ``alcn_normalizer_gain.npz``.
+REAL_LIGHT_CONFS: dict[str, RealLightConfig] = {"gain": RealLightConfig()}
+
+
+@dataclass
+class LiteDistillConfig:
+    """Settings of :func:`~alcn_cv.train.distill.distill` (a :class:`~alcn_cv.nets.lite.LiteNormalizer`
+    student); the defaults are the ``lite`` preset, the recipe of ``alcn_normalizer_lite.npz``.
+
+    Attributes:
+        teacher: a shipped model's name (``paper``) or a weight file.
+        n_windows, n_val: training and validation windows rendered by
+            :func:`alcn_cv.data.phos.render_windows` (seeds ``seed`` and ``seed + 1``).
+        seed: seeds the windows and the student.
+        epochs, batch_size, lr: Adam with a cosine learning-rate schedule.
+        channels: the student's widths.
+        weight_decay_w: weight of the plain squared weight error, relative to the output error.
+        n_objects: catalogue size of the rendered windows.
+    """
+
+    teacher: str = "paper"
+    n_windows: int = 20000
+    n_val: int = 2000
+    seed: int = 0
+    epochs: int = 30
+    batch_size: int = 256
+    lr: float = 3e-3
+    channels: list[int] = field(default_factory=lambda: [8, 16])
+    weight_decay_w: float = 0.01
+    n_objects: int = 100
+
+
+@dataclass
+class GainDistillConfig:
+    """Settings of :func:`~alcn_cv.train.distill.distill_gain` (a smaller gain Normalizer); the
+    defaults are the ``gain-lite`` preset, the recipe of ``alcn_normalizer_gain_lite.npz``.
+
+    Attributes:
+        teacher: a shipped model's name (``gain``) or a gain weight file.
+        scenes: registered scenes (as :attr:`RealLightConfig.scenes`; never the test scenes).
+        rendered: rendered registered scenes added to the data (256x256, 4 lights each).
+        seed: seeds the student's initialisation, the relighting and the rendering.
+        epochs, lr: Adam over every training frame once per epoch, cosine schedule.
+        channels, dilations: the student's hidden width and its dilated 3x3 convolutions.
+    """
+
+    teacher: str = "gain"
+    scenes: list[str] = field(default_factory=lambda: list(REAL_LIGHT_SCENES))
+    rendered: int = 6
+    seed: int = 0
+    epochs: int = 60
+    lr: float = 3e-3
+    channels: int = 8
+    dilations: list[int] = field(default_factory=lambda: [1, 2, 4])
+
+
+#: ``alcn distill`` presets: ``lite`` makes ``alcn_normalizer_lite.npz``, ``gain-lite``
+#: ``alcn_normalizer_gain_lite.npz``.
+DISTILL_CONFS: dict[str, LiteDistillConfig | GainDistillConfig] = {"lite": LiteDistillConfig(),
+                                                                    "gain-lite": GainDistillConfig()}

@@ -22,11 +22,7 @@ Outputs in the run folder: ``train.log``, ``history.json``, ``checkpoint.pt`` (a
 
 Command (the real scenes are for academic research only, see ``shared/data/README.md``)::
 
-    alcn train-real-light --out runs/gain --divisive-sigma 2   # courbevoie, frankfurt, panorama; 300 steps, seed 0
-
-(300 steps: 1 to 3 minutes on 2 CPU cores, one thread, depending on the machine's load. Longer
-training lowers the identification loss on the training scenes but not the identification on
-unseen scenes, and it lowers keypoint matching there: see the model card.)
+    alcn train-real-light --conf gain   # the shipped alcn_normalizer_gain.npz: 1 to 3 minutes on 2 CPU cores
 """
 
 from __future__ import annotations
@@ -37,6 +33,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -46,12 +43,12 @@ from torch import nn
 from tqdm import tqdm
 
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, list_images, read_image, to_gray, write_json
+from alcn_cv.io import IMAGE_SUFFIXES, atomic_write, list_images, read_image, to_gray, write_json
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.nets.gain import GainNormalizer, cell_rms, gaussian_energy
 from alcn_cv.report import machine
 from alcn_cv.train.models import CentreMixture
-from alcn_cv.train.config import RealLightConfig
+from alcn_cv.train.config import RealLightConfig, real_light_scene_dirs
 from alcn_cv.weight_file import save_normalizer_file
 
 __all__ = [
@@ -65,6 +62,7 @@ __all__ = [
     "read_registered_frames",
     "pair_loss",
     "sample_locations",
+    "scene_folders",
     "textured_locations",
     "train_real_light",
 ]
@@ -314,18 +312,33 @@ def pair_loss(
     return loss
 
 
-def _save_weights(net: GainNormalizer, path: Path, cfg: RealLightConfig, step: int, seconds: float) -> Path:
+def _save_weights(net: GainNormalizer, path: Path, cfg: RealLightConfig, step: int, seconds: float,
+                  record: dict[str, Any]) -> Path:
     meta = net.file_meta(
         trained=step > 0,
         description="gain Normalizer trained on registered real scenes (identification objective)",
-        training={"command": cfg.command, "config": asdict(cfg), "step": step, "seconds": round(seconds, 1),
-                  "machine": machine()},
+        training={**record, "config": asdict(cfg), "step": step, "seconds": round(seconds, 1), "machine": machine()},
     )
     return save_normalizer_file(path, net.state_arrays(), meta)
 
 
-def train_real_light(cfg: RealLightConfig, out: str | Path) -> Path:
+def scene_folders(entries: Sequence[str]) -> list[Path]:
+    """The scene folders of ``entries``: a folder without images stands for its sub-folders."""
+    folders = []
+    for entry in map(Path, entries):
+        subfolders = sorted(p for p in entry.iterdir() if p.is_dir()) if entry.is_dir() else []
+        folders += subfolders if subfolders and not any(p.suffix.lower() in IMAGE_SUFFIXES for p in entry.iterdir()) \
+            else [entry]
+    return folders
+
+
+def train_real_light(cfg: RealLightConfig, out: str | Path, *, command: str = "", conf: str | None = None) -> Path:
     """Train a :class:`~alcn_cv.nets.gain.GainNormalizer` on registered scenes (see the module).
+
+    Args:
+        cfg: the settings (the ``gain`` preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`, overridden or not).
+        out: the run folder.
+        command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
 
     Returns:
         The final weight file ``out/gain_normalizer.npz``.
@@ -342,20 +355,20 @@ def train_real_light(cfg: RealLightConfig, out: str | Path) -> Path:
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
     logger.addHandler(handler)
     try:
-        return _train(cfg, out)
+        return _train(cfg, out, {"command": command, "conf": conf})
     finally:
         logger.removeHandler(handler)
         handler.close()
 
 
-def _train(cfg: RealLightConfig, out: Path) -> Path:
+def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     net = GainNormalizer(**cfg.net)
     if max(kernel_radius(s) for s in net.sigmas) > cfg.patch // 2:
         raise InputError(f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2")
-    scenes = [load_scene(s, cfg.crop // 2, cfg.patch) for s in cfg.scenes]
-    rendered = [load_scene(s, cfg.crop // 2, cfg.patch) for s in cfg.rendered]
+    scenes = [load_scene(s, cfg.crop // 2, cfg.patch) for s in scene_folders(real_light_scene_dirs(cfg.scenes))]
+    rendered = [load_scene(s, cfg.crop // 2, cfg.patch) for s in scene_folders(cfg.rendered)]
     for scene in scenes + rendered:
         logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
@@ -380,10 +393,10 @@ def _train(cfg: RealLightConfig, out: Path) -> Path:
             seconds = time.perf_counter() - start
             recent = np.mean([h["loss"] for h in history[-cfg.save_every :]])
             logger.info("step %d: mean loss %.4f over the last %d steps, %.0f s", step, recent, cfg.save_every, seconds)
-            _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds)
+            _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds, record)
             state = {"net": net.state_dict(), "opt": opt.state_dict(), "step": step, "config": asdict(cfg)}
             atomic_write(out / "checkpoint.pt", lambda f: torch.save(state, f))
             write_json(out / "history.json", history)
     seconds = time.perf_counter() - start
     logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
-    return _save_weights(net.eval(), out / "gain_normalizer.npz", cfg, cfg.steps, seconds)
+    return _save_weights(net.eval(), out / "gain_normalizer.npz", cfg, cfg.steps, seconds, record)
