@@ -47,11 +47,6 @@ The keys of :class:`TrainConfig` (also readable from a TOML file with the tables
     every method alike: per-window standardization (zero mean, unit variance over the 32x32) or
     the raw mixture output. ``working_scale`` (float): the scale recorded in the exported weight
     file, the factor from a camera frame to the resolution at which the 48x48 window applies.
-    ``mixture`` (``"window"`` or ``"dense"``): how the Normalizer's weights filter a training
-    window: ``"window"`` -- Eq. 1, one weight vector for the window (the paper's training);
-    ``"dense"`` -- Eq. 3 as at inference: the Normalizer runs fully-convolutionally over the
-    window and its per-pixel weight maps multiply the image before the blurs, so the weights
-    may vary inside a window (e.g. across a shadow edge). A dense step costs about 6 times a window step.
 
 ``[optim]``
     ``objective``: ``"joint"`` -- Eq. 2, the detector and the Normalizer minimise the loss on
@@ -59,11 +54,9 @@ The keys of :class:`TrainConfig` (also readable from a TOML file with the tables
     minimises the loss on windows under ``data.anchor_lighting`` only (as a new detector will see
     one lighting), the Normalizer the loss on all windows with the detector held fixed for the
     others, so that it learns to make other lightings look like the anchor to a detector.
-    ``optimizer`` (``"adam"`` or ``"sgd"``), ``lr`` (float, the detector's), ``normalizer_lr``
-    (float), ``weight_decay`` (float), ``momentum`` (float, SGD), ``grad_clip`` (float, 0 = off),
-    ``batch_size`` (int), ``epochs`` (int), ``schedule`` (``"cosine"``, ``"step"`` or
-    ``"constant"``, per step), ``step_epochs`` (int) and ``step_gamma`` (float) for ``"step"``,
-    ``warmup_steps`` (int, linear warm-up).
+    Adam with a cosine learning-rate schedule per step: ``lr`` (float, the detector's),
+    ``normalizer_lr`` (float), ``weight_decay`` (float), ``grad_clip`` (float, 0 = off),
+    ``batch_size`` (int), ``epochs`` (int), ``warmup_steps`` (int, linear warm-up).
 
 ``[fewshot]`` -- the paper's second stage as a validation (:mod:`alcn_cv.train.fewshot`)
     ``enabled`` (bool): after training, train a fresh detector per method (the trained
@@ -150,24 +143,18 @@ class ModelConfig:
     detector_hidden: int = 512
     detector_dropout: float = 0.0
     detector_input: str = "standardize"
-    mixture: str = "window"
     working_scale: float = 0.5
 
 
 @dataclass
 class OptimConfig:
     objective: str = "meta"
-    optimizer: str = "adam"
     lr: float = 1e-3
     normalizer_lr: float = 1e-3
     weight_decay: float = 0.0
-    momentum: float = 0.9
     grad_clip: float = 5.0
     batch_size: int = 128
     epochs: int = 3
-    schedule: str = "cosine"
-    step_epochs: int = 2
-    step_gamma: float = 0.3
     warmup_steps: int = 100
 
 
@@ -229,10 +216,7 @@ _CHOICES = {
     "model.activation": ("tanh", "relu"),
     "model.init": ("dog", "random"),
     "model.detector_input": ("standardize", "raw"),
-    "model.mixture": ("window", "dense"),
-    "optim.optimizer": ("adam", "sgd"),
     "optim.objective": ("joint", "meta"),
-    "optim.schedule": ("cosine", "step", "constant"),
     "run.device": ("cpu", "cuda"),
 }
 #: Lists of a fixed length (the others take any length).
@@ -340,14 +324,14 @@ def _check(cfg: TrainConfig) -> None:
         if flat[key] not in choices:
             raise InputError(f"config key {key!r} must be one of {', '.join(choices)}, got {flat[key]!r}")
     positive = ["data.n_objects", "model.num_kernels", "model.hidden", "model.detector_hidden", "optim.batch_size",
-                "optim.epochs", "optim.step_epochs", "run.log_every", "fewshot.n_objects", "fewshot.real_images",
+                "optim.epochs", "run.log_every", "fewshot.n_objects", "fewshot.real_images",
                 "fewshot.per_image", "fewshot.n_test", "fewshot.epochs", "model.sigma_step", "optim.lr",
                 "model.output_scale", "model.working_scale"]
     for key in positive:
         if not flat[key] > 0:
             raise InputError(f"config key {key!r} must be positive, got {flat[key]!r}")
     for key in ["data.n_train", "data.n_val", "optim.normalizer_lr", "optim.weight_decay", "optim.grad_clip",
-                "optim.warmup_steps", "run.workers", "run.threads", "optim.momentum"]:
+                "optim.warmup_steps", "run.workers", "run.threads"]:
         if flat[key] < 0:
             raise InputError(f"config key {key!r} must be >= 0, got {flat[key]!r}")
     if not 0 <= cfg.data.background_fraction <= 1:

@@ -196,8 +196,6 @@ def _make_optimizer(model: JointModel, cfg: TrainConfig) -> torch.optim.Optimize
     if model.normalizer is not None:
         lr = cfg.optim.normalizer_lr
         groups.append({"params": model.normalizer.parameters(), "lr": lr, "base_lr": lr})
-    if cfg.optim.optimizer == "sgd":
-        return torch.optim.SGD(groups, momentum=cfg.optim.momentum, weight_decay=cfg.optim.weight_decay)
     return torch.optim.Adam(groups, weight_decay=cfg.optim.weight_decay)
 
 
@@ -315,10 +313,6 @@ def _save(out: Path, cfg: TrainConfig, model: JointModel, optimizer: torch.optim
 def _lr_factor(cfg: TrainConfig, step: int, steps_per_epoch: int) -> float:
     o = cfg.optim
     warm = min(1.0, (step + 1) / o.warmup_steps) if o.warmup_steps else 1.0
-    if o.schedule == "constant":
-        return warm
-    if o.schedule == "step":
-        return warm * o.step_gamma ** (step // (steps_per_epoch * o.step_epochs))
     total = steps_per_epoch * o.epochs
     return warm * 0.5 * (1.0 + math.cos(math.pi * min(step, total) / total))
 
