@@ -361,8 +361,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     cr = sub.add_parser("corner-recall", help="parts the corner detector finds in a rendered scene, before PnP",
                         description="Compares the corner detector's candidates with the true corners of a BOP scene "
                         "(`alcn data pose`): the share of visible parts (corners, edge middles, face centres) found "
-                        "as the best candidate, among the candidates of the whole frame, and within the gates of the true pose; with --background grey "
-                        "also with everything but the object replaced by grey (the table and clutter removed).")
+                        "as the best candidate, among the candidates of the whole frame, and within the gates of the "
+                        "true pose; with --background grey also with everything but the object replaced by grey (the table and clutter removed).")
     cr.add_argument("detector", help="corner detector (.onnx) from `alcn pose train-corners`")
     cr.add_argument("scene", type=Path,
                     help="BOP scene folder with scene_gt.json and mask_visib/ (e.g. DATA/test/000001)")

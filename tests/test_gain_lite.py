@@ -95,8 +95,8 @@ def test_distill_command_from_a_gain_teacher(tmp_path, capsys):
     teacher_path, _ = _teacher(tmp_path / "teacher.npz")
     scenes = _scenes(tmp_path, count=1)
     out = tmp_path / "gain_lite.npz"
-    args = ["--set", f"teacher='{teacher_path}'", "--set", "epochs=1", "--set", "channels=4", "--set", "dilations=[1, 2]",
-            "--set", f"scenes=['{scenes[0]}']", "--set", "rendered=0"]
+    args = ["--set", f"teacher='{teacher_path}'", "--set", "epochs=1", "--set", "channels=4", "--set",
+            "dilations=[1, 2]", "--set", f"scenes=['{scenes[0]}']", "--set", "rendered=0"]
     assert cli(["distill", "--conf", "gain-lite", "--out", str(out), *args, "--no-progress"]) == 0
     assert capsys.readouterr().out.strip() == str(out) and out.with_suffix(".onnx").is_file()
     config = load_normalizer_file(out).meta["config"]

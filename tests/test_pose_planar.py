@@ -125,3 +125,20 @@ def test_planar_on_a_webcam_scene(shared_data, tmp_path):
         assert (tmp_path / name).is_file()
     report = json.loads((tmp_path / "relight_pose.json").read_text())
     assert report["command"] == "test" and len(report["details"][row]["mexico"]["per_frame"]) == 2
+
+
+def test_planar_command_takes_the_recipe_and_the_normalizations(tmp_path, monkeypatch):
+    import argparse
+
+    from pose.cli import add_parser
+
+    parser = argparse.ArgumentParser()
+    add_parser(parser.add_subparsers())
+    seen = []
+    report = tmp_path / "relight_pose.md"
+    monkeypatch.setattr(planar, "main", lambda *a, **kw: seen.append(kw) or report.write_text(""))
+    args = parser.parse_args(["pose", "planar", "--out", str(tmp_path), "--normalizations", "none", "dog",
+                              "--detector", "corners", "--set", "iterations=3"])
+    assert args.func(args) == 0
+    assert seen[0]["normalizers"] == ["none", "dog"]
+    assert seen[0]["recipe"] == dataclasses.replace(corner_confs["planar"], iterations=3)

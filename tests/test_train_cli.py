@@ -90,5 +90,6 @@ def test_distill_help_and_a_tiny_run(tmp_path, capsys):
     assert capsys.readouterr().out.strip() == str(out) and torch.get_num_threads() == threads
     header = load_normalizer_file(out).meta
     assert header["architecture"] == "lite" and header["distillation"]["conf"] == "lite"
-    assert header["distillation"]["settings"]["n_windows"] == 16 and header["distillation"]["settings"]["teacher"] == "paper"
+    settings = header["distillation"]["settings"]
+    assert settings["n_windows"] == 16 and settings["teacher"] == "paper"
     assert f"Command: `alcn distill --conf lite --out {out} {' '.join(args)}`" in out.with_suffix(".md").read_text()
