@@ -11,6 +11,7 @@ import torch
 
 from alcn_cv.cli import main
 from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
+from alcn_cv.train.config import DISTILL_CONFS, REAL_LIGHT_CONFS, TRAIN_CONFS
 from alcn_cv.weight_file import load_normalizer_file
 
 
@@ -27,6 +28,15 @@ def test_print_config_applies_the_preset_set_and_seed(capsys):
 def test_every_training_command_takes_a_preset_and_settings(command, capsys):
     assert main([*command, "--print-config", "--set", "seed=7"]) == 0
     assert tomllib.loads(capsys.readouterr().out)["seed"] == 7
+
+
+@pytest.mark.parametrize("command, confs", [("train", TRAIN_CONFS), ("train-real-light", REAL_LIGHT_CONFS),
+                                            ("distill", DISTILL_CONFS)])
+def test_help_names_every_preset(command, confs, capsys):
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert all(f"{name} (the" in text for name in confs)
 
 
 @pytest.mark.parametrize("args, message", [

@@ -14,16 +14,13 @@ import shlex
 import sys
 from pathlib import Path
 
-from alcn_cv.train.config import DISTILL_CONFS, REAL_LIGHT_CONFS, TRAIN_CONFS
-
 __all__ = ["add_parser"]
 
 
-def _add_conf(parser: argparse.ArgumentParser, confs: dict, default: str | None, what: str) -> None:
-    """``--conf`` and ``--set``, the same on every training command."""
-    names = ", ".join(confs)
+def _add_conf(parser: argparse.ArgumentParser, default: str | None, presets: str) -> None:
+    """``--conf`` and ``--set``, the same on every training command; ``presets`` says what each preset makes."""
     parser.add_argument("--conf", default=default, required=default is None, metavar="NAME",
-                        help=f"preset: {names}{what} (default {default})" if default else f"preset: {names}{what}")
+                        help=f"the preset: {presets}" + (f" (default {default})" if default else ""))
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
                         help="override one key of the preset, dotted, the value as TOML, e.g. --set lr=3e-4 "
                         "(repeatable; --print-config shows every key)")
@@ -48,8 +45,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "history.json, curves.png and alcn_normalizer.npz into --out. The shipped alcn_normalizer.npz is "
         "`alcn train --conf paper`. Multi-process: run under torchrun.",
     )
-    _add_conf(p, TRAIN_CONFS, "paper", " (the shipped alcn_normalizer.npz; paper-full: the paper's scale, for "
-              "a GPU), or a TOML file; keys: alcn_cv.train.config")
+    _add_conf(p, "paper", "paper (the shipped alcn_normalizer.npz), paper-full (the paper's widths and data, for a "
+              "GPU; no shipped file), or a TOML file of alcn_cv.train.config's keys")
     p.add_argument("--out", type=Path, default=Path("runs/alcn"), help="run folder (default: runs/alcn)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--seed", type=int, help="seed (default: the preset's)")
@@ -66,7 +63,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     d.add_argument("images", type=Path, help="folder with one sub-folder of images per object")
     d.add_argument("--out", type=Path, required=True, help="output folder")
-    d.add_argument("--method", default="alcn", help="normalization applied to the windows, any registered name (default alcn)")
+    d.add_argument("--method", default="alcn",
+                   help="normalization applied to the windows, any registered name (default alcn)")
     d.add_argument("--weights", type=Path, help="Normalizer weight file for --method alcn (default: shipped)")
     d.add_argument("--per-image", type=int, default=300, help="synthetic windows per real image (default 300)")
     d.add_argument("--negatives", type=int, default=0,
@@ -89,12 +87,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "alcn_cv/weights/alcn_normalizer_lite.npz`, alcn_normalizer_gain_lite.npz the same with --conf gain-lite "
         "(academic research only, as the webcam frames).",
     )
-    _add_conf(s, DISTILL_CONFS, None, " (the shipped alcn_normalizer_lite.npz and alcn_normalizer_gain_lite.npz; "
-              "--set teacher=FILE distils another teacher)")
+    _add_conf(s, None, "lite (the shipped alcn_normalizer_lite.npz, from the paper model) or gain-lite (the "
+              "shipped alcn_normalizer_gain_lite.npz, from the gain model); --set teacher=FILE distils another teacher")
     s.add_argument("--out", type=Path, help="weight file to write (.npz; the card is .md beside it)")
     s.add_argument("--seed", type=int, help="seed (default: the preset's)")
     s.add_argument("--threads", type=int, default=1,
-                   help="torch and OpenCV threads (default 1, as the shipped files were made; 0: the libraries' default)")
+                   help="torch and OpenCV threads (default 1, as the shipped files were made; 0: the libraries' "
+                   "default)")
     s.add_argument("--no-progress", action="store_true", help="no progress bars")
     s.set_defaults(func=_distill)
 
@@ -106,7 +105,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`; the webcam scenes are for academic "
         "research only.",
     )
-    _add_conf(r, REAL_LIGHT_CONFS, "gain", " (the shipped alcn_normalizer_gain.npz)")
+    _add_conf(r, "gain", "gain (the shipped alcn_normalizer_gain.npz)")
     r.add_argument("--out", type=Path, default=Path("runs/gain"), help="run folder (default: runs/gain)")
     r.add_argument("--seed", type=int, help="seed (default: the preset's)")
     r.add_argument("--threads", type=int, default=1,
@@ -174,7 +173,7 @@ def _train_detector(args: argparse.Namespace) -> int:
 
 def _distill(args: argparse.Namespace) -> int:
     from alcn_cv.errors import InputError
-    from alcn_cv.train.config import preset
+    from alcn_cv.train.config import DISTILL_CONFS, preset
 
     cfg = preset(DISTILL_CONFS, args.conf, _operational(args, seed="seed"))
     if args.print_config:
@@ -201,7 +200,7 @@ def _distill(args: argparse.Namespace) -> int:
 
 
 def _train_real_light(args: argparse.Namespace) -> int:
-    from alcn_cv.train.config import preset
+    from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
 
     cfg = preset(REAL_LIGHT_CONFS, args.conf, _operational(args, seed="seed"))
     if args.print_config:
