@@ -174,12 +174,8 @@ def consistency_loss(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """How much the output changes with the light, relative to its energy:
     ``sum (a - b)^2 / sum (a^2 + b^2)`` over all the patches together.
 
-    Identification compares each patch after removing its mean and scale, so it does not care
-    what a normalization does to flat, dark or noisy regions, nor to the contrast of one region
-    against another; a keypoint detector or a detector's score does, as they compare responses
-    across the image. This term asks for the same output under both lights in absolute terms
-    (0 when equal, about 1 when unrelated, scale-free so a weaker output does not lower it): an
-    output that amplifies noise, or shadow edges, is inconsistent between the frames.
+    Identification ignores each patch's mean and scale; detectors compare responses across the
+    image, so this term asks for the same output in absolute terms (0 when equal, about 1 when unrelated).
 
     Args:
         a, b: ``(n, 1, P, P)``, the same locations under two lights.

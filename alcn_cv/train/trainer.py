@@ -13,10 +13,8 @@ the first: the detector learns from windows under one *anchor* lighting only (as
 later learns from a few images under one light), while the Normalizer minimises the loss on
 *all* windows with the detector held fixed for the non-anchor ones (:meth:`JointModel.forward`
 with an ``anchor`` mask). Its gradient therefore says "make this lighting look like the anchor
-lighting to a detector", the invariance the second stage needs. With plain Eq. 2
-(``"joint"``), the Normalizer beat a DoG on held-out lightings of the training objects but lost
-to it on new objects learnt from one image; with ``"meta"`` it beat the DoG on both in our
-measurements (``alcn_cv/weights/MODEL_CARD.md``).
+lighting to a detector", the invariance the second stage needs (plain Eq. 2, ``"joint"``, lost
+to the DoG on new objects: ``docs/journal.md``).
 
 The same command trains the same detector on a fixed DoG (``model.method = "dog"``) or on the
 raw windows (``"none"``), so the benefit of the learned Normalizer is measured, not assumed.
