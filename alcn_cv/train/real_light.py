@@ -322,9 +322,10 @@ def scene_folders(entries: Sequence[str]) -> list[Path]:
     """The scene folders of ``entries``: a folder without images stands for its sub-folders."""
     folders = []
     for entry in map(Path, entries):
-        subfolders = sorted(p for p in entry.iterdir() if p.is_dir()) if entry.is_dir() else []
-        folders += subfolders if subfolders and not any(p.suffix.lower() in IMAGE_SUFFIXES for p in entry.iterdir()) \
-            else [entry]
+        inside = sorted(entry.iterdir()) if entry.is_dir() else []
+        subfolders = [p for p in inside if p.is_dir()]
+        holds_images = any(p.suffix.lower() in IMAGE_SUFFIXES for p in inside)
+        folders += subfolders if subfolders and not holds_images else [entry]
     return folders
 
 
