@@ -1,11 +1,12 @@
-"""``alcn pose build|track|eval|train-corners|bench-corners``: the 3D pose pipeline on the command line."""
+"""``alcn pose build|track|eval|train-corners|bench-corners|corner-recall|planar|overlay-error``: the 3D pose
+pipeline on the command line. The corner detector's training takes a named recipe (``--conf``, the presets
+of :data:`pose.corner_train.confs`) and ``--set KEY=VALUE`` overrides of its keys."""
 
 from __future__ import annotations
 
 import argparse
 import logging
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -23,7 +24,7 @@ def _build(args: argparse.Namespace) -> int:
 
     build.main(args.input, args.output, images=args.images, K=_intrinsics(args.K), video_step=args.video_step,
                max_frames=args.max_frames, motion_mask=args.motion_mask, feature=args.feature,
-               n_features=args.n_features, normalizer=args.normalizer, box_ply=args.box_ply,
+               n_features=args.n_features, normalizer=args.normalization, box_ply=args.box_ply,
                box_size=args.box_size, box_units=args.box_units, refine_focal=args.refine_focal)
     return 0
 
@@ -52,28 +53,34 @@ def _track(args: argparse.Namespace) -> int:
     K, dist = _intrinsics(args.K), None
     if K is None:
         K, dist = _camera(args.camera)
-    summary = track.main(args.model, args.input, args.output, K, normalizer=args.normalizer, overlay=args.overlay,
+    summary = track.main(args.model, args.input, args.output, K, normalizer=args.normalization, overlay=args.overlay,
                          method=args.method, n_features=args.n_features, min_inliers=args.min_inliers,
                          reprojection_error=args.reprojection_error, dist=dist, detector=args.detector)
     print(f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps -> {args.output}")
     return 0
 
 
+def _recipe(args: argparse.Namespace):
+    """The corner recipe of ``--conf`` with the ``--set`` items applied."""
+    from alcn_cv.train.config import preset
+    from pose.corner_train import confs
+
+    recipe = preset(confs, args.conf, args.settings)
+    recipe.check()
+    return recipe
+
+
 def _eval(args: argparse.Namespace) -> int:
     from pose import evaluate
 
-    normalizers = args.normalizers or evaluate.DEFAULT_NORMALIZERS
+    normalizations = args.normalizations or evaluate.DEFAULT_NORMALIZERS
+    recipe = _recipe(args)
     if args.middlebury:
-        evaluate.middlebury_main(args.middlebury, args.out, normalizers=normalizers, feature=args.feature)
+        evaluate.middlebury_main(args.middlebury, args.out, normalizers=normalizations, feature=args.feature)
     if args.data:
-        corner_kw = {"iterations": args.corner_iterations, "batch_size": args.corner_batch_size,
-                     "device": args.corner_device, "copies": args.corner_copies,
-                     "novel_views": args.corner_novel_views, "novel_distance": tuple(args.corner_novel_distance),
-                     "divisions": args.corner_divisions,
-                     "scale": args.corner_scale, "jitter": args.corner_jitter,
-                     **_no_intensity_kw(args.corner_no_intensity)}
-        evaluate.main(args.data, args.out, normalizers=normalizers, feature=args.feature, detectors=args.detectors,
-                      corner_kw=corner_kw, seeds=args.seeds, sequences=args.sequences, command=_command())
+        evaluate.main(args.data, args.out, normalizers=normalizations, feature=args.feature, detectors=args.detectors,
+                      corner_recipe=recipe, corner_conf=args.conf, corner_device=args.device, seeds=args.seeds,
+                      sequences=args.sequences, command=_command())
     if not (args.middlebury or args.data):
         raise ValueError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
     return 0
@@ -87,59 +94,64 @@ def _command() -> str:
     return shlex.join(["alcn", *sys.argv[1:]])
 
 
-def _no_intensity_kw(no_intensity: bool) -> dict[str, Any]:
-    """The corner CNN's training options of ``--no-intensity``: copies that keep their view's
-    intensities (:func:`pose.corner_data.build_frames` without its ``a I + b``)."""
-    return {"intensity_scale": (1.0, 1.0), "intensity_offset": 0.0} if no_intensity else {}
-
-
 def _train_corners(args: argparse.Namespace) -> int:
     from pose import corner_train
 
-    path = corner_train.main(args.input, args.output, box_ply=args.box_ply, model=args.model,
-                             normalizer=args.normalizer, scale=args.scale, iterations=args.iterations,
-                             batch_size=args.batch_size, device=args.device, copies=args.copies,
-                             novel_views=args.novel_views, novel_distance=tuple(args.novel_distance),
-                             divisions=args.divisions, seed=args.seed, jitter=args.jitter,
-                             **_no_intensity_kw(args.no_intensity))
-    print(f"corner detector ({args.normalizer}) -> {path}")
+    path = corner_train.main(args.input, args.output, _recipe(args), box_ply=args.box_ply, model=args.model,
+                             normalizer=args.normalization, seed=args.seed, device=args.device, conf=args.conf)
+    print(f"corner detector ({args.normalization}) -> {path}")
     return 0
 
 
-def _relight(args: argparse.Namespace) -> int:
-    import shlex
-    import sys
-
+def _planar(args: argparse.Namespace) -> int:
     from pose import planar
 
-    planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizers, detectors=args.detector,
+    planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizations, detectors=args.detector,
                 feature=args.feature, n_features=args.n_features, target_fraction=args.target_fraction, hfov=args.hfov,
-                max_frames=args.max_frames, command=shlex.join(["alcn", *sys.argv[1:]]))
+                max_frames=args.max_frames, recipe=_recipe(args), command=_command())
     print((Path(args.out) / "relight_pose.md").read_text(encoding="utf-8"))
     return 0
 
 
-def _add_relight(sub: argparse._SubParsersAction) -> None:
+def _add_recipe(parser: argparse.ArgumentParser, default: str) -> None:
+    """``--conf`` and ``--set`` of the corner detector's training, declared once for every command that trains it."""
+    from pose.corner_train import confs
+
+    parser.add_argument("--conf", default=default, choices=sorted(confs),
+                        help=f"the corner detector's training recipe (pose.corner_train.confs; default {default})")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
+                        help="override a key of the recipe (pose.corner_train.CornerRecipe), the value as TOML, e.g. "
+                        "--set iterations=1000, --set 'intensity_scale=[1, 1]' (repeatable)")
+
+
+#: ``--normalization``'s help: why the pose commands normalize nothing by default.
+NORMALIZATION_HELP = ("the normalization applied first, a spec NAME[:KEY=VALUE...] (default none: on the rendered "
+                      "Table 1 the default ALCN posed fewer frames than none with either part detector, and none costs "
+                      "nothing per frame; see `alcn pose eval`)")
+
+
+def _add_planar(sub: argparse._SubParsersAction) -> None:
     from pose import planar
 
-    r = sub.add_parser("relight", help="pose of a planar target under real light (fixed webcams): real-light Table 1",
+    r = sub.add_parser("planar", help="pose of a planar target under real light (fixed webcams): real-light Table 1",
                        description="Per scene of fixed outdoor cameras (the camera did not move, the light changes): "
                        "a textured rectangle of the reference frame (median brightness) is the target, its part "
-                       "model is built from that frame after each normalizer (assumed pinhole camera), and its pose "
-                       "is estimated in every other frame with the box's pipeline (part detector + PoseSolver). "
+                       "model is built from that frame after each normalization (assumed pinhole camera), and its "
+                       "pose is estimated in every other frame with the box's pipeline (part detector + PoseSolver). "
                        "Truth: the reference pose. Writes OUT/relight_pose.md, .json, .png and OUT/targets.png. "
                        "The Webcam frames are for academic research only (cite TILDE and AMOS).")
     r.add_argument("--out", type=Path, required=True, help="report folder")
     r.add_argument("--data", help="folder of scenes, one sub-folder of registered frames each (default: "
                    "$ALCN_SHARED_DATA/webcam, else ../shared/data/webcam)")
     r.add_argument("--scenes", nargs="+", help="scene names (default: every scene of --data)")
-    r.add_argument("--normalizers", nargs="+", default=list(planar.DEFAULT_NORMALIZERS),
+    r.add_argument("--normalizations", nargs="+", default=list(planar.DEFAULT_NORMALIZERS),
                    help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZERS) + ")")
     r.add_argument("--detector", nargs="+", default=["features"], choices=sorted(planar.DETECTORS),
                    help="part detectors, each giving rows (default features: OpenCV features matched to the target's "
                    "descriptors; corners: the corner CNN trained on the reference frame for the target's corners and "
-                   "side middles, one network per scene and normalizer: about 8 min each on 2 CPU cores, "
-                   "trained on the GPU where torch sees one)")
+                   "side middles, one network per scene and normalization, by --conf: about 8 min each on 2 CPU "
+                   "cores, trained on the GPU where torch sees one)")
+    _add_recipe(r, "planar")
     r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
     r.add_argument("--n-features", type=int, default=0,
                    help="the strongest keypoints kept per frame (default 0: all; the target's model keeps all of "
@@ -150,7 +162,7 @@ def _add_relight(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--hfov", type=float, default=planar.DEFAULT_HFOV,
                    help=f"assumed horizontal field of view, degrees (default {planar.DEFAULT_HFOV:g})")
     r.add_argument("--max-frames", type=int, help="at most this many frames per scene, evenly spaced (default all)")
-    r.set_defaults(func=_relight)
+    r.set_defaults(func=_planar)
 
 
 def _overlay_error(args: argparse.Namespace) -> int:
@@ -227,20 +239,9 @@ def _corner_recall(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``corner-recall``,
-    ``relight`` and ``overlay-error`` to ``alcn``."""
-    from pose.box import DIVISIONS
-    from pose.corner_data import COPIES, NOVEL_DISTANCE, NOVEL_VIEWS, SCALE
-    from pose.corner_train import BATCH_SIZE, ITERATIONS
+    ``planar`` and ``overlay-error`` to ``alcn``."""
     from pose.solver import METHODS
 
-    novel_distance_help = ("the nearby viewpoints' camera distance, a factor of their view's (default "
-                           f"{NOVEL_DISTANCE[0]:g} {NOVEL_DISTANCE[1]:g}: nearer than the training views, as test "
-                           "views come)")
-
-    jitter_help = ("jitter each training crop after the normalizer (contrast, gain ramp, offset, noise): "
-                   "behind ALCN the intensity copies normalize to nearly one input, and the jitter gives the "
-                   "network their variety back (on the rendered Table 1 it helps ALCN, not none, the DoG nor "
-                   "Tan-Triggs)")
     p = subparsers.add_parser("pose", help="3D box pose: build a part model, track it, evaluate",
                               description="Part-based 3D pose of a box after contrast normalization "
                               "(Rad, Roth & Lepetit, BMVC 2017, Sec. 4.4).")
@@ -262,7 +263,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="static camera, moving object: keep features on what moves")
     b.add_argument("--feature", default="ORB", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default ORB)")
     b.add_argument("--n-features", type=int, default=4000, help="keypoints per training image (default 4000)")
-    b.add_argument("--normalizer", default="none", help="normalizer applied first, a spec NAME[:KEY=VALUE...] (default none)")
+    b.add_argument("--normalization", default="none", help=NORMALIZATION_HELP)
     b.add_argument("--box-ply", help="cuboid .ply of the box: its true size")
     b.add_argument("--box-size", nargs=3, type=float, metavar=("X", "Y", "Z"), help="the box's true size")
     b.add_argument("--box-units", choices=["mm", "cm", "m"],
@@ -287,10 +288,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     cam.add_argument("--camera", help="camera.yaml from `alcn calib camera` (OpenCV FileStorage; default: the camera "
                      "stored in the part model)")
     t.add_argument("--detector", default="features", choices=["features", "corners"],
-                   help="features (default): OpenCV features matched to the part model; corners: the corner CNN (cv2.dnn)")
-    t.add_argument("--normalizer", help="normalizer applied first (default none; a corner detector's own)")
+                   help="features (default): OpenCV features matched to the part model; corners: the corner CNN "
+                   "(cv2.dnn)")
+    t.add_argument("--normalization", help="the normalization applied first, a spec NAME[:KEY=VALUE...]: the one the "
+                   "part model was built after (default none, see `build`); a corner detector's own by default")
     t.add_argument("--overlay", help="write the overlay here (.mp4/.avi or a folder)")
-    t.add_argument("--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant (default usac_default)")
+    t.add_argument("--method", default="usac_default", choices=sorted(METHODS),
+                   help="RANSAC variant (default usac_default)")
     t.add_argument("--n-features", type=int, default=1000, help="keypoints per frame (default 1000)")
     t.add_argument("--min-inliers", type=int, help="fewer inliers: frame lost (default 12; 5 with corners)")
     t.add_argument("--reprojection-error", type=float, default=4.0, help="inlier threshold, px (default 4)")
@@ -300,37 +304,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                        description="BB8 2D projection < 5 px, ADD < 10% of the diameter, 5 cm / 5 deg.")
     e.add_argument("--data", help="pose data set from `alcn data pose` (train/, test/, models/)")
     e.add_argument("--middlebury", nargs="+", help="Middlebury sets (e.g. ../shared/data/middlebury/templeSparseRing)")
-    e.add_argument("--normalizers", nargs="+",
+    e.add_argument("--normalizations", nargs="+",
                    help="rows of the table, NAME[:KEY=VALUE...] (default: none dog:sigma1=1:sigma2=2 alcn, "
                    "the DoG tuned for pose at 640x480)")
     e.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"],
                    help="feature of the classical detector (default SIFT: on the data engine's sequences it "
-                   "gave more correct poses than ORB, and with ALCN far more; `track` uses ORB for speed)")
+                   "gave more correct poses than ORB; `track` uses ORB for speed)")
     e.add_argument("--detectors", nargs="+", default=["features"], choices=["features", "corners"],
-                   help="part detectors, each giving rows (default features; corners: trained on the training sequence first)")
-    e.add_argument("--corner-iterations", type=int, default=ITERATIONS,
-                   help=f"corner CNN training steps (default {ITERATIONS})")
-    e.add_argument("--corner-batch-size", type=int, default=BATCH_SIZE,
-                   help=f"crops per corner CNN training step (default {BATCH_SIZE})")
-    e.add_argument("--corner-device", choices=("cpu", "cuda"),
+                   help="part detectors, each giving rows (default features; corners: trained on the training "
+                   "sequence first, by --conf)")
+    _add_recipe(e, "box")
+    e.add_argument("--device", choices=("cpu", "cuda"),
                    help="where the corner CNNs train (default: cuda where torch sees it, else cpu)")
-    e.add_argument("--corner-copies", type=int, default=COPIES,
-                   help=f"augmented copies of each training view for the corner CNN (default {COPIES})")
-    e.add_argument("--corner-novel-views", type=float, default=NOVEL_VIEWS,
-                   help="share of the copies that see the box from a nearby viewpoint (each face warped by its "
-                   f"plane's homography; default {NOVEL_VIEWS:g})")
-    e.add_argument("--corner-novel-distance", type=float, nargs=2, default=NOVEL_DISTANCE, metavar=("LOW", "HIGH"),
-                   help=novel_distance_help)
-    e.add_argument("--corner-scale", type=float, default=SCALE,
-                   help=f"downscaling of the frames for the corner CNN (default {SCALE:g})")
-    e.add_argument("--corner-divisions", type=int, default=DIVISIONS,
-                   help="steps per box edge of the corner CNN's parts (default "
-                   f"{DIVISIONS}: the corners, the edges' middles and the faces' centres; 1: the 8 corners)")
-    e.add_argument("--corner-no-intensity", action="store_true",
-                   help="train the corner CNN on copies that keep their view's intensities (no a I + b): the "
-                   "detector learns under the training light alone, as the paper's, and the normalizer in front "
-                   "is its only invariance to the light")
-    e.add_argument("--corner-jitter", action="store_true", help=jitter_help)
     e.add_argument("--seeds", type=int, default=1,
                    help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)")
     e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
@@ -348,28 +333,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     box = c.add_mutually_exclusive_group(required=True)
     box.add_argument("--box-ply", help="cuboid .ply of the box in the object frame (mm; BOP models/obj_000001.ply)")
     box.add_argument("--model", help="part model (.npz) whose box corners to use")
-    c.add_argument("--normalizer", default="none", help="normalizer applied first (default none)")
-    c.add_argument("--scale", type=float, default=SCALE, help=f"downscaling of the frames (default {SCALE:g})")
-    c.add_argument("--iterations", type=int, default=ITERATIONS, help=f"training steps (default {ITERATIONS})")
-    c.add_argument("--batch-size", type=int, default=BATCH_SIZE, help=f"crops per training step (default {BATCH_SIZE})")
+    c.add_argument("--normalization", default="none", help=NORMALIZATION_HELP)
+    _add_recipe(c, "box")
     c.add_argument("--device", choices=("cpu", "cuda"),
-                   help="where the network trains (default: cuda where torch sees it, else cpu; the default "
+                   help="where the network trains (default: cuda where torch sees it, else cpu; the box recipe's "
                    "4000 steps take about 8 min on 2 CPU cores)")
-    c.add_argument("--copies", type=int, default=COPIES,
-                   help=f"augmented copies (viewpoint, homography, background, intensity) of each view (default {COPIES})")
-    c.add_argument("--novel-views", type=float, default=NOVEL_VIEWS,
-                   help="share of the copies that see the box from a nearby viewpoint (each face warped by its "
-                   f"plane's homography; default {NOVEL_VIEWS:g})")
-    c.add_argument("--novel-distance", type=float, nargs=2, default=NOVEL_DISTANCE, metavar=("LOW", "HIGH"),
-                   help=novel_distance_help)
-    c.add_argument("--divisions", type=int, default=DIVISIONS,
-                   help="steps per box edge of the parts found (default "
-                   f"{DIVISIONS}: the corners, the edges' middles and the faces' centres; 1: the 8 corners)")
-    c.add_argument("--no-intensity", action="store_true",
-                   help="copies keep their view's intensities (no a I + b): the network learns under the training "
-                   "light alone, and the normalizer is its only invariance to the light")
-    c.add_argument("--jitter", action="store_true", help=jitter_help)
-    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--seed", type=int, default=0, help="seed of the frames and the network (default 0)")
     c.set_defaults(func=_train_corners)
 
     bc = sub.add_parser("bench-corners", help="frames per second of the corner detector (cv2.dnn, no torch)",
@@ -391,9 +360,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     cr = sub.add_parser("corner-recall", help="parts the corner detector finds in a rendered scene, before PnP",
                         description="Compares the corner detector's candidates with the true corners of a BOP scene "
-                        "(`alcn data pose`): the share of visible parts (corners, edge middles, face centres) found as the best candidate, among the "
-                        "candidates of the whole frame, and within the gates of the true pose; with --background grey "
-                        "also with everything but the object replaced by grey (the table and clutter removed).")
+                        "(`alcn data pose`): the share of visible parts (corners, edge middles, face centres) found "
+                        "as the best candidate, among the candidates of the whole frame, and within the gates of the "
+                        "true pose; with --background grey also with everything but the object replaced by grey (the table and clutter removed).")
     cr.add_argument("detector", help="corner detector (.onnx) from `alcn pose train-corners`")
     cr.add_argument("scene", type=Path,
                     help="BOP scene folder with scene_gt.json and mask_visib/ (e.g. DATA/test/000001)")
@@ -402,5 +371,5 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                     help="keep the frames as they are and/or grey everything but the object (default keep)")
     cr.add_argument("--out", type=Path, help="write corner_recall_<background>.json here")
     cr.set_defaults(func=_corner_recall)
-    _add_relight(sub)
+    _add_planar(sub)
     _add_overlay_error(sub)

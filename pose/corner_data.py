@@ -18,30 +18,22 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from alcn_cv.errors import InputError
-from pose.box import DIVISIONS, box_parts, facing_faces, part_visibility
+from pose.box import box_parts, facing_faces, part_visibility
 from pose.corners import PAD, STRIDE, downscale, grid_centres, grid_shape, normalization_for, to_scaled
 from pose.parts import to_gray
 from pose.sequence import TrainingSequence
 
+if TYPE_CHECKING:
+    from pose.corner_train import CornerRecipe
+
 logger = logging.getLogger(__name__)
 
-#: Augmented copies of each training view, and the share of them seen from a nearby viewpoint
-#: (:func:`novel_view`); see :mod:`pose.corner_train` for the measurements.
-COPIES = 11
-NOVEL_VIEWS = 0.6
-#: The novel views' camera distance, as a factor of their view's: down to 0.7 because test
-#: trajectories come nearer than every training view (the held-out scene's #1 down to 0.72 of
-#: the training views in its directions); see :mod:`pose.corner_train` for the measurements.
-NOVEL_DISTANCE = (0.7, 1.2)
-#: Downscaling of a sequence's frames before normalization and detection: a 32x32 window is 43
-#: pixels of a 640x480 frame (see :mod:`pose.corner_train` for 0.5 against 0.75).
-SCALE = 0.75
 
 
 def _read_mask(path: Path, shape: tuple[int, int]) -> np.ndarray | None:
@@ -135,7 +127,7 @@ def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray,
                rng: np.random.Generator, *, azimuth_deg: float = 8.0, elevation_deg: float = 20.0,
-               elevation_range: tuple[float, float] = (20.0, 70.0), distance: tuple[float, float] = NOVEL_DISTANCE,
+               elevation_range: tuple[float, float] = (20.0, 70.0), distance: tuple[float, float],
                min_stretch: float = 0.35, tries: int = 8, parts: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The box of a registered view seen from a nearby viewpoint: each face of the box warped by
@@ -145,7 +137,7 @@ def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndar
 
     The camera turns about the box's centre by up to ``azimuth_deg`` about the box's z axis (up)
     and ``elevation_deg`` in elevation (kept within ``elevation_range`` above the bottom face's
-    plane), its distance scaled within ``distance``. A viewpoint is kept only when every face it
+    plane), its distance scaled within ``distance`` ``(low, high)``. A viewpoint is kept only when every face it
     sees is seen in the view at least ``min_stretch`` as large (a face seen edge-on has no
     texture to give); ``None`` after ``tries`` refusals.
 
@@ -239,37 +231,34 @@ class CornerFrames:
 
 
 def _view_frames(small: np.ndarray, small_mask: np.ndarray | None, uv: np.ndarray, visible: np.ndarray, norm,
-                 rng: np.random.Generator, *, copies: int, backgrounds: float, intensity_scale: tuple[float, float],
-                 intensity_offset: float, noise: float, pos_radius: float, neg_radius: float,
-                 box: tuple[np.ndarray, ...] | None = None, novel_views: float = 0.0,
-                 novel_distance: tuple[float, float] = NOVEL_DISTANCE, **homography_kw: Any
+                 rng: np.random.Generator, recipe: CornerRecipe, box: tuple[np.ndarray, ...] | None = None
                  ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
-    """One downscaled view ``small`` (uint8) and its ``copies`` augmented copies, each normalized by
-    ``norm`` and labelled: ``(image, labels, offsets, owner, visible parts (m, 3))`` per frame
-    (:func:`build_frames`'s arguments; ``uv (n, 2)`` the parts in ``small``'s pixels; ``box``:
-    ``(corners, R, t, K, parts)`` of the view at ``small``'s scale, for :func:`novel_view`)."""
+    """One downscaled view ``small`` (uint8) and its ``recipe.copies`` augmented copies, each
+    normalized by ``norm`` and labelled: ``(image, labels, offsets, owner, visible parts (m, 3))``
+    per frame (``uv (n, 2)`` the parts in ``small``'s pixels; ``box``: ``(corners, R, t, K, parts)``
+    of the view at ``small``'s scale, for :func:`novel_view`; without it no novel view)."""
     h, w = small.shape
     out = []
-    for c in range(copies + 1):
+    for c in range(recipe.copies + 1):
         image, m, xy, vis = small, small_mask, uv, visible
         if c:
-            view = (novel_view(small, *box[:4], rng, distance=novel_distance, parts=box[4])
-                    if box is not None and rng.random() < novel_views else None)
+            view = (novel_view(small, *box[:4], rng, distance=tuple(recipe.novel_distance), parts=box[4])
+                    if box is not None and rng.random() < recipe.novel_views else None)
             if view is not None:
                 image, m, xy, vis = view
-            H = random_homography(rng, (h, w), **homography_kw)
+            H = random_homography(rng, (h, w))
             image = cv2.warpPerspective(image, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
             xy = _transform(H, xy)
             if m is not None:
                 m = cv2.warpPerspective(m, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-                if rng.random() < backgrounds:
+                if rng.random() < recipe.backgrounds:
                     image = replace_background(image, m, rng)
-            image = _intensity_noise(image, rng, intensity_scale, intensity_offset, noise)
+            image = _intensity_noise(image, rng, tuple(recipe.intensity_scale), recipe.intensity_offset, recipe.noise)
         inside = (xy[:, 0] >= 0) & (xy[:, 0] <= w - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= h - 1)
         shown = vis & inside
         normed = norm.normalize(image.astype(np.float32) / np.float32(255))
         lab, off, own = label_grid(xy[shown], np.flatnonzero(shown), xy[inside & ~vis], grid_shape(h, w),
-                                   pos_radius=pos_radius, neg_radius=neg_radius)
+                                   pos_radius=recipe.pos_radius, neg_radius=recipe.neg_radius)
         out.append((normed.astype(np.float32), lab, off, own,
                     np.concatenate([xy[shown], np.flatnonzero(shown)[:, None]], 1)))
     return out
@@ -292,44 +281,32 @@ def _stack_frames(per_view: list[list[tuple[np.ndarray, ...]]]) -> CornerFrames:
                         mean, std)
 
 
-def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: str = "none", *, scale: float = SCALE,
-                 copies: int = COPIES, backgrounds: float = 0.8, intensity_scale: tuple[float, float] = (0.4, 1.6),
-                 intensity_offset: float = 0.2, noise: float = 0.03, pos_radius: float = 4.0,
-                 neg_radius: float = 7.0, novel_views: float = NOVEL_VIEWS,
-                 novel_distance: tuple[float, float] = NOVEL_DISTANCE, divisions: int = DIVISIONS,
+def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: str, recipe: CornerRecipe, *,
                  seed: int = 0) -> CornerFrames:
-    """The labelled training frames of a registered sequence (:func:`pose.sequence.load_sequence`).
+    """The labelled training frames of a registered sequence (:func:`pose.sequence.load_sequence`):
+    each view downscaled by ``recipe.scale`` and its ``recipe.copies`` augmented copies (the keys of
+    :class:`pose.corner_train.CornerRecipe`), normalized by the spec ``normalizer``.
 
     Args:
         sequence: a :class:`pose.sequence.TrainingSequence` with poses (world = object frame).
         corners: ``(8, 3)`` box corners in the object frame (:func:`pose.model.box_corners` order).
         normalizer: a spec for :func:`pose.corners.normalization_for`.
-        scale: downscaling of the frames before normalization and detection.
-        copies: augmented copies per view (:func:`random_homography`, new background, intensity
-            change and noise), besides the view itself.
-        backgrounds: probability that a copy gets a new background (where the view has a mask).
-        intensity_scale, intensity_offset, noise: the intensity change of a copy.
-        pos_radius, neg_radius: see :func:`label_grid` (downscaled pixels).
-        novel_views: probability that a copy first sees the box from a nearby viewpoint
-            (:func:`novel_view`) before its homography.
-        novel_distance: ``(low, high)`` the novel views' camera distance, a factor of their view's.
-        divisions: the parts labelled, :func:`pose.box.box_parts` ``(corners, divisions)``.
+        recipe: the frames' keys of the recipe.
         seed: random seed.
 
     Raises:
-        InputError: an unregistered sequence, ``novel_distance`` not ``0 < low <= high``, or no
-            visible part in any view.
+        InputError: an unregistered sequence, or no visible part in any view.
     """
     from alcn_cv import io
 
     if not sequence.registered:
         raise InputError("the training sequence must be registered (a pose for every image)")
-    if not 0 < novel_distance[0] <= novel_distance[1]:
-        raise InputError(f"novel_distance must be (low, high) with 0 < low <= high, got {novel_distance}")
+    recipe.check()
+    scale = recipe.scale
     norm = normalization_for(normalizer)
     rng = np.random.default_rng(seed)
     mask_dir = sequence.image_dir.parent / "mask_visib"
-    parts = box_parts(corners, divisions)
+    parts = box_parts(corners, recipe.divisions)
     per_view = []
     for view in sequence.views:
         gray = to_gray(io.read_image(sequence.image_dir / view.name))
@@ -340,24 +317,19 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
         K[:2] *= scale
         K[:2, 2] += 0.5 * scale - 0.5
         per_view.append(_view_frames(small, None if mask is None else downscale(mask, scale), to_scaled(uv, scale),
-                                     vis, norm, rng, copies=copies, backgrounds=backgrounds,
-                                     intensity_scale=intensity_scale, intensity_offset=intensity_offset, noise=noise,
-                                     pos_radius=pos_radius, neg_radius=neg_radius, novel_views=novel_views,
-                                     novel_distance=novel_distance, box=(corners, view.R_w2c, view.t_w2c, K, parts)))
+                                     vis, norm, rng, recipe, box=(corners, view.R_w2c, view.t_w2c, K, parts)))
     frames = _stack_frames(per_view)
     logger.info("corner frames: %d (%d views x %d), %d parts, %d part cells", len(frames.labels),
-                len(sequence.views), copies + 1, len(parts), int((frames.labels > 0).sum()))
+                len(sequence.views), recipe.copies + 1, len(parts), int((frames.labels > 0).sum()))
     return frames
 
 
-def build_image_frames(gray: np.ndarray, uv: np.ndarray, normalizer: str = "none", *, scale: float = 0.5,
-                       copies: int = 59, intensity_scale: tuple[float, float] = (0.4, 1.6),
-                       intensity_offset: float = 0.2, noise: float = 0.03, pos_radius: float = 4.0,
-                       neg_radius: float = 7.0, seed: int = 0, **homography_kw: Any) -> CornerFrames:
+def build_image_frames(gray: np.ndarray, uv: np.ndarray, normalizer: str, recipe: CornerRecipe, *,
+                       seed: int = 0) -> CornerFrames:
     """The labelled training frames of one image whose parts are at ``uv (n, 2)`` (pixels of
-    ``gray``, uint8): the image and ``copies`` copies of it warped by :func:`random_homography`
-    (``homography_kw``) with an intensity change and noise, as :func:`build_frames` makes of
-    each view of a sequence (without new backgrounds: the parts' surroundings are the target's).
+    ``gray``, uint8): the image and ``recipe.copies`` copies of it, as :func:`build_frames` makes of
+    each view of a sequence without novel views nor new backgrounds (the parts' surroundings are
+    the target's).
 
     Raises:
         InputError: ``uv`` is not ``(n, 2)`` or no part is inside the image.
@@ -365,11 +337,10 @@ def build_image_frames(gray: np.ndarray, uv: np.ndarray, normalizer: str = "none
     uv = np.asarray(uv, np.float64)
     if uv.ndim != 2 or uv.shape[1] != 2 or not len(uv) or not np.isfinite(uv).all():
         raise InputError(f"need the parts' pixels as a finite (n, 2) array, got {uv.shape}")
-    frames = _stack_frames([_view_frames(
-        downscale(gray, scale), None, to_scaled(uv, scale), np.ones(len(uv), bool), normalization_for(normalizer),
-        np.random.default_rng(seed), copies=copies, backgrounds=0.0, intensity_scale=intensity_scale,
-        intensity_offset=intensity_offset, noise=noise, pos_radius=pos_radius, neg_radius=neg_radius,
-        **homography_kw)])
-    logger.info("corner frames: %d (1 image x %d), %d part cells", len(frames.labels), copies + 1,
+    recipe.check()
+    frames = _stack_frames([_view_frames(downscale(gray, recipe.scale), None, to_scaled(uv, recipe.scale),
+                                         np.ones(len(uv), bool), normalization_for(normalizer),
+                                         np.random.default_rng(seed), recipe)])
+    logger.info("corner frames: %d (1 image x %d), %d part cells", len(frames.labels), recipe.copies + 1,
                 int((frames.labels > 0).sum()))
     return frames

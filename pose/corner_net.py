@@ -23,12 +23,7 @@ class CornerNet(nn.Module):
     then ``n`` offsets ``(dx, dy)``.
 
     Batch normalization after every convolution (Ioffe & Szegedy, ICML 2015) speeds up the short
-    training: on the data engine's sequence #1 (no normalization, 30 training views x 8 frames)
-    the correct poses rose from 6.7% (1500 steps without it) to 36.7% (1000 steps with it). Wider
-    layers (24/48, 128) fit better (87% vs 44% of the training corners score highest at their
-    place) but cost 4 times the training and half the speed; a fully connected layer of 128 and
-    one more (``mixing=1``, the default) fit as well (96% after 2000 steps) for 1.4 times the
-    network's time (29 against 21 ms at 640x480 through ``cv2.dnn``, 2 threads, loaded machine).
+    training; the widths are those of the ``box`` recipe (:class:`pose.corner_train.CornerRecipe`).
 
     Args:
         num_parts: ``n``, the parts found (8: the box corners; 26 with the edges' middles and the

@@ -45,18 +45,8 @@ centre's window shows mostly the box's own texture, a corner's mostly the table.
   the edge's direction, along which the network places it about 3 times less precisely than
   across; the solver weighs its error along the edge down accordingly (:data:`pose.solver.ALONG_SIGMA`).
 
-Measured on the data engine's sequences (30 frames each, no normalization): the first
-design (a window classifier trained on crops around the 30 training views, hard-negative mining,
-a score grid of step 2 with centroid refinement, no gating) found only 60% of the visible
-corners of #1 among its 4 candidates within 5 px (71% within 10 px; the best candidate 43%),
-too few for PnP: 0-47% correct poses. :mod:`pose.corner_train` has the numbers of this design.
-With the gain ALCN in front it runs at 19.1 fps at 640x480 (``alcn pose bench-corners``, cv2.dnn
-with 2 threads, no torch, load 0.3; normalization 4.3 ms, network 33.8 ms at scale 0.75, peaks,
-pose and verification 14.4 ms for 26 parts; 15.7 fps before the verification, at load 1.8); the 8
-corners at scale 0.5 ran at 44 fps (network 15.9 ms). With the proposals (``runs/bench_corners_v8``,
-load 1.0): 18.1 fps on #1 (peaks, pose, verification 17.7 ms; no frame lost, none proposed), 10.4
-fps on #5 where 22 of the 30 frames are lost (56.2 ms: each lost frame pays for a proposal). With
-the refinement (``runs/bench_corners_v9``, load 0.5): 18.2 fps on #1 (17.5 ms), 10.1 on #5.
+Speed: ``alcn pose bench-corners``; measurements behind the design and the constants below:
+``docs/journal.md``.
 """
 
 from __future__ import annotations
@@ -87,16 +77,10 @@ METADATA_KEY = "alcn_cv"
 WINDOW = 32
 STRIDE = 4
 PAD = WINDOW // 2
-#: The lowest :meth:`CornerDetector.support` of a pose the tracker keeps. Measured with the
-#: networks of ``runs/table1_v6`` (seeds 0 and 1, no normalization and the gain ALCN; the sum over
-#: #1-#8 of the mean % of correct poses): without the check 551, with 0.10 608, 0.15 639, 0.20 611,
-#: 0.25 589; on #1 of the held-out scene (``alcn data pose --seed 1``, its 6 networks of
-#: ``runs/heldout_v6``) 52.2 -> 67.2% (0.20: 60.0). Of the accepted poses of #1, #2, #3, #5 and #8
-#: (seed 0, no normalization, no check) the wrong ones scored 0.02-0.40 (most below 0.2), the
-#: right ones 0.18-0.88 (most above 0.3).
+#: The lowest :meth:`CornerDetector.support` of a pose the tracker keeps (of 0.10-0.25, the most
+#: correct poses on Table 1).
 MIN_SUPPORT = 0.15
-#: :meth:`CornerDetector.propose`: candidate triples drawn, and the lowest support of the pose it
-#: proposes (measured below, in :mod:`pose.corner_train`).
+#: :meth:`CornerDetector.propose`: candidate triples drawn, and the lowest support of the pose it proposes.
 PROPOSALS = 2000
 MIN_PROPOSAL_SUPPORT = 0.3
 #: A proposed pose is unique when every pose whose parts project farther than ``RIVAL_DISTANCE``
@@ -104,13 +88,8 @@ MIN_PROPOSAL_SUPPORT = 0.3
 RIVAL_DISTANCE = 20.0
 MAX_RIVAL_RATIO = 0.85
 #: The gate of the tracker's second search of a frame's parts, around the frame's own verified
-#: pose, as a share of :attr:`CornerDetector.gate` (:attr:`CornerDetector.refine_search_scale`).
-#: Measured on the networks of ``runs/table1_v7`` and ``runs/heldout_v7`` (the sum over #1-#8
-#: of the seeds' % of correct poses, 3 seeds; the held-out scene's #1): without it none 2003.4 /
-#: ALCN 2003.3 / held-out 213.4 and 190.0; with a gate of 1.0 2096.6 / 1976.7 / 243.3 / 183.3; 0.5
-#: 2090.0 / 2013.3 / 230.0 / 203.3, and DoG, Tan-Triggs and the lite ALCN together 5913.4 ->
-#: 5933.3 (``runs/refine``). The second search costs no network run and no peak search: the
-#: frame's maps and local maxima are kept.
+#: pose, as a share of :attr:`CornerDetector.gate` (:attr:`CornerDetector.refine_search_scale`);
+#: it costs no network run and no peak search: the frame's maps and local maxima are kept.
 REFINE_SEARCH_SCALE = 0.5
 
 

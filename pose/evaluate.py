@@ -21,7 +21,7 @@ from __future__ import annotations
 import logging
 import re
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +32,8 @@ from alcn_cv.io import atomic_write, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none
 from alcn_cv.errors import DatasetError, InputError
 from pose.build import build as build_model
+from pose.corner_train import CornerRecipe
+from pose.corner_train import confs as corner_confs
 from pose.model import read_box_corners, unit_scale
 from pose.model import save as save_model
 from pose.parts import FeaturePartDetector
@@ -163,20 +165,24 @@ def table_markdown(table: dict[str, dict[str, float]], columns: list[str],
 def main(data_dir: str | Path, out_dir: str | Path, *,
          normalizers: list[str] | tuple[str, ...] = DEFAULT_NORMALIZERS,
          feature: str = "SIFT", obj_id: int = 1, n_features: int = 2000,
-         detectors: list[str] | tuple[str, ...] = ("features",), corner_kw: dict[str, Any] | None = None,
-         seeds: int = 1, sequences: list[int] | None = None, command: str | None = None) -> dict[str, Any]:
+         detectors: list[str] | tuple[str, ...] = ("features",), corner_recipe: CornerRecipe | None = None,
+         corner_conf: str | None = None, corner_device: str | None = None, seeds: int = 1,
+         sequences: list[int] | None = None, command: str | None = None) -> dict[str, Any]:
     """Table-1-style evaluation on a pose data set (``train/000001``, ``test/0000NN``, ``models/``).
 
     For each detector (``"features"``: :class:`pose.parts.FeaturePartDetector`, ``"corners"``:
     :class:`pose.corners.CornerDetector`) and normalizer: a part model is built, or the corner
-    detector trained ``seeds`` times (:func:`pose.corner_train.train_corners` with ``corner_kw``
-    and seeds 0, 1, ...; a cell is then the mean over the seeds, its spread their standard
-    deviation), from the training sequence on normalized images, then tracked through every test
+    detector trained ``seeds`` times (:func:`pose.corner_train.train_corners` by ``corner_recipe``,
+    default the ``box`` preset, recorded as ``corner_conf``, on ``corner_device``, seeds 0, 1, ...;
+    a cell is then the mean over the seeds, its spread their standard deviation), from the
+    training sequence on normalized images, then tracked through every test
     sequence (or those numbered in ``sequences``). Writes ``table1.md`` (with the machine and
     ``command``), ``table1.json``, ``table1.png`` (and the models) into ``out_dir``.
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    if corner_recipe is None:
+        corner_recipe, corner_conf = corner_confs["box"], "box"
     train = data_dir / "train" / "000001"
     tests = sorted(p for p in (data_dir / "test").glob("[0-9]*") if p.is_dir()) if (data_dir / "test").is_dir() else []
     if sequences:
@@ -216,8 +222,8 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
                     t0 = time.perf_counter()
                     suffix = f"_seed{seed}" if seeds > 1 else ""
                     net = train_corners(train, corners, out_dir / f"corners_{file_stem(name)}{suffix}.onnx",
-                                        normalizer=name, obj_id=obj_id, progress=False,
-                                        **{"seed": seed, **(corner_kw or {})})
+                                        corner_recipe, normalizer=name, obj_id=obj_id, seed=seed,
+                                        device=corner_device, conf=corner_conf, progress=False)
                     det = CornerDetector(net)
                     runs.append((det, "mm", det.corners,  # the BOP model's units
                                  {"training_seconds": time.perf_counter() - t0, "detector": str(net)}))
@@ -251,6 +257,8 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
     write_json(out_dir / "table1.json", nan_to_none({
         "data": str(data_dir), "machine": host, "command": command, "columns": columns, "table": table,
         "spread": spread, "seeds": seeds, "details": details,
+        "corner_conf": corner_conf if "corners" in detectors else None,
+        "corner_recipe": asdict(corner_recipe) if "corners" in detectors else None,
         "metrics": {"proj2d_px": PROJ_PX, "add": ADD_FRACTION, "deg": DEG, "cm": CM}}))
     plot_table(table, columns, out_dir / "table1.png", "Correct poses (2D projection < 5 px)", spread)
     return {"table": table, "spread": spread, "details": details}

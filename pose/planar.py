@@ -1,4 +1,4 @@
-"""``alcn pose relight``: pose of a planar target under real light changes (a real-light Table 1).
+"""``alcn pose planar``: pose of a planar target under real light changes (a real-light Table 1).
 
 Rendered light is not real light. The frames of a fixed outdoor camera (the Webcam data set of
 Verdie et al., "TILDE: A Temporally Invariant Learned DEtector", CVPR 2015) are taken at other
@@ -30,16 +30,9 @@ truth. For each scene:
 The part detector is a factory of :data:`DETECTORS`: ``"features"``, the classical detector,
 or ``"corners"``, the learned corner detector of the box (:mod:`pose.corners`) trained for the
 target from the reference frame alone, as the box's is from its training sequence under one
-light (:func:`corner_detector`): its 8 parts are the target's 4 corners and the middles of its
-4 sides (:func:`target_parts`; 4 parts would leave PnP nothing to check a pose with).
-Measured (every frame of the 4 scenes, 1000 steps on 60 copies of the reference frame, 2.5-7
-min per training on the loaded 2-core machine): it finds the 8 parts in the reference frame but
-2-5 of them under other lights without normalization, and poses 15.1% of the frames on average
-(DoG 24.9, ALCN 28.3, the gain ALCN 29.7), far below the SIFT parts (95-100%). With each pose
-verified by the network's scores (:meth:`pose.corners.CornerDetector.verify`; 30 s per training
-on the idle machine): none 16.1%, the default gain ALCN 27.4% (``runs/posereal_corners_v7``).
-With the box's longer training (:data:`CORNER_TRAINING`): none 23.8%, the DoG 1/2 30.0%, the
-gain ALCN 39.1%.
+light (:func:`corner_detector`, the ``planar`` recipe of :data:`pose.corner_train.confs`): its 8
+parts are the target's 4 corners and the middles of its 4 sides (:func:`target_parts`; 4 parts
+would leave PnP nothing to check a pose with).
 
 The Webcam frames are for academic research only (cite TILDE and AMOS).
 """
@@ -49,7 +42,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +55,8 @@ from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, to_gray, write_json
 from alcn_cv.report import describe_machine, machine, nan_to_none, new_figure, save_figure
+from pose.corner_train import CornerRecipe
+from pose.corner_train import confs as corner_confs
 from pose.evaluate import PROJ_PX, score, table_markdown
 from pose.model import PartModel, box_corners
 from pose.parts import FeaturePartDetector, PartDetector, create_feature
@@ -193,11 +188,11 @@ def build_target(image: np.ndarray, region: tuple[int, int, int, int], K: np.nda
     return PlanarTarget(model, K, rvec, tvec, (x, y, w, h), reference, gray)
 
 
-def feature_detector(target: PlanarTarget, normalizer: str, n_features: int = 0,
-                     work_dir: Path | None = None) -> PartDetector:
+def feature_detector(target: PlanarTarget, normalizer: str, n_features: int = 0, work_dir: Path | None = None,
+                     recipe: CornerRecipe | None = None) -> PartDetector:
     """The classical part detector of the target: every keypoint of a frame (``n_features=0``)
     matched to the target's descriptors (:class:`pose.parts.FeaturePartDetector`); ``work_dir``
-    unused (nothing to write)."""
+    and ``recipe`` unused (nothing to train)."""
     return FeaturePartDetector(target.model, normalizer, n_features_global=n_features)
 
 
@@ -210,19 +205,12 @@ def target_parts(target: PlanarTarget) -> tuple[np.ndarray, np.ndarray]:
     return parts, project(parts, target.rvec, target.tvec, target.K)
 
 
-#: Training of the target's corner detector (:func:`pose.corner_train.train_image_corners`):
-#: ``copies`` augmented copies of the reference frame and ``iterations`` steps of ``batch_size``
-#: crops (the box's longer recipe); the rest as the box's. Measured on the four webcam scenes (one
-#: seed, none / the gain ALCN, mean % of frames posed within 5 px): 1000 steps of 16 crops 16.8 /
-#: 27.4, these 4000 of 64 23.8 / 39.1 (``runs/s13/posereal_long``; 7.5 min a network on 2 CPU cores).
-CORNER_TRAINING = {"copies": 59, "iterations": 4000, "batch_size": 64}
-
-
-def corner_detector(target: PlanarTarget, normalizer: str, n_features: int = 0,
-                    work_dir: Path | None = None) -> PartDetector:
+def corner_detector(target: PlanarTarget, normalizer: str, n_features: int = 0, work_dir: Path | None = None,
+                    recipe: CornerRecipe | None = None) -> PartDetector:
     """The learned corner detector of the target (:class:`pose.corners.CornerDetector`), trained
-    on the reference frame after ``normalizer`` (:data:`CORNER_TRAINING`) and written to
-    ``work_dir`` (default: a temporary folder); ``n_features`` unused."""
+    on the reference frame after ``normalizer`` by ``recipe`` (default: the ``planar`` preset of
+    :data:`pose.corner_train.confs`) and written to ``work_dir`` (default: a temporary folder);
+    ``n_features`` unused."""
     import tempfile
 
     from pose.corner_train import train_image_corners
@@ -234,13 +222,13 @@ def corner_detector(target: PlanarTarget, normalizer: str, n_features: int = 0,
     parts, uv = target_parts(target)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(work_dir or tmp) / f"corners_{Path(target.reference).stem}_{file_stem(normalizer)}.onnx"
-        train_image_corners(target.image, uv, parts, target.model.corners, path, normalizer=normalizer, source=target.reference,
-                            progress=False, **CORNER_TRAINING)
+        train_image_corners(target.image, uv, parts, target.model.corners, path, recipe, normalizer=normalizer,
+                            source=target.reference, conf=None if recipe else "planar", progress=False)
         return CornerDetector(path)
 
 
-#: Part detectors by name: ``(target, normalizer, n_features, work_dir) -> PartDetector``.
-DETECTORS: dict[str, Callable[[PlanarTarget, str, int, Path | None], PartDetector]] = {
+#: Part detectors by name: ``(target, normalizer, n_features, work_dir, recipe) -> PartDetector``.
+DETECTORS: dict[str, Callable[[PlanarTarget, str, int, Path | None, CornerRecipe | None], PartDetector]] = {
     "features": feature_detector, "corners": corner_detector}
 
 
@@ -264,14 +252,16 @@ class FrameResult:
 def evaluate_scene(scene: Scene, normalizer: str, *, detector: str = "features", feature: str = "SIFT",
                    n_features: int = 0, reference: int | None = None, region: tuple[int, int, int, int] | None = None,
                    target_fraction: float = DEFAULT_TARGET_FRACTION, hfov: float = DEFAULT_HFOV,
-                   work_dir: Path | None = None) -> tuple[PlanarTarget, list[FrameResult]]:
+                   work_dir: Path | None = None, recipe: CornerRecipe | None = None
+                   ) -> tuple[PlanarTarget, list[FrameResult]]:
     """Build the target in the scene's reference frame after ``normalizer`` and pose it in every
     other frame; returns the target and one :class:`FrameResult` per other frame. ``n_features``:
     the strongest keypoints kept per frame (0: all).
 
     ``reference`` (default :func:`reference_index`) and ``region`` (default
     :func:`select_region` on the raw reference frame, so every normalizer gets the same target);
-    ``work_dir``: where a learned detector is written."""
+    ``work_dir``: where a learned detector is written; ``recipe``: its training (default: the
+    ``planar`` preset)."""
     if detector not in DETECTORS:
         raise InputError(f"unknown detector {detector!r}; choose one of {sorted(DETECTORS)}")
     frames = scene.frames
@@ -280,7 +270,7 @@ def evaluate_scene(scene: Scene, normalizer: str, *, detector: str = "features",
     K = pinhole_camera(w, h, hfov)
     region = region or select_region(frames[ref], target_fraction, feature)
     target = build_target(frames[ref], region, K, normalizer, feature=feature, reference=scene.files[ref])
-    det = DETECTORS[detector](target, normalizer, n_features, work_dir)
+    det = DETECTORS[detector](target, normalizer, n_features, work_dir, recipe)
     solver = PoseSolver(K, min_inliers=MIN_INLIERS[detector], iterations=RANSAC_ITERATIONS[detector],
                         min_inliers_near_prior=MIN_INLIERS_NEAR_PRIOR[detector], outline=target.model.corners)
     truth = (cv2.Rodrigues(target.rvec)[0], target.tvec)
@@ -322,11 +312,13 @@ def plot_targets(scenes: Sequence[Scene], targets: dict[str, PlanarTarget], path
 def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequence[str] | None = None,
          normalizers: Sequence[str] = DEFAULT_NORMALIZERS, detectors: Sequence[str] = ("features",),
          feature: str = "SIFT", n_features: int = 0, target_fraction: float = DEFAULT_TARGET_FRACTION,
-         hfov: float = DEFAULT_HFOV, max_frames: int | None = None, command: str = "") -> dict[str, Any]:
+         hfov: float = DEFAULT_HFOV, max_frames: int | None = None, recipe: CornerRecipe | None = None,
+         command: str = "") -> dict[str, Any]:
     """The real-light Table 1: per scene of ``data`` (default ``<shared data>/webcam``), detector of
     :data:`DETECTORS` and normalizer, the % of frames whose target pose is correct. Writes
     ``relight_pose.md``, ``relight_pose.json``, ``relight_pose.png`` and ``targets.png`` (and the
-    learned detectors, ``corners_<reference>_<normalizer>.onnx``) into ``out_dir``."""
+    learned detectors, ``corners_<reference>_<normalizer>.onnx``, trained by ``recipe``, default the
+    ``planar`` preset) into ``out_dir``."""
     root = Path(data) if data is not None else shared_root("webcam")
     if not root.is_dir():
         raise DatasetError(f"{root}: no such folder (the webcam scenes; set ALCN_SHARED_DATA or give --data)")
@@ -348,7 +340,7 @@ def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequenc
     for detector, name, scene in tqdm(runs, desc="relight pose", unit="scene", leave=False):
         row = row_label(name, detector, feature)
         target, frames = evaluate_scene(scene, name, detector=detector, feature=feature, n_features=n_features,
-                                        region=regions[scene.name], hfov=hfov, work_dir=out_dir)
+                                        region=regions[scene.name], hfov=hfov, work_dir=out_dir, recipe=recipe)
         targets.setdefault(scene.name, target)
         proj = [f.proj_px for f in frames]
         pct = _percent(proj)
@@ -390,7 +382,7 @@ def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequenc
         "command": command, "machine": host, "data": str(root), "columns": columns, "table": table,
         "details": details,
         "settings": {"feature": feature, "n_features": n_features, "detectors": list(detectors),
-                     "corner_training": CORNER_TRAINING,
+                     "corner_recipe": asdict(recipe or corner_confs["planar"]),
                      "target_fraction": target_fraction, "hfov_deg": hfov, "proj2d_px": PROJ_PX,
                      "max_frames": max_frames}}))
     plot_table(table, columns + ["mean"], out_dir / "relight_pose.png",

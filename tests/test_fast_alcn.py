@@ -213,14 +213,15 @@ def test_distill_writes_a_student_closer_than_its_start(tmp_path):
     import hashlib
 
     from alcn_cv.train import distill
+    from alcn_cv.train.config import LiteDistillConfig
 
     torch.manual_seed(2)
     teacher = Normalizer(hidden=16, output_scale=3.0).eval()
     meta = dict(load_normalizer_file().meta)
     meta.update(config=teacher.config, trained=True, description="a test teacher")
     teacher_path = save_normalizer_file(tmp_path / "teacher.npz", teacher.state_arrays(), meta)
-    out = distill.main(tmp_path / "student.npz", teacher_path, "test", n_windows=256, n_val=64, epochs=6,
-                       batch_size=64, n_objects=4, progress=False)
+    cfg = LiteDistillConfig(teacher=str(teacher_path), n_windows=256, n_val=64, epochs=6, batch_size=64, n_objects=4)
+    out = distill.main(tmp_path / "student.npz", cfg, "test", progress=False)
     header = load_normalizer_file(out).meta
     assert header["architecture"] == "lite" and header["trained"] is True
     assert header["teacher"]["sha256"] == hashlib.sha256(teacher_path.read_bytes()).hexdigest()
@@ -233,13 +234,15 @@ def test_distill_writes_a_student_closer_than_its_start(tmp_path):
 
 def test_distill_copies_a_constant_teacher_exactly(tmp_path):
     from alcn_cv.train import distill
+    from alcn_cv.train.config import LiteDistillConfig
 
     dog = [1.0, 0.0, -1.0] + [0.0] * 7
     teacher = Normalizer(hidden=16, init_weights=dog)
     meta = dict(load_normalizer_file().meta)
     meta.update(config=teacher.config)
     path = save_normalizer_file(tmp_path / "teacher.npz", teacher.state_arrays(), meta)
-    student, record = distill.distill(path, n_windows=32, n_val=8, n_objects=2, progress=False)
+    cfg = LiteDistillConfig(teacher=str(path), n_windows=32, n_val=8, n_objects=2)
+    student, record = distill.distill(cfg, progress=False)
     assert record["constant_teacher"] and record["settings"]["epochs"] == 0
     with torch.no_grad():
         out = student(torch.rand(3, 1, 48, 48))

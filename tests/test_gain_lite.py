@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import hashlib
+import shlex
 
 import cv2
 import numpy as np
@@ -16,6 +17,7 @@ from alcn_cv.data.frames import synthetic_frame  # noqa: E402
 from alcn_cv.cli import main as cli  # noqa: E402
 from alcn_cv.enhance.alcn import MODELS, ALCN  # noqa: E402
 from alcn_cv.nets.gain import GainNormalizer  # noqa: E402
+from alcn_cv.train.config import GainDistillConfig  # noqa: E402
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file  # noqa: E402
 
 
@@ -50,13 +52,15 @@ def test_distill_from_a_gain_teacher_writes_a_smaller_gain_student(tmp_path):
 
     teacher_path, teacher = _teacher(tmp_path / "teacher.npz")
     scenes = _scenes(tmp_path)
-    out = distill.main(tmp_path / "student.npz", teacher_path, "test", scenes=scenes, rendered=0, epochs=25, progress=False)
+    cfg = GainDistillConfig(teacher=str(teacher_path), scenes=[str(s) for s in scenes], rendered=0, epochs=25)
+    out = distill.main(tmp_path / "student.npz", cfg, "test", conf="gain-lite", progress=False)
     header = load_normalizer_file(out).meta
     assert header["architecture"] == "gain" and header["config"]["channels"] == 8 and header["trained"] is True
     assert header["teacher"]["sha256"] == hashlib.sha256(teacher_path.read_bytes()).hexdigest()
     assert header["equalization"]["tau"] == pytest.approx(teacher.tau_value())
     assert header["divisive"]["scale"] == pytest.approx(float(teacher.floor_scale.detach()))
     fit = header["distillation"]
+    assert fit["conf"] == "gain-lite" and fit["settings"]["epochs"] == 25
     assert fit["validation"]["maps_relative_error"] < fit["validation_initial"]["maps_relative_error"]
     assert fit["settings"]["frames"] == {"train": 8, "validation": 2}  # every 5th frame of each scene held out
     card = out.with_suffix(".md").read_text()
@@ -76,26 +80,29 @@ def test_distill_gain_is_seeded_and_rejects_other_teachers(tmp_path):
     teacher_path, _ = _teacher(tmp_path / "teacher.npz")
     scenes = _scenes(tmp_path, count=1)
     (tmp_path / "short").mkdir()
-    runs = [distill.distill_gain(teacher_path, scenes, rendered=1, epochs=2, progress=False)[0] for _ in range(2)]
+    cfg = GainDistillConfig(teacher=str(teacher_path), scenes=[str(s) for s in scenes], rendered=1, epochs=2)
+    runs = [distill.distill_gain(cfg, progress=False)[0] for _ in range(2)]
     for a, b in zip(runs[0].state_arrays().values(), runs[1].state_arrays().values()):
         np.testing.assert_array_equal(a, b)
     with pytest.raises(alcn_cv.errors.InputError, match="not a gain"):
-        distill.distill_gain(MODELS["lite"], scenes, progress=False)
+        distill.distill_gain(GainDistillConfig(teacher="lite", scenes=cfg.scenes), progress=False)
+    short = [str(s) for s in _scenes(tmp_path / "short", count=1, frames=3)]
     with pytest.raises(alcn_cv.errors.DatasetError, match="validation"):
-        distill.distill_gain(teacher_path, _scenes(tmp_path / "short", count=1, frames=3), rendered=0, progress=False)
+        distill.distill_gain(GainDistillConfig(teacher=str(teacher_path), scenes=short, rendered=0), progress=False)
 
 
 def test_distill_command_from_a_gain_teacher(tmp_path, capsys):
     teacher_path, _ = _teacher(tmp_path / "teacher.npz")
     scenes = _scenes(tmp_path, count=1)
     out = tmp_path / "gain_lite.npz"
-    args = ["--teacher", str(teacher_path), "--epochs", "1", "--channels", "4", "--dilations", "1,2", "--scenes",
-            str(scenes[0]), "--rendered", "0"]
-    assert cli(["distill", "--out", str(out), *args, "--no-progress"]) == 0
+    args = ["--set", f"teacher='{teacher_path}'", "--set", "epochs=1", "--set", "channels=4", "--set",
+            "dilations=[1, 2]", "--set", f"scenes=['{scenes[0]}']", "--set", "rendered=0"]
+    assert cli(["distill", "--conf", "gain-lite", "--out", str(out), *args, "--no-progress"]) == 0
     assert capsys.readouterr().out.strip() == str(out) and out.with_suffix(".onnx").is_file()
     config = load_normalizer_file(out).meta["config"]
     assert (config["channels"], config["dilations"]) == (4, [1, 2])
-    assert f"Command: `alcn distill --out {out} {' '.join(args)}`" in out.with_suffix(".md").read_text()
+    assert f"Command: `{shlex.join(['alcn', 'distill', '--conf', 'gain-lite', '--out', str(out), *args])}`" in \
+        out.with_suffix(".md").read_text()
 
 
 @pytest.mark.parametrize("backend", ["fast", "opencv"])

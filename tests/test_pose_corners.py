@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import cv2
@@ -200,7 +201,7 @@ def test_propose_finds_the_pose_the_scores_show_and_only_a_unique_one(random_net
 def test_build_frames_labels_follow_the_corners(posedata):
     seq = load_sequence(posedata / "train" / "000001", obj_id=1)
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
-    frames = corner_data.build_frames(seq, corners, "none", scale=1.0, copies=2)
+    frames = corner_data.build_frames(seq, corners, "none", corner_train.CornerRecipe(scale=1.0, copies=2))
     parts = box.box_parts(corners)
     n = 3 * len(seq.views)
     assert frames.images.shape == (n, 240 + 2 * pc.PAD, 320 + 2 * pc.PAD) and frames.images.dtype == np.float32
@@ -240,7 +241,7 @@ def test_novel_view_moves_each_face_with_its_plane(posedata):
     assert (vis0 == vis).all() and mask.any()
     assert np.abs(same.astype(int) - gray)[cv2.erode(mask, np.ones((3, 3), np.uint8)) > 0].mean() < 2
     # another viewpoint: a pixel of every face it sees comes from that face's plane in the view
-    img2, mask2, uv2, _ = corner_data.novel_view(gray, corners, R, t, K, np.random.default_rng(1))
+    img2, mask2, uv2, _ = corner_data.novel_view(gray, corners, R, t, K, np.random.default_rng(1), distance=(0.7, 1.2))
     assert np.abs(uv2 - uv).max() > 1
     checked = 0
     for quad in box.facing_faces(corners, R, t):
@@ -259,7 +260,7 @@ def test_build_image_frames_labels_follow_the_parts():
     rng = np.random.default_rng(0)
     gray = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.float32), (0, 0), 2).astype(np.uint8)
     uv = np.array([[20, 15], [80, 15], [140, 15], [140, 60], [140, 100], [80, 100], [20, 100], [20, 60]], float)
-    frames = corner_data.build_image_frames(gray, uv, "none", scale=1.0, copies=3)
+    frames = corner_data.build_image_frames(gray, uv, "none", corner_train.CornerRecipe(scale=1.0, copies=3))
     assert frames.images.shape == (4, 120 + 2 * pc.PAD, 160 + 2 * pc.PAD) and frames.view.tolist() == [0] * 4
     np.testing.assert_allclose(frames.corners[0][:, :2], uv)
     assert frames.corners[0][:, 2].tolist() == list(range(8))
@@ -267,11 +268,12 @@ def test_build_image_frames_labels_follow_the_parts():
     for f in range(4):
         for x, y, k in frames.corners[f]:
             assert ((frames.labels[f] == k + 1) & (np.linalg.norm(centres - [x, y], axis=2) <= 4.0)).any()
-    assert corner_data.build_image_frames(gray, uv[:4], "none", scale=1.0, copies=0).corners[0][:, 2].tolist() == [
+    recipe = corner_train.CornerRecipe(scale=1.0, copies=0)
+    assert corner_data.build_image_frames(gray, uv[:4], "none", recipe).corners[0][:, 2].tolist() == [
         0, 1, 2, 3]  # any number of parts
     for bad in (uv[:, :1], uv[:0], np.full((8, 2), np.nan)):
         with pytest.raises(InputError, match="parts' pixels"):
-            corner_data.build_image_frames(gray, bad)
+            corner_data.build_image_frames(gray, bad, "none", recipe)
 
 
 def test_mixing_layers_keep_the_geometry():
@@ -355,13 +357,15 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     """`alcn pose train-corners`: a few steps on four frames."""
     onnx = tmp_path / "corners.onnx"
     args = _parser().parse_args(["pose", "train-corners", str(posedata / "train" / "000001"), str(onnx), "--box-ply",
-                                 str(posedata / "models" / "obj_000001.ply"), "--iterations", "12", "--copies", "0",
-                                 "--batch-size", "24", "--device", "cpu"])
+                                 str(posedata / "models" / "obj_000001.ply"), "--conf", "box", "--set", "iterations=12",
+                                 "--set", "copies=0", "--set", "batch_size=24", "--device", "cpu"])
     assert args.func(args) == 0
     meta = pc.read_metadata(onnx)
     assert meta["normalizer"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
-    assert meta["fit"]["batch_size"] == 24 and meta["fit"]["iterations"] == 12 and meta["fit"]["device"] == "cpu"
-    assert meta["fit"]["jitter"] is False
+    assert meta["fit"]["device"] == "cpu" and meta["conf"] == "box"
+    # the recipe is recorded whole: the preset with the settings
+    expected = corner_train.CornerRecipe(iterations=12, copies=0, batch_size=24)
+    assert meta["recipe"] == json.loads(json.dumps(dataclasses.asdict(expected)))
     assert meta["config"] == {"num_parts": 26, "channels": [16, 32], "hidden": 128, "mixing": 1}
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
     np.testing.assert_allclose(meta["parts"], box.box_parts(corners))
@@ -369,83 +373,82 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     assert det.parts.shape == (26, 3) and det.outputs(np.zeros((40, 48), np.float32)).shape == (79, 11, 13)
     # the 8 corners only
     args = _parser().parse_args(["pose", "train-corners", str(posedata / "train" / "000001"), str(onnx), "--box-ply",
-                                 str(posedata / "models" / "obj_000001.ply"), "--iterations", "2", "--copies", "0",
-                                 "--divisions", "1"])
+                                 str(posedata / "models" / "obj_000001.ply"), "--set", "iterations=2", "--set",
+                                 "copies=0", "--set", "divisions=1"])
     assert args.func(args) == 0
     np.testing.assert_allclose(pc.read_metadata(onnx)["parts"], corners)
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="checks the error where torch sees no CUDA device")
 def test_training_on_cuda_without_one_is_a_clear_error(posedata):
+    recipe = corner_train.CornerRecipe(copies=0, iterations=1, batch_size=2, cells=4)
     frames = corner_data.build_frames(load_sequence(posedata / "train" / "000001"),
-                                      read_box_corners(posedata / "models" / "obj_000001.ply"), copies=0)
+                                      read_box_corners(posedata / "models" / "obj_000001.ply"), "none", recipe)
     with pytest.raises(InputError, match="no CUDA device"):
-        corner_train.fit(CornerNet(), frames, iterations=1, batch_size=2, cells=4, device="cuda", progress=False)
+        corner_train.fit(CornerNet(), frames, recipe, device="cuda", progress=False)
 
 
-def _train_corners_kwargs(posedata, tmp_path, monkeypatch, *extras: list[str]) -> list[dict]:
-    """What `alcn pose train-corners` with each list of ``extras`` passes to ``train_corners``."""
-    calls = []
-    monkeypatch.setattr(corner_train, "train_corners", lambda *a, **kw: calls.append(kw) or tmp_path / "c.onnx")
-    common = [str(posedata / "train" / "000001"), str(tmp_path / "c.onnx"), "--box-ply",
-              str(posedata / "models" / "obj_000001.ply")]
-    for extra in extras:
-        args = _parser().parse_args(["pose", "train-corners", *common, *extra])
-        assert args.func(args) == 0
-    return calls
-
-
-def _eval_corner_kw(posedata, tmp_path, monkeypatch, *extra: str) -> dict:
-    """The corner CNN's training options that `alcn pose eval --detectors corners` with ``extra`` passes on."""
+def _recipes(posedata, tmp_path, monkeypatch, *extras: list[str]) -> list:
+    """The recipes `alcn pose train-corners` and `alcn pose eval --detectors corners` pass on with each
+    list of ``extras``."""
     from pose import evaluate
 
     seen = []
-    monkeypatch.setattr(evaluate, "main", lambda *a, **kw: seen.append(kw["corner_kw"]))
-    args = _parser().parse_args(["pose", "eval", "--data", str(posedata), "--out", str(tmp_path / "t"),
-                                 "--detectors", "corners", *extra])
-    assert args.func(args) == 0
-    return seen[0]
+    monkeypatch.setattr(corner_train, "train_corners", lambda _s, _c, _o, recipe, **kw: seen.append(recipe))
+    monkeypatch.setattr(evaluate, "main", lambda *a, **kw: seen.append(kw["corner_recipe"]))
+    for extra in extras:
+        for command in (["train-corners", str(posedata / "train" / "000001"), str(tmp_path / "c.onnx"), "--box-ply",
+                         str(posedata / "models" / "obj_000001.ply")],
+                        ["eval", "--data", str(posedata), "--out", str(tmp_path / "t"), "--detectors", "corners"]):
+            args = _parser().parse_args(["pose", *command, *extra])
+            args.func(args)
+    return seen
 
 
-def test_no_intensity_trains_on_the_views_own_intensities(posedata, tmp_path, monkeypatch):
-    """`--no-intensity` / `--corner-no-intensity`: the copies keep their view's intensities."""
-    calls = _train_corners_kwargs(posedata, tmp_path, monkeypatch, [], ["--no-intensity"])
-    assert "intensity_scale" not in calls[0]
-    assert calls[1]["intensity_scale"] == (1.0, 1.0) and calls[1]["intensity_offset"] == 0.0
-    seen = _eval_corner_kw(posedata, tmp_path, monkeypatch, "--corner-no-intensity")
-    assert seen["intensity_scale"] == (1.0, 1.0) and seen["intensity_offset"] == 0.0
-    # what it changes: a copy differs from its view by the warp alone
+def test_both_commands_take_the_recipe_as_a_preset_and_settings(posedata, tmp_path, monkeypatch, capsys):
+    box_recipe = corner_train.confs["box"]
+    seen = _recipes(posedata, tmp_path, monkeypatch, [], ["--set", "jitter=true", "--set", "novel_distance=[0.6, 1.1]"],
+                    ["--conf", "planar"])
+    assert seen[0] == seen[1] == box_recipe == corner_train.CornerRecipe()
+    assert seen[2] == seen[3] == dataclasses.replace(box_recipe, jitter=True, novel_distance=[0.6, 1.1])
+    assert seen[4] == seen[5] == corner_train.confs["planar"]
+    for bad, key in (["novel_distance=[1.2, 0.7]"], "novel_distance"), (["iterations=many"], "iterations"), \
+            (["iteration=3"], "iteration"):
+        with pytest.raises(InputError, match=key):
+            _recipes(posedata, tmp_path, monkeypatch, ["--set", *bad])
+
+
+def test_no_intensity_trains_on_the_views_own_intensities(posedata):
+    """``intensity_scale=[1, 1]``, ``intensity_offset=0``: the copies keep their view's intensities."""
     seq = load_sequence(posedata / "train" / "000001", obj_id=1)
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
-    frames = corner_data.build_frames(seq, corners, "none", scale=1.0, copies=3, backgrounds=0.0, noise=0.0,
-                                      novel_views=0.0, intensity_scale=(1.0, 1.0), intensity_offset=0.0)
-    changed = corner_data.build_frames(seq, corners, "none", scale=1.0, copies=3, backgrounds=0.0, noise=0.0,
-                                       novel_views=0.0)
+    recipe = corner_train.CornerRecipe(scale=1.0, copies=3, backgrounds=0.0, noise=0.0, novel_views=0.0)
+    frames = corner_data.build_frames(seq, corners, "none", dataclasses.replace(recipe, intensity_scale=[1.0, 1.0],
+                                                                                intensity_offset=0.0))
+    changed = corner_data.build_frames(seq, corners, "none", recipe)
     shifts = [[abs(f.images[c].mean() - f.images[0].mean()) for c in (1, 2, 3)] for f in (frames, changed)]
     assert max(shifts[0]) < 0.3 * max(shifts[1])
 
 
-def test_novel_distance_brings_the_novel_views_nearer(posedata, tmp_path, monkeypatch):
-    """``novel_distance`` (``--novel-distance``, ``--corner-novel-distance``): the novel views'
-    camera distance, so that the network sees the box larger than in any training view."""
+def test_novel_distance_brings_the_novel_views_nearer(posedata):
+    """``novel_distance``: the novel views' camera distance, so that the network sees the box larger
+    than in any training view."""
     seq = load_sequence(posedata / "train" / "000001", obj_id=1)
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
 
     def box_size(distance):  # mean spread of the visible parts over the copies, pixels
-        frames = corner_data.build_frames(seq, corners, "none", scale=1.0, copies=6, backgrounds=0.0, noise=0.0,
-                                          novel_views=1.0, novel_distance=distance, seed=3)
+        recipe = corner_train.CornerRecipe(scale=1.0, copies=6, backgrounds=0.0, noise=0.0, novel_views=1.0,
+                                           novel_distance=list(distance))
+        frames = corner_data.build_frames(seq, corners, "none", recipe, seed=3)
         return np.mean([np.ptp(c[:, :2], 0).max() for c in frames.corners if len(c) >= 4])
 
     assert box_size((0.7, 0.7)) > 1.2 * box_size((1.2, 1.2))
     with pytest.raises(InputError, match="novel_distance"):
-        corner_data.build_frames(seq, corners, novel_distance=(1.2, 0.7))
-    calls = _train_corners_kwargs(posedata, tmp_path, monkeypatch, ["--novel-distance", "0.6", "1.1"])
-    assert calls[0]["novel_distance"] == (0.6, 1.1)
-    assert _eval_corner_kw(posedata, tmp_path, monkeypatch)["novel_distance"] == corner_data.NOVEL_DISTANCE
+        corner_data.build_frames(seq, corners, "none", corner_train.CornerRecipe(novel_distance=[1.2, 0.7]))
 
 
-def test_jitter_varies_each_crop_after_the_normalizer(posedata, tmp_path, monkeypatch):
-    """:func:`pose.corner_train.jitter_crops` (``jitter``, ``--jitter``, ``--corner-jitter``):
+def test_jitter_varies_each_crop_after_the_normalizer(posedata, monkeypatch):
+    """:func:`pose.corner_train.jitter_crops` (the recipe's ``jitter``):
     each crop gets its own contrast, gain ramp, offset and noise within the bounds, in place."""
     rng = np.random.default_rng(0)
     crops = rng.normal(size=(64, 1, 40, 40)).astype(np.float32)
@@ -461,18 +464,14 @@ def test_jitter_varies_each_crop_after_the_normalizer(posedata, tmp_path, monkey
     same = crops.copy()
     corner_train.jitter_crops(same, np.random.default_rng(1), contrast=1.0, ramp=0.0, offset=0.0, noise=0.0)
     np.testing.assert_allclose(same, crops, atol=1e-6)
-    calls = _train_corners_kwargs(posedata, tmp_path, monkeypatch, [], ["--jitter"])
-    assert calls[0]["jitter"] is False and calls[1]["jitter"] is True
-    assert _eval_corner_kw(posedata, tmp_path, monkeypatch)["jitter"] is False
-    assert _eval_corner_kw(posedata, tmp_path, monkeypatch, "--corner-jitter")["jitter"] is True
-    # what fit does with it: the crops jittered where asked (the choice is in the file's "fit", checked above)
+    # what fit does with it: the crops jittered where the recipe asks
+    recipe = corner_train.CornerRecipe(copies=0, iterations=2, batch_size=2, cells=4)
     frames = corner_data.build_frames(load_sequence(posedata / "train" / "000001"),
-                                      read_box_corners(posedata / "models" / "obj_000001.ply"), copies=0)
+                                      read_box_corners(posedata / "models" / "obj_000001.ply"), "none", recipe)
     drawn = []
     monkeypatch.setattr(corner_train, "jitter_crops", lambda images, rng: drawn.append(images.copy()) or images)
     for jitter in (True, False):
-        corner_train.fit(CornerNet(), frames, iterations=2, batch_size=2, cells=4, device="cpu", progress=False,
-                         jitter=jitter)
+        corner_train.fit(CornerNet(), frames, dataclasses.replace(recipe, jitter=jitter), device="cpu", progress=False)
     assert len(drawn) == 2
 
 
@@ -522,7 +521,8 @@ def test_table1_rows_of_the_corner_detector(posedata, tmp_path):
     with pytest.raises(InputError, match="unknown detectors"):
         evaluate.main(posedata, tmp_path, normalizers=["none"], detectors=["cnn"])
     result = evaluate.main(posedata, tmp_path, normalizers=["none"], detectors=["corners"], seeds=2,
-                           corner_kw={"iterations": 5, "copies": 0}, command="alcn pose eval ...")
+                           corner_recipe=corner_train.CornerRecipe(iterations=5, copies=0), corner_conf="box",
+                           command="alcn pose eval ...")
     row = result["table"]["none / corner CNN"]
     assert list(row) == ["#1"] and 0.0 <= row["#1"] <= 100.0 and "#1" in result["spread"]["none / corner CNN"]
     assert (tmp_path / "corners_none_seed1.onnx").is_file()

@@ -1,7 +1,8 @@
-"""pose.planar: a planar target's part model from one frame, posed under light changes (``alcn pose relight``)."""
+"""pose.planar: a planar target's part model from one frame, posed under light changes (``alcn pose planar``)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import cv2
@@ -10,6 +11,7 @@ import pytest
 
 from alcn_cv.errors import DatasetError, InputError
 from pose import planar
+from pose.corner_train import confs as corner_confs
 from pose.solver import PoseSolver, project
 
 
@@ -87,17 +89,17 @@ def test_target_parts_are_its_corners_and_side_middles():
     assert {tuple(p) for p in uv[::2].round(6)} == {tuple(p) for p in target.image_corners().round(6)}
 
 
-def test_corner_detector_is_trained_on_the_reference_frame(tmp_path, monkeypatch):
-    monkeypatch.setitem(planar.CORNER_TRAINING, "iterations", 3)
-    monkeypatch.setitem(planar.CORNER_TRAINING, "copies", 1)
+def test_corner_detector_is_trained_on_the_reference_frame(tmp_path):
     img = _texture(1)
     K = planar.pinhole_camera(img.shape[1], img.shape[0])
     target = planar.build_target(img, (200, 90, 220, 180), K, reference="ref.png")
-    det = planar.DETECTORS["corners"](target, "none", 0, tmp_path)
+    recipe = dataclasses.replace(corner_confs["planar"], iterations=3, copies=1)
+    det = planar.DETECTORS["corners"](target, "none", 0, tmp_path, recipe)
     np.testing.assert_allclose(det.parts, planar.target_parts(target)[0])
     np.testing.assert_allclose(det.corners, target.model.corners)
     assert det.path == tmp_path / "corners_ref_none.onnx" and det.meta["source"] == "ref.png"
     assert det.meta["fit"]["views"] == 1 and det.meta["fit"]["frames"] == 2
+    assert det.meta["recipe"] == json.loads(json.dumps(dataclasses.asdict(recipe))) and det.meta["scale"] == 0.5
     corr = det.detect(img)
     assert corr.object_points.shape[1] == 3 and len(corr.object_points) == len(corr.image_points)
     target.image = None
@@ -105,16 +107,15 @@ def test_corner_detector_is_trained_on_the_reference_frame(tmp_path, monkeypatch
         planar.corner_detector(target, "none")
 
 
-def test_relight_on_a_webcam_scene(shared_data, tmp_path, monkeypatch):
+def test_planar_on_a_webcam_scene(shared_data, tmp_path):
     """Smoke test on real frames: 3 frames of one scene, no normalization, both detectors (a few
     training steps of the learned one)."""
     root = shared_data / "webcam"
     if not (root / "mexico").is_dir():
         pytest.skip(f"the webcam scenes are not in {root}")
-    monkeypatch.setitem(planar.CORNER_TRAINING, "iterations", 3)
-    monkeypatch.setitem(planar.CORNER_TRAINING, "copies", 1)
+    recipe = dataclasses.replace(corner_confs["planar"], iterations=3, copies=1)
     result = planar.main(tmp_path, root, scenes=["mexico"], normalizers=["none"], detectors=["features", "corners"],
-                         max_frames=3, command="test")
+                         max_frames=3, recipe=recipe, command="test")
     assert set(result["table"]) == {"none / sift features", "none / corner CNN"}
     assert len(list(tmp_path.glob("corners_*_none.onnx"))) == 1
     row = "none / sift features"
@@ -124,3 +125,20 @@ def test_relight_on_a_webcam_scene(shared_data, tmp_path, monkeypatch):
         assert (tmp_path / name).is_file()
     report = json.loads((tmp_path / "relight_pose.json").read_text())
     assert report["command"] == "test" and len(report["details"][row]["mexico"]["per_frame"]) == 2
+
+
+def test_planar_command_takes_the_recipe_and_the_normalizations(tmp_path, monkeypatch):
+    import argparse
+
+    from pose.cli import add_parser
+
+    parser = argparse.ArgumentParser()
+    add_parser(parser.add_subparsers())
+    seen = []
+    report = tmp_path / "relight_pose.md"
+    monkeypatch.setattr(planar, "main", lambda *a, **kw: seen.append(kw) or report.write_text(""))
+    args = parser.parse_args(["pose", "planar", "--out", str(tmp_path), "--normalizations", "none", "dog",
+                              "--detector", "corners", "--set", "iterations=3"])
+    assert args.func(args) == 0
+    assert seen[0]["normalizers"] == ["none", "dog"]
+    assert seen[0]["recipe"] == dataclasses.replace(corner_confs["planar"], iterations=3)

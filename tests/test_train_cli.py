@@ -11,20 +11,52 @@ import torch
 
 from alcn_cv.cli import main
 from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
+from alcn_cv.train.config import DISTILL_CONFS, REAL_LIGHT_CONFS, TRAIN_CONFS
 from alcn_cv.weight_file import load_normalizer_file
 
 
-def test_print_config_applies_flags_and_set(capsys):
-    assert main(["train", "--print-config", "--epochs", "2", "--method", "dog", "--set", "optim.lr=3e-4"]) == 0
+def test_print_config_applies_the_preset_set_and_seed(capsys):
+    args = ["--set", "optim.epochs=2", "--set", "model.method=dog", "--set", "optim.lr=3e-4", "--seed", "5"]
+    assert main(["train", "--conf", "paper-full", "--print-config", *args]) == 0
     cfg = tomllib.loads(capsys.readouterr().out)
-    assert (cfg["optim"]["epochs"], cfg["model"]["method"], cfg["optim"]["lr"]) == (2, "dog", 3e-4)
+    assert (cfg["optim"]["epochs"], cfg["model"]["method"], cfg["optim"]["lr"], cfg["seed"]) == (2, "dog", 3e-4, 5)
+    assert cfg["data"]["n_train"] == 500_000
 
 
-def test_config_errors_are_one_line_and_name_the_key(capsys, tmp_path):
-    assert main(["train", "--print-config", "--set", "optim.lrr=1"]) == 2
+@pytest.mark.parametrize("command", [["train"], ["train-real-light"], ["distill", "--conf", "lite"],
+                                     ["distill", "--conf", "gain-lite"]])
+def test_every_training_command_takes_a_preset_and_settings(command, capsys):
+    assert main([*command, "--print-config", "--set", "seed=7"]) == 0
+    assert tomllib.loads(capsys.readouterr().out)["seed"] == 7
+
+
+@pytest.mark.parametrize("command, confs", [("train", TRAIN_CONFS), ("train-real-light", REAL_LIGHT_CONFS),
+                                            ("distill", DISTILL_CONFS)])
+def test_help_names_every_preset(command, confs, capsys):
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert all(f"{name} (the" in text for name in confs)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["train", "--set", "optim.lrr=1"], "optim.lrr"),
+    (["train", "--set", "optim.epochs=two"], "optim.epochs"),
+    (["train", "--set", "optim.epochs"], "KEY=VALUE"),
+    (["train", "--conf", "nonesuch"], "neither a preset"),
+    (["train-real-light", "--set", "net.chanels=8"], "net.chanels"),
+    (["train-real-light", "--set", "steps=[1]"], "steps"),
+    (["distill", "--conf", "lite", "--set", "channels=[8, 'a']"], "channels"),
+    (["distill", "--conf", "gain"], "unknown preset 'gain'"),
+])
+def test_bad_settings_are_one_line_errors(args, message, capsys):
+    assert main([*args, "--print-config"]) == 2
     err = capsys.readouterr().err
-    assert "optim.lrr" in err and err.count("\n") == 1
-    assert main(["train", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "run")]) == 2
+    assert message in err and err.count("\n") == 1
+
+
+def test_a_missing_data_folder_names_the_key(capsys, tmp_path):
+    assert main(["train", "--set", f"data.path='{tmp_path / 'missing'}'", "--out", str(tmp_path / "run")]) == 2
     assert "data.path" in capsys.readouterr().err
 
 
@@ -59,11 +91,15 @@ def test_train_detector_from_a_few_images(tmp_path):
 def test_distill_help_and_a_tiny_run(tmp_path, capsys):
     with pytest.raises(SystemExit) as done:
         main(["distill", "--help"])
-    assert done.value.code == 0 and "--teacher" in capsys.readouterr().out
+    assert done.value.code == 0 and "gain-lite" in capsys.readouterr().out
     out = tmp_path / "lite.npz"
     threads = torch.get_num_threads()
-    args = ["--windows", "16", "--val", "8", "--epochs", "1", "--batch", "8", "--objects", "2"]
-    assert main(["distill", "--out", str(out), *args, "--no-progress"]) == 0
+    args = ["--set", "n_windows=16", "--set", "n_val=8", "--set", "epochs=1", "--set", "batch_size=8",
+            "--set", "n_objects=2"]
+    assert main(["distill", "--conf", "lite", "--out", str(out), *args, "--no-progress"]) == 0
     assert capsys.readouterr().out.strip() == str(out) and torch.get_num_threads() == threads
-    assert load_normalizer_file(out).meta["architecture"] == "lite"
-    assert f"Command: `alcn distill --out {out} {' '.join(args)}`" in out.with_suffix(".md").read_text()
+    header = load_normalizer_file(out).meta
+    assert header["architecture"] == "lite" and header["distillation"]["conf"] == "lite"
+    settings = header["distillation"]["settings"]
+    assert settings["n_windows"] == 16 and settings["teacher"] == "paper"
+    assert f"Command: `alcn distill --conf lite --out {out} {' '.join(args)}`" in out.with_suffix(".md").read_text()

@@ -5,16 +5,17 @@ from __future__ import annotations
 import pytest
 
 from alcn_cv.errors import InputError
-from alcn_cv.train.config import PRESETS, TrainConfig, dump_toml, load_config
+from alcn_cv.train.config import TRAIN_CONFS, TrainConfig, dump_toml, load_config
 
 
 def test_defaults_and_presets():
     cfg = load_config()
     assert cfg == TrainConfig()
     assert not set(cfg.data.train_lighting) & set(cfg.data.val_lighting)
-    paper = load_config("paper")
-    assert paper.data.n_train == 500_000 and paper.run.device == "cuda"
-    assert set(PRESETS) == {"default", "paper"}
+    assert load_config("paper") == cfg  # the defaults are the shipped file's preset
+    full = load_config("paper-full")
+    assert full.data.n_train == 500_000 and full.run.device == "cuda"
+    assert set(TRAIN_CONFS) == {"paper", "paper-full"}
 
 
 def test_toml_file_overrides_and_round_trip(tmp_path):

@@ -1,5 +1,7 @@
 """Training the gain Normalizer on registered real scenes (alcn_cv.train.real_light), on a tiny synthetic set."""
 
+import shlex
+
 import cv2
 import numpy as np
 import pytest
@@ -141,16 +143,21 @@ def test_per_pixel_divisive_centres_equal_the_whole_normalization_with_the_crops
     torch.testing.assert_close(centre, expected, atol=1e-5, rtol=1e-4)
 
 
-def test_cli_passes_the_divisive_sigma_and_the_stride(tmp_path, monkeypatch):
+def test_cli_runs_the_preset_with_its_settings(tmp_path, monkeypatch):
     import alcn_cv.train.real_light as real_light
     from alcn_cv.cli import main
 
-    configs = []
-    monkeypatch.setattr(real_light, "train_real_light", lambda cfg, out: configs.append(cfg) or out)
-    common = ["train-real-light", "--scenes", str(tmp_path), "--out", str(tmp_path / "run")]
-    assert main([*common, "--divisive-sigma", "2", "--stride", "16"]) == 0 and main(common) == 0
-    assert configs[0].net["divisive_sigma"] == 2.0 and "divisive_sigma" not in configs[1].net
-    assert (configs[0].net["stride"], configs[1].net["stride"]) == (16, 8)
+    runs = []
+    monkeypatch.setattr(real_light, "train_real_light", lambda cfg, out, **record: runs.append((cfg, record)) or out)
+    common = ["train-real-light", "--out", str(tmp_path / "run")]
+    assert main([*common, "--set", f"scenes=['{tmp_path}']", "--set", "net.stride=16", "--seed", "3"]) == 0
+    assert main(common) == 0
+    (changed, record), (preset, _) = runs
+    assert preset == RealLightConfig() and preset.net["divisive_sigma"] == 2.0
+    assert (changed.net["stride"], changed.seed, changed.scenes) == (16, 3, [str(tmp_path)])
+    words = ["alcn", "train-real-light", "--conf", "gain", "--set", f"scenes=['{tmp_path}']", "--set", "net.stride=16",
+             "--seed", "3"]
+    assert record == {"conf": "gain", "command": shlex.join(words)}
 
 
 def test_three_steps_lower_the_loss(tmp_path):

@@ -11,7 +11,7 @@ from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.train import trainer
 from alcn_cv.train.checkpoint import load_checkpoint
 from alcn_cv.train.config import load_config
-from alcn_cv.train.models import DENSE_GRID_STRIDE, CentreMixture, JointModel, dog_weights
+from alcn_cv.train.models import CentreMixture, JointModel, dog_weights
 from alcn_cv.train.stage2 import NonFiniteLossError
 from alcn_cv.weight_file import load_normalizer_file
 
@@ -139,23 +139,6 @@ def test_validation_must_hold_lightings_out(data, tmp_path):
     cfg["data"]["path"] = data[0]
     with pytest.raises(InputError, match="hold some lightings out"):
         trainer.train(cfg, tmp_path, progress=False)
-
-
-def test_dense_mixture_starts_as_eq1_and_learns_weights_that_vary_inside_a_window(data, tmp_path):
-    cfg = load_config(_config(data, mixture="dense"))
-    model = JointModel(cfg.model, 4)
-    x = torch.rand(2, 1, 64, 64)
-    with torch.no_grad():
-        dense = model.response(x)
-        model.dense_mixture = False  # untrained, the Normalizer predicts the DoG everywhere: Eq. 3 = Eq. 1
-        np.testing.assert_allclose(dense, model.response(x), atol=1e-5)
-    result = trainer.train(_config(data, mixture="dense"), tmp_path, progress=False)
-    assert result.status == "done"
-    with torch.no_grad():
-        maps = result.model.normalizer.dense(x, DENSE_GRID_STRIDE)
-    assert maps.shape == (2, 10, 64, 64)
-    assert float(maps.std(dim=(2, 3)).max()) > 1e-4  # per-pixel weights: gradients reached the maps
-    assert load_normalizer_file(result.weights).meta["training"]["config"]["model"]["mixture"] == "dense"
 
 
 def test_centre_mixture_equals_kornia_mixture():

@@ -1,8 +1,14 @@
-"""The training configuration: one TOML schema, presets, and command-line overrides.
+"""The training configurations, their named presets (hloc's ``confs``) and ``--set`` overrides.
 
-A configuration file is TOML (read with :mod:`tomllib`) with the tables below; every key is
-optional and defaults to the ``default`` preset. ``alcn train --print-config`` writes the
-effective configuration as TOML, a complete, commented-free starting point.
+Each training command has one configuration class whose defaults are the recipe of its shipped
+weight file, and a dict of named presets: :data:`TRAIN_CONFS` (``alcn train --conf paper``,
+``alcn_normalizer.npz``), :data:`REAL_LIGHT_CONFS` (``alcn train-real-light --conf gain``,
+``alcn_normalizer_gain.npz``) and :data:`DISTILL_CONFS` (``alcn distill --conf lite|gain-lite``).
+:func:`with_settings` applies ``KEY=VALUE`` overrides (dotted keys, values read as TOML and
+checked against the field's type) to any of them. The module imports no torch.
+
+The keys of :class:`TrainConfig` (also readable from a TOML file with the tables below;
+``alcn train --print-config`` writes the effective configuration as TOML):
 
 ``seed`` (int)
     Seed of everything random in a run: network initialisation, shuffling, augmentation and,
@@ -29,9 +35,8 @@ effective configuration as TOML, a complete, commented-free starting point.
     raw windows, the comparison that tells whether the learned Normalizer helps.
     ``num_kernels`` (int), ``sigma_step`` (float): the Gaussian basis, ``sigma_i = i * step``.
     ``channels`` (list of 2 ints), ``hidden`` (int), ``activation`` (``"tanh"``, the paper's, or
-    ``"relu"``): the Normalizer; the paper's is ``[20, 50]``, 1024 (the ``paper`` preset), the
-    default ``[10, 20]``, 256 is five times cheaper (it predicts 10 numbers per window), which
-    is what lets it train in 30 minutes on 2 shared CPU cores and run faster in ``apply``.
+    ``"relu"``): the Normalizer; ``[10, 20]``, 256 (the shipped file) is five times cheaper than
+    the paper's ``[20, 50]``, 1024 (the ``paper-full`` preset), so that it trains on a CPU.
     ``output_scale`` (float): fixed factor on its outputs.
     ``init`` (``"dog"`` or ``"random"``): start the Normalizer at the DoG below (the last
     layer's weights at zero, its bias the DoG) or with every window's weights near zero.
@@ -42,11 +47,6 @@ effective configuration as TOML, a complete, commented-free starting point.
     every method alike: per-window standardization (zero mean, unit variance over the 32x32) or
     the raw mixture output. ``working_scale`` (float): the scale recorded in the exported weight
     file, the factor from a camera frame to the resolution at which the 48x48 window applies.
-    ``mixture`` (``"window"`` or ``"dense"``): how the Normalizer's weights filter a training
-    window: ``"window"`` -- Eq. 1, one weight vector for the window (the paper's training);
-    ``"dense"`` -- Eq. 3 as at inference: the Normalizer runs fully-convolutionally over the
-    window and its per-pixel weight maps multiply the image before the blurs, so the weights
-    may vary inside a window (e.g. across a shadow edge). A dense step costs about 6 times a window step.
 
 ``[optim]``
     ``objective``: ``"joint"`` -- Eq. 2, the detector and the Normalizer minimise the loss on
@@ -54,11 +54,9 @@ effective configuration as TOML, a complete, commented-free starting point.
     minimises the loss on windows under ``data.anchor_lighting`` only (as a new detector will see
     one lighting), the Normalizer the loss on all windows with the detector held fixed for the
     others, so that it learns to make other lightings look like the anchor to a detector.
-    ``optimizer`` (``"adam"`` or ``"sgd"``), ``lr`` (float, the detector's), ``normalizer_lr``
-    (float), ``weight_decay`` (float), ``momentum`` (float, SGD), ``grad_clip`` (float, 0 = off),
-    ``batch_size`` (int), ``epochs`` (int), ``schedule`` (``"cosine"``, ``"step"`` or
-    ``"constant"``, per step), ``step_epochs`` (int) and ``step_gamma`` (float) for ``"step"``,
-    ``warmup_steps`` (int, linear warm-up).
+    Adam with a cosine learning-rate schedule per step: ``lr`` (float, the detector's),
+    ``normalizer_lr`` (float), ``weight_decay`` (float), ``grad_clip`` (float, 0 = off),
+    ``batch_size`` (int), ``epochs`` (int), ``warmup_steps`` (int, linear warm-up).
 
 ``[fewshot]`` -- the paper's second stage as a validation (:mod:`alcn_cv.train.fewshot`)
     ``enabled`` (bool): after training, train a fresh detector per method (the trained
@@ -84,12 +82,16 @@ import dataclasses
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from collections.abc import Sequence
+from typing import Any, TypeVar
 
 from alcn_cv.data.lighting import LIGHT_FAMILIES
+from alcn_cv.data.scenes import TRAIN_SCENES
 from alcn_cv.errors import InputError
 
-__all__ = ["PRESETS", "FewShotSetup", "RealLightConfig", "TrainConfig", "dump_toml", "load_config"]
+__all__ = ["DISTILL_CONFS", "REAL_LIGHT_CONFS", "TRAIN_CONFS", "FewShotSetup", "GainDistillConfig",
+           "LiteDistillConfig", "RealLightConfig", "TrainConfig", "dump_toml", "load_config", "preset",
+           "with_settings"]
 
 
 @dataclass
@@ -142,24 +144,18 @@ class ModelConfig:
     detector_hidden: int = 512
     detector_dropout: float = 0.0
     detector_input: str = "standardize"
-    mixture: str = "window"
     working_scale: float = 0.5
 
 
 @dataclass
 class OptimConfig:
     objective: str = "meta"
-    optimizer: str = "adam"
     lr: float = 1e-3
     normalizer_lr: float = 1e-3
     weight_decay: float = 0.0
-    momentum: float = 0.9
     grad_clip: float = 5.0
     batch_size: int = 128
     epochs: int = 3
-    schedule: str = "cosine"
-    step_epochs: int = 2
-    step_gamma: float = 0.3
     warmup_steps: int = 100
 
 
@@ -202,11 +198,12 @@ class TrainConfig:
         return self.seed if self.data.seed < 0 else self.data.seed
 
 
-#: Named configurations (overrides of the defaults). ``default``: about 30 minutes on 2 CPU
-#: cores; ``paper``: the paper's scale (500,000 windows, the paper's Normalizer), for a GPU.
-PRESETS: dict[str, dict[str, Any]] = {
-    "default": {},
-    "paper": {
+#: ``alcn train`` presets, as overrides of :class:`TrainConfig`'s defaults. ``paper``: the recipe of
+#: the shipped ``alcn_normalizer.npz`` (the defaults; about 30 minutes on 2 CPU cores);
+#: ``paper-full``: the paper's widths and data scale (Sec. 4.2), for a GPU (no shipped file).
+TRAIN_CONFS: dict[str, dict[str, Any]] = {
+    "paper": {},
+    "paper-full": {
         "data": {"n_train": 500_000, "n_val": 20_000},
         "model": {"channels": [20, 50], "hidden": 1024, "detector_hidden": 1024},
         "fewshot": {"n_test": 10_000, "dog": [[0.5, 1.0], [0.5, 1.5], [0.5, 2.5], [1.0, 2.0], [1.0, 3.0]]},
@@ -220,20 +217,21 @@ _CHOICES = {
     "model.activation": ("tanh", "relu"),
     "model.init": ("dog", "random"),
     "model.detector_input": ("standardize", "raw"),
-    "model.mixture": ("window", "dense"),
-    "optim.optimizer": ("adam", "sgd"),
     "optim.objective": ("joint", "meta"),
-    "optim.schedule": ("cosine", "step", "constant"),
     "run.device": ("cpu", "cuda"),
 }
+#: Lists of a fixed length (the others take any length).
+_PAIRS = ("model.channels", "model.dog", "model.detector_channels", "data.gain_jitter")
 
 
-def _type_name(kind: Any) -> str:
-    return getattr(kind, "__name__", str(kind))
+def _type_name(value: Any) -> str:
+    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "a list",
+            tuple: "a list", dict: "a table"}.get(type(value), type(value).__name__)
 
 
 def _coerce(key: str, value: Any, default: Any) -> Any:
-    """Check ``value`` against the type of ``default``; ints are accepted for floats."""
+    """``value`` checked against the type of ``default`` (ints are accepted for floats, lists for
+    tuples; list items against the default's first item)."""
     if isinstance(default, bool):
         ok = isinstance(value, bool)
     elif isinstance(default, float):
@@ -241,53 +239,100 @@ def _coerce(key: str, value: Any, default: Any) -> Any:
         value = float(value) if ok else value
     elif isinstance(default, int):
         ok = isinstance(value, int) and not isinstance(value, bool)
-    elif isinstance(default, list):
-        free = key in _FREE_LISTS
-        ok = isinstance(value, list) and (free or len(value) == len(default))
+    elif isinstance(default, (list, tuple)):
+        ok = isinstance(value, (list, tuple))
         if ok and default:
-            value = [_coerce(f"{key}[{i}]" if isinstance(default[0], list) else key, v, default[0])
-                     for i, v in enumerate(value)]
+            value = [_coerce(key, v, default[0]) for v in value]
+        if ok:
+            value = type(default)(value)
     else:
         ok = isinstance(value, type(default))
     if not ok:
-        fixed_list = isinstance(default, list) and key not in _FREE_LISTS
-        what = f"a list of {len(default)}" if fixed_list else _type_name(type(default))
-        raise InputError(f"config key {key!r} must be {what}, got {value!r}")
+        raise InputError(f"config key {key!r} must be {_type_name(default)}, got {value!r}")
     return value
 
 
-_FREE_LISTS = {"data.train_lighting", "data.val_lighting", "fewshot.test_lighting", "fewshot.dog"}
-
-
 def _merge(obj: Any, values: dict[str, Any], prefix: str = "") -> None:
+    """Set the keys of ``values`` on the dataclass or dict ``obj`` (nested tables recursively)."""
     if not isinstance(values, dict):
         raise InputError(f"config key {prefix.rstrip('.')!r} must be a table, got {values!r}")
-    names = {f.name for f in dataclasses.fields(obj)}
+    names = set(obj) if isinstance(obj, dict) else {f.name for f in dataclasses.fields(obj)}
     for key, value in values.items():
         full = prefix + key
         if key not in names:
             raise InputError(f"unknown config key {full!r}; known keys here: {', '.join(sorted(names))}")
-        current = getattr(obj, key)
-        if dataclasses.is_dataclass(current):
+        current = obj[key] if isinstance(obj, dict) else getattr(obj, key)
+        if dataclasses.is_dataclass(current) or isinstance(current, dict):
             _merge(current, value, full + ".")
+        elif isinstance(obj, dict):
+            obj[key] = _coerce(full, value, current)
         else:
             setattr(obj, key, _coerce(full, value, current))
 
 
+def _parse_setting(item: str) -> dict[str, Any]:
+    """``"optim.lr=3e-4"`` -> ``{"optim": {"lr": 0.0003}}`` (the value is read as TOML, or a bare string)."""
+    if "=" not in item:
+        raise InputError(f"setting {item!r} must be KEY=VALUE, e.g. optim.lr=3e-4")
+    key, text = (s.strip() for s in item.split("=", 1))
+    try:
+        value = tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text
+    out: dict[str, Any] = {}
+    node = out
+    parts = key.split(".")
+    for p in parts[:-1]:
+        node = node.setdefault(p, {})
+    node[parts[-1]] = value
+    return out
+
+
+ConfigT = TypeVar("ConfigT")
+
+
+def with_settings(cfg: ConfigT, settings: Sequence[str | dict[str, Any]] = ()) -> ConfigT:
+    """A copy of the dataclass ``cfg`` with ``settings`` applied in order.
+
+    Args:
+        cfg: a configuration dataclass (nested dataclasses and dicts are tables).
+        settings: ``"KEY=VALUE"`` strings (``--set``; dotted keys, the value read as TOML, else as
+            a string) or nested dicts.
+
+    Raises:
+        InputError: an unknown key or a value of the wrong type, the key named in one line.
+    """
+    cfg = copy.deepcopy(cfg)
+    for item in settings:
+        _merge(cfg, item if isinstance(item, dict) else _parse_setting(item))
+    return cfg
+
+
+def preset(confs: dict[str, ConfigT], name: str, settings: Sequence[str | dict[str, Any]] = ()) -> ConfigT:
+    """The preset ``confs[name]`` with :func:`with_settings` applied (``InputError`` naming the
+    presets for an unknown name)."""
+    if name not in confs:
+        raise InputError(f"unknown preset {name!r}; choose one of {', '.join(confs)}")
+    return with_settings(confs[name], settings)
+
+
 def _check(cfg: TrainConfig) -> None:
     flat = _flatten(cfg.to_dict())
+    for key in _PAIRS:
+        if len(flat[key]) != 2:
+            raise InputError(f"config key {key!r} must be a list of 2, got {flat[key]!r}")
     for key, choices in _CHOICES.items():
         if flat[key] not in choices:
             raise InputError(f"config key {key!r} must be one of {', '.join(choices)}, got {flat[key]!r}")
     positive = ["data.n_objects", "model.num_kernels", "model.hidden", "model.detector_hidden", "optim.batch_size",
-                "optim.epochs", "optim.step_epochs", "run.log_every", "fewshot.n_objects", "fewshot.real_images",
+                "optim.epochs", "run.log_every", "fewshot.n_objects", "fewshot.real_images",
                 "fewshot.per_image", "fewshot.n_test", "fewshot.epochs", "model.sigma_step", "optim.lr",
                 "model.output_scale", "model.working_scale"]
     for key in positive:
         if not flat[key] > 0:
             raise InputError(f"config key {key!r} must be positive, got {flat[key]!r}")
     for key in ["data.n_train", "data.n_val", "optim.normalizer_lr", "optim.weight_decay", "optim.grad_clip",
-                "optim.warmup_steps", "run.workers", "run.threads", "optim.momentum"]:
+                "optim.warmup_steps", "run.workers", "run.threads"]:
         if flat[key] < 0:
             raise InputError(f"config key {key!r} must be >= 0, got {flat[key]!r}")
     if not 0 <= cfg.data.background_fraction <= 1:
@@ -341,24 +386,6 @@ def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def _parse_override(item: str) -> dict[str, Any]:
-    """``"optim.lr=3e-4"`` -> ``{"optim": {"lr": 0.0003}}`` (the value is read as TOML, or a bare string)."""
-    if "=" not in item:
-        raise InputError(f"override {item!r} must be KEY=VALUE, e.g. optim.lr=3e-4")
-    key, text = (s.strip() for s in item.split("=", 1))
-    try:
-        value = tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = text
-    out: dict[str, Any] = {}
-    node = out
-    parts = key.split(".")
-    for p in parts[:-1]:
-        node = node.setdefault(p, {})
-    node[parts[-1]] = value
-    return out
-
-
 def load_config(
     source: str | Path | dict[str, Any] | TrainConfig | None = None,
     overrides: list[str | dict[str, Any]] | dict[str, Any] | None = None,
@@ -366,7 +393,7 @@ def load_config(
     """Build and check a configuration.
 
     Args:
-        source: a preset name of :data:`PRESETS` (default ``"default"``), a path to a TOML
+        source: a preset name of :data:`TRAIN_CONFS` (default ``"paper"``), a path to a TOML
             file (applied over the defaults), a dict of the same shape, or a :class:`TrainConfig`.
         overrides: applied last, in order: ``"optim.lr=3e-4"`` strings (command-line ``--set``)
             and nested dicts (``{"optim": {"lr": 3e-4}}``), or one nested dict.
@@ -380,22 +407,18 @@ def load_config(
         cfg = copy.deepcopy(source)
     elif isinstance(source, dict):
         _merge(cfg, source)
-    elif source is None or str(source) in PRESETS:
-        _merge(cfg, copy.deepcopy(PRESETS[str(source or "default")]))
+    elif source is None or str(source) in TRAIN_CONFS:
+        _merge(cfg, copy.deepcopy(TRAIN_CONFS[str(source or "paper")]))
     else:
         path = Path(source)
         if not path.is_file():
-            raise InputError(f"config {source!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
+            raise InputError(f"config {source!r} is neither a preset ({', '.join(TRAIN_CONFS)}) nor a TOML file")
         try:
             values = tomllib.loads(path.read_text())
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise InputError(f"config file {path}: invalid TOML: {exc}") from None
         _merge(cfg, values)
-    if isinstance(overrides, dict):
-        _merge(cfg, overrides)
-    else:
-        for item in overrides or []:
-            _merge(cfg, item if isinstance(item, dict) else _parse_override(item))
+    cfg = with_settings(cfg, [overrides] if isinstance(overrides, dict) else overrides or [])
     _check(cfg)
     return cfg
 
@@ -410,9 +433,10 @@ def _toml_value(v: Any) -> str:
     return repr(v)
 
 
-def dump_toml(cfg: TrainConfig) -> str:
-    """The configuration as TOML text that :func:`load_config` reads back to the same values."""
-    d = cfg.to_dict()
+def dump_toml(cfg: Any) -> str:
+    """A configuration dataclass as TOML text (:func:`load_config` reads a :class:`TrainConfig`'s
+    back to the same values)."""
+    d = dataclasses.asdict(cfg)
     lines = [f"{k} = {_toml_value(v)}" for k, v in d.items() if not isinstance(v, dict)]
     for table, values in d.items():
         if isinstance(values, dict):
@@ -420,14 +444,21 @@ def dump_toml(cfg: TrainConfig) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _gain_network() -> dict[str, Any]:
+    """The shipped gain Normalizer's :class:`~alcn_cv.nets.gain.GainNormalizer` arguments."""
+    return {"channels": 16, "stride": 8, "dilations": [1, 2, 4], "num_kernels": 2, "sigma_step": 1.0, "eps": 0.01,
+            "gain": "divisive", "floor_scale": 1.0, "divisive_sigma": 2.0, "tau": 3.0, "learn_scales": False}
+
+
 @dataclass
 class RealLightConfig:
-    """Settings of :func:`train_real_light` (defaults: the recipe of the shipped weights).
+    """Settings of :func:`~alcn_cv.train.real_light.train_real_light`; the defaults are the
+    ``gain`` preset, the recipe of the shipped ``alcn_normalizer_gain.npz``.
 
     Attributes:
-        scenes: folders of registered frames, one per scene.
-        rendered: folders of rendered registered scenes (``alcn data scenes``), drawn
-            apart from ``scenes`` so that their number does not set their share.
+        scenes: registered scenes: folders of frames, or names of scenes of the shared ``webcam`` data.
+        rendered: folders of rendered registered scenes (``alcn data scenes``; a folder
+            without images stands for its sub-folders), drawn apart from ``scenes``.
         rendered_fraction: the share of steps that draw a rendered scene (0 when none).
         steps: optimisation steps; each sees 2 frames x ``locations`` crops of one scene.
         locations: textured locations (classes) per step.
@@ -435,19 +466,15 @@ class RealLightConfig:
         patch: side of the identified centre (pixels).
         min_distance: smallest distance between two locations of a step (pixels, Chebyshev).
         temperature: of the softmax over cosine similarities.
-        consistency: weight of :func:`~alcn_cv.train.real_light.consistency_loss` (the output the
-            same under both lights, on the textured and on ``anywhere`` other locations).
-        anywhere: locations per step drawn anywhere in the frame (flat, dark and noisy regions
-            too) for the consistency term only.
+        consistency: weight of :func:`~alcn_cv.train.real_light.consistency_loss`.
+        anywhere: locations per step drawn anywhere in the frame, for the consistency term only.
         lr: Adam's learning rate.
         seed: seeds numpy and torch (data draws and initialisation).
         save_every: steps between checkpoints and intermediate weight files.
-        net: :class:`~alcn_cv.nets.gain.GainNormalizer` arguments (``divisive_sigma`` among them:
-            the divisive normalization's per-pixel energy, absent for the grid's cells).
-        command: the command line that ran the training, recorded in the weight file.
+        net: :class:`~alcn_cv.nets.gain.GainNormalizer` arguments (``--set net.channels=8``).
     """
 
-    scenes: list[str] = field(default_factory=list)
+    scenes: list[str] = field(default_factory=lambda: list(TRAIN_SCENES))
     rendered: list[str] = field(default_factory=list)
     rendered_fraction: float = 0.0
     steps: int = 300
@@ -461,5 +488,66 @@ class RealLightConfig:
     lr: float = 1e-3
     seed: int = 0
     save_every: int = 100
-    net: dict = field(default_factory=dict)
-    command: str = ""
+    net: dict[str, Any] = field(default_factory=_gain_network)
+
+
+#: ``alcn train-real-light`` presets: ``gain`` makes ``alcn_normalizer_gain.npz``.
+REAL_LIGHT_CONFS: dict[str, RealLightConfig] = {"gain": RealLightConfig()}
+
+
+@dataclass
+class LiteDistillConfig:
+    """Settings of :func:`~alcn_cv.train.distill.distill` (a :class:`~alcn_cv.nets.lite.LiteNormalizer`
+    student); the defaults are the ``lite`` preset, the recipe of ``alcn_normalizer_lite.npz``.
+
+    Attributes:
+        teacher: a shipped model's name (``paper``) or a weight file.
+        n_windows, n_val: training and validation windows rendered by
+            :func:`alcn_cv.data.phos.render_windows` (seeds ``seed`` and ``seed + 1``).
+        seed: seeds the windows and the student.
+        epochs, batch_size, lr: Adam with a cosine learning-rate schedule.
+        channels: the student's widths.
+        weight_decay_w: weight of the plain squared weight error, relative to the output error.
+        n_objects: catalogue size of the rendered windows.
+    """
+
+    teacher: str = "paper"
+    n_windows: int = 20000
+    n_val: int = 2000
+    seed: int = 0
+    epochs: int = 30
+    batch_size: int = 256
+    lr: float = 3e-3
+    channels: list[int] = field(default_factory=lambda: [8, 16])
+    weight_decay_w: float = 0.01
+    n_objects: int = 100
+
+
+@dataclass
+class GainDistillConfig:
+    """Settings of :func:`~alcn_cv.train.distill.distill_gain` (a smaller gain Normalizer); the
+    defaults are the ``gain-lite`` preset, the recipe of ``alcn_normalizer_gain_lite.npz``.
+
+    Attributes:
+        teacher: a shipped model's name (``gain``) or a gain weight file.
+        scenes: registered scenes (as :attr:`RealLightConfig.scenes`; never the test scenes).
+        rendered: rendered registered scenes added to the data (256x256, 4 lights each).
+        seed: seeds the student's initialisation, the relighting and the rendering.
+        epochs, lr: Adam over every training frame once per epoch, cosine schedule.
+        channels, dilations: the student's hidden width and its dilated 3x3 convolutions.
+    """
+
+    teacher: str = "gain"
+    scenes: list[str] = field(default_factory=lambda: list(TRAIN_SCENES))
+    rendered: int = 6
+    seed: int = 0
+    epochs: int = 60
+    lr: float = 3e-3
+    channels: int = 8
+    dilations: list[int] = field(default_factory=lambda: [1, 2, 4])
+
+
+#: ``alcn distill`` presets: ``lite`` makes ``alcn_normalizer_lite.npz``, ``gain-lite``
+#: ``alcn_normalizer_gain_lite.npz``.
+DISTILL_CONFS: dict[str, LiteDistillConfig | GainDistillConfig] = {"lite": LiteDistillConfig(),
+                                                                    "gain-lite": GainDistillConfig()}

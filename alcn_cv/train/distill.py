@@ -32,7 +32,7 @@ import shlex
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -48,9 +48,10 @@ from alcn_cv.io import atomic_write
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.report import describe_machine
-from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file, save_normalizer_file
+from alcn_cv.train.config import GainDistillConfig, LiteDistillConfig
+from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
-__all__ = ["distill", "distill_gain", "main", "output_gram"]
+__all__ = ["distill", "distill_gain", "main", "output_gram", "teacher_file"]
 
 logger = logging.getLogger(__name__)
 
@@ -90,40 +91,33 @@ def _fidelity(student: LiteNormalizer, x: torch.Tensor, target: torch.Tensor, gr
     }
 
 
-def distill(
-    teacher: str | os.PathLike | None = None,
-    n_windows: int = 20000,
-    n_val: int = 2000,
-    seed: int = 0,
-    epochs: int = 30,
-    batch_size: int = 256,
-    lr: float = 3e-3,
-    channels: tuple[int, int] = (8, 16),
-    weight_decay_w: float = 0.01,
-    n_objects: int = 100,
-    progress: bool = True,
-) -> tuple[LiteNormalizer, dict[str, Any]]:
-    """Train a :class:`LiteNormalizer` to reproduce ``teacher``'s weights.
+def teacher_file(teacher: str) -> Path:
+    """The weight file of ``teacher``: a shipped model's name (``paper``, ``gain``) or a path."""
+    from alcn_cv.enhance.alcn import MODELS
+
+    return MODELS[teacher] if teacher in MODELS else Path(teacher)
+
+
+def distill(cfg: LiteDistillConfig | None = None, progress: bool = True) -> tuple[LiteNormalizer, dict[str, Any]]:
+    """Train a :class:`LiteNormalizer` to reproduce a teacher's weights.
 
     Args:
-        teacher: the teacher's weight file (default: the paper-model file shipped).
-        n_windows, n_val: training and validation windows rendered by
-            :func:`alcn_cv.data.phos.render_windows` (seeds ``seed`` and ``seed + 1``).
-        epochs, batch_size, lr: Adam with a cosine learning-rate schedule.
-        channels: the student's widths.
-        weight_decay_w: weight of the plain squared weight error, relative to the output error.
-        n_objects: catalogue size of the rendered windows.
+        cfg: the settings (default: the ``lite`` preset, :class:`~alcn_cv.train.config.LiteDistillConfig`).
+        progress: show progress bars.
 
     Returns:
         The student (eval mode) and a record of the run (settings, time, validation fidelity).
     """
-    if n_windows < 1 or n_val < 1 or epochs < 1 or batch_size < 1:
-        raise InputError("n_windows, n_val, epochs and batch_size must be >= 1")
+    cfg = cfg or LiteDistillConfig()
+    n_windows, n_val, seed, epochs, batch_size = cfg.n_windows, cfg.n_val, cfg.seed, cfg.epochs, cfg.batch_size
+    n_objects = cfg.n_objects
+    if n_windows < 1 or n_val < 1 or epochs < 1 or batch_size < 1 or len(cfg.channels) != 2:
+        raise InputError("n_windows, n_val, epochs and batch_size must be >= 1, channels a list of 2")
     torch.manual_seed(seed)
-    teacher_path = Path(teacher) if teacher is not None else DEFAULT_WEIGHTS
-    teacher_file = load_normalizer_file(teacher_path)
-    teacher_net = normalizer_from_file(teacher_file)
-    sigmas = [float(s) for s in teacher_file.meta["sigmas"]]
+    teacher_path = teacher_file(cfg.teacher)
+    teacher_weights = load_normalizer_file(teacher_path)
+    teacher_net = normalizer_from_file(teacher_weights)
+    sigmas = [float(s) for s in teacher_weights.meta["sigmas"]]
     start = time.perf_counter()
 
     def data(n: int, data_seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -135,7 +129,7 @@ def distill(
     x_val, target_val, gram_val = data(n_val, seed + 1)
     prepared = time.perf_counter() - start
 
-    student = LiteNormalizer(num_kernels=teacher_net.num_kernels, channels=channels)
+    student = LiteNormalizer(num_kernels=teacher_net.num_kernels, channels=tuple(cfg.channels))
     with torch.no_grad():  # start predicting the teacher's mean weights everywhere
         student.head.weight.zero_()
         student.head.bias.copy_(target.mean(dim=(0, 2, 3)) / student.output_scale)
@@ -147,7 +141,7 @@ def distill(
     if constant:
         logger.info("the teacher predicts the same weights for every window: the student is that constant")
         epochs = 0
-    optimiser = torch.optim.Adam(student.parameters(), lr=lr)
+    optimiser = torch.optim.Adam(student.parameters(), lr=cfg.lr)
     steps = epochs * ((n_windows + batch_size - 1) // batch_size)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, steps)
     scale = float(torch.diagonal(gram, dim1=1, dim2=2).mean())
@@ -160,7 +154,7 @@ def distill(
             idx = order[i : i + batch_size]
             d = student._weights(x[idx]) - target[idx]
             gb = gram[idx]
-            loss = torch.einsum("bkyx,bkl,blyx->b", d, gb, d).mean() / 9 + weight_decay_w * scale * d.pow(2).mean()
+            loss = torch.einsum("bkyx,bkl,blyx->b", d, gb, d).mean() / 9 + cfg.weight_decay_w * scale * d.pow(2).mean()
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
@@ -169,10 +163,9 @@ def distill(
         bar.set_postfix(val_output_rmse=f"{_fidelity(student, x_val, target_val, gram_val)['output_rmse']:.2e}")
     record = {
         "teacher": {"file": teacher_path.name, "sha256": hashlib.sha256(teacher_path.read_bytes()).hexdigest(),
-                    "description": teacher_file.meta.get("description", "")},
+                    "description": teacher_weights.meta.get("description", "")},
         "constant_teacher": constant,
-        "settings": {"n_windows": n_windows, "n_val": n_val, "seed": seed, "epochs": epochs, "batch_size": batch_size,
-                     "lr": lr, "channels": list(channels), "weight_decay_w": weight_decay_w, "n_objects": n_objects},
+        "settings": {**asdict(cfg), "epochs": epochs},
         "seconds": {"data_and_targets": round(prepared, 1), "total": round(time.perf_counter() - start, 1)},
         "validation": _fidelity(student, x_val, target_val, gram_val),
         "validation_initial": initial,
@@ -180,37 +173,35 @@ def distill(
     return student, record
 
 
-def main(
-    out_path: str | os.PathLike,
-    teacher: str | os.PathLike | None = None,
-    command: str | None = None,
-    **params: Any,
-) -> Path:
-    """Distil a student (:func:`distill`, or :func:`distill_gain` for a gain teacher) and write
-    its weight file and model card (and for a gain student its ONNX export, ``.onnx`` beside it).
+def main(out_path: str | os.PathLike, cfg: LiteDistillConfig | GainDistillConfig, command: str | None = None, *,
+         conf: str | None = None, progress: bool = True) -> Path:
+    """Distil a student (:func:`distill`, or :func:`distill_gain` for a :class:`GainDistillConfig`)
+    and write its weight file, with the whole configuration and the preset's name in its header,
+    and its model card (and for a gain student its ONNX export, ``.onnx`` beside it).
 
     Args:
         out_path: the ``.npz`` to write (the card is the same name with ``.md``).
-        teacher: the teacher's weight file (default: the shipped paper-model file).
+        cfg: the settings (a preset of :data:`~alcn_cv.train.config.DISTILL_CONFS`, overridden or not).
         command: the command line recorded in the card (default: this process').
-        params: passed to :func:`distill` or :func:`distill_gain`.
+        conf: the preset's name, recorded in the header.
+        progress: show progress bars.
 
     Returns:
         The weight file's path.
     """
     out_path = Path(out_path)
     command = command or " ".join(shlex.quote(a) for a in sys.argv)
-    teacher_path = Path(teacher) if teacher is not None else DEFAULT_WEIGHTS
-    if load_normalizer_file(teacher_path).meta.get("architecture") == "gain":
-        return _main_gain(out_path, teacher_path, command, **params)
-    student, record = distill(teacher, **params)
-    teacher_meta = load_normalizer_file(teacher).meta
+    if isinstance(cfg, GainDistillConfig):
+        return _main_gain(out_path, cfg, command, conf, progress)
+    student, record = distill(cfg, progress)
+    teacher_meta = load_normalizer_file(teacher_file(cfg.teacher)).meta
     meta = {k: v for k, v in teacher_meta.items() if k not in ("format", "version", "config", "description", "training")}
     meta.update(
         config=student.config,
         architecture="lite",
         teacher=record["teacher"],
-        distillation={k: record[k] for k in ("constant_teacher", "settings", "seconds", "validation", "validation_initial")},
+        distillation={"conf": conf, **{k: record[k] for k in ("constant_teacher", "settings", "seconds", "validation",
+                                                              "validation_initial")}},
         description=f"LiteNormalizer distilled from {record['teacher']['file']} ({record['teacher']['description']})",
     )
     save_normalizer_file(out_path, student.state_arrays(), meta)
@@ -265,8 +256,6 @@ Speed and the difference from the exact ALCN output on whole frames: `alcn bench
 
 # --- The gain Normalizer's lite variant ----------------------------------------------------------
 
-#: The student of a gain teacher: hidden width and dilations (the teacher's: 16, (1, 2, 4)).
-GAIN_STUDENT = {"channels": 8, "dilations": (1, 2, 4)}
 #: Every ``_GAIN_VAL_EVERY``-th frame of each real scene is held out for validation.
 _GAIN_VAL_EVERY = 5
 #: Side and frames of the rendered registered scenes (:func:`alcn_cv.data.relief_scenes.render_scene`).
@@ -345,17 +334,7 @@ def _output_fidelity(teacher: GainNormalizer, student: GainNormalizer, frames: l
             "output_max_abs_error": worst, "output_p99_abs_error": float(np.mean(p99))}
 
 
-def distill_gain(
-    teacher: str | os.PathLike,
-    scenes: Sequence[str | os.PathLike] | None = None,
-    rendered: int = 6,
-    seed: int = 0,
-    epochs: int = 60,
-    lr: float = 3e-3,
-    channels: int = GAIN_STUDENT["channels"],
-    dilations: Sequence[int] = GAIN_STUDENT["dilations"],
-    progress: bool = True,
-) -> tuple[GainNormalizer, dict[str, Any]]:
+def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) -> tuple[GainNormalizer, dict[str, Any]]:
     """Train a smaller :class:`~alcn_cv.nets.gain.GainNormalizer` to reproduce a gain teacher's maps.
 
     The student has the teacher's features, kernels, divisive step and ``tau`` (copied, fixed)
@@ -364,27 +343,24 @@ def distill_gain(
     light's strength (:func:`_relit`, drawn anew every epoch), and of rendered registered scenes.
 
     Args:
-        teacher: the gain teacher's weight file.
-        scenes: folders of registered frames (default: :data:`~alcn_cv.data.scenes.TRAIN_SCENES` of the
-            shared ``webcam`` data; never the test scenes).
-        rendered: rendered registered scenes added to the data (256x256, 4 lights each).
-        seed: seeds the student's initialisation, the relighting and the rendering.
-        epochs, lr: Adam over every training frame once per epoch, cosine schedule.
-        channels, dilations: the student's hidden width and its dilated 3x3 convolutions.
+        cfg: the settings (default: the ``gain-lite`` preset, :class:`~alcn_cv.train.config.GainDistillConfig`).
+        progress: show progress bars.
 
     Returns:
         The student (eval mode) and a record of the run (settings, time, fidelity).
     """
+    cfg = cfg or GainDistillConfig()
+    seed, epochs, rendered, channels, dilations = cfg.seed, cfg.epochs, cfg.rendered, cfg.channels, cfg.dilations
     if epochs < 1 or rendered < 0 or channels < 1 or not dilations:
         raise InputError("epochs and channels must be >= 1, rendered >= 0, and dilations non-empty")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    teacher_path = Path(teacher)
-    teacher_file = load_normalizer_file(teacher_path)
-    if teacher_file.meta.get("architecture") != "gain":
+    teacher_path = teacher_file(cfg.teacher)
+    teacher_weights = load_normalizer_file(teacher_path)
+    if teacher_weights.meta.get("architecture") != "gain":
         raise InputError(f"{teacher_path} is not a gain Normalizer")
-    teacher_net = normalizer_from_file(teacher_file).eval()
-    scenes = scene_dirs() if scenes is None else list(scenes)
+    teacher_net = normalizer_from_file(teacher_weights).eval()
+    scenes = scene_dirs(cfg.scenes)
     start = time.perf_counter()
     train_frames, val_frames = _gain_frames(scenes, rendered, seed, progress)
     if not val_frames:
@@ -397,8 +373,7 @@ def distill_gain(
     student = GainNormalizer(**config)
     with torch.no_grad():  # the teacher's fixed steps: tau and the divisive floor's scale
         student.log_tau.copy_(teacher_net.log_tau)
-        if teacher_net.gain == "divisive":
-            student.log_floor_scale.copy_(teacher_net.log_floor_scale)
+        student.log_floor_scale.copy_(teacher_net.log_floor_scale)
 
     def val_error() -> float:
         with torch.inference_mode():
@@ -406,7 +381,7 @@ def distill_gain(
 
     initial = {"maps_relative_error": val_error(), **_output_fidelity(teacher_net, student, val_frames)}
     parameters = [p for p in student.parameters() if p.requires_grad]
-    optimiser = torch.optim.Adam(parameters, lr=lr)
+    optimiser = torch.optim.Adam(parameters, lr=cfg.lr)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, epochs * 2 * len(base))
     bar = tqdm(range(epochs), desc="distil gain", unit="epoch", disable=not progress)
     for _ in bar:
@@ -424,9 +399,8 @@ def distill_gain(
     validation = {"maps_relative_error": val_error(), **_output_fidelity(teacher_net, student, val_frames)}
     record = {
         "teacher": {"file": teacher_path.name, "sha256": hashlib.sha256(teacher_path.read_bytes()).hexdigest(),
-                    "description": teacher_file.meta.get("description", "")},
-        "settings": {"scenes": [Path(s).name for s in scenes], "rendered": rendered, "seed": seed, "epochs": epochs,
-                     "lr": lr, "channels": int(channels), "dilations": [int(d) for d in dilations],
+                    "description": teacher_weights.meta.get("description", "")},
+        "settings": {**asdict(cfg), "scenes": [Path(s).name for s in scenes],
                      "frames": {"train": len(train_frames), "validation": len(val_frames)}},
         "seconds": {"data_and_targets": round(prepared, 1), "total": round(time.perf_counter() - start, 1)},
         "validation": validation,
@@ -437,15 +411,16 @@ def distill_gain(
     return student, record
 
 
-def _main_gain(out_path: Path, teacher_path: Path, command: str, **params: Any) -> Path:
+def _main_gain(out_path: Path, cfg: GainDistillConfig, command: str, conf: str | None, progress: bool) -> Path:
     """:func:`main` for a gain teacher: the weight file, its ONNX export and its card."""
     from alcn_cv.train.export import export_onnx
 
-    student, record = distill_gain(teacher_path, **params)
-    trained = bool(load_normalizer_file(teacher_path).meta["trained"])
+    student, record = distill_gain(cfg, progress)
+    trained = bool(load_normalizer_file(teacher_file(cfg.teacher)).meta["trained"])
     meta = student.file_meta(
         trained, teacher=record["teacher"],
-        distillation={k: record[k] for k in ("settings", "seconds", "validation", "validation_initial", "parameters")},
+        distillation={"conf": conf, **{k: record[k] for k in ("settings", "seconds", "validation",
+                                                              "validation_initial", "parameters")}},
         description=f"gain Normalizer distilled from {record['teacher']['file']} "
         f"({record['settings']['channels']} channels, dilations {record['settings']['dilations']})",
     )

@@ -15,11 +15,6 @@ Each 64x64 training window (:mod:`alcn_cv.data.phos`) is used as in the paper: t
 sees its centre 48x48, the mixture filters the whole 64x64 and the detector gets the centre
 32x32 (free of border effects for sigmas up to 5), after the detector input policy
 (``model.detector_input``, per-window standardization by default).
-With ``model.mixture = "dense"`` the window is filtered by Eq. 3 instead, as at inference: the
-Normalizer runs fully-convolutionally over the 64x64 window (:meth:`Normalizer.dense`, windows
-every :data:`DENSE_GRID_STRIDE` pixels, reflect-101 beyond the window) and its per-pixel weight
-maps multiply the image before the blurs (:meth:`CentreMixture.dense`), so the weights can change
-inside a window, across a shadow edge for example. Eq. 1 cannot learn that; a dense step costs ~6x a window step.
 """
 
 from __future__ import annotations
@@ -38,12 +33,8 @@ from alcn_cv.nets.detector import INPUT, Detector
 from alcn_cv.nets.normalizer import Normalizer
 from alcn_cv.train.stage2 import STANDARDIZE_EPS
 
-__all__ = ["DENSE_GRID_STRIDE", "CentreMixture", "JointModel", "dog_weights",
-           "measure_output_range"]
+__all__ = ["CentreMixture", "JointModel", "dog_weights", "measure_output_range"]
 
-#: Spacing of the windows whose weights the Normalizer predicts in ``model.mixture = "dense"``
-#: training; the maps are interpolated in between, as the default runtime does at its stride 8.
-DENSE_GRID_STRIDE = 8
 _NORMALIZER_CROP = (WINDOW - Normalizer.window) // 2  # 8: the Normalizer sees the centre 48x48
 _DETECTOR_CROP = (WINDOW - INPUT) // 2  # 16: the detector sees the centre 32x32
 
@@ -121,7 +112,6 @@ class JointModel(nn.Module):
         super().__init__()
         self.method = cfg.method
         self.policy = cfg.detector_input
-        self.dense_mixture = cfg.mixture == "dense"
         sigmas = gaussian_sigmas(cfg.num_kernels, cfg.sigma_step)
         dog = dog_weights(cfg.num_kernels, cfg.sigma_step, cfg.dog)
         self.mixture = CentreMixture(sigmas)
@@ -148,11 +138,8 @@ class JointModel(nn.Module):
         return standardize_windows(out, STANDARDIZE_EPS) if self.policy == "standardize" else out
 
     def response(self, windows: torch.Tensor) -> torch.Tensor:
-        """The raw mixture output ``(B, 1, 32, 32)`` on the centre (before the input policy):
-        Eq. 1 with one weight vector per window, or Eq. 3 with the Normalizer's per-pixel maps
-        (``model.mixture = "dense"``)."""
-        if self.dense_mixture and self.normalizer is not None:
-            return self.mixture.dense(windows, self.normalizer.dense(windows, DENSE_GRID_STRIDE))
+        """The raw mixture output ``(B, 1, 32, 32)`` on the centre (before the input policy): Eq. 1
+        with one weight vector per window."""
         return self.mixture(windows, self.weights(windows))
 
     def forward(self, windows: torch.Tensor, anchor: torch.Tensor | None = None) -> torch.Tensor:

@@ -22,11 +22,7 @@ Outputs in the run folder: ``train.log``, ``history.json``, ``checkpoint.pt`` (a
 
 Command (the real scenes are for academic research only, see ``shared/data/README.md``)::
 
-    alcn train-real-light --out runs/gain --divisive-sigma 2   # courbevoie, frankfurt, panorama; 300 steps, seed 0
-
-(300 steps: 1 to 3 minutes on 2 CPU cores, one thread, depending on the machine's load. Longer
-training lowers the identification loss on the training scenes but not the identification on
-unseen scenes, and it lowers keypoint matching there: see the model card.)
+    alcn train-real-light --conf gain   # the shipped alcn_normalizer_gain.npz: 1 to 3 minutes on 2 CPU cores
 """
 
 from __future__ import annotations
@@ -37,6 +33,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -158,12 +155,8 @@ def consistency_loss(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """How much the output changes with the light, relative to its energy:
     ``sum (a - b)^2 / sum (a^2 + b^2)`` over all the patches together.
 
-    Identification compares each patch after removing its mean and scale, so it does not care
-    what a normalization does to flat, dark or noisy regions, nor to the contrast of one region
-    against another; a keypoint detector or a detector's score does, as they compare responses
-    across the image. This term asks for the same output under both lights in absolute terms
-    (0 when equal, about 1 when unrelated, scale-free so a weaker output does not lower it): an
-    output that amplifies noise, or shadow edges, is inconsistent between the frames.
+    Identification ignores each patch's mean and scale; detectors compare responses across the
+    image, so this term asks for the same output in absolute terms (0 when equal, about 1 when unrelated).
 
     Args:
         a, b: ``(n, 1, P, P)``, the same locations under two lights.
@@ -296,18 +289,23 @@ def pair_loss(
     return loss
 
 
-def _save_weights(net: GainNormalizer, path: Path, cfg: RealLightConfig, step: int, seconds: float) -> Path:
+def _save_weights(net: GainNormalizer, path: Path, cfg: RealLightConfig, step: int, seconds: float,
+                  record: dict[str, Any]) -> Path:
     meta = net.file_meta(
         trained=step > 0,
         description="gain Normalizer trained on registered real scenes (identification objective)",
-        training={"command": cfg.command, "config": asdict(cfg), "step": step, "seconds": round(seconds, 1),
-                  "machine": machine()},
+        training={**record, "config": asdict(cfg), "step": step, "seconds": round(seconds, 1), "machine": machine()},
     )
     return save_normalizer_file(path, net.state_arrays(), meta)
 
 
-def train_real_light(cfg: RealLightConfig, out: str | Path) -> Path:
+def train_real_light(cfg: RealLightConfig, out: str | Path, *, command: str = "", conf: str | None = None) -> Path:
     """Train a :class:`~alcn_cv.nets.gain.GainNormalizer` on registered scenes (see the module).
+
+    Args:
+        cfg: the settings (the ``gain`` preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`, overridden or not).
+        out: the run folder.
+        command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
 
     Returns:
         The final weight file ``out/gain_normalizer.npz``.
@@ -324,13 +322,13 @@ def train_real_light(cfg: RealLightConfig, out: str | Path) -> Path:
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
     logger.addHandler(handler)
     try:
-        return _train(cfg, out)
+        return _train(cfg, out, {"command": command, "conf": conf})
     finally:
         logger.removeHandler(handler)
         handler.close()
 
 
-def _train(cfg: RealLightConfig, out: Path) -> Path:
+def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     net = GainNormalizer(**cfg.net)
@@ -362,10 +360,10 @@ def _train(cfg: RealLightConfig, out: Path) -> Path:
             seconds = time.perf_counter() - start
             recent = np.mean([h["loss"] for h in history[-cfg.save_every :]])
             logger.info("step %d: mean loss %.4f over the last %d steps, %.0f s", step, recent, cfg.save_every, seconds)
-            _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds)
+            _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds, record)
             state = {"net": net.state_dict(), "opt": opt.state_dict(), "step": step, "config": asdict(cfg)}
             atomic_write(out / "checkpoint.pt", lambda f: torch.save(state, f))
             write_json(out / "history.json", history)
     seconds = time.perf_counter() - start
     logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
-    return _save_weights(net.eval(), out / "gain_normalizer.npz", cfg, cfg.steps, seconds)
+    return _save_weights(net.eval(), out / "gain_normalizer.npz", cfg, cfg.steps, seconds, record)

@@ -13,10 +13,8 @@ the first: the detector learns from windows under one *anchor* lighting only (as
 later learns from a few images under one light), while the Normalizer minimises the loss on
 *all* windows with the detector held fixed for the non-anchor ones (:meth:`JointModel.forward`
 with an ``anchor`` mask). Its gradient therefore says "make this lighting look like the anchor
-lighting to a detector", the invariance the second stage needs. With plain Eq. 2
-(``"joint"``), the Normalizer beat a DoG on held-out lightings of the training objects but lost
-to it on new objects learnt from one image; with ``"meta"`` it beat the DoG on both in our
-measurements (``alcn_cv/weights/MODEL_CARD.md``).
+lighting to a detector", the invariance the second stage needs (plain Eq. 2, ``"joint"``, lost
+to the DoG on new objects: ``docs/journal.md``).
 
 The same command trains the same detector on a fixed DoG (``model.method = "dog"``) or on the
 raw windows (``"none"``), so the benefit of the learned Normalizer is measured, not assumed.
@@ -196,8 +194,6 @@ def _make_optimizer(model: JointModel, cfg: TrainConfig) -> torch.optim.Optimize
     if model.normalizer is not None:
         lr = cfg.optim.normalizer_lr
         groups.append({"params": model.normalizer.parameters(), "lr": lr, "base_lr": lr})
-    if cfg.optim.optimizer == "sgd":
-        return torch.optim.SGD(groups, momentum=cfg.optim.momentum, weight_decay=cfg.optim.weight_decay)
     return torch.optim.Adam(groups, weight_decay=cfg.optim.weight_decay)
 
 
@@ -315,10 +311,6 @@ def _save(out: Path, cfg: TrainConfig, model: JointModel, optimizer: torch.optim
 def _lr_factor(cfg: TrainConfig, step: int, steps_per_epoch: int) -> float:
     o = cfg.optim
     warm = min(1.0, (step + 1) / o.warmup_steps) if o.warmup_steps else 1.0
-    if o.schedule == "constant":
-        return warm
-    if o.schedule == "step":
-        return warm * o.step_gamma ** (step // (steps_per_epoch * o.step_epochs))
     total = steps_per_epoch * o.epochs
     return warm * 0.5 * (1.0 + math.cos(math.pi * min(step, total) / total))
 
