@@ -16,9 +16,15 @@ Stages, each writing under ``--out`` (default ``runs/relit``):
   none, CLAHE, DLCN and Tan-Triggs (default and tuned on the webcam training scenes), the
   shipped default, the relit-trained file and its untrained start.
 
+``--light hard`` relights with more shadows, shading and noise (:data:`LIGHTS`); ``--no-baselines``
+benches the two new files only (the same plans, so their rows compare with a run that had the
+baselines); ``--train-args`` passes more arguments to ``alcn train-real-light``.
+
 Run from the checkout's root::
 
     PYTHONPATH=$PWD nice -n 10 python experiments/real_light_relit.py --out runs/relit
+    PYTHONPATH=$PWD nice -n 10 python experiments/real_light_relit.py --out runs/relit_hard --light hard \
+        --stages scenes train bench --no-baselines
 """
 
 from __future__ import annotations
@@ -34,7 +40,7 @@ import numpy as np
 import torch
 
 from alcn_cv.cli import main as alcn
-from alcn_cv.data.light_changes import relit_frames, sample_pair
+from alcn_cv.data.light_changes import LightChangeConfig, relit_frames, sample_pair
 from alcn_cv.data.permissive_images import Photograph, permissive_photographs
 from alcn_cv.io import to_gray, write_json
 from alcn_cv.nets.gain import GainNormalizer
@@ -42,6 +48,13 @@ from alcn_cv.shared_data import shared_data_dir
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 STAGES = ("speed", "scenes", "train", "bench")
+#: The light changes of the scenes: the generator's defaults, or more shadows, shading and noise.
+LIGHTS = {
+    "default": LightChangeConfig(),
+    "hard": LightChangeConfig(gain=(0.02, 1.5), shading=1.0, ramp=2.0, shadows=(1, 5), penumbra=(0.5, 6.0),
+                              full_well=(200.0, 5000.0), read_noise=(2.0, 10.0)),
+}
+BASELINES = ["none", "clahe", "dlcn", "tantriggs", "alcn"]
 QUICK = ["--seeds", "0", "--max-frames", "12", "--patches", "150", "--max-pairs", "12"]
 
 
@@ -69,24 +82,24 @@ def speed(photos: list[Photograph], out: Path, seconds: float = 10.0) -> dict:
     return result
 
 
-def scenes(photos: list[Photograph], out: Path, frames: int, seed: int) -> list[Path]:
+def scenes(photos: list[Photograph], out: Path, frames: int, seed: int, light: str) -> list[Path]:
     folders, listing = [], []
     for i, photo in enumerate(photos):
         folder = out / "scenes" / f"{i:02d}_{photo.name.replace('/', '_').replace('#', '_').replace('.', '_')}"
         folder.mkdir(parents=True, exist_ok=True)
-        for k, frame in enumerate(relit_frames(photo.image, frames, np.random.default_rng([seed, i]))):
+        for k, frame in enumerate(relit_frames(photo.image, frames, np.random.default_rng([seed, i]), LIGHTS[light])):
             cv2.imwrite(str(folder / f"frame_{k:02d}.png"), to_gray(frame) if frame.ndim == 3 else frame)
         folders.append(folder)
         listing.append({"folder": folder.name, "source": photo.source, "licence": photo.licence,
                         "size": list(photo.image.shape[:2])})
-    write_json(out / "scenes.json", {"frames": frames, "seed": seed, "scenes": listing})
+    write_json(out / "scenes.json", {"frames": frames, "seed": seed, "light": light, "scenes": listing})
     return folders
 
 
-def train(folders: list[Path], out: Path, steps: int, seed: int) -> tuple[Path, Path]:
+def train(folders: list[Path], out: Path, steps: int, seed: int, extra: list[str]) -> tuple[Path, Path]:
     run = out / "train"
     args = ["train-real-light", "--out", str(run), "--scenes", *map(str, folders), "--divisive-sigma", "2",
-            "--steps", str(steps), "--seed", str(seed)]
+            "--steps", str(steps), "--seed", str(seed), *extra]
     if alcn(args) != 0:
         raise SystemExit("training failed")
     trained = run / "gain_normalizer.npz"
@@ -99,9 +112,10 @@ def train(folders: list[Path], out: Path, steps: int, seed: int) -> tuple[Path, 
     return trained, untrained
 
 
-def bench(out: Path, trained: Path, untrained: Path) -> None:
-    methods = ["none", "clahe", "dlcn", "tantriggs", "alcn", f"alcn:weights={trained}", f"alcn:weights={untrained}"]
-    if alcn(["bench", "relight", "--out", str(out / "bench"), "--methods", ",".join(methods), *QUICK]) != 0:
+def bench(out: Path, trained: Path, untrained: Path, baselines: bool) -> None:
+    methods = [*(BASELINES if baselines else []), f"alcn:weights={trained}", f"alcn:weights={untrained}"]
+    tuning = [] if baselines else ["--no-tune"]
+    if alcn(["bench", "relight", "--out", str(out / "bench"), "--methods", ",".join(methods), *QUICK, *tuning]) != 0:
         raise SystemExit("benchmark failed")
 
 
@@ -112,6 +126,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=16, help="relit copies per photograph (default 16)")
     parser.add_argument("--steps", type=int, default=300, help="training steps (default 300, the shipped recipe's)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--light", choices=tuple(LIGHTS), default="default", help="the light changes (default: default)")
+    parser.add_argument("--no-baselines", action="store_true", help="bench the two new files only (no tuning)")
+    parser.add_argument("--train-args", nargs=argparse.REMAINDER, default=[],
+                        help="more arguments of alcn train-real-light (last)")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     photos = photographs()
@@ -120,12 +138,12 @@ def main(argv: list[str] | None = None) -> int:
         speed(photos, args.out)
     folders = sorted(p for p in (args.out / "scenes").glob("*") if p.is_dir())
     if "scenes" in args.stages:
-        folders = scenes(photos, args.out, args.frames, args.seed)
+        folders = scenes(photos, args.out, args.frames, args.seed, args.light)
     trained, untrained = args.out / "train" / "gain_normalizer.npz", args.out / "untrained.npz"
     if "train" in args.stages:
-        trained, untrained = train(folders, args.out, args.steps, args.seed)
+        trained, untrained = train(folders, args.out, args.steps, args.seed, args.train_args)
     if "bench" in args.stages:
-        bench(args.out, trained, untrained)
+        bench(args.out, trained, untrained, not args.no_baselines)
     json.dump({"argv": sys.argv}, (args.out / "command.json").open("w"))
     return 0
 
