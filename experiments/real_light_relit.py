@@ -16,7 +16,8 @@ Stages, each writing under ``--out`` (default ``runs/relit``):
   none, CLAHE, DLCN and Tan-Triggs (default and tuned on the webcam training scenes), the
   shipped default, the relit-trained file and its untrained start.
 
-``--light hard`` relights with more shadows, shading and noise (:data:`LIGHTS`); ``--no-baselines``
+``--light hard`` relights with more shadows, shading and noise, ``--light relief`` adds the
+shading of the photograph read as a relief under a directional light (:data:`LIGHTS`); ``--no-baselines``
 benches the two new files only (the same plans, so their rows compare with a run that had the
 baselines); ``--train-args`` passes more arguments to ``alcn train-real-light``.
 
@@ -53,6 +54,7 @@ LIGHTS = {
     "default": LightChangeConfig(),
     "hard": LightChangeConfig(gain=(0.02, 1.5), shading=1.0, ramp=2.0, shadows=(1, 5), penumbra=(0.5, 6.0),
                               full_well=(200.0, 5000.0), read_noise=(2.0, 10.0)),
+    "relief": LightChangeConfig(relief=(3.0, 30.0)),
 }
 BASELINES = ["none", "clahe", "dlcn", "tantriggs", "alcn"]
 QUICK = ["--seeds", "0", "--max-frames", "12", "--patches", "150", "--max-pairs", "12"]

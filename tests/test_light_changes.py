@@ -10,6 +10,7 @@ import pytest
 
 from alcn_cv.data.light_changes import (
     LightChangeConfig,
+    relief_shading,
     relight,
     relit_frames,
     sample_pair,
@@ -171,3 +172,16 @@ def test_rendered_photographs_are_deterministic():
     a, b = rendered_photographs(1, seed=3, size=64), rendered_photographs(1, seed=3, size=64)
     assert a[0].image.shape == (64, 64) and a[0].image.dtype == np.uint8 and a[0].licence in PERMISSIVE_LICENCES
     assert np.array_equal(a[0].image, b[0].image) and a[0].image.std() > 0
+
+
+def test_relief_shading_follows_the_light_direction():
+    flat = relief_shading(np.full((32, 32), 0.4, np.float32), np.random.default_rng(0), 20.0)
+    assert np.allclose(flat, 1.0, atol=1e-5)
+    bumps = _texture().astype(np.float32) / 255
+    a = relief_shading(bumps, np.random.default_rng(0), 20.0, elevation=30.0, ambient=0.2)
+    b = relief_shading(bumps, np.random.default_rng(1), 20.0, elevation=30.0, ambient=0.2)
+    assert a.dtype == np.float32 and 0.2 - 1e-5 <= a.min() and a.max() <= 2.0 + 1e-5 and a.std() > 0.05
+    assert np.corrcoef(a.ravel(), b.ravel())[0, 1] < 0.9  # another azimuth, another shading
+    image = (bumps * 255).astype(np.uint8)
+    relit = relight(image, np.random.default_rng(0), replace(NONE, relief=(20.0, 20.0)))
+    assert np.abs(relit.astype(int) - image).mean() > 3

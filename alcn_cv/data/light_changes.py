@@ -6,8 +6,9 @@ films it again under another light, with a camera:
 1. decode to linear intensities (``I^2.2``);
 2. the new light: a global strength (:attr:`LightChangeConfig.gain`), a smooth shading field
    with a gain ramp (:func:`shading_field`), hard cast shadows with a penumbra
-   (:func:`shadow_mask`: random polygons, blurred edges, several at once) and the light's
-   colour (per-channel gains, the white balance the camera does not undo);
+   (:func:`shadow_mask`: random polygons, blurred edges, several at once), optionally the
+   shading of the photograph read as a relief under a directional light (:func:`relief_shading`)
+   and the light's colour (per-channel gains, the white balance the camera does not undo);
 3. the camera: an auto-exposure that brings the mean to a target within its range
    (``max_exposure``), the sensor's shot and read noise at the level of that signal
    (:func:`sensor_noise`) and its saturation at full scale, then a digital gain (ISO, up to
@@ -43,6 +44,7 @@ __all__ = [
     "LightChangeConfig",
     "RelitPair",
     "random_homography",
+    "relief_shading",
     "relight",
     "relit_frames",
     "sample_pair",
@@ -72,6 +74,11 @@ class LightChangeConfig:
         shadow_size: a shadow polygon's radius, as a fraction of the image's shorter side.
         penumbra: the penumbra's Gaussian sigma (pixels, log-uniform).
         colour: largest log-gain of a colour channel (the light's colour), colour images only.
+        relief: the height, in pixels, of a full-scale intensity when the photograph is read as a
+            relief lit from one direction (:func:`relief_shading`; log-uniform; ``(0, 0)``: off).
+        relief_sigma: the blur of that height map (pixels, log-uniform).
+        elevation: the directional light's elevation above the image plane (degrees).
+        ambient: the share of ambient light in :func:`relief_shading`.
         target: the auto-exposure's target mean of the signal; ``None``: no auto-exposure, no ISO.
         max_exposure: the exposure's range ``[1 / max_exposure, max_exposure]``.
         max_iso: the largest digital gain.
@@ -92,6 +99,10 @@ class LightChangeConfig:
     shadow_size: Range = (0.1, 0.45)
     penumbra: Range = (0.5, 12.0)
     colour: float = 0.25
+    relief: Range = (0.0, 0.0)
+    relief_sigma: Range = (1.0, 4.0)
+    elevation: Range = (20.0, 70.0)
+    ambient: Range = (0.1, 0.5)
     target: float | None = 0.18
     max_exposure: float = 4.0
     max_iso: float = 16.0
@@ -164,6 +175,29 @@ def shadow_mask(shape: tuple[int, int], rng: np.random.Generator, count: int, li
     return mask
 
 
+def relief_shading(luminance: np.ndarray, rng: np.random.Generator, depth: float, sigma: float = 2.0,
+                   elevation: float = 45.0, ambient: float = 0.3) -> np.ndarray:
+    """Lambertian shading of the photograph read as a relief (bump mapping): the height is the
+    luminance, blurred by ``sigma``, times ``depth`` pixels; a directional light of
+    ``elevation`` degrees and random azimuth plus ``ambient`` light; relative to a flat surface
+    (gain 1 where the relief is flat). The texture's own light changes with the light's
+    direction, as on the relief of the photometric-stereo objects, which a smooth field cannot do.
+
+    Args:
+        luminance: ``(H, W)`` float32 linear intensities in [0, 1].
+
+    Returns:
+        ``(H, W)`` float32 gain in ``[ambient, 1 / sin(elevation)]``.
+    """
+    height = cv2.GaussianBlur(luminance.astype(np.float32), (0, 0), sigma) * np.float32(depth)
+    gx = cv2.Sobel(height, cv2.CV_32F, 1, 0, ksize=3) / np.float32(8)
+    gy = cv2.Sobel(height, cv2.CV_32F, 0, 1, ksize=3) / np.float32(8)
+    azimuth, tilt = rng.uniform(0.0, 2.0 * np.pi), np.deg2rad(elevation)
+    lx, ly, lz = np.cos(tilt) * np.cos(azimuth), np.cos(tilt) * np.sin(azimuth), np.sin(tilt)
+    cosine = (-gx * np.float32(lx) - gy * np.float32(ly) + np.float32(lz)) / np.sqrt(1.0 + gx * gx + gy * gy)
+    return (np.float32(ambient) + np.float32(1.0 - ambient) * np.maximum(cosine, 0.0) / np.float32(lz)).astype(np.float32)
+
+
 def sensor_noise(signal: np.ndarray, rng: np.random.Generator, full_well: float, read_noise: float) -> np.ndarray:
     """The signal as a sensor records it: shot noise (Poisson, in the Gaussian limit, of
     ``signal * full_well`` electrons) plus Gaussian read noise of ``read_noise`` electrons,
@@ -204,6 +238,10 @@ def relight(image: np.ndarray, rng: np.random.Generator, config: LightChangeConf
     light = np.float32(_log_uniform(rng, c.gain)) * shading_field((h, w), rng, c.shading, c.ramp, c.shading_cells)
     light *= shadow_mask((h, w), rng, int(rng.integers(c.shadows[0], c.shadows[1] + 1)), c.shadow_light,
                          c.shadow_size, c.penumbra)
+    if c.relief[1] > 0:
+        luminance = linear.mean(axis=2) if image.ndim == 3 else linear
+        light *= relief_shading(luminance, rng, _log_uniform(rng, c.relief), _log_uniform(rng, c.relief_sigma),
+                                _uniform(rng, c.elevation), _uniform(rng, c.ambient))
     irradiance = linear * (light[..., None] if image.ndim == 3 else light)
     if image.ndim == 3 and c.colour > 0:
         irradiance *= np.exp(rng.uniform(-c.colour, c.colour, 3)).astype(np.float32)
