@@ -49,7 +49,7 @@ from alcn_cv.shared_data import shared_data_dir
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 STAGES = ("speed", "scenes", "train", "bench")
-#: The light changes of the scenes: the generator's defaults, or more shadows, shading and noise.
+#: The light changes of the scenes: the defaults, more shadows, shading and noise, or a relief's shading.
 LIGHTS = {
     "default": LightChangeConfig(),
     "hard": LightChangeConfig(gain=(0.02, 1.5), shading=1.0, ramp=2.0, shadows=(1, 5), penumbra=(0.5, 6.0),
