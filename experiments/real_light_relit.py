@@ -17,7 +17,8 @@ Stages, each writing under ``--out`` (default ``runs/relit``):
   shipped default, the relit-trained file and its untrained start.
 
 ``--light hard`` relights with more shadows, shading and noise, ``--light relief`` adds the
-shading of the photograph read as a relief under a directional light (:data:`LIGHTS`); ``--no-baselines``
+shading of the photograph read as a relief under a directional light (:data:`LIGHTS`); ``--jitter``
+moves each relit copy by up to that many pixels (a fixed camera's registration error); ``--no-baselines``
 benches the two new files only (the same plans, so their rows compare with a run that had the
 baselines); ``--train-args`` passes more arguments to ``alcn train-real-light``.
 
@@ -84,17 +85,17 @@ def speed(photos: list[Photograph], out: Path, seconds: float = 10.0) -> dict:
     return result
 
 
-def scenes(photos: list[Photograph], out: Path, frames: int, seed: int, light: str) -> list[Path]:
+def scenes(photos: list[Photograph], out: Path, frames: int, seed: int, light: str, jitter: float) -> list[Path]:
     folders, listing = [], []
     for i, photo in enumerate(photos):
         folder = out / "scenes" / f"{i:02d}_{photo.name.replace('/', '_').replace('#', '_').replace('.', '_')}"
         folder.mkdir(parents=True, exist_ok=True)
-        for k, frame in enumerate(relit_frames(photo.image, frames, np.random.default_rng([seed, i]), LIGHTS[light])):
+        for k, frame in enumerate(relit_frames(photo.image, frames, np.random.default_rng([seed, i]), LIGHTS[light], jitter)):
             cv2.imwrite(str(folder / f"frame_{k:02d}.png"), to_gray(frame) if frame.ndim == 3 else frame)
         folders.append(folder)
         listing.append({"folder": folder.name, "source": photo.source, "licence": photo.licence,
                         "size": list(photo.image.shape[:2])})
-    write_json(out / "scenes.json", {"frames": frames, "seed": seed, "light": light, "scenes": listing})
+    write_json(out / "scenes.json", {"frames": frames, "seed": seed, "light": light, "jitter": jitter, "scenes": listing})
     return folders
 
 
@@ -129,6 +130,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=300, help="training steps (default 300, the shipped recipe's)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--light", choices=tuple(LIGHTS), default="default", help="the light changes (default: default)")
+    parser.add_argument("--jitter", type=float, default=0.0,
+                        help="registration error of the relit copies, pixels (default 0: pixel-exact)")
     parser.add_argument("--no-baselines", action="store_true", help="bench the two new files only (no tuning)")
     parser.add_argument("--train-args", nargs=argparse.REMAINDER, default=[],
                         help="more arguments of alcn train-real-light (last)")
@@ -140,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         speed(photos, args.out)
     folders = sorted(p for p in (args.out / "scenes").glob("*") if p.is_dir())
     if "scenes" in args.stages:
-        folders = scenes(photos, args.out, args.frames, args.seed, args.light)
+        folders = scenes(photos, args.out, args.frames, args.seed, args.light, args.jitter)
     trained, untrained = args.out / "train" / "gain_normalizer.npz", args.out / "untrained.npz"
     if "train" in args.stages:
         trained, untrained = train(folders, args.out, args.steps, args.seed, args.train_args)

@@ -185,3 +185,12 @@ def test_relief_shading_follows_the_light_direction():
     image = (bumps * 255).astype(np.uint8)
     relit = relight(image, np.random.default_rng(0), replace(NONE, relief=(20.0, 20.0)))
     assert np.abs(relit.astype(int) - image).mean() > 3
+
+
+def test_relit_frames_jitter_stays_within_its_pixels():
+    image = _texture(128, 160, seed=2)
+    still = relit_frames(image, 2, np.random.default_rng(0), NONE)
+    assert all(np.abs(f.astype(int) - image).max() <= 1 for f in still)
+    moved = relit_frames(image, 4, np.random.default_rng(0), NONE, jitter=2.0)
+    shifts = [np.hypot(*cv2.phaseCorrelate(image.astype(np.float64), f.astype(np.float64))[0]) for f in moved]
+    assert max(shifts) <= 2.0 * np.sqrt(2) + 0.5 and any(np.abs(f.astype(int) - image).mean() > 2 for f in moved)

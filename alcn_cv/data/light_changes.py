@@ -263,19 +263,31 @@ def relight(image: np.ndarray, rng: np.random.Generator, config: LightChangeConf
 
 
 def relit_frames(image: np.ndarray, count: int, rng: np.random.Generator,
-                 config: LightChangeConfig = LightChangeConfig()) -> np.ndarray:
-    """``count`` relit copies of one photograph, registered (no geometric change): a scene in
-    the layout of the real-light trainer (:mod:`alcn_cv.train.real_light`).
+                 config: LightChangeConfig = LightChangeConfig(), jitter: float = 0.0) -> np.ndarray:
+    """``count`` relit copies of one photograph, registered to within ``jitter`` pixels: a scene
+    in the layout of the real-light trainer (:mod:`alcn_cv.train.real_light`). With ``jitter``,
+    each copy is seen through a :func:`random_homography` that moves each corner by up to
+    ``jitter`` pixels (a fixed camera's registration error), so that the identification of a
+    location is not pixel-exact.
 
     Returns:
         ``(count, *image.shape)`` uint8.
     """
-    return np.stack([relight(image, rng, config) for _ in range(count)])
+    h, w = image.shape[:2]
+    frames = []
+    for _ in range(count):
+        copy = image
+        if jitter > 0:
+            homography = random_homography((h, w), rng, jitter / max(h, w))
+            copy = cv2.warpPerspective(image, homography, (w, h), flags=cv2.INTER_LINEAR,
+                                       borderMode=cv2.BORDER_REFLECT_101)
+        frames.append(relight(copy, rng, config))
+    return np.stack(frames)
 
 
 def random_homography(shape: tuple[int, int], rng: np.random.Generator, shift: float = 0.06) -> np.ndarray:
     """A small homography: each corner of the ``(H, W)`` frame moved by up to ``shift`` times
-    the frame's side, independently in x and y.
+    the frame's width in x and its height in y.
 
     Returns:
         ``(3, 3)`` float64 mapping pixel coordinates ``(x, y, 1)`` of the frame to the moved one.
