@@ -6,7 +6,7 @@ films it again under another light, with a camera:
 1. decode to linear intensities (``I^2.2``);
 2. the new light: a global strength (:attr:`LightChangeConfig.gain`), a smooth shading field
    with a gain ramp (:func:`shading_field`), hard cast shadows with a penumbra
-   (:func:`shadow_mask`: random polygons, blurred edges, several at once), optionally the
+   (:func:`shadow_mask`: edges, polygons, blinds, windows, foliage, several at once), optionally the
    shading of the photograph read as a relief under a directional light (:func:`relief_shading`)
    and the light's colour (per-channel gains, the white balance the camera does not undo);
 3. the camera: an auto-exposure that brings the mean to a target within its range
@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from alcn_cv.data.lighting import SHADOW_SHAPES, shadow_shape
 from alcn_cv.errors import InputError
 
 __all__ = [
@@ -69,9 +70,8 @@ class LightChangeConfig:
         shading: largest amplitude of the smooth shading field's log-gain (natural log).
         shading_cells: least and most cells per side of the shading field's random grid.
         ramp: largest log-ratio, end to end, of the linear gain ramp.
-        shadows: least and most cast shadows.
+        shadows: least and most cast shadows (:func:`shadow_mask`).
         shadow_light: the light left inside a shadow (ambient / direct + ambient).
-        shadow_size: a shadow polygon's radius, as a fraction of the image's shorter side.
         penumbra: the penumbra's Gaussian sigma (pixels, log-uniform).
         colour: largest log-gain of a colour channel (the light's colour), colour images only.
         relief: the height, in pixels, of a full-scale intensity when the photograph is read as a
@@ -96,7 +96,6 @@ class LightChangeConfig:
     ramp: float = 1.4
     shadows: tuple[int, int] = (0, 3)
     shadow_light: Range = (0.1, 0.6)
-    shadow_size: Range = (0.1, 0.45)
     penumbra: Range = (0.5, 12.0)
     colour: float = 0.25
     relief: Range = (0.0, 0.0)
@@ -150,28 +149,20 @@ def shading_field(shape: tuple[int, int], rng: np.random.Generator, amplitude: f
 
 
 def shadow_mask(shape: tuple[int, int], rng: np.random.Generator, count: int, light: Range = (0.1, 0.6),
-                size: Range = (0.1, 0.45), penumbra: Range = (0.5, 12.0)) -> np.ndarray:
-    """The light left by ``count`` cast shadows: each a random star-shaped polygon (5 to 10
-    vertices, radius ``size`` times the shorter side, centre anywhere) filled, its edge blurred
-    by a Gaussian of sigma ``penumbra`` (log-uniform), leaving ``light`` of the light inside;
-    overlapping shadows multiply.
+                penumbra: Range = (0.5, 12.0), kinds: tuple[str, ...] = SHADOW_SHAPES) -> np.ndarray:
+    """The light left by ``count`` cast shadows: each a hard shadow of a kind drawn from ``kinds``
+    (:func:`alcn_cv.data.lighting.shadow_shape`: a straight edge, a polygon, blinds, a window,
+    foliage) with a penumbra of Gaussian sigma ``penumbra`` (log-uniform), leaving ``light`` of
+    the light inside; overlapping shadows multiply.
 
     Returns:
         ``(H, W)`` float32 in ``[min(light), 1]``; all ones when ``count`` is 0.
     """
-    h, w = shape
-    mask = np.ones((h, w), np.float32)
+    mask = np.ones(shape, np.float32)
     for _ in range(count):
-        vertices = int(rng.integers(5, 11))
-        angles = np.sort(rng.uniform(0.0, 2.0 * np.pi, vertices))
-        radius = _uniform(rng, size) * min(h, w) * rng.uniform(0.5, 1.0, vertices)
-        centre = rng.uniform((0.0, 0.0), (w, h))
-        polygon = centre + np.stack([radius * np.cos(angles), radius * np.sin(angles)], axis=1)
-        occluder = np.zeros((h, w), np.float32)
-        cv2.fillPoly(occluder, [np.round(polygon * 16).astype(np.int32)], 1.0, cv2.LINE_AA, shift=4)
-        sigma = _log_uniform(rng, penumbra)
-        occluder = cv2.GaussianBlur(occluder, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
-        mask *= 1.0 - np.float32(1.0 - _uniform(rng, light)) * occluder
+        kind = kinds[int(rng.integers(len(kinds)))]
+        lit = shadow_shape(rng, shape, kind, penumbra=_log_uniform(rng, penumbra))
+        mask *= 1.0 - np.float32(1.0 - _uniform(rng, light)) * (1.0 - lit)
     return mask
 
 
@@ -237,7 +228,7 @@ def relight(image: np.ndarray, rng: np.random.Generator, config: LightChangeConf
     linear = np.power(image.astype(np.float32) / np.float32(255), np.float32(DECODING_GAMMA))
     light = np.float32(_log_uniform(rng, c.gain)) * shading_field((h, w), rng, c.shading, c.ramp, c.shading_cells)
     light *= shadow_mask((h, w), rng, int(rng.integers(c.shadows[0], c.shadows[1] + 1)), c.shadow_light,
-                         c.shadow_size, c.penumbra)
+                         c.penumbra)
     if c.relief[1] > 0:
         luminance = linear.mean(axis=2) if image.ndim == 3 else linear
         light *= relief_shading(luminance, rng, _log_uniform(rng, c.relief), _log_uniform(rng, c.relief_sigma),
