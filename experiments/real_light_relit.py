@@ -18,7 +18,8 @@ Stages, each writing under ``--out`` (default ``runs/relit``):
 
 ``--light hard`` relights with more shadows, shading and noise, ``--light relief`` adds the
 shading of the photograph read as a relief under a directional light (:data:`LIGHTS`); ``--jitter``
-moves each relit copy by up to that many pixels (a fixed camera's registration error); ``--no-baselines``
+moves each relit copy by up to that many pixels (a fixed camera's registration error); ``--with-webcam F``
+trains on the webcam scenes with a share F of the steps on the relit ones (an academic-only variant); ``--no-baselines``
 benches the two new files only (the same plans, so their rows compare with a run that had the
 baselines); ``--train-args`` passes more arguments to ``alcn train-real-light``.
 
@@ -99,10 +100,13 @@ def scenes(photos: list[Photograph], out: Path, frames: int, seed: int, light: s
     return folders
 
 
-def train(folders: list[Path], out: Path, steps: int, seed: int, extra: list[str]) -> tuple[Path, Path]:
+def train(folders: list[Path], out: Path, steps: int, seed: int, extra: list[str],
+          webcam: float | None) -> tuple[Path, Path]:
     run = out / "train"
-    args = ["train-real-light", "--out", str(run), "--scenes", *map(str, folders), "--divisive-sigma", "2",
-            "--steps", str(steps), "--seed", str(seed), *extra]
+    data = ["--scenes", *map(str, folders)] if webcam is None else \
+        ["--rendered", str(out / "scenes"), "--rendered-fraction", str(webcam)]
+    args = ["train-real-light", "--out", str(run), *data, "--divisive-sigma", "2", "--steps", str(steps),
+            "--seed", str(seed), *extra]
     if alcn(args) != 0:
         raise SystemExit("training failed")
     trained = run / "gain_normalizer.npz"
@@ -132,6 +136,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--light", choices=tuple(LIGHTS), default="default", help="the light changes (default: default)")
     parser.add_argument("--jitter", type=float, default=0.0,
                         help="registration error of the relit copies, pixels (default 0: pixel-exact)")
+    parser.add_argument("--with-webcam", type=float, default=None, metavar="FRACTION",
+                        help="train on the shipped recipe's webcam scenes (academic use only) with this share of "
+                             "steps on the relit scenes (the trainer's second group), instead of the relit ones alone")
     parser.add_argument("--no-baselines", action="store_true", help="bench the two new files only (no tuning)")
     parser.add_argument("--train-args", nargs=argparse.REMAINDER, default=[],
                         help="more arguments of alcn train-real-light (last)")
@@ -146,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         folders = scenes(photos, args.out, args.frames, args.seed, args.light, args.jitter)
     trained, untrained = args.out / "train" / "gain_normalizer.npz", args.out / "untrained.npz"
     if "train" in args.stages:
-        trained, untrained = train(folders, args.out, args.steps, args.seed, args.train_args)
+        trained, untrained = train(folders, args.out, args.steps, args.seed, args.train_args, args.with_webcam)
     if "bench" in args.stages:
         bench(args.out, trained, untrained, not args.no_baselines)
     json.dump({"argv": sys.argv}, (args.out / "command.json").open("w"))
