@@ -109,5 +109,24 @@ def test_tuning_grids_have_one_size_and_start_at_the_default(method):
     grid = relight.TUNING_GRIDS[method]
     assert len(grid) == 8 and len({tuple(p.items()) for p in grid}) == 8
     first, default = relight.build_method(relight._spec(method, grid[0])), relight.build_method(method)
-    inner = (lambda n: vars(n.inner)) if method.endswith("+lstd") else vars
-    assert inner(first) == inner(default)
+    def public(n: object) -> dict:  # the parameters, not the OpenCV objects built from them
+        return {k: v for k, v in vars(n.inner if method.endswith("+lstd") else n).items() if not k.startswith("_")}
+
+    assert public(first) == public(default)
+
+
+def test_clahe_is_tuned_with_the_others(tmp_path):
+    grid = relight.TUNING_GRIDS["clahe"]
+    assert {"clipLimit": 4.0, "tileGridSize": (8, 8)} in grid  # Jenicek & Chum, ICCV 2019
+    root = _make_sets(tmp_path / "data")
+    result = relight.main(tmp_path / "out", [root / "webcam", root / "psm"], ["none", "clahe"],
+                          train_scenes=["square"], test_scenes=["street"], seeds=[0],
+                          settings=relight.Settings(patch=16, patches=40, gallery=1, max_pairs=2, keypoints=200,
+                                                    keypoint_protocols=False),
+                          tune_frames=3, progress=False)
+    tuning = result["tuning"]["clahe"]["all"]
+    assert len(tuning["scores"]) == 8 and tuning["chosen"] in tuning["scores"]
+    chosen = relight.build_method(tuning["chosen"])
+    assert [chosen.clipLimit, *chosen.tileGridSize] in [[p["clipLimit"], *p["tileGridSize"]] for p in grid]
+    row = result["methods"]["clahe (tuned)"]
+    assert row["tuned"] and 0 < row["mean_test"]["identification"]["mean"] <= 100

@@ -304,7 +304,7 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         help="patch identification, keypoint matching and pose on real changes of light (fixed cameras)",
         description="Normalize the registered frames of fixed-camera scenes under different light with each "
         "method's apply(), then score patch identification (NCC), ORB/SIFT matching and RANSAC-homography pose "
-        "between frames; DoG, SLCN, DLCN, Tan-Triggs and DoG+lstd are tuned on the training scenes only. Writes "
+        "between frames; CLAHE, DoG, SLCN, DLCN, Tan-Triggs and DoG+lstd are tuned on the training scenes only. Writes "
         "relight.md, relight.json and relight.png.",
     )
     d = relight.Settings()

@@ -23,7 +23,7 @@ paired with every other frame of the scene (at most ``max_pairs`` pairs, drawn a
   ``pose_px`` (the identity is the truth): the 2D-projection criterion of Rad et al., BMVC
   2017, Sec. 5, on real light.
 
-Parameters of DoG, SLCN, DLCN, Tan-Triggs and DoG + local standardization are tuned on the
+Parameters of CLAHE, DoG, SLCN, DLCN, Tan-Triggs and DoG + local standardization are tuned on the
 training scenes only, each over a grid of the same size (:data:`TUNING_GRIDS`), scored by
 identification on a subsample; the report holds both the default and the tuned rows. With
 ``leave_one_out``, each scene is evaluated with the parameters tuned on the others.
@@ -97,6 +97,11 @@ TUNING_GRIDS: dict[str, list[dict[str, float]]] = {
                         (0.2, 0.5, 2.0), (0.2, 1.0, 3.0), (0.2, 1.5, 3.0), (0.2, 2.0, 4.0)]
     ],
     "dog+lstd": [{"sigma1": a, "sigma2": b} for a, b in _DOG_GRID],
+    # clip 4 on 8x8 tiles: Jenicek & Chum, "No Fear of the Dark", ICCV 2019
+    "clahe": [
+        {"clipLimit": c, "tileGridSize": (t, t)}
+        for c, t in [(2.0, 8), (4.0, 8), (1.0, 8), (8.0, 8), (2.0, 4), (4.0, 4), (2.0, 16), (4.0, 16)]
+    ],
 }
 
 

@@ -1,0 +1,173 @@
+"""Real photographs that permit any use, for training on relit copies (:mod:`alcn_cv.data.light_changes`).
+
+Three sources, each photograph with its licence:
+
+* the photographs that ship inside the scikit-image wheel (:data:`SKIMAGE_PHOTOGRAPHS`): only
+  those whose ``skimage.data`` docstring states public domain, CC0 or no known copyright
+  restrictions, and that load without a download (``pooch``); the phrase of each docstring is
+  kept and :func:`skimage_photographs` checks it is still there;
+* OpenCV's samples under ``../shared/data`` (Apache-2.0, :data:`SHARED_PHOTOGRAPHS`): the
+  chessboard views, the cookie box's still and frames of its video;
+* the data engine's rendered scenes (:func:`alcn_cv.data.relight_scenes.render_scene`, one frame
+  each), generated here.
+
+The ``webcam`` frames (academic research only) and the other shared sets are not listed: they
+are validation data, not training data of a default that anyone may use.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from alcn_cv.errors import DatasetError
+from alcn_cv.io import read_image
+
+__all__ = [
+    "PERMISSIVE_LICENCES",
+    "SHARED_PHOTOGRAPHS",
+    "SKIMAGE_PHOTOGRAPHS",
+    "Photograph",
+    "permissive_photographs",
+    "rendered_photographs",
+    "shared_photographs",
+    "skimage_photographs",
+]
+
+#: The licences a training photograph of the default may carry.
+PERMISSIVE_LICENCES = ("public domain", "CC0", "no known copyright restrictions", "Apache-2.0", "rendered by alcn-cv")
+
+#: ``skimage.data`` function -> (licence, the phrase of its docstring that states it). Left out:
+#: ``cat`` (the same photograph as ``chelsea``), ``clock`` (motion-blurred: its patches are
+#: alike), ``moon``, ``page``, ``stereo_motorcycle`` (no licence stated), ``horse``, ``logo``,
+#: ``colorwheel`` (drawings), ``microaneurysms`` (102x102), ``eagle``, ``lily``, ``skin``,
+#: ``kidney`` (need a download).
+SKIMAGE_PHOTOGRAPHS: dict[str, tuple[str, str]] = {
+    "astronaut": ("public domain", "released into the public domain"),
+    "brick": ("CC0", "Creative Commons CC0 License"),
+    "camera": ("CC0", "CC0 by the photographer"),
+    "cell": ("CC0", "This image is CC0"),
+    "chelsea": ("CC0", "CC0 by the photographer"),
+    "coffee": ("CC0", "CC0 by the photographer"),
+    "coins": ("no known copyright restrictions", "No known copyright restrictions"),
+    "grass": ("CC0", "Creative Commons CC0 License"),
+    "gravel": ("CC0", "Creative Commons CC0 License"),
+    "hubble_deep_field": ("public domain", "may be freely used in the public domain"),
+    "immunohistochemistry": ("no known copyright restrictions", "No known copyright restrictions"),
+    "retina": ("CC0", "CC0 1.0 Universal Public Domain Dedication"),
+    "rocket": ("public domain", "released in the public domain"),
+    "text": ("public domain", "released into the public domain"),
+}
+
+#: Files under the shared data (glob patterns) -> licence: OpenCV's samples.
+SHARED_PHOTOGRAPHS: dict[str, str] = {
+    "chessboard/left*.jpg": "Apache-2.0",
+    "cookie_box/resized_IMG_3875.JPG": "Apache-2.0",
+    "cookie_box/box.mp4": "Apache-2.0",
+}
+
+
+@dataclass(frozen=True)
+class Photograph:
+    """A training photograph: ``image`` uint8 grayscale ``HxW`` or BGR ``HxWx3``, its licence
+    (one of :data:`PERMISSIVE_LICENCES`) and where it comes from."""
+
+    name: str
+    image: np.ndarray
+    licence: str
+    source: str
+
+
+def _fit(image: np.ndarray, max_side: int | None) -> np.ndarray:
+    side = max(image.shape[:2])
+    if max_side is None or side <= max_side:
+        return image
+    scale = max_side / side
+    size = (round(image.shape[1] * scale), round(image.shape[0] * scale))
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+
+
+def skimage_photographs(max_side: int | None = 640) -> list[Photograph]:
+    """The photographs of :data:`SKIMAGE_PHOTOGRAPHS`, BGR or gray uint8, the longer side at most ``max_side``.
+
+    Raises:
+        DatasetError: scikit-image is missing, or a docstring no longer states the recorded licence.
+    """
+    try:
+        import skimage.data
+    except ImportError as exc:
+        raise DatasetError("the scikit-image photographs need scikit-image (pip install 'alcn-cv[data]')") from exc
+    photos = []
+    for name, (licence, phrase) in SKIMAGE_PHOTOGRAPHS.items():
+        loader = getattr(skimage.data, name)
+        if phrase not in " ".join((loader.__doc__ or "").split()):
+            raise DatasetError(f"skimage.data.{name}'s docstring no longer says {phrase!r}; check its licence")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # skimage's deprecation notes
+            image = np.asarray(loader())
+        if image.ndim == 3:
+            image = cv2.cvtColor(image[..., :3], cv2.COLOR_RGB2BGR)
+        photos.append(Photograph(name, _fit(image.astype(np.uint8), max_side), licence, f"skimage.data.{name}"))
+    return photos
+
+
+def _video_frames(path: Path, count: int) -> list[np.ndarray]:
+    capture = cv2.VideoCapture(str(path))
+    total = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+    wanted = set(np.linspace(0, max(total - 1, 0), count).round().astype(int).tolist())
+    frames = []
+    for index in range(total):
+        ok, frame = capture.read()
+        if not ok:
+            break
+        if index in wanted:
+            frames.append(frame)
+    capture.release()
+    return frames
+
+
+def shared_photographs(root: str | Path, video_frames: int = 8, max_side: int | None = 640) -> list[Photograph]:
+    """The photographs of :data:`SHARED_PHOTOGRAPHS` under ``root`` (the shared data folder):
+    every still, and ``video_frames`` evenly spaced frames of each video.
+
+    Raises:
+        DatasetError: none of them is there.
+    """
+    root = Path(root)
+    photos = []
+    for pattern, licence in SHARED_PHOTOGRAPHS.items():
+        for path in sorted(root.glob(pattern)):
+            rel = path.relative_to(root).as_posix()
+            if path.suffix.lower() == ".mp4":
+                for k, frame in enumerate(_video_frames(path, video_frames)):
+                    photos.append(Photograph(f"{rel}#{k}", _fit(frame, max_side), licence, rel))
+            else:
+                photos.append(Photograph(rel, _fit(read_image(path), max_side), licence, rel))
+    if not photos:
+        raise DatasetError(f"{root}: none of {', '.join(SHARED_PHOTOGRAPHS)} found")
+    return photos
+
+
+def rendered_photographs(count: int, seed: int = 0, size: int = 384) -> list[Photograph]:
+    """``count`` rendered scenes of the data engine, the first frame of each (grayscale uint8 ``size x size``)."""
+    from alcn_cv.data.relight_scenes import render_scene
+
+    return [
+        Photograph(f"rendered_{i:03d}", render_scene(np.random.default_rng([seed, i]), size, 2)[0][0],
+                   "rendered by alcn-cv", "alcn_cv.data.relight_scenes")
+        for i in range(count)
+    ]
+
+
+def permissive_photographs(shared: str | Path | None = None, rendered: int = 0, seed: int = 0,
+                           max_side: int | None = 640) -> list[Photograph]:
+    """Every photograph of the three sources: scikit-image's, the shared OpenCV samples (when
+    ``shared`` is given) and ``rendered`` rendered scenes."""
+    photos = skimage_photographs(max_side)
+    if shared is not None:
+        photos += shared_photographs(shared, max_side=max_side)
+    return photos + rendered_photographs(rendered, seed)

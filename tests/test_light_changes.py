@@ -1,0 +1,198 @@
+"""The light-change generator (alcn_cv.data.light_changes) and its permissive photographs (alcn_cv.data.permissive_images)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.data.light_changes import (
+    LightChangeConfig,
+    relief_shading,
+    relight,
+    relit_frames,
+    sample_pair,
+    sensor_noise,
+    shading_field,
+    shadow_mask,
+)
+from alcn_cv.data.permissive_images import (
+    PERMISSIVE_LICENCES,
+    SHARED_PHOTOGRAPHS,
+    SKIMAGE_PHOTOGRAPHS,
+    rendered_photographs,
+    shared_photographs,
+    skimage_photographs,
+)
+from alcn_cv.errors import InputError
+from alcn_cv.shared_data import shared_data_dir
+
+NONE = LightChangeConfig.identity()
+
+
+def _texture(h: int = 96, w: int = 128, colour: bool = False, seed: int = 0) -> np.ndarray:
+    """A smooth random texture (smooth enough for bilinear resampling to be accurate)."""
+    noise = np.random.default_rng(seed).uniform(0, 255, (h, w, 3) if colour else (h, w)).astype(np.float32)
+    return np.clip(cv2.GaussianBlur(noise, (0, 0), 2.0) * 3 - 255, 0, 255).astype(np.uint8)
+
+
+def test_pair_is_deterministic_by_seed():
+    image = _texture(colour=True)
+    a, b = sample_pair(image, np.random.default_rng(5)), sample_pair(image, np.random.default_rng(5))
+    c = sample_pair(image, np.random.default_rng(6))
+    for field in ("first", "second", "homography", "coords", "valid"):
+        assert np.array_equal(getattr(a, field), getattr(b, field))
+    assert not np.array_equal(a.first, c.first)
+
+
+@pytest.mark.parametrize("colour", [False, True])
+def test_shapes_dtypes_and_ranges(colour):
+    image = _texture(colour=colour)
+    pair = sample_pair(image, np.random.default_rng(0))
+    assert pair.first.shape == pair.second.shape == image.shape
+    assert pair.first.dtype == pair.second.dtype == np.uint8
+    assert pair.coords.shape == (*image.shape[:2], 2) and pair.coords.dtype == np.float32
+    assert pair.valid.dtype == bool and 0.5 < pair.valid.mean() <= 1
+    frames = relit_frames(image, 3, np.random.default_rng(0))
+    assert frames.shape == (3, *image.shape) and frames.dtype == np.uint8
+
+
+def test_bad_input_raises():
+    with pytest.raises(InputError):
+        relight(np.zeros((8, 8), np.float32), np.random.default_rng(0))
+    with pytest.raises(InputError):
+        relight(np.zeros((8, 8, 4), np.uint8), np.random.default_rng(0))
+
+
+def test_identity_config_keeps_the_photograph():
+    image = _texture(colour=True)
+    out = relight(image, np.random.default_rng(0), NONE)
+    assert np.abs(out.astype(int) - image).max() <= 1
+
+
+def test_correspondence_follows_the_homography():
+    image = _texture(192, 256, seed=1)
+    pair = sample_pair(image, np.random.default_rng(3), NONE, shift=0.08)
+    assert not np.allclose(pair.homography, np.eye(3))
+    sampled = cv2.remap(pair.second.astype(np.float32), pair.coords[..., 0], pair.coords[..., 1], cv2.INTER_LINEAR)
+    inner = cv2.erode(pair.valid.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    error = np.abs(sampled - pair.first)[inner].mean()
+    shifted = np.abs(np.roll(sampled, 3, axis=1) - pair.first)[inner].mean()
+    assert error < 2.0 and shifted > 5 * error
+    # the valid mask is exactly where the mapped pixel falls inside the second frame
+    x, y = pair.coords[..., 0], pair.coords[..., 1]
+    assert np.array_equal(pair.valid, (x >= 0) & (x <= 255) & (y >= 0) & (y <= 191))
+
+
+def test_shadow_darkens_its_region_only():
+    mask = shadow_mask((128, 128), np.random.default_rng(0), 1, light=(0.2, 0.2), penumbra=(1, 1), kinds=("polygon",))
+    assert mask.dtype == np.float32 and mask.min() == pytest.approx(0.2, abs=0.02) and mask.max() == 1.0
+    assert 0.02 < (mask < 0.5).mean() < 0.98
+    assert np.array_equal(shadow_mask((32, 32), np.random.default_rng(0), 0), np.ones((32, 32), np.float32))
+    several = shadow_mask((128, 128), np.random.default_rng(0), 4, light=(0.5, 0.5), penumbra=(1, 1))
+    assert several.min() < 0.3  # where shadows overlap, they multiply
+    image = np.full((128, 128), 160, np.uint8)
+    out = relight(image, np.random.default_rng(2), replace(NONE, shadows=(1, 1), shadow_light=(0.2, 0.2),
+                                                            penumbra=(1.0, 1.0)))
+    umbra = round(255 * 0.2 ** (1 / 2.2) * 160 / 255)  # a fifth of the linear light
+    assert out.max() == 160 and (out == 160).mean() > 0.02  # lit pixels keep their value, none brightens
+    assert abs(int(out.min()) - umbra) <= 1 and (out <= umbra + 1).mean() > 0.02
+
+
+def test_penumbra_widens_the_edge():
+    def edge_width(sigma: float) -> int:
+        mask = shadow_mask((128, 128), np.random.default_rng(4), 1, light=(0.0, 0.0), penumbra=(sigma, sigma),
+                           kinds=("edge",))
+        return int(((mask > 0.05) & (mask < 0.95)).sum())
+
+    assert edge_width(8.0) > 3 * edge_width(0.5)
+
+
+def test_shading_field():
+    flat = shading_field((40, 50), np.random.default_rng(0), 0.0, 0.0)
+    assert np.allclose(flat, 1.0)
+    ramp = shading_field((40, 50), np.random.default_rng(0), 0.0, 1.0)
+    assert 1.0 < ramp.max() / ramp.min() <= np.e + 1e-3
+    smooth = shading_field((40, 50), np.random.default_rng(0), 0.7, 0.0)
+    assert np.exp(-0.7) - 1e-4 <= smooth.min() < smooth.max() <= np.exp(0.7) + 1e-4
+
+
+def test_noise_grows_relative_to_a_darker_signal():
+    rng = np.random.default_rng(0)
+    for bright, dark in [(0.5, 0.05), (0.05, 0.005)]:
+        rel = [np.std(sensor_noise(np.full(20000, s, np.float32), rng, 1000.0, 3.0) - s) / s for s in (bright, dark)]
+        assert rel[1] > 2 * rel[0]
+    assert np.std(sensor_noise(np.full(20000, 0.5, np.float32), rng, 1000.0, 3.0)) == pytest.approx(
+        np.sqrt(500 + 9) / 1000, rel=0.05)
+    # through the camera: a darker light, brought back by exposure and ISO, is noisier
+    image = np.full((64, 64), 128, np.uint8)
+    noisy = replace(NONE, target=0.18, full_well=(2000.0, 2000.0), read_noise=(4.0, 4.0))
+    stds = [relight(image, np.random.default_rng(1), replace(noisy, gain=(g, g))).std() for g in (1.0, 0.1, 0.01)]
+    assert stds[0] < stds[1] < stds[2]
+
+
+def test_light_colour_exposure_clipping_and_jpeg():
+    image = _texture(colour=True)
+    tinted = relight(image, np.random.default_rng(2), replace(NONE, colour=0.5))
+    ratios = tinted.reshape(-1, 3).mean(0) / image.reshape(-1, 3).mean(0)
+    assert ratios.max() / ratios.min() > 1.1
+    bright = relight(image, np.random.default_rng(0), replace(NONE, gain=(8.0, 8.0)))
+    assert (bright == 255).mean() > 0.5 > (image == 255).mean()
+    darker = relight(image, np.random.default_rng(0), replace(NONE, gamma=(1.5, 1.5)))
+    assert darker.mean() < image.mean()
+    gray = _texture()
+    jpeg = relight(gray, np.random.default_rng(0), replace(NONE, jpeg_probability=1.0, jpeg_quality=(30, 30)))
+    assert 0.5 < np.abs(jpeg.astype(int) - gray).mean() < 8
+
+
+def test_permissive_licences_only():
+    assert SKIMAGE_PHOTOGRAPHS and SHARED_PHOTOGRAPHS
+    assert all(licence in PERMISSIVE_LICENCES for licence, _ in SKIMAGE_PHOTOGRAPHS.values())
+    assert set(SHARED_PHOTOGRAPHS.values()) <= set(PERMISSIVE_LICENCES)
+    assert not any(p.startswith(("webcam", "psm", "middlebury", "lumia_box")) for p in SHARED_PHOTOGRAPHS)
+
+
+def test_skimage_photographs_load_offline_with_their_licence():
+    pytest.importorskip("skimage")
+    photos = skimage_photographs(max_side=256)
+    assert len(photos) == len(SKIMAGE_PHOTOGRAPHS)
+    for p in photos:
+        assert p.image.dtype == np.uint8 and max(p.image.shape[:2]) <= 256 and p.licence in PERMISSIVE_LICENCES
+
+
+def test_shared_photographs():
+    root = shared_data_dir()
+    if not (root / "chessboard").is_dir():
+        pytest.skip(f"the shared data is not at {root}")
+    photos = shared_photographs(root, video_frames=2)
+    assert any(p.name.startswith("chessboard/") for p in photos) and all(p.licence == "Apache-2.0" for p in photos)
+
+
+def test_rendered_photographs_are_deterministic():
+    a, b = rendered_photographs(1, seed=3, size=64), rendered_photographs(1, seed=3, size=64)
+    assert a[0].image.shape == (64, 64) and a[0].image.dtype == np.uint8 and a[0].licence in PERMISSIVE_LICENCES
+    assert np.array_equal(a[0].image, b[0].image) and a[0].image.std() > 0
+
+
+def test_relief_shading_follows_the_light_direction():
+    flat = relief_shading(np.full((32, 32), 0.4, np.float32), np.random.default_rng(0), 20.0)
+    assert np.allclose(flat, 1.0, atol=1e-5)
+    bumps = _texture().astype(np.float32) / 255
+    a = relief_shading(bumps, np.random.default_rng(0), 20.0, elevation=30.0, ambient=0.2)
+    b = relief_shading(bumps, np.random.default_rng(1), 20.0, elevation=30.0, ambient=0.2)
+    assert a.dtype == np.float32 and 0.2 - 1e-5 <= a.min() and a.max() <= 2.0 + 1e-5 and a.std() > 0.05
+    assert np.corrcoef(a.ravel(), b.ravel())[0, 1] < 0.9  # another azimuth, another shading
+    image = (bumps * 255).astype(np.uint8)
+    relit = relight(image, np.random.default_rng(0), replace(NONE, relief=(20.0, 20.0)))
+    assert np.abs(relit.astype(int) - image).mean() > 3
+
+
+def test_relit_frames_jitter_stays_within_its_pixels():
+    image = _texture(128, 160, seed=2)
+    still = relit_frames(image, 2, np.random.default_rng(0), NONE)
+    assert all(np.abs(f.astype(int) - image).max() <= 1 for f in still)
+    moved = relit_frames(image, 4, np.random.default_rng(0), NONE, jitter=2.0)
+    shifts = [np.hypot(*cv2.phaseCorrelate(image.astype(np.float64), f.astype(np.float64))[0]) for f in moved]
+    assert max(shifts) <= 2.0 * np.sqrt(2) + 0.5 and any(np.abs(f.astype(int) - image).mean() > 2 for f in moved)
