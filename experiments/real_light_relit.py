@@ -10,7 +10,7 @@ Stages, each writing under ``--out`` (default ``runs/relit``):
   the registered-scene layout of :mod:`alcn_cv.train.real_light`; ``scenes.json`` lists each
   one's source and licence;
 * ``train``: ``alcn train-real-light`` on those folders with the shipped recipe's settings
-  (``--divisive-sigma 2``, 300 steps, seed 0), and the same network untrained (``untrained.npz``);
+  (``--conf gain``: 300 steps, seed 0), and the same network untrained (``untrained.npz``);
 * ``bench``: ``alcn bench relight``'s quick protocol (the test scenes mexico and the psm objects,
   12 frames, 150 patches, 12 pairs, seed 0; identification, ORB/SIFT matching and pose) for
   none, CLAHE, DLCN and Tan-Triggs (default and tuned on the webcam training scenes), the
@@ -103,10 +103,10 @@ def scenes(photos: list[Photograph], out: Path, frames: int, seed: int, light: s
 def train(folders: list[Path], out: Path, steps: int, seed: int, extra: list[str],
           webcam: float | None) -> tuple[Path, Path]:
     run = out / "train"
-    data = ["--scenes", *map(str, folders)] if webcam is None else \
-        ["--rendered", str(out / "scenes"), "--rendered-fraction", str(webcam)]
-    args = ["train-real-light", "--out", str(run), *data, "--divisive-sigma", "2", "--steps", str(steps),
-            "--seed", str(seed), *extra]
+    data = [f"scenes={json.dumps(list(map(str, folders)))}"] if webcam is None else \
+        [f"rendered={json.dumps([str(out / 'scenes')])}", f"rendered_fraction={webcam}"]
+    settings = [word for item in [*data, f"steps={steps}"] for word in ("--set", item)]
+    args = ["train-real-light", "--conf", "gain", "--out", str(run), *settings, "--seed", str(seed), *extra]
     if alcn(args) != 0:
         raise SystemExit("training failed")
     trained = run / "gain_normalizer.npz"

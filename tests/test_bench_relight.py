@@ -118,7 +118,7 @@ def test_tuning_grids_have_one_size_and_start_at_the_default(method):
 def test_clahe_is_tuned_with_the_others(tmp_path):
     grid = relight.TUNING_GRIDS["clahe"]
     assert {"clipLimit": 4.0, "tileGridSize": (8, 8)} in grid  # Jenicek & Chum, ICCV 2019
-    root = _make_sets(tmp_path / "data")
+    root = make_sets(tmp_path / "data")
     result = relight.main(tmp_path / "out", [root / "webcam", root / "psm"], ["none", "clahe"],
                           train_scenes=["square"], test_scenes=["street"], seeds=[0],
                           settings=relight.Settings(patch=16, patches=40, gallery=1, max_pairs=2, keypoints=200,
