@@ -8,7 +8,7 @@ Three sources, each photograph with its licence:
   kept and :func:`skimage_photographs` checks it is still there;
 * OpenCV's samples under ``../shared/data`` (Apache-2.0, :data:`SHARED_PHOTOGRAPHS`): the
   chessboard views, the cookie box's still and frames of its video;
-* the data engine's rendered scenes (:func:`alcn_cv.data.relight_scenes.render_scene`, one frame
+* the data engine's rendered scenes (:func:`alcn_cv.data.relief_scenes.render_scene`, one frame
   each), generated here.
 
 The ``webcam`` frames (academic research only) and the other shared sets are not listed: they
@@ -154,11 +154,11 @@ def shared_photographs(root: str | Path, video_frames: int = 8, max_side: int | 
 
 def rendered_photographs(count: int, seed: int = 0, size: int = 384) -> list[Photograph]:
     """``count`` rendered scenes of the data engine, the first frame of each (grayscale uint8 ``size x size``)."""
-    from alcn_cv.data.relight_scenes import render_scene
+    from alcn_cv.data.relief_scenes import render_scene
 
     return [
         Photograph(f"rendered_{i:03d}", render_scene(np.random.default_rng([seed, i]), size, 2)[0][0],
-                   "rendered by alcn-cv", "alcn_cv.data.relight_scenes")
+                   "rendered by alcn-cv", "alcn_cv.data.relief_scenes")
         for i in range(count)
     ]
 
