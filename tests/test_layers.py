@@ -27,6 +27,8 @@ RUNTIME = (
     "alcn_cv/extras.py",
     "alcn_cv/io.py",
     "alcn_cv/weight_file.py",
+    "alcn_cv/runtime.py",
+    "alcn_cv/nn.py",
     "alcn_cv/enhance/",
     "alcn_cv/filters/",
     "alcn_cv/nets/__init__.py",
