@@ -127,7 +127,7 @@ class ALCN2d(nn.Module):
         as in :meth:`finish`, ``small`` as in :meth:`weight_maps`."""
         if gray.ndim != 4 or gray.shape[1] != 1:
             raise InputError(f"gray must have shape (B, 1, H, W), got {tuple(gray.shape)}")
-        with self._tf32():
+        with self._tf32(gray):
             return self.finish(self.eq3(gray, small), floor)
 
     def to_unit(self, response: torch.Tensor) -> torch.Tensor:
@@ -144,8 +144,9 @@ class ALCN2d(nn.Module):
         lightness = self.to_unit(self.response(lab[:, :1] * 0.01)) * 100.0
         return lab_to_rgb(torch.cat([lightness, lab[:, 1:]], dim=1), clip=True)
 
-    def _tf32(self) -> AbstractContextManager:
-        if self.allow_tf32 or not torch.backends.cudnn.is_available():
+    def _tf32(self, x: torch.Tensor) -> AbstractContextManager:
+        """cuDNN without TF32 for a CUDA tensor unless :attr:`allow_tf32` (TF32 moves the output by about 1e-3)."""
+        if self.allow_tf32 or not x.is_cuda:
             return nullcontext()
         return torch.backends.cudnn.flags(enabled=torch.backends.cudnn.enabled, benchmark=torch.backends.cudnn.benchmark,
                                           deterministic=torch.backends.cudnn.deterministic, allow_tf32=False)
@@ -277,7 +278,7 @@ class TorchRuntime:
             x = x.clamp(0, 1) if frames.dtype == np.float32 else x.float() * (1.0 / FULL_SCALE[frames.dtype])
             with torch.autocast(self.device.type, torch.float16, enabled=half):  # the network; Eq. 3 in float32
                 maps = self.module.weight_maps(x).float()
-            with self.module._tf32():
+            with self.module._tf32(x):
                 unit = self.module.to_unit(self.module.finish(self.module.mixture(x, maps)))[:, 0]
             if out_dtype != np.float32:
                 unit = torch.round(unit * FULL_SCALE[out_dtype]).to(_TORCH_DTYPES[out_dtype])
