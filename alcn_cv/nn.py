@@ -28,13 +28,13 @@ from kornia.color import lab_to_rgb, rgb_to_lab
 from torch import nn
 
 from alcn_cv.checks import FULL_SCALE
-from alcn_cv.runtime import ModelSpec, resolve_weights
 from alcn_cv.errors import InputError
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.opencv_runtime import WINDOW
+from alcn_cv.runtime import ModelSpec, resolve_weights
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["ALCN2d", "TorchNetwork", "TorchRuntime", "alcn2d", "batches", "torch_threads"]

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -20,7 +21,9 @@ from typing import Protocol
 import cv2
 import numpy as np
 
+from alcn_cv.checks import SUPPORTED_DTYPES, check_image
 from alcn_cv.errors import InputError
+from alcn_cv.extras import require
 from alcn_cv.filters.divisive import divisive_normalization
 from alcn_cv.filters.gaussian_mixture import (
     PYRAMID_MIN_SIGMA,
@@ -28,9 +31,10 @@ from alcn_cv.filters.gaussian_mixture import (
     alcn_filter_grid,
     kernel_radius,
     pyramid_mixture,
+    pyramid_plan,
     upsample_grid,
 )
-from alcn_cv.nets.opencv_runtime import WINDOW
+from alcn_cv.nets.opencv_runtime import WINDOW, OpenCVNormalizer
 from alcn_cv.weight_file import DEFAULT_WEIGHTS
 
 __all__ = ["DEFAULT_MODEL", "MODELS", "GainRuntime", "ModelSpec", "Network", "Runtime", "WindowRuntime", "make_runtime",
@@ -250,6 +254,84 @@ class GainRuntime(WindowRuntime):
 def make_runtime(spec: ModelSpec, network: Network, mixture: str) -> WindowRuntime:
     """The OpenCV runtime of the spec's family with ``network``."""
     return (GainRuntime if spec.per_pixel and spec.scale == 1 else WindowRuntime)(spec, network, mixture)
+
+
+def build_runtime(spec: ModelSpec, meta: dict, weights: Path, backend: str, device: str, grid_stride: int | None,
+                  mixture: str, threads: int | None) -> tuple[Runtime, object]:
+    """The runtime of ``backend`` for the weight file ``weights`` (header ``meta``) and its network."""
+    if backend == "opencv":
+        net = opencv_network(weights, grid_stride, spec)
+        return make_runtime(spec, net, mixture), net
+    require("torch", "kornia", what=f"ALCN(backend={backend!r})")
+    from alcn_cv.nets.device import (
+        torch_device,  # deferred: importing alcn_cv must not need torch
+    )
+    from alcn_cv.nn import ALCN2d, TorchNetwork, TorchRuntime
+
+    module = ALCN2d(weights=weights, scale=spec.scale, grid_stride=grid_stride)
+    module.to(torch_device(device) if backend == "torch" else "cpu")
+    check_teacher(meta, weights)
+    if backend == "torch":
+        return TorchRuntime(module, threads), module.net
+    return make_runtime(spec, TorchNetwork(module.net, module.grid_stride, threads), mixture), module.net
+
+
+def check_batch(frames: np.ndarray, out_dtype: type | np.dtype | str | None) -> np.dtype:
+    """Check a ``(B, H, W)`` batch of :meth:`ALCN.apply_batch <alcn_cv.enhance.alcn.ALCN.apply_batch>`; the output
+    dtype (default: the frames')."""
+    if not isinstance(frames, np.ndarray) or frames.ndim != 3 or frames.size == 0:
+        raise InputError(f"frames must be a non-empty (B, H, W) array, got {getattr(frames, 'shape', type(frames))}")
+    check_image(frames[0])  # the dtype; a float batch's range is checked as a whole below
+    if frames.dtype == np.float32:
+        check_image(frames.reshape(-1, frames.shape[-1]))
+    dtype = np.dtype(frames.dtype if out_dtype is None else out_dtype)
+    if dtype not in SUPPORTED_DTYPES:
+        raise InputError(f"unsupported out_dtype {dtype}; use uint8, uint16 or float32")
+    return dtype
+
+
+def opencv_network(weights: Path, grid_stride: int | None, spec: ModelSpec) -> OpenCVNormalizer:
+    """The ONNX export beside ``weights`` run by ``cv2.dnn``, checked against the spec (it runs at its stride)."""
+    net = OpenCVNormalizer(weights.with_suffix(".onnx"))
+    if grid_stride not in (None, net.stride):
+        raise InputError(f"backend='opencv' evaluates the Normalizer at its stride {net.stride}, got grid_stride={grid_stride}")
+    kernels = net.dense_grid(np.zeros((WINDOW, WINDOW), np.float32)).shape[0]
+    if len(spec.sigmas) != kernels:
+        raise InputError(f"weight file has {len(spec.sigmas)} sigmas for {kernels} outputs")
+    return net
+
+
+def eq1_windows(runtime: Runtime, unit: np.ndarray) -> np.ndarray:
+    """Eq. 1 on every ``(n, S, S)`` float32 window (``S >= 48`` at the working scale): one weight vector from its
+    central 48x48, then the mixture over the whole window -> ``(n, S, S)``."""
+    centre = np.stack([runtime.spec.working_image(w) for w in unit])
+    if centre.shape[1] < WINDOW:
+        raise InputError(f"windows must be at least {WINDOW} px at the working scale, got {centre.shape[1]}")
+    o = (centre.shape[1] - WINDOW) // 2
+    weights = runtime.window_weights(np.ascontiguousarray(centre[:, o : o + WINDOW, o : o + WINDOW]))
+    return np.stack([alcn_filter(w, wt, runtime.spec.full_res_sigmas) for w, wt in zip(unit, weights)])
+
+
+def strip_layout(spec: ModelSpec, grid_stride: int, mixture: str, shape: tuple[int, int]) -> tuple[int, int] | None:
+    """``(halo, step)`` of the strips of a large image (:meth:`Normalization._tiling
+    <alcn_cv.enhance.base.Normalization._tiling>`), or None where strips would change the output.
+
+    A strip gives the whole image's output when it starts on a grid row (and so on a row of every pyramid level)
+    and its working image is the whole one's rows (an integer zoom from the working scale); its halo covers the
+    Normalizer's windows around the grid points its maps interpolate, the mixture's blurs and pyramid filters and
+    the energy's Gaussian.
+    """
+    zoom = 1.0 / spec.scale
+    if abs(zoom - round(zoom)) > 1e-9 or abs(shape[0] * spec.scale - round(shape[0] * spec.scale)) > 1e-9:
+        return None
+    zoom = round(zoom)
+    sigmas = spec.full_res_sigmas
+    top = max(level for level, _ in pyramid_plan(sigmas, PYRAMID_MIN_SIGMA)) if mixture == "pyramid" else 0
+    step = math.lcm(zoom * grid_stride, 2**top)
+    reach = zoom * (spec.reach + grid_stride) + kernel_radius(max(sigmas)) + 2 ** (top + 2)
+    if spec.divisive is not None:
+        reach += kernel_radius(spec.divisive[0])
+    return -(-reach // step) * step, step
 
 
 def resolve_weights(model: str | None, weights: str | Path | None) -> Path:

@@ -5,8 +5,10 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from alcn_cv.filters import divisive  # noqa: E402
-from alcn_cv.filters import torch_divisive  # noqa: E402
+from alcn_cv.filters import (
+    divisive,
+    torch_divisive,
+)
 
 
 def _response(h=57, w=83, seed=0):

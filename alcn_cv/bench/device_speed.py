@@ -23,7 +23,7 @@ import numpy as np
 
 from alcn_cv.report import markdown_table
 
-__all__ = ["device_speed", "device_markdown"]
+__all__ = ["device_markdown", "device_speed"]
 
 
 def _median_ms(calls: dict[str, Callable[[], Any]], rounds: int, sync: Callable[[], None]) -> dict[str, float]:
@@ -74,13 +74,13 @@ def device_speed(device: str, frame: np.ndarray, batches: list[int], rounds: int
             x = torch.from_numpy(host)[:, None].to(dev)
             unit = x.float() * (1.0 / 255)
             calls = {
-                "end to end": lambda: alcn.apply_batch(host),
-                "on device": lambda: on_device(module, x, torch.float32),
-                "kornia dog": lambda: dog(unit),
-                "kornia clahe": lambda: equalize_clahe(unit),
+                "end to end": lambda host=host: alcn.apply_batch(host),
+                "on device": lambda x=x: on_device(module, x, torch.float32),
+                "kornia dog": lambda unit=unit: dog(unit),
+                "kornia clahe": lambda unit=unit: equalize_clahe(unit),
             }
             if half is not None:
-                calls["on device float16"] = lambda: on_device(half, x, torch.float16)
+                calls["on device float16"] = lambda x=x: on_device(half, x, torch.float16)
             ms = _median_ms(calls, rounds, sync)
             rows.append({"batch": batch, **{f"{name} fps": 1e3 * batch / t for name, t in ms.items()}})
         x = torch.from_numpy(frame)[None, None].float() * (1.0 / 255)
@@ -100,6 +100,6 @@ def device_markdown(result: dict[str, Any]) -> list[str]:
     w, h = result["size"]
     lines = [f"## ALCN batched on {result['device']} ({result.get('gpu', '')}), {w}x{h} gray, frames per second", "",
              markdown_table(["batch", *names], [[r["batch"], *(r[n] for n in names)] for r in result["rows"]], digits=1), "",
-             f"Largest difference float16 / float32 on the device: {result['half_max_abs']}; "
-             f"device / CPU (float32): {result['device_vs_cpu_max_abs']}."]
+             (f"Largest difference float16 / float32 on the device: {result['half_max_abs']}; "
+              f"device / CPU (float32): {result['device_vs_cpu_max_abs']}.")]
     return lines

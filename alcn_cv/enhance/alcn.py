@@ -22,15 +22,24 @@ from pathlib import Path
 
 import numpy as np
 
-from alcn_cv.checks import SUPPORTED_DTYPES, check_image, unit_windows
-from alcn_cv.runtime import DEFAULT_MODEL, MODELS, TEACHERS, ModelSpec, Runtime, check_teacher, make_runtime
+from alcn_cv.checks import unit_windows
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import parse_spec, register
 from alcn_cv.errors import InputError
-from alcn_cv.extras import is_installed, require
+from alcn_cv.extras import is_installed
 from alcn_cv.filters.divisive import gaussian_energy
-from alcn_cv.filters.gaussian_mixture import PYRAMID_MIN_SIGMA, alcn_filter, kernel_radius, pyramid_plan
 from alcn_cv.nets.opencv_runtime import WINDOW
+from alcn_cv.runtime import (
+    DEFAULT_MODEL,
+    MODELS,
+    TEACHERS,
+    ModelSpec,
+    Runtime,
+    build_runtime,
+    check_batch,
+    eq1_windows,
+    strip_layout,
+)
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["ALCN", "DEFAULT_MODEL", "MODELS", "TEACHERS", "createALCN", "pin_default_model"]
@@ -49,60 +58,24 @@ class ALCN(Normalization):
     """Adaptive Local Contrast Normalization (Rad, Roth & Lepetit, BMVC 2017).
 
     Args:
-        weights: a Normalizer weight file (``.npz``, see :mod:`alcn_cv.weight_file`); default:
-            the file shipped in the package for ``model``.
-        model: which shipped Normalizer to use when ``weights`` is not given: ``"gain"``
-            (default; the gain-adaptive Normalizer of :mod:`alcn_cv.nets.gain`, F_k = exp(g) w_k,
-            the response divided by its local energy (per pixel, a Gaussian of sigma 2)
-            (:func:`~alcn_cv.filters.divisive.divisive_normalization`), then a contrast
-            equalization ``tanh(x / tau)``; trained on real photographs of outdoor scenes under
-            changing daylight by ``alcn train-real-light``, first on real light changes;
-            ``alcn_normalizer_gain.npz``, card ``alcn_normalizer_gain.md``; **its training
-            photographs are for academic research only**, and so are its weights) or
-            ``"gain-lite"`` (the same method with a smaller network distilled from it by ``alcn
-            distill``, ``alcn_normalizer_gain_lite.npz``, card ``alcn_normalizer_gain_lite.md``;
-            academic research only too) or ``"lite"`` (:class:`~alcn_cv.nets.lite.LiteNormalizer`
-            distilled from the paper's, trained on rendered data only,
-            ``alcn_cv/weights/alcn_normalizer_lite.npz``, a few hundred times cheaper than the
-            paper's; see its model card) or ``"paper"`` (the paper's architecture, trained jointly
-            with a detector, ``alcn_normalizer.npz``; see ``MODEL_CARD.md``).
-        scale: working scale, the factor from the input resolution to the one the Normalizer
-            sees (its 48x48 window and sigmas are in working-scale pixels). Default: the
-            weight file's ``working_scale`` (1 for the gain Normalizers; 0.5 for the paper's
-            and the lite one: a 640x480 frame is seen at 320x240, where a 48-pixel window
-            spans 15% of the width).
-        backend: ``None`` (default): ``"fast"`` when torch is installed, else ``"opencv"``;
-            ``"fast"`` (Normalizer in torch on the CPU, Gaussian mixture in OpenCV),
-            ``"torch"`` (everything in torch/kornia, on ``device``), or ``"opencv"`` (no torch at
-            all: the Normalizer exported to ONNX -- the ``.onnx`` file beside the weight file, see
-            ``alcn export`` -- run by ``cv2.dnn``, the mixture in OpenCV; ``grid_stride`` at the
-            network's stride).
-        device: torch device for ``backend="torch"`` (``"cpu"`` or ``"cuda"``).
-        grid_stride: spacing, in working-scale pixels, of the windows the Normalizer is
-            evaluated on (a multiple of the network's stride); the weight maps are interpolated
-            bilinearly in between. Default: the network's own stride (4 for the paper's, 8 for
-            the lite and gain ones). The paper's network at 8, 16, 32 is 4, 16, 64 times cheaper in its
-            fully connected layer (not in its convolutions) and has smoother maps.
-        mixture: ``"exact"``: Eq. 3 at the input resolution; ``"pyramid"`` (``fast`` and
-            ``opencv`` backends): the blurs of sigma >= 2 pixels on a Gaussian pyramid and the
-            maps sampled directly from the grid at each level
-            (:func:`alcn_cv.filters.gaussian_mixture.pyramid_mixture`), 5 to 10 times cheaper.
-            Default: ``"pyramid"``, except ``"exact"`` with ``backend="torch"`` and for the gain
-            Normalizer: its Weber gain makes the pyramid's error large (0.24 of its [-1, 1]
-            output on ``alcn bench speed``'s frame), and its exact Eq. 3 runs from its grid in
-            OpenCV (:func:`~alcn_cv.filters.gaussian_mixture.alcn_filter_grid`, within 1e-5 of
-            the torch model's output).
-        threads: torch's intra-op threads while the Normalizer runs (restored after); default 1:
-            the fastest for the light Normalizers and on a loaded machine, where the threads of
-            small convolutions wait for each other, and it leaves no torch (OpenMP) threads
-            spinning to slow the OpenCV calls that follow, the mixture's and the application's.
-            None: torch's own setting.
-
-    The default, ``model="gain"`` (exact Eq. 3, divisive normalization, equalization), is the
-    method first on real light changes (``alcn bench relight``); ``model="lite"`` with
-    ``mixture="pyramid"`` is the paper family's real-time configuration and ``model="paper",
-    mixture="exact"`` its exact Eq. 3 with the paper's network.
-    ``alcn bench speed`` measures every variant's time and its difference from the exact output.
+        weights: a Normalizer weight file (``.npz``, :mod:`alcn_cv.weight_file`); default: the shipped ``model``'s.
+        model: a shipped Normalizer (:data:`~alcn_cv.runtime.MODELS`; see each model card): ``"gain"`` (default:
+            F_k = exp(g) w_k on a grid, the response divided by its local energy, then ``tanh(x / tau)``;
+            **academic research only**, like its training photographs), ``"gain-lite"`` (distilled from it),
+            ``"lite"`` (the paper's family distilled, rendered data only) or ``"paper"``.
+        scale: working scale, input resolution -> the Normalizer's (its 48x48 window and sigmas are in working
+            pixels). Default: the weight file's (1 for the gain family, 0.5 for the paper's).
+        backend: ``"fast"`` (the Normalizer in torch on the CPU, Eq. 3 in OpenCV; the default with torch),
+            ``"torch"`` (:class:`alcn_cv.nn.ALCN2d` on ``device``) or ``"opencv"`` (no torch: the ONNX export
+            beside the weight file run by ``cv2.dnn``, Eq. 3 in OpenCV; the default without torch).
+        device: torch device of ``backend="torch"`` (``"cpu"``, ``"cuda"``).
+        grid_stride: spacing of the Normalizer's grid in working pixels, a multiple of its stride (default: its
+            stride); the maps are interpolated bilinearly in between.
+        mixture: ``"exact"`` (Eq. 3 at the input resolution) or ``"pyramid"`` (the wide blurs on a Gaussian
+            pyramid, :func:`~alcn_cv.filters.gaussian_mixture.pyramid_mixture`; ``fast`` and ``opencv`` only).
+            Default: ``"exact"`` for the gain family and ``backend="torch"``, else ``"pyramid"``.
+        threads: torch's intra-op threads while the Normalizer runs (restored after; None: torch's setting).
+            Default 1: no torch threads left spinning against the OpenCV calls that follow.
     """
 
     name = "alcn"
@@ -143,30 +116,10 @@ class ALCN(Normalization):
         self.trained = bool(meta["trained"])
         if not self.trained:
             logger.warning("%s holds UNTRAINED Normalizer weights (%s)", self.weights_path.name, meta.get("description", ""))
-        self.runtime: Runtime = self._runtime(weight_file, grid_stride)
+        self.runtime: Runtime
+        self.runtime, self.net = build_runtime(self.spec, weight_file.meta, self.weights_path, backend, device, grid_stride,
+                                               mixture, threads)
         self.grid_stride = self.runtime.grid_stride
-
-    def _runtime(self, weight_file: object, grid_stride: int | None) -> Runtime:
-        if self.backend == "opencv":
-            from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
-
-            self.net = OpenCVNormalizer(self.weights_path.with_suffix(".onnx"))
-            if grid_stride not in (None, self.net.stride):
-                raise InputError(f"backend='opencv' evaluates the Normalizer at its stride {self.net.stride}, got grid_stride={grid_stride}")
-            if len(self.sigmas) != weight_file.meta["config"].get("num_kernels", len(self.sigmas)):
-                raise InputError(f"weight file has {len(self.sigmas)} sigmas for {weight_file.meta['config']['num_kernels']} outputs")
-            return make_runtime(self.spec, self.net, self.mixture)
-        require("torch", "kornia", what=f"ALCN(backend={self.backend!r})")
-        from alcn_cv.nets.device import torch_device  # deferred: importing alcn_cv must not need torch
-        from alcn_cv.nn import ALCN2d, TorchNetwork, TorchRuntime
-
-        module = ALCN2d(weights=self.weights_path, scale=self.scale, grid_stride=grid_stride)
-        module.to(torch_device(self.device) if self.backend == "torch" else "cpu")
-        self.net = module.net
-        check_teacher(weight_file.meta, self.weights_path)
-        if self.backend == "torch":
-            return TorchRuntime(module, self.threads)
-        return make_runtime(self.spec, TorchNetwork(module.net, module.grid_stride, self.threads), self.mixture)
 
     @property
     def equalization_tau(self) -> float | None:
@@ -204,13 +157,7 @@ class ALCN(Normalization):
         (per-pixel by design) normalizes each window as a small image instead."""
         if self.spec.per_pixel:
             return super().normalize_windows(windows)
-        unit = unit_windows(windows)
-        centre = np.stack([self.spec.working_image(w) for w in unit])
-        if centre.shape[1] < WINDOW:
-            raise InputError(f"windows must be at least {WINDOW} px at the working scale, got {centre.shape[1]}")
-        o = (centre.shape[1] - WINDOW) // 2
-        weights = self.window_weights(centre[:, o : o + WINDOW, o : o + WINDOW])
-        return np.stack([alcn_filter(w, wt, self.full_res_sigmas) for w, wt in zip(unit, weights)])
+        return eq1_windows(self.runtime, unit_windows(windows))
 
     @contextmanager
     def _strip_context(self, img: np.ndarray, strips: list[tuple[int, int, int, int]]) -> Iterator[None]:
@@ -231,20 +178,7 @@ class ALCN(Normalization):
             _DIVISIVE_FLOOR.reset(token)
 
     def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
-        # A strip gives the whole image's output when it starts on a grid row (and so on a row
-        # of every pyramid level) and its working image is the whole one's rows (an integer
-        # zoom from the working scale); its halo covers the Normalizer's windows around the
-        # grid points its maps interpolate, the mixture's blurs and pyramid filters and the energy's Gaussian.
-        zoom = 1.0 / self.scale
-        if abs(zoom - round(zoom)) > 1e-9 or abs(shape[0] * self.scale - round(shape[0] * self.scale)) > 1e-9:
-            return None
-        zoom = round(zoom)
-        top = max(level for level, _ in pyramid_plan(self.full_res_sigmas, PYRAMID_MIN_SIGMA)) if self.mixture == "pyramid" else 0
-        step = math.lcm(zoom * self.grid_stride, 2**top)
-        reach = zoom * (self.spec.reach + self.grid_stride) + kernel_radius(max(self.full_res_sigmas)) + 2 ** (top + 2)
-        if self.spec.divisive is not None:
-            reach += kernel_radius(self.spec.divisive[0])
-        return -(-reach // step) * step, step
+        return strip_layout(self.spec, self.grid_stride, self.mixture, shape)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         return self.runtime.normalize(gray, _DIVISIVE_FLOOR.get())
@@ -267,15 +201,7 @@ class ALCN(Normalization):
         """
         if self.backend != "torch":
             raise InputError(f"apply_batch runs on backend='torch' (device 'cpu' or 'cuda'), not {self.backend!r}")
-        if not isinstance(frames, np.ndarray) or frames.ndim != 3 or frames.size == 0:
-            raise InputError(f"frames must be a non-empty (B, H, W) array, got {getattr(frames, 'shape', type(frames))}")
-        check_image(frames[0])  # the dtype; a float batch's range is checked as a whole below
-        if frames.dtype == np.float32:
-            check_image(frames.reshape(-1, frames.shape[-1]))
-        out_dtype = np.dtype(frames.dtype if out_dtype is None else out_dtype)
-        if out_dtype not in SUPPORTED_DTYPES:
-            raise InputError(f"unsupported out_dtype {out_dtype}; use uint8, uint16 or float32")
-        return self.runtime.apply_batch(frames, out_dtype, half)
+        return self.runtime.apply_batch(frames, check_batch(frames, out_dtype), half)
 
     def __repr__(self) -> str:
         return (
@@ -295,7 +221,7 @@ def pin_default_model(spec: str) -> str:
     return f"{spec}:model={DEFAULT_MODEL}"
 
 
-def createALCN(**params: object) -> ALCN:  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE
+def createALCN(**params: object) -> ALCN:
     """Create an :class:`ALCN` normalization; ``createALCN().apply(img)`` normalizes an image.
 
     Example:

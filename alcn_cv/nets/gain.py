@@ -36,11 +36,15 @@ from torch import nn
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
-from alcn_cv.filters.torch_divisive import divisive_normalization, gaussian_blur, reflect101_pad_any
+from alcn_cv.filters.torch_divisive import (
+    divisive_normalization,
+    gaussian_blur,
+    reflect101_pad_any,
+)
 from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
 from alcn_cv.weight_file import NormalizerFile
 
-__all__ = ["GainNormalizer", "contrast_equalization", "dog_weights", "ARCHITECTURE"]
+__all__ = ["ARCHITECTURE", "GainNormalizer", "contrast_equalization", "dog_weights"]
 
 #: The ``architecture`` field of a gain Normalizer's weight file.
 ARCHITECTURE = "gain"
