@@ -23,7 +23,6 @@ import numpy as np
 
 from alcn_cv.checks import SUPPORTED_DTYPES, check_image
 from alcn_cv.errors import InputError
-from alcn_cv.extras import require
 from alcn_cv.filters.divisive import divisive_normalization
 from alcn_cv.filters.gaussian_mixture import (
     PYRAMID_MIN_SIGMA,
@@ -37,7 +36,7 @@ from alcn_cv.filters.gaussian_mixture import (
 from alcn_cv.nets.opencv_runtime import WINDOW, OpenCVNormalizer
 from alcn_cv.weight_file import DEFAULT_WEIGHTS
 
-__all__ = ["DEFAULT_MODEL", "MODELS", "GainRuntime", "ModelSpec", "Network", "Runtime", "WindowRuntime", "make_runtime",
+__all__ = ["DEFAULT_MODEL", "MODELS", "GainRuntime", "ModelSpec", "Network", "Runtime", "WindowRuntime", "make_runtime", "opencv_network",
            "resolve_weights"]
 
 logger = logging.getLogger(__name__)
@@ -254,26 +253,6 @@ class GainRuntime(WindowRuntime):
 def make_runtime(spec: ModelSpec, network: Network, mixture: str) -> WindowRuntime:
     """The OpenCV runtime of the spec's family with ``network``."""
     return (GainRuntime if spec.per_pixel and spec.scale == 1 else WindowRuntime)(spec, network, mixture)
-
-
-def build_runtime(spec: ModelSpec, meta: dict, weights: Path, backend: str, device: str, grid_stride: int | None,
-                  mixture: str, threads: int | None) -> tuple[Runtime, object]:
-    """The runtime of ``backend`` for the weight file ``weights`` (header ``meta``) and its network."""
-    if backend == "opencv":
-        net = opencv_network(weights, grid_stride, spec)
-        return make_runtime(spec, net, mixture), net
-    require("torch", "kornia", what=f"ALCN(backend={backend!r})")
-    from alcn_cv.nets.device import (
-        torch_device,  # deferred: importing alcn_cv must not need torch
-    )
-    from alcn_cv.nn import ALCN2d, TorchNetwork, TorchRuntime
-
-    module = ALCN2d(weights=weights, scale=spec.scale, grid_stride=grid_stride)
-    module.to(torch_device(device) if backend == "torch" else "cpu")
-    check_teacher(meta, weights)
-    if backend == "torch":
-        return TorchRuntime(module, threads), module.net
-    return make_runtime(spec, TorchNetwork(module.net, module.grid_stride, threads), mixture), module.net
 
 
 def check_batch(frames: np.ndarray, out_dtype: type | np.dtype | str | None) -> np.dtype:

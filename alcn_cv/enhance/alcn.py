@@ -26,7 +26,7 @@ from alcn_cv.checks import unit_windows
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import parse_spec, register
 from alcn_cv.errors import InputError
-from alcn_cv.extras import is_installed
+from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.divisive import gaussian_energy
 from alcn_cv.nets.opencv_runtime import WINDOW
 from alcn_cv.runtime import (
@@ -35,9 +35,11 @@ from alcn_cv.runtime import (
     TEACHERS,
     ModelSpec,
     Runtime,
-    build_runtime,
     check_batch,
+    check_teacher,
     eq1_windows,
+    make_runtime,
+    opencv_network,
     strip_layout,
 )
 from alcn_cv.weight_file import load_normalizer_file
@@ -117,7 +119,7 @@ class ALCN(Normalization):
         if not self.trained:
             logger.warning("%s holds UNTRAINED Normalizer weights (%s)", self.weights_path.name, meta.get("description", ""))
         self.runtime: Runtime
-        self.runtime, self.net = build_runtime(self.spec, weight_file.meta, self.weights_path, backend, device, grid_stride,
+        self.runtime, self.net = _build_runtime(self.spec, weight_file.meta, self.weights_path, backend, device, grid_stride,
                                                mixture, threads)
         self.grid_stride = self.runtime.grid_stride
 
@@ -208,6 +210,26 @@ class ALCN(Normalization):
             f"ALCN(weights={self.weights_path.name!r}, scale={self.scale}, backend={self.backend!r}, "
             f"grid_stride={self.grid_stride}, mixture={self.mixture!r}, threads={self.threads}, trained={self.trained})"
         )
+
+
+def _build_runtime(spec: ModelSpec, meta: dict, weights: Path, backend: str, device: str, grid_stride: int | None,
+                  mixture: str, threads: int | None) -> tuple[Runtime, object]:
+    """The runtime of ``backend`` for the weight file ``weights`` (header ``meta``) and its network."""
+    if backend == "opencv":
+        net = opencv_network(weights, grid_stride, spec)
+        return make_runtime(spec, net, mixture), net
+    require("torch", "kornia", what=f"ALCN(backend={backend!r})")
+    from alcn_cv.nets.device import (
+        torch_device,  # deferred: importing alcn_cv must not need torch
+    )
+    from alcn_cv.nn import ALCN2d, TorchNetwork, TorchRuntime
+
+    module = ALCN2d(weights=weights, scale=spec.scale, grid_stride=grid_stride)
+    module.to(torch_device(device) if backend == "torch" else "cpu")
+    check_teacher(meta, weights)
+    if backend == "torch":
+        return TorchRuntime(module, threads), module.net
+    return make_runtime(spec, TorchNetwork(module.net, module.grid_stride, threads), mixture), module.net
 
 
 def pin_default_model(spec: str) -> str:
