@@ -50,9 +50,7 @@ def test_gain_model_on_a_photograph(shared_data):
     assert np.abs(alcn.apply(photo).astype(np.float64) - expected).max() <= 1
 
 
-@pytest.mark.parametrize("config", [{"sharpness": True}, {"learn_floor": True, "stride": 4, "dilations": (1, 2)},
-                                    {"gain": "divisive", "num_kernels": 4, "tau": 3.0},
-                                    {"gain": "divisive", "divisive_sigma": 2.0, "tau": 3.0}])
+@pytest.mark.parametrize("config", [{"stride": 4, "dilations": (1, 2)}, {"num_kernels": 4}, {"tau": 2.0}])
 def test_other_gain_configurations_equal_the_torch_model(tmp_path, config):
     torch.manual_seed(0)
     net = GainNormalizer(**config)

@@ -119,3 +119,24 @@ def test_targets_are_reported(report):
     assert {"network_ms", "mixture_ms", "contract_ms", "apply_ms"} <= set(targets["stages"]["alcn"]) and targets["profile"]
     md = (out / "speed.md").read_text()
     assert md.index("## Targets") < md.index("## Time") and "Where the time goes" in md
+
+
+def test_device_run_measures_the_batched_path_beside_kornia(tmp_path):
+    """``--device cpu`` runs here what ``--device cuda`` runs on a GPU: every method at every batch size, written."""
+    pytest.importorskip("kornia")
+    settings = dataclasses.replace(speed.presets()["quick"], device="cpu", device_batches=[1, 2], target_size=(64, 48))
+    result = speed.main(tmp_path, settings)
+    rows = json.loads((tmp_path / "speed.json").read_text())["device"]["rows"]
+    assert [r["batch"] for r in rows] == [1, 2] and rows == result["rows"]
+    for row in rows:
+        for name in ("end to end", "on device", "kornia dog", "kornia clahe"):
+            assert row[f"{name} fps"] > 0
+    assert "--device cpu" in result["command"] and "kornia clahe fps" in (tmp_path / "speed.md").read_text()
+    with pytest.raises(InputError, match="--device"):
+        speed.main(tmp_path, dataclasses.replace(settings, device="cuda:7")) if not _cuda() else pytest.skip("a GPU is present")
+
+
+def _cuda() -> bool:
+    import torch
+
+    return torch.cuda.is_available()

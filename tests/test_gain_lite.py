@@ -39,7 +39,7 @@ def _scenes(root, count=2, frames=5, shape=(96, 128)):
 def _teacher(path):
     """A gain teacher whose maps vary over the image (random perturbation of the DoG start)."""
     torch.manual_seed(1)
-    net = GainNormalizer(gain="divisive", tau=3.0)
+    net = GainNormalizer(learn_scales=True)
     with torch.no_grad():
         for p in net.parameters():
             if p.requires_grad:

@@ -13,7 +13,7 @@ torch = pytest.importorskip("torch")
 import alcn_cv  # noqa: E402
 from alcn_cv.data.frames import synthetic_frame  # noqa: E402
 from alcn_cv.enhance import base  # noqa: E402
-from alcn_cv.enhance.alcn import _integer_zoom  # noqa: E402
+from alcn_cv.runtime import _integer_zoom  # noqa: E402
 from alcn_cv.enhance.registry import from_spec  # noqa: E402
 from alcn_cv.errors import InputError  # noqa: E402
 from alcn_cv.io import map_video, open_video_writer  # noqa: E402
@@ -55,7 +55,7 @@ def test_level0_maps_are_the_exact_bilinear_interpolation():
     grid = alcn.weight_grid(gray)
     assert _integer_zoom(1 / 16, -1 / 32) == (16, 7)
     assert _integer_zoom(1 / 8, -1 / 32) is None  # level 1: a quarter-pixel shift
-    maps = alcn._grid_maps_at(grid, (0.5, 0.5), 0, [0, 3], (243, 323))
+    maps = alcn.runtime._grid_maps_at(grid, (0.5, 0.5), 0, [0, 3], (243, 323))
     to_grid = np.array([[1 / 16, 0, -1 / 32], [0, 1 / 16, -1 / 32]])
     for k, m in zip([0, 3], maps):
         exact = cv2.warpAffine(grid[k], to_grid, (323, 243), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,

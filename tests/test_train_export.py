@@ -115,12 +115,12 @@ def test_gain_onnx_takes_the_raw_image(shared_data):
         np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-4, rtol=0)
 
 
-def test_gain_export_with_sharpness(tmp_path):
-    """A gain Normalizer with the fifth (sharpness) feature and a non-trivial head exports too."""
+def test_gain_export_with_a_trained_head(tmp_path):
+    """A gain Normalizer with a non-trivial head exports too."""
     from alcn_cv.nets.gain import GainNormalizer
 
     torch.manual_seed(0)
-    net = GainNormalizer(sharpness=True)
+    net = GainNormalizer()
     with torch.no_grad():
         net.head.weight.normal_(0, 0.1)
     path = save_normalizer_file(tmp_path / "gain.npz", net.state_arrays(), net.file_meta(trained=False))

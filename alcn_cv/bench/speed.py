@@ -320,6 +320,8 @@ class SpeedSettings:
         video_size: frame size ``(width, height)`` of the video-memory test.
         video_methods: labels run in the video test (default: ``alcn`` and the fastest variant).
         threads: OpenCV and torch threads (default: their defaults).
+        device, device_batches: with a device, only the batched torch path on it is measured, at ``target_size``
+            with these batch sizes (:mod:`alcn_cv.bench.device_speed`).
     """
 
     sizes: list[tuple[int, int]] = field(default_factory=lambda: list(SIZES))
@@ -343,6 +345,8 @@ class SpeedSettings:
     large_size: tuple[int, int] = (8000, 8000)
     normalize_video: str | None = None
     normalize_video_frames: int = 0
+    device: str | None = None
+    device_batches: list[int] = field(default_factory=lambda: [1, 8, 64, 128])
 
     def check(self) -> None:
         """Raise :class:`~alcn_cv.errors.InputError` on an unknown colour."""
@@ -359,7 +363,8 @@ def presets() -> dict[str, SpeedSettings]:
         "quick": SpeedSettings(sizes=list(QUICK_SIZES), warmup=0, min_repeats=2, max_repeats=2, budget_s=0.0,
                                video_frames=3, video_budget_s=10.0, video_size=QUICK_SIZES[-1],
                                target_size=QUICK_SIZES[-1], fps_size=QUICK_SIZES[0], target_repeats=2,
-                               large_size=(256, 192), normalize_video="generated", normalize_video_frames=4),
+                               large_size=(256, 192), normalize_video="generated", normalize_video_frames=4,
+                               device_batches=[1, 2]),
     }
 
 
@@ -371,7 +376,7 @@ def speed_command(out_dir: str | os.PathLike, settings: SpeedSettings) -> str:
         "--image": settings.image, "--warmup": settings.warmup, "--min-repeats": settings.min_repeats,
         "--repeats": settings.max_repeats, "--budget": settings.budget_s, "--video-frames": settings.video_frames,
         "--video-budget": settings.video_budget_s, "--video-size": "x".join(map(str, settings.video_size)),
-        "--video-methods": settings.video_methods, "--threads": settings.threads,
+        "--video-methods": settings.video_methods, "--threads": settings.threads, "--device": settings.device,
     })
 
 
@@ -771,6 +776,8 @@ def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> d
     if settings.threads is not None:
         cv2.setNumThreads(settings.threads)
         torch.set_num_threads(settings.threads)
+    if settings.device is not None:
+        return _device_main(out, settings)
     methods = _select_methods(settings)
     machine_before = machine()
     frame_for = _frame_source(settings.image)
@@ -810,6 +817,21 @@ def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> d
     write_json(out / "speed.json", result)
     atomic_write(out / "speed.md", _markdown(result))
     plot_speed(result, out / "speed.png")
+    return result
+
+
+def _device_main(out: Path, settings: SpeedSettings) -> dict[str, Any]:
+    from alcn_cv.bench.device_speed import device_markdown, device_speed
+
+    before = machine()
+    frame = _frame_source(settings.image)(*settings.target_size, "gray")
+    device = device_speed(settings.device, frame, settings.device_batches, settings.target_repeats)
+    result = {"command": speed_command(out, settings), "machine_before": before, "machine_after": machine(),
+              "rows": device["rows"], "device": device}
+    write_json(out / "speed.json", result)
+    lines = [f"# alcn bench speed --device {settings.device}", "", f"`{result['command']}`", "",
+             f"Machine: {describe_machine(before)}", "", *device_markdown(device), ""]
+    atomic_write(out / "speed.md", "\n".join(lines))
     return result
 
 

@@ -115,6 +115,12 @@ class OpenCVNormalizer:
         out = self.net.forward()
         return np.ascontiguousarray(out[0], dtype=np.float32)
 
+    def window_weights(self, windows: np.ndarray) -> np.ndarray:
+        """``(n, 48, 48)`` float32 windows -> ``(n, N)``: the grid point at each window's centre, which sees
+        exactly the window (no padding reaches it)."""
+        c = (WINDOW // 2) // self.stride
+        return np.stack([self.dense_grid(w)[:, c, c] for w in windows])
+
     def dense(self, image: np.ndarray) -> np.ndarray:
         """Per-pixel weight maps F_k (Eq. 3): :meth:`dense_grid` upsampled bilinearly to ``(N, H, W)``."""
         grid = self.dense_grid(image)

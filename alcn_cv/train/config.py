@@ -447,7 +447,7 @@ def dump_toml(cfg: Any) -> str:
 def _gain_network() -> dict[str, Any]:
     """The shipped gain Normalizer's :class:`~alcn_cv.nets.gain.GainNormalizer` arguments."""
     return {"channels": 16, "stride": 8, "dilations": [1, 2, 4], "num_kernels": 2, "sigma_step": 1.0, "eps": 0.01,
-            "gain": "divisive", "floor_scale": 1.0, "divisive_sigma": 2.0, "tau": 3.0, "learn_scales": False}
+            "floor_scale": 1.0, "divisive_sigma": 2.0, "tau": 3.0, "learn_scales": False}
 
 
 @dataclass

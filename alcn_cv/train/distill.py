@@ -267,7 +267,6 @@ class _GridSample:
     """One frame's network input on the gain Normalizer's grid and the teacher's output there."""
 
     features: torch.Tensor  # (1, 4, gh, gw)
-    local: torch.Tensor  # (1, 1, gh, gw), the local mean m of the Weber gain
     maps: torch.Tensor  # (1, N, gh, gw), the teacher's F_k = exp(g) w_k
     energy: float  # mean of sum_k F_k^2 over the grid: the scale of the relative error
 
@@ -298,10 +297,9 @@ def _relit(frame: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 def _grid_sample(teacher: GainNormalizer, frame: np.ndarray) -> _GridSample:
     with torch.no_grad():  # not inference tensors: the loss saves the targets for its backward pass
-        features, local = teacher.features(torch.from_numpy(frame)[None, None])
-        log_gain, weights = teacher.gain_and_weights(teacher.head(teacher.trunk(features)), local)
-        maps = log_gain.exp() * weights
-    return _GridSample(features, local, maps, float(maps.pow(2).sum(1).mean()) + 1e-12)
+        features = teacher.features(torch.from_numpy(frame)[None, None])
+        maps = teacher.maps_from_features(features)
+    return _GridSample(features, maps, float(maps.pow(2).sum(1).mean()) + 1e-12)
 
 
 def _maps_error(student: GainNormalizer, sample: _GridSample) -> torch.Tensor:
@@ -309,8 +307,7 @@ def _maps_error(student: GainNormalizer, sample: _GridSample) -> torch.Tensor:
     squared map, after the common scale that fits them best: the divisive step that follows the
     maps cancels a scale of the whole frame's maps (its floor is relative to the frame's mean
     energy), so only their shape over the frame is the teacher's to copy."""
-    log_gain, weights = student.gain_and_weights(student.head(student.trunk(sample.features)), sample.local)
-    maps = log_gain.exp() * weights
+    maps = student.maps_from_features(sample.features)
     scale = (maps * sample.maps).sum() / maps.pow(2).sum().clamp_min(1e-30)
     return (scale * maps - sample.maps).pow(2).sum(1).mean() / sample.energy
 

@@ -46,7 +46,8 @@ from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.filters.gaussian_mixture import kernel_radius
-from alcn_cv.nets.gain import GainNormalizer, cell_rms, gaussian_energy
+from alcn_cv.filters.torch_divisive import gaussian_energy, inverse_divisor
+from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.report import machine
 from alcn_cv.train.models import CentreMixture
 from alcn_cv.train.config import RealLightConfig
@@ -226,39 +227,28 @@ def _normalized_centres(
 ) -> torch.Tensor:
     """The network's output on the central ``patch x patch`` of each crop ``(B, 1, crop, crop)``:
     the network on the whole crop, Eq. 3 on the centre (:class:`CentreDenseMixture`), the
-    divisive normalization (``gain="divisive"``) and the equalization.
+    divisive normalization (:mod:`alcn_cv.filters.torch_divisive`) and the equalization.
 
-    The divisive normalization needs the response on the cells around the centre's grid points
-    (half a cell more on every side; with ``divisive_sigma``, the Gaussian's radius or more) and
-    the mean energy of the whole frame, which the centres of the crops of each frame drawn
-    anywhere estimate: ``frames`` holds, per frame, the slice of its crops and the slice of those
-    drawn anywhere (all of its crops when none is given).
+    The divisive normalization needs the response the Gaussian's radius around the centre and the mean
+    energy of the whole frame, which the centres of the crops of each frame drawn anywhere estimate:
+    ``frames`` holds, per frame, the slice of its crops and the slice of those drawn anywhere (all of its
+    crops when none is given).
     """
     grid = net.dense_grid(crops)
     crop = crops.shape[-1]
-    if net.gain != "divisive":
-        return net.equalize(_centre_mixture(net.sigmas, crop, patch, net.stride)(crops, grid))
     s = net.stride
     if patch % (2 * s) or (crop - patch) % (2 * s):
         raise InputError(f"the divisive gain needs patch and (crop - patch) / 2 multiples of the stride {s}")
-    if net.divisive_sigma is not None:
-        radius = kernel_radius(net.divisive_sigma)
-        step = s // 2 if s % 2 == 0 else s  # the centre mixture's side needs 2 * margin a multiple of s
-        margin = -(-radius // step) * step
-        response = _centre_mixture(net.sigmas, crop, patch + 2 * margin, s)(crops, grid)
-        trim = margin - radius
-        energy = gaussian_energy(response, net.divisive_sigma, pad=False)[..., trim : trim + patch, trim : trim + patch]
-    else:
-        margin = s // 2
-        response = _centre_mixture(net.sigmas, crop, patch + s, s)(crops, grid)  # the cells around the centre
-        energy = cell_rms(response, s, pad=False)
+    radius = kernel_radius(net.divisive_sigma)
+    step = s // 2 if s % 2 == 0 else s  # the centre mixture's side needs 2 * margin a multiple of s
+    margin = -(-radius // step) * step
+    response = _centre_mixture(net.sigmas, crop, patch + 2 * margin, s)(crops, grid)
+    trim = margin - radius
+    energy = gaussian_energy(response, net.divisive_sigma, pad=False)[..., trim : trim + patch, trim : trim + patch]
     floor = torch.empty(len(crops), 1, 1, 1, dtype=crops.dtype)
     for rows, sample in frames or [(slice(None), slice(None))]:
         floor[rows] = net.floor_scale * energy[sample].mean()
-    inverse = net.inverse_divisor(energy, floor)
-    if net.divisive_sigma is None:
-        inverse = F.interpolate(inverse, size=(patch + 1, patch + 1), mode="bilinear", align_corners=True)[..., :patch, :patch]
-    return net.equalize(response[..., margin : margin + patch, margin : margin + patch] * inverse)
+    return net.equalize(response[..., margin : margin + patch, margin : margin + patch] * inverse_divisor(energy, floor))
 
 
 def anywhere_locations(scene: TrainingScene, count: int, rng: np.random.Generator) -> np.ndarray:

@@ -1,0 +1,117 @@
+"""The torch form of :mod:`alcn_cv.filters.divisive`, differentiable: the same divisive normalization, kornia style.
+
+``divisive_normalization(r) = multiplier * r / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)``, ``e = sqrt(G_sigma * r^2)``
+per pixel and ``f = scale * mean(e)`` over each image (Jarrett et al., ICCV 2009). The Gaussian is
+:func:`~alcn_cv.filters.gaussian_mixture.gaussian_kernel1d`'s with reflect-101 borders for any image size, so
+both forms agree to float rounding (``tests/test_filters_divisive.py``).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from alcn_cv.filters.divisive import ABSOLUTE_FLOOR
+from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
+
+__all__ = ["DivisiveNormalization2d", "divisive_normalization", "gaussian_blur", "gaussian_energy", "inverse_divisor",
+           "reflect101_pad_any"]
+
+
+def _reflect101_index(x: torch.Tensor, dim: int, before: int, after: int) -> torch.Tensor:
+    """Indices of dim ``dim`` (-2 or -1) of ``x`` padded by reflect-101, for any pad size (the
+    reflection repeats on sides shorter than the pad).
+
+    The size is read from the data, in float32, so that the ONNX export (:mod:`alcn_cv.train.export`)
+    computes the indices for every input size with ops ``cv2.dnn`` runs (it has no integer
+    arithmetic); float32 is exact for these small integers.
+    """
+    line = x[0, 0, :, 0] if dim == -2 else x[0, 0, 0, :]
+    positions = (line * 0 + 1).cumsum(0) - 1  # 0..n-1; the inputs are finite
+    last = positions[-1:]  # n - 1
+    i = torch.cat([torch.arange(-before, 0, dtype=x.dtype, device=x.device), positions,
+                   last + 1 + torch.arange(0, after, dtype=x.dtype, device=x.device)])
+    period = torch.clamp(2 * last, min=1)
+    i = i - torch.floor(i / period) * period
+    return (last - (last - i).abs()).long()
+
+
+def reflect101_pad_any(x: torch.Tensor, pad: int) -> torch.Tensor:
+    """``(B, C, H, W)`` padded by ``pad`` on the last two dims with reflect-101, for any size."""
+    if pad < min(x.shape[-2:]) and not torch.onnx.is_in_onnx_export():
+        return F.pad(x, (pad, pad, pad, pad), mode="reflect")  # torch's reflect is reflect-101; one fast pass
+    x = x.index_select(-2, _reflect101_index(x, -2, pad, pad))
+    return x.index_select(-1, _reflect101_index(x, -1, pad, pad))
+
+
+def gaussian_blur(x: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tensor:
+    """Separable Gaussian blur of ``(B, 1, H, W)`` (:func:`~alcn_cv.filters.gaussian_mixture.gaussian_kernel1d`),
+    reflect-101, for any size. ``pad=False``: only where the kernel lies inside, ``(B, 1, H - 2r, W - 2r)``."""
+    kernel = torch.as_tensor(gaussian_kernel1d(sigma), dtype=x.dtype, device=x.device)
+    if pad:
+        x = reflect101_pad_any(x, kernel.numel() // 2)
+    return F.conv2d(F.conv2d(x, kernel.view(1, 1, -1, 1)), kernel.view(1, 1, 1, -1))
+
+
+def gaussian_energy(response: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tensor:
+    """``sqrt(G_sigma * response^2)`` of ``(B, 1, H, W)``, per pixel (:func:`alcn_cv.filters.divisive.gaussian_energy`);
+    ``pad`` as :func:`gaussian_blur`."""
+    # The floor keeps the square root differentiable where the response is exactly flat.
+    return gaussian_blur(response * response, sigma, pad).clamp_min(1e-12).sqrt()
+
+
+def inverse_divisor(energy: torch.Tensor, floor: torch.Tensor) -> torch.Tensor:
+    """``1 / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` for the energy ``e`` ``(B, 1, H, W)`` and the floor ``f``
+    (broadcast, e.g. ``(B, 1, 1, 1)``)."""
+    return (energy * energy + floor * floor + ABSOLUTE_FLOOR**2).rsqrt()
+
+
+def divisive_normalization(
+    response: torch.Tensor,
+    sigma: float,
+    scale: float | torch.Tensor,
+    floor: torch.Tensor | None = None,
+    multiplier: float = 1.0,
+) -> torch.Tensor:
+    """:func:`alcn_cv.filters.divisive.divisive_normalization` in torch.
+
+    Args:
+        response: ``(B, 1, H, W)`` float, unbounded.
+        sigma: the energy's Gaussian (pixels).
+        scale: ``c`` in ``f = c * mean(e)`` over each image (a float or a 0-d tensor, learnable).
+        floor: ``f`` itself, ``(B, 1, 1, 1)``, overriding ``c * mean(e)``.
+        multiplier: a factor of the result.
+
+    Returns:
+        ``(B, 1, H, W)``, the response's dtype and device.
+
+    Example:
+        >>> r = torch.randn(2, 1, 32, 32)
+        >>> divisive_normalization(r, sigma=2.0, scale=1.0).shape
+        torch.Size([2, 1, 32, 32])
+    """
+    energy = gaussian_energy(response, sigma)
+    if floor is None:
+        floor = scale * energy.mean(dim=(-2, -1), keepdim=True)
+    inverse = inverse_divisor(energy, floor)
+    return response * (inverse if multiplier == 1.0 else inverse * multiplier)
+
+
+class DivisiveNormalization2d(nn.Module):
+    """Module form of :func:`divisive_normalization`: ``(B, 1, H, W)`` -> ``(B, 1, H, W)``.
+
+    Args:
+        sigma: the energy's Gaussian (pixels).
+        scale: ``c`` of the floor ``c * mean(e)``.
+    """
+
+    def __init__(self, sigma: float, scale: float = 1.0) -> None:
+        super().__init__()
+        self.sigma, self.scale = float(sigma), float(scale)
+
+    def forward(self, response: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
+        return divisive_normalization(response, self.sigma, self.scale, floor)
+
+    def extra_repr(self) -> str:
+        return f"sigma={self.sigma}, scale={self.scale}"

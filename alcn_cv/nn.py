@@ -1,0 +1,309 @@
+"""ALCN for PyTorch: :func:`alcn2d` and :class:`ALCN2d`, the torch runtime of every shipped model family.
+
+``ALCN2d`` is what ``createALCN(backend="torch")`` runs, and a module a PyTorch model can put in front of
+itself: ``(B, 1 | 3, H, W)`` float intensities in [0, 1] on any device and dtype in, the same shape in [0, 1]
+out, equal to :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>`'s float output (3 channels: RGB,
+normalized on the L channel of CIE Lab, a and b kept), differentiable end to end. Importing this module imports
+torch and kornia; importing :mod:`alcn_cv` does not.
+
+Example:
+    >>> import torch
+    >>> from alcn_cv.nn import ALCN2d
+    >>> alcn = ALCN2d(model="lite").eval().requires_grad_(False)  # frozen in front of a classifier
+    >>> alcn(torch.rand(2, 3, 64, 80)).shape
+    torch.Size([2, 3, 64, 80])
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import AbstractContextManager, contextmanager, nullcontext
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+from kornia.color import lab_to_rgb, rgb_to_lab
+from torch import nn
+
+from alcn_cv.checks import FULL_SCALE
+from alcn_cv.errors import InputError
+from alcn_cv.filters.kornia_mixture import GaussianMixture2d
+from alcn_cv.filters.torch_divisive import divisive_normalization
+from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
+from alcn_cv.nets.lite import normalizer_from_file
+from alcn_cv.nets.opencv_runtime import WINDOW
+from alcn_cv.runtime import ModelSpec, resolve_weights
+from alcn_cv.weight_file import load_normalizer_file
+
+__all__ = ["ALCN2d", "TorchNetwork", "TorchRuntime", "alcn2d", "batches", "torch_threads"]
+
+#: Windows per Normalizer call in :meth:`TorchNetwork.window_weights` (bounds the memory of a batch).
+_WINDOW_BATCH = 512
+_TORCH_DTYPES = {np.dtype(np.uint8): torch.uint8, np.dtype(np.uint16): torch.uint16, np.dtype(np.float32): torch.float32}
+
+
+class ALCN2d(nn.Module):
+    """Adaptive Local Contrast Normalization (Rad, Roth & Lepetit, BMVC 2017) as a module.
+
+    Args:
+        model: a shipped model (:data:`alcn_cv.runtime.MODELS`), default ``"gain"``.
+        weights: a weight file instead of ``model``.
+        scale: the working scale (default: the weight file's).
+        grid_stride: spacing of the Normalizer's grid, a multiple of its stride (default: its stride).
+        allow_tf32: let CUDA convolutions use TF32 (faster, about 1e-3 off); default exact.
+
+    Shape:
+        - image: ``(B, 1, H, W)`` or ``(B, 3, H, W)`` (RGB) float in [0, 1], any device and float dtype
+          (move the module with ``.to(device, dtype)``).
+        - output: the same shape, dtype and device, in [0, 1] (the raw response mapped through
+          the weight file's fixed ``output_range``, clipped).
+
+    Example:
+        >>> import torch
+        >>> ALCN2d()(torch.rand(1, 1, 64, 64)).shape
+        torch.Size([1, 1, 64, 64])
+    """
+
+    def __init__(
+        self,
+        model: str | None = None,
+        weights: str | Path | None = None,
+        scale: float | None = None,
+        grid_stride: int | None = None,
+        allow_tf32: bool = False,
+    ) -> None:
+        super().__init__()
+        weight_file = load_normalizer_file(resolve_weights(model, weights))
+        self.spec = ModelSpec.from_meta(weight_file.meta, scale)
+        self.net = normalizer_from_file(weight_file)
+        if len(self.spec.sigmas) != self.net.num_kernels:
+            raise InputError(f"weight file has {len(self.spec.sigmas)} sigmas for {self.net.num_kernels} outputs")
+        stride = self.net.stride
+        self.grid_stride = stride if grid_stride is None else grid_stride
+        if isinstance(self.grid_stride, bool) or not isinstance(self.grid_stride, int) or self.grid_stride < stride or self.grid_stride % stride:
+            raise InputError(f"grid_stride must be a positive multiple of {stride} for this network, got {grid_stride!r}")
+        self.mixture = GaussianMixture2d(self.spec.full_res_sigmas)
+        self.allow_tf32 = allow_tf32
+
+    def working(self, gray: torch.Tensor) -> torch.Tensor:
+        """``(B, 1, H, W)`` at the working scale: blocks of ``1 / scale`` pixels averaged (``cv2.INTER_AREA`` for
+        sides that are multiples of it, as :meth:`ALCN.apply` resizes), else torch's area or bilinear resize."""
+        if self.spec.scale == 1:
+            return gray
+        size = self.spec.working_shape(tuple(gray.shape[-2:]))
+        zoom = 1.0 / self.spec.scale
+        if zoom == round(zoom) and gray.shape[-2] % round(zoom) == 0 and gray.shape[-1] % round(zoom) == 0:
+            return F.avg_pool2d(gray, round(zoom))
+        if self.spec.scale < 1:
+            return F.interpolate(gray, size=size, mode="area")
+        return F.interpolate(gray, size=size, mode="bilinear", align_corners=False)
+
+    def weight_maps(self, gray: torch.Tensor, small: torch.Tensor | None = None) -> torch.Tensor:
+        """Eq. 3's maps F_k ``(B, N, H, W)`` at the input resolution (``small``: the working image, default
+        :meth:`working`)."""
+        maps = self.net.dense(self.working(gray) if small is None else small, self.grid_stride)
+        if maps.shape[-2:] != gray.shape[-2:]:
+            maps = F.interpolate(maps, size=gray.shape[-2:], mode="bilinear", align_corners=False)
+        return maps
+
+    def eq3(self, gray: torch.Tensor, small: torch.Tensor | None = None) -> torch.Tensor:
+        """Eq. 3's raw response ``(B, 1, H, W)`` (``small`` as in :meth:`weight_maps`)."""
+        return self.mixture(gray, self.weight_maps(gray, small))
+
+    def finish(self, response: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
+        """The gain family's steps after Eq. 3 (the divisive normalization, ``tanh(x / tau)``); ``floor``:
+        ``(B, 1, 1, 1)``, the divisive floor (default: ``c`` times each image's mean energy)."""
+        if self.spec.divisive is not None:
+            sigma, c = self.spec.divisive
+            response = divisive_normalization(response, sigma, self.net.floor_scale if isinstance(self.net, GainNormalizer) else c, floor)
+        if self.spec.tau is not None:
+            response = contrast_equalization(response, self.net.tau if isinstance(self.net, GainNormalizer) else self.spec.tau)
+        return response
+
+    def response(self, gray: torch.Tensor, floor: torch.Tensor | None = None, small: torch.Tensor | None = None) -> torch.Tensor:
+        """The raw normalized response ``(B, 1, H, W)`` (unbounded; :meth:`forward` maps it to [0, 1]); ``floor``
+        as in :meth:`finish`, ``small`` as in :meth:`weight_maps`."""
+        if gray.ndim != 4 or gray.shape[1] != 1:
+            raise InputError(f"gray must have shape (B, 1, H, W), got {tuple(gray.shape)}")
+        with self._tf32(gray):
+            return self.finish(self.eq3(gray, small), floor)
+
+    def to_unit(self, response: torch.Tensor) -> torch.Tensor:
+        """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""
+        lo, hi = self.spec.output_range
+        return ((response - lo) * (1.0 / (hi - lo))).clamp(0, 1)
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        if image.ndim != 4 or image.shape[1] not in (1, 3):
+            raise InputError(f"image must have shape (B, 1 | 3, H, W), got {tuple(image.shape)}")
+        if image.shape[1] == 1:
+            return self.to_unit(self.response(image))
+        lab = rgb_to_lab(image)
+        lightness = self.to_unit(self.response(lab[:, :1] * 0.01)) * 100.0
+        return lab_to_rgb(torch.cat([lightness, lab[:, 1:]], dim=1), clip=True)
+
+    def _tf32(self, x: torch.Tensor) -> AbstractContextManager:
+        """cuDNN without TF32 for a CUDA tensor unless :attr:`allow_tf32` (TF32 moves the output by about 1e-3)."""
+        if self.allow_tf32 or not x.is_cuda:
+            return nullcontext()
+        return torch.backends.cudnn.flags(enabled=torch.backends.cudnn.enabled, benchmark=torch.backends.cudnn.benchmark,
+                                          deterministic=torch.backends.cudnn.deterministic, allow_tf32=False)
+
+    def extra_repr(self) -> str:
+        return f"scale={self.spec.scale}, grid_stride={self.grid_stride}, allow_tf32={self.allow_tf32}"
+
+
+def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | None = None) -> torch.Tensor:
+    """Functional :class:`ALCN2d` (the module built once per model and device, then reused).
+
+    Args:
+        image: ``(B, 1 | 3, H, W)`` float in [0, 1] (3 channels: RGB).
+        model: a shipped model name (default ``"gain"``); weights: a weight file instead.
+
+    Returns:
+        The same shape, dtype and device, in [0, 1].
+
+    Example:
+        >>> import torch
+        >>> alcn2d(torch.rand(1, 1, 48, 48), model="lite").shape
+        torch.Size([1, 1, 48, 48])
+    """
+    key = (model, None if weights is None else str(weights), image.device, image.dtype)
+    module = _MODULES.get(key)
+    if module is None:
+        module = _MODULES[key] = ALCN2d(model, weights).to(image.device, image.dtype).eval()
+    return module(image)
+
+
+_MODULES: dict[tuple, ALCN2d] = {}
+
+
+@contextmanager
+def torch_threads(threads: int | None) -> Iterator[None]:
+    """Run the block with ``threads`` torch intra-op threads (no change for None)."""
+    before = torch.get_num_threads()
+    if threads is None or threads == before:
+        yield
+        return
+    torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+class TorchNetwork:
+    """A torch Normalizer as the OpenCV runtimes use it (:class:`~alcn_cv.runtime.Network`):
+    NumPy in and out on a grid of ``grid_stride``, ``threads`` torch threads while it runs.
+
+    The gain Normalizer's cell moments (its only full-resolution part) are pooled from one reflect-101 border of
+    OpenCV, the same numbers as :meth:`GainNormalizer.cell_moments <alcn_cv.nets.gain.GainNormalizer.cell_moments>`.
+    """
+
+    def __init__(self, net: nn.Module, grid_stride: int, threads: int | None) -> None:
+        self.net, self.stride, self.threads = net, grid_stride, threads
+        self.device = next(net.parameters()).device
+
+    def dense_grid(self, image: np.ndarray) -> np.ndarray:
+        with torch.inference_mode(), torch_threads(self.threads):
+            if isinstance(self.net, GainNormalizer) and self.stride == self.net.stride and self.device.type == "cpu":
+                return self.net.maps_from_features(self.net.features_from_moments(_cell_moments(image, self.stride)))[0].numpy()
+            x = torch.from_numpy(image).to(self.device)[None, None]
+            return self.net.dense_grid(x, self.stride)[0].cpu().numpy()
+
+    def dense(self, image: np.ndarray) -> np.ndarray:
+        with torch.inference_mode(), torch_threads(self.threads):
+            return self.net.dense(torch.from_numpy(image).to(self.device)[None, None], self.stride)[0].cpu().numpy()
+
+    def window_weights(self, windows: np.ndarray) -> np.ndarray:
+        x = torch.from_numpy(windows)[:, None]
+        c = (WINDOW // 2) // self.net.stride  # the grid point at the window's centre sees exactly the window
+        with torch.inference_mode(), torch_threads(self.threads):
+            return torch.cat([self.net.dense_grid(x[i : i + _WINDOW_BATCH].to(self.device))[:, :, c, c].cpu()
+                              for i in range(0, len(x), _WINDOW_BATCH)]).numpy()
+
+
+def _cell_moments(image: np.ndarray, stride: int) -> torch.Tensor:
+    """:meth:`GainNormalizer.cell_moments` of an ``(H, W)`` float32 image, the border by OpenCV (faster), the
+    pooling by torch (the same sums: where a cell is flat its deviation is rounding, which the log amplifies)."""
+    h, w = image.shape
+    gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
+    before = stride // 2
+    padded = cv2.copyMakeBorder(image, before, stride * gh - h - before, before, stride * gw - w - before, cv2.BORDER_REFLECT_101)
+    return torch.cat([F.avg_pool2d(torch.from_numpy(plane)[None, None], stride) for plane in (padded, cv2.multiply(padded, padded))], 1)
+
+
+class TorchRuntime:
+    """The :class:`~alcn_cv.runtime.Runtime` of ``backend="torch"``: :class:`ALCN2d` on its device,
+    NumPy in and out."""
+
+    def __init__(self, module: ALCN2d, threads: int | None) -> None:
+        self.module, self.threads, self.spec, self.grid_stride = module.eval(), threads, module.spec, module.grid_stride
+        self.network = TorchNetwork(module.net, module.grid_stride, threads)
+        self.device = self.network.device
+
+    def _run(self, method: Callable[..., torch.Tensor], gray: np.ndarray, **kwargs: object) -> np.ndarray:
+        # The working image resized by OpenCV, as :meth:`ALCN.apply` does for every size.
+        with torch.inference_mode(), torch_threads(self.threads):
+            small = None if self.spec.scale == 1 else _batch_of_one(self.spec.working_image(gray), self.device)
+            return method(_batch_of_one(gray, self.device), small=small, **kwargs)[0].cpu().numpy()
+
+    def weight_grid(self, gray: np.ndarray) -> np.ndarray:
+        return self.network.dense_grid(self.spec.working_image(gray))
+
+    def weight_maps(self, gray: np.ndarray) -> np.ndarray:
+        return self._run(self.module.weight_maps, gray)
+
+    def window_weights(self, windows: np.ndarray) -> np.ndarray:
+        return self.network.window_weights(windows)
+
+    def mixture(self, gray: np.ndarray) -> np.ndarray:
+        return self._run(self.module.eq3, gray)[0]
+
+    def normalize(self, gray: np.ndarray, floor: float | None = None) -> np.ndarray:
+        floor_tensor = None if floor is None else torch.full((1, 1, 1, 1), floor, device=self.device)
+        return self._run(self.module.response, gray, floor=floor_tensor)[0]
+
+    def apply_batch(self, frames: np.ndarray, out_dtype: np.dtype, half: bool = False) -> np.ndarray:
+        """``(B, H, W)`` uint8, uint16 or float32 frames -> ``(B, H, W)`` of ``out_dtype``: uploaded as they are
+        (from pinned memory on CUDA), converted on the device, the output cast there (see :meth:`ALCN.apply_batch`)."""
+        cuda = self.device.type == "cuda"
+        with torch.inference_mode(), torch_threads(self.threads):
+            host = torch.from_numpy(np.ascontiguousarray(frames).astype(frames.dtype.newbyteorder("="), copy=False))
+            if cuda:
+                host = host.pin_memory()
+            x = host.to(self.device, non_blocking=cuda)[:, None]
+            x = x.clamp(0, 1) if frames.dtype == np.float32 else x.float() * (1.0 / FULL_SCALE[frames.dtype])
+            with torch.autocast(self.device.type, torch.float16, enabled=half):  # the network; Eq. 3 in float32
+                maps = self.module.weight_maps(x).float()
+            with self.module._tf32(x):
+                unit = self.module.to_unit(self.module.finish(self.module.mixture(x, maps)))[:, 0]
+            if out_dtype != np.float32:
+                unit = torch.round(unit * FULL_SCALE[out_dtype]).to(_TORCH_DTYPES[out_dtype])
+            out = torch.empty(unit.shape, dtype=unit.dtype, pin_memory=cuda) if cuda else None
+            if out is None:
+                return unit.cpu().numpy()
+            out.copy_(unit)
+            return out.numpy()
+
+
+def _batch_of_one(plane: np.ndarray, device: torch.device) -> torch.Tensor:
+    return torch.from_numpy(plane).to(device)[None, None]
+
+
+def batches(frames: Iterable[np.ndarray], size: int) -> Iterator[np.ndarray]:
+    """Group an iterable of ``(H, W)`` frames of one size into ``(B, H, W)`` arrays of ``size`` (the last one
+    shorter), for :meth:`ALCN.apply_batch <alcn_cv.enhance.alcn.ALCN.apply_batch>`: ``for out in
+    map(alcn.apply_batch, batches(frames, 64))``."""
+    if size < 1:
+        raise InputError(f"size must be positive, got {size}")
+    batch: list[np.ndarray] = []
+    for frame in frames:
+        batch.append(frame)
+        if len(batch) == size:
+            yield np.stack(batch)
+            batch = []
+    if batch:
+        yield np.stack(batch)

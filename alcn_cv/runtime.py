@@ -1,0 +1,344 @@
+"""ALCN's runtimes behind :class:`~alcn_cv.enhance.alcn.ALCN`: one per model family, a network adapter per backend.
+
+A weight file's header says which method it is (:class:`ModelSpec`). :class:`WindowRuntime` runs the paper's
+family (the paper's and the lite Normalizer: maps at the working scale, Eq. 3 exact or on a pyramid) and
+:class:`GainRuntime` the gain family (maps on the network's grid, Eq. 3 from the grid, divisive normalization,
+``tanh``), both with Eq. 3 in OpenCV and the network behind :class:`Network`: the ONNX export run by
+``cv2.dnn`` (:class:`~alcn_cv.nets.opencv_runtime.OpenCVNormalizer`, ``backend="opencv"``) or the torch network
+on the CPU (:class:`alcn_cv.nn.TorchNetwork`, ``backend="fast"``). ``backend="torch"`` runs everything in torch:
+:class:`alcn_cv.nn.ALCN2d`, behind the same :class:`Runtime` protocol. This module imports no torch.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import cv2
+import numpy as np
+
+from alcn_cv.checks import SUPPORTED_DTYPES, check_image
+from alcn_cv.errors import InputError
+from alcn_cv.filters.divisive import divisive_normalization
+from alcn_cv.filters.gaussian_mixture import (
+    PYRAMID_MIN_SIGMA,
+    alcn_filter,
+    alcn_filter_grid,
+    kernel_radius,
+    pyramid_mixture,
+    pyramid_plan,
+    upsample_grid,
+)
+from alcn_cv.nets.opencv_runtime import WINDOW, OpenCVNormalizer
+from alcn_cv.weight_file import DEFAULT_WEIGHTS
+
+__all__ = ["DEFAULT_MODEL", "MODELS", "GainRuntime", "ModelSpec", "Network", "Runtime", "WindowRuntime", "make_runtime", "opencv_network",
+           "resolve_weights"]
+
+logger = logging.getLogger(__name__)
+
+#: The weight files shipped in the package, by ``model`` name.
+MODELS = {
+    "paper": DEFAULT_WEIGHTS,
+    "lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_lite.npz"),
+    "gain": DEFAULT_WEIGHTS.with_name("alcn_normalizer_gain.npz"),
+    "gain-lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_gain_lite.npz"),
+}
+#: The shipped Normalizer when neither ``model`` nor ``weights`` is given.
+DEFAULT_MODEL = "gain"
+#: The distilled models and the model each was distilled from (a warning when that file changed).
+TEACHERS = {"lite": "paper", "gain-lite": "gain"}
+
+#: ``mixture="pyramid"`` samples the maps exactly this many times per grid cell (at least).
+MAP_STEP_PER_CELL = 4
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """The method a weight file describes, at the input resolution.
+
+    Attributes:
+        sigmas: Eq. 3's sigmas in working pixels; :attr:`full_res_sigmas` in input pixels.
+        scale: the working scale (input -> the Normalizer's resolution).
+        output_range: the raw responses mapped onto [0, 1].
+        tau: the gain family's final ``tanh(x / tau)``, or None.
+        divisive: the gain family's divisive normalization ``(sigma in input pixels, scale c)``, or None.
+        per_pixel: the gain family (maps on a grid of its own, windows normalized as small images).
+        reach: how far from a grid point the network looks (working pixels).
+    """
+
+    sigmas: tuple[float, ...]
+    scale: float
+    output_range: tuple[float, float]
+    tau: float | None
+    divisive: tuple[float, float] | None
+    per_pixel: bool
+    reach: int
+
+    @classmethod
+    def from_meta(cls, meta: dict, scale: float | None = None) -> ModelSpec:
+        scale = float(meta["working_scale"] if scale is None else scale)
+        if not 0 < scale <= 4:
+            raise InputError(f"scale must be in (0, 4], got {scale}")
+        divisive = meta.get("divisive")
+        per_pixel = meta.get("architecture") == "gain"
+        reach = WINDOW // 2
+        if per_pixel:  # the cells, the reach of the context blur on them and of the dilated convolutions
+            config = meta["config"]
+            stride = int(config["stride"])
+            blur = max(float(config["mean_sigma"]), float(config["context_sigma"])) / stride
+            reach = stride * (1 + kernel_radius(blur) + sum(int(d) for d in config["dilations"]))
+        return cls(
+            sigmas=tuple(float(s) for s in meta["sigmas"]),
+            scale=scale,
+            output_range=(float(meta["output_range"][0]), float(meta["output_range"][1])),
+            tau=float(meta["equalization"]["tau"]) if "equalization" in meta else None,
+            divisive=None if divisive is None else (float(divisive["sigma"]) / scale, float(divisive["scale"])),
+            per_pixel=per_pixel,
+            reach=reach,
+        )
+
+    @property
+    def full_res_sigmas(self) -> tuple[float, ...]:
+        """Eq. 3's sigmas in input pixels: ``sigma_k / scale``."""
+        return tuple(s / self.scale for s in self.sigmas)
+
+    def working_shape(self, shape: tuple[int, int]) -> tuple[int, int]:
+        h, w = shape
+        if self.scale == 1:
+            return h, w
+        return max(1, round(h * self.scale)), max(1, round(w * self.scale))
+
+    def working_image(self, gray: np.ndarray) -> np.ndarray:
+        """``(H, W)`` float32 at the working scale (``cv2.INTER_AREA`` down, bilinear up)."""
+        if self.scale == 1:
+            return gray
+        h, w = self.working_shape(gray.shape)
+        return cv2.resize(gray, (w, h), interpolation=cv2.INTER_AREA if self.scale < 1 else cv2.INTER_LINEAR)
+
+
+class Network(Protocol):
+    """A Normalizer as the OpenCV runtimes use it: NumPy in and out, on a grid of :attr:`stride` pixels."""
+
+    stride: int
+
+    def dense_grid(self, image: np.ndarray) -> np.ndarray:
+        """``(h, w)`` working-scale float32 -> ``(N, ceil((h-1)/s)+1, ceil((w-1)/s)+1)``, point ``(i, j)`` at
+        pixel ``(s*i, s*j)``."""
+
+    def dense(self, image: np.ndarray) -> np.ndarray:
+        """``(h, w)`` -> ``(N, h, w)``: :meth:`dense_grid` interpolated bilinearly (``align_corners``)."""
+
+    def window_weights(self, windows: np.ndarray) -> np.ndarray:
+        """``(n, 48, 48)`` float32 -> ``(n, N)``: the prediction for each window (Eq. 1)."""
+
+
+class Runtime(Protocol):
+    """What :class:`~alcn_cv.enhance.alcn.ALCN` asks of a model family's runtime (float32 ``(H, W)`` in [0, 1])."""
+
+    spec: ModelSpec
+    grid_stride: int
+
+    def weight_grid(self, gray: np.ndarray) -> np.ndarray: ...
+
+    def weight_maps(self, gray: np.ndarray) -> np.ndarray: ...
+
+    def window_weights(self, windows: np.ndarray) -> np.ndarray: ...
+
+    def mixture(self, gray: np.ndarray) -> np.ndarray:
+        """Eq. 3's raw response ``(H, W)``."""
+
+    def normalize(self, gray: np.ndarray, floor: float | None = None) -> np.ndarray:
+        """The method's raw response ``(H, W)``; ``floor``: the divisive floor of the whole image."""
+
+
+class WindowRuntime:
+    """The paper's family in OpenCV: the maps of :class:`Network` resized to the input, Eq. 3 exact
+    (:func:`~alcn_cv.filters.gaussian_mixture.alcn_filter`) or on a pyramid
+    (:func:`~alcn_cv.filters.gaussian_mixture.pyramid_mixture`); the gain family's last steps when the spec
+    has them (:meth:`finish`)."""
+
+    def __init__(self, spec: ModelSpec, network: Network, mixture: str) -> None:
+        self.spec, self.network, self.mixture_kind = spec, network, mixture
+        self.grid_stride = network.stride
+
+    def weight_grid(self, gray: np.ndarray) -> np.ndarray:
+        return self.network.dense_grid(self.spec.working_image(gray))
+
+    def weight_maps(self, gray: np.ndarray) -> np.ndarray:
+        h, w = gray.shape
+        maps = self.network.dense(self.spec.working_image(gray))
+        if maps.shape[1:] == (h, w):
+            return maps
+        return np.stack([cv2.resize(m, (w, h), interpolation=cv2.INTER_LINEAR) for m in maps])
+
+    def window_weights(self, windows: np.ndarray) -> np.ndarray:
+        return self.network.window_weights(windows)
+
+    def mixture(self, gray: np.ndarray) -> np.ndarray:
+        if self.mixture_kind == "pyramid":
+            grid = self.weight_grid(gray)
+            h, w = gray.shape
+            small_h, small_w = self.spec.working_shape(gray.shape)
+            ratios = (small_h / h, small_w / w)
+            return pyramid_mixture(gray, self.spec.full_res_sigmas, lambda *args: self._grid_maps_at(grid, ratios, *args),
+                                   PYRAMID_MIN_SIGMA)
+        return alcn_filter(gray, self.weight_maps(gray), self.spec.full_res_sigmas)
+
+    def finish(self, response: np.ndarray, floor: float | None = None) -> np.ndarray:
+        """The gain family's steps after Eq. 3: the divisive normalization, then ``tanh(x / tau)``.
+        ``response`` (float32, the caller's own) is overwritten."""
+        tau, divisive = self.spec.tau, self.spec.divisive
+        inverse_tau = 1.0 if tau is None else 1.0 / tau  # folds into the division
+        if divisive is not None:
+            response = divisive_normalization(response, *divisive, floor=floor, multiplier=inverse_tau)
+        elif inverse_tau != 1.0:
+            np.multiply(response, np.float32(inverse_tau), out=response)
+        return response if tau is None else np.tanh(response, out=response)
+
+    def normalize(self, gray: np.ndarray, floor: float | None = None) -> np.ndarray:
+        return self.finish(self.mixture(gray), floor)
+
+    def _grid_maps_at(
+        self, grid: np.ndarray, ratios: tuple[float, float], level: int, ks: list[int], shape: tuple[int, int]
+    ) -> list[np.ndarray]:
+        # Pixel x of pyramid level L is input pixel 2**L * x (cv2.pyrDown), i.e. working pixel
+        # (2**L * x + 0.5) * r - 0.5 with r = working / input size (cv2.resize), i.e. grid
+        # coordinate that / grid_stride. The maps are interpolated bilinearly from the grid onto
+        # every f-th pixel (cv2.warpAffine, small), then onto every pixel by cv2.resize
+        # (x = f * u + (f - 1) / 2, its pixel-centre convention), several times cheaper than
+        # warping every pixel. The two differ only between samples that straddle a grid point,
+        # by a fraction of the maps' change there; f, a power of 2, is at most a quarter of the
+        # grid's spacing at this level (covered by the error bounds in tests/test_fast_alcn.py).
+        g = self.grid_stride
+        (ry, rx), step = ratios, 2.0**level
+        ax, bx = step * rx / g, (0.5 * rx - 0.5) / g
+        ay, by = step * ry / g, (0.5 * ry - 0.5) / g
+        h, w = shape
+        along_y, along_x = _integer_zoom(ay, by), _integer_zoom(ax, bx)
+        if along_y and along_x and grid.shape[1] * along_y[0] >= along_y[1] + h and grid.shape[2] * along_x[0] >= along_x[1] + w:
+            # The level's pixels fall on a zoom of the grid by an integer factor: one cv2.resize,
+            # the exact bilinear interpolation (at level 0 of a frame of even size, usually).
+            (zy, oy), (zx, ox) = along_y, along_x
+            return [cv2.resize(grid[k], None, fx=zx, fy=zy, interpolation=cv2.INTER_LINEAR)[oy : oy + h, ox : ox + w] for k in ks]
+        f = 2 ** max(0, int(np.floor(np.log2(1.0 / (MAP_STEP_PER_CELL * max(ax, ay))))))
+        to_grid = np.array([[ax * f, 0.0, ax * (f - 1) / 2 + bx], [0.0, ay * f, ay * (f - 1) / 2 + by]])
+        coarse = (w, h) if f == 1 else (-(-w // f) + 1, -(-h // f) + 1)
+        flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+        maps = []
+        for k in ks:
+            small = cv2.warpAffine(grid[k], to_grid, coarse, flags=flags, borderMode=cv2.BORDER_REPLICATE)
+            maps.append(small if f == 1 else cv2.resize(small, None, fx=f, fy=f, interpolation=cv2.INTER_LINEAR)[:h, :w])
+        return maps
+
+
+class GainRuntime(WindowRuntime):
+    """The gain family in OpenCV at scale 1: the maps interpolated from the network's grid as
+    :meth:`GainNormalizer.dense <alcn_cv.nets.gain.GainNormalizer.dense>` does, and the exact Eq. 3 from the
+    grid (:func:`~alcn_cv.filters.gaussian_mixture.alcn_filter_grid`, without the full-resolution maps)."""
+
+    def weight_maps(self, gray: np.ndarray) -> np.ndarray:
+        return np.stack([upsample_grid(m, self.grid_stride, gray.shape) for m in self.weight_grid(gray)])
+
+    def mixture(self, gray: np.ndarray) -> np.ndarray:
+        if self.mixture_kind == "pyramid":
+            return super().mixture(gray)
+        return alcn_filter_grid(gray, self.weight_grid(gray), self.grid_stride, self.spec.full_res_sigmas)
+
+
+def make_runtime(spec: ModelSpec, network: Network, mixture: str) -> WindowRuntime:
+    """The OpenCV runtime of the spec's family with ``network``."""
+    return (GainRuntime if spec.per_pixel and spec.scale == 1 else WindowRuntime)(spec, network, mixture)
+
+
+def check_batch(frames: np.ndarray, out_dtype: type | np.dtype | str | None) -> np.dtype:
+    """Check a ``(B, H, W)`` batch of :meth:`ALCN.apply_batch <alcn_cv.enhance.alcn.ALCN.apply_batch>`; the output
+    dtype (default: the frames')."""
+    if not isinstance(frames, np.ndarray) or frames.ndim != 3 or frames.size == 0:
+        raise InputError(f"frames must be a non-empty (B, H, W) array, got {getattr(frames, 'shape', type(frames))}")
+    check_image(frames[0])  # the dtype; a float batch's range is checked as a whole below
+    if frames.dtype == np.float32:
+        check_image(frames.reshape(-1, frames.shape[-1]))
+    dtype = np.dtype(frames.dtype if out_dtype is None else out_dtype)
+    if dtype not in SUPPORTED_DTYPES:
+        raise InputError(f"unsupported out_dtype {dtype}; use uint8, uint16 or float32")
+    return dtype
+
+
+def opencv_network(weights: Path, grid_stride: int | None, spec: ModelSpec) -> OpenCVNormalizer:
+    """The ONNX export beside ``weights`` run by ``cv2.dnn``, checked against the spec (it runs at its stride)."""
+    net = OpenCVNormalizer(weights.with_suffix(".onnx"))
+    if grid_stride not in (None, net.stride):
+        raise InputError(f"backend='opencv' evaluates the Normalizer at its stride {net.stride}, got grid_stride={grid_stride}")
+    kernels = net.dense_grid(np.zeros((WINDOW, WINDOW), np.float32)).shape[0]
+    if len(spec.sigmas) != kernels:
+        raise InputError(f"weight file has {len(spec.sigmas)} sigmas for {kernels} outputs")
+    return net
+
+
+def eq1_windows(runtime: Runtime, unit: np.ndarray) -> np.ndarray:
+    """Eq. 1 on every ``(n, S, S)`` float32 window (``S >= 48`` at the working scale): one weight vector from its
+    central 48x48, then the mixture over the whole window -> ``(n, S, S)``."""
+    centre = np.stack([runtime.spec.working_image(w) for w in unit])
+    if centre.shape[1] < WINDOW:
+        raise InputError(f"windows must be at least {WINDOW} px at the working scale, got {centre.shape[1]}")
+    o = (centre.shape[1] - WINDOW) // 2
+    weights = runtime.window_weights(np.ascontiguousarray(centre[:, o : o + WINDOW, o : o + WINDOW]))
+    return np.stack([alcn_filter(w, wt, runtime.spec.full_res_sigmas) for w, wt in zip(unit, weights)])
+
+
+def strip_layout(spec: ModelSpec, grid_stride: int, mixture: str, shape: tuple[int, int]) -> tuple[int, int] | None:
+    """``(halo, step)`` of the strips of a large image (:meth:`Normalization._tiling
+    <alcn_cv.enhance.base.Normalization._tiling>`), or None where strips would change the output.
+
+    A strip gives the whole image's output when it starts on a grid row (and so on a row of every pyramid level)
+    and its working image is the whole one's rows (an integer zoom from the working scale); its halo covers the
+    Normalizer's windows around the grid points its maps interpolate, the mixture's blurs and pyramid filters and
+    the energy's Gaussian.
+    """
+    zoom = 1.0 / spec.scale
+    if abs(zoom - round(zoom)) > 1e-9 or abs(shape[0] * spec.scale - round(shape[0] * spec.scale)) > 1e-9:
+        return None
+    zoom = round(zoom)
+    sigmas = spec.full_res_sigmas
+    top = max(level for level, _ in pyramid_plan(sigmas, PYRAMID_MIN_SIGMA)) if mixture == "pyramid" else 0
+    step = math.lcm(zoom * grid_stride, 2**top)
+    reach = zoom * (spec.reach + grid_stride) + kernel_radius(max(sigmas)) + 2 ** (top + 2)
+    if spec.divisive is not None:
+        reach += kernel_radius(spec.divisive[0])
+    return -(-reach // step) * step, step
+
+
+def resolve_weights(model: str | None, weights: str | Path | None) -> Path:
+    """The weight file of ``weights`` or of the shipped ``model`` (default :data:`DEFAULT_MODEL`)."""
+    model = DEFAULT_MODEL if model is None else model
+    if model not in MODELS:
+        raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+    return Path(weights) if weights is not None else MODELS[model]
+
+
+def check_teacher(meta: dict, path: Path) -> None:
+    """Warn when a shipped distilled weight file's teacher (:data:`TEACHERS`) is not the file shipped now."""
+    teacher = meta.get("teacher")
+    model = next((name for name in TEACHERS if MODELS[name] == path), None)
+    if not isinstance(teacher, dict) or model is None:
+        return
+    teacher_path = MODELS[TEACHERS[model]]
+    if hashlib.sha256(teacher_path.read_bytes()).hexdigest() != teacher.get("sha256"):
+        logger.warning("%s was distilled from another version of %s than the one installed: re-distil it "
+                       "(see its model card)", path.name, teacher_path.name)
+
+
+def _integer_zoom(step: float, offset: float) -> tuple[int, int] | None:
+    """``(z, o)`` when pixel ``x`` at grid coordinate ``step * x + offset`` is pixel ``x + o``
+    of the grid zoomed ``z`` times by ``cv2.resize`` (which puts pixel ``x`` at
+    ``(x + 0.5) / z - 0.5``), ``z`` and ``o >= 0`` integers; else None."""
+    zoom = 1.0 / step
+    shift = (offset + 0.5 - 0.5 * step) * zoom
+    if abs(zoom - round(zoom)) > 1e-9 or abs(shift - round(shift)) > 1e-6 or round(shift) < 0 or round(zoom) < 2:
+        return None
+    return round(zoom), round(shift)

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# The GPU checks of issue 40 in one short run (about 5 minutes) on a bare GPU machine that has Python and torch:
+#   kornia (and whatever else is missing) from wheels carried in .whl/, the CUDA tests, then
+#   `alcn bench speed --device cuda` (end to end host uint8 -> host uint8, on the device, float16, against the CPU,
+#   beside kornia's DoG and CLAHE). Reports go to $OUT (default runs/gpu_check).
+# Fill .whl/ beforehand where a registry is reachable, e.g.
+#   pip download --no-deps --only-binary=:all: -d .whl kornia kornia_rs
+set -uo pipefail
+cd "$(dirname "$0")/.."
+OUT=${OUT:-runs/gpu_check}
+mkdir -p "$OUT"
+PY=${PYTHON:-python3}
+SITE=/tmp/site
+if compgen -G ".whl/*.whl" > /dev/null; then
+  "$PY" -m pip install --quiet --no-index --no-deps --target "$SITE" .whl/*.whl 2>&1 | tail -3
+fi
+export PYTHONPATH="$PWD:$SITE${PYTHONPATH:+:$PYTHONPATH}"
+{
+  nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>&1
+  "$PY" - <<'PY'
+import importlib
+for name in ("torch", "kornia", "cv2", "numpy", "tqdm", "pytest"):
+    try:
+        module = importlib.import_module(name)
+        print(name, getattr(module, "__version__", "?"))
+    except Exception as exc:  # a missing module is reported, and the steps that need it fail below
+        print(name, "MISSING:", exc)
+import torch
+print("cuda", torch.cuda.is_available(), torch.version.cuda, torch.cuda.get_device_name(0) if torch.cuda.is_available() else "")
+PY
+} > "$OUT/environment.txt" 2>&1
+cat "$OUT/environment.txt"
+
+# The CUDA tests (they skip with a reason where torch sees no GPU; -rs lists the reasons).
+timeout 150 "$PY" -m pytest -q -rs -p no:cacheprovider --junitxml="$OUT/cuda_tests.xml" \
+  tests/test_nn.py tests/test_speed_paths.py -k "cuda" 2>&1 | tee "$OUT/cuda_tests.txt" | tail -15
+
+# The measurement (writes speed.json and speed.md).
+timeout 240 "$PY" -m alcn_cv.cli bench speed --device cuda --out "$OUT/speed_cuda" 2>&1 | tee "$OUT/speed_cuda.txt" | tail -25
+echo "reports in $OUT"

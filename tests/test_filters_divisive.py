@@ -1,0 +1,52 @@
+"""The divisive normalization's two forms: NumPy/OpenCV (alcn_cv.filters.divisive) and torch (torch_divisive)."""
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from alcn_cv.filters import (
+    divisive,
+    torch_divisive,
+)
+
+
+def _response(h=57, w=83, seed=0):
+    rng = np.random.default_rng(seed)
+    return (rng.standard_normal((h, w)) * np.linspace(0.01, 1.0, w)[None, :]).astype(np.float32)
+
+
+def test_gaussian_energy_numpy_and_torch_agree():
+    r = _response()
+    expected = divisive.gaussian_energy(r, 2.0)
+    np.testing.assert_allclose(torch_divisive.gaussian_energy(torch.from_numpy(r)[None, None], 2.0)[0, 0].numpy(), expected, rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.parametrize("floor, multiplier", [(None, 1.0), (0.05, 1.0), (None, 1 / 3)])
+def test_divisive_normalization_numpy_and_torch_agree(floor, multiplier):
+    r = _response(seed=1)
+    expected = divisive.divisive_normalization(r, 2.0, 0.7, floor=floor, multiplier=multiplier)
+    floor_tensor = None if floor is None else torch.full((1, 1, 1, 1), floor)
+    got = torch_divisive.divisive_normalization(torch.from_numpy(r)[None, None], 2.0, 0.7, floor_tensor, multiplier)
+    np.testing.assert_allclose(got[0, 0].numpy(), expected, rtol=1e-5, atol=1e-6)
+    module = torch_divisive.DivisiveNormalization2d(2.0, 0.7)
+    if multiplier == 1.0:
+        torch.testing.assert_close(module(torch.from_numpy(r)[None, None], floor_tensor), got)
+
+
+def test_invariant_to_a_gain_of_the_response():
+    r = _response(seed=2)
+    np.testing.assert_allclose(divisive.divisive_normalization(8 * r, 2.0, 1.0), divisive.divisive_normalization(r, 2.0, 1.0), atol=1e-3)
+
+
+def test_blur_pads_reflect_101_for_any_size():
+    """The pad of one pass (smaller than the side) and the ONNX-friendly index form give the same values."""
+    x = torch.rand(1, 1, 3, 5)
+    small = torch_divisive.reflect101_pad_any(x, 2)
+    torch.testing.assert_close(small, torch.nn.functional.pad(x, (2, 2, 2, 2), mode="reflect"))
+    tiny = torch_divisive.reflect101_pad_any(x, 4)  # the reflection repeats
+    assert tiny.shape == (1, 1, 11, 13)
+    torch.testing.assert_close(tiny[..., 4:7, 4:9], x)
+    r = _response(2, 3, seed=3)
+    blurred = torch_divisive.gaussian_blur(torch.from_numpy(r)[None, None], 2.0)[0, 0].numpy()
+    assert blurred.shape == (2, 3) and np.isfinite(blurred).all()

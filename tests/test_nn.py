@@ -1,0 +1,151 @@
+"""alcn_cv.nn: ALCN2d / alcn2d, the torch runtime of every shipped model, against apply()."""
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("kornia")
+
+import cv2
+
+import alcn_cv
+from alcn_cv.data.frames import synthetic_frame
+from alcn_cv.errors import InputError
+from alcn_cv.nn import ALCN2d, alcn2d, batches
+from alcn_cv.runtime import MODELS
+
+CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device: the CUDA path is checked on a GPU machine")
+
+
+def _unit(img: np.ndarray) -> np.ndarray:
+    """What apply() converts a uint8 image to (a multiplication by 1/255, not a division)."""
+    return img.astype(np.float32) * np.float32(1.0 / 255)
+
+
+def _gray(h=96, w=128, seed=0):
+    return synthetic_frame(w, h, False, seed=seed)
+
+
+def _bgr(h=96, w=128, seed=0):
+    return synthetic_frame(w, h, True, seed=seed)
+
+
+@pytest.mark.parametrize("model", list(MODELS))
+def test_gray_equals_the_float_output_of_apply(model):
+    gray = _gray()
+    expected = alcn_cv.createALCN(model=model, backend="torch").apply(gray, out_dtype=np.float32)
+    with torch.no_grad():
+        out = ALCN2d(model=model).eval()(torch.from_numpy(_unit(gray))[None, None])
+    assert out.shape == (1, 1, *gray.shape) and out.dtype == torch.float32
+    np.testing.assert_allclose(out[0, 0].numpy(), expected, atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("model", ["gain", "lite"])
+def test_colour_is_normalized_on_lab_lightness(model):
+    """RGB in, normalized on L with a and b kept; kornia's exact CIE Lab against OpenCV's tabulated float one
+    (L up to 0.2 apart, which the normalization amplifies): equal to apply() to a few thousandths."""
+    bgr = _bgr()
+    expected = alcn_cv.createALCN(model=model, backend="torch").apply(bgr, out_dtype=np.float32)
+    rgb = torch.from_numpy(_unit(bgr[..., ::-1].copy())).permute(2, 0, 1)[None]
+    with torch.no_grad():
+        out = ALCN2d(model=model).eval()(rgb)[0].permute(1, 2, 0).numpy()[..., ::-1]
+    diff = np.abs(out - expected)
+    assert diff.max() < 1e-2 and diff.mean() < 1e-3, (diff.max(), diff.mean())
+
+
+def test_functional_form_and_weight_files():
+    x = torch.from_numpy(_unit(_gray()))[None, None]
+    module = ALCN2d(weights=MODELS["lite"]).eval()
+    with torch.no_grad():
+        torch.testing.assert_close(alcn2d(x, model="lite"), module(x))
+        torch.testing.assert_close(ALCN2d()(x), alcn2d(x))  # the default model
+    with pytest.raises(InputError, match="unknown model"):
+        ALCN2d(model="vulkan")
+    with pytest.raises(InputError, match=r"\(B, 1 \| 3, H, W\)"):
+        module(torch.rand(1, 2, 64, 64))
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_lower_precision_dtypes_run_and_stay_close(dtype):
+    """On the CPU with the gain model (torch's CPU float16 convolutions of the lite one's strided layers take
+    minutes); float16 against float32 on CUDA is checked below."""
+    x = torch.from_numpy(_unit(_gray()))[None, None]
+    module = ALCN2d(model="gain").eval()
+    with torch.no_grad():
+        reference = module(x)
+        out = module.to(dtype)(x.to(dtype))
+    assert out.dtype == dtype and torch.isfinite(out).all()
+    assert (out.float() - reference).abs().mean() < 5e-2
+
+
+@pytest.mark.parametrize("model", ["gain", "lite"])
+def test_differentiable_frozen_or_fine_tuned(model):
+    x = torch.from_numpy(_unit(_gray(64, 80)))[None, None].requires_grad_(True)
+    frozen = ALCN2d(model=model).eval().requires_grad_(False)
+    frozen(x).square().mean().backward()
+    assert x.grad is not None and torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0
+    tuned = ALCN2d(model=model)
+    tuned(x.detach()).square().mean().backward()
+    grads = [p.grad for p in tuned.parameters() if p.requires_grad]
+    assert grads and all(g is not None and torch.isfinite(g).all() for g in grads)
+    assert sum(float(g.abs().sum()) for g in grads) > 0
+
+
+@pytest.mark.parametrize("model", ["gain", "lite"])
+def test_traces_as_one_graph_for_torch_compile(model):
+    """Dynamo captures the whole module (``fullgraph=True``); the inductor backend on the CPU compiles for
+    minutes on a loaded machine, so the compiled kernels are checked by the GPU script, not here."""
+    x = torch.rand(2, 1, 64, 80)
+    module = ALCN2d(model=model).eval()
+    with torch.no_grad():
+        torch.testing.assert_close(torch.compile(module, backend="eager", fullgraph=True)(x), module(x), atol=1e-6, rtol=0)
+
+
+def test_apply_batch_uploads_integers_and_casts_on_the_device():
+    frames = np.stack([_gray(seed=i) for i in range(3)])
+    alcn = alcn_cv.createALCN(backend="torch")
+    for out_dtype in (np.uint8, np.uint16, np.float32):
+        batch = alcn.apply_batch(frames, out_dtype=out_dtype)
+        assert batch.dtype == out_dtype and batch.shape == frames.shape
+        expected = np.stack([alcn.apply(f, out_dtype=out_dtype) for f in frames])
+        np.testing.assert_allclose(batch.astype(np.float64), expected.astype(np.float64), atol=1 if out_dtype != np.float32 else 1e-5)
+    sixteen = frames.astype(np.uint16) * 257
+    np.testing.assert_allclose(alcn.apply_batch(sixteen, out_dtype=np.float32), alcn.apply_batch(frames, out_dtype=np.float32), atol=1e-5)
+
+
+def test_batches_group_a_stream():
+    frames = [np.full((4, 5), i, np.uint8) for i in range(7)]
+    groups = list(batches(iter(frames), 3))
+    assert [g.shape for g in groups] == [(3, 4, 5), (3, 4, 5), (1, 4, 5)] and groups[2][0, 0, 0] == 6
+    with pytest.raises(InputError):
+        next(batches(frames, 0))
+
+
+@CUDA
+@pytest.mark.parametrize("model", ["gain", "lite"])
+def test_cuda_equals_the_cpu_and_float16_stays_close(model):
+    x = torch.from_numpy(_unit(synthetic_frame(640, 400, False)))[None, None]
+    cpu = ALCN2d(model=model).eval()
+    cuda = ALCN2d(model=model).eval().cuda()
+    with torch.no_grad():
+        reference = cpu(x)
+        out = cuda(x.cuda())
+        assert (out.cpu() - reference).abs().max() < 1e-4
+        half = cuda.half()(x.cuda().half())
+        assert half.dtype == torch.float16 and (half.float().cpu() - reference).abs().max() < 1e-3
+
+
+@CUDA
+def test_cuda_compiles_with_inductor():
+    x = torch.rand(4, 1, 400, 640, device="cuda")
+    module = ALCN2d().eval().cuda()
+    with torch.no_grad():
+        torch.testing.assert_close(torch.compile(module, fullgraph=True)(x), module(x), atol=1e-4, rtol=0)
+
+
+@CUDA
+def test_cuda_apply_batch_equals_the_cpu():
+    frames = np.stack([synthetic_frame(640, 400, False, seed=i) for i in range(8)])
+    cpu = alcn_cv.createALCN(backend="torch").apply_batch(frames)
+    cuda = alcn_cv.createALCN(backend="torch", device="cuda").apply_batch(frames)
+    assert cuda.dtype == np.uint8 and np.abs(cuda.astype(int) - cpu.astype(int)).max() <= 1
