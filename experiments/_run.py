@@ -1,0 +1,48 @@
+"""Shared by the experiment scripts: run `alcn` commands and keep their JSON reports.
+
+An experiment writes its whole output under ``runs/<name>/`` (ignored by git) and copies each small
+JSON report to ``docs/reports/<name>.json`` (tracked), adding an ``experiment`` record (the script,
+its arguments and the date, UTC). ``experiments/report.py`` builds ``docs/results.md`` from those
+copies alone.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import shlex
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RUNS = ROOT / "runs"
+REPORTS = ROOT / "docs" / "reports"
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
+sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
+
+
+def alcn(*argv: str) -> None:
+    """Run ``alcn ARGV...`` in this process; exit with its status if it fails."""
+    from alcn_cv.cli import main
+
+    sys.argv = ["alcn", *argv]  # the reports record sys.argv as their command
+    status = main(list(argv))
+    if status:
+        raise SystemExit(f"alcn {shlex.join(argv)}: exit status {status}")
+
+
+def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
+    """Copy the JSON ``report`` to ``docs/reports/<name>.json`` with the experiment's record, without the
+    top-level keys ``drop`` (per-frame details: the copy stays small; the whole report stays in ``runs/``)."""
+    data = {k: v for k, v in json.loads(Path(report).read_text(encoding="utf-8")).items() if k not in drop}
+    data["experiment"] = {
+        "script": Path(sys.modules["__main__"].__file__).relative_to(ROOT).as_posix(),
+        "argv": sys.orig_argv[2:] if hasattr(sys, "orig_argv") else [],
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+    }
+    REPORTS.mkdir(parents=True, exist_ok=True)
+    target = REPORTS / f"{name}.json"
+    target.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    print(f"kept {target.relative_to(ROOT)}")
+    return target
