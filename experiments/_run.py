@@ -39,7 +39,7 @@ def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
     data["experiment"] = {
         "script": Path(sys.modules["__main__"].__file__).relative_to(ROOT).as_posix(),
         "argv": sys.orig_argv[2:] if hasattr(sys, "orig_argv") else [],
-        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
     }
     REPORTS.mkdir(parents=True, exist_ok=True)
     target = REPORTS / f"{name}.json"

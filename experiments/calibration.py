@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 
 import cv2
-
 from _run import RUNS, SHARED_DATA, alcn, keep
 
 
@@ -25,14 +24,50 @@ def main() -> None:
 
     out = RUNS / "calibration"
     calib, box = out / "calib", out / "cookie_box"
-    calib_argv = ["calib", "camera", "--images", str(SHARED_DATA / "chessboard"), "--board", "chessboard",
-                  "--cols", "9", "--rows", "6", "--square", "25", "--out", str(calib)]
-    build_argv = ["pose", "build", str(SHARED_DATA / "cookie_box" / "box.mp4"), str(box / "model.npz"),
-                  "--K", "1578.48", "1771.81", "320", "240", "--video-step", "10", "--max-frames", "46",
-                  "--motion-mask", "--n-features", "3000", "--box-ply", str(SHARED_DATA / "cookie_box" / "box.ply"),
-                  "--refine-focal"]
-    track_argv = ["pose", "track", str(box / "model.npz"), str(SHARED_DATA / "cookie_box" / "box.mp4"),
-                  str(box / "poses.json")]
+    calib_argv = [
+        "calib",
+        "camera",
+        "--images",
+        str(SHARED_DATA / "chessboard"),
+        "--board",
+        "chessboard",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square",
+        "25",
+        "--out",
+        str(calib),
+    ]
+    build_argv = [
+        "pose",
+        "build",
+        str(SHARED_DATA / "cookie_box" / "box.mp4"),
+        str(box / "model.npz"),
+        "--K",
+        "1578.48",
+        "1771.81",
+        "320",
+        "240",
+        "--video-step",
+        "10",
+        "--max-frames",
+        "46",
+        "--motion-mask",
+        "--n-features",
+        "3000",
+        "--box-ply",
+        str(SHARED_DATA / "cookie_box" / "box.ply"),
+        "--refine-focal",
+    ]
+    track_argv = [
+        "pose",
+        "track",
+        str(box / "model.npz"),
+        str(SHARED_DATA / "cookie_box" / "box.mp4"),
+        str(box / "poses.json"),
+    ]
     for argv in (calib_argv, build_argv, track_argv):
         alcn(*argv)
     fs = cv2.FileStorage(str(calib / "camera.yaml"), cv2.FILE_STORAGE_READ)
@@ -44,7 +79,13 @@ def main() -> None:
         "benchmark": "calibration",
         "commands": [" ".join(["alcn", *a]) for a in (calib_argv, build_argv, track_argv)],
         "machine": machine(),
-        "calibration": {"rms_px": rms, "fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]), "cy": float(K[1, 2])},
+        "calibration": {
+            "rms_px": rms,
+            "fx": float(K[0, 0]),
+            "fy": float(K[1, 1]),
+            "cx": float(K[0, 2]),
+            "cy": float(K[1, 2]),
+        },
         "tracking": track["summary"],
     }
     (out / "calibration.json").write_text(json.dumps(report, indent=1), encoding="utf-8")

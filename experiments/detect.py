@@ -21,8 +21,28 @@ def main() -> None:
     data, out = RUNS / "detect" / "data", RUNS / "detect" / "bench"
     if not (data / "manifest.json").exists():
         alcn("data", "detect", "--out", str(data))
-    alcn("bench", "detect", "--data", str(data), "--out", str(out), "--methods", METHODS, "--real-images", "1,10",
-         "--policy", "raw,local", "--positives", "100", "--epochs", "4", "--seeds", "0,1,2", "--max-test-images", "16")
+    alcn(
+        "bench",
+        "detect",
+        "--data",
+        str(data),
+        "--out",
+        str(out),
+        "--methods",
+        METHODS,
+        "--real-images",
+        "1,10",
+        "--policy",
+        "raw,local",
+        "--positives",
+        "100",
+        "--epochs",
+        "4",
+        "--seeds",
+        "0,1,2",
+        "--max-test-images",
+        "16",
+    )
     keep(out / "detect.json", "detect")
 
 

@@ -17,8 +17,24 @@ METHODS = "none,dog,dog:sigma1=1:sigma2=2,dlcn,alcn,alcn:model=gain-lite,alcn:mo
 
 def main() -> None:
     out = RUNS / "fewshot"
-    alcn("bench", "fewshot", "--out", str(out), "--methods", METHODS, "--policy", "raw,local", "--draws", "3",
-         "--per-image", "100", "--epochs", "5", "--test-windows", "1500")
+    alcn(
+        "bench",
+        "fewshot",
+        "--out",
+        str(out),
+        "--methods",
+        METHODS,
+        "--policy",
+        "raw,local",
+        "--draws",
+        "3",
+        "--per-image",
+        "100",
+        "--epochs",
+        "5",
+        "--test-windows",
+        "1500",
+    )
     keep(out / "fewshot.json", "fewshot")
 
 

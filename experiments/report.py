@@ -4,8 +4,11 @@ Each report is one experiment's JSON (copied there by the experiment scripts of 
 ``experiment`` record: script, arguments, date). Each table says the command that made it, the
 machine and the date. Takes a second; tests/test_docs.py checks that docs/results.md equals its output.
 
-    python experiments/report.py            # rewrite docs/results.md
-    python experiments/report.py --check    # exit 1 if docs/results.md differs from what it would write
+    python experiments/report.py            # rewrite docs/results.md and the README's results block
+    python experiments/report.py --check    # exit 1 if either differs from what it would write
+
+The README's block between ``<!-- results:begin -->`` and ``<!-- results:end -->`` holds the headline
+rows of the same reports (:func:`headlines`).
 """
 
 from __future__ import annotations
@@ -20,14 +23,25 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 REPORTS = ROOT / "docs" / "reports"
 RESULTS = ROOT / "docs" / "results.md"
+README = ROOT / "README.md"
+BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
+#: The rows of the real-light tables the README shows (each method's better row of default and tuned).
+HEADLINE_METHODS = ("none", "clahe", "dog", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
 
-RELIGHT_METRICS = {"identification": "identification", "matching_sift": "matching SIFT", "matching_orb": "matching ORB",
-                   "pose_sift": "pose SIFT", "pose_orb": "pose ORB", "correct_sift": "correct SIFT",
-                   "correct_orb": "correct ORB"}
+RELIGHT_METRICS = {
+    "identification": "identification",
+    "matching_sift": "matching SIFT",
+    "matching_orb": "matching ORB",
+    "pose_sift": "pose SIFT",
+    "pose_orb": "pose ORB",
+    "correct_sift": "correct SIFT",
+    "correct_orb": "correct ORB",
+}
 
 
 def table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     """A Markdown table; floats with one decimal, ``None`` as ``-``."""
+
     def cell(v: Any) -> str:
         if v is None:
             return "-"
@@ -43,8 +57,8 @@ def describe(machine: dict[str, Any] | None) -> str:
     """One line of a report's ``machine`` record: CPU, cores, load, versions, GPU."""
     if not machine:
         return "not recorded"
-    parts = [f"{machine.get('cpu_model', machine.get('processor', '?'))}, "
-             f"{machine.get('cpus_available', machine.get('cpu_count', '?'))} CPUs"]
+    cpu = machine.get("cpu_model", machine.get("processor", "?"))
+    parts = [f"{cpu}, {machine.get('cpus_available', machine.get('cpu_count', '?'))} CPUs"]
     if "load_average_1_5_15" in machine:
         parts.append("load " + ", ".join(str(v) for v in machine["load_average_1_5_15"]))
     versions = [f"{k} {machine[k]}" for k in ("python", "numpy", "opencv", "torch") if machine.get(k)]
@@ -59,8 +73,10 @@ def provenance(report: dict[str, Any]) -> str:
     rerun = " ".join(["python", exp.get("script", "?"), *exp.get("argv", [])])
     commands = report.get("commands") or [report.get("command")]
     machine = report.get("machine") or report.get("machine_before")
-    return (f"Rerun: `{rerun}`. Command: " + "; ".join(f"`{c}`" for c in commands if c) + ".  \n"
-            f"Machine: {describe(machine)}.  \nDate: {exp.get('date', 'not recorded')}.\n")
+    return (
+        f"Rerun: `{rerun}`. Command: " + "; ".join(f"`{c}`" for c in commands if c) + ".  \n"
+        f"Machine: {describe(machine)}.  \nDate: {exp.get('date', 'not recorded')}.\n"
+    )
 
 
 def _mean_std(summary: dict[str, Any] | None, seeds: int) -> str | None:
@@ -74,25 +90,46 @@ def relight(report: dict[str, Any]) -> str:
     seeds = len(report["settings"]["seeds"])
     loo = report["split"]["mode"] == "leave-one-out"
     metrics = [m for m in RELIGHT_METRICS if any(m in r.get("mean_test", {}) for r in report["methods"].values())]
-    rows = [[label] + [_mean_std(r.get("mean_test", {}).get(m), seeds) for m in metrics]
-            for label, r in report["methods"].items()]
+    rows = [
+        [label] + [_mean_std(r.get("mean_test", {}).get(m), seeds) for m in metrics]
+        for label, r in report["methods"].items()
+    ]
     scenes = ", ".join(report["split"]["test"])
-    title = ("Real light, leave-one-scene-out (each scene with parameters tuned on the others)" if loo else
-             f"Real light, test scenes (tuned on {', '.join(report['split']['train'])})")
-    note = (f"Mean over the scenes {scenes}; {seeds} seed{'s' if seeds > 1 else ''} "
-            f"({', '.join(str(s) for s in report['settings']['seeds'])}). Identification and matching in %, "
-            "pose in % of frame pairs, correct = correct matches per pair.\n")
-    return f"## {title}\n\n{provenance(report)}\n{note}\n" + table(["method"] + [RELIGHT_METRICS[m] for m in metrics], rows)
+    title = (
+        "Real light, leave-one-scene-out (each scene with parameters tuned on the others)"
+        if loo
+        else f"Real light, test scenes (tuned on {', '.join(report['split']['train'])})"
+    )
+    note = (
+        f"Mean over the scenes {scenes}; {seeds} seed{'s' if seeds > 1 else ''} "
+        f"({', '.join(str(s) for s in report['settings']['seeds'])}). Identification and matching in %, "
+        "pose in % of frame pairs, correct = correct matches per pair.\n"
+    )
+    return f"## {title}\n\n{provenance(report)}\n{note}\n" + table(
+        ["method"] + [RELIGHT_METRICS[m] for m in metrics], rows
+    )
 
 
 def speed(report: dict[str, Any]) -> str:
     """``alcn bench speed``: its targets, then the time of every method on every frame."""
     out = f"## Speed\n\n{provenance(report)}\n"
     if report.get("targets"):
-        rows = [[t.get("name"), t.get("measured"), t.get("goal"), {True: "met", False: "missed"}.get(t.get("met"), "-"),
-                 t.get("note", "")] for t in report["targets"]]
+        rows = [
+            [
+                t.get("name"),
+                t.get("measured"),
+                t.get("goal"),
+                {True: "met", False: "missed"}.get(t.get("met"), "-"),
+                t.get("note", ""),
+            ]
+            for t in report["targets"]
+        ]
         out += "Targets:\n\n" + table(["target", "measured", "goal", "", "note"], rows) + "\n"
-    keys = [k for k in ("method", "size", "colour", "median_ms", "fps", "ratio_to_dog") if any(k in r for r in report["rows"])]
+    keys = [
+        k
+        for k in ("method", "size", "colour", "median_ms", "fps", "ratio_to_dog")
+        if any(k in r for r in report["rows"])
+    ]
     rows = [[_size(r.get(k)) if k == "size" else r.get(k) for k in keys] for r in report["rows"]]
     return out + "Time per frame:\n\n" + table(keys, rows)
 
@@ -119,7 +156,9 @@ def columns_table(report: dict[str, Any], title: str) -> str:
             s = spread.get(label, {}).get(c)
             cells.append(None if v is None else f"{v:.1f}" + (f" ± {s:.1f}" if s is not None else ""))
         rows.append([label] + cells)
-    return f"## {title}\n\n{provenance(report)}\n% of frames posed within 5 px.\n\n" + table(["method", *report["columns"]], rows)
+    return f"## {title}\n\n{provenance(report)}\n% of frames posed within 5 px.\n\n" + table(
+        ["method", *report["columns"]], rows
+    )
 
 
 def summary_table(report: dict[str, Any], title: str, key: str | None = "summary") -> str:
@@ -139,8 +178,67 @@ def summary_table(report: dict[str, Any], title: str, key: str | None = "summary
     for method, value in entries.items():
         walk("", value, flat.setdefault(method, {}))
     keys = sorted({k for row in flat.values() for k in row})
-    return (f"## {title}\n\n{provenance(report)}\n" + table(["method", *keys], [[m] + [r.get(k) for k in keys]
-                                                                                for m, r in flat.items()]))
+    return f"## {title}\n\n{provenance(report)}\n" + table(
+        ["method", *keys], [[m] + [r.get(k) for k in keys] for m, r in flat.items()]
+    )
+
+
+def relight_headline(report: dict[str, Any]) -> str:
+    """The README's rows of a real-light report: :data:`HEADLINE_METHODS`, each at the better of its
+    default and tuned rows by identification."""
+    seeds = len(report["settings"]["seeds"])
+    metrics = ["identification", "matching_sift", "matching_orb", "pose_sift", "pose_orb"]
+    rows = []
+    for name in HEADLINE_METHODS:
+        candidates = [
+            (label, r)
+            for label, r in report["methods"].items()
+            if label in (name, f"{name} (tuned)") and "identification" in r.get("mean_test", {})
+        ]
+        if candidates:
+            label, r = max(candidates, key=lambda c: c[1]["mean_test"]["identification"]["mean"])
+            rows.append([label] + [_mean_std(r["mean_test"].get(m), seeds) for m in metrics])
+    loo = report["split"]["mode"] == "leave-one-out"
+    title = "leave-one-scene-out" if loo else f"test scenes {', '.join(report['split']['test'])}"
+    return (
+        f"**Real light** ({title}; `alcn bench relight`, {seeds} seed{'s' if seeds > 1 else ''}, "
+        f"{report['experiment']['date'][:10]}):\n\n" + table(["method"] + [RELIGHT_METRICS[m] for m in metrics], rows)
+    )
+
+
+def speed_headline(report: dict[str, Any]) -> str:
+    """The README's rows of the speed report: its targets."""
+    rows = [
+        [t.get("name"), t.get("measured"), t.get("goal"), {True: "met", False: "missed"}.get(t.get("met"), "-")]
+        for t in report.get("targets", [])
+    ]
+    preset = " --quick" if report.get("settings", {}).get("quick") or "--quick" in report["experiment"]["argv"] else ""
+    return f"**Speed** (`alcn bench speed{preset}`, {report['experiment']['date'][:10]}):\n\n" + table(
+        ["target", "measured", "goal", ""], rows
+    )
+
+
+HEADLINES: dict[str, Callable[[dict[str, Any]], str]] = {
+    "relight_split": relight_headline,
+    "relight_leave_one_out": relight_headline,
+    "speed": speed_headline,
+}
+
+
+def _reports(reports: Path) -> dict[str, dict[str, Any]]:
+    return {p.stem: json.loads(p.read_text(encoding="utf-8")) for p in sorted(reports.glob("*.json"))}
+
+
+def headlines(reports: Path = REPORTS) -> str:
+    """The README's results block: the headline rows of the reports that have them."""
+    found = _reports(reports)
+    return "\n".join(HEADLINES[name](found[name]) for name in HEADLINES if name in found)
+
+
+def readme_with_headlines(readme: str, reports: Path = REPORTS) -> str:
+    """``readme`` with the text between :data:`BEGIN` and :data:`END` replaced by :func:`headlines`."""
+    start, end = readme.index(BEGIN) + len(BEGIN), readme.index(END)
+    return readme[:start] + "\n" + headlines(reports) + readme[end:]
 
 
 RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
@@ -162,18 +260,22 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
 
 def build(reports: Path = REPORTS) -> str:
     """The text of docs/results.md from the JSON files in ``reports``, in the order of :data:`RENDERERS`."""
-    found = {p.stem: p for p in sorted(reports.glob("*.json"))}
+    found = _reports(reports)
     unknown = sorted(set(found) - set(RENDERERS))
     if unknown:
         raise SystemExit(f"no renderer for docs/reports/{unknown[0]}.json (add one to experiments/report.py)")
-    sections = [RENDERERS[name](json.loads(found[name].read_text(encoding="utf-8"))) for name in RENDERERS if name in found]
+    sections = [RENDERERS[name](found[name]) for name in RENDERERS if name in found]
     missing = [name for name in RENDERERS if name not in found]
-    head = ("# Results\n\nGenerated by `python experiments/report.py` from the JSON reports in `docs/reports/`; do not "
-            "edit by hand. Each table gives the script that reruns it, the product command it ran, the machine and "
-            "the date. History and older measurements: [journal.md](journal.md).\n")
+    head = (
+        "# Results\n\nGenerated by `python experiments/report.py` from the JSON reports in `docs/reports/`; do not "
+        "edit by hand. Each table gives the script that reruns it, the product command it ran, the machine and "
+        "the date. History and older measurements: [journal.md](journal.md).\n"
+    )
     if missing:
-        head += ("\nNot run for this page (long; their scripts are in `experiments/` and the journal keeps the numbers "
-                 "as measured then): " + ", ".join(f"`{m}`" for m in missing) + ".\n")
+        head += (
+            "\nNot run for this page (long; their scripts are in `experiments/` and the journal keeps the numbers "
+            "as measured then): " + ", ".join(f"`{m}`" for m in missing) + ".\n"
+        )
     return "\n".join([head, *sections])
 
 
@@ -181,13 +283,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--check", action="store_true", help="compare only; exit 1 on a difference")
     args = parser.parse_args()
-    text = build()
+    readme = README.read_text(encoding="utf-8")
+    wanted = {RESULTS: build(), README: readme_with_headlines(readme)}
+    stale = [path for path, text in wanted.items() if not path.exists() or path.read_text(encoding="utf-8") != text]
     if args.check:
-        same = RESULTS.exists() and RESULTS.read_text(encoding="utf-8") == text
-        print("docs/results.md is up to date" if same else "docs/results.md differs: run python experiments/report.py")
-        sys.exit(0 if same else 1)
-    RESULTS.write_text(text, encoding="utf-8")
-    print(f"wrote {RESULTS.relative_to(ROOT)}")
+        print(
+            "up to date"
+            if not stale
+            else "out of date: " + ", ".join(p.name for p in stale) + " (run python experiments/report.py)"
+        )
+        sys.exit(1 if stale else 0)
+    for path in stale:
+        path.write_text(wanted[path], encoding="utf-8")
+        print(f"wrote {path.relative_to(ROOT)}")
 
 
 if __name__ == "__main__":
