@@ -33,16 +33,24 @@ def alcn(*argv: str) -> None:
 
 
 def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
-    """Copy the JSON ``report`` to ``docs/reports/<name>.json`` with the experiment's record, without the
-    top-level keys ``drop`` (per-frame details: the copy stays small; the whole report stays in ``runs/``)."""
-    data = {k: v for k, v in json.loads(Path(report).read_text(encoding="utf-8")).items() if k not in drop}
+    """Copy the JSON ``report`` to ``docs/reports/<name>.json`` with the experiment's record (the script,
+    its arguments, and the date the report was written, UTC), without the top-level keys ``drop``
+    (per-frame details: the copy stays small; the whole report stays where the run wrote it). The run's
+    output folder is written ``OUT`` and the shared data ``../shared/data``, so that no tracked file
+    cites the ignored output folder or a machine's paths."""
+    report = Path(report)
+    data = {k: v for k, v in json.loads(report.read_text(encoding="utf-8")).items() if k not in drop}
+    written = datetime.datetime.fromtimestamp(report.stat().st_mtime, datetime.UTC)
     data["experiment"] = {
-        "script": Path(sys.modules["__main__"].__file__).relative_to(ROOT).as_posix(),
+        "script": Path(sys.modules["__main__"].__file__).resolve().relative_to(ROOT).as_posix(),
         "argv": sys.orig_argv[2:] if hasattr(sys, "orig_argv") else [],
-        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "date": written.strftime("%Y-%m-%d %H:%M UTC"),
     }
+    text = json.dumps(data, indent=1) + "\n"
+    for path, alias in ((RUNS, "OUT"), (SHARED_DATA.resolve(), "../shared/data"), (ROOT, ".")):
+        text = text.replace(str(path), alias)
     REPORTS.mkdir(parents=True, exist_ok=True)
     target = REPORTS / f"{name}.json"
-    target.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    target.write_text(text, encoding="utf-8")
     print(f"kept {target.relative_to(ROOT)}")
     return target
