@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 
 import cv2
+import numpy as np
 from _run import RUNS, SHARED_DATA, alcn, keep
 
 
@@ -75,6 +76,7 @@ def main() -> None:
     rms = fs.getNode("rms").real()
     fs.release()
     track = json.loads((box / "poses_info.json").read_text(encoding="utf-8"))
+    header = json.loads(str(np.load(box / "model.npz")["header"]))
     report = {
         "benchmark": "calibration",
         "commands": [" ".join(["alcn", *a]) for a in (calib_argv, build_argv, track_argv)],
@@ -85,6 +87,11 @@ def main() -> None:
             "fy": float(K[1, 1]),
             "cx": float(K[0, 2]),
             "cy": float(K[1, 2]),
+        },
+        "cookie_box": {
+            "registered_images": header["extra"]["registered_images"],
+            "refined_fx": header["extra"]["K"][0][0],
+            "box_size_error_percent": 100 * header["box_fit"]["mean_abs_relative_size_error"],
         },
         "tracking": track["summary"],
     }

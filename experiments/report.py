@@ -140,8 +140,12 @@ def _size(value: Any) -> Any:
 
 def calibration(report: dict[str, Any]) -> str:
     """Calibration on OpenCV's chessboard and the cookie box's build and tracking."""
-    rows = [[f"calibration {k}", v] for k, v in report["calibration"].items()]
-    rows += [[f"cookie box {k}", v] for k, v in report["tracking"].items() if not isinstance(v, (dict, list))]
+    def exact(v: Any) -> Any:
+        return f"{v:.3f}" if isinstance(v, float) else v
+
+    rows = [[f"calibration {k}", exact(v)] for k, v in report["calibration"].items()]
+    rows += [[f"cookie box {k}", exact(v)] for k, v in report.get("cookie_box", {}).items()]
+    rows += [[f"tracking {k}", exact(v)] for k, v in report["tracking"].items() if not isinstance(v, (dict, list))]
     return f"## Calibration and the cookie box\n\n{provenance(report)}\n" + table(["quantity", "value"], rows)
 
 
@@ -218,10 +222,20 @@ def speed_headline(report: dict[str, Any]) -> str:
     )
 
 
+def calibration_headline(report: dict[str, Any]) -> str:
+    """The README's line of the calibration report."""
+    c, box, track = report["calibration"], report.get("cookie_box", {}), report["tracking"]
+    return (f"**Calibration and the cookie box** ({report['experiment']['date'][:10]}): chessboard RMS "
+            f"{c['rms_px']:.3f} px, fx {c['fx']:.2f} (OpenCV's reference: 0.409 px, 536.07); the cookie box's "
+            f"model within {box.get('box_size_error_percent', float('nan')):.1f}% of its true size, "
+            f"{track['tracked']} of {track['frames']} frames tracked.\n")
+
+
 HEADLINES: dict[str, Callable[[dict[str, Any]], str]] = {
     "relight_split": relight_headline,
     "relight_leave_one_out": relight_headline,
     "speed": speed_headline,
+    "calibration": calibration_headline,
 }
 
 
