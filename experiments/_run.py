@@ -47,7 +47,12 @@ def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
         "date": written.strftime("%Y-%m-%d %H:%M UTC"),
     }
     text = json.dumps(data, indent=1) + "\n"
-    for path, alias in ((RUNS, "OUT"), (SHARED_DATA.resolve(), "../shared/data"), (SHARED_DATA, "../shared/data"), (ROOT, ".")):
+    for path, alias in (
+        (RUNS, "OUT"),
+        (SHARED_DATA.resolve(), "../shared/data"),
+        (SHARED_DATA, "../shared/data"),
+        (ROOT, "."),
+    ):
         text = text.replace(str(path), alias)
     REPORTS.mkdir(parents=True, exist_ok=True)
     target = REPORTS / f"{name}.json"

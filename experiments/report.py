@@ -26,6 +26,8 @@ RESULTS = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 #: The rows of the real-light tables the README shows (each method's better row of default and tuned).
+#: The first targets of the speed report the README shows (the ratios to a raw DoG, the frame rate, BGR).
+SPEED_HEADLINE_TARGETS = 6
 HEADLINE_METHODS = ("none", "clahe", "dog", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
 
 RELIGHT_METRICS = {
@@ -39,14 +41,14 @@ RELIGHT_METRICS = {
 }
 
 
-def table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    """A Markdown table; floats with one decimal, ``None`` as ``-``."""
+def table(headers: Sequence[str], rows: Sequence[Sequence[Any]], digits: int = 1) -> str:
+    """A Markdown table; floats with ``digits`` decimals, ``None`` as ``-``."""
 
     def cell(v: Any) -> str:
         if v is None:
             return "-"
         if isinstance(v, float):
-            return f"{v:.1f}"
+            return f"{v:.{digits}f}"
         return str(v).replace("|", "\\|")
 
     lines = ["| " + " | ".join(headers) + " |", "|" + "|".join("---" for _ in headers) + "|"]
@@ -110,28 +112,38 @@ def relight(report: dict[str, Any]) -> str:
     )
 
 
+def _targets(report: dict[str, Any]) -> list[dict[str, Any]]:
+    targets = report.get("targets") or []
+    return targets.get("summary", []) if isinstance(targets, dict) else targets
+
+
+def _met(target: dict[str, Any]) -> str:
+    return {True: "met", False: "missed"}.get(target.get("met"), "-")
+
+
 def speed(report: dict[str, Any]) -> str:
     """``alcn bench speed``: its targets, then the time of every method on every frame."""
     out = f"## Speed\n\n{provenance(report)}\n"
-    if report.get("targets"):
-        rows = [
-            [
-                t.get("name"),
-                t.get("measured"),
-                t.get("goal"),
-                {True: "met", False: "missed"}.get(t.get("met"), "-"),
-                t.get("note", ""),
-            ]
-            for t in report["targets"]
-        ]
-        out += "Targets:\n\n" + table(["target", "measured", "goal", "", "note"], rows) + "\n"
-    keys = [
-        k
-        for k in ("method", "size", "colour", "median_ms", "fps", "ratio_to_dog")
-        if any(k in r for r in report["rows"])
+    rows = [
+        [t.get("target", t.get("name")), t.get("measured"), t.get("goal"), _met(t), t.get("note", "")]
+        for t in _targets(report)
     ]
-    rows = [[_size(r.get(k)) if k == "size" else r.get(k) for k in keys] for r in report["rows"]]
-    return out + "Time per frame:\n\n" + table(keys, rows)
+    if rows:
+        out += "Targets:\n\n" + table(["target", "measured", "goal", "", "note"], rows, digits=2) + "\n"
+    rows = [
+        [
+            r.get("method"),
+            f"{r['width']}x{r['height']}" if "width" in r else _size(r.get("size")),
+            r.get("colour"),
+            r.get("median_ms"),
+            r.get("fps"),
+            r.get("ratio_to_dog"),
+        ]
+        for r in report.get("rows", [])
+    ]
+    return (
+        out + "Time per frame:\n\n" + table(["method", "size", "colour", "median ms", "fps", "x dog"], rows, digits=2)
+    )
 
 
 def _size(value: Any) -> Any:
@@ -140,6 +152,7 @@ def _size(value: Any) -> Any:
 
 def calibration(report: dict[str, Any]) -> str:
     """Calibration on OpenCV's chessboard and the cookie box's build and tracking."""
+
     def exact(v: Any) -> Any:
         return f"{v:.3f}" if isinstance(v, float) else v
 
@@ -212,23 +225,25 @@ def relight_headline(report: dict[str, Any]) -> str:
 
 def speed_headline(report: dict[str, Any]) -> str:
     """The README's rows of the speed report: its targets."""
-    rows = [
-        [t.get("name"), t.get("measured"), t.get("goal"), {True: "met", False: "missed"}.get(t.get("met"), "-")]
-        for t in report.get("targets", [])
-    ]
-    preset = " --quick" if report.get("settings", {}).get("quick") or "--quick" in report["experiment"]["argv"] else ""
-    return f"**Speed** (`alcn bench speed{preset}`, {report['experiment']['date'][:10]}):\n\n" + table(
-        ["target", "measured", "goal", ""], rows
+    rows = [[t.get("target", t.get("name")), t.get("measured"), t.get("goal"), _met(t)] for t in _targets(report)]
+    rows = rows[:SPEED_HEADLINE_TARGETS]
+    argv = " ".join(report["experiment"]["argv"])
+    return (
+        f"**Speed** (`python experiments/speed.py {argv}`, {report['experiment']['date'][:10]}; load average "
+        f"{', '.join(str(v) for v in (report.get('machine_before') or {}).get('load_average_1_5_15', []))} "
+        "on 2 shared cores):\n\n" + table(["target", "measured", "goal", ""], rows, digits=2)
     )
 
 
 def calibration_headline(report: dict[str, Any]) -> str:
     """The README's line of the calibration report."""
     c, box, track = report["calibration"], report.get("cookie_box", {}), report["tracking"]
-    return (f"**Calibration and the cookie box** ({report['experiment']['date'][:10]}): chessboard RMS "
-            f"{c['rms_px']:.3f} px, fx {c['fx']:.2f} (OpenCV's reference: 0.409 px, 536.07); the cookie box's "
-            f"model within {box.get('box_size_error_percent', float('nan')):.1f}% of its true size, "
-            f"{track['tracked']} of {track['frames']} frames tracked.\n")
+    return (
+        f"**Calibration and the cookie box** ({report['experiment']['date'][:10]}): chessboard RMS "
+        f"{c['rms_px']:.3f} px, fx {c['fx']:.2f} (OpenCV's reference: 0.409 px, 536.07); the cookie box's "
+        f"model within {box.get('box_size_error_percent', float('nan')):.1f}% of its true size, "
+        f"{track['tracked']} of {track['frames']} frames tracked.\n"
+    )
 
 
 HEADLINES: dict[str, Callable[[dict[str, Any]], str]] = {

@@ -1,28 +1,30 @@
 """Speed (`alcn bench speed`): the speed table of docs/results.md, every ALCN configuration against a raw
 OpenCV DoG, CLAHE and none on the same frames, with the targets table.
 
-Time on 2 shared cores: under a minute with --quick (tiny frames, few repeats: the current table),
-about 25 minutes for the full bench (640x480, 1280x800, 1920x1080, gray and BGR, the video test).
+Time on 2 shared cores: about 25 minutes for the full bench (640x480, 1280x800, 1920x1080, gray and BGR,
+the video test); about 8 minutes for the current table (two sizes, no video test); under a minute with
+--quick (the bench's tiny preset: a smoke test, its ratios mean little).
 
-    python experiments/speed.py --quick   # the table in docs/results.md now
-    python experiments/speed.py           # the full bench (the numbers of the journal)
+    python experiments/speed.py --sizes 640x480,1280x800 --video-frames 0 --budget 3   # the current table
+    python experiments/speed.py                                                          # the full bench
 
-Writes runs/speed/speed.{md,json,png}; keeps docs/reports/speed.json.
+Any option is passed to `alcn bench speed`. Writes runs/speed/speed.{md,json,png}; keeps
+docs/reports/speed.json.
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 
 from _run import RUNS, alcn, keep
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="the bench's quick preset")
-    args = parser.parse_args()
+    if {"-h", "--help"} & set(sys.argv[1:]):
+        print(__doc__)
+        return
     out = RUNS / "speed"
-    alcn("bench", "speed", "--out", str(out), *(["--quick"] if args.quick else []))
+    alcn("bench", "speed", "--out", str(out), *sys.argv[1:])
     keep(out / "speed.json", "speed")
 
 
