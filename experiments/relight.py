@@ -2,7 +2,8 @@
 tables of docs/results.md, on the test scenes (tuned on the training scenes) and leave-one-scene-out.
 
 Data: ../shared/data/webcam (academic research only) and ../shared/data/psm.
-Time on 2 shared cores: about 10 min per seed for the split, 15 min per seed for leave-one-scene-out.
+Time on 2 shared cores at load 11-16 (2026-11-27), one seed: 22 min for the split, 46 min for
+leave-one-scene-out (tuning per fold); more seeds add mostly evaluation time.
 
     python experiments/relight.py                # 1 seed (0): the current tables in docs/results.md
     python experiments/relight.py --seeds 0 1 2  # the 3-seed protocol of the journal's older entries
