@@ -2,7 +2,8 @@
 normalization, mean AUC over 3 objects and 3 seeds (Rad et al. 2017, Sec. 4.3, Fig. 5), at the reduced
 settings the journal's entries used on the shared 2-core machine.
 
-Time on 2 shared cores: about 10 min to render the data, then about 2 hours for the methods below.
+Time on 2 shared cores (an estimate from the journal's runs, not run here): about 10 min to render the data,
+then one to two hours for the methods below.
 
     python experiments/detect.py
 

@@ -1,7 +1,7 @@
 """Few-shot validation (`alcn bench fewshot`): a detector from one image per new object under one light,
 ROC AUC under held-out lights, per draw, each ALCN against the best DoG.
 
-Time on 2 shared cores: about 40 minutes.
+Time on 2 shared cores: about 40 minutes (an estimate, not run here).
 
     python experiments/fewshot.py
 
