@@ -5,18 +5,8 @@ removal of the support plane when it extends beyond the object (:func:`remove_su
 DBSCAN keeping the largest cluster (:func:`largest_cluster`), then the box's frame: the minimal
 oriented bounding box, or, with a known box (a cuboid ``.ply``), the frame of its best-seen face
 (:func:`face_frame`) with the true size matched to the fitted edges (:func:`match_known_size`)
-and placed flush with that face, away from the cameras (:func:`place_known_box`). On the
-cookie-box video (ALCN lite, ORB) the fit went from 26.7% to 2.6-3.3% off: DBSCAN's old radius
-(4 x the median nearest-neighbour distance) cut the lid into 5 clusters and kept 4120 of 6739
-points (two thirds of the lid), and the box then grew from the wrong end of its height. The
-face's normal then came from a RANSAC threshold doubled while it gained inliers, which on the
-lid's noisy points (0.3 cm thick) grew into the sides and tilted the box by 13 degrees
-(:func:`face_frame` now takes the points within 2.5 robust standard deviations of the face's
-least-squares plane), and the box was centred on the points' extent along the face's normal
-whenever that reached the true height, which the hand above the lid did (1.1 cm too high;
-:func:`place_known_box` now hangs it from the face). Measured by ``alcn pose overlay-error``
-on the tracked video (mean distance of the drawn edges to the image's, per frame): 9.7 px
-(worst frame 14.5, mean edge bias 4.0) before, 6.1 px (worst 10.3, bias 2.5) after.
+and placed flush with that face, away from the cameras (:func:`place_known_box`). Why each step is
+there (the cookie box's fit from 26.7% to under 3.3% off): ``docs/journal.md``.
 """
 
 from __future__ import annotations

@@ -11,11 +11,8 @@ Pipeline (hloc-style, one module per stage):
    scale). Each 3D point keeps up to 8 of its track's descriptors: the medoid (the one closest
    to all others) and those farthest from it (:func:`pose.triangulate.representatives`), so that a
    view unlike the typical one (a face seen at a lower angle) still finds a close descriptor; the
-   ratio test at tracking time compares distinct points (:class:`pose.parts.FeaturePartDetector`).
-   Measured on the data engine's sequences (ALCN lite, SIFT, all keypoints of each frame,
-   ground-truth poses): correct matches per frame #1 59 -> 87, #5 29 -> 50, #8 11.5 -> 17 from
-   the medoid alone to every descriptor of the track (the cap of 8 seldom binds: tracks are 6-7
-   views long); frames with >= 12 correct matches #1 23 -> 27, #8 10 -> 19 of 30.
+   ratio test at tracking time compares distinct points (:class:`pose.parts.FeaturePartDetector`). More descriptors per point matched
+   more parts (``docs/journal.md``).
 3. :mod:`pose.box_fit`: the box's size, frame and 8 corners (open3d); an unregistered
    reconstruction is scaled by it.
 4. :func:`build` assembles the model in the object frame; :func:`main` writes ``<out>.npz`` +

@@ -111,9 +111,7 @@ class FeaturePartDetector:
     projected box, grown by ``search_radius``), at most ``n_features`` of them. Without one (first
     frame, tracking lost) the object may be anywhere and *all* keypoints of the frame are used
     (``n_features_global``): the strongest ``n_features`` of a cluttered frame can all lie on the
-    background (measured on the data engine's sequence #5, a checkerboard floor under a grazing
-    light, SIFT: 22-29 of the 2000 strongest keypoints on the box, 4 correct matches per frame;
-    all 12000 keypoints: 400 on the box, 29 correct matches).
+    background (``docs/journal.md``).
 
     Args:
         model: the part model (its ``feature`` names the OpenCV feature used to build it).
@@ -124,16 +122,12 @@ class FeaturePartDetector:
         ratio: Lowe's ratio-test threshold.
         search_radius: guided matching window (pixels) around the prior pose's projections.
         max_candidates: at most this many model points (those projected nearest to a keypoint in
-            the window) are compared with it. A dense model (the cookie box's: 7000 points, 4.8
-            descriptors each) puts 300 points in every window: 0.5 s per frame for all of them,
-            35 ms for 64. On the data engine's sequences (800 points, ~70 per window) 64 changed
-            3 of 240 frames (ALCN lite, SIFT) and none without normalization; 32 lost 27 frames
-            (fewer competitors in the ratio test let wrong matches through).
+            the window) are compared with it. 64 bounds the time on a dense model;
+            fewer let wrong matches through the ratio test (``docs/journal.md``).
         min_guided: fewer guided matches than this: match globally instead.
         cross_check: keep a global match only when the keypoint is also the nearest of one of
-            the point's descriptors among the image's keypoints (mutual nearest neighbours). For
-            a small model in a large image: on Middlebury's temple (a 102-point model, 8000
-            keypoints per view) it raised the share of correct matches from 3-7% to 8-25%.
+            the point's descriptors among the image's keypoints (mutual nearest neighbours). It helps
+            a small model in a large image (``docs/journal.md``).
     """
 
     uses_prior = True

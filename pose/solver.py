@@ -6,34 +6,22 @@ predicted from the previous frames (:class:`PoseTracker`) is a prior: the corres
 agree with it are refined directly, and the full RANSAC runs only when too few do. A frame with
 too few inliers is reported *lost* (no pose) rather than given a wrong one; :class:`PoseTracker`
 logs when tracking is lost and recovered.
-Measured on the data engine's sequences: refining from the prior alone kept wrong local minima
-(10-14 px errors with half the matches as inliers) after large inter-frame motions, hence the
-competition with RANSAC below a high inlier ratio.
+Refining from the prior alone kept wrong local minima after large motions, hence the competition
+with RANSAC (measurements: ``docs/journal.md``).
 
 Parts on one face of a box seen from afar fit two poses almost equally well (the two minima of
 a plane under weak perspective): every refinement therefore also starts from the two IPPE poses
 of its inliers' best-fitting plane and keeps the lowest MSAC cost, or with a prior, among the
 poses whose costs are nearly equal, the one closest to the prior. A pose whose inliers cover
-only a small part of the object's outline is rejected. On the data engine's sequences #1-#8
-(ORB, no normalization, the same part model) these three changes raised the correct poses from
-73.3 66.7 60.0 100 0 76.7 23.3 0 % to 80.0 63.3 76.7 100 0 80.0 26.7 0 %.
+only a small part of the object's outline is rejected.
 
 Correspondences that come with directions (the learned detector's edge middles, found well
 across their edge and poorly along it) get a last Gauss-Newton refinement of the accepted pose in
 which the error along each direction counts :attr:`PoseSolver.along_sigma` times less
 (:data:`ALONG_SIGMA`): the pose the detector's uncertainty makes most likely.
 
-Default RANSAC setting (``method="usac_default"``, 4 px threshold), chosen on evidence
-(``examples/pnp_methods.py``; 2-core CPU shared with other jobs):
-
-* cookie-box video, OpenCV tutorial model (few, noisy matches): USAC-default posed the most
-  frames (224 of 455, vs 200-213 for MAGSAC++, SQPnP, EPnP and AP3P in the classical loop) at
-  4.3 ms per frame without prior and 2.1 ms with it (others 5.5-17.6 ms);
-* cookie-box video, model built by ``alcn pose build`` (500+ inliers per frame): every method
-  posed all frames with the same error (1.24 px); with the prior 1.3-1.7 ms for all, without it
-  classical RANSAC is faster (1.5 ms) than USAC-default (7.8 ms);
-* data engine sequences #1 and #6: USAC-default matched MAGSAC++ and USAC-accurate in correct
-  poses; 4 px gave slightly more correct poses than 6 px.
+Default RANSAC setting: ``method="usac_default"``, 4 px threshold (it posed the most frames of the
+cookie-box video; ``examples/pnp_methods.py`` compares the methods, ``docs/journal.md`` has the numbers).
 """
 
 from __future__ import annotations
@@ -65,16 +53,8 @@ METHODS: dict[str, int] = {
 }
 
 #: How many times less precisely the learned detector finds the middle of an edge along the edge
-#: than across it (:func:`pose.box.edge_directions`). Measured with networks of the gain ALCN, the
-#: DoG and no normalization (4000 steps of 64 crops) against the true projections: median errors
-#: 0.9-1.3 px along and 0.4-0.5 px across on the data engine's #1, 2.4-3.1 and 0.7-0.8 px on the
-#: held-out scene's #1; the corners' and face centres' errors are alike on #1 (0.9-1.0 px: one
-#: sigma for both). With the last refinement that weighs the errors along the edges down by 3, the
-#: tracker's median projection error of the box's corners fell from 1.20 to 1.09 px over #1-#8 (15
-#: networks of ``runs/big``: 5 normalizations, 3 seeds) and from 1.94 to 1.61 px on the held-out
-#: #1 (12 networks), the poses within 5 px rose from 3401 to 3425 of 3600 and from 329 to 335 of
-#: 360 (``runs/s13``); weighing by 2 or 5 instead (post hoc, on the poses found) changed the
-#: median by 0.01 px.
+#: than across it (:func:`pose.box.edge_directions`); measured on the rendered sequences (median errors
+#: about 1 px along and 0.4 px across; ``docs/journal.md``).
 ALONG_SIGMA = 3.0
 
 
@@ -162,9 +142,7 @@ class PoseSolver:
             corners of its box), or ``None``; with it, a pose whose inliers' convex hull in the
             image covers less than ``min_coverage`` of the hull of the projected outline is
             rejected: parts clustered in a small part of the object leave the pose poorly
-            constrained (measured on the data engine's sequences, ORB, no normalization: of 20
-            accepted poses off by more than 15 px, 9 covered less than 15%; of 124 correct
-            ones, 1).
+            constrained (``docs/journal.md``).
         min_coverage: see ``outline``.
         ambiguity_tolerance: with a prior pose, candidate poses whose MSAC cost is within this
             fraction of the lowest are ambiguous; the one closest to the prior is chosen.
@@ -259,8 +237,7 @@ class PoseSolver:
 
         Parts on one face of a box seen from afar leave two poses with nearly the same
         reprojection error: the refinement from RANSAC's minimal sample (or from the previous
-        frame) often falls in the wrong one (measured: 35 px errors of the box's corners on the
-        data engine's sequence #3 with 52 correct inliers)."""
+        frame) often falls in the wrong one."""
         start = self._refine(obj, img, rvec, tvec)
         return self._select(obj, img, [start] + [self._refine(obj, img, r, t)
                                                  for r, t in self._planar_alternatives(obj, img, start[2])], prior)
@@ -428,19 +405,10 @@ class PoseTracker:
     around the predicted pose (guided matching, with a much higher share of correct matches than
     matching the whole frame) instead of falling back to the whole frame at once.
 
-    Measured on the data engine's sequences #1-#8 (SIFT, the same part models; % correct poses):
-    the previous pose as prior gave ALCN lite 96.7 90.0 100 100 96.7 96.7 80.0 50.0 and no
-    normalization 93.3 86.7 90.0 100 93.3 80.0 63.3 13.3; the constant-velocity prediction
-    100 96.7 100 100 96.7 100 96.7 76.7 and 93.3 93.3 100 100 100 80.0 83.3 10.0; coasting 3 lost
-    frames changed only #7 without normalization (83.3 -> 93.3).
-
     Each frame (:meth:`step`) is first searched around the prediction, ``wide_search`` times
     wider than usual when the motion is unknown or extrapolated over lost frames, then, when no
-    pose comes of it, in the whole frame. On #8 (overexposed; the box moves 42 px per frame at
-    the start), with a pose near the prediction needing fewer inliers
-    (:data:`pose.track.MIN_INLIERS_NEAR_PRIOR`), the wide search raised ALCN lite from 76.7 to
-    83.3% (the first frames after the first pose) and changed no other sequence, with or without
-    normalization; a wide search at every frame (35 px) cost #5 a frame and a third of the speed.
+    pose comes of it, in the whole frame; the wide search helps after a fast first motion
+    (``docs/journal.md``).
 
     ``events`` collects ``(frame_index, "lost" | "recovered", reason)`` tuples, also logged.
     """
@@ -489,9 +457,7 @@ class PoseTracker:
 
         When the guided search around the prediction gives no pose, the whole frame is searched
         again before the frame is declared lost: after a single known pose (no velocity yet) or
-        a sudden change of motion the object can leave the search window (measured: 42 px per
-        frame at the start of the data engine's sequence #8 against a 20 px window; the guided
-        matches there were all wrong).
+        a sudden change of motion the object can leave the search window.
 
         When that gives no pose either, the detector may propose one from its own evidence
         (:meth:`pose.parts.PartDetector.propose`; the learned detector's scores where a pose

@@ -19,12 +19,8 @@ labelled background (:func:`shifted_negatives`), meant to penalize settings that
 coarse structure (large sigmas).
 
 It is quick (no network is trained) and deterministic for a seed. It is only a proxy, and
-on the data engine's default benchmark it misled: it preferred coarse settings (DoG 1.5/12
-and 2/12 with a wider grid, 2/5 within the grid below; SLCN and DLCN at the largest sigma).
-DoG 0.5/1.5 scored 0.04-0.14 higher in mean AUC than the DoG it chose, for 1 and 10 real
-images and both input policies; for SLCN and DLCN the chosen sigmas (6-12) scored lower than
-sigma 2 in 5 of 8 cases, equal in 2 and higher in 1. The benchmark therefore runs it only on
-request (``alcn bench detect --tune``).
+on the data engine's default benchmark it preferred coarse settings that detected worse than the
+defaults (``docs/journal.md``), so the benchmark runs it only on request (``alcn bench detect --tune``).
 """
 
 from __future__ import annotations

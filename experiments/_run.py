@@ -1,0 +1,61 @@
+"""Shared by the experiment scripts: run `alcn` commands and keep their JSON reports.
+
+An experiment writes its whole output under ``runs/<name>/`` (ignored by git) and copies each small
+JSON report to ``docs/reports/<name>.json`` (tracked), adding an ``experiment`` record (the script,
+its arguments and the date, UTC). ``experiments/report.py`` builds ``docs/results.md`` from those
+copies alone.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import shlex
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RUNS = ROOT / "runs"
+REPORTS = ROOT / "docs" / "reports"
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
+sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
+
+
+def alcn(*argv: str) -> None:
+    """Run ``alcn ARGV...`` in this process; exit with its status if it fails."""
+    from alcn_cv.cli import main
+
+    sys.argv = ["alcn", *argv]  # the reports record sys.argv as their command
+    status = main(list(argv))
+    if status:
+        raise SystemExit(f"alcn {shlex.join(argv)}: exit status {status}")
+
+
+def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
+    """Copy the JSON ``report`` to ``docs/reports/<name>.json`` with the experiment's record (the script,
+    its arguments, and the date the report was written, UTC), without the top-level keys ``drop``
+    (per-frame details: the copy stays small; the whole report stays where the run wrote it). The run's
+    output folder is written ``OUT`` and the shared data ``../shared/data``, so that no tracked file
+    cites the ignored output folder or a machine's paths."""
+    report = Path(report)
+    data = {k: v for k, v in json.loads(report.read_text(encoding="utf-8")).items() if k not in drop}
+    written = datetime.datetime.fromtimestamp(report.stat().st_mtime, datetime.UTC)
+    data["experiment"] = {
+        "script": Path(sys.modules["__main__"].__file__).resolve().relative_to(ROOT).as_posix(),
+        "argv": sys.orig_argv[2:] if hasattr(sys, "orig_argv") else [],
+        "date": written.strftime("%Y-%m-%d %H:%M UTC"),
+    }
+    text = json.dumps(data, indent=1) + "\n"
+    for path, alias in (
+        (RUNS, "OUT"),
+        (SHARED_DATA.resolve(), "../shared/data"),
+        (SHARED_DATA, "../shared/data"),
+        (ROOT, "."),
+    ):
+        text = text.replace(str(path), alias)
+    REPORTS.mkdir(parents=True, exist_ok=True)
+    target = REPORTS / f"{name}.json"
+    target.write_text(text, encoding="utf-8")
+    print(f"kept {target.relative_to(ROOT)}")
+    return target

@@ -1,0 +1,104 @@
+"""Calibration and the cookie box: the camera from OpenCV's chessboard photographs (against OpenCV's own
+reference, RMS 0.409 px, fx 536.07), then the cookie box's part model built from its video and tracked
+in every frame (the box's fitted size against its true 18.9 x 25.8 x 7.5 cm, the frames posed).
+
+Data: ../shared/data/chessboard and ../shared/data/cookie_box (Apache-2.0, OpenCV's samples).
+Time on 2 shared cores: 15 min at load 15 (2026-11-27; calibration seconds, the build most of it, tracking
+5.5 min); about 3 min on an idle machine.
+
+    python experiments/calibration.py
+
+Writes runs/calibration/{calib,cookie_box}/ and runs/calibration/calibration.json (the numbers of both);
+keeps docs/reports/calibration.json.
+"""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+from _run import RUNS, SHARED_DATA, alcn, keep
+
+
+def main() -> None:
+    from alcn_cv.report import machine
+
+    out = RUNS / "calibration"
+    calib, box = out / "calib", out / "cookie_box"
+    calib_argv = [
+        "calib",
+        "camera",
+        "--images",
+        str(SHARED_DATA / "chessboard"),
+        "--board",
+        "chessboard",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square",
+        "25",
+        "--out",
+        str(calib),
+    ]
+    build_argv = [
+        "pose",
+        "build",
+        str(SHARED_DATA / "cookie_box" / "box.mp4"),
+        str(box / "model.npz"),
+        "--K",
+        "1578.48",
+        "1771.81",
+        "320",
+        "240",
+        "--video-step",
+        "10",
+        "--max-frames",
+        "46",
+        "--motion-mask",
+        "--n-features",
+        "3000",
+        "--box-ply",
+        str(SHARED_DATA / "cookie_box" / "box.ply"),
+        "--refine-focal",
+    ]
+    track_argv = [
+        "pose",
+        "track",
+        str(box / "model.npz"),
+        str(SHARED_DATA / "cookie_box" / "box.mp4"),
+        str(box / "poses.json"),
+    ]
+    for argv in (calib_argv, build_argv, track_argv):
+        alcn(*argv)
+    fs = cv2.FileStorage(str(calib / "camera.yaml"), cv2.FILE_STORAGE_READ)
+    K = fs.getNode("camera_matrix").mat()
+    rms = fs.getNode("rms").real()
+    fs.release()
+    track = json.loads((box / "poses_info.json").read_text(encoding="utf-8"))
+    header = json.loads(str(np.load(box / "model.npz")["header"]))
+    report = {
+        "benchmark": "calibration",
+        "commands": [" ".join(["alcn", *a]) for a in (calib_argv, build_argv, track_argv)],
+        "machine": machine(),
+        "calibration": {
+            "rms_px": rms,
+            "fx": float(K[0, 0]),
+            "fy": float(K[1, 1]),
+            "cx": float(K[0, 2]),
+            "cy": float(K[1, 2]),
+        },
+        "cookie_box": {
+            "registered_images": header["extra"]["registered_images"],
+            "refined_fx": header["extra"]["K"][0][0],
+            "box_size_error_percent": 100 * header["box_fit"]["mean_abs_relative_size_error"],
+        },
+        "tracking": track["summary"],
+    }
+    (out / "calibration.json").write_text(json.dumps(report, indent=1), encoding="utf-8")
+    keep(out / "calibration.json", "calibration")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,42 @@
+"""Few-shot validation (`alcn bench fewshot`): a detector from one image per new object under one light,
+ROC AUC under held-out lights, per draw, each ALCN against the best DoG.
+
+Time on 2 shared cores: about 40 minutes (an estimate, not run here).
+
+    python experiments/fewshot.py
+
+Writes runs/fewshot/fewshot.{md,json,png}; keeps docs/reports/fewshot.json.
+"""
+
+from __future__ import annotations
+
+from _run import RUNS, alcn, keep
+
+METHODS = "none,dog,dog:sigma1=1:sigma2=2,dlcn,alcn,alcn:model=gain-lite,alcn:model=lite"
+
+
+def main() -> None:
+    out = RUNS / "fewshot"
+    alcn(
+        "bench",
+        "fewshot",
+        "--out",
+        str(out),
+        "--methods",
+        METHODS,
+        "--policy",
+        "raw,local",
+        "--draws",
+        "3",
+        "--per-image",
+        "100",
+        "--epochs",
+        "5",
+        "--test-windows",
+        "1500",
+    )
+    keep(out / "fewshot.json", "fewshot")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,68 @@
+"""The README's figure: one fixed outdoor camera under two real lights (rows), normalized by several
+methods (columns), each through its own ``apply()`` with its default parameters.
+
+Data: a scene of ../shared/data/webcam (the Webcam data set of TILDE, Verdie et al., CVPR 2015, from
+AMOS: academic research only; cite TILDE and AMOS). The frames are the scene's darkest and brightest
+by mean intensity. Time: a few seconds.
+
+    python experiments/figure.py                          # docs/figure.png (mexico, the test scene)
+    python experiments/figure.py --scene courbevoie --out runs/figure.png
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import cv2
+import numpy as np
+from _run import ROOT, SHARED_DATA
+
+METHODS = {"input": "none", "CLAHE": "clahe", "DoG": "dog", "Tan-Triggs": "tantriggs", "ALCN": "alcn"}
+TILE_WIDTH = 256
+
+
+def frames(scene: Path) -> list[np.ndarray]:
+    """The scene's darkest and brightest frames (mean intensity), gray uint8."""
+    images = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in sorted(scene.glob("*.jpg"))]
+    if not images:
+        raise SystemExit(f"no frames in {scene}")
+    order = np.argsort([img.mean() for img in images])
+    return [images[order[0]], images[order[-1]]]
+
+
+def label(tile: np.ndarray, text: str) -> np.ndarray:
+    out = cv2.copyMakeBorder(tile, 22, 0, 0, 0, cv2.BORDER_CONSTANT, value=255)
+    cv2.putText(out, text, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.5, 0, 1, cv2.LINE_AA)
+    return out
+
+
+def figure(scene: Path) -> np.ndarray:
+    import alcn_cv
+
+    rows = []
+    for frame in frames(scene):
+        height = round(frame.shape[0] * TILE_WIDTH / frame.shape[1])
+        small = cv2.resize(frame, (TILE_WIDTH, height), interpolation=cv2.INTER_AREA)
+        tiles = []
+        for title, name in METHODS.items():
+            out = alcn_cv.create(name).apply(frame)
+            tile = cv2.resize(out, (TILE_WIDTH, height), interpolation=cv2.INTER_AREA) if name != "none" else small
+            tiles.append(label(tile, title))
+        rows.append(np.hstack([np.pad(t, ((2, 2), (2, 2)), constant_values=255) for t in tiles]))
+    return np.vstack(rows)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scene", default="mexico", help="a scene of ../shared/data/webcam (default mexico)")
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "figure.png", help="PNG to write")
+    args = parser.parse_args()
+    image = figure(SHARED_DATA / "webcam" / args.scene)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(args.out), image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    print(f"wrote {args.out} ({args.out.stat().st_size // 1024} KB)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,339 @@
+"""Build docs/results.md from the JSON reports in docs/reports/ (never edit results.md by hand).
+
+Each report is one experiment's JSON (copied there by the experiment scripts of this folder, with an
+``experiment`` record: script, arguments, date). Each table says the command that made it, the
+machine and the date. Takes a second; tests/test_docs.py checks that docs/results.md equals its output.
+
+    python experiments/report.py            # rewrite docs/results.md and the README's results block
+    python experiments/report.py --check    # exit 1 if either differs from what it would write
+
+The README's block between ``<!-- results:begin -->`` and ``<!-- results:end -->`` holds the headline
+rows of the same reports (:func:`headlines`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+REPORTS = ROOT / "docs" / "reports"
+RESULTS = ROOT / "docs" / "results.md"
+README = ROOT / "README.md"
+BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
+#: The rows of the real-light tables the README shows (each method's better row of default and tuned).
+#: The first targets of the speed report the README shows (the ratios to a raw DoG, the frame rate, BGR).
+SPEED_HEADLINE_TARGETS = 6
+HEADLINE_METHODS = ("none", "clahe", "dog", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
+
+#: Said under every leave-one-scene-out table: the bench tunes the hand-made methods per fold but runs ALCN's
+#: shipped files as they are.
+LOO_NOTE = (
+    "The ALCN rows are the shipped files, trained on courbevoie, frankfurt and panorama: only mexico is "
+    "held out for them (a Normalizer trained per fold scored 72.7 on 2026-11-24, docs/journal.md).\n\n"
+)
+RELIGHT_METRICS = {
+    "identification": "identification",
+    "matching_sift": "matching SIFT",
+    "matching_orb": "matching ORB",
+    "pose_sift": "pose SIFT",
+    "pose_orb": "pose ORB",
+    "correct_sift": "correct SIFT",
+    "correct_orb": "correct ORB",
+}
+
+
+def table(headers: Sequence[str], rows: Sequence[Sequence[Any]], digits: int = 1) -> str:
+    """A Markdown table; floats with ``digits`` decimals, ``None`` as ``-``."""
+
+    def cell(v: Any) -> str:
+        if v is None:
+            return "-"
+        if isinstance(v, float):
+            return f"{v:.{digits}f}"
+        return str(v).replace("|", "\\|")
+
+    lines = ["| " + " | ".join(headers) + " |", "|" + "|".join("---" for _ in headers) + "|"]
+    return "\n".join(lines + ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]) + "\n"
+
+
+def describe(machine: dict[str, Any] | None) -> str:
+    """One line of a report's ``machine`` record: CPU, cores, load, versions, GPU."""
+    if not machine:
+        return "not recorded"
+    cpu = machine.get("cpu_model", machine.get("processor", "?"))
+    parts = [f"{cpu}, {machine.get('cpus_available', machine.get('cpu_count', '?'))} CPUs"]
+    if "load_average_1_5_15" in machine:
+        parts.append("load " + ", ".join(str(v) for v in machine["load_average_1_5_15"]))
+    versions = [f"{k} {machine[k]}" for k in ("python", "numpy", "opencv", "torch") if machine.get(k)]
+    parts.append(", ".join(versions))
+    parts.append(f"GPU: {machine.get('cuda') or 'none'}")
+    return "; ".join(parts)
+
+
+def provenance(report: dict[str, Any]) -> str:
+    """The lines under a table's title: how to rerun it, the command, the machine and the date."""
+    exp = report.get("experiment", {})
+    rerun = " ".join(["python", exp.get("script", "?"), *exp.get("argv", [])])
+    commands = report.get("commands") or [report.get("command")]
+    machine = report.get("machine") or report.get("machine_before")
+    return (
+        f"Rerun: `{rerun}`. Command: " + "; ".join(f"`{c}`" for c in commands if c) + ".  \n"
+        f"Machine: {describe(machine)}.  \nDate: {exp.get('date', 'not recorded')}.\n"
+    )
+
+
+def _mean_std(summary: dict[str, Any] | None, seeds: int) -> str | None:
+    if not summary:
+        return None
+    return f"{summary['mean']:.1f}" + (f" ± {summary['std']:.1f}" if seeds > 1 else "")
+
+
+def relight(report: dict[str, Any]) -> str:
+    """Headline rows of ``alcn bench relight``: every metric's mean over the evaluated scenes."""
+    seeds = len(report["settings"]["seeds"])
+    loo = report["split"]["mode"] == "leave-one-out"
+    metrics = [m for m in RELIGHT_METRICS if any(m in r.get("mean_test", {}) for r in report["methods"].values())]
+    rows = [
+        [label] + [_mean_std(r.get("mean_test", {}).get(m), seeds) for m in metrics]
+        for label, r in report["methods"].items()
+    ]
+    scenes = ", ".join(report["split"]["test"])
+    title = (
+        "Real light, leave-one-scene-out (each scene with parameters tuned on the others)"
+        if loo
+        else f"Real light, test scenes (tuned on {', '.join(report['split']['train'])})"
+    )
+    note = (LOO_NOTE if loo else "") + (
+        f"Mean over the scenes {scenes}; {seeds} seed{'s' if seeds > 1 else ''} "
+        f"({', '.join(str(s) for s in report['settings']['seeds'])}). Identification and matching in %, "
+        "pose in % of frame pairs, correct = correct matches per pair.\n"
+    )
+    return f"## {title}\n\n{provenance(report)}\n{note}\n" + table(
+        ["method"] + [RELIGHT_METRICS[m] for m in metrics], rows
+    )
+
+
+def _targets(report: dict[str, Any]) -> list[dict[str, Any]]:
+    targets = report.get("targets") or []
+    return targets.get("summary", []) if isinstance(targets, dict) else targets
+
+
+def _met(target: dict[str, Any]) -> str:
+    return {True: "met", False: "missed"}.get(target.get("met"), "-")
+
+
+def speed(report: dict[str, Any]) -> str:
+    """``alcn bench speed``: its targets, then the time of every method on every frame."""
+    out = f"## Speed\n\n{provenance(report)}\n"
+    rows = [
+        [t.get("target", t.get("name")), t.get("measured"), t.get("goal"), _met(t), t.get("note", "")]
+        for t in _targets(report)
+    ]
+    if rows:
+        out += "Targets:\n\n" + table(["target", "measured", "goal", "", "note"], rows, digits=2) + "\n"
+    rows = [
+        [
+            r.get("method"),
+            f"{r['width']}x{r['height']}" if "width" in r else _size(r.get("size")),
+            r.get("colour"),
+            r.get("median_ms"),
+            r.get("fps"),
+            r.get("ratio_to_dog"),
+        ]
+        for r in report.get("rows", [])
+    ]
+    return (
+        out + "Time per frame:\n\n" + table(["method", "size", "colour", "median ms", "fps", "x dog"], rows, digits=2)
+    )
+
+
+def _size(value: Any) -> Any:
+    return "x".join(str(v) for v in value) if isinstance(value, list) else value
+
+
+def calibration(report: dict[str, Any]) -> str:
+    """Calibration on OpenCV's chessboard and the cookie box's build and tracking."""
+
+    def exact(v: Any) -> Any:
+        return f"{v:.3f}" if isinstance(v, float) else v
+
+    rows = [[f"calibration {k}", exact(v)] for k, v in report["calibration"].items()]
+    rows += [[f"cookie box {k}", exact(v)] for k, v in report.get("cookie_box", {}).items()]
+    rows += [[f"tracking {k}", exact(v)] for k, v in report["tracking"].items() if not isinstance(v, (dict, list))]
+    return f"## Calibration and the cookie box\n\n{provenance(report)}\n" + table(["quantity", "value"], rows)
+
+
+def columns_table(report: dict[str, Any], title: str) -> str:
+    """A report with ``columns`` and a ``table`` of rows (``alcn pose eval``, ``alcn pose planar``)."""
+    spread = report.get("spread") or {}
+    rows = []
+    for label, values in report["table"].items():
+        cells = []
+        for c in report["columns"]:
+            v = values.get(c)
+            s = spread.get(label, {}).get(c)
+            cells.append(None if v is None else f"{v:.1f}" + (f" ± {s:.1f}" if s is not None else ""))
+        rows.append([label] + cells)
+    return f"## {title}\n\n{provenance(report)}\n% of frames posed within 5 px.\n\n" + table(
+        ["method", *report["columns"]], rows
+    )
+
+
+def summary_table(report: dict[str, Any], title: str, key: str | None = "summary") -> str:
+    """The numbers of a report's ``key`` (every entry but the records when None), one row per entry
+    (``alcn bench detect``, ``alcn bench fewshot``, Middlebury)."""
+    flat: dict[str, dict[str, Any]] = {}
+
+    def walk(prefix: str, value: Any, row: dict[str, Any]) -> None:
+        if isinstance(value, dict):
+            for k, v in value.items():
+                walk(f"{prefix} {k}".strip(), v, row)
+        elif isinstance(value, (int, float)) and not isinstance(value, bool):
+            row[prefix] = float(value)
+
+    records = {"command", "commands", "machine", "experiment"}
+    entries = report[key] if key else {k: v for k, v in report.items() if k not in records and isinstance(v, dict)}
+    for method, value in entries.items():
+        walk("", value, flat.setdefault(method, {}))
+    keys = sorted({k for row in flat.values() for k in row})
+    return f"## {title}\n\n{provenance(report)}\n" + table(
+        ["method", *keys], [[m] + [r.get(k) for k in keys] for m, r in flat.items()]
+    )
+
+
+def relight_headline(report: dict[str, Any]) -> str:
+    """The README's rows of a real-light report: :data:`HEADLINE_METHODS`, each at the better of its
+    default and tuned rows by identification."""
+    seeds = len(report["settings"]["seeds"])
+    metrics = ["identification", "matching_sift", "matching_orb", "pose_sift", "pose_orb"]
+    rows = []
+    for name in HEADLINE_METHODS:
+        candidates = [
+            (label, r)
+            for label, r in report["methods"].items()
+            if label in (name, f"{name} (tuned)") and "identification" in r.get("mean_test", {})
+        ]
+        if candidates:
+            label, r = max(candidates, key=lambda c: c[1]["mean_test"]["identification"]["mean"])
+            rows.append([label] + [_mean_std(r["mean_test"].get(m), seeds) for m in metrics])
+    loo = report["split"]["mode"] == "leave-one-out"
+    title = "leave-one-scene-out" if loo else f"test scenes {', '.join(report['split']['test'])}"
+    return (
+        f"**Real light** ({title}; `alcn bench relight`, {seeds} seed{'s' if seeds > 1 else ''}, "
+        f"{report['experiment']['date'][:10]}):\n\n"
+        + (LOO_NOTE if loo else "")
+        + table(["method"] + [RELIGHT_METRICS[m] for m in metrics], rows)
+    )
+
+
+def speed_headline(report: dict[str, Any]) -> str:
+    """The README's rows of the speed report: its targets."""
+    rows = [[t.get("target", t.get("name")), t.get("measured"), t.get("goal"), _met(t)] for t in _targets(report)]
+    rows = rows[:SPEED_HEADLINE_TARGETS]
+    argv = " ".join(report["experiment"]["argv"])
+    return (
+        f"**Speed** (`python experiments/speed.py {argv}`, {report['experiment']['date'][:10]}; load average "
+        f"{', '.join(str(v) for v in (report.get('machine_before') or {}).get('load_average_1_5_15', []))} "
+        "on 2 shared cores):\n\n" + table(["target", "measured", "goal", ""], rows, digits=2)
+    )
+
+
+def calibration_headline(report: dict[str, Any]) -> str:
+    """The README's line of the calibration report."""
+    c, box, track = report["calibration"], report.get("cookie_box", {}), report["tracking"]
+    return (
+        f"**Calibration and the cookie box** ({report['experiment']['date'][:10]}): chessboard RMS "
+        f"{c['rms_px']:.3f} px, fx {c['fx']:.2f} (OpenCV's reference: 0.409 px, 536.07); the cookie box's "
+        f"model within {box.get('box_size_error_percent', float('nan')):.1f}% of its true size, "
+        f"{track['tracked']} of {track['frames']} frames tracked.\n"
+    )
+
+
+HEADLINES: dict[str, Callable[[dict[str, Any]], str]] = {
+    "relight_split": relight_headline,
+    "relight_leave_one_out": relight_headline,
+    "speed": speed_headline,
+    "calibration": calibration_headline,
+}
+
+
+def _reports(reports: Path) -> dict[str, dict[str, Any]]:
+    return {p.stem: json.loads(p.read_text(encoding="utf-8")) for p in sorted(reports.glob("*.json"))}
+
+
+def headlines(reports: Path = REPORTS) -> str:
+    """The README's results block: the headline rows of the reports that have them."""
+    found = _reports(reports)
+    return "\n".join(HEADLINES[name](found[name]) for name in HEADLINES if name in found)
+
+
+def readme_with_headlines(readme: str, reports: Path = REPORTS) -> str:
+    """``readme`` with the text between :data:`BEGIN` and :data:`END` replaced by :func:`headlines`."""
+    start, end = readme.index(BEGIN) + len(BEGIN), readme.index(END)
+    return readme[:start] + "\n" + headlines(reports) + readme[end:]
+
+
+RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
+    "relight_split": relight,
+    "relight_leave_one_out": relight,
+    "speed": speed,
+    "detect": lambda r: summary_table(r, "Rendered detection (mean AUC)"),
+    "fewshot": lambda r: summary_table(r, "Few-shot validation (ROC AUC)"),
+    "pose_table1_features": lambda r: columns_table(r, "Pose Table 1, SIFT parts (rendered sequences)"),
+    "pose_table1_corners": lambda r: columns_table(r, "Pose Table 1, corner CNN (rendered sequences)"),
+    "pose_table1_control": lambda r: columns_table(r, "Pose Table 1, corner CNN under the training light"),
+    "pose_table1_heldout": lambda r: columns_table(r, "Pose Table 1, corner CNN, held-out scene"),
+    "pose_middlebury": lambda r: summary_table(r, "Pose on Middlebury's real photographs (views posed)", key=None),
+    "pose_planar_features": lambda r: columns_table(r, "Pose on real light, 500 SIFT keypoints"),
+    "pose_planar_corners": lambda r: columns_table(r, "Pose on real light, corner CNN"),
+    "calibration": calibration,
+}
+
+
+def build(reports: Path = REPORTS) -> str:
+    """The text of docs/results.md from the JSON files in ``reports``, in the order of :data:`RENDERERS`."""
+    found = _reports(reports)
+    unknown = sorted(set(found) - set(RENDERERS))
+    if unknown:
+        raise SystemExit(f"no renderer for docs/reports/{unknown[0]}.json (add one to experiments/report.py)")
+    sections = [RENDERERS[name](found[name]) for name in RENDERERS if name in found]
+    missing = [name for name in RENDERERS if name not in found]
+    head = (
+        "# Results\n\nGenerated by `python experiments/report.py` from the JSON reports in `docs/reports/`; do not "
+        "edit by hand. Each table gives the script that reruns it, the product command it ran, the machine and "
+        "the date. History and older measurements: [journal.md](journal.md).\n"
+    )
+    if missing:
+        head += (
+            "\nNot run for this page (long; their scripts are in `experiments/` and the journal keeps the numbers "
+            "as measured then): " + ", ".join(f"`{m}`" for m in missing) + ".\n"
+        )
+    return "\n".join([head, *sections])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--check", action="store_true", help="compare only; exit 1 on a difference")
+    args = parser.parse_args()
+    readme = README.read_text(encoding="utf-8")
+    wanted = {RESULTS: build(), README: readme_with_headlines(readme)}
+    stale = [path for path, text in wanted.items() if not path.exists() or path.read_text(encoding="utf-8") != text]
+    if args.check:
+        print(
+            "up to date"
+            if not stale
+            else "out of date: " + ", ".join(p.name for p in stale) + " (run python experiments/report.py)"
+        )
+        sys.exit(1 if stale else 0)
+    for path in stale:
+        path.write_text(wanted[path], encoding="utf-8")
+        print(f"wrote {path.relative_to(ROOT)}")
+
+
+if __name__ == "__main__":
+    main()

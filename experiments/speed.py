@@ -1,0 +1,32 @@
+"""Speed (`alcn bench speed`): the speed table of docs/results.md, every ALCN configuration against a raw
+OpenCV DoG, CLAHE and none on the same frames, with the targets table.
+
+Time on 2 shared cores: about 25 minutes for the full bench (640x480, 1280x800, 1920x1080, gray and BGR,
+the video test); 17 minutes for the current table at load 15 (two sizes, no video test; 2026-11-27); under a minute with
+--quick (the bench's tiny preset: a smoke test, its ratios mean little).
+
+    python experiments/speed.py --sizes 640x480,1280x800 --video-frames 0 --budget 3   # the current table
+    python experiments/speed.py                                                          # the full bench
+
+Any option is passed to `alcn bench speed`. Writes runs/speed/speed.{md,json,png}; keeps
+docs/reports/speed.json.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from _run import RUNS, alcn, keep
+
+
+def main() -> None:
+    if {"-h", "--help"} & set(sys.argv[1:]):
+        print(__doc__)
+        return
+    out = RUNS / "speed"
+    alcn("bench", "speed", "--out", str(out), *sys.argv[1:])
+    keep(out / "speed.json", "speed")
+
+
+if __name__ == "__main__":
+    main()

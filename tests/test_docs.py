@@ -1,0 +1,104 @@
+"""The documentation is rebuilt, not edited: docs/results.md from docs/reports/, no tracked file citing the
+ignored runs/ folder outside experiments/, and every path the README and docs/ cite exists in git."""
+
+from __future__ import annotations
+
+import fnmatch
+import importlib.util
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+IGNORED_RUNS = "runs" + "/"  # written split, so that this file does not cite it
+
+
+def _tracked() -> list[str]:
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout")
+    out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    return [line for line in out.splitlines() if (ROOT / line).exists()]
+
+
+def _report_module():
+    spec = importlib.util.spec_from_file_location("experiments_report", ROOT / "experiments" / "report.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_results_md_is_what_the_report_script_writes() -> None:
+    report = _report_module()
+    assert (ROOT / "docs" / "results.md").read_text(encoding="utf-8") == report.build(), (
+        "docs/results.md is out of date: run python experiments/report.py"
+    )
+
+
+def test_report_script_rejects_a_report_it_cannot_render(tmp_path: Path) -> None:
+    (tmp_path / "mystery.json").write_text("{}", encoding="utf-8")
+    with pytest.raises(SystemExit, match="mystery"):
+        _report_module().build(tmp_path)
+
+
+def test_no_tracked_file_cites_the_ignored_runs_folder() -> None:
+    offenders = []
+    for name in _tracked():
+        if name.startswith("experiments/") or name == ".gitignore" or name == "tests/test_docs.py":
+            continue
+        path = ROOT / name
+        if path.suffix in {".npz", ".onnx", ".png", ".jpg", ".mp4"}:
+            continue
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError:
+            continue
+        if re.search(r"(?<![\w.])" + re.escape(IGNORED_RUNS), text):
+            offenders.append(name)
+    assert not offenders, f"cite the ignored runs folder (only experiments/ may): {offenders}"
+
+
+def _cited_paths(text: str, top_level: set[str]) -> set[str]:
+    candidates = re.findall(r"`([^`\s]+)`", text) + re.findall(r"\]\(([^)\s#]+)", text)
+    paths = set()
+    for c in candidates:
+        c = c.rstrip(".,:;")
+        if "://" in c or "=" in c:
+            continue
+        if c.split("/")[0] in top_level and ("/" in c or "." in c):
+            paths.add(c)
+    return paths
+
+
+def test_every_path_the_docs_cite_exists_in_git() -> None:
+    tracked = _tracked()
+    top_level = {name.split("/")[0] for name in tracked} - {"docs"}
+    docs = ["README.md"] + [
+        n for n in tracked if n.startswith("docs/") and n.endswith(".md") and n != "docs/journal.md"
+    ]
+    missing = []
+    for doc in docs:
+        base = (ROOT / doc).parent
+        text = (ROOT / doc).read_text(encoding="utf-8")
+        cited = _cited_paths(text, top_level | {"docs"})
+        # links relative to the document (results.md -> journal.md)
+        cited |= {
+            str((base / link).resolve().relative_to(ROOT))
+            for link in re.findall(r"\]\(([\w./-]+\.md)\)", text)
+            if (base / link).resolve().is_relative_to(ROOT)
+        }
+        for path in sorted(cited):
+            path = path.rstrip("/")
+            if not any(t == path or t.startswith(path + "/") or fnmatch.fnmatch(t, path) for t in tracked):
+                missing.append(f"{doc}: {path}")
+    assert not missing, f"cited but not in git: {missing}"
+
+
+def test_readme_results_block_is_what_the_report_script_writes() -> None:
+    report = _report_module()
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert readme == report.readme_with_headlines(readme), (
+        "the README's results block is out of date: run python experiments/report.py"
+    )
