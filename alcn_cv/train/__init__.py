@@ -9,7 +9,7 @@ detector (Eq. 2, :mod:`~alcn_cv.train.trainer`, its stages in :mod:`~alcn_cv.tra
 Example::
 
     import alcn_cv.train
-    result = alcn_cv.train.train("paper", "runs/alcn")  # a preset of TRAIN_CONFS, a TOML file, a dict, a TrainConfig
+    result = alcn_cv.train.train("paper", "out/alcn")  # a preset of TRAIN_CONFS, a TOML file, a dict, a TrainConfig
     result.val_by_family, result.fewshot, result.weights
 
 Importing this package does not import torch; the names below load their module on first use.

@@ -47,7 +47,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     _add_conf(p, "paper", "paper (the shipped alcn_normalizer.npz), paper-full (the paper's widths and data, for a "
               "GPU; no shipped file), or a TOML file of alcn_cv.train.config's keys")
-    p.add_argument("--out", type=Path, default=Path("runs/alcn"), help="run folder (default: runs/alcn)")
+    p.add_argument("--out", type=Path, default=Path("out/alcn"), help="run folder (default: out/alcn)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--seed", type=int, help="seed (default: the preset's)")
     p.add_argument("--device", choices=("cpu", "cuda"), help="run.device (default: the preset's)")
@@ -106,7 +106,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "research only.",
     )
     _add_conf(r, "gain", "gain (the shipped alcn_normalizer_gain.npz)")
-    r.add_argument("--out", type=Path, default=Path("runs/gain"), help="run folder (default: runs/gain)")
+    r.add_argument("--out", type=Path, default=Path("out/gain"), help="run folder (default: out/gain)")
     r.add_argument("--seed", type=int, help="seed (default: the preset's)")
     r.add_argument("--threads", type=int, default=1,
                    help="torch threads (default 1, as the shipped file was made; 0: torch's default)")

@@ -2,7 +2,7 @@
 
 Run ``alcn train`` under ``torchrun`` to train on several processes::
 
-    torchrun --nproc_per_node 2 -m alcn_cv.cli train --conf paper-full --out runs/paper
+    torchrun --nproc_per_node 2 -m alcn_cv.cli train --conf paper-full --out out/paper
 
 Each process reads its rank from the environment that torchrun sets (``RANK``, ``WORLD_SIZE``,
 ``LOCAL_RANK``, ``MASTER_ADDR``, ``MASTER_PORT``); the process group uses ``gloo`` on the CPU and

@@ -106,7 +106,7 @@ class _Shards:
 
 def train(
     config: str | Path | dict[str, Any] | TrainConfig | None = None,
-    out_dir: str | Path = "runs/alcn",
+    out_dir: str | Path = "out/alcn",
     *,
     resume: bool = False,
     progress: bool = True,
