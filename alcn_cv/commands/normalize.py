@@ -129,7 +129,8 @@ def methods_table() -> str:
     for name in available():
         summary, reference = describe(name)
         lines.append(f"{name:<{width}}  {summary}" + (f" [{reference}]" if reference else ""))
-        params = [key if value is inspect.Parameter.empty else f"{key}={value!r}" for key, value in parameters(name).items()]
+        params = [key if value is inspect.Parameter.empty else f"{key}={value!r}".replace(" ", "")
+                  for key, value in parameters(name).items()]
         lines.append(f"{'':<{width}}  parameters: {' '.join(params) or 'none'}")
     return "\n".join(lines)
 
