@@ -122,6 +122,11 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(error, file=sys.stderr)
         return 2
+    except MissingDependencyError as exc:  # a package checked before the work; the message names the command
+        if args.debug:
+            raise
+        print(exc, file=sys.stderr)
+        return 2
     except (ValueError, TypeError, OSError, RuntimeError) as exc:
         if args.debug:
             raise
