@@ -11,7 +11,6 @@ import pytest
 
 import alcn_cv
 from alcn_cv import io
-from alcn_cv.cli import main
 
 
 @pytest.fixture(scope="module")
