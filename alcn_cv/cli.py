@@ -27,9 +27,6 @@ logger = logging.getLogger("alcn_cv")
 
 #: The entry-point group of the subcommands.
 COMMANDS_GROUP = "alcn_cv.commands"
-#: The subcommands that may import pycolmap, whose glog installs a failure handler for SIGTERM (a
-#: C++ stack trace, no cleanup) when it is imported: it is imported before SIGTERM is handled.
-PYCOLMAP_COMMANDS = ("pose", "calib")
 
 
 class Terminated(KeyboardInterrupt):
@@ -42,9 +39,15 @@ def _terminate(signum: int, frame: object) -> None:
 
 @contextlib.contextmanager
 def sigterm_as_interrupt(command: str) -> Iterator[None]:
-    """Handle SIGTERM as SIGINT while ``alcn command`` runs: :class:`Terminated` is raised."""
-    if command in PYCOLMAP_COMMANDS and is_installed("pycolmap"):
-        import pycolmap  # noqa: F401 -- first: the handler set below replaces the one its import sets
+    """Handle SIGTERM as SIGINT while ``alcn command`` runs: :class:`Terminated` is raised.
+
+    The commands of the packages on top of alcn_cv may import pycolmap, whose glog installs a
+    failure handler for SIGTERM (a C++ stack trace, no cleanup): it is imported first, so that the
+    handler set here replaces glog's.
+    """
+    on_top = any(e.name == command and e.module.split(".")[0] != __package__ for e in command_entry_points())
+    if on_top and is_installed("pycolmap"):
+        import pycolmap  # noqa: F401
 
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
