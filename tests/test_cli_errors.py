@@ -28,9 +28,9 @@ def _truncated(path: Path, fraction: float = 0.5) -> Path:
     return path
 
 
-def _video(path: Path, frames: int = 20) -> Path:
-    img = cv2.imread(str(_image(path.with_suffix(".png"))))
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (80, 60))
+def _video(path: Path, frames: int = 20, size: tuple[int, int] = (80, 60)) -> Path:
+    img = cv2.resize(cv2.imread(str(_image(path.with_suffix(".png")))), size)
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, size)
     for i in range(frames):
         writer.write(np.roll(img, 3 * i, axis=1))
     writer.release()
@@ -199,7 +199,7 @@ def test_no_file_is_replaced_or_half_written(tmp_path, capsys, monkeypatch, case
 #: shared data, the glob under tmp_path (also TMPDIR) whose appearance says the work is under way).
 SIGTERM_CASES: dict[str, tuple[Callable[[Path, Path], list[object]], str]] = {
     "normalize a video": (
-        lambda t, data: ["normalize", _video(t / "v.avi", frames=400), t / "out.avi", "-m", "tantriggs"], ".out.*.tmp.avi"),
+        lambda t, data: ["normalize", _video(t / "v.avi", frames=300, size=(640, 480)), t / "out.avi", "-m", "tantriggs"], ".out.*.tmp.avi"),
     "pose build (pycolmap)": (
         lambda t, data: ["pose", "build", data / "cookie_box" / "box.mp4", t / "model.npz", "--box-ply",
                          data / "cookie_box" / "box.ply", "--K", 1578.5, 1771.8, 320, 240, "--motion-mask",
