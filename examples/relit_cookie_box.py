@@ -65,8 +65,10 @@ def main() -> None:
     ap.add_argument("--methods", nargs="+", default=["none", "alcn:model=lite:mixture=pyramid"],
                     help="normalizers (NAME[:KEY=VALUE...]; default: none and the real-time ALCN)")
     ap.add_argument("--data", type=Path, default=shared_data_dir() / "cookie_box")
-    ap.add_argument("--max-frames", type=int, help="only the first N frames (default: all)")
+    ap.add_argument("--max-frames", type=int, default=150,
+                    help="only the first N frames (default 150: five lights, a few minutes; 0: all 456)")
     args = ap.parse_args()
+    args.max_frames = args.max_frames or None
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
     args.out.mkdir(parents=True, exist_ok=True)
     video = args.data / "box.mp4"
