@@ -15,8 +15,8 @@ real-time pose tutorial (fx = 640*55/22.3, fy = 480*55/14.9, cx = 320, cy = 240)
    video with the box drawn.
 3. A contact sheet PNG of a few overlay frames, to check that the box sits on the object.
 
-Time: 180 s of CPU (user), about 3 minutes on 2 idle cores (22 minutes under nice at a load of 15
-on a shared 2-core machine); 455 of 455 frames tracked.
+Time: 180 s of CPU time (user) on 2 cores; 22 minutes wall under nice at a load average of 15 (a shared
+2-core machine); 455 of 455 frames tracked.
 """
 
 from __future__ import annotations
