@@ -8,6 +8,10 @@ Features are detected once per frame; then for each method of ``pose.solver.METH
 are solved independently (no prior) and as a tracked sequence (previous pose as prior). Printed
 per method: time per frame (ms), frames with a pose, mean inliers, mean reprojection error (px),
 and the median frame-to-frame jump of the translation (model units; lower = steadier).
+
+Time with the defaults (200 frames of the cookie box, its model from track_cookie_box.py): 836 s of
+CPU time (user) on 2 cores; 47 minutes wall under nice at a load average of 6-15 (a shared machine).
+The time grows with --max-frames.
 """
 
 from __future__ import annotations

@@ -10,6 +10,10 @@ without normalization (green); the boxes found on the relit video are drawn in t
 colours (ALCN blue, no normalization red) in one overlay video, and side by side, one panel per
 method. The share of relit frames whose pose agrees with the reference (2D projection of the
 box corners within 5 px) is printed and written to ``summary.json``.
+
+Time with the defaults (150 frames, none and the real-time ALCN): 884 s of CPU time (user) on 2
+cores; 58 minutes wall under nice at a load average of 6-17 (a shared machine); 100% of the 150
+frames agree for both.
 """
 
 from __future__ import annotations
