@@ -7,13 +7,17 @@ The OpenCV-style API::
     out = alcn_cv.create("dog").apply(frame)          # any registered normalization
     alcn_cv.available()                               # their names
 
-The base install (``pip install alcn-cv``: NumPy, OpenCV, SciPy) runs all of this: without
+The base install (NumPy, SciPy and the app's own OpenCV, any of its four wheels) runs all of this: without
 torch, ``createALCN()`` runs the shipped Normalizer by ``cv2.dnn``. Importing this package does
 not import torch; the networks (:mod:`alcn_cv.nets`) and the differentiable mixture
 (:mod:`alcn_cv.filters.kornia_mixture`) load it when used. Where a package of an extra is
 missing, ``ALCN``, :mod:`alcn_cv.nets` and the ``alcn`` command raise or print one line naming
 the extra to install (:class:`MissingDependencyError`).
 """
+
+from alcn_cv.extras import require_opencv
+
+require_opencv()  # one line saying how to install OpenCV, before the first import of cv2
 
 from alcn_cv.enhance import ALCN, Normalization, available, create, createALCN, register
 from alcn_cv.errors import ALCNError, DatasetError, InputError, MissingDependencyError, WeightFileError

@@ -6,23 +6,54 @@ each names an ``add_parser(subparsers)`` function, which adds its subcommand and
 ``func`` (called with the parsed ``argparse.Namespace``) as the default. A subcommand whose
 module needs an extra that is not installed is still listed; running it prints the one line
 that names the extra. Errors from bad input end the command with a one-line message and exit
-code 2; a traceback is printed only with ``--debug``.
+code 2; a traceback is printed only with ``--debug``. SIGTERM (``timeout``, a job scheduler) ends
+a command as Ctrl-C does, with exit code 143: temporary files and folders are removed.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import signal
 import sys
+from collections.abc import Iterator
 from importlib import metadata
 
 from alcn_cv.errors import MissingDependencyError
-from alcn_cv.extras import missing_extra
+from alcn_cv.extras import is_installed, missing_extra
 
 logger = logging.getLogger("alcn_cv")
 
 #: The entry-point group of the subcommands.
 COMMANDS_GROUP = "alcn_cv.commands"
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that it unwinds as on Ctrl-C (files cleaned up)."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt(command: str) -> Iterator[None]:
+    """Handle SIGTERM as SIGINT while ``alcn command`` runs: :class:`Terminated` is raised.
+
+    The commands of the packages on top of alcn_cv may import pycolmap, whose glog installs a
+    failure handler for SIGTERM (a C++ stack trace, no cleanup): it is imported first, so that the
+    handler set here replaces glog's.
+    """
+    on_top = any(e.name == command and e.module.split(".")[0] != __package__ for e in command_entry_points())
+    if on_top and is_installed("pycolmap"):
+        import pycolmap  # noqa: F401
+
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _add_unavailable(subparsers: argparse._SubParsersAction, name: str, error: MissingDependencyError) -> None:
@@ -80,7 +111,11 @@ def main(argv: list[str] | None = None) -> int:
         datefmt="%Y/%m/%d %H:%M:%S",
     )
     try:
-        result = args.func(args)
+        with sigterm_as_interrupt(args.command):
+            result = args.func(args)
+    except Terminated:
+        print("alcn: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print("alcn: interrupted", file=sys.stderr)
         return 130
@@ -89,6 +124,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.debug or error is None:
             raise
         print(error, file=sys.stderr)
+        return 2
+    except MissingDependencyError as exc:  # a package checked before the work; the message names the command
+        if args.debug:
+            raise
+        print(exc, file=sys.stderr)
         return 2
     except (ValueError, TypeError, OSError, RuntimeError) as exc:
         if args.debug:

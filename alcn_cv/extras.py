@@ -1,6 +1,7 @@
 """Optional extras: which extra of alcn-cv installs a package, and the one-line error naming it.
 
-The base install (NumPy, OpenCV, SciPy, tqdm) runs every normalization; training, the data
+The base install (NumPy, SciPy, tqdm, and the OpenCV the app already has: :func:`require_opencv`)
+runs every normalization; training, the data
 engine, benchmarks and pose need extras (``pip install "alcn-cv[train]"``, ...). A command or
 function that needs a package that is not installed raises
 :class:`~alcn_cv.errors.MissingDependencyError`, whose message names the extra, read from the
@@ -15,12 +16,17 @@ from importlib import metadata
 
 from alcn_cv.errors import MissingDependencyError
 
-__all__ = ["extra_providing", "is_installed", "missing_dependency", "missing_extra", "require"]
+__all__ = ["OPENCV_MINIMUM", "extra_providing", "is_installed", "missing_dependency", "missing_extra", "require", "require_opencv"]
 
 DISTRIBUTION = "alcn-cv"
 
 #: Import names whose distributions are named otherwise (the others are named as they import).
-_DISTRIBUTIONS_OF = {"skimage": ("scikit-image",), "PIL": ("pillow",), "open3d": ("open3d", "open3d-cpu")}
+_DISTRIBUTIONS_OF = {
+    "skimage": ("scikit-image",),
+    "PIL": ("pillow",),
+    "open3d": ("open3d", "open3d-cpu"),
+    "cv2": ("opencv-contrib-python-headless", "opencv-python", "opencv-python-headless", "opencv-contrib-python"),
+}
 #: Extras that only gather others, or tools for developers: never the one to name.
 _GATHERING_EXTRAS = ("all", "dev")
 
@@ -100,6 +106,37 @@ def missing_dependency(module: str, what: str, preferred: str | None = None) -> 
     )
     error.extra = extra
     return error
+
+
+#: The oldest OpenCV the runtime is tested with (every method; ALCN's gain Normalizers run by
+#: ``cv2.dnn`` need OpenCV 5, or torch for ``backend="fast"``); calibration's ChArUco boards need 4.7.
+OPENCV_MINIMUM = (4, 5, 5)
+_INSTALL_OPENCV = (
+    f'pip install "{DISTRIBUTION}[opencv]" (or any one of opencv-python, opencv-python-headless, '
+    "opencv-contrib-python, opencv-contrib-python-headless)"
+)
+
+
+def require_opencv() -> None:
+    """Raise one line saying how to install OpenCV when ``cv2`` is missing or older than
+    :data:`OPENCV_MINIMUM`. alcn-cv requires no OpenCV wheel: it uses whichever of the four the
+    app has (requiring one would install it beside the app's and take over the ``cv2`` module).
+
+    Raises:
+        MissingDependencyError: no ``cv2`` module, or one too old (``extra`` is ``"opencv"``).
+    """
+    if not is_installed("cv2"):
+        error = MissingDependencyError(f"alcn-cv needs OpenCV (the cv2 module), which is not installed: {_INSTALL_OPENCV}")
+    else:
+        import cv2
+
+        version = tuple(int(part) for part in re.findall(r"\d+", cv2.__version__)[:3])
+        if version >= OPENCV_MINIMUM:
+            return
+        minimum = ".".join(map(str, OPENCV_MINIMUM))
+        error = MissingDependencyError(f"alcn-cv needs OpenCV >= {minimum}, found {cv2.__version__}: upgrade it, or {_INSTALL_OPENCV}")
+    error.extra = "opencv"
+    raise error
 
 
 def is_installed(module: str) -> bool:

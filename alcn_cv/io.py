@@ -24,6 +24,7 @@ __all__ = [
     "VideoReader",
     "atomic_path",
     "atomic_write",
+    "check_writable",
     "is_video",
     "iter_frames",
     "list_images",
@@ -134,16 +135,42 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """
     path = Path(path)
     make_folder(path.parent)
-    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}")
+    try:
+        fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}")
+    except OSError as exc:  # its message would name the temporary file, not the one the caller gave
+        raise OSError(f"cannot write {path}: {exc.strerror}") from None
     os.close(fd)
     tmp = Path(name)
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files
-        os.replace(tmp, path)
+        try:
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise OSError(f"cannot write {path}: {exc.strerror}") from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def check_writable(path: str | os.PathLike) -> None:
+    """Check, before the work, that the file ``path`` can be created: a temporary file is made and
+    removed in its folder, or the nearest folder above it that exists (which a permission check
+    would not tell for root or a read-only file system).
+
+    Raises:
+        InputError: ``path`` lies under a file or its folder is not writable (the message names ``path``).
+    """
+    path = Path(path)
+    folder = next(p for p in (path.parent.absolute(), *path.parent.absolute().parents) if p.exists())
+    if not folder.is_dir():
+        raise InputError(f"cannot write {path}: {folder} is a file")
+    try:
+        fd, name = tempfile.mkstemp(dir=folder, prefix=".alcn_write_check.")
+    except OSError as exc:
+        raise InputError(f"cannot write {path}: {folder} is not writable ({exc.strerror})") from None
+    os.close(fd)
+    os.unlink(name)
 
 
 def make_folder(folder: str | os.PathLike) -> Path:
@@ -389,6 +416,8 @@ def map_video(
                         written = writing.submit(writer.write, out)
                         count += 1
                         progress.update()
+                    progress.total = count  # the header's count is an estimate: the bar ends at the frames decoded
+                    progress.refresh()
                 if written is not None:
                     written.result()
         finally:

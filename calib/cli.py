@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import InputError
+from alcn_cv.extras import require
 
 logger = logging.getLogger(__name__)
 
@@ -62,6 +63,9 @@ def _board_from_args(args: argparse.Namespace):
 def _camera(args: argparse.Namespace) -> int:
     from .camera import main
 
+    if not args.no_report:  # before the work, not after the files are written
+        require("matplotlib", what="alcn calib camera (its calibration.png; --no-report writes the rest without it)",
+                preferred="data")
     flags = (cv2.CALIB_FIX_K3 if args.fix_k3 else 0) | (cv2.CALIB_ZERO_TANGENT_DIST if args.zero_tangent else 0)
     calib = main(args.images or args.video, args.out, _board_from_args(args), max_views=args.max_views, flags=flags,
                  report=not args.no_report)

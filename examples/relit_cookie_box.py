@@ -10,6 +10,10 @@ without normalization (green); the boxes found on the relit video are drawn in t
 colours (ALCN blue, no normalization red) in one overlay video, and side by side, one panel per
 method. The share of relit frames whose pose agrees with the reference (2D projection of the
 box corners within 5 px) is printed and written to ``summary.json``.
+
+Time with the defaults (150 frames, none and the real-time ALCN): 884 s of CPU time (user) on 2
+cores; 58 minutes wall under nice at a load average of 6-17 (a shared machine); 100% of the 150
+frames agree for both.
 """
 
 from __future__ import annotations
@@ -65,8 +69,10 @@ def main() -> None:
     ap.add_argument("--methods", nargs="+", default=["none", "alcn:model=lite:mixture=pyramid"],
                     help="normalizers (NAME[:KEY=VALUE...]; default: none and the real-time ALCN)")
     ap.add_argument("--data", type=Path, default=shared_data_dir() / "cookie_box")
-    ap.add_argument("--max-frames", type=int, help="only the first N frames (default: all)")
+    ap.add_argument("--max-frames", type=int, default=150,
+                    help="only the first N frames (default 150: five lights, a few minutes; 0: all 456)")
     args = ap.parse_args()
+    args.max_frames = args.max_frames or None
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
     args.out.mkdir(parents=True, exist_ok=True)
     video = args.data / "box.mp4"

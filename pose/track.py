@@ -251,5 +251,6 @@ def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.n
                "normalizer": normalizer, "detector": detector, "model": str(model_path), "units": units,
                "events": [{"frame": f, "event": e, "reason": r} for f, e, r in tracker.events]}
     write_json(output.with_name(output.stem + "_info.json"), {"summary": summary, "machine": machine(), "frames": info})
-    logger.info("tracked %d of %d frames at %.1f fps -> %s", tracked, len(scene_gt), summary["fps"], output)
+    # the caller reports the summary (`alcn pose track` prints it): logged at INFO it was printed twice
+    logger.debug("tracked %d of %d frames at %.1f fps -> %s", tracked, len(scene_gt), summary["fps"], output)
     return summary

@@ -1,9 +1,13 @@
-"""The base install (``pip install alcn-cv``, no extras) runs the drop-in without torch.
+"""The base install (no extras) runs the drop-in without torch, beside the app's own OpenCV.
 
-Builds a fresh virtual environment with only this checkout's base dependencies (numpy,
-OpenCV, SciPy, tqdm; pip needs PyPI or its cache), then runs the runtime there: ALCN through
-cv2.dnn with the shipped ONNX, every classical method, ``alcn normalize``, ``alcn --help``,
-and a command of the lab, which must end with the one line naming its extra.
+Each test builds a fresh virtual environment (pip needs PyPI or its cache) from a copy of this
+checkout. Without any OpenCV, importing alcn_cv says in one line how to install one; with the
+``[opencv]`` extra the runtime runs: ALCN through cv2.dnn with the shipped ONNX, every
+classical method, ``alcn normalize``, ``alcn --help``, and a command of the lab, which must end
+with the one line naming its extra. Into an environment that already has ``opencv-python``
+(the GUI build; 4.x from :data:`~alcn_cv.extras.OPENCV_MINIMUM`, and 5.x), installing alcn-cv
+adds no other OpenCV wheel, ``cv2.imshow`` stays the GUI one, and ``apply`` gives the output of
+this environment's OpenCV.
 """
 
 from __future__ import annotations
@@ -19,6 +23,8 @@ import cv2
 import numpy as np
 import pytest
 
+import alcn_cv
+from alcn_cv.extras import OPENCV_MINIMUM
 from alcn_cv.shared_data import shared_data_dir
 
 logger = logging.getLogger(__name__)
@@ -67,8 +73,8 @@ def _real_image(folder: Path) -> Path:
     return path
 
 
-@pytest.mark.slow
-def test_base_install_runs_the_runtime_without_torch(tmp_path, extras_modules):
+def _source(tmp_path: Path) -> Path:
+    """A copy of what the distribution is built from."""
     source = tmp_path / "alcn-cv"
     for name in SOURCES:
         if (ROOT / name).is_dir():
@@ -76,32 +82,124 @@ def test_base_install_runs_the_runtime_without_torch(tmp_path, extras_modules):
         else:
             source.mkdir(exist_ok=True)
             shutil.copy2(ROOT / name, source / name)
+    return source
+
+
+def _env() -> dict[str, str]:
+    return {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
+
+
+def _venv(tmp_path: Path) -> Path:
+    """A fresh virtual environment; returns its python."""
     venv = tmp_path / "venv"
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
-    python, alcn = venv / "bin" / "python", venv / "bin" / "alcn"
+    return venv / "bin" / "python"
+
+
+def _pip_install(python: Path, *requirements: object) -> None:
     install = subprocess.run(
-        [python, "-m", "pip", "install", "-q", "--disable-pip-version-check", str(source)],
-        capture_output=True, text=True, env=env, timeout=900,
+        [python, "-m", "pip", "install", "-q", "--disable-pip-version-check", *map(str, requirements)],
+        check=False, capture_output=True, text=True, env=_env(), timeout=900,
     )
     assert install.returncode == 0, install.stderr[-3000:]
-    size = _site_packages_mb(venv)
+
+
+def _run(cwd: Path, *args: object) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        list(map(str, args)), check=False, capture_output=True, text=True, env=_env(), cwd=cwd, timeout=300
+    )
+
+
+@pytest.mark.slow
+def test_base_install_runs_the_runtime_without_torch(tmp_path, extras_modules):
+    source = _source(tmp_path)
+    python = _venv(tmp_path)
+    alcn = python.parent / "alcn"
+    _pip_install(python, source)
+    proc = _run(tmp_path, python, "-c", "import alcn_cv")  # no OpenCV wheel is required
+    assert proc.returncode == 1 and proc.stderr.strip().splitlines()[-1] == (
+        'alcn_cv.errors.MissingDependencyError: alcn-cv needs OpenCV (the cv2 module), which is not installed: pip '
+        'install "alcn-cv[opencv]" (or any one of opencv-python, opencv-python-headless, opencv-contrib-python, '
+        "opencv-contrib-python-headless)"
+    ), proc.stderr
+    _pip_install(python, f"{source}[opencv]")
+    size = _site_packages_mb(python.parents[1])
     logger.info("base install: %.0f MB in site-packages", size)
     assert size < MAX_SITE_PACKAGES_MB, f"the base install takes {size:.0f} MB"
 
-    def run(*args: object) -> subprocess.CompletedProcess:
-        return subprocess.run(list(map(str, args)), capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
-
     image = _real_image(tmp_path)
-    proc = run(python, "-c", RUNTIME_CHECK, image, ",".join(extras_modules))
+    proc = _run(tmp_path, python, "-c", RUNTIME_CHECK, image, ",".join(extras_modules))
     assert proc.returncode == 0, proc.stderr
-    proc = run(alcn, "normalize", image, tmp_path / "normalized.png")
+    proc = _run(tmp_path, alcn, "normalize", image, tmp_path / "normalized.png")
     assert proc.returncode == 0, proc.stderr
     assert cv2.imread(str(tmp_path / "normalized.png")).shape == cv2.imread(str(image)).shape
-    proc = run(alcn, "--help")
+    proc = _run(tmp_path, alcn, "--help")
     assert proc.returncode == 0 and "normalize" in proc.stdout and "train" in proc.stdout, proc.stderr
-    proc = run(alcn, "train", "--out", tmp_path / "run")
+    proc = _run(tmp_path, alcn, "train", "--out", tmp_path / "run")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.strip().splitlines()[-1] == (
         'alcn train: needs the [train] extra (torch is not installed): pip install "alcn-cv[train]"'
     )
+
+
+BESIDE_CHECK = """
+import importlib.metadata as md, sys
+import cv2, numpy as np
+import alcn_cv
+
+opencv = sorted(d.metadata["Name"] for d in md.distributions() if d.metadata["Name"].lower().startswith("opencv"))
+assert opencv == [sys.argv[3]], f"OpenCV wheels: {opencv}"
+gui = next(line for line in cv2.getBuildInformation().splitlines() if line.strip().startswith("GUI:"))
+assert gui.split(":")[1].strip() != "NONE", gui  # the GUI build, not the headless one
+assert callable(cv2.imshow)
+reference = np.load(sys.argv[2])
+image = cv2.imread(sys.argv[1])
+gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+for name in reference.files:
+    method, _, model = name.partition("-")
+    out = alcn_cv.createALCN(model=model).apply(image) if method == "alcn" else alcn_cv.create(method).apply(gray)
+    diff = np.abs(out.astype(int) - reference[name].astype(int))
+    # cv2.dnn and a few OpenCV kernels differ by a rounding between versions
+    assert out.shape == reference[name].shape and diff.max() <= 1 and (diff > 0).mean() < 1e-3, (name, diff.max())
+if cv2.__version__ < "5":
+    try:
+        alcn_cv.createALCN()
+    except alcn_cv.WeightFileError as exc:
+        assert "use OpenCV 5, install torch (backend='fast') or model='lite'" in str(exc), exc
+    else:
+        raise AssertionError("the gain Normalizer ran through OpenCV 4's cv2.dnn")
+print("ok", cv2.__version__, gui)
+"""
+
+#: ``opencv-python`` releases an app may hold: the oldest 4.x the runtime supports, the last 4.x, and 5.x.
+APP_OPENCV = {
+    "4.5.5": ["opencv-python==4.5.5.64", "numpy<2"],  # built against NumPy 1
+    "4.14": ["opencv-python==4.14.0.94"],
+    "5.0": ["opencv-python==5.0.0.93"],
+}
+
+
+def test_oldest_app_opencv_is_the_supported_minimum():
+    assert APP_OPENCV[".".join(map(str, OPENCV_MINIMUM))]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("version", APP_OPENCV)
+def test_install_beside_the_apps_opencv_keeps_it(tmp_path, version):
+    image = _real_image(tmp_path)
+    # The reference: this checkout's output in this environment. The gain Normalizers (the default
+    # model) run through cv2.dnn on OpenCV 5 only; OpenCV 4 runs the others. The classical methods
+    # are compared on the gray image: Tan-Triggs' gamma amplifies the difference between OpenCV 4's
+    # and 5's Lab conversion of near-black pixels (up to 18 levels on the buddha photograph).
+    models = ["gain", "lite", "paper"] if version.startswith("5") else ["lite", "paper"]
+    frame = cv2.imread(str(image))
+    reference = {f"alcn-{model}": alcn_cv.createALCN(model=model, backend="opencv").apply(frame) for model in models}
+    gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+    reference |= {name: alcn_cv.create(name).apply(gray) for name in alcn_cv.available() if name != "alcn"}
+    np.savez(tmp_path / "reference.npz", **reference)
+    python = _venv(tmp_path)
+    _pip_install(python, *APP_OPENCV[version])  # the app's OpenCV, first
+    _pip_install(python, _source(tmp_path))
+    proc = _run(tmp_path, python, "-c", BESIDE_CHECK, image, tmp_path / "reference.npz", "opencv-python")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.startswith(f"ok {version}"), proc.stdout

@@ -28,9 +28,9 @@ def _truncated(path: Path, fraction: float = 0.5) -> Path:
     return path
 
 
-def _video(path: Path, frames: int = 20) -> Path:
-    img = cv2.imread(str(_image(path.with_suffix(".png"))))
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (80, 60))
+def _video(path: Path, frames: int = 20, size: tuple[int, int] = (80, 60)) -> Path:
+    img = cv2.resize(cv2.imread(str(_image(path.with_suffix(".png")))), size)
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, size)
     for i in range(frames):
         writer.write(np.roll(img, 3 * i, axis=1))
     writer.release()
@@ -130,3 +130,112 @@ def test_interrupted_folder_leaves_no_temporary_file(tmp_path, monkeypatch, caps
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["a.png"]  # no hidden .b.*.tmp.png
     assert main(["normalize", str(tmp_path / "out"), str(tmp_path / "again"), "-m", "none"]) == 0
     assert sorted(p.name for p in (tmp_path / "again").iterdir()) == ["a.png"]
+
+
+def _read_only(monkeypatch):
+    """A target folder where no file can be created (as on a read-only mount; root ignores chmod)."""
+    import tempfile
+
+    def refused(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(Path(kwargs.get("dir", ".")) / ".x.e6wwkm8s.tmp.png"))
+
+    monkeypatch.setattr(tempfile, "mkstemp", refused)
+
+
+def _folder(path: Path, *names: str) -> Path:
+    for name in names:
+        _image(path / name)
+    return path
+
+
+def _corrupt_folder(path: Path) -> Path:
+    """Good images around a truncated one (in name order: a, c, e)."""
+    _folder(path, "a.png", "e.png")
+    _truncated(_image(path / "c.png"))
+    return path
+
+
+# Issue 41, part 2: (arguments from tmp_path, words the one-line error must hold, files of tmp_path that
+# must be left byte for byte as they were, None: every file; a setup taking monkeypatch, or None)
+Protect = tuple[Callable[[Path], list[object]], list[str], Callable | None]
+PROTECT: dict[str, Protect] = {
+    "image onto itself": (lambda t: [_image(t / "a.png"), t / "a.png"], ["a.png is the input", "--in-place"], None),
+    "image onto itself by another path": (
+        lambda t: [_image(t / "a.png"), t / ".." / t.name / "a.png"], ["is the input", "--in-place"], None),
+    "video onto itself": (lambda t: [_video(t / "v.avi"), t / "v.avi", "-m", "none"], ["v.avi is the input"], None),
+    "folder onto itself": (lambda t: [_folder(t / "in", "a.png", "b.png"), t / "in"], ["in is the input"], None),
+    "existing image": (lambda t: [_image(t / "a.png"), _image(t / "b.png")], ["b.png exists", "--overwrite"], None),
+    "existing video": (
+        lambda t: [_video(t / "v.avi"), _video(t / "w.avi"), "-m", "none"], ["w.avi exists", "--overwrite"], None),
+    "existing image in the output folder": (
+        lambda t: [_folder(t / "in", "a.png", "b.png"), _folder(t / "out", "b.png")], ["b.png exists", "--overwrite"],
+        None),
+    "corrupt image in a folder": (lambda t: [_corrupt_folder(t / "in"), t / "out"], ["c.png"], None),
+    "read-only target": (lambda t: [_image(t / "a.png"), t / "ro" / "out.png"], ["cannot write", "out.png"], _read_only),
+}
+
+
+@pytest.mark.parametrize("case", PROTECT)
+def test_no_file_is_replaced_or_half_written(tmp_path, capsys, monkeypatch, case):
+    make_args, words, setup = PROTECT[case]
+    args = ["normalize", *map(str, make_args(tmp_path))]
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    if setup is not None:
+        setup(monkeypatch)
+    capsys.readouterr()
+    assert main(args) == 2
+    monkeypatch.undo()
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if "error" in line.lower()]
+    assert "Traceback" not in err and len(errors) == 1 and errors[0].startswith("alcn normalize: error:"), err
+    for word in words:
+        assert word in errors[0], (word, errors[0])
+    assert ".tmp" not in errors[0] and "alcn_write_check" not in errors[0]
+    after = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    assert after == before, "a file was written, replaced or removed"
+
+
+#: Issue 41, part 2: commands ended by SIGTERM (`timeout`, a job scheduler): (arguments from tmp_path and the
+#: shared data, the glob under tmp_path (also TMPDIR) whose appearance says the work is under way).
+SIGTERM_CASES: dict[str, tuple[Callable[[Path, Path], list[object]], str]] = {
+    "normalize a video": (
+        lambda t, data: ["normalize", _video(t / "v.avi", frames=300, size=(640, 480)), t / "out.avi", "-m", "tantriggs"], ".out.*.tmp.avi"),
+    "pose build (pycolmap)": (
+        lambda t, data: ["pose", "build", data / "cookie_box" / "box.mp4", t / "model.npz", "--box-ply",
+                         data / "cookie_box" / "box.ply", "--K", 1578.5, 1771.8, 320, 240, "--motion-mask",
+                         "--refine-focal", "--video-step", 10],
+        "alcn_pycolmap_log_*"),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", SIGTERM_CASES)
+def test_sigterm_cleans_up_as_ctrl_c(tmp_path, case, request):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    make_args, started = SIGTERM_CASES[case]
+    data = None
+    if "pose" in case:
+        data = request.getfixturevalue("shared_data")
+    work = tmp_path / "work"
+    work.mkdir()
+    env = {**os.environ, "TMPDIR": str(work), "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "alcn_cv.cli", *map(str, make_args(work, data))],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )
+    deadline = time.monotonic() + 240
+    while not list(work.rglob(started)) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert proc.poll() is None, f"ended before {started} appeared: {proc.communicate()[1][-2000:]}"
+    assert list(work.rglob(started)), f"{started} did not appear"
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=240)
+    assert proc.returncode == 128 + signal.SIGTERM, err[-2000:]
+    assert "Traceback" not in err and "stack trace" not in err and err.strip().splitlines()[-1] == "alcn: terminated"
+    left = sorted(p.name for p in work.rglob("*") if p.name.startswith((".", "alcn_")))
+    assert not left, f"left behind: {left}"

@@ -90,7 +90,7 @@ def test_alpha_is_kept(tmp_path, frame):
     alpha = np.tile(np.linspace(0, 255, frame.shape[1]).astype(np.uint8), (frame.shape[0], 1))
     cv2.imwrite(str(tmp_path / "rgba.png"), np.dstack([frame, alpha]))
     for flags, channels in (([], 4), (["--gray"], 4)):
-        assert main(["normalize", str(tmp_path / "rgba.png"), str(tmp_path / "out.png"), "-m", "clahe", *flags]) == 0
+        assert main(["normalize", str(tmp_path / "rgba.png"), str(tmp_path / "out.png"), "-m", "clahe", "--overwrite", *flags]) == 0
         out = cv2.imread(str(tmp_path / "out.png"), cv2.IMREAD_UNCHANGED)
         assert out.shape == frame.shape[:2] + (channels,)
         np.testing.assert_array_equal(out[..., 3], alpha)
@@ -101,5 +101,96 @@ def test_list_explains_every_method(capsys):
 
     assert main(["normalize", "--list"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert [line.split()[0] for line in lines] == available()
+    assert [line.split()[0] for line in lines[::2]] == available()
     assert any("Jarrett" in line for line in lines if line.startswith("dlcn"))
+    # each method's parameters with their defaults (issue 41, part 3)
+    params = dict(zip((line.split()[0] for line in lines[::2]), (line.split("parameters:")[1].split() for line in lines[1::2])))
+    assert params["dog"] == ["sigma1=0.5", "sigma2=1.5"]
+    assert params["clahe"] == ["clipLimit=2.0", "tileGridSize=(8,8)"]
+    assert "model='gain'" in params["alcn"] and "backend=None" in params["alcn"]
+    assert params["none"] == ["none"]
+
+
+def test_help_shows_the_methods_parameters(capsys):
+    with pytest.raises(SystemExit):
+        main(["normalize", "--help"])
+    out = capsys.readouterr().out
+    assert "dog:sigma1=1:sigma2=2" in out and "sigma1=0.5 sigma2=1.5" in out and "--overwrite" in out and "--in-place" in out
+
+
+@pytest.mark.parametrize("kind", ["image", "video", "folder"])
+def test_in_place_and_overwrite_on_request(tmp_path, frame, kind):
+    if kind == "video":
+        src = tmp_path / "v.avi"
+        writer = cv2.VideoWriter(str(src), cv2.VideoWriter_fourcc(*"MJPG"), 10, (80, 60))
+        for i in range(3):
+            writer.write(np.roll(frame, 3 * i, axis=1))
+        writer.release()
+    else:
+        src = tmp_path / "in" / "a.png" if kind == "folder" else tmp_path / "a.png"
+        src.parent.mkdir(exist_ok=True)
+        cv2.imwrite(str(src), frame)
+    before = src.read_bytes()
+    target = src.parent if kind == "folder" else src
+    assert main(["normalize", str(target), str(target), "-m", "dog"]) == 2
+    assert src.read_bytes() == before
+    assert main(["normalize", str(target), str(target), "-m", "dog", "--in-place"]) == 0
+    assert src.read_bytes() != before
+    out = tmp_path / "out" / ("v.avi" if kind == "video" else "a.png")
+    dst = out.parent if kind == "folder" else out
+    assert main(["normalize", str(target), str(dst), "-m", "none"]) == 0
+    assert main(["normalize", str(target), str(dst), "-m", "dog"]) == 2
+    written = out.read_bytes()
+    assert main(["normalize", str(target), str(dst), "-m", "dog", "--overwrite"]) == 0
+    assert out.read_bytes() != written
+    assert not list(tmp_path.rglob(".*")), "temporary file left behind"
+
+
+def test_folder_with_bad_files_skip_bad_and_the_count(tmp_path, frame, caplog):
+    src = tmp_path / "in"
+    src.mkdir()
+    for name in ("a.png", "c.png"):
+        cv2.imwrite(str(src / name), frame)
+    (src / "b.jpg").write_bytes(b"\xff\xd8 not a JPEG")
+    (src / "notes.txt").write_text("not an image")
+    assert main(["normalize", str(src), str(tmp_path / "out"), "-m", "none"]) == 2
+    assert not (tmp_path / "out").exists()  # stopped before anything was written
+    caplog.set_level("INFO")
+    assert main(["normalize", str(src), str(tmp_path / "out"), "-m", "none", "--skip-bad"]) == 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["a.png", "c.png"]
+    assert "wrote 2 images to" in caplog.text and "skipped 2 (1 not an image, 1 unreadable)" in caplog.text
+
+
+SPECS = {  # issue 41, part 3: one spec syntax wherever a method is named; snake_case for OpenCV's camelCase
+    "create": lambda spec: __import__("alcn_cv").create(spec),
+    "from_spec": lambda spec: __import__("alcn_cv.enhance.registry", fromlist=["from_spec"]).from_spec(spec),
+    "pose parts": lambda spec: __import__("pose.parts", fromlist=["x"]).from_spec(spec),
+}
+
+
+@pytest.mark.parametrize("where", SPECS)
+@pytest.mark.parametrize("spec, attrs", [
+    ("dog:sigma1=1:sigma2=2", {"sigma1": 1.0, "sigma2": 2.0}),
+    ("clahe:clip_limit=3:tile_grid_size=(4, 4)", {"clipLimit": 3.0, "tileGridSize": (4, 4)}),
+    ("clahe:clipLimit=3", {"clipLimit": 3.0}),
+])
+def test_spec_strings_everywhere(where, spec, attrs):
+    method = SPECS[where](spec)
+    for key, value in attrs.items():
+        assert getattr(method, key) == value, (where, spec, key)
+
+
+def test_spec_strings_in_normalize(tmp_path, frame):
+    src = tmp_path / "in.png"
+    cv2.imwrite(str(src), frame)
+    for name, args in {
+        "spec.png": ["-m", "dog:sigma1=1:sigma2=2"],
+        "params.png": ["-m", "dog", "-p", "sigma1=1", "-p", "sigma2=2"],
+        "clahe_snake.png": ["-m", "clahe:clip_limit=3"],
+        "clahe_camel.png": ["-m", "clahe", "-p", "clipLimit=3"],
+    }.items():
+        assert main(["normalize", str(src), str(tmp_path / name), *args]) == 0
+    read = {p.name: cv2.imread(str(p)) for p in tmp_path.glob("*.png")}
+    np.testing.assert_array_equal(read["spec.png"], read["params.png"])
+    np.testing.assert_array_equal(read["clahe_snake.png"], read["clahe_camel.png"])
+    assert main(["normalize", str(src), str(tmp_path / "x.png"), "-m", "dog:sigma1=1", "-p", "sigma1=2"]) == 2

@@ -193,3 +193,21 @@ def test_bad_sources(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError):
         list(io.iter_frames(tmp_path / "empty"))
+
+
+def test_track_command_prints_its_last_line_once(tmp_path, capsys, caplog):
+    """Issue 41, part 4: `alcn pose track` printed "tracked N of M frames" twice (its print and the log)."""
+    from alcn_cv.cli import main
+
+    tex = _texture()
+    pm.save(_planar_model(tex), tmp_path / "m.npz")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for i, (r, t) in enumerate(_poses(2)):
+        cv2.imwrite(str(frames / f"{i:04d}.png"), _render(tex, r, t))
+    caplog.set_level("INFO")
+    assert main(["pose", "track", str(tmp_path / "m.npz"), str(frames), str(tmp_path / "poses.json"),
+                 "--K", "500", "500", "159.5", "119.5", "--n-features", "800"]) == 0
+    captured = capsys.readouterr()
+    text = captured.out + captured.err + caplog.text
+    assert text.count("tracked 2 of 2 frames") == 1, text

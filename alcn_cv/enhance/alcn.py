@@ -243,8 +243,19 @@ def pin_default_model(spec: str) -> str:
     return f"{spec}:model={DEFAULT_MODEL}"
 
 
-def createALCN(**params: object) -> ALCN:
+def createALCN(  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE
+    weights: str | Path | None = None,
+    scale: float | None = None,
+    backend: str | None = None,
+    device: str = "cpu",
+    grid_stride: int | None = None,
+    mixture: str | None = None,
+    model: str = DEFAULT_MODEL,
+    threads: int | None = 1,
+) -> ALCN:
     """Create an :class:`ALCN` normalization; ``createALCN().apply(img)`` normalizes an image.
+
+    The parameters are :class:`ALCN`'s, with its defaults.
 
     Example:
         >>> import alcn_cv, numpy as np
@@ -252,4 +263,7 @@ def createALCN(**params: object) -> ALCN:
         >>> alcn_cv.createALCN().apply(frame).shape
         (480, 640)
     """
-    return ALCN(**params)
+    return ALCN(
+        weights=weights, scale=scale, backend=backend, device=device, grid_stride=grid_stride, mixture=mixture,
+        model=model, threads=threads,
+    )

@@ -171,19 +171,25 @@ class Normalization:
         """:meth:`to_unit` then the conversion to ``dtype`` (the same values, fewer passes)."""
         return _unit_in_place_to(self._unclipped_unit(response), dtype)
 
-    def apply(self, img: np.ndarray, out_dtype: type | np.dtype | str | None = None) -> np.ndarray:
-        """Normalize an image, OpenCV style.
+    def apply(
+        self, img: np.ndarray, dst: np.ndarray | None = None, out_dtype: type | np.dtype | str | None = None
+    ) -> np.ndarray:
+        """Normalize an image, OpenCV style: ``apply(src)``, ``apply(src, dst)`` or ``apply(src, dst=out)``.
 
         Args:
             img: ``HxW``, ``HxWx1``, ``HxWx2`` (gray and alpha), BGR ``HxWx3`` or BGRA ``HxWx4``;
                 uint8, uint16 or float32 in [0, 1], in any byte order.
+            dst: as in OpenCV, an array the result is written into when it has the result's
+                shape and dtype and is writable (it may be ``img`` itself); otherwise a new
+                array is returned and ``dst`` is left as it was.
             out_dtype: ``None`` (the input's dtype), ``np.uint8``, ``np.uint16`` or ``np.float32``
                 (values in [0, 1]).
 
         Returns:
-            An array of the input's shape and the requested dtype (native byte order). The
-            colour (or gray) channels are normalized; an alpha channel is passed through
-            unchanged (converted to ``out_dtype`` when that differs).
+            An array of the input's shape and the requested dtype (native byte order): ``dst``
+            when the result was written into it. The colour (or gray) channels are normalized;
+            an alpha channel is passed through unchanged (converted to ``out_dtype`` when that
+            differs).
 
         Images smaller than :attr:`min_size` (the method's window; 0 for the pixel-wise and
         whole-image methods) are normalized all the same: the window is completed by
@@ -193,7 +199,16 @@ class Normalization:
         Raises:
             InputError: the image breaks this contract (:func:`alcn_cv.checks.check_image`).
         """
-        img = check_image(img)
+        if dst is not None and not isinstance(dst, np.ndarray):
+            raise InputError(f"dst must be a numpy array or None, got {type(dst).__name__}")
+        result = self._apply(check_image(img), out_dtype)
+        if dst is not None and dst.shape == result.shape and dst.dtype == result.dtype and dst.flags.writeable:
+            np.copyto(dst, result)
+            return dst
+        return result
+
+    def _apply(self, img: np.ndarray, out_dtype: type | np.dtype | str | None) -> np.ndarray:
+        """:meth:`apply` on a valid image, into a new array."""
         out_dtype = np.dtype(img.dtype if out_dtype is None else out_dtype)
         if out_dtype not in SUPPORTED_DTYPES:
             raise InputError(f"unsupported out_dtype {out_dtype}; use uint8, uint16 or float32")

@@ -1,4 +1,10 @@
-"""Normalizations by name: ``create("clahe", clipLimit=2.0).apply(img)``."""
+"""Normalizations by name or spec: ``create("clahe", clipLimit=2.0)``, ``create("dog:sigma1=1:sigma2=2")``.
+
+A spec ``NAME[:KEY=VALUE...]`` (:func:`parse_spec`, values as Python literals, else strings) names
+a method with parameters wherever a method is named: :func:`create`, ``alcn normalize -m``, the
+benchmarks' and pose commands' method lists. OpenCV's camelCase parameter names (CLAHE's
+``clipLimit``, ``tileGridSize``) are also accepted in snake_case (``clip_limit``).
+"""
 
 from __future__ import annotations
 
@@ -14,7 +20,7 @@ from typing import TypeVar
 from alcn_cv.enhance.base import Normalization, NoNormalization
 from alcn_cv.errors import ALCNError, InputError
 
-__all__ = ["available", "create", "describe", "from_spec", "parse_params", "parse_spec", "register"]
+__all__ = ["available", "create", "describe", "from_spec", "parameters", "parse_params", "parse_spec", "register"]
 
 _REGISTRY: dict[str, type[Normalization]] = {}
 N = TypeVar("N", bound=type[Normalization])
@@ -42,17 +48,52 @@ def describe(name: str) -> tuple[str, str]:
     return _REGISTRY[name].describe()
 
 
-def create(name: str, **params: object) -> Normalization:
-    """Create the normalization registered as ``name`` with its parameters.
+def parameters(name: str) -> dict[str, object]:
+    """The parameters of the method registered as ``name`` and their defaults
+    (:data:`inspect.Parameter.empty` for one without a default), in the constructor's order."""
+    cls = _registered(name)
+    if cls.__init__ is object.__init__:
+        return {}
+    return {
+        p.name: p.default for p in list(inspect.signature(cls.__init__).parameters.values())[1:]
+        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+    }
 
-    Raises:
-        InputError: unknown name, a parameter the method does not have, or a value of the wrong
-            type or out of range (the message names the method and the parameter).
-    """
+
+def _registered(name: str) -> type[Normalization]:
     try:
-        cls: Callable[..., Normalization] = _REGISTRY[name]
+        return _REGISTRY[name]
     except KeyError:
         raise InputError(f"unknown normalization {name!r}; available: {', '.join(available())}") from None
+
+
+def _camel_case(name: str) -> str:
+    head, *rest = name.split("_")
+    return head + "".join(word.capitalize() for word in rest)
+
+
+def create(spec: str, **params: object) -> Normalization:
+    """Create the normalization a name or spec ``NAME[:KEY=VALUE...]`` names, with ``params``.
+
+    ``create("dog", sigma1=1.0)`` and ``create("dog:sigma1=1")`` are the same method; a
+    parameter given both in the spec and as a keyword is an error. A snake_case name stands for
+    the camelCase parameter it spells (``clip_limit`` for CLAHE's ``clipLimit``).
+
+    Raises:
+        InputError: bad spec, unknown name, a parameter the method does not have or given twice,
+            or a value of the wrong type or out of range (the message names the method and the
+            parameter).
+    """
+    name, spec_params = parse_spec(spec)
+    twice = sorted(spec_params.keys() & params.keys())
+    if twice:
+        raise InputError(f"bad parameters for {name!r}: {', '.join(twice)} given in the spec {spec!r} and again")
+    cls: Callable[..., Normalization] = _registered(name)
+    accepted = parameters(name)
+    params = {
+        _camel_case(key) if key not in accepted and _camel_case(key) in accepted else key: value
+        for key, value in {**spec_params, **params}.items()
+    }
     _check_params(name, _REGISTRY[name], params)
     try:
         return cls(**params)
@@ -136,9 +177,8 @@ def parse_spec(spec: str) -> tuple[str, dict[str, object]]:
 
 
 def from_spec(spec: str, **defaults: object) -> Normalization:
-    """The normalization a spec ``NAME[:KEY=VALUE...]`` names (:func:`parse_spec`), e.g.
-    ``from_spec("alcn:model=lite:mixture=pyramid")``; ``defaults`` fill parameters the spec
-    does not give.
+    """:func:`create` with ``defaults`` for the parameters the spec does not give, e.g.
+    ``from_spec("alcn:model=lite", scale=1.0)``.
 
     Raises:
         InputError: bad spec, unknown name or parameters.

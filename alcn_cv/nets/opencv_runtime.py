@@ -70,7 +70,11 @@ class OpenCVNormalizer:
         try:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
-            raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}: {str(exc).strip()}") from None
+            hint = "" if cv2.__version__ >= "5" else (  # 4.x's ONNX importer cannot infer the gain graph's shapes
+                f"; OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers: use OpenCV 5, install torch "
+                "(backend='fast') or model='lite'"
+            )
+            raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}{hint}: {str(exc).strip()}") from None
         #: True when the graph takes the image unpadded (the gain Normalizer's export).
         self.raw_input = self._grid_points(WINDOW) > 1
         self.stride = self._output_stride()
