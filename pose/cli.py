@@ -302,7 +302,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     e = sub.add_parser("eval", help="Table-1-style report and Middlebury errors",
                        description="BB8 2D projection < 5 px, ADD < 10% of the diameter, 5 cm / 5 deg.")
-    e.add_argument("--data", help="pose data set from `alcn data pose` (train/, test/, models/)")
+    e.add_argument("--data", help="pose data set from `alcn data pose` (train/, test/, models/); a small one: "
+                   "`alcn data pose --size small --frames 12 --out DATA` (320x240, 12 frames a sequence; about 15 s, "
+                   "then about 2 min of CPU for this command on 2 cores). `--size small` alone (3 frames) gives too "
+                   "few views to triangulate the box")
     e.add_argument("--middlebury", nargs="+", help="Middlebury sets (e.g. ../shared/data/middlebury/templeSparseRing)")
     e.add_argument("--normalizations", nargs="+",
                    help="rows of the table, NAME[:KEY=VALUE...] (default: none dog:sigma1=1:sigma2=2 alcn, "
