@@ -19,9 +19,9 @@ from alcn_cv.extras import require_opencv
 
 require_opencv()  # one line saying how to install OpenCV, before the first import of cv2
 
-from alcn_cv.enhance import ALCN, Normalization, available, create, createALCN, register
-from alcn_cv.errors import ALCNError, DatasetError, InputError, MissingDependencyError, WeightFileError
-from alcn_cv.filters.gaussian_mixture import alcn_filter, gaussian_sigmas
+from alcn_cv.enhance import ALCN, Normalization, available, create, createALCN, register  # noqa: E402
+from alcn_cv.errors import ALCNError, DatasetError, InputError, MissingDependencyError, WeightFileError  # noqa: E402
+from alcn_cv.filters.gaussian_mixture import alcn_filter, gaussian_sigmas  # noqa: E402
 
 __version__ = "0.1.0"
 

@@ -63,7 +63,9 @@ def _add_unavailable(subparsers: argparse._SubParsersAction, name: str, error: M
         print(error, file=sys.stderr)
         return 2
 
-    parser = subparsers.add_parser(name, help=f"(needs the [{error.extra}] extra, not installed)", description=str(error), add_help=False)
+    parser = subparsers.add_parser(
+        name, help=f"(needs the [{error.extra}] extra, not installed)", description=str(error), add_help=False
+    )
     parser.add_argument("arguments", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     parser.set_defaults(func=fail)
 

@@ -15,6 +15,7 @@ __all__ = [
     "WeightFileError",
 ]
 
+
 class ALCNError(ValueError):
     """Base class of the errors raised by alcn-cv for bad input or bad files."""
 

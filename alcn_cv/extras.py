@@ -16,7 +16,15 @@ from importlib import metadata
 
 from alcn_cv.errors import MissingDependencyError
 
-__all__ = ["OPENCV_MINIMUM", "extra_providing", "is_installed", "missing_dependency", "missing_extra", "require", "require_opencv"]
+__all__ = [
+    "OPENCV_MINIMUM",
+    "extra_providing",
+    "is_installed",
+    "missing_dependency",
+    "missing_extra",
+    "require",
+    "require_opencv",
+]
 
 DISTRIBUTION = "alcn-cv"
 
@@ -56,7 +64,9 @@ def _extras_requirements() -> dict[str, set[str]]:
         for requirement in requirements:
             name = re.match(r"\s*([A-Za-z0-9][\w.-]*)(?:\[([^\]]*)\])?", requirement)
             if name and _normalized(name.group(1)) == DISTRIBUTION:
-                direct.setdefault(extra, set()).update(f"[{e.strip()}]" for e in (name.group(2) or "").split(",") if e.strip())
+                direct.setdefault(extra, set()).update(
+                    f"[{e.strip()}]" for e in (name.group(2) or "").split(",") if e.strip()
+                )
             elif name:
                 direct.setdefault(extra, set()).add(_normalized(name.group(1)))
 
@@ -76,13 +86,16 @@ def _extras_requirements() -> dict[str, set[str]]:
 def extra_providing(module: str, preferred: str | None = None) -> str | None:
     """The extra of alcn-cv that installs the package of ``module`` (an import name).
 
-    Read from the installed metadata. ``preferred`` (for instance the command that failed) wins when it installs the package; otherwise the extra that
-    installs the fewest packages. None when no extra installs it or alcn-cv is not installed.
+    Read from the installed metadata. ``preferred`` (for instance the command that failed) wins when
+    it installs the package; otherwise the extra that installs the fewest packages. None when no
+    extra installs it or alcn-cv is not installed.
     """
     top = module.split(".")[0]
     wanted = {_normalized(name) for name in _DISTRIBUTIONS_OF.get(top, (top,))}
     candidates = {
-        extra: dists for extra, dists in _extras_requirements().items() if wanted & dists and extra not in _GATHERING_EXTRAS
+        extra: dists
+        for extra, dists in _extras_requirements().items()
+        if wanted & dists and extra not in _GATHERING_EXTRAS
     }
     if not candidates:
         return None
@@ -100,7 +113,9 @@ def missing_dependency(module: str, what: str, preferred: str | None = None) -> 
     extra = extra_providing(module, preferred)
     top = module.split(".")[0]
     if extra is None:
-        return MissingDependencyError(f"{what}: needs {top}, which is not installed: pip install {_DISTRIBUTIONS_OF.get(top, (top,))[0]}")
+        return MissingDependencyError(
+            f"{what}: needs {top}, which is not installed: pip install {_DISTRIBUTIONS_OF.get(top, (top,))[0]}"
+        )
     error = MissingDependencyError(
         f'{what}: needs the [{extra}] extra ({top} is not installed): pip install "{DISTRIBUTION}[{extra}]"'
     )
@@ -126,7 +141,9 @@ def require_opencv() -> None:
         MissingDependencyError: no ``cv2`` module, or one too old (``extra`` is ``"opencv"``).
     """
     if not is_installed("cv2"):
-        error = MissingDependencyError(f"alcn-cv needs OpenCV (the cv2 module), which is not installed: {_INSTALL_OPENCV}")
+        error = MissingDependencyError(
+            f"alcn-cv needs OpenCV (the cv2 module), which is not installed: {_INSTALL_OPENCV}"
+        )
     else:
         import cv2
 
@@ -134,7 +151,9 @@ def require_opencv() -> None:
         if version >= OPENCV_MINIMUM:
             return
         minimum = ".".join(map(str, OPENCV_MINIMUM))
-        error = MissingDependencyError(f"alcn-cv needs OpenCV >= {minimum}, found {cv2.__version__}: upgrade it, or {_INSTALL_OPENCV}")
+        error = MissingDependencyError(
+            f"alcn-cv needs OpenCV >= {minimum}, found {cv2.__version__}: upgrade it, or {_INSTALL_OPENCV}"
+        )
     error.extra = "opencv"
     raise error
 

@@ -311,7 +311,9 @@ class VideoReader:
         self.close()
 
 
-def iter_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None = None) -> Iterator[tuple[str, np.ndarray]]:
+def iter_frames(
+    source: str | os.PathLike, step: int = 1, max_frames: int | None = None
+) -> Iterator[tuple[str, np.ndarray]]:
     """``(name, BGR uint8 frame)`` for every ``step``-th frame of a video file or image of a folder.
 
     The one frame iterator of the package. Images of a folder are read in name order (16-bit
@@ -410,7 +412,9 @@ def map_video(
                         ahead = reading.submit(next, frames, None)
                         out = fn(frame)
                         if writer is None:
-                            writer = open_video_writer(tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3)
+                            writer = open_video_writer(
+                                tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3
+                            )
                         if written is not None:
                             written.result()  # one frame in the encoder at a time; its error surfaces here
                         written = writing.submit(writer.write, out)

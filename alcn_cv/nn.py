@@ -41,7 +41,11 @@ __all__ = ["ALCN2d", "TorchNetwork", "TorchRuntime", "alcn2d", "batches", "torch
 
 #: Windows per Normalizer call in :meth:`TorchNetwork.window_weights` (bounds the memory of a batch).
 _WINDOW_BATCH = 512
-_TORCH_DTYPES = {np.dtype(np.uint8): torch.uint8, np.dtype(np.uint16): torch.uint16, np.dtype(np.float32): torch.float32}
+_TORCH_DTYPES = {
+    np.dtype(np.uint8): torch.uint8,
+    np.dtype(np.uint16): torch.uint16,
+    np.dtype(np.float32): torch.float32,
+}
 
 
 class ALCN2d(nn.Module):
@@ -82,8 +86,15 @@ class ALCN2d(nn.Module):
             raise InputError(f"weight file has {len(self.spec.sigmas)} sigmas for {self.net.num_kernels} outputs")
         stride = self.net.stride
         self.grid_stride = stride if grid_stride is None else grid_stride
-        if isinstance(self.grid_stride, bool) or not isinstance(self.grid_stride, int) or self.grid_stride < stride or self.grid_stride % stride:
-            raise InputError(f"grid_stride must be a positive multiple of {stride} for this network, got {grid_stride!r}")
+        if (
+            isinstance(self.grid_stride, bool)
+            or not isinstance(self.grid_stride, int)
+            or self.grid_stride < stride
+            or self.grid_stride % stride
+        ):
+            raise InputError(
+                f"grid_stride must be a positive multiple of {stride} for this network, got {grid_stride!r}"
+            )
         self.mixture = GaussianMixture2d(self.spec.full_res_sigmas)
         self.allow_tf32 = allow_tf32
 
@@ -117,12 +128,18 @@ class ALCN2d(nn.Module):
         ``(B, 1, 1, 1)``, the divisive floor (default: ``c`` times each image's mean energy)."""
         if self.spec.divisive is not None:
             sigma, c = self.spec.divisive
-            response = divisive_normalization(response, sigma, self.net.floor_scale if isinstance(self.net, GainNormalizer) else c, floor)
+            response = divisive_normalization(
+                response, sigma, self.net.floor_scale if isinstance(self.net, GainNormalizer) else c, floor
+            )
         if self.spec.tau is not None:
-            response = contrast_equalization(response, self.net.tau if isinstance(self.net, GainNormalizer) else self.spec.tau)
+            response = contrast_equalization(
+                response, self.net.tau if isinstance(self.net, GainNormalizer) else self.spec.tau
+            )
         return response
 
-    def response(self, gray: torch.Tensor, floor: torch.Tensor | None = None, small: torch.Tensor | None = None) -> torch.Tensor:
+    def response(
+        self, gray: torch.Tensor, floor: torch.Tensor | None = None, small: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """The raw normalized response ``(B, 1, H, W)`` (unbounded; :meth:`forward` maps it to [0, 1]); ``floor``
         as in :meth:`finish`, ``small`` as in :meth:`weight_maps`."""
         if gray.ndim != 4 or gray.shape[1] != 1:
@@ -148,8 +165,12 @@ class ALCN2d(nn.Module):
         """cuDNN without TF32 for a CUDA tensor unless :attr:`allow_tf32` (TF32 moves the output by about 1e-3)."""
         if self.allow_tf32 or not x.is_cuda:
             return nullcontext()
-        return torch.backends.cudnn.flags(enabled=torch.backends.cudnn.enabled, benchmark=torch.backends.cudnn.benchmark,
-                                          deterministic=torch.backends.cudnn.deterministic, allow_tf32=False)
+        return torch.backends.cudnn.flags(
+            enabled=torch.backends.cudnn.enabled,
+            benchmark=torch.backends.cudnn.benchmark,
+            deterministic=torch.backends.cudnn.deterministic,
+            allow_tf32=False,
+        )
 
     def extra_repr(self) -> str:
         return f"scale={self.spec.scale}, grid_stride={self.grid_stride}, allow_tf32={self.allow_tf32}"
@@ -209,7 +230,9 @@ class TorchNetwork:
     def dense_grid(self, image: np.ndarray) -> np.ndarray:
         with torch.inference_mode(), torch_threads(self.threads):
             if isinstance(self.net, GainNormalizer) and self.stride == self.net.stride and self.device.type == "cpu":
-                return self.net.maps_from_features(self.net.features_from_moments(_cell_moments(image, self.stride)))[0].numpy()
+                return self.net.maps_from_features(self.net.features_from_moments(_cell_moments(image, self.stride)))[
+                    0
+                ].numpy()
             x = torch.from_numpy(image).to(self.device)[None, None]
             return self.net.dense_grid(x, self.stride)[0].cpu().numpy()
 
@@ -221,8 +244,12 @@ class TorchNetwork:
         x = torch.from_numpy(windows)[:, None]
         c = (WINDOW // 2) // self.net.stride  # the grid point at the window's centre sees exactly the window
         with torch.inference_mode(), torch_threads(self.threads):
-            return torch.cat([self.net.dense_grid(x[i : i + _WINDOW_BATCH].to(self.device))[:, :, c, c].cpu()
-                              for i in range(0, len(x), _WINDOW_BATCH)]).numpy()
+            return torch.cat(
+                [
+                    self.net.dense_grid(x[i : i + _WINDOW_BATCH].to(self.device))[:, :, c, c].cpu()
+                    for i in range(0, len(x), _WINDOW_BATCH)
+                ]
+            ).numpy()
 
 
 def _cell_moments(image: np.ndarray, stride: int) -> torch.Tensor:
@@ -231,8 +258,13 @@ def _cell_moments(image: np.ndarray, stride: int) -> torch.Tensor:
     h, w = image.shape
     gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
     before = stride // 2
-    padded = cv2.copyMakeBorder(image, before, stride * gh - h - before, before, stride * gw - w - before, cv2.BORDER_REFLECT_101)
-    return torch.cat([F.avg_pool2d(torch.from_numpy(plane)[None, None], stride) for plane in (padded, cv2.multiply(padded, padded))], 1)
+    padded = cv2.copyMakeBorder(
+        image, before, stride * gh - h - before, before, stride * gw - w - before, cv2.BORDER_REFLECT_101
+    )
+    return torch.cat(
+        [F.avg_pool2d(torch.from_numpy(plane)[None, None], stride) for plane in (padded, cv2.multiply(padded, padded))],
+        1,
+    )
 
 
 class TorchRuntime:

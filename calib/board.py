@@ -80,9 +80,11 @@ class BoardSpec:
             raise InputError(f"board kind must be one of {_KINDS}, got {self.kind!r}")
         minimum = 2 if self.kind == "chessboard" else 3
         if int(self.cols) < minimum or int(self.rows) < minimum:
-            raise InputError(f"a {self.kind} needs at least {minimum}x{minimum} "
-                             f"{'inner corners' if self.kind == 'chessboard' else 'squares'}, "
-                             f"got {self.cols}x{self.rows}")
+            raise InputError(
+                f"a {self.kind} needs at least {minimum}x{minimum} "
+                f"{'inner corners' if self.kind == 'chessboard' else 'squares'}, "
+                f"got {self.cols}x{self.rows}"
+            )
         if not self.square > 0:
             raise InputError(f"square size must be positive (mm), got {self.square}")
         if self.kind == "charuco":
@@ -93,8 +95,10 @@ class BoardSpec:
             needed = (self.cols * self.rows) // 2
             size = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary)).bytesList.shape[0]
             if needed > size:
-                raise InputError(f"a {self.cols}x{self.rows} ChArUco board needs {needed} markers but "
-                                 f"{self.dictionary} has {size}; choose a larger dictionary")
+                raise InputError(
+                    f"a {self.cols}x{self.rows} ChArUco board needs {needed} markers but "
+                    f"{self.dictionary} has {size}; choose a larger dictionary"
+                )
 
     # -- geometry ---------------------------------------------------------------------
     @property
@@ -131,14 +135,16 @@ class BoardSpec:
         """A short human-readable description, used in messages."""
         if self.kind == "chessboard":
             return f"{self.cols}x{self.rows} chessboard (inner corners, {self.square:g} mm squares)"
-        return (f"{self.cols}x{self.rows} ChArUco board ({self.square:g} mm squares, {self.marker:g} mm markers, "
-                f"{self.dictionary}{', legacy' if self.legacy else ''})")
+        return (
+            f"{self.cols}x{self.rows} ChArUco board ({self.square:g} mm squares, {self.marker:g} mm markers, "
+            f"{self.dictionary}{', legacy' if self.legacy else ''})"
+        )
 
     def to_dict(self) -> dict:
         return asdict(self)
 
     # -- detection --------------------------------------------------------------------
-    def detector(self) -> "BoardDetector":
+    def detector(self) -> BoardDetector:
         """A reusable detector for this board (builds the ArUco detector once)."""
         return BoardDetector(self)
 
@@ -186,12 +192,14 @@ class BoardDetector:
         if self._board.checkCharucoCornersCollinear(ids):
             return None
         obj, img = self._board.matchImagePoints(corners, ids)
-        return Detection(np.asarray(img, np.float32).reshape(-1, 2), np.asarray(obj, np.float32).reshape(-1, 3),
-                         ids, len(seen))
+        return Detection(
+            np.asarray(img, np.float32).reshape(-1, 2), np.asarray(obj, np.float32).reshape(-1, 3), ids, len(seen)
+        )
 
 
-def suggest_chessboard_size(image: np.ndarray, near: tuple[int, int] | None = None,
-                            max_side: int = 12) -> tuple[int, int] | None:
+def suggest_chessboard_size(
+    image: np.ndarray, near: tuple[int, int] | None = None, max_side: int = 12
+) -> tuple[int, int] | None:
     """Find the inner-corner count of a chessboard seen in ``image`` by trying sizes.
 
     Used to explain a failed or partial detection ("you said 8x6, the image holds a 9x6
@@ -219,8 +227,7 @@ def suggest_chessboard_size(image: np.ndarray, near: tuple[int, int] | None = No
         candidates, ref = everything, (0, 0)
     else:
         ref = tuple(near)
-        candidates = [s for s in everything
-                      if min(abs(s[0] - b[0]) + abs(s[1] - b[1]) for b in (ref, ref[::-1])) <= 2]
+        candidates = [s for s in everything if min(abs(s[0] - b[0]) + abs(s[1] - b[1]) for b in (ref, ref[::-1])) <= 2]
     # Largest first; among equal areas, the orientation closest to the one given.
     for size in sorted(candidates, key=lambda s: (-s[0] * s[1], abs(s[0] - ref[0]) + abs(s[1] - ref[1]))):
         if found(size):
@@ -270,8 +277,16 @@ def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, 
     # Label outside the board so that a printed sheet says what it is.
     label = f"{spec.describe()} - print at 100% ({dpi} dpi)"
     font_scale = max(0.4, margin_px / 60.0)
-    cv2.putText(image, label, (margin_px, image.shape[0] - max(4, margin_px // 4)), cv2.FONT_HERSHEY_SIMPLEX,
-                font_scale, 0, max(1, int(font_scale * 1.5)), cv2.LINE_AA)
+    cv2.putText(
+        image,
+        label,
+        (margin_px, image.shape[0] - max(4, margin_px // 4)),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        font_scale,
+        0,
+        max(1, int(font_scale * 1.5)),
+        cv2.LINE_AA,
+    )
     with atomic_path(path) as tmp:
         Image.fromarray(image).save(tmp, format="PNG", dpi=(dpi, dpi))
     true_square = square_px / px_per_mm
@@ -287,6 +302,12 @@ def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, 
     }
     write_json(path.with_suffix(".json"), info, indent=2)
     if abs(true_square - spec.square) > 2e-3 * spec.square:  # beyond what printers hold anyway
-        logger.warning("at %d dpi a square is %d px = %.3f mm instead of %.3f mm; calibrate with --square %.3f",
-                       dpi, square_px, true_square, spec.square, true_square)
+        logger.warning(
+            "at %d dpi a square is %d px = %.3f mm instead of %.3f mm; calibrate with --square %.3f",
+            dpi,
+            square_px,
+            true_square,
+            spec.square,
+            true_square,
+        )
     return info

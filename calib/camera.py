@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -118,28 +118,41 @@ def _explain_no_board(board: BoardSpec, sample: np.ndarray | None, n_images: int
     if board.kind == "chessboard" and sample is not None:
         guess = _larger_board(board, sample)
         if guess is not None:
-            return (msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard: the board definition does "
-                    f"not match the images; pass --cols {guess[0]} --rows {guess[1]} (inner corners, not squares).")
-        return msg + (" Check --cols/--rows (inner corners, i.e. squares minus one), that the whole board is "
-                      "visible, in focus and well lit.")
+            return (
+                msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard: the board definition does "
+                f"not match the images; pass --cols {guess[0]} --rows {guess[1]} (inner corners, not squares)."
+            )
+        return msg + (
+            " Check --cols/--rows (inner corners, i.e. squares minus one), that the whole board is "
+            "visible, in focus and well lit."
+        )
     if foreign:
-        return (msg + f" {foreign} ArUco marker(s) were seen whose ids are not on this board: the board definition "
-                "does not match the images; check --cols/--rows (squares), --dictionary and --legacy.")
+        return (
+            msg + f" {foreign} ArUco marker(s) were seen whose ids are not on this board: the board definition "
+            "does not match the images; check --cols/--rows (squares), --dictionary and --legacy."
+        )
     if markers:
-        return (msg + f" {markers} ArUco marker(s) of the board were seen but no ChArUco corner could be placed "
-                "between them: the board layout does not match the images; check --cols/--rows (squares, "
-                "not inner corners) and --legacy.")
+        return (
+            msg + f" {markers} ArUco marker(s) of the board were seen but no ChArUco corner could be placed "
+            "between them: the board layout does not match the images; check --cols/--rows (squares, "
+            "not inner corners) and --legacy."
+        )
     # No marker at all: perhaps the images show a chessboard (as the example images do).
     guess = suggest_chessboard_size(sample, near=_COMMON_CHESSBOARD) if sample is not None else None
     if guess is not None:
-        return (msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard: pass --board chessboard "
-                f"--cols {guess[0]} --rows {guess[1]} (inner corners) and its --square size in mm.")
-    return msg + (" Check --board, --dictionary, --cols/--rows (squares) and --legacy, and that the board is "
-                  "visible, in focus and well lit.")
+        return (
+            msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard: pass --board chessboard "
+            f"--cols {guess[0]} --rows {guess[1]} (inner corners) and its --square size in mm."
+        )
+    return msg + (
+        " Check --board, --dictionary, --cols/--rows (squares) and --legacy, and that the board is "
+        "visible, in focus and well lit."
+    )
 
 
-def _check_chessboard_size(board: BoardSpec, samples: Sequence[tuple[str, np.ndarray]],
-                           missed: tuple[str, np.ndarray] | None, num_found: int) -> None:
+def _check_chessboard_size(
+    board: BoardSpec, samples: Sequence[tuple[str, np.ndarray]], missed: tuple[str, np.ndarray] | None, num_found: int
+) -> None:
     """The chessboard detector also finds part of a larger board: check on a few images
     where the board was found that it does not extend by a row or a column; and when the
     board was found in too few images, whether the others hold a board of another size."""
@@ -148,17 +161,21 @@ def _check_chessboard_size(board: BoardSpec, samples: Sequence[tuple[str, np.nda
     if missed is not None and num_found < MIN_VIEWS:
         guess = suggest_chessboard_size(missed[1], near=(board.cols, board.rows))
         if guess is not None and set(guess) != {board.cols, board.rows}:
-            raise InputError(f"the {board.describe()} was found in only {num_found} image(s) and {missed[0]} holds a "
-                             f"{guess[0]}x{guess[1]} chessboard: the board definition does not match the images; "
-                             f"pass --cols {guess[0]} --rows {guess[1]} (inner corners, not squares)")
+            raise InputError(
+                f"the {board.describe()} was found in only {num_found} image(s) and {missed[0]} holds a "
+                f"{guess[0]}x{guess[1]} chessboard: the board definition does not match the images; "
+                f"pass --cols {guess[0]} --rows {guess[1]} (inner corners, not squares)"
+            )
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH + cv2.CALIB_CB_NORMALIZE_IMAGE + cv2.CALIB_CB_FAST_CHECK
     for name, gray in samples:
         for size in ((board.cols + 1, board.rows), (board.cols, board.rows + 1)):
             if cv2.findChessboardCorners(gray, size, flags=flags)[0]:
                 guess = suggest_chessboard_size(gray, near=(board.cols, board.rows)) or size
-                raise InputError(f"{name} holds a {guess[0]}x{guess[1]} chessboard, larger than the {board.cols}x"
-                                 f"{board.rows} given: the board definition does not match the images; pass --cols "
-                                 f"{guess[0]} --rows {guess[1]} (inner corners of the whole board)")
+                raise InputError(
+                    f"{name} holds a {guess[0]}x{guess[1]} chessboard, larger than the {board.cols}x"
+                    f"{board.rows} given: the board definition does not match the images; pass --cols "
+                    f"{guess[0]} --rows {guess[1]} (inner corners of the whole board)"
+                )
 
 
 def _read_gray(path: Path) -> np.ndarray:
@@ -203,10 +220,13 @@ def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tu
             samples.append((path.name, gray))
         views.append(BoardView(path.name, det, _sharpness(gray)))
     if len(sizes) > 1:
-        listing = "; ".join(f"{w}x{h}: {', '.join(names[:3])}{' ...' if len(names) > 3 else ''}"
-                            for (w, h), names in sizes.items())
-        raise InputError(f"images have different sizes ({listing}); calibrate each camera/resolution separately "
-                         "or resize them all to one size first")
+        listing = "; ".join(
+            f"{w}x{h}: {', '.join(names[:3])}{' ...' if len(names) > 3 else ''}" for (w, h), names in sizes.items()
+        )
+        raise InputError(
+            f"images have different sizes ({listing}); calibrate each camera/resolution separately "
+            "or resize them all to one size first"
+        )
     if not views:
         raise InputError(_explain_no_board(board, first, len(paths), foreign, markers))
     _check_chessboard_size(board, samples, missed, len(views))
@@ -214,7 +234,9 @@ def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tu
     return views, next(iter(sizes))
 
 
-def detect_in_video(path: str | os.PathLike, board: BoardSpec, max_candidates: int = 150) -> tuple[list[BoardView], tuple[int, int]]:
+def detect_in_video(
+    path: str | os.PathLike, board: BoardSpec, max_candidates: int = 150
+) -> tuple[list[BoardView], tuple[int, int]]:
     """Detect the board in evenly spaced frames of a video (at most ``max_candidates``
     frames are examined). View names are ``frame_000123``."""
     path = Path(path)
@@ -229,8 +251,9 @@ def detect_in_video(path: str | os.PathLike, board: BoardSpec, max_candidates: i
     n = 0
     samples: list[tuple[str, np.ndarray]] = []
     missed = None
-    for name, frame in tqdm(iter_frames(path, step), total=-(-total // step) if total else None,
-                            desc="detecting board", unit="frame"):
+    for name, frame in tqdm(
+        iter_frames(path, step), total=-(-total // step) if total else None, desc="detecting board", unit="frame"
+    ):
         gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
         first = gray if first is None else first
         size = (gray.shape[1], gray.shape[0])
@@ -270,8 +293,13 @@ def _view_features(view: BoardView, image_size: tuple[int, int]) -> np.ndarray:
     return np.r_[centre, extent, tilt]
 
 
-def select_views(views: Sequence[BoardView], image_size: tuple[int, int], max_views: int = 30,
-                 min_coverage: float = 0.5, board: BoardSpec | None = None) -> list[BoardView]:
+def select_views(
+    views: Sequence[BoardView],
+    image_size: tuple[int, int],
+    max_views: int = 30,
+    min_coverage: float = 0.5,
+    board: BoardSpec | None = None,
+) -> list[BoardView]:
     """Choose views for board coverage and spread of poses.
 
     Views showing fewer than ``min_coverage`` of the board's corners and the blurriest third
@@ -308,8 +336,13 @@ def select_views(views: Sequence[BoardView], image_size: tuple[int, int], max_vi
     return [views[i] for i in chosen]
 
 
-def calibrate(views: Sequence[BoardView], image_size: tuple[int, int], board: BoardSpec | None = None,
-              flags: int = 0, min_views: int = MIN_VIEWS) -> Calibration:
+def calibrate(
+    views: Sequence[BoardView],
+    image_size: tuple[int, int],
+    board: BoardSpec | None = None,
+    flags: int = 0,
+    min_views: int = MIN_VIEWS,
+) -> Calibration:
     """Run ``cv2.calibrateCamera`` on the detected views and measure per-view errors.
 
     Args:
@@ -325,38 +358,65 @@ def calibrate(views: Sequence[BoardView], image_size: tuple[int, int], board: Bo
     """
     views = list(views)
     if len(views) < min_views:
-        raise InputError(f"only {len(views)} view(s) with the board; calibration needs at least {min_views} "
-                         f"(about {RECOMMENDED_VIEWS}-20 recommended): take more images of the board at different "
-                         "positions and tilts")
+        raise InputError(
+            f"only {len(views)} view(s) with the board; calibration needs at least {min_views} "
+            f"(about {RECOMMENDED_VIEWS}-20 recommended): take more images of the board at different "
+            "positions and tilts"
+        )
     if len(views) < RECOMMENDED_VIEWS:
-        logger.warning("only %d views: the calibration may be unreliable (about %d-20 recommended)",
-                       len(views), RECOMMENDED_VIEWS)
+        logger.warning(
+            "only %d views: the calibration may be unreliable (about %d-20 recommended)", len(views), RECOMMENDED_VIEWS
+        )
     obj = [v.detection.object_points.reshape(-1, 1, 3).astype(np.float32) for v in views]
     img = [v.detection.image_points.reshape(-1, 1, 2).astype(np.float32) for v in views]
     criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-9)
     try:
-        rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(obj, img, tuple(image_size), None, None,
-                                                        flags=flags, criteria=criteria)
+        rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
+            obj, img, tuple(image_size), None, None, flags=flags, criteria=criteria
+        )
     except cv2.error as exc:
-        raise InputError(f"calibration failed in OpenCV ({exc.err}); the views may be degenerate (all "
-                         "fronto-parallel, or too few points): add views with the board tilted") from exc
+        raise InputError(
+            f"calibration failed in OpenCV ({exc.err}); the views may be degenerate (all "
+            "fronto-parallel, or too few points): add views with the board tilted"
+        ) from exc
     errors = []
     for o, i, r, t in zip(obj, img, rvecs, tvecs):
         proj, _ = cv2.projectPoints(o, r, t, K, dist)
         errors.append(float(np.sqrt(np.mean(np.sum((proj - i).reshape(-1, 2) ** 2, axis=1)))))
-    result = Calibration(K, np.asarray(dist, np.float64).ravel(), (int(image_size[0]), int(image_size[1])),
-                         float(rms), [v.name for v in views], np.array(errors),
-                         [np.asarray(r).ravel() for r in rvecs], [np.asarray(t).ravel() for t in tvecs],
-                         board, [v.detection.image_points for v in views])
+    result = Calibration(
+        K,
+        np.asarray(dist, np.float64).ravel(),
+        (int(image_size[0]), int(image_size[1])),
+        float(rms),
+        [v.name for v in views],
+        np.array(errors),
+        [np.asarray(r).ravel() for r in rvecs],
+        [np.asarray(t).ravel() for t in tvecs],
+        board,
+        [v.detection.image_points for v in views],
+    )
     if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
         raise InputError("calibration diverged (non-finite or negative focal length); add more varied views")
     if rms > POOR_RMS_PX:
         worst = sorted(zip(errors, result.view_names), reverse=True)[:3]
-        logger.warning("poor calibration: RMS reprojection error %.3f px > %.1f px; worst views: %s. Check the "
-                       "--square size, remove blurred views, or check that the board is flat",
-                       rms, POOR_RMS_PX, ", ".join(f"{n} ({e:.2f} px)" for e, n in worst))
-    logger.info("calibrated %dx%d camera from %d views: RMS %.3f px, fx %.2f fy %.2f cx %.2f cy %.2f",
-                image_size[0], image_size[1], len(views), rms, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
+        logger.warning(
+            "poor calibration: RMS reprojection error %.3f px > %.1f px; worst views: %s. Check the "
+            "--square size, remove blurred views, or check that the board is flat",
+            rms,
+            POOR_RMS_PX,
+            ", ".join(f"{n} ({e:.2f} px)" for e, n in worst),
+        )
+    logger.info(
+        "calibrated %dx%d camera from %d views: RMS %.3f px, fx %.2f fy %.2f cx %.2f cy %.2f",
+        image_size[0],
+        image_size[1],
+        len(views),
+        rms,
+        K[0, 0],
+        K[1, 1],
+        K[0, 2],
+        K[1, 2],
+    )
     return result
 
 
@@ -390,8 +450,9 @@ def save_calibration(calib: Calibration, out_dir: str | os.PathLike, report: boo
     return paths
 
 
-def write_camera_yaml(path: str | os.PathLike, K: np.ndarray, dist: np.ndarray, image_size: tuple[int, int],
-                      rms: float | None = None) -> Path:
+def write_camera_yaml(
+    path: str | os.PathLike, K: np.ndarray, dist: np.ndarray, image_size: tuple[int, int], rms: float | None = None
+) -> Path:
     """Write intrinsics as OpenCV FileStorage YAML (``camera_matrix``, ``distortion_coefficients``,
     ``image_width``, ``image_height`` and optionally ``rms``), atomically."""
     path = Path(path)
@@ -450,8 +511,14 @@ def _is_video(path: Path) -> bool:
     return path.is_file() and is_video(path)
 
 
-def main(source: str | os.PathLike, out_dir: str | os.PathLike, board: BoardSpec, max_views: int = 30,
-         flags: int = 0, report: bool = True) -> Calibration:
+def main(
+    source: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    board: BoardSpec,
+    max_views: int = 30,
+    flags: int = 0,
+    report: bool = True,
+) -> Calibration:
     """Calibrate from a folder of images or a video and write the outputs into ``out_dir``.
 
     Args:

@@ -24,20 +24,38 @@ def _add_board_args(p: argparse.ArgumentParser, with_chessboard: bool = True) ->
     charuco, chess = _BOARD_DEFAULTS["charuco"], _BOARD_DEFAULTS["chessboard"]
     g = p.add_argument_group("board")
     if with_chessboard:
-        g.add_argument("--board", choices=("chessboard", "charuco"), default="charuco",
-                       help="target type (default charuco)")
+        g.add_argument(
+            "--board", choices=("chessboard", "charuco"), default="charuco", help="target type (default charuco)"
+        )
     else:
-        g.add_argument("--board", choices=("charuco",), default="charuco",
-                       help="target type: ChArUco only, the default (a chessboard's pose is ambiguous under a half turn)")
-    either = (lambda chessboard, aruco: f"chessboard: {chessboard}; ChArUco: {aruco}") if with_chessboard else (
-        lambda chessboard, aruco: aruco)
-    g.add_argument("--cols", type=int, help=either("inner corners per row (required)",
-                                                   f"squares along x (default {charuco['cols']})"))
-    g.add_argument("--rows", type=int, help=either("inner corners per column (required)",
-                                                   f"squares along y (default {charuco['rows']})"))
-    g.add_argument("--square", type=float,
-                   help="square side in mm as printed (default " + either(f"{chess['square']:g}", f"{charuco['square']:g}")
-                        + "; it sets the units of poses, not the intrinsics)")
+        g.add_argument(
+            "--board",
+            choices=("charuco",),
+            default="charuco",
+            help="target type: ChArUco only, the default (a chessboard's pose is ambiguous under a half turn)",
+        )
+    either = (
+        (lambda chessboard, aruco: f"chessboard: {chessboard}; ChArUco: {aruco}")
+        if with_chessboard
+        else (lambda chessboard, aruco: aruco)
+    )
+    g.add_argument(
+        "--cols",
+        type=int,
+        help=either("inner corners per row (required)", f"squares along x (default {charuco['cols']})"),
+    )
+    g.add_argument(
+        "--rows",
+        type=int,
+        help=either("inner corners per column (required)", f"squares along y (default {charuco['rows']})"),
+    )
+    g.add_argument(
+        "--square",
+        type=float,
+        help="square side in mm as printed (default "
+        + either(f"{chess['square']:g}", f"{charuco['square']:g}")
+        + "; it sets the units of poses, not the intrinsics)",
+    )
     g.add_argument("--marker", type=float, help=f"ChArUco marker side in mm (default {charuco['marker']:g})")
     g.add_argument("--dictionary", default="DICT_5X5_100", help="ChArUco ArUco dictionary (default DICT_5X5_100)")
     g.add_argument("--legacy", action="store_true", help="ChArUco board printed by OpenCV < 4.6 (even row count)")
@@ -48,7 +66,9 @@ def _board_from_args(args: argparse.Namespace):
 
     defaults = _BOARD_DEFAULTS[args.board]
     if args.board == "chessboard" and (args.cols is None or args.rows is None):
-        raise InputError("a chessboard needs --cols and --rows (inner corners, e.g. --cols 9 --rows 6 for a 10x7-square board)")
+        raise InputError(
+            "a chessboard needs --cols and --rows (inner corners, e.g. --cols 9 --rows 6 for a 10x7-square board)"
+        )
     return BoardSpec(
         kind=args.board,
         cols=args.cols if args.cols is not None else defaults["cols"],
@@ -64,14 +84,25 @@ def _camera(args: argparse.Namespace) -> int:
     from .camera import main
 
     if not args.no_report:  # before the work, not after the files are written
-        require("matplotlib", what="alcn calib camera (its calibration.png; --no-report writes the rest without it)",
-                preferred="data")
+        require(
+            "matplotlib",
+            what="alcn calib camera (its calibration.png; --no-report writes the rest without it)",
+            preferred="data",
+        )
     flags = (cv2.CALIB_FIX_K3 if args.fix_k3 else 0) | (cv2.CALIB_ZERO_TANGENT_DIST if args.zero_tangent else 0)
-    calib = main(args.images or args.video, args.out, _board_from_args(args), max_views=args.max_views, flags=flags,
-                 report=not args.no_report)
+    calib = main(
+        args.images or args.video,
+        args.out,
+        _board_from_args(args),
+        max_views=args.max_views,
+        flags=flags,
+        report=not args.no_report,
+    )
     K, d = calib.K, calib.dist
-    print(f"RMS {calib.rms:.3f} px over {len(calib.view_names)} views; fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} "
-          f"cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}; dist {np.array2string(d, precision=4)}; written to {args.out}")
+    print(
+        f"RMS {calib.rms:.3f} px over {len(calib.view_names)} views; fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} "
+        f"cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}; dist {np.array2string(d, precision=4)}; written to {args.out}"
+    )
     return 0
 
 
@@ -80,10 +111,12 @@ def _board(args: argparse.Namespace) -> int:
 
     info = write_board_image(_board_from_args(args), args.out, dpi=args.dpi, margin_mm=args.margin)
     w, h = info["image_size_mm"]
-    print(f"{args.out}: {info['image_size_px'][0]}x{info['image_size_px'][1]} px = {w:.1f} x {h:.1f} mm at "
-          f"{info['dpi']} dpi; squares {info['square_mm_printed']:.3f} mm"
-          + (f", markers {info['marker_mm_printed']:.3f} mm" if info["marker_mm_printed"] else "")
-          + f"; print at 100% scale and measure a square. Dimensions in {Path(args.out).with_suffix('.json')}")
+    print(
+        f"{args.out}: {info['image_size_px'][0]}x{info['image_size_px'][1]} px = {w:.1f} x {h:.1f} mm at "
+        f"{info['dpi']} dpi; squares {info['square_mm_printed']:.3f} mm"
+        + (f", markers {info['marker_mm_printed']:.3f} mm" if info["marker_mm_printed"] else "")
+        + f"; print at 100% scale and measure a square. Dimensions in {Path(args.out).with_suffix('.json')}"
+    )
     return 0
 
 
@@ -109,9 +142,17 @@ def _register(args: argparse.Namespace) -> int:
     if args.method == "board":
         if calib is None:
             raise InputError("--method board needs --calib camera.yaml (from `alcn calib camera`)")
-        reg = register_charuco(args.source, args.out, calib, _board_from_args(args), step=args.step,
-                               max_frames=args.max_frames, min_points=args.min_corners, max_rms_px=args.max_rms,
-                               overwrite=args.overwrite)
+        reg = register_charuco(
+            args.source,
+            args.out,
+            calib,
+            _board_from_args(args),
+            step=args.step,
+            max_frames=args.max_frames,
+            min_points=args.min_corners,
+            max_rms_px=args.max_rms,
+            overwrite=args.overwrite,
+        )
     else:
         known = None
         if args.known_distance:
@@ -121,13 +162,23 @@ def _register(args: argparse.Namespace) -> int:
             except ValueError:
                 raise InputError(f"--known-distance: {mm!r} is not a number of millimetres") from None
         reference = _load_reference(Path(args.reference), args.reference_unit) if args.reference else None
-        settings = SfmSettings(step=args.step, max_frames=args.max_frames, max_features=args.max_features,
-                               num_threads=args.threads)
-        reg = register_colmap(args.source, args.out, calib, known_distance=known, reference=reference,
-                              settings=settings, overwrite=args.overwrite)
-    print(f"registered {len(reg.registered)} of {len(reg.frames)} frames ({reg.units}); dropped {len(reg.dropped)} "
-          f"(reasons in {Path(args.out) / 'registration.json'}); BOP: {Path(args.out) / 'scene_camera.json'}, "
-          f"COLMAP: {Path(args.out) / 'colmap'} (images in rgb/)")
+        settings = SfmSettings(
+            step=args.step, max_frames=args.max_frames, max_features=args.max_features, num_threads=args.threads
+        )
+        reg = register_colmap(
+            args.source,
+            args.out,
+            calib,
+            known_distance=known,
+            reference=reference,
+            settings=settings,
+            overwrite=args.overwrite,
+        )
+    print(
+        f"registered {len(reg.registered)} of {len(reg.frames)} frames ({reg.units}); dropped {len(reg.dropped)} "
+        f"(reasons in {Path(args.out) / 'registration.json'}); BOP: {Path(args.out) / 'scene_camera.json'}, "
+        f"COLMAP: {Path(args.out) / 'colmap'} (images in rgb/)"
+    )
     return 0
 
 
@@ -143,17 +194,22 @@ def _undistort(args: argparse.Namespace) -> int:
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``alcn calib`` and its subcommands."""
     calib = subparsers.add_parser(
-        "calib", help="camera calibration, boards, registration of training sequences, undistortion",
+        "calib",
+        help="camera calibration, boards, registration of training sequences, undistortion",
         description="Calibrate a camera from a chessboard or ChArUco board, print a board, register a training "
-                    "sequence (poses in mm, BOP + COLMAP output) for `alcn pose build`, and undistort images/videos.")
+        "sequence (poses in mm, BOP + COLMAP output) for `alcn pose build`, and undistort images/videos.",
+    )
     sub = calib.add_subparsers(dest="calib_command", metavar="SUBCOMMAND", required=True)
 
-    p = sub.add_parser("camera", help="calibrate intrinsics and distortion from images or a video of a board",
-                       description="Detect the board, choose views (from a video: by coverage and pose spread), run "
-                                   "cv2.calibrateCamera, and write camera.yaml (OpenCV FileStorage), colmap/cameras.txt, "
-                                   "views.json (per-view errors) and calibration.png into --out. The default board is "
-                                   "ChArUco; the example images in ../shared/data/chessboard show a chessboard: "
-                                   "--board chessboard --cols 9 --rows 6 --square 25.")
+    p = sub.add_parser(
+        "camera",
+        help="calibrate intrinsics and distortion from images or a video of a board",
+        description="Detect the board, choose views (from a video: by coverage and pose spread), run "
+        "cv2.calibrateCamera, and write camera.yaml (OpenCV FileStorage), colmap/cameras.txt, "
+        "views.json (per-view errors) and calibration.png into --out. The default board is "
+        "ChArUco; the example images in ../shared/data/chessboard show a chessboard: "
+        "--board chessboard --cols 9 --rows 6 --square 25.",
+    )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--images", help="folder of images of the board")
     src.add_argument("--video", help="video of the board")
@@ -165,46 +221,68 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-report", action="store_true", help="do not write calibration.png")
     p.set_defaults(func=_camera)
 
-    p = sub.add_parser("board", help="write a printable board image (PNG with its DPI) and its dimensions (JSON)",
-                       description="Write a board to print at 100% scale, and <out>.json with its dimensions.")
+    p = sub.add_parser(
+        "board",
+        help="write a printable board image (PNG with its DPI) and its dimensions (JSON)",
+        description="Write a board to print at 100% scale, and <out>.json with its dimensions.",
+    )
     p.add_argument("--out", required=True, help="output .png")
     _add_board_args(p)
     p.add_argument("--dpi", type=int, default=300, help="print resolution (default 300)")
     p.add_argument("--margin", type=float, default=10.0, help="white margin in mm (default 10)")
     p.set_defaults(func=_board)
 
-    p = sub.add_parser("register", help="register a training sequence: a pose per frame, in mm (BOP + COLMAP)",
-                       description="With a ChArUco board in view (--method board): per-frame solvePnP on the board "
-                                   "corners, unreliable frames dropped and reported. Without (--method sfm): pycolmap "
-                                   "incremental reconstruction, then a similarity to mm from --known-distance or "
-                                   "--reference. Writes rgb/, scene_camera.json, colmap/, registration.json/.png.")
+    p = sub.add_parser(
+        "register",
+        help="register a training sequence: a pose per frame, in mm (BOP + COLMAP)",
+        description="With a ChArUco board in view (--method board): per-frame solvePnP on the board "
+        "corners, unreliable frames dropped and reported. Without (--method sfm): pycolmap "
+        "incremental reconstruction, then a similarity to mm from --known-distance or "
+        "--reference. Writes rgb/, scene_camera.json, colmap/, registration.json/.png.",
+    )
     p.add_argument("source", help="folder of images or a video")
     p.add_argument("--out", required=True, help="output folder (must not exist unless --overwrite)")
-    p.add_argument("--method", choices=("board", "sfm"), default="board",
-                   help="board (a ChArUco board in view) or sfm (pycolmap, no board) (default board)")
+    p.add_argument(
+        "--method",
+        choices=("board", "sfm"),
+        default="board",
+        help="board (a ChArUco board in view) or sfm (pycolmap, no board) (default board)",
+    )
     p.add_argument("--calib", help="camera.yaml from `alcn calib camera` (required for board; optional for sfm)")
     _add_board_args(p, with_chessboard=False)
     p.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
     p.add_argument("--max-frames", type=int, help="use at most this many frames")
     p.add_argument("--min-corners", type=int, default=8, help="board: fewest corners for a pose (default 8)")
     p.add_argument("--max-rms", type=float, default=1.0, help="board: largest RMS reprojection error, px (default 1)")
-    p.add_argument("--known-distance", nargs=3, metavar=("FRAME_A", "FRAME_B", "MM"),
-                   help="sfm: distance in mm between the centres of two input frames (image file names or "
-                        "stems; frame_000123 for a video)")
+    p.add_argument(
+        "--known-distance",
+        nargs=3,
+        metavar=("FRAME_A", "FRAME_B", "MM"),
+        help="sfm: distance in mm between the centres of two input frames (image file names or "
+        "stems; frame_000123 for a video)",
+    )
     p.add_argument("--reference", help="sfm: known poses to align to: a Middlebury *_par.txt or a COLMAP model folder")
-    p.add_argument("--reference-unit", choices=("mm", "cm", "m"), default="mm",
-                   help="sfm: units of a COLMAP --reference (default mm)")
+    p.add_argument(
+        "--reference-unit",
+        choices=("mm", "cm", "m"),
+        default="mm",
+        help="sfm: units of a COLMAP --reference (default mm)",
+    )
     p.add_argument("--max-features", type=int, default=4096, help="sfm: SIFT features per image (default 4096)")
     p.add_argument("--threads", type=int, default=-1, help="sfm: threads (default all)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     p.set_defaults(func=_register)
 
-    p = sub.add_parser("undistort", help="undistort an image, a folder of images or a video",
-                       description="Remove lens distortion; writes the pinhole camera of the output as YAML beside it.")
+    p = sub.add_parser(
+        "undistort",
+        help="undistort an image, a folder of images or a video",
+        description="Remove lens distortion; writes the pinhole camera of the output as YAML beside it.",
+    )
     p.add_argument("source", help="image, folder of images, or video")
     p.add_argument("output", help="output image, folder, or video (.mp4/.avi)")
     p.add_argument("--calib", required=True, help="camera.yaml from `alcn calib camera`")
-    p.add_argument("--alpha", type=float, default=0.0,
-                   help="0: crop to valid pixels; 1: keep all source pixels (default 0)")
+    p.add_argument(
+        "--alpha", type=float, default=0.0, help="0: crop to valid pixels; 1: keep all source pixels (default 0)"
+    )
     p.add_argument("--keep-K", action="store_true", help="keep the input camera matrix as the output's")
     p.set_defaults(func=_undistort)

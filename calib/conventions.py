@@ -19,8 +19,8 @@ Camera conversions between OpenCV and COLMAP live in :mod:`alcn_cv.formats.colma
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -47,7 +47,9 @@ def points_colmap_to_opencv(uv: np.ndarray) -> np.ndarray:
     return np.asarray(uv, np.float64) - 0.5
 
 
-def colmap_from_bop_frames(frames: Sequence[BopFrame], image_size: tuple[int, int]) -> tuple[list[ColmapCamera], list[ColmapImage]]:
+def colmap_from_bop_frames(
+    frames: Sequence[BopFrame], image_size: tuple[int, int]
+) -> tuple[list[ColmapCamera], list[ColmapImage]]:
     """COLMAP cameras and images (poses in mm) of BOP frames that have camera poses.
 
     One ``PINHOLE`` camera per distinct ``K``; image ``im_id`` becomes COLMAP image
@@ -84,8 +86,9 @@ def bop_frames_from_colmap(model: ColmapModel, image_dir: str | os.PathLike, uni
     for k, im in enumerate(images):
         K, dist = model.cameras[im.camera_id].to_opencv()
         if np.any(dist):
-            raise InputError(f"COLMAP camera {im.camera_id} has distortion, which BOP cannot hold; undistort the "
-                             "images first")
+            raise InputError(
+                f"COLMAP camera {im.camera_id} has distortion, which BOP cannot hold; undistort the images first"
+            )
         im_id = int(Path(im.name).stem) if numeric else k
         frames.append(BopFrame(im_id, Path(image_dir) / im.name, K, 1.0, [], im.R_w2c, im.t_w2c * unit_to_mm))
     return frames

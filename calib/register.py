@@ -35,9 +35,9 @@ import contextlib
 import logging
 import os
 import tempfile
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator, Sequence
 
 import cv2
 import numpy as np
@@ -47,8 +47,14 @@ from alcn_cv.data.manifest import atomic_output_dir
 from alcn_cv.errors import InputError
 from alcn_cv.formats import bop
 from alcn_cv.formats.bop import BopFrame
-from alcn_cv.formats.colmap import (ColmapImage, ColmapModel, ColmapPoint3D, camera_from_opencv, model_from_pycolmap,
-                                    write_text_model)
+from alcn_cv.formats.colmap import (
+    ColmapImage,
+    ColmapModel,
+    ColmapPoint3D,
+    camera_from_opencv,
+    model_from_pycolmap,
+    write_text_model,
+)
 from alcn_cv.io import VideoReader, iter_frames, list_images, write_image, write_json
 
 from .board import BoardSpec, Detection
@@ -118,6 +124,7 @@ class Registration:
 
 # -- input frames ------------------------------------------------------------------------
 
+
 def _num_frames(source: Path, step: int, max_frames: int | None) -> int | None:
     if source.is_dir():
         n = -(-len(list_images(source)) // step)
@@ -130,8 +137,15 @@ def _num_frames(source: Path, step: int, max_frames: int | None) -> int | None:
 
 # -- ChArUco path ------------------------------------------------------------------------
 
-def board_pose(detection: Detection, K: np.ndarray, dist: np.ndarray | None, min_points: int = 8,
-               max_rms_px: float = 1.0, min_ambiguity_ratio: float = 1.5) -> FrameRegistration:
+
+def board_pose(
+    detection: Detection,
+    K: np.ndarray,
+    dist: np.ndarray | None,
+    min_points: int = 8,
+    max_rms_px: float = 1.0,
+    min_ambiguity_ratio: float = 1.5,
+) -> FrameRegistration:
     """Pose of the board (board -> camera, board units) from one detection.
 
     Args:
@@ -165,8 +179,9 @@ def board_pose(detection: Detection, K: np.ndarray, dist: np.ndarray | None, min
         return FrameRegistration("", f"reprojection error {rms:.2f} px > {max_rms_px:g} px", rms, n)
     errors = np.asarray(errors, float).ravel()
     if len(errors) > 1 and errors[1] < min_ambiguity_ratio * max(errors[0], 1e-3):
-        return FrameRegistration("", f"ambiguous planar pose (second solution error {errors[1]:.2f} px vs "
-                               f"{errors[0]:.2f} px)", rms, n)
+        return FrameRegistration(
+            "", f"ambiguous planar pose (second solution error {errors[1]:.2f} px vs {errors[0]:.2f} px)", rms, n
+        )
     return FrameRegistration("", "ok", rms, n, R_w2c=R, t_w2c=t)
 
 
@@ -175,29 +190,43 @@ def _write_outputs(tmp: Path, reg: Registration, points3d=None, images: Sequence
     from .report import plot_registration
 
     kept = reg.registered
-    frames = [BopFrame(f.image_id, tmp / "rgb" / f"{f.image_id:06d}.png", reg.K, 1.0, [], f.R_w2c, f.t_w2c)
-              for f in kept]
+    frames = [
+        BopFrame(f.image_id, tmp / "rgb" / f"{f.image_id:06d}.png", reg.K, 1.0, [], f.R_w2c, f.t_w2c) for f in kept
+    ]
     bop.write_scene(tmp, frames)
     cameras, bop_images = colmap_from_bop_frames(frames, reg.image_size)
     units = reg.units if reg.units != "arbitrary" else None
     write_text_model(tmp / "colmap", cameras, bop_images if images is None else images, points3d, units=units)
-    write_json(tmp / "registration.json", {
-        "units": reg.units,
-        "image_size": list(reg.image_size),
-        "cam_K": reg.K.reshape(-1).tolist(),
-        "colmap_image_path": "rgb",
-        "num_frames": len(reg.frames),
-        "num_registered": len(kept),
-        "frames": [
-            {"name": f.name, "status": f.status, "image_id": f.image_id,
-             "rms_px": None if not np.isfinite(f.rms_px) else round(float(f.rms_px), 4), "num_points": f.num_points}
-            for f in reg.frames
-        ],
-    })
+    write_json(
+        tmp / "registration.json",
+        {
+            "units": reg.units,
+            "image_size": list(reg.image_size),
+            "cam_K": reg.K.reshape(-1).tolist(),
+            "colmap_image_path": "rgb",
+            "num_frames": len(reg.frames),
+            "num_registered": len(kept),
+            "frames": [
+                {
+                    "name": f.name,
+                    "status": f.status,
+                    "image_id": f.image_id,
+                    "rms_px": None if not np.isfinite(f.rms_px) else round(float(f.rms_px), 4),
+                    "num_points": f.num_points,
+                }
+                for f in reg.frames
+            ],
+        },
+    )
     centers = np.array([-f.R_w2c.T @ f.t_w2c for f in kept]).reshape(-1, 3)
-    plot_registration([f.name for f in reg.frames], [f.rms_px for f in reg.frames],
-                      [f.status == "ok" for f in reg.frames], centers, tmp / "registration.png",
-                      title=f"{len(kept)} of {len(reg.frames)} frames registered ({reg.units})")
+    plot_registration(
+        [f.name for f in reg.frames],
+        [f.rms_px for f in reg.frames],
+        [f.status == "ok" for f in reg.frames],
+        centers,
+        tmp / "registration.png",
+        title=f"{len(kept)} of {len(reg.frames)} frames registered ({reg.units})",
+    )
 
 
 def _check_enough(reg: Registration, hint: str) -> None:
@@ -206,13 +235,23 @@ def _check_enough(reg: Registration, hint: str) -> None:
         for f in reg.dropped:
             reasons[f.status] = reasons.get(f.status, 0) + 1
         listing = "; ".join(f"{n} x {r}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1])[:4])
-        raise InputError(f"only {len(reg.registered)} of {len(reg.frames)} frames registered (at least "
-                         f"{MIN_REGISTERED} needed); dropped: {listing or 'none'}. {hint}")
+        raise InputError(
+            f"only {len(reg.registered)} of {len(reg.frames)} frames registered (at least "
+            f"{MIN_REGISTERED} needed); dropped: {listing or 'none'}. {hint}"
+        )
 
 
-def register_charuco(source: str | os.PathLike, out_dir: str | os.PathLike, calib: Calibration, board: BoardSpec,
-                     step: int = 1, max_frames: int | None = None, min_points: int = 8, max_rms_px: float = 1.0,
-                     overwrite: bool = False) -> Registration:
+def register_charuco(
+    source: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    calib: Calibration,
+    board: BoardSpec,
+    step: int = 1,
+    max_frames: int | None = None,
+    min_points: int = 8,
+    max_rms_px: float = 1.0,
+    overwrite: bool = False,
+) -> Registration:
     """Register a sequence (folder of images or video) with a ChArUco board in view.
 
     Args:
@@ -232,8 +271,10 @@ def register_charuco(source: str | os.PathLike, out_dir: str | os.PathLike, cali
             fewer than :data:`MIN_REGISTERED` frames registered.
     """
     if board.kind != "charuco":
-        raise InputError("registration with a board needs a ChArUco board (partial views, identified corners); "
-                         "a chessboard's pose is ambiguous under rotation by 180 degrees")
+        raise InputError(
+            "registration with a board needs a ChArUco board (partial views, identified corners); "
+            "a chessboard's pose is ambiguous under rotation by 180 degrees"
+        )
     source = Path(source)
     detector = board.detector()
     undistort = Undistorter(calib, keep_K=True)
@@ -258,20 +299,29 @@ def register_charuco(source: str | os.PathLike, out_dir: str | os.PathLike, cali
             else:
                 logger.info("%s dropped: %s", name, result.status)
             reg.frames.append(result)
-        _check_enough(reg, "Check that the board is in view, in focus, and matches --cols/--rows/--dictionary; "
-                           "or relax --max-rms.")
+        _check_enough(
+            reg,
+            "Check that the board is in view, in focus, and matches --cols/--rows/--dictionary; or relax --max-rms.",
+        )
         _write_outputs(tmp, reg)
     reg.out_dir = Path(out_dir)
     errs = np.array([f.rms_px for f in reg.registered])
-    logger.info("registered %d of %d frames (median board RMS %.3f px); dropped %d",
-                len(reg.registered), len(reg.frames), float(np.median(errs)), len(reg.dropped))
+    logger.info(
+        "registered %d of %d frames (median board RMS %.3f px); dropped %d",
+        len(reg.registered),
+        len(reg.frames),
+        float(np.median(errs)),
+        len(reg.dropped),
+    )
     return reg
 
 
 # -- COLMAP path -------------------------------------------------------------------------
 
-def similarity_from_poses(R_src: np.ndarray, C_src: np.ndarray, R_dst: np.ndarray,
-                          C_dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+
+def similarity_from_poses(
+    R_src: np.ndarray, C_src: np.ndarray, R_dst: np.ndarray, C_dst: np.ndarray
+) -> tuple[float, np.ndarray, np.ndarray]:
     """Similarity ``x_dst = s R x_src + t`` that maps cameras of one frame onto another.
 
     The rotation is the chordal mean (SVD projection) of ``R_dst_i^T R_src_i`` over cameras,
@@ -294,7 +344,7 @@ def similarity_from_poses(R_src: np.ndarray, C_src: np.ndarray, R_dst: np.ndarra
     R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
     a = C_src - C_src.mean(0)
     b = C_dst - C_dst.mean(0)
-    denom = float((a ** 2).sum())
+    denom = float((a**2).sum())
     if denom < 1e-12:
         raise InputError("the reference cameras share one centre; the scale is undefined")
     s = float(np.sum(b * (a @ R.T)) / denom)
@@ -366,15 +416,18 @@ def _write_sfm_frames(source: Path, rgb: Path, calib: Calibration | None, settin
     names: list[str] = []
     size = None
     frames = iter_frames(source, settings.step, settings.max_frames)
-    for name, image in tqdm(frames, total=_num_frames(source, settings.step, settings.max_frames),
-                            desc="preparing frames", unit="frame"):
+    for name, image in tqdm(
+        frames, total=_num_frames(source, settings.step, settings.max_frames), desc="preparing frames", unit="frame"
+    ):
         if undistort is not None:
             image = undistort(image, name)
         if size is None:
             size = (image.shape[1], image.shape[0])
         elif size != (image.shape[1], image.shape[0]):
-            raise InputError(f"{name} is {image.shape[1]}x{image.shape[0]} but earlier frames are "
-                             f"{size[0]}x{size[1]}; all frames must have one size")
+            raise InputError(
+                f"{name} is {image.shape[1]}x{image.shape[0]} but earlier frames are "
+                f"{size[0]}x{size[1]}; all frames must have one size"
+            )
         write_image(rgb / f"{len(names):06d}.png", image)
         names.append(name)
     if len(names) < 3:
@@ -382,8 +435,9 @@ def _write_sfm_frames(source: Path, rgb: Path, calib: Calibration | None, settin
     return _SfmFrames(names, [f"{i:06d}.png" for i in range(len(names))], size)
 
 
-def _reconstruct(frames: _SfmFrames, rgb: Path, work: Path, calib: Calibration | None,
-                 settings: SfmSettings) -> ColmapModel:
+def _reconstruct(
+    frames: _SfmFrames, rgb: Path, work: Path, calib: Calibration | None, settings: SfmSettings
+) -> ColmapModel:
     """pycolmap SIFT extraction, exhaustive matching and incremental mapping; the largest model.
 
     With a calibration the shared ``PINHOLE`` camera is held fixed; without, it is estimated.
@@ -403,8 +457,15 @@ def _reconstruct(frames: _SfmFrames, rgb: Path, work: Path, calib: Calibration |
     pycolmap.set_random_seed(int(settings.seed))
     n = len(frames.names)
     logger.info("extracting SIFT features from %d frames", n)
-    pycolmap.extract_features(db, rgb, image_names=frames.out_names, camera_mode=pycolmap.CameraMode.SINGLE,
-                              reader_options=reader, extraction_options=extraction, device=pycolmap.Device.cpu)
+    pycolmap.extract_features(
+        db,
+        rgb,
+        image_names=frames.out_names,
+        camera_mode=pycolmap.CameraMode.SINGLE,
+        reader_options=reader,
+        extraction_options=extraction,
+        device=pycolmap.Device.cpu,
+    )
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = int(settings.num_threads)
     matching.use_gpu = False
@@ -425,16 +486,22 @@ def _reconstruct(frames: _SfmFrames, rgb: Path, work: Path, calib: Calibration |
     logger.info("incremental reconstruction")
     recs = pycolmap.incremental_mapping(db, rgb, work / "sparse", options=options)
     if not recs:
-        raise InputError(f"pycolmap found no reconstruction in {n} frames: the frames need more "
-                         "overlap and texture (or use a ChArUco board and --method board)")
+        raise InputError(
+            f"pycolmap found no reconstruction in {n} frames: the frames need more "
+            "overlap and texture (or use a ChArUco board and --method board)"
+        )
     model = model_from_pycolmap(max(recs.values(), key=lambda r: r.num_reg_images()))
     if len(model.cameras) != 1:
         raise InputError("the reconstruction has several cameras; expected one shared camera")
     return model
 
 
-def _scale_to_mm(model: ColmapModel, frames: _SfmFrames, known_distance: tuple[str, str, float] | None,
-                 reference: dict[str, tuple[np.ndarray, np.ndarray]] | None) -> None:
+def _scale_to_mm(
+    model: ColmapModel,
+    frames: _SfmFrames,
+    known_distance: tuple[str, str, float] | None,
+    reference: dict[str, tuple[np.ndarray, np.ndarray]] | None,
+) -> None:
     """Bring the model to millimetres, in place: a similarity to reference poses, or a scale from a
     known distance between two camera centres; without either the units stay arbitrary (warned)."""
     by_out = {im.name: im for im in model.images.values()}
@@ -451,13 +518,17 @@ def _scale_to_mm(model: ColmapModel, frames: _SfmFrames, known_distance: tuple[s
     if reference:
         known = [n for n in reference if frames.output_name(n) in by_out]
         if len(known) < 2:
-            raise InputError(f"only {len(known)} reference frame(s) were registered by SfM; the alignment "
-                             "needs 2 (give more reference poses)")
+            raise InputError(
+                f"only {len(known)} reference frame(s) were registered by SfM; the alignment "
+                "needs 2 (give more reference poses)"
+            )
         R_ref = np.array([reference[n][0] for n in known], float)
-        C_ref = np.array([-np.asarray(reference[n][0], float).T @ np.asarray(reference[n][1], float).reshape(3)
-                          for n in known])
-        s, R, t = similarity_from_poses(np.array([image_of(n).R_w2c for n in known]),
-                                        np.array([image_of(n).center for n in known]), R_ref, C_ref)
+        C_ref = np.array(
+            [-np.asarray(reference[n][0], float).T @ np.asarray(reference[n][1], float).reshape(3) for n in known]
+        )
+        s, R, t = similarity_from_poses(
+            np.array([image_of(n).R_w2c for n in known]), np.array([image_of(n).center for n in known]), R_ref, C_ref
+        )
         _apply_similarity(model, s, R, t)
     elif known_distance:
         a, b, mm = known_distance
@@ -466,12 +537,18 @@ def _scale_to_mm(model: ColmapModel, frames: _SfmFrames, known_distance: tuple[s
             raise InputError(f"frames {a} and {b} have the same centre, or the distance {mm} is not positive")
         _apply_similarity(model, float(mm) / d, np.eye(3), np.zeros(3))
     else:
-        logger.warning("no known length given: poses are in the arbitrary units of the reconstruction; pass "
-                       "--known-distance (or --reference) for millimetres")
+        logger.warning(
+            "no known length given: poses are in the arbitrary units of the reconstruction; pass "
+            "--known-distance (or --reference) for millimetres"
+        )
 
 
-def _renumber_registered(model: ColmapModel, frames: _SfmFrames, rgb: Path, reg: Registration,
-                         ) -> tuple[list[ColmapPoint3D], list[ColmapImage]]:
+def _renumber_registered(
+    model: ColmapModel,
+    frames: _SfmFrames,
+    rgb: Path,
+    reg: Registration,
+) -> tuple[list[ColmapPoint3D], list[ColmapImage]]:
     """Record every frame in ``reg`` and keep output ids contiguous: registered images are renamed
     in input order, the others removed; returns the model's points and images with the new ids."""
     K = reg.K
@@ -492,18 +569,32 @@ def _renumber_registered(model: ColmapModel, frames: _SfmFrames, rgb: Path, reg:
             os.replace(rgb / old, rgb / f"{image_id:06d}.png")
     images = []
     for im in model.images.values():
-        images.append(ColmapImage(new_id[im.image_id] + 1, f"{new_id[im.image_id]:06d}.png", 1, im.R_w2c,
-                                  im.t_w2c, im.points2d, im.point3d_ids))
+        images.append(
+            ColmapImage(
+                new_id[im.image_id] + 1,
+                f"{new_id[im.image_id]:06d}.png",
+                1,
+                im.R_w2c,
+                im.t_w2c,
+                im.points2d,
+                im.point3d_ids,
+            )
+        )
     points = list(model.points3d.values())
     for p in points:
         p.track = np.array([(new_id[i] + 1, k) for i, k in p.track], dtype=np.int64).reshape(-1, 2)
     return points, images
 
 
-def register_colmap(source: str | os.PathLike, out_dir: str | os.PathLike, calib: Calibration | None = None,
-                    known_distance: tuple[str, str, float] | None = None,
-                    reference: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
-                    settings: SfmSettings = SfmSettings(), overwrite: bool = False) -> Registration:
+def register_colmap(
+    source: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    calib: Calibration | None = None,
+    known_distance: tuple[str, str, float] | None = None,
+    reference: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
+    settings: SfmSettings = SfmSettings(),
+    overwrite: bool = False,
+) -> Registration:
     """Register a sequence without a board: pycolmap SfM, then a similarity to millimetres.
 
     The steps: write the (undistorted) frames, reconstruct (:func:`_reconstruct`), scale to
@@ -532,8 +623,7 @@ def register_colmap(source: str | os.PathLike, out_dir: str | os.PathLike, calib
     """
     source = Path(source)
     units = "mm" if (known_distance or reference) else "arbitrary"
-    with (atomic_output_dir(out_dir, overwrite=overwrite) as tmp, tempfile.TemporaryDirectory() as work,
-          _quiet_colmap()):
+    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp, tempfile.TemporaryDirectory() as work, _quiet_colmap():
         rgb = tmp / "rgb"
         rgb.mkdir()
         frames = _write_sfm_frames(source, rgb, calib, settings)
@@ -546,8 +636,13 @@ def register_colmap(source: str | os.PathLike, out_dir: str | os.PathLike, calib
         _check_enough(reg, "The frames need more overlap and texture.")
         _write_outputs(tmp, reg, points, images)
     reg.out_dir = Path(out_dir)
-    logger.info("SfM registered %d of %d frames, %d points (units: %s)", len(reg.registered), len(reg.frames),
-                len(points), reg.units)
+    logger.info(
+        "SfM registered %d of %d frames, %d points (units: %s)",
+        len(reg.registered),
+        len(reg.frames),
+        len(points),
+        reg.units,
+    )
     return reg
 
 
@@ -560,5 +655,4 @@ def _sfm_rms(model, image: ColmapImage, K: np.ndarray) -> float:
     x = (K @ (image.R_w2c @ X.T + image.t_w2c[:, None])).T
     uv = x[:, :2] / x[:, 2:]
     err = uv - (image.points2d[idx] - 0.5)
-    return float(np.sqrt(np.mean(np.sum(err ** 2, axis=1))))
-
+    return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))

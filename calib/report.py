@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,8 +22,9 @@ __all__ = ["plot_calibration", "plot_registration"]
 
 def _figure(ncols: int, width: float = 13.0, height: float = 5.0):
     """``(plt, fig, axes)``: one row of ``ncols`` axes, the first a little wider."""
-    plt, fig, axes = new_figure(1, ncols, figsize=(width, height),
-                                gridspec_kw={"width_ratios": [1.2] + [1] * (ncols - 1)})
+    plt, fig, axes = new_figure(
+        1, ncols, figsize=(width, height), gridspec_kw={"width_ratios": [1.2] + [1] * (ncols - 1)}
+    )
     return plt, fig, axes[0]
 
 
@@ -31,7 +33,7 @@ def _save(plt, fig, path: str | os.PathLike) -> Path:
     return save_figure(plt, fig, path)
 
 
-def plot_calibration(calib: "Calibration", path: str | os.PathLike) -> Path:
+def plot_calibration(calib: Calibration, path: str | os.PathLike) -> Path:
     """Board coverage (every detected corner of every view over the image frame, each view's
     outline) and per-view RMS reprojection errors with the overall RMS.
 
@@ -73,15 +75,23 @@ def plot_calibration(calib: "Calibration", path: str | os.PathLike) -> Path:
     ax1.set_xticklabels(calib.view_names, rotation=60, ha="right", fontsize=7)
     ax1.set_ylabel("RMS reprojection error (px)")
     d = calib.dist
-    ax1.set_title(f"fx {K[0, 0]:.2f}  fy {K[1, 1]:.2f}  cx {K[0, 2]:.2f}  cy {K[1, 2]:.2f}\n"
-                  f"k1 {d[0]:.3f}  k2 {d[1]:.3f}  p1 {d[2]:.4f}  p2 {d[3]:.4f}" + (f"  k3 {d[4]:.3f}" if len(d) > 4 else ""),
-                  fontsize=10)
+    ax1.set_title(
+        f"fx {K[0, 0]:.2f}  fy {K[1, 1]:.2f}  cx {K[0, 2]:.2f}  cy {K[1, 2]:.2f}\n"
+        f"k1 {d[0]:.3f}  k2 {d[1]:.3f}  p1 {d[2]:.4f}  p2 {d[3]:.4f}" + (f"  k3 {d[4]:.3f}" if len(d) > 4 else ""),
+        fontsize=10,
+    )
     ax1.legend(fontsize=8)
     return _save(plt, fig, path)
 
 
-def plot_registration(names: Sequence[str], errors: Sequence[float], kept: Sequence[bool],
-                      centers: np.ndarray, path: str | os.PathLike, title: str = "") -> Path:
+def plot_registration(
+    names: Sequence[str],
+    errors: Sequence[float],
+    kept: Sequence[bool],
+    centers: np.ndarray,
+    path: str | os.PathLike,
+    title: str = "",
+) -> Path:
     """Per-frame reprojection errors (dropped frames in red) and the registered camera
     centres projected on their two main axes (world units).
 

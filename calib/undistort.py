@@ -53,15 +53,18 @@ class Undistorter:
     def __call__(self, image: np.ndarray, name: str = "image") -> np.ndarray:
         """Undistort one image (any channels and dtype OpenCV remaps); same shape out."""
         if image.shape[1::-1] != self.size:
-            raise InputError(f"{name} is {image.shape[1]}x{image.shape[0]} but the calibration is for "
-                             f"{self.size[0]}x{self.size[1]}; calibrate at this resolution")
+            raise InputError(
+                f"{name} is {image.shape[1]}x{image.shape[0]} but the calibration is for "
+                f"{self.size[0]}x{self.size[1]}; calibrate at this resolution"
+            )
         if self.identity:
             return image
         return cv2.remap(image, self.map1, self.map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
 
 
-def main(source: str | os.PathLike, output: str | os.PathLike, calib: Calibration, alpha: float = 0.0,
-         keep_K: bool = False) -> Path:
+def main(
+    source: str | os.PathLike, output: str | os.PathLike, calib: Calibration, alpha: float = 0.0, keep_K: bool = False
+) -> Path:
     """Undistort an image, a folder of images or a video.
 
     Args:
@@ -98,5 +101,3 @@ def main(source: str | os.PathLike, output: str | os.PathLike, calib: Calibratio
         raise InputError(f"{source}: no such file or folder")
     write_camera_yaml(yaml_path, undistort.new_K, np.zeros(5), undistort.size)
     return yaml_path
-
-

@@ -32,8 +32,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("model")
     ap.add_argument("video")
-    ap.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"),
-                    help="intrinsics (default: the camera stored in the model)")
+    ap.add_argument(
+        "--K",
+        nargs=4,
+        type=float,
+        metavar=("FX", "FY", "CX", "CY"),
+        help="intrinsics (default: the camera stored in the model)",
+    )
     ap.add_argument("--normalizer", default="none")
     ap.add_argument("--max-frames", type=int, default=200)
     args = ap.parse_args()
@@ -47,15 +52,21 @@ def main() -> None:
             solver = PoseSolver(K, method=name)
             tracker = PoseTracker(solver)
             t0 = time.perf_counter()
-            res = [tracker.update(i, c.object_points, c.image_points) if use_prior
-                   else solver.solve(c.object_points, c.image_points) for i, c in enumerate(corr)]
+            res = [
+                tracker.update(i, c.object_points, c.image_points)
+                if use_prior
+                else solver.solve(c.object_points, c.image_points)
+                for i, c in enumerate(corr)
+            ]
             ms = 1e3 * (time.perf_counter() - t0) / len(corr)
             ok = [r for r in res if r.ok]
             t = np.array([r.tvec.ravel() if r.ok else [np.nan] * 3 for r in res])
             jump = np.nanmedian(np.linalg.norm(np.diff(t, axis=0), axis=1)) if len(ok) > 1 else np.nan
-            print(f"{name:18s} {use_prior!s:5s} {ms:6.2f} {len(ok):4d}/{len(res):4d} "
-                  f"{np.mean([len(r.inliers) for r in ok]) if ok else 0:8.1f} "
-                  f"{np.mean([r.reprojection_error for r in ok]) if ok else np.nan:7.2f} {jump:7.3f}")
+            print(
+                f"{name:18s} {use_prior!s:5s} {ms:6.2f} {len(ok):4d}/{len(res):4d} "
+                f"{np.mean([len(r.inliers) for r in ok]) if ok else 0:8.1f} "
+                f"{np.mean([r.reprojection_error for r in ok]) if ok else np.nan:7.2f} {jump:7.3f}"
+            )
 
 
 if __name__ == "__main__":

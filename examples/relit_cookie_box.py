@@ -44,8 +44,15 @@ def frames(video: Path, max_frames: int | None):
         yield i, frame
 
 
-def registered_build(video: Path, ref: part_model.PartModel, K: np.ndarray, normalizer: str, path: Path,
-                     step: int = 10, max_frames: int | None = None) -> None:
+def registered_build(
+    video: Path,
+    ref: part_model.PartModel,
+    K: np.ndarray,
+    normalizer: str,
+    path: Path,
+    step: int = 10,
+    max_frames: int | None = None,
+) -> None:
     """A model on ``normalizer``-normalized images of the original video, in the reference model's frame:
     the frames are registered by tracking the reference model, then triangulated with these poses fixed."""
     tracker, det = PoseTracker(PoseSolver(K, min_inliers=30)), FeaturePartDetector(ref, "none")
@@ -66,11 +73,19 @@ def registered_build(video: Path, ref: part_model.PartModel, K: np.ndarray, norm
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("out/cookie_box_relit"))
-    ap.add_argument("--methods", nargs="+", default=["none", "alcn:model=lite:mixture=pyramid"],
-                    help="normalizers (NAME[:KEY=VALUE...]; default: none and the real-time ALCN)")
+    ap.add_argument(
+        "--methods",
+        nargs="+",
+        default=["none", "alcn:model=lite:mixture=pyramid"],
+        help="normalizers (NAME[:KEY=VALUE...]; default: none and the real-time ALCN)",
+    )
     ap.add_argument("--data", type=Path, default=shared_data_dir() / "cookie_box")
-    ap.add_argument("--max-frames", type=int, default=150,
-                    help="only the first N frames (default 150: five lights, a few minutes; 0: all 456)")
+    ap.add_argument(
+        "--max-frames",
+        type=int,
+        default=150,
+        help="only the first N frames (default 150: five lights, a few minutes; 0: all 456)",
+    )
     args = ap.parse_args()
     args.max_frames = args.max_frames or None
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
@@ -78,8 +93,19 @@ def main() -> None:
     video = args.data / "box.mp4"
     ref_path = args.out / "model_none.npz"
     if not ref_path.is_file():  # the reference model: built from the video alone (see track_cookie_box.py)
-        build.main(video, ref_path, K=K_TUTORIAL, video_step=10, max_frames=46, motion_mask=True, feature="ORB",
-                   n_features=3000, box_ply=args.data / "box.ply", box_units="cm", refine_focal=True)
+        build.main(
+            video,
+            ref_path,
+            K=K_TUTORIAL,
+            video_step=10,
+            max_frames=46,
+            motion_mask=True,
+            feature="ORB",
+            n_features=3000,
+            box_ply=args.data / "box.ply",
+            box_units="cm",
+            refine_focal=True,
+        )
     ref = part_model.load(ref_path)
     K = np.asarray(ref.extra.get("K", K_TUTORIAL))  # the focal length refined when building
     models = {"none": ref}
@@ -113,8 +139,11 @@ def main() -> None:
                 for img in (vis, panel):
                     track.draw_box(img, models[n].corners, est.rvec, est.tvec, K, track.color_for(n))
             if gt.ok:
-                agree[n].append(est.ok and evaluate.projection_error(
-                    models[n].corners, est.R, est.tvec, gt.R, gt.tvec, K) < evaluate.PROJ_PX)
+                agree[n].append(
+                    est.ok
+                    and evaluate.projection_error(models[n].corners, est.R, est.tvec, gt.R, gt.tvec, K)
+                    < evaluate.PROJ_PX
+                )
             panels.append(cv2.putText(panel, n, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 1.0, (255, 255, 255), 2))
         both.write(name, vis)
         side.write(name, np.hstack(panels))
@@ -122,8 +151,10 @@ def main() -> None:
             io.write_image(args.out / f"side_by_side_{i:04d}.png", np.hstack(panels))
     both.close()
     side.close()
-    summary = {n: {"agreeing_frames_percent": 100.0 * float(np.mean(a)) if a else None, "reference_frames": len(a)}
-               for n, a in agree.items()}
+    summary = {
+        n: {"agreeing_frames_percent": 100.0 * float(np.mean(a)) if a else None, "reference_frames": len(a)}
+        for n, a in agree.items()
+    }
     (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
     print(json.dumps(summary, indent=1))
 

@@ -44,12 +44,15 @@ def contact_sheet(video: Path, out: Path, frames: tuple[int, ...] = (0, 60, 120,
         if not ok:
             break
         if i in frames:
-            tiles.append(cv2.putText(cv2.resize(img, (320, 240)), f"#{i}", (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7,
-                                     (255, 255, 255), 2))
+            tiles.append(
+                cv2.putText(
+                    cv2.resize(img, (320, 240)), f"#{i}", (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2
+                )
+            )
     reader.release()
     while len(tiles) % 4:
         tiles.append(np.zeros_like(tiles[0]))
-    rows = [np.hstack(tiles[k:k + 4]) for k in range(0, len(tiles), 4)]
+    rows = [np.hstack(tiles[k : k + 4]) for k in range(0, len(tiles), 4)]
     cv2.imwrite(str(out), np.vstack(rows))
     return out
 
@@ -57,9 +60,12 @@ def contact_sheet(video: Path, out: Path, frames: tuple[int, ...] = (0, 60, 120,
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("out/cookie_box"))
-    ap.add_argument("--normalizer", default="none",
-                    help="normalizer before the features, NAME[:KEY=VALUE...] (alcn_cv.available(); the real-time "
-                    "ALCN: alcn:model=lite:mixture=pyramid)")
+    ap.add_argument(
+        "--normalizer",
+        default="none",
+        help="normalizer before the features, NAME[:KEY=VALUE...] (alcn_cv.available(); the real-time "
+        "ALCN: alcn:model=lite:mixture=pyramid)",
+    )
     ap.add_argument("--data", type=Path, default=shared_data_dir() / "cookie_box")
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
@@ -67,17 +73,33 @@ def main() -> None:
     video = args.data / "box.mp4"
     model_path = args.out / "cookie_box_model.npz"
     if not model_path.is_file():
-        build.main(video, model_path, K=K, video_step=10, max_frames=46, motion_mask=True, feature="ORB",
-                   n_features=3000, normalizer=args.normalizer, box_ply=args.data / "box.ply", box_units="cm",
-                   refine_focal=True)
+        build.main(
+            video,
+            model_path,
+            K=K,
+            video_step=10,
+            max_frames=46,
+            motion_mask=True,
+            feature="ORB",
+            n_features=3000,
+            normalizer=args.normalizer,
+            box_ply=args.data / "box.ply",
+            box_units="cm",
+            refine_focal=True,
+        )
     K_track = np.asarray(part_model.load(model_path).extra["K"])
-    print(f"intrinsics used for tracking (stored in the model): fx {K_track[0, 0]:.1f} fy {K_track[1, 1]:.1f} "
-          f"(tutorial: {K[0, 0]:.1f} {K[1, 1]:.1f})")
-    summary = track.main(model_path, video, args.out / "poses.json", normalizer=args.normalizer,
-                         overlay=args.out / "overlay.mp4")
+    print(
+        f"intrinsics used for tracking (stored in the model): fx {K_track[0, 0]:.1f} fy {K_track[1, 1]:.1f} "
+        f"(tutorial: {K[0, 0]:.1f} {K[1, 1]:.1f})"
+    )
+    summary = track.main(
+        model_path, video, args.out / "poses.json", normalizer=args.normalizer, overlay=args.out / "overlay.mp4"
+    )
     sheet = contact_sheet(args.out / "overlay.mp4", args.out / "overlay_sheet.png")
-    print(f"tracked {summary['tracked']}/{summary['frames']} frames at {summary['fps']:.1f} fps; "
-          f"overlay {args.out / 'overlay.mp4'}, sheet {sheet}, model {model_path} (+ _cameras.png)")
+    print(
+        f"tracked {summary['tracked']}/{summary['frames']} frames at {summary['fps']:.1f} fps; "
+        f"overlay {args.out / 'overlay.mp4'}, sheet {sheet}, model {model_path} (+ _cameras.png)"
+    )
 
 
 if __name__ == "__main__":

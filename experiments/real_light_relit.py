@@ -54,8 +54,15 @@ STAGES = ("speed", "scenes", "train", "bench")
 #: The light changes of the scenes: the defaults, more shadows, shading and noise, or a relief's shading.
 LIGHTS = {
     "default": LightChangeConfig(),
-    "hard": LightChangeConfig(gain=(0.02, 1.5), shading=1.0, ramp=2.0, shadows=(1, 5), penumbra=(0.5, 6.0),
-                              full_well=(200.0, 5000.0), read_noise=(2.0, 10.0)),
+    "hard": LightChangeConfig(
+        gain=(0.02, 1.5),
+        shading=1.0,
+        ramp=2.0,
+        shadows=(1, 5),
+        penumbra=(0.5, 6.0),
+        full_well=(200.0, 5000.0),
+        read_noise=(2.0, 10.0),
+    ),
     "relief": LightChangeConfig(relief=(3.0, 30.0)),
 }
 BASELINES = ["none", "clahe", "dlcn", "tantriggs", "alcn"]
@@ -79,8 +86,14 @@ def speed(photos: list[Photograph], out: Path, seconds: float = 10.0) -> dict:
         count += 1
     elapsed = time.perf_counter() - start
     sizes = sorted({p.image.shape for p in photos})
-    result = {"pairs": count, "seconds": elapsed, "pairs_per_s": count / elapsed, "images": len(photos),
-              "sizes": [list(s) for s in sizes], "threads": cv2.getNumThreads()}
+    result = {
+        "pairs": count,
+        "seconds": elapsed,
+        "pairs_per_s": count / elapsed,
+        "images": len(photos),
+        "sizes": [list(s) for s in sizes],
+        "threads": cv2.getNumThreads(),
+    }
     write_json(out / "speed.json", result)
     print(f"{count / elapsed:.1f} pairs/s over {len(photos)} photographs (longer side <= 640)")
     return result
@@ -91,20 +104,34 @@ def scenes(photos: list[Photograph], out: Path, frames: int, seed: int, light: s
     for i, photo in enumerate(photos):
         folder = out / "scenes" / f"{i:02d}_{photo.name.replace('/', '_').replace('#', '_').replace('.', '_')}"
         folder.mkdir(parents=True, exist_ok=True)
-        for k, frame in enumerate(relit_frames(photo.image, frames, np.random.default_rng([seed, i]), LIGHTS[light], jitter)):
+        for k, frame in enumerate(
+            relit_frames(photo.image, frames, np.random.default_rng([seed, i]), LIGHTS[light], jitter)
+        ):
             cv2.imwrite(str(folder / f"frame_{k:02d}.png"), to_gray(frame) if frame.ndim == 3 else frame)
         folders.append(folder)
-        listing.append({"folder": folder.name, "source": photo.source, "licence": photo.licence,
-                        "size": list(photo.image.shape[:2])})
-    write_json(out / "scenes.json", {"frames": frames, "seed": seed, "light": light, "jitter": jitter, "scenes": listing})
+        listing.append(
+            {
+                "folder": folder.name,
+                "source": photo.source,
+                "licence": photo.licence,
+                "size": list(photo.image.shape[:2]),
+            }
+        )
+    write_json(
+        out / "scenes.json", {"frames": frames, "seed": seed, "light": light, "jitter": jitter, "scenes": listing}
+    )
     return folders
 
 
-def train(folders: list[Path], out: Path, steps: int, seed: int, extra: list[str],
-          webcam: float | None) -> tuple[Path, Path]:
+def train(
+    folders: list[Path], out: Path, steps: int, seed: int, extra: list[str], webcam: float | None
+) -> tuple[Path, Path]:
     run = out / "train"
-    data = [f"scenes={json.dumps(list(map(str, folders)))}"] if webcam is None else \
-        [f"rendered={json.dumps([str(out / 'scenes')])}", f"rendered_fraction={webcam}"]
+    data = (
+        [f"scenes={json.dumps(list(map(str, folders)))}"]
+        if webcam is None
+        else [f"rendered={json.dumps([str(out / 'scenes')])}", f"rendered_fraction={webcam}"]
+    )
     settings = [word for item in [*data, f"steps={steps}"] for word in ("--set", item)]
     args = ["train-real-light", "--conf", "gain", "--out", str(run), *settings, "--seed", str(seed), *extra]
     if alcn(args) != 0:
@@ -114,8 +141,9 @@ def train(folders: list[Path], out: Path, steps: int, seed: int, extra: list[str
     torch.manual_seed(seed)
     net = GainNormalizer(**meta["training"]["config"]["net"])
     untrained = out / "untrained.npz"
-    save_normalizer_file(untrained, net.state_arrays(),
-                         net.file_meta(trained=False, description="the relit recipe's untrained start"))
+    save_normalizer_file(
+        untrained, net.state_arrays(), net.file_meta(trained=False, description="the relit recipe's untrained start")
+    )
     return trained, untrained
 
 
@@ -133,15 +161,27 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=16, help="relit copies per photograph (default 16)")
     parser.add_argument("--steps", type=int, default=300, help="training steps (default 300, the shipped recipe's)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--light", choices=tuple(LIGHTS), default="default", help="the light changes (default: default)")
-    parser.add_argument("--jitter", type=float, default=0.0,
-                        help="registration error of the relit copies, pixels (default 0: pixel-exact)")
-    parser.add_argument("--with-webcam", type=float, default=None, metavar="FRACTION",
-                        help="train on the shipped recipe's webcam scenes (academic use only) with this share of "
-                             "steps on the relit scenes (the trainer's second group), instead of the relit ones alone")
+    parser.add_argument(
+        "--light", choices=tuple(LIGHTS), default="default", help="the light changes (default: default)"
+    )
+    parser.add_argument(
+        "--jitter",
+        type=float,
+        default=0.0,
+        help="registration error of the relit copies, pixels (default 0: pixel-exact)",
+    )
+    parser.add_argument(
+        "--with-webcam",
+        type=float,
+        default=None,
+        metavar="FRACTION",
+        help="train on the shipped recipe's webcam scenes (academic use only) with this share of "
+        "steps on the relit scenes (the trainer's second group), instead of the relit ones alone",
+    )
     parser.add_argument("--no-baselines", action="store_true", help="bench the two new files only (no tuning)")
-    parser.add_argument("--train-args", nargs=argparse.REMAINDER, default=[],
-                        help="more arguments of alcn train-real-light (last)")
+    parser.add_argument(
+        "--train-args", nargs=argparse.REMAINDER, default=[], help="more arguments of alcn train-real-light (last)"
+    )
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     photos = photographs()

@@ -10,7 +10,8 @@ Normalization Applied to Robust 3D Pose Estimation", BMVC 2017, one module per s
 * :mod:`pose.plots`: figures (the model and its cameras, the Table-1 bars);
 * :mod:`pose.build`: ``alcn pose build``, part model from a training sequence (the stages above);
 * :mod:`pose.parts`: part detectors run after a normalization (:func:`alcn_cv.enhance.registry.from_spec`);
-* :mod:`pose.corners`: the learned detector of the box's corners, edge middles and face centres, run by ``cv2.dnn`` (ONNX);
+* :mod:`pose.corners`: the learned detector of the box's corners, edge middles and face centres,
+  run by ``cv2.dnn`` (ONNX);
   :mod:`pose.corner_data` its labelled training frames, :mod:`pose.corner_net` its network and
   :mod:`pose.corner_train` ``alcn pose train-corners`` (torch, export to ONNX),
   :mod:`pose.corner_bench` ``alcn pose bench-corners`` (its speed, torch-free);

@@ -14,8 +14,19 @@ import numpy as np
 
 from alcn_cv.errors import InputError
 
-__all__ = ["BOX_FACES", "DIVISIONS", "NUM_CORNERS", "box_axes", "box_coordinates", "box_parts", "edge_directions",
-           "facing_faces", "flat_axes", "part_visibility", "parts_per_face"]
+__all__ = [
+    "BOX_FACES",
+    "DIVISIONS",
+    "NUM_CORNERS",
+    "box_axes",
+    "box_coordinates",
+    "box_parts",
+    "edge_directions",
+    "facing_faces",
+    "flat_axes",
+    "part_visibility",
+    "parts_per_face",
+]
 
 NUM_CORNERS = 8
 #: Steps per box edge of the detector's parts (:func:`box_parts`: 2 is the corners, the edges'
@@ -92,9 +103,16 @@ def _edge_vectors(corners: np.ndarray) -> np.ndarray:
     return np.stack([corners[4] - corners[0], corners[2] - corners[0], corners[1] - corners[0]], 1)
 
 
-def part_visibility(corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, shape: tuple[int, int],
-                    mask: np.ndarray | None = None, mask_tolerance: int = 3, parts: np.ndarray | None = None
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def part_visibility(
+    corners: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    K: np.ndarray,
+    shape: tuple[int, int],
+    mask: np.ndarray | None = None,
+    mask_tolerance: int = 3,
+    parts: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Projections of points on the box's surface and which of them are visible, for one pose
     or a batch of ``b`` poses.
 
@@ -139,8 +157,9 @@ def part_visibility(corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.nda
 def parts_per_face(corners: np.ndarray, parts: np.ndarray) -> int:
     """How many of ``parts`` (``(n, 3)``, on the surface of the box ``corners``) lie on its
     fullest face: ``(d + 1)^2`` for :func:`box_parts` with ``d`` divisions."""
-    on_low, on_high = _on_faces(np.asarray(corners, np.float64).reshape(NUM_CORNERS, 3),
-                                np.asarray(parts, np.float64).reshape(-1, 3))
+    on_low, on_high = _on_faces(
+        np.asarray(corners, np.float64).reshape(NUM_CORNERS, 3), np.asarray(parts, np.float64).reshape(-1, 3)
+    )
     return int(max(on_low.sum(0).max(), on_high.sum(0).max()))
 
 
@@ -154,8 +173,11 @@ def _on_faces(corners: np.ndarray, parts: np.ndarray) -> tuple[np.ndarray, np.nd
 
 #: The 6 faces of a box as its corners in turn around each (:func:`pose.model.box_corners` order:
 #: bit 2 of a corner's index is x, bit 1 y, bit 0 z), with the axis and side of each face.
-BOX_FACES = tuple((axis, side, tuple(np.array(quad) + (side << (2 - axis))))
-                  for axis, quad in ((0, (0, 1, 3, 2)), (1, (0, 1, 5, 4)), (2, (0, 2, 6, 4))) for side in (0, 1))
+BOX_FACES = tuple(
+    (axis, side, tuple(np.array(quad) + (side << (2 - axis))))
+    for axis, quad in ((0, (0, 1, 3, 2)), (1, (0, 1, 5, 4)), (2, (0, 2, 6, 4)))
+    for side in (0, 1)
+)
 
 
 def box_coordinates(corners: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -71,8 +71,14 @@ class BoxFit:
     stats: dict[str, Any]
 
 
-def fit_box(points: np.ndarray, known_size: np.ndarray | None = None, *, scale_free: bool = False,
-            viewpoints: np.ndarray | None = None, settings: BoxFitSettings | None = None) -> BoxFit:
+def fit_box(
+    points: np.ndarray,
+    known_size: np.ndarray | None = None,
+    *,
+    scale_free: bool = False,
+    viewpoints: np.ndarray | None = None,
+    settings: BoxFitSettings | None = None,
+) -> BoxFit:
     """Fit the object's box to a sparse point cloud with open3d.
 
     Args:
@@ -115,8 +121,13 @@ def _one_open3d_thread() -> Iterator[None]:
         o3d.utility.set_max_threads(before)
 
 
-def _fit_box(pts: np.ndarray, known_size: np.ndarray | None, scale_free: bool, viewpoints: np.ndarray | None,
-             settings: BoxFitSettings) -> BoxFit:
+def _fit_box(
+    pts: np.ndarray,
+    known_size: np.ndarray | None,
+    scale_free: bool,
+    viewpoints: np.ndarray | None,
+    settings: BoxFitSettings,
+) -> BoxFit:
     import open3d as o3d
 
     o3d.utility.random.seed(settings.seed)
@@ -143,8 +154,9 @@ def _fit_box(pts: np.ndarray, known_size: np.ndarray | None, scale_free: bool, v
     if known_size is None:
         size, center = hi - lo, center + R @ ((lo + hi) / 2)
     else:
-        size, center = place_known_box(cur, R, center, on_face, lo, hi, known_size, scale_free, viewpoints, support,
-                                       stats)
+        size, center = place_known_box(
+            cur, R, center, on_face, lo, hi, known_size, scale_free, viewpoints, support, stats
+        )
     origin = center - R @ (size / 2)
     corners = box_corners(size) @ R.T + origin
     keep = np.zeros(len(pts), bool)
@@ -158,13 +170,15 @@ def remove_outliers(points: np.ndarray, settings: BoxFitSettings) -> np.ndarray:
     import open3d as o3d
 
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    _, kept = pcd.remove_statistical_outlier(nb_neighbors=min(settings.outlier_neighbors, len(points) - 1),
-                                             std_ratio=settings.outlier_std_ratio)
+    _, kept = pcd.remove_statistical_outlier(
+        nb_neighbors=min(settings.outlier_neighbors, len(points) - 1), std_ratio=settings.outlier_std_ratio
+    )
     return np.arange(len(points))[np.asarray(kept)]
 
 
-def remove_support_plane(points: np.ndarray, threshold: float, settings: BoxFitSettings
-                         ) -> tuple[np.ndarray, np.ndarray | None]:
+def remove_support_plane(
+    points: np.ndarray, threshold: float, settings: BoxFitSettings
+) -> tuple[np.ndarray, np.ndarray | None]:
     """The largest plane of ``points``, removed only when it reaches well beyond the rest (the
     table the object stands on). Returns the indices of the points off it (all of them when it
     stays) and the plane ``(a, b, c, d)`` (``None`` when it stays)."""
@@ -213,8 +227,10 @@ def check_solid(points: np.ndarray) -> None:
         raise DatasetError(f"degenerate box fit: the object cluster has only {len(points)} points")
     sv = np.linalg.svd(points - points.mean(0), compute_uv=False)
     if sv[2] <= 1e-3 * sv[0]:
-        raise DatasetError(f"degenerate box fit: the object's {len(points)} points are flat or collinear "
-                           f"(singular values {np.round(sv, 6).tolist()})")
+        raise DatasetError(
+            f"degenerate box fit: the object's {len(points)} points are flat or collinear "
+            f"(singular values {np.round(sv, 6).tolist()})"
+        )
 
 
 def minimal_box_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -245,9 +261,19 @@ def robust_extents(coords: np.ndarray, on_face: np.ndarray, trim: float) -> tupl
     return lo, hi
 
 
-def place_known_box(points: np.ndarray, R: np.ndarray, center: np.ndarray, on_face: np.ndarray, lo: np.ndarray,
-                    hi: np.ndarray, known_size: np.ndarray, scale_free: bool, viewpoints: np.ndarray | None,
-                    support: np.ndarray | None, stats: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+def place_known_box(
+    points: np.ndarray,
+    R: np.ndarray,
+    center: np.ndarray,
+    on_face: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    known_size: np.ndarray,
+    scale_free: bool,
+    viewpoints: np.ndarray | None,
+    support: np.ndarray | None,
+    stats: dict[str, Any],
+) -> tuple[np.ndarray, np.ndarray]:
     """The known box in the fitted frame ``R``: its edge lengths ``(3,)`` (matched to the fitted
     extents ``hi - lo``) and its centre ``(3,)`` (scaled by ``stats["scale"]`` when ``scale_free``).
 
@@ -273,8 +299,12 @@ def place_known_box(points: np.ndarray, R: np.ndarray, center: np.ndarray, on_fa
     mid[2] = -np.sign(toward or 1.0) * matched[2] / 2
     center = center + R @ mid
     rel = (ext - matched) / matched
-    stats.update(known_size=matched.tolist(), size_error=(ext - matched).tolist(),
-                 relative_size_error=rel.tolist(), mean_abs_relative_size_error=float(np.abs(rel).mean()))
+    stats.update(
+        known_size=matched.tolist(),
+        size_error=(ext - matched).tolist(),
+        relative_size_error=rel.tolist(),
+        mean_abs_relative_size_error=float(np.abs(rel).mean()),
+    )
     if support is not None and not scale_free:
         # the box stands on the support plane: move it along the plane's normal to touch it
         n, d = support[:3] / np.linalg.norm(support[:3]), support[3] / np.linalg.norm(support[:3])
@@ -334,8 +364,7 @@ def face_frame(points: np.ndarray, threshold: float, seed: int = 0) -> tuple[np.
     return np.stack([e1, e2, n], 1), center, on_face
 
 
-def match_known_size(fitted: np.ndarray, known_size: np.ndarray, scale_free: bool = False
-                     ) -> tuple[np.ndarray, float]:
+def match_known_size(fitted: np.ndarray, known_size: np.ndarray, scale_free: bool = False) -> tuple[np.ndarray, float]:
     """Match a cuboid's known edge lengths (any order) to the fitted extents of :func:`face_frame`'s
     axes (face edge, face edge, face normal); returns the matched lengths ``(3,)`` and the scale
     that brings the fitted extents to the known units (1 unless ``scale_free``).

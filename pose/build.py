@@ -11,8 +11,8 @@ Pipeline (hloc-style, one module per stage):
    scale). Each 3D point keeps up to 8 of its track's descriptors: the medoid (the one closest
    to all others) and those farthest from it (:func:`pose.triangulate.representatives`), so that a
    view unlike the typical one (a face seen at a lower angle) still finds a close descriptor; the
-   ratio test at tracking time compares distinct points (:class:`pose.parts.FeaturePartDetector`). More descriptors per point matched
-   more parts (``docs/journal.md``).
+   ratio test at tracking time compares distinct points (:class:`pose.parts.FeaturePartDetector`).
+   More descriptors per point matched more parts (``docs/journal.md``).
 3. :mod:`pose.box_fit`: the box's size, frame and 8 corners (open3d); an unregistered
    reconstruction is scaled by it.
 4. :func:`build` assembles the model in the object frame; :func:`main` writes ``<out>.npz`` +
@@ -37,8 +37,14 @@ from pose.model import PartModel, box_corners, read_box_corners
 from pose.parts import descriptor_norm
 from pose.plots import plot_model
 from pose.sequence import TrainingSequence, load_sequence, motion_masks, video_sequence
-from pose.triangulate import (collect_points, extract_features, image_pairs, reconstruct_incremental,
-                              triangulate_fixed_poses, write_database)
+from pose.triangulate import (
+    collect_points,
+    extract_features,
+    image_pairs,
+    reconstruct_incremental,
+    triangulate_fixed_poses,
+    write_database,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -46,12 +52,23 @@ logger = logging.getLogger(__name__)
 VIDEO_BOX_UNITS = "cm"
 
 
-def build(seq: TrainingSequence, *, feature: str = "ORB", n_features: int = 4000, normalizer: str = "none",
-          box_ply: str | Path | None = None, box_size: np.ndarray | None = None, box_units: str | None = None,
-          masks: dict[str, np.ndarray] | None = None, window: int | None = None, ratio: float = 0.8,
-          work_dir: str | Path | None = None, world_is_object: bool = True, refine_focal: bool = False,
-          descriptors_per_point: int = 8
-          ) -> tuple[PartModel, np.ndarray]:
+def build(
+    seq: TrainingSequence,
+    *,
+    feature: str = "ORB",
+    n_features: int = 4000,
+    normalizer: str = "none",
+    box_ply: str | Path | None = None,
+    box_size: np.ndarray | None = None,
+    box_units: str | None = None,
+    masks: dict[str, np.ndarray] | None = None,
+    window: int | None = None,
+    ratio: float = 0.8,
+    work_dir: str | Path | None = None,
+    world_is_object: bool = True,
+    refine_focal: bool = False,
+    descriptors_per_point: int = 8,
+) -> tuple[PartModel, np.ndarray]:
     """Build a part model from a sequence; returns it and the training cameras' centres (object frame).
 
     For a registered sequence the object frame is the sequence's world frame (BOP: the object's
@@ -95,11 +112,14 @@ def build(seq: TrainingSequence, *, feature: str = "ORB", n_features: int = 4000
         margin = 0.05 * np.linalg.norm(hi - lo)
         near = np.all((xyz >= lo - margin) & (xyz <= hi + margin), axis=1)
         if near.sum() < 10:
-            raise DatasetError(f"only {int(near.sum())} triangulated points lie on the known box; check that the "
-                               "sequence's poses are those of this object")
+            raise DatasetError(
+                f"only {int(near.sum())} triangulated points lie on the known box; check that the "
+                "sequence's poses are those of this object"
+            )
         fit = fit_box(xyz[near], known)
-        fit.stats["corner_error"] = float(np.mean(np.min(np.linalg.norm(
-            fit.corners[:, None] - known_corners[None], axis=2), axis=1)))
+        fit.stats["corner_error"] = float(
+            np.mean(np.min(np.linalg.norm(fit.corners[:, None] - known_corners[None], axis=2), axis=1))
+        )
         keep = near.copy()
         keep[near] = fit.keep
         pts, corners, cams = xyz, known_corners, centers
@@ -123,33 +143,68 @@ def build(seq: TrainingSequence, *, feature: str = "ORB", n_features: int = 4000
     index = np.full(len(xyz), -1, np.int64)
     index[keep] = np.arange(int(keep.sum()))
     kept_desc = keep[desc_point]
-    model = PartModel(corners=corners, points3d=pts[keep], descriptors=desc[kept_desc],
-                      descriptor_point=index[desc_point[kept_desc]], track_length=tl[keep], colors=rgb[keep],
-                      units=units, feature=feature.upper(), normalizer=pin_default_model(normalizer),
-                      source=str(seq.info.get("path", "")), box_fit=_jsonable(fit.stats),
-                      extra={"registered_images": len(reg), "training_images": len(seq.views),
-                             "triangulated_points": int(len(xyz))})
+    model = PartModel(
+        corners=corners,
+        points3d=pts[keep],
+        descriptors=desc[kept_desc],
+        descriptor_point=index[desc_point[kept_desc]],
+        track_length=tl[keep],
+        colors=rgb[keep],
+        units=units,
+        feature=feature.upper(),
+        normalizer=pin_default_model(normalizer),
+        source=str(seq.info.get("path", "")),
+        box_fit=_jsonable(fit.stats),
+        extra={"registered_images": len(reg), "training_images": len(seq.views), "triangulated_points": int(len(xyz))},
+    )
     if refine_focal and not registered:
         K = np.mean(cams_K, axis=0)
         K[:2, 2] -= 0.5  # COLMAP -> OpenCV pixel convention
         model.extra["K"] = K.tolist()
-        logger.info("focal length refined by the bundle adjustment: fx %.1f fy %.1f (given %.1f %.1f)",
-                    K[0, 0], K[1, 1], seq.views[0].K[0, 0], seq.views[0].K[1, 1])
+        logger.info(
+            "focal length refined by the bundle adjustment: fx %.1f fy %.1f (given %.1f %.1f)",
+            K[0, 0],
+            K[1, 1],
+            seq.views[0].K[0, 0],
+            seq.views[0].K[1, 1],
+        )
     elif not registered:  # the camera the model was built with, for `alcn pose track`
         model.extra["K"] = np.asarray(seq.views[0].K, np.float64).tolist()
     return model, cams
 
 
 def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
-    return {k: (v.tolist() if isinstance(v, np.ndarray) else float(v) if isinstance(v, np.floating) else
-                int(v) if isinstance(v, np.integer) else v) for k, v in d.items()}
+    return {
+        k: (
+            v.tolist()
+            if isinstance(v, np.ndarray)
+            else float(v)
+            if isinstance(v, np.floating)
+            else int(v)
+            if isinstance(v, np.integer)
+            else v
+        )
+        for k, v in d.items()
+    }
 
 
-def main(input_path: str | Path, output: str | Path, *, images: str | Path | None = None,
-         K: np.ndarray | None = None, video_step: int = 5, max_frames: int = 80, motion_mask: bool = False,
-         feature: str = "ORB", n_features: int = 4000, normalizer: str = "none", box_ply: str | Path | None = None,
-         box_size: tuple[float, float, float] | None = None, box_units: str | None = None,
-         refine_focal: bool = False) -> Path:
+def main(
+    input_path: str | Path,
+    output: str | Path,
+    *,
+    images: str | Path | None = None,
+    K: np.ndarray | None = None,
+    video_step: int = 5,
+    max_frames: int = 80,
+    motion_mask: bool = False,
+    feature: str = "ORB",
+    n_features: int = 4000,
+    normalizer: str = "none",
+    box_ply: str | Path | None = None,
+    box_size: tuple[float, float, float] | None = None,
+    box_units: str | None = None,
+    refine_focal: bool = False,
+) -> Path:
     """Build a part model from ``input_path`` and write ``output`` (.npz, .ply, _cameras.png).
 
     ``input_path``: a registered sequence (see :func:`load_sequence`) or a video file (unregistered:
@@ -169,17 +224,37 @@ def main(input_path: str | Path, output: str | Path, *, images: str | Path | Non
                 frames = [io.read_image(seq.image_dir / v.name) for v in seq.views]
                 masks = dict(zip((v.name for v in seq.views), motion_masks(frames)))
             units = box_units or VIDEO_BOX_UNITS
-            model, cams = build(seq, feature=feature, n_features=n_features, normalizer=normalizer,
-                                box_ply=box_ply, box_size=box_size, box_units=units, masks=masks,
-                                window=8, work_dir=work, refine_focal=refine_focal)
+            model, cams = build(
+                seq,
+                feature=feature,
+                n_features=n_features,
+                normalizer=normalizer,
+                box_ply=box_ply,
+                box_size=box_size,
+                box_units=units,
+                masks=masks,
+                window=8,
+                work_dir=work,
+                refine_focal=refine_focal,
+            )
         else:
             seq = load_sequence(input_path, images)
-            model, cams = build(seq, feature=feature, n_features=n_features, normalizer=normalizer,
-                                box_ply=box_ply, box_size=box_size, box_units=box_units, work_dir=work)
+            model, cams = build(
+                seq,
+                feature=feature,
+                n_features=n_features,
+                normalizer=normalizer,
+                box_ply=box_ply,
+                box_size=box_size,
+                box_units=box_units,
+                work_dir=work,
+            )
     path = part_model.save(model, output)
     plot_model(model, cams, path.with_name(path.stem + "_cameras.png"))
     if "mean_abs_relative_size_error" in model.box_fit:
-        logger.info("box fit error vs the known size: %.1f%% (per axis %s)",
-                    100 * model.box_fit["mean_abs_relative_size_error"],
-                    np.round(model.box_fit["size_error"], 3).tolist())
+        logger.info(
+            "box fit error vs the known size: %.1f%% (per axis %s)",
+            100 * model.box_fit["mean_abs_relative_size_error"],
+            np.round(model.box_fit["size_error"], 3).tolist(),
+        )
     return path

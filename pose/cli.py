@@ -22,10 +22,22 @@ def _intrinsics(values: list[float] | None) -> np.ndarray | None:
 def _build(args: argparse.Namespace) -> int:
     from pose import build
 
-    build.main(args.input, args.output, images=args.images, K=_intrinsics(args.K), video_step=args.video_step,
-               max_frames=args.max_frames, motion_mask=args.motion_mask, feature=args.feature,
-               n_features=args.n_features, normalizer=args.normalization, box_ply=args.box_ply,
-               box_size=args.box_size, box_units=args.box_units, refine_focal=args.refine_focal)
+    build.main(
+        args.input,
+        args.output,
+        images=args.images,
+        K=_intrinsics(args.K),
+        video_step=args.video_step,
+        max_frames=args.max_frames,
+        motion_mask=args.motion_mask,
+        feature=args.feature,
+        n_features=args.n_features,
+        normalizer=args.normalization,
+        box_ply=args.box_ply,
+        box_size=args.box_size,
+        box_units=args.box_units,
+        refine_focal=args.refine_focal,
+    )
     return 0
 
 
@@ -41,9 +53,11 @@ def _camera(path: str | None) -> tuple[np.ndarray | None, np.ndarray | None]:
     try:
         calibration = load_calibration(path)
     except cv2.error:  # OpenCV reads any JSON; a field that is not a matrix fails its assertions
-        raise DatasetError(f"{path}: not a camera calibration; --camera takes the camera.yaml written by "
-                           "`alcn calib camera` (an OpenCV FileStorage with the matrices camera_matrix and "
-                           "distortion_coefficients), not its views.json") from None
+        raise DatasetError(
+            f"{path}: not a camera calibration; --camera takes the camera.yaml written by "
+            "`alcn calib camera` (an OpenCV FileStorage with the matrices camera_matrix and "
+            "distortion_coefficients), not its views.json"
+        ) from None
     return calibration.K, calibration.dist
 
 
@@ -53,9 +67,20 @@ def _track(args: argparse.Namespace) -> int:
     K, dist = _intrinsics(args.K), None
     if K is None:
         K, dist = _camera(args.camera)
-    summary = track.main(args.model, args.input, args.output, K, normalizer=args.normalization, overlay=args.overlay,
-                         method=args.method, n_features=args.n_features, min_inliers=args.min_inliers,
-                         reprojection_error=args.reprojection_error, dist=dist, detector=args.detector)
+    summary = track.main(
+        args.model,
+        args.input,
+        args.output,
+        K,
+        normalizer=args.normalization,
+        overlay=args.overlay,
+        method=args.method,
+        n_features=args.n_features,
+        min_inliers=args.min_inliers,
+        reprojection_error=args.reprojection_error,
+        dist=dist,
+        detector=args.detector,
+    )
     print(f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps -> {args.output}")
     return 0
 
@@ -78,9 +103,19 @@ def _eval(args: argparse.Namespace) -> int:
     if args.middlebury:
         evaluate.middlebury_main(args.middlebury, args.out, normalizers=normalizations, feature=args.feature)
     if args.data:
-        evaluate.main(args.data, args.out, normalizers=normalizations, feature=args.feature, detectors=args.detectors,
-                      corner_recipe=recipe, corner_conf=args.conf, corner_device=args.device, seeds=args.seeds,
-                      sequences=args.sequences, command=_command())
+        evaluate.main(
+            args.data,
+            args.out,
+            normalizers=normalizations,
+            feature=args.feature,
+            detectors=args.detectors,
+            corner_recipe=recipe,
+            corner_conf=args.conf,
+            corner_device=args.device,
+            seeds=args.seeds,
+            sequences=args.sequences,
+            command=_command(),
+        )
     if not (args.middlebury or args.data):
         raise ValueError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
     return 0
@@ -97,8 +132,17 @@ def _command() -> str:
 def _train_corners(args: argparse.Namespace) -> int:
     from pose import corner_train
 
-    path = corner_train.main(args.input, args.output, _recipe(args), box_ply=args.box_ply, model=args.model,
-                             normalizer=args.normalization, seed=args.seed, device=args.device, conf=args.conf)
+    path = corner_train.main(
+        args.input,
+        args.output,
+        _recipe(args),
+        box_ply=args.box_ply,
+        model=args.model,
+        normalizer=args.normalization,
+        seed=args.seed,
+        device=args.device,
+        conf=args.conf,
+    )
     print(f"corner detector ({args.normalization}) -> {path}")
     return 0
 
@@ -106,9 +150,20 @@ def _train_corners(args: argparse.Namespace) -> int:
 def _planar(args: argparse.Namespace) -> int:
     from pose import planar
 
-    planar.main(args.out, args.data, scenes=args.scenes, normalizers=args.normalizations, detectors=args.detector,
-                feature=args.feature, n_features=args.n_features, target_fraction=args.target_fraction, hfov=args.hfov,
-                max_frames=args.max_frames, recipe=_recipe(args), command=_command())
+    planar.main(
+        args.out,
+        args.data,
+        scenes=args.scenes,
+        normalizers=args.normalizations,
+        detectors=args.detector,
+        feature=args.feature,
+        n_features=args.n_features,
+        target_fraction=args.target_fraction,
+        hfov=args.hfov,
+        max_frames=args.max_frames,
+        recipe=_recipe(args),
+        command=_command(),
+    )
     print((Path(args.out) / "relight_pose.md").read_text(encoding="utf-8"))
     return 0
 
@@ -117,50 +172,89 @@ def _add_recipe(parser: argparse.ArgumentParser, default: str) -> None:
     """``--conf`` and ``--set`` of the corner detector's training, declared once for every command that trains it."""
     from pose.corner_train import confs
 
-    parser.add_argument("--conf", default=default, choices=sorted(confs),
-                        help=f"the corner detector's training recipe (pose.corner_train.confs; default {default})")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
-                        help="override a key of the recipe (pose.corner_train.CornerRecipe), the value as TOML, e.g. "
-                        "--set iterations=1000, --set 'intensity_scale=[1, 1]' (repeatable)")
+    parser.add_argument(
+        "--conf",
+        default=default,
+        choices=sorted(confs),
+        help=f"the corner detector's training recipe (pose.corner_train.confs; default {default})",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="settings",
+        help="override a key of the recipe (pose.corner_train.CornerRecipe), the value as TOML, e.g. "
+        "--set iterations=1000, --set 'intensity_scale=[1, 1]' (repeatable)",
+    )
 
 
 #: ``--normalization``'s help: why the pose commands normalize nothing by default.
-NORMALIZATION_HELP = ("the normalization applied first, a spec NAME[:KEY=VALUE...] (default none: on the rendered "
-                      "Table 1 the default ALCN posed fewer frames than none with either part detector, and none costs "
-                      "nothing per frame; see `alcn pose eval`)")
+NORMALIZATION_HELP = (
+    "the normalization applied first, a spec NAME[:KEY=VALUE...] (default none: on the rendered "
+    "Table 1 the default ALCN posed fewer frames than none with either part detector, and none costs "
+    "nothing per frame; see `alcn pose eval`)"
+)
 
 
 def _add_planar(sub: argparse._SubParsersAction) -> None:
     from pose import planar
 
-    r = sub.add_parser("planar", help="pose of a planar target under real light (fixed webcams): real-light Table 1",
-                       description="Per scene of fixed outdoor cameras (the camera did not move, the light changes): "
-                       "a textured rectangle of the reference frame (median brightness) is the target, its part "
-                       "model is built from that frame after each normalization (assumed pinhole camera), and its "
-                       "pose is estimated in every other frame with the box's pipeline (part detector + PoseSolver). "
-                       "Truth: the reference pose. Writes OUT/relight_pose.md, .json, .png and OUT/targets.png. "
-                       "The Webcam frames are for academic research only (cite TILDE and AMOS).")
+    r = sub.add_parser(
+        "planar",
+        help="pose of a planar target under real light (fixed webcams): real-light Table 1",
+        description="Per scene of fixed outdoor cameras (the camera did not move, the light changes): "
+        "a textured rectangle of the reference frame (median brightness) is the target, its part "
+        "model is built from that frame after each normalization (assumed pinhole camera), and its "
+        "pose is estimated in every other frame with the box's pipeline (part detector + PoseSolver). "
+        "Truth: the reference pose. Writes OUT/relight_pose.md, .json, .png and OUT/targets.png. "
+        "The Webcam frames are for academic research only (cite TILDE and AMOS).",
+    )
     r.add_argument("--out", type=Path, required=True, help="report folder")
-    r.add_argument("--data", help="folder of scenes, one sub-folder of registered frames each (default: "
-                   "$ALCN_SHARED_DATA/webcam, else ../shared/data/webcam)")
+    r.add_argument(
+        "--data",
+        help="folder of scenes, one sub-folder of registered frames each (default: "
+        "$ALCN_SHARED_DATA/webcam, else ../shared/data/webcam)",
+    )
     r.add_argument("--scenes", nargs="+", help="scene names (default: every scene of --data)")
-    r.add_argument("--normalizations", nargs="+", default=list(planar.DEFAULT_NORMALIZERS),
-                   help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZERS) + ")")
-    r.add_argument("--detector", nargs="+", default=["features"], choices=sorted(planar.DETECTORS),
-                   help="part detectors, each giving rows (default features: OpenCV features matched to the target's "
-                   "descriptors; corners: the corner CNN trained on the reference frame for the target's corners and "
-                   "side middles, one network per scene and normalization, by --conf: about 8 min each on 2 CPU "
-                   "cores, trained on the GPU where torch sees one)")
+    r.add_argument(
+        "--normalizations",
+        nargs="+",
+        default=list(planar.DEFAULT_NORMALIZERS),
+        help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZERS) + ")",
+    )
+    r.add_argument(
+        "--detector",
+        nargs="+",
+        default=["features"],
+        choices=sorted(planar.DETECTORS),
+        help="part detectors, each giving rows (default features: OpenCV features matched to the target's "
+        "descriptors; corners: the corner CNN trained on the reference frame for the target's corners and "
+        "side middles, one network per scene and normalization, by --conf: about 8 min each on 2 CPU "
+        "cores, trained on the GPU where torch sees one)",
+    )
     _add_recipe(r, "planar")
     r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
-    r.add_argument("--n-features", type=int, default=0,
-                   help="the strongest keypoints kept per frame (default 0: all; the target's model keeps all of "
-                   "the reference frame's)")
-    r.add_argument("--target-fraction", type=float, default=planar.DEFAULT_TARGET_FRACTION,
-                   help="target side as a fraction of the frame's width and height; the window with the most "
-                   f"keypoints of the reference frame is chosen (default {planar.DEFAULT_TARGET_FRACTION:g})")
-    r.add_argument("--hfov", type=float, default=planar.DEFAULT_HFOV,
-                   help=f"assumed horizontal field of view, degrees (default {planar.DEFAULT_HFOV:g})")
+    r.add_argument(
+        "--n-features",
+        type=int,
+        default=0,
+        help="the strongest keypoints kept per frame (default 0: all; the target's model keeps all of "
+        "the reference frame's)",
+    )
+    r.add_argument(
+        "--target-fraction",
+        type=float,
+        default=planar.DEFAULT_TARGET_FRACTION,
+        help="target side as a fraction of the frame's width and height; the window with the most "
+        f"keypoints of the reference frame is chosen (default {planar.DEFAULT_TARGET_FRACTION:g})",
+    )
+    r.add_argument(
+        "--hfov",
+        type=float,
+        default=planar.DEFAULT_HFOV,
+        help=f"assumed horizontal field of view, degrees (default {planar.DEFAULT_HFOV:g})",
+    )
     r.add_argument("--max-frames", type=int, help="at most this many frames per scene, evenly spaced (default all)")
     r.set_defaults(func=_planar)
 
@@ -172,8 +266,14 @@ def _overlay_error(args: argparse.Namespace) -> int:
     from pose import overlay
 
     settings = overlay.EdgeSettings(max_distance=args.max_distance, max_angle=args.max_angle)
-    overlay.main(args.video, [tuple(r) for r in args.run], args.out, settings=settings,
-                 command=shlex.join(["alcn", *sys.argv[1:]]), show=args.show)
+    overlay.main(
+        args.video,
+        [tuple(r) for r in args.run],
+        args.out,
+        settings=settings,
+        command=shlex.join(["alcn", *sys.argv[1:]]),
+        show=args.show,
+    )
     print((Path(args.out) / "overlay_error.md").read_text(encoding="utf-8"))
     return 0
 
@@ -182,25 +282,46 @@ def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
     from pose.overlay import EdgeSettings
 
     d = EdgeSettings()
-    o = sub.add_parser("overlay-error", help="how far the drawn box is from the object's edges, per frame",
-                       description="For every frame posed by `alcn pose track`: the mean distance (px) from "
-                       "samples of the box's visible projected edges to the nearest image edge parallel to them "
-                       "(Canny, gradient direction), no ground truth needed. Writes OUT/overlay_error.md, .json "
-                       "(per frame, per box edge) and .png (the error over the video, one line per run).")
+    o = sub.add_parser(
+        "overlay-error",
+        help="how far the drawn box is from the object's edges, per frame",
+        description="For every frame posed by `alcn pose track`: the mean distance (px) from "
+        "samples of the box's visible projected edges to the nearest image edge parallel to them "
+        "(Canny, gradient direction), no ground truth needed. Writes OUT/overlay_error.md, .json "
+        "(per frame, per box edge) and .png (the error over the video, one line per run).",
+    )
     o.add_argument("video", help="the video (or image folder) that was tracked")
-    o.add_argument("--run", nargs=3, action="append", required=True, metavar=("LABEL", "MODEL", "POSES"),
-                   help="a run to measure: its label, its part model (.npz, with the camera stored by `alcn pose "
-                   "build`) and its poses (.json from `alcn pose track`); repeat to compare runs")
+    o.add_argument(
+        "--run",
+        nargs=3,
+        action="append",
+        required=True,
+        metavar=("LABEL", "MODEL", "POSES"),
+        help="a run to measure: its label, its part model (.npz, with the camera stored by `alcn pose "
+        "build`) and its poses (.json from `alcn pose track`); repeat to compare runs",
+    )
     o.add_argument("--out", type=Path, required=True, help="report folder")
-    o.add_argument("--max-distance", type=float, default=d.max_distance,
-                   help=f"search range along each edge's normal, px; no image edge within it counts as this "
-                   f"(default {d.max_distance:g})")
-    o.add_argument("--max-angle", type=float, default=d.max_angle,
-                   help=f"largest angle between an image edge's gradient and the drawn edge's normal, degrees "
-                   f"(default {d.max_angle:g})")
-    o.add_argument("--show", nargs="*", default=["frame_000300"],
-                   help="frames drawn in OUT/overlay_frames.png with every run's box, besides the first run's two "
-                   "worst (default frame_000300)")
+    o.add_argument(
+        "--max-distance",
+        type=float,
+        default=d.max_distance,
+        help=f"search range along each edge's normal, px; no image edge within it counts as this "
+        f"(default {d.max_distance:g})",
+    )
+    o.add_argument(
+        "--max-angle",
+        type=float,
+        default=d.max_angle,
+        help=f"largest angle between an image edge's gradient and the drawn edge's normal, degrees "
+        f"(default {d.max_angle:g})",
+    )
+    o.add_argument(
+        "--show",
+        nargs="*",
+        default=["frame_000300"],
+        help="frames drawn in OUT/overlay_frames.png with every run's box, besides the first run's two "
+        "worst (default frame_000300)",
+    )
     o.set_defaults(func=_overlay_error)
 
 
@@ -212,13 +333,24 @@ def _bench_corners(args: argparse.Namespace) -> int:
         K, _ = _camera(args.camera)
     if K is None:
         raise ValueError("give the intrinsics of the frames: --K FX FY CX CY or --camera camera.yaml")
-    r = corner_bench.main(args.detector, args.input, K, args.out, command=_command(), size=tuple(args.size),
-                          max_frames=args.max_frames, repeats=args.repeats, threads=args.threads)
-    print(f"{r['fps']:.1f} fps at {r['size'][0]}x{r['size'][1]} ({r['normalizer']} in front; normalize "
-          f"{r['ms']['normalize']:.1f} ms, network {r['ms']['network']:.1f} ms, peaks + pose "
-          f"{r['ms']['peaks_and_pose']:.1f} ms; CPU {r['cpu_ms_per_frame']:.1f} ms per frame; torch imported: "
-          f"{r['torch_imported']}; load "
-          f"{r['machine'].get('load_average_1_5_15')})")
+    r = corner_bench.main(
+        args.detector,
+        args.input,
+        K,
+        args.out,
+        command=_command(),
+        size=tuple(args.size),
+        max_frames=args.max_frames,
+        repeats=args.repeats,
+        threads=args.threads,
+    )
+    print(
+        f"{r['fps']:.1f} fps at {r['size'][0]}x{r['size'][1]} ({r['normalizer']} in front; normalize "
+        f"{r['ms']['normalize']:.1f} ms, network {r['ms']['network']:.1f} ms, peaks + pose "
+        f"{r['ms']['peaks_and_pose']:.1f} ms; CPU {r['cpu_ms_per_frame']:.1f} ms per frame; torch imported: "
+        f"{r['torch_imported']}; load "
+        f"{r['machine'].get('load_average_1_5_15')})"
+    )
     return 0
 
 
@@ -228,10 +360,12 @@ def _corner_recall(args: argparse.Namespace) -> int:
 
     for background in args.background:
         r = corner_bench.corner_recall(args.detector, args.scene, obj_id=args.obj_id, background=background)
-        print(f"{args.scene} ({background} background): {r['visible']} visible parts in {r['frames']} frames; "
-              f"found as the best candidate {100 * r['best']:.0f}%, among the candidates "
-              f"{100 * r['candidates']:.0f}%, in the gates of the true pose {100 * r['gated']:.0f}%; background "
-              f"scored higher {100 * r['background_wins']:.0f}%")
+        print(
+            f"{args.scene} ({background} background): {r['visible']} visible parts in {r['frames']} frames; "
+            f"found as the best candidate {100 * r['best']:.0f}%, among the candidates "
+            f"{100 * r['candidates']:.0f}%, in the gates of the true pose {100 * r['gated']:.0f}%; background "
+            f"scored higher {100 * r['background_wins']:.0f}%"
+        )
         if args.out is not None:
             write_json(args.out / f"corner_recall_{background}.json", r)
     return 0
@@ -242,95 +376,156 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     ``planar`` and ``overlay-error`` to ``alcn``."""
     from pose.solver import METHODS
 
-    p = subparsers.add_parser("pose", help="3D box pose: build a part model, track it, evaluate",
-                              description="Part-based 3D pose of a box after contrast normalization "
-                              "(Rad, Roth & Lepetit, BMVC 2017, Sec. 4.4).")
+    p = subparsers.add_parser(
+        "pose",
+        help="3D box pose: build a part model, track it, evaluate",
+        description="Part-based 3D pose of a box after contrast normalization "
+        "(Rad, Roth & Lepetit, BMVC 2017, Sec. 4.4).",
+    )
     sub = p.add_subparsers(dest="pose_command", metavar="STEP", required=True)
 
-    b = sub.add_parser("build", help="part model from a registered sequence or a video",
-                       description="Triangulate features of the training images (pycolmap, known poses held "
-                       "fixed; or incremental reconstruction for an unregistered video), fit the box (open3d) "
-                       "and write MODEL.npz, MODEL.ply and MODEL_cameras.png. pycolmap's log is shown with "
-                       "`alcn --verbose`.")
+    b = sub.add_parser(
+        "build",
+        help="part model from a registered sequence or a video",
+        description="Triangulate features of the training images (pycolmap, known poses held "
+        "fixed; or incremental reconstruction for an unregistered video), fit the box (open3d) "
+        "and write MODEL.npz, MODEL.ply and MODEL_cameras.png. pycolmap's log is shown with "
+        "`alcn --verbose`.",
+    )
     b.add_argument("input", help="BOP scene folder, COLMAP model folder, Middlebury set, or a video file")
     b.add_argument("output", help="part model to write (.npz)")
     b.add_argument("--images", help="image folder of a COLMAP model")
-    b.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"),
-                   help="intrinsics of a video (OpenCV convention)")
+    b.add_argument(
+        "--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics of a video (OpenCV convention)"
+    )
     b.add_argument("--video-step", type=int, default=5, help="use every N-th frame of a video (default 5)")
     b.add_argument("--max-frames", type=int, default=80, help="at most this many video frames (default 80)")
-    b.add_argument("--motion-mask", action="store_true",
-                   help="static camera, moving object: keep features on what moves")
+    b.add_argument(
+        "--motion-mask", action="store_true", help="static camera, moving object: keep features on what moves"
+    )
     b.add_argument("--feature", default="ORB", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default ORB)")
     b.add_argument("--n-features", type=int, default=4000, help="keypoints per training image (default 4000)")
     b.add_argument("--normalization", default="none", help=NORMALIZATION_HELP)
     b.add_argument("--box-ply", help="cuboid .ply of the box: its true size")
     b.add_argument("--box-size", nargs=3, type=float, metavar=("X", "Y", "Z"), help="the box's true size")
-    b.add_argument("--box-units", choices=["mm", "cm", "m"],
-                   help="units of --box-ply/--box-size (default: cm for a video, the sequence's units otherwise)")
-    b.add_argument("--refine-focal", action="store_true",
-                   help="video: refine the focal length in the bundle adjustment (stored in the model, used by "
-                   "`alcn pose track`)")
+    b.add_argument(
+        "--box-units",
+        choices=["mm", "cm", "m"],
+        help="units of --box-ply/--box-size (default: cm for a video, the sequence's units otherwise)",
+    )
+    b.add_argument(
+        "--refine-focal",
+        action="store_true",
+        help="video: refine the focal length in the bundle adjustment (stored in the model, used by `alcn pose track`)",
+    )
     b.set_defaults(func=_build)
 
-    t = sub.add_parser("track", help="pose of the box in every frame of a video or image folder",
-                       description="Writes BOP scene_gt-style JSON (OUTPUT) and OUTPUT_info.json; with --overlay "
-                       "a video (.mp4/.avi) or PNG folder with the box drawn. The camera is the one stored in the "
-                       "part model (`alcn pose build` from a video, refined with --refine-focal) unless --K or "
-                       "--camera is given.")
-    t.add_argument("model", help="part model (.npz) from `alcn pose build`, or with --detector corners a corner "
-                   "detector (.onnx) from `alcn pose train-corners`")
+    t = sub.add_parser(
+        "track",
+        help="pose of the box in every frame of a video or image folder",
+        description="Writes BOP scene_gt-style JSON (OUTPUT) and OUTPUT_info.json; with --overlay "
+        "a video (.mp4/.avi) or PNG folder with the box drawn. The camera is the one stored in the "
+        "part model (`alcn pose build` from a video, refined with --refine-focal) unless --K or "
+        "--camera is given.",
+    )
+    t.add_argument(
+        "model",
+        help="part model (.npz) from `alcn pose build`, or with --detector corners a corner "
+        "detector (.onnx) from `alcn pose train-corners`",
+    )
     t.add_argument("input", help="video file or image folder")
     t.add_argument("output", help="poses (.json)")
     cam = t.add_mutually_exclusive_group()
-    cam.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"),
-                     help="intrinsics (default: the camera stored in the part model by `alcn pose build`)")
-    cam.add_argument("--camera", help="camera.yaml from `alcn calib camera` (OpenCV FileStorage; default: the camera "
-                     "stored in the part model)")
-    t.add_argument("--detector", default="features", choices=["features", "corners"],
-                   help="features (default): OpenCV features matched to the part model; corners: the corner CNN "
-                   "(cv2.dnn)")
-    t.add_argument("--normalization", help="the normalization applied first, a spec NAME[:KEY=VALUE...]: the one the "
-                   "part model was built after (default none, see `build`); a corner detector's own by default")
+    cam.add_argument(
+        "--K",
+        nargs=4,
+        type=float,
+        metavar=("FX", "FY", "CX", "CY"),
+        help="intrinsics (default: the camera stored in the part model by `alcn pose build`)",
+    )
+    cam.add_argument(
+        "--camera",
+        help="camera.yaml from `alcn calib camera` (OpenCV FileStorage; default: the camera stored in the part model)",
+    )
+    t.add_argument(
+        "--detector",
+        default="features",
+        choices=["features", "corners"],
+        help="features (default): OpenCV features matched to the part model; corners: the corner CNN (cv2.dnn)",
+    )
+    t.add_argument(
+        "--normalization",
+        help="the normalization applied first, a spec NAME[:KEY=VALUE...]: the one the "
+        "part model was built after (default none, see `build`); a corner detector's own by default",
+    )
     t.add_argument("--overlay", help="write the overlay here (.mp4/.avi or a folder)")
-    t.add_argument("--method", default="usac_default", choices=sorted(METHODS),
-                   help="RANSAC variant (default usac_default)")
+    t.add_argument(
+        "--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant (default usac_default)"
+    )
     t.add_argument("--n-features", type=int, default=1000, help="keypoints per frame (default 1000)")
     t.add_argument("--min-inliers", type=int, help="fewer inliers: frame lost (default 12; 5 with corners)")
     t.add_argument("--reprojection-error", type=float, default=4.0, help="inlier threshold, px (default 4)")
     t.set_defaults(func=_track)
 
-    e = sub.add_parser("eval", help="Table-1-style report and Middlebury errors",
-                       description="BB8 2D projection < 5 px, ADD < 10% of the diameter, 5 cm / 5 deg.")
-    e.add_argument("--data", help="pose data set from `alcn data pose` (train/, test/, models/); a small one: "
-                   "`alcn data pose --size small --frames 12 --out DATA` (320x240, 12 frames a sequence; about 15 s, "
-                   "then about 2 min of CPU for this command on 2 cores). `--size small` alone (3 frames) gives too "
-                   "few views to triangulate the box")
+    e = sub.add_parser(
+        "eval",
+        help="Table-1-style report and Middlebury errors",
+        description="BB8 2D projection < 5 px, ADD < 10% of the diameter, 5 cm / 5 deg.",
+    )
+    e.add_argument(
+        "--data",
+        help="pose data set from `alcn data pose` (train/, test/, models/); a small one: "
+        "`alcn data pose --size small --frames 12 --out DATA` (320x240, 12 frames a sequence; about 15 s, "
+        "then about 2 min of CPU for this command on 2 cores). `--size small` alone (3 frames) gives too "
+        "few views to triangulate the box",
+    )
     e.add_argument("--middlebury", nargs="+", help="Middlebury sets (e.g. ../shared/data/middlebury/templeSparseRing)")
-    e.add_argument("--normalizations", nargs="+",
-                   help="rows of the table, NAME[:KEY=VALUE...] (default: none dog:sigma1=1:sigma2=2 alcn, "
-                   "the DoG tuned for pose at 640x480)")
-    e.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"],
-                   help="feature of the classical detector (default SIFT: on the data engine's sequences it "
-                   "gave more correct poses than ORB; `track` uses ORB for speed)")
-    e.add_argument("--detectors", nargs="+", default=["features"], choices=["features", "corners"],
-                   help="part detectors, each giving rows (default features; corners: trained on the training "
-                   "sequence first, by --conf)")
+    e.add_argument(
+        "--normalizations",
+        nargs="+",
+        help="rows of the table, NAME[:KEY=VALUE...] (default: none dog:sigma1=1:sigma2=2 alcn, "
+        "the DoG tuned for pose at 640x480)",
+    )
+    e.add_argument(
+        "--feature",
+        default="SIFT",
+        choices=["ORB", "SIFT", "AKAZE"],
+        help="feature of the classical detector (default SIFT: on the data engine's sequences it "
+        "gave more correct poses than ORB; `track` uses ORB for speed)",
+    )
+    e.add_argument(
+        "--detectors",
+        nargs="+",
+        default=["features"],
+        choices=["features", "corners"],
+        help="part detectors, each giving rows (default features; corners: trained on the training "
+        "sequence first, by --conf)",
+    )
     _add_recipe(e, "box")
-    e.add_argument("--device", choices=("cpu", "cuda"),
-                   help="where the corner CNNs train (default: cuda where torch sees it, else cpu)")
-    e.add_argument("--seeds", type=int, default=1,
-                   help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)")
+    e.add_argument(
+        "--device",
+        choices=("cpu", "cuda"),
+        help="where the corner CNNs train (default: cuda where torch sees it, else cpu)",
+    )
+    e.add_argument(
+        "--seeds",
+        type=int,
+        default=1,
+        help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)",
+    )
     e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
     e.add_argument("--out", type=Path, required=True, help="report folder")
     e.set_defaults(func=_eval)
 
-    c = sub.add_parser("train-corners", help="train the corner CNN on a registered sequence, export ONNX",
-                       description="Dense training on the views of the sequence and augmented copies of them "
-                       "(homographies, new backgrounds, intensity changes), normalized, labelled with the box's "
-                       "parts (corners, edge middles, face centres) projected by the known poses and their sub-stride "
-                       "offsets; the network is written as "
-                       "ONNX for `alcn pose track --detector corners` (cv2.dnn, no torch).")
+    c = sub.add_parser(
+        "train-corners",
+        help="train the corner CNN on a registered sequence, export ONNX",
+        description="Dense training on the views of the sequence and augmented copies of them "
+        "(homographies, new backgrounds, intensity changes), normalized, labelled with the box's "
+        "parts (corners, edge middles, face centres) projected by the known poses and their sub-stride "
+        "offsets; the network is written as "
+        "ONNX for `alcn pose track --detector corners` (cv2.dnn, no torch).",
+    )
     c.add_argument("input", help="registered training sequence (BOP scene folder, COLMAP model, Middlebury set)")
     c.add_argument("output", help="corner detector to write (.onnx)")
     box = c.add_mutually_exclusive_group(required=True)
@@ -338,40 +533,57 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     box.add_argument("--model", help="part model (.npz) whose box corners to use")
     c.add_argument("--normalization", default="none", help=NORMALIZATION_HELP)
     _add_recipe(c, "box")
-    c.add_argument("--device", choices=("cpu", "cuda"),
-                   help="where the network trains (default: cuda where torch sees it, else cpu; the box recipe's "
-                   "4000 steps take about 8 min on 2 CPU cores)")
+    c.add_argument(
+        "--device",
+        choices=("cpu", "cuda"),
+        help="where the network trains (default: cuda where torch sees it, else cpu; the box recipe's "
+        "4000 steps take about 8 min on 2 CPU cores)",
+    )
     c.add_argument("--seed", type=int, default=0, help="seed of the frames and the network (default 0)")
     c.set_defaults(func=_train_corners)
 
-    bc = sub.add_parser("bench-corners", help="frames per second of the corner detector (cv2.dnn, no torch)",
-                        description="Tracks with the corner detector through the frames of a video or image folder "
-                        "resized to --size and reports the time of normalization, network, peaks and pose, the "
-                        "frames per second and the machine's load; with --out as Markdown and JSON.")
+    bc = sub.add_parser(
+        "bench-corners",
+        help="frames per second of the corner detector (cv2.dnn, no torch)",
+        description="Tracks with the corner detector through the frames of a video or image folder "
+        "resized to --size and reports the time of normalization, network, peaks and pose, the "
+        "frames per second and the machine's load; with --out as Markdown and JSON.",
+    )
     bc.add_argument("detector", help="corner detector (.onnx) from `alcn pose train-corners`")
     bc.add_argument("input", help="video file or image folder (e.g. DATA/test/000001/rgb of `alcn data pose`)")
     bcam = bc.add_mutually_exclusive_group(required=True)
     bcam.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics of the frames")
     bcam.add_argument("--camera", help="camera.yaml from `alcn calib camera`")
-    bc.add_argument("--size", nargs=2, type=int, default=[640, 480], metavar=("W", "H"),
-                    help="frame size (default 640 480)")
+    bc.add_argument(
+        "--size", nargs=2, type=int, default=[640, 480], metavar=("W", "H"), help="frame size (default 640 480)"
+    )
     bc.add_argument("--max-frames", type=int, default=60, help="frames used (default 60)")
     bc.add_argument("--repeats", type=int, default=2, help="passes over them (default 2)")
     bc.add_argument("--threads", type=int, help="OpenCV threads (default OpenCV's)")
     bc.add_argument("--out", type=Path, help="write bench_corners.md and .json here")
     bc.set_defaults(func=_bench_corners)
 
-    cr = sub.add_parser("corner-recall", help="parts the corner detector finds in a rendered scene, before PnP",
-                        description="Compares the corner detector's candidates with the true corners of a BOP scene "
-                        "(`alcn data pose`): the share of visible parts (corners, edge middles, face centres) found "
-                        "as the best candidate, among the candidates of the whole frame, and within the gates of the "
-                        "true pose; with --background grey also with everything but the object replaced by grey (the table and clutter removed).")
+    cr = sub.add_parser(
+        "corner-recall",
+        help="parts the corner detector finds in a rendered scene, before PnP",
+        description="Compares the corner detector's candidates with the true corners of a BOP scene "
+        "(`alcn data pose`): the share of visible parts (corners, edge middles, face centres) found "
+        "as the best candidate, among the candidates of the whole frame, and within the gates of the "
+        "true pose; with --background grey also with everything but the object replaced by grey "
+        "(the table and clutter removed).",
+    )
     cr.add_argument("detector", help="corner detector (.onnx) from `alcn pose train-corners`")
-    cr.add_argument("scene", type=Path,
-                    help="BOP scene folder with scene_gt.json and mask_visib/ (e.g. DATA/test/000001)")
+    cr.add_argument(
+        "scene", type=Path, help="BOP scene folder with scene_gt.json and mask_visib/ (e.g. DATA/test/000001)"
+    )
     cr.add_argument("--obj-id", type=int, default=1, help="the box's object id (default 1)")
-    cr.add_argument("--background", nargs="+", default=["keep"], choices=["keep", "grey"],
-                    help="keep the frames as they are and/or grey everything but the object (default keep)")
+    cr.add_argument(
+        "--background",
+        nargs="+",
+        default=["keep"],
+        choices=["keep", "grey"],
+        help="keep the frames as they are and/or grey everything but the object (default keep)",
+    )
     cr.add_argument("--out", type=Path, help="write corner_recall_<background>.json here")
     cr.set_defaults(func=_corner_recall)
     _add_planar(sub)

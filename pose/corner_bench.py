@@ -30,8 +30,16 @@ from alcn_cv.report import describe_machine, machine, markdown_table
 logger = logging.getLogger(__name__)
 
 
-def benchmark(onnx_path: str | Path, source: str | Path, K: np.ndarray, *, size: tuple[int, int] = (640, 480),
-              max_frames: int = 60, repeats: int = 2, threads: int | None = None) -> dict[str, Any]:
+def benchmark(
+    onnx_path: str | Path,
+    source: str | Path,
+    K: np.ndarray,
+    *,
+    size: tuple[int, int] = (640, 480),
+    max_frames: int = 60,
+    repeats: int = 2,
+    threads: int | None = None,
+) -> dict[str, Any]:
     """Track through the first ``max_frames`` frames of ``source`` (resized to ``size``, ``K`` scaled
     alike) ``repeats`` times after one warm-up frame; per-stage milliseconds and frames per second.
 
@@ -61,8 +69,15 @@ def benchmark(onnx_path: str | Path, source: str | Path, K: np.ndarray, *, size:
     total, posed = [], 0
     cpu0 = time.process_time()
     for _ in range(repeats):
-        tracker = PoseTracker(PoseSolver(K, min_inliers=MIN_INLIERS["corners"], iterations=RANSAC_ITERATIONS["corners"],
-                                         min_inliers_near_prior=MIN_INLIERS_NEAR_PRIOR["corners"], outline=det.corners))
+        tracker = PoseTracker(
+            PoseSolver(
+                K,
+                min_inliers=MIN_INLIERS["corners"],
+                iterations=RANSAC_ITERATIONS["corners"],
+                min_inliers_near_prior=MIN_INLIERS_NEAR_PRIOR["corners"],
+                outline=det.corners,
+            )
+        )
         for i, frame in enumerate(frames):
             t0 = time.perf_counter()
             est, _ = tracker.step(i, frame, det)
@@ -80,39 +95,80 @@ def benchmark(onnx_path: str | Path, source: str | Path, K: np.ndarray, *, size:
     per_frame = float(np.mean(total))
     ms = {k: 1000 * float(np.mean(v)) for k, v in stages.items()}
     ms["peaks_and_pose"] = 1000 * per_frame - ms["normalize"] - ms["network"]
-    return {"detector": str(onnx_path), "normalizer": det.normalizer_name, "source": str(source),
-            "size": list(size), "frames": len(frames), "repeats": repeats, "posed": posed / repeats,
-            "ms": ms, "ms_per_frame": 1000 * per_frame, "cpu_ms_per_frame": 1000 * cpu,
-            "fps": 1.0 / per_frame, "opencv_threads": cv2.getNumThreads(), "torch_imported": "torch" in sys.modules,
-            "machine": machine()}
+    return {
+        "detector": str(onnx_path),
+        "normalizer": det.normalizer_name,
+        "source": str(source),
+        "size": list(size),
+        "frames": len(frames),
+        "repeats": repeats,
+        "posed": posed / repeats,
+        "ms": ms,
+        "ms_per_frame": 1000 * per_frame,
+        "cpu_ms_per_frame": 1000 * cpu,
+        "fps": 1.0 / per_frame,
+        "opencv_threads": cv2.getNumThreads(),
+        "torch_imported": "torch" in sys.modules,
+        "machine": machine(),
+    }
 
 
-def main(onnx_path: str | Path, source: str | Path, K: np.ndarray, out: str | Path | None = None,
-         command: str | None = None, **kwargs: Any) -> dict[str, Any]:
+def main(
+    onnx_path: str | Path,
+    source: str | Path,
+    K: np.ndarray,
+    out: str | Path | None = None,
+    command: str | None = None,
+    **kwargs: Any,
+) -> dict[str, Any]:
     """:func:`benchmark`, logged and, with ``out``, written as ``out/bench_corners.{md,json}``."""
     result = benchmark(onnx_path, source, K, **kwargs)
-    logger.info("corner detector (%s) at %dx%d: %.1f fps (%.1f ms: normalize %.1f, network %.1f, peaks + pose "
-                "%.1f), torch imported: %s", result["normalizer"], *result["size"], result["fps"],
-                result["ms_per_frame"], *result["ms"].values(), result["torch_imported"])
+    logger.info(
+        "corner detector (%s) at %dx%d: %.1f fps (%.1f ms: normalize %.1f, network %.1f, peaks + pose "
+        "%.1f), torch imported: %s",
+        result["normalizer"],
+        *result["size"],
+        result["fps"],
+        result["ms_per_frame"],
+        *result["ms"].values(),
+        result["torch_imported"],
+    )
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        md = (f"# Corner detector speed\n\nDetector `{onnx_path}` ({result['normalizer']} in front), "
-              f"{result['frames']} frames of `{source}` at {result['size'][0]}x{result['size'][1]}, "
-              f"{result['repeats']} passes, OpenCV threads {result['opencv_threads']}, torch imported: "
-              f"{result['torch_imported']}.\n\nMachine: {describe_machine(result['machine'])}.\n\n"
-              + (f"Command: `{command}`\n\n" if command else "")
-              + markdown_table(["normalize (ms)", "network (ms)", "peaks + pose (ms)", "per frame (ms)", "fps",
-                                "CPU per frame (ms, all threads)"],
-                               [[*result["ms"].values(), result["ms_per_frame"], result["fps"],
-                                 result["cpu_ms_per_frame"]]], digits=1))
+        md = (
+            f"# Corner detector speed\n\nDetector `{onnx_path}` ({result['normalizer']} in front), "
+            f"{result['frames']} frames of `{source}` at {result['size'][0]}x{result['size'][1]}, "
+            f"{result['repeats']} passes, OpenCV threads {result['opencv_threads']}, torch imported: "
+            f"{result['torch_imported']}.\n\nMachine: {describe_machine(result['machine'])}.\n\n"
+            + (f"Command: `{command}`\n\n" if command else "")
+            + markdown_table(
+                [
+                    "normalize (ms)",
+                    "network (ms)",
+                    "peaks + pose (ms)",
+                    "per frame (ms)",
+                    "fps",
+                    "CPU per frame (ms, all threads)",
+                ],
+                [[*result["ms"].values(), result["ms_per_frame"], result["fps"], result["cpu_ms_per_frame"]]],
+                digits=1,
+            )
+        )
         atomic_write(out / "bench_corners.md", md)
         write_json(out / "bench_corners.json", {**result, "command": command})
     return result
 
 
-def corner_recall(onnx_path: str | Path, scene_dir: str | Path, *, obj_id: int = 1, background: str = "keep",
-                  radius: float = 5.0, gate: float = 20.0) -> dict[str, Any]:
+def corner_recall(
+    onnx_path: str | Path,
+    scene_dir: str | Path,
+    *,
+    obj_id: int = 1,
+    background: str = "keep",
+    radius: float = 5.0,
+    gate: float = 20.0,
+) -> dict[str, Any]:
     """Recall of the corner detector on a BOP scene (``alcn data pose``), frame by frame.
 
     A visible part (:func:`pose.box.part_visibility` with the scene's ``mask_visib``)
@@ -159,8 +215,14 @@ def corner_recall(onnx_path: str | Path, scene_dir: str | Path, *, obj_id: int =
         uv, visible = part_visibility(det.corners, pose.R, pose.t, fr.K, image.shape, mask, parts=det.parts)
         whole, gated = det.peaks(image), det.peaks(image, uv, gate)
         prob, _ = det.maps(image)
-        row = {"frame": fr.im_id, "visible": int(visible.sum()), "best": 0, "candidates": 0, "gated": 0,
-               "background_wins": 0}
+        row = {
+            "frame": fr.im_id,
+            "visible": int(visible.sum()),
+            "best": 0,
+            "candidates": 0,
+            "gated": 0,
+            "background_wins": 0,
+        }
         for k in np.flatnonzero(visible):
             hits = np.linalg.norm(whole[k][0] - uv[k], axis=1) <= radius
             row["best"] += bool(hits[:1].any())
@@ -168,13 +230,20 @@ def corner_recall(onnx_path: str | Path, scene_dir: str | Path, *, obj_id: int =
             row["gated"] += bool((np.linalg.norm(gated[k][0] - uv[k], axis=1) <= radius).any())
             found[k].append(bool(hits.any()))
             j, i = np.round((to_scaled(uv[k], det.scale) + 0.5) / STRIDE).astype(int)  # the nearest cell's centre
-            cells = prob[:, max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].reshape(n + 1, -1)
+            cells = prob[:, max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2].reshape(n + 1, -1)
             if cells.size:
                 at = cells[:, cells[k + 1].argmax()]
                 row["background_wins"] += bool(at[0] > at[k + 1])
         per_frame.append(row)
     total = max(sum(r["visible"] for r in per_frame), 1)
     shares = {key: sum(r[key] for r in per_frame) / total for key in ("best", "candidates", "gated", "background_wins")}
-    return {"detector": str(onnx_path), "scene": str(scene_dir), "background": background, "frames": len(per_frame),
-            "visible": sum(r["visible"] for r in per_frame), **shares,
-            "per_part": {k: float(np.mean(v)) for k, v in found.items() if v}, "per_frame": per_frame}
+    return {
+        "detector": str(onnx_path),
+        "scene": str(scene_dir),
+        "background": background,
+        "frames": len(per_frame),
+        "visible": sum(r["visible"] for r in per_frame),
+        **shares,
+        "per_part": {k: float(np.mean(v)) for k, v in found.items() if v},
+        "per_frame": per_frame,
+    }

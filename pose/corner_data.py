@@ -35,7 +35,6 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 
-
 def _read_mask(path: Path, shape: tuple[int, int]) -> np.ndarray | None:
     if not path.is_file():
         return None
@@ -55,8 +54,15 @@ def replace_background(gray: np.ndarray, mask: np.ndarray, rng: np.random.Genera
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 
-def label_grid(uv: np.ndarray, classes: np.ndarray, hidden: np.ndarray, shape: tuple[int, int], *,
-               pos_radius: float = 4.0, neg_radius: float = 7.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def label_grid(
+    uv: np.ndarray,
+    classes: np.ndarray,
+    hidden: np.ndarray,
+    shape: tuple[int, int],
+    *,
+    pos_radius: float = 4.0,
+    neg_radius: float = 7.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Targets of the network's output grid for one frame.
 
     Args:
@@ -96,9 +102,15 @@ def label_grid(uv: np.ndarray, classes: np.ndarray, hidden: np.ndarray, shape: t
     return labels, offsets, owner
 
 
-def random_homography(rng: np.random.Generator, shape: tuple[int, int], *, max_rotation_deg: float = 15.0,
-                      scale: tuple[float, float] = (0.8, 1.25), perspective: float = 0.06,
-                      max_shift: float = 0.1) -> np.ndarray:
+def random_homography(
+    rng: np.random.Generator,
+    shape: tuple[int, int],
+    *,
+    max_rotation_deg: float = 15.0,
+    scale: tuple[float, float] = (0.8, 1.25),
+    perspective: float = 0.06,
+    max_shift: float = 0.1,
+) -> np.ndarray:
     """A 3x3 homography about the frame's centre: rotation, scaling, the image corners moved by
     up to ``perspective`` of the frame's size, a shift of up to ``max_shift`` of it."""
     h, w = shape
@@ -125,11 +137,22 @@ def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return cv2.Rodrigues(axis / max(np.linalg.norm(axis), 1e-12) * angle)[0]
 
 
-def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray,
-               rng: np.random.Generator, *, azimuth_deg: float = 8.0, elevation_deg: float = 20.0,
-               elevation_range: tuple[float, float] = (20.0, 70.0), distance: tuple[float, float],
-               min_stretch: float = 0.35, tries: int = 8, parts: np.ndarray | None = None
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+def novel_view(
+    image: np.ndarray,
+    corners: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    K: np.ndarray,
+    rng: np.random.Generator,
+    *,
+    azimuth_deg: float = 8.0,
+    elevation_deg: float = 20.0,
+    elevation_range: tuple[float, float] = (20.0, 70.0),
+    distance: tuple[float, float],
+    min_stretch: float = 0.35,
+    tries: int = 8,
+    parts: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The box of a registered view seen from a nearby viewpoint: each face of the box warped by
     its own plane's homography, the rest (the table) by the homography of the plane of the box's
     bottom face. Exact for a box and a table with Lambertian surfaces under the view's light (a
@@ -157,14 +180,19 @@ def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndar
     eye = -R.T @ t - centre
     radius = np.linalg.norm(eye)
     elevation = np.degrees(np.arcsin(np.clip(eye[2] / radius, -1, 1)))
-    seen = {quad: cv2.contourArea(_project(corners[list(quad)], R, t, K).astype(np.float32))
-            for quad in facing_faces(corners, R, t)}
+    seen = {
+        quad: cv2.contourArea(_project(corners[list(quad)], R, t, K).astype(np.float32))
+        for quad in facing_faces(corners, R, t)
+    }
     for _ in range(tries):
         new_elevation = np.clip(elevation + rng.uniform(-elevation_deg, elevation_deg), *elevation_range)
         azimuth = np.arctan2(eye[1], eye[0]) + np.radians(rng.uniform(-azimuth_deg, azimuth_deg))
         e = np.radians(new_elevation)
-        eye2 = radius * rng.uniform(*distance) * np.array([np.cos(e) * np.cos(azimuth), np.cos(e) * np.sin(azimuth),
-                                                           np.sin(e)])
+        eye2 = (
+            radius
+            * rng.uniform(*distance)
+            * np.array([np.cos(e) * np.cos(azimuth), np.cos(e) * np.sin(azimuth), np.sin(e)])
+        )
         # the camera rig turned about the box's centre: the box stays where it was in the frame
         R2 = R @ _rotation_between(eye, eye2).T
         t2 = -R2 @ (eye2 + centre)
@@ -176,16 +204,23 @@ def novel_view(image: np.ndarray, corners: np.ndarray, R: np.ndarray, t: np.ndar
         return None
     bottom = corners[corners[:, 2] <= corners[:, 2].min() + 1e-9]  # the table's plane: the bottom face's
     plane = bottom.mean(0) + 4 * (bottom[[0, 1, 3, 2]] - bottom.mean(0))
-    H = cv2.getPerspectiveTransform(_project(plane, R, t, K).astype(np.float32),
-                                    _project(plane, R2, t2, K).astype(np.float32))
+    H = cv2.getPerspectiveTransform(
+        _project(plane, R, t, K).astype(np.float32), _project(plane, R2, t2, K).astype(np.float32)
+    )
     out = cv2.warpPerspective(image, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
     mask = np.zeros((h, w), np.uint8)
     for quad in faces:
         src, dst = (_project(corners[list(quad)], *pose, K).astype(np.float32) for pose in ((R, t), (R2, t2)))
-        face = cv2.warpPerspective(image, cv2.getPerspectiveTransform(src, dst), (w, h), flags=cv2.INTER_LINEAR,
-                                   borderMode=cv2.BORDER_REFLECT_101)
-        inside = cv2.fillConvexPoly(np.zeros((h, w), np.uint8), np.round(dst * 16).astype(np.int32), 255,
-                                    cv2.LINE_AA, 4)
+        face = cv2.warpPerspective(
+            image,
+            cv2.getPerspectiveTransform(src, dst),
+            (w, h),
+            flags=cv2.INTER_LINEAR,
+            borderMode=cv2.BORDER_REFLECT_101,
+        )
+        inside = cv2.fillConvexPoly(
+            np.zeros((h, w), np.uint8), np.round(dst * 16).astype(np.int32), 255, cv2.LINE_AA, 4
+        )
         out[inside > 0] = face[inside > 0]
         mask |= inside
     uv, visible = part_visibility(corners, R2, t2, K, (h, w), parts=parts)
@@ -196,8 +231,9 @@ def _transform(H: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return cv2.perspectiveTransform(np.asarray(uv, np.float64).reshape(-1, 1, 2), H).reshape(-1, 2)
 
 
-def _intensity_noise(gray: np.ndarray, rng: np.random.Generator, scale: tuple[float, float], offset: float,
-                     noise: float) -> np.ndarray:
+def _intensity_noise(
+    gray: np.ndarray, rng: np.random.Generator, scale: tuple[float, float], offset: float, noise: float
+) -> np.ndarray:
     """``a I + b`` plus Gaussian noise on a uint8 frame (intensities in [0, 1])."""
     x = gray.astype(np.float32) / np.float32(255)
     x = rng.uniform(*scale) * x + rng.uniform(-offset, offset)
@@ -230,9 +266,16 @@ class CornerFrames:
     input_std: float
 
 
-def _view_frames(small: np.ndarray, small_mask: np.ndarray | None, uv: np.ndarray, visible: np.ndarray, norm,
-                 rng: np.random.Generator, recipe: CornerRecipe, box: tuple[np.ndarray, ...] | None = None
-                 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+def _view_frames(
+    small: np.ndarray,
+    small_mask: np.ndarray | None,
+    uv: np.ndarray,
+    visible: np.ndarray,
+    norm,
+    rng: np.random.Generator,
+    recipe: CornerRecipe,
+    box: tuple[np.ndarray, ...] | None = None,
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
     """One downscaled view ``small`` (uint8) and its ``recipe.copies`` augmented copies, each
     normalized by ``norm`` and labelled: ``(image, labels, offsets, owner, visible parts (m, 3))``
     per frame (``uv (n, 2)`` the parts in ``small``'s pixels; ``box``: ``(corners, R, t, K, parts)``
@@ -242,8 +285,11 @@ def _view_frames(small: np.ndarray, small_mask: np.ndarray | None, uv: np.ndarra
     for c in range(recipe.copies + 1):
         image, m, xy, vis = small, small_mask, uv, visible
         if c:
-            view = (novel_view(small, *box[:4], rng, distance=tuple(recipe.novel_distance), parts=box[4])
-                    if box is not None and rng.random() < recipe.novel_views else None)
+            view = (
+                novel_view(small, *box[:4], rng, distance=tuple(recipe.novel_distance), parts=box[4])
+                if box is not None and rng.random() < recipe.novel_views
+                else None
+            )
             if view is not None:
                 image, m, xy, vis = view
             H = random_homography(rng, (h, w))
@@ -257,10 +303,17 @@ def _view_frames(small: np.ndarray, small_mask: np.ndarray | None, uv: np.ndarra
         inside = (xy[:, 0] >= 0) & (xy[:, 0] <= w - 1) & (xy[:, 1] >= 0) & (xy[:, 1] <= h - 1)
         shown = vis & inside
         normed = norm.normalize(image.astype(np.float32) / np.float32(255))
-        lab, off, own = label_grid(xy[shown], np.flatnonzero(shown), xy[inside & ~vis], grid_shape(h, w),
-                                   pos_radius=recipe.pos_radius, neg_radius=recipe.neg_radius)
-        out.append((normed.astype(np.float32), lab, off, own,
-                    np.concatenate([xy[shown], np.flatnonzero(shown)[:, None]], 1)))
+        lab, off, own = label_grid(
+            xy[shown],
+            np.flatnonzero(shown),
+            xy[inside & ~vis],
+            grid_shape(h, w),
+            pos_radius=recipe.pos_radius,
+            neg_radius=recipe.neg_radius,
+        )
+        out.append(
+            (normed.astype(np.float32), lab, off, own, np.concatenate([xy[shown], np.flatnonzero(shown)[:, None]], 1))
+        )
     return out
 
 
@@ -274,15 +327,24 @@ def _stack_frames(per_view: list[list[tuple[np.ndarray, ...]]]) -> CornerFrames:
     mean = float(np.mean([im.mean() for im in originals]))
     std = float(np.sqrt(np.mean([im.var() for im in originals]))) + 1e-6
     flat = [(v, f) for v, frames in enumerate(per_view) for f in frames]
-    padded = np.stack([cv2.copyMakeBorder((f[0] - mean) / std, PAD, PAD, PAD, PAD, cv2.BORDER_REFLECT_101)
-                       for _, f in flat]).astype(np.float32)
-    return CornerFrames(padded, np.stack([f[1] for _, f in flat]), np.stack([f[2] for _, f in flat]),
-                        np.stack([f[3] for _, f in flat]), [f[4] for _, f in flat], np.array([v for v, _ in flat]),
-                        mean, std)
+    padded = np.stack(
+        [cv2.copyMakeBorder((f[0] - mean) / std, PAD, PAD, PAD, PAD, cv2.BORDER_REFLECT_101) for _, f in flat]
+    ).astype(np.float32)
+    return CornerFrames(
+        padded,
+        np.stack([f[1] for _, f in flat]),
+        np.stack([f[2] for _, f in flat]),
+        np.stack([f[3] for _, f in flat]),
+        [f[4] for _, f in flat],
+        np.array([v for v, _ in flat]),
+        mean,
+        std,
+    )
 
 
-def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: str, recipe: CornerRecipe, *,
-                 seed: int = 0) -> CornerFrames:
+def build_frames(
+    sequence: TrainingSequence, corners: np.ndarray, normalizer: str, recipe: CornerRecipe, *, seed: int = 0
+) -> CornerFrames:
     """The labelled training frames of a registered sequence (:func:`pose.sequence.load_sequence`):
     each view downscaled by ``recipe.scale`` and its ``recipe.copies`` augmented copies (the keys of
     :class:`pose.corner_train.CornerRecipe`), normalized by the spec ``normalizer``.
@@ -316,16 +378,33 @@ def build_frames(sequence: TrainingSequence, corners: np.ndarray, normalizer: st
         K = np.asarray(view.K, np.float64).copy()  # of the downscaled frame (:func:`pose.corners.to_scaled`)
         K[:2] *= scale
         K[:2, 2] += 0.5 * scale - 0.5
-        per_view.append(_view_frames(small, None if mask is None else downscale(mask, scale), to_scaled(uv, scale),
-                                     vis, norm, rng, recipe, box=(corners, view.R_w2c, view.t_w2c, K, parts)))
+        per_view.append(
+            _view_frames(
+                small,
+                None if mask is None else downscale(mask, scale),
+                to_scaled(uv, scale),
+                vis,
+                norm,
+                rng,
+                recipe,
+                box=(corners, view.R_w2c, view.t_w2c, K, parts),
+            )
+        )
     frames = _stack_frames(per_view)
-    logger.info("corner frames: %d (%d views x %d), %d parts, %d part cells", len(frames.labels),
-                len(sequence.views), recipe.copies + 1, len(parts), int((frames.labels > 0).sum()))
+    logger.info(
+        "corner frames: %d (%d views x %d), %d parts, %d part cells",
+        len(frames.labels),
+        len(sequence.views),
+        recipe.copies + 1,
+        len(parts),
+        int((frames.labels > 0).sum()),
+    )
     return frames
 
 
-def build_image_frames(gray: np.ndarray, uv: np.ndarray, normalizer: str, recipe: CornerRecipe, *,
-                       seed: int = 0) -> CornerFrames:
+def build_image_frames(
+    gray: np.ndarray, uv: np.ndarray, normalizer: str, recipe: CornerRecipe, *, seed: int = 0
+) -> CornerFrames:
     """The labelled training frames of one image whose parts are at ``uv (n, 2)`` (pixels of
     ``gray``, uint8): the image and ``recipe.copies`` copies of it, as :func:`build_frames` makes of
     each view of a sequence without novel views nor new backgrounds (the parts' surroundings are
@@ -338,9 +417,23 @@ def build_image_frames(gray: np.ndarray, uv: np.ndarray, normalizer: str, recipe
     if uv.ndim != 2 or uv.shape[1] != 2 or not len(uv) or not np.isfinite(uv).all():
         raise InputError(f"need the parts' pixels as a finite (n, 2) array, got {uv.shape}")
     recipe.check()
-    frames = _stack_frames([_view_frames(downscale(gray, recipe.scale), None, to_scaled(uv, recipe.scale),
-                                         np.ones(len(uv), bool), normalization_for(normalizer),
-                                         np.random.default_rng(seed), recipe)])
-    logger.info("corner frames: %d (1 image x %d), %d part cells", len(frames.labels), recipe.copies + 1,
-                int((frames.labels > 0).sum()))
+    frames = _stack_frames(
+        [
+            _view_frames(
+                downscale(gray, recipe.scale),
+                None,
+                to_scaled(uv, recipe.scale),
+                np.ones(len(uv), bool),
+                normalization_for(normalizer),
+                np.random.default_rng(seed),
+                recipe,
+            )
+        ]
+    )
+    logger.info(
+        "corner frames: %d (1 image x %d), %d part cells",
+        len(frames.labels),
+        recipe.copies + 1,
+        int((frames.labels > 0).sum()),
+    )
     return frames

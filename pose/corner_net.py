@@ -5,7 +5,8 @@ the fully connected layer as a 5x5 convolution; no padding), so one output cell 
 window whose top-left corner is 4 times its index: per cell, ``1 + n`` class logits (background,
 the ``n`` parts of the box: :func:`pose.box.box_parts`) and, per part, its offset
 ``(dx, dy)`` from the window's centre in units of the stride (4 pixels of the downscaled frame).
-The offsets place a part finer than the stride, as the offset head of CenterNet (Zhou et al., "Objects as Points", 2019) does.
+The offsets place a part finer than the stride, as the offset head of CenterNet (Zhou et al.,
+"Objects as Points", 2019) does.
 """
 
 from __future__ import annotations
@@ -37,15 +38,24 @@ class CornerNet(nn.Module):
     input_size = WINDOW
     stride = STRIDE
 
-    def __init__(self, num_parts: int = 26, channels: tuple[int, int] = (16, 32), hidden: int = 128,
-                 mixing: int = 1) -> None:
+    def __init__(
+        self, num_parts: int = 26, channels: tuple[int, int] = (16, 32), hidden: int = 128, mixing: int = 1
+    ) -> None:
         super().__init__()
         c1, c2 = channels
         self.config = {"num_parts": num_parts, "channels": [c1, c2], "hidden": hidden, "mixing": mixing}
         layers = [
-            nn.Conv2d(1, c1, 5), nn.BatchNorm2d(c1), nn.ReLU(inplace=True), nn.MaxPool2d(2),
-            nn.Conv2d(c1, c2, 5), nn.BatchNorm2d(c2), nn.ReLU(inplace=True), nn.MaxPool2d(2),
-            nn.Conv2d(c2, hidden, 5), nn.BatchNorm2d(hidden), nn.ReLU(inplace=True),
+            nn.Conv2d(1, c1, 5),
+            nn.BatchNorm2d(c1),
+            nn.ReLU(inplace=True),
+            nn.MaxPool2d(2),
+            nn.Conv2d(c1, c2, 5),
+            nn.BatchNorm2d(c2),
+            nn.ReLU(inplace=True),
+            nn.MaxPool2d(2),
+            nn.Conv2d(c2, hidden, 5),
+            nn.BatchNorm2d(hidden),
+            nn.ReLU(inplace=True),
         ]
         for _ in range(mixing):
             layers += [nn.Conv2d(hidden, hidden, 1), nn.BatchNorm2d(hidden), nn.ReLU(inplace=True)]

@@ -29,8 +29,19 @@ from pose.corners import FORMAT_NAME, FORMAT_VERSION, PAD, STRIDE, WINDOW
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["CornerRecipe", "confs", "corner_loss", "export_onnx", "fit", "fit_and_export", "jitter_crops", "main",
-           "sample_crops", "train_corners", "train_image_corners"]
+__all__ = [
+    "CornerRecipe",
+    "confs",
+    "corner_loss",
+    "export_onnx",
+    "fit",
+    "fit_and_export",
+    "jitter_crops",
+    "main",
+    "sample_crops",
+    "train_corners",
+    "train_image_corners",
+]
 
 
 @dataclass
@@ -85,11 +96,16 @@ class CornerRecipe:
         """Raise :class:`~alcn_cv.errors.InputError` naming the first impossible value."""
         lo, hi = self.novel_distance if len(self.novel_distance) == 2 else (0, -1)
         problems = {
-            "scale": 0 < self.scale <= 2, "novel_distance": 0 < lo <= hi,
-            "intensity_scale": len(self.intensity_scale) == 2 and 0 < min(self.intensity_scale),
-            "channels": len(self.channels) == 2 and min(self.channels) > 0, "divisions": self.divisions >= 1,
-            "iterations": self.iterations >= 1, "batch_size": self.batch_size >= 1, "lr": self.lr > 0,
-            "cells": self.cells >= 1, "copies": self.copies >= 0,
+            "scale": 0 < self.scale <= 2,
+            "novel_distance": 0 < lo <= hi,
+            "intensity_scale": len(self.intensity_scale) == 2 and min(self.intensity_scale) > 0,
+            "channels": len(self.channels) == 2 and min(self.channels) > 0,
+            "divisions": self.divisions >= 1,
+            "iterations": self.iterations >= 1,
+            "batch_size": self.batch_size >= 1,
+            "lr": self.lr > 0,
+            "cells": self.cells >= 1,
+            "copies": self.copies >= 0,
         }
         for key, ok in problems.items():
             if not ok:
@@ -124,10 +140,16 @@ def export_onnx(net, out: str | Path, meta: dict[str, Any]) -> Path:
     buffer = _io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)  # see alcn_cv.train.export
-        torch.onnx.export(net.eval(), (torch.rand(1, 1, WINDOW + 12, WINDOW + 20),), buffer,
-                          input_names=["image"], output_names=["outputs"],
-                          dynamic_axes={"image": {2: "height", 3: "width"}, "outputs": {2: "gh", 3: "gw"}},
-                          opset_version=OPSET, dynamo=False)
+        torch.onnx.export(
+            net.eval(),
+            (torch.rand(1, 1, WINDOW + 12, WINDOW + 20),),
+            buffer,
+            input_names=["image"],
+            output_names=["outputs"],
+            dynamic_axes={"image": {2: "height", 3: "width"}, "outputs": {2: "gh", 3: "gw"}},
+            opset_version=OPSET,
+            dynamo=False,
+        )
     data = with_metadata(buffer.getvalue(), meta)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, data)
@@ -135,8 +157,9 @@ def export_onnx(net, out: str | Path, meta: dict[str, Any]) -> Path:
     return out
 
 
-def sample_crops(frames: CornerFrames, rng: np.random.Generator, n: int, cells: int, near_corner: float = 0.7
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def sample_crops(
+    frames: CornerFrames, rng: np.random.Generator, n: int, cells: int, near_corner: float = 0.7
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``n`` random crops of ``cells x cells`` output cells: images ``(n, 1, S, S)`` with
     ``S = 32 + 4 (cells - 1)``, labels ``(n, cells, cells)``, offsets ``(n, 2, cells, cells)`` and
     owners ``(n, cells, cells)``; a share ``near_corner`` of them contains a visible corner cell."""
@@ -157,15 +180,22 @@ def sample_crops(frames: CornerFrames, rng: np.random.Generator, n: int, cells: 
             j0 = int(np.clip(cj - rng.integers(cells), 0, gw - cells))
         else:
             i0, j0 = int(rng.integers(gh - cells + 1)), int(rng.integers(gw - cells + 1))
-        images[b, 0] = frames.images[f, i0 * STRIDE: i0 * STRIDE + size, j0 * STRIDE: j0 * STRIDE + size]
-        labels[b] = frames.labels[f, i0:i0 + cells, j0:j0 + cells]
-        offsets[b] = frames.offsets[f, :, i0:i0 + cells, j0:j0 + cells]
-        owner[b] = frames.owner[f, i0:i0 + cells, j0:j0 + cells]
+        images[b, 0] = frames.images[f, i0 * STRIDE : i0 * STRIDE + size, j0 * STRIDE : j0 * STRIDE + size]
+        labels[b] = frames.labels[f, i0 : i0 + cells, j0 : j0 + cells]
+        offsets[b] = frames.offsets[f, :, i0 : i0 + cells, j0 : j0 + cells]
+        owner[b] = frames.owner[f, i0 : i0 + cells, j0 : j0 + cells]
     return images, labels, offsets, owner
 
 
-def jitter_crops(images: np.ndarray, rng: np.random.Generator, *, contrast: float = 1.5, ramp: float = 0.4,
-                 offset: float = 0.3, noise: float = 0.15) -> np.ndarray:
+def jitter_crops(
+    images: np.ndarray,
+    rng: np.random.Generator,
+    *,
+    contrast: float = 1.5,
+    ramp: float = 0.4,
+    offset: float = 0.3,
+    noise: float = 0.15,
+) -> np.ndarray:
     """Jitter the network's input after the normalizer, in place: each crop ``x`` of ``images``
     ``(n, 1, S, S)`` float32 (standardized, as :func:`sample_crops` returns them) becomes
     ``exp(log a + gx u + gy v) x + b + n``, ``u, v`` in [-1, 1] across the crop: a contrast ``a``
@@ -179,8 +209,11 @@ def jitter_crops(images: np.ndarray, rng: np.random.Generator, *, contrast: floa
         log_a = rng.uniform(-np.log(contrast), np.log(contrast))
         gx, gy = rng.uniform(-ramp, ramp, 2)
         gain = np.exp(log_a + gx * u[None, :] + gy * u[:, None]).astype(np.float32)
-        images[b, 0] = (gain * images[b, 0] + rng.uniform(-offset, offset)
-                        + rng.normal(0, rng.uniform(0, noise), (size, size)).astype(np.float32))
+        images[b, 0] = (
+            gain * images[b, 0]
+            + rng.uniform(-offset, offset)
+            + rng.normal(0, rng.uniform(0, noise), (size, size)).astype(np.float32)
+        )
     return images
 
 
@@ -205,8 +238,9 @@ def corner_loss(out, labels, offsets, owner, corner_weight: float, offset_weight
     return loss
 
 
-def fit(net, frames: CornerFrames, recipe: CornerRecipe, *, seed: int = 0, progress: bool = True,
-        device: str | None = None) -> dict[str, Any]:
+def fit(
+    net, frames: CornerFrames, recipe: CornerRecipe, *, seed: int = 0, progress: bool = True, device: str | None = None
+) -> dict[str, Any]:
     """Train ``net`` on crops of ``frames`` by ``recipe``'s training keys on ``device`` (a torch
     device; ``None``: CUDA where torch sees it, else the CPU), then leave it on the CPU.
 
@@ -239,13 +273,27 @@ def fit(net, frames: CornerFrames, recipe: CornerRecipe, *, seed: int = 0, progr
         schedule.step()
         losses.append(loss.item())
     net.to("cpu").eval()
-    return {"first_loss": float(np.mean(losses[:10])),
-            "final_loss": float(np.mean(losses[-max(1, min(100, recipe.iterations // 4)):])), "device": str(device)}
+    return {
+        "first_loss": float(np.mean(losses[:10])),
+        "final_loss": float(np.mean(losses[-max(1, min(100, recipe.iterations // 4)) :])),
+        "device": str(device),
+    }
 
 
-def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path, recipe: CornerRecipe | None = None,
-                  *, normalizer: str = "none", units: str = "mm", obj_id: int | None = None, seed: int = 0,
-                  device: str | None = None, conf: str | None = None, progress: bool = True) -> Path:
+def train_corners(
+    sequence_dir: str | Path,
+    corners: np.ndarray,
+    out: str | Path,
+    recipe: CornerRecipe | None = None,
+    *,
+    normalizer: str = "none",
+    units: str = "mm",
+    obj_id: int | None = None,
+    seed: int = 0,
+    device: str | None = None,
+    conf: str | None = None,
+    progress: bool = True,
+) -> Path:
     """Train the corner detector of a box on a registered sequence and export it to ``out`` (``.onnx``).
 
     Args:
@@ -271,13 +319,37 @@ def train_corners(sequence_dir: str | Path, corners: np.ndarray, out: str | Path
     seq = load_sequence(sequence_dir, obj_id=obj_id)
     frames = build_frames(seq, corners, normalizer, recipe, seed=seed)
     provenance = {"source": str(sequence_dir), "views": len(seq.views), "data_seconds": time.perf_counter() - t0}
-    return fit_and_export(frames, box_parts(corners, recipe.divisions), corners, out, recipe, normalizer=normalizer,
-                          units=units, provenance=provenance, seed=seed, device=device, conf=conf, progress=progress)
+    return fit_and_export(
+        frames,
+        box_parts(corners, recipe.divisions),
+        corners,
+        out,
+        recipe,
+        normalizer=normalizer,
+        units=units,
+        provenance=provenance,
+        seed=seed,
+        device=device,
+        conf=conf,
+        progress=progress,
+    )
 
 
-def fit_and_export(frames: CornerFrames, parts: np.ndarray, corners: np.ndarray, out: str | Path,
-                   recipe: CornerRecipe, *, normalizer: str, units: str, provenance: dict[str, Any], seed: int = 0,
-                   device: str | None = None, conf: str | None = None, progress: bool = True) -> Path:
+def fit_and_export(
+    frames: CornerFrames,
+    parts: np.ndarray,
+    corners: np.ndarray,
+    out: str | Path,
+    recipe: CornerRecipe,
+    *,
+    normalizer: str,
+    units: str,
+    provenance: dict[str, Any],
+    seed: int = 0,
+    device: str | None = None,
+    conf: str | None = None,
+    progress: bool = True,
+) -> Path:
     """Train a :class:`pose.corner_net.CornerNet` for ``parts (n, 3)`` on ``frames`` (:func:`fit`)
     and export it (:func:`export_onnx`) with its metadata: the whole ``recipe``, ``conf``, the
     normalization, ``corners (8, 3)`` in ``units`` and ``provenance`` (``source``, ``views``,
@@ -291,23 +363,59 @@ def fit_and_export(frames: CornerFrames, parts: np.ndarray, corners: np.ndarray,
         torch.manual_seed(seed)
         net = CornerNet(len(parts), tuple(recipe.channels), recipe.hidden, recipe.mixing)
         fit_info = fit(net, frames, recipe, seed=seed, progress=progress, device=device)
-    meta = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "normalizer": pin_default_model(normalizer),
-            "scale": recipe.scale, "input_mean": frames.input_mean, "input_std": frames.input_std,
-            "parts": np.asarray(parts, np.float64).tolist(), "corners": np.asarray(corners, np.float64).tolist(),
-            "units": units, "window": WINDOW, "stride": STRIDE, "pad": PAD, "config": net.config,
-            "source": provenance.get("source", ""), "conf": conf, "recipe": dataclasses.asdict(recipe),
-            "fit": {"frames": len(frames.labels), "views": provenance.get("views"), "seed": seed,
-                    "data_seconds": provenance.get("data_seconds"), "train_seconds": time.perf_counter() - t1,
-                    **fit_info}}
+    meta = {
+        "format": FORMAT_NAME,
+        "version": FORMAT_VERSION,
+        "normalizer": pin_default_model(normalizer),
+        "scale": recipe.scale,
+        "input_mean": frames.input_mean,
+        "input_std": frames.input_std,
+        "parts": np.asarray(parts, np.float64).tolist(),
+        "corners": np.asarray(corners, np.float64).tolist(),
+        "units": units,
+        "window": WINDOW,
+        "stride": STRIDE,
+        "pad": PAD,
+        "config": net.config,
+        "source": provenance.get("source", ""),
+        "conf": conf,
+        "recipe": dataclasses.asdict(recipe),
+        "fit": {
+            "frames": len(frames.labels),
+            "views": provenance.get("views"),
+            "seed": seed,
+            "data_seconds": provenance.get("data_seconds"),
+            "train_seconds": time.perf_counter() - t1,
+            **fit_info,
+        },
+    }
     path = export_onnx(net, out, meta)
-    logger.info("corner detector (%s): %d frames, training %.1f s on %s, final loss %.3f", normalizer,
-                len(frames.labels), time.perf_counter() - t1, fit_info["device"], fit_info["final_loss"])
+    logger.info(
+        "corner detector (%s): %d frames, training %.1f s on %s, final loss %.3f",
+        normalizer,
+        len(frames.labels),
+        time.perf_counter() - t1,
+        fit_info["device"],
+        fit_info["final_loss"],
+    )
     return path
 
 
-def train_image_corners(gray: np.ndarray, uv: np.ndarray, parts: np.ndarray, corners: np.ndarray, out: str | Path,
-                        recipe: CornerRecipe | None = None, *, normalizer: str = "none", units: str = "mm",
-                        source: str = "", seed: int = 0, conf: str | None = None, progress: bool = True) -> Path:
+def train_image_corners(
+    gray: np.ndarray,
+    uv: np.ndarray,
+    parts: np.ndarray,
+    corners: np.ndarray,
+    out: str | Path,
+    recipe: CornerRecipe | None = None,
+    *,
+    normalizer: str = "none",
+    units: str = "mm",
+    source: str = "",
+    seed: int = 0,
+    conf: str | None = None,
+    progress: bool = True,
+) -> Path:
     """Train the detector of the parts of one image (a planar target's, :mod:`pose.planar`) and export it.
 
     Args:
@@ -326,12 +434,30 @@ def train_image_corners(gray: np.ndarray, uv: np.ndarray, parts: np.ndarray, cor
     t0 = time.perf_counter()
     frames = build_image_frames(gray, uv, normalizer, recipe, seed=seed)
     provenance = {"source": source, "views": 1, "data_seconds": time.perf_counter() - t0}
-    return fit_and_export(frames, parts, corners, out, recipe, normalizer=normalizer, units=units,
-                          provenance=provenance, seed=seed, conf=conf, progress=progress)
+    return fit_and_export(
+        frames,
+        parts,
+        corners,
+        out,
+        recipe,
+        normalizer=normalizer,
+        units=units,
+        provenance=provenance,
+        seed=seed,
+        conf=conf,
+        progress=progress,
+    )
 
 
-def main(sequence_dir: str | Path, out: str | Path, recipe: CornerRecipe | None = None, *,
-         box_ply: str | Path | None = None, model: str | Path | None = None, **kwargs: Any) -> Path:
+def main(
+    sequence_dir: str | Path,
+    out: str | Path,
+    recipe: CornerRecipe | None = None,
+    *,
+    box_ply: str | Path | None = None,
+    model: str | Path | None = None,
+    **kwargs: Any,
+) -> Path:
     """``alcn pose train-corners``: the box corners from ``box_ply`` (a cuboid mesh, mm) or a part
     model (``model``, its units), then :func:`train_corners` (``kwargs``: its keywords)."""
     from pose import model as part_model

@@ -11,7 +11,8 @@ centre's window shows mostly the box's own texture, a corner's mostly the table.
 * **Training data** (:func:`pose.corner_data.build_frames`): every view of a registered
   training sequence, downscaled by ``scale``, and copies of it seen from nearby viewpoints (each
   face of the box warped by its own plane's homography) and warped by random homographies, with
-  new backgrounds and intensity changes; each normalized whole and labelled on the network's output grid: the cells whose
+  new backgrounds and intensity changes; each normalized whole and labelled on the network's
+  output grid: the cells whose
   window centre is within 4 pixels of a visible part are that part's, with the part's
   offset from the centre as a regression target; far cells are background.
 * **Network** (:class:`pose.corner_net.CornerNet`): the geometry of the paper's detector
@@ -167,8 +168,9 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
     if meta.get("format") != FORMAT_NAME:
         raise WeightFileError(f"{path}: field 'format' is {meta.get('format')!r}, expected {FORMAT_NAME!r}")
     if meta.get("version") != FORMAT_VERSION:
-        raise WeightFileError(f"{path}: field 'version' is {meta.get('version')!r}; this code reads version "
-                              f"{FORMAT_VERSION}")
+        raise WeightFileError(
+            f"{path}: field 'version' is {meta.get('version')!r}; this code reads version {FORMAT_VERSION}"
+        )
     return meta
 
 
@@ -203,22 +205,38 @@ class CornerDetector:
 
     uses_prior = True
 
-    def __init__(self, onnx_path: str | Path, *, top_k: int = 5, min_score: float = 0.05, gate: float = 20.0,
-                 gated_top_k: int = 2, gated_min_score: float = 0.02, min_support: float = MIN_SUPPORT,
-                 proposals: int = PROPOSALS, min_proposal_support: float = MIN_PROPOSAL_SUPPORT,
-                 refine_search_scale: float = REFINE_SEARCH_SCALE) -> None:
+    def __init__(
+        self,
+        onnx_path: str | Path,
+        *,
+        top_k: int = 5,
+        min_score: float = 0.05,
+        gate: float = 20.0,
+        gated_top_k: int = 2,
+        gated_min_score: float = 0.02,
+        min_support: float = MIN_SUPPORT,
+        proposals: int = PROPOSALS,
+        min_proposal_support: float = MIN_PROPOSAL_SUPPORT,
+        refine_search_scale: float = REFINE_SEARCH_SCALE,
+    ) -> None:
         self.path = Path(onnx_path)
         self.meta = read_metadata(self.path)
         if self.meta["window"] != WINDOW or self.meta["stride"] != STRIDE or self.meta["pad"] != PAD:
-            raise WeightFileError(f"{self.path}: window/stride/pad {self.meta['window']}/{self.meta['stride']}/"
-                                  f"{self.meta['pad']}, expected {WINDOW}/{STRIDE}/{PAD}")
+            raise WeightFileError(
+                f"{self.path}: window/stride/pad {self.meta['window']}/{self.meta['stride']}/"
+                f"{self.meta['pad']}, expected {WINDOW}/{STRIDE}/{PAD}"
+            )
         if min(top_k, gated_top_k) < 1 or not (0 <= min_score < 1 and 0 <= gated_min_score < 1) or gate <= 0:
-            raise InputError(f"need top_k, gated_top_k >= 1, min_score, gated_min_score in [0, 1) and gate > 0, "
-                             f"got {top_k}, {gated_top_k}, {min_score}, {gated_min_score}, {gate}")
+            raise InputError(
+                f"need top_k, gated_top_k >= 1, min_score, gated_min_score in [0, 1) and gate > 0, "
+                f"got {top_k}, {gated_top_k}, {min_score}, {gated_min_score}, {gate}"
+            )
         if not (0 <= min_support < 1 and 0 <= min_proposal_support < 1) or proposals < 0 or refine_search_scale < 0:
-            raise InputError(f"need min_support and min_proposal_support in [0, 1), proposals >= 0 and "
-                             f"refine_search_scale >= 0, got {min_support}, {min_proposal_support}, {proposals} "
-                             f"and {refine_search_scale}")
+            raise InputError(
+                f"need min_support and min_proposal_support in [0, 1), proposals >= 0 and "
+                f"refine_search_scale >= 0, got {min_support}, {min_proposal_support}, {proposals} "
+                f"and {refine_search_scale}"
+            )
         try:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
@@ -226,8 +244,9 @@ class CornerDetector:
         self.parts = np.asarray(self.meta["parts"], np.float64).reshape(-1, 3)
         self.corners = np.asarray(self.meta["corners"], np.float64).reshape(NUM_CORNERS, 3)
         if self.meta["config"].get("num_parts") != len(self.parts):
-            raise WeightFileError(f"{self.path}: {len(self.parts)} parts but a network for "
-                                  f"{self.meta['config'].get('num_parts')}")
+            raise WeightFileError(
+                f"{self.path}: {len(self.parts)} parts but a network for {self.meta['config'].get('num_parts')}"
+            )
         self.units = str(self.meta["units"])
         self.scale = float(self.meta["scale"])
         self.normalizer_name = str(self.meta["normalizer"])
@@ -254,8 +273,9 @@ class CornerDetector:
     def outputs(self, normalized: np.ndarray) -> np.ndarray:
         """``(3n + 1, gh, gw)``: ``1 + n`` logits (background, the parts) then the ``n`` parts'
         offsets ``(dx, dy)`` in strides; cell ``(i, j)`` is the window centred on :func:`grid_centres`."""
-        padded = cv2.copyMakeBorder(np.ascontiguousarray(normalized, np.float32), PAD, PAD, PAD, PAD,
-                                    cv2.BORDER_REFLECT_101)
+        padded = cv2.copyMakeBorder(
+            np.ascontiguousarray(normalized, np.float32), PAD, PAD, PAD, PAD, cv2.BORDER_REFLECT_101
+        )
         self.net.setInput(padded[None, None])
         return np.ascontiguousarray(self.net.forward()[0], np.float32)
 
@@ -270,13 +290,14 @@ class CornerDetector:
         z = out[: n + 1]
         e = np.exp(z - z.max(0, keepdims=True))
         prob = e / e.sum(0, keepdims=True)
-        off = out[n + 1:].reshape(n, 2, *z.shape[1:]).transpose(0, 2, 3, 1)
+        off = out[n + 1 :].reshape(n, 2, *z.shape[1:]).transpose(0, 2, 3, 1)
         votes = grid_centres(z.shape[1:])[None] + STRIDE * off.astype(np.float64)
         self._cache = (image, prob, votes)
         return prob, votes
 
-    def peaks(self, image: np.ndarray, predicted: np.ndarray | None = None, radius: float | None = None
-              ) -> list[tuple[np.ndarray, np.ndarray]]:
+    def peaks(
+        self, image: np.ndarray, predicted: np.ndarray | None = None, radius: float | None = None
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per part, ``(xy (m, 2) float64 full-image pixels, scores (m,))``, best first.
 
         Without ``predicted``: the ``top_k`` local maxima above ``min_score``; with ``predicted``
@@ -320,13 +341,13 @@ class CornerDetector:
         R = cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
         return float(self._supports(image, R[None], np.asarray(tvec, np.float64).reshape(1, 3), K)[0][0])
 
-    def _supports(self, image: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _supports(
+        self, image: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`support` of ``b`` poses ``R (b, 3, 3)``, ``t (b, 3)`` at once, ``(b,)`` the
         number of distinct grid cells the parts each pose shows fall in, and ``(b, n, 2)`` the
         parts' projections."""
-        uv, visible = part_visibility(self.corners, R, t, np.asarray(K, np.float64), image.shape[:2],
-                                      parts=self.parts)
+        uv, visible = part_visibility(self.corners, R, t, np.asarray(K, np.float64), image.shape[:2], parts=self.parts)
         pooled = self._pooled_scores(image)
         gh, gw = pooled.shape[1:]
         ij = np.rint((to_scaled(uv, self.scale) - grid_centres((1, 1))[0, 0]) / STRIDE).astype(int)
@@ -399,8 +420,9 @@ class CornerDetector:
             return None
         return cv2.Rodrigues(R[b])[0], t[b].reshape(3, 1).copy()
 
-    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, *,
-               proposed: bool = False) -> str:
+    def verify(
+        self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, *, proposed: bool = False
+    ) -> str:
         """``""`` when the pose's :meth:`support` is at least :attr:`min_support` (at least
         :attr:`min_proposal_support` for a pose ``proposed`` by :meth:`propose`: chosen among
         thousands for its support, it is held to the bar it was proposed at), else why not."""
@@ -408,16 +430,22 @@ class CornerDetector:
         need = self.min_proposal_support if proposed else self.min_support
         return "" if s >= need else f"support {s:.2f} of the network's scores (need {need})"
 
-    def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
-               search_scale: float = 1.0) -> Correspondences:
+    def detect(
+        self,
+        image: np.ndarray,
+        prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        *,
+        search_scale: float = 1.0,
+    ) -> Correspondences:
         """Part candidates of ``image`` as 2D-3D correspondences; with ``prior = (rvec, tvec, K)``
         only those within ``gate * search_scale`` pixels of the part's projection by it. Each
         carries its part's edge direction (:func:`pose.box.edge_directions`), for the solver."""
         predicted = None
         if prior is not None:
             rvec, tvec, K = prior
-            predicted = cv2.projectPoints(self.parts, np.asarray(rvec, np.float64), np.asarray(tvec, np.float64),
-                                          np.asarray(K, np.float64), None)[0].reshape(-1, 2)
+            predicted = cv2.projectPoints(
+                self.parts, np.asarray(rvec, np.float64), np.asarray(tvec, np.float64), np.asarray(K, np.float64), None
+            )[0].reshape(-1, 2)
         peaks = self.peaks(image, predicted, self.gate * search_scale)
         part = np.repeat(np.arange(len(self.parts)), [len(xy) for xy, _ in peaks])
         img = np.concatenate([xy for xy, _ in peaks]).astype(np.float32).reshape(-1, 2)

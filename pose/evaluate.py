@@ -28,9 +28,9 @@ from typing import Any
 import cv2
 import numpy as np
 
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none
-from alcn_cv.errors import DatasetError, InputError
 from pose.build import build as build_model
 from pose.corner_train import CornerRecipe
 from pose.corner_train import confs as corner_confs
@@ -49,8 +49,9 @@ ADD_FRACTION = 0.1
 DEG, CM = 5.0, 5.0
 
 
-def projection_error(vertices: np.ndarray, R: np.ndarray, t: np.ndarray, R_gt: np.ndarray, t_gt: np.ndarray,
-                     K: np.ndarray) -> float:
+def projection_error(
+    vertices: np.ndarray, R: np.ndarray, t: np.ndarray, R_gt: np.ndarray, t_gt: np.ndarray, K: np.ndarray
+) -> float:
     """Mean 2D distance (px) between ``vertices (N, 3)`` projected with both poses."""
     a = project(vertices, cv2.Rodrigues(np.asarray(R, np.float64))[0], np.asarray(t, np.float64), K)
     b = project(vertices, cv2.Rodrigues(np.asarray(R_gt, np.float64))[0], np.asarray(t_gt, np.float64), K)
@@ -77,20 +78,31 @@ class PoseScore:
     def correct(self, diameter: float) -> dict[str, bool]:
         if self.proj_px is None:
             return {"proj2d": False, "add": False, "5cm5deg": False}
-        return {"proj2d": self.proj_px < PROJ_PX, "add": self.add < ADD_FRACTION * diameter,
-                "5cm5deg": self.rot_deg < DEG and self.trans_cm < CM}
+        return {
+            "proj2d": self.proj_px < PROJ_PX,
+            "add": self.add < ADD_FRACTION * diameter,
+            "5cm5deg": self.rot_deg < DEG and self.trans_cm < CM,
+        }
 
 
-def score(vertices: np.ndarray, K: np.ndarray, units: str, est: tuple[np.ndarray, np.ndarray] | None,
-          gt: tuple[np.ndarray, np.ndarray]) -> PoseScore:
+def score(
+    vertices: np.ndarray,
+    K: np.ndarray,
+    units: str,
+    est: tuple[np.ndarray, np.ndarray] | None,
+    gt: tuple[np.ndarray, np.ndarray],
+) -> PoseScore:
     """Errors of the pose ``est = (R, t)`` (``None`` when lost) against ``gt``; lengths in ``units``."""
     if est is None:
         return PoseScore(None, None, None, None)
     R, t = est
     R_gt, t_gt = gt
-    return PoseScore(projection_error(vertices, R, t, R_gt, t_gt, K), add_error(vertices, R, t, R_gt, t_gt),
-                     rotation_error_deg(R, R_gt),
-                     float(np.linalg.norm(np.ravel(t) - np.ravel(t_gt)) * unit_scale(units, "cm")))
+    return PoseScore(
+        projection_error(vertices, R, t, R_gt, t_gt, K),
+        add_error(vertices, R, t, R_gt, t_gt),
+        rotation_error_deg(R, R_gt),
+        float(np.linalg.norm(np.ravel(t) - np.ravel(t_gt)) * unit_scale(units, "cm")),
+    )
 
 
 def summarize(scores: list[PoseScore], diameter: float) -> dict[str, float]:
@@ -116,9 +128,17 @@ def summarize(scores: list[PoseScore], diameter: float) -> dict[str, float]:
 DEFAULT_NORMALIZERS = ("none", "dog:sigma1=1:sigma2=2", "alcn")
 
 
-def evaluate_sequence(detector, scene_dir: Path, obj_id: int, vertices: np.ndarray, units: str,
-                      min_inliers: int = 12, outline: np.ndarray | None = None, iterations: int = 500,
-                      min_inliers_near_prior: int | None = None) -> tuple[list[PoseScore], float]:
+def evaluate_sequence(
+    detector,
+    scene_dir: Path,
+    obj_id: int,
+    vertices: np.ndarray,
+    units: str,
+    min_inliers: int = 12,
+    outline: np.ndarray | None = None,
+    iterations: int = 500,
+    min_inliers_near_prior: int | None = None,
+) -> tuple[list[PoseScore], float]:
     """Track with ``detector`` (a part detector of :mod:`pose.parts` or :mod:`pose.corners`)
     through a BOP test scene and score every frame; returns scores and fps. ``outline``: the
     detector's box corners for :class:`pose.solver.PoseSolver` (its coverage check);
@@ -132,8 +152,15 @@ def evaluate_sequence(detector, scene_dir: Path, obj_id: int, vertices: np.ndarr
     scores, t_total = [], 0.0
     for fr in scene.frames:
         if tracker is None:
-            tracker = PoseTracker(PoseSolver(fr.K, min_inliers=min_inliers, iterations=iterations, outline=outline,
-                                             min_inliers_near_prior=min_inliers_near_prior))
+            tracker = PoseTracker(
+                PoseSolver(
+                    fr.K,
+                    min_inliers=min_inliers,
+                    iterations=iterations,
+                    outline=outline,
+                    min_inliers_near_prior=min_inliers_near_prior,
+                )
+            )
         img = io.read_image(fr.rgb_path)
         t0 = time.perf_counter()
         est, _ = tracker.step(fr.im_id, img, detector)
@@ -148,10 +175,12 @@ def file_stem(spec: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", spec.replace("=", "-"))
 
 
-def table_markdown(table: dict[str, dict[str, float]], columns: list[str],
-                   spread: dict[str, dict[str, float]] | None = None) -> str:
+def table_markdown(
+    table: dict[str, dict[str, float]], columns: list[str], spread: dict[str, dict[str, float]] | None = None
+) -> str:
     """The Table-1-style report as Markdown: one row per ``table`` key, percentages with one
     decimal (``mean ± spread`` where ``spread`` has the cell), ``-`` where a column is missing or NaN."""
+
     def cell(row: str, c: str) -> Any:
         value = table[row].get(c, np.nan)
         if value is None or np.isnan(value):
@@ -162,12 +191,22 @@ def table_markdown(table: dict[str, dict[str, float]], columns: list[str],
     return markdown_table(["", *columns], [[row, *(cell(row, c) for c in columns)] for row in table], digits=1)
 
 
-def main(data_dir: str | Path, out_dir: str | Path, *,
-         normalizers: list[str] | tuple[str, ...] = DEFAULT_NORMALIZERS,
-         feature: str = "SIFT", obj_id: int = 1, n_features: int = 2000,
-         detectors: list[str] | tuple[str, ...] = ("features",), corner_recipe: CornerRecipe | None = None,
-         corner_conf: str | None = None, corner_device: str | None = None, seeds: int = 1,
-         sequences: list[int] | None = None, command: str | None = None) -> dict[str, Any]:
+def main(
+    data_dir: str | Path,
+    out_dir: str | Path,
+    *,
+    normalizers: list[str] | tuple[str, ...] = DEFAULT_NORMALIZERS,
+    feature: str = "SIFT",
+    obj_id: int = 1,
+    n_features: int = 2000,
+    detectors: list[str] | tuple[str, ...] = ("features",),
+    corner_recipe: CornerRecipe | None = None,
+    corner_conf: str | None = None,
+    corner_device: str | None = None,
+    seeds: int = 1,
+    sequences: list[int] | None = None,
+    command: str | None = None,
+) -> dict[str, Any]:
     """Table-1-style evaluation on a pose data set (``train/000001``, ``test/0000NN``, ``models/``).
 
     For each detector (``"features"``: :class:`pose.parts.FeaturePartDetector`, ``"corners"``:
@@ -189,8 +228,10 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
         tests = [p for p in tests if int(p.name) in set(sequences)]
     model_ply = data_dir / "models" / f"obj_{obj_id:06d}.ply"
     if not train.is_dir() or not tests or not model_ply.is_file():
-        raise DatasetError(f"{data_dir}: expected train/000001, test/0000NN (those of --sequences) and "
-                           f"models/obj_{obj_id:06d}.ply (`alcn data pose`)")
+        raise DatasetError(
+            f"{data_dir}: expected train/000001, test/0000NN (those of --sequences) and "
+            f"models/obj_{obj_id:06d}.ply (`alcn data pose`)"
+        )
     if seeds < 1:
         raise InputError(f"seeds must be >= 1, got {seeds}")
     corners = read_box_corners(model_ply)
@@ -211,8 +252,14 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
                 model, _ = build_model(seq, feature=feature, normalizer=name, box_ply=model_ply, work_dir=out_dir)
                 save_model(model, out_dir / f"model_{file_stem(name)}.npz")
                 row = f"{name} / {feature.lower()} features"
-                runs.append((FeaturePartDetector(model, name, n_features=n_features), model.units, model.corners,
-                             {"model_points": len(model.points3d), "box_fit": model.box_fit}))
+                runs.append(
+                    (
+                        FeaturePartDetector(model, name, n_features=n_features),
+                        model.units,
+                        model.corners,
+                        {"model_points": len(model.points3d), "box_fit": model.box_fit},
+                    )
+                )
             else:
                 from pose.corner_train import train_corners
                 from pose.corners import CornerDetector
@@ -221,45 +268,85 @@ def main(data_dir: str | Path, out_dir: str | Path, *,
                 for seed in range(seeds):
                     t0 = time.perf_counter()
                     suffix = f"_seed{seed}" if seeds > 1 else ""
-                    net = train_corners(train, corners, out_dir / f"corners_{file_stem(name)}{suffix}.onnx",
-                                        corner_recipe, normalizer=name, obj_id=obj_id, seed=seed,
-                                        device=corner_device, conf=corner_conf, progress=False)
+                    net = train_corners(
+                        train,
+                        corners,
+                        out_dir / f"corners_{file_stem(name)}{suffix}.onnx",
+                        corner_recipe,
+                        normalizer=name,
+                        obj_id=obj_id,
+                        seed=seed,
+                        device=corner_device,
+                        conf=corner_conf,
+                        progress=False,
+                    )
                     det = CornerDetector(net)
-                    runs.append((det, "mm", det.corners,  # the BOP model's units
-                                 {"training_seconds": time.perf_counter() - t0, "detector": str(net)}))
+                    runs.append(
+                        (
+                            det,
+                            "mm",
+                            det.corners,  # the BOP model's units
+                            {"training_seconds": time.perf_counter() - t0, "detector": str(net)},
+                        )
+                    )
             per_run = []
             for det, units, outline, info in runs:
                 result = {**info, "sequences": {}}
                 for col, scene_dir in zip(columns, tests):
-                    scores, fps = evaluate_sequence(det, scene_dir, obj_id, corners, units, MIN_INLIERS[det_name],
-                                                    outline, RANSAC_ITERATIONS[det_name],
-                                                    MIN_INLIERS_NEAR_PRIOR[det_name])
+                    scores, fps = evaluate_sequence(
+                        det,
+                        scene_dir,
+                        obj_id,
+                        corners,
+                        units,
+                        MIN_INLIERS[det_name],
+                        outline,
+                        RANSAC_ITERATIONS[det_name],
+                        MIN_INLIERS_NEAR_PRIOR[det_name],
+                    )
                     s = summarize(scores, diameter)
                     result["sequences"][col] = {**s, "fps": fps, "frames": len(scores)}
-                    logger.info("%s %s: %.1f%% correct (2D proj.), %.1f%% tracked", row, col, s["proj2d"],
-                                s["tracked"])
+                    logger.info("%s %s: %.1f%% correct (2D proj.), %.1f%% tracked", row, col, s["proj2d"], s["tracked"])
                 per_run.append(result)
             values = {c: [r["sequences"][c]["proj2d"] for r in per_run] for c in columns}
             table[row] = {c: float(np.mean(v)) for c, v in values.items()}
             if len(per_run) > 1:
                 spread[row] = {c: float(np.std(v)) for c, v in values.items()}
-            details[row] = per_run[0] if len(per_run) == 1 else {"seeds": per_run, "proj2d_per_seed": values,
-                                                                 "proj2d_std": spread[row]}
+            details[row] = (
+                per_run[0]
+                if len(per_run) == 1
+                else {"seeds": per_run, "proj2d_per_seed": values, "proj2d_std": spread[row]}
+            )
     host = machine()
-    md = ("# Pose under light changes (Table 1 style)\n\n"
-          f"Data: `{data_dir}`; cells: % of frames with 2D projection error < {PROJ_PX:g} px "
-          f"(ADD < {ADD_FRACTION:g} d and 5 cm / 5 deg in table1.json)"
-          + (f"; corner CNN rows: mean ± standard deviation over {seeds} training seeds" if seeds > 1 else "")
-          + f".\n\nMachine: {describe_machine(host)}. Wall time: {time.perf_counter() - t_start:.0f} s."
-          + (f"\n\nCommand: `{command}`" if command else "") + "\n\n"
-          + table_markdown(table, columns, spread))
+    md = (
+        "# Pose under light changes (Table 1 style)\n\n"
+        f"Data: `{data_dir}`; cells: % of frames with 2D projection error < {PROJ_PX:g} px "
+        f"(ADD < {ADD_FRACTION:g} d and 5 cm / 5 deg in table1.json)"
+        + (f"; corner CNN rows: mean ± standard deviation over {seeds} training seeds" if seeds > 1 else "")
+        + f".\n\nMachine: {describe_machine(host)}. Wall time: {time.perf_counter() - t_start:.0f} s."
+        + (f"\n\nCommand: `{command}`" if command else "")
+        + "\n\n"
+        + table_markdown(table, columns, spread)
+    )
     atomic_write(out_dir / "table1.md", md)
-    write_json(out_dir / "table1.json", nan_to_none({
-        "data": str(data_dir), "machine": host, "command": command, "columns": columns, "table": table,
-        "spread": spread, "seeds": seeds, "details": details,
-        "corner_conf": corner_conf if "corners" in detectors else None,
-        "corner_recipe": asdict(corner_recipe) if "corners" in detectors else None,
-        "metrics": {"proj2d_px": PROJ_PX, "add": ADD_FRACTION, "deg": DEG, "cm": CM}}))
+    write_json(
+        out_dir / "table1.json",
+        nan_to_none(
+            {
+                "data": str(data_dir),
+                "machine": host,
+                "command": command,
+                "columns": columns,
+                "table": table,
+                "spread": spread,
+                "seeds": seeds,
+                "details": details,
+                "corner_conf": corner_conf if "corners" in detectors else None,
+                "corner_recipe": asdict(corner_recipe) if "corners" in detectors else None,
+                "metrics": {"proj2d_px": PROJ_PX, "add": ADD_FRACTION, "deg": DEG, "cm": CM},
+            }
+        ),
+    )
     plot_table(table, columns, out_dir / "table1.png", "Correct poses (2D projection < 5 px)", spread)
     return {"table": table, "spread": spread, "details": details}
 
@@ -278,7 +365,7 @@ def relight(image: np.ndarray, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     h, w = image.shape[:2]
     flip = rng.random() < 0.5
-    ramp = np.linspace(0.25, 1.1, w)[::-1 if flip else 1]
+    ramp = np.linspace(0.25, 1.1, w)[:: -1 if flip else 1]
     g = np.tile(ramp, (h, 1))
     if image.ndim == 3:
         g = g[..., None]
@@ -286,10 +373,17 @@ def relight(image: np.ndarray, seed: int = 0) -> np.ndarray:
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 
-def middlebury_main(sets: list[str | Path], out_dir: str | Path, *,
-                    normalizers: list[str] | tuple[str, ...] = DEFAULT_NORMALIZERS,
-                    feature: str = "SIFT", n_features: int = 8000, ratio: float = 0.9,
-                    min_inliers: int = 12, iterations: int = 10000) -> dict[str, Any]:
+def middlebury_main(
+    sets: list[str | Path],
+    out_dir: str | Path,
+    *,
+    normalizers: list[str] | tuple[str, ...] = DEFAULT_NORMALIZERS,
+    feature: str = "SIFT",
+    n_features: int = 8000,
+    ratio: float = 0.9,
+    min_inliers: int = 12,
+    iterations: int = 10000,
+) -> dict[str, Any]:
     """Build from the odd views of each set, estimate the pose of the even views from their images.
 
     The views are 22.5 degrees apart, so training views are 45 degrees apart and a test view is
@@ -309,9 +403,12 @@ def middlebury_main(sets: list[str | Path], out_dir: str | Path, *,
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     results: dict[str, Any] = {}
-    lines = ["# Middlebury: pose of 8 held-out views from a model of the 8 others\n",
-             "| set | normalizer | light | posed | median rot. err (deg) | median trans. err (mm) | "
-             "median centre err (mm) |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "# Middlebury: pose of 8 held-out views from a model of the 8 others\n",
+        "| set | normalizer | light | posed | median rot. err (deg) | median trans. err (mm) | "
+        "median centre err (mm) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for set_dir in sets:
         set_dir = Path(set_dir)
         views = read_middlebury(set_dir)
@@ -320,8 +417,9 @@ def middlebury_main(sets: list[str | Path], out_dir: str | Path, *,
         for name in normalizers:
             seq = load_sequence(set_dir)
             seq.views = [v for v in seq.views if v.name in train_names]
-            model, _ = build_model(seq, feature=feature, n_features=n_features, normalizer=name,
-                                   ratio=ratio, work_dir=out_dir)
+            model, _ = build_model(
+                seq, feature=feature, n_features=n_features, normalizer=name, ratio=ratio, work_dir=out_dir
+            )
             det = FeaturePartDetector(model, name, n_features=n_features, ratio=ratio, cross_check=True)
             for light in ("original", "relit"):
                 errs = []
@@ -331,22 +429,36 @@ def middlebury_main(sets: list[str | Path], out_dir: str | Path, *,
                         img = relight(img, seed=k)
                     corr = det.detect(img)
                     est = PoseSolver(v.K, min_inliers=min_inliers, iterations=iterations).solve(
-                        corr.object_points, corr.image_points)
+                        corr.object_points, corr.image_points
+                    )
                     if est.ok:
                         c = -est.R.T @ est.tvec.ravel()
-                        errs.append((rotation_error_deg(est.R, v.R_w2c),
-                                     1000 * float(np.linalg.norm(est.tvec.ravel() - v.t_w2c)),
-                                     1000 * float(np.linalg.norm(c - v.center))))
+                        errs.append(
+                            (
+                                rotation_error_deg(est.R, v.R_w2c),
+                                1000 * float(np.linalg.norm(est.tvec.ravel() - v.t_w2c)),
+                                1000 * float(np.linalg.norm(c - v.center)),
+                            )
+                        )
                 e = np.array(errs).reshape(-1, 3)
                 med = np.median(e, 0) if len(e) else np.full(3, np.nan)
                 key = f"{set_dir.name}/{name}/{light}"
-                results[key] = {"posed": len(e), "views": len(tests), "errors": e.tolist(),
-                                "median_rot_deg": med[0], "median_trans_mm": med[1], "median_center_mm": med[2],
-                                "model_points": len(model.points3d)}
-                lines.append(f"| {set_dir.name} | {name} | {light} | {len(e)}/{len(tests)} | {med[0]:.2f} | "
-                             f"{med[1]:.1f} | {med[2]:.1f} |")
-                logger.info("%s: %d/%d posed, median rot %.2f deg, trans %.1f mm", key, len(e), len(tests),
-                            med[0], med[1])
+                results[key] = {
+                    "posed": len(e),
+                    "views": len(tests),
+                    "errors": e.tolist(),
+                    "median_rot_deg": med[0],
+                    "median_trans_mm": med[1],
+                    "median_center_mm": med[2],
+                    "model_points": len(model.points3d),
+                }
+                lines.append(
+                    f"| {set_dir.name} | {name} | {light} | {len(e)}/{len(tests)} | {med[0]:.2f} | "
+                    f"{med[1]:.1f} | {med[2]:.1f} |"
+                )
+                logger.info(
+                    "%s: %d/%d posed, median rot %.2f deg, trans %.1f mm", key, len(e), len(tests), med[0], med[1]
+                )
     atomic_write(out_dir / "middlebury.md", "\n".join(lines) + "\n")
     write_json(out_dir / "middlebury.json", nan_to_none({**results, "machine": machine()}))
     return results

@@ -119,11 +119,14 @@ class PartModel:
             self.descriptor_point = np.arange(n, dtype=np.int32)
         self.descriptor_point = np.asarray(self.descriptor_point, dtype=np.int32).reshape(-1)
         if len(self.descriptor_point) != len(self.descriptors):
-            raise InputError(f"{len(self.descriptors)} descriptors but {len(self.descriptor_point)} descriptor_point "
-                             "entries")
+            raise InputError(
+                f"{len(self.descriptors)} descriptors but {len(self.descriptor_point)} descriptor_point entries"
+            )
         if len(self.descriptor_point) and (self.descriptor_point.min() < 0 or self.descriptor_point.max() >= n):
-            raise InputError(f"descriptor_point must index the {n} points, got values in "
-                             f"[{self.descriptor_point.min()}, {self.descriptor_point.max()}]")
+            raise InputError(
+                f"descriptor_point must index the {n} points, got values in "
+                f"[{self.descriptor_point.min()}, {self.descriptor_point.max()}]"
+            )
         if self.track_length is None:
             self.track_length = np.ones(n, np.int32)
         self.track_length = np.asarray(self.track_length, dtype=np.int32).reshape(n)
@@ -149,28 +152,48 @@ class PartModel:
         d = self.corners[:, None] - self.corners[None]
         return float(np.sqrt((d**2).sum(-1)).max())
 
-    def scaled_to(self, units: str) -> "PartModel":
+    def scaled_to(self, units: str) -> PartModel:
         """A copy with every length converted to ``units``."""
         s = unit_scale(self.units, units)
         return PartModel(
-            corners=self.corners * s, points3d=self.points3d * s, descriptors=self.descriptors,
-            descriptor_point=self.descriptor_point, track_length=self.track_length, colors=self.colors, units=units,
+            corners=self.corners * s,
+            points3d=self.points3d * s,
+            descriptors=self.descriptors,
+            descriptor_point=self.descriptor_point,
+            track_length=self.track_length,
+            colors=self.colors,
+            units=units,
             feature=self.feature,
-            normalizer=self.normalizer, source=self.source, box_fit=dict(self.box_fit), extra=dict(self.extra),
+            normalizer=self.normalizer,
+            source=self.source,
+            box_fit=dict(self.box_fit),
+            extra=dict(self.extra),
         )
 
     def header(self) -> dict[str, Any]:
         return {
-            "format": FORMAT_NAME, "version": FORMAT_VERSION, "units": self.units, "feature": self.feature,
-            "normalizer": self.normalizer, "source": self.source, "box_fit": self.box_fit, "extra": self.extra,
+            "format": FORMAT_NAME,
+            "version": FORMAT_VERSION,
+            "units": self.units,
+            "feature": self.feature,
+            "normalizer": self.normalizer,
+            "source": self.source,
+            "box_fit": self.box_fit,
+            "extra": self.extra,
         }
 
 
 def write_point_cloud(path: str | Path, points: np.ndarray, colors: np.ndarray | None = None) -> Path:
     """Write a coloured point cloud ``(N, 3)`` (RGB ``(N, 3)`` uint8) as a binary PLY, atomically."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    return bop.write_ply(path, bop.PlyModel(vertices=pts, faces=np.zeros((0, 3), np.int64),
-                                            colors=None if colors is None else np.asarray(colors, np.uint8)))
+    return bop.write_ply(
+        path,
+        bop.PlyModel(
+            vertices=pts,
+            faces=np.zeros((0, 3), np.int64),
+            colors=None if colors is None else np.asarray(colors, np.uint8),
+        ),
+    )
 
 
 def read_box_corners(path: str | Path) -> np.ndarray:
@@ -192,15 +215,25 @@ def save(model: PartModel, path: str | Path) -> Path:
         path = path.with_suffix(".npz")
     buf = io.BytesIO()
     np.savez(
-        buf, header=np.array(json.dumps(model.header())), corners=model.corners, box_size=model.box_size,
-        points3d=model.points3d, descriptors=model.descriptors, descriptor_point=model.descriptor_point,
+        buf,
+        header=np.array(json.dumps(model.header())),
+        corners=model.corners,
+        box_size=model.box_size,
+        points3d=model.points3d,
+        descriptors=model.descriptors,
+        descriptor_point=model.descriptor_point,
         track_length=model.track_length,
         colors=model.colors,
     )
     atomic_write(path, buf.getvalue())
     write_point_cloud(path.with_suffix(".ply"), model.points3d, model.colors)
-    logger.info("wrote part model %s (%d points, box %s %s)", path, len(model.points3d),
-                np.round(model.box_size, 3).tolist(), model.units)
+    logger.info(
+        "wrote part model %s (%d points, box %s %s)",
+        path,
+        len(model.points3d),
+        np.round(model.box_size, 3).tolist(),
+        model.units,
+    )
     return path
 
 
@@ -231,11 +264,18 @@ def load(path: str | Path) -> PartModel:
         )
     try:
         return PartModel(
-            corners=arrays["corners"], points3d=arrays["points3d"], descriptors=arrays["descriptors"],
+            corners=arrays["corners"],
+            points3d=arrays["points3d"],
+            descriptors=arrays["descriptors"],
             descriptor_point=arrays["descriptor_point"] if header["version"] >= 2 else None,
-            track_length=arrays["track_length"], colors=arrays["colors"], units=header["units"],
-            feature=header["feature"], normalizer=header.get("normalizer", "none"),
-            source=header.get("source", ""), box_fit=header.get("box_fit", {}), extra=header.get("extra", {}),
+            track_length=arrays["track_length"],
+            colors=arrays["colors"],
+            units=header["units"],
+            feature=header["feature"],
+            normalizer=header.get("normalizer", "none"),
+            source=header.get("source", ""),
+            box_fit=header.get("box_fit", {}),
+            extra=header.get("extra", {}),
         )
     except KeyError as exc:
         raise WeightFileError(f"{path}: field {exc.args[0]!r} missing") from exc
@@ -267,5 +307,4 @@ def from_opencv_tutorial(yml_path: str | Path, box_ply: str | Path | None = None
         corners = read_box_corners(box_ply)
     else:
         corners = box_corners(pts.max(0) - pts.min(0), pts.min(0))
-    return PartModel(corners=corners, points3d=pts, descriptors=desc, units=units, feature="ORB",
-                     source=str(yml_path))
+    return PartModel(corners=corners, points3d=pts, descriptors=desc, units=units, feature="ORB", source=str(yml_path))

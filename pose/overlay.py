@@ -43,6 +43,7 @@ from pose.solver import project
 
 logger = logging.getLogger(__name__)
 
+
 @dataclass
 class EdgeSettings:
     """Settings of :func:`edge_offsets`.
@@ -90,8 +91,9 @@ def image_edges(image: np.ndarray, settings: EdgeSettings) -> tuple[np.ndarray, 
     return edges, np.arctan2(gy, gx)
 
 
-def edge_offsets(edges: np.ndarray, angle: np.ndarray, a: np.ndarray, b: np.ndarray,
-                 settings: EdgeSettings) -> np.ndarray:
+def edge_offsets(
+    edges: np.ndarray, angle: np.ndarray, a: np.ndarray, b: np.ndarray, settings: EdgeSettings
+) -> np.ndarray:
     """Signed distances (pixels, along the normal ``(-dy, dx)`` of ``b - a``) from samples of the
     segment ``a -> b`` to the nearest image edge parallel to it; NaN where none is within
     ``settings.max_distance`` or the sample is outside the image. Empty for a segment shorter
@@ -141,8 +143,15 @@ class FrameError:
     edges: dict[tuple[int, int], float]
 
 
-def frame_error(image: np.ndarray, corners: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray,
-                settings: EdgeSettings | None = None, dist: np.ndarray | None = None) -> FrameError:
+def frame_error(
+    image: np.ndarray,
+    corners: np.ndarray,
+    rvec: np.ndarray,
+    tvec: np.ndarray,
+    K: np.ndarray,
+    settings: EdgeSettings | None = None,
+    dist: np.ndarray | None = None,
+) -> FrameError:
     """How far the box ``corners (8, 3)`` drawn with the pose ``rvec, tvec`` is from the edges of
     ``image`` (grey or BGR uint8, :func:`image_edges`)."""
     settings = settings or EdgeSettings()
@@ -164,8 +173,9 @@ def frame_error(image: np.ndarray, corners: np.ndarray, rvec: np.ndarray, tvec: 
     return FrameError(float(err.mean()), float(found.mean()), matched, per_edge)
 
 
-def _camera_and_poses(model_path: str | Path, poses_path: str | Path
-                      ) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
+def _camera_and_poses(
+    model_path: str | Path, poses_path: str | Path
+) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
     """The box corners, the camera stored in the part model and the ``(rvec, tvec)`` of every posed frame."""
     model = part_model.load(model_path)
     if "K" not in model.extra:
@@ -178,8 +188,9 @@ def _camera_and_poses(model_path: str | Path, poses_path: str | Path
     return model.corners, np.asarray(model.extra["K"], np.float64), poses
 
 
-def measure(model_path: str | Path, poses_path: str | Path, video: str | Path,
-            settings: EdgeSettings | None = None) -> dict[str, FrameError]:
+def measure(
+    model_path: str | Path, poses_path: str | Path, video: str | Path, settings: EdgeSettings | None = None
+) -> dict[str, FrameError]:
     """:class:`FrameError` of every frame of ``video`` posed in ``poses_path`` (``alcn pose track``'s
     JSON) with the box and camera of ``model_path`` (the camera stored by ``alcn pose build``)."""
     corners, K, poses = _camera_and_poses(model_path, poses_path)
@@ -204,16 +215,24 @@ def summarize(errors: dict[str, FrameError], worst: int = 5) -> dict[str, Any]:
     for i, j in BOX_EDGES:
         v = [e.edges[(i, j)] for e in errors.values() if np.isfinite(e.edges.get((i, j), np.nan))]
         if v:
-            per_edge[f"{i}-{j}"] = {"mean_signed_px": float(np.mean(v)), "mean_abs_px": float(np.mean(np.abs(v))),
-                                   "frames": len(v)}
+            per_edge[f"{i}-{j}"] = {
+                "mean_signed_px": float(np.mean(v)),
+                "mean_abs_px": float(np.mean(np.abs(v))),
+                "frames": len(v),
+            }
     # the box's systematic misplacement: how far each edge is off on average, whatever the texture
     bias = [abs(e["mean_signed_px"]) for e in per_edge.values()]
-    return {"frames": len(values), "mean_px": float(values.mean()), "median_px": float(np.median(values)),
-            "edge_bias_px": float(np.mean(bias)) if bias else float("nan"),
-            "p90_px": float(np.percentile(values, 90)),
-            "found": float(np.mean([errors[n].found for n in names])),
-            "matched_px": float(np.nanmean([errors[n].matched_px for n in names])),
-            "worst": [[names[k], float(values[k])] for k in order], "edges": per_edge}
+    return {
+        "frames": len(values),
+        "mean_px": float(values.mean()),
+        "median_px": float(np.median(values)),
+        "edge_bias_px": float(np.mean(bias)) if bias else float("nan"),
+        "p90_px": float(np.percentile(values, 90)),
+        "found": float(np.mean([errors[n].found for n in names])),
+        "matched_px": float(np.nanmean([errors[n].matched_px for n in names])),
+        "worst": [[names[k], float(values[k])] for k in order],
+        "edges": per_edge,
+    }
 
 
 def plot_errors(runs: dict[str, dict[str, FrameError]], path: str | Path, max_distance: float) -> Path:
@@ -223,16 +242,21 @@ def plot_errors(runs: dict[str, dict[str, FrameError]], path: str | Path, max_di
     for label, errors in runs.items():
         v = np.array([e.mean_px for e in errors.values()])
         ax.plot(np.arange(len(v)), v, lw=1, label=f"{label} (mean {np.nanmean(v):.1f} px)")
-    ax.set(xlabel="frame", ylabel="mean distance to image edges (px)", ylim=(0, max_distance),
-           title="Drawn box vs. the image's edges (visible box edges, Canny, oriented)")
+    ax.set(
+        xlabel="frame",
+        ylabel="mean distance to image edges (px)",
+        ylim=(0, max_distance),
+        title="Drawn box vs. the image's edges (visible box edges, Canny, oriented)",
+    )
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
     return save_figure(plt, fig, path, dpi=110)
 
 
-def plot_frames(video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], names: Sequence[str],
-                path: str | Path) -> Path:
+def plot_frames(
+    video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], names: Sequence[str], path: str | Path
+) -> Path:
     """The frames ``names`` of ``video`` with each run's box drawn in its own colour, side by side."""
     from pose.track import draw_box
 
@@ -252,9 +276,15 @@ def plot_frames(video: str | Path, runs: Sequence[tuple[str, str | Path, str | P
     return Path(path)
 
 
-def main(video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], out_dir: str | Path, *,
-         settings: EdgeSettings | None = None, command: str = "", show: Sequence[str] = ("frame_000300",)
-         ) -> dict[str, Any]:
+def main(
+    video: str | Path,
+    runs: Sequence[tuple[str, str | Path, str | Path]],
+    out_dir: str | Path,
+    *,
+    settings: EdgeSettings | None = None,
+    command: str = "",
+    show: Sequence[str] = ("frame_000300",),
+) -> dict[str, Any]:
     """Measure every run ``(label, model, poses)`` on ``video``; writes ``overlay_error.md``,
     ``overlay_error.json``, ``overlay_error.png`` (the error over the video) and
     ``overlay_frames.png`` (the frames ``show`` and the first run's two worst with every run's
@@ -265,38 +295,83 @@ def main(video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], 
     errors = {label: measure(model, poses, video, settings) for label, model, poses in runs}
     summary = {label: summarize(e) for label, e in errors.items()}
     host = machine()
-    rows = [[label, s.get("frames"), s.get("mean_px"), s.get("median_px"), s.get("p90_px"), s.get("found"),
-             s.get("matched_px"), s.get("edge_bias_px"),
-             ", ".join(f"{n} ({v:.1f})" for n, v in s.get("worst", [])[:3])] for label, s in summary.items()]
-    edge_rows = [[f"{i}-{j}", *(summary[label].get("edges", {}).get(f"{i}-{j}", {}).get("mean_signed_px")
-                                for label in errors)] for i, j in BOX_EDGES]
-    md = ("# The drawn box against the image's edges\n\n"
-          f"Command: `{command}`\n\nMachine: {describe_machine(host)}\n\nVideo: `{video}`. Per frame: the mean "
-          "distance (px) from samples of the box's visible projected edges to the nearest parallel image edge "
-          f"(Canny on the colour frame blurred by sigma {settings.blur:g}, thresholds {settings.canny[0]:g}/"
-          f"{settings.canny[1]:g}; gradient within {settings.max_angle:g} deg of the drawn edge's normal; none "
-          f"within {settings.max_distance:g} px counts as {settings.max_distance:g}); `found`: share of the samples "
-          "with an image edge in range, `mean of found`: their mean distance alone; `edge bias`: the mean over the "
-          "box's edges of the absolute value of each edge's mean signed offset (the box's systematic misplacement, "
-          "which the texture's random matches average out of). Texture edges parallel to the box's, the hand and "
-          "motion blur give the per-frame distances a floor of several pixels.\n\n"
-          + markdown_table(["run", "frames", "mean (px)", "median (px)", "90th pct (px)", "found", "mean of found (px)",
-                            "edge bias (px)", "worst frames"],
-                           rows, digits=2)
-          + "\n\nMean signed offset of each box edge (px, along the normal of the projected edge; corners "
-          "numbered as in `pose.model.box_corners`):\n\n"
-          + markdown_table(["edge", *errors], edge_rows, digits=1) + "\n")
+    rows = [
+        [
+            label,
+            s.get("frames"),
+            s.get("mean_px"),
+            s.get("median_px"),
+            s.get("p90_px"),
+            s.get("found"),
+            s.get("matched_px"),
+            s.get("edge_bias_px"),
+            ", ".join(f"{n} ({v:.1f})" for n, v in s.get("worst", [])[:3]),
+        ]
+        for label, s in summary.items()
+    ]
+    edge_rows = [
+        [f"{i}-{j}", *(summary[label].get("edges", {}).get(f"{i}-{j}", {}).get("mean_signed_px") for label in errors)]
+        for i, j in BOX_EDGES
+    ]
+    md = (
+        "# The drawn box against the image's edges\n\n"
+        f"Command: `{command}`\n\nMachine: {describe_machine(host)}\n\nVideo: `{video}`. Per frame: the mean "
+        "distance (px) from samples of the box's visible projected edges to the nearest parallel image edge "
+        f"(Canny on the colour frame blurred by sigma {settings.blur:g}, thresholds {settings.canny[0]:g}/"
+        f"{settings.canny[1]:g}; gradient within {settings.max_angle:g} deg of the drawn edge's normal; none "
+        f"within {settings.max_distance:g} px counts as {settings.max_distance:g}); `found`: share of the samples "
+        "with an image edge in range, `mean of found`: their mean distance alone; `edge bias`: the mean over the "
+        "box's edges of the absolute value of each edge's mean signed offset (the box's systematic misplacement, "
+        "which the texture's random matches average out of). Texture edges parallel to the box's, the hand and "
+        "motion blur give the per-frame distances a floor of several pixels.\n\n"
+        + markdown_table(
+            [
+                "run",
+                "frames",
+                "mean (px)",
+                "median (px)",
+                "90th pct (px)",
+                "found",
+                "mean of found (px)",
+                "edge bias (px)",
+                "worst frames",
+            ],
+            rows,
+            digits=2,
+        )
+        + "\n\nMean signed offset of each box edge (px, along the normal of the projected edge; corners "
+        "numbered as in `pose.model.box_corners`):\n\n" + markdown_table(["edge", *errors], edge_rows, digits=1) + "\n"
+    )
     atomic_write(out_dir / "overlay_error.md", md)
-    write_json(out_dir / "overlay_error.json", {
-        "command": command, "machine": host, "video": str(video), "settings": vars(settings),
-        "runs": {label: {"model": str(m), "poses": str(p), **summary[label],
-                         "per_frame": {n: (None if not np.isfinite(e.mean_px) else e.mean_px)
-                                       for n, e in errors[label].items()}}
-                 for label, m, p in runs}})
+    write_json(
+        out_dir / "overlay_error.json",
+        {
+            "command": command,
+            "machine": host,
+            "video": str(video),
+            "settings": vars(settings),
+            "runs": {
+                label: {
+                    "model": str(m),
+                    "poses": str(p),
+                    **summary[label],
+                    "per_frame": {
+                        n: (None if not np.isfinite(e.mean_px) else e.mean_px) for n, e in errors[label].items()
+                    },
+                }
+                for label, m, p in runs
+            },
+        },
+    )
     plot_errors(errors, out_dir / "overlay_error.png", settings.max_distance)
     worst = [n for n, _ in next(iter(summary.values())).get("worst", [])[:2]]
     plot_frames(video, runs, list(dict.fromkeys([*show, *worst])), out_dir / "overlay_frames.png")
     for label, s in summary.items():
-        logger.info("%s: mean %.2f px, median %.2f px over %d frames", label, s.get("mean_px", np.nan),
-                    s.get("median_px", np.nan), s.get("frames", 0))
+        logger.info(
+            "%s: mean %.2f px, median %.2f px over %d frames",
+            label,
+            s.get("mean_px", np.nan),
+            s.get("median_px", np.nan),
+            s.get("frames", 0),
+        )
     return summary

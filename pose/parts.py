@@ -95,11 +95,17 @@ class PartDetector(Protocol):
     uses_prior: bool
     refine_search_scale: float
 
-    def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
-               search_scale: float = 1.0) -> Correspondences: ...
+    def detect(
+        self,
+        image: np.ndarray,
+        prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        *,
+        search_scale: float = 1.0,
+    ) -> Correspondences: ...
 
-    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, *,
-               proposed: bool = False) -> str: ...
+    def verify(
+        self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, *, proposed: bool = False
+    ) -> str: ...
 
     def propose(self, image: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None: ...
 
@@ -135,9 +141,19 @@ class FeaturePartDetector:
     #: of the predicted region, and a second one would detect and describe them again.
     refine_search_scale = 0.0
 
-    def __init__(self, model: PartModel, normalizer: str = "none", *, n_features: int = 2000,
-                 n_features_global: int = 0, ratio: float = 0.8, search_radius: float = 20.0,
-                 max_candidates: int = 64, min_guided: int = 20, cross_check: bool = False) -> None:
+    def __init__(
+        self,
+        model: PartModel,
+        normalizer: str = "none",
+        *,
+        n_features: int = 2000,
+        n_features_global: int = 0,
+        ratio: float = 0.8,
+        search_radius: float = 20.0,
+        max_candidates: int = 64,
+        min_guided: int = 20,
+        cross_check: bool = False,
+    ) -> None:
         if len(model.points3d) < 4:
             raise InputError(f"the part model has {len(model.points3d)} 3D points; at least 4 are needed")
         self.model = model
@@ -159,15 +175,17 @@ class FeaturePartDetector:
         self._order = np.argsort(owner, kind="stable")
         self._count = np.bincount(owner, minlength=len(model.points3d))
         self._start = np.r_[0, np.cumsum(self._count)[:-1]]
-        self._model_words = (_as_words(model.descriptors) if self.norm == cv2.NORM_HAMMING
-                             else model.descriptors.astype(np.float32))
+        self._model_words = (
+            _as_words(model.descriptors) if self.norm == cv2.NORM_HAMMING else model.descriptors.astype(np.float32)
+        )
 
     def normalize(self, image: np.ndarray) -> np.ndarray:
         """The normalized grayscale uint8 image the features are computed on."""
         return self.normalization.apply(to_gray(image))
 
-    def verify(self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, *,
-               proposed: bool = False) -> str:
+    def verify(
+        self, image: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, *, proposed: bool = False
+    ) -> str:
         """``""``: every pose the solver accepts is kept (its inliers, each a descriptor match,
         are the evidence)."""
         return ""
@@ -177,8 +195,13 @@ class FeaturePartDetector:
         whole search."""
         return None
 
-    def detect(self, image: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, *,
-               search_scale: float = 1.0) -> Correspondences:
+    def detect(
+        self,
+        image: np.ndarray,
+        prior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        *,
+        search_scale: float = 1.0,
+    ) -> Correspondences:
         """Correspondences between ``image`` (BGR or gray uint8) and the model's 3D points.
 
         Args:
@@ -204,8 +227,9 @@ class FeaturePartDetector:
         pairs = self._global(desc) if n else np.zeros((0, 2), np.int64)
         return Correspondences(self.model.points3d[pairs[:, 1]], pts2d[pairs[:, 0]], n)
 
-    def _detect(self, gray: np.ndarray, region: np.ndarray | None, keep: int
-                ) -> tuple[np.ndarray, np.ndarray | None, int]:
+    def _detect(
+        self, gray: np.ndarray, region: np.ndarray | None, keep: int
+    ) -> tuple[np.ndarray, np.ndarray | None, int]:
         """Keypoints ``(n, 2)``, descriptors and ``n``: the ``keep`` strongest (0: all) in
         ``region`` (a uint8 mask, or ``None``: the whole image).
 
@@ -232,8 +256,9 @@ class FeaturePartDetector:
             return np.zeros((0, 2), np.float32), None, 0
         return np.array([k.pt for k in kps], np.float32) + np.float32([x0, y0]), desc, len(kps)
 
-    def _region(self, shape: tuple[int, ...], prior: tuple[np.ndarray, np.ndarray, np.ndarray], radius: float
-                ) -> np.ndarray | None:
+    def _region(
+        self, shape: tuple[int, ...], prior: tuple[np.ndarray, np.ndarray, np.ndarray], radius: float
+    ) -> np.ndarray | None:
         """uint8 mask of the object's predicted region: the convex hull of the box's corners
         projected with the prior pose, grown by ``radius`` pixels; ``None`` when the box is
         not in front of the camera or misses the image."""
@@ -256,8 +281,8 @@ class FeaturePartDetector:
         idx = np.zeros((len(knn), k), np.int64)
         dist = np.full((len(knn), k), np.inf, np.float32)
         for q, m in enumerate(knn):
-            idx[q, :len(m)] = [x.trainIdx for x in m]
-            dist[q, :len(m)] = [x.distance for x in m]
+            idx[q, : len(m)] = [x.trainIdx for x in m]
+            dist[q, : len(m)] = [x.distance for x in m]
         owner = self.model.descriptor_point[idx]
         other = (owner != owner[:, :1]) & np.isfinite(dist)
         d2 = np.where(other.any(1), dist[np.arange(len(knn)), np.argmax(other, axis=1)], np.inf)
@@ -269,8 +294,9 @@ class FeaturePartDetector:
             pairs = pairs[np.isin(pairs[:, 1] * len(desc) + pairs[:, 0], mutual)]
         return pairs
 
-    def _guided(self, pts2d: np.ndarray, desc: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray],
-                radius: float) -> np.ndarray:
+    def _guided(
+        self, pts2d: np.ndarray, desc: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray], radius: float
+    ) -> np.ndarray:
         front, uv = _project_in_front(self.model.points3d, prior)
         if len(front) < 2:
             return np.zeros((0, 2), np.int64)
@@ -318,16 +344,17 @@ class FeaturePartDetector:
             desc = desc.astype(np.float32)
         out = np.empty(len(query), np.float32)
         for a in range(0, len(query), chunk):
-            q, m = desc[query[a:a + chunk]], model[rows[a:a + chunk]]
+            q, m = desc[query[a : a + chunk]], model[rows[a : a + chunk]]
             if self.norm == cv2.NORM_HAMMING:
-                out[a:a + chunk] = np.bitwise_count(q ^ m).sum(1)
+                out[a : a + chunk] = np.bitwise_count(q ^ m).sum(1)
             else:
-                out[a:a + chunk] = np.sqrt(np.maximum(((q - m) ** 2).sum(1), 0))
+                out[a : a + chunk] = np.sqrt(np.maximum(((q - m) ** 2).sum(1), 0))
         return out
 
 
-def _project_in_front(points: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray]
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def _project_in_front(
+    points: np.ndarray, prior: tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     """Indices of the points ``(N, 3)`` in front of the camera of ``prior = (rvec, tvec, K)`` and
     their pixels ``(n, 2)`` (pinhole, no distortion: the search regions are tens of pixels wide)."""
     rvec, tvec, K = prior

@@ -93,8 +93,9 @@ def reference_index(frames: np.ndarray) -> int:
     return int(np.argsort(means)[len(means) // 2])
 
 
-def select_region(gray: np.ndarray, fraction: float = DEFAULT_TARGET_FRACTION, feature: str = "SIFT",
-                  normalizer: str = "none") -> tuple[int, int, int, int]:
+def select_region(
+    gray: np.ndarray, fraction: float = DEFAULT_TARGET_FRACTION, feature: str = "SIFT", normalizer: str = "none"
+) -> tuple[int, int, int, int]:
     """``(x, y, w, h)``: the window of ``fraction`` of the image's width and height that holds the
     most keypoints of ``gray`` (uint8, after ``normalizer``), searched on a grid of 1/20 of the
     image, 8 px from the borders (where a descriptor has no room)."""
@@ -152,8 +153,16 @@ class PlanarTarget:
         return project(self.corners, self.rvec, self.tvec, self.K)
 
 
-def build_target(image: np.ndarray, region: tuple[int, int, int, int], K: np.ndarray, normalizer: str = "none", *,
-                 feature: str = "SIFT", n_features: int = 0, reference: str = "") -> PlanarTarget:
+def build_target(
+    image: np.ndarray,
+    region: tuple[int, int, int, int],
+    K: np.ndarray,
+    normalizer: str = "none",
+    *,
+    feature: str = "SIFT",
+    n_features: int = 0,
+    reference: str = "",
+) -> PlanarTarget:
     """The part model of the rectangle ``region = (x, y, w, h)`` of ``image`` (BGR or gray uint8).
 
     The keypoints of the normalized image (the same normalization and feature as the part
@@ -170,7 +179,7 @@ def build_target(image: np.ndarray, region: tuple[int, int, int, int], K: np.nda
         raise InputError(f"region {region} is not inside the {gray.shape[1]}x{gray.shape[0]} image")
     K = np.asarray(K, np.float64)
     mask = np.zeros(gray.shape, np.uint8)
-    mask[y:y + h, x:x + w] = 255
+    mask[y : y + h, x : x + w] = 255
     det = create_feature(feature, n_features)
     kps, desc = det.detectAndCompute(from_spec(normalizer).apply(gray), mask)
     if desc is None or len(kps) < 4:
@@ -182,14 +191,26 @@ def build_target(image: np.ndarray, region: tuple[int, int, int, int], K: np.nda
     rvec = np.zeros((3, 1))
     tvec = np.array([[(x - K[0, 2]) * depth / K[0, 0]], [(y - K[1, 2]) * depth / K[1, 1]], [depth]])
     size = np.array([w * depth / K[0, 0], h * depth / K[1, 1], 0.0])
-    model = PartModel(corners=box_corners(size), points3d=points.astype(np.float32), descriptors=desc, units="mm",
-                      feature=feature.upper(), normalizer=normalizer, source=reference,
-                      extra={"K": K.tolist(), "region": [x, y, w, h], "planar": True})
+    model = PartModel(
+        corners=box_corners(size),
+        points3d=points.astype(np.float32),
+        descriptors=desc,
+        units="mm",
+        feature=feature.upper(),
+        normalizer=normalizer,
+        source=reference,
+        extra={"K": K.tolist(), "region": [x, y, w, h], "planar": True},
+    )
     return PlanarTarget(model, K, rvec, tvec, (x, y, w, h), reference, gray)
 
 
-def feature_detector(target: PlanarTarget, normalizer: str, n_features: int = 0, work_dir: Path | None = None,
-                     recipe: CornerRecipe | None = None) -> PartDetector:
+def feature_detector(
+    target: PlanarTarget,
+    normalizer: str,
+    n_features: int = 0,
+    work_dir: Path | None = None,
+    recipe: CornerRecipe | None = None,
+) -> PartDetector:
     """The classical part detector of the target: every keypoint of a frame (``n_features=0``)
     matched to the target's descriptors (:class:`pose.parts.FeaturePartDetector`); ``work_dir``
     and ``recipe`` unused (nothing to train)."""
@@ -205,8 +226,13 @@ def target_parts(target: PlanarTarget) -> tuple[np.ndarray, np.ndarray]:
     return parts, project(parts, target.rvec, target.tvec, target.K)
 
 
-def corner_detector(target: PlanarTarget, normalizer: str, n_features: int = 0, work_dir: Path | None = None,
-                    recipe: CornerRecipe | None = None) -> PartDetector:
+def corner_detector(
+    target: PlanarTarget,
+    normalizer: str,
+    n_features: int = 0,
+    work_dir: Path | None = None,
+    recipe: CornerRecipe | None = None,
+) -> PartDetector:
     """The learned corner detector of the target (:class:`pose.corners.CornerDetector`), trained
     on the reference frame after ``normalizer`` by ``recipe`` (default: the ``planar`` preset of
     :data:`pose.corner_train.confs`) and written to ``work_dir`` (default: a temporary folder);
@@ -222,14 +248,26 @@ def corner_detector(target: PlanarTarget, normalizer: str, n_features: int = 0, 
     parts, uv = target_parts(target)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(work_dir or tmp) / f"corners_{Path(target.reference).stem}_{file_stem(normalizer)}.onnx"
-        train_image_corners(target.image, uv, parts, target.model.corners, path, recipe, normalizer=normalizer,
-                            source=target.reference, conf=None if recipe else "planar", progress=False)
+        train_image_corners(
+            target.image,
+            uv,
+            parts,
+            target.model.corners,
+            path,
+            recipe,
+            normalizer=normalizer,
+            source=target.reference,
+            conf=None if recipe else "planar",
+            progress=False,
+        )
         return CornerDetector(path)
 
 
 #: Part detectors by name: ``(target, normalizer, n_features, work_dir, recipe) -> PartDetector``.
 DETECTORS: dict[str, Callable[[PlanarTarget, str, int, Path | None, CornerRecipe | None], PartDetector]] = {
-    "features": feature_detector, "corners": corner_detector}
+    "features": feature_detector,
+    "corners": corner_detector,
+}
 
 
 def row_label(normalizer: str, detector: str, feature: str = "SIFT") -> str:
@@ -249,11 +287,20 @@ class FrameResult:
     seconds: float
 
 
-def evaluate_scene(scene: Scene, normalizer: str, *, detector: str = "features", feature: str = "SIFT",
-                   n_features: int = 0, reference: int | None = None, region: tuple[int, int, int, int] | None = None,
-                   target_fraction: float = DEFAULT_TARGET_FRACTION, hfov: float = DEFAULT_HFOV,
-                   work_dir: Path | None = None, recipe: CornerRecipe | None = None
-                   ) -> tuple[PlanarTarget, list[FrameResult]]:
+def evaluate_scene(
+    scene: Scene,
+    normalizer: str,
+    *,
+    detector: str = "features",
+    feature: str = "SIFT",
+    n_features: int = 0,
+    reference: int | None = None,
+    region: tuple[int, int, int, int] | None = None,
+    target_fraction: float = DEFAULT_TARGET_FRACTION,
+    hfov: float = DEFAULT_HFOV,
+    work_dir: Path | None = None,
+    recipe: CornerRecipe | None = None,
+) -> tuple[PlanarTarget, list[FrameResult]]:
     """Build the target in the scene's reference frame after ``normalizer`` and pose it in every
     other frame; returns the target and one :class:`FrameResult` per other frame. ``n_features``:
     the strongest keypoints kept per frame (0: all).
@@ -271,8 +318,13 @@ def evaluate_scene(scene: Scene, normalizer: str, *, detector: str = "features",
     region = region or select_region(frames[ref], target_fraction, feature)
     target = build_target(frames[ref], region, K, normalizer, feature=feature, reference=scene.files[ref])
     det = DETECTORS[detector](target, normalizer, n_features, work_dir, recipe)
-    solver = PoseSolver(K, min_inliers=MIN_INLIERS[detector], iterations=RANSAC_ITERATIONS[detector],
-                        min_inliers_near_prior=MIN_INLIERS_NEAR_PRIOR[detector], outline=target.model.corners)
+    solver = PoseSolver(
+        K,
+        min_inliers=MIN_INLIERS[detector],
+        iterations=RANSAC_ITERATIONS[detector],
+        min_inliers_near_prior=MIN_INLIERS_NEAR_PRIOR[detector],
+        outline=target.model.corners,
+    )
     truth = (cv2.Rodrigues(target.rvec)[0], target.tvec)
     ref_uv = target.image_corners()
     results = []
@@ -284,8 +336,11 @@ def evaluate_scene(scene: Scene, normalizer: str, *, detector: str = "features",
         est = solver.solve(corr.object_points, corr.image_points, directions=corr.directions)
         seconds = time.perf_counter() - t0
         s = score(target.corners, K, "mm", (est.R, est.tvec) if est.ok else None, truth)
-        worst = (float(np.linalg.norm(project(target.corners, est.rvec, est.tvec, K) - ref_uv, axis=1).max())
-                 if est.ok else None)
+        worst = (
+            float(np.linalg.norm(project(target.corners, est.rvec, est.tvec, K) - ref_uv, axis=1).max())
+            if est.ok
+            else None
+        )
         results.append(FrameResult(scene.files[i], s.proj_px, worst, len(est.inliers), est.num_matches, seconds))
     return target, results
 
@@ -302,18 +357,31 @@ def plot_targets(scenes: Sequence[Scene], targets: dict[str, PlanarTarget], path
         ax.imshow(scene.frames[scene.files.index(t.reference)], cmap="gray")
         x, y, w, h = t.region
         ax.add_patch(plt.Rectangle((x - 0.5, y - 0.5), w, h, fill=False, color="tab:orange", lw=2))
-        ax.set_title(f"{scene.name}: reference {t.reference}, target {w}x{h} px, {len(t.model.points3d)} parts "
-                     f"({t.model.normalizer})", fontsize=9)
+        ax.set_title(
+            f"{scene.name}: reference {t.reference}, target {w}x{h} px, {len(t.model.points3d)} parts "
+            f"({t.model.normalizer})",
+            fontsize=9,
+        )
         ax.axis("off")
     fig.tight_layout()
     return save_figure(plt, fig, path, dpi=90)
 
 
-def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequence[str] | None = None,
-         normalizers: Sequence[str] = DEFAULT_NORMALIZERS, detectors: Sequence[str] = ("features",),
-         feature: str = "SIFT", n_features: int = 0, target_fraction: float = DEFAULT_TARGET_FRACTION,
-         hfov: float = DEFAULT_HFOV, max_frames: int | None = None, recipe: CornerRecipe | None = None,
-         command: str = "") -> dict[str, Any]:
+def main(
+    out_dir: str | Path,
+    data: str | Path | None = None,
+    *,
+    scenes: Sequence[str] | None = None,
+    normalizers: Sequence[str] = DEFAULT_NORMALIZERS,
+    detectors: Sequence[str] = ("features",),
+    feature: str = "SIFT",
+    n_features: int = 0,
+    target_fraction: float = DEFAULT_TARGET_FRACTION,
+    hfov: float = DEFAULT_HFOV,
+    max_frames: int | None = None,
+    recipe: CornerRecipe | None = None,
+    command: str = "",
+) -> dict[str, Any]:
     """The real-light Table 1: per scene of ``data`` (default ``<shared data>/webcam``), detector of
     :data:`DETECTORS` and normalizer, the % of frames whose target pose is correct. Writes
     ``relight_pose.md``, ``relight_pose.json``, ``relight_pose.png`` and ``targets.png`` (and the
@@ -339,66 +407,112 @@ def main(out_dir: str | Path, data: str | Path | None = None, *, scenes: Sequenc
     runs = [(detector, name, s) for detector in detectors for name in normalizers for s in chosen]
     for detector, name, scene in tqdm(runs, desc="relight pose", unit="scene", leave=False):
         row = row_label(name, detector, feature)
-        target, frames = evaluate_scene(scene, name, detector=detector, feature=feature, n_features=n_features,
-                                        region=regions[scene.name], hfov=hfov, work_dir=out_dir, recipe=recipe)
+        target, frames = evaluate_scene(
+            scene,
+            name,
+            detector=detector,
+            feature=feature,
+            n_features=n_features,
+            region=regions[scene.name],
+            hfov=hfov,
+            work_dir=out_dir,
+            recipe=recipe,
+        )
         targets.setdefault(scene.name, target)
         proj = [f.proj_px for f in frames]
         pct = _percent(proj)
         table.setdefault(row, {})[scene.name] = pct
         details.setdefault(row, {})[scene.name] = {
-            "reference": target.reference, "region": list(target.region),
+            "reference": target.reference,
+            "region": list(target.region),
             "parts": len(target.model.points3d) if detector == "features" else len(target_parts(target)[0]),
-            "frames": len(frames), "correct_pct": pct,
+            "frames": len(frames),
+            "correct_pct": pct,
             "all_corners_within_pct": _percent([f.max_corner_px for f in frames]),
             "posed_pct": 100.0 * float(np.mean([p is not None for p in proj])) if frames else float("nan"),
-            "median_error_px": float(np.median([p for p in proj if p is not None])) if any(p is not None for p in proj)
+            "median_error_px": float(np.median([p for p in proj if p is not None]))
+            if any(p is not None for p in proj)
             else None,
             "ms_per_frame": 1000.0 * float(np.mean([f.seconds for f in frames])) if frames else None,
-            "per_frame": [vars(f) for f in frames]}
+            "per_frame": [vars(f) for f in frames],
+        }
         logger.info("%s %s: %.1f%% correct (%d frames)", row, scene.name, pct, len(frames))
-    for row, vals in table.items():
+    for vals in table.values():
         vals["mean"] = float(np.mean([vals[c] for c in columns]))
     host = machine()
     keypoints = "every keypoint" if not n_features else f"the {n_features} strongest keypoints"
     K_note = f"pinhole camera, {hfov:g} deg horizontal field of view, principal point at the centre"
-    md = ("# Pose of a planar target under real light (Table 1 on fixed webcams)\n\n"
-          f"Command: `{command}`\n\nMachine: {describe_machine(host)}\n\n"
-          f"Data: `{root}` (Webcam data set of TILDE, Verdie et al., CVPR 2015, from AMOS; academic research use "
-          "only). Per scene, a target of "
-          f"{target_fraction:g} x the frame's width and height in its reference frame (median brightness; "
-          "`targets.png`), its part model from that frame alone after each normalizer "
-          f"({feature} keypoints, {K_note}), its pose in every other frame by the box's pipeline "
-          f"(`pose.parts.FeaturePartDetector` on {keypoints} of each frame"
-          + (", or the corner CNN of `pose.corners` trained on the reference frame alone for the target's corners "
-             "and side middles" if "corners" in detectors else "") + ", then `pose.solver.PoseSolver`); "
-          "truth: the reference "
-          f"pose (the camera did not move). Cells: % of frames whose target corners reproject within {PROJ_PX:g} px "
-          "on average (lost frames count as wrong); the JSON also gives the share with every corner within "
-          f"{PROJ_PX:g} px, the median error and the time per frame.\n\n"
-          + table_markdown(table, columns + ["mean"])
-          + "\n\n" + _details_markdown(details, columns))
+    md = (
+        "# Pose of a planar target under real light (Table 1 on fixed webcams)\n\n"
+        f"Command: `{command}`\n\nMachine: {describe_machine(host)}\n\n"
+        f"Data: `{root}` (Webcam data set of TILDE, Verdie et al., CVPR 2015, from AMOS; academic research use "
+        "only). Per scene, a target of "
+        f"{target_fraction:g} x the frame's width and height in its reference frame (median brightness; "
+        "`targets.png`), its part model from that frame alone after each normalizer "
+        f"({feature} keypoints, {K_note}), its pose in every other frame by the box's pipeline "
+        f"(`pose.parts.FeaturePartDetector` on {keypoints} of each frame"
+        + (
+            ", or the corner CNN of `pose.corners` trained on the reference frame alone for the target's corners "
+            "and side middles"
+            if "corners" in detectors
+            else ""
+        )
+        + ", then `pose.solver.PoseSolver`); "
+        "truth: the reference "
+        f"pose (the camera did not move). Cells: % of frames whose target corners reproject within {PROJ_PX:g} px "
+        "on average (lost frames count as wrong); the JSON also gives the share with every corner within "
+        f"{PROJ_PX:g} px, the median error and the time per frame.\n\n"
+        + table_markdown(table, columns + ["mean"])
+        + "\n\n"
+        + _details_markdown(details, columns)
+    )
     atomic_write(out_dir / "relight_pose.md", md)
-    write_json(out_dir / "relight_pose.json", nan_to_none({
-        "command": command, "machine": host, "data": str(root), "columns": columns, "table": table,
-        "details": details,
-        "settings": {"feature": feature, "n_features": n_features, "detectors": list(detectors),
-                     "corner_recipe": asdict(recipe or corner_confs["planar"]),
-                     "target_fraction": target_fraction, "hfov_deg": hfov, "proj2d_px": PROJ_PX,
-                     "max_frames": max_frames}}))
-    plot_table(table, columns + ["mean"], out_dir / "relight_pose.png",
-               f"Planar target on fixed webcams: correct poses (< {PROJ_PX:g} px)")
+    write_json(
+        out_dir / "relight_pose.json",
+        nan_to_none(
+            {
+                "command": command,
+                "machine": host,
+                "data": str(root),
+                "columns": columns,
+                "table": table,
+                "details": details,
+                "settings": {
+                    "feature": feature,
+                    "n_features": n_features,
+                    "detectors": list(detectors),
+                    "corner_recipe": asdict(recipe or corner_confs["planar"]),
+                    "target_fraction": target_fraction,
+                    "hfov_deg": hfov,
+                    "proj2d_px": PROJ_PX,
+                    "max_frames": max_frames,
+                },
+            }
+        ),
+    )
+    plot_table(
+        table,
+        columns + ["mean"],
+        out_dir / "relight_pose.png",
+        f"Planar target on fixed webcams: correct poses (< {PROJ_PX:g} px)",
+    )
     plot_targets(chosen, targets, out_dir / "targets.png")
     return {"table": table, "details": details}
 
 
 def _details_markdown(details: dict[str, Any], columns: list[str]) -> str:
-    lines = ["| row | scene | reference | target (x, y, w, h) | parts | posed % | all 4 corners < 5 px % | "
-             "median err (px) | ms/frame |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| row | scene | reference | target (x, y, w, h) | parts | posed % | all 4 corners < 5 px % | "
+        "median err (px) | ms/frame |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for row, per_scene in details.items():
         for c in columns:
             d = per_scene[c]
             med = "-" if d["median_error_px"] is None else f"{d['median_error_px']:.2f}"
-            lines.append(f"| {row} | {c} | {d['reference']} | {tuple(d['region'])} | {d['parts']} | "
-                         f"{d['posed_pct']:.1f} | {d['all_corners_within_pct']:.1f} | {med} | "
-                         f"{d['ms_per_frame']:.0f} |")
+            lines.append(
+                f"| {row} | {c} | {d['reference']} | {tuple(d['region'])} | {d['parts']} | "
+                f"{d['posed_pct']:.1f} | {d['all_corners_within_pct']:.1f} | {med} | "
+                f"{d['ms_per_frame']:.0f} |"
+            )
     return "\n".join(lines) + "\n"

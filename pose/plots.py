@@ -29,14 +29,25 @@ def plot_model(model: PartModel, camera_centers: np.ndarray, path: str | Path) -
         ax.legend(loc="upper right")
     allp = np.vstack([p, model.corners, c])
     mid, r = (allp.max(0) + allp.min(0)) / 2, (allp.max(0) - allp.min(0)).max() / 2
-    ax.set(xlim=(mid[0] - r, mid[0] + r), ylim=(mid[1] - r, mid[1] + r), zlim=(mid[2] - r, mid[2] + r),
-           xlabel=f"x ({model.units})", ylabel="y", zlabel="z",
-           title=f"{len(p)} points, box {np.round(model.box_size, 2).tolist()} {model.units}")
+    ax.set(
+        xlim=(mid[0] - r, mid[0] + r),
+        ylim=(mid[1] - r, mid[1] + r),
+        zlim=(mid[2] - r, mid[2] + r),
+        xlabel=f"x ({model.units})",
+        ylabel="y",
+        zlabel="z",
+        title=f"{len(p)} points, box {np.round(model.box_size, 2).tolist()} {model.units}",
+    )
     return save_figure(plt, fig, path, dpi=110)
 
 
-def plot_table(table: dict[str, dict[str, float]], columns: list[str], path: str | Path, title: str,
-               spread: dict[str, dict[str, float]] | None = None) -> Path:
+def plot_table(
+    table: dict[str, dict[str, float]],
+    columns: list[str],
+    path: str | Path,
+    title: str,
+    spread: dict[str, dict[str, float]] | None = None,
+) -> Path:
     """Bar chart of a Table-1-style report: one group of bars per column (sequence), one bar per
     row, with error bars where ``spread`` has the row."""
     plt, fig, axes = new_figure(figsize=(8, 4))
@@ -45,8 +56,14 @@ def plot_table(table: dict[str, dict[str, float]], columns: list[str], path: str
     w = 0.8 / max(len(table), 1)
     for k, (row, vals) in enumerate(table.items()):
         err = [(spread or {}).get(row, {}).get(c, np.nan) for c in columns]
-        ax.bar(x + (k - (len(table) - 1) / 2) * w, [vals.get(c, np.nan) for c in columns], w, label=row,
-               yerr=None if np.isnan(err).all() else err, capsize=2)
+        ax.bar(
+            x + (k - (len(table) - 1) / 2) * w,
+            [vals.get(c, np.nan) for c in columns],
+            w,
+            label=row,
+            yerr=None if np.isnan(err).all() else err,
+            capsize=2,
+        )
     ax.set(xticks=x, xticklabels=columns, ylabel="% correct poses", ylim=(0, 105), title=title)
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -18,6 +18,7 @@ from alcn_cv import io
 from alcn_cv.errors import DatasetError
 from alcn_cv.io import to_gray
 
+
 @dataclass
 class TrainingView:
     """One training image.
@@ -84,14 +85,21 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
         from alcn_cv.formats.middlebury import read_middlebury
 
         mv = read_middlebury(path)
-        return TrainingSequence(path, [TrainingView(v.name, v.K, None, v.R_w2c, v.t_w2c) for v in mv], "m",
-                        info={"format": "middlebury", "path": str(path)})
+        return TrainingSequence(
+            path,
+            [TrainingView(v.name, v.K, None, v.R_w2c, v.t_w2c) for v in mv],
+            "m",
+            info={"format": "middlebury", "path": str(path)},
+        )
     if (path / "cameras.txt").is_file() or (path / "cameras.bin").is_file():
         from alcn_cv.formats.colmap import read_model
 
         cm = read_model(path)
-        image_dir = Path(images) if images else next(
-            (p for p in (path.parent / "images", path / "images", path.parent / "rgb") if p.is_dir()), None)
+        image_dir = (
+            Path(images)
+            if images
+            else next((p for p in (path.parent / "images", path / "images", path.parent / "rgb") if p.is_dir()), None)
+        )
         if image_dir is None:
             raise DatasetError(f"{path}: no image folder found beside the COLMAP model; pass --images")
         views = []
@@ -100,12 +108,21 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
             views.append(TrainingView(im.name, K, dist if np.any(dist) else None, im.R_w2c, im.t_w2c))
         # A model without a "# Units:" line (e.g. written by COLMAP itself) is taken as metres.
         return TrainingSequence(image_dir, views, cm.units or "m", info={"format": "colmap", "path": str(path)})
-    raise DatasetError(f"{path}: not a BOP scene (scene_camera.json), a COLMAP model (cameras.txt/.bin) "
-                       "or a Middlebury set (*_par.txt)")
+    raise DatasetError(
+        f"{path}: not a BOP scene (scene_camera.json), a COLMAP model (cameras.txt/.bin) "
+        "or a Middlebury set (*_par.txt)"
+    )
 
 
-def video_sequence(video: str | Path, K: np.ndarray, work_dir: str | Path, *, step: int = 5,
-                   max_frames: int = 80, dist: np.ndarray | None = None) -> TrainingSequence:
+def video_sequence(
+    video: str | Path,
+    K: np.ndarray,
+    work_dir: str | Path,
+    *,
+    step: int = 5,
+    max_frames: int = 80,
+    dist: np.ndarray | None = None,
+) -> TrainingSequence:
     """An unregistered sequence: every ``step``-th frame of ``video`` (at most ``max_frames``)
     written as PNG into ``work_dir/images``."""
     image_dir = Path(work_dir) / "images"
@@ -119,8 +136,9 @@ def video_sequence(video: str | Path, K: np.ndarray, work_dir: str | Path, *, st
     return TrainingSequence(image_dir, views, "", info={"format": "video", "path": str(video), "step": step})
 
 
-def motion_masks(frames: list[np.ndarray], threshold: float = 25.0, dilate: int = 25,
-                 min_area: float = 0.005) -> list[np.ndarray]:
+def motion_masks(
+    frames: list[np.ndarray], threshold: float = 25.0, dilate: int = 25, min_area: float = 0.005
+) -> list[np.ndarray]:
     """Masks (uint8 0/255) of what moves in a video taken by a static camera.
 
     The background is the per-pixel median of ``frames``; the mask is the convex hull of the

@@ -106,8 +106,9 @@ def rotation_error_deg(R: np.ndarray, R_gt: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
-def project(points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray,
-            dist: np.ndarray | None = None) -> np.ndarray:
+def project(
+    points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, dist: np.ndarray | None = None
+) -> np.ndarray:
     """Project object points ``(N, 3)`` to pixels ``(N, 2)`` float64."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(pts) == 0:
@@ -150,13 +151,25 @@ class PoseSolver:
             (:meth:`solve`'s ``directions``) than across it (see :data:`ALONG_SIGMA`).
     """
 
-    def __init__(self, K: np.ndarray, dist: np.ndarray | None = None, *, method: str = "usac_default",
-                 reprojection_error: float = 4.0, confidence: float = 0.999, iterations: int = 500,
-                 min_inliers: int = 12, min_inliers_near_prior: int | None = None,
-                 near_prior: tuple[float, float] = (5.0, 0.05), min_inlier_ratio: float = 0.0,
-                 prior_inlier_ratio: float = 0.8,
-                 outline: np.ndarray | None = None, min_coverage: float = 0.15,
-                 ambiguity_tolerance: float = 0.15, along_sigma: float = ALONG_SIGMA) -> None:
+    def __init__(
+        self,
+        K: np.ndarray,
+        dist: np.ndarray | None = None,
+        *,
+        method: str = "usac_default",
+        reprojection_error: float = 4.0,
+        confidence: float = 0.999,
+        iterations: int = 500,
+        min_inliers: int = 12,
+        min_inliers_near_prior: int | None = None,
+        near_prior: tuple[float, float] = (5.0, 0.05),
+        min_inlier_ratio: float = 0.0,
+        prior_inlier_ratio: float = 0.8,
+        outline: np.ndarray | None = None,
+        min_coverage: float = 0.15,
+        ambiguity_tolerance: float = 0.15,
+        along_sigma: float = ALONG_SIGMA,
+    ) -> None:
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
             raise InputError(f"K must be a finite 3x3 intrinsic matrix with positive focal lengths, got {K}")
@@ -192,15 +205,17 @@ class PoseSolver:
         err[depth <= 0] = np.inf
         return err
 
-    def _refine(self, obj: np.ndarray, img: np.ndarray, rvec: np.ndarray, tvec: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _refine(
+        self, obj: np.ndarray, img: np.ndarray, rvec: np.ndarray, tvec: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Two rounds of LM on the inliers of the current pose; returns rvec, tvec, inliers."""
         inl = np.flatnonzero(self._errors(obj, img, rvec, tvec) < self.reprojection_error)
         for _ in range(2):
             if len(inl) < 4:
                 break
-            rvec, tvec = cv2.solvePnPRefineLM(obj[inl], img[inl], self.K, self.dist, rvec.copy(), tvec.copy(),
-                                              self._criteria)
+            rvec, tvec = cv2.solvePnPRefineLM(
+                obj[inl], img[inl], self.K, self.dist, rvec.copy(), tvec.copy(), self._criteria
+            )
             inl = np.flatnonzero(self._errors(obj, img, rvec, tvec) < self.reprojection_error)
         return rvec, tvec, inl
 
@@ -208,8 +223,9 @@ class PoseSolver:
         """MSAC cost of a pose: squared reprojection errors truncated at the inlier threshold."""
         return float((np.minimum(self._errors(obj, img, rvec, tvec), self.reprojection_error) ** 2).sum())
 
-    def _planar_alternatives(self, obj: np.ndarray, img: np.ndarray, inl: np.ndarray
-                             ) -> list[tuple[np.ndarray, np.ndarray]]:
+    def _planar_alternatives(
+        self, obj: np.ndarray, img: np.ndarray, inl: np.ndarray
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
         """The two IPPE poses (Collins & Bartoli, IJCV 2014) of the inliers projected on their
         best-fitting plane: the two minima of a plane seen under weak perspective."""
         if len(inl) < 4:
@@ -230,8 +246,14 @@ class PoseSolver:
             out.append((cv2.Rodrigues(R)[0], t.reshape(3, 1) - (R @ centre).reshape(3, 1)))
         return out
 
-    def _polish(self, obj: np.ndarray, img: np.ndarray, rvec: np.ndarray, tvec: np.ndarray,
-                prior: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _polish(
+        self,
+        obj: np.ndarray,
+        img: np.ndarray,
+        rvec: np.ndarray,
+        tvec: np.ndarray,
+        prior: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`_refine` from ``(rvec, tvec)`` and from the planar alternatives of its inliers,
         then :meth:`_select` among them.
 
@@ -239,11 +261,20 @@ class PoseSolver:
         reprojection error: the refinement from RANSAC's minimal sample (or from the previous
         frame) often falls in the wrong one."""
         start = self._refine(obj, img, rvec, tvec)
-        return self._select(obj, img, [start] + [self._refine(obj, img, r, t)
-                                                 for r, t in self._planar_alternatives(obj, img, start[2])], prior)
+        return self._select(
+            obj,
+            img,
+            [start] + [self._refine(obj, img, r, t) for r, t in self._planar_alternatives(obj, img, start[2])],
+            prior,
+        )
 
-    def _select(self, obj: np.ndarray, img: np.ndarray, candidates: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
-                prior: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _select(
+        self,
+        obj: np.ndarray,
+        img: np.ndarray,
+        candidates: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+        prior: tuple[np.ndarray, np.ndarray] | None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The candidate pose with the lowest MSAC cost; with a prior pose, the one closest to it
         (rotation angle) among those within :attr:`ambiguity_tolerance` of the lowest cost: when
         the correspondences cannot tell two poses apart, the previous frame's pose does."""
@@ -263,28 +294,49 @@ class PoseSolver:
         shift = np.linalg.norm(tvec.ravel() - prior[1].ravel())
         return bool(angle < self.near_prior[0] and shift < self.near_prior[1] * np.linalg.norm(prior[1]))
 
-    def _accept(self, obj: np.ndarray, img: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, inl: np.ndarray,
-                used_prior: bool, prior: tuple[np.ndarray, np.ndarray] | None = None) -> PoseEstimate:
+    def _accept(
+        self,
+        obj: np.ndarray,
+        img: np.ndarray,
+        rvec: np.ndarray,
+        tvec: np.ndarray,
+        inl: np.ndarray,
+        used_prior: bool,
+        prior: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> PoseEstimate:
         n = len(obj)
         need = self.min_inliers_near_prior if self._is_near(rvec, tvec, prior) else self.min_inliers
         if len(inl) < max(need, self.min_inlier_ratio * n):
-            return PoseEstimate(False, num_matches=n, inliers=inl,
-                                reason=f"{len(inl)} inliers of {n} matches (need {need})")
+            return PoseEstimate(
+                False, num_matches=n, inliers=inl, reason=f"{len(inl)} inliers of {n} matches (need {need})"
+            )
         if not (np.isfinite(rvec).all() and np.isfinite(tvec).all()) or tvec.ravel()[2] <= 0:
             return PoseEstimate(False, num_matches=n, reason="degenerate pose (object behind the camera)")
         if self.outline is not None and self.min_coverage > 0:
-            silhouette = cv2.contourArea(cv2.convexHull(project(self.outline, rvec, tvec, self.K, self.dist)
-                                                        .astype(np.float32)))
+            silhouette = cv2.contourArea(
+                cv2.convexHull(project(self.outline, rvec, tvec, self.K, self.dist).astype(np.float32))
+            )
             covered = cv2.contourArea(cv2.convexHull(img[inl].astype(np.float32)))
             if covered < self.min_coverage * silhouette:
-                return PoseEstimate(False, num_matches=n, inliers=inl,
-                                    reason=f"the inliers cover {covered / max(silhouette, 1e-9):.0%} of the object "
-                                    f"(need {self.min_coverage:.0%})")
+                return PoseEstimate(
+                    False,
+                    num_matches=n,
+                    inliers=inl,
+                    reason=f"the inliers cover {covered / max(silhouette, 1e-9):.0%} of the object "
+                    f"(need {self.min_coverage:.0%})",
+                )
         err = self._errors(obj[inl], img[inl], rvec, tvec)
         return PoseEstimate(True, rvec, tvec, inl, n, float(err.mean()), used_prior)
 
-    def _refine_along(self, obj: np.ndarray, img: np.ndarray, directions: np.ndarray, rvec: np.ndarray,
-                      tvec: np.ndarray, iterations: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    def _refine_along(
+        self,
+        obj: np.ndarray,
+        img: np.ndarray,
+        directions: np.ndarray,
+        rvec: np.ndarray,
+        tvec: np.ndarray,
+        iterations: int = 10,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Gauss-Newton on the reprojection errors of ``obj``, ``img`` split along and across the
         projection of each point's direction (``(N, 3)``, zeros: none), the part along it divided
         by :attr:`along_sigma`: the maximum-likelihood pose when an edge's middle is found that
@@ -320,9 +372,13 @@ class PoseSolver:
                 break
         return p[:3].reshape(3, 1), p[3:].reshape(3, 1)
 
-    def solve(self, object_points: np.ndarray, image_points: np.ndarray,
-              prior: tuple[np.ndarray, np.ndarray] | None = None, directions: np.ndarray | None = None
-              ) -> PoseEstimate:
+    def solve(
+        self,
+        object_points: np.ndarray,
+        image_points: np.ndarray,
+        prior: tuple[np.ndarray, np.ndarray] | None = None,
+        directions: np.ndarray | None = None,
+    ) -> PoseEstimate:
         """Estimate the pose from correspondences.
 
         Args:
@@ -357,8 +413,7 @@ class PoseSolver:
         err = self._errors(obj[inl], img[inl], rvec, tvec)
         return replace(est, rvec=rvec, tvec=tvec, reprojection_error=float(err.mean()))
 
-    def _solve(self, obj: np.ndarray, img: np.ndarray, prior: tuple[np.ndarray, np.ndarray] | None
-               ) -> PoseEstimate:
+    def _solve(self, obj: np.ndarray, img: np.ndarray, prior: tuple[np.ndarray, np.ndarray] | None) -> PoseEstimate:
         """:meth:`solve` without the directions, on ``float64`` arrays."""
         n = len(obj)
         need = self.min_inliers if prior is None else self.min_inliers_near_prior
@@ -373,8 +428,15 @@ class PoseSolver:
                 return from_prior
         try:
             ok, rvec, tvec, inl = cv2.solvePnPRansac(
-                obj, img, self.K, self.dist, iterationsCount=self.iterations,
-                reprojectionError=self.reprojection_error, confidence=self.confidence, flags=self.flags)
+                obj,
+                img,
+                self.K,
+                self.dist,
+                iterationsCount=self.iterations,
+                reprojectionError=self.reprojection_error,
+                confidence=self.confidence,
+                flags=self.flags,
+            )
         except cv2.error as exc:  # degenerate samples (e.g. SQPnP on nearly coincident points)
             ok, reason = False, f"PnP failed: {exc.err}"
         else:
@@ -390,8 +452,9 @@ class PoseSolver:
             return est
         if not est.ok:
             return from_prior
-        best = self._select(obj, img, [(from_prior.rvec, from_prior.tvec, from_prior.inliers),
-                                       (est.rvec, est.tvec, est.inliers)], prior)
+        best = self._select(
+            obj, img, [(from_prior.rvec, from_prior.tvec, from_prior.inliers), (est.rvec, est.tvec, est.inliers)], prior
+        )
         return from_prior if best[0] is from_prior.rvec else est
 
 
@@ -450,8 +513,7 @@ class PoseTracker:
         """Solve frame ``frame_index`` from its correspondences with :attr:`prior` and record it."""
         return self._record(frame_index, self.solver.solve(object_points, image_points, self.prior))
 
-    def step(self, frame_index: int, image: np.ndarray, detector: PartDetector
-             ) -> tuple[PoseEstimate, Correspondences]:
+    def step(self, frame_index: int, image: np.ndarray, detector: PartDetector) -> tuple[PoseEstimate, Correspondences]:
         """Detect the parts of ``image`` around the predicted pose, solve, let the detector verify
         the pose (:meth:`pose.parts.PartDetector.verify`), and record the frame.
 
@@ -489,17 +551,25 @@ class PoseTracker:
                 est, corr = refined, near
         return self._record(frame_index, est), corr
 
-    def _search(self, image: np.ndarray, detector: PartDetector, around: tuple[np.ndarray, np.ndarray] | None,
-                prior: tuple[np.ndarray, np.ndarray] | None, *, search_scale: float = 1.0, proposed: bool = False
-                ) -> tuple[PoseEstimate, Correspondences]:
+    def _search(
+        self,
+        image: np.ndarray,
+        detector: PartDetector,
+        around: tuple[np.ndarray, np.ndarray] | None,
+        prior: tuple[np.ndarray, np.ndarray] | None,
+        *,
+        search_scale: float = 1.0,
+        proposed: bool = False,
+    ) -> tuple[PoseEstimate, Correspondences]:
         """Detect the parts of ``image`` around the pose ``around`` (the whole frame for ``None``;
         gates ``search_scale`` times the usual), solve with ``prior``, and verify (:meth:`_verified`)."""
         corr = detector.detect(image, None if around is None else (*around, self.solver.K), search_scale=search_scale)
         est = self.solver.solve(corr.object_points, corr.image_points, prior, corr.directions)
         return self._verified(est, image, detector, proposed=proposed), corr
 
-    def _verified(self, est: PoseEstimate, image: np.ndarray, detector: PartDetector, *, proposed: bool = False
-                  ) -> PoseEstimate:
+    def _verified(
+        self, est: PoseEstimate, image: np.ndarray, detector: PartDetector, *, proposed: bool = False
+    ) -> PoseEstimate:
         """``est``, or a lost frame when the detector rejects its pose (``detector.verify``): a
         wrong pose kept would also become the next frame's prior."""
         if est.ok:

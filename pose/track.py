@@ -49,8 +49,16 @@ def color_for(name: str) -> tuple[int, int, int]:
     return COLORS.get(parse_spec(name)[0], OTHER_COLOR)
 
 
-def draw_box(image: np.ndarray, corners: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray,
-             color: tuple[int, int, int], thickness: int = 2, dist: np.ndarray | None = None) -> np.ndarray:
+def draw_box(
+    image: np.ndarray,
+    corners: np.ndarray,
+    rvec: np.ndarray,
+    tvec: np.ndarray,
+    K: np.ndarray,
+    color: tuple[int, int, int],
+    thickness: int = 2,
+    dist: np.ndarray | None = None,
+) -> np.ndarray:
     """Draw the 12 edges of the box ``corners (8, 3)`` under pose ``rvec, tvec`` on ``image`` in place."""
     uv = project(corners, rvec, tvec, K, dist)
     if not np.isfinite(uv).all() or np.abs(uv).max() > 1e5:
@@ -146,8 +154,9 @@ MIN_INLIERS_NEAR_PRIOR = {"features": 10, "corners": 4}
 RANSAC_ITERATIONS = {"features": 5000, "corners": 5000}
 
 
-def track(frames: Iterator[tuple[str, np.ndarray]], detector: PartDetector, tracker: PoseTracker,
-          total: int | None = None) -> Iterator[tuple[TrackedFrame, np.ndarray]]:
+def track(
+    frames: Iterator[tuple[str, np.ndarray]], detector: PartDetector, tracker: PoseTracker, total: int | None = None
+) -> Iterator[tuple[TrackedFrame, np.ndarray]]:
     """Track the model through ``frames``; yields each frame's result and the frame itself.
 
     ``tracker.events`` collects the lost/recovered events.
@@ -158,8 +167,9 @@ def track(frames: Iterator[tuple[str, np.ndarray]], detector: PartDetector, trac
         yield TrackedFrame(name, est, time.perf_counter() - t0, corr.keypoints), frame
 
 
-def camera_matrix_for(model_K: np.ndarray | None, K: np.ndarray | None, model_path: str | Path,
-                      rtol: float = 0.02) -> np.ndarray:
+def camera_matrix_for(
+    model_K: np.ndarray | None, K: np.ndarray | None, model_path: str | Path, rtol: float = 0.02
+) -> np.ndarray:
     """The intrinsics to track with: ``K`` when given, else those stored in the model (``model_K``,
     e.g. the focal length refined by ``alcn pose build --refine-focal``).
 
@@ -171,24 +181,47 @@ def camera_matrix_for(model_K: np.ndarray | None, K: np.ndarray | None, model_pa
     """
     if K is None:
         if model_K is None:
-            raise InputError(f"{model_path} stores no camera: give the intrinsics (--K FX FY CX CY or "
-                             "--camera camera.yaml from `alcn calib camera`)")
+            raise InputError(
+                f"{model_path} stores no camera: give the intrinsics (--K FX FY CX CY or "
+                "--camera camera.yaml from `alcn calib camera`)"
+            )
         K = np.asarray(model_K, np.float64)
         logger.info("camera of the model: fx %.1f fy %.1f cx %.1f cy %.1f", K[0, 0], K[1, 1], K[0, 2], K[1, 2])
         return K
     K = np.asarray(K, np.float64)
     if model_K is not None and not np.allclose(K, model_K, rtol=rtol, atol=1e-6):
         m = np.asarray(model_K, np.float64)
-        logger.warning("the given intrinsics (fx %.1f fy %.1f cx %.1f cy %.1f) differ from those %s was built with "
-                       "(fx %.1f fy %.1f cx %.1f cy %.1f); leave out --K/--camera to track with the model's",
-                       K[0, 0], K[1, 1], K[0, 2], K[1, 2], model_path, m[0, 0], m[1, 1], m[0, 2], m[1, 2])
+        logger.warning(
+            "the given intrinsics (fx %.1f fy %.1f cx %.1f cy %.1f) differ from those %s was built with "
+            "(fx %.1f fy %.1f cx %.1f cy %.1f); leave out --K/--camera to track with the model's",
+            K[0, 0],
+            K[1, 1],
+            K[0, 2],
+            K[1, 2],
+            model_path,
+            m[0, 0],
+            m[1, 1],
+            m[0, 2],
+            m[1, 2],
+        )
     return K
 
 
-def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.ndarray | None = None, *,
-         normalizer: str | None = None, overlay: str | Path | None = None, method: str = "usac_default",
-         n_features: int = 1000, min_inliers: int | None = None, reprojection_error: float = 4.0,
-         dist: np.ndarray | None = None, detector: str = "features") -> dict:
+def main(
+    model_path: str | Path,
+    source: str | Path,
+    output: str | Path,
+    K: np.ndarray | None = None,
+    *,
+    normalizer: str | None = None,
+    overlay: str | Path | None = None,
+    method: str = "usac_default",
+    n_features: int = 1000,
+    min_inliers: int | None = None,
+    reprojection_error: float = 4.0,
+    dist: np.ndarray | None = None,
+    detector: str = "features",
+) -> dict:
     """Track the box through ``source`` and write ``output`` (scene_gt JSON, keyed by the frame
     names of :func:`alcn_cv.io.iter_frames`: ``frame_000000``, ... for a video, the file stems for a
     folder; the overlay PNGs are named alike).
@@ -215,41 +248,60 @@ def main(model_path: str | Path, source: str | Path, output: str | Path, K: np.n
 
         det = CornerDetector(model_path)
         if normalizer not in (None, det.normalizer_name):
-            raise InputError(f"{model_path} was trained after the normalizer {det.normalizer_name!r}, "
-                             f"not {normalizer!r}")
+            raise InputError(
+                f"{model_path} was trained after the normalizer {det.normalizer_name!r}, not {normalizer!r}"
+            )
         normalizer, corners, units = det.normalizer_name, det.corners, det.units
         model_K = None
     else:
         raise InputError(f"unknown detector {detector!r}; choose 'features' or 'corners'")
     K = camera_matrix_for(model_K, K, model_path)
     min_inliers = MIN_INLIERS[detector] if min_inliers is None else min_inliers
-    tracker = PoseTracker(PoseSolver(K, dist, method=method, min_inliers=min_inliers,
-                                     min_inliers_near_prior=min(MIN_INLIERS_NEAR_PRIOR[detector], min_inliers),
-                                     reprojection_error=reprojection_error, iterations=RANSAC_ITERATIONS[detector],
-                                     outline=corners))
+    tracker = PoseTracker(
+        PoseSolver(
+            K,
+            dist,
+            method=method,
+            min_inliers=min_inliers,
+            min_inliers_near_prior=min(MIN_INLIERS_NEAR_PRIOR[detector], min_inliers),
+            reprojection_error=reprojection_error,
+            iterations=RANSAC_ITERATIONS[detector],
+            outline=corners,
+        )
+    )
     scene_gt, info = {}, {}
     times = []
     with OverlayWriter(overlay) if overlay is not None else contextlib.nullcontext() as writer:
         for res, frame in track(io.iter_frames(source), det, tracker, count_frames(source)):
             scene_gt[res.name] = pose_to_bop(res.estimate)
-            info[res.name] = {"inliers": len(res.estimate.inliers), "matches": res.estimate.num_matches,
-                              "keypoints": res.keypoints, "seconds": res.seconds,
-                              "reprojection_error": res.estimate.reprojection_error if res.estimate.ok else None,
-                              "lost_reason": res.estimate.reason}
+            info[res.name] = {
+                "inliers": len(res.estimate.inliers),
+                "matches": res.estimate.num_matches,
+                "keypoints": res.keypoints,
+                "seconds": res.seconds,
+                "reprojection_error": res.estimate.reprojection_error if res.estimate.ok else None,
+                "lost_reason": res.estimate.reason,
+            }
             times.append(res.seconds)
             if writer is not None:
                 vis = frame.copy()
                 if res.estimate.ok:
-                    draw_box(vis, corners, res.estimate.rvec, res.estimate.tvec, K, color_for(normalizer),
-                             dist=dist)
+                    draw_box(vis, corners, res.estimate.rvec, res.estimate.tvec, K, color_for(normalizer), dist=dist)
                 writer.write(res.name, vis)
     output = Path(output)
     output.parent.mkdir(parents=True, exist_ok=True)
     write_json(output, scene_gt)
     tracked = sum(bool(v) for v in scene_gt.values())
-    summary = {"frames": len(scene_gt), "tracked": tracked, "fps": len(times) / max(sum(times), 1e-9),
-               "normalizer": normalizer, "detector": detector, "model": str(model_path), "units": units,
-               "events": [{"frame": f, "event": e, "reason": r} for f, e, r in tracker.events]}
+    summary = {
+        "frames": len(scene_gt),
+        "tracked": tracked,
+        "fps": len(times) / max(sum(times), 1e-9),
+        "normalizer": normalizer,
+        "detector": detector,
+        "model": str(model_path),
+        "units": units,
+        "events": [{"frame": f, "event": e, "reason": r} for f, e, r in tracker.events],
+    }
     write_json(output.with_name(output.stem + "_info.json"), {"summary": summary, "machine": machine(), "frames": info})
     # the caller reports the summary (`alcn pose track` prints it): logged at INFO it was printed twice
     logger.debug("tracked %d of %d frames at %.1f fps -> %s", tracked, len(scene_gt), summary["fps"], output)

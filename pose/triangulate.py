@@ -83,8 +83,13 @@ class Features:
     colors: np.ndarray  # (N, 3) uint8 RGB
 
 
-def extract_features(seq: TrainingSequence, feature: str = "ORB", n_features: int = 4000, normalizer: str = "none",
-                     masks: dict[str, np.ndarray] | None = None) -> dict[str, Features]:
+def extract_features(
+    seq: TrainingSequence,
+    feature: str = "ORB",
+    n_features: int = 4000,
+    normalizer: str = "none",
+    masks: dict[str, np.ndarray] | None = None,
+) -> dict[str, Features]:
     """Features of every view of ``seq`` on its normalized grayscale image."""
     det = create_feature(feature, n_features)
     norm = from_spec(normalizer)
@@ -101,8 +106,7 @@ def extract_features(seq: TrainingSequence, feature: str = "ORB", n_features: in
             desc = np.zeros((0, det.descriptorSize()), np.uint8 if det.descriptorType() == cv2.CV_8U else np.float32)
         ij = np.clip(np.round(pts).astype(int), 0, [bgr.shape[1] - 1, bgr.shape[0] - 1])
         out[v.name] = Features(pts, desc, bgr[ij[:, 1], ij[:, 0], ::-1].copy())
-    logger.info("%s: %.0f keypoints per image on average", feature,
-                np.mean([len(f.keypoints) for f in out.values()]))
+    logger.info("%s: %.0f keypoints per image on average", feature, np.mean([len(f.keypoints) for f in out.values()]))
     return out
 
 
@@ -111,16 +115,28 @@ def image_pairs(n: int, window: int | None = None) -> list[tuple[int, int]]:
     return [(i, j) for i in range(n) for j in range(i + 1, n) if window is None or j - i <= window]
 
 
-def write_database(db_path: Path, seq: TrainingSequence, feats: dict[str, Features], pairs: list[tuple[int, int]],
-                   norm: int, ratio: float = 0.8) -> Path:
+def write_database(
+    db_path: Path,
+    seq: TrainingSequence,
+    feats: dict[str, Features],
+    pairs: list[tuple[int, int]],
+    norm: int,
+    ratio: float = 0.8,
+) -> Path:
     """Create the COLMAP database: cameras (known intrinsics), images, keypoints, raw matches;
     writes the pairs file and runs pycolmap's geometric verification. Returns the pairs file."""
     with pycolmap_log():
         return _write_database(db_path, seq, feats, pairs, norm, ratio)
 
 
-def _write_database(db_path: Path, seq: TrainingSequence, feats: dict[str, Features], pairs: list[tuple[int, int]],
-                    norm: int, ratio: float) -> Path:
+def _write_database(
+    db_path: Path,
+    seq: TrainingSequence,
+    feats: dict[str, Features],
+    pairs: list[tuple[int, int]],
+    norm: int,
+    ratio: float,
+) -> Path:
     import pycolmap
 
     from alcn_cv.formats.colmap import camera_from_opencv
@@ -128,8 +144,7 @@ def _write_database(db_path: Path, seq: TrainingSequence, feats: dict[str, Featu
     pycolmap.Database.open(db_path).close()
     same = all(np.array_equal(v.K, seq.views[0].K) for v in seq.views) and seq.info.get("format") == "video"
     mode = pycolmap.CameraMode.SINGLE if same else pycolmap.CameraMode.PER_IMAGE
-    pycolmap.import_images(db_path, seq.image_dir, mode,
-                           image_names=[v.name for v in seq.views])
+    pycolmap.import_images(db_path, seq.image_dir, mode, image_names=[v.name for v in seq.views])
     db = pycolmap.Database.open(db_path)
     try:
         ids = {im.name: im for im in db.read_all_images()}
@@ -168,8 +183,9 @@ def triangulate_fixed_poses(seq: TrainingSequence, db_path: Path, out_dir: Path)
             v = next(v for v in seq.views if v.name == im.name)
             rec.add_camera_with_trivial_rig(db.read_camera(im.camera_id))
             pose = pycolmap.Rigid3d(np.hstack([v.R_w2c, np.reshape(v.t_w2c, (3, 1))]))
-            rec.add_image_with_trivial_frame(pycolmap.Image(name=im.name, camera_id=im.camera_id,
-                                                            image_id=im.image_id), pose)
+            rec.add_image_with_trivial_frame(
+                pycolmap.Image(name=im.name, camera_id=im.camera_id, image_id=im.image_id), pose
+            )
     finally:
         db.close()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -200,11 +216,16 @@ def reconstruct_incremental(seq: TrainingSequence, db_path: Path, out_dir: Path,
     with pycolmap_log():
         recs = pycolmap.incremental_mapping(db_path, seq.image_dir, out_dir, opts)
     if not recs:
-        raise DatasetError(f"{seq.info.get('path')}: pycolmap registered no image pair (too little texture, "
-                           "motion or overlap)")
+        raise DatasetError(
+            f"{seq.info.get('path')}: pycolmap registered no image pair (too little texture, motion or overlap)"
+        )
     rec = max(recs.values(), key=lambda r: r.num_reg_images())
-    logger.info("incremental mapping: %d of %d images registered, %d points", rec.num_reg_images(),
-                len(seq.views), rec.num_points3D())
+    logger.info(
+        "incremental mapping: %d of %d images registered, %d points",
+        rec.num_reg_images(),
+        len(seq.views),
+        rec.num_points3D(),
+    )
     return rec
 
 
@@ -230,8 +251,9 @@ def representatives(desc: np.ndarray, norm: int, k: int) -> np.ndarray:
     return np.array(chosen, np.int64)
 
 
-def collect_points(rec, feats: dict[str, Features], norm: int, min_track: int = 2, descriptors_per_point: int = 8
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def collect_points(
+    rec, feats: dict[str, Features], norm: int, min_track: int = 2, descriptors_per_point: int = 8
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """3D points ``(N, 3)``, descriptors ``(M, D)`` with the point each describes ``(M,)`` (up to
     ``descriptors_per_point`` per point, chosen by :func:`representatives`), track lengths
     ``(N,)`` and RGB colours ``(N, 3)`` of a reconstruction whose keypoints are those of ``feats``."""
@@ -250,7 +272,7 @@ def collect_points(rec, feats: dict[str, Features], norm: int, min_track: int = 
         tl.append(len(els))
         rgb.append(np.median(c, 0))
     if not xyz:
-        raise DatasetError("no 3D point was triangulated (too little texture or overlap between the training "
-                           "images, or wrong poses)")
-    return (np.array(xyz), np.concatenate(desc), np.concatenate(owner), np.array(tl, np.int32),
-            np.array(rgb, np.uint8))
+        raise DatasetError(
+            "no 3D point was triangulated (too little texture or overlap between the training images, or wrong poses)"
+        )
+    return (np.array(xyz), np.concatenate(desc), np.concatenate(owner), np.array(tl, np.int32), np.array(rgb, np.uint8))

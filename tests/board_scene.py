@@ -64,9 +64,15 @@ def look_at(center: np.ndarray, target: np.ndarray, right_hint: np.ndarray) -> t
     return R, -R @ np.asarray(center, float)
 
 
-def sample_board_poses(n: int, board_size_mm: tuple[float, float], rng: np.random.Generator,
-                       distance_mm: tuple[float, float] = (380.0, 600.0), tilt_deg: tuple[float, float] = (10.0, 50.0),
-                       roll_deg: float = 35.0, target_jitter: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
+def sample_board_poses(
+    n: int,
+    board_size_mm: tuple[float, float],
+    rng: np.random.Generator,
+    distance_mm: tuple[float, float] = (380.0, 600.0),
+    tilt_deg: tuple[float, float] = (10.0, 50.0),
+    roll_deg: float = 35.0,
+    target_jitter: float = 0.15,
+) -> tuple[np.ndarray, np.ndarray]:
     """Random camera poses viewing the printed (z < 0) side of a board.
 
     Args:
@@ -84,8 +90,9 @@ def sample_board_poses(n: int, board_size_mm: tuple[float, float], rng: np.rando
     w, h = board_size_mm
     Rs, ts = [], []
     for _ in range(n):
-        target = np.array([w / 2 + rng.uniform(-1, 1) * target_jitter * w,
-                           h / 2 + rng.uniform(-1, 1) * target_jitter * h, 0.0])
+        target = np.array(
+            [w / 2 + rng.uniform(-1, 1) * target_jitter * w, h / 2 + rng.uniform(-1, 1) * target_jitter * h, 0.0]
+        )
         tilt = np.deg2rad(rng.uniform(*tilt_deg))
         azimuth = rng.uniform(0, 2 * np.pi)
         direction = np.array([np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), -np.cos(tilt)])
@@ -97,8 +104,14 @@ def sample_board_poses(n: int, board_size_mm: tuple[float, float], rng: np.rando
     return np.array(Rs), np.array(ts)
 
 
-def _plane_texture(board_image: np.ndarray, px_per_mm: float, board_size_mm: tuple[float, float],
-                   rng: np.random.Generator, paper_mm: float, table_mm: float) -> tuple[np.ndarray, np.ndarray]:
+def _plane_texture(
+    board_image: np.ndarray,
+    px_per_mm: float,
+    board_size_mm: tuple[float, float],
+    rng: np.random.Generator,
+    paper_mm: float,
+    table_mm: float,
+) -> tuple[np.ndarray, np.ndarray]:
     """BGR uint8 texture of the table with the board on white paper, and the 3x3 matrix A
     mapping texture pixel (u, v, 1) to plane millimetres (X, Y, 1)."""
     bh, bw = board_image.shape[:2]
@@ -136,10 +149,19 @@ def _lighting(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
     return np.clip(gain, 0.55, 1.25)[..., None] * tint.astype(np.float32)
 
 
-def render_board_views(board: cv2.aruco.CharucoBoard, K: np.ndarray, R_w2c: np.ndarray, t_w2c: np.ndarray,
-                       image_size: tuple[int, int], rng: np.random.Generator, dist: np.ndarray | None = None,
-                       px_per_mm: float = 4.0, supersample: int = 3, noise_sigma: float = 2.0,
-                       lighting: bool = True) -> list[np.ndarray]:
+def render_board_views(
+    board: cv2.aruco.CharucoBoard,
+    K: np.ndarray,
+    R_w2c: np.ndarray,
+    t_w2c: np.ndarray,
+    image_size: tuple[int, int],
+    rng: np.random.Generator,
+    dist: np.ndarray | None = None,
+    px_per_mm: float = 4.0,
+    supersample: int = 3,
+    noise_sigma: float = 2.0,
+    lighting: bool = True,
+) -> list[np.ndarray]:
     """Render the board (on a cluttered table) seen by each camera.
 
     Args:
@@ -163,7 +185,9 @@ def render_board_views(board: cv2.aruco.CharucoBoard, K: np.ndarray, R_w2c: np.n
     square_px = int(round(square * px_per_mm))
     px_per_mm = square_px / square  # exact integer squares in the texture
     board_image = board.generateImage((cols * square_px, rows * square_px), marginSize=0, borderBits=1)
-    texture, A = _plane_texture(board_image, px_per_mm, size_mm, rng, paper_mm=0.3 * square, table_mm=1.0 * max(size_mm))
+    texture, A = _plane_texture(
+        board_image, px_per_mm, size_mm, rng, paper_mm=0.3 * square, table_mm=1.0 * max(size_mm)
+    )
     w, h = image_size
     f = int(supersample)
     # Pixel centre p of the f-times larger image and p' of the output: p = f p' + (f - 1) / 2.
@@ -172,28 +196,50 @@ def render_board_views(board: cv2.aruco.CharucoBoard, K: np.ndarray, R_w2c: np.n
     images = []
     for R, t in zip(np.asarray(R_w2c, float), np.asarray(t_w2c, float)):
         Hm = S @ K @ np.c_[R[:, :2], t] @ A
-        big = cv2.warpPerspective(texture, Hm, (w * f, h * f), flags=cv2.INTER_LINEAR,
-                                  borderMode=cv2.BORDER_CONSTANT, borderValue=(40, 40, 40))
+        big = cv2.warpPerspective(
+            texture,
+            Hm,
+            (w * f, h * f),
+            flags=cv2.INTER_LINEAR,
+            borderMode=cv2.BORDER_CONSTANT,
+            borderValue=(40, 40, 40),
+        )
         img = cv2.resize(big, (w, h), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
         if dist is not None and np.any(dist):
             # For each distorted output pixel, the undistorted pixel it comes from.
             grid = np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1).reshape(-1, 1, 2).astype(np.float64)
-            und = cv2.undistortPoints(grid, K, np.asarray(dist, float), None, None, K,
-                                          (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-9))
+            und = cv2.undistortPoints(
+                grid,
+                K,
+                np.asarray(dist, float),
+                None,
+                None,
+                K,
+                (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-9),
+            )
             maps = und.reshape(h, w, 2).astype(np.float32)
             img = cv2.remap(img, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         if lighting:
-            img = (img ** 2.2) * _lighting(rng, (h, w))  # light acts on linear values
+            img = (img**2.2) * _lighting(rng, (h, w))  # light acts on linear values
             img = np.clip(img, 0, 1) ** (1 / rng.uniform(1.9, 2.5))
         img = img * 255.0 + rng.normal(0, noise_sigma, img.shape)
         images.append(np.clip(np.rint(img), 0, 255).astype(np.uint8))
     return images
 
 
-def make_board_scene(n_views: int = 12, image_size: tuple[int, int] = (640, 480), focal: float = 600.0,
-                     cols: int = 7, rows: int = 5, square_mm: float = 35.0, marker_mm: float = 26.0,
-                     dictionary: str = "DICT_5X5_100", dist: np.ndarray | None = None, seed: int = 0,
-                     **render_kwargs) -> BoardScene:
+def make_board_scene(
+    n_views: int = 12,
+    image_size: tuple[int, int] = (640, 480),
+    focal: float = 600.0,
+    cols: int = 7,
+    rows: int = 5,
+    square_mm: float = 35.0,
+    marker_mm: float = 26.0,
+    dictionary: str = "DICT_5X5_100",
+    dist: np.ndarray | None = None,
+    seed: int = 0,
+    **render_kwargs,
+) -> BoardScene:
     """Render ``n_views`` random views of a ChArUco board (default: the 7x5, 35 mm board
     that ``alcn calib board`` prints) with a camera of focal length ``focal`` px and
     principal point slightly off centre. Extra keyword arguments go to
@@ -201,8 +247,9 @@ def make_board_scene(n_views: int = 12, image_size: tuple[int, int] = (640, 480)
     rng = np.random.default_rng(seed)
     w, h = image_size
     K = np.array([[focal, 0, w / 2 - 3.7], [0, focal * 1.002, h / 2 + 2.4], [0, 0, 1.0]])
-    board = cv2.aruco.CharucoBoard((cols, rows), square_mm, marker_mm,
-                                   cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)))
+    board = cv2.aruco.CharucoBoard(
+        (cols, rows), square_mm, marker_mm, cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
+    )
     size_mm = (cols * square_mm, rows * square_mm)
     scale = focal / 600.0 * 640.0 / w  # keep the board's apparent size for other cameras
     R, t = sample_board_poses(n_views, size_mm, rng, distance_mm=(380.0 * scale, 600.0 * scale))

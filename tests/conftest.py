@@ -51,7 +51,9 @@ def run_python():
 
     def run(code: str, *args: str, blocked: tuple[str, ...] = OPTIONAL_MODULES) -> subprocess.CompletedProcess:
         script = _BLOCK.format(blocked=tuple(blocked)) + textwrap.dedent(code)
-        return subprocess.run([sys.executable, "-c", script, *map(str, args)], capture_output=True, text=True, timeout=120)
+        return subprocess.run(
+            [sys.executable, "-c", script, *map(str, args)], capture_output=True, text=True, timeout=120
+        )
 
     return run
 
@@ -62,7 +64,9 @@ def run_without_torch(run_python):
     torch or kornia fails; fails the test if it errors or if torch got imported anyway."""
 
     def run(code: str, *args: str) -> None:
-        proc = run_python(textwrap.dedent(code) + "\nassert 'torch' not in sys.modules\n", *args, blocked=("torch", "kornia"))
+        proc = run_python(
+            textwrap.dedent(code) + "\nassert 'torch' not in sys.modules\n", *args, blocked=("torch", "kornia")
+        )
         assert proc.returncode == 0, proc.stdout + proc.stderr
 
     return run

@@ -24,8 +24,12 @@ def _forward(net: torch.nn.Module, gray: np.ndarray) -> np.ndarray:
 
 def _images() -> list[np.ndarray]:
     rng = np.random.default_rng(2)
-    frames = [synthetic_frame(320, 200, False, seed=5), synthetic_frame(333, 251, False, seed=6),
-              (rng.random((61, 47)) * 255).astype(np.uint8), np.full((40, 56), 90, np.uint8)]
+    frames = [
+        synthetic_frame(320, 200, False, seed=5),
+        synthetic_frame(333, 251, False, seed=6),
+        (rng.random((61, 47)) * 255).astype(np.uint8),
+        np.full((40, 56), 90, np.uint8),
+    ]
     return [f.astype(np.float32) / np.float32(255) for f in frames]
 
 
@@ -70,7 +74,9 @@ def test_upsample_grid_is_torch_align_corners(stride, shape):
     gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
     grid = np.random.default_rng(0).random((gh, gw), dtype=np.float32)
     size = (stride * (gh - 1) + 1, stride * (gw - 1) + 1)
-    expected = F.interpolate(torch.from_numpy(grid)[None, None], size=size, mode="bilinear", align_corners=True)[0, 0, :h, :w]
+    expected = F.interpolate(torch.from_numpy(grid)[None, None], size=size, mode="bilinear", align_corners=True)[
+        0, 0, :h, :w
+    ]
     np.testing.assert_allclose(upsample_grid(grid, stride, shape), expected.numpy(), atol=1e-4, rtol=0)
 
 
@@ -81,4 +87,6 @@ def test_alcn_filter_grid_is_alcn_filter_of_the_upsampled_maps(proportional):
     if proportional:  # a band-pass of two kernels (F_2 = -F_1): one shared product
         grid[1] = -grid[0]
     maps = np.stack([upsample_grid(m, 8, image.shape) for m in grid])
-    np.testing.assert_allclose(alcn_filter_grid(image, grid, 8, (1.0, 2.0)), alcn_filter(image, maps, (1.0, 2.0)), atol=1e-6)
+    np.testing.assert_allclose(
+        alcn_filter_grid(image, grid, 8, (1.0, 2.0)), alcn_filter(image, maps, (1.0, 2.0)), atol=1e-6
+    )

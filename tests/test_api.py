@@ -47,7 +47,7 @@ def test_shape_and_dtype_are_kept(methods, frames, name, dtype, layout):
     out = methods[name].apply(img)
     assert out.shape == img.shape and out.dtype == img.dtype
     if dtype == np.float32:
-        assert 0 <= out.min() and out.max() <= 1
+        assert out.min() >= 0 and out.max() <= 1
 
 
 @pytest.mark.parametrize("name", METHODS)
@@ -204,8 +204,13 @@ def random_head_weights(tmp_path_factory):
     torch.manual_seed(3)
     net = Normalizer(output_scale=2.0)
     folder = tmp_path_factory.mktemp("weights")
-    meta = {"config": net.config, "sigmas": list(alcn_cv.gaussian_sigmas()), "working_scale": 0.5,
-            "output_range": [-1.0, 1.0], "trained": False}
+    meta = {
+        "config": net.config,
+        "sigmas": list(alcn_cv.gaussian_sigmas()),
+        "working_scale": 0.5,
+        "output_range": [-1.0, 1.0],
+        "trained": False,
+    }
     path = save_normalizer_file(folder / "random.npz", net.state_arrays(), meta)
     export_onnx(path.with_suffix(".onnx"), path)
     return path

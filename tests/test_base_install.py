@@ -99,7 +99,11 @@ def _venv(tmp_path: Path) -> Path:
 def _pip_install(python: Path, *requirements: object) -> None:
     install = subprocess.run(
         [python, "-m", "pip", "install", "-q", "--disable-pip-version-check", *map(str, requirements)],
-        check=False, capture_output=True, text=True, env=_env(), timeout=900,
+        check=False,
+        capture_output=True,
+        text=True,
+        env=_env(),
+        timeout=900,
     )
     assert install.returncode == 0, install.stderr[-3000:]
 
@@ -118,7 +122,7 @@ def test_base_install_runs_the_runtime_without_torch(tmp_path, extras_modules):
     _pip_install(python, source)
     proc = _run(tmp_path, python, "-c", "import alcn_cv")  # no OpenCV wheel is required
     assert proc.returncode == 1 and proc.stderr.strip().splitlines()[-1] == (
-        'alcn_cv.errors.MissingDependencyError: alcn-cv needs OpenCV (the cv2 module), which is not installed: pip '
+        "alcn_cv.errors.MissingDependencyError: alcn-cv needs OpenCV (the cv2 module), which is not installed: pip "
         'install "alcn-cv[opencv]" (or any one of opencv-python, opencv-python-headless, opencv-contrib-python, '
         "opencv-contrib-python-headless)"
     ), proc.stderr

@@ -102,13 +102,22 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
 
     real_create = D.create_normalization
     monkeypatch.setattr(D, "create_normalization", lambda m, p: broken() if m == "he" else real_create(m, p))
-    settings = S.DetectSettings(methods=["none", "dog", "he"], real_images=[1], policies=["raw", "local"],
-                                positives_per_object=8, epochs=1, batch_size=32, threads=1, tune=True)
+    settings = S.DetectSettings(
+        methods=["none", "dog", "he"],
+        real_images=[1],
+        policies=["raw", "local"],
+        positives_per_object=8,
+        epochs=1,
+        batch_size=32,
+        threads=1,
+        tune=True,
+    )
     result = D.main(small_data, out, settings, progress=False)
     assert (out / "detect.md").is_file() and (out / "detect.json").is_file()
     assert not (out / "detect.partial.json").exists()
     assert sorted(p.name for p in out.glob("pr_*.png")) == sorted(
-        f"pr_{n}_1real.png" for n in ("matte_box", "velvet_toy", "specular_can"))
+        f"pr_{n}_1real.png" for n in ("matte_box", "velvet_toy", "specular_can")
+    )
     saved = json.loads((out / "detect.json").read_text())
     assert saved["runs"]["he|1|raw|0"]["error"] == "RuntimeError: boom"  # reported, the run went on
     for key in ("none|1|raw|0", "dog|1|local|0"):
@@ -118,14 +127,29 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     assert "error" in saved["summary"]["he|1|raw"]
     assert saved["summary"]["dog|1|local"]["seeds"] == [0]
     assert "failed" in (out / "detect.md").read_text()
-    assert [round(v, 4) for v in saved["window_agreement"]["dog"].values()] == [1.0]  # DoG looks no further than a window
+    assert [round(v, 4) for v in saved["window_agreement"]["dog"].values()] == [
+        1.0
+    ]  # DoG looks no further than a window
     assert result["machine"]["cpu_count"] >= 1
 
 
 def test_cli_and_bad_input(small_data, tmp_path):
     assert cli_main(["bench", "detect", "--data", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
-    assert cli_main(["bench", "detect", "--data", str(small_data), "--out", str(tmp_path / "o"),
-                     "--methods", "none,nonexistent"]) == 2
+    assert (
+        cli_main(
+            [
+                "bench",
+                "detect",
+                "--data",
+                str(small_data),
+                "--out",
+                str(tmp_path / "o"),
+                "--methods",
+                "none,nonexistent",
+            ]
+        )
+        == 2
+    )
     with pytest.raises(DatasetError):
         detect_data.load_data(tmp_path)
     with pytest.raises(SystemExit):
@@ -137,8 +161,11 @@ def test_batched_score_maps_equal_single(policy):
     torch.manual_seed(0)
     net = Detector(3, hidden=16).eval()
     rng = np.random.default_rng(4)
-    images = [rng.random((40, 44)).astype(np.float32), rng.random((36, 40)).astype(np.float32),
-              rng.random((40, 44)).astype(np.float32)]
+    images = [
+        rng.random((40, 44)).astype(np.float32),
+        rng.random((36, 40)).astype(np.float32),
+        rng.random((40, 44)).astype(np.float32),
+    ]
     pol = policies.InputPolicy(policy, rng.random((4, 64, 64)).astype(np.float32))
     batched = D._all_score_maps(net, images, pol, "cpu", batch=2)
     for img, p in zip(images, batched):
@@ -150,8 +177,13 @@ def test_method_specs_and_seeds():
     assert (norm.mixture, norm.scale, norm.net.stride) == ("pyramid", 1.0, 8)
     assert D.create_normalization("dog:sigma2=2.5", {"sigma1": 1.0}).sigma2 == 2.5
     S.DetectSettings(methods=["alcn", "alcn:model=lite"], seeds=[0, 1]).check()
-    for bad in (dict(methods=["nope:x=1"]), dict(methods=["cnn:depth=2"]), dict(methods=["dog", "dog"]),
-                dict(seeds=[]), dict(seeds=[1, 1])):
+    for bad in (
+        dict(methods=["nope:x=1"]),
+        dict(methods=["cnn:depth=2"]),
+        dict(methods=["dog", "dog"]),
+        dict(seeds=[]),
+        dict(seeds=[1, 1]),
+    ):
         with pytest.raises(InputError):
             S.DetectSettings(**bad).check()
 
@@ -159,9 +191,11 @@ def test_method_specs_and_seeds():
 def test_summarize_over_seeds():
     settings = S.DetectSettings(methods=["dog"], real_images=[1], policies=["local"], seeds=[0, 1, 2])
     objects = lambda a, b: {"a": {"auc": a}, "b": {"auc": b}}  # noqa: E731
-    runs = {S.run_key("dog", 1, "local", 0): {"objects": objects(0.2, 0.4)},
-            S.run_key("dog", 1, "local", 1): {"objects": objects(0.4, None)},
-            S.run_key("dog", 1, "local", 2): {"error": "RuntimeError: boom"}}
+    runs = {
+        S.run_key("dog", 1, "local", 0): {"objects": objects(0.2, 0.4)},
+        S.run_key("dog", 1, "local", 1): {"objects": objects(0.4, None)},
+        S.run_key("dog", 1, "local", 2): {"error": "RuntimeError: boom"},
+    }
     cell = D.summarize(runs, settings, ["a", "b"])["dog|1|local"]
     assert cell["seeds"] == [0, 1] and cell["failed_seeds"] == [2]
     assert cell["objects"]["a"]["mean"] == pytest.approx(0.3) and cell["objects"]["a"]["std"] == pytest.approx(0.1)
@@ -204,9 +238,17 @@ def test_resnets_train_with_context_under_dense_policies(small_data):
 def test_alcn_opencv_backend_runs_end_to_end(small_data, tmp_path):
     """The cv2.dnn backend normalizes the training windows through ALCN.normalize_windows (it
     once failed with "'OpenCVNormalizer' object is not callable")."""
-    settings = S.DetectSettings(methods=["alcn:backend=opencv"], real_images=[1], policies=["local"],
-                                positives_per_object=4, negatives_ratio=0.5, epochs=1, batch_size=16, threads=1,
-                                max_test_images=1)
+    settings = S.DetectSettings(
+        methods=["alcn:backend=opencv"],
+        real_images=[1],
+        policies=["local"],
+        positives_per_object=4,
+        negatives_ratio=0.5,
+        epochs=1,
+        batch_size=16,
+        threads=1,
+        max_test_images=1,
+    )
     result = D.main(small_data, tmp_path / "out", settings, progress=False)
     run = result["runs"][S.run_key("alcn:backend=opencv", 1, "local", 0)]
     assert "error" not in run, run.get("error")
@@ -222,7 +264,10 @@ def test_pr_curves_stop_at_the_last_true_positive_and_ties_are_grouped():
     np.testing.assert_array_equal(precision, [1.0, 0.9, 0.6, 0.7])
     same = ([0.1, 0.4], [1.0, 0.5])
     assert plots._ties({"none": ([0.2], [1.0]), "dlcn": same, "alcn": ([0.3], [0.9]), "whitening": same}) == {
-        "none": ["none"], "dlcn": ["dlcn", "whitening"], "alcn": ["alcn"]}
+        "none": ["none"],
+        "dlcn": ["dlcn", "whitening"],
+        "alcn": ["alcn"],
+    }
     styles = plots.method_styles(["none", "alcn", "ns", "dog", "slcn", "dlcn", "lrn", "whitening"])
     assert styles["none"][0] != styles["alcn"][0] and styles["dlcn"][0] != styles["whitening"][0]
 
@@ -234,11 +279,22 @@ def test_report_gives_mean_and_spread_over_seeds():
     from alcn_cv.report import machine
 
     settings = S.DetectSettings(methods=["dog"], real_images=[1], policies=["raw"], seeds=[0, 1])
-    runs = {S.run_key("dog", 1, "raw", 0): {"objects": {"a": {"auc": 0.2}}},
-            S.run_key("dog", 1, "raw", 1): {"objects": {"a": {"auc": 0.4}}}}
-    result = {"settings": asdict(settings), "summary": D.summarize(runs, settings, ["a"]), "runs": runs,
-              "machine": machine(), "command": detect_command("d", "o", settings), "data": "/d", "test_images": [1],
-              "working_scale": 0.5, "box_size": 36.0, "seconds": 1.0}
+    runs = {
+        S.run_key("dog", 1, "raw", 0): {"objects": {"a": {"auc": 0.2}}},
+        S.run_key("dog", 1, "raw", 1): {"objects": {"a": {"auc": 0.4}}},
+    }
+    result = {
+        "settings": asdict(settings),
+        "summary": D.summarize(runs, settings, ["a"]),
+        "runs": runs,
+        "machine": machine(),
+        "command": detect_command("d", "o", settings),
+        "data": "/d",
+        "test_images": [1],
+        "working_scale": 0.5,
+        "box_size": 36.0,
+        "seconds": 1.0,
+    }
     md = detect_markdown(result, ["a"])
     assert md.startswith("# Few-shot detection benchmark") and "(data)" not in md.splitlines()[0]
     assert "| dog | 0.300 ± 0.100 | 0.300 ± 0.100 |" in md and "2 (0, 1)" in md

@@ -21,10 +21,18 @@ from alcn_cv.train import fewshot as F  # noqa: E402
 def _tiny_data(setup):
     rng = np.random.default_rng(setup.seed)
     n, m = 24, 16
-    test = PhosBatch(windows=rng.integers(0, 256, (m, 64, 64), dtype=np.uint8), labels=np.arange(m) % 3,
-                     light_ids=np.arange(m) % 2, kinds=np.zeros(m, np.int64), offsets=np.zeros((m, 2), np.float32),
-                     extents=np.zeros(m, np.float32), n_objects=2, object_seed=setup.object_seed, seed=setup.seed,
-                     light_families=["dark", "side"])
+    test = PhosBatch(
+        windows=rng.integers(0, 256, (m, 64, 64), dtype=np.uint8),
+        labels=np.arange(m) % 3,
+        light_ids=np.arange(m) % 2,
+        kinds=np.zeros(m, np.int64),
+        offsets=np.zeros((m, 2), np.float32),
+        extents=np.zeros(m, np.float32),
+        n_objects=2,
+        object_seed=setup.object_seed,
+        seed=setup.seed,
+        light_families=["dark", "side"],
+    )
     return rng.integers(0, 256, (n, 64, 64), dtype=np.uint8), np.arange(n) % 3, test
 
 
@@ -56,17 +64,26 @@ def test_every_spec_reaches_the_detector_through_normalize_windows(policy, monke
 def test_draws_differ_and_settings_check():
     s = B.FewShotSettings(draws=2)
     assert (s.setup(1).seed, s.setup(1).object_seed) == (1, s.object_seed + 1)
-    for bad in (dict(methods=["nope"]), dict(methods=["dog", "dog"]), dict(policies=["sideways"]), dict(draws=0),
-                dict(methods=[])):
+    for bad in (
+        dict(methods=["nope"]),
+        dict(methods=["dog", "dog"]),
+        dict(policies=["sideways"]),
+        dict(draws=0),
+        dict(methods=[]),
+    ):
         with pytest.raises(InputError):
             B.FewShotSettings(**bad).check()
 
 
 def test_compare_to_dog_takes_the_best_dog_per_draw():
     settings = B.FewShotSettings(methods=["dog", "dog:sigma1=1:sigma2=2", "alcn"], policies=["raw"], draws=3)
-    runs = {"raw": {"dog": [{"auc": 0.7}, {"auc": 0.8}, {"auc": 0.6}],
-                    "dog:sigma1=1:sigma2=2": [{"auc": 0.75}, {"error": "x"}, {"auc": 0.5}],
-                    "alcn": [{"auc": 0.74}, {"auc": 0.81}, {"error": "y"}]}}
+    runs = {
+        "raw": {
+            "dog": [{"auc": 0.7}, {"auc": 0.8}, {"auc": 0.6}],
+            "dog:sigma1=1:sigma2=2": [{"auc": 0.75}, {"error": "x"}, {"auc": 0.5}],
+            "alcn": [{"auc": 0.74}, {"auc": 0.81}, {"error": "y"}],
+        }
+    }
     rows = B.compare_to_dog(runs, settings)["raw"]["alcn"]
     assert [r["above"] for r in rows] == [False, True, None]
     assert rows[0]["dog"] == "dog:sigma1=1:sigma2=2" and rows[0]["margin"] == pytest.approx(-0.01)
@@ -85,9 +102,30 @@ def test_fewshot_validation_is_score_inputs_of_each_method():
 
 def test_cli_end_to_end(tmp_path):
     out = tmp_path / "fs"
-    code = cli_main(["bench", "fewshot", "--out", str(out), "--methods", "none,dog,alcn", "--policy", "raw",
-                     "--draws", "1", "--objects", "2", "--per-image", "6", "--test-windows", "30", "--epochs", "1",
-                     "--threads", "1"])
+    code = cli_main(
+        [
+            "bench",
+            "fewshot",
+            "--out",
+            str(out),
+            "--methods",
+            "none,dog,alcn",
+            "--policy",
+            "raw",
+            "--draws",
+            "1",
+            "--objects",
+            "2",
+            "--per-image",
+            "6",
+            "--test-windows",
+            "30",
+            "--epochs",
+            "1",
+            "--threads",
+            "1",
+        ]
+    )
     assert code == 0
     saved = json.loads((out / "fewshot.json").read_text())
     assert set(saved["runs"]["raw"]) == {"none", "dog", "alcn"}

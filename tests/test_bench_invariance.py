@@ -49,7 +49,8 @@ def test_main_writes_table_json_and_figure(tmp_path):
     saved = json.loads((tmp_path / "out" / "invariance.json").read_text())
     assert saved["methods"].keys() == set(methods)
     assert result["methods"]["dog:sigma2=3.0"]["detail"] != pytest.approx(
-        invariance.main(data, tmp_path / "dog", ["dog"], erode=2, progress=False)["methods"]["dog"]["detail"])
+        invariance.main(data, tmp_path / "dog", ["dog"], erode=2, progress=False)["methods"]["dog"]["detail"]
+    )
     assert (tmp_path / "out" / "invariance_ball.png").is_file()
     assert "| dlcn |" in (tmp_path / "out" / "invariance.md").read_text()
     for row in result["methods"].values():

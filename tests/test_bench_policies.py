@@ -49,8 +49,10 @@ class _MinusImageMean(Normalization):
 def test_window_agreement():
     rng = np.random.default_rng(2)
     x = np.linspace(0, 1, 200, dtype=np.float32)
-    images = [np.clip(0.5 * x[None, :] + 0.4 * x[:150, None] + 0.1 * rng.random((150, 200)), 0, 1).astype(np.float32)
-              for _ in range(2)]
+    images = [
+        np.clip(0.5 * x[None, :] + 0.4 * x[:150, None] + 0.1 * rng.random((150, 200)), 0, 1).astype(np.float32)
+        for _ in range(2)
+    ]
     dog = from_spec("dog")
     assert D.window_agreement(dog, images, [dog.normalize(im) for im in images]) == pytest.approx(1.0, abs=1e-5)
     wide = _MinusImageMean()

@@ -50,16 +50,24 @@ def test_local_standardization_composite():
     norm = relight.build_method("dog:sigma2=3.0+lstd")
     assert isinstance(norm, relight.LocallyStandardized) and norm.inner.sigma2 == 3.0
     out = norm.apply(lit(texture())[2], out_dtype=np.float32)
-    assert out.dtype == np.float32 and 0 <= out.min() and out.max() <= 1
+    assert out.dtype == np.float32 and out.min() >= 0 and out.max() <= 1
     with pytest.raises(InputError):
         relight.build_method("nonexistent+lstd")
 
 
 def test_main_writes_the_report(tmp_path):
     root = make_sets(tmp_path / "data")
-    result = relight.main(tmp_path / "out", [root / "webcam", root / "psm"], ["none", "dog", "dog+lstd"],
-                          train_scenes=["square"], test_scenes=["street", "psm"], seeds=[0, 1], settings=SMALL,
-                          tune_frames=3, progress=False)
+    result = relight.main(
+        tmp_path / "out",
+        [root / "webcam", root / "psm"],
+        ["none", "dog", "dog+lstd"],
+        train_scenes=["square"],
+        test_scenes=["street", "psm"],
+        seeds=[0, 1],
+        settings=SMALL,
+        tune_frames=3,
+        progress=False,
+    )
     saved = json.loads((tmp_path / "out" / "relight.json").read_text())
     assert set(saved["methods"]) == {"none", "dog", "dog+lstd", "dog (tuned)", "dog+lstd (tuned)"}
     assert saved["split"] == {"mode": "train/test", "train": ["square"], "test": ["street", "ball"]}
@@ -71,7 +79,9 @@ def test_main_writes_the_report(tmp_path):
     for metric in relight.METRICS:
         assert 0 <= row["mean_test"][metric]["mean"] <= (1e9 if metric in relight.COUNT_METRICS else 100)
     # gains and a gradient on a fine texture: a band-pass identifies better than the raw frames
-    assert row["mean_test"]["identification"]["mean"] >= result["methods"]["none"]["mean_test"]["identification"]["mean"]
+    assert (
+        row["mean_test"]["identification"]["mean"] >= result["methods"]["none"]["mean_test"]["identification"]["mean"]
+    )
     text = (tmp_path / "out" / "relight.md").read_text()
     assert "| dog (tuned) |" in text and "Patch identification" in text and "± " in text
     assert (tmp_path / "out" / "relight.png").stat().st_size > 0
@@ -79,25 +89,73 @@ def test_main_writes_the_report(tmp_path):
 
 def test_leave_one_out_and_cli(tmp_path):
     root = make_sets(tmp_path / "data")
-    args = ["bench", "relight", "--out", str(tmp_path / "loo"), "--data", str(root / "webcam"), str(root / "psm"),
-            "--methods", "none,slcn", "--leave-one-out", "street", "square", "ball", "--seeds", "3",
-            "--patch", "16", "--patches", "30", "--max-pairs", "3", "--no-keypoints", "--tune-frames", "3"]
+    args = [
+        "bench",
+        "relight",
+        "--out",
+        str(tmp_path / "loo"),
+        "--data",
+        str(root / "webcam"),
+        str(root / "psm"),
+        "--methods",
+        "none,slcn",
+        "--leave-one-out",
+        "street",
+        "square",
+        "ball",
+        "--seeds",
+        "3",
+        "--patch",
+        "16",
+        "--patches",
+        "30",
+        "--max-pairs",
+        "3",
+        "--no-keypoints",
+        "--tune-frames",
+        "3",
+    ]
     assert cli_main(args) == 0
     saved = json.loads((tmp_path / "loo" / "relight.json").read_text())
     assert saved["split"]["mode"] == "leave-one-out" and saved["split"]["train"] == []
     assert set(saved["tuning"]["slcn"]) == {"street", "square", "ball"}  # one fold per held-out scene
     tuned = saved["methods"]["slcn (tuned)"]
-    assert {n: tuned["specs"][n] for n in tuned["specs"]} == {n: saved["tuning"]["slcn"][n]["chosen"] for n in tuned["specs"]}
+    assert {n: tuned["specs"][n] for n in tuned["specs"]} == {
+        n: saved["tuning"]["slcn"][n]["chosen"] for n in tuned["specs"]
+    }
     assert "matching_orb" not in tuned["mean_test"]
-    assert cli_main(["bench", "relight", "--out", str(tmp_path / "x"), "--data", str(root / "webcam"),
-                     "--test-scenes", "mexico"]) == 2
+    assert (
+        cli_main(
+            [
+                "bench",
+                "relight",
+                "--out",
+                str(tmp_path / "x"),
+                "--data",
+                str(root / "webcam"),
+                "--test-scenes",
+                "mexico",
+            ]
+        )
+        == 2
+    )
 
 
 @pytest.mark.shared_data
 def test_real_photometric_stereo(shared_data, tmp_path):
     settings = relight.Settings(patches=60, gallery=1, max_pairs=3, keypoints=300)
-    result = relight.main(tmp_path, [shared_data / "psm"], ["none", "dog"], train_scenes=["cat"],
-                          test_scenes=["owl"], seeds=[0], settings=settings, max_frames=4, tuning=False, progress=False)
+    result = relight.main(
+        tmp_path,
+        [shared_data / "psm"],
+        ["none", "dog"],
+        train_scenes=["cat"],
+        test_scenes=["owl"],
+        seeds=[0],
+        settings=settings,
+        max_frames=4,
+        tuning=False,
+        progress=False,
+    )
     assert result["scenes"]["owl"]["frames"] == 4 and result["scenes"]["owl"]["size"] == [512, 340]
     for label in ("none", "dog"):
         assert 100 / 60 < result["methods"][label]["mean_test"]["identification"]["mean"] <= 100  # above chance
@@ -109,6 +167,7 @@ def test_tuning_grids_have_one_size_and_start_at_the_default(method):
     grid = relight.TUNING_GRIDS[method]
     assert len(grid) == 8 and len({tuple(p.items()) for p in grid}) == 8
     first, default = relight.build_method(relight._spec(method, grid[0])), relight.build_method(method)
+
     def public(n: object) -> dict:  # the parameters, not the OpenCV objects built from them
         return {k: v for k, v in vars(n.inner if method.endswith("+lstd") else n).items() if not k.startswith("_")}
 
@@ -119,11 +178,19 @@ def test_clahe_is_tuned_with_the_others(tmp_path):
     grid = relight.TUNING_GRIDS["clahe"]
     assert {"clipLimit": 4.0, "tileGridSize": (8, 8)} in grid  # Jenicek & Chum, ICCV 2019
     root = make_sets(tmp_path / "data")
-    result = relight.main(tmp_path / "out", [root / "webcam", root / "psm"], ["none", "clahe"],
-                          train_scenes=["square"], test_scenes=["street"], seeds=[0],
-                          settings=relight.Settings(patch=16, patches=40, gallery=1, max_pairs=2, keypoints=200,
-                                                    keypoint_protocols=False),
-                          tune_frames=3, progress=False)
+    result = relight.main(
+        tmp_path / "out",
+        [root / "webcam", root / "psm"],
+        ["none", "clahe"],
+        train_scenes=["square"],
+        test_scenes=["street"],
+        seeds=[0],
+        settings=relight.Settings(
+            patch=16, patches=40, gallery=1, max_pairs=2, keypoints=200, keypoint_protocols=False
+        ),
+        tune_frames=3,
+        progress=False,
+    )
     tuning = result["tuning"]["clahe"]["all"]
     assert len(tuning["scores"]) == 8 and tuning["chosen"] in tuning["scores"]
     chosen = relight.build_method(tuning["chosen"])

@@ -9,7 +9,17 @@ import pytest
 from alcn_cv import InputError
 from alcn_cv.bench import speed
 
-METHODS = ["none", "clahe", "alcn", "alcn exact", "alcn grid16 pyramid", "alcn lite", "alcn lite exact", "alcn torch cpu", "alcn gain-lite"]
+METHODS = [
+    "none",
+    "clahe",
+    "alcn",
+    "alcn exact",
+    "alcn grid16 pyramid",
+    "alcn lite",
+    "alcn lite exact",
+    "alcn torch cpu",
+    "alcn gain-lite",
+]
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +61,11 @@ def test_every_case_has_every_method_and_its_ratio_to_dog(report):
 def test_accuracy_is_measured_against_the_exact_path(report):
     _, result = report
     acc = {(a["method"], a["width"]) for a in result["accuracy"]}
-    others = ("alcn grid16 pyramid", "alcn lite", "alcn lite exact")  # the paper family; the gain ones are their own method
+    others = (
+        "alcn grid16 pyramid",
+        "alcn lite",
+        "alcn lite exact",
+    )  # the paper family; the gain ones are their own method
     assert acc == {(m, w) for m in others for w, _ in speed.QUICK_SIZES}
     by_case = {(a["method"], a["width"]): a for a in result["accuracy"]}
     for a in result["accuracy"]:
@@ -94,7 +108,9 @@ def test_cli_is_registered(tmp_path):
 
     parser = argparse.ArgumentParser()
     cli.add_parser(parser.add_subparsers(dest="command"))
-    args = parser.parse_args(["bench", "speed", "--out", str(tmp_path), "--quick", "--sizes", "64x48", "--methods", "none"])
+    args = parser.parse_args(
+        ["bench", "speed", "--out", str(tmp_path), "--quick", "--sizes", "64x48", "--methods", "none"]
+    )
     assert args.func is cli._run_speed and args.quick and args.sizes == [(64, 48)] and args.methods == ["none"]
 
 
@@ -108,15 +124,21 @@ def test_report_states_machine_command_and_settings(report):
 def test_targets_are_reported(report):
     out, result = report
     targets = result["targets"]
-    assert len(targets["summary"]) == 12  # the default against 2 and 4 DoGs, its lite variant, the lite paper-family ALCN, ...
+    assert (
+        len(targets["summary"]) == 12
+    )  # the default against 2 and 4 DoGs, its lite variant, the lite paper-family ALCN, ...
     for row in targets["summary"]:
         assert set(row) == {"target", "measured", "goal", "met", "note"}
     assert {r["method"] for r in targets["contract"]} == set(__import__("alcn_cv").available())
-    assert [r["threads"] for r in targets["threads"]] == [1, None] and all(r["torch_threads_kept"] for r in targets["threads"])
+    assert [r["threads"] for r in targets["threads"]] == [1, None] and all(
+        r["torch_threads_kept"] for r in targets["threads"]
+    )
     assert {r["method"] for r in targets["memory"]} == {"alcn", "dog"}
     assert targets["video"]["frames"] >= 2 and targets["video"]["normalize_s"] > 0
     assert "cpu" in targets["batched"] and targets["batched"]["cpu"]["half_max_abs"] < 0.05
-    assert {"network_ms", "mixture_ms", "contract_ms", "apply_ms"} <= set(targets["stages"]["alcn"]) and targets["profile"]
+    assert {"network_ms", "mixture_ms", "contract_ms", "apply_ms"} <= set(targets["stages"]["alcn"]) and targets[
+        "profile"
+    ]
     md = (out / "speed.md").read_text()
     assert md.index("## Targets") < md.index("## Time") and "Where the time goes" in md
 
@@ -133,7 +155,9 @@ def test_device_run_measures_the_batched_path_beside_kornia(tmp_path):
             assert row[f"{name} fps"] > 0
     assert "--device cpu" in result["command"] and "kornia clahe fps" in (tmp_path / "speed.md").read_text()
     with pytest.raises(InputError, match="--device"):
-        speed.main(tmp_path, dataclasses.replace(settings, device="cuda:7")) if not _cuda() else pytest.skip("a GPU is present")
+        speed.main(tmp_path, dataclasses.replace(settings, device="cuda:7")) if not _cuda() else pytest.skip(
+            "a GPU is present"
+        )
 
 
 def _cuda() -> bool:

@@ -7,9 +7,9 @@ import cv2
 import numpy as np
 import pytest
 
-from board_scene import make_board_scene
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats.colmap import read_model
+from board_scene import make_board_scene
 from calib.board import BoardSpec
 from calib.camera import BoardView, calibrate, detect_in_images, load_calibration, main, select_views
 

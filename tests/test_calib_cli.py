@@ -29,8 +29,25 @@ def test_board_command(tmp_path, capsys):
 
 @pytest.mark.shared_data
 def test_camera_command_on_real_chessboard(shared_data, tmp_path, capsys):
-    rc = alcn(["calib", "camera", "--images", str(shared_data / "chessboard"), "--board", "chessboard",
-               "--cols", "9", "--rows", "6", "--square", "25", "--out", str(tmp_path), "--no-report"])
+    rc = alcn(
+        [
+            "calib",
+            "camera",
+            "--images",
+            str(shared_data / "chessboard"),
+            "--board",
+            "chessboard",
+            "--cols",
+            "9",
+            "--rows",
+            "6",
+            "--square",
+            "25",
+            "--out",
+            str(tmp_path),
+            "--no-report",
+        ]
+    )
     assert rc == 0
     assert "RMS 0.409 px over 13 views" in capsys.readouterr().out
     assert (tmp_path / "camera.yaml").is_file() and (tmp_path / "colmap" / "cameras.txt").is_file()
@@ -43,10 +60,14 @@ def test_register_and_undistort_commands(tmp_path, capsys):
     for i, image in enumerate(scene.images):
         cv2.imwrite(str(frames / f"{i}.png"), image)
     write_camera_yaml(tmp_path / "camera.yaml", scene.K, np.zeros(5), (640, 480))
-    rc = alcn(["calib", "register", str(frames), "--calib", str(tmp_path / "camera.yaml"), "--out", str(tmp_path / "reg")])
+    rc = alcn(
+        ["calib", "register", str(frames), "--calib", str(tmp_path / "camera.yaml"), "--out", str(tmp_path / "reg")]
+    )
     assert rc == 0
     assert "registered 3 of 3 frames (mm)" in capsys.readouterr().out
-    rc = alcn(["calib", "undistort", str(frames / "0.png"), str(tmp_path / "u.png"), "--calib", str(tmp_path / "camera.yaml")])
+    rc = alcn(
+        ["calib", "undistort", str(frames / "0.png"), str(tmp_path / "u.png"), "--calib", str(tmp_path / "camera.yaml")]
+    )
     assert rc == 0 and (tmp_path / "u.camera.yaml").is_file()
 
 
@@ -68,8 +89,8 @@ def test_register_sfm_with_known_distance(shared_data, tmp_path, capsys):
     """6 consecutive Middlebury views, no board: SfM, scaled by one known camera distance."""
     from scipy.spatial.transform import Rotation
 
-    from alcn_cv.formats.middlebury import read_middlebury
     from alcn_cv.formats import bop
+    from alcn_cv.formats.middlebury import read_middlebury
 
     views = read_middlebury(shared_data / "middlebury" / "templeSparseRing")[5:11]
     frames = tmp_path / "frames"
@@ -79,8 +100,25 @@ def test_register_sfm_with_known_distance(shared_data, tmp_path, capsys):
     write_camera_yaml(tmp_path / "camera.yaml", views[0].K, np.zeros(5), (640, 480))
     a, b = views[0], views[-1]
     mm = np.linalg.norm(a.center - b.center) * 1000.0
-    rc = alcn(["calib", "register", str(frames), "--method", "sfm", "--calib", str(tmp_path / "camera.yaml"),
-               "--known-distance", a.name, b.name, f"{mm:.3f}", "--threads", "2", "--out", str(tmp_path / "reg")])
+    rc = alcn(
+        [
+            "calib",
+            "register",
+            str(frames),
+            "--method",
+            "sfm",
+            "--calib",
+            str(tmp_path / "camera.yaml"),
+            "--known-distance",
+            a.name,
+            b.name,
+            f"{mm:.3f}",
+            "--threads",
+            "2",
+            "--out",
+            str(tmp_path / "reg"),
+        ]
+    )
     assert rc == 0
     assert "registered 6 of 6 frames (mm)" in capsys.readouterr().out
     est = [(f.R_w2c, f.t_w2c) for f in bop.load_scene(tmp_path / "reg").frames]

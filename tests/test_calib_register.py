@@ -8,11 +8,11 @@ import pycolmap
 import pytest
 from scipy.spatial.transform import Rotation
 
-from board_scene import make_board_scene
 from alcn_cv.errors import InputError
 from alcn_cv.formats import bop
 from alcn_cv.formats.colmap import read_model
 from alcn_cv.formats.middlebury import read_middlebury
+from board_scene import make_board_scene
 from calib.board import BoardSpec
 from calib.camera import Calibration
 from calib.register import SfmSettings, register_charuco, register_colmap, similarity_from_poses
@@ -120,8 +120,9 @@ def test_colmap_registration_of_middlebury_temple(shared_data, tmp_path):
     reference = {v.name: (v.R_w2c, v.t_w2c * 1000.0) for v in views}
     # One thread: COLMAP's multi-threaded matching and mapping are not deterministic, and on a
     # fresh-clone CI run beside another test worker they once registered only 5 of 16 views.
-    reg = register_colmap(views[0].path.parent, tmp_path / "reg", calib, reference=reference,
-                          settings=SfmSettings(num_threads=1))
+    reg = register_colmap(
+        views[0].path.parent, tmp_path / "reg", calib, reference=reference, settings=SfmSettings(num_threads=1)
+    )
     gt = {v.path.stem: v for v in views}  # registered frames are named by their file stem
     kept = reg.registered
     assert len(kept) >= 10, [f"{f.name}: {f.status}" for f in reg.dropped]

@@ -4,8 +4,8 @@ import cv2
 import numpy as np
 import pytest
 
-from board_scene import make_board_scene
 from alcn_cv.errors import InputError
+from board_scene import make_board_scene
 from calib.board import BoardSpec
 from calib.camera import Calibration, load_calibration
 from calib.undistort import Undistorter, main

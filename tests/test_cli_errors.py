@@ -63,28 +63,66 @@ def _file(path: Path) -> Path:
 Case = tuple[Callable[[Path], list[str]], list[str], str]
 CASES: dict[str, Case] = {
     "image to a name without extension": (
-        lambda t: [_image(t / "in.png"), t / "out" / "noext"], ["noext", "image file"], "out/noext"),
-    "image to a video name": (lambda t: [_image(t / "in.png"), t / "out" / "x.mp4"], ["x.mp4", "image file"], "out/x.mp4"),
-    "image under a file": (lambda t: [_image(t / "in.png"), _file(t / "blocker") / "x.png"], ["blocker is a file"], "blocker/x.png"),
+        lambda t: [_image(t / "in.png"), t / "out" / "noext"],
+        ["noext", "image file"],
+        "out/noext",
+    ),
+    "image to a video name": (
+        lambda t: [_image(t / "in.png"), t / "out" / "x.mp4"],
+        ["x.mp4", "image file"],
+        "out/x.mp4",
+    ),
+    "image under a file": (
+        lambda t: [_image(t / "in.png"), _file(t / "blocker") / "x.png"],
+        ["blocker is a file"],
+        "blocker/x.png",
+    ),
     "folder to a file": (
-        lambda t: [_image(t / "dir" / "a.png").parent, _file(t / "blocker")], ["blocker is a file"], "blocker/a.png"),
-    "truncated JPEG": (lambda t: [_truncated(_image(t / "cut.jpg")), t / "out.png"], ["cut.jpg", "truncated"], "out.png"),
+        lambda t: [_image(t / "dir" / "a.png").parent, _file(t / "blocker")],
+        ["blocker is a file"],
+        "blocker/a.png",
+    ),
+    "truncated JPEG": (
+        lambda t: [_truncated(_image(t / "cut.jpg")), t / "out.png"],
+        ["cut.jpg", "truncated"],
+        "out.png",
+    ),
     "truncated PNG": (lambda t: [_truncated(_image(t / "cut.png")), t / "out.png"], ["cut.png"], "out.png"),
     "truncated video": (
-        lambda t: [_truncated(_video(t / "v.avi"), 0.6), t / "out.avi", "-m", "none"], ["v.avi", "of 20 frames"], "out.avi"),
+        lambda t: [_truncated(_video(t / "v.avi"), 0.6), t / "out.avi", "-m", "none"],
+        ["v.avi", "of 20 frames"],
+        "out.avi",
+    ),
     "empty weight file": (
-        lambda t: [_image(t / "in.png"), t / "out.png", "-p", f"weights={_empty(t / 'w.npz')}"], ["w.npz", "empty"], "out.png"),
+        lambda t: [_image(t / "in.png"), t / "out.png", "-p", f"weights={_empty(t / 'w.npz')}"],
+        ["w.npz", "empty"],
+        "out.png",
+    ),
     "random bytes weight file": (
         lambda t: [_image(t / "in.png"), t / "out.png", "-p", f"weights={_truncated(_image(t / 'w.png'), 1.0)}"],
-        ["w.png", "not a .npz"], "out.png"),
+        ["w.png", "not a .npz"],
+        "out.png",
+    ),
     "NaN weights": (
         lambda t: [_image(t / "in.png"), t / "out.png", "-p", f"weights={_weights(t / 'nan.npz', np.nan)}"],
-        ["nan.npz", "NaN"], "out.png"),
+        ["nan.npz", "NaN"],
+        "out.png",
+    ),
     "inf weights": (
         lambda t: [_image(t / "in.png"), t / "out.png", "-p", f"weights={_weights(t / 'inf.npz', np.inf)}"],
-        ["inf.npz", "infinite"], "out.png"),
-    "parameter not a number": (lambda t: [_image(t / "in.png"), t / "out.png", "-p", "scale=abc"], ["'alcn'", "scale='abc'"], "out.png"),
-    "unknown parameter": (lambda t: [_image(t / "in.png"), t / "out.png", "-m", "dog", "-p", "sigma=2"], ["'dog'", "sigma1"], "out.png"),
+        ["inf.npz", "infinite"],
+        "out.png",
+    ),
+    "parameter not a number": (
+        lambda t: [_image(t / "in.png"), t / "out.png", "-p", "scale=abc"],
+        ["'alcn'", "scale='abc'"],
+        "out.png",
+    ),
+    "unknown parameter": (
+        lambda t: [_image(t / "in.png"), t / "out.png", "-m", "dog", "-p", "sigma=2"],
+        ["'dog'", "sigma1"],
+        "out.png",
+    ),
     "no input": (lambda t: [], ["INPUT"], "out.png"),
 }
 
@@ -161,17 +199,29 @@ Protect = tuple[Callable[[Path], list[object]], list[str], Callable | None]
 PROTECT: dict[str, Protect] = {
     "image onto itself": (lambda t: [_image(t / "a.png"), t / "a.png"], ["a.png is the input", "--in-place"], None),
     "image onto itself by another path": (
-        lambda t: [_image(t / "a.png"), t / ".." / t.name / "a.png"], ["is the input", "--in-place"], None),
+        lambda t: [_image(t / "a.png"), t / ".." / t.name / "a.png"],
+        ["is the input", "--in-place"],
+        None,
+    ),
     "video onto itself": (lambda t: [_video(t / "v.avi"), t / "v.avi", "-m", "none"], ["v.avi is the input"], None),
     "folder onto itself": (lambda t: [_folder(t / "in", "a.png", "b.png"), t / "in"], ["in is the input"], None),
     "existing image": (lambda t: [_image(t / "a.png"), _image(t / "b.png")], ["b.png exists", "--overwrite"], None),
     "existing video": (
-        lambda t: [_video(t / "v.avi"), _video(t / "w.avi"), "-m", "none"], ["w.avi exists", "--overwrite"], None),
+        lambda t: [_video(t / "v.avi"), _video(t / "w.avi"), "-m", "none"],
+        ["w.avi exists", "--overwrite"],
+        None,
+    ),
     "existing image in the output folder": (
-        lambda t: [_folder(t / "in", "a.png", "b.png"), _folder(t / "out", "b.png")], ["b.png exists", "--overwrite"],
-        None),
+        lambda t: [_folder(t / "in", "a.png", "b.png"), _folder(t / "out", "b.png")],
+        ["b.png exists", "--overwrite"],
+        None,
+    ),
     "corrupt image in a folder": (lambda t: [_corrupt_folder(t / "in"), t / "out"], ["c.png"], None),
-    "read-only target": (lambda t: [_image(t / "a.png"), t / "ro" / "out.png"], ["cannot write", "out.png"], _read_only),
+    "read-only target": (
+        lambda t: [_image(t / "a.png"), t / "ro" / "out.png"],
+        ["cannot write", "out.png"],
+        _read_only,
+    ),
 }
 
 
@@ -199,12 +249,35 @@ def test_no_file_is_replaced_or_half_written(tmp_path, capsys, monkeypatch, case
 #: shared data, the glob under tmp_path (also TMPDIR) whose appearance says the work is under way).
 SIGTERM_CASES: dict[str, tuple[Callable[[Path, Path], list[object]], str]] = {
     "normalize a video": (
-        lambda t, data: ["normalize", _video(t / "v.avi", frames=300, size=(640, 480)), t / "out.avi", "-m", "tantriggs"], ".out.*.tmp.avi"),
+        lambda t, data: [
+            "normalize",
+            _video(t / "v.avi", frames=300, size=(640, 480)),
+            t / "out.avi",
+            "-m",
+            "tantriggs",
+        ],
+        ".out.*.tmp.avi",
+    ),
     "pose build (pycolmap)": (
-        lambda t, data: ["pose", "build", data / "cookie_box" / "box.mp4", t / "model.npz", "--box-ply",
-                         data / "cookie_box" / "box.ply", "--K", 1578.5, 1771.8, 320, 240, "--motion-mask",
-                         "--refine-focal", "--video-step", 10],
-        "alcn_pycolmap_log_*"),
+        lambda t, data: [
+            "pose",
+            "build",
+            data / "cookie_box" / "box.mp4",
+            t / "model.npz",
+            "--box-ply",
+            data / "cookie_box" / "box.ply",
+            "--K",
+            1578.5,
+            1771.8,
+            320,
+            240,
+            "--motion-mask",
+            "--refine-focal",
+            "--video-step",
+            10,
+        ],
+        "alcn_pycolmap_log_*",
+    ),
 }
 
 
@@ -226,7 +299,10 @@ def test_sigterm_cleans_up_as_ctrl_c(tmp_path, case, request):
     env = {**os.environ, "TMPDIR": str(work), "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
     proc = subprocess.Popen(
         [sys.executable, "-m", "alcn_cv.cli", *map(str, make_args(work, data))],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
     )
     deadline = time.monotonic() + 240
     while not list(work.rglob(started)) and proc.poll() is None and time.monotonic() < deadline:

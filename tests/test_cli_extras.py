@@ -57,5 +57,6 @@ def test_extras_are_read_from_the_installed_metadata():
     error = missing_dependency("kornia", "alcn_cv.filters.kornia_mixture")
     assert isinstance(error, MissingDependencyError) and isinstance(error, ImportError)
     assert str(error) == (
-        'alcn_cv.filters.kornia_mixture: needs the [train] extra (kornia is not installed): pip install "alcn-cv[train]"'
+        "alcn_cv.filters.kornia_mixture: needs the [train] extra (kornia is not installed): "
+        'pip install "alcn-cv[train]"'
     )

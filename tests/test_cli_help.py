@@ -28,8 +28,11 @@ def _has_default(action: argparse.Action) -> bool:
 @pytest.mark.parametrize("command", sorted(COMMANDS))
 def test_help_states_every_default(command):
     parser = COMMANDS[command]
-    missing = [a.option_strings[-1] for a in parser._actions
-               if a.option_strings and _has_default(a) and "default" not in (a.help or "")]
+    missing = [
+        a.option_strings[-1]
+        for a in parser._actions
+        if a.option_strings and _has_default(a) and "default" not in (a.help or "")
+    ]
     assert not missing, f"{command}: no default in the help of {missing}"
 
 

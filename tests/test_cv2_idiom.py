@@ -27,7 +27,10 @@ DST_CASES = {
     "dst of another dtype": (lambda m, img, dst: m.apply(img, dst), lambda out: np.zeros(out.shape, np.float32), False),
     "read-only dst": (lambda m, img, dst: m.apply(img, dst), lambda out: np.zeros_like(out).view(), False),
     "dst and out_dtype": (
-        lambda m, img, dst: m.apply(img, dst, out_dtype=np.float32), lambda out: np.empty(out.shape, np.float32), True),
+        lambda m, img, dst: m.apply(img, dst, out_dtype=np.float32),
+        lambda out: np.empty(out.shape, np.float32),
+        True,
+    ),
 }
 
 

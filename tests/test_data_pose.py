@@ -20,8 +20,9 @@ from alcn_cv.formats.colmap import read_text_model
 @pytest.fixture(scope="module")
 def plain(tmp_path_factory):
     """Small sequences without clutter: the duck is the only possible occluder of the box."""
-    return pose.generate(tmp_path_factory.mktemp("pose") / "plain", size="small", n_frames=2, clutter=False,
-                         progress=False)
+    return pose.generate(
+        tmp_path_factory.mktemp("pose") / "plain", size="small", n_frames=2, clutter=False, progress=False
+    )
 
 
 def _scenes(root):
@@ -31,7 +32,8 @@ def _scenes(root):
 def test_layout_and_schemas(plain):
     scenes = _scenes(plain)
     assert [s.relative_to(plain).as_posix() for s in scenes] == (
-        [f"test/{k:06d}" for k in range(1, 9)] + ["train/000001"])
+        [f"test/{k:06d}" for k in range(1, 9)] + ["train/000001"]
+    )
     for s in scenes:
         jsonschema.validate(json.loads((s / "scene_camera.json").read_text()), schema("bop_scene_camera"))
         jsonschema.validate(json.loads((s / "scene_gt.json").read_text()), schema("bop_scene_gt"))
@@ -147,10 +149,12 @@ def _elevations_deg(poses) -> np.ndarray:
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_three_sweeps_see_every_stretch_of_azimuth_from_high_and_low(seed):
     """Every 11 consecutive views (about 120 deg of the 330 deg loop) span nearly the 30-60 deg band."""
+
     def narrowest_span(cycles):
-        el = _elevations_deg(pose.trajectory(30, np.random.default_rng([seed, 20]), span_deg=330.0,
-                                             elevation_cycles=cycles))
-        return min(np.ptp(el[i:i + 11]) for i in range(len(el) - 10))
+        el = _elevations_deg(
+            pose.trajectory(30, np.random.default_rng([seed, 20]), span_deg=330.0, elevation_cycles=cycles)
+        )
+        return min(np.ptp(el[i : i + 11]) for i in range(len(el) - 10))
 
     assert narrowest_span(3) > 25.0
     assert narrowest_span(1) < 12.0  # one sweep: a stretch of azimuth is seen from one height only
@@ -160,8 +164,11 @@ def test_training_loops_change_only_the_training_sequence(tmp_path):
     kw = dict(size="small", n_frames=4, n_test=1, seed=3, clutter=False, progress=False)
     one = pose.generate(tmp_path / "one", train_sweeps=(1,), **kw)
     default = pose.generate(tmp_path / "default", **kw)
-    assert json.loads((default / "manifest.json").read_text())["parameters"]["train_sweeps"] == \
-        list(pose.TRAIN_SWEEPS) == [1, 3]
+    assert (
+        json.loads((default / "manifest.json").read_text())["parameters"]["train_sweeps"]
+        == list(pose.TRAIN_SWEEPS)
+        == [1, 3]
+    )
     for f in sorted((one / "test").rglob("*.png")) + sorted((one / "test").rglob("*.json")):
         assert f.read_bytes() == (default / f.relative_to(one)).read_bytes(), f
     a, b = load_scene(one / "train" / "000001"), load_scene(default / "train" / "000001")

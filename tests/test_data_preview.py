@@ -45,13 +45,17 @@ def test_compare_psm(shared_data, tmp_path):
     for name in ("psm_comparison.png", "psm_comparison.md", "psm_comparison.json"):
         assert (tmp_path / name).stat().st_size > 100
     # The random lighting families change appearance more than the 12 near-frontal PSM lights.
-    assert (stats["engine light families"]["across_lights_pairwise_ncc"]["mean"]
-            < stats["real psm"]["across_lights_pairwise_ncc"]["mean"])
+    assert (
+        stats["engine light families"]["across_lights_pairwise_ncc"]["mean"]
+        < stats["real psm"]["across_lights_pairwise_ncc"]["mean"]
+    )
 
 
 def test_cli(tmp_path, capsys):
-    assert main(["data", "detect", "--size", "small", "--n-test", "1", "--n-train", "1", "--out",
-                 str(tmp_path / "d")]) == 0
+    assert (
+        main(["data", "detect", "--size", "small", "--n-test", "1", "--n-train", "1", "--out", str(tmp_path / "d")])
+        == 0
+    )
     assert main(["data", "preview", str(tmp_path / "d"), "--out", str(tmp_path / "p.png")]) == 0
     assert (tmp_path / "p.png").exists()
     assert main(["data", "phos", "-n", "5", "--objects", "2", "--out", str(tmp_path / "w")]) == 0

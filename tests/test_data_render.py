@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from alcn_cv.data.lighting import LIGHT_FAMILIES, Light, LightArrays, Lighting, directional, sample_lighting, shadow_shape
+from alcn_cv.data.lighting import (
+    LIGHT_FAMILIES,
+    Light,
+    LightArrays,
+    Lighting,
+    directional,
+    sample_lighting,
+    shadow_shape,
+)
 from alcn_cv.data.render import (
     MATERIALS,
     Surface,
@@ -96,8 +104,9 @@ def test_every_family_renders_within_range():
     rng = np.random.default_rng(1)
     n = len(LIGHT_FAMILIES)
     alb = np.full((n, 32, 32, 3), 0.4, np.float32)
-    surf = Surface(alb, np.zeros((n, 32, 32), np.float32),
-                   np.broadcast_to(MATERIALS["plastic"].vector(), (n, 32, 32, 6)).copy())
+    surf = Surface(
+        alb, np.zeros((n, 32, 32), np.float32), np.broadcast_to(MATERIALS["plastic"].vector(), (n, 32, 32, 6)).copy()
+    )
     lts = [sample_lighting(rng, f, 32, 32) for f in LIGHT_FAMILIES]
     img = render_surfaces(surf, lts, rng, gray=True)
     assert img.shape == (n, 32, 32) and img.dtype == np.uint8

@@ -18,8 +18,20 @@ def _image():
 
 def test_augment_centres_the_object_at_the_requested_extent():
     img, box = _image()
-    win = augment(img, box, 32, np.random.default_rng(1), extent=40, max_shift=0, max_rotation_deg=0,
-                  max_scale_change=0, noise=0, intensity_scale=(1, 1), intensity_offset=0, replace_background=0)
+    win = augment(
+        img,
+        box,
+        32,
+        np.random.default_rng(1),
+        extent=40,
+        max_shift=0,
+        max_rotation_deg=0,
+        max_scale_change=0,
+        noise=0,
+        intensity_scale=(1, 1),
+        intensity_offset=0,
+        replace_background=0,
+    )
     assert win.shape == (32, 64, 64) and win.dtype == np.uint8
     bright = win.mean(0) > 140
     ys, xs = np.nonzero(bright)
@@ -46,8 +58,17 @@ def test_augment_varies_intensity_background_and_noise():
 
 def test_negatives_avoid_the_object():
     img, box = _image()
-    neg = sample_negatives([img], [box], 50, np.random.default_rng(3), natural_fraction=0.0, off_centre_fraction=0.0,
-                           noise=0, intensity_scale=(1, 1), intensity_offset=0)
+    neg = sample_negatives(
+        [img],
+        [box],
+        50,
+        np.random.default_rng(3),
+        natural_fraction=0.0,
+        off_centre_fraction=0.0,
+        noise=0,
+        intensity_scale=(1, 1),
+        intensity_offset=0,
+    )
     assert neg.shape == (50, 64, 64)
     centre = neg[:, 16:48, 16:48].astype(np.float32)
     assert (centre.reshape(50, -1).mean(1) < 120).all()  # background is 90, the object >= 150

@@ -12,9 +12,17 @@ from alcn_cv.formats.coco import CocoImage
 
 
 def test_row_labels_differ_for_images_of_the_same_light_family():
-    images = [CocoImage(k + 1, f"{k}.png", 8, 8, Path(f"{k}.png"),
-                        {"light_family": "shadow", "lighting": {"family": "shadow", "gain": gain}})
-              for k, gain in enumerate([0.86, 0.93])]
+    images = [
+        CocoImage(
+            k + 1,
+            f"{k}.png",
+            8,
+            8,
+            Path(f"{k}.png"),
+            {"light_family": "shadow", "lighting": {"family": "shadow", "gain": gain}},
+        )
+        for k, gain in enumerate([0.86, 0.93])
+    ]
     labels = [image_label(k, im) for k, im in enumerate(images)]
     assert len(set(labels)) == 2 and all("shadow light" in label for label in labels)
 

@@ -245,7 +245,9 @@ def test_alpha_is_passed_through(name, dtype, colour):
     np.testing.assert_array_equal(out[..., :-1], norm.apply(img[..., :-1]))
     np.testing.assert_array_equal(img, before)
     as_float = norm.apply(img, out_dtype=np.float32)
-    np.testing.assert_allclose(as_float[..., -1], alpha, atol=1e-6 if dtype == np.float32 else 0.5 / np.iinfo(dtype).max)
+    np.testing.assert_allclose(
+        as_float[..., -1], alpha, atol=1e-6 if dtype == np.float32 else 0.5 / np.iinfo(dtype).max
+    )
 
 
 @pytest.mark.parametrize("name", CLASSICAL)

@@ -20,8 +20,12 @@ def _saturated_hues() -> np.ndarray:
     """Fully saturated hues at four brightnesses, in 8x8 blocks alternating with black and
     white ones: the normalized lightness lands far from the input's, out of the sRGB gamut."""
     hue = np.linspace(0, 179, 48).astype(np.uint8)
-    rows = [cv2.cvtColor(np.stack([hue, np.full_like(hue, 255), np.full_like(hue, value)], axis=-1)[None], cv2.COLOR_HSV2BGR)[0]
-            for value in (255, 192, 96, 32)]
+    rows = [
+        cv2.cvtColor(
+            np.stack([hue, np.full_like(hue, 255), np.full_like(hue, value)], axis=-1)[None], cv2.COLOR_HSV2BGR
+        )[0]
+        for value in (255, 192, 96, 32)
+    ]
     blocks = np.repeat(np.repeat(np.stack(rows), 8, axis=0), 8, axis=1)
     blocks[::16, ::2] = 0
     blocks[8::16, 1::2] = 255
@@ -29,7 +33,10 @@ def _saturated_hues() -> np.ndarray:
 
 
 def _images() -> list[np.ndarray]:
-    images = [synthetic_frame(200, 150, True, seed=3), np.random.default_rng(0).integers(0, 256, (90, 120, 3), dtype=np.uint8)]
+    images = [
+        synthetic_frame(200, 150, True, seed=3),
+        np.random.default_rng(0).integers(0, 256, (90, 120, 3), dtype=np.uint8),
+    ]
     saturated = np.zeros((64, 96, 3), np.uint8)
     saturated[:, :32, 2] = 255  # pure red, green and blue blocks next to black: out-of-gamut lightness
     saturated[:, 32:64, 1] = 255
@@ -41,8 +48,11 @@ def _images() -> list[np.ndarray]:
 def test_colour_within_one_level_of_the_lab_round_trip(name):
     method = from_spec(name)
     for img in _images():
-        for source, out_dtype in ((img, np.uint8), (img.astype(np.uint16) * 257, np.uint16),
-                                  (img.astype(np.float32) / np.float32(255), np.float32)):
+        for source, out_dtype in (
+            (img, np.uint8),
+            (img.astype(np.uint16) * 257, np.uint16),
+            (img.astype(np.float32) / np.float32(255), np.float32),
+        ):
             out = method.apply(source, out_dtype=out_dtype)
             reference = lab_round_trip(method, source, np.dtype(out_dtype))
             assert out.dtype == reference.dtype and out.shape == reference.shape

@@ -75,7 +75,9 @@ def test_pyramid_eq1_error_bound(image):
 def test_pyramid_eq3_error_bound(image):
     rng = np.random.default_rng(4)
     h, w = image.shape
-    maps = np.stack([cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR) for g in rng.normal(size=(10, 4, 5)).astype(np.float32)])
+    maps = np.stack(
+        [cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR) for g in rng.normal(size=(10, 4, 5)).astype(np.float32)]
+    )
     exact = alcn_filter(image, maps, FULL_RES_SIGMAS)
     diff = np.abs(alcn_filter_pyramid(image, maps, FULL_RES_SIGMAS) - exact)
     assert exact.std() > 0.1
@@ -263,7 +265,12 @@ def test_default_is_the_gain_normalizer_and_lite_the_pyramid():
     from alcn_cv.enhance.alcn import MODELS
 
     default = alcn_cv.createALCN()
-    assert (default.weights_path, default.mixture, default.grid_stride, default.scale) == (MODELS["gain"], "exact", 8, 1.0)
+    assert (default.weights_path, default.mixture, default.grid_stride, default.scale) == (
+        MODELS["gain"],
+        "exact",
+        8,
+        1.0,
+    )
     assert alcn_cv.createALCN(backend="opencv").mixture == "exact"
     lite = alcn_cv.createALCN(model="lite")
     assert (lite.weights_path, lite.mixture, lite.grid_stride) == (MODELS["lite"], "pyramid", 8)
@@ -274,7 +281,9 @@ def test_default_is_the_gain_normalizer_and_lite_the_pyramid():
 def test_threads_are_restored(image):
     before = torch.get_num_threads()
     alcn = _alcn(None, model="paper", threads=1, grid_stride=16)
-    np.testing.assert_allclose(alcn.normalize(image), _alcn(None, model="paper", grid_stride=16).normalize(image), atol=1e-6)
+    np.testing.assert_allclose(
+        alcn.normalize(image), _alcn(None, model="paper", grid_stride=16).normalize(image), atol=1e-6
+    )
     assert torch.get_num_threads() == before
     with pytest.raises(InputError, match="threads"):
         alcn_cv.createALCN(threads=0)
@@ -297,7 +306,9 @@ def test_a_stale_lite_file_is_reported(tmp_path, monkeypatch, caplog, model, tea
 def test_files_record_the_default_model_by_name():
     from alcn_cv.enhance.alcn import DEFAULT_MODEL, pin_default_model
 
-    assert pin_default_model("alcn") == f"alcn:model={DEFAULT_MODEL}" and alcn_cv.createALCN().weights_path.stem.endswith(DEFAULT_MODEL)
+    assert pin_default_model(
+        "alcn"
+    ) == f"alcn:model={DEFAULT_MODEL}" and alcn_cv.createALCN().weights_path.stem.endswith(DEFAULT_MODEL)
     assert pin_default_model("alcn:threads=1") == f"alcn:threads=1:model={DEFAULT_MODEL}"
     for spec in ("alcn:model=lite", "alcn:weights=w.npz", "dog", "dog:sigma1=1"):
         assert pin_default_model(spec) == spec

@@ -19,7 +19,12 @@ def _response(h=57, w=83, seed=0):
 def test_gaussian_energy_numpy_and_torch_agree():
     r = _response()
     expected = divisive.gaussian_energy(r, 2.0)
-    np.testing.assert_allclose(torch_divisive.gaussian_energy(torch.from_numpy(r)[None, None], 2.0)[0, 0].numpy(), expected, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(
+        torch_divisive.gaussian_energy(torch.from_numpy(r)[None, None], 2.0)[0, 0].numpy(),
+        expected,
+        rtol=1e-5,
+        atol=1e-7,
+    )
 
 
 @pytest.mark.parametrize("floor, multiplier", [(None, 1.0), (0.05, 1.0), (None, 1 / 3)])
@@ -36,7 +41,9 @@ def test_divisive_normalization_numpy_and_torch_agree(floor, multiplier):
 
 def test_invariant_to_a_gain_of_the_response():
     r = _response(seed=2)
-    np.testing.assert_allclose(divisive.divisive_normalization(8 * r, 2.0, 1.0), divisive.divisive_normalization(r, 2.0, 1.0), atol=1e-3)
+    np.testing.assert_allclose(
+        divisive.divisive_normalization(8 * r, 2.0, 1.0), divisive.divisive_normalization(r, 2.0, 1.0), atol=1e-3
+    )
 
 
 def test_blur_pads_reflect_101_for_any_size():

@@ -30,8 +30,17 @@ def _frames(n=3):
     for i in range(n):
         R = Rotation.from_euler("xyz", [10 * i, 5, -20], degrees=True).as_matrix()
         t = np.array([1.0 * i, -20.0, 600.0])
-        out.append(BopFrame(i, None, K, 1.0, [BopObjectPose(1, R, t), BopObjectPose(2, R.T, t + 50)],
-                            R if i else None, t if i else None))
+        out.append(
+            BopFrame(
+                i,
+                None,
+                K,
+                1.0,
+                [BopObjectPose(1, R, t), BopObjectPose(2, R.T, t + 50)],
+                R if i else None,
+                t if i else None,
+            )
+        )
     return out
 
 
@@ -89,16 +98,36 @@ def test_missing_and_truncated_scene_files(tmp_path):
 
 def _cube(scale=50.0):
     v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) * scale
-    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    f = np.array(
+        [
+            [0, 1, 3],
+            [0, 3, 2],
+            [4, 6, 7],
+            [4, 7, 5],
+            [0, 4, 5],
+            [0, 5, 1],
+            [2, 3, 7],
+            [2, 7, 6],
+            [0, 2, 6],
+            [0, 6, 4],
+            [1, 5, 7],
+            [1, 7, 3],
+        ]
+    )
     return v, f
 
 
 @pytest.mark.parametrize("binary", [True, False])
 def test_ply_roundtrip(tmp_path, binary):
     v, f = _cube()
-    m = PlyModel(v, f, v / np.linalg.norm(v, axis=1, keepdims=True), np.full((8, 3), 200, np.uint8),
-                 np.linspace(0, 1, 16).reshape(8, 2), "tex.png")
+    m = PlyModel(
+        v,
+        f,
+        v / np.linalg.norm(v, axis=1, keepdims=True),
+        np.full((8, 3), 200, np.uint8),
+        np.linspace(0, 1, 16).reshape(8, 2),
+        "tex.png",
+    )
     write_ply(tmp_path / "m.ply", m, binary=binary)
     r = read_ply(tmp_path / "m.ply")
     np.testing.assert_allclose(r.vertices, v, atol=1e-4)
@@ -127,9 +156,11 @@ def test_bad_ply_files(tmp_path):
         read_ply(p)
     with pytest.raises(DatasetError, match="not found"):
         read_ply(tmp_path / "none.ply")
-    p.write_text("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
-                 "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
-                 "0 0 0\n10 0 0\n10 10 0\n0 10 0\n4 0 1 2 3\n")
+    p.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0\n10 0 0\n10 10 0\n0 10 0\n4 0 1 2 3\n"
+    )
     with pytest.raises(DatasetError, match="triangles"):
         read_ply(p)
 

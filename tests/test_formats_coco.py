@@ -28,10 +28,13 @@ def _doc(tmp_path, **changes):
 
 
 def test_roundtrip_and_image_lookup(tmp_path):
-    path = write_coco(tmp_path / "w.json", [{"id": 3, "file_name": "images/a.png", "width": 60, "height": 40,
-                                             "light_family": "dark"}],
-                      [{"id": 1, "image_id": 3, "category_id": 1, "bbox": [1, 2, 3, 4]}],
-                      [{"id": 1, "name": "box"}], {"description": "t"})
+    path = write_coco(
+        tmp_path / "w.json",
+        [{"id": 3, "file_name": "images/a.png", "width": 60, "height": 40, "light_family": "dark"}],
+        [{"id": 1, "image_id": 3, "category_id": 1, "bbox": [1, 2, 3, 4]}],
+        [{"id": 1, "name": "box"}],
+        {"description": "t"},
+    )
     _doc(tmp_path)
     ds = load_coco(path, check_images=True)
     assert ds.images[0].extra == {"light_family": "dark"} and ds.info["description"] == "t"
@@ -53,8 +56,10 @@ def test_roundtrip_and_image_lookup(tmp_path):
         ({"images": [{"id": 1, "file_name": "a.png", "width": "60", "height": 40}]}, r"images\[0\]\.width"),
         ({"annotations": [{"id": 1, "image_id": 7, "category_id": 2, "bbox": [1, 2, 3, 4]}]}, r"image_id"),
         ({"annotations": [{"id": 1, "image_id": 1, "category_id": 5, "bbox": [1, 2, 3, 4]}]}, r"category_id"),
-        ({"annotations": [{"id": 1, "image_id": 1, "category_id": 2, "bbox": [0.1, 0.2, 600, 400]}]},
-         r"bbox.*wrong unit"),
+        (
+            {"annotations": [{"id": 1, "image_id": 1, "category_id": 2, "bbox": [0.1, 0.2, 600, 400]}]},
+            r"bbox.*wrong unit",
+        ),
         ({"categories": None}, r"categories"),
     ],
 )

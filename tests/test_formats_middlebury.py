@@ -8,10 +8,7 @@ import pytest
 from alcn_cv.errors import DatasetError
 from alcn_cv.formats.middlebury import read_middlebury
 
-_LINE = (
-    "a.png 1520.4 0 302.32 0 1525.9 246.87 0 0 1 "
-    "1 0 0 0 1 0 0 0 1 0.01 -0.02 0.6"
-)
+_LINE = "a.png 1520.4 0 302.32 0 1525.9 246.87 0 0 1 1 0 0 0 1 0 0 0 1 0.01 -0.02 0.6"
 
 
 def test_reads_synthetic_file(tmp_path):

@@ -13,9 +13,9 @@ import pytest
 torch = pytest.importorskip("torch")
 
 import alcn_cv  # noqa: E402
-from alcn_cv.data.frames import synthetic_frame  # noqa: E402
 from alcn_cv.cli import main as cli  # noqa: E402
-from alcn_cv.enhance.alcn import MODELS, ALCN  # noqa: E402
+from alcn_cv.data.frames import synthetic_frame  # noqa: E402
+from alcn_cv.enhance.alcn import ALCN, MODELS  # noqa: E402
 from alcn_cv.nets.gain import GainNormalizer  # noqa: E402
 from alcn_cv.train.config import GainDistillConfig  # noqa: E402
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file  # noqa: E402
@@ -44,7 +44,9 @@ def _teacher(path):
         for p in net.parameters():
             if p.requires_grad:
                 p.add_(0.2 * torch.randn_like(p))
-    return save_normalizer_file(path, net.state_arrays(), net.file_meta(trained=True, description="a test teacher")), net
+    return save_normalizer_file(
+        path, net.state_arrays(), net.file_meta(trained=True, description="a test teacher")
+    ), net
 
 
 def test_distill_from_a_gain_teacher_writes_a_smaller_gain_student(tmp_path):
@@ -95,14 +97,28 @@ def test_distill_command_from_a_gain_teacher(tmp_path, capsys):
     teacher_path, _ = _teacher(tmp_path / "teacher.npz")
     scenes = _scenes(tmp_path, count=1)
     out = tmp_path / "gain_lite.npz"
-    args = ["--set", f"teacher='{teacher_path}'", "--set", "epochs=1", "--set", "channels=4", "--set",
-            "dilations=[1, 2]", "--set", f"scenes=['{scenes[0]}']", "--set", "rendered=0"]
+    args = [
+        "--set",
+        f"teacher='{teacher_path}'",
+        "--set",
+        "epochs=1",
+        "--set",
+        "channels=4",
+        "--set",
+        "dilations=[1, 2]",
+        "--set",
+        f"scenes=['{scenes[0]}']",
+        "--set",
+        "rendered=0",
+    ]
     assert cli(["distill", "--conf", "gain-lite", "--out", str(out), *args, "--no-progress"]) == 0
     assert capsys.readouterr().out.strip() == str(out) and out.with_suffix(".onnx").is_file()
     config = load_normalizer_file(out).meta["config"]
     assert (config["channels"], config["dilations"]) == (4, [1, 2])
-    assert f"Command: `{shlex.join(['alcn', 'distill', '--conf', 'gain-lite', '--out', str(out), *args])}`" in \
-        out.with_suffix(".md").read_text()
+    assert (
+        f"Command: `{shlex.join(['alcn', 'distill', '--conf', 'gain-lite', '--out', str(out), *args])}`"
+        in out.with_suffix(".md").read_text()
+    )
 
 
 @pytest.mark.parametrize("backend", ["fast", "opencv"])

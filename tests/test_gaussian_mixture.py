@@ -25,7 +25,7 @@ def rng():
 
 
 def test_basis_is_the_papers():
-    assert SIGMAS == tuple(i / 2 for i in range(1, 11))
+    assert tuple(i / 2 for i in range(1, 11)) == SIGMAS
     assert gaussian_sigmas(4, 1.0) == (1.0, 2.0, 3.0, 4.0)
     for s in SIGMAS:
         k = gaussian_kernel1d(s)
@@ -57,7 +57,9 @@ def test_blur_stack_matches_scipy(rng):
     image = rng.random((33, 45), dtype=np.float32)
     stack = gaussian_blur_stack(image, SIGMAS)
     for s, b in zip(SIGMAS, stack):
-        np.testing.assert_allclose(b, ndi.gaussian_filter(image.astype(np.float64), s, mode="mirror", truncate=3.0), atol=1e-6)
+        np.testing.assert_allclose(
+            b, ndi.gaussian_filter(image.astype(np.float64), s, mode="mirror", truncate=3.0), atol=1e-6
+        )
 
 
 @pytest.mark.parametrize("per_pixel", [False, True])

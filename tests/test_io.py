@@ -89,10 +89,9 @@ def test_a_parent_that_is_a_file_is_named(tmp_path, image):
 
 
 def test_interrupt_leaves_no_temporary_file_and_temporary_files_are_no_inputs(tmp_path, image):
-    with pytest.raises(KeyboardInterrupt):
-        with atomic_path(tmp_path / "out.png") as tmp:
-            cv2.imwrite(str(tmp), image)  # a complete image under the temporary name
-            raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt), atomic_path(tmp_path / "out.png") as tmp:
+        cv2.imwrite(str(tmp), image)  # a complete image under the temporary name
+        raise KeyboardInterrupt
     assert not list(tmp_path.iterdir())
     cv2.imwrite(str(tmp_path / ".out.abc.tmp.png"), image)  # left by an older version
     cv2.imwrite(str(tmp_path / "real.png"), image)

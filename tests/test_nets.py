@@ -89,8 +89,13 @@ def test_detector_dense_equals_windows():
 
 
 def test_weight_file_round_trip(tmp_path, net):
-    meta = {"config": net.config, "sigmas": [i / 2 for i in range(1, 11)], "working_scale": 0.5,
-            "output_range": [-1.0, 1.0], "trained": False}
+    meta = {
+        "config": net.config,
+        "sigmas": [i / 2 for i in range(1, 11)],
+        "working_scale": 0.5,
+        "output_range": [-1.0, 1.0],
+        "trained": False,
+    }
     path = save_normalizer_file(tmp_path / "w.npz", net.state_arrays(), meta)
     again = Normalizer.from_file(load_normalizer_file(path))
     x = torch.rand(2, 1, 48, 48)
@@ -114,7 +119,9 @@ def test_weight_file_errors(tmp_path, net):
 
     header = json.loads(np.load(path)["__meta__"].item())
     header["version"] = 99
-    np.savez(tmp_path / "v99.npz", **{k: v for k, v in net.state_arrays().items()}, __meta__=np.array(json.dumps(header)))
+    np.savez(
+        tmp_path / "v99.npz", **{k: v for k, v in net.state_arrays().items()}, __meta__=np.array(json.dumps(header))
+    )
     with pytest.raises(WeightFileError, match="version 99"):
         load_normalizer_file(tmp_path / "v99.npz")
     bad_config = dict(meta, config=dict(net.config, hidden=7))

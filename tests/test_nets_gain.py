@@ -128,13 +128,17 @@ def test_shipped_gain_model_through_create_alcn():
     windows = alcn.normalize_windows(np.clip(image[0, :, :64, :64].numpy(), 0, 1))
     assert windows.shape == (1, 64, 64) and np.abs(windows).max() < 1
     fast = alcn_cv.createALCN(model="gain", backend="fast").normalize(image[0, 0].numpy())
-    np.testing.assert_allclose(alcn_cv.createALCN(model="gain", backend="opencv").normalize(image[0, 0].numpy()), fast, atol=1e-4, rtol=0)
+    np.testing.assert_allclose(
+        alcn_cv.createALCN(model="gain", backend="opencv").normalize(image[0, 0].numpy()), fast, atol=1e-4, rtol=0
+    )
 
 
 def test_gain_windows_are_normalized_as_small_images_and_the_lite_ones_by_eq1():
     import alcn_cv
 
-    windows = np.clip(_lit_texture(64, 64)[0].numpy().repeat(2, axis=0) * np.array([1.0, 0.3], np.float32)[:, None, None], 0, 1)
+    windows = np.clip(
+        _lit_texture(64, 64)[0].numpy().repeat(2, axis=0) * np.array([1.0, 0.3], np.float32)[:, None, None], 0, 1
+    )
     gain = alcn_cv.createALCN(model="gain")
     assert gain.spec.per_pixel and not alcn_cv.createALCN(model="lite").spec.per_pixel
     np.testing.assert_array_equal(gain.normalize_windows(windows), np.stack([gain.normalize(w) for w in windows]))
@@ -180,7 +184,9 @@ def test_defaults_are_the_shipped_model():
     from alcn_cv.runtime import MODELS
 
     shipped = load_normalizer_file(MODELS["gain"]).meta["config"]
-    assert GainNormalizer().config == {k: v for k, v in shipped.items() if k not in ("gain", "sharpness", "learn_floor")}
+    assert GainNormalizer().config == {
+        k: v for k, v in shipped.items() if k not in ("gain", "sharpness", "learn_floor")
+    }
 
 
 def test_per_pixel_divisive_weight_file_round_trip_through_create_alcn(tmp_path):

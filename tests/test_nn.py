@@ -6,7 +6,6 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("kornia")
 
-import cv2
 
 import alcn_cv
 from alcn_cv.data.frames import synthetic_frame
@@ -14,7 +13,9 @@ from alcn_cv.errors import InputError
 from alcn_cv.nn import ALCN2d, alcn2d, batches
 from alcn_cv.runtime import MODELS
 
-CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device: the CUDA path is checked on a GPU machine")
+CUDA = pytest.mark.skipif(
+    not torch.cuda.is_available(), reason="no CUDA device: the CUDA path is checked on a GPU machine"
+)
 
 
 def _unit(img: np.ndarray) -> np.ndarray:
@@ -98,7 +99,9 @@ def test_traces_as_one_graph_for_torch_compile(model):
     x = torch.rand(2, 1, 64, 80)
     module = ALCN2d(model=model).eval()
     with torch.no_grad():
-        torch.testing.assert_close(torch.compile(module, backend="eager", fullgraph=True)(x), module(x), atol=1e-6, rtol=0)
+        torch.testing.assert_close(
+            torch.compile(module, backend="eager", fullgraph=True)(x), module(x), atol=1e-6, rtol=0
+        )
 
 
 def test_apply_batch_uploads_integers_and_casts_on_the_device():
@@ -108,9 +111,13 @@ def test_apply_batch_uploads_integers_and_casts_on_the_device():
         batch = alcn.apply_batch(frames, out_dtype=out_dtype)
         assert batch.dtype == out_dtype and batch.shape == frames.shape
         expected = np.stack([alcn.apply(f, out_dtype=out_dtype) for f in frames])
-        np.testing.assert_allclose(batch.astype(np.float64), expected.astype(np.float64), atol=1 if out_dtype != np.float32 else 1e-5)
+        np.testing.assert_allclose(
+            batch.astype(np.float64), expected.astype(np.float64), atol=1 if out_dtype != np.float32 else 1e-5
+        )
     sixteen = frames.astype(np.uint16) * 257
-    np.testing.assert_allclose(alcn.apply_batch(sixteen, out_dtype=np.float32), alcn.apply_batch(frames, out_dtype=np.float32), atol=1e-5)
+    np.testing.assert_allclose(
+        alcn.apply_batch(sixteen, out_dtype=np.float32), alcn.apply_batch(frames, out_dtype=np.float32), atol=1e-5
+    )
 
 
 def test_batches_group_a_stream():

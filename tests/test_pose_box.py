@@ -46,7 +46,7 @@ def test_box_parts_are_the_surface_lattice():
     np.testing.assert_array_equal(parts[:8], corners)  # the corners keep their indices
     on_faces = (np.abs(np.abs(parts) - [50, 30, 20]) < 1e-9).sum(1)
     assert sorted(on_faces.tolist()) == [1] * 6 + [2] * 12 + [3] * 8  # face centres, edge middles, corners
-    assert len(box.box_parts(corners, 3)) == 4 ** 3 - 2 ** 3
+    assert len(box.box_parts(corners, 3)) == 4**3 - 2**3
     with pytest.raises(InputError, match="divisions"):
         box.box_parts(corners, 0)
 

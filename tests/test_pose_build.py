@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 
 from alcn_cv.errors import DatasetError, InputError
-from pose import box_fit, build, sequence, triangulate
+from pose import box_fit, build, plots, sequence, triangulate
 from pose import model as pm
-from pose import plots
 from pose.evaluate import relight
 
 
@@ -65,8 +64,9 @@ def test_fit_box_lid_only_extends_away_from_the_cameras():
     for cams, z in ((above, (0.0, 55.0)), (above * [1, 1, -1] + [0, 0, 110], (55.0, 110.0))):
         fit = box_fit.fit_box(lid, known_size=[55, 140, 95], viewpoints=cams)
         assert (fit.corners[:, 2].min(), fit.corners[:, 2].max()) == pytest.approx(z, abs=1.5)
-        assert np.ptp(fit.corners[:, 0]) == pytest.approx(140, abs=3) and np.ptp(fit.corners[:, 1]) == \
-            pytest.approx(95, abs=3)
+        assert np.ptp(fit.corners[:, 0]) == pytest.approx(140, abs=3) and np.ptp(fit.corners[:, 1]) == pytest.approx(
+            95, abs=3
+        )
 
 
 def test_fit_box_frame_from_the_lid_when_a_side_is_badly_triangulated():

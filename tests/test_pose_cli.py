@@ -18,8 +18,23 @@ def test_help(step, capsys):
 def test_errors_are_one_line(tmp_path, capsys):
     assert main(["pose", "build", str(tmp_path), str(tmp_path / "m.npz")]) == 2
     assert "not a BOP scene" in capsys.readouterr().err
-    assert main(["pose", "track", str(tmp_path / "missing.npz"), str(tmp_path), str(tmp_path / "p.json"),
-                 "--K", "500", "500", "320", "240"]) == 2
+    assert (
+        main(
+            [
+                "pose",
+                "track",
+                str(tmp_path / "missing.npz"),
+                str(tmp_path),
+                str(tmp_path / "p.json"),
+                "--K",
+                "500",
+                "500",
+                "320",
+                "240",
+            ]
+        )
+        == 2
+    )
     assert "part model not found" in capsys.readouterr().err
     assert main(["pose", "eval", "--out", str(tmp_path / "r")]) == 2
 
@@ -29,10 +44,19 @@ def test_camera_that_is_not_a_calibration_is_one_line(tmp_path, capsys):
     import json
 
     views = tmp_path / "views.json"
-    views.write_text(json.dumps({"image_size": [640, 480], "camera_matrix": [[500, 0, 320], [0, 500, 240], [0, 0, 1]],
-                                 "distortion_coefficients": [0, 0, 0, 0, 0], "views": []}))
-    code = main(["pose", "track", str(tmp_path / "m.npz"), str(tmp_path), str(tmp_path / "p.json"),
-                 "--camera", str(views)])
+    views.write_text(
+        json.dumps(
+            {
+                "image_size": [640, 480],
+                "camera_matrix": [[500, 0, 320], [0, 500, 240], [0, 0, 1]],
+                "distortion_coefficients": [0, 0, 0, 0, 0],
+                "views": [],
+            }
+        )
+    )
+    code = main(
+        ["pose", "track", str(tmp_path / "m.npz"), str(tmp_path), str(tmp_path / "p.json"), "--camera", str(views)]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "Traceback" not in err
     assert "not a camera calibration" in err and "camera.yaml" in err

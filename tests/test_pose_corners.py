@@ -12,9 +12,8 @@ import torch
 
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.nets.detector import Detector
-from pose import box, corner_data, corner_train
+from pose import box, corner_data, corner_train, track
 from pose import corners as pc
-from pose import track
 from pose.cli import add_parser
 from pose.corner_net import CornerNet
 from pose.model import box_corners, read_box_corners
@@ -27,8 +26,15 @@ def posedata(tmp_path_factory):
     """Four registered 320x240 training frames of the data engine's box, one test sequence."""
     from alcn_cv.data import pose
 
-    return pose.generate(tmp_path_factory.mktemp("corners") / "data", size="small", n_frames=4, n_test=1,
-                         clutter=False, train_sweeps=(1,), progress=False)
+    return pose.generate(
+        tmp_path_factory.mktemp("corners") / "data",
+        size="small",
+        n_frames=4,
+        n_test=1,
+        clutter=False,
+        train_sweeps=(1,),
+        progress=False,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -37,9 +43,21 @@ def random_net(tmp_path_factory):
     torch.manual_seed(0)
     net = CornerNet(8, channels=(4, 8), hidden=16).eval()
     corners = box_corners([140, 95, 55]).tolist()
-    meta = {"format": pc.FORMAT_NAME, "version": pc.FORMAT_VERSION, "normalizer": "none", "scale": 0.5,
-            "input_mean": 0.5, "input_std": 0.25, "parts": corners, "corners": corners, "units": "mm",
-            "window": pc.WINDOW, "stride": pc.STRIDE, "pad": pc.PAD, "config": net.config}
+    meta = {
+        "format": pc.FORMAT_NAME,
+        "version": pc.FORMAT_VERSION,
+        "normalizer": "none",
+        "scale": 0.5,
+        "input_mean": 0.5,
+        "input_std": 0.25,
+        "parts": corners,
+        "corners": corners,
+        "units": "mm",
+        "window": pc.WINDOW,
+        "stride": pc.STRIDE,
+        "pad": pc.PAD,
+        "config": net.config,
+    }
     path = corner_train.export_onnx(net, tmp_path_factory.mktemp("onnx") / "c.onnx", meta)
     return net, path
 
@@ -68,8 +86,9 @@ def test_label_grid_offsets_point_at_the_corner():
     for k, corner in zip([2, 5], uv):
         cells = owner == k
         assert cells.sum() >= 4
-        np.testing.assert_allclose(centres[cells] + pc.STRIDE * offsets[:, cells].T, np.tile(corner, (cells.sum(), 1)),
-                                   atol=1e-5)
+        np.testing.assert_allclose(
+            centres[cells] + pc.STRIDE * offsets[:, cells].T, np.tile(corner, (cells.sum(), 1)), atol=1e-5
+        )
     assert (owner[d.min(0) > 7.0] == -1).all()
 
 
@@ -219,8 +238,9 @@ def test_build_frames_labels_follow_the_corners(posedata):
         for x, y, k in visible:  # every visible part has its cells, whose votes hit it
             cells = (frames.labels[f] == k + 1) & (np.linalg.norm(centres - [x, y], axis=2) <= 4.0)
             assert cells.any()
-            np.testing.assert_allclose(centres[cells] + pc.STRIDE * frames.offsets[f][:, cells].T,
-                                       np.tile([x, y], (cells.sum(), 1)), atol=1e-4)
+            np.testing.assert_allclose(
+                centres[cells] + pc.STRIDE * frames.offsets[f][:, cells].T, np.tile([x, y], (cells.sum(), 1)), atol=1e-4
+            )
     # the copies differ from their view (warp, background, intensity)
     assert np.abs(frames.images[1] - frames.images[0]).mean() > 0.1
 
@@ -235,8 +255,9 @@ def test_novel_view_moves_each_face_with_its_plane(posedata):
     R, t, K = view.R_w2c, view.t_w2c, view.K
     uv, vis = box.part_visibility(corners, R, t, K, gray.shape)
     # no motion: the same frame and corners
-    same, mask, uv0, vis0 = corner_data.novel_view(gray, corners, R, t, K, np.random.default_rng(0), azimuth_deg=0,
-                                                   elevation_deg=0, distance=(1, 1))
+    same, mask, uv0, vis0 = corner_data.novel_view(
+        gray, corners, R, t, K, np.random.default_rng(0), azimuth_deg=0, elevation_deg=0, distance=(1, 1)
+    )
     np.testing.assert_allclose(uv0, uv, atol=1e-6)
     assert (vis0 == vis).all() and mask.any()
     assert np.abs(same.astype(int) - gray)[cv2.erode(mask, np.ones((3, 3), np.uint8)) > 0].mean() < 2
@@ -270,7 +291,11 @@ def test_build_image_frames_labels_follow_the_parts():
             assert ((frames.labels[f] == k + 1) & (np.linalg.norm(centres - [x, y], axis=2) <= 4.0)).any()
     recipe = corner_train.CornerRecipe(scale=1.0, copies=0)
     assert corner_data.build_image_frames(gray, uv[:4], "none", recipe).corners[0][:, 2].tolist() == [
-        0, 1, 2, 3]  # any number of parts
+        0,
+        1,
+        2,
+        3,
+    ]  # any number of parts
     for bad in (uv[:, :1], uv[:0], np.full((8, 2), np.nan)):
         with pytest.raises(InputError, match="parts' pixels"):
             corner_data.build_image_frames(gray, bad, "none", recipe)
@@ -301,12 +326,15 @@ def test_runs_where_torch_cannot_be_imported(random_net, run_without_torch):
     frame = np.random.default_rng(2).integers(0, 256, (120, 160, 3), dtype=np.uint8)
     ref = pc.CornerDetector(path, min_score=0.0).detect(frame)
     out = path.parent / "points.npy"
-    run_without_torch(f"""
+    run_without_torch(
+        f"""
         import numpy as np
         from pose.corners import CornerDetector
         frame = np.random.default_rng(2).integers(0, 256, (120, 160, 3), dtype=np.uint8)
         np.save(sys.argv[1], CornerDetector({str(path)!r}, min_score=0.0).detect(frame).image_points)
-    """, out)
+    """,
+        out,
+    )
     assert len(ref.image_points) > 0
     np.testing.assert_allclose(np.load(out), ref.image_points, atol=1e-3)
 
@@ -337,8 +365,11 @@ def test_bad_files(tmp_path, random_net):
         corner_train.export_onnx(random_net[0], tmp_path / "x.pt", {})
     with pytest.raises(InputError, match="box_ply"):
         corner_train.main(tmp_path, tmp_path / "c.onnx")
-    wrong = corner_train.export_onnx(random_net[0], tmp_path / "wrong.onnx", {
-        **pc.read_metadata(random_net[1]), "parts": box_corners([1, 2, 3]).tolist() * 2})  # 16 parts, 8 outputs
+    wrong = corner_train.export_onnx(
+        random_net[0],
+        tmp_path / "wrong.onnx",
+        {**pc.read_metadata(random_net[1]), "parts": box_corners([1, 2, 3]).tolist() * 2},
+    )  # 16 parts, 8 outputs
     with pytest.raises(WeightFileError, match="16 parts but a network for 8"):
         pc.CornerDetector(wrong)
     with pytest.raises(InputError, match="trained after the normalizer 'none'"):
@@ -356,9 +387,26 @@ def _parser():
 def test_train_corners_lowers_the_loss(posedata, tmp_path):
     """`alcn pose train-corners`: a few steps on four frames."""
     onnx = tmp_path / "corners.onnx"
-    args = _parser().parse_args(["pose", "train-corners", str(posedata / "train" / "000001"), str(onnx), "--box-ply",
-                                 str(posedata / "models" / "obj_000001.ply"), "--conf", "box", "--set", "iterations=12",
-                                 "--set", "copies=0", "--set", "batch_size=24", "--device", "cpu"])
+    args = _parser().parse_args(
+        [
+            "pose",
+            "train-corners",
+            str(posedata / "train" / "000001"),
+            str(onnx),
+            "--box-ply",
+            str(posedata / "models" / "obj_000001.ply"),
+            "--conf",
+            "box",
+            "--set",
+            "iterations=12",
+            "--set",
+            "copies=0",
+            "--set",
+            "batch_size=24",
+            "--device",
+            "cpu",
+        ]
+    )
     assert args.func(args) == 0
     meta = pc.read_metadata(onnx)
     assert meta["normalizer"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
@@ -372,9 +420,22 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     det = pc.CornerDetector(onnx)
     assert det.parts.shape == (26, 3) and det.outputs(np.zeros((40, 48), np.float32)).shape == (79, 11, 13)
     # the 8 corners only
-    args = _parser().parse_args(["pose", "train-corners", str(posedata / "train" / "000001"), str(onnx), "--box-ply",
-                                 str(posedata / "models" / "obj_000001.ply"), "--set", "iterations=2", "--set",
-                                 "copies=0", "--set", "divisions=1"])
+    args = _parser().parse_args(
+        [
+            "pose",
+            "train-corners",
+            str(posedata / "train" / "000001"),
+            str(onnx),
+            "--box-ply",
+            str(posedata / "models" / "obj_000001.ply"),
+            "--set",
+            "iterations=2",
+            "--set",
+            "copies=0",
+            "--set",
+            "divisions=1",
+        ]
+    )
     assert args.func(args) == 0
     np.testing.assert_allclose(pc.read_metadata(onnx)["parts"], corners)
 
@@ -382,8 +443,12 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
 @pytest.mark.skipif(torch.cuda.is_available(), reason="checks the error where torch sees no CUDA device")
 def test_training_on_cuda_without_one_is_a_clear_error(posedata):
     recipe = corner_train.CornerRecipe(copies=0, iterations=1, batch_size=2, cells=4)
-    frames = corner_data.build_frames(load_sequence(posedata / "train" / "000001"),
-                                      read_box_corners(posedata / "models" / "obj_000001.ply"), "none", recipe)
+    frames = corner_data.build_frames(
+        load_sequence(posedata / "train" / "000001"),
+        read_box_corners(posedata / "models" / "obj_000001.ply"),
+        "none",
+        recipe,
+    )
     with pytest.raises(InputError, match="no CUDA device"):
         corner_train.fit(CornerNet(), frames, recipe, device="cuda", progress=False)
 
@@ -397,9 +462,16 @@ def _recipes(posedata, tmp_path, monkeypatch, *extras: list[str]) -> list:
     monkeypatch.setattr(corner_train, "train_corners", lambda _s, _c, _o, recipe, **kw: seen.append(recipe))
     monkeypatch.setattr(evaluate, "main", lambda *a, **kw: seen.append(kw["corner_recipe"]))
     for extra in extras:
-        for command in (["train-corners", str(posedata / "train" / "000001"), str(tmp_path / "c.onnx"), "--box-ply",
-                         str(posedata / "models" / "obj_000001.ply")],
-                        ["eval", "--data", str(posedata), "--out", str(tmp_path / "t"), "--detectors", "corners"]):
+        for command in (
+            [
+                "train-corners",
+                str(posedata / "train" / "000001"),
+                str(tmp_path / "c.onnx"),
+                "--box-ply",
+                str(posedata / "models" / "obj_000001.ply"),
+            ],
+            ["eval", "--data", str(posedata), "--out", str(tmp_path / "t"), "--detectors", "corners"],
+        ):
             args = _parser().parse_args(["pose", *command, *extra])
             args.func(args)
     return seen
@@ -407,13 +479,22 @@ def _recipes(posedata, tmp_path, monkeypatch, *extras: list[str]) -> list:
 
 def test_both_commands_take_the_recipe_as_a_preset_and_settings(posedata, tmp_path, monkeypatch, capsys):
     box_recipe = corner_train.confs["box"]
-    seen = _recipes(posedata, tmp_path, monkeypatch, [], ["--set", "jitter=true", "--set", "novel_distance=[0.6, 1.1]"],
-                    ["--conf", "planar"])
+    seen = _recipes(
+        posedata,
+        tmp_path,
+        monkeypatch,
+        [],
+        ["--set", "jitter=true", "--set", "novel_distance=[0.6, 1.1]"],
+        ["--conf", "planar"],
+    )
     assert seen[0] == seen[1] == box_recipe == corner_train.CornerRecipe()
     assert seen[2] == seen[3] == dataclasses.replace(box_recipe, jitter=True, novel_distance=[0.6, 1.1])
     assert seen[4] == seen[5] == corner_train.confs["planar"]
-    for bad, key in (["novel_distance=[1.2, 0.7]"], "novel_distance"), (["iterations=many"], "iterations"), \
-            (["iteration=3"], "iteration"):
+    for bad, key in (
+        (["novel_distance=[1.2, 0.7]"], "novel_distance"),
+        (["iterations=many"], "iterations"),
+        (["iteration=3"], "iteration"),
+    ):
         with pytest.raises(InputError, match=key):
             _recipes(posedata, tmp_path, monkeypatch, ["--set", *bad])
 
@@ -423,8 +504,9 @@ def test_no_intensity_trains_on_the_views_own_intensities(posedata):
     seq = load_sequence(posedata / "train" / "000001", obj_id=1)
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
     recipe = corner_train.CornerRecipe(scale=1.0, copies=3, backgrounds=0.0, noise=0.0, novel_views=0.0)
-    frames = corner_data.build_frames(seq, corners, "none", dataclasses.replace(recipe, intensity_scale=[1.0, 1.0],
-                                                                                intensity_offset=0.0))
+    frames = corner_data.build_frames(
+        seq, corners, "none", dataclasses.replace(recipe, intensity_scale=[1.0, 1.0], intensity_offset=0.0)
+    )
     changed = corner_data.build_frames(seq, corners, "none", recipe)
     shifts = [[abs(f.images[c].mean() - f.images[0].mean()) for c in (1, 2, 3)] for f in (frames, changed)]
     assert max(shifts[0]) < 0.3 * max(shifts[1])
@@ -437,8 +519,9 @@ def test_novel_distance_brings_the_novel_views_nearer(posedata):
     corners = read_box_corners(posedata / "models" / "obj_000001.ply")
 
     def box_size(distance):  # mean spread of the visible parts over the copies, pixels
-        recipe = corner_train.CornerRecipe(scale=1.0, copies=6, backgrounds=0.0, noise=0.0, novel_views=1.0,
-                                           novel_distance=list(distance))
+        recipe = corner_train.CornerRecipe(
+            scale=1.0, copies=6, backgrounds=0.0, noise=0.0, novel_views=1.0, novel_distance=list(distance)
+        )
         frames = corner_data.build_frames(seq, corners, "none", recipe, seed=3)
         return np.mean([np.ptp(c[:, :2], 0).max() for c in frames.corners if len(c) >= 4])
 
@@ -458,16 +541,22 @@ def test_jitter_varies_each_crop_after_the_normalizer(posedata, monkeypatch):
     ratio = np.median(np.abs(gain) / (np.abs(crops - crops.mean((2, 3), keepdims=True)) + 1e-3), axis=(2, 3))
     assert ratio.min() < 0.85 and ratio.max() > 1.15  # contrasts differ from crop to crop
     assert ratio.min() > 1 / 1.5 / np.exp(0.8) and ratio.max() < 1.5 * np.exp(0.8)  # and stay within the bounds
-    left, right = (np.abs(jittered[:, 0, :, :8]).mean((1, 2)) / np.abs(crops[:, 0, :, :8]).mean((1, 2)),
-                   np.abs(jittered[:, 0, :, -8:]).mean((1, 2)) / np.abs(crops[:, 0, :, -8:]).mean((1, 2)))
+    left, right = (
+        np.abs(jittered[:, 0, :, :8]).mean((1, 2)) / np.abs(crops[:, 0, :, :8]).mean((1, 2)),
+        np.abs(jittered[:, 0, :, -8:]).mean((1, 2)) / np.abs(crops[:, 0, :, -8:]).mean((1, 2)),
+    )
     assert np.abs(np.log(right / left)).max() > 0.3  # a gain ramp across some crops
     same = crops.copy()
     corner_train.jitter_crops(same, np.random.default_rng(1), contrast=1.0, ramp=0.0, offset=0.0, noise=0.0)
     np.testing.assert_allclose(same, crops, atol=1e-6)
     # what fit does with it: the crops jittered where the recipe asks
     recipe = corner_train.CornerRecipe(copies=0, iterations=2, batch_size=2, cells=4)
-    frames = corner_data.build_frames(load_sequence(posedata / "train" / "000001"),
-                                      read_box_corners(posedata / "models" / "obj_000001.ply"), "none", recipe)
+    frames = corner_data.build_frames(
+        load_sequence(posedata / "train" / "000001"),
+        read_box_corners(posedata / "models" / "obj_000001.ply"),
+        "none",
+        recipe,
+    )
     drawn = []
     monkeypatch.setattr(corner_train, "jitter_crops", lambda images, rng: drawn.append(images.copy()) or images)
     for jitter in (True, False):
@@ -482,14 +571,42 @@ def test_track_and_bench_the_corner_detector(posedata, random_net, tmp_path):
     K = [str(v) for v in np.asarray(cam["cam_K"])[[0, 4, 2, 5]]]
     out = tmp_path / "poses.json"
     parser = _parser()
-    args = parser.parse_args(["pose", "track", str(random_net[1]), str(train / "rgb"), str(out), "--detector",
-                              "corners", "--K", *K, "--overlay", str(tmp_path / "overlay")])
+    args = parser.parse_args(
+        [
+            "pose",
+            "track",
+            str(random_net[1]),
+            str(train / "rgb"),
+            str(out),
+            "--detector",
+            "corners",
+            "--K",
+            *K,
+            "--overlay",
+            str(tmp_path / "overlay"),
+        ]
+    )
     assert args.func(args) == 0
     assert len(json.loads(out.read_text())) == 4
     info = json.loads((tmp_path / "poses_info.json").read_text())
     assert info["summary"]["detector"] == "corners" and len(list((tmp_path / "overlay").glob("*.png"))) == 4
-    args = parser.parse_args(["pose", "bench-corners", str(random_net[1]), str(train / "rgb"), "--K", *K, "--size",
-                              "160", "120", "--repeats", "1", "--out", str(tmp_path / "bench")])
+    args = parser.parse_args(
+        [
+            "pose",
+            "bench-corners",
+            str(random_net[1]),
+            str(train / "rgb"),
+            "--K",
+            *K,
+            "--size",
+            "160",
+            "120",
+            "--repeats",
+            "1",
+            "--out",
+            str(tmp_path / "bench"),
+        ]
+    )
     assert args.func(args) == 0
     bench = json.loads((tmp_path / "bench" / "bench_corners.json").read_text())
     assert bench["frames"] == 4 and bench["fps"] > 0 and set(bench["ms"]) == {"normalize", "network", "peaks_and_pose"}
@@ -507,8 +624,19 @@ def test_corner_recall_against_the_true_corners(posedata, random_net, tmp_path, 
     assert set(r["per_part"]) <= set(range(8))
     with pytest.raises(InputError, match="background"):
         corner_bench.corner_recall(random_net[1], scene, background="black")
-    args = _parser().parse_args(["pose", "corner-recall", str(random_net[1]), str(scene), "--background", "keep",
-                                 "grey", "--out", str(tmp_path)])
+    args = _parser().parse_args(
+        [
+            "pose",
+            "corner-recall",
+            str(random_net[1]),
+            str(scene),
+            "--background",
+            "keep",
+            "grey",
+            "--out",
+            str(tmp_path),
+        ]
+    )
     assert args.func(args) == 0
     assert "grey background" in capsys.readouterr().out
     grey = json.loads((tmp_path / "corner_recall_grey.json").read_text())
@@ -520,9 +648,16 @@ def test_table1_rows_of_the_corner_detector(posedata, tmp_path):
 
     with pytest.raises(InputError, match="unknown detectors"):
         evaluate.main(posedata, tmp_path, normalizers=["none"], detectors=["cnn"])
-    result = evaluate.main(posedata, tmp_path, normalizers=["none"], detectors=["corners"], seeds=2,
-                           corner_recipe=corner_train.CornerRecipe(iterations=5, copies=0), corner_conf="box",
-                           command="alcn pose eval ...")
+    result = evaluate.main(
+        posedata,
+        tmp_path,
+        normalizers=["none"],
+        detectors=["corners"],
+        seeds=2,
+        corner_recipe=corner_train.CornerRecipe(iterations=5, copies=0),
+        corner_conf="box",
+        command="alcn pose eval ...",
+    )
     row = result["table"]["none / corner CNN"]
     assert list(row) == ["#1"] and 0.0 <= row["#1"] <= 100.0 and "#1" in result["spread"]["none / corner CNN"]
     assert (tmp_path / "corners_none_seed1.onnx").is_file()

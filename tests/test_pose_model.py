@@ -13,9 +13,13 @@ from pose import model as pm
 
 def _model(n=50):
     rng = np.random.default_rng(0)
-    return pm.PartModel(corners=pm.box_corners([140, 95, 55]), points3d=rng.uniform(0, 100, (n, 3)),
-                        descriptors=rng.integers(0, 256, (n, 32), dtype=np.uint8), units="mm",
-                        box_fit={"object_points": n})
+    return pm.PartModel(
+        corners=pm.box_corners([140, 95, 55]),
+        points3d=rng.uniform(0, 100, (n, 3)),
+        descriptors=rng.integers(0, 256, (n, 32), dtype=np.uint8),
+        units="mm",
+        box_fit={"object_points": n},
+    )
 
 
 def test_box_corners_and_edges():
@@ -62,8 +66,12 @@ def test_other_version_and_corrupt_files(tmp_path):
 def test_several_descriptors_per_point_and_version_1(tmp_path):
     rng = np.random.default_rng(1)
     owner = np.array([0, 0, 1, 2, 2, 2], np.int32)
-    m = pm.PartModel(corners=pm.box_corners([1, 1, 1]), points3d=rng.uniform(0, 1, (3, 3)),
-                     descriptors=rng.integers(0, 256, (6, 32), dtype=np.uint8), descriptor_point=owner)
+    m = pm.PartModel(
+        corners=pm.box_corners([1, 1, 1]),
+        points3d=rng.uniform(0, 1, (3, 3)),
+        descriptors=rng.integers(0, 256, (6, 32), dtype=np.uint8),
+        descriptor_point=owner,
+    )
     back = pm.load(pm.save(m, tmp_path / "m.npz"))
     assert np.array_equal(back.descriptor_point, owner) and np.array_equal(back.descriptors, m.descriptors)
     assert np.array_equal(back.scaled_to("cm").descriptor_point, owner)
@@ -83,16 +91,21 @@ def test_several_descriptors_per_point_and_version_1(tmp_path):
     with pytest.raises(WeightFileError, match="descriptor"):
         pm.load(tmp_path / "v2.npz")
     with pytest.raises(InputError, match="index the 3 points"):
-        pm.PartModel(corners=pm.box_corners([1, 1, 1]), points3d=np.zeros((3, 3)),
-                     descriptors=np.zeros((2, 32), np.uint8), descriptor_point=[0, 3])
+        pm.PartModel(
+            corners=pm.box_corners([1, 1, 1]),
+            points3d=np.zeros((3, 3)),
+            descriptors=np.zeros((2, 32), np.uint8),
+            descriptor_point=[0, 3],
+        )
 
 
 def test_bad_models():
     with pytest.raises(InputError):
         pm.PartModel(corners=np.zeros((4, 3)))
     with pytest.raises(InputError):
-        pm.PartModel(corners=pm.box_corners([1, 1, 1]), points3d=np.zeros((3, 3)),
-                     descriptors=np.zeros((2, 32), np.uint8))
+        pm.PartModel(
+            corners=pm.box_corners([1, 1, 1]), points3d=np.zeros((3, 3)), descriptors=np.zeros((2, 32), np.uint8)
+        )
     with pytest.raises(InputError):
         pm.PartModel(corners=pm.box_corners([1, 1, 1]), units="inch")
 

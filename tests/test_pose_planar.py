@@ -28,7 +28,8 @@ def _solve(target: planar.PlanarTarget, image: np.ndarray, normalizer: str = "no
     det = planar.feature_detector(target, normalizer)
     corr = det.detect(image)
     return PoseSolver(target.K, min_inliers=12, iterations=2000, outline=target.model.corners).solve(
-        corr.object_points, corr.image_points)
+        corr.object_points, corr.image_points
+    )
 
 
 def test_pinhole_camera_and_reference():
@@ -84,8 +85,9 @@ def test_target_parts_are_its_corners_and_side_middles():
     target = planar.build_target(img, (200, 90, 220, 180), K)
     parts, uv = planar.target_parts(target)
     assert parts.shape == (8, 3) and np.all(parts[:, 2] == 0)
-    np.testing.assert_allclose(uv, [[200, 90], [310, 90], [420, 90], [420, 180], [420, 270], [310, 270], [200, 270],
-                                    [200, 180]], atol=1e-6)
+    np.testing.assert_allclose(
+        uv, [[200, 90], [310, 90], [420, 90], [420, 180], [420, 270], [310, 270], [200, 270], [200, 180]], atol=1e-6
+    )
     assert {tuple(p) for p in uv[::2].round(6)} == {tuple(p) for p in target.image_corners().round(6)}
 
 
@@ -114,8 +116,16 @@ def test_planar_on_a_webcam_scene(shared_data, tmp_path):
     if not (root / "mexico").is_dir():
         pytest.skip(f"the webcam scenes are not in {root}")
     recipe = dataclasses.replace(corner_confs["planar"], iterations=3, copies=1)
-    result = planar.main(tmp_path, root, scenes=["mexico"], normalizers=["none"], detectors=["features", "corners"],
-                         max_frames=3, recipe=recipe, command="test")
+    result = planar.main(
+        tmp_path,
+        root,
+        scenes=["mexico"],
+        normalizers=["none"],
+        detectors=["features", "corners"],
+        max_frames=3,
+        recipe=recipe,
+        command="test",
+    )
     assert set(result["table"]) == {"none / sift features", "none / corner CNN"}
     assert len(list(tmp_path.glob("corners_*_none.onnx"))) == 1
     row = "none / sift features"
@@ -137,8 +147,21 @@ def test_planar_command_takes_the_recipe_and_the_normalizations(tmp_path, monkey
     seen = []
     report = tmp_path / "relight_pose.md"
     monkeypatch.setattr(planar, "main", lambda *a, **kw: seen.append(kw) or report.write_text(""))
-    args = parser.parse_args(["pose", "planar", "--out", str(tmp_path), "--normalizations", "none", "dog",
-                              "--detector", "corners", "--set", "iterations=3"])
+    args = parser.parse_args(
+        [
+            "pose",
+            "planar",
+            "--out",
+            str(tmp_path),
+            "--normalizations",
+            "none",
+            "dog",
+            "--detector",
+            "corners",
+            "--set",
+            "iterations=3",
+        ]
+    )
     assert args.func(args) == 0
     assert seen[0]["normalizers"] == ["none", "dog"]
     assert seen[0]["recipe"] == dataclasses.replace(corner_confs["planar"], iterations=3)

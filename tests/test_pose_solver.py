@@ -69,8 +69,9 @@ def test_tracker_predicts_at_constant_velocity_and_coasts():
     step_r, step_t = np.array([0.0, 0.05, 0.02]), np.array([4.0, -2.0, 5.0])
 
     def pose(i):
-        return np.array([[0.3], [-0.4], [0.2]]) + i * step_r[:, None], np.array([[10.0], [-5.0], [400.0]]) + \
-            i * step_t[:, None]
+        return np.array([[0.3], [-0.4], [0.2]]) + i * step_r[:, None], np.array([[10.0], [-5.0], [400.0]]) + i * step_t[
+            :, None
+        ]
 
     def uv(i):
         return project(pts, *pose(i), K)
@@ -373,7 +374,8 @@ def test_a_verified_pose_is_refined_around_itself():
     rough = exact + rng.normal(0, 3.0, exact.shape)
     R = cv2.Rodrigues(rvec)[0]
     unrefined, corr = PoseTracker(PoseSolver(K, min_inliers=8, reprojection_error=12.0)).step(
-        0, None, _RefiningDetector(pts, exact, rough, reject_refined=True))  # the refined pose is rejected: kept
+        0, None, _RefiningDetector(pts, exact, rough, reject_refined=True)
+    )  # the refined pose is rejected: kept
     assert unrefined.ok and len(corr.image_points) == 20
     det = _RefiningDetector(pts, exact, rough)
     est, corr = PoseTracker(PoseSolver(K, min_inliers=8, reprojection_error=12.0)).step(0, None, det)

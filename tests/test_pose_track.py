@@ -34,8 +34,7 @@ def _planar_model(tex, mm_per_px=0.5):
     kps, desc = create_feature("ORB", 1500).detectAndCompute(tex, None)
     uv = np.array([k.pt for k in kps])
     pts = np.c_[uv * mm_per_px, np.zeros(len(uv))]
-    return pm.PartModel(corners=pm.box_corners([128, 128, 20], [0, 0, -20]), points3d=pts, descriptors=desc,
-                        units="mm")
+    return pm.PartModel(corners=pm.box_corners([128, 128, 20], [0, 0, -20]), points3d=pts, descriptors=desc, units="mm")
 
 
 def _render(tex, rvec, tvec, mm_per_px=0.5):
@@ -49,8 +48,10 @@ def _render(tex, rvec, tvec, mm_per_px=0.5):
 
 
 def _poses(n=6):
-    return [(np.array([[0.2 + 0.03 * i], [-0.1], [0.05 * i]]), np.array([[-60.0 + 2 * i], [-60.0], [330.0]]))
-            for i in range(n)]
+    return [
+        (np.array([[0.2 + 0.03 * i], [-0.1], [0.05 * i]]), np.array([[-60.0 + 2 * i], [-60.0], [330.0]]))
+        for i in range(n)
+    ]
 
 
 def test_track_folder_writes_bop_json_and_overlay(tmp_path):
@@ -64,8 +65,9 @@ def test_track_folder_writes_bop_json_and_overlay(tmp_path):
         cv2.imwrite(str(frames / f"{i:04d}.png"), _render(tex, r, t))
     black = np.zeros((SIZE[1], SIZE[0], 3), np.uint8)  # no object: lost, never a wrong pose
     cv2.imwrite(str(frames / f"{len(poses):04d}.png"), black)
-    summary = track.main(tmp_path / "m.npz", frames, tmp_path / "out" / "poses.json", K,
-                         overlay=tmp_path / "ov", n_features=800)
+    summary = track.main(
+        tmp_path / "m.npz", frames, tmp_path / "out" / "poses.json", K, overlay=tmp_path / "ov", n_features=800
+    )
     assert summary["frames"] == len(poses) + 1 and summary["tracked"] == len(poses)
     assert summary["events"][-1]["event"] == "lost"
     gt = json.loads((tmp_path / "out" / "poses.json").read_text())
@@ -123,8 +125,13 @@ def test_ratio_test_compares_distinct_points():
     tex = _texture(2)
     one = _planar_model(tex)
     n = len(one.points3d)
-    two = pm.PartModel(corners=one.corners, points3d=one.points3d, descriptors=np.vstack([one.descriptors] * 2),
-                       descriptor_point=np.r_[np.arange(n), np.arange(n)], units="mm")
+    two = pm.PartModel(
+        corners=one.corners,
+        points3d=one.points3d,
+        descriptors=np.vstack([one.descriptors] * 2),
+        descriptor_point=np.r_[np.arange(n), np.arange(n)],
+        units="mm",
+    )
     r, t = _poses(1)[0]
     img = _render(tex, r, t)
     single = FeaturePartDetector(one, n_features=500).detect(img)
@@ -146,9 +153,13 @@ def test_cross_check_keeps_mutual_nearest_neighbours():
     rng = np.random.default_rng(0)
     n = len(real.points3d)
     decoys = rng.uniform(-60, 60, decoy.points3d.shape)
-    model = pm.PartModel(corners=real.corners, points3d=np.vstack([real.points3d, decoys]).astype(np.float32),
-                         descriptors=np.vstack([real.descriptors, decoy.descriptors]),
-                         descriptor_point=np.r_[real.descriptor_point, decoy.descriptor_point + n], units="mm")
+    model = pm.PartModel(
+        corners=real.corners,
+        points3d=np.vstack([real.points3d, decoys]).astype(np.float32),
+        descriptors=np.vstack([real.descriptors, decoy.descriptors]),
+        descriptor_point=np.r_[real.descriptor_point, decoy.descriptor_point + n],
+        units="mm",
+    )
     r, t = _poses(1)[0]
     img = _render(tex, r, t)
 
@@ -170,7 +181,7 @@ def test_keypoints_in_predicted_region_with_a_prior():
     model = _planar_model(tex)
     r, t = _poses(1)[0][0], np.array([[-30.0], [-30.0], [600.0]])
     img = _render(tex, r, t)
-    yy, xx = np.mgrid[:SIZE[1], :SIZE[0]]
+    yy, xx = np.mgrid[: SIZE[1], : SIZE[0]]
     clutter = np.where(((xx + yy // 2) // 5 + yy // 5) % 2, 188, 68).astype(np.uint8)  # a fine checkerboard floor
     img = np.where(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)[..., None] == 90, clutter[..., None], img)
     det = FeaturePartDetector(model, n_features=150, min_guided=5)
@@ -206,8 +217,25 @@ def test_track_command_prints_its_last_line_once(tmp_path, capsys, caplog):
     for i, (r, t) in enumerate(_poses(2)):
         cv2.imwrite(str(frames / f"{i:04d}.png"), _render(tex, r, t))
     caplog.set_level("INFO")
-    assert main(["pose", "track", str(tmp_path / "m.npz"), str(frames), str(tmp_path / "poses.json"),
-                 "--K", "500", "500", "159.5", "119.5", "--n-features", "800"]) == 0
+    assert (
+        main(
+            [
+                "pose",
+                "track",
+                str(tmp_path / "m.npz"),
+                str(frames),
+                str(tmp_path / "poses.json"),
+                "--K",
+                "500",
+                "500",
+                "159.5",
+                "119.5",
+                "--n-features",
+                "800",
+            ]
+        )
+        == 0
+    )
     captured = capsys.readouterr()
     text = captured.out + captured.err + caplog.text
     assert text.count("tracked 2 of 2 frames") == 1, text

@@ -10,8 +10,17 @@ from pathlib import Path
 import pytest
 
 from alcn_cv.errors import InputError
-from alcn_cv.train.config import (DISTILL_CONFS, REAL_LIGHT_CONFS, TRAIN_CONFS, LiteDistillConfig, RealLightConfig,
-                                  TrainConfig, load_config, preset, with_settings)
+from alcn_cv.train.config import (
+    DISTILL_CONFS,
+    REAL_LIGHT_CONFS,
+    TRAIN_CONFS,
+    LiteDistillConfig,
+    RealLightConfig,
+    TrainConfig,
+    load_config,
+    preset,
+    with_settings,
+)
 from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 
 WEIGHTS = DEFAULT_WEIGHTS.parent
@@ -49,15 +58,20 @@ def test_gain_preset_is_the_shipped_gain_file():
     _recorded_equal(recorded, dataclasses.asdict(cfg), "training.config")
     assert [Path(s).name for s in training["config"]["scenes"]] == cfg.scenes
     # the network: what the preset sets, as recorded (the header also records removed variants' off switches)
-    assert {k: training["config"]["net"][k] for k in cfg.net if k in training["config"]["net"]} == \
-        {k: v for k, v in cfg.net.items() if k in training["config"]["net"]}
+    assert {k: training["config"]["net"][k] for k in cfg.net if k in training["config"]["net"]} == {
+        k: v for k, v in cfg.net.items() if k in training["config"]["net"]
+    }
     header = load_normalizer_file(WEIGHTS / "alcn_normalizer_gain.npz").meta["config"]
     assert {k: header[k] for k in cfg.net} == cfg.net
 
 
-@pytest.mark.parametrize("name, file, teacher", [("lite", "alcn_normalizer_lite.npz", "alcn_normalizer.npz"),
-                                                 ("gain-lite", "alcn_normalizer_gain_lite.npz",
-                                                  "alcn_normalizer_gain.npz")])
+@pytest.mark.parametrize(
+    "name, file, teacher",
+    [
+        ("lite", "alcn_normalizer_lite.npz", "alcn_normalizer.npz"),
+        ("gain-lite", "alcn_normalizer_gain_lite.npz", "alcn_normalizer_gain.npz"),
+    ],
+)
 def test_distill_presets_are_the_shipped_students(name, file, teacher):
     meta = load_normalizer_file(WEIGHTS / file).meta
     cfg = dataclasses.asdict(preset(DISTILL_CONFS, name))
@@ -69,8 +83,9 @@ def test_distill_presets_are_the_shipped_students(name, file, teacher):
     assert teacher_file(cfg["teacher"]).name == teacher
 
 
-@pytest.mark.parametrize("file", ["alcn_normalizer", "alcn_normalizer_lite", "alcn_normalizer_gain",
-                                  "alcn_normalizer_gain_lite"])
+@pytest.mark.parametrize(
+    "file", ["alcn_normalizer", "alcn_normalizer_lite", "alcn_normalizer_gain", "alcn_normalizer_gain_lite"]
+)
 def test_each_onnx_file_is_its_weight_file(file):
     onnx = pytest.importorskip("onnx")
     props = {p.key: p.value for p in onnx.load(str(WEIGHTS / f"{file}.onnx")).metadata_props}
@@ -84,8 +99,13 @@ def test_settings_are_typed_by_the_fields():
     assert isinstance(cfg.lr, float) and LiteDistillConfig().lr == 3e-3  # the preset itself is untouched
     net = with_settings(RealLightConfig(), ["net.divisive_sigma=3", "net.dilations=[1, 2]"]).net
     assert (net["divisive_sigma"], net["dilations"]) == (3.0, [1, 2])
-    for bad, key in (["epochs=1.5", "epochs"], ["lr=fast", "lr"], ["channels=4", "channels"],
-                     ["chanels=[4, 4]", "chanels"], ["teacher.x=1", "teacher"]):
+    for bad, key in (
+        ["epochs=1.5", "epochs"],
+        ["lr=fast", "lr"],
+        ["channels=4", "channels"],
+        ["chanels=[4, 4]", "chanels"],
+        ["teacher.x=1", "teacher"],
+    ):
         with pytest.raises(InputError, match=key):
             with_settings(LiteDistillConfig(), [bad])
     with pytest.raises(InputError, match="net.tau"):

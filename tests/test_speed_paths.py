@@ -13,10 +13,10 @@ torch = pytest.importorskip("torch")
 import alcn_cv  # noqa: E402
 from alcn_cv.data.frames import synthetic_frame  # noqa: E402
 from alcn_cv.enhance import base  # noqa: E402
-from alcn_cv.runtime import _integer_zoom  # noqa: E402
 from alcn_cv.enhance.registry import from_spec  # noqa: E402
 from alcn_cv.errors import InputError  # noqa: E402
 from alcn_cv.io import map_video, open_video_writer  # noqa: E402
+from alcn_cv.runtime import _integer_zoom  # noqa: E402
 
 
 @pytest.mark.parametrize("spec", ["alcn", "alcn:model=lite", "alcn:model=paper:grid_stride=16", "dog", "slcn"])
@@ -58,8 +58,9 @@ def test_level0_maps_are_the_exact_bilinear_interpolation():
     maps = alcn.runtime._grid_maps_at(grid, (0.5, 0.5), 0, [0, 3], (243, 323))
     to_grid = np.array([[1 / 16, 0, -1 / 32], [0, 1 / 16, -1 / 32]])
     for k, m in zip([0, 3], maps):
-        exact = cv2.warpAffine(grid[k], to_grid, (323, 243), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                               borderMode=cv2.BORDER_REPLICATE)
+        exact = cv2.warpAffine(
+            grid[k], to_grid, (323, 243), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE
+        )
         np.testing.assert_allclose(m, exact, atol=1e-6)
 
 
@@ -151,8 +152,12 @@ def test_uint8_shortcut_equals_the_float_path(monkeypatch, name):
 def test_uint8_lookup_equals_the_float_path_on_every_level(monkeypatch, name):
     method = from_spec(name)
     rng = np.random.default_rng(3)
-    frames = [np.arange(256, dtype=np.uint8).reshape(16, 16), rng.integers(0, 256, (123, 77), dtype=np.uint8),
-              synthetic_frame(200, 150, False, seed=8), np.full((9, 11), 200, np.uint8)]
+    frames = [
+        np.arange(256, dtype=np.uint8).reshape(16, 16),
+        rng.integers(0, 256, (123, 77), dtype=np.uint8),
+        synthetic_frame(200, 150, False, seed=8),
+        np.full((9, 11), 200, np.uint8),
+    ]
     direct = [method.apply(frame) for frame in frames]
     monkeypatch.setattr(method, "_apply_gray_uint8", lambda gray8: None)
     for frame, result in zip(frames, direct):
@@ -174,5 +179,7 @@ def test_output_map_is_the_numpy_one():
     response = np.random.default_rng(1).normal(0, 0.08, (120, 160)).astype(np.float32)
     unit = np.clip((response.astype(np.float64) + 0.1) * 5, 0, 1)
     np.testing.assert_allclose(method.to_unit(response), unit, atol=1e-6)
-    np.testing.assert_array_equal(method._response_to(response.copy(), np.dtype(np.uint8)),
-                                  np.rint(method.to_unit(response) * 255).astype(np.uint8))
+    np.testing.assert_array_equal(
+        method._response_to(response.copy(), np.dtype(np.uint8)),
+        np.rint(method.to_unit(response) * 255).astype(np.uint8),
+    )

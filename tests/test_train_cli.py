@@ -23,15 +23,17 @@ def test_print_config_applies_the_preset_set_and_seed(capsys):
     assert cfg["data"]["n_train"] == 500_000
 
 
-@pytest.mark.parametrize("command", [["train"], ["train-real-light"], ["distill", "--conf", "lite"],
-                                     ["distill", "--conf", "gain-lite"]])
+@pytest.mark.parametrize(
+    "command", [["train"], ["train-real-light"], ["distill", "--conf", "lite"], ["distill", "--conf", "gain-lite"]]
+)
 def test_every_training_command_takes_a_preset_and_settings(command, capsys):
     assert main([*command, "--print-config", "--set", "seed=7"]) == 0
     assert tomllib.loads(capsys.readouterr().out)["seed"] == 7
 
 
-@pytest.mark.parametrize("command, confs", [("train", TRAIN_CONFS), ("train-real-light", REAL_LIGHT_CONFS),
-                                            ("distill", DISTILL_CONFS)])
+@pytest.mark.parametrize(
+    "command, confs", [("train", TRAIN_CONFS), ("train-real-light", REAL_LIGHT_CONFS), ("distill", DISTILL_CONFS)]
+)
 def test_help_names_every_preset(command, confs, capsys):
     with pytest.raises(SystemExit):
         main([command, "--help"])
@@ -39,16 +41,19 @@ def test_help_names_every_preset(command, confs, capsys):
     assert all(f"{name} (the" in text for name in confs)
 
 
-@pytest.mark.parametrize("args, message", [
-    (["train", "--set", "optim.lrr=1"], "optim.lrr"),
-    (["train", "--set", "optim.epochs=two"], "optim.epochs"),
-    (["train", "--set", "optim.epochs"], "KEY=VALUE"),
-    (["train", "--conf", "nonesuch"], "neither a preset"),
-    (["train-real-light", "--set", "net.chanels=8"], "net.chanels"),
-    (["train-real-light", "--set", "steps=[1]"], "steps"),
-    (["distill", "--conf", "lite", "--set", "channels=[8, 'a']"], "channels"),
-    (["distill", "--conf", "gain"], "unknown preset 'gain'"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["train", "--set", "optim.lrr=1"], "optim.lrr"),
+        (["train", "--set", "optim.epochs=two"], "optim.epochs"),
+        (["train", "--set", "optim.epochs"], "KEY=VALUE"),
+        (["train", "--conf", "nonesuch"], "neither a preset"),
+        (["train-real-light", "--set", "net.chanels=8"], "net.chanels"),
+        (["train-real-light", "--set", "steps=[1]"], "steps"),
+        (["distill", "--conf", "lite", "--set", "channels=[8, 'a']"], "channels"),
+        (["distill", "--conf", "gain"], "unknown preset 'gain'"),
+    ],
+)
 def test_bad_settings_are_one_line_errors(args, message, capsys):
     assert main([*args, "--print-config"]) == 2
     err = capsys.readouterr().err
@@ -80,8 +85,19 @@ def test_train_detector_from_a_few_images(tmp_path):
     mask = np.zeros((60, 60), np.uint8)
     mask[10:50, 10:50] = 255
     cv2.imwrite(str(tmp_path / "images" / "disc" / "a.mask.png"), mask)
-    args = ["train-detector", str(tmp_path / "images"), "--out", str(tmp_path / "det"), "--method", "dog",
-            "--per-image", "12", "--epochs", "1", "--no-progress"]
+    args = [
+        "train-detector",
+        str(tmp_path / "images"),
+        "--out",
+        str(tmp_path / "det"),
+        "--method",
+        "dog",
+        "--per-image",
+        "12",
+        "--epochs",
+        "1",
+        "--no-progress",
+    ]
     assert main(args) == 0
     state = torch.load(tmp_path / "det" / "detector.pt", weights_only=True)
     assert state["classes"] == ["background", "disc", "square"] and state["method"] == "dog"
@@ -94,8 +110,18 @@ def test_distill_help_and_a_tiny_run(tmp_path, capsys):
     assert done.value.code == 0 and "gain-lite" in capsys.readouterr().out
     out = tmp_path / "lite.npz"
     threads = torch.get_num_threads()
-    args = ["--set", "n_windows=16", "--set", "n_val=8", "--set", "epochs=1", "--set", "batch_size=8",
-            "--set", "n_objects=2"]
+    args = [
+        "--set",
+        "n_windows=16",
+        "--set",
+        "n_val=8",
+        "--set",
+        "epochs=1",
+        "--set",
+        "batch_size=8",
+        "--set",
+        "n_objects=2",
+    ]
     assert main(["distill", "--conf", "lite", "--out", str(out), *args, "--no-progress"]) == 0
     assert capsys.readouterr().out.strip() == str(out) and torch.get_num_threads() == threads
     header = load_normalizer_file(out).meta

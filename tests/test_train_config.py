@@ -21,8 +21,12 @@ def test_defaults_and_presets():
 def test_toml_file_overrides_and_round_trip(tmp_path):
     path = tmp_path / "c.toml"
     path.write_text('seed = 3\n[optim]\nlr = 1\nepochs = 2\n[model]\nmethod = "dog"\n')
-    overrides = ["optim.batch_size=16", {"run": {"threads": 2}}, "data.train_lighting=['ambient', 'side']",
-                 "data.val_lighting=['dark']"]
+    overrides = [
+        "optim.batch_size=16",
+        {"run": {"threads": 2}},
+        "data.train_lighting=['ambient', 'side']",
+        "data.val_lighting=['dark']",
+    ]
     cfg = load_config(path, overrides)
     assert (cfg.seed, cfg.optim.lr, cfg.optim.epochs, cfg.model.method) == (3, 1.0, 2, "dog")
     assert isinstance(cfg.optim.lr, float)

@@ -22,7 +22,8 @@ def test_two_cpu_processes_hold_equal_weights(tmp_path):
     train_dir = phos.generate(tmp_path / "train", 64, 0, n_objects=2, lighting="ambient,bright", progress=False)
     val_dir = phos.generate(tmp_path / "val", 16, 1, n_objects=2, lighting="side", progress=False)
     script = tmp_path / "run.py"
-    script.write_text(textwrap.dedent(f"""
+    script.write_text(
+        textwrap.dedent(f"""
         import sys
         import numpy as np
         import torch
@@ -38,13 +39,16 @@ def test_two_cpu_processes_hold_equal_weights(tmp_path):
         flat = torch.cat([p.detach().flatten() for p in result.model.parameters()]).numpy()
         np.save({str(tmp_path)!r} + f"/rank{{distributed.rank()}}.npy", flat)
         distributed.shutdown()
-    """))
+    """)
+    )
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script)]
     # The launch itself (rendezvous on a free local port, under a loaded CI machine) failed once
     # in about a dozen runs without a trace of our code in it: relaunch once. What is tested,
     # equal replicas after training, is asserted on the run that completes.
     for _ in range(2):
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        proc = subprocess.run(
+            cmd, capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"}
+        )
         if proc.returncode == 0 or "alcn_cv" in proc.stderr:
             break
     assert proc.returncode == 0, proc.stderr[-3000:]

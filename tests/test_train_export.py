@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import cv2
 import numpy as np
 import pytest
@@ -11,11 +10,10 @@ import torch
 from alcn_cv.enhance.alcn import ALCN, MODELS
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import alcn_filter
-from alcn_cv.nets import Normalizer
+from alcn_cv.nets import Normalizer, opencv_runtime
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
-from alcn_cv.nets import opencv_runtime
-from alcn_cv.train.export import DEFAULT_ONNX, export_onnx
 from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
+from alcn_cv.train.export import DEFAULT_ONNX, export_onnx
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 
@@ -27,8 +25,13 @@ def random_weights(tmp_path_factory):
     with torch.no_grad():
         net.head.weight.normal_(0, 0.05)
     path = tmp_path_factory.mktemp("w") / "random.npz"
-    meta = {"config": net.config, "sigmas": [0.5 * i for i in range(1, 11)], "working_scale": 0.5,
-            "output_range": [-0.2, 0.2], "trained": False}
+    meta = {
+        "config": net.config,
+        "sigmas": [0.5 * i for i in range(1, 11)],
+        "working_scale": 0.5,
+        "output_range": [-0.2, 0.2],
+        "trained": False,
+    }
     save_normalizer_file(path, net.state_arrays(), meta)
     onnx_path = export_onnx(path.with_suffix(".onnx"), path)
     return path, onnx_path, net.eval()
@@ -37,8 +40,10 @@ def random_weights(tmp_path_factory):
 def _images(shared_data, n=3):
     paths = sorted((shared_data / "psm").glob("*/*.0.png"))[:n]
     assert paths
-    return [cv2.resize(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), None, fx=0.3, fy=0.3).astype(np.float32) / 255
-            for p in paths]
+    return [
+        cv2.resize(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE), None, fx=0.3, fy=0.3).astype(np.float32) / 255
+        for p in paths
+    ]
 
 
 def test_window_matches_the_network():
@@ -49,8 +54,14 @@ def test_lite_normalizer_exports_and_runs_in_opencv(tmp_path):
     torch.manual_seed(1)
     net = LiteNormalizer(output_scale=2.0)
     path = tmp_path / "lite.npz"
-    meta = {"config": net.config, "architecture": "lite", "sigmas": [0.5 * i for i in range(1, 11)],
-            "working_scale": 1.0, "output_range": [-0.2, 0.2], "trained": False}
+    meta = {
+        "config": net.config,
+        "architecture": "lite",
+        "sigmas": [0.5 * i for i in range(1, 11)],
+        "working_scale": 1.0,
+        "output_range": [-0.2, 0.2],
+        "trained": False,
+    }
     save_normalizer_file(path, net.state_arrays(), meta)
     ocv = OpenCVNormalizer(export_onnx(path.with_suffix(".onnx"), path))
     assert ocv.stride == net.stride == 8
@@ -63,7 +74,9 @@ def test_lite_normalizer_exports_and_runs_in_opencv(tmp_path):
     np.testing.assert_allclose(ocv.dense(image), dense, atol=1e-4)
     for mixture in ("exact", "pyramid"):
         fast = ALCN(weights=path, mixture=mixture).normalize(image)
-        np.testing.assert_allclose(ALCN(weights=path, backend="opencv", mixture=mixture).normalize(image), fast, atol=1e-4)
+        np.testing.assert_allclose(
+            ALCN(weights=path, backend="opencv", mixture=mixture).normalize(image), fast, atol=1e-4
+        )
 
 
 @pytest.mark.shared_data
@@ -109,7 +122,10 @@ def test_gain_onnx_takes_the_raw_image(shared_data):
     assert ocv.raw_input and ocv.stride == net.stride == 8
     assert not OpenCVNormalizer(MODELS["lite"].with_suffix(".onnx")).raw_input
     rng = np.random.default_rng(2)
-    for image in [_webcam_frame(shared_data), *(rng.random(shape, dtype=np.float32) for shape in [(48, 48), (5, 9), (1, 1), (17, 130)])]:
+    for image in [
+        _webcam_frame(shared_data),
+        *(rng.random(shape, dtype=np.float32) for shape in [(48, 48), (5, 9), (1, 1), (17, 130)]),
+    ]:
         with torch.no_grad():
             ref = net.dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
         np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-4, rtol=0)
@@ -148,12 +164,15 @@ def test_gain_model_through_opencv_backend(shared_data, mixture):
 def test_gain_model_runs_where_torch_cannot_be_imported(tmp_path, run_without_torch):
     image = np.random.default_rng(4).random((66, 90), dtype=np.float32)
     out = tmp_path / "gain.npy"
-    run_without_torch("""
+    run_without_torch(
+        """
         import numpy as np
         import alcn_cv
         image = np.random.default_rng(4).random((66, 90), dtype=np.float32)
         np.save(sys.argv[1], alcn_cv.createALCN(model="gain", backend="opencv").normalize(image))
-    """, out)
+    """,
+        out,
+    )
     np.testing.assert_allclose(np.load(out), ALCN(model="gain", backend="fast").normalize(image), atol=1e-4, rtol=0)
 
 
@@ -163,12 +182,15 @@ def test_runs_where_torch_cannot_be_imported(random_weights, run_without_torch):
     with torch.no_grad():
         ref = net.dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
     out = onnx_path.parent / "grid.npy"
-    run_without_torch(f"""
+    run_without_torch(
+        f"""
         import numpy as np
         from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
         image = np.random.default_rng(1).random((50, 70), dtype=np.float32)
         np.save(sys.argv[1], OpenCVNormalizer({str(onnx_path)!r}).dense_grid(image))
-    """, out)
+    """,
+        out,
+    )
     np.testing.assert_allclose(np.load(out), ref, atol=1e-4)
 
 

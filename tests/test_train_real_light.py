@@ -74,7 +74,9 @@ def test_anywhere_locations_stay_in_the_frame(tmp_path):
     centres = anywhere_locations(scene, 500, np.random.default_rng(0))
     _, h, w = scene.frames.shape
     assert centres.shape == (500, 2)
-    assert centres.min() >= scene.pad and (centres[:, 0] < h - scene.pad).all() and (centres[:, 1] < w - scene.pad).all()
+    assert (
+        centres.min() >= scene.pad and (centres[:, 0] < h - scene.pad).all() and (centres[:, 1] < w - scene.pad).all()
+    )
 
 
 def test_pair_loss_adds_the_weighted_consistency(tmp_path):
@@ -89,9 +91,22 @@ def test_pair_loss_adds_the_weighted_consistency(tmp_path):
         plain = float(pair_loss(net, scene, (0, 1), centres, base, anywhere))
         both = float(pair_loss(net, scene, (0, 1), centres, weighted, anywhere))
         every = np.concatenate([centres, anywhere])
-        outputs = [_normalized_centres(net, torch.from_numpy(np.stack([scene.frames[f][y - CROP // 2 : y + CROP // 2, x - CROP // 2 : x + CROP // 2]
-                                                                       for y, x in every]))[:, None], PATCH,
-                                       [(slice(None), slice(len(centres), None))]) for f in (0, 1)]
+        outputs = [
+            _normalized_centres(
+                net,
+                torch.from_numpy(
+                    np.stack(
+                        [
+                            scene.frames[f][y - CROP // 2 : y + CROP // 2, x - CROP // 2 : x + CROP // 2]
+                            for y, x in every
+                        ]
+                    )
+                )[:, None],
+                PATCH,
+                [(slice(None), slice(len(centres), None))],
+            )
+            for f in (0, 1)
+        ]
     assert both == pytest.approx(plain + 2.0 * float(consistency_loss(*outputs)), rel=1e-4)
 
 
@@ -108,7 +123,9 @@ def test_per_pixel_divisive_centres_equal_the_whole_normalization_with_the_crops
         centre = _normalized_centres(net, crops, PATCH, [(slice(0, 2), slice(1, 2)), (slice(2, 4), slice(2, 4))])
         response = net.response(crops)
         energy = gaussian_energy(response, 2.0)[centre_of]
-        floor = 0.7 * torch.stack([energy[1].mean(), energy[1].mean(), energy[2:].mean(), energy[2:].mean()]).view(4, 1, 1, 1)
+        floor = 0.7 * torch.stack([energy[1].mean(), energy[1].mean(), energy[2:].mean(), energy[2:].mean()]).view(
+            4, 1, 1, 1
+        )
         expected = net.equalize(net.divide(response, floor))[centre_of]
     torch.testing.assert_close(centre, expected, atol=1e-5, rtol=1e-4)
 
@@ -125,16 +142,37 @@ def test_cli_runs_the_preset_with_its_settings(tmp_path, monkeypatch):
     (changed, record), (preset, _) = runs
     assert preset == RealLightConfig() and preset.net["divisive_sigma"] == 2.0
     assert (changed.net["stride"], changed.seed, changed.scenes) == (16, 3, [str(tmp_path)])
-    words = ["alcn", "train-real-light", "--conf", "gain", "--set", f"scenes=['{tmp_path}']", "--set", "net.stride=16",
-             "--seed", "3"]
+    words = [
+        "alcn",
+        "train-real-light",
+        "--conf",
+        "gain",
+        "--set",
+        f"scenes=['{tmp_path}']",
+        "--set",
+        "net.stride=16",
+        "--seed",
+        "3",
+    ]
     assert record == {"conf": "gain", "command": shlex.join(words)}
 
 
 def test_three_steps_lower_the_loss(tmp_path):
     torch.set_num_threads(1)
     scene_dir = _write_scene(tmp_path / "scene")
-    cfg = RealLightConfig(scenes=[str(scene_dir)], steps=3, locations=16, crop=CROP, patch=PATCH,
-                          min_distance=8, temperature=0.5, lr=0.02, seed=0, save_every=3, net={"channels": 8})
+    cfg = RealLightConfig(
+        scenes=[str(scene_dir)],
+        steps=3,
+        locations=16,
+        crop=CROP,
+        patch=PATCH,
+        min_distance=8,
+        temperature=0.5,
+        lr=0.02,
+        seed=0,
+        save_every=3,
+        net={"channels": 8},
+    )
     path = train_real_light(cfg, tmp_path / "run")
     weight_file = load_normalizer_file(path)
     assert weight_file.meta["trained"] and weight_file.meta["architecture"] == "gain"

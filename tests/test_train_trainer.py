@@ -46,8 +46,16 @@ def test_train_outputs_and_gradients_reach_the_normalizer(data, tmp_path):
     assert 0 <= result.fewshot["alcn"]["auc"] <= 1
     assert result.status == "done" and len(result.history) == 2
     assert set(result.val_by_family) == {"side"}
-    for name in ("checkpoint.pt", "train.log", "history.json", "curves.png", "config.toml", "alcn_normalizer.npz",
-                 "fewshot.json", "summary.md"):
+    for name in (
+        "checkpoint.pt",
+        "train.log",
+        "history.json",
+        "curves.png",
+        "config.toml",
+        "alcn_normalizer.npz",
+        "fewshot.json",
+        "summary.md",
+    ):
         assert (tmp_path / name).is_file(), name
     assert "held-out val" in (tmp_path / "train.log").read_text()
     assert "| dog 0.5/1.5 |" in (tmp_path / "summary.md").read_text()
@@ -165,10 +173,13 @@ def test_meta_objective_trains_the_normalizer_only_on_other_lightings(data):
 
 
 def test_meta_objective_renders_anchor_windows(tmp_path):
-    cfg = {"data": {"n_train": 24, "n_val": 8, "n_objects": 2, "train_lighting": ["ambient", "bright"]},
-           "model": {"channels": [4, 8], "hidden": 16, "detector_channels": [4, 8], "detector_hidden": 16},
-           "optim": {"objective": "meta", "epochs": 1, "batch_size": 8},
-           "fewshot": {"enabled": False}, "run": {"threads": 1}}
+    cfg = {
+        "data": {"n_train": 24, "n_val": 8, "n_objects": 2, "train_lighting": ["ambient", "bright"]},
+        "model": {"channels": [4, 8], "hidden": 16, "detector_channels": [4, 8], "detector_hidden": 16},
+        "optim": {"objective": "meta", "epochs": 1, "batch_size": 8},
+        "fewshot": {"enabled": False},
+        "run": {"threads": 1},
+    }
     result = trainer.train(cfg, tmp_path, progress=False)
     assert result.status == "done"
     with np.load(next(tmp_path.glob("windows-*.npz"))) as z:

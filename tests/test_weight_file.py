@@ -44,7 +44,10 @@ def _bad_files(tmp_path, lite):
         "nan": (poisoned["nan"], f"{key}.*NaN or infinite"),
         "inf": (poisoned["inf"], f"{key}.*NaN or infinite"),
         "header list": (_write_npz(tmp_path / "list.npz", lite.arrays, ["a"]), "not a JSON object"),
-        "nan range": (_write_npz(tmp_path / "range.npz", lite.arrays, {**lite.meta, "output_range": [float("nan"), 1.0]}), "finite"),
+        "nan range": (
+            _write_npz(tmp_path / "range.npz", lite.arrays, {**lite.meta, "output_range": [float("nan"), 1.0]}),
+            "finite",
+        ),
     }
 
 

@@ -288,10 +288,16 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         help="labels run in the video test (default: alcn and the fastest ALCN variant)",
     )
     p.add_argument("--threads", type=int, help="OpenCV and torch threads (default: theirs)")
-    p.add_argument("--device", help="measure only ALCN's batched torch path on this device (cuda, cpu): end to end "
-                   "host uint8 to host uint8, on the device, float16, against the CPU, beside kornia's DoG and CLAHE")
-    p.add_argument("--device-batches", type=_list(int), help="batch sizes of --device (default "
-                   + ",".join(map(str, d.device_batches)) + ")")
+    p.add_argument(
+        "--device",
+        help="measure only ALCN's batched torch path on this device (cuda, cpu): end to end "
+        "host uint8 to host uint8, on the device, float16, against the CPU, beside kornia's DoG and CLAHE",
+    )
+    p.add_argument(
+        "--device-batches",
+        type=_list(int),
+        help="batch sizes of --device (default " + ",".join(map(str, d.device_batches)) + ")",
+    )
     p.set_defaults(func=_run_speed)
 
 

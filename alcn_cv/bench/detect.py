@@ -70,7 +70,14 @@ from alcn_cv.bench import tuning
 from alcn_cv.bench.detect_data import DetectData, ScaledImage, TrainingSet, load_data, read_test_images, training_set
 from alcn_cv.bench.detect_report import detect_command, detect_markdown
 from alcn_cv.bench.detect_settings import (
-    CROP, DEEP_BASELINES, RESNET_CONTEXT, RESNETS, STRIDE, WINDOW, DetectSettings, run_key,
+    CROP,
+    DEEP_BASELINES,
+    RESNET_CONTEXT,
+    RESNETS,
+    STRIDE,
+    WINDOW,
+    DetectSettings,
+    run_key,
 )
 from alcn_cv.bench.metrics import match_detections, nms, pr_auc, precision_recall
 from alcn_cv.bench.plots import plot_pr_curves
@@ -85,7 +92,15 @@ from alcn_cv.report import machine
 if TYPE_CHECKING:
     from torch import nn
 
-__all__ = ["create_normalization", "detect_in_image", "fixed_boxes", "main", "score_maps", "summarize", "window_agreement"]
+__all__ = [
+    "create_normalization",
+    "detect_in_image",
+    "fixed_boxes",
+    "main",
+    "score_maps",
+    "summarize",
+    "window_agreement",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -121,7 +136,9 @@ def score_maps(net: nn.Module, image: np.ndarray, policy: InputPolicy, device: s
         return F.softmax(logits[:, :hd, :wd], dim=0).cpu().numpy()
 
 
-def _all_score_maps(net: nn.Module, images: list[np.ndarray], policy: InputPolicy, device: str, batch: int = 8) -> list[np.ndarray]:
+def _all_score_maps(
+    net: nn.Module, images: list[np.ndarray], policy: InputPolicy, device: str, batch: int = 8
+) -> list[np.ndarray]:
     """:func:`score_maps` of many images; dense policies run images of equal size in batches."""
     if policy.name == "standardize":
         return [score_maps(net, img, policy, device) for img in images]
@@ -147,8 +164,14 @@ def _all_score_maps(net: nn.Module, images: list[np.ndarray], policy: InputPolic
 def fixed_boxes(centres: np.ndarray, side_x: float, side_y: float) -> np.ndarray:
     """Boxes ``[x, y, w, h]`` of a fixed size centred on ``(n, 2)`` centres (pixel-edge coordinates)."""
     centres = np.asarray(centres, np.float64).reshape(-1, 2)
-    return np.column_stack([centres[:, 0] - side_x / 2, centres[:, 1] - side_y / 2,
-                            np.full(len(centres), side_x), np.full(len(centres), side_y)])
+    return np.column_stack(
+        [
+            centres[:, 0] - side_x / 2,
+            centres[:, 1] - side_y / 2,
+            np.full(len(centres), side_x),
+            np.full(len(centres), side_y),
+        ]
+    )
 
 
 def detect_in_image(
@@ -206,7 +229,10 @@ def create_normalization(method: str, params: dict[str, Any]) -> Normalization:
 
 
 def window_agreement(
-    norm: Normalization, images: list[np.ndarray], normalized: list[np.ndarray], count: int = AGREEMENT_WINDOWS,
+    norm: Normalization,
+    images: list[np.ndarray],
+    normalized: list[np.ndarray],
+    count: int = AGREEMENT_WINDOWS,
     seed: int = 0,
 ) -> float | None:
     """How closely what the detector trains on matches what it is tested on, for one method.
@@ -245,8 +271,14 @@ def window_agreement(
 
 
 def _train(
-    method: str, train: np.ndarray, labels: np.ndarray, num_classes: int, settings: DetectSettings, seed: int,
-    val: tuple[np.ndarray, np.ndarray], config: tuple[int, int] | None = None,
+    method: str,
+    train: np.ndarray,
+    labels: np.ndarray,
+    num_classes: int,
+    settings: DetectSettings,
+    seed: int,
+    val: tuple[np.ndarray, np.ndarray],
+    config: tuple[int, int] | None = None,
 ) -> nn.Module:
     import torch
 
@@ -256,13 +288,26 @@ def _train(
         torch.manual_seed(seed)
         net = _make_net(method, num_classes, config, context=(train.shape[-1] - CROP) // 2)
     return train_detector(
-        train, labels, num_classes, epochs=settings.epochs, batch_size=settings.batch_size, lr=settings.lr,
-        seed=seed, val=val, progress=False, net=net, device=settings.device,
+        train,
+        labels,
+        num_classes,
+        epochs=settings.epochs,
+        batch_size=settings.batch_size,
+        lr=settings.lr,
+        seed=seed,
+        val=val,
+        progress=False,
+        net=net,
+        device=settings.device,
     )
 
 
 def _train_cnn_sweep(
-    train: np.ndarray, labels: np.ndarray, num_classes: int, settings: DetectSettings, seed: int,
+    train: np.ndarray,
+    labels: np.ndarray,
+    num_classes: int,
+    settings: DetectSettings,
+    seed: int,
     val: tuple[np.ndarray, np.ndarray],
 ) -> tuple[nn.Module, dict[str, Any]]:
     from alcn_cv.train.stage2 import evaluate_detector
@@ -279,7 +324,11 @@ def _train_cnn_sweep(
 
 
 def _evaluate(
-    data: DetectData, test_images: list[ScaledImage], net: nn.Module, policy: InputPolicy, settings: DetectSettings,
+    data: DetectData,
+    test_images: list[ScaledImage],
+    net: nn.Module,
+    policy: InputPolicy,
+    settings: DetectSettings,
 ) -> dict[str, Any]:
     """AUC and precision-recall per object of a trained network on normalized test images."""
     probs = _all_score_maps(net, [t.image for t in test_images], policy, settings.device)
@@ -325,10 +374,15 @@ def summarize(runs: dict[str, Any], settings: DetectSettings, names: list[str]) 
     for method in settings.methods:
         for n_real in settings.real_images:
             for policy in settings.policies:
-                seeded = [(seed, runs.get(run_key(method, n_real, policy, seed), {"error": "not run"})) for seed in settings.seeds]
+                seeded = [
+                    (seed, runs.get(run_key(method, n_real, policy, seed), {"error": "not run"}))
+                    for seed in settings.seeds
+                ]
                 done = [(seed, r) for seed, r in seeded if "error" not in r]
-                cell: dict[str, Any] = {"seeds": [seed for seed, _ in done],
-                                        "failed_seeds": [seed for seed, r in seeded if "error" in r]}
+                cell: dict[str, Any] = {
+                    "seeds": [seed for seed, _ in done],
+                    "failed_seeds": [seed for seed, r in seeded if "error" in r],
+                }
                 if not done:
                     cell["error"] = seeded[0][1]["error"]
                 else:
@@ -336,8 +390,11 @@ def summarize(runs: dict[str, Any], settings: DetectSettings, names: list[str]) 
                     for name in names:
                         aucs = [r["objects"][name]["auc"] for _, r in done if r["objects"][name]["auc"] is not None]
                         cell["objects"][name] = _spread(aucs) if aucs else None
-                    means = [float(np.mean(v)) for v in
-                             ([o["auc"] for o in r["objects"].values() if o["auc"] is not None] for _, r in done) if v]
+                    means = [
+                        float(np.mean(v))
+                        for v in ([o["auc"] for o in r["objects"].values() if o["auc"] is not None] for _, r in done)
+                        if v
+                    ]
                     cell["mean"] = _spread(means) if means else None
                 summary[f"{method}|{n_real}|{policy}"] = cell
     return summary
@@ -385,8 +442,14 @@ def _normalize_training(
 
 
 def _train_and_score(
-    state: _Run, method: str, n_real: int, policy_name: str, seed: int, params: dict[str, Any],
-    normalized: tuple[Normalization, np.ndarray, np.ndarray, float], test_cache: dict[str, list[ScaledImage]],
+    state: _Run,
+    method: str,
+    n_real: int,
+    policy_name: str,
+    seed: int,
+    params: dict[str, Any],
+    normalized: tuple[Normalization, np.ndarray, np.ndarray, float],
+    test_cache: dict[str, list[ScaledImage]],
 ) -> dict[str, Any]:
     """One run: the detector trained on the normalized windows under a policy, scored on the test images."""
     from alcn_cv.train.stage2 import evaluate_detector
@@ -402,7 +465,9 @@ def _train_and_score(
     t1 = time.perf_counter()
     num_classes = len(state.data.categories) + 1
     if method == "cnn":
-        net, state.cnn[f"{n_real}|{policy_name}|{seed}"] = _train_cnn_sweep(train, ts.labels, num_classes, settings, seed, val)
+        net, state.cnn[f"{n_real}|{policy_name}|{seed}"] = _train_cnn_sweep(
+            train, ts.labels, num_classes, settings, seed, val
+        )
     else:
         net = _train(method, train, ts.labels, num_classes, settings, seed, val)
     t_train = time.perf_counter() - t1
@@ -410,10 +475,15 @@ def _train_and_score(
     if cache_key not in test_cache:  # test images do not depend on the seed
         test_cache[cache_key] = [ScaledImage(t.id, norm.normalize(t.image), t.sx, t.sy) for t in state.test_images]
         state.agreement.setdefault(method, {})[cache_key] = window_agreement(
-            norm, [t.image for t in state.test_images], [t.image for t in test_cache[cache_key]])
+            norm, [t.image for t in state.test_images], [t.image for t in test_cache[cache_key]]
+        )
     return {
-        "method": method, "real_images": n_real, "policy": policy.to_dict(), "seed": seed,
-        "params": params, "images_used": ts.images_used,
+        "method": method,
+        "real_images": n_real,
+        "policy": policy.to_dict(),
+        "seed": seed,
+        "params": params,
+        "images_used": ts.images_used,
         "objects": _evaluate(state.data, test_cache[cache_key], net, policy, settings),
         "val_relit_acc": evaluate_detector(net, *val)[1],
         "seconds": {"normalize_train": t_norm, "train": t_train, "total": t_norm + time.perf_counter() - t0},
@@ -437,13 +507,24 @@ def _run_method(state: _Run, method: str, out: Path, bar: tqdm) -> None:
                         normalized = exc
                 if isinstance(normalized, Exception):
                     raise normalized
-                state.runs[key] = _train_and_score(state, method, n_real, policy_name, seed, params, normalized, test_cache)
+                state.runs[key] = _train_and_score(
+                    state, method, n_real, policy_name, seed, params, normalized, test_cache
+                )
             except Exception as exc:  # one method failing is reported, not the end of the run
-                logger.error("run %s failed: %s: %s", key, type(exc).__name__, exc, exc_info=logger.isEnabledFor(logging.DEBUG))
-                state.runs[key] = {"method": method, "real_images": n_real, "policy": policy_name, "seed": seed,
-                                   "error": f"{type(exc).__name__}: {exc}"}
+                logger.error(
+                    "run %s failed: %s: %s", key, type(exc).__name__, exc, exc_info=logger.isEnabledFor(logging.DEBUG)
+                )
+                state.runs[key] = {
+                    "method": method,
+                    "real_images": n_real,
+                    "policy": policy_name,
+                    "seed": seed,
+                    "error": f"{type(exc).__name__}: {exc}",
+                }
             bar.update()
-            write_json(out / "detect.partial.json", {"runs": state.runs, "tuned": {str(k): v for k, v in state.tuned.items()}})
+            write_json(
+                out / "detect.partial.json", {"runs": state.runs, "tuned": {str(k): v for k, v in state.tuned.items()}}
+            )
 
 
 def _result(state: _Run, command: str, seconds: float) -> dict[str, Any]:
@@ -502,12 +583,18 @@ def main(
     state = _Run(data, settings, read_test_images(data, settings.max_test_images))
     logger.info("read %d test images", len(state.test_images))
     _tune(state)
-    with tqdm(total=len(settings.methods) * len(settings.seeds) * len(settings.real_images) * len(settings.policies),
-              desc="detect benchmark", unit="run", disable=not progress) as bar:
+    with tqdm(
+        total=len(settings.methods) * len(settings.seeds) * len(settings.real_images) * len(settings.policies),
+        desc="detect benchmark",
+        unit="run",
+        disable=not progress,
+    ) as bar:
         for method in settings.methods:
             _run_method(state, method, out, bar)
 
-    result = _result(state, detect_command(data_dir, out_dir, settings, working_scale, box_size), time.perf_counter() - start)
+    result = _result(
+        state, detect_command(data_dir, out_dir, settings, working_scale, box_size), time.perf_counter() - start
+    )
     names = [data.name(c) for c in data.categories]
     result["figures"] = plot_pr_curves(result, names, out)
     result["seconds"] = time.perf_counter() - start

@@ -45,7 +45,9 @@ class DetectData:
         return self.test.category(category).name
 
 
-def load_data(data_dir: str | os.PathLike, working_scale: float | None = None, box_size: float | None = None) -> DetectData:
+def load_data(
+    data_dir: str | os.PathLike, working_scale: float | None = None, box_size: float | None = None
+) -> DetectData:
     """Read ``train.json``, ``test.json`` and (when present) ``manifest.json`` of a benchmark folder.
 
     Args:
@@ -66,8 +68,10 @@ def load_data(data_dir: str | os.PathLike, working_scale: float | None = None, b
     scale = working_scale if working_scale is not None else manifest.get("working_scale")
     box = box_size if box_size is not None else manifest.get("box_size")
     if scale is None or box is None:
-        raise DatasetError(f"{manifest_path}: fields 'working_scale' and 'box_size' are needed "
-                           "(or pass --working-scale and --box-size)")
+        raise DatasetError(
+            f"{manifest_path}: fields 'working_scale' and 'box_size' are needed "
+            "(or pass --working-scale and --box-size)"
+        )
     scale, box = float(scale), float(box)
     if not 0 < scale <= 4 or not box > 0:
         raise DatasetError(f"{manifest_path}: working_scale {scale} must be in (0, 4] and box_size {box} positive")
@@ -164,7 +168,9 @@ def training_set(data: DetectData, n_real: int, settings: DetectSettings, seed: 
     val_labels.append(np.zeros(n_val_neg))
     val = np.concatenate(val_windows).astype(np.float32) / np.float32(255)
     return TrainingSet(
-        np.concatenate(windows), np.concatenate(labels).astype(np.int64),
-        tuning.relight(val, np.random.default_rng([seed, n_real, 1])), np.concatenate(val_labels).astype(np.int64),
+        np.concatenate(windows),
+        np.concatenate(labels).astype(np.int64),
+        tuning.relight(val, np.random.default_rng([seed, n_real, 1])),
+        np.concatenate(val_labels).astype(np.int64),
         used,
     )

@@ -13,21 +13,37 @@ __all__ = ["detect_command", "detect_markdown"]
 
 
 def detect_command(
-    data_dir: str | os.PathLike, out_dir: str | os.PathLike, settings: DetectSettings,
-    working_scale: float | None = None, box_size: float | None = None,
+    data_dir: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    settings: DetectSettings,
+    working_scale: float | None = None,
+    box_size: float | None = None,
 ) -> str:
     """The ``alcn bench detect`` command line that runs these settings (``max_detections`` and
     the preset aside, every setting spelled out)."""
-    return command_line(["alcn", "bench", "detect", "--data", data_dir, "--out", out_dir], {
-        "--methods": settings.methods, "--real-images": settings.real_images, "--policy": settings.policies,
-        "--positives": settings.positives_per_object, "--negatives-ratio": settings.negatives_ratio,
-        "--epochs": settings.epochs, "--batch-size": settings.batch_size, "--lr": settings.lr,
-        "--seeds": settings.seeds, "--tune": settings.tune,
-        "--cnn-sweep": [f"{d}x{w}" for d, w in settings.cnn_sweep],
-        "--nms-iou": settings.nms_iou, "--match-iou": settings.match_iou,
-        "--max-test-images": settings.max_test_images, "--working-scale": working_scale, "--box-size": box_size,
-        "--threads": settings.threads, "--device": settings.device,
-    })
+    return command_line(
+        ["alcn", "bench", "detect", "--data", data_dir, "--out", out_dir],
+        {
+            "--methods": settings.methods,
+            "--real-images": settings.real_images,
+            "--policy": settings.policies,
+            "--positives": settings.positives_per_object,
+            "--negatives-ratio": settings.negatives_ratio,
+            "--epochs": settings.epochs,
+            "--batch-size": settings.batch_size,
+            "--lr": settings.lr,
+            "--seeds": settings.seeds,
+            "--tune": settings.tune,
+            "--cnn-sweep": [f"{d}x{w}" for d, w in settings.cnn_sweep],
+            "--nms-iou": settings.nms_iou,
+            "--match-iou": settings.match_iou,
+            "--max-test-images": settings.max_test_images,
+            "--working-scale": working_scale,
+            "--box-size": box_size,
+            "--threads": settings.threads,
+            "--device": settings.device,
+        },
+    )
 
 
 def _cell(spread: dict[str, Any] | None) -> str | None:
@@ -58,19 +74,27 @@ def _header(result: dict[str, Any], settings: DetectSettings) -> list[str]:
         f"Total time {result['seconds']:.0f} s.",
         "- **Input policies** (how the normalized windows reach the detector; the same for every method):",
     ]
-    lines += [f"  - `{name}`{'' if name in settings.policies else ' (not run here)'}: {text}."
-              for name, text in POLICY_DESCRIPTIONS.items()]
+    lines += [
+        f"  - `{name}`{'' if name in settings.policies else ' (not run here)'}: {text}."
+        for name, text in POLICY_DESCRIPTIONS.items()
+    ]
     if len(seeds) > 1:
-        lines.append(f"- **Seeds:** {len(seeds)} ({', '.join(map(str, seeds))}); every cell is the mean ± standard "
-                     "deviation over the seeds (a seed draws other training windows, detector initialisation and "
-                     "batch order).")
+        lines.append(
+            f"- **Seeds:** {len(seeds)} ({', '.join(map(str, seeds))}); every cell is the mean ± standard "
+            "deviation over the seeds (a seed draws other training windows, detector initialisation and "
+            "batch order)."
+        )
     else:
-        lines.append(f"- **Seeds:** one ({seeds[0]}), so there is no spread: a single seed's AUC moves by several "
-                     "hundredths with the training windows and the detector's initialisation; read small "
-                     "differences with care, or rerun with `--seeds 0,1,2`.")
+        lines.append(
+            f"- **Seeds:** one ({seeds[0]}), so there is no spread: a single seed's AUC moves by several "
+            "hundredths with the training windows and the detector's initialisation; read small "
+            "differences with care, or rerun with `--seeds 0,1,2`."
+        )
     lines.append("")
     if result.get("alcn_trained") is False:
-        lines.append("**The `alcn` row used UNTRAINED Normalizer weights** (the shipped file's `trained` flag is false).\n")
+        lines.append(
+            "**The `alcn` row used UNTRAINED Normalizer weights** (the shipped file's `trained` flag is false).\n"
+        )
     return lines
 
 
@@ -88,19 +112,29 @@ def detect_markdown(result: dict[str, Any], names: list[str]) -> str:
                     rows.append([method] + ["failed"] * (len(names) + 1))
                     continue
                 failed = f" ({len(summary['failed_seeds'])} seed(s) failed)" if summary["failed_seeds"] else ""
-                rows.append([method + failed] + [_cell(summary["objects"][n]) for n in names] + [_cell(summary["mean"])])
+                rows.append(
+                    [method + failed] + [_cell(summary["objects"][n]) for n in names] + [_cell(summary["mean"])]
+                )
             lines.append(f"\n## {n_real} real image(s) per object, input policy `{policy}`\n")
             lines.append(markdown_table(["method"] + names + ["mean"], rows))
     agreement = result.get("window_agreement") or {}
     if agreement:
         lines.append("\n## Training windows against test images\n")
-        lines.append("Correlation between the 32x32 centres of 64x64 test-image windows normalized alone (what the "
-                     "detector trains on) and the same pixels of the normalized whole image (what it is tested on), "
-                     "200 random windows; 1 = the same, lower = the detector is tested on another response than it "
-                     "learnt (methods with a context wider than the window).\n")
-        lines.append(markdown_table(["method", "agreement"], [
-            [m, ", ".join("-" if v is None else f"{v:.3f}" for v in by_params.values())] for m, by_params in agreement.items()
-        ]))
+        lines.append(
+            "Correlation between the 32x32 centres of 64x64 test-image windows normalized alone (what the "
+            "detector trains on) and the same pixels of the normalized whole image (what it is tested on), "
+            "200 random windows; 1 = the same, lower = the detector is tested on another response than it "
+            "learnt (methods with a context wider than the window).\n"
+        )
+        lines.append(
+            markdown_table(
+                ["method", "agreement"],
+                [
+                    [m, ", ".join("-" if v is None else f"{v:.3f}" for v in by_params.values())]
+                    for m, by_params in agreement.items()
+                ],
+            )
+        )
     failures = [f"- `{k}`: {v['error']}" for k, v in result["runs"].items() if "error" in v]
     if failures:
         lines.append("\n## Failures\n\n" + "\n".join(failures) + "\n")
@@ -114,7 +148,9 @@ def detect_markdown(result: dict[str, Any], names: list[str]) -> str:
     if result.get("cnn"):
         lines.append("\n## Plain CNN sweep (chosen by accuracy on relit held-out training windows)\n")
         for key, c in result["cnn"].items():
-            lines.append(f"- {key}: chosen depth {c['chosen']['depth']} width {c['chosen']['width']}; "
-                         + ", ".join(f"{s['depth']}x{s['width']}: {s['val_acc']:.3f}" for s in c["sweep"]))
+            lines.append(
+                f"- {key}: chosen depth {c['chosen']['depth']} width {c['chosen']['width']}; "
+                + ", ".join(f"{s['depth']}x{s['width']}: {s['val_acc']:.3f}" for s in c["sweep"])
+            )
         lines.append("")
     return "\n".join(lines) + "\n"

@@ -9,8 +9,18 @@ from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
 
 __all__ = [
-    "CROP", "DEEP_BASELINES", "POLICIES", "POLICY_DESCRIPTIONS", "RESNETS", "RESNET_CONTEXT", "STRIDE", "WINDOW",
-    "DetectSettings", "default_methods", "presets", "run_key",
+    "CROP",
+    "DEEP_BASELINES",
+    "POLICIES",
+    "POLICY_DESCRIPTIONS",
+    "RESNETS",
+    "RESNET_CONTEXT",
+    "STRIDE",
+    "WINDOW",
+    "DetectSettings",
+    "default_methods",
+    "presets",
+    "run_key",
 ]
 
 #: Deep baselines (own networks, no normalization) of Sec. 4.3.1.

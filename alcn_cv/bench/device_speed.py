@@ -28,7 +28,7 @@ __all__ = ["device_markdown", "device_speed"]
 
 def _median_ms(calls: dict[str, Callable[[], Any]], rounds: int, sync: Callable[[], None]) -> dict[str, float]:
     times: dict[str, list[float]] = {name: [] for name in calls}
-    for name, call in calls.items():  # warm-up: kernels, caches, cuDNN's choices
+    for call in calls.values():  # warm-up: kernels, caches, cuDNN's choices
         call()
     sync()
     for _ in range(rounds):
@@ -86,9 +86,15 @@ def device_speed(device: str, frame: np.ndarray, batches: list[int], rounds: int
         x = torch.from_numpy(frame)[None, None].float() * (1.0 / 255)
         full = module(x.to(dev)).float().cpu()
         cpu = ALCN2d().eval()(x)
-        result = {"device": str(dev), "size": [frame.shape[1], frame.shape[0]], "rows": rows,
-                  "device_vs_cpu_max_abs": float((full - cpu).abs().max()) if dev.type != "cpu" else None,
-                  "half_max_abs": float((half(x.to(dev, torch.float16)).float().cpu() - full).abs().max()) if half is not None else None}
+        result = {
+            "device": str(dev),
+            "size": [frame.shape[1], frame.shape[0]],
+            "rows": rows,
+            "device_vs_cpu_max_abs": float((full - cpu).abs().max()) if dev.type != "cpu" else None,
+            "half_max_abs": float((half(x.to(dev, torch.float16)).float().cpu() - full).abs().max())
+            if half is not None
+            else None,
+        }
     if dev.type == "cuda":
         result["gpu"] = torch.cuda.get_device_name(dev)
     return result
@@ -98,8 +104,14 @@ def device_markdown(result: dict[str, Any]) -> list[str]:
     """The device section of ``speed.md``."""
     names = [k for k in result["rows"][0] if k != "batch"]
     w, h = result["size"]
-    lines = [f"## ALCN batched on {result['device']} ({result.get('gpu', '')}), {w}x{h} gray, frames per second", "",
-             markdown_table(["batch", *names], [[r["batch"], *(r[n] for n in names)] for r in result["rows"]], digits=1), "",
-             (f"Largest difference float16 / float32 on the device: {result['half_max_abs']}; "
-              f"device / CPU (float32): {result['device_vs_cpu_max_abs']}.")]
+    lines = [
+        f"## ALCN batched on {result['device']} ({result.get('gpu', '')}), {w}x{h} gray, frames per second",
+        "",
+        markdown_table(["batch", *names], [[r["batch"], *(r[n] for n in names)] for r in result["rows"]], digits=1),
+        "",
+        (
+            f"Largest difference float16 / float32 on the device: {result['half_max_abs']}; "
+            f"device / CPU (float32): {result['device_vs_cpu_max_abs']}."
+        ),
+    ]
     return lines

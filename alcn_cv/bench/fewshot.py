@@ -102,17 +102,38 @@ class FewShotSettings:
         bad = [p for p in self.policies if p not in POLICIES]
         if bad or not self.policies:
             raise InputError(f"unknown or no policy {bad}; choose from {', '.join(POLICIES)}")
-        if min(self.draws, self.objects, self.real_images, self.per_image, self.test_windows, self.epochs,
-               self.batch_size) < 1 or not self.lr > 0:
-            raise InputError("draws, objects, real_images, per_image, test_windows, epochs and batch_size must be "
-                             ">= 1 and lr > 0")
+        if (
+            min(
+                self.draws,
+                self.objects,
+                self.real_images,
+                self.per_image,
+                self.test_windows,
+                self.epochs,
+                self.batch_size,
+            )
+            < 1
+            or not self.lr > 0
+        ):
+            raise InputError(
+                "draws, objects, real_images, per_image, test_windows, epochs and batch_size must be >= 1 and lr > 0"
+            )
         return self
 
     def setup(self, draw: int) -> FewShotSetup:
         """The few-shot setup of one draw."""
-        return FewShotSetup(n_objects=self.objects, object_seed=self.object_seed + draw, real_images=self.real_images,
-                            per_image=self.per_image, n_test=self.test_windows, test_lighting=tuple(self.test_lighting),
-                            epochs=self.epochs, batch_size=self.batch_size, lr=self.lr, seed=draw)
+        return FewShotSetup(
+            n_objects=self.objects,
+            object_seed=self.object_seed + draw,
+            real_images=self.real_images,
+            per_image=self.per_image,
+            n_test=self.test_windows,
+            test_lighting=tuple(self.test_lighting),
+            epochs=self.epochs,
+            batch_size=self.batch_size,
+            lr=self.lr,
+            seed=draw,
+        )
 
 
 def _is(spec: str, name: str) -> bool:
@@ -140,8 +161,16 @@ def compare_to_dog(runs: dict[str, Any], settings: FewShotSettings) -> dict[str,
                     rows.append({"draw": draw, "above": None})
                     continue
                 dog_auc, dog = max(done)
-                rows.append({"draw": draw, "auc": mine["auc"], "dog": dog, "dog_auc": dog_auc,
-                             "margin": mine["auc"] - dog_auc, "above": bool(mine["auc"] > dog_auc)})
+                rows.append(
+                    {
+                        "draw": draw,
+                        "auc": mine["auc"],
+                        "dog": dog,
+                        "dog_auc": dog_auc,
+                        "margin": mine["auc"] - dog_auc,
+                        "above": bool(mine["auc"] > dog_auc),
+                    }
+                )
             out[policy][variant] = rows
     return out if dogs and variants else {}
 
@@ -169,10 +198,21 @@ def _run_draw(settings: FewShotSettings, draw: int, runs: dict[str, Any], bar: t
             t1 = time.perf_counter()
             try:
                 policy = InputPolicy(policy_name, train_n)
-                entry = nan_to_none(score_inputs(f"{method} ({policy_name}, draw {draw})", policy.windows(train_n), train_y,
-                                                 policy.windows(test_n), test, setup))
-                entry.update(draw=draw, policy=policy.to_dict(),
-                             seconds={"normalize": normalize_s, "train_and_test": time.perf_counter() - t1})
+                entry = nan_to_none(
+                    score_inputs(
+                        f"{method} ({policy_name}, draw {draw})",
+                        policy.windows(train_n),
+                        train_y,
+                        policy.windows(test_n),
+                        test,
+                        setup,
+                    )
+                )
+                entry.update(
+                    draw=draw,
+                    policy=policy.to_dict(),
+                    seconds={"normalize": normalize_s, "train_and_test": time.perf_counter() - t1},
+                )
             except Exception as exc:
                 logger.error("few-shot %s, %s, draw %d: %s: %s", method, policy_name, draw, type(exc).__name__, exc)
                 entry = {"draw": draw, "error": f"{type(exc).__name__}: {exc}"}
@@ -185,20 +225,38 @@ def _spread(values: list[float]) -> dict[str, Any] | None:
 
 
 def _summary(runs: dict[str, Any]) -> dict[str, Any]:
-    return {policy: {method: {metric: _spread([r[metric] for r in draws if r.get(metric) is not None])
-                              for metric in ("auc", "accuracy")}
-                     for method, draws in by_method.items()} for policy, by_method in runs.items()}
+    return {
+        policy: {
+            method: {
+                metric: _spread([r[metric] for r in draws if r.get(metric) is not None])
+                for metric in ("auc", "accuracy")
+            }
+            for method, draws in by_method.items()
+        }
+        for policy, by_method in runs.items()
+    }
 
 
 def fewshot_command(out_dir: str | os.PathLike, settings: FewShotSettings) -> str:
     """The ``alcn bench fewshot`` command line that runs these settings (every setting spelled out)."""
-    return command_line(["alcn", "bench", "fewshot", "--out", out_dir], {
-        "--methods": settings.methods, "--policy": settings.policies, "--draws": settings.draws,
-        "--objects": settings.objects, "--object-seed": settings.object_seed, "--real-images": settings.real_images,
-        "--per-image": settings.per_image, "--test-windows": settings.test_windows,
-        "--test-lighting": settings.test_lighting, "--epochs": settings.epochs, "--batch-size": settings.batch_size,
-        "--lr": settings.lr, "--threads": settings.threads,
-    })
+    return command_line(
+        ["alcn", "bench", "fewshot", "--out", out_dir],
+        {
+            "--methods": settings.methods,
+            "--policy": settings.policies,
+            "--draws": settings.draws,
+            "--objects": settings.objects,
+            "--object-seed": settings.object_seed,
+            "--real-images": settings.real_images,
+            "--per-image": settings.per_image,
+            "--test-windows": settings.test_windows,
+            "--test-lighting": settings.test_lighting,
+            "--epochs": settings.epochs,
+            "--batch-size": settings.batch_size,
+            "--lr": settings.lr,
+            "--threads": settings.threads,
+        },
+    )
 
 
 def _cell(spread: dict[str, Any] | None) -> str | None:
@@ -231,20 +289,34 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
         rows = []
         for method, draws in by_method.items():
             summary = result["summary"][policy][method]
-            rows.append([method] + ["failed" if "error" in r else r["auc"] for r in draws]
-                        + [_cell(summary["auc"]), _cell(summary["accuracy"])])
-        lines += [markdown_table(["method"] + [f"draw {d}" for d in range(s["draws"])] + ["AUC mean ± std",
-                                                                                           "accuracy mean ± std"], rows), ""]
+            rows.append(
+                [method]
+                + ["failed" if "error" in r else r["auc"] for r in draws]
+                + [_cell(summary["auc"]), _cell(summary["accuracy"])]
+            )
+        lines += [
+            markdown_table(
+                ["method"] + [f"draw {d}" for d in range(s["draws"])] + ["AUC mean ± std", "accuracy mean ± std"], rows
+            ),
+            "",
+        ]
     if result["alcn_vs_dog"]:
         lines.append("## ALCN against the best DoG, per draw (AUC margin; ✓ above, ✗ not)\n")
         rows = []
         for policy, variants in result["alcn_vs_dog"].items():
             for variant, draws in variants.items():
-                cells = ["-" if r["above"] is None else f"{r['margin']:+.4f} {'✓' if r['above'] else '✗'}" for r in draws]
+                cells = [
+                    "-" if r["above"] is None else f"{r['margin']:+.4f} {'✓' if r['above'] else '✗'}" for r in draws
+                ]
                 rows.append([variant, policy] + cells + [f"{sum(bool(r['above']) for r in draws)}/{len(draws)}"])
         lines += [markdown_table(["ALCN", "policy"] + [f"draw {d}" for d in range(s["draws"])] + ["above"], rows), ""]
-    errors = [f"- `{m}` ({p}, draw {r['draw']}): {r['error']}" for p, bm in result["runs"].items()
-              for m, draws in bm.items() for r in draws if "error" in r]
+    errors = [
+        f"- `{m}` ({p}, draw {r['draw']}): {r['error']}"
+        for p, bm in result["runs"].items()
+        for m, draws in bm.items()
+        for r in draws
+        if "error" in r
+    ]
     if errors:
         lines += ["## Failed runs\n", *errors, ""]
     return "\n".join(lines)
@@ -254,8 +326,10 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
     """AUC per method: the mean over draws as a bar, every draw as a point; one panel per policy."""
     policies = list(result["runs"])
     plt, fig, axes = new_figure(1, len(policies), figsize=(5.5 * len(policies), 4.5))
-    lowest = min([r["auc"] for bm in result["runs"].values() for d in bm.values() for r in d if r.get("auc") is not None],
-                 default=0.5)
+    lowest = min(
+        [r["auc"] for bm in result["runs"].values() for d in bm.values() for r in d if r.get("auc") is not None],
+        default=0.5,
+    )
     for ax, policy in zip(axes[0], policies):
         by_method = result["runs"][policy]
         methods = list(by_method)
@@ -276,7 +350,10 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
 
 
 def main(
-    out_dir: str | os.PathLike, settings: FewShotSettings | None = None, command: str | None = None, progress: bool = True,
+    out_dir: str | os.PathLike,
+    settings: FewShotSettings | None = None,
+    command: str | None = None,
+    progress: bool = True,
 ) -> dict[str, Any]:
     """Run the few-shot validation on registered normalizations (see the module docstring) and write its report.
 
@@ -305,8 +382,13 @@ def main(
         for draw in range(settings.draws):
             _run_draw(settings, draw, runs, bar)
     result = {
-        "benchmark": "fewshot", "command": command or fewshot_command(out_dir, settings), "settings": asdict(settings),
-        "machine": machine(), "runs": runs, "summary": _summary(runs), "alcn_vs_dog": compare_to_dog(runs, settings),
+        "benchmark": "fewshot",
+        "command": command or fewshot_command(out_dir, settings),
+        "settings": asdict(settings),
+        "machine": machine(),
+        "runs": runs,
+        "summary": _summary(runs),
+        "alcn_vs_dog": compare_to_dog(runs, settings),
     }
     result["seconds"] = time.perf_counter() - start
     result["figure"] = str(_figure(result, out / "fewshot.png"))

@@ -36,9 +36,9 @@ from tqdm.auto import tqdm
 
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, from_spec, parse_spec
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
-from alcn_cv.errors import DatasetError, InputError
 
 __all__ = ["PhotometricObject", "agreement", "detail", "load_objects", "main"]
 
@@ -150,7 +150,9 @@ def detail(normalized: np.ndarray, mask: np.ndarray) -> float:
     return float(np.mean(scores))
 
 
-def _figure(obj: PhotometricObject, results: dict[str, np.ndarray], norms: dict[str, Normalization], path: Path) -> Path:
+def _figure(
+    obj: PhotometricObject, results: dict[str, np.ndarray], norms: dict[str, Normalization], path: Path
+) -> Path:
     names = list(results)
     k = len(obj.images)
     h, w = obj.mask.shape
@@ -240,13 +242,20 @@ def main(
         rows[name] = row
 
     object_names = [o.name for o in objects]
-    command = command_line(["alcn", "bench", "invariance", "--data", data_dir, "--out", out_dir], {
-        "--methods": methods, "--scale": scale, "--erode": erode, "--figure-object": figure_object})
+    command = command_line(
+        ["alcn", "bench", "invariance", "--data", data_dir, "--out", out_dir],
+        {"--methods": methods, "--scale": scale, "--erode": erode, "--figure-object": figure_object},
+    )
     result = {
         "benchmark": "invariance",
         "data": str(Path(data_dir).resolve()),
         "command": command,
-        "settings": {"methods": methods, "scale": scale, "erode": erode, "lights": {o.name: len(o.images) for o in objects}},
+        "settings": {
+            "methods": methods,
+            "scale": scale,
+            "erode": erode,
+            "lights": {o.name: len(o.images) for o in objects},
+        },
         "metrics": {
             "agreement": "mean pairwise normalized cross-correlation inside the eroded object mask",
             "detail": "sqrt(mean |forward-difference gradient|^2) / std inside the mask, mean over lights",

@@ -80,9 +80,7 @@ def nms(boxes: object, scores: object, iou_threshold: float, max_detections: int
     return np.asarray(keep, dtype=np.int64)
 
 
-def match_detections(
-    det_boxes: object, det_scores: object, gt_boxes: object, iou_threshold: float = 0.5
-) -> np.ndarray:
+def match_detections(det_boxes: object, det_scores: object, gt_boxes: object, iou_threshold: float = 0.5) -> np.ndarray:
     """PASCAL VOC matching of one image's detections to its ground truth.
 
     Detections are taken by decreasing score; each is a true positive when its best-overlapping

@@ -30,8 +30,10 @@ def method_styles(methods: Sequence[str]) -> dict[str, tuple[Any, str, str]]:
     from matplotlib import colormaps
 
     cmap = colormaps["tab20"]
-    return {m: (cmap(_PALETTE_ORDER[k % 20]), ("-", "--", ":")[min(k // 10, 2)], _MARKERS[k % len(_MARKERS)])
-            for k, m in enumerate(methods)}
+    return {
+        m: (cmap(_PALETTE_ORDER[k % 20]), ("-", "--", ":")[min(k // 10, 2)], _MARKERS[k % len(_MARKERS)])
+        for k, m in enumerate(methods)
+    }
 
 
 def trim_pr_curve(recall: Sequence[float], precision: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
@@ -82,9 +84,17 @@ def plot_pr_curves(result: dict[str, Any], names: list[str], out: Path) -> list[
                     colour, style, marker = styles[method]
                     recall, precision = curves[method]
                     label = method + (f" (= {', '.join(tied[1:])})" if len(tied) > 1 else "")
-                    ax.plot(recall, precision, linestyle=style, color=colour, marker=marker, markersize=4,
-                            markevery=max(1, len(recall) // 12), lw=2.4 if parse_spec(method)[0] == "alcn" else 1.3,
-                            label=f"{label}: AUC {aucs[method]:.3f}")
+                    ax.plot(
+                        recall,
+                        precision,
+                        linestyle=style,
+                        color=colour,
+                        marker=marker,
+                        markersize=4,
+                        markevery=max(1, len(recall) // 12),
+                        lw=2.4 if parse_spec(method)[0] == "alcn" else 1.3,
+                        label=f"{label}: AUC {aucs[method]:.3f}",
+                    )
                 ax.set_xlim(0, 1)
                 ax.set_ylim(0, 1.05)
                 ax.set_xlabel("recall")
@@ -92,8 +102,14 @@ def plot_pr_curves(result: dict[str, Any], names: list[str], out: Path) -> list[
                 ax.set_title(f"{name}, {n_real} real image(s), input {policy}, seed {seed}", fontsize=10)
                 ax.grid(alpha=0.3)
                 if curves:
-                    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
-                              title="method (= same curve)", title_fontsize=7)
+                    ax.legend(
+                        fontsize=7,
+                        loc="upper left",
+                        bbox_to_anchor=(1.01, 1.0),
+                        borderaxespad=0.0,
+                        title="method (= same curve)",
+                        title_fontsize=7,
+                    )
             fig.tight_layout()
             path = out / f"pr_{name}_{n_real}real.png"
             save_figure(plt, fig, path)
@@ -108,7 +124,9 @@ def plot_speed(result: dict[str, Any], path: Path) -> None:
     methods = list(dict.fromkeys(r["method"] for r in result["rows"]))
     for method, (colour, _, _) in method_styles(methods).items():
         for kind, style in (("gray", "-o"), ("bgr", "--s")):
-            pts = sorted((r["pixels"], r["median_ms"]) for r in result["rows"] if r["method"] == method and r["colour"] == kind)
+            pts = sorted(
+                (r["pixels"], r["median_ms"]) for r in result["rows"] if r["method"] == method and r["colour"] == kind
+            )
             if pts:
                 ax.plot(*zip(*pts), style, color=colour, label=f"{method} ({kind})", markersize=4)
     ax.set_xscale("log")

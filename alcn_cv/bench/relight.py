@@ -93,8 +93,16 @@ TUNING_GRIDS: dict[str, list[dict[str, float]]] = {
     "dlcn": [{"sigma": s} for s in _LCN_GRID],
     "tantriggs": [
         {"gamma": g, "sigma0": a, "sigma1": b}
-        for g, a, b in [(0.2, 1.0, 2.0), (0.1, 1.0, 2.0), (0.4, 1.0, 2.0), (0.2, 0.5, 1.5),
-                        (0.2, 0.5, 2.0), (0.2, 1.0, 3.0), (0.2, 1.5, 3.0), (0.2, 2.0, 4.0)]
+        for g, a, b in [
+            (0.2, 1.0, 2.0),
+            (0.1, 1.0, 2.0),
+            (0.4, 1.0, 2.0),
+            (0.2, 0.5, 1.5),
+            (0.2, 0.5, 2.0),
+            (0.2, 1.0, 3.0),
+            (0.2, 1.5, 3.0),
+            (0.2, 2.0, 4.0),
+        ]
     ],
     "dog+lstd": [{"sigma1": a, "sigma2": b} for a, b in _DOG_GRID],
     # clip 4 on 8x8 tiles: Jenicek & Chum, "No Fear of the Dark", ICCV 2019
@@ -256,8 +264,11 @@ def _ratio_matches(d1: np.ndarray | None, d2: np.ndarray | None, norm: int, rati
 
 
 def _keypoint_scores(
-    kp1: tuple[np.ndarray, np.ndarray | None], kp2: tuple[np.ndarray, np.ndarray | None], norm: int,
-    shape: tuple[int, int], settings: Settings,
+    kp1: tuple[np.ndarray, np.ndarray | None],
+    kp2: tuple[np.ndarray, np.ndarray | None],
+    norm: int,
+    shape: tuple[int, int],
+    settings: Settings,
 ) -> tuple[float, float, int]:
     """(matching score, pose success, correct matches) of a frame pair from its keypoints
     ``(points, descriptors)``."""
@@ -280,9 +291,7 @@ def _keypoint_scores(
     return score, float(np.linalg.norm(moved, axis=2).max() < settings.pose_px), correct
 
 
-def evaluate_scene(
-    norm: Normalization, scene: Scene, plans: Sequence[PairPlan], settings: Settings
-) -> dict[str, Any]:
+def evaluate_scene(norm: Normalization, scene: Scene, plans: Sequence[PairPlan], settings: Settings) -> dict[str, Any]:
     """Every protocol on one scene for one method, one value per plan (seed) and metric.
 
     The frames are normalized once (``apply``, float32) and reused by every plan; keypoints are
@@ -331,7 +340,11 @@ def _subsample(scene: Scene, frames: int) -> Scene:
 
 
 def tune(
-    method: str, scenes: Sequence[Scene], settings: Settings, seed: int = 0, frames: int = 8,
+    method: str,
+    scenes: Sequence[Scene],
+    settings: Settings,
+    seed: int = 0,
+    frames: int = 8,
     progress: Callable[[], None] | None = None,
 ) -> dict[str, Any]:
     """Choose ``method``'s setting among :data:`TUNING_GRIDS` by identification on ``scenes``.
@@ -435,12 +448,18 @@ def main(
     if tuned and not all(folds.values()):
         raise InputError("tuning needs training scenes (or --no-tune)")
 
-    bar = tqdm(total=len(folds) * sum(len(TUNING_GRIDS[m]) for m in tuned),
-               desc="relight tuning", unit="setting", disable=not progress or not tuned)
+    bar = tqdm(
+        total=len(folds) * sum(len(TUNING_GRIDS[m]) for m in tuned),
+        desc="relight tuning",
+        unit="setting",
+        disable=not progress or not tuned,
+    )
     tuning_result: dict[str, dict[str, Any]] = {m: {} for m in tuned}
     for fold, fold_train in folds.items():
         for m in tuned:
-            tuning_result[m][fold] = tune(m, fold_train, settings, seed=min(seeds), frames=tune_frames, progress=bar.update)
+            tuning_result[m][fold] = tune(
+                m, fold_train, settings, seed=min(seeds), frames=tune_frames, progress=bar.update
+            )
     bar.close()
 
     rows: dict[str, dict[str, str]] = {m: {s.name: m for s in evaluated} for m in methods}
@@ -466,8 +485,10 @@ def main(
         if errors:
             entry["errors"] = errors
         ok = {n: r for n, r in per_scene.items() if "error" not in r}
-        entry["scenes"] = {n: {"ms_per_frame": r["ms_per_frame"], **{m: _summary(v) for m, v in r["metrics"].items()}}
-                           for n, r in ok.items()}
+        entry["scenes"] = {
+            n: {"ms_per_frame": r["ms_per_frame"], **{m: _summary(v) for m, v in r["metrics"].items()}}
+            for n, r in ok.items()
+        }
         for key, group in (("mean_test", test), ("mean_train", train)):
             names = [s.name for s in group]
             if names and all(n in ok for n in names):
@@ -485,13 +506,24 @@ def main(
             "test": [s.name for s in test],
         },
         "scenes": {
-            s.name: {"group": s.group, "frames": len(s.frames), "size": [int(s.frames.shape[2]), int(s.frames.shape[1])],
-                     "files": list(s.files)}
+            s.name: {
+                "group": s.group,
+                "frames": len(s.frames),
+                "size": [int(s.frames.shape[2]), int(s.frames.shape[1])],
+                "files": list(s.files),
+            }
             for s in evaluated
         },
-        "settings": {**asdict(settings), "seeds": list(seeds), "max_frames": max_frames, "methods": methods,
-                     "tuning": tuning, "tune_frames": tune_frames, "tune_seed": min(seeds),
-                     "tuning_grids": {m: [_spec(m, p) for p in TUNING_GRIDS[m]] for m in tuned}},
+        "settings": {
+            **asdict(settings),
+            "seeds": list(seeds),
+            "max_frames": max_frames,
+            "methods": methods,
+            "tuning": tuning,
+            "tune_frames": tune_frames,
+            "tune_seed": min(seeds),
+            "tuning_grids": {m: [_spec(m, p) for p in TUNING_GRIDS[m]] for m in tuned},
+        },
         "metrics": {
             "identification": "% of gallery patches whose best NCC match among all sampled locations is their own",
             "matching": "% correct ratio-test matches (within match_px) per min(#keypoints), ORB and SIFT",

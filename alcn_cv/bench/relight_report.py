@@ -21,8 +21,15 @@ _TITLES = {
     "correct_orb": "Correct ORB matches per frame pair (count; the matching score's numerator)",
     "correct_sift": "Correct SIFT matches per frame pair (count; the matching score's numerator)",
 }
-_SHORT = {"identification": "identification", "matching_orb": "matching ORB", "matching_sift": "matching SIFT",
-          "pose_orb": "pose ORB", "pose_sift": "pose SIFT", "correct_orb": "correct ORB", "correct_sift": "correct SIFT"}
+_SHORT = {
+    "identification": "identification",
+    "matching_orb": "matching ORB",
+    "matching_sift": "matching SIFT",
+    "pose_orb": "pose ORB",
+    "pose_sift": "pose SIFT",
+    "correct_orb": "correct ORB",
+    "correct_sift": "correct SIFT",
+}
 
 
 def _cell(summary: dict[str, Any] | None) -> str | None:
@@ -51,7 +58,9 @@ def _metric_table(result: dict[str, Any], metric: str) -> str:
     rows = []
     for label, r in result["methods"].items():
         scenes = r["scenes"]
-        row = [label] + [_cell(scenes.get(n, {}).get(metric)) for n in test] + [_cell(r.get("mean_test", {}).get(metric))]
+        row = (
+            [label] + [_cell(scenes.get(n, {}).get(metric)) for n in test] + [_cell(r.get("mean_test", {}).get(metric))]
+        )
         if train:
             row += [_cell(scenes.get(n, {}).get(metric)) for n in train] + [_cell(r.get("mean_train", {}).get(metric))]
         rows.append(row)
@@ -66,24 +75,40 @@ def _tuning_text(result: dict[str, Any]) -> str:
     for method, folds in result["tuning"].items():
         for fold, t in folds.items():
             scores = list(t["scores"].values())  # the grid's first setting is the default
-            rows.append([method] + ([f"all but {fold}"] if loo else []) + [f"`{t['chosen']}`", f"{t['scores'][t['chosen']]:.1f}",
-                        f"{scores[0]:.1f}", f"{min(scores):.1f}-{max(scores):.1f}"])
+            rows.append(
+                [method]
+                + ([f"all but {fold}"] if loo else [])
+                + [
+                    f"`{t['chosen']}`",
+                    f"{t['scores'][t['chosen']]:.1f}",
+                    f"{scores[0]:.1f}",
+                    f"{min(scores):.1f}-{max(scores):.1f}",
+                ]
+            )
     s = result["settings"]
     text = (
         f"Each method's {len(next(iter(s['tuning_grids'].values())))} settings (`relight.json`: settings.tuning_grids) "
         f"scored by identification on {s['tune_frames']} evenly spaced frames of each training scene (seed "
         f"{s['tune_seed']}); the first best setting is chosen.\n\n"
     )
-    headers = ["method"] + (["tuned on"] if loo else []) + ["chosen", "identification %", "default's %", "range over grid"]
+    headers = (
+        ["method"] + (["tuned on"] if loo else []) + ["chosen", "identification %", "default's %", "range over grid"]
+    )
     return text + markdown_table(headers, rows)
 
 
 def _figure(result: dict[str, Any], path: Path) -> Path:
     labels = [k for k, r in result["methods"].items() if "mean_test" in r]
-    panels = [("identification", ["identification"], "%"), ("matching score", ["matching_orb", "matching_sift"], "%"),
-              ("pose success", ["pose_orb", "pose_sift"], "%"),
-              ("correct matches per pair", ["correct_orb", "correct_sift"], "count")]
-    panels = [(t, [m for m in ms if any(m in result["methods"][k]["mean_test"] for k in labels)], unit) for t, ms, unit in panels]
+    panels = [
+        ("identification", ["identification"], "%"),
+        ("matching score", ["matching_orb", "matching_sift"], "%"),
+        ("pose success", ["pose_orb", "pose_sift"], "%"),
+        ("correct matches per pair", ["correct_orb", "correct_sift"], "count"),
+    ]
+    panels = [
+        (t, [m for m in ms if any(m in result["methods"][k]["mean_test"] for k in labels)], unit)
+        for t, ms, unit in panels
+    ]
     panels = [(t, ms, unit) for t, ms, unit in panels if ms]
     plt, fig, axes = new_figure(1, len(panels), figsize=(5.5 * len(panels), 4.8))
     x = np.arange(len(labels))
@@ -92,8 +117,14 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
         for j, m in enumerate(metrics):
             means = [result["methods"][k]["mean_test"][m]["mean"] for k in labels]
             stds = [result["methods"][k]["mean_test"][m]["std"] for k in labels]
-            ax.bar(x + (j - (len(metrics) - 1) / 2) * width, means, width, yerr=stds, capsize=2,
-                   label=_SHORT[m].split()[-1] if len(metrics) > 1 else None)
+            ax.bar(
+                x + (j - (len(metrics) - 1) / 2) * width,
+                means,
+                width,
+                yerr=stds,
+                capsize=2,
+                label=_SHORT[m].split()[-1] if len(metrics) > 1 else None,
+            )
         ax.set_xticks(x)
         ax.set_xticklabels(labels, rotation=60, ha="right", fontsize=8)
         ax.set_ylabel(unit)
@@ -101,8 +132,11 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
         ax.grid(axis="y", alpha=0.3)
         if len(metrics) > 1:
             ax.legend(fontsize=8)
-    fig.suptitle(f"alcn bench relight: test scenes {', '.join(result['split']['test'])}; "
-                 f"error bars: std over seeds {result['settings']['seeds']}", fontsize=10)
+    fig.suptitle(
+        f"alcn bench relight: test scenes {', '.join(result['split']['test'])}; "
+        f"error bars: std over seeds {result['settings']['seeds']}",
+        fontsize=10,
+    )
     fig.tight_layout()
     return save_figure(plt, fig, path, dpi=90)
 
@@ -113,24 +147,34 @@ def write_report(result: dict[str, Any], out: Path) -> None:
     write_json(out / "relight.json", result)
     metrics = _metrics(result)
     s, split = result["settings"], result["split"]
-    scenes = ", ".join(f"{n} ({v['group']}, {v['frames']} frames {v['size'][0]}x{v['size'][1]})" for n, v in result["scenes"].items())
-    failures = [f"- `{label}` failed on {scene}: {err}" for label, r in result["methods"].items()
-                for scene, err in r.get("errors", {}).items()]
+    scenes = ", ".join(
+        f"{n} ({v['group']}, {v['frames']} frames {v['size'][0]}x{v['size'][1]})" for n, v in result["scenes"].items()
+    )
+    failures = [
+        f"- `{label}` failed on {scene}: {err}"
+        for label, r in result["methods"].items()
+        for scene, err in r.get("errors", {}).items()
+    ]
     text = [
         "# Normalizations on real changes of light (`alcn bench relight`)\n",
         f"Command: `{result['command'] or 'alcn_cv.bench.relight.main(...)'}`; "
         f"wall time {result['seconds'] / 60:.1f} min.  ",
         f"Machine: {describe_machine(result['machine'])}.\n",
         f"Split: {split['mode']}; test {', '.join(split['test'])}"
-        + (f"; train (tuning) {', '.join(split['train'])}" if split["train"] else "") + ".  ",
+        + (f"; train (tuning) {', '.join(split['train'])}" if split["train"] else "")
+        + ".  ",
         f"Scenes: {scenes}.\n",
         f"Every method normalizes whole grayscale frames through its own `apply()` (uint8 in, float32 out); "
         f"{s['gallery']} gallery frames per scene and seed, each paired with the other frames (at most "
         f"{s['max_pairs'] or 'all'} pairs per scene and seed). Identification: {s['patches']} textured "
         f"{s['patch']}x{s['patch']} patch locations, NCC over all of them (chance {100 / s['patches']:.2f}%). "
-        + (f"Keypoints: {s['keypoints']} per frame on apply()'s uint8 output, ratio test {s['ratio']}, correct within "
-           f"{s['match_px']} px; pose: RANSAC homography ({s['ransac_px']} px), success when every corner moves less "
-           f"than {s['pose_px']} px. " if s["keypoint_protocols"] else "Identification only (no keypoint protocols). ")
+        + (
+            f"Keypoints: {s['keypoints']} per frame on apply()'s uint8 output, ratio test {s['ratio']}, correct within "
+            f"{s['match_px']} px; pose: RANSAC homography ({s['ransac_px']} px), success when every corner moves less "
+            f"than {s['pose_px']} px. "
+            if s["keypoint_protocols"]
+            else "Identification only (no keypoint protocols). "
+        )
         + f"Cells: mean ± standard deviation over seeds {s['seeds']} (the seed draws the gallery frames, patch "
         "locations and pairs).\n",
         "## Summary (mean over test scenes)\n",

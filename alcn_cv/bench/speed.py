@@ -59,12 +59,12 @@ from tqdm.auto import tqdm
 from alcn_cv.bench.plots import plot_speed
 from alcn_cv.checks import FULL_SCALE
 from alcn_cv.data.frames import synthetic_frame
-from alcn_cv.io import atomic_write, write_json
-from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 from alcn_cv.enhance.alcn import ALCN, BACKENDS
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
+from alcn_cv.io import atomic_write, write_json
+from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 
 __all__ = ["SIZES", "Method", "SpeedSettings", "default_methods", "lab_round_trip", "main", "presets", "time_calls"]
 
@@ -119,8 +119,10 @@ def default_methods(
     CPU, and on CUDA when torch sees a GPU or ``cuda`` is True)."""
     methods = [Method(name, lambda name=name: create(name)) for name in ("none", "clahe", REFERENCE)]
     methods += [_alcn(label, None, **params) for label, params in GAIN_VARIANTS.items()]
-    methods += [_alcn(label, weights if params.get("model") == "paper" else lite_weights, **params)
-                for label, params in ALCN_VARIANTS.items()]
+    methods += [
+        _alcn(label, weights if params.get("model") == "paper" else lite_weights, **params)
+        for label, params in ALCN_VARIANTS.items()
+    ]
     if "opencv" in BACKENDS:
         methods.append(_alcn("alcn opencv", None, backend="opencv"))
     methods.append(_alcn("alcn torch cpu", None, backend="torch", device="cpu"))
@@ -171,8 +173,15 @@ def _time_rounds(
 
 def _stats(times: np.ndarray) -> dict[str, float]:
     q1, median, q3 = np.percentile(times * 1e3, [25, 50, 75])
-    return {"median_ms": float(median), "iqr_ms": float(q3 - q1), "q1_ms": float(q1), "q3_ms": float(q3),
-            "min_ms": float(times.min() * 1e3), "fps": float(1e3 / median), "repeats": int(len(times))}
+    return {
+        "median_ms": float(median),
+        "iqr_ms": float(q3 - q1),
+        "q1_ms": float(q1),
+        "q3_ms": float(q3),
+        "min_ms": float(times.min() * 1e3),
+        "fps": float(1e3 / median),
+        "repeats": int(len(times)),
+    }
 
 
 def _rss_kb(field_name: str = "VmRSS") -> int | None:
@@ -220,7 +229,9 @@ def peak_memory(fn: Callable[[], Any]) -> dict[str, float | None]:
     }
 
 
-def _split(norm: ALCN, gray: np.ndarray, repeats: int, budget_s: float) -> tuple[dict[str, float], np.ndarray, np.ndarray]:
+def _split(
+    norm: ALCN, gray: np.ndarray, repeats: int, budget_s: float
+) -> tuple[dict[str, float], np.ndarray, np.ndarray]:
     """Median times of the Normalizer network (:meth:`ALCN.weight_grid`) and of the whole
     ``normalize``, run in turns 1 to ``repeats`` times (stopping after ``budget_s`` seconds);
     the rest of ``normalize`` is map interpolation and the mixture.
@@ -251,7 +262,9 @@ def _to_gray(frame: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)[..., 0]) / np.float32(100)
 
 
-def video_memory(norm: Normalization, size: tuple[int, int], frames: int, budget_s: float, colour: bool = False) -> dict[str, Any]:
+def video_memory(
+    norm: Normalization, size: tuple[int, int], frames: int, budget_s: float, colour: bool = False
+) -> dict[str, Any]:
     """Resident memory while ``norm`` normalizes a generated video frame after frame.
 
     Frames are :func:`synthetic_frame` with the light moving; the loop stops after ``frames``
@@ -275,7 +288,11 @@ def video_memory(norm: Normalization, size: tuple[int, int], frames: int, budget
             break
     arr = np.array(rss)
     half = arr[len(arr) // 2 :]
-    slope = float(np.polyfit(np.arange(len(half)), half, 1)[0] * 1024) if len(half) >= 2 and np.isfinite(half).all() else None
+    slope = (
+        float(np.polyfit(np.arange(len(half)), half, 1)[0] * 1024)
+        if len(half) >= 2 and np.isfinite(half).all()
+        else None
+    )
     return {
         "size": [width, height],
         "colour": colour,
@@ -292,8 +309,13 @@ def video_memory(norm: Normalization, size: tuple[int, int], frames: int, budget
 def _accuracy(approx: np.ndarray, exact: np.ndarray, output_range: Sequence[float]) -> dict[str, float]:
     diff = np.abs(approx.astype(np.float64) - exact)
     span = float(output_range[1] - output_range[0])
-    return {"max_abs": float(diff.max()), "mean_abs": float(diff.mean()), "max_rel_range": float(diff.max() / span),
-            "mean_rel_range": float(diff.mean() / span), "exact_std": float(exact.std())}
+    return {
+        "max_abs": float(diff.max()),
+        "mean_abs": float(diff.mean()),
+        "max_rel_range": float(diff.max() / span),
+        "mean_rel_range": float(diff.mean() / span),
+        "exact_std": float(exact.std()),
+    }
 
 
 @dataclass
@@ -360,24 +382,49 @@ def presets() -> dict[str, SpeedSettings]:
     warm-up, a 3-frame video of tiny frames: seconds, for tests)."""
     return {
         "default": SpeedSettings(),
-        "quick": SpeedSettings(sizes=list(QUICK_SIZES), warmup=0, min_repeats=2, max_repeats=2, budget_s=0.0,
-                               video_frames=3, video_budget_s=10.0, video_size=QUICK_SIZES[-1],
-                               target_size=QUICK_SIZES[-1], fps_size=QUICK_SIZES[0], target_repeats=2,
-                               large_size=(256, 192), normalize_video="generated", normalize_video_frames=4,
-                               device_batches=[1, 2]),
+        "quick": SpeedSettings(
+            sizes=list(QUICK_SIZES),
+            warmup=0,
+            min_repeats=2,
+            max_repeats=2,
+            budget_s=0.0,
+            video_frames=3,
+            video_budget_s=10.0,
+            video_size=QUICK_SIZES[-1],
+            target_size=QUICK_SIZES[-1],
+            fps_size=QUICK_SIZES[0],
+            target_repeats=2,
+            large_size=(256, 192),
+            normalize_video="generated",
+            normalize_video_frames=4,
+            device_batches=[1, 2],
+        ),
     }
 
 
 def speed_command(out_dir: str | os.PathLike, settings: SpeedSettings) -> str:
     """The ``alcn bench speed`` command line that runs these settings."""
-    return command_line(["alcn", "bench", "speed", "--out", out_dir], {
-        "--sizes": [f"{w}x{h}" for w, h in settings.sizes], "--colours": settings.colours,
-        "--methods": settings.methods, "--weights": settings.weights, "--lite-weights": settings.lite_weights,
-        "--image": settings.image, "--warmup": settings.warmup, "--min-repeats": settings.min_repeats,
-        "--repeats": settings.max_repeats, "--budget": settings.budget_s, "--video-frames": settings.video_frames,
-        "--video-budget": settings.video_budget_s, "--video-size": "x".join(map(str, settings.video_size)),
-        "--video-methods": settings.video_methods, "--threads": settings.threads, "--device": settings.device,
-    })
+    return command_line(
+        ["alcn", "bench", "speed", "--out", out_dir],
+        {
+            "--sizes": [f"{w}x{h}" for w, h in settings.sizes],
+            "--colours": settings.colours,
+            "--methods": settings.methods,
+            "--weights": settings.weights,
+            "--lite-weights": settings.lite_weights,
+            "--image": settings.image,
+            "--warmup": settings.warmup,
+            "--min-repeats": settings.min_repeats,
+            "--repeats": settings.max_repeats,
+            "--budget": settings.budget_s,
+            "--video-frames": settings.video_frames,
+            "--video-budget": settings.video_budget_s,
+            "--video-size": "x".join(map(str, settings.video_size)),
+            "--video-methods": settings.video_methods,
+            "--threads": settings.threads,
+            "--device": settings.device,
+        },
+    )
 
 
 def _select_methods(settings: SpeedSettings) -> list[Method]:
@@ -408,8 +455,9 @@ def _frame_source(image: str | os.PathLike | None) -> Callable[[int, int, str], 
     return frame
 
 
-def _ready(methods: list[Method], built: dict[str, Normalization], errors: dict[str, str], frame: np.ndarray,
-           warmup: int) -> dict[str, tuple[Method, Normalization]]:
+def _ready(
+    methods: list[Method], built: dict[str, Normalization], errors: dict[str, str], frame: np.ndarray, warmup: int
+) -> dict[str, tuple[Method, Normalization]]:
     """Build (once) and warm up every method on the frame; a method that fails is recorded in
     ``errors`` and left out from then on."""
     ready: dict[str, tuple[Method, Normalization]] = {}
@@ -429,7 +477,10 @@ def _ready(methods: list[Method], built: dict[str, Normalization], errors: dict[
 
 
 def _time_case(
-    ready: dict[str, tuple[Method, Normalization]], frame: np.ndarray, colour: str, settings: SpeedSettings,
+    ready: dict[str, tuple[Method, Normalization]],
+    frame: np.ndarray,
+    colour: str,
+    settings: SpeedSettings,
     progress: tqdm,
 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The timing rows of one frame size and colour, and the accuracy rows of the ALCN
@@ -438,14 +489,25 @@ def _time_case(
     gray = _to_gray(frame)
     # The methods are timed in rounds (one call of each per round) so that all of them see the
     # same load of a shared machine.
-    times = _time_rounds({label: (lambda norm=norm: norm.apply(frame)) for label, (_, norm) in ready.items()},
-                         settings.min_repeats, settings.max_repeats, settings.budget_s)
+    times = _time_rounds(
+        {label: (lambda norm=norm: norm.apply(frame)) for label, (_, norm) in ready.items()},
+        settings.min_repeats,
+        settings.max_repeats,
+        settings.budget_s,
+    )
     rows, outputs, map_std = [], {}, float("nan")
     for label, (method, norm) in ready.items():
         progress.set_postfix_str(f"{label} {width}x{height} {colour}")
         progress.update()
-        row: dict[str, Any] = {"method": label, "params": method.params, "width": width, "height": height,
-                               "pixels": width * height, "colour": colour, **_stats(times[label])}
+        row: dict[str, Any] = {
+            "method": label,
+            "params": method.params,
+            "width": width,
+            "height": height,
+            "pixels": width * height,
+            "colour": colour,
+            **_stats(times[label]),
+        }
         if isinstance(norm, ALCN):
             split, grid, result = _split(norm, gray, settings.min_repeats, settings.budget_s)
             row.update(split)
@@ -455,22 +517,36 @@ def _time_case(
                     # How much the weight maps vary over the frame: coarser grids cost nothing
                     # in accuracy when they are constant (an untrained Normalizer).
                     map_std = float(grid.std(axis=(1, 2)).mean())
-        row.update(peak_memory(lambda: norm.apply(frame)))
+        row.update(peak_memory(lambda norm=norm: norm.apply(frame)))
         rows.append(row)
     accuracy = []
     if EXACT in outputs:
         exact_norm = ready[EXACT][1]
-        accuracy = [{"method": label, "params": ready[label][0].params, "width": width, "height": height,
-                     "exact_map_std": map_std, **_accuracy(out, outputs[EXACT], exact_norm.output_range)}
-                    for label, out in outputs.items() if label != EXACT]
+        accuracy = [
+            {
+                "method": label,
+                "params": ready[label][0].params,
+                "width": width,
+                "height": height,
+                "exact_map_std": map_std,
+                **_accuracy(out, outputs[EXACT], exact_norm.output_range),
+            }
+            for label, out in outputs.items()
+            if label != EXACT
+        ]
     reference = next((r["median_ms"] for r in rows if r["method"] == REFERENCE), None)
     for row in rows:
         row["ratio_to_dog"] = None if reference is None else row["median_ms"] / reference
     return rows, accuracy
 
 
-def _video_test(methods: list[Method], built: dict[str, Normalization], errors: dict[str, str],
-                rows: list[dict[str, Any]], settings: SpeedSettings) -> list[dict[str, Any]]:
+def _video_test(
+    methods: list[Method],
+    built: dict[str, Normalization],
+    errors: dict[str, str],
+    rows: list[dict[str, Any]],
+    settings: SpeedSettings,
+) -> list[dict[str, Any]]:
     """Memory over a generated video of the chosen ALCN variants (default: ``alcn`` and the
     fastest variant on the largest grayscale frames)."""
     if settings.video_frames <= 0:
@@ -486,8 +562,12 @@ def _video_test(methods: list[Method], built: dict[str, Normalization], errors: 
         if label not in built:
             built[label] = next(m for m in methods if m.label == label).factory()
         logger.info("video memory: %s on %dx%d", label, *settings.video_size)
-        video.append({"method": label, **video_memory(built[label], settings.video_size, settings.video_frames,
-                                                       settings.video_budget_s)})
+        video.append(
+            {
+                "method": label,
+                **video_memory(built[label], settings.video_size, settings.video_frames, settings.video_budget_s),
+            }
+        )
     return video
 
 
@@ -536,8 +616,14 @@ def _profile(norm: ALCN, frame: np.ndarray, calls: int) -> list[dict[str, Any]]:
         norm.apply(frame)
     profiler.disable()
     stats = pstats.Stats(profiler).stats  # type: ignore[attr-defined]
-    rows = [{"function": f"{Path(file).name}:{line}({fn})" if file != "~" else fn, "calls_per_apply": nc / calls,
-             "own_ms_per_apply": tt * 1e3 / calls} for (file, line, fn), (_, nc, tt, _, _) in stats.items()]
+    rows = [
+        {
+            "function": f"{Path(file).name}:{line}({fn})" if file != "~" else fn,
+            "calls_per_apply": nc / calls,
+            "own_ms_per_apply": tt * 1e3 / calls,
+        }
+        for (file, line, fn), (_, nc, tt, _, _) in stats.items()
+    ]
     return sorted(rows, key=lambda r: -r["own_ms_per_apply"])[:12]
 
 
@@ -546,10 +632,20 @@ def _stages(norm: ALCN, frame: np.ndarray, repeats: int) -> dict[str, float]:
     (``weight_grid``, with the working-scale resize), the mixture (``normalize`` minus the
     network), the ``apply`` contract (``apply`` minus ``normalize``)."""
     gray = frame.astype(np.float32) / np.float32(255)
-    t = _medians({"network": lambda: norm.weight_grid(gray), "normalize": lambda: norm.normalize(gray),
-                  "apply": lambda: norm.apply(frame)}, repeats)
-    return {"network_ms": t["network"], "mixture_ms": max(0.0, t["normalize"] - t["network"]),
-            "contract_ms": max(0.0, t["apply"] - t["normalize"]), "apply_ms": t["apply"]}
+    t = _medians(
+        {
+            "network": lambda: norm.weight_grid(gray),
+            "normalize": lambda: norm.normalize(gray),
+            "apply": lambda: norm.apply(frame),
+        },
+        repeats,
+    )
+    return {
+        "network_ms": t["network"],
+        "mixture_ms": max(0.0, t["normalize"] - t["network"]),
+        "contract_ms": max(0.0, t["apply"] - t["normalize"]),
+        "apply_ms": t["apply"],
+    }
 
 
 def _contract_overhead(frame: np.ndarray, repeats: int) -> list[dict[str, Any]]:
@@ -561,7 +657,10 @@ def _contract_overhead(frame: np.ndarray, repeats: int) -> list[dict[str, Any]]:
     rows = []
     for name in available():
         method = create(name)
-        calls = {"apply": lambda: method.apply(frame), "own": lambda: method._normalize(gray)}
+        calls = {
+            "apply": lambda method=method: method.apply(frame),
+            "own": lambda method=method: method._normalize(gray),
+        }
         for fn in calls.values():
             fn()
         times = _time_rounds(calls, 3, repeats, 2.0)  # at most about 2 s each: sqi takes seconds
@@ -569,9 +668,17 @@ def _contract_overhead(frame: np.ndarray, repeats: int) -> list[dict[str, Any]]:
         fastest = {label: float(v.min() * 1e3) for label, v in times.items()}
         # The fastest runs are the least disturbed by a shared machine's load: the overhead is
         # taken from them, the medians are reported beside.
-        rows.append({"method": name, "apply_ms": t["apply"], "own_ms": t["own"], "apply_min_ms": fastest["apply"],
-                     "own_min_ms": fastest["own"], "overhead": fastest["apply"] / fastest["own"] - 1 if fastest["own"] > 0 else None,
-                     "overhead_of_medians": t["apply"] / t["own"] - 1 if t["own"] > 0 else None})
+        rows.append(
+            {
+                "method": name,
+                "apply_ms": t["apply"],
+                "own_ms": t["own"],
+                "apply_min_ms": fastest["apply"],
+                "own_min_ms": fastest["own"],
+                "overhead": fastest["apply"] / fastest["own"] - 1 if fastest["own"] > 0 else None,
+                "overhead_of_medians": t["apply"] / t["own"] - 1 if t["own"] > 0 else None,
+            }
+        )
     return rows
 
 
@@ -602,8 +709,14 @@ def _after_apply(frame: np.ndarray, repeats: int, threads: int | None) -> dict[s
         app()
         after.append(time.perf_counter() - t0)
     alone_ms, after_ms = float(np.median(alone) * 1e3), float(np.median(after) * 1e3)
-    return {"threads": threads, "app_ms": alone_ms, "app_after_apply_ms": after_ms, "ratio": after_ms / alone_ms,
-            "apply_ms": float(np.median(applied) * 1e3), "torch_threads_kept": torch.get_num_threads() == before_threads}
+    return {
+        "threads": threads,
+        "app_ms": alone_ms,
+        "app_after_apply_ms": after_ms,
+        "ratio": after_ms / alone_ms,
+        "apply_ms": float(np.median(applied) * 1e3),
+        "torch_threads_kept": torch.get_num_threads() == before_threads,
+    }
 
 
 def _large_memory(size: tuple[int, int]) -> list[dict[str, Any]]:
@@ -611,16 +724,26 @@ def _large_memory(size: tuple[int, int]) -> list[dict[str, Any]]:
     default ALCN and the DoG, against the image's float32 size."""
     width, height = size
     tile = synthetic_frame(min(width, 1280), min(height, 800), False)
-    image = np.ascontiguousarray(np.tile(tile, (-(-height // tile.shape[0]), -(-width // tile.shape[1])))[:height, :width])
+    image = np.ascontiguousarray(
+        np.tile(tile, (-(-height // tile.shape[0]), -(-width // tile.shape[1])))[:height, :width]
+    )
     float_mb = image.size * 4 / 2**20
     rows = []
     for label, norm in (("alcn", ALCN()), ("dog", create("dog"))):
         t0 = time.perf_counter()
-        memory = peak_memory(lambda: norm.apply(image))
+        memory = peak_memory(lambda norm=norm: norm.apply(image))
         added = memory["rss_added_mb"]
-        rows.append({"method": label, "size": [width, height], "seconds": time.perf_counter() - t0, "float32_mb": float_mb,
-                     **memory, "added_per_float32": None if added is None else added / float_mb,
-                     "strips": len(norm._strips(image.shape) or [])})
+        rows.append(
+            {
+                "method": label,
+                "size": [width, height],
+                "seconds": time.perf_counter() - t0,
+                "float32_mb": float_mb,
+                **memory,
+                "added_per_float32": None if added is None else added / float_mb,
+                "strips": len(norm._strips(image.shape) or []),
+            }
+        )
     return rows
 
 
@@ -653,10 +776,17 @@ def _normalize_video(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     t0 = time.perf_counter()
     map_video(source, work / "normalized.mp4", create("alcn").apply, desc="alcn normalize")  # what the command runs
     whole_s = time.perf_counter() - t0
-    return {"video": source, "frames": len(frames), "size": [frames[0].shape[1], frames[0].shape[0]],
-            "decode_encode_s": codec_s, "apply_s": apply_s, "normalize_s": whole_s,
-            "sequential_s": codec_s + apply_s, "bound_s": max(codec_s, apply_s),
-            "normalize_fps": len(frames) / whole_s}
+    return {
+        "video": source,
+        "frames": len(frames),
+        "size": [frames[0].shape[1], frames[0].shape[0]],
+        "decode_encode_s": codec_s,
+        "apply_s": apply_s,
+        "normalize_s": whole_s,
+        "sequential_s": codec_s + apply_s,
+        "bound_s": max(codec_s, apply_s),
+        "normalize_fps": len(frames) / whole_s,
+    }
 
 
 def _batched(frame: np.ndarray, small: np.ndarray, repeats: int) -> dict[str, Any]:
@@ -673,10 +803,21 @@ def _batched(frame: np.ndarray, small: np.ndarray, repeats: int) -> dict[str, An
         norm = ALCN(backend="torch", device=device)
         full = norm.apply_batch(batch, out_dtype=np.float32)
         half = norm.apply_batch(batch, out_dtype=np.float32, half=True)
-        t = _medians({"float32": lambda: norm.apply_batch(batch), "float16": lambda: norm.apply_batch(batch, half=True)}, rounds)
-        result[device] = {"size": [batch.shape[2], batch.shape[1]], "batch": len(batch),
-                          "ms_per_frame": t["float32"] / len(batch), "ms_per_frame_half": t["float16"] / len(batch),
-                          "fps": 1e3 * len(batch) / t["float32"], "half_max_abs": float(np.abs(half - full).max())}
+        t = _medians(
+            {
+                "float32": lambda norm=norm, batch=batch: norm.apply_batch(batch),
+                "float16": lambda norm=norm, batch=batch: norm.apply_batch(batch, half=True),
+            },
+            rounds,
+        )
+        result[device] = {
+            "size": [batch.shape[2], batch.shape[1]],
+            "batch": len(batch),
+            "ms_per_frame": t["float32"] / len(batch),
+            "ms_per_frame_half": t["float16"] / len(batch),
+            "fps": 1e3 * len(batch) / t["float32"],
+            "half_max_abs": float(np.abs(half - full).max()),
+        }
     return result
 
 
@@ -704,14 +845,25 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     default, gain_lite, lite = ALCN(), ALCN(model="gain-lite"), ALCN(model="lite")
     repeats = settings.target_repeats
     logger.info("targets: ratios at %dx%d", width, height)
-    t = _medians({"dog raw": lambda: raw_dog(gray), "alcn gray": lambda: default.apply(gray),
-                  "alcn bgr": lambda: default.apply(bgr), "alcn gain-lite gray": lambda: gain_lite.apply(gray),
-                  "alcn lite gray": lambda: lite.apply(gray), "alcn lite bgr": lambda: lite.apply(bgr),
-                  "dog raw small": lambda: raw_dog(small),
-                  "alcn gray small": lambda: default.apply(small)}, repeats)
+    t = _medians(
+        {
+            "dog raw": lambda: raw_dog(gray),
+            "alcn gray": lambda: default.apply(gray),
+            "alcn bgr": lambda: default.apply(bgr),
+            "alcn gain-lite gray": lambda: gain_lite.apply(gray),
+            "alcn lite gray": lambda: lite.apply(gray),
+            "alcn lite bgr": lambda: lite.apply(bgr),
+            "dog raw small": lambda: raw_dog(small),
+            "alcn gray small": lambda: default.apply(small),
+        },
+        repeats,
+    )
     logger.info("targets: stages, contract, threads, memory, video, batches")
-    stages = {"alcn": _stages(default, gray, repeats), "alcn gain-lite": _stages(gain_lite, gray, repeats),
-              "alcn lite": _stages(lite, gray, repeats)}
+    stages = {
+        "alcn": _stages(default, gray, repeats),
+        "alcn gain-lite": _stages(gain_lite, gray, repeats),
+        "alcn lite": _stages(lite, gray, repeats),
+    }
     profile = _profile(default, gray, repeats)
     contract = _contract_overhead(gray, max(3, repeats // 2))
     threads = [_after_apply(gray, repeats, 1), _after_apply(gray, repeats, None)]
@@ -722,39 +874,104 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     fps = 1e3 / t["alcn gray small"]
     colour = t["alcn bgr"] / t["alcn gray"]
     gain_error, gain_lite_error = _gain_error(default, gray), _gain_error(gain_lite, gray)
-    colour_levels = max(int(np.abs(norm.apply(bgr).astype(np.int16) - lab_round_trip(norm, bgr)).max()) for norm in (default, lite))
-    worst = max((r for r in contract if r["method"] != "none" and r["overhead"] is not None), key=lambda r: r["overhead"])
+    colour_levels = max(
+        int(np.abs(norm.apply(bgr).astype(np.int16) - lab_round_trip(norm, bgr)).max()) for norm in (default, lite)
+    )
+    worst = max(
+        (r for r in contract if r["method"] != "none" and r["overhead"] is not None), key=lambda r: r["overhead"]
+    )
     alcn_memory = next(r for r in memory if r["method"] == "alcn")
     size = f"{width}x{height}"
     summary = [
-        _target(f"default ALCN (the gain Normalizer) / raw DoG, {size} gray", ratio, "<= 2 (stretch 1.5)", ratio <= 2,
-                f"{t['alcn gray']:.2f} ms against {t['dog raw']:.2f} ms; largest difference from the torch model's output: {gain_error:.1e}"),
-        _target(f"default ALCN / raw DoG, {size} gray: real time (issue 15)", ratio, "<= 4", ratio <= 4, "the same ratio"),
-        _target(f"its lite variant (alcn:model=gain-lite) / raw DoG, {size} gray", gain_lite_ratio, "<= 4", gain_lite_ratio <= 4,
-                f"{t['alcn gain-lite gray']:.2f} ms; largest difference from the torch model's output: {gain_lite_error:.1e}"),
-        _target(f"lite paper-family ALCN (alcn:model=lite, pyramid) / raw DoG, {size} gray", lite_ratio, "<= 2", lite_ratio <= 2,
-                f"{t['alcn lite gray']:.2f} ms; the default before the gain Normalizer"),
+        _target(
+            f"default ALCN (the gain Normalizer) / raw DoG, {size} gray",
+            ratio,
+            "<= 2 (stretch 1.5)",
+            ratio <= 2,
+            f"{t['alcn gray']:.2f} ms against {t['dog raw']:.2f} ms; "
+            f"largest difference from the torch model's output: {gain_error:.1e}",
+        ),
+        _target(
+            f"default ALCN / raw DoG, {size} gray: real time (issue 15)", ratio, "<= 4", ratio <= 4, "the same ratio"
+        ),
+        _target(
+            f"its lite variant (alcn:model=gain-lite) / raw DoG, {size} gray",
+            gain_lite_ratio,
+            "<= 4",
+            gain_lite_ratio <= 4,
+            f"{t['alcn gain-lite gray']:.2f} ms; "
+            f"largest difference from the torch model's output: {gain_lite_error:.1e}",
+        ),
+        _target(
+            f"lite paper-family ALCN (alcn:model=lite, pyramid) / raw DoG, {size} gray",
+            lite_ratio,
+            "<= 2",
+            lite_ratio <= 2,
+            f"{t['alcn lite gray']:.2f} ms; the default before the gain Normalizer",
+        ),
         _target("default ALCN fps, {}x{} gray".format(*settings.fps_size), fps, ">= 200", fps >= 200),
-        _target(f"BGR / gray, {size}", colour, "<= 1.3", colour <= 1.3, f"lite model: {t['alcn lite bgr'] / t['alcn lite gray']:.2f}"),
-        _target(f"BGR output against the float Lab round trip, {size}: largest difference (levels)", colour_levels,
-                "<= 1", colour_levels <= 1, "default and lite models, uint8"),
-        _target("apply() overhead over the method's own computation (worst method but none)", worst["overhead"],
-                "<= 0.2", worst["overhead"] <= 0.2, worst["method"]),
-        _target("peak memory added / float32 image, {}x{} gray".format(*settings.large_size),
-                alcn_memory["added_per_float32"], "<= 3", None if alcn_memory["added_per_float32"] is None
-                else alcn_memory["added_per_float32"] <= 3, f"{alcn_memory['strips']} strips"),
-        _target("OpenCV calls after apply / alone", threads[0]["ratio"], "about 1", threads[0]["ratio"] <= 1.1,
-                f"torch's threads: {threads[1]['ratio']:.2f}, apply {threads[1]['apply_ms']:.1f} ms against "
-                f"{threads[0]['apply_ms']:.1f} ms"),
-        _target("alcn normalize video / (decode+encode + apply, in sequence)", video["normalize_s"] / video["sequential_s"],
-                "< 1: decoding and encoding hidden", video["normalize_s"] < video["sequential_s"],
-                f"bound max(decode+encode, apply): {video['bound_s'] / video['sequential_s']:.2f}"),
-        _target(f"batched torch path, {size} frames per second on CUDA", batched["cuda"]["fps"] if batched["cuda_available"] else None,
-                ">= 2000 on an H100", batched["cuda"]["fps"] >= 2000 if batched["cuda_available"] else None,
-                "no CUDA device in this run: path tested on the CPU" if not batched["cuda_available"] else ""),
+        _target(
+            f"BGR / gray, {size}",
+            colour,
+            "<= 1.3",
+            colour <= 1.3,
+            f"lite model: {t['alcn lite bgr'] / t['alcn lite gray']:.2f}",
+        ),
+        _target(
+            f"BGR output against the float Lab round trip, {size}: largest difference (levels)",
+            colour_levels,
+            "<= 1",
+            colour_levels <= 1,
+            "default and lite models, uint8",
+        ),
+        _target(
+            "apply() overhead over the method's own computation (worst method but none)",
+            worst["overhead"],
+            "<= 0.2",
+            worst["overhead"] <= 0.2,
+            worst["method"],
+        ),
+        _target(
+            "peak memory added / float32 image, {}x{} gray".format(*settings.large_size),
+            alcn_memory["added_per_float32"],
+            "<= 3",
+            None if alcn_memory["added_per_float32"] is None else alcn_memory["added_per_float32"] <= 3,
+            f"{alcn_memory['strips']} strips",
+        ),
+        _target(
+            "OpenCV calls after apply / alone",
+            threads[0]["ratio"],
+            "about 1",
+            threads[0]["ratio"] <= 1.1,
+            f"torch's threads: {threads[1]['ratio']:.2f}, apply {threads[1]['apply_ms']:.1f} ms against "
+            f"{threads[0]['apply_ms']:.1f} ms",
+        ),
+        _target(
+            "alcn normalize video / (decode+encode + apply, in sequence)",
+            video["normalize_s"] / video["sequential_s"],
+            "< 1: decoding and encoding hidden",
+            video["normalize_s"] < video["sequential_s"],
+            f"bound max(decode+encode, apply): {video['bound_s'] / video['sequential_s']:.2f}",
+        ),
+        _target(
+            f"batched torch path, {size} frames per second on CUDA",
+            batched["cuda"]["fps"] if batched["cuda_available"] else None,
+            ">= 2000 on an H100",
+            batched["cuda"]["fps"] >= 2000 if batched["cuda_available"] else None,
+            "no CUDA device in this run: path tested on the CPU" if not batched["cuda_available"] else "",
+        ),
     ]
-    return {"times_ms": t, "summary": summary, "stages": stages, "profile": profile, "contract": contract,
-            "threads": threads, "memory": memory, "video": video, "batched": batched}
+    return {
+        "times_ms": t,
+        "summary": summary,
+        "stages": stages,
+        "profile": profile,
+        "contract": contract,
+        "threads": threads,
+        "memory": memory,
+        "video": video,
+        "batched": batched,
+    }
 
 
 def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> dict[str, Any]:
@@ -800,11 +1017,17 @@ def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> d
 
     result = {
         "command": speed_command(out_dir, settings),
-        "settings": {**asdict(settings), "sizes": [list(size) for size in settings.sizes],
-                     "video_size": list(settings.video_size),
-                     "target_size": list(settings.target_size), "fps_size": list(settings.fps_size),
-                     "large_size": list(settings.large_size), "frames": settings.image or "synthetic_frame(seed=0)",
-                     "opencv_threads": cv2.getNumThreads(), "torch_threads": torch.get_num_threads()},
+        "settings": {
+            **asdict(settings),
+            "sizes": [list(size) for size in settings.sizes],
+            "video_size": list(settings.video_size),
+            "target_size": list(settings.target_size),
+            "fps_size": list(settings.fps_size),
+            "large_size": list(settings.large_size),
+            "frames": settings.image or "synthetic_frame(seed=0)",
+            "opencv_threads": cv2.getNumThreads(),
+            "torch_threads": torch.get_num_threads(),
+        },
         "machine_before": machine_before,
         "machine_after": machine(),
         "reference": REFERENCE,
@@ -826,11 +1049,24 @@ def _device_main(out: Path, settings: SpeedSettings) -> dict[str, Any]:
     before = machine()
     frame = _frame_source(settings.image)(*settings.target_size, "gray")
     device = device_speed(settings.device, frame, settings.device_batches, settings.target_repeats)
-    result = {"command": speed_command(out, settings), "machine_before": before, "machine_after": machine(),
-              "rows": device["rows"], "device": device}
+    result = {
+        "command": speed_command(out, settings),
+        "machine_before": before,
+        "machine_after": machine(),
+        "rows": device["rows"],
+        "device": device,
+    }
     write_json(out / "speed.json", result)
-    lines = [f"# alcn bench speed --device {settings.device}", "", f"`{result['command']}`", "",
-             f"Machine: {describe_machine(before)}", "", *device_markdown(device), ""]
+    lines = [
+        f"# alcn bench speed --device {settings.device}",
+        "",
+        f"`{result['command']}`",
+        "",
+        f"Machine: {describe_machine(before)}",
+        "",
+        *device_markdown(device),
+        "",
+    ]
     atomic_write(out / "speed.md", "\n".join(lines))
     return result
 
@@ -848,10 +1084,12 @@ def _markdown(result: dict[str, Any]) -> str:
         f"{', '.join(result['settings']['colours'])}; time budget {result['settings']['budget_s']} s per case; "
         f"video test {result['settings']['video_frames']} frames of "
         f"{'x'.join(map(str, result['settings']['video_size']))}; weights "
-        f"{result['settings']['weights'] or 'shipped'} (paper model), {result['settings']['lite_weights'] or 'shipped'} (lite), shipped (gain and gain-lite).",
+        f"{result['settings']['weights'] or 'shipped'} (paper model), "
+        f"{result['settings']['lite_weights'] or 'shipped'} (lite), shipped (gain and gain-lite).",
         "",
         f"Frames: {result['settings']['frames']}. Times: `apply(uint8 frame)`, median and interquartile range over "
-        f"{result['settings']['min_repeats']}-{result['settings']['max_repeats']} runs after {result['settings']['warmup']} "
+        f"{result['settings']['min_repeats']}-{result['settings']['max_repeats']} runs "
+        f"after {result['settings']['warmup']} "
         "warm-up, the methods timed in turns (one call each per round); `x dog` is the ratio of medians to `dog` in "
         "the same run. ALCN's network / mixture split: medians of `weight_grid` and `normalize` run in turns on "
         "the frame's intensities (network: `weight_grid`; mixture: the rest, map interpolation and Eq. 3); the "
@@ -859,29 +1097,113 @@ def _markdown(result: dict[str, Any]) -> str:
         "",
     ]
     lines += _targets_markdown(result["targets"]) + ["## Time", ""]
-    headers = ["size", "colour", "method", "x dog", "median ms", "IQR ms", "fps", "network ms", "mixture ms",
-               "traced peak MB", "RSS peak MB", "RSS added MB", "runs"]
-    table = [[f"{r['width']}x{r['height']}", r["colour"], r["method"], r["ratio_to_dog"], r["median_ms"], r["iqr_ms"],
-              r["fps"], r.get("network_ms"), r.get("mixture_ms"), r["traced_peak_mb"], r["rss_peak_mb"], r["rss_added_mb"], r["repeats"]]
-             for r in result["rows"]]
+    headers = [
+        "size",
+        "colour",
+        "method",
+        "x dog",
+        "median ms",
+        "IQR ms",
+        "fps",
+        "network ms",
+        "mixture ms",
+        "traced peak MB",
+        "RSS peak MB",
+        "RSS added MB",
+        "runs",
+    ]
+    table = [
+        [
+            f"{r['width']}x{r['height']}",
+            r["colour"],
+            r["method"],
+            r["ratio_to_dog"],
+            r["median_ms"],
+            r["iqr_ms"],
+            r["fps"],
+            r.get("network_ms"),
+            r.get("mixture_ms"),
+            r["traced_peak_mb"],
+            r["rss_peak_mb"],
+            r["rss_added_mb"],
+            r["repeats"],
+        ]
+        for r in result["rows"]
+    ]
     lines.append(markdown_table(headers, table, digits=2))
     if result["accuracy"]:
-        lines += ["## Accuracy of the approximations and backends", "",
-                  f"Raw response (`normalize`) of each ALCN configuration and backend against `{EXACT}` (the "
-                  "paper's Normalizer and the exact Eq. 3, same grayscale frame); relative: divided by the width of "
-                  "the exact output range.", ""]
-        lines.append(markdown_table(
-            ["size", "method", "max abs", "mean abs", "max / range", "mean / range", "std of exact",
-             "spatial std of the maps"],
-            [[f"{a['width']}x{a['height']}", a["method"], a["max_abs"], a["mean_abs"], a["max_rel_range"],
-              a["mean_rel_range"], a["exact_std"], a["exact_map_std"]] for a in result["accuracy"]], digits=5))
+        lines += [
+            "## Accuracy of the approximations and backends",
+            "",
+            f"Raw response (`normalize`) of each ALCN configuration and backend against `{EXACT}` (the "
+            "paper's Normalizer and the exact Eq. 3, same grayscale frame); relative: divided by the width of "
+            "the exact output range.",
+            "",
+        ]
+        lines.append(
+            markdown_table(
+                [
+                    "size",
+                    "method",
+                    "max abs",
+                    "mean abs",
+                    "max / range",
+                    "mean / range",
+                    "std of exact",
+                    "spatial std of the maps",
+                ],
+                [
+                    [
+                        f"{a['width']}x{a['height']}",
+                        a["method"],
+                        a["max_abs"],
+                        a["mean_abs"],
+                        a["max_rel_range"],
+                        a["mean_rel_range"],
+                        a["exact_std"],
+                        a["exact_map_std"],
+                    ]
+                    for a in result["accuracy"]
+                ],
+                digits=5,
+            )
+        )
     if result["video"]:
-        lines += ["", "## Memory over a video", "",
-                  "Resident set (RSS) of the process after each frame of a generated video (`apply` on uint8 frames).", ""]
-        lines.append(markdown_table(
-            ["method", "size", "frames", "ms / frame", "RSS first MB", "RSS last MB", "RSS max MB", "growth kB / frame"],
-            [[v["method"], "x".join(map(str, v["size"])), v["frames"], v["median_frame_ms"], v["rss_first_mb"],
-              v["rss_last_mb"], v["rss_max_mb"], v["growth_kb_per_frame"]] for v in result["video"]], digits=1))
+        lines += [
+            "",
+            "## Memory over a video",
+            "",
+            "Resident set (RSS) of the process after each frame of a generated video (`apply` on uint8 frames).",
+            "",
+        ]
+        lines.append(
+            markdown_table(
+                [
+                    "method",
+                    "size",
+                    "frames",
+                    "ms / frame",
+                    "RSS first MB",
+                    "RSS last MB",
+                    "RSS max MB",
+                    "growth kB / frame",
+                ],
+                [
+                    [
+                        v["method"],
+                        "x".join(map(str, v["size"])),
+                        v["frames"],
+                        v["median_frame_ms"],
+                        v["rss_first_mb"],
+                        v["rss_last_mb"],
+                        v["rss_max_mb"],
+                        v["growth_kb_per_frame"],
+                    ]
+                    for v in result["video"]
+                ],
+                digits=1,
+            )
+        )
     if result["errors"]:
         lines += ["", "## Not run", ""] + [f"- `{k}`: {v}" for k, v in result["errors"].items()]
     return "\n".join(lines) + "\n"
@@ -890,41 +1212,130 @@ def _markdown(result: dict[str, Any]) -> str:
 def _targets_markdown(t: dict[str, Any]) -> list[str]:
     """The targets' section of ``speed.md``."""
     yes_no = {True: "met", False: "missed", None: "-"}
-    lines = ["## Targets", "", "Ratios of medians of calls timed in turns in this run (see `speed.json` for every time).", ""]
-    lines.append(markdown_table(["target", "measured", "goal", "", "note"],
-                                [[r["target"], r["measured"], r["goal"], yes_no[r["met"]], r["note"]] for r in t["summary"]],
-                                digits=2))
+    lines = [
+        "## Targets",
+        "",
+        "Ratios of medians of calls timed in turns in this run (see `speed.json` for every time).",
+        "",
+    ]
+    lines.append(
+        markdown_table(
+            ["target", "measured", "goal", "", "note"],
+            [[r["target"], r["measured"], r["goal"], yes_no[r["met"]], r["note"]] for r in t["summary"]],
+            digits=2,
+        )
+    )
     lines += ["", "### Where the time goes (ms, medians in turns; frame of the first target)", ""]
-    lines.append(markdown_table(["model", "network", "mixture", "apply contract", "apply"],
-                                [[m, s["network_ms"], s["mixture_ms"], s["contract_ms"], s["apply_ms"]] for m, s in t["stages"].items()],
-                                digits=2))
+    lines.append(
+        markdown_table(
+            ["model", "network", "mixture", "apply contract", "apply"],
+            [[m, s["network_ms"], s["mixture_ms"], s["contract_ms"], s["apply_ms"]] for m, s in t["stages"].items()],
+            digits=2,
+        )
+    )
     lines += ["", "Profile of the default's `apply` (cProfile, own time per call, with its overhead):", ""]
-    lines.append(markdown_table(["function", "calls per apply", "own ms per apply"],
-                                [[p["function"], p["calls_per_apply"], p["own_ms_per_apply"]] for p in t["profile"]], digits=2))
-    lines += ["", "### apply() against each method's own computation (`_normalize` on float32 intensities)", "",
-              "Overhead from the fastest runs of each (the least disturbed by the load); medians beside.", ""]
-    lines.append(markdown_table(["method", "apply ms", "own ms", "apply min ms", "own min ms", "overhead", "of medians"],
-                                [[r["method"], r["apply_ms"], r["own_ms"], r["apply_min_ms"], r["own_min_ms"], r["overhead"],
-                                  r["overhead_of_medians"]] for r in t["contract"]], digits=3))
+    lines.append(
+        markdown_table(
+            ["function", "calls per apply", "own ms per apply"],
+            [[p["function"], p["calls_per_apply"], p["own_ms_per_apply"]] for p in t["profile"]],
+            digits=2,
+        )
+    )
+    lines += [
+        "",
+        "### apply() against each method's own computation (`_normalize` on float32 intensities)",
+        "",
+        "Overhead from the fastest runs of each (the least disturbed by the load); medians beside.",
+        "",
+    ]
+    lines.append(
+        markdown_table(
+            ["method", "apply ms", "own ms", "apply min ms", "own min ms", "overhead", "of medians"],
+            [
+                [
+                    r["method"],
+                    r["apply_ms"],
+                    r["own_ms"],
+                    r["apply_min_ms"],
+                    r["own_min_ms"],
+                    r["overhead"],
+                    r["overhead_of_medians"],
+                ]
+                for r in t["contract"]
+            ],
+            digits=3,
+        )
+    )
     lines += ["", "### An application's OpenCV calls (GaussianBlur + Canny) alone and right after apply", ""]
-    lines.append(markdown_table(["Normalizer torch threads", "alone ms", "after apply ms", "ratio", "apply ms", "torch threads kept"],
-                                [[r["threads"] or "torch's", r["app_ms"], r["app_after_apply_ms"], r["ratio"], r["apply_ms"],
-                                  r["torch_threads_kept"]] for r in t["threads"]], digits=2))
+    lines.append(
+        markdown_table(
+            ["Normalizer torch threads", "alone ms", "after apply ms", "ratio", "apply ms", "torch threads kept"],
+            [
+                [
+                    r["threads"] or "torch's",
+                    r["app_ms"],
+                    r["app_after_apply_ms"],
+                    r["ratio"],
+                    r["apply_ms"],
+                    r["torch_threads_kept"],
+                ]
+                for r in t["threads"]
+            ],
+            digits=2,
+        )
+    )
     lines += ["", "### Peak memory on a large grayscale image", ""]
-    lines.append(markdown_table(["method", "size", "s", "float32 image MB", "RSS added MB", "added / float32", "strips"],
-                                [[r["method"], "x".join(map(str, r["size"])), r["seconds"], r["float32_mb"], r["rss_added_mb"],
-                                  r["added_per_float32"], r["strips"]] for r in t["memory"]], digits=2))
+    lines.append(
+        markdown_table(
+            ["method", "size", "s", "float32 image MB", "RSS added MB", "added / float32", "strips"],
+            [
+                [
+                    r["method"],
+                    "x".join(map(str, r["size"])),
+                    r["seconds"],
+                    r["float32_mb"],
+                    r["rss_added_mb"],
+                    r["added_per_float32"],
+                    r["strips"],
+                ]
+                for r in t["memory"]
+            ],
+            digits=2,
+        )
+    )
     v = t["video"]
-    lines += ["", f"### `alcn normalize` on {Path(v['video']).name} ({v['frames']} frames of {'x'.join(map(str, v['size']))})", ""]
-    lines.append(markdown_table(["decode+encode s", "apply alone s", "sequential sum s", "alcn normalize s", "fps"],
-                                [[v["decode_encode_s"], v["apply_s"], v["sequential_s"], v["normalize_s"], v["normalize_fps"]]],
-                                digits=2))
+    lines += [
+        "",
+        f"### `alcn normalize` on {Path(v['video']).name} ({v['frames']} frames of {'x'.join(map(str, v['size']))})",
+        "",
+    ]
+    lines.append(
+        markdown_table(
+            ["decode+encode s", "apply alone s", "sequential sum s", "alcn normalize s", "fps"],
+            [[v["decode_encode_s"], v["apply_s"], v["sequential_s"], v["normalize_s"], v["normalize_fps"]]],
+            digits=2,
+        )
+    )
     b = t["batched"]
     lines += ["", "### Batched torch path (`ALCN.apply_batch`, batches of 4)", ""]
-    lines.append(markdown_table(["device", "frames", "ms per frame", "ms per frame float16", "fps", "float16 max abs diff"],
-                                [[d, f"{b[d]['batch']} x {b[d]['size'][0]}x{b[d]['size'][1]}", b[d]["ms_per_frame"],
-                                  b[d]["ms_per_frame_half"], b[d]["fps"], b[d]["half_max_abs"]]
-                                 for d in ("cpu", "cuda") if d in b], digits=4))
+    lines.append(
+        markdown_table(
+            ["device", "frames", "ms per frame", "ms per frame float16", "fps", "float16 max abs diff"],
+            [
+                [
+                    d,
+                    f"{b[d]['batch']} x {b[d]['size'][0]}x{b[d]['size'][1]}",
+                    b[d]["ms_per_frame"],
+                    b[d]["ms_per_frame_half"],
+                    b[d]["fps"],
+                    b[d]["half_max_abs"],
+                ]
+                for d in ("cpu", "cuda")
+                if d in b
+            ],
+            digits=4,
+        )
+    )
     if not b["cuda_available"]:
         lines += ["", "No CUDA device in this run: the CUDA path is tested on the CPU only (the CUDA test skips)."]
     return lines + [""]

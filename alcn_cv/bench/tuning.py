@@ -44,12 +44,7 @@ logger = logging.getLogger(__name__)
 #: 3 sigma): a larger kernel sees reflected window borders at training time and the real
 #: surroundings at test time, which the window-level score cannot see but the detector pays for.
 GRIDS: dict[str, list[dict[str, float]]] = {
-    "dog": [
-        {"sigma1": s1, "sigma2": s2}
-        for s1 in (0.5, 1.0, 1.5, 2.0)
-        for s2 in (1.5, 2.0, 3.0, 4.0, 5.0)
-        if s2 > s1
-    ],
+    "dog": [{"sigma1": s1, "sigma2": s2} for s1 in (0.5, 1.0, 1.5, 2.0) for s2 in (1.5, 2.0, 3.0, 4.0, 5.0) if s2 > s1],
     "slcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)],
     "dlcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)],
 }
@@ -83,7 +78,9 @@ def relight(windows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     angle = rng.uniform(0, 2 * np.pi, n)
     strength = np.log(rng.uniform(1.0, 3.0, n))
     y, x = np.mgrid[0:h, 0:w]
-    t = ((x - w / 2)[None] * np.cos(angle)[:, None, None] + (y - h / 2)[None] * np.sin(angle)[:, None, None]) / max(h, w)
+    t = ((x - w / 2)[None] * np.cos(angle)[:, None, None] + (y - h / 2)[None] * np.sin(angle)[:, None, None]) / max(
+        h, w
+    )
     gradient = np.exp(strength[:, None, None] * t)
     offset = rng.uniform(-0.03, 0.03, n)[:, None, None]
     out = gain * np.power(np.clip(windows, 0, 1), gamma) * gradient + offset
@@ -91,8 +88,9 @@ def relight(windows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return (np.rint(np.clip(out, 0, 1) * 255) / 255).astype(np.float32)
 
 
-def shifted_negatives(windows: np.ndarray, labels: np.ndarray, rng: np.random.Generator,
-                      shift: tuple[int, int] = (6, 10)) -> tuple[np.ndarray, np.ndarray]:
+def shifted_negatives(
+    windows: np.ndarray, labels: np.ndarray, rng: np.random.Generator, shift: tuple[int, int] = (6, 10)
+) -> tuple[np.ndarray, np.ndarray]:
     """Object windows moved off centre, as background: the localization negatives of the search.
 
     Args:
@@ -115,7 +113,9 @@ def shifted_negatives(windows: np.ndarray, labels: np.ndarray, rng: np.random.Ge
     return np.concatenate([windows, moved]), np.concatenate([labels, np.zeros(len(moved), labels.dtype)])
 
 
-def _score(method: str, params: dict[str, Any], references: np.ndarray, queries: np.ndarray, labels: np.ndarray) -> float:
+def _score(
+    method: str, params: dict[str, Any], references: np.ndarray, queries: np.ndarray, labels: np.ndarray
+) -> float:
     norm = create(method, **params)
 
     def features(windows: np.ndarray) -> np.ndarray:
@@ -166,7 +166,9 @@ def tune(
     return dict(best["params"]), trials
 
 
-def tune_all(windows: np.ndarray, labels: np.ndarray, seed: int, methods: Iterable[str] = tuple(GRIDS)) -> dict[str, dict[str, Any]]:
+def tune_all(
+    windows: np.ndarray, labels: np.ndarray, seed: int, methods: Iterable[str] = tuple(GRIDS)
+) -> dict[str, dict[str, Any]]:
     """:func:`tune` every method of ``methods`` on the same windows and relighting.
 
     Returns:

@@ -81,8 +81,9 @@ def normalization_grid(images: list[np.ndarray], labels: list[str], methods: lis
                 ax.set_title(textwrap.fill(method_title(method), 24), fontsize=8)
             if j == 0:
                 ax.set_ylabel(labels[i], fontsize=8)
-    fig.suptitle("Rows: test images under different lights; columns: every normalization, as apply() gives it",
-                 fontsize=10)
+    fig.suptitle(
+        "Rows: test images under different lights; columns: every normalization, as apply() gives it", fontsize=10
+    )
     fig.tight_layout(pad=0.3, rect=(0, 0, 1, 1 - 0.35 / height))  # room for the title line
     path.parent.mkdir(parents=True, exist_ok=True)
     return save_figure(plt, fig, path, dpi=110)
@@ -113,7 +114,10 @@ def main(out_dir: Path, seed: int = 0) -> Path:
     settings.policies = ["local"]
     bench.main(data_dir, out_dir / "bench", settings)
     table = out_dir / "bench" / "detect.md"
-    logger.info("detection benchmark (small preset; the full one is `alcn bench detect`):\n%s", table.read_text(encoding="utf-8"))
+    logger.info(
+        "detection benchmark (small preset; the full one is `alcn bench detect`):\n%s",
+        table.read_text(encoding="utf-8"),
+    )
     logger.info("outputs: %s (normalized.png, bench/detect.md, bench/*.png)", out_dir)
     return out_dir
 

@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
+from alcn_cv.data.lighting import LIGHT_FAMILIES, Lighting, directional, sample_lighting
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.objects import ReliefObject, background_surface, make_object, paste, to_surface
 from alcn_cv.data.parallel import parallel_map
-from alcn_cv.data.lighting import LIGHT_FAMILIES, Lighting, directional, sample_lighting
 from alcn_cv.data.render import Material, render_surfaces
 from alcn_cv.data.textures import photo_crop, procedural_texture
 from alcn_cv.errors import InputError
@@ -99,8 +99,15 @@ def benchmark_objects(object_seed: int, canonical: int) -> list[ReliefObject]:
 
 def training_lighting() -> Lighting:
     """The constant training lighting: white light from 70 degrees elevation, moderate ambient."""
-    return Lighting("ambient", [directional(45.0, 70.0, (0.85, 0.85, 0.85))], np.full(3, 0.25, np.float32),
-                    gain=1.0, gamma=2.2, shot_noise=5e-4, read_noise=1e-3)
+    return Lighting(
+        "ambient",
+        [directional(45.0, 70.0, (0.85, 0.85, 0.85))],
+        np.full(3, 0.25, np.float32),
+        gain=1.0,
+        gamma=2.2,
+        shot_noise=5e-4,
+        read_noise=1e-3,
+    )
 
 
 def _ground(rng: np.random.Generator, h: int, w: int):
@@ -118,8 +125,12 @@ def _tight_box(cov: np.ndarray) -> list[float] | None:
 def _render(rng, surf, lighting: Lighting, cfg: DetectConfig) -> np.ndarray:
     scale = 2 if max(cfg.width, cfg.height) > 400 else 1
     return render_surfaces(
-        to_surface([surf]), [lighting], rng, camera_height=1.5 * max(cfg.width, cfg.height),
-        shadow_steps=24, shadow_scale=scale,
+        to_surface([surf]),
+        [lighting],
+        rng,
+        camera_height=1.5 * max(cfg.width, cfg.height),
+        shadow_steps=24,
+        shadow_scale=scale,
     )[0]
 
 
@@ -167,8 +178,14 @@ def _test_image(rng, objs: list[ReliefObject], cfg: DetectConfig, p_object: floa
             paste(*surf, dist, (x, y), s, rng.uniform(0, 360))
     anns = []
     for k, x, y in placements:
-        cov = paste(*surf, objs[k], (x, y), obj_scale * rng.uniform(0.9, 1.1), rng.uniform(-10, 10),
-                    tilt=(rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05)))
+        cov = paste(
+            *surf,
+            objs[k],
+            (x, y),
+            obj_scale * rng.uniform(0.9, 1.1),
+            rng.uniform(-10, 10),
+            tilt=(rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05)),
+        )
         box = _tight_box(cov)
         if box is not None:
             anns.append((k + 1, box, float(cov.sum())))
@@ -231,24 +248,36 @@ def generate(
         raise InputError(f"unknown size {size!r}; known: {sorted(SIZES)}")
     base = SIZES[size]
     cfg = DetectConfig(
-        width=width or base.width, height=height or base.height,
-        n_train=base.n_train if n_train is None else n_train, n_test=base.n_test if n_test is None else n_test,
-        object_px=base.object_px, box_px=base.box_px, canonical=base.canonical,
+        width=width or base.width,
+        height=height or base.height,
+        n_train=base.n_train if n_train is None else n_train,
+        n_test=base.n_test if n_test is None else n_test,
+        object_px=base.object_px,
+        box_px=base.box_px,
+        canonical=base.canonical,
     )
     if cfg.width < 2 * cfg.object_px or cfg.height < 2 * cfg.object_px or cfg.n_train < 1 or cfg.n_test < 0:
-        raise InputError(f"images must be at least twice the object size ({cfg.object_px} px), with n_train >= 1: "
-                         f"got {cfg.width}x{cfg.height}, n_train={cfg.n_train}")
-    cats = [{"id": k + 1, "name": name, "supercategory": "object", "material": mat}
-            for k, (name, mat, _) in enumerate(OBJECTS)]
+        raise InputError(
+            f"images must be at least twice the object size ({cfg.object_px} px), with n_train >= 1: "
+            f"got {cfg.width}x{cfg.height}, n_train={cfg.n_train}"
+        )
+    cats = [
+        {"id": k + 1, "name": name, "supercategory": "object", "material": mat}
+        for k, (name, mat, _) in enumerate(OBJECTS)
+    ]
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         (tmp / "images" / "train").mkdir(parents=True)
         (tmp / "images" / "test").mkdir(parents=True)
-        jobs = [("train", k, j, f"images/train/{OBJECTS[k][0]}_{j:02d}.png")
-                for k in range(len(OBJECTS)) for j in range(cfg.n_train)]
+        jobs = [
+            ("train", k, j, f"images/train/{OBJECTS[k][0]}_{j:02d}.png")
+            for k in range(len(OBJECTS))
+            for j in range(cfg.n_train)
+        ]
         jobs += [("test", 0, j, f"images/test/{j:05d}.png") for j in range(cfg.n_test)]
         jobs = [(split, k, j, str(tmp / name), name, seed, object_seed, cfg, p_object) for split, k, j, name in jobs]
-        results = list(parallel_map(_image_job, jobs, workers=workers, desc="detect images", unit="img",
-                                    progress=progress))
+        results = list(
+            parallel_map(_image_job, jobs, workers=workers, desc="detect images", unit="img", progress=progress)
+        )
         for split in ("train", "test"):
             images, anns = [], []
             for job, (objs_here, lighting) in zip(jobs, results):
@@ -260,18 +289,42 @@ def generate(
                     entry["light_family"] = lighting["family"]
                 images.append({**entry, "lighting": lighting})
                 for cat, box, area in objs_here:
-                    anns.append({"id": len(anns) + 1, "image_id": iid, "category_id": cat, "bbox": box,
-                                 "area": round(area, 2), "iscrowd": 0})
+                    anns.append(
+                        {
+                            "id": len(anns) + 1,
+                            "image_id": iid,
+                            "category_id": cat,
+                            "bbox": box,
+                            "area": round(area, 2),
+                            "iscrowd": 0,
+                        }
+                    )
             info = {"description": f"alcn-cv ALCN-2D-like detection benchmark, {split} images", "seed": seed}
             write_coco(tmp / f"{split}.json", images, anns, cats, info)
-        params = {"size": size, "object_seed": object_seed, "width": cfg.width, "height": cfg.height,
-                  "n_train": cfg.n_train, "n_test": cfg.n_test, "object_px": cfg.object_px, "p_object": p_object}
-        write_json(tmp / "manifest.json", make_manifest(
-            "detect", seed, params,
-            working_scale=cfg.working_scale, box_size=cfg.box_px, window=48, detector_window=32,
-            objects=[{"id": k + 1, "name": n, "material": m, "shape": s} for k, (n, m, s) in enumerate(OBJECTS)],
-            light_families=list(LIGHT_FAMILIES), files={"train": "train.json", "test": "test.json"},
-            bbox_convention="COCO [x, y, w, h]: tight box of the visible silhouette, full-resolution pixels",
-        ))
+        params = {
+            "size": size,
+            "object_seed": object_seed,
+            "width": cfg.width,
+            "height": cfg.height,
+            "n_train": cfg.n_train,
+            "n_test": cfg.n_test,
+            "object_px": cfg.object_px,
+            "p_object": p_object,
+        }
+        write_json(
+            tmp / "manifest.json",
+            make_manifest(
+                "detect",
+                seed,
+                params,
+                working_scale=cfg.working_scale,
+                box_size=cfg.box_px,
+                window=48,
+                detector_window=32,
+                objects=[{"id": k + 1, "name": n, "material": m, "shape": s} for k, (n, m, s) in enumerate(OBJECTS)],
+                light_families=list(LIGHT_FAMILIES),
+                files={"train": "train.json", "test": "test.json"},
+                bbox_convention="COCO [x, y, w, h]: tight box of the visible silhouette, full-resolution pixels",
+            ),
+        )
     return Path(out_dir)
-

@@ -115,9 +115,19 @@ class LightChangeConfig:
     @classmethod
     def identity(cls) -> LightChangeConfig:
         """No change of light: :func:`relight` returns the photograph (to within one 8-bit level)."""
-        return cls(gain=(1.0, 1.0), shading=0.0, ramp=0.0, shadows=(0, 0), colour=0.0, target=None,
-                   exposure_error=(0.0, 0.0), full_well=(np.inf, np.inf), read_noise=(0.0, 0.0),
-                   gamma=(DECODING_GAMMA, DECODING_GAMMA), jpeg_probability=0.0)
+        return cls(
+            gain=(1.0, 1.0),
+            shading=0.0,
+            ramp=0.0,
+            shadows=(0, 0),
+            colour=0.0,
+            target=None,
+            exposure_error=(0.0, 0.0),
+            full_well=(np.inf, np.inf),
+            read_noise=(0.0, 0.0),
+            gamma=(DECODING_GAMMA, DECODING_GAMMA),
+            jpeg_probability=0.0,
+        )
 
 
 def _log_uniform(rng: np.random.Generator, bounds: Range) -> float:
@@ -129,8 +139,9 @@ def _uniform(rng: np.random.Generator, bounds: Range) -> float:
     return float(rng.uniform(*bounds)) if bounds[0] < bounds[1] else float(bounds[0])
 
 
-def shading_field(shape: tuple[int, int], rng: np.random.Generator, amplitude: float, ramp: float,
-                  cells: tuple[int, int] = (2, 6)) -> np.ndarray:
+def shading_field(
+    shape: tuple[int, int], rng: np.random.Generator, amplitude: float, ramp: float, cells: tuple[int, int] = (2, 6)
+) -> np.ndarray:
     """A smooth positive gain field: ``exp(amplitude * s + ramp * t)``, ``s`` a random grid of
     ``cells`` per side in [-1, 1] upsampled bicubically, ``t`` a linear ramp in [-0.5, 0.5] in a
     random direction (so ``ramp`` is its log-ratio end to end).
@@ -148,8 +159,14 @@ def shading_field(shape: tuple[int, int], rng: np.random.Generator, amplitude: f
     return np.exp(np.float32(amplitude) * smooth + np.float32(ramp * rng.uniform(0.0, 1.0)) * t).astype(np.float32)
 
 
-def shadow_mask(shape: tuple[int, int], rng: np.random.Generator, count: int, light: Range = (0.1, 0.6),
-                penumbra: Range = (0.5, 12.0), kinds: tuple[str, ...] = SHADOW_SHAPES) -> np.ndarray:
+def shadow_mask(
+    shape: tuple[int, int],
+    rng: np.random.Generator,
+    count: int,
+    light: Range = (0.1, 0.6),
+    penumbra: Range = (0.5, 12.0),
+    kinds: tuple[str, ...] = SHADOW_SHAPES,
+) -> np.ndarray:
     """The light left by ``count`` cast shadows: each a hard shadow of a kind drawn from ``kinds``
     (:func:`alcn_cv.data.lighting.shadow_shape`: a straight edge, a polygon, blinds, a window,
     foliage) with a penumbra of Gaussian sigma ``penumbra`` (log-uniform), leaving ``light`` of
@@ -166,8 +183,14 @@ def shadow_mask(shape: tuple[int, int], rng: np.random.Generator, count: int, li
     return mask
 
 
-def relief_shading(luminance: np.ndarray, rng: np.random.Generator, depth: float, sigma: float = 2.0,
-                   elevation: float = 45.0, ambient: float = 0.3) -> np.ndarray:
+def relief_shading(
+    luminance: np.ndarray,
+    rng: np.random.Generator,
+    depth: float,
+    sigma: float = 2.0,
+    elevation: float = 45.0,
+    ambient: float = 0.3,
+) -> np.ndarray:
     """Lambertian shading of the photograph read as a relief (bump mapping): the height is the
     luminance, blurred by ``sigma``, times ``depth`` pixels; a directional light of
     ``elevation`` degrees and random azimuth plus ``ambient`` light; relative to a flat surface
@@ -186,7 +209,9 @@ def relief_shading(luminance: np.ndarray, rng: np.random.Generator, depth: float
     azimuth, tilt = rng.uniform(0.0, 2.0 * np.pi), np.deg2rad(elevation)
     lx, ly, lz = np.cos(tilt) * np.cos(azimuth), np.cos(tilt) * np.sin(azimuth), np.sin(tilt)
     cosine = (-gx * np.float32(lx) - gy * np.float32(ly) + np.float32(lz)) / np.sqrt(1.0 + gx * gx + gy * gy)
-    return (np.float32(ambient) + np.float32(1.0 - ambient) * np.maximum(cosine, 0.0) / np.float32(lz)).astype(np.float32)
+    return (np.float32(ambient) + np.float32(1.0 - ambient) * np.maximum(cosine, 0.0) / np.float32(lz)).astype(
+        np.float32
+    )
 
 
 def sensor_noise(signal: np.ndarray, rng: np.random.Generator, full_well: float, read_noise: float) -> np.ndarray:
@@ -219,20 +244,32 @@ def relight(image: np.ndarray, rng: np.random.Generator, config: LightChangeConf
     Returns:
         uint8 of ``image``'s shape.
     """
-    if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim not in (2, 3) or \
-            (image.ndim == 3 and image.shape[2] != 3) or min(image.shape[:2]) < 2:
-        raise InputError(f"image must be uint8 HxW or HxWx3, got {getattr(image, 'dtype', type(image))} "
-                         f"{getattr(image, 'shape', '')}")
+    if (
+        not isinstance(image, np.ndarray)
+        or image.dtype != np.uint8
+        or image.ndim not in (2, 3)
+        or (image.ndim == 3 and image.shape[2] != 3)
+        or min(image.shape[:2]) < 2
+    ):
+        raise InputError(
+            f"image must be uint8 HxW or HxWx3, got {getattr(image, 'dtype', type(image))} "
+            f"{getattr(image, 'shape', '')}"
+        )
     c = config
     h, w = image.shape[:2]
     linear = np.power(image.astype(np.float32) / np.float32(255), np.float32(DECODING_GAMMA))
     light = np.float32(_log_uniform(rng, c.gain)) * shading_field((h, w), rng, c.shading, c.ramp, c.shading_cells)
-    light *= shadow_mask((h, w), rng, int(rng.integers(c.shadows[0], c.shadows[1] + 1)), c.shadow_light,
-                         c.penumbra)
+    light *= shadow_mask((h, w), rng, int(rng.integers(c.shadows[0], c.shadows[1] + 1)), c.shadow_light, c.penumbra)
     if c.relief[1] > 0:
         luminance = linear.mean(axis=2) if image.ndim == 3 else linear
-        light *= relief_shading(luminance, rng, _log_uniform(rng, c.relief), _log_uniform(rng, c.relief_sigma),
-                                _uniform(rng, c.elevation), _uniform(rng, c.ambient))
+        light *= relief_shading(
+            luminance,
+            rng,
+            _log_uniform(rng, c.relief),
+            _log_uniform(rng, c.relief_sigma),
+            _uniform(rng, c.elevation),
+            _uniform(rng, c.ambient),
+        )
     irradiance = linear * (light[..., None] if image.ndim == 3 else light)
     if image.ndim == 3 and c.colour > 0:
         irradiance *= np.exp(rng.uniform(-c.colour, c.colour, 3)).astype(np.float32)
@@ -248,13 +285,19 @@ def relight(image: np.ndarray, rng: np.random.Generator, config: LightChangeConf
     out = np.rint(out * np.float32(255)).astype(np.uint8)
     if rng.random() < c.jpeg_probability:
         quality = int(rng.integers(c.jpeg_quality[0], c.jpeg_quality[1] + 1))
-        out = cv2.imdecode(cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, quality])[1],
-                           cv2.IMREAD_UNCHANGED).reshape(out.shape)
+        out = cv2.imdecode(
+            cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, quality])[1], cv2.IMREAD_UNCHANGED
+        ).reshape(out.shape)
     return out
 
 
-def relit_frames(image: np.ndarray, count: int, rng: np.random.Generator,
-                 config: LightChangeConfig = LightChangeConfig(), jitter: float = 0.0) -> np.ndarray:
+def relit_frames(
+    image: np.ndarray,
+    count: int,
+    rng: np.random.Generator,
+    config: LightChangeConfig = LightChangeConfig(),
+    jitter: float = 0.0,
+) -> np.ndarray:
     """``count`` relit copies of one photograph, registered to within ``jitter`` pixels: a scene
     in the layout of the real-light trainer (:mod:`alcn_cv.train.real_light`). With ``jitter``,
     each copy is seen through a :func:`random_homography` that moves each corner by up to
@@ -270,8 +313,9 @@ def relit_frames(image: np.ndarray, count: int, rng: np.random.Generator,
         copy = image
         if jitter > 0:
             homography = random_homography((h, w), rng, jitter / max(h, w))
-            copy = cv2.warpPerspective(image, homography, (w, h), flags=cv2.INTER_LINEAR,
-                                       borderMode=cv2.BORDER_REFLECT_101)
+            copy = cv2.warpPerspective(
+                image, homography, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101
+            )
         frames.append(relight(copy, rng, config))
     return np.stack(frames)
 
@@ -307,18 +351,17 @@ class RelitPair:
     valid: np.ndarray
 
 
-def sample_pair(image: np.ndarray, rng: np.random.Generator, config: LightChangeConfig = LightChangeConfig(),
-                shift: float = 0.06) -> RelitPair:
+def sample_pair(
+    image: np.ndarray, rng: np.random.Generator, config: LightChangeConfig = LightChangeConfig(), shift: float = 0.06
+) -> RelitPair:
     """Relight ``image`` twice (:func:`relight`), the second copy through a
     :func:`random_homography` of ``shift`` (0: registered)."""
     h, w = image.shape[:2]
     homography = random_homography((h, w), rng, shift) if shift > 0 else np.eye(3)
-    warped = cv2.warpPerspective(image, homography, (w, h), flags=cv2.INTER_LINEAR,
-                                 borderMode=cv2.BORDER_REFLECT_101)
+    warped = cv2.warpPerspective(image, homography, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
     first = relight(image, rng, config)
     second = relight(warped, rng, config)
     grid = np.stack(np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32)), axis=-1)
     coords = cv2.perspectiveTransform(grid.reshape(-1, 1, 2), homography).reshape(h, w, 2)
     valid = (coords[..., 0] >= 0) & (coords[..., 0] <= w - 1) & (coords[..., 1] >= 0) & (coords[..., 1] <= h - 1)
     return RelitPair(first, second, homography, coords, valid)
-

@@ -14,8 +14,8 @@ degrees elevation), ``shadow`` (hard cast shadow shapes and a strong gradient), 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -32,6 +32,7 @@ __all__ = [
     "SHADOW_SHAPES",
     "shadow_shape",
 ]
+
 
 @dataclass(frozen=True)
 class Light:
@@ -85,7 +86,7 @@ class LightArrays:
     cos_inner: np.ndarray  # (B, L)
 
     @classmethod
-    def pack(cls, lights: Sequence[Sequence[Light]]) -> "LightArrays":
+    def pack(cls, lights: Sequence[Sequence[Light]]) -> LightArrays:
         """Pack one list of lights per batch item."""
         b = len(lights)
         n = max(1, max(len(ls) for ls in lights))
@@ -151,8 +152,11 @@ class Lighting:
         return {
             "family": self.family,
             "lights": [
-                {"kind": li.kind, "vector": [round(float(v), 4) for v in li.vector],
-                 "colour": [round(float(c), 4) for c in li.colour]}
+                {
+                    "kind": li.kind,
+                    "vector": [round(float(v), 4) for v in li.vector],
+                    "colour": [round(float(c), 4) for c in li.colour],
+                }
                 for li in self.lights
             ],
             "ambient": [round(float(a), 4) for a in self.ambient],
@@ -230,9 +234,15 @@ def sample_lighting(
         target = np.array([cx + rng.normal(0, 0.25) * size, cy + rng.normal(0, 0.25) * size, 0.0])
         axis = target - np.array(pos)
         cone = rng.uniform(10, 35)
-        return Light(kind, tuple(float(p) for p in pos), tuple(float(c) for c in colour * scale), float(rng_),
-                     tuple(float(a) for a in axis / np.linalg.norm(axis)), float(cone),
-                     float(rng.uniform(0.1, 0.6) * cone))
+        return Light(
+            kind,
+            tuple(float(p) for p in pos),
+            tuple(float(c) for c in colour * scale),
+            float(rng_),
+            tuple(float(a) for a in axis / np.linalg.norm(axis)),
+            float(cone),
+            float(rng.uniform(0.1, 0.6) * cone),
+        )
 
     if family in ("ambient", "dark", "bright"):
         lights.append(directional(az, rng.uniform(50, 90), _warm_cool(rng) * rng.uniform(0.7, 1.0)))
@@ -258,8 +268,13 @@ def sample_lighting(
         ambient = np.full(3, rng.uniform(0.02, 0.15))
     elif family == "colour":
         for _ in range(int(rng.integers(2, 4))):
-            lights.append(directional(rng.uniform(0, 360), rng.uniform(20, 85),
-                                      _light_colour(rng, rng.uniform(0.5, 1.0)) * rng.uniform(0.4, 0.9)))
+            lights.append(
+                directional(
+                    rng.uniform(0, 360),
+                    rng.uniform(20, 85),
+                    _light_colour(rng, rng.uniform(0.5, 1.0)) * rng.uniform(0.4, 0.9),
+                )
+            )
         ambient = _light_colour(rng, rng.uniform(0.0, 0.8)) * rng.uniform(0.05, 0.25)
     else:  # mixed
         for _ in range(int(rng.integers(1, 4))):
@@ -317,8 +332,9 @@ def shadow_shape(rng: np.random.Generator, shape: tuple[int, int], kind: str, *,
         c = rng.uniform(0.2, 0.8, 2) * (w, h)
         r = rng.uniform(0.3, 0.8) * s
         ang = np.sort(rng.uniform(0, 2 * np.pi, n))
-        pts = np.stack([c[0] + r * np.cos(ang) * rng.uniform(0.5, 1.5, n),
-                        c[1] + r * np.sin(ang) * rng.uniform(0.5, 1.5, n)], 1)
+        pts = np.stack(
+            [c[0] + r * np.cos(ang) * rng.uniform(0.5, 1.5, n), c[1] + r * np.sin(ang) * rng.uniform(0.5, 1.5, n)], 1
+        )
         cv2.fillPoly(m, [np.round(pts * 16).astype(np.int32)], 0.0, cv2.LINE_AA, 4)
     elif kind in ("blinds", "window"):
         a = rng.uniform(0, np.pi)

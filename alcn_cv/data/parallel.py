@@ -7,8 +7,9 @@ so rendering items in worker processes gives byte-identical datasets.
 from __future__ import annotations
 
 import multiprocessing
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
-from typing import Callable, Iterable, Iterator, TypeVar
+from typing import TypeVar
 
 from tqdm import tqdm
 

@@ -157,14 +157,19 @@ def rendered_photographs(count: int, seed: int = 0, size: int = 384) -> list[Pho
     from alcn_cv.data.relief_scenes import render_scene
 
     return [
-        Photograph(f"rendered_{i:03d}", render_scene(np.random.default_rng([seed, i]), size, 2)[0][0],
-                   "rendered by alcn-cv", "alcn_cv.data.relief_scenes")
+        Photograph(
+            f"rendered_{i:03d}",
+            render_scene(np.random.default_rng([seed, i]), size, 2)[0][0],
+            "rendered by alcn-cv",
+            "alcn_cv.data.relief_scenes",
+        )
         for i in range(count)
     ]
 
 
-def permissive_photographs(shared: str | Path | None = None, rendered: int = 0, seed: int = 0,
-                           max_side: int | None = 640) -> list[Photograph]:
+def permissive_photographs(
+    shared: str | Path | None = None, rendered: int = 0, seed: int = 0, max_side: int | None = 640
+) -> list[Photograph]:
     """Every photograph of the three sources: scikit-image's, the shared OpenCV samples (when
     ``shared`` is given) and ``rendered`` rendered scenes."""
     photos = skimage_photographs(max_side)

@@ -32,20 +32,20 @@ import inspect
 import logging
 import os
 import zipfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
-from alcn_cv.io import write_json
+from alcn_cv.data.lighting import LIGHT_FAMILIES, sample_lighting
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest, read_manifest, save_npz
 from alcn_cv.data.objects import ReliefObject, background_surface, make_catalog, make_object, paste, to_surface
 from alcn_cv.data.parallel import parallel_map
-from alcn_cv.data.lighting import LIGHT_FAMILIES, sample_lighting
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.io import write_json
 
 logger = logging.getLogger(__name__)
 
@@ -93,11 +93,18 @@ class PhosBatch:
     def __len__(self) -> int:
         return len(self.labels)
 
-    def subset(self, index: np.ndarray | slice) -> "PhosBatch":
+    def subset(self, index: np.ndarray | slice) -> PhosBatch:
         """The windows selected by ``index`` (a slice, integer or boolean array)."""
         return PhosBatch(
-            self.windows[index], self.labels[index], self.light_ids[index], self.kinds[index],
-            self.offsets[index], self.extents[index], self.n_objects, self.object_seed, self.seed,
+            self.windows[index],
+            self.labels[index],
+            self.light_ids[index],
+            self.kinds[index],
+            self.offsets[index],
+            self.extents[index],
+            self.n_objects,
+            self.object_seed,
+            self.seed,
             self.light_families,
         )
 
@@ -149,8 +156,15 @@ def _render_chunk(
         if rng.random() < 0.3:  # clutter at the window's edge
             a = rng.uniform(0, 2 * np.pi)
             d = rng.uniform(0.65, 0.9) * w
-            paste(albedo, height, material, distractors[int(rng.integers(len(distractors)))],
-                  (centre + d * np.cos(a), centre + d * np.sin(a)), scale * rng.uniform(0.7, 1.3), rng.uniform(0, 360))
+            paste(
+                albedo,
+                height,
+                material,
+                distractors[int(rng.integers(len(distractors)))],
+                (centre + d * np.cos(a), centre + d * np.sin(a)),
+                scale * rng.uniform(0.7, 1.3),
+                rng.uniform(0, 360),
+            )
         is_object = rng.random() >= background_fraction
         kind = 0 if is_object else int(rng.choice([1, 2, 3], p=[0.35, 0.4, 0.25]))
         angle = rng.uniform(-15, 15)
@@ -167,8 +181,16 @@ def _render_chunk(
             extents[i] = extent
         elif kind == 2:
             off = rng.uniform(-3, 3, 2)
-            paste(albedo, height, material, distractors[int(rng.integers(len(distractors)))],
-                  (centre + off[0], centre + off[1]), scale, rng.uniform(0, 360), tilt=tilt)
+            paste(
+                albedo,
+                height,
+                material,
+                distractors[int(rng.integers(len(distractors)))],
+                (centre + off[0], centre + off[1]),
+                scale,
+                rng.uniform(0, 360),
+                tilt=tilt,
+            )
         kinds[i] = kind
         fam = families[int(rng.integers(len(families)))]
         light_ids[i] = fam
@@ -213,11 +235,26 @@ def render_windows(
         raise InputError(f"background_fraction must be in [0, 1], got {background_fraction}")
     families = _families(lighting)
     cols = [
-        np.empty((n, WINDOW, WINDOW), np.uint8), np.empty(n, np.int64), np.empty(n, np.int64),
-        np.empty(n, np.int64), np.empty((n, 2), np.float32), np.empty(n, np.float32),
+        np.empty((n, WINDOW, WINDOW), np.uint8),
+        np.empty(n, np.int64),
+        np.empty(n, np.int64),
+        np.empty(n, np.int64),
+        np.empty((n, 2), np.float32),
+        np.empty(n, np.float32),
     ]
-    jobs = [(c, min(_CHUNK, n - c * _CHUNK), int(seed), int(n_objects), int(object_seed), families,
-             float(background_fraction), tuple(object_size)) for c in range((n + _CHUNK - 1) // _CHUNK)]
+    jobs = [
+        (
+            c,
+            min(_CHUNK, n - c * _CHUNK),
+            int(seed),
+            int(n_objects),
+            int(object_seed),
+            families,
+            float(background_fraction),
+            tuple(object_size),
+        )
+        for c in range((n + _CHUNK - 1) // _CHUNK)
+    ]
     parts = parallel_map(_chunk_job, jobs, workers=workers, desc="phos windows", unit="chunk", progress=progress)
     for (c, count, *_), part in zip(jobs, parts):
         for dst, src in zip(cols, part):
@@ -227,8 +264,7 @@ def render_windows(
 
 def _chunk_job(job: tuple) -> tuple[np.ndarray, ...]:
     c, count, seed, n_objects, object_seed, families, background_fraction, object_size = job
-    return _render_chunk(c, count, seed, _catalog(n_objects, object_seed), families, background_fraction,
-                         object_size)
+    return _render_chunk(c, count, seed, _catalog(n_objects, object_seed), families, background_fraction, object_size)
 
 
 _ARRAYS = ("windows", "labels", "light_ids", "kinds", "offsets", "extents")
@@ -255,19 +291,29 @@ def generate(
     """
     batch = render_windows(n, seed, progress=progress, **params)
     # The manifest records every parameter, the defaults of render_windows included.
-    defaults = {k: p.default for k, p in inspect.signature(render_windows).parameters.items()
-                if p.kind == p.KEYWORD_ONLY and k not in ("progress", "workers")}
+    defaults = {
+        k: p.default
+        for k, p in inspect.signature(render_windows).parameters.items()
+        if p.kind == p.KEYWORD_ONLY and k not in ("progress", "workers")
+    }
     defaults.update({k: v for k, v in params.items() if k != "workers"})
     defaults = {k: (list(v) if isinstance(v, tuple) else v) for k, v in defaults.items()}
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         save_npz(tmp / "windows.npz", **{k: getattr(batch, k) for k in _ARRAYS})
         counts = np.bincount(batch.labels, minlength=batch.n_objects + 1)
-        write_json(tmp / "manifest.json", make_manifest(
-            "phos", seed, {"n": int(n), **defaults},
-            window=WINDOW, light_families=list(LIGHT_FAMILIES), kinds=list(KIND_NAMES),
-            files={"windows": "windows.npz"},
-            counts={"background": int(counts[0]), "object": int(counts[1:].sum())},
-        ))
+        write_json(
+            tmp / "manifest.json",
+            make_manifest(
+                "phos",
+                seed,
+                {"n": int(n), **defaults},
+                window=WINDOW,
+                light_families=list(LIGHT_FAMILIES),
+                kinds=list(KIND_NAMES),
+                files={"windows": "windows.npz"},
+                counts={"background": int(counts[0]), "object": int(counts[1:].sum())},
+            ),
+        )
     return Path(out_dir)
 
 
@@ -293,8 +339,9 @@ def load(out_dir: str | os.PathLike) -> PhosBatch:
     n = len(arrays["labels"])
     win = arrays["windows"]
     if win.dtype != np.uint8 or win.ndim != 3 or win.shape[0] != n or win.shape[1:] != (WINDOW, WINDOW):
-        raise DatasetError(f"{path}: field 'windows' must be uint8 ({n}, {WINDOW}, {WINDOW}), got "
-                           f"{win.dtype} {win.shape}")
+        raise DatasetError(
+            f"{path}: field 'windows' must be uint8 ({n}, {WINDOW}, {WINDOW}), got {win.dtype} {win.shape}"
+        )
     for k in _ARRAYS[1:]:
         if len(arrays[k]) != n:
             raise DatasetError(f"{path}: field {k!r} has {len(arrays[k])} entries, expected {n}")
@@ -303,9 +350,14 @@ def load(out_dir: str | os.PathLike) -> PhosBatch:
         raise DatasetError(f"{path}: field 'labels' outside 0..{k_obj} (parameters.n_objects)")
     fams = tuple(man.get("light_families", LIGHT_FAMILIES))
     return PhosBatch(
-        win, arrays["labels"].astype(np.int64), arrays["light_ids"].astype(np.int64),
-        arrays["kinds"].astype(np.int64), arrays["offsets"].astype(np.float32),
-        arrays["extents"].astype(np.float32), k_obj, int(man["parameters"].get("object_seed", 0)),
-        int(man["seed"]), fams,
+        win,
+        arrays["labels"].astype(np.int64),
+        arrays["light_ids"].astype(np.int64),
+        arrays["kinds"].astype(np.int64),
+        arrays["offsets"].astype(np.float32),
+        arrays["extents"].astype(np.float32),
+        k_obj,
+        int(man["parameters"].get("object_seed", 0)),
+        int(man["seed"]),
+        fams,
     )
-

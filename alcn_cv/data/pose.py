@@ -30,12 +30,20 @@ from pathlib import Path
 
 import numpy as np
 
+from alcn_cv.data.lighting import Light, Lighting, directional
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.raster import (
-    Mesh, Scene, SceneObject, ShadowSettings, box_mesh, ellipsoid_mesh, look_at, merge_meshes, render_frame,
+    Mesh,
+    Scene,
+    SceneObject,
+    ShadowSettings,
+    box_mesh,
+    ellipsoid_mesh,
+    look_at,
+    merge_meshes,
+    render_frame,
 )
-from alcn_cv.data.lighting import Light, Lighting, directional
 from alcn_cv.data.render import Material
 from alcn_cv.data.textures import colour_jitter, photo_crop, procedural_texture, random_texture
 from alcn_cv.errors import InputError
@@ -53,14 +61,32 @@ from alcn_cv.io import write_image, write_json
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["PoseConfig", "SIZES", "BOX_SIZE_MM", "make_box", "make_duck", "make_scene", "sequence_lighting",
-           "trajectory", "TRAIN_SWEEPS", "generate"]
+__all__ = [
+    "PoseConfig",
+    "SIZES",
+    "BOX_SIZE_MM",
+    "make_box",
+    "make_duck",
+    "make_scene",
+    "sequence_lighting",
+    "trajectory",
+    "TRAIN_SWEEPS",
+    "generate",
+]
 
 #: The box's size (x, y, z) in mm.
 BOX_SIZE_MM = (140.0, 95.0, 55.0)
 #: Test sequences' lighting: #1 = training, #2-#4 mild, #5-#8 drastic.
-SEQUENCE_KINDS = ("train", "mild_direction", "mild_fill", "mild_dim", "side", "spot_dark", "colour_window",
-                  "overexposed_blinds")
+SEQUENCE_KINDS = (
+    "train",
+    "mild_direction",
+    "mild_fill",
+    "mild_dim",
+    "side",
+    "spot_dark",
+    "colour_window",
+    "overexposed_blinds",
+)
 
 
 @dataclass(frozen=True)
@@ -149,16 +175,29 @@ def make_scene(seed: int, clutter_seed: int, *, clutter: bool = True, texel: int
             flat = crng.random() < 0.4
             size = (crng.uniform(50, 160), crng.uniform(40, 120), 1.0) if flat else tuple(crng.uniform(20, 70, 3))
             t = max(16, int(max(size[:2]) / 2 * texel / 256))
-            atlas = np.concatenate([np.concatenate([random_texture(crng, t) for _ in range(3)], 1),
-                                    np.concatenate([random_texture(crng, t) for _ in range(3)], 1)], 0)
-            mat = Material(str(crng.choice(["matte", "plastic"])), 0.9, float(crng.uniform(0, 0.4)),
-                           float(crng.uniform(10, 80)))
-            objs.append(SceneObject(box_mesh(size, atlas, mat), _yaw(crng.uniform(0, 360)),
-                                    np.array([pos[0], pos[1], size[2] / 2]), 0))
+            atlas = np.concatenate(
+                [
+                    np.concatenate([random_texture(crng, t) for _ in range(3)], 1),
+                    np.concatenate([random_texture(crng, t) for _ in range(3)], 1),
+                ],
+                0,
+            )
+            mat = Material(
+                str(crng.choice(["matte", "plastic"])), 0.9, float(crng.uniform(0, 0.4)), float(crng.uniform(10, 80))
+            )
+            objs.append(
+                SceneObject(
+                    box_mesh(size, atlas, mat), _yaw(crng.uniform(0, 360)), np.array([pos[0], pos[1], size[2] / 2]), 0
+                )
+            )
     table = random_texture(crng, table_px, p_photo=0.6)
-    return Scene(objs, table, table_mm_per_px=float(crng.uniform(0.6, 1.5)) * 1024 / table_px,
-                 table_material=Material("matte", 1.0, float(crng.uniform(0.0, 0.15)), 20.0),
-                 wall=tuple(float(c) for c in crng.uniform(0.05, 0.4, 3)))
+    return Scene(
+        objs,
+        table,
+        table_mm_per_px=float(crng.uniform(0.6, 1.5)) * 1024 / table_px,
+        table_material=Material("matte", 1.0, float(crng.uniform(0.0, 0.15)), 20.0),
+        wall=tuple(float(c) for c in crng.uniform(0.05, 0.4, 3)),
+    )
 
 
 #: Elevation sweeps of the training sequence's loops around the objects: the camera circles them
@@ -190,8 +229,15 @@ def trajectory(n: int, rng: np.random.Generator, *, span_deg: float | None = Non
 
 
 def _train_lighting() -> Lighting:
-    return Lighting("ambient", [directional(60.0, 65.0, (0.9, 0.9, 0.9))], np.full(3, 0.25, np.float32),
-                    gain=1.0, gamma=2.2, shot_noise=5e-4, read_noise=1.5e-3)
+    return Lighting(
+        "ambient",
+        [directional(60.0, 65.0, (0.9, 0.9, 0.9))],
+        np.full(3, 0.25, np.float32),
+        gain=1.0,
+        gamma=2.2,
+        shot_noise=5e-4,
+        read_noise=1.5e-3,
+    )
 
 
 def sequence_lighting(index: int, rng: np.random.Generator) -> Lighting:
@@ -203,33 +249,73 @@ def sequence_lighting(index: int, rng: np.random.Generator) -> Lighting:
     noise = dict(shot_noise=j(4e-4, 2e-3), read_noise=j(1e-3, 4e-3))
     kind = SEQUENCE_KINDS[(index - 1) % len(SEQUENCE_KINDS)]
     if kind == "mild_direction":
-        return Lighting("ambient", [directional(60 + j(30, 50), j(45, 55), (0.95, 0.88, 0.78))],
-                        np.full(3, 0.22, np.float32), gain=j(0.85, 1.1), **noise)
+        return Lighting(
+            "ambient",
+            [directional(60 + j(30, 50), j(45, 55), (0.95, 0.88, 0.78))],
+            np.full(3, 0.22, np.float32),
+            gain=j(0.85, 1.1),
+            **noise,
+        )
     if kind == "mild_fill":
-        return Lighting("mixed", [directional(60, 65, (1.0, 1.0, 1.0)),
-                                  directional(240 + j(-20, 20), j(30, 45), (0.25, 0.28, 0.35))],
-                        np.full(3, 0.18, np.float32), gain=j(0.9, 1.1), **noise)
+        return Lighting(
+            "mixed",
+            [directional(60, 65, (1.0, 1.0, 1.0)), directional(240 + j(-20, 20), j(30, 45), (0.25, 0.28, 0.35))],
+            np.full(3, 0.18, np.float32),
+            gain=j(0.9, 1.1),
+            **noise,
+        )
     if kind == "mild_dim":
-        return Lighting("dark", [directional(j(0, 40), j(70, 80), (0.8, 0.85, 1.0))],
-                        np.full(3, 0.2, np.float32), gain=j(0.45, 0.6), **noise)
+        return Lighting(
+            "dark",
+            [directional(j(0, 40), j(70, 80), (0.8, 0.85, 1.0))],
+            np.full(3, 0.2, np.float32),
+            gain=j(0.45, 0.6),
+            **noise,
+        )
     if kind == "side":
-        return Lighting("side", [directional(j(0, 360), j(14, 20), (1.5, 1.45, 1.3))],
-                        np.full(3, 0.03, np.float32), gain=1.0, **noise)
+        return Lighting(
+            "side",
+            [directional(j(0, 360), j(14, 20), (1.5, 1.45, 1.3))],
+            np.full(3, 0.03, np.float32),
+            gain=1.0,
+            **noise,
+        )
     if kind == "spot_dark":
         a = np.deg2rad(j(0, 360))
         pos = (450 * np.cos(a), 450 * np.sin(a), 500.0)
         axis = -np.asarray(pos) / np.linalg.norm(pos)
-        return Lighting("spot", [Light("spot", pos, (6.0, 5.6, 5.0), 500.0, tuple(axis), 24.0, 8.0)],
-                        np.full(3, 0.01, np.float32), gain=j(0.6, 0.8), **noise)
+        return Lighting(
+            "spot",
+            [Light("spot", pos, (6.0, 5.6, 5.0), 500.0, tuple(axis), 24.0, 8.0)],
+            np.full(3, 0.01, np.float32),
+            gain=j(0.6, 0.8),
+            **noise,
+        )
     if kind == "colour_window":
-        return Lighting("colour", [directional(j(150, 210), j(35, 50), (1.1, 0.25, 0.15)),
-                                   directional(j(-30, 30), j(35, 50), (0.15, 0.35, 1.2))],
-                        np.array([0.05, 0.03, 0.08], np.float32), gain=1.0, shadow_shape="window", **noise)
+        return Lighting(
+            "colour",
+            [
+                directional(j(150, 210), j(35, 50), (1.1, 0.25, 0.15)),
+                directional(j(-30, 30), j(35, 50), (0.15, 0.35, 1.2)),
+            ],
+            np.array([0.05, 0.03, 0.08], np.float32),
+            gain=1.0,
+            shadow_shape="window",
+            **noise,
+        )
     # overexposed_blinds
     a = np.deg2rad(j(0, 360))
-    return Lighting("bright", [directional(j(0, 360), j(55, 75)),
-                               Light("point", (250 * np.cos(a), 250 * np.sin(a), 300.0), (1.5, 1.4, 1.3), 350.0)],
-                    np.full(3, 0.2, np.float32), gain=j(2.5, 3.5), shadow_shape="blinds", **noise)
+    return Lighting(
+        "bright",
+        [
+            directional(j(0, 360), j(55, 75)),
+            Light("point", (250 * np.cos(a), 250 * np.sin(a), 300.0), (1.5, 1.4, 1.3), 350.0),
+        ],
+        np.full(3, 0.2, np.float32),
+        gain=j(2.5, 3.5),
+        shadow_shape="blinds",
+        **noise,
+    )
 
 
 def _write_sequence(
@@ -242,8 +328,17 @@ def _write_sequence(
     placed = [o for o in scene.objects if o.obj_id > 0]
     for f, (R, t) in enumerate(poses):
         rng = np.random.default_rng([*seed_key, f])
-        img, buf = render_frame(scene, K, R, t, cfg.width, cfg.height, lighting, rng,
-                                ShadowSettings(res=cfg.shadow_res, gobo_seed=seed_key[0]))
+        img, buf = render_frame(
+            scene,
+            K,
+            R,
+            t,
+            cfg.width,
+            cfg.height,
+            lighting,
+            rng,
+            ShadowSettings(res=cfg.shadow_res, gobo_seed=seed_key[0]),
+        )
         write_image(seq_dir / "rgb" / f"{f:06d}.png", img)
         objs, inf = [], []
         for k, o in enumerate(placed):
@@ -251,8 +346,11 @@ def _write_sequence(
             m = (buf.obj_id == o.obj_id).astype(np.uint8) * 255
             write_image(seq_dir / "mask_visib" / f"{f:06d}_{k:06d}.png", m)
             ys, xs = np.nonzero(m)
-            box = [int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)] \
-                if len(xs) else [-1, -1, 0, 0]
+            box = (
+                [int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)]
+                if len(xs)
+                else [-1, -1, 0, 0]
+            )
             inf.append({"bbox_visib": box, "px_count_visib": int(len(xs))})
         info[str(f)] = inf
         frames.append(BopFrame(f, seq_dir / "rgb" / f"{f:06d}.png", K, 1.0, objs, R, t))
@@ -290,9 +388,13 @@ def _sequence_job(job: tuple) -> tuple[list[BopFrame], dict]:
     scene = make_scene(seed, k, clutter=clutter, texel=cfg.texel, table_px=cfg.table_px)
     if k == 0:
         _write_models(root / "models", scene)
-        poses = [camera_pose for cycles in train_sweeps  # every loop starts where the first does
-                 for camera_pose in trajectory(cfg.n_frames, np.random.default_rng([seed, 20]), span_deg=330.0,
-                                               elevation_cycles=cycles)]
+        poses = [
+            camera_pose
+            for cycles in train_sweeps  # every loop starts where the first does
+            for camera_pose in trajectory(
+                cfg.n_frames, np.random.default_rng([seed, 20]), span_deg=330.0, elevation_cycles=cycles
+            )
+        ]
         light = _train_lighting()
         frames = _write_sequence(root / "train" / "000001", scene, poses, light, cfg, (seed, 30))
     else:
@@ -339,8 +441,9 @@ def generate(
     if size not in SIZES:
         raise InputError(f"unknown size {size!r}; known: {sorted(SIZES)}")
     base = SIZES[size]
-    cfg = dataclasses.replace(base, n_frames=n_frames or base.n_frames,
-                              n_test=base.n_test if n_test is None else n_test)
+    cfg = dataclasses.replace(
+        base, n_frames=n_frames or base.n_frames, n_test=base.n_test if n_test is None else n_test
+    )
     if cfg.n_frames < 1 or not 0 <= cfg.n_test <= len(SEQUENCE_KINDS):
         raise InputError(f"need n_frames >= 1 and 0 <= n_test <= {len(SEQUENCE_KINDS)}")
     train_sweeps = tuple(float(c) for c in train_sweeps)
@@ -350,8 +453,9 @@ def generate(
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         write_camera(tmp, cfg.K, cfg.width, cfg.height)
         jobs = [(k, str(tmp), seed, cfg, clutter, training_light, train_sweeps) for k in range(cfg.n_test + 1)]
-        results = parallel_map(_sequence_job, jobs, workers=workers, desc="pose sequences", unit="seq",
-                               progress=progress)
+        results = parallel_map(
+            _sequence_job, jobs, workers=workers, desc="pose sequences", unit="seq", progress=progress
+        )
         for k, (frames, light) in enumerate(results):
             if k == 0:
                 seq = tmp / "train" / "000001"
@@ -360,16 +464,36 @@ def generate(
                 write_text_model(seq / "colmap", [cam], images, units="mm")
                 sequences.append({"split": "train", "scene_id": 1, "kind": "train", "lighting": light})
             else:
-                sequences.append({"split": "test", "scene_id": k, "kind": SEQUENCE_KINDS[k - 1],
-                                  "change": "none" if k == 1 or training_light else ("mild" if k <= 4 else "drastic"),
-                                  "lighting": light})
-        write_json(tmp / "manifest.json", make_manifest(
-            "pose", seed, {"size": size, "width": cfg.width, "height": cfg.height, "focal": cfg.focal,
-                           "n_frames": cfg.n_frames, "n_test": cfg.n_test, "clutter": clutter,
-                           "training_light": training_light, "train_sweeps": list(train_sweeps)},
-            units="mm", camera_convention="OpenCV pinhole, pixel centre (0, 0); COLMAP model: cx + 0.5",
-            objects=[{"obj_id": 1, "name": "box", "size_mm": list(BOX_SIZE_MM)}, {"obj_id": 2, "name": "duck"}],
-            sequences=sequences, colmap={"train/000001": "train/000001/colmap (images relative to rgb/)"},
-        ))
+                sequences.append(
+                    {
+                        "split": "test",
+                        "scene_id": k,
+                        "kind": SEQUENCE_KINDS[k - 1],
+                        "change": "none" if k == 1 or training_light else ("mild" if k <= 4 else "drastic"),
+                        "lighting": light,
+                    }
+                )
+        write_json(
+            tmp / "manifest.json",
+            make_manifest(
+                "pose",
+                seed,
+                {
+                    "size": size,
+                    "width": cfg.width,
+                    "height": cfg.height,
+                    "focal": cfg.focal,
+                    "n_frames": cfg.n_frames,
+                    "n_test": cfg.n_test,
+                    "clutter": clutter,
+                    "training_light": training_light,
+                    "train_sweeps": list(train_sweeps),
+                },
+                units="mm",
+                camera_convention="OpenCV pinhole, pixel centre (0, 0); COLMAP model: cx + 0.5",
+                objects=[{"obj_id": 1, "name": "box", "size_mm": list(BOX_SIZE_MM)}, {"obj_id": 2, "name": "duck"}],
+                sequences=sequences,
+                colmap={"train/000001": "train/000001/colmap (images relative to rgb/)"},
+            ),
+        )
     return Path(out_dir)
-

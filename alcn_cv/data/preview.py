@@ -86,8 +86,15 @@ def _coco(paths: list[Path], n: int, thumb: int = 400) -> np.ndarray:
     return grid(tiles, 4)
 
 
-def draw_model_box(img: np.ndarray, corners: np.ndarray, K: np.ndarray, R: np.ndarray, t: np.ndarray,
-                   colour=(0, 255, 0), thickness: int = 2) -> None:
+def draw_model_box(
+    img: np.ndarray,
+    corners: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    colour=(0, 255, 0),
+    thickness: int = 2,
+) -> None:
     """Draw the 12 edges of a 3D box (corners (8, 3) in the order of ``itertools.product``)."""
     pts, _ = cv2.projectPoints(corners.astype(np.float64), cv2.Rodrigues(R)[0], t.astype(np.float64), K, None)
     p = pts.reshape(-1, 2)
@@ -158,4 +165,3 @@ def preview(dataset: str | os.PathLike, out_png: str | os.PathLike, *, n: int = 
     else:
         raise DatasetError(f"{src}: not a dataset (no manifest.json, scene_camera.json, and not a .json file)")
     return write_image(out_png, sheet)
-

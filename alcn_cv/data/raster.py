@@ -99,8 +99,15 @@ def box_mesh(size: tuple[float, float, float], atlas: np.ndarray, material: Mate
         if np.dot(n, centre) < 0:  # keep faces counter-clockwise from outside
             tri1, tri2 = tri1[::-1], tri2[::-1]
         tris += [tri1, tri2]
-    return Mesh(np.array(verts), np.array(tris, np.int64), None, np.array(uvs, np.float32), None,
-                atlas.astype(np.float32), material)
+    return Mesh(
+        np.array(verts),
+        np.array(tris, np.int64),
+        None,
+        np.array(uvs, np.float32),
+        None,
+        atlas.astype(np.float32),
+        material,
+    )
 
 
 def ellipsoid_mesh(
@@ -146,8 +153,15 @@ def merge_meshes(meshes: list[Mesh]) -> Mesh:
         normals.append(m.normals)
         cols.append(m.colors)
         off += len(m.vertices)
-    return Mesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(normals), None,
-                np.concatenate(cols), None, meshes[0].material)
+    return Mesh(
+        np.concatenate(verts),
+        np.concatenate(faces),
+        np.concatenate(normals),
+        None,
+        np.concatenate(cols),
+        None,
+        meshes[0].material,
+    )
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 1.0)):
@@ -210,7 +224,7 @@ def rasterize(
     Z = depth[faces]
     ok = np.isfinite(P).all(axis=(1, 2)) & np.isfinite(Z).all(axis=1)
     if perspective:
-        ok &= (Z > near).all(axis=1)
+        ok &= (near < Z).all(axis=1)
     x0 = np.clip(np.ceil(P[..., 0].min(1)), 0, width)
     x1 = np.clip(np.floor(P[..., 0].max(1)), -1, width - 1)
     y0 = np.clip(np.ceil(P[..., 1].min(1)), 0, height)
@@ -383,8 +397,9 @@ def _sample_mipmapped(tex: np.ndarray, mapx: np.ndarray, mapy: np.ndarray, level
     The level of detail is log2 of the texture footprint of one pixel (texels per pixel, from
     the finite differences of the sampling maps).
     """
-    fx = np.maximum(np.abs(np.diff(mapx, axis=1, append=mapx[:, -1:])),
-                    np.abs(np.diff(mapy, axis=1, append=mapy[:, -1:])))
+    fx = np.maximum(
+        np.abs(np.diff(mapx, axis=1, append=mapx[:, -1:])), np.abs(np.diff(mapy, axis=1, append=mapy[:, -1:]))
+    )
     fy = np.maximum(np.abs(np.diff(mapx, axis=0, append=mapx[-1:])), np.abs(np.diff(mapy, axis=0, append=mapy[-1:])))
     lod = np.clip(np.log2(np.maximum(np.maximum(fx, fy), 1e-6)), 0, levels - 1)
     out = np.zeros(mapx.shape + (3,), np.float32)
@@ -393,8 +408,13 @@ def _sample_mipmapped(tex: np.ndarray, mapx: np.ndarray, mapy: np.ndarray, level
         w = np.clip(1.0 - np.abs(lod - k), 0.0, 1.0)
         if w.any():
             s = 2.0**k
-            smp = cv2.remap(level, (mapx + 0.5) / s - 0.5, (mapy + 0.5) / s - 0.5, cv2.INTER_LINEAR,
-                            borderMode=cv2.BORDER_REFLECT_101)
+            smp = cv2.remap(
+                level,
+                (mapx + 0.5) / s - 0.5,
+                (mapy + 0.5) / s - 0.5,
+                cv2.INTER_LINEAR,
+                borderMode=cv2.BORDER_REFLECT_101,
+            )
             out += w[..., None] * smp
         level = cv2.pyrDown(level)
     return out
@@ -427,8 +447,9 @@ class _GBuffer:
     model_xyz: np.ndarray
 
 
-def _table_gbuffer(scene: Scene, K: np.ndarray, R_w2c: np.ndarray, t_w2c: np.ndarray, width: int,
-                   height: int) -> tuple[_GBuffer, np.ndarray, np.ndarray]:
+def _table_gbuffer(
+    scene: Scene, K: np.ndarray, R_w2c: np.ndarray, t_w2c: np.ndarray, width: int, height: int
+) -> tuple[_GBuffer, np.ndarray, np.ndarray]:
     """Intersect each pixel's ray with the table ``z = 0`` and shade it as table (or wall beyond).
 
     Returns:
@@ -459,8 +480,16 @@ def _table_gbuffer(scene: Scene, K: np.ndarray, R_w2c: np.ndarray, t_w2c: np.nda
     return _GBuffer(P, N, albedo, material, obj_id, model_xyz), C, s_table
 
 
-def _draw_objects(gb: _GBuffer, scene: Scene, verts: np.ndarray, faces: np.ndarray, owner: np.ndarray,
-                  on_obj: np.ndarray, tri: np.ndarray, bary: np.ndarray) -> None:
+def _draw_objects(
+    gb: _GBuffer,
+    scene: Scene,
+    verts: np.ndarray,
+    faces: np.ndarray,
+    owner: np.ndarray,
+    on_obj: np.ndarray,
+    tri: np.ndarray,
+    bary: np.ndarray,
+) -> None:
     """Overwrite the G-buffer where an object is in front of the table: position, normal,
     albedo (texture or vertex colours), material, object id and model point."""
     fidx = np.nonzero(on_obj.reshape(-1))[0]
@@ -495,16 +524,18 @@ def _draw_objects(gb: _GBuffer, scene: Scene, verts: np.ndarray, faces: np.ndarr
         Nf[pix] = n_w / np.linalg.norm(n_w, axis=1, keepdims=True)
         if o.mesh.texture is not None:
             uv = (o.mesh.uv[lv] * bk[..., None].astype(np.float32)).sum(1).astype(np.float32)
-            Af[pix] = cv2.remap(o.mesh.texture, uv[:, :1], uv[:, 1:], cv2.INTER_LINEAR,
-                                borderMode=cv2.BORDER_REPLICATE).reshape(-1, 3)
+            Af[pix] = cv2.remap(
+                o.mesh.texture, uv[:, :1], uv[:, 1:], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+            ).reshape(-1, 3)
         else:
             Af[pix] = (o.mesh.colors[lv] * bk[..., None]).sum(1)
         Mf[pix] = o.mesh.material.vector()
         Of[pix] = o.obj_id
 
 
-def _shadow_visibility(gb: _GBuffer, verts: np.ndarray, faces: np.ndarray, lighting: Lighting,
-                       shadows: ShadowSettings) -> np.ndarray:
+def _shadow_visibility(
+    gb: _GBuffer, verts: np.ndarray, faces: np.ndarray, lighting: Lighting, shadows: ShadowSettings
+) -> np.ndarray:
     """float32 (1, L, H, W) visibility of each light from each pixel: shadow maps, and the
     world-fixed hard shadow pattern (window frame, blinds...) on light 0."""
     height, width = gb.obj_id.shape
@@ -566,7 +597,15 @@ def render_frame(
     V = C - gb.P
     V /= np.linalg.norm(V, axis=-1, keepdims=True) + 1e-12
     lights = LightArrays.pack([lighting.lights])
-    rad = shade(gb.P[None].astype(np.float32), gb.N[None].astype(np.float32), V[None].astype(np.float32),
-                gb.albedo[None], gb.material[None], lights, lighting.ambient[None], vis)
+    rad = shade(
+        gb.P[None].astype(np.float32),
+        gb.N[None].astype(np.float32),
+        V[None].astype(np.float32),
+        gb.albedo[None],
+        gb.material[None],
+        lights,
+        lighting.ambient[None],
+        vis,
+    )
     img = expose(rad[..., ::-1].copy(), [lighting], rng)[0]
     return img, FrameBuffers(depth, gb.obj_id, gb.model_xyz)

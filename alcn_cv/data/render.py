@@ -33,8 +33,8 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -371,8 +371,15 @@ def _motion_blur(img: np.ndarray, length: float, angle_deg: float) -> np.ndarray
     c = k // 2
     a = np.deg2rad(angle_deg)
     dx, dy = np.cos(a) * length / 2, np.sin(a) * length / 2
-    cv2.line(kernel, (int(round(c * 16 - dx * 16)), int(round(c * 16 - dy * 16))),
-             (int(round(c * 16 + dx * 16)), int(round(c * 16 + dy * 16))), 1.0, 1, cv2.LINE_AA, 4)
+    cv2.line(
+        kernel,
+        (int(round(c * 16 - dx * 16)), int(round(c * 16 - dy * 16))),
+        (int(round(c * 16 + dx * 16)), int(round(c * 16 + dy * 16))),
+        1.0,
+        1,
+        cv2.LINE_AA,
+        4,
+    )
     kernel /= kernel.sum()
     return cv2.filter2D(img, -1, kernel, borderType=cv2.BORDER_REFLECT_101)
 
@@ -417,8 +424,9 @@ def render_surfaces(
         hs, ws = h // shadow_scale, w // shadow_scale
         small = np.stack([cv2.resize(x, (ws, hs), interpolation=cv2.INTER_AREA) for x in surface.height])
         small = small / shadow_scale
-        ls = dataclasses.replace(lights, pos=lights.pos * np.where(lights.w[..., None] > 0, 1.0 / shadow_scale, 1.0)
-                                 .astype(np.float32))
+        ls = dataclasses.replace(
+            lights, pos=lights.pos * np.where(lights.w[..., None] > 0, 1.0 / shadow_scale, 1.0).astype(np.float32)
+        )
         vs = heightfield_shadows(small.astype(np.float32), ls, steps=shadow_steps)
         vis = np.stack([np.stack([cv2.resize(v, (w, h), interpolation=cv2.INTER_LINEAR) for v in vb]) for vb in vs])
     else:

@@ -27,11 +27,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.io import atomic_write, write_json
-from alcn_cv.data.objects import make_object, paste, to_surface
 from alcn_cv.data.lighting import LIGHT_FAMILIES, Light, Lighting, sample_lighting
+from alcn_cv.data.objects import make_object, paste, to_surface
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.errors import DatasetError
+from alcn_cv.io import atomic_write, write_json
 
 logger = logging.getLogger(__name__)
 
@@ -52,9 +52,13 @@ def image_stats(gray: np.ndarray, mask: np.ndarray) -> dict[str, float]:
     lc = local[inner] if inner.sum() >= 10 else local[mask]
     p1, p99 = np.percentile(v, [1, 99])
     return {
-        "mean": float(v.mean()), "std": float(v.std()), "dynamic_range": float(p99 - p1),
-        "saturated": float((v >= 254 / 255).mean()), "black": float((v <= 2 / 255).mean()),
-        "local_contrast_median": float(np.median(lc)), "local_contrast_p90": float(np.percentile(lc, 90)),
+        "mean": float(v.mean()),
+        "std": float(v.std()),
+        "dynamic_range": float(p99 - p1),
+        "saturated": float((v >= 254 / 255).mean()),
+        "black": float((v <= 2 / 255).mean()),
+        "local_contrast_median": float(np.median(lc)),
+        "local_contrast_p90": float(np.percentile(lc, 90)),
     }
 
 
@@ -155,8 +159,17 @@ def render_like_psm(
                 lts.append(sample_lighting(rng, LIGHT_FAMILIES[i % len(LIGHT_FAMILIES)], size, size))
             else:
                 x, y, z = lights[i]
-                lts.append(Lighting("psm", [Light("directional", (float(x), float(-y), float(z)))],
-                                    np.zeros(3, np.float32), gain=1.0, gamma=2.2, shot_noise=5e-4, read_noise=2e-3))
+                lts.append(
+                    Lighting(
+                        "psm",
+                        [Light("directional", (float(x), float(-y), float(z)))],
+                        np.zeros(3, np.float32),
+                        gain=1.0,
+                        gamma=2.2,
+                        shot_noise=5e-4,
+                        read_noise=2e-3,
+                    )
+                )
         surf = to_surface([(alb, hgt, mat)] * count)
         imgs = render_surfaces(surf, lts, rng, gray=True)
         out[f"object{k + 1}"] = ([g.astype(np.float32) / 255.0 for g in imgs], cov > 0.5)
@@ -218,10 +231,10 @@ def compare_psm(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed:
     rows = list(STAT_NAMES) + ["across_lights_cv_of_mean", "across_lights_pairwise_ncc"]
     lines = ["| statistic | " + " | ".join(sets) + " |", "|---" * (len(sets) + 1) + "|"]
     for r in rows:
-        lines.append(f"| {r} | " + " | ".join(f"{stats[n][r]['mean']:.3f} ± {stats[n][r]['std']:.3f}"
-                                              for n in sets) + " |")
+        lines.append(
+            f"| {r} | " + " | ".join(f"{stats[n][r]['mean']:.3f} ± {stats[n][r]['std']:.3f}" for n in sets) + " |"
+        )
     atomic_write(out / "psm_comparison.md", "\n".join(lines) + "\n")
     _figure(out / "psm_comparison.png", sets, stats)
     logger.info("wrote %s", out / "psm_comparison.png")
     return stats
-

@@ -13,7 +13,7 @@ procedural-texture crops, with the same intensity changes.
 from __future__ import annotations
 
 import logging
-from typing import Sequence
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -65,8 +65,9 @@ def object_box(image_shape: tuple[int, ...], mask_or_bbox) -> tuple[np.ndarray, 
         if not np.isfinite(box).all() or box[2] <= 0 or box[3] <= 0:
             raise InputError(f"bbox must be [x, y, w, h] with positive w and h, got {box.tolist()}")
         return box, None
-    raise InputError(f"mask_or_bbox must be a mask of shape {image_shape[:2]} or a bbox [x, y, w, h], "
-                     f"got shape {arr.shape}")
+    raise InputError(
+        f"mask_or_bbox must be a mask of shape {image_shape[:2]} or a bbox [x, y, w, h], got shape {arr.shape}"
+    )
 
 
 def _intensity_noise(win: np.ndarray, rng: np.random.Generator, a_range, b_max, noise_max) -> np.ndarray:
@@ -84,8 +85,11 @@ def _background(rng: np.random.Generator, gray: bool, backgrounds: Sequence[np.n
     u = rng.random()
     if u < 0.4:
         col = rng.uniform(0, 1, 1 if gray else 3).astype(np.float32)
-        return np.broadcast_to(col, (WINDOW, WINDOW) + (() if gray else (3,))).reshape(
-            (WINDOW, WINDOW) if gray else (WINDOW, WINDOW, 3)).copy()
+        return (
+            np.broadcast_to(col, (WINDOW, WINDOW) + (() if gray else (3,)))
+            .reshape((WINDOW, WINDOW) if gray else (WINDOW, WINDOW, 3))
+            .copy()
+        )
     if backgrounds and u < 0.7:
         src = _as_float(backgrounds[int(rng.integers(len(backgrounds)))], gray)
         h, w = src.shape[:2]
@@ -221,8 +225,12 @@ def sample_negatives(
             half = 16 / s
             for _ in range(50):
                 px, py = rng.uniform(0, w - 1), rng.uniform(0, h - 1)
-                if (px + half < box[0] or px - half > box[0] + box[2]
-                        or py + half < box[1] or py - half > box[1] + box[3]):
+                if (
+                    px + half < box[0]
+                    or px - half > box[0] + box[2]
+                    or py + half < box[1]
+                    or py - half > box[1] + box[3]
+                ):
                     break
             else:
                 out[i] = _background(rng, gray, None)

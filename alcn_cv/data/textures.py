@@ -101,9 +101,7 @@ def fractal_noise(
 
 def _palette(rng: np.random.Generator, n: int) -> np.ndarray:
     """``n`` random RGB colours (n, 3) in [0.02, 0.95], varied in hue and value."""
-    hsv = np.stack(
-        [rng.uniform(0, 180, n), rng.uniform(0, 255, n), rng.uniform(30, 250, n)], axis=1
-    ).astype(np.float32)
+    hsv = np.stack([rng.uniform(0, 180, n), rng.uniform(0, 255, n), rng.uniform(30, 250, n)], axis=1).astype(np.float32)
     rgb = cv2.cvtColor(hsv[None].astype(np.uint8), cv2.COLOR_HSV2RGB)[0].astype(np.float32) / 255.0
     return np.clip(rgb**2.2, 0.02, 0.95)
 
@@ -171,14 +169,23 @@ def procedural_texture(rng: np.random.Generator, size: int | tuple[int, int], ki
             p1 = (int(rng.integers(0, w)), int(rng.integers(0, h)))
             if choice == 0:
                 text = "".join(chr(int(c)) for c in rng.integers(65, 91, int(rng.integers(1, 6))))
-                cv2.putText(canvas, text, p1, int(rng.integers(0, 8)), rng.uniform(0.3, 2.0) * h / 64, col,
-                            int(rng.integers(1, 4)), cv2.LINE_AA)
+                cv2.putText(
+                    canvas,
+                    text,
+                    p1,
+                    int(rng.integers(0, 8)),
+                    rng.uniform(0.3, 2.0) * h / 64,
+                    col,
+                    int(rng.integers(1, 4)),
+                    cv2.LINE_AA,
+                )
             elif choice == 1:
                 p2 = (int(rng.integers(0, w)), int(rng.integers(0, h)))
                 cv2.rectangle(canvas, p1, p2, col, -1 if rng.random() < 0.6 else int(rng.integers(1, 4)), cv2.LINE_AA)
             else:
-                cv2.circle(canvas, p1, int(rng.integers(2, max(3, h // 3))), col, -1 if rng.random() < 0.6 else 2,
-                           cv2.LINE_AA)
+                cv2.circle(
+                    canvas, p1, int(rng.integers(2, max(3, h // 3))), col, -1 if rng.random() < 0.6 else 2, cv2.LINE_AA
+                )
         return (canvas.astype(np.float32) / 255.0) ** 2.2
     if kind == "wood":
         cx, cy = rng.uniform(-w, 2 * w), rng.uniform(-h, 2 * h)

@@ -117,10 +117,13 @@ class ALCN(Normalization):
         self.sigmas, self.scale, self.output_range = self.spec.sigmas, self.spec.scale, self.spec.output_range
         self.trained = bool(meta["trained"])
         if not self.trained:
-            logger.warning("%s holds UNTRAINED Normalizer weights (%s)", self.weights_path.name, meta.get("description", ""))
+            logger.warning(
+                "%s holds UNTRAINED Normalizer weights (%s)", self.weights_path.name, meta.get("description", "")
+            )
         self.runtime: Runtime
-        self.runtime, self.net = _build_runtime(self.spec, weight_file.meta, self.weights_path, backend, device, grid_stride,
-                                               mixture, threads)
+        self.runtime, self.net = _build_runtime(
+            self.spec, weight_file.meta, self.weights_path, backend, device, grid_stride, mixture, threads
+        )
         self.grid_stride = self.runtime.grid_stride
 
     @property
@@ -185,7 +188,9 @@ class ALCN(Normalization):
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         return self.runtime.normalize(gray, _DIVISIVE_FLOOR.get())
 
-    def apply_batch(self, frames: np.ndarray, out_dtype: type | np.dtype | str | None = None, half: bool = False) -> np.ndarray:
+    def apply_batch(
+        self, frames: np.ndarray, out_dtype: type | np.dtype | str | None = None, half: bool = False
+    ) -> np.ndarray:
         """:meth:`apply` on a batch of grayscale frames of one size in one pass on :attr:`device`
         (``backend="torch"``): the GPU path. The frames go to the device as they are (uint8: a quarter of the
         float traffic; from pinned memory on CUDA), are converted there, and the output is cast there. The
@@ -212,8 +217,16 @@ class ALCN(Normalization):
         )
 
 
-def _build_runtime(spec: ModelSpec, meta: dict, weights: Path, backend: str, device: str, grid_stride: int | None,
-                  mixture: str, threads: int | None) -> tuple[Runtime, object]:
+def _build_runtime(
+    spec: ModelSpec,
+    meta: dict,
+    weights: Path,
+    backend: str,
+    device: str,
+    grid_stride: int | None,
+    mixture: str,
+    threads: int | None,
+) -> tuple[Runtime, object]:
     """The runtime of ``backend`` for the weight file ``weights`` (header ``meta``) and its network."""
     if backend == "opencv":
         net = opencv_network(weights, grid_stride, spec)
@@ -264,6 +277,12 @@ def createALCN(  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE
         (480, 640)
     """
     return ALCN(
-        weights=weights, scale=scale, backend=backend, device=device, grid_stride=grid_stride, mixture=mixture,
-        model=model, threads=threads,
+        weights=weights,
+        scale=scale,
+        backend=backend,
+        device=device,
+        grid_stride=grid_stride,
+        mixture=mixture,
+        model=model,
+        threads=threads,
     )

@@ -29,7 +29,7 @@ from typing import ClassVar
 import cv2
 import numpy as np
 
-from alcn_cv.checks import FULL_SCALE, SUPPORTED_DTYPES, unit_windows, check_gray, check_image
+from alcn_cv.checks import FULL_SCALE, SUPPORTED_DTYPES, check_gray, check_image, unit_windows
 from alcn_cv.errors import InputError
 
 __all__ = ["Normalization", "NoNormalization"]
@@ -41,7 +41,9 @@ TILE_PIXELS = 2**24
 #: ``cv2.transform`` matrix of the L channel of a float Lab image, divided by 100: intensities in [0, 1].
 _LIGHTNESS_OF_LAB = np.float32([[0.01, 0.0, 0.0]])
 #: The 256 intensities of a uint8 image as :meth:`Normalization.apply`'s float path sees them.
-_UINT8_LEVELS = np.arange(256, dtype=np.uint8).astype(np.float32).reshape(1, 256) * np.float32(1.0 / FULL_SCALE[np.dtype(np.uint8)])
+_UINT8_LEVELS = np.arange(256, dtype=np.uint8).astype(np.float32).reshape(1, 256) * np.float32(
+    1.0 / FULL_SCALE[np.dtype(np.uint8)]
+)
 #: The classes that already warned about an image smaller than their window (once per process).
 _WARNED_SMALL: set[type] = set()
 
@@ -133,7 +135,10 @@ class Normalization:
             logger.warning(
                 "%s: image of %dx%d px is smaller than the method's %d px window; the window is "
                 "completed by mirroring the image at its borders (warned once)",
-                self.name, shape[1], shape[0], self.min_size,
+                self.name,
+                shape[1],
+                shape[0],
+                self.min_size,
             )
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
@@ -314,8 +319,10 @@ class Normalization:
         rows = max(step, TILE_PIXELS // 2 // width // step * step)
         if rows >= height:
             return None
-        return [(start, min(start + rows, height), max(0, start - halo), min(height, start + rows + halo))
-                for start in range(0, height, rows)]
+        return [
+            (start, min(start + rows, height), max(0, start - halo), min(height, start + rows + halo))
+            for start in range(0, height, rows)
+        ]
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"

@@ -197,7 +197,9 @@ class LocalResponseNormalization(Normalization):
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         a = gray - np.float32(gray.mean())
-        energy = cv2.boxFilter(a * a, cv2.CV_32F, (self.size, self.size), normalize=True, borderType=cv2.BORDER_REFLECT_101)
+        energy = cv2.boxFilter(
+            a * a, cv2.CV_32F, (self.size, self.size), normalize=True, borderType=cv2.BORDER_REFLECT_101
+        )
         return a / np.power(self.k + self.alpha * np.maximum(energy, 0.0), self.beta)
 
 

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TypeVar
 
-from alcn_cv.enhance.base import Normalization, NoNormalization
+from alcn_cv.enhance.base import NoNormalization, Normalization
 from alcn_cv.errors import ALCNError, InputError
 
 __all__ = ["available", "create", "describe", "from_spec", "parameters", "parse_params", "parse_spec", "register"]
@@ -55,7 +55,8 @@ def parameters(name: str) -> dict[str, object]:
     if cls.__init__ is object.__init__:
         return {}
     return {
-        p.name: p.default for p in list(inspect.signature(cls.__init__).parameters.values())[1:]
+        p.name: p.default
+        for p in list(inspect.signature(cls.__init__).parameters.values())[1:]
         if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
     }
 
@@ -100,7 +101,9 @@ def create(spec: str, **params: object) -> Normalization:
     except ALCNError:
         raise
     except (TypeError, ValueError) as exc:
-        raise InputError(f"bad parameters for {name!r} ({', '.join(f'{k}={v!r}' for k, v in params.items())}): {exc}") from None
+        raise InputError(
+            f"bad parameters for {name!r} ({', '.join(f'{k}={v!r}' for k, v in params.items())}): {exc}"
+        ) from None
 
 
 # What a value must be for the types of an ``__init__`` annotation: numpy scalars count as
@@ -112,7 +115,14 @@ _ACCEPTED: dict[type, tuple[type, ...]] = {
     tuple: (tuple, list),
     list: (list, tuple),
 }
-_TYPE_NAMES = {float: "a number", int: "an integer", bool: "True or False", str: "a string", type(None): "None", Path: "a path"}
+_TYPE_NAMES = {
+    float: "a number",
+    int: "an integer",
+    bool: "True or False",
+    str: "a string",
+    type(None): "None",
+    Path: "a path",
+}
 
 
 def _check_params(name: str, cls: type[Normalization], params: dict[str, object]) -> None:
@@ -120,13 +130,22 @@ def _check_params(name: str, cls: type[Normalization], params: dict[str, object]
     which parameter of which method is wrong rather than what ``float()`` thinks of ``'abc'``."""
     no_init = cls.__init__ is object.__init__  # whose signature is (*args, **kwargs)
     signature = inspect.signature(cls.__init__)
-    accepted = [] if no_init else [
-        p.name for p in list(signature.parameters.values())[1:] if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
-    ]
+    accepted = (
+        []
+        if no_init
+        else [
+            p.name
+            for p in list(signature.parameters.values())[1:]
+            if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        ]
+    )
     if no_init or not any(p.kind == p.VAR_KEYWORD for p in signature.parameters.values()):
         for key in params:
             if key not in accepted:
-                raise InputError(f"bad parameters for {name!r}: no parameter {key!r}; its parameters: {', '.join(accepted) or 'none'}")
+                raise InputError(
+                    f"bad parameters for {name!r}: no parameter {key!r}; "
+                    f"its parameters: {', '.join(accepted) or 'none'}"
+                )
     try:
         hints = typing.get_type_hints(cls.__init__)
     except (NameError, TypeError):  # an annotation only a type checker can resolve: leave it to the constructor
@@ -154,7 +173,10 @@ def _annotation_types(hint: object) -> tuple[type, ...]:
 
 
 def parse_params(items: list[str]) -> dict[str, object]:
-    """``["clipLimit=2", "backend=torch"]`` -> ``{"clipLimit": 2, "backend": "torch"}`` (Python literals, else strings)."""
+    """``["clipLimit=2", "backend=torch"]`` -> ``{"clipLimit": 2, "backend": "torch"}``.
+
+    Values are Python literals, else strings.
+    """
     params: dict[str, object] = {}
     for item in items:
         key, sep, value = item.partition("=")

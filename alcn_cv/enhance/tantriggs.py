@@ -78,7 +78,9 @@ class TanTriggs(Normalization):
     summary = "gamma correction, difference of Gaussians, then contrast equalization with a final tanh"
     reference = "Tan & Triggs, IEEE TIP 2010"
 
-    def __init__(self, gamma: float = 0.2, sigma0: float = 1.0, sigma1: float = 2.0, alpha: float = 0.1, tau: float = 10.0) -> None:
+    def __init__(
+        self, gamma: float = 0.2, sigma0: float = 1.0, sigma1: float = 2.0, alpha: float = 0.1, tau: float = 10.0
+    ) -> None:
         self.gamma = check_positive("gamma", gamma)
         self.sigma0 = check_positive("sigma0", sigma0)
         self.sigma1 = check_positive("sigma1", sigma1)

@@ -25,7 +25,9 @@ def _blurred_square(response: np.ndarray, sigma: float) -> np.ndarray:
     """``G_sigma * response^2``, reflect-101 beyond the borders. Never negative, float rounding
     included: every term of the blur is a positive weight times a square, so no clip is needed."""
     kernel = gaussian_kernel1d(sigma)
-    return cv2.sepFilter2D(cv2.multiply(response, response), cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101)
+    return cv2.sepFilter2D(
+        cv2.multiply(response, response), cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101
+    )
 
 
 def gaussian_energy(response: np.ndarray, sigma: float) -> np.ndarray:

@@ -270,7 +270,9 @@ def alcn_filter_grid(image: np.ndarray, grid: np.ndarray, stride: int, sigmas: S
         out, blurred = None, None
         for scale, sigma in zip(scales, sigmas):
             kernel = _cached_kernel(sigma)
-            blurred = cv2.sepFilter2D(product, cv2.CV_32F, kernel * scale, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
+            blurred = cv2.sepFilter2D(
+                product, cv2.CV_32F, kernel * scale, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101
+            )
             if out is None:
                 out, blurred = blurred, None
             else:

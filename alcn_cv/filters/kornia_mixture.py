@@ -45,7 +45,9 @@ def _blur_channels(x: torch.Tensor, bank: torch.Tensor) -> torch.Tensor:
     return out.reshape(b, n, h, w)
 
 
-def gaussian_mixture2d(image: torch.Tensor, weights: torch.Tensor, sigmas: Sequence[float] | None = None) -> torch.Tensor:
+def gaussian_mixture2d(
+    image: torch.Tensor, weights: torch.Tensor, sigmas: Sequence[float] | None = None
+) -> torch.Tensor:
     """Differentiable ALCN Gaussian mixture on kornia's Gaussian filtering.
 
     Args:

@@ -15,8 +15,14 @@ from torch import nn
 from alcn_cv.filters.divisive import ABSOLUTE_FLOOR
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 
-__all__ = ["DivisiveNormalization2d", "divisive_normalization", "gaussian_blur", "gaussian_energy", "inverse_divisor",
-           "reflect101_pad_any"]
+__all__ = [
+    "DivisiveNormalization2d",
+    "divisive_normalization",
+    "gaussian_blur",
+    "gaussian_energy",
+    "inverse_divisor",
+    "reflect101_pad_any",
+]
 
 
 def _reflect101_index(x: torch.Tensor, dim: int, before: int, after: int) -> torch.Tensor:
@@ -30,8 +36,13 @@ def _reflect101_index(x: torch.Tensor, dim: int, before: int, after: int) -> tor
     line = x[0, 0, :, 0] if dim == -2 else x[0, 0, 0, :]
     positions = (line * 0 + 1).cumsum(0) - 1  # 0..n-1; the inputs are finite
     last = positions[-1:]  # n - 1
-    i = torch.cat([torch.arange(-before, 0, dtype=x.dtype, device=x.device), positions,
-                   last + 1 + torch.arange(0, after, dtype=x.dtype, device=x.device)])
+    i = torch.cat(
+        [
+            torch.arange(-before, 0, dtype=x.dtype, device=x.device),
+            positions,
+            last + 1 + torch.arange(0, after, dtype=x.dtype, device=x.device),
+        ]
+    )
     period = torch.clamp(2 * last, min=1)
     i = i - torch.floor(i / period) * period
     return (last - (last - i).abs()).long()

@@ -27,7 +27,7 @@ __all__ = ["SCHEMA_DIR", "schema", "validate_json"]
 SCHEMA_DIR = Path(__file__).resolve().parent / "schemas"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def schema(name: str) -> dict[str, Any]:
     """The JSON schema ``name`` (``coco``, ``bop_scene_camera``, ``bop_scene_gt``, ``manifest``)."""
     path = SCHEMA_DIR / f"{name}.schema.json"
@@ -47,12 +47,17 @@ def validate_json(obj: Any, name: str, file: str | os.PathLike) -> None:
     try:
         import jsonschema
     except ModuleNotFoundError as exc:  # a runtime dependency of alcn-cv; say how to get it
-        raise ModuleNotFoundError("validating COCO and BOP files needs the 'jsonschema' package "
-                                  "(pip install 'jsonschema>=4.20')") from exc
+        raise ModuleNotFoundError(
+            "validating COCO and BOP files needs the 'jsonschema' package (pip install 'jsonschema>=4.20')"
+        ) from exc
     validator = jsonschema.Draft202012Validator(schema(name))
     errors = list(validator.iter_errors(obj))
     if errors:
         err = max(errors, key=lambda e: len(e.absolute_path))
-        field = "".join(f"[{p}]" if isinstance(p, int) else (f".{p}" if i else str(p))
-                        for i, p in enumerate(err.absolute_path)) or "(top level)"
+        field = (
+            "".join(
+                f"[{p}]" if isinstance(p, int) else (f".{p}" if i else str(p)) for i, p in enumerate(err.absolute_path)
+            )
+            or "(top level)"
+        )
         raise DatasetError(f"{file}: field {field}: {err.message}")

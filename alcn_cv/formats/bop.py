@@ -26,9 +26,9 @@ import cv2
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from alcn_cv.io import atomic_write, read_json, write_json
 from alcn_cv.errors import DatasetError
 from alcn_cv.formats import validate_json
+from alcn_cv.io import atomic_write, read_json, write_json
 
 logger = logging.getLogger(__name__)
 
@@ -155,14 +155,17 @@ def load_scene(scene_dir: str | os.PathLike, *, check_images: bool = False) -> B
             R = _rotation(gt_file, f"{key}[{i}].cam_R_m2c", g["cam_R_m2c"])
             t = np.asarray(g["cam_t_m2c"], np.float64)
             if np.linalg.norm(t) < _MIN_PLAUSIBLE_MM:
-                raise DatasetError(f"{gt_file}: field {key}[{i}].cam_t_m2c: {t.tolist()} is too small for "
-                                   "millimetres (wrong unit? BOP uses mm)")
+                raise DatasetError(
+                    f"{gt_file}: field {key}[{i}].cam_t_m2c: {t.tolist()} is too small for "
+                    "millimetres (wrong unit? BOP uses mm)"
+                )
             objects.append(BopObjectPose(int(g["obj_id"]), R, t))
         rgb = root / "rgb" / f"{int(key):06d}.png"
         if not rgb.exists() and (root / "rgb" / f"{int(key):06d}.jpg").exists():
             rgb = root / "rgb" / f"{int(key):06d}.jpg"
-        frames.append(BopFrame(int(key), rgb, K, float(c["depth_scale"]) if "depth_scale" in c else None,
-                               objects, R_w2c, t_w2c))
+        frames.append(
+            BopFrame(int(key), rgb, K, float(c["depth_scale"]) if "depth_scale" in c else None, objects, R_w2c, t_w2c)
+        )
     if check_images:
         # BOP keeps the image size in the dataset's camera.json (two levels up), when present.
         size = None
@@ -180,16 +183,27 @@ def load_scene(scene_dir: str | os.PathLike, *, check_images: bool = False) -> B
             if size is not None and (w, h) != size:
                 raise DatasetError(f"{cam_json}: fields width/height: {size[0]}x{size[1]} but {f.rgb_path} is {w}x{h}")
             if not (0 <= f.K[0, 2] < w and 0 <= f.K[1, 2] < h):
-                raise DatasetError(f"{cam_file}: field {f.im_id}.cam_K: principal point outside the "
-                                   f"{w}x{h} image {f.rgb_path}")
+                raise DatasetError(
+                    f"{cam_file}: field {f.im_id}.cam_K: principal point outside the {w}x{h} image {f.rgb_path}"
+                )
     return BopScene(root, frames)
 
 
 def write_camera(root: str | os.PathLike, K: np.ndarray, width: int, height: int, depth_scale: float = 1.0) -> Path:
     """Write a BOP dataset's ``camera.json`` (fx, fy, cx, cy, width, height, depth_scale) atomically."""
     path = Path(root) / "camera.json"
-    write_json(path, {"cx": float(K[0, 2]), "cy": float(K[1, 2]), "depth_scale": float(depth_scale),
-                      "fx": float(K[0, 0]), "fy": float(K[1, 1]), "height": int(height), "width": int(width)})
+    write_json(
+        path,
+        {
+            "cx": float(K[0, 2]),
+            "cy": float(K[1, 2]),
+            "depth_scale": float(depth_scale),
+            "fx": float(K[0, 0]),
+            "fy": float(K[1, 1]),
+            "height": int(height),
+            "width": int(width),
+        },
+    )
     return path
 
 
@@ -214,8 +228,9 @@ def write_scene(
             c["cam_R_w2c"] = _flat(f.R_w2c)
             c["cam_t_w2c"] = _flat(f.t_w2c)
         cams[str(f.im_id)] = c
-        gts[str(f.im_id)] = [{"cam_R_m2c": _flat(o.R), "cam_t_m2c": _flat(o.t), "obj_id": int(o.obj_id)}
-                             for o in f.objects]
+        gts[str(f.im_id)] = [
+            {"cam_R_m2c": _flat(o.R), "cam_t_m2c": _flat(o.t), "obj_id": int(o.obj_id)} for o in f.objects
+        ]
     validate_json(cams, "bop_scene_camera", root / "scene_camera.json")
     validate_json(gts, "bop_scene_gt", root / "scene_gt.json")
     write_json(root / "scene_camera.json", cams, indent=None)
@@ -245,9 +260,22 @@ class PlyModel:
 
 
 _PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2", "ushort": "u2",
-    "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4",
-    "double": "f8", "float64": "f8",
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
 }
 
 
@@ -347,11 +375,16 @@ def read_ply(path: str | os.PathLike, *, unit_check: bool = True) -> PlyModel:
     if faces.size and (faces.min() < 0 or faces.max() >= len(verts)):
         raise DatasetError(f"{path}: element face: vertex index out of range")
     if unit_check and len(verts) and np.ptp(verts, axis=0).max() < _MIN_PLAUSIBLE_MM:
-        raise DatasetError(f"{path}: element vertex: model is {np.ptp(verts, axis=0).max():.4g} units across; "
-                           "BOP models are in millimetres (wrong unit?)")
+        raise DatasetError(
+            f"{path}: element vertex: model is {np.ptp(verts, axis=0).max():.4g} units across; "
+            "BOP models are in millimetres (wrong unit?)"
+        )
     normals = np.stack([v["nx"], v["ny"], v["nz"]], 1) if all(k in v for k in ("nx", "ny", "nz")) else None
-    colors = (np.stack([v["red"], v["green"], v["blue"]], 1).astype(np.uint8)
-              if all(k in v for k in ("red", "green", "blue")) else None)
+    colors = (
+        np.stack([v["red"], v["green"], v["blue"]], 1).astype(np.uint8)
+        if all(k in v for k in ("red", "green", "blue"))
+        else None
+    )
     tc = np.stack([v["texture_u"], v["texture_v"]], 1) if "texture_u" in v and "texture_v" in v else None
     return PlyModel(verts, faces, normals, colors, tc, texture_file)
 
@@ -403,9 +436,13 @@ def models_info(models: dict[int, PlyModel]) -> dict[str, dict[str, float]]:
         # Diameter: largest vertex distance (exact on the convex hull's vertices).
         hull = v[ConvexHull(v).vertices] if len(v) > 4 else v
         d = np.sqrt(((hull[:, None] - hull[None]) ** 2).sum(-1)).max()
-        info[str(oid)] = {"diameter": round(float(d), 6), "min_x": round(float(lo[0]), 6),
-                          "min_y": round(float(lo[1]), 6), "min_z": round(float(lo[2]), 6),
-                          "size_x": round(float(hi[0] - lo[0]), 6), "size_y": round(float(hi[1] - lo[1]), 6),
-                          "size_z": round(float(hi[2] - lo[2]), 6)}
+        info[str(oid)] = {
+            "diameter": round(float(d), 6),
+            "min_x": round(float(lo[0]), 6),
+            "min_y": round(float(lo[1]), 6),
+            "min_z": round(float(lo[2]), 6),
+            "size_x": round(float(hi[0] - lo[0]), 6),
+            "size_y": round(float(hi[1] - lo[1]), 6),
+            "size_z": round(float(hi[2] - lo[2]), 6),
+        }
     return info
-

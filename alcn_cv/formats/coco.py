@@ -15,16 +15,17 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import cv2
 import numpy as np
 
-from alcn_cv.io import read_json, write_json
 from alcn_cv.errors import DatasetError
 from alcn_cv.formats import validate_json
+from alcn_cv.io import read_json, write_json
 
 logger = logging.getLogger(__name__)
 
@@ -166,21 +167,40 @@ def load_coco(
             raise DatasetError(f"{path}: field annotations[{i}].category_id: no category with id {d['category_id']}")
         box = np.asarray(d["bbox"], np.float64)
         im = by_id[d["image_id"]]
-        if box[2] <= 0 or box[3] <= 0 or box[0] < -0.5 or box[1] < -0.5 or box[0] + box[2] > im.width + 0.5 \
-                or box[1] + box[3] > im.height + 0.5:
-            raise DatasetError(f"{path}: field annotations[{i}].bbox: {box.tolist()} is empty or outside its "
-                               f"{im.width}x{im.height} image (wrong unit or image size?)")
+        if (
+            box[2] <= 0
+            or box[3] <= 0
+            or box[0] < -0.5
+            or box[1] < -0.5
+            or box[0] + box[2] > im.width + 0.5
+            or box[1] + box[3] > im.height + 0.5
+        ):
+            raise DatasetError(
+                f"{path}: field annotations[{i}].bbox: {box.tolist()} is empty or outside its "
+                f"{im.width}x{im.height} image (wrong unit or image size?)"
+            )
         extra = {k: v for k, v in d.items() if k not in ("id", "image_id", "category_id", "bbox", "area", "iscrowd")}
-        anns.append(CocoAnnotation(int(d["id"]), int(d["image_id"]), int(d["category_id"]), box,
-                                   float(d.get("area", box[2] * box[3])), int(d.get("iscrowd", 0)), extra))
+        anns.append(
+            CocoAnnotation(
+                int(d["id"]),
+                int(d["image_id"]),
+                int(d["category_id"]),
+                box,
+                float(d.get("area", box[2] * box[3])),
+                int(d.get("iscrowd", 0)),
+                extra,
+            )
+        )
     if check_images:
         for i, im in enumerate(images):
             size = _image_size(im.path)
             if size is None:
                 raise DatasetError(f"{path}: field images[{i}].file_name: cannot read {im.path}")
             if size != (im.width, im.height):
-                raise DatasetError(f"{path}: field images[{i}].width/height: {im.width}x{im.height} but "
-                                   f"{im.path} is {size[0]}x{size[1]}")
+                raise DatasetError(
+                    f"{path}: field images[{i}].width/height: {im.width}x{im.height} but "
+                    f"{im.path} is {size[0]}x{size[1]}"
+                )
     return CocoDataset(path, images, anns, cats, dict(doc.get("info", {})))
 
 

@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -321,17 +321,12 @@ def write_text_model(
         "# Image list with two lines of data per image:",
         "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME",
         "#   POINTS2D[] as (X, Y, POINT3D_ID)",
-        f"# Number of images: {len(images)}, mean observations per image: "
-        f"{n_obs / max(len(images), 1):g}",
+        f"# Number of images: {len(images)}, mean observations per image: {n_obs / max(len(images), 1):g}",
         *unit_line,
     ]
     for i in images:
-        lines.append(
-            " ".join([str(i.image_id), *map(_fmt, i.qvec), *map(_fmt, i.t_w2c), str(i.camera_id), i.name])
-        )
-        lines.append(
-            " ".join(f"{_fmt(x)} {_fmt(y)} {int(pid)}" for (x, y), pid in zip(i.points2d, i.point3d_ids))
-        )
+        lines.append(" ".join([str(i.image_id), *map(_fmt, i.qvec), *map(_fmt, i.t_w2c), str(i.camera_id), i.name]))
+        lines.append(" ".join(f"{_fmt(x)} {_fmt(y)} {int(pid)}" for (x, y), pid in zip(i.points2d, i.point3d_ids)))
     atomic_write(out / "images.txt", "\n".join(lines) + "\n")
 
     lines = [
@@ -344,8 +339,13 @@ def write_text_model(
         track = " ".join(f"{int(a)} {int(b)}" for a, b in p.track)
         lines.append(" ".join([str(p.point3d_id), *map(_fmt, p.xyz), *map(str, p.rgb), _fmt(p.error), track]).rstrip())
     atomic_write(out / "points3D.txt", "\n".join(lines) + "\n")
-    logger.debug("wrote COLMAP text model (%d cameras, %d images, %d points) to %s",
-                 len(cameras), len(images), len(points3d), out)
+    logger.debug(
+        "wrote COLMAP text model (%d cameras, %d images, %d points) to %s",
+        len(cameras),
+        len(images),
+        len(points3d),
+        out,
+    )
     return out
 
 
@@ -386,7 +386,10 @@ def _read_cameras_txt(file: Path) -> dict[int, ColmapCamera]:
         cid = _int(file, n, "CAMERA_ID", tok[0])
         try:
             cameras[cid] = ColmapCamera(
-                cid, tok[1], _int(file, n, "WIDTH", tok[2]), _int(file, n, "HEIGHT", tok[3]),
+                cid,
+                tok[1],
+                _int(file, n, "WIDTH", tok[2]),
+                _int(file, n, "HEIGHT", tok[3]),
                 _floats(file, n, "PARAMS", tok[4:]),
             )
         except InputError as exc:
@@ -422,8 +425,13 @@ def _read_images_txt(file: Path) -> dict[int, ColmapImage]:
         if np.linalg.norm(q) < 1e-12:
             raise DatasetError(f"{file}:{n}: field QVEC is zero")
         images[iid] = ColmapImage(
-            iid, tok[9], _int(file, n, "CAMERA_ID", tok[8]), rotmat_from_qvec(q),
-            _floats(file, n, "TVEC", tok[5:8]), pts_arr[:, :2], pts_arr[:, 2].astype(np.int64),
+            iid,
+            tok[9],
+            _int(file, n, "CAMERA_ID", tok[8]),
+            rotmat_from_qvec(q),
+            _floats(file, n, "TVEC", tok[5:8]),
+            pts_arr[:, :2],
+            pts_arr[:, 2].astype(np.int64),
         )
         k += 2
     return images
@@ -440,8 +448,13 @@ def _read_points3d_txt(file: Path) -> dict[int, ColmapPoint3D]:
         pid = _int(file, n, "POINT3D_ID", tok[0])
         rgb = _floats(file, n, "RGB", tok[4:7])
         track = _floats(file, n, "TRACK", tok[8:]).astype(np.int64).reshape(-1, 2)
-        points[pid] = ColmapPoint3D(pid, _floats(file, n, "XYZ", tok[1:4]), rgb.astype(np.uint8),
-                                    float(_floats(file, n, "ERROR", tok[7:8])[0]), track)
+        points[pid] = ColmapPoint3D(
+            pid,
+            _floats(file, n, "XYZ", tok[1:4]),
+            rgb.astype(np.uint8),
+            float(_floats(file, n, "ERROR", tok[7:8])[0]),
+            track,
+        )
     return points
 
 
@@ -462,8 +475,7 @@ def read_text_model(path: str | os.PathLike) -> ColmapModel:
     for image in images.values():
         if image.camera_id not in cameras:
             raise DatasetError(
-                f"{root / 'images.txt'}: image {image.name!r} field CAMERA_ID={image.camera_id} "
-                f"is not in cameras.txt"
+                f"{root / 'images.txt'}: image {image.name!r} field CAMERA_ID={image.camera_id} is not in cameras.txt"
             )
     units = None
     for line in (root / "images.txt").read_text(encoding="utf-8").splitlines():
@@ -488,11 +500,15 @@ def model_from_pycolmap(rec) -> ColmapModel:
         pts = im.points2D
         xy = np.array([p.xy for p in pts]).reshape(-1, 2)
         ids = np.array([p.point3D_id if p.has_point3D() else -1 for p in pts], dtype=np.int64).reshape(-1)
-        images[int(iid)] = ColmapImage(int(iid), im.name, int(im.camera_id), pose.rotation.matrix(),
-                                       np.array(pose.translation), xy, ids)
+        images[int(iid)] = ColmapImage(
+            int(iid), im.name, int(im.camera_id), pose.rotation.matrix(), np.array(pose.translation), xy, ids
+        )
     points = {
         int(pid): ColmapPoint3D(
-            int(pid), np.array(p.xyz), np.array(p.color), float(p.error),
+            int(pid),
+            np.array(p.xyz),
+            np.array(p.color),
+            float(p.error),
             np.array([(e.image_id, e.point2D_idx) for e in p.track.elements], dtype=np.int64).reshape(-1, 2),
         )
         for pid, p in rec.points3D.items()

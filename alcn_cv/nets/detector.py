@@ -82,4 +82,3 @@ class Detector(WindowClassifier):
             nn.Dropout(dropout),
             nn.Conv2d(hidden, num_classes, 1),
         )
-

@@ -119,7 +119,9 @@ class GainNormalizer(nn.Module):
         super().__init__()
         if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
             raise InputError(f"stride must be a positive integer, got {stride!r}")
-        if not (eps > 0 and tau > 0 and mean_sigma > 0 and context_sigma > 0 and floor_scale > 0 and divisive_sigma > 0):
+        if not (
+            eps > 0 and tau > 0 and mean_sigma > 0 and context_sigma > 0 and floor_scale > 0 and divisive_sigma > 0
+        ):
             raise InputError("eps, tau, mean_sigma, context_sigma, floor_scale and divisive_sigma must be positive")
         self.sigmas = gaussian_sigmas(num_kernels, sigma_step)
         init_weights = dog_weights(self.sigmas) if init_weights is None else [float(w) for w in init_weights]
@@ -234,7 +236,12 @@ class GainNormalizer(nn.Module):
             ``(B, N, ceil((H-1)/g)+1, ceil((W-1)/g)+1)``, point ``(i, j)`` at pixel ``(g*i, g*j)``.
         """
         grid_stride = self.stride if grid_stride is None else grid_stride
-        if isinstance(grid_stride, bool) or not isinstance(grid_stride, int) or grid_stride < self.stride or grid_stride % self.stride:
+        if (
+            isinstance(grid_stride, bool)
+            or not isinstance(grid_stride, int)
+            or grid_stride < self.stride
+            or grid_stride % self.stride
+        ):
             raise InputError(f"grid_stride must be a positive multiple of {self.stride}, got {grid_stride!r}")
         step = grid_stride // self.stride
         if step > 1:  # extend the image so the network's grid reaches the last point of the coarser one
@@ -276,8 +283,12 @@ class GainNormalizer(nn.Module):
         config = dict(weight_file.meta["config"])
         for key, value in _REMOVED_VARIANTS.items():
             if key in config and config.pop(key) != value:
-                raise WeightFileError(f"{key}={weight_file.meta['config'][key]!r}: a removed variant of the gain Normalizer")
-        return Normalizer.from_file.__func__(cls, NormalizerFile(weight_file.arrays, {**weight_file.meta, "config": config}))
+                raise WeightFileError(
+                    f"{key}={weight_file.meta['config'][key]!r}: a removed variant of the gain Normalizer"
+                )
+        return Normalizer.from_file.__func__(
+            cls, NormalizerFile(weight_file.arrays, {**weight_file.meta, "config": config})
+        )
 
     #: The parameters as float32 arrays, for :func:`alcn_cv.weight_file.save_normalizer_file`.
     state_arrays = Normalizer.state_arrays

@@ -90,8 +90,15 @@ class LiteNormalizer(Normalizer):
         }
 
     def _weights(self, x: torch.Tensor, fc_stride: int = 1) -> torch.Tensor:
-        if (torch.is_grad_enabled() or x.device.type != "cpu" or x.dtype != torch.float32 or self.config["activation"] != "tanh"
-                or torch.jit.is_tracing() or torch.onnx.is_in_onnx_export() or torch.compiler.is_compiling()):  # traces record torch ops
+        if (
+            torch.is_grad_enabled()
+            or x.device.type != "cpu"
+            or x.dtype != torch.float32
+            or self.config["activation"] != "tanh"
+            or torch.jit.is_tracing()
+            or torch.onnx.is_in_onnx_export()
+            or torch.compiler.is_compiling()
+        ):  # traces record torch ops
             hidden = F.conv2d(self.features(x), self.fc.weight, self.fc.bias, stride=fc_stride)
             return self.output_scale * self.head(self.activation(hidden))
         # Inference on the CPU: the same layers with the tanh computed in place by NumPy, whose

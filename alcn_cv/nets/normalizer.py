@@ -165,7 +165,12 @@ class Normalizer(nn.Module):
         default :attr:`stride`): ``(B, N, ceil((H-1)/g)+1, ceil((W-1)/g)+1)`` with
         ``g = grid_stride``; grid point ``(i, j)`` is the window centred on pixel ``(g*i, g*j)``."""
         grid_stride = self.stride if grid_stride is None else grid_stride
-        if isinstance(grid_stride, bool) or not isinstance(grid_stride, int) or grid_stride < self.stride or grid_stride % self.stride:
+        if (
+            isinstance(grid_stride, bool)
+            or not isinstance(grid_stride, int)
+            or grid_stride < self.stride
+            or grid_stride % self.stride
+        ):
             raise InputError(f"grid_stride must be a positive multiple of {self.stride}, got {grid_stride!r}")
         h, w = image.shape[-2:]
         gh, gw = math.ceil((h - 1) / grid_stride) + 1, math.ceil((w - 1) / grid_stride) + 1

@@ -17,6 +17,7 @@ from alcn_cv.nets.detector import INPUT, WindowClassifier
 
 __all__ = ["PlainCNN"]
 
+
 def _feature_size(depth: int) -> int:
     size = INPUT
     for _ in range(2):

@@ -77,7 +77,9 @@ class CifarResNet(nn.Module):
         self.context = context
         self.input_size = INPUT + 2 * context
         self.config = {"num_classes": num_classes, "blocks": blocks, "in_channels": in_channels, "context": context}
-        self.stem = nn.Sequential(nn.Conv2d(in_channels, 16, 3, 1, 1, bias=False), nn.BatchNorm2d(16), nn.ReLU(inplace=True))
+        self.stem = nn.Sequential(
+            nn.Conv2d(in_channels, 16, 3, 1, 1, bias=False), nn.BatchNorm2d(16), nn.ReLU(inplace=True)
+        )
         layers: list[nn.Module] = []
         cin = 16
         for stage, cout in enumerate((16, 32, 64)):

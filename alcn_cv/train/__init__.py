@@ -19,8 +19,16 @@ from __future__ import annotations
 
 import importlib
 
-__all__ = ["JointModel", "TrainConfig", "TrainResult", "export_onnx", "load_checkpoint", "load_config", "train",
-           "train_detector"]
+__all__ = [
+    "JointModel",
+    "TrainConfig",
+    "TrainResult",
+    "export_onnx",
+    "load_checkpoint",
+    "load_config",
+    "train",
+    "train_detector",
+]
 
 _LAZY = {
     "train": "alcn_cv.train.trainer",

@@ -29,8 +29,16 @@ from alcn_cv.weight_file import save_normalizer_file
 if TYPE_CHECKING:
     from alcn_cv.train.trainer import TrainResult
 
-__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "TrainState", "load_checkpoint", "restore_checkpoint",
-           "save_checkpoint", "versions", "write_normalizer_file"]
+__all__ = [
+    "CHECKPOINT_FORMAT",
+    "CHECKPOINT_VERSION",
+    "TrainState",
+    "load_checkpoint",
+    "restore_checkpoint",
+    "save_checkpoint",
+    "versions",
+    "write_normalizer_file",
+]
 
 CHECKPOINT_FORMAT = "alcn-cv/checkpoint"
 CHECKPOINT_VERSION = 1
@@ -67,13 +75,25 @@ def versions() -> dict[str, str]:
     return {"alcn_cv": str(alcn_cv.__version__), "torch": str(torch.__version__)}
 
 
-def save_checkpoint(path: Path, cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optimizer,
-                    state: TrainState, status: str) -> None:
+def save_checkpoint(
+    path: Path, cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optimizer, state: TrainState, status: str
+) -> None:
     """Write the checkpoint atomically (``status``: ``"epoch"`` or ``"interrupted"``)."""
-    ckpt = {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "versions": versions(),
-            "config": cfg.to_dict(), "status": status, "epoch": state.epoch, "step_in_epoch": state.step_in_epoch,
-            "sums": state.sums, "history": state.history, "model": model.state_dict(),
-            "optimizer": optimizer.state_dict(), "rng": torch.get_rng_state(), "elapsed": state.elapsed()}
+    ckpt = {
+        "format": CHECKPOINT_FORMAT,
+        "version": CHECKPOINT_VERSION,
+        "versions": versions(),
+        "config": cfg.to_dict(),
+        "status": status,
+        "epoch": state.epoch,
+        "step_in_epoch": state.step_in_epoch,
+        "sums": state.sums,
+        "history": state.history,
+        "model": model.state_dict(),
+        "optimizer": optimizer.state_dict(),
+        "rng": torch.get_rng_state(),
+        "elapsed": state.elapsed(),
+    }
     atomic_write(path, lambda f: torch.save(ckpt, f))
 
 
@@ -112,8 +132,9 @@ def load_checkpoint(path: str | Path, cfg: TrainConfig | None = None) -> dict[st
     return ckpt
 
 
-def restore_checkpoint(ckpt: dict[str, Any], model: JointModel, optimizer: torch.optim.Optimizer,
-                       start: float) -> TrainState:
+def restore_checkpoint(
+    ckpt: dict[str, Any], model: JointModel, optimizer: torch.optim.Optimizer, start: float
+) -> TrainState:
     """Load a checkpoint read by :func:`load_checkpoint` into the model, the optimizer and torch's
     random state; return the run's state, its clock (started at ``start``) moved back by the time
     the checkpoint records."""
@@ -123,8 +144,9 @@ def restore_checkpoint(ckpt: dict[str, Any], model: JointModel, optimizer: torch
     return TrainState(ckpt["history"], ckpt["epoch"], ckpt["step_in_epoch"], ckpt["sums"], start - ckpt["elapsed"])
 
 
-def write_normalizer_file(model: JointModel, cfg: TrainConfig, train_set: PhosBatch, result: TrainResult,
-                          seconds: float) -> Path:
+def write_normalizer_file(
+    model: JointModel, cfg: TrainConfig, train_set: PhosBatch, result: TrainResult, seconds: float
+) -> Path:
     """Write the trained Normalizer as ``alcn_normalizer.npz`` in the run folder.
 
     The header gets the output range measured on up to 4000 training windows (drawn with
@@ -147,9 +169,15 @@ def write_normalizer_file(model: JointModel, cfg: TrainConfig, train_set: PhosBa
         "trained": True,
         "detector_input": cfg.model.detector_input,
         "description": f"trained with a detector by `alcn train` (objective {cfg.optim.objective!r}), seed {cfg.seed}, "
-                       f"{len(train_set)} windows of {train_set.n_objects} objects, {seconds / 60:.1f} min",
-        "training": {"config": cfg.to_dict(), "versions": versions(), "val_accuracy": result.val_accuracy,
-                     "val_by_family": result.val_by_family, "fewshot": result.fewshot, "seconds": round(seconds, 1),
-                     "machine": machine()},
+        f"{len(train_set)} windows of {train_set.n_objects} objects, {seconds / 60:.1f} min",
+        "training": {
+            "config": cfg.to_dict(),
+            "versions": versions(),
+            "val_accuracy": result.val_accuracy,
+            "val_by_family": result.val_by_family,
+            "fewshot": result.fewshot,
+            "seconds": round(seconds, 1),
+            "machine": machine(),
+        },
     }
     return save_normalizer_file(result.out_dir / "alcn_normalizer.npz", net.state_arrays(), meta)

@@ -19,11 +19,22 @@ __all__ = ["add_parser"]
 
 def _add_conf(parser: argparse.ArgumentParser, default: str | None, presets: str) -> None:
     """``--conf`` and ``--set``, the same on every training command; ``presets`` says what each preset makes."""
-    parser.add_argument("--conf", default=default, required=default is None, metavar="NAME",
-                        help=f"the preset: {presets}" + (f" (default {default})" if default else ""))
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
-                        help="override one key of the preset, dotted, the value as TOML, e.g. --set lr=3e-4 "
-                        "(repeatable; --print-config shows every key)")
+    parser.add_argument(
+        "--conf",
+        default=default,
+        required=default is None,
+        metavar="NAME",
+        help=f"the preset: {presets}" + (f" (default {default})" if default else ""),
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="settings",
+        help="override one key of the preset, dotted, the value as TOML, e.g. --set lr=3e-4 "
+        "(repeatable; --print-config shows every key)",
+    )
     parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
 
 
@@ -38,15 +49,20 @@ def _command(name: str, args: argparse.Namespace, *extra: str) -> str:
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``train``, ``train-detector``, ``distill``, ``train-real-light`` and ``export`` to the ``alcn`` command."""
     p = subparsers.add_parser(
-        "train", help="train the ALCN Normalizer jointly with a detector (Eq. 2)",
+        "train",
+        help="train the ALCN Normalizer jointly with a detector (Eq. 2)",
         description="Train ALCN's Normalizer jointly with a detector on Phos-like rendered windows (Eq. 2 of "
         "Rad et al. 2017), validating on held-out lightings; --set model.method=dog (or none) trains the same "
         "detector on a fixed DoG (or raw windows) for comparison. Writes checkpoint.pt, train.log, "
         "history.json, curves.png and alcn_normalizer.npz into --out. The shipped alcn_normalizer.npz is "
         "`alcn train --conf paper`. Multi-process: run under torchrun.",
     )
-    _add_conf(p, "paper", "paper (the shipped alcn_normalizer.npz), paper-full (the paper's widths and data, for a "
-              "GPU; no shipped file), or a TOML file of alcn_cv.train.config's keys")
+    _add_conf(
+        p,
+        "paper",
+        "paper (the shipped alcn_normalizer.npz), paper-full (the paper's widths and data, for a "
+        "GPU; no shipped file), or a TOML file of alcn_cv.train.config's keys",
+    )
     p.add_argument("--out", type=Path, default=Path("out/alcn"), help="run folder (default: out/alcn)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--seed", type=int, help="seed (default: the preset's)")
@@ -55,7 +71,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_train)
 
     d = subparsers.add_parser(
-        "train-detector", help="train a detector for new objects from a few images (second stage)",
+        "train-detector",
+        help="train a detector for new objects from a few images (second stage)",
         description="The second stage of ALCN: from a few real images of new objects (one folder per object, "
         "images showing the object; an optional *.mask.png beside an image marks it), make the paper's simple "
         "synthetic images, normalize them with the frozen Normalizer (or another method) and train a new "
@@ -63,12 +80,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     d.add_argument("images", type=Path, help="folder with one sub-folder of images per object")
     d.add_argument("--out", type=Path, required=True, help="output folder")
-    d.add_argument("--method", default="alcn",
-                   help="normalization applied to the windows, any registered name (default alcn)")
+    d.add_argument(
+        "--method", default="alcn", help="normalization applied to the windows, any registered name (default alcn)"
+    )
     d.add_argument("--weights", type=Path, help="Normalizer weight file for --method alcn (default: shipped)")
     d.add_argument("--per-image", type=int, default=300, help="synthetic windows per real image (default 300)")
-    d.add_argument("--negatives", type=int, default=0,
-                   help="background windows (default: as many as all positive windows)")
+    d.add_argument(
+        "--negatives", type=int, default=0, help="background windows (default: as many as all positive windows)"
+    )
     d.add_argument("--extent", type=float, default=40.0, help="object size in window pixels (default 40)")
     d.add_argument("--epochs", type=int, default=15, help="training epochs (default 15)")
     d.add_argument("--batch-size", type=int, default=64, help="windows per batch (default 64)")
@@ -78,7 +97,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     d.set_defaults(func=_train_detector)
 
     s = subparsers.add_parser(
-        "distill", help="distil a light Normalizer from a trained one",
+        "distill",
+        help="distil a light Normalizer from a trained one",
         description="Train a LiteNormalizer to reproduce the paper-model Normalizer's mixture weights on rendered "
         "windows (--conf lite), or a smaller gain Normalizer to reproduce the gain Normalizer's maps on the frames "
         "of the real training scenes and rendered ones (--conf gain-lite) (alcn_cv.train.distill); writes the "
@@ -87,18 +107,26 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "alcn_cv/weights/alcn_normalizer_lite.npz`, alcn_normalizer_gain_lite.npz the same with --conf gain-lite "
         "(academic research only, as the webcam frames).",
     )
-    _add_conf(s, None, "lite (the shipped alcn_normalizer_lite.npz, from the paper model) or gain-lite (the "
-              "shipped alcn_normalizer_gain_lite.npz, from the gain model); --set teacher=FILE distils another teacher")
+    _add_conf(
+        s,
+        None,
+        "lite (the shipped alcn_normalizer_lite.npz, from the paper model) or gain-lite (the "
+        "shipped alcn_normalizer_gain_lite.npz, from the gain model); --set teacher=FILE distils another teacher",
+    )
     s.add_argument("--out", type=Path, help="weight file to write (.npz; the card is .md beside it)")
     s.add_argument("--seed", type=int, help="seed (default: the preset's)")
-    s.add_argument("--threads", type=int, default=1,
-                   help="torch and OpenCV threads (default 1, as the shipped files were made; 0: the libraries' "
-                   "default)")
+    s.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch and OpenCV threads (default 1, as the shipped files were made; 0: the libraries' default)",
+    )
     s.add_argument("--no-progress", action="store_true", help="no progress bars")
     s.set_defaults(func=_distill)
 
     r = subparsers.add_parser(
-        "train-real-light", help="train the gain Normalizer on registered real scenes (identification objective)",
+        "train-real-light",
+        help="train the gain Normalizer on registered real scenes (identification objective)",
         description="Train the gain-adaptive Normalizer (alcn_cv.nets.gain) on fixed-camera scenes under changing "
         "light: each textured location is a class seen under every frame's light (alcn_cv.train.real_light). "
         "Writes OUT/gain_normalizer.npz, checkpoints, train.log and history.json. The shipped "
@@ -108,12 +136,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _add_conf(r, "gain", "gain (the shipped alcn_normalizer_gain.npz)")
     r.add_argument("--out", type=Path, default=Path("out/gain"), help="run folder (default: out/gain)")
     r.add_argument("--seed", type=int, help="seed (default: the preset's)")
-    r.add_argument("--threads", type=int, default=1,
-                   help="torch threads (default 1, as the shipped file was made; 0: torch's default)")
+    r.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch threads (default 1, as the shipped file was made; 0: torch's default)",
+    )
     r.set_defaults(func=_train_real_light)
 
     e = subparsers.add_parser(
-        "export", help="export the Normalizer to ONNX (for the torch-free OpenCV runtime)",
+        "export",
+        help="export the Normalizer to ONNX (for the torch-free OpenCV runtime)",
         description="Export the Normalizer of a weight file as a fully-convolutional ONNX model with dynamic "
         "image size, run by cv2.dnn in alcn_cv.nets.opencv_runtime (no torch needed).",
     )
@@ -165,9 +198,20 @@ def _train(args: argparse.Namespace) -> int:
 def _train_detector(args: argparse.Namespace) -> int:
     from alcn_cv.train.stage2 import main
 
-    main(args.images, args.out, method=args.method, weights=args.weights, per_image=args.per_image,
-         negatives=args.negatives, extent=args.extent, epochs=args.epochs, batch_size=args.batch_size, lr=args.lr,
-         seed=args.seed, progress=not args.no_progress)
+    main(
+        args.images,
+        args.out,
+        method=args.method,
+        weights=args.weights,
+        per_image=args.per_image,
+        negatives=args.negatives,
+        extent=args.extent,
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        seed=args.seed,
+        progress=not args.no_progress,
+    )
     return 0
 
 

@@ -80,18 +80,29 @@ from __future__ import annotations
 import copy
 import dataclasses
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Sequence
 from typing import Any, TypeVar
 
 from alcn_cv.data.lighting import LIGHT_FAMILIES
 from alcn_cv.data.scenes import TRAIN_SCENES
 from alcn_cv.errors import InputError
 
-__all__ = ["DISTILL_CONFS", "REAL_LIGHT_CONFS", "TRAIN_CONFS", "FewShotSetup", "GainDistillConfig",
-           "LiteDistillConfig", "RealLightConfig", "TrainConfig", "dump_toml", "load_config", "preset",
-           "with_settings"]
+__all__ = [
+    "DISTILL_CONFS",
+    "REAL_LIGHT_CONFS",
+    "TRAIN_CONFS",
+    "FewShotSetup",
+    "GainDistillConfig",
+    "LiteDistillConfig",
+    "RealLightConfig",
+    "TrainConfig",
+    "dump_toml",
+    "load_config",
+    "preset",
+    "with_settings",
+]
 
 
 @dataclass
@@ -121,7 +132,8 @@ class DataConfig:
     n_objects: int = 100
     object_seed: int = 0
     train_lighting: list[str] = field(
-        default_factory=lambda: ["ambient", "bright", "shadow", "point", "colour", "mixed"])
+        default_factory=lambda: ["ambient", "bright", "shadow", "point", "colour", "mixed"]
+    )
     val_lighting: list[str] = field(default_factory=lambda: ["dark", "side", "spot"])
     background_fraction: float = 0.35
     gain_jitter: list[float] = field(default_factory=lambda: [0.5, 2.0])
@@ -225,8 +237,15 @@ _PAIRS = ("model.channels", "model.dog", "model.detector_channels", "data.gain_j
 
 
 def _type_name(value: Any) -> str:
-    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string", list: "a list",
-            tuple: "a list", dict: "a table"}.get(type(value), type(value).__name__)
+    return {
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+        str: "a string",
+        list: "a list",
+        tuple: "a list",
+        dict: "a table",
+    }.get(type(value), type(value).__name__)
 
 
 def _coerce(key: str, value: Any, default: Any) -> Any:
@@ -324,33 +343,62 @@ def _check(cfg: TrainConfig) -> None:
     for key, choices in _CHOICES.items():
         if flat[key] not in choices:
             raise InputError(f"config key {key!r} must be one of {', '.join(choices)}, got {flat[key]!r}")
-    positive = ["data.n_objects", "model.num_kernels", "model.hidden", "model.detector_hidden", "optim.batch_size",
-                "optim.epochs", "run.log_every", "fewshot.n_objects", "fewshot.real_images",
-                "fewshot.per_image", "fewshot.n_test", "fewshot.epochs", "model.sigma_step", "optim.lr",
-                "model.output_scale", "model.working_scale"]
+    positive = [
+        "data.n_objects",
+        "model.num_kernels",
+        "model.hidden",
+        "model.detector_hidden",
+        "optim.batch_size",
+        "optim.epochs",
+        "run.log_every",
+        "fewshot.n_objects",
+        "fewshot.real_images",
+        "fewshot.per_image",
+        "fewshot.n_test",
+        "fewshot.epochs",
+        "model.sigma_step",
+        "optim.lr",
+        "model.output_scale",
+        "model.working_scale",
+    ]
     for key in positive:
         if not flat[key] > 0:
             raise InputError(f"config key {key!r} must be positive, got {flat[key]!r}")
-    for key in ["data.n_train", "data.n_val", "optim.normalizer_lr", "optim.weight_decay", "optim.grad_clip",
-                "optim.warmup_steps", "run.workers", "run.threads"]:
+    for key in [
+        "data.n_train",
+        "data.n_val",
+        "optim.normalizer_lr",
+        "optim.weight_decay",
+        "optim.grad_clip",
+        "optim.warmup_steps",
+        "run.workers",
+        "run.threads",
+    ]:
         if flat[key] < 0:
             raise InputError(f"config key {key!r} must be >= 0, got {flat[key]!r}")
     if not 0 <= cfg.data.background_fraction <= 1:
         raise InputError(f"config key 'data.background_fraction' must be in [0, 1], got {cfg.data.background_fraction}")
     if cfg.optim.objective == "meta" and not cfg.data.path:
         if cfg.data.anchor_lighting not in cfg.data.train_lighting:
-            raise InputError(f"config key 'data.anchor_lighting' ({cfg.data.anchor_lighting!r}) must be one of "
-                             f"'data.train_lighting' {cfg.data.train_lighting}")
+            raise InputError(
+                f"config key 'data.anchor_lighting' ({cfg.data.anchor_lighting!r}) must be one of "
+                f"'data.train_lighting' {cfg.data.train_lighting}"
+            )
         if len(cfg.data.train_lighting) < 2 or not 0 < cfg.data.anchor_fraction < 1:
-            raise InputError("config key 'data.anchor_fraction' must be in (0, 1), with another lighting beside the "
-                             "anchor in 'data.train_lighting', for optim.objective = 'meta'")
+            raise InputError(
+                "config key 'data.anchor_fraction' must be in (0, 1), with another lighting beside the "
+                "anchor in 'data.train_lighting', for optim.objective = 'meta'"
+            )
     if not 0 <= cfg.model.detector_dropout < 1:
         raise InputError(f"config key 'model.detector_dropout' must be in [0, 1), got {cfg.model.detector_dropout}")
     lo, hi = cfg.data.gain_jitter
     if not 0 < lo <= hi:
         raise InputError(f"config key 'data.gain_jitter' must be 0 < lo <= hi, got {cfg.data.gain_jitter}")
-    for key, names in (("data.train_lighting", cfg.data.train_lighting), ("data.val_lighting", cfg.data.val_lighting),
-                       ("fewshot.test_lighting", cfg.fewshot.test_lighting)):
+    for key, names in (
+        ("data.train_lighting", cfg.data.train_lighting),
+        ("data.val_lighting", cfg.data.val_lighting),
+        ("fewshot.test_lighting", cfg.fewshot.test_lighting),
+    ):
         bad = [s for s in names if s not in LIGHT_FAMILIES]
         if bad or not names:
             raise InputError(f"config key {key!r} must list lighting families of {LIGHT_FAMILIES}, got {names}")
@@ -359,8 +407,10 @@ def _check(cfg: TrainConfig) -> None:
             raise InputError(f"config key 'fewshot.dog' must list [a, b] sigma pairs, got {cfg.fewshot.dog}")
     overlap = set(cfg.data.train_lighting) & set(cfg.data.val_lighting)
     if overlap and not (cfg.data.path and cfg.data.val_path):
-        raise InputError(f"config keys 'data.train_lighting' and 'data.val_lighting' share {sorted(overlap)}: "
-                         "validation must use held-out lightings")
+        raise InputError(
+            f"config keys 'data.train_lighting' and 'data.val_lighting' share {sorted(overlap)}: "
+            "validation must use held-out lightings"
+        )
     steps = [cfg.model.sigma_step * (i + 1) for i in range(cfg.model.num_kernels)]
     for key, pairs in (("model.dog", [cfg.model.dog]), ("fewshot.dog", cfg.fewshot.dog)):
         for s in (s for pair in pairs for s in pair):
@@ -446,8 +496,18 @@ def dump_toml(cfg: Any) -> str:
 
 def _gain_network() -> dict[str, Any]:
     """The shipped gain Normalizer's :class:`~alcn_cv.nets.gain.GainNormalizer` arguments."""
-    return {"channels": 16, "stride": 8, "dilations": [1, 2, 4], "num_kernels": 2, "sigma_step": 1.0, "eps": 0.01,
-            "floor_scale": 1.0, "divisive_sigma": 2.0, "tau": 3.0, "learn_scales": False}
+    return {
+        "channels": 16,
+        "stride": 8,
+        "dilations": [1, 2, 4],
+        "num_kernels": 2,
+        "sigma_step": 1.0,
+        "eps": 0.01,
+        "floor_scale": 1.0,
+        "divisive_sigma": 2.0,
+        "tau": 3.0,
+        "learn_scales": False,
+    }
 
 
 @dataclass
@@ -549,5 +609,7 @@ class GainDistillConfig:
 
 #: ``alcn distill`` presets: ``lite`` makes ``alcn_normalizer_lite.npz``, ``gain-lite``
 #: ``alcn_normalizer_gain_lite.npz``.
-DISTILL_CONFS: dict[str, LiteDistillConfig | GainDistillConfig] = {"lite": LiteDistillConfig(),
-                                                                    "gain-lite": GainDistillConfig()}
+DISTILL_CONFS: dict[str, LiteDistillConfig | GainDistillConfig] = {
+    "lite": LiteDistillConfig(),
+    "gain-lite": GainDistillConfig(),
+}

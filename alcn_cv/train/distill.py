@@ -137,7 +137,9 @@ def distill(cfg: LiteDistillConfig | None = None, progress: bool = True) -> tupl
     # A teacher that predicts the same weights everywhere (an untrained, DoG-initialised one) is
     # reproduced exactly by those weights as the student's bias; training would only add noise
     # (Adam scales the rounding-level gradients up to full steps).
-    constant = bool(float((target - target.mean(dim=(0, 2, 3), keepdim=True)).abs().max()) <= 1e-6 * (1 + float(target.abs().max())))
+    constant = bool(
+        float((target - target.mean(dim=(0, 2, 3), keepdim=True)).abs().max()) <= 1e-6 * (1 + float(target.abs().max()))
+    )
     if constant:
         logger.info("the teacher predicts the same weights for every window: the student is that constant")
         epochs = 0
@@ -162,8 +164,11 @@ def distill(cfg: LiteDistillConfig | None = None, progress: bool = True) -> tupl
         student.eval()
         bar.set_postfix(val_output_rmse=f"{_fidelity(student, x_val, target_val, gram_val)['output_rmse']:.2e}")
     record = {
-        "teacher": {"file": teacher_path.name, "sha256": hashlib.sha256(teacher_path.read_bytes()).hexdigest(),
-                    "description": teacher_weights.meta.get("description", "")},
+        "teacher": {
+            "file": teacher_path.name,
+            "sha256": hashlib.sha256(teacher_path.read_bytes()).hexdigest(),
+            "description": teacher_weights.meta.get("description", ""),
+        },
         "constant_teacher": constant,
         "settings": {**asdict(cfg), "epochs": epochs},
         "seconds": {"data_and_targets": round(prepared, 1), "total": round(time.perf_counter() - start, 1)},
@@ -173,8 +178,14 @@ def distill(cfg: LiteDistillConfig | None = None, progress: bool = True) -> tupl
     return student, record
 
 
-def main(out_path: str | os.PathLike, cfg: LiteDistillConfig | GainDistillConfig, command: str | None = None, *,
-         conf: str | None = None, progress: bool = True) -> Path:
+def main(
+    out_path: str | os.PathLike,
+    cfg: LiteDistillConfig | GainDistillConfig,
+    command: str | None = None,
+    *,
+    conf: str | None = None,
+    progress: bool = True,
+) -> Path:
     """Distil a student (:func:`distill`, or :func:`distill_gain` for a :class:`GainDistillConfig`)
     and write its weight file, with the whole configuration and the preset's name in its header,
     and its model card (and for a gain student its ONNX export, ``.onnx`` beside it).
@@ -195,13 +206,17 @@ def main(out_path: str | os.PathLike, cfg: LiteDistillConfig | GainDistillConfig
         return _main_gain(out_path, cfg, command, conf, progress)
     student, record = distill(cfg, progress)
     teacher_meta = load_normalizer_file(teacher_file(cfg.teacher)).meta
-    meta = {k: v for k, v in teacher_meta.items() if k not in ("format", "version", "config", "description", "training")}
+    meta = {
+        k: v for k, v in teacher_meta.items() if k not in ("format", "version", "config", "description", "training")
+    }
     meta.update(
         config=student.config,
         architecture="lite",
         teacher=record["teacher"],
-        distillation={"conf": conf, **{k: record[k] for k in ("constant_teacher", "settings", "seconds", "validation",
-                                                              "validation_initial")}},
+        distillation={
+            "conf": conf,
+            **{k: record[k] for k in ("constant_teacher", "settings", "seconds", "validation", "validation_initial")},
+        },
         description=f"LiteNormalizer distilled from {record['teacher']['file']} ({record['teacher']['description']})",
     )
     save_normalizer_file(out_path, student.state_arrays(), meta)
@@ -213,14 +228,17 @@ def _write_card(path: Path, name: str, record: dict[str, Any], trained: bool, co
     v, s = record["validation"], record["settings"]
     constant_note = (
         "\n- The teacher predicts the same weights for every window, so the student is those weights (its bias) "
-        "and was not trained (0 epochs)." if record["constant_teacher"] else ""
+        "and was not trained (0 epochs)."
+        if record["constant_teacher"]
+        else ""
     )
     text = f"""# Model card: `{name}`
 
-A light Normalizer (`alcn_cv.nets.lite.LiteNormalizer`, channels {s['channels']}, grid stride 8) distilled
-from the paper-architecture Normalizer `{record['teacher']['file']}` (SHA-256 `{record['teacher']['sha256'][:16]}...`:
-{record['teacher']['description']}). It predicts that teacher's ALCN mixture weights; it is only as good as the
-teacher. {"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}
+A light Normalizer (`alcn_cv.nets.lite.LiteNormalizer`, channels {s["channels"]}, grid stride 8) distilled
+from the paper-architecture Normalizer `{record["teacher"]["file"]}` (SHA-256 `{record["teacher"]["sha256"][:16]}...`:
+{record["teacher"]["description"]}). It predicts that teacher's ALCN mixture weights; it is only as good as the
+teacher.
+{"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}
 
 Use: `alcn_cv.createALCN(model="lite")`, real time: `alcn_cv.createALCN(model="lite", mixture="pyramid")`.
 ALCN warns when the installed teacher differs from this one: then re-run the command below.
@@ -228,30 +246,29 @@ ALCN warns when the installed teacher differs from this one: then re-run the com
 ## How it was made
 
 - Command: `{command}`
-- Data: {s['n_windows']} training and {s['n_val']} validation 64x64 windows of the data engine
-  (`alcn_cv.data.phos.render_windows`, {s['n_objects']} objects, seeds {s['seed']} and {s['seed'] + 1});
+- Data: {s["n_windows"]} training and {s["n_val"]} validation 64x64 windows of the data engine
+  (`alcn_cv.data.phos.render_windows`, {s["n_objects"]} objects, seeds {s["seed"]} and {s["seed"] + 1});
   targets: the teacher's weights at offsets 0, 8, 16 of each window (9 per window).
 - Loss: ALCN output error of the weights on the window's centre 32x32 (`d^T M d`, `M` the Gram matrix of the
-  window's blurs) plus {s['weight_decay_w']} x the plain weight error. Adam, lr {s['lr']}, cosine schedule,
-  {s['epochs']} epochs, batch {s['batch_size']}, seed {s['seed']}.{constant_note}
-- Time: {record['seconds']['total']} s ({record['seconds']['data_and_targets']} s rendering and teacher targets) on
+  window's blurs) plus {s["weight_decay_w"]} x the plain weight error. Adam, lr {s["lr"]}, cosine schedule,
+  {s["epochs"]} epochs, batch {s["batch_size"]}, seed {s["seed"]}.{constant_note}
+- Time: {record["seconds"]["total"]} s ({record["seconds"]["data_and_targets"]} s rendering and teacher targets) on
   {describe_machine()}.
 
 ## Fidelity to the teacher (validation windows)
 
 | measure | value |
 |---|---|
-| RMS error of the ALCN output (centre 32x32) | {v['output_rmse']:.3g} |
-| the same, predicting the teacher's mean weights everywhere (the student before training) | {record['validation_initial']['output_rmse']:.3g} |
-| RMS of the teacher's ALCN output | {v['output_rms_teacher']:.3g} |
-| RMS error of the weights | {v['weights_rmse']:.3g} |
-| largest weight error | {v['weights_max_abs_error']:.3g} |
-| the teacher's weights: standard deviation over windows (mean over kernels) | {v['weights_spread_teacher']:.3g} |
+| RMS error of the ALCN output (centre 32x32) | {v["output_rmse"]:.3g} |
+| the same, untrained (the teacher's mean weights) | {record["validation_initial"]["output_rmse"]:.3g} |
+| RMS of the teacher's ALCN output | {v["output_rms_teacher"]:.3g} |
+| RMS error of the weights | {v["weights_rmse"]:.3g} |
+| largest weight error | {v["weights_max_abs_error"]:.3g} |
+| the teacher's weights: standard deviation over windows (mean over kernels) | {v["weights_spread_teacher"]:.3g} |
 
 Speed and the difference from the exact ALCN output on whole frames: `alcn bench speed` (rows `alcn lite ...`).
 """
     atomic_write(path, text)
-
 
 
 # --- The gain Normalizer's lite variant ----------------------------------------------------------
@@ -271,7 +288,9 @@ class _GridSample:
     energy: float  # mean of sum_k F_k^2 over the grid: the scale of the relative error
 
 
-def _gain_frames(scenes: Sequence[str | os.PathLike], rendered: int, seed: int, progress: bool) -> tuple[list[np.ndarray], list[np.ndarray]]:
+def _gain_frames(
+    scenes: Sequence[str | os.PathLike], rendered: int, seed: int, progress: bool
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Training and validation frames, ``(H, W)`` float32 in [0, 1]: the frames of the real
     scenes (every :data:`_GAIN_VAL_EVERY`-th held out) and of ``rendered`` rendered scenes
     (the last one held out when there are two or more)."""
@@ -327,8 +346,12 @@ def _output_fidelity(teacher: GainNormalizer, student: GainNormalizer, frames: l
             count += d.numel()
             worst = max(worst, float(d.max()))
             p99.append(float(torch.quantile(d.flatten()[:: max(1, d.numel() // 100000)], 0.99)))
-    return {"output_rmse": (squared / count) ** 0.5, "output_rms_teacher": (total / count) ** 0.5,
-            "output_max_abs_error": worst, "output_p99_abs_error": float(np.mean(p99))}
+    return {
+        "output_rmse": (squared / count) ** 0.5,
+        "output_rms_teacher": (total / count) ** 0.5,
+        "output_max_abs_error": worst,
+        "output_p99_abs_error": float(np.mean(p99)),
+    }
 
 
 def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) -> tuple[GainNormalizer, dict[str, Any]]:
@@ -361,12 +384,19 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
     start = time.perf_counter()
     train_frames, val_frames = _gain_frames(scenes, rendered, seed, progress)
     if not val_frames:
-        raise DatasetError(f"no validation frames: a scene needs {_GAIN_VAL_EVERY} frames or more, or use 2 rendered scenes or more")
+        raise DatasetError(
+            f"no validation frames: a scene needs {_GAIN_VAL_EVERY} frames or more, or use 2 rendered scenes or more"
+        )
     base = [_grid_sample(teacher_net, f) for f in train_frames]
     val_samples = [_grid_sample(teacher_net, f) for f in val_frames]
     prepared = time.perf_counter() - start
 
-    config = {**teacher_net.config, "channels": int(channels), "dilations": [int(d) for d in dilations], "learn_scales": False}
+    config = {
+        **teacher_net.config,
+        "channels": int(channels),
+        "dilations": [int(d) for d in dilations],
+        "learn_scales": False,
+    }
     student = GainNormalizer(**config)
     with torch.no_grad():  # the teacher's fixed steps: tau and the divisive floor's scale
         student.log_tau.copy_(teacher_net.log_tau)
@@ -395,15 +425,23 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
         bar.set_postfix(val_maps_error=f"{val_error():.2e}")
     validation = {"maps_relative_error": val_error(), **_output_fidelity(teacher_net, student, val_frames)}
     record = {
-        "teacher": {"file": teacher_path.name, "sha256": hashlib.sha256(teacher_path.read_bytes()).hexdigest(),
-                    "description": teacher_weights.meta.get("description", "")},
-        "settings": {**asdict(cfg), "scenes": [Path(s).name for s in scenes],
-                     "frames": {"train": len(train_frames), "validation": len(val_frames)}},
+        "teacher": {
+            "file": teacher_path.name,
+            "sha256": hashlib.sha256(teacher_path.read_bytes()).hexdigest(),
+            "description": teacher_weights.meta.get("description", ""),
+        },
+        "settings": {
+            **asdict(cfg),
+            "scenes": [Path(s).name for s in scenes],
+            "frames": {"train": len(train_frames), "validation": len(val_frames)},
+        },
         "seconds": {"data_and_targets": round(prepared, 1), "total": round(time.perf_counter() - start, 1)},
         "validation": validation,
         "validation_initial": initial,
-        "parameters": {"student": sum(p.numel() for p in student.parameters()),
-                       "teacher": sum(p.numel() for p in teacher_net.parameters())},
+        "parameters": {
+            "student": sum(p.numel() for p in student.parameters()),
+            "teacher": sum(p.numel() for p in teacher_net.parameters()),
+        },
     }
     return student, record
 
@@ -415,9 +453,12 @@ def _main_gain(out_path: Path, cfg: GainDistillConfig, command: str, conf: str |
     student, record = distill_gain(cfg, progress)
     trained = bool(load_normalizer_file(teacher_file(cfg.teacher)).meta["trained"])
     meta = student.file_meta(
-        trained, teacher=record["teacher"],
-        distillation={"conf": conf, **{k: record[k] for k in ("settings", "seconds", "validation",
-                                                              "validation_initial", "parameters")}},
+        trained,
+        teacher=record["teacher"],
+        distillation={
+            "conf": conf,
+            **{k: record[k] for k in ("settings", "seconds", "validation", "validation_initial", "parameters")},
+        },
         description=f"gain Normalizer distilled from {record['teacher']['file']} "
         f"({record['settings']['channels']} channels, dilations {record['settings']['dilations']})",
     )
@@ -433,12 +474,12 @@ def _write_gain_card(path: Path, name: str, record: dict[str, Any], trained: boo
     text = f"""# Model card: `{name}` (the gain Normalizer's lite variant)
 
 `alcn_cv.createALCN(model="gain-lite")`. A smaller gain-adaptive Normalizer (`alcn_cv.nets.gain.GainNormalizer`,
-{s['channels']} channels, dilations {s['dilations']}; {record['parameters']['student']} parameters against the
-teacher's {record['parameters']['teacher']}) distilled from `{teacher['file']}` (SHA-256 `{teacher['sha256'][:16]}...`:
-{teacher['description'] or 'the gain Normalizer'}). Same features, kernels, divisive step and `tau` as the teacher
+{s["channels"]} channels, dilations {s["dilations"]}; {record["parameters"]["student"]} parameters against the
+teacher's {record["parameters"]["teacher"]}) distilled from `{teacher["file"]}` (SHA-256 `{teacher["sha256"][:16]}...`:
+{teacher["description"] or "the gain Normalizer"}). Same features, kernels, divisive step and `tau` as the teacher
 (copied, fixed); only the network on the grid is smaller. It is only as good as the teacher.
 {"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}
-`{Path(name).with_suffix('.onnx').name}` is the same network for the torch-free `backend="opencv"`
+`{Path(name).with_suffix(".onnx").name}` is the same network for the torch-free `backend="opencv"`
 (written by the same command through `alcn export`). ALCN warns when the installed teacher differs from this one.
 **Distilled on frames of the "Webcam" data set (Verdie, Yi, Fua & Lepetit, TILDE, CVPR 2015; AMOS, Jacobs,
 Roman & Pless, CVPR 2007), like its teacher: these weights are for academic research only, as those photographs are.**
@@ -446,27 +487,28 @@ Roman & Pless, CVPR 2007), like its teacher: these weights are for academic rese
 ## How it was made
 
 - Command: `{command}`
-- Data: the frames of the training scenes {', '.join(s['scenes'])} (`../shared/data/webcam`; every
+- Data: the frames of the training scenes {", ".join(s["scenes"])} (`../shared/data/webcam`; every
   {_GAIN_VAL_EVERY}th frame held out for validation; `mexico` and the psm objects, the test set, never read) and
-  {s['rendered']} rendered registered scenes ({_RENDERED_SIZE}x{_RENDERED_SIZE}, {_RENDERED_FRAMES} lights each,
-  `alcn_cv.data.relief_scenes.render_scene`, the last held out): {s['frames']['train']} training and
-  {s['frames']['validation']} validation frames, grayscale; each training frame also under another light's
+  {s["rendered"]} rendered registered scenes ({_RENDERED_SIZE}x{_RENDERED_SIZE}, {_RENDERED_FRAMES} lights each,
+  `alcn_cv.data.relief_scenes.render_scene`, the last held out): {s["frames"]["train"]} training and
+  {s["frames"]["validation"]} validation frames, grayscale; each training frame also under another light's
   strength every epoch (a gain of 0.3 to 1.5, clipped, mirrored half of the time).
 - Targets: the teacher's maps `F_k = exp(g) w_k` on its stride-8 grid (the features are the same, computed
   once). Loss: their squared error relative to the teacher's mean squared map on the frame, after the common
-  scale that fits them best (the divisive step that follows cancels a scale of the whole frame's maps). Adam, lr {s['lr']}, cosine schedule, {s['epochs']} epochs of one frame
-  per step, seed {s['seed']}.
-- Time: {record['seconds']['total']} s ({record['seconds']['data_and_targets']} s reading, rendering and teacher
+  scale that fits them best (the divisive step that follows cancels a scale of the whole frame's maps).
+  Adam, lr {s["lr"]}, cosine schedule, {s["epochs"]} epochs of one frame per step, seed {s["seed"]}.
+- Time: {record["seconds"]["total"]} s ({record["seconds"]["data_and_targets"]} s reading, rendering and teacher
   targets) on {describe_machine()}.
 
 ## Fidelity to the teacher (validation frames, the whole normalization, output in (-1, 1))
 
 | measure | this student | its start (DoG + divisive, untrained) |
 |---|---|---|
-| relative squared error of the maps on the grid (after the best common scale) | {v['maps_relative_error']:.3g} | {start['maps_relative_error']:.3g} |
-| RMS difference from the teacher's output | {v['output_rmse']:.3g} | {start['output_rmse']:.3g} |
-| 99th percentile of the absolute difference | {v['output_p99_abs_error']:.3g} | {start['output_p99_abs_error']:.3g} |
-| largest absolute difference | {v['output_max_abs_error']:.3g} | {start['output_max_abs_error']:.3g} |
-| RMS of the teacher's output | {v['output_rms_teacher']:.3g} | |
+| maps on the grid, relative squared error (best common scale) | {v["maps_relative_error"]:.3g} |\
+ {start["maps_relative_error"]:.3g} |
+| RMS difference from the teacher's output | {v["output_rmse"]:.3g} | {start["output_rmse"]:.3g} |
+| 99th percentile of the absolute difference | {v["output_p99_abs_error"]:.3g} | {start["output_p99_abs_error"]:.3g} |
+| largest absolute difference | {v["output_max_abs_error"]:.3g} | {start["output_max_abs_error"]:.3g} |
+| RMS of the teacher's output | {v["output_rms_teacher"]:.3g} | |
 """
     atomic_write(path, text)

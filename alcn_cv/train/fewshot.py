@@ -67,8 +67,14 @@ def make_fewshot_data(setup: FewShotSetup) -> tuple[np.ndarray, np.ndarray, Phos
         ``(train windows (n, 64, 64) uint8, train labels (n,), test PhosBatch)``.
     """
     rng = np.random.default_rng(setup.seed)
-    refs = render_windows(setup.n_objects * setup.real_images * 8 + 64, setup.seed + 17, n_objects=setup.n_objects,
-                          object_seed=setup.object_seed, lighting="ambient", background_fraction=0.0)
+    refs = render_windows(
+        setup.n_objects * setup.real_images * 8 + 64,
+        setup.seed + 17,
+        n_objects=setup.n_objects,
+        object_seed=setup.object_seed,
+        lighting="ambient",
+        background_fraction=0.0,
+    )
     images, boxes, windows, labels = [], [], [], []
     for k in range(1, setup.n_objects + 1):
         idx = np.flatnonzero(refs.labels == k)[: setup.real_images]
@@ -83,21 +89,33 @@ def make_fewshot_data(setup: FewShotSetup) -> tuple[np.ndarray, np.ndarray, Phos
     n_pos = sum(len(w) for w in windows)
     windows.append(sample_negatives(images, boxes, n_pos, rng, extent=None))
     labels.append(np.zeros(n_pos, np.int64))
-    test = render_windows(setup.n_test, setup.seed + 29, n_objects=setup.n_objects, object_seed=setup.object_seed,
-                          lighting=list(setup.test_lighting), background_fraction=0.5)
+    test = render_windows(
+        setup.n_test,
+        setup.seed + 29,
+        n_objects=setup.n_objects,
+        object_seed=setup.object_seed,
+        lighting=list(setup.test_lighting),
+        background_fraction=0.5,
+    )
     return np.concatenate(windows), np.concatenate(labels), test
 
 
 @torch.no_grad()
 def _apply(method: Method, windows: np.ndarray) -> np.ndarray:
-    out = [method(torch.from_numpy(windows[i : i + 512]).unsqueeze(1).float() / 255.0)
-           for i in range(0, len(windows), 512)]
+    out = [
+        method(torch.from_numpy(windows[i : i + 512]).unsqueeze(1).float() / 255.0) for i in range(0, len(windows), 512)
+    ]
     return torch.cat(out)[:, 0].numpy().astype(np.float32)
 
 
 def score_inputs(
-    name: str, train_inputs: np.ndarray, train_labels: np.ndarray, test_inputs: np.ndarray, test: PhosBatch,
-    setup: FewShotSetup, progress: bool = False,
+    name: str,
+    train_inputs: np.ndarray,
+    train_labels: np.ndarray,
+    test_inputs: np.ndarray,
+    test: PhosBatch,
+    setup: FewShotSetup,
+    progress: bool = False,
 ) -> dict:
     """Train a fresh detector on one method's detector inputs and test it (steps 3 and 4 above).
 
@@ -116,8 +134,16 @@ def score_inputs(
     Returns:
         ``{"accuracy", "auc", "by_family": {family: {"accuracy", "auc"}}}``.
     """
-    net = train_detector(train_inputs, train_labels, setup.n_objects + 1, epochs=setup.epochs,
-                         batch_size=setup.batch_size, lr=setup.lr, seed=setup.seed, progress=progress)
+    net = train_detector(
+        train_inputs,
+        train_labels,
+        setup.n_objects + 1,
+        epochs=setup.epochs,
+        batch_size=setup.batch_size,
+        lr=setup.lr,
+        seed=setup.seed,
+        progress=progress,
+    )
     x = torch.from_numpy(np.ascontiguousarray(test_inputs, dtype=np.float32)).unsqueeze(1)
     with torch.no_grad():
         prob = torch.cat([torch.softmax(net(x[i : i + 512]), 1) for i in range(0, len(x), 512)]).numpy()
@@ -126,10 +152,17 @@ def score_inputs(
     entry = {"accuracy": float(correct.mean()), "auc": auc(score, test.labels > 0), "by_family": {}}
     for f in np.unique(test.light_ids):
         m = test.light_ids == f
-        entry["by_family"][test.light_families[f]] = {"accuracy": float(correct[m].mean()),
-                                                     "auc": auc(score[m], test.labels[m] > 0)}
-    logger.info("few-shot %s: accuracy %.4f, AUC %.4f (%s)", name, entry["accuracy"], entry["auc"],
-                ", ".join(f"{k} {v['auc']:.3f}" for k, v in entry["by_family"].items()))
+        entry["by_family"][test.light_families[f]] = {
+            "accuracy": float(correct[m].mean()),
+            "auc": auc(score[m], test.labels[m] > 0),
+        }
+    logger.info(
+        "few-shot %s: accuracy %.4f, AUC %.4f (%s)",
+        name,
+        entry["accuracy"],
+        entry["auc"],
+        ", ".join(f"{k} {v['auc']:.3f}" for k, v in entry["by_family"].items()),
+    )
     return entry
 
 
@@ -157,16 +190,18 @@ def fewshot_validation(
     """
     setup = setup or FewShotSetup()
     train_x, train_y, test = data if data is not None else make_fewshot_data(setup)
-    return {name: score_inputs(name, _apply(method, train_x), train_y, _apply(method, test.windows), test, setup, progress)
-            for name, method in methods.items()}
+    return {
+        name: score_inputs(name, _apply(method, train_x), train_y, _apply(method, test.windows), test, setup, progress)
+        for name, method in methods.items()
+    }
 
 
-def standard_methods(model: JointModel | None, dog_pairs: Sequence[Sequence[float]], num_kernels: int, step: float,
-                     policy: str) -> dict[str, Method]:
+def standard_methods(
+    model: JointModel | None, dog_pairs: Sequence[Sequence[float]], num_kernels: int, step: float, policy: str
+) -> dict[str, Method]:
     """The trained model's normalization (``"alcn"``), DoGs ``"dog a/b"`` and ``"none"``, all under ``policy``."""
     finish = (lambda z: standardize_windows(z, STANDARDIZE_EPS)) if policy == "standardize" else (lambda z: z)
-    mixture = model.mixture if model is not None else CentreMixture(
-        tuple((i + 1) * step for i in range(num_kernels)))
+    mixture = model.mixture if model is not None else CentreMixture(tuple((i + 1) * step for i in range(num_kernels)))
     methods: dict[str, Method] = {}
     if model is not None and model.normalizer is not None:
         methods["alcn"] = model.normalized

@@ -92,8 +92,10 @@ class CentreMixture(nn.Module):
             windows ``(B, 1, H, W)``, maps ``(B, N, H, W)`` -> ``(B, 1, size, size)``
         """
         if windows.shape[-2:] != (self.window, self.window) or maps.shape[-2:] != windows.shape[-2:]:
-            raise InputError(f"windows and maps must be {self.window}x{self.window}, got "
-                             f"{tuple(windows.shape[-2:])} and {tuple(maps.shape[-2:])}")
+            raise InputError(
+                f"windows and maps must be {self.window}x{self.window}, got "
+                f"{tuple(windows.shape[-2:])} and {tuple(maps.shape[-2:])}"
+            )
         return (self.bands @ (maps * windows) @ self.bands.transpose(1, 2)).sum(1, keepdim=True)
 
 
@@ -118,8 +120,12 @@ class JointModel(nn.Module):
         self.normalizer: Normalizer | None = None
         if self.method == "alcn":
             self.normalizer = Normalizer(
-                cfg.num_kernels, tuple(cfg.channels), cfg.hidden, cfg.output_scale,
-                init_weights=dog if cfg.init == "dog" else None, activation=cfg.activation,
+                cfg.num_kernels,
+                tuple(cfg.channels),
+                cfg.hidden,
+                cfg.output_scale,
+                init_weights=dog if cfg.init == "dog" else None,
+                activation=cfg.activation,
             )
         self.register_buffer("fixed_weights", torch.tensor(dog, dtype=torch.float32))
         self.detector = Detector(num_classes, tuple(cfg.detector_channels), cfg.detector_hidden, cfg.detector_dropout)

@@ -44,13 +44,13 @@ from tqdm import tqdm
 
 from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, write_json
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_energy, inverse_divisor
+from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.report import machine
-from alcn_cv.train.models import CentreMixture
 from alcn_cv.train.config import RealLightConfig
+from alcn_cv.train.models import CentreMixture
 from alcn_cv.weight_file import save_normalizer_file
 
 __all__ = [
@@ -129,7 +129,9 @@ def training_scene(scene: Scene, pad: int, patch: int) -> TrainingScene:
 
 def _crops(frame: np.ndarray, centres: np.ndarray, size: int) -> torch.Tensor:
     half = size // 2
-    return torch.from_numpy(np.stack([frame[y - half : y - half + size, x - half : x - half + size] for y, x in centres]))[:, None]
+    return torch.from_numpy(
+        np.stack([frame[y - half : y - half + size, x - half : x - half + size] for y, x in centres])
+    )[:, None]
 
 
 def identification_loss(a: torch.Tensor, b: torch.Tensor, temperature: float) -> torch.Tensor:
@@ -192,7 +194,10 @@ class CentreDenseMixture(nn.Module):
         self.radius = max(kernel_radius(s) for s in sigmas)
         lo = (crop - 2 * size) // 2
         if lo < 0 or lo % stride or (2 * size) % stride or self.radius > size // 2:
-            raise InputError(f"crop {crop}, centre {size} and stride {stride} do not fit: (crop - 2 * size) / 2 and 2 * size must be multiples of the stride, the widest kernel within size / 2")
+            raise InputError(
+                f"crop {crop}, centre {size} and stride {stride} do not fit: (crop - 2 * size) / 2 and 2 * size "
+                "must be multiples of the stride, the widest kernel within size / 2"
+            )
         side = size + 2 * self.radius
         self.first = lo + size // 2 - self.radius  # first pixel of the region around the centre
         self.side, self.size, self.crop = side, size, crop
@@ -248,7 +253,9 @@ def _normalized_centres(
     floor = torch.empty(len(crops), 1, 1, 1, dtype=crops.dtype)
     for rows, sample in frames or [(slice(None), slice(None))]:
         floor[rows] = net.floor_scale * energy[sample].mean()
-    return net.equalize(response[..., margin : margin + patch, margin : margin + patch] * inverse_divisor(energy, floor))
+    return net.equalize(
+        response[..., margin : margin + patch, margin : margin + patch] * inverse_divisor(energy, floor)
+    )
 
 
 def anywhere_locations(scene: TrainingScene, count: int, rng: np.random.Generator) -> np.ndarray:
@@ -259,7 +266,11 @@ def anywhere_locations(scene: TrainingScene, count: int, rng: np.random.Generato
 
 
 def pair_loss(
-    net: GainNormalizer, scene: TrainingScene, frames: tuple[int, int], centres: np.ndarray, cfg: RealLightConfig,
+    net: GainNormalizer,
+    scene: TrainingScene,
+    frames: tuple[int, int],
+    centres: np.ndarray,
+    cfg: RealLightConfig,
     anywhere: np.ndarray | None = None,
 ) -> torch.Tensor:
     """The objective on one pair of frames of a scene: :func:`identification_loss` of the
@@ -279,8 +290,9 @@ def pair_loss(
     return loss
 
 
-def _save_weights(net: GainNormalizer, path: Path, cfg: RealLightConfig, step: int, seconds: float,
-                  record: dict[str, Any]) -> Path:
+def _save_weights(
+    net: GainNormalizer, path: Path, cfg: RealLightConfig, step: int, seconds: float, record: dict[str, Any]
+) -> Path:
     meta = net.file_meta(
         trained=step > 0,
         description="gain Normalizer trained on registered real scenes (identification objective)",
@@ -323,7 +335,9 @@ def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
     torch.manual_seed(cfg.seed)
     net = GainNormalizer(**cfg.net)
     if max(kernel_radius(s) for s in net.sigmas) > cfg.patch // 2:
-        raise InputError(f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2")
+        raise InputError(
+            f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2"
+        )
     scenes = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(scene_dirs(cfg.scenes))]
     rendered = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(cfg.rendered)]
     for scene in scenes + rendered:
@@ -352,7 +366,7 @@ def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
             logger.info("step %d: mean loss %.4f over the last %d steps, %.0f s", step, recent, cfg.save_every, seconds)
             _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds, record)
             state = {"net": net.state_dict(), "opt": opt.state_dict(), "step": step, "config": asdict(cfg)}
-            atomic_write(out / "checkpoint.pt", lambda f: torch.save(state, f))
+            atomic_write(out / "checkpoint.pt", lambda f, state=state: torch.save(state, f))
             write_json(out / "history.json", history)
     seconds = time.perf_counter() - start
     logger.info("trained %d steps in %.0f s", cfg.steps, seconds)

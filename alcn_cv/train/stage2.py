@@ -28,8 +28,15 @@ from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.detector import INPUT, Detector
 
-__all__ = ["STANDARDIZE_EPS", "NonFiniteLossError", "evaluate_detector", "main", "normalize_windows", "object_windows",
-           "train_detector"]
+__all__ = [
+    "STANDARDIZE_EPS",
+    "NonFiniteLossError",
+    "evaluate_detector",
+    "main",
+    "normalize_windows",
+    "object_windows",
+    "train_detector",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -56,10 +63,15 @@ def _check_windows(
         raise InputError(f"{what} windows are empty")
     if not np.isfinite(windows).all():
         raise InputError(f"{what} windows contain NaN or inf")
-    if (not isinstance(labels, np.ndarray) or labels.shape != (len(windows),)
-            or not np.issubdtype(labels.dtype, np.integer)):
-        raise InputError(f"{what} labels must be an integer array of shape ({len(windows)},), got "
-                         f"{getattr(labels, 'dtype', None)} {getattr(labels, 'shape', None)}")
+    if (
+        not isinstance(labels, np.ndarray)
+        or labels.shape != (len(windows),)
+        or not np.issubdtype(labels.dtype, np.integer)
+    ):
+        raise InputError(
+            f"{what} labels must be an integer array of shape ({len(windows)},), got "
+            f"{getattr(labels, 'dtype', None)} {getattr(labels, 'shape', None)}"
+        )
     if labels.min() < 0 or labels.max() >= num_classes:
         raise InputError(f"{what} labels must be in [0, {num_classes - 1}], got [{labels.min()}, {labels.max()}]")
     return torch.from_numpy(windows).unsqueeze(1), torch.from_numpy(labels.astype(np.int64))
@@ -196,8 +208,16 @@ def normalize_windows(windows: np.ndarray, normalization, policy: str = "standar
     if windows.ndim != 3 or windows.shape[1:] != (64, 64) or windows.dtype != np.uint8:
         raise InputError(f"windows must be uint8 (n, 64, 64), got {windows.dtype} {windows.shape}")
     c = (64 - INPUT) // 2
-    out = np.stack([normalization.normalize(w.astype(np.float32) / np.float32(255))[c : c + INPUT, c : c + INPUT]
-                    for w in windows]) if len(windows) else np.zeros((0, INPUT, INPUT), np.float32)
+    out = (
+        np.stack(
+            [
+                normalization.normalize(w.astype(np.float32) / np.float32(255))[c : c + INPUT, c : c + INPUT]
+                for w in windows
+            ]
+        )
+        if len(windows)
+        else np.zeros((0, INPUT, INPUT), np.float32)
+    )
     return standardize_windows(out, STANDARDIZE_EPS) if policy == "standardize" else out.astype(np.float32)
 
 
@@ -294,14 +314,21 @@ def main(
     windows, labels = object_windows(objects, per_image, negatives, extent, seed)
     params: dict = {"weights": weights, "scale": 1.0} if method == "alcn" else {}
     x = normalize_windows(windows, alcn_cv.create(method, **params))
-    logger.info("%d objects, %d windows (%d background), method %s", len(objects), len(x), int((labels == 0).sum()),
-                method)
-    net = train_detector(x, labels, len(objects) + 1, epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
-                         progress=progress)
+    logger.info(
+        "%d objects, %d windows (%d background), method %s", len(objects), len(x), int((labels == 0).sum()), method
+    )
+    net = train_detector(
+        x, labels, len(objects) + 1, epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, progress=progress
+    )
     out = Path(out)
     path = out / "detector.pt"
-    state = {"state_dict": net.state_dict(), "config": net.config, "classes": ["background"] + [n for n, _ in objects],
-             "method": method, "policy": "standardize"}
+    state = {
+        "state_dict": net.state_dict(),
+        "config": net.config,
+        "classes": ["background"] + [n for n, _ in objects],
+        "method": method,
+        "policy": "standardize",
+    }
     atomic_write(path, lambda f: torch.save(state, f))
     write_json(out / "classes.json", state["classes"])
     logger.info("detector written to %s", path)

@@ -37,26 +37,44 @@ def plot_curves(history: list[dict[str, Any]], path: Path) -> None:
 
 def summary_markdown(cfg: TrainConfig, result: TrainResult, machine_start: dict[str, Any]) -> str:
     """A Markdown summary of a run: settings, time, machine, held-out and few-shot validation."""
-    lines = [f"# `alcn train` run: {cfg.model.method}", "",
-             f"- status: {result.status}; {len(result.history)} epoch(s); training "
-             f"{result.history[-1]['seconds'] / 60 if result.history else 0:.1f} min, whole run (data, training, "
-             f"few-shot validation, export) {result.seconds / 60:.1f} min",
-             f"- machine at start: {describe_machine(machine_start)}", f"- machine at end: {describe_machine(machine())}",
-             f"- versions: {versions()}", f"- seed {cfg.seed}; configuration: `config.toml` in this folder", "",
-             "## Held-out lightings (stage 1: the training objects, lighting families never trained on)", "",
-             "| epoch | train acc | held-out acc | " + " | ".join(result.val_by_family) + " |",
-             "|---|---|---|" + "---|" * len(result.val_by_family)]
+    lines = [
+        f"# `alcn train` run: {cfg.model.method}",
+        "",
+        f"- status: {result.status}; {len(result.history)} epoch(s); training "
+        f"{result.history[-1]['seconds'] / 60 if result.history else 0:.1f} min, whole run (data, training, "
+        f"few-shot validation, export) {result.seconds / 60:.1f} min",
+        f"- machine at start: {describe_machine(machine_start)}",
+        f"- machine at end: {describe_machine(machine())}",
+        f"- versions: {versions()}",
+        f"- seed {cfg.seed}; configuration: `config.toml` in this folder",
+        "",
+        "## Held-out lightings (stage 1: the training objects, lighting families never trained on)",
+        "",
+        "| epoch | train acc | held-out acc | " + " | ".join(result.val_by_family) + " |",
+        "|---|---|---|" + "---|" * len(result.val_by_family),
+    ]
     for h in result.history:
-        lines.append(f"| {h['epoch']} | {h['train_acc']:.4f} | {h['val_acc']:.4f} | "
-                     + " | ".join(f"{h['val_by_family'].get(f, float('nan')):.4f}" for f in result.val_by_family)
-                     + " |")
+        lines.append(
+            f"| {h['epoch']} | {h['train_acc']:.4f} | {h['val_acc']:.4f} | "
+            + " | ".join(f"{h['val_by_family'].get(f, float('nan')):.4f}" for f in result.val_by_family)
+            + " |"
+        )
     if result.fewshot:
         families = list(next(iter(result.fewshot.values()))["by_family"])
-        lines += ["", "## Few-shot validation (stage 2: new objects, 1 image under one light; same detector and "
-                  f"input policy `{cfg.model.detector_input}` for every method)", "",
-                  "AUC object vs. background (accuracy over background + objects in brackets)", "",
-                  "| method | all | " + " | ".join(families) + " |", "|---|---|" + "---|" * len(families)]
+        lines += [
+            "",
+            "## Few-shot validation (stage 2: new objects, 1 image under one light; same detector and "
+            f"input policy `{cfg.model.detector_input}` for every method)",
+            "",
+            "AUC object vs. background (accuracy over background + objects in brackets)",
+            "",
+            "| method | all | " + " | ".join(families) + " |",
+            "|---|---|" + "---|" * len(families),
+        ]
         for name, r in result.fewshot.items():
-            lines.append(f"| {name} | {r['auc']:.4f} ({r['accuracy']:.3f}) | "
-                         + " | ".join(f"{r['by_family'][f]['auc']:.4f}" for f in families) + " |")
+            lines.append(
+                f"| {name} | {r['auc']:.4f} ({r['accuracy']:.3f}) | "
+                + " | ".join(f"{r['by_family'][f]['auc']:.4f}" for f in families)
+                + " |"
+            )
     return "\n".join(lines) + "\n"

@@ -35,9 +35,10 @@ import logging
 import math
 import signal
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 import torch
@@ -50,8 +51,13 @@ from alcn_cv.io import atomic_write
 from alcn_cv.nets.device import torch_device
 from alcn_cv.report import machine
 from alcn_cv.train import distributed
-from alcn_cv.train.checkpoint import (TrainState, load_checkpoint, restore_checkpoint, save_checkpoint,
-                                      write_normalizer_file)
+from alcn_cv.train.checkpoint import (
+    TrainState,
+    load_checkpoint,
+    restore_checkpoint,
+    save_checkpoint,
+    write_normalizer_file,
+)
 from alcn_cv.train.config import TrainConfig, dump_toml, load_config
 from alcn_cv.train.fewshot import FewShotSetup, fewshot_validation, standard_methods
 from alcn_cv.train.models import JointModel
@@ -144,8 +150,13 @@ def train(
         result.seconds = time.perf_counter() - start
         if distributed.is_main():
             atomic_write(out / "summary.md", summary_markdown(cfg, result, machine_start))
-        logger.info("%s run %s in %.1f min: held-out validation accuracy %.4f", cfg.model.method, result.status,
-                    result.seconds / 60, result.val_accuracy)
+        logger.info(
+            "%s run %s in %.1f min: held-out validation accuracy %.4f",
+            cfg.model.method,
+            result.status,
+            result.seconds / 60,
+            result.val_accuracy,
+        )
     return result
 
 
@@ -165,19 +176,29 @@ def _prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[dict[str, A
     return ckpt, device
 
 
-def _prepare_data(cfg: TrainConfig, out: Path, device: torch.device,
-                  progress: bool) -> tuple[PhosBatch, PhosBatch, int]:
+def _prepare_data(
+    cfg: TrainConfig, out: Path, device: torch.device, progress: bool
+) -> tuple[PhosBatch, PhosBatch, int]:
     """The training and validation windows and the number of classes."""
     train_set, val_set = load_windows(cfg, out, progress)
     num_classes = check_windows(train_set, val_set)
-    logger.info("%s: %d training windows (%s), %d validation windows (held out: %s), %d classes, device %s, "
-                "%d process(es)", cfg.model.method, len(train_set), ", ".join(cfg.data.train_lighting),
-                len(val_set), ", ".join(cfg.data.val_lighting), num_classes, device, distributed.world_size())
+    logger.info(
+        "%s: %d training windows (%s), %d validation windows (held out: %s), %d classes, device %s, %d process(es)",
+        cfg.model.method,
+        len(train_set),
+        ", ".join(cfg.data.train_lighting),
+        len(val_set),
+        ", ".join(cfg.data.val_lighting),
+        num_classes,
+        device,
+        distributed.world_size(),
+    )
     return train_set, val_set, num_classes
 
 
-def _build_models(cfg: TrainConfig, num_classes: int, device: torch.device, ckpt: dict[str, Any] | None,
-                  start: float, out: Path) -> tuple[JointModel, torch.optim.Optimizer, TrainState]:
+def _build_models(
+    cfg: TrainConfig, num_classes: int, device: torch.device, ckpt: dict[str, Any] | None, start: float, out: Path
+) -> tuple[JointModel, torch.optim.Optimizer, TrainState]:
     """The model (initialised from ``cfg.seed``), its optimizer and the run's state, restored from ``ckpt``."""
     torch.manual_seed(cfg.seed)
     model = JointModel(cfg.model, num_classes).to(device)
@@ -205,17 +226,33 @@ def _shards(cfg: TrainConfig, train_set: PhosBatch) -> _Shards:
         anchor_id = train_set.light_families.index(cfg.data.anchor_lighting)
         anchors = torch.from_numpy(train_set.light_ids == anchor_id)
         if not anchors.any() or anchors.all():
-            raise InputError(f"optim.objective 'meta' needs training windows under the anchor lighting "
-                             f"{cfg.data.anchor_lighting!r} and under others")
-    return _Shards(torch.from_numpy(train_set.windows), torch.from_numpy(train_set.labels), anchors, used,
-                   math.ceil(used // world / cfg.optim.batch_size))
+            raise InputError(
+                f"optim.objective 'meta' needs training windows under the anchor lighting "
+                f"{cfg.data.anchor_lighting!r} and under others"
+            )
+    return _Shards(
+        torch.from_numpy(train_set.windows),
+        torch.from_numpy(train_set.labels),
+        anchors,
+        used,
+        math.ceil(used // world / cfg.optim.batch_size),
+    )
 
 
 # ------------------------------------------------------------------------------- epoch loop
 
 
-def _fit(cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optimizer, state: TrainState,
-         train_set: PhosBatch, val_set: PhosBatch, device: torch.device, out: Path, progress: bool) -> str:
+def _fit(
+    cfg: TrainConfig,
+    model: JointModel,
+    optimizer: torch.optim.Optimizer,
+    state: TrainState,
+    train_set: PhosBatch,
+    val_set: PhosBatch,
+    device: torch.device,
+    out: Path,
+    progress: bool,
+) -> str:
     """Train until ``optim.epochs``, validating and saving a checkpoint after every epoch.
 
     Returns:
@@ -231,8 +268,12 @@ def _fit(cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optimizer, 
                 _end_epoch(cfg, model, optimizer, state, val_set, device, out)
     except KeyboardInterrupt:
         _save(out, cfg, model, optimizer, state, "interrupted")
-        logger.warning("interrupted at epoch %d, step %d: checkpoint saved to %s (continue with --resume)",
-                       state.epoch + 1, state.step_in_epoch, out / _CHECKPOINT)
+        logger.warning(
+            "interrupted at epoch %d, step %d: checkpoint saved to %s (continue with --resume)",
+            state.epoch + 1,
+            state.step_in_epoch,
+            out / _CHECKPOINT,
+        )
         return "interrupted"
     except NonFiniteLossError as exc:
         logger.error("%s", exc)
@@ -240,16 +281,29 @@ def _fit(cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optimizer, 
     return "done"
 
 
-def _train_epoch(cfg: TrainConfig, ddp: torch.nn.Module, optimizer: torch.optim.Optimizer, state: TrainState,
-                 shards: _Shards, device: torch.device, out: Path, progress: bool) -> None:
+def _train_epoch(
+    cfg: TrainConfig,
+    ddp: torch.nn.Module,
+    optimizer: torch.optim.Optimizer,
+    state: TrainState,
+    shards: _Shards,
+    device: torch.device,
+    out: Path,
+    progress: bool,
+) -> None:
     """The remaining optimisation steps of the current epoch, on this process's share of its order."""
     rank, world, batch = distributed.rank(), distributed.world_size(), cfg.optim.batch_size
     steps, epoch, sums = shards.steps_per_epoch, state.epoch, state.sums
     perm, gains = _epoch_plan(cfg, epoch, len(shards.windows))
     mine = perm[: shards.used][rank::world]
     params = [p for p in ddp.parameters() if p.requires_grad]
-    bar = tqdm(total=steps, initial=state.step_in_epoch, desc=f"epoch {epoch + 1}/{cfg.optim.epochs}",
-               disable=not (progress and distributed.is_main()), leave=False)
+    bar = tqdm(
+        total=steps,
+        initial=state.step_in_epoch,
+        desc=f"epoch {epoch + 1}/{cfg.optim.epochs}",
+        disable=not (progress and distributed.is_main()),
+        leave=False,
+    )
     while state.step_in_epoch < steps:
         idx = mine[state.step_in_epoch * batch : (state.step_in_epoch + 1) * batch]
         x = shards.windows[idx].unsqueeze(1).float().div_(255.0).mul_(gains[idx].view(-1, 1, 1, 1))
@@ -262,10 +316,13 @@ def _train_epoch(cfg: TrainConfig, ddp: torch.nn.Module, optimizer: torch.optim.
         loss = F.cross_entropy(logits, y)
         if not torch.isfinite(loss):
             ckpt_path = out / _CHECKPOINT
-            kept = (f"the last good checkpoint is {ckpt_path}" if ckpt_path.is_file()
-                    else "no checkpoint was written yet")
-            raise NonFiniteLossError(f"loss is {loss.item()} at epoch {epoch + 1}, step {state.step_in_epoch + 1}; "
-                                     f"training stopped, {kept} (try a lower optim.lr)")
+            kept = (
+                f"the last good checkpoint is {ckpt_path}" if ckpt_path.is_file() else "no checkpoint was written yet"
+            )
+            raise NonFiniteLossError(
+                f"loss is {loss.item()} at epoch {epoch + 1}, step {state.step_in_epoch + 1}; "
+                f"training stopped, {kept} (try a lower optim.lr)"
+            )
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         if cfg.optim.grad_clip:
@@ -278,23 +335,52 @@ def _train_epoch(cfg: TrainConfig, ddp: torch.nn.Module, optimizer: torch.optim.
         bar.update()
         bar.set_postfix(loss=f"{sums[0] / sums[2]:.3f}", acc=f"{sums[1] / sums[2]:.3f}")
         if state.step_in_epoch % cfg.run.log_every == 0:
-            logger.info("epoch %d step %d/%d: loss %.4f acc %.4f lr %.2e", epoch + 1, state.step_in_epoch,
-                        steps, sums[0] / sums[2], sums[1] / sums[2], cfg.optim.lr * factor)
+            logger.info(
+                "epoch %d step %d/%d: loss %.4f acc %.4f lr %.2e",
+                epoch + 1,
+                state.step_in_epoch,
+                steps,
+                sums[0] / sums[2],
+                sums[1] / sums[2],
+                cfg.optim.lr * factor,
+            )
         _on_step(epoch * steps + state.step_in_epoch)
     bar.close()
 
 
-def _end_epoch(cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optimizer, state: TrainState,
-               val_set: PhosBatch, device: torch.device, out: Path) -> None:
+def _end_epoch(
+    cfg: TrainConfig,
+    model: JointModel,
+    optimizer: torch.optim.Optimizer,
+    state: TrainState,
+    val_set: PhosBatch,
+    device: torch.device,
+    out: Path,
+) -> None:
     """Validate on the held-out lightings, record the epoch, save the checkpoint, history and curves."""
     sums = state.sums
     val_loss, val_acc, by_family = _validate(model, val_set, device)
-    state.history.append({"epoch": state.epoch + 1, "train_loss": sums[0] / sums[2], "train_acc": sums[1] / sums[2],
-                          "val_loss": val_loss, "val_acc": val_acc, "val_by_family": by_family,
-                          "seconds": round(state.elapsed(), 1)})
-    logger.info("epoch %d/%d: train loss %.4f acc %.4f | held-out val loss %.4f acc %.4f (%s)",
-                state.epoch + 1, cfg.optim.epochs, sums[0] / sums[2], sums[1] / sums[2], val_loss, val_acc,
-                ", ".join(f"{k} {v:.3f}" for k, v in by_family.items()))
+    state.history.append(
+        {
+            "epoch": state.epoch + 1,
+            "train_loss": sums[0] / sums[2],
+            "train_acc": sums[1] / sums[2],
+            "val_loss": val_loss,
+            "val_acc": val_acc,
+            "val_by_family": by_family,
+            "seconds": round(state.elapsed(), 1),
+        }
+    )
+    logger.info(
+        "epoch %d/%d: train loss %.4f acc %.4f | held-out val loss %.4f acc %.4f (%s)",
+        state.epoch + 1,
+        cfg.optim.epochs,
+        sums[0] / sums[2],
+        sums[1] / sums[2],
+        val_loss,
+        val_acc,
+        ", ".join(f"{k} {v:.3f}" for k, v in by_family.items()),
+    )
     state.epoch, state.step_in_epoch, state.sums = state.epoch + 1, 0, [0.0, 0, 0]
     _save(out, cfg, model, optimizer, state, "epoch")
     if distributed.is_main():
@@ -302,8 +388,9 @@ def _end_epoch(cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optim
         plot_curves(state.history, out / "curves.png")
 
 
-def _save(out: Path, cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optimizer, state: TrainState,
-          status: str) -> None:
+def _save(
+    out: Path, cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optimizer, state: TrainState, status: str
+) -> None:
     if distributed.is_main():
         save_checkpoint(out / _CHECKPOINT, cfg, model, optimizer, state, status)
 
@@ -343,19 +430,31 @@ def _validate(model: JointModel, val_set: PhosBatch, device: torch.device) -> tu
         loss += float(F.cross_entropy(logits, y[i : i + 512].to(device), reduction="sum"))
         preds.append(logits.argmax(1).cpu())
     correct = (torch.cat(preds) == y).numpy()
-    by_family = {val_set.light_families[f]: float(correct[val_set.light_ids == f].mean())
-                 for f in np.unique(val_set.light_ids)}
+    by_family = {
+        val_set.light_families[f]: float(correct[val_set.light_ids == f].mean()) for f in np.unique(val_set.light_ids)
+    }
     model.train()
     return loss / len(x), float(correct.mean()), by_family
 
 
 def _fewshot(model: JointModel, cfg: TrainConfig, progress: bool) -> dict[str, Any]:
     f = cfg.fewshot
-    setup = FewShotSetup(n_objects=f.n_objects, real_images=f.real_images, per_image=f.per_image, n_test=f.n_test,
-                         test_lighting=tuple(f.test_lighting), epochs=f.epochs, seed=cfg.seed)
+    setup = FewShotSetup(
+        n_objects=f.n_objects,
+        real_images=f.real_images,
+        per_image=f.per_image,
+        n_test=f.n_test,
+        test_lighting=tuple(f.test_lighting),
+        epochs=f.epochs,
+        seed=cfg.seed,
+    )
     methods = standard_methods(model, f.dog, cfg.model.num_kernels, cfg.model.sigma_step, cfg.model.detector_input)
-    logger.info("few-shot validation: %d new objects, %d image(s) each, tested under %s", f.n_objects,
-                f.real_images, ", ".join(f.test_lighting))
+    logger.info(
+        "few-shot validation: %d new objects, %d image(s) each, tested under %s",
+        f.n_objects,
+        f.real_images,
+        ", ".join(f.test_lighting),
+    )
     return fewshot_validation(methods, setup, progress=progress)
 
 

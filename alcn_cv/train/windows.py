@@ -39,10 +39,16 @@ def _render_part(args: tuple) -> PhosBatch:
 
 def _render(n: int, seed: int, lighting: list[str], cfg: TrainConfig, desc: str, progress: bool) -> PhosBatch:
     """Render ``n`` windows in parts of 4096 (part ``p`` seeded by ``[seed, p]``), on ``run.workers`` processes."""
-    kwargs = {"n_objects": cfg.data.n_objects, "object_seed": cfg.data.object_seed, "lighting": lighting,
-              "background_fraction": cfg.data.background_fraction}
-    jobs = [(min(_PART, n - s), int(np.random.SeedSequence([seed, p]).generate_state(1)[0]), kwargs)
-            for p, s in enumerate(range(0, n, _PART))]
+    kwargs = {
+        "n_objects": cfg.data.n_objects,
+        "object_seed": cfg.data.object_seed,
+        "lighting": lighting,
+        "background_fraction": cfg.data.background_fraction,
+    }
+    jobs = [
+        (min(_PART, n - s), int(np.random.SeedSequence([seed, p]).generate_state(1)[0]), kwargs)
+        for p, s in enumerate(range(0, n, _PART))
+    ]
     if cfg.run.workers > 0 and len(jobs) > 1:
         import multiprocessing
 
@@ -58,8 +64,21 @@ def _render(n: int, seed: int, lighting: list[str], cfg: TrainConfig, desc: str,
 def _data_key(cfg: TrainConfig) -> str:
     d = cfg.data
     anchor = [d.anchor_lighting, d.anchor_fraction] if cfg.optim.objective == "meta" else None
-    text = json.dumps([d.n_train, d.n_val, cfg.data_seed, d.n_objects, d.object_seed, d.train_lighting,
-                       d.val_lighting, d.background_fraction, _PART, anchor], sort_keys=True)
+    text = json.dumps(
+        [
+            d.n_train,
+            d.n_val,
+            cfg.data_seed,
+            d.n_objects,
+            d.object_seed,
+            d.train_lighting,
+            d.val_lighting,
+            d.background_fraction,
+            _PART,
+            anchor,
+        ],
+        sort_keys=True,
+    )
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -72,27 +91,44 @@ def load_windows(cfg: TrainConfig, out_dir: Path, progress: bool) -> tuple[PhosB
         with np.load(cache) as z:
             cached = {k: z[k] for k in z.files}
         meta = json.loads(str(cached.pop("meta")))
-        sets = [PhosBatch(*[cached[f"{name}_{k}"] for k in _ARRAYS], n_objects=meta["n_objects"],
-                          object_seed=meta["object_seed"], seed=meta[f"{name}_seed"]) for name in ("train", "val")]
+        sets = [
+            PhosBatch(
+                *[cached[f"{name}_{k}"] for k in _ARRAYS],
+                n_objects=meta["n_objects"],
+                object_seed=meta["object_seed"],
+                seed=meta[f"{name}_seed"],
+            )
+            for name in ("train", "val")
+        ]
         logger.info("windows read from the cache %s", cache.name)
         return train_set or sets[0], val_set or sets[1]
     if train_set is None and cfg.optim.objective == "meta":
         n_anchor = round(cfg.data.n_train * cfg.data.anchor_fraction)
         others = [f for f in cfg.data.train_lighting if f != cfg.data.anchor_lighting]
-        parts = [_render(n_anchor, cfg.data_seed, [cfg.data.anchor_lighting], cfg, "anchor windows", progress),
-                 _render(cfg.data.n_train - n_anchor, cfg.data_seed + 7, others, cfg, "training windows", progress)]
-        train_set = PhosBatch(*[np.concatenate([getattr(p, k) for p in parts]) for k in _ARRAYS],
-                              n_objects=parts[0].n_objects, object_seed=parts[0].object_seed, seed=cfg.data_seed)
+        parts = [
+            _render(n_anchor, cfg.data_seed, [cfg.data.anchor_lighting], cfg, "anchor windows", progress),
+            _render(cfg.data.n_train - n_anchor, cfg.data_seed + 7, others, cfg, "training windows", progress),
+        ]
+        train_set = PhosBatch(
+            *[np.concatenate([getattr(p, k) for p in parts]) for k in _ARRAYS],
+            n_objects=parts[0].n_objects,
+            object_seed=parts[0].object_seed,
+            seed=cfg.data_seed,
+        )
     if train_set is None:
         train_set = _render(cfg.data.n_train, cfg.data_seed, cfg.data.train_lighting, cfg, "training windows", progress)
     if val_set is None:
-        val_set = _render(cfg.data.n_val, cfg.data_seed + 1_000_003, cfg.data.val_lighting, cfg,
-                          "validation windows", progress)
+        val_set = _render(
+            cfg.data.n_val, cfg.data_seed + 1_000_003, cfg.data.val_lighting, cfg, "validation windows", progress
+        )
     if not (cfg.data.path and cfg.data.val_path) and distributed.is_main():
-        arrays = {f"{name}_{k}": getattr(s, k) for name, s in (("train", train_set), ("val", val_set))
-                  for k in _ARRAYS}
-        meta = {"n_objects": train_set.n_objects, "object_seed": train_set.object_seed,
-                "train_seed": train_set.seed, "val_seed": val_set.seed}
+        arrays = {f"{name}_{k}": getattr(s, k) for name, s in (("train", train_set), ("val", val_set)) for k in _ARRAYS}
+        meta = {
+            "n_objects": train_set.n_objects,
+            "object_seed": train_set.object_seed,
+            "train_seed": train_set.seed,
+            "val_seed": val_set.seed,
+        }
         atomic_write(cache, lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
     return train_set, val_set
 
