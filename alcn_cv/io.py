@@ -363,7 +363,7 @@ def open_video_writer(path: str | Path, fps: float, size: tuple[int, int], color
     """A ``cv2.VideoWriter`` for ``path`` (codec from the extension: MJPG for .avi/.mkv, else mp4v)."""
     path = Path(path)
     make_folder(path.parent)
-    fourcc = cv2.VideoWriter_fourcc(*_FOURCC.get(path.suffix.lower(), "mp4v"))
+    fourcc = cv2.VideoWriter.fourcc(*_FOURCC.get(path.suffix.lower(), "mp4v"))
     writer = cv2.VideoWriter(str(path), fourcc, fps, size, color)
     if not writer.isOpened():
         raise OSError(f"cannot write video {path} (unsupported extension or codec)")

@@ -19,6 +19,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -43,6 +44,9 @@ from alcn_cv.runtime import (
     strip_layout,
 )
 from alcn_cv.weight_file import load_normalizer_file
+
+if TYPE_CHECKING:
+    from alcn_cv.nn import TorchRuntime
 
 __all__ = ["ALCN", "DEFAULT_MODEL", "MODELS", "TEACHERS", "createALCN", "pin_default_model"]
 
@@ -132,7 +136,7 @@ class ALCN(Normalization):
         return self.spec.tau
 
     @property
-    def min_size(self) -> int:  # type: ignore[override] -- the window's side depends on the scale
+    def min_size(self) -> int:  # type: ignore[override]  # the window's side depends on the scale
         """The Normalizer's 48-pixel window in input pixels, ``ceil(48 / scale)``; smaller images are mirrored."""
         return math.ceil(WINDOW / self.scale)
 
@@ -208,7 +212,7 @@ class ALCN(Normalization):
         """
         if self.backend != "torch":
             raise InputError(f"apply_batch runs on backend='torch' (device 'cpu' or 'cuda'), not {self.backend!r}")
-        return self.runtime.apply_batch(frames, check_batch(frames, out_dtype), half)
+        return cast("TorchRuntime", self.runtime).apply_batch(frames, check_batch(frames, out_dtype), half)
 
     def __repr__(self) -> str:
         return (
@@ -232,9 +236,8 @@ def _build_runtime(
         net = opencv_network(weights, grid_stride, spec)
         return make_runtime(spec, net, mixture), net
     require("torch", "kornia", what=f"ALCN(backend={backend!r})")
-    from alcn_cv.nets.device import (
-        torch_device,  # deferred: importing alcn_cv must not need torch
-    )
+    # deferred: importing alcn_cv must not need torch
+    from alcn_cv.nets.device import torch_device
     from alcn_cv.nn import ALCN2d, TorchNetwork, TorchRuntime
 
     module = ALCN2d(weights=weights, scale=spec.scale, grid_stride=grid_stride)

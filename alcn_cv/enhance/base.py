@@ -39,7 +39,7 @@ logger = logging.getLogger(__name__)
 #: (:meth:`Normalization._tiling`): the peak memory stays a small multiple of a strip's.
 TILE_PIXELS = 2**24
 #: ``cv2.transform`` matrix of the L channel of a float Lab image, divided by 100: intensities in [0, 1].
-_LIGHTNESS_OF_LAB = np.float32([[0.01, 0.0, 0.0]])
+_LIGHTNESS_OF_LAB = np.array([[0.01, 0.0, 0.0]], np.float32)
 #: The 256 intensities of a uint8 image as :meth:`Normalization.apply`'s float path sees them.
 _UINT8_LEVELS = np.arange(256, dtype=np.uint8).astype(np.float32).reshape(1, 256) * np.float32(
     1.0 / FULL_SCALE[np.dtype(np.uint8)]

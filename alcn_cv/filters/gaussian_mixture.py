@@ -267,17 +267,19 @@ def alcn_filter_grid(image: np.ndarray, grid: np.ndarray, stride: int, sigmas: S
         product = upsample_grid(grid[0], stride, image.shape)
         cv2.multiply(image, product, dst=product)
         # s_k folded into each blur's row kernel: no pass to scale, and the first blur is the output
-        out, blurred = None, None
+        total: np.ndarray | None = None
+        blurred = None
         for scale, sigma in zip(scales, sigmas):
             kernel = _cached_kernel(sigma)
             blurred = cv2.sepFilter2D(
                 product, cv2.CV_32F, kernel * scale, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101
             )
-            if out is None:
-                out, blurred = blurred, None
+            if total is None:
+                total, blurred = blurred, None
             else:
-                cv2.add(out, blurred, dst=out)
-        return out
+                cv2.add(total, blurred, dst=total)
+        assert total is not None  # sigmas is not empty
+        return total
     out: np.ndarray | None = None
     blurred = np.empty(image.shape, np.float32)
     for k, sigma in enumerate(sigmas):
@@ -289,6 +291,7 @@ def alcn_filter_grid(image: np.ndarray, grid: np.ndarray, stride: int, sigmas: S
             continue
         cv2.sepFilter2D(product, cv2.CV_32F, kernel, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
         cv2.add(out, blurred, dst=out)
+    assert out is not None  # sigmas is not empty
     return out
 
 
