@@ -10,7 +10,7 @@ x each normalization).
     python experiments/pose_planar.py                  # both
     python experiments/pose_planar.py --part features  # or: corners
 
-Writes runs/pose_planar/<part>/relight_pose.{md,json,png}; keeps docs/reports/pose_planar_<part>.json.
+Writes runs/pose_planar/<part>/planar_pose.{md,json,png}; keeps docs/reports/pose_planar_<part>.json.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ def main() -> None:
     for part in args.part or PARTS:
         out = RUNS / "pose_planar" / part
         alcn("pose", "planar", "--out", str(out), *PARTS[part])
-        keep(out / "relight_pose.json", f"pose_planar_{part}", drop=("details",))
+        keep(out / "planar_pose.json", f"pose_planar_{part}", drop=("details",))
 
 
 if __name__ == "__main__":

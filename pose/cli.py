@@ -164,7 +164,7 @@ def _planar(args: argparse.Namespace) -> int:
         recipe=_recipe(args),
         command=_command(),
     )
-    print((Path(args.out) / "relight_pose.md").read_text(encoding="utf-8"))
+    print((Path(args.out) / "planar_pose.md").read_text(encoding="utf-8"))
     return 0
 
 
@@ -207,7 +207,7 @@ def _add_planar(sub: argparse._SubParsersAction) -> None:
         "a textured rectangle of the reference frame (median brightness) is the target, its part "
         "model is built from that frame after each normalization (assumed pinhole camera), and its "
         "pose is estimated in every other frame with the box's pipeline (part detector + PoseSolver). "
-        "Truth: the reference pose. Writes OUT/relight_pose.md, .json, .png and OUT/targets.png. "
+        "Truth: the reference pose. Writes OUT/planar_pose.md, .json, .png and OUT/targets.png. "
         "The Webcam frames are for academic research only (cite TILDE and AMOS).",
     )
     r.add_argument("--out", type=Path, required=True, help="report folder")

@@ -384,7 +384,7 @@ def main(
 ) -> dict[str, Any]:
     """The real-light Table 1: per scene of ``data`` (default ``<shared data>/webcam``), detector of
     :data:`DETECTORS` and normalizer, the % of frames whose target pose is correct. Writes
-    ``relight_pose.md``, ``relight_pose.json``, ``relight_pose.png`` and ``targets.png`` (and the
+    ``planar_pose.md``, ``planar_pose.json``, ``planar_pose.png`` and ``targets.png`` (and the
     learned detectors, ``corners_<reference>_<normalizer>.onnx``, trained by ``recipe``, default the
     ``planar`` preset) into ``out_dir``."""
     root = Path(data) if data is not None else shared_root("webcam")
@@ -466,9 +466,9 @@ def main(
         + "\n\n"
         + _details_markdown(details, columns)
     )
-    atomic_write(out_dir / "relight_pose.md", md)
+    atomic_write(out_dir / "planar_pose.md", md)
     write_json(
-        out_dir / "relight_pose.json",
+        out_dir / "planar_pose.json",
         nan_to_none(
             {
                 "command": command,
@@ -493,7 +493,7 @@ def main(
     plot_table(
         table,
         columns + ["mean"],
-        out_dir / "relight_pose.png",
+        out_dir / "planar_pose.png",
         f"Planar target on fixed webcams: correct poses (< {PROJ_PX:g} px)",
     )
     plot_targets(chosen, targets, out_dir / "targets.png")

@@ -131,9 +131,9 @@ def test_planar_on_a_webcam_scene(shared_data, tmp_path):
     row = "none / sift features"
     assert set(result["table"][row]) == {"mexico", "mean"}
     assert 0 <= result["table"][row]["mexico"] <= 100
-    for name in ("relight_pose.md", "relight_pose.json", "relight_pose.png", "targets.png"):
+    for name in ("planar_pose.md", "planar_pose.json", "planar_pose.png", "targets.png"):
         assert (tmp_path / name).is_file()
-    report = json.loads((tmp_path / "relight_pose.json").read_text())
+    report = json.loads((tmp_path / "planar_pose.json").read_text())
     assert report["command"] == "test" and len(report["details"][row]["mexico"]["per_frame"]) == 2
 
 
@@ -145,7 +145,7 @@ def test_planar_command_takes_the_recipe_and_the_normalizations(tmp_path, monkey
     parser = argparse.ArgumentParser()
     add_parser(parser.add_subparsers())
     seen = []
-    report = tmp_path / "relight_pose.md"
+    report = tmp_path / "planar_pose.md"
     monkeypatch.setattr(planar, "main", lambda *a, **kw: seen.append(kw) or report.write_text(""))
     args = parser.parse_args(
         [
