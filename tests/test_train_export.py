@@ -101,18 +101,38 @@ def _webcam_frame(shared_data):
     return cv2.imread(str(path), cv2.IMREAD_GRAYSCALE).astype(np.float32) / 255
 
 
-def test_gain_onnx_takes_the_raw_image(shared_data):
-    """The gain export pads inside its graph (any size, even below its reflections' reach) and
-    equals the torch model on a real frame; its runtime passes the image as it is."""
+def test_gain_onnx_takes_the_cell_moments(shared_data):
+    """The gain export runs on the grid only (the moments computed outside, bit for bit as torch's), at any
+    size (even below its reflections' reach), and equals the torch model on a real frame."""
     net = normalizer_from_file(load_normalizer_file(MODELS["gain"]))
     ocv = OpenCVNormalizer(MODELS["gain"].with_suffix(".onnx"))
-    assert ocv.raw_input and ocv.stride == net.stride == 8
-    assert not OpenCVNormalizer(MODELS["lite"].with_suffix(".onnx")).raw_input
+    assert ocv.moments_input and ocv.stride == net.stride == 8
+    assert not OpenCVNormalizer(MODELS["lite"].with_suffix(".onnx")).moments_input
     rng = np.random.default_rng(2)
     for image in [_webcam_frame(shared_data), *(rng.random(shape, dtype=np.float32) for shape in [(48, 48), (5, 9), (1, 1), (17, 130)])]:
         with torch.no_grad():
             ref = net.dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
-        np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-4, rtol=0)
+        np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-5, rtol=0)
+
+
+def test_cell_moments_are_torch_bit_for_bit():
+    """Flat cells (their deviation is the sums' rounding, amplified by the log) and cells cut by the border."""
+    net = normalizer_from_file(load_normalizer_file(MODELS["gain"]))
+    rng = np.random.default_rng(5)
+    image = rng.random((83, 117), dtype=np.float32)
+    image[10:50, 20:90] = np.float32(200 / 255)
+    for frame in (image, image[:9, :13], image[:1, :3]):
+        with torch.no_grad():
+            ref = net.cell_moments(torch.from_numpy(np.ascontiguousarray(frame))[None, None]).numpy()
+        np.testing.assert_array_equal(opencv_runtime.cell_moments(np.ascontiguousarray(frame), net.stride), ref)
+
+
+def test_gain_export_needs_its_cell(tmp_path):
+    onnx = tmp_path / "gain.onnx"
+    onnx.write_bytes(MODELS["gain"].with_suffix(".onnx").read_bytes())
+    with pytest.raises(WeightFileError, match="cell size"):
+        OpenCVNormalizer(onnx)
+    assert OpenCVNormalizer(onnx, cell=8).stride == 8
 
 
 def test_gain_export_with_a_trained_head(tmp_path):

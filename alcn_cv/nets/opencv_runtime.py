@@ -10,10 +10,10 @@ This module imports neither torch nor :mod:`alcn_cv.nets`.
 for the same weights (to float rounding): the image is padded here by reflect-101
 (``cv2.BORDER_REFLECT_101``) exactly as the torch network pads it, and the grid is upsampled
 bilinearly with the grid points on the pixels ``s*i`` (``align_corners=True``), ``s`` the
-network's output stride (4 for the paper's Normalizer, 8 for the lite and the gain ones). The
-gain Normalizer's export (:mod:`alcn_cv.nets.gain`) takes the image itself and pads inside the
-graph. Both the kind of input and the stride are read from the model by running it on probe
-images: a padded-input graph gives one grid point for a 48-pixel input (its window).
+network's output stride (4 for the paper's Normalizer, 8 for the lite and the gain ones), read
+from the model by running it on probe images. The gain Normalizer's export takes the moments of the
+image's cells (:func:`cell_moments`, computed here, so that ``cv2.dnn`` sees only the grid); its input is
+named ``moments`` (the others' ``image``).
 """
 
 from __future__ import annotations
@@ -26,8 +26,9 @@ import numpy as np
 
 from alcn_cv.checks import check_gray
 from alcn_cv.errors import WeightFileError
+from alcn_cv.weight_file import load_normalizer_file
 
-__all__ = ["DEFAULT_ONNX", "OpenCVNormalizer"]
+__all__ = ["DEFAULT_ONNX", "IMAGE_INPUT", "MOMENTS_INPUT", "OpenCVNormalizer", "cell_moments"]
 
 #: The ONNX model shipped beside the default weight file (the shipped weights, exported).
 DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
@@ -36,6 +37,33 @@ DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normal
 WINDOW = 48
 # Grid points of the probe run that measures the model's output stride.
 _PROBE_POINTS = 3
+#: The input of the paper's and the lite Normalizers' exports: the padded image.
+IMAGE_INPUT = "image"
+#: The input of the gain Normalizer's export: :func:`cell_moments`.
+MOMENTS_INPUT = "moments"
+
+
+def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
+    """:meth:`GainNormalizer.cell_moments <alcn_cv.nets.gain.GainNormalizer.cell_moments>` of an ``(H, W)``
+    float32 image, bit for bit: ``(1, 2, gh, gw)`` float32, the mean of each ``stride``-pixel cell centred on a
+    grid point, of the image and of its square.
+
+    The sums run in torch's order (row by row, left to right): where a cell is flat its standard deviation is
+    the rounding of these sums, which the network's log amplifies.
+    """
+    h, w = image.shape
+    gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
+    before = stride // 2
+    planes = np.empty((2, stride * gh, stride * gw), np.float32)
+    cv2.copyMakeBorder(image, before, stride * gh - h - before, before, stride * gw - w - before,
+                       cv2.BORDER_REFLECT_101, dst=planes[0])
+    cv2.multiply(planes[0], planes[0], dst=planes[1])
+    cells = planes.reshape(2, gh, stride, gw, stride)
+    sums = np.zeros((1, 2, gh, gw), np.float32)
+    for dy in range(stride):
+        for dx in range(stride):
+            np.add(sums[0], cells[:, :, dy, :, dx], out=sums[0])
+    return np.divide(sums, np.float32(stride * stride), out=sums)
 
 
 def _interpolation_matrix(n: int, grid: int, stride: int) -> np.ndarray:
@@ -56,14 +84,16 @@ class OpenCVNormalizer:
     Args:
         onnx_path: the ``.onnx`` file written by :func:`alcn_cv.train.export.export_onnx`;
             default: the model shipped with the package (the shipped weights).
+        cell: the cells' side of a gain Normalizer's export (its weight file's ``config.stride``);
+            default: read from the weight file beside ``onnx_path`` (the same name, ``.npz``).
 
     Raises:
-        WeightFileError: the file is missing or OpenCV cannot read it.
+        WeightFileError: the file is missing or OpenCV cannot read it; a gain export without its cell.
     """
 
     window = WINDOW
 
-    def __init__(self, onnx_path: str | Path | None = None) -> None:
+    def __init__(self, onnx_path: str | Path | None = None, cell: int | None = None) -> None:
         self.path = Path(onnx_path) if onnx_path is not None else DEFAULT_ONNX
         if not self.path.is_file():
             raise WeightFileError(f"ONNX model not found: {self.path} (write one with `alcn export --onnx PATH`)")
@@ -71,22 +101,33 @@ class OpenCVNormalizer:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
             raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}: {str(exc).strip()}") from None
-        #: True when the graph takes the image unpadded (the gain Normalizer's export).
-        self.raw_input = self._grid_points(WINDOW) > 1
-        self.stride = self._output_stride()
+        #: True for the gain Normalizer's export (input :data:`MOMENTS_INPUT`, :func:`cell_moments`).
+        self.moments_input = self._has_input(MOMENTS_INPUT)
+        self.stride = self._cell(cell) if self.moments_input else self._output_stride()
+
+    def _has_input(self, name: str) -> bool:
+        try:
+            self.net.setInput(np.zeros((1, 2, 1, 1), np.float32), name)
+        except cv2.error:
+            return False
+        return True
+
+    def _cell(self, cell: int | None) -> int:
+        if cell is not None:
+            return int(cell)
+        header = self.path.with_suffix(".npz")
+        if not header.is_file():
+            raise WeightFileError(f"{self.path} is a gain Normalizer: give its cell size or put its weight file beside it")
+        return int(load_normalizer_file(header).meta["config"]["stride"])
 
     def _grid_points(self, side: int) -> int:
         self.net.setInput(np.zeros((1, 1, side, side), np.float32))
         return self.net.forward().shape[-1]
 
     def _output_stride(self) -> int:
-        # Padded input: a (48 + 8k)-pixel input gives 1 + 8k / stride grid points for the
-        # strides 1, 2, 4, 8. Raw input: (1 + 48) pixels give 1 + 48 / stride points.
-        if self.raw_input:
-            extent, side = WINDOW, WINDOW + 1
-        else:
-            extent = 8 * (_PROBE_POINTS - 1)
-            side = WINDOW + extent
+        # A (48 + 8k)-pixel padded input gives 1 + 8k / stride grid points for the strides 1, 2, 4, 8.
+        extent = 8 * (_PROBE_POINTS - 1)
+        side = WINDOW + extent
         points = self._grid_points(side)
         if points < 2 or extent % (points - 1):
             raise WeightFileError(f"{self.path}: not a Normalizer export (a {side}-pixel probe gave {points} grid points)")
@@ -104,16 +145,15 @@ class OpenCVNormalizer:
         """
         h, w = check_gray(image).shape
         s = self.stride
-        if self.raw_input:
-            self.net.setInput(np.ascontiguousarray(image, dtype=np.float32)[None, None])
+        if self.moments_input:
+            self.net.setInput(cell_moments(image, s))
         else:
             gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
             half = WINDOW // 2
             padded = cv2.copyMakeBorder(image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w,
                                         cv2.BORDER_REFLECT_101)
             self.net.setInput(padded[None, None])
-        out = self.net.forward()
-        return np.ascontiguousarray(out[0], dtype=np.float32)
+        return self.net.forward()[0]
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
         """``(n, 48, 48)`` float32 windows -> ``(n, N)``: the grid point at each window's centre, which sees
@@ -130,4 +170,4 @@ class OpenCVNormalizer:
         return np.matmul(ay, np.matmul(grid, ax.T))
 
     def __repr__(self) -> str:
-        return f"OpenCVNormalizer({self.path.name!r}, stride={self.stride}, raw_input={self.raw_input})"
+        return f"OpenCVNormalizer({self.path.name!r}, stride={self.stride}, moments_input={self.moments_input})"

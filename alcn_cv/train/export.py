@@ -14,15 +14,19 @@ outside the graph so that the graph has no data-dependent indexing and every ONN
 (``cv2.dnn`` included) runs it.
 
 The gain Normalizer (:class:`~alcn_cv.nets.gain.GainNormalizer`, ``architecture: "gain"``)
-computes its cell statistics from the image itself, so its graph is the whole
-:meth:`~alcn_cv.nets.gain.GainNormalizer.dense_grid` at its own stride ``s`` (8), on the raw
-image at the working scale (1)::
+computes its only full-resolution part, the cell moments, in the runtime
+(:func:`alcn_cv.nets.opencv_runtime.cell_moments`), so that the graph sees only its grid of stride
+``s`` (8): it is :meth:`~alcn_cv.nets.gain.GainNormalizer.features_from_moments` and
+:meth:`~alcn_cv.nets.gain.GainNormalizer.maps_from_features`::
 
-    input  "image":   (B, 1, H, W) float32, intensities in [0, 1]
-    output "weights": (B, N, ceil((H-1)/s)+1, ceil((W-1)/s)+1) float32, the maps F_k
+    input  "moments": (B, 2, gh, gw) float32, GainNormalizer.cell_moments of the image
+    output "weights": (B, N, gh, gw) float32, the maps F_k
 
-The runtime tells the two kinds apart by running them (a 48-pixel input gives one grid point to
-a padded-input graph, several to the gain graph). Both spatial sizes are dynamic.
+with ``gh = ceil((H-1)/s)+1`` (``gw`` the same) for an ``H x W`` image at the working scale (1). Its
+reflect-101 borders are ONNX ``Pad`` nodes (mode ``reflect``), which ``cv2.dnn`` also applies where a
+pad exceeds a small grid (the ONNX standard leaves that case undefined).
+
+The runtime tells the kinds apart by their input's name. Both spatial sizes are dynamic.
 
 The weight file's header (sigmas, working scale, output range, trained) is stored in the ONNX
 model's ``metadata_props`` under the key ``alcn_cv``, so the ``.onnx`` describes itself.
@@ -43,7 +47,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW
-from alcn_cv.nets.opencv_runtime import DEFAULT_ONNX
+from alcn_cv.nets.opencv_runtime import DEFAULT_ONNX, IMAGE_INPUT, MOMENTS_INPUT
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx"]
@@ -56,16 +60,18 @@ METADATA_KEY = "alcn_cv"
 
 
 class _DenseGrid(nn.Module):
-    """The Normalizer's grid of weights as the export's graph (see the module docstring): on a
-    padded image for the paper's and the lite Normalizers, on the image for the gain one."""
+    """The Normalizer's grid of weights as the export's graph (see the module docstring): from a padded
+    image for the paper's and the lite Normalizers, from the cell moments for the gain one."""
 
-    def __init__(self, net: nn.Module, raw_image: bool) -> None:
+    def __init__(self, net: nn.Module, from_moments: bool) -> None:
         super().__init__()
         self.net = net
-        self.raw_image = raw_image
+        self.from_moments = from_moments
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return self.net.dense_grid(image) if self.raw_image else self.net._weights(image)
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.from_moments:
+            return self.net.maps_from_features(self.net.features_from_moments(x))
+        return self.net._weights(x)
 
 
 def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
@@ -87,8 +93,12 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
         raise InputError(f"the ONNX output must end in .onnx, got {out}")
     weight_file = load_normalizer_file(weights)
     net = normalizer_from_file(weight_file).eval()
-    raw_image = weight_file.meta.get("architecture") == "gain"
-    example = torch.rand(1, 1, WINDOW + net.stride * 3, WINDOW + net.stride * 5)
+    from_moments = weight_file.meta.get("architecture") == "gain"
+    if from_moments:  # a grid larger than every pad of the graph (cv2.dnn takes any size)
+        mean = torch.rand(1, 1, WINDOW, WINDOW + 8)
+        example, input_name = torch.cat([mean, mean * mean + 0.01], 1), MOMENTS_INPUT
+    else:
+        example, input_name = torch.rand(1, 1, WINDOW + net.stride * 3, WINDOW + net.stride * 5), IMAGE_INPUT
     buffer = io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():
         # dynamo=False: the TorchScript exporter needs no onnxscript and handles this plain
@@ -96,11 +106,11 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
         warnings.simplefilter("ignore", DeprecationWarning)
         # The shape checks of the Python code are constants of the trace, as they should be.
         warnings.simplefilter("ignore", torch.jit.TracerWarning)
-        # The gain graph's index arithmetic has slices the exporter leaves unfolded (harmless).
+        # The reflect pads' slices (step -1) stay unfolded (harmless).
         warnings.filterwarnings("ignore", message="Constant folding", category=UserWarning)
         torch.onnx.export(
-            _DenseGrid(net, raw_image), (example,), buffer, input_names=["image"], output_names=["weights"],
-            dynamic_axes={"image": {0: "batch", 2: "height", 3: "width"},
+            _DenseGrid(net, from_moments), (example,), buffer, input_names=[input_name], output_names=["weights"],
+            dynamic_axes={input_name: {0: "batch", 2: "height", 3: "width"},
                           "weights": {0: "batch", 2: "grid_height", 3: "grid_width"}},
             opset_version=OPSET, dynamo=False,
         )
