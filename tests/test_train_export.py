@@ -43,6 +43,8 @@ def _images(shared_data, n=3):
 
 def test_window_matches_the_network():
     assert opencv_runtime.WINDOW == Normalizer.window == LiteNormalizer.window
+    first = LiteNormalizer().features[0]
+    assert first.kernel_size == first.stride == (opencv_runtime.BLOCK,) * 2
 
 
 def test_lite_normalizer_exports_and_runs_in_opencv(tmp_path):
@@ -106,8 +108,9 @@ def test_gain_onnx_takes_the_cell_moments(shared_data):
     size (even below its reflections' reach), and equals the torch model on a real frame."""
     net = normalizer_from_file(load_normalizer_file(MODELS["gain"]))
     ocv = OpenCVNormalizer(MODELS["gain"].with_suffix(".onnx"))
-    assert ocv.moments_input and ocv.stride == net.stride == 8
-    assert not OpenCVNormalizer(MODELS["lite"].with_suffix(".onnx")).moments_input
+    assert ocv.input == opencv_runtime.MOMENTS_INPUT and ocv.stride == net.stride == 8
+    assert OpenCVNormalizer(MODELS["lite"].with_suffix(".onnx")).input == opencv_runtime.BLOCKS_INPUT
+    assert OpenCVNormalizer(MODELS["paper"].with_suffix(".onnx")).input == opencv_runtime.IMAGE_INPUT
     rng = np.random.default_rng(2)
     for image in [_webcam_frame(shared_data), *(rng.random(shape, dtype=np.float32) for shape in [(48, 48), (5, 9), (1, 1), (17, 130)])]:
         with torch.no_grad():
@@ -206,3 +209,12 @@ def test_bad_files_and_inputs(tmp_path, random_weights):
         ocv.dense_grid(np.zeros((20, 20), np.uint8))
     with pytest.raises(InputError, match="HxW"):
         ocv.dense_grid(np.zeros((20, 20, 3), np.float32))
+
+
+def test_image_blocks_are_space_to_depth():
+    padded = np.arange(8 * 12, dtype=np.float32).reshape(8, 12)
+    blocks = opencv_runtime.image_blocks(padded)
+    b = opencv_runtime.BLOCK
+    assert blocks.shape == (1, b * b, 8 // b, 12 // b)
+    for y, x, i, j in [(0, 0, 0, 0), (1, 2, 1, 0), (3, 3, 1, 2), (2, 1, 0, 1)]:
+        assert blocks[0, b * y + x, i, j] == padded[b * i + y, b * j + x]

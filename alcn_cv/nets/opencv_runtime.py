@@ -12,8 +12,10 @@ for the same weights (to float rounding): the image is padded here by reflect-10
 bilinearly with the grid points on the pixels ``s*i`` (``align_corners=True``), ``s`` the
 network's output stride (4 for the paper's Normalizer, 8 for the lite and the gain ones), read
 from the model by running it on probe images. The gain Normalizer's export takes the moments of the
-image's cells (:func:`cell_moments`, computed here, so that ``cv2.dnn`` sees only the grid); its input is
-named ``moments`` (the others' ``image``).
+image's cells (:func:`cell_moments`, computed here, so that ``cv2.dnn`` sees only the grid) and the lite
+Normalizer's the padded image cut into 4x4 blocks (:func:`image_blocks`: its first convolution, 4x4 with stride
+4, becomes a 1x1 one, which ``cv2.dnn`` runs without spreading a one-channel full-resolution tensor over its
+blocked layout); the input's name says which (:data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT`, :data:`MOMENTS_INPUT`).
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ from alcn_cv.checks import check_gray
 from alcn_cv.errors import WeightFileError
 from alcn_cv.weight_file import load_normalizer_file
 
-__all__ = ["DEFAULT_ONNX", "IMAGE_INPUT", "MOMENTS_INPUT", "OpenCVNormalizer", "cell_moments"]
+__all__ = ["BLOCK", "BLOCKS_INPUT", "DEFAULT_ONNX", "IMAGE_INPUT", "MOMENTS_INPUT", "OpenCVNormalizer", "cell_moments",
+           "image_blocks"]
 
 #: The ONNX model shipped beside the default weight file (the shipped weights, exported).
 DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
@@ -37,10 +40,22 @@ DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normal
 WINDOW = 48
 # Grid points of the probe run that measures the model's output stride.
 _PROBE_POINTS = 3
-#: The input of the paper's and the lite Normalizers' exports: the padded image.
+#: The input of the paper's Normalizer's export: the padded image.
 IMAGE_INPUT = "image"
+#: The input of the lite Normalizer's export: :func:`image_blocks` of the padded image.
+BLOCKS_INPUT = "blocks"
+#: The side of those blocks: the lite Normalizer's first convolution (4x4, stride 4; a test checks they agree).
+BLOCK = 4
 #: The input of the gain Normalizer's export: :func:`cell_moments`.
 MOMENTS_INPUT = "moments"
+
+
+def image_blocks(padded: np.ndarray) -> np.ndarray:
+    """``(H, W)`` float32, both multiples of :data:`BLOCK` -> ``(1, BLOCK**2, H / BLOCK, W / BLOCK)``: channel
+    ``BLOCK * y + x`` holds pixel ``(y, x)`` of each block (space to depth)."""
+    h, w = padded.shape
+    blocks = padded.reshape(h // BLOCK, BLOCK, w // BLOCK, BLOCK).transpose(1, 3, 0, 2)
+    return np.ascontiguousarray(blocks).reshape(1, BLOCK * BLOCK, h // BLOCK, w // BLOCK)
 
 
 def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
@@ -101,9 +116,9 @@ class OpenCVNormalizer:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
             raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}: {str(exc).strip()}") from None
-        #: True for the gain Normalizer's export (input :data:`MOMENTS_INPUT`, :func:`cell_moments`).
-        self.moments_input = self._has_input(MOMENTS_INPUT)
-        self.stride = self._cell(cell) if self.moments_input else self._output_stride()
+        #: The graph's input: :data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT` or :data:`MOMENTS_INPUT`.
+        self.input = next((name for name in (MOMENTS_INPUT, BLOCKS_INPUT) if self._has_input(name)), IMAGE_INPUT)
+        self.stride = self._cell(cell) if self.input == MOMENTS_INPUT else self._output_stride()
 
     def _has_input(self, name: str) -> bool:
         try:
@@ -121,8 +136,11 @@ class OpenCVNormalizer:
         return int(load_normalizer_file(header).meta["config"]["stride"])
 
     def _grid_points(self, side: int) -> int:
-        self.net.setInput(np.zeros((1, 1, side, side), np.float32))
+        self._set_padded(np.zeros((side, side), np.float32))
         return self.net.forward().shape[-1]
+
+    def _set_padded(self, padded: np.ndarray) -> None:
+        self.net.setInput(image_blocks(padded) if self.input == BLOCKS_INPUT else padded[None, None])
 
     def _output_stride(self) -> int:
         # A (48 + 8k)-pixel padded input gives 1 + 8k / stride grid points for the strides 1, 2, 4, 8.
@@ -145,14 +163,14 @@ class OpenCVNormalizer:
         """
         h, w = check_gray(image).shape
         s = self.stride
-        if self.moments_input:
+        if self.input == MOMENTS_INPUT:
             self.net.setInput(cell_moments(image, s))
         else:
             gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
             half = WINDOW // 2
             padded = cv2.copyMakeBorder(image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w,
                                         cv2.BORDER_REFLECT_101)
-            self.net.setInput(padded[None, None])
+            self._set_padded(padded)
         return self.net.forward()[0]
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
@@ -170,4 +188,4 @@ class OpenCVNormalizer:
         return np.matmul(ay, np.matmul(grid, ax.T))
 
     def __repr__(self) -> str:
-        return f"OpenCVNormalizer({self.path.name!r}, stride={self.stride}, moments_input={self.moments_input})"
+        return f"OpenCVNormalizer({self.path.name!r}, stride={self.stride}, input={self.input!r})"

@@ -7,6 +7,10 @@ its grid of stride ``s`` (4 for the paper's Normalizer, 8 for the lite one)::
     input  "image":   (B, 1, s * (gh - 1) + 48, s * (gw - 1) + 48) float32, intensities in [0, 1]
     output "weights": (B, N, gh, gw) float32
 
+The lite Normalizer's graph takes that padded image cut into 4x4 blocks
+(:func:`alcn_cv.nets.opencv_runtime.image_blocks`), its first convolution (4x4, stride 4) turned into a 1x1
+one over the blocks' 16 pixels: input ``"blocks"``, ``(B, 16, (s * (gh - 1) + 48) / 4, (s * (gw - 1) + 48) / 4)``.
+
 Grid point ``(i, j)`` is the window of the *unpadded* image centred on pixel ``(s*i, s*j)``,
 exactly as :meth:`alcn_cv.nets.Normalizer.dense_grid`, which pads by 24 pixels on the top and
 left and ``s * (gh - 1) + 24 - H`` on the bottom (the same on the right); the padding stays
@@ -26,7 +30,7 @@ with ``gh = ceil((H-1)/s)+1`` (``gw`` the same) for an ``H x W`` image at the wo
 reflect-101 borders are ONNX ``Pad`` nodes (mode ``reflect``), which ``cv2.dnn`` also applies where a
 pad exceeds a small grid (the ONNX standard leaves that case undefined).
 
-The runtime tells the kinds apart by their input's name. Both spatial sizes are dynamic.
+The runtime tells the three kinds apart by their input's name. Both spatial sizes are dynamic.
 
 The weight file's header (sigmas, working scale, output range, trained) is stored in the ONNX
 model's ``metadata_props`` under the key ``alcn_cv``, so the ``.onnx`` describes itself.
@@ -34,6 +38,7 @@ model's ``metadata_props`` under the key ``alcn_cv``, so the ``.onnx`` describes
 
 from __future__ import annotations
 
+import copy
 import io
 import json
 import logging
@@ -45,9 +50,9 @@ from torch import nn
 
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write
-from alcn_cv.nets.lite import normalizer_from_file
+from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW
-from alcn_cv.nets.opencv_runtime import DEFAULT_ONNX, IMAGE_INPUT, MOMENTS_INPUT
+from alcn_cv.nets.opencv_runtime import BLOCK, BLOCKS_INPUT, DEFAULT_ONNX, IMAGE_INPUT, MOMENTS_INPUT
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx"]
@@ -97,6 +102,9 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
     if from_moments:  # a grid larger than every pad of the graph (cv2.dnn takes any size)
         mean = torch.rand(1, 1, WINDOW, WINDOW + 8)
         example, input_name = torch.cat([mean, mean * mean + 0.01], 1), MOMENTS_INPUT
+    elif isinstance(net, LiteNormalizer):
+        net = _on_blocks(net)
+        example, input_name = torch.rand(1, BLOCK * BLOCK, (WINDOW + 8 * 3) // BLOCK, (WINDOW + 8 * 5) // BLOCK), BLOCKS_INPUT
     else:
         example, input_name = torch.rand(1, 1, WINDOW + net.stride * 3, WINDOW + net.stride * 5), IMAGE_INPUT
     buffer = io.BytesIO()
@@ -118,6 +126,20 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
     atomic_write(out, data)
     logger.info("Normalizer exported to %s (%d kB)", out, len(data) // 1024)
     return out
+
+
+def _on_blocks(net: LiteNormalizer) -> LiteNormalizer:
+    """A copy of the lite Normalizer on :func:`~alcn_cv.nets.opencv_runtime.image_blocks`: its first
+    convolution (4x4, stride 4) as the same sums over the blocks' channels (1x1)."""
+    first = net.features[0]
+    if first.kernel_size != (BLOCK, BLOCK) or first.stride != (BLOCK, BLOCK):
+        raise InputError(f"the lite Normalizer's first convolution must be {BLOCK}x{BLOCK} with stride {BLOCK}")
+    on_blocks = copy.deepcopy(net)
+    on_blocks.features[0] = nn.Conv2d(BLOCK * BLOCK, first.out_channels, 1)
+    with torch.no_grad():
+        on_blocks.features[0].weight.copy_(first.weight.reshape(first.out_channels, BLOCK * BLOCK, 1, 1))
+        on_blocks.features[0].bias.copy_(first.bias)
+    return on_blocks
 
 
 def with_metadata(model_bytes: bytes, meta: dict) -> bytes:
