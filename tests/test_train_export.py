@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import cv2
 import numpy as np
 import pytest
@@ -11,11 +10,10 @@ import torch
 from alcn_cv.enhance.alcn import ALCN, MODELS
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import alcn_filter
-from alcn_cv.nets import Normalizer
+from alcn_cv.nets import Normalizer, opencv_runtime
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
-from alcn_cv.nets import opencv_runtime
-from alcn_cv.train.export import DEFAULT_ONNX, export_onnx
 from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
+from alcn_cv.train.export import DEFAULT_ONNX, export_onnx
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 
@@ -112,7 +110,8 @@ def test_gain_onnx_takes_the_cell_moments(shared_data):
     assert OpenCVNormalizer(MODELS["lite"].with_suffix(".onnx")).input == opencv_runtime.BLOCKS_INPUT
     assert OpenCVNormalizer(MODELS["paper"].with_suffix(".onnx")).input == opencv_runtime.IMAGE_INPUT
     rng = np.random.default_rng(2)
-    for image in [_webcam_frame(shared_data), *(rng.random(shape, dtype=np.float32) for shape in [(48, 48), (5, 9), (1, 1), (17, 130)])]:
+    shapes = [(48, 48), (5, 9), (1, 1), (17, 130)]
+    for image in [_webcam_frame(shared_data), *(rng.random(shape, dtype=np.float32) for shape in shapes)]:
         with torch.no_grad():
             ref = net.dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
         np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-5, rtol=0)
@@ -133,7 +132,7 @@ def test_cell_moments_are_torch_bit_for_bit():
 def test_gain_export_needs_its_cell(tmp_path):
     onnx = tmp_path / "gain.onnx"
     onnx.write_bytes(MODELS["gain"].with_suffix(".onnx").read_bytes())
-    with pytest.raises(WeightFileError, match="cell size"):
+    with pytest.raises(WeightFileError, match="cell"):
         OpenCVNormalizer(onnx)
     assert OpenCVNormalizer(onnx, cell=8).stride == 8
 

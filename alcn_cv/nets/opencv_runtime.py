@@ -132,7 +132,7 @@ class OpenCVNormalizer:
             return int(cell)
         header = self.path.with_suffix(".npz")
         if not header.is_file():
-            raise WeightFileError(f"{self.path} is a gain Normalizer: give its cell size or put its weight file beside it")
+            raise WeightFileError(f"{self.path} is a gain Normalizer: give its cell or put its weight file beside it")
         return int(load_normalizer_file(header).meta["config"]["stride"])
 
     def _grid_points(self, side: int) -> int:
@@ -148,7 +148,7 @@ class OpenCVNormalizer:
         side = WINDOW + extent
         points = self._grid_points(side)
         if points < 2 or extent % (points - 1):
-            raise WeightFileError(f"{self.path}: not a Normalizer export (a {side}-pixel probe gave {points} grid points)")
+            raise WeightFileError(f"{self.path}: not a Normalizer export ({side}-pixel probe: {points} grid points)")
         return extent // (points - 1)
 
     def dense_grid(self, image: np.ndarray) -> np.ndarray:

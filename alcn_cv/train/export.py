@@ -52,7 +52,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW
-from alcn_cv.nets.opencv_runtime import BLOCK, BLOCKS_INPUT, DEFAULT_ONNX, IMAGE_INPUT, MOMENTS_INPUT
+from alcn_cv.nets.opencv_runtime import BLOCK, BLOCKS_INPUT, DEFAULT_ONNX, IMAGE_INPUT, MOMENTS_INPUT, image_blocks
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx"]
@@ -102,11 +102,11 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
     if from_moments:  # a grid larger than every pad of the graph (cv2.dnn takes any size)
         mean = torch.rand(1, 1, WINDOW, WINDOW + 8)
         example, input_name = torch.cat([mean, mean * mean + 0.01], 1), MOMENTS_INPUT
-    elif isinstance(net, LiteNormalizer):
-        net = _on_blocks(net)
-        example, input_name = torch.rand(1, BLOCK * BLOCK, (WINDOW + 8 * 3) // BLOCK, (WINDOW + 8 * 5) // BLOCK), BLOCKS_INPUT
     else:
         example, input_name = torch.rand(1, 1, WINDOW + net.stride * 3, WINDOW + net.stride * 5), IMAGE_INPUT
+        if isinstance(net, LiteNormalizer):
+            net, input_name = _on_blocks(net), BLOCKS_INPUT
+            example = torch.from_numpy(image_blocks(example[0, 0].numpy()))
     buffer = io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():
         # dynamo=False: the TorchScript exporter needs no onnxscript and handles this plain
