@@ -101,12 +101,13 @@ def _webcam_frame(shared_data):
     return cv2.imread(str(path), cv2.IMREAD_GRAYSCALE).astype(np.float32) / 255
 
 
-def test_gain_onnx_takes_the_cell_moments(shared_data):
-    """The gain export runs on the grid only (the moments computed outside, bit for bit as torch's), at any
-    size (even below its reflections' reach), and equals the torch model on a real frame."""
+def test_gain_onnx_takes_the_features(shared_data):
+    """The gain export runs the grid's convolutions only (the features computed outside, the cell moments bit
+    for bit as torch's), at any size (even below its reflections' reach), and equals the torch model on a real
+    frame; so do the features."""
     net = normalizer_from_file(load_normalizer_file(MODELS["gain"]))
     ocv = OpenCVNormalizer(MODELS["gain"].with_suffix(".onnx"))
-    assert ocv.input == opencv_runtime.MOMENTS_INPUT and ocv.stride == net.stride == 8
+    assert ocv.input == opencv_runtime.FEATURES_INPUT and ocv.stride == net.stride == 8
     assert OpenCVNormalizer(MODELS["lite"].with_suffix(".onnx")).input == opencv_runtime.BLOCKS_INPUT
     assert OpenCVNormalizer(MODELS["paper"].with_suffix(".onnx")).input == opencv_runtime.IMAGE_INPUT
     rng = np.random.default_rng(2)
@@ -115,6 +116,9 @@ def test_gain_onnx_takes_the_cell_moments(shared_data):
         with torch.no_grad():
             ref = net.dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
         np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-5, rtol=0)
+        with torch.no_grad():
+            features = net.features(torch.from_numpy(image)[None, None]).numpy()
+        np.testing.assert_allclose(ocv.features(image), features, atol=1e-5, rtol=0)
 
 
 def test_cell_moments_are_torch_bit_for_bit():
@@ -129,12 +133,13 @@ def test_cell_moments_are_torch_bit_for_bit():
         np.testing.assert_array_equal(opencv_runtime.cell_moments(np.ascontiguousarray(frame), net.stride), ref)
 
 
-def test_gain_export_needs_its_cell(tmp_path):
+def test_gain_export_needs_its_config(tmp_path):
     onnx = tmp_path / "gain.onnx"
     onnx.write_bytes(MODELS["gain"].with_suffix(".onnx").read_bytes())
-    with pytest.raises(WeightFileError, match="cell"):
+    with pytest.raises(WeightFileError, match="config"):
         OpenCVNormalizer(onnx)
-    assert OpenCVNormalizer(onnx, cell=8).stride == 8
+    config = load_normalizer_file(MODELS["gain"]).meta["config"]
+    assert OpenCVNormalizer(onnx, config={**config, "stride": 16}).stride == 16
 
 
 def test_gain_export_with_a_trained_head(tmp_path):

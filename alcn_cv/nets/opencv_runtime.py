@@ -11,11 +11,11 @@ for the same weights (to float rounding): the image is padded here by reflect-10
 (``cv2.BORDER_REFLECT_101``) exactly as the torch network pads it, and the grid is upsampled
 bilinearly with the grid points on the pixels ``s*i`` (``align_corners=True``), ``s`` the
 network's output stride (4 for the paper's Normalizer, 8 for the lite and the gain ones), read
-from the model by running it on probe images. The gain Normalizer's export takes the moments of the
-image's cells (:func:`cell_moments`, computed here, so that ``cv2.dnn`` sees only the grid) and the lite
+from the model by running it on probe images. The gain Normalizer's export takes its features on the grid
+(:class:`GainFeatures`, computed here, so that ``cv2.dnn`` runs only the grid's convolutions) and the lite
 Normalizer's the padded image cut into 4x4 blocks (:func:`image_blocks`: its first convolution, 4x4 with stride
 4, becomes a 1x1 one, which ``cv2.dnn`` runs without spreading a one-channel full-resolution tensor over its
-blocked layout); the input's name says which (:data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT`, :data:`MOMENTS_INPUT`).
+blocked layout); the input's name says which (:data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT`, :data:`FEATURES_INPUT`).
 """
 
 from __future__ import annotations
@@ -28,10 +28,11 @@ import numpy as np
 
 from alcn_cv.checks import check_gray
 from alcn_cv.errors import WeightFileError
+from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 from alcn_cv.weight_file import load_normalizer_file
 
-__all__ = ["BLOCK", "BLOCKS_INPUT", "DEFAULT_ONNX", "IMAGE_INPUT", "MOMENTS_INPUT", "OpenCVNormalizer", "cell_moments",
-           "image_blocks"]
+__all__ = ["BLOCK", "BLOCKS_INPUT", "DEFAULT_ONNX", "FEATURES_INPUT", "IMAGE_INPUT", "GainFeatures", "OpenCVNormalizer",
+           "cell_moments", "image_blocks"]
 
 #: The ONNX model shipped beside the default weight file (the shipped weights, exported).
 DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
@@ -46,8 +47,8 @@ IMAGE_INPUT = "image"
 BLOCKS_INPUT = "blocks"
 #: The side of those blocks: the lite Normalizer's first convolution (4x4, stride 4; a test checks they agree).
 BLOCK = 4
-#: The input of the gain Normalizer's export: :func:`cell_moments`.
-MOMENTS_INPUT = "moments"
+#: The input of the gain Normalizer's export: :class:`GainFeatures`.
+FEATURES_INPUT = "features"
 
 
 def image_blocks(padded: np.ndarray) -> np.ndarray:
@@ -93,22 +94,50 @@ def _interpolation_matrix(n: int, grid: int, stride: int) -> np.ndarray:
     return m.astype(np.float32)
 
 
+class GainFeatures:
+    """:meth:`GainNormalizer.features <alcn_cv.nets.gain.GainNormalizer.features>` in OpenCV and NumPy: an
+    ``(H, W)`` float32 image -> ``(1, 4, gh, gw)`` float32, the log of each cell's mean, of the local and the
+    context means (the grid's reflect-101 Gaussian blurs) and of the cell's standard deviation, plus ``eps``.
+
+    Args:
+        config: the gain Normalizer's ``config`` (its weight file's header): ``stride``, ``mean_sigma``,
+            ``context_sigma``, ``eps``.
+    """
+
+    def __init__(self, config: dict) -> None:
+        self.stride = int(config["stride"])
+        self.eps = np.float32(config["eps"])
+        # The blurs of the grid stand for blurs of the image: sigma in cells = sigma / stride.
+        self.kernels = [gaussian_kernel1d(float(config[key]) / self.stride).astype(np.float32)
+                        for key in ("mean_sigma", "context_sigma")]
+
+    def __call__(self, image: np.ndarray) -> np.ndarray:
+        mean, square = cell_moments(image, self.stride)[0]
+        features = np.empty((1, 4, *mean.shape), np.float32)
+        features[0, 0] = mean
+        for plane, kernel in zip(features[0, 1:3], self.kernels):
+            cv2.sepFilter2D(mean, -1, kernel, kernel, dst=plane, borderType=cv2.BORDER_REFLECT_101)
+        np.sqrt(np.maximum(square - mean * mean, 0), out=features[0, 3])
+        features += self.eps
+        return np.log(features, out=features)
+
+
 class OpenCVNormalizer:
     """The ALCN Normalizer run by ``cv2.dnn`` from its ONNX export.
 
     Args:
         onnx_path: the ``.onnx`` file written by :func:`alcn_cv.train.export.export_onnx`;
             default: the model shipped with the package (the shipped weights).
-        cell: the cells' side of a gain Normalizer's export (its weight file's ``config.stride``);
-            default: read from the weight file beside ``onnx_path`` (the same name, ``.npz``).
+        config: a gain Normalizer's ``config`` (:class:`GainFeatures`); default: read from the weight file
+            beside ``onnx_path`` (the same name, ``.npz``) when the export is a gain Normalizer's.
 
     Raises:
-        WeightFileError: the file is missing or OpenCV cannot read it; a gain export without its cell.
+        WeightFileError: the file is missing or OpenCV cannot read it; a gain export without its config.
     """
 
     window = WINDOW
 
-    def __init__(self, onnx_path: str | Path | None = None, cell: int | None = None) -> None:
+    def __init__(self, onnx_path: str | Path | None = None, config: dict | None = None) -> None:
         self.path = Path(onnx_path) if onnx_path is not None else DEFAULT_ONNX
         if not self.path.is_file():
             raise WeightFileError(f"ONNX model not found: {self.path} (write one with `alcn export --onnx PATH`)")
@@ -116,9 +145,11 @@ class OpenCVNormalizer:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
             raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}: {str(exc).strip()}") from None
-        #: The graph's input: :data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT` or :data:`MOMENTS_INPUT`.
-        self.input = next((name for name in (MOMENTS_INPUT, BLOCKS_INPUT) if self._has_input(name)), IMAGE_INPUT)
-        self.stride = self._cell(cell) if self.input == MOMENTS_INPUT else self._output_stride()
+        #: The graph's input: :data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT` or :data:`FEATURES_INPUT`.
+        self.input = next((name for name in (FEATURES_INPUT, BLOCKS_INPUT) if self._has_input(name)), IMAGE_INPUT)
+        #: The gain Normalizer's features (for :data:`FEATURES_INPUT`), or None.
+        self.features = GainFeatures(self._config(config)) if self.input == FEATURES_INPUT else None
+        self.stride = self._output_stride() if self.features is None else self.features.stride
 
     def _has_input(self, name: str) -> bool:
         try:
@@ -127,13 +158,13 @@ class OpenCVNormalizer:
             return False
         return True
 
-    def _cell(self, cell: int | None) -> int:
-        if cell is not None:
-            return int(cell)
+    def _config(self, config: dict | None) -> dict:
+        if config is not None:
+            return config
         header = self.path.with_suffix(".npz")
         if not header.is_file():
-            raise WeightFileError(f"{self.path} is a gain Normalizer: give its cell or put its weight file beside it")
-        return int(load_normalizer_file(header).meta["config"]["stride"])
+            raise WeightFileError(f"{self.path} is a gain Normalizer: give its config or put its weight file beside it")
+        return load_normalizer_file(header).meta["config"]
 
     def _grid_points(self, side: int) -> int:
         self._set_padded(np.zeros((side, side), np.float32))
@@ -163,8 +194,8 @@ class OpenCVNormalizer:
         """
         h, w = check_gray(image).shape
         s = self.stride
-        if self.input == MOMENTS_INPUT:
-            self.net.setInput(cell_moments(image, s))
+        if self.features is not None:
+            self.net.setInput(self.features(image))
         else:
             gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
             half = WINDOW // 2

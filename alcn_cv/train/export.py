@@ -18,13 +18,13 @@ outside the graph so that the graph has no data-dependent indexing and every ONN
 (``cv2.dnn`` included) runs it.
 
 The gain Normalizer (:class:`~alcn_cv.nets.gain.GainNormalizer`, ``architecture: "gain"``)
-computes its only full-resolution part, the cell moments, in the runtime
-(:func:`alcn_cv.nets.opencv_runtime.cell_moments`), so that the graph sees only its grid of stride
-``s`` (8): it is :meth:`~alcn_cv.nets.gain.GainNormalizer.features_from_moments` and
-:meth:`~alcn_cv.nets.gain.GainNormalizer.maps_from_features`::
+computes its features on its grid of stride ``s`` (8) in the runtime
+(:class:`alcn_cv.nets.opencv_runtime.GainFeatures`: its only full-resolution part, the cell moments, and
+the grid's blurs), so that the graph is :meth:`~alcn_cv.nets.gain.GainNormalizer.maps_from_features`, the
+grid's convolutions::
 
-    input  "moments": (B, 2, gh, gw) float32, GainNormalizer.cell_moments of the image
-    output "weights": (B, N, gh, gw) float32, the maps F_k
+    input  "features": (B, 4, gh, gw) float32, GainNormalizer.features of the image
+    output "weights":  (B, N, gh, gw) float32, the maps F_k
 
 with ``gh = ceil((H-1)/s)+1`` (``gw`` the same) for an ``H x W`` image at the working scale (1). Its
 reflect-101 borders are ONNX ``Pad`` nodes (mode ``reflect``), which ``cv2.dnn`` also applies where a
@@ -52,7 +52,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW
-from alcn_cv.nets.opencv_runtime import BLOCK, BLOCKS_INPUT, DEFAULT_ONNX, IMAGE_INPUT, MOMENTS_INPUT, image_blocks
+from alcn_cv.nets.opencv_runtime import BLOCK, BLOCKS_INPUT, DEFAULT_ONNX, FEATURES_INPUT, IMAGE_INPUT, image_blocks
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx"]
@@ -66,17 +66,15 @@ METADATA_KEY = "alcn_cv"
 
 class _DenseGrid(nn.Module):
     """The Normalizer's grid of weights as the export's graph (see the module docstring): from a padded
-    image for the paper's and the lite Normalizers, from the cell moments for the gain one."""
+    image for the paper's and the lite Normalizers, from the features for the gain one."""
 
-    def __init__(self, net: nn.Module, from_moments: bool) -> None:
+    def __init__(self, net: nn.Module, from_features: bool) -> None:
         super().__init__()
         self.net = net
-        self.from_moments = from_moments
+        self.from_features = from_features
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if self.from_moments:
-            return self.net.maps_from_features(self.net.features_from_moments(x))
-        return self.net._weights(x)
+        return self.net.maps_from_features(x) if self.from_features else self.net._weights(x)
 
 
 def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
@@ -98,10 +96,9 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
         raise InputError(f"the ONNX output must end in .onnx, got {out}")
     weight_file = load_normalizer_file(weights)
     net = normalizer_from_file(weight_file).eval()
-    from_moments = weight_file.meta.get("architecture") == "gain"
-    if from_moments:  # a grid larger than every pad of the graph (cv2.dnn takes any size)
-        mean = torch.rand(1, 1, WINDOW, WINDOW + 8)
-        example, input_name = torch.cat([mean, mean * mean + 0.01], 1), MOMENTS_INPUT
+    from_features = weight_file.meta.get("architecture") == "gain"
+    if from_features:  # a grid larger than every pad of the graph (cv2.dnn takes any size)
+        example, input_name = torch.randn(1, 4, WINDOW, WINDOW + 8), FEATURES_INPUT
     else:
         example, input_name = torch.rand(1, 1, WINDOW + net.stride * 3, WINDOW + net.stride * 5), IMAGE_INPUT
         if isinstance(net, LiteNormalizer):
@@ -117,7 +114,7 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
         # The reflect pads' slices (step -1) stay unfolded (harmless).
         warnings.filterwarnings("ignore", message="Constant folding", category=UserWarning)
         torch.onnx.export(
-            _DenseGrid(net, from_moments), (example,), buffer, input_names=[input_name], output_names=["weights"],
+            _DenseGrid(net, from_features), (example,), buffer, input_names=[input_name], output_names=["weights"],
             dynamic_axes={input_name: {0: "batch", 2: "height", 3: "width"},
                           "weights": {0: "batch", 2: "grid_height", 3: "grid_width"}},
             opset_version=OPSET, dynamo=False,
