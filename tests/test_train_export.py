@@ -48,6 +48,8 @@ def _images(shared_data, n=3):
 
 def test_window_matches_the_network():
     assert opencv_runtime.WINDOW == Normalizer.window == LiteNormalizer.window
+    first = LiteNormalizer().features[0]
+    assert first.kernel_size == first.stride == (opencv_runtime.BLOCK,) * 2
 
 
 def test_lite_normalizer_exports_and_runs_in_opencv(tmp_path):
@@ -114,21 +116,45 @@ def _webcam_frame(shared_data):
     return cv2.imread(str(path), cv2.IMREAD_GRAYSCALE).astype(np.float32) / 255
 
 
-def test_gain_onnx_takes_the_raw_image(shared_data):
-    """The gain export pads inside its graph (any size, even below its reflections' reach) and
-    equals the torch model on a real frame; its runtime passes the image as it is."""
+def test_gain_onnx_takes_the_features(shared_data):
+    """The gain export runs the grid's convolutions only (the features computed outside, the cell moments bit
+    for bit as torch's), at any size (even below its reflections' reach), and equals the torch model on a real
+    frame; so do the features."""
     net = normalizer_from_file(load_normalizer_file(MODELS["gain"]))
     ocv = OpenCVNormalizer(MODELS["gain"].with_suffix(".onnx"))
-    assert ocv.raw_input and ocv.stride == net.stride == 8
-    assert not OpenCVNormalizer(MODELS["lite"].with_suffix(".onnx")).raw_input
+    assert ocv.input == opencv_runtime.FEATURES_INPUT and ocv.stride == net.stride == 8
+    assert OpenCVNormalizer(MODELS["lite"].with_suffix(".onnx")).input == opencv_runtime.BLOCKS_INPUT
+    assert OpenCVNormalizer(MODELS["paper"].with_suffix(".onnx")).input == opencv_runtime.IMAGE_INPUT
     rng = np.random.default_rng(2)
-    for image in [
-        _webcam_frame(shared_data),
-        *(rng.random(shape, dtype=np.float32) for shape in [(48, 48), (5, 9), (1, 1), (17, 130)]),
-    ]:
+    shapes = [(48, 48), (5, 9), (1, 1), (17, 130)]
+    for image in [_webcam_frame(shared_data), *(rng.random(shape, dtype=np.float32) for shape in shapes)]:
         with torch.no_grad():
             ref = net.dense_grid(torch.from_numpy(image)[None, None])[0].numpy()
-        np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-4, rtol=0)
+        np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-5, rtol=0)
+        with torch.no_grad():
+            features = net.features(torch.from_numpy(image)[None, None]).numpy()
+        np.testing.assert_allclose(ocv.features(image), features, atol=1e-5, rtol=0)
+
+
+def test_cell_moments_are_torch_bit_for_bit():
+    """Flat cells (their deviation is the sums' rounding, amplified by the log) and cells cut by the border."""
+    net = normalizer_from_file(load_normalizer_file(MODELS["gain"]))
+    rng = np.random.default_rng(5)
+    image = rng.random((83, 117), dtype=np.float32)
+    image[10:50, 20:90] = np.float32(200 / 255)
+    for frame in (image, image[:9, :13], image[:1, :3]):
+        with torch.no_grad():
+            ref = net.cell_moments(torch.from_numpy(np.ascontiguousarray(frame))[None, None]).numpy()
+        np.testing.assert_array_equal(opencv_runtime.cell_moments(np.ascontiguousarray(frame), net.stride), ref)
+
+
+def test_gain_export_needs_its_config(tmp_path):
+    onnx = tmp_path / "gain.onnx"
+    onnx.write_bytes(MODELS["gain"].with_suffix(".onnx").read_bytes())
+    with pytest.raises(WeightFileError, match="config"):
+        OpenCVNormalizer(onnx)
+    config = load_normalizer_file(MODELS["gain"]).meta["config"]
+    assert OpenCVNormalizer(onnx, config={**config, "stride": 16}).stride == 16
 
 
 def test_gain_export_with_a_trained_head(tmp_path):
@@ -208,3 +234,12 @@ def test_bad_files_and_inputs(tmp_path, random_weights):
         ocv.dense_grid(np.zeros((20, 20), np.uint8))
     with pytest.raises(InputError, match="HxW"):
         ocv.dense_grid(np.zeros((20, 20, 3), np.float32))
+
+
+def test_image_blocks_are_space_to_depth():
+    padded = np.arange(8 * 12, dtype=np.float32).reshape(8, 12)
+    blocks = opencv_runtime.image_blocks(padded)
+    b = opencv_runtime.BLOCK
+    assert blocks.shape == (1, b * b, 8 // b, 12 // b)
+    for y, x, i, j in [(0, 0, 0, 0), (1, 2, 1, 0), (3, 3, 1, 2), (2, 1, 0, 1)]:
+        assert blocks[0, b * y + x, i, j] == padded[b * i + y, b * j + x]

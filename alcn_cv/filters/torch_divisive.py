@@ -50,8 +50,10 @@ def _reflect101_index(x: torch.Tensor, dim: int, before: int, after: int) -> tor
 
 def reflect101_pad_any(x: torch.Tensor, pad: int) -> torch.Tensor:
     """``(B, C, H, W)`` padded by ``pad`` on the last two dims with reflect-101, for any size."""
-    if pad < min(x.shape[-2:]) and not torch.onnx.is_in_onnx_export():
-        return F.pad(x, (pad, pad, pad, pad), mode="reflect")  # torch's reflect is reflect-101; one fast pass
+    if pad < min(x.shape[-2:]) or torch.onnx.is_in_onnx_export():
+        # torch's reflect is reflect-101; one fast pass. Exported as an ONNX Pad, which cv2.dnn (the export's
+        # consumer) reflects repeatedly where the pad exceeds the size, as the index path below.
+        return F.pad(x, (pad, pad, pad, pad), mode="reflect")
     x = x.index_select(-2, _reflect101_index(x, -2, pad, pad))
     return x.index_select(-1, _reflect101_index(x, -1, pad, pad))
 

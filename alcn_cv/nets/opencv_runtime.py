@@ -10,10 +10,12 @@ This module imports neither torch nor :mod:`alcn_cv.nets`.
 for the same weights (to float rounding): the image is padded here by reflect-101
 (``cv2.BORDER_REFLECT_101``) exactly as the torch network pads it, and the grid is upsampled
 bilinearly with the grid points on the pixels ``s*i`` (``align_corners=True``), ``s`` the
-network's output stride (4 for the paper's Normalizer, 8 for the lite and the gain ones). The
-gain Normalizer's export (:mod:`alcn_cv.nets.gain`) takes the image itself and pads inside the
-graph. Both the kind of input and the stride are read from the model by running it on probe
-images: a padded-input graph gives one grid point for a 48-pixel input (its window).
+network's output stride (4 for the paper's Normalizer, 8 for the lite and the gain ones), read
+from the model by running it on probe images. The gain Normalizer's export takes its features on the grid
+(:class:`GainFeatures`, computed here, so that ``cv2.dnn`` runs only the grid's convolutions) and the lite
+Normalizer's the padded image cut into 4x4 blocks (:func:`image_blocks`: its first convolution, 4x4 with stride
+4, becomes a 1x1 one, which ``cv2.dnn`` runs without spreading a one-channel full-resolution tensor over its
+blocked layout); the input's name says which (:data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT`, :data:`FEATURES_INPUT`).
 """
 
 from __future__ import annotations
@@ -26,8 +28,11 @@ import numpy as np
 
 from alcn_cv.checks import check_gray
 from alcn_cv.errors import WeightFileError
+from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
+from alcn_cv.weight_file import load_normalizer_file
 
-__all__ = ["DEFAULT_ONNX", "OpenCVNormalizer"]
+__all__ = ["BLOCK", "BLOCKS_INPUT", "DEFAULT_ONNX", "FEATURES_INPUT", "IMAGE_INPUT", "GainFeatures", "OpenCVNormalizer",
+           "cell_moments", "image_blocks"]
 
 #: The ONNX model shipped beside the default weight file (the shipped weights, exported).
 DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
@@ -36,6 +41,45 @@ DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normal
 WINDOW = 48
 # Grid points of the probe run that measures the model's output stride.
 _PROBE_POINTS = 3
+#: The input of the paper's Normalizer's export: the padded image.
+IMAGE_INPUT = "image"
+#: The input of the lite Normalizer's export: :func:`image_blocks` of the padded image.
+BLOCKS_INPUT = "blocks"
+#: The side of those blocks: the lite Normalizer's first convolution (4x4, stride 4; a test checks they agree).
+BLOCK = 4
+#: The input of the gain Normalizer's export: :class:`GainFeatures`.
+FEATURES_INPUT = "features"
+
+
+def image_blocks(padded: np.ndarray) -> np.ndarray:
+    """``(H, W)`` float32, both multiples of :data:`BLOCK` -> ``(1, BLOCK**2, H / BLOCK, W / BLOCK)``: channel
+    ``BLOCK * y + x`` holds pixel ``(y, x)`` of each block (space to depth)."""
+    h, w = padded.shape
+    blocks = padded.reshape(h // BLOCK, BLOCK, w // BLOCK, BLOCK).transpose(1, 3, 0, 2)
+    return np.ascontiguousarray(blocks).reshape(1, BLOCK * BLOCK, h // BLOCK, w // BLOCK)
+
+
+def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
+    """:meth:`GainNormalizer.cell_moments <alcn_cv.nets.gain.GainNormalizer.cell_moments>` of an ``(H, W)``
+    float32 image, bit for bit: ``(1, 2, gh, gw)`` float32, the mean of each ``stride``-pixel cell centred on a
+    grid point, of the image and of its square.
+
+    The sums run in torch's order (row by row, left to right): where a cell is flat its standard deviation is
+    the rounding of these sums, which the network's log amplifies.
+    """
+    h, w = image.shape
+    gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
+    before = stride // 2
+    planes = np.empty((2, stride * gh, stride * gw), np.float32)
+    cv2.copyMakeBorder(image, before, stride * gh - h - before, before, stride * gw - w - before,
+                       cv2.BORDER_REFLECT_101, dst=planes[0])
+    cv2.multiply(planes[0], planes[0], dst=planes[1])
+    cells = planes.reshape(2, gh, stride, gw, stride)
+    sums = np.zeros((1, 2, gh, gw), np.float32)
+    for dy in range(stride):
+        for dx in range(stride):
+            np.add(sums[0], cells[:, :, dy, :, dx], out=sums[0])
+    return np.divide(sums, np.float32(stride * stride), out=sums)
 
 
 def _interpolation_matrix(n: int, grid: int, stride: int) -> np.ndarray:
@@ -50,20 +94,50 @@ def _interpolation_matrix(n: int, grid: int, stride: int) -> np.ndarray:
     return m.astype(np.float32)
 
 
+class GainFeatures:
+    """:meth:`GainNormalizer.features <alcn_cv.nets.gain.GainNormalizer.features>` in OpenCV and NumPy: an
+    ``(H, W)`` float32 image -> ``(1, 4, gh, gw)`` float32, the log of each cell's mean, of the local and the
+    context means (the grid's reflect-101 Gaussian blurs) and of the cell's standard deviation, plus ``eps``.
+
+    Args:
+        config: the gain Normalizer's ``config`` (its weight file's header): ``stride``, ``mean_sigma``,
+            ``context_sigma``, ``eps``.
+    """
+
+    def __init__(self, config: dict) -> None:
+        self.stride = int(config["stride"])
+        self.eps = np.float32(config["eps"])
+        # The blurs of the grid stand for blurs of the image: sigma in cells = sigma / stride.
+        self.kernels = [gaussian_kernel1d(float(config[key]) / self.stride).astype(np.float32)
+                        for key in ("mean_sigma", "context_sigma")]
+
+    def __call__(self, image: np.ndarray) -> np.ndarray:
+        mean, square = cell_moments(image, self.stride)[0]
+        features = np.empty((1, 4, *mean.shape), np.float32)
+        features[0, 0] = mean
+        for plane, kernel in zip(features[0, 1:3], self.kernels):
+            cv2.sepFilter2D(mean, -1, kernel, kernel, dst=plane, borderType=cv2.BORDER_REFLECT_101)
+        np.sqrt(np.maximum(square - mean * mean, 0), out=features[0, 3])
+        features += self.eps
+        return np.log(features, out=features)
+
+
 class OpenCVNormalizer:
     """The ALCN Normalizer run by ``cv2.dnn`` from its ONNX export.
 
     Args:
         onnx_path: the ``.onnx`` file written by :func:`alcn_cv.train.export.export_onnx`;
             default: the model shipped with the package (the shipped weights).
+        config: a gain Normalizer's ``config`` (:class:`GainFeatures`); default: read from the weight file
+            beside ``onnx_path`` (the same name, ``.npz``) when the export is a gain Normalizer's.
 
     Raises:
-        WeightFileError: the file is missing or OpenCV cannot read it.
+        WeightFileError: the file is missing or OpenCV cannot read it; a gain export without its config.
     """
 
     window = WINDOW
 
-    def __init__(self, onnx_path: str | Path | None = None) -> None:
+    def __init__(self, onnx_path: str | Path | None = None, config: dict | None = None) -> None:
         self.path = Path(onnx_path) if onnx_path is not None else DEFAULT_ONNX
         if not self.path.is_file():
             raise WeightFileError(f"ONNX model not found: {self.path} (write one with `alcn export --onnx PATH`)")
@@ -75,25 +149,41 @@ class OpenCVNormalizer:
                 "(backend='fast') or model='lite'"
             )
             raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}{hint}: {str(exc).strip()}") from None
-        #: True when the graph takes the image unpadded (the gain Normalizer's export).
-        self.raw_input = self._grid_points(WINDOW) > 1
-        self.stride = self._output_stride()
+        #: The graph's input: :data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT` or :data:`FEATURES_INPUT`.
+        self.input = next((name for name in (FEATURES_INPUT, BLOCKS_INPUT) if self._has_input(name)), IMAGE_INPUT)
+        #: The gain Normalizer's features (for :data:`FEATURES_INPUT`), or None.
+        self.features = GainFeatures(self._config(config)) if self.input == FEATURES_INPUT else None
+        self.stride = self._output_stride() if self.features is None else self.features.stride
+
+    def _has_input(self, name: str) -> bool:
+        try:
+            self.net.setInput(np.zeros((1, 2, 1, 1), np.float32), name)
+        except cv2.error:
+            return False
+        return True
+
+    def _config(self, config: dict | None) -> dict:
+        if config is not None:
+            return config
+        header = self.path.with_suffix(".npz")
+        if not header.is_file():
+            raise WeightFileError(f"{self.path} is a gain Normalizer: give its config or put its weight file beside it")
+        return load_normalizer_file(header).meta["config"]
 
     def _grid_points(self, side: int) -> int:
-        self.net.setInput(np.zeros((1, 1, side, side), np.float32))
+        self._set_padded(np.zeros((side, side), np.float32))
         return self.net.forward().shape[-1]
 
+    def _set_padded(self, padded: np.ndarray) -> None:
+        self.net.setInput(image_blocks(padded) if self.input == BLOCKS_INPUT else padded[None, None])
+
     def _output_stride(self) -> int:
-        # Padded input: a (48 + 8k)-pixel input gives 1 + 8k / stride grid points for the
-        # strides 1, 2, 4, 8. Raw input: (1 + 48) pixels give 1 + 48 / stride points.
-        if self.raw_input:
-            extent, side = WINDOW, WINDOW + 1
-        else:
-            extent = 8 * (_PROBE_POINTS - 1)
-            side = WINDOW + extent
+        # A (48 + 8k)-pixel padded input gives 1 + 8k / stride grid points for the strides 1, 2, 4, 8.
+        extent = 8 * (_PROBE_POINTS - 1)
+        side = WINDOW + extent
         points = self._grid_points(side)
         if points < 2 or extent % (points - 1):
-            raise WeightFileError(f"{self.path}: not a Normalizer export (a {side}-pixel probe gave {points} grid points)")
+            raise WeightFileError(f"{self.path}: not a Normalizer export ({side}-pixel probe: {points} grid points)")
         return extent // (points - 1)
 
     def dense_grid(self, image: np.ndarray) -> np.ndarray:
@@ -108,16 +198,15 @@ class OpenCVNormalizer:
         """
         h, w = check_gray(image).shape
         s = self.stride
-        if self.raw_input:
-            self.net.setInput(np.ascontiguousarray(image, dtype=np.float32)[None, None])
+        if self.features is not None:
+            self.net.setInput(self.features(image))
         else:
             gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
             half = WINDOW // 2
             padded = cv2.copyMakeBorder(image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w,
                                         cv2.BORDER_REFLECT_101)
-            self.net.setInput(padded[None, None])
-        out = self.net.forward()
-        return np.ascontiguousarray(out[0], dtype=np.float32)
+            self._set_padded(padded)
+        return self.net.forward()[0]
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
         """``(n, 48, 48)`` float32 windows -> ``(n, N)``: the grid point at each window's centre, which sees
@@ -134,4 +223,4 @@ class OpenCVNormalizer:
         return np.matmul(ay, np.matmul(grid, ax.T))
 
     def __repr__(self) -> str:
-        return f"OpenCVNormalizer({self.path.name!r}, stride={self.stride}, raw_input={self.raw_input})"
+        return f"OpenCVNormalizer({self.path.name!r}, stride={self.stride}, input={self.input!r})"

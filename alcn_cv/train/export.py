@@ -7,6 +7,10 @@ its grid of stride ``s`` (4 for the paper's Normalizer, 8 for the lite one)::
     input  "image":   (B, 1, s * (gh - 1) + 48, s * (gw - 1) + 48) float32, intensities in [0, 1]
     output "weights": (B, N, gh, gw) float32
 
+The lite Normalizer's graph takes that padded image cut into 4x4 blocks
+(:func:`alcn_cv.nets.opencv_runtime.image_blocks`), its first convolution (4x4, stride 4) turned into a 1x1
+one over the blocks' 16 pixels: input ``"blocks"``, ``(B, 16, (s * (gh - 1) + 48) / 4, (s * (gw - 1) + 48) / 4)``.
+
 Grid point ``(i, j)`` is the window of the *unpadded* image centred on pixel ``(s*i, s*j)``,
 exactly as :meth:`alcn_cv.nets.Normalizer.dense_grid`, which pads by 24 pixels on the top and
 left and ``s * (gh - 1) + 24 - H`` on the bottom (the same on the right); the padding stays
@@ -14,15 +18,19 @@ outside the graph so that the graph has no data-dependent indexing and every ONN
 (``cv2.dnn`` included) runs it.
 
 The gain Normalizer (:class:`~alcn_cv.nets.gain.GainNormalizer`, ``architecture: "gain"``)
-computes its cell statistics from the image itself, so its graph is the whole
-:meth:`~alcn_cv.nets.gain.GainNormalizer.dense_grid` at its own stride ``s`` (8), on the raw
-image at the working scale (1)::
+computes its features on its grid of stride ``s`` (8) in the runtime
+(:class:`alcn_cv.nets.opencv_runtime.GainFeatures`: its only full-resolution part, the cell moments, and
+the grid's blurs), so that the graph is :meth:`~alcn_cv.nets.gain.GainNormalizer.maps_from_features`, the
+grid's convolutions::
 
-    input  "image":   (B, 1, H, W) float32, intensities in [0, 1]
-    output "weights": (B, N, ceil((H-1)/s)+1, ceil((W-1)/s)+1) float32, the maps F_k
+    input  "features": (B, 4, gh, gw) float32, GainNormalizer.features of the image
+    output "weights":  (B, N, gh, gw) float32, the maps F_k
 
-The runtime tells the two kinds apart by running them (a 48-pixel input gives one grid point to
-a padded-input graph, several to the gain graph). Both spatial sizes are dynamic.
+with ``gh = ceil((H-1)/s)+1`` (``gw`` the same) for an ``H x W`` image at the working scale (1). Its
+reflect-101 borders are ONNX ``Pad`` nodes (mode ``reflect``), which ``cv2.dnn`` also applies where a
+pad exceeds a small grid (the ONNX standard leaves that case undefined).
+
+The runtime tells the three kinds apart by their input's name. Both spatial sizes are dynamic.
 
 The weight file's header (sigmas, working scale, output range, trained) is stored in the ONNX
 model's ``metadata_props`` under the key ``alcn_cv``, so the ``.onnx`` describes itself.
@@ -30,6 +38,7 @@ model's ``metadata_props`` under the key ``alcn_cv``, so the ``.onnx`` describes
 
 from __future__ import annotations
 
+import copy
 import io
 import json
 import logging
@@ -41,9 +50,9 @@ from torch import nn
 
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write
-from alcn_cv.nets.lite import normalizer_from_file
+from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW
-from alcn_cv.nets.opencv_runtime import DEFAULT_ONNX
+from alcn_cv.nets.opencv_runtime import BLOCK, BLOCKS_INPUT, DEFAULT_ONNX, FEATURES_INPUT, IMAGE_INPUT, image_blocks
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx"]
@@ -56,16 +65,16 @@ METADATA_KEY = "alcn_cv"
 
 
 class _DenseGrid(nn.Module):
-    """The Normalizer's grid of weights as the export's graph (see the module docstring): on a
-    padded image for the paper's and the lite Normalizers, on the image for the gain one."""
+    """The Normalizer's grid of weights as the export's graph (see the module docstring): from a padded
+    image for the paper's and the lite Normalizers, from the features for the gain one."""
 
-    def __init__(self, net: nn.Module, raw_image: bool) -> None:
+    def __init__(self, net: nn.Module, from_features: bool) -> None:
         super().__init__()
         self.net = net
-        self.raw_image = raw_image
+        self.from_features = from_features
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return self.net.dense_grid(image) if self.raw_image else self.net._weights(image)
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net.maps_from_features(x) if self.from_features else self.net._weights(x)
 
 
 def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
@@ -87,8 +96,14 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
         raise InputError(f"the ONNX output must end in .onnx, got {out}")
     weight_file = load_normalizer_file(weights)
     net = normalizer_from_file(weight_file).eval()
-    raw_image = weight_file.meta.get("architecture") == "gain"
-    example = torch.rand(1, 1, WINDOW + net.stride * 3, WINDOW + net.stride * 5)
+    from_features = weight_file.meta.get("architecture") == "gain"
+    if from_features:  # a grid larger than every pad of the graph (cv2.dnn takes any size)
+        example, input_name = torch.randn(1, 4, WINDOW, WINDOW + 8), FEATURES_INPUT
+    else:
+        example, input_name = torch.rand(1, 1, WINDOW + net.stride * 3, WINDOW + net.stride * 5), IMAGE_INPUT
+        if isinstance(net, LiteNormalizer):
+            net, input_name = _on_blocks(net), BLOCKS_INPUT
+            example = torch.from_numpy(image_blocks(example[0, 0].numpy()))
     buffer = io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():
         # dynamo=False: the TorchScript exporter needs no onnxscript and handles this plain
@@ -96,11 +111,11 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
         warnings.simplefilter("ignore", DeprecationWarning)
         # The shape checks of the Python code are constants of the trace, as they should be.
         warnings.simplefilter("ignore", torch.jit.TracerWarning)
-        # The gain graph's index arithmetic has slices the exporter leaves unfolded (harmless).
+        # The reflect pads' slices (step -1) stay unfolded (harmless).
         warnings.filterwarnings("ignore", message="Constant folding", category=UserWarning)
         torch.onnx.export(
-            _DenseGrid(net, raw_image), (example,), buffer, input_names=["image"], output_names=["weights"],
-            dynamic_axes={"image": {0: "batch", 2: "height", 3: "width"},
+            _DenseGrid(net, from_features), (example,), buffer, input_names=[input_name], output_names=["weights"],
+            dynamic_axes={input_name: {0: "batch", 2: "height", 3: "width"},
                           "weights": {0: "batch", 2: "grid_height", 3: "grid_width"}},
             opset_version=OPSET, dynamo=False,
         )
@@ -108,6 +123,20 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
     atomic_write(out, data)
     logger.info("Normalizer exported to %s (%d kB)", out, len(data) // 1024)
     return out
+
+
+def _on_blocks(net: LiteNormalizer) -> LiteNormalizer:
+    """A copy of the lite Normalizer on :func:`~alcn_cv.nets.opencv_runtime.image_blocks`: its first
+    convolution (4x4, stride 4) as the same sums over the blocks' channels (1x1)."""
+    first = net.features[0]
+    if first.kernel_size != (BLOCK, BLOCK) or first.stride != (BLOCK, BLOCK):
+        raise InputError(f"the lite Normalizer's first convolution must be {BLOCK}x{BLOCK} with stride {BLOCK}")
+    on_blocks = copy.deepcopy(net)
+    on_blocks.features[0] = nn.Conv2d(BLOCK * BLOCK, first.out_channels, 1)
+    with torch.no_grad():
+        on_blocks.features[0].weight.copy_(first.weight.reshape(first.out_channels, BLOCK * BLOCK, 1, 1))
+        on_blocks.features[0].bias.copy_(first.bias)
+    return on_blocks
 
 
 def with_metadata(model_bytes: bytes, meta: dict) -> bytes:
