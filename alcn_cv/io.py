@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from itertools import islice
 from pathlib import Path
-from typing import IO, Any, TypeVar
+from typing import IO, Any, TypeVar, cast
 
 import cv2
 import numpy as np
@@ -447,7 +447,9 @@ def map_video(
     """
     src, dst = Path(src), Path(dst)
     writer = None
-    batched = fn if batch_size is not None else lambda frames: [fn(frames[0])]  # type: ignore[arg-type]
+    per_frame = cast(Callable[[np.ndarray], np.ndarray], fn)
+    batched = cast(Callable[[list[np.ndarray]], list[np.ndarray]], fn) if batch_size is not None else (
+        lambda frames: [per_frame(frames[0])])
     with atomic_path(dst) as tmp:
         try:
             with VideoReader(src) as video:

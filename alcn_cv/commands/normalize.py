@@ -122,7 +122,7 @@ def main(
     def normalize_each(frames: list[np.ndarray]) -> list[np.ndarray]:
         return [normalization.apply(load_frame(frame)) for frame in frames]
 
-    normalize = normalize_each
+    normalize: Callable[[list[np.ndarray]], list[np.ndarray]] = normalize_each
     if device is not None and isinstance(normalization, ALCN):  # with a device, the name was checked above
         normalize = _batch_normalizer(normalization, load_frame)
     size = 1 if device is None else batch_size
