@@ -250,8 +250,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "cuda:1; ALCN only), ALCN runs on that torch device --batch-size frames at a time (apply_batch): the next "
         "frames are decoded and the previous ones encoded in two threads while the device works, and colour "
         "frames are normalized on their CIE L as in the per-frame path (the same output within a grey level). "
-        "--device cpu runs that path on the CPU, where it is slower than the default (torch's Eq. 3 is written "
-        "for the GPU).",
+        "--device cpu runs that path on the CPU, where it is slower than the default (which "
+        "runs Eq. 3 in OpenCV).",
         epilog="methods (-m NAME or NAME:KEY=VALUE..., e.g. -m dog:sigma1=1:sigma2=2 or -m clahe:clip_limit=3; "
         "OpenCV's camelCase names are also accepted in snake_case):\n" + methods_table(),
     )
