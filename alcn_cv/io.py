@@ -7,10 +7,11 @@ import json
 import logging
 import os
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from itertools import islice
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, TypeVar, cast
 
 import cv2
 import numpy as np
@@ -29,6 +30,7 @@ __all__ = [
     "iter_frames",
     "list_images",
     "make_folder",
+    "map_batches",
     "map_video",
     "open_video_writer",
     "read_image",
@@ -39,6 +41,8 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
+T = TypeVar("T")
+R = TypeVar("R")
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pnm"})
 VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv"})
@@ -370,24 +374,71 @@ def open_video_writer(path: str | Path, fps: float, size: tuple[int, int], color
     return writer
 
 
+def map_batches(
+    items: Iterable[T],
+    fn: Callable[[list[T]], list[R]],
+    write: Callable[[R], object],
+    batch_size: int = 1,
+    progress: tqdm | None = None,
+) -> int:
+    """``write(out)`` for every output of ``fn(batch)``, ``batch`` the next ``batch_size`` items (the last
+    batch shorter), in order: the next batch is read from ``items`` and the previous one written in two
+    threads while ``fn`` runs (OpenCV's decoding and encoding release the GIL). The one overlapped pipeline of
+    the package (videos, folders, one frame or a batch at a time). An error in any of the three surfaces
+    here, after the batch being read is finished.
+
+    Returns:
+        The number of items.
+    """
+    if batch_size < 1:
+        raise InputError(f"batch size must be positive, got {batch_size}")
+    source = iter(items)
+
+    def read() -> list[T]:
+        return list(islice(source, batch_size))
+
+    def write_all(outs: list[R]) -> None:
+        for out in outs:
+            write(out)
+
+    count = 0
+    with ThreadPoolExecutor(1) as reading, ThreadPoolExecutor(1) as writing:
+        ahead = reading.submit(read)
+        written = None
+        while batch := ahead.result():
+            ahead = reading.submit(read)
+            outs = fn(batch)
+            if written is not None:
+                written.result()  # one batch in the encoder at a time; its error surfaces here
+            written = writing.submit(write_all, outs)
+            count += len(batch)
+            if progress is not None:
+                progress.update(len(batch))
+        if written is not None:
+            written.result()
+    return count
+
+
 def map_video(
     src: str | Path,
     dst: str | Path,
-    fn: Callable[[np.ndarray], np.ndarray],
+    fn: Callable[[np.ndarray], np.ndarray] | Callable[[list[np.ndarray]], list[np.ndarray]],
     desc: str | None = None,
     allow_partial: bool = False,
+    batch_size: int | None = None,
 ) -> int:
     """Write ``fn(frame)`` for every frame of the video ``src`` into the video ``dst``.
 
     The output is written under a temporary name and renamed when complete; its frame size and
     colour follow ``fn``'s first output, its frame rate the input's. A progress bar shows the
-    frames. Decoding, ``fn`` and encoding overlap: the next frame is decoded and the previous
-    one encoded in two threads while ``fn`` runs, the frames in order.
+    frames. Decoding, ``fn`` and encoding overlap (:func:`map_batches`), the frames in order.
 
     Args:
         allow_partial: accept a video that ends more than one frame before the frame count of
             its header (a truncated file), with a warning; by default it is an error and ``dst``
             is not written.
+        batch_size: ``fn`` takes a list of up to this many frames and returns their outputs (a GPU's
+            batches); None: ``fn`` takes one frame.
 
     Returns:
         The number of frames written.
@@ -398,32 +449,26 @@ def map_video(
     """
     src, dst = Path(src), Path(dst)
     writer = None
-    count = 0
+    per_frame = cast(Callable[[np.ndarray], np.ndarray], fn)
+    batched = (
+        cast(Callable[[list[np.ndarray]], list[np.ndarray]], fn)
+        if batch_size is not None
+        else (lambda frames: [per_frame(frames[0])])
+    )
     with atomic_path(dst) as tmp:
         try:
-            # Decoding, fn and encoding overlap: the next frame is decoded and the previous one
-            # encoded in two threads while fn runs (OpenCV releases the GIL in both), in order.
-            with VideoReader(src) as video, ThreadPoolExecutor(1) as reading, ThreadPoolExecutor(1) as writing:
-                frames = iter(video)
-                ahead = reading.submit(next, frames, None)
-                written = None
+            with VideoReader(src) as video:
+
+                def write(out: np.ndarray) -> None:
+                    nonlocal writer
+                    if writer is None:
+                        writer = open_video_writer(tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3)
+                    writer.write(out)
+
                 with tqdm(total=len(video) or None, desc=desc or src.name, unit="frame") as progress:
-                    while (frame := ahead.result()) is not None:
-                        ahead = reading.submit(next, frames, None)
-                        out = fn(frame)
-                        if writer is None:
-                            writer = open_video_writer(
-                                tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3
-                            )
-                        if written is not None:
-                            written.result()  # one frame in the encoder at a time; its error surfaces here
-                        written = writing.submit(writer.write, out)
-                        count += 1
-                        progress.update()
+                    count = map_batches(video, batched, write, batch_size or 1, progress)
                     progress.total = count  # the header's count is an estimate: the bar ends at the frames decoded
                     progress.refresh()
-                if written is not None:
-                    written.result()
         finally:
             if writer is not None:
                 writer.release()

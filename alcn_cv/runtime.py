@@ -36,8 +36,18 @@ from alcn_cv.filters.gaussian_mixture import (
 from alcn_cv.nets.opencv_runtime import WINDOW, OpenCVNormalizer
 from alcn_cv.weight_file import DEFAULT_WEIGHTS
 
-__all__ = ["DEFAULT_MODEL", "MODELS", "GainRuntime", "ModelSpec", "Network", "Runtime", "WindowRuntime", "make_runtime", "opencv_network",
-           "resolve_weights"]
+__all__ = [
+    "DEFAULT_MODEL",
+    "MODELS",
+    "GainRuntime",
+    "ModelSpec",
+    "Network",
+    "Runtime",
+    "WindowRuntime",
+    "make_runtime",
+    "opencv_network",
+    "resolve_weights",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -185,8 +195,12 @@ class WindowRuntime:
             h, w = gray.shape
             small_h, small_w = self.spec.working_shape(gray.shape)
             ratios = (small_h / h, small_w / w)
-            return pyramid_mixture(gray, self.spec.full_res_sigmas, lambda *args: self._grid_maps_at(grid, ratios, *args),
-                                   PYRAMID_MIN_SIGMA)
+            return pyramid_mixture(
+                gray,
+                self.spec.full_res_sigmas,
+                lambda *args: self._grid_maps_at(grid, ratios, *args),
+                PYRAMID_MIN_SIGMA,
+            )
         return alcn_filter(gray, self.weight_maps(gray), self.spec.full_res_sigmas)
 
     def finish(self, response: np.ndarray, floor: float | None = None) -> np.ndarray:
@@ -220,11 +234,19 @@ class WindowRuntime:
         ay, by = step * ry / g, (0.5 * ry - 0.5) / g
         h, w = shape
         along_y, along_x = _integer_zoom(ay, by), _integer_zoom(ax, bx)
-        if along_y and along_x and grid.shape[1] * along_y[0] >= along_y[1] + h and grid.shape[2] * along_x[0] >= along_x[1] + w:
+        if (
+            along_y
+            and along_x
+            and grid.shape[1] * along_y[0] >= along_y[1] + h
+            and grid.shape[2] * along_x[0] >= along_x[1] + w
+        ):
             # The level's pixels fall on a zoom of the grid by an integer factor: one cv2.resize,
             # the exact bilinear interpolation (at level 0 of a frame of even size, usually).
             (zy, oy), (zx, ox) = along_y, along_x
-            return [cv2.resize(grid[k], None, fx=zx, fy=zy, interpolation=cv2.INTER_LINEAR)[oy : oy + h, ox : ox + w] for k in ks]
+            return [
+                cv2.resize(grid[k], None, fx=zx, fy=zy, interpolation=cv2.INTER_LINEAR)[oy : oy + h, ox : ox + w]
+                for k in ks
+            ]
         f = 2 ** max(0, int(np.floor(np.log2(1.0 / (MAP_STEP_PER_CELL * max(ax, ay))))))
         to_grid = np.array([[ax * f, 0.0, ax * (f - 1) / 2 + bx], [0.0, ay * f, ay * (f - 1) / 2 + by]])
         coarse = (w, h) if f == 1 else (-(-w // f) + 1, -(-h // f) + 1)
@@ -232,7 +254,9 @@ class WindowRuntime:
         maps = []
         for k in ks:
             small = cv2.warpAffine(grid[k], to_grid, coarse, flags=flags, borderMode=cv2.BORDER_REPLICATE)
-            maps.append(small if f == 1 else cv2.resize(small, None, fx=f, fy=f, interpolation=cv2.INTER_LINEAR)[:h, :w])
+            maps.append(
+                small if f == 1 else cv2.resize(small, None, fx=f, fy=f, interpolation=cv2.INTER_LINEAR)[:h, :w]
+            )
         return maps
 
 
@@ -273,7 +297,9 @@ def opencv_network(weights: Path, grid_stride: int | None, spec: ModelSpec) -> O
     """The ONNX export beside ``weights`` run by ``cv2.dnn``, checked against the spec (it runs at its stride)."""
     net = OpenCVNormalizer(weights.with_suffix(".onnx"))
     if grid_stride not in (None, net.stride):
-        raise InputError(f"backend='opencv' evaluates the Normalizer at its stride {net.stride}, got grid_stride={grid_stride}")
+        raise InputError(
+            f"backend='opencv' evaluates the Normalizer at its stride {net.stride}, got grid_stride={grid_stride}"
+        )
     kernels = net.dense_grid(np.zeros((WINDOW, WINDOW), np.float32)).shape[0]
     if len(spec.sigmas) != kernels:
         raise InputError(f"weight file has {len(spec.sigmas)} sigmas for {kernels} outputs")
@@ -329,8 +355,11 @@ def check_teacher(meta: dict, path: Path) -> None:
         return
     teacher_path = MODELS[TEACHERS[model]]
     if hashlib.sha256(teacher_path.read_bytes()).hexdigest() != teacher.get("sha256"):
-        logger.warning("%s was distilled from another version of %s than the one installed: re-distil it "
-                       "(see its model card)", path.name, teacher_path.name)
+        logger.warning(
+            "%s was distilled from another version of %s than the one installed: re-distil it (see its model card)",
+            path.name,
+            teacher_path.name,
+        )
 
 
 def _integer_zoom(step: float, offset: float) -> tuple[int, int] | None:

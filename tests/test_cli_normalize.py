@@ -69,7 +69,15 @@ def test_errors_are_one_line(tmp_path, capsys):
 
 
 def test_debug_shows_the_traceback(tmp_path):
-    cmd = [sys.executable, "-m", "alcn_cv.cli", "--debug", "normalize", str(tmp_path / "missing.png"), str(tmp_path / "o.png")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "alcn_cv.cli",
+        "--debug",
+        "normalize",
+        str(tmp_path / "missing.png"),
+        str(tmp_path / "o.png"),
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     assert proc.returncode != 0 and "Traceback" in proc.stderr and "InputError" in proc.stderr
     proc = subprocess.run(cmd[:3] + cmd[4:], capture_output=True, text=True)
@@ -90,7 +98,20 @@ def test_alpha_is_kept(tmp_path, frame):
     alpha = np.tile(np.linspace(0, 255, frame.shape[1]).astype(np.uint8), (frame.shape[0], 1))
     cv2.imwrite(str(tmp_path / "rgba.png"), np.dstack([frame, alpha]))
     for flags, channels in (([], 4), (["--gray"], 4)):
-        assert main(["normalize", str(tmp_path / "rgba.png"), str(tmp_path / "out.png"), "-m", "clahe", "--overwrite", *flags]) == 0
+        assert (
+            main(
+                [
+                    "normalize",
+                    str(tmp_path / "rgba.png"),
+                    str(tmp_path / "out.png"),
+                    "-m",
+                    "clahe",
+                    "--overwrite",
+                    *flags,
+                ]
+            )
+            == 0
+        )
         out = cv2.imread(str(tmp_path / "out.png"), cv2.IMREAD_UNCHANGED)
         assert out.shape == frame.shape[:2] + (channels,)
         np.testing.assert_array_equal(out[..., 3], alpha)
@@ -104,7 +125,9 @@ def test_list_explains_every_method(capsys):
     assert [line.split()[0] for line in lines[::2]] == available()
     assert any("Jarrett" in line for line in lines if line.startswith("dlcn"))
     # each method's parameters with their defaults (issue 41, part 3)
-    params = dict(zip((line.split()[0] for line in lines[::2]), (line.split("parameters:")[1].split() for line in lines[1::2])))
+    params = dict(
+        zip((line.split()[0] for line in lines[::2]), (line.split("parameters:")[1].split() for line in lines[1::2]))
+    )
     assert params["dog"] == ["sigma1=0.5", "sigma2=1.5"]
     assert params["clahe"] == ["clipLimit=2.0", "tileGridSize=(8,8)"]
     assert "model='gain'" in params["alcn"] and "backend=None" in params["alcn"]
@@ -115,7 +138,12 @@ def test_help_shows_the_methods_parameters(capsys):
     with pytest.raises(SystemExit):
         main(["normalize", "--help"])
     out = capsys.readouterr().out
-    assert "dog:sigma1=1:sigma2=2" in out and "sigma1=0.5 sigma2=1.5" in out and "--overwrite" in out and "--in-place" in out
+    assert (
+        "dog:sigma1=1:sigma2=2" in out
+        and "sigma1=0.5 sigma2=1.5" in out
+        and "--overwrite" in out
+        and "--in-place" in out
+    )
 
 
 @pytest.mark.parametrize("kind", ["image", "video", "folder"])
@@ -169,11 +197,14 @@ SPECS = {  # issue 41, part 3: one spec syntax wherever a method is named; snake
 
 
 @pytest.mark.parametrize("where", SPECS)
-@pytest.mark.parametrize("spec, attrs", [
-    ("dog:sigma1=1:sigma2=2", {"sigma1": 1.0, "sigma2": 2.0}),
-    ("clahe:clip_limit=3:tile_grid_size=(4, 4)", {"clipLimit": 3.0, "tileGridSize": (4, 4)}),
-    ("clahe:clipLimit=3", {"clipLimit": 3.0}),
-])
+@pytest.mark.parametrize(
+    "spec, attrs",
+    [
+        ("dog:sigma1=1:sigma2=2", {"sigma1": 1.0, "sigma2": 2.0}),
+        ("clahe:clip_limit=3:tile_grid_size=(4, 4)", {"clipLimit": 3.0, "tileGridSize": (4, 4)}),
+        ("clahe:clipLimit=3", {"clipLimit": 3.0}),
+    ],
+)
 def test_spec_strings_everywhere(where, spec, attrs):
     method = SPECS[where](spec)
     for key, value in attrs.items():
@@ -194,3 +225,82 @@ def test_spec_strings_in_normalize(tmp_path, frame):
     np.testing.assert_array_equal(read["spec.png"], read["params.png"])
     np.testing.assert_array_equal(read["clahe_snake.png"], read["clahe_camel.png"])
     assert main(["normalize", str(src), str(tmp_path / "x.png"), "-m", "dog:sigma1=1", "-p", "sigma1=2"]) == 2
+
+
+def _cuda() -> bool:
+    torch = pytest.importorskip("torch")
+    return torch.cuda.is_available()
+
+
+def _mixed_folder(folder, frame):
+    """Colour, gray, 16-bit, alpha and two sizes: every kind the batched path groups and reassembles."""
+    folder.mkdir()
+    for i in range(5):
+        cv2.imwrite(str(folder / f"c{i}.png"), np.roll(frame, 3 * i, axis=1))
+    cv2.imwrite(str(folder / "gray.png"), frame[..., 1])
+    cv2.imwrite(str(folder / "gray16.png"), frame[..., 1].astype(np.uint16) * 257)
+    cv2.imwrite(str(folder / "rgba.png"), np.dstack([frame, frame[..., 0]]))
+    cv2.imwrite(str(folder / "wide.png"), np.hstack([frame, frame]))
+    return sorted(p.name for p in folder.iterdir())
+
+
+@pytest.mark.parametrize("device", ["cpu", "cuda"])
+def test_device_batches_give_the_per_frame_output(tmp_path, frame, device, caplog):
+    """``--device``: ALCN's apply_batch on the device, the output within a grey level of apply() on each frame."""
+    if device == "cuda" and not _cuda():
+        pytest.skip("no CUDA device: the CUDA path is checked on a GPU machine")
+    names = _mixed_folder(tmp_path / "in", frame)
+    caplog.set_level("INFO")
+    assert main(["normalize", str(tmp_path / "in"), str(tmp_path / "each")]) == 0
+    args = ["normalize", str(tmp_path / "in"), str(tmp_path / "batched"), "--device", device, "--batch-size", "3"]
+    assert main(args) == 0
+    assert sorted(p.name for p in (tmp_path / "batched").iterdir()) == names
+    for name in names:
+        each = cv2.imread(str(tmp_path / "each" / name), cv2.IMREAD_UNCHANGED)
+        batched = cv2.imread(str(tmp_path / "batched" / name), cv2.IMREAD_UNCHANGED)
+        assert batched.shape == each.shape and batched.dtype == each.dtype, name
+        one_level = 257 if each.dtype == np.uint16 else 1
+        assert np.abs(batched.astype(int) - each.astype(int)).max() <= one_level, name
+    assert "frames/s (9 frames in" in caplog.text and f"batches of 3 on {device}" in caplog.text
+
+
+def test_device_on_a_video_keeps_order_and_count(tmp_path, frame, caplog):
+    src = tmp_path / "in.avi"
+    writer = cv2.VideoWriter(str(src), cv2.VideoWriter_fourcc(*"MJPG"), 10, (80, 60))
+    for i in range(7):
+        writer.write(np.roll(frame, 5 * i, axis=1))
+    writer.release()
+    caplog.set_level("INFO")
+    assert main(["normalize", str(src), str(tmp_path / "each.avi")]) == 0
+    assert main(["normalize", str(src), str(tmp_path / "batched.avi"), "--device", "cpu", "--batch-size", "3"]) == 0
+    assert "7 frames in" in caplog.text and "batches of 3 on cpu" in caplog.text
+    with VideoReader(tmp_path / "each.avi") as each, VideoReader(tmp_path / "batched.avi") as batched:
+        pairs = list(zip(each, batched, strict=True))
+    assert len(pairs) == 7
+    for a, b in pairs:  # within a grey level before encoding; MJPG's quantization spreads a level a little
+        diff = np.abs(a.astype(int) - b.astype(int))
+        assert diff.mean() < 0.5 and diff.max() <= 8
+
+
+def test_device_errors_are_one_line(tmp_path, frame, capsys):
+    src = tmp_path / "in.png"
+    cv2.imwrite(str(src), frame)
+    for args, message in [
+        (["-m", "dog", "--device", "cpu"], "--device runs ALCN's batched torch path"),
+        (["-p", "backend=fast", "--device", "cpu"], "backend='torch'"),
+        (["--device", "cpu", "--batch-size", "0"], "--batch-size must be positive"),
+    ]:
+        assert main(["normalize", str(src), str(tmp_path / "out.png"), *args]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], (args, err)
+    assert not (tmp_path / "out.png").exists()
+    if not _cuda():
+        assert main(["normalize", str(src), str(tmp_path / "out.png"), "--device", "cuda"]) == 2
+        assert "torch sees no CUDA device" in capsys.readouterr().err
+
+
+def test_help_explains_the_device(capsys):
+    with pytest.raises(SystemExit):
+        main(["normalize", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "--device DEV" in out and "--batch-size N" in out and "ALCN only" in out and "frames per second" in out

@@ -58,12 +58,22 @@ def to_unit_float(img: np.ndarray) -> np.ndarray:
     return unit
 
 
-def _lab_and_lightness(unit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lab_and_lightness(unit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """CIE Lab of float BGR intensities in [0, 1], computed in place in ``unit`` (L in [0, 100]),
     and its L / 100 as a float32 ``HxW`` plane in [0, 1]: what :meth:`Normalization.apply`
     normalizes for a colour image."""
     lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab, dst=unit)
     return lab, cv2.transform(lab, _LIGHTNESS_OF_LAB)
+
+
+def bgr_with_lightness(lab: np.ndarray, lightness: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
+    """The BGR image of ``out_dtype`` of the float32 Lab image ``lab`` (:func:`lab_and_lightness`; used as
+    scratch space) with its L channel replaced by the float32 ``HxW`` plane ``lightness`` in [0, 100]."""
+    cv2.insertChannel(lightness, lab, 0)
+    bgr = cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=lab)
+    if out_dtype == np.uint8:
+        return cv2.convertScaleAbs(bgr, alpha=FULL_SCALE[out_dtype])
+    return _unit_in_place_to(bgr, out_dtype)
 
 
 def _unit_in_place_to(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
@@ -261,18 +271,14 @@ class Normalization:
         path), and ``COLOR_Lab2LBGR`` followed by the sRGB curve in OpenCV passes (a fit on square
         roots, within 0.1 level) measured no faster than ``Lab2BGR``'s fused spline (``alcn bench
         speed`` measures the BGR / gray ratio)."""
-        lab, lightness = _lab_and_lightness(unit)
+        lab, lightness = lab_and_lightness(unit)
         response = self._normalize_checked(lightness)
         lo, hi = self.output_range
         scale = 100.0 / (hi - lo)
         lightness = cv2.addWeighted(response, scale, response, 0.0, -lo * scale)
         cv2.threshold(lightness, 0.0, 0.0, cv2.THRESH_TOZERO, dst=lightness)
         cv2.threshold(lightness, 100.0, 0.0, cv2.THRESH_TRUNC, dst=lightness)
-        cv2.insertChannel(lightness, lab, 0)
-        bgr = cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=lab)
-        if out_dtype == np.uint8:
-            return cv2.convertScaleAbs(bgr, alpha=FULL_SCALE[out_dtype])
-        return _unit_in_place_to(bgr, out_dtype)
+        return bgr_with_lightness(lab, lightness, out_dtype)
 
     def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray | None:
         """:meth:`apply`'s result for a uint8 ``HxW`` image and uint8 output, computed without the
@@ -292,7 +298,7 @@ class Normalization:
         without alpha: its intensities in [0, 1], or a BGR image's CIE L / 100 (as :meth:`_apply_bgr`)."""
         unit = to_unit_float(img)
         if unit.ndim == 3 and unit.shape[2] == 3:
-            return _lab_and_lightness(unit)[1]
+            return lab_and_lightness(unit)[1]
         return unit.reshape(img.shape[:2])
 
     def _strip_context(self, img: np.ndarray, strips: list[tuple[int, int, int, int]]) -> AbstractContextManager:

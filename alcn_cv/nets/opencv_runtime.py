@@ -31,8 +31,17 @@ from alcn_cv.errors import WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 from alcn_cv.weight_file import load_normalizer_file
 
-__all__ = ["BLOCK", "BLOCKS_INPUT", "DEFAULT_ONNX", "FEATURES_INPUT", "IMAGE_INPUT", "GainFeatures", "OpenCVNormalizer",
-           "cell_moments", "image_blocks"]
+__all__ = [
+    "BLOCK",
+    "BLOCKS_INPUT",
+    "DEFAULT_ONNX",
+    "FEATURES_INPUT",
+    "IMAGE_INPUT",
+    "GainFeatures",
+    "OpenCVNormalizer",
+    "cell_moments",
+    "image_blocks",
+]
 
 #: The ONNX model shipped beside the default weight file (the shipped weights, exported).
 DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
@@ -71,8 +80,9 @@ def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
     gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
     before = stride // 2
     planes = np.empty((2, stride * gh, stride * gw), np.float32)
-    cv2.copyMakeBorder(image, before, stride * gh - h - before, before, stride * gw - w - before,
-                       cv2.BORDER_REFLECT_101, dst=planes[0])
+    cv2.copyMakeBorder(
+        image, before, stride * gh - h - before, before, stride * gw - w - before, cv2.BORDER_REFLECT_101, dst=planes[0]
+    )
     cv2.multiply(planes[0], planes[0], dst=planes[1])
     cells = planes.reshape(2, gh, stride, gw, stride)
     sums = np.zeros((1, 2, gh, gw), np.float32)
@@ -108,8 +118,10 @@ class GainFeatures:
         self.stride = int(config["stride"])
         self.eps = np.float32(config["eps"])
         # The blurs of the grid stand for blurs of the image: sigma in cells = sigma / stride.
-        self.kernels = [gaussian_kernel1d(float(config[key]) / self.stride).astype(np.float32)
-                        for key in ("mean_sigma", "context_sigma")]
+        self.kernels = [
+            gaussian_kernel1d(float(config[key]) / self.stride).astype(np.float32)
+            for key in ("mean_sigma", "context_sigma")
+        ]
 
     def __call__(self, image: np.ndarray) -> np.ndarray:
         mean, square = cell_moments(image, self.stride)[0]
@@ -144,9 +156,14 @@ class OpenCVNormalizer:
         try:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
-            hint = "" if cv2.__version__ >= "5" else (  # 4.x's ONNX importer cannot infer the gain graph's shapes
-                f"; OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers: use OpenCV 5, install torch "
-                "(backend='fast') or model='lite'"
+            hint = (
+                ""
+                if cv2.__version__ >= "5"
+                # 4.x's ONNX importer cannot infer the gain graph's shapes
+                else (
+                    f"; OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers: use OpenCV 5, "
+                    "install torch (backend='fast') or model='lite'"
+                )
             )
             raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}{hint}: {str(exc).strip()}") from None
         #: The graph's input: :data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT` or :data:`FEATURES_INPUT`.
@@ -203,8 +220,9 @@ class OpenCVNormalizer:
         else:
             gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
             half = WINDOW // 2
-            padded = cv2.copyMakeBorder(image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w,
-                                        cv2.BORDER_REFLECT_101)
+            padded = cv2.copyMakeBorder(
+                image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w, cv2.BORDER_REFLECT_101
+            )
             self._set_padded(padded)
         return self.net.forward()[0]
 

@@ -114,10 +114,17 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
         # The reflect pads' slices (step -1) stay unfolded (harmless).
         warnings.filterwarnings("ignore", message="Constant folding", category=UserWarning)
         torch.onnx.export(
-            _DenseGrid(net, from_features), (example,), buffer, input_names=[input_name], output_names=["weights"],
-            dynamic_axes={input_name: {0: "batch", 2: "height", 3: "width"},
-                          "weights": {0: "batch", 2: "grid_height", 3: "grid_width"}},
-            opset_version=OPSET, dynamo=False,
+            _DenseGrid(net, from_features),
+            (example,),
+            buffer,
+            input_names=[input_name],
+            output_names=["weights"],
+            dynamic_axes={
+                input_name: {0: "batch", 2: "height", 3: "width"},
+                "weights": {0: "batch", 2: "grid_height", 3: "grid_width"},
+            },
+            opset_version=OPSET,
+            dynamo=False,
         )
     data = with_metadata(buffer.getvalue(), weight_file.meta)
     atomic_write(out, data)
@@ -152,4 +159,3 @@ def with_metadata(model_bytes: bytes, meta: dict) -> bytes:
     entry.key, entry.value = METADATA_KEY, json.dumps(header)
     onnx.checker.check_model(model)
     return model.SerializeToString()
-
