@@ -223,32 +223,26 @@ def main(
             if motion_mask:
                 frames = [io.read_image(seq.image_dir / v.name) for v in seq.views]
                 masks = dict(zip((v.name for v in seq.views), motion_masks(frames)))
-            units = box_units or VIDEO_BOX_UNITS
-            model, cams = build(
-                seq,
-                feature=feature,
-                n_features=n_features,
-                normalizer=normalizer,
-                box_ply=box_ply,
-                box_size=box_size,
-                box_units=units,
-                masks=masks,
-                window=8,
-                work_dir=work,
-                refine_focal=refine_focal,
-            )
+            # an unregistered video: its own units, matches within 8 frames, the focal length refinable
+            video = {
+                "box_units": box_units or VIDEO_BOX_UNITS,
+                "masks": masks,
+                "window": 8,
+                "refine_focal": refine_focal,
+            }
         else:
             seq = load_sequence(input_path, images)
-            model, cams = build(
-                seq,
-                feature=feature,
-                n_features=n_features,
-                normalizer=normalizer,
-                box_ply=box_ply,
-                box_size=box_size,
-                box_units=box_units,
-                work_dir=work,
-            )
+            video = {"box_units": box_units}
+        model, cams = build(
+            seq,
+            feature=feature,
+            n_features=n_features,
+            normalizer=normalizer,
+            box_ply=box_ply,
+            box_size=box_size,
+            work_dir=work,
+            **video,
+        )
     path = part_model.save(model, output)
     plot_model(model, cams, path.with_name(path.stem + "_cameras.png"))
     if "mean_abs_relative_size_error" in model.box_fit:
