@@ -1,6 +1,6 @@
 """Measure every RANSAC variant of pose.solver on a video: the evidence behind the default.
 
-    .venv/bin/python examples/pnp_methods.py MODEL.npz VIDEO [--K FX FY CX CY] [--normalizer none]
+    .venv/bin/python examples/pnp_methods.py MODEL.npz VIDEO [--K FX FY CX CY] [--normalization none]
 
 The camera is the one stored in the model (``alcn pose build`` stores it), unless --K is given.
 
@@ -9,9 +9,8 @@ are solved independently (no prior) and as a tracked sequence (previous pose as 
 per method: time per frame (ms), frames with a pose, mean inliers, mean reprojection error (px),
 and the median frame-to-frame jump of the translation (model units; lower = steadier).
 
-Time with the defaults (200 frames of the cookie box, its model from track_cookie_box.py): 836 s of
-CPU time (user) on 2 cores; 47 minutes wall under nice at a load average of 6-15 (a shared machine).
-The time grows with --max-frames.
+Time with the defaults (the first 40 frames of the cookie box, its model from track_cookie_box.py):
+2 min 37 s on 2 cores beside the test suite (191 s of CPU time); it grows linearly with --max-frames.
 """
 
 from __future__ import annotations
@@ -39,12 +38,12 @@ def main() -> None:
         metavar=("FX", "FY", "CX", "CY"),
         help="intrinsics (default: the camera stored in the model)",
     )
-    ap.add_argument("--normalizer", default="none")
-    ap.add_argument("--max-frames", type=int, default=200)
+    ap.add_argument("--normalization", default="none", help="NAME[:KEY=VALUE...] (default none)")
+    ap.add_argument("--max-frames", type=int, default=40, help="the first N frames (default 40)")
     args = ap.parse_args()
     model = part_model.load(args.model)
     K = camera_matrix_for(model.extra.get("K"), None if args.K is None else camera_matrix(*args.K), args.model)
-    det = FeaturePartDetector(model, args.normalizer)
+    det = FeaturePartDetector(model, args.normalization)
     corr = [det.detect(f) for _, f in zip(range(args.max_frames), (f for _, f in io.iter_frames(args.video)))]
     print(f"{'method':18s} {'prior':5s} {'ms':>6s} {'posed':>9s} {'inliers':>8s} {'err px':>7s} {'jump':>7s}")
     for name in sorted(METHODS):
