@@ -33,7 +33,7 @@ cat "$OUT/environment.txt"
 
 # The CUDA tests (they skip with a reason where torch sees no GPU; -rs lists the reasons).
 timeout 150 "$PY" -m pytest -q -rs -p no:cacheprovider --junitxml="$OUT/cuda_tests.xml" \
-  tests/test_nn.py tests/test_speed_paths.py -k "cuda" 2>&1 | tee "$OUT/cuda_tests.txt" | tail -15
+  tests/test_nn.py tests/test_speed_paths.py tests/test_cli_normalize.py -k "cuda" 2>&1 | tee "$OUT/cuda_tests.txt" | tail -15
 
 # The measurement (writes speed.json and speed.md).
 timeout 240 "$PY" -m alcn_cv.cli bench speed --device cuda --out "$OUT/speed_cuda" 2>&1 | tee "$OUT/speed_cuda.txt" | tail -25
