@@ -6,7 +6,9 @@ import contextlib
 import json
 import logging
 import os
+import signal
 import tempfile
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from itertools import islice
@@ -268,6 +270,32 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
     return path
 
 
+#: The signals the command line turns into exceptions (Ctrl-C, and SIGTERM as Ctrl-C).
+_INTERRUPTS = {signal.SIGINT, signal.SIGTERM}
+
+
+@contextlib.contextmanager
+def signals_to_main_thread() -> Iterator[None]:
+    """Threads started inside (OpenCV's FFmpeg threads, the pipeline's workers) block SIGINT and
+    SIGTERM, so that the main thread takes them, where Python raises: delivered to a decoder or an
+    encoder thread, a signal interrupts FFmpeg mid-frame (seen: a crash instead of the cleanup)."""
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _INTERRUPTS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def block_interrupts() -> None:
+    """Block SIGINT and SIGTERM in the calling worker thread (a thread pool's ``initializer``): the
+    main thread takes them (see :func:`signals_to_main_thread`)."""
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_BLOCK, _INTERRUPTS)
+
+
 class VideoReader:
     """Frames of a video file, as an iterator of BGR uint8 arrays.
 
@@ -280,7 +308,8 @@ class VideoReader:
         self.path = Path(path)
         if not self.path.is_file():
             raise InputError(f"video not found: {self.path}")
-        self._cap = cv2.VideoCapture(str(self.path))
+        with signals_to_main_thread():  # FFmpeg's decoder threads start here
+            self._cap = cv2.VideoCapture(str(self.path))
         if not self._cap.isOpened():
             raise InputError(f"cannot open video {self.path}: corrupt or unsupported format")
         self.fps = self._cap.get(cv2.CAP_PROP_FPS) or 30.0
@@ -368,7 +397,8 @@ def open_video_writer(path: str | Path, fps: float, size: tuple[int, int], color
     path = Path(path)
     make_folder(path.parent)
     fourcc = cv2.VideoWriter.fourcc(*_FOURCC.get(path.suffix.lower(), "mp4v"))
-    writer = cv2.VideoWriter(str(path), fourcc, fps, size, color)
+    with signals_to_main_thread():  # FFmpeg's encoder threads start here
+        writer = cv2.VideoWriter(str(path), fourcc, fps, size, color)
     if not writer.isOpened():
         raise OSError(f"cannot write video {path} (unsupported extension or codec)")
     return writer
@@ -402,7 +432,10 @@ def map_batches(
             write(out)
 
     count = 0
-    with ThreadPoolExecutor(1) as reading, ThreadPoolExecutor(1) as writing:
+    with (
+        ThreadPoolExecutor(1, initializer=block_interrupts) as reading,
+        ThreadPoolExecutor(1, initializer=block_interrupts) as writing,
+    ):
         ahead = reading.submit(read)
         written = None
         while batch := ahead.result():
