@@ -33,7 +33,7 @@ from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
-from alcn_cv.nets.opencv_runtime import WINDOW
+from alcn_cv.nets.opencv_runtime import WINDOW, cells_padded
 from alcn_cv.runtime import ModelSpec, resolve_weights
 from alcn_cv.weight_file import load_normalizer_file
 
@@ -255,12 +255,7 @@ class TorchNetwork:
 def _cell_moments(image: np.ndarray, stride: int) -> torch.Tensor:
     """:meth:`GainNormalizer.cell_moments` of an ``(H, W)`` float32 image, the border by OpenCV (faster), the
     pooling by torch (the same sums: where a cell is flat its deviation is rounding, which the log amplifies)."""
-    h, w = image.shape
-    gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
-    before = stride // 2
-    padded = cv2.copyMakeBorder(
-        image, before, stride * gh - h - before, before, stride * gw - w - before, cv2.BORDER_REFLECT_101
-    )
+    padded = cells_padded(image, stride)
     return torch.cat(
         [F.avg_pool2d(torch.from_numpy(plane)[None, None], stride) for plane in (padded, cv2.multiply(padded, padded))],
         1,

@@ -68,6 +68,17 @@ def image_blocks(padded: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(blocks).reshape(1, BLOCK * BLOCK, h // BLOCK, w // BLOCK)
 
 
+def cells_padded(image: np.ndarray, stride: int) -> np.ndarray:
+    """An ``(H, W)`` float32 image mirrored (reflect-101) to whole ``stride``-pixel cells, each centred on a
+    grid point ``stride * i``: ``(stride * gh, stride * gw)``, ``gh = ceil((H - 1) / stride) + 1``."""
+    h, w = image.shape
+    gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
+    before = stride // 2
+    return cv2.copyMakeBorder(
+        image, before, stride * gh - h - before, before, stride * gw - w - before, cv2.BORDER_REFLECT_101
+    )
+
+
 def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
     """:meth:`GainNormalizer.cell_moments <alcn_cv.nets.gain.GainNormalizer.cell_moments>` of an ``(H, W)``
     float32 image, bit for bit: ``(1, 2, gh, gw)`` float32, the mean of each ``stride``-pixel cell centred on a
@@ -76,19 +87,14 @@ def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
     The sums run in torch's order (row by row, left to right): where a cell is flat its standard deviation is
     the rounding of these sums, which the network's log amplifies.
     """
-    h, w = image.shape
-    gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
-    before = stride // 2
-    planes = np.empty((2, stride * gh, stride * gw), np.float32)
-    cv2.copyMakeBorder(
-        image, before, stride * gh - h - before, before, stride * gw - w - before, cv2.BORDER_REFLECT_101, dst=planes[0]
-    )
-    cv2.multiply(planes[0], planes[0], dst=planes[1])
-    cells = planes.reshape(2, gh, stride, gw, stride)
+    padded = cells_padded(image, stride)
+    gh, gw = padded.shape[0] // stride, padded.shape[1] // stride
     sums = np.zeros((1, 2, gh, gw), np.float32)
-    for dy in range(stride):
-        for dx in range(stride):
-            np.add(sums[0], cells[:, :, dy, :, dx], out=sums[0])
+    for plane, total in zip((padded, cv2.multiply(padded, padded)), sums[0]):
+        cells = plane.reshape(gh, stride, gw, stride)
+        for dy in range(stride):
+            for dx in range(stride):
+                np.add(total, cells[:, dy, :, dx], out=total)
     return np.divide(sums, np.float32(stride * stride), out=sums)
 
 
