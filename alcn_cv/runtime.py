@@ -280,11 +280,13 @@ def make_runtime(spec: ModelSpec, network: Network, mixture: str) -> WindowRunti
 
 
 def check_batch(frames: np.ndarray, out_dtype: type | np.dtype | str | None) -> np.dtype:
-    """Check a ``(B, H, W)`` batch of :meth:`ALCN.apply_batch <alcn_cv.enhance.alcn.ALCN.apply_batch>`; the output
-    dtype (default: the frames')."""
-    if not isinstance(frames, np.ndarray) or frames.ndim != 3 or frames.size == 0:
-        raise InputError(f"frames must be a non-empty (B, H, W) array, got {getattr(frames, 'shape', type(frames))}")
-    check_image(frames[0])  # the dtype; a float batch's range is checked as a whole below
+    """Check a ``(B, H, W)`` or ``(B, H, W, C)`` batch of :meth:`ALCN.apply_batch
+    <alcn_cv.enhance.alcn.ALCN.apply_batch>`; the output dtype (default: the frames')."""
+    if not isinstance(frames, np.ndarray) or frames.ndim not in (3, 4) or frames.size == 0:
+        raise InputError(
+            f"frames must be a non-empty (B, H, W) or (B, H, W, C) array, got {getattr(frames, 'shape', type(frames))}"
+        )
+    check_image(frames[0])  # the dtype and channels; a float batch's range is checked as a whole below
     if frames.dtype == np.float32:
         check_image(frames.reshape(-1, frames.shape[-1]))
     dtype = np.dtype(frames.dtype if out_dtype is None else out_dtype)

@@ -98,6 +98,17 @@ def test_batched_path_errors():
         alcn.apply_batch(np.full((2, 64, 64), 2.0, np.float32))
 
 
+def test_batched_path_takes_what_apply_takes():
+    """BGR and BGRA frames: normalized on their CIE L, alpha passed through, as apply() does."""
+    alcn = alcn_cv.createALCN(backend="torch")
+    rng = np.random.default_rng(0)
+    bgra = rng.integers(0, 256, (2, 64, 80, 4), dtype=np.uint8)
+    for frames in (np.ascontiguousarray(bgra[..., :3]), bgra):
+        out = alcn.apply_batch(frames)
+        assert out.shape == frames.shape and out.dtype == np.uint8
+        assert np.abs(out.astype(int) - np.stack([alcn.apply(f) for f in frames])).max() <= 1
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device: the CUDA path is checked on a GPU machine")
 def test_cuda_agrees_with_the_cpu():
     frames = np.stack([synthetic_frame(320, 240, False, seed=i) for i in range(4)])

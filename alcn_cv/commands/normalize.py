@@ -15,7 +15,6 @@ from tqdm import tqdm
 
 from alcn_cv.enhance import available, create
 from alcn_cv.enhance.alcn import ALCN
-from alcn_cv.enhance.base import bgr_with_lightness, lab_and_lightness, to_unit_float
 from alcn_cv.enhance.registry import describe, parameters, parse_params, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import (
@@ -154,9 +153,8 @@ def main(
 def _batch_normalizer(
     alcn: ALCN, load: Callable[[np.ndarray], np.ndarray]
 ) -> Callable[[list[np.ndarray]], list[np.ndarray]]:
-    """``alcn.apply`` on a list of images (gray, BGR, either with alpha; uint8 or uint16) by
-    :meth:`~alcn_cv.enhance.alcn.ALCN.apply_batch`, one batch per shape and dtype: the intensities (a colour
-    image's CIE L / 100, a and b kept) go to the device, an alpha channel is passed through."""
+    """``alcn.apply`` on a list of images by :meth:`~alcn_cv.enhance.alcn.ALCN.apply_batch`, one batch per
+    shape and dtype (a folder may mix them)."""
 
     def normalize_batch(images: list[np.ndarray]) -> list[np.ndarray]:
         images = [load(img) for img in images]
@@ -165,26 +163,11 @@ def _batch_normalizer(
             groups.setdefault((img.shape, img.dtype), []).append(index)
         outs: list[np.ndarray] = [images[0]] * len(images)
         for indices in groups.values():
-            for index, out in zip(indices, _apply_same_shape(alcn, [images[i] for i in indices])):
+            for index, out in zip(indices, alcn.apply_batch(np.stack([images[i] for i in indices]))):
                 outs[index] = out
         return outs
 
     return normalize_batch
-
-
-def _apply_same_shape(alcn: ALCN, images: list[np.ndarray]) -> Iterator[np.ndarray]:
-    shape, dtype = images[0].shape, images[0].dtype
-    alpha = len(shape) == 3 and shape[2] in (2, 4)
-    bodies = [img[..., :-1] if alpha else img for img in images]
-    if len(shape) == 3 and shape[2] in (3, 4):
-        labs, planes = zip(*(lab_and_lightness(to_unit_float(body)) for body in bodies))
-        units = alcn.apply_batch(np.stack(planes), out_dtype=np.float32)
-        outs = (bgr_with_lightness(lab, unit * np.float32(100), dtype) for lab, unit in zip(labs, units))
-    else:
-        planes = np.stack([body.reshape(shape[:2]) for body in bodies])
-        outs = (out.reshape(bodies[0].shape) for out in alcn.apply_batch(planes, out_dtype=dtype))
-    for img, out in zip(images, outs):
-        yield np.concatenate([out.reshape(shape[:2] + (-1,)), img[..., -1:]], axis=2) if alpha else out
 
 
 def _normalize_folder(

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 
 from alcn_cv.checks import unit_windows
-from alcn_cv.enhance.base import Normalization
+from alcn_cv.enhance.base import Normalization, bgr_with_lightness, lab_and_lightness, to_unit_float, with_alpha
 from alcn_cv.enhance.registry import parse_spec, register
 from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
@@ -195,24 +195,39 @@ class ALCN(Normalization):
     def apply_batch(
         self, frames: np.ndarray, out_dtype: type | np.dtype | str | None = None, half: bool = False
     ) -> np.ndarray:
-        """:meth:`apply` on a batch of grayscale frames of one size in one pass on :attr:`device`
-        (``backend="torch"``): the GPU path. The frames go to the device as they are (uint8: a quarter of the
-        float traffic; from pinned memory on CUDA), are converted there, and the output is cast there. The
+        """:meth:`apply` on a batch of frames of one size and layout in one pass on :attr:`device`
+        (``backend="torch"``): the GPU path. Colour frames are normalized on their CIE L (the Lab
+        conversions on the CPU, as :meth:`apply`), an alpha channel is passed through. The frames go to the
+        device as they are (uint8: a quarter of the float traffic; from pinned memory on CUDA), are converted
+        there, and the output is cast there. The
         working image is the frames averaged over blocks of ``1 / scale`` pixels (``cv2.INTER_AREA`` when the
         sides are multiples of ``1 / scale``; other sizes by torch's area interpolation).
         :func:`alcn_cv.nn.batches` groups a stream of frames.
 
         Args:
-            frames: ``(B, H, W)`` uint8, uint16, or float32 intensities in [0, 1].
+            frames: ``(B, H, W)`` or ``(B, H, W, C)`` (gray, gray + alpha, BGR, BGRA) uint8, uint16, or float32
+                intensities in [0, 1].
             out_dtype: as in :meth:`apply` (default: the frames' dtype).
             half: run the Normalizer in float16 under ``torch.autocast``; Eq. 3 stays in float32.
 
         Returns:
-            ``(B, H, W)`` of ``out_dtype``.
+            The frames' shape, of ``out_dtype``.
         """
         if self.backend != "torch":
             raise InputError(f"apply_batch runs on backend='torch' (device 'cpu' or 'cuda'), not {self.backend!r}")
-        return cast("TorchRuntime", self.runtime).apply_batch(frames, check_batch(frames, out_dtype), half)
+        dtype = check_batch(frames, out_dtype)
+        run = cast("TorchRuntime", self.runtime).apply_batch
+        channels = 1 if frames.ndim == 3 else frames.shape[3]
+        body = frames[..., :-1] if channels in (2, 4) else frames
+        if channels in (3, 4):
+            labs, planes = zip(*(lab_and_lightness(to_unit_float(image)) for image in body))
+            units = run(np.stack(planes), np.dtype(np.float32), half)
+            out = np.stack([bgr_with_lightness(lab, unit * np.float32(100), dtype) for lab, unit in zip(labs, units)])
+        else:
+            out = run(np.ascontiguousarray(body.reshape(body.shape[:3])), dtype, half).reshape(body.shape)
+        if channels not in (2, 4):
+            return out
+        return np.stack([with_alpha(image, alpha, dtype) for image, alpha in zip(out, frames[..., -1])])
 
     def __repr__(self) -> str:
         return (

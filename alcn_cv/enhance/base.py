@@ -76,6 +76,14 @@ def bgr_with_lightness(lab: np.ndarray, lightness: np.ndarray, out_dtype: np.dty
     return _unit_in_place_to(bgr, out_dtype)
 
 
+def with_alpha(result: np.ndarray, alpha: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
+    """``result`` (``HxWxC`` of ``out_dtype``) with the ``HxW`` ``alpha`` as its last channel, converted to
+    ``out_dtype`` when that differs: a new array, so that the input's alpha is not shared."""
+    if alpha.dtype != out_dtype:
+        alpha = _unit_in_place_to(to_unit_float(alpha), out_dtype)
+    return np.concatenate([result, alpha[..., None]], axis=2)
+
+
 def _unit_in_place_to(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
     """float32 intensities clipped to [0, 1] and converted to ``dtype`` (``rint(unit * full
     scale)`` for the integer types), with ``unit`` as scratch space. An image of up to four
@@ -238,11 +246,7 @@ class Normalization:
             with self._strip_context(img, strips):
                 for start, stop, lo, hi in strips:
                     result[start:stop] = self._apply_colour(img[lo:hi], out_dtype)[start - lo : stop - lo]
-        if alpha is None:
-            return result
-        if alpha.dtype != out_dtype:
-            alpha = _unit_in_place_to(to_unit_float(alpha), out_dtype)
-        return np.concatenate([result, alpha[..., None]], axis=2)  # a new array: the input's alpha is not shared
+        return result if alpha is None else with_alpha(result, alpha, out_dtype)
 
     def _apply_colour(self, img: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
         """:meth:`apply` on a valid gray or BGR image without alpha."""
