@@ -104,23 +104,24 @@ def test_pair_loss_adds_the_weighted_consistency(tmp_path):
                 )[:, None],
                 PATCH,
                 [(slice(None), slice(len(centres), None))],
-            )
+            )[0]
             for f in (0, 1)
         ]
     assert both == pytest.approx(plain + 2.0 * float(consistency_loss(*outputs)), rel=1e-4)
 
 
-def test_per_pixel_divisive_centres_equal_the_whole_normalization_with_the_crops_floor():
+@pytest.mark.parametrize("noise_floor", [0.0, 0.05])
+def test_per_pixel_divisive_centres_equal_the_whole_normalization_with_the_crops_floor(noise_floor):
     """The training path of the per-pixel divisive energy: the response on the Gaussian's reach
-    around the centre, the floor from the centres of the crops drawn for it."""
-    net = GainNormalizer(stride=8, floor_scale=0.7)
+    around the centre, the floor from the centres of the crops drawn for it, the noise floor."""
+    net = GainNormalizer(stride=8, floor_scale=0.7, noise_floor=noise_floor)
     with torch.no_grad():
         net.head.weight.normal_(0.0, 0.05)
     crops = torch.rand(4, 1, CROP, CROP) * torch.tensor([1.0, 0.2, 0.5, 0.05]).view(4, 1, 1, 1)
     lo = (CROP - PATCH) // 2
     centre_of = (..., slice(lo, lo + PATCH), slice(lo, lo + PATCH))
     with torch.no_grad():
-        centre = _normalized_centres(net, crops, PATCH, [(slice(0, 2), slice(1, 2)), (slice(2, 4), slice(2, 4))])
+        centre, _ = _normalized_centres(net, crops, PATCH, [(slice(0, 2), slice(1, 2)), (slice(2, 4), slice(2, 4))])
         response = net.response(crops)
         energy = gaussian_energy(response, 2.0)[centre_of]
         floor = 0.7 * torch.stack([energy[1].mean(), energy[1].mean(), energy[2:].mean(), energy[2:].mean()]).view(

@@ -175,7 +175,7 @@ class ALCN(Normalization):
         if self.spec.divisive is None:
             yield
             return
-        sigma, c = self.spec.divisive
+        sigma, c, _ = self.spec.divisive
         total = 0.0
         for start, stop, lo, hi in strips:
             energy = gaussian_energy(self.runtime.mixture(self._intensity(img[lo:hi])), sigma)

@@ -507,6 +507,7 @@ def _gain_network() -> dict[str, Any]:
         "divisive_sigma": 2.0,
         "tau": 3.0,
         "learn_scales": False,
+        "noise_floor": 0.0,
     }
 
 
@@ -545,6 +546,7 @@ class RealLightConfig:
     temperature: float = 0.05
     consistency: float = 1.0
     anywhere: int = 24
+    gain_prior: float = 0.0
     lr: float = 1e-3
     seed: int = 0
     save_every: int = 100

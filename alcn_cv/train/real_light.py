@@ -58,6 +58,7 @@ __all__ = [
     "RealLightConfig",
     "consistency_loss",
     "TrainingScene",
+    "crop_windows",
     "anywhere_locations",
     "identification_loss",
     "pair_loss",
@@ -65,6 +66,7 @@ __all__ = [
     "textured_locations",
     "train_real_light",
     "training_scene",
+    "training_scenes",
 ]
 
 logger = logging.getLogger(__name__)
@@ -127,7 +129,9 @@ def training_scene(scene: Scene, pad: int, patch: int) -> TrainingScene:
     return TrainingScene(scene.name, padded, candidates, pad)
 
 
-def _crops(frame: np.ndarray, centres: np.ndarray, size: int) -> torch.Tensor:
+def crop_windows(frame: np.ndarray, centres: np.ndarray, size: int) -> torch.Tensor:
+    """The ``size x size`` windows of ``frame`` (padded ``(H, W)`` float32) centred on ``centres`` ``(n, 2)``
+    ``(y, x)``: ``(n, 1, size, size)``."""
     half = size // 2
     return torch.from_numpy(
         np.stack([frame[y - half : y - half + size, x - half : x - half + size] for y, x in centres])
@@ -229,7 +233,7 @@ def _centre_mixture(sigmas: tuple[float, ...], crop: int, size: int, stride: int
 
 def _normalized_centres(
     net: GainNormalizer, crops: torch.Tensor, patch: int, frames: Sequence[tuple[slice, slice]] = ()
-) -> torch.Tensor:
+) -> tuple[torch.Tensor, torch.Tensor]:
     """The network's output on the central ``patch x patch`` of each crop ``(B, 1, crop, crop)``:
     the network on the whole crop, Eq. 3 on the centre (:class:`CentreDenseMixture`), the
     divisive normalization (:mod:`alcn_cv.filters.torch_divisive`) and the equalization.
@@ -253,9 +257,19 @@ def _normalized_centres(
     floor = torch.empty(len(crops), 1, 1, 1, dtype=crops.dtype)
     for rows, sample in frames or [(slice(None), slice(None))]:
         floor[rows] = net.floor_scale * energy[sample].mean()
-    return net.equalize(
-        response[..., margin : margin + patch, margin : margin + patch] * inverse_divisor(energy, floor)
-    )
+    centre = response[..., margin : margin + patch, margin : margin + patch]
+    outputs = net.equalize(centre * inverse_divisor(energy, floor, net.noise_floor))
+    return outputs, 0.5 * grid.square().sum(1).clamp_min(1e-12).log().mean()
+
+
+def training_scenes(cfg: RealLightConfig) -> tuple[list[TrainingScene], list[TrainingScene]]:
+    """The two groups of scenes a run draws from, ready for training (padded by ``cfg.crop // 2``):
+    ``cfg.scenes`` and ``cfg.rendered``."""
+    scenes = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(scene_dirs(cfg.scenes))]
+    rendered = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(cfg.rendered)]
+    for scene in scenes + rendered:
+        logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
+    return scenes, rendered
 
 
 def anywhere_locations(scene: TrainingScene, count: int, rng: np.random.Generator) -> np.ndarray:
@@ -279,14 +293,18 @@ def pair_loss(
     ``anywhere`` ``(m, 2)`` locations."""
     fa, fb = frames
     every = centres if anywhere is None or not len(anywhere) else np.concatenate([centres, anywhere])
-    crops = torch.cat([_crops(scene.frames[fa], every, cfg.crop), _crops(scene.frames[fb], every, cfg.crop)])
+    crops = torch.cat([crop_windows(scene.frames[f], every, cfg.crop) for f in (fa, fb)])
     m, n = len(every), len(centres)
     drawn = (lambda first: slice(first + n, first + m)) if m > n else (lambda first: slice(first, first + m))
-    outputs = _normalized_centres(net, crops, cfg.patch, [(slice(0, m), drawn(0)), (slice(m, 2 * m), drawn(m))])
+    outputs, log_scale = _normalized_centres(
+        net, crops, cfg.patch, [(slice(0, m), drawn(0)), (slice(m, 2 * m), drawn(m))]
+    )
     a, b = outputs[:m], outputs[m:]
     loss = identification_loss(a[:n], b[:n], cfg.temperature)
     if cfg.consistency:
         loss = loss + cfg.consistency * consistency_loss(a, b)
+    if cfg.gain_prior:
+        loss = loss + cfg.gain_prior * (log_scale - net.initial_log_scale) ** 2
     return loss
 
 
@@ -338,10 +356,7 @@ def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
         raise InputError(
             f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2"
         )
-    scenes = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(scene_dirs(cfg.scenes))]
-    rendered = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(cfg.rendered)]
-    for scene in scenes + rendered:
-        logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
+    scenes, rendered = training_scenes(cfg)
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     history: list[dict] = []
     start = time.perf_counter()
