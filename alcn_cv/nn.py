@@ -127,9 +127,9 @@ class ALCN2d(nn.Module):
         """The gain family's steps after Eq. 3 (the divisive normalization, ``tanh(x / tau)``); ``floor``:
         ``(B, 1, 1, 1)``, the divisive floor (default: ``c`` times each image's mean energy)."""
         if self.spec.divisive is not None:
-            sigma, c, noise = self.spec.divisive
+            sigma, c = self.spec.divisive
             response = divisive_normalization(
-                response, sigma, self.net.floor_scale if isinstance(self.net, GainNormalizer) else c, floor, noise=noise
+                response, sigma, self.net.floor_scale if isinstance(self.net, GainNormalizer) else c, floor
             )
         if self.spec.tau is not None:
             response = contrast_equalization(

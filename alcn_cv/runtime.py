@@ -76,8 +76,7 @@ class ModelSpec:
         scale: the working scale (input -> the Normalizer's resolution).
         output_range: the raw responses mapped onto [0, 1].
         tau: the gain family's final ``tanh(x / tau)``, or None.
-        divisive: the gain family's divisive normalization ``(sigma in input pixels, scale c, noise floor n)``,
-            or None.
+        divisive: the gain family's divisive normalization ``(sigma in input pixels, scale c)``, or None.
         per_pixel: the gain family (maps on a grid of its own, windows normalized as small images).
         reach: how far from a grid point the network looks (working pixels).
     """
@@ -86,7 +85,7 @@ class ModelSpec:
     scale: float
     output_range: tuple[float, float]
     tau: float | None
-    divisive: tuple[float, float, float] | None
+    divisive: tuple[float, float] | None
     per_pixel: bool
     reach: int
 
@@ -108,9 +107,7 @@ class ModelSpec:
             scale=scale,
             output_range=(float(meta["output_range"][0]), float(meta["output_range"][1])),
             tau=float(meta["equalization"]["tau"]) if "equalization" in meta else None,
-            divisive=None
-            if divisive is None
-            else (float(divisive["sigma"]) / scale, float(divisive["scale"]), float(divisive.get("noise", 0.0))),
+            divisive=None if divisive is None else (float(divisive["sigma"]) / scale, float(divisive["scale"])),
             per_pixel=per_pixel,
             reach=reach,
         )
@@ -212,8 +209,7 @@ class WindowRuntime:
         tau, divisive = self.spec.tau, self.spec.divisive
         inverse_tau = 1.0 if tau is None else 1.0 / tau  # folds into the division
         if divisive is not None:
-            sigma, c, noise = divisive
-            response = divisive_normalization(response, sigma, c, floor=floor, multiplier=inverse_tau, noise=noise)
+            response = divisive_normalization(response, *divisive, floor=floor, multiplier=inverse_tau)
         elif inverse_tau != 1.0:
             np.multiply(response, np.float32(inverse_tau), out=response)
         return response if tau is None else np.tanh(response, out=response)

@@ -16,12 +16,12 @@ Stages, each writing under ``--out`` (default ``runs/relit``):
   none, CLAHE, DLCN and Tan-Triggs (default and tuned on the webcam training scenes), the
   shipped default, the relit-trained file and its untrained start.
 
-``--light hard`` relights with more shadows, shading and noise, ``--light relief`` adds the
-shading of the photograph read as a relief under a directional light (:data:`LIGHTS`); ``--jitter``
-moves each relit copy by up to that many pixels (a fixed camera's registration error); ``--with-webcam F``
-trains on the webcam scenes with a share F of the steps on the relit ones (an academic-only variant); ``--no-baselines``
-benches the two new files only (the same plans, so their rows compare with a run that had the
-baselines); ``--train-args`` passes more arguments to ``alcn train-real-light``.
+``--light hard`` relights with more shadows, shading and noise, ``--light relief`` adds the shading of the
+photograph read as a relief under a directional light (:data:`alcn_cv.data.light_changes.LIGHTS`);
+``--jitter`` moves each relit copy by up to that many pixels (a fixed camera's registration error); ``--with-
+webcam F`` trains on the webcam scenes with a share F of the steps on the relit ones (an academic-only
+variant); ``--no-baselines`` benches the two new files only (the same plans, so their rows compare with a run
+that had the baselines); ``--train-args`` passes more arguments to ``alcn train-real-light``.
 
 Run from the checkout's root::
 
@@ -43,39 +43,16 @@ import numpy as np
 import torch
 
 from alcn_cv.cli import main as alcn
-from alcn_cv.data.light_changes import LightChangeConfig, relit_frames, sample_pair
-from alcn_cv.data.permissive_images import Photograph, permissive_photographs
-from alcn_cv.io import to_gray, write_json
+from alcn_cv.data.light_changes import LIGHTS, sample_pair
+from alcn_cv.data.permissive_images import Photograph, relit_scenes, training_photographs
+from alcn_cv.io import write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.shared_data import shared_data_dir
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 STAGES = ("speed", "scenes", "train", "bench")
-#: The light changes of the scenes: the defaults, more shadows, shading and noise, or a relief's shading.
-LIGHTS = {
-    "default": LightChangeConfig(),
-    "hard": LightChangeConfig(
-        gain=(0.02, 1.5),
-        shading=1.0,
-        ramp=2.0,
-        shadows=(1, 5),
-        penumbra=(0.5, 6.0),
-        full_well=(200.0, 5000.0),
-        read_noise=(2.0, 10.0),
-    ),
-    "relief": LightChangeConfig(relief=(3.0, 30.0)),
-}
 BASELINES = ["none", "clahe", "dlcn", "tantriggs", "alcn"]
 QUICK = ["--seeds", "0", "--max-frames", "12", "--patches", "150", "--max-pairs", "12"]
-
-
-def photographs() -> list[Photograph]:
-    """The permissive photographs, with fewer of the near-identical chessboard views and video frames."""
-    photos = permissive_photographs(shared_data_dir())
-    chessboards = [p for p in photos if p.name.startswith("chessboard/")]
-    video = [p for p in photos if "#" in p.name]
-    keep = chessboards[::3] + video[::2]
-    return [p for p in photos if p not in chessboards and p not in video] + keep
 
 
 def speed(photos: list[Photograph], out: Path, seconds: float = 10.0) -> dict:
@@ -101,13 +78,11 @@ def speed(photos: list[Photograph], out: Path, seconds: float = 10.0) -> dict:
 
 def scenes(photos: list[Photograph], out: Path, frames: int, seed: int, light: str, jitter: float) -> list[Path]:
     folders, listing = [], []
-    for i, photo in enumerate(photos):
-        folder = out / "scenes" / f"{i:02d}_{photo.name.replace('/', '_').replace('#', '_').replace('.', '_')}"
+    for photo, scene in zip(photos, relit_scenes(photos, frames, seed, light, jitter)):
+        folder = out / "scenes" / scene.name
         folder.mkdir(parents=True, exist_ok=True)
-        for k, frame in enumerate(
-            relit_frames(photo.image, frames, np.random.default_rng([seed, i]), LIGHTS[light], jitter)
-        ):
-            cv2.imwrite(str(folder / f"frame_{k:02d}.png"), to_gray(frame) if frame.ndim == 3 else frame)
+        for file, frame in zip(scene.files, scene.frames):
+            cv2.imwrite(str(folder / file), frame)
         folders.append(folder)
         listing.append(
             {
@@ -184,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    photos = photographs()
+    photos = training_photographs(shared_data_dir())
     print(f"{len(photos)} photographs: " + ", ".join(sorted({p.licence for p in photos})))
     if "speed" in args.stages:
         speed(photos, args.out)

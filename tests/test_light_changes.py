@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from alcn_cv.data.light_changes import (
+    LIGHTS,
     LightChangeConfig,
     relief_shading,
     relight,
@@ -23,6 +24,8 @@ from alcn_cv.data.permissive_images import (
     PERMISSIVE_LICENCES,
     SHARED_PHOTOGRAPHS,
     SKIMAGE_PHOTOGRAPHS,
+    Photograph,
+    relit_scenes,
     rendered_photographs,
     shared_photographs,
     skimage_photographs,
@@ -200,3 +203,23 @@ def test_relit_frames_jitter_stays_within_its_pixels():
     moved = relit_frames(image, 4, np.random.default_rng(0), NONE, jitter=2.0)
     shifts = [np.hypot(*cv2.phaseCorrelate(image.astype(np.float64), f.astype(np.float64))[0]) for f in moved]
     assert max(shifts) <= 2.0 * np.sqrt(2) + 0.5 and any(np.abs(f.astype(int) - image).mean() > 2 for f in moved)
+
+
+def test_relit_scenes_are_registered_gray_scenes_drawn_by_seed():
+    photos = [
+        Photograph("a/b.png", _texture(64, 80, colour=True), "CC0", "test"),
+        Photograph("c", _texture(), "CC0", "t"),
+    ]
+    scenes = relit_scenes(photos, 3, seed=5, light="relief")
+    assert [s.name for s in scenes] == ["00_a_b_png", "01_c"] and {s.group for s in scenes} == {"relit"}
+    assert scenes[0].frames.shape == (3, 64, 80) and scenes[0].frames.dtype == np.uint8
+    assert scenes[1].frames.shape == (3, 96, 128) and len(scenes[1].files) == 3
+    assert not np.array_equal(scenes[1].frames[0], scenes[1].frames[1])  # each frame under its own light
+    again = relit_scenes(photos, 3, seed=5, light="relief")
+    assert all(np.array_equal(a.frames, b.frames) for a, b in zip(scenes, again))
+    assert not np.array_equal(relit_scenes(photos, 3, seed=6)[1].frames, scenes[1].frames)
+    assert set(LIGHTS) >= {"default", "hard", "relief"}
+    with pytest.raises(InputError, match="at least 2"):
+        relit_scenes(photos, 1)
+    with pytest.raises(InputError, match="unknown light"):
+        relit_scenes(photos, 2, light="moonlight")

@@ -15,12 +15,15 @@ from alcn_cv.train.real_light import (
     _normalized_centres,
     anywhere_locations,
     consistency_loss,
+    harris_response,
     identification_loss,
     pair_loss,
+    repeatability_loss,
     sample_locations,
     textured_locations,
     train_real_light,
     training_scene,
+    training_scenes,
 )
 from alcn_cv.weight_file import load_normalizer_file
 
@@ -69,7 +72,47 @@ def test_consistency_loss_is_zero_when_equal_and_scale_free():
     assert float(consistency_loss(a, 3 * a)) == pytest.approx(0.4) and identification_loss(a, 3 * a, 0.05) < 1e-3
 
 
-def test_anywhere_locations_stay_in_the_frame(tmp_path):
+def test_harris_response_peaks_at_a_corner_and_repeatability_sees_what_moves():
+    square = torch.zeros(1, 1, 32, 32)
+    square[..., 10:, 10:] = 1.0
+    response = harris_response(square)[0, 0]
+    peak = np.unravel_index(int(response.argmax()), response.shape)
+    assert abs(peak[0] - 9.5) <= 1.5 and abs(peak[1] - 9.5) <= 1.5  # the corner, not the edges
+    assert float(response[20, 5:15].max()) < 0.1 * float(response.max())  # an edge is no corner
+    assert float(repeatability_loss(square, 2.0 * square)) > 0.5  # Harris is quartic: a gain changes it
+    assert float(repeatability_loss(square, square)) == 0.0
+    noisy = square + 0.3 * torch.randn(1, 1, 32, 32, generator=torch.Generator().manual_seed(0))
+    other = square + 0.3 * torch.randn(1, 1, 32, 32, generator=torch.Generator().manual_seed(1))
+    assert float(repeatability_loss(noisy, other)) > float(repeatability_loss(square + 0.3, square + 0.3))
+
+
+def test_pair_loss_adds_the_weighted_repeatability(tmp_path):
+    scene = training_scene(load_scene_folder(_write_scene(tmp_path / "s"))[0], CROP // 2, PATCH)
+    net = GainNormalizer(stride=8)
+    centres = sample_locations(scene.candidates, 6, 16, np.random.default_rng(0))
+    with torch.no_grad():
+        plain = float(pair_loss(net, scene, (0, 1), centres, RealLightConfig(crop=CROP, patch=PATCH)))
+        both = float(pair_loss(net, scene, (0, 1), centres, RealLightConfig(crop=CROP, patch=PATCH, repeatability=2.0)))
+    assert both > plain
+
+
+def test_training_scenes_add_the_relit_photographs(tmp_path, monkeypatch):
+    from alcn_cv.data.scenes import Scene
+    from alcn_cv.train import real_light
+
+    texture = np.random.default_rng(0).integers(0, 256, (4, 150, 170), dtype=np.uint8)
+    drawn = []
+
+    def relit(frames, seed, light, jitter):
+        drawn.append((frames, seed, light, jitter))
+        return [Scene("00_photo", "relit", texture[:frames], tuple(f"{i}.png" for i in range(frames)))]
+
+    monkeypatch.setattr(real_light, "relit_permissive_scenes", relit)
+    cfg = RealLightConfig(scenes=[str(_write_scene(tmp_path / "s"))], relit=3, light="hard", jitter=1.0, seed=7)
+    scenes, rendered = training_scenes(cfg)
+    assert [s.name for s in scenes] == ["s", "00_photo"] and rendered == []
+    assert drawn == [(3, 7, "hard", 1.0)] and scenes[1].frames.shape == (3, 150 + 160, 170 + 160)  # padded by crop // 2
+
     scene = training_scene(load_scene_folder(_write_scene(tmp_path / "scene"))[0], CROP // 2, PATCH)
     centres = anywhere_locations(scene, 500, np.random.default_rng(0))
     _, h, w = scene.frames.shape
@@ -104,24 +147,23 @@ def test_pair_loss_adds_the_weighted_consistency(tmp_path):
                 )[:, None],
                 PATCH,
                 [(slice(None), slice(len(centres), None))],
-            )[0]
+            )
             for f in (0, 1)
         ]
     assert both == pytest.approx(plain + 2.0 * float(consistency_loss(*outputs)), rel=1e-4)
 
 
-@pytest.mark.parametrize("noise_floor", [0.0, 0.05])
-def test_per_pixel_divisive_centres_equal_the_whole_normalization_with_the_crops_floor(noise_floor):
+def test_per_pixel_divisive_centres_equal_the_whole_normalization_with_the_crops_floor():
     """The training path of the per-pixel divisive energy: the response on the Gaussian's reach
-    around the centre, the floor from the centres of the crops drawn for it, the noise floor."""
-    net = GainNormalizer(stride=8, floor_scale=0.7, noise_floor=noise_floor)
+    around the centre, the floor from the centres of the crops drawn for it."""
+    net = GainNormalizer(stride=8, floor_scale=0.7)
     with torch.no_grad():
         net.head.weight.normal_(0.0, 0.05)
     crops = torch.rand(4, 1, CROP, CROP) * torch.tensor([1.0, 0.2, 0.5, 0.05]).view(4, 1, 1, 1)
     lo = (CROP - PATCH) // 2
     centre_of = (..., slice(lo, lo + PATCH), slice(lo, lo + PATCH))
     with torch.no_grad():
-        centre, _ = _normalized_centres(net, crops, PATCH, [(slice(0, 2), slice(1, 2)), (slice(2, 4), slice(2, 4))])
+        centre = _normalized_centres(net, crops, PATCH, [(slice(0, 2), slice(1, 2)), (slice(2, 4), slice(2, 4))])
         response = net.response(crops)
         energy = gaussian_energy(response, 2.0)[centre_of]
         floor = 0.7 * torch.stack([energy[1].mean(), energy[1].mean(), energy[2:].mean(), energy[2:].mean()]).view(

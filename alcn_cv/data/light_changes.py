@@ -42,6 +42,7 @@ from alcn_cv.data.lighting import SHADOW_SHAPES, shadow_shape
 from alcn_cv.errors import InputError
 
 __all__ = [
+    "LIGHTS",
     "LightChangeConfig",
     "RelitPair",
     "random_homography",
@@ -128,6 +129,23 @@ class LightChangeConfig:
             gamma=(DECODING_GAMMA, DECODING_GAMMA),
             jpeg_probability=0.0,
         )
+
+
+#: Named light changes: the defaults; more shadows, shading and noise; the defaults plus the shading of the
+#: photograph read as a relief under a directional light (the recipe of the permissive default).
+LIGHTS: dict[str, LightChangeConfig] = {
+    "default": LightChangeConfig(),
+    "hard": LightChangeConfig(
+        gain=(0.02, 1.5),
+        shading=1.0,
+        ramp=2.0,
+        shadows=(1, 5),
+        penumbra=(0.5, 6.0),
+        full_well=(200.0, 5000.0),
+        read_noise=(2.0, 10.0),
+    ),
+    "relief": LightChangeConfig(relief=(3.0, 30.0)),
+}
 
 
 def _log_uniform(rng: np.random.Generator, bounds: Range) -> float:

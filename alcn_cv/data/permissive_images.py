@@ -24,8 +24,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from alcn_cv.errors import DatasetError
-from alcn_cv.io import read_image
+from alcn_cv.data.light_changes import LIGHTS, relit_frames
+from alcn_cv.data.scenes import Scene
+from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.io import read_image, to_gray
 
 __all__ = [
     "PERMISSIVE_LICENCES",
@@ -33,9 +35,12 @@ __all__ = [
     "SKIMAGE_PHOTOGRAPHS",
     "Photograph",
     "permissive_photographs",
+    "relit_permissive_scenes",
+    "relit_scenes",
     "rendered_photographs",
     "shared_photographs",
     "skimage_photographs",
+    "training_photographs",
 ]
 
 #: The licences a training photograph of the default may carry.
@@ -176,3 +181,44 @@ def permissive_photographs(
     if shared is not None:
         photos += shared_photographs(shared, max_side=max_side)
     return photos + rendered_photographs(rendered, seed)
+
+
+def training_photographs(shared: str | Path) -> list[Photograph]:
+    """:func:`permissive_photographs` with a third of the near-identical chessboard views and half of the
+    cookie box's video frames, so that no view weighs much more than the others in training."""
+    photos = permissive_photographs(shared)
+    chessboards = [p for p in photos if p.name.startswith("chessboard/")]
+    video = [p for p in photos if "#" in p.name]
+    keep = chessboards[::3] + video[::2]
+    return [p for p in photos if p not in chessboards and p not in video] + keep
+
+
+def relit_scenes(
+    photos: list[Photograph], frames: int, seed: int = 0, light: str = "relief", jitter: float = 0.0
+) -> list[Scene]:
+    """Each photograph relit ``frames`` times (:func:`~alcn_cv.data.light_changes.relit_frames` with
+    :data:`~alcn_cv.data.light_changes.LIGHTS` ``[light]``, generator ``[seed, i]`` for the ``i``-th): registered
+    grayscale scenes (group ``relit``) for the real-light trainer, made in memory.
+
+    Raises:
+        InputError: ``frames < 2`` or an unknown ``light``.
+    """
+    if frames < 2:
+        raise InputError(f"a relit scene needs at least 2 frames, got {frames}")
+    if light not in LIGHTS:
+        raise InputError(f"unknown light {light!r}; known: {', '.join(LIGHTS)}")
+    scenes = []
+    for i, photo in enumerate(photos):
+        relit = relit_frames(photo.image, frames, np.random.default_rng([seed, i]), LIGHTS[light], jitter)
+        gray = np.stack([to_gray(f) if f.ndim == 3 else f for f in relit])
+        name = f"{i:02d}_{photo.name.replace('/', '_').replace('#', '_').replace('.', '_')}"
+        scenes.append(Scene(name, "relit", gray, tuple(f"frame_{k:02d}.png" for k in range(frames))))
+    return scenes
+
+
+def relit_permissive_scenes(frames: int, seed: int = 0, light: str = "relief", jitter: float = 0.0) -> list[Scene]:
+    """:func:`relit_scenes` of :func:`training_photographs` (the shared data folder's OpenCV samples included):
+    the training data of the default Normalizer, which permits any use."""
+    from alcn_cv.shared_data import shared_data_dir
+
+    return relit_scenes(training_photographs(shared_data_dir()), frames, seed, light, jitter)

@@ -15,8 +15,8 @@ did not move), so a pixel is the same point of the scene in every frame. The dat
   ``<root>/scene_NNN/frame_NN.png``.
 * Phos-like folders: one folder per object holding its photographs under different light.
 
-The split: the gain Normalizer trains on :data:`TRAIN_SCENES`; :data:`TEST_SCENES` are never
-trained or tuned on.
+The split: the baselines are tuned on :data:`TRAIN_SCENES` (and the gain Normalizer, trained on
+relit photographs that permit any use, is validated on them); :data:`TEST_SCENES` are never trained or tuned on.
 
 A folder's images named ``NAME.<index>.<ext>`` form the scene ``NAME`` (ordered by index); its
 other images form the scene named after the folder (ordered by name). Frames are read with
@@ -60,7 +60,7 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-#: The gain Normalizer's training scenes (``webcam``); the benchmark tunes parameters on them.
+#: The ``webcam`` scenes the benchmark tunes parameters on and the gain Normalizer is validated on.
 TRAIN_SCENES = ("courbevoie", "frankfurt", "panorama")
 #: Scenes and data sets never trained or tuned on.
 TEST_SCENES = ("mexico", "psm")

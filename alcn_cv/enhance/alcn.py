@@ -7,8 +7,8 @@ and detail: ``ALCN(I) = sum_k G_{sigma_k / s} * (F_k(I) o I)``. The gain family 
 local energy and equalizes it. :class:`ALCN` is the ``apply()`` front; the work is a model family's runtime
 (:mod:`alcn_cv.runtime`, OpenCV; :mod:`alcn_cv.nn`, torch).
 
-The default model, ``"gain"``, is trained on the webcam frames of Verdie et al. and AMOS, **for academic research
-only** (see its model card); ``model="lite"`` (rendered data) has no such restriction.
+The default model, ``"gain"``, and ``"gain-lite"`` are trained on public-domain, CC0 and Apache-2.0
+photographs, relit; ``"paper"`` and ``"lite"`` on rendered windows (see each model card).
 """
 
 from __future__ import annotations
@@ -66,8 +66,8 @@ class ALCN(Normalization):
     Args:
         weights: a Normalizer weight file (``.npz``, :mod:`alcn_cv.weight_file`); default: the shipped ``model``'s.
         model: a shipped Normalizer (:data:`~alcn_cv.runtime.MODELS`; see each model card): ``"gain"`` (default:
-            F_k = exp(g) w_k on a grid, the response divided by its local energy, then ``tanh(x / tau)``;
-            **academic research only**, like its training photographs), ``"gain-lite"`` (distilled from it),
+            F_k = exp(g) w_k on a grid, the response divided by its local energy, then ``tanh(x / tau)``; trained
+            on relit photographs that permit any use), ``"gain-lite"`` (distilled from it),
             ``"lite"`` (the paper's family distilled, rendered data only) or ``"paper"``.
         scale: working scale, input resolution -> the Normalizer's (its 48x48 window and sigmas are in working
             pixels). Default: the weight file's (1 for the gain family, 0.5 for the paper's).
@@ -175,7 +175,7 @@ class ALCN(Normalization):
         if self.spec.divisive is None:
             yield
             return
-        sigma, c, _ = self.spec.divisive
+        sigma, c = self.spec.divisive
         total = 0.0
         for start, stop, lo, hi in strips:
             energy = gaussian_energy(self.runtime.mixture(self._intensity(img[lo:hi])), sigma)

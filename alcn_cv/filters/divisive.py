@@ -1,11 +1,9 @@
 """Divisive normalization per pixel: the gain Normalizer's last step before its equalization.
 
 After Jarrett et al., ICCV 2009 (DLCN: the response divided by its local standard deviation, floored by the
-image's mean of it): ``response / sqrt(e^2 + f^2 + n^2 + ABSOLUTE_FLOOR^2)`` with ``e = sqrt(G_sigma * r^2)``,
-``f = scale * mean(e)`` and ``n`` a fixed noise floor (response units). Without ``n``, invariant to a gain of the
-whole response; a flat region of a contrasted image stays flat. With it, a response weaker than ``n`` (a sensor's
-noise, say) is not lifted to full contrast: a keypoint detector fed the output does not find noise. The torch
-form, differentiable, is :mod:`alcn_cv.filters.torch_divisive`.
+image's mean of it): ``response / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` with ``e = sqrt(G_sigma * r^2)`` and
+``f = scale * mean(e)``. Invariant to a gain of the whole response; a flat region of a contrasted image stays
+flat. The torch form, differentiable, is :mod:`alcn_cv.filters.torch_divisive`.
 """
 
 from __future__ import annotations
@@ -39,14 +37,9 @@ def gaussian_energy(response: np.ndarray, sigma: float) -> np.ndarray:
 
 
 def divisive_normalization(
-    response: np.ndarray,
-    sigma: float,
-    scale: float,
-    floor: float | None = None,
-    multiplier: float = 1.0,
-    noise: float = 0.0,
+    response: np.ndarray, sigma: float, scale: float, floor: float | None = None, multiplier: float = 1.0
 ) -> np.ndarray:
-    """``multiplier * response / sqrt(e^2 + f^2 + n^2 + ABSOLUTE_FLOOR^2)`` (see the module).
+    """``multiplier * response / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` (see the module).
 
     Args:
         response: ``(H, W)`` float32, unbounded.
@@ -56,7 +49,6 @@ def divisive_normalization(
             ``c`` times the mean of :func:`gaussian_energy` over the whole image).
         multiplier: a factor of the result, folded into its division (the gain Normalizer's
             ``1 / tau``): no pass of its own.
-        noise: ``n``, the noise floor (>= 0, response units).
 
     Returns:
         ``(H, W)`` float32.
@@ -69,5 +61,5 @@ def divisive_normalization(
     # e^2 is the blurred square itself: OpenCV passes on it, no square root squared again
     squared = _blurred_square(response, sigma)
     f = scale * float(cv2.mean(cv2.sqrt(squared))[0]) if floor is None else floor
-    divisor = cv2.sqrt(cv2.add(squared, f * f + noise * noise + ABSOLUTE_FLOOR**2, dst=squared), dst=squared)
+    divisor = cv2.sqrt(cv2.add(squared, f * f + ABSOLUTE_FLOOR**2, dst=squared), dst=squared)
     return cv2.divide(response, divisor, dst=divisor, scale=multiplier)

@@ -1,9 +1,9 @@
 """The torch form of :mod:`alcn_cv.filters.divisive`, differentiable: the same divisive normalization, kornia style.
 
-``divisive_normalization(r) = multiplier * r / sqrt(e^2 + f^2 + n^2 + ABSOLUTE_FLOOR^2)``, ``e = sqrt(G_sigma * r^2)``
-per pixel, ``f = scale * mean(e)`` over each image and ``n`` the noise floor (Jarrett et al., ICCV 2009). The
-Gaussian is :func:`~alcn_cv.filters.gaussian_mixture.gaussian_kernel1d`'s with reflect-101 borders for any image
-size, so both forms agree to float rounding (``tests/test_filters_divisive.py``).
+``divisive_normalization(r) = multiplier * r / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)``, ``e = sqrt(G_sigma * r^2)``
+per pixel and ``f = scale * mean(e)`` over each image (Jarrett et al., ICCV 2009). The Gaussian is
+:func:`~alcn_cv.filters.gaussian_mixture.gaussian_kernel1d`'s with reflect-101 borders for any image size, so
+both forms agree to float rounding (``tests/test_filters_divisive.py``).
 """
 
 from __future__ import annotations
@@ -74,10 +74,10 @@ def gaussian_energy(response: torch.Tensor, sigma: float, pad: bool = True) -> t
     return gaussian_blur(response * response, sigma, pad).clamp_min(1e-12).sqrt()
 
 
-def inverse_divisor(energy: torch.Tensor, floor: torch.Tensor, noise: float = 0.0) -> torch.Tensor:
-    """``1 / sqrt(e^2 + f^2 + n^2 + ABSOLUTE_FLOOR^2)`` for the energy ``e`` ``(B, 1, H, W)``, the floor ``f``
-    (broadcast, e.g. ``(B, 1, 1, 1)``) and the noise floor ``n`` (response units)."""
-    return (energy * energy + floor * floor + (noise * noise + ABSOLUTE_FLOOR**2)).rsqrt()
+def inverse_divisor(energy: torch.Tensor, floor: torch.Tensor) -> torch.Tensor:
+    """``1 / sqrt(e^2 + f^2 + ABSOLUTE_FLOOR^2)`` for the energy ``e`` ``(B, 1, H, W)`` and the floor ``f``
+    (broadcast, e.g. ``(B, 1, 1, 1)``)."""
+    return (energy * energy + floor * floor + ABSOLUTE_FLOOR**2).rsqrt()
 
 
 def divisive_normalization(
@@ -86,7 +86,6 @@ def divisive_normalization(
     scale: float | torch.Tensor,
     floor: torch.Tensor | None = None,
     multiplier: float = 1.0,
-    noise: float = 0.0,
 ) -> torch.Tensor:
     """:func:`alcn_cv.filters.divisive.divisive_normalization` in torch.
 
@@ -96,7 +95,6 @@ def divisive_normalization(
         scale: ``c`` in ``f = c * mean(e)`` over each image (a float or a 0-d tensor, learnable).
         floor: ``f`` itself, ``(B, 1, 1, 1)``, overriding ``c * mean(e)``.
         multiplier: a factor of the result.
-        noise: ``n``, the noise floor (>= 0, response units).
 
     Returns:
         ``(B, 1, H, W)``, the response's dtype and device.
@@ -109,7 +107,7 @@ def divisive_normalization(
     energy = gaussian_energy(response, sigma)
     if floor is None:
         floor = scale * energy.mean(dim=(-2, -1), keepdim=True)
-    inverse = inverse_divisor(energy, floor, noise)
+    inverse = inverse_divisor(energy, floor)
     return response * (inverse if multiplier == 1.0 else inverse * multiplier)
 
 
@@ -119,15 +117,14 @@ class DivisiveNormalization2d(nn.Module):
     Args:
         sigma: the energy's Gaussian (pixels).
         scale: ``c`` of the floor ``c * mean(e)``.
-        noise: ``n``, the noise floor (response units).
     """
 
-    def __init__(self, sigma: float, scale: float = 1.0, noise: float = 0.0) -> None:
+    def __init__(self, sigma: float, scale: float = 1.0) -> None:
         super().__init__()
-        self.sigma, self.scale, self.noise = float(sigma), float(scale), float(noise)
+        self.sigma, self.scale = float(sigma), float(scale)
 
     def forward(self, response: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
-        return divisive_normalization(response, self.sigma, self.scale, floor, noise=self.noise)
+        return divisive_normalization(response, self.sigma, self.scale, floor)
 
     def extra_repr(self) -> str:
-        return f"sigma={self.sigma}, scale={self.scale}, noise={self.noise}"
+        return f"sigma={self.sigma}, scale={self.scale}"

@@ -98,8 +98,6 @@ class GainNormalizer(nn.Module):
         floor_scale: ``c`` of the divisive floor ``c * mean(e)``.
         learn_scales: learn ``tau`` and ``c`` (otherwise they keep their initial values).
         divisive_sigma: the divisive normalization's energy ``e = sqrt(G_sigma * r^2)`` (working pixels).
-        noise_floor: the divisive normalization's noise floor ``n`` (response units: intensities in [0, 1]
-            times the maps), fixed; the network's gain ``exp(g)`` decides where the response rises above it.
     """
 
     def __init__(
@@ -117,7 +115,6 @@ class GainNormalizer(nn.Module):
         floor_scale: float = 1.0,
         learn_scales: bool = False,
         divisive_sigma: float = 2.0,
-        noise_floor: float = 0.0,
     ) -> None:
         super().__init__()
         if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
@@ -126,8 +123,6 @@ class GainNormalizer(nn.Module):
             eps > 0 and tau > 0 and mean_sigma > 0 and context_sigma > 0 and floor_scale > 0 and divisive_sigma > 0
         ):
             raise InputError("eps, tau, mean_sigma, context_sigma, floor_scale and divisive_sigma must be positive")
-        if not noise_floor >= 0:
-            raise InputError(f"noise_floor must be >= 0, got {noise_floor}")
         self.sigmas = gaussian_sigmas(num_kernels, sigma_step)
         init_weights = dog_weights(self.sigmas) if init_weights is None else [float(w) for w in init_weights]
         if len(init_weights) != num_kernels:
@@ -152,8 +147,6 @@ class GainNormalizer(nn.Module):
         self.log_floor_scale = nn.Parameter(torch.tensor(math.log(floor_scale)), requires_grad=learn_scales)
         #: The divisive normalization's energy sigma (working pixels).
         self.divisive_sigma = float(divisive_sigma)
-        #: The divisive normalization's noise floor (response units).
-        self.noise_floor = float(noise_floor)
         self.mixture = GaussianMixture2d(self.sigmas)
         self.config: dict[str, Any] = {
             "num_kernels": num_kernels,
@@ -169,14 +162,7 @@ class GainNormalizer(nn.Module):
             "floor_scale": float(floor_scale),
             "learn_scales": bool(learn_scales),
             "divisive_sigma": self.divisive_sigma,
-            "noise_floor": self.noise_floor,
         }
-
-    @property
-    def initial_log_scale(self) -> float:
-        """``log ||F||`` of the untrained maps (the norm over the kernels of the zero-sum ``init_weights``)."""
-        w = np.asarray(self.config["init_weights"], np.float64)
-        return float(np.log(np.linalg.norm(w - w.mean())))
 
     @property
     def num_kernels(self) -> int:
@@ -279,9 +265,9 @@ class GainNormalizer(nn.Module):
 
     def divide(self, response: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
         """:func:`~alcn_cv.filters.torch_divisive.divisive_normalization` of the response ``(B, 1, H, W)`` with
-        :attr:`divisive_sigma`, the floor scale ``c`` and :attr:`noise_floor`; ``floor`` ``(B, 1, 1, 1)``
-        overrides ``c * mean(e)`` over each image (training estimates the whole frame's mean from crops)."""
-        return divisive_normalization(response, self.divisive_sigma, self.floor_scale, floor, noise=self.noise_floor)
+        :attr:`divisive_sigma` and the floor scale ``c``; ``floor`` ``(B, 1, 1, 1)`` overrides ``c * mean(e)``
+        over each image (training estimates the whole frame's mean from crops)."""
+        return divisive_normalization(response, self.divisive_sigma, self.floor_scale, floor)
 
     def equalize(self, response: torch.Tensor) -> torch.Tensor:
         """The final :func:`contrast_equalization` with ``tau``: into (-1, 1)."""
@@ -310,13 +296,8 @@ class GainNormalizer(nn.Module):
     def file_meta(self, trained: bool, **provenance: Any) -> dict[str, Any]:
         """The weight file's header: ``architecture``, ``config``, ``sigmas``, ``working_scale`` 1,
         ``output_range`` ``[-1, 1]`` (the equalized output), the equalization's ``tau`` and the divisive
-        normalization's ``stride``, ``scale``, ``sigma`` and ``noise``."""
-        divisive = {
-            "stride": self.stride,
-            "scale": float(self.floor_scale.detach()),
-            "sigma": self.divisive_sigma,
-            "noise": self.noise_floor,
-        }
+        normalization's ``stride``, ``scale`` and ``sigma``."""
+        divisive = {"stride": self.stride, "scale": float(self.floor_scale.detach()), "sigma": self.divisive_sigma}
         return {
             "architecture": ARCHITECTURE,
             "config": self.config,

@@ -126,12 +126,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     r = subparsers.add_parser(
         "train-real-light",
-        help="train the gain Normalizer on registered real scenes (identification objective)",
+        help="train the gain Normalizer on registered scenes under changing light (identification objective)",
         description="Train the gain-adaptive Normalizer (alcn_cv.nets.gain) on fixed-camera scenes under changing "
         "light: each textured location is a class seen under every frame's light (alcn_cv.train.real_light). "
-        "Writes OUT/gain_normalizer.npz, checkpoints, train.log and history.json. The shipped "
-        "alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`; the webcam scenes are for academic "
-        "research only.",
+        "The gain preset trains on photographs that permit any use, each relit several times (relit=4); "
+        "--set scenes=[...] adds registered scenes (folders, or the webcam scenes courbevoie, frankfurt, "
+        "panorama: academic research only). Writes OUT/gain_normalizer.npz, checkpoints, train.log and "
+        "history.json. The shipped alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`.",
     )
     _add_conf(r, "gain", "gain (the shipped alcn_normalizer_gain.npz)")
     r.add_argument("--out", type=Path, default=Path("out/gain"), help="run folder (default: out/gain)")

@@ -86,7 +86,6 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from alcn_cv.data.lighting import LIGHT_FAMILIES
-from alcn_cv.data.scenes import TRAIN_SCENES
 from alcn_cv.errors import InputError
 
 __all__ = [
@@ -507,17 +506,22 @@ def _gain_network() -> dict[str, Any]:
         "divisive_sigma": 2.0,
         "tau": 3.0,
         "learn_scales": False,
-        "noise_floor": 0.0,
     }
 
 
 @dataclass
 class RealLightConfig:
     """Settings of :func:`~alcn_cv.train.real_light.train_real_light`; the defaults are the
-    ``gain`` preset, the recipe of the shipped ``alcn_normalizer_gain.npz``.
+    ``gain`` preset, the recipe of the shipped ``alcn_normalizer_gain.npz``: relit copies of photographs
+    that permit any use, no webcam frame (those are its validation).
 
     Attributes:
         scenes: registered scenes: folders of frames, or names of scenes of the shared ``webcam`` data.
+        relit: relit copies of each permissive photograph
+            (:func:`~alcn_cv.data.permissive_images.training_photographs`), drawn with ``scenes`` as scenes
+            of their own (0: none).
+        light: the light changes of those copies (:data:`~alcn_cv.data.light_changes.LIGHTS`).
+        jitter: their registration error (pixels; 0: pixel-exact).
         rendered: folders of rendered registered scenes (``alcn data scenes``; a folder
             without images stands for its sub-folders), drawn apart from ``scenes``.
         rendered_fraction: the share of steps that draw a rendered scene (0 when none).
@@ -529,13 +533,17 @@ class RealLightConfig:
         temperature: of the softmax over cosine similarities.
         consistency: weight of :func:`~alcn_cv.train.real_light.consistency_loss`.
         anywhere: locations per step drawn anywhere in the frame, for the consistency term only.
+        repeatability: weight of :func:`~alcn_cv.train.real_light.repeatability_loss` (the same locations).
         lr: Adam's learning rate.
         seed: seeds numpy and torch (data draws and initialisation).
         save_every: steps between checkpoints and intermediate weight files.
         net: :class:`~alcn_cv.nets.gain.GainNormalizer` arguments (``--set net.channels=8``).
     """
 
-    scenes: list[str] = field(default_factory=lambda: list(TRAIN_SCENES))
+    scenes: list[str] = field(default_factory=list)
+    relit: int = 4
+    light: str = "relief"
+    jitter: float = 0.0
     rendered: list[str] = field(default_factory=list)
     rendered_fraction: float = 0.0
     steps: int = 300
@@ -546,7 +554,7 @@ class RealLightConfig:
     temperature: float = 0.05
     consistency: float = 1.0
     anywhere: int = 24
-    gain_prior: float = 0.0
+    repeatability: float = 1.0
     lr: float = 1e-3
     seed: int = 0
     save_every: int = 100
@@ -593,6 +601,8 @@ class GainDistillConfig:
     Attributes:
         teacher: a shipped model's name (``gain``) or a gain weight file.
         scenes: registered scenes (as :attr:`RealLightConfig.scenes`; never the test scenes).
+        relit, light: relit copies of the permissive photographs added to the data (as
+            :attr:`RealLightConfig.relit` and :attr:`RealLightConfig.light`; 0: none).
         rendered: rendered registered scenes added to the data (256x256, 4 lights each).
         seed: seeds the student's initialisation, the relighting and the rendering.
         epochs, lr: Adam over every training frame once per epoch, cosine schedule.
@@ -600,7 +610,9 @@ class GainDistillConfig:
     """
 
     teacher: str = "gain"
-    scenes: list[str] = field(default_factory=lambda: list(TRAIN_SCENES))
+    scenes: list[str] = field(default_factory=list)
+    relit: int = 4
+    light: str = "relief"
     rendered: int = 6
     seed: int = 0
     epochs: int = 60

@@ -40,8 +40,9 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from alcn_cv.data.permissive_images import relit_permissive_scenes
 from alcn_cv.data.phos import render_windows
-from alcn_cv.data.scenes import load_scenes, scene_dirs
+from alcn_cv.data.scenes import TRAIN_SCENES, Scene, load_scenes, scene_dirs
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
 from alcn_cv.io import atomic_write
@@ -275,6 +276,8 @@ Speed and the difference from the exact ALCN output on whole frames: `alcn bench
 
 #: Every ``_GAIN_VAL_EVERY``-th frame of each real scene is held out for validation.
 _GAIN_VAL_EVERY = 5
+#: The shared webcam scenes (academic research only).
+WEBCAM_SCENES = (*TRAIN_SCENES, "mexico")
 #: Side and frames of the rendered registered scenes (:func:`alcn_cv.data.relief_scenes.render_scene`).
 _RENDERED_SIZE, _RENDERED_FRAMES = 256, 4
 
@@ -289,7 +292,7 @@ class _GridSample:
 
 
 def _gain_frames(
-    scenes: Sequence[str | os.PathLike], rendered: int, seed: int, progress: bool
+    scenes: Sequence[Scene], rendered: int, seed: int, progress: bool
 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Training and validation frames, ``(H, W)`` float32 in [0, 1]: the frames of the real
     scenes (every :data:`_GAIN_VAL_EVERY`-th held out) and of ``rendered`` rendered scenes
@@ -298,7 +301,7 @@ def _gain_frames(
 
     train: list[np.ndarray] = []
     val: list[np.ndarray] = []
-    for scene in load_scenes(scenes):
+    for scene in scenes:
         for i, frame in enumerate(scene.unit_frames()):
             (val if i % _GAIN_VAL_EVERY == _GAIN_VAL_EVERY - 1 else train).append(frame)
     for i in tqdm(range(rendered), desc="render scenes", unit="scene", disable=not progress):
@@ -380,8 +383,10 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
     if teacher_weights.meta.get("architecture") != "gain":
         raise InputError(f"{teacher_path} is not a gain Normalizer")
     teacher_net = normalizer_from_file(teacher_weights).eval()
-    scenes = scene_dirs(cfg.scenes)
     start = time.perf_counter()
+    scenes = load_scenes(scene_dirs(cfg.scenes)) if cfg.scenes else []
+    if cfg.relit:
+        scenes += relit_permissive_scenes(cfg.relit, seed, cfg.light)
     train_frames, val_frames = _gain_frames(scenes, rendered, seed, progress)
     if not val_frames:
         raise DatasetError(
@@ -432,7 +437,7 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
         },
         "settings": {
             **asdict(cfg),
-            "scenes": [Path(s).name for s in scenes],
+            "scenes": [s.name for s in scenes if s.group != "relit"],
             "frames": {"train": len(train_frames), "validation": len(val_frames)},
         },
         "seconds": {"data_and_targets": round(prepared, 1), "total": round(time.perf_counter() - start, 1)},
@@ -468,6 +473,35 @@ def _main_gain(out_path: Path, cfg: GainDistillConfig, command: str, conf: str |
     return out_path
 
 
+def _gain_sources(s: dict[str, Any]) -> str:
+    """The distillation data, in words, from the run's settings."""
+    parts = []
+    if s["scenes"]:
+        parts.append(f"the registered scenes {', '.join(s['scenes'])}")
+    if s["relit"]:
+        parts.append(
+            f"the permissive photographs relit {s['relit']} times each (`alcn_cv.data.permissive_images`, "
+            f"light `{s['light']}`)"
+        )
+    if s["rendered"]:
+        parts.append(
+            f"{s['rendered']} rendered registered scenes ({_RENDERED_SIZE}x{_RENDERED_SIZE}, {_RENDERED_FRAMES} "
+            "lights each, `alcn_cv.data.relief_scenes.render_scene`, the last held out)"
+        )
+    return "; ".join(parts)
+
+
+def _gain_terms(s: dict[str, Any]) -> str:
+    """What the student's data allow: the webcam frames are for academic research only."""
+    if any(Path(scene).name in WEBCAM_SCENES for scene in s["scenes"]):
+        return (
+            '**Distilled on frames of the "Webcam" data set (Verdie, Yi, Fua & Lepetit, TILDE, CVPR 2015; AMOS, '
+            "Jacobs, Roman & Pless, CVPR 2007): these weights are for academic research only, as those "
+            "photographs are.**"
+        )
+    return "Distilled on data that permit any use, as its teacher should be (see the teacher's card)."
+
+
 def _write_gain_card(path: Path, name: str, record: dict[str, Any], trained: bool, command: str) -> None:
     v, start, s = record["validation"], record["validation_initial"], record["settings"]
     teacher = record["teacher"]
@@ -481,16 +515,13 @@ teacher's {record["parameters"]["teacher"]}) distilled from `{teacher["file"]}` 
 {"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}
 `{Path(name).with_suffix(".onnx").name}` is the same network for the torch-free `backend="opencv"`
 (written by the same command through `alcn export`). ALCN warns when the installed teacher differs from this one.
-**Distilled on frames of the "Webcam" data set (Verdie, Yi, Fua & Lepetit, TILDE, CVPR 2015; AMOS, Jacobs,
-Roman & Pless, CVPR 2007), like its teacher: these weights are for academic research only, as those photographs are.**
+{_gain_terms(s)}
 
 ## How it was made
 
 - Command: `{command}`
-- Data: the frames of the training scenes {", ".join(s["scenes"])} (`../shared/data/webcam`; every
-  {_GAIN_VAL_EVERY}th frame held out for validation; `mexico` and the psm objects, the test set, never read) and
-  {s["rendered"]} rendered registered scenes ({_RENDERED_SIZE}x{_RENDERED_SIZE}, {_RENDERED_FRAMES} lights each,
-  `alcn_cv.data.relief_scenes.render_scene`, the last held out): {s["frames"]["train"]} training and
+- Data: the frames of {_gain_sources(s)} (every {_GAIN_VAL_EVERY}th frame of a scene held out for validation;
+  the test scenes `mexico` and the psm objects never read): {s["frames"]["train"]} training and
   {s["frames"]["validation"]} validation frames, grayscale; each training frame also under another light's
   strength every epoch (a gain of 0.3 to 1.5, clipped, mirrored half of the time).
 - Targets: the teacher's maps `F_k = exp(g) w_k` on its stride-8 grid (the features are the same, computed

@@ -1,7 +1,8 @@
-r"""Training the gain Normalizer on real light changes (registered photographs of fixed cameras).
+r"""Training the gain Normalizer on light changes of registered scenes (real cameras, or photographs relit).
 
 ALCN's Eq. 2 needs labels; on a registered multi-illumination set (one folder of frames per
-scene, the camera fixed, the light changing: the ``webcam`` layout) a textured location is an
+scene, the camera fixed, the light changing: the ``webcam`` layout; or a photograph relit several times,
+:func:`~alcn_cv.data.permissive_images.relit_permissive_scenes`) a textured location is an
 "object", its index the label, seen under every frame's light. A step draws a scene, two of its
 frames and ``locations`` textured locations (at least ``min_distance`` apart), crops ``crop x
 crop`` windows around them in both frames, normalizes them with
@@ -9,7 +10,9 @@ crop`` windows around them in both frames, normalizes them with
 Eq. 3 at full resolution on the centre, the equalization) and classifies each central
 ``patch x patch`` of one frame among the locations of the other by normalized cross-correlation
 (zero mean, unit norm, cosine over a temperature, symmetric cross-entropy). This is the task of
-patch identification under a change of light, made differentiable.
+patch identification under a change of light, made differentiable. Two terms ask the same of the output
+everywhere a detector looks: its consistency (:func:`consistency_loss`) and that of a keypoint detector's
+response to it (:func:`repeatability_loss`).
 
 The network sees the whole crop, which holds its receptive field; the mixture runs only where
 the central ``patch`` needs it (:class:`CentreDenseMixture`: ``patch`` plus the widest kernel's
@@ -20,9 +23,10 @@ Outputs in the run folder: ``train.log``, ``history.json``, ``checkpoint.pt`` (a
 ``save_every`` steps), ``gain_normalizer_step{N}.npz`` at those steps and
 ``gain_normalizer.npz`` (:mod:`alcn_cv.weight_file`, ``architecture: "gain"``) at the end.
 
-Command (the real scenes are for academic research only, see ``shared/data/README.md``)::
+Command (the ``gain`` preset reads photographs that permit any use; the webcam scenes, which
+``--set scenes=[...]`` adds, are for academic research only, see ``shared/data/README.md``)::
 
-    alcn train-real-light --conf gain   # the shipped alcn_normalizer_gain.npz: 1 to 3 minutes on 2 CPU cores
+    alcn train-real-light --conf gain   # the shipped alcn_normalizer_gain.npz: a few minutes on 2 CPU cores
 """
 
 from __future__ import annotations
@@ -42,10 +46,11 @@ import torch.nn.functional as F
 from torch import nn
 from tqdm import tqdm
 
+from alcn_cv.data.permissive_images import relit_permissive_scenes
 from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
-from alcn_cv.filters.torch_divisive import gaussian_energy, inverse_divisor
+from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.report import machine
@@ -61,7 +66,9 @@ __all__ = [
     "crop_windows",
     "anywhere_locations",
     "identification_loss",
+    "harris_response",
     "pair_loss",
+    "repeatability_loss",
     "sample_locations",
     "textured_locations",
     "train_real_light",
@@ -174,6 +181,29 @@ def consistency_loss(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return (a - b).square().sum() / (a.square().sum() + b.square().sum()).clamp_min(1e-12)
 
 
+def harris_response(x: torch.Tensor, sigma: float = 1.5, k: float = 0.04) -> torch.Tensor:
+    """Harris's corner response ``det(M) - k trace(M)^2`` of ``(n, 1, P, P)`` images (``M`` the structure tensor:
+    central-difference gradients, their products blurred by ``G_sigma``, reflect-101 borders): ``(n, 1, P, P)``.
+    What ORB ranks its FAST corners by, differentiable."""
+    gx = (F.pad(x, (1, 1, 0, 0), mode="reflect")[..., 2:] - F.pad(x, (1, 1, 0, 0), mode="reflect")[..., :-2]) / 2
+    gy = (F.pad(x, (0, 0, 1, 1), mode="reflect")[..., 2:, :] - F.pad(x, (0, 0, 1, 1), mode="reflect")[..., :-2, :]) / 2
+    sxx, syy, sxy = (gaussian_blur(t, sigma) for t in (gx * gx, gy * gy, gx * gy))
+    return sxx * syy - sxy * sxy - k * (sxx + syy) ** 2
+
+
+def repeatability_loss(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """:func:`consistency_loss` of the :func:`harris_response` of the outputs: a keypoint detector fed them
+    must respond alike under both lights (noise lifted to contrast in one frame is not in the other).
+
+    Args:
+        a, b: ``(n, 1, P, P)``, the same locations under two lights.
+
+    Returns:
+        A scalar tensor in [0, 2].
+    """
+    return consistency_loss(harris_response(a), harris_response(b))
+
+
 class CentreDenseMixture(nn.Module):
     """Eq. 3 on the centre of a crop, from the maps on the grid of the network's stride.
 
@@ -233,7 +263,7 @@ def _centre_mixture(sigmas: tuple[float, ...], crop: int, size: int, stride: int
 
 def _normalized_centres(
     net: GainNormalizer, crops: torch.Tensor, patch: int, frames: Sequence[tuple[slice, slice]] = ()
-) -> tuple[torch.Tensor, torch.Tensor]:
+) -> torch.Tensor:
     """The network's output on the central ``patch x patch`` of each crop ``(B, 1, crop, crop)``:
     the network on the whole crop, Eq. 3 on the centre (:class:`CentreDenseMixture`), the
     divisive normalization (:mod:`alcn_cv.filters.torch_divisive`) and the equalization.
@@ -258,14 +288,16 @@ def _normalized_centres(
     for rows, sample in frames or [(slice(None), slice(None))]:
         floor[rows] = net.floor_scale * energy[sample].mean()
     centre = response[..., margin : margin + patch, margin : margin + patch]
-    outputs = net.equalize(centre * inverse_divisor(energy, floor, net.noise_floor))
-    return outputs, 0.5 * grid.square().sum(1).clamp_min(1e-12).log().mean()
+    return net.equalize(centre * inverse_divisor(energy, floor))
 
 
 def training_scenes(cfg: RealLightConfig) -> tuple[list[TrainingScene], list[TrainingScene]]:
     """The two groups of scenes a run draws from, ready for training (padded by ``cfg.crop // 2``):
-    ``cfg.scenes`` and ``cfg.rendered``."""
-    scenes = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(scene_dirs(cfg.scenes))]
+    ``cfg.scenes`` with the ``cfg.relit`` copies of the permissive photographs, and ``cfg.rendered``."""
+    sources = load_scenes(scene_dirs(cfg.scenes)) if cfg.scenes else []
+    if cfg.relit:
+        sources += relit_permissive_scenes(cfg.relit, cfg.seed, cfg.light, cfg.jitter)
+    scenes = [training_scene(s, cfg.crop // 2, cfg.patch) for s in sources]
     rendered = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(cfg.rendered)]
     for scene in scenes + rendered:
         logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
@@ -296,15 +328,13 @@ def pair_loss(
     crops = torch.cat([crop_windows(scene.frames[f], every, cfg.crop) for f in (fa, fb)])
     m, n = len(every), len(centres)
     drawn = (lambda first: slice(first + n, first + m)) if m > n else (lambda first: slice(first, first + m))
-    outputs, log_scale = _normalized_centres(
-        net, crops, cfg.patch, [(slice(0, m), drawn(0)), (slice(m, 2 * m), drawn(m))]
-    )
+    outputs = _normalized_centres(net, crops, cfg.patch, [(slice(0, m), drawn(0)), (slice(m, 2 * m), drawn(m))])
     a, b = outputs[:m], outputs[m:]
     loss = identification_loss(a[:n], b[:n], cfg.temperature)
     if cfg.consistency:
         loss = loss + cfg.consistency * consistency_loss(a, b)
-    if cfg.gain_prior:
-        loss = loss + cfg.gain_prior * (log_scale - net.initial_log_scale) ** 2
+    if cfg.repeatability:
+        loss = loss + cfg.repeatability * repeatability_loss(a, b)
     return loss
 
 
@@ -313,7 +343,7 @@ def _save_weights(
 ) -> Path:
     meta = net.file_meta(
         trained=step > 0,
-        description="gain Normalizer trained on registered real scenes (identification objective)",
+        description="gain Normalizer trained on registered scenes under changing light (identification objective)",
         training={**record, "config": asdict(cfg), "step": step, "seconds": round(seconds, 1), "machine": machine()},
     )
     return save_normalizer_file(path, net.state_arrays(), meta)
@@ -330,8 +360,8 @@ def train_real_light(cfg: RealLightConfig, out: str | Path, *, command: str = ""
     Returns:
         The final weight file ``out/gain_normalizer.npz``.
     """
-    if not cfg.scenes:
-        raise InputError("no scenes given")
+    if not cfg.scenes and not cfg.relit:
+        raise InputError("no scenes given (scenes, relit)")
     if not 0 <= cfg.rendered_fraction < 1 or (cfg.rendered_fraction > 0 and not cfg.rendered):
         raise InputError(f"rendered_fraction must be in [0, 1) and needs rendered scenes, got {cfg.rendered_fraction}")
     if cfg.crop < 2 * cfg.patch or cfg.locations < 2 or cfg.steps < 1:
