@@ -54,7 +54,7 @@ def test_distill_from_a_gain_teacher_writes_a_smaller_gain_student(tmp_path):
 
     teacher_path, teacher = _teacher(tmp_path / "teacher.npz")
     scenes = _scenes(tmp_path)
-    cfg = GainDistillConfig(teacher=str(teacher_path), scenes=[str(s) for s in scenes], rendered=0, epochs=25)
+    cfg = GainDistillConfig(teacher=str(teacher_path), scenes=[str(s) for s in scenes], relit=0, rendered=0, epochs=25)
     out = distill.main(tmp_path / "student.npz", cfg, "test", conf="gain-lite", progress=False)
     header = load_normalizer_file(out).meta
     assert header["architecture"] == "gain" and header["config"]["channels"] == 8 and header["trained"] is True
@@ -66,7 +66,7 @@ def test_distill_from_a_gain_teacher_writes_a_smaller_gain_student(tmp_path):
     assert fit["validation"]["maps_relative_error"] < fit["validation_initial"]["maps_relative_error"]
     assert fit["settings"]["frames"] == {"train": 8, "validation": 2}  # every 5th frame of each scene held out
     card = out.with_suffix(".md").read_text()
-    assert "Command: `test`" in card and "teacher.npz" in card and "academic research only" in card
+    assert "Command: `test`" in card and "teacher.npz" in card and "carry those photographs' terms" in card
     # the student runs through ALCN on every backend, its ONNX export included
     gray = synthetic_frame(160, 120, False).astype(np.float32) / np.float32(255)
     fast, opencv = ALCN(weights=out), ALCN(weights=out, backend="opencv")
@@ -82,7 +82,7 @@ def test_distill_gain_is_seeded_and_rejects_other_teachers(tmp_path):
     teacher_path, _ = _teacher(tmp_path / "teacher.npz")
     scenes = _scenes(tmp_path, count=1)
     (tmp_path / "short").mkdir()
-    cfg = GainDistillConfig(teacher=str(teacher_path), scenes=[str(s) for s in scenes], rendered=1, epochs=2)
+    cfg = GainDistillConfig(teacher=str(teacher_path), scenes=[str(s) for s in scenes], relit=0, rendered=1, epochs=2)
     runs = [distill.distill_gain(cfg, progress=False)[0] for _ in range(2)]
     for a, b in zip(runs[0].state_arrays().values(), runs[1].state_arrays().values()):
         np.testing.assert_array_equal(a, b)
@@ -90,7 +90,9 @@ def test_distill_gain_is_seeded_and_rejects_other_teachers(tmp_path):
         distill.distill_gain(GainDistillConfig(teacher="lite", scenes=cfg.scenes), progress=False)
     short = [str(s) for s in _scenes(tmp_path / "short", count=1, frames=3)]
     with pytest.raises(alcn_cv.errors.DatasetError, match="validation"):
-        distill.distill_gain(GainDistillConfig(teacher=str(teacher_path), scenes=short, rendered=0), progress=False)
+        distill.distill_gain(
+            GainDistillConfig(teacher=str(teacher_path), scenes=short, relit=0, rendered=0), progress=False
+        )
 
 
 def test_distill_command_from_a_gain_teacher(tmp_path, capsys):
@@ -108,6 +110,8 @@ def test_distill_command_from_a_gain_teacher(tmp_path, capsys):
         "dilations=[1, 2]",
         "--set",
         f"scenes=['{scenes[0]}']",
+        "--set",
+        "relit=0",
         "--set",
         "rendered=0",
     ]
@@ -127,7 +131,7 @@ def test_shipped_gain_lite_model_equals_its_torch_model(backend):
     assert alcn.weights_path == MODELS["gain-lite"] and alcn.trained and alcn.mixture == "exact"
     header = load_normalizer_file(MODELS["gain-lite"]).meta
     assert header["config"]["channels"] < load_normalizer_file(MODELS["gain"]).meta["config"]["channels"]
-    assert "academic research only" in MODELS["gain-lite"].with_suffix(".md").read_text()
+    assert "photographs that permit any use" in MODELS["gain-lite"].with_suffix(".md").read_text()
     reference = ALCN(model="gain-lite").net
     gray = synthetic_frame(320, 200, False, seed=5).astype(np.float32) / np.float32(255)
     with torch.inference_mode():

@@ -205,6 +205,7 @@ def test_three_steps_lower_the_loss(tmp_path):
     scene_dir = _write_scene(tmp_path / "scene")
     cfg = RealLightConfig(
         scenes=[str(scene_dir)],
+        relit=0,
         steps=3,
         locations=16,
         crop=CROP,

@@ -611,9 +611,9 @@ class GainDistillConfig:
 
     teacher: str = "gain"
     scenes: list[str] = field(default_factory=list)
-    relit: int = 4
+    relit: int = 5
     light: str = "relief"
-    rendered: int = 6
+    rendered: int = 0
     seed: int = 0
     epochs: int = 60
     lr: float = 3e-3

@@ -492,14 +492,17 @@ def _gain_sources(s: dict[str, Any]) -> str:
 
 
 def _gain_terms(s: dict[str, Any]) -> str:
-    """What the student's data allow: the webcam frames are for academic research only."""
+    """What the student's data allow: the webcam frames are for academic research only, other scenes carry
+    their own terms, the relit permissive photographs (and the rendered scenes) permit any use."""
     if any(Path(scene).name in WEBCAM_SCENES for scene in s["scenes"]):
         return (
             '**Distilled on frames of the "Webcam" data set (Verdie, Yi, Fua & Lepetit, TILDE, CVPR 2015; AMOS, '
             "Jacobs, Roman & Pless, CVPR 2007): these weights are for academic research only, as those "
             "photographs are.**"
         )
-    return "Distilled on data that permit any use, as its teacher should be (see the teacher's card)."
+    if s["scenes"]:
+        return "**Distilled on the registered scenes named below: these weights carry those photographs' terms.**"
+    return "Distilled on photographs that permit any use: so may these weights be used (mind the teacher's terms)."
 
 
 def _write_gain_card(path: Path, name: str, record: dict[str, Any], trained: bool, command: str) -> None:

@@ -1,0 +1,55 @@
+"""Does learning matter? The shipped default against its own untrained start and against the same recipe trained
+on the webcam scenes (academic research only), beside the tuned hand-made methods: `alcn bench relight`'s quick
+protocol (12 frames per scene, 150 patches, 12 pairs) over 3 seeds, on the test scenes (tuned on the training ones).
+
+The untrained start is the default's network as the preset initialises it (seed 0): the DoG G1 - G2, the divisive
+normalization and the equalization, no learning. The webcam variant is `alcn train-real-light --conf gain --set
+scenes=[courbevoie,frankfurt,panorama] --set relit=0` (the default's recipe on real light changes).
+
+    python experiments/learning.py      # about 15 min on 2 cores
+
+Writes runs/learning/{untrained.npz,webcam/,bench/}; keeps docs/reports/relight_learning.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import torch
+from _run import RUNS, alcn, keep
+
+from alcn_cv.nets.gain import GainNormalizer
+from alcn_cv.runtime import MODELS
+from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
+
+QUICK = ["--max-frames", "12", "--patches", "150", "--max-pairs", "12"]
+BASELINES = ["none", "clahe", "dog", "dlcn", "tantriggs"]
+
+
+def untrained_start(path: str) -> str:
+    """The default's network as its preset initialises it (same config, seed 0), saved untrained."""
+    meta = load_normalizer_file(MODELS["gain"]).meta
+    torch.manual_seed(meta["training"]["config"]["seed"])
+    net = GainNormalizer(**meta["training"]["config"]["net"])
+    save_normalizer_file(path, net.state_arrays(), net.file_meta(trained=False, description="the default's start"))
+    return path
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", nargs="+", default=["0", "1", "2"], help="sampling seeds (default: 0 1 2)")
+    args = parser.parse_args()
+    out = RUNS / "learning"
+    out.mkdir(parents=True, exist_ok=True)
+    untrained = untrained_start(str(out / "untrained.npz"))
+    webcam = out / "webcam"
+    scenes = "scenes=['courbevoie','frankfurt','panorama']"
+    alcn("train-real-light", "--conf", "gain", "--set", scenes, "--set", "relit=0", "--out", str(webcam))
+    methods = [*BASELINES, "alcn", f"alcn:weights={untrained}", f"alcn:weights={webcam / 'gain_normalizer.npz'}"]
+    bench = out / "bench"
+    alcn("bench", "relight", "--out", str(bench), "--methods", ",".join(methods), "--seeds", *args.seeds, *QUICK)
+    keep(bench / "relight.json", "relight_learning")
+
+
+if __name__ == "__main__":
+    main()
