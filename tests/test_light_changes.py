@@ -23,13 +23,13 @@ from alcn_cv.data.light_changes import (
 from alcn_cv.data.permissive_images import (
     PERMISSIVE_LICENCES,
     SHARED_PHOTOGRAPHS,
-    SKIMAGE_PHOTOGRAPHS,
     Photograph,
     relit_scenes,
     rendered_photographs,
     shared_photographs,
     skimage_photographs,
 )
+from alcn_cv.data.textures import SKIMAGE_PHOTOGRAPHS
 from alcn_cv.errors import InputError
 from alcn_cv.shared_data import shared_data_dir
 

@@ -7,7 +7,8 @@ Modules:
 - :mod:`~alcn_cv.data.render`: materials (matte, plastic, velvet-like, metal), vectorised
   shading, height-field shadows and the camera (exposure, noise, saturation, gamma, motion blur).
 - :mod:`~alcn_cv.data.frames`: a reproducible textured frame under uneven light (benchmarks, tests).
-- :mod:`~alcn_cv.data.textures`: procedural textures and photographs of :mod:`skimage.data`.
+- :mod:`~alcn_cv.data.textures`: procedural textures and the photographs of :mod:`skimage.data`
+  that permit any use.
 - :mod:`~alcn_cv.data.objects`: textured relief objects and their placement on 2.5D surfaces.
 - :mod:`~alcn_cv.data.phos`: the Normalizer's Phos-like 64x64 training windows.
 - :mod:`~alcn_cv.data.synthetic`: the paper's simple synthetic images from a few real images.

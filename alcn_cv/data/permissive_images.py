@@ -2,14 +2,15 @@
 
 Three sources, each photograph with its licence:
 
-* the photographs that ship inside the scikit-image wheel (:data:`SKIMAGE_PHOTOGRAPHS`): only
-  those whose ``skimage.data`` docstring states public domain, CC0 or no known copyright
-  restrictions, and that load without a download (``pooch``); the phrase of each docstring is
-  kept and :func:`skimage_photographs` checks it is still there;
+* the photographs that ship inside the scikit-image wheel
+  (:data:`alcn_cv.data.textures.SKIMAGE_PHOTOGRAPHS`, the photographs the data engine's textures
+  are cut from): only those whose ``skimage.data`` docstring states public domain, CC0 or no known
+  copyright restrictions, and that load without a download (``pooch``); the phrase of each
+  docstring is kept and checked when it is read;
 * OpenCV's samples under ``../shared/data`` (Apache-2.0, :data:`SHARED_PHOTOGRAPHS`): the
   chessboard views, the cookie box's still and frames of its video;
 * the data engine's rendered scenes (:func:`alcn_cv.data.relief_scenes.render_scene`, one frame
-  each), generated here.
+  each), generated here from procedural textures and crops of those photographs.
 
 The ``webcam`` frames (academic research only) and the other shared sets are not listed: they
 are validation data, not training data of a default that anyone may use.
@@ -17,7 +18,6 @@ are validation data, not training data of a default that anyone may use.
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,13 +26,13 @@ import numpy as np
 
 from alcn_cv.data.light_changes import LIGHTS, relit_frames
 from alcn_cv.data.scenes import Scene
+from alcn_cv.data.textures import SKIMAGE_PHOTOGRAPHS, skimage_photograph
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import read_image, to_gray
 
 __all__ = [
     "PERMISSIVE_LICENCES",
     "SHARED_PHOTOGRAPHS",
-    "SKIMAGE_PHOTOGRAPHS",
     "Photograph",
     "permissive_photographs",
     "relit_permissive_scenes",
@@ -45,28 +45,6 @@ __all__ = [
 
 #: The licences a training photograph of the default may carry.
 PERMISSIVE_LICENCES = ("public domain", "CC0", "no known copyright restrictions", "Apache-2.0", "rendered by alcn-cv")
-
-#: ``skimage.data`` function -> (licence, the phrase of its docstring that states it). Left out:
-#: ``cat`` (the same photograph as ``chelsea``), ``clock`` (motion-blurred: its patches are
-#: alike), ``moon``, ``page``, ``stereo_motorcycle`` (no licence stated), ``horse``, ``logo``,
-#: ``colorwheel`` (drawings), ``microaneurysms`` (102x102), ``eagle``, ``lily``, ``skin``,
-#: ``kidney`` (need a download).
-SKIMAGE_PHOTOGRAPHS: dict[str, tuple[str, str]] = {
-    "astronaut": ("public domain", "released into the public domain"),
-    "brick": ("CC0", "Creative Commons CC0 License"),
-    "camera": ("CC0", "CC0 by the photographer"),
-    "cell": ("CC0", "This image is CC0"),
-    "chelsea": ("CC0", "CC0 by the photographer"),
-    "coffee": ("CC0", "CC0 by the photographer"),
-    "coins": ("no known copyright restrictions", "No known copyright restrictions"),
-    "grass": ("CC0", "Creative Commons CC0 License"),
-    "gravel": ("CC0", "Creative Commons CC0 License"),
-    "hubble_deep_field": ("public domain", "may be freely used in the public domain"),
-    "immunohistochemistry": ("no known copyright restrictions", "No known copyright restrictions"),
-    "retina": ("CC0", "CC0 1.0 Universal Public Domain Dedication"),
-    "rocket": ("public domain", "released in the public domain"),
-    "text": ("public domain", "released into the public domain"),
-}
 
 #: Files under the shared data (glob patterns) -> licence: OpenCV's samples.
 SHARED_PHOTOGRAPHS: dict[str, str] = {
@@ -97,26 +75,19 @@ def _fit(image: np.ndarray, max_side: int | None) -> np.ndarray:
 
 
 def skimage_photographs(max_side: int | None = 640) -> list[Photograph]:
-    """The photographs of :data:`SKIMAGE_PHOTOGRAPHS`, BGR or gray uint8, the longer side at most ``max_side``.
+    """The photographs of :data:`~alcn_cv.data.textures.SKIMAGE_PHOTOGRAPHS`, BGR or gray uint8, the
+    longer side at most ``max_side``.
 
     Raises:
-        DatasetError: scikit-image is missing, or a docstring no longer states the recorded licence.
+        DatasetError: as :func:`~alcn_cv.data.textures.skimage_photograph` (scikit-image is missing,
+            or a docstring no longer states the recorded licence).
     """
-    try:
-        import skimage.data
-    except ImportError as exc:
-        raise DatasetError("the scikit-image photographs need scikit-image (pip install 'alcn-cv[data]')") from exc
     photos = []
-    for name, (licence, phrase) in SKIMAGE_PHOTOGRAPHS.items():
-        loader = getattr(skimage.data, name)
-        if phrase not in " ".join((loader.__doc__ or "").split()):
-            raise DatasetError(f"skimage.data.{name}'s docstring no longer says {phrase!r}; check its licence")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # skimage's deprecation notes
-            image = np.asarray(loader())
+    for name, (licence, _) in SKIMAGE_PHOTOGRAPHS.items():
+        image = skimage_photograph(name)
         if image.ndim == 3:
-            image = cv2.cvtColor(image[..., :3], cv2.COLOR_RGB2BGR)
-        photos.append(Photograph(name, _fit(image.astype(np.uint8), max_side), licence, f"skimage.data.{name}"))
+            image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+        photos.append(Photograph(name, _fit(image, max_side), licence, f"skimage.data.{name}"))
     return photos
 
 

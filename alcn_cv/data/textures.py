@@ -1,26 +1,32 @@
 """Textures for albedos and backgrounds: procedural patterns and real photographs.
 
 Photographs come from :mod:`skimage.data`, which ships them inside the installed package
-(nothing is downloaded). Every function takes a :class:`numpy.random.Generator` and is
-deterministic for its state. Textures are float32 RGB arrays of shape (H, W, 3) with values in
-[0, 1], in *linear* reflectance (albedo), not gamma-encoded: photographs are linearised with
-gamma 2.2 so that the renderer's lighting multiplies reflectances, not display values.
+(nothing is downloaded), and only those whose licence permits any use
+(:data:`SKIMAGE_PHOTOGRAPHS`), so that whatever the data engine renders carries no photograph's
+terms. Every function takes a :class:`numpy.random.Generator` and is deterministic for its
+state. Textures are float32 RGB arrays of shape (H, W, 3) with values in [0, 1], in *linear*
+reflectance (albedo), not gamma-encoded: photographs are linearised with gamma 2.2 so that the
+renderer's lighting multiplies reflectances, not display values.
 """
 
 from __future__ import annotations
 
 import functools
 import logging
+import warnings
 
 import cv2
 import numpy as np
+
+from alcn_cv.errors import DatasetError, InputError
 
 logger = logging.getLogger(__name__)
 
 __all__ = [
     "display_texture",
-    "PHOTO_NAMES",
+    "SKIMAGE_PHOTOGRAPHS",
     "PROCEDURAL_KINDS",
+    "skimage_photograph",
     "photos",
     "fractal_noise",
     "procedural_texture",
@@ -29,50 +35,73 @@ __all__ = [
     "colour_jitter",
 ]
 
-#: Photographs of :mod:`skimage.data` that are shipped with scikit-image (no download).
-PHOTO_NAMES: tuple[str, ...] = (
-    "astronaut",
-    "camera",
-    "coffee",
-    "chelsea",
-    "rocket",
-    "brick",
-    "grass",
-    "gravel",
-    "moon",
-    "coins",
-    "clock",
-    "page",
-    "text",
-    "hubble_deep_field",
-    "immunohistochemistry",
-    "retina",
-    "colorwheel",
-    "cell",
-)
+#: ``skimage.data`` function -> (licence, the phrase of its docstring that states it): the
+#: photographs that permit any use and load without a download. Left out: ``cat`` (the same
+#: photograph as ``chelsea``), ``clock`` (public domain, but motion-blurred: its patches are
+#: alike), ``moon``, ``page``, ``stereo_motorcycle`` (no licence stated), ``horse``, ``logo``,
+#: ``colorwheel`` (drawings), ``microaneurysms`` (102x102), ``eagle``, ``lily``, ``skin``,
+#: ``kidney`` (need a download).
+SKIMAGE_PHOTOGRAPHS: dict[str, tuple[str, str]] = {
+    "astronaut": ("public domain", "released into the public domain"),
+    "brick": ("CC0", "Creative Commons CC0 License"),
+    "camera": ("CC0", "CC0 by the photographer"),
+    "cell": ("CC0", "This image is CC0"),
+    "chelsea": ("CC0", "CC0 by the photographer"),
+    "coffee": ("CC0", "CC0 by the photographer"),
+    "coins": ("no known copyright restrictions", "No known copyright restrictions"),
+    "grass": ("CC0", "Creative Commons CC0 License"),
+    "gravel": ("CC0", "Creative Commons CC0 License"),
+    "hubble_deep_field": ("public domain", "may be freely used in the public domain"),
+    "immunohistochemistry": ("no known copyright restrictions", "No known copyright restrictions"),
+    "retina": ("CC0", "CC0 1.0 Universal Public Domain Dedication"),
+    "rocket": ("public domain", "released in the public domain"),
+    "text": ("public domain", "released into the public domain"),
+}
 
 #: Kinds of procedural textures :func:`procedural_texture` draws from.
 PROCEDURAL_KINDS: tuple[str, ...] = ("noise", "stripes", "checker", "cells", "print", "wood", "marble", "blobs")
 
 
+def skimage_photograph(name: str) -> np.ndarray:
+    """``skimage.data.<name>()`` for a ``name`` of :data:`SKIMAGE_PHOTOGRAPHS`: uint8 RGB (H, W, 3) or gray (H, W).
+
+    Raises:
+        InputError: ``name`` is not listed.
+        DatasetError: scikit-image is missing, or the docstring no longer states the recorded licence.
+    """
+    try:
+        import skimage.data
+    except ImportError as exc:
+        raise DatasetError("the scikit-image photographs need scikit-image (pip install 'alcn-cv[data]')") from exc
+    if name not in SKIMAGE_PHOTOGRAPHS:
+        raise InputError(f"skimage.data.{name} is not among the photographs that permit any use (SKIMAGE_PHOTOGRAPHS)")
+    loader = getattr(skimage.data, name)
+    phrase = SKIMAGE_PHOTOGRAPHS[name][1]
+    if phrase not in " ".join((loader.__doc__ or "").split()):
+        raise DatasetError(f"skimage.data.{name}'s docstring no longer says {phrase!r}; check its licence")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # skimage's deprecation notes
+        image = np.asarray(loader())
+    if image.dtype != np.uint8:
+        raise DatasetError(f"skimage.data.{name} is {image.dtype}, not uint8")
+    return image[..., :3] if image.ndim == 3 else image
+
+
 @functools.lru_cache(maxsize=1)
 def photos() -> tuple[np.ndarray, ...]:
-    """The photographs of :data:`PHOTO_NAMES` as linear float32 RGB (H, W, 3) in [0, 1].
+    """The photographs of :data:`SKIMAGE_PHOTOGRAPHS`, in its order, as linear float32 RGB (H, W, 3) in [0, 1].
 
     Grayscale photographs are replicated to three channels. Cached after the first call.
-    """
-    import skimage.data
 
+    Raises:
+        DatasetError: scikit-image is missing, or a docstring no longer states the recorded licence.
+    """
     out = []
-    for name in PHOTO_NAMES:
-        img = np.asarray(getattr(skimage.data, name)())
-        if img.dtype != np.uint8:
-            img = cv2.normalize(img.astype(np.float32), None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    for name in SKIMAGE_PHOTOGRAPHS:
+        img = skimage_photograph(name)
         if img.ndim == 2:
             img = np.repeat(img[..., None], 3, axis=2)
-        img = img[..., :3]
-        lin = (img.astype(np.float32) / 255.0) ** 2.2
-        out.append(np.ascontiguousarray(lin))
+        out.append(np.ascontiguousarray((img.astype(np.float32) / 255.0) ** 2.2))
     return tuple(out)
 
 
@@ -229,7 +258,7 @@ def photo_crop(
     Args:
         rng: random generator.
         size: side or (height, width) of the output.
-        indices: restrict to these photographs (indices into :data:`PHOTO_NAMES`).
+        indices: restrict to these photographs (indices into :func:`photos`).
     """
     h, w = (size, size) if isinstance(size, int) else size
     pool = photos()
