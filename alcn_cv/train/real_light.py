@@ -185,8 +185,8 @@ def harris_response(x: torch.Tensor, sigma: float = 1.5, k: float = 0.04) -> tor
     """Harris's corner response ``det(M) - k trace(M)^2`` of ``(n, 1, P, P)`` images (``M`` the structure tensor:
     central-difference gradients, their products blurred by ``G_sigma``, reflect-101 borders): ``(n, 1, P, P)``.
     What ORB ranks its FAST corners by, differentiable."""
-    gx = (F.pad(x, (1, 1, 0, 0), mode="reflect")[..., 2:] - F.pad(x, (1, 1, 0, 0), mode="reflect")[..., :-2]) / 2
-    gy = (F.pad(x, (0, 0, 1, 1), mode="reflect")[..., 2:, :] - F.pad(x, (0, 0, 1, 1), mode="reflect")[..., :-2, :]) / 2
+    wide, tall = F.pad(x, (1, 1, 0, 0), mode="reflect"), F.pad(x, (0, 0, 1, 1), mode="reflect")
+    gx, gy = (wide[..., 2:] - wide[..., :-2]) / 2, (tall[..., 2:, :] - tall[..., :-2, :]) / 2
     sxx, syy, sxy = (gaussian_blur(t, sigma) for t in (gx * gx, gy * gy, gx * gy))
     return sxx * syy - sxy * sxy - k * (sxx + syy) ** 2
 
@@ -321,8 +321,8 @@ def pair_loss(
 ) -> torch.Tensor:
     """The objective on one pair of frames of a scene: :func:`identification_loss` of the
     normalized centres of the crops around the textured ``centres`` ``(n, 2)`` (padded
-    coordinates), plus ``cfg.consistency`` times :func:`consistency_loss` over those and the
-    ``anywhere`` ``(m, 2)`` locations."""
+    coordinates), plus ``cfg.consistency`` times :func:`consistency_loss` and ``cfg.repeatability`` times
+    :func:`repeatability_loss` over those and the ``anywhere`` ``(m, 2)`` locations."""
     fa, fb = frames
     every = centres if anywhere is None or not len(anywhere) else np.concatenate([centres, anywhere])
     crops = torch.cat([crop_windows(scene.frames[f], every, cfg.crop) for f in (fa, fb)])
