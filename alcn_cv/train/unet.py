@@ -17,7 +17,7 @@ Outputs in the run folder: ``train.log``, ``history.json`` (every ``save_every``
 
 Command::
 
-    alcn train-unet --conf gain --out runs/unet/train   # the webcam scenes: academic research only
+    alcn train-unet --conf gain --out out/unet   # the webcam scenes: academic research only
 """
 
 from __future__ import annotations
