@@ -61,6 +61,7 @@ class UNetNormalizer(nn.Module):
         ``(B, 1, H, W)`` in [0, 1] -> ``(B, 1, H, W)`` in (-1, 1).
 
     Example:
+        >>> import torch
         >>> net = UNetNormalizer(channels=8, levels=3)
         >>> net(torch.rand(2, 1, 37, 50)).shape
         torch.Size([2, 1, 37, 50])
