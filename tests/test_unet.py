@@ -23,7 +23,7 @@ from alcn_cv.train.real_light import (
     sample_locations,
     training_scene,
 )
-from alcn_cv.train.unet import centre_outputs, train_unet, unet_pair_loss
+from alcn_cv.train.unet import centre_outputs, output_range, train_unet, unet_pair_loss
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 from scene_sets import make_sets
 
@@ -130,11 +130,19 @@ def test_a_short_training_writes_its_files_and_lowers_the_loss(tmp_path):
     history = json.loads((tmp_path / "run" / "history.json").read_text())
     assert [h["step"] for h in history] == list(range(1, 13)) and all(np.isfinite(h["loss"]) for h in history)
     assert "trained 12 steps" in (tmp_path / "run" / "train.log").read_text()
+    # The output range: where the outputs on the training frames lie (all 3 frames of each scene, unpadded).
+    trained = UNetNormalizer.from_file(load_normalizer_file(path))
+    scenes = [training_scene(load_scene_folder(f)[0], CROP // 2, PATCH) for f in cfg.scenes]
+    lo, hi = meta["output_range"]
+    assert (lo, hi) == pytest.approx(output_range(trained, scenes)) and -1 < lo < hi < 1
+    pad = CROP // 2
+    with torch.no_grad():
+        outputs = torch.cat([trained(torch.from_numpy(s.frames[:, None, pad:-pad, pad:-pad])) for s in scenes])
+    assert 0.995 < float(((outputs >= lo) & (outputs <= hi)).float().mean()) < 1
     # The trained file identifies better than its initialisation (the same seed builds the same start).
     torch.manual_seed(cfg.seed)
     untrained = UNetNormalizer(channels=4, levels=2)
-    trained = UNetNormalizer.from_file(load_normalizer_file(path))
-    scene = training_scene(load_scene_folder(root / "webcam" / "street")[0], CROP // 2, PATCH)
+    scene = scenes[0]
     rng = np.random.default_rng(5)
     losses = {"untrained": 0.0, "trained": 0.0}
     with torch.no_grad():
@@ -158,6 +166,11 @@ def test_the_bench_spec_builds_and_applies(tmp_path):
         expected = net(torch.from_numpy(image.astype(np.float32) / 255)[None, None])[0, 0].numpy()
     np.testing.assert_allclose(method.normalize(image.astype(np.float32) / 255), expected, atol=1e-6)
     assert isinstance(build_method(f"unet:weights={path}+lstd"), LocallyStandardized)
+    # The file's output range is apply()'s fixed map: its lowest and highest responses go to 0 and 255.
+    meta = net.file_meta(trained=True, output_range=(expected.min(), expected.max()))
+    narrow = save_normalizer_file(tmp_path / "n.npz", net.state_arrays(), meta)
+    stretched = build_method(f"unet:weights={narrow}").apply(image)
+    assert (stretched.min(), stretched.max()) == (0, 255)
     for bad in ("unet", f"unet:weights={path}:scale=2"):
         with pytest.raises(InputError):
             build_method(bad)

@@ -23,7 +23,8 @@ class UNetNormalization(Normalization):
     """A U-Net trained to output the normalized image (Jenicek & Chum's jointly trained U-Net).
 
     Args:
-        weights: a weight file of ``architecture: "unet"`` (:func:`alcn_cv.train.unet.train_unet`).
+        weights: a weight file of ``architecture: "unet"`` (:func:`alcn_cv.train.unet.train_unet`); its
+            ``output_range`` is the fixed map of the responses to the image's range.
 
     Example:
         >>> import numpy as np
@@ -40,7 +41,9 @@ class UNetNormalization(Normalization):
     output_range = (-1.0, 1.0)
 
     def __init__(self, weights: str | os.PathLike) -> None:
-        self.net = UNetNormalizer.from_file(load_normalizer_file(weights))
+        weight_file = load_normalizer_file(weights)
+        self.net = UNetNormalizer.from_file(weight_file)
+        self.output_range = tuple(weight_file.meta["output_range"])
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         with torch.inference_mode():

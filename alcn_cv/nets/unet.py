@@ -122,15 +122,17 @@ class UNetNormalizer(nn.Module):
     #: The parameters as float32 arrays, for :func:`alcn_cv.weight_file.save_normalizer_file`.
     state_arrays = Normalizer.state_arrays
 
-    def file_meta(self, trained: bool, **provenance: Any) -> dict[str, Any]:
+    def file_meta(
+        self, trained: bool, output_range: tuple[float, float] = (-1.0, 1.0), **provenance: Any
+    ) -> dict[str, Any]:
         """The weight file's header: ``architecture`` ``"unet"``, ``config``, no ``sigmas``, ``working_scale`` 1,
-        ``output_range`` ``[-1, 1]``."""
+        ``output_range`` (the responses mapped to an image's range; default ``tanh``'s)."""
         return {
             "architecture": ARCHITECTURE,
             "config": self.config,
             "sigmas": [],
             "working_scale": 1.0,
-            "output_range": [-1.0, 1.0],
+            "output_range": [float(v) for v in output_range],
             "trained": bool(trained),
             **provenance,
         }

@@ -13,7 +13,8 @@ The U-Net runs only on the part of each crop that its output on the central ``pa
 (:func:`centre_outputs`), with the same result as on the whole crop.
 
 Outputs in the run folder: ``train.log``, ``history.json`` (every ``save_every`` steps) and
-``unet_normalizer.npz`` (:mod:`alcn_cv.weight_file`, ``architecture: "unet"``) at the end.
+``unet_normalizer.npz`` (:mod:`alcn_cv.weight_file`, ``architecture: "unet"``) at the end, its ``output_range``
+measured on the training scenes (:func:`output_range`).
 
 Command::
 
@@ -24,7 +25,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -49,7 +50,7 @@ from alcn_cv.train.real_light import (
 )
 from alcn_cv.weight_file import save_normalizer_file
 
-__all__ = ["centre_outputs", "train_unet", "unet_pair_loss"]
+__all__ = ["centre_outputs", "output_range", "train_unet", "unet_pair_loss"]
 
 logger = logging.getLogger(__name__)
 
@@ -89,6 +90,22 @@ def unet_pair_loss(
     first, second = centre_outputs(net, crops, cfg.patch).chunk(2)
     loss = identification_loss(first[:located], second[:located], cfg.temperature)
     return loss + cfg.consistency * consistency_loss(first, second) if cfg.consistency else loss
+
+
+def output_range(net: UNetNormalizer, scenes: Sequence[TrainingScene], frames: int = 4) -> tuple[float, float]:
+    """The 0.1 and 99.9 percentiles of the U-Net's output on ``frames`` evenly spaced frames of each scene (their
+    padding left out): the fixed map of its responses to an image's range (the weight file's ``output_range``).
+
+    The objective is blind to the output's offset and scale (normalized cross-correlation, and a consistency
+    relative to the outputs' energy), so nothing fixes them: a fixed map of (-1, 1) may leave the image flat."""
+    values = []
+    with torch.no_grad():
+        for scene in scenes:
+            p = scene.pad
+            for index in np.linspace(0, len(scene.frames) - 1, min(frames, len(scene.frames))).round().astype(int):
+                values.append(net(torch.from_numpy(scene.frames[index, p:-p, p:-p])[None, None]).flatten())
+    lo, hi = np.percentile(torch.cat(values).numpy(), [0.1, 99.9])
+    return float(lo), float(max(hi, lo + 1e-6))
 
 
 def train_unet(
@@ -164,8 +181,10 @@ def _train(cfg: RealLightConfig, out: Path, arguments: dict[str, Any], record: d
             write_json(out / "history.json", history)
     seconds = time.perf_counter() - start
     logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
-    meta = net.eval().file_meta(
+    net.eval()
+    meta = net.file_meta(
         trained=True,
+        output_range=output_range(net, scenes + rendered),
         description="free-form U-Net normalizer trained as the gain Normalizer (identification objective)",
         training={**record, "config": asdict(cfg), "seconds": round(seconds, 1), "machine": machine()},
     )
