@@ -1,10 +1,11 @@
 """Command line of the training stage: ``alcn train``, ``alcn train-detector``, ``alcn distill`` and ``alcn export``.
 
-``alcn train``, ``alcn train-real-light`` and ``alcn distill`` each take a named preset
-(``--conf``, :mod:`alcn_cv.train.config`: the recipe of a shipped weight file) and ``--set
-KEY=VALUE`` overrides; ``alcn train-detector`` is the paper's second stage, a new detector for new
-objects from a few real images on the frozen Normalizer; ``alcn export`` writes a Normalizer as
-ONNX for the torch-free OpenCV runtime. torch is imported only when a command runs.
+``alcn train``, ``alcn train-real-light`` and ``alcn distill`` each take a named preset (``--conf``,
+:mod:`alcn_cv.train.config`: the recipe of a shipped weight file) and ``--set KEY=VALUE`` overrides
+(``alcn train-unet``, the free-form baseline, takes train-real-light's); ``alcn train-detector`` is
+the paper's second stage, a new detector for new objects from a few real images on the frozen
+Normalizer; ``alcn export`` writes a Normalizer as ONNX for the torch-free OpenCV runtime. torch is
+imported only when a command runs.
 """
 
 from __future__ import annotations
