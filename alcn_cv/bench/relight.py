@@ -52,7 +52,7 @@ from alcn_cv.bench.policies import LOCAL_BOX, local_standardize
 from alcn_cv.bench.relight_report import write_report
 from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, select_scenes, shared_root
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import from_spec
+from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.report import machine
 
@@ -163,9 +163,17 @@ class LocallyStandardized(Normalization):
 
 
 def build_method(spec: str) -> Normalization:
-    """The normalization of a spec ``NAME[:KEY=VALUE...][+lstd]`` (:func:`~alcn_cv.enhance.registry.from_spec`)."""
+    """The normalization of a spec ``NAME[:KEY=VALUE...][+lstd]`` (:func:`~alcn_cv.enhance.registry.from_spec`),
+    or ``unet:weights=PATH``, the lab's free-form baseline (:class:`~alcn_cv.bench.unet.UNetNormalization`)."""
     if spec.endswith(LSTD):
-        return LocallyStandardized(from_spec(spec[: -len(LSTD)]))
+        return LocallyStandardized(build_method(spec[: -len(LSTD)]))
+    name, params = parse_spec(spec)
+    if name == "unet":
+        if set(params) != {"weights"}:
+            raise InputError(f"bad method {spec!r}; the U-Net is unet:weights=PATH")
+        from alcn_cv.bench.unet import UNetNormalization  # torch, only for this method
+
+        return UNetNormalization(str(params["weights"]))
     return from_spec(spec)
 
 

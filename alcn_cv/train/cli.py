@@ -1,10 +1,11 @@
 """Command line of the training stage: ``alcn train``, ``alcn train-detector``, ``alcn distill`` and ``alcn export``.
 
-``alcn train``, ``alcn train-real-light`` and ``alcn distill`` each take a named preset
-(``--conf``, :mod:`alcn_cv.train.config`: the recipe of a shipped weight file) and ``--set
-KEY=VALUE`` overrides; ``alcn train-detector`` is the paper's second stage, a new detector for new
-objects from a few real images on the frozen Normalizer; ``alcn export`` writes a Normalizer as
-ONNX for the torch-free OpenCV runtime. torch is imported only when a command runs.
+``alcn train``, ``alcn train-real-light`` and ``alcn distill`` each take a named preset (``--conf``,
+:mod:`alcn_cv.train.config`: the recipe of a shipped weight file) and ``--set KEY=VALUE`` overrides
+(``alcn train-unet``, the free-form baseline, takes train-real-light's); ``alcn train-detector`` is
+the paper's second stage, a new detector for new objects from a few real images on the frozen
+Normalizer; ``alcn export`` writes a Normalizer as ONNX for the torch-free OpenCV runtime. torch is
+imported only when a command runs.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 __all__ = ["add_parser"]
@@ -38,6 +40,12 @@ def _add_conf(parser: argparse.ArgumentParser, default: str | None, presets: str
     parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
 
 
+def _add_run(parser: argparse.ArgumentParser, out: str) -> None:
+    """``--out`` (the run folder, default ``out``) and ``--seed``, the same on the real-light training commands."""
+    parser.add_argument("--out", type=Path, default=Path(out), help=f"run folder (default: {out})")
+    parser.add_argument("--seed", type=int, help="seed (default: the preset's)")
+
+
 def _command(name: str, args: argparse.Namespace, *extra: str) -> str:
     """The command line that makes this run again, recorded in the weight file or its card."""
     words = ["alcn", name, "--conf", args.conf, *extra]
@@ -47,7 +55,8 @@ def _command(name: str, args: argparse.Namespace, *extra: str) -> str:
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``train``, ``train-detector``, ``distill``, ``train-real-light`` and ``export`` to the ``alcn`` command."""
+    """Add ``train``, ``train-detector``, ``distill``, ``train-real-light``, ``train-unet`` and ``export`` to the
+    ``alcn`` command."""
     p = subparsers.add_parser(
         "train",
         help="train the ALCN Normalizer jointly with a detector (Eq. 2)",
@@ -135,8 +144,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "history.json. The shipped alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`.",
     )
     _add_conf(r, "gain", "gain (the shipped alcn_normalizer_gain.npz)")
-    r.add_argument("--out", type=Path, default=Path("out/gain"), help="run folder (default: out/gain)")
-    r.add_argument("--seed", type=int, help="seed (default: the preset's)")
+    _add_run(r, "out/gain")
     r.add_argument(
         "--threads",
         type=int,
@@ -144,6 +152,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="torch threads (default 1, as the shipped file was made; 0: torch's default)",
     )
     r.set_defaults(func=_train_real_light)
+
+    u = subparsers.add_parser(
+        "train-unet",
+        help="train the free-form U-Net baseline exactly as train-real-light trains the gain Normalizer",
+        description="Train a small U-Net that outputs the normalized image (alcn_cv.nets.unet; Jenicek & Chum's "
+        "jointly trained U-Net) with train-real-light's data, objective and budget (alcn_cv.train.unet): the same "
+        "presets and --set keys; net.* and gain_prior are the gain network's and unused. Writes "
+        "OUT/unet_normalizer.npz, train.log and history.json; bench it as unet:weights=OUT/unet_normalizer.npz.",
+    )
+    _add_conf(u, "gain", "a preset of train-real-light")
+    _add_run(u, "out/unet")
+    u.add_argument("--channels", type=int, default=8, help="the U-Net's first width (default 8)")
+    u.add_argument("--levels", type=int, default=3, help="the U-Net's resolutions (default 3)")
+    u.add_argument("--threads", type=int, default=1, help="torch threads (default 1; 0: torch's default)")
+    u.set_defaults(func=_train_unet)
 
     e = subparsers.add_parser(
         "export",
@@ -250,15 +273,38 @@ def _train_real_light(args: argparse.Namespace) -> int:
     cfg = preset(REAL_LIGHT_CONFS, args.conf, _operational(args, seed="seed"))
     if args.print_config:
         return _print_config(cfg)
-    import torch
-
     from alcn_cv.train.real_light import train_real_light
 
+    return _print_with_threads(
+        args.threads,
+        lambda: train_real_light(cfg, args.out, command=_command("train-real-light", args), conf=args.conf),
+    )
+
+
+def _train_unet(args: argparse.Namespace) -> int:
+    from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
+
+    cfg = preset(REAL_LIGHT_CONFS, args.conf, _operational(args, seed="seed"))
+    if args.print_config:
+        return _print_config(cfg)
+    from alcn_cv.train.unet import train_unet
+
+    net = {"channels": args.channels, "levels": args.levels}
+    command = _command("train-unet", args, "--channels", str(args.channels), "--levels", str(args.levels))
+    return _print_with_threads(
+        args.threads, lambda: train_unet(cfg, args.out, net=net, command=command, conf=args.conf)
+    )
+
+
+def _print_with_threads(threads: int, run: Callable[[], object]) -> int:
+    """Print what ``run()`` returns, run with ``threads`` torch threads (0: torch's default)."""
+    import torch
+
     previous = torch.get_num_threads()
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    if threads:
+        torch.set_num_threads(threads)
     try:
-        print(train_real_light(cfg, args.out, command=_command("train-real-light", args), conf=args.conf))
+        print(run())
     finally:
         torch.set_num_threads(previous)
     return 0

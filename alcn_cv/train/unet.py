@@ -1,0 +1,191 @@
+r"""Training the free-form baseline, :class:`~alcn_cv.nets.unet.UNetNormalizer`, exactly as the gain Normalizer.
+
+The same data, objective and budget as :func:`alcn_cv.train.real_light.train_real_light` under a
+:class:`~alcn_cv.train.config.RealLightConfig`: the scenes of :func:`~alcn_cv.train.real_light.training_scenes`,
+each step's scene, frames and locations drawn in the same order from the same generator, the crops of
+:func:`~alcn_cv.train.real_light.crop_windows`, :func:`~alcn_cv.train.real_light.identification_loss` on the
+textured locations plus ``consistency`` times :func:`~alcn_cv.train.real_light.consistency_loss` on those and the
+``anywhere`` ones, ``steps`` steps of Adam at ``lr``, gradients clipped to norm 5. What belongs to the gain
+network alone does not apply: ``net`` (its arguments; the U-Net takes its own) and ``gain_prior`` (a prior on
+its gain maps, which the U-Net does not have).
+
+The U-Net runs only on the part of each crop that its output on the central ``patch`` depends on
+(:func:`centre_outputs`), with the same result as on the whole crop.
+
+Outputs in the run folder: ``train.log``, ``history.json`` (every ``save_every`` steps) and
+``unet_normalizer.npz`` (:mod:`alcn_cv.weight_file`, ``architecture: "unet"``) at the end, its ``output_range``
+measured on the training scenes (:func:`output_range`).
+
+Command::
+
+    alcn train-unet --conf gain --out out/unet   # the webcam scenes: academic research only
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from alcn_cv.errors import InputError
+from alcn_cv.io import write_json
+from alcn_cv.nets.unet import UNetNormalizer
+from alcn_cv.report import machine
+from alcn_cv.train.config import RealLightConfig
+from alcn_cv.train.real_light import (
+    TrainingScene,
+    anywhere_locations,
+    consistency_loss,
+    crop_windows,
+    identification_loss,
+    sample_locations,
+    training_scenes,
+)
+from alcn_cv.weight_file import save_normalizer_file
+
+__all__ = ["centre_outputs", "output_range", "train_unet", "unet_pair_loss"]
+
+logger = logging.getLogger(__name__)
+
+
+def centre_outputs(net: UNetNormalizer, crops: torch.Tensor, patch: int) -> torch.Tensor:
+    """The U-Net's output on the central ``patch x patch`` of each crop ``(B, 1, crop, crop)``: ``(B, 1, patch,
+    patch)``, equal to the centre of ``net(crops)``.
+
+    The network runs on the centre and :attr:`~UNetNormalizer.reach` pixels around it, the region starting on
+    a multiple of :attr:`~UNetNormalizer.multiple` so that its pooling grid is the whole crop's.
+    """
+    crop = crops.shape[-1]
+    if crops.shape[-2] != crop or patch > crop:
+        raise InputError(f"crops must be square and at least {patch} pixels, got {tuple(crops.shape[-2:])}")
+    first = (crop - patch) // 2
+    lo = max(0, first - net.reach) // net.multiple * net.multiple
+    hi = min(crop, first + patch + net.reach)
+    start = first - lo
+    return net(crops[..., lo:hi, lo:hi])[..., start : start + patch, start : start + patch]
+
+
+def unet_pair_loss(
+    net: UNetNormalizer,
+    scene: TrainingScene,
+    frames: tuple[int, int],
+    centres: np.ndarray,
+    cfg: RealLightConfig,
+    anywhere: np.ndarray | None = None,
+) -> torch.Tensor:
+    """The gain Normalizer's objective (:func:`alcn_cv.train.real_light.pair_loss`) on the U-Net's output: the
+    identification of the centres of the crops around ``centres`` ``(n, 2)`` between the two ``frames``, plus
+    ``cfg.consistency`` times the consistency over those and the ``anywhere`` ``(m, 2)`` locations."""
+    located = len(centres)
+    if anywhere is not None and len(anywhere):
+        centres = np.concatenate([centres, anywhere])
+    crops = torch.cat([crop_windows(scene.frames[f], centres, cfg.crop) for f in frames])
+    first, second = centre_outputs(net, crops, cfg.patch).chunk(2)
+    loss = identification_loss(first[:located], second[:located], cfg.temperature)
+    return loss + cfg.consistency * consistency_loss(first, second) if cfg.consistency else loss
+
+
+def output_range(net: UNetNormalizer, scenes: Sequence[TrainingScene], frames: int = 4) -> tuple[float, float]:
+    """The 0.1 and 99.9 percentiles of the U-Net's output on ``frames`` evenly spaced frames of each scene (their
+    padding left out): the fixed map of its responses to an image's range (the weight file's ``output_range``).
+
+    The objective is blind to the output's offset and scale (normalized cross-correlation, and a consistency
+    relative to the outputs' energy), so nothing fixes them: a fixed map of (-1, 1) may leave the image flat."""
+    values = []
+    with torch.no_grad():
+        for scene in scenes:
+            p = scene.pad
+            for index in np.linspace(0, len(scene.frames) - 1, min(frames, len(scene.frames))).round().astype(int):
+                values.append(net(torch.from_numpy(scene.frames[index, p:-p, p:-p])[None, None]).flatten())
+    lo, hi = np.percentile(torch.cat(values).numpy(), [0.1, 99.9])
+    return float(lo), float(max(hi, lo + 1e-6))
+
+
+def train_unet(
+    cfg: RealLightConfig,
+    out: str | Path,
+    *,
+    net: Mapping[str, Any] | None = None,
+    command: str = "",
+    conf: str | None = None,
+) -> Path:
+    """Train a :class:`~alcn_cv.nets.unet.UNetNormalizer` as the gain Normalizer is trained (see the module).
+
+    Args:
+        cfg: the gain Normalizer's settings (a preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`);
+            ``cfg.net`` and ``cfg.gain_prior`` are the gain network's and are not used.
+        out: the run folder.
+        net: :class:`~alcn_cv.nets.unet.UNetNormalizer` arguments (default: its defaults).
+        command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
+
+    Returns:
+        The weight file ``out/unet_normalizer.npz``.
+    """
+    if not cfg.scenes or cfg.locations < 2 or cfg.steps < 1 or cfg.crop < cfg.patch:
+        raise InputError("need scenes, locations >= 2, steps >= 1 and crop >= patch")
+    if not 0 <= cfg.rendered_fraction < 1 or (cfg.rendered_fraction > 0 and not cfg.rendered):
+        raise InputError(f"rendered_fraction must be in [0, 1) and needs rendered scenes, got {cfg.rendered_fraction}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    log_file = logging.FileHandler(out / "train.log")
+    log_file.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+    level = logger.level
+    logger.setLevel(logging.INFO)  # the log file holds the progress whatever the caller's logging
+    logger.addHandler(log_file)
+    try:
+        return _train(cfg, out, dict(net or {}), {"command": command, "conf": conf})
+    finally:
+        logger.removeHandler(log_file)
+        logger.setLevel(level)
+        log_file.close()
+
+
+def _train(cfg: RealLightConfig, out: Path, arguments: dict[str, Any], record: dict[str, Any]) -> Path:
+    # The generators as in real_light._train: the same seeds, the network built first, the same draws per step.
+    rng = np.random.default_rng(cfg.seed)
+    torch.manual_seed(cfg.seed)
+    net = UNetNormalizer(**arguments)
+    scenes, rendered = training_scenes(cfg)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
+    history: list[dict[str, Any]] = []
+    start = time.perf_counter()
+    logger.info("U-Net %s: %d parameters", net.config, sum(p.numel() for p in net.parameters()))
+    for scene in scenes + rendered:
+        logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
+    net.train()
+    for step in (bar := tqdm(range(1, cfg.steps + 1), desc="unet", unit="step")):
+        use_rendered = bool(rendered) and rng.random() < cfg.rendered_fraction
+        pool = rendered if use_rendered else scenes
+        scene = pool[rng.integers(len(pool))]
+        pair = tuple(int(f) for f in rng.choice(len(scene.frames), 2, replace=False))
+        located = sample_locations(scene.candidates, cfg.locations, cfg.min_distance, rng)
+        loss = unet_pair_loss(
+            net, scene, pair, located, cfg, anywhere_locations(scene, cfg.anywhere, rng) if cfg.anywhere else None
+        )
+        opt.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
+        opt.step()
+        history.append({"step": step, "scene": scene.name, "loss": loss.item()})
+        bar.set_postfix(loss=f"{loss.item():.3f}")
+        if step % cfg.save_every == 0 or step == cfg.steps:
+            recent = np.mean([h["loss"] for h in history[-cfg.save_every :]])
+            logger.info("step %d: mean loss %.4f, %.0f s", step, recent, time.perf_counter() - start)
+            write_json(out / "history.json", history)
+    seconds = time.perf_counter() - start
+    logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
+    net.eval()
+    meta = net.file_meta(
+        trained=True,
+        output_range=output_range(net, scenes + rendered),
+        description="free-form U-Net normalizer trained as the gain Normalizer (identification objective)",
+        training={**record, "config": asdict(cfg), "seconds": round(seconds, 1), "machine": machine()},
+    )
+    return save_normalizer_file(out / "unet_normalizer.npz", net.state_arrays(), meta)

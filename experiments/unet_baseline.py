@@ -1,0 +1,101 @@
+"""Experiment (issue 39, part 3): the free-form learned baseline, a U-Net trained exactly as the gain Normalizer.
+
+Stages, each writing under ``--out`` (default ``runs/unet``):
+
+* ``unet``: ``alcn train-unet --conf CONF`` (:mod:`alcn_cv.train.unet`: the preset's scenes, draws,
+  objective, steps and learning rate, the U-Net instead of Eq. 3) into ``OUT/train``;
+* ``gain``: ``alcn train-real-light --conf CONF``, the gain Normalizer on the same preset, into ``OUT/gain``
+  (the shipped ``alcn`` was made by the ``gain`` preset; another preset needs its own gain file to compare);
+* ``objective``: the training objective (identification + consistency, ``gain_prior`` left out) of both
+  trained files on ``--draws`` draws (frames and locations, as training draws them) of each training and test
+  scene, into ``OUT/objective.json``: how well each fits the training scenes and how much of it holds on new ones;
+* ``bench``: ``alcn bench relight``'s quick protocol (seed 0, 12 frames, 150 patches, 12 pairs, no
+  tuning; identification, ORB/SIFT matching and pose on the test and the training scenes) for the
+  U-Net, the gain file of ``gain`` when there is one, the shipped ALCN (``alcn``) and no normalization,
+  into ``OUT/bench/relight.{md,json,png}``.
+
+The preset ``gain`` trains on the webcam training scenes (academic research only). Time on 2 shared cores at
+load 4-9 (2026-11-27): ``unet`` 29 min (300 steps, about 5 s each), ``gain`` 2 min, ``objective`` 7 min,
+``bench`` 3 to 5 min.
+
+    PYTHONPATH=$PWD nice -n 10 python experiments/unet_baseline.py --conf gain
+    PYTHONPATH=$PWD nice -n 10 python experiments/unet_baseline.py --stages bench   # bench the trained files again
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+from pathlib import Path
+
+from _run import RUNS, alcn
+
+STAGES = ("unet", "gain", "objective", "bench")
+QUICK = ["--seeds", "0", "--max-frames", "12", "--patches", "150", "--max-pairs", "12", "--no-tune"]
+
+
+def objective(conf: str, unet: Path, gain: Path, draws: int, out: Path) -> dict:
+    """The mean objective of each file per scene and over the bench's training and test scenes, in ``out``."""
+    import numpy as np
+    import torch
+
+    from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, load_scenes, select_scenes, shared_root
+    from alcn_cv.io import write_json
+    from alcn_cv.nets.gain import GainNormalizer
+    from alcn_cv.nets.unet import UNetNormalizer
+    from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
+    from alcn_cv.train.real_light import anywhere_locations, pair_loss, sample_locations, training_scene
+    from alcn_cv.train.unet import unet_pair_loss
+    from alcn_cv.weight_file import load_normalizer_file
+
+    cfg = replace(preset(REAL_LIGHT_CONFS, conf), gain_prior=0.0)
+    nets = {
+        "unet": (UNetNormalizer.from_file(load_normalizer_file(unet)), unet_pair_loss),
+        "gain": (GainNormalizer.from_file(load_normalizer_file(gain)), pair_loss),
+    }
+    scenes = load_scenes([shared_root("webcam"), shared_root("psm")])
+    groups = {"train": select_scenes(scenes, TRAIN_SCENES), "test": select_scenes(scenes, TEST_SCENES)}
+    result: dict = {"conf": conf, "draws": draws, "scenes": {}}
+    for group, members in groups.items():
+        for scene in members:
+            ready = training_scene(scene, cfg.crop // 2, cfg.patch)
+            rng = np.random.default_rng(0)
+            losses: dict[str, list[float]] = {name: [] for name in nets}
+            for _ in range(draws):
+                pair = tuple(int(f) for f in rng.choice(len(ready.frames), 2, replace=False))
+                centres = sample_locations(ready.candidates, cfg.locations, cfg.min_distance, rng)
+                anywhere = anywhere_locations(ready, cfg.anywhere, rng)
+                with torch.no_grad():
+                    for name, (net, loss) in nets.items():
+                        losses[name].append(float(loss(net, ready, pair, centres, cfg, anywhere)))
+            result["scenes"][scene.name] = {"group": group, **{n: float(np.mean(v)) for n, v in losses.items()}}
+            print(scene.name, group, {n: round(float(np.mean(v)), 3) for n, v in losses.items()})
+    for group in groups:
+        rows = [r for r in result["scenes"].values() if r["group"] == group]
+        result[f"mean_{group}"] = {n: float(np.mean([r[n] for r in rows])) for n in nets}
+        print(group, {n: round(v, 3) for n, v in result[f"mean_{group}"].items()})
+    write_json(out / "objective.json", result)
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--conf", default="gain", help="the train-real-light preset (default: gain)")
+    parser.add_argument("--out", type=Path, default=RUNS / "unet", help="run folder (default: runs/unet)")
+    parser.add_argument("--stages", nargs="+", choices=STAGES, default=list(STAGES))
+    parser.add_argument("--draws", type=int, default=8, help="objective: draws per scene (default 8)")
+    args = parser.parse_args()
+    unet, gain = args.out / "train" / "unet_normalizer.npz", args.out / "gain" / "gain_normalizer.npz"
+    if "unet" in args.stages:
+        alcn("train-unet", "--conf", args.conf, "--out", str(unet.parent))
+    if "gain" in args.stages:
+        alcn("train-real-light", "--conf", args.conf, "--out", str(gain.parent))
+    if "objective" in args.stages:
+        objective(args.conf, unet, gain, args.draws, args.out)
+    if "bench" in args.stages:
+        methods = [f"unet:weights={unet}", *([f"alcn:weights={gain}"] if gain.is_file() else []), "alcn", "none"]
+        alcn("bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *QUICK)
+
+
+if __name__ == "__main__":
+    main()
