@@ -224,6 +224,9 @@ def relight_headline(report: dict[str, Any]) -> str:
             rows.append([label] + [_mean_std(r["mean_test"].get(m), seeds) for m in metrics])
     loo = report["split"]["mode"] == "leave-one-out"
     title = "leave-one-scene-out" if loo else f"test scenes {', '.join(report['split']['test'])}"
+    settings = report["settings"]
+    if settings.get("max_frames") != 20 or settings.get("patches") != 300:
+        title += f"; {settings.get('max_frames')} frames per scene, {settings['patches']} patches"
     return (
         f"**Real light** ({title}; `alcn bench relight`, {seeds} seed{'s' if seeds > 1 else ''}, "
         f"{report['experiment']['date'][:10]}):\n\n"
@@ -284,6 +287,9 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
     "relight_leave_one_out": relight,
     "relight_learning": lambda r: relight(
         r, "Does learning matter? The default, its untrained start, the same recipe on webcam frames (quick protocol)"
+    ),
+    "relight_unet": lambda r: relight(
+        r, "The free-form U-Net against ALCN: the same data, objective and budget (quick protocol)"
     ),
     "speed": speed,
     "detect": lambda r: summary_table(r, "Rendered detection (mean AUC)"),

@@ -30,7 +30,17 @@ from scene_sets import make_sets
 CROP, PATCH = 96, 32
 #: A tiny run: 12 steps of 12 locations (and 4 drawn anywhere) on crops of 96 around patches of 32.
 TINY = RealLightConfig(
-    steps=12, locations=12, crop=CROP, patch=PATCH, min_distance=8, anywhere=4, temperature=0.5, lr=3e-3, save_every=6
+    relit=0,
+    steps=12,
+    locations=12,
+    crop=CROP,
+    patch=PATCH,
+    min_distance=8,
+    anywhere=4,
+    temperature=0.5,
+    repeatability=0.0,
+    lr=3e-3,
+    save_every=6,
 )
 
 

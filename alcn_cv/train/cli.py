@@ -158,7 +158,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="train the free-form U-Net baseline exactly as train-real-light trains the gain Normalizer",
         description="Train a small U-Net that outputs the normalized image (alcn_cv.nets.unet; Jenicek & Chum's "
         "jointly trained U-Net) with train-real-light's data, objective and budget (alcn_cv.train.unet): the same "
-        "presets and --set keys; net.* and gain_prior are the gain network's and unused. Writes "
+        "presets and --set keys; net.* are the gain network's and unused. Writes "
         "OUT/unet_normalizer.npz, train.log and history.json; bench it as unet:weights=OUT/unet_normalizer.npz.",
     )
     _add_conf(u, "gain", "a preset of train-real-light")

@@ -34,7 +34,7 @@ from __future__ import annotations
 import functools
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -64,9 +64,12 @@ __all__ = [
     "consistency_loss",
     "TrainingScene",
     "crop_windows",
+    "draw_step",
+    "fit",
     "anywhere_locations",
     "identification_loss",
     "harris_response",
+    "objective",
     "pair_loss",
     "repeatability_loss",
     "sample_locations",
@@ -311,6 +314,31 @@ def anywhere_locations(scene: TrainingScene, count: int, rng: np.random.Generato
     return np.stack([rng.integers(p, h - p, count), rng.integers(p, w - p, count)], axis=1)
 
 
+def objective(a: torch.Tensor, b: torch.Tensor, textured: int, cfg: RealLightConfig) -> torch.Tensor:
+    """The training objective on the outputs ``(m, 1, P, P)`` of the same ``m`` locations under two lights, the
+    first ``textured`` of them the classes: :func:`identification_loss` of those, plus ``cfg.consistency`` times
+    :func:`consistency_loss` and ``cfg.repeatability`` times :func:`repeatability_loss` over all ``m``."""
+    loss = identification_loss(a[:textured], b[:textured], cfg.temperature)
+    if cfg.consistency:
+        loss = loss + cfg.consistency * consistency_loss(a, b)
+    if cfg.repeatability:
+        loss = loss + cfg.repeatability * repeatability_loss(a, b)
+    return loss
+
+
+def draw_step(
+    scenes: Sequence[TrainingScene], rendered: Sequence[TrainingScene], cfg: RealLightConfig, rng: np.random.Generator
+) -> tuple[TrainingScene, tuple[int, int], np.ndarray, np.ndarray | None]:
+    """What one training step sees: a scene (from ``rendered`` with probability ``cfg.rendered_fraction``), two
+    of its frames, ``cfg.locations`` textured centres and ``cfg.anywhere`` centres drawn anywhere (or None)."""
+    group = rendered if rendered and rng.random() < cfg.rendered_fraction else scenes
+    scene = group[rng.integers(len(group))]
+    fa, fb = rng.choice(len(scene.frames), 2, replace=False)
+    centres = sample_locations(scene.candidates, cfg.locations, cfg.min_distance, rng)
+    anywhere = anywhere_locations(scene, cfg.anywhere, rng) if cfg.anywhere else None
+    return scene, (int(fa), int(fb)), centres, anywhere
+
+
 def pair_loss(
     net: GainNormalizer,
     scene: TrainingScene,
@@ -329,13 +357,7 @@ def pair_loss(
     m, n = len(every), len(centres)
     drawn = (lambda first: slice(first + n, first + m)) if m > n else (lambda first: slice(first, first + m))
     outputs = _normalized_centres(net, crops, cfg.patch, [(slice(0, m), drawn(0)), (slice(m, 2 * m), drawn(m))])
-    a, b = outputs[:m], outputs[m:]
-    loss = identification_loss(a[:n], b[:n], cfg.temperature)
-    if cfg.consistency:
-        loss = loss + cfg.consistency * consistency_loss(a, b)
-    if cfg.repeatability:
-        loss = loss + cfg.repeatability * repeatability_loss(a, b)
-    return loss
+    return objective(outputs[:m], outputs[m:], n, cfg)
 
 
 def _save_weights(
@@ -387,18 +409,43 @@ def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
             f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2"
         )
     scenes, rendered = training_scenes(cfg)
+
+    def save(step: int, seconds: float, opt: torch.optim.Optimizer) -> None:
+        _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds, record)
+        state = {"net": net.state_dict(), "opt": opt.state_dict(), "step": step, "config": asdict(cfg)}
+        atomic_write(out / "checkpoint.pt", lambda f, state=state: torch.save(state, f))
+
+    seconds = fit(net, pair_loss, scenes, rendered, cfg, rng, out, save, "real-light", logger)
+    return _save_weights(net, out / "gain_normalizer.npz", cfg, cfg.steps, seconds, record)
+
+
+def fit(
+    net: nn.Module,
+    step_loss: Callable[..., torch.Tensor],
+    scenes: Sequence[TrainingScene],
+    rendered: Sequence[TrainingScene],
+    cfg: RealLightConfig,
+    rng: np.random.Generator,
+    out: Path,
+    save: Callable[[int, float, torch.optim.Optimizer], None],
+    desc: str,
+    log: logging.Logger,
+) -> float:
+    """The training loop of the gain Normalizer and of its baselines: ``cfg.steps`` steps of Adam at ``cfg.lr`` on
+    ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to
+    norm 5; every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer)``, a line in ``log`` and
+    ``out/history.json``. Leaves ``net`` in eval mode.
+
+    Returns:
+        The seconds it took.
+    """
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     history: list[dict] = []
     start = time.perf_counter()
     net.train()
-    bar = tqdm(range(1, cfg.steps + 1), desc="real-light", unit="step")
-    for step in bar:
-        group = rendered if rendered and rng.random() < cfg.rendered_fraction else scenes
-        scene = group[rng.integers(len(group))]
-        fa, fb = rng.choice(len(scene.frames), 2, replace=False)
-        centres = sample_locations(scene.candidates, cfg.locations, cfg.min_distance, rng)
-        anywhere = anywhere_locations(scene, cfg.anywhere, rng) if cfg.anywhere else None
-        loss = pair_loss(net, scene, (fa, fb), centres, cfg, anywhere)
+    for step in (bar := tqdm(range(1, cfg.steps + 1), desc=desc, unit="step")):
+        scene, frames, centres, anywhere = draw_step(scenes, rendered, cfg, rng)
+        loss = step_loss(net, scene, frames, centres, cfg, anywhere)
         opt.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
@@ -408,11 +455,10 @@ def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
         if step % cfg.save_every == 0 or step == cfg.steps:
             seconds = time.perf_counter() - start
             recent = np.mean([h["loss"] for h in history[-cfg.save_every :]])
-            logger.info("step %d: mean loss %.4f over the last %d steps, %.0f s", step, recent, cfg.save_every, seconds)
-            _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds, record)
-            state = {"net": net.state_dict(), "opt": opt.state_dict(), "step": step, "config": asdict(cfg)}
-            atomic_write(out / "checkpoint.pt", lambda f, state=state: torch.save(state, f))
+            log.info("step %d: mean loss %.4f over the last %d steps, %.0f s", step, recent, cfg.save_every, seconds)
+            save(step, seconds, opt)
             write_json(out / "history.json", history)
     seconds = time.perf_counter() - start
-    logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
-    return _save_weights(net.eval(), out / "gain_normalizer.npz", cfg, cfg.steps, seconds, record)
+    log.info("trained %d steps in %.0f s", cfg.steps, seconds)
+    net.eval()
+    return seconds

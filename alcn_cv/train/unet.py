@@ -4,10 +4,9 @@ The same data, objective and budget as :func:`alcn_cv.train.real_light.train_rea
 :class:`~alcn_cv.train.config.RealLightConfig`: the scenes of :func:`~alcn_cv.train.real_light.training_scenes`,
 each step's scene, frames and locations drawn in the same order from the same generator, the crops of
 :func:`~alcn_cv.train.real_light.crop_windows`, :func:`~alcn_cv.train.real_light.identification_loss` on the
-textured locations plus ``consistency`` times :func:`~alcn_cv.train.real_light.consistency_loss` on those and the
-``anywhere`` ones, ``steps`` steps of Adam at ``lr``, gradients clipped to norm 5. What belongs to the gain
-network alone does not apply: ``net`` (its arguments; the U-Net takes its own) and ``gain_prior`` (a prior on
-its gain maps, which the U-Net does not have).
+textured locations plus the consistency and repeatability terms on those and the ``anywhere`` ones
+(:func:`~alcn_cv.train.real_light.objective`), ``steps`` steps of Adam at ``lr``, gradients clipped to norm 5.
+``net`` (the gain network's arguments) does not apply: the U-Net takes its own.
 
 The U-Net runs only on the part of each crop that its output on the central ``patch`` depends on
 (:func:`centre_outputs`), with the same result as on the whole crop.
@@ -18,13 +17,12 @@ measured on the training scenes (:func:`output_range`).
 
 Command::
 
-    alcn train-unet --conf gain --out out/unet   # the webcam scenes: academic research only
+    alcn train-unet --conf gain --out out/unet   # the default's data: relit permissive photographs
 """
 
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
@@ -32,22 +30,12 @@ from typing import Any
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from alcn_cv.errors import InputError
-from alcn_cv.io import write_json
 from alcn_cv.nets.unet import UNetNormalizer
 from alcn_cv.report import machine
 from alcn_cv.train.config import RealLightConfig
-from alcn_cv.train.real_light import (
-    TrainingScene,
-    anywhere_locations,
-    consistency_loss,
-    crop_windows,
-    identification_loss,
-    sample_locations,
-    training_scenes,
-)
+from alcn_cv.train.real_light import TrainingScene, crop_windows, fit, objective, training_scenes
 from alcn_cv.weight_file import save_normalizer_file
 
 __all__ = ["centre_outputs", "output_range", "train_unet", "unet_pair_loss"]
@@ -80,16 +68,14 @@ def unet_pair_loss(
     cfg: RealLightConfig,
     anywhere: np.ndarray | None = None,
 ) -> torch.Tensor:
-    """The gain Normalizer's objective (:func:`alcn_cv.train.real_light.pair_loss`) on the U-Net's output: the
+    """The gain Normalizer's objective (:func:`alcn_cv.train.real_light.objective`) on the U-Net's output: the
     identification of the centres of the crops around ``centres`` ``(n, 2)`` between the two ``frames``, plus
-    ``cfg.consistency`` times the consistency over those and the ``anywhere`` ``(m, 2)`` locations."""
+    the consistency and repeatability terms over those and the ``anywhere`` ``(m, 2)`` locations."""
     located = len(centres)
     if anywhere is not None and len(anywhere):
         centres = np.concatenate([centres, anywhere])
     crops = torch.cat([crop_windows(scene.frames[f], centres, cfg.crop) for f in frames])
-    first, second = centre_outputs(net, crops, cfg.patch).chunk(2)
-    loss = identification_loss(first[:located], second[:located], cfg.temperature)
-    return loss + cfg.consistency * consistency_loss(first, second) if cfg.consistency else loss
+    return objective(*centre_outputs(net, crops, cfg.patch).chunk(2), located, cfg)
 
 
 def output_range(net: UNetNormalizer, scenes: Sequence[TrainingScene], frames: int = 4) -> tuple[float, float]:
@@ -120,7 +106,7 @@ def train_unet(
 
     Args:
         cfg: the gain Normalizer's settings (a preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`);
-            ``cfg.net`` and ``cfg.gain_prior`` are the gain network's and are not used.
+            ``cfg.net`` is the gain network's and is not used.
         out: the run folder.
         net: :class:`~alcn_cv.nets.unet.UNetNormalizer` arguments (default: its defaults).
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
@@ -128,7 +114,7 @@ def train_unet(
     Returns:
         The weight file ``out/unet_normalizer.npz``.
     """
-    if not cfg.scenes or cfg.locations < 2 or cfg.steps < 1 or cfg.crop < cfg.patch:
+    if not (cfg.scenes or cfg.relit) or cfg.locations < 2 or cfg.steps < 1 or cfg.crop < cfg.patch:
         raise InputError("need scenes, locations >= 2, steps >= 1 and crop >= patch")
     if not 0 <= cfg.rendered_fraction < 1 or (cfg.rendered_fraction > 0 and not cfg.rendered):
         raise InputError(f"rendered_fraction must be in [0, 1) and needs rendered scenes, got {cfg.rendered_fraction}")
@@ -153,35 +139,10 @@ def _train(cfg: RealLightConfig, out: Path, arguments: dict[str, Any], record: d
     torch.manual_seed(cfg.seed)
     net = UNetNormalizer(**arguments)
     scenes, rendered = training_scenes(cfg)
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
-    history: list[dict[str, Any]] = []
-    start = time.perf_counter()
     logger.info("U-Net %s: %d parameters", net.config, sum(p.numel() for p in net.parameters()))
     for scene in scenes + rendered:
         logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
-    net.train()
-    for step in (bar := tqdm(range(1, cfg.steps + 1), desc="unet", unit="step")):
-        use_rendered = bool(rendered) and rng.random() < cfg.rendered_fraction
-        pool = rendered if use_rendered else scenes
-        scene = pool[rng.integers(len(pool))]
-        pair = tuple(int(f) for f in rng.choice(len(scene.frames), 2, replace=False))
-        located = sample_locations(scene.candidates, cfg.locations, cfg.min_distance, rng)
-        loss = unet_pair_loss(
-            net, scene, pair, located, cfg, anywhere_locations(scene, cfg.anywhere, rng) if cfg.anywhere else None
-        )
-        opt.zero_grad()
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
-        opt.step()
-        history.append({"step": step, "scene": scene.name, "loss": loss.item()})
-        bar.set_postfix(loss=f"{loss.item():.3f}")
-        if step % cfg.save_every == 0 or step == cfg.steps:
-            recent = np.mean([h["loss"] for h in history[-cfg.save_every :]])
-            logger.info("step %d: mean loss %.4f, %.0f s", step, recent, time.perf_counter() - start)
-            write_json(out / "history.json", history)
-    seconds = time.perf_counter() - start
-    logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
-    net.eval()
+    seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, lambda *_: None, "unet", logger)
     meta = net.file_meta(
         trained=True,
         output_range=output_range(net, scenes + rendered),
