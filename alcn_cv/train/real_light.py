@@ -188,8 +188,9 @@ def harris_response(x: torch.Tensor, sigma: float = 1.5, k: float = 0.04) -> tor
     """Harris's corner response ``det(M) - k trace(M)^2`` of ``(n, 1, P, P)`` images (``M`` the structure tensor:
     central-difference gradients, their products blurred by ``G_sigma``, reflect-101 borders): ``(n, 1, P, P)``.
     What ORB ranks its FAST corners by, differentiable."""
-    wide, tall = F.pad(x, (1, 1, 0, 0), mode="reflect"), F.pad(x, (0, 0, 1, 1), mode="reflect")
-    gx, gy = (wide[..., 2:] - wide[..., :-2]) / 2, (tall[..., 2:, :] - tall[..., :-2, :]) / 2
+    # One pad per difference term: the order of the float operations the shipped file was trained with.
+    gx = (F.pad(x, (1, 1, 0, 0), mode="reflect")[..., 2:] - F.pad(x, (1, 1, 0, 0), mode="reflect")[..., :-2]) / 2
+    gy = (F.pad(x, (0, 0, 1, 1), mode="reflect")[..., 2:, :] - F.pad(x, (0, 0, 1, 1), mode="reflect")[..., :-2, :]) / 2
     sxx, syy, sxy = (gaussian_blur(t, sigma) for t in (gx * gx, gy * gy, gx * gy))
     return sxx * syy - sxy * sxy - k * (sxx + syy) ** 2
 
