@@ -341,23 +341,30 @@ def draw_step(
 
 
 def pair_loss(
-    net: GainNormalizer,
+    net: nn.Module,
     scene: TrainingScene,
     frames: tuple[int, int],
     centres: np.ndarray,
     cfg: RealLightConfig,
     anywhere: np.ndarray | None = None,
+    normalize: Callable[..., torch.Tensor] | None = None,
 ) -> torch.Tensor:
     """The objective on one pair of frames of a scene: :func:`identification_loss` of the
     normalized centres of the crops around the textured ``centres`` ``(n, 2)`` (padded
     coordinates), plus ``cfg.consistency`` times :func:`consistency_loss` and ``cfg.repeatability`` times
-    :func:`repeatability_loss` over those and the ``anywhere`` ``(m, 2)`` locations."""
+    :func:`repeatability_loss` over those and the ``anywhere`` ``(m, 2)`` locations.
+
+    ``normalize(net, crops, patch, frames)`` gives the network's output on the central ``patch`` of each crop
+    (``frames``: per frame, the slice of its crops and of those drawn anywhere); default: the gain
+    Normalizer's, whose divisive floor is estimated from those drawn anywhere."""
     fa, fb = frames
     every = centres if anywhere is None or not len(anywhere) else np.concatenate([centres, anywhere])
     crops = torch.cat([crop_windows(scene.frames[f], every, cfg.crop) for f in (fa, fb)])
     m, n = len(every), len(centres)
     drawn = (lambda first: slice(first + n, first + m)) if m > n else (lambda first: slice(first, first + m))
-    outputs = _normalized_centres(net, crops, cfg.patch, [(slice(0, m), drawn(0)), (slice(m, 2 * m), drawn(m))])
+    outputs = (normalize or _normalized_centres)(
+        net, crops, cfg.patch, [(slice(0, m), drawn(0)), (slice(m, 2 * m), drawn(m))]
+    )
     return objective(outputs[:m], outputs[m:], n, cfg)
 
 

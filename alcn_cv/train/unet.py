@@ -22,6 +22,7 @@ Command::
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
@@ -35,7 +36,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.nets.unet import UNetNormalizer
 from alcn_cv.report import machine
 from alcn_cv.train.config import RealLightConfig
-from alcn_cv.train.real_light import TrainingScene, crop_windows, fit, objective, training_scenes
+from alcn_cv.train.real_light import TrainingScene, fit, pair_loss, training_scenes
 from alcn_cv.weight_file import save_normalizer_file
 
 __all__ = ["centre_outputs", "output_range", "train_unet", "unet_pair_loss"]
@@ -43,9 +44,12 @@ __all__ = ["centre_outputs", "output_range", "train_unet", "unet_pair_loss"]
 logger = logging.getLogger(__name__)
 
 
-def centre_outputs(net: UNetNormalizer, crops: torch.Tensor, patch: int) -> torch.Tensor:
+def centre_outputs(
+    net: UNetNormalizer, crops: torch.Tensor, patch: int, frames: Sequence[tuple[slice, slice]] = ()
+) -> torch.Tensor:
     """The U-Net's output on the central ``patch x patch`` of each crop ``(B, 1, crop, crop)``: ``(B, 1, patch,
-    patch)``, equal to the centre of ``net(crops)``.
+    patch)``, equal to the centre of ``net(crops)`` (``frames``, which crops belong to which frame, does not
+    matter to it: it has no frame-wide floor).
 
     The network runs on the centre and :attr:`~UNetNormalizer.reach` pixels around it, the region starting on
     a multiple of :attr:`~UNetNormalizer.multiple` so that its pooling grid is the whole crop's.
@@ -60,22 +64,9 @@ def centre_outputs(net: UNetNormalizer, crops: torch.Tensor, patch: int) -> torc
     return net(crops[..., lo:hi, lo:hi])[..., start : start + patch, start : start + patch]
 
 
-def unet_pair_loss(
-    net: UNetNormalizer,
-    scene: TrainingScene,
-    frames: tuple[int, int],
-    centres: np.ndarray,
-    cfg: RealLightConfig,
-    anywhere: np.ndarray | None = None,
-) -> torch.Tensor:
-    """The gain Normalizer's objective (:func:`alcn_cv.train.real_light.objective`) on the U-Net's output: the
-    identification of the centres of the crops around ``centres`` ``(n, 2)`` between the two ``frames``, plus
-    the consistency and repeatability terms over those and the ``anywhere`` ``(m, 2)`` locations."""
-    located = len(centres)
-    if anywhere is not None and len(anywhere):
-        centres = np.concatenate([centres, anywhere])
-    crops = torch.cat([crop_windows(scene.frames[f], centres, cfg.crop) for f in frames])
-    return objective(*centre_outputs(net, crops, cfg.patch).chunk(2), located, cfg)
+#: :func:`~alcn_cv.train.real_light.pair_loss` on the U-Net's :func:`centre_outputs`: the gain Normalizer's
+#: objective (identification, consistency, repeatability) on the U-Net's output.
+unet_pair_loss = functools.partial(pair_loss, normalize=centre_outputs)
 
 
 def output_range(net: UNetNormalizer, scenes: Sequence[TrainingScene], frames: int = 4) -> tuple[float, float]:
