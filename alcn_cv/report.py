@@ -1,12 +1,14 @@
-"""Writing benchmark results: Markdown tables, figures, the machine and the command of a run."""
+"""Writing benchmark results: Markdown tables, figures, the machine, the command and the log of a run."""
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
 import platform
 import shlex
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +19,7 @@ from alcn_cv.io import atomic_path, write_json
 __all__ = [
     "command_line",
     "describe_machine",
+    "log_to",
     "machine",
     "markdown_table",
     "nan_to_none",
@@ -132,3 +135,22 @@ def save_figure(plt: Any, fig: Any, path: str | os.PathLike, dpi: int = 100) -> 
         fig.savefig(tmp, format="png", dpi=dpi)
     plt.close(fig)
     return path
+
+
+@contextlib.contextmanager
+def log_to(path: str | os.PathLike) -> Iterator[None]:
+    """Copy the ``alcn_cv`` loggers' records to the file ``path`` (a run's ``train.log``) while the block runs, at
+    INFO level at least."""
+    handler = logging.FileHandler(path)
+    handler.setFormatter(logging.Formatter("[%(asctime)s %(name)s %(levelname)s] %(message)s", "%Y/%m/%d %H:%M:%S"))
+    root = logging.getLogger("alcn_cv")
+    previous = root.level
+    root.addHandler(handler)
+    if root.getEffectiveLevel() > logging.INFO:
+        root.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+        root.setLevel(previous)
+        handler.close()

@@ -59,3 +59,17 @@ def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
     target.write_text(text, encoding="utf-8")
     print(f"kept {target.relative_to(ROOT)}")
     return target
+
+
+def untrained_start(trained: str | Path, path: str | Path, description: str) -> Path:
+    """The untrained start of a trained gain weight file: the network its recipe builds (the same arguments and
+    seed) before any step, saved to ``path``."""
+    import torch
+
+    from alcn_cv.nets.gain import GainNormalizer
+    from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
+
+    config = load_normalizer_file(trained).meta["training"]["config"]
+    torch.manual_seed(config["seed"])
+    net = GainNormalizer(**config["net"])
+    return save_normalizer_file(path, net.state_arrays(), net.file_meta(trained=False, description=description))

@@ -15,24 +15,12 @@ from __future__ import annotations
 
 import argparse
 
-import torch
-from _run import RUNS, alcn, keep
+from _run import RUNS, alcn, keep, untrained_start
 
-from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.runtime import MODELS
-from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 QUICK = ["--max-frames", "12", "--patches", "150", "--max-pairs", "12"]
 BASELINES = ["none", "clahe", "dog", "dlcn", "tantriggs"]
-
-
-def untrained_start(path: str) -> str:
-    """The default's network as its preset initialises it (same config, seed 0), saved untrained."""
-    meta = load_normalizer_file(MODELS["gain"]).meta
-    torch.manual_seed(meta["training"]["config"]["seed"])
-    net = GainNormalizer(**meta["training"]["config"]["net"])
-    save_normalizer_file(path, net.state_arrays(), net.file_meta(trained=False, description="the default's start"))
-    return path
 
 
 def main() -> None:
@@ -41,7 +29,7 @@ def main() -> None:
     args = parser.parse_args()
     out = RUNS / "learning"
     out.mkdir(parents=True, exist_ok=True)
-    untrained = untrained_start(str(out / "untrained.npz"))
+    untrained = untrained_start(MODELS["gain"], out / "untrained.npz", "the default's start")
     webcam = out / "webcam"
     scenes = "scenes=['courbevoie','frankfurt','panorama']"
     alcn("train-real-light", "--conf", "gain", "--set", scenes, "--set", "relit=0", "--out", str(webcam))

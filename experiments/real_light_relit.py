@@ -40,15 +40,14 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import torch
+from _run import untrained_start
 
 from alcn_cv.cli import main as alcn
 from alcn_cv.data.light_changes import LIGHTS, sample_pair
 from alcn_cv.data.permissive_images import Photograph, relit_scenes, training_photographs
+from alcn_cv.data.scenes import TRAIN_SCENES
 from alcn_cv.io import write_json
-from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.shared_data import shared_data_dir
-from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 STAGES = ("speed", "scenes", "train", "bench")
 BASELINES = ["none", "clahe", "dlcn", "tantriggs", "alcn"]
@@ -102,24 +101,23 @@ def train(
     folders: list[Path], out: Path, steps: int, seed: int, extra: list[str], webcam: float | None
 ) -> tuple[Path, Path]:
     run = out / "train"
+    # relit=0: the relit copies are the folders written by the scenes stage, not the preset's own.
     data = (
-        [f"scenes={json.dumps(list(map(str, folders)))}"]
+        [f"scenes={json.dumps(list(map(str, folders)))}", "relit=0"]
         if webcam is None
-        else [f"rendered={json.dumps([str(out / 'scenes')])}", f"rendered_fraction={webcam}"]
+        else [
+            f"scenes={json.dumps(list(TRAIN_SCENES))}",
+            "relit=0",
+            f"rendered={json.dumps([str(out / 'scenes')])}",
+            f"rendered_fraction={webcam}",
+        ]
     )
     settings = [word for item in [*data, f"steps={steps}"] for word in ("--set", item)]
     args = ["train-real-light", "--conf", "gain", "--out", str(run), *settings, "--seed", str(seed), *extra]
     if alcn(args) != 0:
         raise SystemExit("training failed")
     trained = run / "gain_normalizer.npz"
-    meta = load_normalizer_file(trained).meta
-    torch.manual_seed(seed)
-    net = GainNormalizer(**meta["training"]["config"]["net"])
-    untrained = out / "untrained.npz"
-    save_normalizer_file(
-        untrained, net.state_arrays(), net.file_meta(trained=False, description="the relit recipe's untrained start")
-    )
-    return trained, untrained
+    return trained, untrained_start(trained, out / "untrained.npz", "the relit recipe's untrained start")
 
 
 def bench(out: Path, trained: Path, untrained: Path, baselines: bool) -> None:

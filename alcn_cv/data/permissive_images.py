@@ -29,6 +29,7 @@ from alcn_cv.data.scenes import Scene
 from alcn_cv.data.textures import SKIMAGE_PHOTOGRAPHS, skimage_photograph
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import read_image, to_gray
+from alcn_cv.shared_data import shared_data_dir
 
 __all__ = [
     "PERMISSIVE_LICENCES",
@@ -190,6 +191,4 @@ def relit_scenes(
 def relit_permissive_scenes(frames: int, seed: int = 0, light: str = "relief", jitter: float = 0.0) -> list[Scene]:
     """:func:`relit_scenes` of :func:`training_photographs` (the shared data folder's OpenCV samples included):
     the training data of the default Normalizer, which permits any use."""
-    from alcn_cv.shared_data import shared_data_dir
-
     return relit_scenes(training_photographs(shared_data_dir()), frames, seed, light, jitter)

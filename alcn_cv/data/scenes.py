@@ -49,6 +49,7 @@ from alcn_cv.shared_data import shared_data_dir
 
 __all__ = [
     "TEST_SCENES",
+    "WEBCAM_SCENES",
     "TRAIN_SCENES",
     "Scene",
     "load_scene_folder",
@@ -64,6 +65,8 @@ logger = logging.getLogger(__name__)
 TRAIN_SCENES = ("courbevoie", "frankfurt", "panorama")
 #: Scenes and data sets never trained or tuned on.
 TEST_SCENES = ("mexico", "psm")
+#: The scenes of the shared ``webcam`` data (academic research use only).
+WEBCAM_SCENES = (*TRAIN_SCENES, "mexico")
 
 _INDEXED = re.compile(r"^(?P<name>.+)\.(?P<index>\d+)$")
 _MASK = re.compile(r"\.mask$", re.IGNORECASE)

@@ -86,7 +86,7 @@ class UNetNormalizer(nn.Module):
     def reach(self) -> int:
         """An upper bound of the receptive field's radius (pixels, Chebyshev): the output at a pixel does not
         depend on the input farther away, when the padded grids of the two inputs align (see :attr:`multiple`)."""
-        half = 2 ** (len(self.down) - 1)
+        half = self.multiple  # 2 ** (levels - 1), the bottom level's pixel in input pixels
         # Per level l above the bottom: 2 + 2 convolutions, the pooling and the upsampling; the bottom's 2 convolutions.
         return 7 * (half - 1) + 2 * half
 

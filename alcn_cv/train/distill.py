@@ -40,9 +40,8 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from alcn_cv.data.permissive_images import relit_permissive_scenes
 from alcn_cv.data.phos import render_windows
-from alcn_cv.data.scenes import TRAIN_SCENES, Scene, load_scenes, scene_dirs
+from alcn_cv.data.scenes import WEBCAM_SCENES, Scene
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
 from alcn_cv.io import atomic_write
@@ -50,6 +49,7 @@ from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.report import describe_machine
 from alcn_cv.train.config import GainDistillConfig, LiteDistillConfig
+from alcn_cv.train.real_light import source_scenes
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 __all__ = ["distill", "distill_gain", "main", "output_gram", "teacher_file"]
@@ -276,8 +276,6 @@ Speed and the difference from the exact ALCN output on whole frames: `alcn bench
 
 #: Every ``_GAIN_VAL_EVERY``-th frame of each real scene is held out for validation.
 _GAIN_VAL_EVERY = 5
-#: The shared webcam scenes (academic research only).
-WEBCAM_SCENES = (*TRAIN_SCENES, "mexico")
 #: Side and frames of the rendered registered scenes (:func:`alcn_cv.data.relief_scenes.render_scene`).
 _RENDERED_SIZE, _RENDERED_FRAMES = 256, 4
 
@@ -384,9 +382,7 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
         raise InputError(f"{teacher_path} is not a gain Normalizer")
     teacher_net = normalizer_from_file(teacher_weights).eval()
     start = time.perf_counter()
-    scenes = load_scenes(scene_dirs(cfg.scenes)) if cfg.scenes else []
-    if cfg.relit:
-        scenes += relit_permissive_scenes(cfg.relit, seed, cfg.light)
+    scenes = source_scenes(cfg.scenes, cfg.relit, seed, cfg.light)
     train_frames, val_frames = _gain_frames(scenes, rendered, seed, progress)
     if not val_frames:
         raise DatasetError(
@@ -494,7 +490,7 @@ def _gain_sources(s: dict[str, Any]) -> str:
 def _gain_terms(s: dict[str, Any]) -> str:
     """What the student's data allow: the webcam frames are for academic research only, other scenes carry
     their own terms, the relit permissive photographs (and the rendered scenes) permit any use."""
-    if any(Path(scene).name in WEBCAM_SCENES for scene in s["scenes"]):
+    if any(scene in WEBCAM_SCENES for scene in s["scenes"]):
         return (
             '**Distilled on frames of the "Webcam" data set (Verdie, Yi, Fua & Lepetit, TILDE, CVPR 2015; AMOS, '
             "Jacobs, Roman & Pless, CVPR 2007): these weights are for academic research only, as those "

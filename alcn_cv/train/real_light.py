@@ -31,10 +31,11 @@ Command (the ``gain`` preset reads photographs that permit any use; the webcam s
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -53,7 +54,7 @@ from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.gain import GainNormalizer
-from alcn_cv.report import machine
+from alcn_cv.report import log_to, machine
 from alcn_cv.train.config import RealLightConfig
 from alcn_cv.train.models import CentreMixture
 from alcn_cv.weight_file import save_normalizer_file
@@ -73,9 +74,11 @@ __all__ = [
     "pair_loss",
     "repeatability_loss",
     "sample_locations",
+    "source_scenes",
     "textured_locations",
     "train_real_light",
     "training_scene",
+    "training_run",
     "training_scenes",
 ]
 
@@ -295,12 +298,18 @@ def _normalized_centres(
     return net.equalize(centre * inverse_divisor(energy, floor))
 
 
+def source_scenes(scenes: Sequence[str], relit: int, seed: int, light: str, jitter: float = 0.0) -> list[Scene]:
+    """The registered scenes a gain Normalizer learns from: those of ``scenes`` (folders, or names of the shared
+    ``webcam`` scenes) and, unless ``relit`` is 0, each permissive photograph relit ``relit`` times
+    (:func:`~alcn_cv.data.permissive_images.relit_permissive_scenes` with ``seed``, ``light`` and ``jitter``)."""
+    sources = load_scenes(scene_dirs(scenes)) if scenes else []
+    return sources + (relit_permissive_scenes(relit, seed, light, jitter) if relit else [])
+
+
 def training_scenes(cfg: RealLightConfig) -> tuple[list[TrainingScene], list[TrainingScene]]:
     """The two groups of scenes a run draws from, ready for training (padded by ``cfg.crop // 2``):
     ``cfg.scenes`` with the ``cfg.relit`` copies of the permissive photographs, and ``cfg.rendered``."""
-    sources = load_scenes(scene_dirs(cfg.scenes)) if cfg.scenes else []
-    if cfg.relit:
-        sources += relit_permissive_scenes(cfg.relit, cfg.seed, cfg.light, cfg.jitter)
+    sources = source_scenes(cfg.scenes, cfg.relit, cfg.seed, cfg.light, cfg.jitter)
     scenes = [training_scene(s, cfg.crop // 2, cfg.patch) for s in sources]
     rendered = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(cfg.rendered)]
     for scene in scenes + rendered:
@@ -390,22 +399,31 @@ def train_real_light(cfg: RealLightConfig, out: str | Path, *, command: str = ""
     Returns:
         The final weight file ``out/gain_normalizer.npz``.
     """
+    if cfg.crop < 2 * cfg.patch:
+        raise InputError(f"need crop >= 2 * patch, got crop {cfg.crop} and patch {cfg.patch}")
+    with training_run(cfg, out) as folder:
+        return _train(cfg, folder, {"command": command, "conf": conf})
+
+
+@contextlib.contextmanager
+def training_run(cfg: RealLightConfig, out: str | Path) -> Iterator[Path]:
+    """The run of any network on ``cfg``'s draws: checks what :func:`draw_step` needs (scenes or relit
+    photographs, a rendered share in [0, 1) with rendered scenes, at least 2 locations, at least 1 step),
+    makes the run folder ``out`` and copies the log into its ``train.log`` (:func:`alcn_cv.report.log_to`).
+
+    Yields:
+        The run folder.
+    """
     if not cfg.scenes and not cfg.relit:
         raise InputError("no scenes given (scenes, relit)")
     if not 0 <= cfg.rendered_fraction < 1 or (cfg.rendered_fraction > 0 and not cfg.rendered):
         raise InputError(f"rendered_fraction must be in [0, 1) and needs rendered scenes, got {cfg.rendered_fraction}")
-    if cfg.crop < 2 * cfg.patch or cfg.locations < 2 or cfg.steps < 1:
-        raise InputError("need crop >= 2 * patch, locations >= 2 and steps >= 1")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    handler = logging.FileHandler(out / "train.log")
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
-    logger.addHandler(handler)
-    try:
-        return _train(cfg, out, {"command": command, "conf": conf})
-    finally:
-        logger.removeHandler(handler)
-        handler.close()
+    if cfg.locations < 2 or cfg.steps < 1:
+        raise InputError("need locations >= 2 and steps >= 1")
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    with log_to(folder / "train.log"):
+        yield folder
 
 
 def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
@@ -423,7 +441,7 @@ def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
         state = {"net": net.state_dict(), "opt": opt.state_dict(), "step": step, "config": asdict(cfg)}
         atomic_write(out / "checkpoint.pt", lambda f, state=state: torch.save(state, f))
 
-    seconds = fit(net, pair_loss, scenes, rendered, cfg, rng, out, save, "real-light", logger)
+    seconds = fit(net, pair_loss, scenes, rendered, cfg, rng, out, save, "real-light")
     return _save_weights(net, out / "gain_normalizer.npz", cfg, cfg.steps, seconds, record)
 
 
@@ -437,11 +455,10 @@ def fit(
     out: Path,
     save: Callable[[int, float, torch.optim.Optimizer], None],
     desc: str,
-    log: logging.Logger,
 ) -> float:
     """The training loop of the gain Normalizer and of its baselines: ``cfg.steps`` steps of Adam at ``cfg.lr`` on
     ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to
-    norm 5; every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer)``, a line in ``log`` and
+    norm 5; every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer)``, a line of log and
     ``out/history.json``. Leaves ``net`` in eval mode.
 
     Returns:
@@ -463,10 +480,10 @@ def fit(
         if step % cfg.save_every == 0 or step == cfg.steps:
             seconds = time.perf_counter() - start
             recent = np.mean([h["loss"] for h in history[-cfg.save_every :]])
-            log.info("step %d: mean loss %.4f over the last %d steps, %.0f s", step, recent, cfg.save_every, seconds)
+            logger.info("step %d: mean loss %.4f over the last %d steps, %.0f s", step, recent, cfg.save_every, seconds)
             save(step, seconds, opt)
             write_json(out / "history.json", history)
     seconds = time.perf_counter() - start
-    log.info("trained %d steps in %.0f s", cfg.steps, seconds)
+    logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
     net.eval()
     return seconds

@@ -49,7 +49,7 @@ from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write
 from alcn_cv.nets.device import torch_device
-from alcn_cv.report import machine
+from alcn_cv.report import log_to, machine
 from alcn_cv.train import distributed
 from alcn_cv.train.checkpoint import (
     TrainState,
@@ -140,7 +140,7 @@ def train(
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     machine_start = machine()
-    with _log_to(out / "train.log") if distributed.is_main() else contextlib.nullcontext():
+    with log_to(out / "train.log") if distributed.is_main() else contextlib.nullcontext():
         ckpt, device = _prepare_run(cfg, out, resume)
         train_set, val_set, num_classes = _prepare_data(cfg, out, device, progress and distributed.is_main())
         model, optimizer, state = _build_models(cfg, num_classes, device, ckpt, start, out)
@@ -482,23 +482,6 @@ def _finish(cfg: TrainConfig, result: TrainResult, train_set: PhosBatch, state: 
 
 
 # ---------------------------------------------------------------------------------- helpers
-
-
-@contextlib.contextmanager
-def _log_to(path: Path) -> Iterator[None]:
-    handler = logging.FileHandler(path)
-    handler.setFormatter(logging.Formatter("[%(asctime)s %(name)s %(levelname)s] %(message)s", "%Y/%m/%d %H:%M:%S"))
-    root = logging.getLogger("alcn_cv")
-    previous = root.level
-    root.addHandler(handler)
-    if root.getEffectiveLevel() > logging.INFO:
-        root.setLevel(logging.INFO)
-    try:
-        yield
-    finally:
-        root.removeHandler(handler)
-        root.setLevel(previous)
-        handler.close()
 
 
 @contextlib.contextmanager

@@ -36,7 +36,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.nets.unet import UNetNormalizer
 from alcn_cv.report import machine
 from alcn_cv.train.config import RealLightConfig
-from alcn_cv.train.real_light import TrainingScene, fit, pair_loss, training_scenes
+from alcn_cv.train.real_light import TrainingScene, fit, pair_loss, training_run, training_scenes
 from alcn_cv.weight_file import save_normalizer_file
 
 __all__ = ["centre_outputs", "output_range", "train_unet", "unet_pair_loss"]
@@ -105,23 +105,10 @@ def train_unet(
     Returns:
         The weight file ``out/unet_normalizer.npz``.
     """
-    if not (cfg.scenes or cfg.relit) or cfg.locations < 2 or cfg.steps < 1 or cfg.crop < cfg.patch:
-        raise InputError("need scenes, locations >= 2, steps >= 1 and crop >= patch")
-    if not 0 <= cfg.rendered_fraction < 1 or (cfg.rendered_fraction > 0 and not cfg.rendered):
-        raise InputError(f"rendered_fraction must be in [0, 1) and needs rendered scenes, got {cfg.rendered_fraction}")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    log_file = logging.FileHandler(out / "train.log")
-    log_file.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
-    level = logger.level
-    logger.setLevel(logging.INFO)  # the log file holds the progress whatever the caller's logging
-    logger.addHandler(log_file)
-    try:
-        return _train(cfg, out, dict(net or {}), {"command": command, "conf": conf})
-    finally:
-        logger.removeHandler(log_file)
-        logger.setLevel(level)
-        log_file.close()
+    if cfg.crop < cfg.patch:
+        raise InputError(f"need crop >= patch, got crop {cfg.crop} and patch {cfg.patch}")
+    with training_run(cfg, out) as folder:
+        return _train(cfg, folder, dict(net or {}), {"command": command, "conf": conf})
 
 
 def _train(cfg: RealLightConfig, out: Path, arguments: dict[str, Any], record: dict[str, Any]) -> Path:
@@ -131,9 +118,7 @@ def _train(cfg: RealLightConfig, out: Path, arguments: dict[str, Any], record: d
     net = UNetNormalizer(**arguments)
     scenes, rendered = training_scenes(cfg)
     logger.info("U-Net %s: %d parameters", net.config, sum(p.numel() for p in net.parameters()))
-    for scene in scenes + rendered:
-        logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
-    seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, lambda *_: None, "unet", logger)
+    seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, lambda *_: None, "unet")
     meta = net.file_meta(
         trained=True,
         output_range=output_range(net, scenes + rendered),
