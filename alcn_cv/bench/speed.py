@@ -27,10 +27,10 @@ frame (it must stay flat).
 The **targets** (:func:`targets`) come first in the report, each with its measured value: the
 default ALCN (the gain Normalizer), its lite variant and the lite paper-family ALCN against a raw
 OpenCV DoG (:func:`raw_dog`) at 1280x800 (the gain ones with their difference from their torch
-model) and the default's frame rate at 640x480, BGR
-against gray and its difference from the plain float Lab round trip (:func:`lab_round_trip`,
-within one level), the cost of the ``apply`` contract over each
-method's own computation, the peak memory on an 8000x8000 image, an application's OpenCV calls
+model) and the default's frame rate at 640x480, the torch-free backend against the default one and
+the default against DLCN, BGR against gray and its difference from the plain float Lab round trip
+(:func:`lab_round_trip`, within one level), the cost of the ``apply`` contract over each method's own
+computation, the peak memory on an 8000x8000 image, an application's OpenCV calls
 right after ``apply``, ``alcn normalize`` on the cookie-box video against its decoding and
 encoding alone, and the batched torch path (CUDA when present); with where the default's time
 goes (its stages, and a profile).
@@ -843,13 +843,17 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     gray, bgr = synthetic_frame(width, height, False), synthetic_frame(width, height, True)
     small = synthetic_frame(*settings.fps_size, False)
     default, gain_lite, lite = ALCN(), ALCN(model="gain-lite"), ALCN(model="lite")
+    torch_free, dlcn = ALCN(backend="opencv"), create("dlcn")
     repeats = settings.target_repeats
     logger.info("targets: ratios at %dx%d", width, height)
     t = _medians(
         {
             "dog raw": lambda: raw_dog(gray),
+            "dlcn gray": lambda: dlcn.apply(gray),
             "alcn gray": lambda: default.apply(gray),
+            "alcn opencv gray": lambda: torch_free.apply(gray),
             "alcn bgr": lambda: default.apply(bgr),
+            "alcn opencv bgr": lambda: torch_free.apply(bgr),
             "alcn gain-lite gray": lambda: gain_lite.apply(gray),
             "alcn lite gray": lambda: lite.apply(gray),
             "alcn lite bgr": lambda: lite.apply(bgr),
@@ -873,6 +877,7 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     ratio, gain_lite_ratio, lite_ratio = (t[f"alcn{m} gray"] / t["dog raw"] for m in ("", " gain-lite", " lite"))
     fps = 1e3 / t["alcn gray small"]
     colour = t["alcn bgr"] / t["alcn gray"]
+    torch_free_ratio, dlcn_ratio = t["alcn opencv gray"] / t["alcn gray"], t["alcn gray"] / t["dlcn gray"]
     gain_error, gain_lite_error = _gain_error(default, gray), _gain_error(gain_lite, gray)
     colour_levels = max(
         int(np.abs(norm.apply(bgr).astype(np.int16) - lab_round_trip(norm, bgr)).max()) for norm in (default, lite)
@@ -910,6 +915,21 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
             f"{t['alcn lite gray']:.2f} ms; the default before the gain Normalizer",
         ),
         _target("default ALCN fps, {}x{} gray".format(*settings.fps_size), fps, ">= 200", fps >= 200),
+        _target(
+            f"torch-free backend (backend='opencv') / the default backend, {size} gray (issue 40)",
+            torch_free_ratio,
+            "<= 1.1",
+            torch_free_ratio <= 1.1,
+            f"{t['alcn opencv gray']:.2f} ms against {t['alcn gray']:.2f} ms; BGR "
+            f"{t['alcn opencv bgr']:.2f} against {t['alcn bgr']:.2f} ms",
+        ),
+        _target(
+            f"default ALCN / DLCN, {size} gray (issue 40, stretch)",
+            dlcn_ratio,
+            "<= 1",
+            dlcn_ratio <= 1,
+            f"DLCN {t['dlcn gray']:.2f} ms, {t['dlcn gray'] / t['dog raw']:.2f} raw DoGs",
+        ),
         _target(
             f"BGR / gray, {size}",
             colour,
