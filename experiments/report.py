@@ -172,17 +172,17 @@ def calibration(report: dict[str, Any]) -> str:
 def columns_table(report: dict[str, Any], title: str) -> str:
     """A report with ``columns`` and a ``table`` of rows (``alcn pose eval``, ``alcn pose planar``)."""
     spread = report.get("spread") or {}
+    # The products' tables carry a mean over the columns (sequences, scenes) that their ``columns`` do not name.
+    columns = report["columns"] + (["mean"] if all("mean" in v for v in report["table"].values()) else [])
     rows = []
     for label, values in report["table"].items():
         cells = []
-        for c in report["columns"]:
+        for c in columns:
             v = values.get(c)
             s = spread.get(label, {}).get(c)
             cells.append(None if v is None else f"{v:.1f}" + (f" ± {s:.1f}" if s is not None else ""))
         rows.append([label] + cells)
-    return f"## {title}\n\n{provenance(report)}\n% of frames posed within 5 px.\n\n" + table(
-        ["method", *report["columns"]], rows
-    )
+    return f"## {title}\n\n{provenance(report)}\n% of frames posed within 5 px.\n\n" + table(["method", *columns], rows)
 
 
 def summary_table(report: dict[str, Any], title: str, key: str | None = "summary") -> str:
