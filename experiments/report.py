@@ -291,6 +291,9 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
     "relight_unet": lambda r: relight(
         r, "The free-form U-Net against ALCN: the same data, objective and budget (quick protocol)"
     ),
+    "orb_orientation": lambda r: summary_table(
+        r, "Why ALCN lowers ORB matching: ORB's orientation, and a wide band that restores it (quick protocol)"
+    ),
     "speed": speed,
     "detect": lambda r: summary_table(r, "Rendered detection (mean AUC)"),
     "fewshot": lambda r: summary_table(r, "Few-shot validation (ROC AUC)"),

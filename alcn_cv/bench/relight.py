@@ -271,7 +271,7 @@ def _ratio_matches(d1: np.ndarray | None, d2: np.ndarray | None, norm: int, rati
     return [(m[0].queryIdx, m[0].trainIdx) for m in knn if len(m) == 2 and m[0].distance < ratio * m[1].distance]
 
 
-def _keypoint_scores(
+def keypoint_scores(
     kp1: tuple[np.ndarray, np.ndarray | None],
     kp2: tuple[np.ndarray, np.ndarray | None],
     norm: int,
@@ -329,7 +329,7 @@ def evaluate_scene(norm: Normalization, scene: Scene, plans: Sequence[PairPlan],
             values["identification"].append(identification(normalized[g], normalized[f], locations, settings.patch))
             for kind, (_, kind_norm) in detectors.items():
                 pair = features(kind, g), features(kind, f)
-                score, success, correct = _keypoint_scores(*pair, kind_norm, scene.frames.shape[1:], settings)
+                score, success, correct = keypoint_scores(*pair, kind_norm, scene.frames.shape[1:], settings)
                 values[f"matching_{kind}"].append(score)
                 values[f"pose_{kind}"].append(success)
                 values[f"correct_{kind}"].append(correct)
