@@ -31,6 +31,7 @@ from alcn_cv.checks import FULL_SCALE
 from alcn_cv.errors import InputError
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.torch_divisive import divisive_normalization
+from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.opencv_runtime import WINDOW, cells_padded
@@ -137,15 +138,29 @@ class ALCN2d(nn.Module):
             )
         return response
 
+    def with_band(self, response: torch.Tensor, gray: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
+        """:meth:`finish`'s ``response`` plus the model's weighted :mod:`~alcn_cv.filters.torch_wide_band` of
+        ``gray`` (``floor``: the band's divisive floor ``(B, 1, 1, 1)``); the response itself for a model without."""
+        if not self.spec.band or self.spec.tau is None or self.spec.divisive is None:
+            return response
+        gain = isinstance(self.net, GainNormalizer)
+        tau = self.net.tau if gain else self.spec.tau
+        c = self.net.floor_scale if gain else self.spec.divisive[1]
+        return response + self.spec.band * wide_band(gray, tau, c, floor)
+
     def response(
-        self, gray: torch.Tensor, floor: torch.Tensor | None = None, small: torch.Tensor | None = None
+        self,
+        gray: torch.Tensor,
+        floor: torch.Tensor | None = None,
+        small: torch.Tensor | None = None,
+        band_floor: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """The raw normalized response ``(B, 1, H, W)`` (unbounded; :meth:`forward` maps it to [0, 1]); ``floor``
-        as in :meth:`finish`, ``small`` as in :meth:`weight_maps`."""
+        as in :meth:`finish`, ``small`` as in :meth:`weight_maps`, ``band_floor`` as in :meth:`with_band`."""
         if gray.ndim != 4 or gray.shape[1] != 1:
             raise InputError(f"gray must have shape (B, 1, H, W), got {tuple(gray.shape)}")
         with self._tf32(gray):
-            return self.finish(self.eq3(gray, small), floor)
+            return self.with_band(self.finish(self.eq3(gray, small), floor), gray, band_floor)
 
     def to_unit(self, response: torch.Tensor) -> torch.Tensor:
         """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""
@@ -289,9 +304,11 @@ class TorchRuntime:
     def mixture(self, gray: np.ndarray) -> np.ndarray:
         return self._run(self.module.eq3, gray)[0]
 
-    def normalize(self, gray: np.ndarray, floor: float | None = None) -> np.ndarray:
-        floor_tensor = None if floor is None else torch.full((1, 1, 1, 1), floor, device=self.device)
-        return self._run(self.module.response, gray, floor=floor_tensor)[0]
+    def normalize(self, gray: np.ndarray, floor: float | None = None, band_floor: float | None = None) -> np.ndarray:
+        floor_tensor, band_floor_tensor = (
+            None if f is None else torch.full((1, 1, 1, 1), f, device=self.device) for f in (floor, band_floor)
+        )
+        return self._run(self.module.response, gray, floor=floor_tensor, band_floor=band_floor_tensor)[0]
 
     def apply_batch(self, frames: np.ndarray, out_dtype: np.dtype, half: bool = False) -> np.ndarray:
         """``(B, H, W)`` uint8, uint16 or float32 frames -> ``(B, H, W)`` of ``out_dtype``: uploaded as they are
@@ -306,7 +323,8 @@ class TorchRuntime:
             with torch.autocast(self.device.type, torch.float16, enabled=half):  # the network; Eq. 3 in float32
                 maps = self.module.weight_maps(x).float()
             with self.module._tf32(x):
-                unit = self.module.to_unit(self.module.finish(self.module.mixture(x, maps)))[:, 0]
+                unit = self.module.to_unit(self.module.with_band(self.module.finish(self.module.mixture(x, maps)), x))
+                unit = unit[:, 0]
             if out_dtype != np.float32:
                 unit = torch.round(unit * FULL_SCALE[out_dtype]).to(_TORCH_DTYPES[out_dtype])
             out = torch.empty(unit.shape, dtype=unit.dtype, pin_memory=cuda) if cuda else None

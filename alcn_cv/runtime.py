@@ -33,6 +33,7 @@ from alcn_cv.filters.gaussian_mixture import (
     pyramid_plan,
     upsample_grid,
 )
+from alcn_cv.filters.wide_band import BLOCK, band_reach, check_band_meta, wide_band
 from alcn_cv.nets.opencv_runtime import WINDOW, OpenCVNormalizer
 from alcn_cv.weight_file import DEFAULT_WEIGHTS
 
@@ -79,6 +80,7 @@ class ModelSpec:
         divisive: the gain family's divisive normalization ``(sigma in input pixels, scale c)``, or None.
         per_pixel: the gain family (maps on a grid of its own, windows normalized as small images).
         reach: how far from a grid point the network looks (working pixels).
+        band: the weight of the :mod:`~alcn_cv.filters.wide_band` added to the gain family's output (0: none).
     """
 
     sigmas: tuple[float, ...]
@@ -88,6 +90,7 @@ class ModelSpec:
     divisive: tuple[float, float] | None
     per_pixel: bool
     reach: int
+    band: float = 0.0
 
     @classmethod
     def from_meta(cls, meta: dict, scale: float | None = None) -> ModelSpec:
@@ -110,6 +113,7 @@ class ModelSpec:
             divisive=None if divisive is None else (float(divisive["sigma"]) / scale, float(divisive["scale"])),
             per_pixel=per_pixel,
             reach=reach,
+            band=check_band_meta(meta["band"]) if "band" in meta else 0.0,
         )
 
     @property
@@ -162,8 +166,9 @@ class Runtime(Protocol):
     def mixture(self, gray: np.ndarray) -> np.ndarray:
         """Eq. 3's raw response ``(H, W)``."""
 
-    def normalize(self, gray: np.ndarray, floor: float | None = None) -> np.ndarray:
-        """The method's raw response ``(H, W)``; ``floor``: the divisive floor of the whole image."""
+    def normalize(self, gray: np.ndarray, floor: float | None = None, band_floor: float | None = None) -> np.ndarray:
+        """The method's raw response ``(H, W)``; ``floor`` and ``band_floor``: the divisive floors of the whole
+        image (the response's and the wide band's)."""
 
 
 class WindowRuntime:
@@ -214,8 +219,12 @@ class WindowRuntime:
             np.multiply(response, np.float32(inverse_tau), out=response)
         return response if tau is None else np.tanh(response, out=response)
 
-    def normalize(self, gray: np.ndarray, floor: float | None = None) -> np.ndarray:
-        return self.finish(self.mixture(gray), floor)
+    def normalize(self, gray: np.ndarray, floor: float | None = None, band_floor: float | None = None) -> np.ndarray:
+        out = self.finish(self.mixture(gray), floor)
+        if self.spec.band and self.spec.tau is not None and self.spec.divisive is not None:
+            band = wide_band(gray, self.spec.tau, self.spec.divisive[1], band_floor)
+            cv2.scaleAdd(band, self.spec.band, out, dst=out)
+        return out
 
     def _grid_maps_at(
         self, grid: np.ndarray, ratios: tuple[float, float], level: int, ks: list[int], shape: tuple[int, int]
@@ -338,6 +347,9 @@ def strip_layout(spec: ModelSpec, grid_stride: int, mixture: str, shape: tuple[i
     reach = zoom * (spec.reach + grid_stride) + kernel_radius(max(sigmas)) + 2 ** (top + 2)
     if spec.divisive is not None:
         reach += kernel_radius(spec.divisive[0])
+    if spec.band:  # its blocks start on whole blocks of the image's; its reach is its own
+        step = math.lcm(step, BLOCK)
+        reach = max(reach, band_reach())
     return -(-reach // step) * step, step
 
 

@@ -49,8 +49,9 @@ def test_gain_model_on_a_photograph(shared_data):
     gray = photo.astype(np.float32) / np.float32(255)
     alcn = ALCN(model="gain")
     np.testing.assert_allclose(alcn.normalize(gray), _forward(alcn.net, gray), atol=1e-3, rtol=0)
-    # apply's uint8 output: the forward's [-1, 1] mapped to [0, 255] and rounded, within a level
-    expected = np.rint((_forward(alcn.net, gray) + 1) * 127.5)
+    # apply's uint8 output: the forward's output range mapped to [0, 255] and rounded, within a level
+    lo, hi = alcn.output_range
+    expected = np.rint(np.clip((_forward(alcn.net, gray) - lo) / (hi - lo), 0, 1) * 255)
     assert np.abs(alcn.apply(photo).astype(np.float64) - expected).max() <= 1
 
 

@@ -29,6 +29,7 @@ from alcn_cv.enhance.registry import parse_spec, register
 from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.divisive import gaussian_energy
+from alcn_cv.filters.wide_band import BLOCK, block_means, wide_band_floor
 from alcn_cv.nets.opencv_runtime import WINDOW
 from alcn_cv.runtime import (
     DEFAULT_MODEL,
@@ -54,9 +55,11 @@ logger = logging.getLogger(__name__)
 
 BACKENDS = ("fast", "torch", "opencv")
 MIXTURES = ("exact", "pyramid")
-#: The divisive floor of the whole image while its strips are normalized (None: each call computes it from its
-#: own image); a context variable, so threads do not share it.
-_DIVISIVE_FLOOR: ContextVar[float | None] = ContextVar("alcn_divisive_floor", default=None)
+#: The divisive floors of the whole image, the response's and the wide band's, while its strips are normalized
+#: (None: each call computes them from its own image); a context variable, so threads do not share them.
+_DIVISIVE_FLOORS: ContextVar[tuple[float | None, float | None]] = ContextVar(
+    "alcn_divisive_floors", default=(None, None)
+)
 
 
 @register
@@ -171,26 +174,35 @@ class ALCN(Normalization):
     @contextmanager
     def _strip_context(self, img: np.ndarray, strips: list[tuple[int, int, int, int]]) -> Iterator[None]:
         # The divisive floor is a mean of the energy over the whole image: a first pass over the
-        # strips sums it (Eq. 3 and the energy computed twice, the memory still a strip's).
+        # strips sums it (Eq. 3 and the energy computed twice, the memory still a strip's). The wide
+        # band's is the mean over the whole image's blocks, which the strips' own blocks make up.
         if self.spec.divisive is None:
             yield
             return
         sigma, c = self.spec.divisive
         total = 0.0
+        blocks = []
         for start, stop, lo, hi in strips:
-            energy = gaussian_energy(self.runtime.mixture(self._intensity(img[lo:hi])), sigma)
+            intensity = self._intensity(img[lo:hi])
+            energy = gaussian_energy(self.runtime.mixture(intensity), sigma)
             total += float(energy[start - lo : stop - lo].sum(dtype=np.float64))
-        token = _DIVISIVE_FLOOR.set(c * total / (img.shape[0] * img.shape[1]))
+            if self.spec.band:  # its blocks; the last strip's bottom reflected from rows above it, as the whole's
+                last = stop == img.shape[0]
+                blocks.append(block_means(intensity if last else intensity[start - lo : stop - lo]))
+                if last:
+                    blocks[-1] = blocks[-1][(start - lo) // BLOCK :]
+        band_floor = wide_band_floor(np.concatenate(blocks), c) if blocks else None
+        token = _DIVISIVE_FLOORS.set((c * total / (img.shape[0] * img.shape[1]), band_floor))
         try:
             yield
         finally:
-            _DIVISIVE_FLOOR.reset(token)
+            _DIVISIVE_FLOORS.reset(token)
 
     def _tiling(self, shape: tuple[int, int]) -> tuple[int, int] | None:
         return strip_layout(self.spec, self.grid_stride, self.mixture, shape)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
-        return self.runtime.normalize(gray, _DIVISIVE_FLOOR.get())
+        return self.runtime.normalize(gray, *_DIVISIVE_FLOORS.get())
 
     def apply_batch(
         self, frames: np.ndarray, out_dtype: type | np.dtype | str | None = None, half: bool = False

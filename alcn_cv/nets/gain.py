@@ -11,7 +11,8 @@ each cell's mean, of a local mean, of a wider context mean and of the cell's sta
 on a grid of stride :attr:`~GainNormalizer.stride` (8 pixels), so it costs a small fraction of the
 full-resolution mixture; the maps are interpolated bilinearly in between. Eq. 3's response is then divided by
 its local energy (:mod:`alcn_cv.filters.torch_divisive`, Jarrett et al. 2009) and equalized by
-``tanh(x / tau)`` (:func:`contrast_equalization`, Tan & Triggs, TIP 2010): the output lies in (-1, 1).
+``tanh(x / tau)`` (:func:`contrast_equalization`, Tan & Triggs, TIP 2010), in (-1, 1); the output adds ``band``
+times the :mod:`~alcn_cv.filters.wide_band` (0.3 in the shipped files), so that ORB can orient its keypoints.
 
 The constructor's defaults are the shipped files' (``alcn_normalizer_gain.npz``; ``channels=8`` for
 ``alcn_normalizer_gain_lite.npz``).
@@ -19,7 +20,8 @@ The constructor's defaults are the shipped files' (``alcn_normalizer_gain.npz``;
 Shapes (``B`` images, ``N`` kernels, ``g`` the grid stride): input ``(B, 1, H, W)`` float intensities in
 [0, 1]; :meth:`~GainNormalizer.dense_grid` ``(B, N, ceil((H-1)/g)+1, ceil((W-1)/g)+1)``, grid point
 ``(i, j)`` at pixel ``(g*i, g*j)``; :meth:`~GainNormalizer.dense` ``(B, N, H, W)``;
-:meth:`~GainNormalizer.response` ``(B, 1, H, W)``; :meth:`~GainNormalizer.forward` ``(B, 1, H, W)`` in (-1, 1).
+:meth:`~GainNormalizer.response` ``(B, 1, H, W)``; :meth:`~GainNormalizer.forward` ``(B, 1, H, W)`` in
+``(-1 - band, 1 + band)``.
 """
 
 from __future__ import annotations
@@ -41,6 +43,8 @@ from alcn_cv.filters.torch_divisive import (
     gaussian_blur,
     reflect101_pad_any,
 )
+from alcn_cv.filters.torch_wide_band import wide_band
+from alcn_cv.filters.wide_band import band_meta
 from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
 from alcn_cv.weight_file import NormalizerFile
 
@@ -98,6 +102,8 @@ class GainNormalizer(nn.Module):
         floor_scale: ``c`` of the divisive floor ``c * mean(e)``.
         learn_scales: learn ``tau`` and ``c`` (otherwise they keep their initial values).
         divisive_sigma: the divisive normalization's energy ``e = sqrt(G_sigma * r^2)`` (working pixels).
+        band: the weight of the :mod:`~alcn_cv.filters.wide_band` added to the output (0: none), so that ORB
+            orients its keypoints; it has no parameters, and training (on crops too small for it) leaves it out.
     """
 
     def __init__(
@@ -115,6 +121,7 @@ class GainNormalizer(nn.Module):
         floor_scale: float = 1.0,
         learn_scales: bool = False,
         divisive_sigma: float = 2.0,
+        band: float = 0.3,
     ) -> None:
         super().__init__()
         if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:
@@ -123,6 +130,8 @@ class GainNormalizer(nn.Module):
             eps > 0 and tau > 0 and mean_sigma > 0 and context_sigma > 0 and floor_scale > 0 and divisive_sigma > 0
         ):
             raise InputError("eps, tau, mean_sigma, context_sigma, floor_scale and divisive_sigma must be positive")
+        if not 0 <= band < 1:
+            raise InputError(f"band must be in [0, 1), got {band}")
         self.sigmas = gaussian_sigmas(num_kernels, sigma_step)
         init_weights = dog_weights(self.sigmas) if init_weights is None else [float(w) for w in init_weights]
         if len(init_weights) != num_kernels:
@@ -148,6 +157,8 @@ class GainNormalizer(nn.Module):
         #: The divisive normalization's energy sigma (working pixels).
         self.divisive_sigma = float(divisive_sigma)
         self.mixture = GaussianMixture2d(self.sigmas)
+        #: The weight of the wide band added to the output.
+        self.band = float(band)
         self.config: dict[str, Any] = {
             "num_kernels": num_kernels,
             "sigma_step": float(sigma_step),
@@ -162,6 +173,7 @@ class GainNormalizer(nn.Module):
             "floor_scale": float(floor_scale),
             "learn_scales": bool(learn_scales),
             "divisive_sigma": self.divisive_sigma,
+            "band": self.band,
         }
 
     @property
@@ -274,8 +286,12 @@ class GainNormalizer(nn.Module):
         return contrast_equalization(response, self.tau)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        """The whole normalization, ``tanh(divide(ALCN(I)) / tau)``: ``(B, 1, H, W)`` -> ``(B, 1, H, W)`` in (-1, 1)."""
-        return self.equalize(self.divide(self.response(image)))
+        """The whole normalization, ``tanh(divide(ALCN(I)) / tau)`` plus the weighted wide band: ``(B, 1, H, W)`` ->
+        ``(B, 1, H, W)`` in ``(-1 - band, 1 + band)``."""
+        out = self.equalize(self.divide(self.response(image)))
+        if self.band:
+            out = out + self.band * wide_band(image, self.tau, self.floor_scale)
+        return out
 
     @classmethod
     def from_file(cls, weight_file: NormalizerFile) -> GainNormalizer:
@@ -295,18 +311,21 @@ class GainNormalizer(nn.Module):
 
     def file_meta(self, trained: bool, **provenance: Any) -> dict[str, Any]:
         """The weight file's header: ``architecture``, ``config``, ``sigmas``, ``working_scale`` 1,
-        ``output_range`` ``[-1, 1]`` (the equalized output), the equalization's ``tau`` and the divisive
-        normalization's ``stride``, ``scale`` and ``sigma``."""
+        ``output_range`` ``[-1 - band, 1 + band]`` (the equalized output and the band), the equalization's ``tau``,
+        the divisive normalization's ``stride``, ``scale`` and ``sigma``, and the wide band's (:func:`band_meta`)
+        when it has one."""
         divisive = {"stride": self.stride, "scale": float(self.floor_scale.detach()), "sigma": self.divisive_sigma}
+        band = {"band": band_meta(self.band)} if self.band else {}
         return {
             "architecture": ARCHITECTURE,
             "config": self.config,
             "sigmas": list(self.sigmas),
             "working_scale": 1.0,
-            "output_range": [-1.0, 1.0],
+            "output_range": [-1.0 - self.band, 1.0 + self.band],
             "trained": bool(trained),
             "equalization": {"kind": "tanh", "tau": self.tau_value()},
             "divisive": divisive,
+            **band,
             **provenance,
         }
 
