@@ -187,10 +187,10 @@ class ALCN(Normalization):
             energy = gaussian_energy(self.runtime.mixture(intensity), sigma)
             total += float(energy[start - lo : stop - lo].sum(dtype=np.float64))
             if self.spec.band:  # its blocks; the last strip's bottom reflected from rows above it, as the whole's
-                last = stop == img.shape[0]
-                blocks.append(block_means(intensity if last else intensity[start - lo : stop - lo]))
-                if last:
-                    blocks[-1] = blocks[-1][(start - lo) // BLOCK :]
+                if stop == img.shape[0]:
+                    blocks.append(block_means(intensity)[(start - lo) // BLOCK :])
+                else:
+                    blocks.append(block_means(intensity[start - lo : stop - lo]))
         band_floor = wide_band_floor(np.concatenate(blocks), c) if blocks else None
         token = _DIVISIVE_FLOORS.set((c * total / (img.shape[0] * img.shape[1]), band_floor))
         try:
