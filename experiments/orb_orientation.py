@@ -46,9 +46,9 @@ from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 SETTINGS = Settings(patches=150, max_pairs=12)
 MAX_FRAMES = 12
-BASELINES = ("none", "clahe", "dog", "dlcn", "alcn")  # alcn: the shipped default, band 0.3
+BASELINES = ("none", "clahe", "dog", "dlcn", "alcn")  # alcn: the shipped default, band 0.15
 #: The band's weights tried besides the shipped one (0: none).
-BAND_WEIGHTS = (0.0, 0.1, 0.2)
+BAND_WEIGHTS = (0.0, 0.1, 0.2, 0.3)
 #: The exposure-only light: a global gain (the camera's tone curve kept), the sensor's noise, 8-bit quantization.
 EXPOSURE = replace(
     LightChangeConfig.identity(),

@@ -294,6 +294,9 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
     "orb_orientation": lambda r: summary_table(
         r, "Why ALCN lowers ORB matching: ORB's orientation, and a wide band that restores it (quick protocol)"
     ),
+    "directional_light": lambda r: summary_table(
+        r, "Whole-image identification under hard directional light (rendered, a stand-in for faces)"
+    ),
     "speed": speed,
     "detect": lambda r: summary_table(r, "Rendered detection (mean AUC)"),
     "fewshot": lambda r: summary_table(r, "Few-shot validation (ROC AUC)"),

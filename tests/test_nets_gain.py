@@ -93,7 +93,7 @@ def test_weight_file_round_trip(tmp_path):
             p.add_(0.01 * torch.randn_like(p))
     path = save_normalizer_file(tmp_path / "gain.npz", net.state_arrays(), net.file_meta(trained=True))
     weight_file = load_normalizer_file(path)
-    assert weight_file.meta["architecture"] == ARCHITECTURE and weight_file.meta["output_range"] == [-1.3, 1.3]
+    assert weight_file.meta["architecture"] == ARCHITECTURE and weight_file.meta["output_range"] == [-1.15, 1.15]
     loaded = GainNormalizer.from_file(weight_file)
     image = _lit_texture()
     with torch.no_grad():
@@ -109,12 +109,12 @@ def test_contrast_equalization_numpy_and_torch_agree():
 
 def test_shipped_gain_model_through_create_alcn():
     """``createALCN(model="gain")``: the shipped weights, the exact mixture equal to the torch
-    model's equalized output plus its wide band, outputs in (-1.3, 1.3) whatever the light's strength, and the
+    model's equalized output plus its wide band, outputs in (-1.15, 1.15) whatever the light's strength, and the
     cv2.dnn backend (its ONNX export) equal to the fast one."""
     import alcn_cv
 
     alcn = alcn_cv.createALCN(model="gain", mixture="exact")
-    assert alcn.trained and alcn.equalization_tau is not None and alcn.output_range == (-1.3, 1.3)
+    assert alcn.trained and alcn.equalization_tau is not None and alcn.output_range == (-1.15, 1.15)
     image = _lit_texture(96, 120)
     out = alcn.normalize(image[0, 0].numpy())
     with torch.inference_mode():

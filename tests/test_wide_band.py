@@ -73,7 +73,7 @@ def test_strips_of_alcn_give_the_whole_band_down_to_a_last_strip_of_one_row(monk
     from alcn_cv.enhance import base
 
     alcn = createALCN()
-    assert alcn.spec.band == 0.3
+    assert alcn.spec.band == 0.15
     frame = synthetic_frame(416, 289, False, seed=4)
     whole = alcn.apply(frame, out_dtype=np.float32)
     monkeypatch.setattr(base, "TILE_PIXELS", 20_000)

@@ -34,7 +34,7 @@ from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import InputError
 from alcn_cv.io import write_json
 
-__all__ = ["KIND", "generate", "render_scene"]
+__all__ = ["KIND", "generate", "relief_surface", "render_scene"]
 
 logger = logging.getLogger(__name__)
 
@@ -64,10 +64,32 @@ def render_scene(
     Returns:
         ``(frames, size, size)`` uint8 grayscale frames and the family of each.
     """
-    if size < 32 or frames < 2 or not 1 <= objects[0] <= objects[1]:
-        raise InputError(
-            f"need size >= 32, frames >= 2 and 1 <= objects[0] <= objects[1]; got {size}, {frames}, {objects}"
-        )
+    if frames < 2:
+        raise InputError(f"need frames >= 2, got {frames}")
+    albedo, height, material = relief_surface(rng, size, objects)
+    names = [str(families[int(i)]) for i in rng.integers(len(families), size=frames)]
+    relief = float(height.max())
+    lightings = [sample_lighting(rng, name, size, size, relief=relief) for name in names]
+    surface = to_surface([(albedo, height, material)] * frames)
+    return render_surfaces(surface, lightings, rng, gray=True, shadow_steps=12, shadow_scale=2), names
+
+
+def relief_surface(
+    rng: np.random.Generator, size: int, objects: tuple[int, int] = (3, 7)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The surface of one scene: a textured, uneven ground of ``size x size`` pixels with relief objects.
+
+    Args:
+        rng: the scene's generator.
+        size: side of the surface (pixels).
+        objects: least and most relief objects on the ground.
+
+    Returns:
+        ``(albedo, height, material)`` as :func:`~alcn_cv.data.objects.background_surface` gives them, for
+        :func:`~alcn_cv.data.objects.to_surface` and :func:`~alcn_cv.data.render.render_surfaces`.
+    """
+    if size < 32 or not 1 <= objects[0] <= objects[1]:
+        raise InputError(f"need size >= 32 and 1 <= objects[0] <= objects[1]; got {size}, {objects}")
     albedo, height, material = background_surface(rng, size, size, random_texture(rng, size, p_photo=0.6))
     for _ in range(int(rng.integers(objects[0], objects[1] + 1))):
         extent = rng.uniform(0.15, 0.4) * size
@@ -80,11 +102,7 @@ def render_scene(
             extent / (0.92 * _CANONICAL),
             rng.uniform(0, 360),
         )
-    names = [str(families[int(i)]) for i in rng.integers(len(families), size=frames)]
-    relief = float(height.max())
-    lightings = [sample_lighting(rng, name, size, size, relief=relief) for name in names]
-    surface = to_surface([(albedo, height, material)] * frames)
-    return render_surfaces(surface, lightings, rng, gray=True, shadow_steps=12, shadow_scale=2), names
+    return albedo, height, material
 
 
 def _scene_job(job: tuple[int, int, int, int]) -> tuple[np.ndarray, list[str]]:

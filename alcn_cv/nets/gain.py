@@ -12,7 +12,7 @@ on a grid of stride :attr:`~GainNormalizer.stride` (8 pixels), so it costs a sma
 full-resolution mixture; the maps are interpolated bilinearly in between. Eq. 3's response is then divided by
 its local energy (:mod:`alcn_cv.filters.torch_divisive`, Jarrett et al. 2009) and equalized by
 ``tanh(x / tau)`` (:func:`contrast_equalization`, Tan & Triggs, TIP 2010), in (-1, 1); the output adds ``band``
-times the :mod:`~alcn_cv.filters.wide_band` (0.3 in the shipped files), so that ORB can orient its keypoints.
+times the :mod:`~alcn_cv.filters.wide_band` (0.15 in the shipped files), so that ORB can orient its keypoints.
 
 The constructor's defaults are the shipped files' (``alcn_normalizer_gain.npz``; ``channels=8`` for
 ``alcn_normalizer_gain_lite.npz``).
@@ -121,7 +121,7 @@ class GainNormalizer(nn.Module):
         floor_scale: float = 1.0,
         learn_scales: bool = False,
         divisive_sigma: float = 2.0,
-        band: float = 0.3,
+        band: float = 0.15,
     ) -> None:
         super().__init__()
         if isinstance(stride, bool) or not isinstance(stride, int) or stride < 1:

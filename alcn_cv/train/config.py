@@ -506,7 +506,7 @@ def _gain_network() -> dict[str, Any]:
         "divisive_sigma": 2.0,
         "tau": 3.0,
         "learn_scales": False,
-        "band": 0.3,
+        "band": 0.15,
     }
 
 
