@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -109,7 +108,7 @@ def main() -> None:
         "machine": machine(),
         "settings": {**vars(args), "elevations": ELEVATIONS, "azimuths": AZIMUTHS, "sizes": SIZES},
     }
-    path = Path(out / "directional_light.json")
+    path = out / "directional_light.json"
     path.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
     keep(path, "directional_light")
 

@@ -6,8 +6,8 @@ the orientation then follows noise and changes with the light. The band ``tanh(d
 the DoG of sigma 8 and 32 divided by its own local energy (sigma 32, :mod:`alcn_cv.filters.divisive`) and
 equalized as ALCN's output, gives the patch that gradient again, invariant to the light's strength as the rest;
 weighted by ``weight`` (0.15 in the default model), it leaves patch identification and SIFT unchanged
-(``experiments/orb_orientation.py``). Under hard directional light the band also carries the shading of the
-relief, which a larger weight lets into the output (``experiments/directional_light.py``).
+(``experiments/orb_orientation.py``). On rendered relief scenes under hard directional light the band also
+carries the relief's shading, which a larger weight lets into the output (``experiments/directional_light.py``).
 
 The band is computed on blocks of :data:`BLOCK` x :data:`BLOCK` pixels (their means; the image reflected
 beyond its bottom and right borders to whole blocks) and interpolated back bilinearly (pixel centres, as
