@@ -297,6 +297,9 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
     "directional_light": lambda r: summary_table(
         r, "Whole-image identification under hard directional light (rendered, a stand-in for faces)"
     ),
+    "relief_training": lambda r: summary_table(
+        r, "Training with rendered directional light: the faces stand-in at 12 degrees, and real light (quick protocol)"
+    ),
     "speed": speed,
     "detect": lambda r: summary_table(r, "Rendered detection (mean AUC)"),
     "fewshot": lambda r: summary_table(r, "Few-shot validation (ROC AUC)"),

@@ -1,0 +1,133 @@
+"""Experiment (issue 39): does training matter when its data ask for it? The `gain` recipe with rendered
+directional light among its scenes.
+
+The shipped recipe (`alcn train-real-light --conf gain`: relit photographs that permit any use) ends where it
+starts: its light changes are cancelled by the divisive step. Hard directional light is not (the faces kept
+outside the repository, and their rendered stand-in in `experiments/directional_light.py`, rank Tan-Triggs above
+ALCN). Stages, each writing under ``--out`` (default ``runs/relief_training``):
+
+* ``scenes``: ``--identities`` relief scenes of the data engine, rendered as the stand-in renders its identities
+  (``directional_light.render_identity``: a frontal light and 4 directional lights at each of 5 elevations, cast
+  shadows, sensor noise) but from another seed and at 256 px, saved as registered scenes in ``OUT/scenes``;
+* ``train``: ``alcn train-real-light --conf gain --set rendered=[OUT/scenes]`` with each of :data:`VARIANTS`' settings
+  (the share of training steps that draw a rendered scene, the recipe's budget of 300 steps at lr 1e-3 or twice the
+  steps at five times the rate, with the control that has no rendered scene), into ``OUT/<variant>`` (a variant whose
+  weight file is there already is not trained again);
+* ``faces``: the stand-in itself (its seed, 80 identities, 128 px) at the most grazing light (12 degrees), outputs
+  compared at 32 and 64 px, for the shipped file, each trained file and the hand-made methods that lead there;
+* ``bench``: ``alcn bench relight``'s quick protocol (seed 0, 12 frames, 150 patches, 12 pairs, no tuning) for the
+  trained files, the shipped file and no normalization, on the test and the webcam training scenes.
+
+The summary puts the two side by side: what the rendered faces gain against what real light's keypoints lose.
+
+    PYTHONPATH=$PWD nice -n 10 python experiments/relief_training.py     # about 25 min on 2 cores
+
+Writes OUT/relief_training.json; keeps docs/reports/relief_training.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+from _run import RUNS, alcn, keep
+from directional_light import identification, render_identity
+from tqdm.auto import tqdm
+
+from alcn_cv.enhance.registry import from_spec
+from alcn_cv.report import machine
+
+STAGES = ("scenes", "train", "faces", "bench")
+#: The trained variants: ``alcn train-real-light --conf gain --set ...`` settings besides the rendered scenes.
+VARIANTS = {
+    "share 0.25": {"rendered_fraction": 0.25},
+    "share 0.5": {"rendered_fraction": 0.5},
+    "share 0, 600 steps at lr 5e-3": {"rendered_fraction": 0.0, "steps": 600, "lr": 5e-3},
+    "share 0.5, 600 steps at lr 5e-3": {"rendered_fraction": 0.5, "steps": 600, "lr": 5e-3},
+}
+QUICK = ["--seeds", "0", "--max-frames", "12", "--patches", "150", "--max-pairs", "12", "--no-tune"]
+#: The stand-in's probes at 12 degrees (the last elevation of `directional_light.ELEVATIONS`).
+GRAZING = "elevation 12"
+FACE_BASELINES = ("tantriggs", "dlcn")
+
+
+def render_scenes(folder: Path, identities: int, seed: int) -> None:
+    """``identities`` relief scenes as folders of PNG frames (the layout `alcn_cv.data.scenes` reads)."""
+    for index in tqdm(range(identities), desc="render", unit="scene"):
+        scene = folder / f"relief_{index:03d}"
+        scene.mkdir(parents=True, exist_ok=True)
+        for k, frame in enumerate(render_identity(index, 256, seed)):
+            cv2.imwrite(str(scene / f"{k:02d}.png"), frame)
+
+
+def faces(methods: dict[str, str]) -> dict[str, dict[str, float]]:
+    """The stand-in's identification at 12 degrees, at 32 and 64 px, per method."""
+    images = np.stack([render_identity(i, 128, 7) for i in tqdm(range(80), desc="stand-in", unit="scene")])
+    result = {}
+    for name, spec in tqdm(methods.items(), desc="faces", unit="method"):
+        norm = from_spec(spec)
+        normalized = np.stack([[norm.apply(im, out_dtype=np.float32) for im in scene] for scene in images])
+        result[name] = {f"faces {size} px": identification(normalized, size)[GRAZING] for size in (32, 64)}
+    return result
+
+
+def bench_means(report: dict, spec: str) -> dict[str, float]:
+    """Identification and ORB / SIFT matching of ``spec`` in an ``alcn bench relight`` report, test and training."""
+    method = report["methods"][spec]
+    return {
+        f"{group} {metric.replace('_', ' ')}": method[f"mean_{group}"][metric]["mean"]
+        for group in ("test", "train")
+        for metric in ("identification", "matching_orb", "matching_sift")
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, default=RUNS / "relief_training", help="run folder")
+    parser.add_argument("--stages", nargs="+", choices=STAGES, default=list(STAGES), help="stages to run")
+    parser.add_argument("--identities", type=int, default=40, help="rendered training scenes (default: 40)")
+    parser.add_argument("--seed", type=int, default=11, help="their rendering seed (default: 11; the stand-in's is 7)")
+    args = parser.parse_args()
+    scenes = args.out / "scenes"
+    trained = {
+        f"trained, {name}": args.out / name.replace(" ", "_").replace(",", "") / "gain_normalizer.npz"
+        for name in VARIANTS
+    }
+    if "scenes" in args.stages:
+        render_scenes(scenes, args.identities, args.seed)
+    if "train" in args.stages:
+        for settings, path in zip(VARIANTS.values(), trained.values()):
+            if path.exists():
+                continue
+            overrides = [f"rendered=[{json.dumps(str(scenes))}]"] + [f"{k}={v}" for k, v in settings.items()]
+            alcn("train-real-light", "--conf", "gain", "--out", str(path.parent), *(f"--set={o}" for o in overrides))
+    specs = {"shipped (trained without rendered scenes)": "alcn"} | {
+        name: f"alcn:weights={p}" for name, p in trained.items()
+    }
+    summary: dict[str, dict[str, float]] = {}
+    if "faces" in args.stages:
+        for name, row in faces(specs | {m: m for m in FACE_BASELINES}).items():
+            summary.setdefault(name, {}).update(row)
+    if "bench" in args.stages:
+        methods = [*specs.values(), "none"]
+        alcn("bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *QUICK)
+        report = json.loads((args.out / "bench" / "relight.json").read_text(encoding="utf-8"))
+        for name, spec in (specs | {"none": "none"}).items():
+            summary.setdefault(name, {}).update(bench_means(report, spec))
+    result = {
+        "summary": summary,
+        "command": "python " + " ".join(sys.argv),
+        "machine": machine(),
+        "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
+    }
+    path = args.out / "relief_training.json"
+    path.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+    keep(path, "relief_training")
+
+
+if __name__ == "__main__":
+    main()
