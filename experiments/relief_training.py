@@ -20,7 +20,7 @@ ALCN). Stages, each writing under ``--out`` (default ``runs/relief_training``):
 
 The summary puts the two side by side: what the rendered faces gain against what real light's keypoints lose.
 
-    PYTHONPATH=$PWD nice -n 10 python experiments/relief_training.py     # about 25 min on 2 cores
+    PYTHONPATH=$PWD nice -n 10 python experiments/relief_training.py     # about 15 min on 2 cores
 
 Writes OUT/relief_training.json; keeps docs/reports/relief_training.json.
 """
@@ -92,6 +92,7 @@ def main() -> None:
     parser.add_argument("--identities", type=int, default=40, help="rendered training scenes (default: 40)")
     parser.add_argument("--seed", type=int, default=11, help="their rendering seed (default: 11; the stand-in's is 7)")
     args = parser.parse_args()
+    command = "python " + " ".join(sys.argv)  # before alcn() sets sys.argv to its own commands
     scenes = args.out / "scenes"
     trained = {
         f"trained, {name}": args.out / name.replace(" ", "_").replace(",", "") / "gain_normalizer.npz"
@@ -120,7 +121,7 @@ def main() -> None:
             summary.setdefault(name, {}).update(bench_means(report, spec))
     result = {
         "summary": summary,
-        "command": "python " + " ".join(sys.argv),
+        "command": command,
         "machine": machine(),
         "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
     }
