@@ -60,6 +60,19 @@ def render_identity(index: int, size: int, seed: int) -> np.ndarray:
     return render_surfaces(surface, lightings, rng, gray=True, shadow_steps=24)
 
 
+def render_stand_in(identities: int = 80, size: int = 128, seed: int = 7) -> np.ndarray:
+    """``(identities, 1 + len(ELEVATIONS) * AZIMUTHS, size, size)`` uint8: :func:`render_identity` of each."""
+    return np.stack([render_identity(i, size, seed) for i in tqdm(range(identities), desc="render", unit="scene")])
+
+
+def identify(spec: str, images: np.ndarray) -> dict[int, dict[str, float]]:
+    """:func:`identification` of the images of :func:`render_stand_in` normalized by the method ``spec``'s
+    ``apply()`` (float output), for each side of :data:`SIZES`."""
+    norm = from_spec(spec)
+    normalized = np.stack([[norm.apply(im, out_dtype=np.float32) for im in scene] for scene in images])
+    return {size: identification(normalized, size) for size in SIZES}
+
+
 def descriptors(images: np.ndarray, size: int) -> np.ndarray:
     """``(..., H, W)`` float -> ``(..., size * size)``: area-resized, zero-mean, unit-norm."""
     flat = images.reshape(-1, *images.shape[-2:])
@@ -89,19 +102,15 @@ def main() -> None:
     args = parser.parse_args()
     out = RUNS / "directional_light"
     out.mkdir(parents=True, exist_ok=True)
-    images = np.stack(
-        [render_identity(i, args.size, args.seed) for i in tqdm(range(args.identities), desc="render", unit="scene")]
-    )
+    images = render_stand_in(args.identities, args.size, args.seed)
     cv2.imwrite(str(out / "identity_0.png"), np.hstack(list(images[0, ::AZIMUTHS])))
     methods = {m: m for m in BASELINES} | {
         f"alcn, band {w}": band_variant(w, out / f"band_{w}.npz") for w in BAND_WEIGHTS
     }
     summary: dict[str, dict[str, float]] = {}
     for name, spec in tqdm(methods.items(), desc="methods", unit="method"):
-        norm = from_spec(spec)
-        normalized = np.stack([[norm.apply(im, out_dtype=np.float32) for im in scene] for scene in images])
-        for size in SIZES:
-            summary[f"{name}, {size} px"] = identification(normalized, size)
+        for size, result in identify(spec, images).items():
+            summary[f"{name}, {size} px"] = result
     report = {
         "summary": summary,
         "command": "python " + " ".join(sys.argv),

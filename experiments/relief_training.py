@@ -13,8 +13,9 @@ ALCN). Stages, each writing under ``--out`` (default ``runs/relief_training``):
   (the share of training steps that draw a rendered scene, the recipe's budget of 300 steps at lr 1e-3 or twice the
   steps at five times the rate, with the control that has no rendered scene), into ``OUT/<variant>`` (a variant whose
   weight file is there already is not trained again);
-* ``faces``: the stand-in itself (its seed, 80 identities, 128 px) at the most grazing light (12 degrees), outputs
-  compared at 32 and 64 px, for the shipped file, each trained file and the hand-made methods that lead there;
+* ``faces``: the stand-in itself (``directional_light.render_stand_in``: its seed, 80 identities, 128 px) at the
+  most grazing light (12 degrees), outputs compared at 32 and 64 px, for the shipped file, each trained file and
+  the hand-made methods that lead there;
 * ``bench``: ``alcn bench relight``'s quick protocol (seed 0, 12 frames, 150 patches, 12 pairs, no tuning) for the
   trained files, the shipped file and no normalization, on the test and the webcam training scenes.
 
@@ -33,12 +34,10 @@ import sys
 from pathlib import Path
 
 import cv2
-import numpy as np
 from _run import RUNS, alcn, keep
-from directional_light import identification, render_identity
+from directional_light import identify, render_identity, render_stand_in
 from tqdm.auto import tqdm
 
-from alcn_cv.enhance.registry import from_spec
 from alcn_cv.report import machine
 
 STAGES = ("scenes", "train", "faces", "bench")
@@ -65,14 +64,12 @@ def render_scenes(folder: Path, identities: int, seed: int) -> None:
 
 
 def faces(methods: dict[str, str]) -> dict[str, dict[str, float]]:
-    """The stand-in's identification at 12 degrees, at 32 and 64 px, per method."""
-    images = np.stack([render_identity(i, 128, 7) for i in tqdm(range(80), desc="stand-in", unit="scene")])
-    result = {}
-    for name, spec in tqdm(methods.items(), desc="faces", unit="method"):
-        norm = from_spec(spec)
-        normalized = np.stack([[norm.apply(im, out_dtype=np.float32) for im in scene] for scene in images])
-        result[name] = {f"faces {size} px": identification(normalized, size)[GRAZING] for size in (32, 64)}
-    return result
+    """The stand-in's identification at 12 degrees, at each of its sizes, per method."""
+    images = render_stand_in()
+    return {
+        name: {f"faces {size} px": result[GRAZING] for size, result in identify(spec, images).items()}
+        for name, spec in tqdm(methods.items(), desc="faces", unit="method")
+    }
 
 
 def bench_means(report: dict, spec: str) -> dict[str, float]:
