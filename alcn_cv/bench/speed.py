@@ -843,7 +843,7 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     gray, bgr = synthetic_frame(width, height, False), synthetic_frame(width, height, True)
     small = synthetic_frame(*settings.fps_size, False)
     default, gain_lite, lite = ALCN(), ALCN(model="gain-lite"), ALCN(model="lite")
-    torch_free, dlcn = ALCN(backend="opencv"), create("dlcn")
+    torch_free, torch_cpu, dlcn = ALCN(backend="opencv"), ALCN(backend="torch", device="cpu"), create("dlcn")
     repeats = settings.target_repeats
     logger.info("targets: ratios at %dx%d", width, height)
     t = _medians(
@@ -852,6 +852,7 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
             "dlcn gray": lambda: dlcn.apply(gray),
             "alcn gray": lambda: default.apply(gray),
             "alcn opencv gray": lambda: torch_free.apply(gray),
+            "alcn torch gray": lambda: torch_cpu.apply(gray),
             "alcn bgr": lambda: default.apply(bgr),
             "alcn opencv bgr": lambda: torch_free.apply(bgr),
             "alcn gain-lite gray": lambda: gain_lite.apply(gray),
@@ -922,6 +923,14 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
             torch_free_ratio <= 1.1,
             f"{t['alcn opencv gray']:.2f} ms against {t['alcn gray']:.2f} ms; BGR "
             f"{t['alcn opencv bgr']:.2f} against {t['alcn bgr']:.2f} ms",
+        ),
+        _target(
+            f"torch backend on the CPU (backend='torch', ALCN2d) / the default backend, {size} gray (issue 40: every "
+            "CPU backend at the speed of the fastest)",
+            t["alcn torch gray"] / t["alcn gray"],
+            "<= 1.1",
+            t["alcn torch gray"] / t["alcn gray"] <= 1.1,
+            f"{t['alcn torch gray']:.2f} ms",
         ),
         _target(
             f"default ALCN / DLCN, {size} gray (issue 40, stretch)",

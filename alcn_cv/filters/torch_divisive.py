@@ -14,6 +14,7 @@ from torch import nn
 
 from alcn_cv.filters.divisive import ABSOLUTE_FLOOR
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
+from alcn_cv.filters.torch_separable import filter_columns, filter_rows
 
 __all__ = [
     "DivisiveNormalization2d",
@@ -64,7 +65,7 @@ def gaussian_blur(x: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tens
     kernel = torch.as_tensor(gaussian_kernel1d(sigma), dtype=x.dtype, device=x.device)
     if pad:
         x = reflect101_pad_any(x, kernel.numel() // 2)
-    return F.conv2d(F.conv2d(x, kernel.view(1, 1, -1, 1)), kernel.view(1, 1, 1, -1))
+    return filter_rows(filter_columns(x, kernel), kernel)
 
 
 def gaussian_energy(response: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tensor:
