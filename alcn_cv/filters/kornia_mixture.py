@@ -38,7 +38,7 @@ def _kernel_bank(sigmas: Sequence[float], device: torch.device, dtype: torch.dty
 def _blur_channels(x: torch.Tensor, bank: torch.Tensor, sigmas: Sequence[float]) -> torch.Tensor:
     """Blur channel ``i`` of ``x`` ``(B, N, H, W)`` with kernel ``bank[i]`` of ``sigmas[i]`` (reflect-101), each at
     its own width (the bank's zeros left out)."""
-    b, n, h, w = x.shape
+    h, w = x.shape[-2:]
     widest = bank.shape[1] // 2
     if min(h, w) <= widest:
         raise InputError(
