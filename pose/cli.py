@@ -101,7 +101,9 @@ def _eval(args: argparse.Namespace) -> int:
     normalizations = args.normalizations or evaluate.DEFAULT_NORMALIZERS
     recipe = _recipe(args)
     if args.middlebury:
-        evaluate.middlebury_main(args.middlebury, args.out, normalizers=normalizations, feature=args.feature)
+        evaluate.middlebury_main(
+            args.middlebury, args.out, normalizers=normalizations, feature=args.feature, command=_command()
+        )
     if args.data:
         evaluate.main(
             args.data,

@@ -383,6 +383,7 @@ def middlebury_main(
     ratio: float = 0.9,
     min_inliers: int = 12,
     iterations: int = 10000,
+    command: str | None = None,
 ) -> dict[str, Any]:
     """Build from the odd views of each set, estimate the pose of the even views from their images.
 
@@ -395,7 +396,8 @@ def middlebury_main(
 
     Reports per normalizer and condition (original / relit) the median rotation (deg) and
     translation (mm) errors, the share of views with a pose, and the camera-centre error, as
-    ``middlebury.md`` and ``middlebury.json`` in ``out_dir``.
+    ``middlebury.md`` and ``middlebury.json`` in ``out_dir`` (with the machine and ``command``, the
+    command line that ran it).
     """
     from alcn_cv import io
     from alcn_cv.formats.middlebury import read_middlebury
@@ -459,6 +461,8 @@ def middlebury_main(
                 logger.info(
                     "%s: %d/%d posed, median rot %.2f deg, trans %.1f mm", key, len(e), len(tests), med[0], med[1]
                 )
+    if command:
+        lines.append(f"\nCommand: `{command}`")
     atomic_write(out_dir / "middlebury.md", "\n".join(lines) + "\n")
-    write_json(out_dir / "middlebury.json", nan_to_none({**results, "machine": machine()}))
+    write_json(out_dir / "middlebury.json", nan_to_none({**results, "machine": machine(), "command": command}))
     return results
