@@ -34,6 +34,7 @@ from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
+from alcn_cv.nets.normalizer import interpolate_grid
 from alcn_cv.nets.opencv_runtime import WINDOW, cells_padded
 from alcn_cv.runtime import ModelSpec, resolve_weights
 from alcn_cv.weight_file import load_normalizer_file
@@ -115,14 +116,31 @@ class ALCN2d(nn.Module):
     def weight_maps(self, gray: torch.Tensor, small: torch.Tensor | None = None) -> torch.Tensor:
         """Eq. 3's maps F_k ``(B, N, H, W)`` at the input resolution (``small``: the working image, default
         :meth:`working`)."""
-        maps = self.net.dense(self.working(gray) if small is None else small, self.grid_stride)
+        return self._maps(gray, small, first_only=False)
+
+    def eq3(self, gray: torch.Tensor, small: torch.Tensor | None = None, half: bool = False) -> torch.Tensor:
+        """Eq. 3's raw response ``(B, 1, H, W)`` (``small`` as in :meth:`weight_maps`; ``half``: the network under
+        float16 autocast, Eq. 3 itself in ``gray``'s dtype).
+
+        The gain Normalizer's two maps are ``F`` and ``-F`` (its kernel weights sum to zero), so there Eq. 3 is
+        :meth:`GaussianMixture2d.difference <alcn_cv.filters.kornia_mixture.GaussianMixture2d.difference>` of the
+        one product ``F o I``: one map interpolated and multiplied instead of two.
+        """
+        two_maps = isinstance(self.net, GainNormalizer) and self.net.num_kernels == 2
+        with torch.autocast(gray.device.type, torch.float16, enabled=half):
+            maps = self._maps(gray, small, first_only=two_maps).to(gray.dtype)
+        return self.mixture.difference(gray * maps) if two_maps else self.mixture(gray, maps)
+
+    def _maps(self, gray: torch.Tensor, small: torch.Tensor | None, first_only: bool) -> torch.Tensor:
+        working = self.working(gray) if small is None else small
+        if first_only:
+            grid = self.net.dense_grid(working, self.grid_stride)[:, :1]
+            maps = interpolate_grid(grid, self.grid_stride, (working.shape[-2], working.shape[-1]))
+        else:
+            maps = self.net.dense(working, self.grid_stride)
         if maps.shape[-2:] != gray.shape[-2:]:
             maps = F.interpolate(maps, size=gray.shape[-2:], mode="bilinear", align_corners=False)
         return maps
-
-    def eq3(self, gray: torch.Tensor, small: torch.Tensor | None = None) -> torch.Tensor:
-        """Eq. 3's raw response ``(B, 1, H, W)`` (``small`` as in :meth:`weight_maps`)."""
-        return self.mixture(gray, self.weight_maps(gray, small))
 
     def finish(self, response: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
         """The gain family's steps after Eq. 3 (the divisive normalization, ``tanh(x / tau)``); ``floor``:
@@ -320,11 +338,9 @@ class TorchRuntime:
                 host = host.pin_memory()
             x = host.to(self.device, non_blocking=cuda)[:, None]
             x = x.clamp(0, 1) if frames.dtype == np.float32 else x.float() * (1.0 / FULL_SCALE[frames.dtype])
-            with torch.autocast(self.device.type, torch.float16, enabled=half):  # the network; Eq. 3 in float32
-                maps = self.module.weight_maps(x).float()
             with self.module._tf32(x):
-                unit = self.module.to_unit(self.module.with_band(self.module.finish(self.module.mixture(x, maps)), x))
-                unit = unit[:, 0]
+                response = self.module.eq3(x, half=half)  # the network in float16 when half; Eq. 3 in float32
+                unit = self.module.to_unit(self.module.with_band(self.module.finish(response), x))[:, 0]
             if out_dtype != np.float32:
                 unit = torch.round(unit * FULL_SCALE[out_dtype]).to(_TORCH_DTYPES[out_dtype])
             out = torch.empty(unit.shape, dtype=unit.dtype, pin_memory=cuda) if cuda else None

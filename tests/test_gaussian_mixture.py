@@ -82,6 +82,18 @@ def test_gradients_reach_weights_and_image():
     assert torch.autograd.gradcheck(lambda i, w: gaussian_mixture2d(i, w), (image, weights), fast_mode=True)
 
 
+def test_difference_is_eq3_of_opposite_maps_with_its_gradients():
+    mixture = GaussianMixture2d((1.0, 2.0)).double()
+    image = torch.rand(2, 1, 30, 41, dtype=torch.float64)
+    f = torch.randn(2, 1, 30, 41, dtype=torch.float64, requires_grad=True)
+    torch.testing.assert_close(mixture.difference(f * image), mixture(image, torch.cat([f, -f], dim=1)))
+    assert torch.autograd.gradcheck(lambda m: mixture.difference(m * image), (f,), fast_mode=True)
+    with pytest.raises(InputError, match="two kernels"):
+        GaussianMixture2d((1.0, 2.0, 3.0)).difference(image.float())
+    with pytest.raises(InputError, match="two kernels"):
+        mixture.difference(torch.rand(1, 2, 30, 41, dtype=torch.float64))
+
+
 def test_custom_sigmas(rng):
     image = rng.random((40, 40), dtype=np.float32)
     w = np.array([1.0, -1.0])

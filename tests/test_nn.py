@@ -54,6 +54,17 @@ def test_colour_is_normalized_on_lab_lightness(model):
     assert diff.max() < 1e-2 and diff.mean() < 1e-3, (diff.max(), diff.mean())
 
 
+def test_eq3_of_the_gain_models_is_the_mixture_of_their_maps():
+    """Eq. 3 of the two opposite maps as one difference of blurs: the mixture of both maps, to float rounding."""
+    x = torch.from_numpy(_unit(_gray()))[None, None]
+    for model in ("gain", "gain-lite"):
+        module = ALCN2d(model=model).eval()
+        with torch.no_grad():
+            maps = module.weight_maps(x)
+            torch.testing.assert_close(maps[:, 1:], -maps[:, :1])
+            torch.testing.assert_close(module.eq3(x), module.mixture(x, maps), atol=1e-6, rtol=0)
+
+
 def test_functional_form_and_weight_files():
     x = torch.from_numpy(_unit(_gray()))[None, None]
     module = ALCN2d(weights=MODELS["lite"]).eval()

@@ -6,7 +6,7 @@ import torch.nn.functional as F
 from kornia.filters import filter2d_separable
 
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
-from alcn_cv.filters.kornia_mixture import _blur_channels, _kernel_bank
+from alcn_cv.filters.kornia_mixture import _blurs, _kernel_bank
 from alcn_cv.filters.torch_separable import filter_columns, filter_rows
 
 
@@ -50,4 +50,4 @@ def test_mixture_blur_equals_kornias_filter():
     x = torch.rand(2, 2, 50, 70)
     kernels = bank.repeat(2, 1)
     reference = filter2d_separable(x.reshape(4, 1, 50, 70), kernels, kernels, border_type="reflect")
-    torch.testing.assert_close(_blur_channels(x, bank, sigmas), reference.view(2, 2, 50, 70), atol=1e-6, rtol=0)
+    torch.testing.assert_close(torch.cat(_blurs(x, bank, sigmas), 1), reference.view(2, 2, 50, 70), atol=1e-6, rtol=0)

@@ -35,9 +35,10 @@ def _kernel_bank(sigmas: Sequence[float], device: torch.device, dtype: torch.dty
     return bank
 
 
-def _blur_channels(x: torch.Tensor, bank: torch.Tensor, sigmas: Sequence[float]) -> torch.Tensor:
-    """Blur channel ``i`` of ``x`` ``(B, N, H, W)`` with kernel ``bank[i]`` of ``sigmas[i]`` (reflect-101), each at
-    its own width (the bank's zeros left out)."""
+def _blurs(x: torch.Tensor, bank: torch.Tensor, sigmas: Sequence[float]) -> list[torch.Tensor]:
+    """Channel ``i`` of ``x`` ``(B, N, H, W)`` (or its one channel, for every kernel) blurred with kernel ``bank[i]``
+    of ``sigmas[i]`` (reflect-101), each at its own width (the bank's zeros left out): ``N`` tensors
+    ``(B, 1, H, W)``. One pad of the widest radius serves every kernel, each reading its own margin of it."""
     h, w = x.shape[-2:]
     widest = bank.shape[1] // 2
     if min(h, w) <= widest:
@@ -45,13 +46,15 @@ def _blur_channels(x: torch.Tensor, bank: torch.Tensor, sigmas: Sequence[float])
             f"image {h}x{w} is too small for sigma {widest / TRUNCATE:.1f} (kernel radius {widest}); "
             f"it needs at least {widest + 1} pixels per side"
         )
+    padded = F.pad(x, (widest, widest, widest, widest), mode="reflect")  # torch's reflect is reflect-101
     blurred = []
     for i, sigma in enumerate(sigmas):
         r = kernel_radius(sigma)
-        taps = bank[i, widest - r : widest + r + 1]
-        channel = F.pad(x[:, i : i + 1], (r, r, r, r), mode="reflect")  # torch's reflect is reflect-101
-        blurred.append(filter_columns(filter_rows(channel, taps), taps))
-    return torch.cat(blurred, dim=1)
+        o = widest - r
+        taps = bank[i, o : o + 2 * r + 1]
+        channel = padded[:, i : i + 1] if x.shape[1] > 1 else padded
+        blurred.append(filter_columns(filter_rows(channel[..., o : o + h + 2 * r, o : o + w + 2 * r], taps), taps))
+    return blurred
 
 
 def gaussian_mixture2d(
@@ -81,14 +84,11 @@ def gaussian_mixture2d(
 
 
 def _mix(image: torch.Tensor, weights: torch.Tensor, bank: torch.Tensor, sigmas: Sequence[float]) -> torch.Tensor:
-    b, _, h, w = image.shape
-    n = bank.shape[0]
     if weights.ndim == 2:  # Eq. 1: blur the image with every kernel once, then weigh.
-        blurred = _blur_channels(image.expand(b, n, h, w), bank, sigmas)
-        return torch.einsum("bnhw,bn->bhw", blurred, weights).unsqueeze(1)
+        return torch.einsum("bnhw,bn->bhw", torch.cat(_blurs(image, bank, sigmas), dim=1), weights).unsqueeze(1)
     if weights.shape[2:] != image.shape[2:]:
-        raise InputError(f"weight maps {tuple(weights.shape[2:])} do not match the image {(h, w)}")
-    return _blur_channels(weights * image, bank, sigmas).sum(dim=1, keepdim=True)  # Eq. 3
+        raise InputError(f"weight maps {tuple(weights.shape[2:])} do not match the image {tuple(image.shape[2:])}")
+    return torch.cat(_blurs(weights * image, bank, sigmas), dim=1).sum(dim=1, keepdim=True)  # Eq. 3
 
 
 class GaussianMixture2d(nn.Module):
@@ -115,6 +115,24 @@ class GaussianMixture2d(nn.Module):
         if weights.shape[1] != self.num_kernels:
             raise InputError(f"{weights.shape[1]} weights for {self.num_kernels} kernels")
         return _mix(image, weights, self.bank.to(image.dtype), self.sigmas)
+
+    def difference(self, product: torch.Tensor) -> torch.Tensor:
+        """Eq. 3 of two kernels whose maps are ``F`` and ``-F`` (the gain Normalizer's, :mod:`alcn_cv.nets.gain`):
+        ``G_1 * P - G_2 * P`` of the one product ``P = F o I`` ``(B, 1, H, W)`` -> ``(B, 1, H, W)``, half the
+        products and pads of :meth:`forward` with both maps.
+
+        Example:
+            >>> mixture, image, f = GaussianMixture2d((1.0, 2.0)), torch.rand(1, 1, 32, 32), torch.rand(1, 1, 32, 32)
+            >>> torch.allclose(mixture.difference(f * image), mixture(image, torch.cat([f, -f], dim=1)))
+            True
+        """
+        if self.num_kernels != 2 or product.ndim != 4 or product.shape[1] != 1:
+            raise InputError(
+                f"difference takes a (B, 1, H, W) product and a mixture of two kernels, got {tuple(product.shape)} "
+                f"and {self.num_kernels} kernels"
+            )
+        first, second = _blurs(product, self.bank.to(product.dtype), self.sigmas)
+        return first - second
 
     def extra_repr(self) -> str:
         return f"sigmas={self.sigmas}"

@@ -45,7 +45,7 @@ from alcn_cv.filters.torch_divisive import (
 )
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.filters.wide_band import band_meta
-from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
+from alcn_cv.nets.normalizer import Normalizer, interpolate_grid, reflect101_pad
 from alcn_cv.weight_file import NormalizerFile
 
 __all__ = ["ARCHITECTURE", "GainNormalizer", "contrast_equalization", "dog_weights"]
@@ -207,7 +207,8 @@ class GainNormalizer(nn.Module):
         # H + 2s - 2 pixels hold exactly ceil((H-1)/s)+1 cells (the pooling drops the rest), so
         # the pads do not depend on the size and the ONNX export keeps the size dynamic.
         after = 2 * s - 2 - before
-        return F.avg_pool2d(reflect101_pad(torch.cat([image, image * image], dim=1), before, after, before, after), s)
+        padded = reflect101_pad(image, before, after, before, after)  # the square of the pad is the pad of the square
+        return torch.cat([F.avg_pool2d(padded, s), F.avg_pool2d(padded * padded, s)], dim=1)
 
     def features(self, image: torch.Tensor) -> torch.Tensor:
         """The network's input ``(B, 4, gh, gw)`` on the grid of :attr:`stride`: :meth:`features_from_moments`
@@ -266,10 +267,7 @@ class GainNormalizer(nn.Module):
     def dense(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
         """Per-pixel maps F_k ``(B, N, H, W)``: :meth:`dense_grid` interpolated bilinearly (exact on the grid)."""
         grid_stride = self.stride if grid_stride is None else grid_stride
-        grid = self.dense_grid(image, grid_stride)
-        h, w = image.shape[-2:]
-        size = (grid_stride * (grid.shape[-2] - 1) + 1, grid_stride * (grid.shape[-1] - 1) + 1)
-        return F.interpolate(grid, size=size, mode="bilinear", align_corners=True)[..., :h, :w]
+        return interpolate_grid(self.dense_grid(image, grid_stride), grid_stride, image.shape[-2:])
 
     def response(self, image: torch.Tensor, maps: torch.Tensor | None = None) -> torch.Tensor:
         """Eq. 3, ``sum_k G_{sigma_k} * (F_k o I)`` ``(B, 1, H, W)``, unbounded (maps: default :meth:`dense`)."""
