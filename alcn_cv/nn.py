@@ -135,7 +135,7 @@ class ALCN2d(nn.Module):
         working = self.working(gray) if small is None else small
         if first_only:
             grid = self.net.dense_grid(working, self.grid_stride)[:, :1]
-            maps = interpolate_grid(grid, self.grid_stride, (working.shape[-2], working.shape[-1]))
+            maps = interpolate_grid(grid, self.grid_stride, working.shape[-2:])
         else:
             maps = self.net.dense(working, self.grid_stride)
         if maps.shape[-2:] != gray.shape[-2:]:

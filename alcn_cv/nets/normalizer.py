@@ -72,7 +72,7 @@ def interpolate_grid(grid: torch.Tensor, stride: int, shape: tuple[int, int]) ->
         torch.Size([1, 2, 33, 40])
     """
     h, w = shape
-    b, n, gh, gw = grid.shape
+    gh, gw = grid.shape[-2:]
     if stride * (gh - 1) < h - 1 or stride * (gw - 1) < w - 1:
         raise InputError(f"a grid of {gh}x{gw} points {stride} px apart does not cover {h}x{w} pixels")
     phases = torch.arange(stride, device=grid.device, dtype=grid.dtype) / stride
