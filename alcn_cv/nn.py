@@ -31,10 +31,10 @@ from alcn_cv.checks import FULL_SCALE
 from alcn_cv.errors import InputError
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.torch_divisive import divisive_normalization
+from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
-from alcn_cv.nets.normalizer import interpolate_grid
 from alcn_cv.nets.opencv_runtime import WINDOW, cells_padded
 from alcn_cv.runtime import ModelSpec, resolve_weights
 from alcn_cv.weight_file import load_normalizer_file
@@ -183,7 +183,8 @@ class ALCN2d(nn.Module):
     def to_unit(self, response: torch.Tensor) -> torch.Tensor:
         """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""
         lo, hi = self.spec.output_range
-        return ((response - lo) * (1.0 / (hi - lo))).clamp(0, 1)
+        unit = (response - lo) * (1.0 / (hi - lo))
+        return unit.clamp(0, 1) if torch.is_grad_enabled() and unit.requires_grad else unit.clamp_(0, 1)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         if image.ndim != 4 or image.shape[1] not in (1, 3):

@@ -39,6 +39,23 @@ def test_divisive_normalization_numpy_and_torch_agree(floor, multiplier):
         torch.testing.assert_close(module(torch.from_numpy(r)[None, None], floor_tensor), got)
 
 
+def test_torch_with_and_without_a_gradient_agree():
+    """Without a gradient asked for, the divisor is computed in place: the same numbers, the response untouched."""
+    r = torch.from_numpy(_response(seed=3))[None, None]
+    before = r.clone()
+    with torch.no_grad():
+        in_place = torch_divisive.divisive_normalization(r, 2.0, 0.7, multiplier=1 / 3)
+    assert torch.equal(r, before)
+    leaf = r.clone().requires_grad_(True)
+    with_graph = torch_divisive.divisive_normalization(leaf, 2.0, 0.7, multiplier=1 / 3)
+    assert with_graph.requires_grad
+    torch.testing.assert_close(with_graph.detach(), in_place, atol=0, rtol=0)
+    scale = torch.tensor(0.7, requires_grad=True)  # a learnable floor scale asks for the graph too
+    with_graph = torch_divisive.divisive_normalization(r, 2.0, scale, multiplier=1 / 3)
+    with_graph.sum().backward()
+    assert scale.grad is not None
+
+
 def test_invariant_to_a_gain_of_the_response():
     r = _response(seed=2)
     np.testing.assert_allclose(

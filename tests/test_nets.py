@@ -3,11 +3,9 @@
 import numpy as np
 import pytest
 import torch
-import torch.nn.functional as F
 
 from alcn_cv import InputError, WeightFileError
 from alcn_cv.nets import Detector, Normalizer, reflect101_pad
-from alcn_cv.nets.normalizer import interpolate_grid
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 
@@ -130,27 +128,3 @@ def test_weight_file_errors(tmp_path, net):
     path = save_normalizer_file(tmp_path / "bad.npz", net.state_arrays(), bad_config)
     with pytest.raises(WeightFileError, match="do not fit"):
         Normalizer.from_file(load_normalizer_file(path))
-
-
-@pytest.mark.parametrize(
-    "grid_shape, stride, shape",
-    [((101, 161), 8, (800, 1280)), ((5, 6), 8, (33, 40)), ((7, 9), 4, (25, 30)), ((2, 2), 8, (8, 9))],
-)
-def test_interpolate_grid_is_bilinear_with_the_grid_on_pixels(grid_shape, stride, shape):
-    """torch's bilinear interpolation with aligned corners, cropped (a last row or column where the grid ends
-    on the image's last pixel); differentiable, in the grid's dtype."""
-    grid = torch.rand(2, 3, *grid_shape, dtype=torch.float64, requires_grad=True)
-    size = tuple(stride * (g - 1) + 1 for g in grid_shape)
-    expected = F.interpolate(grid, size=size, mode="bilinear", align_corners=True)[..., : shape[0], : shape[1]]
-    out = interpolate_grid(grid, stride, shape)
-    assert out.shape == (2, 3, *shape) and out.is_contiguous()
-    torch.testing.assert_close(out, expected, atol=1e-12, rtol=0)
-    (g,) = torch.autograd.grad(out.sum(), grid)
-    (g_expected,) = torch.autograd.grad(expected.sum(), grid)
-    torch.testing.assert_close(g, g_expected)
-    assert interpolate_grid(grid.detach().to(torch.bfloat16), stride, shape).dtype == torch.bfloat16
-
-
-def test_interpolate_grid_too_small_is_a_clear_error():
-    with pytest.raises(InputError, match="does not cover"):
-        interpolate_grid(torch.rand(1, 1, 3, 3), 4, (10, 8))

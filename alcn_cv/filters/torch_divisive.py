@@ -105,11 +105,18 @@ def divisive_normalization(
         >>> divisive_normalization(r, sigma=2.0, scale=1.0).shape
         torch.Size([2, 1, 32, 32])
     """
-    energy = gaussian_energy(response, sigma)
+    # e^2 is the blurred square itself (no square root squared again), kept positive so that the square root of the
+    # floor's mean and the inverse square root stay differentiable where the response is exactly flat
+    squared = gaussian_blur(response * response, sigma).clamp_min(1e-12)
     if floor is None:
-        floor = scale * energy.mean(dim=(-2, -1), keepdim=True)
-    inverse = inverse_divisor(energy, floor)
-    return response * (inverse if multiplier == 1.0 else inverse * multiplier)
+        floor = scale * squared.sqrt().mean(dim=(-2, -1), keepdim=True)
+    offset = floor * floor + ABSOLUTE_FLOOR**2
+    if torch.is_grad_enabled() and any(isinstance(v, torch.Tensor) and v.requires_grad for v in (response, offset)):
+        result = (squared + offset).rsqrt() * response
+        return result if multiplier == 1.0 else result * multiplier
+    # no gradient asked for: the same operations in place, fewer full-size arrays
+    result = squared.add_(offset).rsqrt_().mul_(response)
+    return result if multiplier == 1.0 else result.mul_(multiplier)
 
 
 class DivisiveNormalization2d(nn.Module):

@@ -6,6 +6,7 @@ import torch
 import torch.nn.functional as F
 
 from alcn_cv.filters.torch_divisive import divisive_normalization, gaussian_blur, gaussian_energy
+from alcn_cv.filters.torch_resize import upsample_blocks
 from alcn_cv.filters.wide_band import BLOCK, ENERGY_SIGMA, SIGMAS
 
 __all__ = ["block_means", "wide_band", "wide_band_floor"]
@@ -41,5 +42,4 @@ def wide_band(
     """
     h, w = image.shape[-2:]
     small = divisive_normalization(_band_response(block_means(image)), ENERGY_SIGMA / BLOCK, scale, floor)
-    band = F.interpolate(torch.tanh(small / tau), scale_factor=BLOCK, mode="bilinear", align_corners=False)
-    return band[..., :h, :w]
+    return upsample_blocks(torch.tanh(small / tau), BLOCK, (h, w))

@@ -43,9 +43,10 @@ from alcn_cv.filters.torch_divisive import (
     gaussian_blur,
     reflect101_pad_any,
 )
+from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.filters.wide_band import band_meta
-from alcn_cv.nets.normalizer import Normalizer, interpolate_grid, reflect101_pad
+from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
 from alcn_cv.weight_file import NormalizerFile
 
 __all__ = ["ARCHITECTURE", "GainNormalizer", "contrast_equalization", "dog_weights"]

@@ -19,9 +19,10 @@ import torch.nn.functional as F
 from torch import nn
 
 from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.weight_file import NormalizerFile
 
-__all__ = ["Normalizer", "interpolate_grid", "reflect101_pad"]
+__all__ = ["Normalizer", "reflect101_pad"]
 
 WINDOW = 48
 STRIDE = 4
@@ -48,45 +49,6 @@ def reflect101_pad(x: torch.Tensor, top: int, bottom: int, left: int, right: int
         return F.pad(x, (left, right, top, bottom), mode="reflect")  # the same, one pass
     x = x.index_select(-2, index(h, top, bottom))
     return x.index_select(-1, index(w, left, right))
-
-
-def interpolate_grid(grid: torch.Tensor, stride: int, shape: tuple[int, int]) -> torch.Tensor:
-    """Maps given on a grid interpolated bilinearly onto every pixel, grid point ``(i, j)`` on pixel
-    ``(stride * i, stride * j)``: ``F.interpolate(grid, size=stride * (g - 1) + 1, mode="bilinear",
-    align_corners=True)`` cropped to ``shape``, to float rounding (its positions ``p / stride`` exact here).
-
-    A pixel's offset within its cell is a phase ``p / stride``: one ``torch.lerp`` over every cell and phase writes
-    the output once, where ``F.interpolate`` costs twice as much on the CPU. The OpenCV form is
-    :func:`alcn_cv.filters.gaussian_mixture.upsample_grid`.
-
-    Args:
-        grid: ``(B, N, gh, gw)`` float, ``stride * (gh - 1) >= H - 1`` and ``stride * (gw - 1) >= W - 1``.
-        stride: the grid's spacing in pixels.
-        shape: ``(H, W)`` of the output.
-
-    Returns:
-        ``(B, N, H, W)``, ``grid``'s dtype and device.
-
-    Example:
-        >>> interpolate_grid(torch.rand(1, 2, 5, 6), 8, (33, 40)).shape
-        torch.Size([1, 2, 33, 40])
-    """
-    h, w = shape
-    gh, gw = grid.shape[-2:]
-    if stride * (gh - 1) < h - 1 or stride * (gw - 1) < w - 1:
-        raise InputError(f"a grid of {gh}x{gw} points {stride} px apart does not cover {h}x{w} pixels")
-    phases = torch.arange(stride, device=grid.device, dtype=grid.dtype) / stride
-    # along the grid's rows (few), then down its columns: the full-size output written once
-    cells = min(gw - 1, -(-w // stride))  # the cells that hold the first w columns
-    rows = torch.lerp(grid[..., :cells, None], grid[..., 1 : cells + 1, None], phases).flatten(-2)
-    if rows.shape[-1] < w:
-        rows = torch.cat([rows, grid[..., cells : cells + 1]], -1)
-    rows = rows[..., :w]
-    cells = min(gh - 1, -(-h // stride))
-    out = torch.lerp(rows[..., :cells, None, :], rows[..., 1 : cells + 1, None, :], phases[:, None]).flatten(-3, -2)
-    if out.shape[-2] < h:
-        out = torch.cat([out, rows[..., cells : cells + 1, :]], -2)
-    return out[..., :h, :]
 
 
 class Normalizer(nn.Module):
