@@ -78,8 +78,9 @@ def upsample_blocks(small: torch.Tensor, block: int, shape: tuple[int, int]) -> 
         ``(B, C, H, W)``, ``small``'s dtype and device.
 
     Example:
-        >>> upsample_blocks(torch.rand(1, 1, 4, 5), 4, (16, 18)).shape
-        torch.Size([1, 1, 16, 18])
+        >>> band = upsample_blocks(torch.tensor([[[[0.0, 1.0]]]]), 4, (4, 8))  # two blocks of 4x4
+        >>> band[0, 0, 0].tolist()  # the centres on pixels 1.5 and 5.5: a ramp between, held beyond
+        [0.0, 0.0, 0.125, 0.375, 0.625, 0.875, 1.0, 1.0]
     """
     h, w = shape
     if block % 2 or block * small.shape[-2] < h or block * small.shape[-1] < w:
