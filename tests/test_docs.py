@@ -1,9 +1,12 @@
 """The documentation is rebuilt, not edited: docs/results.md from docs/reports/, no tracked file citing the
-ignored runs/ folder outside experiments/, and every path the README and docs/ cite exists in git."""
+ignored runs/ folder outside experiments/, every path the README and docs/ cite exists in git, and every docstring
+example runs."""
 
 from __future__ import annotations
 
+import doctest
 import fnmatch
+import importlib
 import importlib.util
 import re
 import shutil
@@ -102,3 +105,23 @@ def test_readme_results_block_is_what_the_report_script_writes() -> None:
     assert readme == report.readme_with_headlines(readme), (
         "the README's results block is out of date: run python experiments/report.py"
     )
+
+
+def _modules_with_examples() -> list[str]:
+    return sorted(
+        ".".join(path.relative_to(ROOT).with_suffix("").parts)
+        for package in ("alcn_cv", "pose", "calib")
+        for path in (ROOT / package).rglob("*.py")
+        if ">>> " in path.read_text(encoding="utf-8")
+    )
+
+
+@pytest.mark.parametrize("module", _modules_with_examples())
+def test_docstring_examples_run(module: str) -> None:
+    """Every ``>>>`` example of a docstring runs and prints what it says."""
+    try:
+        imported = importlib.import_module(module)
+    except ImportError as exc:  # an optional extra (torch, kornia) not installed here
+        pytest.skip(f"{module}: {exc}")
+    result = doctest.testmod(imported, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    assert result.failed == 0, f"{result.failed} of {result.attempted} examples failed"
