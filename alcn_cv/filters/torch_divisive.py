@@ -68,11 +68,16 @@ def gaussian_blur(x: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tens
     return filter_rows(filter_columns(x, kernel), kernel)
 
 
+def _blurred_square(response: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tensor:
+    """``G_sigma * response^2``, kept positive: its square root and inverse square root stay differentiable where the
+    response is exactly flat."""
+    return gaussian_blur(response * response, sigma, pad).clamp_min(1e-12)
+
+
 def gaussian_energy(response: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tensor:
     """``sqrt(G_sigma * response^2)`` of ``(B, 1, H, W)``, per pixel (:func:`alcn_cv.filters.divisive.gaussian_energy`);
     ``pad`` as :func:`gaussian_blur`."""
-    # The floor keeps the square root differentiable where the response is exactly flat.
-    return gaussian_blur(response * response, sigma, pad).clamp_min(1e-12).sqrt()
+    return _blurred_square(response, sigma, pad).sqrt()
 
 
 def inverse_divisor(energy: torch.Tensor, floor: torch.Tensor) -> torch.Tensor:
@@ -105,9 +110,7 @@ def divisive_normalization(
         >>> divisive_normalization(r, sigma=2.0, scale=1.0).shape
         torch.Size([2, 1, 32, 32])
     """
-    # e^2 is the blurred square itself (no square root squared again), kept positive so that the square root of the
-    # floor's mean and the inverse square root stay differentiable where the response is exactly flat
-    squared = gaussian_blur(response * response, sigma).clamp_min(1e-12)
+    squared = _blurred_square(response, sigma)  # e^2 itself: no square root squared again
     if floor is None:
         floor = scale * squared.sqrt().mean(dim=(-2, -1), keepdim=True)
     offset = floor * floor + ABSOLUTE_FLOOR**2
