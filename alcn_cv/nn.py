@@ -20,7 +20,6 @@ from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -35,7 +34,8 @@ from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
-from alcn_cv.nets.opencv_runtime import WINDOW, cells_padded
+from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
+from alcn_cv.row_parts import run_parts
 from alcn_cv.runtime import ModelSpec, resolve_weights
 from alcn_cv.weight_file import load_normalizer_file
 
@@ -261,12 +261,15 @@ class TorchNetwork:
         self.net, self.stride, self.threads = net, grid_stride, threads
         self.device = next(net.parameters()).device
 
-    def dense_grid(self, image: np.ndarray) -> np.ndarray:
+    def dense_grid(self, image: np.ndarray, alongside: Callable[[], object] | None = None) -> np.ndarray:
         with torch.inference_mode(), torch_threads(self.threads):
             if isinstance(self.net, GainNormalizer) and self.stride == self.net.stride and self.device.type == "cpu":
-                return self.net.maps_from_features(self.net.features_from_moments(_cell_moments(image, self.stride)))[
-                    0
-                ].numpy()
+                moments = _cell_moments(image, self.stride)
+                if alongside is not None:
+                    alongside()
+                return self.net.maps_from_features(self.net.features_from_moments(moments))[0].numpy()
+            if alongside is not None:
+                alongside()
             x = torch.from_numpy(image).to(self.device)[None, None]
             return self.net.dense_grid(x, self.stride)[0].cpu().numpy()
 
@@ -288,12 +291,14 @@ class TorchNetwork:
 
 def _cell_moments(image: np.ndarray, stride: int) -> torch.Tensor:
     """:meth:`GainNormalizer.cell_moments` of an ``(H, W)`` float32 image, the border by OpenCV (faster), the
-    pooling by torch (the same sums: where a cell is flat its deviation is rounding, which the log amplifies)."""
-    padded = cells_padded(image, stride)
-    return torch.cat(
-        [F.avg_pool2d(torch.from_numpy(plane)[None, None], stride) for plane in (padded, cv2.multiply(padded, padded))],
-        1,
-    )
+    pooling by torch (the same sums: where a cell is flat its deviation is rounding, which the log amplifies);
+    the grid's rows in parts on OpenCV's threads (:func:`~alcn_cv.nets.opencv_runtime.cell_parts`)."""
+
+    def moments(first: int, stop: int) -> torch.Tensor:
+        planes = cells_padded(image, stride, (first, stop))
+        return torch.cat([F.avg_pool2d(torch.from_numpy(plane)[None, None], stride) for plane in planes], 1)
+
+    return torch.cat(run_parts(moments, cell_parts(len(image), stride)), 2)
 
 
 class TorchRuntime:

@@ -14,6 +14,8 @@ from __future__ import annotations
 import hashlib
 import logging
 import math
+from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -23,7 +25,7 @@ import numpy as np
 
 from alcn_cv.checks import SUPPORTED_DTYPES, check_image
 from alcn_cv.errors import InputError
-from alcn_cv.filters.divisive import divisive_normalization
+from alcn_cv.filters.divisive import blurred_square, divide_by_energy, divisive_floor, divisive_normalization
 from alcn_cv.filters.gaussian_mixture import (
     PYRAMID_MIN_SIGMA,
     alcn_filter,
@@ -35,6 +37,8 @@ from alcn_cv.filters.gaussian_mixture import (
 )
 from alcn_cv.filters.wide_band import BLOCK, band_reach, check_band_meta, wide_band
 from alcn_cv.nets.opencv_runtime import WINDOW, OpenCVNormalizer
+from alcn_cv.row_parts import row_parts, run_parts, submit
+from alcn_cv.scratch import work_array
 from alcn_cv.weight_file import DEFAULT_WEIGHTS
 
 __all__ = [
@@ -140,9 +144,10 @@ class Network(Protocol):
 
     stride: int
 
-    def dense_grid(self, image: np.ndarray) -> np.ndarray:
+    def dense_grid(self, image: np.ndarray, alongside: Callable[[], object] | None = None) -> np.ndarray:
         """``(h, w)`` working-scale float32 -> ``(N, ceil((h-1)/s)+1, ceil((w-1)/s)+1)``, point ``(i, j)`` at
-        pixel ``(s*i, s*j)``."""
+        pixel ``(s*i, s*j)``; ``alongside()`` is called once the full-resolution work is done (the gain
+        Normalizer's cell moments, on OpenCV's threads), before the layers on the grid (one thread)."""
 
     def dense(self, image: np.ndarray) -> np.ndarray:
         """``(h, w)`` -> ``(N, h, w)``: :meth:`dense_grid` interpolated bilinearly (``align_corners``)."""
@@ -272,7 +277,8 @@ class WindowRuntime:
 class GainRuntime(WindowRuntime):
     """The gain family in OpenCV at scale 1: the maps interpolated from the network's grid as
     :meth:`GainNormalizer.dense <alcn_cv.nets.gain.GainNormalizer.dense>` does, and the exact Eq. 3 from the
-    grid (:func:`~alcn_cv.filters.gaussian_mixture.alcn_filter_grid`, without the full-resolution maps)."""
+    grid (:func:`~alcn_cv.filters.gaussian_mixture.alcn_filter_grid`, without the full-resolution maps), on
+    OpenCV's threads (:mod:`alcn_cv.row_parts`)."""
 
     def weight_maps(self, gray: np.ndarray) -> np.ndarray:
         return np.stack([upsample_grid(m, self.grid_stride, gray.shape) for m in self.weight_grid(gray)])
@@ -281,6 +287,69 @@ class GainRuntime(WindowRuntime):
         if self.mixture_kind == "pyramid":
             return super().mixture(gray)
         return alcn_filter_grid(gray, self.weight_grid(gray), self.grid_stride, self.spec.full_res_sigmas)
+
+    def normalize(self, gray: np.ndarray, floor: float | None = None, band_floor: float | None = None) -> np.ndarray:
+        """:meth:`WindowRuntime.normalize`'s values, bit for bit, on OpenCV's threads: the wide band beside the
+        network's layers on the grid, then Eq. 3 and its energy ``e^2`` for each part of the rows
+        (:func:`~alcn_cv.row_parts.row_parts`), the divisive floor from the whole image's energy, then each part's
+        division, ``tanh`` and band. The temporaries are work arrays (:mod:`alcn_cv.scratch`)."""
+        spec = self.spec
+        if self.mixture_kind == "pyramid" or spec.divisive is None or spec.tau is None:
+            return super().normalize(gray, floor, band_floor)
+        sigma, c = spec.divisive
+        band: list[Future[np.ndarray]] = []  # computed beside the network's layers on the grid
+
+        def start_band() -> None:
+            if spec.band:
+                band.append(submit(wide_band, gray, spec.tau, c, band_floor))
+
+        grid = self.network.dense_grid(gray, start_band)
+        parts = row_parts(len(gray), self.grid_stride)
+        response = work_array("runtime.GainRuntime.normalize.response", gray.shape)
+        squared = work_array("runtime.GainRuntime.normalize.squared", gray.shape)
+        energy = work_array("runtime.GainRuntime.normalize.energy", gray.shape) if floor is None else None
+        reach = kernel_radius(sigma)
+
+        def eq3_and_energy(start: int, stop: int) -> None:
+            # Eq. 3 over the rows the energy's blur reaches, then e^2 of this part's rows
+            lo, hi = max(0, start - reach), min(len(gray), stop + reach)
+            own = slice(start - lo, stop - lo)
+            if (lo, hi) == (start, stop):
+                blurred_square(
+                    alcn_filter_grid(gray, grid, self.grid_stride, spec.full_res_sigmas, dst=response), sigma, squared
+                )
+            else:
+                eq3 = alcn_filter_grid(
+                    gray,
+                    grid,
+                    self.grid_stride,
+                    spec.full_res_sigmas,
+                    (lo, hi),
+                    work_array("runtime.eq3", (hi - lo, gray.shape[1])),
+                )
+                response[start:stop] = eq3[own]
+                squared[start:stop] = blurred_square(eq3, sigma, work_array("runtime.e2", eq3.shape))[own]
+            if energy is not None:
+                cv2.sqrt(squared[start:stop], dst=energy[start:stop])
+
+        run_parts(eq3_and_energy, parts)
+        if floor is None:
+            assert energy is not None  # computed by the parts when no floor is given
+            floor = divisive_floor(energy, c)
+        whole_floor = floor  # a name the closure below sees as a float
+        inverse_tau = 1.0 / spec.tau
+        band_image = band[0].result() if band else None
+        out = np.empty_like(gray)
+
+        def divide(start: int, stop: int) -> None:
+            rows = out[start:stop]
+            divide_by_energy(response[start:stop], squared[start:stop], whole_floor, inverse_tau, dst=rows)
+            np.tanh(rows, out=rows)
+            if band_image is not None:
+                cv2.scaleAdd(band_image[start:stop], spec.band, rows, dst=rows)
+
+        run_parts(divide, parts)
+        return out
 
 
 def make_runtime(spec: ModelSpec, network: Network, mixture: str) -> WindowRuntime:

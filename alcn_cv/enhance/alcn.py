@@ -85,6 +85,11 @@ class ALCN(Normalization):
             Default: ``"exact"`` for the gain family and ``backend="torch"``, else ``"pyramid"``.
         threads: torch's intra-op threads while the Normalizer runs (restored after; None: torch's setting).
             Default 1: no torch threads left spinning against the OpenCV calls that follow.
+
+    The gain family on ``backend="fast"`` and ``"opencv"`` also uses OpenCV's threads, as OpenCV's own parallel
+    functions do: each image's rows are cut into one part per thread of ``cv2.getNumThreads()``
+    (:mod:`alcn_cv.row_parts`; the same output whatever their number), and ``cv2.setNumThreads(1)`` makes
+    :meth:`apply` sequential. Its temporaries are kept between calls (:mod:`alcn_cv.scratch`).
     """
 
     name = "alcn"

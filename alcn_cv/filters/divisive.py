@@ -12,8 +12,16 @@ import cv2
 import numpy as np
 
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
+from alcn_cv.scratch import work_array
 
-__all__ = ["ABSOLUTE_FLOOR", "divisive_normalization", "gaussian_energy"]
+__all__ = [
+    "ABSOLUTE_FLOOR",
+    "blurred_square",
+    "divide_by_energy",
+    "divisive_floor",
+    "divisive_normalization",
+    "gaussian_energy",
+]
 
 #: Added (squared) to every divisor, in intensity units ([0, 1]): a 40th of an 8-bit level, far
 #: below any real texture, so that a flat image's response, float rounding only, stays near zero
@@ -21,19 +29,19 @@ __all__ = ["ABSOLUTE_FLOOR", "divisive_normalization", "gaussian_energy"]
 ABSOLUTE_FLOOR = 1e-4
 
 
-def _blurred_square(response: np.ndarray, sigma: float) -> np.ndarray:
-    """``G_sigma * response^2``, reflect-101 beyond the borders. Never negative, float rounding
-    included: every term of the blur is a positive weight times a square, so no clip is needed."""
+def blurred_square(response: np.ndarray, sigma: float, dst: np.ndarray | None = None) -> np.ndarray:
+    """``(H, W)`` float32: ``e^2 = G_sigma * response^2``, reflect-101 beyond the borders, in ``dst`` when given
+    (OpenCV's ``dst``). Never negative, float rounding included: every term of the blur is a positive weight
+    times a square, so no clip is needed."""
     kernel = gaussian_kernel1d(sigma)
-    return cv2.sepFilter2D(
-        cv2.multiply(response, response), cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101
-    )
+    square = cv2.multiply(response, response, dst=work_array("divisive.blurred_square.square", response.shape))
+    return cv2.sepFilter2D(square, cv2.CV_32F, kernel, kernel, dst=dst, borderType=cv2.BORDER_REFLECT_101)
 
 
 def gaussian_energy(response: np.ndarray, sigma: float) -> np.ndarray:
     """``(H, W)`` float32: ``sqrt(G_sigma * response^2)``, the kernel of
     :func:`~alcn_cv.filters.gaussian_mixture.gaussian_kernel1d`, reflect-101 beyond the borders."""
-    return cv2.sqrt(_blurred_square(response, sigma))
+    return cv2.sqrt(blurred_square(response, sigma))
 
 
 def divisive_normalization(
@@ -58,8 +66,26 @@ def divisive_normalization(
         >>> divisive_normalization(r, sigma=2.0, scale=1.0).shape
         (32, 32)
     """
+    squared = blurred_square(response, sigma)
+    if floor is None:
+        floor = divisive_floor(
+            cv2.sqrt(squared, dst=work_array("divisive.divisive_normalization.e", squared.shape)), scale
+        )
+    return divide_by_energy(response, squared, floor, multiplier)
+
+
+def divisive_floor(energy: np.ndarray, scale: float) -> float:
+    """The floor ``f = scale * mean(e)`` of an image's energy ``e`` (:func:`gaussian_energy`)."""
+    return scale * float(cv2.mean(energy)[0])
+
+
+def divide_by_energy(
+    response: np.ndarray, squared: np.ndarray, floor: float, multiplier: float = 1.0, dst: np.ndarray | None = None
+) -> np.ndarray:
+    """``multiplier * response / sqrt(squared + floor^2 + ABSOLUTE_FLOOR^2)``: :func:`divisive_normalization`'s
+    division, for a caller that computes ``e^2`` (``squared``, the :func:`blurred_square` of the response) and
+    the floor itself (over an image's rows in parts). The divisor is computed in ``squared``, the result in
+    ``dst`` (default: ``squared`` too)."""
     # e^2 is the blurred square itself: OpenCV passes on it, no square root squared again
-    squared = _blurred_square(response, sigma)
-    f = scale * float(cv2.mean(cv2.sqrt(squared))[0]) if floor is None else floor
-    divisor = cv2.sqrt(cv2.add(squared, f * f + ABSOLUTE_FLOOR**2, dst=squared), dst=squared)
-    return cv2.divide(response, divisor, dst=divisor, scale=multiplier)
+    divisor = cv2.sqrt(cv2.add(squared, floor * floor + ABSOLUTE_FLOOR**2, dst=squared), dst=squared)
+    return cv2.divide(response, divisor, dst=divisor if dst is None else dst, scale=multiplier)

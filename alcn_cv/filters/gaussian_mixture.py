@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import InputError
+from alcn_cv.scratch import work_array
 
 DEFAULT_NUM_KERNELS = 10
 DEFAULT_SIGMA_STEP = 0.5
@@ -81,6 +82,14 @@ def gaussian_kernel1d(sigma: float) -> np.ndarray:
     x = np.arange(-r, r + 1, dtype=np.float64)
     k = np.exp(-0.5 * (x / sigma) ** 2)
     return k / k.sum()
+
+
+#: The products ``F_k o I`` of :func:`alcn_filter_grid`, in a work array.
+_PRODUCT = functools.partial(work_array, "gaussian_mixture.alcn_filter_grid.product")
+
+
+def _new_float32(shape: tuple[int, int]) -> np.ndarray:
+    return np.empty(shape, np.float32)
 
 
 @functools.lru_cache(maxsize=256)
@@ -197,8 +206,15 @@ def upsample_grid(grid: np.ndarray, stride: int, shape: tuple[int, int]) -> np.n
     Returns:
         ``(h, w)`` float32.
     """
+    return _upsample(grid, stride, shape, _new_float32)
+
+
+def _upsample(
+    grid: np.ndarray, stride: int, shape: tuple[int, int], empty: Callable[[tuple[int, int]], np.ndarray]
+) -> np.ndarray:
+    """:func:`upsample_grid` into ``empty(shape)`` (a new float32 array or a work array)."""
     h, w = shape
-    return _upsample_rows(_upsample_columns(grid.astype(np.float32, copy=False), stride, w), stride, h)
+    return _upsample_rows(_upsample_columns(grid.astype(np.float32, copy=False), stride, w), stride, h, empty)
 
 
 def _upsample_columns(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
@@ -214,12 +230,12 @@ def _upsample_columns(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
     return out[:, :n]
 
 
-def _upsample_rows(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
+def _upsample_rows(grid: np.ndarray, stride: int, n: int, empty: Callable[[tuple[int, int]], np.ndarray]) -> np.ndarray:
     """``grid`` ``(g, m)`` interpolated linearly along its first axis onto ``n`` rows, row ``r`` at
-    grid coordinate ``r / stride``."""
+    grid coordinate ``r / stride``, in ``empty(shape)`` (a new float32 array or a work array)."""
     m = grid.shape[1]
     cells = min(len(grid) - 1, -(-n // stride))
-    out = np.empty((cells * stride + 1, m), np.float32)
+    out = empty((cells * stride + 1, m))
     # Row stride * i + p of the output is column block p of row i of this view.
     blocks = out[:-1].reshape(cells, stride * m)
     above, below = grid[:cells], grid[1 : cells + 1]
@@ -245,7 +261,14 @@ def _proportional(grid: np.ndarray) -> np.ndarray | None:
     return scales
 
 
-def alcn_filter_grid(image: np.ndarray, grid: np.ndarray, stride: int, sigmas: Sequence[float]) -> np.ndarray:
+def alcn_filter_grid(
+    image: np.ndarray,
+    grid: np.ndarray,
+    stride: int,
+    sigmas: Sequence[float],
+    rows: tuple[int, int] | None = None,
+    dst: np.ndarray | None = None,
+) -> np.ndarray:
     """Eq. 3 with maps given on a grid: :func:`alcn_filter` of the maps :func:`upsample_grid`
     interpolates, in fewer passes (one map at a time, multiplied by the image in place).
 
@@ -254,45 +277,63 @@ def alcn_filter_grid(image: np.ndarray, grid: np.ndarray, stride: int, sigmas: S
         grid: ``(N, gh, gw)`` float32 maps, point ``(i, j)`` on pixel ``(stride * i, stride * j)``.
         stride: the grid's spacing in pixels.
         sigmas: the ``N`` standard deviations, in pixels.
+        rows: ``(start, stop)``: only these rows of the output, computed from the rows within the widest
+            kernel's reach around them (the whole output's values, bit for bit); default all.
+        dst: a C-contiguous float32 array of the output's shape to write it into (OpenCV's ``dst``).
 
     Returns:
-        ``(H, W)`` float32.
+        ``(H, W)`` float32, or ``(stop - start, W)``: ``dst`` when given.
     """
     image = _check_plane(image)
     sigmas = check_sigmas(sigmas)
     if grid.ndim != 3 or len(grid) != len(sigmas):
         raise InputError(f"need one grid map per sigma, got {grid.shape} for {len(sigmas)} sigmas")
-    scales = _proportional(grid)
-    if scales is not None:  # one product for every kernel: sum_k G_k * (s_k F o I)
-        product = upsample_grid(grid[0], stride, image.shape)
-        cv2.multiply(image, product, dst=product)
-        # s_k folded into each blur's row kernel: no pass to scale, and the first blur is the output
-        total: np.ndarray | None = None
-        blurred = None
-        for scale, sigma in zip(scales, sigmas):
-            kernel = _cached_kernel(sigma)
-            blurred = cv2.sepFilter2D(
-                product, cv2.CV_32F, kernel * scale, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101
-            )
-            if total is None:
-                total, blurred = blurred, None
-            else:
-                cv2.add(total, blurred, dst=total)
-        assert total is not None  # sigmas is not empty
-        return total
-    out: np.ndarray | None = None
-    blurred = np.empty(image.shape, np.float32)
+    start, stop = (0, len(image)) if rows is None else rows
+    shape = (stop - start, image.shape[1])
+    if dst is None:
+        dst = np.empty(shape, np.float32)
+    elif dst.shape != shape or dst.dtype != np.float32 or not dst.flags.c_contiguous:
+        raise InputError(f"dst must be a C-contiguous float32 array of shape {shape}, got {dst.dtype} {dst.shape}")
+    scales = _proportional(grid)  # of the whole grid, so that every part takes the same path
+    # From a grid row, so the part's maps are the whole one's rows; the blurs' reflected margins fall
+    # outside the rows kept unless they are the image's own.
+    reach = kernel_radius(max(sigmas))
+    lo, hi = max(0, start - reach) // stride * stride, min(len(image), stop + reach)
+    if (lo, hi) != (start, stop):
+        part = _alcn_filter_grid(image[lo:hi], grid[:, lo // stride :], stride, sigmas, scales, None)
+        np.copyto(dst, part[start - lo : stop - lo])
+        return dst
+    return _alcn_filter_grid(image, grid, stride, sigmas, scales, dst)
+
+
+def _alcn_filter_grid(
+    image: np.ndarray,
+    grid: np.ndarray,
+    stride: int,
+    sigmas: tuple[float, ...],
+    scales: np.ndarray | None,
+    dst: np.ndarray | None,
+) -> np.ndarray:
+    """:func:`alcn_filter_grid` of the whole ``image`` into ``dst`` (None: a work array); its temporaries are
+    work arrays (:mod:`alcn_cv.scratch`)."""
+    h, w = image.shape
+    if dst is None:
+        dst = work_array("gaussian_mixture.alcn_filter_grid.part", (h, w))
+    blurred = work_array("gaussian_mixture.alcn_filter_grid.blurred", (h, w))
+    maps = [grid[0]] if scales is not None else list(grid)
     for k, sigma in enumerate(sigmas):
-        product = upsample_grid(grid[k], stride, image.shape)
-        cv2.multiply(image, product, dst=product)
+        if k < len(maps):  # one product for every kernel when the maps are proportional
+            product = _upsample(maps[k], stride, (h, w), _PRODUCT)
+            cv2.multiply(image, product, dst=product)
         kernel = _cached_kernel(sigma)
-        if out is None:
-            out = cv2.sepFilter2D(product, cv2.CV_32F, kernel, kernel, borderType=cv2.BORDER_REFLECT_101)
-            continue
-        cv2.sepFilter2D(product, cv2.CV_32F, kernel, kernel, dst=blurred, borderType=cv2.BORDER_REFLECT_101)
-        cv2.add(out, blurred, dst=out)
-    assert out is not None  # sigmas is not empty
-    return out
+        # with one product for every kernel (sum_k G_k * (s_k F o I)), s_k is folded into the blur's row kernel
+        row_kernel = kernel if scales is None else kernel * scales[k]
+        cv2.sepFilter2D(
+            product, cv2.CV_32F, row_kernel, kernel, dst=dst if k == 0 else blurred, borderType=cv2.BORDER_REFLECT_101
+        )
+        if k:
+            cv2.add(dst, blurred, dst=dst)
+    return dst
 
 
 # --- The pyramid approximation of Eq. 3 (fast path) ------------------------------------------

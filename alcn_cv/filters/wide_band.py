@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import WeightFileError
-from alcn_cv.filters.divisive import divisive_normalization, gaussian_energy
+from alcn_cv.filters.divisive import divisive_floor, divisive_normalization, gaussian_energy
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, kernel_radius
 
 __all__ = [
@@ -89,7 +89,7 @@ def _band_response(small: np.ndarray) -> np.ndarray:
 def wide_band_floor(small: np.ndarray, scale: float) -> float:
     """The band's divisive floor ``c * mean(e)`` over a whole image from its :func:`block_means` (an image
     normalized in strips computes it once)."""
-    return scale * float(cv2.mean(gaussian_energy(_band_response(small), ENERGY_SIGMA / BLOCK))[0])
+    return divisive_floor(gaussian_energy(_band_response(small), ENERGY_SIGMA / BLOCK), scale)
 
 
 def wide_band(gray: np.ndarray, tau: float, scale: float = 1.0, floor: float | None = None) -> np.ndarray:

@@ -21,6 +21,7 @@ blocked layout); the input's name says which (:data:`IMAGE_INPUT`, :data:`BLOCKS
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -29,6 +30,8 @@ import numpy as np
 from alcn_cv.checks import check_gray
 from alcn_cv.errors import WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
+from alcn_cv.row_parts import row_parts, run_parts
+from alcn_cv.scratch import work_array
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = [
@@ -68,34 +71,58 @@ def image_blocks(padded: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(blocks).reshape(1, BLOCK * BLOCK, h // BLOCK, w // BLOCK)
 
 
-def cells_padded(image: np.ndarray, stride: int) -> np.ndarray:
-    """An ``(H, W)`` float32 image mirrored (reflect-101) to whole ``stride``-pixel cells, each centred on a
-    grid point ``stride * i``: ``(stride * gh, stride * gw)``, ``gh = ceil((H - 1) / stride) + 1``."""
+def cell_parts(height: int, stride: int) -> list[tuple[int, int]]:
+    """The grid rows of an image of ``height`` rows (``gh = ceil((height - 1) / stride) + 1``) cut into
+    ``(first, stop)`` parts, one per part of its rows (:func:`~alcn_cv.row_parts.row_parts`)."""
+    parts = [(start // stride, stop // stride) for start, stop in row_parts(height, stride)]
+    parts[-1] = (parts[-1][0], -(-(height - 1) // stride) + 1)
+    return parts
+
+
+def cells_padded(image: np.ndarray, stride: int, cells: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The grid rows ``cells = (first, stop)`` of an ``(H, W)`` float32 image mirrored (reflect-101) to whole
+    ``stride``-pixel cells, each centred on a grid point ``stride * i``, and their square: two
+    ``(stride * (stop - first), stride * gw)`` work arrays (:mod:`alcn_cv.scratch`; the cell moments'
+    temporaries), ``gw = ceil((W - 1) / stride) + 1``."""
     h, w = image.shape
-    gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
+    width = stride * (-(-(w - 1) // stride) + 1)
     before = stride // 2
-    return cv2.copyMakeBorder(
-        image, before, stride * gh - h - before, before, stride * gw - w - before, cv2.BORDER_REFLECT_101
+    # the image rows of the part's first and last padded rows (beyond the image: mirrored)
+    top, bottom = stride * cells[0] - before, stride * cells[1] - before
+    shape = (stride * (cells[1] - cells[0]), width)
+    padded = cv2.copyMakeBorder(
+        image[max(top, 0) : min(bottom, h)],
+        max(0, -top),
+        max(0, bottom - h),
+        before,
+        width - w - before,
+        cv2.BORDER_REFLECT_101,
+        dst=work_array("opencv_runtime.cells_padded.padded", shape),
     )
+    return padded, cv2.multiply(padded, padded, dst=work_array("opencv_runtime.cells_padded.square", shape))
 
 
 def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
     """:meth:`GainNormalizer.cell_moments <alcn_cv.nets.gain.GainNormalizer.cell_moments>` of an ``(H, W)``
     float32 image, bit for bit: ``(1, 2, gh, gw)`` float32, the mean of each ``stride``-pixel cell centred on a
-    grid point, of the image and of its square.
+    grid point, of the image and of its square; the grid's rows in parts on OpenCV's threads.
 
     The sums run in torch's order (row by row, left to right): where a cell is flat its standard deviation is
     the rounding of these sums, which the network's log amplifies.
     """
-    padded = cells_padded(image, stride)
-    gh, gw = padded.shape[0] // stride, padded.shape[1] // stride
-    sums = np.zeros((1, 2, gh, gw), np.float32)
-    for plane, total in zip((padded, cv2.multiply(padded, padded)), sums[0]):
-        cells = plane.reshape(gh, stride, gw, stride)
-        for dy in range(stride):
-            for dx in range(stride):
-                np.add(total, cells[:, dy, :, dx], out=total)
-    return np.divide(sums, np.float32(stride * stride), out=sums)
+
+    def moments(first: int, stop: int) -> np.ndarray:
+        padded, square = cells_padded(image, stride, (first, stop))
+        gh, gw = padded.shape[0] // stride, padded.shape[1] // stride
+        sums = np.zeros((1, 2, gh, gw), np.float32)
+        for plane, total in zip((padded, square), sums[0]):
+            cells = plane.reshape(gh, stride, gw, stride)
+            for dy in range(stride):
+                for dx in range(stride):
+                    np.add(total, cells[:, dy, :, dx], out=total)
+        return np.divide(sums, np.float32(stride * stride), out=sums)
+
+    return np.concatenate(run_parts(moments, cell_parts(len(image), stride)), axis=2)
 
 
 def _interpolation_matrix(n: int, grid: int, stride: int) -> np.ndarray:
@@ -130,7 +157,11 @@ class GainFeatures:
         ]
 
     def __call__(self, image: np.ndarray) -> np.ndarray:
-        mean, square = cell_moments(image, self.stride)[0]
+        return self.from_moments(cell_moments(image, self.stride))
+
+    def from_moments(self, moments: np.ndarray) -> np.ndarray:
+        """The features of :func:`cell_moments` ``(1, 2, gh, gw)``."""
+        mean, square = moments[0]
         features = np.empty((1, 4, *mean.shape), np.float32)
         features[0, 0] = mean
         for plane, kernel in zip(features[0, 1:3], self.kernels):
@@ -209,11 +240,12 @@ class OpenCVNormalizer:
             raise WeightFileError(f"{self.path}: not a Normalizer export ({side}-pixel probe: {points} grid points)")
         return extent // (points - 1)
 
-    def dense_grid(self, image: np.ndarray) -> np.ndarray:
+    def dense_grid(self, image: np.ndarray, alongside: Callable[[], object] | None = None) -> np.ndarray:
         """The Normalizer's output on its grid (stride :attr:`stride`).
 
         Args:
             image: ``(H, W)`` float32 intensities in [0, 1] (at the working scale).
+            alongside: called once the full-resolution work is done (:class:`~alcn_cv.runtime.Network`).
 
         Returns:
             ``(N, ceil((H-1)/s)+1, ceil((W-1)/s)+1)`` float32 with ``s = stride``; grid point
@@ -222,7 +254,10 @@ class OpenCVNormalizer:
         h, w = check_gray(image).shape
         s = self.stride
         if self.features is not None:
-            self.net.setInput(self.features(image))
+            moments = cell_moments(image, s)
+            if alongside is not None:
+                alongside()
+            self.net.setInput(self.features.from_moments(moments))
         else:
             gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
             half = WINDOW // 2
@@ -230,6 +265,8 @@ class OpenCVNormalizer:
                 image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w, cv2.BORDER_REFLECT_101
             )
             self._set_padded(padded)
+            if alongside is not None:
+                alongside()
         return self.net.forward()[0]
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
