@@ -305,9 +305,9 @@ class GainRuntime(WindowRuntime):
 
         grid = self.network.dense_grid(gray, start_band)
         parts = row_parts(len(gray), self.grid_stride)
-        response = work_array("runtime.GainRuntime.normalize.response", gray.shape)
-        squared = work_array("runtime.GainRuntime.normalize.squared", gray.shape)
-        energy = work_array("runtime.GainRuntime.normalize.energy", gray.shape) if floor is None else None
+        response = work_array("runtime.normalize.response", gray.shape)
+        squared = work_array("runtime.normalize.squared", gray.shape)
+        energy = work_array("runtime.normalize.energy", gray.shape) if floor is None else None
         reach = kernel_radius(sigma)
 
         def eq3_and_energy(start: int, stop: int) -> None:
@@ -325,10 +325,10 @@ class GainRuntime(WindowRuntime):
                     self.grid_stride,
                     spec.full_res_sigmas,
                     (lo, hi),
-                    work_array("runtime.eq3", (hi - lo, gray.shape[1])),
+                    work_array("runtime.normalize.eq3", (hi - lo, gray.shape[1])),
                 )
                 response[start:stop] = eq3[own]
-                squared[start:stop] = blurred_square(eq3, sigma, work_array("runtime.e2", eq3.shape))[own]
+                squared[start:stop] = blurred_square(eq3, sigma, work_array("runtime.normalize.e2", eq3.shape))[own]
             if energy is not None:
                 cv2.sqrt(squared[start:stop], dst=energy[start:stop])
 
