@@ -298,7 +298,7 @@ def _cell_moments(image: np.ndarray, stride: int) -> torch.Tensor:
         planes = cells_padded(image, stride, (first, stop))
         return torch.cat([F.avg_pool2d(torch.from_numpy(plane)[None, None], stride) for plane in planes], 1)
 
-    return torch.cat(run_parts(moments, cell_parts(len(image), stride)), 2)
+    return torch.cat(run_parts(moments, cell_parts(image.shape, stride)), 2)
 
 
 class TorchRuntime:

@@ -19,10 +19,13 @@ from typing import TypeVar
 
 import cv2
 
-__all__ = ["MIN_PART_ROWS", "row_parts", "run_parts", "submit"]
+__all__ = ["MIN_PART_PIXELS", "MIN_PART_ROWS", "row_parts", "run_parts", "submit"]
 
-#: The fewest rows a part may have: below this a thread costs more than it saves.
-MIN_PART_ROWS = 96
+#: The fewest rows a part may have (its blurs' margins are computed twice).
+MIN_PART_ROWS = 64
+#: The fewest pixels a part may have: below this the threads' hand-offs cost what the part saves (640x480 frames
+#: ran slower in two parts than in one on the 2-core VM, 1280x800 frames faster).
+MIN_PART_PIXELS = 2**18
 
 T = TypeVar("T")
 _pool: ThreadPoolExecutor | None = None
@@ -45,16 +48,18 @@ def _executor() -> ThreadPoolExecutor:
         return _pool
 
 
-def row_parts(height: int, step: int, count: int | None = None) -> list[tuple[int, int]]:
-    """``[(start, stop), ...]``: ``height`` rows cut into ``count`` parts (default: one per thread of
-    ``cv2.getNumThreads()``; fewer where a part would have less than :data:`MIN_PART_ROWS` rows), each starting on
-    a multiple of ``step``.
+def row_parts(shape: tuple[int, int], step: int, count: int | None = None) -> list[tuple[int, int]]:
+    """``[(start, stop), ...]``: the rows of an image of ``shape`` ``(H, W)`` cut into ``count`` parts (default: one
+    per thread of ``cv2.getNumThreads()``; fewer where a part would have less than :data:`MIN_PART_ROWS` rows or
+    :data:`MIN_PART_PIXELS` pixels), each starting on a multiple of ``step``.
 
     Example:
-        >>> row_parts(800, 8, count=2)
+        >>> row_parts((800, 1280), 8, count=2)
         [(0, 400), (400, 800)]
     """
-    count = max(1, min(cv2.getNumThreads() if count is None else count, height // MIN_PART_ROWS))
+    height, width = shape
+    most = min(height // MIN_PART_ROWS, height * width // MIN_PART_PIXELS)
+    count = max(1, min(cv2.getNumThreads() if count is None else count, most))
     starts = sorted({round(height * i / count / step) * step for i in range(count)})
     return list(zip(starts, [*starts[1:], height]))
 

@@ -38,7 +38,6 @@ from alcn_cv.filters.gaussian_mixture import (
 from alcn_cv.filters.wide_band import BLOCK, band_reach, check_band_meta, wide_band
 from alcn_cv.nets.opencv_runtime import WINDOW, OpenCVNormalizer
 from alcn_cv.row_parts import row_parts, run_parts, submit
-from alcn_cv.scratch import work_array
 from alcn_cv.weight_file import DEFAULT_WEIGHTS
 
 __all__ = [
@@ -292,22 +291,21 @@ class GainRuntime(WindowRuntime):
         """:meth:`WindowRuntime.normalize`'s values, bit for bit, on OpenCV's threads: the wide band beside the
         network's layers on the grid, then Eq. 3 and its energy ``e^2`` for each part of the rows
         (:func:`~alcn_cv.row_parts.row_parts`), the divisive floor from the whole image's energy, then each part's
-        division, ``tanh`` and band. The temporaries are work arrays (:mod:`alcn_cv.scratch`)."""
+        division, ``tanh`` and band."""
         spec = self.spec
         if self.mixture_kind == "pyramid" or spec.divisive is None or spec.tau is None:
             return super().normalize(gray, floor, band_floor)
         sigma, c = spec.divisive
+        parts = row_parts(gray.shape, self.grid_stride)
         band: list[Future[np.ndarray]] = []  # computed beside the network's layers on the grid
 
         def start_band() -> None:
-            if spec.band:
+            if spec.band and len(parts) > 1:  # an image too small for parts stays on one thread
                 band.append(submit(wide_band, gray, spec.tau, c, band_floor))
 
         grid = self.network.dense_grid(gray, start_band)
-        parts = row_parts(len(gray), self.grid_stride)
-        response = work_array("runtime.normalize.response", gray.shape)
-        squared = work_array("runtime.normalize.squared", gray.shape)
-        energy = work_array("runtime.normalize.energy", gray.shape) if floor is None else None
+        response, squared = np.empty_like(gray), np.empty_like(gray)
+        energy = np.empty_like(gray) if floor is None else None
         reach = kernel_radius(sigma)
 
         def eq3_and_energy(start: int, stop: int) -> None:
@@ -319,16 +317,9 @@ class GainRuntime(WindowRuntime):
                     alcn_filter_grid(gray, grid, self.grid_stride, spec.full_res_sigmas, dst=response), sigma, squared
                 )
             else:
-                eq3 = alcn_filter_grid(
-                    gray,
-                    grid,
-                    self.grid_stride,
-                    spec.full_res_sigmas,
-                    (lo, hi),
-                    work_array("runtime.normalize.eq3", (hi - lo, gray.shape[1])),
-                )
+                eq3 = alcn_filter_grid(gray, grid, self.grid_stride, spec.full_res_sigmas, (lo, hi))
                 response[start:stop] = eq3[own]
-                squared[start:stop] = blurred_square(eq3, sigma, work_array("runtime.normalize.e2", eq3.shape))[own]
+                squared[start:stop] = blurred_square(eq3, sigma)[own]
             if energy is not None:
                 cv2.sqrt(squared[start:stop], dst=energy[start:stop])
 
@@ -338,18 +329,16 @@ class GainRuntime(WindowRuntime):
             floor = divisive_floor(energy, c)
         whole_floor = floor  # a name the closure below sees as a float
         inverse_tau = 1.0 / spec.tau
-        band_image = band[0].result() if band else None
-        out = np.empty_like(gray)
+        band_image = band[0].result() if band else wide_band(gray, spec.tau, c, band_floor) if spec.band else None
 
-        def divide(start: int, stop: int) -> None:
-            rows = out[start:stop]
-            divide_by_energy(response[start:stop], squared[start:stop], whole_floor, inverse_tau, dst=rows)
+        def divide(start: int, stop: int) -> None:  # in place in the rows of e^2
+            rows = divide_by_energy(response[start:stop], squared[start:stop], whole_floor, inverse_tau)
             np.tanh(rows, out=rows)
             if band_image is not None:
                 cv2.scaleAdd(band_image[start:stop], spec.band, rows, dst=rows)
 
         run_parts(divide, parts)
-        return out
+        return squared
 
 
 def make_runtime(spec: ModelSpec, network: Network, mixture: str) -> WindowRuntime:

@@ -1,5 +1,5 @@
-"""The row parts of the OpenCV runtimes (:mod:`alcn_cv.row_parts`) and the work arrays they use
-(:mod:`alcn_cv.scratch`): the gain runtime gives the same output, bit for bit, on any number of OpenCV threads."""
+"""The row parts of the OpenCV runtimes (:mod:`alcn_cv.row_parts`): the gain runtime gives the same output, bit for
+bit, on any number of OpenCV threads."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import cv2
 import numpy as np
 import pytest
 
+import alcn_cv.row_parts as row_parts_module
 from alcn_cv.filters.gaussian_mixture import alcn_filter_grid
 from alcn_cv.nets.opencv_runtime import cell_moments, cell_parts
-from alcn_cv.row_parts import MIN_PART_ROWS, row_parts, run_parts, submit
-from alcn_cv.scratch import MAX_ELEMENTS, work_array
+from alcn_cv.row_parts import MIN_PART_PIXELS, MIN_PART_ROWS, row_parts, run_parts, submit
 
 
 @pytest.fixture
@@ -24,20 +24,31 @@ def opencv_threads():
     cv2.setNumThreads(before)
 
 
-@pytest.mark.parametrize(("height", "step", "count"), [(800, 8, 2), (801, 8, 3), (1000, 8, 5), (120, 8, 4), (50, 4, 2)])
-def test_row_parts_cover_the_rows_from_multiples_of_the_step(height, step, count):
-    parts = row_parts(height, step, count)
-    assert parts[0][0] == 0 and parts[-1][1] == height
+@pytest.fixture
+def small_parts(monkeypatch):
+    """Parts of 32 rows and any number of pixels, so that the tests' small images are cut as large ones are."""
+    monkeypatch.setattr(row_parts_module, "MIN_PART_ROWS", 32)
+    monkeypatch.setattr(row_parts_module, "MIN_PART_PIXELS", 1)
+
+
+@pytest.mark.parametrize(
+    ("shape", "step", "count"),
+    [((800, 1280), 8, 2), ((801, 1283), 8, 3), ((1000, 4000), 8, 5), ((120, 9000), 8, 4), ((50, 9000), 4, 2)],
+)
+def test_row_parts_cover_the_rows_from_multiples_of_the_step(shape, step, count):
+    parts = row_parts(shape, step, count)
+    assert parts[0][0] == 0 and parts[-1][1] == shape[0]
     assert all(stop == start for (_, stop), (start, _) in zip(parts, parts[1:]))
     assert all(start % step == 0 and stop > start for start, stop in parts)
-    assert len(parts) == max(1, min(count, height // MIN_PART_ROWS))
+    assert len(parts) == max(1, min(count, shape[0] // MIN_PART_ROWS, shape[0] * shape[1] // MIN_PART_PIXELS))
 
 
-def test_row_parts_follow_opencv_threads(opencv_threads):
+def test_row_parts_follow_opencv_threads_and_keep_small_images_whole(opencv_threads):
     opencv_threads(1)
-    assert row_parts(2000, 8) == [(0, 2000)]
+    assert row_parts((2000, 2000), 8) == [(0, 2000)]
     opencv_threads(3)
-    assert len(row_parts(2000, 8)) == 3
+    assert len(row_parts((2000, 2000), 8)) == 3
+    assert row_parts((480, 640), 8) == [(0, 480)]  # fewer pixels than two parts need
 
 
 def test_run_parts_returns_the_parts_in_order_and_raises_their_errors():
@@ -68,18 +79,6 @@ def test_a_forked_child_gets_threads_of_its_own():
     assert os.waitstatus_to_exitcode(status) == 0
 
 
-def test_work_arrays_are_kept_by_name_and_thread():
-    a = work_array("test_row_parts.a", (10, 20))
-    assert a.dtype == np.float32 and a.flags.c_contiguous
-    assert np.shares_memory(work_array("test_row_parts.a", (20, 10)), a)  # the same memory, reshaped
-    assert not np.shares_memory(work_array("test_row_parts.b", (10, 20)), a)
-    assert work_array("test_row_parts.a", (40, 20)).size == 800  # grown
-    other = submit(work_array, "test_row_parts.a", (10, 20)).result()
-    assert not np.shares_memory(other, work_array("test_row_parts.a", (10, 20)))  # another thread's
-    big = work_array("test_row_parts.big", (MAX_ELEMENTS + 1,))
-    assert not np.shares_memory(big, work_array("test_row_parts.big", (MAX_ELEMENTS + 1,)))  # not kept
-
-
 @pytest.mark.parametrize("shape", [(200, 300), (203, 97)])
 def test_alcn_filter_grid_rows_are_the_whole_outputs_rows(shape):
     rng = np.random.default_rng(3)
@@ -94,10 +93,10 @@ def test_alcn_filter_grid_rows_are_the_whole_outputs_rows(shape):
 
 
 @pytest.mark.parametrize("shape", [(800, 640), (801, 333), (97, 300), (200, 50)])
-def test_cell_moments_in_parts_are_the_whole_images(shape, opencv_threads):
+def test_cell_moments_in_parts_are_the_whole_images(shape, opencv_threads, small_parts):
     image = np.random.default_rng(4).random(shape, dtype=np.float32)
     opencv_threads(1)
-    assert cell_parts(shape[0], 8) == [(0, -(-(shape[0] - 1) // 8) + 1)]
+    assert cell_parts(shape, 8) == [(0, -(-(shape[0] - 1) // 8) + 1)]
     whole = cell_moments(image, 8)
     for threads in (2, 3, 5):
         opencv_threads(threads)
@@ -106,7 +105,7 @@ def test_cell_moments_in_parts_are_the_whole_images(shape, opencv_threads):
 
 @pytest.mark.parametrize("backend", ["fast", "opencv"])
 @pytest.mark.parametrize("model", ["gain", "gain-lite"])
-def test_the_gain_runtime_gives_one_output_on_any_number_of_threads(backend, model, opencv_threads):
+def test_the_gain_runtime_gives_one_output_on_any_number_of_threads(backend, model, opencv_threads, small_parts):
     pytest.importorskip("torch") if backend == "fast" else None
     from alcn_cv.data.frames import synthetic_frame
     from alcn_cv.enhance.alcn import ALCN
@@ -119,5 +118,6 @@ def test_the_gain_runtime_gives_one_output_on_any_number_of_threads(backend, mod
         floors = WindowRuntime.normalize(runtime, gray, 0.01, 0.02)
         for threads in (1, 2, 3, 4):
             opencv_threads(threads)
+            assert len(row_parts(gray.shape, 8)) == min(threads, height // 32)
             np.testing.assert_array_equal(runtime.normalize(gray), sequential)
             np.testing.assert_array_equal(runtime.normalize(gray, 0.01, 0.02), floors)

@@ -89,7 +89,7 @@ class ALCN(Normalization):
     The gain family on ``backend="fast"`` and ``"opencv"`` also uses OpenCV's threads, as OpenCV's own parallel
     functions do: each image's rows are cut into one part per thread of ``cv2.getNumThreads()``
     (:mod:`alcn_cv.row_parts`; the same output whatever their number), and ``cv2.setNumThreads(1)`` makes
-    :meth:`apply` sequential. Its temporaries are kept between calls (:mod:`alcn_cv.scratch`).
+    :meth:`apply` sequential.
     """
 
     name = "alcn"

@@ -12,7 +12,6 @@ import cv2
 import numpy as np
 
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
-from alcn_cv.scratch import work_array
 
 __all__ = [
     "ABSOLUTE_FLOOR",
@@ -34,7 +33,7 @@ def blurred_square(response: np.ndarray, sigma: float, dst: np.ndarray | None = 
     (OpenCV's ``dst``). Never negative, float rounding included: every term of the blur is a positive weight
     times a square, so no clip is needed."""
     kernel = gaussian_kernel1d(sigma)
-    square = cv2.multiply(response, response, dst=work_array("divisive.blurred_square.square", response.shape))
+    square = cv2.multiply(response, response)
     return cv2.sepFilter2D(square, cv2.CV_32F, kernel, kernel, dst=dst, borderType=cv2.BORDER_REFLECT_101)
 
 
@@ -68,9 +67,7 @@ def divisive_normalization(
     """
     squared = blurred_square(response, sigma)
     if floor is None:
-        floor = divisive_floor(
-            cv2.sqrt(squared, dst=work_array("divisive.divisive_normalization.e", squared.shape)), scale
-        )
+        floor = divisive_floor(cv2.sqrt(squared), scale)
     return divide_by_energy(response, squared, floor, multiplier)
 
 

@@ -37,7 +37,6 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import InputError
-from alcn_cv.scratch import work_array
 
 DEFAULT_NUM_KERNELS = 10
 DEFAULT_SIGMA_STEP = 0.5
@@ -82,14 +81,6 @@ def gaussian_kernel1d(sigma: float) -> np.ndarray:
     x = np.arange(-r, r + 1, dtype=np.float64)
     k = np.exp(-0.5 * (x / sigma) ** 2)
     return k / k.sum()
-
-
-#: The products ``F_k o I`` of :func:`alcn_filter_grid`, in a work array.
-_PRODUCT = functools.partial(work_array, "gaussian_mixture.alcn_filter_grid.product")
-
-
-def _new_float32(shape: tuple[int, int]) -> np.ndarray:
-    return np.empty(shape, np.float32)
 
 
 @functools.lru_cache(maxsize=256)
@@ -206,15 +197,8 @@ def upsample_grid(grid: np.ndarray, stride: int, shape: tuple[int, int]) -> np.n
     Returns:
         ``(h, w)`` float32.
     """
-    return _upsample(grid, stride, shape, _new_float32)
-
-
-def _upsample(
-    grid: np.ndarray, stride: int, shape: tuple[int, int], empty: Callable[[tuple[int, int]], np.ndarray]
-) -> np.ndarray:
-    """:func:`upsample_grid` into ``empty(shape)`` (a new float32 array or a work array)."""
     h, w = shape
-    return _upsample_rows(_upsample_columns(grid.astype(np.float32, copy=False), stride, w), stride, h, empty)
+    return _upsample_rows(_upsample_columns(grid.astype(np.float32, copy=False), stride, w), stride, h)
 
 
 def _upsample_columns(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
@@ -230,12 +214,12 @@ def _upsample_columns(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
     return out[:, :n]
 
 
-def _upsample_rows(grid: np.ndarray, stride: int, n: int, empty: Callable[[tuple[int, int]], np.ndarray]) -> np.ndarray:
+def _upsample_rows(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
     """``grid`` ``(g, m)`` interpolated linearly along its first axis onto ``n`` rows, row ``r`` at
-    grid coordinate ``r / stride``, in ``empty(shape)`` (a new float32 array or a work array)."""
+    grid coordinate ``r / stride``."""
     m = grid.shape[1]
     cells = min(len(grid) - 1, -(-n // stride))
-    out = empty((cells * stride + 1, m))
+    out = np.empty((cells * stride + 1, m), np.float32)
     # Row stride * i + p of the output is column block p of row i of this view.
     blocks = out[:-1].reshape(cells, stride * m)
     above, below = grid[:cells], grid[1 : cells + 1]
@@ -282,7 +266,7 @@ def alcn_filter_grid(
         dst: a C-contiguous float32 array of the output's shape to write it into (OpenCV's ``dst``).
 
     Returns:
-        ``(H, W)`` float32, or ``(stop - start, W)``: ``dst`` when given.
+        ``(H, W)`` float32, or ``(stop - start, W)`` (rows of a larger array): ``dst`` when given.
     """
     image = _check_plane(image)
     sigmas = check_sigmas(sigmas)
@@ -290,20 +274,20 @@ def alcn_filter_grid(
         raise InputError(f"need one grid map per sigma, got {grid.shape} for {len(sigmas)} sigmas")
     start, stop = (0, len(image)) if rows is None else rows
     shape = (stop - start, image.shape[1])
-    if dst is None:
-        dst = np.empty(shape, np.float32)
-    elif dst.shape != shape or dst.dtype != np.float32 or not dst.flags.c_contiguous:
+    if dst is not None and (dst.shape != shape or dst.dtype != np.float32 or not dst.flags.c_contiguous):
         raise InputError(f"dst must be a C-contiguous float32 array of shape {shape}, got {dst.dtype} {dst.shape}")
     scales = _proportional(grid)  # of the whole grid, so that every part takes the same path
     # From a grid row, so the part's maps are the whole one's rows; the blurs' reflected margins fall
     # outside the rows kept unless they are the image's own.
     reach = kernel_radius(max(sigmas))
     lo, hi = max(0, start - reach) // stride * stride, min(len(image), stop + reach)
-    if (lo, hi) != (start, stop):
-        part = _alcn_filter_grid(image[lo:hi], grid[:, lo // stride :], stride, sigmas, scales, None)
-        np.copyto(dst, part[start - lo : stop - lo])
-        return dst
-    return _alcn_filter_grid(image, grid, stride, sigmas, scales, dst)
+    if (lo, hi) == (start, stop):
+        return _alcn_filter_grid(image, grid, stride, sigmas, scales, dst)
+    part = _alcn_filter_grid(image[lo:hi], grid[:, lo // stride :], stride, sigmas, scales, None)
+    if dst is None:
+        return part[start - lo : stop - lo]
+    np.copyto(dst, part[start - lo : stop - lo])
+    return dst
 
 
 def _alcn_filter_grid(
@@ -314,16 +298,15 @@ def _alcn_filter_grid(
     scales: np.ndarray | None,
     dst: np.ndarray | None,
 ) -> np.ndarray:
-    """:func:`alcn_filter_grid` of the whole ``image`` into ``dst`` (None: a work array); its temporaries are
-    work arrays (:mod:`alcn_cv.scratch`)."""
+    """:func:`alcn_filter_grid` of the whole ``image``, into ``dst`` when given."""
     h, w = image.shape
     if dst is None:
-        dst = work_array("gaussian_mixture.alcn_filter_grid.part", (h, w))
-    blurred = work_array("gaussian_mixture.alcn_filter_grid.blurred", (h, w))
+        dst = np.empty((h, w), np.float32)
+    blurred = np.empty((h, w), np.float32)
     maps = [grid[0]] if scales is not None else list(grid)
     for k, sigma in enumerate(sigmas):
         if k < len(maps):  # one product for every kernel when the maps are proportional
-            product = _upsample(maps[k], stride, (h, w), _PRODUCT)
+            product = upsample_grid(maps[k], stride, (h, w))
             cv2.multiply(image, product, dst=product)
         kernel = _cached_kernel(sigma)
         # with one product for every kernel (sum_k G_k * (s_k F o I)), s_k is folded into the blur's row kernel

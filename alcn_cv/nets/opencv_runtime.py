@@ -31,7 +31,6 @@ from alcn_cv.checks import check_gray
 from alcn_cv.errors import WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 from alcn_cv.row_parts import row_parts, run_parts
-from alcn_cv.scratch import work_array
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = [
@@ -71,25 +70,23 @@ def image_blocks(padded: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(blocks).reshape(1, BLOCK * BLOCK, h // BLOCK, w // BLOCK)
 
 
-def cell_parts(height: int, stride: int) -> list[tuple[int, int]]:
-    """The grid rows of an image of ``height`` rows (``gh = ceil((height - 1) / stride) + 1``) cut into
+def cell_parts(shape: tuple[int, int], stride: int) -> list[tuple[int, int]]:
+    """The grid rows of an image of ``shape`` ``(H, W)`` (``gh = ceil((H - 1) / stride) + 1``) cut into
     ``(first, stop)`` parts, one per part of its rows (:func:`~alcn_cv.row_parts.row_parts`)."""
-    parts = [(start // stride, stop // stride) for start, stop in row_parts(height, stride)]
-    parts[-1] = (parts[-1][0], -(-(height - 1) // stride) + 1)
+    parts = [(start // stride, stop // stride) for start, stop in row_parts(shape, stride)]
+    parts[-1] = (parts[-1][0], -(-(shape[0] - 1) // stride) + 1)
     return parts
 
 
 def cells_padded(image: np.ndarray, stride: int, cells: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """The grid rows ``cells = (first, stop)`` of an ``(H, W)`` float32 image mirrored (reflect-101) to whole
-    ``stride``-pixel cells, each centred on a grid point ``stride * i``, and their square: two
-    ``(stride * (stop - first), stride * gw)`` work arrays (:mod:`alcn_cv.scratch`; the cell moments'
-    temporaries), ``gw = ceil((W - 1) / stride) + 1``."""
+    ``stride``-pixel cells, each centred on a grid point ``stride * i``, and their square: two float32
+    ``(stride * (stop - first), stride * gw)`` arrays, ``gw = ceil((W - 1) / stride) + 1``."""
     h, w = image.shape
     width = stride * (-(-(w - 1) // stride) + 1)
     before = stride // 2
     # the image rows of the part's first and last padded rows (beyond the image: mirrored)
     top, bottom = stride * cells[0] - before, stride * cells[1] - before
-    shape = (stride * (cells[1] - cells[0]), width)
     padded = cv2.copyMakeBorder(
         image[max(top, 0) : min(bottom, h)],
         max(0, -top),
@@ -97,9 +94,8 @@ def cells_padded(image: np.ndarray, stride: int, cells: tuple[int, int]) -> tupl
         before,
         width - w - before,
         cv2.BORDER_REFLECT_101,
-        dst=work_array("opencv_runtime.cells_padded.padded", shape),
     )
-    return padded, cv2.multiply(padded, padded, dst=work_array("opencv_runtime.cells_padded.square", shape))
+    return padded, cv2.multiply(padded, padded)
 
 
 def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
@@ -122,7 +118,7 @@ def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
                     np.add(total, cells[:, dy, :, dx], out=total)
         return np.divide(sums, np.float32(stride * stride), out=sums)
 
-    return np.concatenate(run_parts(moments, cell_parts(len(image), stride)), axis=2)
+    return np.concatenate(run_parts(moments, cell_parts(image.shape, stride)), axis=2)
 
 
 def _interpolation_matrix(n: int, grid: int, stride: int) -> np.ndarray:
