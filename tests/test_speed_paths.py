@@ -64,13 +64,18 @@ def test_level0_maps_are_the_exact_bilinear_interpolation():
         np.testing.assert_allclose(m, exact, atol=1e-6)
 
 
-def test_normalizer_threads_default_to_one_and_are_restored():
+def test_torch_threads_default_by_backend_and_are_restored():
     before = torch.get_num_threads()
     alcn = alcn_cv.createALCN()
     assert alcn.threads == 1
     alcn.apply(synthetic_frame(96, 72, False))
     assert torch.get_num_threads() == before
     assert alcn_cv.createALCN(threads=None).threads is None
+    # everything in torch: torch's own setting, unless asked
+    assert alcn_cv.createALCN(backend="torch").threads is None
+    assert alcn_cv.createALCN(backend="torch", threads=2).threads == 2
+    with pytest.raises(InputError, match="'auto'"):
+        alcn_cv.createALCN(threads="all")
 
 
 @pytest.mark.parametrize("model", ["lite", "gain"])

@@ -7,6 +7,7 @@ from kornia.filters import filter2d_separable
 
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 from alcn_cv.filters.kornia_mixture import _blurs, _kernel_bank
+from alcn_cv.filters import torch_separable
 from alcn_cv.filters.torch_separable import filter_columns, filter_rows
 
 
@@ -51,3 +52,22 @@ def test_mixture_blur_equals_kornias_filter():
     kernels = bank.repeat(2, 1)
     reference = filter2d_separable(x.reshape(4, 1, 50, 70), kernels, kernels, border_type="reflect")
     torch.testing.assert_close(torch.cat(_blurs(x, bank, sigmas), 1), reference.view(2, 2, 50, 70), atol=1e-6, rtol=0)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_without_a_gradient_the_passes_are_shifted_sums_equal_to_the_convolution(dtype, monkeypatch):
+    kernel = torch.as_tensor(gaussian_kernel1d(2.0), dtype=dtype)
+    k = kernel.numel()
+    x = torch.randn(2, 3, 41, 57, dtype=dtype)[..., 1:-1, 2:]  # a strided view, as the mixture's padded margins
+    expected = (_conv(x, kernel, (k, 1)), _conv(x, kernel, (1, k)))
+    convolutions, conv2d = [], F.conv2d
+    monkeypatch.setattr(torch_separable.F, "conv2d", lambda *a, **kw: convolutions.append(a) or conv2d(*a, **kw))
+    with torch.no_grad():
+        passes = (filter_columns(x, kernel), filter_rows(x, kernel))
+    assert not convolutions
+    for got, want in zip(passes, expected):
+        assert got.shape == want.shape and got.is_contiguous()
+        torch.testing.assert_close(got, want, atol=1e-6, rtol=0)
+    filter_rows(x.requires_grad_(), kernel)  # a recorded gradient: the grouped convolution
+    filter_rows(x.detach().bfloat16(), kernel.bfloat16())  # bfloat16: the convolution accumulates in float32
+    assert len(convolutions) == 2

@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Literal, cast
 
 import numpy as np
 
@@ -83,8 +83,10 @@ class ALCN(Normalization):
         mixture: ``"exact"`` (Eq. 3 at the input resolution) or ``"pyramid"`` (the wide blurs on a Gaussian
             pyramid, :func:`~alcn_cv.filters.gaussian_mixture.pyramid_mixture`; ``fast`` and ``opencv`` only).
             Default: ``"exact"`` for the gain family and ``backend="torch"``, else ``"pyramid"``.
-        threads: torch's intra-op threads while the Normalizer runs (restored after; None: torch's setting).
-            Default 1: no torch threads left spinning against the OpenCV calls that follow.
+        threads: torch's intra-op threads while ALCN runs in torch (restored after; None: torch's setting).
+            Default ``"auto"``: 1 with ``backend="fast"``, whose torch part (the network's layers on the grid) is
+            small, so that no torch threads are left spinning against the OpenCV calls around it; torch's setting
+            with ``backend="torch"``, which runs everything in torch. ``backend="opencv"`` runs no torch.
 
     The gain family on ``backend="fast"`` and ``"opencv"`` also uses OpenCV's threads, as OpenCV's own parallel
     functions do: each image's rows are cut into one part per thread of ``cv2.getNumThreads()``
@@ -105,7 +107,7 @@ class ALCN(Normalization):
         grid_stride: int | None = None,
         mixture: str | None = None,
         model: str = DEFAULT_MODEL,
-        threads: int | None = 1,
+        threads: int | None | Literal["auto"] = "auto",
     ) -> None:
         backend = ("fast" if is_installed("torch") else "opencv") if backend is None else backend
         if backend not in BACKENDS:
@@ -114,8 +116,10 @@ class ALCN(Normalization):
             raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
         if mixture is not None and mixture not in MIXTURES:
             raise InputError(f"unknown mixture {mixture!r}; choose one of {', '.join(MIXTURES)}")
-        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
-            raise InputError(f"threads must be a positive integer or None, got {threads!r}")
+        if threads == "auto":
+            threads = None if backend == "torch" else 1
+        elif threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+            raise InputError(f"threads must be a positive integer, None or 'auto', got {threads!r}")
         self.backend, self.device, self.threads = backend, device, threads
         self.weights_path = Path(weights) if weights is not None else MODELS[model]
         weight_file = load_normalizer_file(self.weights_path)
@@ -299,7 +303,7 @@ def createALCN(  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE
     grid_stride: int | None = None,
     mixture: str | None = None,
     model: str = DEFAULT_MODEL,
-    threads: int | None = 1,
+    threads: int | None | Literal["auto"] = "auto",
 ) -> ALCN:
     """Create an :class:`ALCN` normalization; ``createALCN().apply(img)`` normalizes an image.
 
