@@ -6,6 +6,7 @@ The OpenCV-style API::
     out = alcn_cv.createALCN().apply(frame)          # like cv2.createCLAHE().apply
     out = alcn_cv.create("dog").apply(frame)          # any registered normalization
     alcn_cv.available()                               # their names
+    alcn_cv.keep_freed_memory()                       # once, on glibc: no page faults from frame to frame
 
 The base install (NumPy, SciPy and the app's own OpenCV, any of its four wheels) runs all of this: without
 torch, ``createALCN()`` runs the shipped Normalizer by ``cv2.dnn``. Importing this package does
@@ -22,6 +23,7 @@ require_opencv()  # one line saying how to install OpenCV, before the first impo
 from alcn_cv.enhance import ALCN, Normalization, available, create, createALCN, register  # noqa: E402
 from alcn_cv.errors import ALCNError, DatasetError, InputError, MissingDependencyError, WeightFileError  # noqa: E402
 from alcn_cv.filters.gaussian_mixture import alcn_filter, gaussian_sigmas  # noqa: E402
+from alcn_cv.malloc import keep_freed_memory  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -38,5 +40,6 @@ __all__ = [
     "create",
     "createALCN",
     "gaussian_sigmas",
+    "keep_freed_memory",
     "register",
 ]

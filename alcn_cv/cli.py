@@ -7,7 +7,8 @@ each names an ``add_parser(subparsers)`` function, which adds its subcommand and
 module needs an extra that is not installed is still listed; running it prints the one line
 that names the extra. Errors from bad input end the command with a one-line message and exit
 code 2; a traceback is printed only with ``--debug``. SIGTERM (``timeout``, a job scheduler) ends
-a command as Ctrl-C does, with exit code 143: temporary files and folders are removed.
+a command as Ctrl-C does, with exit code 143: temporary files and folders are removed. The command's process
+keeps the memory a frame frees for the next one (:func:`alcn_cv.malloc.keep_freed_memory`, on glibc).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from importlib import metadata
 
 from alcn_cv.errors import MissingDependencyError
 from alcn_cv.extras import is_installed, missing_extra
+from alcn_cv.malloc import keep_freed_memory
 
 logger = logging.getLogger("alcn_cv")
 
@@ -112,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         format="[%(asctime)s %(name)s %(levelname)s] %(message)s",
         datefmt="%Y/%m/%d %H:%M:%S",
     )
+    keep_freed_memory()
     try:
         with sigterm_as_interrupt(args.command):
             result = args.func(args)

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from alcn_cv.io import atomic_path, write_json
+from alcn_cv.malloc import kept_freed_memory
 
 __all__ = [
     "command_line",
@@ -81,6 +82,9 @@ def machine() -> dict[str, Any]:
             info["cpu_model"] = names[0]
     except OSError:
         pass
+    kept = kept_freed_memory()
+    if kept is not None:
+        info["malloc_kept"] = {"mmap_threshold": kept[0], "trim_threshold": kept[1]}
     if "torch" in sys.modules:
         torch = sys.modules["torch"]
         info["torch"] = torch.__version__
@@ -101,6 +105,12 @@ def describe_machine(info: dict[str, Any] | None = None) -> str:
     versions = f"Python {info.get('python')}, NumPy {info.get('numpy')}, OpenCV {info.get('opencv')}"
     if info.get("torch"):
         versions += f", torch {info['torch']} ({info.get('torch_threads')} threads), CUDA: {info.get('cuda') or 'none'}"
+    if info.get("malloc_kept"):
+        kept = info["malloc_kept"]
+        versions += (
+            f"; glibc malloc keeps freed memory (mmap threshold {kept['mmap_threshold'] >> 20} MiB, "
+            f"trim threshold {kept['trim_threshold'] >> 20} MiB)"
+        )
     return "; ".join(parts + [versions, info.get("platform", "")]).rstrip("; ")
 
 

@@ -72,6 +72,8 @@ def describe(machine: dict[str, Any] | None) -> str:
     versions = [f"{k} {machine[k]}" for k in ("python", "numpy", "opencv", "torch") if machine.get(k)]
     parts.append(", ".join(versions))
     parts.append(f"GPU: {machine.get('cuda') or 'none'}")
+    if machine.get("malloc_kept"):
+        parts.append("glibc malloc keeps freed memory (alcn_cv.keep_freed_memory)")
     return "; ".join(parts)
 
 
@@ -240,10 +242,12 @@ def speed_headline(report: dict[str, Any]) -> str:
     rows = [[t.get("target", t.get("name")), t.get("measured"), t.get("goal"), _met(t)] for t in _targets(report)]
     rows = rows[:SPEED_HEADLINE_TARGETS]
     argv = " ".join(report["experiment"]["argv"])
+    machine = report.get("machine_before") or {}
     return (
         f"**Speed** (`python experiments/speed.py {argv}`, {report['experiment']['date'][:10]}; load average "
-        f"{', '.join(str(v) for v in (report.get('machine_before') or {}).get('load_average_1_5_15', []))} "
-        "on 2 shared cores):\n\n" + table(["target", "measured", "goal", ""], rows, digits=2)
+        f"{', '.join(str(v) for v in machine.get('load_average_1_5_15', []))} "
+        f"on 2 shared cores, {machine.get('cpu_model', 'CPU not recorded')}):\n\n"
+        + table(["target", "measured", "goal", ""], rows, digits=2)
     )
 
 

@@ -125,8 +125,8 @@ def test_targets_are_reported(report):
     out, result = report
     targets = result["targets"]
     # the default against 2 and 4 DoGs, its lite variant, the lite paper-family ALCN, the frame rate, the
-    # torch-free backend, the torch backend on the CPU, DLCN, ...
-    assert len(targets["summary"]) == 15
+    # torch-free backend, the torch backend on the CPU, DLCN, ..., fresh processes with and without kept memory, ...
+    assert len(targets["summary"]) == 16
     for backend in ("torch-free backend", "torch backend on the CPU"):
         assert any(backend in r["target"] and r["measured"] > 0 for r in targets["summary"])
     for row in targets["summary"]:
@@ -136,6 +136,9 @@ def test_targets_are_reported(report):
         r["torch_threads_kept"] for r in targets["threads"]
     )
     assert {r["method"] for r in targets["memory"]} == {"alcn", "dog"}
+    fresh = targets["fresh_processes"]
+    assert set(fresh) == {"alcn glibc", "alcn kept", "dog glibc", "dog kept"}
+    assert all(r["ms"] > 0 and r["page_faults_per_call"] >= 0 for r in fresh.values())
     assert targets["video"]["frames"] >= 2 and targets["video"]["normalize_s"] > 0
     assert "cpu" in targets["batched"] and targets["batched"]["cpu"]["half_max_abs"] < 0.05
     assert {"network_ms", "mixture_ms", "contract_ms", "apply_ms"} <= set(targets["stages"]["alcn"]) and targets[

@@ -5,9 +5,9 @@ import torch
 import torch.nn.functional as F
 from kornia.filters import filter2d_separable
 
+from alcn_cv.filters import torch_separable
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 from alcn_cv.filters.kornia_mixture import _blurs, _kernel_bank
-from alcn_cv.filters import torch_separable
 from alcn_cv.filters.torch_separable import filter_columns, filter_rows
 
 

@@ -24,16 +24,16 @@ alcn:model=lite,alcn:model=paper:mixture=exact``. A video
 test runs ALCN over a generated 1920x1080 video and records the resident memory after every
 frame (it must stay flat).
 
-The **targets** (:func:`targets`) come first in the report, each with its measured value: the
-default ALCN (the gain Normalizer), its lite variant and the lite paper-family ALCN against a raw
-OpenCV DoG (:func:`raw_dog`) at 1280x800 (the gain ones with their difference from their torch
-model) and the default's frame rate at 640x480, the torch-free backend against the default one and
-the default against DLCN, BGR against gray and its difference from the plain float Lab round trip
-(:func:`lab_round_trip`, within one level), the cost of the ``apply`` contract over each method's own
-computation, the peak memory on an 8000x8000 image, an application's OpenCV calls
-right after ``apply``, ``alcn normalize`` on the cookie-box video against its decoding and
-encoding alone, and the batched torch path (CUDA when present); with where the default's time
-goes (its stages, and a profile).
+The **targets** (:func:`targets`) come first in the report, each with its measured value: the default ALCN (the gain
+Normalizer), its lite variant and the lite paper-family ALCN against a raw OpenCV DoG (:func:`raw_dog`) at 1280x800
+(the gain ones with their difference from their torch model) and the default's frame rate at 640x480, the torch-free
+backend against the default one and the default against DLCN, BGR against gray and its difference from the plain
+float Lab round trip (:func:`lab_round_trip`, within one level), the cost of the ``apply`` contract over each
+method's own computation, the peak memory on an 8000x8000 image, an application's OpenCV calls right after
+``apply``, the default ALCN and a raw DoG in fresh processes with glibc's malloc as it starts and keeping freed
+memory (:mod:`alcn_cv.malloc`; the ``alcn`` command, and so this run, keeps it), ``alcn normalize`` on the cookie-
+box video against its decoding and encoding alone, and the batched torch path (CUDA when present); with where the
+default's time goes (its stages, and a profile).
 
 Outputs in ``out_dir``: ``speed.json`` (every number, the settings, the command, the machine and
 its load before and after), ``speed.md`` (machine, command, settings and the tables) and
@@ -42,8 +42,12 @@ its load before and after), ``speed.md`` (machine, command, settings and the tab
 
 from __future__ import annotations
 
+import json
 import logging
 import os
+import resource
+import subprocess
+import sys
 import tempfile
 import time
 import tracemalloc
@@ -64,6 +68,7 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, write_json
+from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 
 __all__ = ["SIZES", "Method", "SpeedSettings", "default_methods", "lab_round_trip", "main", "presets", "time_calls"]
@@ -719,6 +724,43 @@ def _after_apply(frame: np.ndarray, repeats: int, threads: int | None) -> dict[s
     }
 
 
+def fresh_process_main() -> None:
+    """The child of :func:`_fresh_processes`: ``argv`` is a frame (``.npy``), a method (``alcn``, the default ALCN,
+    or ``dog``, a raw DoG) and a number of calls; prints the median ms per call after the first and the page faults
+    per call as JSON."""
+    frame, method, calls = np.load(sys.argv[1]), sys.argv[2], int(sys.argv[3])
+    fn = ALCN().apply if method == "alcn" else raw_dog
+    fn(frame)
+    faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    times = []
+    for _ in range(calls):
+        t0 = time.perf_counter()
+        fn(frame)
+        times.append(time.perf_counter() - t0)
+    faults = (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults) / calls
+    print(json.dumps({"ms": float(np.median(times) * 1e3), "page_faults_per_call": faults}))
+
+
+def _fresh_processes(frame: np.ndarray, work: Path, calls: int) -> dict[str, dict[str, Any]]:
+    """The default ALCN and a raw DoG on ``frame``, each timed in a fresh Python process (:func:`fresh_process_main`)
+    as an application that starts, builds it and normalizes frames sees them: with glibc's malloc as it starts, and
+    with it keeping freed memory (:data:`~alcn_cv.malloc.GLIBC_TUNABLES`, as :func:`~alcn_cv.malloc.keep_freed_memory`
+    does, and as this process runs)."""
+    path = work / "fresh_process_frame.npy"
+    np.save(path, frame)
+    code = "from alcn_cv.bench.speed import fresh_process_main; fresh_process_main()"
+    result: dict[str, dict[str, Any]] = {}
+    for malloc, tunables in (("glibc", None), ("kept", GLIBC_TUNABLES)):
+        env = {k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"}
+        if tunables:
+            env["GLIBC_TUNABLES"] = tunables
+        for method in ("alcn", "dog"):
+            argv = [sys.executable, "-c", code, str(path), method, str(calls)]
+            done = subprocess.run(argv, env=env, capture_output=True, text=True, check=True)
+            result[f"{method} {malloc}"] = json.loads(done.stdout.strip().splitlines()[-1])
+    return result
+
+
 def _large_memory(size: tuple[int, int]) -> list[dict[str, Any]]:
     """Peak memory of ``apply`` on a large grayscale uint8 image (a synthetic frame tiled), for the
     default ALCN and the DoG, against the image's float32 size."""
@@ -880,6 +922,7 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     profile = _profile(default, gray, repeats)
     contract = _contract_overhead(gray, max(3, repeats // 2))
     threads = [_after_apply(gray, repeats, 1), _after_apply(gray, repeats, None)]
+    fresh = _fresh_processes(gray, work, max(5, 2 * repeats))
     memory = _large_memory(settings.large_size)
     video = _normalize_video(settings, work)
     batched = _batched(gray, small, repeats)
@@ -985,6 +1028,16 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
             f"{threads[0]['apply_ms']:.1f} ms",
         ),
         _target(
+            f"default ALCN in a fresh process: glibc's malloc as it starts / keeping freed memory, {size} gray",
+            fresh["alcn glibc"]["ms"] / fresh["alcn kept"]["ms"],
+            "1 with alcn_cv.keep_freed_memory()",
+            None,
+            f"{fresh['alcn glibc']['ms']:.2f} ms against {fresh['alcn kept']['ms']:.2f} "
+            f"({fresh['alcn glibc']['page_faults_per_call']:.0f} page faults per call against "
+            f"{fresh['alcn kept']['page_faults_per_call']:.0f}); raw DoG {fresh['dog glibc']['ms']:.2f} against "
+            f"{fresh['dog kept']['ms']:.2f} ms",
+        ),
+        _target(
             "alcn normalize video / (decode+encode + apply, in sequence)",
             video["normalize_s"] / video["sequential_s"],
             "< 1: decoding and encoding hidden",
@@ -1006,6 +1059,7 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
         "profile": profile,
         "contract": contract,
         "threads": threads,
+        "fresh_processes": fresh,
         "memory": memory,
         "video": video,
         "batched": batched,
