@@ -8,6 +8,7 @@ import pytest
 
 import alcn_cv
 from alcn_cv import InputError, WeightFileError
+from alcn_cv.data.frames import synthetic_frame
 from alcn_cv.enhance.alcn import MODELS
 
 METHODS = alcn_cv.available()
@@ -164,9 +165,11 @@ def test_import_does_not_load_torch(run_without_torch):
 
 
 def test_backend_follows_what_is_installed(run_python):
-    """createALCN() runs the Normalizer in torch when torch is installed, else by cv2.dnn (the
-    shipped ONNX); asking for torch where it is missing names the extra to install."""
-    assert alcn_cv.createALCN().backend == "fast"
+    """createALCN() runs a shipped Normalizer's ONNX export by cv2.dnn, installed torch or not, and a user's
+    weight file in torch when torch is installed; asking for torch where it is missing names the extra to install."""
+    assert alcn_cv.createALCN().backend == "opencv" and alcn_cv.createALCN(model="lite").backend == "opencv"
+    assert alcn_cv.createALCN(weights=alcn_cv.createALCN().weights_path).backend == "fast"
+    assert alcn_cv.createALCN(model="paper", grid_stride=16).backend == "fast"  # cv2.dnn runs the network's own
     proc = run_python("""
         import sys, numpy as np, alcn_cv
         from alcn_cv.errors import ALCNError, MissingDependencyError
@@ -245,3 +248,18 @@ def test_alcn_window_in_input_pixels_and_small_images(caplog, monkeypatch):
         out = alcn_cv.createALCN(model="lite").apply(np.full((47, 47), 128, np.uint8))
     assert out.shape == (47, 47)
     assert any("96 px window" in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.parametrize("model", ["gain", "lite"])
+def test_one_alcn_shared_by_threads(model):
+    """cv2.dnn keeps the input it was given between setInput and forward: the default backend runs one
+    inference at a time, so threads sharing one ALCN each get their own frame's output."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    alcn = alcn_cv.createALCN(model=model)
+    frames = [synthetic_frame(160, 120, False, seed=i) for i in range(8)]
+    expected = [alcn.apply(f) for f in frames]
+    with ThreadPoolExecutor(4) as pool:
+        for _ in range(3):
+            for got, want in zip(pool.map(alcn.apply, frames), expected):
+                np.testing.assert_array_equal(got, want)

@@ -41,7 +41,7 @@ def test_whole_image_methods_and_odd_working_sizes_are_not_cut(monkeypatch):
 
 
 def test_lite_inference_tanh_equals_torch():
-    alcn = alcn_cv.createALCN(model="lite")
+    alcn = alcn_cv.createALCN(model="lite", backend="fast")
     image = torch.from_numpy(synthetic_frame(200, 160, False).astype(np.float32) / 255)[None, None]
     with torch.inference_mode():
         fast = alcn.net.dense_grid(image)

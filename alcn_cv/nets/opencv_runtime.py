@@ -21,6 +21,7 @@ blocked layout); the input's name says which (:data:`IMAGE_INPUT`, :data:`BLOCKS
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -186,6 +187,8 @@ class OpenCVNormalizer:
         self.path = Path(onnx_path) if onnx_path is not None else DEFAULT_ONNX
         if not self.path.is_file():
             raise WeightFileError(f"ONNX model not found: {self.path} (write one with `alcn export --onnx PATH`)")
+        # one inference at a time: setInput and forward share the network's state across threads
+        self._lock = threading.Lock()
         try:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
@@ -220,12 +223,24 @@ class OpenCVNormalizer:
             raise WeightFileError(f"{self.path} is a gain Normalizer: give its config or put its weight file beside it")
         return load_normalizer_file(header).meta["config"]
 
-    def _grid_points(self, side: int) -> int:
-        self._set_padded(np.zeros((side, side), np.float32))
-        return self.net.forward().shape[-1]
+    def __getstate__(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if k not in ("net", "_lock")}
 
-    def _set_padded(self, padded: np.ndarray) -> None:
-        self.net.setInput(image_blocks(padded) if self.input == BLOCKS_INPUT else padded[None, None])
+    def __setstate__(self, state: dict) -> None:  # the network read again from its file
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+        self.net = cv2.dnn.readNetFromONNX(str(self.path))
+
+    def _forward(self, blob: np.ndarray) -> np.ndarray:
+        with self._lock:
+            self.net.setInput(blob)
+            return self.net.forward()
+
+    def _grid_points(self, side: int) -> int:
+        return self._forward(self._padded_input(np.zeros((side, side), np.float32))).shape[-1]
+
+    def _padded_input(self, padded: np.ndarray) -> np.ndarray:
+        return image_blocks(padded) if self.input == BLOCKS_INPUT else padded[None, None]
 
     def _output_stride(self) -> int:
         # A (48 + 8k)-pixel padded input gives 1 + 8k / stride grid points for the strides 1, 2, 4, 8.
@@ -250,20 +265,17 @@ class OpenCVNormalizer:
         h, w = check_gray(image).shape
         s = self.stride
         if self.features is not None:
-            moments = cell_moments(image, s)
-            if alongside is not None:
-                alongside()
-            self.net.setInput(self.features.from_moments(moments))
+            blob = self.features.from_moments(cell_moments(image, s))
         else:
             gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
             half = WINDOW // 2
             padded = cv2.copyMakeBorder(
                 image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w, cv2.BORDER_REFLECT_101
             )
-            self._set_padded(padded)
-            if alongside is not None:
-                alongside()
-        return self.net.forward()[0]
+            blob = self._padded_input(padded)
+        if alongside is not None:
+            alongside()
+        return self._forward(blob)[0]
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
         """``(n, 48, 48)`` float32 windows -> ``(n, N)``: the grid point at each window's centre, which sees
