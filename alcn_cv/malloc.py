@@ -3,10 +3,10 @@
 glibc serves a block above its mmap threshold with freshly mapped pages, and trims the top of its heap when more
 than its trim threshold lies free there. Both thresholds start low (128 KiB) and only grow as large blocks are
 freed, so a short process that normalizes frames of one size returns most of each frame's temporary arrays to
-the system and faults their pages in again on the next call, one 4 KiB page at a time. On the 2-core VM at
-1280x800 gray, in a fresh process, that is about 8,000 page faults per call of the default ALCN, which then takes
-19-21 ms instead of 11-12 (a raw DoG 8 instead of 2.7); a process that has already freed larger blocks (a long
-benchmark, say) does not see it. ``alcn bench speed`` measures both in fresh processes.
+the system and faults their pages in again on the next call, one 4 KiB page at a time: thousands of page faults
+per 1280x800 frame, which cost the default ALCN a third of its time and a raw DoG two thirds on the project's 2-core
+VMs. A process that has already freed larger blocks (a long benchmark, say) does not see it. ``alcn bench speed``
+times both in fresh processes.
 
 :func:`keep_freed_memory` fixes both thresholds for the whole process (``mallopt``), as starting it with
 :data:`GLIBC_TUNABLES` in the environment does. The ``alcn`` command calls it first; an application calls it

@@ -244,7 +244,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         type=_list(str),
         help="comma-separated labels to run (default all; dog always runs). Labels: none, clahe, dog, "
         + ", ".join(f"'{v}'" for v in [*speed.GAIN_VARIANTS, *speed.ALCN_VARIANTS])
-        + ", 'alcn opencv', 'alcn torch cpu', 'alcn torch cuda' "
+        + ", 'alcn fast', 'alcn torch cpu', 'alcn torch cuda' "
         "('alcn': the default, the gain Normalizer; the last three: the default on those backends)",
     )
     p.add_argument(

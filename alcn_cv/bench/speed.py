@@ -26,10 +26,10 @@ frame (it must stay flat).
 
 The **targets** (:func:`targets`) come first in the report, each with its measured value: the default ALCN (the gain
 Normalizer), its lite variant and the lite paper-family ALCN against a raw OpenCV DoG (:func:`raw_dog`) at 1280x800
-(the gain ones with their difference from their torch model) and the default's frame rate at 640x480, the torch-free
-backend against the default one and the default against DLCN, BGR against gray and its difference from the plain
-float Lab round trip (:func:`lab_round_trip`, within one level), the cost of the ``apply`` contract over each
-method's own computation, the peak memory on an 8000x8000 image, an application's OpenCV calls right after
+(the gain ones with their difference from their torch model) and the default's frame rate at 640x480, the default
+(torch-free) backend against the network in torch and the default against DLCN, BGR against gray and its difference
+from the plain float Lab round trip (:func:`lab_round_trip`, within one level), the cost of the ``apply`` contract
+over each method's own computation, the peak memory on an 8000x8000 image, an application's OpenCV calls right after
 ``apply``, the default ALCN and a raw DoG in fresh processes with glibc's malloc as it starts and keeping freed
 memory (:mod:`alcn_cv.malloc`; the ``alcn`` command, and so this run, keeps it), ``alcn normalize`` on the cookie-
 box video against its decoding and encoding alone, and the batched torch path (CUDA when present); with where the
