@@ -901,7 +901,6 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
             "dlcn gray": lambda: dlcn.apply(gray),
             "alcn gray": lambda: default.apply(gray),
             "alcn fast gray": lambda: torch_network.apply(gray),
-            "alcn torch gray": lambda: torch_cpu.apply(gray),
             "alcn bgr": lambda: default.apply(bgr),
             "alcn fast bgr": lambda: torch_network.apply(bgr),
             "alcn gain-lite gray": lambda: gain_lite.apply(gray),
@@ -912,6 +911,9 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
         },
         repeats,
     )
+    # after the others, in its own turns: its OpenMP threads, still spinning when it returns, slowed the call that
+    # followed it in the turns above by 2-4 ms at 1280x800 (the default's BGR call, 2026-11-28)
+    t |= _medians({"alcn torch gray": lambda: torch_cpu.apply(gray)}, repeats)
     logger.info("targets: stages, contract, threads, memory, video, batches")
     stages = {
         "alcn": _stages(default, gray, repeats),
