@@ -731,11 +731,7 @@ def fresh_process_main() -> None:
     fn = ALCN().apply if method == "alcn" else raw_dog
     fn(frame)
     faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-    times = []
-    for _ in range(calls):
-        t0 = time.perf_counter()
-        fn(frame)
-        times.append(time.perf_counter() - t0)
+    times = time_calls(lambda: fn(frame), 0, calls, calls, 0.0)
     faults = (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults) / calls
     print(json.dumps({"ms": float(np.median(times) * 1e3), "page_faults_per_call": faults}))
 

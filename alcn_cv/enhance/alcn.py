@@ -21,7 +21,6 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal, cast
 
-import cv2
 import numpy as np
 
 from alcn_cv.checks import unit_windows
@@ -31,7 +30,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.divisive import gaussian_energy
 from alcn_cv.filters.wide_band import BLOCK, block_means, wide_band_floor
-from alcn_cv.nets.opencv_runtime import WINDOW
+from alcn_cv.nets.opencv_runtime import RUNS_GAIN, WINDOW
 from alcn_cv.runtime import (
     DEFAULT_MODEL,
     MODELS,
@@ -116,7 +115,7 @@ class ALCN(Normalization):
             raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
         self.weights_path = Path(weights) if weights is not None else MODELS[model]
         if backend is None:  # a user's weight file may sit beside an older export: its own network in torch
-            shipped = weights is None and grid_stride is None and cv2.__version__ >= "5"
+            shipped = weights is None and grid_stride is None and RUNS_GAIN
             backend = "opencv" if shipped or not is_installed("torch") else "fast"
         if backend not in BACKENDS:
             raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")

@@ -55,6 +55,8 @@ WINDOW = 48
 _PROBE_POINTS = 3
 #: The input of the paper's Normalizer's export: the padded image.
 IMAGE_INPUT = "image"
+#: Whether ``cv2.dnn`` runs the gain Normalizers' exports: OpenCV 4's ONNX importer cannot infer their shapes.
+RUNS_GAIN = cv2.__version__ >= "5"
 #: The input of the lite Normalizer's export: :func:`image_blocks` of the padded image.
 BLOCKS_INPUT = "blocks"
 #: The side of those blocks: the lite Normalizer's first convolution (4x4, stride 4; a test checks they agree).
@@ -194,8 +196,7 @@ class OpenCVNormalizer:
         except cv2.error as exc:
             hint = (
                 ""
-                if cv2.__version__ >= "5"
-                # 4.x's ONNX importer cannot infer the gain graph's shapes
+                if RUNS_GAIN
                 else (
                     f"; OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers: use OpenCV 5, "
                     "install torch (backend='fast') or model='lite'"
