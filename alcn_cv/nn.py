@@ -23,13 +23,13 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
-from kornia.color import lab_to_rgb, rgb_to_lab
 from torch import nn
 
 from alcn_cv.checks import FULL_SCALE
 from alcn_cv.errors import InputError
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.torch_divisive import divisive_normalization
+from alcn_cv.filters.torch_lab import lab_to_rgb, rgb_to_lab
 from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
@@ -193,7 +193,7 @@ class ALCN2d(nn.Module):
             return self.to_unit(self.response(image))
         lab = rgb_to_lab(image)
         lightness = self.to_unit(self.response(lab[:, :1] * 0.01)) * 100.0
-        return lab_to_rgb(torch.cat([lightness, lab[:, 1:]], dim=1), clip=True)
+        return lab_to_rgb(torch.cat([lightness, lab[:, 1:]], dim=1))
 
     def _tf32(self, x: torch.Tensor) -> AbstractContextManager:
         """cuDNN without TF32 for a CUDA tensor unless :attr:`allow_tf32` (TF32 moves the output by about 1e-3)."""

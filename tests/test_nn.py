@@ -43,15 +43,16 @@ def test_gray_equals_the_float_output_of_apply(model):
 
 @pytest.mark.parametrize("model", ["gain", "lite"])
 def test_colour_is_normalized_on_lab_lightness(model):
-    """RGB in, normalized on L with a and b kept; kornia's exact CIE Lab against OpenCV's tabulated float one
-    (L up to 0.2 apart, which the normalization amplifies): equal to apply() to a few thousandths."""
+    """RGB in, normalized on L with a and b kept, by the Lab conversions of apply() (alcn_cv.filters.torch_lab):
+    equal to apply() to the float32 rounding of the conversions (L within 3e-5 of 100), which the normalization
+    amplifies as it does a gray input's (3e-7 of relative noise moves a gray output by about 1e-4)."""
     bgr = _bgr()
     expected = alcn_cv.createALCN(model=model, backend="torch").apply(bgr, out_dtype=np.float32)
     rgb = torch.from_numpy(_unit(bgr[..., ::-1].copy())).permute(2, 0, 1)[None]
     with torch.no_grad():
         out = ALCN2d(model=model).eval()(rgb)[0].permute(1, 2, 0).numpy()[..., ::-1]
     diff = np.abs(out - expected)
-    assert diff.max() < 1e-2 and diff.mean() < 1e-3, (diff.max(), diff.mean())
+    assert diff.max() < 3e-4 and diff.mean() < 1e-5, (diff.max(), diff.mean())
 
 
 def test_eq3_of_the_gain_models_is_the_mixture_of_their_maps():

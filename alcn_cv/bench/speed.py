@@ -64,9 +64,10 @@ from alcn_cv.bench.plots import plot_speed
 from alcn_cv.checks import FULL_SCALE
 from alcn_cv.data.frames import synthetic_frame
 from alcn_cv.enhance.alcn import ALCN
-from alcn_cv.enhance.base import Normalization
+from alcn_cv.enhance.base import Normalization, lab_and_lightness
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
+from alcn_cv.filters.lab import srgb_to_linear
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
@@ -260,10 +261,9 @@ def _split(
 def _to_gray(frame: np.ndarray) -> np.ndarray:
     """The float32 intensities ALCN's ``normalize`` sees for a uint8 frame (gray: the frame;
     colour: CIE L / 100, as :meth:`Normalization.apply` does)."""
-    unit = frame.astype(np.float32) / np.float32(255)
     if frame.ndim == 2:
-        return unit
-    return np.ascontiguousarray(cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)[..., 0]) / np.float32(100)
+        return frame.astype(np.float32) / np.float32(255)
+    return lab_and_lightness(frame)[1]
 
 
 def video_memory(
@@ -586,13 +586,14 @@ def raw_dog(frame: np.ndarray) -> np.ndarray:
 
 
 def lab_round_trip(method: Normalization, img: np.ndarray, out_dtype: np.dtype | None = None) -> np.ndarray:
-    """The reference of ``apply``'s colour path, written plainly: a BGR image to float CIE Lab,
-    L / 100 normalized (:meth:`Normalization.normalize`) and mapped to [0, 1] (``to_unit``), times
-    100 back into L, Lab to BGR, clipped and converted with NumPy (``rint`` for integer types)."""
+    """The reference of ``apply``'s colour path, written plainly: a BGR image decoded to linear intensities and
+    converted to float CIE Lab (:mod:`alcn_cv.filters.lab`), L / 100 normalized (:meth:`Normalization.normalize`)
+    and mapped to [0, 1] (``to_unit``), times 100 back into L, Lab to BGR, clipped and converted with NumPy (``rint``
+    for integer types)."""
     out_dtype = np.dtype(img.dtype if out_dtype is None else out_dtype)
     unit = img.astype(np.float32) * np.float32(1 / FULL_SCALE[img.dtype]) if img.dtype != np.float32 else img.copy()
-    lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab)
-    lightness = np.ascontiguousarray(lab[..., 0]) / np.float32(100)
+    lab = cv2.cvtColor(srgb_to_linear(unit), cv2.COLOR_LBGR2Lab)
+    lightness = np.ascontiguousarray(lab[..., 0]) * np.float32(0.01)
     lab[..., 0] = method.to_unit(method.normalize(lightness)) * 100.0
     bgr = np.clip(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR), 0, 1)
     return bgr if out_dtype == np.float32 else np.rint(bgr * FULL_SCALE[out_dtype]).astype(out_dtype)

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Literal, cast
 import numpy as np
 
 from alcn_cv.checks import unit_windows
-from alcn_cv.enhance.base import Normalization, bgr_with_lightness, lab_and_lightness, to_unit_float, with_alpha
+from alcn_cv.enhance.base import Normalization, bgr_with_lightness, lab_and_lightness, with_alpha
 from alcn_cv.enhance.registry import parse_spec, register
 from alcn_cv.errors import InputError
 from alcn_cv.extras import is_installed, require
@@ -245,7 +245,7 @@ class ALCN(Normalization):
         channels = 1 if frames.ndim == 3 else frames.shape[3]
         body = frames[..., :-1] if channels in (2, 4) else frames
         if channels in (3, 4):
-            labs, planes = zip(*(lab_and_lightness(to_unit_float(image)) for image in body))
+            labs, planes = zip(*(lab_and_lightness(image) for image in body))
             units = run(np.stack(planes), np.dtype(np.float32), half)
             out = np.stack([bgr_with_lightness(lab, unit * np.float32(100), dtype) for lab, unit in zip(labs, units)])
         else:

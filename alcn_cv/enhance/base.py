@@ -31,6 +31,7 @@ import numpy as np
 
 from alcn_cv.checks import FULL_SCALE, SUPPORTED_DTYPES, check_gray, check_image, unit_windows
 from alcn_cv.errors import InputError
+from alcn_cv.filters.lab import srgb_to_linear
 
 __all__ = ["Normalization", "NoNormalization"]
 
@@ -44,6 +45,8 @@ _LIGHTNESS_OF_LAB = np.array([[0.01, 0.0, 0.0]], np.float32)
 _UINT8_LEVELS = np.arange(256, dtype=np.uint8).astype(np.float32).reshape(1, 256) * np.float32(
     1.0 / FULL_SCALE[np.dtype(np.uint8)]
 )
+#: :func:`~alcn_cv.filters.lab.srgb_to_linear` of :data:`_UINT8_LEVELS`.
+_LINEAR_UINT8_LEVELS = srgb_to_linear(_UINT8_LEVELS.copy())
 #: The classes that already warned about an image smaller than their window (once per process).
 _WARNED_SMALL: set[type] = set()
 
@@ -61,11 +64,13 @@ def to_unit_float(img: np.ndarray) -> np.ndarray:
     return unit
 
 
-def lab_and_lightness(unit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """CIE Lab of float BGR intensities in [0, 1], computed in place in ``unit`` (L in [0, 100]),
-    and its L / 100 as a float32 ``HxW`` plane in [0, 1]: what :meth:`Normalization.apply`
-    normalizes for a colour image."""
-    lab = cv2.cvtColor(unit, cv2.COLOR_BGR2Lab, dst=unit)
+def lab_and_lightness(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CIE Lab of a valid BGR image (uint8, uint16 or float32 in [0, 1]) as a new float32 array (L in [0, 100];
+    :mod:`alcn_cv.filters.lab`: the sRGB curve decoded, then OpenCV's ``COLOR_LBGR2Lab``), and its L / 100 as a
+    float32 ``HxW`` plane in [0, 1]: what :meth:`Normalization.apply` normalizes for a colour image."""
+    # a uint8 image's decoded curve by one table lookup: the float path's values for its 256 levels
+    linear = cv2.LUT(img, _LINEAR_UINT8_LEVELS) if img.dtype == np.uint8 else srgb_to_linear(to_unit_float(img))
+    lab = cv2.cvtColor(linear, cv2.COLOR_LBGR2Lab, dst=linear)
     return lab, cv2.transform(lab, _LIGHTNESS_OF_LAB)
 
 
@@ -258,27 +263,21 @@ class Normalization:
             if direct is not None:
                 self._warn_if_small(img.shape)
                 return direct.reshape(img.shape)
-        unit = to_unit_float(img)
         if img.ndim == 3 and img.shape[2] == 3:
-            return self._apply_bgr(unit, out_dtype)
+            return self._apply_bgr(img, out_dtype)
+        unit = to_unit_float(img)
         return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
 
-    def _apply_bgr(self, unit: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
-        """:meth:`apply` on BGR intensities in [0, 1] (``unit``, used as scratch space): the
-        L channel of CIE Lab normalized, a and b kept.
+    def _apply_bgr(self, img: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
+        """:meth:`apply` on a valid BGR image: the L channel of CIE Lab normalized, a and b kept.
 
-        OpenCV passes throughout, the two Lab conversions in place in ``unit``: L / 100 in one
-        ``cv2.transform``, the response mapped to [0, 100] by ``cv2.addWeighted`` and two
-        thresholds and put back by ``cv2.insertChannel``; ``cv2.COLOR_Lab2BGR`` clips linear RGB
-        to [0, 1] before its gamma curve (``Lab2RGBfloat`` in OpenCV's ``color_lab.cpp``), so a
-        uint8 output is one ``cv2.convertScaleAbs``. The two float conversions are most of the
-        cost and stay: OpenCV's float ``BGR2Lab`` interpolates a fixed-point table (its L is up
-        to 0.2 off the CIE formula, which a normalization amplifies to several levels), its
-        8-bit conversions quantize L to 100/255 and a, b to units (many levels off the float
-        path), and ``COLOR_Lab2LBGR`` followed by the sRGB curve in OpenCV passes (a fit on square
-        roots, within 0.1 level) measured no faster than ``Lab2BGR``'s fused spline (``alcn bench
-        speed`` measures the BGR / gray ratio)."""
-        lab, lightness = lab_and_lightness(unit)
+        OpenCV passes throughout: the Lab image of :func:`lab_and_lightness` (its L / 100 in one ``cv2.transform``),
+        the response mapped to [0, 100] by ``cv2.addWeighted`` and two thresholds and put back by
+        ``cv2.insertChannel`` (:func:`bgr_with_lightness`); ``cv2.COLOR_Lab2BGR`` clips linear RGB to [0, 1] before
+        its sRGB curve, so a uint8 output is one ``cv2.convertScaleAbs``. The two float conversions are most of the
+        cost (``alcn bench speed`` measures the BGR / gray ratio); OpenCV's 8-bit conversions quantize L to 100/255
+        and a, b to units, many levels off the float path."""
+        lab, lightness = lab_and_lightness(img)
         response = self._normalize_checked(lightness)
         lo, hi = self.output_range
         scale = 100.0 / (hi - lo)
@@ -303,10 +302,9 @@ class Normalization:
     def _intensity(self, img: np.ndarray) -> np.ndarray:
         """The float32 ``HxW`` plane :meth:`apply` normalizes for a valid gray or BGR image
         without alpha: its intensities in [0, 1], or a BGR image's CIE L / 100 (as :meth:`_apply_bgr`)."""
-        unit = to_unit_float(img)
-        if unit.ndim == 3 and unit.shape[2] == 3:
-            return lab_and_lightness(unit)[1]
-        return unit.reshape(img.shape[:2])
+        if img.ndim == 3 and img.shape[2] == 3:
+            return lab_and_lightness(img)[1]
+        return to_unit_float(img).reshape(img.shape[:2])
 
     def _strip_context(self, img: np.ndarray, strips: list[tuple[int, int, int, int]]) -> AbstractContextManager:
         """The context :meth:`apply` normalizes the strips of a large image in (:meth:`_strips`):

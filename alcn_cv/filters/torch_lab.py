@@ -1,0 +1,79 @@
+"""CIE Lab in torch as :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>` computes it (:mod:`alcn_cv.filters.lab`):
+OpenCV's constants and its splines for the cube root and the sRGB encoding, differentiable, on any device.
+
+kornia's :func:`~kornia.color.rgb_to_lab` uses the exact CIE formulas and another white point; through a
+normalization that amplifies L, they put :class:`~alcn_cv.nn.ALCN2d` 1e-2 away from ``apply()`` in colour.
+
+Example::
+
+    >>> import torch
+    >>> rgb = torch.rand(1, 3, 8, 8)
+    >>> bool((lab_to_rgb(rgb_to_lab(rgb)) - rgb).abs().max() < 1e-3)
+    True
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from alcn_cv.filters.lab import (
+    CUBE_ROOT_SCALE,
+    GAMMA_SCALE,
+    L_SLOPE,
+    LINEAR_BELOW,
+    SLOPE,
+    SRGB_TO_XYZ,
+    WHITE_POINT,
+    XYZ_TO_SRGB,
+    cube_root_table,
+    inverse_gamma_table,
+)
+
+__all__ = ["lab_to_rgb", "rgb_to_lab"]
+
+_OFFSET = 16.0 / 116.0
+
+
+def _spline(x: torch.Tensor, table: np.ndarray) -> torch.Tensor:
+    """The spline of :func:`~alcn_cv.filters.lab.spline_coefficients` at ``x`` (in knots), as OpenCV evaluates it:
+    the polynomial of interval ``clamp(floor(x), 0, n - 1)``, beyond the ends too."""
+    coefficients = torch.as_tensor(table, dtype=x.dtype, device=x.device)
+    index = x.detach().floor().clamp(0, len(table) - 1).long()
+    t = x - index.to(x.dtype)
+    a, b, c, d = (coefficients[:, k][index] for k in range(4))
+    return ((d * t + c) * t + b) * t + a
+
+
+def _matrix(m: np.ndarray, like: torch.Tensor) -> torch.Tensor:
+    return torch.as_tensor(m.astype(np.float32), dtype=like.dtype, device=like.device)
+
+
+def rgb_to_lab(image: torch.Tensor) -> torch.Tensor:
+    """RGB ``(B, 3, H, W)`` in [0, 1] (sRGB-encoded; clipped) -> CIE Lab ``(B, 3, H, W)``: L in [0, 100], a and b
+    in about [-128, 127], as OpenCV's ``COLOR_LBGR2Lab`` of the decoded intensities."""
+    rgb = image.clamp(0.0, 1.0)
+    linear = torch.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    # X and Z relative to the white point's, as OpenCV folds it into the matrix
+    to_xyz = _matrix(SRGB_TO_XYZ / WHITE_POINT[:, None], image)
+    xyz = torch.einsum("ij,bjhw->bihw", to_xyz, linear)
+    f = _spline(xyz * float(CUBE_ROOT_SCALE), cube_root_table())
+    fx, fy, fz = f.unbind(1)
+    y = xyz[:, 1]
+    lightness = torch.where(y > LINEAR_BELOW, 116.0 * fy - 16.0, L_SLOPE * y)
+    return torch.stack([lightness, 500.0 * (fx - fy), 200.0 * (fy - fz)], dim=1)
+
+
+def lab_to_rgb(lab: torch.Tensor) -> torch.Tensor:
+    """CIE Lab ``(B, 3, H, W)`` -> RGB ``(B, 3, H, W)`` in [0, 1] (sRGB-encoded; linear RGB clipped to [0, 1] before
+    the encoding), as OpenCV's float ``COLOR_Lab2BGR``."""
+    lightness, a, b = lab.unbind(1)
+    dark = lightness <= 8.0  # (6 / 29)^3 * 903.3
+    y_dark = lightness / L_SLOPE
+    fy = torch.where(dark, SLOPE * y_dark + _OFFSET, (lightness + 16.0) / 116.0)
+    y = torch.where(dark, y_dark, fy * fy * fy)
+    fxz = torch.stack([a / 500.0 + fy, fy - b / 200.0], dim=1)
+    x, z = torch.where(fxz <= 6.0 / 29.0, (fxz - _OFFSET) / SLOPE, fxz * fxz * fxz).unbind(1)
+    to_rgb = _matrix(XYZ_TO_SRGB * WHITE_POINT[None, :], lab)
+    linear = torch.einsum("ij,bjhw->bihw", to_rgb, torch.stack([x, y, z], dim=1)).clamp(0.0, 1.0)
+    return _spline(linear * float(GAMMA_SCALE), inverse_gamma_table())
