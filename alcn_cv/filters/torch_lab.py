@@ -35,18 +35,25 @@ __all__ = ["lab_to_rgb", "rgb_to_lab"]
 _OFFSET = 16.0 / 116.0
 
 
-def _spline(x: torch.Tensor, table: np.ndarray) -> torch.Tensor:
+#: The splines' coefficients ``(1024, 4)`` (tensors, so that ``torch.compile`` captures them as constants).
+_CUBE_ROOT = torch.from_numpy(cube_root_table())
+_INVERSE_GAMMA = torch.from_numpy(inverse_gamma_table())
+
+
+def _spline(x: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
     """The spline of :func:`~alcn_cv.filters.lab.spline_coefficients` at ``x`` (in knots), as OpenCV evaluates it:
     the polynomial of interval ``clamp(floor(x), 0, n - 1)``, beyond the ends too."""
-    coefficients = torch.as_tensor(table, dtype=x.dtype, device=x.device)
+    coefficients = table.to(device=x.device, dtype=x.dtype)
     index = x.detach().floor().clamp(0, len(table) - 1).long()
     t = x - index.to(x.dtype)
     a, b, c, d = (coefficients[:, k][index] for k in range(4))
     return ((d * t + c) * t + b) * t + a
 
 
-def _matrix(m: np.ndarray, like: torch.Tensor) -> torch.Tensor:
-    return torch.as_tensor(m.astype(np.float32), dtype=like.dtype, device=like.device)
+#: Linear RGB -> XYZ relative to the white point (X and Z divided by its, as OpenCV folds it into the matrix), and
+#: XYZ relative to the white point -> linear RGB.
+_TO_XYZ = torch.from_numpy((SRGB_TO_XYZ / WHITE_POINT[:, None]).astype(np.float32))
+_TO_RGB = torch.from_numpy((XYZ_TO_SRGB * WHITE_POINT[None, :]).astype(np.float32))
 
 
 def rgb_to_lab(image: torch.Tensor) -> torch.Tensor:
@@ -54,10 +61,8 @@ def rgb_to_lab(image: torch.Tensor) -> torch.Tensor:
     in about [-128, 127], as OpenCV's ``COLOR_LBGR2Lab`` of the decoded intensities."""
     rgb = image.clamp(0.0, 1.0)
     linear = torch.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
-    # X and Z relative to the white point's, as OpenCV folds it into the matrix
-    to_xyz = _matrix(SRGB_TO_XYZ / WHITE_POINT[:, None], image)
-    xyz = torch.einsum("ij,bjhw->bihw", to_xyz, linear)
-    f = _spline(xyz * float(CUBE_ROOT_SCALE), cube_root_table())
+    xyz = torch.einsum("ij,bjhw->bihw", _TO_XYZ.to(linear), linear)
+    f = _spline(xyz * float(CUBE_ROOT_SCALE), _CUBE_ROOT)
     fx, fy, fz = f.unbind(1)
     y = xyz[:, 1]
     lightness = torch.where(y > LINEAR_BELOW, 116.0 * fy - 16.0, L_SLOPE * y)
@@ -74,6 +79,5 @@ def lab_to_rgb(lab: torch.Tensor) -> torch.Tensor:
     y = torch.where(dark, y_dark, fy * fy * fy)
     fxz = torch.stack([a / 500.0 + fy, fy - b / 200.0], dim=1)
     x, z = torch.where(fxz <= 6.0 / 29.0, (fxz - _OFFSET) / SLOPE, fxz * fxz * fxz).unbind(1)
-    to_rgb = _matrix(XYZ_TO_SRGB * WHITE_POINT[None, :], lab)
-    linear = torch.einsum("ij,bjhw->bihw", to_rgb, torch.stack([x, y, z], dim=1)).clamp(0.0, 1.0)
-    return _spline(linear * float(GAMMA_SCALE), inverse_gamma_table())
+    linear = torch.einsum("ij,bjhw->bihw", _TO_RGB.to(lab), torch.stack([x, y, z], dim=1)).clamp(0.0, 1.0)
+    return _spline(linear * float(GAMMA_SCALE), _INVERSE_GAMMA)
