@@ -29,7 +29,7 @@ from alcn_cv.checks import FULL_SCALE
 from alcn_cv.errors import InputError
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.torch_divisive import divisive_normalization
-from alcn_cv.filters.torch_lab import lab_to_rgb, rgb_to_lab
+from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
@@ -98,6 +98,7 @@ class ALCN2d(nn.Module):
                 f"grid_stride must be a positive multiple of {stride} for this network, got {grid_stride!r}"
             )
         self.mixture = GaussianMixture2d(self.spec.full_res_sigmas)
+        self.to_lab, self.from_lab = RgbToLab(), LabToRgb()  # colour images: the CIE Lab of apply()
         self.allow_tf32 = allow_tf32
 
     def working(self, gray: torch.Tensor) -> torch.Tensor:
@@ -191,9 +192,9 @@ class ALCN2d(nn.Module):
             raise InputError(f"image must have shape (B, 1 | 3, H, W), got {tuple(image.shape)}")
         if image.shape[1] == 1:
             return self.to_unit(self.response(image))
-        lab = rgb_to_lab(image)
+        lab = self.to_lab(image)
         lightness = self.to_unit(self.response(lab[:, :1] * 0.01)) * 100.0
-        return lab_to_rgb(torch.cat([lightness, lab[:, 1:]], dim=1))
+        return self.from_lab(torch.cat([lightness, lab[:, 1:]], dim=1))
 
     def _tf32(self, x: torch.Tensor) -> AbstractContextManager:
         """cuDNN without TF32 for a CUDA tensor unless :attr:`allow_tf32` (TF32 moves the output by about 1e-3)."""

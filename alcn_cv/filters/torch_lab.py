@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from torch import nn
 
 from alcn_cv.filters.lab import (
     CUBE_ROOT_SCALE,
@@ -30,48 +31,38 @@ from alcn_cv.filters.lab import (
     inverse_gamma_table,
 )
 
-__all__ = ["lab_to_rgb", "rgb_to_lab"]
+__all__ = ["LabToRgb", "RgbToLab", "lab_to_rgb", "rgb_to_lab"]
 
 _OFFSET = 16.0 / 116.0
-
-
-#: The splines' coefficients ``(1024, 4)`` (tensors, so that ``torch.compile`` captures them as constants).
+#: Linear RGB -> XYZ relative to the white point (X and Z divided by its, as OpenCV folds it into the matrix), and
+#: XYZ relative to the white point -> linear RGB.
+_TO_XYZ = torch.from_numpy((SRGB_TO_XYZ / WHITE_POINT[:, None]).astype(np.float32))
+_TO_RGB = torch.from_numpy((XYZ_TO_SRGB * WHITE_POINT[None, :]).astype(np.float32))
+#: The splines' coefficients ``(1024, 4)``.
 _CUBE_ROOT = torch.from_numpy(cube_root_table())
 _INVERSE_GAMMA = torch.from_numpy(inverse_gamma_table())
 
 
 def _spline(x: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
-    """The spline of :func:`~alcn_cv.filters.lab.spline_coefficients` at ``x`` (in knots), as OpenCV evaluates it:
-    the polynomial of interval ``clamp(floor(x), 0, n - 1)``, beyond the ends too."""
-    coefficients = table.to(device=x.device, dtype=x.dtype)
+    """The spline of :func:`~alcn_cv.filters.lab.spline_coefficients` ``table`` at ``x`` (in knots), as OpenCV
+    evaluates it: the polynomial of interval ``clamp(floor(x), 0, n - 1)``, beyond the ends too."""
     index = x.detach().floor().clamp(0, len(table) - 1).long()
     t = x - index.to(x.dtype)
-    a, b, c, d = (coefficients[:, k][index] for k in range(4))
+    a, b, c, d = (table[:, k][index] for k in range(4))
     return ((d * t + c) * t + b) * t + a
 
 
-#: Linear RGB -> XYZ relative to the white point (X and Z divided by its, as OpenCV folds it into the matrix), and
-#: XYZ relative to the white point -> linear RGB.
-_TO_XYZ = torch.from_numpy((SRGB_TO_XYZ / WHITE_POINT[:, None]).astype(np.float32))
-_TO_RGB = torch.from_numpy((XYZ_TO_SRGB * WHITE_POINT[None, :]).astype(np.float32))
-
-
-def rgb_to_lab(image: torch.Tensor) -> torch.Tensor:
-    """RGB ``(B, 3, H, W)`` in [0, 1] (sRGB-encoded; clipped) -> CIE Lab ``(B, 3, H, W)``: L in [0, 100], a and b
-    in about [-128, 127], as OpenCV's ``COLOR_LBGR2Lab`` of the decoded intensities."""
+def _rgb_to_lab(image: torch.Tensor, to_xyz: torch.Tensor, cube_root: torch.Tensor) -> torch.Tensor:
     rgb = image.clamp(0.0, 1.0)
     linear = torch.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
-    xyz = torch.einsum("ij,bjhw->bihw", _TO_XYZ.to(linear), linear)
-    f = _spline(xyz * float(CUBE_ROOT_SCALE), _CUBE_ROOT)
-    fx, fy, fz = f.unbind(1)
+    xyz = torch.einsum("ij,bjhw->bihw", to_xyz, linear)
+    fx, fy, fz = _spline(xyz * float(CUBE_ROOT_SCALE), cube_root).unbind(1)
     y = xyz[:, 1]
     lightness = torch.where(y > LINEAR_BELOW, 116.0 * fy - 16.0, L_SLOPE * y)
     return torch.stack([lightness, 500.0 * (fx - fy), 200.0 * (fy - fz)], dim=1)
 
 
-def lab_to_rgb(lab: torch.Tensor) -> torch.Tensor:
-    """CIE Lab ``(B, 3, H, W)`` -> RGB ``(B, 3, H, W)`` in [0, 1] (sRGB-encoded; linear RGB clipped to [0, 1] before
-    the encoding), as OpenCV's float ``COLOR_Lab2BGR``."""
+def _lab_to_rgb(lab: torch.Tensor, to_rgb: torch.Tensor, inverse_gamma: torch.Tensor) -> torch.Tensor:
     lightness, a, b = lab.unbind(1)
     dark = lightness <= 8.0  # (6 / 29)^3 * 903.3
     y_dark = lightness / L_SLOPE
@@ -79,5 +70,42 @@ def lab_to_rgb(lab: torch.Tensor) -> torch.Tensor:
     y = torch.where(dark, y_dark, fy * fy * fy)
     fxz = torch.stack([a / 500.0 + fy, fy - b / 200.0], dim=1)
     x, z = torch.where(fxz <= 6.0 / 29.0, (fxz - _OFFSET) / SLOPE, fxz * fxz * fxz).unbind(1)
-    linear = torch.einsum("ij,bjhw->bihw", _TO_RGB.to(lab), torch.stack([x, y, z], dim=1)).clamp(0.0, 1.0)
-    return _spline(linear * float(GAMMA_SCALE), _INVERSE_GAMMA)
+    linear = torch.einsum("ij,bjhw->bihw", to_rgb, torch.stack([x, y, z], dim=1)).clamp(0.0, 1.0)
+    return _spline(linear * float(GAMMA_SCALE), inverse_gamma)
+
+
+def rgb_to_lab(image: torch.Tensor) -> torch.Tensor:
+    """RGB ``(B, 3, H, W)`` in [0, 1] (sRGB-encoded; clipped) -> CIE Lab ``(B, 3, H, W)``: L in [0, 100], a and b
+    in about [-128, 127], as OpenCV's ``COLOR_LBGR2Lab`` of the decoded intensities. Its constants are copied to
+    ``image``'s device at each call; :class:`RgbToLab` keeps them there."""
+    return _rgb_to_lab(image, _TO_XYZ.to(image), _CUBE_ROOT.to(image))
+
+
+def lab_to_rgb(lab: torch.Tensor) -> torch.Tensor:
+    """CIE Lab ``(B, 3, H, W)`` -> RGB ``(B, 3, H, W)`` in [0, 1] (sRGB-encoded; linear RGB clipped to [0, 1] before
+    the encoding), as OpenCV's float ``COLOR_Lab2BGR``; :class:`LabToRgb` keeps the constants on its device."""
+    return _lab_to_rgb(lab, _TO_RGB.to(lab), _INVERSE_GAMMA.to(lab))
+
+
+class RgbToLab(nn.Module):
+    """:func:`rgb_to_lab` with its matrix and spline as buffers (not saved), moved with the module."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.register_buffer("to_xyz", _TO_XYZ.clone(), persistent=False)
+        self.register_buffer("cube_root", _CUBE_ROOT.clone(), persistent=False)
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        return _rgb_to_lab(image, self.to_xyz.to(image.dtype), self.cube_root.to(image.dtype))
+
+
+class LabToRgb(nn.Module):
+    """:func:`lab_to_rgb` with its matrix and spline as buffers (not saved), moved with the module."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.register_buffer("to_rgb", _TO_RGB.clone(), persistent=False)
+        self.register_buffer("inverse_gamma", _INVERSE_GAMMA.clone(), persistent=False)
+
+    def forward(self, lab: torch.Tensor) -> torch.Tensor:
+        return _lab_to_rgb(lab, self.to_rgb.to(lab.dtype), self.inverse_gamma.to(lab.dtype))
