@@ -79,3 +79,19 @@ def test_apply_decodes_uint8_and_float_images_alike():
     # the float values apply() sees for a uint8 image: the table of the decoded curve is the float path's
     from_float = clahe.apply(bgr.astype(np.float32) * np.float32(1 / 255), out_dtype=np.float32)
     np.testing.assert_array_equal(from_uint8, from_float)
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16, torch.float64])
+def test_torch_lab_in_other_dtypes_stays_near_float32(dtype):
+    """The spline's interval is found in float32 (1023 is not a bfloat16); the values follow the dtype's precision."""
+    rgb = torch.rand(1, 3, 16, 20)
+    lab = torch_lab.rgb_to_lab(rgb)
+    other = torch_lab.RgbToLab().to(dtype)(rgb.to(dtype))
+    assert other.dtype == dtype
+    assert (other.float() - lab).abs().max() < {torch.float16: 1.0, torch.bfloat16: 5.0, torch.float64: 1e-3}[dtype]
+    back = torch_lab.LabToRgb().to(dtype)(lab.to(dtype)).float()
+    assert (back - torch_lab.lab_to_rgb(lab)).abs().max() < {
+        torch.float16: 0.05,
+        torch.bfloat16: 0.15,
+        torch.float64: 1e-5,
+    }[dtype]

@@ -46,7 +46,7 @@ _INVERSE_GAMMA = torch.from_numpy(inverse_gamma_table())
 def _spline(x: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
     """The spline of :func:`~alcn_cv.filters.lab.spline_coefficients` ``table`` at ``x`` (in knots), as OpenCV
     evaluates it: the polynomial of interval ``clamp(floor(x), 0, n - 1)``, beyond the ends too."""
-    index = x.detach().floor().clamp(0, len(table) - 1).long()
+    index = x.detach().float().floor().clamp(0, len(table) - 1).long()  # float32: 1023 is not a bfloat16
     t = x - index.to(x.dtype)
     a, b, c, d = (table[:, k][index] for k in range(4))
     return ((d * t + c) * t + b) * t + a
