@@ -90,6 +90,9 @@ def lab_to_rgb(lab: torch.Tensor) -> torch.Tensor:
 class RgbToLab(nn.Module):
     """:func:`rgb_to_lab` with its matrix and spline as buffers (not saved), moved with the module."""
 
+    to_xyz: torch.Tensor
+    cube_root: torch.Tensor
+
     def __init__(self) -> None:
         super().__init__()
         self.register_buffer("to_xyz", _TO_XYZ.clone(), persistent=False)
@@ -101,6 +104,9 @@ class RgbToLab(nn.Module):
 
 class LabToRgb(nn.Module):
     """:func:`lab_to_rgb` with its matrix and spline as buffers (not saved), moved with the module."""
+
+    to_rgb: torch.Tensor
+    inverse_gamma: torch.Tensor
 
     def __init__(self) -> None:
         super().__init__()
