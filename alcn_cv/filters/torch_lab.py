@@ -14,6 +14,8 @@ Example::
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import torch
 from torch import nn
@@ -87,31 +89,36 @@ def lab_to_rgb(lab: torch.Tensor) -> torch.Tensor:
     return _lab_to_rgb(lab, _TO_RGB.to(lab), _INVERSE_GAMMA.to(lab))
 
 
-class RgbToLab(nn.Module):
-    """:func:`rgb_to_lab` with its matrix and spline as buffers (not saved), moved with the module."""
+class _Conversion(nn.Module):
+    """A conversion of this module with its matrix and spline as buffers (not saved), moved with the module."""
 
-    to_xyz: torch.Tensor
-    cube_root: torch.Tensor
+    matrix: torch.Tensor
+    spline: torch.Tensor
 
-    def __init__(self) -> None:
+    def __init__(
+        self,
+        convert: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor],
+        matrix: torch.Tensor,
+        spline: torch.Tensor,
+    ) -> None:
         super().__init__()
-        self.register_buffer("to_xyz", _TO_XYZ.clone(), persistent=False)
-        self.register_buffer("cube_root", _CUBE_ROOT.clone(), persistent=False)
+        self.convert = convert
+        self.register_buffer("matrix", matrix.clone(), persistent=False)
+        self.register_buffer("spline", spline.clone(), persistent=False)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return _rgb_to_lab(image, self.to_xyz.to(image.dtype), self.cube_root.to(image.dtype))
+        return self.convert(image, self.matrix.to(image.dtype), self.spline.to(image.dtype))
 
 
-class LabToRgb(nn.Module):
-    """:func:`lab_to_rgb` with its matrix and spline as buffers (not saved), moved with the module."""
-
-    to_rgb: torch.Tensor
-    inverse_gamma: torch.Tensor
+class RgbToLab(_Conversion):
+    """:func:`rgb_to_lab` as a module: its constants move with it (``.to(device, dtype)``)."""
 
     def __init__(self) -> None:
-        super().__init__()
-        self.register_buffer("to_rgb", _TO_RGB.clone(), persistent=False)
-        self.register_buffer("inverse_gamma", _INVERSE_GAMMA.clone(), persistent=False)
+        super().__init__(_rgb_to_lab, _TO_XYZ, _CUBE_ROOT)
 
-    def forward(self, lab: torch.Tensor) -> torch.Tensor:
-        return _lab_to_rgb(lab, self.to_rgb.to(lab.dtype), self.inverse_gamma.to(lab.dtype))
+
+class LabToRgb(_Conversion):
+    """:func:`lab_to_rgb` as a module: its constants move with it (``.to(device, dtype)``)."""
+
+    def __init__(self) -> None:
+        super().__init__(_lab_to_rgb, _TO_RGB, _INVERSE_GAMMA)
