@@ -1,7 +1,9 @@
 """Filtering operations: ALCN's Gaussian mixture and per-window standardization.
 
 :mod:`~alcn_cv.filters.gaussian_mixture` (NumPy/OpenCV) imports no torch; the differentiable
-:func:`gaussian_mixture2d` and :class:`GaussianMixture2d` (kornia) load torch on first use.
+:func:`gaussian_mixture2d` and :class:`GaussianMixture2d` (kornia) load torch on first use. Each
+step has its NumPy/OpenCV module and its torch twin (``torch_*``): the divisive normalization, the
+wide band, the CIE Lab of colour images (:mod:`~alcn_cv.filters.lab`, :mod:`~alcn_cv.filters.torch_lab`).
 """
 
 from alcn_cv.filters.gaussian_mixture import (
