@@ -231,7 +231,8 @@ class GainNormalizer(nn.Module):
     def maps_from_features(self, features: torch.Tensor) -> torch.Tensor:
         """F_k = exp(g) * w_k ``(B, N, gh, gw)`` from :meth:`features` ``(B, 4, gh, gw)``: the dilated
         convolutions (reflect-101 borders, ReLU), the head, the weights made to sum to zero."""
-        # oneDNN's channels-last convolutions are 1.3x as fast on the CPU; inference only, so that training's sums stay
+        # oneDNN's channels-last convolutions are 1.3x as fast on the CPU; in inference only, so that training (and the
+        # preset's rebuild of the shipped file) keeps its own sums
         x = features.contiguous(memory_format=torch.channels_last) if cpu_inference(features) else features
         for conv, d in zip(self.convs, self.dilations):
             x = F.relu(conv(reflect101_pad_any(x, d)))
