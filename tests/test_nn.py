@@ -157,6 +157,16 @@ def test_cuda_equals_the_cpu_and_float16_stays_close(model):
 
 
 @CUDA
+def test_cuda_colour_equals_the_cpu():
+    """The CIE Lab conversions' buffers move with the module; the colour output is the CPU's to float rounding."""
+    rgb = torch.from_numpy(_unit(_bgr()[..., ::-1].copy())).permute(2, 0, 1)[None]
+    with torch.no_grad():
+        reference = ALCN2d().eval()(rgb)
+        out = ALCN2d().eval().cuda()(rgb.cuda()).cpu()
+    assert (out - reference).abs().max() < 1e-3
+
+
+@CUDA
 def test_cuda_compiles_with_inductor():
     x = torch.rand(4, 1, 400, 640, device="cuda")
     module = ALCN2d().eval().cuda()
