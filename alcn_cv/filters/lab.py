@@ -90,12 +90,12 @@ def spline_coefficients(values: np.ndarray) -> np.ndarray:
 def cube_root_table() -> np.ndarray:
     """:func:`spline_coefficients` of Lab's ``f(t)`` (the cube root, linear below :data:`LINEAR_BELOW`) at
     ``t = i / CUBE_ROOT_SCALE``, ``i = 0 .. 1024``."""
-    t = np.arange(1025) / (2048.0 / 3.0)
+    t = np.arange(1025) / float(CUBE_ROOT_SCALE)
     return spline_coefficients(np.where(t < LINEAR_BELOW, SLOPE * t + 16.0 / 116.0, np.cbrt(t)))
 
 
 @cache
 def inverse_gamma_table() -> np.ndarray:
     """:func:`spline_coefficients` of the sRGB curve encoding linear intensities at ``i / 1024``, ``i = 0 .. 1024``."""
-    x = np.arange(1025) / 1024.0
+    x = np.arange(1025) / float(GAMMA_SCALE)
     return spline_coefficients(np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1.0 / 2.4) - 0.055))
