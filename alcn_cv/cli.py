@@ -6,7 +6,7 @@ each names an ``add_parser(subparsers)`` function, which adds its subcommand and
 ``func`` (called with the parsed ``argparse.Namespace``) as the default. A subcommand whose
 module needs an extra that is not installed is still listed; running it prints the one line
 that names the extra. Errors from bad input end the command with a one-line message and exit
-code 2; a traceback is printed only with ``--debug``. SIGTERM (``timeout``, a job scheduler) ends
+code 2; ``--debug`` prints the traceback before that line. SIGTERM (``timeout``, a job scheduler) ends
 a command as Ctrl-C does, with exit code 143: temporary files and folders are removed. The command's process
 keeps the memory a frame frees for the next one (:func:`alcn_cv.malloc.keep_freed_memory`, on glibc).
 """
@@ -18,6 +18,7 @@ import contextlib
 import logging
 import signal
 import sys
+import traceback
 from collections.abc import Iterator
 from importlib import metadata
 
@@ -126,21 +127,23 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except ModuleNotFoundError as exc:  # a package of an extra, imported when the command runs
         error = missing_extra(exc, f"alcn {args.command}", preferred=args.command)
-        if args.debug or error is None:
+        if error is None:
             raise
-        print(error, file=sys.stderr)
-        return 2
+        return _failed(str(error), args.debug)
     except MissingDependencyError as exc:  # a package checked before the work; the message names the command
-        if args.debug:
-            raise
-        print(exc, file=sys.stderr)
-        return 2
+        return _failed(str(exc), args.debug)
     except (ValueError, TypeError, OSError, RuntimeError) as exc:
-        if args.debug:
-            raise
-        print(f"alcn {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return _failed(f"alcn {args.command}: error: {exc}", args.debug)
     return int(result or 0)
+
+
+def _failed(message: str, debug: bool) -> int:
+    """Print the error's one line (after its traceback with ``--debug``) and return exit code 2; called while
+    the exception is handled."""
+    if debug:
+        traceback.print_exc()
+    print(message, file=sys.stderr)
+    return 2
 
 
 if __name__ == "__main__":

@@ -459,6 +459,7 @@ def map_video(
     desc: str | None = None,
     allow_partial: bool = False,
     batch_size: int | None = None,
+    max_frames: int | None = None,
 ) -> int:
     """Write ``fn(frame)`` for every frame of the video ``src`` into the video ``dst``.
 
@@ -472,6 +473,7 @@ def map_video(
             is not written.
         batch_size: ``fn`` takes a list of up to this many frames and returns their outputs (a GPU's
             batches); None: ``fn`` takes one frame.
+        max_frames: stop after the first this many frames (None: every frame).
 
     Returns:
         The number of frames written.
@@ -480,6 +482,8 @@ def map_video(
         InputError: ``src`` cannot be opened, holds no decodable frame, or (without
             ``allow_partial``) fewer frames than its header says.
     """
+    if max_frames is not None and max_frames < 1:
+        raise InputError(f"max_frames must be positive, got {max_frames}")
     src, dst = Path(src), Path(dst)
     writer = None
     per_frame = cast(Callable[[np.ndarray], np.ndarray], fn)
@@ -498,8 +502,10 @@ def map_video(
                         writer = open_video_writer(tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3)
                     writer.write(out)
 
-                with tqdm(total=len(video) or None, desc=desc or src.name, unit="frame") as progress:
-                    count = map_batches(video, batched, write, batch_size or 1, progress)
+                total = len(video) if max_frames is None else min(len(video) or max_frames, max_frames)
+                frames = video if max_frames is None else islice(video, max_frames)
+                with tqdm(total=total or None, desc=desc or src.name, unit="frame") as progress:
+                    count = map_batches(frames, batched, write, batch_size or 1, progress)
                     progress.total = count  # the header's count is an estimate: the bar ends at the frames decoded
                     progress.refresh()
         finally:
@@ -509,7 +515,7 @@ def map_video(
             raise InputError(f"no frame could be decoded from {src}")
         # A header's count is often one frame too high (the shared cookie_box/box.mp4 says 456,
         # FFmpeg decodes 455): a shortfall of one frame is not taken for truncation.
-        if count < video.frame_count - 1:
+        if count < min(video.frame_count, max_frames or video.frame_count) - 1:
             message = f"{src}: decoded {count} of {video.frame_count} frames (truncated or corrupt video)"
             if not allow_partial:
                 raise InputError(f"{message}; nothing written (--allow-partial keeps the decoded frames)")

@@ -188,13 +188,27 @@ class ALCN2d(nn.Module):
         return unit.clamp(0, 1) if torch.is_grad_enabled() and unit.requires_grad else unit.clamp_(0, 1)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        if image.ndim != 4 or image.shape[1] not in (1, 3):
-            raise InputError(f"image must have shape (B, 1 | 3, H, W), got {tuple(image.shape)}")
+        self._check_input(image)
         if image.shape[1] == 1:
             return self.to_unit(self.response(image))
         lab = self.to_lab(image)
         lightness = self.to_unit(self.response(lab[:, :1] * 0.01)) * 100.0
         return self.from_lab(torch.cat([lightness, lab[:, 1:]], dim=1))
+
+    def _check_input(self, image: torch.Tensor) -> None:
+        """An :class:`InputError` naming what is wrong with :meth:`forward`'s ``image`` (its values are not read:
+        a range check would wait for the device on every call)."""
+        if image.ndim != 4 or image.shape[1] not in (1, 3) or 0 in image.shape:
+            raise InputError(f"image must have shape (B, 1 | 3, H, W), none of them 0, got {tuple(image.shape)}")
+        if not image.is_floating_point():
+            raise InputError(f"image must be float in [0, 1], got {image.dtype} (a uint8 image: image / 255)")
+        weight = next(self.net.parameters())
+        autocast = torch.is_autocast_enabled(image.device.type)
+        if image.device != weight.device or (image.dtype != weight.dtype and not autocast):
+            raise InputError(
+                f"image is {image.dtype} on {image.device}, the module {weight.dtype} on {weight.device}: "
+                "move the module with .to(image.device, image.dtype)"
+            )
 
     def _tf32(self, x: torch.Tensor) -> AbstractContextManager:
         """cuDNN without TF32 for a CUDA tensor unless :attr:`allow_tf32` (TF32 moves the output by about 1e-3)."""

@@ -51,6 +51,9 @@ def test_video(tmp_path, frame):
     assert len(frames) == 5 and frames[0].shape == (60, 80, 3)
     assert not list(tmp_path.glob(".*tmp*")), "temporary file left behind"
     assert main(["normalize", str(src), str(tmp_path / "out.png")]) == 2
+    assert main(["normalize", str(src), str(tmp_path / "first.avi"), "-m", "none", "--max-frames", "2"]) == 0
+    with VideoReader(tmp_path / "first.avi") as video:
+        assert len(list(video)) == 2
 
 
 def test_errors_are_one_line(tmp_path, capsys):
@@ -79,7 +82,8 @@ def test_debug_shows_the_traceback(tmp_path):
         str(tmp_path / "o.png"),
     ]
     proc = subprocess.run(cmd, capture_output=True, text=True)
-    assert proc.returncode != 0 and "Traceback" in proc.stderr and "InputError" in proc.stderr
+    assert proc.returncode == 2 and "Traceback" in proc.stderr and "InputError" in proc.stderr
+    assert proc.stderr.rstrip().splitlines()[-1].startswith("alcn normalize: error:")
     proc = subprocess.run(cmd[:3] + cmd[4:], capture_output=True, text=True)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_path, list_images, make_folder, map_video, read_image, write_image
+from alcn_cv.io import VideoReader, atomic_path, list_images, make_folder, map_video, read_image, write_image
 
 
 @pytest.fixture
@@ -121,6 +121,16 @@ def test_truncated_video_is_an_error_unless_partial_is_allowed(tmp_path, image, 
 def test_complete_video(tmp_path, image):
     src = _video(tmp_path / "in.avi", 6, image)
     assert map_video(src, tmp_path / "out.avi", lambda frame: frame) == 6
+
+
+def test_the_first_frames_of_a_video(tmp_path, image):
+    src = _video(tmp_path / "in.avi", 6, image)
+    assert map_video(src, tmp_path / "out.avi", lambda frame: frame, max_frames=4) == 4
+    with VideoReader(tmp_path / "out.avi") as video:
+        assert sum(1 for _ in video) == 4
+    assert map_video(src, tmp_path / "all.avi", lambda frame: frame, max_frames=10) == 6
+    with pytest.raises(InputError, match="max_frames must be positive"):
+        map_video(src, tmp_path / "none.avi", lambda frame: frame, max_frames=0)
 
 
 def test_a_header_one_frame_too_high_is_no_truncation(shared_data, tmp_path):

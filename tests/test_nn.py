@@ -78,6 +78,18 @@ def test_functional_form_and_weight_files():
         module(torch.rand(1, 2, 64, 64))
 
 
+def test_a_wrong_input_is_named_before_torch_fails():
+    module = ALCN2d(model="lite").eval()
+    with pytest.raises(InputError, match=r"none of them 0"):
+        module(torch.rand(0, 1, 32, 32))
+    with pytest.raises(InputError, match=r"float in \[0, 1\], got torch.uint8"):
+        module(torch.zeros(1, 1, 32, 32, dtype=torch.uint8))
+    with pytest.raises(InputError, match=r"torch.float64 on cpu, the module torch.float32 on cpu: move the module"):
+        module(torch.rand(1, 1, 32, 32, dtype=torch.float64))
+    with torch.no_grad():
+        assert module.double()(torch.rand(1, 1, 32, 32, dtype=torch.float64)).dtype == torch.float64
+
+
 @pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
 def test_lower_precision_dtypes_run_and_stay_close(dtype):
     """On the CPU with the gain model (torch's CPU float16 convolutions of the lite one's strided layers take

@@ -78,6 +78,7 @@ def main(
     skip_bad: bool = False,
     device: str | None = None,
     batch_size: int = 32,
+    max_frames: int | None = None,
 ) -> None:
     """Normalize ``src`` (image, folder of images, or video) into ``dst`` with ``method``.
 
@@ -87,7 +88,7 @@ def main(
     In a folder, an image that cannot be read stops the run before anything is written, or with
     ``skip_bad`` is skipped; the end says how many images were written and what was skipped
     and why, and the frames per second. ``allow_partial`` accepts a video that ends before its
-    header's frame count (see :func:`alcn_cv.io.map_video`).
+    header's frame count (see :func:`alcn_cv.io.map_video`); ``max_frames`` writes a video's first frames only.
 
     ``device`` (``"cpu"``, ``"cuda"``, ...): ALCN on that torch device, ``batch_size`` frames of one size at a
     time (:meth:`ALCN.apply_batch <alcn_cv.enhance.alcn.ALCN.apply_batch>`, colour frames on their CIE L
@@ -133,7 +134,9 @@ def main(
     if src.is_dir():
         frames = _normalize_folder(src, outputs, normalize, size, skip_bad)
     elif is_video(src):
-        frames = map_video(src, dst, normalize, f"normalize {src.name}", allow_partial, batch_size=size)
+        frames = map_video(
+            src, dst, normalize, f"normalize {src.name}", allow_partial, batch_size=size, max_frames=max_frames
+        )
         logger.info("wrote %d frames to %s", frames, dst)
     else:
         write_image(dst, normalize([read_image(src, alpha=True)])[0])
@@ -247,6 +250,7 @@ def _run(args: argparse.Namespace) -> None:
         skip_bad=args.skip_bad,
         device=args.device,
         batch_size=args.batch_size,
+        max_frames=args.max_frames,
     )
 
 
@@ -317,6 +321,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--allow-partial",
         action="store_true",
         help="accept a video that ends before the frame count of its header (truncated): write the decoded frames",
+    )
+    parser.add_argument(
+        "--max-frames",
+        type=int,
+        metavar="N",
+        help="of a video, normalize and write the first N frames only (default: every frame)",
     )
     parser.add_argument(
         "--device",

@@ -97,7 +97,10 @@ class ALCN(Normalization):
     """
 
     name = "alcn"
-    summary = "Adaptive Local Contrast Normalization: a CNN predicts per-pixel weights of Gaussian kernels (Eq. 3)"
+    summary = (
+        "Adaptive Local Contrast Normalization: a CNN predicts per-pixel weights of Gaussian kernels (Eq. 3); "
+        f"models {', '.join(f'{m} (default)' if m == DEFAULT_MODEL else m for m in MODELS)}"
+    )
     reference = "Rad, Roth & Lepetit, BMVC 2017"
 
     def __init__(

@@ -109,12 +109,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "distill",
         help="distil a light Normalizer from a trained one",
         description="Train a LiteNormalizer to reproduce the paper-model Normalizer's mixture weights on rendered "
-        "windows (--conf lite), or a smaller gain Normalizer to reproduce the gain Normalizer's maps on the frames "
-        "of the real training scenes and rendered ones (--conf gain-lite) (alcn_cv.train.distill); writes the "
-        "weight file and its model card (.md beside it), which records this command, and for a gain student its "
-        "ONNX export. The shipped alcn_normalizer_lite.npz is `alcn distill --conf lite --out "
-        "alcn_cv/weights/alcn_normalizer_lite.npz`, alcn_normalizer_gain_lite.npz the same with --conf gain-lite "
-        "(academic research only, as the webcam frames).",
+        "windows (--conf lite), or a smaller gain Normalizer to reproduce the gain Normalizer's maps on relit "
+        "photographs that permit any use (--conf gain-lite) "
+        "(alcn_cv.train.distill); writes the weight file and its model card (.md beside it), which records this "
+        "command, and for a gain student its ONNX export. The shipped alcn_normalizer_lite.npz is `alcn distill "
+        "--conf lite --out alcn_cv/weights/alcn_normalizer_lite.npz`, alcn_normalizer_gain_lite.npz the same with "
+        "--conf gain-lite (its terms: those of the photographs, any use).",
     )
     _add_conf(
         s,
