@@ -26,6 +26,7 @@ __all__ = [
     "nan_to_none",
     "new_figure",
     "save_figure",
+    "spread",
     "write_json",
 ]
 
@@ -48,6 +49,11 @@ def nan_to_none(obj: Any) -> Any:
     if isinstance(obj, (float, np.floating)):
         return None if not np.isfinite(obj) else float(obj)
     return obj
+
+
+def spread(values: list[float]) -> dict[str, Any] | None:
+    """``{"mean", "std", "values"}`` of a benchmark's runs (seeds, draws); None for none."""
+    return {"mean": float(np.mean(values)), "std": float(np.std(values)), "values": values} if values else None
 
 
 def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]], digits: int = 3) -> str:

@@ -22,6 +22,7 @@ __all__ = ["DEFAULT_WEIGHTS", "FORMAT", "VERSION", "NormalizerFile", "load_norma
 
 FORMAT = "alcn-cv/normalizer"
 VERSION = 1
+#: The ``paper`` model's file: where a path is left out (the shipped models by name: :data:`alcn_cv.runtime.MODELS`).
 DEFAULT_WEIGHTS = Path(__file__).parent / "weights" / "alcn_normalizer.npz"
 _META_KEY = "__meta__"
 _REQUIRED: dict[str, type | tuple[type, ...]] = {
@@ -66,7 +67,7 @@ def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: 
 
 
 def load_normalizer_file(path: str | Path | None = None) -> NormalizerFile:
-    """Read and check a weight file (default: the one shipped in the package).
+    """Read and check a weight file (default: :data:`DEFAULT_WEIGHTS`).
 
     Raises:
         WeightFileError: missing, empty, not a ``.npz`` archive, corrupt, of another format or of

@@ -43,13 +43,14 @@ class Detection:
         image_points: float32 (N, 2) pixel coordinates, OpenCV convention (pixel centre (0, 0)).
         object_points: float32 (N, 3) the same points in the board frame, mm (z = 0).
         ids: int32 (N,) corner ids (chessboard: row-major index; ChArUco: the board's ids).
-        num_markers: ArUco markers seen (0 for chessboards).
+
+    The ArUco markers an image shows, the board found or not, are the detector's
+    (:attr:`BoardDetector.last_num_markers`).
     """
 
     image_points: np.ndarray
     object_points: np.ndarray
     ids: np.ndarray
-    num_markers: int = 0
 
 
 @dataclass(frozen=True)
@@ -150,7 +151,12 @@ class BoardSpec:
 
 
 class BoardDetector:
-    """Detects one :class:`BoardSpec` in images. Call it with a gray or BGR uint8 image."""
+    """Detects one :class:`BoardSpec` in images. Call it with a gray or BGR uint8 image.
+
+    Attributes:
+        last_num_markers: the ArUco markers the last image showed (0 for chessboards), the board found or not.
+        last_foreign_markers: those of them that are not the board's (another dictionary or board).
+    """
 
     def __init__(self, spec: BoardSpec, min_charuco_corners: int = 6) -> None:
         self.spec = spec
@@ -192,9 +198,7 @@ class BoardDetector:
         if self._board.checkCharucoCornersCollinear(ids):
             return None
         obj, img = self._board.matchImagePoints(corners, ids)
-        return Detection(
-            np.asarray(img, np.float32).reshape(-1, 2), np.asarray(obj, np.float32).reshape(-1, 3), ids, len(seen)
-        )
+        return Detection(np.asarray(img, np.float32).reshape(-1, 2), np.asarray(obj, np.float32).reshape(-1, 3), ids)
 
 
 def suggest_chessboard_size(

@@ -4,7 +4,6 @@ and undistortion."""
 from __future__ import annotations
 
 import argparse
-import logging
 from pathlib import Path
 
 import cv2
@@ -12,8 +11,6 @@ import numpy as np
 
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
-
-logger = logging.getLogger(__name__)
 
 _BOARD_DEFAULTS = {"chessboard": {"square": 25.0}, "charuco": {"cols": 7, "rows": 5, "square": 35.0, "marker": 26.0}}
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -14,8 +13,6 @@ from alcn_cv.report import new_figure, save_figure
 
 if TYPE_CHECKING:
     from .camera import Calibration
-
-logger = logging.getLogger(__name__)
 
 __all__ = ["plot_calibration", "plot_registration"]
 

@@ -5,12 +5,9 @@ of :data:`pose.corner_train.confs`) and ``--set KEY=VALUE`` overrides of its key
 from __future__ import annotations
 
 import argparse
-import logging
 from pathlib import Path
 
 import numpy as np
-
-logger = logging.getLogger(__name__)
 
 
 def _intrinsics(values: list[float] | None) -> np.ndarray | None:
@@ -457,8 +454,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     t.add_argument(
         "--normalization",
-        help="the normalization applied first, a spec NAME[:KEY=VALUE...]: the one the "
-        "part model was built after (default none, see `build`); a corner detector's own by default",
+        help="the normalization applied first, a spec NAME[:KEY=VALUE...] (default: the one the part model was "
+        "built after, or the corner detector trained after, recorded in each; another warns for a part model, "
+        "and is an error for a corner detector)",
     )
     t.add_argument("--overlay", help="write the overlay here (.mp4/.avi or a folder)")
     t.add_argument(

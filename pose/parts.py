@@ -14,7 +14,6 @@ for Contrast Normalization Applied to Robust 3D Pose Estimation", BMVC 2017:
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -25,8 +24,6 @@ from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import to_gray
 from pose.model import PartModel
-
-logger = logging.getLogger(__name__)
 
 FEATURES = ("ORB", "SIFT", "AKAZE")
 

@@ -229,8 +229,8 @@ def main(
     Args:
         model_path: ``detector="features"``: a part model (``.npz``, ``alcn pose build``);
             ``detector="corners"``: a corner detector (``.onnx``, ``alcn pose train-corners``).
-        normalizer: the normalizer applied first (default ``"none"``; a corner detector uses the
-            one it was trained with, and another name is an error).
+        normalizer: the normalizer applied first (default: the one the model was made after, recorded in it; a
+            part model tracked after another one warns, a corner detector's is an error).
         K: ``(3, 3)`` intrinsics; default: those stored in the part model (:func:`camera_matrix_for`).
         min_inliers: default :data:`MIN_INLIERS` of the detector.
 
@@ -239,7 +239,14 @@ def main(
     """
     if detector == "features":
         model = part_model.load(model_path)
-        normalizer = normalizer or "none"
+        if normalizer not in (None, model.normalizer):
+            logger.warning(
+                "%s was built after the normalizer %r; tracking after %r, its descriptors may not match",
+                model_path,
+                model.normalizer,
+                normalizer,
+            )
+        normalizer = normalizer or model.normalizer
         det: PartDetector = FeaturePartDetector(model, normalizer, n_features=n_features)
         corners, units = model.corners, model.units
         model_K = model.extra.get("K")

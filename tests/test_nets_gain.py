@@ -7,6 +7,7 @@ import torch
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters import gaussian_blur_stack
 from alcn_cv.filters.divisive import divisive_normalization
+from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.nets.gain import ARCHITECTURE, GainNormalizer, contrast_equalization, dog_weights
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
@@ -50,6 +51,7 @@ def test_bad_inputs_are_rejected():
         GainNormalizer(num_kernels=2, sigma_step=0.5)  # the DoG 1/2 needs sigma 2 in the basis
     with pytest.raises(InputError):
         dog_weights((0.5, 1.0))
+    assert dog_weights(gaussian_sigmas(4, 0.1), 0.1, 0.3) == [1.0, 0.0, -1.0, 0.0]  # 3 * 0.1 is not 0.3
 
 
 @pytest.mark.parametrize("num_kernels, sigma_step", [(2, 1.0), (10, 0.5)])

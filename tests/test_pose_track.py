@@ -107,6 +107,21 @@ def test_track_video_names_frames_in_order_and_uses_the_model_camera(tmp_path, c
         track.main(tmp_path / "m.npz", video, tmp_path / "poses3.json")
 
 
+def test_a_part_model_is_tracked_after_the_normalizer_it_was_built_after(tmp_path, caplog):
+    tex = _texture()
+    model = _planar_model(tex)
+    model.normalizer = "clahe"
+    pm.save(model, tmp_path / "m.npz")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    r, t = _poses(1)[0]
+    cv2.imwrite(str(frames / "0.png"), _render(tex, r, t))
+    assert track.main(tmp_path / "m.npz", frames, tmp_path / "a.json", K, n_features=800)["normalizer"] == "clahe"
+    with caplog.at_level("WARNING", logger="pose.track"):
+        summary = track.main(tmp_path / "m.npz", frames, tmp_path / "b.json", K, normalizer="none", n_features=800)
+    assert summary["normalizer"] == "none" and "built after the normalizer 'clahe'" in caplog.text
+
+
 def test_detector_runs_after_any_normalizer():
     import alcn_cv
 

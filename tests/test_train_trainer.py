@@ -8,10 +8,12 @@ import torch
 
 from alcn_cv.data import phos
 from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
+from alcn_cv.nets.gain import dog_weights
 from alcn_cv.train import trainer
 from alcn_cv.train.checkpoint import load_checkpoint
 from alcn_cv.train.config import load_config
-from alcn_cv.train.models import CentreMixture, JointModel, dog_weights
+from alcn_cv.train.models import CentreMixture, JointModel
 from alcn_cv.train.stage2 import NonFiniteLossError
 from alcn_cv.weight_file import load_normalizer_file
 
@@ -60,7 +62,7 @@ def test_train_outputs_and_gradients_reach_the_normalizer(data, tmp_path):
     assert "held-out val" in (tmp_path / "train.log").read_text()
     assert "| dog 0.5/1.5 |" in (tmp_path / "summary.md").read_text()
     # The Normalizer moved away from its DoG initialisation: gradients went through the mixture.
-    init = torch.tensor(dog_weights(10, 0.5, [0.5, 1.5]))
+    init = torch.tensor(dog_weights(gaussian_sigmas(10, 0.5), 0.5, 1.5))
     with torch.no_grad():
         x = torch.rand(4, 1, 64, 64)
         assert not torch.allclose(result.model.weights(x), init.expand(4, -1))

@@ -87,7 +87,7 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.io import atomic_write, write_json
-from alcn_cv.report import machine
+from alcn_cv.report import machine, spread
 
 if TYPE_CHECKING:
     from torch import nn
@@ -359,10 +359,6 @@ def _evaluate(
     return per_object
 
 
-def _spread(values: list[float]) -> dict[str, Any]:
-    return {"mean": float(np.mean(values)), "std": float(np.std(values)), "values": values}
-
-
 def summarize(runs: dict[str, Any], settings: DetectSettings, names: list[str]) -> dict[str, Any]:
     """AUC per object and its mean over objects, as mean and standard deviation over the seeds.
 
@@ -389,13 +385,13 @@ def summarize(runs: dict[str, Any], settings: DetectSettings, names: list[str]) 
                     cell["objects"] = {}
                     for name in names:
                         aucs = [r["objects"][name]["auc"] for _, r in done if r["objects"][name]["auc"] is not None]
-                        cell["objects"][name] = _spread(aucs) if aucs else None
+                        cell["objects"][name] = spread(aucs)
                     means = [
                         float(np.mean(v))
                         for v in ([o["auc"] for o in r["objects"].values() if o["auc"] is not None] for _, r in done)
                         if v
                     ]
-                    cell["mean"] = _spread(means) if means else None
+                    cell["mean"] = spread(means)
                 summary[f"{method}|{n_real}|{policy}"] = cell
     return summary
 

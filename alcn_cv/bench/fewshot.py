@@ -48,7 +48,16 @@ from alcn_cv.bench.policies import InputPolicy
 from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, write_json
-from alcn_cv.report import command_line, describe_machine, machine, markdown_table, nan_to_none, new_figure, save_figure
+from alcn_cv.report import (
+    command_line,
+    describe_machine,
+    machine,
+    markdown_table,
+    nan_to_none,
+    new_figure,
+    save_figure,
+    spread,
+)
 from alcn_cv.train.config import FewShotSetup
 
 __all__ = ["DEFAULT_METHODS", "FewShotSettings", "compare_to_dog", "fewshot_command", "fewshot_markdown", "main"]
@@ -220,15 +229,11 @@ def _run_draw(settings: FewShotSettings, draw: int, runs: dict[str, Any], bar: t
             bar.update()
 
 
-def _spread(values: list[float]) -> dict[str, Any] | None:
-    return {"mean": float(np.mean(values)), "std": float(np.std(values)), "values": values} if values else None
-
-
 def _summary(runs: dict[str, Any]) -> dict[str, Any]:
     return {
         policy: {
             method: {
-                metric: _spread([r[metric] for r in draws if r.get(metric) is not None])
+                metric: spread([r[metric] for r in draws if r.get(metric) is not None])
                 for metric in ("auc", "accuracy")
             }
             for method, draws in by_method.items()

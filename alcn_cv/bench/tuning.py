@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from alcn_cv.bench.detect_settings import CROP
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
@@ -49,7 +50,6 @@ GRIDS: dict[str, list[dict[str, float]]] = {
     "dlcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)],
 }
 
-CROP = 32
 #: Added to the standard deviation by the per-window standardizations of the benchmark
 #: (the features here, the detector's ``standardize`` and ``local`` input policies).
 STANDARDIZE_EPS = 1e-6

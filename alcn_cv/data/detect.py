@@ -21,7 +21,6 @@ test image's lighting family and parameters are stored in its ``lighting`` field
 from __future__ import annotations
 
 import functools
-import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,8 +36,6 @@ from alcn_cv.data.textures import photo_crop, procedural_texture
 from alcn_cv.errors import InputError
 from alcn_cv.formats.coco import write_coco
 from alcn_cv.io import write_image, write_json
-
-logger = logging.getLogger(__name__)
 
 __all__ = ["DetectConfig", "SIZES", "OBJECTS", "benchmark_objects", "generate"]
 

@@ -13,7 +13,6 @@ complete, so a half-written dataset is never mistaken for a complete one.
 from __future__ import annotations
 
 import contextlib
-import logging
 import os
 import shutil
 import tempfile
@@ -26,8 +25,6 @@ import numpy as np
 
 from alcn_cv.errors import DatasetError
 from alcn_cv.io import atomic_path, read_json
-
-logger = logging.getLogger(__name__)
 
 __all__ = [
     "GENERATOR",

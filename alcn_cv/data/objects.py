@@ -10,7 +10,6 @@ map gives self-shading and a cast shadow on whatever it stands on.
 from __future__ import annotations
 
 import functools
-import logging
 from dataclasses import dataclass
 
 import cv2
@@ -19,14 +18,11 @@ import numpy as np
 from alcn_cv.data.render import MATERIAL_FIELDS, Material, Surface, sample_material
 from alcn_cv.data.textures import fractal_noise, procedural_texture, random_texture
 
-logger = logging.getLogger(__name__)
-
 __all__ = [
     "ReliefObject",
     "SHAPES",
     "make_object",
     "make_catalog",
-    "empty_surface",
     "paste",
     "background_surface",
     "to_surface",
@@ -151,13 +147,6 @@ def make_catalog(n: int, seed: int, size: int = 96, materials: tuple[str, ...] |
         mat = materials[k % len(materials)] if materials else None
         out.append(make_object(rng, size, material=mat))
     return out
-
-
-def empty_surface(h: int, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Zero albedo (H, W, 3), height (H, W) and matte material (H, W, 6) arrays."""
-    mat = np.empty((h, w, len(MATERIAL_FIELDS)), np.float32)
-    mat[:] = Material("matte").vector()
-    return np.zeros((h, w, 3), np.float32), np.zeros((h, w), np.float32), mat
 
 
 def background_surface(

@@ -28,7 +28,7 @@ from alcn_cv.data.light_changes import LIGHTS, relit_frames
 from alcn_cv.data.scenes import Scene
 from alcn_cv.data.textures import SKIMAGE_PHOTOGRAPHS, skimage_photograph
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import read_image, to_gray
+from alcn_cv.io import VideoReader, read_image, to_gray
 from alcn_cv.shared_data import shared_data_dir
 
 __all__ = [
@@ -93,18 +93,10 @@ def skimage_photographs(max_side: int | None = 640) -> list[Photograph]:
 
 
 def _video_frames(path: Path, count: int) -> list[np.ndarray]:
-    capture = cv2.VideoCapture(str(path))
-    total = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
-    wanted = set(np.linspace(0, max(total - 1, 0), count).round().astype(int).tolist())
-    frames = []
-    for index in range(total):
-        ok, frame = capture.read()
-        if not ok:
-            break
-        if index in wanted:
-            frames.append(frame)
-    capture.release()
-    return frames
+    """``count`` frames evenly spaced over the video's header count (fewer if it ends before)."""
+    with VideoReader(path) as video:
+        wanted = set(np.linspace(0, max(len(video) - 1, 0), count).round().astype(int).tolist())
+        return [frame for index, frame in zip(range(len(video)), video) if index in wanted]
 
 
 def shared_photographs(root: str | Path, video_frames: int = 8, max_side: int | None = 640) -> list[Photograph]:

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import functools
 import inspect
-import logging
 import os
 import zipfile
 from collections.abc import Sequence
@@ -46,8 +45,6 @@ from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import write_json
-
-logger = logging.getLogger(__name__)
 
 __all__ = ["WINDOW", "KIND_NAMES", "PhosBatch", "render_windows", "generate", "load"]
 

@@ -22,7 +22,6 @@ known poses (world frame in mm, image names relative to ``rgb/``) and an empty `
 from __future__ import annotations
 
 import dataclasses
-import logging
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -58,8 +57,6 @@ from alcn_cv.formats.bop import (
 )
 from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, write_text_model
 from alcn_cv.io import write_image, write_json
-
-logger = logging.getLogger(__name__)
 
 __all__ = [
     "PoseConfig",
@@ -328,7 +325,7 @@ def _write_sequence(
     placed = [o for o in scene.objects if o.obj_id > 0]
     for f, (R, t) in enumerate(poses):
         rng = np.random.default_rng([*seed_key, f])
-        img, buf = render_frame(
+        img, obj_id = render_frame(
             scene,
             K,
             R,
@@ -343,7 +340,7 @@ def _write_sequence(
         objs, inf = [], []
         for k, o in enumerate(placed):
             objs.append(BopObjectPose(o.obj_id, R @ o.R, R @ o.t + t))
-            m = (buf.obj_id == o.obj_id).astype(np.uint8) * 255
+            m = (obj_id == o.obj_id).astype(np.uint8) * 255
             write_image(seq_dir / "mask_visib" / f"{f:06d}_{k:06d}.png", m)
             ys, xs = np.nonzero(m)
             box = (

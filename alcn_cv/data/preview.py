@@ -8,7 +8,6 @@ dataset's ``models/``), and the label and lighting family for Phos windows.
 
 from __future__ import annotations
 
-import logging
 import os
 from pathlib import Path
 
@@ -18,8 +17,6 @@ import numpy as np
 from alcn_cv.data.manifest import read_manifest
 from alcn_cv.errors import DatasetError
 from alcn_cv.io import write_image
-
-logger = logging.getLogger(__name__)
 
 __all__ = ["preview", "grid", "draw_model_box"]
 

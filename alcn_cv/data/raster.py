@@ -15,7 +15,6 @@ directional lights, perspective for point and spot lights). Shading is
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field
 
 import cv2
@@ -24,8 +23,6 @@ import numpy as np
 from alcn_cv.data.lighting import LightArrays, Lighting, shadow_shape
 from alcn_cv.data.render import MATERIAL_FIELDS, Material, expose, shade
 from alcn_cv.errors import InputError
-
-logger = logging.getLogger(__name__)
 
 __all__ = [
     "Mesh",
@@ -36,7 +33,6 @@ __all__ = [
     "rasterize",
     "SceneObject",
     "Scene",
-    "FrameBuffers",
     "ShadowSettings",
     "render_frame",
 ]
@@ -327,23 +323,6 @@ class Scene:
         return np.concatenate(verts), np.concatenate(faces), np.concatenate(owner)
 
 
-@dataclass
-class FrameBuffers:
-    """Per-pixel outputs of :func:`render_frame` besides the image.
-
-    Attributes:
-        depth: float64 (H, W) camera z in mm (inf beyond the table).
-        obj_id: int64 (H, W) ``obj_id`` of the visible object (0 for clutter and the table, -1
-            beyond the table).
-        model_xyz: float64 (H, W, 3) the visible point in its object's model frame (mm), NaN on
-            the table.
-    """
-
-    depth: np.ndarray
-    obj_id: np.ndarray
-    model_xyz: np.ndarray
-
-
 def _shadow_maps(verts: np.ndarray, faces: np.ndarray, lights, extent: float, res: int = 1024):
     """One shadow map per light: (kind, projection data, depth map)."""
     maps = []
@@ -563,7 +542,7 @@ def render_frame(
     lighting: Lighting,
     rng: np.random.Generator,
     shadows: ShadowSettings = ShadowSettings(),
-) -> tuple[np.ndarray, FrameBuffers]:
+) -> tuple[np.ndarray, np.ndarray]:
     """Render one BGR uint8 frame of ``scene`` seen by an OpenCV pinhole camera.
 
     The steps: rasterise the objects, intersect the table (:func:`_table_gbuffer`), draw the
@@ -581,7 +560,8 @@ def render_frame(
         shadows: shadow-map resolution and the seed of the hard shadow shape.
 
     Returns:
-        ``(image, buffers)``: uint8 (H, W, 3) BGR and the :class:`FrameBuffers`.
+        ``(image, obj_id)``: uint8 (H, W, 3) BGR, and int64 (H, W) the ``obj_id`` of the object each pixel
+        shows (0 for clutter and the table, -1 beyond the table).
     """
     verts, faces, owner = scene.world_meshes()
     cam = verts @ R_w2c.T + t_w2c
@@ -592,7 +572,6 @@ def render_frame(
     gb, C, s_table = _table_gbuffer(scene, K, R_w2c, t_w2c, width, height)
     on_obj = (tri >= 0) & (zbuf <= s_table)
     _draw_objects(gb, scene, verts, faces, owner, on_obj, tri, bary)
-    depth = np.where(on_obj, zbuf, s_table)
     vis = _shadow_visibility(gb, verts, faces, lighting, shadows)
     V = C - gb.P
     V /= np.linalg.norm(V, axis=-1, keepdims=True) + 1e-12
@@ -608,4 +587,4 @@ def render_frame(
         vis,
     )
     img = expose(rad[..., ::-1].copy(), [lighting], rng)[0]
-    return img, FrameBuffers(depth, gb.obj_id, gb.model_xyz)
+    return img, gb.obj_id

@@ -32,7 +32,6 @@ The lights and their families are in :mod:`alcn_cv.data.lighting`.
 from __future__ import annotations
 
 import dataclasses
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -41,8 +40,6 @@ import numpy as np
 
 from alcn_cv.data.lighting import LightArrays, Lighting, shadow_shape
 from alcn_cv.errors import InputError
-
-logger = logging.getLogger(__name__)
 
 __all__ = [
     "MATERIAL_FIELDS",

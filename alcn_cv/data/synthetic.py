@@ -12,7 +12,6 @@ procedural-texture crops, with the same intensity changes.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Sequence
 
 import cv2
@@ -20,8 +19,6 @@ import numpy as np
 
 from alcn_cv.data.textures import display_texture
 from alcn_cv.errors import InputError
-
-logger = logging.getLogger(__name__)
 
 __all__ = ["augment", "sample_negatives", "object_box"]
 

@@ -12,15 +12,12 @@ renderer's lighting multiplies reflectances, not display values.
 from __future__ import annotations
 
 import functools
-import logging
 import warnings
 
 import cv2
 import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError
-
-logger = logging.getLogger(__name__)
 
 __all__ = [
     "display_texture",

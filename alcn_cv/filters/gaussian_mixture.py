@@ -474,9 +474,9 @@ def alcn_filter_pyramid(
 
     Same arguments and result as :func:`alcn_filter`; the maps of Eq. 3 are reduced to each
     level with ``cv2.pyrDown``. The approximation is exact in the limit of smooth maps and
-    Gaussian pyramid kernels; its error against :func:`alcn_filter` is measured by
-    ``alcn bench speed`` and bounded in ``tests/test_fast_alcn.py`` (largest near the image's
-    bottom and right borders, where the pyramid's reflection is off by a pixel).
+    Gaussian pyramid kernels; its error against :func:`alcn_filter` is bounded in
+    ``tests/test_fast_alcn.py`` (largest near the image's bottom and right borders, where the pyramid's
+    reflection is off by a pixel). ``ALCN(mixture="pyramid")`` runs the same pyramid on its grid's maps.
 
     Args:
         min_sigma: smallest residual sigma at a coarse level (see :func:`pyramid_plan`);

@@ -5,11 +5,11 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from alcn_cv.filters.torch_divisive import divisive_normalization, gaussian_blur, gaussian_energy
+from alcn_cv.filters.torch_divisive import divisive_normalization, gaussian_blur
 from alcn_cv.filters.torch_resize import upsample_blocks
 from alcn_cv.filters.wide_band import BLOCK, ENERGY_SIGMA, SIGMAS
 
-__all__ = ["block_means", "wide_band", "wide_band_floor"]
+__all__ = ["block_means", "wide_band"]
 
 
 def block_means(image: torch.Tensor) -> torch.Tensor:
@@ -23,11 +23,6 @@ def block_means(image: torch.Tensor) -> torch.Tensor:
 
 def _band_response(small: torch.Tensor) -> torch.Tensor:
     return gaussian_blur(small, SIGMAS[0] / BLOCK) - gaussian_blur(small, SIGMAS[1] / BLOCK)
-
-
-def wide_band_floor(small: torch.Tensor, scale: float | torch.Tensor) -> torch.Tensor:
-    """``(B, 1, 1, 1)``: the floor of :func:`alcn_cv.filters.wide_band.wide_band_floor` per image."""
-    return scale * gaussian_energy(_band_response(small), ENERGY_SIGMA / BLOCK).mean(dim=(-2, -1), keepdim=True)
 
 
 def wide_band(

@@ -16,7 +16,6 @@ line).
 
 from __future__ import annotations
 
-import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,8 +28,6 @@ from scipy.spatial import ConvexHull
 from alcn_cv.errors import DatasetError
 from alcn_cv.formats import validate_json
 from alcn_cv.io import atomic_write, read_json, write_json
-
-logger = logging.getLogger(__name__)
 
 __all__ = [
     "BopObjectPose",

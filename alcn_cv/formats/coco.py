@@ -13,7 +13,6 @@ image-folder layout (pass ``image_root``) read directly.
 
 from __future__ import annotations
 
-import logging
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -26,8 +25,6 @@ import numpy as np
 from alcn_cv.errors import DatasetError
 from alcn_cv.formats import validate_json
 from alcn_cv.io import read_json, write_json
-
-logger = logging.getLogger(__name__)
 
 __all__ = ["CocoImage", "CocoAnnotation", "CocoCategory", "CocoDataset", "load_coco", "write_coco"]
 

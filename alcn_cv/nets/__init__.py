@@ -1,8 +1,11 @@
 """The networks of ALCN: the Normalizer (predicts mixture weights) and its runtimes, the Detector.
 
-* :mod:`~alcn_cv.nets.normalizer` -- the paper's Normalizer (torch); :mod:`~alcn_cv.nets.lite` --
-  the real-time Normalizer and the loader of weight files; :mod:`~alcn_cv.nets.opencv_runtime` --
-  both run by ``cv2.dnn`` from their ONNX export, without torch.
+* :mod:`~alcn_cv.nets.gain` -- the gain Normalizer (the default model); :mod:`~alcn_cv.nets.normalizer` -- the
+  paper's Normalizer; :mod:`~alcn_cv.nets.lite` -- the real-time Normalizer and the loader of weight files;
+  :mod:`~alcn_cv.nets.opencv_runtime` -- each of them run by ``cv2.dnn`` from its ONNX export, without torch;
+  :mod:`~alcn_cv.nets.cpu_inference` -- when a Normalizer may take faster CPU kernels.
+* :mod:`~alcn_cv.nets.unet` -- the free-form U-Net baseline; :mod:`~alcn_cv.nets.resnet`,
+  :mod:`~alcn_cv.nets.plain` -- the paper's baseline window classifiers (Sec. 4.3.1).
 * :mod:`~alcn_cv.nets.detector` -- the Detector trained jointly with the Normalizer (Eq. 2).
 * :mod:`~alcn_cv.nets.device` -- the torch device a network runs or trains on.
 

@@ -62,13 +62,15 @@ _REMOVED_VARIANTS = {"gain": "divisive", "sharpness": False, "learn_floor": Fals
 
 
 def dog_weights(sigmas: Sequence[float], sigma1: float = DOG_SIGMAS[0], sigma2: float = DOG_SIGMAS[1]) -> list[float]:
-    """The mixture weights of ``G_sigma1 - G_sigma2`` over the basis ``sigmas`` (both must be in it)."""
+    """The mixture weights of ``G_sigma1 - G_sigma2`` over the basis ``sigmas`` (both must be in it, to float
+    rounding: ``3 * 0.1`` is the basis's 0.3)."""
     sigmas = [float(s) for s in sigmas]
-    if sigma1 not in sigmas or sigma2 not in sigmas:
+    positions = [[i for i, b in enumerate(sigmas) if math.isclose(b, s, rel_tol=1e-9)] for s in (sigma1, sigma2)]
+    if not all(positions):
         raise InputError(f"the DoG sigmas {sigma1} and {sigma2} must be in the basis {sigmas}")
     weights = [0.0] * len(sigmas)
-    weights[sigmas.index(sigma1)] = 1.0
-    weights[sigmas.index(sigma2)] = -1.0
+    weights[positions[0][0]] += 1.0
+    weights[positions[1][0]] -= 1.0
     return weights
 
 

@@ -46,7 +46,7 @@ __all__ = [
     "image_blocks",
 ]
 
-#: The ONNX model shipped beside the default weight file (the shipped weights, exported).
+#: The ONNX export shipped beside :data:`~alcn_cv.weight_file.DEFAULT_WEIGHTS` (the ``paper`` model's).
 DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
 # The Normalizer's window (``Normalizer.window``; a test checks they agree; importing
 # alcn_cv.nets here would import torch).
@@ -175,7 +175,7 @@ class OpenCVNormalizer:
 
     Args:
         onnx_path: the ``.onnx`` file written by :func:`alcn_cv.train.export.export_onnx`;
-            default: the model shipped with the package (the shipped weights).
+            default: :data:`DEFAULT_ONNX`, the ``paper`` model's (``createALCN`` passes its model's own).
         config: a gain Normalizer's ``config`` (:class:`GainFeatures`); default: read from the weight file
             beside ``onnx_path`` (the same name, ``.npz``) when the export is a gain Normalizer's.
 

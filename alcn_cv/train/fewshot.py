@@ -31,9 +31,11 @@ import torch
 
 from alcn_cv.data.phos import PhosBatch, render_windows
 from alcn_cv.data.synthetic import augment, sample_negatives
+from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.filters.standardize import standardize_windows
+from alcn_cv.nets.gain import dog_weights
 from alcn_cv.train.config import FewShotSetup
-from alcn_cv.train.models import CentreMixture, JointModel, dog_weights
+from alcn_cv.train.models import CentreMixture, JointModel
 from alcn_cv.train.stage2 import STANDARDIZE_EPS, train_detector
 
 __all__ = ["FewShotSetup", "auc", "fewshot_validation", "make_fewshot_data", "score_inputs", "standard_methods"]
@@ -201,12 +203,13 @@ def standard_methods(
 ) -> dict[str, Method]:
     """The trained model's normalization (``"alcn"``), DoGs ``"dog a/b"`` and ``"none"``, all under ``policy``."""
     finish = (lambda z: standardize_windows(z, STANDARDIZE_EPS)) if policy == "standardize" else (lambda z: z)
-    mixture = model.mixture if model is not None else CentreMixture(tuple((i + 1) * step for i in range(num_kernels)))
+    sigmas = gaussian_sigmas(num_kernels, step)
+    mixture = model.mixture if model is not None else CentreMixture(sigmas)
     methods: dict[str, Method] = {}
     if model is not None and model.normalizer is not None:
         methods["alcn"] = model.normalized
     for a, b in dog_pairs:
-        w = torch.tensor(dog_weights(num_kernels, step, [a, b]))
+        w = torch.tensor(dog_weights(sigmas, a, b))
         methods[f"dog {a:g}/{b:g}"] = lambda x, w=w: finish(mixture(x, w.expand(len(x), -1)))
     methods["none"] = lambda x: finish(x[..., 16:48, 16:48])
     return methods

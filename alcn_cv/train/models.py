@@ -30,22 +30,14 @@ from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, gaussian_sigmas, kernel_radius
 from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.nets.detector import INPUT, Detector
+from alcn_cv.nets.gain import dog_weights
 from alcn_cv.nets.normalizer import Normalizer
 from alcn_cv.train.stage2 import STANDARDIZE_EPS
 
-__all__ = ["CentreMixture", "JointModel", "dog_weights", "measure_output_range"]
+__all__ = ["CentreMixture", "JointModel", "measure_output_range"]
 
 _NORMALIZER_CROP = (WINDOW - Normalizer.window) // 2  # 8: the Normalizer sees the centre 48x48
 _DETECTOR_CROP = (WINDOW - INPUT) // 2  # 16: the detector sees the centre 32x32
-
-
-def dog_weights(num_kernels: int, step: float, sigmas: list[float]) -> list[float]:
-    """Mixture weights of the DoG ``G_a - G_b`` in the basis ``sigma_i = i * step``."""
-    w = [0.0] * num_kernels
-    a, b = (int(round(s / step)) - 1 for s in sigmas)
-    w[a] += 1.0
-    w[b] -= 1.0
-    return w
 
 
 class CentreMixture(nn.Module):
@@ -115,7 +107,7 @@ class JointModel(nn.Module):
         self.method = cfg.method
         self.policy = cfg.detector_input
         sigmas = gaussian_sigmas(cfg.num_kernels, cfg.sigma_step)
-        dog = dog_weights(cfg.num_kernels, cfg.sigma_step, cfg.dog)
+        dog = dog_weights(sigmas, *cfg.dog)
         self.mixture = CentreMixture(sigmas)
         self.normalizer: Normalizer | None = None
         if self.method == "alcn":
