@@ -2,7 +2,8 @@
 
 ``ALCN2d`` is what ``createALCN(backend="torch")`` runs, and a module a PyTorch model can put in front of
 itself: ``(B, 1 | 3, H, W)`` float intensities in [0, 1] on any device and dtype in, the same shape in [0, 1]
-out, equal to :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>`'s float output (3 channels: RGB,
+out, equal to :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>`'s float output (with ``mixture="exact"`` for the
+``lite`` and ``paper`` models, whose default mixture in ``apply`` approximates it on a pyramid; 3 channels: RGB,
 normalized on the L channel of CIE Lab, a and b kept), differentiable end to end. Importing this module imports
 torch and kornia; importing :mod:`alcn_cv` does not.
 

@@ -121,8 +121,8 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     saved = json.loads((out / "detect.json").read_text())
     assert saved["runs"]["he|1|raw|0"]["error"] == "RuntimeError: boom"  # reported, the run went on
     for key in ("none|1|raw|0", "dog|1|local|0"):
-        for obj in saved["runs"][key]["objects"].values():
-            assert obj["auc"] is None or 0 <= obj["auc"] <= 1
+        aucs = [obj["auc"] for obj in saved["runs"][key]["objects"].values()]
+        assert any(a is not None for a in aucs) and all(a is None or 0 <= a <= 1 for a in aucs), aucs
     assert "dog" in saved["tuned"]["1"]
     assert "error" in saved["summary"]["he|1|raw"]
     assert saved["summary"]["dog|1|local"]["seeds"] == [0]

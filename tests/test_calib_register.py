@@ -153,6 +153,7 @@ def test_charuco_registration_from_video(scene, tmp_path):
     calib = Calibration(scene.K, DIST, (640, 480), 0.0)
     reg = register_charuco(path, tmp_path / "reg", calib, BoardSpec(), step=2)
     assert [f.name for f in reg.frames] == ["frame_000000", "frame_000002", "frame_000004", "frame_000006"]
+    assert len(reg.registered) == 4
     for f in reg.registered:
         i = int(f.name.split("_")[1])
         assert _angle_deg(f.R_w2c, scene.R_w2c[i]) < 1.0

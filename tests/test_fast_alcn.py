@@ -278,13 +278,23 @@ def test_default_is_the_gain_normalizer_and_lite_the_pyramid():
     assert alcn_cv.createALCN(model="lite", backend="opencv").mixture == "pyramid"
 
 
-def test_threads_are_restored(image):
+def test_threads_are_restored(image, monkeypatch):
+    """The network in torch (``backend="fast"``) on 1 thread while it runs, the caller's 2 again after."""
     before = torch.get_num_threads()
-    alcn = _alcn(None, model="paper", threads=1, grid_stride=16)
-    np.testing.assert_allclose(
-        alcn.normalize(image), _alcn(None, model="paper", grid_stride=16).normalize(image), atol=1e-6
-    )
-    assert torch.get_num_threads() == before
+    set_threads = torch.set_num_threads
+    calls: list[int] = []
+    monkeypatch.setattr(torch, "set_num_threads", lambda n: (calls.append(n), set_threads(n))[1])
+    try:
+        torch.set_num_threads(2)
+        alcn = _alcn(None, model="paper", backend="fast", threads=1, grid_stride=16)
+        np.testing.assert_allclose(
+            alcn.normalize(image),
+            _alcn(None, model="paper", backend="fast", threads=None, grid_stride=16).normalize(image),
+            atol=1e-6,
+        )
+        assert 1 in calls and calls[-1] == 2 and torch.get_num_threads() == 2  # set for the call, then restored
+    finally:
+        set_threads(before)
     with pytest.raises(InputError, match="threads"):
         alcn_cv.createALCN(threads=0)
 

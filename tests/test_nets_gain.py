@@ -144,6 +144,25 @@ def test_gain_windows_are_normalized_as_small_images_and_the_lite_ones_by_eq1():
     gain = alcn_cv.createALCN(model="gain")
     assert gain.spec.per_pixel and not alcn_cv.createALCN(model="lite").spec.per_pixel
     np.testing.assert_array_equal(gain.normalize_windows(windows), np.stack([gain.normalize(w) for w in windows]))
+    # Eq. 1: the weights the torch network predicts for each window's central 48x48 (at the working scale), applied
+    # to the whole window; the runtime under test runs the network by cv2.dnn
+    from alcn_cv.filters.gaussian_mixture import alcn_filter
+    from alcn_cv.nn import ALCN2d
+
+    lite = alcn_cv.createALCN(model="lite")
+    windows = np.clip(
+        _lit_texture(96, 96)[0].numpy().repeat(2, axis=0) * np.array([1.0, 0.3], np.float32)[:, None, None], 0, 1
+    )
+    net = ALCN2d(model="lite").net
+    centre = net.window // 2 // net.stride
+    for window, out in zip(windows, lite.normalize_windows(windows)):
+        small = lite.spec.working_image(window)
+        o = (small.shape[0] - net.window) // 2
+        with torch.no_grad():
+            crop = torch.from_numpy(np.ascontiguousarray(small[o : o + net.window, o : o + net.window]))[None, None]
+            weights = net.dense_grid(crop)[0, :, centre, centre].numpy()
+        np.testing.assert_allclose(out, alcn_filter(window, weights, lite.spec.full_res_sigmas), atol=1e-4, rtol=0)
+        assert np.abs(out - lite.normalize(window)).max() > 3e-4  # not the per-pixel Eq. 3 of the window
 
 
 def test_divisive_floor_keeps_a_flat_region_flat():

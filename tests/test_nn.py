@@ -33,8 +33,10 @@ def _bgr(h=96, w=128, seed=0):
 
 @pytest.mark.parametrize("model", list(MODELS))
 def test_gray_equals_the_float_output_of_apply(model):
+    """Against the OpenCV runtime (the default backend; the exact mixture, which the lite and paper models'
+    default pyramid approximates), not the torch backend, which runs this module."""
     gray = _gray()
-    expected = alcn_cv.createALCN(model=model, backend="torch").apply(gray, out_dtype=np.float32)
+    expected = alcn_cv.createALCN(model=model, mixture="exact").apply(gray, out_dtype=np.float32)
     with torch.no_grad():
         out = ALCN2d(model=model).eval()(torch.from_numpy(_unit(gray))[None, None])
     assert out.shape == (1, 1, *gray.shape) and out.dtype == torch.float32
@@ -47,7 +49,7 @@ def test_colour_is_normalized_on_lab_lightness(model):
     equal to apply() to the float32 rounding of the conversions (L within 3e-5 of 100), which the normalization
     amplifies as it does a gray input's (3e-7 of relative noise moves a gray output by about 1e-4)."""
     bgr = _bgr()
-    expected = alcn_cv.createALCN(model=model, backend="torch").apply(bgr, out_dtype=np.float32)
+    expected = alcn_cv.createALCN(model=model, mixture="exact").apply(bgr, out_dtype=np.float32)
     rgb = torch.from_numpy(_unit(bgr[..., ::-1].copy())).permute(2, 0, 1)[None]
     with torch.no_grad():
         out = ALCN2d(model=model).eval()(rgb)[0].permute(1, 2, 0).numpy()[..., ::-1]
@@ -90,8 +92,11 @@ def test_a_wrong_input_is_named_before_torch_fails():
         assert module.double()(torch.rand(1, 1, 32, 32, dtype=torch.float64)).dtype == torch.float64
 
 
-@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
-def test_lower_precision_dtypes_run_and_stay_close(dtype):
+@pytest.mark.parametrize(
+    ("dtype", "mean", "largest"),  # measured 5.5e-4 / 6.1e-3 and 3.5e-3 / 5.0e-2: bfloat16 keeps 8 bits of mantissa
+    [(torch.float16, 2e-3, 2e-2), (torch.bfloat16, 1e-2, 1e-1)],
+)
+def test_lower_precision_dtypes_run_and_stay_close(dtype, mean, largest):
     """On the CPU with the gain model (torch's CPU float16 convolutions of the lite one's strided layers take
     minutes); float16 against float32 on CUDA is checked below."""
     x = torch.from_numpy(_unit(_gray()))[None, None]
@@ -100,7 +105,8 @@ def test_lower_precision_dtypes_run_and_stay_close(dtype):
         reference = module(x)
         out = module.to(dtype)(x.to(dtype))
     assert out.dtype == dtype and torch.isfinite(out).all()
-    assert (out.float() - reference).abs().mean() < 5e-2
+    error = (out.float() - reference).abs()
+    assert error.mean() < mean and error.max() < largest, (error.mean(), error.max())
 
 
 @pytest.mark.parametrize("model", ["gain", "lite"])

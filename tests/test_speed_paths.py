@@ -66,10 +66,14 @@ def test_level0_maps_are_the_exact_bilinear_interpolation():
 
 def test_torch_threads_default_by_backend_and_are_restored():
     before = torch.get_num_threads()
-    alcn = alcn_cv.createALCN()
-    assert alcn.threads == 1
-    alcn.apply(synthetic_frame(96, 72, False))
-    assert torch.get_num_threads() == before
+    alcn = alcn_cv.createALCN(backend="fast")  # the network in torch
+    assert alcn.threads == 1 and alcn_cv.createALCN().threads == 1
+    try:
+        torch.set_num_threads(2)
+        alcn.apply(synthetic_frame(96, 72, False))
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
     assert alcn_cv.createALCN(threads=None).threads is None
     # everything in torch: torch's own setting, unless asked
     assert alcn_cv.createALCN(backend="torch").threads is None
