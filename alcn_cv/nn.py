@@ -4,8 +4,10 @@
 itself: ``(B, 1 | 3, H, W)`` float intensities in [0, 1] on any device and dtype in, the same shape in [0, 1]
 out, equal to :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>`'s float output (with ``mixture="exact"`` for the
 ``lite`` and ``paper`` models, whose default mixture in ``apply`` approximates it on a pyramid; 3 channels: RGB,
-normalized on the L channel of CIE Lab, a and b kept), differentiable end to end. Importing this module imports
-torch and kornia; importing :mod:`alcn_cv` does not.
+normalized on the L channel of CIE Lab, a and b kept), differentiable end to end. In float32 inference on the CPU
+(:func:`~alcn_cv.nets.cpu_inference.cpu_inference`) colour is converted to Lab by ``apply()``'s own OpenCV passes
+(within 3e-6 of it); elsewhere by :mod:`alcn_cv.filters.torch_lab`, OpenCV's arithmetic in torch (within 1e-4).
+Importing this module imports torch and kornia; importing :mod:`alcn_cv` does not.
 
 Example:
     >>> import torch
@@ -29,10 +31,12 @@ from torch import nn
 from alcn_cv.checks import FULL_SCALE
 from alcn_cv.errors import InputError
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
+from alcn_cv.filters.lab import linear_to_lab, srgb_to_linear
 from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
+from alcn_cv.nets.cpu_inference import cpu_inference
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
@@ -192,7 +196,7 @@ class ALCN2d(nn.Module):
         self._check_input(image)
         if image.shape[1] == 1:
             return self.to_unit(self.response(image))
-        lab = self.to_lab(image)
+        lab = _opencv_lab(image) if cpu_inference(image) else self.to_lab(image)
         lightness = self.to_unit(self.response(lab[:, :1] * 0.01)) * 100.0
         return self.from_lab(torch.cat([lightness, lab[:, 1:]], dim=1))
 
@@ -224,6 +228,18 @@ class ALCN2d(nn.Module):
 
     def extra_repr(self) -> str:
         return f"scale={self.spec.scale}, grid_stride={self.grid_stride}, allow_tf32={self.allow_tf32}"
+
+
+def _opencv_lab(image: torch.Tensor) -> torch.Tensor:
+    """:class:`~alcn_cv.filters.torch_lab.RgbToLab` of ``(B, 3, H, W)`` float32 CPU RGB by OpenCV's passes, the very
+    ones of :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>` (:func:`~alcn_cv.filters.lab.linear_to_lab`): L
+    rounded otherwise in float32, which the divisive step amplifies several hundred times in flat regions, puts the
+    output 1e-4 from ``apply()``'s (2.7e-6 with these passes)."""
+    lab = torch.empty_like(image)
+    for rgb, out in zip(image, lab):
+        bgr = np.clip(np.ascontiguousarray(rgb.flip(0).permute(1, 2, 0).numpy()), 0.0, 1.0)
+        out.copy_(torch.from_numpy(linear_to_lab(srgb_to_linear(bgr))).permute(2, 0, 1))
+    return lab
 
 
 def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | None = None) -> torch.Tensor:

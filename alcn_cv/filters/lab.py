@@ -36,6 +36,7 @@ __all__ = [
     "XYZ_TO_SRGB",
     "cube_root_table",
     "inverse_gamma_table",
+    "linear_to_lab",
     "spline_coefficients",
     "srgb_to_linear",
 ]
@@ -62,6 +63,13 @@ def srgb_to_linear(unit: np.ndarray) -> np.ndarray:
     high = cv2.pow(cv2.addWeighted(plane, 1.0 / 1.055, plane, 0.0, 0.055 / 1.055), 2.4)
     np.copyto(plane, np.where(plane <= np.float32(0.04045), cv2.multiply(plane, 1.0 / 12.92), high))
     return unit
+
+
+def linear_to_lab(linear: np.ndarray) -> np.ndarray:
+    """CIE Lab of a C-ordered float32 ``HxWx3`` image of linear BGR intensities in [0, 1] (:func:`srgb_to_linear`),
+    in place: OpenCV's ``COLOR_LBGR2Lab``, which computes each pixel (its cube root by the spline of
+    :func:`cube_root_table`), L in [0, 100]."""
+    return cv2.cvtColor(linear, cv2.COLOR_LBGR2Lab, dst=linear)
 
 
 def spline_coefficients(values: np.ndarray) -> np.ndarray:
