@@ -29,8 +29,8 @@ from pose.track import camera_matrix_for
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("model")
-    ap.add_argument("video")
+    ap.add_argument("model", help="part model (.npz) of the box: `alcn pose build`, examples/track_cookie_box.py")
+    ap.add_argument("video", help="video of the box")
     ap.add_argument(
         "--K",
         nargs=4,

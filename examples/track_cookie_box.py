@@ -23,11 +23,13 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from alcn_cv.errors import ALCNError
 from alcn_cv.shared_data import shared_data_dir
 from pose import build, track
 from pose import model as part_model
@@ -59,14 +61,19 @@ def contact_sheet(video: Path, out: Path, frames: tuple[int, ...] = (0, 60, 120,
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", type=Path, default=Path("out/cookie_box"))
+    ap.add_argument("--out", type=Path, default=Path("out/cookie_box"), help="output folder (default out/cookie_box)")
     ap.add_argument(
         "--normalizer",
         default="none",
         help="normalizer before the features, NAME[:KEY=VALUE...] (alcn_cv.available(); the real-time "
         "ALCN: alcn:model=lite:mixture=pyramid)",
     )
-    ap.add_argument("--data", type=Path, default=shared_data_dir() / "cookie_box")
+    ap.add_argument(
+        "--data",
+        type=Path,
+        default=shared_data_dir() / "cookie_box",
+        help="folder of box.mp4 and box.ply (default: the shared data's)",
+    )
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
     args.out.mkdir(parents=True, exist_ok=True)
@@ -103,4 +110,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except ALCNError as exc:
+        sys.exit(f"track_cookie_box.py: error: {exc}")

@@ -8,6 +8,7 @@ copies alone.
 
 from __future__ import annotations
 
+import argparse
 import datetime
 import json
 import shlex
@@ -17,9 +18,18 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 RUNS = ROOT / "runs"
 REPORTS = ROOT / "docs" / "reports"
-SHARED_DATA = ROOT.parent / "shared" / "data"
 
 sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
+
+from alcn_cv.shared_data import shared_data_dir  # noqa: E402
+
+#: The real photographs (``../shared/data`` beside the checkout, or ``ALCN_SHARED_DATA``).
+SHARED_DATA = shared_data_dir()
+
+
+def command_line(doc: str) -> argparse.ArgumentParser:
+    """An experiment's command line, its whole docstring as the help: what it runs, what it writes and where."""
+    return argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
 
 
 def alcn(*argv: str) -> None:

@@ -18,10 +18,11 @@ import json
 
 import cv2
 import numpy as np
-from _run import RUNS, SHARED_DATA, alcn, keep
+from _run import RUNS, SHARED_DATA, alcn, command_line, keep
 
 
 def main() -> None:
+    command_line(__doc__).parse_args()
     from alcn_cv.report import machine
 
     out = RUNS / "calibration"

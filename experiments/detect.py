@@ -13,12 +13,13 @@ curves; keeps docs/reports/detect.json.
 
 from __future__ import annotations
 
-from _run import RUNS, alcn, keep
+from _run import RUNS, alcn, command_line, keep
 
 METHODS = "none,dog,dlcn,tantriggs,alcn,alcn:model=gain-lite,alcn:model=lite"
 
 
 def main() -> None:
+    command_line(__doc__).parse_args()
     data, out = RUNS / "detect" / "data", RUNS / "detect" / "bench"
     if not (data / "manifest.json").exists():
         alcn("data", "detect", "--out", str(data))

@@ -19,13 +19,12 @@ Writes runs/directional_light/directional_light.json; keeps docs/reports/directi
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 
 import cv2
 import numpy as np
-from _run import RUNS, keep
+from _run import RUNS, command_line, keep
 from orb_orientation import band_variant
 from tqdm.auto import tqdm
 
@@ -95,7 +94,7 @@ def identification(normalized: np.ndarray, size: int) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_line(__doc__)
     parser.add_argument("--identities", type=int, default=80, help="rendered scenes (default: 80)")
     parser.add_argument("--size", type=int, default=128, help="side of the rendered images (default: 128)")
     parser.add_argument("--seed", type=int, default=7, help="rendering seed (default: 7)")

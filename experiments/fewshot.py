@@ -10,12 +10,13 @@ Writes runs/fewshot/fewshot.{md,json,png}; keeps docs/reports/fewshot.json.
 
 from __future__ import annotations
 
-from _run import RUNS, alcn, keep
+from _run import RUNS, alcn, command_line, keep
 
 METHODS = "none,dog,dog:sigma1=1:sigma2=2,dlcn,alcn,alcn:model=gain-lite,alcn:model=lite"
 
 
 def main() -> None:
+    command_line(__doc__).parse_args()
     out = RUNS / "fewshot"
     alcn(
         "bench",

@@ -11,12 +11,11 @@ by mean intensity. Time: a few seconds.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import cv2
 import numpy as np
-from _run import ROOT, SHARED_DATA
+from _run import ROOT, SHARED_DATA, command_line
 
 METHODS = {"input": "none", "CLAHE": "clahe", "DoG": "dog", "Tan-Triggs": "tantriggs", "ALCN": "alcn"}
 TILE_WIDTH = 256
@@ -54,7 +53,7 @@ def figure(scene: Path) -> np.ndarray:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_line(__doc__)
     parser.add_argument("--scene", default="mexico", help="a scene of ../shared/data/webcam (default mexico)")
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "figure.png", help="PNG to write")
     args = parser.parse_args()

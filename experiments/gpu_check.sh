@@ -2,7 +2,8 @@
 # The GPU checks of issue 40 in one short run (about 5 minutes) on a bare GPU machine that has Python and torch:
 #   kornia (and whatever else is missing) from wheels carried in .whl/, the CUDA tests, then
 #   `alcn bench speed --device cuda` (end to end host uint8 -> host uint8, on the device, float16, against the CPU,
-#   beside kornia's DoG and CLAHE). Reports go to $OUT (default runs/gpu_check).
+#   beside kornia's DoG and CLAHE). Reports go to $OUT (default runs/gpu_check). Both steps run whatever the first
+#   gives; the exit status is the first failure's (0 when both pass).
 # Fill .whl/ beforehand where a registry is reachable, e.g.
 #   pip download --no-deps --only-binary=:all: -d .whl kornia kornia_rs
 set -uo pipefail
@@ -34,7 +35,11 @@ cat "$OUT/environment.txt"
 # The CUDA tests (they skip with a reason where torch sees no GPU; -rs lists the reasons).
 timeout 150 "$PY" -m pytest -q -rs -p no:cacheprovider --junitxml="$OUT/cuda_tests.xml" \
   tests/test_nn.py tests/test_speed_paths.py tests/test_cli_normalize.py -k "cuda" 2>&1 | tee "$OUT/cuda_tests.txt" | tail -15
+tests_status=${PIPESTATUS[0]}
 
 # The measurement (writes speed.json and speed.md).
 timeout 240 "$PY" -m alcn_cv.cli bench speed --device cuda --out "$OUT/speed_cuda" 2>&1 | tee "$OUT/speed_cuda.txt" | tail -25
-echo "reports in $OUT"
+bench_status=${PIPESTATUS[0]}
+echo "reports in $OUT (CUDA tests: exit status $tests_status; bench: $bench_status)"
+if [ "$tests_status" -ne 0 ]; then exit "$tests_status"; fi
+exit "$bench_status"

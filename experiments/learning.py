@@ -13,9 +13,7 @@ Writes runs/learning/{untrained.npz,webcam/,bench/}; keeps docs/reports/relight_
 
 from __future__ import annotations
 
-import argparse
-
-from _run import RUNS, alcn, keep, untrained_start
+from _run import RUNS, alcn, command_line, keep, untrained_start
 
 from alcn_cv.runtime import MODELS
 
@@ -24,7 +22,7 @@ BASELINES = ["none", "clahe", "dog", "dlcn", "tantriggs"]
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_line(__doc__)
     parser.add_argument("--seeds", nargs="+", default=["0", "1", "2"], help="sampling seeds (default: 0 1 2)")
     args = parser.parse_args()
     out = RUNS / "learning"

@@ -22,7 +22,6 @@ Writes runs/orb_orientation/{orb_orientation.json,band_*.npz}; keeps docs/report
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from dataclasses import replace
@@ -30,7 +29,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from _run import RUNS, keep
+from _run import RUNS, command_line, keep
 from tqdm.auto import tqdm
 
 from alcn_cv.bench.relight import PairPlan, Settings, build_method, evaluate_scene, keypoint_scores, plan_pairs
@@ -108,7 +107,7 @@ def upright_orb(norm: Normalization, scene: Scene, plans: list[PairPlan]) -> lis
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_line(__doc__)
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
     args = parser.parse_args()
     out = RUNS / "orb_orientation"

@@ -15,15 +15,13 @@ Writes runs/pose_planar/<part>/planar_pose.{md,json,png}; keeps docs/reports/pos
 
 from __future__ import annotations
 
-import argparse
-
-from _run import RUNS, alcn, keep
+from _run import RUNS, alcn, command_line, keep
 
 PARTS = {"features": ["--detector", "features", "--n-features", "500"], "corners": ["--detector", "corners"]}
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_line(__doc__)
     parser.add_argument("--part", choices=sorted(PARTS), action="append", help="run only these parts (default: both)")
     args = parser.parse_args()
     for part in args.part or PARTS:

@@ -5,29 +5,27 @@ photographs (Rad et al. 2017, Table 1).
 
 Not run for docs/results.md (hours): the journal keeps its numbers as measured. Time on 2 shared cores:
 the data about 20 min; the corner CNN about 8 min per network (5 normalizations x 3 seeds, so about
-2 hours per data set; `--corner-device cuda` trains them on a GPU in 1.5-2 min each); the SIFT rows
+2 hours per data set; `alcn pose eval` trains them on a GPU where torch sees one, in 1.5-2 min each); the SIFT rows
 about 30 min; Middlebury about 10 min.
 
     python experiments/pose_table1.py                      # every part below, in turn
     python experiments/pose_table1.py --part features      # one part: data, features, corners,
                                                            # control, heldout, middlebury
 
-Writes runs/pose_table1/<part>/table1.{md,json} (middlebury.json for Middlebury); keeps
-docs/reports/pose_table1_<part>.json.
+Writes runs/pose_table1/<part>/table1.{md,json} (middlebury.{md,json} for Middlebury); keeps
+docs/reports/pose_table1_<part>.json (pose_middlebury.json for Middlebury).
 """
 
 from __future__ import annotations
 
-import argparse
-
-from _run import RUNS, SHARED_DATA, alcn, keep
+from _run import RUNS, SHARED_DATA, alcn, command_line, keep
 
 NORMALIZATIONS = ["none", "dog:sigma1=1:sigma2=2", "tantriggs", "alcn", "alcn:model=lite"]
 PARTS = ("data", "features", "corners", "control", "heldout", "middlebury")
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_line(__doc__)
     parser.add_argument("--part", choices=PARTS, action="append", help="run only these parts (default: all)")
     parser.add_argument("--seeds", default="3", help="corner CNN seeds per normalization (default 3)")
     args = parser.parse_args()

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from _run import untrained_start
+from _run import command_line, untrained_start
 
 from alcn_cv.cli import main as alcn
 from alcn_cv.data.light_changes import LIGHTS, sample_pair
@@ -128,7 +128,7 @@ def bench(out: Path, trained: Path, untrained: Path, baselines: bool) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_line(__doc__)
     parser.add_argument("--out", type=Path, default=Path("runs/relit"))
     parser.add_argument("--stages", nargs="+", choices=STAGES, default=list(STAGES))
     parser.add_argument("--frames", type=int, default=16, help="relit copies per photograph (default 16)")

@@ -28,13 +28,12 @@ Writes OUT/relief_training.json; keeps docs/reports/relief_training.json.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
 import cv2
-from _run import RUNS, alcn, keep
+from _run import RUNS, alcn, command_line, keep
 from directional_light import identify, render_identity, render_stand_in
 from tqdm.auto import tqdm
 
@@ -83,7 +82,7 @@ def bench_means(report: dict, spec: str) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_line(__doc__)
     parser.add_argument("--out", type=Path, default=RUNS / "relief_training", help="run folder")
     parser.add_argument("--stages", nargs="+", choices=STAGES, default=list(STAGES), help="stages to run")
     parser.add_argument("--identities", type=int, default=40, help="rendered training scenes (default: 40)")

@@ -15,13 +15,11 @@ docs/reports/relight_split.json and docs/reports/relight_leave_one_out.json.
 
 from __future__ import annotations
 
-import argparse
-
-from _run import RUNS, alcn, keep
+from _run import RUNS, alcn, command_line, keep
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_line(__doc__)
     parser.add_argument("--seeds", nargs="+", default=["0"], help="sampling seeds (default: 0)")
     parser.add_argument("--only", choices=("split", "leave_one_out"), help="run one of the two protocols")
     parser.add_argument(

@@ -21,7 +21,7 @@ from _run import RUNS, alcn, keep
 
 def main() -> None:
     if {"-h", "--help"} & set(sys.argv[1:]):
-        print(__doc__)
+        print(f"usage: speed.py [OPTION ...] (the options of `alcn bench speed`)\n\n{__doc__}")
         return
     out = RUNS / "speed"
     alcn("bench", "speed", "--out", str(out), *sys.argv[1:])

@@ -25,10 +25,9 @@ load 4-9 (2026-11-27): ``unet`` 29 min (300 steps, about 5 s each), ``gain`` 2 m
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
-from _run import RUNS, alcn, keep
+from _run import RUNS, alcn, command_line, keep
 
 STAGES = ("unet", "gain", "objective", "bench")
 QUICK = ["--seeds", "0", "--max-frames", "12", "--patches", "150", "--max-pairs", "12", "--no-tune"]
@@ -77,7 +76,7 @@ def objective(conf: str, unet: Path, gain: Path, draws: int, out: Path) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = command_line(__doc__)
     parser.add_argument("--conf", default="gain", help="the train-real-light preset (default: gain)")
     parser.add_argument("--out", type=Path, default=RUNS / "unet", help="run folder (default: runs/unet)")
     parser.add_argument("--stages", nargs="+", choices=STAGES, default=list(STAGES))
