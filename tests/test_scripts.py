@@ -7,6 +7,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+#: Where the experiments write (ignored by git; experiments/_run.py's RUNS).
+RUNS = ROOT / "runs"
 SCRIPTS = sorted(p for folder in ("experiments", "examples") for p in (ROOT / folder).glob("[!_]*.py"))
 
 
@@ -14,5 +16,5 @@ SCRIPTS = sorted(p for folder in ("experiments", "examples") for p in (ROOT / fo
 def test_help_says_what_the_script_does_and_writes(script):
     proc = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and proc.stdout.startswith("usage:"), proc.stderr[-2000:]
-    if script.parent.name == "experiments":  # an experiment writes under runs/ (or the docs it rebuilds)
-        assert "runs/" in proc.stdout or "docs/" in proc.stdout, proc.stdout
+    if script.parent.name == "experiments":  # where an experiment writes: its runs folder (or the docs it rebuilds)
+        assert f"{RUNS.name}/" in proc.stdout or "docs/" in proc.stdout, proc.stdout
