@@ -495,6 +495,11 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
         height = fs.getNode("image_height").real()
         rms_node = fs.getNode("rms")
         rms = rms_node.real() if not rms_node.empty() else float("nan")
+    except cv2.error:  # OpenCV reads any JSON or YAML; a top level that is not a map fails its assertions
+        raise DatasetError(
+            f"{path}: not a camera calibration (an OpenCV FileStorage with the matrices camera_matrix and "
+            "distortion_coefficients: the camera.yaml of `alcn calib camera`, not its views.json)"
+        ) from None
     finally:
         fs.release()
     if K is None or np.asarray(K).shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:

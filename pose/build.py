@@ -87,7 +87,7 @@ def build(
         known = np.asarray(box_size, np.float64)
     registered = seq.registered
     if not registered and known is None:
-        raise InputError("an unregistered sequence needs the object's size (a box .ply or box_size) for its scale")
+        raise InputError("an unregistered sequence needs the object's size for its scale: --box-ply or --box-size")
     units = seq.units or box_units or "mm"
     if known is not None and box_units and seq.units and box_units != seq.units:
         known = known * part_model.unit_scale(box_units, seq.units)

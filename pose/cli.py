@@ -38,32 +38,22 @@ def _build(args: argparse.Namespace) -> int:
     return 0
 
 
-def _camera(path: str | None) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """``(K, dist)`` of a calibration file from ``alcn calib camera`` (``None, None`` without one)."""
+def _calibration(path: str | None):
+    """The :class:`~calib.camera.Calibration` of a file from ``alcn calib camera`` (None without one)."""
     if path is None:
-        return None, None
-    import cv2
-
-    from alcn_cv.errors import DatasetError
+        return None
     from calib.camera import load_calibration
 
-    try:
-        calibration = load_calibration(path)
-    except cv2.error:  # OpenCV reads any JSON; a field that is not a matrix fails its assertions
-        raise DatasetError(
-            f"{path}: not a camera calibration; --camera takes the camera.yaml written by "
-            "`alcn calib camera` (an OpenCV FileStorage with the matrices camera_matrix and "
-            "distortion_coefficients), not its views.json"
-        ) from None
-    return calibration.K, calibration.dist
+    return load_calibration(path)
 
 
 def _track(args: argparse.Namespace) -> int:
     from pose import track
 
-    K, dist = _intrinsics(args.K), None
-    if K is None:
-        K, dist = _camera(args.camera)
+    K, dist, size = _intrinsics(args.K), None, None
+    calibration = _calibration(args.camera) if K is None else None
+    if calibration is not None:
+        K, dist, size = calibration.K, calibration.dist, calibration.image_size
     summary = track.main(
         args.model,
         args.input,
@@ -77,6 +67,7 @@ def _track(args: argparse.Namespace) -> int:
         reprojection_error=args.reprojection_error,
         dist=dist,
         detector=args.detector,
+        image_size=size,
     )
     print(f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps -> {args.output}")
     return 0
@@ -328,8 +319,9 @@ def _bench_corners(args: argparse.Namespace) -> int:
     from pose import corner_bench
 
     K = _intrinsics(args.K)
-    if K is None:
-        K, _ = _camera(args.camera)
+    calibration = _calibration(args.camera) if K is None else None
+    if calibration is not None:
+        K = calibration.K
     if K is None:
         raise ValueError("give the intrinsics of the frames: --K FX FY CX CY or --camera camera.yaml")
     r = corner_bench.main(

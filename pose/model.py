@@ -246,6 +246,8 @@ def load(path: str | Path) -> PartModel:
     path = Path(path)
     if not path.is_file():
         raise WeightFileError(f"{path}: part model not found")
+    if path.suffix.lower() == ".ply":
+        raise WeightFileError(f"{path}: the point cloud of a part model; the model is the .npz beside it")
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}

@@ -33,7 +33,7 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv import io
-from alcn_cv.errors import DatasetError
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, read_json, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, new_figure, save_figure
 from pose import model as part_model
@@ -291,8 +291,13 @@ def main(
     box) into ``out_dir``."""
     settings = settings or EdgeSettings()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(f"{out_dir} is a file; the output is a folder")
     errors = {label: measure(model, poses, video, settings) for label, model, poses in runs}
+    for (label, _, poses), measured in zip(runs, errors.values()):
+        if not any(np.isfinite(e.mean_px) for e in measured.values()):
+            raise InputError(f"run {label}: no frame of {video} is posed in {poses}; nothing to measure")
+    out_dir.mkdir(parents=True, exist_ok=True)
     summary = {label: summarize(e) for label, e in errors.items()}
     host = machine()
     rows = [

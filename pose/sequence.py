@@ -63,9 +63,11 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
             ``scene_gt.json``); without annotations, ``scene_camera.json``'s ``cam_R_w2c`` is used.
 
     Raises:
-        DatasetError: the folder is none of these, or an image has no pose.
+        DatasetError: no such folder, the folder is none of these, or an image has no pose.
     """
     path = Path(path)
+    if not path.exists():
+        raise DatasetError(f"{path}: no such file or folder")
     if (path / "scene_camera.json").is_file():
         from alcn_cv.formats import bop
 

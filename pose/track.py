@@ -27,6 +27,7 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv import io
+from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import InputError
 from alcn_cv.io import write_json
 from alcn_cv.report import machine
@@ -221,6 +222,7 @@ def main(
     reprojection_error: float = 4.0,
     dist: np.ndarray | None = None,
     detector: str = "features",
+    image_size: tuple[int, int] | None = None,
 ) -> dict:
     """Track the box through ``source`` and write ``output`` (scene_gt JSON, keyed by the frame
     names of :func:`alcn_cv.io.iter_frames`: ``frame_000000``, ... for a video, the file stems for a
@@ -233,13 +235,23 @@ def main(
             part model tracked after another one warns, a corner detector's is an error).
         K: ``(3, 3)`` intrinsics; default: those stored in the part model (:func:`camera_matrix_for`).
         min_inliers: default :data:`MIN_INLIERS` of the detector.
+        image_size: ``(width, height)`` the calibration of ``K`` and ``dist`` is for; frames of another size are an
+            error.
 
     Returns:
         A summary dict: frames, tracked frames, fps, events, output paths.
     """
+    if image_size is not None:
+        _, first = next(io.iter_frames(source, max_frames=1))
+        if first.shape[1::-1] != tuple(image_size):
+            raise InputError(
+                f"the frames of {source} are {first.shape[1]}x{first.shape[0]} but the calibration is for "
+                f"{image_size[0]}x{image_size[1]}; calibrate at this resolution"
+            )
     if detector == "features":
         model = part_model.load(model_path)
-        if normalizer not in (None, model.normalizer):
+        det: PartDetector = FeaturePartDetector(model, normalizer or model.normalizer, n_features=n_features)
+        if normalizer is not None and not same_method(normalizer, model.normalizer):
             logger.warning(
                 "%s was built after the normalizer %r; tracking after %r, its descriptors may not match",
                 model_path,
@@ -247,7 +259,6 @@ def main(
                 normalizer,
             )
         normalizer = normalizer or model.normalizer
-        det: PartDetector = FeaturePartDetector(model, normalizer, n_features=n_features)
         corners, units = model.corners, model.units
         model_K = model.extra.get("K")
     elif detector == "corners":

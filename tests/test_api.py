@@ -265,3 +265,14 @@ def test_one_alcn_shared_by_threads(model):
         for _ in range(3):
             for got, want in zip(pool.map(alcn.apply, frames), expected):
                 np.testing.assert_array_equal(got, want)
+
+
+def test_same_method_fills_in_the_defaults():
+    from alcn_cv.enhance.registry import same_method
+
+    assert same_method("clahe", "clahe:clip_limit=2.0:tileGridSize=(8, 8)")
+    assert same_method("alcn", "alcn:model=gain")
+    assert not same_method("clahe", "clahe:clipLimit=4")
+    assert not same_method("alcn", "alcn:model=lite")
+    with pytest.raises(InputError, match="unknown normalization"):
+        same_method("clahe", "clahee")

@@ -148,6 +148,10 @@ def test_corrupt_or_incomplete_yaml(tmp_path):
         load_calibration(bad)
     with pytest.raises(DatasetError, match="not found"):
         load_calibration(tmp_path / "missing.yaml")
+    views = tmp_path / "views.json"  # what `alcn calib camera` writes beside camera.yaml
+    views.write_text('[{"name": "left01", "rms_px": 0.3}]')
+    with pytest.raises(DatasetError, match="not its views.json"):
+        load_calibration(views)
 
 
 def test_poor_rms_warns(scene, caplog):

@@ -123,6 +123,8 @@ def test_image_pairs_and_relight():
 def test_bad_inputs(tmp_path):
     with pytest.raises(DatasetError, match="not a BOP scene"):
         sequence.load_sequence(tmp_path)
+    with pytest.raises(DatasetError, match="no such file or folder"):
+        sequence.load_sequence(tmp_path / "missing.mp4")
     with pytest.raises(InputError, match="intrinsics"):
         build.main(tmp_path / "v.mp4", tmp_path / "m.npz") if (tmp_path / "v.mp4").write_bytes(b"x") else None
 

@@ -61,6 +61,9 @@ def test_other_version_and_corrupt_files(tmp_path):
         pm.load(tmp_path / "bad.npz")
     with pytest.raises(WeightFileError, match="not found"):
         pm.load(tmp_path / "missing.npz")
+    (tmp_path / "m.ply").write_text("ply\n")  # the point cloud save writes beside the model
+    with pytest.raises(WeightFileError, match="the model is the .npz beside it"):
+        pm.load(tmp_path / "m.ply")
 
 
 def test_several_descriptors_per_point_and_version_1(tmp_path):

@@ -121,3 +121,28 @@ def test_known_box_flush_with_the_lid_when_points_rise_above_it():
     cams = np.array([[70.0, -150.0, 400.0], [20.0, -100.0, 300.0]])
     fit = box_fit.fit_box(np.vstack([lid, front, hand]), known_size=[140, 95, 55], viewpoints=cams)
     assert (fit.corners[:, 2].min(), fit.corners[:, 2].max()) == pytest.approx((0.0, 55.0), abs=1.0)
+
+
+def test_a_run_without_a_posed_frame_is_an_error_before_anything_is_written(tmp_path):
+    import json
+
+    from alcn_cv.errors import InputError
+    from pose import model as part_model
+
+    model = part_model.PartModel(
+        corners=box_corners([100, 80, 40]), points3d=np.zeros((1, 3)), descriptors=np.zeros((1, 32), np.uint8)
+    )
+    model.extra["K"] = camera_matrix(600.0, 600.0, 160.0, 120.0).tolist()
+    part_model.save(model, tmp_path / "m.npz")
+    video = tmp_path / "v.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (320, 240))
+    for _ in range(3):
+        writer.write(np.full((240, 320, 3), 128, np.uint8))
+    writer.release()
+    (tmp_path / "lost.json").write_text(json.dumps({f"frame_{i:06d}": [] for i in range(3)}))
+    with pytest.raises(InputError, match="run lost: no frame"):
+        overlay.main(video, [("lost", tmp_path / "m.npz", tmp_path / "lost.json")], tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    (tmp_path / "file").write_text("")
+    with pytest.raises(InputError, match="is a file"):
+        overlay.main(video, [("lost", tmp_path / "m.npz", tmp_path / "lost.json")], tmp_path / "file")

@@ -120,6 +120,14 @@ def test_a_part_model_is_tracked_after_the_normalizer_it_was_built_after(tmp_pat
     with caplog.at_level("WARNING", logger="pose.track"):
         summary = track.main(tmp_path / "m.npz", frames, tmp_path / "b.json", K, normalizer="none", n_features=800)
     assert summary["normalizer"] == "none" and "built after the normalizer 'clahe'" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="pose.track"):  # the same method, its default given
+        track.main(
+            tmp_path / "m.npz", frames, tmp_path / "d.json", K, normalizer="clahe:clip_limit=2.0", n_features=800
+        )
+    assert "built after" not in caplog.text
+    with pytest.raises(InputError, match=r"are 320x240 but the calibration is for 1280x960"):
+        track.main(tmp_path / "m.npz", frames, tmp_path / "c.json", K, n_features=800, image_size=(1280, 960))
 
 
 def test_detector_runs_after_any_normalizer():

@@ -20,7 +20,17 @@ from typing import TypeVar
 from alcn_cv.enhance.base import NoNormalization, Normalization
 from alcn_cv.errors import ALCNError, InputError
 
-__all__ = ["available", "create", "describe", "from_spec", "parameters", "parse_params", "parse_spec", "register"]
+__all__ = [
+    "available",
+    "create",
+    "describe",
+    "from_spec",
+    "parameters",
+    "parse_params",
+    "parse_spec",
+    "register",
+    "same_method",
+]
 
 _REGISTRY: dict[str, type[Normalization]] = {}
 N = TypeVar("N", bound=type[Normalization])
@@ -73,6 +83,31 @@ def _camel_case(name: str) -> str:
     return head + "".join(word.capitalize() for word in rest)
 
 
+def _accepted_names(params: dict[str, object], accepted: dict[str, object]) -> dict[str, object]:
+    """``params`` with each snake_case name the method does not have as the camelCase one it spells."""
+    return {
+        _camel_case(key) if key not in accepted and _camel_case(key) in accepted else key: value
+        for key, value in params.items()
+    }
+
+
+def same_method(spec: str, other: str) -> bool:
+    """Whether two specs name the same method with the same parameters, the defaults included:
+    ``same_method("clahe", "clahe:clip_limit=2.0")`` is True.
+
+    Raises:
+        InputError: a bad spec or an unknown name.
+    """
+
+    def full(text: str) -> tuple[str, dict[str, object]]:
+        name, params = parse_spec(text)
+        accepted = parameters(name)
+        defaults = {k: v for k, v in accepted.items() if v is not inspect.Parameter.empty}
+        return name, {**defaults, **_accepted_names(params, accepted)}
+
+    return full(spec) == full(other)
+
+
 def create(spec: str, **params: object) -> Normalization:
     """Create the normalization a name or spec ``NAME[:KEY=VALUE...]`` names, with ``params``.
 
@@ -90,11 +125,7 @@ def create(spec: str, **params: object) -> Normalization:
     if twice:
         raise InputError(f"bad parameters for {name!r}: {', '.join(twice)} given in the spec {spec!r} and again")
     cls: Callable[..., Normalization] = _registered(name)
-    accepted = parameters(name)
-    params = {
-        _camel_case(key) if key not in accepted and _camel_case(key) in accepted else key: value
-        for key, value in {**spec_params, **params}.items()
-    }
+    params = _accepted_names({**spec_params, **params}, parameters(name))
     _check_params(name, _REGISTRY[name], params)
     try:
         return cls(**params)
