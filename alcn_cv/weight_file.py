@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import json
+import logging
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +18,8 @@ import numpy as np
 
 from alcn_cv.errors import WeightFileError
 from alcn_cv.io import atomic_write
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["DEFAULT_WEIGHTS", "FORMAT", "VERSION", "NormalizerFile", "load_normalizer_file", "save_normalizer_file"]
 
@@ -51,7 +54,9 @@ class NormalizerFile:
 
 
 def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> Path:
-    """Write a weight file atomically (temporary name, then rename)."""
+    """Write a weight file atomically (temporary name, then rename). An ONNX export beside it (the same name,
+    ``.onnx``), which ``backend="opencv"`` would run, was made from the weights it held before: it is removed
+    (``alcn export`` makes it again)."""
     path = Path(path)
     meta = {"format": FORMAT, "version": VERSION, **meta}
     _check_meta(meta, path)
@@ -63,6 +68,12 @@ def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: 
     }
     np.savez(buffer, **stored)
     atomic_write(path, buffer.getvalue())
+    stale = path.with_suffix(".onnx")
+    if stale.is_file():
+        stale.unlink()
+        logger.warning(
+            "removed %s, the ONNX export of the weights %s held before (alcn export makes it again)", stale, path
+        )
     return path
 
 

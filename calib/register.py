@@ -280,7 +280,7 @@ def register_charuco(
     undistort = Undistorter(calib, keep_K=True)
     K = np.asarray(calib.K, float)
     reg = Registration(K, tuple(calib.image_size))
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp:
         (tmp / "rgb").mkdir()
         frames = iter_frames(source, step, max_frames)
         for name, image in tqdm(frames, total=_num_frames(source, step, max_frames), desc="registering", unit="frame"):
@@ -623,7 +623,11 @@ def register_colmap(
     """
     source = Path(source)
     units = "mm" if (known_distance or reference) else "arbitrary"
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp, tempfile.TemporaryDirectory() as work, _quiet_colmap():
+    with (
+        atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp,
+        tempfile.TemporaryDirectory() as work,
+        _quiet_colmap(),
+    ):
         rgb = tmp / "rgb"
         rgb.mkdir()
         frames = _write_sfm_frames(source, rgb, calib, settings)

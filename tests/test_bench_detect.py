@@ -152,6 +152,8 @@ def test_cli_and_bad_input(small_data, tmp_path):
     )
     with pytest.raises(DatasetError):
         detect_data.load_data(tmp_path)
+    with pytest.raises(DatasetError, match="not a folder"):
+        detect_data.load_data(tmp_path / "missing")
     with pytest.raises(SystemExit):
         cli_main(["bench", "--help"])
 

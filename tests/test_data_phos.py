@@ -113,3 +113,26 @@ def test_load_errors_name_the_file_and_field(tmp_path):
     (d / "manifest.json").write_text(json.dumps({**man, "parameters": {"n_objects": 3}}))
     with pytest.raises(DatasetError, match="windows.npz"):
         phos.load(d)
+
+
+def test_overwrite_replaces_an_earlier_output_only(tmp_path):
+    """--overwrite replaces a folder an earlier run wrote (its manifest.json) or an empty one, never other files."""
+    from alcn_cv.data.manifest import atomic_output_dir
+
+    def write(out, **kwargs):
+        with atomic_output_dir(out, **kwargs) as tmp:
+            (tmp / "manifest.json").write_text("{}")
+
+    write(tmp_path / "data")
+    with pytest.raises(FileExistsError, match="--overwrite"):
+        write(tmp_path / "data")
+    write(tmp_path / "data", overwrite=True)
+    (tmp_path / "empty").mkdir()
+    write(tmp_path / "empty", overwrite=True)
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "notes.txt").write_text("mine")
+    (tmp_path / "file.json").write_text("mine")
+    for out in (tmp_path / "notes", tmp_path / "file.json"):
+        with pytest.raises(FileExistsError, match="not an earlier output"):
+            write(out, overwrite=True)
+    assert (tmp_path / "notes" / "notes.txt").read_text() == (tmp_path / "file.json").read_text() == "mine"

@@ -72,3 +72,15 @@ def test_nan_weights_are_not_saved(tmp_path, lite):
         save_normalizer_file(tmp_path / "w.npz", arrays, lite.meta)
     assert not list(tmp_path.iterdir())
     assert load_normalizer_file(save_normalizer_file(tmp_path / "ok.npz", lite.arrays, lite.meta)).meta["trained"]
+
+
+def test_saving_weights_removes_the_export_of_the_old_ones(tmp_path, lite, caplog):
+    """backend="opencv" runs the .onnx beside a weight file: one made from the weights it held before would run
+    silently (a retrained model in the folder of its old export)."""
+    weights = save_normalizer_file(tmp_path / "w.npz", lite.arrays, lite.meta)
+    (tmp_path / "w.onnx").write_bytes(b"an old export")
+    (tmp_path / "other.onnx").write_bytes(b"another model's")
+    with caplog.at_level("WARNING", logger="alcn_cv.weight_file"):
+        save_normalizer_file(weights, lite.arrays, lite.meta)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other.onnx", "w.npz"]
+    assert "w.onnx" in caplog.text

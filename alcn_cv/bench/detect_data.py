@@ -61,6 +61,8 @@ def load_data(
             that the training set lacks.
     """
     root = Path(data_dir)
+    if not root.is_dir():
+        raise DatasetError(f"{root}: not a folder (the detection benchmark's data: `alcn data detect --out DIR`)")
     manifest_path = root / "manifest.json"
     manifest = read_json(manifest_path) if manifest_path.is_file() else {}
     if not isinstance(manifest, dict):

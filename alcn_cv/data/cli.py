@@ -220,7 +220,8 @@ def add_parser(subparsers) -> None:
         help="registered scenes under many lights, to train the gain Normalizer",
         description="Render fixed views of textured relief scenes, each under many lightings "
         "(directional, spot, point, cast shadows, dark, over-exposed), one folder of registered "
-        "grayscale frames per scene: the layout `alcn train-real-light --rendered` reads.",
+        "grayscale frames per scene: the layout `alcn train-real-light --set 'rendered=[\"DIR\"]' --set "
+        "rendered_fraction=0.5` reads.",
     )
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("--scenes", type=int, default=24, help="number of scenes (default 24)")

@@ -67,15 +67,20 @@ def read_manifest(folder: str | os.PathLike, kind: str | None = None) -> dict[st
 
 
 @contextlib.contextmanager
-def atomic_output_dir(out_dir: str | os.PathLike, *, overwrite: bool = False) -> Iterator[Path]:
+def atomic_output_dir(
+    out_dir: str | os.PathLike, *, overwrite: bool = False, marker: str = "manifest.json"
+) -> Iterator[Path]:
     """Yield a temporary folder that becomes ``out_dir`` when the block completes.
 
     On error the temporary folder is removed and ``out_dir`` is left as it was. With
-    ``overwrite``, an existing ``out_dir`` is replaced; otherwise it is an error.
+    ``overwrite``, an existing ``out_dir`` is replaced if it is an earlier output (it holds ``marker``) or an
+    empty folder; anything else (a file, a folder of other files) is never removed.
     """
     out = Path(out_dir)
     if out.exists() and not overwrite:
-        raise FileExistsError(f"{out} exists; pass overwrite=True (--overwrite) to replace it")
+        raise FileExistsError(f"{out} exists; --overwrite (overwrite=True) replaces it")
+    if out.exists() and not (out.is_dir() and ((out / marker).is_file() or not any(out.iterdir()))):
+        raise FileExistsError(f"{out} is not an earlier output (no {marker}): not replaced; give another path")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
     try:

@@ -125,7 +125,7 @@ def generate(
 
     Returns:
         The output folder: a folder of scenes, ``scene_NNN`` (:func:`alcn_cv.data.scenes.load_scene_folder`;
-        ``alcn train-real-light --rendered``). Cost: about 1 s of CPU per 320x320 frame.
+        ``alcn train-real-light --set 'rendered=["DIR"]'``). Cost: about 1 s of CPU per 320x320 frame.
     """
     if scenes < 1:
         raise InputError(f"need at least one scene, got {scenes}")

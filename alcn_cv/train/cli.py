@@ -19,8 +19,9 @@ from pathlib import Path
 __all__ = ["add_parser"]
 
 
-def _add_conf(parser: argparse.ArgumentParser, default: str | None, presets: str) -> None:
-    """``--conf`` and ``--set``, the same on every training command; ``presets`` says what each preset makes."""
+def _add_conf(parser: argparse.ArgumentParser, default: str | None, presets: str, example: str) -> None:
+    """``--conf`` and ``--set``, the same on every training command; ``presets`` says what each preset makes,
+    ``example`` is a ``--set`` item of its keys."""
     parser.add_argument(
         "--conf",
         default=default,
@@ -34,7 +35,7 @@ def _add_conf(parser: argparse.ArgumentParser, default: str | None, presets: str
         default=[],
         metavar="KEY=VALUE",
         dest="settings",
-        help="override one key of the preset, dotted, the value as TOML, e.g. --set lr=3e-4 "
+        help=f"override one key of the preset, dotted, the value as TOML, e.g. --set {example} "
         "(repeatable; --print-config shows every key)",
     )
     parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
@@ -71,6 +72,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "paper",
         "paper (the shipped alcn_normalizer.npz), paper-full (the paper's widths and data, for a "
         "GPU; no shipped file), or a TOML file of alcn_cv.train.config's keys",
+        "optim.lr=3e-4",
     )
     p.add_argument("--out", type=Path, default=Path("out/alcn"), help="run folder (default: out/alcn)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
@@ -121,6 +123,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         None,
         "lite (the shipped alcn_normalizer_lite.npz, from the paper model) or gain-lite (the "
         "shipped alcn_normalizer_gain_lite.npz, from the gain model); --set teacher=FILE distils another teacher",
+        "epochs=30",
     )
     s.add_argument("--out", type=Path, help="weight file to write (.npz; the card is .md beside it)")
     s.add_argument("--seed", type=int, help="seed (default: the preset's)")
@@ -143,7 +146,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "panorama: academic research only). Writes OUT/gain_normalizer.npz, checkpoints, train.log and "
         "history.json. The shipped alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`.",
     )
-    _add_conf(r, "gain", "gain (the shipped alcn_normalizer_gain.npz)")
+    _add_conf(r, "gain", "gain (the shipped alcn_normalizer_gain.npz)", "steps=600")
     _add_run(r, "out/gain")
     r.add_argument(
         "--threads",
@@ -161,7 +164,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "presets and --set keys; net.* are the gain network's and unused. Writes "
         "OUT/unet_normalizer.npz, train.log and history.json; bench it as unet:weights=OUT/unet_normalizer.npz.",
     )
-    _add_conf(u, "gain", "a preset of train-real-light")
+    _add_conf(u, "gain", "a preset of train-real-light", "steps=600")
     _add_run(u, "out/unet")
     u.add_argument("--channels", type=int, default=8, help="the U-Net's first width (default 8)")
     u.add_argument("--levels", type=int, default=3, help="the U-Net's resolutions (default 3)")
@@ -175,7 +178,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "image size, run by cv2.dnn in alcn_cv.nets.opencv_runtime (no torch needed).",
     )
     e.add_argument("--onnx", type=Path, required=True, help="output .onnx path")
-    e.add_argument("--weights", type=Path, help="Normalizer weight file (.npz; default: the shipped one)")
+    e.add_argument("--weights", type=Path, help="Normalizer weight file (.npz; default: the default model's)")
     e.set_defaults(func=_export)
 
 

@@ -291,7 +291,7 @@ def _merge(obj: Any, values: dict[str, Any], prefix: str = "") -> None:
 def _parse_setting(item: str) -> dict[str, Any]:
     """``"optim.lr=3e-4"`` -> ``{"optim": {"lr": 0.0003}}`` (the value is read as TOML, or a bare string)."""
     if "=" not in item:
-        raise InputError(f"setting {item!r} must be KEY=VALUE, e.g. optim.lr=3e-4")
+        raise InputError(f"setting {item!r} must be KEY=VALUE (--print-config shows the keys)")
     key, text = (s.strip() for s in item.split("=", 1))
     try:
         value = tomllib.loads(f"v = {text}")["v"]

@@ -225,8 +225,20 @@ def main(
     return out_path
 
 
+def _created(path: Path, model: str, **params: str) -> str:
+    """How to create ALCN from the weight file ``path``: by the shipped ``model``'s name where it is that file."""
+    from alcn_cv.runtime import MODELS
+
+    shipped = MODELS[model].resolve() == Path(path).resolve()
+    args = [
+        f'model="{model}"' if shipped else f'weights="{Path(path).name}"',
+        *(f'{k}="{v}"' for k, v in params.items()),
+    ]
+    return f"`alcn_cv.createALCN({', '.join(args)})`"
+
+
 def _write_card(path: Path, name: str, record: dict[str, Any], trained: bool, command: str) -> None:
-    v, s = record["validation"], record["settings"]
+    v, s, weights = record["validation"], record["settings"], path.with_suffix(".npz")
     constant_note = (
         "\n- The teacher predicts the same weights for every window, so the student is those weights (its bias) "
         "and was not trained (0 epochs)."
@@ -241,7 +253,7 @@ from the paper-architecture Normalizer `{record["teacher"]["file"]}` (SHA-256 `{
 teacher.
 {"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}
 
-Use: `alcn_cv.createALCN(model="lite")`, real time: `alcn_cv.createALCN(model="lite", mixture="pyramid")`.
+Use: {_created(weights, "lite")}, real time: {_created(weights, "lite", mixture="pyramid")}.
 ALCN warns when the installed teacher differs from this one: then re-run the command below.
 
 ## How it was made
@@ -503,10 +515,10 @@ def _gain_terms(s: dict[str, Any]) -> str:
 
 def _write_gain_card(path: Path, name: str, record: dict[str, Any], trained: bool, command: str) -> None:
     v, start, s = record["validation"], record["validation_initial"], record["settings"]
-    teacher = record["teacher"]
+    teacher, weights = record["teacher"], path.with_suffix(".npz")
     text = f"""# Model card: `{name}` (the gain Normalizer's lite variant)
 
-`alcn_cv.createALCN(model="gain-lite")`. A smaller gain-adaptive Normalizer (`alcn_cv.nets.gain.GainNormalizer`,
+{_created(weights, "gain-lite")}. A smaller gain-adaptive Normalizer (`alcn_cv.nets.gain.GainNormalizer`,
 {s["channels"]} channels, dilations {s["dilations"]}; {record["parameters"]["student"]} parameters against the
 teacher's {record["parameters"]["teacher"]}) distilled from `{teacher["file"]}` (SHA-256 `{teacher["sha256"][:16]}...`:
 {teacher["description"] or "the gain Normalizer"}). Same features, kernels, divisive step and `tau` as the teacher

@@ -53,6 +53,7 @@ from alcn_cv.io import atomic_write
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW
 from alcn_cv.nets.opencv_runtime import BLOCK, BLOCKS_INPUT, DEFAULT_ONNX, FEATURES_INPUT, IMAGE_INPUT, image_blocks
+from alcn_cv.runtime import resolve_weights
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx"]
@@ -82,7 +83,7 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
 
     Args:
         out: the ``.onnx`` path to write.
-        weights: a Normalizer weight file (``.npz``); default: the one shipped in the package.
+        weights: a Normalizer weight file (``.npz``); default: the default model's (``createALCN()``'s).
 
     Returns:
         The written path.
@@ -94,7 +95,7 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
     out = Path(out)
     if out.suffix != ".onnx":
         raise InputError(f"the ONNX output must end in .onnx, got {out}")
-    weight_file = load_normalizer_file(weights)
+    weight_file = load_normalizer_file(resolve_weights(None, weights))
     net = normalizer_from_file(weight_file).eval()
     from_features = weight_file.meta.get("architecture") == "gain"
     if from_features:  # a grid larger than every pad of the graph (cv2.dnn takes any size)

@@ -479,8 +479,10 @@ def fit(
         bar.set_postfix(loss=f"{loss.item():.3f}")
         if step % cfg.save_every == 0 or step == cfg.steps:
             seconds = time.perf_counter() - start
-            recent = np.mean([h["loss"] for h in history[-cfg.save_every :]])
-            logger.info("step %d: mean loss %.4f over the last %d steps, %.0f s", step, recent, cfg.save_every, seconds)
+            recent = [h["loss"] for h in history[-cfg.save_every :]]
+            logger.info(
+                "step %d: mean loss %.4f over the last %d steps, %.0f s", step, np.mean(recent), len(recent), seconds
+            )
             save(step, seconds, opt)
             write_json(out / "history.json", history)
     seconds = time.perf_counter() - start
