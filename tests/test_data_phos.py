@@ -136,3 +136,14 @@ def test_overwrite_replaces_an_earlier_output_only(tmp_path):
         with pytest.raises(FileExistsError, match="not an earlier output"):
             write(out, overwrite=True)
     assert (tmp_path / "notes" / "notes.txt").read_text() == (tmp_path / "file.json").read_text() == "mine"
+
+
+def test_an_output_folder_gets_the_permissions_of_any_new_folder(tmp_path):
+    import os
+
+    from alcn_cv.data.manifest import atomic_output_dir
+
+    with atomic_output_dir(tmp_path / "data") as tmp:
+        (tmp / "manifest.json").write_text("{}")
+    (tmp_path / "plain").mkdir()
+    assert os.stat(tmp_path / "data").st_mode == os.stat(tmp_path / "plain").st_mode
