@@ -197,7 +197,8 @@ def test_cli_runs_the_preset_with_its_settings(tmp_path, monkeypatch):
         "--seed",
         "3",
     ]
-    assert record == {"conf": "gain", "command": shlex.join(words)}
+    assert record == {"conf": "gain", "command": shlex.join(words), "progress": True}
+    assert main([*common, "--no-progress"]) == 0 and runs[-1][1]["progress"] is False
 
 
 def test_three_steps_lower_the_loss(tmp_path):

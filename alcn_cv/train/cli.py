@@ -42,9 +42,11 @@ def _add_conf(parser: argparse.ArgumentParser, default: str | None, presets: str
 
 
 def _add_run(parser: argparse.ArgumentParser, out: str) -> None:
-    """``--out`` (the run folder, default ``out``) and ``--seed``, the same on the real-light training commands."""
+    """``--out`` (the run folder, default ``out``), ``--seed`` and ``--no-progress``, the same on the real-light
+    training commands."""
     parser.add_argument("--out", type=Path, default=Path(out), help=f"run folder (default: {out})")
     parser.add_argument("--seed", type=int, help="seed (default: the preset's)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def _command(name: str, args: argparse.Namespace, *extra: str) -> str:
@@ -280,7 +282,9 @@ def _train_real_light(args: argparse.Namespace) -> int:
 
     return _print_with_threads(
         args.threads,
-        lambda: train_real_light(cfg, args.out, command=_command("train-real-light", args), conf=args.conf),
+        lambda: train_real_light(
+            cfg, args.out, command=_command("train-real-light", args), conf=args.conf, progress=not args.no_progress
+        ),
     )
 
 
@@ -295,7 +299,8 @@ def _train_unet(args: argparse.Namespace) -> int:
     net = {"channels": args.channels, "levels": args.levels}
     command = _command("train-unet", args, "--channels", str(args.channels), "--levels", str(args.levels))
     return _print_with_threads(
-        args.threads, lambda: train_unet(cfg, args.out, net=net, command=command, conf=args.conf)
+        args.threads,
+        lambda: train_unet(cfg, args.out, net=net, command=command, conf=args.conf, progress=not args.no_progress),
     )
 
 

@@ -388,13 +388,16 @@ def _save_weights(
     return save_normalizer_file(path, net.state_arrays(), meta)
 
 
-def train_real_light(cfg: RealLightConfig, out: str | Path, *, command: str = "", conf: str | None = None) -> Path:
+def train_real_light(
+    cfg: RealLightConfig, out: str | Path, *, command: str = "", conf: str | None = None, progress: bool = True
+) -> Path:
     """Train a :class:`~alcn_cv.nets.gain.GainNormalizer` on registered scenes (see the module).
 
     Args:
         cfg: the settings (the ``gain`` preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`, overridden or not).
         out: the run folder.
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
+        progress: show a progress bar.
 
     Returns:
         The final weight file ``out/gain_normalizer.npz``.
@@ -402,7 +405,7 @@ def train_real_light(cfg: RealLightConfig, out: str | Path, *, command: str = ""
     if cfg.crop < 2 * cfg.patch:
         raise InputError(f"need crop >= 2 * patch, got crop {cfg.crop} and patch {cfg.patch}")
     with training_run(cfg, out) as folder:
-        return _train(cfg, folder, {"command": command, "conf": conf})
+        return _train(cfg, folder, {"command": command, "conf": conf}, progress)
 
 
 @contextlib.contextmanager
@@ -426,7 +429,7 @@ def training_run(cfg: RealLightConfig, out: str | Path) -> Iterator[Path]:
         yield folder
 
 
-def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
+def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any], progress: bool) -> Path:
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     net = GainNormalizer(**cfg.net)
@@ -441,7 +444,7 @@ def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any]) -> Path:
         state = {"net": net.state_dict(), "opt": opt.state_dict(), "step": step, "config": asdict(cfg)}
         atomic_write(out / "checkpoint.pt", lambda f, state=state: torch.save(state, f))
 
-    seconds = fit(net, pair_loss, scenes, rendered, cfg, rng, out, save, "real-light")
+    seconds = fit(net, pair_loss, scenes, rendered, cfg, rng, out, save, "real-light", progress)
     return _save_weights(net, out / "gain_normalizer.npz", cfg, cfg.steps, seconds, record)
 
 
@@ -455,6 +458,7 @@ def fit(
     out: Path,
     save: Callable[[int, float, torch.optim.Optimizer], None],
     desc: str,
+    progress: bool = True,
 ) -> float:
     """The training loop of the gain Normalizer and of its baselines: ``cfg.steps`` steps of Adam at ``cfg.lr`` on
     ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to
@@ -468,7 +472,7 @@ def fit(
     history: list[dict] = []
     start = time.perf_counter()
     net.train()
-    for step in (bar := tqdm(range(1, cfg.steps + 1), desc=desc, unit="step")):
+    for step in (bar := tqdm(range(1, cfg.steps + 1), desc=desc, unit="step", disable=not progress)):
         scene, frames, centres, anywhere = draw_step(scenes, rendered, cfg, rng)
         loss = step_loss(net, scene, frames, centres, cfg, anywhere)
         opt.zero_grad()

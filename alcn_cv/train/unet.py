@@ -92,6 +92,7 @@ def train_unet(
     net: Mapping[str, Any] | None = None,
     command: str = "",
     conf: str | None = None,
+    progress: bool = True,
 ) -> Path:
     """Train a :class:`~alcn_cv.nets.unet.UNetNormalizer` as the gain Normalizer is trained (see the module).
 
@@ -101,6 +102,7 @@ def train_unet(
         out: the run folder.
         net: :class:`~alcn_cv.nets.unet.UNetNormalizer` arguments (default: its defaults).
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
+        progress: show a progress bar.
 
     Returns:
         The weight file ``out/unet_normalizer.npz``.
@@ -108,17 +110,17 @@ def train_unet(
     if cfg.crop < cfg.patch:
         raise InputError(f"need crop >= patch, got crop {cfg.crop} and patch {cfg.patch}")
     with training_run(cfg, out) as folder:
-        return _train(cfg, folder, dict(net or {}), {"command": command, "conf": conf})
+        return _train(cfg, folder, dict(net or {}), {"command": command, "conf": conf}, progress)
 
 
-def _train(cfg: RealLightConfig, out: Path, arguments: dict[str, Any], record: dict[str, Any]) -> Path:
+def _train(cfg: RealLightConfig, out: Path, arguments: dict[str, Any], record: dict[str, Any], progress: bool) -> Path:
     # The generators as in real_light._train: the same seeds, the network built first, the same draws per step.
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     net = UNetNormalizer(**arguments)
     scenes, rendered = training_scenes(cfg)
     logger.info("U-Net %s: %d parameters", net.config, sum(p.numel() for p in net.parameters()))
-    seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, lambda *_: None, "unet")
+    seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, lambda *_: None, "unet", progress)
     meta = net.file_meta(
         trained=True,
         output_range=output_range(net, scenes + rendered),
