@@ -502,10 +502,10 @@ def map_video(
                         writer = open_video_writer(tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3)
                     writer.write(out)
 
-                total = len(video) if max_frames is None else min(len(video) or max_frames, max_frames)
-                frames = video if max_frames is None else islice(video, max_frames)
-                with tqdm(total=total or None, desc=desc or src.name, unit="frame") as progress:
-                    count = map_batches(frames, batched, write, batch_size or 1, progress)
+                # the frames wanted by the header's count (0: unknown) and max_frames
+                limit = video.frame_count if max_frames is None else min(video.frame_count, max_frames)
+                with tqdm(total=limit or max_frames, desc=desc or src.name, unit="frame") as progress:
+                    count = map_batches(islice(video, max_frames), batched, write, batch_size or 1, progress)
                     progress.total = count  # the header's count is an estimate: the bar ends at the frames decoded
                     progress.refresh()
         finally:
@@ -515,7 +515,7 @@ def map_video(
             raise InputError(f"no frame could be decoded from {src}")
         # A header's count is often one frame too high (the shared cookie_box/box.mp4 says 456,
         # FFmpeg decodes 455): a shortfall of one frame is not taken for truncation.
-        if count < min(video.frame_count, max_frames or video.frame_count) - 1:
+        if count < limit - 1:
             message = f"{src}: decoded {count} of {video.frame_count} frames (truncated or corrupt video)"
             if not allow_partial:
                 raise InputError(f"{message}; nothing written (--allow-partial keeps the decoded frames)")

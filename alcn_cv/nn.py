@@ -31,7 +31,7 @@ from torch import nn
 from alcn_cv.checks import FULL_SCALE
 from alcn_cv.errors import InputError
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
-from alcn_cv.filters.lab import linear_to_lab, srgb_to_linear
+from alcn_cv.filters.lab import srgb_to_lab
 from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_resize import interpolate_grid
@@ -232,13 +232,13 @@ class ALCN2d(nn.Module):
 
 def _opencv_lab(image: torch.Tensor) -> torch.Tensor:
     """:class:`~alcn_cv.filters.torch_lab.RgbToLab` of ``(B, 3, H, W)`` float32 CPU RGB by OpenCV's passes, the very
-    ones of :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>` (:func:`~alcn_cv.filters.lab.linear_to_lab`): L
+    ones of :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>` (:func:`~alcn_cv.filters.lab.srgb_to_lab`): L
     rounded otherwise in float32, which the divisive step amplifies several hundred times in flat regions, puts the
     output 1e-4 from ``apply()``'s (2.7e-6 with these passes)."""
     lab = torch.empty_like(image)
     for rgb, out in zip(image, lab):
         bgr = np.clip(np.ascontiguousarray(rgb.flip(0).permute(1, 2, 0).numpy()), 0.0, 1.0)
-        out.copy_(torch.from_numpy(linear_to_lab(srgb_to_linear(bgr))).permute(2, 0, 1))
+        out.copy_(torch.from_numpy(srgb_to_lab(bgr)).permute(2, 0, 1))
     return lab
 
 

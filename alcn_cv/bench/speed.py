@@ -67,7 +67,7 @@ from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization, lab_and_lightness
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
-from alcn_cv.filters.lab import srgb_to_linear
+from alcn_cv.filters.lab import srgb_to_lab
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
@@ -592,7 +592,7 @@ def lab_round_trip(method: Normalization, img: np.ndarray, out_dtype: np.dtype |
     for integer types)."""
     out_dtype = np.dtype(img.dtype if out_dtype is None else out_dtype)
     unit = img.astype(np.float32) * np.float32(1 / FULL_SCALE[img.dtype]) if img.dtype != np.float32 else img.copy()
-    lab = cv2.cvtColor(srgb_to_linear(unit), cv2.COLOR_LBGR2Lab)
+    lab = srgb_to_lab(unit)
     lightness = np.ascontiguousarray(lab[..., 0]) * np.float32(0.01)
     lab[..., 0] = method.to_unit(method.normalize(lightness)) * 100.0
     bgr = np.clip(cv2.cvtColor(lab, cv2.COLOR_Lab2BGR), 0, 1)

@@ -31,7 +31,7 @@ import numpy as np
 
 from alcn_cv.checks import FULL_SCALE, SUPPORTED_DTYPES, check_gray, check_image, unit_windows
 from alcn_cv.errors import InputError
-from alcn_cv.filters.lab import linear_to_lab, srgb_to_linear
+from alcn_cv.filters.lab import linear_to_lab, srgb_to_lab, srgb_to_linear
 
 __all__ = ["Normalization", "NoNormalization"]
 
@@ -66,11 +66,12 @@ def to_unit_float(img: np.ndarray) -> np.ndarray:
 
 def lab_and_lightness(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """CIE Lab of a valid BGR image (uint8, uint16 or float32 in [0, 1]) as a new float32 array (L in [0, 100];
-    :mod:`alcn_cv.filters.lab`: the sRGB curve decoded, then OpenCV's ``COLOR_LBGR2Lab``), and its L / 100 as a
-    float32 ``HxW`` plane in [0, 1]: what :meth:`Normalization.apply` normalizes for a colour image."""
+    :func:`~alcn_cv.filters.lab.srgb_to_lab`), and its L / 100 as a float32 ``HxW`` plane in [0, 1]: what
+    :meth:`Normalization.apply` normalizes for a colour image."""
     # a uint8 image's decoded curve by one table lookup: the float path's values for its 256 levels
-    linear = cv2.LUT(img, _LINEAR_UINT8_LEVELS) if img.dtype == np.uint8 else srgb_to_linear(to_unit_float(img))
-    lab = linear_to_lab(linear)
+    lab = (
+        linear_to_lab(cv2.LUT(img, _LINEAR_UINT8_LEVELS)) if img.dtype == np.uint8 else srgb_to_lab(to_unit_float(img))
+    )
     return lab, cv2.transform(lab, _LIGHTNESS_OF_LAB)
 
 

@@ -38,6 +38,7 @@ __all__ = [
     "inverse_gamma_table",
     "linear_to_lab",
     "spline_coefficients",
+    "srgb_to_lab",
     "srgb_to_linear",
 ]
 
@@ -70,6 +71,12 @@ def linear_to_lab(linear: np.ndarray) -> np.ndarray:
     in place: OpenCV's ``COLOR_LBGR2Lab``, which computes each pixel (its cube root by the spline of
     :func:`cube_root_table`), L in [0, 100]."""
     return cv2.cvtColor(linear, cv2.COLOR_LBGR2Lab, dst=linear)
+
+
+def srgb_to_lab(unit: np.ndarray) -> np.ndarray:
+    """CIE Lab of a C-ordered float32 ``HxWx3`` image of BGR sRGB intensities in [0, 1], in place:
+    :func:`linear_to_lab` of :func:`srgb_to_linear`, the conversion ``apply()`` makes of a colour image."""
+    return linear_to_lab(srgb_to_linear(unit))
 
 
 def spline_coefficients(values: np.ndarray) -> np.ndarray:
