@@ -29,7 +29,16 @@ from tqdm import tqdm
 
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats.colmap import ColmapCamera, camera_from_opencv, write_text_model
-from alcn_cv.io import VIDEO_SUFFIXES, VideoReader, atomic_path, is_video, iter_frames, list_images, write_json
+from alcn_cv.io import (
+    VIDEO_SUFFIXES,
+    VideoReader,
+    atomic_path,
+    is_video,
+    iter_frames,
+    list_images,
+    make_folder,
+    write_json,
+)
 
 from .board import BoardSpec, Detection, suggest_chessboard_size
 
@@ -427,7 +436,7 @@ def save_calibration(calib: Calibration, out_dir: str | os.PathLike, report: boo
         Paths of the written files by kind.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     yaml_path = write_camera_yaml(out / "camera.yaml", calib.K, calib.dist, calib.image_size, rms=calib.rms)
     colmap_dir = write_text_model(out / "colmap", [calib.colmap_camera()], [])
     info = {

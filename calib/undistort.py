@@ -17,7 +17,7 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv.errors import InputError
-from alcn_cv.io import IMAGE_SUFFIXES, is_video, list_images, map_video, read_image, write_image
+from alcn_cv.io import IMAGE_SUFFIXES, is_video, list_images, make_folder, map_video, read_image, write_image
 
 from .camera import Calibration, write_camera_yaml
 
@@ -83,12 +83,12 @@ def main(
     suffix = source.suffix.lower()
     if source.is_dir():
         files = list_images(source)
-        output.mkdir(parents=True, exist_ok=True)
+        make_folder(output)
         for path in tqdm(files, desc="undistorting", unit="image", disable=len(files) < 10):
             write_image(output / path.name, undistort(read_image(path), path.name))
         yaml_path = output / "camera.yaml"
     elif source.is_file() and is_video(source):
-        output.parent.mkdir(parents=True, exist_ok=True)
+        make_folder(output.parent)
         n = map_video(source, output, lambda frame: undistort(frame, source.name), desc="undistorting")
         logger.info("undistorted %d frames to %s", n, output)
         yaml_path = output.with_name(f"{output.stem}.camera.yaml")

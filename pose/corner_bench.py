@@ -24,7 +24,7 @@ import numpy as np
 
 from alcn_cv import io
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table
 
 logger = logging.getLogger(__name__)
@@ -135,7 +135,7 @@ def main(
     )
     if out is not None:
         out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
+        make_folder(out)
         md = (
             f"# Corner detector speed\n\nDetector `{onnx_path}` ({result['normalizer']} in front), "
             f"{result['frames']} frames of `{source}` at {result['size'][0]}x{result['size'][1]}, "

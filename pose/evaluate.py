@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none
 from pose.build import build as build_model
 from pose.corner_train import CornerRecipe
@@ -219,7 +219,7 @@ def main(
     ``command``), ``table1.json``, ``table1.png`` (and the models) into ``out_dir``.
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     if corner_recipe is None:
         corner_recipe, corner_conf = corner_confs["box"], "box"
     train = data_dir / "train" / "000001"
@@ -403,7 +403,7 @@ def middlebury_main(
     from alcn_cv.formats.middlebury import read_middlebury
 
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     results: dict[str, Any] = {}
     lines = [
         "# Middlebury: pose of 8 held-out views from a model of the 8 others\n",

@@ -53,7 +53,7 @@ import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.formats import bop
-from alcn_cv.io import atomic_write
+from alcn_cv.io import atomic_write, check_writable
 
 logger = logging.getLogger(__name__)
 
@@ -208,11 +208,23 @@ def read_box_corners(path: str | Path) -> np.ndarray:
     return box_corners(hi - lo, lo)
 
 
-def save(model: PartModel, path: str | Path) -> Path:
-    """Write ``model`` to ``path`` (``.npz``) and its point cloud to ``<stem>.ply`` beside it."""
+def model_path(path: str | Path) -> Path:
+    """``path`` as a part model's path, checked: an ``.npz`` file (its point cloud is named after it) that can be
+    written.
+
+    Raises:
+        InputError: another suffix, or a folder that cannot be written.
+    """
     path = Path(path)
     if path.suffix != ".npz":
-        path = path.with_suffix(".npz")
+        raise InputError(f"a part model must end in .npz, got {path}")
+    check_writable(path)
+    return path
+
+
+def save(model: PartModel, path: str | Path) -> Path:
+    """Write ``model`` to ``path`` (``.npz``) and its point cloud to ``<stem>.ply`` beside it."""
+    path = model_path(path)
     buf = io.BytesIO()
     np.savez(
         buf,

@@ -34,12 +34,13 @@ from tqdm import tqdm
 
 from alcn_cv import io
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, read_json, write_json
+from alcn_cv.io import atomic_write, make_folder, read_json, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, new_figure, save_figure
 from pose import model as part_model
 from pose.box import facing_faces
 from pose.model import BOX_EDGES
 from pose.solver import project
+from pose.track import count_frames
 
 logger = logging.getLogger(__name__)
 
@@ -195,7 +196,8 @@ def measure(
     JSON) with the box and camera of ``model_path`` (the camera stored by ``alcn pose build``)."""
     corners, K, poses = _camera_and_poses(model_path, poses_path)
     out = {}
-    for name, frame in tqdm(io.iter_frames(video), desc="overlay error", unit="frame", leave=False):
+    frames = io.iter_frames(video)
+    for name, frame in tqdm(frames, total=count_frames(video), desc="overlay error", unit="frame", leave=False):
         if name not in poses:
             out[name] = FrameError(float("nan"), 0.0, float("nan"), {})
             continue
@@ -297,7 +299,7 @@ def main(
     for (label, _, poses), measured in zip(runs, errors.values()):
         if not any(np.isfinite(e.mean_px) for e in measured.values()):
             raise InputError(f"run {label}: no frame of {video} is posed in {poses}; nothing to measure")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     summary = {label: summarize(e) for label, e in errors.items()}
     host = machine()
     rows = [

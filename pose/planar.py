@@ -53,7 +53,7 @@ from tqdm import tqdm
 from alcn_cv.data.scenes import Scene, load_scene_folder, select_scenes, shared_root
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, to_gray, write_json
+from alcn_cv.io import atomic_write, make_folder, to_gray, write_json
 from alcn_cv.report import describe_machine, machine, nan_to_none, new_figure, save_figure
 from pose.corner_train import CornerRecipe
 from pose.corner_train import confs as corner_confs
@@ -393,7 +393,7 @@ def main(
     all_scenes = load_scene_folder(root, max_frames)
     chosen = select_scenes(all_scenes, scenes) if scenes else all_scenes
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     for name in normalizers:  # a bad spec fails now, not after minutes of work
         from_spec(name)
     unknown = sorted(set(detectors) - set(DETECTORS))

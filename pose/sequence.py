@@ -16,7 +16,7 @@ import numpy as np
 
 from alcn_cv import io
 from alcn_cv.errors import DatasetError
-from alcn_cv.io import to_gray
+from alcn_cv.io import make_folder, to_gray
 
 
 @dataclass
@@ -128,7 +128,7 @@ def video_sequence(
     """An unregistered sequence: every ``step``-th frame of ``video`` (at most ``max_frames``)
     written as PNG into ``work_dir/images``."""
     image_dir = Path(work_dir) / "images"
-    image_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(image_dir)
     views = []
     for name, frame in io.iter_frames(video, step=step, max_frames=max_frames):
         io.write_image(image_dir / f"{name}.png", frame)

@@ -29,7 +29,7 @@ from tqdm import tqdm
 from alcn_cv import io
 from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import InputError
-from alcn_cv.io import write_json
+from alcn_cv.io import check_writable, make_folder, write_json
 from alcn_cv.report import machine
 from pose import model as part_model
 from pose.model import BOX_EDGES
@@ -241,6 +241,8 @@ def main(
     Returns:
         A summary dict: frames, tracked frames, fps, events, output paths.
     """
+    output = Path(output)
+    check_writable(output)  # before the tracking, not after it
     if image_size is not None:
         _, first = next(io.iter_frames(source, max_frames=1))
         if first.shape[1::-1] != tuple(image_size):
@@ -306,8 +308,7 @@ def main(
                 if res.estimate.ok:
                     draw_box(vis, corners, res.estimate.rvec, res.estimate.tvec, K, color_for(normalizer), dist=dist)
                 writer.write(res.name, vis)
-    output = Path(output)
-    output.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(output.parent)
     write_json(output, scene_gt)
     tracked = sum(bool(v) for v in scene_gt.values())
     summary = {

@@ -32,7 +32,7 @@ from tqdm import tqdm
 from alcn_cv import io
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError
-from alcn_cv.io import to_gray
+from alcn_cv.io import make_folder, to_gray
 from pose.parts import create_feature, match_descriptors
 from pose.sequence import TrainingSequence
 
@@ -188,7 +188,7 @@ def triangulate_fixed_poses(seq: TrainingSequence, db_path: Path, out_dir: Path)
             )
     finally:
         db.close()
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     opts = pycolmap.IncrementalPipelineOptions()
     opts.min_num_matches = 8
     opts.random_seed = RANDOM_SEED
@@ -212,7 +212,7 @@ def reconstruct_incremental(seq: TrainingSequence, db_path: Path, out_dir: Path,
     # one thread: COLMAP's mapper is reproducible only single-threaded (Ceres sums in thread order);
     # with two, the cookie-box video gave 5961 or 5940 points from one run to the next
     opts.num_threads = 1
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     with pycolmap_log():
         recs = pycolmap.incremental_mapping(db_path, seq.image_dir, out_dir, opts)
     if not recs:

@@ -128,7 +128,9 @@ def test_overwrite_replaces_an_earlier_output_only(tmp_path):
         write(tmp_path / "data")
     write(tmp_path / "data", overwrite=True)
     (tmp_path / "empty").mkdir()
-    write(tmp_path / "empty", overwrite=True)
+    write(tmp_path / "empty")  # an empty folder counts as absent
+    (tmp_path / "empty2").mkdir()
+    write(tmp_path / "empty2", overwrite=True)
     (tmp_path / "notes").mkdir()
     (tmp_path / "notes" / "notes.txt").write_text("mine")
     (tmp_path / "file.json").write_text("mine")

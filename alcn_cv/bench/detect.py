@@ -86,7 +86,7 @@ from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.filters.standardize import standardize_windows
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import machine, spread
 
 if TYPE_CHECKING:
@@ -575,7 +575,7 @@ def main(
     start = time.perf_counter()
     data = load_data(data_dir, working_scale, box_size)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     state = _Run(data, settings, read_test_images(data, settings.max_test_images))
     logger.info("read %d test images", len(state.test_images))
     _tune(state)

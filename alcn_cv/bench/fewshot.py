@@ -47,7 +47,7 @@ from alcn_cv.bench.detect_settings import POLICIES, POLICY_DESCRIPTIONS
 from alcn_cv.bench.policies import InputPolicy
 from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import (
     command_line,
     describe_machine,
@@ -380,7 +380,7 @@ def main(
         torch.set_num_threads(settings.threads)
     start = time.perf_counter()
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     runs: dict[str, Any] = {p: {m: [] for m in settings.methods} for p in settings.policies}
     total = settings.draws * len(settings.methods) * len(settings.policies)
     with tqdm(total=total, desc="few-shot validation", unit="run", disable=not progress) as bar:

@@ -37,7 +37,7 @@ from tqdm.auto import tqdm
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, from_spec, parse_spec
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
 
 __all__ = ["PhotometricObject", "agreement", "detail", "load_objects", "main"]
@@ -207,7 +207,7 @@ def main(
     if figure_object not in (None, "all") and figure_object not in [o.name for o in objects]:
         raise InputError(f"no object {figure_object!r}; objects: {', '.join(o.name for o in objects)}")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * erode + 1, 2 * erode + 1))
     masks = {o.name: cv2.erode(o.mask.astype(np.uint8), kernel) > 0 if erode else o.mask for o in objects}
     shown = {o.name for o in objects} if figure_object == "all" else {figure_object or objects[0].name}

@@ -54,6 +54,7 @@ from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, s
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.errors import InputError
+from alcn_cv.io import make_folder
 from alcn_cv.report import machine
 
 __all__ = [
@@ -436,6 +437,7 @@ def main(
     settings = settings.check()
     methods = list(methods)
     _check_methods(methods)
+    make_folder(out_dir)  # before the benchmark, not after it
     if not seeds:
         raise InputError("give at least one seed")
     roots = [Path(p) for p in data] if data else [shared_root("webcam"), shared_root("psm")]

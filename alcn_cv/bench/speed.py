@@ -68,7 +68,7 @@ from alcn_cv.enhance.base import Normalization, lab_and_lightness
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import srgb_to_lab
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 
@@ -1078,7 +1078,7 @@ def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> d
     settings = settings or SpeedSettings()
     settings.check()
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     import torch
 
     if settings.threads is not None:
@@ -1159,6 +1159,7 @@ def _device_main(out: Path, settings: SpeedSettings) -> dict[str, Any]:
         "",
     ]
     atomic_write(out / "speed.md", "\n".join(lines))
+    (out / "speed.png").unlink(missing_ok=True)  # a CPU run's plot, which this report no longer describes
     return result
 
 

@@ -25,6 +25,7 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv.enhance import available, create
+from alcn_cv.io import make_folder
 
 if TYPE_CHECKING:
     from alcn_cv.enhance.base import Normalization
@@ -85,7 +86,7 @@ def normalization_grid(images: list[np.ndarray], labels: list[str], methods: lis
         "Rows: test images under different lights; columns: every normalization, as apply() gives it", fontsize=10
     )
     fig.tight_layout(pad=0.3, rect=(0, 0, 1, 1 - 0.35 / height))  # room for the title line
-    path.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(path.parent)
     return save_figure(plt, fig, path, dpi=110)
 
 
@@ -94,7 +95,7 @@ def main(out_dir: Path, seed: int = 0) -> Path:
     from alcn_cv.data.manifest import read_manifest
     from alcn_cv.formats.coco import load_coco
 
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     data_dir = out_dir / "data"
     logger.info("rendering a small detection set into %s", data_dir)
     detect.generate(data_dir, seed=seed, size="small", n_test=6, width=480, height=300, p_object=1.0, overwrite=True)

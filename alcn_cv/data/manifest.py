@@ -78,14 +78,15 @@ def atomic_output_dir(
 ) -> Iterator[Path]:
     """Yield a temporary folder that becomes ``out_dir`` when the block completes.
 
-    On error the temporary folder is removed and ``out_dir`` is left as it was. With
-    ``overwrite``, an existing ``out_dir`` is replaced if it is an earlier output (it holds ``marker``) or an
-    empty folder; anything else (a file, a folder of other files) is never removed.
+    On error the temporary folder is removed and ``out_dir`` is left as it was. An empty folder counts as
+    absent (as for ``git clone``); with ``overwrite``, an existing ``out_dir`` is also replaced if it is an earlier
+    output (it holds ``marker``); anything else (a file, a folder of other files) is never removed.
     """
     out = Path(out_dir)
-    if out.exists() and not overwrite:
-        raise FileExistsError(f"{out} exists; --overwrite (overwrite=True) replaces it")
-    if out.exists() and not (out.is_dir() and ((out / marker).is_file() or not any(out.iterdir()))):
+    empty = out.is_dir() and not any(out.iterdir())
+    if out.exists() and not overwrite and not empty:
+        raise FileExistsError(f"{out} exists (--overwrite, or overwrite=True, replaces it)")
+    if out.exists() and not (empty or (out.is_dir() and (out / marker).is_file())):
         raise FileExistsError(f"{out} is not an earlier output (no {marker}): not replaced; give another path")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))

@@ -44,12 +44,13 @@ def parallel_map(
     with tqdm(total=len(items), desc=desc, unit=unit, disable=not progress) as bar:
         if workers == 1 or len(items) <= 1:
             for it in items:
-                yield fn(it)
-                bar.update()
+                result = fn(it)
+                bar.update()  # before the yield: a consumer that stops at the last item still sees it done
+                yield result
             return
         # "spawn": no fork of a process that may hold OpenCV or torch threads.
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(min(workers, len(items)), mp_context=ctx) as pool:
-            for r in pool.map(fn, items):
-                yield r
+            for result in pool.map(fn, items):
                 bar.update()
+                yield result

@@ -31,7 +31,7 @@ from alcn_cv.data.lighting import LIGHT_FAMILIES, Light, Lighting, sample_lighti
 from alcn_cv.data.objects import make_object, paste, to_surface
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.errors import DatasetError
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, make_folder, write_json
 
 logger = logging.getLogger(__name__)
 
@@ -226,7 +226,7 @@ def compare_psm(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed:
     }
     stats = {name: set_stats(objs) for name, objs in sets.items()}
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     write_json(out / "psm_comparison.json", stats)
     rows = list(STAT_NAMES) + ["across_lights_cv_of_mean", "across_lights_pairwise_ncc"]
     lines = ["| statistic | " + " | ".join(sets) + " |", "|---" * (len(sets) + 1) + "|"]

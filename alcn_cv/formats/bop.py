@@ -27,7 +27,7 @@ from scipy.spatial import ConvexHull
 
 from alcn_cv.errors import DatasetError
 from alcn_cv.formats import validate_json
-from alcn_cv.io import atomic_write, read_json, write_json
+from alcn_cv.io import atomic_write, make_folder, read_json, write_json
 
 __all__ = [
     "BopObjectPose",
@@ -217,7 +217,7 @@ def write_scene(
     Both files are validated against their schemas and written atomically.
     """
     root = Path(scene_dir)
-    root.mkdir(parents=True, exist_ok=True)
+    make_folder(root)
     cams, gts = {}, {}
     for f in frames:
         c: dict[str, Any] = {"cam_K": _flat(f.K), "depth_scale": 1.0 if f.depth_scale is None else f.depth_scale}

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write
+from alcn_cv.io import atomic_write, make_folder
 
 logger = logging.getLogger(__name__)
 
@@ -289,7 +289,7 @@ def write_text_model(
         The output folder.
     """
     out = Path(path)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     cameras = list(cameras)
     images = list(images)
     points3d = list(points3d or [])

@@ -52,7 +52,7 @@ from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.report import log_to, machine
 from alcn_cv.train.config import RealLightConfig
@@ -424,7 +424,7 @@ def training_run(cfg: RealLightConfig, out: str | Path) -> Iterator[Path]:
     if cfg.locations < 2 or cfg.steps < 1:
         raise InputError("need locations >= 2 and steps >= 1")
     folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
+    make_folder(folder)
     with log_to(folder / "train.log"):
         yield folder
 

@@ -47,7 +47,7 @@ from tqdm.auto import tqdm
 
 from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write
+from alcn_cv.io import atomic_write, make_folder
 from alcn_cv.nets.device import torch_device
 from alcn_cv.report import log_to, machine
 from alcn_cv.train import distributed
@@ -137,7 +137,7 @@ def train(
     cfg = load_config(config)
     distributed.init(cfg.run.device)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     start = time.perf_counter()
     machine_start = machine()
     with log_to(out / "train.log") if distributed.is_main() else contextlib.nullcontext():
