@@ -34,7 +34,7 @@ from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.lab import srgb_to_lab
 from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
-from alcn_cv.filters.torch_resize import interpolate_grid
+from alcn_cv.filters.torch_resize import area_downsample, interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.nets.cpu_inference import cpu_inference
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
@@ -107,8 +107,8 @@ class ALCN2d(nn.Module):
         self.allow_tf32 = allow_tf32
 
     def working(self, gray: torch.Tensor) -> torch.Tensor:
-        """``(B, 1, H, W)`` at the working scale: blocks of ``1 / scale`` pixels averaged (``cv2.INTER_AREA`` for
-        sides that are multiples of it, as :meth:`ALCN.apply` resizes), else torch's area or bilinear resize."""
+        """``(B, 1, H, W)`` at the working scale, resized as :meth:`ALCN.apply` does: ``cv2.INTER_AREA`` down
+        (blocks of ``1 / scale`` pixels averaged when the sides are multiples of it), bilinear up."""
         if self.spec.scale == 1:
             return gray
         size = self.spec.working_shape(tuple(gray.shape[-2:]))
@@ -116,7 +116,7 @@ class ALCN2d(nn.Module):
         if zoom == round(zoom) and gray.shape[-2] % round(zoom) == 0 and gray.shape[-1] % round(zoom) == 0:
             return F.avg_pool2d(gray, round(zoom))
         if self.spec.scale < 1:
-            return F.interpolate(gray, size=size, mode="area")
+            return area_downsample(gray, size)
         return F.interpolate(gray, size=size, mode="bilinear", align_corners=False)
 
     def weight_maps(self, gray: torch.Tensor, small: torch.Tensor | None = None) -> torch.Tensor:
@@ -133,7 +133,8 @@ class ALCN2d(nn.Module):
         one product ``F o I``: one map interpolated and multiplied instead of two.
         """
         two_maps = isinstance(self.net, GainNormalizer) and self.net.num_kernels == 2
-        with torch.autocast(gray.device.type, torch.float16, enabled=half):
+        # autocast's enabled=False would also switch off a caller's own autocast (bfloat16, say) inside
+        with torch.autocast(gray.device.type, torch.float16) if half else nullcontext():
             maps = self._maps(gray, small, first_only=two_maps).to(gray.dtype)
         return self.mixture.difference(gray * maps) if two_maps else self.mixture(gray, maps)
 
@@ -260,7 +261,8 @@ def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | 
     key = (model, None if weights is None else str(weights), image.device, image.dtype)
     module = _MODULES.get(key)
     if module is None:
-        module = _MODULES[key] = ALCN2d(model, weights).to(image.device, image.dtype).eval()
+        # frozen: a backward through it must not accumulate gradients in a module the caller never sees
+        module = _MODULES[key] = ALCN2d(model, weights).to(image.device, image.dtype).eval().requires_grad_(False)
     return module(image)
 
 

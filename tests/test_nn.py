@@ -33,10 +33,12 @@ def _bgr(h=96, w=128, seed=0):
 
 
 @pytest.mark.parametrize("model", list(MODELS))
-def test_gray_equals_the_float_output_of_apply(model):
+@pytest.mark.parametrize("shape", [(96, 128), (75, 101)])
+def test_gray_equals_the_float_output_of_apply(model, shape):
     """Against the OpenCV runtime (the default backend; the exact mixture, which the lite and paper models'
-    default pyramid approximates), not the torch backend, which runs this module."""
-    gray = _gray()
+    default pyramid approximates), not the torch backend, which runs this module; odd sides too, which the lite and
+    paper models' working scale resizes by OpenCV's area weights."""
+    gray = _gray(*shape)
     expected = alcn_cv.createALCN(model=model, mixture="exact").apply(gray, out_dtype=np.float32)
     with torch.no_grad():
         out = ALCN2d(model=model).eval()(torch.from_numpy(_unit(gray))[None, None])
@@ -133,7 +135,9 @@ def test_lower_precision_dtypes_run_and_stay_close(dtype, mean, largest):
 
 @pytest.mark.parametrize("model", ["gain", "lite"])
 def test_differentiable_frozen_or_fine_tuned(model):
-    x = torch.from_numpy(_unit(_gray(64, 80)))[None, None].requires_grad_(True)
+    image = _unit(_gray(64, 80))
+    image[:16] = 0  # a black border: flat cells, where a square root's gradient would be infinite
+    x = torch.from_numpy(image)[None, None].requires_grad_(True)
     frozen = ALCN2d(model=model).eval().requires_grad_(False)
     frozen(x).square().mean().backward()
     assert x.grad is not None and torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0
@@ -142,6 +146,30 @@ def test_differentiable_frozen_or_fine_tuned(model):
     grads = [p.grad for p in tuned.parameters() if p.requires_grad]
     assert grads and all(g is not None and torch.isfinite(g).all() for g in grads)
     assert sum(float(g.abs().sum()) for g in grads) > 0
+
+
+def test_the_functional_forms_module_is_frozen_and_fixed_scales_stay_fixed():
+    """alcn2d's cached module gathers no gradient from the caller's backward; requires_grad_(True) on ALCN2d makes
+    its network trainable, not the divisive step's fixed tau and floor (buffers)."""
+    x = torch.rand(1, 1, 64, 64)
+    out = alcn2d(x, model="gain-lite")
+    assert not out.requires_grad
+    module = ALCN2d(model="gain").requires_grad_(False).requires_grad_(True)
+    names = [name for name, _ in module.named_parameters()]
+    assert names and not [name for name in names if "log_" in name]
+    assert {"net.log_tau", "net.log_floor_scale"} <= set(module.state_dict())
+
+
+def test_a_callers_autocast_stays_on():
+    """Under the caller's bfloat16 autocast, a bfloat16 image runs (the float16 autocast of half=True is not
+    opened otherwise, which would switch the caller's off inside)."""
+    module = ALCN2d(model="gain").eval()
+    x = torch.from_numpy(_unit(_gray(64, 80)))[None, None]
+    with torch.no_grad():
+        reference = module(x)
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            out = module(x.bfloat16())
+    assert torch.isfinite(out).all() and (out.float() - reference).abs().mean() < 1e-2
 
 
 @pytest.mark.parametrize("model", ["gain", "lite"])

@@ -1,4 +1,5 @@
-"""Bilinear upsampling by an integer factor in torch, as ``torch.lerp`` over phases: ALCN's two interpolations.
+"""ALCN's resizes in torch: bilinear upsampling by an integer factor as ``torch.lerp`` over phases, and
+``cv2.INTER_AREA``'s downsampling.
 
 Between two samples ``factor`` pixels apart, each output pixel sits at a fixed fraction of the way, its phase: one
 ``torch.lerp`` over every pair of neighbours and every phase writes a whole axis at once, and the second axis is
@@ -9,16 +10,24 @@ to float rounding (``tests/test_torch_resize.py``). Two placements of the sample
   its OpenCV form is :func:`alcn_cv.filters.gaussian_mixture.upsample_grid`.
 * :func:`upsample_blocks`: one sample per block of ``block`` pixels, at the block's centre, the edges held
   (``align_corners=False``, ``cv2.resize``'s placement); the wide band's (:mod:`alcn_cv.filters.torch_wide_band`).
+
+:func:`area_downsample` is ``cv2.resize(..., interpolation=cv2.INTER_AREA)`` to any smaller size, differentiable:
+the working image of the ``lite`` and ``paper`` models (torch's own ``mode="area"`` averages other pixels when the
+sides are not multiples of the factor).
 """
 
 from __future__ import annotations
 
+import math
+from functools import lru_cache
+
+import numpy as np
 import torch
 import torch.nn.functional as F
 
 from alcn_cv.errors import InputError
 
-__all__ = ["interpolate_grid", "upsample_blocks"]
+__all__ = ["area_downsample", "interpolate_grid", "upsample_blocks"]
 
 
 def _along(x: torch.Tensor, dim: int, phases: torch.Tensor, start: int, size: int) -> torch.Tensor:
@@ -90,3 +99,54 @@ def upsample_blocks(small: torch.Tensor, block: int, shape: tuple[int, int]) -> 
     phases = (torch.arange(block, device=small.device, dtype=small.dtype) + 0.5) / block
     padded = F.pad(small, (1, 1, 1, 1), mode="replicate")
     return _along(_along(padded, -1, phases, block // 2, w), -2, phases, block // 2, h)
+
+
+@lru_cache(maxsize=64)
+def _area_taps(src: int, dst: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(taps, dst)`` source indices and float32 weights of ``cv2.INTER_AREA`` from ``src`` to ``dst <= src``
+    samples: output ``d`` averages the source interval ``[d s, (d + 1) s)``, ``s = src / dst``, each pixel weighed
+    by its overlap (OpenCV's own table, ``computeResizeAreaTab``; unused taps: index 0, weight 0)."""
+    scale = src / dst
+    rows: list[list[tuple[int, float]]] = []
+    for d in range(dst):
+        start, stop = d * scale, (d + 1) * scale
+        cell = min(scale, src - start)
+        first, last = math.ceil(start), min(math.floor(stop), src - 1)
+        first = min(first, last)
+        row = [(first - 1, (first - start) / cell)] if first - start > 1e-3 else []
+        row += [(i, 1.0 / cell) for i in range(first, last)]
+        if stop - last > 1e-3:
+            row.append((last, min(stop - last, 1.0, cell) / cell))
+        rows.append(row)
+    taps = max(len(row) for row in rows)
+    index, weight = np.zeros((taps, dst), np.int64), np.zeros((taps, dst), np.float32)
+    for d, row in enumerate(rows):
+        for k, (i, a) in enumerate(row):
+            index[k, d], weight[k, d] = i, a
+    return index, weight
+
+
+def area_downsample(x: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+    """``cv2.resize(x, size[::-1], interpolation=cv2.INTER_AREA)`` for a smaller ``size``, to float rounding
+    (``tests/test_torch_resize.py``), differentiable.
+
+    Args:
+        x: ``(B, C, H, W)`` float.
+        size: ``(h, w)`` with ``1 <= h <= H`` and ``1 <= w <= W``.
+
+    Returns:
+        ``(B, C, h, w)``, ``x``'s dtype and device.
+
+    Example:
+        >>> area_downsample(torch.arange(4.0).reshape(1, 1, 1, 4), (1, 3)).tolist()  # 4/3 pixels an output
+        [[[[0.25, 1.5, 2.75]]]]
+    """
+    h, w = size
+    if not (1 <= h <= x.shape[-2] and 1 <= w <= x.shape[-1]):
+        raise InputError(f"area_downsample makes images smaller: {tuple(x.shape[-2:])} to {(h, w)}")
+    for dim, dst in ((-2, h), (-1, w)):
+        index, weight = (torch.from_numpy(a).to(x.device) for a in _area_taps(x.shape[dim], dst))
+        weight = weight.to(x.dtype)
+        shape = (-1, 1) if dim == -2 else (-1,)
+        x = sum(x.index_select(dim, i) * a.reshape(shape) for i, a in zip(index, weight))
+    return x

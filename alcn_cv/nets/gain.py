@@ -157,8 +157,13 @@ class GainNormalizer(nn.Module):
         with torch.no_grad():
             self.head.weight.zero_()
             self.head.bias.copy_(torch.tensor([0.0] + init_weights))
-        self.log_tau = nn.Parameter(torch.tensor(math.log(tau)), requires_grad=learn_scales)
-        self.log_floor_scale = nn.Parameter(torch.tensor(math.log(floor_scale)), requires_grad=learn_scales)
+        for name, value in (("log_tau", tau), ("log_floor_scale", floor_scale)):
+            initial = torch.tensor(math.log(value))
+            # fixed values are buffers, so that a caller's requires_grad_(True) leaves them fixed
+            if learn_scales:
+                self.register_parameter(name, nn.Parameter(initial))
+            else:
+                self.register_buffer(name, initial)
         #: The divisive normalization's energy sigma (working pixels).
         self.divisive_sigma = float(divisive_sigma)
         self.mixture = GaussianMixture2d(self.sigmas)
@@ -227,7 +232,10 @@ class GainNormalizer(nn.Module):
         # The blurs of the grid stand for blurs of the image: sigma in cells = sigma / stride.
         local = gaussian_blur(mean, self.mean_sigma / self.stride)
         context = gaussian_blur(mean, self.context_sigma / self.stride)
-        std = (square - mean * mean).clamp_min(0.0).sqrt()
+        variance = (square - mean * mean).clamp_min(0.0)
+        # sqrt's gradient at 0 is infinite: a flat cell (black borders, padding) would give the input NaN gradients
+        positive = variance > 0
+        std = torch.where(positive, torch.where(positive, variance, 1.0).sqrt(), 0.0)
         return (torch.cat([mean, local, context, std], dim=1) + self.eps).log()
 
     def maps_from_features(self, features: torch.Tensor) -> torch.Tensor:
