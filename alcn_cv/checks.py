@@ -52,7 +52,8 @@ def check_image(img: object) -> np.ndarray:
         )
     native = img.dtype.newbyteorder("=")
     if native not in SUPPORTED_DTYPES:
-        raise InputError(f"unsupported dtype {img.dtype}; use uint8, uint16 or float32 (intensities in [0, 1])")
+        hint = " (image.astype(np.float32))" if native.kind == "f" else ""
+        raise InputError(f"unsupported dtype {img.dtype}; use uint8, uint16 or float32 (intensities in [0, 1]){hint}")
     if img.dtype != native:  # byte order is a storage detail, not a pixel type
         img = img.astype(native)
     if img.dtype == np.float32:
@@ -63,7 +64,7 @@ def check_image(img: object) -> np.ndarray:
                 raise InputError("float32 image contains NaN or inf")
             raise InputError(
                 f"float32 intensities must be in [0, 1], got [{lo:.4g}, {hi:.4g}]"
-                + (" (divide by 255 first)" if hi <= 255 else "")
+                + (" (divide by 255 first)" if lo >= 0 and 1.5 < hi <= 255 else "")
             )
     return img
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import os
 import signal
 import sys
 import traceback
@@ -30,6 +31,8 @@ logger = logging.getLogger("alcn_cv")
 
 #: The entry-point group of the subcommands.
 COMMANDS_GROUP = "alcn_cv.commands"
+#: FFmpeg's log level for fatal errors only (AV_LOG_FATAL), OpenCV's ``OPENCV_FFMPEG_LOGLEVEL`` without --verbose.
+FFMPEG_FATAL = 8
 
 
 class Terminated(KeyboardInterrupt):
@@ -116,6 +119,10 @@ def main(argv: list[str] | None = None) -> int:
         datefmt="%Y/%m/%d %H:%M:%S",
     )
     keep_freed_memory()
+    if not args.verbose:
+        # FFmpeg's decoder reports recoverable stream errors (a slice type it tolerates) on stderr, between the
+        # progress bars; a truncated or unreadable video is checked by the frames it gives (alcn_cv.io)
+        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", str(FFMPEG_FATAL))
     try:
         with sigterm_as_interrupt(args.command):
             result = args.func(args)

@@ -47,6 +47,8 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pnm"})
+#: The image formats of :data:`IMAGE_SUFFIXES` that hold 8 bits a channel (the others hold 16).
+EIGHT_BIT_SUFFIXES = frozenset({".jpg", ".jpeg", ".bmp", ".webp"})
 VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv"})
 _FOURCC = {".avi": "MJPG", ".mkv": "MJPG"}  # everything else: mp4v
 _UMASK = os.umask(0)
@@ -248,7 +250,8 @@ def to_gray(image: np.ndarray) -> np.ndarray:
 def write_image(path: str | Path, img: np.ndarray) -> Path:
     """Write an image atomically (:func:`atomic_path`), creating the folder.
 
-    A grayscale image with alpha (``HxWx2``, which OpenCV cannot encode) is written as BGRA.
+    A grayscale image with alpha (``HxWx2``, which OpenCV cannot encode) is written as BGRA; a 16-bit image in a
+    format of 8 bits a channel (:data:`EIGHT_BIT_SUFFIXES`) is scaled to 8 bits, with a warning.
 
     Raises:
         InputError: ``path`` has no image extension (:data:`IMAGE_SUFFIXES`) or lies under a file.
@@ -260,6 +263,12 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
         raise InputError(f"cannot write an image to {path} ({kind}); use one of {', '.join(sorted(IMAGE_SUFFIXES))}")
     if img.ndim == 3 and img.shape[2] == 2:
         img = np.dstack([cv2.cvtColor(img[..., 0], cv2.COLOR_GRAY2BGR), img[..., 1]])
+    if img.ndim == 3 and img.shape[2] == 4 and path.suffix.lower() in (".jpg", ".jpeg"):
+        logger.warning("%s has no alpha channel: the image's alpha is not written", path)
+    if img.dtype == np.uint16 and path.suffix.lower() in EIGHT_BIT_SUFFIXES:
+        # OpenCV would saturate every value above 255 (a white image); scaled, as image tools convert
+        logger.warning("%s holds 8 bits a channel: the 16-bit image is scaled to 8 bits", path)
+        img = cv2.convertScaleAbs(img, alpha=1 / 257)
     with atomic_path(path) as tmp:
         try:
             written = cv2.imwrite(str(tmp), img)

@@ -412,7 +412,9 @@ def strip_layout(spec: ModelSpec, grid_stride: int, mixture: str, shape: tuple[i
 
 
 def resolve_weights(model: str | None, weights: str | Path | None) -> Path:
-    """The weight file of ``weights`` or of the shipped ``model`` (default :data:`DEFAULT_MODEL`)."""
+    """The weight file of ``weights`` or of the shipped ``model`` (default :data:`DEFAULT_MODEL`), not both."""
+    if model is not None and weights is not None:
+        raise InputError(f"give a model or a weight file, not both (model={model!r}, weights={str(weights)!r})")
     model = DEFAULT_MODEL if model is None else model
     if model not in MODELS:
         raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")

@@ -115,6 +115,12 @@ def test_bad_input_messages(methods):
         alcn.apply(BAD["0..255 float"])
     with pytest.raises(InputError, match="out_dtype"):
         alcn.apply(np.zeros((8, 8), np.uint8), out_dtype=np.int16)
+    with pytest.raises(InputError, match="unknown out_dtype 'foo'"):
+        alcn.apply(np.zeros((8, 8), np.uint8), out_dtype="foo")
+    with pytest.raises(InputError, match=r"image.astype\(np.float32\)"):
+        alcn.apply(BAD["float64"])
+    with pytest.raises(InputError, match=r"\[-0.5, 0.5\]$"):  # centred values: no hint about 0..255
+        alcn.apply(np.full((8, 8), 0.5, np.float32) - np.eye(8, dtype=np.float32))
 
 
 def test_alcn_backends_agree(frames):
@@ -145,6 +151,15 @@ def test_alcn_parameters():
     with pytest.raises(WeightFileError, match="not found"):
         alcn_cv.createALCN(weights="/nonexistent/weights.npz")
     assert alcn_cv.createALCN(scale=1.0).scale == 1.0
+    with pytest.raises(InputError, match="not both"):
+        alcn_cv.createALCN(model="paper", weights=MODELS["lite"])
+    assert alcn_cv.createALCN(weights=MODELS["lite"]).weights_path == MODELS["lite"]
+    with pytest.raises(InputError, match="backend='fast' runs on the CPU"):
+        alcn_cv.createALCN(backend="fast", device="cuda")
+    with pytest.raises(InputError, match="not a torch device"):
+        alcn_cv.createALCN(backend="torch", device="gpu0")
+    with pytest.raises(InputError, match="runs no torch"):
+        alcn_cv.createALCN(backend="opencv", threads=2)
 
 
 def test_shipped_weights_say_what_they_are(caplog):

@@ -69,6 +69,16 @@ def test_errors_are_one_line(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     assert main(["normalize", str(tmp_path / "empty"), str(tmp_path / "o"), "-m", "none"]) == 2
     assert "no images" in capsys.readouterr().err
+    image = tmp_path / "image.png"
+    cv2.imwrite(str(image), np.zeros((8, 8), np.uint8))
+    for args, message in [
+        ([str(tmp_path), str(tmp_path / "out.jpg")], "got the file name"),  # a folder's output
+        ([str(image), str(tmp_path / "o.png"), "--max-frames", "3"], "not one"),
+        ([str(image), str(tmp_path / "o.png"), "--batch-size", "8"], "without it each frame"),
+    ]:
+        assert main(["normalize", *args, "-m", "none"]) == 2
+        assert message in capsys.readouterr().err.strip().splitlines()[-1]
+    assert not (tmp_path / "out.jpg").exists()
 
 
 def test_debug_shows_the_traceback(tmp_path):

@@ -71,6 +71,16 @@ def test_gray_and_alpha_are_written_as_bgra(tmp_path, image):
     np.testing.assert_array_equal(written[..., 3], image[..., 1])
 
 
+def test_a_16_bit_image_is_scaled_for_an_8_bit_format(tmp_path, image, caplog):
+    """OpenCV would write 255 for every value above it: a white JPEG."""
+    deep = image.astype(np.uint16) * 257
+    np.testing.assert_array_equal(cv2.imread(str(write_image(tmp_path / "a.bmp", deep)), cv2.IMREAD_UNCHANGED), image)
+    assert "scaled to 8 bits" in caplog.text
+    kept = cv2.imread(str(write_image(tmp_path / "a.png", deep)), cv2.IMREAD_UNCHANGED)
+    assert kept.dtype == np.uint16
+    np.testing.assert_array_equal(kept, deep)
+
+
 @pytest.mark.parametrize("name", ["noext", "x.mp4", "x.txt"])
 def test_write_image_needs_an_image_extension(tmp_path, image, name):
     with pytest.raises(InputError, match=name):

@@ -108,6 +108,12 @@ def test_a_wrong_input_is_named_before_torch_fails():
     module = ALCN2d(model="lite").eval()
     with pytest.raises(InputError, match=r"none of them 0"):
         module(torch.rand(0, 1, 32, 32))
+    with pytest.raises(InputError, match=r"RGBA: image\[:, :3\]"):
+        module(torch.rand(1, 4, 32, 32))
+    with pytest.raises(InputError, match=r"channels last: image.permute\(0, 3, 1, 2\)"):
+        module(torch.rand(1, 32, 32, 3))
+    with pytest.raises(InputError, match=r"one image: image\[None\]"):
+        module(torch.rand(3, 32, 32))
     with pytest.raises(InputError, match=r"float in \[0, 1\], got torch.uint8"):
         module(torch.zeros(1, 1, 32, 32, dtype=torch.uint8))
     with pytest.raises(InputError, match=r"torch.float64 on cpu, the module torch.float32 on cpu: move the module"):

@@ -30,6 +30,9 @@ from alcn_cv.io import (
 
 logger = logging.getLogger(__name__)
 
+#: Frames per batch of ``--device``.
+DEFAULT_BATCH = 32
+
 
 def _check_output(src: Path, dst: Path, overwrite: bool, in_place: bool) -> list[Path]:
     """The files ``dst`` names for ``src`` (one, or one per image of a folder), checked before
@@ -47,6 +50,8 @@ def _check_output(src: Path, dst: Path, overwrite: bool, in_place: bool) -> list
     if src.is_dir():
         if dst.exists() and not dst.is_dir():
             raise InputError(f"the output of a folder must be a folder, but {dst} is a file")
+        if not dst.exists() and (dst.suffix.lower() in IMAGE_SUFFIXES or is_video(dst)):
+            raise InputError(f"the output of a folder must be a folder, got the file name {dst}")
         outputs = [dst / path.name for path in list_images(src)]
     elif is_video(src):
         if not is_video(dst):
@@ -60,8 +65,8 @@ def _check_output(src: Path, dst: Path, overwrite: bool, in_place: bool) -> list
         outputs = [dst]
     existing = [path for path in outputs if path.exists()]
     if existing and not overwrite:
-        more = f" and {len(existing) - 1} more" if len(existing) > 1 else ""
-        raise InputError(f"the output {existing[0]}{more} exists (--overwrite replaces it)")
+        more = f" and {len(existing) - 1} more exist" if len(existing) > 1 else " exists"
+        raise InputError(f"the output {existing[0]}{more} (--overwrite replaces it)")
     check_writable(outputs[0])
     return outputs
 
@@ -77,7 +82,7 @@ def main(
     in_place: bool = False,
     skip_bad: bool = False,
     device: str | None = None,
-    batch_size: int = 32,
+    batch_size: int = DEFAULT_BATCH,
     max_frames: int | None = None,
 ) -> None:
     """Normalize ``src`` (image, folder of images, or video) into ``dst`` with ``method``.
@@ -101,6 +106,10 @@ def main(
     import cv2
 
     outputs = _check_output(src, dst, overwrite, in_place)
+    if max_frames is not None and not is_video(src):
+        raise InputError(f"--max-frames counts the frames of a video; {src} is not one")
+    if batch_size != DEFAULT_BATCH and device is None:
+        raise InputError("--batch-size sets the batches of --device; without it each frame is normalized alone")
     params = dict(params or {})
     if device is not None:
         name, spec_params = parse_spec(method)
@@ -337,8 +346,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--batch-size",
         type=int,
-        default=32,
+        default=DEFAULT_BATCH,
         metavar="N",
-        help="frames per batch with --device (default: 32; fewer if the device runs out of memory)",
+        help=f"frames per batch with --device (default: {DEFAULT_BATCH}; fewer if the device runs out of memory)",
     )
     parser.set_defaults(func=_run)

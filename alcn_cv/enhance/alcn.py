@@ -42,6 +42,7 @@ from alcn_cv.runtime import (
     eq1_windows,
     make_runtime,
     opencv_network,
+    resolve_weights,
     strip_layout,
 )
 from alcn_cv.weight_file import load_normalizer_file
@@ -68,18 +69,19 @@ class ALCN(Normalization):
 
     Args:
         weights: a Normalizer weight file (``.npz``, :mod:`alcn_cv.weight_file`); default: the shipped ``model``'s.
-        model: a shipped Normalizer (:data:`~alcn_cv.runtime.MODELS`; see each model card): ``"gain"`` (default:
-            F_k = exp(g) w_k on a grid, the response divided by its local energy, then ``tanh(x / tau)``; trained
-            on relit photographs that permit any use), ``"gain-lite"`` (distilled from it),
-            ``"lite"`` (the paper's family distilled, rendered data only) or ``"paper"``.
+        model: instead of ``weights``, a shipped Normalizer (:data:`~alcn_cv.runtime.MODELS`; see each model
+            card): ``"gain"`` (default: F_k = exp(g) w_k on a grid, the response divided by its local energy, then
+            ``tanh(x / tau)``; trained on relit photographs that permit any use), ``"gain-lite"`` (distilled from
+            it), ``"lite"`` (the paper's family distilled, rendered data only) or ``"paper"``.
         scale: working scale, input resolution -> the Normalizer's (its 48x48 window and sigmas are in working
             pixels). Default: the weight file's (1 for the gain family, 0.5 for the paper's).
         backend: ``"opencv"`` (no torch: the ONNX export beside the weight file run by ``cv2.dnn``, Eq. 3 in
             OpenCV), ``"fast"`` (the Normalizer in torch on the CPU, Eq. 3 in OpenCV; any grid stride, no ONNX
             file needed) or ``"torch"`` (:class:`alcn_cv.nn.ALCN2d` on ``device``). Default: ``"opencv"`` for a shipped
-            ``model`` at its own grid stride on OpenCV 5 (faster than ``"fast"`` at every size ``alcn bench speed``
+            ``model`` without a ``grid_stride`` on OpenCV 5 (faster than ``"fast"`` at every size ``alcn bench speed``
             runs, the same output to 1e-5), else ``"fast"`` where torch is installed.
-        device: torch device of ``backend="torch"`` (``"cpu"``, ``"cuda"``).
+        device: torch device of ``backend="torch"`` (``"cpu"``, ``"cuda"``); another device than the CPU selects
+            that backend when none is given.
         grid_stride: spacing of the Normalizer's grid in working pixels, a multiple of its stride (default: its
             stride); the maps are interpolated bilinearly in between.
         mixture: ``"exact"`` (Eq. 3 at the input resolution) or ``"pyramid"`` (the wide blurs on a Gaussian
@@ -114,14 +116,22 @@ class ALCN(Normalization):
         model: str = DEFAULT_MODEL,
         threads: int | None | Literal["auto"] = "auto",
     ) -> None:
-        if model not in MODELS:
-            raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
-        self.weights_path = Path(weights) if weights is not None else MODELS[model]
-        if backend is None:  # a user's weight file may sit beside an older export: its own network in torch
+        # another model than the default beside a weight file is an error (the default is in the signature, as
+        # the registry's specs and cv2's create functions show their defaults)
+        self.weights_path = resolve_weights(None if weights is not None and model == DEFAULT_MODEL else model, weights)
+        if backend is None and device != "cpu":
+            backend = "torch"  # the one backend that runs on a device
+        elif backend is None:  # a user's weight file may sit beside an older export: its own network in torch
             shipped = weights is None and grid_stride is None and RUNS_GAIN
             backend = "opencv" if shipped or not is_installed("torch") else "fast"
         if backend not in BACKENDS:
             raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+        if backend != "torch" and device != "cpu":
+            raise InputError(f"device={device!r} runs backend='torch'; backend={backend!r} runs on the CPU")
+        if backend == "opencv" and threads not in ("auto", None):
+            raise InputError(
+                "threads sets torch's threads, and backend='opencv' runs no torch (cv2.setNumThreads sets OpenCV's)"
+            )
         if mixture is not None and mixture not in MIXTURES:
             raise InputError(f"unknown mixture {mixture!r}; choose one of {', '.join(MIXTURES)}")
         if threads == "auto":

@@ -241,7 +241,10 @@ class Normalization:
 
     def _apply(self, img: np.ndarray, out_dtype: type | np.dtype | str | None) -> np.ndarray:
         """:meth:`apply` on a valid image, into a new array."""
-        out_dtype = np.dtype(img.dtype if out_dtype is None else out_dtype)
+        try:
+            out_dtype = np.dtype(img.dtype if out_dtype is None else out_dtype)
+        except TypeError:
+            raise InputError(f"unknown out_dtype {out_dtype!r}; use uint8, uint16 or float32") from None
         if out_dtype not in SUPPORTED_DTYPES:
             raise InputError(f"unsupported out_dtype {out_dtype}; use uint8, uint16 or float32")
         alpha = None

@@ -14,11 +14,15 @@ def torch_device(name: str | None = None, what: str = "device") -> torch.device:
     CUDA where torch sees a CUDA device, else the CPU.
 
     Raises:
-        InputError: a CUDA device asked for where torch sees none (``what`` names the setting).
+        InputError: not a device's name, or a CUDA device asked for where torch sees none (``what`` names the
+            setting).
     """
     if name is None:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    device = torch.device(name)
+    try:
+        device = torch.device(name)
+    except (RuntimeError, TypeError):
+        raise InputError(f"{what} is {name!r}, not a torch device (cpu, cuda, cuda:1, ...)") from None
     if device.type == "cuda" and not torch.cuda.is_available():
         raise InputError(f"{what} is {name!r} but torch sees no CUDA device")
     return device
