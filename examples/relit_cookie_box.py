@@ -95,12 +95,12 @@ def main() -> None:
         "--max-frames",
         type=int,
         default=60,
-        help="only the first N frames (default 60: two lights; 0: all 456); at least 40, as each model is built "
-        "from every 10th of them",
+        help="only the first N frames (default 60: two lights; 0: all 456); at least 60: each model is built "
+        "from every 10th of them, and from the 4 views of 40 frames nothing is triangulated",
     )
     args = ap.parse_args()
-    if 0 < args.max_frames < 40:
-        ap.error(f"--max-frames {args.max_frames}: at least 40 (a model needs 4 views, one every 10 frames)")
+    if 0 < args.max_frames < 60:
+        ap.error(f"--max-frames {args.max_frames}: at least 60 (a model needs 6 views, one every 10 frames)")
     args.max_frames = args.max_frames or None
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
     args.out.mkdir(parents=True, exist_ok=True)

@@ -18,3 +18,18 @@ def test_help_says_what_the_script_does_and_writes(script):
     assert proc.returncode == 0 and proc.stdout.startswith("usage:"), proc.stderr[-2000:]
     if script.parent.name == "experiments":  # where an experiment writes: its runs folder (or the docs it rebuilds)
         assert f"{RUNS.name}/" in proc.stdout or "docs/" in proc.stdout, proc.stdout
+
+
+@pytest.mark.shared_data
+def test_the_feature_matching_example_runs(shared_data, tmp_path):
+    """The OpenCV app's example, end to end on the cookie box: every normalizer finds matches that agree."""
+    video = shared_data / "cookie_box" / "box.mp4"
+    if not video.is_file():
+        pytest.skip(f"{video} not found")
+    script = ROOT / "examples" / "feature_matching.py"
+    cmd = [sys.executable, str(script), "--video", str(video), "--out", str(tmp_path), "--feature", "SIFT"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    agreeing = [int(line.split(", ")[-1].split()[0]) for line in proc.stdout.splitlines() if "agree" in line]
+    assert len(agreeing) == 3 and min(agreeing) > 50, proc.stdout
+    assert (tmp_path / "matches.png").is_file()
