@@ -234,3 +234,25 @@ def test_three_steps_lower_the_loss(tmp_path):
             losses["untrained"] += float(pair_loss(untrained, scene, pair, centres, cfg))
             losses["trained"] += float(pair_loss(trained, scene, pair, centres, cfg))
     assert losses["trained"] < losses["untrained"]
+
+
+def test_a_run_folder_holds_one_run(tmp_path, caplog):
+    """A second run into a folder replaces the first's log and removes its step snapshots, which the second run's
+    would not all replace (another save_every or fewer steps); a resumed run of `alcn train` appends to its log."""
+    import logging
+
+    from alcn_cv.report import log_to
+    from alcn_cv.train.config import REAL_LIGHT_CONFS
+    from alcn_cv.train.real_light import training_run
+
+    (tmp_path / "train.log").write_text("the first log\n")
+    (tmp_path / "gain_normalizer_step4.npz").write_bytes(b"")
+    (tmp_path / "mine.npz").write_bytes(b"")
+    with training_run(REAL_LIGHT_CONFS["gain"], tmp_path):
+        logging.getLogger("alcn_cv.test").info("this run")
+    log = (tmp_path / "train.log").read_text()
+    assert "first log" not in log and "this run" in log and "removed 1 step snapshots" in log
+    assert sorted(p.name for p in tmp_path.glob("*.npz")) == ["mine.npz"]
+    with log_to(tmp_path / "train.log", append=True):
+        logging.getLogger("alcn_cv.test").info("resumed")
+    assert "this run" in (tmp_path / "train.log").read_text()

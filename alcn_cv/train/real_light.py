@@ -425,7 +425,12 @@ def training_run(cfg: RealLightConfig, out: str | Path) -> Iterator[Path]:
         raise InputError("need locations >= 2 and steps >= 1")
     folder = Path(out)
     make_folder(folder)
+    earlier = sorted(folder.glob("*_step*.npz"))  # an earlier run's snapshots, which this run's would not all replace
+    for path in earlier:
+        path.unlink()
     with log_to(folder / "train.log"):
+        if earlier:
+            logger.warning("removed %d step snapshots of an earlier run in %s", len(earlier), folder)
         yield folder
 
 

@@ -140,7 +140,7 @@ def train(
     make_folder(out)
     start = time.perf_counter()
     machine_start = machine()
-    with log_to(out / "train.log") if distributed.is_main() else contextlib.nullcontext():
+    with log_to(out / "train.log", append=resume) if distributed.is_main() else contextlib.nullcontext():
         ckpt, device = _prepare_run(cfg, out, resume)
         train_set, val_set, num_classes = _prepare_data(cfg, out, device, progress and distributed.is_main())
         model, optimizer, state = _build_models(cfg, num_classes, device, ckpt, start, out)
