@@ -181,6 +181,21 @@ def check_writable(path: str | os.PathLike) -> None:
     os.unlink(name)
 
 
+def output_path(path: str | os.PathLike, suffix: str, what: str) -> Path:
+    """``path`` as the path of a file to write, checked before the work: it ends in ``suffix`` (the files written
+    beside it are named after it) and can be written (:func:`check_writable`).
+
+    Raises:
+        InputError: another suffix (the message names ``what``, e.g. "a weight file"), or a folder that cannot be
+            written.
+    """
+    path = Path(path)
+    if path.suffix != suffix:
+        raise InputError(f"{what} must end in {suffix}, got {path}")
+    check_writable(path)
+    return path
+
+
 def make_folder(folder: str | os.PathLike) -> Path:
     """Create ``folder`` and its parents when missing.
 

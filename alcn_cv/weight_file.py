@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from alcn_cv.errors import InputError, WeightFileError
-from alcn_cv.io import atomic_write, check_writable
+from alcn_cv.errors import WeightFileError
+from alcn_cv.io import atomic_write, output_path
 
 logger = logging.getLogger(__name__)
 
@@ -53,25 +53,11 @@ class NormalizerFile:
     meta: dict[str, Any] = field(default_factory=dict)
 
 
-def weight_path(path: str | Path) -> Path:
-    """``path`` as a weight file's path, checked before any work: it ends in ``.npz`` (its card and ONNX export are
-    named after it) and can be written.
-
-    Raises:
-        InputError: another suffix, or a folder that cannot be written.
-    """
-    path = Path(path)
-    if path.suffix != ".npz":
-        raise InputError(f"a weight file must end in .npz, got {path}")
-    check_writable(path)
-    return path
-
-
 def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> Path:
     """Write a weight file atomically (temporary name, then rename). An ONNX export beside it (the same name,
     ``.onnx``), which ``backend="opencv"`` would run, was made from the weights it held before: it is removed
     (``alcn export`` makes it again)."""
-    path = weight_path(path)
+    path = output_path(path, ".npz", "a weight file")
     meta = {"format": FORMAT, "version": VERSION, **meta}
     _check_meta(meta, path)
     _check_arrays(arrays, path)

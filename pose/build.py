@@ -220,7 +220,7 @@ def main(
     ``refine_focal`` lets the bundle adjustment refine the focal length; the camera, refined or
     given, is stored in the model's ``extra["K"]``, which ``alcn pose track`` uses by default).
     """
-    input_path, output = Path(input_path), part_model.model_path(output)  # checked before the work
+    input_path, output = Path(input_path), part_model.model_file(output)  # checked before the work
     make_folder(output.parent)
     with tempfile.TemporaryDirectory(prefix="alcn_pose_frames_", dir=output.parent) as work:
         if input_path.is_file() and io.is_video(input_path):

@@ -23,7 +23,7 @@ from tqdm import tqdm
 
 from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import InputError
-from alcn_cv.io import check_writable, make_folder
+from alcn_cv.io import make_folder, output_path
 from pose.box import NUM_CORNERS, box_parts
 from pose.corner_data import CornerFrames, build_frames, build_image_frames
 from pose.corners import FORMAT_NAME, FORMAT_VERSION, PAD, STRIDE, WINDOW
@@ -135,7 +135,7 @@ def export_onnx(net, out: str | Path, meta: dict[str, Any]) -> Path:
     from alcn_cv.io import atomic_write
     from alcn_cv.train.export import OPSET, with_metadata
 
-    out = _onnx_output(out)
+    out = output_path(out, ".onnx", "a corner detector")
     buffer = _io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)  # see alcn_cv.train.export
@@ -279,15 +279,6 @@ def fit(
     }
 
 
-def _onnx_output(out: str | Path) -> Path:
-    """``out`` as a path, checked: an ``.onnx`` file that can be written."""
-    out = Path(out)
-    if out.suffix != ".onnx":
-        raise InputError(f"the ONNX output must end in .onnx, got {out}")
-    check_writable(out)
-    return out
-
-
 def train_corners(
     sequence_dir: str | Path,
     corners: np.ndarray,
@@ -320,7 +311,7 @@ def train_corners(
 
     recipe = recipe or confs["box"]
     recipe.check()
-    _onnx_output(out)  # before the training, not after it
+    output_path(out, ".onnx", "a corner detector")  # before the training, not after it
     corners = np.asarray(corners, np.float64)
     if corners.shape != (NUM_CORNERS, 3) or not np.isfinite(corners).all():
         raise InputError(f"corners must be a finite (8, 3) array, got shape {corners.shape}")

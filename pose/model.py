@@ -53,7 +53,7 @@ import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.formats import bop
-from alcn_cv.io import atomic_write, check_writable
+from alcn_cv.io import atomic_write, output_path
 
 logger = logging.getLogger(__name__)
 
@@ -208,23 +208,16 @@ def read_box_corners(path: str | Path) -> np.ndarray:
     return box_corners(hi - lo, lo)
 
 
-def model_path(path: str | Path) -> Path:
-    """``path`` as a part model's path, checked: an ``.npz`` file (its point cloud is named after it) that can be
-    written.
-
-    Raises:
-        InputError: another suffix, or a folder that cannot be written.
-    """
+def model_file(path: str | Path) -> Path:
+    """``path`` as a part model's file, checked before the work (:func:`~alcn_cv.io.output_path`): ``.npz``, which
+    is appended to a path without a suffix, as ``numpy.savez`` does; another suffix is an error."""
     path = Path(path)
-    if path.suffix != ".npz":
-        raise InputError(f"a part model must end in .npz, got {path}")
-    check_writable(path)
-    return path
+    return output_path(path if path.suffix else path.with_suffix(".npz"), ".npz", "a part model")
 
 
 def save(model: PartModel, path: str | Path) -> Path:
     """Write ``model`` to ``path`` (``.npz``) and its point cloud to ``<stem>.ply`` beside it."""
-    path = model_path(path)
+    path = model_file(path)
     buf = io.BytesIO()
     np.savez(
         buf,

@@ -53,8 +53,7 @@ def test_a_weight_file_must_end_in_npz_before_the_distillation(tmp_path):
 
 
 def test_pose_outputs_are_checked_before_the_work(tmp_path):
-    from pose import model as part_model
-    from pose import track
+    from pose import build, track
     from pose.corner_train import train_corners
 
     blocker = tmp_path / "file"
@@ -64,8 +63,8 @@ def test_pose_outputs_are_checked_before_the_work(tmp_path):
         train_corners(tmp_path / "missing_sequence", corners, tmp_path / "corners.pt")
     with pytest.raises(InputError, match="is a file"):
         train_corners(tmp_path / "missing_sequence", corners, blocker / "corners.onnx")
-    with pytest.raises(InputError, match=r"must end in \.npz"):
-        part_model.model_path(tmp_path / "model.ply")
+    with pytest.raises(InputError, match=r"a part model must end in \.npz"):  # not: the missing video
+        build.main(tmp_path / "missing.mp4", tmp_path / "model.ply")
     with pytest.raises(InputError, match="is a file"):  # not: the missing part model
         track.main(tmp_path / "missing.npz", tmp_path / "missing.mp4", blocker / "poses.json")
 

@@ -44,13 +44,13 @@ from alcn_cv.data.phos import render_windows
 from alcn_cv.data.scenes import WEBCAM_SCENES, Scene
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
-from alcn_cv.io import atomic_write
+from alcn_cv.io import atomic_write, output_path
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.report import describe_machine
 from alcn_cv.train.config import GainDistillConfig, LiteDistillConfig
 from alcn_cv.train.real_light import source_scenes
-from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file, weight_path
+from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 __all__ = ["distill", "distill_gain", "main", "output_gram", "teacher_file"]
 
@@ -201,7 +201,7 @@ def main(
     Returns:
         The weight file's path.
     """
-    out_path = weight_path(out_path)  # before the distillation, not after it
+    out_path = output_path(out_path, ".npz", "a weight file")  # before the distillation, not after it
     command = command or " ".join(shlex.quote(a) for a in sys.argv)
     if isinstance(cfg, GainDistillConfig):
         return _main_gain(out_path, cfg, command, conf, progress)
