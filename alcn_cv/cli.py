@@ -110,6 +110,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@contextlib.contextmanager
+def _ffmpeg_fatal_only(quiet: bool) -> Iterator[None]:
+    """With ``quiet``, OpenCV's FFmpeg logs fatal errors only while the block runs (``OPENCV_FFMPEG_LOGLEVEL``, read
+    as each video opens), unless the caller set a level: its decoder reports recoverable stream errors (a slice type
+    it tolerates) between the progress bars, and a truncated or unreadable video is checked by the frames it gives
+    (:mod:`alcn_cv.io`)."""
+    if not quiet or "OPENCV_FFMPEG_LOGLEVEL" in os.environ:
+        yield
+        return
+    os.environ["OPENCV_FFMPEG_LOGLEVEL"] = str(FFMPEG_FATAL)
+    try:
+        yield
+    finally:
+        os.environ.pop("OPENCV_FFMPEG_LOGLEVEL", None)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -119,12 +135,8 @@ def main(argv: list[str] | None = None) -> int:
         datefmt="%Y/%m/%d %H:%M:%S",
     )
     keep_freed_memory()
-    if not args.verbose:
-        # FFmpeg's decoder reports recoverable stream errors (a slice type it tolerates) on stderr, between the
-        # progress bars; a truncated or unreadable video is checked by the frames it gives (alcn_cv.io)
-        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", str(FFMPEG_FATAL))
     try:
-        with sigterm_as_interrupt(args.command):
+        with sigterm_as_interrupt(args.command), _ffmpeg_fatal_only(not args.verbose):
             result = args.func(args)
     except Terminated:
         print("alcn: terminated", file=sys.stderr)

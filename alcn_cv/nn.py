@@ -218,8 +218,12 @@ class ALCN2d(nn.Module):
                 hint = " (RGBA: image[:, :3])"
             elif image.ndim == 4 and image.shape[-1] in (1, 3):
                 hint = " (channels last: image.permute(0, 3, 1, 2))"
-            elif image.ndim in (2, 3):
-                hint = " (one image: image[None] or image[None, None])"
+            elif image.ndim == 3 and image.shape[0] in (1, 3):
+                hint = " (one image: image[None])"
+            elif image.ndim == 3:
+                hint = " (a batch of gray images: image[:, None])"
+            elif image.ndim == 2:
+                hint = " (one gray image: image[None, None])"
             raise InputError(f"image must have shape (B, 1 | 3, H, W), none of them 0, got {tuple(image.shape)}{hint}")
         if not image.is_floating_point():
             raise InputError(f"image must be float in [0, 1], got {image.dtype} (a uint8 image: image / 255)")

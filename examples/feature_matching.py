@@ -10,7 +10,7 @@ normalizer and drawn side by side in ``OUT/matches.png`` (one row per normalizer
 are needed (``pip install .``); a second or two on 2 cores.
 
 On the cookie box, frames 0 and 20 (60), matches that agree: SIFT none 291 (201), CLAHE 416 (300), Tan-Triggs
-397 (293), ALCN 496 (352); ORB none 319 (257), CLAHE 404 (297), Tan-Triggs 163, ALCN 231 (135). ORB orients
+397 (293), ALCN 496 (352); ORB none 319 (257), CLAHE 404 (297), Tan-Triggs 221 (163), ALCN 231 (135). ORB orients
 each keypoint by the intensity centroid of its patch, which a global light change keeps and a band-pass output
 does not (docs/journal.md, 2026-11-27 (night)): for ORB under such a change, CLAHE is the stronger choice.
 """
@@ -69,16 +69,17 @@ def main() -> None:
             raise ALCNError(f"{args.video} has {len(frames)} frames, fewer than --second {args.second} + 1")
         first, second = frames[0], relight(frames[args.second])
         feature = cv2.ORB_create(1000) if args.feature == "ORB" else cv2.SIFT_create(1000)
+        normalizations = {spec: alcn_cv.create(spec) for spec in args.methods}  # a bad spec stops before the work
         rows = []
-        for spec in args.methods:
-            normalization = alcn_cv.create(spec)
+        for spec, normalization in normalizations.items():
             a, b = normalization.apply(first), normalization.apply(second)
             kp1, kp2, agreeing = match(a, b, feature)
             print(f"{spec:>12}: {len(kp1)} and {len(kp2)} keypoints, {len(agreeing)} matches that agree")
             drawn = cv2.drawMatches(a, kp1, b, kp2, agreeing, None, matchColor=(0, 255, 0), flags=2)
             rows.append(cv2.putText(drawn, f"{spec}: {len(agreeing)}", (10, 30), 0, 1.0, (0, 0, 255), 2))
         args.out.mkdir(parents=True, exist_ok=True)
-        cv2.imwrite(str(args.out / "matches.png"), np.vstack(rows))
+        if not cv2.imwrite(str(args.out / "matches.png"), np.vstack(rows)):
+            raise ALCNError(f"cannot write {args.out / 'matches.png'}")
         print(f"wrote {args.out / 'matches.png'}")
     except ALCNError as exc:
         raise SystemExit(f"feature_matching.py: error: {exc}") from None

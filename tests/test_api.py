@@ -160,6 +160,8 @@ def test_alcn_parameters():
         alcn_cv.createALCN(backend="torch", device="gpu0")
     with pytest.raises(InputError, match="runs no torch"):
         alcn_cv.createALCN(backend="opencv", threads=2)
+    assert alcn_cv.createALCN(threads=2).backend == "fast"  # torch threads: the backend that runs torch
+    assert alcn_cv.createALCN(backend="fast", device="cpu:0").backend == "fast"
 
 
 def test_shipped_weights_say_what_they_are(caplog):

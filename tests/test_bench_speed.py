@@ -94,6 +94,17 @@ def test_time_calls_counts():
     assert order == ["a", "b", "a", "b"] and [len(t) for t in rounds.values()] == [2, 2]  # in turns
 
 
+def test_weight_files_given_replace_the_variants_shipped_models():
+    """--weights / --lite-weights: every variant of the paper's family is built from the file given."""
+    from alcn_cv.runtime import MODELS
+
+    methods = speed.default_methods(weights=MODELS["paper"], lite_weights=MODELS["lite"], cuda=False)
+    variants = [m for m in methods if m.label in speed.ALCN_VARIANTS]
+    assert variants and all("model" not in m.params for m in variants)
+    for method in variants:
+        assert method.factory().weights_path in (MODELS["paper"], MODELS["lite"])
+
+
 def test_bad_arguments(tmp_path):
     with pytest.raises(InputError, match="unknown method"):
         speed.main(tmp_path, dataclasses.replace(speed.presets()["quick"], methods=["alcn turbo"]))

@@ -114,6 +114,8 @@ def test_a_wrong_input_is_named_before_torch_fails():
         module(torch.rand(1, 32, 32, 3))
     with pytest.raises(InputError, match=r"one image: image\[None\]"):
         module(torch.rand(3, 32, 32))
+    with pytest.raises(InputError, match=r"a batch of gray images: image\[:, None\]"):
+        module(torch.rand(5, 32, 32))
     with pytest.raises(InputError, match=r"float in \[0, 1\], got torch.uint8"):
         module(torch.zeros(1, 1, 32, 32, dtype=torch.uint8))
     with pytest.raises(InputError, match=r"torch.float64 on cpu, the module torch.float32 on cpu: move the module"):

@@ -69,10 +69,13 @@ def test_pose_outputs_are_checked_before_the_work(tmp_path):
         track.main(tmp_path / "missing.npz", tmp_path / "missing.mp4", blocker / "poses.json")
 
 
-def test_a_benchmark_folder_is_checked_before_the_benchmark(tmp_path):
+@pytest.mark.shared_data
+def test_a_benchmark_folder_is_checked_before_the_benchmark(tmp_path, shared_data, monkeypatch):
     from alcn_cv.bench import relight
 
     blocker = tmp_path / "file"
     blocker.write_text("mine")
-    with pytest.raises(InputError, match="is a file"):  # not: the missing scenes
-        relight.main(blocker, data=[tmp_path / "no_scenes"], methods=["none"], tuning=False)
+    monkeypatch.setattr(relight, "evaluate_scene", lambda *args, **kwargs: pytest.fail("the benchmark ran"))
+    data = [shared_data / "webcam", shared_data / "psm"]
+    with pytest.raises(InputError, match="is a file"):
+        relight.main(blocker, data=data, methods=["none"], tuning=False, max_frames=3)

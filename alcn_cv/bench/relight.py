@@ -437,7 +437,6 @@ def main(
     settings = settings.check()
     methods = list(methods)
     _check_methods(methods)
-    make_folder(out_dir)  # before the benchmark, not after it
     if not seeds:
         raise InputError("give at least one seed")
     roots = [Path(p) for p in data] if data else [shared_root("webcam"), shared_root("psm")]
@@ -457,6 +456,7 @@ def main(
     tuned = [m for m in methods if m in TUNING_GRIDS] if tuning else []
     if tuned and not all(folds.values()):
         raise InputError("tuning needs training scenes (or --no-tune)")
+    make_folder(out_dir)  # before the benchmark, not after it
 
     bar = tqdm(
         total=len(folds) * sum(len(TUNING_GRIDS[m]) for m in tuned),

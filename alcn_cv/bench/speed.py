@@ -112,6 +112,9 @@ class Method:
 
 
 def _alcn(label: str, weights: str | os.PathLike | None, **params: Any) -> Method:
+    """An ALCN variant of ``params``; a weight file given replaces the variant's shipped model."""
+    if weights is not None:
+        params = {k: v for k, v in params.items() if k != "model"}
     return Method(label, lambda: ALCN(weights=weights, **params), dict(params), alcn=True)
 
 
@@ -692,7 +695,7 @@ def _after_apply(frame: np.ndarray, repeats: int, threads: int | None) -> dict[s
     ``apply`` and right after themselves, in turns, with the Normalizer on ``threads`` torch threads."""
     import torch
 
-    norm = ALCN(threads=threads)
+    norm = ALCN(backend="fast", threads=threads)
     before_threads = torch.get_num_threads()
 
     def app() -> None:

@@ -82,7 +82,7 @@ def main(
     in_place: bool = False,
     skip_bad: bool = False,
     device: str | None = None,
-    batch_size: int = DEFAULT_BATCH,
+    batch_size: int | None = None,
     max_frames: int | None = None,
 ) -> None:
     """Normalize ``src`` (image, folder of images, or video) into ``dst`` with ``method``.
@@ -95,9 +95,10 @@ def main(
     and why, and the frames per second. ``allow_partial`` accepts a video that ends before its
     header's frame count (see :func:`alcn_cv.io.map_video`); ``max_frames`` writes a video's first frames only.
 
-    ``device`` (``"cpu"``, ``"cuda"``, ...): ALCN on that torch device, ``batch_size`` frames of one size at a
-    time (:meth:`ALCN.apply_batch <alcn_cv.enhance.alcn.ALCN.apply_batch>`, colour frames on their CIE L
-    as :meth:`~alcn_cv.enhance.base.Normalization.apply`); None: ``apply`` on each frame.
+    ``device`` (``"cpu"``, ``"cuda"``, ...): ALCN on that torch device, ``batch_size`` (default
+    :data:`DEFAULT_BATCH`) frames of one size at a time (:meth:`ALCN.apply_batch
+    <alcn_cv.enhance.alcn.ALCN.apply_batch>`, colour frames on their CIE L as
+    :meth:`~alcn_cv.enhance.base.Normalization.apply`); None: ``apply`` on each frame.
 
     Raises:
         InputError: a check fails, or ``device`` is given for a method other than ALCN or with another
@@ -108,8 +109,9 @@ def main(
     outputs = _check_output(src, dst, overwrite, in_place)
     if max_frames is not None and not is_video(src):
         raise InputError(f"--max-frames counts the frames of a video; {src} is not one")
-    if batch_size != DEFAULT_BATCH and device is None:
+    if batch_size is not None and device is None:
         raise InputError("--batch-size sets the batches of --device; without it each frame is normalized alone")
+    batch_size = DEFAULT_BATCH if batch_size is None else batch_size
     params = dict(params or {})
     if device is not None:
         name, spec_params = parse_spec(method)
@@ -346,7 +348,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--batch-size",
         type=int,
-        default=DEFAULT_BATCH,
         metavar="N",
         help=f"frames per batch with --device (default: {DEFAULT_BATCH}; fewer if the device runs out of memory)",
     )

@@ -81,7 +81,7 @@ class ALCN(Normalization):
             ``model`` without a ``grid_stride`` on OpenCV 5 (faster than ``"fast"`` at every size ``alcn bench speed``
             runs, the same output to 1e-5), else ``"fast"`` where torch is installed.
         device: torch device of ``backend="torch"`` (``"cpu"``, ``"cuda"``); another device than the CPU selects
-            that backend when none is given.
+            that backend when none is given, as ``threads`` other than ``"auto"`` select ``"fast"``.
         grid_stride: spacing of the Normalizer's grid in working pixels, a multiple of its stride (default: its
             stride); the maps are interpolated bilinearly in between.
         mixture: ``"exact"`` (Eq. 3 at the input resolution) or ``"pyramid"`` (the wide blurs on a Gaussian
@@ -91,6 +91,8 @@ class ALCN(Normalization):
             Default ``"auto"``: 1 with ``backend="fast"``, whose torch part (the network's layers on the grid) is
             small, so that no torch threads are left spinning against the OpenCV calls around it; torch's setting
             with ``backend="torch"``, which runs everything in torch. ``backend="opencv"`` runs no torch.
+        A ``model`` other than the default beside ``weights`` is an error (the default itself cannot be told from
+        a model not given).
 
     The gain family on ``backend="fast"`` and ``"opencv"`` also uses OpenCV's threads, as OpenCV's own parallel
     functions do: each image's rows are cut into one part per thread of ``cv2.getNumThreads()``
@@ -119,25 +121,30 @@ class ALCN(Normalization):
         # another model than the default beside a weight file is an error (the default is in the signature, as
         # the registry's specs and cv2's create functions show their defaults)
         self.weights_path = resolve_weights(None if weights is not None and model == DEFAULT_MODEL else model, weights)
-        if backend is None and device != "cpu":
+        if (
+            threads != "auto"
+            and threads is not None
+            and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1)
+        ):
+            raise InputError(f"threads must be a positive integer, None or 'auto', got {threads!r}")
+        on_cpu = str(device).split(":")[0] == "cpu"
+        if backend is None and not on_cpu:
             backend = "torch"  # the one backend that runs on a device
         elif backend is None:  # a user's weight file may sit beside an older export: its own network in torch
-            shipped = weights is None and grid_stride is None and RUNS_GAIN
+            shipped = weights is None and grid_stride is None and threads == "auto" and RUNS_GAIN
             backend = "opencv" if shipped or not is_installed("torch") else "fast"
         if backend not in BACKENDS:
             raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
-        if backend != "torch" and device != "cpu":
+        if backend != "torch" and not on_cpu:
             raise InputError(f"device={device!r} runs backend='torch'; backend={backend!r} runs on the CPU")
-        if backend == "opencv" and threads not in ("auto", None):
+        if backend == "opencv" and threads != "auto":
             raise InputError(
                 "threads sets torch's threads, and backend='opencv' runs no torch (cv2.setNumThreads sets OpenCV's)"
             )
-        if mixture is not None and mixture not in MIXTURES:
-            raise InputError(f"unknown mixture {mixture!r}; choose one of {', '.join(MIXTURES)}")
         if threads == "auto":
             threads = None if backend == "torch" else 1
-        elif threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
-            raise InputError(f"threads must be a positive integer, None or 'auto', got {threads!r}")
+        if mixture is not None and mixture not in MIXTURES:
+            raise InputError(f"unknown mixture {mixture!r}; choose one of {', '.join(MIXTURES)}")
         self.backend, self.device, self.threads = backend, device, threads
         weight_file = load_normalizer_file(self.weights_path)
         meta = weight_file.meta

@@ -420,8 +420,7 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
             return float(np.mean([float(_maps_error(student, s)) for s in val_samples]))
 
     initial = {"maps_relative_error": val_error(), **_output_fidelity(teacher_net, student, val_frames)}
-    parameters = [p for p in student.parameters() if p.requires_grad]
-    optimiser = torch.optim.Adam(parameters, lr=cfg.lr)
+    optimiser = torch.optim.Adam(student.parameters(), lr=cfg.lr)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, epochs * 2 * len(base))
     bar = tqdm(range(epochs), desc="distil gain", unit="epoch", disable=not progress)
     for _ in bar:
@@ -451,9 +450,9 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
         "seconds": {"data_and_targets": round(prepared, 1), "total": round(time.perf_counter() - start, 1)},
         "validation": validation,
         "validation_initial": initial,
-        "parameters": {
-            "student": sum(p.numel() for p in student.parameters()),
-            "teacher": sum(p.numel() for p in teacher_net.parameters()),
+        "parameters": {  # the values each weight file stores (tau and the floor scale, fixed in training, included)
+            name: sum(a.size for a in net.state_arrays().values())
+            for name, net in (("student", student), ("teacher", teacher_net))
         },
     }
     return student, record

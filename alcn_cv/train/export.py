@@ -49,7 +49,7 @@ import torch
 from torch import nn
 
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write
+from alcn_cv.io import atomic_write, output_path
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW
 from alcn_cv.nets.opencv_runtime import BLOCK, BLOCKS_INPUT, DEFAULT_ONNX, FEATURES_INPUT, IMAGE_INPUT, image_blocks
@@ -90,11 +90,9 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
 
     Raises:
         WeightFileError: missing or corrupt weight file.
-        InputError: ``out`` is not a ``.onnx`` path.
+        InputError: ``out`` is not a ``.onnx`` path, or cannot be written.
     """
-    out = Path(out)
-    if out.suffix != ".onnx":
-        raise InputError(f"the ONNX output must end in .onnx, got {out}")
+    out = output_path(out, ".onnx", "an ONNX export")
     weight_file = load_normalizer_file(resolve_weights(None, weights))
     net = normalizer_from_file(weight_file).eval()
     from_features = weight_file.meta.get("architecture") == "gain"

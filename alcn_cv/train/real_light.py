@@ -34,6 +34,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import logging
+import re
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass
@@ -412,7 +413,8 @@ def train_real_light(
 def training_run(cfg: RealLightConfig, out: str | Path) -> Iterator[Path]:
     """The run of any network on ``cfg``'s draws: checks what :func:`draw_step` needs (scenes or relit
     photographs, a rendered share in [0, 1) with rendered scenes, at least 2 locations, at least 1 step),
-    makes the run folder ``out`` and copies the log into its ``train.log`` (:func:`alcn_cv.report.log_to`).
+    makes the run folder ``out`` and copies the log into its ``train.log`` (:func:`alcn_cv.report.log_to`). A folder
+    holds one run: an earlier run's ``train.log`` is replaced and its step snapshots (``*_step{N}.npz``) removed.
 
     Yields:
         The run folder.
@@ -425,7 +427,8 @@ def training_run(cfg: RealLightConfig, out: str | Path) -> Iterator[Path]:
         raise InputError("need locations >= 2 and steps >= 1")
     folder = Path(out)
     make_folder(folder)
-    earlier = sorted(folder.glob("*_step*.npz"))  # an earlier run's snapshots, which this run's would not all replace
+    # an earlier run's snapshots, which this run's would not all replace
+    earlier = sorted(p for p in folder.glob("*_step*.npz") if re.search(r"_step\d+\.npz$", p.name))
     for path in earlier:
         path.unlink()
     with log_to(folder / "train.log"):
