@@ -3,12 +3,17 @@
 #   kornia (and whatever else is missing) from wheels carried in .whl/, the CUDA tests, then
 #   `alcn bench speed --device cuda` (end to end host uint8 -> host uint8, on the device, float16, against the CPU,
 #   beside kornia's DoG and CLAHE). Reports go to $OUT (default runs/gpu_check). Both steps run whatever the first
-#   gives; the exit status is the first failure's (0 when both pass).
+#   gives; the exit status is the first failure's (0 when both pass). DEVICE=cpu rehearses the script on a machine
+#   without a GPU (the CUDA tests skip, the bench measures the CPU), so that a short GPU slot is not spent on a fault
+#   of the script itself.
 # Fill .whl/ beforehand where a registry is reachable, e.g.
 #   pip download --no-deps --only-binary=:all: -d .whl kornia kornia_rs
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-runs/gpu_check}
+DEVICE=${DEVICE:-cuda}
+# the CPU's batches are slow: two small ones rehearse the path (BATCHES overrides either default)
+BATCHES=${BATCHES:-$([ "$DEVICE" = cpu ] && echo 1,2)}
 mkdir -p "$OUT"
 PY=${PYTHON:-python3}
 SITE=/tmp/site
@@ -38,7 +43,8 @@ timeout 150 "$PY" -m pytest -q -rs -p no:cacheprovider --junitxml="$OUT/cuda_tes
 tests_status=${PIPESTATUS[0]}
 
 # The measurement (writes speed.json and speed.md).
-timeout 240 "$PY" -m alcn_cv.cli bench speed --device cuda --out "$OUT/speed_cuda" 2>&1 | tee "$OUT/speed_cuda.txt" | tail -25
+timeout 240 "$PY" -m alcn_cv.cli bench speed --device "$DEVICE" ${BATCHES:+--device-batches "$BATCHES"} \
+  --out "$OUT/speed_$DEVICE" 2>&1 | tee "$OUT/speed_$DEVICE.txt" | tail -25
 bench_status=${PIPESTATUS[0]}
 echo "reports in $OUT (CUDA tests: exit status $tests_status; bench: $bench_status)"
 if [ "$tests_status" -ne 0 ]; then exit "$tests_status"; fi

@@ -1,5 +1,7 @@
-"""The scripts of ``experiments/`` and ``examples/``: ``--help`` explains each without running it."""
+"""The scripts of ``experiments/`` and ``examples/``: ``--help`` explains each without running it; the OpenCV app's
+example and the GPU check (rehearsed on the CPU) run end to end."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -33,3 +35,15 @@ def test_the_feature_matching_example_runs(shared_data, tmp_path):
     agreeing = [int(line.split(", ")[-1].split()[0]) for line in proc.stdout.splitlines() if "agree" in line]
     assert len(agreeing) == 3 and min(agreeing) > 50, proc.stdout
     assert (tmp_path / "matches.png").is_file()
+
+
+def test_the_gpu_check_rehearses_on_the_cpu(tmp_path):
+    """experiments/gpu_check.sh with DEVICE=cpu: the script a short GPU slot runs, end to end, so that the slot is
+    not spent on a fault of the script (its CUDA tests skip here; the bench measures the CPU's batched path)."""
+    env = {**os.environ, "DEVICE": "cpu", "OUT": str(tmp_path), "PYTHON": sys.executable}
+    proc = subprocess.run(
+        ["bash", str(ROOT / "experiments" / "gpu_check.sh")], capture_output=True, text=True, timeout=300, env=env
+    )
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert "ALCN batched on cpu" in (tmp_path / "speed_cpu" / "speed.md").read_text()
+    assert (tmp_path / "cuda_tests.xml").is_file() and (tmp_path / "environment.txt").is_file()

@@ -104,8 +104,9 @@ def device_markdown(result: dict[str, Any]) -> list[str]:
     """The device section of ``speed.md``."""
     names = [k for k in result["rows"][0] if k != "batch"]
     w, h = result["size"]
+    gpu = f" ({result['gpu']})" if result.get("gpu") else ""
     lines = [
-        f"## ALCN batched on {result['device']} ({result.get('gpu', '')}), {w}x{h} gray, frames per second",
+        f"## ALCN batched on {result['device']}{gpu}, {w}x{h} gray, frames per second",
         "",
         markdown_table(["batch", *names], [[r["batch"], *(r[n] for n in names)] for r in result["rows"]], digits=1),
         "",

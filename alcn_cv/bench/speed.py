@@ -430,6 +430,7 @@ def speed_command(out_dir: str | os.PathLike, settings: SpeedSettings) -> str:
             "--video-methods": settings.video_methods,
             "--threads": settings.threads,
             "--device": settings.device,
+            "--device-batches": ",".join(map(str, settings.device_batches)) if settings.device else None,
         },
     )
 
