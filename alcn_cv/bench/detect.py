@@ -592,6 +592,8 @@ def main(
         state, detect_command(data_dir, out_dir, settings, working_scale, box_size), time.perf_counter() - start
     )
     names = [data.name(c) for c in data.categories]
+    for earlier in out.glob("pr_*real.png"):  # an earlier run's curves, named after its objects and real images
+        earlier.unlink()
     result["figures"] = plot_pr_curves(result, names, out)
     result["seconds"] = time.perf_counter() - start
     write_json(out / "detect.json", result)
