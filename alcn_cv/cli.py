@@ -110,6 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def add_progress_option(parser: argparse.ArgumentParser) -> None:
+    """``--no-progress`` (``args.no_progress``): the one switch of a subcommand's progress bars."""
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")
+
+
 @contextlib.contextmanager
 def _ffmpeg_fatal_only(quiet: bool) -> Iterator[None]:
     """With ``quiet``, OpenCV's FFmpeg logs fatal errors only while the block runs (``OPENCV_FFMPEG_LOGLEVEL``, read

@@ -484,6 +484,7 @@ def map_video(
     allow_partial: bool = False,
     batch_size: int | None = None,
     max_frames: int | None = None,
+    progress: bool = True,
 ) -> int:
     """Write ``fn(frame)`` for every frame of the video ``src`` into the video ``dst``.
 
@@ -498,6 +499,7 @@ def map_video(
         batch_size: ``fn`` takes a list of up to this many frames and returns their outputs (a GPU's
             batches); None: ``fn`` takes one frame.
         max_frames: stop after the first this many frames (None: every frame).
+        progress: the progress bar.
 
     Returns:
         The number of frames written.
@@ -528,10 +530,10 @@ def map_video(
 
                 # the frames wanted by the header's count (0: unknown) and max_frames
                 limit = video.frame_count if max_frames is None else min(video.frame_count, max_frames)
-                with tqdm(total=limit or max_frames, desc=desc or src.name, unit="frame") as progress:
-                    count = map_batches(islice(video, max_frames), batched, write, batch_size or 1, progress)
-                    progress.total = count  # the header's count is an estimate: the bar ends at the frames decoded
-                    progress.refresh()
+                with tqdm(total=limit or max_frames, desc=desc or src.name, unit="frame", disable=not progress) as bar:
+                    count = map_batches(islice(video, max_frames), batched, write, batch_size or 1, bar)
+                    bar.total = count  # the header's count is an estimate: the bar ends at the frames decoded
+                    bar.refresh()
         finally:
             if writer is not None:
                 writer.release()

@@ -56,6 +56,19 @@ def test_video(tmp_path, frame):
         assert len(list(video)) == 2
 
 
+def test_no_progress_shows_no_bar(tmp_path, frame, capsys):
+    """--no-progress, the one switch of the progress bars of normalize, data, bench and train."""
+    src = tmp_path / "in.avi"
+    writer = cv2.VideoWriter(str(src), cv2.VideoWriter_fourcc(*"MJPG"), 10, (80, 60))
+    for _ in range(3):
+        writer.write(frame)
+    writer.release()
+    assert main(["normalize", str(src), str(tmp_path / "a.avi"), "-m", "none"]) == 0
+    assert "frame" in capsys.readouterr().err  # the bar: "normalize in.avi: 100%|...| 3/3 [..., ...frame/s]"
+    assert main(["normalize", str(src), str(tmp_path / "b.avi"), "-m", "none", "--no-progress"]) == 0
+    assert "%|" not in capsys.readouterr().err
+
+
 def test_errors_are_one_line(tmp_path, capsys):
     corrupt = tmp_path / "corrupt.png"
     corrupt.write_bytes(b"\x89PNG not really")

@@ -18,6 +18,7 @@ from typing import Any
 
 from alcn_cv.bench import detect, fewshot, invariance, relight, speed
 from alcn_cv.bench.detect_settings import POLICIES, DetectSettings, presets
+from alcn_cv.cli import add_progress_option
 from alcn_cv.data import scenes
 from alcn_cv.errors import InputError
 
@@ -136,12 +137,15 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
     p.add_argument("--device", help="torch device (default cpu)")
+    add_progress_option(p)
     p.set_defaults(func=_run_detect)
 
 
 def _run_detect(args: argparse.Namespace) -> int:
     settings = _override(presets()[args.size], args)
-    result = detect.main(args.data, args.out, settings, args.working_scale, args.box_size)
+    result = detect.main(
+        args.data, args.out, settings, args.working_scale, args.box_size, progress=not args.no_progress
+    )
     print((Path(args.out) / "detect.md").read_text(encoding="utf-8"))
     return 1 if all("error" in r for r in result["runs"].values()) else 0
 
@@ -181,12 +185,13 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
     p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
     p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
+    add_progress_option(p)
     p.set_defaults(func=_run_fewshot)
 
 
 def _run_fewshot(args: argparse.Namespace) -> int:
     settings = _override(fewshot.FewShotSettings(), args)
-    result = fewshot.main(args.out, settings)
+    result = fewshot.main(args.out, settings, progress=not args.no_progress)
     print((Path(args.out) / "fewshot.md").read_text(encoding="utf-8"))
     runs = [r for by_method in result["runs"].values() for draws in by_method.values() for r in draws]
     return 1 if all("error" in r for r in runs) else 0
@@ -210,11 +215,14 @@ def _add_invariance(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--figure-object", default=None, help="object shown in the figure (default: the first; 'all': every one)"
     )
+    add_progress_option(p)
     p.set_defaults(func=_run_invariance)
 
 
 def _run_invariance(args: argparse.Namespace) -> int:
-    result = invariance.main(args.data, args.out, args.methods, args.scale, args.erode, args.figure_object)
+    result = invariance.main(
+        args.data, args.out, args.methods, args.scale, args.erode, args.figure_object, not args.no_progress
+    )
     failed = [n for n, r in result["methods"].items() if "error" in r]
     print((Path(args.out) / "invariance.md").read_text(encoding="utf-8"))
     return 1 if failed and len(failed) == len(result["methods"]) else 0
@@ -298,12 +306,13 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         type=_list(int),
         help="batch sizes of --device (default " + ",".join(map(str, d.device_batches)) + ")",
     )
+    add_progress_option(p)
     p.set_defaults(func=_run_speed)
 
 
 def _run_speed(args: argparse.Namespace) -> int:
     settings = _override(speed.presets()["quick" if args.quick else "default"], args)
-    result = speed.main(args.out, settings)
+    result = speed.main(args.out, settings, progress=not args.no_progress)
     print((Path(args.out) / "speed.md").read_text(encoding="utf-8"))
     return 0 if result["rows"] else 1
 
@@ -375,6 +384,7 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--tune-frames", type=int, default=8, help="frames per training scene the tuning scores on (default 8)"
     )
+    add_progress_option(p)
     p.set_defaults(func=_run_relight)
 
 
@@ -400,6 +410,7 @@ def _run_relight(args: argparse.Namespace) -> int:
         not args.no_tune,
         args.tune_frames,
         command=shlex.join(["alcn", *sys.argv[1:]]),
+        progress=not args.no_progress,
     )
     print((Path(args.out) / "relight.md").read_text(encoding="utf-8"))
     return 1 if all("errors" in r for r in result["methods"].values()) else 0

@@ -1069,12 +1069,13 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     }
 
 
-def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> dict[str, Any]:
+def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None, progress: bool = True) -> dict[str, Any]:
     """Run the speed benchmark and write ``speed.json``, ``speed.md`` and ``speed.png`` into ``out_dir``.
 
     Args:
         out_dir: output folder (created).
         settings: the run's settings; default :class:`SpeedSettings` (see :func:`presets`).
+        progress: a progress bar over the cases.
 
     Returns:
         The contents of ``speed.json``.
@@ -1099,11 +1100,11 @@ def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None) -> d
     accuracy: list[dict[str, Any]] = []
     errors: dict[str, str] = {}
     cases = [(w, h, c) for (w, h) in settings.sizes for c in settings.colours]
-    with tqdm(total=len(cases) * len(methods), desc="speed", unit="case") as progress:
+    with tqdm(total=len(cases) * len(methods), desc="speed", unit="case", disable=not progress) as bar:
         for width, height, colour in cases:
             frame = frame_for(width, height, colour)
             ready = _ready(methods, built, errors, frame, settings.warmup)
-            case_rows, case_accuracy = _time_case(ready, frame, colour, settings, progress)
+            case_rows, case_accuracy = _time_case(ready, frame, colour, settings, bar)
             rows += case_rows
             accuracy += case_accuracy
     video = _video_test(methods, built, errors, rows, settings)

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from alcn_cv.cli import add_progress_option
 from alcn_cv.enhance import available, create
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.registry import describe, parameters, parse_params, parse_spec
@@ -84,6 +85,7 @@ def main(
     device: str | None = None,
     batch_size: int | None = None,
     max_frames: int | None = None,
+    progress: bool = True,
 ) -> None:
     """Normalize ``src`` (image, folder of images, or video) into ``dst`` with ``method``.
 
@@ -93,7 +95,8 @@ def main(
     In a folder, an image that cannot be read stops the run before anything is written, or with
     ``skip_bad`` is skipped; the end says how many images were written and what was skipped
     and why, and the frames per second. ``allow_partial`` accepts a video that ends before its
-    header's frame count (see :func:`alcn_cv.io.map_video`); ``max_frames`` writes a video's first frames only.
+    header's frame count (see :func:`alcn_cv.io.map_video`); ``max_frames`` writes a video's first frames only;
+    ``progress``: the progress bars.
 
     ``device`` (``"cpu"``, ``"cuda"``, ...): ALCN on that torch device, ``batch_size`` (default
     :data:`DEFAULT_BATCH`) frames of one size at a time (:meth:`ALCN.apply_batch
@@ -143,10 +146,17 @@ def main(
     size = 1 if device is None else batch_size
     start = time.perf_counter()
     if src.is_dir():
-        frames = _normalize_folder(src, outputs, normalize, size, skip_bad)
+        frames = _normalize_folder(src, outputs, normalize, size, skip_bad, progress)
     elif is_video(src):
         frames = map_video(
-            src, dst, normalize, f"normalize {src.name}", allow_partial, batch_size=size, max_frames=max_frames
+            src,
+            dst,
+            normalize,
+            f"normalize {src.name}",
+            allow_partial,
+            batch_size=size,
+            max_frames=max_frames,
+            progress=progress,
         )
         logger.info("wrote %d frames to %s", frames, dst)
     else:
@@ -190,6 +200,7 @@ def _normalize_folder(
     normalize: Callable[[list[np.ndarray]], list[np.ndarray]],
     batch_size: int,
     skip_bad: bool,
+    progress: bool,
 ) -> int:
     images = list_images(src)
     skipped = {
@@ -198,7 +209,7 @@ def _normalize_folder(
         if path.is_file() and path not in images and not path.name.startswith(".")
     }
     if not skip_bad:  # every image is read first: a bad one stops the run before anything is written
-        for path in tqdm(images, desc=f"check {src.name}", unit="image"):
+        for path in tqdm(images, desc=f"check {src.name}", unit="image", disable=not progress):
             read_image(path, alpha=True)
 
     def readable() -> Iterator[tuple[Path, np.ndarray]]:
@@ -214,8 +225,8 @@ def _normalize_folder(
     def normalize_pairs(pairs: list[tuple[Path, np.ndarray]]) -> list[tuple[Path, np.ndarray]]:
         return list(zip([output for output, _ in pairs], normalize([img for _, img in pairs])))
 
-    with tqdm(total=len(images), desc=f"normalize {src.name}", unit="image") as progress:
-        written = map_batches(readable(), normalize_pairs, lambda pair: write_image(*pair), batch_size, progress)
+    with tqdm(total=len(images), desc=f"normalize {src.name}", unit="image", disable=not progress) as bar:
+        written = map_batches(readable(), normalize_pairs, lambda pair: write_image(*pair), batch_size, bar)
     reasons = ", ".join(f"{count} {reason}" for reason, count in sorted(Counter(skipped.values()).items()))
     logger.info(
         "wrote %d images to %s; skipped %d%s",
@@ -262,6 +273,7 @@ def _run(args: argparse.Namespace) -> None:
         device=args.device,
         batch_size=args.batch_size,
         max_frames=args.max_frames,
+        progress=not args.no_progress,
     )
 
 
@@ -351,4 +363,5 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="N",
         help=f"frames per batch with --device (default: {DEFAULT_BATCH}; fewer if the device runs out of memory)",
     )
+    add_progress_option(parser)
     parser.set_defaults(func=_run)

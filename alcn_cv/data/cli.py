@@ -7,6 +7,8 @@ import logging
 import time
 from pathlib import Path
 
+from alcn_cv.cli import add_progress_option
+
 logger = logging.getLogger(__name__)
 
 __all__ = ["add_parser"]
@@ -25,7 +27,7 @@ def _phos(args: argparse.Namespace) -> int:
         lighting=args.lighting,
         background_fraction=args.background_fraction,
         overwrite=args.overwrite,
-        progress=True,
+        progress=not args.no_progress,
         workers=args.workers,
     )
     logger.info("wrote %d windows to %s in %.1f s", args.n, out, time.perf_counter() - t)
@@ -46,6 +48,7 @@ def _detect(args: argparse.Namespace) -> int:
         width=args.width,
         height=args.height,
         overwrite=args.overwrite,
+        progress=not args.no_progress,
         workers=args.workers,
     )
     logger.info("wrote the detection benchmark to %s in %.1f s", out, time.perf_counter() - t)
@@ -66,6 +69,7 @@ def _pose(args: argparse.Namespace) -> int:
         training_light=args.training_light,
         train_sweeps=args.train_sweeps or pose.TRAIN_SWEEPS,
         overwrite=args.overwrite,
+        progress=not args.no_progress,
         workers=args.workers,
     )
     logger.info("wrote the pose sequences to %s in %.1f s", out, time.perf_counter() - t)
@@ -83,6 +87,7 @@ def _scenes(args: argparse.Namespace) -> int:
         size=args.size,
         seed=args.seed,
         overwrite=args.overwrite,
+        progress=not args.no_progress,
         workers=args.workers,
     )
     logger.info("wrote the rendered scenes to %s in %.1f s", out, time.perf_counter() - t)
@@ -142,6 +147,7 @@ def add_parser(subparsers) -> None:
     q.add_argument(
         "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
     )
+    add_progress_option(q)
     q.set_defaults(func=_phos)
 
     q = sub.add_parser(
@@ -167,6 +173,7 @@ def add_parser(subparsers) -> None:
     q.add_argument(
         "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
     )
+    add_progress_option(q)
     q.set_defaults(func=_detect)
 
     q = sub.add_parser(
@@ -213,6 +220,7 @@ def add_parser(subparsers) -> None:
     q.add_argument(
         "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
     )
+    add_progress_option(q)
     q.set_defaults(func=_pose)
 
     q = sub.add_parser(
@@ -232,6 +240,7 @@ def add_parser(subparsers) -> None:
     q.add_argument(
         "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
     )
+    add_progress_option(q)
     q.set_defaults(func=_scenes)
 
     q = sub.add_parser(

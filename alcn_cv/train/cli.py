@@ -16,6 +16,8 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from alcn_cv.cli import add_progress_option
+
 __all__ = ["add_parser"]
 
 
@@ -46,7 +48,7 @@ def _add_run(parser: argparse.ArgumentParser, out: str) -> None:
     training commands."""
     parser.add_argument("--out", type=Path, default=Path(out), help=f"run folder (default: {out})")
     parser.add_argument("--seed", type=int, help="seed (default: the preset's)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_progress_option(parser)
 
 
 def _command(name: str, args: argparse.Namespace, *extra: str) -> str:
@@ -80,7 +82,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--seed", type=int, help="seed (default: the preset's)")
     p.add_argument("--device", choices=("cpu", "cuda"), help="run.device (default: the preset's)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_progress_option(p)
     p.set_defaults(func=_train)
 
     d = subparsers.add_parser(
@@ -106,7 +108,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--batch-size", type=int, default=64, help="windows per batch (default 64)")
     d.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
     d.add_argument("--seed", type=int, default=0, help="seed of the synthetic images and the detector (default 0)")
-    d.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_progress_option(d)
     d.set_defaults(func=_train_detector)
 
     s = subparsers.add_parser(
@@ -135,7 +137,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=1,
         help="torch and OpenCV threads (default 1, as the shipped files were made; 0: the libraries' default)",
     )
-    s.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_progress_option(s)
     s.set_defaults(func=_distill)
 
     r = subparsers.add_parser(
