@@ -34,7 +34,7 @@ HEADLINE_METHODS = ("none", "clahe", "dog", "dlcn", "tantriggs", "alcn", "alcn:m
 #: shipped files as they are.
 LOO_NOTE = (
     "The ALCN rows are the shipped files as they are: the gain models are trained on relit photographs that "
-    "permit any use, so every scene is held out for them.\n\n"
+    "permit any use, so no scene is in their training data (the webcam training scenes chose their recipe).\n\n"
 )
 RELIGHT_METRICS = {
     "identification": "identification",
