@@ -239,8 +239,10 @@ def test_three_steps_lower_the_loss(tmp_path):
 def test_a_run_folder_holds_one_run(tmp_path, caplog):
     """A second run into a folder replaces the first's log and removes its step snapshots, which the second run's
     would not all replace (another save_every or fewer steps); a resumed run of `alcn train` appends to its log."""
+    import dataclasses
     import logging
 
+    from alcn_cv.errors import InputError
     from alcn_cv.report import log_to
     from alcn_cv.train.config import REAL_LIGHT_CONFS
     from alcn_cv.train.real_light import training_run
@@ -253,6 +255,11 @@ def test_a_run_folder_holds_one_run(tmp_path, caplog):
     log = (tmp_path / "train.log").read_text()
     assert "first log" not in log and "this run" in log and "removed 1 step snapshots" in log
     assert sorted(p.name for p in tmp_path.glob("*.npz")) == ["mine.npz"]
+    with pytest.raises(InputError, match="save_every >= 1"), training_run(
+        dataclasses.replace(REAL_LIGHT_CONFS["gain"], save_every=0), tmp_path / "never"
+    ):
+        pass
+    assert not (tmp_path / "never").exists()  # checked before the folder is made
     with log_to(tmp_path / "train.log", append=True):
         logging.getLogger("alcn_cv.test").info("resumed")
     assert "this run" in (tmp_path / "train.log").read_text()

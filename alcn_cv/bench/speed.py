@@ -794,7 +794,7 @@ def _large_memory(size: tuple[int, int]) -> list[dict[str, Any]]:
 VIDEO_TURNS = 3
 
 
-def _normalize_video(settings: SpeedSettings, work: Path) -> dict[str, Any]:
+def _normalize_video(settings: SpeedSettings, work: Path, progress: bool = True) -> dict[str, Any]:
     """``alcn normalize`` on a video (:func:`alcn_cv.io.map_video` with the default's ``apply``, what
     the command runs) against its decoding and encoding alone and ``apply`` alone: :data:`VIDEO_TURNS` turns of
     the three, the fastest of each."""
@@ -817,14 +817,14 @@ def _normalize_video(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     codec_s = apply_s = whole_s = float("inf")
     for _ in range(VIDEO_TURNS):
         t0 = time.perf_counter()
-        map_video(source, work / "copy.mp4", lambda frame: frame, desc="decode+encode")
+        map_video(source, work / "copy.mp4", lambda frame: frame, desc="decode+encode", progress=progress)
         codec_s = min(codec_s, time.perf_counter() - t0)
         t0 = time.perf_counter()
         for frame in frames:
             norm.apply(frame)
         apply_s = min(apply_s, time.perf_counter() - t0)
         t0 = time.perf_counter()
-        map_video(source, work / "normalized.mp4", create("alcn").apply, desc="alcn normalize")  # the command's
+        map_video(source, work / "normalized.mp4", create("alcn").apply, desc="alcn normalize", progress=progress)
         whole_s = min(whole_s, time.perf_counter() - t0)
     return {
         "video": source,
@@ -886,7 +886,7 @@ def _gain_error(gain: ALCN, frame: np.ndarray) -> float:
     return float(np.abs(gain.normalize(gray) - expected).max())
 
 
-def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
+def targets(settings: SpeedSettings, work: Path, progress: bool = True) -> dict[str, Any]:
     """Every target of the real-time work, measured in this run (ratios of medians of methods
     timed in turns, so that they see the same load)."""
     width, height = settings.target_size
@@ -926,7 +926,7 @@ def targets(settings: SpeedSettings, work: Path) -> dict[str, Any]:
     threads = [_after_apply(gray, repeats, 1), _after_apply(gray, repeats, None)]
     fresh = _fresh_processes(gray, work, max(5, 2 * repeats))
     memory = _large_memory(settings.large_size)
-    video = _normalize_video(settings, work)
+    video = _normalize_video(settings, work, progress)
     batched = _batched(gray, small, repeats)
     ratio, gain_lite_ratio, lite_ratio = (t[f"alcn{m} gray"] / t["dog raw"] for m in ("", " gain-lite", " lite"))
     fps = 1e3 / t["alcn gray small"]
@@ -1075,7 +1075,7 @@ def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None, prog
     Args:
         out_dir: output folder (created).
         settings: the run's settings; default :class:`SpeedSettings` (see :func:`presets`).
-        progress: a progress bar over the cases.
+        progress: the progress bars (the cases, the video row's pipelines).
 
     Returns:
         The contents of ``speed.json``.
@@ -1109,7 +1109,7 @@ def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None, prog
             accuracy += case_accuracy
     video = _video_test(methods, built, errors, rows, settings)
     with tempfile.TemporaryDirectory() as work:
-        target_results = targets(settings, Path(work))
+        target_results = targets(settings, Path(work), progress)
 
     result = {
         "command": speed_command(out_dir, settings),

@@ -413,9 +413,9 @@ def train_real_light(
 def training_run(cfg: RealLightConfig, out: str | Path) -> Iterator[Path]:
     """The run of any network on ``cfg``'s draws: checks what :func:`draw_step` needs (scenes or relit
     photographs, a rendered share in [0, 1) with rendered scenes, at least 2 locations, 1 step and 1 step between
-    snapshots),
-    makes the run folder ``out`` and copies the log into its ``train.log`` (:func:`alcn_cv.report.log_to`). A folder
-    holds one run: an earlier run's ``train.log`` is replaced and its step snapshots (``*_step{N}.npz``) removed.
+    snapshots), makes the run folder ``out`` and copies the log into its ``train.log``
+    (:func:`alcn_cv.report.log_to`). A folder holds one run: an earlier run's ``train.log`` is replaced and its step
+    snapshots (``*_step{N}.npz``) removed.
 
     Yields:
         The run folder.
