@@ -255,8 +255,9 @@ def test_a_run_folder_holds_one_run(tmp_path, caplog):
     log = (tmp_path / "train.log").read_text()
     assert "first log" not in log and "this run" in log and "removed 1 step snapshots" in log
     assert sorted(p.name for p in tmp_path.glob("*.npz")) == ["mine.npz"]
-    with pytest.raises(InputError, match="save_every >= 1"), training_run(
-        dataclasses.replace(REAL_LIGHT_CONFS["gain"], save_every=0), tmp_path / "never"
+    with (
+        pytest.raises(InputError, match="save_every >= 1"),
+        training_run(dataclasses.replace(REAL_LIGHT_CONFS["gain"], save_every=0), tmp_path / "never"),
     ):
         pass
     assert not (tmp_path / "never").exists()  # checked before the folder is made
