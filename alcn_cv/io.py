@@ -51,8 +51,9 @@ IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".
 EIGHT_BIT_SUFFIXES = frozenset({".jpg", ".jpeg", ".bmp", ".webp"})
 VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv"})
 _FOURCC = {".avi": "MJPG", ".mkv": "MJPG"}  # everything else: mp4v
-_UMASK = os.umask(0)
-os.umask(_UMASK)
+#: The process's umask, read once: the permissions of what is made under a temporary name.
+UMASK = os.umask(0)
+os.umask(UMASK)
 
 
 def is_video(path: str | Path) -> bool:
@@ -151,7 +152,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     tmp = Path(name)
     try:
         yield tmp
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600 files
+        os.chmod(tmp, 0o666 & ~UMASK)  # mkstemp makes 0600 files
         try:
             os.replace(tmp, path)
         except OSError as exc:
@@ -181,17 +182,26 @@ def check_writable(path: str | os.PathLike) -> None:
     os.unlink(name)
 
 
-def output_path(path: str | os.PathLike, suffix: str, what: str) -> Path:
-    """``path`` as the path of a file to write, checked before the work: it ends in ``suffix`` (the files written
-    beside it are named after it) and can be written (:func:`check_writable`).
+def with_suffix(path: str | os.PathLike, suffix: str, what: str) -> Path:
+    """``path``, which must end in ``suffix`` (the files written beside it are named after it).
 
     Raises:
-        InputError: another suffix (the message names ``what``, e.g. "a weight file"), or a folder that cannot be
-            written.
+        InputError: another suffix (the message names ``what``, e.g. "a weight file").
     """
     path = Path(path)
     if path.suffix != suffix:
         raise InputError(f"{what} must end in {suffix}, got {path}")
+    return path
+
+
+def output_path(path: str | os.PathLike, suffix: str, what: str) -> Path:
+    """``path`` as the path of a file to write, checked before the work: :func:`with_suffix`, and it can be written
+    (:func:`check_writable`).
+
+    Raises:
+        InputError: another suffix, or a folder that cannot be written.
+    """
+    path = with_suffix(path, suffix, what)
     check_writable(path)
     return path
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from alcn_cv.errors import WeightFileError
-from alcn_cv.io import atomic_write, output_path
+from alcn_cv.io import atomic_write, with_suffix
 
 logger = logging.getLogger(__name__)
 
@@ -57,7 +57,7 @@ def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: 
     """Write a weight file atomically (temporary name, then rename). An ONNX export beside it (the same name,
     ``.onnx``), which ``backend="opencv"`` would run, was made from the weights it held before: it is removed
     (``alcn export`` makes it again)."""
-    path = output_path(path, ".npz", "a weight file")
+    path = with_suffix(path, ".npz", "a weight file")
     meta = {"format": FORMAT, "version": VERSION, **meta}
     _check_meta(meta, path)
     _check_arrays(arrays, path)

@@ -23,7 +23,7 @@ from tqdm import tqdm
 
 from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import InputError
-from alcn_cv.io import make_folder, output_path
+from alcn_cv.io import atomic_write, output_path, with_suffix
 from pose.box import NUM_CORNERS, box_parts
 from pose.corner_data import CornerFrames, build_frames, build_image_frames
 from pose.corners import FORMAT_NAME, FORMAT_VERSION, PAD, STRIDE, WINDOW
@@ -132,10 +132,9 @@ def export_onnx(net, out: str | Path, meta: dict[str, Any]) -> Path:
 
     import torch
 
-    from alcn_cv.io import atomic_write
     from alcn_cv.train.export import OPSET, with_metadata
 
-    out = output_path(out, ".onnx", "a corner detector")
+    out = with_suffix(out, ".onnx", "a corner detector")
     buffer = _io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)  # see alcn_cv.train.export
@@ -150,8 +149,7 @@ def export_onnx(net, out: str | Path, meta: dict[str, Any]) -> Path:
             dynamo=False,
         )
     data = with_metadata(buffer.getvalue(), meta)
-    make_folder(out.parent)
-    atomic_write(out, data)
+    atomic_write(out, data)  # its folder made when missing
     logger.info("corner detector written to %s (%d kB)", out, len(data) // 1024)
     return out
 

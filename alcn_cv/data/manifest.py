@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from alcn_cv.errors import DatasetError
-from alcn_cv.io import atomic_path, read_json
+from alcn_cv.io import UMASK, atomic_path, read_json
 
 __all__ = [
     "GENERATOR",
@@ -66,12 +66,6 @@ def read_manifest(folder: str | os.PathLike, kind: str | None = None) -> dict[st
     return man
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 @contextlib.contextmanager
 def atomic_output_dir(
     out_dir: str | os.PathLike, *, overwrite: bool = False, marker: str = "manifest.json"
@@ -90,7 +84,7 @@ def atomic_output_dir(
         raise FileExistsError(f"{out} is not an earlier output (no {marker}): not replaced; give another path")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
-    tmp.chmod(0o777 & ~_umask())  # mkdtemp's folder is private (0700); the output is as any other folder made here
+    tmp.chmod(0o777 & ~UMASK)  # mkdtemp's folder is private (0700); the output is as any other folder made here
     try:
         yield tmp
         if out.exists():
