@@ -28,6 +28,7 @@ __all__ = [
     "atomic_path",
     "atomic_write",
     "check_writable",
+    "count_frames",
     "is_video",
     "iter_frames",
     "list_images",
@@ -424,6 +425,29 @@ def iter_frames(
                 break
     if count == 0:
         raise InputError(f"{source}: the video holds no decodable frame")
+
+
+def count_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None = None) -> int | None:
+    """How many frames :func:`iter_frames` yields for the same arguments: a progress bar's total.
+
+    ``None`` when that is unknown: a video whose container does not say, or a source
+    :func:`iter_frames` refuses (it says why when it is read).
+    """
+    source = Path(source)
+    try:
+        if source.is_dir():
+            total = len(list_images(source))
+        elif is_video(source):
+            with VideoReader(source) as video:
+                total = len(video)
+        else:
+            return None
+    except InputError:
+        return None
+    if total <= 0:
+        return None
+    count = -(-total // step)
+    return count if max_frames is None else min(count, max_frames)
 
 
 def open_video_writer(path: str | Path, fps: float, size: tuple[int, int], color: bool = True) -> cv2.VideoWriter:

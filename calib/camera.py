@@ -31,8 +31,8 @@ from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats.colmap import ColmapCamera, camera_from_opencv, write_text_model
 from alcn_cv.io import (
     VIDEO_SUFFIXES,
-    VideoReader,
     atomic_path,
+    count_frames,
     is_video,
     iter_frames,
     list_images,
@@ -194,7 +194,9 @@ def _read_gray(path: Path) -> np.ndarray:
     return image
 
 
-def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tuple[list[BoardView], tuple[int, int]]:
+def detect_in_images(
+    paths: Sequence[str | os.PathLike], board: BoardSpec, progress: bool = True
+) -> tuple[list[BoardView], tuple[int, int]]:
     """Detect the board in every image.
 
     Returns:
@@ -214,7 +216,7 @@ def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tu
     foreign = markers = 0
     samples: list[tuple[str, np.ndarray]] = []
     missed = None
-    for path in tqdm(paths, desc="detecting board", unit="image", disable=len(paths) < 20):
+    for path in tqdm(paths, desc="detecting board", unit="image", disable=not progress or len(paths) < 20):
         gray = _read_gray(path)
         first = gray if first is None else first
         sizes.setdefault((gray.shape[1], gray.shape[0]), []).append(path.name)
@@ -244,13 +246,12 @@ def detect_in_images(paths: Sequence[str | os.PathLike], board: BoardSpec) -> tu
 
 
 def detect_in_video(
-    path: str | os.PathLike, board: BoardSpec, max_candidates: int = 150
+    path: str | os.PathLike, board: BoardSpec, max_candidates: int = 150, progress: bool = True
 ) -> tuple[list[BoardView], tuple[int, int]]:
     """Detect the board in evenly spaced frames of a video (at most ``max_candidates``
     frames are examined). View names are ``frame_000123``."""
     path = Path(path)
-    with VideoReader(path) as video:
-        total = max(len(video), 0)
+    total = count_frames(path)
     step = max(1, -(-total // max_candidates)) if total else 1
     detector = board.detector()
     views: list[BoardView] = []
@@ -261,7 +262,11 @@ def detect_in_video(
     samples: list[tuple[str, np.ndarray]] = []
     missed = None
     for name, frame in tqdm(
-        iter_frames(path, step), total=-(-total // step) if total else None, desc="detecting board", unit="frame"
+        iter_frames(path, step),
+        total=count_frames(path, step),
+        desc="detecting board",
+        unit="frame",
+        disable=not progress,
     ):
         gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
         first = gray if first is None else first
@@ -532,6 +537,7 @@ def main(
     max_views: int = 30,
     flags: int = 0,
     report: bool = True,
+    progress: bool = True,
 ) -> Calibration:
     """Calibrate from a folder of images or a video and write the outputs into ``out_dir``.
 
@@ -543,12 +549,13 @@ def main(
         max_views: most views used (the selection keeps coverage and pose spread).
         flags: ``cv2.CALIB_*`` flags.
         report: also write ``calibration.png``.
+        progress: a progress bar over the frames searched for the board.
     """
     source = Path(source)
     if source.is_dir():
-        views, size = detect_in_images(list_images(source), board)
+        views, size = detect_in_images(list_images(source), board, progress)
     elif _is_video(source):
-        views, size = detect_in_video(source, board)
+        views, size = detect_in_video(source, board, progress=progress)
     elif source.is_file():
         raise InputError(f"{source}: expected a folder of images or a video ({', '.join(sorted(VIDEO_SUFFIXES))})")
     else:

@@ -9,6 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from alcn_cv.cli import add_progress_option
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
 
@@ -94,6 +95,7 @@ def _camera(args: argparse.Namespace) -> int:
         max_views=args.max_views,
         flags=flags,
         report=not args.no_report,
+        progress=not args.no_progress,
     )
     K, d = calib.K, calib.dist
     print(
@@ -149,6 +151,7 @@ def _register(args: argparse.Namespace) -> int:
             min_points=args.min_corners,
             max_rms_px=args.max_rms,
             overwrite=args.overwrite,
+            progress=not args.no_progress,
         )
     else:
         known = None
@@ -170,6 +173,7 @@ def _register(args: argparse.Namespace) -> int:
             reference=reference,
             settings=settings,
             overwrite=args.overwrite,
+            progress=not args.no_progress,
         )
     print(
         f"registered {len(reg.registered)} of {len(reg.frames)} frames ({reg.units}); dropped {len(reg.dropped)} "
@@ -183,7 +187,14 @@ def _undistort(args: argparse.Namespace) -> int:
     from .camera import load_calibration
     from .undistort import main
 
-    yaml_path = main(args.source, args.output, load_calibration(args.calib), alpha=args.alpha, keep_K=args.keep_K)
+    yaml_path = main(
+        args.source,
+        args.output,
+        load_calibration(args.calib),
+        alpha=args.alpha,
+        keep_K=args.keep_K,
+        progress=not args.no_progress,
+    )
     print(f"undistorted {args.source} -> {args.output}; camera of the output: {yaml_path}")
     return 0
 
@@ -216,6 +227,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--fix-k3", action="store_true", help="fix k3 = 0 (few or central views)")
     p.add_argument("--zero-tangent", action="store_true", help="fix p1 = p2 = 0")
     p.add_argument("--no-report", action="store_true", help="do not write calibration.png")
+    add_progress_option(p)
     p.set_defaults(func=_camera)
 
     p = sub.add_parser(
@@ -268,6 +280,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-features", type=int, default=4096, help="sfm: SIFT features per image (default 4096)")
     p.add_argument("--threads", type=int, default=-1, help="sfm: threads (default all)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    add_progress_option(p)
     p.set_defaults(func=_register)
 
     p = sub.add_parser(
@@ -282,4 +295,5 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--alpha", type=float, default=0.0, help="0: crop to valid pixels; 1: keep all source pixels (default 0)"
     )
     p.add_argument("--keep-K", action="store_true", help="keep the input camera matrix as the output's")
+    add_progress_option(p)
     p.set_defaults(func=_undistort)

@@ -55,7 +55,7 @@ from alcn_cv.formats.colmap import (
     model_from_pycolmap,
     write_text_model,
 )
-from alcn_cv.io import VideoReader, iter_frames, list_images, write_image, write_json
+from alcn_cv.io import count_frames, iter_frames, write_image, write_json
 
 from .board import BoardSpec, Detection
 from .camera import Calibration
@@ -123,16 +123,6 @@ class Registration:
 
 
 # -- input frames ------------------------------------------------------------------------
-
-
-def _num_frames(source: Path, step: int, max_frames: int | None) -> int | None:
-    if source.is_dir():
-        n = -(-len(list_images(source)) // step)
-    else:
-        with VideoReader(source) as video:
-            total = max(len(video), 0)
-        n = -(-total // step) if total else None
-    return n if max_frames is None or n is None else min(n, max_frames)
 
 
 # -- ChArUco path ------------------------------------------------------------------------
@@ -251,6 +241,7 @@ def register_charuco(
     min_points: int = 8,
     max_rms_px: float = 1.0,
     overwrite: bool = False,
+    progress: bool = True,
 ) -> Registration:
     """Register a sequence (folder of images or video) with a ChArUco board in view.
 
@@ -283,7 +274,9 @@ def register_charuco(
     with atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp:
         (tmp / "rgb").mkdir()
         frames = iter_frames(source, step, max_frames)
-        for name, image in tqdm(frames, total=_num_frames(source, step, max_frames), desc="registering", unit="frame"):
+        for name, image in tqdm(
+            frames, total=count_frames(source, step, max_frames), desc="registering", unit="frame", disable=not progress
+        ):
             image = undistort(image, name)
             det = detector(image)  # detect on the undistorted frame: the corners then follow K exactly
             if det is None:
@@ -410,14 +403,20 @@ class _SfmFrames:
         return to_out.get(name, to_out.get(Path(name).stem))
 
 
-def _write_sfm_frames(source: Path, rgb: Path, calib: Calibration | None, settings: SfmSettings) -> _SfmFrames:
+def _write_sfm_frames(
+    source: Path, rgb: Path, calib: Calibration | None, settings: SfmSettings, progress: bool
+) -> _SfmFrames:
     """Undistort (with a calibration) and write the input frames to ``rgb/``; all must have one size."""
     undistort = Undistorter(calib, keep_K=True) if calib is not None else None
     names: list[str] = []
     size = None
     frames = iter_frames(source, settings.step, settings.max_frames)
     for name, image in tqdm(
-        frames, total=_num_frames(source, settings.step, settings.max_frames), desc="preparing frames", unit="frame"
+        frames,
+        total=count_frames(source, settings.step, settings.max_frames),
+        desc="preparing frames",
+        unit="frame",
+        disable=not progress,
     ):
         if undistort is not None:
             image = undistort(image, name)
@@ -594,6 +593,7 @@ def register_colmap(
     reference: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
     settings: SfmSettings = SfmSettings(),
     overwrite: bool = False,
+    progress: bool = True,
 ) -> Registration:
     """Register a sequence without a board: pycolmap SfM, then a similarity to millimetres.
 
@@ -630,7 +630,7 @@ def register_colmap(
     ):
         rgb = tmp / "rgb"
         rgb.mkdir()
-        frames = _write_sfm_frames(source, rgb, calib, settings)
+        frames = _write_sfm_frames(source, rgb, calib, settings, progress)
         model = _reconstruct(frames, rgb, Path(work), calib, settings)
         _scale_to_mm(model, frames, known_distance, reference)
         (camera,) = model.cameras.values()

@@ -63,7 +63,12 @@ class Undistorter:
 
 
 def main(
-    source: str | os.PathLike, output: str | os.PathLike, calib: Calibration, alpha: float = 0.0, keep_K: bool = False
+    source: str | os.PathLike,
+    output: str | os.PathLike,
+    calib: Calibration,
+    alpha: float = 0.0,
+    keep_K: bool = False,
+    progress: bool = True,
 ) -> Path:
     """Undistort an image, a folder of images or a video.
 
@@ -73,6 +78,7 @@ def main(
             names); for a video: output video path (``.mp4``/``.avi``).
         calib: calibration of the camera.
         alpha, keep_K: output camera (see :class:`Undistorter`).
+        progress: a progress bar over a folder's images or a video's frames.
 
     Returns:
         The path of the output camera YAML (``camera.yaml`` in the output folder, or
@@ -84,12 +90,14 @@ def main(
     if source.is_dir():
         files = list_images(source)
         make_folder(output)
-        for path in tqdm(files, desc="undistorting", unit="image", disable=len(files) < 10):
+        for path in tqdm(files, desc="undistorting", unit="image", disable=not progress or len(files) < 10):
             write_image(output / path.name, undistort(read_image(path), path.name))
         yaml_path = output / "camera.yaml"
     elif source.is_file() and is_video(source):
         make_folder(output.parent)
-        n = map_video(source, output, lambda frame: undistort(frame, source.name), desc="undistorting")
+        n = map_video(
+            source, output, lambda frame: undistort(frame, source.name), desc="undistorting", progress=progress
+        )
         logger.info("undistorted %d frames to %s", n, output)
         yaml_path = output.with_name(f"{output.stem}.camera.yaml")
     elif source.is_file() and suffix in IMAGE_SUFFIXES:

@@ -72,6 +72,7 @@ def build(
     world_is_object: bool = True,
     refine_focal: bool = False,
     descriptors_per_point: int = 8,
+    progress: bool = True,
 ) -> tuple[PartModel, np.ndarray]:
     """Build a part model from a sequence; returns it and the training cameras' centres (object frame).
 
@@ -99,8 +100,8 @@ def build(
     norm = descriptor_norm(feature)
     with tempfile.TemporaryDirectory(prefix="alcn_pose_build_", dir=work_dir, ignore_cleanup_errors=True) as work:
         tmp = Path(work)
-        feats = extract_features(seq, feature, n_features, normalizer, masks)
-        write_database(tmp / "database.db", seq, feats, image_pairs(len(seq.views), window), norm, ratio)
+        feats = extract_features(seq, feature, n_features, normalizer, masks, progress)
+        write_database(tmp / "database.db", seq, feats, image_pairs(len(seq.views), window), norm, ratio, progress)
         if registered:
             rec = triangulate_fixed_poses(seq, tmp / "database.db", tmp / "sparse")
         else:
@@ -212,6 +213,7 @@ def main(
     box_size: tuple[float, float, float] | None = None,
     box_units: str | None = None,
     refine_focal: bool = False,
+    progress: bool = True,
 ) -> Path:
     """Build a part model from ``input_path`` and write ``output`` (.npz, .ply, _cameras.png).
 
@@ -249,6 +251,7 @@ def main(
             box_ply=box_ply,
             box_size=box_size,
             work_dir=work,
+            progress=progress,
             **video,
         )
     path = part_model.save(model, output)

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from alcn_cv.cli import add_progress_option
+
 
 def _intrinsics(values: list[float] | None) -> np.ndarray | None:
     from pose.solver import camera_matrix
@@ -34,6 +36,7 @@ def _build(args: argparse.Namespace) -> int:
         box_size=args.box_size,
         box_units=args.box_units,
         refine_focal=args.refine_focal,
+        progress=not args.no_progress,
     )
     return 0
 
@@ -68,6 +71,7 @@ def _track(args: argparse.Namespace) -> int:
         dist=dist,
         detector=args.detector,
         image_size=size,
+        progress=not args.no_progress,
     )
     print(f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps -> {args.output}")
     return 0
@@ -90,7 +94,12 @@ def _eval(args: argparse.Namespace) -> int:
     recipe = _recipe(args)
     if args.middlebury:
         evaluate.middlebury_main(
-            args.middlebury, args.out, normalizers=normalizations, feature=args.feature, command=_command()
+            args.middlebury,
+            args.out,
+            normalizers=normalizations,
+            feature=args.feature,
+            command=_command(),
+            progress=not args.no_progress,
         )
     if args.data:
         evaluate.main(
@@ -105,6 +114,7 @@ def _eval(args: argparse.Namespace) -> int:
             seeds=args.seeds,
             sequences=args.sequences,
             command=_command(),
+            progress=not args.no_progress,
         )
     if not (args.middlebury or args.data):
         raise ValueError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
@@ -132,6 +142,7 @@ def _train_corners(args: argparse.Namespace) -> int:
         seed=args.seed,
         device=args.device,
         conf=args.conf,
+        progress=not args.no_progress,
     )
     print(f"corner detector ({args.normalization}) -> {path}")
     return 0
@@ -153,6 +164,7 @@ def _planar(args: argparse.Namespace) -> int:
         max_frames=args.max_frames,
         recipe=_recipe(args),
         command=_command(),
+        progress=not args.no_progress,
     )
     print((Path(args.out) / "planar_pose.md").read_text(encoding="utf-8"))
     return 0
@@ -246,13 +258,11 @@ def _add_planar(sub: argparse._SubParsersAction) -> None:
         help=f"assumed horizontal field of view, degrees (default {planar.DEFAULT_HFOV:g})",
     )
     r.add_argument("--max-frames", type=int, help="at most this many frames per scene, evenly spaced (default all)")
+    add_progress_option(r)
     r.set_defaults(func=_planar)
 
 
 def _overlay_error(args: argparse.Namespace) -> int:
-    import shlex
-    import sys
-
     from pose import overlay
 
     settings = overlay.EdgeSettings(max_distance=args.max_distance, max_angle=args.max_angle)
@@ -261,8 +271,9 @@ def _overlay_error(args: argparse.Namespace) -> int:
         [tuple(r) for r in args.run],
         args.out,
         settings=settings,
-        command=shlex.join(["alcn", *sys.argv[1:]]),
+        command=_command(),
         show=args.show,
+        progress=not args.no_progress,
     )
     print((Path(args.out) / "overlay_error.md").read_text(encoding="utf-8"))
     return 0
@@ -312,6 +323,7 @@ def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
         help="frames drawn in OUT/overlay_frames.png with every run's box, besides the first run's two "
         "worst (default frame_000300)",
     )
+    add_progress_option(o)
     o.set_defaults(func=_overlay_error)
 
 
@@ -409,6 +421,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="video: refine the focal length in the bundle adjustment (stored in the model, used by `alcn pose track`)",
     )
+    add_progress_option(b)
     b.set_defaults(func=_build)
 
     t = sub.add_parser(
@@ -457,6 +470,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     t.add_argument("--n-features", type=int, default=1000, help="keypoints per frame (default 1000)")
     t.add_argument("--min-inliers", type=int, help="fewer inliers: frame lost (default 12; 5 with corners)")
     t.add_argument("--reprojection-error", type=float, default=4.0, help="inlier threshold, px (default 4)")
+    add_progress_option(t)
     t.set_defaults(func=_track)
 
     e = sub.add_parser(
@@ -507,6 +521,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
     e.add_argument("--out", type=Path, required=True, help="report folder")
+    add_progress_option(e)
     e.set_defaults(func=_eval)
 
     c = sub.add_parser(
@@ -532,6 +547,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "4000 steps take about 8 min on 2 CPU cores)",
     )
     c.add_argument("--seed", type=int, default=0, help="seed of the frames and the network (default 0)")
+    add_progress_option(c)
     c.set_defaults(func=_train_corners)
 
     bc = sub.add_parser(

@@ -27,6 +27,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, make_folder, write_json
@@ -206,6 +207,7 @@ def main(
     seeds: int = 1,
     sequences: list[int] | None = None,
     command: str | None = None,
+    progress: bool = True,
 ) -> dict[str, Any]:
     """Table-1-style evaluation on a pose data set (``train/000001``, ``test/0000NN``, ``models/``).
 
@@ -216,7 +218,8 @@ def main(
     a cell is then the mean over the seeds, its spread their standard deviation), from the
     training sequence on normalized images, then tracked through every test
     sequence (or those numbered in ``sequences``). Writes ``table1.md`` (with the machine and
-    ``command``), ``table1.json``, ``table1.png`` (and the models) into ``out_dir``.
+    ``command``), ``table1.json``, ``table1.png`` (and the models, an earlier run's removed) into ``out_dir``;
+    ``progress``: a progress bar over the models.
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     make_folder(out_dir)
@@ -243,13 +246,18 @@ def main(
     unknown = set(detectors) - {"features", "corners"}
     if unknown:
         raise InputError(f"unknown detectors {sorted(unknown)}; choose 'features' and/or 'corners'")
+    for earlier in [*out_dir.glob("model_*.npz"), *out_dir.glob("corners_*.onnx")]:  # another run's normalizers
+        earlier.unlink()
     t_start = time.perf_counter()
+    bar = tqdm(total=len(detectors) * len(normalizers), desc="pose eval", unit="model", disable=not progress)
     for det_name in detectors:
         for name in normalizers:
             runs = []  # per seed: (detector, units, outline, info)
             if det_name == "features":
                 seq = load_sequence(train, obj_id=obj_id)
-                model, _ = build_model(seq, feature=feature, normalizer=name, box_ply=model_ply, work_dir=out_dir)
+                model, _ = build_model(
+                    seq, feature=feature, normalizer=name, box_ply=model_ply, work_dir=out_dir, progress=progress
+                )
                 save_model(model, out_dir / f"model_{file_stem(name)}.npz")
                 row = f"{name} / {feature.lower()} features"
                 runs.append(
@@ -317,6 +325,8 @@ def main(
                 if len(per_run) == 1
                 else {"seeds": per_run, "proj2d_per_seed": values, "proj2d_std": spread[row]}
             )
+            bar.update()
+    bar.close()
     host = machine()
     md = (
         "# Pose under light changes (Table 1 style)\n\n"
@@ -384,6 +394,7 @@ def middlebury_main(
     min_inliers: int = 12,
     iterations: int = 10000,
     command: str | None = None,
+    progress: bool = True,
 ) -> dict[str, Any]:
     """Build from the odd views of each set, estimate the pose of the even views from their images.
 
@@ -397,7 +408,7 @@ def middlebury_main(
     Reports per normalizer and condition (original / relit) the median rotation (deg) and
     translation (mm) errors, the share of views with a pose, and the camera-centre error, as
     ``middlebury.md`` and ``middlebury.json`` in ``out_dir`` (with the machine and ``command``, the
-    command line that ran it).
+    command line that ran it); ``progress``: a progress bar over the models.
     """
     from alcn_cv import io
     from alcn_cv.formats.middlebury import read_middlebury
@@ -411,6 +422,7 @@ def middlebury_main(
         "median centre err (mm) |",
         "|---|---|---|---|---|---|---|",
     ]
+    bar = tqdm(total=len(sets) * len(normalizers), desc="middlebury", unit="model", disable=not progress)
     for set_dir in sets:
         set_dir = Path(set_dir)
         views = read_middlebury(set_dir)
@@ -420,7 +432,13 @@ def middlebury_main(
             seq = load_sequence(set_dir)
             seq.views = [v for v in seq.views if v.name in train_names]
             model, _ = build_model(
-                seq, feature=feature, n_features=n_features, normalizer=name, ratio=ratio, work_dir=out_dir
+                seq,
+                feature=feature,
+                n_features=n_features,
+                normalizer=name,
+                ratio=ratio,
+                work_dir=out_dir,
+                progress=progress,
             )
             det = FeaturePartDetector(model, name, n_features=n_features, ratio=ratio, cross_check=True)
             for light in ("original", "relit"):
@@ -461,6 +479,8 @@ def middlebury_main(
                 logger.info(
                     "%s: %d/%d posed, median rot %.2f deg, trans %.1f mm", key, len(e), len(tests), med[0], med[1]
                 )
+            bar.update()
+    bar.close()
     if command:
         lines.append(f"\nCommand: `{command}`")
     atomic_write(out_dir / "middlebury.md", "\n".join(lines) + "\n")

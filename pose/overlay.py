@@ -40,7 +40,6 @@ from pose import model as part_model
 from pose.box import facing_faces
 from pose.model import BOX_EDGES
 from pose.solver import project
-from pose.track import count_frames
 
 logger = logging.getLogger(__name__)
 
@@ -190,14 +189,20 @@ def _camera_and_poses(
 
 
 def measure(
-    model_path: str | Path, poses_path: str | Path, video: str | Path, settings: EdgeSettings | None = None
+    model_path: str | Path,
+    poses_path: str | Path,
+    video: str | Path,
+    settings: EdgeSettings | None = None,
+    progress: bool = True,
 ) -> dict[str, FrameError]:
     """:class:`FrameError` of every frame of ``video`` posed in ``poses_path`` (``alcn pose track``'s
     JSON) with the box and camera of ``model_path`` (the camera stored by ``alcn pose build``)."""
     corners, K, poses = _camera_and_poses(model_path, poses_path)
     out = {}
     frames = io.iter_frames(video)
-    for name, frame in tqdm(frames, total=count_frames(video), desc="overlay error", unit="frame", leave=False):
+    for name, frame in tqdm(
+        frames, total=io.count_frames(video), desc="overlay error", unit="frame", leave=False, disable=not progress
+    ):
         if name not in poses:
             out[name] = FrameError(float("nan"), 0.0, float("nan"), {})
             continue
@@ -286,6 +291,7 @@ def main(
     settings: EdgeSettings | None = None,
     command: str = "",
     show: Sequence[str] = ("frame_000300",),
+    progress: bool = True,
 ) -> dict[str, Any]:
     """Measure every run ``(label, model, poses)`` on ``video``; writes ``overlay_error.md``,
     ``overlay_error.json``, ``overlay_error.png`` (the error over the video) and
@@ -295,7 +301,7 @@ def main(
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"{out_dir} is a file; the output is a folder")
-    errors = {label: measure(model, poses, video, settings) for label, model, poses in runs}
+    errors = {label: measure(model, poses, video, settings, progress) for label, model, poses in runs}
     for (label, _, poses), measured in zip(runs, errors.values()):
         if not any(np.isfinite(e.mean_px) for e in measured.values()):
             raise InputError(f"run {label}: no frame of {video} is posed in {poses}; nothing to measure")

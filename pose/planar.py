@@ -381,6 +381,7 @@ def main(
     max_frames: int | None = None,
     recipe: CornerRecipe | None = None,
     command: str = "",
+    progress: bool = True,
 ) -> dict[str, Any]:
     """The real-light Table 1: per scene of ``data`` (default ``<shared data>/webcam``), detector of
     :data:`DETECTORS` and normalizer, the % of frames whose target pose is correct. Writes
@@ -405,7 +406,7 @@ def main(
     targets: dict[str, PlanarTarget] = {}
     regions = {s.name: select_region(s.frames[reference_index(s.frames)], target_fraction, feature) for s in chosen}
     runs = [(detector, name, s) for detector in detectors for name in normalizers for s in chosen]
-    for detector, name, scene in tqdm(runs, desc="relight pose", unit="scene", leave=False):
+    for detector, name, scene in tqdm(runs, desc="relight pose", unit="scene", leave=False, disable=not progress):
         row = row_label(name, detector, feature)
         target, frames = evaluate_scene(
             scene,

@@ -70,20 +70,6 @@ def draw_box(
     return image
 
 
-def count_frames(source: str | Path) -> int | None:
-    """Number of frames of a video or images of a folder (``None`` when unknown)."""
-    source = Path(source)
-    if source.is_dir():
-        try:
-            return len(io.list_images(source))
-        except InputError:  # no image: alcn_cv.io.iter_frames says so
-            return None
-    if not source.is_file():
-        return None
-    with io.VideoReader(source) as video:
-        return len(video) or None
-
-
 class OverlayWriter:
     """Writes overlay frames to a video (``.mp4``, ``.avi``, ...) or to a folder of PNGs named by frame.
 
@@ -156,13 +142,19 @@ RANSAC_ITERATIONS = {"features": 5000, "corners": 5000}
 
 
 def track(
-    frames: Iterator[tuple[str, np.ndarray]], detector: PartDetector, tracker: PoseTracker, total: int | None = None
+    frames: Iterator[tuple[str, np.ndarray]],
+    detector: PartDetector,
+    tracker: PoseTracker,
+    total: int | None = None,
+    progress: bool = True,
 ) -> Iterator[tuple[TrackedFrame, np.ndarray]]:
     """Track the model through ``frames``; yields each frame's result and the frame itself.
 
     ``tracker.events`` collects the lost/recovered events.
     """
-    for i, (name, frame) in enumerate(tqdm(frames, total=total, desc="track", unit="frame", leave=False)):
+    for i, (name, frame) in enumerate(
+        tqdm(frames, total=total, desc="track", unit="frame", leave=False, disable=not progress)
+    ):
         t0 = time.perf_counter()
         est, corr = tracker.step(i, frame, detector)
         yield TrackedFrame(name, est, time.perf_counter() - t0, corr.keypoints), frame
@@ -223,6 +215,7 @@ def main(
     dist: np.ndarray | None = None,
     detector: str = "features",
     image_size: tuple[int, int] | None = None,
+    progress: bool = True,
 ) -> dict:
     """Track the box through ``source`` and write ``output`` (scene_gt JSON, keyed by the frame
     names of :func:`alcn_cv.io.iter_frames`: ``frame_000000``, ... for a video, the file stems for a
@@ -292,7 +285,7 @@ def main(
     scene_gt, info = {}, {}
     times = []
     with OverlayWriter(overlay) if overlay is not None else contextlib.nullcontext() as writer:
-        for res, frame in track(io.iter_frames(source), det, tracker, count_frames(source)):
+        for res, frame in track(io.iter_frames(source), det, tracker, io.count_frames(source), progress):
             scene_gt[res.name] = pose_to_bop(res.estimate)
             info[res.name] = {
                 "inliers": len(res.estimate.inliers),

@@ -89,12 +89,13 @@ def extract_features(
     n_features: int = 4000,
     normalizer: str = "none",
     masks: dict[str, np.ndarray] | None = None,
+    progress: bool = True,
 ) -> dict[str, Features]:
-    """Features of every view of ``seq`` on its normalized grayscale image."""
+    """Features of every view of ``seq`` on its normalized grayscale image (``progress``: a progress bar)."""
     det = create_feature(feature, n_features)
     norm = from_spec(normalizer)
     out = {}
-    for v in tqdm(seq.views, desc="features", unit="img", leave=False):
+    for v in tqdm(seq.views, desc="features", unit="img", leave=False, disable=not progress):
         img = io.read_image(seq.image_dir / v.name)
         if img.dtype != np.uint8:
             img = (img >> 8).astype(np.uint8)
@@ -122,11 +123,13 @@ def write_database(
     pairs: list[tuple[int, int]],
     norm: int,
     ratio: float = 0.8,
+    progress: bool = True,
 ) -> Path:
     """Create the COLMAP database: cameras (known intrinsics), images, keypoints, raw matches;
-    writes the pairs file and runs pycolmap's geometric verification. Returns the pairs file."""
+    writes the pairs file and runs pycolmap's geometric verification (``progress``: a progress bar over
+    the pairs). Returns the pairs file."""
     with pycolmap_log():
-        return _write_database(db_path, seq, feats, pairs, norm, ratio)
+        return _write_database(db_path, seq, feats, pairs, norm, ratio, progress)
 
 
 def _write_database(
@@ -136,6 +139,7 @@ def _write_database(
     pairs: list[tuple[int, int]],
     norm: int,
     ratio: float,
+    progress: bool,
 ) -> Path:
     import pycolmap
 
@@ -156,7 +160,7 @@ def _write_database(
             db.update_camera(cam)
             db.write_keypoints(im.image_id, feats[v.name].keypoints + 0.5)  # COLMAP pixel convention
         lines = []
-        for i, j in tqdm(pairs, desc="match", unit="pair", leave=False):
+        for i, j in tqdm(pairs, desc="match", unit="pair", leave=False, disable=not progress):
             a, b = seq.views[i].name, seq.views[j].name
             m = match_descriptors(feats[a].descriptors, feats[b].descriptors, norm, ratio)
             db.write_matches(ids[a].image_id, ids[b].image_id, m.astype(np.uint32))

@@ -50,3 +50,23 @@ def test_building_the_command_line_does_not_import_torch():
     code = "import sys, alcn_cv.cli as c; c.build_parser(); print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
+
+
+#: The commands that show no progress bar (no long loop of their own), so take no ``--no-progress``.
+WITHOUT_PROGRESS_BARS = {
+    "alcn calib board",
+    "alcn data compare-psm",
+    "alcn data preview",
+    "alcn export",
+    "alcn pose bench-corners",
+    "alcn pose corner-recall",
+}
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_every_command_with_progress_bars_can_hide_them(command):
+    parser = COMMANDS[command]
+    if any(isinstance(a, argparse._SubParsersAction) for a in parser._actions):
+        return  # a group: its leaves are checked
+    options = {o for a in parser._actions for o in a.option_strings}
+    assert ("--no-progress" in options) == (command not in WITHOUT_PROGRESS_BARS), command

@@ -57,7 +57,7 @@ def test_video(tmp_path, frame):
 
 
 def test_no_progress_shows_no_bar(tmp_path, frame, capsys):
-    """--no-progress, the one switch of the progress bars of normalize, data, bench and train."""
+    """--no-progress, the one switch of the progress bars of every command that shows them."""
     src = tmp_path / "in.avi"
     writer = cv2.VideoWriter(str(src), cv2.VideoWriter_fourcc(*"MJPG"), 10, (80, 60))
     for _ in range(3):

@@ -9,7 +9,17 @@ import numpy as np
 import pytest
 
 from alcn_cv.errors import InputError
-from alcn_cv.io import VideoReader, atomic_path, list_images, make_folder, map_video, read_image, write_image
+from alcn_cv.io import (
+    VideoReader,
+    atomic_path,
+    count_frames,
+    iter_frames,
+    list_images,
+    make_folder,
+    map_video,
+    read_image,
+    write_image,
+)
 
 
 @pytest.fixture
@@ -114,6 +124,25 @@ def _video(path, frames: int, image: np.ndarray):
         writer.write(np.roll(image, 4 * i, axis=1))
     writer.release()
     return path
+
+
+@pytest.mark.parametrize(("step", "max_frames"), [(1, None), (2, None), (3, 2), (4, 10)])
+def test_count_frames_is_what_iter_frames_yields(tmp_path, image, step, max_frames):
+    video = _video(tmp_path / "in.avi", 7, image)
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for i in range(5):
+        cv2.imwrite(str(folder / f"{i:02d}.png"), image)
+    for source in (video, folder):
+        assert count_frames(source, step, max_frames) == sum(1 for _ in iter_frames(source, step, max_frames))
+
+
+def test_count_frames_of_what_iter_frames_refuses_is_unknown(tmp_path, image):
+    (tmp_path / "empty").mkdir()
+    cv2.imwrite(str(tmp_path / "one.png"), image)
+    (tmp_path / "broken.avi").write_bytes(b"not a video")
+    for source in ("empty", "one.png", "broken.avi", "missing.avi"):
+        assert count_frames(tmp_path / source) is None
 
 
 def test_truncated_video_is_an_error_unless_partial_is_allowed(tmp_path, image, caplog):

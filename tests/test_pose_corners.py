@@ -667,3 +667,20 @@ def test_table1_rows_of_the_corner_detector(posedata, tmp_path):
     assert (tmp_path / "table1.png").is_file()
     details = result["details"]["none / corner CNN"]
     assert len(details["seeds"]) == 2 and details["seeds"][0]["sequences"]["#1"]["frames"] == 4
+
+
+def test_eval_removes_an_earlier_runs_models_first(posedata, tmp_path, monkeypatch):
+    from pose import evaluate
+
+    out = tmp_path / "eval"
+    out.mkdir()
+    for name in ("model_dog.npz", "corners_dog_seed1.onnx", "notes.txt"):
+        (out / name).write_bytes(b"earlier")
+
+    def stop(*_args, **_kwargs):
+        raise RuntimeError("stopped at the first model")
+
+    monkeypatch.setattr(evaluate, "build_model", stop)
+    with pytest.raises(RuntimeError, match="first model"):
+        evaluate.main(posedata, out, normalizers=["none"], progress=False)
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]  # what the command did not write stays

@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from alcn_cv.cli import add_progress_option
 from alcn_cv.enhance import available, create
 from alcn_cv.io import make_folder
 
@@ -54,7 +55,9 @@ def image_label(index: int, image: CocoImage) -> str:
     return f"test image {index + 1}\n{image.extra.get('light_family', '?')} light{gain}"
 
 
-def normalization_grid(images: list[np.ndarray], labels: list[str], methods: list[str], path: Path, **params) -> Path:
+def normalization_grid(
+    images: list[np.ndarray], labels: list[str], methods: list[str], path: Path, progress: bool = True, **params
+) -> Path:
     """Write a PNG grid: one row per image, one column per normalization method.
 
     Args:
@@ -63,6 +66,7 @@ def normalization_grid(images: list[np.ndarray], labels: list[str], methods: lis
         methods: registered method names; ``params[name]`` gives a method's parameters. The
             column titles give each name and the method's full name.
         path: the PNG to write.
+        progress: a progress bar over the methods.
     """
     from alcn_cv.report import new_figure, save_figure
 
@@ -70,7 +74,7 @@ def normalization_grid(images: list[np.ndarray], labels: list[str], methods: lis
     cell = 2.2
     height = cell * h / w * len(images) + 1.0
     plt, fig, axes = new_figure(len(images), len(methods), figsize=(cell * len(methods) + 0.6, height))
-    for j, name in enumerate(tqdm(methods, desc="normalize", unit="method")):
+    for j, name in enumerate(tqdm(methods, desc="normalize", unit="method", disable=not progress)):
         method = create(name, **params.get(name, {}))
         for i, img in enumerate(images):
             out = method.apply(img)
@@ -90,7 +94,7 @@ def normalization_grid(images: list[np.ndarray], labels: list[str], methods: lis
     return save_figure(plt, fig, path, dpi=110)
 
 
-def main(out_dir: Path, seed: int = 0) -> Path:
+def main(out_dir: Path, seed: int = 0, progress: bool = True) -> Path:
     from alcn_cv.data import detect
     from alcn_cv.data.manifest import read_manifest
     from alcn_cv.formats.coco import load_coco
@@ -98,12 +102,22 @@ def main(out_dir: Path, seed: int = 0) -> Path:
     make_folder(out_dir)
     data_dir = out_dir / "data"
     logger.info("rendering a small detection set into %s", data_dir)
-    detect.generate(data_dir, seed=seed, size="small", n_test=6, width=480, height=300, p_object=1.0, overwrite=True)
+    detect.generate(
+        data_dir,
+        seed=seed,
+        size="small",
+        n_test=6,
+        width=480,
+        height=300,
+        p_object=1.0,
+        overwrite=True,
+        progress=progress,
+    )
     test = load_coco(data_dir / "test.json")
     images = [test.read_image(im) for im in test.images]
     labels = [image_label(k, im) for k, im in enumerate(test.images)]
     scale = float(read_manifest(data_dir, "detect")["working_scale"])
-    grid = normalization_grid(images, labels, available(), out_dir / "normalized.png", alcn={"scale": scale})
+    grid = normalization_grid(images, labels, available(), out_dir / "normalized.png", progress, alcn={"scale": scale})
     logger.info("wrote %s", grid)
 
     from alcn_cv.bench import detect as bench
@@ -113,7 +127,7 @@ def main(out_dir: Path, seed: int = 0) -> Path:
     settings.methods = [m for m in DEMO_BENCH_METHODS if m in available()]
     settings.real_images = [1, 3]
     settings.policies = ["local"]
-    bench.main(data_dir, out_dir / "bench", settings)
+    bench.main(data_dir, out_dir / "bench", settings, progress=progress)
     table = out_dir / "bench" / "detect.md"
     logger.info(
         "detection benchmark (small preset; the full one is `alcn bench detect`):\n%s",
@@ -134,4 +148,5 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default: demo_out)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the generated data")
-    parser.set_defaults(func=lambda args: main(args.out, args.seed) and 0)
+    add_progress_option(parser)
+    parser.set_defaults(func=lambda args: main(args.out, args.seed, not args.no_progress) and 0)
