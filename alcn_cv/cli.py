@@ -110,6 +110,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def add_conf_options(parser: argparse.ArgumentParser, default: str | None, presets: str, example: str) -> None:
+    """``--conf NAME`` (``args.conf``, required without a ``default``) and ``--set KEY=VALUE`` (``args.settings``), the
+    one way every training command takes a named preset and overrides of its keys; ``presets`` says what each preset
+    makes, ``example`` is a ``--set`` item of its keys."""
+    parser.add_argument(
+        "--conf",
+        default=default,
+        required=default is None,
+        metavar="NAME",
+        help=f"the preset: {presets}" + (f" (default {default})" if default else ""),
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="settings",
+        help=f"override one key of the preset, dotted, the value as TOML, e.g. --set {example} (repeatable)",
+    )
+
+
 def add_progress_option(parser: argparse.ArgumentParser) -> None:
     """``--no-progress`` (``args.no_progress``): the one switch of a subcommand's progress bars."""
     parser.add_argument("--no-progress", action="store_true", help="no progress bars (for logs and scripts)")

@@ -21,12 +21,23 @@ from alcn_cv.io import atomic_write, with_suffix
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_WEIGHTS", "FORMAT", "VERSION", "NormalizerFile", "load_normalizer_file", "save_normalizer_file"]
+__all__ = [
+    "DEFAULT_WEIGHTS",
+    "FORMAT",
+    "ONNX_METADATA_KEY",
+    "VERSION",
+    "NormalizerFile",
+    "load_normalizer_file",
+    "save_normalizer_file",
+]
 
 FORMAT = "alcn-cv/normalizer"
 VERSION = 1
 #: The ``paper`` model's file: where a path is left out (the shipped models by name: :data:`alcn_cv.runtime.MODELS`).
 DEFAULT_WEIGHTS = Path(__file__).parent / "weights" / "alcn_normalizer.npz"
+#: The key of the header in an ONNX export's ``metadata_props`` (a Normalizer's and a corner detector's), so that
+#: the ``.onnx`` describes itself.
+ONNX_METADATA_KEY = "alcn_cv"
 _META_KEY = "__meta__"
 _REQUIRED: dict[str, type | tuple[type, ...]] = {
     "config": dict,

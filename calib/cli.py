@@ -137,10 +137,10 @@ def _register(args: argparse.Namespace) -> int:
     from .camera import load_calibration
     from .register import SfmSettings, register_charuco, register_colmap
 
-    calib = load_calibration(args.calib) if args.calib else None
+    calib = load_calibration(args.camera) if args.camera else None
     if args.method == "board":
         if calib is None:
-            raise InputError("--method board needs --calib camera.yaml (from `alcn calib camera`)")
+            raise InputError("--method board needs --camera camera.yaml (from `alcn calib camera`)")
         reg = register_charuco(
             args.source,
             args.out,
@@ -190,7 +190,7 @@ def _undistort(args: argparse.Namespace) -> int:
     yaml_path = main(
         args.source,
         args.output,
-        load_calibration(args.calib),
+        load_calibration(args.camera),
         alpha=args.alpha,
         keep_K=args.keep_K,
         progress=not args.no_progress,
@@ -257,7 +257,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default="board",
         help="board (a ChArUco board in view) or sfm (pycolmap, no board) (default board)",
     )
-    p.add_argument("--calib", help="camera.yaml from `alcn calib camera` (required for board; optional for sfm)")
+    p.add_argument("--camera", help="camera.yaml from `alcn calib camera` (required for board; optional for sfm)")
     _add_board_args(p, with_chessboard=False)
     p.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
     p.add_argument("--max-frames", type=int, help="use at most this many frames")
@@ -290,7 +290,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("source", help="image, folder of images, or video")
     p.add_argument("output", help="output image, folder, or video (.mp4/.avi)")
-    p.add_argument("--calib", required=True, help="camera.yaml from `alcn calib camera`")
+    p.add_argument("--camera", required=True, help="camera.yaml from `alcn calib camera`")
     p.add_argument(
         "--alpha", type=float, default=0.0, help="0: crop to valid pixels; 1: keep all source pixels (default 0)"
     )

@@ -59,7 +59,7 @@ from alcn_cv.io import count_frames, iter_frames, write_image, write_json
 
 from .board import BoardSpec, Detection
 from .camera import Calibration
-from .conventions import colmap_from_bop_frames
+from .conventions import colmap_from_bop_frames, points_colmap_to_opencv
 from .undistort import Undistorter
 
 logger = logging.getLogger(__name__)
@@ -658,5 +658,5 @@ def _sfm_rms(model, image: ColmapImage, K: np.ndarray) -> float:
     X = np.array([model.points3d[int(i)].xyz for i in image.point3d_ids[idx]])
     x = (K @ (image.R_w2c @ X.T + image.t_w2c[:, None])).T
     uv = x[:, :2] / x[:, 2:]
-    err = uv - (image.points2d[idx] - 0.5)
+    err = uv - points_colmap_to_opencv(image.points2d[idx])
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from _run import RUNS, alcn, command_line, keep
 
-PARTS = {"features": ["--detector", "features", "--n-features", "500"], "corners": ["--detector", "corners"]}
+PARTS = {"features": ["--detectors", "features", "--n-features", "500"], "corners": ["--detectors", "corners"]}
 
 
 def main() -> None:

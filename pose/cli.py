@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from alcn_cv.cli import add_progress_option
+from alcn_cv.cli import add_conf_options, add_progress_option
 
 
 def _intrinsics(values: list[float] | None) -> np.ndarray | None:
@@ -156,7 +156,7 @@ def _planar(args: argparse.Namespace) -> int:
         args.data,
         scenes=args.scenes,
         normalizers=args.normalizations,
-        detectors=args.detector,
+        detectors=args.detectors,
         feature=args.feature,
         n_features=args.n_features,
         target_fraction=args.target_fraction,
@@ -171,24 +171,11 @@ def _planar(args: argparse.Namespace) -> int:
 
 
 def _add_recipe(parser: argparse.ArgumentParser, default: str) -> None:
-    """``--conf`` and ``--set`` of the corner detector's training, declared once for every command that trains it."""
+    """:func:`~alcn_cv.cli.add_conf_options` of the corner detector's training, for every command that trains it."""
     from pose.corner_train import confs
 
-    parser.add_argument(
-        "--conf",
-        default=default,
-        choices=sorted(confs),
-        help=f"the corner detector's training recipe (pose.corner_train.confs; default {default})",
-    )
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        dest="settings",
-        help="override a key of the recipe (pose.corner_train.CornerRecipe), the value as TOML, e.g. "
-        "--set iterations=1000, --set 'intensity_scale=[1, 1]' (repeatable)",
-    )
+    presets = "the corner detector's training (pose.corner_train.confs: " + ", ".join(sorted(confs)) + ")"
+    add_conf_options(parser, default, presets, "iterations=1000")
 
 
 #: ``--normalization``'s help: why the pose commands normalize nothing by default.
@@ -226,7 +213,7 @@ def _add_planar(sub: argparse._SubParsersAction) -> None:
         help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZERS) + ")",
     )
     r.add_argument(
-        "--detector",
+        "--detectors",
         nargs="+",
         default=["features"],
         choices=sorted(planar.DETECTORS),

@@ -63,6 +63,7 @@ import numpy as np
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.weight_file import ONNX_METADATA_KEY
 from pose.box import NUM_CORNERS, edge_directions, part_visibility, parts_per_face
 from pose.parts import Correspondences, to_gray
 
@@ -72,7 +73,6 @@ __all__ = ["CornerDetector", "normalization_for", "read_metadata"]
 
 FORMAT_NAME = "alcn-corner-detector"
 FORMAT_VERSION = 3
-METADATA_KEY = "alcn_cv"
 # alcn_cv.nets.Detector's input window and output stride (a test checks they agree; importing
 # alcn_cv.nets here would import torch, which the tracking path must not need).
 WINDOW = 32
@@ -162,9 +162,9 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
         raise WeightFileError(f"{path}: not an ONNX model ({exc})") from None
     props = {p.key: p.value for p in model.metadata_props}
     try:
-        meta = json.loads(props[METADATA_KEY])
+        meta = json.loads(props[ONNX_METADATA_KEY])
     except (KeyError, json.JSONDecodeError):
-        raise WeightFileError(f"{path}: no '{METADATA_KEY}' metadata; not a corner detector") from None
+        raise WeightFileError(f"{path}: no '{ONNX_METADATA_KEY}' metadata; not a corner detector") from None
     if meta.get("format") != FORMAT_NAME:
         raise WeightFileError(f"{path}: field 'format' is {meta.get('format')!r}, expected {FORMAT_NAME!r}")
     if meta.get("version") != FORMAT_VERSION:

@@ -402,8 +402,8 @@ def middlebury_main(
     22.5 degrees from the nearest: a loose ratio test (``ratio``) keeps enough matches, mutual
     nearest neighbours (``FeaturePartDetector(cross_check=True)``) drop most wrong ones (the
     models have about a hundred points, the views 8000 keypoints), and RANSAC gets many
-    ``iterations`` for the remaining low inlier ratios (8-25%). Without the cross-check a
-    ``min_inliers`` of 20 was needed to keep wrong poses (8-15 deg) out, and posed 0-2 views of 8.
+    ``iterations`` for the remaining low inlier ratios (8-25%). Without the cross-check, keeping wrong poses
+    (8-15 deg) out takes a ``min_inliers`` of 20, which poses 0-2 views of 8.
 
     Reports per normalizer and condition (original / relit) the median rotation (deg) and
     translation (mm) errors, the share of views with a pose, and the camera-centre error, as

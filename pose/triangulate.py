@@ -144,6 +144,7 @@ def _write_database(
     import pycolmap
 
     from alcn_cv.formats.colmap import camera_from_opencv
+    from calib.conventions import points_opencv_to_colmap
 
     pycolmap.Database.open(db_path).close()
     same = all(np.array_equal(v.K, seq.views[0].K) for v in seq.views) and seq.info.get("format") == "video"
@@ -158,7 +159,7 @@ def _write_database(
             cc = camera_from_opencv(v.K, v.dist, cam.width, cam.height, im.camera_id)
             cam.model, cam.params = cc.model, cc.params
             db.update_camera(cam)
-            db.write_keypoints(im.image_id, feats[v.name].keypoints + 0.5)  # COLMAP pixel convention
+            db.write_keypoints(im.image_id, points_opencv_to_colmap(feats[v.name].keypoints).astype(np.float32))
         lines = []
         for i, j in tqdm(pairs, desc="match", unit="pair", leave=False, disable=not progress):
             a, b = seq.views[i].name, seq.views[j].name

@@ -61,19 +61,26 @@ def test_register_and_undistort_commands(tmp_path, capsys):
         cv2.imwrite(str(frames / f"{i}.png"), image)
     write_camera_yaml(tmp_path / "camera.yaml", scene.K, np.zeros(5), (640, 480))
     rc = alcn(
-        ["calib", "register", str(frames), "--calib", str(tmp_path / "camera.yaml"), "--out", str(tmp_path / "reg")]
+        ["calib", "register", str(frames), "--camera", str(tmp_path / "camera.yaml"), "--out", str(tmp_path / "reg")]
     )
     assert rc == 0
     assert "registered 3 of 3 frames (mm)" in capsys.readouterr().out
     rc = alcn(
-        ["calib", "undistort", str(frames / "0.png"), str(tmp_path / "u.png"), "--calib", str(tmp_path / "camera.yaml")]
+        [
+            "calib",
+            "undistort",
+            str(frames / "0.png"),
+            str(tmp_path / "u.png"),
+            "--camera",
+            str(tmp_path / "camera.yaml"),
+        ]
     )
     assert rc == 0 and (tmp_path / "u.camera.yaml").is_file()
 
 
 def test_bad_input_gives_one_line_error(tmp_path, capsys):
     (tmp_path / "camera.yaml").write_text("not: [valid\n")
-    rc = alcn(["calib", "undistort", str(tmp_path), str(tmp_path / "o"), "--calib", str(tmp_path / "camera.yaml")])
+    rc = alcn(["calib", "undistort", str(tmp_path), str(tmp_path / "o"), "--camera", str(tmp_path / "camera.yaml")])
     err = capsys.readouterr().err
     assert rc == 2 and "calib camera" in err and "Traceback" not in err
     rc = alcn(["calib", "camera", "--images", str(tmp_path), "--board", "chessboard", "--out", str(tmp_path / "o")])
@@ -81,7 +88,7 @@ def test_bad_input_gives_one_line_error(tmp_path, capsys):
     assert rc == 2 and "--cols and --rows" in err
     rc = alcn(["calib", "register", str(tmp_path), "--out", str(tmp_path / "r")])
     err = capsys.readouterr().err
-    assert rc == 2 and "--calib" in err
+    assert rc == 2 and "--camera" in err
 
 
 @pytest.mark.shared_data
@@ -107,7 +114,7 @@ def test_register_sfm_with_known_distance(shared_data, tmp_path, capsys):
             str(frames),
             "--method",
             "sfm",
-            "--calib",
+            "--camera",
             str(tmp_path / "camera.yaml"),
             "--known-distance",
             a.name,

@@ -156,7 +156,7 @@ def test_planar_command_takes_the_recipe_and_the_normalizations(tmp_path, monkey
             "--normalizations",
             "none",
             "dog",
-            "--detector",
+            "--detectors",
             "corners",
             "--set",
             "iterations=3",

@@ -131,7 +131,7 @@ def score_maps(net: nn.Module, image: np.ndarray, policy: InputPolicy, device: s
         else:
             x = torch.from_numpy(np.ascontiguousarray(image))[None, None].to(device)
             win = F.unfold(x, CROP, stride=STRIDE)[0].T.reshape(-1, 1, CROP, CROP)
-            win = standardize_windows(win, eps=tuning.STANDARDIZE_EPS)
+            win = standardize_windows(win, eps=tuning.BENCH_STANDARDIZE_EPS)
             logits = torch.cat([net(win[i : i + _BATCH]) for i in range(0, len(win), _BATCH)]).T.reshape(-1, hd, wd)
         return F.softmax(logits[:, :hd, :wd], dim=0).cpu().numpy()
 

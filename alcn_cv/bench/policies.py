@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.bench.detect_settings import CROP, POLICIES
-from alcn_cv.bench.tuning import STANDARDIZE_EPS, centre_windows
+from alcn_cv.bench.tuning import BENCH_STANDARDIZE_EPS, centre_windows
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
 
@@ -23,7 +23,7 @@ __all__ = ["LOCAL_BOX", "InputPolicy", "local_standardize"]
 LOCAL_BOX = 31
 
 
-def local_standardize(image: np.ndarray, size: int = LOCAL_BOX, eps: float = STANDARDIZE_EPS) -> np.ndarray:
+def local_standardize(image: np.ndarray, size: int = LOCAL_BOX, eps: float = BENCH_STANDARDIZE_EPS) -> np.ndarray:
     """Standardize every pixel by the mean and standard deviation of the ``size x size`` box around it.
 
     Box filters with reflect-101 borders. An image operation, so a detector runs densely on
@@ -70,7 +70,7 @@ class InputPolicy:
             raise InputError("per-window standardization scores bare 32x32 windows; it takes no context")
         centres = centre_windows(windows, size)
         if self.name == "standardize":
-            return standardize_windows(centres, eps=STANDARDIZE_EPS)
+            return standardize_windows(centres, eps=BENCH_STANDARDIZE_EPS)
         return ((centres - np.float32(self.mean)) / np.float32(self.std)).astype(np.float32)
 
     def image(self, image: np.ndarray) -> np.ndarray:

@@ -71,6 +71,7 @@ from alcn_cv.filters.lab import srgb_to_lab
 from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
+from alcn_cv.shared_data import shared_data_dir
 
 __all__ = ["SIZES", "Method", "SpeedSettings", "default_methods", "lab_round_trip", "main", "presets", "time_calls"]
 
@@ -801,7 +802,7 @@ def _normalize_video(settings: SpeedSettings, work: Path, progress: bool = True)
     from alcn_cv.io import VideoReader, map_video, open_video_writer
 
     source = settings.normalize_video
-    shared = Path(os.environ.get("ALCN_SHARED_DATA", "/work/shared/data")) / "cookie_box" / "box.mp4"
+    shared = shared_data_dir() / "cookie_box" / "box.mp4"
     if source is None and shared.is_file():
         source = str(shared)
     if source is None or source == "generated":
@@ -912,8 +913,8 @@ def targets(settings: SpeedSettings, work: Path, progress: bool = True) -> dict[
         },
         repeats,
     )
-    # after the others, in its own turns: its OpenMP threads, still spinning when it returns, slowed the call that
-    # followed it in the turns above by 2-4 ms at 1280x800 (the default's BGR call, 2026-11-28)
+    # after the others, in its own turns: its OpenMP threads, still spinning when it returns, slow the call that
+    # follows it by 2-4 ms at 1280x800
     t |= _medians({"alcn torch gray": lambda: torch_cpu.apply(gray)}, repeats)
     logger.info("targets: stages, contract, threads, memory, video, batches")
     stages = {

@@ -36,7 +36,7 @@ from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
 
-__all__ = ["GRIDS", "STANDARDIZE_EPS", "centre_windows", "relight", "tune", "tune_all"]
+__all__ = ["BENCH_STANDARDIZE_EPS", "GRIDS", "centre_windows", "relight", "tune", "tune_all"]
 
 logger = logging.getLogger(__name__)
 
@@ -50,9 +50,11 @@ GRIDS: dict[str, list[dict[str, float]]] = {
     "dlcn": [{"sigma": s} for s in (1.0, 1.5, 2.0, 3.0, 4.0, 5.0)],
 }
 
-#: Added to the standard deviation by the per-window standardizations of the benchmark
-#: (the features here, the detector's ``standardize`` and ``local`` input policies).
-STANDARDIZE_EPS = 1e-6
+#: Added to the standard deviation by the per-window standardizations of the benchmark (the features here, the
+#: detector's ``standardize`` and ``local`` input policies): smaller than training's
+#: :data:`~alcn_cv.filters.standardize.STANDARDIZE_EPS`, because the benchmark standardizes the raw output of every
+#: method, some of them (a DoG of [0, 1] intensities) of a far smaller amplitude than ALCN's.
+BENCH_STANDARDIZE_EPS = 1e-6
 
 
 def centre_windows(windows: np.ndarray, size: int = CROP) -> np.ndarray:
@@ -120,7 +122,7 @@ def _score(
 
     def features(windows: np.ndarray) -> np.ndarray:
         out = norm.normalize_windows(windows)
-        f = standardize_windows(centre_windows(out), eps=STANDARDIZE_EPS).reshape(len(out), -1)
+        f = standardize_windows(centre_windows(out), eps=BENCH_STANDARDIZE_EPS).reshape(len(out), -1)
         return f / (np.linalg.norm(f, axis=1, keepdims=True) + 1e-12)
 
     sim = features(queries) @ features(references).T

@@ -213,8 +213,8 @@ def add_parser(subparsers) -> None:
         metavar="N",
         help="the training sequence's loops around the box, --frames views each, by the up-and-down sweeps "
         "of their elevation (30-60 deg) (default: 1 3, once as the test trajectories, then three times so "
-        "that every stretch of azimuth is seen from high and low; 1: the single loop of datasets made "
-        "before 2026-11-24); the test sequences do not depend on it",
+        "that every stretch of azimuth is seen from high and low; 1: a single loop); the test sequences do not "
+        "depend on it",
     )
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     q.add_argument(

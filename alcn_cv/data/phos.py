@@ -34,6 +34,7 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -86,6 +87,8 @@ class PhosBatch:
     object_seed: int
     seed: int
     light_families: tuple[str, ...] = field(default=LIGHT_FAMILIES)
+    #: The names of the per-window arrays, in the order of the fields.
+    ARRAYS: ClassVar[tuple[str, ...]] = ("windows", "labels", "light_ids", "kinds", "offsets", "extents")
 
     def __len__(self) -> int:
         return len(self.labels)
@@ -264,9 +267,6 @@ def _chunk_job(job: tuple) -> tuple[np.ndarray, ...]:
     return _render_chunk(c, count, seed, _catalog(n_objects, object_seed), families, background_fraction, object_size)
 
 
-_ARRAYS = ("windows", "labels", "light_ids", "kinds", "offsets", "extents")
-
-
 def generate(
     out_dir: str | os.PathLike,
     n: int,
@@ -296,7 +296,7 @@ def generate(
     defaults.update({k: v for k, v in params.items() if k != "workers"})
     defaults = {k: (list(v) if isinstance(v, tuple) else v) for k, v in defaults.items()}
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
-        save_npz(tmp / "windows.npz", **{k: getattr(batch, k) for k in _ARRAYS})
+        save_npz(tmp / "windows.npz", **{k: getattr(batch, k) for k in PhosBatch.ARRAYS})
         counts = np.bincount(batch.labels, minlength=batch.n_objects + 1)
         write_json(
             tmp / "manifest.json",
@@ -325,12 +325,12 @@ def load(out_dir: str | os.PathLike) -> PhosBatch:
     path = out / man.get("files", {}).get("windows", "windows.npz")
     try:
         with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in _ARRAYS if k in z.files}
+            arrays = {k: z[k] for k in PhosBatch.ARRAYS if k in z.files}
     except FileNotFoundError:
         raise DatasetError(f"{path}: file not found") from None
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise DatasetError(f"{path}: truncated or corrupt ({exc})") from None
-    missing = [k for k in _ARRAYS if k not in arrays]
+    missing = [k for k in PhosBatch.ARRAYS if k not in arrays]
     if missing:
         raise DatasetError(f"{path}: missing array(s) {missing}")
     n = len(arrays["labels"])
@@ -339,7 +339,7 @@ def load(out_dir: str | os.PathLike) -> PhosBatch:
         raise DatasetError(
             f"{path}: field 'windows' must be uint8 ({n}, {WINDOW}, {WINDOW}), got {win.dtype} {win.shape}"
         )
-    for k in _ARRAYS[1:]:
+    for k in PhosBatch.ARRAYS[1:]:
         if len(arrays[k]) != n:
             raise DatasetError(f"{path}: field {k!r} has {len(arrays[k])} entries, expected {n}")
     k_obj = int(man["parameters"].get("n_objects", 0))

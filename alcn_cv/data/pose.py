@@ -34,9 +34,9 @@ from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.raster import (
     Mesh,
-    Scene,
     SceneObject,
     ShadowSettings,
+    TableScene,
     box_mesh,
     ellipsoid_mesh,
     look_at,
@@ -150,7 +150,9 @@ def _yaw(deg: float) -> np.ndarray:
     return np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1.0]])
 
 
-def make_scene(seed: int, clutter_seed: int, *, clutter: bool = True, texel: int = 256, table_px: int = 1024) -> Scene:
+def make_scene(
+    seed: int, clutter_seed: int, *, clutter: bool = True, texel: int = 256, table_px: int = 1024
+) -> TableScene:
     """The table-top scene: box and duck (fixed by ``seed``), clutter and table by ``clutter_seed``.
 
     ``texel`` is the side of each box face's texture, ``table_px`` that of the table's texture.
@@ -188,7 +190,7 @@ def make_scene(seed: int, clutter_seed: int, *, clutter: bool = True, texel: int
                 )
             )
     table = random_texture(crng, table_px, p_photo=0.6)
-    return Scene(
+    return TableScene(
         objs,
         table,
         table_mm_per_px=float(crng.uniform(0.6, 1.5)) * 1024 / table_px,
@@ -316,7 +318,7 @@ def sequence_lighting(index: int, rng: np.random.Generator) -> Lighting:
 
 
 def _write_sequence(
-    seq_dir: Path, scene: Scene, poses, lighting: Lighting, cfg: PoseConfig, seed_key: tuple
+    seq_dir: Path, scene: TableScene, poses, lighting: Lighting, cfg: PoseConfig, seed_key: tuple
 ) -> list[BopFrame]:
     (seq_dir / "rgb").mkdir(parents=True)
     (seq_dir / "mask_visib").mkdir()
@@ -356,7 +358,7 @@ def _write_sequence(
     return frames
 
 
-def _write_models(models_dir: Path, scene: Scene) -> None:
+def _write_models(models_dir: Path, scene: TableScene) -> None:
     models_dir.mkdir(parents=True)
     plys = {}
     for o in scene.objects:
@@ -428,9 +430,8 @@ def generate(
             the same seed's dataset (the same scenes, trajectories and noise), so that what a
             method loses from the control to the dataset is what the light changes cost it.
         train_sweeps: the training sequence's loops around the objects, ``n_frames`` views each,
-            by the up-and-down sweeps of their elevation (:data:`TRAIN_SWEEPS`; ``(1,)``: the
-            one loop of the datasets made before 2026-11-24). The test sequences do not depend
-            on it.
+            by the up-and-down sweeps of their elevation (:data:`TRAIN_SWEEPS`; ``(1,)``: a single
+            loop). The test sequences do not depend on it.
         overwrite: replace an existing folder.
         progress: show a progress bar.
         workers: worker processes, one sequence each (the output does not depend on it).

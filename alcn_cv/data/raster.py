@@ -32,7 +32,7 @@ __all__ = [
     "look_at",
     "rasterize",
     "SceneObject",
-    "Scene",
+    "TableScene",
     "ShadowSettings",
     "render_frame",
 ]
@@ -291,7 +291,7 @@ class SceneObject:
 
 
 @dataclass
-class Scene:
+class TableScene:
     """A table-top scene: objects on an infinite textured table ``z = 0`` (world z up).
 
     Attributes:
@@ -427,7 +427,7 @@ class _GBuffer:
 
 
 def _table_gbuffer(
-    scene: Scene, K: np.ndarray, R_w2c: np.ndarray, t_w2c: np.ndarray, width: int, height: int
+    scene: TableScene, K: np.ndarray, R_w2c: np.ndarray, t_w2c: np.ndarray, width: int, height: int
 ) -> tuple[_GBuffer, np.ndarray, np.ndarray]:
     """Intersect each pixel's ray with the table ``z = 0`` and shade it as table (or wall beyond).
 
@@ -461,7 +461,7 @@ def _table_gbuffer(
 
 def _draw_objects(
     gb: _GBuffer,
-    scene: Scene,
+    scene: TableScene,
     verts: np.ndarray,
     faces: np.ndarray,
     owner: np.ndarray,
@@ -533,7 +533,7 @@ def _shadow_visibility(
 
 
 def render_frame(
-    scene: Scene,
+    scene: TableScene,
     K: np.ndarray,
     R_w2c: np.ndarray,
     t_w2c: np.ndarray,

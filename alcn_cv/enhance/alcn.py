@@ -312,7 +312,7 @@ def pin_default_model(spec: str) -> str:
     """``spec`` (``NAME[:KEY=VALUE...]``) with ALCN's default model named: ``"alcn"`` ->
     ``"alcn:model=gain"``; other specs unchanged. For files that record the normalization they
     were made with (pose models, corner detectors): a later change of the default does not change
-    what they mean (the default was ``"lite"`` until 2026-11-24)."""
+    what they mean."""
     name, params = parse_spec(spec)
     if name != ALCN.name or "model" in params or "weights" in params:
         return spec

@@ -14,12 +14,16 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["standardize_windows"]
+__all__ = ["STANDARDIZE_EPS", "standardize_windows"]
 
 ArrayT = TypeVar("ArrayT", np.ndarray, "torch.Tensor")
 
+#: ``eps`` of the detector input's per-window standardization in training, both stages (the shipped Normalizers
+#: were trained with it).
+STANDARDIZE_EPS = 1e-4
 
-def standardize_windows(windows: ArrayT, eps: float = 1e-4) -> ArrayT:
+
+def standardize_windows(windows: ArrayT, eps: float = STANDARDIZE_EPS) -> ArrayT:
     """Standardize every window over its last two axes.
 
     Args:

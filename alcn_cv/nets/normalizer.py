@@ -20,11 +20,11 @@ from torch import nn
 
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.torch_resize import interpolate_grid
+from alcn_cv.nets.opencv_runtime import WINDOW
 from alcn_cv.weight_file import NormalizerFile
 
 __all__ = ["Normalizer", "reflect101_pad"]
 
-WINDOW = 48
 STRIDE = 4
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
 

@@ -48,8 +48,7 @@ __all__ = [
 
 #: The ONNX export shipped beside :data:`~alcn_cv.weight_file.DEFAULT_WEIGHTS` (the ``paper`` model's).
 DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
-# The Normalizer's window (``Normalizer.window``; a test checks they agree; importing
-# alcn_cv.nets here would import torch).
+#: The Normalizer's window in pixels (``Normalizer.window`` takes it from here: this module imports no torch).
 WINDOW = 48
 # Grid points of the probe run that measures the model's output stride.
 _PROBE_POINTS = 3

@@ -16,31 +16,17 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from alcn_cv.cli import add_progress_option
+from alcn_cv.cli import add_conf_options, add_progress_option
 
 __all__ = ["add_parser"]
 
 
 def _add_conf(parser: argparse.ArgumentParser, default: str | None, presets: str, example: str) -> None:
-    """``--conf`` and ``--set``, the same on every training command; ``presets`` says what each preset makes,
-    ``example`` is a ``--set`` item of its keys."""
+    """:func:`~alcn_cv.cli.add_conf_options` and ``--print-config``, the same on every training command."""
+    add_conf_options(parser, default, presets, example)
     parser.add_argument(
-        "--conf",
-        default=default,
-        required=default is None,
-        metavar="NAME",
-        help=f"the preset: {presets}" + (f" (default {default})" if default else ""),
+        "--print-config", action="store_true", help="print the effective configuration (every key) and exit"
     )
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        dest="settings",
-        help=f"override one key of the preset, dotted, the value as TOML, e.g. --set {example} "
-        "(repeatable; --print-config shows every key)",
-    )
-    parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
 
 
 def _add_run(parser: argparse.ArgumentParser, out: str) -> None:

@@ -54,7 +54,7 @@ from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW
 from alcn_cv.nets.opencv_runtime import BLOCK, BLOCKS_INPUT, DEFAULT_ONNX, FEATURES_INPUT, IMAGE_INPUT, image_blocks
 from alcn_cv.runtime import resolve_weights
-from alcn_cv.weight_file import load_normalizer_file
+from alcn_cv.weight_file import ONNX_METADATA_KEY, load_normalizer_file
 
 __all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx"]
 
@@ -62,7 +62,6 @@ logger = logging.getLogger(__name__)
 
 #: ONNX opset of the export (read by OpenCV 4.x and 5.x).
 OPSET = 17
-METADATA_KEY = "alcn_cv"
 
 
 class _DenseGrid(nn.Module):
@@ -155,6 +154,6 @@ def with_metadata(model_bytes: bytes, meta: dict) -> bytes:
     model = onnx.load_from_string(model_bytes)
     header = {k: v for k, v in meta.items() if k != "training"}
     entry = model.metadata_props.add()
-    entry.key, entry.value = METADATA_KEY, json.dumps(header)
+    entry.key, entry.value = ONNX_METADATA_KEY, json.dumps(header)
     onnx.checker.check_model(model)
     return model.SerializeToString()

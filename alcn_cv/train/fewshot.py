@@ -36,7 +36,7 @@ from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.nets.gain import dog_weights
 from alcn_cv.train.config import FewShotSetup
 from alcn_cv.train.models import CentreMixture, JointModel
-from alcn_cv.train.stage2 import STANDARDIZE_EPS, train_detector
+from alcn_cv.train.stage2 import train_detector
 
 __all__ = ["FewShotSetup", "auc", "fewshot_validation", "make_fewshot_data", "score_inputs", "standard_methods"]
 
@@ -202,7 +202,7 @@ def standard_methods(
     model: JointModel | None, dog_pairs: Sequence[Sequence[float]], num_kernels: int, step: float, policy: str
 ) -> dict[str, Method]:
     """The trained model's normalization (``"alcn"``), DoGs ``"dog a/b"`` and ``"none"``, all under ``policy``."""
-    finish = (lambda z: standardize_windows(z, STANDARDIZE_EPS)) if policy == "standardize" else (lambda z: z)
+    finish = standardize_windows if policy == "standardize" else (lambda z: z)
     sigmas = gaussian_sigmas(num_kernels, step)
     mixture = model.mixture if model is not None else CentreMixture(sigmas)
     methods: dict[str, Method] = {}

@@ -32,7 +32,6 @@ from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.nets.detector import INPUT, Detector
 from alcn_cv.nets.gain import dog_weights
 from alcn_cv.nets.normalizer import Normalizer
-from alcn_cv.train.stage2 import STANDARDIZE_EPS
 
 __all__ = ["CentreMixture", "JointModel", "measure_output_range"]
 
@@ -133,7 +132,7 @@ class JointModel(nn.Module):
         """The detector's input ``(B, 1, 32, 32)``: mixture output (or raw) centre, after the policy."""
         c = _DETECTOR_CROP
         out = windows[..., c : c + INPUT, c : c + INPUT] if self.method == "none" else self.response(windows)
-        return standardize_windows(out, STANDARDIZE_EPS) if self.policy == "standardize" else out
+        return standardize_windows(out) if self.policy == "standardize" else out
 
     def response(self, windows: torch.Tensor) -> torch.Tensor:
         """The raw mixture output ``(B, 1, 32, 32)`` on the centre (before the input policy): Eq. 1

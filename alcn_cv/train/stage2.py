@@ -29,7 +29,6 @@ from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.detector import INPUT, Detector
 
 __all__ = [
-    "STANDARDIZE_EPS",
     "NonFiniteLossError",
     "evaluate_detector",
     "main",
@@ -39,10 +38,6 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
-
-#: ``eps`` of the detector input's per-window standardization, in both stages (the shipped
-#: Normalizer was trained with it).
-STANDARDIZE_EPS = 1e-4
 
 _EVAL_BATCH = 1024
 
@@ -218,7 +213,7 @@ def normalize_windows(windows: np.ndarray, normalization, policy: str = "standar
         if len(windows)
         else np.zeros((0, INPUT, INPUT), np.float32)
     )
-    return standardize_windows(out, STANDARDIZE_EPS) if policy == "standardize" else out.astype(np.float32)
+    return standardize_windows(out) if policy == "standardize" else out.astype(np.float32)
 
 
 def _read_objects(folder: Path) -> list[tuple[str, list[tuple[np.ndarray, object]]]]:

@@ -30,7 +30,6 @@ Outputs in the run folder: ``checkpoint.pt`` (atomic, every epoch and on Ctrl-C)
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import math
 import signal
@@ -47,9 +46,9 @@ from tqdm.auto import tqdm
 
 from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, make_folder
+from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.nets.device import torch_device
-from alcn_cv.report import log_to, machine
+from alcn_cv.report import log_to, machine, nan_to_none
 from alcn_cv.train import distributed
 from alcn_cv.train.checkpoint import (
     TrainState,
@@ -384,7 +383,7 @@ def _end_epoch(
     state.epoch, state.step_in_epoch, state.sums = state.epoch + 1, 0, [0.0, 0, 0]
     _save(out, cfg, model, optimizer, state, "epoch")
     if distributed.is_main():
-        atomic_write(out / "history.json", json.dumps(state.history, indent=1))
+        write_json(out / "history.json", nan_to_none(state.history))
         plot_curves(state.history, out / "curves.png")
 
 
@@ -476,7 +475,7 @@ def _finish(cfg: TrainConfig, result: TrainResult, train_set: PhosBatch, state: 
     total = state.history[-1]["seconds"] if state.history else state.elapsed()
     if cfg.fewshot.enabled:
         result.fewshot = _fewshot(model, cfg, progress)
-        atomic_write(result.out_dir / "fewshot.json", json.dumps(result.fewshot, indent=1))
+        write_json(result.out_dir / "fewshot.json", nan_to_none(result.fewshot))
     result.weights = write_normalizer_file(model, cfg, train_set, result, total)
     logger.info("Normalizer weights written to %s", result.weights)
 

@@ -29,7 +29,6 @@ __all__ = ["check_windows", "load_windows"]
 logger = logging.getLogger(__name__)
 
 _PART = 4096  # windows rendered per part (parts are independent of the worker count)
-_ARRAYS = ("windows", "labels", "light_ids", "kinds", "offsets", "extents")
 
 
 def _render_part(args: tuple) -> PhosBatch:
@@ -57,7 +56,7 @@ def _render(n: int, seed: int, lighting: list[str], cfg: TrainConfig, desc: str,
     else:
         parts = [_render_part(j) for j in tqdm(jobs, desc=desc, disable=not progress)]
     first = parts[0]
-    cat = {k: np.concatenate([getattr(p, k) for p in parts]) for k in _ARRAYS}
+    cat = {k: np.concatenate([getattr(p, k) for p in parts]) for k in PhosBatch.ARRAYS}
     return PhosBatch(**cat, n_objects=first.n_objects, object_seed=first.object_seed, seed=seed)
 
 
@@ -93,7 +92,7 @@ def load_windows(cfg: TrainConfig, out_dir: Path, progress: bool) -> tuple[PhosB
         meta = json.loads(str(cached.pop("meta")))
         sets = [
             PhosBatch(
-                *[cached[f"{name}_{k}"] for k in _ARRAYS],
+                *[cached[f"{name}_{k}"] for k in PhosBatch.ARRAYS],
                 n_objects=meta["n_objects"],
                 object_seed=meta["object_seed"],
                 seed=meta[f"{name}_seed"],
@@ -110,7 +109,7 @@ def load_windows(cfg: TrainConfig, out_dir: Path, progress: bool) -> tuple[PhosB
             _render(cfg.data.n_train - n_anchor, cfg.data_seed + 7, others, cfg, "training windows", progress),
         ]
         train_set = PhosBatch(
-            *[np.concatenate([getattr(p, k) for p in parts]) for k in _ARRAYS],
+            *[np.concatenate([getattr(p, k) for p in parts]) for k in PhosBatch.ARRAYS],
             n_objects=parts[0].n_objects,
             object_seed=parts[0].object_seed,
             seed=cfg.data_seed,
@@ -122,7 +121,11 @@ def load_windows(cfg: TrainConfig, out_dir: Path, progress: bool) -> tuple[PhosB
             cfg.data.n_val, cfg.data_seed + 1_000_003, cfg.data.val_lighting, cfg, "validation windows", progress
         )
     if not (cfg.data.path and cfg.data.val_path) and distributed.is_main():
-        arrays = {f"{name}_{k}": getattr(s, k) for name, s in (("train", train_set), ("val", val_set)) for k in _ARRAYS}
+        arrays = {
+            f"{name}_{k}": getattr(s, k)
+            for name, s in (("train", train_set), ("val", val_set))
+            for k in PhosBatch.ARRAYS
+        }
         meta = {
             "n_objects": train_set.n_objects,
             "object_seed": train_set.object_seed,
