@@ -102,14 +102,16 @@ def _jpeg_is_complete(data: bytes) -> bool:
     return False
 
 
-def read_image(path: str | Path, alpha: bool = False) -> np.ndarray:
+def read_image(path: str | Path, alpha: bool = False, gray: bool = False) -> np.ndarray:
     """Read an image as OpenCV does, keeping 16-bit depth.
 
     Args:
         alpha: keep an alpha channel (``HxWx4`` BGRA); by default it is dropped.
+        gray: decode it as an 8-bit gray image (``cv2.IMREAD_GRAYSCALE``, the codec's own conversion).
 
     Returns:
-        ``HxW`` grayscale, ``HxWx3`` BGR or, with ``alpha``, ``HxWx4`` BGRA; uint8 or uint16.
+        ``HxW`` grayscale, ``HxWx3`` BGR or, with ``alpha``, ``HxWx4`` BGRA; uint8 or uint16 (uint8 ``HxW`` with
+        ``gray``).
 
     Raises:
         InputError: the file is missing, unreadable, corrupt or truncated.
@@ -123,7 +125,8 @@ def read_image(path: str | Path, alpha: bool = False) -> np.ndarray:
         raise InputError(f"cannot read image {path}: {exc.strerror}") from None
     if data[:2] == b"\xff\xd8" and not _jpeg_is_complete(data):
         raise InputError(f"{path}: truncated or corrupt JPEG (no end-of-image marker)")
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+    flag = cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_UNCHANGED
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), flag) if data else None
     if img is None or img.size == 0:
         raise InputError(f"cannot read image {path}: corrupt, truncated or unsupported format")
     if img.ndim == 3 and img.shape[2] == 4 and not alpha:

@@ -37,6 +37,7 @@ from alcn_cv.io import (
     iter_frames,
     list_images,
     make_folder,
+    read_image,
     write_json,
 )
 
@@ -187,13 +188,6 @@ def _check_chessboard_size(
                 )
 
 
-def _read_gray(path: Path) -> np.ndarray:
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        raise InputError(f"{path}: cannot read this image (corrupt or unsupported format)")
-    return image
-
-
 def detect_in_images(
     paths: Sequence[str | os.PathLike], board: BoardSpec, progress: bool = True
 ) -> tuple[list[BoardView], tuple[int, int]]:
@@ -217,7 +211,7 @@ def detect_in_images(
     samples: list[tuple[str, np.ndarray]] = []
     missed = None
     for path in tqdm(paths, desc="detecting board", unit="image", disable=not progress or len(paths) < 20):
-        gray = _read_gray(path)
+        gray = read_image(path, gray=True)
         first = gray if first is None else first
         sizes.setdefault((gray.shape[1], gray.shape[0]), []).append(path.name)
         det = detector(gray)

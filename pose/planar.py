@@ -54,7 +54,7 @@ from alcn_cv.data.scenes import Scene, load_scene_folder, select_scenes, shared_
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, make_folder, to_gray, write_json
-from alcn_cv.report import describe_machine, machine, nan_to_none, new_figure, save_figure
+from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none, new_figure, save_figure
 from pose.corner_train import CornerRecipe
 from pose.corner_train import confs as corner_confs
 from pose.evaluate import PROJ_PX, score, table_markdown
@@ -502,18 +502,33 @@ def main(
 
 
 def _details_markdown(details: dict[str, Any], columns: list[str]) -> str:
-    lines = [
-        "| row | scene | reference | target (x, y, w, h) | parts | posed % | all 4 corners < 5 px % | "
-        "median err (px) | ms/frame |",
-        "|---|---|---|---|---|---|---|---|---|",
+    headers = [
+        "row",
+        "scene",
+        "reference",
+        "target (x, y, w, h)",
+        "parts",
+        "posed %",
+        "all 4 corners < 5 px %",
+        "median err (px)",
+        "ms/frame",
     ]
+    rows = []
     for row, per_scene in details.items():
         for c in columns:
             d = per_scene[c]
-            med = "-" if d["median_error_px"] is None else f"{d['median_error_px']:.2f}"
-            lines.append(
-                f"| {row} | {c} | {d['reference']} | {tuple(d['region'])} | {d['parts']} | "
-                f"{d['posed_pct']:.1f} | {d['all_corners_within_pct']:.1f} | {med} | "
-                f"{d['ms_per_frame']:.0f} |"
+            med = None if d["median_error_px"] is None else f"{d['median_error_px']:.2f}"
+            rows.append(
+                [
+                    row,
+                    c,
+                    d["reference"],
+                    tuple(d["region"]),
+                    d["parts"],
+                    f"{d['posed_pct']:.1f}",
+                    f"{d['all_corners_within_pct']:.1f}",
+                    med,
+                    f"{d['ms_per_frame']:.0f}",
+                ]
             )
-    return "\n".join(lines) + "\n"
+    return markdown_table(headers, rows)

@@ -27,8 +27,8 @@ def _windows(n_per_class: int = 12, seed: int = 0):
 
 def test_relight_is_deterministic_and_in_range():
     w, _ = _windows(2)
-    a = tuning.relight(w, np.random.default_rng(3))
-    b = tuning.relight(w, np.random.default_rng(3))
+    a = tuning.relight_windows(w, np.random.default_rng(3))
+    b = tuning.relight_windows(w, np.random.default_rng(3))
     np.testing.assert_array_equal(a, b)
     assert a.dtype == np.float32 and a.min() >= 0 and a.max() <= 1
     assert not np.allclose(a, w)

@@ -172,7 +172,7 @@ def training_set(data: DetectData, n_real: int, settings: DetectSettings, seed: 
     return TrainingSet(
         np.concatenate(windows),
         np.concatenate(labels).astype(np.int64),
-        tuning.relight(val, np.random.default_rng([seed, n_real, 1])),
+        tuning.relight_windows(val, np.random.default_rng([seed, n_real, 1])),
         np.concatenate(val_labels).astype(np.int64),
         used,
     )

@@ -37,7 +37,7 @@ from tqdm.auto import tqdm
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, from_spec, parse_spec
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, make_folder, write_json
+from alcn_cv.io import atomic_write, make_folder, read_image, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
 
 __all__ = ["PhotometricObject", "agreement", "detail", "load_objects", "main"]
@@ -58,13 +58,6 @@ class PhotometricObject:
     name: str
     images: np.ndarray
     mask: np.ndarray
-
-
-def _read_gray(path: Path) -> np.ndarray:
-    img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if img is None:
-        raise DatasetError(f"{path}: cannot read the image")
-    return img
 
 
 def load_objects(data_dir: str | os.PathLike, scale: float = 1.0) -> list[PhotometricObject]:
@@ -92,8 +85,8 @@ def load_objects(data_dir: str | os.PathLike, scale: float = 1.0) -> list[Photom
         if not shots or not mask_path.is_file():
             logger.debug("skipping %s: no %s.<i>.png images or no mask", folder, folder.name)
             continue
-        images = [_read_gray(p) for _, p in shots]
-        mask = _read_gray(mask_path) > 127
+        images = [read_image(p, gray=True) for _, p in shots]
+        mask = read_image(mask_path, gray=True) > 127
         if any(img.shape != mask.shape for img in images):
             raise DatasetError(f"{folder}: images and mask {folder.name}.mask.png differ in size")
         if scale != 1:

@@ -5,7 +5,7 @@ taken under one lighting, where every setting separates the classes perfectly, s
 scores each setting by how well the classes stay apart under *synthetic* changes of light
 applied to the training windows (nothing from the test set is used):
 
-1. ``relight`` draws, for every window, a gain (log-uniform 0.15-3), a gamma (0.5-2), a linear
+1. ``relight_windows`` draws, for every window, a gain (log-uniform 0.15-3), a gamma (0.5-2), a linear
    brightness gradient across the window (up to a factor 3 end to end), an offset and noise.
 2. Each setting normalizes the original windows (the references) and the relit ones (the
    queries); the 32x32 centres are standardized per window.
@@ -36,7 +36,7 @@ from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
 
-__all__ = ["BENCH_STANDARDIZE_EPS", "GRIDS", "centre_windows", "relight", "tune", "tune_all"]
+__all__ = ["BENCH_STANDARDIZE_EPS", "GRIDS", "centre_windows", "relight_windows", "tune", "tune_all"]
 
 logger = logging.getLogger(__name__)
 
@@ -64,7 +64,7 @@ def centre_windows(windows: np.ndarray, size: int = CROP) -> np.ndarray:
     return windows[:, o : o + size, o : o + size]
 
 
-def relight(windows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def relight_windows(windows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Synthetic changes of light of float windows in [0, 1] (see the module docstring).
 
     Args:
@@ -157,7 +157,7 @@ def tune(
     if windows.ndim != 3 or windows.shape[1] < CROP or windows.shape[2] < CROP or len(windows) != len(labels):
         raise InputError(f"windows must be (n, S>={CROP}, S>={CROP}) with one label each, got {windows.shape}")
     windows, labels = shifted_negatives(windows, np.asarray(labels), rng)
-    queries = relight(windows, rng)
+    queries = relight_windows(windows, rng)
     trials = []
     for params in grid:
         score = _score(method, params, windows, queries, np.asarray(labels))

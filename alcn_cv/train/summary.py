@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from alcn_cv.report import describe_machine, machine, new_figure, save_figure
+from alcn_cv.report import describe_machine, machine, markdown_table, new_figure, save_figure
 from alcn_cv.train.checkpoint import versions
 from alcn_cv.train.config import TrainConfig
 
@@ -50,15 +50,20 @@ def summary_markdown(cfg: TrainConfig, result: TrainResult, machine_start: dict[
         "",
         "## Held-out lightings (stage 1: the training objects, lighting families never trained on)",
         "",
-        "| epoch | train acc | held-out acc | " + " | ".join(result.val_by_family) + " |",
-        "|---|---|---|" + "---|" * len(result.val_by_family),
+        markdown_table(
+            ["epoch", "train acc", "held-out acc", *result.val_by_family],
+            [
+                [
+                    h["epoch"],
+                    h["train_acc"],
+                    h["val_acc"],
+                    *(h["val_by_family"].get(f, float("nan")) for f in result.val_by_family),
+                ]
+                for h in result.history
+            ],
+            digits=4,
+        ),
     ]
-    for h in result.history:
-        lines.append(
-            f"| {h['epoch']} | {h['train_acc']:.4f} | {h['val_acc']:.4f} | "
-            + " | ".join(f"{h['val_by_family'].get(f, float('nan')):.4f}" for f in result.val_by_family)
-            + " |"
-        )
     if result.fewshot:
         families = list(next(iter(result.fewshot.values()))["by_family"])
         lines += [
@@ -68,13 +73,13 @@ def summary_markdown(cfg: TrainConfig, result: TrainResult, machine_start: dict[
             "",
             "AUC object vs. background (accuracy over background + objects in brackets)",
             "",
-            "| method | all | " + " | ".join(families) + " |",
-            "|---|---|" + "---|" * len(families),
+            markdown_table(
+                ["method", "all", *families],
+                [
+                    [name, f"{r['auc']:.4f} ({r['accuracy']:.3f})", *(r["by_family"][f]["auc"] for f in families)]
+                    for name, r in result.fewshot.items()
+                ],
+                digits=4,
+            ),
         ]
-        for name, r in result.fewshot.items():
-            lines.append(
-                f"| {name} | {r['auc']:.4f} ({r['accuracy']:.3f}) | "
-                + " | ".join(f"{r['by_family'][f]['auc']:.4f}" for f in families)
-                + " |"
-            )
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines)
