@@ -133,7 +133,7 @@ def command_line(words: Sequence[str], options: dict[str, Any]) -> str:
     return shlex.join(args)
 
 
-def new_figure(nrows: int = 1, ncols: int = 1, **kwargs: Any):
+def new_figure(nrows: int = 1, ncols: int = 1, **kwargs: Any) -> tuple[Any, Any, np.ndarray]:
     """``(plt, fig, axes)`` from matplotlib's Agg backend (no display needed)."""
     import matplotlib
 

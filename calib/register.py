@@ -175,7 +175,12 @@ def board_pose(
     return FrameRegistration("", "ok", rms, n, R_w2c=R, t_w2c=t)
 
 
-def _write_outputs(tmp: Path, reg: Registration, points3d=None, images: Sequence[ColmapImage] | None = None) -> None:
+def _write_outputs(
+    tmp: Path,
+    reg: Registration,
+    points3d: Sequence[ColmapPoint3D] | None = None,
+    images: Sequence[ColmapImage] | None = None,
+) -> None:
     """scene_camera.json (+ empty scene_gt.json), colmap/, registration.json and registration.png."""
     from .report import plot_registration
 
@@ -346,7 +351,7 @@ def similarity_from_poses(
     return s, R, C_dst.mean(0) - s * R @ C_src.mean(0)
 
 
-def _apply_similarity(model, s: float, R: np.ndarray, t: np.ndarray) -> None:
+def _apply_similarity(model: ColmapModel, s: float, R: np.ndarray, t: np.ndarray) -> None:
     """x' = s R x + t on a ColmapModel, in place: points move, poses follow."""
     for p in model.points3d.values():
         p.xyz = s * R @ p.xyz + t
@@ -650,7 +655,7 @@ def register_colmap(
     return reg
 
 
-def _sfm_rms(model, image: ColmapImage, K: np.ndarray) -> float:
+def _sfm_rms(model: ColmapModel, image: ColmapImage, K: np.ndarray) -> float:
     """RMS reprojection error (px) of an image's triangulated keypoints."""
     idx = np.flatnonzero(image.point3d_ids >= 0)
     if not len(idx):

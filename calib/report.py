@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,7 +25,7 @@ def _figure(ncols: int, width: float = 13.0, height: float = 5.0):
     return plt, fig, axes[0]
 
 
-def _save(plt, fig, path: str | os.PathLike) -> Path:
+def _save(plt: Any, fig: Any, path: str | os.PathLike) -> Path:
     fig.tight_layout()
     return save_figure(plt, fig, path)
 

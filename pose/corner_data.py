@@ -30,6 +30,7 @@ from pose.parts import to_gray
 from pose.sequence import TrainingSequence
 
 if TYPE_CHECKING:
+    from alcn_cv.enhance.base import Normalization
     from pose.corner_train import CornerRecipe
 
 logger = logging.getLogger(__name__)
@@ -271,7 +272,7 @@ def _view_frames(
     small_mask: np.ndarray | None,
     uv: np.ndarray,
     visible: np.ndarray,
-    norm,
+    norm: Normalization,
     rng: np.random.Generator,
     recipe: CornerRecipe,
     box: tuple[np.ndarray, ...] | None = None,

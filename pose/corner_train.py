@@ -16,7 +16,7 @@ import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
@@ -27,6 +27,11 @@ from alcn_cv.io import atomic_write, output_path, with_suffix
 from pose.box import NUM_CORNERS, box_parts
 from pose.corner_data import CornerFrames, build_frames, build_image_frames
 from pose.corners import FORMAT_NAME, FORMAT_VERSION, PAD, STRIDE, WINDOW
+
+if TYPE_CHECKING:
+    import torch
+
+    from pose.corner_net import CornerNet
 
 logger = logging.getLogger(__name__)
 
@@ -121,7 +126,7 @@ confs: dict[str, CornerRecipe] = {
 }
 
 
-def export_onnx(net, out: str | Path, meta: dict[str, Any]) -> Path:
+def export_onnx(net: CornerNet, out: str | Path, meta: dict[str, Any]) -> Path:
     """Write the corner network as ONNX with ``meta`` in its ``metadata_props`` (atomically).
 
     Graph: input ``"image"`` ``(1, 1, H, W)`` float32 (the normalized, downscaled frame padded
@@ -214,7 +219,14 @@ def jitter_crops(
     return images
 
 
-def corner_loss(out, labels, offsets, owner, corner_weight: float, offset_weight: float):
+def corner_loss(
+    out: torch.Tensor,
+    labels: torch.Tensor,
+    offsets: torch.Tensor,
+    owner: torch.Tensor,
+    corner_weight: float,
+    offset_weight: float,
+) -> torch.Tensor:
     """Cross-entropy of the cells (``-1`` ignored, part classes weighted by ``corner_weight``)
     plus ``offset_weight`` times the smooth L1 loss of the offsets of the owned cells; torch tensors
     as :func:`sample_crops` returns them and the network's ``(b, 3n + 1, cells, cells)`` output."""
@@ -236,7 +248,13 @@ def corner_loss(out, labels, offsets, owner, corner_weight: float, offset_weight
 
 
 def fit(
-    net, frames: CornerFrames, recipe: CornerRecipe, *, seed: int = 0, progress: bool = True, device: str | None = None
+    net: CornerNet,
+    frames: CornerFrames,
+    recipe: CornerRecipe,
+    *,
+    seed: int = 0,
+    progress: bool = True,
+    device: str | None = None,
 ) -> dict[str, Any]:
     """Train ``net`` on crops of ``frames`` by ``recipe``'s training keys on ``device`` (a torch
     device; ``None``: CUDA where torch sees it, else the CPU), then leave it on the CPU.

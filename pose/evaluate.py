@@ -37,7 +37,7 @@ from pose.corner_train import CornerRecipe
 from pose.corner_train import confs as corner_confs
 from pose.model import read_box_corners, unit_scale
 from pose.model import save as save_model
-from pose.parts import FeaturePartDetector
+from pose.parts import FeaturePartDetector, PartDetector
 from pose.plots import plot_table
 from pose.sequence import load_sequence
 from pose.solver import PoseSolver, PoseTracker, project, rotation_error_deg
@@ -130,7 +130,7 @@ DEFAULT_NORMALIZERS = ("none", "dog:sigma1=1:sigma2=2", "alcn")
 
 
 def evaluate_sequence(
-    detector,
+    detector: PartDetector,
     scene_dir: Path,
     obj_id: int,
     vertices: np.ndarray,

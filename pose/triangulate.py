@@ -24,6 +24,7 @@ import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -35,6 +36,9 @@ from alcn_cv.errors import DatasetError
 from alcn_cv.io import make_folder, to_gray
 from pose.parts import create_feature, match_descriptors
 from pose.sequence import TrainingSequence
+
+if TYPE_CHECKING:
+    import pycolmap
 
 logger = logging.getLogger(__name__)
 
@@ -177,7 +181,7 @@ def _write_database(
     return pairs_path
 
 
-def triangulate_fixed_poses(seq: TrainingSequence, db_path: Path, out_dir: Path):
+def triangulate_fixed_poses(seq: TrainingSequence, db_path: Path, out_dir: Path) -> pycolmap.Reconstruction:
     """Triangulate with the known poses held fixed; returns a ``pycolmap.Reconstruction``."""
     import pycolmap
 
@@ -201,7 +205,9 @@ def triangulate_fixed_poses(seq: TrainingSequence, db_path: Path, out_dir: Path)
         return pycolmap.triangulate_points(rec, db_path, seq.image_dir, out_dir, options=opts)
 
 
-def reconstruct_incremental(seq: TrainingSequence, db_path: Path, out_dir: Path, refine_focal: bool = False):
+def reconstruct_incremental(
+    seq: TrainingSequence, db_path: Path, out_dir: Path, refine_focal: bool = False
+) -> pycolmap.Reconstruction:
     """pycolmap incremental mapping; returns the largest reconstruction (unknown scale).
 
     The intrinsics are held fixed, except the focal length with ``refine_focal`` (self-calibration
@@ -257,7 +263,11 @@ def representatives(desc: np.ndarray, norm: int, k: int) -> np.ndarray:
 
 
 def collect_points(
-    rec, feats: dict[str, Features], norm: int, min_track: int = 2, descriptors_per_point: int = 8
+    rec: pycolmap.Reconstruction,
+    feats: dict[str, Features],
+    norm: int,
+    min_track: int = 2,
+    descriptors_per_point: int = 8,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """3D points ``(N, 3)``, descriptors ``(M, D)`` with the point each describes ``(M,)`` (up to
     ``descriptors_per_point`` per point, chosen by :func:`representatives`), track lengths

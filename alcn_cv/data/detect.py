@@ -119,7 +119,9 @@ def _tight_box(cov: np.ndarray) -> list[float] | None:
     return [float(xs.min()), float(ys.min()), float(xs.max() - xs.min() + 1), float(ys.max() - ys.min() + 1)]
 
 
-def _render(rng, surf, lighting: Lighting, cfg: DetectConfig) -> np.ndarray:
+def _render(
+    rng: np.random.Generator, surf: tuple[np.ndarray, np.ndarray, np.ndarray], lighting: Lighting, cfg: DetectConfig
+) -> np.ndarray:
     scale = 2 if max(cfg.width, cfg.height) > 400 else 1
     return render_surfaces(
         to_surface([surf]),
@@ -131,7 +133,7 @@ def _render(rng, surf, lighting: Lighting, cfg: DetectConfig) -> np.ndarray:
     )[0]
 
 
-def _train_image(rng, obj: ReliefObject, cfg: DetectConfig):
+def _train_image(rng: np.random.Generator, obj: ReliefObject, cfg: DetectConfig):
     h, w = cfg.height, cfg.width
     surf = _ground(rng, h, w)
     centre = (w / 2 + rng.uniform(-0.1, 0.1) * w, h / 2 + rng.uniform(-0.1, 0.1) * h)
@@ -144,7 +146,7 @@ def _free(boxes: list[tuple[float, float, float]], x: float, y: float, r: float)
     return all((x - bx) ** 2 + (y - by) ** 2 > (r + br) ** 2 for bx, by, br in boxes)
 
 
-def _test_image(rng, objs: list[ReliefObject], cfg: DetectConfig, p_object: float):
+def _test_image(rng: np.random.Generator, objs: list[ReliefObject], cfg: DetectConfig, p_object: float):
     h, w = cfg.height, cfg.width
     surf = _ground(rng, h, w)
     obj_scale = cfg.object_px / (0.92 * objs[0].size)

@@ -206,7 +206,9 @@ def make_scene(
 TRAIN_SWEEPS = (1, 3)
 
 
-def trajectory(n: int, rng: np.random.Generator, *, span_deg: float | None = None, elevation_cycles: float = 1.0):
+def trajectory(
+    n: int, rng: np.random.Generator, *, span_deg: float | None = None, elevation_cycles: float = 1.0
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """Camera poses of an orbit around the objects: n (R_w2c, t_w2c) pairs (mm).
 
     The camera turns by ``span_deg`` (random in 120-300 deg when None) at 520-680 mm from the
@@ -318,7 +320,12 @@ def sequence_lighting(index: int, rng: np.random.Generator) -> Lighting:
 
 
 def _write_sequence(
-    seq_dir: Path, scene: TableScene, poses, lighting: Lighting, cfg: PoseConfig, seed_key: tuple
+    seq_dir: Path,
+    scene: TableScene,
+    poses: Sequence[tuple[np.ndarray, np.ndarray]],
+    lighting: Lighting,
+    cfg: PoseConfig,
+    seed_key: tuple,
 ) -> list[BopFrame]:
     (seq_dir / "rgb").mkdir(parents=True)
     (seq_dir / "mask_visib").mkdir()

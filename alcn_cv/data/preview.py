@@ -37,7 +37,7 @@ def grid(tiles: list[np.ndarray], cols: int, pad: int = 2) -> np.ndarray:
     return out
 
 
-def _label(img: np.ndarray, text: str, org=(4, 14), scale: float = 0.45) -> None:
+def _label(img: np.ndarray, text: str, org: tuple[int, int] = (4, 14), scale: float = 0.45) -> None:
     """White text with a black outline (shifted copies: a thicker stroke would change the advance)."""
     x, y = org
     for dx, dy in ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, 1), (-1, 1), (1, -1)):
@@ -89,7 +89,7 @@ def draw_model_box(
     K: np.ndarray,
     R: np.ndarray,
     t: np.ndarray,
-    colour=(0, 255, 0),
+    colour: tuple[int, int, int] = (0, 255, 0),
     thickness: int = 2,
 ) -> None:
     """Draw the 12 edges of a 3D box (corners (8, 3) in the order of ``itertools.product``)."""

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from alcn_cv.data.lighting import LightArrays, Lighting, shadow_shape
+from alcn_cv.data.lighting import Light, LightArrays, Lighting, shadow_shape
 from alcn_cv.data.render import MATERIAL_FIELDS, Material, expose, shade
 from alcn_cv.errors import InputError
 
@@ -160,7 +160,9 @@ def merge_meshes(meshes: list[Mesh]) -> Mesh:
     )
 
 
-def look_at(eye: np.ndarray, target: np.ndarray, up: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 1.0)):
+def look_at(
+    eye: np.ndarray, target: np.ndarray, up: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 1.0)
+) -> tuple[np.ndarray, np.ndarray]:
     """World-to-camera pose of an OpenCV camera (x right, y down, z forward) at ``eye``.
 
     Returns:
@@ -188,7 +190,7 @@ def rasterize(
     near: float = 1.0,
     max_pairs: int = 2_000_000,
     with_attributes: bool = True,
-):
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """Rasterise triangles given in screen coordinates with a z-buffer.
 
     Args:
@@ -308,7 +310,7 @@ class TableScene:
     table_material: Material = field(default_factory=lambda: Material("matte"))
     wall: tuple[float, float, float] = (0.2, 0.2, 0.2)
 
-    def world_meshes(self):
+    def world_meshes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Concatenated world-frame geometry: vertices (N, 3), faces (M, 3), object index per face."""
         verts, faces, owner = [], [], []
         off = 0
@@ -323,7 +325,7 @@ class TableScene:
         return np.concatenate(verts), np.concatenate(faces), np.concatenate(owner)
 
 
-def _shadow_maps(verts: np.ndarray, faces: np.ndarray, lights, extent: float, res: int = 1024):
+def _shadow_maps(verts: np.ndarray, faces: np.ndarray, lights: list[Light], extent: float, res: int = 1024):
     """One shadow map per light: (kind, projection data, depth map)."""
     maps = []
     for li in lights:
@@ -348,7 +350,14 @@ def _shadow_maps(verts: np.ndarray, faces: np.ndarray, lights, extent: float, re
     return maps
 
 
-def _lookup_shadow(kind, proj, scale, zb, P: np.ndarray, bias: float) -> np.ndarray:
+def _lookup_shadow(
+    kind: str,
+    proj: np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray],
+    scale: float | None,
+    zb: np.ndarray,
+    P: np.ndarray,
+    bias: float,
+) -> np.ndarray:
     res = zb.shape[0]
     if kind == "ortho":
         cam = P @ proj.T

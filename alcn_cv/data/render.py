@@ -126,7 +126,9 @@ class Surface:
     material: np.ndarray
 
 
-def heightfield_geometry(height: np.ndarray, camera: tuple[float, float, float] | None = None):
+def heightfield_geometry(
+    height: np.ndarray, camera: tuple[float, float, float] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions, normals and view directions of height fields.
 
     Args:
@@ -263,7 +265,7 @@ def shade(
         # Shade only the items that have a light in this slot (slots 2 and 3 are often empty).
         sel = slice(None) if active.all() else np.nonzero(active)[0]
 
-        def g(a, sel=sel):
+        def g(a: np.ndarray, sel: slice | np.ndarray = sel) -> np.ndarray:
             return a if a.shape[0] == 1 else a[sel]
 
         Px, Py, Pz, Nx, Ny, Nz, Vx, Vy, Vz = (g(a) for a in (px, py, pz, nx, ny, nz, vx, vy, vz))

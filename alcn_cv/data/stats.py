@@ -91,7 +91,7 @@ def set_stats(objects: dict[str, tuple[list[np.ndarray], np.ndarray]]) -> dict[s
     return out
 
 
-def load_psm(psm_dir: str | os.PathLike):
+def load_psm(psm_dir: str | os.PathLike) -> tuple[dict[str, tuple[list[np.ndarray], np.ndarray]], np.ndarray]:
     """Read the PSM set: ``({name: (12 gray float32 images, bool mask)}, lights (12, 3))``."""
     root = Path(psm_dir)
     lf = root / "lights.txt"
@@ -127,7 +127,7 @@ def load_psm(psm_dir: str | os.PathLike):
 
 def render_like_psm(
     lights: np.ndarray | None, n_objects: int = 4, seed: int = 0, size: int = 256, *, plain: bool = False
-):
+) -> dict[str, tuple[list[np.ndarray], np.ndarray]]:
     """Render ``n_objects`` relief objects on black under 12 lightings.
 
     Args:

@@ -48,7 +48,9 @@ def _as_float(image: np.ndarray, gray: bool) -> np.ndarray:
     return f
 
 
-def object_box(image_shape: tuple[int, ...], mask_or_bbox) -> tuple[np.ndarray, np.ndarray | None]:
+def object_box(
+    image_shape: tuple[int, ...], mask_or_bbox: np.ndarray | Sequence[float]
+) -> tuple[np.ndarray, np.ndarray | None]:
     """Normalise a mask or a COCO box to ``(bbox [x, y, w, h] float64, mask float32 or None)``."""
     arr = np.asarray(mask_or_bbox)
     if arr.ndim == 2 and arr.shape == tuple(image_shape[:2]):
@@ -67,7 +69,9 @@ def object_box(image_shape: tuple[int, ...], mask_or_bbox) -> tuple[np.ndarray, 
     )
 
 
-def _intensity_noise(win: np.ndarray, rng: np.random.Generator, a_range, b_max, noise_max) -> np.ndarray:
+def _intensity_noise(
+    win: np.ndarray, rng: np.random.Generator, a_range: tuple[float, float], b_max: float, noise_max: float
+) -> np.ndarray:
     n = len(win)
     shp = (n,) + (1,) * (win.ndim - 1)
     a = rng.uniform(*a_range, n).reshape(shp).astype(np.float32)
@@ -99,7 +103,7 @@ def _background(rng: np.random.Generator, gray: bool, backgrounds: Sequence[np.n
 
 def augment(
     image: np.ndarray,
-    mask_or_bbox,
+    mask_or_bbox: np.ndarray | Sequence[float],
     n: int,
     rng: np.random.Generator,
     *,

@@ -23,12 +23,16 @@ import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, make_folder
+
+if TYPE_CHECKING:
+    import pycolmap
 
 logger = logging.getLogger(__name__)
 
@@ -486,7 +490,7 @@ def read_text_model(path: str | os.PathLike) -> ColmapModel:
     return ColmapModel(cameras, images, points, units)
 
 
-def model_from_pycolmap(rec) -> ColmapModel:
+def model_from_pycolmap(rec: pycolmap.Reconstruction) -> ColmapModel:
     """Convert a ``pycolmap.Reconstruction`` to a :class:`ColmapModel` (registered images only)."""
     cameras = {
         int(cid): ColmapCamera(int(cid), c.model.name, int(c.width), int(c.height), np.array(c.params))

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -27,6 +28,9 @@ from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.detector import INPUT, Detector
+
+if TYPE_CHECKING:
+    from alcn_cv.enhance.base import Normalization
 
 __all__ = [
     "NonFiniteLossError",
@@ -186,7 +190,7 @@ def train_detector(
     return net.eval()
 
 
-def normalize_windows(windows: np.ndarray, normalization, policy: str = "standardize") -> np.ndarray:
+def normalize_windows(windows: np.ndarray, normalization: Normalization, policy: str = "standardize") -> np.ndarray:
     """Normalize 64x64 windows and keep the detector's centre 32x32.
 
     Args:
