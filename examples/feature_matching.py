@@ -3,10 +3,10 @@
     .venv/bin/python examples/feature_matching.py [--video ../shared/data/cookie_box/box.mp4] [--feature SIFT]
 
 Frame 0 of the video is matched with frame ``--second`` (default 20), which is first relit here: darkened to a
-quarter, a light gradient across it, a gamma of 1.6 and the 8-bit rounding of a dark frame. Each normalizer of
+quarter, a light gradient across it, a gamma of 1.6 and the 8-bit rounding of a dark frame. Each normalization of
 ``--methods`` (``alcn_cv.create`` specs) runs before the features (1000 keypoints) on both frames; the matches pass
 Lowe's ratio test (0.8) and a RANSAC homography (5 px), whose inliers, the matches that agree, are printed for each
-normalizer and drawn side by side in ``OUT/matches.png`` (one row per normalizer). Only OpenCV and the runtime
+normalization and drawn side by side in ``OUT/matches.png`` (one row per normalization). Only OpenCV and the runtime
 are needed (``pip install .``); a second or two on 2 cores.
 
 On the cookie box, frames 0 and 20 (60), matches that agree: SIFT none 291 (201), CLAHE 416 (300), Tan-Triggs
@@ -58,7 +58,7 @@ def main() -> None:
     ap.add_argument("--video", type=Path, default=shared_data_dir() / "cookie_box" / "box.mp4", help="a video file")
     ap.add_argument("--second", type=int, default=20, help="the frame matched with frame 0 (default 20)")
     ap.add_argument(
-        "--methods", nargs="+", default=["none", "clahe", "alcn"], help="normalizers (default: %(default)s)"
+        "--methods", nargs="+", default=["none", "clahe", "alcn"], help="normalizations (default: %(default)s)"
     )
     ap.add_argument("--feature", choices=("ORB", "SIFT"), default="ORB", help="the features (default ORB)")
     ap.add_argument("--out", type=Path, default=Path("out/matching"), help="output folder (default out/matching)")

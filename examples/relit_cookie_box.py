@@ -5,7 +5,7 @@
 
 Each frame of ``../shared/data/cookie_box/box.mp4`` is relit (``pose.evaluate.relight``: a strong
 light gradient whose side changes every 30 frames, darkening and a gamma change). For each
-normalizer a part model is built from the *original* video (training lighting, as in the paper)
+normalization a part model is built from the *original* video (training lighting, as in the paper)
 and tracked through the relit one. The reference poses are those tracked on the original video
 without normalization (green); the boxes found on the relit video are drawn in the paper's Fig. 1
 colours (ALCN blue, no normalization red) in one overlay video, and side by side, one panel per
@@ -52,12 +52,12 @@ def registered_build(
     video: Path,
     ref: part_model.PartModel,
     K: np.ndarray,
-    normalizer: str,
+    normalization: str,
     path: Path,
     step: int = 10,
     max_frames: int | None = None,
 ) -> None:
-    """A model on ``normalizer``-normalized images of the original video, in the reference model's frame:
+    """A model on ``normalization``-normalized images of the original video, in the reference model's frame:
     the frames are registered by tracking the reference model, then triangulated with these poses fixed."""
     tracker, det = PoseTracker(PoseSolver(K, min_inliers=30)), FeaturePartDetector(ref, "none")
     with tempfile.TemporaryDirectory(dir=path.parent) as work:
@@ -68,7 +68,7 @@ def registered_build(
                 io.write_image(Path(work) / f"{i:06d}.png", frame)
                 views.append(TrainingView(f"{i:06d}.png", K, None, est.R, est.tvec.ravel()))
         seq = TrainingSequence(Path(work), views, ref.units, info={"format": "registered video", "path": str(video)})
-        model, _ = build.build(seq, feature=ref.feature, n_features=3000, normalizer=normalizer, work_dir=work)
+        model, _ = build.build(seq, feature=ref.feature, n_features=3000, normalization=normalization, work_dir=work)
     model.corners = ref.corners  # same object frame as the reference
     model.extra["K"] = K.tolist()
     part_model.save(model, path)
@@ -83,7 +83,7 @@ def main() -> None:
         "--methods",
         nargs="+",
         default=["none", "alcn:model=lite:mixture=pyramid"],
-        help="normalizers (NAME[:KEY=VALUE...]; default: none and the real-time ALCN)",
+        help="normalizations (NAME[:KEY=VALUE...]; default: none and the real-time ALCN)",
     )
     ap.add_argument(
         "--data",

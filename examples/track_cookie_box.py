@@ -1,6 +1,6 @@
 """Build a part model of the cookie box from its video and track it.
 
-    .venv/bin/python examples/track_cookie_box.py [--out out/cookie_box] [--normalizer none]
+    .venv/bin/python examples/track_cookie_box.py [--out out/cookie_box] [--normalization none]
 
 Input: ``../shared/data/cookie_box/box.mp4`` (456 frames, 640x480, a hand-held box in front of a
 static camera), ``box.ply`` (the cuboid, 18.9 x 25.8 x 7.5 cm) and the intrinsics of OpenCV's
@@ -63,9 +63,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("out/cookie_box"), help="output folder (default out/cookie_box)")
     ap.add_argument(
-        "--normalizer",
+        "--normalization",
         default="none",
-        help="normalizer before the features, NAME[:KEY=VALUE...] (alcn_cv.available(); the real-time "
+        help="normalization before the features, NAME[:KEY=VALUE...] (alcn_cv.available(); the real-time "
         "ALCN: alcn:model=lite:mixture=pyramid)",
     )
     ap.add_argument(
@@ -89,7 +89,7 @@ def main() -> None:
             motion_mask=True,
             feature="ORB",
             n_features=3000,
-            normalizer=args.normalizer,
+            normalization=args.normalization,
             box_ply=args.data / "box.ply",
             box_units="cm",
             refine_focal=True,
@@ -100,7 +100,7 @@ def main() -> None:
         f"(tutorial: {K[0, 0]:.1f} {K[1, 1]:.1f})"
     )
     summary = track.main(
-        model_path, video, args.out / "poses.json", normalizer=args.normalizer, overlay=args.out / "overlay.mp4"
+        model_path, video, args.out / "poses.json", normalization=args.normalization, overlay=args.out / "overlay.mp4"
     )
     sheet = contact_sheet(args.out / "overlay.mp4", args.out / "overlay_sheet.png")
     print(

@@ -61,7 +61,7 @@ def build(
     *,
     feature: str = "ORB",
     n_features: int = 4000,
-    normalizer: str = "none",
+    normalization: str = "none",
     box_ply: str | Path | None = None,
     box_size: np.ndarray | None = None,
     box_units: str | None = None,
@@ -100,7 +100,7 @@ def build(
     norm = descriptor_norm(feature)
     with tempfile.TemporaryDirectory(prefix="alcn_pose_build_", dir=work_dir, ignore_cleanup_errors=True) as work:
         tmp = Path(work)
-        feats = extract_features(seq, feature, n_features, normalizer, masks, progress)
+        feats = extract_features(seq, feature, n_features, normalization, masks, progress)
         write_database(tmp / "database.db", seq, feats, image_pairs(len(seq.views), window), norm, ratio, progress)
         if registered:
             rec = triangulate_fixed_poses(seq, tmp / "database.db", tmp / "sparse")
@@ -157,7 +157,7 @@ def build(
         colors=rgb[keep],
         units=units,
         feature=feature.upper(),
-        normalizer=pin_default_model(normalizer),
+        normalization=pin_default_model(normalization),
         source=str(seq.info.get("path", "")),
         box_fit=_jsonable(fit.stats),
         extra={"registered_images": len(reg), "training_images": len(seq.views), "triangulated_points": int(len(xyz))},
@@ -208,7 +208,7 @@ def main(
     motion_mask: bool = False,
     feature: str = "ORB",
     n_features: int = 4000,
-    normalizer: str = "none",
+    normalization: str = "none",
     box_ply: str | Path | None = None,
     box_size: tuple[float, float, float] | None = None,
     box_units: str | None = None,
@@ -247,7 +247,7 @@ def main(
             seq,
             feature=feature,
             n_features=n_features,
-            normalizer=normalizer,
+            normalization=normalization,
             box_ply=box_ply,
             box_size=box_size,
             work_dir=work,

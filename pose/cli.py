@@ -31,7 +31,7 @@ def _build(args: argparse.Namespace) -> int:
         motion_mask=args.motion_mask,
         feature=args.feature,
         n_features=args.n_features,
-        normalizer=args.normalization,
+        normalization=args.normalization,
         box_ply=args.box_ply,
         box_size=args.box_size,
         box_units=args.box_units,
@@ -62,7 +62,7 @@ def _track(args: argparse.Namespace) -> int:
         args.input,
         args.output,
         K,
-        normalizer=args.normalization,
+        normalization=args.normalization,
         overlay=args.overlay,
         method=args.method,
         n_features=args.n_features,
@@ -90,13 +90,13 @@ def _recipe(args: argparse.Namespace):
 def _eval(args: argparse.Namespace) -> int:
     from pose import evaluate
 
-    normalizations = args.normalizations or evaluate.DEFAULT_NORMALIZERS
+    normalizations = args.normalizations or evaluate.DEFAULT_NORMALIZATIONS
     recipe = _recipe(args)
     if args.middlebury:
         evaluate.middlebury_main(
             args.middlebury,
             args.out,
-            normalizers=normalizations,
+            normalizations=normalizations,
             feature=args.feature,
             command=_command(),
             progress=not args.no_progress,
@@ -105,7 +105,7 @@ def _eval(args: argparse.Namespace) -> int:
         evaluate.main(
             args.data,
             args.out,
-            normalizers=normalizations,
+            normalizations=normalizations,
             feature=args.feature,
             detectors=args.detectors,
             corner_recipe=recipe,
@@ -138,7 +138,7 @@ def _train_corners(args: argparse.Namespace) -> int:
         _recipe(args),
         box_ply=args.box_ply,
         model=args.model,
-        normalizer=args.normalization,
+        normalization=args.normalization,
         seed=args.seed,
         device=args.device,
         conf=args.conf,
@@ -155,7 +155,7 @@ def _planar(args: argparse.Namespace) -> int:
         args.out,
         args.data,
         scenes=args.scenes,
-        normalizers=args.normalizations,
+        normalizations=args.normalizations,
         detectors=args.detectors,
         feature=args.feature,
         n_features=args.n_features,
@@ -209,8 +209,8 @@ def _add_planar(sub: argparse._SubParsersAction) -> None:
     r.add_argument(
         "--normalizations",
         nargs="+",
-        default=list(planar.DEFAULT_NORMALIZERS),
-        help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZERS) + ")",
+        default=list(planar.DEFAULT_NORMALIZATIONS),
+        help="rows, NAME[:KEY=VALUE...] (default: " + " ".join(planar.DEFAULT_NORMALIZATIONS) + ")",
     )
     r.add_argument(
         "--detectors",
@@ -335,7 +335,7 @@ def _bench_corners(args: argparse.Namespace) -> int:
         threads=args.threads,
     )
     print(
-        f"{r['fps']:.1f} fps at {r['size'][0]}x{r['size'][1]} ({r['normalizer']} in front; normalize "
+        f"{r['fps']:.1f} fps at {r['size'][0]}x{r['size'][1]} ({r['normalization']} in front; normalize "
         f"{r['ms']['normalize']:.1f} ms, network {r['ms']['network']:.1f} ms, peaks + pose "
         f"{r['ms']['peaks_and_pose']:.1f} ms; CPU {r['cpu_ms_per_frame']:.1f} ms per frame; torch imported: "
         f"{r['torch_imported']}; load "

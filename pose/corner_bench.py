@@ -97,7 +97,7 @@ def benchmark(
     ms["peaks_and_pose"] = 1000 * per_frame - ms["normalize"] - ms["network"]
     return {
         "detector": str(onnx_path),
-        "normalizer": det.normalizer_name,
+        "normalization": det.normalization_spec,
         "source": str(source),
         "size": list(size),
         "frames": len(frames),
@@ -126,7 +126,7 @@ def main(
     logger.info(
         "corner detector (%s) at %dx%d: %.1f fps (%.1f ms: normalize %.1f, network %.1f, peaks + pose "
         "%.1f), torch imported: %s",
-        result["normalizer"],
+        result["normalization"],
         *result["size"],
         result["fps"],
         result["ms_per_frame"],
@@ -137,7 +137,7 @@ def main(
         out = Path(out)
         make_folder(out)
         md = (
-            f"# Corner detector speed\n\nDetector `{onnx_path}` ({result['normalizer']} in front), "
+            f"# Corner detector speed\n\nDetector `{onnx_path}` ({result['normalization']} in front), "
             f"{result['frames']} frames of `{source}` at {result['size'][0]}x{result['size'][1]}, "
             f"{result['repeats']} passes, OpenCV threads {result['opencv_threads']}, torch imported: "
             f"{result['torch_imported']}.\n\nMachine: {describe_machine(result['machine'])}.\n\n"

@@ -320,7 +320,7 @@ def _view_frames(
 
 def _stack_frames(per_view: list[list[tuple[np.ndarray, ...]]]) -> CornerFrames:
     """:class:`CornerFrames` of the frames of :func:`_view_frames` per view, standardized by one
-    fixed affine map for every input (the normalizers' output ranges differ widely), from the
+    fixed affine map for every input (the normalizations' output ranges differ widely), from the
     views themselves (each list's first frame)."""
     if not any((f[1] > 0).any() for frames in per_view for f in frames):
         raise InputError("no part of the box is visible in any training image")
@@ -344,16 +344,16 @@ def _stack_frames(per_view: list[list[tuple[np.ndarray, ...]]]) -> CornerFrames:
 
 
 def build_frames(
-    sequence: TrainingSequence, corners: np.ndarray, normalizer: str, recipe: CornerRecipe, *, seed: int = 0
+    sequence: TrainingSequence, corners: np.ndarray, normalization: str, recipe: CornerRecipe, *, seed: int = 0
 ) -> CornerFrames:
     """The labelled training frames of a registered sequence (:func:`pose.sequence.load_sequence`):
     each view downscaled by ``recipe.scale`` and its ``recipe.copies`` augmented copies (the keys of
-    :class:`pose.corner_train.CornerRecipe`), normalized by the spec ``normalizer``.
+    :class:`pose.corner_train.CornerRecipe`), normalized by the spec ``normalization``.
 
     Args:
         sequence: a :class:`pose.sequence.TrainingSequence` with poses (world = object frame).
         corners: ``(8, 3)`` box corners in the object frame (:func:`pose.model.box_corners` order).
-        normalizer: a spec for :func:`pose.corners.normalization_for`.
+        normalization: a spec for :func:`pose.corners.normalization_for`.
         recipe: the frames' keys of the recipe.
         seed: random seed.
 
@@ -366,7 +366,7 @@ def build_frames(
         raise InputError("the training sequence must be registered (a pose for every image)")
     recipe.check()
     scale = recipe.scale
-    norm = normalization_for(normalizer)
+    norm = normalization_for(normalization)
     rng = np.random.default_rng(seed)
     mask_dir = sequence.image_dir.parent / "mask_visib"
     parts = box_parts(corners, recipe.divisions)
@@ -404,7 +404,7 @@ def build_frames(
 
 
 def build_image_frames(
-    gray: np.ndarray, uv: np.ndarray, normalizer: str, recipe: CornerRecipe, *, seed: int = 0
+    gray: np.ndarray, uv: np.ndarray, normalization: str, recipe: CornerRecipe, *, seed: int = 0
 ) -> CornerFrames:
     """The labelled training frames of one image whose parts are at ``uv (n, 2)`` (pixels of
     ``gray``, uint8): the image and ``recipe.copies`` copies of it, as :func:`build_frames` makes of
@@ -425,7 +425,7 @@ def build_image_frames(
                 None,
                 to_scaled(uv, recipe.scale),
                 np.ones(len(uv), bool),
-                normalization_for(normalizer),
+                normalization_for(normalization),
                 np.random.default_rng(seed),
                 recipe,
             )

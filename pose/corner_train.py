@@ -65,14 +65,14 @@ class CornerRecipe:
             test views come nearer than the training views).
         backgrounds: share of the copies with a new background (where the view has a mask).
         intensity_scale, intensity_offset, noise: the copies' intensity change ``a I + b`` and noise
-            (``[1, 1]`` and 0: the views' own intensities, the normalizer the only invariance).
+            (``[1, 1]`` and 0: the views' own intensities, the normalization the only invariance).
         pos_radius, neg_radius: part cells within ``pos_radius`` (downscaled pixels), the cells up
             to ``neg_radius`` ignored (:func:`pose.corner_data.label_grid`).
     Network (:class:`pose.corner_net.CornerNet`): ``channels``, ``hidden``, ``mixing``.
     Training (:func:`fit`):
         iterations, batch_size: Adam steps and crops per step (the rate divided by 10 for the last quarter).
         cells: the crops' side in output cells; ``lr``: Adam's learning rate.
-        jitter: jitter each crop after the normalizer (:func:`jitter_crops`).
+        jitter: jitter each crop after the normalization (:func:`jitter_crops`).
         corner_weight, offset_weight: see :func:`corner_loss`.
     """
 
@@ -198,13 +198,13 @@ def jitter_crops(
     offset: float = 0.3,
     noise: float = 0.15,
 ) -> np.ndarray:
-    """Jitter the network's input after the normalizer, in place: each crop ``x`` of ``images``
+    """Jitter the network's input after the normalization, in place: each crop ``x`` of ``images``
     ``(n, 1, S, S)`` float32 (standardized, as :func:`sample_crops` returns them) becomes
     ``exp(log a + gx u + gy v) x + b + n``, ``u, v`` in [-1, 1] across the crop: a contrast ``a``
     log-uniform in ``[1 / contrast, contrast]``, a gain ramp (``gx, gy`` uniform in ``+-ramp``), an
     offset ``b`` uniform in ``+-offset`` and Gaussian noise of a standard deviation uniform in
     ``[0, noise]``. The copies' intensity change ``a I + b`` gives the network without normalization
-    this variety back where a normalizer in front took it away."""
+    this variety back where a normalization in front took it away."""
     size = images.shape[-1]
     u = np.linspace(-1, 1, size, dtype=np.float32)
     for b in range(len(images)):
@@ -301,7 +301,7 @@ def train_corners(
     out: str | Path,
     recipe: CornerRecipe | None = None,
     *,
-    normalizer: str = "none",
+    normalization: str = "none",
     units: str = "mm",
     obj_id: int | None = None,
     seed: int = 0,
@@ -317,7 +317,7 @@ def train_corners(
         corners: ``(8, 3)`` box corners in the object (world) frame, in ``units``.
         out: the ``.onnx`` file to write.
         recipe: the recipe (default: ``confs["box"]``); ``conf``: its preset's name, recorded with it.
-        normalizer: the normalization spec applied first (stored in the file; tracking uses the same).
+        normalization: the normalization spec applied first (stored in the file; tracking uses the same).
         seed, device: of the frames and :func:`fit`.
 
     Returns:
@@ -333,7 +333,7 @@ def train_corners(
         raise InputError(f"corners must be a finite (8, 3) array, got shape {corners.shape}")
     t0 = time.perf_counter()
     seq = load_sequence(sequence_dir, obj_id=obj_id)
-    frames = build_frames(seq, corners, normalizer, recipe, seed=seed)
+    frames = build_frames(seq, corners, normalization, recipe, seed=seed)
     provenance = {"source": str(sequence_dir), "views": len(seq.views), "data_seconds": time.perf_counter() - t0}
     return fit_and_export(
         frames,
@@ -341,7 +341,7 @@ def train_corners(
         corners,
         out,
         recipe,
-        normalizer=normalizer,
+        normalization=normalization,
         units=units,
         provenance=provenance,
         seed=seed,
@@ -358,7 +358,7 @@ def fit_and_export(
     out: str | Path,
     recipe: CornerRecipe,
     *,
-    normalizer: str,
+    normalization: str,
     units: str,
     provenance: dict[str, Any],
     seed: int = 0,
@@ -382,7 +382,7 @@ def fit_and_export(
     meta = {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
-        "normalizer": pin_default_model(normalizer),
+        "normalization": pin_default_model(normalization),
         "scale": recipe.scale,
         "input_mean": frames.input_mean,
         "input_std": frames.input_std,
@@ -408,7 +408,7 @@ def fit_and_export(
     path = export_onnx(net, out, meta)
     logger.info(
         "corner detector (%s): %d frames, training %.1f s on %s, final loss %.3f",
-        normalizer,
+        normalization,
         len(frames.labels),
         time.perf_counter() - t1,
         fit_info["device"],
@@ -425,7 +425,7 @@ def train_image_corners(
     out: str | Path,
     recipe: CornerRecipe | None = None,
     *,
-    normalizer: str = "none",
+    normalization: str = "none",
     units: str = "mm",
     source: str = "",
     seed: int = 0,
@@ -440,7 +440,7 @@ def train_image_corners(
         corners: ``(8, 3)`` the object's box (the pose solver's outline; a flat one for a plane).
         out: the ``.onnx`` file to write.
         recipe: the recipe (default: ``confs["planar"]``; ``divisions`` and the viewpoint keys unused).
-        normalizer, seed, conf: as :func:`train_corners`'s.
+        normalization, seed, conf: as :func:`train_corners`'s.
     """
     recipe = recipe or confs["planar"]
     recipe.check()
@@ -448,7 +448,7 @@ def train_image_corners(
     if parts.ndim != 2 or parts.shape != (len(uv), 3) or not np.isfinite(parts).all():
         raise InputError(f"parts must be a finite (n, 3) array for the n = {len(uv)} pixels, got shape {parts.shape}")
     t0 = time.perf_counter()
-    frames = build_image_frames(gray, uv, normalizer, recipe, seed=seed)
+    frames = build_image_frames(gray, uv, normalization, recipe, seed=seed)
     provenance = {"source": source, "views": 1, "data_seconds": time.perf_counter() - t0}
     return fit_and_export(
         frames,
@@ -456,7 +456,7 @@ def train_image_corners(
         corners,
         out,
         recipe,
-        normalizer=normalizer,
+        normalization=normalization,
         units=units,
         provenance=provenance,
         seed=seed,

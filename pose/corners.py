@@ -20,7 +20,7 @@ centre's window shows mostly the box's own texture, a corner's mostly the table.
   class logits and ``n`` sub-stride offsets per cell, trained densely on crops of the frames
   (:func:`pose.corner_train.train_corners`).
 * **Export** (:func:`pose.corner_train.export_onnx`): ONNX (``(1, 1, H, W)`` -> ``(1, 3n + 1, gh, gw)``)
-  with the parts, the box corners, units, scale and normalizer in its ``metadata_props`` (key ``alcn_cv``),
+  with the parts, the box corners, units, scale and normalization in its ``metadata_props`` (key ``alcn_cv``),
   so the ``.onnx`` file is the whole detector.
 * **Inference** (:class:`CornerDetector`): ``cv2.dnn`` runs it once on the padded, normalized
   frame (no torch import); per part, the local maxima of its softmax score above
@@ -72,7 +72,9 @@ logger = logging.getLogger(__name__)
 __all__ = ["CornerDetector", "normalization_for", "read_metadata"]
 
 FORMAT_NAME = "alcn-corner-detector"
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
+#: Version 3 names the normalization ``normalizer``; :func:`read_metadata` renames it.
+READABLE_VERSIONS = (3, 4)
 # alcn_cv.nets.Detector's input window and output stride (a test checks they agree; importing
 # alcn_cv.nets here would import torch, which the tracking path must not need).
 WINDOW = 32
@@ -167,10 +169,13 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
         raise WeightFileError(f"{path}: no '{ONNX_METADATA_KEY}' metadata; not a corner detector") from None
     if meta.get("format") != FORMAT_NAME:
         raise WeightFileError(f"{path}: field 'format' is {meta.get('format')!r}, expected {FORMAT_NAME!r}")
-    if meta.get("version") != FORMAT_VERSION:
+    if meta.get("version") not in READABLE_VERSIONS:
         raise WeightFileError(
-            f"{path}: field 'version' is {meta.get('version')!r}; this code reads version {FORMAT_VERSION}"
+            f"{path}: field 'version' is {meta.get('version')!r}; this code reads versions "
+            f"{', '.join(map(str, READABLE_VERSIONS))} (train it again with `alcn pose train-corners`)"
         )
+    if meta["version"] == 3 and "normalizer" in meta:
+        meta["normalization"] = meta.pop("normalizer")
     return meta
 
 
@@ -200,7 +205,7 @@ class CornerDetector:
     Attributes:
         parts: ``(n, 3)`` float64 the parts found (object frame, :attr:`units`).
         corners: ``(8, 3)`` float64 box corners (the outline of :class:`pose.solver.PoseSolver`).
-        normalizer_name, scale, input_mean, input_std: from the file.
+        normalization_spec, scale, input_mean, input_std: from the file.
     """
 
     uses_prior = True
@@ -249,9 +254,9 @@ class CornerDetector:
             )
         self.units = str(self.meta["units"])
         self.scale = float(self.meta["scale"])
-        self.normalizer_name = str(self.meta["normalizer"])
+        self.normalization_spec = str(self.meta["normalization"])
         self.input_mean, self.input_std = float(self.meta["input_mean"]), float(self.meta["input_std"])
-        self.normalization = normalization_for(self.normalizer_name)
+        self.normalization = normalization_for(self.normalization_spec)
         self.top_k, self.min_score, self.gate = top_k, min_score, gate
         self.gated_top_k, self.gated_min_score = gated_top_k, gated_min_score
         self.min_support = min_support

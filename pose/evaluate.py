@@ -9,7 +9,7 @@ Metrics of one estimated pose against the ground truth (both object-to-camera):
 * 5 cm / 5 deg: rotation error under 5 degrees and translation error under 5 cm
   (Shotton et al., CVPR 2013).
 
-A lost frame counts as wrong. :func:`main` writes the Table-1-style report (rows: normalizer x
+A lost frame counts as wrong. :func:`main` writes the Table-1-style report (rows: normalization x
 detector, columns: sequences #1..#8, cells: % correct by the 2D projection metric; ADD and
 5cm/5deg in the JSON) as Markdown, JSON and PNG. :func:`middlebury_main` evaluates real
 photographs: a model built from 8 of the 16 calibrated views, the pose of the 8 others from
@@ -126,7 +126,7 @@ def summarize(scores: list[PoseScore], diameter: float) -> dict[str, float]:
 #: sequences #1-#8 (SIFT parts, 500 RANSAC iterations; sum of the % over the sequences): 1/2 763,
 #: 1/3 760, 1.5/4.5 713, 0.5/2.5 700, 2/4 653, and 0.5/1.5 (the default DoG, tuned for the
 #: detection benchmark's working scale of 0.25) 653; with 5000 iterations 1/2 777, 1/3 773, 0.5/1.5 670.
-DEFAULT_NORMALIZERS = ("none", "dog:sigma1=1:sigma2=2", "alcn")
+DEFAULT_NORMALIZATIONS = ("none", "dog:sigma1=1:sigma2=2", "alcn")
 
 
 def evaluate_sequence(
@@ -172,7 +172,7 @@ def evaluate_sequence(
 
 
 def file_stem(spec: str) -> str:
-    """A file-name-safe form of a normalizer spec: ``"alcn:model=lite"`` -> ``"alcn_model-lite"``."""
+    """A file-name-safe form of a normalization spec: ``"alcn:model=lite"`` -> ``"alcn_model-lite"``."""
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", spec.replace("=", "-"))
 
 
@@ -196,7 +196,7 @@ def main(
     data_dir: str | Path,
     out_dir: str | Path,
     *,
-    normalizers: list[str] | tuple[str, ...] = DEFAULT_NORMALIZERS,
+    normalizations: list[str] | tuple[str, ...] = DEFAULT_NORMALIZATIONS,
     feature: str = "SIFT",
     obj_id: int = 1,
     n_features: int = 2000,
@@ -212,7 +212,7 @@ def main(
     """Table-1-style evaluation on a pose data set (``train/000001``, ``test/0000NN``, ``models/``).
 
     For each detector (``"features"``: :class:`pose.parts.FeaturePartDetector`, ``"corners"``:
-    :class:`pose.corners.CornerDetector`) and normalizer: a part model is built, or the corner
+    :class:`pose.corners.CornerDetector`) and normalization: a part model is built, or the corner
     detector trained ``seeds`` times (:func:`pose.corner_train.train_corners` by ``corner_recipe``,
     default the ``box`` preset, recorded as ``corner_conf``, on ``corner_device``, seeds 0, 1, ...;
     a cell is then the mean over the seeds, its spread their standard deviation), from the
@@ -246,17 +246,17 @@ def main(
     unknown = set(detectors) - {"features", "corners"}
     if unknown:
         raise InputError(f"unknown detectors {sorted(unknown)}; choose 'features' and/or 'corners'")
-    for earlier in [*out_dir.glob("model_*.npz"), *out_dir.glob("corners_*.onnx")]:  # another run's normalizers
+    for earlier in [*out_dir.glob("model_*.npz"), *out_dir.glob("corners_*.onnx")]:  # another run's normalizations
         earlier.unlink()
     t_start = time.perf_counter()
-    bar = tqdm(total=len(detectors) * len(normalizers), desc="pose eval", unit="model", disable=not progress)
+    bar = tqdm(total=len(detectors) * len(normalizations), desc="pose eval", unit="model", disable=not progress)
     for det_name in detectors:
-        for name in normalizers:
+        for name in normalizations:
             runs = []  # per seed: (detector, units, outline, info)
             if det_name == "features":
                 seq = load_sequence(train, obj_id=obj_id)
                 model, _ = build_model(
-                    seq, feature=feature, normalizer=name, box_ply=model_ply, work_dir=out_dir, progress=progress
+                    seq, feature=feature, normalization=name, box_ply=model_ply, work_dir=out_dir, progress=progress
                 )
                 save_model(model, out_dir / f"model_{file_stem(name)}.npz")
                 row = f"{name} / {feature.lower()} features"
@@ -281,7 +281,7 @@ def main(
                         corners,
                         out_dir / f"corners_{file_stem(name)}{suffix}.onnx",
                         corner_recipe,
-                        normalizer=name,
+                        normalization=name,
                         obj_id=obj_id,
                         seed=seed,
                         device=corner_device,
@@ -387,7 +387,7 @@ def middlebury_main(
     sets: list[str | Path],
     out_dir: str | Path,
     *,
-    normalizers: list[str] | tuple[str, ...] = DEFAULT_NORMALIZERS,
+    normalizations: list[str] | tuple[str, ...] = DEFAULT_NORMALIZATIONS,
     feature: str = "SIFT",
     n_features: int = 8000,
     ratio: float = 0.9,
@@ -405,7 +405,7 @@ def middlebury_main(
     ``iterations`` for the remaining low inlier ratios (8-25%). Without the cross-check, keeping wrong poses
     (8-15 deg) out takes a ``min_inliers`` of 20, which poses 0-2 views of 8.
 
-    Reports per normalizer and condition (original / relit) the median rotation (deg) and
+    Reports per normalization and condition (original / relit) the median rotation (deg) and
     translation (mm) errors, the share of views with a pose, and the camera-centre error, as
     ``middlebury.md`` and ``middlebury.json`` in ``out_dir`` (with the machine and ``command``, the
     command line that ran it); ``progress``: a progress bar over the models.
@@ -418,24 +418,24 @@ def middlebury_main(
     results: dict[str, Any] = {}
     lines = [
         "# Middlebury: pose of 8 held-out views from a model of the 8 others\n",
-        "| set | normalizer | light | posed | median rot. err (deg) | median trans. err (mm) | "
+        "| set | normalization | light | posed | median rot. err (deg) | median trans. err (mm) | "
         "median centre err (mm) |",
         "|---|---|---|---|---|---|---|",
     ]
-    bar = tqdm(total=len(sets) * len(normalizers), desc="middlebury", unit="model", disable=not progress)
+    bar = tqdm(total=len(sets) * len(normalizations), desc="middlebury", unit="model", disable=not progress)
     for set_dir in sets:
         set_dir = Path(set_dir)
         views = read_middlebury(set_dir)
         train_names = {v.name for v in views[0::2]}
         tests = views[1::2]
-        for name in normalizers:
+        for name in normalizations:
             seq = load_sequence(set_dir)
             seq.views = [v for v in seq.views if v.name in train_names]
             model, _ = build_model(
                 seq,
                 feature=feature,
                 n_features=n_features,
-                normalizer=name,
+                normalization=name,
                 ratio=ratio,
                 work_dir=out_dir,
                 progress=progress,

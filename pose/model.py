@@ -19,7 +19,7 @@ key                   shape         dtype      meaning
 ====================  ============  =========  ===============================================
 ``header``            ()            str        JSON: ``format``, ``version``, ``units``,
                                                ``feature`` (OpenCV detector name),
-                                               ``normalizer``, ``source``, ``box_fit`` (fit
+                                               ``normalization``, ``source``, ``box_fit`` (fit
                                                statistics), ``extra``
 ``corners``           (8, 3)        float64    box corners in the object frame, in the order
                                                of :func:`box_corners`
@@ -34,9 +34,9 @@ key                   shape         dtype      meaning
 
 :func:`save` also writes the point cloud beside the archive as ``<stem>.ply`` (for MeshLab,
 open3d, CloudCompare). Files are written atomically (temporary name, then rename).
-Version 1 had one descriptor per point and no ``descriptor_point``; it is still read. Reading
-an archive of another version raises :class:`~alcn_cv.errors.WeightFileError` naming both
-versions.
+Version 1 had one descriptor per point and no ``descriptor_point``; versions 1 and 2 name the
+normalization ``normalizer`` in the header; both are still read. Reading an archive of another
+version raises :class:`~alcn_cv.errors.WeightFileError` naming both versions.
 """
 
 from __future__ import annotations
@@ -58,8 +58,8 @@ from alcn_cv.io import atomic_write, output_path, with_suffix
 logger = logging.getLogger(__name__)
 
 FORMAT_NAME = "alcn-part-model"
-FORMAT_VERSION = 2
-READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+READABLE_VERSIONS = (1, 2, 3)
 UNITS = ("mm", "cm", "m")
 _UNIT_IN_M = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
 
@@ -102,7 +102,7 @@ class PartModel:
     colors: np.ndarray | None = None
     units: str = "mm"
     feature: str = "ORB"
-    normalizer: str = "none"
+    normalization: str = "none"
     source: str = ""
     box_fit: dict[str, Any] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
@@ -164,7 +164,7 @@ class PartModel:
             colors=self.colors,
             units=units,
             feature=self.feature,
-            normalizer=self.normalizer,
+            normalization=self.normalization,
             source=self.source,
             box_fit=dict(self.box_fit),
             extra=dict(self.extra),
@@ -176,7 +176,7 @@ class PartModel:
             "version": FORMAT_VERSION,
             "units": self.units,
             "feature": self.feature,
-            "normalizer": self.normalizer,
+            "normalization": self.normalization,
             "source": self.source,
             "box_fit": self.box_fit,
             "extra": self.extra,
@@ -281,7 +281,7 @@ def load(path: str | Path) -> PartModel:
             colors=arrays["colors"],
             units=header["units"],
             feature=header["feature"],
-            normalizer=header.get("normalizer", "none"),
+            normalization=header.get("normalization" if header["version"] >= 3 else "normalizer", "none"),
             source=header.get("source", ""),
             box_fit=header.get("box_fit", {}),
             extra=header.get("extra", {}),

@@ -118,7 +118,7 @@ class FeaturePartDetector:
 
     Args:
         model: the part model (its ``feature`` names the OpenCV feature used to build it).
-        normalizer: the normalization applied first, ``NAME[:KEY=VALUE...]``
+        normalization: the normalization applied first, ``NAME[:KEY=VALUE...]``
             (:func:`alcn_cv.enhance.registry.from_spec`), e.g. ``"alcn:model=lite:mixture=pyramid"``.
         n_features: the strongest keypoints kept inside the predicted region (with a prior pose).
         n_features_global: the strongest keypoints kept without a prior (0: all).
@@ -141,7 +141,7 @@ class FeaturePartDetector:
     def __init__(
         self,
         model: PartModel,
-        normalizer: str = "none",
+        normalization: str = "none",
         *,
         n_features: int = 2000,
         n_features_global: int = 0,
@@ -154,8 +154,8 @@ class FeaturePartDetector:
         if len(model.points3d) < 4:
             raise InputError(f"the part model has {len(model.points3d)} 3D points; at least 4 are needed")
         self.model = model
-        self.normalizer_name = normalizer
-        self.normalization = from_spec(normalizer)
+        self.normalization_spec = normalization
+        self.normalization = from_spec(normalization)
         self.feature = create_feature(model.feature, 0)
         self.n_features, self.n_features_global = n_features, n_features_global
         self.norm = descriptor_norm(model.feature)

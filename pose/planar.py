@@ -70,7 +70,7 @@ logger = logging.getLogger(__name__)
 #: eval``), DLCN and Tan-Triggs (the strongest classical methods of ``alcn bench relight``), the
 #: default ALCN (the gain-adaptive Normalizer trained on real webcam frames) and the lite one distilled
 #: from the paper's, trained on rendered data.
-DEFAULT_NORMALIZERS = ("none", "dog:sigma1=1:sigma2=2", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
+DEFAULT_NORMALIZATIONS = ("none", "dog:sigma1=1:sigma2=2", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
 #: Assumed horizontal field of view (degrees) of the webcams, whose intrinsics are unknown.
 DEFAULT_HFOV = 60.0
 #: Side of the target as a fraction of the frame's width and height.
@@ -94,17 +94,17 @@ def reference_index(frames: np.ndarray) -> int:
 
 
 def select_region(
-    gray: np.ndarray, fraction: float = DEFAULT_TARGET_FRACTION, feature: str = "SIFT", normalizer: str = "none"
+    gray: np.ndarray, fraction: float = DEFAULT_TARGET_FRACTION, feature: str = "SIFT", normalization: str = "none"
 ) -> tuple[int, int, int, int]:
     """``(x, y, w, h)``: the window of ``fraction`` of the image's width and height that holds the
-    most keypoints of ``gray`` (uint8, after ``normalizer``), searched on a grid of 1/20 of the
+    most keypoints of ``gray`` (uint8, after ``normalization``), searched on a grid of 1/20 of the
     image, 8 px from the borders (where a descriptor has no room)."""
     if not 0 < fraction <= 1:
         raise InputError(f"the target fraction must be in (0, 1], got {fraction}")
     h, w = gray.shape[:2]
     tw, th = max(int(round(fraction * w)), 16), max(int(round(fraction * h)), 16)
     margin = 8
-    kps = create_feature(feature, 0).detect(from_spec(normalizer).apply(gray), None)
+    kps = create_feature(feature, 0).detect(from_spec(normalization).apply(gray), None)
     count = np.zeros((h + 1, w + 1), np.float64)
     pts = np.array([k.pt for k in kps], np.float64).reshape(-1, 2).astype(int)
     np.add.at(count, (np.minimum(pts[:, 1], h - 1) + 1, np.minimum(pts[:, 0], w - 1) + 1), 1)
@@ -157,7 +157,7 @@ def build_target(
     image: np.ndarray,
     region: tuple[int, int, int, int],
     K: np.ndarray,
-    normalizer: str = "none",
+    normalization: str = "none",
     *,
     feature: str = "SIFT",
     n_features: int = 0,
@@ -181,7 +181,7 @@ def build_target(
     mask = np.zeros(gray.shape, np.uint8)
     mask[y : y + h, x : x + w] = 255
     det = create_feature(feature, n_features)
-    kps, desc = det.detectAndCompute(from_spec(normalizer).apply(gray), mask)
+    kps, desc = det.detectAndCompute(from_spec(normalization).apply(gray), mask)
     if desc is None or len(kps) < 4:
         raise DatasetError(f"only {len(kps)} {feature} keypoints in the target region {region}; choose a textured one")
     uv = np.array([k.pt for k in kps], np.float64)
@@ -197,7 +197,7 @@ def build_target(
         descriptors=desc,
         units="mm",
         feature=feature.upper(),
-        normalizer=normalizer,
+        normalization=normalization,
         source=reference,
         extra={"K": K.tolist(), "region": [x, y, w, h], "planar": True},
     )
@@ -206,7 +206,7 @@ def build_target(
 
 def feature_detector(
     target: PlanarTarget,
-    normalizer: str,
+    normalization: str,
     n_features: int = 0,
     work_dir: Path | None = None,
     recipe: CornerRecipe | None = None,
@@ -214,7 +214,7 @@ def feature_detector(
     """The classical part detector of the target: every keypoint of a frame (``n_features=0``)
     matched to the target's descriptors (:class:`pose.parts.FeaturePartDetector`); ``work_dir``
     and ``recipe`` unused (nothing to train)."""
-    return FeaturePartDetector(target.model, normalizer, n_features_global=n_features)
+    return FeaturePartDetector(target.model, normalization, n_features_global=n_features)
 
 
 def target_parts(target: PlanarTarget) -> tuple[np.ndarray, np.ndarray]:
@@ -228,13 +228,13 @@ def target_parts(target: PlanarTarget) -> tuple[np.ndarray, np.ndarray]:
 
 def corner_detector(
     target: PlanarTarget,
-    normalizer: str,
+    normalization: str,
     n_features: int = 0,
     work_dir: Path | None = None,
     recipe: CornerRecipe | None = None,
 ) -> PartDetector:
     """The learned corner detector of the target (:class:`pose.corners.CornerDetector`), trained
-    on the reference frame after ``normalizer`` by ``recipe`` (default: the ``planar`` preset of
+    on the reference frame after ``normalization`` by ``recipe`` (default: the ``planar`` preset of
     :data:`pose.corner_train.confs`) and written to ``work_dir`` (default: a temporary folder);
     ``n_features`` unused."""
     import tempfile
@@ -247,7 +247,7 @@ def corner_detector(
         raise InputError("the target has no reference image to train a detector on")
     parts, uv = target_parts(target)
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(work_dir or tmp) / f"corners_{Path(target.reference).stem}_{file_stem(normalizer)}.onnx"
+        path = Path(work_dir or tmp) / f"corners_{Path(target.reference).stem}_{file_stem(normalization)}.onnx"
         train_image_corners(
             target.image,
             uv,
@@ -255,7 +255,7 @@ def corner_detector(
             target.model.corners,
             path,
             recipe,
-            normalizer=normalizer,
+            normalization=normalization,
             source=target.reference,
             conf=None if recipe else "planar",
             progress=False,
@@ -263,16 +263,16 @@ def corner_detector(
         return CornerDetector(path)
 
 
-#: Part detectors by name: ``(target, normalizer, n_features, work_dir, recipe) -> PartDetector``.
+#: Part detectors by name: ``(target, normalization, n_features, work_dir, recipe) -> PartDetector``.
 DETECTORS: dict[str, Callable[[PlanarTarget, str, int, Path | None, CornerRecipe | None], PartDetector]] = {
     "features": feature_detector,
     "corners": corner_detector,
 }
 
 
-def row_label(normalizer: str, detector: str, feature: str = "SIFT") -> str:
-    """The table's row of a normalizer and a detector of :data:`DETECTORS`."""
-    return f"{normalizer} / " + (f"{feature.lower()} features" if detector == "features" else "corner CNN")
+def row_label(normalization: str, detector: str, feature: str = "SIFT") -> str:
+    """The table's row of a normalization and a detector of :data:`DETECTORS`."""
+    return f"{normalization} / " + (f"{feature.lower()} features" if detector == "features" else "corner CNN")
 
 
 @dataclass
@@ -289,7 +289,7 @@ class FrameResult:
 
 def evaluate_scene(
     scene: Scene,
-    normalizer: str,
+    normalization: str,
     *,
     detector: str = "features",
     feature: str = "SIFT",
@@ -301,12 +301,12 @@ def evaluate_scene(
     work_dir: Path | None = None,
     recipe: CornerRecipe | None = None,
 ) -> tuple[PlanarTarget, list[FrameResult]]:
-    """Build the target in the scene's reference frame after ``normalizer`` and pose it in every
+    """Build the target in the scene's reference frame after ``normalization`` and pose it in every
     other frame; returns the target and one :class:`FrameResult` per other frame. ``n_features``:
     the strongest keypoints kept per frame (0: all).
 
     ``reference`` (default :func:`reference_index`) and ``region`` (default
-    :func:`select_region` on the raw reference frame, so every normalizer gets the same target);
+    :func:`select_region` on the raw reference frame, so every normalization gets the same target);
     ``work_dir``: where a learned detector is written; ``recipe``: its training (default: the
     ``planar`` preset)."""
     if detector not in DETECTORS:
@@ -316,8 +316,8 @@ def evaluate_scene(
     h, w = frames.shape[1:3]
     K = pinhole_camera(w, h, hfov)
     region = region or select_region(frames[ref], target_fraction, feature)
-    target = build_target(frames[ref], region, K, normalizer, feature=feature, reference=scene.files[ref])
-    det = DETECTORS[detector](target, normalizer, n_features, work_dir, recipe)
+    target = build_target(frames[ref], region, K, normalization, feature=feature, reference=scene.files[ref])
+    det = DETECTORS[detector](target, normalization, n_features, work_dir, recipe)
     solver = PoseSolver(
         K,
         min_inliers=MIN_INLIERS[detector],
@@ -359,7 +359,7 @@ def plot_targets(scenes: Sequence[Scene], targets: dict[str, PlanarTarget], path
         ax.add_patch(plt.Rectangle((x - 0.5, y - 0.5), w, h, fill=False, color="tab:orange", lw=2))
         ax.set_title(
             f"{scene.name}: reference {t.reference}, target {w}x{h} px, {len(t.model.points3d)} parts "
-            f"({t.model.normalizer})",
+            f"({t.model.normalization})",
             fontsize=9,
         )
         ax.axis("off")
@@ -372,7 +372,7 @@ def main(
     data: str | Path | None = None,
     *,
     scenes: Sequence[str] | None = None,
-    normalizers: Sequence[str] = DEFAULT_NORMALIZERS,
+    normalizations: Sequence[str] = DEFAULT_NORMALIZATIONS,
     detectors: Sequence[str] = ("features",),
     feature: str = "SIFT",
     n_features: int = 0,
@@ -384,9 +384,9 @@ def main(
     progress: bool = True,
 ) -> dict[str, Any]:
     """The real-light Table 1: per scene of ``data`` (default ``<shared data>/webcam``), detector of
-    :data:`DETECTORS` and normalizer, the % of frames whose target pose is correct. Writes
+    :data:`DETECTORS` and normalization, the % of frames whose target pose is correct. Writes
     ``planar_pose.md``, ``planar_pose.json``, ``planar_pose.png`` and ``targets.png`` (and the
-    learned detectors, ``corners_<reference>_<normalizer>.onnx``, trained by ``recipe``, default the
+    learned detectors, ``corners_<reference>_<normalization>.onnx``, trained by ``recipe``, default the
     ``planar`` preset) into ``out_dir``."""
     root = Path(data) if data is not None else shared_root("webcam")
     if not root.is_dir():
@@ -395,7 +395,7 @@ def main(
     chosen = select_scenes(all_scenes, scenes) if scenes else all_scenes
     out_dir = Path(out_dir)
     make_folder(out_dir)
-    for name in normalizers:  # a bad spec fails now, not after minutes of work
+    for name in normalizations:  # a bad spec fails now, not after minutes of work
         from_spec(name)
     unknown = sorted(set(detectors) - set(DETECTORS))
     if unknown:
@@ -405,7 +405,7 @@ def main(
     details: dict[str, Any] = {}
     targets: dict[str, PlanarTarget] = {}
     regions = {s.name: select_region(s.frames[reference_index(s.frames)], target_fraction, feature) for s in chosen}
-    runs = [(detector, name, s) for detector in detectors for name in normalizers for s in chosen]
+    runs = [(detector, name, s) for detector in detectors for name in normalizations for s in chosen]
     for detector, name, scene in tqdm(runs, desc="relight pose", unit="scene", leave=False, disable=not progress):
         row = row_label(name, detector, feature)
         target, frames = evaluate_scene(
@@ -449,7 +449,7 @@ def main(
         f"Data: `{root}` (Webcam data set of TILDE, Verdie et al., CVPR 2015, from AMOS; academic research use "
         "only). Per scene, a target of "
         f"{target_fraction:g} x the frame's width and height in its reference frame (median brightness; "
-        "`targets.png`), its part model from that frame alone after each normalizer "
+        "`targets.png`), its part model from that frame alone after each normalization "
         f"({feature} keypoints, {K_note}), its pose in every other frame by the box's pipeline "
         f"(`pose.parts.FeaturePartDetector` on {keypoints} of each frame"
         + (

@@ -10,7 +10,7 @@ frame's pose as prior. Output:
   ``<name>_info.json`` with per-frame inlier counts, timings and the lost/recovered events;
 * with ``overlay``, a video (``.mp4``/``.avi``) or a folder of PNGs with the box drawn in the
   colours of the paper's Fig. 1: ground truth green, ALCN blue, no normalization red
-  (:data:`COLORS`; any other normalizer yellow).
+  (:data:`COLORS`; any other normalization yellow).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ OTHER_COLOR = (0, 220, 255)
 
 
 def color_for(name: str) -> tuple[int, int, int]:
-    """Overlay colour (BGR) of a normalizer (a name or ``NAME:KEY=VALUE...`` spec) or ``"gt"``."""
+    """Overlay colour (BGR) of a normalization (a name or ``NAME:KEY=VALUE...`` spec) or ``"gt"``."""
     from alcn_cv.enhance.registry import parse_spec
 
     return COLORS.get(parse_spec(name)[0], OTHER_COLOR)
@@ -206,7 +206,7 @@ def main(
     output: str | Path,
     K: np.ndarray | None = None,
     *,
-    normalizer: str | None = None,
+    normalization: str | None = None,
     overlay: str | Path | None = None,
     method: str = "usac_default",
     n_features: int = 1000,
@@ -224,7 +224,7 @@ def main(
     Args:
         model_path: ``detector="features"``: a part model (``.npz``, ``alcn pose build``);
             ``detector="corners"``: a corner detector (``.onnx``, ``alcn pose train-corners``).
-        normalizer: the normalizer applied first (default: the one the model was made after, recorded in it; a
+        normalization: the normalization applied first (default: the one the model was made after, recorded in it; a
             part model tracked after another one warns, a corner detector's is an error).
         K: ``(3, 3)`` intrinsics; default: those stored in the part model (:func:`camera_matrix_for`).
         min_inliers: default :data:`MIN_INLIERS` of the detector.
@@ -245,26 +245,26 @@ def main(
             )
     if detector == "features":
         model = part_model.load(model_path)
-        det: PartDetector = FeaturePartDetector(model, normalizer or model.normalizer, n_features=n_features)
-        if normalizer is not None and not same_method(normalizer, model.normalizer):
+        det: PartDetector = FeaturePartDetector(model, normalization or model.normalization, n_features=n_features)
+        if normalization is not None and not same_method(normalization, model.normalization):
             logger.warning(
-                "%s was built after the normalizer %r; tracking after %r, its descriptors may not match",
+                "%s was built after the normalization %r; tracking after %r, its descriptors may not match",
                 model_path,
-                model.normalizer,
-                normalizer,
+                model.normalization,
+                normalization,
             )
-        normalizer = normalizer or model.normalizer
+        normalization = normalization or model.normalization
         corners, units = model.corners, model.units
         model_K = model.extra.get("K")
     elif detector == "corners":
         from pose.corners import CornerDetector
 
         det = CornerDetector(model_path)
-        if normalizer not in (None, det.normalizer_name):
+        if normalization not in (None, det.normalization_spec):
             raise InputError(
-                f"{model_path} was trained after the normalizer {det.normalizer_name!r}, not {normalizer!r}"
+                f"{model_path} was trained after the normalization {det.normalization_spec!r}, not {normalization!r}"
             )
-        normalizer, corners, units = det.normalizer_name, det.corners, det.units
+        normalization, corners, units = det.normalization_spec, det.corners, det.units
         model_K = None
     else:
         raise InputError(f"unknown detector {detector!r}; choose 'features' or 'corners'")
@@ -299,7 +299,7 @@ def main(
             if writer is not None:
                 vis = frame.copy()
                 if res.estimate.ok:
-                    draw_box(vis, corners, res.estimate.rvec, res.estimate.tvec, K, color_for(normalizer), dist=dist)
+                    draw_box(vis, corners, res.estimate.rvec, res.estimate.tvec, K, color_for(normalization), dist=dist)
                 writer.write(res.name, vis)
     make_folder(output.parent)
     write_json(output, scene_gt)
@@ -308,7 +308,7 @@ def main(
         "frames": len(scene_gt),
         "tracked": tracked,
         "fps": len(times) / max(sum(times), 1e-9),
-        "normalizer": normalizer,
+        "normalization": normalization,
         "detector": detector,
         "model": str(model_path),
         "units": units,

@@ -91,13 +91,13 @@ def extract_features(
     seq: TrainingSequence,
     feature: str = "ORB",
     n_features: int = 4000,
-    normalizer: str = "none",
+    normalization: str = "none",
     masks: dict[str, np.ndarray] | None = None,
     progress: bool = True,
 ) -> dict[str, Features]:
     """Features of every view of ``seq`` on its normalized grayscale image (``progress``: a progress bar)."""
     det = create_feature(feature, n_features)
-    norm = from_spec(normalizer)
+    norm = from_spec(normalization)
     out = {}
     for v in tqdm(seq.views, desc="features", unit="img", leave=False, disable=not progress):
         img = io.read_image(seq.image_dir / v.name)

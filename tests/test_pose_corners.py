@@ -46,7 +46,7 @@ def random_net(tmp_path_factory):
     meta = {
         "format": pc.FORMAT_NAME,
         "version": pc.FORMAT_VERSION,
-        "normalizer": "none",
+        "normalization": "none",
         "scale": 0.5,
         "input_mean": 0.5,
         "input_std": 0.25,
@@ -318,7 +318,7 @@ def test_onnx_matches_torch(random_net):
     got = det.outputs(image)
     assert got.shape == ref.shape == (25, 12, 16) and np.ptp(ref) > 1e-3
     np.testing.assert_allclose(got, ref, atol=1e-4)
-    assert det.corners.shape == (8, 3) and det.scale == 0.5 and det.normalizer_name == "none"
+    assert det.corners.shape == (8, 3) and det.scale == 0.5 and det.normalization_spec == "none"
 
 
 def test_runs_where_torch_cannot_be_imported(random_net, run_without_torch):
@@ -372,8 +372,8 @@ def test_bad_files(tmp_path, random_net):
     )  # 16 parts, 8 outputs
     with pytest.raises(WeightFileError, match="16 parts but a network for 8"):
         pc.CornerDetector(wrong)
-    with pytest.raises(InputError, match="trained after the normalizer 'none'"):
-        track.main(random_net[1], tmp_path, tmp_path / "p.json", np.eye(3), normalizer="alcn", detector="corners")
+    with pytest.raises(InputError, match="trained after the normalization 'none'"):
+        track.main(random_net[1], tmp_path, tmp_path / "p.json", np.eye(3), normalization="alcn", detector="corners")
 
 
 def _parser():
@@ -409,7 +409,7 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     )
     assert args.func(args) == 0
     meta = pc.read_metadata(onnx)
-    assert meta["normalizer"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
+    assert meta["normalization"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
     assert meta["fit"]["device"] == "cpu" and meta["conf"] == "box"
     # the recipe is recorded whole: the preset with the settings
     expected = corner_train.CornerRecipe(iterations=12, copies=0, batch_size=24)
@@ -648,11 +648,11 @@ def test_table1_rows_of_the_corner_detector(posedata, tmp_path):
     from pose import evaluate
 
     with pytest.raises(InputError, match="unknown detectors"):
-        evaluate.main(posedata, tmp_path, normalizers=["none"], detectors=["cnn"])
+        evaluate.main(posedata, tmp_path, normalizations=["none"], detectors=["cnn"])
     result = evaluate.main(
         posedata,
         tmp_path,
-        normalizers=["none"],
+        normalizations=["none"],
         detectors=["corners"],
         seeds=2,
         corner_recipe=corner_train.CornerRecipe(iterations=5, copies=0),
@@ -682,5 +682,14 @@ def test_eval_removes_an_earlier_runs_models_first(posedata, tmp_path, monkeypat
 
     monkeypatch.setattr(evaluate, "build_model", stop)
     with pytest.raises(RuntimeError, match="first model"):
-        evaluate.main(posedata, out, normalizers=["none"], progress=False)
+        evaluate.main(posedata, out, normalizations=["none"], progress=False)
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]  # what the command did not write stays
+
+
+def test_version_3_names_the_normalization_normalizer(random_net, tmp_path):
+    meta = pc.read_metadata(random_net[1])
+    meta["version"] = 3
+    meta["normalizer"] = meta.pop("normalization")
+    old = corner_train.export_onnx(random_net[0], tmp_path / "v3.onnx", meta)
+    assert pc.read_metadata(old)["normalization"] == "none"
+    assert pc.CornerDetector(old).normalization_spec == "none"

@@ -18,7 +18,7 @@ def test_report_table_and_plot(tmp_path):
 
 def test_missing_dataset(tmp_path):
     with pytest.raises(DatasetError, match="train/000001"):
-        evaluate.main(tmp_path, tmp_path / "out", normalizers=["none"])
+        evaluate.main(tmp_path, tmp_path / "out", normalizations=["none"])
 
 
 def test_normalizer_specs_name_parameters_and_files():

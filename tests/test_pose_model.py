@@ -130,3 +130,17 @@ def test_files_have_normal_permissions(tmp_path):
     for p in (path, path.with_suffix(".ply")):
         assert p.stat().st_mode & 0o777 == 0o666 & ~umask
     assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary file left
+
+
+def test_version_2_names_the_normalization_normalizer(tmp_path):
+    model = _model()
+    model.normalization = "clahe"
+    path = pm.save(model, tmp_path / "m.npz")
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    header = json.loads(str(arrays["header"]))
+    header["version"] = 2
+    header["normalizer"] = header.pop("normalization")
+    arrays["header"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "v2.npz", **arrays)
+    assert pm.load(tmp_path / "v2.npz").normalization == "clahe"

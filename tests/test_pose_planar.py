@@ -24,8 +24,8 @@ def _texture(seed: int = 0, size: tuple[int, int] = (360, 480)) -> np.ndarray:
     return img.astype(np.uint8)
 
 
-def _solve(target: planar.PlanarTarget, image: np.ndarray, normalizer: str = "none"):
-    det = planar.feature_detector(target, normalizer)
+def _solve(target: planar.PlanarTarget, image: np.ndarray, normalization: str = "none"):
+    det = planar.feature_detector(target, normalization)
     corr = det.detect(image)
     return PoseSolver(target.K, min_inliers=12, iterations=2000, outline=target.model.corners).solve(
         corr.object_points, corr.image_points
@@ -120,7 +120,7 @@ def test_planar_on_a_webcam_scene(shared_data, tmp_path):
         tmp_path,
         root,
         scenes=["mexico"],
-        normalizers=["none"],
+        normalizations=["none"],
         detectors=["features", "corners"],
         max_frames=3,
         recipe=recipe,
@@ -163,5 +163,5 @@ def test_planar_command_takes_the_recipe_and_the_normalizations(tmp_path, monkey
         ]
     )
     assert args.func(args) == 0
-    assert seen[0]["normalizers"] == ["none", "dog"]
+    assert seen[0]["normalizations"] == ["none", "dog"]
     assert seen[0]["recipe"] == dataclasses.replace(corner_confs["planar"], iterations=3)

@@ -110,20 +110,20 @@ def test_track_video_names_frames_in_order_and_uses_the_model_camera(tmp_path, c
 def test_a_part_model_is_tracked_after_the_normalizer_it_was_built_after(tmp_path, caplog):
     tex = _texture()
     model = _planar_model(tex)
-    model.normalizer = "clahe"
+    model.normalization = "clahe"
     pm.save(model, tmp_path / "m.npz")
     frames = tmp_path / "frames"
     frames.mkdir()
     r, t = _poses(1)[0]
     cv2.imwrite(str(frames / "0.png"), _render(tex, r, t))
-    assert track.main(tmp_path / "m.npz", frames, tmp_path / "a.json", K, n_features=800)["normalizer"] == "clahe"
+    assert track.main(tmp_path / "m.npz", frames, tmp_path / "a.json", K, n_features=800)["normalization"] == "clahe"
     with caplog.at_level("WARNING", logger="pose.track"):
-        summary = track.main(tmp_path / "m.npz", frames, tmp_path / "b.json", K, normalizer="none", n_features=800)
-    assert summary["normalizer"] == "none" and "built after the normalizer 'clahe'" in caplog.text
+        summary = track.main(tmp_path / "m.npz", frames, tmp_path / "b.json", K, normalization="none", n_features=800)
+    assert summary["normalization"] == "none" and "built after the normalization 'clahe'" in caplog.text
     caplog.clear()
     with caplog.at_level("WARNING", logger="pose.track"):  # the same method, its default given
         track.main(
-            tmp_path / "m.npz", frames, tmp_path / "d.json", K, normalizer="clahe:clip_limit=2.0", n_features=800
+            tmp_path / "m.npz", frames, tmp_path / "d.json", K, normalization="clahe:clip_limit=2.0", n_features=800
         )
     assert "built after" not in caplog.text
     with pytest.raises(InputError, match=r"are 320x240 but the calibration is for 1280x960"):

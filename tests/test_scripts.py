@@ -24,7 +24,7 @@ def test_help_says_what_the_script_does_and_writes(script):
 
 @pytest.mark.shared_data
 def test_the_feature_matching_example_runs(shared_data, tmp_path):
-    """The OpenCV app's example, end to end on the cookie box: every normalizer finds matches that agree."""
+    """The OpenCV app's example, end to end on the cookie box: every normalization finds matches that agree."""
     video = shared_data / "cookie_box" / "box.mp4"
     if not video.is_file():
         pytest.skip(f"{video} not found")
