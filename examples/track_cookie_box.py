@@ -29,6 +29,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import ALCNError
 from alcn_cv.shared_data import shared_data_dir
 from pose import build, track
@@ -79,7 +80,8 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     video = args.data / "box.mp4"
     model_path = args.out / "cookie_box_model.npz"
-    if not model_path.is_file():
+    # a model of an earlier run is reused when it was built after the same normalization
+    if not model_path.is_file() or not same_method(part_model.load(model_path).normalization, args.normalization):
         build.main(
             video,
             model_path,

@@ -177,8 +177,10 @@ def build(
             seq.views[0].K[1, 1],
             "; their ratio moved: more frames or views from more directions" if moved else "",
         )
-    elif not registered:  # the camera the model was built with, for `alcn pose track`
-        model.extra["K"] = np.asarray(seq.views[0].K, np.float64).tolist()
+    elif not registered or all(np.allclose(v.K, seq.views[0].K) for v in seq.views):
+        model.extra["K"] = np.asarray(seq.views[0].K, np.float64).tolist()  # the camera, for `alcn pose track`
+    if "K" in model.extra:
+        model.extra["image_size"] = list(seq.size)  # the frames that camera is for (extract_features read them)
     return model, cams
 
 
@@ -240,6 +242,11 @@ def main(
                 "window": 8,
                 "refine_focal": refine_focal,
             }
+        elif input_path.is_file():
+            raise InputError(
+                f"{input_path}: build from a video ({', '.join(sorted(io.VIDEO_SUFFIXES))}) or a registered sequence's "
+                "folder (a BOP scene, a COLMAP model or a Middlebury set)"
+            )
         else:
             seq = load_sequence(input_path, images)
             video = {"box_units": box_units}
@@ -258,13 +265,14 @@ def main(
     plot_model(model, cams, path.with_name(path.stem + "_cameras.png"))
     if "mean_abs_relative_size_error" in model.box_fit:
         error = model.box_fit["mean_abs_relative_size_error"]
+        # with the corners of the box file the model's box is exact: the fit only says how its points cover it
+        poor = error > SUSPICIOUS and "corner_error" not in model.box_fit
         logger.log(
-            logging.WARNING if error > SUSPICIOUS else logging.INFO,
-            "box fit error vs the known size: %.1f%% (per axis %s)%s",
+            logging.WARNING if poor else logging.INFO,
+            "box fit error vs the known size: %.1f%% (per axis %s %s)%s",
             100 * error,
             np.round(model.box_fit["size_error"], 3).tolist(),
-            "; the model's points fit the box poorly: more frames or views from more directions"
-            if error > SUSPICIOUS
-            else "",
+            model.units,
+            "; the model's points fit the box poorly: more frames or views from more directions" if poor else "",
         )
     return path

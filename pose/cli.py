@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from alcn_cv.cli import add_conf_options, add_progress_option
+from alcn_cv.errors import InputError
 
 
 def _intrinsics(values: list[float] | None) -> np.ndarray | None:
@@ -21,7 +22,7 @@ def _intrinsics(values: list[float] | None) -> np.ndarray | None:
 def _build(args: argparse.Namespace) -> int:
     from pose import build
 
-    build.main(
+    path = build.main(
         args.input,
         args.output,
         images=args.images,
@@ -38,6 +39,7 @@ def _build(args: argparse.Namespace) -> int:
         refine_focal=args.refine_focal,
         progress=not args.no_progress,
     )
+    print(f"part model -> {path} (its points: {path.with_suffix('.ply')}, its cameras: {path.stem}_cameras.png)")
     return 0
 
 
@@ -73,7 +75,11 @@ def _track(args: argparse.Namespace) -> int:
         image_size=size,
         progress=not args.no_progress,
     )
-    print(f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps -> {args.output}")
+    lost = summary["frames"] - summary["tracked"]
+    why = f"; {lost} lost, most often: {summary['lost_reason']}" if lost else ""
+    print(
+        f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps{why} -> {args.output}"
+    )
     return 0
 
 
@@ -90,6 +96,8 @@ def _recipe(args: argparse.Namespace):
 def _eval(args: argparse.Namespace) -> int:
     from pose import evaluate
 
+    if not (args.middlebury or args.data):
+        raise InputError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
     normalizations = args.normalizations or evaluate.DEFAULT_NORMALIZATIONS
     recipe = _recipe(args)
     if args.middlebury:
@@ -116,8 +124,8 @@ def _eval(args: argparse.Namespace) -> int:
             command=_command(),
             progress=not args.no_progress,
         )
-    if not (args.middlebury or args.data):
-        raise ValueError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
+    written = [name for name, given in (("middlebury.md", args.middlebury), ("table1.md", args.data)) if given]
+    print("report -> " + ", ".join(str(Path(args.out) / name) for name in written))
     return 0
 
 
@@ -178,11 +186,10 @@ def _add_recipe(parser: argparse.ArgumentParser, default: str) -> None:
     add_conf_options(parser, default, presets, "iterations=1000")
 
 
-#: ``--normalization``'s help: why the pose commands normalize nothing by default.
+#: ``--normalization``'s help: the pose commands normalize nothing unless asked.
 NORMALIZATION_HELP = (
-    "the normalization applied first, a spec NAME[:KEY=VALUE...] (default none: on the rendered "
-    "Table 1 the default ALCN posed fewer frames than none with either part detector, and none costs "
-    "nothing per frame; see `alcn pose eval`)"
+    "the normalization applied first, a spec NAME[:KEY=VALUE...] (default none, which costs nothing per frame; "
+    "`alcn pose eval` compares normalizations on your sequences, docs/results.md on the rendered Table 1)"
 )
 
 
@@ -322,7 +329,7 @@ def _bench_corners(args: argparse.Namespace) -> int:
     if calibration is not None:
         K = calibration.K
     if K is None:
-        raise ValueError("give the intrinsics of the frames: --K FX FY CX CY or --camera camera.yaml")
+        raise InputError("give the intrinsics of the frames: --K FX FY CX CY or --camera camera.yaml")
     r = corner_bench.main(
         args.detector,
         args.input,

@@ -254,7 +254,10 @@ def load(path: str | Path) -> PartModel:
     if not path.is_file():
         raise WeightFileError(f"{path}: part model not found")
     if path.suffix.lower() == ".ply":
-        raise WeightFileError(f"{path}: the point cloud of a part model; the model is the .npz beside it")
+        beside = path.with_suffix(".npz")
+        if beside.is_file():
+            raise WeightFileError(f"{path}: the point cloud of a part model; the model is {beside}")
+        raise WeightFileError(f"{path}: a point cloud or mesh, not a part model (the .npz of `alcn pose build`)")
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}

@@ -279,6 +279,9 @@ def plot_frames(
                 cv2.putText(vis, label, (8, 20 + 18 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.55, colors[k % len(colors)], 2)
             cv2.putText(vis, name, (8, vis.shape[0] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 2)
             tiles[name] = vis
+    missing = [n for n in names if n not in tiles]
+    if missing:
+        logger.warning("%s holds no frame named %s; %s leaves it out", video, ", ".join(missing), Path(path).name)
     io.write_image(path, np.hstack([tiles[n] for n in names if n in tiles]))
     return Path(path)
 

@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import re
 import time
+from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,7 +31,7 @@ from tqdm import tqdm
 from alcn_cv import io
 from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import InputError
-from alcn_cv.io import check_writable, make_folder, write_json
+from alcn_cv.io import check_writable, make_folder, output_path, write_json
 from alcn_cv.report import machine
 from pose import model as part_model
 from pose.model import BOX_EDGES
@@ -200,6 +202,23 @@ def camera_matrix_for(
     return K
 
 
+def _overlay_path(overlay: str | Path, source: str | Path) -> Path:
+    """The overlay's path, checked before the tracking: a video (:data:`alcn_cv.io.VIDEO_SUFFIXES`) or a folder
+    of PNGs (no suffix), not the input."""
+    overlay = Path(overlay)
+    if overlay.suffix and not io.is_video(overlay):
+        raise InputError(
+            f"--overlay {overlay}: a video ({', '.join(sorted(io.VIDEO_SUFFIXES))}) or a folder without a suffix"
+        )
+    if overlay.resolve() == Path(source).resolve():
+        raise InputError(f"--overlay {overlay} is the input; write the overlay elsewhere")
+    if io.is_video(overlay):
+        check_writable(overlay)
+    else:
+        make_folder(overlay)
+    return overlay
+
+
 def main(
     model_path: str | Path,
     source: str | Path,
@@ -232,18 +251,24 @@ def main(
             error.
 
     Returns:
-        A summary dict: frames, tracked frames, fps, events, output paths.
+        A summary dict: frames, tracked frames, the most frequent reason a frame was lost, fps, events.
+
+    Raises:
+        InputError: an output that is the input, a suffix other than ``.json`` (the poses) or a video's (the
+            overlay), frames of another size than the camera's, or settings out of range.
     """
-    output = Path(output)
-    check_writable(output)  # before the tracking, not after it
-    if image_size is not None:
-        _, first = next(io.iter_frames(source, max_frames=1))
-        if first.shape[1::-1] != tuple(image_size):
-            raise InputError(
-                f"the frames of {source} are {first.shape[1]}x{first.shape[0]} but the calibration is for "
-                f"{image_size[0]}x{image_size[1]}; calibrate at this resolution"
-            )
+    output = output_path(output, ".json", "the poses")  # before the tracking, not after it
+    if overlay is not None:
+        overlay = _overlay_path(overlay, source)
+    if reprojection_error <= 0 or n_features < 0 or (min_inliers is not None and min_inliers < 4):
+        raise InputError(
+            "reprojection_error must be > 0 px, n_features >= 0 (0: all) and min_inliers >= 4 (a pose needs 4 points); "
+            f"got {reprojection_error}, {n_features} and {min_inliers}"
+        )
+    model_size = None
     if detector == "features":
+        if Path(model_path).suffix.lower() == ".onnx":
+            raise InputError(f"{model_path} is a corner detector: track with it by --detector corners")
         model = part_model.load(model_path)
         det: PartDetector = FeaturePartDetector(model, normalization or model.normalization, n_features=n_features)
         if normalization is not None and not same_method(normalization, model.normalization):
@@ -255,7 +280,7 @@ def main(
             )
         normalization = normalization or model.normalization
         corners, units = model.corners, model.units
-        model_K = model.extra.get("K")
+        model_K, model_size = model.extra.get("K"), model.extra.get("image_size")
     elif detector == "corners":
         from pose.corners import CornerDetector
 
@@ -268,6 +293,16 @@ def main(
         model_K = None
     else:
         raise InputError(f"unknown detector {detector!r}; choose 'features' or 'corners'")
+    if K is None and model_size is not None:  # the model's camera: it holds for frames of its size only
+        image_size = tuple(model_size)
+    if image_size is not None:
+        _, first = next(io.iter_frames(source, max_frames=1))
+        if first.shape[1::-1] != tuple(image_size):
+            of = "the calibration" if K is not None else f"the camera of {model_path}"
+            raise InputError(
+                f"the frames of {source} are {first.shape[1]}x{first.shape[0]} but {of} is for "
+                f"{image_size[0]}x{image_size[1]}; give the intrinsics at this resolution (--K or --camera)"
+            )
     K = camera_matrix_for(model_K, K, model_path)
     min_inliers = MIN_INLIERS[detector] if min_inliers is None else min_inliers
     tracker = PoseTracker(
@@ -304,9 +339,14 @@ def main(
     make_folder(output.parent)
     write_json(output, scene_gt)
     tracked = sum(bool(v) for v in scene_gt.values())
+    # the reasons carry their frame's counts: grouped by their words, the first of the most frequent group
+    lost = [f["lost_reason"] for f in info.values() if f["lost_reason"]]
+    groups = Counter(re.sub(r"[\d.]+%?", "#", r) for r in lost)
+    most = groups.most_common(1)[0][0] if groups else None
     summary = {
         "frames": len(scene_gt),
         "tracked": tracked,
+        "lost_reason": next((r for r in lost if re.sub(r"[\d.]+%?", "#", r) == most), None),
         "fps": len(times) / max(sum(times), 1e-9),
         "normalization": normalization,
         "detector": detector,

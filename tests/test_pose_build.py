@@ -127,6 +127,9 @@ def test_bad_inputs(tmp_path):
         sequence.load_sequence(tmp_path / "missing.mp4")
     with pytest.raises(InputError, match="intrinsics"):
         build.main(tmp_path / "v.mp4", tmp_path / "m.npz") if (tmp_path / "v.mp4").write_bytes(b"x") else None
+    (tmp_path / "photo.jpg").write_bytes(b"x")
+    with pytest.raises(InputError, match="build from a video"):
+        build.main(tmp_path / "photo.jpg", tmp_path / "m.npz")
 
 
 def test_triangulation_with_fixed_poses_on_middlebury(shared_data, tmp_path):
@@ -147,6 +150,9 @@ def test_triangulation_with_fixed_poses_on_middlebury(shared_data, tmp_path):
     lo, hi = np.array([-0.073568, 0.021728, -0.012445]), np.array([0.028855, 0.181892, 0.062736])
     inside = np.all((model.points3d > lo - 0.01) & (model.points3d < hi + 0.01), axis=1)
     assert inside.mean() > 0.9
+    # the views share one camera: the model keeps it, and the size of the frames it is for, for `pose track`
+    np.testing.assert_allclose(model.extra["K"], views[seq.views[0].name].K)
+    assert model.extra["image_size"] == list(cv2.imread(str(src / seq.views[0].name)).shape[1::-1])
     # seeded RANSAC and mapping: the same model every time
     again, _ = build.build(seq, feature="SIFT", n_features=4000, work_dir=tmp_path)
     np.testing.assert_array_equal(again.points3d, model.points3d)

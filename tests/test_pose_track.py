@@ -262,3 +262,45 @@ def test_track_command_prints_its_last_line_once(tmp_path, capsys, caplog):
     captured = capsys.readouterr()
     text = captured.out + captured.err + caplog.text
     assert text.count("tracked 2 of 2 frames") == 1, text
+
+
+def test_outputs_and_settings_are_checked_before_the_tracking(tmp_path):
+    tex = _texture()
+    model = _planar_model(tex)
+    model.extra["K"], model.extra["image_size"] = K.tolist(), [640, 480]
+    pm.save(model, tmp_path / "m.npz")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for i, (r, t) in enumerate(_poses(2)):
+        cv2.imwrite(str(frames / f"{i:04d}.png"), _render(tex, r, t))
+    before = sorted(p.read_bytes() for p in frames.iterdir())
+    m = tmp_path / "m.npz"
+    for kwargs, match in (
+        ({"overlay": frames}, "is the input"),
+        ({"overlay": tmp_path / "p.json"}, "a video .* or a folder without a suffix"),
+        ({"overlay": tmp_path / "ov.gif"}, "a video .* or a folder without a suffix"),
+        ({"reprojection_error": -1.0}, "reprojection_error must be > 0"),
+        ({"min_inliers": 3}, "min_inliers >= 4"),
+    ):
+        with pytest.raises(InputError, match=match):
+            track.main(m, frames, tmp_path / "p.json", K, **kwargs)
+    with pytest.raises(InputError, match="must end in .json|suffix"):
+        track.main(m, frames, tmp_path / "p.txt", K)
+    with pytest.raises(InputError, match="--detector corners"):
+        track.main(tmp_path / "c.onnx", frames, tmp_path / "p.json", K)
+    with pytest.raises(InputError, match=r"are 320x240 but the camera of .*m.npz is for 640x480"):
+        track.main(m, frames, tmp_path / "p.json")  # the model's camera, for frames of another size
+    assert sorted(p.read_bytes() for p in frames.iterdir()) == before and not (tmp_path / "p.json").exists()
+
+
+def test_the_summary_says_why_frames_were_lost(tmp_path):
+    tex = _texture()
+    pm.save(_planar_model(tex), tmp_path / "m.npz")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    r, t = _poses(1)[0]
+    cv2.imwrite(str(frames / "0.png"), _render(tex, r, t))
+    for i in (1, 2):
+        cv2.imwrite(str(frames / f"{i}.png"), np.full((SIZE[1], SIZE[0], 3), 90, np.uint8))
+    summary = track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800)
+    assert summary["tracked"] == 1 and "match" in summary["lost_reason"]
