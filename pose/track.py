@@ -238,7 +238,8 @@ def main(
 ) -> dict:
     """Track the box through ``source`` and write ``output`` (scene_gt JSON, keyed by the frame
     names of :func:`alcn_cv.io.iter_frames`: ``frame_000000``, ... for a video, the file stems for a
-    folder; the overlay PNGs are named alike).
+    folder; the overlay PNGs are named alike). Its translations are in the model's units (``units`` in the
+    ``_info.json`` beside it), where BOP's own are millimetres.
 
     Args:
         model_path: ``detector="features"``: a part model (``.npz``, ``alcn pose build``);

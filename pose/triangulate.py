@@ -224,6 +224,8 @@ def reconstruct_incremental(
     # with two, the cookie-box video gave 5961 or 5940 points from one run to the next
     opts.num_threads = 1
     make_folder(out_dir)
+    # one thread, no progress of its own: a minute on a few dozen frames, said before it starts
+    logger.info("incremental mapping of %d images (pycolmap, one thread)", len(seq.views))
     with pycolmap_log():
         recs = pycolmap.incremental_mapping(db_path, seq.image_dir, out_dir, opts)
     if not recs:
