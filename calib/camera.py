@@ -32,6 +32,7 @@ from alcn_cv.formats.colmap import ColmapCamera, camera_from_opencv, write_text_
 from alcn_cv.io import (
     VIDEO_SUFFIXES,
     atomic_path,
+    check_writable,
     count_frames,
     is_video,
     iter_frames,
@@ -429,7 +430,8 @@ def calibrate(
 
 
 def save_calibration(calib: Calibration, out_dir: str | os.PathLike, report: bool = True) -> dict[str, Path]:
-    """Write ``camera.yaml``, ``colmap/``, ``views.json`` and (optionally) ``calibration.png``.
+    """Write ``camera.yaml``, ``colmap/``, ``views.json`` and (optionally) ``calibration.png``; without
+    ``report`` an earlier ``calibration.png`` in ``out_dir`` is removed.
 
     Returns:
         Paths of the written files by kind.
@@ -455,6 +457,8 @@ def save_calibration(calib: Calibration, out_dir: str | os.PathLike, report: boo
         from .report import plot_calibration
 
         paths["report"] = plot_calibration(calib, out / "calibration.png")
+    else:  # an earlier run's picture would stand beside this calibration as if it showed it
+        (out / "calibration.png").unlink(missing_ok=True)
     return paths
 
 
@@ -544,7 +548,18 @@ def main(
         flags: ``cv2.CALIB_*`` flags.
         report: also write ``calibration.png``.
         progress: a progress bar over the frames searched for the board.
+
+    Raises:
+        InputError: ``max_views`` below :data:`MIN_VIEWS`, an output folder that cannot be written
+            (both before the board is searched for), or bad input (see :func:`detect_in_images`,
+            :func:`calibrate`).
     """
+    if max_views < MIN_VIEWS:  # else the selection, not the images, would leave too few views, found only at the end
+        raise InputError(
+            f"--max-views {max_views}: a calibration needs at least {MIN_VIEWS} views (about "
+            f"{RECOMMENDED_VIEWS}-20 recommended); give --max-views {RECOMMENDED_VIEWS} or more"
+        )
+    check_writable(Path(out_dir) / "camera.yaml")  # a folder under a file fails now, not after the calibration
     source = Path(source)
     if source.is_dir():
         views, size = detect_in_images(list_images(source), board, progress)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -12,6 +13,9 @@ import numpy as np
 from alcn_cv.cli import add_progress_option
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
+
+if TYPE_CHECKING:
+    from .register import Registration
 
 _BOARD_DEFAULTS = {"chessboard": {"square": 25.0}, "charuco": {"cols": 7, "rows": 5, "square": 35.0, "marker": 26.0}}
 
@@ -134,6 +138,22 @@ def _load_reference(path: Path, unit: str) -> dict[str, tuple[np.ndarray, np.nda
 
 
 def _register(args: argparse.Namespace) -> int:
+    try:
+        reg = _registration(args)
+    except FileExistsError:
+        if args.overwrite or not Path(args.out).exists():
+            raise
+        # atomic_output_dir's message also names the keyword of the Python call (overwrite=True)
+        raise InputError(f"{args.out} exists (--overwrite replaces it)") from None
+    print(
+        f"registered {len(reg.registered)} of {len(reg.frames)} frames ({reg.units}); dropped {len(reg.dropped)} "
+        f"(reasons in {Path(args.out) / 'registration.json'}); BOP: {Path(args.out) / 'scene_camera.json'}, "
+        f"COLMAP: {Path(args.out) / 'colmap'} (images in rgb/)"
+    )
+    return 0
+
+
+def _registration(args: argparse.Namespace) -> Registration:
     from .camera import load_calibration
     from .register import SfmSettings, register_charuco, register_colmap
 
@@ -141,7 +161,7 @@ def _register(args: argparse.Namespace) -> int:
     if args.method == "board":
         if calib is None:
             raise InputError("--method board needs --camera camera.yaml (from `alcn calib camera`)")
-        reg = register_charuco(
+        return register_charuco(
             args.source,
             args.out,
             calib,
@@ -153,34 +173,27 @@ def _register(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
             progress=not args.no_progress,
         )
-    else:
-        known = None
-        if args.known_distance:
-            a, b, mm = args.known_distance
-            try:
-                known = (a, b, float(mm))
-            except ValueError:
-                raise InputError(f"--known-distance: {mm!r} is not a number of millimetres") from None
-        reference = _load_reference(Path(args.reference), args.reference_unit) if args.reference else None
-        settings = SfmSettings(
-            step=args.step, max_frames=args.max_frames, max_features=args.max_features, num_threads=args.threads
-        )
-        reg = register_colmap(
-            args.source,
-            args.out,
-            calib,
-            known_distance=known,
-            reference=reference,
-            settings=settings,
-            overwrite=args.overwrite,
-            progress=not args.no_progress,
-        )
-    print(
-        f"registered {len(reg.registered)} of {len(reg.frames)} frames ({reg.units}); dropped {len(reg.dropped)} "
-        f"(reasons in {Path(args.out) / 'registration.json'}); BOP: {Path(args.out) / 'scene_camera.json'}, "
-        f"COLMAP: {Path(args.out) / 'colmap'} (images in rgb/)"
+    known = None
+    if args.known_distance:
+        a, b, mm = args.known_distance
+        try:
+            known = (a, b, float(mm))
+        except ValueError:
+            raise InputError(f"--known-distance: {mm!r} is not a number of millimetres") from None
+    reference = _load_reference(Path(args.reference), args.reference_unit) if args.reference else None
+    settings = SfmSettings(
+        step=args.step, max_frames=args.max_frames, max_features=args.max_features, num_threads=args.threads
     )
-    return 0
+    return register_colmap(
+        args.source,
+        args.out,
+        calib,
+        known_distance=known,
+        reference=reference,
+        settings=settings,
+        overwrite=args.overwrite,
+        progress=not args.no_progress,
+    )
 
 
 def _undistort(args: argparse.Namespace) -> int:
@@ -257,7 +270,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default="board",
         help="board (a ChArUco board in view) or sfm (pycolmap, no board) (default board)",
     )
-    p.add_argument("--camera", help="camera.yaml from `alcn calib camera` (required for board; optional for sfm)")
+    p.add_argument(
+        "--camera",
+        help="camera.yaml from `alcn calib camera` (required for board; optional for sfm, which without it "
+        "estimates one focal length, for square pixels, with the principal point at the image centre)",
+    )
     _add_board_args(p, with_chessboard=False)
     p.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
     p.add_argument("--max-frames", type=int, help="use at most this many frames")
@@ -286,7 +303,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "undistort",
         help="undistort an image, a folder of images or a video",
-        description="Remove lens distortion; writes the pinhole camera of the output as YAML beside it.",
+        description="Remove lens distortion, and write the pinhole camera of the output (no distortion) as "
+        "YAML: for an output image or video, <stem>.camera.yaml beside it (out.mp4: out.camera.yaml); for an "
+        "output folder, camera.yaml inside it.",
     )
     p.add_argument("source", help="image, folder of images, or video")
     p.add_argument("output", help="output image, folder, or video (.mp4/.avi)")

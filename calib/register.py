@@ -55,7 +55,7 @@ from alcn_cv.formats.colmap import (
     model_from_pycolmap,
     write_text_model,
 )
-from alcn_cv.io import count_frames, iter_frames, write_image, write_json
+from alcn_cv.io import check_writable, count_frames, iter_frames, write_image, write_json
 
 from .board import BoardSpec, Detection
 from .camera import Calibration
@@ -175,6 +175,15 @@ def board_pose(
     return FrameRegistration("", "ok", rms, n, R_w2c=R, t_w2c=t)
 
 
+@contextlib.contextmanager
+def _output_dir(out_dir: str | os.PathLike, overwrite: bool) -> Iterator[Path]:
+    """:func:`atomic_output_dir` for a registration, after :func:`check_writable`: a path under a file then fails
+    with the one-line "... is a file" of the other commands, not with mkdir's ``[Errno 17] File exists``."""
+    check_writable(out_dir)
+    with atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp:
+        yield tmp
+
+
 def _write_outputs(
     tmp: Path,
     reg: Registration,
@@ -263,8 +272,9 @@ def register_charuco(
         The registration; dropped frames and their reasons are logged and written.
 
     Raises:
-        InputError: not a ChArUco board, frames of another size than the calibration, or
-            fewer than :data:`MIN_REGISTERED` frames registered.
+        InputError: not a ChArUco board, ``out_dir`` under a file, frames of another size than the
+            calibration, or fewer than :data:`MIN_REGISTERED` frames registered.
+        FileExistsError: ``out_dir`` exists (without ``overwrite``, or not an earlier output).
     """
     if board.kind != "charuco":
         raise InputError(
@@ -276,7 +286,7 @@ def register_charuco(
     undistort = Undistorter(calib, keep_K=True)
     K = np.asarray(calib.K, float)
     reg = Registration(K, tuple(calib.image_size))
-    with atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp:
+    with _output_dir(out_dir, overwrite) as tmp:
         (tmp / "rgb").mkdir()
         frames = iter_frames(source, step, max_frames)
         for name, image in tqdm(
@@ -402,10 +412,55 @@ class _SfmFrames:
     out_names: list[str]
     size: tuple[int, int]
 
-    def output_name(self, name: str) -> str | None:
-        """The output image of the input frame ``name`` (a file name is accepted for its stem), or None."""
-        to_out = dict(zip(self.names, self.out_names))
-        return to_out.get(name, to_out.get(Path(name).stem))
+    def input_name(self, name: str) -> str | None:
+        """The input frame that ``name`` means (its name, or a file name for its stem), or None."""
+        for candidate in (name, Path(name).stem):
+            if candidate in self.names:
+                return candidate
+        return None
+
+
+def _listing(names: Sequence[str], most: int = 5) -> str:
+    return ", ".join(names[:most]) + (" ..." if len(names) > most else "")
+
+
+def _by_input_names(
+    frames: _SfmFrames,
+    known_distance: tuple[str, str, float] | None,
+    reference: dict[str, tuple[np.ndarray, np.ndarray]] | None,
+) -> tuple[tuple[str, str, float] | None, dict[str, tuple[np.ndarray, np.ndarray]] | None]:
+    """``known_distance`` and ``reference`` with the names of the input frames they mean, checked before the
+    reconstruction: a wrong name fails in seconds, not after the minutes of SfM.
+
+    Raises:
+        InputError: a ``known_distance`` frame that is no input frame or a distance that is not positive, or fewer
+            than 2 ``reference`` poses of input frames.
+    """
+    after = "input frames, after --step/--max-frames"
+    if known_distance is not None:
+        a, b, mm = known_distance
+        if not mm > 0:
+            raise InputError(f"--known-distance: the distance {mm:g} mm must be positive")
+        names = []
+        for name in (a, b):
+            found = frames.input_name(name)
+            if found is None:
+                raise InputError(
+                    f"--known-distance: {name!r} is not an input frame ({after}: {_listing(frames.names)}); "
+                    "give the file name or stem of one of them"
+                )
+            names.append(found)
+        known_distance = (names[0], names[1], mm)
+    if reference:
+        found_names = {name: frames.input_name(name) for name in reference}
+        matched = {found: reference[name] for name, found in found_names.items() if found is not None}
+        if len(matched) < 2:
+            raise InputError(
+                f"--reference: {len(matched)} of its {len(reference)} poses ({_listing(list(reference))}) are of "
+                f"input frames ({after}: {_listing(frames.names)}); the alignment needs 2"
+            )
+        reference = matched
+    return known_distance, reference
 
 
 def _write_sfm_frames(
@@ -444,15 +499,20 @@ def _reconstruct(
 ) -> ColmapModel:
     """pycolmap SIFT extraction, exhaustive matching and incremental mapping; the largest model.
 
-    With a calibration the shared ``PINHOLE`` camera is held fixed; without, it is estimated.
+    With a calibration its shared ``PINHOLE`` camera is held fixed; without, one shared ``SIMPLE_PINHOLE``
+    camera (one focal length) is estimated, its principal point held at the image centre.
     """
     import pycolmap
 
     reader = pycolmap.ImageReaderOptions()
-    reader.camera_model = "PINHOLE"
     if calib is not None:
         cam = camera_from_opencv(calib.K, None, *frames.size)
+        reader.camera_model = cam.model
         reader.camera_params = ",".join(repr(float(p)) for p in cam.params)
+    else:
+        # Square pixels, as in nearly every camera: with fx and fy both free, SfM trades one against the poses
+        # (Middlebury's temple: fx 1383, fy 1514 for a true 1520, 1526; one focal length: 1516).
+        reader.camera_model = "SIMPLE_PINHOLE"
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.sift.max_num_features = int(settings.max_features)
     extraction.num_threads = int(settings.num_threads)
@@ -507,20 +567,19 @@ def _scale_to_mm(
     reference: dict[str, tuple[np.ndarray, np.ndarray]] | None,
 ) -> None:
     """Bring the model to millimetres, in place: a similarity to reference poses, or a scale from a
-    known distance between two camera centres; without either the units stay arbitrary (warned)."""
+    known distance between two camera centres; without either the units stay arbitrary (warned).
+    The frames are named by their input names (:func:`_by_input_names`)."""
     by_out = {im.name: im for im in model.images.values()}
+    registered = {name: by_out[out] for name, out in zip(frames.names, frames.out_names) if out in by_out}
 
     def image_of(name: str) -> ColmapImage:
-        out = frames.output_name(name)
-        if out is None:
-            raise InputError(f"{name!r} is not an input frame (known: {', '.join(frames.names[:5])} ...)")
-        image = by_out.get(out)
+        image = registered.get(name)
         if image is None:
             raise InputError(f"frame {name!r} was not registered by SfM; choose another frame as reference")
         return image
 
     if reference:
-        known = [n for n in reference if frames.output_name(n) in by_out]
+        known = [n for n in reference if n in registered]
         if len(known) < 2:
             raise InputError(
                 f"only {len(known)} reference frame(s) were registered by SfM; the alignment "
@@ -537,8 +596,8 @@ def _scale_to_mm(
     elif known_distance:
         a, b, mm = known_distance
         d = np.linalg.norm(image_of(a).center - image_of(b).center)
-        if d < 1e-9 or not mm > 0:
-            raise InputError(f"frames {a} and {b} have the same centre, or the distance {mm} is not positive")
+        if d < 1e-9:
+            raise InputError(f"--known-distance: frames {a} and {b} have the same centre; choose two apart")
         _apply_similarity(model, float(mm) / d, np.eye(3), np.zeros(3))
     else:
         logger.warning(
@@ -609,8 +668,8 @@ def register_colmap(
         source: folder of images or a video.
         out_dir: output folder (see the module docstring).
         calib: known intrinsics (held fixed; frames are undistorted first). Without it, one
-            shared ``PINHOLE`` camera is estimated (principal point at the image centre) —
-            calibrate first if the lens distorts.
+            shared ``SIMPLE_PINHOLE`` camera (one focal length: square pixels) is estimated, its
+            principal point at the image centre — calibrate first if the lens distorts.
         known_distance: ``(name_a, name_b, mm)``: the distance between the centres of two
             input frames (names as :func:`alcn_cv.io.iter_frames` gives them, ``frame_000123``
             for videos; a file name with its suffix is accepted too). Sets the scale.
@@ -624,18 +683,21 @@ def register_colmap(
     recorded as ``"units": "arbitrary"`` in ``registration.json``).
 
     Raises:
-        InputError: fewer than 3 frames, no reconstruction, or a reference naming unknown frames.
+        InputError: ``out_dir`` under a file, fewer than 3 frames, a ``known_distance`` or fewer than 2
+            ``reference`` frames that are no input frames (before the reconstruction), or no reconstruction.
+        FileExistsError: ``out_dir`` exists (without ``overwrite``, or not an earlier output).
     """
     source = Path(source)
     units = "mm" if (known_distance or reference) else "arbitrary"
     with (
-        atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp,
+        _output_dir(out_dir, overwrite) as tmp,
         tempfile.TemporaryDirectory() as work,
         _quiet_colmap(),
     ):
         rgb = tmp / "rgb"
         rgb.mkdir()
         frames = _write_sfm_frames(source, rgb, calib, settings, progress)
+        known_distance, reference = _by_input_names(frames, known_distance, reference)
         model = _reconstruct(frames, rgb, Path(work), calib, settings)
         _scale_to_mm(model, frames, known_distance, reference)
         (camera,) = model.cameras.values()

@@ -2,8 +2,9 @@
 
 The output camera is the pinhole ``new_K`` of ``cv2.getOptimalNewCameraMatrix`` with the
 given ``alpha`` (0: only valid pixels, cropped; 1: every source pixel kept, black borders),
-or the input K with ``keep_K``. It is written beside the output as ``camera.yaml`` (zero
-distortion), so that the undistorted images have a calibration of their own.
+or the input K with ``keep_K``. It is written as a camera YAML with zero distortion, so that the
+undistorted images have a calibration of their own: ``<stem>.camera.yaml`` beside an output image
+or video, ``camera.yaml`` inside an output folder.
 """
 
 from __future__ import annotations
@@ -83,8 +84,13 @@ def main(
     Returns:
         The path of the output camera YAML (``camera.yaml`` in the output folder, or
         ``<output stem>.camera.yaml`` beside an output file).
+
+    Raises:
+        InputError: the output is the input (it would be overwritten), or an unreadable source.
     """
     source, output = Path(source), Path(output)
+    if source.resolve() == output.resolve():  # resolved: ./a.png, a link to it and a.png are one file
+        raise InputError(f"the output {output} is the input {source}: it would be overwritten; give another output")
     undistort = Undistorter(calib, alpha, keep_K)
     suffix = source.suffix.lower()
     if source.is_dir():

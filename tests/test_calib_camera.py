@@ -166,3 +166,25 @@ def test_poor_rms_warns(scene, caplog):
         calib = calibrate(views, (640, 480))
     assert calib.rms > 1.0
     assert any("poor calibration" in r.message for r in caplog.records)
+
+
+def test_max_views_below_the_minimum_is_refused_before_the_search(scene_dir, tmp_path, monkeypatch):
+    """--max-views 2 would select 2 of the views found and then blame the images for too few."""
+    from calib import camera
+
+    monkeypatch.setattr(camera, "detect_in_images", lambda *a, **k: pytest.fail("the board was searched for"))
+    with pytest.raises(InputError, match="--max-views 2: a calibration needs at least 3 views"):
+        main(scene_dir, tmp_path / "out", BoardSpec(), max_views=2)
+    assert not (tmp_path / "out").exists()
+
+
+def test_without_report_an_earlier_calibration_png_is_removed(tmp_path):
+    """The picture of an earlier run would stand beside the new camera.yaml as if it showed it."""
+    from calib.camera import Calibration, save_calibration
+
+    (tmp_path / "calibration.png").write_bytes(b"an earlier run's picture")
+    (tmp_path / "mine.png").write_bytes(b"not written by the calibration")
+    K = np.array([[500.0, 0, 319.5], [0, 500, 239.5], [0, 0, 1]])
+    paths = save_calibration(Calibration(K, np.zeros(5), (640, 480), 0.2), tmp_path, report=False)
+    assert "report" not in paths and not (tmp_path / "calibration.png").exists()
+    assert (tmp_path / "mine.png").is_file() and load_calibration(tmp_path / "camera.yaml").rms == pytest.approx(0.2)

@@ -169,3 +169,58 @@ def test_default_charuco_board_on_chessboard_images_names_the_chessboard(shared_
     err = capsys.readouterr().err
     assert rc == 2 and "Traceback" not in err
     assert "--board chessboard --cols 9 --rows 6" in err
+
+
+def test_undistort_help_says_where_the_camera_yaml_goes(capsys):
+    text = _help(capsys, "calib", "undistort")
+    assert "<stem>.camera.yaml beside it" in text and "output folder, camera.yaml inside it" in text
+
+
+def test_undistort_onto_its_input_is_a_one_line_error(tmp_path, capsys):
+    image = tmp_path / "left02.png"
+    cv2.imwrite(str(image), np.zeros((48, 64, 3), np.uint8))
+    write_camera_yaml(tmp_path / "camera.yaml", np.diag([50.0, 50.0, 1.0]), np.zeros(5), (64, 48))
+    rc = alcn(["calib", "undistort", str(image), str(image), "--camera", str(tmp_path / "camera.yaml")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "is the input" in err and "Traceback" not in err
+
+
+def test_camera_max_views_below_the_minimum_is_a_one_line_error(tmp_path, capsys):
+    rc = alcn(["calib", "camera", "--images", str(tmp_path), "--out", str(tmp_path / "o"), "--max-views", "2"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--max-views 2: a calibration needs at least 3 views" in err
+
+
+def test_calib_outputs_under_a_file_or_existing_are_one_line_errors(tmp_path, capsys):
+    """Under a file: "is a file", as the other commands say (not [Errno 17]); an existing --out: the
+    CLI's option, not the Python keyword."""
+    blocker = tmp_path / "afile"
+    blocker.write_text("mine")
+    write_camera_yaml(tmp_path / "camera.yaml", np.diag([50.0, 50.0, 1.0]), np.zeros(5), (64, 48))
+    camera = ["--camera", str(tmp_path / "camera.yaml")]
+    rc = alcn(["calib", "camera", "--images", str(tmp_path), "--out", str(blocker), "--no-report"])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"{blocker} is a file" in err  # before the search finds no image there
+    rc = alcn(["calib", "register", str(tmp_path), *camera, "--out", str(blocker / "x")])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"{blocker} is a file" in err and "Errno" not in err
+    (tmp_path / "reg").mkdir()
+    (tmp_path / "reg" / "mine.txt").write_text("mine")
+    rc = alcn(["calib", "register", str(tmp_path), *camera, "--out", str(tmp_path / "reg")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err.endswith(f"{tmp_path / 'reg'} exists (--overwrite replaces it)")
+
+
+def test_register_known_distance_names_are_checked_before_the_reconstruction(tmp_path, capsys, monkeypatch):
+    """With --step 2 frame b is not an input frame: said before SfM, which would take minutes."""
+    from calib import register
+
+    monkeypatch.setattr(register, "_reconstruct", lambda *a, **k: pytest.fail("the reconstruction ran"))
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for name in "abcde":
+        cv2.imwrite(str(frames / f"{name}.png"), np.zeros((48, 64, 3), np.uint8))
+    args = ["calib", "register", str(frames), "--method", "sfm", "--step", "2", "--out", str(tmp_path / "reg")]
+    rc = alcn([*args, "--known-distance", "a.png", "b", "100"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--known-distance: 'b' is not an input frame" in err and "a, c, e" in err

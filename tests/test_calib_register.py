@@ -185,3 +185,30 @@ def test_board_pose_rejects_unreliable_frames():
     assert "reprojection error" in board_pose(outlier, K, None).status
     few = board_pose(detection(R_near, np.array([-100.0, -60, 450]), 0.05, n=6), K, None)
     assert few.status.startswith("too few board corners")
+
+
+def test_sfm_frame_names_are_checked_before_the_reconstruction(frames, tmp_path, monkeypatch):
+    """A --known-distance or --reference that names no input frame fails before the minutes of SfM."""
+    from calib import register
+
+    monkeypatch.setattr(register, "_reconstruct", lambda *a, **k: pytest.fail("the reconstruction ran"))
+    pose = (np.eye(3), np.zeros(3))
+    with pytest.raises(InputError, match=r"--known-distance: 'f003' is not an input frame \(.*f000, f002"):
+        register_colmap(frames, tmp_path / "reg", known_distance=("f000", "f003", 100.0))
+    with pytest.raises(InputError, match="must be positive"):
+        register_colmap(frames, tmp_path / "reg", known_distance=("f000.png", "f002", 0.0))
+    with pytest.raises(InputError, match=r"--reference: 1 of its 3 poses .* are of input frames"):
+        register_colmap(frames, tmp_path / "reg", reference={"f000.png": pose, "f001": pose, "f003": pose})
+    assert not (tmp_path / "reg").exists()
+
+
+@pytest.mark.shared_data
+def test_sfm_without_a_calibration_estimates_one_focal_length(shared_data, tmp_path):
+    """Square pixels: with fx and fy free the temple gave fx 1383 / fy 1514 (truth 1520 / 1526)."""
+    views = read_middlebury(shared_data / "middlebury" / "templeSparseRing")
+    reg = register_colmap(views[0].path.parent, tmp_path / "reg", settings=SfmSettings(num_threads=1))
+    assert len(reg.registered) >= 10
+    K, truth = reg.K, views[0].K
+    assert K[0, 0] == K[1, 1]
+    assert K[0, 0] == pytest.approx(truth[0, 0], rel=0.01) and K[1, 1] == pytest.approx(truth[1, 1], rel=0.01)
+    np.testing.assert_allclose(K[:2, 2], [(640 - 1) / 2, (480 - 1) / 2])  # held at the image centre

@@ -73,3 +73,23 @@ def test_bad_input(scene, tmp_path):
     (tmp_path / "bad.png").write_bytes(b"not a png")
     with pytest.raises(InputError, match="cannot read"):
         main(tmp_path / "bad.png", tmp_path / "o.png", calib)
+
+
+def test_an_output_that_is_the_input_is_refused(scene, tmp_path):
+    """An image, a folder or a video onto itself (by any spelling of its path) would be overwritten."""
+    calib = Calibration(scene.K, DIST, (640, 480), 0.0)
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    image = folder / "0.png"
+    cv2.imwrite(str(image), scene.images[0])
+    video = tmp_path / "v.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 5, (640, 480))
+    writer.write(scene.images[0])
+    writer.release()
+    before = {path: path.read_bytes() for path in (image, video)}
+    for source, output in ((image, folder / ".." / "imgs" / "0.png"), (folder, folder), (video, video)):
+        with pytest.raises(InputError, match="is the input"):
+            main(source, output, calib)
+    assert {path: path.read_bytes() for path in before} == before
+    assert sorted(p.name for p in folder.iterdir()) == ["0.png"]  # no camera.yaml either
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["imgs", "v.avi"]

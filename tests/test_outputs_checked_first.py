@@ -79,3 +79,26 @@ def test_a_benchmark_folder_is_checked_before_the_benchmark(tmp_path, shared_dat
     data = [shared_data / "webcam", shared_data / "psm"]
     with pytest.raises(InputError, match="is a file"):
         relight.main(blocker, data=data, methods=["none"], tuning=False, max_frames=3)
+
+
+def test_calib_output_folders_are_checked_before_the_work(tmp_path):
+    """A calibration or registration into a folder under a file fails before the board search or the
+    SfM (here: before the missing input is noticed), with the one-line "is a file"."""
+    from calib.board import BoardSpec
+    from calib.camera import Calibration
+    from calib.camera import main as calibrate_camera
+    from calib.register import register_charuco, register_colmap
+
+    blocker = tmp_path / "file"
+    blocker.write_text("mine")
+    missing = tmp_path / "missing_images"
+    calib = Calibration(np.array([[500.0, 0, 319.5], [0, 500, 239.5], [0, 0, 1]]), np.zeros(5), (640, 480), 0.0)
+    with pytest.raises(InputError, match="is a file"):
+        calibrate_camera(missing, blocker, BoardSpec())
+    with pytest.raises(InputError, match="is a file"):
+        calibrate_camera(missing, blocker / "calibration", BoardSpec())
+    with pytest.raises(InputError, match="is a file"):  # not: mkdir's [Errno 17] File exists
+        register_colmap(missing, blocker / "reg")
+    with pytest.raises(InputError, match="is a file"):
+        register_charuco(missing, blocker / "reg", calib, BoardSpec())
+    assert blocker.read_text() == "mine"
