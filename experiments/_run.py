@@ -27,9 +27,35 @@ from alcn_cv.shared_data import shared_data_dir  # noqa: E402
 SHARED_DATA = shared_data_dir()
 
 
-def command_line(doc: str) -> argparse.ArgumentParser:
-    """An experiment's command line, its whole docstring as the help: what it runs, what it writes and where."""
-    return argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+#: The option that lets a run with other arguments than the published one's replace its report.
+KEEP = "--keep"
+
+
+def command_line(doc: str, keeps: bool = True) -> argparse.ArgumentParser:
+    """An experiment's command line, its whole docstring as the help: what it runs, what it writes and where;
+    for a script that ``keeps`` a report, :data:`KEEP` (no abbreviations, so that :func:`keep` can find it)."""
+    parser = argparse.ArgumentParser(
+        description=doc, formatter_class=argparse.RawDescriptionHelpFormatter, allow_abbrev=False
+    )
+    if not keeps:
+        return parser
+    parser.add_argument(
+        KEEP,
+        action="store_true",
+        help="replace the published report in docs/reports even when this run's arguments differ from those it "
+        "records (without it, only a run with the same arguments replaces it)",
+    )
+    return parser
+
+
+def _script_args() -> list[str]:
+    """The experiment script's own arguments, as typed (``sys.argv`` is the last ``alcn`` command's)."""
+    argv = getattr(sys, "orig_argv", [])
+    script = Path(sys.modules["__main__"].__file__).resolve()
+    for i, arg in enumerate(argv):
+        if arg.endswith(".py") and Path(arg).resolve() == script:
+            return argv[i + 1 :]
+    return []
 
 
 def alcn(*argv: str) -> None:
@@ -47,13 +73,31 @@ def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
     its arguments, and the date the report was written, UTC), without the top-level keys ``drop``
     (per-frame details: the copy stays small; the whole report stays where the run wrote it). The run's
     output folder is written ``OUT`` and the shared data ``../shared/data``, so that no tracked file
-    cites the ignored output folder or a machine's paths."""
+    cites the ignored output folder or a machine's paths.
+
+    A published report is replaced only by a run with the arguments it records, or with :data:`KEEP`: a smoke run
+    with other settings leaves it alone (and says so). Returns the published report's path, or ``report`` when
+    it was not replaced."""
     report = Path(report)
+    target = REPORTS / f"{name}.json"
+    args = _script_args()
+    replace = KEEP in args
+    args = [a for a in args if a != KEEP]
+    if target.is_file() and not replace:
+        published = json.loads(target.read_text(encoding="utf-8")).get("experiment", {}).get("argv")
+        if published != args:
+            script = Path(sys.modules["__main__"].__file__).resolve().relative_to(ROOT).as_posix()
+            command = shlex.join(["python", script, *(published or [])])
+            print(
+                f"not kept: {target.relative_to(ROOT)} is the report of `{command}` (other options); "
+                f"this run's stays at {report} ({KEEP} replaces the published one)"
+            )
+            return report
     data = {k: v for k, v in json.loads(report.read_text(encoding="utf-8")).items() if k not in drop}
     written = datetime.datetime.fromtimestamp(report.stat().st_mtime, datetime.UTC)
     data["experiment"] = {
         "script": Path(sys.modules["__main__"].__file__).resolve().relative_to(ROOT).as_posix(),
-        "argv": sys.orig_argv[2:] if hasattr(sys, "orig_argv") else [],
+        "argv": args,
         "date": written.strftime("%Y-%m-%d %H:%M UTC"),
     }
     text = json.dumps(data, indent=1) + "\n"
@@ -65,7 +109,6 @@ def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
     ):
         text = text.replace(str(path), alias)
     REPORTS.mkdir(parents=True, exist_ok=True)
-    target = REPORTS / f"{name}.json"
     target.write_text(text, encoding="utf-8")
     print(f"kept {target.relative_to(ROOT)}")
     return target

@@ -53,7 +53,7 @@ def figure(scene: Path) -> np.ndarray:
 
 
 def main() -> None:
-    parser = command_line(__doc__)
+    parser = command_line(__doc__, keeps=False)
     parser.add_argument("--scene", default="mexico", help="a scene of ../shared/data/webcam (default mexico)")
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "figure.png", help="PNG to write")
     args = parser.parse_args()

@@ -4,7 +4,7 @@ protocol (12 frames per scene, 150 patches, 12 pairs) over 3 seeds, on the test 
 
 The untrained start is the default's network as the preset initialises it (seed 0): the DoG G1 - G2, the divisive
 normalization and the equalization, no learning. The webcam variant is `alcn train-real-light --conf gain --set
-scenes=[courbevoie,frankfurt,panorama] --set relit=0` (the default's recipe on real light changes).
+"scenes=['courbevoie','frankfurt','panorama']" --set relit=0` (the default's recipe on real light changes).
 
     python experiments/learning.py      # about 15 min on 2 cores
 

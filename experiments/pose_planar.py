@@ -3,7 +3,7 @@ frame posed in every other frame of the fixed camera with the box's pipeline, % 
 500 strongest SIFT keypoints per frame, and with the corner CNN trained on the reference frame alone.
 
 Data: ../shared/data/webcam (academic research only; cite TILDE and AMOS).
-Not run for docs/results.md (the corner rows take hours): the journal keeps its numbers as measured.
+The SIFT part is in docs/results.md; the corner part is not (hours): the journal keeps its numbers as measured.
 Time on 2 shared cores: the SIFT rows about 15 min; the corner rows about 8 min per network (4 scenes
 x each normalization).
 

@@ -128,7 +128,7 @@ def bench(out: Path, trained: Path, untrained: Path, baselines: bool) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = command_line(__doc__)
+    parser = command_line(__doc__, keeps=False)
     parser.add_argument("--out", type=Path, default=Path("runs/relit"))
     parser.add_argument("--stages", nargs="+", choices=STAGES, default=list(STAGES))
     parser.add_argument("--frames", type=int, default=16, help="relit copies per photograph (default 16)")

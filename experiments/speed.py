@@ -8,15 +8,15 @@ the video test); 17 minutes for the current table at load 15 (two sizes, no vide
     python experiments/speed.py --sizes 640x480,1280x800 --video-frames 0 --budget 3   # the current table
     python experiments/speed.py                                                          # the full bench
 
-Any option is passed to `alcn bench speed`. Writes runs/speed/speed.{md,json,png}; keeps
-docs/reports/speed.json.
+Any option is passed to `alcn bench speed`, but --keep: a run with other options than the published report's
+replaces docs/reports/speed.json only with it. Writes runs/speed/speed.{md,json,png}.
 """
 
 from __future__ import annotations
 
 import sys
 
-from _run import RUNS, alcn, keep
+from _run import KEEP, RUNS, alcn, keep
 
 
 def main() -> None:
@@ -24,7 +24,7 @@ def main() -> None:
         print(f"usage: speed.py [OPTION ...] (the options of `alcn bench speed`)\n\n{__doc__}")
         return
     out = RUNS / "speed"
-    alcn("bench", "speed", "--out", str(out), *sys.argv[1:])
+    alcn("bench", "speed", "--out", str(out), *(a for a in sys.argv[1:] if a != KEEP))
     keep(out / "speed.json", "speed")
 
 

@@ -47,3 +47,32 @@ def test_the_gpu_check_rehearses_on_the_cpu(tmp_path):
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert "ALCN batched on cpu" in (tmp_path / "speed_cpu" / "speed.md").read_text()
     assert (tmp_path / "cuda_tests.xml").is_file() and (tmp_path / "environment.txt").is_file()
+
+
+def test_a_run_with_other_options_keeps_the_published_report(tmp_path, monkeypatch, capsys):
+    """An experiment's smoke run (other options than the published report's) replaced that report; only the same
+    options or --keep replace it now."""
+    import json
+    import types
+
+    monkeypatch.syspath_prepend(str(ROOT / "experiments"))
+    import _run
+
+    script = tmp_path / "exp.py"
+    script.write_text("")
+    monkeypatch.setattr(_run, "ROOT", tmp_path)
+    monkeypatch.setattr(_run, "REPORTS", tmp_path / "reports")
+    monkeypatch.setitem(sys.modules, "__main__", types.SimpleNamespace(__file__=str(script)))
+    report = tmp_path / "run.json"
+
+    def run(*args: str, value: int) -> dict:
+        monkeypatch.setattr(sys, "orig_argv", [sys.executable, str(script), *args])
+        report.write_text(json.dumps({"value": value}))
+        _run.keep(report, "exp")
+        return json.loads((tmp_path / "reports" / "exp.json").read_text())
+
+    assert run("--n", "3", value=1)["experiment"]["argv"] == ["--n", "3"]  # the first report is kept
+    assert run("--n", "3", value=2)["value"] == 2  # the same options replace it
+    assert run("--n", "1", value=3)["value"] == 2 and "not kept" in capsys.readouterr().out
+    kept = run("--n", "1", "--keep", value=4)
+    assert kept["value"] == 4 and kept["experiment"]["argv"] == ["--n", "1"]

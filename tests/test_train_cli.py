@@ -52,6 +52,9 @@ def test_help_names_every_preset(command, confs, capsys):
         (["train-real-light", "--set", "steps=[1]"], "steps"),
         (["distill", "--conf", "lite", "--set", "channels=[8, 'a']"], "channels"),
         (["distill", "--conf", "gain"], "unknown preset 'gain'"),
+        (["train-real-light", "--set", "steps=-5"], "steps >= 1"),  # checked before printing, not at the run
+        (["train-unet", "--set", "lr=0"], "lr must be > 0"),
+        (["train-real-light", "--set", "scenes=[courbevoie]"], "quote the strings"),
     ],
 )
 def test_bad_settings_are_one_line_errors(args, message, capsys):
@@ -136,3 +139,11 @@ def test_distill_help_and_a_tiny_run(tmp_path, capsys):
     settings = header["distillation"]["settings"]
     assert settings["n_windows"] == 16 and settings["teacher"] == "paper"
     assert f"Command: `alcn distill --conf lite --out {out} {' '.join(args)}`" in out.with_suffix(".md").read_text()
+    assert main(["distill", "--conf", "lite", "--out", str(out), *args, "--no-progress"]) == 2  # not replaced
+    assert "exists (--overwrite replaces it" in capsys.readouterr().err
+
+
+def test_train_unet_prints_its_own_network(capsys):
+    assert main(["train-unet", "--print-config", "--channels", "4", "--levels", "2"]) == 0
+    net = tomllib.loads(capsys.readouterr().out)["net"]
+    assert net == {"channels": 4, "levels": 2}

@@ -11,6 +11,7 @@ imported only when a command runs.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import shlex
 import sys
 from collections.abc import Callable
@@ -105,8 +106,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "photographs that permit any use (--conf gain-lite) "
         "(alcn_cv.train.distill); writes the weight file and its model card (.md beside it), which records this "
         "command, and for a gain student its ONNX export. The shipped alcn_normalizer_lite.npz is `alcn distill "
-        "--conf lite --out alcn_cv/weights/alcn_normalizer_lite.npz`, alcn_normalizer_gain_lite.npz the same with "
-        "--conf gain-lite (its terms: those of the photographs, any use).",
+        "--conf lite --out alcn_cv/weights/alcn_normalizer_lite.npz --overwrite`, alcn_normalizer_gain_lite.npz the "
+        "same with --conf gain-lite (its terms: those of the photographs, any use); to compare with a shipped file, "
+        "write to another --out.",
     )
     _add_conf(
         s,
@@ -116,6 +118,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "epochs=30",
     )
     s.add_argument("--out", type=Path, help="weight file to write (.npz; the card is .md beside it)")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing weight file, its card and export")
     s.add_argument("--seed", type=int, help="seed (default: the preset's)")
     s.add_argument(
         "--threads",
@@ -132,7 +135,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Train the gain-adaptive Normalizer (alcn_cv.nets.gain) on fixed-camera scenes under changing "
         "light: each textured location is a class seen under every frame's light (alcn_cv.train.real_light). "
         "The gain preset trains on photographs that permit any use, each relit several times (relit=4); "
-        "--set scenes=[...] adds registered scenes (folders, or the webcam scenes courbevoie, frankfurt, "
+        "--set \"scenes=['a', 'b']\" adds registered scenes (folders, or the webcam scenes courbevoie, frankfurt, "
         "panorama: academic research only). Writes OUT/gain_normalizer.npz, checkpoints, train.log and "
         "history.json. The shipped alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`.",
     )
@@ -252,7 +255,7 @@ def _distill(args: argparse.Namespace) -> int:
         cv2.setNumThreads(args.threads)
     try:
         command = _command("distill", args, "--out", str(args.out))
-        path = main(args.out, cfg, command, conf=args.conf, progress=not args.no_progress)
+        path = main(args.out, cfg, command, conf=args.conf, progress=not args.no_progress, overwrite=args.overwrite)
     finally:
         torch.set_num_threads(previous[0])
         cv2.setNumThreads(previous[1])
@@ -264,6 +267,7 @@ def _train_real_light(args: argparse.Namespace) -> int:
     from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
 
     cfg = preset(REAL_LIGHT_CONFS, args.conf, _operational(args, seed="seed"))
+    cfg.check()
     if args.print_config:
         return _print_config(cfg)
     from alcn_cv.train.real_light import train_real_light
@@ -280,11 +284,13 @@ def _train_unet(args: argparse.Namespace) -> int:
     from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
 
     cfg = preset(REAL_LIGHT_CONFS, args.conf, _operational(args, seed="seed"))
-    if args.print_config:
-        return _print_config(cfg)
+    cfg.check()
+    net = {"channels": args.channels, "levels": args.levels}
+    if args.print_config:  # its network is the U-Net of --channels and --levels, not the preset's gain network
+        sys.stdout.write("# net: the U-Net's --channels and --levels (--set net.* is not used)\n")
+        return _print_config(dataclasses.replace(cfg, net=net))
     from alcn_cv.train.unet import train_unet
 
-    net = {"channels": args.channels, "levels": args.levels}
     command = _command("train-unet", args, "--channels", str(args.channels), "--levels", str(args.levels))
     return _print_with_threads(
         args.threads,

@@ -266,7 +266,13 @@ def _coerce(key: str, value: Any, default: Any) -> Any:
     else:
         ok = isinstance(value, type(default))
     if not ok:
-        raise InputError(f"config key {key!r} must be {_type_name(default)}, got {value!r}")
+        # a value that is no TOML stays a string: the usual cause is a list of unquoted words
+        hint = (
+            " (a TOML value: quote the strings, e.g. ['a', 'b'])"
+            if isinstance(value, str) and value[:1] in "[{"
+            else ""
+        )
+        raise InputError(f"config key {key!r} must be {_type_name(default)}, got {value!r}{hint}")
     return value
 
 
@@ -560,6 +566,28 @@ class RealLightConfig:
     seed: int = 0
     save_every: int = 100
     net: dict[str, Any] = field(default_factory=_gain_network)
+
+    def check(self) -> None:
+        """What a run on these settings needs: scenes or relit photographs, a rendered share in [0, 1) with
+        rendered scenes, at least 2 locations, 1 step and 1 step between snapshots and a positive learning rate
+        (the network's own needs, such as the crop's size, are its trainer's to check).
+
+        Raises:
+            InputError: the first setting out of range, named.
+        """
+        if not self.scenes and not self.relit:
+            raise InputError("no scenes given (scenes, relit)")
+        if not 0 <= self.rendered_fraction < 1 or (self.rendered_fraction > 0 and not self.rendered):
+            raise InputError(
+                f"rendered_fraction must be in [0, 1) and needs rendered scenes, got {self.rendered_fraction}"
+            )
+        if self.locations < 2 or self.steps < 1 or self.save_every < 1:
+            raise InputError(
+                f"need locations >= 2, steps >= 1 and save_every >= 1, got {self.locations}, {self.steps}, "
+                f"{self.save_every}"
+            )
+        if not self.lr > 0:
+            raise InputError(f"lr must be > 0, got {self.lr}")
 
 
 #: ``alcn train-real-light`` presets: ``gain`` makes ``alcn_normalizer_gain.npz``.

@@ -186,6 +186,7 @@ def main(
     *,
     conf: str | None = None,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> Path:
     """Distil a student (:func:`distill`, or :func:`distill_gain` for a :class:`GainDistillConfig`)
     and write its weight file, with the whole configuration and the preset's name in its header,
@@ -197,11 +198,17 @@ def main(
         command: the command line recorded in the card (default: this process').
         conf: the preset's name, recorded in the header.
         progress: show progress bars.
+        overwrite: replace an existing weight file (a shipped one, say, which its card's command rebuilds).
 
     Returns:
         The weight file's path.
+
+    Raises:
+        InputError: ``out_path`` exists and ``overwrite`` is false, or cannot be written.
     """
     out_path = output_path(out_path, ".npz", "a weight file")  # before the distillation, not after it
+    if out_path.exists() and not overwrite:
+        raise InputError(f"{out_path} exists (--overwrite replaces it, its card and ONNX export with it)")
     command = command or " ".join(shlex.quote(a) for a in sys.argv)
     if isinstance(cfg, GainDistillConfig):
         return _main_gain(out_path, cfg, command, conf, progress)
@@ -345,7 +352,7 @@ def _maps_error(student: GainNormalizer, sample: _GridSample) -> torch.Tensor:
 
 
 def _output_fidelity(teacher: GainNormalizer, student: GainNormalizer, frames: list[np.ndarray]) -> dict[str, float]:
-    """The whole normalization (:meth:`GainNormalizer.forward`, output in (-1, 1)) of the student
+    """The whole normalization (:meth:`GainNormalizer.forward`, in (-1, 1) plus the wide band) of the student
     against the teacher's on validation frames: RMS and largest differences, and the RMS of the
     teacher's output."""
     squared, total, count, worst, p99 = 0.0, 0.0, 0, 0.0, []
@@ -541,7 +548,7 @@ teacher's {record["parameters"]["teacher"]}) distilled from `{teacher["file"]}` 
 - Time: {record["seconds"]["total"]} s ({record["seconds"]["data_and_targets"]} s reading, rendering and teacher
   targets) on {describe_machine()}.
 
-## Fidelity to the teacher (validation frames, the whole normalization, output in (-1, 1))
+## Fidelity to the teacher (validation frames, the whole normalization: its output in (-1, 1) plus the wide band)
 
 | measure | this student | its start (DoG + divisive, untrained) |
 |---|---|---|

@@ -411,23 +411,15 @@ def train_real_light(
 
 @contextlib.contextmanager
 def training_run(cfg: RealLightConfig, out: str | Path) -> Iterator[Path]:
-    """The run of any network on ``cfg``'s draws: checks what :func:`draw_step` needs (scenes or relit
-    photographs, a rendered share in [0, 1) with rendered scenes, at least 2 locations, 1 step and 1 step between
-    snapshots), makes the run folder ``out`` and copies the log into its ``train.log``
-    (:func:`alcn_cv.report.log_to`). A folder holds one run: an earlier run's ``train.log`` is replaced and its step
-    snapshots (``*_step{N}.npz``) removed.
+    """The run of any network on ``cfg``'s draws: checks the settings (:meth:`RealLightConfig.check
+    <alcn_cv.train.config.RealLightConfig.check>`), makes the run folder ``out`` and copies the log into its
+    ``train.log`` (:func:`alcn_cv.report.log_to`). A folder holds one run: an earlier run's ``train.log`` is
+    replaced and its step snapshots (``*_step{N}.npz``) removed.
 
     Yields:
         The run folder.
     """
-    if not cfg.scenes and not cfg.relit:
-        raise InputError("no scenes given (scenes, relit)")
-    if not 0 <= cfg.rendered_fraction < 1 or (cfg.rendered_fraction > 0 and not cfg.rendered):
-        raise InputError(f"rendered_fraction must be in [0, 1) and needs rendered scenes, got {cfg.rendered_fraction}")
-    if cfg.locations < 2 or cfg.steps < 1 or cfg.save_every < 1:
-        raise InputError(
-            f"need locations >= 2, steps >= 1 and save_every >= 1, got {cfg.locations}, {cfg.steps}, {cfg.save_every}"
-        )
+    cfg.check()
     folder = Path(out)
     make_folder(folder)
     # an earlier run's snapshots, which this run's would not all replace
