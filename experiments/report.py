@@ -202,7 +202,8 @@ def summary_table(report: dict[str, Any], title: str, caption: str = "") -> str:
     for method, value in report["summary"].items():
         walk("", value, flat.setdefault(method, {}))
     keys = sorted({k for row in flat.values() for k in row})
-    return f"## {title}\n\n{provenance(report)}\n{caption + chr(10) if caption else ''}" + table(
+    under = f"{caption}\n" if caption else ""  # a caption is a paragraph of its own, before the table
+    return f"## {title}\n\n{provenance(report)}\n{under}" + table(
         ["method", *keys], [[m] + [r.get(k) for k in keys] for m, r in flat.items()]
     )
 

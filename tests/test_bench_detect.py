@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ torch = pytest.importorskip("torch")
 from alcn_cv.bench import detect as D  # noqa: E402
 from alcn_cv.bench import detect_data, policies  # noqa: E402
 from alcn_cv.bench import detect_settings as S  # noqa: E402
+from alcn_cv.cli import build_parser  # noqa: E402
 from alcn_cv.cli import main as cli_main  # noqa: E402
 from alcn_cv.errors import DatasetError, InputError  # noqa: E402
 from alcn_cv.nets import Detector  # noqa: E402
@@ -302,4 +304,24 @@ def test_report_gives_mean_and_spread_over_seeds():
     md = detect_markdown(result, ["a"])
     assert md.startswith("# Few-shot detection benchmark") and "(data)" not in md.splitlines()[0]
     assert "| dog | 0.300 ± 0.100 | 0.300 ± 0.100 |" in md and "2 (0, 1)" in md
-    assert "--seeds 0,1" in md and "`raw`: the normalized windows" in md
+    # recorded in the space form of --seeds, which parses back to the same seeds
+    assert "--seeds 0 1 --methods dog" in md and "`raw`: the normalized windows" in md
+    assert build_parser().parse_args(shlex.split(detect_command("d", "o", settings))[1:]).seeds == [0, 1]
+
+
+@pytest.mark.parametrize("given", [["0", "1", "2"], ["0,1,2"], ["0,1", "2"]])
+def test_seeds_take_spaces_and_commas_as_relight(given):
+    parsed = build_parser().parse_args(["bench", "detect", "--data", "d", "--out", "o", "--seeds", *given])
+    assert parsed.seeds == [0, 1, 2]
+    assert build_parser().parse_args(["bench", "detect", "--data", "d", "--out", "o"]).seeds is None  # the preset's
+
+
+def test_a_seed_that_is_no_integer_is_one_clear_error(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        build_parser().parse_args(["bench", "detect", "--data", "d", "--out", "o", "--seeds", "0,a"])
+    assert exit_.value.code == 2
+    assert (
+        capsys.readouterr()
+        .err.splitlines()[-1]
+        .endswith("argument --seeds: a seed is an integer (e.g. --seeds 0 1 2 or 0,1,2), got 'a'")
+    )

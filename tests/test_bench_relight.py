@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from alcn_cv.bench import relight
+from alcn_cv.cli import build_parser
 from alcn_cv.cli import main as cli_main
 from alcn_cv.data.scenes import Scene
 from alcn_cv.errors import InputError
@@ -197,3 +198,71 @@ def test_clahe_is_tuned_with_the_others(tmp_path):
     assert [chosen.clipLimit, *chosen.tileGridSize] in [[p["clipLimit"], *p["tileGridSize"]] for p in grid]
     row = result["methods"]["clahe (tuned)"]
     assert row["tuned"] and 0 < row["mean_test"]["identification"]["mean"] <= 100
+
+
+def test_one_seed_prints_bare_numbers_and_each_alcn_backend(tmp_path):
+    root = make_sets(tmp_path / "data")
+    result = relight.main(
+        tmp_path / "out",
+        [root / "webcam"],
+        ["none", "alcn", "alcn:model=lite+lstd"],
+        train_scenes=["square"],
+        test_scenes=["street"],
+        seeds=[0],
+        settings=relight.Settings(patch=16, patches=30, gallery=1, max_pairs=2, keypoint_protocols=False),
+        tuning=False,
+        progress=False,
+    )
+    text = (tmp_path / "out" / "relight.md").read_text()
+    # one seed: no "± 0.0", which reads as a measured zero spread
+    assert "±" not in text.split("Cells:")[1] and "one seed (0), so no spread" in text
+    identification = result["methods"]["none"]["mean_test"]["identification"]["mean"]
+    assert f"| none | {identification:.1f} |" in text
+    # the time of an ALCN method depends on what ran it: recorded and shown beside its ms/frame
+    saved = json.loads((tmp_path / "out" / "relight.json").read_text())
+    backends = {label: r.get("backend") for label, r in saved["methods"].items()}
+    assert backends == {"none": None, "alcn": "opencv", "alcn:model=lite+lstd": "opencv"}
+    summary = text.split("## Summary")[1].split("\n## ")[0]
+    rows = {line.split(" | ")[0]: line for line in summary.splitlines() if line.startswith("| ")}
+    assert rows["| method"].endswith("| ms/frame | backend |")
+    assert rows["| alcn"].endswith("| opencv |") and rows["| none"].endswith("| - |")
+
+
+def test_seeds_must_be_distinct(tmp_path):
+    # a repeated seed would count its draw twice in the spread; refused before any data is read
+    with pytest.raises(InputError, match="distinct"):
+        relight.main(tmp_path / "out", [tmp_path / "no data"], seeds=[0, 0])
+
+
+@pytest.mark.parametrize("given", [["0", "1", "2"], ["0,1,2"], ["0,1", "2"]])
+def test_seeds_take_spaces_and_commas(given):
+    parsed = build_parser().parse_args(["bench", "relight", "--out", "o", "--seeds", *given])
+    assert parsed.seeds == [0, 1, 2]
+
+
+def test_a_seed_that_is_no_integer_is_one_clear_error(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        build_parser().parse_args(["bench", "relight", "--out", "o", "--seeds", "0", "1.5"])
+    assert exit_.value.code == 2
+    assert (
+        capsys.readouterr()
+        .err.splitlines()[-1]
+        .endswith("argument --seeds: a seed is an integer (e.g. --seeds 0 1 2 or 0,1,2), got '1.5'")
+    )
+
+
+def test_quick_preset_and_the_options_that_override_it(tmp_path):
+    root = make_sets(tmp_path / "data")
+    common = ["bench", "relight", "--data", str(root / "webcam"), "--train-scenes", "square", "--test-scenes"]
+    common += ["street", "--methods", "none", "--seeds", "0", "--patch", "16", "--no-keypoints", "--no-tune"]
+    assert cli_main([*common, "--out", str(tmp_path / "q"), "--quick", "--patches", "30", "--no-progress"]) == 0
+    settings = json.loads((tmp_path / "q" / "relight.json").read_text())["settings"]
+    quick = relight.PRESETS["quick"]
+    # the preset's sampling sizes, but an option given with it wins
+    assert (settings["max_frames"], settings["max_pairs"], settings["patches"]) == (
+        quick["max_frames"],
+        quick["max_pairs"],
+        30,
+    )
+    parsed = build_parser().parse_args(["bench", "relight", "--out", "o"])
+    assert not parsed.quick and parsed.max_frames is None  # the default preset applies in the handler

@@ -4,10 +4,12 @@ example runs."""
 
 from __future__ import annotations
 
+import copy
 import doctest
 import fnmatch
 import importlib
 import importlib.util
+import json
 import re
 import shutil
 import subprocess
@@ -105,6 +107,48 @@ def test_readme_results_block_is_what_the_report_script_writes() -> None:
     assert readme == report.readme_with_headlines(readme), (
         "the README's results block is out of date: run python experiments/report.py"
     )
+
+
+def _kept(name: str) -> dict:
+    return json.loads((ROOT / "docs" / "reports" / f"{name}.json").read_text(encoding="utf-8"))
+
+
+def test_middlebury_table_says_its_units_and_counts_views_as_integers() -> None:
+    text = _report_module().middlebury(_kept("pose_middlebury"))
+    header = next(line for line in text.splitlines() if line.startswith("| set/"))
+    assert "median rotation error (deg)" in header and "median camera-centre error (mm)" in header
+    assert "_" not in header  # no raw JSON key
+    assert "| templeSparseRing/none/original | 5/8 |" in text and "| 102 |" in text
+
+
+def test_orb_orientation_table_names_its_columns_and_defines_exposure_scenes() -> None:
+    report = _kept("orb_orientation")
+    text = _report_module().orb_orientation(report)
+    header = next(line for line in text.splitlines() if line.startswith("| method"))
+    assert "_" not in header and "| matching ORB | matching ORB upright |" in header
+    assert "Exposure scenes: exposure-only copies" in text
+    # the cells are the report's numbers, under their readable headers
+    row = next(line for line in text.splitlines() if line.startswith("| none, test scenes"))
+    cells = dict(zip(header.strip("| ").split(" | "), row.strip("| ").split(" | ")))
+    assert cells["correct ORB upright"] == f"{report['summary']['none, test scenes']['correct_orb_upright']:.1f}"
+
+
+@pytest.mark.parametrize("name", ["directional_light", "relief_training"])
+def test_rendered_light_tables_say_what_their_cells_measure(name: str) -> None:
+    text = _report_module().RENDERERS[name](_kept(name))
+    caption = text.split("Date: ")[1].split("|")[0]  # between the provenance and the table
+    assert "probes identified" in caption and "N px" in caption and "resized to" in caption
+
+
+def test_relight_tables_take_reports_with_and_without_backends() -> None:
+    """``alcn bench relight`` records each ALCN method's backend since it exists; the kept reports predate it."""
+    report = _report_module()
+    old = _kept("relight_split")
+    new = copy.deepcopy(old)
+    for label, entry in new["methods"].items():
+        if label.startswith("alcn"):
+            entry["backend"] = "opencv"
+    assert report.relight(new) == report.relight(old) and report.relight_headline(new) == report.relight_headline(old)
 
 
 def _modules_with_examples() -> list[str]:

@@ -35,6 +35,38 @@ def _list(kind: type) -> Callable[[str], list]:
     return parse
 
 
+class _Seeds(argparse.Action):
+    """``--seeds 0 1 2``, each item also split on commas (``--seeds 0,1,2``, the form of older recorded commands)."""
+
+    def __call__(
+        self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: str | None = None
+    ) -> None:
+        seeds = []
+        for text in (v for item in values for v in item.split(",") if v.strip()):
+            try:
+                seeds.append(int(text))
+            except ValueError:
+                # argparse's own error line: an InputError raised while parsing would end in a traceback
+                raise argparse.ArgumentError(
+                    self, f"a seed is an integer (e.g. --seeds 0 1 2 or 0,1,2), got {text!r}"
+                ) from None
+        setattr(namespace, self.dest, seeds)
+
+
+def _add_seeds(p: argparse.ArgumentParser, default: Sequence[int], what: str, from_preset: bool = False) -> None:
+    """The ``--seeds`` option of every benchmark that repeats its runs (``from_preset``: the parsed default is None,
+    the preset's ``default`` applies)."""
+    p.add_argument(
+        "--seeds",
+        nargs="+",
+        action=_Seeds,
+        metavar="SEED",
+        default=None if from_preset else list(default),
+        help=f"{what}; cells give the mean ± standard deviation over the seeds, e.g. --seeds 0 1 2 (0,1,2 also "
+        f"accepted; default {' '.join(map(str, default))})",
+    )
+
+
 def _methods_help(default: Sequence[str] | None, suffix: str = "") -> str:
     """The help of a benchmark's ``--methods``: normalizations given as spec strings."""
     shown = ",".join(default) if default else "every registered normalization"
@@ -115,11 +147,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
     p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
     p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
-    p.add_argument(
-        "--seeds",
-        type=_list(int),
-        help="repeat every run with each of these seeds and report mean +- standard deviation (default 0)",
-    )
+    _add_seeds(p, d.seeds, "repeat every run with each of these seeds", from_preset=True)
     p.add_argument(
         "--tune",
         dest="tune",
@@ -317,14 +345,25 @@ def _run_speed(args: argparse.Namespace) -> int:
     return 0 if result["rows"] else 1
 
 
+def _preset_flags(sizes: dict[str, int | None]) -> str:
+    """A preset of ``alcn bench relight`` as the options it stands for."""
+    return " ".join(f"--{k.replace('_', '-')} {v}" for k, v in sizes.items())
+
+
 def _add_relight(subparsers: argparse._SubParsersAction) -> None:
+    default, quick = relight.PRESETS["default"], relight.PRESETS["quick"]
     p = subparsers.add_parser(
         "relight",
         help="patch identification, keypoint matching and pose on real changes of light (fixed cameras)",
         description="Normalize the registered frames of fixed-camera scenes under different light with each "
         "method's apply(), then score patch identification (NCC), ORB/SIFT matching and RANSAC-homography pose "
         "between frames; CLAHE, DoG, SLCN, DLCN, Tan-Triggs and DoG+lstd are tuned on the training scenes only. Writes "
-        "relight.md, relight.json and relight.png.",
+        "relight.md, relight.json and relight.png. Run time on 2 CPU cores: the default "
+        f"({len(relight.DEFAULT_METHODS)} methods, seeds {' '.join(map(str, relight.DEFAULT_SEEDS))}, "
+        f"{_preset_flags(default)}, tuning) more than an hour (one seed: about 22 min); --quick "
+        f"({_preset_flags(quick)}, the quick protocol of docs/results.md) about a third of that; --quick --seeds 0 "
+        "--no-tune about 2 min, with --methods none about 15 s. --quick picks the quick preset; --max-frames, "
+        "--patches and --max-pairs given with it override it.",
     )
     d = relight.Settings()
     p.add_argument("--out", required=True, type=Path, help="output folder")
@@ -361,11 +400,23 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         help="evaluate each scene with parameters tuned on the others, instead of the split "
         f"(no scene given: {' '.join(relight.DEFAULT_LEAVE_ONE_OUT)})",
     )
-    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
-    p.add_argument("--max-frames", type=int, default=20, help="frames per scene, evenly spaced (default 20; 0: all)")
+    _add_seeds(p, relight.DEFAULT_SEEDS, "sampling seeds (they draw the gallery frames, patch locations and pairs)")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"preset: {_preset_flags(quick)}, the quick protocol (default: the benchmark's, {_preset_flags(default)})",
+    )
+    p.add_argument(
+        "--max-frames",
+        type=int,
+        help=f"frames per scene, evenly spaced (default {default['max_frames']}, --quick {quick['max_frames']}; "
+        "0: all)",
+    )
     p.add_argument("--patch", type=int, default=d.patch, help=f"patch side in pixels (default {d.patch})")
     p.add_argument(
-        "--patches", type=int, default=d.patches, help=f"patch locations per gallery frame (default {d.patches})"
+        "--patches",
+        type=int,
+        help=f"patch locations per gallery frame (default {default['patches']}, --quick {quick['patches']})",
     )
     p.add_argument(
         "--gallery", type=int, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})"
@@ -373,8 +424,8 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--max-pairs",
         type=int,
-        default=d.max_pairs,
-        help=f"frame pairs per scene and seed, drawn at random (default {d.max_pairs}; 0: all)",
+        help=f"frame pairs per scene and seed, drawn at random (default {default['max_pairs']}, --quick "
+        f"{quick['max_pairs']}; 0: all)",
     )
     p.add_argument(
         "--keypoints", type=int, default=d.keypoints, help=f"ORB/SIFT keypoints per frame (default {d.keypoints})"
@@ -389,11 +440,13 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run_relight(args: argparse.Namespace) -> int:
+    preset = relight.PRESETS["quick" if args.quick else "default"]
+    sizes = {k: v if getattr(args, k) is None else getattr(args, k) for k, v in preset.items()}
     settings = relight.Settings(
         patch=args.patch,
-        patches=args.patches,
+        patches=sizes["patches"],
         gallery=args.gallery,
-        max_pairs=args.max_pairs or None,
+        max_pairs=sizes["max_pairs"] or None,
         keypoints=args.keypoints,
         keypoint_protocols=not args.no_keypoints,
     )
@@ -406,7 +459,7 @@ def _run_relight(args: argparse.Namespace) -> int:
         args.leave_one_out,
         args.seeds,
         settings,
-        args.max_frames or None,
+        sizes["max_frames"] or None,
         not args.no_tune,
         args.tune_frames,
         command=shlex.join(["alcn", *sys.argv[1:]]),

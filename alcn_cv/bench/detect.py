@@ -41,7 +41,7 @@ report shows it beside the AUCs.
 
 A method may carry parameters, ``NAME:KEY=VALUE[:KEY=VALUE...]`` (``alcn:model=lite:mixture=pyramid``
 is the paper family's real-time ALCN, ``dog:sigma2=2``), and every run may be repeated
-over several seeds (``--seeds 0,1,2``): a single seed's AUC moves by several hundredths with the
+over several seeds (``--seeds 0 1 2``): a single seed's AUC moves by several hundredths with the
 training windows and the detector's initialisation, so differences between methods are only
 read against the spread over seeds.
 

@@ -21,8 +21,10 @@ def detect_command(
 ) -> str:
     """The ``alcn bench detect`` command line that runs these settings (``max_detections`` and
     the preset aside, every setting spelled out)."""
+    # the seeds in the space form of --seeds (command_line joins a list with commas, --methods' form)
+    seeds = ["--seeds", *map(str, settings.seeds)]
     return command_line(
-        ["alcn", "bench", "detect", "--data", data_dir, "--out", out_dir],
+        ["alcn", "bench", "detect", "--data", data_dir, "--out", out_dir, *seeds],
         {
             "--methods": settings.methods,
             "--real-images": settings.real_images,
@@ -32,7 +34,6 @@ def detect_command(
             "--epochs": settings.epochs,
             "--batch-size": settings.batch_size,
             "--lr": settings.lr,
-            "--seeds": settings.seeds,
             "--tune": settings.tune,
             "--cnn-sweep": [f"{d}x{w}" for d, w in settings.cnn_sweep],
             "--nms-iou": settings.nms_iou,
@@ -88,7 +89,7 @@ def _header(result: dict[str, Any], settings: DetectSettings) -> list[str]:
         lines.append(
             f"- **Seeds:** one ({seeds[0]}), so there is no spread: a single seed's AUC moves by several "
             "hundredths with the training windows and the detector's initialisation; read small "
-            "differences with care, or rerun with `--seeds 0,1,2`."
+            "differences with care, or rerun with `--seeds 0 1 2`."
         )
     lines.append("")
     if result.get("alcn_trained") is False:

@@ -51,6 +51,7 @@ from tqdm.auto import tqdm
 from alcn_cv.bench.policies import LOCAL_BOX, local_standardize
 from alcn_cv.bench.relight_report import write_report
 from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, select_scenes, shared_root
+from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.errors import InputError
@@ -59,11 +60,14 @@ from alcn_cv.report import machine
 
 __all__ = [
     "DEFAULT_METHODS",
+    "DEFAULT_SEEDS",
+    "PRESETS",
     "COUNT_METRICS",
     "METRICS",
     "TUNING_GRIDS",
     "LocallyStandardized",
     "Settings",
+    "backend_of",
     "build_method",
     "evaluate_scene",
     "identification",
@@ -77,6 +81,7 @@ logger = logging.getLogger(__name__)
 
 DEFAULT_METHODS = ("none", "clahe", "dog", "slcn", "dlcn", "sqi", "tantriggs", "dog+lstd", "alcn", "alcn:model=lite")
 DEFAULT_LEAVE_ONE_OUT = ("courbevoie", "frankfurt", "mexico", "panorama")
+DEFAULT_SEEDS = (0, 1, 2)
 DETECTORS = ("orb", "sift")
 #: Every reported number: percentages, except :data:`COUNT_METRICS`.
 METRICS = ("identification", "matching_orb", "matching_sift", "pose_orb", "pose_sift", "correct_orb", "correct_sift")
@@ -139,6 +144,14 @@ class Settings:
         return self
 
 
+#: The sampling sizes of ``alcn bench relight``'s presets: the benchmark's, and ``quick``, the quick protocol of
+#: docs/results.md's "(quick protocol)" tables (``--quick``; about 3 times faster).
+PRESETS: dict[str, dict[str, int | None]] = {
+    "default": {"max_frames": 20, "patches": Settings.patches, "max_pairs": Settings.max_pairs},
+    "quick": {"max_frames": 12, "patches": 150, "max_pairs": 12},
+}
+
+
 class LocallyStandardized(Normalization):
     """A normalization followed by a per-pixel local standardization of its raw response.
 
@@ -176,6 +189,14 @@ def build_method(spec: str) -> Normalization:
 
         return UNetNormalization(str(params["weights"]))
     return from_spec(spec)
+
+
+def backend_of(norm: Normalization) -> str | None:
+    """The backend an ALCN runs on (:attr:`ALCN.backend <alcn_cv.enhance.alcn.ALCN>`, also under ``+lstd``): its
+    ms/frame depend on it (a user's weight file runs on ``fast``, the shipped files on ``opencv``); None for the
+    other methods, which have one implementation."""
+    inner = norm.inner if isinstance(norm, LocallyStandardized) else norm
+    return inner.backend if isinstance(inner, ALCN) else None
 
 
 def _spec(method: str, params: dict[str, float]) -> str:
@@ -402,9 +423,9 @@ def main(
     train_scenes: Sequence[str] = TRAIN_SCENES,
     test_scenes: Sequence[str] = TEST_SCENES,
     leave_one_out: Sequence[str] | None = None,
-    seeds: Sequence[int] = (0, 1, 2),
+    seeds: Sequence[int] = DEFAULT_SEEDS,
     settings: Settings = Settings(),
-    max_frames: int | None = 20,
+    max_frames: int | None = PRESETS["default"]["max_frames"],
     tuning: bool = True,
     tune_frames: int = 8,
     progress: bool = True,
@@ -437,8 +458,8 @@ def main(
     settings = settings.check()
     methods = list(methods)
     _check_methods(methods)
-    if not seeds:
-        raise InputError("give at least one seed")
+    if not seeds or len(set(seeds)) != len(seeds):  # a repeated seed would add a copy to the spread
+        raise InputError(f"seeds must be distinct and at least one, got {list(seeds)}")
     roots = [Path(p) for p in data] if data else [shared_root("webcam"), shared_root("psm")]
     scenes = load_scenes(roots, max_frames)
     if leave_one_out is not None:
@@ -480,9 +501,13 @@ def main(
     plans = {s.name: [plan_pairs(s, seed, settings) for seed in seeds] for s in evaluated}
     jobs = [(s, spec) for s in evaluated for spec in dict.fromkeys(r[s.name] for r in rows.values())]
     cache: dict[tuple[str, str], dict[str, Any]] = {}
+    backends: dict[str, str] = {}
     for scene, spec in tqdm(jobs, desc="relight", unit="method x scene", disable=not progress):
         try:
-            cache[scene.name, spec] = evaluate_scene(build_method(spec), scene, plans[scene.name], settings)
+            norm = build_method(spec)
+            if (backend := backend_of(norm)) is not None:
+                backends[spec] = backend
+            cache[scene.name, spec] = evaluate_scene(norm, scene, plans[scene.name], settings)
         except Exception as exc:  # one method failing is reported, not the end of the run
             logger.exception("%s failed on %s", spec, scene.name)
             cache[scene.name, spec] = {"error": f"{type(exc).__name__}: {exc}"}
@@ -492,6 +517,8 @@ def main(
         per_scene = {name: cache[name, spec] for name, spec in specs.items()}
         errors = {n: r["error"] for n, r in per_scene.items() if "error" in r}
         entry: dict[str, Any] = {"specs": specs, "tuned": label.endswith("(tuned)")}
+        if ran_on := [backends[spec] for spec in specs.values() if spec in backends]:
+            entry["backend"] = ran_on[0]  # the specs of a row differ in parameters only, not in backend
         if errors:
             entry["errors"] = errors
         ok = {n: r for n, r in per_scene.items() if "error" not in r}

@@ -35,7 +35,8 @@ _SHORT = {
 def _cell(summary: dict[str, Any] | None) -> str | None:
     if summary is None:
         return None
-    return f"{summary['mean']:.1f} ± {summary['std']:.1f}"
+    # one seed has no spread: "± 0.0" would read as a measured zero variance (docs/results.md prints the same)
+    return f"{summary['mean']:.1f}" + (f" ± {summary['std']:.1f}" if len(summary["seeds"]) > 1 else "")
 
 
 def _metrics(result: dict[str, Any]) -> list[str]:
@@ -47,8 +48,10 @@ def _summary_table(result: dict[str, Any], metrics: list[str]) -> str:
     for label, r in result["methods"].items():
         test = r.get("mean_test", {})
         ms = [s["ms_per_frame"] for n, s in r["scenes"].items() if n in result["split"]["test"]]
-        rows.append([label] + [_cell(test.get(m)) for m in metrics] + [f"{np.mean(ms):.1f}" if ms else None])
-    return markdown_table(["method"] + [_SHORT[m] for m in metrics] + ["ms/frame"], rows)
+        rows.append(
+            [label] + [_cell(test.get(m)) for m in metrics] + [f"{np.mean(ms):.1f}" if ms else None, r.get("backend")]
+        )
+    return markdown_table(["method"] + [_SHORT[m] for m in metrics] + ["ms/frame", "backend"], rows)
 
 
 def _metric_table(result: dict[str, Any], metric: str) -> str:
@@ -112,16 +115,16 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
     panels = [(t, ms, unit) for t, ms, unit in panels if ms]
     plt, fig, axes = new_figure(1, len(panels), figsize=(5.5 * len(panels), 4.8))
     x = np.arange(len(labels))
+    spread = len(result["settings"]["seeds"]) > 1  # one seed has no error bar to draw
     for ax, (title, metrics, unit) in zip(axes[0], panels):
         width = 0.8 / len(metrics)
         for j, m in enumerate(metrics):
             means = [result["methods"][k]["mean_test"][m]["mean"] for k in labels]
-            stds = [result["methods"][k]["mean_test"][m]["std"] for k in labels]
             ax.bar(
                 x + (j - (len(metrics) - 1) / 2) * width,
                 means,
                 width,
-                yerr=stds,
+                yerr=[result["methods"][k]["mean_test"][m]["std"] for k in labels] if spread else None,
                 capsize=2,
                 label=_SHORT[m].split()[-1] if len(metrics) > 1 else None,
             )
@@ -134,7 +137,11 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
             ax.legend(fontsize=8)
     fig.suptitle(
         f"alcn bench relight: test scenes {', '.join(result['split']['test'])}; "
-        f"error bars: std over seeds {result['settings']['seeds']}",
+        + (
+            f"error bars: std over seeds {result['settings']['seeds']}"
+            if spread
+            else f"one seed ({result['settings']['seeds'][0]})"
+        ),
         fontsize=10,
     )
     fig.tight_layout()
@@ -175,8 +182,15 @@ def write_report(result: dict[str, Any], out: Path) -> None:
             if s["keypoint_protocols"]
             else "Identification only (no keypoint protocols). "
         )
-        + f"Cells: mean ± standard deviation over seeds {s['seeds']} (the seed draws the gallery frames, patch "
-        "locations and pairs).\n",
+        + (
+            f"Cells: mean ± standard deviation over seeds {s['seeds']}"
+            if len(s["seeds"]) > 1
+            else f"Cells: one seed ({s['seeds'][0]}), so no spread"
+        )
+        + " (the seed draws the gallery frames, patch locations and pairs). ms/frame: `apply()` on the test "
+        "scenes' frames; backend: what ran each ALCN method, which the time depends on (`opencv`: cv2.dnn, the "
+        "shipped files' default; `fast`: the network in torch on the CPU, a user's weight file's default; `torch`: "
+        "all in torch).\n",
         "## Summary (mean over test scenes)\n",
         _summary_table(result, metrics),
     ]
