@@ -121,20 +121,3 @@ def test_the_gain_runtime_gives_one_output_on_any_number_of_threads(backend, mod
             assert len(row_parts(gray.shape, 8)) == min(threads, height // 32)
             np.testing.assert_array_equal(runtime.normalize(gray), sequential)
             np.testing.assert_array_equal(runtime.normalize(gray, 0.01, 0.02), floors)
-
-
-@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
-def test_the_colour_conversions_in_parts_give_the_whole_images_values(opencv_threads, small_parts, dtype):
-    """OpenCV's colour conversions run on one thread, so apply() converts a colour image in row parts."""
-    from alcn_cv.enhance.base import bgr_with_lightness, lab_and_lightness
-
-    unit = np.random.default_rng(4).random((131, 97, 3))
-    img = unit.astype(np.float32) if dtype == np.float32 else np.round(unit * np.iinfo(dtype).max).astype(dtype)
-    results = []
-    for threads in (1, 3):
-        opencv_threads(threads)
-        lab, lightness = lab_and_lightness(img)
-        results.append((lab.copy(), lightness, bgr_with_lightness(lab, lightness * np.float32(90), np.dtype(dtype))))
-    for one, parts in zip(*results):
-        np.testing.assert_array_equal(one, parts)
-    assert results[1][2].dtype == dtype and results[1][2].shape == img.shape

@@ -32,7 +32,6 @@ import numpy as np
 from alcn_cv.checks import FULL_SCALE, SUPPORTED_DTYPES, check_gray, check_image, unit_windows
 from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import linear_to_lab, srgb_to_lab, srgb_to_linear
-from alcn_cv.row_parts import row_parts, run_parts
 
 __all__ = ["Normalization", "NoNormalization"]
 
@@ -69,44 +68,21 @@ def lab_and_lightness(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """CIE Lab of a valid BGR image (uint8, uint16 or float32 in [0, 1]) as a new float32 array (L in [0, 100];
     :func:`~alcn_cv.filters.lab.srgb_to_lab`), and its L / 100 as a float32 ``HxW`` plane in [0, 1]: what
     :meth:`Normalization.apply` normalizes for a colour image."""
-    lab = np.empty(img.shape, np.float32)
-    lightness = np.empty(img.shape[:2], np.float32)
-
-    def convert(start: int, stop: int) -> None:
-        rows = lab[start:stop]
-        if img.dtype == np.uint8:  # the decoded curve by one table lookup: the float path's values for 256 levels
-            linear_to_lab(cv2.LUT(img[start:stop], _LINEAR_UINT8_LEVELS, dst=rows))
-        else:
-            rows[...] = srgb_to_lab(to_unit_float(img[start:stop]))
-        cv2.transform(rows, _LIGHTNESS_OF_LAB, dst=lightness[start:stop])
-
-    _per_pixel_in_parts(convert, img.shape[:2])
-    return lab, lightness
+    # a uint8 image's decoded curve by one table lookup: the float path's values for its 256 levels
+    lab = (
+        linear_to_lab(cv2.LUT(img, _LINEAR_UINT8_LEVELS)) if img.dtype == np.uint8 else srgb_to_lab(to_unit_float(img))
+    )
+    return lab, cv2.transform(lab, _LIGHTNESS_OF_LAB)
 
 
 def bgr_with_lightness(lab: np.ndarray, lightness: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
     """The BGR image of ``out_dtype`` of the float32 Lab image ``lab`` (:func:`lab_and_lightness`; used as
     scratch space) with its L channel replaced by the float32 ``HxW`` plane ``lightness`` in [0, 100]."""
-    out = np.empty(lab.shape, out_dtype)
-
-    def convert(start: int, stop: int) -> None:
-        rows = lab[start:stop]
-        cv2.insertChannel(lightness[start:stop], rows, 0)
-        bgr = cv2.cvtColor(rows, cv2.COLOR_Lab2BGR, dst=rows)
-        if out_dtype == np.uint8:
-            cv2.convertScaleAbs(bgr, dst=out[start:stop], alpha=FULL_SCALE[out_dtype])
-        else:
-            out[start:stop] = _unit_in_place_to(bgr, out_dtype)
-
-    _per_pixel_in_parts(convert, lab.shape[:2])
-    return out
-
-
-def _per_pixel_in_parts(convert: Callable[[int, int], None], shape: tuple[int, int]) -> None:
-    """``convert(start, stop)`` of the rows of an image of ``shape``, one part per thread
-    (:func:`~alcn_cv.row_parts.row_parts`): OpenCV's colour conversions run on one thread, and these are
-    per pixel, so the parts give the whole image's values."""
-    run_parts(convert, row_parts(shape, 1))
+    cv2.insertChannel(lightness, lab, 0)
+    bgr = cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=lab)
+    if out_dtype == np.uint8:
+        return cv2.convertScaleAbs(bgr, alpha=FULL_SCALE[out_dtype])
+    return _unit_in_place_to(bgr, out_dtype)
 
 
 def with_alpha(result: np.ndarray, alpha: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
@@ -303,8 +279,8 @@ class Normalization:
         the response mapped to [0, 100] by ``cv2.addWeighted`` and two thresholds and put back by
         ``cv2.insertChannel`` (:func:`bgr_with_lightness`); ``cv2.COLOR_Lab2BGR`` clips linear RGB to [0, 1] before
         its sRGB curve, so a uint8 output is one ``cv2.convertScaleAbs``. The two float conversions are most of the
-        cost, made in row parts on OpenCV's threads (``alcn bench speed`` measures the BGR / gray ratio); OpenCV's
-        8-bit conversions quantize L to 100/255 and a, b to units, many levels off the float path."""
+        cost (``alcn bench speed`` measures the BGR / gray ratio); OpenCV's 8-bit conversions quantize L to 100/255
+        and a, b to units, many levels off the float path."""
         lab, lightness = lab_and_lightness(img)
         response = self._normalize_checked(lightness)
         lo, hi = self.output_range
