@@ -113,7 +113,7 @@ def main() -> None:
             video,
             ref_path,
             K=K_TUTORIAL,
-            video_step=10,
+            step=10,
             max_frames=46,
             motion_mask=True,
             feature="ORB",

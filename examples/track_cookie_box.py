@@ -86,7 +86,7 @@ def main() -> None:
             video,
             model_path,
             K=K,
-            video_step=10,
+            step=10,
             max_frames=46,
             motion_mask=True,
             feature="ORB",

@@ -53,7 +53,7 @@ def main() -> None:
         "1771.81",
         "320",
         "240",
-        "--video-step",
+        "--step",
         "10",
         "--max-frames",
         "46",

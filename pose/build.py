@@ -205,7 +205,7 @@ def main(
     *,
     images: str | Path | None = None,
     K: np.ndarray | None = None,
-    video_step: int = 5,
+    step: int = 5,
     max_frames: int = 80,
     motion_mask: bool = False,
     feature: str = "ORB",
@@ -230,7 +230,7 @@ def main(
         if input_path.is_file() and io.is_video(input_path):
             if K is None:
                 raise InputError("building from a video needs the intrinsics (--K fx fy cx cy)")
-            seq = video_sequence(input_path, K, work, step=video_step, max_frames=max_frames)
+            seq = video_sequence(input_path, K, work, step=step, max_frames=max_frames)
             masks = None
             if motion_mask:
                 frames = [io.read_image(seq.image_dir / v.name) for v in seq.views]

@@ -27,7 +27,7 @@ def _build(args: argparse.Namespace) -> int:
         args.output,
         images=args.images,
         K=_intrinsics(args.K),
-        video_step=args.video_step,
+        step=args.step,
         max_frames=args.max_frames,
         motion_mask=args.motion_mask,
         feature=args.feature,
@@ -395,7 +395,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument(
         "--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics of a video (OpenCV convention)"
     )
-    b.add_argument("--video-step", type=int, default=5, help="use every N-th frame of a video (default 5)")
+    b.add_argument("--step", type=int, default=5, help="use every N-th frame of a video (default 5)")
     b.add_argument("--max-frames", type=int, default=80, help="at most this many video frames (default 80)")
     b.add_argument(
         "--motion-mask", action="store_true", help="static camera, moving object: keep features on what moves"

@@ -273,7 +273,7 @@ SIGTERM_CASES: dict[str, tuple[Callable[[Path, Path], list[object]], str]] = {
             240,
             "--motion-mask",
             "--refine-focal",
-            "--video-step",
+            "--step",
             10,
         ],
         "alcn_pycolmap_log_*",
