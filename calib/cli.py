@@ -141,8 +141,8 @@ def _register(args: argparse.Namespace) -> int:
     try:
         reg = _registration(args)
     except FileExistsError:
-        if args.overwrite or not Path(args.out).exists():
-            raise
+        if args.overwrite or not (Path(args.out) / "registration.json").is_file():
+            raise  # not an earlier registration: its message says --overwrite would not replace it
         # atomic_output_dir's message also names the keyword of the Python call (overwrite=True)
         raise InputError(f"{args.out} exists (--overwrite replaces it)") from None
     print(

@@ -49,13 +49,27 @@ def command_line(doc: str, keeps: bool = True) -> argparse.ArgumentParser:
 
 
 def _script_args() -> list[str]:
-    """The experiment script's own arguments, as typed (``sys.argv`` is the last ``alcn`` command's)."""
+    """The experiment script's own arguments, as typed, :data:`KEEP` left out (``sys.argv`` is the last ``alcn``
+    command's)."""
     argv = getattr(sys, "orig_argv", [])
     script = Path(sys.modules["__main__"].__file__).resolve()
     for i, arg in enumerate(argv):
         if arg.endswith(".py") and Path(arg).resolve() == script:
-            return argv[i + 1 :]
+            return [a for a in argv[i + 1 :] if a != KEEP]
     return []
+
+
+def script_command() -> str:
+    """The experiment's command line, for a report the script writes itself: ``python SCRIPT ARGS`` (without
+    :data:`KEEP`, which says what to do with the report, not what it measures)."""
+    script = Path(sys.modules["__main__"].__file__).resolve().relative_to(ROOT).as_posix()
+    return shlex.join(["python", script, *_script_args()])
+
+
+def _what_ran(report: dict) -> object:
+    """What a report measured: its commands (the runs' own ``command`` or ``commands``), else the script's
+    arguments: two runs of the same commands are the same measurement whatever options led to them."""
+    return report.get("commands") or report.get("command") or report.get("experiment", {}).get("argv")
 
 
 def alcn(*argv: str) -> None:
@@ -75,24 +89,12 @@ def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
     output folder is written ``OUT`` and the shared data ``../shared/data``, so that no tracked file
     cites the ignored output folder or a machine's paths.
 
-    A published report is replaced only by a run with the arguments it records, or with :data:`KEEP`: a smoke run
-    with other settings leaves it alone (and says so). Returns the published report's path, or ``report`` when
-    it was not replaced."""
+    A published report is replaced only by a run of the same commands (:func:`_what_ran`), or with :data:`KEEP`: a
+    smoke run with other settings leaves it alone (and says so). Returns the published report's path, or
+    ``report`` when it was not replaced."""
     report = Path(report)
     target = REPORTS / f"{name}.json"
     args = _script_args()
-    replace = KEEP in args
-    args = [a for a in args if a != KEEP]
-    if target.is_file() and not replace:
-        published = json.loads(target.read_text(encoding="utf-8")).get("experiment", {}).get("argv")
-        if published != args:
-            script = Path(sys.modules["__main__"].__file__).resolve().relative_to(ROOT).as_posix()
-            command = shlex.join(["python", script, *(published or [])])
-            print(
-                f"not kept: {target.relative_to(ROOT)} is the report of `{command}` (other options); "
-                f"this run's stays at {report} ({KEEP} replaces the published one)"
-            )
-            return report
     data = {k: v for k, v in json.loads(report.read_text(encoding="utf-8")).items() if k not in drop}
     written = datetime.datetime.fromtimestamp(report.stat().st_mtime, datetime.UTC)
     data["experiment"] = {
@@ -108,6 +110,16 @@ def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
         (ROOT, "."),
     ):
         text = text.replace(str(path), alias)
+    if target.is_file() and KEEP not in getattr(sys, "orig_argv", []):
+        published = json.loads(target.read_text(encoding="utf-8"))
+        if _what_ran(published) != _what_ran(json.loads(text)):
+            argv = published.get("experiment", {}).get("argv") or []
+            print(
+                f"not kept: {target.relative_to(ROOT)} is the report of other settings (its run: "
+                f"`{shlex.join(['python', published.get('experiment', {}).get('script', '?'), *argv])}`); "
+                f"this run's stays at {report} ({KEEP} replaces the published one)"
+            )
+            return report
     REPORTS.mkdir(parents=True, exist_ok=True)
     target.write_text(text, encoding="utf-8")
     print(f"kept {target.relative_to(ROOT)}")

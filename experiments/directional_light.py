@@ -20,11 +20,10 @@ Writes runs/directional_light/directional_light.json; keeps docs/reports/directi
 from __future__ import annotations
 
 import json
-import sys
 
 import cv2
 import numpy as np
-from _run import RUNS, command_line, keep
+from _run import RUNS, command_line, keep, script_command
 from orb_orientation import band_variant
 from tqdm.auto import tqdm
 
@@ -112,7 +111,7 @@ def main() -> None:
             summary[f"{name}, {size} px"] = result
     report = {
         "summary": summary,
-        "command": "python " + " ".join(sys.argv),
+        "command": script_command(),
         "machine": machine(),
         "settings": {**vars(args), "elevations": ELEVATIONS, "azimuths": AZIMUTHS, "sizes": SIZES},
     }

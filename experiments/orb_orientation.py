@@ -23,13 +23,12 @@ Writes runs/orb_orientation/{orb_orientation.json,band_*.npz}; keeps docs/report
 from __future__ import annotations
 
 import json
-import sys
 from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
-from _run import RUNS, command_line, keep
+from _run import RUNS, command_line, keep, script_command
 from tqdm.auto import tqdm
 
 from alcn_cv.bench.relight import PairPlan, Settings, build_method, evaluate_scene, keypoint_scores, plan_pairs
@@ -134,7 +133,7 @@ def main() -> None:
                 summary[f"{name}, {set_name} scenes"] = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
     report = {
         "summary": summary,
-        "command": "python " + " ".join(sys.argv),
+        "command": script_command(),
         "machine": machine(),
         "settings": {"patches": SETTINGS.patches, "max_pairs": SETTINGS.max_pairs, "max_frames": MAX_FRAMES},
         "seeds": args.seeds,

@@ -29,11 +29,10 @@ Writes OUT/relief_training.json; keeps docs/reports/relief_training.json.
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import cv2
-from _run import RUNS, alcn, command_line, keep
+from _run import RUNS, alcn, command_line, keep, script_command
 from directional_light import identify, render_identity, render_stand_in
 from tqdm.auto import tqdm
 
@@ -88,7 +87,7 @@ def main() -> None:
     parser.add_argument("--identities", type=int, default=40, help="rendered training scenes (default: 40)")
     parser.add_argument("--seed", type=int, default=11, help="their rendering seed (default: 11; the stand-in's is 7)")
     args = parser.parse_args()
-    command = "python " + " ".join(sys.argv)  # before alcn() sets sys.argv to its own commands
+    command = script_command()
     scenes = args.out / "scenes"
     trained = {
         f"trained, {name}": args.out / name.replace(" ", "_").replace(",", "") / "gain_normalizer.npz"

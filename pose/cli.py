@@ -514,7 +514,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)",
     )
     e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
-    e.add_argument("--out", type=Path, required=True, help="report folder")
+    e.add_argument(
+        "--out", type=Path, required=True, help="report folder (a folder of an earlier evaluation loses its models)"
+    )
     add_progress_option(e)
     e.set_defaults(func=_eval)
 

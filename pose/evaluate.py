@@ -218,7 +218,8 @@ def main(
     a cell is then the mean over the seeds, its spread their standard deviation), from the
     training sequence on normalized images, then tracked through every test
     sequence (or those numbered in ``sequences``). Writes ``table1.md`` (with the machine and
-    ``command``), ``table1.json``, ``table1.png`` (and the models, an earlier run's removed) into ``out_dir``;
+    ``command``), ``table1.json``, ``table1.png`` (and the models; a folder with an earlier ``table1.json`` loses
+    that run's ``model_*.npz`` and ``corners_*.onnx``) into ``out_dir``;
     ``progress``: a progress bar over the models.
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
@@ -246,8 +247,9 @@ def main(
     unknown = set(detectors) - {"features", "corners"}
     if unknown:
         raise InputError(f"unknown detectors {sorted(unknown)}; choose 'features' and/or 'corners'")
-    for earlier in [*out_dir.glob("model_*.npz"), *out_dir.glob("corners_*.onnx")]:  # another run's normalizations
-        earlier.unlink()
+    if (out_dir / "table1.json").is_file():  # an earlier evaluation's folder: its models, of other normalizations
+        for earlier in [*out_dir.glob("model_*.npz"), *out_dir.glob("corners_*.onnx")]:
+            earlier.unlink()
     t_start = time.perf_counter()
     bar = tqdm(total=len(detectors) * len(normalizations), desc="pose eval", unit="model", disable=not progress)
     for det_name in detectors:

@@ -206,10 +206,8 @@ def _overlay_path(overlay: str | Path, source: str | Path) -> Path:
     """The overlay's path, checked before the tracking: a video (:data:`alcn_cv.io.VIDEO_SUFFIXES`) or a folder
     of PNGs (no suffix), not the input."""
     overlay = Path(overlay)
-    if overlay.suffix and not io.is_video(overlay):
-        raise InputError(
-            f"--overlay {overlay}: a video ({', '.join(sorted(io.VIDEO_SUFFIXES))}) or a folder without a suffix"
-        )
+    if not overlay.is_dir() and overlay.suffix.lower() in io.IMAGE_SUFFIXES | {".json"}:  # a folder may hold a dot
+        raise InputError(f"--overlay {overlay}: a video ({', '.join(sorted(io.VIDEO_SUFFIXES))}) or a folder")
     if overlay.resolve() == Path(source).resolve():
         raise InputError(f"--overlay {overlay} is the input; write the overlay elsewhere")
     if io.is_video(overlay):

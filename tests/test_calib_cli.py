@@ -207,6 +207,10 @@ def test_calib_outputs_under_a_file_or_existing_are_one_line_errors(tmp_path, ca
     (tmp_path / "reg").mkdir()
     (tmp_path / "reg" / "mine.txt").write_text("mine")
     rc = alcn(["calib", "register", str(tmp_path), *camera, "--out", str(tmp_path / "reg")])
+    err = capsys.readouterr().err.strip()  # --overwrite would not replace it either: not offered
+    assert rc == 2 and "is not an earlier output" in err and "--overwrite" not in err
+    (tmp_path / "reg" / "registration.json").write_text("{}")
+    rc = alcn(["calib", "register", str(tmp_path), *camera, "--out", str(tmp_path / "reg")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and err.endswith(f"{tmp_path / 'reg'} exists (--overwrite replaces it)")
 

@@ -674,7 +674,7 @@ def test_eval_removes_an_earlier_runs_models_first(posedata, tmp_path, monkeypat
 
     out = tmp_path / "eval"
     out.mkdir()
-    for name in ("model_dog.npz", "corners_dog_seed1.onnx", "notes.txt"):
+    for name in ("model_dog.npz", "corners_dog_seed1.onnx", "notes.txt", "table1.json"):
         (out / name).write_bytes(b"earlier")
 
     def stop(*_args, **_kwargs):
@@ -683,7 +683,12 @@ def test_eval_removes_an_earlier_runs_models_first(posedata, tmp_path, monkeypat
     monkeypatch.setattr(evaluate, "build_model", stop)
     with pytest.raises(RuntimeError, match="first model"):
         evaluate.main(posedata, out, normalizations=["none"], progress=False)
-    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]  # what the command did not write stays
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "table1.json"]  # what it did not write stays
+    (out / "table1.json").unlink()
+    (out / "model_mine.npz").write_bytes(b"a user's")  # no earlier evaluation here: nothing is removed
+    with pytest.raises(RuntimeError, match="first model"):
+        evaluate.main(posedata, out, normalizations=["none"], progress=False)
+    assert (out / "model_mine.npz").is_file()
 
 
 def test_version_3_names_the_normalization_normalizer(random_net, tmp_path):

@@ -65,14 +65,19 @@ def test_a_run_with_other_options_keeps_the_published_report(tmp_path, monkeypat
     monkeypatch.setitem(sys.modules, "__main__", types.SimpleNamespace(__file__=str(script)))
     report = tmp_path / "run.json"
 
-    def run(*args: str, value: int) -> dict:
+    def run(*args: str, value: int, command: str | None = None) -> dict:
         monkeypatch.setattr(sys, "orig_argv", [sys.executable, str(script), *args])
-        report.write_text(json.dumps({"value": value}))
-        _run.keep(report, "exp")
-        return json.loads((tmp_path / "reports" / "exp.json").read_text())
+        report.write_text(json.dumps({"value": value} | ({"command": command} if command else {})))
+        _run.keep(report, name)
+        return json.loads((tmp_path / "reports" / f"{name}.json").read_text())
 
+    name = "exp"  # a report without a command of its own: the script's options say what ran
     assert run("--n", "3", value=1)["experiment"]["argv"] == ["--n", "3"]  # the first report is kept
     assert run("--n", "3", value=2)["value"] == 2  # the same options replace it
     assert run("--n", "1", value=3)["value"] == 2 and "not kept" in capsys.readouterr().out
     kept = run("--n", "1", "--keep", value=4)
     assert kept["value"] == 4 and kept["experiment"]["argv"] == ["--n", "1"]
+    name = "bench"  # a report of an alcn command: the same command from other options (all parts, say) replaces it
+    assert run("--part", "a", value=1, command="alcn bench x --seeds 0")["value"] == 1
+    assert run(value=2, command="alcn bench x --seeds 0")["value"] == 2
+    assert run("--part", "a", value=3, command="alcn bench x --seeds 1")["value"] == 2

@@ -47,7 +47,7 @@ def _images(shared_data, n=3):
 
 
 def test_window_matches_the_network():
-    assert opencv_runtime.WINDOW == Normalizer.window == LiteNormalizer.window
+    assert opencv_runtime.WINDOW == Normalizer.window == LiteNormalizer.window == 48  # the paper's windows
     first = LiteNormalizer().features[0]
     assert first.kernel_size == first.stride == (opencv_runtime.BLOCK,) * 2
 

@@ -85,8 +85,11 @@ def load_objects(data_dir: str | os.PathLike, scale: float = 1.0) -> list[Photom
         if not shots or not mask_path.is_file():
             logger.debug("skipping %s: no %s.<i>.png images or no mask", folder, folder.name)
             continue
-        images = [read_image(p, gray=True) for _, p in shots]
-        mask = read_image(mask_path, gray=True) > 127
+        try:
+            images = [read_image(p, gray=True) for _, p in shots]
+            mask = read_image(mask_path, gray=True) > 127
+        except InputError as exc:  # a file of the data set, not the caller's input
+            raise DatasetError(str(exc)) from None
         if any(img.shape != mask.shape for img in images):
             raise DatasetError(f"{folder}: images and mask {folder.name}.mask.png differ in size")
         if scale != 1:

@@ -78,10 +78,11 @@ def atomic_output_dir(
     """
     out = Path(out_dir)
     empty = out.is_dir() and not any(out.iterdir())
-    if out.exists() and not overwrite and not empty:
-        raise FileExistsError(f"{out} exists (--overwrite, or overwrite=True, replaces it)")
+    # a folder that overwriting would not replace says so first, whether or not overwriting was asked
     if out.exists() and not (empty or (out.is_dir() and (out / marker).is_file())):
         raise FileExistsError(f"{out} is not an earlier output (no {marker}): not replaced; give another path")
+    if out.exists() and not overwrite and not empty:
+        raise FileExistsError(f"{out} exists (--overwrite, or overwrite=True, replaces it)")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
     tmp.chmod(0o777 & ~UMASK)  # mkdtemp's folder is private (0700); the output is as any other folder made here

@@ -269,7 +269,7 @@ def _coerce(key: str, value: Any, default: Any) -> Any:
         # a value that is no TOML stays a string: the usual cause is a list of unquoted words
         hint = (
             " (a TOML value: quote the strings, e.g. ['a', 'b'])"
-            if isinstance(value, str) and value[:1] in "[{"
+            if isinstance(value, str) and value.startswith(("[", "{"))
             else ""
         )
         raise InputError(f"config key {key!r} must be {_type_name(default)}, got {value!r}{hint}")
