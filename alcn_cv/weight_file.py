@@ -101,6 +101,11 @@ def load_normalizer_file(path: str | Path | None = None) -> NormalizerFile:
     if path.stat().st_size == 0:
         raise WeightFileError(f"weight file {path} is empty")
     if not zipfile.is_zipfile(path):
+        if path.suffix.lower() == ".onnx":  # an export: the weight file is the .npz it was made from
+            raise WeightFileError(
+                f"{path} is an ONNX export; give the weight file (.npz) it was exported from, and keep the .onnx "
+                "beside it under the same name: backend='opencv' reads it there"
+            )
         raise WeightFileError(f"weight file {path} is not a .npz archive")
     try:
         with np.load(path, allow_pickle=False) as data:

@@ -154,6 +154,9 @@ def test_alcn_parameters():
     with pytest.raises(InputError, match="not both"):
         alcn_cv.createALCN(model="paper", weights=MODELS["lite"])
     assert alcn_cv.createALCN(weights=MODELS["lite"]).weights_path == MODELS["lite"]
+    with pytest.raises(WeightFileError, match="an ONNX export; give the weight file .*beside it"):
+        alcn_cv.createALCN(weights=MODELS["lite"].with_suffix(".onnx"))
+    assert repr(alcn_cv.createALCN(model="lite")).startswith("ALCN(model='lite', ")  # a shipped model by its name
     with pytest.raises(InputError, match="backend='fast' runs on the CPU"):
         alcn_cv.createALCN(backend="fast", device="cuda")
     with pytest.raises(InputError, match="not a torch device"):
@@ -293,3 +296,12 @@ def test_same_method_fills_in_the_defaults():
     assert not same_method("alcn", "alcn:model=lite")
     with pytest.raises(InputError, match="unknown normalization"):
         same_method("clahe", "clahee")
+
+
+def test_a_weight_file_without_its_export_says_how_to_make_it(tmp_path):
+    import shutil
+
+    weights = shutil.copy(MODELS["lite"], tmp_path / "mine.npz")
+    with pytest.raises(WeightFileError, match=r"alcn export --weights .*mine\.npz --onnx .*mine\.onnx"):
+        alcn_cv.createALCN(weights=weights, backend="opencv")
+    assert f"weights='{weights}'" in repr(alcn_cv.createALCN(weights=weights))  # a user's file by its path

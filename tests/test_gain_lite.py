@@ -17,7 +17,7 @@ from alcn_cv.cli import main as cli  # noqa: E402
 from alcn_cv.data.frames import synthetic_frame  # noqa: E402
 from alcn_cv.enhance.alcn import ALCN, MODELS  # noqa: E402
 from alcn_cv.nets.gain import GainNormalizer  # noqa: E402
-from alcn_cv.train.config import GainDistillConfig  # noqa: E402
+from alcn_cv.train.config import GainDistillConfig, LiteDistillConfig  # noqa: E402
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file  # noqa: E402
 
 
@@ -88,6 +88,8 @@ def test_distill_gain_is_seeded_and_rejects_other_teachers(tmp_path):
         np.testing.assert_array_equal(a, b)
     with pytest.raises(alcn_cv.errors.InputError, match="not a gain"):
         distill.distill_gain(GainDistillConfig(teacher="lite", scenes=cfg.scenes), progress=False)
+    with pytest.raises(alcn_cv.errors.InputError, match="paper's family.*--conf gain-lite"):  # before rendering
+        distill.distill(LiteDistillConfig(teacher=str(teacher_path)), progress=False)
     short = [str(s) for s in _scenes(tmp_path / "short", count=1, frames=3)]
     with pytest.raises(alcn_cv.errors.DatasetError, match="validation"):
         distill.distill_gain(

@@ -55,6 +55,7 @@ def test_help_names_every_preset(command, confs, capsys):
         (["train-real-light", "--set", "steps=-5"], "steps >= 1"),  # checked before printing, not at the run
         (["train-unet", "--set", "lr=0"], "lr must be > 0"),
         (["train-real-light", "--set", "scenes=[courbevoie]"], "quote the strings"),
+        (["train", "--set", "data.train_lighting=['foo']"], "data.train_lighting' must list lighting families"),
     ],
 )
 def test_bad_settings_are_one_line_errors(args, message, capsys):
@@ -112,6 +113,12 @@ def test_train_detector_from_a_few_images(tmp_path):
     state = torch.load(tmp_path / "det" / "detector.pt", weights_only=True)
     assert state["classes"] == ["background", "disc", "square"] and state["method"] == "dog"
     assert main(["train-detector", str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 2
+    weights = ["--weights", str(tmp_path / "w.npz")]
+    assert main([*args, *weights]) == 2  # a Normalizer for a DoG
+    alcn = [*args[:4], "--method", "alcn:model=lite", *args[6:]]
+    assert main(alcn) == 0  # the spec it records makes the same normalization again: scale 1, the windows' own
+    assert torch.load(tmp_path / "det" / "detector.pt", weights_only=True)["method"] == "alcn:scale=1.0:model=lite"
+    assert main([*alcn[:5], "alcn:weights=a.npz", *alcn[6:], *weights]) == 2  # the weights given twice
 
 
 def test_distill_help_and_a_tiny_run(tmp_path, capsys):
@@ -147,3 +154,11 @@ def test_train_unet_prints_its_own_network(capsys):
     assert main(["train-unet", "--print-config", "--channels", "4", "--levels", "2"]) == 0
     net = tomllib.loads(capsys.readouterr().out)["net"]
     assert net == {"channels": 4, "levels": 2}
+
+
+@pytest.mark.parametrize("command", [["train", "--conf", "paper-full"], ["train-real-light"], ["train-unet"]])
+def test_a_training_run_never_writes_into_a_folder_of_other_files(command, tmp_path, capsys):
+    (tmp_path / "scene_gt.json").write_text("{}")  # a data set's folder, say
+    assert main([*command, "--out", str(tmp_path), "--no-progress"]) == 2
+    assert "holds other files than a training run's" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene_gt.json"]

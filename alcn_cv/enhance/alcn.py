@@ -275,8 +275,10 @@ class ALCN(Normalization):
         return np.stack([with_alpha(image, alpha, dtype) for image, alpha in zip(out, frames[..., -1])])
 
     def __repr__(self) -> str:
+        shipped = next((name for name, path in MODELS.items() if path == self.weights_path), None)
+        source = f"model={shipped!r}" if shipped else f"weights={str(self.weights_path)!r}"
         return (
-            f"ALCN(weights={self.weights_path.name!r}, scale={self.scale}, backend={self.backend!r}, "
+            f"ALCN({source}, scale={self.scale}, backend={self.backend!r}, "
             f"grid_stride={self.grid_stride}, mixture={self.mixture!r}, threads={self.threads}, trained={self.trained})"
         )
 

@@ -187,7 +187,10 @@ class OpenCVNormalizer:
     def __init__(self, onnx_path: str | Path | None = None, config: dict | None = None) -> None:
         self.path = Path(onnx_path) if onnx_path is not None else DEFAULT_ONNX
         if not self.path.is_file():
-            raise WeightFileError(f"ONNX model not found: {self.path} (write one with `alcn export --onnx PATH`)")
+            raise WeightFileError(
+                f"ONNX model not found: {self.path} (backend='opencv' runs the export beside the weight file: "
+                f"`alcn export --weights {self.path.with_suffix('.npz')} --onnx {self.path}`)"
+            )
         # one inference at a time: setInput and forward share the network's state across threads
         self._lock = threading.Lock()
         try:

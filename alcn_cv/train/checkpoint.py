@@ -18,9 +18,9 @@ import numpy as np
 import torch
 
 from alcn_cv.data.phos import PhosBatch
-from alcn_cv.errors import WeightFileError
+from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
-from alcn_cv.io import atomic_write
+from alcn_cv.io import atomic_write, make_folder
 from alcn_cv.report import machine
 from alcn_cv.train.config import TrainConfig
 from alcn_cv.train.models import JointModel, measure_output_range
@@ -35,6 +35,7 @@ __all__ = [
     "TrainState",
     "load_checkpoint",
     "restore_checkpoint",
+    "run_folder",
     "save_checkpoint",
     "versions",
     "write_normalizer_file",
@@ -66,6 +67,19 @@ class TrainState:
     def elapsed(self) -> float:
         """Seconds of the run so far (across resumptions)."""
         return time.perf_counter() - self.start
+
+
+def run_folder(out: str | Path) -> Path:
+    """The run folder ``out`` of a training command, made when missing: an empty folder or an earlier run's (its
+    ``train.log``), never a folder of other files, so that a run's files never mix with a data set's.
+
+    Raises:
+        InputError: ``out`` holds files and no ``train.log``, or lies under a file.
+    """
+    out = Path(out)
+    if out.is_dir() and any(out.iterdir()) and not (out / "train.log").is_file():
+        raise InputError(f"{out} holds other files than a training run's (no train.log); give another --out")
+    return make_folder(out)
 
 
 def versions() -> dict[str, str]:

@@ -83,7 +83,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("images", type=Path, help="folder with one sub-folder of images per object")
     d.add_argument("--out", type=Path, required=True, help="output folder")
     d.add_argument(
-        "--method", default="alcn", help="normalization applied to the windows, any registered name (default alcn)"
+        "--method",
+        default="alcn",
+        help="normalization applied to the windows, a spec NAME[:KEY=VALUE...] (default alcn; ALCN at scale=1, "
+        "the windows' own; detector.pt records the spec with every parameter)",
     )
     d.add_argument("--weights", type=Path, help="Normalizer weight file for --method alcn (default: shipped)")
     d.add_argument("--per-image", type=int, default=300, help="synthetic windows per real image (default 300)")
@@ -168,7 +171,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "export",
         help="export the Normalizer to ONNX (for the torch-free OpenCV runtime)",
         description="Export the Normalizer of a weight file as a fully-convolutional ONNX model with dynamic "
-        "image size, run by cv2.dnn in alcn_cv.nets.opencv_runtime (no torch needed).",
+        "image size, run by cv2.dnn in alcn_cv.nets.opencv_runtime (no torch needed). backend='opencv' reads the "
+        "export beside its weight file under the same name (W.npz: W.onnx); createALCN takes the .npz.",
     )
     e.add_argument("--onnx", type=Path, required=True, help="output .onnx path")
     e.add_argument("--weights", type=Path, help="Normalizer weight file (.npz; default: the default model's)")

@@ -383,6 +383,15 @@ def _check(cfg: TrainConfig) -> None:
             raise InputError(f"config key {key!r} must be >= 0, got {flat[key]!r}")
     if not 0 <= cfg.data.background_fraction <= 1:
         raise InputError(f"config key 'data.background_fraction' must be in [0, 1], got {cfg.data.background_fraction}")
+    # the families first: a misspelt one is named, not the anchor it then leaves out
+    for key, names in (
+        ("data.train_lighting", cfg.data.train_lighting),
+        ("data.val_lighting", cfg.data.val_lighting),
+        ("fewshot.test_lighting", cfg.fewshot.test_lighting),
+    ):
+        bad = [s for s in names if s not in LIGHT_FAMILIES]
+        if bad or not names:
+            raise InputError(f"config key {key!r} must list lighting families of {LIGHT_FAMILIES}, got {names}")
     if cfg.optim.objective == "meta" and not cfg.data.path:
         if cfg.data.anchor_lighting not in cfg.data.train_lighting:
             raise InputError(
@@ -399,14 +408,6 @@ def _check(cfg: TrainConfig) -> None:
     lo, hi = cfg.data.gain_jitter
     if not 0 < lo <= hi:
         raise InputError(f"config key 'data.gain_jitter' must be 0 < lo <= hi, got {cfg.data.gain_jitter}")
-    for key, names in (
-        ("data.train_lighting", cfg.data.train_lighting),
-        ("data.val_lighting", cfg.data.val_lighting),
-        ("fewshot.test_lighting", cfg.fewshot.test_lighting),
-    ):
-        bad = [s for s in names if s not in LIGHT_FAMILIES]
-        if bad or not names:
-            raise InputError(f"config key {key!r} must list lighting families of {LIGHT_FAMILIES}, got {names}")
     for pair in cfg.fewshot.dog:
         if len(pair) != 2:
             raise InputError(f"config key 'fewshot.dog' must list [a, b] sigma pairs, got {cfg.fewshot.dog}")

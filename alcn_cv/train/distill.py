@@ -117,6 +117,11 @@ def distill(cfg: LiteDistillConfig | None = None, progress: bool = True) -> tupl
     torch.manual_seed(seed)
     teacher_path = teacher_file(cfg.teacher)
     teacher_weights = load_normalizer_file(teacher_path)
+    if teacher_weights.meta.get("architecture") in ("gain", "unet"):  # a student of the paper's family: its weights
+        raise InputError(
+            f"{teacher_path} is not a Normalizer of the paper's family (paper, lite); "
+            "distil a gain Normalizer with --conf gain-lite"
+        )
     teacher_net = normalizer_from_file(teacher_weights)
     sigmas = [float(s) for s in teacher_weights.meta["sigmas"]]
     start = time.perf_counter()

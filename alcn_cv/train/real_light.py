@@ -53,9 +53,10 @@ from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
-from alcn_cv.io import atomic_write, make_folder, write_json
+from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.report import log_to, machine
+from alcn_cv.train.checkpoint import run_folder
 from alcn_cv.train.config import RealLightConfig
 from alcn_cv.train.models import CentreMixture
 from alcn_cv.weight_file import save_normalizer_file
@@ -420,8 +421,7 @@ def training_run(cfg: RealLightConfig, out: str | Path) -> Iterator[Path]:
         The run folder.
     """
     cfg.check()
-    folder = Path(out)
-    make_folder(folder)
+    folder = run_folder(out)
     # an earlier run's snapshots, which this run's would not all replace
     earlier = sorted(p for p in folder.glob("*_step*.npz") if re.search(r"_step\d+\.npz$", p.name))
     for path in earlier:

@@ -24,6 +24,8 @@ import torch.nn.functional as F
 from torch import nn
 from tqdm.auto import tqdm
 
+from alcn_cv.enhance.alcn import ALCN
+from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.io import atomic_write, write_json
@@ -300,19 +302,33 @@ def main(
             image is the object unless ``NAME.mask.png`` beside ``NAME.*`` marks it).
         out: output folder; ``detector.pt`` holds ``{"state_dict", "config", "classes",
             "method", "policy"}``.
-        method: the normalization (``"alcn"`` uses the Normalizer ``weights``, default shipped).
+        method: the normalization, a spec ``NAME[:KEY=VALUE...]``; ALCN's windows are at its working scale
+            (``scale=1`` unless the spec says otherwise).
+        weights: the Normalizer of ``method`` ``"alcn"`` (default: the shipped default's), as ``alcn:weights=...``.
         per_image, negatives, extent: see :func:`object_windows`.
         epochs, batch_size, lr, seed: see :func:`train_detector`.
 
     Returns:
-        The path of ``detector.pt``.
-    """
-    import alcn_cv
+        The path of ``detector.pt``; its ``"method"`` is the spec with every parameter set here, which makes the
+        same normalization again.
 
+    Raises:
+        InputError: ``weights`` with another method than ALCN, or given twice.
+    """
+    name, given = parse_spec(method)
+    defaults: dict[str, object] = {}
+    if name == ALCN.name:
+        defaults["scale"] = 1.0  # the windows are cut at the detector's scale already
+        if weights is not None:
+            if "weights" in given:
+                raise InputError(f"the Normalizer's weights are given twice: --weights and in {method!r}")
+            defaults["weights"] = str(weights)
+    elif weights is not None:
+        raise InputError(f"--weights is the Normalizer of --method alcn, not of {name!r}")
+    method = name + "".join(f":{k}={v}" for k, v in {**defaults, **given}.items())
     objects = _read_objects(Path(images))
     windows, labels = object_windows(objects, per_image, negatives, extent, seed)
-    params: dict = {"weights": weights, "scale": 1.0} if method == "alcn" else {}
-    x = normalize_windows(windows, alcn_cv.create(method, **params))
+    x = normalize_windows(windows, from_spec(method))
     logger.info(
         "%d objects, %d windows (%d background), method %s", len(objects), len(x), int((labels == 0).sum()), method
     )

@@ -26,7 +26,7 @@ def plot_curves(history: list[dict[str, Any]], path: Path) -> None:
     ax2.plot(epochs, [h["train_acc"] for h in history], "o-", label="training")
     ax2.plot(epochs, [h["val_acc"] for h in history], "o-", lw=2, label="validation, all held-out")
     for fam in history[-1]["val_by_family"]:
-        ax2.plot(epochs, [h["val_by_family"][fam] for h in history], "--", label=f"validation, {fam}")
+        ax2.plot(epochs, [h["val_by_family"][fam] for h in history], ".--", label=f"validation, {fam}")
     ax2.set(xlabel="epoch", ylabel="accuracy", title="accuracy", ylim=(0, 1))
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)

@@ -46,7 +46,7 @@ from tqdm.auto import tqdm
 
 from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, make_folder, write_json
+from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.device import torch_device
 from alcn_cv.report import log_to, machine, nan_to_none
 from alcn_cv.train import distributed
@@ -54,6 +54,7 @@ from alcn_cv.train.checkpoint import (
     TrainState,
     load_checkpoint,
     restore_checkpoint,
+    run_folder,
     save_checkpoint,
     write_normalizer_file,
 )
@@ -135,8 +136,7 @@ def train(
     """
     cfg = load_config(config)
     distributed.init(cfg.run.device)
-    out = Path(out_dir)
-    make_folder(out)
+    out = run_folder(out_dir)
     start = time.perf_counter()
     machine_start = machine()
     with log_to(out / "train.log", append=resume) if distributed.is_main() else contextlib.nullcontext():

@@ -146,9 +146,15 @@ def check_windows(train_set: PhosBatch, val_set: PhosBatch) -> int:
     if len(train_set) == 0 or len(val_set) == 0:
         raise InputError("training and validation windows must not be empty")
     if train_set.n_objects != val_set.n_objects:
-        raise InputError(f"training windows have {train_set.n_objects} objects, validation {val_set.n_objects}")
+        raise InputError(
+            f"training windows have {train_set.n_objects} objects, validation {val_set.n_objects}: render both with "
+            f"one catalogue (data.n_objects, or `alcn data phos --objects`), or give data.val_path of the same"
+        )
     shared = set(np.unique(train_set.light_ids)) & set(np.unique(val_set.light_ids))
     if shared:
         names = sorted(train_set.light_families[i] for i in shared)
-        raise InputError(f"validation windows share the training lightings {names}; hold some lightings out")
+        raise InputError(
+            f"validation windows share the training lightings {names}; hold some lightings out (data.train_lighting "
+            "and data.val_lighting, or `alcn data phos --lighting` for each of data.path and data.val_path)"
+        )
     return train_set.n_objects + 1
