@@ -149,3 +149,19 @@ def test_an_output_folder_gets_the_permissions_of_any_new_folder(tmp_path):
         (tmp / "manifest.json").write_text("{}")
     (tmp_path / "plain").mkdir()
     assert os.stat(tmp_path / "data").st_mode == os.stat(tmp_path / "plain").st_mode
+
+
+def test_user_errors_are_told_before_the_rendering(tmp_path, monkeypatch):
+    """An existing folder, a folder under a file and an empty dataset fail at once, not after minutes of rendering
+    (at the default 100000 windows) or, under a file, with a bare "[Errno 17] File exists"."""
+    phos.generate(tmp_path / "data", 5, 0, n_objects=2, progress=False)
+    blocker = tmp_path / "file.json"
+    blocker.write_text("mine")
+    monkeypatch.setattr(phos, "parallel_map", lambda *args, **kwargs: pytest.fail("rendered"))
+    with pytest.raises(FileExistsError, match="--overwrite"):
+        phos.generate(tmp_path / "data", 5, 0, n_objects=2, progress=False)
+    with pytest.raises(InputError, match="is a file"):
+        phos.generate(blocker / "p", 5, 0, n_objects=2, progress=False)
+    with pytest.raises(InputError, match=r"\(-n\) must be at least 1, got 0"):
+        phos.generate(tmp_path / "empty", 0, 0, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data", "file.json"]

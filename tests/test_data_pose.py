@@ -180,3 +180,16 @@ def test_training_loops_change_only_the_training_sequence(tmp_path):
     assert len(read_text_model(default / "train" / "000001" / "colmap").images) == 8
     with pytest.raises(InputError, match="train_sweeps"):
         pose.generate(tmp_path / "bad", train_sweeps=(1, -1), **kw)
+
+
+def test_zero_frames_and_an_output_under_a_file_are_errors(tmp_path, monkeypatch):
+    """--frames 0 is refused, not read as "the size's default" (3 frames, silently); an output under a file fails
+    in one line before the rendering."""
+    blocker = tmp_path / "file.json"
+    blocker.write_text("mine")
+    monkeypatch.setattr(pose, "parallel_map", lambda *args, **kwargs: pytest.fail("rendered"))
+    with pytest.raises(InputError, match=r"frames >= 1 \(--frames\).*got 0"):
+        pose.generate(tmp_path / "zero", size="small", n_frames=0, progress=False)
+    with pytest.raises(InputError, match="is a file"):
+        pose.generate(blocker / "pose", size="small", progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file.json"]

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import json
+
 import cv2
 import numpy as np
 import pytest
 
 from alcn_cv.cli import main
-from alcn_cv.data import detect, phos, pose
+from alcn_cv.data import detect, phos, pose, relief_scenes
 from alcn_cv.data.preview import preview
 from alcn_cv.data.stats import compare_psm, image_stats
-from alcn_cv.errors import DatasetError
+from alcn_cv.errors import DatasetError, InputError
 
 
 def test_contact_sheets_of_every_kind(tmp_path):
@@ -62,3 +64,48 @@ def test_cli(tmp_path, capsys):
     assert main(["data", "preview", str(tmp_path / "missing"), "--out", str(tmp_path / "q.png")]) == 2
     assert "not a dataset" in capsys.readouterr().err
     assert main(["data", "detect", "--size", "small", "--out", str(tmp_path / "d")]) == 2  # exists
+
+
+def _tiles(sheet_path, tile_h, tile_w, pad=2):
+    """(rows, columns) of a contact sheet of tiles of ``tile_h`` x ``tile_w`` pixels."""
+    h, w = cv2.imread(str(sheet_path)).shape[:2]
+    assert (h - pad) % (tile_h + pad) == 0 and (w - pad) % (tile_w + pad) == 0, (h, w)
+    return (h - pad) // (tile_h + pad), (w - pad) // (tile_w + pad)
+
+
+def test_n_is_how_many_samples_a_sheet_shows(tmp_path):
+    """-n is what a sheet shows, without empty columns: the frames of one pose sequence (was: a strip of 16
+    columns, 13 empty), as many frames of every sequence of a pose root (was: one each whatever -n), Phos windows
+    (was: at least 32)."""
+    s = pose.generate(tmp_path / "pose", size="small", n_frames=2, n_test=2, progress=False)  # 320x240 frames
+    assert _tiles(preview(s / "test" / "000001", tmp_path / "a.png", n=16), 240, 320) == (1, 2)
+    assert _tiles(preview(s, tmp_path / "b.png", n=6), 240, 320) == (2, 4)  # 3 sequences, 2 frames each
+    assert _tiles(preview(s, tmp_path / "c.png", n=1), 240, 320) == (1, 3)  # at least one frame a sequence
+    p = phos.generate(tmp_path / "phos", 40, 0, n_objects=3, progress=False)
+    assert _tiles(preview(p, tmp_path / "d.png", n=4), 128, 128) == (1, 4)
+    assert _tiles(preview(p, tmp_path / "e.png", n=12), 128, 128) == (2, 8)
+    with pytest.raises(InputError, match=r"\(-n\) must be at least 1"):
+        preview(p, tmp_path / "f.png", n=0)
+
+
+def test_a_sheet_of_rendered_scenes_and_of_an_unknown_kind(tmp_path):
+    """The folders of `alcn data scenes` are previewed (a few frames of a few scenes, a row each); another kind's
+    error names the kinds previewed."""
+    out = relief_scenes.generate(tmp_path / "scenes", scenes=3, frames=3, size=32, progress=False)
+    sheet = preview(out, tmp_path / "s.png", n=4)
+    assert _tiles(sheet, 256, 256) == (2, 2) and cv2.imread(str(sheet)).std() > 10
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "manifest.json").write_text(
+        json.dumps({"generator_version": "1", "kind": "other", "seed": 0, "parameters": {}})
+    )
+    with pytest.raises(DatasetError, match="unknown dataset kind 'other'; .*phos, detect, pose, relief_scenes"):
+        preview(tmp_path / "other", tmp_path / "o.png")
+
+
+def test_compare_psm_names_a_missing_folder_and_checks_its_output_first(tmp_path):
+    with pytest.raises(DatasetError, match=r"nope: folder not found \(the PSM set"):  # was: nope/lights.txt
+        compare_psm(tmp_path / "nope", tmp_path / "out")
+    blocker = tmp_path / "file.json"
+    blocker.write_text("mine")
+    with pytest.raises(InputError, match="is a file"):  # before reading the set and rendering
+        compare_psm(tmp_path / "nope", blocker / "out")

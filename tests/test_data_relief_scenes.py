@@ -38,3 +38,26 @@ def test_generate_writes_folders_the_trainer_reads(tmp_path):
     # Scene i depends on (seed, i) only: a run of one scene gives the same first scene.
     one = generate(tmp_path / "one", scenes=1, frames=3, size=96, seed=5, progress=False)
     assert (one / "scene_000" / "frame_02.png").read_bytes() == (out / "scene_000" / "frame_02.png").read_bytes()
+
+
+def test_arguments_and_output_are_checked_before_the_progress_bar(tmp_path, monkeypatch, capsys):
+    """--size, the side in pixels, --frames and an output under a file fail in one line before any scene is
+    rendered (the checks of render_scene run in the workers, after the bar has started)."""
+    import alcn_cv.data.relief_scenes as relief_scenes
+    from alcn_cv.cli import main
+
+    blocker = tmp_path / "file.json"
+    blocker.write_text("mine")
+    monkeypatch.setattr(relief_scenes, "parallel_map", lambda *args, **kwargs: pytest.fail("rendered"))
+    with pytest.raises(InputError, match=r"--size is the side of the frames in pixels, at least 32; got 10"):
+        generate(tmp_path / "s", size=10, progress=False)
+    with pytest.raises(InputError, match=r"--frames"):
+        generate(tmp_path / "s", frames=1, progress=False)
+    with pytest.raises(InputError, match="is a file"):
+        generate(blocker / "s", progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file.json"]
+    # `data detect --size small` is a preset; here --size is a number, and argparse's error says which
+    with pytest.raises(SystemExit) as exit_:
+        main(["data", "scenes", "--size", "small", "--out", str(tmp_path / "s")])
+    assert exit_.value.code == 2
+    assert "argument --size: the side of the frames in pixels, e.g. 256; got 'small'" in capsys.readouterr().err

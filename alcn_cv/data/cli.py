@@ -112,6 +112,15 @@ def _compare_psm(args: argparse.Namespace) -> int:
     return 0
 
 
+def _side_in_pixels(text: str) -> int:
+    """``data scenes --size``: an integer; its error says what the number is, since the --size of ``data detect``
+    and ``data pose`` is a preset name (``small``) that argparse's "invalid int value" would leave unexplained."""
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"the side of the frames in pixels, e.g. 256; got {text!r}") from None
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``data`` subcommand and its sub-subcommands to the ``alcn`` parser."""
     p = subparsers.add_parser(
@@ -234,7 +243,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("--scenes", type=int, default=24, help="number of scenes (default 24)")
     q.add_argument("--frames", type=int, default=12, help="lightings (frames) per scene (default 12)")
-    q.add_argument("--size", type=int, default=320, help="side of the square frames in pixels (default 320)")
+    q.add_argument(
+        "--size",
+        type=_side_in_pixels,
+        default=320,
+        metavar="PIXELS",
+        help="side of the square frames in pixels, at least 32 (default 320); not a preset name as the "
+        "--size of `data detect` and `data pose`",
+    )
     q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     q.add_argument(
@@ -246,12 +262,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     q = sub.add_parser(
         "preview",
         help="contact sheet of a dataset with its ground truth drawn",
-        description="Write a PNG contact sheet of a data-engine folder, a COCO JSON file or a "
-        "BOP scene folder, with boxes, projected model boxes or labels drawn.",
+        description="Write a PNG contact sheet of a data-engine folder (phos, detect, pose, scenes), a COCO JSON "
+        "file or a BOP scene folder, with boxes, projected model boxes, labels or light families drawn.",
     )
     q.add_argument("dataset", help="dataset folder, COCO .json file or BOP scene folder")
     q.add_argument("--out", required=True, help="output PNG")
-    q.add_argument("-n", type=int, default=16, help="about how many samples to show (default 16)")
+    q.add_argument(
+        "-n",
+        type=int,
+        default=16,
+        help="how many samples to show (default 16): Phos windows, COCO images split between train and test, "
+        "BOP frames (at least one per sequence of a pose dataset), frames of the rendered scenes (a few frames "
+        "of a few scenes)",
+    )
     q.set_defaults(func=_preview)
 
     q = sub.add_parser(

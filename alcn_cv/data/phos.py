@@ -45,7 +45,7 @@ from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import write_json
+from alcn_cv.io import check_writable, write_json
 
 __all__ = ["WINDOW", "KIND_NAMES", "PhosBatch", "render_windows", "generate", "load"]
 
@@ -123,6 +123,15 @@ def _families(lighting: str | Sequence[str]) -> list[int]:
     if bad or not names:
         raise InputError(f"unknown lighting {bad or lighting!r}; use 'random' or names from {LIGHT_FAMILIES}")
     return [LIGHT_FAMILIES.index(s) for s in names]
+
+
+def _check_parameters(n: int, n_objects: int, background_fraction: float, lighting: str | Sequence[str]) -> list[int]:
+    """Check the parameters of :func:`render_windows`; return the indices of the lighting families."""
+    if n < 0 or n_objects < 1:
+        raise InputError(f"need n >= 0 and n_objects >= 1, got n={n}, n_objects={n_objects}")
+    if not 0.0 <= background_fraction <= 1.0:
+        raise InputError(f"background_fraction must be in [0, 1], got {background_fraction}")
+    return _families(lighting)
 
 
 def _render_chunk(
@@ -229,11 +238,7 @@ def render_windows(
     Returns:
         A :class:`PhosBatch`. Cost: about 2 ms of CPU time per window (one core).
     """
-    if n < 0 or n_objects < 1:
-        raise InputError(f"need n >= 0 and n_objects >= 1, got n={n}, n_objects={n_objects}")
-    if not 0.0 <= background_fraction <= 1.0:
-        raise InputError(f"background_fraction must be in [0, 1], got {background_fraction}")
-    families = _families(lighting)
+    families = _check_parameters(n, n_objects, background_fraction, lighting)
     cols = [
         np.empty((n, WINDOW, WINDOW), np.uint8),
         np.empty(n, np.int64),
@@ -286,7 +291,6 @@ def generate(
     Returns:
         The output folder.
     """
-    batch = render_windows(n, seed, progress=progress, **params)
     # The manifest records every parameter, the defaults of render_windows included.
     defaults = {
         k: p.default
@@ -294,8 +298,17 @@ def generate(
         if p.kind == p.KEYWORD_ONLY and k not in ("progress", "workers")
     }
     defaults.update({k: v for k, v in params.items() if k != "workers"})
+    # Every user error is told before the rendering (minutes for the default 100000 windows): an empty
+    # dataset is one, and so is an output under a file, which atomic_output_dir's mkdir would only report
+    # as a bare "[Errno 17] File exists".
+    if n < 1:
+        raise InputError(f"the number of windows (-n) must be at least 1, got {n}")
+    _check_parameters(n, defaults["n_objects"], defaults["background_fraction"], defaults["lighting"])
+    check_writable(out_dir)
     defaults = {k: (list(v) if isinstance(v, tuple) else v) for k, v in defaults.items()}
+    # Rendered inside the block: atomic_output_dir refuses an existing folder before the rendering starts.
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+        batch = render_windows(n, seed, progress=progress, **params)
         save_npz(tmp / "windows.npz", **{k: getattr(batch, k) for k in PhosBatch.ARRAYS})
         counts = np.bincount(batch.labels, minlength=batch.n_objects + 1)
         write_json(

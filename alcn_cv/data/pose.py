@@ -56,7 +56,7 @@ from alcn_cv.formats.bop import (
     write_scene,
 )
 from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, write_text_model
-from alcn_cv.io import write_image, write_json
+from alcn_cv.io import check_writable, write_image, write_json
 
 __all__ = [
     "PoseConfig",
@@ -446,14 +446,21 @@ def generate(
     if size not in SIZES:
         raise InputError(f"unknown size {size!r}; known: {sorted(SIZES)}")
     base = SIZES[size]
+    # None, not 0, means the size's default: --frames 0 is an error, not a silent 3 or 60
     cfg = dataclasses.replace(
-        base, n_frames=n_frames or base.n_frames, n_test=base.n_test if n_test is None else n_test
+        base,
+        n_frames=base.n_frames if n_frames is None else n_frames,
+        n_test=base.n_test if n_test is None else n_test,
     )
     if cfg.n_frames < 1 or not 0 <= cfg.n_test <= len(SEQUENCE_KINDS):
-        raise InputError(f"need n_frames >= 1 and 0 <= n_test <= {len(SEQUENCE_KINDS)}")
+        raise InputError(
+            f"need frames >= 1 (--frames) and 0 <= test sequences <= {len(SEQUENCE_KINDS)} (--n-test); "
+            f"got {cfg.n_frames} and {cfg.n_test}"
+        )
     train_sweeps = tuple(float(c) for c in train_sweeps)
     if not train_sweeps or not all(c >= 0 for c in train_sweeps):
         raise InputError(f"train_sweeps must be one or more numbers >= 0, got {train_sweeps}")
+    check_writable(out_dir)  # an output under a file: one line now, not atomic_output_dir's bare [Errno 17]
     sequences = []
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         write_camera(tmp, cfg.K, cfg.width, cfg.height)

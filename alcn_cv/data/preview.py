@@ -1,9 +1,10 @@
 """Contact sheets of datasets with their ground truth drawn (``alcn data preview``).
 
 Accepted inputs: a folder written by the data engine (its ``manifest.json`` says ``phos``,
-``detect`` or ``pose``), a COCO JSON file, or a BOP scene folder (``scene_camera.json``). Boxes are
-drawn for COCO, the projected 3D bounding box of each model for BOP (models read from the
-dataset's ``models/``), and the label and lighting family for Phos windows.
+``detect``, ``pose`` or ``relief_scenes``), a COCO JSON file, or a BOP scene folder
+(``scene_camera.json``). Boxes are drawn for COCO, the projected 3D bounding box of each model for
+BOP (models read from the dataset's ``models/``), the label and lighting family for Phos windows,
+and the light family of each frame of the rendered scenes (a few frames of a few scenes, one scene a row).
 """
 
 from __future__ import annotations
@@ -15,18 +16,22 @@ import cv2
 import numpy as np
 
 from alcn_cv.data.manifest import read_manifest
-from alcn_cv.errors import DatasetError
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import write_image
 
-__all__ = ["preview", "grid", "draw_model_box"]
+__all__ = ["KINDS", "preview", "grid", "draw_model_box"]
 
 _COLOURS = [(0, 255, 0), (255, 128, 0), (0, 128, 255), (255, 0, 255), (0, 255, 255), (255, 255, 0)]
+#: The kinds of data-engine folders :func:`preview` draws.
+KINDS = ("phos", "detect", "pose", "relief_scenes")
 
 
 def grid(tiles: list[np.ndarray], cols: int, pad: int = 2) -> np.ndarray:
-    """Arrange equally sized BGR tiles in a grid with ``pad`` pixels of gray between them."""
+    """Arrange equally sized BGR tiles in a grid of ``cols`` columns (fewer when there are fewer tiles) with
+    ``pad`` pixels of gray between them."""
     if not tiles:
         raise DatasetError("nothing to preview: the dataset has no images")
+    cols = min(cols, len(tiles))  # a single row is as wide as its tiles, without empty columns
     h, w = tiles[0].shape[:2]
     rows = (len(tiles) + cols - 1) // cols
     out = np.full((rows * (h + pad) + pad, cols * (w + pad) + pad, 3), 64, np.uint8)
@@ -109,15 +114,29 @@ def _box_corners(vertices: np.ndarray) -> np.ndarray:
     return np.array([[(lo, hi)[a][0], (lo, hi)[b][1], (lo, hi)[c][2]] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
 
 
-def _bop(scene_dirs: list[Path], models_dir: Path | None, per_scene: int) -> np.ndarray:
+def _spread(count: int, take: int) -> list[int]:
+    """``min(take, count)`` indices spread evenly over ``range(count)``, first and last included."""
+    return [int(i) for i in np.linspace(0, count - 1, min(take, count)).round()]
+
+
+def _bop(scene_dirs: list[Path], models_dir: Path | None, n: int) -> np.ndarray:
     from alcn_cv.formats.bop import load_scene, read_ply
 
+    if not scene_dirs:
+        raise DatasetError("nothing to preview: the dataset has no sequences")
+    scenes = [(d, load_scene(d)) for d in scene_dirs]
+    # n frames in all, as many of every sequence (at least one), so that the sheet's rows line up by sequence
+    per_scene = max(1, min(round(n / len(scenes)), min(len(s.frames) for _, s in scenes)))
+    if len(scenes) == 1:
+        cols = 4
+    elif per_scene == 1:
+        cols = 3  # one frame of each sequence: 3 x 3 for the 9 sequences of a pose dataset
+    else:
+        cols = per_scene * max(1, 4 // per_scene)  # whole sequences a row: two of two frames, one of three or more
     corners: dict[int, np.ndarray] = {}
     tiles = []
-    for d in scene_dirs:
-        scene = load_scene(d)
-        take = scene.frames[:: max(1, len(scene.frames) // per_scene)][:per_scene]
-        for f in take:
+    for d, scene in scenes:
+        for f in (scene.frames[i] for i in _spread(len(scene.frames), per_scene)):
             img = cv2.imread(str(f.rgb_path), cv2.IMREAD_COLOR)
             if img is None:
                 raise DatasetError(f"{d / 'scene_camera.json'}: field {f.im_id}: cannot read {f.rgb_path}")
@@ -131,7 +150,33 @@ def _bop(scene_dirs: list[Path], models_dir: Path | None, per_scene: int) -> np.
             _label(img, f"{d.parent.name}/{d.name} #{f.im_id}", scale=0.6, org=(6, 20))
             s = 320 / img.shape[1]
             tiles.append(cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_AREA))
-    return grid(tiles, 3 if per_scene == 1 else per_scene)
+    return grid(tiles, cols)
+
+
+def _relief_scenes(folder: Path, n: int, side: int = 256) -> np.ndarray:
+    """About ``n`` frames of ``alcn data scenes``: about sqrt(n) scenes, a row each, about sqrt(n) lights each."""
+    from alcn_cv.data.relief_scenes import KIND
+
+    lights = read_manifest(folder, KIND).get("lights", {})
+    scenes = sorted(p for p in folder.glob("scene_*") if p.is_dir())
+    rows = [scenes[i] for i in _spread(len(scenes), max(1, round(np.sqrt(n))))]
+    per_scene = max(1, -(-n // max(1, len(rows))))
+    tiles = []
+    for d in rows:
+        files = sorted(d.glob("frame_*.png"))
+        for j in _spread(len(files), per_scene):
+            img = cv2.imread(str(files[j]), cv2.IMREAD_GRAYSCALE)
+            if img is None:
+                raise DatasetError(f"{files[j]}: unreadable frame")
+            small = cv2.resize(
+                img, (side, side), interpolation=cv2.INTER_AREA if img.shape[0] > side else cv2.INTER_NEAREST
+            )
+            tile = cv2.cvtColor(small, cv2.COLOR_GRAY2BGR)
+            _label(tile, f"{d.name} #{j}")
+            families = lights.get(d.name, [])
+            _label(tile, families[j] if j < len(families) else "", (4, side - 6), 0.4)
+            tiles.append(tile)
+    return grid(tiles, per_scene)
 
 
 def preview(dataset: str | os.PathLike, out_png: str | os.PathLike, *, n: int = 16) -> Path:
@@ -140,25 +185,33 @@ def preview(dataset: str | os.PathLike, out_png: str | os.PathLike, *, n: int = 
     Args:
         dataset: a data-engine folder, a COCO JSON file, or a BOP scene folder.
         out_png: output PNG.
-        n: about how many samples to show.
+        n: how many samples to show: Phos windows, COCO images (at least one a file), BOP frames (as many of
+            each sequence, at least one), frames of rendered scenes (about sqrt(n) scenes, sqrt(n) frames each).
     """
+    if n < 1:
+        raise InputError(f"the number of samples to show (-n) must be at least 1, got {n}")
     src = Path(dataset)
     if src.is_file() and src.suffix == ".json":
         sheet = _coco([src], n)
     elif (src / "scene_camera.json").exists():
         models = src.parent.parent / "models"
-        sheet = _bop([src], models if models.is_dir() else None, max(1, n))
+        sheet = _bop([src], models if models.is_dir() else None, n)
     elif (src / "manifest.json").exists():
         kind = read_manifest(src)["kind"]
         if kind == "phos":
-            sheet = _phos(src, max(n, 32))
+            sheet = _phos(src, n)
         elif kind == "detect":
             sheet = _coco([src / "train.json", src / "test.json"], n)
         elif kind == "pose":
             scenes = sorted(p for p in src.glob("*/*") if (p / "scene_camera.json").exists())
-            sheet = _bop(scenes, src / "models", 1)
+            sheet = _bop(scenes, src / "models", n)
+        elif kind == "relief_scenes":
+            sheet = _relief_scenes(src, n)
         else:
-            raise DatasetError(f"{src / 'manifest.json'}: field kind: unknown dataset kind {kind!r}")
+            raise DatasetError(
+                f"{src / 'manifest.json'}: field kind: unknown dataset kind {kind!r}; "
+                f"alcn data preview draws {', '.join(KINDS)}"
+            )
     else:
         raise DatasetError(f"{src}: not a dataset (no manifest.json, scene_camera.json, and not a .json file)")
     return write_image(out_png, sheet)

@@ -32,7 +32,7 @@ from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import InputError
-from alcn_cv.io import write_json
+from alcn_cv.io import check_writable, write_json
 
 __all__ = ["KIND", "generate", "relief_surface", "render_scene"]
 
@@ -43,6 +43,8 @@ KIND = "relief_scenes"
 #: Light families of the frames: every family but ``colour`` (the frames are grayscale).
 FAMILIES: tuple[str, ...] = tuple(f for f in LIGHT_FAMILIES if f != "colour")
 _CANONICAL = 96
+#: The least side of the frames (pixels).
+_MIN_SIZE = 32
 
 
 def render_scene(
@@ -88,8 +90,8 @@ def relief_surface(
         ``(albedo, height, material)`` as :func:`~alcn_cv.data.objects.background_surface` gives them, for
         :func:`~alcn_cv.data.objects.to_surface` and :func:`~alcn_cv.data.render.render_surfaces`.
     """
-    if size < 32 or not 1 <= objects[0] <= objects[1]:
-        raise InputError(f"need size >= 32 and 1 <= objects[0] <= objects[1]; got {size}, {objects}")
+    if size < _MIN_SIZE or not 1 <= objects[0] <= objects[1]:
+        raise InputError(f"need size >= {_MIN_SIZE} and 1 <= objects[0] <= objects[1]; got {size}, {objects}")
     albedo, height, material = background_surface(rng, size, size, random_texture(rng, size, p_photo=0.6))
     for _ in range(int(rng.integers(objects[0], objects[1] + 1))):
         extent = rng.uniform(0.15, 0.4) * size
@@ -127,8 +129,14 @@ def generate(
         The output folder: a folder of scenes, ``scene_NNN`` (:func:`alcn_cv.data.scenes.load_scene_folder`;
         ``alcn train-real-light --set 'rendered=["DIR"]'``). Cost: about 1 s of CPU per 320x320 frame.
     """
+    # render_scene and relief_surface check these too, but in the workers, after the progress bar has started
     if scenes < 1:
-        raise InputError(f"need at least one scene, got {scenes}")
+        raise InputError(f"need at least one scene (--scenes), got {scenes}")
+    if frames < 2:
+        raise InputError(f"need at least 2 frames (lightings) per scene (--frames), got {frames}")
+    if size < _MIN_SIZE:
+        raise InputError(f"--size is the side of the frames in pixels, at least {_MIN_SIZE}; got {size}")
+    check_writable(out_dir)  # an output under a file: one line now, not atomic_output_dir's bare [Errno 17]
     jobs = [(int(seed), i, int(size), int(frames)) for i in range(scenes)]
     rendered = parallel_map(_scene_job, jobs, workers=workers, desc="relief scenes", unit="scene", progress=progress)
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:

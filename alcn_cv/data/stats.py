@@ -31,7 +31,7 @@ from alcn_cv.data.lighting import LIGHT_FAMILIES, Light, Lighting, sample_lighti
 from alcn_cv.data.objects import make_object, paste, to_surface
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.errors import DatasetError
-from alcn_cv.io import atomic_write, make_folder, write_json
+from alcn_cv.io import atomic_write, check_writable, make_folder, write_json
 
 logger = logging.getLogger(__name__)
 
@@ -94,6 +94,9 @@ def set_stats(objects: dict[str, tuple[list[np.ndarray], np.ndarray]]) -> dict[s
 def load_psm(psm_dir: str | os.PathLike) -> tuple[dict[str, tuple[list[np.ndarray], np.ndarray]], np.ndarray]:
     """Read the PSM set: ``({name: (12 gray float32 images, bool mask)}, lights (12, 3))``."""
     root = Path(psm_dir)
+    if not root.is_dir():  # else the first complaint would be the missing lights.txt, not the folder
+        what = "not a folder" if root.exists() else "folder not found"
+        raise DatasetError(f"{root}: {what} (the PSM set: lights.txt and a folder of images per object)")
     lf = root / "lights.txt"
     try:
         rows = lf.read_text().split("\n")
@@ -217,6 +220,8 @@ def compare_psm(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed:
     Writes ``out_dir/psm_comparison.png`` (figure), ``psm_comparison.md`` and
     ``psm_comparison.json`` (tables). Returns the statistics.
     """
+    out = Path(out_dir)
+    check_writable(out / "psm_comparison.json")  # before the renderings: an output under a file fails at once
     real, lights = load_psm(psm_dir)
     sets = {
         "real psm": real,
@@ -225,7 +230,6 @@ def compare_psm(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed:
         "engine light families": render_like_psm(None, seed=seed),
     }
     stats = {name: set_stats(objs) for name, objs in sets.items()}
-    out = Path(out_dir)
     make_folder(out)
     write_json(out / "psm_comparison.json", stats)
     rows = list(STAT_NAMES) + ["across_lights_cv_of_mean", "across_lights_pairwise_ncc"]
