@@ -102,3 +102,12 @@ def test_calib_output_folders_are_checked_before_the_work(tmp_path):
     with pytest.raises(InputError, match="is a file"):
         register_charuco(missing, blocker / "reg", calib, BoardSpec())
     assert blocker.read_text() == "mine"
+
+
+def test_an_output_folder_under_a_file_is_a_one_line_error(tmp_path):
+    from alcn_cv.data.manifest import atomic_output_dir
+    from alcn_cv.errors import InputError
+
+    (tmp_path / "f").write_text("mine")
+    with pytest.raises(InputError, match="is a file"), atomic_output_dir(tmp_path / "f" / "d"):
+        pass  # the data commands' output folder (mkdir's [Errno 17] before)

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from alcn_cv.errors import DatasetError
-from alcn_cv.io import UMASK, atomic_path, read_json
+from alcn_cv.io import UMASK, atomic_path, make_folder, read_json
 
 __all__ = [
     "GENERATOR",
@@ -83,7 +83,7 @@ def atomic_output_dir(
         raise FileExistsError(f"{out} is not an earlier output (no {marker}): not replaced; give another path")
     if out.exists() and not overwrite and not empty:
         raise FileExistsError(f"{out} exists (--overwrite, or overwrite=True, replaces it)")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(out.parent)  # a parent that is a file: the one-line InputError, not mkdir's errno
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
     tmp.chmod(0o777 & ~UMASK)  # mkdtemp's folder is private (0700); the output is as any other folder made here
     try:
