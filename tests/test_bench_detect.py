@@ -104,8 +104,9 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("boom")
 
-    real_create = D.create_normalization
-    monkeypatch.setattr(D, "create_normalization", lambda m, p: broken() if m == "he" else real_create(m, p))
+    # a run failing once its method is built (not the spec's fault: out of memory, a device error)
+    real_normalize = D._normalize_training
+    monkeypatch.setattr(D, "_normalize_training", lambda m, p, ts: broken() if m == "he" else real_normalize(m, p, ts))
     settings = S.DetectSettings(
         methods=["none", "dog", "he"],
         real_images=[1],
@@ -160,6 +161,72 @@ def test_cli_and_bad_input(small_data, tmp_path):
         detect_data.load_data(tmp_path / "missing")
     with pytest.raises(SystemExit):
         cli_main(["bench", "--help"])
+
+
+def test_a_bad_weight_file_is_one_line_before_any_work(small_data, tmp_path, capsys, monkeypatch):
+    bad = tmp_path / "detector.pt"
+    bad.write_bytes(b"not an npz")
+    monkeypatch.setattr(D, "read_test_images", lambda *a: pytest.fail("the benchmark started"))
+    out = tmp_path / "o"
+    argv = ["bench", "detect", "--data", str(small_data), "--out", str(out), "--size", "small"]
+    assert cli_main([*argv, "--methods", f"none,alcn:weights={bad}"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"alcn bench: error: method 'alcn:weights={bad}': weight file {bad} is not a .npz archive"
+    assert not out.exists()
+    with pytest.raises(InputError, match="'alcn:scale=-1'"):  # a bad parameter, too
+        D.build_methods(["alcn:scale=-1"])
+
+
+def _report_result(settings, runs):
+    from dataclasses import asdict
+
+    from alcn_cv.bench.detect_report import detect_command
+    from alcn_cv.report import machine
+
+    return {
+        "settings": asdict(settings),
+        "summary": D.summarize(runs, settings, ["a", "b"]),
+        "runs": runs,
+        "machine": machine(),
+        "command": detect_command("d", "o", settings),
+        "data": "/d",
+        "test_images": [1],
+        "working_scale": 0.5,
+        "box_size": 36.0,
+        "seconds": 1.0,
+    }
+
+
+def test_tables_and_curves_say_how_many_real_images_were_used(tmp_path, monkeypatch):
+    from alcn_cv.bench import plots
+    from alcn_cv.bench.detect_report import detect_markdown, real_images_label
+
+    methods = ["none", "he", "clahe", "ns", "dog", "slcn", "dlcn", "lrn", "whitening", "alcn:weights=out/x/y.npz"]
+    settings = S.DetectSettings(methods=methods, real_images=[1, 10], policies=["raw"])
+    curve = {"auc": 0.5, "num_gt": 1, "pr": {"recall": [0.0, 1.0], "precision": [1.0, 0.5]}}
+    runs = {
+        S.run_key(m, n, "raw", 0): {
+            "real_images": n,
+            "images_used": {"a": min(n, 3), "b": min(n, 3)},
+            "objects": {"a": curve, "b": {"auc": None, "num_gt": 0}},  # b: no instance in the test images
+        }
+        for m in methods
+        for n in (1, 10)
+    }
+    md = detect_markdown(_report_result(settings, runs), ["a", "b"])
+    assert "## 1 real image(s) per object, input policy `raw`" in md
+    assert "## 3 real image(s) per object (10 requested), input policy `raw`" in md
+    assert "10 requested: a 3, b 3" in md and "no instance of b" in md
+    assert real_images_label(10, {"a": 3, "b": 10}) == "3-10 real image(s) (10 requested; a 3)"
+    figures = {}
+    monkeypatch.setattr(plots, "save_figure", lambda plt, fig, path: figures.setdefault(path.name, fig))
+    plots.plot_pr_curves(_report_result(settings, runs), ["a", "b"], tmp_path)
+    ax = figures["pr_a_10real.png"].axes[0]
+    assert ax.get_title().startswith("a, 3 real image(s) (10 requested), input raw")
+    # every method's curve is the same: one entry names them all, on lines that keep the legend narrow
+    (entry,) = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "alcn:weights=out/x/y.npz" in entry.replace("\n", "") and max(map(len, entry.splitlines())) <= 40
+    assert "no instance of b" in figures["pr_b_1real.png"].axes[0].texts[0].get_text()
 
 
 @pytest.mark.parametrize("policy", ["raw", "local"])

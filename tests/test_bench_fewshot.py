@@ -133,5 +133,20 @@ def test_cli_end_to_end(tmp_path):
     assert saved["alcn_vs_dog"]["raw"]["alcn"][0]["above"] in (True, False)
     text = (out / "fewshot.md").read_text()
     assert "ALCN against the best DoG" in text and "--draws 1" in text
+    assert "±" not in text  # one draw has no spread: "± 0.000" would read as a measured one
     assert (out / "fewshot.png").stat().st_size > 0
     assert cli_main(["bench", "fewshot", "--out", str(out), "--methods", "nope"]) == 2
+
+
+def test_a_bad_weight_file_is_one_line_before_any_draw(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(F, "make_fewshot_data", lambda *a: pytest.fail("a draw started"))
+    out = tmp_path / "fs"
+    assert cli_main(["bench", "fewshot", "--out", str(out), "--methods", "none,alcn:weights=some/detector.pt"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "alcn bench: error: method 'alcn:weights=some/detector.pt': weight file not found: some/detector.pt"
+    assert not out.exists()
+
+
+def test_cells_give_the_spread_over_draws():
+    assert B._cell({"mean": 0.75, "std": 0.05, "values": [0.7, 0.8]}) == "0.750 ± 0.050"
+    assert B._cell({"mean": 0.75, "std": 0.0, "values": [0.75]}) == "0.750"

@@ -70,6 +70,61 @@ def test_bad_input(tmp_path):
     assert cli_main(["bench", "invariance", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
 
 
+def test_a_bad_weight_file_is_one_line_before_any_work(tmp_path, capsys, monkeypatch):
+    data = _fake_set(tmp_path / "psm")
+    monkeypatch.setattr(invariance, "load_objects", lambda *a: pytest.fail("the benchmark started"))
+    out = tmp_path / "o"
+    argv = ["bench", "invariance", "--data", str(data), "--out", str(out)]
+    assert cli_main([*argv, "--methods", "none,alcn:weights=some/detector.pt"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "alcn bench: error: method 'alcn:weights=some/detector.pt': weight file not found: some/detector.pt"
+    assert not out.exists()
+
+
+def test_a_failing_run_is_reported_without_a_traceback(tmp_path, monkeypatch, caplog):
+    from alcn_cv.enhance.registry import create
+
+    def broken(self, gray):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(type(create("dog")), "normalize", broken)
+    data = _fake_set(tmp_path / "psm")
+    result = invariance.main(data, tmp_path / "o", ["none", "dog"], erode=2, progress=False)
+    assert result["methods"]["dog"]["error"] == "RuntimeError: boom" and "error" not in result["methods"]["none"]
+    (record,) = [r for r in caplog.records if "dog" in r.getMessage()]
+    assert not record.exc_info and record.getMessage() == "method dog failed: RuntimeError: boom"
+
+
+def test_earlier_figures_go_and_long_labels_fit(tmp_path, monkeypatch):
+    import shutil
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from alcn_cv.enhance.alcn import ALCN
+
+    data = _fake_set(tmp_path / "psm")
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "invariance_cat.png").write_bytes(b"")  # an earlier run's figure, of another data set
+    weights = tmp_path / "out" / "train1" / "alcn_normalizer.npz"
+    weights.parent.mkdir(parents=True)
+    shutil.copy(ALCN().weights_path, weights)
+    spec = f"alcn:weights={weights}"
+    figures = []
+    real_save = invariance.save_figure
+    monkeypatch.setattr(
+        invariance, "save_figure", lambda plt, fig, path, **kw: figures.append(fig) or real_save(plt, fig, path, **kw)
+    )
+    invariance.main(data, out, ["none", spec], erode=2, progress=False)
+    assert sorted(p.name for p in out.glob("invariance_*.png")) == ["invariance_ball.png"]
+    (fig,) = figures
+    label = next(ax for ax in fig.axes if ax.get_ylabel().startswith("alcn")).yaxis.label
+    assert label.get_text().replace("\n", "") == spec  # the whole spec, on lines
+    canvas = FigureCanvasAgg(fig)  # the figure is saved and closed: drawn again to lay its labels out
+    canvas.draw()
+    assert label.get_window_extent(canvas.get_renderer()).x0 >= 0  # inside the figure
+
+
 @pytest.mark.shared_data
 def test_real_photographs(shared_data, tmp_path):
     result = invariance.main(shared_data / "psm", tmp_path, ["none", "dog"], scale=0.25, progress=False)

@@ -59,6 +59,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -85,6 +86,7 @@ from alcn_cv.bench.policies import InputPolicy
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec, parse_spec
+from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import machine, spread
@@ -93,6 +95,7 @@ if TYPE_CHECKING:
     from torch import nn
 
 __all__ = [
+    "build_methods",
     "create_normalization",
     "detect_in_image",
     "fixed_boxes",
@@ -226,6 +229,24 @@ def create_normalization(method: str, params: dict[str, Any]) -> Normalization:
     if name == "alcn":  # windows and test images are already at the working scale
         params = {"scale": 1.0, **params}
     return from_spec(method, **params)
+
+
+def build_methods(
+    methods: list[str], build: Callable[[str], Normalization] = lambda spec: create_normalization(spec, {})
+) -> dict[str, Normalization]:
+    """Every method of a benchmark, built (its weight file loaded) before any work: a bad parameter or weight file
+    ends the command with one line naming the method, not with a failed run found after the long work.
+
+    Raises:
+        InputError: a method that cannot be built; the message names its spec.
+    """
+    norms = {}
+    for spec in methods:
+        try:
+            norms[spec] = build(spec)
+        except (InputError, WeightFileError) as exc:
+            raise InputError(f"method {spec!r}: {exc}") from None
+    return norms
 
 
 def window_agreement(
@@ -506,7 +527,7 @@ def _run_method(state: _Run, method: str, out: Path, bar: tqdm) -> None:
                 state.runs[key] = _train_and_score(
                     state, method, n_real, policy_name, seed, params, normalized, test_cache
                 )
-            except Exception as exc:  # one method failing is reported, not the end of the run
+            except Exception as exc:  # its spec was built up front: what fails here is the run's, reported
                 logger.error(
                     "run %s failed: %s: %s", key, type(exc).__name__, exc, exc_info=logger.isEnabledFor(logging.DEBUG)
                 )
@@ -563,13 +584,18 @@ def main(
         progress: progress bar across runs.
 
     Returns:
-        The dictionary written to ``detect.json``. A method that fails is recorded with its
-        error and the run continues.
+        The dictionary written to ``detect.json``. A run that fails once its method is built (out of
+        memory, a device error) is recorded with its error and the benchmark continues.
+
+    Raises:
+        InputError: bad settings, or a method that cannot be built (a bad parameter or weight
+            file), before any work.
     """
     import torch
 
     settings = settings or DetectSettings()
     settings.check()
+    build_methods(settings.methods)  # a bad spec or weight file: one line before any work (runs build their own)
     if settings.threads:
         torch.set_num_threads(settings.threads)
     start = time.perf_counter()

@@ -9,7 +9,7 @@ from typing import Any
 from alcn_cv.bench.detect_settings import POLICY_DESCRIPTIONS, DetectSettings
 from alcn_cv.report import command_line, describe_machine, markdown_table
 
-__all__ = ["detect_command", "detect_markdown"]
+__all__ = ["detect_command", "detect_markdown", "images_used", "real_images_label", "untested_objects"]
 
 
 def detect_command(
@@ -44,6 +44,36 @@ def detect_command(
             "--threads": settings.threads,
             "--device": settings.device,
         },
+    )
+
+
+def images_used(result: dict[str, Any], n_real: int) -> dict[str, int]:
+    """Real training images per object of the runs that asked for ``n_real``: fewer where the data set has fewer
+    (every such run uses the same ones); empty when none of them finished."""
+    return next(
+        (r["images_used"] for r in result["runs"].values() if r.get("real_images") == n_real and "images_used" in r),
+        {},
+    )
+
+
+def real_images_label(n_real: int, used: dict[str, int], unit: str = "") -> str:
+    """The real images (``unit``: e.g. " per object") a table or figure shows: those used, with the number asked for
+    where the data set had fewer (``--real-images 10`` on a set with 3 per object trains on 3, and "10" would
+    misread the result)."""
+    short = {name: n for name, n in used.items() if n != n_real}
+    if not short:
+        return f"{n_real} real image(s){unit}"
+    counts = sorted(set(used.values()))
+    if len(counts) == 1:
+        return f"{counts[0]} real image(s){unit} ({n_real} requested)"
+    fewer = ", ".join(f"{name} {n}" for name, n in short.items())
+    return f"{counts[0]}-{counts[-1]} real image(s){unit} ({n_real} requested; {fewer})"
+
+
+def untested_objects(result: dict[str, Any]) -> list[str]:
+    """The objects without an instance in the test images: nothing to detect, so no AUC (``-`` in the tables)."""
+    return sorted(
+        {name for r in result["runs"].values() for name, obj in r.get("objects", {}).items() if obj.get("num_gt") == 0}
     )
 
 
@@ -91,6 +121,21 @@ def _header(result: dict[str, Any], settings: DetectSettings) -> list[str]:
             "hundredths with the training windows and the detector's initialisation; read small "
             "differences with care, or rerun with `--seeds 0 1 2`."
         )
+    short = {n: used for n in settings.real_images if (used := images_used(result, n)) and set(used.values()) != {n}}
+    if short:
+        lines.append(
+            "- **Real images used:** the data set has fewer training images than requested; "
+            + "; ".join(
+                f"{n} requested: " + ", ".join(f"{o} {k}" for o, k in used.items()) for n, used in short.items()
+            )
+            + " (`images_used` in detect.json). The tables and figures say what was used."
+        )
+    untested = untested_objects(result)
+    if untested:
+        lines.append(
+            f"- **`-` cells:** the test images hold no instance of {', '.join(untested)}, so there is nothing to "
+            "detect and no AUC; the mean is over the other objects."
+        )
     lines.append("")
     if result.get("alcn_trained") is False:
         lines.append(
@@ -116,7 +161,8 @@ def detect_markdown(result: dict[str, Any], names: list[str]) -> str:
                 rows.append(
                     [method + failed] + [_cell(summary["objects"][n]) for n in names] + [_cell(summary["mean"])]
                 )
-            lines.append(f"\n## {n_real} real image(s) per object, input policy `{policy}`\n")
+            label = real_images_label(n_real, images_used(result, n_real), " per object")
+            lines.append(f"\n## {label}, input policy `{policy}`\n")
             lines.append(markdown_table(["method"] + names + ["mean"], rows))
     agreement = result.get("window_agreement") or {}
     if agreement:

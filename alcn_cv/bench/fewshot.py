@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.detect import create_normalization
+from alcn_cv.bench.detect import build_methods, create_normalization
 from alcn_cv.bench.detect_settings import POLICIES, POLICY_DESCRIPTIONS
 from alcn_cv.bench.policies import InputPolicy
 from alcn_cv.enhance.registry import available, parse_spec
@@ -196,7 +196,7 @@ def _run_draw(settings: FewShotSettings, draw: int, runs: dict[str, Any], bar: t
             norm = create_normalization(method, {})
             train_n, test_n = norm.normalize_windows(train_x), norm.normalize_windows(test.windows)
             normalize_s = time.perf_counter() - t0
-        except Exception as exc:  # one method failing is reported, not the end of the run
+        except Exception as exc:  # its spec was built up front: what fails here is the run's, reported
             logger.error("few-shot %s, draw %d: %s: %s", method, draw, type(exc).__name__, exc)
             for policy in settings.policies:
                 runs[policy][method].append({"draw": draw, "error": f"{type(exc).__name__}: {exc}"})
@@ -265,7 +265,10 @@ def fewshot_command(out_dir: str | os.PathLike, settings: FewShotSettings) -> st
 
 
 def _cell(spread: dict[str, Any] | None) -> str | None:
-    return None if spread is None else f"{spread['mean']:.3f} ± {spread['std']:.3f}"
+    if spread is None:
+        return None
+    # one draw has no spread: "± 0.000" would read as a measured zero variance (as relight's one seed)
+    return f"{spread['mean']:.3f}" + (f" ± {spread['std']:.3f}" if len(spread["values"]) > 1 else "")
 
 
 def fewshot_markdown(result: dict[str, Any]) -> str:
@@ -299,9 +302,10 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
                 + ["failed" if "error" in r else r["auc"] for r in draws]
                 + [_cell(summary["auc"]), _cell(summary["accuracy"])]
             )
+        stat = " mean ± std" if s["draws"] > 1 else ""
         lines += [
             markdown_table(
-                ["method"] + [f"draw {d}" for d in range(s["draws"])] + ["AUC mean ± std", "accuracy mean ± std"], rows
+                ["method"] + [f"draw {d}" for d in range(s["draws"])] + [f"AUC{stat}", f"accuracy{stat}"], rows
             ),
             "",
         ]
@@ -372,10 +376,15 @@ def main(
         The dictionary written to ``fewshot.json``: ``runs`` (policy -> method -> one result of
         :func:`~alcn_cv.train.fewshot.score_inputs` per draw, or its ``error``), ``summary``
         (mean and spread over draws), ``alcn_vs_dog`` (:func:`compare_to_dog`).
+
+    Raises:
+        InputError: bad settings, or a method that cannot be built (a bad parameter or weight file), before any
+            draw.
     """
     import torch
 
     settings = (settings or FewShotSettings()).check()
+    build_methods(settings.methods)  # a bad spec or weight file: one line before any draw (each builds its own)
     if settings.threads:
         torch.set_num_threads(settings.threads)
     start = time.perf_counter()

@@ -34,6 +34,8 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
+from alcn_cv.bench.detect import build_methods
+from alcn_cv.bench.plots import wrap_label
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, from_spec, parse_spec
 from alcn_cv.errors import DatasetError, InputError
@@ -43,6 +45,9 @@ from alcn_cv.report import command_line, describe_machine, machine, markdown_tab
 __all__ = ["PhotometricObject", "agreement", "detail", "load_objects", "main"]
 
 logger = logging.getLogger(__name__)
+
+#: Characters per line of a method's row label in the figure (a spec is broken after a ``:`` or ``/``).
+_LABEL_WIDTH = 24
 
 
 @dataclass(frozen=True)
@@ -153,7 +158,8 @@ def _figure(
     k = len(obj.images)
     h, w = obj.mask.shape
     cell = 1.3
-    plt, fig, axes = new_figure(len(names), k, figsize=(cell * k * w / h + 1.2, cell * len(names) + 0.6))
+    images_width, height = cell * k * w / h, cell * len(names) + 0.6
+    plt, fig, axes = new_figure(len(names), k, figsize=(images_width, height))
     for r, name in enumerate(names):
         for c in range(k):
             ax = axes[r, c]
@@ -163,9 +169,15 @@ def _figure(
             if r == 0:
                 ax.set_title(f"light {c}", fontsize=8)
             if c == 0:
-                ax.set_ylabel(name, fontsize=9, rotation=0, ha="right", va="center")
+                ax.set_ylabel(wrap_label(name, _LABEL_WIDTH), fontsize=9, rotation=0, ha="right", va="center")
+    # the figure grows to the left by the widest row label, measured: a fixed margin clipped a weight file's path
+    labels = max(axes[r, 0].yaxis.label.get_window_extent().width for r in range(len(names))) / fig.dpi
+    margin = labels + 0.15  # inches: the label's gap to the image and the figure's edge
+    width = margin + images_width + 0.6  # and room for the gaps between the images
+    fig.set_size_inches(width, height)
     fig.suptitle(f"{obj.name}: every method under every light (fixed output mapping of apply())", fontsize=10)
-    fig.subplots_adjust(left=0.07, right=0.995, top=0.93, bottom=0.01, wspace=0.03, hspace=0.05)
+    # half an inch on top for the title and the lights' titles, whatever the rows (a fraction let them overlap)
+    fig.subplots_adjust(left=margin / width, right=0.995, top=1 - 0.5 / height, bottom=0.01, wspace=0.03, hspace=0.05)
     return save_figure(plt, fig, path, dpi=80)
 
 
@@ -194,11 +206,17 @@ def main(
 
     Returns:
         The results dictionary also written to ``invariance.json``.
+
+    Raises:
+        InputError: an unknown method, or one that cannot be built (a bad parameter or weight file), before
+            the photographs are read.
+        DatasetError: see :func:`load_objects`.
     """
     methods = list(available()) if methods is None else list(methods)
     unknown = [m for m in methods if parse_spec(m)[0] not in available()]
     if unknown:
         raise InputError(f"unknown method(s) {', '.join(unknown)}; available: {', '.join(available())}")
+    norms = build_methods(methods, from_spec)
     objects = load_objects(data_dir, scale)
     if figure_object not in (None, "all") and figure_object not in [o.name for o in objects]:
         raise InputError(f"no object {figure_object!r}; objects: {', '.join(o.name for o in objects)}")
@@ -209,15 +227,13 @@ def main(
     shown = {o.name for o in objects} if figure_object == "all" else {figure_object or objects[0].name}
 
     rows: dict[str, dict[str, Any]] = {}
-    norms: dict[str, Normalization] = {}
     shown_results: dict[str, dict[str, np.ndarray]] = {name: {} for name in shown}
     bar = tqdm(methods, desc="invariance", unit="method", disable=not progress)
     for name in bar:
         bar.set_postfix(method=name)
         row: dict[str, Any] = {"objects": {}}
+        norm = norms[name]
         try:
-            norm = from_spec(name)
-            norms[name] = norm
             if hasattr(norm, "trained"):
                 row["trained"] = bool(norm.trained)
             start = time.perf_counter()
@@ -232,8 +248,10 @@ def main(
             row["seconds_per_image"] = (time.perf_counter() - start) / sum(len(o.images) for o in objects)
             row["agreement"] = float(np.mean([v["agreement"] for v in row["objects"].values()]))
             row["detail"] = float(np.mean([v["detail"] for v in row["objects"].values()]))
-        except Exception as exc:  # one method failing is reported, not the end of the run
-            logger.exception("method %s failed", name)
+        except Exception as exc:  # its spec was built up front: what fails here is the run's, reported in the table
+            logger.error(
+                "method %s failed: %s: %s", name, type(exc).__name__, exc, exc_info=logger.isEnabledFor(logging.DEBUG)
+            )
             row = {"objects": {}, "error": f"{type(exc).__name__}: {exc}"}
         rows[name] = row
 
@@ -259,6 +277,8 @@ def main(
         "machine": machine(),
         "methods": rows,
     }
+    for earlier in out.glob("invariance_*.png"):  # an earlier run's figures, named after its objects
+        earlier.unlink()
     write_json(out / "invariance.json", result)
 
     headers = ["method"] + [f"agreement {o}" for o in object_names] + ["agreement (mean)", "detail (mean)", "ms/image"]

@@ -3,25 +3,44 @@ frame size of the speed benchmark. One colour per method, the same in every pane
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from alcn_cv.bench.detect_report import images_used, real_images_label, untested_objects
 from alcn_cv.bench.detect_settings import DetectSettings, run_key
 from alcn_cv.enhance.registry import parse_spec
 from alcn_cv.report import new_figure, save_figure
 
-__all__ = ["method_styles", "plot_pr_curves", "plot_speed", "trim_pr_curve"]
+__all__ = ["method_styles", "plot_pr_curves", "plot_speed", "trim_pr_curve", "wrap_label"]
 
 #: tab20's saturated colours first, then its light ones: neighbours in a list of methods get
 #: hues that differ clearly (tab20 in its own order pairs each colour with its light variant).
 _PALETTE_ORDER = list(range(0, 20, 2)) + list(range(1, 20, 2))
 
 
+#: Characters per line of a legend entry: the methods of a tied curve on one line took half the figure.
+_LEGEND_WIDTH = 40
+
 #: Point markers, one per method in turn: curves that share a stretch stay told apart.
 _MARKERS = "osD^vP*Xph<>"
+
+
+def wrap_label(text: str, width: int) -> str:
+    """``text`` on lines of at most ``width`` characters, broken after a space, ``:`` or ``/`` where it can (inside a
+    longer piece elsewhere): a method's spec with a weight file's path, or the methods of a tied curve, on one line
+    would push the figure's images or axes aside or run off its edge."""
+    lines: list[str] = []
+    for piece in re.findall(r"[^ :/]+[ :/]?|[ :/]", text):  # each piece ends at its break
+        for chunk in (piece[i : i + width] for i in range(0, len(piece), width)):
+            if lines and len(lines[-1]) + len(chunk.rstrip()) <= width:
+                lines[-1] += chunk
+            else:
+                lines.append(chunk)
+    return "\n".join(line.rstrip() for line in lines)
 
 
 def method_styles(methods: Sequence[str]) -> dict[str, tuple[Any, str, str]]:
@@ -68,9 +87,12 @@ def plot_pr_curves(result: dict[str, Any], names: list[str], out: Path) -> list[
     settings = DetectSettings(**result["settings"])
     styles = method_styles(settings.methods)
     seed = settings.seeds[0]
+    untested = untested_objects(result)
     written = []
     for name in names:
         for n_real in settings.real_images:
+            used = images_used(result, n_real)
+            real = real_images_label(n_real, {name: used[name]} if name in used else {})
             plt, fig, axes = new_figure(1, len(settings.policies), figsize=(7.6 * len(settings.policies), 4.8))
             for ax, policy in zip(axes[0], settings.policies):
                 curves, aucs = {}, {}
@@ -84,6 +106,7 @@ def plot_pr_curves(result: dict[str, Any], names: list[str], out: Path) -> list[
                     colour, style, marker = styles[method]
                     recall, precision = curves[method]
                     label = method + (f" (= {', '.join(tied[1:])})" if len(tied) > 1 else "")
+                    label = wrap_label(f"{label}: AUC {aucs[method]:.3f}", _LEGEND_WIDTH)
                     ax.plot(
                         recall,
                         precision,
@@ -93,13 +116,13 @@ def plot_pr_curves(result: dict[str, Any], names: list[str], out: Path) -> list[
                         markersize=4,
                         markevery=max(1, len(recall) // 12),
                         lw=2.4 if parse_spec(method)[0] == "alcn" else 1.3,
-                        label=f"{label}: AUC {aucs[method]:.3f}",
+                        label=label,
                     )
                 ax.set_xlim(0, 1)
                 ax.set_ylim(0, 1.05)
                 ax.set_xlabel("recall")
                 ax.set_ylabel("precision")
-                ax.set_title(f"{name}, {n_real} real image(s), input {policy}, seed {seed}", fontsize=10)
+                ax.set_title(f"{name}, {real}, input {policy}, seed {seed}", fontsize=10)
                 ax.grid(alpha=0.3)
                 if curves:
                     ax.legend(
@@ -110,6 +133,9 @@ def plot_pr_curves(result: dict[str, Any], names: list[str], out: Path) -> list[
                         title="method (= same curve)",
                         title_fontsize=7,
                     )
+                else:  # an empty panel says why
+                    why = f"no instance of {name} in the test images" if name in untested else "every run failed"
+                    ax.text(0.5, 0.5, f"no curve: {why}", ha="center", va="center", transform=ax.transAxes)
             fig.tight_layout()
             path = out / f"pr_{name}_{n_real}real.png"
             save_figure(plt, fig, path)
