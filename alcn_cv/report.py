@@ -27,6 +27,7 @@ __all__ = [
     "new_figure",
     "save_figure",
     "spread",
+    "spread_cell",
     "write_json",
 ]
 
@@ -49,6 +50,20 @@ def nan_to_none(obj: Any) -> Any:
     if isinstance(obj, (float, np.floating)):
         return None if not np.isfinite(obj) else float(obj)
     return obj
+
+
+def spread_cell(spread: dict[str, Any] | None, digits: int = 3, runs: int | None = None) -> str | None:
+    """A table's cell of a :func:`spread`: ``"mean ± std"``, the mean alone for one run (``± 0`` would read as a
+    measured zero variance), None for none; ``runs`` (default: its values) counts the runs.
+
+    Example:
+        >>> spread_cell(spread([0.5, 0.7])), spread_cell(spread([0.5]))
+        ('0.600 ± 0.100', '0.500')
+    """
+    if spread is None:
+        return None
+    one = (len(spread["values"]) if runs is None else runs) <= 1
+    return f"{spread['mean']:.{digits}f}" + ("" if one else f" ± {spread['std']:.{digits}f}")
 
 
 def spread(values: list[float]) -> dict[str, Any] | None:

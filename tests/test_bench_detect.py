@@ -177,7 +177,7 @@ def test_a_bad_weight_file_is_one_line_before_any_work(small_data, tmp_path, cap
         D.build_methods(["alcn:scale=-1"])
 
 
-def _report_result(settings, runs):
+def _report_result(settings, runs, names=("a", "b")):
     from dataclasses import asdict
 
     from alcn_cv.bench.detect_report import detect_command
@@ -185,7 +185,7 @@ def _report_result(settings, runs):
 
     return {
         "settings": asdict(settings),
-        "summary": D.summarize(runs, settings, ["a", "b"]),
+        "summary": D.summarize(runs, settings, list(names)),
         "runs": runs,
         "machine": machine(),
         "command": detect_command("d", "o", settings),
@@ -346,29 +346,14 @@ def test_pr_curves_stop_at_the_last_true_positive_and_ties_are_grouped():
 
 
 def test_report_gives_mean_and_spread_over_seeds():
-    from dataclasses import asdict
-
     from alcn_cv.bench.detect_report import detect_command, detect_markdown
-    from alcn_cv.report import machine
 
     settings = S.DetectSettings(methods=["dog"], real_images=[1], policies=["raw"], seeds=[0, 1])
     runs = {
         S.run_key("dog", 1, "raw", 0): {"objects": {"a": {"auc": 0.2}}},
         S.run_key("dog", 1, "raw", 1): {"objects": {"a": {"auc": 0.4}}},
     }
-    result = {
-        "settings": asdict(settings),
-        "summary": D.summarize(runs, settings, ["a"]),
-        "runs": runs,
-        "machine": machine(),
-        "command": detect_command("d", "o", settings),
-        "data": "/d",
-        "test_images": [1],
-        "working_scale": 0.5,
-        "box_size": 36.0,
-        "seconds": 1.0,
-    }
-    md = detect_markdown(result, ["a"])
+    md = detect_markdown(_report_result(settings, runs, names=["a"]), ["a"])
     assert md.startswith("# Few-shot detection benchmark") and "(data)" not in md.splitlines()[0]
     assert "| dog | 0.300 ± 0.100 | 0.300 ± 0.100 |" in md and "2 (0, 1)" in md
     # recorded in the space form of --seeds, which parses back to the same seeds

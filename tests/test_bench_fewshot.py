@@ -148,5 +148,8 @@ def test_a_bad_weight_file_is_one_line_before_any_draw(tmp_path, capsys, monkeyp
 
 
 def test_cells_give_the_spread_over_draws():
-    assert B._cell({"mean": 0.75, "std": 0.05, "values": [0.7, 0.8]}) == "0.750 ± 0.050"
-    assert B._cell({"mean": 0.75, "std": 0.0, "values": [0.75]}) == "0.750"
+    from alcn_cv.report import spread_cell
+
+    assert spread_cell({"mean": 0.75, "std": 0.05, "values": [0.7, 0.8]}) == "0.750 ± 0.050"
+    assert spread_cell({"mean": 0.75, "std": 0.0, "values": [0.75]}) == "0.750"
+    assert spread_cell({"mean": 75.0, "std": 0.0, "values": [75.0, 75.0]}, 1, runs=1) == "75.0"  # one seed of two

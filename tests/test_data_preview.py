@@ -94,6 +94,8 @@ def test_a_sheet_of_rendered_scenes_and_of_an_unknown_kind(tmp_path):
     out = relief_scenes.generate(tmp_path / "scenes", scenes=3, frames=3, size=32, progress=False)
     sheet = preview(out, tmp_path / "s.png", n=4)
     assert _tiles(sheet, 256, 256) == (2, 2) and cv2.imread(str(sheet)).std() > 10
+    sheet = preview(out, tmp_path / "t.png", n=16)  # 4 scenes of 4 frames asked, 3 of 3 there: a scene a row
+    assert _tiles(sheet, 256, 256) == (3, 3)
     (tmp_path / "other").mkdir()
     (tmp_path / "other" / "manifest.json").write_text(
         json.dumps({"generator_version": "1", "kind": "other", "seed": 0, "parameters": {}})

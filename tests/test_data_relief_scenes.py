@@ -56,6 +56,10 @@ def test_arguments_and_output_are_checked_before_the_progress_bar(tmp_path, monk
     with pytest.raises(InputError, match="is a file"):
         generate(blocker / "s", progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file.json"]
+    (tmp_path / "done").mkdir()
+    (tmp_path / "done" / "manifest.json").write_text("{}")
+    with pytest.raises(FileExistsError, match="--overwrite"):  # an earlier output: refused before the rendering
+        generate(tmp_path / "done", progress=False)
     # `data detect --size small` is a preset; here --size is a number, and argparse's error says which
     with pytest.raises(SystemExit) as exit_:
         main(["data", "scenes", "--size", "small", "--out", str(tmp_path / "s")])

@@ -119,6 +119,8 @@ def test_train_detector_from_a_few_images(tmp_path):
     assert main(alcn) == 0  # the spec it records makes the same normalization again: scale 1, the windows' own
     assert torch.load(tmp_path / "det" / "detector.pt", weights_only=True)["method"] == "alcn:scale=1.0:model=lite"
     assert main([*alcn[:5], "alcn:weights=a.npz", *alcn[6:], *weights]) == 2  # the weights given twice
+    assert main([*args[:4], *args[6:]]) == 0  # the default ALCN, its model named: a later default changes nothing
+    assert torch.load(tmp_path / "det" / "detector.pt", weights_only=True)["method"] == "alcn:scale=1.0:model=gain"
 
 
 def test_distill_help_and_a_tiny_run(tmp_path, capsys):
@@ -162,3 +164,11 @@ def test_a_training_run_never_writes_into_a_folder_of_other_files(command, tmp_p
     assert main([*command, "--out", str(tmp_path), "--no-progress"]) == 2
     assert "holds other files than a training run's" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene_gt.json"]
+
+
+def test_a_run_folder_may_hold_hidden_files_and_configurations(tmp_path):
+    from alcn_cv.train.checkpoint import run_folder
+
+    (tmp_path / ".gitkeep").write_text("")
+    (tmp_path / "my.toml").write_text("seed = 1")
+    assert run_folder(tmp_path) == tmp_path

@@ -7,7 +7,7 @@ import os
 from typing import Any
 
 from alcn_cv.bench.detect_settings import POLICY_DESCRIPTIONS, DetectSettings
-from alcn_cv.report import command_line, describe_machine, markdown_table
+from alcn_cv.report import command_line, describe_machine, markdown_table, spread_cell
 
 __all__ = ["detect_command", "detect_markdown", "images_used", "real_images_label", "untested_objects"]
 
@@ -75,12 +75,6 @@ def untested_objects(result: dict[str, Any]) -> list[str]:
     return sorted(
         {name for r in result["runs"].values() for name, obj in r.get("objects", {}).items() if obj.get("num_gt") == 0}
     )
-
-
-def _cell(spread: dict[str, Any] | None) -> str | None:
-    if spread is None:
-        return None
-    return f"{spread['mean']:.3f}" + (f" ± {spread['std']:.3f}" if len(spread["values"]) > 1 else "")
 
 
 def _header(result: dict[str, Any], settings: DetectSettings) -> list[str]:
@@ -159,7 +153,9 @@ def detect_markdown(result: dict[str, Any], names: list[str]) -> str:
                     continue
                 failed = f" ({len(summary['failed_seeds'])} seed(s) failed)" if summary["failed_seeds"] else ""
                 rows.append(
-                    [method + failed] + [_cell(summary["objects"][n]) for n in names] + [_cell(summary["mean"])]
+                    [method + failed]
+                    + [spread_cell(summary["objects"][n]) for n in names]
+                    + [spread_cell(summary["mean"])]
                 )
             label = real_images_label(n_real, images_used(result, n_real), " per object")
             lines.append(f"\n## {label}, input policy `{policy}`\n")

@@ -57,6 +57,7 @@ from alcn_cv.report import (
     new_figure,
     save_figure,
     spread,
+    spread_cell,
 )
 from alcn_cv.train.config import FewShotSetup
 
@@ -264,13 +265,6 @@ def fewshot_command(out_dir: str | os.PathLike, settings: FewShotSettings) -> st
     )
 
 
-def _cell(spread: dict[str, Any] | None) -> str | None:
-    if spread is None:
-        return None
-    # one draw has no spread: "± 0.000" would read as a measured zero variance (as relight's one seed)
-    return f"{spread['mean']:.3f}" + (f" ± {spread['std']:.3f}" if len(spread["values"]) > 1 else "")
-
-
 def fewshot_markdown(result: dict[str, Any]) -> str:
     """``fewshot.md``: machine, command, settings, policies, AUC per draw and ALCN against DoG."""
     s = result["settings"]
@@ -300,7 +294,7 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
             rows.append(
                 [method]
                 + ["failed" if "error" in r else r["auc"] for r in draws]
-                + [_cell(summary["auc"]), _cell(summary["accuracy"])]
+                + [spread_cell(summary["auc"]), spread_cell(summary["accuracy"])]
             )
         stat = " mean ± std" if s["draws"] > 1 else ""
         lines += [

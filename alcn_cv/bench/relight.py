@@ -53,7 +53,7 @@ from alcn_cv.bench.relight_report import write_report
 from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, select_scenes, shared_root
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import from_spec, parse_spec
+from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import make_folder
 from alcn_cv.report import machine
@@ -201,8 +201,7 @@ def backend_of(norm: Normalization) -> str | None:
 
 def _spec(method: str, params: dict[str, float]) -> str:
     base = method[: -len(LSTD)] if method.endswith(LSTD) else method
-    text = base + "".join(f":{k}={v}" for k, v in params.items())
-    return text + (LSTD if method.endswith(LSTD) else "")
+    return format_spec(base, params) + (LSTD if method.endswith(LSTD) else "")
 
 
 # ---------------------------------------------------------------------------------------------

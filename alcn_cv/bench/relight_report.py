@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from alcn_cv.io import atomic_write, make_folder
-from alcn_cv.report import describe_machine, markdown_table, new_figure, save_figure, write_json
+from alcn_cv.report import describe_machine, markdown_table, new_figure, save_figure, spread_cell, write_json
 
 __all__ = ["write_report"]
 
@@ -33,10 +33,7 @@ _SHORT = {
 
 
 def _cell(summary: dict[str, Any] | None) -> str | None:
-    if summary is None:
-        return None
-    # one seed has no spread: "± 0.0" would read as a measured zero variance (docs/results.md prints the same)
-    return f"{summary['mean']:.1f}" + (f" ± {summary['std']:.1f}" if len(summary["seeds"]) > 1 else "")
+    return None if summary is None else spread_cell(summary, 1, runs=len(summary["seeds"]))
 
 
 def _metrics(result: dict[str, Any]) -> list[str]:

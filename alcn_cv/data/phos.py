@@ -45,7 +45,7 @@ from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import check_writable, write_json
+from alcn_cv.io import write_json
 
 __all__ = ["WINDOW", "KIND_NAMES", "PhosBatch", "render_windows", "generate", "load"]
 
@@ -298,15 +298,12 @@ def generate(
         if p.kind == p.KEYWORD_ONLY and k not in ("progress", "workers")
     }
     defaults.update({k: v for k, v in params.items() if k != "workers"})
-    # Every user error is told before the rendering (minutes for the default 100000 windows): an empty
-    # dataset is one, and so is an output under a file, which atomic_output_dir's mkdir would only report
-    # as a bare "[Errno 17] File exists".
+    # Every user error is told before the rendering (minutes for the default 100000 windows), the output's by
+    # atomic_output_dir, which the rendering runs in.
     if n < 1:
         raise InputError(f"the number of windows (-n) must be at least 1, got {n}")
     _check_parameters(n, defaults["n_objects"], defaults["background_fraction"], defaults["lighting"])
-    check_writable(out_dir)
     defaults = {k: (list(v) if isinstance(v, tuple) else v) for k, v in defaults.items()}
-    # Rendered inside the block: atomic_output_dir refuses an existing folder before the rendering starts.
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         batch = render_windows(n, seed, progress=progress, **params)
         save_npz(tmp / "windows.npz", **{k: getattr(batch, k) for k in PhosBatch.ARRAYS})

@@ -56,7 +56,7 @@ from alcn_cv.formats.bop import (
     write_scene,
 )
 from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, write_text_model
-from alcn_cv.io import check_writable, write_image, write_json
+from alcn_cv.io import write_image, write_json
 
 __all__ = [
     "PoseConfig",
@@ -460,7 +460,6 @@ def generate(
     train_sweeps = tuple(float(c) for c in train_sweeps)
     if not train_sweeps or not all(c >= 0 for c in train_sweeps):
         raise InputError(f"train_sweeps must be one or more numbers >= 0, got {train_sweeps}")
-    check_writable(out_dir)  # an output under a file: one line now, not atomic_output_dir's bare [Errno 17]
     sequences = []
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         write_camera(tmp, cfg.K, cfg.width, cfg.height)

@@ -54,9 +54,8 @@ def _phos(folder: Path, n: int) -> np.ndarray:
     from alcn_cv.data.phos import load
 
     batch = load(folder)
-    idx = np.linspace(0, len(batch) - 1, min(n, len(batch))).astype(int)
     tiles = []
-    for i in idx:
+    for i in _spread(len(batch), n):
         t = cv2.cvtColor(cv2.resize(batch.windows[i], (128, 128), interpolation=cv2.INTER_NEAREST), cv2.COLOR_GRAY2BGR)
         cv2.rectangle(t, (32, 32), (95, 95), (0, 200, 255), 1)  # the detector's 32x32 centre
         _label(t, f"{batch.labels[i]}" if batch.labels[i] else "bg")
@@ -161,10 +160,12 @@ def _relief_scenes(folder: Path, n: int, side: int = 256) -> np.ndarray:
     scenes = sorted(p for p in folder.glob("scene_*") if p.is_dir())
     rows = [scenes[i] for i in _spread(len(scenes), max(1, round(np.sqrt(n))))]
     per_scene = max(1, -(-n // max(1, len(rows))))
-    tiles = []
+    tiles, cols = [], 1
     for d in rows:
         files = sorted(d.glob("frame_*.png"))
-        for j in _spread(len(files), per_scene):
+        chosen = _spread(len(files), per_scene)
+        cols = max(cols, len(chosen))  # a scene of fewer frames than asked: its row is as long as its frames
+        for j in chosen:
             img = cv2.imread(str(files[j]), cv2.IMREAD_GRAYSCALE)
             if img is None:
                 raise DatasetError(f"{files[j]}: unreadable frame")
@@ -176,7 +177,7 @@ def _relief_scenes(folder: Path, n: int, side: int = 256) -> np.ndarray:
             families = lights.get(d.name, [])
             _label(tile, families[j] if j < len(families) else "", (4, side - 6), 0.4)
             tiles.append(tile)
-    return grid(tiles, per_scene)
+    return grid(tiles, cols)
 
 
 def preview(dataset: str | os.PathLike, out_png: str | os.PathLike, *, n: int = 16) -> Path:

@@ -32,7 +32,7 @@ from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import InputError
-from alcn_cv.io import check_writable, write_json
+from alcn_cv.io import write_json
 
 __all__ = ["KIND", "generate", "relief_surface", "render_scene"]
 
@@ -136,10 +136,12 @@ def generate(
         raise InputError(f"need at least 2 frames (lightings) per scene (--frames), got {frames}")
     if size < _MIN_SIZE:
         raise InputError(f"--size is the side of the frames in pixels, at least {_MIN_SIZE}; got {size}")
-    check_writable(out_dir)  # an output under a file: one line now, not atomic_output_dir's bare [Errno 17]
     jobs = [(int(seed), i, int(size), int(frames)) for i in range(scenes)]
-    rendered = parallel_map(_scene_job, jobs, workers=workers, desc="relief scenes", unit="scene", progress=progress)
+    # rendered inside the block: atomic_output_dir refuses an existing or unwritable output before the minutes of work
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+        rendered = parallel_map(
+            _scene_job, jobs, workers=workers, desc="relief scenes", unit="scene", progress=progress
+        )
         lights = {}
         for i, (stack, names) in enumerate(rendered):
             folder = tmp / f"scene_{i:03d}"

@@ -229,6 +229,17 @@ def parse_spec(spec: str) -> tuple[str, dict[str, object]]:
     return name, parse_params(items)
 
 
+def format_spec(name: str, params: dict[str, object]) -> str:
+    """The spec of a method and its parameters, the inverse of :func:`parse_spec`: ``("dog", {"sigma1": 1.0})`` ->
+    ``"dog:sigma1=1.0"``.
+
+    Example:
+        >>> format_spec("alcn", {"model": "lite", "scale": 1.0})
+        'alcn:model=lite:scale=1.0'
+    """
+    return name + "".join(f":{k}={v}" for k, v in params.items())
+
+
 def from_spec(spec: str, **defaults: object) -> Normalization:
     """:func:`create` with ``defaults`` for the parameters the spec does not give, e.g.
     ``from_spec("alcn:model=lite", scale=1.0)``.

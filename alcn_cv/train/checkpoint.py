@@ -70,14 +70,16 @@ class TrainState:
 
 
 def run_folder(out: str | Path) -> Path:
-    """The run folder ``out`` of a training command, made when missing: an empty folder or an earlier run's (its
-    ``train.log``), never a folder of other files, so that a run's files never mix with a data set's.
+    """The run folder ``out`` of a training command, made when missing: a folder empty but for hidden files (a
+    ``.gitkeep``) and configurations (``*.toml``), or an earlier run's (its ``train.log``); never a folder of other
+    files, so that a run's files never mix with a data set's.
 
     Raises:
-        InputError: ``out`` holds files and no ``train.log``, or lies under a file.
+        InputError: ``out`` holds other files and no ``train.log``, or lies under a file.
     """
     out = Path(out)
-    if out.is_dir() and any(out.iterdir()) and not (out / "train.log").is_file():
+    others = out.is_dir() and any(not p.name.startswith(".") and p.suffix != ".toml" for p in out.iterdir())
+    if others and not (out / "train.log").is_file():
         raise InputError(f"{out} holds other files than a training run's (no train.log); give another --out")
     return make_folder(out)
 

@@ -86,7 +86,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--method",
         default="alcn",
         help="normalization applied to the windows, a spec NAME[:KEY=VALUE...] (default alcn; ALCN at scale=1, "
-        "the windows' own; detector.pt records the spec with every parameter)",
+        "the windows' own; detector.pt records the spec with its scale and ALCN's model named)",
     )
     d.add_argument("--weights", type=Path, help="Normalizer weight file for --method alcn (default: shipped)")
     d.add_argument("--per-image", type=int, default=300, help="synthetic windows per real image (default 300)")

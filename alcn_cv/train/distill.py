@@ -46,7 +46,7 @@ from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
 from alcn_cv.io import atomic_write, output_path
 from alcn_cv.nets.gain import GainNormalizer
-from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
+from alcn_cv.nets.lite import ARCHITECTURES, LiteNormalizer, normalizer_from_file
 from alcn_cv.report import describe_machine
 from alcn_cv.train.config import GainDistillConfig, LiteDistillConfig
 from alcn_cv.train.real_light import source_scenes
@@ -117,10 +117,11 @@ def distill(cfg: LiteDistillConfig | None = None, progress: bool = True) -> tupl
     torch.manual_seed(seed)
     teacher_path = teacher_file(cfg.teacher)
     teacher_weights = load_normalizer_file(teacher_path)
-    if teacher_weights.meta.get("architecture") in ("gain", "unet"):  # a student of the paper's family: its weights
+    architecture = teacher_weights.meta.get("architecture", "paper")  # the paper's files predate the key
+    if architecture not in ARCHITECTURES:  # the student learns a paper-family teacher's mixture weights
+        hint = "; distil a gain Normalizer with --conf gain-lite" if architecture == "gain" else ""
         raise InputError(
-            f"{teacher_path} is not a Normalizer of the paper's family (paper, lite); "
-            "distil a gain Normalizer with --conf gain-lite"
+            f"{teacher_path} is a {architecture} Normalizer, not of the paper's family (paper, lite){hint}"
         )
     teacher_net = normalizer_from_file(teacher_weights)
     sigmas = [float(s) for s in teacher_weights.meta["sigmas"]]

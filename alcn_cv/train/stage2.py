@@ -24,8 +24,8 @@ import torch.nn.functional as F
 from torch import nn
 from tqdm.auto import tqdm
 
-from alcn_cv.enhance.alcn import ALCN
-from alcn_cv.enhance.registry import from_spec, parse_spec
+from alcn_cv.enhance.alcn import ALCN, pin_default_model
+from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.io import atomic_write, write_json
@@ -309,8 +309,8 @@ def main(
         epochs, batch_size, lr, seed: see :func:`train_detector`.
 
     Returns:
-        The path of ``detector.pt``; its ``"method"`` is the spec with every parameter set here, which makes the
-        same normalization again.
+        The path of ``detector.pt``; its ``"method"`` is the spec with the parameters set here and ALCN's model
+        named (:func:`~alcn_cv.enhance.alcn.pin_default_model`).
 
     Raises:
         InputError: ``weights`` with another method than ALCN, or given twice.
@@ -325,10 +325,11 @@ def main(
             defaults["weights"] = str(weights)
     elif weights is not None:
         raise InputError(f"--weights is the Normalizer of --method alcn, not of {name!r}")
-    method = name + "".join(f":{k}={v}" for k, v in {**defaults, **given}.items())
+    normalization = from_spec(method, **defaults)  # a path's own ":" stays out of the spec's parsing
+    method = pin_default_model(format_spec(name, {**defaults, **given}))
     objects = _read_objects(Path(images))
     windows, labels = object_windows(objects, per_image, negatives, extent, seed)
-    x = normalize_windows(windows, from_spec(method))
+    x = normalize_windows(windows, normalization)
     logger.info(
         "%d objects, %d windows (%d background), method %s", len(objects), len(x), int((labels == 0).sum()), method
     )
