@@ -19,6 +19,7 @@ Example:
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
@@ -67,8 +68,8 @@ class ALCN2d(nn.Module):
 
     Shape:
         - image: ``(B, 1, H, W)`` or ``(B, 3, H, W)`` (RGB) float in [0, 1], any device and float dtype
-          (move the module with ``.to(device, dtype)``); a side of at least the widest kernel's reach (7 px for the
-          ``gain`` models, 31 for ``lite`` and ``paper``; ``apply()`` mirrors smaller images).
+          (move the module with ``.to(device, dtype)``), any size: a side shorter than a kernel's reach is mirrored
+          as ``apply()`` mirrors it (OpenCV's reflect-101, repeated).
         - output: the same shape, dtype and device, in [0, 1] (the raw response mapped through
           the weight file's fixed ``output_range``, clipped).
 
@@ -288,9 +289,27 @@ def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | 
 _MODULES: dict[tuple, ALCN2d] = {}
 
 
+#: Whether this process is a fork of one that may have run torch's threads (:func:`_forked_child`).
+_FORKED = False
+
+
+def _forked_child() -> None:
+    # torch's intra-op threads (OpenMP) do not survive a fork: the first parallel operation of a child forked after
+    # the parent used them hangs (a multiprocessing pool's worker, say). The child runs on one thread instead, its
+    # outputs those of one thread (to float rounding: one grey level of a uint8 output at most).
+    global _FORKED
+    _FORKED = True
+    torch.set_num_threads(1)
+
+
+os.register_at_fork(after_in_child=_forked_child)
+
+
 @contextmanager
 def torch_threads(threads: int | None) -> Iterator[None]:
-    """Run the block with ``threads`` torch intra-op threads (no change for None)."""
+    """Run the block with ``threads`` torch intra-op threads (no change for None; one in a forked child, where
+    torch's threads hang)."""
+    threads = 1 if _FORKED and threads is not None else threads
     before = torch.get_num_threads()
     if threads is None or threads == before:
         yield

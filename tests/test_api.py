@@ -1,6 +1,7 @@
 """The OpenCV-style contract of every registered normalization, and ALCN's own API."""
 
 import logging
+import os
 
 import cv2
 import numpy as np
@@ -305,3 +306,34 @@ def test_a_weight_file_without_its_export_says_how_to_make_it(tmp_path):
     with pytest.raises(WeightFileError, match=r"alcn export --weights .*mine\.npz --onnx .*mine\.onnx"):
         alcn_cv.createALCN(weights=weights, backend="opencv")
     assert f"weights='{weights}'" in repr(alcn_cv.createALCN(weights=weights))  # a user's file by its path
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork on this platform")
+@pytest.mark.parametrize("kwargs", [{"backend": "torch"}, {"backend": "fast", "threads": 2}])
+def test_a_forked_child_normalizes_after_its_parent_used_torchs_threads(kwargs):
+    """torch's threads do not survive a fork: the child's first call hung (a multiprocessing pool's worker)."""
+    import multiprocessing
+
+    frame = np.random.default_rng(0).integers(0, 256, (240, 320, 3)).astype(np.uint8)
+    alcn = alcn_cv.createALCN(**kwargs)
+    parent = alcn.apply(frame)
+
+    def child() -> None:
+        os._exit(0 if np.abs(alcn.apply(frame).astype(int) - parent).max() <= 1 else 3)
+
+    process = multiprocessing.get_context("fork").Process(target=child)
+    process.start()
+    process.join(120)
+    hung = process.is_alive()
+    if hung:
+        process.kill()
+    assert not hung and process.exitcode == 0
+
+
+@pytest.mark.parametrize("shape", [(1, 640), (640, 1), (3, 3), (6, 6, 3)])
+def test_the_torch_backend_mirrors_small_images_as_the_default_backend(shape):
+    """apply() mirrors an image smaller than its kernels; the torch backend raised below 7 px (31 for lite)."""
+    img = np.random.default_rng(1).integers(0, 256, shape).astype(np.uint8)
+    for model in ("gain", "lite"):
+        torch_out = alcn_cv.createALCN(model=model, backend="torch").apply(img)
+        assert np.abs(torch_out.astype(int) - alcn_cv.createALCN(model=model).apply(img)).max() <= 1

@@ -66,9 +66,9 @@ def test_invariant_to_a_gain_of_the_response():
 def test_blur_pads_reflect_101_for_any_size():
     """The pad of one pass (smaller than the side) and the ONNX-friendly index form give the same values."""
     x = torch.rand(1, 1, 3, 5)
-    small = torch_divisive.reflect101_pad_any(x, 2)
+    small = torch_divisive.reflect101_pad(x, 2, 2, 2, 2)
     torch.testing.assert_close(small, torch.nn.functional.pad(x, (2, 2, 2, 2), mode="reflect"))
-    tiny = torch_divisive.reflect101_pad_any(x, 4)  # the reflection repeats
+    tiny = torch_divisive.reflect101_pad(x, 4, 4, 4, 4)  # the reflection repeats
     assert tiny.shape == (1, 1, 11, 13)
     torch.testing.assert_close(tiny[..., 4:7, 4:9], x)
     r = _response(2, 3, seed=3)

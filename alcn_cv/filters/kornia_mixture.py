@@ -12,12 +12,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import torch
-import torch.nn.functional as F
 from kornia.filters import get_gaussian_kernel1d
 from torch import nn
 
 from alcn_cv.errors import InputError
-from alcn_cv.filters.gaussian_mixture import TRUNCATE, check_sigmas, gaussian_sigmas, kernel_radius
+from alcn_cv.filters.gaussian_mixture import check_sigmas, gaussian_sigmas, kernel_radius
+from alcn_cv.filters.torch_divisive import reflect101_pad
 from alcn_cv.filters.torch_separable import filter_columns, filter_rows
 
 __all__ = ["GaussianMixture2d", "gaussian_mixture2d"]
@@ -41,12 +41,7 @@ def _blurs(x: torch.Tensor, bank: torch.Tensor, sigmas: Sequence[float]) -> list
     ``(B, 1, H, W)``. One pad of the widest radius serves every kernel, each reading its own margin of it."""
     h, w = x.shape[-2:]
     widest = bank.shape[1] // 2
-    if min(h, w) <= widest:
-        raise InputError(
-            f"image {h}x{w} is too small for sigma {widest / TRUNCATE:.1f} (kernel radius {widest}); "
-            f"it needs at least {widest + 1} pixels per side"
-        )
-    padded = F.pad(x, (widest, widest, widest, widest), mode="reflect")  # torch's reflect is reflect-101
+    padded = reflect101_pad(x, widest, widest, widest, widest)  # a side shorter than the kernel: as OpenCV's
     blurred = []
     for i, sigma in enumerate(sigmas):
         r = kernel_radius(sigma)

@@ -22,7 +22,7 @@ __all__ = [
     "gaussian_blur",
     "gaussian_energy",
     "inverse_divisor",
-    "reflect101_pad_any",
+    "reflect101_pad",
 ]
 
 
@@ -49,14 +49,25 @@ def _reflect101_index(x: torch.Tensor, dim: int, before: int, after: int) -> tor
     return (last - (last - i).abs()).long()
 
 
-def reflect101_pad_any(x: torch.Tensor, pad: int) -> torch.Tensor:
-    """``(B, C, H, W)`` padded by ``pad`` on the last two dims with reflect-101, for any size."""
-    if pad < min(x.shape[-2:]) or torch.onnx.is_in_onnx_export():
+def reflect101_pad(x: torch.Tensor, top: int, bottom: int, left: int, right: int) -> torch.Tensor:
+    """``(..., H, W)`` padded on the last two dims with reflect-101 (``cv2.BORDER_REFLECT_101``), for any pad size:
+    unlike ``F.pad(mode="reflect")``, a pad longer than its side repeats the reflection, as OpenCV does (a side of
+    one pixel repeats it).
+
+    Example:
+        >>> reflect101_pad(torch.arange(3.0).view(1, 3), 0, 0, 4, 0)[0].tolist()
+        [0.0, 1.0, 2.0, 1.0, 0.0, 1.0, 2.0]
+    """
+    if x.ndim != 4:  # the index path reads the sizes of a (B, C, H, W) tensor
+        padded = reflect101_pad(x.reshape(-1, 1, *x.shape[-2:]), top, bottom, left, right)
+        return padded.reshape(*x.shape[:-2], *padded.shape[-2:])
+    h, w = x.shape[-2:]
+    if (max(top, bottom) < h and max(left, right) < w) or torch.onnx.is_in_onnx_export():
         # torch's reflect is reflect-101; one fast pass. Exported as an ONNX Pad, which cv2.dnn (the export's
         # consumer) reflects repeatedly where the pad exceeds the size, as the index path below.
-        return F.pad(x, (pad, pad, pad, pad), mode="reflect")
-    x = x.index_select(-2, _reflect101_index(x, -2, pad, pad))
-    return x.index_select(-1, _reflect101_index(x, -1, pad, pad))
+        return F.pad(x, (left, right, top, bottom), mode="reflect")
+    x = x.index_select(-2, _reflect101_index(x, -2, top, bottom))
+    return x.index_select(-1, _reflect101_index(x, -1, left, right))
 
 
 def gaussian_blur(x: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tensor:
@@ -64,7 +75,8 @@ def gaussian_blur(x: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tens
     reflect-101, for any size. ``pad=False``: only where the kernel lies inside, ``(B, 1, H - 2r, W - 2r)``."""
     kernel = torch.as_tensor(gaussian_kernel1d(sigma), dtype=x.dtype, device=x.device)
     if pad:
-        x = reflect101_pad_any(x, kernel.numel() // 2)
+        r = kernel.numel() // 2
+        x = reflect101_pad(x, r, r, r, r)
     return filter_rows(filter_columns(x, kernel), kernel)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from alcn_cv.filters.torch_divisive import divisive_normalization, gaussian_blur
+from alcn_cv.filters.torch_divisive import divisive_normalization, gaussian_blur, reflect101_pad
 from alcn_cv.filters.torch_resize import upsample_blocks
 from alcn_cv.filters.wide_band import BLOCK, ENERGY_SIGMA, SIGMAS
 
@@ -17,7 +17,7 @@ def block_means(image: torch.Tensor) -> torch.Tensor:
     :func:`alcn_cv.filters.wide_band.block_means`."""
     bottom, right = -image.shape[-2] % BLOCK, -image.shape[-1] % BLOCK
     if bottom or right:
-        image = F.pad(image, (0, right, 0, bottom), mode="reflect")
+        image = reflect101_pad(image, 0, bottom, 0, right)
     return F.avg_pool2d(image, BLOCK)
 
 

@@ -41,7 +41,6 @@ from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.torch_divisive import (
     divisive_normalization,
     gaussian_blur,
-    reflect101_pad_any,
 )
 from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
@@ -245,7 +244,7 @@ class GainNormalizer(nn.Module):
         # preset's rebuild of the shipped file) keeps its own sums
         x = features.contiguous(memory_format=torch.channels_last) if cpu_inference(features) else features
         for conv, d in zip(self.convs, self.dilations):
-            x = F.relu(conv(reflect101_pad_any(x, d)))
+            x = F.relu(conv(reflect101_pad(x, d, d, d, d)))
         head = self.head(x)
         # A band-pass, as the DoG: weights summing to zero, so the response does not follow the
         # local mean (which the division would turn into structure in flat regions).

@@ -19,6 +19,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.filters.torch_divisive import reflect101_pad
 from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.nets.opencv_runtime import WINDOW
 from alcn_cv.weight_file import NormalizerFile
@@ -27,28 +28,6 @@ __all__ = ["Normalizer", "reflect101_pad"]
 
 STRIDE = 4
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
-
-
-def reflect101_pad(x: torch.Tensor, top: int, bottom: int, left: int, right: int) -> torch.Tensor:
-    """Pad the last two dims with reflect-101 (``cv2.BORDER_REFLECT_101``), for any pad size.
-
-    Unlike ``F.pad(mode="reflect")`` this also works when a pad exceeds the image size
-    (the reflection repeats, as in OpenCV).
-    """
-
-    def index(n: int, before: int, after: int) -> torch.Tensor:
-        i = torch.arange(-before, n + after, device=x.device)
-        if n == 1:
-            return torch.zeros_like(i)
-        period = 2 * (n - 1)
-        i = torch.remainder(i, period)
-        return torch.where(i >= n, period - i, i)
-
-    h, w = x.shape[-2:]
-    if max(top, bottom) < h and max(left, right) < w and x.ndim in (3, 4):
-        return F.pad(x, (left, right, top, bottom), mode="reflect")  # the same, one pass
-    x = x.index_select(-2, index(h, top, bottom))
-    return x.index_select(-1, index(w, left, right))
 
 
 class Normalizer(nn.Module):
