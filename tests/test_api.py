@@ -337,3 +337,16 @@ def test_the_torch_backend_mirrors_small_images_as_the_default_backend(shape):
     for model in ("gain", "lite"):
         torch_out = alcn_cv.createALCN(model=model, backend="torch").apply(img)
         assert np.abs(torch_out.astype(int) - alcn_cv.createALCN(model=model).apply(img)).max() <= 1
+
+
+def test_the_default_path_imports_neither_torch_nor_scipy():
+    """An OpenCV app's start-up: `import alcn_cv` took twice as long with SciPy, used by the Retinex baseline only."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np, alcn_cv; alcn_cv.createALCN().apply(np.zeros((64, 64), np.uint8)); "
+        "print(sorted(m for m in ('torch', 'scipy') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr

@@ -10,7 +10,6 @@ from collections.abc import Sequence
 
 import cv2
 import numpy as np
-from scipy import fft
 
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
@@ -44,6 +43,8 @@ def poisson_reconstruct(gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     div[1:, :] -= gy[:-1, :]
     eig = (2 * np.cos(np.pi * np.arange(h) / h) - 2)[:, None] + (2 * np.cos(np.pi * np.arange(w) / w) - 2)[None, :]
     eig[0, 0] = 1.0
+    from scipy import fft  # here: importing alcn_cv would take twice as long with scipy (OpenCV's DCT is even-sized)
+
     coef = fft.dctn(div, type=2, norm="ortho") / eig
     coef[0, 0] = 0.0
     return fft.idctn(coef, type=2, norm="ortho")
