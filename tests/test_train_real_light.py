@@ -1,5 +1,6 @@
 """Training the gain Normalizer on registered real scenes (alcn_cv.train.real_light), on a tiny synthetic set."""
 
+import json
 import shlex
 
 import cv2
@@ -264,3 +265,50 @@ def test_a_run_folder_holds_one_run(tmp_path, caplog):
     with log_to(tmp_path / "train.log", append=True):
         logging.getLogger("alcn_cv.test").info("resumed")
     assert "this run" in (tmp_path / "train.log").read_text()
+
+
+def test_a_resumed_run_ends_as_an_uninterrupted_one(tmp_path, monkeypatch):
+    """train-real-light wrote checkpoint.pt and could not resume from it: now --resume goes on from its step, the
+    draws and Adam's state restored, to the same weights."""
+    import dataclasses
+
+    import alcn_cv.train.real_light as real_light
+    from alcn_cv.errors import WeightFileError
+
+    torch.set_num_threads(1)
+    cfg = RealLightConfig(
+        scenes=[str(_write_scene(tmp_path / "scene"))],
+        relit=0,
+        steps=4,
+        locations=16,
+        crop=CROP,
+        patch=PATCH,
+        min_distance=8,
+        temperature=0.5,
+        lr=0.02,
+        save_every=2,
+        net={"channels": 8},
+    )
+    whole = load_normalizer_file(train_real_light(cfg, tmp_path / "whole")).arrays
+    draw_step = real_light.draw_step
+    calls = []
+
+    def stopped_at_step_3(*args):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return draw_step(*args)
+
+    monkeypatch.setattr(real_light, "draw_step", stopped_at_step_3)
+    with pytest.raises(KeyboardInterrupt):
+        train_real_light(cfg, tmp_path / "resumed")
+    monkeypatch.setattr(real_light, "draw_step", draw_step)
+    resumed = load_normalizer_file(train_real_light(cfg, tmp_path / "resumed", resume=True)).arrays
+    for key, value in whole.items():
+        np.testing.assert_array_equal(resumed[key], value, err_msg=key)
+    history = json.loads((tmp_path / "resumed" / "history.json").read_text())
+    assert [h["step"] for h in history] == [1, 2, 3, 4]
+    with pytest.raises(WeightFileError, match="differ in lr"):
+        train_real_light(dataclasses.replace(cfg, lr=0.01), tmp_path / "resumed", resume=True)
+    with pytest.raises(WeightFileError, match="no checkpoint"):
+        train_real_light(cfg, tmp_path / "never", resume=True)

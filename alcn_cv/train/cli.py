@@ -150,6 +150,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=1,
         help="torch threads (default 1, as the shipped file was made; 0: torch's default)",
     )
+    r.add_argument("--resume", action="store_true", help="go on from OUT/checkpoint.pt, as if never stopped")
     r.set_defaults(func=_train_real_light)
 
     u = subparsers.add_parser(
@@ -279,7 +280,12 @@ def _train_real_light(args: argparse.Namespace) -> int:
     return _print_with_threads(
         args.threads,
         lambda: train_real_light(
-            cfg, args.out, command=_command("train-real-light", args), conf=args.conf, progress=not args.no_progress
+            cfg,
+            args.out,
+            command=_command("train-real-light", args),
+            conf=args.conf,
+            progress=not args.no_progress,
+            resume=args.resume,
         ),
     )
 

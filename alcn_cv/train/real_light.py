@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import json
 import logging
 import re
 import time
@@ -50,7 +51,7 @@ from tqdm import tqdm
 
 from alcn_cv.data.permissive_images import relit_permissive_scenes
 from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
-from alcn_cv.errors import InputError
+from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
 from alcn_cv.io import atomic_write, write_json
@@ -391,7 +392,13 @@ def _save_weights(
 
 
 def train_real_light(
-    cfg: RealLightConfig, out: str | Path, *, command: str = "", conf: str | None = None, progress: bool = True
+    cfg: RealLightConfig,
+    out: str | Path,
+    *,
+    command: str = "",
+    conf: str | None = None,
+    progress: bool = True,
+    resume: bool = False,
 ) -> Path:
     """Train a :class:`~alcn_cv.nets.gain.GainNormalizer` on registered scenes (see the module).
 
@@ -400,54 +407,92 @@ def train_real_light(
         out: the run folder.
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
         progress: show a progress bar.
+        resume: go on from ``out/checkpoint.pt`` (written every ``cfg.save_every`` steps), as if never stopped: the
+            same weights as an uninterrupted run.
 
     Returns:
         The final weight file ``out/gain_normalizer.npz``.
+
+    Raises:
+        WeightFileError: ``resume`` without a checkpoint, or with one of other settings.
     """
     if cfg.crop < 2 * cfg.patch:
         raise InputError(f"need crop >= 2 * patch, got crop {cfg.crop} and patch {cfg.patch}")
-    with training_run(cfg, out) as folder:
-        return _train(cfg, folder, {"command": command, "conf": conf}, progress)
+    with training_run(cfg, out, resume) as folder:
+        return _train(cfg, folder, {"command": command, "conf": conf}, progress, resume)
 
 
 @contextlib.contextmanager
-def training_run(cfg: RealLightConfig, out: str | Path) -> Iterator[Path]:
+def training_run(cfg: RealLightConfig, out: str | Path, resume: bool = False) -> Iterator[Path]:
     """The run of any network on ``cfg``'s draws: checks the settings (:meth:`RealLightConfig.check
     <alcn_cv.train.config.RealLightConfig.check>`), makes the run folder ``out`` and copies the log into its
     ``train.log`` (:func:`alcn_cv.report.log_to`). A folder holds one run: an earlier run's ``train.log`` is
-    replaced and its step snapshots (``*_step{N}.npz``) removed.
+    replaced and its step snapshots (``*_step{N}.npz``) removed, unless the run is resumed (its log goes on).
 
     Yields:
         The run folder.
     """
     cfg.check()
     folder = run_folder(out)
-    # an earlier run's snapshots, which this run's would not all replace
-    earlier = sorted(p for p in folder.glob("*_step*.npz") if re.search(r"_step\d+\.npz$", p.name))
+    # an earlier run's snapshots, which this run's would not all replace (a resumed run's are its own)
+    earlier = [] if resume else sorted(p for p in folder.glob("*_step*.npz") if re.search(r"_step\d+\.npz$", p.name))
     for path in earlier:
         path.unlink()
-    with log_to(folder / "train.log"):
+    with log_to(folder / "train.log", append=resume):
         if earlier:
             logger.warning("removed %d step snapshots of an earlier run in %s", len(earlier), folder)
         yield folder
 
 
-def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any], progress: bool) -> Path:
+def _checkpoint(path: Path, cfg: RealLightConfig) -> dict[str, Any]:
+    """The state a run saved in ``path`` (:func:`fit`'s ``save``), checked to be a run of ``cfg``.
+
+    Raises:
+        WeightFileError: no such file, not a checkpoint, or a run of other settings (named).
+    """
+    if not path.is_file():
+        raise WeightFileError(f"{path}: no checkpoint to resume from (a run writes one every save_every steps)")
+    try:
+        state = torch.load(path, weights_only=True)
+    except Exception as exc:  # torch raises its own unpickling errors
+        raise WeightFileError(f"{path}: not a checkpoint of train-real-light ({exc})") from None
+    if not isinstance(state, dict) or "draws" not in state:
+        raise WeightFileError(f"{path}: not a checkpoint of train-real-light (no state of its draws)")
+    differ = sorted(k for k, v in asdict(cfg).items() if state["config"].get(k) != v)
+    if differ:
+        raise WeightFileError(f"{path} was written with other settings (they differ in {', '.join(differ)})")
+    logger.info("resuming from step %d of %d", state["step"], cfg.steps)
+    return state
+
+
+def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any], progress: bool, resume: bool = False) -> Path:
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     net = GainNormalizer(**cfg.net)
+    start = _checkpoint(out / "checkpoint.pt", cfg) if resume else None
+    if start is not None:
+        net.load_state_dict(start["net"])
     if max(kernel_radius(s) for s in net.sigmas) > cfg.patch // 2:
         raise InputError(
             f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2"
         )
     scenes, rendered = training_scenes(cfg)
 
-    def save(step: int, seconds: float, opt: torch.optim.Optimizer) -> None:
+    def save(step: int, seconds: float, opt: torch.optim.Optimizer, history: list[dict]) -> None:
         _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds, record)
-        state = {"net": net.state_dict(), "opt": opt.state_dict(), "step": step, "config": asdict(cfg)}
+        state = {
+            "net": net.state_dict(),
+            "opt": opt.state_dict(),
+            "step": step,
+            "seconds": seconds,
+            "history": history,
+            "draws": json.dumps(rng.bit_generator.state),  # the next step's draws, as an uninterrupted run's
+            "torch_rng": torch.get_rng_state(),
+            "config": asdict(cfg),
+        }
         atomic_write(out / "checkpoint.pt", lambda f, state=state: torch.save(state, f))
 
-    seconds = fit(net, pair_loss, scenes, rendered, cfg, rng, out, save, "real-light", progress)
+    seconds = fit(net, pair_loss, scenes, rendered, cfg, rng, out, save, "real-light", progress, start)
     return _save_weights(net, out / "gain_normalizer.npz", cfg, cfg.steps, seconds, record)
 
 
@@ -459,23 +504,32 @@ def fit(
     cfg: RealLightConfig,
     rng: np.random.Generator,
     out: Path,
-    save: Callable[[int, float, torch.optim.Optimizer], None],
+    save: Callable[[int, float, torch.optim.Optimizer, list[dict]], None],
     desc: str,
     progress: bool = True,
+    start: dict[str, Any] | None = None,
 ) -> float:
     """The training loop of the gain Normalizer and of its baselines: ``cfg.steps`` steps of Adam at ``cfg.lr`` on
     ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to
     norm 5; every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer)``, a line of log and
-    ``out/history.json``. Leaves ``net`` in eval mode.
+    ``out/history.json``; ``start``, a checkpoint's state (:func:`_checkpoint`), goes on after its step. Leaves ``net``
+    in eval mode.
 
     Returns:
-        The seconds it took.
+        The seconds it took (with the checkpoint's).
     """
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     history: list[dict] = []
-    start = time.perf_counter()
+    first, before = 1, 0.0
+    if start is not None:
+        opt.load_state_dict(start["opt"])
+        history, first, before = list(start["history"]), start["step"] + 1, start["seconds"]
+        rng.bit_generator.state = json.loads(start["draws"])
+        torch.set_rng_state(start["torch_rng"])
+    began = time.perf_counter() - before
     net.train()
-    for step in (bar := tqdm(range(1, cfg.steps + 1), desc=desc, unit="step", disable=not progress)):
+    steps = range(first, cfg.steps + 1)
+    for step in (bar := tqdm(steps, desc=desc, unit="step", total=len(steps), disable=not progress)):
         scene, frames, centres, anywhere = draw_step(scenes, rendered, cfg, rng)
         loss = step_loss(net, scene, frames, centres, cfg, anywhere)
         opt.zero_grad()
@@ -485,14 +539,14 @@ def fit(
         history.append({"step": step, "scene": scene.name, "loss": loss.item()})
         bar.set_postfix(loss=f"{loss.item():.3f}")
         if step % cfg.save_every == 0 or step == cfg.steps:
-            seconds = time.perf_counter() - start
+            seconds = time.perf_counter() - began
             recent = [h["loss"] for h in history[-cfg.save_every :]]
             logger.info(
                 "step %d: mean loss %.4f over the last %d steps, %.0f s", step, np.mean(recent), len(recent), seconds
             )
-            save(step, seconds, opt)
+            save(step, seconds, opt, history)
             write_json(out / "history.json", history)
-    seconds = time.perf_counter() - start
+    seconds = time.perf_counter() - began
     logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
     net.eval()
     return seconds
