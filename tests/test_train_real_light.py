@@ -198,8 +198,9 @@ def test_cli_runs_the_preset_with_its_settings(tmp_path, monkeypatch):
         "--seed",
         "3",
     ]
-    assert record == {"conf": "gain", "command": shlex.join(words), "progress": True}
+    assert record == {"conf": "gain", "command": shlex.join(words), "progress": True, "resume": False}
     assert main([*common, "--no-progress"]) == 0 and runs[-1][1]["progress"] is False
+    assert main([*common, "--resume"]) == 0 and runs[-1][1]["resume"] is True
 
 
 def test_three_steps_lower_the_loss(tmp_path):
