@@ -295,21 +295,22 @@ _FORKED = False
 
 def _forked_child() -> None:
     # torch's intra-op threads (OpenMP) do not survive a fork: the first parallel operation of a child forked after
-    # the parent used them hangs (a multiprocessing pool's worker, say). The child runs on one thread instead, its
-    # outputs those of one thread (to float rounding: one grey level of a uint8 output at most).
+    # the parent used them hangs (a multiprocessing pool's worker, say). ALCN's calls in the child run on one thread
+    # instead (torch_threads), their outputs those of one thread (to float rounding: one grey level of a uint8
+    # output at most); the rest of the child's torch is left as it is.
     global _FORKED
     _FORKED = True
-    torch.set_num_threads(1)
 
 
-os.register_at_fork(after_in_child=_forked_child)
+if hasattr(os, "register_at_fork"):  # not on Windows, which has no fork
+    os.register_at_fork(after_in_child=_forked_child)
 
 
 @contextmanager
 def torch_threads(threads: int | None) -> Iterator[None]:
     """Run the block with ``threads`` torch intra-op threads (no change for None; one in a forked child, where
     torch's threads hang)."""
-    threads = 1 if _FORKED and threads is not None else threads
+    threads = 1 if _FORKED else threads
     before = torch.get_num_threads()
     if threads is None or threads == before:
         yield

@@ -303,8 +303,10 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(tmp_path, monkeypatch):
     monkeypatch.setattr(real_light, "draw_step", stopped_at_step_3)
     with pytest.raises(KeyboardInterrupt):
         train_real_light(cfg, tmp_path / "resumed")
-    monkeypatch.setattr(real_light, "draw_step", draw_step)
+    calls.clear()
+    monkeypatch.setattr(real_light, "draw_step", lambda *args: calls.append(1) or draw_step(*args))
     resumed = load_normalizer_file(train_real_light(cfg, tmp_path / "resumed", resume=True)).arrays
+    assert len(calls) == 2  # steps 3 and 4 only: it went on from the checkpoint of step 2
     for key, value in whole.items():
         np.testing.assert_array_equal(resumed[key], value, err_msg=key)
     history = json.loads((tmp_path / "resumed" / "history.json").read_text())

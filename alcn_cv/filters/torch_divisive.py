@@ -27,26 +27,11 @@ __all__ = [
 
 
 def _reflect101_index(x: torch.Tensor, dim: int, before: int, after: int) -> torch.Tensor:
-    """Indices of dim ``dim`` (-2 or -1) of ``x`` padded by reflect-101, for any pad size (the
-    reflection repeats on sides shorter than the pad).
-
-    The size is read from the data, in float32, so that the ONNX export (:mod:`alcn_cv.train.export`)
-    computes the indices for every input size with ops ``cv2.dnn`` runs (it has no integer
-    arithmetic); float32 is exact for these small integers.
-    """
-    line = x[0, 0, :, 0] if dim == -2 else x[0, 0, 0, :]
-    positions = (line * 0 + 1).cumsum(0) - 1  # 0..n-1; the inputs are finite
-    last = positions[-1:]  # n - 1
-    i = torch.cat(
-        [
-            torch.arange(-before, 0, dtype=x.dtype, device=x.device),
-            positions,
-            last + 1 + torch.arange(0, after, dtype=x.dtype, device=x.device),
-        ]
-    )
-    period = torch.clamp(2 * last, min=1)
-    i = i - torch.floor(i / period) * period
-    return (last - (last - i).abs()).long()
+    """Indices of dim ``dim`` of ``x`` padded by reflect-101, for any pad size (the reflection repeats on sides
+    shorter than the pad; a side of one pixel repeats it), in integers whatever ``x``'s dtype and values."""
+    last = x.shape[dim] - 1
+    i = torch.arange(-before, last + 1 + after, device=x.device).remainder(max(2 * last, 1))
+    return last - (last - i).abs()
 
 
 def reflect101_pad(x: torch.Tensor, top: int, bottom: int, left: int, right: int) -> torch.Tensor:

@@ -434,10 +434,13 @@ def training_run(cfg: RealLightConfig, out: str | Path, resume: bool = False) ->
     """
     cfg.check()
     folder = run_folder(out)
-    # an earlier run's snapshots, which this run's would not all replace (a resumed run's are its own)
+    # an earlier run's snapshots, which this run's would not all replace, and its checkpoint, which a --resume of a
+    # run stopped before its first save would take for its own (a resumed run's are its own)
     earlier = [] if resume else sorted(p for p in folder.glob("*_step*.npz") if re.search(r"_step\d+\.npz$", p.name))
     for path in earlier:
         path.unlink()
+    if not resume:
+        (folder / "checkpoint.pt").unlink(missing_ok=True)
     with log_to(folder / "train.log", append=resume):
         if earlier:
             logger.warning("removed %d step snapshots of an earlier run in %s", len(earlier), folder)
@@ -456,8 +459,10 @@ def _checkpoint(path: Path, cfg: RealLightConfig) -> dict[str, Any]:
         state = torch.load(path, weights_only=True)
     except Exception as exc:  # torch raises its own unpickling errors
         raise WeightFileError(f"{path}: not a checkpoint of train-real-light ({exc})") from None
-    if not isinstance(state, dict) or "draws" not in state:
-        raise WeightFileError(f"{path}: not a checkpoint of train-real-light (no state of its draws)")
+    if not isinstance(state, dict) or "config" not in state:
+        raise WeightFileError(f"{path}: not a checkpoint of train-real-light")
+    if "draws" not in state:
+        raise WeightFileError(f"{path} was written before --resume existed (no state of its draws); run without it")
     differ = sorted(k for k, v in asdict(cfg).items() if state["config"].get(k) != v)
     if differ:
         raise WeightFileError(f"{path} was written with other settings (they differ in {', '.join(differ)})")
@@ -511,9 +516,9 @@ def fit(
 ) -> float:
     """The training loop of the gain Normalizer and of its baselines: ``cfg.steps`` steps of Adam at ``cfg.lr`` on
     ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to
-    norm 5; every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer)``, a line of log and
-    ``out/history.json``; ``start``, a checkpoint's state (:func:`_checkpoint`), goes on after its step. Leaves ``net``
-    in eval mode.
+    norm 5; every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer, history)``, a line of
+    log and ``out/history.json``; ``start``, a checkpoint's state (:func:`_checkpoint`), goes on after its step.
+    Leaves ``net`` in eval mode.
 
     Returns:
         The seconds it took (with the checkpoint's).
@@ -529,7 +534,8 @@ def fit(
     began = time.perf_counter() - before
     net.train()
     steps = range(first, cfg.steps + 1)
-    for step in (bar := tqdm(steps, desc=desc, unit="step", total=len(steps), disable=not progress)):
+    bar = tqdm(steps, desc=desc, unit="step", initial=first - 1, total=cfg.steps, disable=not progress)
+    for step in bar:
         scene, frames, centres, anywhere = draw_step(scenes, rendered, cfg, rng)
         loss = step_loss(net, scene, frames, centres, cfg, anywhere)
         opt.zero_grad()
