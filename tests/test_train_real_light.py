@@ -203,23 +203,18 @@ def test_cli_runs_the_preset_with_its_settings(tmp_path, monkeypatch):
     assert main([*common, "--resume"]) == 0 and runs[-1][1]["resume"] is True
 
 
+def _tiny(scene_dir, **changes) -> RealLightConfig:
+    """A run of a few steps on one written scene (:func:`_write_scene`)."""
+    settings = {"steps": 3, "save_every": 3, "locations": 16, "min_distance": 8, "temperature": 0.5, "lr": 0.02}
+    return RealLightConfig(
+        scenes=[str(scene_dir)], relit=0, crop=CROP, patch=PATCH, net={"channels": 8}, **{**settings, **changes}
+    )
+
+
 def test_three_steps_lower_the_loss(tmp_path):
     torch.set_num_threads(1)
     scene_dir = _write_scene(tmp_path / "scene")
-    cfg = RealLightConfig(
-        scenes=[str(scene_dir)],
-        relit=0,
-        steps=3,
-        locations=16,
-        crop=CROP,
-        patch=PATCH,
-        min_distance=8,
-        temperature=0.5,
-        lr=0.02,
-        seed=0,
-        save_every=3,
-        net={"channels": 8},
-    )
+    cfg = _tiny(scene_dir)
     path = train_real_light(cfg, tmp_path / "run")
     weight_file = load_normalizer_file(path)
     assert weight_file.meta["trained"] and weight_file.meta["architecture"] == "gain"
@@ -277,19 +272,7 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(tmp_path, monkeypatch):
     from alcn_cv.errors import WeightFileError
 
     torch.set_num_threads(1)
-    cfg = RealLightConfig(
-        scenes=[str(_write_scene(tmp_path / "scene"))],
-        relit=0,
-        steps=4,
-        locations=16,
-        crop=CROP,
-        patch=PATCH,
-        min_distance=8,
-        temperature=0.5,
-        lr=0.02,
-        save_every=2,
-        net={"channels": 8},
-    )
+    cfg = _tiny(_write_scene(tmp_path / "scene"), steps=4, save_every=2)
     whole = load_normalizer_file(train_real_light(cfg, tmp_path / "whole")).arrays
     draw_step = real_light.draw_step
     calls = []
