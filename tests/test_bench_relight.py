@@ -255,8 +255,10 @@ def test_quick_preset_and_the_options_that_override_it(tmp_path):
     root = make_sets(tmp_path / "data")
     common = ["bench", "relight", "--data", str(root / "webcam"), "--train-scenes", "square", "--test-scenes"]
     common += ["street", "--methods", "none", "--seeds", "0", "--patch", "16", "--no-keypoints", "--no-tune"]
-    assert cli_main([*common, "--out", str(tmp_path / "q"), "--quick", "--patches", "30", "--no-progress"]) == 0
+    args = ["--out", str(tmp_path / "q"), "--quick", "--patches", "30", "--n-features", "300", "--no-progress"]
+    assert cli_main([*common, *args]) == 0
     settings = json.loads((tmp_path / "q" / "relight.json").read_text())["settings"]
+    assert settings["keypoints"] == 300  # --n-features, as the pose commands name it
     quick = relight.PRESETS["quick"]
     # the preset's sampling sizes, but an option given with it wins
     assert (settings["max_frames"], settings["max_pairs"], settings["patches"]) == (

@@ -428,7 +428,10 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         f"{quick['max_pairs']}; 0: all)",
     )
     p.add_argument(
-        "--keypoints", type=int, default=d.keypoints, help=f"ORB/SIFT keypoints per frame (default {d.keypoints})"
+        "--n-features",
+        type=int,
+        default=d.keypoints,
+        help=f"ORB/SIFT keypoints per frame, as the pose commands' --n-features (default {d.keypoints})",
     )
     p.add_argument("--no-keypoints", action="store_true", help="identification only (skip matching and pose)")
     p.add_argument("--no-tune", action="store_true", help="default parameters only")
@@ -447,7 +450,7 @@ def _run_relight(args: argparse.Namespace) -> int:
         patches=sizes["patches"],
         gallery=args.gallery,
         max_pairs=sizes["max_pairs"] or None,
-        keypoints=args.keypoints,
+        keypoints=args.n_features,
         keypoint_protocols=not args.no_keypoints,
     )
     result = relight.main(
