@@ -258,7 +258,7 @@ def detect_in_video(
     missed = None
     for name, frame in tqdm(
         iter_frames(path, step),
-        total=count_frames(path, step),
+        total=-(-total // step) if total else None,
         desc="detecting board",
         unit="frame",
         disable=not progress,

@@ -55,7 +55,7 @@ from alcn_cv.formats.colmap import (
     model_from_pycolmap,
     write_text_model,
 )
-from alcn_cv.io import check_writable, count_frames, iter_frames, write_image, write_json
+from alcn_cv.io import count_frames, iter_frames, write_image, write_json
 
 from .board import BoardSpec, Detection
 from .camera import Calibration
@@ -175,15 +175,6 @@ def board_pose(
     return FrameRegistration("", "ok", rms, n, R_w2c=R, t_w2c=t)
 
 
-@contextlib.contextmanager
-def _output_dir(out_dir: str | os.PathLike, overwrite: bool) -> Iterator[Path]:
-    """:func:`atomic_output_dir` for a registration, after :func:`check_writable`: a path under a file then fails
-    with the one-line "... is a file" of the other commands, not with mkdir's ``[Errno 17] File exists``."""
-    check_writable(out_dir)
-    with atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp:
-        yield tmp
-
-
 def _write_outputs(
     tmp: Path,
     reg: Registration,
@@ -286,7 +277,7 @@ def register_charuco(
     undistort = Undistorter(calib, keep_K=True)
     K = np.asarray(calib.K, float)
     reg = Registration(K, tuple(calib.image_size))
-    with _output_dir(out_dir, overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp:
         (tmp / "rgb").mkdir()
         frames = iter_frames(source, step, max_frames)
         for name, image in tqdm(
@@ -690,7 +681,7 @@ def register_colmap(
     source = Path(source)
     units = "mm" if (known_distance or reference) else "arbitrary"
     with (
-        _output_dir(out_dir, overwrite) as tmp,
+        atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp,
         tempfile.TemporaryDirectory() as work,
         _quiet_colmap(),
     ):

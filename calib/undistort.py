@@ -100,7 +100,6 @@ def main(
             write_image(output / path.name, undistort(read_image(path), path.name))
         yaml_path = output / "camera.yaml"
     elif source.is_file() and is_video(source):
-        make_folder(output.parent)
         n = map_video(
             source, output, lambda frame: undistort(frame, source.name), desc="undistorting", progress=progress
         )

@@ -25,7 +25,7 @@ import numpy as np
 
 import alcn_cv
 from alcn_cv.errors import ALCNError
-from alcn_cv.io import iter_frames
+from alcn_cv.io import iter_frames, write_image
 from alcn_cv.shared_data import shared_data_dir
 
 
@@ -77,9 +77,7 @@ def main() -> None:
             print(f"{spec:>12}: {len(kp1)} and {len(kp2)} keypoints, {len(agreeing)} matches that agree")
             drawn = cv2.drawMatches(a, kp1, b, kp2, agreeing, None, matchColor=(0, 255, 0), flags=2)
             rows.append(cv2.putText(drawn, f"{spec}: {len(agreeing)}", (10, 30), 0, 1.0, (0, 0, 255), 2))
-        args.out.mkdir(parents=True, exist_ok=True)
-        if not cv2.imwrite(str(args.out / "matches.png"), np.vstack(rows)):
-            raise ALCNError(f"cannot write {args.out / 'matches.png'}")
+        write_image(args.out / "matches.png", np.vstack(rows))
         print(f"wrote {args.out / 'matches.png'}")
     except ALCNError as exc:
         raise SystemExit(f"feature_matching.py: error: {exc}") from None

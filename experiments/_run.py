@@ -48,22 +48,20 @@ def command_line(doc: str, keeps: bool = True) -> argparse.ArgumentParser:
     return parser
 
 
-def _script_args() -> list[str]:
-    """The experiment script's own arguments, as typed, :data:`KEEP` left out (``sys.argv`` is the last ``alcn``
-    command's)."""
+def _script() -> tuple[str, list[str], bool]:
+    """The experiment script (its path in the checkout), its own arguments as typed but :data:`KEEP`, and whether
+    :data:`KEEP` was given (``sys.argv`` is the last ``alcn`` command's)."""
     argv = getattr(sys, "orig_argv", [])
     script = Path(sys.modules["__main__"].__file__).resolve()
-    for i, arg in enumerate(argv):
-        if arg.endswith(".py") and Path(arg).resolve() == script:
-            return [a for a in argv[i + 1 :] if a != KEEP]
-    return []
+    args = next((argv[i + 1 :] for i, a in enumerate(argv) if a.endswith(".py") and Path(a).resolve() == script), [])
+    return script.relative_to(ROOT).as_posix(), [a for a in args if a != KEEP], KEEP in args
 
 
 def script_command() -> str:
     """The experiment's command line, for a report the script writes itself: ``python SCRIPT ARGS`` (without
     :data:`KEEP`, which says what to do with the report, not what it measures)."""
-    script = Path(sys.modules["__main__"].__file__).resolve().relative_to(ROOT).as_posix()
-    return shlex.join(["python", script, *_script_args()])
+    script, args, _ = _script()
+    return shlex.join(["python", script, *args])
 
 
 def _what_ran(report: dict) -> object:
@@ -94,11 +92,11 @@ def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
     ``report`` when it was not replaced."""
     report = Path(report)
     target = REPORTS / f"{name}.json"
-    args = _script_args()
+    script, args, replace = _script()
     data = {k: v for k, v in json.loads(report.read_text(encoding="utf-8")).items() if k not in drop}
     written = datetime.datetime.fromtimestamp(report.stat().st_mtime, datetime.UTC)
     data["experiment"] = {
-        "script": Path(sys.modules["__main__"].__file__).resolve().relative_to(ROOT).as_posix(),
+        "script": script,
         "argv": args,
         "date": written.strftime("%Y-%m-%d %H:%M UTC"),
     }
@@ -110,7 +108,7 @@ def keep(report: Path, name: str, drop: tuple[str, ...] = ()) -> Path:
         (ROOT, "."),
     ):
         text = text.replace(str(path), alias)
-    if target.is_file() and KEEP not in getattr(sys, "orig_argv", []):
+    if target.is_file() and not replace:
         published = json.loads(target.read_text(encoding="utf-8"))
         if _what_ran(published) != _what_ran(json.loads(text)):
             argv = published.get("experiment", {}).get("argv") or []

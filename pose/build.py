@@ -31,7 +31,7 @@ import numpy as np
 from alcn_cv import io
 from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import make_folder
+from alcn_cv.io import check_writable, make_folder
 from pose import model as part_model
 from pose.box_fit import fit_box
 from pose.model import PartModel, box_corners, read_box_corners
@@ -224,7 +224,8 @@ def main(
     ``refine_focal`` lets the bundle adjustment refine the focal length; the camera, refined or
     given, is stored in the model's ``extra["K"]``, which ``alcn pose track`` uses by default).
     """
-    input_path, output = Path(input_path), part_model.model_file(output)  # checked before the work
+    input_path, output = Path(input_path), part_model.model_file(output)
+    check_writable(output)  # before the work
     make_folder(output.parent)
     with tempfile.TemporaryDirectory(prefix="alcn_pose_frames_", dir=output.parent) as work:
         if input_path.is_file() and io.is_video(input_path):

@@ -53,7 +53,7 @@ import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.formats import bop
-from alcn_cv.io import atomic_write, output_path, with_suffix
+from alcn_cv.io import atomic_write, with_suffix
 
 logger = logging.getLogger(__name__)
 
@@ -208,18 +208,16 @@ def read_box_corners(path: str | Path) -> np.ndarray:
     return box_corners(hi - lo, lo)
 
 
-def model_file(path: str | Path, writable: bool = True) -> Path:
+def model_file(path: str | Path) -> Path:
     """``path`` as a part model's file: ``.npz``, which is appended to a path without a suffix, as ``numpy.savez``
-    does (another suffix is an error), and, with ``writable``, checked before the work to be writable
-    (:func:`~alcn_cv.io.output_path`)."""
+    does (another suffix is an error)."""
     path = Path(path)
-    path = path if path.suffix else path.with_suffix(".npz")
-    return output_path(path, ".npz", "a part model") if writable else with_suffix(path, ".npz", "a part model")
+    return with_suffix(path if path.suffix else path.with_suffix(".npz"), ".npz", "a part model")
 
 
 def save(model: PartModel, path: str | Path) -> Path:
     """Write ``model`` to ``path`` (``.npz``) and its point cloud to ``<stem>.ply`` beside it."""
-    path = model_file(path, writable=False)  # the write itself says why it cannot be written
+    path = model_file(path)  # the write itself says why it cannot be written
     buf = io.BytesIO()
     np.savez(
         buf,

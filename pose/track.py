@@ -335,17 +335,15 @@ def main(
                 if res.estimate.ok:
                     draw_box(vis, corners, res.estimate.rvec, res.estimate.tvec, K, color_for(normalization), dist=dist)
                 writer.write(res.name, vis)
-    make_folder(output.parent)
-    write_json(output, scene_gt)
+    write_json(output, scene_gt)  # its folder made by the atomic write
     tracked = sum(bool(v) for v in scene_gt.values())
     # the reasons carry their frame's counts: grouped by their words, the first of the most frequent group
-    lost = [f["lost_reason"] for f in info.values() if f["lost_reason"]]
-    groups = Counter(re.sub(r"[\d.]+%?", "#", r) for r in lost)
-    most = groups.most_common(1)[0][0] if groups else None
+    lost = [(re.sub(r"[\d.]+%?", "#", r), r) for r in (f["lost_reason"] for f in info.values()) if r]
+    most = Counter(words for words, _ in lost).most_common(1)[0][0] if lost else None
     summary = {
         "frames": len(scene_gt),
         "tracked": tracked,
-        "lost_reason": next((r for r in lost if re.sub(r"[\d.]+%?", "#", r) == most), None),
+        "lost_reason": next((r for words, r in lost if words == most), None),
         "fps": len(times) / max(sum(times), 1e-9),
         "normalization": normalization,
         "detector": detector,

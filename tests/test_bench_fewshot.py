@@ -48,7 +48,7 @@ def test_every_spec_reaches_the_detector_through_normalize_windows(policy, monke
     monkeypatch.setattr(F, "score_inputs", record)
     settings = B.FewShotSettings(methods=["none", "dog", "alcn:model=gain"], policies=[policy], draws=1, objects=2)
     runs = {policy: {m: [] for m in settings.methods}}
-    B._run_draw(settings, 0, runs, B.tqdm(disable=True))
+    B._run_draw(settings, 0, B.build_methods(settings.methods), runs, B.tqdm(disable=True))
     train_x, _, test = _tiny_data(settings.setup(0))
     for method in settings.methods:
         norm = create_normalization(method, {})

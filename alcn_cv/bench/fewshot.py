@@ -42,9 +42,10 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.detect import build_methods, create_normalization
+from alcn_cv.bench.detect import build_methods
 from alcn_cv.bench.detect_settings import POLICIES, POLICY_DESCRIPTIONS
 from alcn_cv.bench.policies import InputPolicy
+from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, make_folder, write_json
@@ -185,8 +186,11 @@ def compare_to_dog(runs: dict[str, Any], settings: FewShotSettings) -> dict[str,
     return out if dogs and variants else {}
 
 
-def _run_draw(settings: FewShotSettings, draw: int, runs: dict[str, Any], bar: tqdm) -> None:
-    """Every method and policy on one draw's windows; a failing method is recorded with its error."""
+def _run_draw(
+    settings: FewShotSettings, draw: int, norms: dict[str, Normalization], runs: dict[str, Any], bar: tqdm
+) -> None:
+    """Every method (``norms``, built once) and policy on one draw's windows; a failing method is recorded with its
+    error."""
     from alcn_cv.train.fewshot import make_fewshot_data, score_inputs  # torch: only when a draw runs
 
     setup = settings.setup(draw)
@@ -194,10 +198,10 @@ def _run_draw(settings: FewShotSettings, draw: int, runs: dict[str, Any], bar: t
     for method in settings.methods:
         t0 = time.perf_counter()
         try:
-            norm = create_normalization(method, {})
+            norm = norms[method]
             train_n, test_n = norm.normalize_windows(train_x), norm.normalize_windows(test.windows)
             normalize_s = time.perf_counter() - t0
-        except Exception as exc:  # its spec was built up front: what fails here is the run's, reported
+        except Exception as exc:  # built up front: what fails here is the run's, reported
             logger.error("few-shot %s, draw %d: %s: %s", method, draw, type(exc).__name__, exc)
             for policy in settings.policies:
                 runs[policy][method].append({"draw": draw, "error": f"{type(exc).__name__}: {exc}"})
@@ -378,7 +382,7 @@ def main(
     import torch
 
     settings = (settings or FewShotSettings()).check()
-    build_methods(settings.methods)  # a bad spec or weight file: one line before any draw (each builds its own)
+    norms = build_methods(settings.methods)  # a bad spec or weight file: one line before any draw
     if settings.threads:
         torch.set_num_threads(settings.threads)
     start = time.perf_counter()
@@ -388,7 +392,7 @@ def main(
     total = settings.draws * len(settings.methods) * len(settings.policies)
     with tqdm(total=total, desc="few-shot validation", unit="run", disable=not progress) as bar:
         for draw in range(settings.draws):
-            _run_draw(settings, draw, runs, bar)
+            _run_draw(settings, draw, norms, runs, bar)
     result = {
         "benchmark": "fewshot",
         "command": command or fewshot_command(out_dir, settings),

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from alcn_cv.io import atomic_write, make_folder
+from alcn_cv.io import atomic_write
 from alcn_cv.report import describe_machine, markdown_table, new_figure, save_figure, spread_cell, write_json
 
 __all__ = ["write_report"]
@@ -147,8 +147,7 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
 
 def write_report(result: dict[str, Any], out: Path) -> None:
     """Write ``relight.json`` (everything), ``relight.md`` (the tables) and ``relight.png`` (bars) into ``out``."""
-    make_folder(out)
-    write_json(out / "relight.json", result)
+    write_json(out / "relight.json", result)  # its folder made by the atomic write
     metrics = _metrics(result)
     s, split = result["settings"], result["split"]
     scenes = ", ".join(

@@ -90,7 +90,6 @@ def normalization_grid(
         "Rows: test images under different lights; columns: every normalization, as apply() gives it", fontsize=10
     )
     fig.tight_layout(pad=0.3, rect=(0, 0, 1, 1 - 0.35 / height))  # room for the title line
-    make_folder(path.parent)
     return save_figure(plt, fig, path, dpi=110)
 
 

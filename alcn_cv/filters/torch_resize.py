@@ -126,6 +126,14 @@ def _area_taps(src: int, dst: int) -> tuple[np.ndarray, np.ndarray]:
     return index, weight
 
 
+@lru_cache(maxsize=64)
+def _area_taps_on(src: int, dst: int, device: torch.device, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`_area_taps` as tensors on ``device``, the weights of ``dtype``: copied once, not at every call."""
+    index, weight = _area_taps(src, dst)
+    with torch.inference_mode(False):  # made in an inference call, the cached tensors would refuse a backward later
+        return torch.from_numpy(index).to(device), torch.from_numpy(weight).to(device, dtype)
+
+
 def area_downsample(x: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
     """``cv2.resize(x, size[::-1], interpolation=cv2.INTER_AREA)`` for a smaller ``size``, to float rounding
     (``tests/test_torch_resize.py``), differentiable.
@@ -145,8 +153,7 @@ def area_downsample(x: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
     if not (1 <= h <= x.shape[-2] and 1 <= w <= x.shape[-1]):
         raise InputError(f"area_downsample makes images smaller: {tuple(x.shape[-2:])} to {(h, w)}")
     for dim, dst in ((-2, h), (-1, w)):
-        index, weight = (torch.from_numpy(a).to(x.device) for a in _area_taps(x.shape[dim], dst))
-        weight = weight.to(x.dtype)
+        index, weight = _area_taps_on(x.shape[dim], dst, x.device, x.dtype)
         shape = (-1, 1) if dim == -2 else (-1,)
         x = sum(x.index_select(dim, i) * a.reshape(shape) for i, a in zip(index, weight))
     return x

@@ -272,8 +272,8 @@ def _train_real_light(args: argparse.Namespace) -> int:
     from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
 
     cfg = preset(REAL_LIGHT_CONFS, args.conf, _operational(args, seed="seed"))
-    cfg.check()
-    if args.print_config:
+    if args.print_config:  # a run checks its settings itself (training_run)
+        cfg.check()
         return _print_config(cfg)
     from alcn_cv.train.real_light import train_real_light
 
@@ -294,9 +294,9 @@ def _train_unet(args: argparse.Namespace) -> int:
     from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
 
     cfg = preset(REAL_LIGHT_CONFS, args.conf, _operational(args, seed="seed"))
-    cfg.check()
     net = {"channels": args.channels, "levels": args.levels}
     if args.print_config:  # its network is the U-Net of --channels and --levels, not the preset's gain network
+        cfg.check()
         sys.stdout.write("# net: the U-Net's --channels and --levels (--set net.* is not used)\n")
         return _print_config(dataclasses.replace(cfg, net=net))
     from alcn_cv.train.unet import train_unet

@@ -436,7 +436,7 @@ def training_run(cfg: RealLightConfig, out: str | Path, resume: bool = False) ->
     folder = run_folder(out)
     # an earlier run's snapshots, which this run's would not all replace, and its checkpoint, which a --resume of a
     # run stopped before its first save would take for its own (a resumed run's are its own)
-    earlier = [] if resume else sorted(p for p in folder.glob("*_step*.npz") if re.search(r"_step\d+\.npz$", p.name))
+    earlier = [] if resume else [p for p in folder.glob("*_step*.npz") if re.search(r"_step\d+\.npz$", p.name)]
     for path in earlier:
         path.unlink()
     if not resume:
