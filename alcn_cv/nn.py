@@ -4,9 +4,10 @@
 itself: ``(B, 1 | 3, H, W)`` float intensities in [0, 1] on any device and dtype in, the same shape in [0, 1]
 out, equal to :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>`'s float output (with ``mixture="exact"`` for the
 ``lite`` and ``paper`` models, whose default mixture in ``apply`` approximates it on a pyramid; 3 channels: RGB,
-normalized on the L channel of CIE Lab, a and b kept), differentiable end to end. In float32 inference on the CPU
-(:func:`~alcn_cv.nets.cpu_inference.cpu_inference`) colour is converted to Lab by ``apply()``'s own OpenCV passes
-(within 3e-6 of it); elsewhere by :mod:`alcn_cv.filters.torch_lab`, OpenCV's arithmetic in torch (within 1e-4).
+normalized on the L channel of CIE Lab, a and b kept), differentiable end to end. In float32 on the CPU, with or
+without autograd (:func:`~alcn_cv.nets.cpu_inference.cpu_eager`), colour is converted to Lab by ``apply()``'s own
+OpenCV passes (within 3e-6 of it), differentiated as :mod:`alcn_cv.filters.torch_lab`, OpenCV's arithmetic in torch,
+which converts it elsewhere (within 1e-4).
 Importing this module imports torch and kornia; importing :mod:`alcn_cv` does not.
 
 Example:
@@ -37,7 +38,7 @@ from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_resize import area_downsample, interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
-from alcn_cv.nets.cpu_inference import cpu_inference
+from alcn_cv.nets.cpu_inference import cpu_eager
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
@@ -76,8 +77,8 @@ class ALCN2d(nn.Module):
     Values are not read, so that a call never waits for the device: outside [0, 1] the output is undefined (a
     negative gray value makes the whole image NaN through the log of its cell means; colour is clipped to [0, 1]
     before Lab), where ``apply()`` raises. Against float32, float16 is about 2e-3 off in gray and 4e-2 in colour,
-    bfloat16 2e-2 and 0.15 (its Lab round trip alone). Colour with autograd, on CUDA or compiled goes through the
-    torch Lab conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some. ``torch.jit.trace``
+    bfloat16 2e-2 and 0.15 (its Lab round trip alone). Colour on CUDA, traced or compiled goes through the torch Lab
+    conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some. ``torch.jit.trace``
     records the sizes of the traced image (use ``torch.compile`` for other sizes).
 
     Example:
@@ -206,7 +207,7 @@ class ALCN2d(nn.Module):
         self._check_input(image)
         if image.shape[1] == 1:
             return self.to_unit(self.response(image))
-        lab = _opencv_lab(image) if cpu_inference(image) else self.to_lab(image)
+        lab = _OpenCVLab.apply(image, self.to_lab) if cpu_eager(image) else self.to_lab(image)
         lightness = self.to_unit(self.response(lab[:, :1] * 0.01)) * 100.0
         return self.from_lab(torch.cat([lightness, lab[:, 1:]], dim=1))
 
@@ -251,16 +252,29 @@ class ALCN2d(nn.Module):
         return f"scale={self.spec.scale}, grid_stride={self.grid_stride}, allow_tf32={self.allow_tf32}"
 
 
-def _opencv_lab(image: torch.Tensor) -> torch.Tensor:
+class _OpenCVLab(torch.autograd.Function):
     """:class:`~alcn_cv.filters.torch_lab.RgbToLab` of ``(B, 3, H, W)`` float32 CPU RGB by OpenCV's passes, the very
-    ones of :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>` (:func:`~alcn_cv.filters.lab.srgb_to_lab`): L
-    rounded otherwise in float32, which the divisive step amplifies several hundred times in flat regions, puts the
-    output 1e-4 from ``apply()``'s (2.7e-6 with these passes)."""
-    lab = torch.empty_like(image)
-    for rgb, out in zip(image, lab):
-        bgr = np.clip(np.ascontiguousarray(rgb.flip(0).permute(1, 2, 0).numpy()), 0.0, 1.0)
-        out.copy_(torch.from_numpy(srgb_to_lab(bgr)).permute(2, 0, 1))
-    return lab
+    ones of :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>` (:func:`~alcn_cv.filters.lab.srgb_to_lab`), with
+    the torch conversion's gradient: L rounded otherwise in float32, which the divisive step amplifies several hundred
+    times in flat regions, puts the output 1e-4 from ``apply()``'s (2.7e-6 with these passes)."""
+
+    @staticmethod
+    def forward(ctx: torch.autograd.function.FunctionCtx, image: torch.Tensor, to_lab: RgbToLab) -> torch.Tensor:
+        ctx.save_for_backward(image)
+        ctx.to_lab = to_lab
+        lab = torch.empty_like(image)
+        for rgb, out in zip(image.detach(), lab):
+            bgr = np.clip(np.ascontiguousarray(rgb.flip(0).permute(1, 2, 0).numpy()), 0.0, 1.0)
+            out.copy_(torch.from_numpy(srgb_to_lab(bgr)).permute(2, 0, 1))
+        return lab
+
+    @staticmethod
+    def backward(ctx: torch.autograd.function.FunctionCtx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
+        (image,) = ctx.saved_tensors
+        with torch.enable_grad():
+            x = image.detach().requires_grad_(True)
+            (grad_image,) = torch.autograd.grad(ctx.to_lab(x), x, grad)
+        return grad_image, None
 
 
 def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | None = None) -> torch.Tensor:

@@ -2,6 +2,7 @@
 
 Both paths give torch's values to float rounding (about 2e-7), and only where nothing is recorded (no gradient, no
 trace, no ONNX export, no ``torch.compile``), so training, exports and compiled graphs keep torch's operations.
+:func:`cpu_eager` admits autograd as well, for a kernel that comes with its own backward.
 """
 
 from __future__ import annotations
@@ -9,19 +10,24 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-__all__ = ["cpu_inference", "tanh_"]
+__all__ = ["cpu_eager", "cpu_inference", "tanh_"]
 
 
-def cpu_inference(x: torch.Tensor) -> bool:
-    """Whether ``x`` is float32 on the CPU and no gradient, trace, export or compilation records what is done to it."""
+def cpu_eager(x: torch.Tensor) -> bool:
+    """Whether ``x`` is float32 on the CPU and no trace, export or compilation records what is done to it (autograd
+    may: a kernel run here needs a backward of its own)."""
     return not (
-        torch.is_grad_enabled()
-        or x.device.type != "cpu"
+        x.device.type != "cpu"
         or x.dtype != torch.float32
         or torch.jit.is_tracing()
         or torch.onnx.is_in_onnx_export()
         or torch.compiler.is_compiling()
     )
+
+
+def cpu_inference(x: torch.Tensor) -> bool:
+    """Whether ``x`` is float32 on the CPU and no gradient, trace, export or compilation records what is done to it."""
+    return not torch.is_grad_enabled() and cpu_eager(x)
 
 
 def tanh_(x: torch.Tensor) -> torch.Tensor:
