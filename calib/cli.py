@@ -182,7 +182,7 @@ def _registration(args: argparse.Namespace) -> Registration:
             raise InputError(f"--known-distance: {mm!r} is not a number of millimetres") from None
     reference = _load_reference(Path(args.reference), args.reference_unit) if args.reference else None
     settings = SfmSettings(
-        step=args.step, max_frames=args.max_frames, max_features=args.max_features, num_threads=args.threads
+        step=args.step, max_frames=args.max_frames, n_features=args.n_features, num_threads=args.threads
     )
     return register_colmap(
         args.source,
@@ -294,7 +294,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default="mm",
         help="sfm: units of a COLMAP --reference (default mm)",
     )
-    p.add_argument("--max-features", type=int, default=4096, help="sfm: SIFT features per image (default 4096)")
+    p.add_argument(
+        "--n-features",
+        type=int,
+        default=4096,
+        help="sfm: SIFT keypoints per image, as the pose commands' --n-features (default 4096)",
+    )
     p.add_argument("--threads", type=int, default=-1, help="sfm: threads (default all)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     add_progress_option(p)

@@ -383,14 +383,15 @@ class SfmSettings:
 
     Attributes:
         step, max_frames: use every ``step``-th input frame, at most ``max_frames``.
-        max_features: SIFT features per image.
+        n_features: SIFT keypoints per image (``alcn calib register --n-features``, as the pose commands name
+            the keypoints per image).
         num_threads: threads for pycolmap (-1: all).
         seed: random seed of the reconstruction.
     """
 
     step: int = 1
     max_frames: int | None = None
-    max_features: int = 4096
+    n_features: int = 4096
     num_threads: int = -1
     seed: int = 0
 
@@ -505,7 +506,7 @@ def _reconstruct(
         # (Middlebury's temple: fx 1383, fy 1514 for a true 1520, 1526; one focal length: 1516).
         reader.camera_model = "SIMPLE_PINHOLE"
     extraction = pycolmap.FeatureExtractionOptions()
-    extraction.sift.max_num_features = int(settings.max_features)
+    extraction.sift.max_num_features = int(settings.n_features)
     extraction.num_threads = int(settings.num_threads)
     extraction.use_gpu = False
     db = work / "database.db"

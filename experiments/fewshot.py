@@ -1,5 +1,5 @@
 """Few-shot validation (`alcn bench fewshot`): a detector from one image per new object under one light,
-ROC AUC under held-out lights, per draw, each ALCN against the best DoG.
+ROC AUC under held-out lights, per seed, each ALCN against the best DoG.
 
 Time on 2 shared cores: about 40 minutes (an estimate, not run here).
 
@@ -27,8 +27,10 @@ def main() -> None:
         METHODS,
         "--policy",
         "raw,local",
-        "--draws",
-        "3",
+        "--seeds",
+        "0",
+        "1",
+        "2",
         "--per-image",
         "100",
         "--epochs",

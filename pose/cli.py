@@ -336,7 +336,7 @@ def _bench_corners(args: argparse.Namespace) -> int:
         K,
         args.out,
         command=_command(),
-        size=tuple(args.size),
+        size=tuple(args.frame_size),
         max_frames=args.max_frames,
         repeats=args.repeats,
         threads=args.threads,
@@ -550,7 +550,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "bench-corners",
         help="frames per second of the corner detector (cv2.dnn, no torch)",
         description="Tracks with the corner detector through the frames of a video or image folder "
-        "resized to --size and reports the time of normalization, network, peaks and pose, the "
+        "resized to --frame-size and reports the time of normalization, network, peaks and pose, the "
         "frames per second and the machine's load; with --out as Markdown and JSON.",
     )
     bc.add_argument("detector", help="corner detector (.onnx) from `alcn pose train-corners`")
@@ -559,7 +559,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     bcam.add_argument("--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics of the frames")
     bcam.add_argument("--camera", help="camera.yaml from `alcn calib camera`")
     bc.add_argument(
-        "--size", nargs=2, type=int, default=[640, 480], metavar=("W", "H"), help="frame size (default 640 480)"
+        "--frame-size",
+        nargs=2,
+        type=int,
+        default=[640, 480],
+        metavar=("W", "H"),
+        help="width and height in pixels the frames are resized to (default 640 480)",
     )
     bc.add_argument("--max-frames", type=int, default=60, help="frames used (default 60)")
     bc.add_argument("--repeats", type=int, default=2, help="passes over them (default 2)")

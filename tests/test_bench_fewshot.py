@@ -46,9 +46,9 @@ def test_every_spec_reaches_the_detector_through_normalize_windows(policy, monke
 
     monkeypatch.setattr(F, "make_fewshot_data", _tiny_data)
     monkeypatch.setattr(F, "score_inputs", record)
-    settings = B.FewShotSettings(methods=["none", "dog", "alcn:model=gain"], policies=[policy], draws=1, objects=2)
+    settings = B.FewShotSettings(methods=["none", "dog", "alcn:model=gain"], policies=[policy], seeds=[0], objects=2)
     runs = {policy: {m: [] for m in settings.methods}}
-    B._run_draw(settings, 0, B.build_methods(settings.methods), runs, B.tqdm(disable=True))
+    B._run_seed(settings, 0, B.build_methods(settings.methods), runs, B.tqdm(disable=True))
     train_x, _, test = _tiny_data(settings.setup(0))
     for method in settings.methods:
         norm = create_normalization(method, {})
@@ -61,22 +61,25 @@ def test_every_spec_reaches_the_detector_through_normalize_windows(policy, monke
     assert create_normalization("alcn:model=gain", {}).scale == 1.0
 
 
-def test_draws_differ_and_settings_check():
-    s = B.FewShotSettings(draws=2)
-    assert (s.setup(1).seed, s.setup(1).object_seed) == (1, s.object_seed + 1)
+def test_seeds_differ_and_settings_check():
+    s = B.FewShotSettings(seeds=[0, 5])
+    assert (s.setup(5).seed, s.setup(5).object_seed) == (5, s.object_seed + 5)
+    assert B.FewShotSettings().seeds == [0, 1, 2]  # the repetitions of the former default --draws 3, seed for seed
     for bad in (
         dict(methods=["nope"]),
         dict(methods=["dog", "dog"]),
         dict(policies=["sideways"]),
-        dict(draws=0),
+        dict(seeds=[]),
+        dict(seeds=[1, 1]),
+        dict(seeds=[-1]),
         dict(methods=[]),
     ):
         with pytest.raises(InputError):
             B.FewShotSettings(**bad).check()
 
 
-def test_compare_to_dog_takes_the_best_dog_per_draw():
-    settings = B.FewShotSettings(methods=["dog", "dog:sigma1=1:sigma2=2", "alcn"], policies=["raw"], draws=3)
+def test_compare_to_dog_takes_the_best_dog_per_seed():
+    settings = B.FewShotSettings(methods=["dog", "dog:sigma1=1:sigma2=2", "alcn"], policies=["raw"], seeds=[4, 5, 6])
     runs = {
         "raw": {
             "dog": [{"auc": 0.7}, {"auc": 0.8}, {"auc": 0.6}],
@@ -85,9 +88,9 @@ def test_compare_to_dog_takes_the_best_dog_per_draw():
         }
     }
     rows = B.compare_to_dog(runs, settings)["raw"]["alcn"]
-    assert [r["above"] for r in rows] == [False, True, None]
+    assert [r["above"] for r in rows] == [False, True, None] and [r["seed"] for r in rows] == [4, 5, 6]
     assert rows[0]["dog"] == "dog:sigma1=1:sigma2=2" and rows[0]["margin"] == pytest.approx(-0.01)
-    assert B.compare_to_dog(runs, B.FewShotSettings(methods=["dog"], policies=["raw"], draws=3)) == {}
+    assert B.compare_to_dog(runs, B.FewShotSettings(methods=["dog"], policies=["raw"], seeds=[4, 5, 6])) == {}
 
 
 def test_fewshot_validation_is_score_inputs_of_each_method():
@@ -112,8 +115,8 @@ def test_cli_end_to_end(tmp_path):
             "none,dog,alcn",
             "--policy",
             "raw",
-            "--draws",
-            "1",
+            "--seeds",
+            "3",
             "--objects",
             "2",
             "--per-image",
@@ -129,17 +132,20 @@ def test_cli_end_to_end(tmp_path):
     assert code == 0
     saved = json.loads((out / "fewshot.json").read_text())
     assert set(saved["runs"]["raw"]) == {"none", "dog", "alcn"}
-    assert 0 <= saved["runs"]["raw"]["alcn"][0]["auc"] <= 1
+    assert 0 <= saved["runs"]["raw"]["alcn"][0]["auc"] <= 1 and saved["runs"]["raw"]["alcn"][0]["seed"] == 3
+    assert saved["settings"]["seeds"] == [3] and "draws" not in saved["settings"]
     assert saved["alcn_vs_dog"]["raw"]["alcn"][0]["above"] in (True, False)
+    # the recorded command spells --seeds as `alcn bench detect` does, and runs again
+    assert saved["command"].startswith(f"alcn bench fewshot --out {out} --seeds 3 ")
     text = (out / "fewshot.md").read_text()
-    assert "ALCN against the best DoG" in text and "--draws 1" in text
-    assert "±" not in text  # one draw has no spread: "± 0.000" would read as a measured one
+    assert "ALCN against the best DoG" in text and "--seeds 3" in text and "| seed 3 |" in text
+    assert "±" not in text  # one seed has no spread: "± 0.000" would read as a measured one
     assert (out / "fewshot.png").stat().st_size > 0
     assert cli_main(["bench", "fewshot", "--out", str(out), "--methods", "nope"]) == 2
 
 
-def test_a_bad_weight_file_is_one_line_before_any_draw(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(F, "make_fewshot_data", lambda *a: pytest.fail("a draw started"))
+def test_a_bad_weight_file_is_one_line_before_any_seed_runs(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(F, "make_fewshot_data", lambda *a: pytest.fail("a seed's run started"))
     out = tmp_path / "fs"
     assert cli_main(["bench", "fewshot", "--out", str(out), "--methods", "none,alcn:weights=some/detector.pt"]) == 2
     err = capsys.readouterr().err.strip()
@@ -147,9 +153,22 @@ def test_a_bad_weight_file_is_one_line_before_any_draw(tmp_path, capsys, monkeyp
     assert not out.exists()
 
 
-def test_cells_give_the_spread_over_draws():
+def test_cells_give_the_spread_over_seeds():
     from alcn_cv.report import spread_cell
 
     assert spread_cell({"mean": 0.75, "std": 0.05, "values": [0.7, 0.8]}) == "0.750 ± 0.050"
     assert spread_cell({"mean": 0.75, "std": 0.0, "values": [0.75]}) == "0.750"
     assert spread_cell({"mean": 75.0, "std": 0.0, "values": [75.0, 75.0]}, 1, runs=1) == "75.0"  # one seed of two
+
+
+def test_seeds_is_the_option_of_bench_detect(tmp_path):
+    """--seeds as `alcn bench detect` takes it (space or comma form); not given, the settings' default holds."""
+    from alcn_cv.bench.cli import _run_fewshot
+    from alcn_cv.cli import build_parser
+
+    parser = build_parser()
+    args = parser.parse_args(["bench", "fewshot", "--out", str(tmp_path), "--seeds", "0,1", "4"])
+    assert args.seeds == [0, 1, 4] and args.func is _run_fewshot
+    assert parser.parse_args(["bench", "fewshot", "--out", str(tmp_path)]).seeds is None
+    with pytest.raises(SystemExit):
+        parser.parse_args(["bench", "fewshot", "--out", str(tmp_path), "--draws", "3"])

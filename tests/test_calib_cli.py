@@ -228,3 +228,12 @@ def test_register_known_distance_names_are_checked_before_the_reconstruction(tmp
     rc = alcn([*args, "--known-distance", "a.png", "b", "100"])
     err = capsys.readouterr().err
     assert rc == 2 and "--known-distance: 'b' is not an input frame" in err and "a, c, e" in err
+
+
+def test_register_takes_n_features_as_the_pose_commands(capsys):
+    """SIFT keypoints per image: --n-features, as `alcn pose build` and `alcn bench relight` name them."""
+    from alcn_cv.cli import build_parser
+
+    args = build_parser().parse_args(["calib", "register", "frames", "--out", "reg", "--n-features", "2048"])
+    assert args.n_features == 2048
+    assert "--n-features" in _help(capsys, "calib", "register")

@@ -70,3 +70,24 @@ def test_every_command_with_progress_bars_can_hide_them(command):
         return  # a group: its leaves are checked
     options = {o for a in parser._actions for o in a.option_strings}
     assert ("--no-progress" in options) == (command not in WITHOUT_PROGRESS_BARS), command
+
+
+def _commands_with(option: str) -> dict[str, argparse.Action]:
+    return {c: a for c, p in COMMANDS.items() for a in p._actions if option in a.option_strings}
+
+
+def test_one_option_name_for_each_idea():
+    """The same idea has the same option in every command (a newcomer's walk-through found three that had two)."""
+    # --size names a preset wherever it appears; a size in pixels says what it measures (--side, --frame-size)
+    sizes = _commands_with("--size")
+    assert sizes and all(a.choices for a in sizes.values()), {c: a.choices for c, a in sizes.items()}
+    # the keypoints per image: --n-features
+    assert {"alcn calib register", "alcn pose build", "alcn pose track", "alcn bench relight"} <= set(
+        _commands_with("--n-features")
+    )
+    # the benchmarks' repetitions, each with its own seed: one --seeds declaration
+    seeds = _commands_with("--seeds")
+    benches = {"alcn bench detect", "alcn bench fewshot", "alcn bench relight"}
+    assert benches <= set(seeds) and len({type(seeds[c]) for c in benches}) == 1
+    retired = {"--max-features", "--draws"}
+    assert not {c for c, p in COMMANDS.items() for a in p._actions if retired & set(a.option_strings)}

@@ -28,7 +28,7 @@ def test_render_scene_is_deterministic_and_checks_its_arguments():
 
 
 def test_generate_writes_folders_the_trainer_reads(tmp_path):
-    out = generate(tmp_path / "scenes", scenes=2, frames=3, size=96, seed=5, progress=False)
+    out = generate(tmp_path / "scenes", scenes=2, frames=3, side=96, seed=5, progress=False)
     manifest = read_manifest(out, KIND)
     assert sorted(manifest["lights"]) == ["scene_000", "scene_001"]
     scenes = load_scene_folder(out)
@@ -36,12 +36,12 @@ def test_generate_writes_folders_the_trainer_reads(tmp_path):
     scene = training_scene(scenes[1], 48, 32)
     assert scene.frames.shape == (3, 96 + 96, 96 + 96) and len(scene.candidates) > 0
     # Scene i depends on (seed, i) only: a run of one scene gives the same first scene.
-    one = generate(tmp_path / "one", scenes=1, frames=3, size=96, seed=5, progress=False)
+    one = generate(tmp_path / "one", scenes=1, frames=3, side=96, seed=5, progress=False)
     assert (one / "scene_000" / "frame_02.png").read_bytes() == (out / "scene_000" / "frame_02.png").read_bytes()
 
 
 def test_arguments_and_output_are_checked_before_the_progress_bar(tmp_path, monkeypatch, capsys):
-    """--size, the side in pixels, --frames and an output under a file fail in one line before any scene is
+    """The side in pixels (side), --frames and an output under a file fail in one line before any scene is
     rendered (the checks of render_scene run in the workers, after the bar has started)."""
     import alcn_cv.data.relief_scenes as relief_scenes
     from alcn_cv.cli import main
@@ -49,8 +49,8 @@ def test_arguments_and_output_are_checked_before_the_progress_bar(tmp_path, monk
     blocker = tmp_path / "file.json"
     blocker.write_text("mine")
     monkeypatch.setattr(relief_scenes, "parallel_map", lambda *args, **kwargs: pytest.fail("rendered"))
-    with pytest.raises(InputError, match=r"--size is the side of the frames in pixels, at least 32; got 10"):
-        generate(tmp_path / "s", size=10, progress=False)
+    with pytest.raises(InputError, match=r"--side is the side of the frames in pixels, at least 32; got 10"):
+        generate(tmp_path / "s", side=10, progress=False)
     with pytest.raises(InputError, match=r"--frames"):
         generate(tmp_path / "s", frames=1, progress=False)
     with pytest.raises(InputError, match="is a file"):
@@ -60,8 +60,11 @@ def test_arguments_and_output_are_checked_before_the_progress_bar(tmp_path, monk
     (tmp_path / "done" / "manifest.json").write_text("{}")
     with pytest.raises(FileExistsError, match="--overwrite"):  # an earlier output: refused before the rendering
         generate(tmp_path / "done", progress=False)
-    # `data detect --size small` is a preset; here --size is a number, and argparse's error says which
-    with pytest.raises(SystemExit) as exit_:
-        main(["data", "scenes", "--size", "small", "--out", str(tmp_path / "s")])
-    assert exit_.value.code == 2
-    assert "argument --size: the side of the frames in pixels, e.g. 256; got 'small'" in capsys.readouterr().err
+    # `data detect --size small` is a preset; the frames' side here is --side, and argparse's error says what it is
+    for bad in ("small", "10"):
+        with pytest.raises(SystemExit) as exit_:
+            main(["data", "scenes", "--side", bad, "--out", str(tmp_path / "s")])
+        assert exit_.value.code == 2
+        err = capsys.readouterr().err
+        assert f"argument --side: the side of the square frames in pixels, at least 32, e.g. 256; got '{bad}'" in err
+    assert not (tmp_path / "s").exists()

@@ -599,7 +599,7 @@ def test_track_and_bench_the_corner_detector(posedata, random_net, tmp_path):
             str(train / "rgb"),
             "--K",
             *K,
-            "--size",
+            "--frame-size",
             "160",
             "120",
             "--repeats",

@@ -139,7 +139,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         "--positives",
         type=int,
         dest="positives_per_object",
-        help=f"synthetic windows per object (default {d.positives_per_object})",
+        help=f"synthetic windows per object, spread over its --real-images (default {d.positives_per_object})",
     )
     p.add_argument(
         "--negatives-ratio", type=float, help=f"background windows per object window (default {d.negatives_ratio})"
@@ -183,26 +183,34 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "fewshot",
         help="few-shot validation: a detector of new objects trained from one image under one light, per normalization",
-        description="For each draw, render new objects seen in one image under one light, make the paper's simple "
+        description="For each seed, render new objects seen in one image under one light, make the paper's simple "
         "synthetic training windows and test windows under held-out lighting; every method normalizes both through "
         "Normalization.normalize_windows (ALCN: Eq. 1), the same input policy and the same detector follow; ROC AUC "
-        "(object vs. background) and accuracy per draw, and per draw whether each ALCN variant is above the best DoG. "
+        "(object vs. background) and accuracy per seed, and per seed whether each ALCN variant is above the best DoG. "
         "Writes fewshot.md, fewshot.json and fewshot.png.",
     )
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
     _add_policies(p, d.policies)
-    p.add_argument(
-        "--draws", type=int, help=f"repetitions with new objects, windows and detector seed (default {d.draws})"
+    _add_seeds(
+        p,
+        d.seeds,
+        "repeat every run with each of these seeds, each with its own new objects, windows and detector initialisation",
+        from_preset=True,
     )
-    p.add_argument("--objects", type=int, help=f"new objects per draw (default {d.objects})")
+    p.add_argument("--objects", type=int, help=f"new objects per seed (default {d.objects})")
     p.add_argument(
-        "--object-seed", type=int, help=f"catalogue seed of draw 0; draw d uses it + d (default {d.object_seed})"
+        "--object-seed", type=int, help=f"object catalogue seed of seed 0; seed s uses it + s (default {d.object_seed})"
     )
     p.add_argument("--real-images", type=int, help=f"reference images per object (default {d.real_images})")
-    p.add_argument("--per-image", type=int, help=f"synthetic windows per reference image (default {d.per_image})")
     p.add_argument(
-        "--test-windows", type=int, help=f"test windows per draw, half background (default {d.test_windows})"
+        "--per-image",
+        type=int,
+        help=f"synthetic windows per reference image, as in `alcn train-detector` (`alcn bench detect --positives` "
+        f"counts them per object) (default {d.per_image})",
+    )
+    p.add_argument(
+        "--test-windows", type=int, help=f"test windows per seed, half background (default {d.test_windows})"
     )
     p.add_argument(
         "--test-lighting",
@@ -221,7 +229,7 @@ def _run_fewshot(args: argparse.Namespace) -> int:
     settings = _override(fewshot.FewShotSettings(), args)
     result = fewshot.main(args.out, settings, progress=not args.no_progress)
     print((Path(args.out) / "fewshot.md").read_text(encoding="utf-8"))
-    runs = [r for by_method in result["runs"].values() for draws in by_method.values() for r in draws]
+    runs = [r for by_method in result["runs"].values() for seeded in by_method.values() for r in seeded]
     return 1 if all("error" in r for r in runs) else 0
 
 

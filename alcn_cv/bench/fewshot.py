@@ -9,7 +9,7 @@ reaches the detector the same way:
 1. **Windows** (:func:`alcn_cv.train.fewshot.make_fewshot_data`): the paper's simple synthetic
    images of ``objects`` rendered objects (``real_images`` images each, training-like light)
    and background windows; test windows of the same objects and background under held-out
-   lighting families. 64x64 each, drawn once per draw and shared by every method.
+   lighting families. 64x64 each, drawn once per seed and shared by every method.
 2. **Normalization** through the runtime's public window API,
    :meth:`~alcn_cv.enhance.base.Normalization.normalize_windows` (ALCN: Eq. 1, one weight
    vector per window from its centre 48x48), on training and test windows alike; the windows
@@ -22,12 +22,12 @@ reaches the detector the same way:
    every method; accuracy (background + objects) and the ROC AUC of object vs. background on
    the test windows, overall and per lighting family.
 
-A *draw* is one repetition with its own objects (catalogue seed ``object_seed + draw``),
-windows and detector initialisation (seed ``draw``). The report says, per draw and policy,
-whether each ALCN variant's AUC is above the best DoG's.
+Every seed (``--seeds``, as in ``alcn bench detect``) is one repetition with its own objects (catalogue seed
+``object_seed + seed``), windows and detector initialisation (seed ``seed``). The report says, per seed and
+policy, whether each ALCN variant's AUC is above the best DoG's.
 
 Outputs: ``fewshot.json`` (every number, settings, machine, command), ``fewshot.md`` and
-``fewshot.png`` (AUC per method, one point per draw).
+``fewshot.png`` (AUC per method, one point per seed).
 """
 
 from __future__ import annotations
@@ -78,12 +78,13 @@ class FewShotSettings:
     Attributes:
         methods: registered normalization specs ``NAME[:KEY=VALUE...]``.
         policies: detector input policies (:data:`~alcn_cv.bench.detect_settings.POLICIES`).
-        draws: repetitions, each with its own objects, windows and detector initialisation.
-        objects: new objects per draw.
-        object_seed: catalogue seed of draw 0 (draw ``d`` uses ``object_seed + d``).
+        seeds: one repetition per seed, each with its own objects, windows and detector initialisation
+            (``--seeds``, as in ``alcn bench detect``); the tables give the mean and spread over seeds.
+        objects: new objects per seed.
+        object_seed: catalogue seed of seed 0 (seed ``s`` uses ``object_seed + s``).
         real_images: reference images per object.
         per_image: synthetic training windows per reference image (as many background windows).
-        test_windows: test windows per draw (half background).
+        test_windows: test windows per seed (half background).
         test_lighting: lighting families of the test windows.
         epochs, batch_size, lr: detector training (the same for every method).
         threads: torch threads (``None``: torch's default).
@@ -91,7 +92,7 @@ class FewShotSettings:
 
     methods: list[str] = field(default_factory=lambda: list(DEFAULT_METHODS))
     policies: list[str] = field(default_factory=lambda: ["raw", "local"])
-    draws: int = 3
+    seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
     objects: int = _SETUP.n_objects
     object_seed: int = _SETUP.object_seed
     real_images: int = _SETUP.real_images
@@ -113,9 +114,10 @@ class FewShotSettings:
         bad = [p for p in self.policies if p not in POLICIES]
         if bad or not self.policies:
             raise InputError(f"unknown or no policy {bad}; choose from {', '.join(POLICIES)}")
+        if not self.seeds or len(set(self.seeds)) != len(self.seeds) or min(self.seeds) < 0:
+            raise InputError(f"seeds must be distinct, non-negative and at least one, got {self.seeds}")
         if (
             min(
-                self.draws,
                 self.objects,
                 self.real_images,
                 self.per_image,
@@ -127,15 +129,15 @@ class FewShotSettings:
             or not self.lr > 0
         ):
             raise InputError(
-                "draws, objects, real_images, per_image, test_windows, epochs and batch_size must be >= 1 and lr > 0"
+                "objects, real_images, per_image, test_windows, epochs and batch_size must be >= 1 and lr > 0"
             )
         return self
 
-    def setup(self, draw: int) -> FewShotSetup:
-        """The few-shot setup of one draw."""
+    def setup(self, seed: int) -> FewShotSetup:
+        """The few-shot setup of one seed."""
         return FewShotSetup(
             n_objects=self.objects,
-            object_seed=self.object_seed + draw,
+            object_seed=self.object_seed + seed,
             real_images=self.real_images,
             per_image=self.per_image,
             n_test=self.test_windows,
@@ -143,7 +145,7 @@ class FewShotSettings:
             epochs=self.epochs,
             batch_size=self.batch_size,
             lr=self.lr,
-            seed=draw,
+            seed=seed,
         )
 
 
@@ -152,11 +154,11 @@ def _is(spec: str, name: str) -> bool:
 
 
 def compare_to_dog(runs: dict[str, Any], settings: FewShotSettings) -> dict[str, Any]:
-    """Per policy, ALCN variant and draw: its AUC against the best DoG's (every ``dog`` spec run).
+    """Per policy, ALCN variant and seed: its AUC against the best DoG's (every ``dog`` spec run).
 
     Returns:
-        ``{policy: {variant: [{"draw", "auc", "dog", "dog_auc", "margin", "above"}, ...]}}``;
-        empty without a DoG or an ALCN among the methods.
+        ``{policy: {variant: [{"seed", "auc", "dog", "dog_auc", "margin", "above"}, ...]}}``, one entry per seed
+        in the order of ``settings.seeds``; empty without a DoG or an ALCN among the methods.
     """
     dogs = [m for m in settings.methods if _is(m, "dog")]
     variants = [m for m in settings.methods if _is(m, "alcn")]
@@ -165,16 +167,16 @@ def compare_to_dog(runs: dict[str, Any], settings: FewShotSettings) -> dict[str,
         out[policy] = {}
         for variant in variants:
             rows = []
-            for draw in range(settings.draws):
-                done = [(runs[policy][m][draw]["auc"], m) for m in dogs if runs[policy][m][draw].get("auc") is not None]
-                mine = runs[policy][variant][draw]
+            for i, seed in enumerate(settings.seeds):
+                done = [(runs[policy][m][i]["auc"], m) for m in dogs if runs[policy][m][i].get("auc") is not None]
+                mine = runs[policy][variant][i]
                 if not done or mine.get("auc") is None:
-                    rows.append({"draw": draw, "above": None})
+                    rows.append({"seed": seed, "above": None})
                     continue
                 dog_auc, dog = max(done)
                 rows.append(
                     {
-                        "draw": draw,
+                        "seed": seed,
                         "auc": mine["auc"],
                         "dog": dog,
                         "dog_auc": dog_auc,
@@ -186,14 +188,14 @@ def compare_to_dog(runs: dict[str, Any], settings: FewShotSettings) -> dict[str,
     return out if dogs and variants else {}
 
 
-def _run_draw(
-    settings: FewShotSettings, draw: int, norms: dict[str, Normalization], runs: dict[str, Any], bar: tqdm
+def _run_seed(
+    settings: FewShotSettings, seed: int, norms: dict[str, Normalization], runs: dict[str, Any], bar: tqdm
 ) -> None:
-    """Every method (``norms``, built once) and policy on one draw's windows; a failing method is recorded with its
+    """Every method (``norms``, built once) and policy on one seed's windows; a failing method is recorded with its
     error."""
-    from alcn_cv.train.fewshot import make_fewshot_data, score_inputs  # torch: only when a draw runs
+    from alcn_cv.train.fewshot import make_fewshot_data, score_inputs  # torch: only when a seed runs
 
-    setup = settings.setup(draw)
+    setup = settings.setup(seed)
     train_x, train_y, test = make_fewshot_data(setup)
     for method in settings.methods:
         t0 = time.perf_counter()
@@ -202,19 +204,19 @@ def _run_draw(
             train_n, test_n = norm.normalize_windows(train_x), norm.normalize_windows(test.windows)
             normalize_s = time.perf_counter() - t0
         except Exception as exc:  # built up front: what fails here is the run's, reported
-            logger.error("few-shot %s, draw %d: %s: %s", method, draw, type(exc).__name__, exc)
+            logger.error("few-shot %s, seed %d: %s: %s", method, seed, type(exc).__name__, exc)
             for policy in settings.policies:
-                runs[policy][method].append({"draw": draw, "error": f"{type(exc).__name__}: {exc}"})
+                runs[policy][method].append({"seed": seed, "error": f"{type(exc).__name__}: {exc}"})
                 bar.update()
             continue
         for policy_name in settings.policies:
-            bar.set_postfix(run=f"{method}|{policy_name}|{draw}")
+            bar.set_postfix(run=f"{method}|{policy_name}|{seed}")
             t1 = time.perf_counter()
             try:
                 policy = InputPolicy(policy_name, train_n)
                 entry = nan_to_none(
                     score_inputs(
-                        f"{method} ({policy_name}, draw {draw})",
+                        f"{method} ({policy_name}, seed {seed})",
                         policy.windows(train_n),
                         train_y,
                         policy.windows(test_n),
@@ -223,13 +225,13 @@ def _run_draw(
                     )
                 )
                 entry.update(
-                    draw=draw,
+                    seed=seed,
                     policy=policy.to_dict(),
                     seconds={"normalize": normalize_s, "train_and_test": time.perf_counter() - t1},
                 )
             except Exception as exc:
-                logger.error("few-shot %s, %s, draw %d: %s: %s", method, policy_name, draw, type(exc).__name__, exc)
-                entry = {"draw": draw, "error": f"{type(exc).__name__}: {exc}"}
+                logger.error("few-shot %s, %s, seed %d: %s: %s", method, policy_name, seed, type(exc).__name__, exc)
+                entry = {"seed": seed, "error": f"{type(exc).__name__}: {exc}"}
             runs[policy_name][method].append(entry)
             bar.update()
 
@@ -238,10 +240,10 @@ def _summary(runs: dict[str, Any]) -> dict[str, Any]:
     return {
         policy: {
             method: {
-                metric: spread([r[metric] for r in draws if r.get(metric) is not None])
+                metric: spread([r[metric] for r in seeded if r.get(metric) is not None])
                 for metric in ("auc", "accuracy")
             }
-            for method, draws in by_method.items()
+            for method, seeded in by_method.items()
         }
         for policy, by_method in runs.items()
     }
@@ -249,12 +251,13 @@ def _summary(runs: dict[str, Any]) -> dict[str, Any]:
 
 def fewshot_command(out_dir: str | os.PathLike, settings: FewShotSettings) -> str:
     """The ``alcn bench fewshot`` command line that runs these settings (every setting spelled out)."""
+    # the seeds in the space form of --seeds, as alcn bench detect records them (command_line joins a list with commas)
+    seeds = ["--seeds", *map(str, settings.seeds)]
     return command_line(
-        ["alcn", "bench", "fewshot", "--out", out_dir],
+        ["alcn", "bench", "fewshot", "--out", out_dir, *seeds],
         {
             "--methods": settings.methods,
             "--policy": settings.policies,
-            "--draws": settings.draws,
             "--objects": settings.objects,
             "--object-seed": settings.object_seed,
             "--real-images": settings.real_images,
@@ -270,8 +273,9 @@ def fewshot_command(out_dir: str | os.PathLike, settings: FewShotSettings) -> st
 
 
 def fewshot_markdown(result: dict[str, Any]) -> str:
-    """``fewshot.md``: machine, command, settings, policies, AUC per draw and ALCN against DoG."""
+    """``fewshot.md``: machine, command, settings, policies, AUC per seed and ALCN against DoG."""
     s = result["settings"]
+    seeds = s["seeds"]
     lines = [
         "# Few-shot validation: every normalization with the same detector\n",
         "A detector is trained from the simple synthetic images of new rendered objects seen in "
@@ -282,9 +286,9 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
         "accuracy over background and objects.\n",
         f"- **Machine:** {describe_machine(result['machine'])}",
         f"- **Command:** `{result['command']}`",
-        f"- **Settings:** {s['draws']} draws (draw d: objects of catalogue seed {s['object_seed']} + d, windows and "
-        f"detector seed d); {s['objects']} objects, {s['per_image']} synthetic windows per image and as many "
-        f"background windows; {s['test_windows']} test windows; detector {s['epochs']} epochs, batch "
+        f"- **Settings:** seeds {', '.join(map(str, seeds))} (seed s: objects of catalogue seed {s['object_seed']} "
+        f"+ s, windows and detector seed s); {s['objects']} objects, {s['per_image']} synthetic windows per image and "
+        f"as many background windows; {s['test_windows']} test windows; detector {s['epochs']} epochs, batch "
         f"{s['batch_size']}, Adam lr {s['lr']}. Total time {result['seconds']:.0f} s.",
         "- **Input policies** (the same for every method):",
         *[f"  - `{p}`: {POLICY_DESCRIPTIONS[p]}" for p in s["policies"]],
@@ -293,35 +297,33 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
     for policy, by_method in result["runs"].items():
         lines.append(f"## AUC, policy `{policy}`\n")
         rows = []
-        for method, draws in by_method.items():
+        for method, seeded in by_method.items():
             summary = result["summary"][policy][method]
             rows.append(
                 [method]
-                + ["failed" if "error" in r else r["auc"] for r in draws]
+                + ["failed" if "error" in r else r["auc"] for r in seeded]
                 + [spread_cell(summary["auc"]), spread_cell(summary["accuracy"])]
             )
-        stat = " mean ± std" if s["draws"] > 1 else ""
+        stat = " mean ± std" if len(seeds) > 1 else ""
         lines += [
-            markdown_table(
-                ["method"] + [f"draw {d}" for d in range(s["draws"])] + [f"AUC{stat}", f"accuracy{stat}"], rows
-            ),
+            markdown_table(["method"] + [f"seed {d}" for d in seeds] + [f"AUC{stat}", f"accuracy{stat}"], rows),
             "",
         ]
     if result["alcn_vs_dog"]:
-        lines.append("## ALCN against the best DoG, per draw (AUC margin; ✓ above, ✗ not)\n")
+        lines.append("## ALCN against the best DoG, per seed (AUC margin; ✓ above, ✗ not)\n")
         rows = []
         for policy, variants in result["alcn_vs_dog"].items():
-            for variant, draws in variants.items():
+            for variant, seeded in variants.items():
                 cells = [
-                    "-" if r["above"] is None else f"{r['margin']:+.4f} {'✓' if r['above'] else '✗'}" for r in draws
+                    "-" if r["above"] is None else f"{r['margin']:+.4f} {'✓' if r['above'] else '✗'}" for r in seeded
                 ]
-                rows.append([variant, policy] + cells + [f"{sum(bool(r['above']) for r in draws)}/{len(draws)}"])
-        lines += [markdown_table(["ALCN", "policy"] + [f"draw {d}" for d in range(s["draws"])] + ["above"], rows), ""]
+                rows.append([variant, policy] + cells + [f"{sum(bool(r['above']) for r in seeded)}/{len(seeded)}"])
+        lines += [markdown_table(["ALCN", "policy"] + [f"seed {d}" for d in seeds] + ["above"], rows), ""]
     errors = [
-        f"- `{m}` ({p}, draw {r['draw']}): {r['error']}"
+        f"- `{m}` ({p}, seed {r['seed']}): {r['error']}"
         for p, bm in result["runs"].items()
-        for m, draws in bm.items()
-        for r in draws
+        for m, seeded in bm.items()
+        for r in seeded
         if "error" in r
     ]
     if errors:
@@ -330,7 +332,7 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
 
 
 def _figure(result: dict[str, Any], path: Path) -> Path:
-    """AUC per method: the mean over draws as a bar, every draw as a point; one panel per policy."""
+    """AUC per method: the mean over seeds as a bar, every seed as a point; one panel per policy."""
     policies = list(result["runs"])
     plt, fig, axes = new_figure(1, len(policies), figsize=(5.5 * len(policies), 4.5))
     lowest = min(
@@ -351,7 +353,7 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
         ax.set_title(f"policy {policy}")
         ax.set_ylim(min(0.5, lowest - 0.02), 1.0)
         ax.grid(axis="y", alpha=0.3)
-    fig.suptitle("Few-shot validation (bars: mean over draws; points: draws)")
+    fig.suptitle("Few-shot validation (bars: mean over seeds; points: seeds)")
     fig.tight_layout()
     return save_figure(plt, fig, path)
 
@@ -372,27 +374,27 @@ def main(
 
     Returns:
         The dictionary written to ``fewshot.json``: ``runs`` (policy -> method -> one result of
-        :func:`~alcn_cv.train.fewshot.score_inputs` per draw, or its ``error``), ``summary``
-        (mean and spread over draws), ``alcn_vs_dog`` (:func:`compare_to_dog`).
+        :func:`~alcn_cv.train.fewshot.score_inputs` per seed, in the order of ``settings.seeds``, or its ``error``),
+        ``summary`` (mean and spread over seeds), ``alcn_vs_dog`` (:func:`compare_to_dog`).
 
     Raises:
         InputError: bad settings, or a method that cannot be built (a bad parameter or weight file), before any
-            draw.
+            seed runs.
     """
     import torch
 
     settings = (settings or FewShotSettings()).check()
-    norms = build_methods(settings.methods)  # a bad spec or weight file: one line before any draw
+    norms = build_methods(settings.methods)  # a bad spec or weight file: one line before any seed runs
     if settings.threads:
         torch.set_num_threads(settings.threads)
     start = time.perf_counter()
     out = Path(out_dir)
     make_folder(out)
     runs: dict[str, Any] = {p: {m: [] for m in settings.methods} for p in settings.policies}
-    total = settings.draws * len(settings.methods) * len(settings.policies)
+    total = len(settings.seeds) * len(settings.methods) * len(settings.policies)
     with tqdm(total=total, desc="few-shot validation", unit="run", disable=not progress) as bar:
-        for draw in range(settings.draws):
-            _run_draw(settings, draw, norms, runs, bar)
+        for seed in settings.seeds:
+            _run_seed(settings, seed, norms, runs, bar)
     result = {
         "benchmark": "fewshot",
         "command": command or fewshot_command(out_dir, settings),

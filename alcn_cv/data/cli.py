@@ -84,7 +84,7 @@ def _scenes(args: argparse.Namespace) -> int:
         args.out,
         scenes=args.scenes,
         frames=args.frames,
-        size=args.size,
+        side=args.side,
         seed=args.seed,
         overwrite=args.overwrite,
         progress=not args.no_progress,
@@ -113,12 +113,19 @@ def _compare_psm(args: argparse.Namespace) -> int:
 
 
 def _side_in_pixels(text: str) -> int:
-    """``data scenes --size``: an integer; its error says what the number is, since the --size of ``data detect``
-    and ``data pose`` is a preset name (``small``) that argparse's "invalid int value" would leave unexplained."""
+    """``data scenes --side``: an integer of at least the smallest side the scenes render at, checked here so that
+    the error names the option (``relief_scenes.generate`` checks it again for its Python callers)."""
+    from alcn_cv.data.relief_scenes import MIN_SIDE
+
     try:
-        return int(text)
+        side = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"the side of the frames in pixels, e.g. 256; got {text!r}") from None
+        side = None
+    if side is None or side < MIN_SIDE:
+        raise argparse.ArgumentTypeError(
+            f"the side of the square frames in pixels, at least {MIN_SIDE}, e.g. 256; got {text!r}"
+        )
+    return side
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -244,12 +251,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument("--scenes", type=int, default=24, help="number of scenes (default 24)")
     q.add_argument("--frames", type=int, default=12, help="lightings (frames) per scene (default 12)")
     q.add_argument(
-        "--size",
+        "--side",
         type=_side_in_pixels,
         default=320,
         metavar="PIXELS",
-        help="side of the square frames in pixels, at least 32 (default 320); not a preset name as the "
-        "--size of `data detect` and `data pose`",
+        help="side of the square frames in pixels, at least 32 (default 320)",
     )
     q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")

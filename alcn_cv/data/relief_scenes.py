@@ -44,7 +44,7 @@ KIND = "relief_scenes"
 FAMILIES: tuple[str, ...] = tuple(f for f in LIGHT_FAMILIES if f != "colour")
 _CANONICAL = 96
 #: The least side of the frames (pixels).
-_MIN_SIZE = 32
+MIN_SIDE = 32
 
 
 def render_scene(
@@ -90,8 +90,8 @@ def relief_surface(
         ``(albedo, height, material)`` as :func:`~alcn_cv.data.objects.background_surface` gives them, for
         :func:`~alcn_cv.data.objects.to_surface` and :func:`~alcn_cv.data.render.render_surfaces`.
     """
-    if size < _MIN_SIZE or not 1 <= objects[0] <= objects[1]:
-        raise InputError(f"need size >= {_MIN_SIZE} and 1 <= objects[0] <= objects[1]; got {size}, {objects}")
+    if size < MIN_SIDE or not 1 <= objects[0] <= objects[1]:
+        raise InputError(f"need size >= {MIN_SIDE} and 1 <= objects[0] <= objects[1]; got {size}, {objects}")
     albedo, height, material = background_surface(rng, size, size, random_texture(rng, size, p_photo=0.6))
     for _ in range(int(rng.integers(objects[0], objects[1] + 1))):
         extent = rng.uniform(0.15, 0.4) * size
@@ -116,7 +116,7 @@ def generate(
     out_dir: str | os.PathLike,
     scenes: int = 24,
     frames: int = 12,
-    size: int = 320,
+    side: int = 320,
     seed: int = 0,
     *,
     overwrite: bool = False,
@@ -134,9 +134,9 @@ def generate(
         raise InputError(f"need at least one scene (--scenes), got {scenes}")
     if frames < 2:
         raise InputError(f"need at least 2 frames (lightings) per scene (--frames), got {frames}")
-    if size < _MIN_SIZE:
-        raise InputError(f"--size is the side of the frames in pixels, at least {_MIN_SIZE}; got {size}")
-    jobs = [(int(seed), i, int(size), int(frames)) for i in range(scenes)]
+    if side < MIN_SIDE:
+        raise InputError(f"--side is the side of the frames in pixels, at least {MIN_SIDE}; got {side}")
+    jobs = [(int(seed), i, int(side), int(frames)) for i in range(scenes)]
     # rendered inside the block: atomic_output_dir refuses an existing or unwritable output before the minutes of work
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         rendered = parallel_map(
@@ -154,9 +154,9 @@ def generate(
             make_manifest(
                 KIND,
                 seed,
-                {"scenes": scenes, "frames": frames, "size": size, "families": list(FAMILIES)},
+                {"scenes": scenes, "frames": frames, "side": side, "families": list(FAMILIES)},
                 lights=lights,
             ),
         )
-    logger.info("wrote %d scenes of %d frames (%dx%d) to %s", scenes, frames, size, size, out_dir)
+    logger.info("wrote %d scenes of %d frames (%dx%d) to %s", scenes, frames, side, side, out_dir)
     return Path(out_dir)
