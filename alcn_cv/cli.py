@@ -20,8 +20,9 @@ import os
 import signal
 import sys
 import traceback
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from importlib import metadata
+from typing import Any
 
 from alcn_cv.errors import MissingDependencyError
 from alcn_cv.extras import is_installed, missing_extra
@@ -128,6 +129,41 @@ def add_conf_options(parser: argparse.ArgumentParser, default: str | None, prese
         metavar="KEY=VALUE",
         dest="settings",
         help=f"override one key of the preset, dotted, the value as TOML, e.g. --set {example} (repeatable)",
+    )
+
+
+class _Seeds(argparse.Action):
+    """``--seeds 0 1 2``, each item also split on commas (``--seeds 0,1,2``, the form of older recorded commands)."""
+
+    def __call__(
+        self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: str | None = None
+    ) -> None:
+        seeds = []
+        for text in (v for item in values for v in item.split(",") if v.strip()):
+            try:
+                seeds.append(int(text))
+            except ValueError:
+                # argparse's own error line: an InputError raised while parsing would end in a traceback
+                raise argparse.ArgumentError(
+                    self, f"a seed is an integer (e.g. --seeds 0 1 2 or 0,1,2), got {text!r}"
+                ) from None
+        setattr(namespace, self.dest, seeds)
+
+
+def add_seeds_option(
+    parser: argparse.ArgumentParser, default: Sequence[int], what: str, from_preset: bool = False
+) -> None:
+    """``--seeds 0 1 2`` (``args.seeds``, a list of integers), the one way every command that repeats its runs takes
+    their seeds; ``what`` says what a seed draws (``from_preset``: the parsed default is None, the preset's
+    ``default`` applies)."""
+    parser.add_argument(
+        "--seeds",
+        nargs="+",
+        action=_Seeds,
+        metavar="SEED",
+        default=None if from_preset else list(default),
+        help=f"{what}; cells give the mean ± standard deviation over the seeds, e.g. --seeds 0 1 2 (0,1,2 also "
+        f"accepted; default {' '.join(map(str, default))})",
     )
 
 

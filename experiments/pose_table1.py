@@ -30,7 +30,7 @@ PARTS = ("data", "features", "corners", "control", "heldout", "middlebury")
 def main() -> None:
     parser = command_line(__doc__)
     parser.add_argument("--part", choices=PARTS, action="append", help="run only these parts (default: all)")
-    parser.add_argument("--seeds", default="3", help="corner CNN seeds per normalization (default 3)")
+    parser.add_argument("--seeds", nargs="+", default=["0", "1", "2"], help="corner CNN training seeds (default 0 1 2)")
     args = parser.parse_args()
     parts = args.part or PARTS
     root = RUNS / "pose_table1"
@@ -47,9 +47,9 @@ def main() -> None:
             rendered(folder)
     runs = {
         "features": (data, ["--detectors", "features"]),
-        "corners": (data, ["--detectors", "corners", "--seeds", args.seeds]),
-        "control": (control, ["--detectors", "corners", "--seeds", args.seeds]),
-        "heldout": (heldout, ["--detectors", "corners", "--seeds", args.seeds]),
+        "corners": (data, ["--detectors", "corners", "--seeds", *args.seeds]),
+        "control": (control, ["--detectors", "corners", "--seeds", *args.seeds]),
+        "heldout": (heldout, ["--detectors", "corners", "--seeds", *args.seeds]),
     }
     for part, (folder, extra) in runs.items():
         if part in parts:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from alcn_cv.cli import add_conf_options, add_progress_option
+from alcn_cv.cli import add_conf_options, add_progress_option, add_seeds_option
 from alcn_cv.errors import InputError
 
 
@@ -507,12 +507,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         choices=("cpu", "cuda"),
         help="where the corner CNNs train (default: cuda where torch sees it, else cpu)",
     )
-    e.add_argument(
-        "--seeds",
-        type=int,
-        default=1,
-        help="train the corner CNN with this many seeds; cells give mean and standard deviation (default 1)",
-    )
+    add_seeds_option(e, [0], "train the corner CNN once with each of these seeds")
     e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
     e.add_argument(
         "--out", type=Path, required=True, help="report folder (a folder of an earlier evaluation loses its models)"

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import re
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -204,7 +205,7 @@ def main(
     corner_recipe: CornerRecipe | None = None,
     corner_conf: str | None = None,
     corner_device: str | None = None,
-    seeds: int = 1,
+    seeds: Sequence[int] = (0,),
     sequences: list[int] | None = None,
     command: str | None = None,
     progress: bool = True,
@@ -213,9 +214,9 @@ def main(
 
     For each detector (``"features"``: :class:`pose.parts.FeaturePartDetector`, ``"corners"``:
     :class:`pose.corners.CornerDetector`) and normalization: a part model is built, or the corner
-    detector trained ``seeds`` times (:func:`pose.corner_train.train_corners` by ``corner_recipe``,
-    default the ``box`` preset, recorded as ``corner_conf``, on ``corner_device``, seeds 0, 1, ...;
-    a cell is then the mean over the seeds, its spread their standard deviation), from the
+    detector trained once per seed of ``seeds`` (:func:`pose.corner_train.train_corners` by ``corner_recipe``,
+    default the ``box`` preset, recorded as ``corner_conf``, on ``corner_device``; with several seeds a cell is
+    the mean over them, its spread their standard deviation), from the
     training sequence on normalized images, then tracked through every test
     sequence (or those numbered in ``sequences``). Writes ``table1.md`` (with the machine and
     ``command``), ``table1.json``, ``table1.png`` (and the models; a folder with an earlier ``table1.json`` loses
@@ -236,8 +237,9 @@ def main(
             f"{data_dir}: expected train/000001, test/0000NN (those of --sequences) and "
             f"models/obj_{obj_id:06d}.ply (`alcn data pose`)"
         )
-    if seeds < 1:
-        raise InputError(f"seeds must be >= 1, got {seeds}")
+    seeds = [int(seed) for seed in seeds]
+    if not seeds or min(seeds) < 0 or len(set(seeds)) < len(seeds):
+        raise InputError(f"seeds must be distinct non-negative integers, at least one; got {seeds}")
     corners = read_box_corners(model_ply)
     diameter = float(np.linalg.norm(corners.max(0) - corners.min(0)))
     columns = [f"#{int(p.name)}" for p in tests]
@@ -275,9 +277,9 @@ def main(
                 from pose.corners import CornerDetector
 
                 row = f"{name} / corner CNN"
-                for seed in range(seeds):
+                for seed in seeds:
                     t0 = time.perf_counter()
-                    suffix = f"_seed{seed}" if seeds > 1 else ""
+                    suffix = f"_seed{seed}" if len(seeds) > 1 else ""
                     net = train_corners(
                         train,
                         corners,
@@ -334,7 +336,11 @@ def main(
         "# Pose under light changes (Table 1 style)\n\n"
         f"Data: `{data_dir}`; cells: % of frames with 2D projection error < {PROJ_PX:g} px "
         f"(ADD < {ADD_FRACTION:g} d and 5 cm / 5 deg in table1.json)"
-        + (f"; corner CNN rows: mean ± standard deviation over {seeds} training seeds" if seeds > 1 else "")
+        + (
+            f"; corner CNN rows: mean ± standard deviation over training seeds {', '.join(map(str, seeds))}"
+            if len(seeds) > 1
+            else ""
+        )
         + f".\n\nMachine: {describe_machine(host)}. Wall time: {time.perf_counter() - t_start:.0f} s."
         + (f"\n\nCommand: `{command}`" if command else "")
         + "\n\n"

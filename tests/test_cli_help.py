@@ -85,9 +85,9 @@ def test_one_option_name_for_each_idea():
     assert {"alcn calib register", "alcn pose build", "alcn pose track", "alcn bench relight"} <= set(
         _commands_with("--n-features")
     )
-    # the benchmarks' repetitions, each with its own seed: one --seeds declaration
+    # runs repeated, each with its own seed: one --seeds declaration, a list of seeds everywhere
     seeds = _commands_with("--seeds")
-    benches = {"alcn bench detect", "alcn bench fewshot", "alcn bench relight"}
-    assert benches <= set(seeds) and len({type(seeds[c]) for c in benches}) == 1
+    repeated = {"alcn bench detect", "alcn bench fewshot", "alcn bench relight", "alcn pose eval"}
+    assert repeated <= set(seeds) and len({type(a) for a in seeds.values()}) == 1, seeds
     retired = {"--max-features", "--draws"}
     assert not {c for c, p in COMMANDS.items() for a in p._actions if retired & set(a.option_strings)}

@@ -18,7 +18,7 @@ from typing import Any
 
 from alcn_cv.bench import detect, fewshot, invariance, relight, speed
 from alcn_cv.bench.detect_settings import POLICIES, DetectSettings, presets
-from alcn_cv.cli import add_progress_option
+from alcn_cv.cli import add_progress_option, add_seeds_option
 from alcn_cv.data import scenes
 from alcn_cv.errors import InputError
 
@@ -33,38 +33,6 @@ def _list(kind: type) -> Callable[[str], list]:
             raise InputError(f"expected a comma-separated list of {kind.__name__}, got {text!r}") from None
 
     return parse
-
-
-class _Seeds(argparse.Action):
-    """``--seeds 0 1 2``, each item also split on commas (``--seeds 0,1,2``, the form of older recorded commands)."""
-
-    def __call__(
-        self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: str | None = None
-    ) -> None:
-        seeds = []
-        for text in (v for item in values for v in item.split(",") if v.strip()):
-            try:
-                seeds.append(int(text))
-            except ValueError:
-                # argparse's own error line: an InputError raised while parsing would end in a traceback
-                raise argparse.ArgumentError(
-                    self, f"a seed is an integer (e.g. --seeds 0 1 2 or 0,1,2), got {text!r}"
-                ) from None
-        setattr(namespace, self.dest, seeds)
-
-
-def _add_seeds(p: argparse.ArgumentParser, default: Sequence[int], what: str, from_preset: bool = False) -> None:
-    """The ``--seeds`` option of every benchmark that repeats its runs (``from_preset``: the parsed default is None,
-    the preset's ``default`` applies)."""
-    p.add_argument(
-        "--seeds",
-        nargs="+",
-        action=_Seeds,
-        metavar="SEED",
-        default=None if from_preset else list(default),
-        help=f"{what}; cells give the mean ± standard deviation over the seeds, e.g. --seeds 0 1 2 (0,1,2 also "
-        f"accepted; default {' '.join(map(str, default))})",
-    )
 
 
 def _methods_help(default: Sequence[str] | None, suffix: str = "") -> str:
@@ -147,7 +115,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
     p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
     p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
-    _add_seeds(p, d.seeds, "repeat every run with each of these seeds", from_preset=True)
+    add_seeds_option(p, d.seeds, "repeat every run with each of these seeds", from_preset=True)
     p.add_argument(
         "--tune",
         dest="tune",
@@ -192,7 +160,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
     _add_policies(p, d.policies)
-    _add_seeds(
+    add_seeds_option(
         p,
         d.seeds,
         "repeat every run with each of these seeds, each with its own new objects, windows and detector initialisation",
@@ -408,7 +376,9 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         help="evaluate each scene with parameters tuned on the others, instead of the split "
         f"(no scene given: {' '.join(relight.DEFAULT_LEAVE_ONE_OUT)})",
     )
-    _add_seeds(p, relight.DEFAULT_SEEDS, "sampling seeds (they draw the gallery frames, patch locations and pairs)")
+    add_seeds_option(
+        p, relight.DEFAULT_SEEDS, "sampling seeds (they draw the gallery frames, patch locations and pairs)"
+    )
     p.add_argument(
         "--quick",
         action="store_true",
