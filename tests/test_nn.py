@@ -168,6 +168,17 @@ def test_colour_gradient_on_the_cpu_is_the_torch_conversions():
     torch.testing.assert_close(eager.grad, compiled.grad, atol=1e-6, rtol=1e-3)
 
 
+def test_colour_under_torch_func_transforms():
+    """torch.func.grad and vmap see the OpenCV Lab passes as one differentiable, batchable operation."""
+    rgb = torch.from_numpy(_unit(_bgr(32, 40)[..., ::-1].copy())).permute(2, 0, 1)[None]
+    module = ALCN2d(model="gain").eval().requires_grad_(False)
+    x = rgb.clone().requires_grad_(True)
+    module(x).square().mean().backward()
+    torch.testing.assert_close(torch.func.grad(lambda t: module(t).square().mean())(rgb), x.grad)
+    pair = torch.cat([rgb, rgb.flip(-1)])
+    torch.testing.assert_close(torch.func.vmap(lambda t: module(t[None])[0])(pair), module(pair))
+
+
 def test_the_functional_forms_module_is_frozen_and_fixed_scales_stay_fixed():
     """alcn2d's cached module gathers no gradient from the caller's backward; requires_grad_(True) on ALCN2d makes
     its network trainable, not the divisive step's fixed tau and floor (buffers)."""
