@@ -77,9 +77,14 @@ class ALCN2d(nn.Module):
     Values are not read, so that a call never waits for the device: outside [0, 1] the output is undefined (a
     negative gray value makes the whole image NaN through the log of its cell means; colour is clipped to [0, 1]
     before Lab), where ``apply()`` raises. Against float32, float16 is about 2e-3 off in gray and 4e-2 in colour,
-    bfloat16 2e-2 and 0.15 (its Lab round trip alone). Colour on CUDA, traced or compiled goes through the torch Lab
-    conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some. ``torch.jit.trace``
-    records the sizes of the traced image (use ``torch.compile`` for other sizes).
+    bfloat16 2e-2 and 0.15 (its Lab round trip alone). Under a caller's autocast an image of another float dtype than
+    the module's is let through and the output may be float32: the network and the filters run at autocast's
+    precision (bfloat16: about 1e-2 off float32), the Lab conversions in the image's dtype. Colour on CUDA, traced or
+    compiled goes through the torch Lab conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some.
+    ``torch.jit.trace`` records the sizes of the traced image: on another size the traced module fails or, without
+    an error, returns wrong values (use ``torch.compile`` for several sizes). The 1e-5 from ``apply()`` holds for
+    integers converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs
+    by a float rounding, which the divisive step amplifies to 6e-5 on a photograph.
 
     Example:
         >>> import torch
@@ -121,7 +126,10 @@ class ALCN2d(nn.Module):
         (blocks of ``1 / scale`` pixels averaged when the sides are multiples of it), bilinear up."""
         if self.spec.scale == 1:
             return gray
-        size = self.spec.working_shape(tuple(gray.shape[-2:]))
+        h, w = gray.shape[-2:]
+        if torch.jit.is_tracing():  # the sizes are 0-d tensors there, which round() refuses; the trace keeps them
+            h, w = int(h), int(w)
+        size = self.spec.working_shape((h, w))
         zoom = 1.0 / self.spec.scale
         if zoom == round(zoom) and gray.shape[-2] % round(zoom) == 0 and gray.shape[-1] % round(zoom) == 0:
             return F.avg_pool2d(gray, round(zoom))
@@ -212,23 +220,9 @@ class ALCN2d(nn.Module):
         return self.from_lab(torch.cat([lightness, lab[:, 1:]], dim=1))
 
     def _check_input(self, image: torch.Tensor) -> None:
-        """An :class:`InputError` naming what is wrong with :meth:`forward`'s ``image`` (its values are not read:
-        a range check would wait for the device on every call)."""
-        if image.ndim != 4 or image.shape[1] not in (1, 3) or 0 in image.shape:
-            hint = ""
-            if image.ndim == 4 and image.shape[1] == 4:
-                hint = " (RGBA: image[:, :3])"
-            elif image.ndim == 4 and image.shape[-1] in (1, 3):
-                hint = " (channels last: image.permute(0, 3, 1, 2))"
-            elif image.ndim == 3 and image.shape[0] in (1, 3):
-                hint = " (one image: image[None])"
-            elif image.ndim == 3:
-                hint = " (a batch of gray images: image[:, None])"
-            elif image.ndim == 2:
-                hint = " (one gray image: image[None, None])"
-            raise InputError(f"image must have shape (B, 1 | 3, H, W), none of them 0, got {tuple(image.shape)}{hint}")
-        if not image.is_floating_point():
-            raise InputError(f"image must be float in [0, 1], got {image.dtype} (a uint8 image: image / 255)")
+        """:func:`_check_image`, and an :class:`InputError` for an image on another device or dtype than the module
+        (another dtype is let through under autocast)."""
+        _check_image(image)
         weight = next(self.net.parameters())
         autocast = torch.is_autocast_enabled(image.device.type)
         if image.device != weight.device or (image.dtype != weight.dtype and not autocast):
@@ -250,6 +244,34 @@ class ALCN2d(nn.Module):
 
     def extra_repr(self) -> str:
         return f"scale={self.spec.scale}, grid_stride={self.grid_stride}, allow_tf32={self.allow_tf32}"
+
+
+def _check_image(image: torch.Tensor) -> None:
+    """An :class:`InputError` naming what is wrong with an image for :class:`ALCN2d`, and how to fix it: not a
+    tensor, not ``(B, 1 | 3, H, W)``, not float. Its values are not read: a range check would wait for the device on
+    every call."""
+    if not isinstance(image, torch.Tensor):
+        raise InputError(f"image must be a torch.Tensor, got {type(image).__name__} (a NumPy array: torch.from_numpy)")
+    if image.ndim != 4 or image.shape[1] not in (1, 3) or 0 in image.shape:
+        hint = ""
+        if image.ndim == 4 and image.shape[1] == 4:
+            hint = " (RGBA: image[:, :3])"
+        elif image.ndim == 4 and image.shape[-1] in (1, 3):
+            hint = " (channels last: image.permute(0, 3, 1, 2))"
+        elif image.ndim == 3 and image.shape[0] in (1, 3):
+            hint = " (one image: image[None])"
+        elif image.ndim == 3 and image.shape[-1] in (1, 3):
+            hint = " (one image, channels last: image.permute(2, 0, 1)[None])"
+        elif image.ndim == 3:
+            hint = " (a batch of gray images: image[:, None])"
+        elif image.ndim == 2:
+            hint = " (one gray image: image[None, None])"
+        raise InputError(f"image must have shape (B, 1 | 3, H, W), none of them 0, got {tuple(image.shape)}{hint}")
+    if not image.is_floating_point():
+        # a multiplication, as apply() converts integers: a division differs by a rounding, which the divisive step
+        # amplifies (6e-5 on a photograph)
+        scale = {torch.uint8: " (a uint8 image: image * (1 / 255))", torch.uint16: " (image * (1 / 65535))"}
+        raise InputError(f"image must be float in [0, 1], got {image.dtype}{scale.get(image.dtype, '')}")
 
 
 class _OpenCVLab(torch.autograd.Function):
@@ -274,7 +296,7 @@ class _OpenCVLab(torch.autograd.Function):
     @staticmethod
     def backward(ctx: torch.autograd.function.FunctionCtx, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
         (image,) = ctx.saved_tensors
-        _, vjp = torch.func.vjp(ctx.to_lab, image)
+        vjp = torch.func.vjp(ctx.to_lab, image)[1]
         return vjp(grad)[0], None
 
     @staticmethod
@@ -285,7 +307,7 @@ class _OpenCVLab(torch.autograd.Function):
 
 
 def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | None = None) -> torch.Tensor:
-    """Functional :class:`ALCN2d` (the module built once per model and device, then reused).
+    """Functional :class:`ALCN2d` (the module built once per model, device and dtype, then reused).
 
     Args:
         image: ``(B, 1 | 3, H, W)`` float in [0, 1] (3 channels: RGB).
@@ -299,6 +321,7 @@ def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | 
         >>> alcn2d(torch.rand(1, 1, 48, 48), model="lite").shape
         torch.Size([1, 1, 48, 48])
     """
+    _check_image(image)  # before a module is built for the image's dtype, which must be a float one
     key = (model, None if weights is None else str(weights), image.device, image.dtype)
     module = _MODULES.get(key)
     if module is None:

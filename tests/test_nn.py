@@ -1,5 +1,8 @@
 """alcn_cv.nn: ALCN2d / alcn2d, the torch runtime of every shipped model, against apply()."""
 
+import shutil
+import warnings
+
 import cv2
 import numpy as np
 import pytest
@@ -11,6 +14,9 @@ pytest.importorskip("kornia")
 import alcn_cv
 from alcn_cv.data.frames import synthetic_frame
 from alcn_cv.errors import InputError
+from alcn_cv.filters.torch_divisive import reflect101_pad
+from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
+from alcn_cv.filters.torch_resize import upsample_blocks
 from alcn_cv.nn import ALCN2d, alcn2d, batches
 from alcn_cv.runtime import MODELS
 
@@ -124,6 +130,17 @@ def test_a_wrong_input_is_named_before_torch_fails():
         assert module.double()(torch.rand(1, 1, 32, 32, dtype=torch.float64)).dtype == torch.float64
 
 
+def test_the_functional_form_names_a_wrong_input_too():
+    """alcn2d checks the image before it builds a module for its dtype (torch's own error for an integer one); the
+    hint for integers is apply()'s conversion, a multiplication (a division is 6e-5 off apply() on a photograph)."""
+    with pytest.raises(InputError, match=r"got torch.uint8 \(a uint8 image: image \* \(1 / 255\)\)"):
+        alcn2d(torch.zeros(1, 1, 32, 32, dtype=torch.uint8))
+    with pytest.raises(InputError, match=r"must be a torch.Tensor, got ndarray \(a NumPy array: torch.from_numpy\)"):
+        alcn2d(np.zeros((1, 1, 32, 32), np.float32))
+    with pytest.raises(InputError, match=r"one image, channels last: image.permute\(2, 0, 1\)\[None\]"):
+        alcn2d(torch.rand(32, 40, 3))
+
+
 @pytest.mark.parametrize(
     ("dtype", "mean", "largest"),  # measured 5.5e-4 / 6.1e-3 and 3.5e-3 / 5.0e-2: bfloat16 keeps 8 bits of mantissa
     [(torch.float16, 2e-3, 2e-2), (torch.bfloat16, 1e-2, 1e-1)],
@@ -201,6 +218,50 @@ def test_a_callers_autocast_stays_on():
         with torch.autocast("cpu", dtype=torch.bfloat16):
             out = module(x.bfloat16())
     assert torch.isfinite(out).all() and (out.float() - reference).abs().mean() < 1e-2
+
+
+def test_a_callers_autocast_leaves_the_colour_conversions_in_the_images_dtype():
+    """Under the caller's bfloat16 autocast the Lab conversions run in float32 for a float32 image (a bfloat16 einsum
+    moves L by 1.6 of 100); the network and the filters take autocast's precision."""
+    rgb = torch.from_numpy(_unit(_bgr(48, 64)[..., ::-1].copy())).permute(2, 0, 1)[None]
+    module = ALCN2d(model="gain").eval()
+    to_lab, from_lab = RgbToLab(), LabToRgb()
+    with torch.no_grad():
+        lab, reference = to_lab(rgb), module(rgb)
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            autocast_lab, autocast_rgb, out = to_lab(rgb), from_lab(lab), module(rgb)
+    assert autocast_lab.dtype == autocast_rgb.dtype == torch.float32
+    torch.testing.assert_close(autocast_lab, lab, atol=0, rtol=0)
+    torch.testing.assert_close(autocast_rgb, from_lab(lab), atol=0, rtol=0)
+    assert (out - reference).abs().max() < 2e-2
+
+
+@pytest.mark.parametrize("model", ["lite", "paper"])
+def test_torch_jit_trace_records_the_working_scale(model):
+    """The lite and paper models resize to their working scale from the image's sizes, which a trace gives as
+    tensors; the traced module equals the module on the traced size."""
+    x = torch.rand(2, 1, 64, 80)
+    module = ALCN2d(model=model).eval()
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("ignore", torch.jit.TracerWarning)
+        traced = torch.jit.trace(module, x)
+        torch.testing.assert_close(traced(x), module(x), atol=1e-5, rtol=0)
+
+
+@pytest.mark.skipif(
+    not any(shutil.which(c) for c in ("c++", "g++", "clang++")), reason="inductor on the CPU needs a C++ compiler"
+)
+def test_inductor_compiles_the_borders_of_a_small_image():
+    """A side shorter than its pad mirrored (reflect101_pad), then the wide band's edges held (upsample_blocks):
+    inductor fails on an index_select of computed indices and on F.pad's replicate mode after a concatenation (torch
+    2.13), which the module meets on training crops. The graph kept small: on the CPU inductor compiles the whole
+    module for minutes."""
+
+    def borders(x: torch.Tensor) -> torch.Tensor:
+        return upsample_blocks(torch.tanh(reflect101_pad(x, 9, 9, 9, 9)), 4, (90, 90))
+
+    x = torch.rand(1, 1, 6, 5)
+    torch.testing.assert_close(torch.compile(borders)(x), borders(x), atol=1e-6, rtol=0)
 
 
 @pytest.mark.parametrize("model", ["gain", "lite"])

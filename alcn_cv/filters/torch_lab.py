@@ -90,7 +90,8 @@ def lab_to_rgb(lab: torch.Tensor) -> torch.Tensor:
 
 
 class _Conversion(nn.Module):
-    """A conversion of this module with its matrix and spline as buffers (not saved), moved with the module."""
+    """A conversion of this module with its matrix and spline as buffers (not saved), moved with the module; it runs
+    in the image's dtype, a caller's autocast switched off inside."""
 
     matrix: torch.Tensor
     spline: torch.Tensor
@@ -107,7 +108,10 @@ class _Conversion(nn.Module):
         self.register_buffer("spline", spline.clone(), persistent=False)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return self.convert(image, self.matrix.to(image.dtype), self.spline.to(image.dtype))
+        # in the image's own dtype under a caller's autocast too: a bfloat16 einsum moves L by 1.6 (of 100), which a
+        # normalization after it amplifies; the conversion costs little at any precision
+        with torch.autocast(image.device.type, enabled=False):
+            return self.convert(image, self.matrix.to(image.dtype), self.spline.to(image.dtype))
 
 
 class RgbToLab(_Conversion):

@@ -23,7 +23,6 @@ from functools import lru_cache
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from alcn_cv.errors import InputError
 
@@ -97,7 +96,10 @@ def upsample_blocks(small: torch.Tensor, block: int, shape: tuple[int, int]) -> 
     # Sample j of the edge-padded blocks sits on pixel block * j - (block + 1) / 2; pixel x = block * j + q - block / 2
     # is at phase (q + 1/2) / block between samples j and j + 1.
     phases = (torch.arange(block, device=small.device, dtype=small.dtype) + 0.5) / block
-    padded = F.pad(small, (1, 1, 1, 1), mode="replicate")
+    # the edges held by copies, not F.pad's replicate mode: inductor fails on that after a concatenation (torch 2.13,
+    # the reflect-101 border of a small image before it)
+    padded = torch.cat([small[..., :1, :], small, small[..., -1:, :]], -2)
+    padded = torch.cat([padded[..., :1], padded, padded[..., -1:]], -1)
     return _along(_along(padded, -1, phases, block // 2, w), -2, phases, block // 2, h)
 
 
