@@ -42,7 +42,7 @@ from pose.parts import FeaturePartDetector, PartDetector
 from pose.plots import plot_table
 from pose.sequence import load_sequence
 from pose.solver import PoseSolver, PoseTracker, project, rotation_error_deg
-from pose.track import MIN_INLIERS, MIN_INLIERS_NEAR_PRIOR, RANSAC_ITERATIONS
+from pose.track import MIN_GUIDED_RATIO, MIN_INLIERS, MIN_INLIERS_NEAR_PRIOR, RANSAC_ITERATIONS, TRUSTED_GUIDED_RATIO
 
 logger = logging.getLogger(__name__)
 
@@ -140,12 +140,16 @@ def evaluate_sequence(
     outline: np.ndarray | None = None,
     iterations: int = 500,
     min_inliers_near_prior: int | None = None,
+    trusted_guided_ratio: float = 0.0,
+    min_guided_ratio: float = 0.0,
 ) -> tuple[list[PoseScore], float]:
     """Track with ``detector`` (a part detector of :mod:`pose.parts` or :mod:`pose.corners`)
     through a BOP test scene and score every frame; returns scores and fps. ``outline``: the
     detector's box corners for :class:`pose.solver.PoseSolver` (its coverage check);
     ``iterations``, ``min_inliers_near_prior``: its RANSAC iterations and the inliers a pose near
-    the tracker's prediction needs."""
+    the tracker's prediction needs; ``trusted_guided_ratio``, ``min_guided_ratio``: the
+    :class:`pose.solver.PoseTracker`'s check of that pose (``alcn pose track``'s, by detector, in
+    :mod:`pose.track`)."""
     from alcn_cv import io
     from alcn_cv.formats import bop
 
@@ -161,7 +165,9 @@ def evaluate_sequence(
                     iterations=iterations,
                     outline=outline,
                     min_inliers_near_prior=min_inliers_near_prior,
-                )
+                ),
+                trusted_guided_ratio=trusted_guided_ratio,
+                min_guided_ratio=min_guided_ratio,
             )
         img = io.read_image(fr.rgb_path)
         t0 = time.perf_counter()
@@ -315,6 +321,8 @@ def main(
                         outline,
                         RANSAC_ITERATIONS[det_name],
                         MIN_INLIERS_NEAR_PRIOR[det_name],
+                        TRUSTED_GUIDED_RATIO[det_name],
+                        MIN_GUIDED_RATIO[det_name],
                     )
                     s = summarize(scores, diameter)
                     result["sequences"][col] = {**s, "fps": fps, "frames": len(scores)}

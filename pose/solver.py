@@ -473,13 +473,37 @@ class PoseTracker:
     pose comes of it, in the whole frame; the wide search helps after a fast first motion
     (``docs/journal.md``).
 
+    A pose solved from the parts found around the prediction must be borne out by them: the
+    detector matches a part found there to the model points projected near it, so around a wrong
+    prediction the matches lean toward the prediction, and a wrong pose near it fits a fair share
+    of them, but a smaller one than a right prediction's matches give the right pose. When fewer
+    than ``trusted_guided_ratio`` of the matches are its inliers, the whole frame is searched
+    as well, and its pose, found without the prediction, is taken; when the whole frame gives
+    none, the pose found around the prediction is kept if at least ``min_guided_ratio`` of the
+    matches are its inliers, and the frame is lost otherwise. Both ``0``: every pose found
+    around the prediction is kept.
+
     ``events`` collects ``(frame_index, "lost" | "recovered", reason)`` tuples, also logged.
     """
 
-    def __init__(self, solver: PoseSolver, coast: int = 3, wide_search: float = 2.5) -> None:
+    def __init__(
+        self,
+        solver: PoseSolver,
+        coast: int = 3,
+        wide_search: float = 2.5,
+        *,
+        trusted_guided_ratio: float = 0.0,
+        min_guided_ratio: float = 0.0,
+    ) -> None:
+        if not 0 <= min_guided_ratio <= trusted_guided_ratio < 1:
+            raise InputError(
+                "need 0 <= min_guided_ratio <= trusted_guided_ratio < 1, "
+                f"got {min_guided_ratio} and {trusted_guided_ratio}"
+            )
         self.solver = solver
         self.wide_search = wide_search
         self.coast = coast
+        self.trusted_guided_ratio, self.min_guided_ratio = trusted_guided_ratio, min_guided_ratio
         self.events: list[tuple[int, str, str]] = []
         self._poses: list[tuple[int, np.ndarray, np.ndarray]] = []  # the last two accepted (frame, rvec, tvec)
         self._frame: int | None = None  # the last frame given to update
@@ -519,7 +543,10 @@ class PoseTracker:
 
         When the guided search around the prediction gives no pose, the whole frame is searched
         again before the frame is declared lost: after a single known pose (no velocity yet) or
-        a sudden change of motion the object can leave the search window.
+        a sudden change of motion the object can leave the search window. So it is when the
+        pose it gives has fewer than :attr:`trusted_guided_ratio` of its matches as inliers: the
+        whole frame's pose replaces it, and without one it is kept only with at least
+        :attr:`min_guided_ratio` (the class docstring says why).
 
         When that gives no pose either, the detector may propose one from its own evidence
         (:meth:`pose.parts.PartDetector.propose`; the learned detector's scores where a pose
@@ -536,8 +563,19 @@ class PoseTracker:
         """
         prior = self.prior
         est, corr = self._search(image, detector, prior, prior, search_scale=self.search_scale)
-        if not est.ok and prior is not None and detector.uses_prior:
-            est, corr = self._search(image, detector, None, prior)
+        k, n = len(est.inliers), est.num_matches
+        if prior is not None and detector.uses_prior and not (est.ok and k >= self.trusted_guided_ratio * n):
+            found, whole = self._search(image, detector, None, prior)
+            if found.ok or not est.ok:
+                est, corr = found, whole
+            elif k < self.min_guided_ratio * n:
+                est = PoseEstimate(
+                    False,
+                    num_matches=n,
+                    inliers=est.inliers,
+                    reason=f"{k} inliers of {n} matches around the prediction ({k / n:.0%}, need "
+                    f"{self.min_guided_ratio:.0%}); whole frame: {found.reason}",
+                )
         if not est.ok:
             proposal = detector.propose(image, self.solver.K)
             if proposal is not None:

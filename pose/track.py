@@ -133,6 +133,25 @@ MIN_INLIERS = {"features": 12, "corners": 5}
 #: 56.7 to 76.7% correct poses and changed nothing else, with or without normalization; 8 inliers
 #: anywhere also gave 80.0 on #8 but let wrong poses through on #1 without normalization (93.3 -> 80.0).
 MIN_INLIERS_NEAR_PRIOR = {"features": 10, "corners": 4}
+#: A pose found around the tracker's prediction with fewer than this share of the matches found there as
+#: inliers is checked against the whole frame, whose pose replaces it (:class:`pose.solver.PoseTracker`'s
+#: ``trusted_guided_ratio``); without one it is kept only with at least :data:`MIN_GUIDED_RATIO`. The
+#: matches found around a wrong prediction lean toward it, and the pose solved from them stays near it:
+#: on the data engine's sequences #1-#8 (`alcn data pose --frames 30`, seeds 0, 1, 2; ORB, 1000 keypoints,
+#: as `track`, and SIFT, 2000, as `pose eval`; no normalization or ALCN lite: 8 runs, 1920 frames), the
+#: wrong poses found there (> 10 deg or > 10% of the distance off) had a median of 43% of their matches as
+#: inliers, the right ones 82%, but as few as 35% on the overexposed #8. Correct / wrong / lost frames: 1614 /
+#: 145 / 161 without the check, 1724 / 44 / 152 with 0.6 and 0.3, no run with fewer correct ones. On five
+#: of the runs (1009 / 83 / 108 without): 0.5 and 0.3 1049 / 44 / 107, 0.6 and 0.3 1063 / 32 / 105;
+#: a single threshold loses right poses of #8: 0.5 1028 / 25 / 147, 0.4 1034 / 34 / 132, 0.3 1029 /
+#: 49 / 122. The cookie box video tracked with ORB: 455 of 455 frames either way, the drawn box as close
+#: to the image's edges (`alcn pose overlay-error`); 26 of its frames searched whole as well, 0.3 s each
+#: (13 -> 10 fps on 2 cores; none with 0.5), and #1-#8 of seed 0 with ORB took 131 s instead of 76. The
+#: corner detector is not checked: up to 4 candidates per corner, most of them wrong
+#: (:data:`RANSAC_ITERATIONS`), leave its right poses a small share too.
+TRUSTED_GUIDED_RATIO = {"features": 0.6, "corners": 0.0}
+#: See :data:`TRUSTED_GUIDED_RATIO`.
+MIN_GUIDED_RATIO = {"features": 0.3, "corners": 0.0}
 #: RANSAC iterations per detector (a cap: USAC stops once confident). The corner detector's
 #: candidates are few but mostly wrong (up to 4 per corner): on the data engine's sequences #1-#8
 #: (no normalization) 5000 iterations raised the sum over the sequences of the % of correct poses
@@ -314,7 +333,9 @@ def main(
             reprojection_error=reprojection_error,
             iterations=RANSAC_ITERATIONS[detector],
             outline=corners,
-        )
+        ),
+        trusted_guided_ratio=TRUSTED_GUIDED_RATIO[detector],
+        min_guided_ratio=MIN_GUIDED_RATIO[detector],
     )
     scene_gt, info = {}, {}
     times = []
