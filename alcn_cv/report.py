@@ -67,7 +67,7 @@ def spread_cell(spread: dict[str, Any] | None, digits: int = 3, runs: int | None
 
 
 def spread(values: list[float]) -> dict[str, Any] | None:
-    """``{"mean", "std", "values"}`` of a benchmark's runs (seeds, draws); None for none."""
+    """``{"mean", "std", "values"}`` of a benchmark's runs (one per seed); None for none."""
     return {"mean": float(np.mean(values)), "std": float(np.std(values)), "values": values} if values else None
 
 
