@@ -91,7 +91,7 @@ def test_n_is_how_many_samples_a_sheet_shows(tmp_path):
 def test_a_sheet_of_rendered_scenes_and_of_an_unknown_kind(tmp_path):
     """The folders of `alcn data scenes` are previewed (a few frames of a few scenes, a row each); another kind's
     error names the kinds previewed."""
-    out = relief_scenes.generate(tmp_path / "scenes", scenes=3, frames=3, size=32, progress=False)
+    out = relief_scenes.generate(tmp_path / "scenes", scenes=3, frames=3, side=32, progress=False)
     sheet = preview(out, tmp_path / "s.png", n=4)
     assert _tiles(sheet, 256, 256) == (2, 2) and cv2.imread(str(sheet)).std() > 10
     sheet = preview(out, tmp_path / "t.png", n=16)  # 4 scenes of 4 frames asked, 3 of 3 there: a scene a row

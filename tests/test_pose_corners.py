@@ -654,7 +654,7 @@ def test_table1_rows_of_the_corner_detector(posedata, tmp_path):
         tmp_path,
         normalizations=["none"],
         detectors=["corners"],
-        seeds=2,
+        seeds=[0, 1],
         corner_recipe=corner_train.CornerRecipe(iterations=5, copies=0),
         corner_conf="box",
         command="alcn pose eval ...",
