@@ -51,8 +51,7 @@ def benchmark(
         threads: ``cv2.setNumThreads`` (default: OpenCV's).
     """
     from pose.corners import CornerDetector
-    from pose.solver import PoseSolver, PoseTracker
-    from pose.track import MIN_INLIERS, MIN_INLIERS_NEAR_PRIOR, RANSAC_ITERATIONS
+    from pose.track import make_tracker
 
     if threads is not None:
         cv2.setNumThreads(threads)
@@ -69,15 +68,7 @@ def benchmark(
     total, posed = [], 0
     cpu0 = time.process_time()
     for _ in range(repeats):
-        tracker = PoseTracker(
-            PoseSolver(
-                K,
-                min_inliers=MIN_INLIERS["corners"],
-                iterations=RANSAC_ITERATIONS["corners"],
-                min_inliers_near_prior=MIN_INLIERS_NEAR_PRIOR["corners"],
-                outline=det.corners,
-            )
-        )
+        tracker = make_tracker("corners", K, det.corners)
         for i, frame in enumerate(frames):
             t0 = time.perf_counter()
             est, _ = tracker.step(i, frame, det)

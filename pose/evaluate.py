@@ -41,8 +41,8 @@ from pose.model import save as save_model
 from pose.parts import FeaturePartDetector, PartDetector
 from pose.plots import plot_table
 from pose.sequence import load_sequence
-from pose.solver import PoseSolver, PoseTracker, project, rotation_error_deg
-from pose.track import MIN_GUIDED_RATIO, MIN_INLIERS, MIN_INLIERS_NEAR_PRIOR, RANSAC_ITERATIONS, TRUSTED_GUIDED_RATIO
+from pose.solver import PoseSolver, project, rotation_error_deg
+from pose.track import make_tracker
 
 logger = logging.getLogger(__name__)
 
@@ -136,20 +136,13 @@ def evaluate_sequence(
     obj_id: int,
     vertices: np.ndarray,
     units: str,
-    min_inliers: int = 12,
+    kind: str = "features",
     outline: np.ndarray | None = None,
-    iterations: int = 500,
-    min_inliers_near_prior: int | None = None,
-    trusted_guided_ratio: float = 0.0,
-    min_guided_ratio: float = 0.0,
 ) -> tuple[list[PoseScore], float]:
-    """Track with ``detector`` (a part detector of :mod:`pose.parts` or :mod:`pose.corners`)
-    through a BOP test scene and score every frame; returns scores and fps. ``outline``: the
-    detector's box corners for :class:`pose.solver.PoseSolver` (its coverage check);
-    ``iterations``, ``min_inliers_near_prior``: its RANSAC iterations and the inliers a pose near
-    the tracker's prediction needs; ``trusted_guided_ratio``, ``min_guided_ratio``: the
-    :class:`pose.solver.PoseTracker`'s check of that pose (``alcn pose track``'s, by detector, in
-    :mod:`pose.track`)."""
+    """Track with ``detector`` (a part detector of :mod:`pose.parts` or :mod:`pose.corners`, of ``kind``
+    ``"features"`` or ``"corners"``) through a BOP test scene, as ``alcn pose track`` does
+    (:func:`pose.track.make_tracker`), and score every frame; returns scores and fps. ``outline``: the
+    detector's box corners for :class:`pose.solver.PoseSolver` (its coverage check)."""
     from alcn_cv import io
     from alcn_cv.formats import bop
 
@@ -158,17 +151,7 @@ def evaluate_sequence(
     scores, t_total = [], 0.0
     for fr in scene.frames:
         if tracker is None:
-            tracker = PoseTracker(
-                PoseSolver(
-                    fr.K,
-                    min_inliers=min_inliers,
-                    iterations=iterations,
-                    outline=outline,
-                    min_inliers_near_prior=min_inliers_near_prior,
-                ),
-                trusted_guided_ratio=trusted_guided_ratio,
-                min_guided_ratio=min_guided_ratio,
-            )
+            tracker = make_tracker(kind, fr.K, outline)
         img = io.read_image(fr.rgb_path)
         t0 = time.perf_counter()
         est, _ = tracker.step(fr.im_id, img, detector)
@@ -317,12 +300,8 @@ def main(
                         obj_id,
                         corners,
                         units,
-                        MIN_INLIERS[det_name],
+                        det_name,
                         outline,
-                        RANSAC_ITERATIONS[det_name],
-                        MIN_INLIERS_NEAR_PRIOR[det_name],
-                        TRUSTED_GUIDED_RATIO[det_name],
-                        MIN_GUIDED_RATIO[det_name],
                     )
                     s = summarize(scores, diameter)
                     result["sequences"][col] = {**s, "fps": fps, "frames": len(scores)}

@@ -236,6 +236,36 @@ def _overlay_path(overlay: str | Path, source: str | Path) -> Path:
     return overlay
 
 
+def make_tracker(
+    detector: str,
+    K: np.ndarray,
+    outline: np.ndarray | None,
+    dist: np.ndarray | None = None,
+    method: str = "usac_default",
+    min_inliers: int | None = None,
+    reprojection_error: float = 4.0,
+) -> PoseTracker:
+    """The :class:`~pose.solver.PoseTracker` of a ``detector`` (``"features"`` or ``"corners"``): its solver's
+    inliers, RANSAC iterations and checks of a pose near the prediction are the detector's (:data:`MIN_INLIERS`,
+    :data:`RANSAC_ITERATIONS`, :data:`MIN_INLIERS_NEAR_PRIOR`, :data:`TRUSTED_GUIDED_RATIO`,
+    :data:`MIN_GUIDED_RATIO`); ``min_inliers`` overrides the first. ``outline``: the detector's box corners."""
+    min_inliers = MIN_INLIERS[detector] if min_inliers is None else min_inliers
+    return PoseTracker(
+        PoseSolver(
+            K,
+            dist,
+            method=method,
+            min_inliers=min_inliers,
+            min_inliers_near_prior=min(MIN_INLIERS_NEAR_PRIOR[detector], min_inliers),
+            reprojection_error=reprojection_error,
+            iterations=RANSAC_ITERATIONS[detector],
+            outline=outline,
+        ),
+        trusted_guided_ratio=TRUSTED_GUIDED_RATIO[detector],
+        min_guided_ratio=MIN_GUIDED_RATIO[detector],
+    )
+
+
 def main(
     model_path: str | Path,
     source: str | Path,
@@ -322,21 +352,7 @@ def main(
                 f"{image_size[0]}x{image_size[1]}; give the intrinsics at this resolution (--K or --camera)"
             )
     K = camera_matrix_for(model_K, K, model_path)
-    min_inliers = MIN_INLIERS[detector] if min_inliers is None else min_inliers
-    tracker = PoseTracker(
-        PoseSolver(
-            K,
-            dist,
-            method=method,
-            min_inliers=min_inliers,
-            min_inliers_near_prior=min(MIN_INLIERS_NEAR_PRIOR[detector], min_inliers),
-            reprojection_error=reprojection_error,
-            iterations=RANSAC_ITERATIONS[detector],
-            outline=corners,
-        ),
-        trusted_guided_ratio=TRUSTED_GUIDED_RATIO[detector],
-        min_guided_ratio=MIN_GUIDED_RATIO[detector],
-    )
+    tracker = make_tracker(detector, K, corners, dist, method, min_inliers, reprojection_error)
     scene_gt, info = {}, {}
     times = []
     with OverlayWriter(overlay) if overlay is not None else contextlib.nullcontext() as writer:
