@@ -126,9 +126,7 @@ class ALCN2d(nn.Module):
         (blocks of ``1 / scale`` pixels averaged when the sides are multiples of it), bilinear up."""
         if self.spec.scale == 1:
             return gray
-        h, w = gray.shape[-2:]
-        if torch.jit.is_tracing():  # the sizes are 0-d tensors there, which round() refuses; the trace keeps them
-            h, w = int(h), int(w)
+        h, w = map(int, gray.shape[-2:])  # 0-d tensors under torch.jit.trace, which round() refuses
         size = self.spec.working_shape((h, w))
         zoom = 1.0 / self.spec.scale
         if zoom == round(zoom) and gray.shape[-2] % round(zoom) == 0 and gray.shape[-1] % round(zoom) == 0:

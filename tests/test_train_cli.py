@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import tomllib
 
 import cv2
@@ -11,6 +12,7 @@ import torch
 
 from alcn_cv.cli import main
 from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
+from alcn_cv.runtime import resolve_weights
 from alcn_cv.train.config import DISTILL_CONFS, REAL_LIGHT_CONFS, TRAIN_CONFS
 from alcn_cv.weight_file import load_normalizer_file
 
@@ -121,6 +123,12 @@ def test_train_detector_from_a_few_images(tmp_path):
     assert main([*alcn[:5], "alcn:weights=a.npz", *alcn[6:], *weights]) == 2  # the weights given twice
     assert main([*args[:4], *args[6:]]) == 0  # the default ALCN, its model named: a later default changes nothing
     assert torch.load(tmp_path / "det" / "detector.pt", weights_only=True)["method"] == "alcn:scale=1.0:model=gain"
+    colon = tmp_path / "a:b"  # a --weights path with a ":", which a spec's parsing would split
+    colon.mkdir()
+    lite = colon / "lite.npz"
+    shutil.copy(resolve_weights("lite", None), lite)
+    assert main([*args[:4], "--method", "alcn", *args[6:], "--weights", str(lite)]) == 0
+    assert torch.load(tmp_path / "det" / "detector.pt", weights_only=True)["method"] == f"alcn:scale=1.0:weights={lite}"
 
 
 def test_distill_help_and_a_tiny_run(tmp_path, capsys):

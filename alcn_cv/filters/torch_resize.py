@@ -103,7 +103,6 @@ def upsample_blocks(small: torch.Tensor, block: int, shape: tuple[int, int]) -> 
     return _along(_along(padded, -1, phases, block // 2, w), -2, phases, block // 2, h)
 
 
-@lru_cache(maxsize=64)
 def _area_taps(src: int, dst: int) -> tuple[np.ndarray, np.ndarray]:
     """``(taps, dst)`` source indices and float32 weights of ``cv2.INTER_AREA`` from ``src`` to ``dst <= src``
     samples: output ``d`` averages the source interval ``[d s, (d + 1) s)``, ``s = src / dst``, each pixel weighed

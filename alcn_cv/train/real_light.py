@@ -456,7 +456,7 @@ def _checkpoint(path: Path, cfg: RealLightConfig) -> dict[str, Any]:
     if not path.is_file():
         raise WeightFileError(f"{path}: no checkpoint to resume from (a run writes one every save_every steps)")
     try:
-        state = torch.load(path, weights_only=True)
+        state = torch.load(path, map_location="cpu", weights_only=True)  # a run on a GPU resumes on a CPU too
     except Exception as exc:  # torch raises its own unpickling errors
         raise WeightFileError(f"{path}: not a checkpoint of train-real-light ({exc})") from None
     if not isinstance(state, dict) or "config" not in state:

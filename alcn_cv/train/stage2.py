@@ -326,7 +326,9 @@ def main(
     elif weights is not None:
         raise InputError(f"--weights is the Normalizer of --method alcn, not of {name!r}")
     normalization = from_spec(method, **defaults)  # a path's own ":" stays out of the spec's parsing
-    method = pin_default_model(format_spec(name, {**defaults, **given}))
+    method = format_spec(name, {**defaults, **given})
+    if "weights" not in defaults:  # a --weights path may hold a ":", which parsing the spec again would split on
+        method = pin_default_model(method)
     objects = _read_objects(Path(images))
     windows, labels = object_windows(objects, per_image, negatives, extent, seed)
     x = normalize_windows(windows, normalization)
