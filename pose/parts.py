@@ -175,6 +175,11 @@ class FeaturePartDetector:
         self._model_words = (
             _as_words(model.descriptors) if self.norm == cv2.NORM_HAMMING else model.descriptors.astype(np.float32)
         )
+        # the last frame's normalized image and whole-frame correspondences: the tracker's second search of a frame
+        # (the whole frame, after a guided search) costs no normalization, and no detection when the guided search
+        # already fell back to the whole frame
+        self._normalized: tuple[np.ndarray, np.ndarray] | None = None
+        self._whole: tuple[np.ndarray, Correspondences] | None = None
 
     def normalize(self, image: np.ndarray) -> np.ndarray:
         """The normalized grayscale uint8 image the features are computed on."""
@@ -211,7 +216,9 @@ class FeaturePartDetector:
             search_scale: multiplies :attr:`search_radius` (the tracker widens the search when
                 its prediction is uncertain).
         """
-        gray = self.normalize(image)
+        if self._normalized is None or self._normalized[0] is not image:
+            self._normalized = (image, self.normalize(image))
+        gray = self._normalized[1]
         if prior is not None:
             radius = self.search_radius * search_scale
             region = self._region(gray.shape, prior, radius)
@@ -220,9 +227,11 @@ class FeaturePartDetector:
                 pairs = self._guided(pts2d, desc, prior, radius) if n else np.zeros((0, 2), np.int64)
                 if len(pairs) >= self.min_guided:
                     return Correspondences(self.model.points3d[pairs[:, 1]], pts2d[pairs[:, 0]], n)
-        pts2d, desc, n = self._detect(gray, None, self.n_features_global)
-        pairs = self._global(desc) if n else np.zeros((0, 2), np.int64)
-        return Correspondences(self.model.points3d[pairs[:, 1]], pts2d[pairs[:, 0]], n)
+        if self._whole is None or self._whole[0] is not image:
+            pts2d, desc, n = self._detect(gray, None, self.n_features_global)
+            pairs = self._global(desc) if n else np.zeros((0, 2), np.int64)
+            self._whole = (image, Correspondences(self.model.points3d[pairs[:, 1]], pts2d[pairs[:, 0]], n))
+        return self._whole[1]
 
     def _detect(
         self, gray: np.ndarray, region: np.ndarray | None, keep: int
