@@ -3,8 +3,7 @@ reference, RMS 0.409 px, fx 536.07), then the cookie box's part model built from
 in every frame (the box's fitted size against its true 18.9 x 25.8 x 7.5 cm, the frames posed).
 
 Data: ../shared/data/chessboard and ../shared/data/cookie_box (Apache-2.0, OpenCV's samples).
-Time on 2 shared cores: 15 min at load 15 (2026-11-27; calibration seconds, the build most of it, tracking
-5.5 min); about 3 min on an idle machine.
+Time: under 2 min on 2 quiet cores (tracking 16 fps); several times that on a loaded machine.
 
     python experiments/calibration.py
 
