@@ -6,6 +6,7 @@ import torch
 
 from alcn_cv import InputError, WeightFileError
 from alcn_cv.nets import Detector, Normalizer, reflect101_pad
+from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 
@@ -128,3 +129,14 @@ def test_weight_file_errors(tmp_path, net):
     path = save_normalizer_file(tmp_path / "bad.npz", net.state_arrays(), bad_config)
     with pytest.raises(WeightFileError, match="do not fit"):
         Normalizer.from_file(load_normalizer_file(path))
+
+
+@pytest.mark.parametrize("bad", [True, 4.0, 2, 6, -4])
+def test_grid_stride_must_be_a_multiple_of_the_network_stride(bad):
+    with pytest.raises(InputError, match="grid_stride must be a positive multiple of 4"):
+        check_grid_stride(bad, 4)
+
+
+def test_grid_stride_defaults_to_the_network_stride():
+    assert check_grid_stride(None, 8) == 8
+    assert check_grid_stride(16, 8) == 16

@@ -46,7 +46,7 @@ from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.filters.wide_band import band_meta
 from alcn_cv.nets.cpu_inference import cpu_inference, tanh_
-from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
+from alcn_cv.nets.normalizer import Normalizer, check_grid_stride, reflect101_pad
 from alcn_cv.weight_file import NormalizerFile
 
 __all__ = ["ARCHITECTURE", "GainNormalizer", "contrast_equalization", "dog_weights"]
@@ -262,14 +262,7 @@ class GainNormalizer(nn.Module):
         Returns:
             ``(B, N, ceil((H-1)/g)+1, ceil((W-1)/g)+1)``, point ``(i, j)`` at pixel ``(g*i, g*j)``.
         """
-        grid_stride = self.stride if grid_stride is None else grid_stride
-        if (
-            isinstance(grid_stride, bool)
-            or not isinstance(grid_stride, int)
-            or grid_stride < self.stride
-            or grid_stride % self.stride
-        ):
-            raise InputError(f"grid_stride must be a positive multiple of {self.stride}, got {grid_stride!r}")
+        grid_stride = check_grid_stride(grid_stride, self.stride)
         step = grid_stride // self.stride
         if step > 1:  # extend the image so the network's grid reaches the last point of the coarser one
             h, w = image.shape[-2:]

@@ -24,10 +24,27 @@ from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.nets.opencv_runtime import WINDOW
 from alcn_cv.weight_file import NormalizerFile
 
-__all__ = ["Normalizer", "reflect101_pad"]
+__all__ = ["Normalizer", "check_grid_stride", "reflect101_pad"]
 
 STRIDE = 4
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
+
+
+def check_grid_stride(grid_stride: int | None, stride: int) -> int:
+    """``grid_stride``, or the network's ``stride`` for ``None``, checked to be a positive multiple of ``stride``.
+
+    Raises:
+        InputError: anything else (a bool, a float, a smaller or unaligned stride).
+    """
+    grid_stride = stride if grid_stride is None else grid_stride
+    if (
+        isinstance(grid_stride, bool)
+        or not isinstance(grid_stride, int)
+        or grid_stride < stride
+        or grid_stride % stride
+    ):
+        raise InputError(f"grid_stride must be a positive multiple of {stride}, got {grid_stride!r}")
+    return grid_stride
 
 
 class Normalizer(nn.Module):
@@ -141,14 +158,7 @@ class Normalizer(nn.Module):
         """The network's output on a grid of stride ``grid_stride`` (a multiple of :attr:`stride`,
         default :attr:`stride`): ``(B, N, ceil((H-1)/g)+1, ceil((W-1)/g)+1)`` with
         ``g = grid_stride``; grid point ``(i, j)`` is the window centred on pixel ``(g*i, g*j)``."""
-        grid_stride = self.stride if grid_stride is None else grid_stride
-        if (
-            isinstance(grid_stride, bool)
-            or not isinstance(grid_stride, int)
-            or grid_stride < self.stride
-            or grid_stride % self.stride
-        ):
-            raise InputError(f"grid_stride must be a positive multiple of {self.stride}, got {grid_stride!r}")
+        grid_stride = check_grid_stride(grid_stride, self.stride)
         h, w = image.shape[-2:]
         gh, gw = math.ceil((h - 1) / grid_stride) + 1, math.ceil((w - 1) / grid_stride) + 1
         half = WINDOW // 2
