@@ -1,4 +1,4 @@
-"""The runtime's input contract: validation of images, intensity images and batches of windows.
+"""The input contract: validation of images, intensity images, batches of windows and run seeds.
 
 Every normalization's :meth:`~alcn_cv.enhance.base.Normalization.apply` and the Normalizer
 runtimes check their input here, so a bad array ends in one :class:`~alcn_cv.errors.InputError`
@@ -7,11 +7,22 @@ that names the problem.
 
 from __future__ import annotations
 
+import numbers
+from collections.abc import Iterable
+
 import numpy as np
 
 from alcn_cv.errors import InputError
 
-__all__ = ["FULL_SCALE", "SUPPORTED_DTYPES", "check_gray", "check_image", "check_positive", "unit_windows"]
+__all__ = [
+    "FULL_SCALE",
+    "SUPPORTED_DTYPES",
+    "check_gray",
+    "check_image",
+    "check_positive",
+    "check_seeds",
+    "unit_windows",
+]
 
 SUPPORTED_DTYPES = (np.uint8, np.uint16, np.float32)
 FULL_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
@@ -29,6 +40,34 @@ def check_positive(name: str, value: float) -> float:
     if not np.isfinite(value) or value <= 0:
         raise InputError(f"{name} must be positive and finite, got {value}")
     return value
+
+
+def check_seeds(seeds: Iterable[int]) -> list[int]:
+    """``seeds``, the seeds a command repeats its runs with, as a list of ints: at least one, each a non-negative
+    integer (NumPy's generators take no negative seed), none twice (a repeated seed would count its run twice in the
+    spread over seeds).
+
+    Example:
+        >>> check_seeds((0, 1, 2))
+        [0, 1, 2]
+
+    Raises:
+        InputError: no seed, a seed that is no non-negative integer, or a repeated one; the message names them.
+    """
+    given = list(seeds)
+    good = [isinstance(s, numbers.Integral) and not isinstance(s, bool) and s >= 0 for s in given]
+    bad = [s for s, ok in zip(given, good) if not ok]
+    valid = [int(s) for s, ok in zip(given, good) if ok]
+    repeated = sorted({s for i, s in enumerate(valid) if s in valid[:i]})
+    if not given or bad or repeated:
+        problems = ([f"not a non-negative integer: {bad}"] if bad else []) + (
+            [f"repeated: {repeated}"] if repeated else []
+        )
+        raise InputError(
+            f"seeds must be distinct non-negative integers, at least one; got {given}"
+            + (f" ({'; '.join(problems)})" if problems else "")
+        )
+    return valid
 
 
 def check_image(img: object) -> np.ndarray:

@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from alcn_cv.checks import check_seeds
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none
@@ -226,9 +227,7 @@ def main(
             f"{data_dir}: expected train/000001, test/0000NN (those of --sequences) and "
             f"models/obj_{obj_id:06d}.ply (`alcn data pose`)"
         )
-    seeds = [int(seed) for seed in seeds]
-    if not seeds or min(seeds) < 0 or len(set(seeds)) < len(seeds):
-        raise InputError(f"seeds must be distinct non-negative integers, at least one; got {seeds}")
+    seeds = check_seeds(seeds)
     corners = read_box_corners(model_ply)
     diameter = float(np.linalg.norm(corners.max(0) - corners.min(0)))
     columns = [f"#{int(p.name)}" for p in tests]

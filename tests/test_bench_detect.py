@@ -15,6 +15,7 @@ from alcn_cv.bench import detect_data, policies  # noqa: E402
 from alcn_cv.bench import detect_settings as S  # noqa: E402
 from alcn_cv.cli import build_parser  # noqa: E402
 from alcn_cv.cli import main as cli_main  # noqa: E402
+from alcn_cv.enhance.registry import build_methods  # noqa: E402
 from alcn_cv.errors import DatasetError, InputError  # noqa: E402
 from alcn_cv.nets import Detector  # noqa: E402
 
@@ -106,7 +107,12 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
 
     # a run failing once its method is built (not the spec's fault: out of memory, a device error)
     real_normalize = D._normalize_training
-    monkeypatch.setattr(D, "_normalize_training", lambda m, p, ts: broken() if m == "he" else real_normalize(m, p, ts))
+    monkeypatch.setattr(
+        D, "_normalize_training", lambda norm, ts: broken() if norm.name == "he" else real_normalize(norm, ts)
+    )
+    built = []
+    real_create = D.create_normalization
+    monkeypatch.setattr(D, "create_normalization", lambda m, p=None: built.append(m) or real_create(m, p))
     settings = S.DetectSettings(
         methods=["none", "dog", "he"],
         real_images=[1],
@@ -125,6 +131,7 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     )
     saved = json.loads((out / "detect.json").read_text())
     assert saved["runs"]["he|1|raw|0"]["error"] == "RuntimeError: boom"  # reported, the run went on
+    assert built == ["none", "dog", "he", "dog"]  # each method built once, DoG again with its tuned parameters
     for key in ("none|1|raw|0", "dog|1|local|0"):
         aucs = [obj["auc"] for obj in saved["runs"][key]["objects"].values()]
         assert any(a is not None for a in aucs) and all(a is None or 0 <= a <= 1 for a in aucs), aucs
@@ -174,7 +181,7 @@ def test_a_bad_weight_file_is_one_line_before_any_work(small_data, tmp_path, cap
     assert err == f"alcn bench: error: method 'alcn:weights={bad}': weight file {bad} is not a .npz archive"
     assert not out.exists()
     with pytest.raises(InputError, match="'alcn:scale=-1'"):  # a bad parameter, too
-        D.build_methods(["alcn:scale=-1"])
+        build_methods(["alcn:scale=-1"], D.create_normalization)
 
 
 def _report_result(settings, runs, names=("a", "b")):

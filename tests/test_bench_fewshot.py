@@ -14,6 +14,7 @@ from alcn_cv.bench.detect import create_normalization  # noqa: E402
 from alcn_cv.bench.policies import InputPolicy  # noqa: E402
 from alcn_cv.cli import main as cli_main  # noqa: E402
 from alcn_cv.data.phos import PhosBatch  # noqa: E402
+from alcn_cv.enhance.registry import build_methods  # noqa: E402
 from alcn_cv.errors import InputError  # noqa: E402
 from alcn_cv.train import fewshot as F  # noqa: E402
 
@@ -48,7 +49,7 @@ def test_every_spec_reaches_the_detector_through_normalize_windows(policy, monke
     monkeypatch.setattr(F, "score_inputs", record)
     settings = B.FewShotSettings(methods=["none", "dog", "alcn:model=gain"], policies=[policy], seeds=[0], objects=2)
     runs = {policy: {m: [] for m in settings.methods}}
-    B._run_seed(settings, 0, B.build_methods(settings.methods), runs, B.tqdm(disable=True))
+    B._run_seed(settings, 0, build_methods(settings.methods, create_normalization), runs, B.tqdm(disable=True))
     train_x, _, test = _tiny_data(settings.setup(0))
     for method in settings.methods:
         norm = create_normalization(method, {})

@@ -11,6 +11,7 @@ import torch
 from alcn_cv.data.scenes import load_scene_folder
 from alcn_cv.filters.torch_divisive import gaussian_energy
 from alcn_cv.nets.gain import GainNormalizer
+from alcn_cv.train.checkpoint import CHECKPOINT_FORMAT, load_checkpoint
 from alcn_cv.train.real_light import (
     RealLightConfig,
     _normalized_centres,
@@ -294,7 +295,11 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(tmp_path, monkeypatch):
         np.testing.assert_array_equal(resumed[key], value, err_msg=key)
     history = json.loads((tmp_path / "resumed" / "history.json").read_text())
     assert [h["step"] for h in history] == [1, 2, 3, 4]
-    with pytest.raises(WeightFileError, match="differ in lr"):
+    with pytest.raises(WeightFileError, match="differs in lr"):
         train_real_light(dataclasses.replace(cfg, lr=0.01), tmp_path / "resumed", resume=True)
-    with pytest.raises(WeightFileError, match="no checkpoint"):
+    with pytest.raises(WeightFileError, match="not found"):
         train_real_light(cfg, tmp_path / "never", resume=True)
+    path = tmp_path / "resumed" / "checkpoint.pt"
+    torch.save({**torch.load(path, weights_only=True), "format": CHECKPOINT_FORMAT}, path)  # as alcn train's
+    with pytest.raises(WeightFileError, match="not a checkpoint of alcn train-real-light"):
+        load_checkpoint(path, cfg)

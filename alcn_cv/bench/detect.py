@@ -59,7 +59,6 @@ from __future__ import annotations
 import logging
 import os
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -85,8 +84,7 @@ from alcn_cv.bench.plots import plot_pr_curves
 from alcn_cv.bench.policies import InputPolicy
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import from_spec, parse_spec
-from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.enhance.registry import build_methods, from_spec, parse_spec
 from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import machine, spread
@@ -95,7 +93,6 @@ if TYPE_CHECKING:
     from torch import nn
 
 __all__ = [
-    "build_methods",
     "create_normalization",
     "detect_in_image",
     "fixed_boxes",
@@ -221,32 +218,16 @@ def _make_net(method: str, num_classes: int, config: tuple[int, int] | None = No
     return Detector(num_classes)
 
 
-def create_normalization(method: str, params: dict[str, Any]) -> Normalization:
-    """``method`` is a spec (``NAME[:KEY=VALUE...]``); ``params`` (tuned ones) fill what it does not give."""
+def create_normalization(method: str, params: dict[str, Any] | None = None) -> Normalization:
+    """The normalization a benchmark's windows and test images go through: ``method`` is a spec
+    (``NAME[:KEY=VALUE...]``), ``params`` (tuned ones) fill what it does not give; a deep baseline's is ``none``."""
     name, _ = parse_spec(method)
     if name in DEEP_BASELINES:
         return from_spec("none")
+    params = params or {}
     if name == "alcn":  # windows and test images are already at the working scale
         params = {"scale": 1.0, **params}
     return from_spec(method, **params)
-
-
-def build_methods(
-    methods: list[str], build: Callable[[str], Normalization] = lambda spec: create_normalization(spec, {})
-) -> dict[str, Normalization]:
-    """Every method of a benchmark, built (its weight file loaded) before any work: a bad parameter or weight file
-    ends the command with one line naming the method, not with a failed run found after the long work.
-
-    Raises:
-        InputError: a method that cannot be built; the message names its spec.
-    """
-    norms = {}
-    for spec in methods:
-        try:
-            norms[spec] = build(spec)
-        except (InputError, WeightFileError) as exc:
-            raise InputError(f"method {spec!r}: {exc}") from None
-    return norms
 
 
 def window_agreement(
@@ -419,12 +400,14 @@ def summarize(runs: dict[str, Any], settings: DetectSettings, names: list[str]) 
 
 @dataclass
 class _Run:
-    """What the runs of a benchmark share and gather: data, test images, training sets (built
-    once per seed and number of real images, shared by every method), tuned parameters, results."""
+    """What the runs of a benchmark share and gather: data, test images, the normalizations (built once per method
+    and parameters), training sets (built once per seed and number of real images, shared by every method), tuned
+    parameters, results."""
 
     data: DetectData
     settings: DetectSettings
     test_images: list[ScaledImage]
+    norms: dict[tuple[str, str], Normalization] = field(default_factory=dict)
     training_sets: dict[tuple[int, int], TrainingSet] = field(default_factory=dict)
     tuned: dict[int, dict[str, Any]] = field(default_factory=dict)
     runs: dict[str, Any] = field(default_factory=dict)
@@ -449,12 +432,23 @@ def _tune(state: _Run) -> None:
         state.tuned[n] = tuning.tune_all(ts.windows, ts.labels, settings.seeds[0], to_tune)
 
 
-def _normalize_training(
-    method: str, params: dict[str, Any], ts: TrainingSet
-) -> tuple[Normalization, np.ndarray, np.ndarray, float]:
+def _params_key(params: dict[str, Any]) -> str:
+    """A key of tuned parameters, the same whatever their order."""
+    return repr(sorted(params.items()))
+
+
+def _normalization(state: _Run, method: str, params: dict[str, Any]) -> Normalization:
+    """``method`` with its tuned ``params`` (:func:`create_normalization`), built once per method and parameters:
+    a normalization holds no state between calls, so every seed's runs share it."""
+    key = (method, _params_key(params))
+    if key not in state.norms:
+        state.norms[key] = create_normalization(method, params)
+    return state.norms[key]
+
+
+def _normalize_training(norm: Normalization, ts: TrainingSet) -> tuple[Normalization, np.ndarray, np.ndarray, float]:
     """The method, its training and validation windows normalized, and the seconds it took."""
     t0 = time.perf_counter()
-    norm = create_normalization(method, params)
     return norm, norm.normalize_windows(ts.windows), norm.normalize_windows(ts.val_windows), time.perf_counter() - t0
 
 
@@ -488,7 +482,7 @@ def _train_and_score(
     else:
         net = _train(method, train, ts.labels, num_classes, settings, seed, val)
     t_train = time.perf_counter() - t1
-    cache_key = repr(sorted(params.items()))
+    cache_key = _params_key(params)
     if cache_key not in test_cache:  # test images do not depend on the seed
         test_cache[cache_key] = [ScaledImage(t.id, norm.normalize(t.image), t.sx, t.sy) for t in state.test_images]
         state.agreement.setdefault(method, {})[cache_key] = window_agreement(
@@ -519,7 +513,9 @@ def _run_method(state: _Run, method: str, out: Path, bar: tqdm) -> None:
             try:
                 if normalized is None:  # once per method and training set, shared by the policies
                     try:
-                        normalized = _normalize_training(method, params, state.training(seed, n_real))
+                        normalized = _normalize_training(
+                            _normalization(state, method, params), state.training(seed, n_real)
+                        )
                     except Exception as exc:
                         normalized = exc
                 if isinstance(normalized, Exception):
@@ -595,14 +591,16 @@ def main(
 
     settings = settings or DetectSettings()
     settings.check()
-    build_methods(settings.methods)  # a bad spec or weight file: one line before any work (runs build their own)
+    # a bad spec or weight file: one line before any work; the untuned runs use these
+    built = build_methods(settings.methods, create_normalization)
     if settings.threads:
         torch.set_num_threads(settings.threads)
     start = time.perf_counter()
     data = load_data(data_dir, working_scale, box_size)
     out = Path(out_dir)
     make_folder(out)
-    state = _Run(data, settings, read_test_images(data, settings.max_test_images))
+    norms = {(spec, _params_key({})): norm for spec, norm in built.items()}
+    state = _Run(data, settings, read_test_images(data, settings.max_test_images), norms)
     logger.info("read %d test images", len(state.test_images))
     _tune(state)
     with tqdm(

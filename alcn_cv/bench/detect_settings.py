@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from alcn_cv.checks import check_seeds
 from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
 
@@ -113,8 +114,7 @@ class DetectSettings:
             raise InputError(f"the deep baselines {', '.join(DEEP_BASELINES)} take no parameters")
         if len(set(self.methods)) != len(self.methods):
             raise InputError(f"a method is listed twice: {self.methods}")
-        if not self.seeds or len(set(self.seeds)) != len(self.seeds):
-            raise InputError(f"seeds must be distinct and at least one, got {self.seeds}")
+        check_seeds(self.seeds)
         if not self.real_images or min(self.real_images) < 1:
             raise InputError(f"real_images must be positive integers, got {self.real_images}")
         bad = [p for p in self.policies if p not in POLICIES]

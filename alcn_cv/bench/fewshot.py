@@ -42,11 +42,12 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.detect import build_methods
+from alcn_cv.bench.detect import create_normalization
 from alcn_cv.bench.detect_settings import POLICIES, POLICY_DESCRIPTIONS
 from alcn_cv.bench.policies import InputPolicy
+from alcn_cv.checks import check_seeds
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import available, parse_spec
+from alcn_cv.enhance.registry import available, build_methods, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import (
@@ -114,8 +115,7 @@ class FewShotSettings:
         bad = [p for p in self.policies if p not in POLICIES]
         if bad or not self.policies:
             raise InputError(f"unknown or no policy {bad}; choose from {', '.join(POLICIES)}")
-        if not self.seeds or len(set(self.seeds)) != len(self.seeds) or min(self.seeds) < 0:
-            raise InputError(f"seeds must be distinct, non-negative and at least one, got {self.seeds}")
+        check_seeds(self.seeds)
         if (
             min(
                 self.objects,
@@ -384,7 +384,8 @@ def main(
     import torch
 
     settings = (settings or FewShotSettings()).check()
-    norms = build_methods(settings.methods)  # a bad spec or weight file: one line before any seed runs
+    # a bad spec or weight file: one line before any seed runs
+    norms = build_methods(settings.methods, create_normalization)
     if settings.threads:
         torch.set_num_threads(settings.threads)
     start = time.perf_counter()

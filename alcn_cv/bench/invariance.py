@@ -34,10 +34,9 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.detect import build_methods
 from alcn_cv.bench.plots import wrap_label
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import available, from_spec, parse_spec
+from alcn_cv.enhance.registry import available, build_methods, parse_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, make_folder, read_image, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
@@ -216,7 +215,7 @@ def main(
     unknown = [m for m in methods if parse_spec(m)[0] not in available()]
     if unknown:
         raise InputError(f"unknown method(s) {', '.join(unknown)}; available: {', '.join(available())}")
-    norms = build_methods(methods, from_spec)
+    norms = build_methods(methods)
     objects = load_objects(data_dir, scale)
     if figure_object not in (None, "all") and figure_object not in [o.name for o in objects]:
         raise InputError(f"no object {figure_object!r}; objects: {', '.join(o.name for o in objects)}")

@@ -88,10 +88,11 @@ def plot_pr_curves(result: dict[str, Any], names: list[str], out: Path) -> list[
     styles = method_styles(settings.methods)
     seed = settings.seeds[0]
     untested = untested_objects(result)
+    used_by_n = {n_real: images_used(result, n_real) for n_real in settings.real_images}
     written = []
     for name in names:
         for n_real in settings.real_images:
-            used = images_used(result, n_real)
+            used = used_by_n[n_real]
             real = real_images_label(n_real, {name: used[name]} if name in used else {})
             plt, fig, axes = new_figure(1, len(settings.policies), figsize=(7.6 * len(settings.policies), 4.8))
             for ax, policy in zip(axes[0], settings.policies):

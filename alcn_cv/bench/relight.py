@@ -50,6 +50,7 @@ from tqdm.auto import tqdm
 
 from alcn_cv.bench.policies import LOCAL_BOX, local_standardize
 from alcn_cv.bench.relight_report import write_report
+from alcn_cv.checks import check_seeds
 from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, select_scenes, shared_root
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
@@ -457,8 +458,7 @@ def main(
     settings = settings.check()
     methods = list(methods)
     _check_methods(methods)
-    if not seeds or len(set(seeds)) != len(seeds):  # a repeated seed would add a copy to the spread
-        raise InputError(f"seeds must be distinct and at least one, got {list(seeds)}")
+    seeds = check_seeds(seeds)
     roots = [Path(p) for p in data] if data else [shared_root("webcam"), shared_root("psm")]
     scenes = load_scenes(roots, max_frames)
     if leave_one_out is not None:

@@ -5,12 +5,15 @@ the model, the optimizer, the torch random state and the :class:`TrainState`, so
 resumed from it ends with the same weights as an uninterrupted one. The weight file
 (``alcn_normalizer.npz``, :mod:`alcn_cv.weight_file`) holds the Normalizer with ``trained = True``
 and the record of its training.
+
+Every checkpoint, ``alcn train-real-light``'s (:mod:`alcn_cv.train.real_light`) too, starts with
+:func:`checkpoint_header` and is read back by :func:`load_checkpoint`.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,7 +25,7 @@ from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.io import atomic_write, make_folder
 from alcn_cv.report import machine
-from alcn_cv.train.config import TrainConfig
+from alcn_cv.train.config import RealLightConfig, TrainConfig
 from alcn_cv.train.models import JointModel, measure_output_range
 from alcn_cv.weight_file import save_normalizer_file
 
@@ -32,7 +35,9 @@ if TYPE_CHECKING:
 __all__ = [
     "CHECKPOINT_FORMAT",
     "CHECKPOINT_VERSION",
+    "REAL_LIGHT_CHECKPOINT_FORMAT",
     "TrainState",
+    "checkpoint_header",
     "load_checkpoint",
     "restore_checkpoint",
     "run_folder",
@@ -42,7 +47,15 @@ __all__ = [
 ]
 
 CHECKPOINT_FORMAT = "alcn-cv/checkpoint"
+#: The format of ``alcn train-real-light``'s checkpoints: another run state than ``alcn train``'s.
+REAL_LIGHT_CHECKPOINT_FORMAT = "alcn-cv/real-light-checkpoint"
 CHECKPOINT_VERSION = 1
+
+#: The checkpoint format and the command of each kind of run configuration.
+_KINDS: dict[type, tuple[str, str]] = {
+    TrainConfig: (CHECKPOINT_FORMAT, "alcn train"),
+    RealLightConfig: (REAL_LIGHT_CHECKPOINT_FORMAT, "alcn train-real-light"),
+}
 
 
 @dataclass
@@ -96,10 +109,7 @@ def save_checkpoint(
 ) -> None:
     """Write the checkpoint atomically (``status``: ``"epoch"`` or ``"interrupted"``)."""
     ckpt = {
-        "format": CHECKPOINT_FORMAT,
-        "version": CHECKPOINT_VERSION,
-        "versions": versions(),
-        "config": cfg.to_dict(),
+        **checkpoint_header(cfg),
         "status": status,
         "epoch": state.epoch,
         "step_in_epoch": state.step_in_epoch,
@@ -113,33 +123,58 @@ def save_checkpoint(
     atomic_write(path, lambda f: torch.save(ckpt, f))
 
 
-def load_checkpoint(path: str | Path, cfg: TrainConfig | None = None) -> dict[str, Any]:
-    """Read a training checkpoint and check that it fits ``cfg``.
+def _config_dict(cfg: TrainConfig | RealLightConfig) -> dict[str, Any]:
+    return cfg.to_dict() if isinstance(cfg, TrainConfig) else asdict(cfg)
+
+
+def checkpoint_header(cfg: TrainConfig | RealLightConfig) -> dict[str, Any]:
+    """The entries of a checkpoint that :func:`load_checkpoint` checks: the format of the command ``cfg`` configures
+    (``alcn train`` or ``alcn train-real-light``), its version, the versions that write it and ``cfg``."""
+    return {
+        "format": _KINDS[type(cfg)][0],
+        "version": CHECKPOINT_VERSION,
+        "versions": versions(),
+        "config": _config_dict(cfg),
+    }
+
+
+def _differences(saved: dict[str, Any], cfg: TrainConfig | RealLightConfig) -> list[str]:
+    """The settings of ``cfg`` a run resumed from a checkpoint written with ``saved`` must keep and does not: all of
+    a :class:`RealLightConfig`; a :class:`TrainConfig`'s model, data, seed and optimisation (not its run options)."""
+    now = _config_dict(cfg)
+    if isinstance(cfg, RealLightConfig):
+        return sorted(k for k, v in now.items() if saved.get(k) != v)
+    diff = [f"{t}.{k}" for t in ("model", "data") for k in now[t] if saved[t].get(k) != now[t][k]]
+    diff += [k for k in ("seed",) if saved[k] != now[k]]
+    diff += [f"optim.{k}" for k in now["optim"] if saved["optim"].get(k) != now["optim"][k]]
+    return diff
+
+
+def load_checkpoint(path: str | Path, cfg: TrainConfig | RealLightConfig | None = None) -> dict[str, Any]:
+    """Read a checkpoint of ``alcn train`` or ``alcn train-real-light`` (:func:`checkpoint_header`) and, given
+    ``cfg``, check that it is one of the command ``cfg`` configures, written with the settings a resumed run keeps.
 
     Raises:
-        WeightFileError: missing, corrupt, of another format or version (the message gives the
-            versions that wrote it and this one), or written for another model configuration.
+        WeightFileError: missing, corrupt, of another format (another command's) or version (the message gives the
+            versions that wrote it and this one), or written with other settings (named).
     """
     path = Path(path)
     if not path.is_file():
-        raise WeightFileError(f"checkpoint not found: {path}")
+        raise WeightFileError(f"checkpoint not found: {path} (a run writes it at its first save)")
     try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)  # a run on a GPU resumes on a CPU too
     except Exception as exc:  # torch raises many kinds for a damaged zip or pickle
         raise WeightFileError(f"checkpoint {path} is corrupt or unreadable ({type(exc).__name__}: {exc})") from None
-    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
-        raise WeightFileError(f"{path} is not an alcn-cv training checkpoint")
+    kinds = [_KINDS[type(cfg)]] if cfg is not None else list(_KINDS.values())
+    if not isinstance(ckpt, dict) or ckpt.get("format") not in [fmt for fmt, _ in kinds]:
+        raise WeightFileError(f"{path} is not a checkpoint of {' or '.join(command for _, command in kinds)}")
     if ckpt.get("version") != CHECKPOINT_VERSION:
         raise WeightFileError(
             f"{path}: checkpoint version {ckpt.get('version')} written by {ckpt.get('versions')}; this alcn-cv "
             f"({versions()}) reads version {CHECKPOINT_VERSION}"
         )
     if cfg is not None:
-        saved = ckpt["config"]
-        now = cfg.to_dict()
-        diff = [f"{t}.{k}" for t in ("model", "data") for k in now[t] if saved[t].get(k) != now[t][k]]
-        diff += [k for k in ("seed",) if saved[k] != now[k]]
-        diff += [f"optim.{k}" for k in now["optim"] if saved["optim"].get(k) != now["optim"][k]]
+        diff = _differences(ckpt["config"], cfg)
         if diff:
             raise WeightFileError(
                 f"checkpoint {path} was written with another configuration (differs in {', '.join(diff)}; "

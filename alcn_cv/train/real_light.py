@@ -51,13 +51,13 @@ from tqdm import tqdm
 
 from alcn_cv.data.permissive_images import relit_permissive_scenes
 from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
-from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.report import log_to, machine
-from alcn_cv.train.checkpoint import run_folder
+from alcn_cv.train.checkpoint import checkpoint_header, load_checkpoint, run_folder
 from alcn_cv.train.config import RealLightConfig
 from alcn_cv.train.models import CentreMixture
 from alcn_cv.weight_file import save_normalizer_file
@@ -447,35 +447,13 @@ def training_run(cfg: RealLightConfig, out: str | Path, resume: bool = False) ->
         yield folder
 
 
-def _checkpoint(path: Path, cfg: RealLightConfig) -> dict[str, Any]:
-    """The state a run saved in ``path`` (:func:`fit`'s ``save``), checked to be a run of ``cfg``.
-
-    Raises:
-        WeightFileError: no such file, not a checkpoint, or a run of other settings (named).
-    """
-    if not path.is_file():
-        raise WeightFileError(f"{path}: no checkpoint to resume from (a run writes one every save_every steps)")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)  # a run on a GPU resumes on a CPU too
-    except Exception as exc:  # torch raises its own unpickling errors
-        raise WeightFileError(f"{path}: not a checkpoint of train-real-light ({exc})") from None
-    if not isinstance(state, dict) or "config" not in state:
-        raise WeightFileError(f"{path}: not a checkpoint of train-real-light")
-    if "draws" not in state:
-        raise WeightFileError(f"{path} was written before --resume existed (no state of its draws); run without it")
-    differ = sorted(k for k, v in asdict(cfg).items() if state["config"].get(k) != v)
-    if differ:
-        raise WeightFileError(f"{path} was written with other settings (they differ in {', '.join(differ)})")
-    logger.info("resuming from step %d of %d", state["step"], cfg.steps)
-    return state
-
-
 def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any], progress: bool, resume: bool = False) -> Path:
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     net = GainNormalizer(**cfg.net)
-    start = _checkpoint(out / "checkpoint.pt", cfg) if resume else None
+    start = load_checkpoint(out / "checkpoint.pt", cfg) if resume else None
     if start is not None:
+        logger.info("resuming from step %d of %d", start["step"], cfg.steps)
         net.load_state_dict(start["net"])
     if max(kernel_radius(s) for s in net.sigmas) > cfg.patch // 2:
         raise InputError(
@@ -486,6 +464,7 @@ def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any], progress: bo
     def save(step: int, seconds: float, opt: torch.optim.Optimizer, history: list[dict]) -> None:
         _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds, record)
         state = {
+            **checkpoint_header(cfg),
             "net": net.state_dict(),
             "opt": opt.state_dict(),
             "step": step,
@@ -493,7 +472,6 @@ def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any], progress: bo
             "history": history,
             "draws": json.dumps(rng.bit_generator.state),  # the next step's draws, as an uninterrupted run's
             "torch_rng": torch.get_rng_state(),
-            "config": asdict(cfg),
         }
         atomic_write(out / "checkpoint.pt", lambda f, state=state: torch.save(state, f))
 
@@ -517,8 +495,8 @@ def fit(
     """The training loop of the gain Normalizer and of its baselines: ``cfg.steps`` steps of Adam at ``cfg.lr`` on
     ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to
     norm 5; every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer, history)``, a line of
-    log and ``out/history.json``; ``start``, a checkpoint's state (:func:`_checkpoint`), goes on after its step.
-    Leaves ``net`` in eval mode.
+    log and ``out/history.json``; ``start``, a checkpoint's state (:func:`~alcn_cv.train.checkpoint.load_checkpoint`),
+    goes on after its step. Leaves ``net`` in eval mode.
 
     Returns:
         The seconds it took (with the checkpoint's).
