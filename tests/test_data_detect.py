@@ -63,6 +63,10 @@ def test_bad_arguments(tmp_path):
         detect.generate(tmp_path / "x", size="huge")
     with pytest.raises(InputError):
         detect.generate(tmp_path / "x", size="small", width=100, progress=False)
+    with pytest.raises(InputError):  # 0 was read as the size's default width
+        detect.generate(tmp_path / "x", size="small", width=0, progress=False)
+    with pytest.raises(InputError, match="p_object"):
+        detect.generate(tmp_path / "x", size="small", p_object=1.5, progress=False)
     assert not (tmp_path / "x").exists()
 
 

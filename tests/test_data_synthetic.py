@@ -89,3 +89,15 @@ def test_bad_input():
         augment(np.zeros((0, 0), np.uint8), box, 2, rng)
     with pytest.raises(InputError):
         sample_negatives([img], [], 2, rng)
+    with pytest.raises(InputError):
+        sample_negatives([img], [box], -1, rng)
+
+
+def test_a_box_past_the_top_left_corner_keeps_its_object():
+    """A box starting at a negative coordinate sliced its background mask from the far side of the image: empty,
+    so the whole window, object included, was replaced by background."""
+    img = np.full((100, 100), 200, np.uint8)
+    img[:30, :30] = 20  # the object, in the corner; its box runs 5 px past it
+    kwargs = dict(replace_background=1.0, noise=0, intensity_offset=0, intensity_scale=(1, 1), max_shift=0)
+    win = augment(img, [-5, -5, 35, 35], 8, np.random.default_rng(0), **kwargs)
+    assert (win[:, 28:36, 28:36] == 20).all()  # the object's centre, whatever the background

@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from alcn_cv.data.textures import SKIMAGE_PHOTOGRAPHS, photo_crop, photos, random_texture, skimage_photograph
+from alcn_cv.data.textures import (
+    SKIMAGE_PHOTOGRAPHS,
+    photo_crop,
+    photos,
+    procedural_texture,
+    random_texture,
+    skimage_photograph,
+)
 from alcn_cv.errors import DatasetError, InputError
 
 skimage_data = pytest.importorskip("skimage.data")
@@ -46,3 +53,12 @@ def test_crops_and_textures_are_linear_rgb_and_deterministic():
     assert crop.shape == (40, 56, 3) and crop.dtype == np.float32 and 0 <= crop.min() <= crop.max() <= 1
     a = random_texture(np.random.default_rng(1), 32, p_photo=1.0)
     assert np.array_equal(a, random_texture(np.random.default_rng(1), 32, p_photo=1.0)) and a.std() > 0
+
+
+def test_procedural_texture_kinds_and_sizes():
+    """An unknown kind was a ValueError raised after drawing; a NumPy integer side could not be unpacked."""
+    with pytest.raises(InputError, match="unknown procedural texture"):
+        procedural_texture(np.random.default_rng(0), 16, "plaid")
+    a = procedural_texture(np.random.default_rng(3), np.int64(24), "blobs")
+    assert a.shape == (24, 24, 3) and np.array_equal(a, procedural_texture(np.random.default_rng(3), 24, "blobs"))
+    assert photo_crop(np.random.default_rng(0), np.int32(20)).shape == (20, 20, 3)

@@ -134,3 +134,30 @@ def test_caller_array_untouched(rng):
     alcn_filter(image, maps)
     np.testing.assert_array_equal(image, before[0])
     np.testing.assert_array_equal(maps, before[1])
+
+
+def test_module_checks_shapes_as_the_function_does():
+    """GaussianMixture2d blurred channel i of a colour image with kernel i (and broadcast a batch of one) without a
+    word, where gaussian_mixture2d refused."""
+    mixture = GaussianMixture2d((1.0, 2.0, 3.0))
+    with pytest.raises(InputError, match="image"):
+        mixture(torch.rand(1, 3, 16, 16), torch.ones(1, 3))
+    with pytest.raises(InputError, match="weights"):
+        mixture(torch.rand(2, 1, 16, 16), torch.ones(1, 3, 16, 16))
+
+
+def test_a_grid_that_does_not_cover_the_image_is_an_input_error(rng):
+    """upsample_grid returned a smaller array (9x9 for 20x20), and alcn_filter_grid a cv2.error."""
+    from alcn_cv.filters.gaussian_mixture import alcn_filter_grid, upsample_grid
+
+    grid = rng.random((3, 3), dtype=np.float32)
+    assert upsample_grid(grid, 4, (9, 9)).shape == (9, 9)
+    with pytest.raises(InputError, match="cover"):
+        upsample_grid(grid, 4, (20, 20))
+    image = rng.random((20, 20), dtype=np.float32)
+    with pytest.raises(InputError, match="cover"):
+        alcn_filter_grid(image, np.stack([grid, -grid]), 4, (1.0, 2.0))
+    maps = rng.random((2, 6, 6), dtype=np.float32)
+    for rows in ((5, 3), (-1, 4), (0, 21)):
+        with pytest.raises(InputError, match="rows"):
+            alcn_filter_grid(image, maps, 4, (1.0, 2.0), rows=rows)

@@ -95,3 +95,15 @@ def test_torch_lab_in_other_dtypes_stays_near_float32(dtype):
         torch.bfloat16: 0.15,
         torch.float64: 1e-5,
     }[dtype]
+
+
+def test_srgb_to_linear_writes_a_strided_view_in_place():
+    """The reshape of a strided view is a copy: the view was returned unchanged."""
+    unit = np.random.default_rng(2).random((6, 8, 3), dtype=np.float32)
+    expected = srgb_to_linear(unit.copy())
+    whole = unit.copy()
+    assert srgb_to_linear(whole[:, ::2]) is not None
+    np.testing.assert_array_equal(whole[:, ::2], expected[:, ::2])
+    np.testing.assert_array_equal(whole[:, 1::2], unit[:, 1::2])  # the rest untouched
+    fortran = np.asfortranarray(unit)
+    np.testing.assert_array_equal(srgb_to_linear(fortran), expected)

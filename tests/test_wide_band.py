@@ -80,3 +80,12 @@ def test_strips_of_alcn_give_the_whole_band_down_to_a_last_strip_of_one_row(monk
     strips = alcn._strips(frame.shape[:2])
     assert strips is not None and strips[-1][1] - strips[-1][0] == 1
     np.testing.assert_allclose(alcn.apply(frame, out_dtype=np.float32), whole, atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("meta", [{k: v for k, v in band_meta(0.3).items() if k != "weight"}, [0.3], None])
+def test_a_band_entry_without_a_weight_is_a_weight_file_error(meta):
+    """It was a KeyError (or an AttributeError) from the runtime's loader."""
+    with pytest.raises(WeightFileError):
+        check_band_meta(meta)
+    with pytest.raises(WeightFileError, match="weight"):
+        check_band_meta({**band_meta(0.3), "weight": "heavy"})

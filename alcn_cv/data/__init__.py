@@ -20,6 +20,8 @@ Modules:
   their split and terms.
 - :mod:`~alcn_cv.data.preview`, :mod:`~alcn_cv.data.stats`: contact sheets; statistics beside the
   real PSM photographs.
+- :mod:`~alcn_cv.data.light_changes`, :mod:`~alcn_cv.data.permissive_images`: real photographs
+  that permit any use, relit (the default gain Normalizer's training data).
 - :mod:`~alcn_cv.data.manifest`: manifests, atomic folders, deterministic files.
 
 Every generator is deterministic for its seed (byte-identical output) and writes a

@@ -128,6 +128,15 @@ def _side_in_pixels(text: str) -> int:
     return side
 
 
+def _add_run_options(parser: argparse.ArgumentParser) -> None:
+    """The options every generator shares: ``--overwrite``, ``--workers`` and ``--no-progress``."""
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
+    parser.add_argument(
+        "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
+    )
+    add_progress_option(parser)
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``data`` subcommand and its sub-subcommands to the ``alcn`` parser."""
     p = subparsers.add_parser(
@@ -159,11 +168,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument(
         "--background-fraction", type=float, default=0.35, help="fraction of background windows (default 0.35)"
     )
-    q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    q.add_argument(
-        "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
-    )
-    add_progress_option(q)
+    _add_run_options(q)
     q.set_defaults(func=_phos)
 
     q = sub.add_parser(
@@ -185,11 +190,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument("--n-train", type=int, default=None, help="training images per object (default: 10; small 3)")
     q.add_argument("--width", type=int, default=None, help="image width (default: 1280; small 320)")
     q.add_argument("--height", type=int, default=None, help="image height (default: 800; small 200)")
-    q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    q.add_argument(
-        "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
-    )
-    add_progress_option(q)
+    _add_run_options(q)
     q.set_defaults(func=_detect)
 
     q = sub.add_parser(
@@ -232,11 +233,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "that every stretch of azimuth is seen from high and low; 1: a single loop); the test sequences do not "
         "depend on it",
     )
-    q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    q.add_argument(
-        "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
-    )
-    add_progress_option(q)
+    _add_run_options(q)
     q.set_defaults(func=_pose)
 
     q = sub.add_parser(
@@ -258,11 +255,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="side of the square frames in pixels, at least 32 (default 320)",
     )
     q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    q.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
-    q.add_argument(
-        "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
-    )
-    add_progress_option(q)
+    _add_run_options(q)
     q.set_defaults(func=_scenes)
 
     q = sub.add_parser(

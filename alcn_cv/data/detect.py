@@ -247,8 +247,9 @@ def generate(
         raise InputError(f"unknown size {size!r}; known: {sorted(SIZES)}")
     base = SIZES[size]
     cfg = DetectConfig(
-        width=width or base.width,
-        height=height or base.height,
+        # None, not 0, means the size's default: --width 0 is an error, not a silent 1280
+        width=base.width if width is None else width,
+        height=base.height if height is None else height,
         n_train=base.n_train if n_train is None else n_train,
         n_test=base.n_test if n_test is None else n_test,
         object_px=base.object_px,
@@ -257,9 +258,11 @@ def generate(
     )
     if cfg.width < 2 * cfg.object_px or cfg.height < 2 * cfg.object_px or cfg.n_train < 1 or cfg.n_test < 0:
         raise InputError(
-            f"images must be at least twice the object size ({cfg.object_px} px), with n_train >= 1: "
-            f"got {cfg.width}x{cfg.height}, n_train={cfg.n_train}"
+            f"images must be at least twice the object size ({cfg.object_px} px), with n_train >= 1 and "
+            f"n_test >= 0: got {cfg.width}x{cfg.height}, n_train={cfg.n_train}, n_test={cfg.n_test}"
         )
+    if not 0.0 <= p_object <= 1.0:
+        raise InputError(f"p_object is a probability, in [0, 1]; got {p_object}")
     cats = [
         {"id": k + 1, "name": name, "supercategory": "object", "material": mat}
         for k, (name, mat, _) in enumerate(OBJECTS)

@@ -160,9 +160,10 @@ def _uniform(rng: np.random.Generator, bounds: Range) -> float:
 def shading_field(
     shape: tuple[int, int], rng: np.random.Generator, amplitude: float, ramp: float, cells: tuple[int, int] = (2, 6)
 ) -> np.ndarray:
-    """A smooth positive gain field: ``exp(amplitude * s + ramp * t)``, ``s`` a random grid of
-    ``cells`` per side in [-1, 1] upsampled bicubically, ``t`` a linear ramp in [-0.5, 0.5] in a
-    random direction (so ``ramp`` is its log-ratio end to end).
+    """A smooth positive gain field: ``exp(amplitude * s + ramp * u * t)``, ``s`` a random grid of
+    ``cells`` per side in [-1, 1] upsampled bicubically, ``u`` uniform in [0, 1], ``t`` a linear ramp
+    in a random direction, 1 per ``max(H, W)`` pixels and 0 at the centre (so ``ramp`` is the largest
+    log-ratio across the frame's longer side).
 
     Returns:
         ``(H, W)`` float32, positive; all ones when ``amplitude`` and ``ramp`` are 0.
@@ -191,7 +192,7 @@ def shadow_mask(
     the light inside; overlapping shadows multiply.
 
     Returns:
-        ``(H, W)`` float32 in ``[min(light), 1]``; all ones when ``count`` is 0.
+        ``(H, W)`` float32 in ``[min(light)^count, 1]``; all ones when ``count`` is 0.
     """
     mask = np.ones(shape, np.float32)
     for _ in range(count):

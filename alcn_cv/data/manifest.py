@@ -2,7 +2,7 @@
 
 Every dataset folder holds a ``manifest.json``::
 
-    {"generator": "alcn_cv.data", "generator_version": "1", "kind": "phos" | "detect" | "pose",
+    {"generator": "alcn_cv.data", "generator_version": "1", "kind": "phos" | "detect" | "pose" | "relief_scenes",
      "seed": 0, "parameters": {...}, ...}
 
 It holds no time stamp or timing, so that the same seed and parameters give byte-identical

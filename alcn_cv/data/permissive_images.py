@@ -153,8 +153,9 @@ def training_photographs(shared: str | Path) -> list[Photograph]:
     photos = permissive_photographs(shared)
     chessboards = [p for p in photos if p.name.startswith("chessboard/")]
     video = [p for p in photos if "#" in p.name]
-    keep = chessboards[::3] + video[::2]
-    return [p for p in photos if p not in chessboards and p not in video] + keep
+    # by name: a Photograph's == would compare its pixels (a dataclass compares every field)
+    thinned = {p.name for p in chessboards + video}
+    return [p for p in photos if p.name not in thinned] + chessboards[::3] + video[::2]
 
 
 def relit_scenes(

@@ -230,6 +230,8 @@ def rasterize(
     area = (P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1]) - (P[:, 2, 0] - P[:, 0, 0]) * (P[:, 1, 1] - P[:, 0, 1])
     ok &= (x1 >= x0) & (y1 >= y0) & (np.abs(area) > 1e-12)
     ids = np.nonzero(ok)[0]
+    if not len(ids):  # every triangle culled: behind the camera, off the buffer or degenerate
+        return result()
     bw = (x1[ids] - x0[ids] + 1).astype(np.int64)
     counts = bw * (y1[ids] - y0[ids] + 1).astype(np.int64)
     cand_pix, cand_z, cand_tri, cand_w = [], [], [], []
@@ -425,14 +427,13 @@ class ShadowSettings:
 @dataclass
 class _GBuffer:
     """Per-pixel inputs of the shader: world point, unit normal, linear RGB albedo, material
-    parameters (:data:`MATERIAL_FIELDS`), and the object id and model point of each pixel."""
+    parameters (:data:`MATERIAL_FIELDS`), and the object id of each pixel."""
 
     P: np.ndarray
     N: np.ndarray
     albedo: np.ndarray
     material: np.ndarray
     obj_id: np.ndarray
-    model_xyz: np.ndarray
 
 
 def _table_gbuffer(
@@ -464,8 +465,7 @@ def _table_gbuffer(
     albedo[:] = _sample_mipmapped(tex, mapx, mapy)
     albedo[~hit] = scene.wall
     obj_id = np.where(hit, 0, -1).astype(np.int64)
-    model_xyz = np.full((height, width, 3), np.nan)
-    return _GBuffer(P, N, albedo, material, obj_id, model_xyz), C, s_table
+    return _GBuffer(P, N, albedo, material, obj_id), C, s_table
 
 
 def _draw_objects(
@@ -479,7 +479,7 @@ def _draw_objects(
     bary: np.ndarray,
 ) -> None:
     """Overwrite the G-buffer where an object is in front of the table: position, normal,
-    albedo (texture or vertex colours), material, object id and model point."""
+    albedo (texture or vertex colours), material and object id."""
     fidx = np.nonzero(on_obj.reshape(-1))[0]
     if not len(fidx):
         return
@@ -492,7 +492,6 @@ def _draw_objects(
     Nf = gb.N.reshape(-1, 3)
     Af = gb.albedo.reshape(-1, 3)
     Mf = gb.material.reshape(-1, len(MATERIAL_FIELDS))
-    Xf = gb.model_xyz.reshape(-1, 3)
     Of = gb.obj_id.reshape(-1)
     for k, o in enumerate(scene.objects):
         m = own == k
@@ -502,7 +501,6 @@ def _draw_objects(
         lf = t_sel[m] - first_face[k]
         lv = o.mesh.faces[lf]  # local vertex ids (n, 3)
         bk = b[m]
-        Xf[pix] = (o.mesh.vertices[lv] * bk[..., None]).sum(1)
         if o.mesh.normals is not None:
             n_loc = (o.mesh.normals[lv] * bk[..., None]).sum(1)
         else:

@@ -22,7 +22,6 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from alcn_cv.data.lighting import LIGHT_FAMILIES, sample_lighting
@@ -32,7 +31,7 @@ from alcn_cv.data.parallel import parallel_map
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import InputError
-from alcn_cv.io import write_json
+from alcn_cv.io import write_image, write_json
 
 __all__ = ["KIND", "generate", "relief_surface", "render_scene"]
 
@@ -147,7 +146,7 @@ def generate(
             folder = tmp / f"scene_{i:03d}"
             folder.mkdir()
             for j, frame in enumerate(stack):
-                cv2.imwrite(str(folder / f"frame_{j:02d}.png"), frame)
+                write_image(folder / f"frame_{j:02d}.png", frame)  # raises where cv2.imwrite returns False
             lights[folder.name] = names
         write_json(
             tmp / "manifest.json",

@@ -147,6 +147,7 @@ def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) ->
     Raises:
         DatasetError: ``root`` is not a folder, holds no scene of at least two frames, or a
             scene's frames differ in size.
+        InputError: ``max_frames`` is less than 2.
     """
     root = Path(root)
     if not root.is_dir():

@@ -131,7 +131,7 @@ def load_psm(psm_dir: str | os.PathLike) -> tuple[dict[str, tuple[list[np.ndarra
 def render_like_psm(
     lights: np.ndarray | None, n_objects: int = 4, seed: int = 0, size: int = 256, *, plain: bool = False
 ) -> dict[str, tuple[list[np.ndarray], np.ndarray]]:
-    """Render ``n_objects`` relief objects on black under 12 lightings.
+    """Render ``n_objects`` relief objects on black under ``len(lights)`` lightings (12 when ``lights`` is None).
 
     Args:
         lights: (L, 3) light directions in the PSM convention (x right, y up, z towards the

@@ -148,7 +148,11 @@ def augment(
     if mask is None:
         mask = np.zeros(img.shape[:2], np.float32)
         x, y, w, h = box
-        mask[int(np.floor(y)) : int(np.ceil(y + h)), int(np.floor(x)) : int(np.ceil(x + w))] = 1.0
+        # clamped at 0: a box that starts above or left of the image would otherwise slice from the far side
+        mask[
+            max(0, int(np.floor(y))) : max(0, int(np.ceil(y + h))),
+            max(0, int(np.floor(x))) : max(0, int(np.ceil(x + w))),
+        ] = 1.0
     cx, cy = box[0] + (box[2] - 1) / 2, box[1] + (box[3] - 1) / 2
     base = 1.0 if extent is None else extent / max(box[2], box[3])
     c = (WINDOW - 1) / 2
@@ -199,6 +203,8 @@ def sample_negatives(
     Returns:
         uint8 windows (n, 64, 64) or (n, 64, 64, 3).
     """
+    if n < 0:
+        raise InputError(f"n must be >= 0, got {n}")
     if len(images) != len(masks_or_bboxes) or not images:
         raise InputError("need one mask or box per image, and at least one image")
     prepared = []

@@ -125,6 +125,14 @@ def fractal_noise(
     return cv2.normalize(acc, None, 0.0, 1.0, cv2.NORM_MINMAX)
 
 
+def _height_width(size: int | tuple[int, int]) -> tuple[int, int]:
+    """``(h, w)`` of a side (a NumPy integer too) or of an ``(h, w)`` pair."""
+    if isinstance(size, (int, np.integer)):
+        return int(size), int(size)
+    h, w = size
+    return int(h), int(w)
+
+
 def _palette(rng: np.random.Generator, n: int) -> np.ndarray:
     """``n`` random RGB colours (n, 3) in [0.02, 0.95], varied in hue and value."""
     hsv = np.stack([rng.uniform(0, 180, n), rng.uniform(0, 255, n), rng.uniform(30, 250, n)], axis=1).astype(np.float32)
@@ -146,8 +154,10 @@ def procedural_texture(rng: np.random.Generator, size: int | tuple[int, int], ki
         size: side or (height, width) in pixels.
         kind: one of :data:`PROCEDURAL_KINDS`, random when None.
     """
-    h, w = (size, size) if isinstance(size, int) else size
+    h, w = _height_width(size)
     kind = kind or str(rng.choice(PROCEDURAL_KINDS))
+    if kind not in PROCEDURAL_KINDS:  # before any draw
+        raise InputError(f"unknown procedural texture kind {kind!r}; known: {PROCEDURAL_KINDS}")
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     colours = _palette(rng, int(rng.integers(2, 5)))
     if kind == "noise":
@@ -224,12 +234,11 @@ def procedural_texture(rng: np.random.Generator, size: int | tuple[int, int], ki
         ang = rng.uniform(0, np.pi)
         t = 0.5 + 0.5 * np.sin((xx * np.cos(ang) + yy * np.sin(ang)) / rng.uniform(6, 20) + 8 * n)
         return _map_palette(t, colours)
-    if kind == "blobs":
-        t = fractal_noise(rng, (h, w), base=int(rng.integers(3, 10)), persistence=0.3)
-        t = (t > rng.uniform(0.35, 0.65)).astype(np.float32)
-        t = cv2.GaussianBlur(t, (0, 0), 0.7)
-        return _map_palette(t, colours[:2])
-    raise ValueError(f"unknown procedural texture kind {kind!r}; known: {PROCEDURAL_KINDS}")
+    # blobs
+    t = fractal_noise(rng, (h, w), base=int(rng.integers(3, 10)), persistence=0.3)
+    t = (t > rng.uniform(0.35, 0.65)).astype(np.float32)
+    t = cv2.GaussianBlur(t, (0, 0), 0.7)
+    return _map_palette(t, colours[:2])
 
 
 def colour_jitter(rng: np.random.Generator, img: np.ndarray, strength: float = 1.0) -> np.ndarray:
@@ -250,14 +259,14 @@ def photo_crop(
     """A random crop of a random :func:`photos` photograph, float32 (H, W, 3) linear RGB.
 
     The crop has random scale (0.25x to 1.5x, more for outputs larger than the photograph),
-    rotation by multiples of 90 degrees and flips.
+    rotation by multiples of 90 degrees (square outputs only) and flips.
 
     Args:
         rng: random generator.
         size: side or (height, width) of the output.
         indices: restrict to these photographs (indices into :func:`photos`).
     """
-    h, w = (size, size) if isinstance(size, int) else size
+    h, w = _height_width(size)
     pool = photos()
     idx = int(rng.choice(indices)) if indices else int(rng.integers(len(pool)))
     img = pool[idx]

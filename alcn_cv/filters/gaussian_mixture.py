@@ -92,6 +92,11 @@ def _cached_kernel(sigma: float) -> np.ndarray:
 
 
 def check_sigmas(sigmas: Sequence[float]) -> tuple[float, ...]:
+    """``sigmas`` as a tuple of floats.
+
+    Raises:
+        InputError: ``sigmas`` is empty, or one is not positive and finite.
+    """
     sigmas = tuple(float(s) for s in sigmas)
     if not sigmas or any(not np.isfinite(s) or s <= 0 for s in sigmas):
         raise InputError(f"sigmas must be positive and finite, got {sigmas}")
@@ -196,8 +201,14 @@ def upsample_grid(grid: np.ndarray, stride: int, shape: tuple[int, int]) -> np.n
 
     Returns:
         ``(h, w)`` float32.
+
+    Raises:
+        InputError: the grid does not cover ``shape`` (as :func:`~alcn_cv.filters.torch_resize.interpolate_grid`).
     """
     h, w = shape
+    gh, gw = grid.shape
+    if stride * (gh - 1) < h - 1 or stride * (gw - 1) < w - 1:
+        raise InputError(f"a grid of {gh}x{gw} points {stride} px apart does not cover {h}x{w} pixels")
     return _upsample_rows(_upsample_columns(grid.astype(np.float32, copy=False), stride, w), stride, h)
 
 
@@ -273,6 +284,8 @@ def alcn_filter_grid(
     if grid.ndim != 3 or len(grid) != len(sigmas):
         raise InputError(f"need one grid map per sigma, got {grid.shape} for {len(sigmas)} sigmas")
     start, stop = (0, len(image)) if rows is None else rows
+    if not 0 <= start <= stop <= len(image):
+        raise InputError(f"rows must be (start, stop) with 0 <= start <= stop <= {len(image)}, got {rows}")
     shape = (stop - start, image.shape[1])
     if dst is not None and (dst.shape != shape or dst.dtype != np.float32 or not dst.flags.c_contiguous):
         raise InputError(f"dst must be a C-contiguous float32 array of shape {shape}, got {dst.dtype} {dst.shape}")

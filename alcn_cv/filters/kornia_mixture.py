@@ -66,16 +66,22 @@ def gaussian_mixture2d(
     Returns:
         ``(B, 1, H, W)`` normalized image, same dtype and device as ``image``.
     """
-    if image.ndim != 4 or image.shape[1] != 1:
-        raise InputError(f"image must have shape (B, 1, H, W), got {tuple(image.shape)}")
-    if weights.ndim not in (2, 4) or weights.shape[0] != image.shape[0]:
-        raise InputError(f"weights must have shape (B, N) or (B, N, H, W), got {tuple(weights.shape)}")
+    _check_shapes(image, weights)
     n = weights.shape[1]
     sigmas = gaussian_sigmas(n) if sigmas is None else check_sigmas(sigmas)
     if len(sigmas) != n:
         raise InputError(f"{n} weights for {len(sigmas)} sigmas")
     bank = _kernel_bank(sigmas, image.device, image.dtype)
     return _mix(image, weights, bank, sigmas)
+
+
+def _check_shapes(image: torch.Tensor, weights: torch.Tensor) -> None:
+    """An image ``(B, 1, H, W)`` and weights of the same batch, ``(B, N)`` or ``(B, N, H, W)``: a colour image would
+    otherwise be blurred channel by kernel, and a batch of one broadcast, without a word."""
+    if image.ndim != 4 or image.shape[1] != 1:
+        raise InputError(f"image must have shape (B, 1, H, W), got {tuple(image.shape)}")
+    if weights.ndim not in (2, 4) or weights.shape[0] != image.shape[0]:
+        raise InputError(f"weights must have shape (B, N) or (B, N, H, W), got {tuple(weights.shape)}")
 
 
 def _mix(image: torch.Tensor, weights: torch.Tensor, bank: torch.Tensor, sigmas: Sequence[float]) -> torch.Tensor:
@@ -107,6 +113,7 @@ class GaussianMixture2d(nn.Module):
         return len(self.sigmas)
 
     def forward(self, image: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+        _check_shapes(image, weights)
         if weights.shape[1] != self.num_kernels:
             raise InputError(f"{weights.shape[1]} weights for {self.num_kernels} kernels")
         return _mix(image, weights, self.bank.to(image.dtype), self.sigmas)

@@ -59,10 +59,15 @@ GAMMA_SCALE = np.float32(1024.0)
 
 def srgb_to_linear(unit: np.ndarray) -> np.ndarray:
     """The sRGB curve decoded, in place: float32 intensities in [0, 1] -> linear intensities in [0, 1]
-    (``x / 12.92`` up to 0.04045, ``((x + 0.055) / 1.055)^2.4`` above), in OpenCV passes."""
-    plane = unit.reshape(unit.shape[0] if unit.ndim > 1 else 1, -1)  # one channel: OpenCV's scalars reach every value
+    (``x / 12.92`` up to 0.04045, ``((x + 0.055) / 1.055)^2.4`` above), in OpenCV passes. Any layout: a strided
+    view is computed in a contiguous copy and written back."""
+    # the reshape of a strided view would be a copy, and the result would never reach ``unit``
+    work = unit if unit.flags.c_contiguous else np.ascontiguousarray(unit)
+    plane = work.reshape(work.shape[0] if work.ndim > 1 else 1, -1)  # one channel: OpenCV's scalars reach every value
     high = cv2.pow(cv2.addWeighted(plane, 1.0 / 1.055, plane, 0.0, 0.055 / 1.055), 2.4)
     np.copyto(plane, np.where(plane <= np.float32(0.04045), cv2.multiply(plane, 1.0 / 12.92), high))
+    if work is not unit:
+        np.copyto(unit, work)
     return unit
 
 

@@ -55,11 +55,15 @@ def check_band_meta(meta: dict[str, Any]) -> float:
     """The weight of a weight file's ``band`` entry (:func:`band_meta`).
 
     Raises:
-        WeightFileError: a band of other sigmas or blocks than this version computes.
+        WeightFileError: a band of other sigmas or blocks than this version computes, or without a numeric weight.
     """
-    if {k: v for k, v in meta.items() if k != "weight"} != {k: v for k, v in band_meta(0.0).items() if k != "weight"}:
+    expected = {k: v for k, v in band_meta(0.0).items() if k != "weight"}
+    if not isinstance(meta, dict) or {k: v for k, v in meta.items() if k != "weight"} != expected:
         raise WeightFileError(f"a wide band this version does not compute: {meta}")
-    return float(meta["weight"])
+    try:
+        return float(meta["weight"])
+    except (KeyError, TypeError, ValueError):
+        raise WeightFileError(f"the wide band's weight is missing or not a number: {meta}") from None
 
 
 def band_reach() -> int:
