@@ -63,6 +63,8 @@ def main() -> None:
     ap.add_argument("--feature", choices=("ORB", "SIFT"), default="ORB", help="the features (default ORB)")
     ap.add_argument("--out", type=Path, default=Path("out/matching"), help="output folder (default out/matching)")
     args = ap.parse_args()
+    if args.second < 0:
+        ap.error(f"--second {args.second}: a frame number, 0 or more")
     try:
         frames = [frame for _, frame in iter_frames(args.video, max_frames=args.second + 1)]
         if len(frames) <= args.second:

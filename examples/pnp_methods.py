@@ -16,11 +16,13 @@ Time with the defaults (the first 40 frames of the cookie box, its model from tr
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import numpy as np
 
 from alcn_cv import io
+from alcn_cv.errors import ALCNError
 from pose import model as part_model
 from pose.parts import FeaturePartDetector
 from pose.solver import METHODS, PoseSolver, PoseTracker, camera_matrix
@@ -41,6 +43,8 @@ def main() -> None:
     ap.add_argument("--normalization", default="none", help="NAME[:KEY=VALUE...] (default none)")
     ap.add_argument("--max-frames", type=int, default=40, help="the first N frames (default 40)")
     args = ap.parse_args()
+    if args.max_frames < 1:
+        ap.error(f"--max-frames {args.max_frames}: at least 1")
     model = part_model.load(args.model)
     K = camera_matrix_for(model.extra.get("K"), None if args.K is None else camera_matrix(*args.K), args.model)
     det = FeaturePartDetector(model, args.normalization)
@@ -69,4 +73,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except ALCNError as exc:
+        sys.exit(f"pnp_methods.py: error: {exc}")

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from alcn_cv import io
 from alcn_cv.errors import ALCNError
@@ -137,38 +138,41 @@ def main() -> None:
     ref_det = FeaturePartDetector(ref, "none")
     trackers = {n: PoseTracker(PoseSolver(K)) for n in args.methods}
     ref_tracker = PoseTracker(PoseSolver(K))
-    both = track.OverlayWriter(args.out / "relit_overlay.mp4")
-    side = track.OverlayWriter(args.out / "relit_side_by_side.mp4")
     agree = {n: [] for n in args.methods}
-    for i, frame in frames(video, args.max_frames):
-        name = str(i)
-        relit = evaluate.relight(frame, seed=i // 30)
-        c = ref_det.detect(frame)
-        gt = ref_tracker.update(i, c.object_points, c.image_points)
-        vis = relit.copy()
-        panels = []
-        if gt.ok:
-            track.draw_box(vis, ref.corners, gt.rvec, gt.tvec, K, track.color_for("gt"))
-        for n in args.methods:
-            c = detectors[n].detect(relit)
-            est = trackers[n].update(i, c.object_points, c.image_points)
-            panel = relit.copy()
-            if est.ok:
-                for img in (vis, panel):
-                    track.draw_box(img, models[n].corners, est.rvec, est.tvec, K, track.color_for(n))
+    total = io.count_frames(video, max_frames=args.max_frames)
+    relit_frames = tqdm(frames(video, args.max_frames), total=total, desc="track the relit video", unit="frame")
+    # as context managers: a run stopped midway leaves no unfinished video behind
+    with (
+        track.OverlayWriter(args.out / "relit_overlay.mp4") as both,
+        track.OverlayWriter(args.out / "relit_side_by_side.mp4") as side,
+    ):
+        for i, frame in relit_frames:
+            name = str(i)
+            relit = evaluate.relight(frame, seed=i // 30)
+            c = ref_det.detect(frame)
+            gt = ref_tracker.update(i, c.object_points, c.image_points)
+            vis = relit.copy()
+            panels = []
             if gt.ok:
-                agree[n].append(
-                    est.ok
-                    and evaluate.projection_error(models[n].corners, est.R, est.tvec, gt.R, gt.tvec, K)
-                    < evaluate.PROJ_PX
-                )
-            panels.append(cv2.putText(panel, n, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 1.0, (255, 255, 255), 2))
-        both.write(name, vis)
-        side.write(name, np.hstack(panels))
-        if i % 90 == 0:
-            io.write_image(args.out / f"side_by_side_{i:04d}.png", np.hstack(panels))
-    both.close()
-    side.close()
+                track.draw_box(vis, ref.corners, gt.rvec, gt.tvec, K, track.color_for("gt"))
+            for n in args.methods:
+                c = detectors[n].detect(relit)
+                est = trackers[n].update(i, c.object_points, c.image_points)
+                panel = relit.copy()
+                if est.ok:
+                    for img in (vis, panel):
+                        track.draw_box(img, models[n].corners, est.rvec, est.tvec, K, track.color_for(n))
+                if gt.ok:
+                    agree[n].append(
+                        est.ok
+                        and evaluate.projection_error(models[n].corners, est.R, est.tvec, gt.R, gt.tvec, K)
+                        < evaluate.PROJ_PX
+                    )
+                panels.append(cv2.putText(panel, n, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 1.0, (255, 255, 255), 2))
+            both.write(name, vis)
+            side.write(name, np.hstack(panels))
+            if i % 90 == 0:
+                io.write_image(args.out / f"side_by_side_{i:04d}.png", np.hstack(panels))
     summary = {
         n: {"agreeing_frames_percent": 100.0 * float(np.mean(a)) if a else None, "reference_frames": len(a)}
         for n, a in agree.items()

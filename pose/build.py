@@ -31,6 +31,7 @@ import numpy as np
 from alcn_cv import io
 from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.extras import require
 from alcn_cv.io import check_writable, make_folder
 from pose import model as part_model
 from pose.box_fit import fit_box
@@ -224,6 +225,8 @@ def main(
     ``refine_focal`` lets the bundle adjustment refine the focal length; the camera, refined or
     given, is stored in the model's ``extra["K"]``, which ``alcn pose track`` uses by default).
     """
+    # the reconstruction (pycolmap), the box fit (open3d) and the plot come after the features: checked before those
+    require("pycolmap", "open3d", "matplotlib", what="pose.build.main", preferred="pose")
     input_path, output = Path(input_path), part_model.model_file(output)
     check_writable(output)  # before the work
     make_folder(output.parent)

@@ -11,6 +11,7 @@ import numpy as np
 
 from alcn_cv.cli import add_conf_options, add_progress_option, add_seeds_option
 from alcn_cv.errors import InputError
+from alcn_cv.extras import require
 
 
 def _intrinsics(values: list[float] | None) -> np.ndarray | None:
@@ -20,6 +21,8 @@ def _intrinsics(values: list[float] | None) -> np.ndarray | None:
 
 
 def _build(args: argparse.Namespace) -> int:
+    # the extra named with the command (build.main checks the same, named for its Python callers)
+    require("pycolmap", "open3d", "matplotlib", what="alcn pose build", preferred="pose")
     from pose import build
 
     path = build.main(

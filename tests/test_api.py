@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import alcn_cv
+import alcn_cv.enhance.alcn as alcn_module
 from alcn_cv import InputError, WeightFileError
 from alcn_cv.data.frames import synthetic_frame
 from alcn_cv.enhance.alcn import MODELS
@@ -216,6 +217,37 @@ def test_backend_follows_what_is_installed(run_python):
     assert len(lines) == 3 and all('pip install "alcn-cv[train]"' in line for line in lines), lines
     assert lines[0].startswith("ALCN(backend='fast'): needs the [train] extra")
     assert lines[2].startswith("alcn_cv.nets.Normalizer: needs the [train] extra")
+
+
+def test_torch_threads_without_torch_name_the_extra(run_python):
+    """threads select the backend that runs torch; without torch that said backend='opencv' runs no torch."""
+    proc = run_python("""
+        import alcn_cv
+        from alcn_cv.errors import MissingDependencyError
+        try:
+            alcn_cv.createALCN(threads=2)
+        except MissingDependencyError as exc:
+            print(exc)
+    """)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == (
+        "ALCN(backend='fast'): needs the [train] extra (torch is not installed): pip install \"alcn-cv[train]\""
+    )
+
+
+def test_gain_models_on_opencv_4_fail_in_one_line(monkeypatch, capfd):
+    """OpenCV 4's cv2.dnn cannot import the gain exports: one line saying what runs them, before cv2.dnn logs its
+    own errors and fails with lines of C++ context."""
+    monkeypatch.setattr(alcn_module, "RUNS_GAIN", False)
+    for model in ("gain", "gain-lite"):
+        with pytest.raises(WeightFileError) as error:
+            alcn_cv.createALCN(model=model, backend="opencv")
+        assert "\n" not in str(error.value), error.value
+        assert "cv2.dnn cannot run the gain Normalizers" in str(error.value)
+        assert "use OpenCV 5, install torch (backend='fast') or model='lite'" in str(error.value)
+    assert "onnx_importer" not in capfd.readouterr().err
+    assert alcn_cv.createALCN(model="lite", backend="opencv").backend == "opencv"
+    assert alcn_cv.createALCN().backend == "fast"  # the default: torch where cv2.dnn cannot
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,8 @@
 """``alcn`` where the extras are not installed: its commands are listed, and one that needs a
 missing package ends with one line naming the extra to install (exit 2, no traceback)."""
 
+import cv2
+import numpy as np
 import pytest
 
 from alcn_cv.cli import main
@@ -25,6 +27,34 @@ def test_a_command_needing_a_missing_extra_says_which(run_python, tmp_path):
         'alcn train: needs the [train] extra (torch is not installed): pip install "alcn-cv[train]"'
     )
     assert not (tmp_path / "run" / "checkpoint.pt").exists()
+
+
+@pytest.mark.parametrize(
+    ("command", "line"),
+    [
+        (["demo"], 'alcn demo: needs the [bench] extra (skimage is not installed): pip install "alcn-cv[bench]"'),
+        (
+            ["pose", "build", "VIDEO", "--K", "800", "800", "320", "240", "--box-size", "19", "26", "7.5"],
+            'alcn pose build: needs the [pose] extra (pycolmap is not installed): pip install "alcn-cv[pose]"',
+        ),
+    ],
+    ids=["demo", "pose-build"],
+)
+def test_a_command_checks_its_extra_before_the_work(run_python, tmp_path, command, line):
+    """`alcn demo` rendered its data and `alcn pose build` computed its features before the missing package stopped
+    them (with another extra named, for the demo): the extra is named first, and nothing is written."""
+    video = tmp_path / "box.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 48))
+    for k in range(15):  # the 3 frames, one in 5, that a build from a video needs
+        writer.write(np.random.default_rng(k).integers(0, 256, (48, 64, 3), np.uint8))
+    writer.release()
+    out = tmp_path / "out"
+    args = [str(video) if a == "VIDEO" else a for a in command]
+    args += ["--out", out] if command == ["demo"] else [out / "model.npz"]
+    proc = run_python(ALCN, *args)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.strip().splitlines() == [line]
+    assert not out.exists()
 
 
 def test_a_missing_module_imported_while_running_is_one_line(monkeypatch, capsys, tmp_path):

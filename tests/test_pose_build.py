@@ -172,3 +172,27 @@ def test_pycolmap_log_goes_to_the_logger(tmp_path, capfd, caplog):
         pycolmap.incremental_mapping(tmp_path / "db.db", tmp_path / "images", tmp_path)
     assert "pycolmap: " in caplog.text and "Loading database" in caplog.text
     assert "Loading database" not in capfd.readouterr().err
+
+
+def test_a_build_without_the_pose_extra_says_so_before_the_work(run_python, tmp_path):
+    """Without pycolmap, a build from Python (the examples) computed every frame's features, then ended in a
+    traceback: one line names the extra first, and nothing is written."""
+    proc = run_python(
+        """
+        import sys
+        from alcn_cv.errors import MissingDependencyError
+        from pose import build
+        try:
+            build.main(sys.argv[1], sys.argv[2])
+        except MissingDependencyError as exc:
+            print(exc)
+        """,
+        tmp_path / "box.mp4",
+        tmp_path / "out" / "model.npz",
+        blocked=("pycolmap",),
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == (
+        'pose.build.main: needs the [pose] extra (pycolmap is not installed): pip install "alcn-cv[pose]"'
+    )
+    assert not (tmp_path / "out").exists()

@@ -37,6 +37,26 @@ def test_the_feature_matching_example_runs(shared_data, tmp_path):
     assert (tmp_path / "matches.png").is_file()
 
 
+@pytest.mark.parametrize(
+    ("script", "args", "code", "line"),
+    [
+        ("pnp_methods.py", ["MISSING.npz", "box.mp4"], 1, "pnp_methods.py: error: MISSING.npz: part model not found"),
+        ("pnp_methods.py", ["MISSING.npz", "box.mp4", "--max-frames", "0"], 2, "--max-frames 0: at least 1"),
+        ("feature_matching.py", ["--second", "-1"], 2, "--second -1: a frame number, 0 or more"),
+    ],
+    ids=["missing-model", "no-frames", "negative-frame"],
+)
+def test_an_example_given_bad_input_ends_in_one_line(tmp_path, script, args, code, line):
+    """A missing part model ended pnp_methods.py in a traceback, --max-frames 0 in a division by zero, and
+    feature_matching.py's --second -1 in an error about max_frames."""
+    args = [str(tmp_path / a) if a.startswith("MISSING") else a for a in args]
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "examples" / script), *args], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == code and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert proc.stderr.strip().splitlines()[-1].endswith(line.replace("MISSING", str(tmp_path / "MISSING")))
+
+
 def test_the_gpu_check_rehearses_on_the_cpu(tmp_path):
     """experiments/gpu_check.sh with DEVICE=cpu: the script a short GPU slot runs, end to end, so that the slot is
     not spent on a fault of the script (its CUDA tests skip here; the bench measures the CPU's batched path)."""

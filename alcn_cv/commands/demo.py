@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from alcn_cv.cli import add_progress_option
 from alcn_cv.enhance import available, create
+from alcn_cv.extras import require
 from alcn_cv.io import make_folder
 
 if TYPE_CHECKING:
@@ -94,6 +95,8 @@ def normalization_grid(
 
 
 def main(out_dir: Path, seed: int = 0, progress: bool = True) -> Path:
+    # the rendering, the grid and the benchmark need the [bench] extra: checked before anything is rendered or written
+    require("skimage", "matplotlib", "torch", "kornia", what="alcn demo", preferred="bench")
     from alcn_cv.data import detect
     from alcn_cv.data.manifest import read_manifest
     from alcn_cv.formats.coco import load_coco

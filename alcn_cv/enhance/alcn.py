@@ -21,12 +21,13 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal, cast
 
+import cv2
 import numpy as np
 
 from alcn_cv.checks import unit_windows
 from alcn_cv.enhance.base import Normalization, bgr_with_lightness, lab_and_lightness, with_alpha
 from alcn_cv.enhance.registry import parse_spec, register
-from alcn_cv.errors import InputError
+from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.divisive import gaussian_energy
 from alcn_cv.filters.wide_band import BLOCK, block_means, wide_band_floor
@@ -130,8 +131,10 @@ class ALCN(Normalization):
         on_cpu = str(device).split(":")[0] == "cpu"
         if backend is None and not on_cpu:
             backend = "torch"  # the one backend that runs on a device
+        elif backend is None and threads != "auto":  # torch's threads: without torch, the error names its extra
+            backend = "fast"
         elif backend is None:  # a user's weight file may sit beside an older export: its own network in torch
-            shipped = weights is None and grid_stride is None and threads == "auto" and RUNS_GAIN
+            shipped = weights is None and grid_stride is None and RUNS_GAIN
             backend = "opencv" if shipped or not is_installed("torch") else "fast"
         if backend not in BACKENDS:
             raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
@@ -295,6 +298,13 @@ def _build_runtime(
 ) -> tuple[Runtime, object]:
     """The runtime of ``backend`` for the weight file ``weights`` (header ``meta``) and its network."""
     check_teacher(meta, weights)
+    if backend == "opencv" and spec.per_pixel and not RUNS_GAIN:
+        # before cv2.dnn tries: its ONNX importer logs errors of its own and fails with several lines of C++ context
+        hint = "" if is_installed("torch") else ' (torch: pip install "alcn-cv[train]")'
+        raise WeightFileError(
+            f"OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers ({weights.name}): "
+            f"use OpenCV 5, install torch (backend='fast') or model='lite'{hint}"
+        )
     if backend == "opencv":
         net = opencv_network(weights, grid_stride, spec)
         return make_runtime(spec, net, mixture), net
