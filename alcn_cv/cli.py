@@ -20,7 +20,7 @@ import os
 import signal
 import sys
 import traceback
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from importlib import metadata
 from typing import Any
 
@@ -165,6 +165,23 @@ def add_seeds_option(
         help=f"{what}; cells give the mean ± standard deviation over the seeds, e.g. --seeds 0 1 2 (0,1,2 also "
         f"accepted; default {' '.join(map(str, default))})",
     )
+
+
+def number_at_least(kind: type[int] | type[float], low: float, above: bool = False) -> Callable[[str], int | float]:
+    """An argparse ``type`` for a number of ``kind`` at least ``low`` (greater than ``low`` with ``above``): a
+    value out of range is an error that names its option, as a Python caller's names the keyword."""
+    bound = f"{'greater than' if above else 'at least'} {low:g}"
+
+    def parse(text: str) -> int | float:
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if value is None or value < low or (above and value == low):
+            raise argparse.ArgumentTypeError(f"{'an integer' if kind is int else 'a number'} {bound}, got {text!r}")
+        return value
+
+    return parse
 
 
 def add_progress_option(parser: argparse.ArgumentParser) -> None:

@@ -367,7 +367,8 @@ def opencv_network(weights: Path, grid_stride: int | None, spec: ModelSpec) -> O
     net = OpenCVNormalizer(weights.with_suffix(".onnx"))
     if grid_stride not in (None, net.stride):
         raise InputError(
-            f"backend='opencv' evaluates the Normalizer at its stride {net.stride}, got grid_stride={grid_stride}"
+            f"backend='opencv' evaluates the Normalizer at its stride {net.stride}, got grid_stride={grid_stride}; "
+            "another grid stride runs the network in torch: backend='fast' (the [train] extra)"
         )
     kernels = net.dense_grid(np.zeros((WINDOW, WINDOW), np.float32)).shape[0]
     if len(spec.sigmas) != kernels:

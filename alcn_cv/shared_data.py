@@ -13,7 +13,11 @@ ENV_VAR = "ALCN_SHARED_DATA"
 
 
 def shared_data_dir() -> Path:
-    """Return the folder of the shared real data (it may not exist)."""
+    """The folder of the shared real data (it may not exist): ``$ALCN_SHARED_DATA``; else ``../shared/data``
+    beside the checkout this package is imported from; else, for an installed package (``pip install .``, not
+    ``-e``), ``../shared/data`` from the current directory (the clone it was installed from, say)."""
     if ENV_VAR in os.environ:
         return Path(os.environ[ENV_VAR]).expanduser()
-    return Path(__file__).resolve().parents[1].parent / "shared" / "data"
+    checkout = Path(__file__).resolve().parents[1]
+    base = checkout if (checkout / "pyproject.toml").is_file() else Path.cwd()
+    return base.parent / "shared" / "data"

@@ -157,6 +157,8 @@ def _registration(args: argparse.Namespace) -> Registration:
     from .camera import load_calibration
     from .register import SfmSettings, register_charuco, register_colmap
 
+    if not Path(args.source).exists():  # the first argument is checked first, before what the method needs
+        raise InputError(f"no such video or folder: {args.source}")
     calib = load_calibration(args.camera) if args.camera else None
     if args.method == "board":
         if calib is None:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from alcn_cv.cli import add_conf_options, add_progress_option, add_seeds_option
+from alcn_cv.cli import add_conf_options, add_progress_option, add_seeds_option, number_at_least
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
 
@@ -464,9 +464,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     t.add_argument(
         "--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant (default usac_default)"
     )
-    t.add_argument("--n-features", type=int, default=1000, help="keypoints per frame (default 1000)")
-    t.add_argument("--min-inliers", type=int, help="fewer inliers: frame lost (default 12; 5 with corners)")
-    t.add_argument("--reprojection-error", type=float, default=4.0, help="inlier threshold, px (default 4)")
+    t.add_argument(
+        "--n-features", type=number_at_least(int, 0), default=1000, help="keypoints per frame (default 1000; 0: all)"
+    )
+    t.add_argument(
+        "--min-inliers",
+        type=number_at_least(int, 4),
+        help="fewer inliers: frame lost (default 12; 5 with corners; a pose needs 4)",
+    )
+    t.add_argument(
+        "--reprojection-error",
+        type=number_at_least(float, 0, above=True),
+        default=4.0,
+        help="inlier threshold, px (default 4)",
+    )
     add_progress_option(t)
     t.set_defaults(func=_track)
 

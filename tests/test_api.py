@@ -382,3 +382,19 @@ def test_the_default_path_imports_neither_torch_nor_scipy():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_another_grid_stride_without_torch_says_what_runs_it(run_python):
+    """cv2.dnn runs the network at its own stride; without torch another stride's error says which backend runs it."""
+    proc = run_python("""
+        import alcn_cv
+        from alcn_cv.errors import InputError
+        try:
+            alcn_cv.createALCN(grid_stride=16)
+        except InputError as exc:
+            print(exc)
+    """)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip().endswith(
+        "another grid stride runs the network in torch: backend='fast' (the [train] extra)"
+    )

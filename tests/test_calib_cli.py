@@ -237,3 +237,11 @@ def test_register_takes_n_features_as_the_pose_commands(capsys):
     args = build_parser().parse_args(["calib", "register", "frames", "--out", "reg", "--n-features", "2048"])
     assert args.n_features == 2048
     assert "--n-features" in _help(capsys, "calib", "register")
+
+
+def test_register_names_a_missing_source_before_a_missing_camera(tmp_path, capsys):
+    """The board method needs --camera, but a source that does not exist is the first thing wrong."""
+    rc = alcn(["calib", "register", str(tmp_path / "missing"), "--out", str(tmp_path / "reg")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.strip().endswith(f"no such video or folder: {tmp_path / 'missing'}"), err
+    assert not (tmp_path / "reg").exists()

@@ -321,3 +321,19 @@ def test_sigterm_cleans_up_as_ctrl_c(tmp_path, case, request):
     assert "Traceback" not in err and "stack trace" not in err and err.strip().splitlines()[-1] == "alcn: terminated"
     left = sorted(p.name for p in work.rglob("*") if p.name.startswith((".", "alcn_")))
     assert not left, f"left behind: {left}"
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "says"),
+    [
+        ("--min-inliers", "2", "an integer at least 4, got '2'"),
+        ("--n-features", "-1", "an integer at least 0, got '-1'"),
+        ("--reprojection-error", "0", "a number greater than 0, got '0'"),
+    ],
+)
+def test_an_option_out_of_range_is_named(capsys, option, value, says):
+    """`alcn pose track` named the settings as the Python keywords (min_inliers) where a user typed an option."""
+    with pytest.raises(SystemExit) as stop:
+        main(["pose", "track", "model.npz", "video.mp4", "poses.json", option, value])
+    assert stop.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].endswith(f"error: argument {option}: {says}")

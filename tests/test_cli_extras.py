@@ -37,12 +37,20 @@ def test_a_command_needing_a_missing_extra_says_which(run_python, tmp_path):
             ["pose", "build", "VIDEO", "--K", "800", "800", "320", "240", "--box-size", "19", "26", "7.5"],
             'alcn pose build: needs the [pose] extra (pycolmap is not installed): pip install "alcn-cv[pose]"',
         ),
+        (
+            ["data", "phos"],
+            'alcn data phos: needs the [data] extra (skimage is not installed): pip install "alcn-cv[data]"',
+        ),
+        (
+            ["data", "scenes"],
+            'alcn data scenes: needs the [data] extra (skimage is not installed): pip install "alcn-cv[data]"',
+        ),
     ],
-    ids=["demo", "pose-build"],
+    ids=["demo", "pose-build", "data-phos", "data-scenes"],
 )
 def test_a_command_checks_its_extra_before_the_work(run_python, tmp_path, command, line):
-    """`alcn demo` rendered its data and `alcn pose build` computed its features before the missing package stopped
-    them (with another extra named, for the demo): the extra is named first, and nothing is written."""
+    """`alcn demo` and `alcn data` rendered and `alcn pose build` computed its features before the missing package
+    stopped them (with another extra named, for the demo): the extra is named first, and nothing is written."""
     video = tmp_path / "box.avi"
     writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 48))
     for k in range(15):  # the 3 frames, one in 5, that a build from a video needs
@@ -50,7 +58,7 @@ def test_a_command_checks_its_extra_before_the_work(run_python, tmp_path, comman
     writer.release()
     out = tmp_path / "out"
     args = [str(video) if a == "VIDEO" else a for a in command]
-    args += ["--out", out] if command == ["demo"] else [out / "model.npz"]
+    args += [out / "model.npz"] if command[:2] == ["pose", "build"] else ["--out", out]
     proc = run_python(ALCN, *args)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.strip().splitlines() == [line]

@@ -8,13 +8,20 @@ import time
 from pathlib import Path
 
 from alcn_cv.cli import add_progress_option
+from alcn_cv.extras import require
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["add_parser"]
 
 
+def _require_textures(command: str) -> None:
+    # the generators texture their scenes with scikit-image's photographs: the extra is named before any work
+    require("skimage", what=f"alcn data {command}", preferred="data")
+
+
 def _phos(args: argparse.Namespace) -> int:
+    _require_textures("phos")
     from alcn_cv.data import phos
 
     t = time.perf_counter()
@@ -35,6 +42,7 @@ def _phos(args: argparse.Namespace) -> int:
 
 
 def _detect(args: argparse.Namespace) -> int:
+    _require_textures("detect")
     from alcn_cv.data import detect
 
     t = time.perf_counter()
@@ -56,6 +64,7 @@ def _detect(args: argparse.Namespace) -> int:
 
 
 def _pose(args: argparse.Namespace) -> int:
+    _require_textures("pose")
     from alcn_cv.data import pose
 
     t = time.perf_counter()
@@ -77,6 +86,7 @@ def _pose(args: argparse.Namespace) -> int:
 
 
 def _scenes(args: argparse.Namespace) -> int:
+    _require_textures("scenes")
     from alcn_cv.data import relief_scenes
 
     t = time.perf_counter()

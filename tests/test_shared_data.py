@@ -1,0 +1,28 @@
+"""Where the shared real data are looked for (alcn_cv.shared_data)."""
+
+from pathlib import Path
+
+from alcn_cv import shared_data
+from alcn_cv.shared_data import ENV_VAR, shared_data_dir
+
+
+def test_the_environment_variable_wins(monkeypatch, tmp_path):
+    monkeypatch.setenv(ENV_VAR, str(tmp_path))
+    assert shared_data_dir() == tmp_path
+
+
+def test_beside_the_checkout(monkeypatch):
+    monkeypatch.delenv(ENV_VAR, raising=False)
+    checkout = Path(shared_data.__file__).resolve().parents[1]
+    assert (checkout / "pyproject.toml").is_file()
+    assert shared_data_dir() == checkout.parent / "shared" / "data"
+
+
+def test_an_installed_package_looks_beside_the_current_folder(monkeypatch, tmp_path):
+    installed = tmp_path / "site-packages" / "alcn_cv" / "shared_data.py"  # no pyproject.toml above it
+    work = tmp_path / "clone"
+    work.mkdir()
+    monkeypatch.delenv(ENV_VAR, raising=False)
+    monkeypatch.setattr(shared_data, "__file__", str(installed))
+    monkeypatch.chdir(work)
+    assert shared_data_dir() == tmp_path / "shared" / "data"
