@@ -24,7 +24,7 @@ import numpy as np
 
 from alcn_cv import io
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, make_folder, write_json
+from alcn_cv.io import atomic_write, make_folder, to_gray, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table
 
 logger = logging.getLogger(__name__)
@@ -50,7 +50,7 @@ def benchmark(
         size: ``(width, height)`` the frames are resized to.
         threads: ``cv2.setNumThreads`` (default: OpenCV's).
     """
-    from pose.corners import CornerDetector
+    from pose.corners import CornerDetector, scaled_camera
     from pose.track import make_tracker
 
     if threads is not None:
@@ -59,12 +59,12 @@ def benchmark(
     if not frames:
         raise InputError(f"{source}: no frame")
     h0, w0 = frames[0].shape[:2]
-    K = np.asarray(K, np.float64).copy()
-    K[0] *= size[0] / w0
-    K[1] *= size[1] / h0
+    K = scaled_camera(K, size[0] / w0, size[1] / h0)
     frames = [cv2.resize(f, size, interpolation=cv2.INTER_AREA) for f in frames]
     det = CornerDetector(onnx_path)
-    det.detect(frames[0])  # warm-up: cv2.dnn allocates on the first run
+    # warm-up: cv2.dnn allocates on the first run; on a copy, so that the first frame timed is not
+    # served from the detector's cache of the last frame's maps
+    det.detect(frames[0].copy())
     total, posed = [], 0
     cpu0 = time.process_time()
     for _ in range(repeats):
@@ -181,12 +181,11 @@ def corner_recall(
         (part index -> share found among the candidates), "per_frame" (dicts)}``; shares in [0, 1].
 
     Raises:
-        InputError: an unknown ``background`` or a frame without the object's mask.
+        InputError: an unknown ``background``, or a frame without the object or its mask.
     """
     from alcn_cv.formats import bop
     from pose.box import part_visibility
-    from pose.corners import STRIDE, CornerDetector, to_scaled
-    from pose.parts import to_gray
+    from pose.corners import CornerDetector, grid_cell, to_scaled
 
     if background not in ("keep", "grey"):
         raise InputError(f"background must be 'keep' or 'grey', got {background!r}")
@@ -195,7 +194,10 @@ def corner_recall(
     n = len(det.parts)
     per_frame, found = [], {k: [] for k in range(n)}
     for fr in bop.load_scene(scene_dir).frames:
-        index = [o.obj_id for o in fr.objects].index(obj_id)
+        ids = [o.obj_id for o in fr.objects]
+        if obj_id not in ids:
+            raise InputError(f"{scene_dir}: object {obj_id} is not annotated in frame {fr.im_id} (scene_gt.json)")
+        index = ids.index(obj_id)
         mask = cv2.imread(str(scene_dir / "mask_visib" / f"{fr.im_id:06d}_{index:06d}.png"), cv2.IMREAD_GRAYSCALE)
         if mask is None:
             raise InputError(f"{scene_dir}: no mask_visib of object {obj_id} in frame {fr.im_id}")
@@ -220,7 +222,7 @@ def corner_recall(
             row["candidates"] += bool(hits.any())
             row["gated"] += bool((np.linalg.norm(gated[k][0] - uv[k], axis=1) <= radius).any())
             found[k].append(bool(hits.any()))
-            j, i = np.round((to_scaled(uv[k], det.scale) + 0.5) / STRIDE).astype(int)  # the nearest cell's centre
+            j, i = grid_cell(to_scaled(uv[k], det.scale))
             cells = prob[:, max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2].reshape(n + 1, -1)
             if cells.size:
                 at = cells[:, cells[k + 1].argmax()]

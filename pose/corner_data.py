@@ -24,9 +24,9 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import InputError
+from alcn_cv.io import to_gray
 from pose.box import box_parts, facing_faces, part_visibility
-from pose.corners import PAD, STRIDE, downscale, grid_centres, grid_shape, normalization_for, to_scaled
-from pose.parts import to_gray
+from pose.corners import PAD, STRIDE, downscale, grid_centres, grid_shape, normalization_for, scaled_camera, to_scaled
 from pose.sequence import TrainingSequence
 
 if TYPE_CHECKING:
@@ -373,12 +373,10 @@ def build_frames(
     per_view = []
     for view in sequence.views:
         gray = to_gray(io.read_image(sequence.image_dir / view.name))
-        mask = _read_mask(mask_dir / f"{Path(view.name).stem}_000000.png", gray.shape)
+        mask = _read_mask(view.mask or mask_dir / f"{Path(view.name).stem}_000000.png", gray.shape)
         uv, vis = part_visibility(corners, view.R_w2c, view.t_w2c, view.K, gray.shape, mask, parts=parts)
         small = downscale(gray, scale)
-        K = np.asarray(view.K, np.float64).copy()  # of the downscaled frame (:func:`pose.corners.to_scaled`)
-        K[:2] *= scale
-        K[:2, 2] += 0.5 * scale - 0.5
+        K = scaled_camera(view.K, scale)  # of the downscaled frame
         per_view.append(
             _view_frames(
                 small,

@@ -103,9 +103,15 @@ class CornerRecipe:
         lo, hi = self.novel_distance if len(self.novel_distance) == 2 else (0, -1)
         problems = {
             "scale": 0 < self.scale <= 2,
+            "novel_views": 0 <= self.novel_views <= 1,
             "novel_distance": 0 < lo <= hi,
+            "backgrounds": 0 <= self.backgrounds <= 1,
+            "noise": self.noise >= 0,
+            "pos_radius": 0 < self.pos_radius <= self.neg_radius,
             "intensity_scale": len(self.intensity_scale) == 2 and min(self.intensity_scale) > 0,
             "channels": len(self.channels) == 2 and min(self.channels) > 0,
+            "hidden": self.hidden >= 1,
+            "mixing": self.mixing >= 0,
             "divisions": self.divisions >= 1,
             "iterations": self.iterations >= 1,
             "batch_size": self.batch_size >= 1,
@@ -130,7 +136,8 @@ def export_onnx(net: CornerNet, out: str | Path, meta: dict[str, Any]) -> Path:
     """Write the corner network as ONNX with ``meta`` in its ``metadata_props`` (atomically).
 
     Graph: input ``"image"`` ``(1, 1, H, W)`` float32 (the normalized, downscaled frame padded
-    by 16 pixels on every side), output ``"outputs"`` ``(1, 25, (H-32)//4+1, (W-32)//4+1)``.
+    by 16 pixels on every side), output ``"outputs"`` ``(1, 3n + 1, (H-32)//4+1, (W-32)//4+1)`` for the
+    ``n`` parts of ``net`` (:meth:`pose.corners.CornerDetector.outputs`).
     """
     import io as _io
     import warnings

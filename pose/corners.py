@@ -63,9 +63,10 @@ import numpy as np
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.io import to_gray
 from alcn_cv.weight_file import ONNX_METADATA_KEY
 from pose.box import NUM_CORNERS, edge_directions, part_visibility, parts_per_face
-from pose.parts import Correspondences, to_gray
+from pose.parts import Correspondences
 
 logger = logging.getLogger(__name__)
 
@@ -145,6 +146,25 @@ def to_scaled(uv: np.ndarray, scale: float) -> np.ndarray:
 def from_scaled(uv: np.ndarray, scale: float) -> np.ndarray:
     """Inverse of :func:`to_scaled`."""
     return (np.asarray(uv, np.float64) + 0.5) / scale - 0.5
+
+
+def scaled_camera(K: np.ndarray, scale_x: float, scale_y: float | None = None) -> np.ndarray:
+    """The intrinsics ``(3, 3)`` float64 of the image resized by ``scale_x`` across and ``scale_y``
+    (default ``scale_x``) down, as ``cv2.resize`` maps the pixels (:func:`to_scaled`: OpenCV pixel
+    centres, so the principal point moves by ``0.5 * scale - 0.5`` besides its scaling)."""
+    scale_y = scale_x if scale_y is None else scale_y
+    K = np.array(K, np.float64)
+    K[0] *= scale_x
+    K[1] *= scale_y
+    K[0, 2] += 0.5 * scale_x - 0.5
+    K[1, 2] += 0.5 * scale_y - 0.5
+    return K
+
+
+def grid_cell(uv: np.ndarray) -> np.ndarray:
+    """``(..., 2)`` int: the column and row of the grid cell whose window is centred nearest to
+    each point ``uv (..., 2)`` (x, y pixels of the downscaled frame, :func:`grid_centres`)."""
+    return np.rint((np.asarray(uv, np.float64) - grid_centres((1, 1))[0, 0]) / STRIDE).astype(int)
 
 
 def read_metadata(path: str | Path) -> dict[str, Any]:
@@ -307,7 +327,8 @@ class CornerDetector:
 
         Without ``predicted``: the ``top_k`` local maxima above ``min_score``; with ``predicted``
         ``(n, 2)`` full-image pixels: the ``gated_top_k`` above ``gated_min_score`` within
-        ``radius`` pixels of the part's prediction."""
+        ``radius`` pixels (default :attr:`gate`) of the part's prediction."""
+        radius = self.gate if radius is None else radius
         out = []
         for k, (xy, sc) in enumerate(self._local_maxima(image)):
             if predicted is None:
@@ -355,7 +376,7 @@ class CornerDetector:
         uv, visible = part_visibility(self.corners, R, t, np.asarray(K, np.float64), image.shape[:2], parts=self.parts)
         pooled = self._pooled_scores(image)
         gh, gw = pooled.shape[1:]
-        ij = np.rint((to_scaled(uv, self.scale) - grid_centres((1, 1))[0, 0]) / STRIDE).astype(int)
+        ij = grid_cell(to_scaled(uv, self.scale))
         j, i = np.clip(ij[..., 0], 0, gw - 1), np.clip(ij[..., 1], 0, gh - 1)
         scores = np.where(visible, pooled[np.arange(len(self.parts)), i, j], 0.0)
         shown = visible.sum(1)

@@ -157,6 +157,8 @@ def evaluate_sequence(
         t0 = time.perf_counter()
         est, _ = tracker.step(fr.im_id, img, detector)
         t_total += time.perf_counter() - t0
+        if obj_id not in [o.obj_id for o in fr.objects]:
+            raise DatasetError(f"{scene_dir}: object {obj_id} is not annotated in frame {fr.im_id} (scene_gt.json)")
         gt = fr.pose(obj_id)
         scores.append(score(vertices, fr.K, units, (est.R, est.tvec) if est.ok else None, (gt.R, gt.t)))
     return scores, len(scene.frames) / max(t_total, 1e-9)
@@ -351,7 +353,7 @@ def main(
             }
         ),
     )
-    plot_table(table, columns, out_dir / "table1.png", "Correct poses (2D projection < 5 px)", spread)
+    plot_table(table, columns, out_dir / "table1.png", f"Correct poses (2D projection < {PROJ_PX:g} px)", spread)
     return {"table": table, "spread": spread, "details": details}
 
 

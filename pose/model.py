@@ -2,9 +2,10 @@
 
 A part model describes one rigid box-like object in its own *object frame*:
 
-* the box: its size ``(3,)`` along the frame's axes and its 8 corners ``(8, 3)``; the corners
-  are the *parts* the learned detector looks for (the Box experiment of Rad et al., BMVC 2017,
-  Sec. 4.4, with the part-based method of Crivellaro et al., ICCV 2015);
+* the box: its size ``(3,)`` along the frame's axes and its 8 corners ``(8, 3)``; the learned
+  detector's parts lie on it (:func:`pose.box.box_parts`: the corners of the Box experiment of
+  Rad et al., BMVC 2017, Sec. 4.4, after Crivellaro et al., ICCV 2015, the edges' middles and
+  the faces' centres), and the pose solver checks its inliers against its outline;
 * the sparse 3D points triangulated from the training sequence, each with one or more
   descriptors (the classical detector matches image features to them) and its track length;
 * the units of every length (``"mm"``, ``"cm"`` or ``"m"``).
@@ -135,11 +136,6 @@ class PartModel:
         self.colors = np.asarray(self.colors, dtype=np.uint8).reshape(n, 3)
         if self.units not in UNITS:
             raise InputError(f"unknown unit {self.units!r}; expected one of {UNITS}")
-
-    @property
-    def parts(self) -> np.ndarray:
-        """The parts' 3D positions ``(8, 3)``: the box corners."""
-        return self.corners
 
     @property
     def box_size(self) -> np.ndarray:

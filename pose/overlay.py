@@ -96,8 +96,8 @@ def edge_offsets(
 ) -> np.ndarray:
     """Signed distances (pixels, along the normal ``(-dy, dx)`` of ``b - a``) from samples of the
     segment ``a -> b`` to the nearest image edge parallel to it; NaN where none is within
-    ``settings.max_distance`` or the sample is outside the image. Empty for a segment shorter
-    than two steps."""
+    ``settings.max_distance`` or the sample is outside the image. Empty when the segment less
+    its trimmed ends (``settings.trim``) is shorter than two steps."""
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     length = float(np.linalg.norm(b - a))
     n_samples = int(length * (1 - 2 * settings.trim) / settings.step)

@@ -509,7 +509,7 @@ def _details_markdown(details: dict[str, Any], columns: list[str]) -> str:
         "target (x, y, w, h)",
         "parts",
         "posed %",
-        "all 4 corners < 5 px %",
+        f"all 4 corners < {PROJ_PX:g} px %",
         "median err (px)",
         "ms/frame",
     ]

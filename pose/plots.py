@@ -12,13 +12,8 @@ from pose.model import BOX_EDGES, PartModel
 
 def plot_model(model: PartModel, camera_centers: np.ndarray, path: str | Path) -> Path:
     """A PNG of the points, the box and the training cameras' centres (object frame)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig = plt.figure(figsize=(7, 6))
-    ax = fig.add_subplot(projection="3d")
+    plt, fig, axes = new_figure(figsize=(7, 6), subplot_kw={"projection": "3d"})
+    ax = axes[0, 0]
     p = model.points3d
     ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=1, c=model.colors / 255.0)
     for i, j in BOX_EDGES:

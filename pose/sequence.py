@@ -27,6 +27,7 @@ class TrainingView:
         name: file name relative to ``image_dir``.
         K: (3, 3) OpenCV intrinsics; ``dist`` OpenCV distortion or ``None``.
         R_w2c, t_w2c: world-to-camera pose (``None`` for an unregistered image).
+        mask: the file of the object's visible pixels (a BOP ``mask_visib``), or ``None``.
     """
 
     name: str
@@ -34,6 +35,7 @@ class TrainingView:
     dist: np.ndarray | None = None
     R_w2c: np.ndarray | None = None
     t_w2c: np.ndarray | None = None
+    mask: Path | None = None
 
 
 @dataclass
@@ -74,14 +76,19 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
         scene = bop.load_scene(path)
         views = []
         for fr in scene.frames:
+            mask = None
             if fr.objects:  # world = the object's model frame (the object is static in a training sequence)
-                o = fr.objects[0] if obj_id is None else fr.pose(obj_id)
-                R, t = o.R, o.t
+                ids = [o.obj_id for o in fr.objects]
+                if obj_id is not None and obj_id not in ids:
+                    raise DatasetError(f"{path / 'scene_gt.json'}: image {fr.im_id} has no object {obj_id}")
+                index = 0 if obj_id is None else ids.index(obj_id)
+                R, t = fr.objects[index].R, fr.objects[index].t
+                mask = path / "mask_visib" / f"{fr.im_id:06d}_{index:06d}.png"
             elif fr.R_w2c is not None:
                 R, t = fr.R_w2c, fr.t_w2c
             else:
                 raise DatasetError(f"{path / 'scene_gt.json'}: image {fr.im_id} has no pose (field 'cam_R_m2c')")
-            views.append(TrainingView(fr.rgb_path.name, fr.K, None, R, np.ravel(t)))
+            views.append(TrainingView(fr.rgb_path.name, fr.K, None, R, np.ravel(t), mask))
         return TrainingSequence(scene.frames[0].rgb_path.parent, views, "mm", info={"format": "bop", "path": str(path)})
     if any(path.glob("*_par.txt")):
         from alcn_cv.formats.middlebury import read_middlebury
@@ -145,7 +152,7 @@ def motion_masks(
 
     The background is the per-pixel median of ``frames``; the mask is the convex hull of the
     regions (larger than ``min_area`` of the image) that differ from it by more than
-    ``threshold`` grey levels, dilated by ``dilate`` pixels. Used for hand-held objects in front
+    ``threshold`` grey levels, dilated by a disc ``dilate`` pixels across. Used for hand-held objects in front
     of a fixed camera (e.g. the cookie-box video), whose static background would otherwise
     dominate the reconstruction.
     """

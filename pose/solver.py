@@ -27,6 +27,7 @@ cookie-box video; ``examples/pnp_methods.py`` compares the methods, ``docs/journ
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
@@ -177,6 +178,11 @@ class PoseSolver:
             raise InputError(f"unknown PnP method {method!r}; choose one of {sorted(METHODS)}")
         if min_inliers < 4:
             raise InputError(f"min_inliers must be >= 4 (PnP needs 4 points), got {min_inliers}")
+        if not (reprojection_error > 0 and 0 < confidence < 1 and iterations >= 1):
+            raise InputError(
+                "need reprojection_error > 0, confidence in (0, 1) and iterations >= 1, "
+                f"got {reprojection_error}, {confidence} and {iterations}"
+            )
         self.K, self.dist = K, None if dist is None else np.asarray(dist, np.float64)
         self.method, self.flags = method, METHODS[method]
         self.reprojection_error, self.confidence, self.iterations = reprojection_error, confidence, iterations
@@ -306,7 +312,8 @@ class PoseSolver:
     ) -> PoseEstimate:
         n = len(obj)
         need = self.min_inliers_near_prior if self._is_near(rvec, tvec, prior) else self.min_inliers
-        if len(inl) < max(need, self.min_inlier_ratio * n):
+        need = max(need, math.ceil(self.min_inlier_ratio * n))
+        if len(inl) < need:
             return PoseEstimate(
                 False, num_matches=n, inliers=inl, reason=f"{len(inl)} inliers of {n} matches (need {need})"
             )
@@ -484,6 +491,10 @@ class PoseTracker:
     around the prediction is kept.
 
     ``events`` collects ``(frame_index, "lost" | "recovered", reason)`` tuples, also logged.
+
+    Frame indices are expected to increase from one call to the next; a frame given again
+    replaces the pose recorded for it, and an earlier one starts a new motion (the poses recorded
+    for it and later frames are forgotten).
     """
 
     def __init__(
@@ -617,6 +628,8 @@ class PoseTracker:
         return est
 
     def _record(self, frame_index: int, est: PoseEstimate) -> PoseEstimate:
+        # only poses of earlier frames predict this one's successor (equal indices: no velocity)
+        self._poses = [p for p in self._poses if p[0] < frame_index]
         self._frame = frame_index
         if est.ok:
             self._poses = (self._poses + [(frame_index, est.rvec, est.tvec)])[-2:]

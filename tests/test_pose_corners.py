@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.nets.detector import Detector
 from pose import box, corner_data, corner_train, track
 from pose import corners as pc
@@ -70,6 +70,38 @@ def test_constants_match_the_detector():
         assert net(torch.zeros(1, 1, 32 + 8, 32 + 12)).shape == (1, 79, 3, 4)
     assert pc.grid_shape(240, 320) == (61, 81)
     np.testing.assert_allclose(pc.grid_centres((2, 3))[1, 2], [7.5, 3.5])
+
+
+def test_scaled_camera_follows_the_resize():
+    """The intrinsics of a resized frame project where ``cv2.resize`` moves the pixels (OpenCV pixel
+    centres: ``(x + 0.5) s - 0.5``), for one scale and for one per axis."""
+    K = camera_matrix(300.0, 280.0, 39.5, 29.5)
+    rng = np.random.default_rng(0)
+    pts = rng.uniform([-20, -15, 200], [20, 15, 300], (20, 3))
+    uv = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), K, None)[0].reshape(-1, 2)
+    for sx, sy in ((0.75, 0.75), (2.0, 0.5)):
+        moved = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), pc.scaled_camera(K, sx, sy), None)[0].reshape(-1, 2)
+        np.testing.assert_allclose(moved, (uv + 0.5) * [sx, sy] - 0.5, atol=1e-9)
+    np.testing.assert_array_equal(pc.scaled_camera(K, 0.75), pc.scaled_camera(K, 0.75, 0.75))
+    # the principal point of an 80x60 frame doubled in size: where a blob at it lands
+    K = camera_matrix(300.0, 280.0, 39.0, 29.0)
+    blob = np.zeros((60, 80), np.float32)
+    blob[29, 39] = 1.0
+    big = cv2.resize(cv2.GaussianBlur(blob, (0, 0), 3.0), (160, 120), interpolation=cv2.INTER_LINEAR)
+    yy, xx = np.mgrid[:120, :160]
+    centroid = [(xx * big).sum() / big.sum(), (yy * big).sum() / big.sum()]
+    np.testing.assert_allclose(centroid, pc.scaled_camera(K, 2.0)[:2, 2], atol=0.02)
+
+
+def test_grid_cell_is_the_cell_centred_nearest():
+    centres = pc.grid_centres((5, 7))
+    uv = np.random.default_rng(1).uniform([0, 0], [23, 15], (200, 2))
+    j, i = pc.grid_cell(uv).T
+    d = np.linalg.norm(centres[None] - uv[:, None, None], axis=3).reshape(len(uv), -1)
+    np.testing.assert_allclose(d[np.arange(len(uv)), i * 7 + j], d.min(1))
+    np.testing.assert_array_equal(
+        pc.grid_cell(centres.reshape(-1, 2)), np.c_[np.tile(np.arange(7), 5), np.repeat(np.arange(5), 7)]
+    )
 
 
 def test_label_grid_offsets_point_at_the_corner():
@@ -149,6 +181,7 @@ def test_candidates_are_gated_by_the_predicted_pose(random_net, monkeypatch):
     predicted = np.tile(right + [8.0, -5.0], (8, 1))  # 9.4 px off
     np.testing.assert_allclose(det.peaks(None, predicted, 20.0)[2][0], [right], atol=1e-6)
     assert len(det.peaks(None, predicted, 5.0)[2][0]) == 0
+    np.testing.assert_allclose(det.peaks(None, predicted)[2][0], [right], atol=1e-6)  # within the gate by default
     # detect() projects the corners with the prior and gates with gate * search_scale
     K = camera_matrix(300, 300, 159.5, 119.5)
     rvec, tvec = np.zeros(3), np.array([0.0, 0.0, 1000.0])
@@ -243,6 +276,27 @@ def test_build_frames_labels_follow_the_corners(posedata):
             )
     # the copies differ from their view (warp, background, intensity)
     assert np.abs(frames.images[1] - frames.images[0]).mean() > 0.1
+
+
+def test_the_training_frames_use_the_mask_of_the_sequences_object(posedata, tmp_path, monkeypatch):
+    """A BOP frame's ``mask_visib`` is per object (``<image>_<annotation index>.png``): the sequence of
+    object ``obj_id`` carries that object's masks, and the corner frames read them."""
+    train = posedata / "train" / "000001"
+    ids = [o["obj_id"] for o in json.loads((train / "scene_gt.json").read_text())["0"]]
+    for index, obj_id in enumerate(ids):
+        seq = load_sequence(train, obj_id=obj_id)
+        assert all(v.mask.name == f"{int(v.name.split('.')[0]):06d}_{index:06d}.png" for v in seq.views)
+        assert all(v.mask.is_file() for v in seq.views)
+    with pytest.raises(DatasetError, match="no object 99"):
+        load_sequence(train, obj_id=99)
+    seq = load_sequence(train, obj_id=ids[0])
+    for v in seq.views:
+        v.mask = tmp_path / f"mask_of_{v.name}"
+    read = []
+    monkeypatch.setattr(corner_data, "_read_mask", lambda path, shape: read.append(path))
+    corners = read_box_corners(posedata / "models" / "obj_000001.ply")
+    corner_data.build_frames(seq, corners, "none", corner_train.CornerRecipe(scale=0.5, copies=0))
+    assert read == [v.mask for v in seq.views]
 
 
 def test_novel_view_moves_each_face_with_its_plane(posedata):
@@ -350,6 +404,16 @@ def test_alcn_runs_at_the_detector_resolution_torch_free_where_it_can(tmp_path):
     weights = shutil.copy(MODELS["lite"], tmp_path / "lite.npz")  # weights without an ONNX twin
     lite = pc.normalization_for(f"alcn:weights={weights}:mixture=pyramid")
     assert lite.scale == 1.0 and lite.backend == "fast" and lite.mixture == "pyramid"
+
+
+def test_an_impossible_recipe_is_named():
+    """Shares outside [0, 1], a negative noise, part cells beyond the ignored ring, an empty layer."""
+    for conf in corner_train.confs.values():
+        conf.check()
+    bad = {"novel_views": 1.5, "backgrounds": -0.1, "noise": -0.01, "pos_radius": 8.0, "hidden": 0, "mixing": -1}
+    for key, value in bad.items():
+        with pytest.raises(InputError, match=f"'{key}'"):
+            dataclasses.replace(corner_train.confs["box"], **{key: value}).check()
 
 
 def test_bad_files(tmp_path, random_net):
@@ -614,6 +678,20 @@ def test_track_and_bench_the_corner_detector(posedata, random_net, tmp_path):
     assert bench["cpu_ms_per_frame"] > 0 and "fps" in (tmp_path / "bench" / "bench_corners.md").read_text()
 
 
+def test_bench_scales_the_camera_with_the_frames(posedata, random_net, monkeypatch):
+    """`alcn pose bench-corners --frame-size`: the camera of the resized frames (pixel centres moved
+    as ``cv2.resize`` moves them, :func:`pose.corners.scaled_camera`)."""
+    from pose import corner_bench
+
+    cameras = []
+    make_tracker = track.make_tracker
+    monkeypatch.setattr(track, "make_tracker", lambda kind, K, *a: cameras.append(K) or make_tracker(kind, K, *a))
+    K = camera_matrix(300.0, 300.0, 159.5, 119.5)
+    rgb = posedata / "train" / "000001" / "rgb"
+    corner_bench.benchmark(random_net[1], rgb, K, size=(160, 120), max_frames=2, repeats=1)
+    np.testing.assert_allclose(cameras[0], [[150.0, 0.0, 79.5], [0.0, 150.0, 59.5], [0.0, 0.0, 1.0]])
+
+
 def test_corner_recall_against_the_true_corners(posedata, random_net, tmp_path, capsys):
     """`alcn pose corner-recall`: shares of the visible corners, as they are and on a grey background."""
     from pose import corner_bench
@@ -625,6 +703,8 @@ def test_corner_recall_against_the_true_corners(posedata, random_net, tmp_path, 
     assert set(r["per_part"]) <= set(range(8))
     with pytest.raises(InputError, match="background"):
         corner_bench.corner_recall(random_net[1], scene, background="black")
+    with pytest.raises(InputError, match="object 99 is not annotated"):
+        corner_bench.corner_recall(random_net[1], scene, obj_id=99)
     args = _parser().parse_args(
         [
             "pose",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from alcn_cv.errors import DatasetError
@@ -37,3 +38,35 @@ def test_overlay_colours_follow_the_paper_for_specs_too():
     assert color_for("alcn:model=lite:mixture=pyramid") == color_for("alcn") == COLORS["alcn"]
     assert color_for("none") == COLORS["none"] != COLORS["alcn"]
     assert color_for("clahe:clipLimit=2") == OTHER_COLOR
+
+
+class _NoParts:
+    """A part detector that finds nothing (every frame lost)."""
+
+    uses_prior = False
+    refine_search_scale = 0.0
+
+    def detect(self, image, prior=None, *, search_scale=1.0):
+        from pose.parts import Correspondences
+
+        return Correspondences(np.zeros((0, 3), np.float32), np.zeros((0, 2), np.float32))
+
+    def verify(self, image, rvec, tvec, K, *, proposed=False):
+        return ""
+
+    def propose(self, image, K):
+        return None
+
+
+def test_a_test_sequence_without_the_object_is_a_dataset_error(tmp_path):
+    from alcn_cv.data import pose
+    from pose.model import read_box_corners
+
+    data = pose.generate(
+        tmp_path / "data", size="small", n_frames=2, n_test=1, clutter=False, train_sweeps=(1,), progress=False
+    )
+    corners = read_box_corners(data / "models" / "obj_000001.ply")
+    scores, _ = evaluate.evaluate_sequence(_NoParts(), data / "test" / "000001", 1, corners, "mm")
+    assert len(scores) == 2 and all(s.proj_px is None for s in scores)  # lost frames count as wrong
+    with pytest.raises(DatasetError, match="object 99 is not annotated in frame 0"):
+        evaluate.evaluate_sequence(_NoParts(), data / "test" / "000001", 99, corners, "mm")

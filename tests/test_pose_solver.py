@@ -256,6 +256,33 @@ def test_bad_arguments():
     pts, uv, *_ = _scene(np.random.default_rng(0), n=30, outliers=0.0)
     with pytest.raises(InputError, match="directions"):
         PoseSolver(K).solve(pts, uv, directions=np.ones((29, 3)))
+    # RANSAC settings that lost every frame, or posed it with one method and not another
+    for bad in ({"reprojection_error": 0.0}, {"confidence": 1.0}, {"confidence": 0.0}, {"iterations": 0}):
+        with pytest.raises(InputError, match="confidence in"):
+            PoseSolver(K, **bad)
+
+
+def test_a_lost_frame_names_the_inliers_it_needed():
+    """With ``min_inlier_ratio`` the share of the matches decides, and the reason says how many."""
+    pts, uv, *_ = _scene(np.random.default_rng(4), n=40, outliers=0.0)
+    uv[:20] = uv[20:][::-1]  # half of the matches wrong
+    est = PoseSolver(K, min_inlier_ratio=0.6, iterations=2000).solve(pts, uv)
+    assert not est.ok and len(est.inliers) >= 12
+    assert est.reason == f"{len(est.inliers)} inliers of 40 matches (need 24)"
+
+
+def test_a_frame_given_again_replaces_its_pose():
+    """The same frame index twice (a frame solved again) or an earlier one (a new pass over a video)
+    leaves no zero or negative interval between the poses that predict the next frame."""
+    rng = np.random.default_rng(5)
+    pts, uv, *_ = _scene(rng, outliers=0.0)
+    tracker = PoseTracker(PoseSolver(K))
+    assert tracker.update(0, pts, uv).ok
+    again = tracker.update(0, pts, uv)
+    r, t = tracker.prior  # one pose known, the frame's latest: the prediction is that pose
+    assert again.ok and r is again.rvec and t is again.tvec
+    assert tracker.update(1, pts, uv).ok and tracker.update(0, pts, uv).ok
+    assert [f for f, *_ in tracker._poses] == [0] and tracker.prior is not None
 
 
 def test_errors_along_the_directions_weigh_less():
