@@ -66,7 +66,7 @@ from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.io import to_gray
 from alcn_cv.weight_file import ONNX_METADATA_KEY
 from pose.box import NUM_CORNERS, edge_directions, part_visibility, parts_per_face
-from pose.parts import Correspondences
+from pose.parts import Correspondences, same_frame
 
 logger = logging.getLogger(__name__)
 
@@ -308,7 +308,7 @@ class CornerDetector:
         """Softmax scores ``(1 + n, gh, gw)`` (class 0: background) and per part the position each
         cell votes for ``(n, gh, gw, 2)`` (x, y, downscaled pixels) of a BGR or gray uint8 frame.
         The last frame's are kept, so the tracker's second search of a frame costs nothing."""
-        if self._cache is not None and self._cache[0] is image:
+        if self._cache is not None and same_frame(self._cache[0], image):
             return self._cache[1], self._cache[2]
         out = self.outputs(self.normalize(image))
         n = len(self.parts)
@@ -317,7 +317,7 @@ class CornerDetector:
         prob = e / e.sum(0, keepdims=True)
         off = out[n + 1 :].reshape(n, 2, *z.shape[1:]).transpose(0, 2, 3, 1)
         votes = grid_centres(z.shape[1:])[None] + STRIDE * off.astype(np.float64)
-        self._cache = (image, prob, votes)
+        self._cache = (image.copy(), prob, votes)
         return prob, votes
 
     def peaks(

@@ -59,6 +59,13 @@ def match_descriptors(query: np.ndarray, train: np.ndarray, norm: int, ratio: fl
     return np.array(pairs, np.int64).reshape(-1, 2)
 
 
+def same_frame(kept: np.ndarray | None, image: np.ndarray) -> bool:
+    """Whether ``image`` holds the pixels of ``kept``, a copy of the last frame a detector computed on: what it
+    keeps is reused for the tracker's second search of a frame. Compared by content, not identity: an app that
+    reads every frame into one buffer gives new pixels in the same array."""
+    return kept is not None and kept.shape == image.shape and kept.dtype == image.dtype and np.array_equal(kept, image)
+
+
 @dataclass
 class Correspondences:
     """2D-3D correspondences found in one image.
@@ -178,8 +185,9 @@ class FeaturePartDetector:
         # the last frame's normalized image and whole-frame correspondences: the tracker's second search of a frame
         # (the whole frame, after a guided search) costs no normalization, and no detection when the guided search
         # already fell back to the whole frame
-        self._normalized: tuple[np.ndarray, np.ndarray] | None = None
-        self._whole: tuple[np.ndarray, Correspondences] | None = None
+        self._frame: np.ndarray | None = None  # a copy of that frame
+        self._normalized: np.ndarray | None = None
+        self._whole: Correspondences | None = None
 
     def normalize(self, image: np.ndarray) -> np.ndarray:
         """The normalized grayscale uint8 image the features are computed on."""
@@ -216,9 +224,9 @@ class FeaturePartDetector:
             search_scale: multiplies :attr:`search_radius` (the tracker widens the search when
                 its prediction is uncertain).
         """
-        if self._normalized is None or self._normalized[0] is not image:
-            self._normalized = (image, self.normalize(image))
-        gray = self._normalized[1]
+        if not same_frame(self._frame, image):
+            self._frame, self._normalized, self._whole = image.copy(), self.normalize(image), None
+        gray = self._normalized
         if prior is not None:
             radius = self.search_radius * search_scale
             region = self._region(gray.shape, prior, radius)
@@ -227,11 +235,11 @@ class FeaturePartDetector:
                 pairs = self._guided(pts2d, desc, prior, radius) if n else np.zeros((0, 2), np.int64)
                 if len(pairs) >= self.min_guided:
                     return Correspondences(self.model.points3d[pairs[:, 1]], pts2d[pairs[:, 0]], n)
-        if self._whole is None or self._whole[0] is not image:
+        if self._whole is None:
             pts2d, desc, n = self._detect(gray, None, self.n_features_global)
             pairs = self._global(desc) if n else np.zeros((0, 2), np.int64)
-            self._whole = (image, Correspondences(self.model.points3d[pairs[:, 1]], pts2d[pairs[:, 0]], n))
-        return self._whole[1]
+            self._whole = Correspondences(self.model.points3d[pairs[:, 1]], pts2d[pairs[:, 0]], n)
+        return self._whole
 
     def _detect(
         self, gray: np.ndarray, region: np.ndarray | None, keep: int

@@ -778,3 +778,17 @@ def test_version_3_names_the_normalization_normalizer(random_net, tmp_path):
     old = corner_train.export_onnx(random_net[0], tmp_path / "v3.onnx", meta)
     assert pc.read_metadata(old)["normalization"] == "none"
     assert pc.CornerDetector(old).normalization_spec == "none"
+
+
+def test_the_maps_of_a_frame_read_into_the_same_buffer_are_new(random_net):
+    """The maps of the last frame are kept for the tracker's second search; new pixels in the same array (an app's
+    ``video.read(frame)``) are a new frame."""
+    det = pc.CornerDetector(random_net[1])
+    rng = np.random.default_rng(0)
+    buffer = rng.integers(0, 256, (120, 160, 3), np.uint8)
+    first = det.maps(buffer)
+    assert det.maps(buffer)[0] is first[0]
+    buffer[:] = rng.integers(0, 256, (120, 160, 3), np.uint8)
+    second = det.maps(buffer)
+    assert not np.array_equal(second[0], first[0])
+    np.testing.assert_array_equal(second[0], pc.CornerDetector(random_net[1]).maps(buffer.copy())[0])

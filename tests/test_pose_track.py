@@ -142,6 +142,22 @@ def test_detector_runs_after_any_normalizer():
             assert len(corr.image_points) == len(corr.object_points) > 20
 
 
+def test_a_frame_read_into_the_same_buffer_is_a_new_frame():
+    """The detector keeps the last frame's work for the tracker's second search of it; an app that reads every frame
+    into one buffer (``video.read(frame)``) must get the new frame's correspondences, not the kept ones."""
+    tex = _texture(1)
+    detector = FeaturePartDetector(_planar_model(tex), n_features=500)
+    (r0, t0), (r1, t1) = _poses(6)[0], _poses(6)[5]
+    buffer = _render(tex, r0, t0)
+    first = detector.detect(buffer)
+    assert detector.detect(buffer) is first  # the same frame again: kept
+    buffer[:] = _render(tex, r1, t1)
+    second = detector.detect(buffer)
+    fresh = FeaturePartDetector(_planar_model(tex), n_features=500).detect(buffer.copy())
+    assert np.array_equal(second.image_points, fresh.image_points)
+    assert not np.array_equal(second.image_points, first.image_points)
+
+
 def test_ratio_test_compares_distinct_points():
     """Each point described twice (the same descriptor): a plain 2-NN ratio test would reject every
     match (the runner-up is the same point); the detector compares the closest other point."""
