@@ -68,6 +68,15 @@ def test_bad_input(tmp_path):
     with pytest.raises(InputError):
         invariance.main(data, tmp_path / "o", ["none"], figure_object="cat")
     assert cli_main(["bench", "invariance", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
+    # degenerate sets: an erosion that leaves no pixel, a negative one, an object under one light (NaN agreements)
+    with pytest.raises(InputError, match="ball holds no pixel once eroded by 30 px"):
+        invariance.main(data, tmp_path / "o", ["none"], erode=30, progress=False)
+    with pytest.raises(InputError, match="erode must be >= 0"):
+        invariance.main(data, tmp_path / "o", ["none"], erode=-1, progress=False)
+    assert not (tmp_path / "o").exists()
+    one = _fake_set(tmp_path / "one", n_lights=1)
+    with pytest.raises(DatasetError, match="one photograph"):
+        invariance.load_objects(one)
 
 
 def test_a_bad_weight_file_is_one_line_before_any_work(tmp_path, capsys, monkeypatch):

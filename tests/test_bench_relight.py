@@ -40,6 +40,16 @@ def test_protocols_on_identical_frames():
     assert again.pairs == plan.pairs and all((again.locations[g] == plan.locations[g]).all() for g in plan.gallery)
 
 
+def test_a_flat_gallery_frame_is_named():
+    """No textured patch: identification of none was argmax's ValueError (of one, a trivial 100%)."""
+    from alcn_cv.errors import DatasetError
+
+    frames = np.stack([np.full((64, 64), 90, np.uint8), lit(texture(64, 64))[0]])
+    scene = Scene("dim", "test", frames, ("night.png", "day.png"))
+    with pytest.raises(DatasetError, match="'dim': frame night.png has 0 textured 16x16"):
+        relight.plan_pairs(scene, 0, relight.Settings(patch=16, gallery=2))
+
+
 def test_textured_locations_avoid_flat_regions():
     frame = np.zeros((64, 128), np.uint8)
     frame[:, 64:] = np.rint(texture(64, 64) * 255)

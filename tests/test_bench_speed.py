@@ -110,6 +110,15 @@ def test_bad_arguments(tmp_path):
         speed.main(tmp_path, dataclasses.replace(speed.presets()["quick"], methods=["alcn turbo"]))
     with pytest.raises(InputError, match="colours"):
         speed.main(tmp_path, dataclasses.replace(speed.presets()["quick"], colours=["rgba"]))
+    # no timed run: a median of none (np.percentile's IndexError after the build of every method)
+    with pytest.raises(InputError, match="min_repeats"):
+        speed.main(tmp_path, dataclasses.replace(speed.presets()["quick"], min_repeats=0))
+    with pytest.raises(InputError, match="device_batches"):
+        speed.main(tmp_path, dataclasses.replace(speed.presets()["quick"], device="cpu", device_batches=[]))
+    # a video method the run does not time: named up front, not a StopIteration after every timing
+    quick = dataclasses.replace(speed.presets()["quick"], methods=["none"], video_methods=["alcn lite"])
+    with pytest.raises(InputError, match=r"video method\(s\) \['alcn lite'\]"):
+        speed.main(tmp_path, quick)
 
 
 def test_cli_is_registered(tmp_path):

@@ -51,6 +51,9 @@ def test_toml_file_overrides_and_round_trip(tmp_path):
         ({"data": {"train_lighting": ["moonlight"]}}, "data.train_lighting"),
         ({"model": {"dog": [0.5, 0.7]}}, "model.dog"),
         ({"optim": 3}, "optim"),
+        # "meta" with so few windows that none (or all) would be rendered under the anchor lighting
+        ({"data": {"n_train": 1}}, "data.n_train"),
+        ({"data": {"n_train": 3, "anchor_fraction": 0.9}}, "data.anchor_fraction"),
     ],
 )
 def test_errors_name_the_key(values, key):

@@ -8,6 +8,7 @@ import sys
 import textwrap
 
 import numpy as np
+import torch
 
 from alcn_cv.data import phos
 from alcn_cv.train import distributed
@@ -16,6 +17,17 @@ from alcn_cv.train import distributed
 def test_single_process_helpers():
     assert (distributed.rank(), distributed.world_size(), distributed.is_main()) == (0, 1, True)
     assert distributed.init("cpu") is False
+
+
+def test_replicas_are_compared_on_their_device(monkeypatch):
+    """nccl reduces CUDA tensors only: the parameters are compared where they are (they were copied to the CPU)."""
+    seen = []
+    monkeypatch.setattr(distributed, "world_size", lambda: 2)
+    monkeypatch.setattr(distributed.dist, "all_reduce", lambda tensor, op: seen.append(tensor.device))
+    monkeypatch.setattr(distributed.torch, "equal", lambda a, b: a.device == b.device)  # meta tensors hold no values
+    model = torch.nn.Linear(3, 2, device="meta")  # a device of its own, as a GPU's would be
+    assert distributed.replicas_equal(model) is True
+    assert seen == [torch.device("meta")] * 2
 
 
 def test_two_cpu_processes_hold_equal_weights(tmp_path):

@@ -58,6 +58,29 @@ def test_textured_locations_and_sampling():
     assert gaps.min() >= 12
 
 
+def test_a_flat_scene_is_named_not_trained_on_with_a_nan_loss():
+    """No textured location: nothing to identify, and the loss of no classes is NaN (it reached the weights)."""
+    from alcn_cv.data.scenes import Scene
+    from alcn_cv.errors import DatasetError
+
+    flat = Scene("flat", "test", np.full((3, 64, 64), 128, np.uint8), ("a.png", "b.png", "c.png"))
+    with pytest.raises(DatasetError, match="'flat' has 0 textured 32x32"):
+        training_scene(flat, CROP // 2, PATCH)
+    assert torch.isnan(identification_loss(torch.zeros(0, 1, 4, 4), torch.zeros(0, 1, 4, 4), 0.05))
+
+
+@pytest.mark.parametrize(
+    "change, match", [({"anywhere": -1}, "anywhere"), ({"relit": -1}, "relit"), ({"temperature": 0.0}, "temperature")]
+)
+def test_settings_out_of_range_are_named(change, match):
+    from dataclasses import replace
+
+    from alcn_cv.errors import InputError
+
+    with pytest.raises(InputError, match=match):
+        replace(RealLightConfig(), **change).check()
+
+
 def test_identification_loss_prefers_matching_patches():
     a = torch.randn(16, 1, 8, 8)
     assert identification_loss(a, a * 3 + 1, 0.05) < 1e-3  # NCC ignores gain and offset

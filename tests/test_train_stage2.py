@@ -64,3 +64,17 @@ def test_seed_changes_result_and_custom_net():
 def test_bad_input(windows, labels, match):
     with pytest.raises(InputError, match=match):
         train_detector(windows, labels, 3, epochs=1, batch_size=2, lr=1e-3, seed=0, progress=False)
+
+
+@pytest.mark.parametrize(
+    "labels, match", [(np.zeros(0, np.int64), "empty"), ([0, 1], "labels"), (np.zeros(2, np.float32), "labels")]
+)
+def test_evaluate_detector_names_bad_labels_of_a_network_without_num_classes(labels, match):
+    """A network that does not say its classes: the labels' own check names what is wrong (it was a bare
+    ValueError of ``labels.max()`` for none, an AttributeError for a list)."""
+    net = torch.nn.Sequential(torch.nn.Flatten(), torch.nn.Linear(32 * 32, 3))
+    windows = np.zeros((len(labels), 32, 32), np.float32)
+    with pytest.raises(InputError, match=match):
+        evaluate_detector(net, windows, labels)
+    loss, accuracy = evaluate_detector(net, np.zeros((2, 32, 32), np.float32), np.array([0, 2]))
+    assert np.isfinite(loss) and 0 <= accuracy <= 1

@@ -10,7 +10,7 @@ from alcn_cv.data import phos
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.nets.gain import dog_weights
-from alcn_cv.train import trainer
+from alcn_cv.train import trainer, windows
 from alcn_cv.train.checkpoint import load_checkpoint
 from alcn_cv.train.config import load_config
 from alcn_cv.train.models import CentreMixture, JointModel
@@ -61,6 +61,7 @@ def test_train_outputs_and_gradients_reach_the_normalizer(data, tmp_path):
         assert (tmp_path / name).is_file(), name
     assert "held-out val" in (tmp_path / "train.log").read_text()
     assert "| dog 0.5/1.5 |" in (tmp_path / "summary.md").read_text()
+    assert "new objects, 1 image(s) each under one light" in (tmp_path / "summary.md").read_text()
     # The Normalizer moved away from its DoG initialisation: gradients went through the mixture.
     init = torch.tensor(dog_weights(gaussian_sigmas(10, 0.5), 0.5, 1.5))
     with torch.no_grad():
@@ -186,3 +187,52 @@ def test_meta_objective_renders_anchor_windows(tmp_path):
     assert result.status == "done"
     with np.load(next(tmp_path.glob("windows-*.npz"))) as z:
         assert np.bincount(z["train_light_ids"], minlength=3)[[0, 2]].tolist() == [12, 12]
+
+
+def test_meta_objective_names_an_anchor_lighting_the_windows_lack(data, tmp_path):
+    """Windows read from data.path: a misspelt anchor is an InputError naming it (it was list.index's ValueError)."""
+    cfg = _config(data)
+    cfg["data"]["anchor_lighting"] = "ambiant"
+    with pytest.raises(InputError, match="anchor lighting 'ambiant'"):
+        trainer.train(cfg, tmp_path, progress=False)
+
+
+def test_cached_windows_are_those_of_the_settings_and_folders(data, tmp_path):
+    """A run folder's cache holds the windows read from data.path too: a later run there that renders its windows
+    must not take those for its own; the key of rendered windows is the one earlier caches were written under."""
+    read = load_config({**_config(data), "data": {"path": data[0], "n_train": 96, "n_val": 48, "n_objects": 3}})
+    rendered = load_config({**_config(data), "data": {"n_train": 96, "n_val": 48, "n_objects": 3}})
+    train_read, _ = windows.load_windows(read, tmp_path, False)
+    train_rendered, _ = windows.load_windows(rendered, tmp_path, False)
+    assert np.array_equal(train_read.windows, phos.load(data[0]).windows)
+    assert not np.array_equal(train_rendered.windows, train_read.windows)
+    assert len(list(tmp_path.glob("windows-*.npz"))) == 2
+    key = load_config({"data": {"n_train": 200, "n_val": 60, "n_objects": 3}})
+    assert windows._data_key(key) == "eb466d6df4480fa0"  # as before the folders joined the key
+    assert windows._data_key(load_config("paper")) == "56d1d03489f7d337"
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_a_cuda_run_writes_its_weights_and_resumes_exactly(data, tmp_path, monkeypatch):
+    """run.device = "cuda": the few-shot validation and the weight file at the end (they ran CPU windows through the
+    CUDA model), and a resumed run equal to an uninterrupted one with dropout (drawn on the device)."""
+    cfg = _config(data, detector_dropout=0.3)
+    cfg["run"] = {**cfg["run"], "device": "cuda"}
+    cfg["fewshot"] = {"n_objects": 2, "per_image": 8, "n_test": 40, "epochs": 1, "dog": [[0.5, 1.5]]}
+    full = trainer.train(cfg, tmp_path / "full", progress=False)
+    assert full.weights is not None and set(full.fewshot) == {"alcn", "dog 0.5/1.5", "none"}
+    assert next(full.model.parameters()).device.type == "cpu"
+    assert load_checkpoint(tmp_path / "full" / "checkpoint.pt")["cuda_rng"] is not None
+    cfg["fewshot"] = {"enabled": False}
+
+    def interrupt(step):
+        if step == 8:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(trainer, "_on_step", interrupt)
+    trainer.train(cfg, tmp_path / "part", progress=False)
+    monkeypatch.undo()
+    trainer.train(cfg, tmp_path / "part", resume=True, progress=False)
+    a, b = _weights(tmp_path / "full" / "checkpoint.pt"), _weights(tmp_path / "part" / "checkpoint.pt")
+    for k in a:
+        assert torch.equal(a[k], b[k]), k

@@ -72,7 +72,8 @@ def load_objects(data_dir: str | os.PathLike, scale: float = 1.0) -> list[Photom
         scale: resize factor applied to images and masks (``cv2.INTER_AREA``).
 
     Raises:
-        DatasetError: no object found, an unreadable image, or images of different sizes.
+        DatasetError: no object found, an object with one photograph (the agreement compares two lights or more),
+            an unreadable image, or images of different sizes.
     """
     root = Path(data_dir)
     if not root.is_dir():
@@ -89,6 +90,8 @@ def load_objects(data_dir: str | os.PathLike, scale: float = 1.0) -> list[Photom
         if not shots or not mask_path.is_file():
             logger.debug("skipping %s: no %s.<i>.png images or no mask", folder, folder.name)
             continue
+        if len(shots) < 2:
+            raise DatasetError(f"{folder}: one photograph ({shots[0][1].name}); the agreement needs 2 lights or more")
         try:
             images = [read_image(p, gray=True) for _, p in shots]
             mask = read_image(mask_path, gray=True) > 127
@@ -208,9 +211,11 @@ def main(
 
     Raises:
         InputError: an unknown method, or one that cannot be built (a bad parameter or weight file), before
-            the photographs are read.
+            the photographs are read; a negative ``erode``, or one that leaves a mask empty.
         DatasetError: see :func:`load_objects`.
     """
+    if erode < 0:
+        raise InputError(f"erode must be >= 0 pixels, got {erode}")
     methods = list(available()) if methods is None else list(methods)
     unknown = [m for m in methods if parse_spec(m)[0] not in available()]
     if unknown:
@@ -219,10 +224,15 @@ def main(
     objects = load_objects(data_dir, scale)
     if figure_object not in (None, "all") and figure_object not in [o.name for o in objects]:
         raise InputError(f"no object {figure_object!r}; objects: {', '.join(o.name for o in objects)}")
-    out = Path(out_dir)
-    make_folder(out)
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * erode + 1, 2 * erode + 1))
     masks = {o.name: cv2.erode(o.mask.astype(np.uint8), kernel) > 0 if erode else o.mask for o in objects}
+    empty = [name for name, mask in masks.items() if not mask.any()]
+    if empty:
+        raise InputError(
+            f"the mask of {', '.join(empty)} holds no pixel once eroded by {erode} px: give a smaller erode"
+        )
+    out = Path(out_dir)
+    make_folder(out)
     shown = {o.name for o in objects} if figure_object == "all" else {figure_object or objects[0].name}
 
     rows: dict[str, dict[str, Any]] = {}

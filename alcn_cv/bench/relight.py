@@ -55,7 +55,7 @@ from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, s
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
-from alcn_cv.errors import InputError
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import make_folder
 from alcn_cv.report import machine
 
@@ -268,11 +268,22 @@ def identification(gallery: np.ndarray, query: np.ndarray, locations: np.ndarray
 
 
 def plan_pairs(scene: Scene, seed: int, settings: Settings) -> PairPlan:
-    """The gallery frames, their patch locations and the frame pairs of one seed (the same for every method)."""
+    """The gallery frames, their patch locations and the frame pairs of one seed (the same for every method).
+
+    Raises:
+        DatasetError: a gallery frame with fewer than 2 textured patch locations (a flat frame), where identification
+            has nothing to tell apart.
+    """
     rng = np.random.default_rng([seed, zlib.crc32(scene.name.encode())])
     n = len(scene.frames)
     gallery = tuple(sorted(int(i) for i in rng.choice(n, size=min(settings.gallery, n), replace=False)))
     locations = {g: patch_locations(scene.frames[g], settings.patch, settings.patches, rng) for g in gallery}
+    flat = [g for g in gallery if len(locations[g]) < 2]
+    if flat:
+        raise DatasetError(
+            f"scene {scene.name!r}: frame {scene.files[flat[0]]} has {len(locations[flat[0]])} textured "
+            f"{settings.patch}x{settings.patch} patch location(s); identification needs 2 or more"
+        )
     pairs = [(g, f) for g in gallery for f in range(n) if f != g]
     if settings.max_pairs is not None and len(pairs) > settings.max_pairs:
         pick = np.sort(rng.choice(len(pairs), size=settings.max_pairs, replace=False))
@@ -328,7 +339,8 @@ def evaluate_scene(norm: Normalization, scene: Scene, plans: Sequence[PairPlan],
     detected once per frame.
 
     Returns:
-        ``{"metrics": {metric: [percent per plan]}, "ms_per_frame": float}``.
+        ``{"metrics": {metric: [value per plan]}, "ms_per_frame": float}``, each value the mean over the plan's
+        pairs, in percent but for :data:`COUNT_METRICS` (a count per pair).
     """
     start = time.perf_counter()
     normalized = [norm.apply(frame, out_dtype=np.float32) for frame in scene.frames]

@@ -379,10 +379,23 @@ class SpeedSettings:
     device_batches: list[int] = field(default_factory=lambda: [1, 8, 64, 128])
 
     def check(self) -> None:
-        """Raise :class:`~alcn_cv.errors.InputError` on an unknown colour."""
+        """Raise :class:`~alcn_cv.errors.InputError` on an unknown colour, a negative warm-up, settings that time no
+        run (a median of none: ``max_repeats`` or ``target_repeats`` below 1, or ``min_repeats`` below 1 without a
+        time budget), or, with a device, no batch size or one below 1."""
         bad = [c for c in self.colours if c not in COLOURS]
         if bad or not self.colours:
             raise InputError(f"colours must be among {COLOURS}, got {list(self.colours)}")
+        if self.warmup < 0 or min(self.max_repeats, self.target_repeats) < 1:
+            raise InputError(
+                f"need warmup >= 0 and max_repeats (--repeats) and target_repeats >= 1, got {self.warmup}, "
+                f"{self.max_repeats} and {self.target_repeats}"
+            )
+        if self.min_repeats < 1 and not self.budget_s > 0:
+            raise InputError(
+                f"min_repeats {self.min_repeats} with a budget of {self.budget_s} s times no run: give min_repeats >= 1"
+            )
+        if self.device is not None and (not self.device_batches or min(self.device_batches) < 1):
+            raise InputError(f"device_batches must be batch sizes >= 1, got {self.device_batches}")
 
 
 def presets() -> dict[str, SpeedSettings]:
@@ -437,16 +450,24 @@ def speed_command(out_dir: str | os.PathLike, settings: SpeedSettings) -> str:
 
 
 def _select_methods(settings: SpeedSettings) -> list[Method]:
-    """The methods of :func:`default_methods` that the settings name, and ``dog``."""
+    """The methods of :func:`default_methods` that the settings name, and ``dog``.
+
+    Raises:
+        InputError: an unknown label, or a label of ``video_methods`` that is not among them.
+    """
     methods = default_methods(settings.weights, settings.lite_weights)
-    if settings.methods is None:
-        return methods
     labels = [m.label for m in methods]
-    unknown = [m for m in settings.methods if m not in labels]
+    if settings.methods is not None:
+        unknown = [m for m in settings.methods if m not in labels]
+        if unknown:
+            raise InputError(f"unknown method(s) {unknown}; available: {', '.join(labels)}")
+        keep = set(settings.methods) | {REFERENCE}
+        methods = [m for m in methods if m.label in keep]
+    selected = [m.label for m in methods]
+    unknown = [m for m in settings.video_methods or [] if m not in selected]
     if unknown:
-        raise InputError(f"unknown method(s) {unknown}; available: {', '.join(labels)}")
-    keep = set(settings.methods) | {REFERENCE}
-    return [m for m in methods if m.label in keep]
+        raise InputError(f"video method(s) {unknown} are not among this run's methods: {', '.join(selected)}")
+    return methods
 
 
 def _frame_source(image: str | os.PathLike | None) -> Callable[[int, int, str], np.ndarray]:
@@ -566,6 +587,9 @@ def _video_test(
         gray = [r for r in rows if r["method"] in alcn_labels and r["colour"] == "gray"]
         fastest = min(gray, key=lambda r: (-r["pixels"], r["median_ms"]))["method"] if gray else None
         video_methods = [label for label in dict.fromkeys(["alcn", fastest]) if label in alcn_labels]
+    for label in (label for label in video_methods if label in errors):
+        logger.warning("video memory: %s left out, it failed to run (%s)", label, errors[label])
+    video_methods = [label for label in video_methods if label not in errors]
     video = []
     for label in video_methods:
         if label not in built:
@@ -1415,7 +1439,7 @@ def _targets_markdown(t: dict[str, Any]) -> list[str]:
         )
     )
     b = t["batched"]
-    lines += ["", "### Batched torch path (`ALCN.apply_batch`, batches of 4)", ""]
+    lines += ["", "### Batched torch path (`ALCN.apply_batch`; frames: batch x size)", ""]
     lines.append(
         markdown_table(
             ["device", "frames", "ms per frame", "ms per frame float16", "fps", "float16 max abs diff"],

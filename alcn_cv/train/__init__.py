@@ -18,6 +18,7 @@ Importing this package does not import torch; the names below load their module 
 from __future__ import annotations
 
 import importlib
+from typing import Any
 
 __all__ = [
     "JointModel",
@@ -42,7 +43,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     if name in _LAZY:
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -107,7 +107,9 @@ def versions() -> dict[str, str]:
 def save_checkpoint(
     path: Path, cfg: TrainConfig, model: JointModel, optimizer: torch.optim.Optimizer, state: TrainState, status: str
 ) -> None:
-    """Write the checkpoint atomically (``status``: ``"epoch"`` or ``"interrupted"``)."""
+    """Write the checkpoint atomically (``status``: ``"epoch"`` or ``"interrupted"``), with the random state of torch
+    on the CPU and, for a model on a CUDA device, of that device (its dropout draws there)."""
+    device = next(model.parameters()).device
     ckpt = {
         **checkpoint_header(cfg),
         "status": status,
@@ -118,6 +120,7 @@ def save_checkpoint(
         "model": model.state_dict(),
         "optimizer": optimizer.state_dict(),
         "rng": torch.get_rng_state(),
+        "cuda_rng": torch.cuda.get_rng_state(device) if device.type == "cuda" else None,
         "elapsed": state.elapsed(),
     }
     atomic_write(path, lambda f: torch.save(ckpt, f))
@@ -187,11 +190,14 @@ def restore_checkpoint(
     ckpt: dict[str, Any], model: JointModel, optimizer: torch.optim.Optimizer, start: float
 ) -> TrainState:
     """Load a checkpoint read by :func:`load_checkpoint` into the model, the optimizer and torch's
-    random state; return the run's state, its clock (started at ``start``) moved back by the time
-    the checkpoint records."""
+    random state (the CPU's, and the model's CUDA device's where the checkpoint holds one); return the run's state,
+    its clock (started at ``start``) moved back by the time the checkpoint records."""
     model.load_state_dict(ckpt["model"])
     optimizer.load_state_dict(ckpt["optimizer"])
     torch.set_rng_state(ckpt["rng"])
+    device = next(model.parameters()).device
+    if device.type == "cuda" and ckpt.get("cuda_rng") is not None:
+        torch.cuda.set_rng_state(ckpt["cuda_rng"], device)
     return TrainState(ckpt["history"], ckpt["epoch"], ckpt["step_in_epoch"], ckpt["sums"], start - ckpt["elapsed"])
 
 

@@ -403,6 +403,13 @@ def _check(cfg: TrainConfig) -> None:
                 "config key 'data.anchor_fraction' must be in (0, 1), with another lighting beside the "
                 "anchor in 'data.train_lighting', for optim.objective = 'meta'"
             )
+        n_anchor = round(cfg.data.n_train * cfg.data.anchor_fraction)  # as windows.load_windows renders them
+        if cfg.data.n_train and not 0 < n_anchor < cfg.data.n_train:
+            raise InputError(
+                f"config keys 'data.n_train' ({cfg.data.n_train}) and 'data.anchor_fraction' "
+                f"({cfg.data.anchor_fraction}) leave {n_anchor} anchor windows of {cfg.data.n_train}: "
+                "optim.objective = 'meta' needs windows under the anchor lighting and under others"
+            )
     if not 0 <= cfg.model.detector_dropout < 1:
         raise InputError(f"config key 'model.detector_dropout' must be in [0, 1), got {cfg.model.detector_dropout}")
     lo, hi = cfg.data.gain_jitter
@@ -570,8 +577,9 @@ class RealLightConfig:
 
     def check(self) -> None:
         """What a run on these settings needs: scenes or relit photographs, a rendered share in [0, 1) with
-        rendered scenes, at least 2 locations, 1 step and 1 step between snapshots and a positive learning rate
-        (the network's own needs, such as the crop's size, are its trainer's to check).
+        rendered scenes, at least 2 locations, 1 step and 1 step between snapshots, no negative count of relit
+        copies or of locations drawn anywhere, and a positive learning rate and temperature (the network's own
+        needs, such as the crop's size, are its trainer's to check).
 
         Raises:
             InputError: the first setting out of range, named.
@@ -587,8 +595,12 @@ class RealLightConfig:
                 f"need locations >= 2, steps >= 1 and save_every >= 1, got {self.locations}, {self.steps}, "
                 f"{self.save_every}"
             )
+        if self.relit < 0 or self.anywhere < 0:
+            raise InputError(f"relit and anywhere must be >= 0, got {self.relit} and {self.anywhere}")
         if not self.lr > 0:
             raise InputError(f"lr must be > 0, got {self.lr}")
+        if not self.temperature > 0:
+            raise InputError(f"temperature must be > 0, got {self.temperature}")
 
 
 #: ``alcn train-real-light`` presets: ``gain`` makes ``alcn_normalizer_gain.npz``.

@@ -81,8 +81,10 @@ def wrap(model: nn.Module, device: torch.device) -> nn.Module:
 
 @torch.no_grad()
 def replicas_equal(model: nn.Module) -> bool:
-    """True when every process holds the same parameters (compared with an all-reduce of max and min)."""
-    flat = torch.cat([p.detach().flatten().float() for p in model.parameters()]).cpu()
+    """True when every process holds the same parameters (compared with an all-reduce of max and min).
+
+    The parameters stay on their device: nccl (``"cuda"``) reduces CUDA tensors only, gloo (``"cpu"``) CPU ones."""
+    flat = torch.cat([p.detach().flatten().float() for p in model.parameters()])
     if world_size() == 1:
         return True
     hi, lo = flat.clone(), flat.clone()

@@ -157,10 +157,12 @@ class JointModel(nn.Module):
 def measure_output_range(
     model: JointModel, windows: np.ndarray, percentiles: tuple[float, float] = (0.5, 99.5)
 ) -> list[float]:
-    """Range of raw mixture responses (before the detector input policy) on training windows."""
+    """The ``percentiles`` of the raw mixture responses (before the detector input policy) of ``model``, on whatever
+    device it is, to ``(n, 64, 64)`` uint8 ``windows``: ``[low, high]``."""
+    device = model.fixed_weights.device
     values = []
     for i in range(0, len(windows), 512):
-        x = torch.from_numpy(windows[i : i + 512]).unsqueeze(1).float() / 255.0
-        values.append(model.response(x).flatten().numpy())
+        x = torch.from_numpy(windows[i : i + 512]).unsqueeze(1).to(device).float() / 255.0
+        values.append(model.response(x).flatten().cpu().numpy())
     lo, hi = np.percentile(np.concatenate(values), percentiles)
     return [float(lo), float(hi)]

@@ -51,7 +51,7 @@ from tqdm import tqdm
 
 from alcn_cv.data.permissive_images import relit_permissive_scenes
 from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
-from alcn_cv.errors import InputError
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
 from alcn_cv.io import atomic_write, write_json
@@ -138,9 +138,19 @@ def sample_locations(candidates: np.ndarray, count: int, min_distance: int, rng:
 
 
 def training_scene(scene: Scene, pad: int, patch: int) -> TrainingScene:
-    """The scene's frames in [0, 1], reflect-101 padded by ``pad``, and its textured locations."""
+    """The scene's frames in [0, 1], reflect-101 padded by ``pad``, and its textured locations.
+
+    Raises:
+        DatasetError: fewer than 2 textured locations (a flat scene): nothing to identify, and with none the
+            identification loss would be NaN.
+    """
     stack = scene.unit_frames()
     candidates = textured_locations(stack, patch) + pad
+    if len(candidates) < 2:
+        raise DatasetError(
+            f"scene {scene.name!r} has {len(candidates)} textured {patch}x{patch} location(s); training needs 2 or "
+            "more (frames with texture)"
+        )
     padded = np.stack([cv2.copyMakeBorder(f, pad, pad, pad, pad, cv2.BORDER_REFLECT_101) for f in stack])
     return TrainingScene(scene.name, padded, candidates, pad)
 

@@ -90,7 +90,10 @@ def evaluate_detector(net: nn.Module, windows: np.ndarray, labels: np.ndarray) -
     Returns:
         ``(loss, accuracy)``, accuracy in [0, 1].
     """
-    num_classes = getattr(net, "num_classes", int(labels.max()) + 1)
+    num_classes = getattr(net, "num_classes", None)
+    if num_classes is None:  # every label is a class; malformed labels are left to the check, which names them
+        valid = isinstance(labels, np.ndarray) and labels.size and np.issubdtype(labels.dtype, np.integer)
+        num_classes = int(labels.max()) + 1 if valid else 1
     x, y = _check_windows(windows, labels, num_classes, "validation", getattr(net, "input_size", INPUT))
     device = next(net.parameters()).device
     was_training = net.training

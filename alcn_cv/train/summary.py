@@ -68,8 +68,8 @@ def summary_markdown(cfg: TrainConfig, result: TrainResult, machine_start: dict[
         families = list(next(iter(result.fewshot.values()))["by_family"])
         lines += [
             "",
-            "## Few-shot validation (stage 2: new objects, 1 image under one light; same detector and "
-            f"input policy `{cfg.model.detector_input}` for every method)",
+            f"## Few-shot validation (stage 2: new objects, {cfg.fewshot.real_images} image(s) each under one light; "
+            f"same detector and input policy `{cfg.model.detector_input}` for every method)",
             "",
             "AUC object vs. background (accuracy over background + objects in brackets)",
             "",

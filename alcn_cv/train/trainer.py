@@ -84,7 +84,7 @@ class TrainResult:
         val_by_family: the same per held-out lighting family.
         weights: the exported Normalizer weight file (``method = "alcn"`` and status ``"done"``).
         seconds: wall-clock time of this call.
-        model: the trained :class:`JointModel` (in eval mode).
+        model: the trained :class:`JointModel` (in eval mode, on the CPU).
         fewshot: results of the few-shot validation (:mod:`alcn_cv.train.fewshot`) per method.
     """
 
@@ -222,7 +222,8 @@ def _shards(cfg: TrainConfig, train_set: PhosBatch) -> _Shards:
     used = len(train_set) // world * world
     anchors = None
     if cfg.optim.objective == "meta":
-        anchor_id = train_set.light_families.index(cfg.data.anchor_lighting)
+        families = train_set.light_families  # windows read from data.path: the anchor is not checked against them yet
+        anchor_id = families.index(cfg.data.anchor_lighting) if cfg.data.anchor_lighting in families else -1
         anchors = torch.from_numpy(train_set.light_ids == anchor_id)
         if not anchors.any() or anchors.all():
             raise InputError(
@@ -462,11 +463,13 @@ def _fewshot(model: JointModel, cfg: TrainConfig, progress: bool) -> dict[str, A
 
 def _finish(cfg: TrainConfig, result: TrainResult, train_set: PhosBatch, state: TrainState, progress: bool) -> None:
     """After the loop: the last validation in ``result``, then, for a finished Normalizer run, the
-    few-shot validation (``fewshot.json``) and the weight file."""
+    few-shot validation (``fewshot.json``) and the weight file. ``result.model`` ends on the CPU, where the few-shot
+    validation runs its methods (a ``run.device = "cuda"`` run's too)."""
     model = result.model
     model.eval()
     if distributed.world_size() > 1 and not distributed.replicas_equal(model):
         logger.error("the replicas of the %d processes hold different weights", distributed.world_size())
+    model.cpu()
     if state.history:
         result.val_accuracy = state.history[-1]["val_acc"]
         result.val_by_family = state.history[-1]["val_by_family"]

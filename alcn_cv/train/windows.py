@@ -61,24 +61,27 @@ def _render(n: int, seed: int, lighting: list[str], cfg: TrainConfig, desc: str,
 
 
 def _data_key(cfg: TrainConfig) -> str:
+    """The key of the cached windows: the settings that render them and, when a set is read from a folder (the
+    cache holds it too), the folders (so a run that renders never takes another's read windows for its own)."""
     d = cfg.data
     anchor = [d.anchor_lighting, d.anchor_fraction] if cfg.optim.objective == "meta" else None
-    text = json.dumps(
-        [
-            d.n_train,
-            d.n_val,
-            cfg.data_seed,
-            d.n_objects,
-            d.object_seed,
-            d.train_lighting,
-            d.val_lighting,
-            d.background_fraction,
-            _PART,
-            anchor,
-        ],
-        sort_keys=True,
-    )
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    settings = [
+        d.n_train,
+        d.n_val,
+        cfg.data_seed,
+        d.n_objects,
+        d.object_seed,
+        d.train_lighting,
+        d.val_lighting,
+        d.background_fraction,
+        _PART,
+        anchor,
+    ]
+    if d.path or d.val_path:  # appended only then: the key of rendered windows stays that of earlier caches
+        settings.append(
+            [str(Path(d.path).resolve()) if d.path else "", str(Path(d.val_path).resolve()) if d.val_path else ""]
+        )
+    return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
 
 
 def load_windows(cfg: TrainConfig, out_dir: Path, progress: bool) -> tuple[PhosBatch, PhosBatch]:
@@ -100,7 +103,7 @@ def load_windows(cfg: TrainConfig, out_dir: Path, progress: bool) -> tuple[PhosB
             for name in ("train", "val")
         ]
         logger.info("windows read from the cache %s", cache.name)
-        return train_set or sets[0], val_set or sets[1]
+        return train_set if train_set is not None else sets[0], val_set if val_set is not None else sets[1]
     if train_set is None and cfg.optim.objective == "meta":
         n_anchor = round(cfg.data.n_train * cfg.data.anchor_fraction)
         others = [f for f in cfg.data.train_lighting if f != cfg.data.anchor_lighting]
