@@ -40,6 +40,19 @@ def test_protocols_on_identical_frames():
     assert again.pairs == plan.pairs and all((again.locations[g] == plan.locations[g]).all() for g in plan.gallery)
 
 
+def test_a_keypoint_is_matched_once():
+    """Two keypoints of the first frame nearest to the same one of the second (ORB finds one corner at several
+    pyramid levels) count once, by the nearer: the matching score is a fraction of the keypoints."""
+    d2 = np.array([[0, 0, 0, 0], [100, 100, 100, 100], [200, 0, 200, 0]], np.float32)
+    d1 = np.array([[1, 0, 0, 0], [0, 3, 0, 0], [101, 100, 100, 100], [50, 50, 50, 50]], np.float32)
+    pairs = relight.one_to_one_matches(d1, d2, cv2.NORM_L2, 0.8)
+    assert pairs.tolist() == [[0, 0], [2, 1]]  # d1[1] is also nearest to d2[0], farther; d1[3] fails the ratio test
+    points = np.zeros((4, 2), np.float32)
+    score, _, correct = relight.keypoint_scores((points, d1), (points[:3], d2), cv2.NORM_L2, (8, 8), SMALL)
+    assert correct == 2 and score == pytest.approx(2 / 3)
+    assert relight.one_to_one_matches(None, d2, cv2.NORM_L2, 0.8).shape == (0, 2)
+
+
 def test_a_flat_gallery_frame_is_named():
     """No textured patch: identification of none was argmax's ValueError (of one, a trivial 100%)."""
     from alcn_cv.errors import DatasetError

@@ -12,14 +12,15 @@ paired with every other frame of the scene (at most ``max_pairs`` pairs, drawn a
   raw frame) are identified in the other frame by normalized cross-correlation against the
   patches at all the same locations (chance ``1 / patches``).
 * **matching** (%, ORB and SIFT): keypoints on the normalized frames (``apply``'s uint8
-  output), Lowe's ratio test, a match is correct when its keypoints are within ``match_px``
+  output), Lowe's ratio test, each keypoint in at most one match (:func:`one_to_one_matches`), a
+  match is correct when its keypoints are within ``match_px``
   (the frames are registered); score = correct matches / the smaller keypoint count
   (Mikolajczyk & Schmid, PAMI 2005's matching score). The score divides by the keypoint count,
   so a method that finds keypoints in more of the frame scores lower for the same quality of
   match; the report also gives the mean number of **correct matches** per pair (a count), which
   does not.
 * **pose** (%, ORB and SIFT): a RANSAC homography (``cv2.findHomography``, ``ransac_px``) from
-  the ratio-test matches; a success when it moves each corner of the frame less than
+  those matches; a success when it moves each corner of the frame less than
   ``pose_px`` (the identity is the truth): the 2D-projection criterion of Rad et al., BMVC
   2017, Sec. 5, on real light.
 
@@ -73,6 +74,7 @@ __all__ = [
     "evaluate_scene",
     "identification",
     "main",
+    "one_to_one_matches",
     "patch_locations",
     "plan_pairs",
     "tune",
@@ -297,11 +299,25 @@ def _detector(kind: str, n: int) -> tuple[Any, int]:
     return cv2.SIFT_create(nfeatures=n), cv2.NORM_L2
 
 
-def _ratio_matches(d1: np.ndarray | None, d2: np.ndarray | None, norm: int, ratio: float) -> list[tuple[int, int]]:
+def one_to_one_matches(d1: np.ndarray | None, d2: np.ndarray | None, norm: int, ratio: float) -> np.ndarray:
+    """``(n, 2)`` int64 index pairs ``(i1, i2)``: each descriptor of ``d1`` matched to its nearest of ``d2`` when
+    it is nearer than ``ratio`` times the second nearest (Lowe's ratio test), then each of ``d2`` kept in at most
+    one match, its nearest (Mikolajczyk & Schmid's matching score counts a keypoint once: ORB's pyramid finds one
+    corner at several levels, whose keypoints would all match the same one). In the order of ``d1``."""
     if d1 is None or d2 is None or len(d1) < 1 or len(d2) < 2:
-        return []
+        return np.zeros((0, 2), np.int64)
     knn = cv2.BFMatcher(norm).knnMatch(d1, d2, k=2)
-    return [(m[0].queryIdx, m[0].trainIdx) for m in knn if len(m) == 2 and m[0].distance < ratio * m[1].distance]
+    kept = [
+        (m[0].queryIdx, m[0].trainIdx, m[0].distance)
+        for m in knn
+        if len(m) == 2 and m[0].distance < ratio * m[1].distance
+    ]
+    if not kept:
+        return np.zeros((0, 2), np.int64)
+    pairs = np.array([(q, t) for q, t, _ in kept], np.int64)
+    nearest_first = np.argsort(np.array([d for _, _, d in kept]), kind="stable")
+    _, first = np.unique(pairs[nearest_first, 1], return_index=True)
+    return pairs[np.sort(nearest_first[first])]
 
 
 def keypoint_scores(
@@ -314,14 +330,13 @@ def keypoint_scores(
     """(matching score, pose success, correct matches) of a frame pair from its keypoints
     ``(points, descriptors)``."""
     (p1, d1), (p2, d2) = kp1, kp2
-    matches = _ratio_matches(d1, d2, norm, settings.ratio)
-    if not matches:
+    idx = one_to_one_matches(d1, d2, norm, settings.ratio)
+    if not len(idx):
         return 0.0, 0.0, 0
-    idx = np.array(matches)
     src, dst = p1[idx[:, 0]], p2[idx[:, 1]]
     correct = np.count_nonzero(np.linalg.norm(src - dst, axis=1) <= settings.match_px)
     score = correct / min(len(p1), len(p2))
-    if len(matches) < 4:
+    if len(idx) < 4:
         return score, 0.0, correct
     homography, _ = cv2.findHomography(src, dst, cv2.RANSAC, settings.ransac_px)
     if homography is None:
@@ -574,7 +589,7 @@ def main(
         },
         "metrics": {
             "identification": "% of gallery patches whose best NCC match among all sampled locations is their own",
-            "matching": "% correct ratio-test matches (within match_px) per min(#keypoints), ORB and SIFT",
+            "matching": "% correct one-to-one ratio-test matches (within match_px) per min(#keypoints), ORB and SIFT",
             "pose": "% of pairs whose RANSAC homography moves every frame corner less than pose_px",
             "correct": "mean count of correct ratio-test matches (within match_px) per pair, ORB and SIFT",
         },
