@@ -50,6 +50,8 @@ R = TypeVar("R")
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pnm"})
 #: The image formats of :data:`IMAGE_SUFFIXES` that hold 8 bits a channel (the others hold 16).
 EIGHT_BIT_SUFFIXES = frozenset({".jpg", ".jpeg", ".bmp", ".webp"})
+#: The image formats of :data:`IMAGE_SUFFIXES` that hold float32 pixels.
+FLOAT_SUFFIXES = frozenset({".tif", ".tiff"})
 VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv"})
 _FOURCC = {".avi": "MJPG", ".mkv": "MJPG"}  # everything else: mp4v
 #: The process's umask, read once: the permissions of what is made under a temporary name.
@@ -280,7 +282,10 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
     """Write an image atomically (:func:`atomic_path`), creating the folder.
 
     A grayscale image with alpha (``HxWx2``, which OpenCV cannot encode) is written as BGRA; a 16-bit image in a
-    format of 8 bits a channel (:data:`EIGHT_BIT_SUFFIXES`) is scaled to 8 bits, with a warning.
+    format of 8 bits a channel (:data:`EIGHT_BIT_SUFFIXES`) is scaled to 8 bits, with a warning; a float32 image
+    (intensities in [0, 1], as :meth:`Normalization.apply <alcn_cv.enhance.base.Normalization.apply>` gives it) is
+    written as it is to TIFF, and elsewhere converted to the format's 8 or 16 bits, with a warning (OpenCV would
+    saturate it to 0 and 1: a black image).
 
     Raises:
         InputError: ``path`` has no image extension (:data:`IMAGE_SUFFIXES`) or lies under a file.
@@ -294,6 +299,10 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
         img = np.dstack([cv2.cvtColor(img[..., 0], cv2.COLOR_GRAY2BGR), img[..., 1]])
     if img.ndim == 3 and img.shape[2] == 4 and path.suffix.lower() in (".jpg", ".jpeg"):
         logger.warning("%s has no alpha channel: the image's alpha is not written", path)
+    if img.dtype == np.float32 and path.suffix.lower() not in FLOAT_SUFFIXES:
+        deep, full = (np.uint8, 255) if path.suffix.lower() in EIGHT_BIT_SUFFIXES else (np.uint16, 65535)
+        logger.warning("%s holds integers: the float32 image (in [0, 1]) is written as %s", path, deep.__name__)
+        img = np.rint(np.clip(img, 0.0, 1.0) * np.float32(full)).astype(deep)
     if img.dtype == np.uint16 and path.suffix.lower() in EIGHT_BIT_SUFFIXES:
         # OpenCV would saturate every value above 255 (a white image); scaled, as image tools convert
         logger.warning("%s holds 8 bits a channel: the 16-bit image is scaled to 8 bits", path)

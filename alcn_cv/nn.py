@@ -41,6 +41,7 @@ from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.nets.cpu_inference import cpu_eager
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
+from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
 from alcn_cv.row_parts import run_parts
 from alcn_cv.runtime import ModelSpec, resolve_weights
@@ -106,17 +107,7 @@ class ALCN2d(nn.Module):
         self.net = normalizer_from_file(weight_file)
         if len(self.spec.sigmas) != self.net.num_kernels:
             raise InputError(f"weight file has {len(self.spec.sigmas)} sigmas for {self.net.num_kernels} outputs")
-        stride = self.net.stride
-        self.grid_stride = stride if grid_stride is None else grid_stride
-        if (
-            isinstance(self.grid_stride, bool)
-            or not isinstance(self.grid_stride, int)
-            or self.grid_stride < stride
-            or self.grid_stride % stride
-        ):
-            raise InputError(
-                f"grid_stride must be a positive multiple of {stride} for this network, got {grid_stride!r}"
-            )
+        self.grid_stride = check_grid_stride(grid_stride, self.net.stride)
         self.mixture = GaussianMixture2d(self.spec.full_res_sigmas)
         self.to_lab, self.from_lab = RgbToLab(), LabToRgb()  # colour images: the CIE Lab of apply()
         self.allow_tf32 = allow_tf32

@@ -346,20 +346,25 @@ def make_runtime(spec: ModelSpec, network: Network, mixture: str) -> WindowRunti
     return (GainRuntime if spec.per_pixel and spec.scale == 1 else WindowRuntime)(spec, network, mixture)
 
 
-def check_batch(frames: np.ndarray, out_dtype: type | np.dtype | str | None) -> np.dtype:
+def check_batch(frames: np.ndarray, out_dtype: type | np.dtype | str | None) -> tuple[np.ndarray, np.dtype]:
     """Check a ``(B, H, W)`` or ``(B, H, W, C)`` batch of :meth:`ALCN.apply_batch
-    <alcn_cv.enhance.alcn.ALCN.apply_batch>`; the output dtype (default: the frames')."""
+    <alcn_cv.enhance.alcn.ALCN.apply_batch>`: the frames in native byte order (the array itself when it is) and the
+    output dtype (default: the frames')."""
     if not isinstance(frames, np.ndarray) or frames.ndim not in (3, 4) or frames.size == 0:
         raise InputError(
             f"frames must be a non-empty (B, H, W) or (B, H, W, C) array, got {getattr(frames, 'shape', type(frames))}"
         )
     check_image(frames[0])  # the dtype and channels; a float batch's range is checked as a whole below
+    frames = frames.astype(frames.dtype.newbyteorder("="), copy=False)  # as apply() takes any byte order
     if frames.dtype == np.float32:
         check_image(frames.reshape(-1, frames.shape[-1]))
-    dtype = np.dtype(frames.dtype if out_dtype is None else out_dtype)
+    try:
+        dtype = np.dtype(frames.dtype if out_dtype is None else out_dtype)
+    except TypeError:
+        raise InputError(f"unknown out_dtype {out_dtype!r}; use uint8, uint16 or float32") from None
     if dtype not in SUPPORTED_DTYPES:
         raise InputError(f"unsupported out_dtype {dtype}; use uint8, uint16 or float32")
-    return dtype
+    return frames, dtype
 
 
 def opencv_network(weights: Path, grid_stride: int | None, spec: ModelSpec) -> OpenCVNormalizer:

@@ -93,7 +93,8 @@ def load_normalizer_file(path: str | Path | None = None) -> NormalizerFile:
 
     Raises:
         WeightFileError: missing, empty, not a ``.npz`` archive, corrupt, of another format or of
-            an incompatible version, or holding NaN or infinite weights.
+            an incompatible version, a header field missing or out of range (a sigma or the working scale
+            not positive, an empty output range), or holding NaN or infinite weights.
     """
     path = DEFAULT_WEIGHTS if path is None else Path(path)
     if not path.is_file():
@@ -147,6 +148,10 @@ def _check_meta(meta: dict[str, Any], path: Path) -> None:
     numbers = [*meta["sigmas"], meta["working_scale"], *meta["output_range"]]
     if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in numbers):
         raise WeightFileError(f"{path}: sigmas, working_scale and output_range must be finite numbers")
+    if not all(v > 0 for v in [*meta["sigmas"], meta["working_scale"]]):  # Gaussian widths and a resize factor
+        raise WeightFileError(
+            f"{path}: sigmas {meta['sigmas']} and working_scale {meta['working_scale']} must be positive"
+        )
     if len(meta["output_range"]) != 2:
         raise WeightFileError(f"{path}: output_range must be [lo, hi], got {meta['output_range']}")
     lo, hi = meta["output_range"]

@@ -398,3 +398,38 @@ def test_another_grid_stride_without_torch_says_what_runs_it(run_python):
     assert proc.stdout.strip().endswith(
         "another grid stride runs the network in torch: backend='fast' (the [train] extra)"
     )
+
+
+@pytest.mark.parametrize("name", [n for n in METHODS if n != "alcn"])
+def test_a_method_shared_by_threads_and_pickled_gives_each_frame_its_output(name):
+    """A cv2.CLAHE keeps its buffers between calls: one shared by threads mixed their frames (and it could not be
+    pickled for a process pool); ALCN's own case is test_one_alcn_shared_by_threads."""
+    import pickle
+    from concurrent.futures import ThreadPoolExecutor
+
+    method = alcn_cv.create(name)
+    frames = [synthetic_frame(96 + 16 * i, 72 + 8 * i, False, seed=i) for i in range(6)]
+    expected = [method.apply(f) for f in frames]
+    with ThreadPoolExecutor(4) as pool:
+        for got, want in zip(pool.map(method.apply, frames * 8), expected * 8):
+            np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(method)).apply(frames[0]), expected[0])
+
+
+def test_to_unit_takes_a_response_of_any_shape(methods):
+    """A stack of windows' responses, say: OpenCV takes no array of four dimensions."""
+    dog = methods["dog"]
+    response = np.random.default_rng(0).normal(0.0, 0.1, (2, 3, 4, 5)).astype(np.float32)
+    expected = np.stack([dog.to_unit(r) for r in response.reshape(-1, 4, 5)]).reshape(response.shape)
+    np.testing.assert_allclose(dog.to_unit(response), expected, atol=1e-7, rtol=0)  # planes: cv2.addWeighted
+
+
+def test_window_weights_take_uint8_windows_as_normalize_windows_does():
+    """uint8 windows were cast to float32 without the scale: intensities of 0-255 where the network wants [0, 1]."""
+    alcn = alcn_cv.createALCN(model="lite")
+    windows = (np.random.default_rng(0).random((3, 48, 48)) * 255).astype(np.uint8)
+    np.testing.assert_array_equal(
+        alcn.window_weights(windows), alcn.window_weights(windows.astype(np.float32) * np.float32(1 / 255))
+    )
+    with pytest.raises(InputError, match="uint8 or float32"):
+        alcn.window_weights(windows.astype(np.int32))

@@ -331,3 +331,11 @@ def test_help_explains_the_device(capsys):
         main(["normalize", "--help"])
     out = " ".join(capsys.readouterr().out.split())
     assert "--device DEV" in out and "--batch-size N" in out and "ALCN only" in out and "frames per second" in out
+
+
+def test_a_missing_input_is_named_whatever_its_output(tmp_path, capsys):
+    """A missing folder was judged by its name as an image, and the error blamed the output folder's name."""
+    for src, dst in [("missing", "out"), ("missing.png", "o.png"), ("missing.mp4", "o.mp4")]:
+        assert main(["normalize", str(tmp_path / src), str(tmp_path / dst), "-m", "none"]) == 2
+        assert capsys.readouterr().err.strip().endswith(f"no such image, folder or video: {tmp_path / src}")
+    assert not list(tmp_path.iterdir())

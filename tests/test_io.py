@@ -178,3 +178,16 @@ def test_a_header_one_frame_too_high_is_no_truncation(shared_data, tmp_path):
     if not src.is_file():
         pytest.skip(f"{src} not found")
     assert map_video(src, tmp_path / "out.avi", lambda frame: frame[::8, ::8]) >= 455
+
+
+def test_a_float_image_is_converted_for_an_integer_format(tmp_path, image, caplog):
+    """OpenCV would saturate float32 intensities in [0, 1] to 0 and 1: a black image."""
+    unit = image.astype(np.float32) / np.float32(255)
+    eight = cv2.imread(str(write_image(tmp_path / "a.bmp", unit)), cv2.IMREAD_UNCHANGED)
+    np.testing.assert_array_equal(eight, image)
+    assert "written as uint8" in caplog.text
+    sixteen = cv2.imread(str(write_image(tmp_path / "a.png", unit)), cv2.IMREAD_UNCHANGED)
+    np.testing.assert_array_equal(sixteen, image.astype(np.uint16) * 257)
+    kept = cv2.imread(str(write_image(tmp_path / "a.tif", unit)), cv2.IMREAD_UNCHANGED)
+    assert kept.dtype == np.float32
+    np.testing.assert_array_equal(kept, unit)

@@ -140,3 +140,13 @@ def test_grid_stride_must_be_a_multiple_of_the_network_stride(bad):
 def test_grid_stride_defaults_to_the_network_stride():
     assert check_grid_stride(None, 8) == 8
     assert check_grid_stride(16, 8) == 16
+
+
+def test_a_config_the_network_refuses_is_a_weight_file_error(tmp_path):
+    """The constructor's InputError (a ValueError) and a malformed value (ValueError) name the weight file's fault."""
+    net = Normalizer(num_kernels=1, channels=(2, 3), hidden=4)
+    meta = {"config": net.config, "sigmas": [0.5], "working_scale": 0.5, "output_range": [-1.0, 1.0], "trained": False}
+    for config in (dict(net.config, activation="sigmoid"), dict(net.config, channels=[2, 3, 4])):
+        path = save_normalizer_file(tmp_path / "w.npz", net.state_arrays(), dict(meta, config=config))
+        with pytest.raises(WeightFileError, match="do not fit"):
+            Normalizer.from_file(load_normalizer_file(path))

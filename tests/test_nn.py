@@ -341,3 +341,21 @@ def test_cuda_apply_batch_equals_the_cpu():
     cpu = alcn_cv.createALCN(backend="torch").apply_batch(frames)
     cuda = alcn_cv.createALCN(backend="torch", device="cuda").apply_batch(frames)
     assert cuda.dtype == np.uint8 and np.abs(cuda.astype(int) - cpu.astype(int)).max() <= 1
+
+
+def test_apply_batch_takes_any_byte_order_and_names_a_bad_out_dtype():
+    """As apply(): big-endian frames were refused as an "unsupported out_dtype >u2" nobody gave, and their float
+    range went unchecked; an unknown out_dtype raised numpy's TypeError."""
+    frames = np.stack([_gray(seed=i) for i in range(2)]).astype(np.uint16) * 257
+    alcn = alcn_cv.createALCN(backend="torch")
+    expected = alcn.apply_batch(frames)
+    swapped = alcn.apply_batch(frames.astype(">u2"))
+    assert swapped.dtype == np.uint16 and swapped.dtype.isnative
+    np.testing.assert_array_equal(swapped, expected)
+    unit = frames.astype(np.float32) / np.float32(65535)
+    np.testing.assert_array_equal(alcn.apply_batch(unit.astype(">f4")), alcn.apply_batch(unit))
+    unit[1, 0, 0] = 2.0  # the second frame's: the first frame is checked alone
+    with pytest.raises(InputError, match=r"in \[0, 1\]"):
+        alcn.apply_batch(unit.astype(">f4"))
+    with pytest.raises(InputError, match="unknown out_dtype"):
+        alcn.apply_batch(frames, out_dtype="nonsense")

@@ -84,3 +84,13 @@ def test_saving_weights_removes_the_export_of_the_old_ones(tmp_path, lite, caplo
         save_normalizer_file(weights, lite.arrays, lite.meta)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other.onnx", "w.npz"]
     assert "w.onnx" in caplog.text
+
+
+@pytest.mark.parametrize(("field", "value"), [("sigmas", [0.5, -1.0]), ("sigmas", [0.0]), ("working_scale", 0)])
+def test_a_header_of_widths_that_are_not_positive_is_refused_on_loading(tmp_path, lite, field, value):
+    """A sigma or a working scale of zero or less described no method: refused when the file is read, not by the
+    first apply() (InputError) or the constructor (a scale out of range)."""
+    path = _write_npz(tmp_path / "w.npz", lite.arrays, {**lite.meta, field: value})
+    with pytest.raises(WeightFileError, match="must be positive") as info:
+        load_normalizer_file(path)
+    assert str(path) in str(info.value)

@@ -57,7 +57,12 @@ def image_label(index: int, image: CocoImage) -> str:
 
 
 def normalization_grid(
-    images: list[np.ndarray], labels: list[str], methods: list[str], path: Path, progress: bool = True, **params
+    images: list[np.ndarray],
+    labels: list[str],
+    methods: list[str],
+    path: Path,
+    progress: bool = True,
+    **params: dict[str, object],
 ) -> Path:
     """Write a PNG grid: one row per image, one column per normalization method.
 

@@ -41,9 +41,11 @@ def _check_output(src: Path, dst: Path, overwrite: bool, in_place: bool) -> list
     the folder must be writable.
 
     Raises:
-        InputError: an output is its input (without ``in_place``), exists (without ``overwrite``)
-            or cannot be written (the message names the output given).
+        InputError: no input ``src``; an output is its input (without ``in_place``), exists (without
+            ``overwrite``) or cannot be written (the message names the output given).
     """
+    if not src.exists():  # else its kind, told by its name, would be judged by the output's
+        raise InputError(f"no such image, folder or video: {src}")
     if src.resolve() == dst.resolve():
         if not in_place:
             raise InputError(f"the output {dst} is the input {src}: it would be replaced (--in-place replaces it)")

@@ -194,10 +194,11 @@ class ALCN(Normalization):
         return self.runtime.weight_maps(gray)
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
-        """Eq. 1's weights: ``(n, 48, 48)`` float32 windows at the working scale -> ``(n, N)``."""
+        """Eq. 1's weights: ``(n, 48, 48)`` windows at the working scale, uint8 or float32 intensities in [0, 1]
+        (as :meth:`normalize_windows` takes them) -> ``(n, N)``."""
         if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.shape[1:] != (WINDOW, WINDOW):
             raise InputError(f"windows must be (n, {WINDOW}, {WINDOW}), got {getattr(windows, 'shape', type(windows))}")
-        return self.runtime.window_weights(np.ascontiguousarray(windows, dtype=np.float32))
+        return self.runtime.window_weights(np.ascontiguousarray(unit_windows(windows)))
 
     def normalize_windows(self, windows: np.ndarray) -> np.ndarray:
         """Eq. 1 on every ``(n, S, S)`` window (``S >= 48`` at the working scale): one weight vector from its
@@ -254,7 +255,7 @@ class ALCN(Normalization):
 
         Args:
             frames: ``(B, H, W)`` or ``(B, H, W, C)`` (gray, gray + alpha, BGR, BGRA) uint8, uint16, or float32
-                intensities in [0, 1].
+                intensities in [0, 1], in any byte order.
             out_dtype: as in :meth:`apply` (default: the frames' dtype).
             half: run the Normalizer in float16 under ``torch.autocast``; Eq. 3 stays in float32.
 
@@ -263,7 +264,7 @@ class ALCN(Normalization):
         """
         if self.backend != "torch":
             raise InputError(f"apply_batch runs on backend='torch' (device 'cpu' or 'cuda'), not {self.backend!r}")
-        dtype = check_batch(frames, out_dtype)
+        frames, dtype = check_batch(frames, out_dtype)
         run = cast("TorchRuntime", self.runtime).apply_batch
         channels = 1 if frames.ndim == 3 else frames.shape[3]
         body = frames[..., :-1] if channels in (2, 4) else frames

@@ -95,10 +95,11 @@ def with_alpha(result: np.ndarray, alpha: np.ndarray, out_dtype: np.dtype) -> np
 
 def _unit_in_place_to(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
     """float32 intensities clipped to [0, 1] and converted to ``dtype`` (``rint(unit * full
-    scale)`` for the integer types), with ``unit`` as scratch space. An image of up to four
-    channels takes OpenCV passes: for uint8 the lower clip, then ``cv2.convertScaleAbs``, which
-    rounds half to even and saturates as ``np.rint`` after the clip does, bit for bit."""
-    if unit.ndim == 3 and unit.shape[2] > 4:
+    scale)`` for the integer types), with ``unit`` as scratch space, any shape. A row, a plane or
+    an image of up to four channels takes OpenCV passes: for uint8 the lower clip, then
+    ``cv2.convertScaleAbs``, which rounds half to even and saturates as ``np.rint`` after the clip
+    does, bit for bit."""
+    if not (unit.ndim in (1, 2) or (unit.ndim == 3 and unit.shape[2] <= 4)):  # what OpenCV cannot take as a Mat
         np.clip(unit, 0.0, 1.0, out=unit)
     else:  # cv2.threshold: no scalar that OpenCV could take for an array
         cv2.threshold(unit, 0.0, 0.0, cv2.THRESH_TOZERO, dst=unit)

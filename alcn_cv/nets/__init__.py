@@ -29,7 +29,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> object:
     if name in _LAZY:
         try:
             module = importlib.import_module(_LAZY[name])

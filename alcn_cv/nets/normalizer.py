@@ -167,11 +167,15 @@ class Normalizer(nn.Module):
 
     @classmethod
     def from_file(cls, weight_file: NormalizerFile) -> Normalizer:
-        """Build the network described by a weight file and load its arrays."""
+        """Build the network described by a weight file and load its arrays.
+
+        Raises:
+            WeightFileError: a ``config`` the network refuses, or arrays that do not fit it.
+        """
         try:
             net = cls(**weight_file.meta["config"])
             net.load_state_dict({k: torch.from_numpy(np.array(v)) for k, v in weight_file.arrays.items()})
-        except (TypeError, RuntimeError) as exc:
+        except (TypeError, ValueError, RuntimeError) as exc:  # ValueError: the constructor's InputError among them
             raise WeightFileError(f"weights do not fit the Normalizer they describe: {exc}") from None
         return net.eval()
 

@@ -11,11 +11,12 @@ for the same weights (to float rounding): the image is padded here by reflect-10
 (``cv2.BORDER_REFLECT_101``) exactly as the torch network pads it, and the grid is upsampled
 bilinearly with the grid points on the pixels ``s*i`` (``align_corners=True``), ``s`` the
 network's output stride (4 for the paper's Normalizer, 8 for the lite and the gain ones), read
-from the model by running it on probe images. The gain Normalizer's export takes its features on the grid
-(:class:`GainFeatures`, computed here, so that ``cv2.dnn`` runs only the grid's convolutions) and the lite
-Normalizer's the padded image cut into 4x4 blocks (:func:`image_blocks`: its first convolution, 4x4 with stride
-4, becomes a 1x1 one, which ``cv2.dnn`` runs without spreading a one-channel full-resolution tensor over its
-blocked layout); the input's name says which (:data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT`, :data:`FEATURES_INPUT`).
+from the model by running it on probe images (the gain Normalizer's from its config). The gain
+Normalizer's export takes its features on the grid (:class:`GainFeatures`, computed here, so that ``cv2.dnn``
+runs only the grid's convolutions) and the lite Normalizer's the padded image cut into 4x4 blocks
+(:func:`image_blocks`: its first convolution, 4x4 with stride 4, becomes a 1x1 one, which ``cv2.dnn`` runs
+without spreading a one-channel full-resolution tensor over its blocked layout); the input's name says which
+(:data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT`, :data:`FEATURES_INPUT`).
 """
 
 from __future__ import annotations
