@@ -433,3 +433,16 @@ def test_window_weights_take_uint8_windows_as_normalize_windows_does():
     )
     with pytest.raises(InputError, match="uint8 or float32"):
         alcn.window_weights(windows.astype(np.int32))
+
+
+def test_a_spec_value_may_hold_a_colon():
+    """A Windows path (``C:\\...``) or a POSIX file name with a ``:`` split the spec into a bad parameter."""
+    from alcn_cv.enhance.registry import parse_spec
+
+    assert parse_spec(r"alcn:weights=C:\models\a.npz:scale=0.5") == (
+        "alcn",
+        {"weights": r"C:\models\a.npz", "scale": 0.5},
+    )
+    assert parse_spec("alcn:weights=/tmp/a:b.npz") == ("alcn", {"weights": "/tmp/a:b.npz"})
+    with pytest.raises(InputError, match="expected NAME"):
+        parse_spec("alcn:lite")  # a value without its key

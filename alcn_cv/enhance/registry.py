@@ -11,6 +11,7 @@ from __future__ import annotations
 import ast
 import inspect
 import numbers
+import re
 import types
 import typing
 from collections.abc import Callable, Sequence
@@ -221,11 +222,16 @@ def parse_params(items: list[str]) -> dict[str, object]:
     return params
 
 
+#: The ``:`` before each ``KEY=VALUE`` of a spec (not one inside a value: a Windows drive, a path).
+_PARAMETER_START = re.compile(r":(?=[A-Za-z_]\w*=)")
+
+
 def parse_spec(spec: str) -> tuple[str, dict[str, object]]:
     """A method with parameters, ``NAME[:KEY=VALUE...]``: ``"alcn:model=lite:mixture=pyramid"`` ->
-    ``("alcn", {"model": "lite", "mixture": "pyramid"})``. The name is not checked here."""
-    name, *items = spec.strip().split(":")
-    if not name:
+    ``("alcn", {"model": "lite", "mixture": "pyramid"})``. The name is not checked here. A ``:`` starts a parameter
+    only before ``KEY=``, so a value may hold one: ``"alcn:weights=C:\\models\\a.npz"``."""
+    name, *items = _PARAMETER_START.split(spec.strip())
+    if not name or ":" in name:  # "alcn:lite": a value without its key
         raise InputError(f"bad method {spec!r}; expected NAME[:KEY=VALUE...]")
     return name, parse_params(items)
 
