@@ -315,6 +315,7 @@ def test_device_errors_are_one_line(tmp_path, frame, capsys):
     for args, message in [
         (["-m", "dog", "--device", "cpu"], "--device runs ALCN's batched torch path"),
         (["-p", "backend=fast", "--device", "cpu"], "backend='torch'"),
+        (["-p", "device=cuda", "--device", "cpu"], "--device cpu and the device parameter 'cuda' differ"),
         (["--device", "cpu", "--batch-size", "0"], "--batch-size must be positive"),
     ]:
         assert main(["normalize", str(src), str(tmp_path / "out.png"), *args]) == 2

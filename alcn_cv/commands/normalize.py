@@ -125,8 +125,11 @@ def main(
                 f"--device runs ALCN's batched torch path (-m alcn); {name!r} runs on the CPU, one "
                 "frame at a time, without --device"
             )
-        if {**spec_params, **params}.get("backend", "torch") != "torch":
+        given = {**spec_params, **params}
+        if given.get("backend", "torch") != "torch":
             raise InputError("--device runs ALCN with backend='torch'; drop the backend parameter")
+        if given.get("device", device) != device:
+            raise InputError(f"--device {device} and the device parameter {given['device']!r} differ; give one")
         if batch_size < 1:
             raise InputError(f"--batch-size must be positive, got {batch_size}")
         params.update(backend="torch", device=device)
