@@ -219,20 +219,35 @@ def test_backend_follows_what_is_installed(run_python):
     assert lines[2].startswith("alcn_cv.nets.Normalizer: needs the [train] extra")
 
 
-def test_torch_threads_without_torch_name_the_extra(run_python):
-    """threads select the backend that runs torch; without torch that said backend='opencv' runs no torch."""
-    proc = run_python("""
+@pytest.mark.parametrize(
+    ("call", "error", "ending"),
+    [
+        # threads select the backend that runs torch; without torch that said backend='opencv' runs no torch
+        (
+            "threads=2",
+            "MissingDependencyError",
+            "ALCN(backend='fast'): needs the [train] extra (torch is not installed): pip install \"alcn-cv[train]\"",
+        ),
+        # cv2.dnn runs the network at its own stride
+        (
+            "grid_stride=16",
+            "InputError",
+            "another grid stride runs the network in torch: backend='fast' (the [train] extra)",
+        ),
+    ],
+    ids=["threads", "grid_stride"],
+)
+def test_what_needs_torch_without_it_says_what_to_do(run_python, call, error, ending):
+    proc = run_python(f"""
         import alcn_cv
-        from alcn_cv.errors import MissingDependencyError
+        from alcn_cv.errors import {error}
         try:
-            alcn_cv.createALCN(threads=2)
-        except MissingDependencyError as exc:
+            alcn_cv.createALCN({call})
+        except {error} as exc:
             print(exc)
     """)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip() == (
-        "ALCN(backend='fast'): needs the [train] extra (torch is not installed): pip install \"alcn-cv[train]\""
-    )
+    assert proc.stdout.strip().endswith(ending), proc.stdout
 
 
 def test_gain_models_on_opencv_4_fail_in_one_line(monkeypatch, capfd):
@@ -382,22 +397,6 @@ def test_the_default_path_imports_neither_torch_nor_scipy():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
-
-
-def test_another_grid_stride_without_torch_says_what_runs_it(run_python):
-    """cv2.dnn runs the network at its own stride; without torch another stride's error says which backend runs it."""
-    proc = run_python("""
-        import alcn_cv
-        from alcn_cv.errors import InputError
-        try:
-            alcn_cv.createALCN(grid_stride=16)
-        except InputError as exc:
-            print(exc)
-    """)
-    assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip().endswith(
-        "another grid stride runs the network in torch: backend='fast' (the [train] extra)"
-    )
 
 
 @pytest.mark.parametrize("name", [n for n in METHODS if n != "alcn"])
