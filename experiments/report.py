@@ -95,13 +95,6 @@ def _mean_std(summary: dict[str, Any] | None, seeds: int) -> str | None:
     return f"{summary['mean']:.1f}" + (f" ± {summary['std']:.1f}" if seeds > 1 else "")
 
 
-#: Said of a relight report measured before the matching score counted each keypoint once (2026-11-29).
-MANY_TO_ONE_NOTE = (
-    "Matching and correct-match columns counted before the score took each keypoint in one match at most "
-    "(docs/journal.md, 2026-11-29, session 16): not comparable with the tables above; identification is.\n"
-)
-
-
 def relight(report: dict[str, Any], title: str | None = None) -> str:
     """Headline rows of ``alcn bench relight``: every metric's mean over the evaluated scenes (``title``: the
     section's, default from the split)."""
@@ -118,15 +111,10 @@ def relight(report: dict[str, Any], title: str | None = None) -> str:
         if loo
         else f"Real light, test scenes (tuned on {', '.join(report['split']['train'])})"
     )
-    many_to_one = "one-to-one" not in report.get("metrics", {}).get("matching", "one-to-one")
-    note = (
-        (LOO_NOTE if loo else "")
-        + (MANY_TO_ONE_NOTE if many_to_one else "")
-        + (
-            f"Mean over the scenes {scenes}; {seeds} seed{'s' if seeds > 1 else ''} "
-            f"({', '.join(str(s) for s in report['settings']['seeds'])}). Identification and matching in %, "
-            "pose in % of frame pairs, correct = correct matches per pair.\n"
-        )
+    note = (LOO_NOTE if loo else "") + (
+        f"Mean over the scenes {scenes}; {seeds} seed{'s' if seeds > 1 else ''} "
+        f"({', '.join(str(s) for s in report['settings']['seeds'])}). Identification and matching in %, "
+        "pose in % of frame pairs, correct = correct matches per pair.\n"
     )
     return f"## {title}\n\n{provenance(report)}\n{note}\n" + table(
         ["method"] + [RELIGHT_METRICS[m] for m in metrics], rows
