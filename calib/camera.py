@@ -104,7 +104,8 @@ class Calibration:
     image_points: list[np.ndarray] = field(default_factory=list)
 
     def colmap_camera(self, camera_id: int = 1) -> ColmapCamera:
-        """The same camera as a COLMAP camera (``OPENCV`` or ``FULL_OPENCV`` model)."""
+        """The same camera as a COLMAP camera (``OPENCV``, or ``FULL_OPENCV`` when ``k3`` is non-zero;
+        ``PINHOLE`` without distortion); the principal point gets COLMAP's +0.5."""
         return camera_from_opencv(self.K, self.dist, *self.image_size, camera_id=camera_id)
 
 

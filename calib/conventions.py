@@ -72,14 +72,31 @@ def colmap_from_bop_frames(
     return cameras, images
 
 
-def bop_frames_from_colmap(model: ColmapModel, image_dir: str | os.PathLike, unit_to_mm: float = 1.0) -> list[BopFrame]:
+#: Millimetres per unit of the ``# Units:`` header of a COLMAP model.
+_MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
+
+
+def bop_frames_from_colmap(
+    model: ColmapModel, image_dir: str | os.PathLike, unit_to_mm: float | None = None
+) -> list[BopFrame]:
     """BOP frames (K, pose in mm) of a COLMAP model whose images are named ``<im_id:06d>.png``
     (or any name: ids then follow the name order).
 
+    Args:
+        model: the COLMAP model.
+        image_dir: folder of its images.
+        unit_to_mm: millimetres per unit of the model's translations. Default: from the model's
+            ``# Units:`` header (``mm``, ``cm`` or ``m``), or 1 (millimetres) without one.
+
     Raises:
         InputError: a camera with distortion (BOP images have none: undistort them first,
-            e.g. ``alcn calib undistort --keep-K``).
+            e.g. ``alcn calib undistort --keep-K``), or a units header other than mm/cm/m
+            without ``unit_to_mm``.
     """
+    if unit_to_mm is None:
+        if model.units is not None and model.units not in _MM_PER_UNIT:
+            raise InputError(f"the COLMAP model's units are {model.units!r}; pass unit_to_mm (millimetres per unit)")
+        unit_to_mm = _MM_PER_UNIT.get(model.units or "mm")
     images = sorted(model.images.values(), key=lambda im: im.name)
     numeric = all(Path(im.name).stem.isdigit() for im in images)
     frames = []

@@ -71,3 +71,21 @@ def test_distorted_colmap_camera_is_refused_for_bop(tmp_path):
         bop_frames_from_colmap(read_model(tmp_path), tmp_path)
     with pytest.raises(InputError, match="no camera pose"):
         colmap_from_bop_frames([BopFrame(0, "a.png", K, 1.0)], (640, 480))
+
+
+def test_bop_frames_follow_the_colmap_units_header(tmp_path):
+    """A model whose header says metres gives BOP translations in mm (it was taken as mm: 1000x off)."""
+    cameras, images = colmap_from_bop_frames(_frames(2), (640, 480))
+    for im in images:
+        im.t_w2c = im.t_w2c / 1000.0
+    write_text_model(tmp_path / "m", cameras, images, units="m")
+    back = bop_frames_from_colmap(read_model(tmp_path / "m"), tmp_path)
+    for f, g in zip(_frames(2), back):
+        np.testing.assert_allclose(g.t_w2c, f.t_w2c, atol=1e-9)
+    # An explicit factor still wins; an unknown unit needs one.
+    np.testing.assert_allclose(
+        bop_frames_from_colmap(read_model(tmp_path / "m"), tmp_path, unit_to_mm=1.0)[0].t_w2c, images[0].t_w2c
+    )
+    write_text_model(tmp_path / "ft", cameras, images, units="ft")
+    with pytest.raises(InputError, match="unit_to_mm"):
+        bop_frames_from_colmap(read_model(tmp_path / "ft"), tmp_path)

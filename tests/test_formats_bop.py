@@ -176,3 +176,31 @@ def test_image_size_is_checked_against_camera_json(tmp_path):
     cv2.imwrite(str(scene_dir / "rgb" / "000001.png"), np.zeros((240, 320, 3), np.uint8))
     with pytest.raises(DatasetError, match=r"camera.json: fields width/height: 640x480 but .*000001.png is 320x240"):
         load_scene(scene_dir, check_images=True)
+
+
+_PLY_HEAD = "ply\nformat ascii 1.0\nelement vertex 3\n{vprops}element face {nf}\n{fprop}end_header\n"
+_XYZ = "property float x\nproperty float y\nproperty float z\n"
+_FACE = "property list uchar int vertex_indices\n"
+
+
+@pytest.mark.parametrize(
+    "header, body, match",
+    [
+        (_PLY_HEAD.format(vprops=_XYZ.replace("float x", "foo x"), nf=1, fprop=_FACE), "", "bad property"),
+        (_PLY_HEAD.format(vprops=_XYZ, nf=1, fprop=_FACE.replace(" int ", " foo ")), "", "bad property"),
+        (_PLY_HEAD.format(vprops=_XYZ, nf=1, fprop="property list uchar vertex_indices\n"), "", "bad property"),
+        (_PLY_HEAD.format(vprops=_XYZ, nf=2, fprop=_FACE), "0 0 0\n10 0 0\n0 10 0\n3 0 1 2\n", "truncated"),
+        (_PLY_HEAD.format(vprops=_XYZ, nf=1, fprop=_FACE), "0 0 a\n10 0 0\n0 10 0\n3 0 1 2\n", "element vertex"),
+        (_PLY_HEAD.format(vprops=_XYZ, nf=1, fprop=_FACE), "0 0 0\n10 0 0\n0 10 0\n3 0 1 x\n", "element face"),
+        (_PLY_HEAD.format(vprops=_XYZ, nf=1, fprop=_FACE).replace("vertex 3", "vertex x"), "", "element NAME COUNT"),
+    ],
+)
+def test_malformed_ply_raises_dataset_error(tmp_path, header, body, match):
+    """Malformed headers and bodies raise DatasetError, not a bare KeyError/IndexError/ValueError."""
+    p = tmp_path / "m.ply"
+    p.write_text(header + body)
+    with pytest.raises(DatasetError, match=match):
+        read_ply(p)
+    p.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 0\nend_header")  # no newline after the header
+    with pytest.raises(DatasetError):
+        read_ply(p)

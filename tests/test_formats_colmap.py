@@ -125,3 +125,35 @@ def test_bad_files(tmp_path):
         read_model(tmp_path)
     with pytest.raises(InputError, match="camera_id 2"):
         write_text_model(tmp_path / "x", [cam], [ColmapImage(1, "a.png", 2, np.eye(3), np.zeros(3))])
+
+
+@pytest.mark.parametrize("model", ["SIMPLE_DIVISION", "DIVISION", "SIMPLE_FISHEYE", "FISHEYE", "EUCM"])
+def test_every_pycolmap_camera_model_is_read(tmp_path, model):
+    """COLMAP's newer camera models are valid files: read them (to_opencv refuses them, as fisheyes)."""
+    pc = pycolmap.Camera.create_from_model_id(1, getattr(pycolmap.CameraModelId, model), 100.0, 64, 48)
+    cam = ColmapCamera(1, model, 64, 48, np.array(pc.params))
+    write_text_model(tmp_path, [cam], _images(1))
+    read = read_model(tmp_path).cameras[1]
+    assert read.model == model and read.params.size == len(pc.params)
+    with pytest.raises(InputError, match="no OpenCV pinhole equivalent"):
+        read.to_opencv()
+
+
+@pytest.mark.parametrize(
+    "file, text, match",
+    [
+        ("cameras.txt", "1 PINHOLE 64 48 50 50 32 24\n1 PINHOLE 64 48 60 60 32 24\n", "duplicate id 1"),
+        ("images.txt", "1 1 0 0 0 0 0 1 1 a.png\n\n1 1 0 0 0 0 0 1 1 b.png\n\n", "duplicate id 1"),
+        ("images.txt", "1 1 0 0 0 0 0 1 1 a.png\n1.0 2.0 3.5\n", "POINT3D_ID"),
+        ("points3D.txt", "1 0 0 1 300 0 0 0.5\n", "RGB"),
+        ("points3D.txt", "1 0 0 1 3 0 0 0.5 1.5 0\n", "TRACK"),
+        ("points3D.txt", "1 0 0 1 3 0 0 0.5\n1 0 0 2 3 0 0 0.5\n", "duplicate id 1"),
+    ],
+)
+def test_malformed_values_are_refused_not_silently_changed(tmp_path, file, text, match):
+    """Duplicate ids (one record lost), colours beyond 0..255 (wrapped) and fractional ids (truncated)."""
+    cam = ColmapCamera(1, "PINHOLE", 64, 48, [50.0, 50.0, 32.0, 24.0])
+    write_text_model(tmp_path, [cam], [])
+    (tmp_path / file).write_text(text)
+    with pytest.raises(DatasetError, match=match):
+        read_model(tmp_path)

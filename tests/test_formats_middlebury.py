@@ -56,3 +56,9 @@ def test_real_sets(shared_data, name):
         assert x[2] > 0
         u, w = x[:2] / x[2]
         assert 0 < u < 640 and 0 < w < 480
+
+
+def test_binary_file_is_a_dataset_error(tmp_path):
+    (tmp_path / "x_par.txt").write_bytes(b"\xff\xfe\x00binary")
+    with pytest.raises(DatasetError, match="not a text file"):
+        read_middlebury(tmp_path)

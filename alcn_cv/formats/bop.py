@@ -276,6 +276,13 @@ _PLY_TYPES = {
 }
 
 
+def _ply_int(path: Path, token: str) -> int:
+    try:
+        return int(token)
+    except ValueError:
+        raise DatasetError(f"{path}: element face: {token!r} is not an integer") from None
+
+
 def read_ply(path: str | os.PathLike, *, unit_check: bool = True) -> PlyModel:
     """Read a triangle-mesh PLY (ASCII or binary little-endian).
 
@@ -295,7 +302,8 @@ def read_ply(path: str | os.PathLike, *, unit_check: bool = True) -> PlyModel:
     if not data.startswith(b"ply") or end < 0:
         raise DatasetError(f"{path}: not a PLY file (missing 'ply' magic or 'end_header')")
     header = data[:end].decode("ascii", "replace").splitlines()
-    body = data[data.index(b"\n", end) + 1 :]
+    newline = data.find(b"\n", end)
+    body = data[newline + 1 :] if newline >= 0 else b""
     fmt = None
     texture_file = None
     elements: list[tuple[str, int, list[tuple[str, ...]]]] = []
@@ -308,11 +316,19 @@ def read_ply(path: str | os.PathLike, *, unit_check: bool = True) -> PlyModel:
         elif tok[0] == "comment" and len(tok) >= 3 and tok[1] == "TextureFile":
             texture_file = tok[2]
         elif tok[0] == "element":
+            if len(tok) != 3 or not tok[2].isdigit():
+                raise DatasetError(f"{path}: header: expected 'element NAME COUNT', got {line.strip()!r}")
             elements.append((tok[1], int(tok[2]), []))
         elif tok[0] == "property":
             if not elements:
                 raise DatasetError(f"{path}: header: property before any element")
-            elements[-1][2].append(tuple(tok[1:]))
+            prop = tuple(tok[1:])
+            types = prop[1:3] if prop[:1] == ("list",) else prop[:1]
+            if len(prop) != (4 if prop[:1] == ("list",) else 2) or any(t not in _PLY_TYPES for t in types):
+                raise DatasetError(
+                    f"{path}: header: bad property {line.strip()!r} (types: {', '.join(sorted(_PLY_TYPES))})"
+                )
+            elements[-1][2].append(prop)
     if fmt not in ("ascii", "binary_little_endian"):
         raise DatasetError(f"{path}: header field format: {fmt!r} not supported (ascii, binary_little_endian)")
     out: dict[str, Any] = {}
@@ -326,11 +342,15 @@ def read_ply(path: str | os.PathLike, *, unit_check: bool = True) -> PlyModel:
             if fmt == "ascii":
                 faces = []
                 for _ in range(count):
-                    n = int(tokens[offset])
-                    faces.append(tokens[offset + 1 : offset + 1 + n])
-                    offset += 1 + n
+                    if offset >= len(tokens):
+                        raise DatasetError(f"{path}: truncated (element face)")
+                    n = _ply_int(path, tokens[offset])
                     if n != 3:
                         raise DatasetError(f"{path}: element face: only triangles are supported, found {n}-gon")
+                    if offset + 1 + n > len(tokens):
+                        raise DatasetError(f"{path}: truncated (element face)")
+                    faces.append([_ply_int(path, t) for t in tokens[offset + 1 : offset + 1 + n]])
+                    offset += 1 + n
                 out["faces"] = np.asarray(faces, np.int64).reshape(-1, 3)
             else:
                 dt = np.dtype([("n", _PLY_TYPES[ctype]), ("i", _PLY_TYPES[itype], 3)]).newbyteorder("<")
@@ -350,7 +370,10 @@ def read_ply(path: str | os.PathLike, *, unit_check: bool = True) -> PlyModel:
             n = len(props) * count
             if offset + n > len(tokens):
                 raise DatasetError(f"{path}: truncated (element {name})")
-            vals = np.asarray(tokens[offset : offset + n], np.float64).reshape(count, len(props))
+            try:
+                vals = np.asarray(tokens[offset : offset + n], np.float64).reshape(count, len(props))
+            except ValueError as exc:
+                raise DatasetError(f"{path}: element {name}: {exc}") from None
             offset += n
             cols = {k: vals[:, i] for i, k in enumerate(names)}
         else:

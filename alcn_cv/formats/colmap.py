@@ -70,6 +70,12 @@ _MODEL_NUM_PARAMS: dict[str, int] = {
     "THIN_PRISM_FISHEYE": 12,
     "FOV": 5,
     "RAD_TAN_THIN_PRISM_FISHEYE": 16,
+    "SIMPLE_DIVISION": 4,
+    "DIVISION": 5,
+    "SIMPLE_FISHEYE": 3,
+    "FISHEYE": 4,
+    "EUCM": 6,
+    "EQUIRECTANGULAR": 2,
 }
 
 
@@ -388,6 +394,8 @@ def _read_cameras_txt(file: Path) -> dict[int, ColmapCamera]:
         if len(tok) < 5:
             raise DatasetError(f"{file}:{n}: expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[], got {line!r}")
         cid = _int(file, n, "CAMERA_ID", tok[0])
+        if cid in cameras:
+            raise DatasetError(f"{file}:{n}: field CAMERA_ID: duplicate id {cid}")
         try:
             cameras[cid] = ColmapCamera(
                 cid,
@@ -425,6 +433,10 @@ def _read_images_txt(file: Path) -> dict[int, ColmapImage]:
             raise DatasetError(f"{file}:{n2}: field POINTS2D must hold triples (X, Y, POINT3D_ID)")
         pts_arr = _floats(file, n2, "POINTS2D", pts).reshape(-1, 3) if pts else np.zeros((0, 3))
         iid = _int(file, n, "IMAGE_ID", tok[0])
+        if iid in images:
+            raise DatasetError(f"{file}:{n}: field IMAGE_ID: duplicate id {iid}")
+        if np.any(pts_arr[:, 2] != np.round(pts_arr[:, 2])):
+            raise DatasetError(f"{file}:{n2}: field POINT3D_ID must be integers")
         q = _floats(file, n, "QVEC", tok[1:5])
         if np.linalg.norm(q) < 1e-12:
             raise DatasetError(f"{file}:{n}: field QVEC is zero")
@@ -450,8 +462,15 @@ def _read_points3d_txt(file: Path) -> dict[int, ColmapPoint3D]:
         if len(tok) < 8 or (len(tok) - 8) % 2:
             raise DatasetError(f"{file}:{n}: expected POINT3D_ID X Y Z R G B ERROR TRACK[], got {line!r}")
         pid = _int(file, n, "POINT3D_ID", tok[0])
+        if pid in points:
+            raise DatasetError(f"{file}:{n}: field POINT3D_ID: duplicate id {pid}")
         rgb = _floats(file, n, "RGB", tok[4:7])
-        track = _floats(file, n, "TRACK", tok[8:]).astype(np.int64).reshape(-1, 2)
+        if np.any((rgb < 0) | (rgb > 255) | (rgb != np.round(rgb))):
+            raise DatasetError(f"{file}:{n}: field RGB must be integers in 0..255, got {tok[4:7]}")
+        track = _floats(file, n, "TRACK", tok[8:])
+        if np.any(track != np.round(track)):
+            raise DatasetError(f"{file}:{n}: field TRACK must hold integers (IMAGE_ID, POINT2D_IDX)")
+        track = track.astype(np.int64).reshape(-1, 2)
         points[pid] = ColmapPoint3D(
             pid,
             _floats(file, n, "XYZ", tok[1:4]),
@@ -527,7 +546,10 @@ def _read_binary_model(root: Path) -> ColmapModel:
         rec = pycolmap.Reconstruction(str(root))
     except Exception as exc:  # pycolmap raises plain RuntimeError/ValueError with C++ messages
         raise DatasetError(f"{root}: cannot read the COLMAP binary model ({exc})") from exc
-    return model_from_pycolmap(rec)
+    try:
+        return model_from_pycolmap(rec)
+    except InputError as exc:  # e.g. a camera model this module does not know
+        raise DatasetError(f"{root}: {exc}") from exc
 
 
 def read_model(path: str | os.PathLike) -> ColmapModel:

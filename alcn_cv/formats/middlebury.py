@@ -87,7 +87,11 @@ def read_middlebury(path: str | os.PathLike, check_images: bool = True) -> list[
         par = find_par_file(par)
     if not par.is_file():
         raise DatasetError(f"{par}: file not found")
-    lines = [(n, line.split()) for n, line in enumerate(par.read_text().splitlines(), 1) if line.strip()]
+    try:
+        text = par.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{par}: not a text file ({exc})") from None
+    lines = [(n, line.split()) for n, line in enumerate(text.splitlines(), 1) if line.strip()]
     if not lines:
         raise DatasetError(f"{par}: empty file")
     n0, head = lines[0]
