@@ -177,7 +177,8 @@ def number_at_least(kind: type[int] | type[float], low: float, above: bool = Fal
             value = kind(text)
         except ValueError:
             value = None
-        if value is None or value < low or (above and value == low):
+        # `not >=`: NaN compares false with everything and is no number in range
+        if value is None or not (value > low if above else value >= low):
             raise argparse.ArgumentTypeError(f"{'an integer' if kind is int else 'a number'} {bound}, got {text!r}")
         return value
 

@@ -162,9 +162,11 @@ def new_figure(nrows: int = 1, ncols: int = 1, **kwargs: Any) -> tuple[Any, Any,
 def save_figure(plt: Any, fig: Any, path: str | os.PathLike, dpi: int = 100) -> Path:
     """Save a figure as PNG atomically and close it."""
     path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=dpi)
-    plt.close(fig)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", dpi=dpi)
+    finally:  # closed on a failed write too: pyplot keeps every open figure
+        plt.close(fig)
     return path
 
 

@@ -234,6 +234,8 @@ def main(
         if input_path.is_file() and io.is_video(input_path):
             if K is None:
                 raise InputError("building from a video needs the intrinsics (--K fx fy cx cy)")
+            if images is not None:
+                logger.warning("%s: a video; images (the image folder of a COLMAP model) ignored", input_path)
             seq = video_sequence(input_path, K, work, step=step, max_frames=max_frames)
             masks = None
             if motion_mask:
@@ -254,6 +256,16 @@ def main(
         else:
             seq = load_sequence(input_path, images)
             video = {"box_units": box_units}
+            # a registered sequence has its cameras and poses: these only apply to a video
+            ignored = [
+                name
+                for name, given in (("K", K is not None), ("motion_mask", motion_mask), ("refine_focal", refine_focal))
+                if given
+            ]
+            if ignored:
+                logger.warning(
+                    "%s: a registered sequence; %s apply to a video only, ignored", input_path, ", ".join(ignored)
+                )
         model, cams = build(
             seq,
             feature=feature,

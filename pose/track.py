@@ -236,6 +236,24 @@ def _overlay_path(overlay: str | Path, source: str | Path) -> Path:
     return overlay
 
 
+def _check_frame_size(frame: np.ndarray, image_size: tuple[int, int], what: str, of: str) -> None:
+    """Raise :class:`InputError` when ``frame`` is not ``image_size`` ``(width, height)``, the size ``of`` is for;
+    ``what`` (``"the frames of X are"``) begins the message."""
+    if frame.shape[1::-1] != image_size:
+        raise InputError(
+            f"{what} {frame.shape[1]}x{frame.shape[0]} but {of} is for {image_size[0]}x{image_size[1]}; "
+            "give the intrinsics at this resolution (--K or --camera)"
+        )
+
+
+def _source_fps(source: str | Path, default: float = 30.0) -> float:
+    """The frame rate of a video ``source`` (the overlay video plays at it); ``default`` for an image folder."""
+    if Path(source).is_file() and io.is_video(source):
+        with io.VideoReader(source) as video:
+            return float(video.fps)
+    return default
+
+
 def make_tracker(
     detector: str,
     K: np.ndarray,
@@ -308,7 +326,8 @@ def main(
     output = output_path(output, ".json", "the poses")  # before the tracking, not after it
     if overlay is not None:
         overlay = _overlay_path(overlay, source)
-    if reprojection_error <= 0 or n_features < 0 or (min_inliers is not None and min_inliers < 4):
+    # `not > 0`: a NaN threshold fails too (every point would be an outlier)
+    if not reprojection_error > 0 or n_features < 0 or (min_inliers is not None and min_inliers < 4):
         raise InputError(
             "reprojection_error must be > 0 px, n_features >= 0 (0: all) and min_inliers >= 4 (a pose needs 4 points); "
             f"got {reprojection_error}, {n_features} and {min_inliers}"
@@ -344,19 +363,19 @@ def main(
     if K is None and model_size is not None:  # the model's camera: it holds for frames of its size only
         image_size = tuple(model_size)
     if image_size is not None:
+        image_size = tuple(int(v) for v in image_size)
+        of = "the calibration" if K is not None else f"the camera of {model_path}"
         _, first = next(io.iter_frames(source, max_frames=1))
-        if first.shape[1::-1] != tuple(image_size):
-            of = "the calibration" if K is not None else f"the camera of {model_path}"
-            raise InputError(
-                f"the frames of {source} are {first.shape[1]}x{first.shape[0]} but {of} is for "
-                f"{image_size[0]}x{image_size[1]}; give the intrinsics at this resolution (--K or --camera)"
-            )
+        # the first frame before the tracking, a folder's others as they come
+        _check_frame_size(first, image_size, f"the frames of {source} are", of)
     K = camera_matrix_for(model_K, K, model_path)
     tracker = make_tracker(detector, K, corners, dist, method, min_inliers, reprojection_error)
     scene_gt, info = {}, {}
     times = []
-    with OverlayWriter(overlay) if overlay is not None else contextlib.nullcontext() as writer:
+    with OverlayWriter(overlay, _source_fps(source)) if overlay is not None else contextlib.nullcontext() as writer:
         for res, frame in track(io.iter_frames(source), det, tracker, io.count_frames(source), progress):
+            if image_size is not None:  # a folder's images may differ in size: the camera holds for one
+                _check_frame_size(frame, image_size, f"frame {res.name} of {source} is", of)
             scene_gt[res.name] = pose_to_bop(res.estimate)
             info[res.name] = {
                 "inliers": len(res.estimate.inliers),

@@ -329,6 +329,7 @@ def test_sigterm_cleans_up_as_ctrl_c(tmp_path, case, request):
         ("--min-inliers", "2", "an integer at least 4, got '2'"),
         ("--n-features", "-1", "an integer at least 0, got '-1'"),
         ("--reprojection-error", "0", "a number greater than 0, got '0'"),
+        ("--reprojection-error", "nan", "a number greater than 0, got 'nan'"),  # NaN compares false: it passed
     ],
 )
 def test_an_option_out_of_range_is_named(capsys, option, value, says):

@@ -196,3 +196,24 @@ def test_a_build_without_the_pose_extra_says_so_before_the_work(run_python, tmp_
         'pose.build.main: needs the [pose] extra (pycolmap is not installed): pip install "alcn-cv[pose]"'
     )
     assert not (tmp_path / "out").exists()
+
+
+def test_options_of_a_video_given_for_a_registered_sequence_are_said_to_be_ignored(
+    shared_data, tmp_path, monkeypatch, caplog
+):
+    """--K, --motion-mask and --refine-focal were silently ignored for a registered sequence."""
+    pytest.importorskip("pycolmap")
+    pytest.importorskip("open3d")
+    pytest.importorskip("matplotlib")
+
+    class StopError(Exception):
+        pass
+
+    def stop(*args, **kwargs):
+        raise StopError
+
+    monkeypatch.setattr(build, "build", stop)
+    src = shared_data / "middlebury" / "templeSparseRing"
+    with caplog.at_level("WARNING", logger="pose.build"), pytest.raises(StopError):
+        build.main(src, tmp_path / "m.npz", K=np.eye(3), motion_mask=True, refine_focal=True)
+    assert "K, motion_mask, refine_focal apply to a video only, ignored" in caplog.text

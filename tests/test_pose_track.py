@@ -320,3 +320,42 @@ def test_the_summary_says_why_frames_were_lost(tmp_path):
         cv2.imwrite(str(frames / f"{i}.png"), np.full((SIZE[1], SIZE[0], 3), 90, np.uint8))
     summary = track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800)
     assert summary["tracked"] == 1 and "match" in summary["lost_reason"]
+
+
+def test_every_frame_of_a_folder_is_checked_against_the_camera_size(tmp_path):
+    """Only the first frame was compared with the calibration's size: a later image of another size was
+    tracked with intrinsics that do not hold for it."""
+    tex = _texture()
+    pm.save(_planar_model(tex), tmp_path / "m.npz")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    (r0, t0), (r1, t1) = _poses(2)
+    cv2.imwrite(str(frames / "0.png"), _render(tex, r0, t0))
+    cv2.imwrite(str(frames / "1.png"), cv2.resize(_render(tex, r1, t1), (640, 480)))
+    with pytest.raises(InputError, match=r"frame 1 of .* is 640x480 but the calibration is for 320x240"):
+        track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800, image_size=SIZE)
+    assert not (tmp_path / "p.json").exists()
+
+
+def test_a_nan_reprojection_error_is_refused(tmp_path):
+    pm.save(_planar_model(_texture()), tmp_path / "m.npz")
+    with pytest.raises(InputError, match="reprojection_error must be > 0"):
+        track.main(tmp_path / "m.npz", tmp_path, tmp_path / "p.json", K, reprojection_error=float("nan"))
+
+
+def test_the_overlay_video_keeps_the_frame_rate_of_the_input(tmp_path):
+    """The overlay video was written at 30 fps whatever the input's: a 10 fps video played 3x too fast."""
+    tex = _texture()
+    pm.save(_planar_model(tex), tmp_path / "m.npz")
+    video = tmp_path / "in.avi"
+    writer = io.open_video_writer(video, 10.0, SIZE)
+    for r, t in _poses(3):
+        writer.write(_render(tex, r, t))
+    writer.release()
+    track.main(tmp_path / "m.npz", video, tmp_path / "p.json", K, n_features=800, overlay=tmp_path / "ov.avi")
+    cap = cv2.VideoCapture(str(tmp_path / "ov.avi"))
+    try:
+        assert cap.get(cv2.CAP_PROP_FPS) == pytest.approx(10.0)
+        assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 3
+    finally:
+        cap.release()
