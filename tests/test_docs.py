@@ -151,13 +151,22 @@ def test_relight_tables_take_reports_with_and_without_backends() -> None:
     assert report.relight(new) == report.relight(old) and report.relight_headline(new) == report.relight_headline(old)
 
 
+def _runs_an_example(text: str) -> bool:
+    """A ``>>>`` line doctest runs: not one marked ``doctest: +SKIP`` (those check nothing)."""
+    return any(line.lstrip().startswith(">>> ") and "doctest: +SKIP" not in line for line in text.splitlines())
+
+
 def _modules_with_examples() -> list[str]:
     return sorted(
         ".".join(path.relative_to(ROOT).with_suffix("").parts)
         for package in ("alcn_cv", "pose", "calib")
         for path in (ROOT / package).rglob("*.py")
-        if ">>> " in path.read_text(encoding="utf-8")
+        if _runs_an_example(path.read_text(encoding="utf-8"))
     )
+
+
+def test_some_modules_have_examples() -> None:
+    assert len(_modules_with_examples()) > 10  # an empty list would make the test below check nothing
 
 
 @pytest.mark.parametrize("module", _modules_with_examples())
@@ -168,4 +177,5 @@ def test_docstring_examples_run(module: str) -> None:
     except ImportError as exc:  # an optional extra (torch, kornia) not installed here
         pytest.skip(f"{module}: {exc}")
     result = doctest.testmod(imported, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted > 0, f"{module}: doctest found none of its examples"
     assert result.failed == 0, f"{result.failed} of {result.attempted} examples failed"
