@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from alcn_cv.checks import FULL_SCALE
 from alcn_cv.errors import DatasetError, InputError
 
 __all__ = [
@@ -300,9 +301,9 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
     if img.ndim == 3 and img.shape[2] == 4 and path.suffix.lower() in (".jpg", ".jpeg"):
         logger.warning("%s has no alpha channel: the image's alpha is not written", path)
     if img.dtype == np.float32 and path.suffix.lower() not in FLOAT_SUFFIXES:
-        deep, full = (np.uint8, 255) if path.suffix.lower() in EIGHT_BIT_SUFFIXES else (np.uint16, 65535)
-        logger.warning("%s holds integers: the float32 image (in [0, 1]) is written as %s", path, deep.__name__)
-        img = np.rint(np.clip(img, 0.0, 1.0) * np.float32(full)).astype(deep)
+        deep = np.dtype(np.uint8 if path.suffix.lower() in EIGHT_BIT_SUFFIXES else np.uint16)
+        logger.warning("%s holds integers: the float32 image (in [0, 1]) is written as %s", path, deep.name)
+        img = np.rint(np.clip(img, 0.0, 1.0) * np.float32(FULL_SCALE[deep])).astype(deep)
     if img.dtype == np.uint16 and path.suffix.lower() in EIGHT_BIT_SUFFIXES:
         # OpenCV would saturate every value above 255 (a white image); scaled, as image tools convert
         logger.warning("%s holds 8 bits a channel: the 16-bit image is scaled to 8 bits", path)

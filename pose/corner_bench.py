@@ -62,9 +62,9 @@ def benchmark(
     K = scaled_camera(K, size[0] / w0, size[1] / h0)
     frames = [cv2.resize(f, size, interpolation=cv2.INTER_AREA) for f in frames]
     det = CornerDetector(onnx_path)
-    # warm-up: cv2.dnn allocates on the first run; on a copy, so that the first frame timed is not
-    # served from the detector's cache of the last frame's maps
-    det.detect(frames[0].copy())
+    # warm-up: cv2.dnn allocates on the first run; on the first frame mirrored, other pixels, so that the first
+    # frame timed is not served from the detector's cache of the last frame's maps (parts.same_frame)
+    det.detect(cv2.flip(frames[0], 1))
     total, posed = [], 0
     cpu0 = time.process_time()
     for _ in range(repeats):

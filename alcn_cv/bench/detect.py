@@ -446,10 +446,10 @@ def _normalization(state: _Run, method: str, params: dict[str, Any]) -> Normaliz
     return state.norms[key]
 
 
-def _normalize_training(norm: Normalization, ts: TrainingSet) -> tuple[Normalization, np.ndarray, np.ndarray, float]:
-    """The method, its training and validation windows normalized, and the seconds it took."""
+def _normalize_training(norm: Normalization, ts: TrainingSet) -> tuple[np.ndarray, np.ndarray, float]:
+    """The training and validation windows normalized by ``norm``, and the seconds it took."""
     t0 = time.perf_counter()
-    return norm, norm.normalize_windows(ts.windows), norm.normalize_windows(ts.val_windows), time.perf_counter() - t0
+    return norm.normalize_windows(ts.windows), norm.normalize_windows(ts.val_windows), time.perf_counter() - t0
 
 
 def _train_and_score(
@@ -459,7 +459,7 @@ def _train_and_score(
     policy_name: str,
     seed: int,
     params: dict[str, Any],
-    normalized: tuple[Normalization, np.ndarray, np.ndarray, float],
+    normalized: tuple[np.ndarray, np.ndarray, float],
     test_cache: dict[str, list[ScaledImage]],
 ) -> dict[str, Any]:
     """One run: the detector trained on the normalized windows under a policy, scored on the test images."""
@@ -467,7 +467,8 @@ def _train_and_score(
 
     t0 = time.perf_counter()
     settings, ts = state.settings, state.training(seed, n_real)
-    norm, train_windows, val_windows, t_norm = normalized
+    norm = _normalization(state, method, params)  # built by the caller
+    train_windows, val_windows, t_norm = normalized
     if isinstance(norm, ALCN):
         state.alcn_trained = norm.trained if state.alcn_trained is None else state.alcn_trained and norm.trained
     policy = InputPolicy(policy_name, train_windows)
@@ -506,7 +507,7 @@ def _run_method(state: _Run, method: str, out: Path, bar: tqdm) -> None:
     test_cache: dict[str, list[ScaledImage]] = {}
     for seed, n_real in ((seed, n) for seed in state.settings.seeds for n in state.settings.real_images):
         params = state.tuned.get(n_real, {}).get(method, {}).get("params", {})
-        normalized: tuple[Normalization, np.ndarray, np.ndarray, float] | Exception | None = None
+        normalized: tuple[np.ndarray, np.ndarray, float] | Exception | None = None
         for policy_name in state.settings.policies:
             key = run_key(method, n_real, policy_name, seed)
             bar.set_postfix(run=key)

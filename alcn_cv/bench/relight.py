@@ -307,15 +307,11 @@ def one_to_one_matches(d1: np.ndarray | None, d2: np.ndarray | None, norm: int, 
     if d1 is None or d2 is None or len(d1) < 1 or len(d2) < 2:
         return np.zeros((0, 2), np.int64)
     knn = cv2.BFMatcher(norm).knnMatch(d1, d2, k=2)
-    kept = [
-        (m[0].queryIdx, m[0].trainIdx, m[0].distance)
-        for m in knn
-        if len(m) == 2 and m[0].distance < ratio * m[1].distance
-    ]
-    if not kept:
+    best = [m[0] for m in knn if len(m) == 2 and m[0].distance < ratio * m[1].distance]
+    if not best:
         return np.zeros((0, 2), np.int64)
-    pairs = np.array([(q, t) for q, t, _ in kept], np.int64)
-    nearest_first = np.argsort(np.array([d for _, _, d in kept]), kind="stable")
+    pairs = np.array([(m.queryIdx, m.trainIdx) for m in best], np.int64)
+    nearest_first = np.argsort([m.distance for m in best], kind="stable")
     _, first = np.unique(pairs[nearest_first, 1], return_index=True)
     return pairs[np.sort(nearest_first[first])]
 
@@ -591,7 +587,7 @@ def main(
             "identification": "% of gallery patches whose best NCC match among all sampled locations is their own",
             "matching": "% correct one-to-one ratio-test matches (within match_px) per min(#keypoints), ORB and SIFT",
             "pose": "% of pairs whose RANSAC homography moves every frame corner less than pose_px",
-            "correct": "mean count of correct ratio-test matches (within match_px) per pair, ORB and SIFT",
+            "correct": "mean count of correct one-to-one ratio-test matches (within match_px) per pair, ORB and SIFT",
         },
         "tuning": tuning_result,
         "machine": machine(),

@@ -21,7 +21,6 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal, cast
 
-import cv2
 import numpy as np
 
 from alcn_cv.checks import unit_windows
@@ -31,7 +30,7 @@ from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.divisive import gaussian_energy
 from alcn_cv.filters.wide_band import BLOCK, block_means, wide_band_floor
-from alcn_cv.nets.opencv_runtime import RUNS_GAIN, WINDOW
+from alcn_cv.nets.opencv_runtime import GAIN_NEEDS, RUNS_GAIN, WINDOW
 from alcn_cv.runtime import (
     DEFAULT_MODEL,
     MODELS,
@@ -302,10 +301,7 @@ def _build_runtime(
     if backend == "opencv" and spec.per_pixel and not RUNS_GAIN:
         # before cv2.dnn tries: its ONNX importer logs errors of its own and fails with several lines of C++ context
         hint = "" if is_installed("torch") else ' (torch: pip install "alcn-cv[train]")'
-        raise WeightFileError(
-            f"OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers ({weights.name}): "
-            f"use OpenCV 5, install torch (backend='fast') or model='lite'{hint}"
-        )
+        raise WeightFileError(f"{weights.name}: {GAIN_NEEDS}{hint}")
     if backend == "opencv":
         net = opencv_network(weights, grid_stride, spec)
         return make_runtime(spec, net, mixture), net

@@ -38,6 +38,7 @@ from alcn_cv.weight_file import load_normalizer_file
 __all__ = [
     "BLOCK",
     "BLOCKS_INPUT",
+    "GAIN_NEEDS",
     "DEFAULT_ONNX",
     "FEATURES_INPUT",
     "IMAGE_INPUT",
@@ -57,6 +58,11 @@ _PROBE_POINTS = 3
 IMAGE_INPUT = "image"
 #: Whether ``cv2.dnn`` runs the gain Normalizers' exports: OpenCV 4's ONNX importer cannot infer their shapes.
 RUNS_GAIN = cv2.__version__ >= "5"
+#: What to do where ``cv2.dnn`` cannot run the gain Normalizers (not :data:`RUNS_GAIN`).
+GAIN_NEEDS = (
+    f"OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers: use OpenCV 5, install torch "
+    "(backend='fast') or model='lite'"
+)
 #: The input of the lite Normalizer's export: :func:`image_blocks` of the padded image.
 BLOCKS_INPUT = "blocks"
 #: The side of those blocks: the lite Normalizer's first convolution (4x4, stride 4; a test checks they agree).
@@ -197,14 +203,7 @@ class OpenCVNormalizer:
         try:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
-            hint = (
-                ""
-                if RUNS_GAIN
-                else (
-                    f"; OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers: use OpenCV 5, "
-                    "install torch (backend='fast') or model='lite'"
-                )
-            )
+            hint = "" if RUNS_GAIN else f"; {GAIN_NEEDS}"
             raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}{hint}: {str(exc).strip()}") from None
         #: The graph's input: :data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT` or :data:`FEATURES_INPUT`.
         self.input = next((name for name in (FEATURES_INPUT, BLOCKS_INPUT) if self._has_input(name)), IMAGE_INPUT)

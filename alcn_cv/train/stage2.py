@@ -53,8 +53,9 @@ class NonFiniteLossError(RuntimeError):
 
 
 def _check_windows(
-    windows: object, labels: object, num_classes: int, what: str, size: int = INPUT
+    windows: object, labels: object, num_classes: int | None, what: str, size: int = INPUT
 ) -> tuple[torch.Tensor, torch.Tensor]:
+    # num_classes None: every label is a class (only the lower bound is checked)
     if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.shape[1:] != (size, size):
         shape = getattr(windows, "shape", None)
         raise InputError(f"{what} windows must be an (n, {size}, {size}) array, got {shape}")
@@ -73,8 +74,9 @@ def _check_windows(
             f"{what} labels must be an integer array of shape ({len(windows)},), got "
             f"{getattr(labels, 'dtype', None)} {getattr(labels, 'shape', None)}"
         )
-    if labels.min() < 0 or labels.max() >= num_classes:
-        raise InputError(f"{what} labels must be in [0, {num_classes - 1}], got [{labels.min()}, {labels.max()}]")
+    if labels.min() < 0 or (num_classes is not None and labels.max() >= num_classes):
+        bound = "non-negative" if num_classes is None else f"in [0, {num_classes - 1}]"
+        raise InputError(f"{what} labels must be {bound}, got [{labels.min()}, {labels.max()}]")
     return torch.from_numpy(windows).unsqueeze(1), torch.from_numpy(labels.astype(np.int64))
 
 
@@ -90,11 +92,9 @@ def evaluate_detector(net: nn.Module, windows: np.ndarray, labels: np.ndarray) -
     Returns:
         ``(loss, accuracy)``, accuracy in [0, 1].
     """
-    num_classes = getattr(net, "num_classes", None)
-    if num_classes is None:  # every label is a class; malformed labels are left to the check, which names them
-        valid = isinstance(labels, np.ndarray) and labels.size and np.issubdtype(labels.dtype, np.integer)
-        num_classes = int(labels.max()) + 1 if valid else 1
-    x, y = _check_windows(windows, labels, num_classes, "validation", getattr(net, "input_size", INPUT))
+    x, y = _check_windows(
+        windows, labels, getattr(net, "num_classes", None), "validation", getattr(net, "input_size", INPUT)
+    )
     device = next(net.parameters()).device
     was_training = net.training
     net.eval()
