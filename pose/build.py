@@ -38,7 +38,14 @@ from pose.box_fit import fit_box
 from pose.model import PartModel, box_corners, read_box_corners
 from pose.parts import descriptor_norm
 from pose.plots import plot_model
-from pose.sequence import TrainingSequence, load_sequence, motion_masks, video_sequence
+from pose.sequence import (
+    VIDEO_MAX_FRAMES,
+    VIDEO_STEP,
+    TrainingSequence,
+    load_sequence,
+    motion_masks,
+    video_sequence,
+)
 from pose.triangulate import (
     collect_points,
     extract_features,
@@ -206,8 +213,8 @@ def main(
     *,
     images: str | Path | None = None,
     K: np.ndarray | None = None,
-    step: int = 5,
-    max_frames: int = 80,
+    step: int | None = None,
+    max_frames: int | None = None,
     motion_mask: bool = False,
     feature: str = "ORB",
     n_features: int = 4000,
@@ -224,6 +231,9 @@ def main(
     needs ``K`` and the box size; ``motion_mask`` keeps only what moves, for a static camera;
     ``refine_focal`` lets the bundle adjustment refine the focal length; the camera, refined or
     given, is stored in the model's ``extra["K"]``, which ``alcn pose track`` uses by default).
+    Of a video every ``step``-th frame is used, at most ``max_frames`` (``None``: the defaults
+    :data:`pose.sequence.VIDEO_STEP` and :data:`pose.sequence.VIDEO_MAX_FRAMES`). The options of a
+    video that a registered sequence ignores are warned about when given.
     """
     # the reconstruction (pycolmap), the box fit (open3d) and the plot come after the features: checked before those
     require("pycolmap", "open3d", "matplotlib", what="pose.build.main", preferred="pose")
@@ -236,7 +246,13 @@ def main(
                 raise InputError("building from a video needs the intrinsics (--K fx fy cx cy)")
             if images is not None:
                 logger.warning("%s: a video; images (the image folder of a COLMAP model) ignored", input_path)
-            seq = video_sequence(input_path, K, work, step=step, max_frames=max_frames)
+            seq = video_sequence(
+                input_path,
+                K,
+                work,
+                step=VIDEO_STEP if step is None else step,
+                max_frames=VIDEO_MAX_FRAMES if max_frames is None else max_frames,
+            )
             masks = None
             if motion_mask:
                 frames = [io.read_image(seq.image_dir / v.name) for v in seq.views]
@@ -257,11 +273,14 @@ def main(
             seq = load_sequence(input_path, images)
             video = {"box_units": box_units}
             # a registered sequence has its cameras and poses: these only apply to a video
-            ignored = [
-                name
-                for name, given in (("K", K is not None), ("motion_mask", motion_mask), ("refine_focal", refine_focal))
-                if given
-            ]
+            video_options = {
+                "K": K is not None,
+                "step": step is not None,
+                "max_frames": max_frames is not None,
+                "motion_mask": motion_mask,
+                "refine_focal": refine_focal,
+            }
+            ignored = [name for name, given in video_options.items() if given]
             if ignored:
                 logger.warning(
                     "%s: a registered sequence; %s apply to a video only, ignored", input_path, ", ".join(ignored)

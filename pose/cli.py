@@ -374,6 +374,7 @@ def _corner_recall(args: argparse.Namespace) -> int:
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``corner-recall``,
     ``planar`` and ``overlay-error`` to ``alcn``."""
+    from pose.sequence import VIDEO_MAX_FRAMES, VIDEO_STEP
     from pose.solver import METHODS
 
     p = subparsers.add_parser(
@@ -398,8 +399,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument(
         "--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics of a video (OpenCV convention)"
     )
-    b.add_argument("--step", type=int, default=5, help="use every N-th frame of a video (default 5)")
-    b.add_argument("--max-frames", type=int, default=80, help="at most this many video frames (default 80)")
+    b.add_argument("--step", type=int, help=f"use every N-th frame of a video (default {VIDEO_STEP})")
+    b.add_argument("--max-frames", type=int, help=f"at most this many video frames (default {VIDEO_MAX_FRAMES})")
     b.add_argument(
         "--motion-mask", action="store_true", help="static camera, moving object: keep features on what moves"
     )

@@ -194,17 +194,16 @@ def corner_recall(
     n = len(det.parts)
     per_frame, found = [], {k: [] for k in range(n)}
     for fr in bop.load_scene(scene_dir).frames:
-        ids = [o.obj_id for o in fr.objects]
-        if obj_id not in ids:
+        index = fr.object_index(obj_id)
+        if index is None:
             raise InputError(f"{scene_dir}: object {obj_id} is not annotated in frame {fr.im_id} (scene_gt.json)")
-        index = ids.index(obj_id)
         mask = cv2.imread(str(scene_dir / "mask_visib" / f"{fr.im_id:06d}_{index:06d}.png"), cv2.IMREAD_GRAYSCALE)
         if mask is None:
             raise InputError(f"{scene_dir}: no mask_visib of object {obj_id} in frame {fr.im_id}")
         image = to_gray(io.read_image(fr.rgb_path))
         if background == "grey":
             image = np.where(mask > 0, image, np.uint8(128))
-        pose = fr.pose(obj_id)
+        pose = fr.objects[index]
         uv, visible = part_visibility(det.corners, pose.R, pose.t, fr.K, image.shape, mask, parts=det.parts)
         whole, gated = det.peaks(image), det.peaks(image, uv, gate)
         prob, _ = det.maps(image)

@@ -307,7 +307,10 @@ class CornerDetector:
     def maps(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Softmax scores ``(1 + n, gh, gw)`` (class 0: background) and per part the position each
         cell votes for ``(n, gh, gw, 2)`` (x, y, downscaled pixels) of a BGR or gray uint8 frame.
-        The last frame's are kept, so the tracker's second search of a frame costs nothing."""
+        The last frame's are kept, so the tracker's second search of a frame costs nothing.
+
+        The one comparison of ``image`` with the last frame (by content, :func:`pose.parts.same_frame`): each
+        public method calls it once and hands its maps to the internal ones."""
         if self._cache is not None and same_frame(self._cache[0], image):
             return self._cache[1], self._cache[2]
         out = self.outputs(self.normalize(image))
@@ -328,9 +331,18 @@ class CornerDetector:
         Without ``predicted``: the ``top_k`` local maxima above ``min_score``; with ``predicted``
         ``(n, 2)`` full-image pixels: the ``gated_top_k`` above ``gated_min_score`` within
         ``radius`` pixels (default :attr:`gate`) of the part's prediction."""
+        return self._peaks(self.maps(image), predicted, radius)
+
+    def _peaks(
+        self,
+        maps: tuple[np.ndarray, np.ndarray],
+        predicted: np.ndarray | None = None,
+        radius: float | None = None,
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """:meth:`peaks` of a frame's :meth:`maps`."""
         radius = self.gate if radius is None else radius
         out = []
-        for k, (xy, sc) in enumerate(self._local_maxima(image)):
+        for k, (xy, sc) in enumerate(self._local_maxima(maps)):
             if predicted is None:
                 above, keep = sc >= self.min_score, self.top_k
             else:
@@ -341,16 +353,16 @@ class CornerDetector:
             out.append((xy[order], sc[order]))
         return out
 
-    def _local_maxima(self, image: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per part, every local maximum of its score (3x3) above the lower of ``min_score`` and
-        ``gated_min_score``: ``(xy (m, 2) full-image pixels, scores (m,))``. The last frame's are
-        kept: the tracker searches a frame up to four times (guided, whole frame, around a
-        proposal, around its own pose)."""
-        prob, votes = self.maps(image)
+    def _local_maxima(self, maps: tuple[np.ndarray, np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per part, every local maximum of its score (3x3) in a frame's :meth:`maps` above the lower of
+        ``min_score`` and ``gated_min_score``: ``(xy (m, 2) full-image pixels, scores (m,))``. The last frame's
+        are kept: the tracker searches a frame up to four times (guided, whole frame, around a proposal, around
+        its own pose)."""
+        prob, votes = maps
         if self._maxima is not None and self._maxima[0] is prob:
             return self._maxima[1]
         low = min(self.min_score, self.gated_min_score)
-        pooled = self._pooled_scores(image)
+        pooled = self._pooled_scores(prob)
         maxima = []
         for k in range(len(self.parts)):
             p = prob[k + 1]
@@ -365,16 +377,17 @@ class CornerDetector:
         (:func:`pose.box.part_visibility`), of each part's best score among the 3x3 cells around
         its projection; 0 when it shows none. In ``[0, 1]``."""
         R = cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
-        return float(self._supports(image, R[None], np.asarray(tvec, np.float64).reshape(1, 3), K)[0][0])
+        t = np.asarray(tvec, np.float64).reshape(1, 3)
+        return float(self._supports(self.maps(image)[0], image.shape[:2], R[None], t, K)[0][0])
 
     def _supports(
-        self, image: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray
+        self, prob: np.ndarray, shape: tuple[int, int], R: np.ndarray, t: np.ndarray, K: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`support` of ``b`` poses ``R (b, 3, 3)``, ``t (b, 3)`` at once, ``(b,)`` the
-        number of distinct grid cells the parts each pose shows fall in, and ``(b, n, 2)`` the
-        parts' projections."""
-        uv, visible = part_visibility(self.corners, R, t, np.asarray(K, np.float64), image.shape[:2], parts=self.parts)
-        pooled = self._pooled_scores(image)
+        """:meth:`support` of ``b`` poses ``R (b, 3, 3)``, ``t (b, 3)`` at once in the frame of shape ``shape``
+        (``(h, w)``) and scores ``prob`` (:meth:`maps`), ``(b,)`` the number of distinct grid cells the parts
+        each pose shows fall in, and ``(b, n, 2)`` the parts' projections."""
+        uv, visible = part_visibility(self.corners, R, t, np.asarray(K, np.float64), shape, parts=self.parts)
+        pooled = self._pooled_scores(prob)
         gh, gw = pooled.shape[1:]
         ij = grid_cell(to_scaled(uv, self.scale))
         j, i = np.clip(ij[..., 0], 0, gw - 1), np.clip(ij[..., 1], 0, gh - 1)
@@ -385,10 +398,9 @@ class CornerDetector:
         distinct = 1 + (np.diff(cells, axis=1) != 0).sum(1) - (~visible).any(1)
         return scores.sum(1) / np.maximum(shown, 1), distinct, uv
 
-    def _pooled_scores(self, image: np.ndarray) -> np.ndarray:
-        """``(n, gh, gw)``: each part's best score among the 3x3 cells around every cell (kept
-        for the last frame's maps)."""
-        prob, _ = self.maps(image)
+    def _pooled_scores(self, prob: np.ndarray) -> np.ndarray:
+        """``(n, gh, gw)``: each part's best score in ``prob`` (:meth:`maps`) among the 3x3 cells around every
+        cell (kept for the last frame's maps)."""
         if self._pooled is None or self._pooled[0] is not prob:
             kernel = np.ones((3, 3), np.uint8)
             self._pooled = (prob, np.stack([cv2.dilate(p, kernel) for p in prob[1:]]))
@@ -413,7 +425,8 @@ class CornerDetector:
         """
         if self.proposals == 0:
             return None
-        peaks = self.peaks(image)
+        maps = self.maps(image)
+        peaks = self._peaks(maps)
         parts = np.array([k for k, (xy, _) in enumerate(peaks) if len(xy)], np.int64)
         if len(parts) < 3:
             return None
@@ -437,7 +450,7 @@ class CornerDetector:
             t.extend(tv.reshape(3) for tv in tvecs)
         if not R:
             return None
-        support, cells, uv = self._supports(image, np.array(R), np.array(t), K)
+        support, cells, uv = self._supports(maps[0], image.shape[:2], np.array(R), np.array(t), K)
         support[cells < self._face_parts] = 0.0
         b = int(np.argmax(support))
         elsewhere = np.linalg.norm(uv - uv[b], axis=-1).mean(-1) > RIVAL_DISTANCE

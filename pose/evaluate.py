@@ -157,9 +157,10 @@ def evaluate_sequence(
         t0 = time.perf_counter()
         est, _ = tracker.step(fr.im_id, img, detector)
         t_total += time.perf_counter() - t0
-        if obj_id not in [o.obj_id for o in fr.objects]:
+        index = fr.object_index(obj_id)
+        if index is None:
             raise DatasetError(f"{scene_dir}: object {obj_id} is not annotated in frame {fr.im_id} (scene_gt.json)")
-        gt = fr.pose(obj_id)
+        gt = fr.objects[index]
         scores.append(score(vertices, fr.K, units, (est.R, est.tvec) if est.ok else None, (gt.R, gt.t)))
     return scores, len(scene.frames) / max(t_total, 1e-9)
 

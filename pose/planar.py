@@ -20,8 +20,7 @@ truth. For each scene:
 3. in every other frame of the scene, the pose of the target by the box's pipeline: the part
    detector (:class:`pose.parts.FeaturePartDetector`, every keypoint of the frame, no prior:
    the frames are not a video) and :class:`pose.solver.PoseSolver` with the settings of
-   ``alcn pose eval`` (:data:`pose.track.MIN_INLIERS`, :data:`pose.track.RANSAC_ITERATIONS`,
-   the target's corners as the outline);
+   ``alcn pose eval`` (:func:`pose.track.make_solver`, the target's corners as the outline);
 4. the truth is the reference pose; a pose is correct when the target's corners reproject
    within 5 px of their reference positions on average (:func:`pose.evaluate.score`, the 2D
    projection metric of ``alcn pose eval``; the JSON also has the share with *every* corner
@@ -61,8 +60,8 @@ from pose.evaluate import PROJ_PX, score, table_markdown
 from pose.model import PartModel, box_corners
 from pose.parts import FeaturePartDetector, PartDetector, create_feature
 from pose.plots import plot_table
-from pose.solver import PoseSolver, project
-from pose.track import MIN_INLIERS, MIN_INLIERS_NEAR_PRIOR, RANSAC_ITERATIONS
+from pose.solver import project
+from pose.track import make_solver
 
 logger = logging.getLogger(__name__)
 
@@ -318,13 +317,7 @@ def evaluate_scene(
     region = region or select_region(frames[ref], target_fraction, feature)
     target = build_target(frames[ref], region, K, normalization, feature=feature, reference=scene.files[ref])
     det = DETECTORS[detector](target, normalization, n_features, work_dir, recipe)
-    solver = PoseSolver(
-        K,
-        min_inliers=MIN_INLIERS[detector],
-        iterations=RANSAC_ITERATIONS[detector],
-        min_inliers_near_prior=MIN_INLIERS_NEAR_PRIOR[detector],
-        outline=target.model.corners,
-    )
+    solver = make_solver(detector, K, target.model.corners)
     truth = (cv2.Rodrigues(target.rvec)[0], target.tvec)
     ref_uv = target.image_corners()
     results = []

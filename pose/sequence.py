@@ -78,10 +78,9 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
         for fr in scene.frames:
             mask = None
             if fr.objects:  # world = the object's model frame (the object is static in a training sequence)
-                ids = [o.obj_id for o in fr.objects]
-                if obj_id is not None and obj_id not in ids:
+                index = 0 if obj_id is None else fr.object_index(obj_id)
+                if index is None:
                     raise DatasetError(f"{path / 'scene_gt.json'}: image {fr.im_id} has no object {obj_id}")
-                index = 0 if obj_id is None else ids.index(obj_id)
                 R, t = fr.objects[index].R, fr.objects[index].t
                 mask = path / "mask_visib" / f"{fr.im_id:06d}_{index:06d}.png"
             elif fr.R_w2c is not None:
@@ -123,13 +122,18 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
     )
 
 
+#: The frames of a video :func:`video_sequence` keeps by default: every ``VIDEO_STEP``-th, at most ``VIDEO_MAX_FRAMES``.
+VIDEO_STEP = 5
+VIDEO_MAX_FRAMES = 80
+
+
 def video_sequence(
     video: str | Path,
     K: np.ndarray,
     work_dir: str | Path,
     *,
-    step: int = 5,
-    max_frames: int = 80,
+    step: int = VIDEO_STEP,
+    max_frames: int = VIDEO_MAX_FRAMES,
     dist: np.ndarray | None = None,
 ) -> TrainingSequence:
     """An unregistered sequence: every ``step``-th frame of ``video`` (at most ``max_frames``)

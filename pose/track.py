@@ -72,21 +72,43 @@ def draw_box(
     return image
 
 
+def _overlay_is_video(path: Path) -> bool:
+    """Whether the overlay ``path`` is a video (:data:`alcn_cv.io.VIDEO_SUFFIXES`) rather than a folder of PNGs: a
+    path without a suffix, or an existing folder (its name may hold a dot).
+
+    Raises:
+        InputError: any other suffix (``.gif``, an image's): it would silently have been a folder.
+    """
+    if io.is_video(path):
+        return True
+    if path.suffix and not path.is_dir():
+        raise InputError(
+            f"overlay {path}: a video ({', '.join(sorted(io.VIDEO_SUFFIXES))}) or a folder (no suffix, or an existing "
+            "folder)"
+        )
+    return False
+
+
 class OverlayWriter:
-    """Writes overlay frames to a video (``.mp4``, ``.avi``, ...) or to a folder of PNGs named by frame.
+    """Writes overlay frames to a video (``.mp4``, ``.avi``, ...) or to a folder of PNGs named by frame (a path
+    without a suffix, or an existing folder).
 
     A video is written under a temporary name (:func:`alcn_cv.io.atomic_path`) and renamed by
     :meth:`close`; used as a context manager, a video unfinished by an error is removed.
+
+    Raises:
+        InputError: a path with another suffix.
     """
 
     def __init__(self, path: str | Path, fps: float = 30.0) -> None:
         self.path = Path(path)
         self.fps = fps
+        self._is_video = _overlay_is_video(self.path)
         self._video: cv2.VideoWriter | None = None
         self._stack = contextlib.ExitStack()
 
     def write(self, name: str, frame: np.ndarray) -> None:
-        if io.is_video(self.path):
+        if self._is_video:
             if self._video is None:
                 tmp = self._stack.enter_context(io.atomic_path(self.path))
                 self._video = io.open_video_writer(tmp, self.fps, frame.shape[1::-1])
@@ -222,14 +244,13 @@ def camera_matrix_for(
 
 
 def _overlay_path(overlay: str | Path, source: str | Path) -> Path:
-    """The overlay's path, checked before the tracking: a video (:data:`alcn_cv.io.VIDEO_SUFFIXES`) or a folder
-    of PNGs (no suffix), not the input."""
+    """The overlay's path, checked before the tracking: a video or a folder of PNGs (:class:`OverlayWriter`), not
+    the input."""
     overlay = Path(overlay)
-    if not overlay.is_dir() and overlay.suffix.lower() in io.IMAGE_SUFFIXES | {".json"}:  # a folder may hold a dot
-        raise InputError(f"--overlay {overlay}: a video ({', '.join(sorted(io.VIDEO_SUFFIXES))}) or a folder")
+    is_video = _overlay_is_video(overlay)
     if overlay.resolve() == Path(source).resolve():
         raise InputError(f"--overlay {overlay} is the input; write the overlay elsewhere")
-    if io.is_video(overlay):
+    if is_video:
         check_writable(overlay)
     else:
         make_folder(overlay)
@@ -254,6 +275,31 @@ def _source_fps(source: str | Path, default: float = 30.0) -> float:
     return default
 
 
+def make_solver(
+    detector: str,
+    K: np.ndarray,
+    outline: np.ndarray | None,
+    dist: np.ndarray | None = None,
+    method: str = "usac_default",
+    min_inliers: int | None = None,
+    reprojection_error: float = 4.0,
+) -> PoseSolver:
+    """The :class:`~pose.solver.PoseSolver` of a ``detector`` (``"features"`` or ``"corners"``): its inliers and
+    RANSAC iterations are the detector's (:data:`MIN_INLIERS`, :data:`MIN_INLIERS_NEAR_PRIOR`,
+    :data:`RANSAC_ITERATIONS`); ``min_inliers`` overrides the first. ``outline``: the detector's box corners."""
+    min_inliers = MIN_INLIERS[detector] if min_inliers is None else min_inliers
+    return PoseSolver(
+        K,
+        dist,
+        method=method,
+        min_inliers=min_inliers,
+        min_inliers_near_prior=min(MIN_INLIERS_NEAR_PRIOR[detector], min_inliers),
+        reprojection_error=reprojection_error,
+        iterations=RANSAC_ITERATIONS[detector],
+        outline=outline,
+    )
+
+
 def make_tracker(
     detector: str,
     K: np.ndarray,
@@ -263,22 +309,11 @@ def make_tracker(
     min_inliers: int | None = None,
     reprojection_error: float = 4.0,
 ) -> PoseTracker:
-    """The :class:`~pose.solver.PoseTracker` of a ``detector`` (``"features"`` or ``"corners"``): its solver's
-    inliers, RANSAC iterations and checks of a pose near the prediction are the detector's (:data:`MIN_INLIERS`,
-    :data:`RANSAC_ITERATIONS`, :data:`MIN_INLIERS_NEAR_PRIOR`, :data:`TRUSTED_GUIDED_RATIO`,
-    :data:`MIN_GUIDED_RATIO`); ``min_inliers`` overrides the first. ``outline``: the detector's box corners."""
-    min_inliers = MIN_INLIERS[detector] if min_inliers is None else min_inliers
+    """The :class:`~pose.solver.PoseTracker` of a ``detector`` around its :func:`make_solver` (same arguments):
+    its checks of a pose near the prediction are the detector's (:data:`TRUSTED_GUIDED_RATIO`,
+    :data:`MIN_GUIDED_RATIO`)."""
     return PoseTracker(
-        PoseSolver(
-            K,
-            dist,
-            method=method,
-            min_inliers=min_inliers,
-            min_inliers_near_prior=min(MIN_INLIERS_NEAR_PRIOR[detector], min_inliers),
-            reprojection_error=reprojection_error,
-            iterations=RANSAC_ITERATIONS[detector],
-            outline=outline,
-        ),
+        make_solver(detector, K, outline, dist, method, min_inliers, reprojection_error),
         trusted_guided_ratio=TRUSTED_GUIDED_RATIO[detector],
         min_guided_ratio=MIN_GUIDED_RATIO[detector],
     )
@@ -321,7 +356,8 @@ def main(
 
     Raises:
         InputError: an output that is the input, a suffix other than ``.json`` (the poses) or a video's (the
-            overlay), frames of another size than the camera's, or settings out of range.
+            overlay, unless it has none or is an existing folder), frames of another size than the camera's, or
+            settings out of range.
     """
     output = output_path(output, ".json", "the poses")  # before the tracking, not after it
     if overlay is not None:

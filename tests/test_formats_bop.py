@@ -60,6 +60,13 @@ def test_scene_roundtrip(tmp_path):
         load_scene(tmp_path, check_images=True)
 
 
+def test_object_index_is_the_mask_index_of_an_annotated_object():
+    frame = _frames(1)[0]
+    frame.objects.append(BopObjectPose(1, np.eye(3), np.zeros(3)))  # a second instance: the first one's index
+    assert (frame.object_index(1), frame.object_index(2), frame.object_index(7)) == (0, 1, None)
+    assert frame.pose(2) is frame.objects[1]
+
+
 def _edit(path, fn):
     doc = json.loads(path.read_text())
     fn(doc)

@@ -217,3 +217,34 @@ def test_options_of_a_video_given_for_a_registered_sequence_are_said_to_be_ignor
     with caplog.at_level("WARNING", logger="pose.build"), pytest.raises(StopError):
         build.main(src, tmp_path / "m.npz", K=np.eye(3), motion_mask=True, refine_focal=True)
     assert "K, motion_mask, refine_focal apply to a video only, ignored" in caplog.text
+
+
+def test_a_video_option_is_said_to_be_ignored_exactly_when_given(shared_data, tmp_path, monkeypatch, caplog):
+    """`alcn pose build` passed its defaults of --step and --max-frames on as given: a registered sequence could not
+    tell `--step 5` (the default's value, ignored) from no option."""
+    from alcn_cv.cli import main
+
+    pytest.importorskip("pycolmap")
+    pytest.importorskip("open3d")
+    pytest.importorskip("matplotlib")
+
+    class StopError(Exception):
+        pass
+
+    def stop(*args, **kwargs):
+        raise StopError
+
+    monkeypatch.setattr(build, "build", stop)
+    src = shared_data / "middlebury" / "templeSparseRing"
+    for options, ignored in (
+        ([], None),
+        (["--step", str(sequence.VIDEO_STEP)], "step"),
+        (["--max-frames", str(sequence.VIDEO_MAX_FRAMES), "--motion-mask"], "max_frames, motion_mask"),
+    ):
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="pose.build"), pytest.raises(StopError):
+            main(["pose", "build", str(src), str(tmp_path / "m.npz"), *options])
+        if ignored is None:
+            assert "ignored" not in caplog.text
+        else:
+            assert f"a registered sequence; {ignored} apply to a video only, ignored" in caplog.text

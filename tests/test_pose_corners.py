@@ -792,3 +792,29 @@ def test_the_maps_of_a_frame_read_into_the_same_buffer_are_new(random_net):
     second = det.maps(buffer)
     assert not np.array_equal(second[0], first[0])
     np.testing.assert_array_equal(second[0], pc.CornerDetector(random_net[1]).maps(buffer.copy())[0])
+
+
+def test_each_call_compares_the_frame_with_the_last_once(random_net, monkeypatch):
+    """Every internal use of the maps compared the whole frame with the last one again (twice per detect, three
+    times per propose): the public call compares once and hands the maps on."""
+    det = pc.CornerDetector(random_net[1])
+    compared, same_frame = [], pc.same_frame
+
+    def counted(kept, image):
+        compared.append(1)
+        return same_frame(kept, image)
+
+    monkeypatch.setattr(pc, "same_frame", counted)
+    image = np.random.default_rng(0).integers(0, 256, (240, 320, 3), np.uint8)
+    K = camera_matrix(300, 300, 159.5, 119.5)
+    rvec, tvec = cv2.Rodrigues(np.diag([1.0, -1.0, -1.0]))[0], np.array([-70.0, 47.5, 800.0])
+    det.maps(image)  # the first frame: nothing kept to compare with
+    for call in (
+        lambda: det.detect(image),
+        lambda: det.detect(image, (rvec, tvec, K)),
+        lambda: det.verify(image, rvec, tvec, K),
+        lambda: det.propose(image, K),
+    ):
+        compared.clear()
+        call()
+        assert len(compared) == 1

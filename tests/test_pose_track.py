@@ -65,9 +65,10 @@ def test_track_folder_writes_bop_json_and_overlay(tmp_path):
         cv2.imwrite(str(frames / f"{i:04d}.png"), _render(tex, r, t))
     black = np.zeros((SIZE[1], SIZE[0], 3), np.uint8)  # no object: lost, never a wrong pose
     cv2.imwrite(str(frames / f"{len(poses):04d}.png"), black)
+    (tmp_path / "ov.v2").mkdir()  # an existing folder's name may hold a dot
     summary = track.main(
         tmp_path / "m.npz", frames, tmp_path / "out" / "poses.json", K, overlay=tmp_path / "ov.v2", n_features=800
-    )  # a folder's name may hold a dot
+    )
     assert summary["frames"] == len(poses) + 1 and summary["tracked"] == len(poses)
     assert summary["events"][-1]["event"] == "lost"
     gt = json.loads((tmp_path / "out" / "poses.json").read_text())
@@ -295,6 +296,7 @@ def test_outputs_and_settings_are_checked_before_the_tracking(tmp_path):
         ({"overlay": frames}, "is the input"),
         ({"overlay": tmp_path / "p.json"}, "a video .* or a folder"),
         ({"overlay": tmp_path / "ov.png"}, "a video .* or a folder"),
+        ({"overlay": tmp_path / "ov.gif"}, "a video .* or a folder"),
         ({"reprojection_error": -1.0}, "reprojection_error must be > 0"),
         ({"min_inliers": 3}, "min_inliers >= 4"),
     ):
@@ -359,3 +361,17 @@ def test_the_overlay_video_keeps_the_frame_rate_of_the_input(tmp_path):
         assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 3
     finally:
         cap.release()
+
+
+def test_an_overlay_of_an_unknown_suffix_is_refused(tmp_path):
+    """An overlay named ``out.gif`` (any suffix but a video's) was silently a folder of PNGs of that name."""
+    frame = np.zeros((8, 8, 3), np.uint8)
+    for name in ("out.gif", "out.png", "out.v2"):
+        with pytest.raises(InputError, match=r"overlay .*out\.\w+: a video \(\.avi, .*\.mp4.*\) or a folder"):
+            track.OverlayWriter(tmp_path / name)
+        assert not (tmp_path / name).exists()
+    (tmp_path / "run.v2").mkdir()
+    for name in ("frames", "run.v2"):  # no suffix, or an existing folder whatever its name: a folder of PNGs
+        with track.OverlayWriter(tmp_path / name) as writer:
+            writer.write("a", frame)
+        assert (tmp_path / name / "a.png").is_file()

@@ -76,12 +76,17 @@ class BopFrame:
     R_w2c: np.ndarray | None = None
     t_w2c: np.ndarray | None = None
 
+    def object_index(self, obj_id: int) -> int | None:
+        """The index of ``obj_id``'s first pose in :attr:`objects` (that of its ``mask_visib`` image,
+        ``<im_id:06d>_<index:06d>.png``), or ``None`` when it is not annotated in this frame."""
+        return next((i for i, o in enumerate(self.objects) if o.obj_id == obj_id), None)
+
     def pose(self, obj_id: int) -> BopObjectPose:
         """The pose of ``obj_id`` in this frame (KeyError when absent)."""
-        for o in self.objects:
-            if o.obj_id == obj_id:
-                return o
-        raise KeyError(f"object {obj_id} not annotated in image {self.im_id}")
+        index = self.object_index(obj_id)
+        if index is None:
+            raise KeyError(f"object {obj_id} not annotated in image {self.im_id}")
+        return self.objects[index]
 
 
 @dataclass
