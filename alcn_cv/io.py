@@ -30,6 +30,7 @@ __all__ = [
     "atomic_write",
     "check_writable",
     "count_frames",
+    "eight_bits",
     "is_video",
     "iter_frames",
     "list_images",
@@ -279,6 +280,14 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     raise InputError(f"image must be HxW or HxWx3, got shape {image.shape}")
 
 
+def eight_bits(img: np.ndarray) -> np.ndarray:
+    """A uint16 image as uint8, each value ``x`` as ``round(x / 257)``: 0 and 65535 become 0 and 255 exactly, a
+    16-bit image made from 8 bits (``x * 257``) its 8 bits again, and a value between two levels the nearest (the
+    top byte, ``x >> 8``, is up to one level lower); no ``x / 257`` is a tie. The one 16-to-8-bit conversion of
+    :func:`write_image` and :func:`iter_frames`."""
+    return cv2.convertScaleAbs(img, alpha=1 / 257)
+
+
 def write_image(path: str | Path, img: np.ndarray) -> Path:
     """Write an image atomically (:func:`atomic_path`), creating the folder.
 
@@ -307,7 +316,7 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
     if img.dtype == np.uint16 and path.suffix.lower() in EIGHT_BIT_SUFFIXES:
         # OpenCV would saturate every value above 255 (a white image); scaled, as image tools convert
         logger.warning("%s holds 8 bits a channel: the 16-bit image is scaled to 8 bits", path)
-        img = cv2.convertScaleAbs(img, alpha=1 / 257)
+        img = eight_bits(img)
     with atomic_path(path) as tmp:
         try:
             written = cv2.imwrite(str(tmp), img)
@@ -422,7 +431,7 @@ def iter_frames(
                 return
             img = read_image(path)  # without alpha
             if img.dtype != np.uint8:
-                img = (img >> 8).astype(np.uint8)
+                img = eight_bits(img)
             count += 1
             yield path.stem, img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
         return

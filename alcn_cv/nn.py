@@ -21,6 +21,7 @@ Example:
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
@@ -202,6 +203,10 @@ class ALCN2d(nn.Module):
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
         self._check_input(image)
+        return self._normalize(image)
+
+    def _normalize(self, image: torch.Tensor) -> torch.Tensor:
+        """:meth:`forward` of an image already checked (:meth:`_check_input`)."""
         if image.shape[1] == 1:
             return self.to_unit(self.response(image))
         lab = _OpenCVLab.apply(image, self.to_lab) if cpu_eager(image) else self.to_lab(image)
@@ -316,12 +321,54 @@ def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | 
     if module is None:
         # frozen: a backward through it must not accumulate gradients in a module the caller never sees
         module = _MODULES[key] = ALCN2d(model, weights).to(image.device, image.dtype).eval().requires_grad_(False)
-    return module(image)
+    return module._normalize(image)  # checked above, and the module is of the image's device and dtype
 
 
 _MODULES: dict[tuple, ALCN2d] = {}
 
 
+class _ThreadScopes:
+    """The open :func:`torch_threads` blocks of the process, by thread, kept to that function's contract; the count of
+    before the first block is restored when the last one ends."""
+
+    def __init__(self) -> None:
+        self.changed = threading.Condition()
+        self.counts: dict[int, list[int]] = {}  # thread id -> the counts of its open blocks, innermost last
+        self.before = 0
+
+    def _may_open(self, me: int, threads: int) -> bool:
+        return self.counts.keys() <= {me} or all(c == threads for counts in self.counts.values() for c in counts)
+
+    @contextmanager
+    def scope(self, threads: int) -> Iterator[None]:
+        me = threading.get_ident()
+        with self.changed:
+            self.changed.wait_for(lambda: self._may_open(me, threads))
+            if not self.counts:
+                self.before = torch.get_num_threads()
+            self.counts.setdefault(me, []).append(threads)
+            _set_threads(threads)
+        try:
+            yield
+        finally:
+            with self.changed:
+                mine = self.counts[me]
+                mine.pop()
+                if mine:  # the enclosing block's count (this thread's blocks the only ones open if it differs)
+                    _set_threads(mine[-1])
+                else:
+                    del self.counts[me]
+                    if not self.counts:
+                        _set_threads(self.before)
+                self.changed.notify_all()
+
+
+def _set_threads(threads: int) -> None:
+    if torch.get_num_threads() != threads:
+        torch.set_num_threads(threads)
+
+
+_SCOPES = _ThreadScopes()
 #: Whether this process is a fork of one that may have run torch's threads (:func:`_forked_child`).
 _FORKED = False
 
@@ -333,6 +380,10 @@ def _forked_child() -> None:
     # output at most); the rest of the child's torch is left as it is.
     global _FORKED
     _FORKED = True
+    # only the forking thread came along: the others' blocks stay behind, and so does the lock should one hold it
+    me = threading.get_ident()
+    _SCOPES.changed = threading.Condition()
+    _SCOPES.counts = {me: _SCOPES.counts[me]} if me in _SCOPES.counts else {}
 
 
 if hasattr(os, "register_at_fork"):  # not on Windows, which has no fork
@@ -341,18 +392,22 @@ if hasattr(os, "register_at_fork"):  # not on Windows, which has no fork
 
 @contextmanager
 def torch_threads(threads: int | None) -> Iterator[None]:
-    """Run the block with ``threads`` torch intra-op threads (no change for None; one in a forked child, where
-    torch's threads hang)."""
+    """Run the block with ``threads`` torch intra-op threads, the count of before restored after it (no change for
+    None; one in a forked child, where torch's threads hang).
+
+    Safe across Python threads, though torch's count is in part the whole process's (with OpenMP, the count each new
+    thread starts with; all of it with torch's own thread pool): blocks asking for one count run together; a block
+    asking for another waits until those of the other threads have ended (a thread's own nested block sets its count at
+    once when no other thread's is open, else waits likewise). So a thread inside a block must not wait for another
+    thread that opens a block of another count (a deadlock); a block of None runs with whatever count is in effect,
+    another thread's block's included.
+    """
     threads = 1 if _FORKED else threads
-    before = torch.get_num_threads()
-    if threads is None or threads == before:
+    if threads is None:
         yield
         return
-    torch.set_num_threads(threads)
-    try:
+    with _SCOPES.scope(threads):
         yield
-    finally:
-        torch.set_num_threads(before)
 
 
 class TorchNetwork:

@@ -13,6 +13,7 @@ from alcn_cv.io import (
     VideoReader,
     atomic_path,
     count_frames,
+    eight_bits,
     iter_frames,
     list_images,
     make_folder,
@@ -89,6 +90,18 @@ def test_a_16_bit_image_is_scaled_for_an_8_bit_format(tmp_path, image, caplog):
     kept = cv2.imread(str(write_image(tmp_path / "a.png", deep)), cv2.IMREAD_UNCHANGED)
     assert kept.dtype == np.uint16
     np.testing.assert_array_equal(kept, deep)
+
+
+def test_16_bit_frames_and_8_bit_writes_share_one_conversion(tmp_path):
+    """Every 16-bit value to round(x / 257) on both paths: 0 and 65535 exactly, the nearest level between (the top
+    byte, x >> 8, is a level lower for most values)."""
+    every = np.arange(65536, dtype=np.uint16).reshape(256, 256)
+    write_image(tmp_path / "frames" / "deep.png", every)
+    ((_, frame),) = iter_frames(tmp_path / "frames")
+    written = cv2.imread(str(write_image(tmp_path / "deep.bmp", every)), cv2.IMREAD_GRAYSCALE)
+    np.testing.assert_array_equal(frame, cv2.cvtColor(written, cv2.COLOR_GRAY2BGR))
+    np.testing.assert_array_equal(written, np.rint(every / 257).astype(np.uint8))
+    assert eight_bits(every)[[0, -1], [0, -1]].tolist() == [0, 255]
 
 
 @pytest.mark.parametrize("name", ["noext", "x.mp4", "x.txt"])

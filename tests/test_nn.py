@@ -1,7 +1,10 @@
 """alcn_cv.nn: ALCN2d / alcn2d, the torch runtime of every shipped model, against apply()."""
 
 import shutil
+import threading
+import time
 import warnings
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -12,6 +15,7 @@ pytest.importorskip("kornia")
 
 
 import alcn_cv
+import alcn_cv.nn as alcn_nn
 from alcn_cv.data.frames import synthetic_frame
 from alcn_cv.errors import InputError
 from alcn_cv.filters.torch_divisive import reflect101_pad
@@ -139,6 +143,74 @@ def test_the_functional_form_names_a_wrong_input_too():
         alcn2d(np.zeros((1, 1, 32, 32), np.float32))
     with pytest.raises(InputError, match=r"one image, channels last: image.permute\(2, 0, 1\)\[None\]"):
         alcn2d(torch.rand(32, 40, 3))
+
+
+def test_the_functional_form_checks_an_image_once(monkeypatch):
+    calls = []
+    check = alcn_nn._check_image
+    monkeypatch.setattr(alcn_nn, "_check_image", lambda image: (calls.append(image), check(image))[1])
+    x = torch.rand(1, 1, 32, 32)
+    with torch.no_grad():
+        alcn2d(x, model="lite")  # the module built, or reused
+        alcn2d(x, model="lite")  # reused
+    assert len(calls) == 2
+
+
+def test_torch_threads_of_two_python_threads_do_not_mix():
+    """torch's count is in part the process's (with OpenMP, the count a new thread starts with): a block of another
+    count waits for another thread's open one, which keeps its count, and the count of before is left (interleaved,
+    the second block restored the first's count after the first had restored it); blocks of one count run together
+    (a barrier they both reach); nested in one thread, the inner count, then the outer."""
+    seen: dict[str, int] = {}
+
+    def run(*targets: Callable[[], None]) -> None:
+        threads = [threading.Thread(target=t) for t in targets]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(20)
+
+    def fresh() -> None:  # a new thread's count: torch's, not this thread's own
+        seen["fresh"] = torch.get_num_threads()
+
+    run(fresh)
+    before = seen["fresh"]
+    mine, other = before + 1, before + 2
+    opened, waiting = threading.Event(), threading.Event()
+
+    def first() -> None:
+        with alcn_nn.torch_threads(mine):
+            opened.set()
+            waiting.wait(10)
+            time.sleep(0.2)  # where the second block would be open, were it not waiting for this one
+            seen["first"] = torch.get_num_threads()
+
+    def second() -> None:
+        opened.wait(10)
+        waiting.set()
+        with alcn_nn.torch_threads(other):
+            seen["second"] = torch.get_num_threads()
+            time.sleep(0.4)  # ends after the first block
+
+    run(first, second)
+    run(fresh)
+    assert seen == {"fresh": before, "first": mine, "second": other}
+
+    def together(name: str, barrier: threading.Barrier) -> None:
+        with alcn_nn.torch_threads(mine):
+            barrier.wait(10)
+            with alcn_nn.torch_threads(mine):
+                seen[name] = torch.get_num_threads()
+
+    barrier = threading.Barrier(2)
+    run(lambda: together("a", barrier), lambda: together("b", barrier))
+    assert seen["a"] == seen["b"] == mine and not barrier.broken
+    main = torch.get_num_threads()
+    with alcn_nn.torch_threads(mine):
+        with alcn_nn.torch_threads(other):
+            seen["inner"] = torch.get_num_threads()
+        seen["outer"] = torch.get_num_threads()
+    assert (seen["inner"], seen["outer"], torch.get_num_threads()) == (other, mine, main)
 
 
 @pytest.mark.parametrize(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+
 import numpy as np
 import pytest
 import torch
@@ -91,6 +93,31 @@ def test_resume_equals_uninterrupted_run(data, tmp_path, monkeypatch):
     for k in a:
         assert torch.equal(a[k], b[k]), k
     assert resumed.history[-1]["val_loss"] == full.history[-1]["val_loss"]
+
+
+def test_a_ctrl_c_right_after_a_step_is_saved_with_that_step_counted(data, tmp_path, monkeypatch):
+    """Ctrl-C between optimizer.step() and the step's counter: the interrupted run's checkpoint counts the step its
+    weights hold (Adam's own count of the steps it took), so that a resumed run does not take it twice."""
+    make_optimizer = trainer._make_optimizer
+
+    def interrupted_at_eighth_step(model, cfg):
+        optimizer = make_optimizer(model, cfg)
+        step, taken = optimizer.step, []
+
+        def step_then_ctrl_c():
+            step()
+            taken.append(1)
+            if len(taken) == 8:  # mid-way through the second epoch (6 steps per epoch)
+                signal.raise_signal(signal.SIGINT)
+
+        optimizer.step = step_then_ctrl_c
+        return optimizer
+
+    monkeypatch.setattr(trainer, "_make_optimizer", interrupted_at_eighth_step)
+    assert trainer.train(_config(data), tmp_path, progress=False).status == "interrupted"
+    ckpt = load_checkpoint(tmp_path / "checkpoint.pt")
+    assert (ckpt["epoch"], ckpt["step_in_epoch"]) == (1, 2)
+    assert {int(s["step"]) for s in ckpt["optimizer"]["state"].values()} == {8}
 
 
 def test_nan_loss_stops_and_keeps_last_good_checkpoint(data, tmp_path, monkeypatch):

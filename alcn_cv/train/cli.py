@@ -250,20 +250,19 @@ def _distill(args: argparse.Namespace) -> int:
     if args.out is None:
         raise InputError("alcn distill needs --out (the weight file to write)")
     import cv2
-    import torch
 
+    from alcn_cv.nn import torch_threads
     from alcn_cv.train.distill import main
 
-    previous = torch.get_num_threads(), cv2.getNumThreads()
+    previous = cv2.getNumThreads()
     if args.threads:
-        torch.set_num_threads(args.threads)
         cv2.setNumThreads(args.threads)
     try:
         command = _command("distill", args, "--out", str(args.out))
-        path = main(args.out, cfg, command, conf=args.conf, progress=not args.no_progress, overwrite=args.overwrite)
+        with torch_threads(args.threads or None):
+            path = main(args.out, cfg, command, conf=args.conf, progress=not args.no_progress, overwrite=args.overwrite)
     finally:
-        torch.set_num_threads(previous[0])
-        cv2.setNumThreads(previous[1])
+        cv2.setNumThreads(previous)
     print(path)
     return 0
 
@@ -309,16 +308,12 @@ def _train_unet(args: argparse.Namespace) -> int:
 
 
 def _print_with_threads(threads: int, run: Callable[[], object]) -> int:
-    """Print what ``run()`` returns, run with ``threads`` torch threads (0: torch's default)."""
-    import torch
+    """Print what ``run()`` returns, run with ``threads`` torch threads (0: torch's default), in a
+    :func:`~alcn_cv.nn.torch_threads` block."""
+    from alcn_cv.nn import torch_threads
 
-    previous = torch.get_num_threads()
-    if threads:
-        torch.set_num_threads(threads)
-    try:
+    with torch_threads(threads or None):
         print(run())
-    finally:
-        torch.set_num_threads(previous)
     return 0
 
 

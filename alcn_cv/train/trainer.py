@@ -70,6 +70,8 @@ __all__ = ["JointModel", "TrainResult", "load_checkpoint", "train"]
 logger = logging.getLogger(__name__)
 
 _CHECKPOINT = "checkpoint.pt"
+#: The signals :func:`_interrupts_deferred` holds.
+_DEFERRED = (signal.SIGINT, signal.SIGTERM)
 
 
 @dataclass
@@ -327,11 +329,14 @@ def _train_epoch(
         loss.backward()
         if cfg.optim.grad_clip:
             torch.nn.utils.clip_grad_norm_(params, cfg.optim.grad_clip)
-        optimizer.step()
-        sums[0] += loss.item() * len(idx)
-        sums[1] += int((logits.argmax(1) == y).sum())
-        sums[2] += len(idx)
-        state.step_in_epoch += 1
+        # a Ctrl-C between the step and its counter would checkpoint the step's weights with the counter of before
+        # (a resumed run takes that step twice)
+        with _interrupts_deferred():
+            optimizer.step()
+            sums[0] += loss.item() * len(idx)
+            sums[1] += int((logits.argmax(1) == y).sum())
+            sums[2] += len(idx)
+            state.step_in_epoch += 1
         bar.update()
         bar.set_postfix(loss=f"{sums[0] / sums[2]:.3f}", acc=f"{sums[1] / sums[2]:.3f}")
         if state.step_in_epoch % cfg.run.log_every == 0:
@@ -498,3 +503,24 @@ def _sigint_as_keyboard_interrupt() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
+def _interrupts_deferred() -> Iterator[None]:
+    """Hold Ctrl-C and SIGTERM (which the command line raises as Ctrl-C) until the block ends, then deliver them to
+    the handlers of before: no signal cuts the block short. Python handles signals in the main thread only, so
+    another thread's block has nothing to hold."""
+    held: list[int] = []
+    kept = [s for s in _DEFERRED if signal.getsignal(s) is not None]  # None: set outside Python, not to be put back
+    try:
+        previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in kept}
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(held):
+            signal.raise_signal(s)
