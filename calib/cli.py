@@ -4,6 +4,7 @@ and undistortion."""
 from __future__ import annotations
 
 import argparse
+import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -123,17 +124,27 @@ def _board(args: argparse.Namespace) -> int:
     return 0
 
 
-def _load_reference(path: Path, unit: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+def _load_reference(path: Path, unit: str | None) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Known poses ``{image name: (R_w2c, t_w2c in mm)}`` from a Middlebury ``*_par.txt``
-    (metres) or a COLMAP model folder (in ``unit``)."""
+    (metres) or a COLMAP model folder: in ``unit`` when given, else as its ``# Units:`` header says
+    (:func:`calib.conventions.colmap_unit_to_mm`, as for ``bop_frames_from_colmap``), else mm."""
     from alcn_cv.formats.colmap import read_model
     from alcn_cv.formats.middlebury import read_middlebury
+
+    from .conventions import _MM_PER_UNIT, colmap_unit_to_mm
 
     if path.is_file() and path.name.endswith("_par.txt"):
         return {v.name: (v.R_w2c, v.t_w2c * 1000.0) for v in read_middlebury(path, check_images=False)}
     if path.is_dir():
-        scale = {"mm": 1.0, "cm": 10.0, "m": 1000.0}[unit]
-        return {im.name: (im.R_w2c, im.t_w2c * scale) for im in read_model(path).images.values()}
+        model = read_model(path)
+        if unit is not None and model.units is not None and unit != model.units:
+            logging.getLogger(__name__).warning(
+                "--reference-unit %s overrides the reference model's units header (%s)", unit, model.units
+            )
+        scale = colmap_unit_to_mm(
+            model, None if unit is None else _MM_PER_UNIT[unit], option="--reference-unit (mm, cm or m)"
+        )
+        return {im.name: (im.R_w2c, im.t_w2c * scale) for im in model.images.values()}
     raise InputError(f"{path}: --reference must be a Middlebury *_par.txt or a COLMAP model folder")
 
 
@@ -293,8 +304,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--reference-unit",
         choices=("mm", "cm", "m"),
-        default="mm",
-        help="sfm: units of a COLMAP --reference (default mm)",
+        help="sfm: units of a COLMAP --reference (default: its '# Units:' header, else mm)",
     )
     p.add_argument(
         "--n-features",

@@ -34,6 +34,7 @@ __all__ = [
     "points_colmap_to_opencv",
     "colmap_from_bop_frames",
     "bop_frames_from_colmap",
+    "colmap_unit_to_mm",
 ]
 
 
@@ -76,6 +77,27 @@ def colmap_from_bop_frames(
 _MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 
 
+def colmap_unit_to_mm(
+    model: ColmapModel, unit_to_mm: float | None = None, option: str = "unit_to_mm (millimetres per unit)"
+) -> float:
+    """Millimetres per unit of a COLMAP model's translations: ``unit_to_mm`` when given, else from the
+    model's ``# Units:`` header (``mm``, ``cm`` or ``m``), else 1 (millimetres) without one.
+
+    Args:
+        model: the COLMAP model (its ``units`` as :func:`alcn_cv.formats.colmap.read_text_model` read them).
+        unit_to_mm: an explicit factor; it wins over the header.
+        option: how the error names the way to give the factor (a command-line option for the CLI).
+
+    Raises:
+        InputError: a units header other than mm/cm/m without ``unit_to_mm``.
+    """
+    if unit_to_mm is not None:
+        return float(unit_to_mm)
+    if model.units is not None and model.units not in _MM_PER_UNIT:
+        raise InputError(f"the COLMAP model's units are {model.units!r}; pass {option}")
+    return _MM_PER_UNIT[model.units or "mm"]
+
+
 def bop_frames_from_colmap(
     model: ColmapModel, image_dir: str | os.PathLike, unit_to_mm: float | None = None
 ) -> list[BopFrame]:
@@ -93,10 +115,7 @@ def bop_frames_from_colmap(
             e.g. ``alcn calib undistort --keep-K``), or a units header other than mm/cm/m
             without ``unit_to_mm``.
     """
-    if unit_to_mm is None:
-        if model.units is not None and model.units not in _MM_PER_UNIT:
-            raise InputError(f"the COLMAP model's units are {model.units!r}; pass unit_to_mm (millimetres per unit)")
-        unit_to_mm = _MM_PER_UNIT.get(model.units or "mm")
+    unit_to_mm = colmap_unit_to_mm(model, unit_to_mm)
     images = sorted(model.images.values(), key=lambda im: im.name)
     numeric = all(Path(im.name).stem.isdigit() for im in images)
     frames = []

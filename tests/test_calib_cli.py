@@ -245,3 +245,60 @@ def test_register_names_a_missing_source_before_a_missing_camera(tmp_path, capsy
     err = capsys.readouterr().err
     assert rc == 2 and err.strip().endswith(f"no such video or folder: {tmp_path / 'missing'}"), err
     assert not (tmp_path / "reg").exists()
+
+
+def test_register_reference_model_follows_its_units_header(tmp_path, capsys, monkeypatch):
+    """A COLMAP --reference in metres (``# Units: m``) registers as the same model in mm: its header is
+    read as bop_frames_from_colmap reads it (it was taken as mm, the poses 1000x too small)."""
+    from scipy.spatial.transform import Rotation
+
+    from alcn_cv.formats import bop
+    from alcn_cv.formats.colmap import ColmapImage, ColmapModel, camera_from_opencv, write_text_model
+    from calib import register
+
+    K = np.array([[80.0, 0, 31.5], [0, 80.0, 23.5], [0, 0, 1]])
+    R = Rotation.random(4, random_state=3).as_matrix()
+    t_mm = np.random.default_rng(3).normal(0, 80, (4, 3)) + [0, 0, 700]
+    # SfM's arbitrary frame: the world scaled by 1/250, turned and moved.
+    R0, t0, s0 = Rotation.random(random_state=5).as_matrix(), np.array([0.3, -0.2, 1.0]), 1 / 250
+    camera = camera_from_opencv(K, None, 64, 48)
+
+    def reconstruct(frames, *args, **kwargs):
+        images = {}
+        for i, out in enumerate(frames.out_names):
+            R_sfm = R[i] @ R0.T
+            images[i + 1] = ColmapImage(i + 1, out, 1, R_sfm, s0 * t_mm[i] - R_sfm @ t0)
+        return ColmapModel({1: camera}, images, {})
+
+    monkeypatch.setattr(register, "_reconstruct", reconstruct)
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for name in "abcd":
+        cv2.imwrite(str(frames / f"{name}.png"), np.zeros((48, 64, 3), np.uint8))
+    for units, scale in (("mm", 1.0), ("m", 1e-3)):
+        images = [ColmapImage(i + 1, f"{n}.png", 1, R[i], t_mm[i] * scale) for i, n in enumerate("abc")]
+        write_text_model(tmp_path / f"ref_{units}", [camera], images, units=units)
+    args = ["calib", "register", str(frames), "--method", "sfm", "--no-progress"]
+    poses = {}
+    for units in ("mm", "m"):
+        out = tmp_path / f"reg_{units}"
+        assert alcn([*args, "--reference", str(tmp_path / f"ref_{units}"), "--out", str(out)]) == 0
+        assert "registered 4 of 4 frames (mm)" in capsys.readouterr().out
+        poses[units] = [(f.R_w2c, f.t_w2c) for f in bop.load_scene(out).frames]
+    for (R_mm, t_mm_est), (R_m, t_m), R_gt, t_gt in zip(poses["mm"], poses["m"], R, t_mm):
+        np.testing.assert_allclose(R_m, R_mm, atol=1e-9)
+        np.testing.assert_allclose(t_m, t_mm_est, atol=1e-6)
+        # The world of the reference, in mm: the 4th frame, not in the reference, too.
+        np.testing.assert_allclose(R_m, R_gt, atol=1e-9)
+        np.testing.assert_allclose(t_m, t_gt, atol=1e-6)
+    # An explicit --reference-unit still wins over the header (as unit_to_mm does); an unknown unit needs one.
+    out = tmp_path / "reg_forced"
+    assert alcn([*args, "--reference", str(tmp_path / "ref_m"), "--reference-unit", "mm", "--out", str(out)]) == 0
+    capsys.readouterr()
+    t_forced = bop.load_scene(out).frames[0].t_w2c
+    np.testing.assert_allclose(t_forced, t_mm[0] * 1e-3, atol=1e-9)
+    images = [ColmapImage(i + 1, f"{n}.png", 1, R[i], t_mm[i]) for i, n in enumerate("ab")]
+    write_text_model(tmp_path / "ref_ft", [camera], images, units="ft")
+    rc = alcn([*args, "--reference", str(tmp_path / "ref_ft"), "--out", str(tmp_path / "reg_ft")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "units are 'ft'; pass --reference-unit" in err, err
