@@ -25,6 +25,7 @@ from alcn_cv.errors import DatasetError, InputError
 __all__ = [
     "IMAGE_SUFFIXES",
     "VIDEO_SUFFIXES",
+    "FrameReader",
     "VideoReader",
     "atomic_path",
     "atomic_write",
@@ -401,14 +402,81 @@ class VideoReader:
         self.close()
 
 
+class FrameReader:
+    """The frames of :func:`iter_frames` (same arguments, frames, names and errors), with the frame rate of a video:
+    an iterator of ``(name, BGR uint8 frame)``, one pass. The source is opened and checked here, not at the first
+    frame; close the reader (or use it as a context manager) to release a video.
+
+    Attributes:
+        fps: the video's frame rate (:attr:`VideoReader.fps`); None for a folder of images, which has none.
+
+    Raises:
+        InputError: what :func:`iter_frames` raises; a video that holds no decodable frame at the end of the pass.
+    """
+
+    def __init__(self, source: str | os.PathLike, step: int = 1, max_frames: int | None = None) -> None:
+        source = Path(source)
+        if isinstance(step, bool) or not isinstance(step, int) or step < 1:
+            raise InputError(f"step must be a positive integer, got {step!r}")
+        if max_frames is not None and max_frames < 1:
+            raise InputError(f"max_frames must be a positive integer or None, got {max_frames!r}")
+        self._video: VideoReader | None = None
+        if source.is_dir():
+            frames = self._images(list_images(source)[::step])
+        elif not source.exists():
+            raise InputError(f"no such video or folder: {source}")
+        elif not is_video(source):
+            raise InputError(f"{source}: not a video ({', '.join(sorted(VIDEO_SUFFIXES))}) or a folder of images")
+        else:
+            self._video = VideoReader(source)
+            frames = self._video_frames(self._video, step)
+        self.fps = None if self._video is None else self._video.fps
+        # stops without reading past the last frame wanted
+        self._frames = islice(frames, max_frames)
+
+    @staticmethod
+    def _images(paths: list[Path]) -> Iterator[tuple[str, np.ndarray]]:
+        for path in paths:
+            img = read_image(path)  # without alpha
+            if img.dtype != np.uint8:
+                img = eight_bits(img)
+            yield path.stem, img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+
+    @staticmethod
+    def _video_frames(video: VideoReader, step: int) -> Iterator[tuple[str, np.ndarray]]:
+        count = 0
+        for index, frame in video.frames(step):
+            count += 1
+            yield f"frame_{index:06d}", frame
+        if count == 0:
+            raise InputError(f"{video.path}: the video holds no decodable frame")
+
+    def __iter__(self) -> FrameReader:
+        return self
+
+    def __next__(self) -> tuple[str, np.ndarray]:
+        return next(self._frames)
+
+    def close(self) -> None:
+        if self._video is not None:
+            self._video.close()
+
+    def __enter__(self) -> FrameReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 def iter_frames(
     source: str | os.PathLike, step: int = 1, max_frames: int | None = None
 ) -> Iterator[tuple[str, np.ndarray]]:
     """``(name, BGR uint8 frame)`` for every ``step``-th frame of a video file or image of a folder.
 
-    The one frame iterator of the package. Images of a folder are read in name order (16-bit
-    images are reduced to 8 bits, grayscale ones converted to BGR) and named by their stem;
-    video frames are named ``frame_000000``, ``frame_000001``, ... by their index in the video.
+    The one frame iterator of the package (a :class:`FrameReader`, which also gives a video's frame rate, as a
+    generator: nothing is opened before the first frame is asked for). Images of a folder are read in name order
+    (16-bit images are reduced to 8 bits, grayscale ones converted to BGR) and named by their stem; video frames are
+    named ``frame_000000``, ``frame_000001``, ... by their index in the video.
 
     Args:
         source: a video file (:data:`VIDEO_SUFFIXES`) or a folder of images.
@@ -419,34 +487,8 @@ def iter_frames(
         InputError: no such file or folder, a folder without images, a video that cannot be
             opened or holds no decodable frame, ``step < 1``.
     """
-    source = Path(source)
-    if isinstance(step, bool) or not isinstance(step, int) or step < 1:
-        raise InputError(f"step must be a positive integer, got {step!r}")
-    if max_frames is not None and max_frames < 1:
-        raise InputError(f"max_frames must be a positive integer or None, got {max_frames!r}")
-    count = 0
-    if source.is_dir():
-        for path in list_images(source)[::step]:
-            if max_frames is not None and count >= max_frames:
-                return
-            img = read_image(path)  # without alpha
-            if img.dtype != np.uint8:
-                img = eight_bits(img)
-            count += 1
-            yield path.stem, img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-        return
-    if not source.exists():
-        raise InputError(f"no such video or folder: {source}")
-    if not is_video(source):
-        raise InputError(f"{source}: not a video ({', '.join(sorted(VIDEO_SUFFIXES))}) or a folder of images")
-    with VideoReader(source) as video:
-        for index, frame in video.frames(step):
-            count += 1
-            yield f"frame_{index:06d}", frame
-            if max_frames is not None and count >= max_frames:
-                break
-    if count == 0:
-        raise InputError(f"{source}: the video holds no decodable frame")
+    with FrameReader(source, step, max_frames) as frames:
+        yield from frames
 
 
 def count_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None = None) -> int | None:

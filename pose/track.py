@@ -267,14 +267,6 @@ def _check_frame_size(frame: np.ndarray, image_size: tuple[int, int], what: str,
         )
 
 
-def _source_fps(source: str | Path, default: float = 30.0) -> float:
-    """The frame rate of a video ``source`` (the overlay video plays at it); ``default`` for an image folder."""
-    if Path(source).is_file() and io.is_video(source):
-        with io.VideoReader(source) as video:
-            return float(video.fps)
-    return default
-
-
 def make_solver(
     detector: str,
     K: np.ndarray,
@@ -408,8 +400,12 @@ def main(
     tracker = make_tracker(detector, K, corners, dist, method, min_inliers, reprojection_error)
     scene_gt, info = {}, {}
     times = []
-    with OverlayWriter(overlay, _source_fps(source)) if overlay is not None else contextlib.nullcontext() as writer:
-        for res, frame in track(io.iter_frames(source), det, tracker, io.count_frames(source), progress):
+    with (
+        io.FrameReader(source) as frames,
+        # the overlay video plays at the input's frame rate; a folder of images has none: 30 fps
+        OverlayWriter(overlay, frames.fps or 30.0) if overlay is not None else contextlib.nullcontext() as writer,
+    ):
+        for res, frame in track(frames, det, tracker, io.count_frames(source), progress):
             if image_size is not None:  # a folder's images may differ in size: the camera holds for one
                 _check_frame_size(frame, image_size, f"frame {res.name} of {source} is", of)
             scene_gt[res.name] = pose_to_bop(res.estimate)

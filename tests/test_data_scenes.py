@@ -75,11 +75,13 @@ def test_unit_frames_are_every_image_in_name_order_over_255(tmp_path):
 
 
 def test_sixteen_bit_frames_are_rounded_to_eight(tmp_path):
+    """Every 16-bit value x to round(x / 257) (:func:`alcn_cv.io.eight_bits`)."""
     folder = tmp_path / "deep"
     folder.mkdir()
-    for i, level in enumerate((257 * 10, 257 * 200 + 100)):
-        cv2.imwrite(str(folder / f"{i}.png"), np.full((8, 8), level, np.uint16))
-    assert load_scene_folder(folder)[0].frames[:, 0, 0].tolist() == [10, 200]
+    every = np.arange(65536, dtype=np.uint16).reshape(256, 256)
+    for i, frame in enumerate((every, every[::-1])):  # a scene has two frames or more
+        cv2.imwrite(str(folder / f"{i}.png"), frame)
+    np.testing.assert_array_equal(load_scene_folder(folder)[0].frames[0], np.rint(every / 257).astype(np.uint8))
 
 
 def test_scene_dirs_are_folders_or_shared_webcam_scenes(tmp_path):

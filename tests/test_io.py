@@ -10,6 +10,7 @@ import pytest
 
 from alcn_cv.errors import InputError
 from alcn_cv.io import (
+    FrameReader,
     VideoReader,
     atomic_path,
     count_frames,
@@ -148,6 +149,22 @@ def test_count_frames_is_what_iter_frames_yields(tmp_path, image, step, max_fram
         cv2.imwrite(str(folder / f"{i:02d}.png"), image)
     for source in (video, folder):
         assert count_frames(source, step, max_frames) == sum(1 for _ in iter_frames(source, step, max_frames))
+
+
+def test_a_frame_reader_gives_the_frames_of_iter_frames_and_a_videos_frame_rate(tmp_path, image):
+    video = _video(tmp_path / "in.avi", 5, image)
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for i in range(3):
+        cv2.imwrite(str(folder / f"{i:02d}.png"), image)
+    for source, fps in ((video, 10.0), (folder, None)):
+        with FrameReader(source, 2, 2) as frames:
+            assert frames.fps == fps
+            read = list(frames)
+        expected = list(iter_frames(source, 2, 2))
+        assert [name for name, _ in read] == [name for name, _ in expected] and len(read) == 2
+        for (_, a), (_, b) in zip(read, expected, strict=True):
+            np.testing.assert_array_equal(a, b)
 
 
 def test_count_frames_of_what_iter_frames_refuses_is_unknown(tmp_path, image):

@@ -120,6 +120,42 @@ def test_a_ctrl_c_right_after_a_step_is_saved_with_that_step_counted(data, tmp_p
     assert {int(s["step"]) for s in ckpt["optimizer"]["state"].values()} == {8}
 
 
+class _CtrlCAfterAppend(list):
+    """A history that raises Ctrl-C as soon as an epoch's entry is in (module-level: the checkpoint pickles it)."""
+
+    def append(self, entry):
+        super().append(entry)
+        signal.raise_signal(signal.SIGINT)
+
+
+def test_a_ctrl_c_right_after_an_epochs_entry_is_saved_with_that_epoch_counted(data, tmp_path, monkeypatch):
+    """Ctrl-C between the epoch's history entry and the epoch's counter: the interrupted run's checkpoint counts the
+    epoch its history holds, so that a resumed run does not record it twice."""
+    build_models = trainer._build_models
+
+    def with_ctrl_c_after_the_first_entry(*args):
+        model, optimizer, state = build_models(*args)
+        state.history = _CtrlCAfterAppend(state.history)
+        return model, optimizer, state
+
+    monkeypatch.setattr(trainer, "_build_models", with_ctrl_c_after_the_first_entry)
+    assert trainer.train(_config(data), tmp_path, progress=False).status == "interrupted"
+    ckpt = torch.load(tmp_path / "checkpoint.pt", weights_only=False)  # its history is a _CtrlCAfterAppend
+    assert (ckpt["epoch"], ckpt["step_in_epoch"], [h["epoch"] for h in ckpt["history"]]) == (1, 0, [1])
+
+
+def test_a_run_leaves_the_callers_thread_count_as_it_was(data, tmp_path, monkeypatch):
+    """The run's ``run.threads`` were set for the whole process and left so after it: a Python caller's own torch
+    work ran on them."""
+    before = torch.get_num_threads()
+    during = []
+    monkeypatch.setattr(trainer, "_on_step", lambda step: during.append(torch.get_num_threads()))
+    cfg = _config(data)
+    cfg["optim"]["epochs"], cfg["run"]["threads"] = 1, before + 1
+    assert trainer.train(cfg, tmp_path, progress=False).status == "done"
+    assert set(during) == {before + 1} and torch.get_num_threads() == before
+
+
 def test_nan_loss_stops_and_keeps_last_good_checkpoint(data, tmp_path, monkeypatch):
     def poison(step):
         if step == 7:

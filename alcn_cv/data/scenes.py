@@ -44,7 +44,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import IMAGE_SUFFIXES, list_images, read_image
+from alcn_cv.io import IMAGE_SUFFIXES, eight_bits, list_images, read_image
 from alcn_cv.shared_data import shared_data_dir
 
 __all__ = [
@@ -107,7 +107,7 @@ def scene_dirs(entries: Sequence[str | os.PathLike] = TRAIN_SCENES) -> list[Path
 def _gray_u8(path: Path) -> np.ndarray:
     img = read_image(path)
     if img.dtype == np.uint16:
-        img = np.rint(img / np.float32(257.0)).astype(np.uint8)
+        img = eight_bits(img)
     return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
 
 

@@ -48,6 +48,7 @@ from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.device import torch_device
+from alcn_cv.nn import torch_threads
 from alcn_cv.report import log_to, machine, nan_to_none
 from alcn_cv.train import distributed
 from alcn_cv.train.checkpoint import (
@@ -119,7 +120,8 @@ def train(
     resume: bool = False,
     progress: bool = True,
 ) -> TrainResult:
-    """Train ALCN's Normalizer jointly with a detector (Eq. 2), or a baseline detector.
+    """Train ALCN's Normalizer jointly with a detector (Eq. 2), or a baseline detector, on ``run.threads`` torch
+    threads (:func:`alcn_cv.nn.torch_threads`: the caller's count is restored after the run).
 
     Args:
         config: a :class:`~alcn_cv.train.config.TrainConfig`, a preset name, a TOML path or a dict
@@ -141,7 +143,10 @@ def train(
     out = run_folder(out_dir)
     start = time.perf_counter()
     machine_start = machine()
-    with log_to(out / "train.log", append=resume) if distributed.is_main() else contextlib.nullcontext():
+    with (
+        log_to(out / "train.log", append=resume) if distributed.is_main() else contextlib.nullcontext(),
+        torch_threads(cfg.run.threads or None),
+    ):
         ckpt, device = _prepare_run(cfg, out, resume)
         train_set, val_set, num_classes = _prepare_data(cfg, out, device, progress and distributed.is_main())
         model, optimizer, state = _build_models(cfg, num_classes, device, ckpt, start, out)
@@ -165,12 +170,10 @@ def train(
 
 
 def _prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[dict[str, Any] | None, torch.device]:
-    """Read the checkpoint to resume (or record the configuration), set the threads, choose the device."""
+    """Read the checkpoint to resume (or record the configuration), choose the device."""
     ckpt = load_checkpoint(out / _CHECKPOINT, cfg) if resume else None
     if not resume and distributed.is_main():
         (out / "config.toml").write_text(dump_toml(cfg))
-    if cfg.run.threads:
-        torch.set_num_threads(cfg.run.threads)
     device = torch_device(cfg.run.device, "config key 'run.device'")
     if distributed.world_size() > 1 and device.type == "cuda":
         device = torch.device("cuda", distributed.local_rank())
@@ -365,17 +368,6 @@ def _end_epoch(
     """Validate on the held-out lightings, record the epoch, save the checkpoint, history and curves."""
     sums = state.sums
     val_loss, val_acc, by_family = _validate(model, val_set, device)
-    state.history.append(
-        {
-            "epoch": state.epoch + 1,
-            "train_loss": sums[0] / sums[2],
-            "train_acc": sums[1] / sums[2],
-            "val_loss": val_loss,
-            "val_acc": val_acc,
-            "val_by_family": by_family,
-            "seconds": round(state.elapsed(), 1),
-        }
-    )
     logger.info(
         "epoch %d/%d: train loss %.4f acc %.4f | held-out val loss %.4f acc %.4f (%s)",
         state.epoch + 1,
@@ -386,7 +378,21 @@ def _end_epoch(
         val_acc,
         ", ".join(f"{k} {v:.3f}" for k, v in by_family.items()),
     )
-    state.epoch, state.step_in_epoch, state.sums = state.epoch + 1, 0, [0.0, 0, 0]
+    # a Ctrl-C between the entry and the counter would checkpoint the epoch's entry with the epoch unfinished (a
+    # resumed run records it twice)
+    with _interrupts_deferred():
+        state.history.append(
+            {
+                "epoch": state.epoch + 1,
+                "train_loss": sums[0] / sums[2],
+                "train_acc": sums[1] / sums[2],
+                "val_loss": val_loss,
+                "val_acc": val_acc,
+                "val_by_family": by_family,
+                "seconds": round(state.elapsed(), 1),
+            }
+        )
+        state.epoch, state.step_in_epoch, state.sums = state.epoch + 1, 0, [0.0, 0, 0]
     _save(out, cfg, model, optimizer, state, "epoch")
     if distributed.is_main():
         write_json(out / "history.json", nan_to_none(state.history))
