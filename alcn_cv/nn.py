@@ -20,6 +20,7 @@ Example:
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 from collections.abc import Callable, Iterable, Iterator
@@ -31,7 +32,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from alcn_cv.checks import FULL_SCALE
+from alcn_cv.checks import _FLOAT_TOLERANCE, FULL_SCALE
 from alcn_cv.errors import InputError
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.lab import srgb_to_lab
@@ -63,7 +64,8 @@ class ALCN2d(nn.Module):
     """Adaptive Local Contrast Normalization (Rad, Roth & Lepetit, BMVC 2017) as a module.
 
     Args:
-        model: a shipped model (:data:`alcn_cv.runtime.MODELS`), default ``"gain"``.
+        model: a shipped model (:data:`alcn_cv.runtime.MODELS`): ``"gain"`` (the default), ``"gain-lite"``,
+            ``"lite"`` or ``"paper"``.
         weights: a weight file instead of ``model``.
         scale: the working scale (default: the weight file's).
         grid_stride: spacing of the Normalizer's grid, a multiple of its stride (default: its stride).
@@ -71,22 +73,36 @@ class ALCN2d(nn.Module):
 
     Shape:
         - image: ``(B, 1, H, W)`` or ``(B, 3, H, W)`` (RGB) float in [0, 1], any device and float dtype
-          (move the module with ``.to(device, dtype)``), any size: a side shorter than a kernel's reach is mirrored
-          as ``apply()`` mirrors it (OpenCV's reflect-101, repeated).
+          (move the module with ``.to(device, dtype)``), any size (``B = 0`` too: an empty output): a side shorter
+          than a kernel's reach is mirrored as ``apply()`` mirrors it (OpenCV's reflect-101, repeated).
         - output: the same shape, dtype and device, in [0, 1] (the raw response mapped through
           the weight file's fixed ``output_range``, clipped).
 
-    Values are not read, so that a call never waits for the device: outside [0, 1] the output is undefined (a
-    negative gray value makes the whole image NaN through the log of its cell means; colour is clipped to [0, 1]
-    before Lab), where ``apply()`` raises. Against float32, float16 is about 2e-3 off in gray and 4e-2 in colour,
+    Raises:
+        InputError: building, an unknown ``model``, both ``model`` and ``weights``, or a ``grid_stride`` that is not
+            a multiple of the network's stride (:class:`~alcn_cv.errors.WeightFileError`: a weight file that does
+            not load); calling, see :meth:`forward`.
+
+    The range of the image is checked only where reading it costs no device sync: on the CPU, run eagerly (not
+    under ``torch.jit.trace``, ``torch.compile``, an ONNX export or a ``torch.func`` transform), a value outside
+    [0, 1] (1e-3 of rounding allowed, as ``apply()``), NaN or inf raises. Elsewhere (CUDA, say) it is not checked
+    and the output is undefined: a negative gray value makes the whole image NaN through the log of its cell means,
+    colour is clipped to [0, 1] before Lab, and a NaN or inf pixel makes its whole image NaN (the divisive floor is
+    the image's mean energy). Against float32, float16 is about 2e-3 off in gray and 4e-2 in colour,
     bfloat16 2e-2 and 0.15 (its Lab round trip alone). Under a caller's autocast an image of another float dtype than
     the module's is let through and the output may be float32: the network and the filters run at autocast's
     precision (bfloat16: about 1e-2 off float32), the Lab conversions in the image's dtype. Colour on CUDA, traced or
     compiled goes through the torch Lab conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some.
     ``torch.jit.trace`` records the sizes of the traced image: on another size the traced module fails or, without
-    an error, returns wrong values (use ``torch.compile`` for several sizes). The 1e-5 from ``apply()`` holds for
+    an error, returns wrong values (use ``torch.compile`` for several sizes); ``torch.jit.script`` is not supported
+    (trace the module, or ``torch.compile`` it). On the ``meta`` device a gray image propagates its shape; colour
+    raises (torch has no autocast there, which the Lab conversions switch off). The 1e-5 from ``apply()`` holds for
     integers converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs
     by a float rounding, which the divisive step amplifies to 6e-5 on a photograph.
+
+    Fine-tuning: the network's parameters train (``requires_grad_(True)``, the default of a new module); the gain
+    models' ``tau`` and ``floor_scale`` are buffers, fixed. The gradients reaching the gain networks are small
+    (about 1e-6 of a mean squared error, against weights of about 5e-2): use Adam rather than plain SGD.
 
     Example:
         >>> import torch
@@ -202,23 +218,51 @@ class ALCN2d(nn.Module):
         return unit.clamp(0, 1) if torch.is_grad_enabled() and unit.requires_grad else unit.clamp_(0, 1)
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
+        """Normalize a batch of images, differentiably (to the image and, unless frozen, to the network).
+
+        Args:
+            image: ``(B, 1, H, W)`` gray or ``(B, 3, H, W)`` RGB float intensities in [0, 1], of the module's device
+                and dtype (another float dtype under autocast); ``B`` may be 0, ``H`` and ``W`` may not.
+
+        Returns:
+            ``(B, 1 | 3, H, W)``, the image's dtype (float32 possibly, under autocast) and device, in [0, 1]:
+            gray normalized, RGB normalized on the L channel of CIE Lab with a and b kept.
+
+        Raises:
+            InputError: not a tensor, not ``(B, 1 | 3, H, W)``, not float, on another device or of another dtype
+                than the module, colour on the ``meta`` device; on the CPU run eagerly, values outside [0, 1], NaN or
+                inf (not checked elsewhere: see the class).
+
+        Example:
+            >>> import torch
+            >>> alcn = ALCN2d(model="lite").eval()
+            >>> with torch.no_grad():
+            ...     out = alcn(torch.rand(2, 3, 48, 64))
+            >>> out.shape, bool(out.min() >= 0) and bool(out.max() <= 1)
+            (torch.Size([2, 3, 48, 64]), True)
+        """
         self._check_input(image)
         return self._normalize(image)
 
     def _normalize(self, image: torch.Tensor) -> torch.Tensor:
         """:meth:`forward` of an image already checked (:meth:`_check_input`)."""
-        if image.shape[1] == 1:
-            return self.to_unit(self.response(image))
-        lab = _OpenCVLab.apply(image, self.to_lab) if cpu_eager(image) else self.to_lab(image)
-        lightness = self.to_unit(self.response(lab[:, :1] * 0.01)) * 100.0
-        return self.from_lab(torch.cat([lightness, lab[:, 1:]], dim=1))
+        # The filters take in-place paths where no gradient is recorded, and torch.jit.trace's check traces again
+        # under no_grad: while tracing, requires_grad alone decides, so that both traces record the same graph.
+        with torch.enable_grad() if torch.jit.is_tracing() else nullcontext():
+            if image.shape[1] == 1:
+                return self.to_unit(self.response(image))
+            lab = _OpenCVLab.apply(image, self.to_lab) if cpu_eager(image) else self.to_lab(image)
+            lightness = self.to_unit(self.response(lab[:, :1] * 0.01)) * 100.0
+            return self.from_lab(torch.cat([lightness, lab[:, 1:]], dim=1))
 
     def _check_input(self, image: torch.Tensor) -> None:
         """:func:`_check_image`, and an :class:`InputError` for an image on another device or dtype than the module
         (another dtype is let through under autocast)."""
         _check_image(image)
         weight = next(self.net.parameters())
-        autocast = torch.is_autocast_enabled(image.device.type)
+        device_type = image.device.type
+        # torch.is_autocast_enabled raises for a device without autocast (meta)
+        autocast = torch.amp.is_autocast_available(device_type) and torch.is_autocast_enabled(device_type)
         if image.device != weight.device or (image.dtype != weight.dtype and not autocast):
             raise InputError(
                 f"image is {image.dtype} on {image.device}, the module {weight.dtype} on {weight.device}: "
@@ -242,11 +286,11 @@ class ALCN2d(nn.Module):
 
 def _check_image(image: torch.Tensor) -> None:
     """An :class:`InputError` naming what is wrong with an image for :class:`ALCN2d`, and how to fix it: not a
-    tensor, not ``(B, 1 | 3, H, W)``, not float. Its values are not read: a range check would wait for the device on
-    every call."""
+    tensor, not ``(B, 1 | 3, H, W)`` (``B`` may be 0), not float, colour on a device without autocast (meta); its
+    range where reading it costs no device sync (:func:`_check_range`)."""
     if not isinstance(image, torch.Tensor):
         raise InputError(f"image must be a torch.Tensor, got {type(image).__name__} (a NumPy array: torch.from_numpy)")
-    if image.ndim != 4 or image.shape[1] not in (1, 3) or 0 in image.shape:
+    if image.ndim != 4 or image.shape[1] not in (1, 3) or 0 in image.shape[2:]:
         hint = ""
         if image.ndim == 4 and image.shape[1] == 4:
             hint = " (RGBA: image[:, :3])"
@@ -260,12 +304,47 @@ def _check_image(image: torch.Tensor) -> None:
             hint = " (a batch of gray images: image[:, None])"
         elif image.ndim == 2:
             hint = " (one gray image: image[None, None])"
-        raise InputError(f"image must have shape (B, 1 | 3, H, W), none of them 0, got {tuple(image.shape)}{hint}")
+        raise InputError(f"image must have shape (B, 1 | 3, H, W), H and W not 0, got {tuple(image.shape)}{hint}")
     if not image.is_floating_point():
         # a multiplication, as apply() converts integers: a division differs by a rounding, which the divisive step
         # amplifies (6e-5 on a photograph)
         scale = {torch.uint8: " (a uint8 image: image * (1 / 255))", torch.uint16: " (image * (1 / 65535))"}
         raise InputError(f"image must be float in [0, 1], got {image.dtype}{scale.get(image.dtype, '')}")
+    if image.shape[1] == 3 and not torch.amp.is_autocast_available(image.device.type):
+        # the Lab conversions switch a caller's autocast off, which torch refuses on such a device
+        raise InputError(
+            f"colour is not supported on the {image.device.type} device (the Lab conversions switch autocast off, "
+            "which torch has not there); a gray (B, 1, H, W) image is"
+        )
+    _check_range(image)
+
+
+def _check_range(image: torch.Tensor) -> None:
+    """An :class:`InputError` for values outside [0, 1] (``apply()``'s 1e-3 of rounding allowed), NaN or inf, with
+    the likely fix, for an image on the CPU run eagerly: elsewhere reading the values would wait for the device
+    (CUDA), see nothing (meta, a trace, a compilation, an export) or fail (``torch.func.vmap``)."""
+    if (
+        image.device.type != "cpu"
+        or image.numel() == 0
+        or torch.jit.is_tracing()
+        or torch.onnx.is_in_onnx_export()
+        or torch.compiler.is_compiling()
+        or torch._C._functorch.is_functorch_wrapped_tensor(image)
+    ):
+        return
+    lo, hi = (float(v) for v in image.detach().aminmax())  # NaN propagates to both
+    if lo >= -_FLOAT_TOLERANCE and hi <= 1 + _FLOAT_TOLERANCE:
+        return
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        hint = " (one such pixel would make its whole image NaN)"
+    elif lo < -0.5:  # transforms.Normalize's ImageNet statistics put black at -2.1
+        hint = " (standardized? undo transforms.Normalize, image * std + mean; standardize after ALCN2d)"
+    elif hi > 2:
+        scale = "255" if hi <= 255 else "65535"  # 0..255 from uint8.float(), 0..65535 from uint16
+        hint = f" (0..{scale} intensities: image * (1 / {scale}))"
+    else:  # a bicubic resize overshoots the range a little
+        hint = " (an overshoot, of a bicubic resize say: image.clamp(0, 1))"
+    raise InputError(f"image must be float in [0, 1], got values in [{lo:.4g}, {hi:.4g}]{hint}")
 
 
 class _OpenCVLab(torch.autograd.Function):
@@ -301,14 +380,20 @@ class _OpenCVLab(torch.autograd.Function):
 
 
 def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | None = None) -> torch.Tensor:
-    """Functional :class:`ALCN2d` (the module built once per model, device and dtype, then reused).
+    """Functional :class:`ALCN2d`: the module built once per model, device and dtype, then reused, and frozen
+    (``eval()``, ``requires_grad_(False)``): gradients reach the image only (fine-tune an :class:`ALCN2d` instead).
 
     Args:
-        image: ``(B, 1 | 3, H, W)`` float in [0, 1] (3 channels: RGB).
-        model: a shipped model name (default ``"gain"``); weights: a weight file instead.
+        image: ``(B, 1 | 3, H, W)`` float in [0, 1] (3 channels: RGB), any device and float dtype.
+        model: a shipped model: ``"gain"`` (the default), ``"gain-lite"``, ``"lite"`` or ``"paper"``.
+        weights: a weight file instead of ``model``.
 
     Returns:
         The same shape, dtype and device, in [0, 1].
+
+    Raises:
+        InputError: an image :meth:`ALCN2d.forward` refuses (its range checked on the CPU only, as there), an
+            unknown ``model``, or both ``model`` and ``weights``.
 
     Example:
         >>> import torch

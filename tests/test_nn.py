@@ -116,8 +116,8 @@ def test_functional_form_and_weight_files():
 
 def test_a_wrong_input_is_named_before_torch_fails():
     module = ALCN2d(model="lite").eval()
-    with pytest.raises(InputError, match=r"none of them 0"):
-        module(torch.rand(0, 1, 32, 32))
+    with pytest.raises(InputError, match=r"H and W not 0"):
+        module(torch.rand(1, 1, 0, 32))
     with pytest.raises(InputError, match=r"RGBA: image\[:, :3\]"):
         module(torch.rand(1, 4, 32, 32))
     with pytest.raises(InputError, match=r"channels last: image.permute\(0, 3, 1, 2\)"):
@@ -143,6 +143,55 @@ def test_the_functional_form_names_a_wrong_input_too():
         alcn2d(np.zeros((1, 1, 32, 32), np.float32))
     with pytest.raises(InputError, match=r"one image, channels last: image.permute\(2, 0, 1\)\[None\]"):
         alcn2d(torch.rand(32, 40, 3))
+
+
+def test_values_outside_the_unit_range_are_named_on_the_cpu():
+    """On the CPU, run eagerly, the range is read (no device to wait for): 0..255 RGB was normalized silently wrong
+    (0.73 off), a standardized gray image gave NaN everywhere, a NaN pixel a NaN image. apply()'s 1e-3 of rounding
+    is let through; traced, compiled or vmapped it is not checked (test_traces_as_one_graph_for_torch_compile,
+    test_colour_under_torch_func_transforms)."""
+    module = ALCN2d(model="lite").eval()
+    x = torch.rand(2, 3, 32, 40)
+    with pytest.raises(InputError, match=r"got values in \[.*\] \(0\.\.255 intensities: image \* \(1 / 255\)\)"):
+        module(x * 255)
+    with pytest.raises(InputError, match=r"\(0\.\.65535 intensities: image \* \(1 / 65535\)\)"):
+        module(x * 65535)
+    with pytest.raises(InputError, match=r"standardized\? undo transforms.Normalize"):
+        module((x[:, :1] - 0.5) / 0.25)
+    with pytest.raises(InputError, match=r"got values in \[-0\.1, 1\.1\] \(an overshoot.*: image.clamp\(0, 1\)\)"):
+        module(x.clamp(0.1, 0.9) * 1.5 - 0.25)
+    nan = x.clone()
+    nan[1, 0, 3, 4] = float("nan")
+    with pytest.raises(InputError, match=r"one such pixel would make its whole image NaN"):
+        alcn2d(nan)
+    with pytest.raises(InputError, match=r"\(0\.\.255 intensities"):
+        alcn2d(x[:, :1] * 255, model="lite")
+    with torch.no_grad():
+        assert torch.isfinite(module(x * (1 + 5e-4) - 2e-4)).all()
+
+
+def test_an_empty_batch_gives_an_empty_output():
+    """B = 0, which convolutions take (the last batch of a filtered stream, say), was refused; its output keeps the
+    autograd graph of a trainable module, as any batch's."""
+    module = ALCN2d(model="gain")
+    for channels in (1, 3):
+        x = torch.rand(0, channels, 32, 40, requires_grad=True)
+        out = module(x)
+        assert (out.shape, out.dtype, out.device) == (x.shape, x.dtype, x.device)
+        out.sum().backward()
+        assert x.grad is not None and x.grad.shape == x.shape
+        assert alcn2d(x.detach()).shape == x.shape
+
+
+def test_the_meta_device_propagates_gray_shapes_and_names_colour():
+    """On the meta device repr() read tau's value and forward asked torch whether autocast was on, both errors; a gray
+    image now propagates its shape, colour (whose Lab conversions switch autocast off) is an InputError."""
+    module = ALCN2d().to("meta")
+    assert "tau=?" in repr(module)
+    out = module(torch.empty(2, 1, 33, 47, device="meta"))
+    assert out.shape == (2, 1, 33, 47) and out.device.type == "meta" and out.dtype == torch.float32
+    with pytest.raises(InputError, match=r"colour is not supported on the meta device"):
+        module(torch.empty(1, 3, 33, 47, device="meta"))
 
 
 def test_the_functional_form_checks_an_image_once(monkeypatch):
@@ -318,6 +367,21 @@ def test_torch_jit_trace_records_the_working_scale(model):
         warnings.simplefilter("ignore", torch.jit.TracerWarning)
         traced = torch.jit.trace(module, x)
         torch.testing.assert_close(traced(x), module(x), atol=1e-5, rtol=0)
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_torch_jit_trace_of_a_trainable_module(channels):
+    """Traced with gradients on and the network trainable: torch.jit.trace's check traces again under no_grad,
+    where the filters take in-place paths ("Graphs differed across invocations"); the traced module trains."""
+    x = torch.rand(1, channels, 24, 32)
+    module = ALCN2d(model="gain").eval()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", torch.jit.TracerWarning)
+        traced = torch.jit.trace(module, x)
+    out = traced(x)
+    torch.testing.assert_close(out, module(x), atol=1e-5, rtol=0)
+    out.square().mean().backward()
+    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in module.parameters())
 
 
 @pytest.mark.skipif(

@@ -335,4 +335,6 @@ class GainNormalizer(nn.Module):
         }
 
     def extra_repr(self) -> str:
-        return f"stride={self.stride}, dilations={self.dilations}, tau={self.tau_value():.3g}"
+        # a module on the meta device (shape propagation, deferred initialization) has no value to read
+        tau = "?" if self.log_tau.is_meta else f"{self.tau_value():.3g}"
+        return f"stride={self.stride}, dilations={self.dilations}, tau={tau}"
