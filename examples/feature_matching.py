@@ -18,12 +18,15 @@ does not (docs/journal.md, 2026-11-27 (night)): for ORB under such a change, CLA
 from __future__ import annotations
 
 import argparse
+import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 import alcn_cv
+from alcn_cv.cli import FFMPEG_FATAL
 from alcn_cv.errors import ALCNError
 from alcn_cv.io import iter_frames, write_image
 from alcn_cv.shared_data import shared_data_dir
@@ -36,8 +39,11 @@ def relight(frame: np.ndarray) -> np.ndarray:
     return np.clip(255 * (unit * gradient) ** 1.6 * 4, 0, 255).round().astype(np.uint8)
 
 
-def match(first: np.ndarray, second: np.ndarray, feature: cv2.Feature2D) -> tuple[list, list, list[cv2.DMatch]]:
-    """Keypoints of both images and the ratio-tested matches that agree with a RANSAC homography."""
+def match(
+    first: np.ndarray, second: np.ndarray, feature: cv2.Feature2D
+) -> tuple[Sequence[cv2.KeyPoint], Sequence[cv2.KeyPoint], list[cv2.DMatch]]:
+    """Keypoints of both images and the ratio-tested matches that agree with a RANSAC homography (none when
+    RANSAC finds no homography)."""
     kp1, des1 = feature.detectAndCompute(first, None)
     kp2, des2 = feature.detectAndCompute(second, None)
     if des1 is None or des2 is None:
@@ -47,9 +53,11 @@ def match(first: np.ndarray, second: np.ndarray, feature: cv2.Feature2D) -> tupl
     good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < 0.8 * p[1].distance]
     if len(good) < 4:
         return kp1, kp2, []
-    src = np.float32([kp1[m.queryIdx].pt for m in good])
-    dst = np.float32([kp2[m.trainIdx].pt for m in good])
+    src = np.array([kp1[m.queryIdx].pt for m in good], np.float32)
+    dst = np.array([kp2[m.trainIdx].pt for m in good], np.float32)
     _, inliers = cv2.findHomography(src, dst, cv2.RANSAC, 5.0)
+    if inliers is None:  # no homography (degenerate points, e.g. all on a line): no match agrees
+        return kp1, kp2, []
     return kp1, kp2, [m for m, keep in zip(good, inliers.ravel()) if keep]
 
 
@@ -63,6 +71,9 @@ def main() -> None:
     ap.add_argument("--feature", choices=("ORB", "SIFT"), default="ORB", help="the features (default ORB)")
     ap.add_argument("--out", type=Path, default=Path("out/matching"), help="output folder (default out/matching)")
     args = ap.parse_args()
+    # before the video opens: FFmpeg's notes on the stream (a slice type it tolerates) are no errors of this
+    # script; a level set by the caller is kept
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", str(FFMPEG_FATAL))
     if args.second < 0:
         ap.error(f"--second {args.second}: a frame number, 0 or more")
     try:
@@ -70,7 +81,7 @@ def main() -> None:
         if len(frames) <= args.second:
             raise ALCNError(f"{args.video} has {len(frames)} frames, fewer than --second {args.second} + 1")
         first, second = frames[0], relight(frames[args.second])
-        feature = cv2.ORB_create(1000) if args.feature == "ORB" else cv2.SIFT_create(1000)
+        feature = cv2.ORB.create(1000) if args.feature == "ORB" else cv2.SIFT.create(1000)
         normalizations = {spec: alcn_cv.create(spec) for spec in args.methods}  # a bad spec stops before the work
         rows = []
         for spec, normalization in normalizations.items():
@@ -81,7 +92,7 @@ def main() -> None:
             rows.append(cv2.putText(drawn, f"{spec}: {len(agreeing)}", (10, 30), 0, 1.0, (0, 0, 255), 2))
         write_image(args.out / "matches.png", np.vstack(rows))
         print(f"wrote {args.out / 'matches.png'}")
-    except ALCNError as exc:
+    except (ALCNError, OSError) as exc:  # OSError: an --out that cannot be written
         raise SystemExit(f"feature_matching.py: error: {exc}") from None
 
 

@@ -1,8 +1,10 @@
 """Measure every RANSAC variant of pose.solver on a video: the evidence behind the default.
 
-    .venv/bin/python examples/pnp_methods.py MODEL.npz VIDEO [--K FX FY CX CY] [--normalization none]
+    .venv/bin/python examples/pnp_methods.py MODEL.npz VIDEO [--K FX FY CX CY] [--normalization SPEC]
 
-The camera is the one stored in the model (``alcn pose build`` stores it), unless --K is given.
+The camera is the one stored in the model (``alcn pose build`` stores it), unless --K is given; the
+normalization before the features is the one the model was built after (as ``alcn pose track``), unless
+--normalization is given.
 
 Features are detected once per frame; then for each method of ``pose.solver.METHODS`` the frames
 are solved independently (no prior) and as a tracked sequence (previous pose as prior). Printed
@@ -16,17 +18,26 @@ Time with the defaults (the first 40 frames of the cookie box, its model from tr
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 
 import numpy as np
+from tqdm import tqdm
 
 from alcn_cv import io
+from alcn_cv.cli import FFMPEG_FATAL
+from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import ALCNError
 from pose import model as part_model
 from pose.parts import FeaturePartDetector
-from pose.solver import METHODS, PoseSolver, PoseTracker, camera_matrix
+from pose.solver import METHODS, PoseEstimate, PoseSolver, PoseTracker, camera_matrix
 from pose.track import camera_matrix_for
+
+
+def translations(results: list[PoseEstimate]) -> np.ndarray:
+    """``(N, 3)``: each frame's translation, NaN where no pose was found."""
+    return np.array([r.tvec.ravel() if r.ok and r.tvec is not None else [np.nan] * 3 for r in results])
 
 
 def main() -> None:
@@ -40,40 +51,57 @@ def main() -> None:
         metavar=("FX", "FY", "CX", "CY"),
         help="intrinsics (default: the camera stored in the model)",
     )
-    ap.add_argument("--normalization", default="none", help="NAME[:KEY=VALUE...] (default none)")
+    ap.add_argument(
+        "--normalization",
+        help="NAME[:KEY=VALUE...] (default: the one the model was built after, as `alcn pose track` uses)",
+    )
     ap.add_argument("--max-frames", type=int, default=40, help="the first N frames (default 40)")
     args = ap.parse_args()
     if args.max_frames < 1:
         ap.error(f"--max-frames {args.max_frames}: at least 1")
+    # before the video opens: FFmpeg's notes on the stream (a slice type it tolerates) are no errors of this
+    # script; a level set by the caller is kept
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", str(FFMPEG_FATAL))
     model = part_model.load(args.model)
     K = camera_matrix_for(model.extra.get("K"), None if args.K is None else camera_matrix(*args.K), args.model)
-    det = FeaturePartDetector(model, args.normalization)
-    corr = [det.detect(f) for _, f in zip(range(args.max_frames), (f for _, f in io.iter_frames(args.video)))]
-    print(f"{'method':18s} {'prior':5s} {'ms':>6s} {'posed':>9s} {'inliers':>8s} {'err px':>7s} {'jump':>7s}")
-    for name in sorted(METHODS):
-        for use_prior in (False, True):
-            solver = PoseSolver(K, method=name)
-            tracker = PoseTracker(solver)
-            t0 = time.perf_counter()
-            res = [
+    normalization = args.normalization or model.normalization
+    if not same_method(normalization, model.normalization):  # measured, but the descriptors may not match
+        print(f"note: {args.model} was built after {model.normalization!r}, the features after {normalization!r}")
+    det = FeaturePartDetector(model, normalization)
+    total = io.count_frames(args.video, max_frames=args.max_frames)
+    frames = tqdm(io.iter_frames(args.video, max_frames=args.max_frames), total=total, desc="features", unit="frame")
+    corr = [det.detect(frame) for _, frame in frames]
+    runs = [(name, use_prior) for name in sorted(METHODS) for use_prior in (False, True)]
+    # the rows are written above the bar (tqdm.write), the bar counts the solved frames of every run
+    bar = tqdm(total=len(runs) * len(corr), desc="solve", unit="frame")
+    bar.write(f"{'method':18s} {'prior':5s} {'ms':>6s} {'posed':>9s} {'inliers':>8s} {'err px':>7s} {'jump':>7s}")
+    for name, use_prior in runs:
+        solver = PoseSolver(K, method=name)
+        tracker = PoseTracker(solver)
+        res, seconds = [], 0.0
+        for i, c in enumerate(corr):
+            t0 = time.perf_counter()  # the solver's time only, not the bar's
+            res.append(
                 tracker.update(i, c.object_points, c.image_points)
                 if use_prior
                 else solver.solve(c.object_points, c.image_points)
-                for i, c in enumerate(corr)
-            ]
-            ms = 1e3 * (time.perf_counter() - t0) / len(corr)
-            ok = [r for r in res if r.ok]
-            t = np.array([r.tvec.ravel() if r.ok else [np.nan] * 3 for r in res])
-            jump = np.nanmedian(np.linalg.norm(np.diff(t, axis=0), axis=1)) if len(ok) > 1 else np.nan
-            print(
-                f"{name:18s} {use_prior!s:5s} {ms:6.2f} {len(ok):4d}/{len(res):4d} "
-                f"{np.mean([len(r.inliers) for r in ok]) if ok else 0:8.1f} "
-                f"{np.mean([r.reprojection_error for r in ok]) if ok else np.nan:7.2f} {jump:7.3f}"
             )
+            seconds += time.perf_counter() - t0
+            bar.update()
+        ms = 1e3 * seconds / len(corr)
+        ok = [r for r in res if r.ok]
+        t = translations(res)
+        jump = np.nanmedian(np.linalg.norm(np.diff(t, axis=0), axis=1)) if len(ok) > 1 else np.nan
+        bar.write(
+            f"{name:18s} {use_prior!s:5s} {ms:6.2f} {len(ok):4d}/{len(res):4d} "
+            f"{np.mean([len(r.inliers) for r in ok]) if ok else 0:8.1f} "
+            f"{np.mean([r.reprojection_error for r in ok]) if ok else np.nan:7.2f} {jump:7.3f}"
+        )
+    bar.close()
 
 
 if __name__ == "__main__":
     try:
         main()
-    except ALCNError as exc:
+    except (ALCNError, OSError) as exc:  # OSError: a model or video that cannot be read
         sys.exit(f"pnp_methods.py: error: {exc}")

@@ -23,30 +23,37 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import cv2
 import numpy as np
 from tqdm import tqdm
 
+import alcn_cv
 from alcn_cv import io
+from alcn_cv.cli import FFMPEG_FATAL
 from alcn_cv.errors import ALCNError
 from alcn_cv.shared_data import shared_data_dir
 from pose import build, evaluate, track
 from pose import model as part_model
 from pose.parts import FeaturePartDetector
 from pose.sequence import TrainingSequence, TrainingView
-from pose.solver import PoseSolver, PoseTracker, camera_matrix
-
-K_TUTORIAL = camera_matrix(640 * 55 / 22.3, 480 * 55 / 14.9, 320.0, 240.0)
+from pose.solver import PoseEstimate, PoseSolver, PoseTracker
 
 
-def frames(video: Path, max_frames: int | None):
+def frames(video: Path, max_frames: int | None) -> Iterator[tuple[int, np.ndarray]]:
     """``(index, frame)`` of the first ``max_frames`` frames (all when ``None``)."""
     for i, (_, frame) in enumerate(io.iter_frames(video, max_frames=max_frames)):
         yield i, frame
+
+
+def found(est: PoseEstimate) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(rvec, tvec)`` of a pose found, ``None`` for a frame lost."""
+    return (est.rvec, est.tvec) if est.ok and est.rvec is not None and est.tvec is not None else None
 
 
 def registered_build(
@@ -65,9 +72,10 @@ def registered_build(
         views = []
         for i, frame in frames(video, max_frames):
             est, _ = tracker.step(i, frame, det)
-            if est.ok and i % step == 0:
+            pose = found(est)
+            if pose is not None and i % step == 0:
                 io.write_image(Path(work) / f"{i:06d}.png", frame)
-                views.append(TrainingView(f"{i:06d}.png", K, None, est.R, est.tvec.ravel()))
+                views.append(TrainingView(f"{i:06d}.png", K, None, est.R, pose[1].ravel()))
         seq = TrainingSequence(Path(work), views, ref.units, info={"format": "registered video", "path": str(video)})
         model, _ = build.build(seq, feature=ref.feature, n_features=3000, normalization=normalization, work_dir=work)
     model.corners = ref.corners  # same object frame as the reference
@@ -100,9 +108,16 @@ def main() -> None:
         "from every 10th of them, and from the 4 views of 40 frames nothing is triangulated",
     )
     args = ap.parse_args()
+    if args.max_frames < 0:
+        ap.error(f"--max-frames {args.max_frames}: a number of frames, 0 (all) or at least 60")
     if 0 < args.max_frames < 60:
         ap.error(f"--max-frames {args.max_frames}: at least 60 (a model needs 6 views, one every 10 frames)")
     args.max_frames = args.max_frames or None
+    for spec in args.methods:  # a bad spec stops here, not after the reference model's minutes of building
+        alcn_cv.create(spec)
+    # before the video opens: FFmpeg's notes on the stream (a slice type it tolerates) are no errors of this
+    # script; a level set by the caller is kept
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", str(FFMPEG_FATAL))
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
     args.out.mkdir(parents=True, exist_ok=True)
     video = args.data / "box.mp4"
@@ -110,21 +125,9 @@ def main() -> None:
     if ref_path.is_file():
         logging.info("none: the reference model %s, built before (delete it to rebuild)", ref_path)
     else:  # the reference model: built from the video alone (see track_cookie_box.py)
-        build.main(
-            video,
-            ref_path,
-            K=K_TUTORIAL,
-            step=10,
-            max_frames=46,
-            motion_mask=True,
-            feature="ORB",
-            n_features=3000,
-            box_ply=args.data / "box.ply",
-            box_units="cm",
-            refine_focal=True,
-        )
+        build.main(video, ref_path, box_ply=args.data / "box.ply", **build.COOKIE_BOX)
     ref = part_model.load(ref_path)
-    K = np.asarray(ref.extra.get("K", K_TUTORIAL))  # the focal length refined when building
+    K = np.asarray(ref.extra.get("K", build.COOKIE_BOX["K"]))  # the focal length refined when building
     models = {"none": ref}
     for name in args.methods:
         path = args.out / f"model_{evaluate.file_stem(name)}.npz"
@@ -138,7 +141,7 @@ def main() -> None:
     ref_det = FeaturePartDetector(ref, "none")
     trackers = {n: PoseTracker(PoseSolver(K)) for n in args.methods}
     ref_tracker = PoseTracker(PoseSolver(K))
-    agree = {n: [] for n in args.methods}
+    agree: dict[str, list[bool]] = {n: [] for n in args.methods}
     total = io.count_frames(video, max_frames=args.max_frames)
     relit_frames = tqdm(frames(video, args.max_frames), total=total, desc="track the relit video", unit="frame")
     # as context managers: a run stopped midway leaves no unfinished video behind
@@ -151,21 +154,23 @@ def main() -> None:
             relit = evaluate.relight(frame, seed=i // 30)
             c = ref_det.detect(frame)
             gt = ref_tracker.update(i, c.object_points, c.image_points)
+            gt_pose = found(gt)
             vis = relit.copy()
             panels = []
-            if gt.ok:
-                track.draw_box(vis, ref.corners, gt.rvec, gt.tvec, K, track.color_for("gt"))
+            if gt_pose is not None:
+                track.draw_box(vis, ref.corners, *gt_pose, K, track.color_for("gt"))
             for n in args.methods:
                 c = detectors[n].detect(relit)
                 est = trackers[n].update(i, c.object_points, c.image_points)
+                pose = found(est)
                 panel = relit.copy()
-                if est.ok:
+                if pose is not None:
                     for img in (vis, panel):
-                        track.draw_box(img, models[n].corners, est.rvec, est.tvec, K, track.color_for(n))
-                if gt.ok:
+                        track.draw_box(img, models[n].corners, *pose, K, track.color_for(n))
+                if gt_pose is not None:
                     agree[n].append(
-                        est.ok
-                        and evaluate.projection_error(models[n].corners, est.R, est.tvec, gt.R, gt.tvec, K)
+                        pose is not None
+                        and evaluate.projection_error(models[n].corners, est.R, pose[1], gt.R, gt_pose[1], K)
                         < evaluate.PROJ_PX
                     )
                 panels.append(cv2.putText(panel, n, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 1.0, (255, 255, 255), 2))
@@ -184,5 +189,5 @@ def main() -> None:
 if __name__ == "__main__":
     try:
         main()
-    except ALCNError as exc:
+    except (ALCNError, OSError) as exc:  # OSError: an --out that cannot be written
         sys.exit(f"relit_cookie_box.py: error: {exc}")

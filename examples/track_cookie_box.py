@@ -6,11 +6,11 @@ Input: ``../shared/data/cookie_box/box.mp4`` (456 frames, 640x480, a hand-held b
 static camera), ``box.ply`` (the cuboid, 18.9 x 25.8 x 7.5 cm) and the intrinsics of OpenCV's
 real-time pose tutorial (fx = 640*55/22.3, fy = 480*55/14.9, cx = 320, cy = 240).
 
-1. ``alcn pose build`` on the unregistered video: every 10th frame, features kept on what moves
-   (static camera), pycolmap incremental reconstruction with the focal length refined by the
-   bundle adjustment (to fx 651 px, fy 648 px: with the tutorial's fx = 1578 px held fixed, the box's
-   front side is folded into the plane of its lid and the fit is 8.5% off instead of 2.7%), open3d box
-   fit (frame from the lid, the best-seen face) scaled to box.ply's size.
+1. ``alcn pose build`` on the unregistered video with the cookie box's preset (``pose.build.COOKIE_BOX``):
+   every 10th frame, features kept on what moves (static camera), pycolmap incremental reconstruction with
+   the focal length refined by the bundle adjustment (to fx 651 px, fy 648 px: with the tutorial's fx = 1578 px
+   held fixed, the box's front side is folded into the plane of its lid and the fit is 8.5% off instead of
+   2.7%), open3d box fit (frame from the lid, the best-seen face) scaled to box.ply's size.
 2. ``alcn pose track`` on every frame with the refined intrinsics (stored in the model): poses as JSON and an overlay
    video with the box drawn.
 3. A contact sheet PNG of a few overlay frames, to check that the box sits on the object.
@@ -23,41 +23,41 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from alcn_cv import io
+from alcn_cv.cli import FFMPEG_FATAL
 from alcn_cv.enhance.registry import same_method
-from alcn_cv.errors import ALCNError
+from alcn_cv.errors import ALCNError, DatasetError
 from alcn_cv.shared_data import shared_data_dir
 from pose import build, track
 from pose import model as part_model
-from pose.solver import camera_matrix
-
-K = camera_matrix(640 * 55 / 22.3, 480 * 55 / 14.9, 320.0, 240.0)
 
 
 def contact_sheet(video: Path, out: Path, frames: tuple[int, ...] = (0, 60, 120, 180, 240, 300, 360, 420)) -> Path:
-    reader = cv2.VideoCapture(str(video))
-    tiles = []
-    for i in range(max(frames) + 1):
-        ok, img = reader.read()
-        if not ok:
-            break
-        if i in frames:
-            tiles.append(
-                cv2.putText(
-                    cv2.resize(img, (320, 240)), f"#{i}", (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2
-                )
-            )
-    reader.release()
-    while len(tiles) % 4:
+    """Write ``out``: the ``frames`` of ``video`` that it has, at 320x240 and numbered, four to a row.
+
+    Raises:
+        InputError: ``video`` cannot be opened or has no frame (:func:`alcn_cv.io.iter_frames`).
+        DatasetError: ``video`` has none of ``frames``.
+        OSError: ``out`` cannot be written.
+    """
+    tiles = [
+        cv2.putText(cv2.resize(img, (320, 240)), f"#{i}", (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2)
+        for i, (_, img) in enumerate(io.iter_frames(video, max_frames=max(frames) + 1))
+        if i in frames
+    ]
+    if not tiles:  # a video shorter than the first of frames
+        raise DatasetError(f"{video}: none of the frames {', '.join(map(str, frames))}; no contact sheet")
+    while len(tiles) % 4:  # the last row filled with black
         tiles.append(np.zeros_like(tiles[0]))
     rows = [np.hstack(tiles[k : k + 4]) for k in range(0, len(tiles), 4)]
-    cv2.imwrite(str(out), np.vstack(rows))
-    return out
+    return io.write_image(out, np.vstack(rows))
 
 
 def main() -> None:
@@ -76,6 +76,9 @@ def main() -> None:
         help="folder of box.mp4 and box.ply (default: the shared data's)",
     )
     args = ap.parse_args()
+    # before the video opens: FFmpeg's notes on the stream (a slice type it tolerates) are no errors of this
+    # script; a level set by the caller is kept
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", str(FFMPEG_FATAL))
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
     args.out.mkdir(parents=True, exist_ok=True)
     video = args.data / "box.mp4"
@@ -83,20 +86,9 @@ def main() -> None:
     # a model of an earlier run is reused when it was built after the same normalization
     if not model_path.is_file() or not same_method(part_model.load(model_path).normalization, args.normalization):
         build.main(
-            video,
-            model_path,
-            K=K,
-            step=10,
-            max_frames=46,
-            motion_mask=True,
-            feature="ORB",
-            n_features=3000,
-            normalization=args.normalization,
-            box_ply=args.data / "box.ply",
-            box_units="cm",
-            refine_focal=True,
+            video, model_path, box_ply=args.data / "box.ply", normalization=args.normalization, **build.COOKIE_BOX
         )
-    K_track = np.asarray(part_model.load(model_path).extra["K"])
+    K_track, K = np.asarray(part_model.load(model_path).extra["K"]), build.COOKIE_BOX["K"]
     print(
         f"intrinsics used for tracking (stored in the model): fx {K_track[0, 0]:.1f} fy {K_track[1, 1]:.1f} "
         f"(tutorial: {K[0, 0]:.1f} {K[1, 1]:.1f})"
@@ -114,5 +106,5 @@ def main() -> None:
 if __name__ == "__main__":
     try:
         main()
-    except ALCNError as exc:
+    except (ALCNError, OSError) as exc:  # OSError: an --out that cannot be written
         sys.exit(f"track_cookie_box.py: error: {exc}")

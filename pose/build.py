@@ -17,6 +17,10 @@ Pipeline (hloc-style, one module per stage):
    reconstruction is scaled by it.
 4. :func:`build` assembles the model in the object frame; :func:`main` writes ``<out>.npz`` +
    ``<out>.ply`` (:mod:`pose.model`) and ``<out>_cameras.png`` (:func:`pose.plots.plot_model`).
+
+:data:`VIDEO_CONFS` names the settings of a known object's video (hloc's ``confs``): ``cookie_box``
+(:data:`COOKIE_BOX`), those the shared data's cookie box is built with by its examples and its experiment
+(:func:`conf_options`: the same settings as options of ``alcn pose build``).
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ from pose.sequence import (
     motion_masks,
     video_sequence,
 )
+from pose.solver import camera_matrix
 from pose.triangulate import (
     collect_points,
     extract_features,
@@ -62,6 +67,32 @@ VIDEO_BOX_UNITS = "cm"
 #: A refined focal length's fx / fy moved, or the box fit off the known size, by more than this share: warned
 #: (the cookie box from its first 120 frames with the motion mask: fx / fy 0.79, 15% off; from the whole video 2.7%).
 SUSPICIOUS = 0.1
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.flags.writeable = False  # a preset's array is shared by every build that uses it
+    return array
+
+
+#: Named settings of :func:`main` for the video of a known object (hloc's ``confs``): its keyword arguments but the
+#: paths (the video, the output, ``box_ply``). ``cookie_box``: the shared data's ``cookie_box/box.mp4``, a hand-held box
+#: before a static camera (the motion mask), with the intrinsics of OpenCV's real-time pose tutorial (fx = 640*55/22.3,
+#: fy = 480*55/14.9, cx = 320, cy = 240), which are refined (held fixed at fx 1578 px, the box's front side folds into
+#: the plane of its lid: the box fit is 8.5% off instead of 2.7%); every 10th frame, at most 46: all 456 frames.
+VIDEO_CONFS: dict[str, dict[str, Any]] = {
+    "cookie_box": {
+        "K": _read_only(camera_matrix(640 * 55 / 22.3, 480 * 55 / 14.9, 320.0, 240.0)),
+        "step": 10,
+        "max_frames": 46,
+        "motion_mask": True,
+        "feature": "ORB",
+        "n_features": 3000,
+        "box_units": "cm",
+        "refine_focal": True,
+    },
+}
+#: The cookie box's settings: ``main(video, output, box_ply=..., **COOKIE_BOX)``.
+COOKIE_BOX = VIDEO_CONFS["cookie_box"]
 
 
 def build(
@@ -311,3 +342,21 @@ def main(
             "; the model's points fit the box poorly: more frames or views from more directions" if poor else "",
         )
     return path
+
+
+def conf_options(conf: dict[str, Any]) -> list[str]:
+    """The options of ``alcn pose build`` that give the settings ``conf`` (one of :data:`VIDEO_CONFS`), for a script
+    that runs the command: ``alcn pose build VIDEO OUT --box-ply PLY *conf_options(COOKIE_BOX)``. Numbers are
+    written in full (``repr``), so that the command builds from the same values as :func:`main` does; a switch
+    that is ``False`` (the command's default) is left out."""
+    options: list[str] = []
+    for key, value in conf.items():
+        option = "--" + key.replace("_", "-")
+        if key == "K":
+            K = np.asarray(value, np.float64)
+            options += [option, *(repr(float(v)) for v in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))]
+        elif isinstance(value, bool):
+            options += [option] if value else []
+        else:
+            options += [option, str(value)]
+    return options

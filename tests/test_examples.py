@@ -1,0 +1,158 @@
+"""The OpenCV app's examples (``examples/``): the cookie box built from one preset, bad input that ends in one line
+before the work, FFmpeg's stream notes kept off the terminal, and the helpers' edge cases (no homography, an empty
+overlay, the model's normalization)."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.errors import DatasetError, InputError
+from pose import build
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+
+
+def _example(name: str) -> ModuleType:
+    """The example script ``name`` imported as a module (its ``main`` not run)."""
+    spec = importlib.util.spec_from_file_location(f"example_{name.removesuffix('.py')}", EXAMPLES / name)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _run(script: str, *args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(EXAMPLES / script), *args], capture_output=True, text=True, timeout=300, env=env
+    )
+
+
+class _StopError(Exception):
+    """Raised by a stand-in to end an example's main where the test has seen what it needs."""
+
+
+@pytest.mark.parametrize("script", ["track_cookie_box.py", "relit_cookie_box.py"])
+def test_the_cookie_box_examples_build_with_the_preset(script, tmp_path, monkeypatch):
+    """Both examples wrote the cookie box's build settings out themselves (the camera as K in one, K_TUTORIAL in the
+    other): they build with build.COOKIE_BOX now, the box file from --data."""
+    calls = []
+
+    def record(*args, **kwargs):
+        calls.append((args, kwargs))
+        raise _StopError
+
+    module = _example(script)
+    monkeypatch.setattr(build, "main", record)
+    monkeypatch.setattr(sys, "argv", [script, "--out", str(tmp_path), "--data", str(tmp_path / "data")])
+    with pytest.raises(_StopError):
+        module.main()
+    (video, output), kwargs = calls[0]
+    assert video == tmp_path / "data" / "box.mp4" and kwargs.pop("box_ply") == tmp_path / "data" / "box.ply"
+    assert kwargs.pop("normalization", "none") == "none"
+    assert kwargs == build.COOKIE_BOX
+
+
+def test_relit_checks_its_methods_before_the_work(tmp_path):
+    """`--methods none bogus` ran 91 s (the reference model built) before it failed; a negative --max-frames was
+    taken as a number of frames."""
+    out = tmp_path / "out"
+    proc = _run("relit_cookie_box.py", "--out", str(out), "--methods", "none", "bogus")
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert proc.stderr.strip().splitlines()[-1].startswith("relit_cookie_box.py: error: unknown normalization 'bogus'")
+    assert not out.exists()  # nothing built
+    proc = _run("relit_cookie_box.py", "--out", str(out), "--max-frames", "-5")
+    assert proc.returncode == 2 and "--max-frames -5: a number of frames, 0 (all) or at least 60" in proc.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("script", "args"),
+    [("track_cookie_box.py", []), ("relit_cookie_box.py", ["--methods", "none"]), ("feature_matching.py", [])],
+)
+def test_an_out_that_cannot_be_written_ends_in_one_line(script, args, tmp_path, shared_data):
+    """A folder that cannot be made (an OSError, here under a file) ended in a traceback: the examples caught
+    ALCNError only."""
+    if script == "feature_matching.py" and not (shared_data / "cookie_box" / "box.mp4").is_file():
+        pytest.skip("the cookie box video not found")
+    (tmp_path / "a_file").write_text("")
+    proc = _run(script, "--out", str(tmp_path / "a_file" / "out"), *args)
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    last = proc.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"{script}: error: ") and str(tmp_path / "a_file") in last, proc.stderr[-2000:]
+
+
+@pytest.mark.shared_data
+def test_ffmpeg_notes_on_the_cookie_box_are_not_printed(shared_data, tmp_path):
+    """Every open of the cookie box printed `[h264 @ ...] A non-intra slice in an IDR NAL unit.`: the examples set
+    OPENCV_FFMPEG_LOGLEVEL before the video opens, unless the caller set it (its level is kept)."""
+    video = shared_data / "cookie_box" / "box.mp4"
+    if not video.is_file():
+        pytest.skip(f"{video} not found")
+    env = {k: v for k, v in os.environ.items() if k != "OPENCV_FFMPEG_LOGLEVEL"}
+    args = ("--video", str(video), "--methods", "none", "--out", str(tmp_path))
+    quiet = _run("feature_matching.py", *args, env=env)
+    assert quiet.returncode == 0 and "non-intra slice" not in quiet.stdout + quiet.stderr, quiet.stderr[-2000:]
+    # AV_LOG_ERROR: the note is printed (by OpenCV's FFmpeg log callback, on stdout), so the run above was a test
+    told = _run("feature_matching.py", *args, env={**env, "OPENCV_FFMPEG_LOGLEVEL": "16"})
+    assert told.returncode == 0 and "non-intra slice" in told.stdout + told.stderr, told.stdout[-2000:]
+
+
+def test_no_homography_is_no_match_that_agrees(monkeypatch):
+    """cv2.findHomography gives no mask when RANSAC finds no homography: the matching ended in a TypeError."""
+    fm = _example("feature_matching.py")
+    image = cv2.resize(np.random.default_rng(0).integers(0, 256, (60, 80), np.uint8), (320, 240))
+    monkeypatch.setattr(fm.cv2, "findHomography", lambda *args: (None, None))
+    kp1, kp2, agreeing = fm.match(image, image, cv2.ORB.create(500))
+    assert len(kp1) > 4 and len(kp2) > 4 and agreeing == []
+
+
+def _video(path: Path, frames: int) -> Path:
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), 30, (64, 48))
+    for i in range(frames):
+        writer.write(np.full((48, 64, 3), 40 * i, np.uint8))
+    writer.release()
+    return path
+
+
+def test_the_contact_sheet_of_a_short_or_empty_overlay(tmp_path):
+    """An overlay without any of the sheet's frames ended in an IndexError; a short one fills its row with black."""
+    sheet = _example("track_cookie_box.py").contact_sheet
+    short = _video(tmp_path / "short.avi", 3)
+    written = cv2.imread(str(sheet(short, tmp_path / "sheet.png", frames=(0, 2))))
+    assert written.shape == (240, 4 * 320, 3) and written[:, 2 * 320 :].max() == 0
+    with pytest.raises(DatasetError, match="none of the frames 5, 9"):
+        sheet(short, tmp_path / "none.png", frames=(5, 9))
+    (tmp_path / "empty.avi").write_bytes(b"")
+    with pytest.raises(InputError, match="cannot open video"):
+        sheet(tmp_path / "empty.avi", tmp_path / "empty.png")
+
+
+@pytest.mark.parametrize(("given", "used"), [(None, "clahe:clip_limit=2.0"), ("none", "none")])
+def test_pnp_methods_normalizes_as_the_model_was_built(given, used, monkeypatch, tmp_path):
+    """--normalization defaulted to none whatever the model was built after; the default is the model's, as
+    `alcn pose track` uses."""
+    pnp = _example("pnp_methods.py")
+    model = type("Model", (), {"normalization": "clahe:clip_limit=2.0", "extra": {"K": np.eye(3).tolist()}})()
+    seen = []
+
+    def detector(model, normalization):
+        seen.append(normalization)
+        raise _StopError
+
+    monkeypatch.setattr(pnp.part_model, "load", lambda path: model)
+    monkeypatch.setattr(pnp, "FeaturePartDetector", detector)
+    argv = ["pnp_methods.py", "model.npz", "video.mp4", *(["--normalization", given] if given else [])]
+    monkeypatch.setattr(sys, "argv", argv)
+    with pytest.raises(_StopError):
+        pnp.main()
+    assert seen == [used]
