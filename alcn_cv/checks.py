@@ -15,6 +15,7 @@ import numpy as np
 from alcn_cv.errors import InputError
 
 __all__ = [
+    "FLOAT_TOLERANCE",
     "FULL_SCALE",
     "SUPPORTED_DTYPES",
     "check_gray",
@@ -26,8 +27,8 @@ __all__ = [
 
 SUPPORTED_DTYPES = (np.uint8, np.uint16, np.float32)
 FULL_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
-# float32 intensities are expected in [0, 1]; tolerate rounding just outside.
-_FLOAT_TOLERANCE = 1e-3
+#: How far outside [0, 1] float32 intensities may lie (rounding) before they are refused.
+FLOAT_TOLERANCE = 1e-3
 
 
 def check_positive(name: str, value: float) -> float:
@@ -98,7 +99,7 @@ def check_image(img: object) -> np.ndarray:
     if img.dtype == np.float32:
         # min and max see NaN (it propagates) and inf (out of range) without a boolean copy
         lo, hi = float(img.min()), float(img.max())
-        if not (lo >= -_FLOAT_TOLERANCE and hi <= 1 + _FLOAT_TOLERANCE):
+        if not (lo >= -FLOAT_TOLERANCE and hi <= 1 + FLOAT_TOLERANCE):
             if not np.isfinite(img).all():
                 raise InputError("float32 image contains NaN or inf")
             raise InputError(

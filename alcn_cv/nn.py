@@ -32,7 +32,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from alcn_cv.checks import _FLOAT_TOLERANCE, FULL_SCALE
+from alcn_cv.checks import FLOAT_TOLERANCE, FULL_SCALE
 from alcn_cv.errors import InputError
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.lab import srgb_to_lab
@@ -333,7 +333,7 @@ def _check_range(image: torch.Tensor) -> None:
     ):
         return
     lo, hi = (float(v) for v in image.detach().aminmax())  # NaN propagates to both
-    if lo >= -_FLOAT_TOLERANCE and hi <= 1 + _FLOAT_TOLERANCE:
+    if lo >= -FLOAT_TOLERANCE and hi <= 1 + FLOAT_TOLERANCE:
         return
     if not (math.isfinite(lo) and math.isfinite(hi)):
         hint = " (one such pixel would make its whole image NaN)"

@@ -131,7 +131,7 @@ def _load_reference(path: Path, unit: str | None) -> dict[str, tuple[np.ndarray,
     from alcn_cv.formats.colmap import read_model
     from alcn_cv.formats.middlebury import read_middlebury
 
-    from .conventions import _MM_PER_UNIT, colmap_unit_to_mm
+    from .conventions import MM_PER_UNIT, colmap_unit_to_mm
 
     if path.is_file() and path.name.endswith("_par.txt"):
         return {v.name: (v.R_w2c, v.t_w2c * 1000.0) for v in read_middlebury(path, check_images=False)}
@@ -142,7 +142,7 @@ def _load_reference(path: Path, unit: str | None) -> dict[str, tuple[np.ndarray,
                 "--reference-unit %s overrides the reference model's units header (%s)", unit, model.units
             )
         scale = colmap_unit_to_mm(
-            model, None if unit is None else _MM_PER_UNIT[unit], option="--reference-unit (mm, cm or m)"
+            model, None if unit is None else MM_PER_UNIT[unit], option="--reference-unit (mm, cm or m)"
         )
         return {im.name: (im.R_w2c, im.t_w2c * scale) for im in model.images.values()}
     raise InputError(f"{path}: --reference must be a Middlebury *_par.txt or a COLMAP model folder")

@@ -35,6 +35,7 @@ __all__ = [
     "colmap_from_bop_frames",
     "bop_frames_from_colmap",
     "colmap_unit_to_mm",
+    "MM_PER_UNIT",
 ]
 
 
@@ -74,7 +75,7 @@ def colmap_from_bop_frames(
 
 
 #: Millimetres per unit of the ``# Units:`` header of a COLMAP model.
-_MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
+MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 
 
 def colmap_unit_to_mm(
@@ -93,9 +94,9 @@ def colmap_unit_to_mm(
     """
     if unit_to_mm is not None:
         return float(unit_to_mm)
-    if model.units is not None and model.units not in _MM_PER_UNIT:
+    if model.units is not None and model.units not in MM_PER_UNIT:
         raise InputError(f"the COLMAP model's units are {model.units!r}; pass {option}")
-    return _MM_PER_UNIT[model.units or "mm"]
+    return MM_PER_UNIT[model.units or "mm"]
 
 
 def bop_frames_from_colmap(
