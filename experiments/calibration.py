@@ -15,14 +15,15 @@ from __future__ import annotations
 
 import json
 
-import cv2
-import numpy as np
 from _run import RUNS, SHARED_DATA, alcn, command_line, keep
 
 
 def main() -> None:
     command_line(__doc__).parse_args()
     from alcn_cv.report import machine
+    from calib.camera import load_calibration
+    from pose import build
+    from pose.model import load as load_part_model
 
     out = RUNS / "calibration"
     calib, box = out / "calib", out / "cookie_box"
@@ -47,21 +48,9 @@ def main() -> None:
         "build",
         str(SHARED_DATA / "cookie_box" / "box.mp4"),
         str(box / "model.npz"),
-        "--K",
-        "1578.48",
-        "1771.81",
-        "320",
-        "240",
-        "--step",
-        "10",
-        "--max-frames",
-        "46",
-        "--motion-mask",
-        "--n-features",
-        "3000",
         "--box-ply",
         str(SHARED_DATA / "cookie_box" / "box.ply"),
-        "--refine-focal",
+        *build.conf_options(build.COOKIE_BOX),
     ]
     track_argv = [
         "pose",
@@ -72,27 +61,24 @@ def main() -> None:
     ]
     for argv in (calib_argv, build_argv, track_argv):
         alcn(*argv)
-    fs = cv2.FileStorage(str(calib / "camera.yaml"), cv2.FILE_STORAGE_READ)
-    K = fs.getNode("camera_matrix").mat()
-    rms = fs.getNode("rms").real()
-    fs.release()
+    camera = load_calibration(calib / "camera.yaml")
+    model = load_part_model(box / "model.npz")
     track = json.loads((box / "poses_info.json").read_text(encoding="utf-8"))
-    header = json.loads(str(np.load(box / "model.npz")["header"]))
     report = {
         "benchmark": "calibration",
         "commands": [" ".join(["alcn", *a]) for a in (calib_argv, build_argv, track_argv)],
         "machine": machine(),
         "calibration": {
-            "rms_px": rms,
-            "fx": float(K[0, 0]),
-            "fy": float(K[1, 1]),
-            "cx": float(K[0, 2]),
-            "cy": float(K[1, 2]),
+            "rms_px": camera.rms,
+            "fx": float(camera.K[0, 0]),
+            "fy": float(camera.K[1, 1]),
+            "cx": float(camera.K[0, 2]),
+            "cy": float(camera.K[1, 2]),
         },
         "cookie_box": {
-            "registered_images": header["extra"]["registered_images"],
-            "refined_fx": header["extra"]["K"][0][0],
-            "box_size_error_percent": 100 * header["box_fit"]["mean_abs_relative_size_error"],
+            "registered_images": model.extra["registered_images"],
+            "refined_fx": model.extra["K"][0][0],
+            "box_size_error_percent": 100 * model.box_fit["mean_abs_relative_size_error"],
         },
         "tracking": track["summary"],
     }

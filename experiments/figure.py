@@ -3,27 +3,36 @@ methods (columns), each through its own ``apply()`` with its default parameters.
 
 Data: a scene of ../shared/data/webcam (the Webcam data set of TILDE, Verdie et al., CVPR 2015, from
 AMOS: academic research only; cite TILDE and AMOS). The frames are the scene's darkest and brightest
-by mean intensity. Time: a few seconds.
+by mean intensity. Time: a few seconds. Deterministic: tests/test_docs.py renders it again and compares it with the
+published one, so a change to a method's output shows up there.
 
-    python experiments/figure.py                          # docs/figure.png (mexico, the test scene)
-    python experiments/figure.py --scene courbevoie --out runs/figure.png
+    python experiments/figure.py --publish                # runs/figure.png, then docs/figure.png (the README's)
+    python experiments/figure.py --scene courbevoie       # runs/figure.png only
 """
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import cv2
 import numpy as np
-from _run import ROOT, SHARED_DATA, command_line
+from _run import ROOT, RUNS, SHARED_DATA, command_line
 
+#: The README's figure, which --publish replaces.
+PUBLISHED = ROOT / "docs" / "figure.png"
 METHODS = {"input": "none", "CLAHE": "clahe", "DoG": "dog", "Tan-Triggs": "tantriggs", "ALCN": "alcn"}
 TILE_WIDTH = 256
 
 
 def frames(scene: Path) -> list[np.ndarray]:
     """The scene's darkest and brightest frames (mean intensity), gray uint8."""
-    images = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in sorted(scene.glob("*.jpg"))]
+    images = []
+    for path in sorted(scene.glob("*.jpg")):
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if image is None:
+            raise SystemExit(f"{path}: not a readable image")
+        images.append(image)
     if not images:
         raise SystemExit(f"no frames in {scene}")
     order = np.argsort([img.mean() for img in images])
@@ -55,12 +64,16 @@ def figure(scene: Path) -> np.ndarray:
 def main() -> None:
     parser = command_line(__doc__, keeps=False)
     parser.add_argument("--scene", default="mexico", help="a scene of ../shared/data/webcam (default mexico)")
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "figure.png", help="PNG to write")
+    parser.add_argument("--out", type=Path, default=RUNS / "figure.png", help="PNG to write (default: runs/figure.png)")
+    parser.add_argument("--publish", action="store_true", help=f"then copy it to {PUBLISHED.relative_to(ROOT)}")
     args = parser.parse_args()
     image = figure(SHARED_DATA / "webcam" / args.scene)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(args.out), image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     print(f"wrote {args.out} ({args.out.stat().st_size // 1024} KB)")
+    if args.publish:
+        shutil.copyfile(args.out, PUBLISHED)
+        print(f"published {PUBLISHED.relative_to(ROOT)}")
 
 
 if __name__ == "__main__":

@@ -2,19 +2,21 @@
 # The GPU checks of issue 40 in one short run (about 5 minutes) on a bare GPU machine that has Python and torch:
 #   kornia (and whatever else is missing) from wheels carried in .whl/, the CUDA tests, then
 #   `alcn bench speed --device cuda` (end to end host uint8 -> host uint8, on the device, float16, against the CPU,
-#   beside kornia's DoG and CLAHE). Reports go to $OUT (default runs/gpu_check). Both steps run whatever the first
-#   gives; the exit status is the first failure's (0 when both pass). DEVICE=cpu rehearses the script on a machine
-#   without a GPU (the CUDA tests skip, the bench measures the CPU), so that a short GPU slot is not spent on a fault
-#   of the script itself.
+#   beside kornia's DoG and CLAHE). Reports go to $GPU_CHECK_OUT (default runs/gpu_check); the bench's JSON is kept
+#   as docs/reports/speed_gpu.json (experiments/_run.py's keep; experiments/report.py renders it). Both steps run
+#   whatever the first gives; the exit status is the first failure's (0 when both pass). DEVICE=cpu rehearses the
+#   script on a machine without a GPU (the CUDA tests skip, the bench measures the CPU, nothing is kept), so that a
+#   short GPU slot is not spent on a fault of the script itself.
 # Fill .whl/ beforehand where a registry is reachable, e.g.
 #   pip download --no-deps --only-binary=:all: -d .whl kornia kornia_rs
 set -uo pipefail
 cd "$(dirname "$0")/.."
-OUT=${OUT:-runs/gpu_check}
+# absolute: the kept report writes the run folder (runs/) as OUT, which a relative path would not match
+GPU_CHECK_OUT=$(realpath -m "${GPU_CHECK_OUT:-runs/gpu_check}")
 DEVICE=${DEVICE:-cuda}
 # the CPU's batches are slow: two small ones rehearse the path (BATCHES overrides either default)
 BATCHES=${BATCHES:-$([ "$DEVICE" = cpu ] && echo 1,2)}
-mkdir -p "$OUT"
+mkdir -p "$GPU_CHECK_OUT"
 PY=${PYTHON:-python3}
 SITE=/tmp/site
 if compgen -G ".whl/*.whl" > /dev/null; then
@@ -34,18 +36,29 @@ for name in ("torch", "kornia", "cv2", "numpy", "tqdm", "pytest"):
 import torch
 print("cuda", torch.cuda.is_available(), torch.version.cuda, torch.cuda.get_device_name(0) if torch.cuda.is_available() else "")
 PY
-} > "$OUT/environment.txt" 2>&1
-cat "$OUT/environment.txt"
+} > "$GPU_CHECK_OUT/environment.txt" 2>&1
+cat "$GPU_CHECK_OUT/environment.txt"
 
 # The CUDA tests (they skip with a reason where torch sees no GPU; -rs lists the reasons).
-timeout 150 "$PY" -m pytest -q -rs -p no:cacheprovider --junitxml="$OUT/cuda_tests.xml" \
-  tests/test_nn.py tests/test_speed_paths.py tests/test_cli_normalize.py -k "cuda" 2>&1 | tee "$OUT/cuda_tests.txt" | tail -15
+timeout 150 "$PY" -m pytest -q -rs -p no:cacheprovider --junitxml="$GPU_CHECK_OUT/cuda_tests.xml" \
+  tests/test_nn.py tests/test_speed_paths.py tests/test_cli_normalize.py -k "cuda" 2>&1 | tee "$GPU_CHECK_OUT/cuda_tests.txt" | tail -15
 tests_status=${PIPESTATUS[0]}
 
 # The measurement (writes speed.json and speed.md).
 timeout 240 "$PY" -m alcn_cv.cli bench speed --device "$DEVICE" ${BATCHES:+--device-batches "$BATCHES"} \
-  --out "$OUT/speed_$DEVICE" 2>&1 | tee "$OUT/speed_$DEVICE.txt" | tail -25
+  --out "$GPU_CHECK_OUT/speed_$DEVICE" 2>&1 | tee "$GPU_CHECK_OUT/speed_$DEVICE.txt" | tail -25
 bench_status=${PIPESTATUS[0]}
-echo "reports in $OUT (CUDA tests: exit status $tests_status; bench: $bench_status)"
+# Keep the GPU's report (the CPU rehearsal's measures nothing published); failing to keep it fails the bench step.
+if [ "$DEVICE" != cpu ] && [ "$bench_status" -eq 0 ]; then
+  "$PY" - "$GPU_CHECK_OUT/speed_$DEVICE/speed.json" <<'PY' || bench_status=$?
+import sys
+
+sys.path.insert(0, "experiments")
+from _run import keep
+
+keep(sys.argv[1], "speed_gpu", script="experiments/gpu_check.sh")
+PY
+fi
+echo "reports in $GPU_CHECK_OUT (CUDA tests: exit status $tests_status; bench: $bench_status)"
 if [ "$tests_status" -ne 0 ]; then exit "$tests_status"; fi
 exit "$bench_status"

@@ -13,17 +13,16 @@ Writes runs/learning/{untrained.npz,webcam/,bench/}; keeps docs/reports/relight_
 
 from __future__ import annotations
 
-from _run import RUNS, alcn, command_line, keep, untrained_start
+from _run import RUNS, alcn, command_line, keep, quick_protocol, untrained_start
 
 from alcn_cv.runtime import MODELS
 
-QUICK = ["--max-frames", "12", "--patches", "150", "--max-pairs", "12"]
 BASELINES = ["none", "clahe", "dog", "dlcn", "tantriggs"]
 
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument("--seeds", nargs="+", default=["0", "1", "2"], help="sampling seeds (default: 0 1 2)")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
     args = parser.parse_args()
     out = RUNS / "learning"
     out.mkdir(parents=True, exist_ok=True)
@@ -33,7 +32,8 @@ def main() -> None:
     alcn("train-real-light", "--conf", "gain", "--set", scenes, "--set", "relit=0", "--out", str(webcam))
     methods = [*BASELINES, "alcn", f"alcn:weights={untrained}", f"alcn:weights={webcam / 'gain_normalizer.npz'}"]
     bench = out / "bench"
-    alcn("bench", "relight", "--out", str(bench), "--methods", ",".join(methods), "--seeds", *args.seeds, *QUICK)
+    seeds = [str(seed) for seed in args.seeds]
+    alcn("bench", "relight", "--out", str(bench), "--methods", ",".join(methods), "--seeds", *seeds, *quick_protocol())
     keep(bench / "relight.json", "relight_learning")
 
 

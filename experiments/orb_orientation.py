@@ -24,26 +24,25 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
-from pathlib import Path
+from typing import cast
 
 import cv2
 import numpy as np
-from _run import RUNS, command_line, keep, script_command
+from _run import RUNS, band_variant, command_line, keep, script_command
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.relight import PairPlan, Settings, build_method, evaluate_scene, keypoint_scores, plan_pairs
+from alcn_cv.bench.relight import PRESETS, PairPlan, Settings, build_method, evaluate_scene, keypoint_scores, plan_pairs
 from alcn_cv.data.light_changes import LightChangeConfig, relit_frames
 from alcn_cv.data.permissive_images import training_photographs
 from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, select_scenes, shared_root
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.filters.wide_band import band_meta
 from alcn_cv.report import machine
-from alcn_cv.runtime import MODELS
 from alcn_cv.shared_data import shared_data_dir
-from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
-SETTINGS = Settings(patches=150, max_pairs=12)
-MAX_FRAMES = 12
+#: `alcn bench relight`'s quick protocol: its frames per scene, and its patches and pairs in the bench's settings
+#: (a preset's patches are a number: only its frames and pairs may be None, all of them).
+MAX_FRAMES = PRESETS["quick"]["max_frames"]
+SETTINGS = Settings(patches=cast(int, PRESETS["quick"]["patches"]), max_pairs=PRESETS["quick"]["max_pairs"])
 BASELINES = ("none", "clahe", "dog", "dlcn", "alcn")  # alcn: the shipped default, band 0.15
 #: The band's weights tried besides the shipped one (0: none).
 BAND_WEIGHTS = (0.0, 0.1, 0.2, 0.3)
@@ -54,18 +53,6 @@ EXPOSURE = replace(
     full_well=LightChangeConfig.full_well,
     read_noise=LightChangeConfig.read_noise,
 )
-
-
-def band_variant(weight: float, path: Path) -> str:
-    """The spec of the shipped default with the wide band's ``weight`` instead of its own (written to ``path``)."""
-    shipped = load_normalizer_file(MODELS["gain"])
-    meta = {k: v for k, v in shipped.meta.items() if k not in ("format", "version", "band")}
-    meta["config"] = {**meta["config"], "band": weight}
-    meta["output_range"] = [-1.0 - weight, 1.0 + weight]
-    if weight:
-        meta["band"] = band_meta(weight)
-    save_normalizer_file(path, shipped.arrays, meta)
-    return f"alcn:weights={path}"
 
 
 def exposure_scenes(photographs: int = 8, frames: int = 6, seed: int = 123) -> list[Scene]:
@@ -81,7 +68,7 @@ def exposure_scenes(photographs: int = 8, frames: int = 6, seed: int = 123) -> l
 def upright_orb(norm: Normalization, scene: Scene, plans: list[PairPlan]) -> list[dict[str, float]]:
     """Per plan, ORB's matching score, pose success and correct matches with every keypoint's angle set to 0 (the
     frames normalized by ``apply``'s uint8 output, as the bench's)."""
-    orb = cv2.ORB_create(nfeatures=SETTINGS.keypoints)
+    orb = cv2.ORB.create(nfeatures=SETTINGS.keypoints)
     features = []
     for frame in scene.frames:
         image = norm.apply(frame)

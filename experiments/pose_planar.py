@@ -22,7 +22,9 @@ PARTS = {"features": ["--detectors", "features", "--n-features", "500"], "corner
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument("--part", choices=sorted(PARTS), action="append", help="run only these parts (default: both)")
+    parser.add_argument(
+        "--part", nargs="+", action="extend", choices=PARTS, help="run only these parts (default: both, in turn)"
+    )
     args = parser.parse_args()
     for part in args.part or PARTS:
         out = RUNS / "pose_planar" / part

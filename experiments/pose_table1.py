@@ -29,10 +29,15 @@ PARTS = ("data", "features", "corners", "control", "heldout", "middlebury")
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument("--part", choices=PARTS, action="append", help="run only these parts (default: all)")
-    parser.add_argument("--seeds", nargs="+", default=["0", "1", "2"], help="corner CNN training seeds (default 0 1 2)")
+    parser.add_argument(
+        "--part", nargs="+", action="extend", choices=PARTS, help="run only these parts (default: all, in turn)"
+    )
+    parser.add_argument(
+        "--seeds", nargs="+", type=int, default=[0, 1, 2], help="corner CNN training seeds (default: 0 1 2)"
+    )
     args = parser.parse_args()
     parts = args.part or PARTS
+    seeds = [str(seed) for seed in args.seeds]
     root = RUNS / "pose_table1"
     data, control, heldout = root / "data", root / "data_training_light", root / "data_heldout"
     renderings = {data: [], control: ["--training-light"], heldout: ["--seed", "1", "--n-test", "1"]}
@@ -47,9 +52,9 @@ def main() -> None:
             rendered(folder)
     runs = {
         "features": (data, ["--detectors", "features"]),
-        "corners": (data, ["--detectors", "corners", "--seeds", *args.seeds]),
-        "control": (control, ["--detectors", "corners", "--seeds", *args.seeds]),
-        "heldout": (heldout, ["--detectors", "corners", "--seeds", *args.seeds]),
+        "corners": (data, ["--detectors", "corners", "--seeds", *seeds]),
+        "control": (control, ["--detectors", "corners", "--seeds", *seeds]),
+        "heldout": (heldout, ["--detectors", "corners", "--seeds", *seeds]),
     }
     for part, (folder, extra) in runs.items():
         if part in parts:

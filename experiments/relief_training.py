@@ -4,24 +4,26 @@ directional light among its scenes.
 The shipped recipe (`alcn train-real-light --conf gain`: relit photographs that permit any use) ends where it
 starts: its light changes are cancelled by the divisive step. Hard directional light is not (the faces kept
 outside the repository, and their rendered stand-in in `experiments/directional_light.py`, rank Tan-Triggs above
-ALCN). Stages, each writing under ``--out`` (default ``runs/relief_training``):
+ALCN). Parts (``--part``; default: all, in this order), each writing under ``--out`` (default
+``runs/relief_training``), the rendered scenes and the files trained on them in ``DATA`` =
+``OUT/identities_<identities>_seed_<seed>`` (a run with other ``--identities`` or ``--seed`` has its own):
 
 * ``scenes``: ``--identities`` relief scenes of the data engine, rendered as the stand-in renders its identities
-  (``directional_light.render_identity``: a frontal light and 4 directional lights at each of 5 elevations, cast
-  shadows, sensor noise) but from another seed and at 256 px, saved as registered scenes in ``OUT/scenes``;
-* ``train``: ``alcn train-real-light --conf gain --set rendered=[OUT/scenes]`` with each of :data:`VARIANTS`' settings
-  (the share of training steps that draw a rendered scene, the recipe's budget of 300 steps at lr 1e-3 or twice the
-  steps at five times the rate, with the control that has no rendered scene), into ``OUT/<variant>`` (a variant whose
-  weight file is there already is not trained again);
-* ``faces``: the stand-in itself (``directional_light.render_stand_in``: its seed, 80 identities, 128 px) at the
+  (``_run.render_identity``: a frontal light and 4 directional lights at each of 5 elevations, cast shadows, sensor
+  noise) but from another seed and at 256 px, saved as registered scenes in ``DATA/scenes``;
+* ``train``: ``alcn train-real-light --conf gain --set rendered=[DATA/scenes]`` with each of :data:`VARIANTS`'
+  settings (the share of training steps that draw a rendered scene, the recipe's budget of 300 steps at lr 1e-3 or
+  twice the steps at five times the rate, with the control that has no rendered scene), into ``DATA/<variant>`` (a
+  variant whose weight file is there already, trained on the same scenes, is not trained again);
+* ``faces``: the stand-in itself (``_run.render_stand_in``: its seed, 80 identities, 128 px) at the
   most grazing light (12 degrees), outputs compared at 32 and 64 px, for the shipped file, each trained file and
   the hand-made methods that lead there;
-* ``bench``: ``alcn bench relight``'s quick protocol (seed 0, 12 frames, 150 patches, 12 pairs, no tuning) for the
+* ``bench``: ``alcn bench relight``'s quick protocol (seed 0, no tuning) for the
   trained files, the shipped file and no normalization, on the test and the webcam training scenes.
 
 The summary puts the two side by side: what the rendered faces gain against what real light's keypoints lose.
 
-    PYTHONPATH=$PWD nice -n 10 python experiments/relief_training.py     # about 15 min on 2 cores
+    python experiments/relief_training.py     # about 15 min on 2 cores
 
 Writes OUT/relief_training.json; keeps docs/reports/relief_training.json.
 """
@@ -30,15 +32,27 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import cv2
-from _run import RUNS, alcn, command_line, keep, script_command
-from directional_light import identify, render_identity, render_stand_in
+from _run import (
+    ELEVATIONS,
+    RUNS,
+    alcn,
+    command_line,
+    identify,
+    keep,
+    quick_protocol,
+    recorded_settings,
+    render_identity,
+    render_stand_in,
+    script_command,
+)
 from tqdm.auto import tqdm
 
 from alcn_cv.report import machine
 
-STAGES = ("scenes", "train", "faces", "bench")
+PARTS = ("scenes", "train", "faces", "bench")
 #: The trained variants: ``alcn train-real-light --conf gain --set ...`` settings besides the rendered scenes.
 VARIANTS = {
     "share 0.25": {"rendered_fraction": 0.25},
@@ -46,9 +60,8 @@ VARIANTS = {
     "share 0, 600 steps at lr 5e-3": {"rendered_fraction": 0.0, "steps": 600, "lr": 5e-3},
     "share 0.5, 600 steps at lr 5e-3": {"rendered_fraction": 0.5, "steps": 600, "lr": 5e-3},
 }
-QUICK = ["--seeds", "0", "--max-frames", "12", "--patches", "150", "--max-pairs", "12", "--no-tune"]
-#: The stand-in's probes at 12 degrees (the last elevation of `directional_light.ELEVATIONS`).
-GRAZING = "elevation 12"
+#: The stand-in's probes under the most grazing light (12 degrees).
+GRAZING = f"elevation {ELEVATIONS[-1]}"
 FACE_BASELINES = ("tantriggs", "dlcn")
 
 
@@ -70,7 +83,7 @@ def faces(methods: dict[str, str]) -> dict[str, dict[str, float]]:
     }
 
 
-def bench_means(report: dict, spec: str) -> dict[str, float]:
+def bench_means(report: dict[str, Any], spec: str) -> dict[str, float]:
     """Identification and ORB / SIFT matching of ``spec`` in an ``alcn bench relight`` report, test and training."""
     method = report["methods"][spec]
     return {
@@ -82,20 +95,26 @@ def bench_means(report: dict, spec: str) -> dict[str, float]:
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument("--out", type=Path, default=RUNS / "relief_training", help="run folder")
-    parser.add_argument("--stages", nargs="+", choices=STAGES, default=list(STAGES), help="stages to run")
+    parser.add_argument(
+        "--out", type=Path, default=RUNS / "relief_training", help="run folder (default: runs/relief_training)"
+    )
+    parser.add_argument(
+        "--part", nargs="+", action="extend", choices=PARTS, help="run only these parts (default: all, in turn)"
+    )
     parser.add_argument("--identities", type=int, default=40, help="rendered training scenes (default: 40)")
     parser.add_argument("--seed", type=int, default=11, help="their rendering seed (default: 11; the stand-in's is 7)")
     args = parser.parse_args()
+    args.part = args.part or list(PARTS)
     command = script_command()
-    scenes = args.out / "scenes"
+    # apart for each (identities, seed): another run's scenes would mix with these, its weight files pass for theirs
+    data = args.out / f"identities_{args.identities}_seed_{args.seed}"
+    scenes = data / "scenes"
     trained = {
-        f"trained, {name}": args.out / name.replace(" ", "_").replace(",", "") / "gain_normalizer.npz"
-        for name in VARIANTS
+        f"trained, {name}": data / name.replace(" ", "_").replace(",", "") / "gain_normalizer.npz" for name in VARIANTS
     }
-    if "scenes" in args.stages:
+    if "scenes" in args.part:
         render_scenes(scenes, args.identities, args.seed)
-    if "train" in args.stages:
+    if "train" in args.part:
         for settings, path in zip(VARIANTS.values(), trained.values()):
             if path.exists():
                 continue
@@ -105,12 +124,13 @@ def main() -> None:
         name: f"alcn:weights={p}" for name, p in trained.items()
     }
     summary: dict[str, dict[str, float]] = {}
-    if "faces" in args.stages:
+    if "faces" in args.part:
         for name, row in faces(specs | {m: m for m in FACE_BASELINES}).items():
             summary.setdefault(name, {}).update(row)
-    if "bench" in args.stages:
+    if "bench" in args.part:
         methods = [*specs.values(), "none"]
-        alcn("bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *QUICK)
+        quick = ["--seeds", "0", *quick_protocol(), "--no-tune"]
+        alcn("bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *quick)
         report = json.loads((args.out / "bench" / "relight.json").read_text(encoding="utf-8"))
         for name, spec in (specs | {"none": "none"}).items():
             summary.setdefault(name, {}).update(bench_means(report, spec))
@@ -118,7 +138,7 @@ def main() -> None:
         "summary": summary,
         "command": command,
         "machine": machine(),
-        "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
+        "settings": recorded_settings(args),
     }
     path = args.out / "relief_training.json"
     path.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")

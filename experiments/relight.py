@@ -5,9 +5,11 @@ Data: ../shared/data/webcam (academic research only) and ../shared/data/psm.
 Time on 2 shared cores at load 11-16 (2026-11-27), one seed: 22 min for the split, 46 min for
 leave-one-scene-out (tuning per fold); more seeds add mostly evaluation time.
 
-    python experiments/relight.py                # 1 seed (0)
-    python experiments/relight.py --seeds 0 1 2  # the 3-seed protocol of the journal's older entries
-    python experiments/relight.py --only leave_one_out --quick  # 12 frames, 150 patches, 12 pairs: 3x faster
+    python experiments/relight.py --part split                  # the published split: 3 seeds (0 1 2)
+    python experiments/relight.py --part leave_one_out --quick  # the published leave-one-scene-out
+    python experiments/relight.py --seeds 0                     # both protocols in full, one seed
+
+--quick: `alcn bench relight`'s quick protocol (fewer frames, patches and pairs; about 3 times faster).
 
 Writes runs/relight/{split,leave_one_out}/relight.{md,json,png}; keeps the JSON in
 docs/reports/relight_split.json and docs/reports/relight_leave_one_out.json.
@@ -15,24 +17,29 @@ docs/reports/relight_split.json and docs/reports/relight_leave_one_out.json.
 
 from __future__ import annotations
 
-from _run import RUNS, alcn, command_line, keep
+from _run import RUNS, alcn, command_line, keep, quick_protocol
+
+PROTOCOLS = {"split": [], "leave_one_out": ["--leave-one-out"]}
 
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument("--seeds", nargs="+", default=["0"], help="sampling seeds (default: 0)")
-    parser.add_argument("--only", choices=("split", "leave_one_out"), help="run one of the two protocols")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
     parser.add_argument(
-        "--quick", action="store_true", help="the quick protocol: 12 frames per scene, 150 patches, 12 pairs"
+        "--part",
+        "--only",  # its former name: the published reports' arguments, the journal and the model card cite it
+        nargs="+",
+        action="extend",
+        choices=PROTOCOLS,
+        help="run only these protocols (default: both, in turn)",
     )
+    parser.add_argument("--quick", action="store_true", help="`alcn bench relight`'s quick protocol")
     args = parser.parse_args()
-    quick = ["--max-frames", "12", "--patches", "150", "--max-pairs", "12"] if args.quick else []
-    protocols = {"split": [], "leave_one_out": ["--leave-one-out"]}
-    for name, extra in protocols.items():
-        if args.only and name != args.only:
-            continue
+    quick = quick_protocol() if args.quick else []
+    seeds = [str(seed) for seed in args.seeds]
+    for name in args.part or PROTOCOLS:
         out = RUNS / "relight" / name
-        alcn("bench", "relight", "--out", str(out), "--seeds", *args.seeds, *extra, *quick)
+        alcn("bench", "relight", "--out", str(out), "--seeds", *seeds, *PROTOCOLS[name], *quick)
         keep(out / "relight.json", f"relight_{name}")
 
 

@@ -21,14 +21,21 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
+
+from alcn_cv.bench.relight import PRESETS  # noqa: E402
+
 REPORTS = ROOT / "docs" / "reports"
 RESULTS = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
-#: The rows of the real-light tables the README shows (each method's better row of default and tuned).
 #: The first targets of the speed report the README shows (the ratios to a raw DoG, the frame rate, BGR).
 SPEED_HEADLINE_TARGETS = 6
+#: The rows of the real-light tables the README shows (each method's better row of default and tuned).
 HEADLINE_METHODS = ("none", "clahe", "dog", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
+#: Options an experiment renamed after a kept report recorded its arguments (script, old name: new name): the rerun
+#: line says the current name (the old one still works).
+RENAMED_OPTIONS = {("experiments/relight.py", "--only"): "--part"}
 
 #: Said under every leave-one-scene-out table: the bench tunes the hand-made methods per fold but runs ALCN's
 #: shipped files as they are.
@@ -61,12 +68,17 @@ def table(headers: Sequence[str], rows: Sequence[Sequence[Any]], digits: int = 1
     return "\n".join(lines + ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]) + "\n"
 
 
+def _cores(machine: dict[str, Any]) -> Any:
+    """The CPU cores a run had (those it could use, else the machine's)."""
+    return machine.get("cpus_available", machine.get("cpu_count", "?"))
+
+
 def describe(machine: dict[str, Any] | None) -> str:
     """One line of a report's ``machine`` record: CPU, cores, load, versions, GPU."""
     if not machine:
         return "not recorded"
     cpu = machine.get("cpu_model", machine.get("processor", "?"))
-    parts = [f"{cpu}, {machine.get('cpus_available', machine.get('cpu_count', '?'))} CPUs"]
+    parts = [f"{cpu}, {_cores(machine)} CPUs"]
     if "load_average_1_5_15" in machine:
         parts.append("load " + ", ".join(str(v) for v in machine["load_average_1_5_15"]))
     versions = [f"{k} {machine[k]}" for k in ("python", "numpy", "opencv", "torch") if machine.get(k)]
@@ -80,7 +92,9 @@ def describe(machine: dict[str, Any] | None) -> str:
 def provenance(report: dict[str, Any]) -> str:
     """The lines under a table's title: how to rerun it, the command, the machine and the date."""
     exp = report.get("experiment", {})
-    rerun = " ".join(["python", exp.get("script", "?"), *exp.get("argv", [])])
+    script = exp.get("script", "?")
+    argv = [RENAMED_OPTIONS.get((script, arg), arg) for arg in exp.get("argv", [])]
+    rerun = " ".join(["bash" if script.endswith(".sh") else "python", script, *argv])
     commands = report.get("commands") or [report.get("command")]
     machine = report.get("machine") or report.get("machine_before")
     return (
@@ -95,9 +109,19 @@ def _mean_std(summary: dict[str, Any] | None, seeds: int) -> str | None:
     return f"{summary['mean']:.1f}" + (f" ± {summary['std']:.1f}" if seeds > 1 else "")
 
 
+def _protocol(settings: dict[str, Any]) -> str | None:
+    """A relight report's sampling sizes when they are not the benchmark's default preset (``None`` when they are),
+    named ``quick protocol`` when they are the quick one's."""
+    sizes = {key: settings.get(key) for key in PRESETS["default"]}
+    if sizes == PRESETS["default"]:
+        return None
+    text = f"{sizes['max_frames']} frames per scene, {sizes['patches']} patches, {sizes['max_pairs']} pairs"
+    return f"quick protocol: {text}" if sizes == PRESETS["quick"] else text
+
+
 def relight(report: dict[str, Any], title: str | None = None) -> str:
     """Headline rows of ``alcn bench relight``: every metric's mean over the evaluated scenes (``title``: the
-    section's, default from the split)."""
+    section's, default from the split and the sampling sizes when not the default)."""
     seeds = len(report["settings"]["seeds"])
     loo = report["split"]["mode"] == "leave-one-out"
     metrics = [m for m in RELIGHT_METRICS if any(m in r.get("mean_test", {}) for r in report["methods"].values())]
@@ -106,11 +130,15 @@ def relight(report: dict[str, Any], title: str | None = None) -> str:
         for label, r in report["methods"].items()
     ]
     scenes = ", ".join(report["split"]["test"])
-    title = title or (
-        "Real light, leave-one-scene-out (each scene with parameters tuned on the others)"
-        if loo
-        else f"Real light, test scenes (tuned on {', '.join(report['split']['train'])})"
-    )
+    if title is None:
+        split = "leave-one-scene-out" if loo else "test scenes"
+        tuned = (
+            "each scene with parameters tuned on the others"
+            if loo
+            else "tuned on " + ", ".join(report["split"]["train"])
+        )
+        protocol = _protocol(report["settings"])
+        title = f"Real light, {split} ({tuned}{'; ' + protocol if protocol else ''})"
     note = (LOO_NOTE if loo else "") + (
         f"Mean over the scenes {scenes}; {seeds} seed{'s' if seeds > 1 else ''} "
         f"({', '.join(str(s) for s in report['settings']['seeds'])}). Identification and matching in %, "
@@ -127,12 +155,13 @@ def _targets(report: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def _met(target: dict[str, Any]) -> str:
-    return {True: "met", False: "missed"}.get(target.get("met"), "-")
+    met = target.get("met")
+    return "-" if met is None else "met" if met else "missed"
 
 
-def speed(report: dict[str, Any]) -> str:
+def speed(report: dict[str, Any], title: str = "Speed") -> str:
     """``alcn bench speed``: its targets, then the time of every method on every frame."""
-    out = f"## Speed\n\n{provenance(report)}\n"
+    out = f"## {title}\n\n{provenance(report)}\n"
     rows = [
         [t.get("target", t.get("name")), t.get("measured"), t.get("goal"), _met(t), t.get("note", "")]
         for t in _targets(report)
@@ -288,9 +317,9 @@ def relight_headline(report: dict[str, Any]) -> str:
             rows.append([label] + [_mean_std(r["mean_test"].get(m), seeds) for m in metrics])
     loo = report["split"]["mode"] == "leave-one-out"
     title = "leave-one-scene-out" if loo else f"test scenes {', '.join(report['split']['test'])}"
-    settings = report["settings"]
-    if settings.get("max_frames") != 20 or settings.get("patches") != 300:
-        title += f"; {settings.get('max_frames')} frames per scene, {settings['patches']} patches"
+    protocol = _protocol(report["settings"])
+    if protocol:
+        title += f"; {protocol}"
     return (
         f"**Real light** ({title}; `alcn bench relight`, {seeds} seed{'s' if seeds > 1 else ''}, "
         f"{report['experiment']['date'][:10]}):\n\n"
@@ -308,7 +337,7 @@ def speed_headline(report: dict[str, Any]) -> str:
     return (
         f"**Speed** (`python experiments/speed.py {argv}`, {report['experiment']['date'][:10]}; load average "
         f"{', '.join(str(v) for v in machine.get('load_average_1_5_15', []))} "
-        f"on 2 shared cores, {machine.get('cpu_model', 'CPU not recorded')}):\n\n"
+        f"on {_cores(machine)} cores, {machine.get('cpu_model', 'CPU not recorded')}):\n\n"
         + table(["target", "measured", "goal", ""], rows, digits=2)
     )
 
@@ -348,6 +377,9 @@ def readme_with_headlines(readme: str, reports: Path = REPORTS) -> str:
     return readme[:start] + "\n" + headlines(reports) + readme[end:]
 
 
+#: The reports of a GPU machine (``experiments/gpu_check.sh``), which the page does not count among the long runs.
+GPU_REPORTS = ("speed_gpu",)
+
 RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
     "relight_split": relight,
     "relight_leave_one_out": relight,
@@ -374,6 +406,7 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
         "tuning) on the test / webcam training scenes, identification and matching in %.\n",
     ),
     "speed": speed,
+    "speed_gpu": lambda r: speed(r, "Speed on a GPU"),
     "detect": lambda r: summary_table(r, "Rendered detection (mean AUC)"),
     "fewshot": lambda r: summary_table(r, "Few-shot validation (ROC AUC)"),
     "pose_table1_features": lambda r: columns_table(r, "Pose Table 1, SIFT parts (rendered sequences)"),
@@ -394,7 +427,7 @@ def build(reports: Path = REPORTS) -> str:
     if unknown:
         raise SystemExit(f"no renderer for docs/reports/{unknown[0]}.json (add one to experiments/report.py)")
     sections = [RENDERERS[name](found[name]) for name in RENDERERS if name in found]
-    missing = [name for name in RENDERERS if name not in found]
+    missing = [name for name in RENDERERS if name not in found and name not in GPU_REPORTS]
     head = (
         "# Results\n\nGenerated by `python experiments/report.py` from the JSON reports in `docs/reports/`; do not "
         "edit by hand. Each table gives the script that reruns it, the product command it ran, the machine and "
@@ -405,6 +438,8 @@ def build(reports: Path = REPORTS) -> str:
             "\nNot run for this page (long; their scripts are in `experiments/` and the journal keeps the numbers "
             "as measured then): " + ", ".join(f"`{m}`" for m in missing) + ".\n"
         )
+    if any(name not in found for name in GPU_REPORTS):
+        head += "\nThe speed on a GPU (`experiments/gpu_check.sh`, on a GPU machine) is not run for this page.\n"
     return "\n".join([head, *sections])
 
 

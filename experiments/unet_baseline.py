@@ -1,6 +1,6 @@
 """Experiment (issue 39, part 3): the free-form learned baseline, a U-Net trained exactly as the gain Normalizer.
 
-Stages, each writing under ``--out`` (default ``runs/unet``):
+Parts (``--part``; default: all, in this order), each writing under ``--out`` (default ``runs/unet``):
 
 * ``unet``: ``alcn train-unet --conf CONF`` (:mod:`alcn_cv.train.unet`: the preset's scenes, draws,
   objective, steps and learning rate, the U-Net instead of Eq. 3) into ``OUT/train``;
@@ -9,31 +9,32 @@ Stages, each writing under ``--out`` (default ``runs/unet``):
 * ``objective``: the training objective (identification, consistency and repeatability) of both
   trained files on ``--draws`` draws (frames and locations, as training draws them) of each training and test
   scene, into ``OUT/objective.json``: how well each fits the training scenes and how much of it holds on new ones;
-* ``bench``: ``alcn bench relight``'s quick protocol (seed 0, 12 frames, 150 patches, 12 pairs, no
-  tuning; identification, ORB/SIFT matching and pose on the test and the training scenes) for the
-  U-Net, the gain file of ``gain`` when there is one, the shipped ALCN (``alcn``) and no normalization,
-  into ``OUT/bench/relight.{md,json,png}``; the JSON is kept as ``docs/reports/relight_unet.json``.
+* ``bench``: ``alcn bench relight``'s quick protocol (seed 0, no tuning; identification, ORB/SIFT matching and
+  pose on the test and the training scenes) for the U-Net, the gain file of ``gain`` when there is one, the shipped
+  ALCN (``alcn``) and no normalization, into ``OUT/bench/relight.{md,json,png}``; the JSON is kept as
+  ``docs/reports/relight_unet.json``.
 
 The preset ``gain`` trains on relit permissive photographs (it trained on the webcam scenes before 2026-11-27,
 when these times were measured). Time on 2 shared cores at
 load 4-9 (2026-11-27): ``unet`` 29 min (300 steps, about 5 s each), ``gain`` 2 min, ``objective`` 7 min,
 ``bench`` 3 to 5 min.
 
-    PYTHONPATH=$PWD nice -n 10 python experiments/unet_baseline.py --conf gain
-    PYTHONPATH=$PWD nice -n 10 python experiments/unet_baseline.py --stages bench   # bench the trained files again
+    python experiments/unet_baseline.py --conf gain
+    python experiments/unet_baseline.py --part bench   # bench the trained files again
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-from _run import RUNS, alcn, command_line, keep
+from _run import RUNS, alcn, command_line, keep, quick_protocol
 
-STAGES = ("unet", "gain", "objective", "bench")
-QUICK = ["--seeds", "0", "--max-frames", "12", "--patches", "150", "--max-pairs", "12", "--no-tune"]
+PARTS = ("unet", "gain", "objective", "bench")
 
 
-def objective(conf: str, unet: Path, gain: Path, draws: int, out: Path) -> dict:
+def objective(conf: str, unet: Path, gain: Path, draws: int, out: Path) -> dict[str, Any]:
     """The mean objective of each file per scene and over the bench's training and test scenes, in ``out``."""
     import numpy as np
     import torch
@@ -48,13 +49,14 @@ def objective(conf: str, unet: Path, gain: Path, draws: int, out: Path) -> dict:
     from alcn_cv.weight_file import load_normalizer_file
 
     cfg = preset(REAL_LIGHT_CONFS, conf)
-    nets = {
+    # each network with its loss: the same objective, the U-Net's taken on the centres of its crops
+    nets: dict[str, tuple[torch.nn.Module, Callable[..., torch.Tensor]]] = {
         "unet": (UNetNormalizer.from_file(load_normalizer_file(unet)), unet_pair_loss),
         "gain": (GainNormalizer.from_file(load_normalizer_file(gain)), pair_loss),
     }
     scenes = load_scenes([shared_root("webcam"), shared_root("psm")])
     groups = {"train": select_scenes(scenes, TRAIN_SCENES), "test": select_scenes(scenes, TEST_SCENES)}
-    result: dict = {"conf": conf, "draws": draws, "scenes": {}}
+    result: dict[str, Any] = {"conf": conf, "draws": draws, "scenes": {}}
     for group, members in groups.items():
         for scene in members:
             ready = training_scene(scene, cfg.crop // 2, cfg.patch)
@@ -79,19 +81,23 @@ def main() -> None:
     parser = command_line(__doc__)
     parser.add_argument("--conf", default="gain", help="the train-real-light preset (default: gain)")
     parser.add_argument("--out", type=Path, default=RUNS / "unet", help="run folder (default: runs/unet)")
-    parser.add_argument("--stages", nargs="+", choices=STAGES, default=list(STAGES))
+    parser.add_argument(
+        "--part", nargs="+", action="extend", choices=PARTS, help="run only these parts (default: all, in turn)"
+    )
     parser.add_argument("--draws", type=int, default=8, help="objective: draws per scene (default 8)")
     args = parser.parse_args()
+    parts = args.part or PARTS
     unet, gain = args.out / "train" / "unet_normalizer.npz", args.out / "gain" / "gain_normalizer.npz"
-    if "unet" in args.stages:
+    if "unet" in parts:
         alcn("train-unet", "--conf", args.conf, "--out", str(unet.parent))
-    if "gain" in args.stages:
+    if "gain" in parts:
         alcn("train-real-light", "--conf", args.conf, "--out", str(gain.parent))
-    if "objective" in args.stages:
+    if "objective" in parts:
         objective(args.conf, unet, gain, args.draws, args.out)
-    if "bench" in args.stages:
+    if "bench" in parts:
         methods = [f"unet:weights={unet}", *([f"alcn:weights={gain}"] if gain.is_file() else []), "alcn", "none"]
-        alcn("bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *QUICK)
+        quick = ["--seeds", "0", *quick_protocol(), "--no-tune"]
+        alcn("bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *quick)
         keep(args.out / "bench" / "relight.json", "relight_unet")
 
 

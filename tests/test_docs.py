@@ -1,6 +1,6 @@
-"""The documentation is rebuilt, not edited: docs/results.md from docs/reports/, no tracked file citing the
-ignored runs/ folder outside experiments/, every path the README and docs/ cite exists in git, and every docstring
-example runs."""
+"""The documentation is rebuilt, not edited: docs/results.md from docs/reports/, docs/figure.png by its script, no
+tracked file citing the ignored runs/ folder outside experiments/, every path the README and docs/ cite exists in git,
+and every docstring example runs."""
 
 from __future__ import annotations
 
@@ -13,8 +13,10 @@ import json
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -39,6 +41,22 @@ def test_results_md_is_what_the_report_script_writes() -> None:
     report = _report_module()
     assert (ROOT / "docs" / "results.md").read_text(encoding="utf-8") == report.build(), (
         "docs/results.md is out of date: run python experiments/report.py"
+    )
+
+
+@pytest.mark.shared_data
+def test_the_readme_figure_is_what_its_script_renders(shared_data: Path, tmp_path: Path) -> None:
+    """docs/figure.png went stale when ALCN's output changed: a fresh render (a second) must match it, up to one gray
+    level (the float rounding of another CPU)."""
+    import cv2
+
+    out = tmp_path / "figure.png"
+    script = ROOT / "experiments" / "figure.py"
+    proc = subprocess.run([sys.executable, str(script), "--out", str(out)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    fresh, published = (cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in (out, ROOT / "docs" / "figure.png"))
+    assert fresh.shape == published.shape and np.abs(fresh.astype(int) - published).max() <= 1, (
+        "docs/figure.png is out of date: run python experiments/figure.py --publish"
     )
 
 

@@ -60,7 +60,7 @@ def test_an_example_given_bad_input_ends_in_one_line(tmp_path, script, args, cod
 def test_the_gpu_check_rehearses_on_the_cpu(tmp_path):
     """experiments/gpu_check.sh with DEVICE=cpu: the script a short GPU slot runs, end to end, so that the slot is
     not spent on a fault of the script (its CUDA tests skip here; the bench measures the CPU's batched path)."""
-    env = {**os.environ, "DEVICE": "cpu", "OUT": str(tmp_path), "PYTHON": sys.executable}
+    env = {**os.environ, "DEVICE": "cpu", "GPU_CHECK_OUT": str(tmp_path), "PYTHON": sys.executable}
     proc = subprocess.run(
         ["bash", str(ROOT / "experiments" / "gpu_check.sh")], capture_output=True, text=True, timeout=300, env=env
     )

@@ -179,8 +179,9 @@ class Normalizer(nn.Module):
             raise WeightFileError(f"weights do not fit the Normalizer they describe: {exc}") from None
         return net.eval()
 
-    def state_arrays(self) -> dict[str, np.ndarray]:
-        """The parameters as float32 arrays, for :func:`alcn_cv.weight_file.save_normalizer_file`."""
+    def state_arrays(self: nn.Module) -> dict[str, np.ndarray]:
+        """The parameters as float32 arrays, for :func:`alcn_cv.weight_file.save_normalizer_file` (typed on any
+        module: the other Normalizers borrow it)."""
         return {k: v.detach().cpu().numpy().astype(np.float32) for k, v in self.state_dict().items()}
 
     def extra_repr(self) -> str:
