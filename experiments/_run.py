@@ -155,15 +155,11 @@ def quick_protocol() -> list[str]:
 def untrained_start(trained: str | Path, path: str | Path, description: str) -> Path:
     """The untrained start of a trained gain weight file: the network its recipe builds (the same arguments and
     seed) before any step, saved to ``path``."""
-    import torch
-
-    from alcn_cv.nets.gain import GainNormalizer
+    from alcn_cv.train.real_light import initial_network
     from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
-    # as alcn_cv.train.real_light starts a run (seed, then network): it saves no step 0, and no library call makes it
     config = load_normalizer_file(trained).meta["training"]["config"]
-    torch.manual_seed(config["seed"])
-    net = GainNormalizer(**config["net"])
+    net = initial_network(config["seed"], config["net"])
     return save_normalizer_file(path, net.state_arrays(), net.file_meta(trained=False, description=description))
 
 

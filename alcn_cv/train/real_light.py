@@ -72,6 +72,7 @@ __all__ = [
     "fit",
     "anywhere_locations",
     "identification_loss",
+    "initial_network",
     "harris_response",
     "objective",
     "pair_loss",
@@ -457,10 +458,18 @@ def training_run(cfg: RealLightConfig, out: str | Path, resume: bool = False) ->
         yield folder
 
 
+def initial_network(seed: int, net: dict[str, Any]) -> GainNormalizer:
+    """The network a run of ``seed`` starts from, before any step (a run saves no step 0): a
+    :class:`~alcn_cv.nets.gain.GainNormalizer` of the arguments ``net`` (``RealLightConfig.net``), its weights drawn
+    after ``torch.manual_seed(seed)``, as :func:`train_real_light` draws them. The untrained start of a shipped
+    file: ``initial_network(**{k: meta["training"]["config"][k] for k in ("seed", "net")})``."""
+    torch.manual_seed(seed)
+    return GainNormalizer(**net)
+
+
 def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any], progress: bool, resume: bool = False) -> Path:
     rng = np.random.default_rng(cfg.seed)
-    torch.manual_seed(cfg.seed)
-    net = GainNormalizer(**cfg.net)
+    net = initial_network(cfg.seed, cfg.net)
     start = load_checkpoint(out / "checkpoint.pt", cfg) if resume else None
     if start is not None:
         logger.info("resuming from step %d of %d", start["step"], cfg.steps)
