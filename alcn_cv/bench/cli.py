@@ -359,14 +359,17 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--train-scenes",
         nargs="+",
-        default=list(scenes.TRAIN_SCENES),
-        help=f"scenes or data sets to tune on (default: {' '.join(scenes.TRAIN_SCENES)})",
+        default=None,
+        help="scenes or data sets to tune on, evaluated too (default: "
+        f"{' '.join(scenes.TRAIN_SCENES)} when tuning, looked up in --data, or with neither --data nor --test-scenes; "
+        "else none: with --no-tune only the test scenes are evaluated)",
     )
     p.add_argument(
         "--test-scenes",
         nargs="+",
-        default=list(scenes.TEST_SCENES),
-        help=f"scenes or data sets evaluated only (default: {' '.join(scenes.TEST_SCENES)})",
+        default=None,
+        help=f"scenes or data sets evaluated only (default: {' '.join(scenes.TEST_SCENES)}; with --data, every scene "
+        "of it that is not a training scene)",
     )
     p.add_argument(
         "--leave-one-out",

@@ -29,6 +29,17 @@ training scenes only, each over a grid of the same size (:data:`TUNING_GRIDS`), 
 identification on a subsample; the report holds both the default and the tuned rows. With
 ``leave_one_out``, each scene is evaluated with the parameters tuned on the others.
 
+The split (:func:`split_scenes`): without ``data`` and without ``test_scenes``, the published one
+(:data:`~alcn_cv.data.scenes.TEST_SCENES` evaluated, :data:`~alcn_cv.data.scenes.TRAIN_SCENES` tuned on and
+evaluated too, tuned or not). Tuning needs training scenes: the default ones, looked up in ``data``, unless
+``train_scenes`` names others. Without tuning, training scenes are optional: none unless named when ``data`` or
+``test_scenes`` is given, so only the test scenes are evaluated (``data`` without ``test_scenes``: every scene of
+``data``).
+
+A method whose weight file records training scenes (``training.config.scenes`` and ``rendered``,
+``distillation.settings.scenes``) among the test scenes of the run is scored there all the same, with a warning;
+its row records them (``trained_on`` and ``note``, "trained on: mexico").
+
 A spec ending in ``+lstd`` (``dog+lstd``) is the method followed by a per-pixel local
 standardization (:class:`LocallyStandardized`, the detection benchmark's
 :func:`~alcn_cv.bench.policies.local_standardize`).
@@ -38,6 +49,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import time
 import zlib
 from collections.abc import Callable, Sequence
@@ -57,8 +69,9 @@ from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import make_folder
+from alcn_cv.io import IMAGE_SUFFIXES, make_folder
 from alcn_cv.report import machine
+from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -77,6 +90,8 @@ __all__ = [
     "one_to_one_matches",
     "patch_locations",
     "plan_pairs",
+    "split_scenes",
+    "trained_scenes",
     "tune",
 ]
 
@@ -428,11 +443,107 @@ def tune(
 # The benchmark
 
 
-def _check_methods(methods: Sequence[str]) -> None:
-    for spec in methods:
-        build_method(spec)  # raises InputError on an unknown name or bad parameters
+def _check_methods(methods: Sequence[str]) -> dict[str, set[str]]:
+    """Build every method (raising :class:`InputError` on an unknown name or bad parameters); each spec's
+    :func:`trained_scenes`."""
     if len(set(methods)) != len(methods):
         raise InputError("a method is listed twice")
+    return {spec: trained_scenes(spec, build_method(spec)) for spec in methods}
+
+
+_INDEXED_NAME = re.compile(r"^(?P<name>.+)\.\d+$")
+
+
+def _scene_names(entry: str) -> set[str]:
+    """The names of the scenes a trainer's scene entry (a folder, or the name of a shared ``webcam`` scene) stands
+    for, as :func:`~alcn_cv.data.scenes.load_scene_folder` names them (read from file names, no image is read):
+    the entry's last part, and where it is a folder here, the scenes in it and in its sub-folders."""
+    path = Path(entry).expanduser()
+    names = {path.name}
+    if path.is_dir():
+        for folder in [path, *(p for p in path.iterdir() if p.is_dir() and not p.name.startswith("."))]:
+            for file in folder.iterdir():
+                if file.suffix.lower() in IMAGE_SUFFIXES and not file.stem.lower().endswith(".mask"):
+                    m = _INDEXED_NAME.match(file.stem)
+                    names.add(m.group("name") if m else folder.name)
+    return names
+
+
+def trained_scenes(spec: str, norm: Normalization | None = None) -> set[str]:
+    """The registered scenes the weight file of ``spec`` (``alcn:weights=PATH``, ``unet:weights=PATH``, a shipped
+    ALCN model) was trained on, by scene name: its header's ``training.config.scenes`` and ``rendered`` (folders or
+    shared ``webcam`` scene names, :func:`_scene_names`) and ``distillation.settings.scenes``; empty for a method
+    without a weight file, or one that records none."""
+    norm = build_method(spec) if norm is None else norm
+    inner = norm.inner if isinstance(norm, LocallyStandardized) else norm
+    path = getattr(inner, "weights_path", None)
+    if path is None:
+        base = spec[: -len(LSTD)] if spec.endswith(LSTD) else spec
+        path = parse_spec(base)[1].get("weights")
+    if path is None:
+        return set()
+    meta = load_normalizer_file(str(path)).meta
+
+    def strings(value: Any) -> list[str]:
+        return [v for v in value if isinstance(v, str)] if isinstance(value, list) else []
+
+    config = (meta.get("training") or {}).get("config") or {}
+    entries = strings(config.get("scenes")) + strings(config.get("rendered"))
+    names = {n for e in entries for n in _scene_names(e)}
+    return names | set(strings(((meta.get("distillation") or {}).get("settings") or {}).get("scenes")))
+
+
+def split_scenes(
+    scenes: Sequence[Scene],
+    train_scenes: Sequence[str] | None,
+    test_scenes: Sequence[str] | None,
+    tuned: Sequence[str],
+    roots: Sequence[Path] | None,
+) -> tuple[list[Scene], list[Scene]]:
+    """The training and test scenes of a train/test run (see the module docstring).
+
+    Args:
+        scenes: every scene read.
+        train_scenes, test_scenes: scene or data-set names; None: the default.
+        tuned: the methods to tune (training scenes needed).
+        roots: the folders given (``data``); None: the shared data's default.
+
+    Raises:
+        InputError: a name matches no scene; tuning without training scenes (naming the default ones looked for);
+            a scene both a training and a test scene while tuning; no test scene.
+    """
+    if train_scenes is None:
+        if tuned or (roots is None and test_scenes is None):  # the published split, tuned or not
+            missing = [n for n in TRAIN_SCENES if not any(n in (s.name, s.group) for s in scenes)]
+            if tuned and missing:
+                where = ", ".join(str(r) for r in roots) if roots is not None else "the shared data"
+                raise InputError(
+                    f"tuning ({', '.join(tuned)}) needs training scenes: looked for the default "
+                    f"{', '.join(TRAIN_SCENES)} in {where}, {', '.join(missing)} not found; give --train-scenes "
+                    "(train_scenes), or --no-tune (tuning=False) to evaluate the test scenes only"
+                )
+            train_scenes = TRAIN_SCENES
+        else:
+            train_scenes = ()
+    train = select_scenes(scenes, train_scenes)
+    if test_scenes is not None:
+        test = select_scenes(scenes, test_scenes)
+    elif roots is None:
+        test = select_scenes(scenes, TEST_SCENES)
+    else:
+        test = [s for s in scenes if all(s is not t for t in train)]
+    both = [s.name for s in train if any(s is t for t in test)]
+    if both and tuned:
+        raise InputError(
+            f"{', '.join(both)}: both a training and a test scene; tuning on a test scene would score the tuned "
+            "methods on their own tuning data (give other --train-scenes, or --no-tune to evaluate it as a test scene)"
+        )
+    if both:  # no tuning: a training scene is only evaluated, as a test scene it is evaluated once
+        logger.info("%s: a test scene, not also a training scene (no tuning)", ", ".join(both))
+        train = [s for s in train if s.name not in both]
+    if not test:
+        raise InputError("no test scene: every scene is a training scene; give --test-scenes (test_scenes)")
+    return train, test
 
 
 def _summary(values: Sequence[float]) -> dict[str, Any]:
@@ -443,8 +554,8 @@ def main(
     out_dir: str | os.PathLike,
     data: Sequence[str | os.PathLike] | None = None,
     methods: Sequence[str] = DEFAULT_METHODS,
-    train_scenes: Sequence[str] = TRAIN_SCENES,
-    test_scenes: Sequence[str] = TEST_SCENES,
+    train_scenes: Sequence[str] | None = None,
+    test_scenes: Sequence[str] | None = None,
     leave_one_out: Sequence[str] | None = None,
     seeds: Sequence[int] = DEFAULT_SEEDS,
     settings: Settings = Settings(),
@@ -461,8 +572,11 @@ def main(
         data: folders of registered multi-light scenes (default: the shared ``webcam`` and ``psm``).
         methods: specs ``NAME[:KEY=VALUE...]`` (:func:`~alcn_cv.enhance.registry.from_spec`),
             optionally ending in ``+lstd`` (:class:`LocallyStandardized`).
-        train_scenes: scenes (or data-set names) the parameters are tuned on.
-        test_scenes: scenes (or data-set names) evaluated only.
+        train_scenes: scenes (or data-set names) the parameters are tuned on, evaluated too; None: the default
+            (:func:`split_scenes`: :data:`~alcn_cv.data.scenes.TRAIN_SCENES` when tuning or when neither ``data``
+            nor ``test_scenes`` is given, else none).
+        test_scenes: scenes (or data-set names) evaluated only; None: :data:`~alcn_cv.data.scenes.TEST_SCENES`,
+            or with ``data`` every scene of it that is not a training scene.
         leave_one_out: if given, ignore the split: each of these scenes is evaluated with the
             parameters tuned on the others.
         seeds: one run per seed (gallery frames, patch locations and pairs change); the report
@@ -480,10 +594,11 @@ def main(
     start = time.perf_counter()
     settings = settings.check()
     methods = list(methods)
-    _check_methods(methods)
+    trained_on = _check_methods(methods)
     seeds = check_seeds(seeds)
     roots = [Path(p) for p in data] if data else [shared_root("webcam"), shared_root("psm")]
     scenes = load_scenes(roots, max_frames)
+    tuned = [m for m in methods if m in TUNING_GRIDS] if tuning else []
     if leave_one_out is not None:
         evaluated = select_scenes(scenes, leave_one_out or DEFAULT_LEAVE_ONE_OUT)
         if len(evaluated) < 2:
@@ -491,14 +606,20 @@ def main(
         folds = {s.name: [o for o in evaluated if o is not s] for s in evaluated}
         test, train = evaluated, []
     else:
-        train, test = select_scenes(scenes, train_scenes), select_scenes(scenes, test_scenes)
-        if {s.name for s in train} & {s.name for s in test}:
-            raise InputError("a scene is both a training and a test scene")
+        train, test = split_scenes(scenes, train_scenes, test_scenes, tuned, None if not data else roots)
         evaluated = test + train
         folds = {"all": train}
-    tuned = [m for m in methods if m in TUNING_GRIDS] if tuning else []
     if tuned and not all(folds.values()):
-        raise InputError("tuning needs training scenes (or --no-tune)")
+        raise InputError("tuning needs training scenes: none given (give --train-scenes, or --no-tune)")
+    leaks = {spec: sorted(names & {s.name for s in test}) for spec, names in trained_on.items()}
+    leaks = {spec: names for spec, names in leaks.items() if names}
+    for spec, names in leaks.items():
+        logger.warning(
+            "%s was trained on the test scene(s) %s (its weight file's training scenes): its scores there are not "
+            "held out",
+            spec,
+            ", ".join(names),
+        )
     make_folder(out_dir)  # before the benchmark, not after it
 
     bar = tqdm(
@@ -543,6 +664,9 @@ def main(
             entry["backend"] = ran_on[0]  # the specs of a row differ in parameters only, not in backend
         if errors:
             entry["errors"] = errors
+        if label in leaks:
+            entry["trained_on"] = leaks[label]  # test scenes its weights were trained on
+            entry["note"] = f"trained on: {', '.join(leaks[label])}"
         ok = {n: r for n, r in per_scene.items() if "error" not in r}
         entry["scenes"] = {
             n: {"ms_per_frame": r["ms_per_frame"], **{m: _summary(v) for m, v in r["metrics"].items()}}

@@ -36,6 +36,11 @@ def _cell(summary: dict[str, Any] | None) -> str | None:
     return None if summary is None else spread_cell(summary, 1, runs=len(summary["seeds"]))
 
 
+def _label(label: str, r: dict[str, Any]) -> str:
+    """A method's row label, with its note (weights trained on a test scene of the run) when it has one."""
+    return f"{label} ({r['note']})" if r.get("note") else label
+
+
 def _metrics(result: dict[str, Any]) -> list[str]:
     return [m for m in _TITLES if any(m in s for r in result["methods"].values() for s in r["scenes"].values())]
 
@@ -45,9 +50,8 @@ def _summary_table(result: dict[str, Any], metrics: list[str]) -> str:
     for label, r in result["methods"].items():
         test = r.get("mean_test", {})
         ms = [s["ms_per_frame"] for n, s in r["scenes"].items() if n in result["split"]["test"]]
-        rows.append(
-            [label] + [_cell(test.get(m)) for m in metrics] + [f"{np.mean(ms):.1f}" if ms else None, r.get("backend")]
-        )
+        cells = [_cell(test.get(m)) for m in metrics]
+        rows.append([_label(label, r), *cells, f"{np.mean(ms):.1f}" if ms else None, r.get("backend")])
     return markdown_table(["method"] + [_SHORT[m] for m in metrics] + ["ms/frame", "backend"], rows)
 
 
@@ -58,9 +62,8 @@ def _metric_table(result: dict[str, Any], metric: str) -> str:
     rows = []
     for label, r in result["methods"].items():
         scenes = r["scenes"]
-        row = (
-            [label] + [_cell(scenes.get(n, {}).get(metric)) for n in test] + [_cell(r.get("mean_test", {}).get(metric))]
-        )
+        row = [_label(label, r)] + [_cell(scenes.get(n, {}).get(metric)) for n in test]
+        row.append(_cell(r.get("mean_test", {}).get(metric)))
         if train:
             row += [_cell(scenes.get(n, {}).get(metric)) for n in train] + [_cell(r.get("mean_train", {}).get(metric))]
         rows.append(row)

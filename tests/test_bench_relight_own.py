@@ -1,0 +1,136 @@
+"""``alcn bench relight`` on a user's own scenes: the split's defaults, and weights trained on a test scene."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.bench import relight
+from alcn_cv.cli import main as cli_main
+from alcn_cv.errors import InputError
+from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
+from scene_sets import texture
+
+TINY = relight.Settings(patch=16, patches=20, gallery=1, max_pairs=2, keypoint_protocols=False)
+TINY_FLAGS = ["--patch", "16", "--patches", "20", "--gallery", "1", "--max-pairs", "2", "--no-keypoints"]
+GAIN_WEIGHTS = Path(relight.__file__).parents[1] / "weights" / "alcn_normalizer_gain.npz"
+
+
+def own_scenes(root: Path, names: tuple[str, ...] = ("one", "two", "three")) -> Path:
+    """Under ``root``: one registered scene per name, 3 frames of 48x64, one texture under 3 gains."""
+    for seed, name in enumerate(names):
+        (root / name).mkdir(parents=True)
+        base = 0.15 + 0.8 * texture(48, 64, seed=seed)
+        for i, gain in enumerate((1.0, 0.5, 0.25)):
+            cv2.imwrite(str(root / name / f"frame_{i}.png"), np.rint(base * gain * 255).astype(np.uint8))
+    return root
+
+
+def bench(tmp_path: Path, *args: str) -> dict:
+    out = tmp_path / "out"
+    assert cli_main(["bench", "relight", "--out", str(out), "--seeds", "0", "--no-progress", *TINY_FLAGS, *args]) == 0
+    return json.loads((out / "relight.json").read_text())
+
+
+def test_own_scenes_without_tuning_need_no_training_scenes(tmp_path):
+    """The default training scenes were looked up in the user's --data: "no scene or data set 'courbevoie'"."""
+    data = own_scenes(tmp_path / "mine")
+    saved = bench(tmp_path, "--data", str(data), "--test-scenes", "three", "--no-tune", "--methods", "none")
+    assert saved["split"] == {"mode": "train/test", "train": [], "test": ["three"]}
+    assert list(saved["scenes"]) == ["three"] and set(saved["methods"]["none"]["scenes"]) == {"three"}
+    # --data without --test-scenes: every scene of it
+    saved = bench(tmp_path, "--data", str(data), "--no-tune", "--methods", "none")
+    assert saved["split"]["test"] == ["one", "three", "two"] and saved["split"]["train"] == []
+    # a training scene named without tuning is evaluated; named as a test scene too, once, as a test scene
+    saved = bench(tmp_path, "--data", str(data), "--test-scenes", "three", "--train-scenes", "one", "--no-tune")
+    assert saved["split"]["train"] == ["one"] and "mean_train" in saved["methods"]["none"]
+    saved = bench(tmp_path, "--data", str(data), "--test-scenes", "three", "--train-scenes", "three", "--no-tune")
+    assert saved["split"] == {"mode": "train/test", "train": [], "test": ["three"]}
+
+
+def test_tuning_without_training_scenes_is_one_clear_line(tmp_path, capsys):
+    data = own_scenes(tmp_path / "mine")
+    args = ["bench", "relight", "--out", str(tmp_path / "out"), "--data", str(data), "--test-scenes", "three"]
+    assert cli_main([*args, "--methods", "none,dog", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "tuning (dog) needs training scenes" in err and "courbevoie, frankfurt, panorama" in err
+    assert str(data) in err and "--train-scenes" in err and "--no-tune" in err
+    # tuning on a test scene: refused, the scene named
+    with pytest.raises(InputError, match="three: both a training and a test scene; tuning on a test scene"):
+        relight.main(tmp_path / "o", [data], ["dog"], ["three"], ["three"], seeds=[0], settings=TINY, progress=False)
+    # training scenes named: tuned on them, as before
+    result = relight.main(
+        tmp_path / "o", [data], ["dog"], ["one"], ["three"], seeds=[0], settings=TINY, tune_frames=3, progress=False
+    )
+    assert result["split"]["train"] == ["one"] and "dog (tuned)" in result["methods"]
+
+
+def test_the_shared_default_split_is_kept_and_test_scenes_alone_are_alone(tmp_path, monkeypatch):
+    """Without --data: the published split (also with --no-tune); --test-scenes alone evaluated only those."""
+    shared = tmp_path / "shared"
+    own_scenes(shared / "webcam", ("courbevoie", "frankfurt", "panorama", "mexico"))
+    own_scenes(shared / "psm", ("ball",))
+    monkeypatch.setattr(relight, "shared_root", lambda name: shared / name)
+    split = bench(tmp_path, "--no-tune", "--methods", "none")["split"]
+    assert split == {"mode": "train/test", "train": ["courbevoie", "frankfurt", "panorama"], "test": ["mexico", "ball"]}
+    saved = bench(tmp_path, "--test-scenes", "mexico", "--no-tune", "--methods", "none")
+    assert saved["split"]["train"] == [] and list(saved["scenes"]) == ["mexico"]
+    # tuning: on the default training scenes, evaluated too, as before
+    split = bench(tmp_path, "--test-scenes", "mexico", "--methods", "none,dog", "--tune-frames", "3")["split"]
+    assert split["train"] == ["courbevoie", "frankfurt", "panorama"] and split["test"] == ["mexico"]
+
+
+def weights_trained_on(path: Path, **records: list[str]) -> str:
+    """A copy of the shipped gain weights whose header records ``training.config`` (``scenes``, ``rendered``) or
+    ``distillation.settings`` (``distilled``) scenes."""
+    shipped = load_normalizer_file(GAIN_WEIGHTS)
+    meta = json.loads(json.dumps(shipped.meta))
+    meta["training"]["config"].update({k: v for k, v in records.items() if k != "distilled"})
+    if "distilled" in records:
+        meta["distillation"] = {"settings": {"scenes": records["distilled"]}}
+    return f"alcn:weights={save_normalizer_file(path, shipped.arrays, meta)}"
+
+
+@pytest.mark.filterwarnings("ignore:Tight layout not applied")  # the figure's labels: long weight paths
+@pytest.mark.parametrize("record", ["name", "folder", "distilled"])
+def test_weights_trained_on_a_test_scene_are_flagged(tmp_path, caplog, record):
+    data = own_scenes(tmp_path / "mine")
+    recorded = {
+        "name": {"scenes": ["one", "three"]},
+        "folder": {"scenes": [str(data / "three")]},
+        "distilled": {"distilled": ["three"]},
+    }[record]
+    leaky = weights_trained_on(tmp_path / "leaky.npz", **recorded)
+    clean = weights_trained_on(tmp_path / "clean.npz", scenes=["one"])
+    with caplog.at_level(logging.WARNING, logger="alcn_cv.bench.relight"):
+        result = relight.main(
+            tmp_path / "out",
+            [data],
+            ["none", leaky, clean],
+            train_scenes=["one"],  # evaluated too: weights trained on a training scene are not flagged
+            test_scenes=["three"],
+            seeds=[0],
+            settings=TINY,
+            tuning=False,
+            progress=False,
+        )
+    saved = json.loads((tmp_path / "out" / "relight.json").read_text())
+    row = saved["methods"][leaky]
+    assert row["trained_on"] == ["three"] and row["note"] == "trained on: three"
+    assert "three" in row["scenes"] and result["methods"][leaky]["note"] == "trained on: three"
+    assert "note" not in saved["methods"][clean] and "note" not in saved["methods"]["none"]
+    assert f"| {leaky} (trained on: three) |" in (tmp_path / "out" / "relight.md").read_text()
+    warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert any(leaky in m and "trained on the test scene(s) three" in m for m in warned)
+    assert not any(clean in m for m in warned)
+
+
+def test_the_shipped_weights_record_no_test_scene():
+    for spec in ("alcn", "alcn:model=lite", "alcn:model=paper", "none"):
+        assert relight.trained_scenes(spec) & {"mexico", "buddha", "cat", "horse", "owl"} == set()
