@@ -92,11 +92,13 @@ def load_normalizer_file(path: str | Path | None = None) -> NormalizerFile:
     """Read and check a weight file (default: :data:`DEFAULT_WEIGHTS`).
 
     Raises:
-        WeightFileError: missing, empty, not a ``.npz`` archive, corrupt, of another format or of
-            an incompatible version, a header field missing or out of range (a sigma or the working scale
-            not positive, an empty output range), or holding NaN or infinite weights.
+        WeightFileError: missing, a folder (the weight file in it named), empty, not a ``.npz`` archive, corrupt,
+            of another format or of an incompatible version, a header field missing or out of range (a sigma or the
+            working scale not positive, an empty output range), or holding NaN or infinite weights.
     """
     path = DEFAULT_WEIGHTS if path is None else Path(path)
+    if path.is_dir():
+        raise WeightFileError(_folder_message(path))
     if not path.is_file():
         raise WeightFileError(f"weight file not found: {path}")
     if path.stat().st_size == 0:
@@ -121,6 +123,23 @@ def load_normalizer_file(path: str | Path | None = None) -> NormalizerFile:
     _check_meta(meta, path)
     _check_arrays(arrays, path)
     return NormalizerFile(arrays=arrays, meta=meta)
+
+
+#: The weight files a training run writes into its folder, by command.
+_RUN_WEIGHTS = ("gain_normalizer.npz", "alcn_normalizer.npz", "unet_normalizer.npz")
+
+
+def _folder_message(folder: Path) -> str:
+    """Why a folder is no weight file, and the file in it meant: a training run's final weights, or its one ``.npz``."""
+    files = sorted(folder.glob("*.npz"))
+    meant = next((folder / n for n in _RUN_WEIGHTS if (folder / n).is_file()), files[0] if len(files) == 1 else None)
+    if meant is not None:
+        return f"{folder} is a folder, not a weight file; did you mean {meant}?"
+    return f"{folder} is a folder, not a weight file (.npz)" + (
+        f"; it holds {len(files)}: {', '.join(p.name for p in files[:5])}{', ...' if len(files) > 5 else ''}"
+        if files
+        else ""
+    )
 
 
 def _check_arrays(arrays: dict[str, np.ndarray], path: Path) -> None:

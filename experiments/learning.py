@@ -29,7 +29,7 @@ def main() -> None:
     untrained = untrained_start(MODELS["gain"], out / "untrained.npz", "the default's start")
     webcam = out / "webcam"
     scenes = "scenes=['courbevoie','frankfurt','panorama']"
-    alcn("train-real-light", "--conf", "gain", "--set", scenes, "--set", "relit=0", "--out", str(webcam))
+    alcn("train-real-light", "--conf", "gain", "--set", scenes, "--set", "relit=0", "--out", str(webcam), "--overwrite")
     methods = [*BASELINES, "alcn", f"alcn:weights={untrained}", f"alcn:weights={webcam / 'gain_normalizer.npz'}"]
     bench = out / "bench"
     seeds = [str(seed) for seed in args.seeds]

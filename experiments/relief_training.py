@@ -119,7 +119,15 @@ def main() -> None:
             if path.exists():
                 continue
             overrides = [f"rendered=[{json.dumps(str(scenes))}]"] + [f"{k}={v}" for k, v in settings.items()]
-            alcn("train-real-light", "--conf", "gain", "--out", str(path.parent), *(f"--set={o}" for o in overrides))
+            alcn(
+                "train-real-light",
+                "--conf",
+                "gain",
+                "--out",
+                str(path.parent),
+                "--overwrite",
+                *(f"--set={o}" for o in overrides),
+            )
     specs = {"shipped (trained without rendered scenes)": "alcn"} | {
         name: f"alcn:weights={p}" for name, p in trained.items()
     }

@@ -89,9 +89,9 @@ def main() -> None:
     parts = args.part or PARTS
     unet, gain = args.out / "train" / "unet_normalizer.npz", args.out / "gain" / "gain_normalizer.npz"
     if "unet" in parts:
-        alcn("train-unet", "--conf", args.conf, "--out", str(unet.parent))
+        alcn("train-unet", "--conf", args.conf, "--out", str(unet.parent), "--overwrite")
     if "gain" in parts:
-        alcn("train-real-light", "--conf", args.conf, "--out", str(gain.parent))
+        alcn("train-real-light", "--conf", args.conf, "--out", str(gain.parent), "--overwrite")
     if "objective" in parts:
         objective(args.conf, unet, gain, args.draws, args.out)
     if "bench" in parts:

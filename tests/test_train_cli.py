@@ -79,7 +79,8 @@ def test_export(tmp_path, capsys):
     out = tmp_path / "n.onnx"
     assert main(["export", "--onnx", str(out), "--weights", str(MODELS["paper"])]) == 0
     assert OpenCVNormalizer(out).dense_grid(np.zeros((9, 9), np.float32)).shape == (10, 3, 3)
-    assert main(["export", "--onnx", str(out)]) == 0  # the default model's: the gain Normalizer, its 2 maps
+    assert main(["export", "--onnx", str(out)]) == 2  # exists
+    assert main(["export", "--onnx", str(out), "--overwrite"]) == 0  # the default model's: the gain Normalizer, 2 maps
     shutil.copy(MODELS["gain"], out.with_suffix(".npz"))  # its features' settings, read beside the export
     assert OpenCVNormalizer(out).dense_grid(np.zeros((17, 17), np.float32)).shape == (2, 3, 3)
     assert main(["export", "--onnx", str(tmp_path / "n.txt")]) == 2

@@ -122,21 +122,18 @@ def test_pair_loss_adds_the_weighted_repeatability(tmp_path):
 
 
 def test_training_scenes_add_the_relit_photographs(tmp_path, monkeypatch):
-    from alcn_cv.data.scenes import Scene
+    from alcn_cv.data.permissive_images import Photograph, relit_scenes
     from alcn_cv.train import real_light
 
-    texture = np.random.default_rng(0).integers(0, 256, (4, 150, 170), dtype=np.uint8)
-    drawn = []
-
-    def relit(frames, seed, light, jitter):
-        drawn.append((frames, seed, light, jitter))
-        return [Scene("00_photo", "relit", texture[:frames], tuple(f"{i}.png" for i in range(frames)))]
-
-    monkeypatch.setattr(real_light, "relit_permissive_scenes", relit)
-    cfg = RealLightConfig(scenes=[str(_write_scene(tmp_path / "s"))], relit=3, light="hard", jitter=1.0, seed=7)
+    photo = Photograph("photo", np.random.default_rng(0).integers(0, 256, (170, 180), dtype=np.uint8), "CC0", "test")
+    monkeypatch.setattr(real_light, "training_photographs", lambda shared: [photo])
+    scene_dir = _write_scene(tmp_path / "s", h=160, w=170)  # at least the crop (160) on a side
+    cfg = RealLightConfig(scenes=[str(scene_dir)], relit=3, light="hard", jitter=1.0, seed=7)
     scenes, rendered = training_scenes(cfg)
     assert [s.name for s in scenes] == ["s", "00_photo"] and rendered == []
-    assert drawn == [(3, 7, "hard", 1.0)] and scenes[1].frames.shape == (3, 150 + 160, 170 + 160)  # padded by crop // 2
+    assert scenes[1].frames.shape == (3, 170 + 160, 180 + 160)  # padded by crop // 2
+    (expected,) = relit_scenes([photo], 3, 7, "hard", 1.0)
+    np.testing.assert_array_equal(scenes[1].frames[:, 80:-80, 80:-80], expected.unit_frames())
 
     scene = training_scene(load_scene_folder(_write_scene(tmp_path / "scene"))[0], CROP // 2, PATCH)
     centres = anywhere_locations(scene, 500, np.random.default_rng(0))
@@ -222,9 +219,17 @@ def test_cli_runs_the_preset_with_its_settings(tmp_path, monkeypatch):
         "--seed",
         "3",
     ]
-    assert record == {"conf": "gain", "command": shlex.join(words), "progress": True, "resume": False}
+    assert record == {
+        "conf": "gain",
+        "command": shlex.join(words),
+        "progress": True,
+        "resume": False,
+        "overwrite": False,
+    }
     assert main([*common, "--no-progress"]) == 0 and runs[-1][1]["progress"] is False
-    assert main([*common, "--resume"]) == 0 and runs[-1][1]["resume"] is True
+    # (--resume without --conf takes the checkpoint's settings: tests/test_train_real_light_run.py)
+    assert main([*common, "--resume", "--conf", "gain"]) == 0 and runs[-1][1]["resume"] is True
+    assert main([*common, "--overwrite"]) == 0 and runs[-1][1]["overwrite"] is True
 
 
 def _tiny(scene_dir, **changes) -> RealLightConfig:

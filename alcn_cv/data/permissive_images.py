@@ -14,10 +14,15 @@ Three sources, each photograph with its licence:
 
 The ``webcam`` frames (academic research only) and the other shared sets are not listed: they
 are validation data, not training data of a default that anyone may use.
+
+Your own photographs (:func:`folder_photographs`, ``alcn train-real-light --set photos=[...]``) are relit the
+same way; their terms are yours.
 """
 
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,17 +30,20 @@ import cv2
 import numpy as np
 
 from alcn_cv.data.light_changes import LIGHTS, relit_frames
-from alcn_cv.data.scenes import Scene
+from alcn_cv.data.scenes import Scene, read_eight_bits
 from alcn_cv.data.textures import SKIMAGE_PHOTOGRAPHS, skimage_photograph
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import VideoReader, read_image, to_gray
+from alcn_cv.io import IMAGE_SUFFIXES, VideoReader, list_images, read_image, to_gray
 from alcn_cv.shared_data import shared_data_dir
 
 __all__ = [
     "PERMISSIVE_LICENCES",
     "SHARED_PHOTOGRAPHS",
+    "USER_LICENCE",
     "Photograph",
+    "folder_photographs",
     "permissive_photographs",
+    "photo_files",
     "relit_permissive_scenes",
     "relit_scenes",
     "rendered_photographs",
@@ -46,6 +54,9 @@ __all__ = [
 
 #: The licences a training photograph of the default may carry.
 PERMISSIVE_LICENCES = ("public domain", "CC0", "no known copyright restrictions", "Apache-2.0", "rendered by alcn-cv")
+
+#: The licence recorded for the photographs of :func:`folder_photographs`: the user's own terms.
+USER_LICENCE = "the user's"
 
 #: Files under the shared data (glob patterns) -> licence: OpenCV's samples.
 SHARED_PHOTOGRAPHS: dict[str, str] = {
@@ -58,7 +69,7 @@ SHARED_PHOTOGRAPHS: dict[str, str] = {
 @dataclass(frozen=True)
 class Photograph:
     """A training photograph: ``image`` uint8 grayscale ``HxW`` or BGR ``HxWx3``, its licence
-    (one of :data:`PERMISSIVE_LICENCES`) and where it comes from."""
+    (one of :data:`PERMISSIVE_LICENCES`, or :data:`USER_LICENCE` for the user's) and where it comes from."""
 
     name: str
     image: np.ndarray
@@ -118,6 +129,56 @@ def shared_photographs(root: str | Path, video_frames: int = 8, max_side: int | 
                 photos.append(Photograph(rel, _fit(read_image(path), max_side), licence, rel))
     if not photos:
         raise DatasetError(f"{root}: none of {', '.join(SHARED_PHOTOGRAPHS)} found")
+    return photos
+
+
+def photo_files(folders: Sequence[str | os.PathLike]) -> list[Path]:
+    """The images directly in each of ``folders`` (:data:`~alcn_cv.io.IMAGE_SUFFIXES`, hidden files skipped), folder
+    by folder in name order; ``~`` is expanded and a relative folder is taken from the working folder. Lists the
+    folders only (what a configuration's check can afford).
+
+    Raises:
+        InputError: a folder is missing or holds no image (one line naming it).
+    """
+    files = []
+    for given in folders:
+        folder = Path(given).expanduser()
+        if not folder.is_dir():
+            raise InputError(f"photos: {given}: folder not found")
+        try:
+            files += list_images(folder)
+        except InputError:
+            kinds = ", ".join(sorted(IMAGE_SUFFIXES))
+            raise InputError(f"photos: {given}: no image ({kinds}) in this folder") from None
+    return files
+
+
+def folder_photographs(
+    folders: Sequence[str | os.PathLike], min_side: int = 0, max_side: int | None = 640
+) -> list[Photograph]:
+    """The user's photographs: every image of :func:`photo_files` ``(folders)``, gray or colour, 8 or 16 bits
+    (:func:`~alcn_cv.data.scenes.read_eight_bits`: rounded to 8 bits, with a warning when their values use less than
+    a sixteenth of the range), the longer side brought to at most ``max_side`` as the shipped photographs', licence
+    :data:`USER_LICENCE`, named ``FOLDER/FILE`` (the folder's own name).
+
+    Raises:
+        InputError: as :func:`photo_files`, an unreadable image, or one whose shorter side (once fitted) is below
+            ``min_side`` (the training crop), the file and the minimum named.
+    """
+    photos = []
+    for path in photo_files(folders):
+        image = read_eight_bits(path)
+        fitted = _fit(image, max_side)
+        h, w = fitted.shape[:2]
+        if min(h, w) < min_side:
+            size = f"{image.shape[1]}x{image.shape[0]} pixels"
+            if fitted is not image:
+                size += f" ({w}x{h} once its longer side is brought to {max_side}, as the shipped photographs')"
+            raise InputError(
+                f"photos: {path}: {size}, smaller than the training crop: photographs need at least "
+                f"{min_side}x{min_side} pixels (crop={min_side})"
+            )
+        photos.append(Photograph(f"{path.parent.name}/{path.name}", fitted, USER_LICENCE, str(path)))
     return photos
 
 

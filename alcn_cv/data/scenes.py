@@ -20,7 +20,10 @@ relit photographs that permit any use, is validated on them); :data:`TEST_SCENES
 
 A folder's images named ``NAME.<index>.<ext>`` form the scene ``NAME`` (ordered by index); its
 other images form the scene named after the folder (ordered by name). Frames are read with
-:func:`alcn_cv.io.read_image` as uint8 grayscale (16-bit images rounded to 8 bits).
+:func:`alcn_cv.io.read_image` as uint8 grayscale (16-bit images rounded to 8 bits, with a warning when
+their values use less than a sixteenth of the range: 12-bit data in 16-bit files keep a few grey levels).
+A scene whose frames do not look registered (:func:`registration_score` below :data:`REGISTERED_SCORE`:
+unrelated photographs of one size) is loaded with a warning: training on it learns nothing.
 
 Example (with the shared data)::
 
@@ -48,12 +51,16 @@ from alcn_cv.io import IMAGE_SUFFIXES, eight_bits, list_images, read_image
 from alcn_cv.shared_data import shared_data_dir
 
 __all__ = [
+    "NARROW_16_BIT",
+    "REGISTERED_SCORE",
     "TEST_SCENES",
     "WEBCAM_SCENES",
     "TRAIN_SCENES",
     "Scene",
     "load_scene_folder",
     "load_scenes",
+    "read_eight_bits",
+    "registration_score",
     "scene_dirs",
     "select_scenes",
     "shared_root",
@@ -67,6 +74,18 @@ TRAIN_SCENES = ("courbevoie", "frankfurt", "panorama")
 TEST_SCENES = ("mexico", "psm")
 #: The scenes of the shared ``webcam`` data (academic research use only).
 WEBCAM_SCENES = (*TRAIN_SCENES, "mexico")
+
+#: A 16-bit image whose maximum is below this uses less than a sixteenth of the range (12-bit data in a 16-bit
+#: file, say): rounded to 8 bits (:func:`alcn_cv.io.eight_bits`) it keeps 16 grey levels or fewer.
+NARROW_16_BIT = 4096
+#: Frames of a registered scene score at least this (:func:`registration_score`). Measured (2026-11-29): the
+#: webcam scenes 0.331-0.682 (frankfurt the lowest; 0.266 and more on the 12 or 20 frames the benchmark reads),
+#: the psm objects 0.859-0.912, 24 rendered scenes of ``alcn data scenes`` 0.306 and more, the gain preset's relit
+#: photographs 0.216 and more (0.170 under light ``hard``); unrelated photographs of one size -0.007 to 0.004 (14
+#: of scikit-image's, 35 and 5 of the shared data), the views of Middlebury's dino and temple rings -0.006 and
+#: 0.017. Views of one fixed background with a moving object or camera are not caught: the chessboard views 0.169,
+#: the cookie box's video 0.294.
+REGISTERED_SCORE = 0.1
 
 _INDEXED = re.compile(r"^(?P<name>.+)\.(?P<index>\d+)$")
 _MASK = re.compile(r"\.mask$", re.IGNORECASE)
@@ -99,16 +118,93 @@ def shared_root(name: str) -> Path:
 
 
 def scene_dirs(entries: Sequence[str | os.PathLike] = TRAIN_SCENES) -> list[Path]:
-    """The folders of ``entries`` (default: the training scenes): each an existing folder, else
-    the name of a scene of the shared ``webcam`` data."""
-    return [Path(e) if Path(e).is_dir() else shared_root("webcam") / e for e in entries]
+    """The folders of ``entries`` (default: the training scenes): each an existing folder (``~`` expanded, a
+    relative path from the working folder), else the name of a scene of the shared ``webcam`` data.
+
+    Raises:
+        InputError: an entry is neither (the message lists the webcam scenes).
+    """
+    webcam = shared_root("webcam")
+    dirs = []
+    for entry in entries:
+        path = Path(entry).expanduser()
+        name = str(entry)
+        if path.is_dir():
+            dirs.append(path)
+        elif Path(name).name == name and (name in WEBCAM_SCENES or (webcam / name).is_dir()):
+            dirs.append(webcam / name)  # the shared data's absence is load_scene_folder's to report
+        else:
+            names = sorted({*WEBCAM_SCENES, *(p.name for p in _subfolders(webcam))})
+            raise InputError(f"{name}: neither a folder nor a webcam scene ({', '.join(names)})")
+    return dirs
 
 
-def _gray_u8(path: Path) -> np.ndarray:
+def _subfolders(folder: Path) -> list[Path]:
+    try:
+        return sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
+    except OSError:
+        return []
+
+
+def _narrow_maximum(image: np.ndarray) -> int | None:
+    """The maximum of a 16-bit image that uses less than a sixteenth of the range (:data:`NARROW_16_BIT`), else None."""
+    if image.dtype != np.uint16:
+        return None
+    top = int(image.max())
+    return top if top < NARROW_16_BIT else None
+
+
+def _narrow_warning(what: str, maximum: int) -> str:
+    return (
+        f"{what}: a 16-bit maximum of {maximum} uses less than 1/16 of the range (12-bit data in a 16-bit file?): "
+        f"as 8 bits it keeps {round(maximum / 257) + 1} grey levels; scale the values to 16 bits (x16 for 12-bit data)"
+    )
+
+
+def read_eight_bits(path: str | os.PathLike) -> np.ndarray:
+    """An image as uint8, gray ``HxW`` or BGR ``HxWx3`` (:func:`alcn_cv.io.read_image`; 16 bits rounded to 8 by
+    :func:`alcn_cv.io.eight_bits`), with a warning naming the file and its maximum when its 16-bit values use less
+    than a sixteenth of the range (:data:`NARROW_16_BIT`).
+
+    Raises:
+        InputError: as :func:`~alcn_cv.io.read_image`.
+    """
+    image = read_image(path)
+    narrow = _narrow_maximum(image)
+    if narrow is not None:
+        logger.warning(_narrow_warning(str(path), narrow))
+    return eight_bits(image) if image.dtype == np.uint16 else image
+
+
+def _gray_u8(path: Path) -> tuple[np.ndarray, int | None]:
+    """The frame as uint8 gray, and its maximum when it is a narrow 16-bit image (:func:`_narrow_maximum`)."""
     img = read_image(path)
+    narrow = _narrow_maximum(img)
     if img.dtype == np.uint16:
         img = eight_bits(img)
-    return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    return (img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)), narrow
+
+
+def registration_score(frames: np.ndarray) -> float:
+    """How registered the frames ``(n, H, W)`` look: the median over pairs of frames of the normalized
+    cross-correlation of their gradient magnitudes, on frames of about 128 x 128 pixels (area-resized, blurred by a
+    Gaussian of sigma 1), each magnitude less its blur by a Gaussian of sigma 4 (so that the layout of a photograph,
+    an object centred on a plain ground, does not count: where the edges are does). The edges of a fixed view stay
+    in place whatever the light; unrelated photographs score about 0 (:data:`REGISTERED_SCORE` gives measured
+    values)."""
+    n, h, w = frames.shape
+    scale = min(1.0, 128 / np.sqrt(h * w))
+    size = (max(8, round(w * scale)), max(8, round(h * scale)))
+    rows = []
+    for frame in frames:
+        small = cv2.GaussianBlur(cv2.resize(frame.astype(np.float32), size, interpolation=cv2.INTER_AREA), (0, 0), 1.0)
+        magnitude = cv2.magnitude(cv2.Sobel(small, cv2.CV_32F, 1, 0), cv2.Sobel(small, cv2.CV_32F, 0, 1))
+        magnitude -= cv2.GaussianBlur(magnitude, (0, 0), 4.0)
+        row = magnitude[2:-2, 2:-2].ravel().astype(np.float64)  # the borders' reflected gradients left out
+        row -= row.mean()
+        rows.append(row / max(float(np.linalg.norm(row)), 1e-12))
+    stack = np.stack(rows)
+    return float(np.median((stack @ stack.T)[np.triu_indices(n, 1)]))
 
 
 def _evenly_spaced(n: int, max_frames: int | None) -> list[int]:
@@ -162,10 +258,27 @@ def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) ->
                 logger.debug("skipping %s/%s: fewer than two frames", folder, name)
                 continue
             paths = [paths[i] for i in _evenly_spaced(len(paths), max_frames)]
-            frames = [_gray_u8(p) for p in paths]
+            frames, narrow = zip(*(_gray_u8(p) for p in paths))
             if any(f.shape != frames[0].shape for f in frames):
                 raise DatasetError(f"{folder}: the frames of scene {name!r} differ in size (not registered)")
-            scenes.append(Scene(name, root.name, np.stack(frames), tuple(p.name for p in paths)))
+            deep = [(p, m) for p, m in zip(paths, narrow) if m is not None]
+            if deep:
+                path, top = max(deep, key=lambda d: d[1])
+                many = f" (and {len(deep) - 1} more of its {len(paths)} frames)" if len(deep) > 1 else ""
+                logger.warning(_narrow_warning(f"scene {name!r}: {path}{many}", top))
+            stack = np.stack(frames)
+            score = registration_score(stack)
+            if score < REGISTERED_SCORE:
+                logger.warning(
+                    "scene %r (%s) does not look registered: its frames' gradients correlate %.2f (registered scenes "
+                    "%.1f or more); a scene is one fixed view under several lights, and unrelated photographs train "
+                    "at chance (give those as photos=[...] to alcn train-real-light)",
+                    name,
+                    folder,
+                    score,
+                    REGISTERED_SCORE,
+                )
+            scenes.append(Scene(name, root.name, stack, tuple(p.name for p in paths)))
     if not scenes:
         raise DatasetError(
             f"{root}: no scene (a folder of at least two frames, or NAME.<i>{'|'.join(sorted(IMAGE_SUFFIXES))})"

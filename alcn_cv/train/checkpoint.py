@@ -12,7 +12,10 @@ Every checkpoint, ``alcn train-real-light``'s (:mod:`alcn_cv.train.real_light`) 
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -37,11 +40,15 @@ __all__ = [
     "CHECKPOINT_VERSION",
     "REAL_LIGHT_CHECKPOINT_FORMAT",
     "TrainState",
+    "check_run_folder",
     "checkpoint_header",
+    "earlier_run",
+    "interrupts_deferred",
     "load_checkpoint",
     "restore_checkpoint",
     "run_folder",
     "save_checkpoint",
+    "sigint_as_keyboard_interrupt",
     "versions",
     "write_normalizer_file",
 ]
@@ -50,6 +57,8 @@ CHECKPOINT_FORMAT = "alcn-cv/checkpoint"
 #: The format of ``alcn train-real-light``'s checkpoints: another run state than ``alcn train``'s.
 REAL_LIGHT_CHECKPOINT_FORMAT = "alcn-cv/real-light-checkpoint"
 CHECKPOINT_VERSION = 1
+#: The signals :func:`interrupts_deferred` holds.
+_DEFERRED = (signal.SIGINT, signal.SIGTERM)
 
 #: The checkpoint format and the command of each kind of run configuration.
 _KINDS: dict[type, tuple[str, str]] = {
@@ -91,10 +100,44 @@ def run_folder(out: str | Path) -> Path:
         InputError: ``out`` holds other files and no ``train.log``, or lies under a file.
     """
     out = Path(out)
+    _check_not_foreign(out)
+    return make_folder(out)
+
+
+def _check_not_foreign(out: Path) -> None:
     others = out.is_dir() and any(not p.name.startswith(".") and p.suffix != ".toml" for p in out.iterdir())
     if others and not (out / "train.log").is_file():
         raise InputError(f"{out} holds other files than a training run's (no train.log); give another --out")
-    return make_folder(out)
+
+
+def earlier_run(out: str | Path) -> list[str]:
+    """The results of an earlier run in the run folder ``out`` (its ``train.log`` beside them): its checkpoint,
+    ``history.json`` and weight files (``*.npz``), by name; none for a run that failed before its first save."""
+    out = Path(out)
+    if not (out / "train.log").is_file():
+        return []
+    names = ("checkpoint.pt", "history.json")
+    return sorted(p.name for p in out.iterdir() if p.is_file() and (p.name in names or p.suffix == ".npz"))
+
+
+def check_run_folder(out: str | Path, *, resume: bool = False, overwrite: bool = False) -> Path:
+    """Check, before any work and writing nothing, that a run may go into the folder ``out``: not a folder of other
+    files (:func:`run_folder`), nor, unless the run resumes it or ``overwrite``, a folder of an earlier run
+    (:func:`earlier_run`).
+
+    Raises:
+        InputError: either, named with the way out (``--resume``, ``--overwrite``, another ``--out``).
+    """
+    out = Path(out)
+    _check_not_foreign(out)
+    results = [] if resume or overwrite else earlier_run(out)
+    if results:
+        shown = ", ".join(results[:4]) + (f" and {len(results) - 4} more" if len(results) > 4 else "")
+        raise InputError(
+            f"{out} holds an earlier run ({shown}): --resume continues it, --overwrite replaces it, or give another "
+            "--out"
+        )
+    return out
 
 
 def versions() -> dict[str, str]:
@@ -142,15 +185,21 @@ def checkpoint_header(cfg: TrainConfig | RealLightConfig) -> dict[str, Any]:
 
 
 def _differences(saved: dict[str, Any], cfg: TrainConfig | RealLightConfig) -> list[str]:
-    """The settings of ``cfg`` a run resumed from a checkpoint written with ``saved`` must keep and does not: all of
-    a :class:`RealLightConfig`; a :class:`TrainConfig`'s model, data, seed and optimisation (not its run options)."""
+    """The settings of ``cfg`` a run resumed from a checkpoint written with ``saved`` must keep and does not, each
+    with both values: all of a :class:`RealLightConfig` but a larger ``steps`` (training longer); a
+    :class:`TrainConfig`'s model, data, seed and optimisation (not its run options)."""
     now = _config_dict(cfg)
     if isinstance(cfg, RealLightConfig):
-        return sorted(k for k, v in now.items() if saved.get(k) != v)
-    diff = [f"{t}.{k}" for t in ("model", "data") for k in now[t] if saved[t].get(k) != now[t][k]]
-    diff += [k for k in ("seed",) if saved[k] != now[k]]
-    diff += [f"optim.{k}" for k in now["optim"] if saved["optim"].get(k) != now["optim"][k]]
-    return diff
+        pairs = [(k, saved.get(k), v) for k, v in now.items()]
+        changed = [(k, a, b) for k, a, b in pairs if a != b and not (k == "steps" and _larger(b, a))]
+    else:
+        pairs = [(f"{t}.{k}", saved[t].get(k), now[t][k]) for t in ("model", "data", "optim") for k in now[t]]
+        changed = [(k, a, b) for k, a, b in [*pairs, ("seed", saved.get("seed"), now["seed"])] if a != b]
+    return [f"{key} ({before!r} in the checkpoint, {after!r} now)" for key, before, after in sorted(changed)]
+
+
+def _larger(now: Any, saved: Any) -> bool:
+    return isinstance(now, int) and isinstance(saved, int) and now > saved
 
 
 def load_checkpoint(path: str | Path, cfg: TrainConfig | RealLightConfig | None = None) -> dict[str, Any]:
@@ -159,7 +208,7 @@ def load_checkpoint(path: str | Path, cfg: TrainConfig | RealLightConfig | None 
 
     Raises:
         WeightFileError: missing, corrupt, of another format (another command's) or version (the message gives the
-            versions that wrote it and this one), or written with other settings (named).
+            versions that wrote it and this one), or written with other settings (each named with both values).
     """
     path = Path(path)
     if not path.is_file():
@@ -180,8 +229,8 @@ def load_checkpoint(path: str | Path, cfg: TrainConfig | RealLightConfig | None 
         diff = _differences(ckpt["config"], cfg)
         if diff:
             raise WeightFileError(
-                f"checkpoint {path} was written with another configuration (differs in {', '.join(diff)}; "
-                f"written by {ckpt.get('versions')}); start a new run folder or use its configuration"
+                f"checkpoint {path} was written with another configuration: differs in {'; '.join(diff)}; start a "
+                "new run folder or use its configuration"
             )
     return ckpt
 
@@ -238,3 +287,39 @@ def write_normalizer_file(
         },
     }
     return save_normalizer_file(result.out_dir / "alcn_normalizer.npz", net.state_arrays(), meta)
+
+
+@contextlib.contextmanager
+def sigint_as_keyboard_interrupt() -> Iterator[None]:
+    """Make sure Ctrl-C raises KeyboardInterrupt (a parent may have set SIGINT to be ignored)."""
+    try:
+        previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """Hold Ctrl-C and SIGTERM (which the command line raises as Ctrl-C) until the block ends, then deliver them to
+    the handlers of before: no signal cuts the block short (an optimisation step and its counter, which a checkpoint
+    must see together). Python handles signals in the main thread only, so another thread's block has nothing to
+    hold."""
+    held: list[int] = []
+    kept = [s for s in _DEFERRED if signal.getsignal(s) is not None]  # None: set outside Python, not to be put back
+    try:
+        previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in kept}
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(held):
+            signal.raise_signal(s)

@@ -12,14 +12,18 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
 import shlex
+import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from alcn_cv.cli import add_conf_options, add_progress_option
+from alcn_cv.cli import Terminated, add_conf_options, add_progress_option
 
 __all__ = ["add_parser"]
+
+logger = logging.getLogger(__name__)
 
 
 def _add_conf(parser: argparse.ArgumentParser, default: str | None, presets: str, example: str) -> None:
@@ -38,12 +42,16 @@ def _add_run(parser: argparse.ArgumentParser, out: str) -> None:
     add_progress_option(parser)
 
 
-def _command(name: str, args: argparse.Namespace, *extra: str) -> str:
-    """The command line that makes this run again, recorded in the weight file or its card."""
-    words = ["alcn", name, "--conf", args.conf, *extra]
-    for item in args.settings:
-        words += ["--set", item]
-    return shlex.join(words + ([] if args.seed is None else ["--seed", str(args.seed)]))
+def _command(name: str, args: argparse.Namespace, *extra: str, conf: str | None = None) -> str:
+    """The command line that makes this run again, recorded in the weight file or its card (``conf``: the preset,
+    default ``args.conf``)."""
+    return shlex.join(["alcn", name, "--conf", conf or args.conf, *extra, *_setting_words(args)])
+
+
+def _setting_words(args: argparse.Namespace) -> list[str]:
+    """The ``--set`` and ``--seed`` options given, as words of a command line."""
+    words = [word for item in args.settings for word in ("--set", item)]
+    return words + ([] if args.seed is None else ["--seed", str(args.seed)])
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -140,9 +148,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "The gain preset trains on photographs that permit any use, each relit several times (relit=4); "
         "--set \"scenes=['a', 'b']\" adds registered scenes (folders, or the webcam scenes courbevoie, frankfurt, "
         "panorama: academic research only). Writes OUT/gain_normalizer.npz, checkpoints, train.log and "
-        "history.json. The shipped alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`.",
+        "history.json; Ctrl-C saves a checkpoint at the step reached and prints the command that goes on from it. "
+        "The shipped alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`.",
     )
     _add_conf(r, "gain", "gain (the shipped alcn_normalizer_gain.npz)", "steps=600")
+    r.set_defaults(conf=None)  # --resume without --conf takes the checkpoint's settings
     _add_run(r, "out/gain")
     r.add_argument(
         "--threads",
@@ -150,7 +160,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=1,
         help="torch threads (default 1, as the shipped file was made; 0: torch's default)",
     )
-    r.add_argument("--resume", action="store_true", help="go on from OUT/checkpoint.pt, as if never stopped")
+    r.add_argument(
+        "--resume",
+        action="store_true",
+        help="go on from OUT/checkpoint.pt, as if never stopped, with its settings (--set and --seed change them: "
+        "a larger steps trains longer); with --conf, the preset's settings, checked against the checkpoint's",
+    )
+    r.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
     r.set_defaults(func=_train_real_light)
 
     u = subparsers.add_parser(
@@ -166,6 +182,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     u.add_argument("--channels", type=int, default=8, help="the U-Net's first width (default 8)")
     u.add_argument("--levels", type=int, default=3, help="the U-Net's resolutions (default 3)")
     u.add_argument("--threads", type=int, default=1, help="torch threads (default 1; 0: torch's default)")
+    u.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
     u.set_defaults(func=_train_unet)
 
     e = subparsers.add_parser(
@@ -173,10 +190,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="export the Normalizer to ONNX (for the torch-free OpenCV runtime)",
         description="Export the Normalizer of a weight file as a fully-convolutional ONNX model with dynamic "
         "image size, run by cv2.dnn in alcn_cv.nets.opencv_runtime (no torch needed). backend='opencv' reads the "
-        "export beside its weight file under the same name (W.npz: W.onnx); createALCN takes the .npz.",
+        "export beside its weight file under the same name (W.npz: W.onnx), where it is written by default; "
+        "createALCN takes the .npz.",
     )
-    e.add_argument("--onnx", type=Path, required=True, help="output .onnx path")
+    e.add_argument(
+        "--onnx",
+        type=Path,
+        help="output .onnx path (default: beside the weights, W.onnx for W.npz, where backend='opencv' reads it)",
+    )
     e.add_argument("--weights", type=Path, help="Normalizer weight file (.npz; default: the default model's)")
+    e.add_argument("--overwrite", action="store_true", help="replace an existing .onnx")
     e.set_defaults(func=_export)
 
 
@@ -268,25 +291,67 @@ def _distill(args: argparse.Namespace) -> int:
 
 
 def _train_real_light(args: argparse.Namespace) -> int:
+    from alcn_cv.errors import InputError
     from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
 
-    cfg = preset(REAL_LIGHT_CONFS, args.conf, _operational(args, seed="seed"))
+    settings = _operational(args, seed="seed")
+    if args.resume and args.overwrite:
+        raise InputError("give --resume (go on with the run in --out) or --overwrite (replace it), not both")
+    if args.resume and args.conf is None:  # the checkpoint's settings, with those given
+        from alcn_cv.train.real_light import resumed_config
+
+        cfg, record = resumed_config(args.out, settings)
+        conf, first = record.get("conf"), record.get("command")  # none from a checkpoint written before they were kept
+        command = shlex.join([*shlex.split(first), *_setting_words(args)]) if first else ""
+    else:
+        conf = args.conf or "gain"
+        cfg = preset(REAL_LIGHT_CONFS, conf, settings)
+        command = _command("train-real-light", args, conf=conf)
     if args.print_config:  # a run checks its settings itself (training_run)
         cfg.check()
         return _print_config(cfg)
-    from alcn_cv.train.real_light import train_real_light
+    from alcn_cv.nn import torch_threads
+    from alcn_cv.train.real_light import TrainingInterrupted, train_real_light
 
-    return _print_with_threads(
-        args.threads,
-        lambda: train_real_light(
-            cfg,
-            args.out,
-            command=_command("train-real-light", args),
-            conf=args.conf,
-            progress=not args.no_progress,
-            resume=args.resume,
+    try:
+        with torch_threads(args.threads or None):
+            path = train_real_light(
+                cfg,
+                args.out,
+                command=command,
+                conf=conf,
+                progress=not args.no_progress,
+                resume=args.resume,
+                overwrite=args.overwrite,
+            )
+    except TrainingInterrupted as exc:
+        if exc.step:  # the run's own options; its settings are the checkpoint's
+            words = ["alcn", "train-real-light", "--out", str(args.out), "--resume"]
+            if args.threads != 1:
+                words += ["--threads", str(args.threads)]
+            if args.no_progress:
+                words.append("--no-progress")
+            print(f"interrupted at step {exc.step}; continue with: {shlex.join(words)}", file=sys.stderr)
+        else:
+            print("interrupted before the first step: nothing saved", file=sys.stderr)
+        return 128 + signal.SIGTERM if isinstance(exc.__cause__, Terminated) else 130
+    print(_next_steps(Path(path)))
+    return 0
+
+
+def _next_steps(weights: Path) -> str:
+    """Where a run's weights are and the commands that use them."""
+    w = str(weights)
+    steps = [
+        ("normalize an image with them", ["alcn", "normalize", "IMAGE", "OUTPUT", "-m", f"alcn:weights={w}"]),
+        ("export them for backend='opencv' (ONNX, beside them)", ["alcn", "export", "--weights", w]),
+        (
+            "compare them with the shipped model on real light changes",
+            ["alcn", "bench", "relight", "--quick", "--methods", f"alcn,alcn:weights={w}"]
+            + ["--out", str(weights.parent / "bench")],
         ),
-    )
+    ]
+    return "\n".join([f"weights: {w}", "next:", *(f"  {what}:\n    {shlex.join(words)}" for what, words in steps)])
 
 
 def _train_unet(args: argparse.Namespace) -> int:
@@ -298,8 +363,10 @@ def _train_unet(args: argparse.Namespace) -> int:
         cfg.check()
         sys.stdout.write("# net: the U-Net's --channels and --levels (--set net.* is not used)\n")
         return _print_config(dataclasses.replace(cfg, net=net))
+    from alcn_cv.train.checkpoint import check_run_folder
     from alcn_cv.train.unet import train_unet
 
+    check_run_folder(args.out, overwrite=args.overwrite)  # before the scenes are loaded
     command = _command("train-unet", args, "--channels", str(args.channels), "--levels", str(args.levels))
     return _print_with_threads(
         args.threads,
@@ -318,8 +385,21 @@ def _print_with_threads(threads: int, run: Callable[[], object]) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
+    from alcn_cv.errors import InputError
+    from alcn_cv.runtime import resolve_weights
     from alcn_cv.train.export import export_onnx
 
-    path = export_onnx(args.onnx, args.weights)
-    print(path)
+    weights = resolve_weights(None, args.weights)
+    beside = weights.with_suffix(".onnx")
+    onnx = beside if args.onnx is None else args.onnx
+    if onnx.exists() and not args.overwrite:
+        raise InputError(f"{onnx} exists (--overwrite replaces it)")
+    if onnx.resolve() != beside.resolve():
+        logger.warning(
+            "writing %s: backend='opencv' reads the export of %s at %s, beside it, and will not find this one",
+            onnx,
+            weights,
+            beside,
+        )
+    print(export_onnx(onnx, weights))
     return 0

@@ -533,8 +533,14 @@ class RealLightConfig:
     Attributes:
         scenes: registered scenes: folders of frames, or names of scenes of the shared ``webcam`` data.
         relit: relit copies of each permissive photograph
-            (:func:`~alcn_cv.data.permissive_images.training_photographs`), drawn with ``scenes`` as scenes
-            of their own (0: none).
+            (:func:`~alcn_cv.data.permissive_images.training_photographs`) and of each of ``photos``, drawn with
+            ``scenes`` as scenes of their own (0: none).
+        photos: folders of your own photographs (any of jpg, png, tif, bmp...; gray or colour, 8 or 16 bits; ``~``
+            expanded, relative to the working folder; recorded as given), each image relit ``relit`` times like
+            the shipped photographs and **added** to them (their copies are unchanged: the ``i``-th photograph's
+            draws are seeded ``[seed, i]``, yours come after); every image at least ``crop`` pixels on a side.
+        shipped_photos: relight the permissive photographs too; ``false`` with ``photos`` trains on your
+            photographs alone.
         light: the light changes of those copies (:data:`~alcn_cv.data.light_changes.LIGHTS`).
         jitter: their registration error (pixels; 0: pixel-exact).
         rendered: folders of rendered registered scenes (``alcn data scenes``; a folder
@@ -557,6 +563,8 @@ class RealLightConfig:
 
     scenes: list[str] = field(default_factory=list)
     relit: int = 4
+    photos: list[str] = field(default_factory=list)
+    shipped_photos: bool = True
     light: str = "relief"
     jitter: float = 0.0
     rendered: list[str] = field(default_factory=list)
@@ -578,14 +586,24 @@ class RealLightConfig:
     def check(self) -> None:
         """What a run on these settings needs: scenes or relit photographs, a rendered share in [0, 1) with
         rendered scenes, at least 2 locations, 1 step and 1 step between snapshots, no negative count of relit
-        copies or of locations drawn anywhere, and a positive learning rate and temperature (the network's own
-        needs, such as the crop's size, are its trainer's to check).
+        copies or of locations drawn anywhere, and a positive learning rate and temperature; each of ``scenes`` a
+        folder or a webcam scene's name; ``photos`` relit, each an existing folder holding images (listed, not read:
+        the images' sizes are checked as they are read). The network's own needs, such as the crop's size, are its
+        trainer's to check.
 
         Raises:
             InputError: the first setting out of range, named.
         """
-        if not self.scenes and not self.relit:
-            raise InputError("no scenes given (scenes, relit)")
+        if self.photos and self.relit < 2:
+            raise InputError(f"photos are trained on as relit copies: they need relit >= 2, got relit={self.relit}")
+        # imported here, not with the module: the configurations import no data module
+        from alcn_cv.data.permissive_images import photo_files
+        from alcn_cv.data.scenes import scene_dirs
+
+        scene_dirs(self.scenes)
+        photo_files(self.photos)
+        if not self.scenes and not (self.relit and (self.shipped_photos or self.photos)):
+            raise InputError("no scenes given (scenes, or relit with shipped_photos or photos)")
         if not 0 <= self.rendered_fraction < 1 or (self.rendered_fraction > 0 and not self.rendered):
             raise InputError(
                 f"rendered_fraction must be in [0, 1) and needs rendered scenes, got {self.rendered_fraction}"

@@ -20,7 +20,7 @@ radius on every side, so no border rule is involved), with the same result as th
 normalization there.
 
 Outputs in the run folder: ``train.log``, ``history.json``, ``checkpoint.pt`` (atomic, every
-``save_every`` steps), ``gain_normalizer_step{N}.npz`` at those steps and
+``save_every`` steps and on Ctrl-C), ``gain_normalizer_step{N}.npz`` at those steps and
 ``gain_normalizer.npz`` (:mod:`alcn_cv.weight_file`, ``architecture: "gain"``) at the end.
 
 Command (the ``gain`` preset reads photographs that permit any use; the webcam scenes, which
@@ -32,13 +32,14 @@ Command (the ``gain`` preset reads photographs that permit any use; the webcam s
 from __future__ import annotations
 
 import contextlib
+import copy
 import functools
 import json
 import logging
 import re
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -48,17 +49,27 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 from tqdm import tqdm
+from tqdm.contrib.logging import logging_redirect_tqdm
 
-from alcn_cv.data.permissive_images import relit_permissive_scenes
+from alcn_cv.data.permissive_images import folder_photographs, relit_scenes, training_photographs
 from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
-from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.report import log_to, machine
-from alcn_cv.train.checkpoint import checkpoint_header, load_checkpoint, run_folder
-from alcn_cv.train.config import RealLightConfig
+from alcn_cv.shared_data import shared_data_dir
+from alcn_cv.train.checkpoint import (
+    REAL_LIGHT_CHECKPOINT_FORMAT,
+    check_run_folder,
+    checkpoint_header,
+    interrupts_deferred,
+    load_checkpoint,
+    run_folder,
+    sigint_as_keyboard_interrupt,
+)
+from alcn_cv.train.config import RealLightConfig, with_settings
 from alcn_cv.train.models import CentreMixture
 from alcn_cv.weight_file import save_normalizer_file
 
@@ -66,6 +77,7 @@ __all__ = [
     "CentreDenseMixture",
     "RealLightConfig",
     "consistency_loss",
+    "TrainingInterrupted",
     "TrainingScene",
     "crop_windows",
     "draw_step",
@@ -77,6 +89,7 @@ __all__ = [
     "objective",
     "pair_loss",
     "repeatability_loss",
+    "resumed_config",
     "sample_locations",
     "source_scenes",
     "textured_locations",
@@ -138,13 +151,23 @@ def sample_locations(candidates: np.ndarray, count: int, min_distance: int, rng:
     return np.stack(chosen) if chosen else np.zeros((0, 2), np.int64)
 
 
-def training_scene(scene: Scene, pad: int, patch: int) -> TrainingScene:
+def training_scene(scene: Scene, pad: int, patch: int, crop: int | None = None) -> TrainingScene:
     """The scene's frames in [0, 1], reflect-101 padded by ``pad``, and its textured locations.
 
     Raises:
+        InputError: frames smaller than the ``crop x crop`` training window, or than the ``patch x patch`` patches
+            (the scene and the minimum size named).
         DatasetError: fewer than 2 textured locations (a flat scene): nothing to identify, and with none the
             identification loss would be NaN.
     """
+    h, w = scene.frames.shape[1:]
+    least = max(patch, crop or 0)
+    if min(h, w) < least:
+        what = f"the training crop (crop={crop})" if least == crop else f"the {patch}x{patch} patches"
+        raise InputError(
+            f"scene {scene.name!r}: frames of {w}x{h} are smaller than {what}: frames need at least {least}x{least} "
+            "pixels"
+        )
     stack = scene.unit_frames()
     candidates = textured_locations(stack, patch) + pad
     if len(candidates) < 2:
@@ -312,20 +335,39 @@ def _normalized_centres(
     return net.equalize(centre * inverse_divisor(energy, floor))
 
 
-def source_scenes(scenes: Sequence[str], relit: int, seed: int, light: str, jitter: float = 0.0) -> list[Scene]:
+def source_scenes(
+    scenes: Sequence[str],
+    relit: int,
+    seed: int,
+    light: str,
+    jitter: float = 0.0,
+    photos: Sequence[str] = (),
+    shipped_photos: bool = True,
+    min_side: int = 0,
+) -> list[Scene]:
     """The registered scenes a gain Normalizer learns from: those of ``scenes`` (folders, or names of the shared
-    ``webcam`` scenes) and, unless ``relit`` is 0, each permissive photograph relit ``relit`` times
-    (:func:`~alcn_cv.data.permissive_images.relit_permissive_scenes` with ``seed``, ``light`` and ``jitter``)."""
+    ``webcam`` scenes) and, unless ``relit`` is 0, each photograph relit ``relit`` times
+    (:func:`~alcn_cv.data.permissive_images.relit_scenes` with ``seed``, ``light`` and ``jitter``): the permissive
+    ones (:func:`~alcn_cv.data.permissive_images.training_photographs`, unless ``shipped_photos`` is False), then those
+    of the folders ``photos`` (:func:`~alcn_cv.data.permissive_images.folder_photographs`, each side at least
+    ``min_side``), so that adding photos leaves the permissive ones' copies as they were."""
     sources = load_scenes(scene_dirs(scenes)) if scenes else []
-    return sources + (relit_permissive_scenes(relit, seed, light, jitter) if relit else [])
+    if not relit:
+        return sources
+    mine = folder_photographs(photos, min_side) if photos else []  # read first: a bad file fails before any relighting
+    shipped = training_photographs(shared_data_dir()) if shipped_photos else []
+    return sources + relit_scenes(shipped + mine, relit, seed, light, jitter)
 
 
 def training_scenes(cfg: RealLightConfig) -> tuple[list[TrainingScene], list[TrainingScene]]:
-    """The two groups of scenes a run draws from, ready for training (padded by ``cfg.crop // 2``):
-    ``cfg.scenes`` with the ``cfg.relit`` copies of the permissive photographs, and ``cfg.rendered``."""
-    sources = source_scenes(cfg.scenes, cfg.relit, cfg.seed, cfg.light, cfg.jitter)
-    scenes = [training_scene(s, cfg.crop // 2, cfg.patch) for s in sources]
-    rendered = [training_scene(s, cfg.crop // 2, cfg.patch) for s in load_scenes(cfg.rendered)]
+    """The two groups of scenes a run draws from, ready for training (padded by ``cfg.crop // 2``, each frame at
+    least ``cfg.crop`` on a side): ``cfg.scenes`` with the ``cfg.relit`` copies of the permissive photographs and of
+    ``cfg.photos``, and ``cfg.rendered``."""
+    sources = source_scenes(
+        cfg.scenes, cfg.relit, cfg.seed, cfg.light, cfg.jitter, cfg.photos, cfg.shipped_photos, cfg.crop
+    )
+    scenes = [training_scene(s, cfg.crop // 2, cfg.patch, cfg.crop) for s in sources]
+    rendered = [training_scene(s, cfg.crop // 2, cfg.patch, cfg.crop) for s in load_scenes(cfg.rendered)]
     for scene in scenes + rendered:
         logger.info("scene %s: %d frames, %d textured locations", scene.name, len(scene.frames), len(scene.candidates))
     return scenes, rendered
@@ -391,6 +433,18 @@ def pair_loss(
     return objective(outputs[:m], outputs[m:], n, cfg)
 
 
+class TrainingInterrupted(KeyboardInterrupt):
+    """Ctrl-C or SIGTERM (its ``__cause__``) stopped :func:`fit`, which saved the steps done first.
+
+    Attributes:
+        step: the steps done: those of the checkpoint that ``--resume`` goes on from (0: none, nothing saved).
+    """
+
+    def __init__(self, step: int) -> None:
+        super().__init__(f"interrupted at step {step}")
+        self.step = step
+
+
 def _save_weights(
     net: GainNormalizer, path: Path, cfg: RealLightConfig, step: int, seconds: float, record: dict[str, Any]
 ) -> Path:
@@ -410,35 +464,147 @@ def train_real_light(
     conf: str | None = None,
     progress: bool = True,
     resume: bool = False,
+    overwrite: bool = False,
 ) -> Path:
     """Train a :class:`~alcn_cv.nets.gain.GainNormalizer` on registered scenes (see the module).
+
+    What can fail before training is checked before the run folder is touched: the settings, the folder (an earlier
+    run's is replaced only with ``overwrite``), the checkpoint to resume and the scenes, loaded first (their lines of
+    log go into ``train.log`` all the same). An error after that is written into ``train.log`` before it propagates.
 
     Args:
         cfg: the settings (the ``gain`` preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`, overridden or not).
         out: the run folder.
-        command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
+        command, conf: the command line and the preset's name, recorded in the weight file with ``cfg`` (a resumed
+            run given neither records its checkpoint's).
         progress: show a progress bar.
-        resume: go on from ``out/checkpoint.pt`` (written every ``cfg.save_every`` steps), as if never stopped: the
-            same weights as an uninterrupted run.
+        resume: go on from ``out/checkpoint.pt`` (written every ``cfg.save_every`` steps and on Ctrl-C), as if never
+            stopped: the same weights as an uninterrupted run. ``cfg`` is the checkpoint's (:func:`resumed_config`)
+            but for a larger ``steps`` (training longer).
+        overwrite: replace the earlier run that ``out`` holds (its checkpoint, history and weight files).
 
     Returns:
         The final weight file ``out/gain_normalizer.npz``.
 
     Raises:
-        WeightFileError: ``resume`` without a checkpoint, or with one of other settings.
+        InputError: settings out of range; ``out`` holds another run (without ``resume`` or ``overwrite``) or
+            other files.
+        DatasetError: a scene missing or unfit for training.
+        WeightFileError: ``resume`` without a checkpoint, or with one of other settings (each named, both values).
+        TrainingInterrupted: Ctrl-C or SIGTERM; the checkpoint holds the last step done (:func:`fit`).
     """
+    out = Path(out)
+    _check_settings(cfg)
+    check_run_folder(out, resume=resume, overwrite=overwrite)
+    start = load_checkpoint(out / "checkpoint.pt", cfg) if resume else None
+    record: dict[str, Any] = {"command": command, "conf": conf}
+    if start is not None and not command:
+        record.update(start.get("record") or {})
+    with _log_kept() as kept:
+        data = training_scenes(cfg)
+    with training_run(cfg, out, resume, kept=kept) as folder:
+        if not resume:
+            _remove_final(folder)
+        return _train(cfg, folder, record, progress, start, data)
+
+
+def resumed_config(
+    out: str | Path, settings: Sequence[str | dict[str, Any]] = ()
+) -> tuple[RealLightConfig, dict[str, Any]]:
+    """The settings of the run in the folder ``out`` (its checkpoint's) with ``settings`` applied
+    (:func:`~alcn_cv.train.config.with_settings`; a resumed run takes a larger ``steps`` and nothing else), and what
+    its weight file records besides (``command`` and ``conf``; empty for a checkpoint written before they were kept).
+
+    Raises:
+        WeightFileError: no readable checkpoint of ``alcn train-real-light`` in ``out``, or one of unknown settings.
+        InputError: a setting unknown or of the wrong type.
+    """
+    path = Path(out) / "checkpoint.pt"
+    ckpt = load_checkpoint(path)
+    if ckpt["format"] != REAL_LIGHT_CHECKPOINT_FORMAT:
+        raise WeightFileError(f"{path} is not a checkpoint of alcn train-real-light")
+    saved = copy.deepcopy(ckpt["config"])
+    unknown = sorted(set(saved) - {f.name for f in fields(RealLightConfig)})
+    if unknown:
+        raise WeightFileError(f"checkpoint {path} holds settings this alcn-cv does not know: {', '.join(unknown)}")
+    return with_settings(RealLightConfig(**saved), settings), dict(ckpt.get("record") or {})
+
+
+def _check_settings(cfg: RealLightConfig) -> None:
+    """The settings' ranges (:meth:`RealLightConfig.check <alcn_cv.train.config.RealLightConfig.check>`) and the
+    network's needs: a crop of two patches at least, the widest kernel within half a patch."""
+    cfg.check()
     if cfg.crop < 2 * cfg.patch:
         raise InputError(f"need crop >= 2 * patch, got crop {cfg.crop} and patch {cfg.patch}")
-    with training_run(cfg, out, resume) as folder:
-        return _train(cfg, folder, {"command": command, "conf": conf}, progress, resume)
+    with torch.random.fork_rng(devices=[]):  # the caller's draws untouched
+        sigmas = GainNormalizer(**cfg.net).sigmas
+    if max(kernel_radius(s) for s in sigmas) > cfg.patch // 2:
+        raise InputError(f"patch {cfg.patch} is too small for sigma {max(sigmas)}: the kernels must fit in patch / 2")
+
+
+def _remove_final(folder: Path) -> None:
+    """Remove an earlier run's final weight file and its export (a run stopped before its end would leave them
+    beside its own checkpoint)."""
+    for name in ("gain_normalizer.npz", "gain_normalizer.onnx"):
+        path = folder / name
+        if path.is_file():
+            path.unlink()
+            logger.warning("removed %s of an earlier run", path)
+
+
+class _Kept(logging.Handler):
+    """Keeps the records it is given."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.INFO)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
 
 
 @contextlib.contextmanager
-def training_run(cfg: RealLightConfig, out: str | Path, resume: bool = False) -> Iterator[Path]:
+def _log_kept() -> Iterator[list[logging.LogRecord]]:
+    """The records of the ``alcn_cv`` loggers (INFO at least) while the block runs, for a run's ``train.log`` not
+    yet open (:func:`training_run`'s ``kept``); they reach the console as ever."""
+    handler = _Kept()
+    top = logging.getLogger("alcn_cv")
+    previous = top.level
+    top.addHandler(handler)
+    if top.getEffectiveLevel() > logging.INFO:
+        top.setLevel(logging.INFO)
+    try:
+        yield handler.records
+    finally:
+        top.removeHandler(handler)
+        top.setLevel(previous)
+
+
+@contextlib.contextmanager
+def _run_log_only() -> Iterator[None]:
+    """The records of the block reach the ``alcn_cv`` logger's handlers (the run's ``train.log``,
+    :func:`~alcn_cv.report.log_to`), not the root logger's (the console, which has them already)."""
+    top = logging.getLogger("alcn_cv")
+    previous = top.propagate
+    top.propagate = False
+    try:
+        yield
+    finally:
+        top.propagate = previous
+
+
+@contextlib.contextmanager
+def training_run(
+    cfg: RealLightConfig, out: str | Path, resume: bool = False, *, kept: Sequence[logging.LogRecord] = ()
+) -> Iterator[Path]:
     """The run of any network on ``cfg``'s draws: checks the settings (:meth:`RealLightConfig.check
     <alcn_cv.train.config.RealLightConfig.check>`), makes the run folder ``out`` and copies the log into its
-    ``train.log`` (:func:`alcn_cv.report.log_to`). A folder holds one run: an earlier run's ``train.log`` is
-    replaced and its step snapshots (``*_step{N}.npz``) removed, unless the run is resumed (its log goes on).
+    ``train.log`` (:func:`alcn_cv.report.log_to`), after ``kept``, the records of the work done before the folder
+    was touched (:func:`train_real_light` loads its scenes first). An error of the block is written into
+    ``train.log`` before it propagates. A folder holds one run: an earlier run's ``train.log`` is replaced, its
+    step snapshots (``*_step{N}.npz``), checkpoint and history removed, unless the run is resumed (its log goes on);
+    whether an earlier run may be replaced is for the caller to check first
+    (:func:`~alcn_cv.train.checkpoint.check_run_folder`).
 
     Yields:
         The run folder.
@@ -452,10 +618,19 @@ def training_run(cfg: RealLightConfig, out: str | Path, resume: bool = False) ->
         path.unlink()
     if not resume:
         (folder / "checkpoint.pt").unlink(missing_ok=True)
+        (folder / "history.json").unlink(missing_ok=True)
     with log_to(folder / "train.log", append=resume):
+        with _run_log_only():
+            for record in kept:
+                logging.getLogger(record.name).handle(record)
         if earlier:
             logger.warning("removed %d step snapshots of an earlier run in %s", len(earlier), folder)
-        yield folder
+        try:
+            yield folder
+        except Exception as exc:
+            with _run_log_only():
+                logger.error("the run failed: %s", exc, exc_info=True)
+            raise
 
 
 def initial_network(seed: int, net: dict[str, Any]) -> GainNormalizer:
@@ -467,18 +642,20 @@ def initial_network(seed: int, net: dict[str, Any]) -> GainNormalizer:
     return GainNormalizer(**net)
 
 
-def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any], progress: bool, resume: bool = False) -> Path:
+def _train(
+    cfg: RealLightConfig,
+    out: Path,
+    record: dict[str, Any],
+    progress: bool,
+    start: dict[str, Any] | None,
+    data: tuple[list[TrainingScene], list[TrainingScene]],
+) -> Path:
     rng = np.random.default_rng(cfg.seed)
     net = initial_network(cfg.seed, cfg.net)
-    start = load_checkpoint(out / "checkpoint.pt", cfg) if resume else None
     if start is not None:
         logger.info("resuming from step %d of %d", start["step"], cfg.steps)
         net.load_state_dict(start["net"])
-    if max(kernel_radius(s) for s in net.sigmas) > cfg.patch // 2:
-        raise InputError(
-            f"patch {cfg.patch} is too small for sigma {max(net.sigmas)}: the kernels must fit in patch / 2"
-        )
-    scenes, rendered = training_scenes(cfg)
+    scenes, rendered = data
 
     def save(step: int, seconds: float, opt: torch.optim.Optimizer, history: list[dict]) -> None:
         _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds, record)
@@ -491,6 +668,7 @@ def _train(cfg: RealLightConfig, out: Path, record: dict[str, Any], progress: bo
             "history": history,
             "draws": json.dumps(rng.bit_generator.state),  # the next step's draws, as an uninterrupted run's
             "torch_rng": torch.get_rng_state(),
+            "record": record,  # what the weight file of a run resumed with the checkpoint's settings records
         }
         atomic_write(out / "checkpoint.pt", lambda f, state=state: torch.save(state, f))
 
@@ -515,7 +693,13 @@ def fit(
     ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to
     norm 5; every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer, history)``, a line of
     log and ``out/history.json``; ``start``, a checkpoint's state (:func:`~alcn_cv.train.checkpoint.load_checkpoint`),
-    goes on after its step. Leaves ``net`` in eval mode.
+    goes on after its step. Leaves ``net`` in eval mode. The progress bar shows the mean loss of the last
+    ``cfg.save_every`` steps (the logged one); lines of log print above it.
+
+    Ctrl-C and SIGTERM wait while a step updates the weights and while a save writes
+    (:func:`~alcn_cv.train.checkpoint.interrupts_deferred`); then the steps done since the last save are saved as
+    the periodic saves are (the next step's draws those of an uninterrupted run) and :class:`TrainingInterrupted`
+    is raised.
 
     Returns:
         The seconds it took (with the checkpoint's).
@@ -530,25 +714,53 @@ def fit(
         torch.set_rng_state(start["torch_rng"])
     began = time.perf_counter() - before
     net.train()
-    steps = range(first, cfg.steps + 1)
-    bar = tqdm(steps, desc=desc, unit="step", initial=first - 1, total=cfg.steps, disable=not progress)
-    for step in bar:
-        scene, frames, centres, anywhere = draw_step(scenes, rendered, cfg, rng)
-        loss = step_loss(net, scene, frames, centres, cfg, anywhere)
-        opt.zero_grad()
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
-        opt.step()
-        history.append({"step": step, "scene": scene.name, "loss": loss.item()})
-        bar.set_postfix(loss=f"{loss.item():.3f}")
-        if step % cfg.save_every == 0 or step == cfg.steps:
-            seconds = time.perf_counter() - began
-            recent = [h["loss"] for h in history[-cfg.save_every :]]
-            logger.info(
-                "step %d: mean loss %.4f over the last %d steps, %.0f s", step, np.mean(recent), len(recent), seconds
-            )
-            save(step, seconds, opt, history)
+    done = saved = first - 1
+    # the generators' states before the draws of the step under way: a run stopped within it does it again
+    step_start: tuple[Any, torch.Tensor] | None = None
+
+    def save_all(step: int) -> None:
+        with interrupts_deferred():  # the checkpoint, the snapshot and the history of one step, whole
+            save(step, time.perf_counter() - began, opt, history)
             write_json(out / "history.json", history)
+
+    bar = tqdm(
+        range(first, cfg.steps + 1), desc=desc, unit="step", initial=first - 1, total=cfg.steps, disable=not progress
+    )
+    try:
+        with sigint_as_keyboard_interrupt(), logging_redirect_tqdm() if progress else contextlib.nullcontext():
+            for step in bar:
+                step_start = (rng.bit_generator.state, torch.get_rng_state())
+                scene, frames, centres, anywhere = draw_step(scenes, rendered, cfg, rng)
+                loss = step_loss(net, scene, frames, centres, cfg, anywhere)
+                opt.zero_grad()
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
+                # a Ctrl-C between the update and its entry would save the step's weights as those of the step before
+                with interrupts_deferred():
+                    opt.step()
+                    history.append({"step": step, "scene": scene.name, "loss": loss.item()})
+                    done, step_start = step, None
+                recent = [h["loss"] for h in history[-cfg.save_every :]]
+                bar.set_postfix_str(f"mean loss {np.mean(recent):.3f}")
+                if step % cfg.save_every == 0 or step == cfg.steps:
+                    logger.info(
+                        "step %d: mean loss %.4f over the last %d steps, %.0f s",
+                        step,
+                        np.mean(recent),
+                        len(recent),
+                        time.perf_counter() - began,
+                    )
+                    save_all(step)
+                    saved = step
+    except KeyboardInterrupt as exc:
+        bar.close()
+        if step_start is not None:
+            rng.bit_generator.state, _ = step_start
+            torch.set_rng_state(step_start[1])
+        if done > saved:
+            save_all(done)
+        logger.warning("interrupted at step %d of %d", done, cfg.steps)
+        raise TrainingInterrupted(done) from exc
     seconds = time.perf_counter() - began
     logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
     net.eval()

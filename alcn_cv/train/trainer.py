@@ -32,9 +32,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import signal
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,10 +51,12 @@ from alcn_cv.report import log_to, machine, nan_to_none
 from alcn_cv.train import distributed
 from alcn_cv.train.checkpoint import (
     TrainState,
+    interrupts_deferred,
     load_checkpoint,
     restore_checkpoint,
     run_folder,
     save_checkpoint,
+    sigint_as_keyboard_interrupt,
     write_normalizer_file,
 )
 from alcn_cv.train.config import TrainConfig, dump_toml, load_config
@@ -71,8 +71,6 @@ __all__ = ["JointModel", "TrainResult", "load_checkpoint", "train"]
 logger = logging.getLogger(__name__)
 
 _CHECKPOINT = "checkpoint.pt"
-#: The signals :func:`_interrupts_deferred` holds.
-_DEFERRED = (signal.SIGINT, signal.SIGTERM)
 
 
 @dataclass
@@ -267,7 +265,7 @@ def _fit(
     shards = _shards(cfg, train_set)
     model.train()
     try:
-        with _sigint_as_keyboard_interrupt():
+        with sigint_as_keyboard_interrupt():
             while state.epoch < cfg.optim.epochs:
                 _train_epoch(cfg, ddp, optimizer, state, shards, device, out, progress)
                 _end_epoch(cfg, model, optimizer, state, val_set, device, out)
@@ -334,7 +332,7 @@ def _train_epoch(
             torch.nn.utils.clip_grad_norm_(params, cfg.optim.grad_clip)
         # a Ctrl-C between the step and its counter would checkpoint the step's weights with the counter of before
         # (a resumed run takes that step twice)
-        with _interrupts_deferred():
+        with interrupts_deferred():
             optimizer.step()
             sums[0] += loss.item() * len(idx)
             sums[1] += int((logits.argmax(1) == y).sum())
@@ -380,7 +378,7 @@ def _end_epoch(
     )
     # a Ctrl-C between the entry and the counter would checkpoint the epoch's entry with the epoch unfinished (a
     # resumed run records it twice)
-    with _interrupts_deferred():
+    with interrupts_deferred():
         state.history.append(
             {
                 "epoch": state.epoch + 1,
@@ -492,41 +490,3 @@ def _finish(cfg: TrainConfig, result: TrainResult, train_set: PhosBatch, state: 
         write_json(result.out_dir / "fewshot.json", nan_to_none(result.fewshot))
     result.weights = write_normalizer_file(model, cfg, train_set, result, total)
     logger.info("Normalizer weights written to %s", result.weights)
-
-
-# ---------------------------------------------------------------------------------- helpers
-
-
-@contextlib.contextmanager
-def _sigint_as_keyboard_interrupt() -> Iterator[None]:
-    """Make sure Ctrl-C raises KeyboardInterrupt (a parent may have set SIGINT to be ignored)."""
-    try:
-        previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
-@contextlib.contextmanager
-def _interrupts_deferred() -> Iterator[None]:
-    """Hold Ctrl-C and SIGTERM (which the command line raises as Ctrl-C) until the block ends, then deliver them to
-    the handlers of before: no signal cuts the block short. Python handles signals in the main thread only, so
-    another thread's block has nothing to hold."""
-    held: list[int] = []
-    kept = [s for s in _DEFERRED if signal.getsignal(s) is not None]  # None: set outside Python, not to be put back
-    try:
-        previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in kept}
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-        for s in dict.fromkeys(held):
-            signal.raise_signal(s)

@@ -1,0 +1,79 @@
+"""What the scene loader (alcn_cv.data.scenes) tells about folders that are no usable registered scene: frames that
+do not look registered, 12-bit data in 16-bit files, a scene path that names nothing."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.data.scenes import (
+    REGISTERED_SCORE,
+    WEBCAM_SCENES,
+    load_scene_folder,
+    registration_score,
+    scene_dirs,
+    shared_root,
+)
+from alcn_cv.errors import InputError
+from scene_sets import lit, make_sets, texture
+
+
+def _warnings(caplog) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+
+
+def test_unrelated_photographs_of_one_size_are_warned_about(tmp_path, caplog):
+    folder = tmp_path / "holiday"
+    folder.mkdir()
+    for i in range(4):  # four unrelated textures, each under its own light
+        cv2.imwrite(str(folder / f"img_{i}.png"), lit(texture(seed=10 + i))[i % 3])
+    root = make_sets(tmp_path / "sets")
+    with caplog.at_level("WARNING"):
+        (scene,) = load_scene_folder(folder)
+        load_scene_folder(root / "webcam")
+        load_scene_folder(root / "psm")
+    assert registration_score(scene.frames) < REGISTERED_SCORE
+    (message,) = _warnings(caplog)  # the registered scenes of make_sets pass
+    assert "'holiday'" in message and "does not look registered" in message
+
+
+def test_registration_score_of_a_scene_and_of_noise():
+    frames = np.stack(lit(texture(seed=3)))
+    assert registration_score(frames) > 0.8
+    noise = np.random.default_rng(0).integers(0, 256, (3, 120, 160), dtype=np.uint8)
+    assert registration_score(noise) < REGISTERED_SCORE
+
+
+@pytest.mark.shared_data
+def test_the_real_registered_scenes_pass_with_margin(shared_data):
+    for data in ("webcam", "psm"):
+        for scene in load_scene_folder(shared_data / data, max_frames=12):
+            assert registration_score(scene.frames) > 2 * REGISTERED_SCORE, scene.name
+
+
+def test_twelve_bit_frames_in_sixteen_bit_files_are_warned_about(tmp_path, caplog):
+    deep, full = tmp_path / "deep", tmp_path / "full"
+    for folder in (deep, full):
+        folder.mkdir()
+    for i, frame in enumerate(lit(texture())):
+        cv2.imwrite(str(deep / f"{i}.png"), frame.astype(np.uint16) * 16)  # 12-bit values: at most 4080
+        cv2.imwrite(str(full / f"{i}.png"), frame.astype(np.uint16) * 257)
+    with caplog.at_level("WARNING"):
+        load_scene_folder(full)
+        assert not _warnings(caplog)
+        load_scene_folder(deep)
+    (message,) = _warnings(caplog)  # one line for the scene
+    top = int(max(f.max() for f in lit(texture()))) * 16
+    assert "scene 'deep'" in message and f"maximum of {top}" in message and ".png" in message
+
+
+def test_a_misspelt_scene_is_neither_a_folder_nor_a_webcam_scene(tmp_path, monkeypatch):
+    with pytest.raises(InputError, match="frankfrut: neither a folder nor a webcam scene") as err:
+        scene_dirs(["frankfrut"])
+    assert all(name in str(err.value) for name in WEBCAM_SCENES) and "\n" not in str(err.value)
+    with pytest.raises(InputError, match="neither a folder"):
+        scene_dirs([str(tmp_path / "missing")])
+    (tmp_path / "home" / "mine").mkdir(parents=True)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert scene_dirs(["~/mine", "mexico"]) == [tmp_path / "home" / "mine", shared_root("webcam") / "mexico"]

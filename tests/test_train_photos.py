@@ -1,0 +1,178 @@
+"""Training the gain Normalizer on your own photographs: ``alcn train-real-light --set photos=[...]``
+(alcn_cv.train.config.RealLightConfig.photos, alcn_cv.data.permissive_images.folder_photographs)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+
+from alcn_cv.data.permissive_images import USER_LICENCE, Photograph, folder_photographs, relit_scenes
+from alcn_cv.data.scenes import Scene
+from alcn_cv.errors import InputError
+from alcn_cv.train.config import REAL_LIGHT_CONFS, RealLightConfig, preset
+
+CROP, PATCH = 96, 32
+
+
+def _photo(h: int = 120, w: int = 130, seed: int = 0) -> np.ndarray:
+    """A textured uint8 photograph ``(h, w)``."""
+    noise = np.random.default_rng(seed).random((h, w)).astype(np.float32)
+    return np.rint(255 * cv2.normalize(cv2.GaussianBlur(noise, (0, 0), 2.0), None, 0, 1, cv2.NORM_MINMAX)).astype(
+        np.uint8
+    )
+
+
+def _folder(path, count: int = 2, h: int = 120, w: int = 130):
+    path.mkdir(parents=True)
+    for i in range(count):
+        cv2.imwrite(str(path / f"p{i}.png"), _photo(h, w, seed=i))
+    return path
+
+
+@pytest.fixture
+def shipped(monkeypatch):
+    """Two stand-ins for the permissive photographs (reading the real ones takes seconds)."""
+    from alcn_cv.train import real_light
+
+    photos = [Photograph(f"shipped{i}", _photo(110, 120, seed=10 + i), "CC0", "test") for i in range(2)]
+    monkeypatch.setattr(real_light, "training_photographs", lambda shared: photos)
+    return photos
+
+
+def test_every_format_depth_and_colour_is_read_as_eight_bits(tmp_path, caplog):
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    gray = _photo()
+    colour = np.dstack([gray, gray[::-1], gray[:, ::-1]])
+    cv2.imwrite(str(folder / "a.jpg"), colour)
+    cv2.imwrite(str(folder / "b.png"), gray.astype(np.uint16) * 257)  # 16-bit, the whole range
+    cv2.imwrite(str(folder / "c.tif"), colour.astype(np.uint16) * 257)
+    cv2.imwrite(str(folder / "d.bmp"), gray)
+    (folder / "notes.txt").write_text("not an image")
+    with caplog.at_level("WARNING"):
+        photos = folder_photographs([folder], min_side=CROP)
+    assert [p.name for p in photos] == ["mine/a.jpg", "mine/b.png", "mine/c.tif", "mine/d.bmp"]
+    assert all(p.image.dtype == np.uint8 and p.licence == USER_LICENCE for p in photos)
+    assert [p.image.ndim for p in photos] == [3, 2, 3, 2]  # colour kept: the light's colour relights it
+    np.testing.assert_array_equal(photos[1].image, gray)
+    np.testing.assert_array_equal(photos[2].image, colour)
+    assert not caplog.records
+
+
+def test_twelve_bit_photographs_are_warned_about(tmp_path, caplog):
+    folder = tmp_path / "deep"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "raw.png"), (_photo().astype(np.uint16) * 16).clip(0, 4095))  # 12-bit data
+    with caplog.at_level("WARNING"):
+        folder_photographs([folder])
+    assert any("raw.png" in r.getMessage() and "maximum of 4080" in r.getMessage() for r in caplog.records)
+
+
+def test_photos_are_relit_after_the_shipped_ones_which_stay_as_they_were(tmp_path, shipped):
+    from alcn_cv.train.real_light import training_scenes
+
+    folder = _folder(tmp_path / "mine")
+    base = RealLightConfig(relit=3, crop=CROP, patch=PATCH, seed=5)
+    alone, _ = training_scenes(base)
+    both, _ = training_scenes(dataclasses.replace(base, photos=[str(folder)]))
+    assert [s.name for s in both] == ["00_shipped0", "01_shipped1", "02_mine_p0_png", "03_mine_p1_png"]
+    for a, b in zip(alone, both):
+        np.testing.assert_array_equal(a.frames, b.frames)
+    # the user's photographs relit exactly as a shipped one would be in their place
+    expected = relit_scenes([*shipped, *folder_photographs([folder])], 3, 5)[2]
+    inside = (slice(None), slice(CROP // 2, -CROP // 2), slice(CROP // 2, -CROP // 2))  # the padding left out
+    np.testing.assert_array_equal(both[2].frames[inside], expected.unit_frames())
+
+    mine, _ = training_scenes(dataclasses.replace(base, photos=[str(folder)], shipped_photos=False))
+    assert [s.name for s in mine] == ["00_mine_p0_png", "01_mine_p1_png"]
+
+
+def test_photo_folders_expand_the_home_and_start_from_the_working_folder(tmp_path, monkeypatch, shipped):
+    from alcn_cv.train.real_light import training_scenes
+
+    _folder(tmp_path / "home" / "mine", count=1)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.chdir(tmp_path / "home")
+    for given in ("~/mine", "mine", "./mine"):
+        cfg = RealLightConfig(relit=2, crop=CROP, patch=PATCH, photos=[given], shipped_photos=False)
+        cfg.check()
+        assert [s.name for s in training_scenes(cfg)[0]] == ["00_mine_p0_png"]
+
+
+def test_bad_photo_folders_and_files_are_one_line_errors(tmp_path, shipped):
+    from alcn_cv.train.real_light import training_scenes
+
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "empty" / "readme.txt").write_text("no images here")
+    cases = {"missing": "folder not found", "empty": "no image"}
+    for name, match in cases.items():
+        cfg = RealLightConfig(relit=2, photos=[str(tmp_path / name)])
+        for run in (cfg.check, lambda cfg=cfg: training_scenes(cfg)):
+            with pytest.raises(InputError, match=f"photos: .*{name}: {match}") as err:
+                run()
+            assert "\n" not in str(err.value)
+    broken = _folder(tmp_path / "broken", count=1)
+    (broken / "zz.png").write_bytes(b"\x89PNG\r\n\x1a\nnot really")
+    RealLightConfig(relit=2, photos=[str(broken)]).check()  # listed, not read
+    with pytest.raises(InputError, match="zz.png"):
+        training_scenes(RealLightConfig(relit=2, crop=CROP, patch=PATCH, photos=[str(broken)]))
+    small = _folder(tmp_path / "small", count=1, h=90, w=300)
+    with pytest.raises(InputError, match=r"p0.png: 300x90 pixels, .*at least 96x96 pixels \(crop=96\)"):
+        training_scenes(RealLightConfig(relit=2, crop=CROP, patch=PATCH, photos=[str(small)]))
+    wide = _folder(tmp_path / "wide", count=1, h=100, w=1000)  # fitted to 640: 64 high
+    with pytest.raises(InputError, match=r"1000x100 pixels \(640x64 once its longer side is brought to 640"):
+        training_scenes(RealLightConfig(relit=2, crop=CROP, patch=PATCH, photos=[str(wide)]))
+
+
+def test_the_settings_of_photos_are_checked(tmp_path):
+    folder = _folder(tmp_path / "mine", count=1)
+    with pytest.raises(InputError, match="relit >= 2"):
+        RealLightConfig(relit=0, photos=[str(folder)]).check()
+    with pytest.raises(InputError, match="no scenes given"):
+        RealLightConfig(shipped_photos=False).check()
+    RealLightConfig(shipped_photos=False, photos=[str(folder)]).check()
+    cfg = preset(REAL_LIGHT_CONFS, "gain", [f"photos=['{folder}']", "shipped_photos=false"])
+    assert (cfg.photos, cfg.shipped_photos, cfg.relit) == ([str(folder)], False, 4)
+    with pytest.raises(InputError, match="'photos' must be a list"):
+        preset(REAL_LIGHT_CONFS, "gain", [f"photos={folder}"])
+    assert REAL_LIGHT_CONFS["gain"].photos == [] and REAL_LIGHT_CONFS["gain"].shipped_photos
+
+
+def test_the_weight_file_records_the_folders_as_given(tmp_path, monkeypatch):
+    import torch
+
+    from alcn_cv.train.real_light import train_real_light
+    from alcn_cv.weight_file import load_normalizer_file
+
+    torch.set_num_threads(1)
+    _folder(tmp_path / "mine")
+    monkeypatch.chdir(tmp_path)
+    cfg = RealLightConfig(
+        photos=["mine"],
+        shipped_photos=False,
+        relit=2,
+        steps=2,
+        save_every=2,
+        locations=8,
+        min_distance=8,
+        crop=CROP,
+        patch=PATCH,
+        net={"channels": 8},
+    )
+    meta = load_normalizer_file(train_real_light(cfg, tmp_path / "run", progress=False)).meta
+    assert meta["training"]["config"]["photos"] == ["mine"] and meta["training"]["config"]["shipped_photos"] is False
+
+
+def test_frames_smaller_than_the_crop_or_the_patches_name_the_scene():
+    from alcn_cv.train.real_light import training_scene
+
+    frames = np.stack([_photo(80, 90, seed=i) for i in range(2)])
+    scene = Scene("street", "webcam", frames, ("a.png", "b.png"))
+    with pytest.raises(InputError, match=r"scene 'street': frames of 90x80 .*crop=96.*at least 96x96"):
+        training_scene(scene, CROP // 2, PATCH, CROP)
+    with pytest.raises(InputError, match=r"scene 'street': frames of 90x80 .*the 100x100 patches"):
+        training_scene(scene, CROP // 2, 100)
+    assert len(training_scene(scene, CROP // 2, PATCH).frames) == 2  # no crop given: the patches' bound only

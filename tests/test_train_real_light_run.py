@@ -1,0 +1,285 @@
+"""The run lifecycle of `alcn train-real-light` (alcn_cv.train.real_light), modelled on `alcn train`'s: an earlier run
+is replaced only with --overwrite and never by a run that fails its checks, Ctrl-C saves the step reached and prints
+the command that goes on, --resume takes the checkpoint's settings, the end prints the next commands; and the
+`alcn export` and weight-file paths those commands take."""
+
+from __future__ import annotations
+
+import json
+import logging
+import shlex
+import sys
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+import alcn_cv
+from alcn_cv.cli import build_parser, main
+from alcn_cv.enhance.registry import from_spec
+from alcn_cv.errors import WeightFileError
+from alcn_cv.train import real_light
+from alcn_cv.train.checkpoint import load_checkpoint
+from alcn_cv.weight_file import load_normalizer_file
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
+
+
+def _scene(folder, frames=3, h=120, w=136, seed=0):
+    """A registered scene: one texture under a different uneven light in each frame."""
+    rng = np.random.default_rng(seed)
+    texture = cv2.GaussianBlur(rng.random((h, w)).astype(np.float32), (0, 0), 1.5)
+    texture = (texture - texture.min()) / (texture.max() - texture.min())
+    folder.mkdir(parents=True)
+    yy, xx = np.mgrid[0:h, 0:w] / max(h, w)
+    for i in range(frames):
+        light = np.exp(rng.uniform(-1.5, 0.0) + rng.uniform(-1.5, 1.5) * xx + rng.uniform(-1.0, 1.0) * yy)
+        frame = np.clip((0.3 + 0.4 * texture) * light * (1 + 0.2 * rng.standard_normal((h, w))), 0, 1)
+        cv2.imwrite(str(folder / f"{i:02d}.png"), np.rint(255 * frame).astype(np.uint8))
+    return folder
+
+
+def _tiny(scene, steps=2, save_every=2, **more) -> list[str]:
+    """The --set options of a run of a few steps on ``scene``."""
+    settings = {
+        "scenes": f"['{scene}']",
+        "relit": 0,
+        "crop": 96,
+        "patch": 32,
+        "net.channels": 8,
+        "locations": 16,
+        "min_distance": 8,
+        "temperature": 0.5,
+        "lr": 0.02,
+        "steps": steps,
+        "save_every": save_every,
+        **more,
+    }
+    return [word for key, value in settings.items() for word in ("--set", f"{key}={value}")]
+
+
+def _run(out, *options) -> list[str]:
+    return ["train-real-light", "--out", str(out), "--no-progress", *options]
+
+
+def _interrupted_at(call: int, monkeypatch) -> list[int]:
+    """Ctrl-C within step ``call`` of the next run, after its draws (the generators moved on)."""
+    draw_step, calls = real_light.draw_step, []
+
+    def draw(*args):
+        drawn = draw_step(*args)
+        calls.append(1)
+        if len(calls) == call:
+            raise KeyboardInterrupt
+        return drawn
+
+    monkeypatch.setattr(real_light, "draw_step", draw)
+    return calls
+
+
+def test_a_failed_or_unasked_run_never_destroys_an_earlier_one(tmp_path, capsys):
+    scene = _scene(tmp_path / "scene")
+    out = tmp_path / "run"
+    assert main(_run(out, *_tiny(scene))) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert {"checkpoint.pt", "gain_normalizer_step2.npz", "gain_normalizer.npz", "train.log"} <= set(before)
+    capsys.readouterr()
+
+    assert main(_run(out, *_tiny(scene))) == 2  # the same run again: only with --overwrite
+    err = capsys.readouterr().err
+    assert "holds an earlier run" in err and "--resume continues it, --overwrite replaces it" in err
+    misspelt = _tiny(tmp_path / "scnee")
+    assert main(_run(out, "--overwrite", *misspelt)) == 2  # fails on its scenes, before the folder is touched
+    assert "scnee" in capsys.readouterr().err
+    assert main(_run(out, "--overwrite", *_tiny(scene, patch=8))) == 2  # the kernels do not fit: checked first too
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
+
+    assert main(_run(tmp_path / "new", *misspelt)) == 2
+    assert not (tmp_path / "new").exists()
+
+    assert main(_run(out, "--overwrite", *_tiny(scene, steps=1, save_every=1))) == 0  # replaced: no file of the first
+    assert sorted(p.name for p in out.iterdir()) == [
+        "checkpoint.pt",
+        "gain_normalizer.npz",
+        "gain_normalizer_step1.npz",
+        "history.json",
+        "train.log",
+    ]
+    assert "scene scene: 3 frames" in (out / "train.log").read_text()  # loaded before the log opened: logged too
+
+
+def test_an_error_during_the_run_is_in_train_log(tmp_path, monkeypatch, caplog):
+    def broken(*args, **kwargs):
+        raise RuntimeError("the loss broke")
+
+    from alcn_cv.train.config import RealLightConfig
+
+    monkeypatch.setattr(real_light, "pair_loss", broken)
+    cfg = RealLightConfig(
+        scenes=[str(_scene(tmp_path / "scene"))], relit=0, crop=96, patch=32, net={"channels": 8}, steps=2
+    )
+    with caplog.at_level(logging.INFO), pytest.raises(RuntimeError, match="the loss broke"):
+        real_light.train_real_light(cfg, tmp_path / "run", progress=False)
+    log = (tmp_path / "run" / "train.log").read_text()
+    assert "ERROR] the run failed: the loss broke" in log and "Traceback" in log
+    assert "the run failed" not in caplog.text  # the console gets it once, from the command line
+
+
+def test_ctrl_c_saves_the_step_reached_and_prints_how_to_go_on(tmp_path, monkeypatch, capsys):
+    scene = _scene(tmp_path / "scene")
+    settings = _tiny(scene, steps=4, save_every=10)
+    assert main(_run(tmp_path / "whole", *settings)) == 0
+    whole = load_normalizer_file(tmp_path / "whole" / "gain_normalizer.npz")
+    capsys.readouterr()
+
+    out = tmp_path / "run"
+    calls = _interrupted_at(3, monkeypatch)  # within step 3; no periodic save before (save_every 10)
+    assert main(_run(out, *settings, "--threads", "1")) == 130
+    hint = shlex.join(["alcn", "train-real-light", "--out", str(out), "--resume", "--no-progress"])
+    assert capsys.readouterr().err.strip().endswith(f"interrupted at step 2; continue with: {hint}")
+    assert load_checkpoint(out / "checkpoint.pt")["step"] == 2
+    assert "interrupted at step 2 of 4" in (out / "train.log").read_text()
+
+    assert len(calls) == 3
+    monkeypatch.undo()
+    draws = _interrupted_at(0, monkeypatch)  # counts the steps only
+    assert main(shlex.split(hint)[1:]) == 0  # as printed: no --set, the checkpoint's settings
+    assert len(draws) == 2  # steps 3 and 4, from the state at the start of step 3
+    resumed = load_normalizer_file(out / "gain_normalizer.npz")
+    for key, value in whole.arrays.items():
+        np.testing.assert_array_equal(resumed.arrays[key], value, err_msg=key)
+    assert resumed.meta["training"]["command"] == whole.meta["training"]["command"]  # the run's, kept in its checkpoint
+    assert [h["step"] for h in json.loads((out / "history.json").read_text())] == [1, 2, 3, 4]
+
+
+def test_ctrl_c_before_the_first_step_saves_nothing(tmp_path, monkeypatch, capsys):
+    _interrupted_at(1, monkeypatch)
+    assert main(_run(tmp_path / "run", *_tiny(_scene(tmp_path / "scene")))) == 130
+    assert "interrupted before the first step: nothing saved" in capsys.readouterr().err
+    assert not (tmp_path / "run" / "checkpoint.pt").exists()
+
+
+def test_resume_takes_the_checkpoints_settings_and_names_each_difference(tmp_path, capsys):
+    scene = _scene(tmp_path / "scene")
+    out = tmp_path / "run"
+    assert main(_run(out, *_tiny(scene))) == 0
+    capsys.readouterr()
+    # with a preset, its settings are compared: each difference named, with both values
+    assert main(_run(out, "--resume", "--conf", "gain", *_tiny(scene, steps=1, save_every=5, lr=0.01))) == 2
+    err = capsys.readouterr().err
+    for named in ("lr (0.02 in the checkpoint, 0.01 now)", "save_every (2 in the checkpoint, 5 now)", "steps (2 in"):
+        assert named in err
+    assert "{'alcn_cv'" not in err  # no raw dict of versions
+    assert main(_run(out, "--resume", "--set", "steps=1")) == 2  # fewer steps than done
+    assert "steps (2 in the checkpoint, 1 now)" in capsys.readouterr().err
+    assert main(_run(out, "--resume", "--set", "steps=3")) == 0  # longer: the checkpoint's settings, steps raised
+    assert [h["step"] for h in json.loads((out / "history.json").read_text())] == [1, 2, 3]
+    meta = load_normalizer_file(out / "gain_normalizer.npz").meta["training"]
+    assert meta["config"]["steps"] == 3 and meta["config"]["lr"] == 0.02
+    assert meta["command"].startswith("alcn train-real-light --conf gain --set") and meta["command"].endswith(
+        "--set steps=3"
+    )
+    assert main(_run(out, "--resume", "--conf", "gain", *_tiny(scene, steps=4))) == 0  # a preset's: same settings
+
+
+def test_the_end_of_a_run_prints_the_weights_and_commands_that_work(tmp_path, capsys):
+    scene = _scene(tmp_path / "scene")
+    out = tmp_path / "run"
+    assert main(_run(out, *_tiny(scene, steps=1, save_every=1))) == 0
+    printed = capsys.readouterr().out
+    weights = out / "gain_normalizer.npz"
+    assert printed.startswith(f"weights: {weights}\n")
+    commands = [shlex.split(line)[1:] for line in printed.splitlines() if line.strip().startswith("alcn ")]
+    normalize, export, bench = commands
+    assert normalize[:3] == ["normalize", "IMAGE", "OUTPUT"] and export == ["export", "--weights", str(weights)]
+    normalize[1:3] = [str(scene / "00.png"), str(tmp_path / "normalized.png")]
+    assert main(normalize) == 0 and cv2.imread(str(tmp_path / "normalized.png")) is not None
+    assert main(export) == 0 and weights.with_suffix(".onnx").is_file()  # beside: backend='opencv' finds it
+    args = build_parser().parse_args(bench)  # its options exist (the bench itself takes minutes), its methods too
+    assert args.quick and args.methods == ["alcn", f"alcn:weights={weights}"]
+    assert from_spec(args.methods[1]).normalize(np.full((40, 40), 0.5, np.float32)).shape == (40, 40)
+
+
+def test_the_bar_shows_the_mean_loss_and_logs_print_above_it(tmp_path, monkeypatch):
+    from tqdm import tqdm
+
+    from alcn_cv.train.config import RealLightConfig
+
+    postfixes, redirected = [], []
+
+    class Bar(tqdm):
+        def set_postfix_str(self, s="", refresh=True):
+            postfixes.append(s)
+            super().set_postfix_str(s, refresh)
+
+        def set_postfix(self, *args, **kwargs):
+            postfixes.append(kwargs)
+            super().set_postfix(*args, **kwargs)
+
+    console = logging.StreamHandler(sys.stderr)
+    logging.root.addHandler(console)
+    draw_step = real_light.draw_step
+    monkeypatch.setattr(real_light, "tqdm", Bar)
+    monkeypatch.setattr(
+        real_light, "draw_step", lambda *a: redirected.append(console not in logging.root.handlers) or draw_step(*a)
+    )
+    cfg = RealLightConfig(
+        scenes=[str(_scene(tmp_path / "scene"))], relit=0, crop=96, patch=32, net={"channels": 8}, steps=3
+    )
+    try:
+        real_light.train_real_light(cfg, tmp_path / "run", progress=True)
+    finally:
+        logging.root.removeHandler(console)
+    assert redirected == [True, True, True]  # the console's handler writes through tqdm while the bar runs
+    losses = [h["loss"] for h in json.loads((tmp_path / "run" / "history.json").read_text())]
+    assert postfixes == [f"mean loss {np.mean(losses[: i + 1]):.3f}" for i in range(3)]
+
+
+def test_export_writes_beside_the_weights_and_never_over_a_file_unasked(tmp_path, capsys, caplog):
+    from alcn_cv.runtime import MODELS
+
+    weights = tmp_path / "mine.npz"
+    weights.write_bytes(MODELS["gain"].read_bytes())
+    assert main(["export", "--weights", str(weights)]) == 0
+    beside = weights.with_suffix(".onnx")
+    assert capsys.readouterr().out.strip() == str(beside) and beside.is_file()
+    assert alcn_cv.createALCN(weights=weights, backend="opencv") is not None
+    assert main(["export", "--weights", str(weights)]) == 2
+    assert f"{beside} exists (--overwrite replaces it)" in capsys.readouterr().err
+    assert main(["export", "--weights", str(weights), "--overwrite"]) == 0
+    elsewhere = tmp_path / "other" / "n.onnx"
+    elsewhere.parent.mkdir()
+    with caplog.at_level(logging.WARNING):
+        assert main(["export", "--weights", str(weights), "--onnx", str(elsewhere)]) == 0
+    assert elsewhere.is_file() and "will not find this one" in caplog.text and str(beside) in caplog.text
+
+
+def test_a_run_folder_given_for_weights_names_the_file_meant(tmp_path):
+    from alcn_cv.runtime import MODELS
+
+    (tmp_path / "train.log").write_text("")
+    with pytest.raises(WeightFileError, match=r"a folder, not a weight file \(\.npz\)$"):
+        alcn_cv.createALCN(weights=tmp_path)
+    (tmp_path / "gain_normalizer_step1.npz").write_bytes(MODELS["gain"].read_bytes())
+    with pytest.raises(WeightFileError, match=r"did you mean .*gain_normalizer_step1\.npz\?"):
+        alcn_cv.createALCN(weights=tmp_path)
+    (tmp_path / "gain_normalizer.npz").write_bytes(MODELS["gain"].read_bytes())
+    with pytest.raises(
+        WeightFileError, match=f"{tmp_path} is a folder.*did you mean {tmp_path / 'gain_normalizer.npz'}"
+    ):
+        alcn_cv.createALCN(weights=tmp_path)
+
+
+def test_train_unet_asks_for_overwrite_too(tmp_path, capsys):
+    (tmp_path / "train.log").write_text("")
+    (tmp_path / "history.json").write_text("[]")
+    assert main(["train-unet", "--out", str(tmp_path), "--no-progress"]) == 2  # before its scenes are loaded
+    assert "holds an earlier run (history.json)" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["history.json", "train.log"]
