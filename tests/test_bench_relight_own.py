@@ -134,3 +134,41 @@ def test_weights_trained_on_a_test_scene_are_flagged(tmp_path, caplog, record):
 def test_the_shipped_weights_record_no_test_scene():
     for spec in ("alcn", "alcn:model=lite", "alcn:model=paper", "none"):
         assert relight.trained_scenes(spec) & {"mexico", "buddha", "cat", "horse", "owl"} == set()
+
+
+def test_trained_scenes_are_named_as_the_loader_names_them(tmp_path):
+    """Hidden files and one-frame scenes of a recorded folder were counted as scenes it was trained on."""
+    data = own_scenes(tmp_path / "mine")
+    blank = np.zeros((48, 64), np.uint8)
+    for name in (".ghost.0.png", ".ghost.1.png", "lone.0.png"):
+        cv2.imwrite(str(data / "one" / name), blank)
+    spec = weights_trained_on(tmp_path / "w.npz", scenes=[str(data)])
+    assert relight.trained_scenes(spec) == {"mine", "one", "two", "three"}
+
+
+def test_trained_scenes_of_photos_and_windows_paths(tmp_path):
+    """A test scene's folder relit as photos was not flagged; a path recorded on Windows was one name."""
+    data = own_scenes(tmp_path / "mine")
+    (data / "three" / "sub").mkdir()  # photos reads a folder's own images: its subfolders are no scene of it
+    for i in range(2):
+        cv2.imwrite(str(data / "three" / "sub" / f"{i}.png"), np.zeros((48, 64), np.uint8))
+    photos = weights_trained_on(tmp_path / "p.npz", photos=[str(data / "three"), "C:\\photos\\mexico"])
+    assert relight.trained_scenes(photos) == {"three", "mexico"}
+    windows = weights_trained_on(tmp_path / "w.npz", scenes=["D:\\data\\webcam\\mexico", "frankfurt"])
+    assert relight.trained_scenes(windows) == {"mexico", "frankfurt"}
+
+
+def test_a_folder_that_cannot_be_listed_is_logged_not_fatal(tmp_path, monkeypatch, caplog):
+    data = own_scenes(tmp_path / "mine")
+    spec = weights_trained_on(tmp_path / "w.npz", scenes=[str(data), "mexico"])
+    listed = Path.iterdir
+
+    def iterdir(self):
+        if self == data:
+            raise PermissionError(13, "Permission denied", str(self))
+        return listed(self)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    with caplog.at_level(logging.WARNING, logger="alcn_cv.bench.relight"):
+        assert relight.trained_scenes(spec) == {"mine", "mexico"}
+    assert f"{data}: cannot list" in caplog.text and "Permission denied" in caplog.text

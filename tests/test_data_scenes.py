@@ -12,6 +12,7 @@ from alcn_cv.data.scenes import (
     load_scene_folder,
     load_scenes,
     scene_dirs,
+    scene_names,
     select_scenes,
     shared_root,
 )
@@ -98,3 +99,20 @@ def test_shared_scenes(shared_data):
     assert set(TRAIN_SCENES) <= names and "mexico" in names
     assert {s.name for s in select_scenes(scenes, ["psm"])} == {"buddha", "cat", "horse", "owl"}
     assert all(len(s.frames) == 3 and s.frames.dtype == np.uint8 for s in scenes)
+
+
+def test_scene_names_are_the_loaders_without_reading_an_image(tmp_path, monkeypatch):
+    """The bench named a weight file's scene folders itself, counting hidden files and one-frame scenes."""
+    root = make_sets(tmp_path)
+    psm = root / "psm"
+    for name in (".ghost.0.png", ".ghost.1.png", "lone.0.png"):  # hidden files; a scene of one frame
+        cv2.imwrite(str(psm / "ball" / name), np.zeros((40, 40), np.uint8))
+    (psm / ".hidden").mkdir()
+    for i in range(2):
+        cv2.imwrite(str(psm / ".hidden" / f"{i}.png"), np.zeros((40, 40), np.uint8))
+    for folder in (root / "webcam", psm, psm / "ball"):
+        loaded = [s.name for s in load_scene_folder(folder)]
+        monkeypatch.setattr("alcn_cv.data.scenes.read_image", None)  # names from the file names alone
+        assert scene_names(folder) == loaded
+        monkeypatch.undo()
+    assert scene_names(psm / "ball", subfolders=False) == ["ball"] and scene_names(tmp_path / "missing") == []

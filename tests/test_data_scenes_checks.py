@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from alcn_cv.data.scenes import (
+    NARROW_16_BIT,
     REGISTERED_SCORE,
     WEBCAM_SCENES,
     load_scene_folder,
+    read_eight_bits,
     registration_score,
     scene_dirs,
     shared_root,
@@ -66,6 +68,25 @@ def test_twelve_bit_frames_in_sixteen_bit_files_are_warned_about(tmp_path, caplo
     (message,) = _warnings(caplog)  # one line for the scene
     top = int(max(f.max() for f in lit(texture()))) * 16
     assert "scene 'deep'" in message and f"maximum of {top}" in message and ".png" in message
+
+
+def test_the_dark_frames_of_a_sixteen_bit_scene_are_not_warned_about(tmp_path, caplog):
+    """Every frame whose maximum was below 4096 was warned of: a multi-light scene has dark frames by design. The
+    scene's maximum counts; a single photograph is warned of by its own (17 grey levels at 4095: 0 to 16)."""
+    folder = tmp_path / "lights"
+    folder.mkdir()
+    base = texture()
+    for i, top in enumerate((65535, 3000, 1000)):  # one bright frame, two dark ones
+        cv2.imwrite(str(folder / f"{i}.png"), np.rint(base * top).astype(np.uint16))
+    with caplog.at_level("WARNING"):
+        (scene,) = load_scene_folder(folder)
+    assert len(scene.frames) == 3 and not _warnings(caplog)
+    dark = tmp_path / "dark.png"
+    cv2.imwrite(str(dark), np.rint(base * (NARROW_16_BIT - 1)).astype(np.uint16))
+    with caplog.at_level("WARNING"):
+        read_eight_bits(dark)
+    (message,) = _warnings(caplog)
+    assert str(dark) in message and "maximum of 4095" in message and "keeps 17 grey levels (0 to 16)" in message
 
 
 def test_a_misspelt_scene_is_neither_a_folder_nor_a_webcam_scene(tmp_path, monkeypatch):

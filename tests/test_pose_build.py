@@ -200,43 +200,38 @@ def test_a_build_without_the_pose_extra_says_so_before_the_work(run_python, tmp_
     assert not (tmp_path / "out").exists()
 
 
-def test_options_of_a_video_given_for_a_registered_sequence_are_said_to_be_ignored(
-    shared_data, tmp_path, monkeypatch, caplog
-):
-    """--K, --motion-mask and --refine-focal were silently ignored for a registered sequence."""
-    pytest.importorskip("pycolmap")
-    pytest.importorskip("open3d")
-    pytest.importorskip("matplotlib")
+class StopError(Exception):
+    """Raised by :func:`pose.build.build` under the fixture ``build_stops``."""
 
-    class StopError(Exception):
-        pass
+
+@pytest.fixture
+def build_stops(monkeypatch):
+    """``pose.build.build`` raising :class:`StopError`: a test stops there, once ``main`` has checked and logged its
+    options (the ``[pose]`` extra needed to get there, else skipped)."""
+    for module in ("pycolmap", "open3d", "matplotlib"):
+        pytest.importorskip(module)
 
     def stop(*args, **kwargs):
         raise StopError
 
     monkeypatch.setattr(build, "build", stop)
+
+
+def test_options_of_a_video_given_for_a_registered_sequence_are_said_to_be_ignored(
+    shared_data, tmp_path, caplog, build_stops
+):
+    """--K, --motion-mask and --refine-focal were silently ignored for a registered sequence."""
     src = shared_data / "middlebury" / "templeSparseRing"
     with caplog.at_level("WARNING", logger="pose.build"), pytest.raises(StopError):
         build.main(src, tmp_path / "m.npz", K=np.eye(3), motion_mask=True, refine_focal=True)
     assert "K, motion_mask, refine_focal apply to a video only, ignored" in caplog.text
 
 
-def test_a_video_option_is_said_to_be_ignored_exactly_when_given(shared_data, tmp_path, monkeypatch, caplog):
+def test_a_video_option_is_said_to_be_ignored_exactly_when_given(shared_data, tmp_path, caplog, build_stops):
     """`alcn pose build` passed its defaults of --step and --max-frames on as given: a registered sequence could not
     tell `--step 5` (the default's value, ignored) from no option."""
     from alcn_cv.cli import main
 
-    pytest.importorskip("pycolmap")
-    pytest.importorskip("open3d")
-    pytest.importorskip("matplotlib")
-
-    class StopError(Exception):
-        pass
-
-    def stop(*args, **kwargs):
-        raise StopError
-
-    monkeypatch.setattr(build, "build", stop)
     src = shared_data / "middlebury" / "templeSparseRing"
     for options, ignored in (
         ([], None),

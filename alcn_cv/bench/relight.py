@@ -36,9 +36,9 @@ evaluated too, tuned or not). Tuning needs training scenes: the default ones, lo
 ``test_scenes`` is given, so only the test scenes are evaluated (``data`` without ``test_scenes``: every scene of
 ``data``).
 
-A method whose weight file records training scenes (``training.config.scenes`` and ``rendered``,
-``distillation.settings.scenes``) among the test scenes of the run is scored there all the same, with a warning;
-its row records them (``trained_on`` and ``note``, "trained on: mexico").
+A method whose weight file records training scenes (``training.config.scenes``, ``rendered`` and ``photos``,
+``distillation.settings.scenes``; :func:`trained_scenes`) among the test scenes of the run is scored there all the
+same, with a warning; its row records them (``trained_on`` and ``note``, "trained on: mexico").
 
 A spec ending in ``+lstd`` (``dog+lstd``) is the method followed by a per-pixel local
 standardization (:class:`LocallyStandardized`, the detection benchmark's
@@ -49,12 +49,11 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 import time
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
-from pathlib import Path
+from pathlib import Path, PureWindowsPath
 from typing import Any
 
 import cv2
@@ -64,12 +63,20 @@ from tqdm.auto import tqdm
 from alcn_cv.bench.policies import LOCAL_BOX, local_standardize
 from alcn_cv.bench.relight_report import write_report
 from alcn_cv.checks import check_seeds
-from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, select_scenes, shared_root
+from alcn_cv.data.scenes import (
+    TEST_SCENES,
+    TRAIN_SCENES,
+    Scene,
+    load_scenes,
+    scene_names,
+    select_scenes,
+    shared_root,
+)
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import IMAGE_SUFFIXES, make_folder
+from alcn_cv.io import make_folder
 from alcn_cv.report import machine
 from alcn_cv.weight_file import load_normalizer_file
 
@@ -443,37 +450,35 @@ def tune(
 # The benchmark
 
 
-def _check_methods(methods: Sequence[str]) -> dict[str, set[str]]:
-    """Build every method (raising :class:`InputError` on an unknown name or bad parameters); each spec's
-    :func:`trained_scenes`."""
+def _build_methods(methods: Sequence[str]) -> dict[str, set[str]]:
+    """Build every method, raising :class:`InputError` on a spec listed twice, an unknown name or bad parameters
+    (before any scene is read); each spec's :func:`trained_scenes`."""
     if len(set(methods)) != len(methods):
         raise InputError("a method is listed twice")
     return {spec: trained_scenes(spec, build_method(spec)) for spec in methods}
 
 
-_INDEXED_NAME = re.compile(r"^(?P<name>.+)\.\d+$")
-
-
-def _scene_names(entry: str) -> set[str]:
-    """The names of the scenes a trainer's scene entry (a folder, or the name of a shared ``webcam`` scene) stands
-    for, as :func:`~alcn_cv.data.scenes.load_scene_folder` names them (read from file names, no image is read):
-    the entry's last part, and where it is a folder here, the scenes in it and in its sub-folders."""
-    path = Path(entry).expanduser()
-    names = {path.name}
-    if path.is_dir():
-        for folder in [path, *(p for p in path.iterdir() if p.is_dir() and not p.name.startswith("."))]:
-            for file in folder.iterdir():
-                if file.suffix.lower() in IMAGE_SUFFIXES and not file.stem.lower().endswith(".mask"):
-                    m = _INDEXED_NAME.match(file.stem)
-                    names.add(m.group("name") if m else folder.name)
+def _entry_names(entry: str, subfolders: bool = True) -> set[str]:
+    """The names of the scenes a trainer's entry (a folder, or the name of a shared ``webcam`` scene) stands for:
+    its last part (a path recorded on Windows read as one), and where it is a folder here, the scenes
+    :func:`~alcn_cv.data.scenes.scene_names` finds in it (file names only, no image read). A folder that cannot be
+    listed is logged and skipped: the check is a warning, not a reason to stop the benchmark."""
+    names = {PureWindowsPath(entry).name if "\\" in entry else Path(entry).name}
+    try:
+        names.update(scene_names(Path(entry).expanduser(), subfolders))
+    except (OSError, RuntimeError) as exc:  # RuntimeError: ~user of no home folder
+        logger.warning(
+            "%s: cannot list the folder a weight file was trained on (%s); its scene names unchecked", entry, exc
+        )
     return names
 
 
 def trained_scenes(spec: str, norm: Normalization | None = None) -> set[str]:
     """The registered scenes the weight file of ``spec`` (``alcn:weights=PATH``, ``unet:weights=PATH``, a shipped
     ALCN model) was trained on, by scene name: its header's ``training.config.scenes`` and ``rendered`` (folders or
-    shared ``webcam`` scene names, :func:`_scene_names`) and ``distillation.settings.scenes``; empty for a method
-    without a weight file, or one that records none."""
+    shared ``webcam`` scene names: each one's last part, and the scenes in it where it is a folder here),
+    ``training.config.photos`` (folders of photographs relit: each one's name, and the scenes of its own images) and
+    ``distillation.settings.scenes``; empty for a method without a weight file, or one that records none."""
     norm = build_method(spec) if norm is None else norm
     inner = norm.inner if isinstance(norm, LocallyStandardized) else norm
     path = getattr(inner, "weights_path", None)
@@ -488,8 +493,8 @@ def trained_scenes(spec: str, norm: Normalization | None = None) -> set[str]:
         return [v for v in value if isinstance(v, str)] if isinstance(value, list) else []
 
     config = (meta.get("training") or {}).get("config") or {}
-    entries = strings(config.get("scenes")) + strings(config.get("rendered"))
-    names = {n for e in entries for n in _scene_names(e)}
+    names = {n for e in strings(config.get("scenes")) + strings(config.get("rendered")) for n in _entry_names(e)}
+    names |= {n for e in strings(config.get("photos")) for n in _entry_names(e, subfolders=False)}
     return names | set(strings(((meta.get("distillation") or {}).get("settings") or {}).get("scenes")))
 
 
@@ -594,7 +599,7 @@ def main(
     start = time.perf_counter()
     settings = settings.check()
     methods = list(methods)
-    trained_on = _check_methods(methods)
+    trained_on = _build_methods(methods)
     seeds = check_seeds(seeds)
     roots = [Path(p) for p in data] if data else [shared_root("webcam"), shared_root("psm")]
     scenes = load_scenes(roots, max_frames)

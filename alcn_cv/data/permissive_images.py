@@ -34,7 +34,6 @@ from alcn_cv.data.scenes import Scene, read_eight_bits
 from alcn_cv.data.textures import SKIMAGE_PHOTOGRAPHS, skimage_photograph
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import IMAGE_SUFFIXES, VideoReader, list_images, read_image, to_gray
-from alcn_cv.shared_data import shared_data_dir
 
 __all__ = [
     "PERMISSIVE_LICENCES",
@@ -44,7 +43,6 @@ __all__ = [
     "folder_photographs",
     "permissive_photographs",
     "photo_files",
-    "relit_permissive_scenes",
     "relit_scenes",
     "rendered_photographs",
     "shared_photographs",
@@ -240,9 +238,3 @@ def relit_scenes(
         name = f"{i:02d}_{photo.name.replace('/', '_').replace('#', '_').replace('.', '_')}"
         scenes.append(Scene(name, "relit", gray, tuple(f"frame_{k:02d}.png" for k in range(frames))))
     return scenes
-
-
-def relit_permissive_scenes(frames: int, seed: int = 0, light: str = "relief", jitter: float = 0.0) -> list[Scene]:
-    """:func:`relit_scenes` of :func:`training_photographs` (the shared data folder's OpenCV samples included):
-    the training data of the default Normalizer, which permits any use."""
-    return relit_scenes(training_photographs(shared_data_dir()), frames, seed, light, jitter)

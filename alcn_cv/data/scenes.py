@@ -20,8 +20,10 @@ relit photographs that permit any use, is validated on them); :data:`TEST_SCENES
 
 A folder's images named ``NAME.<index>.<ext>`` form the scene ``NAME`` (ordered by index); its
 other images form the scene named after the folder (ordered by name). Frames are read with
-:func:`alcn_cv.io.read_image` as uint8 grayscale (16-bit images rounded to 8 bits, with a warning when
-their values use less than a sixteenth of the range: 12-bit data in 16-bit files keep a few grey levels).
+:func:`alcn_cv.io.read_image` as uint8 grayscale (16-bit images rounded to 8 bits, with a warning when a scene's
+values, its brightest frame's maximum, use less than a sixteenth of the range: 12-bit data in 16-bit files keep a few
+grey levels; the dark frames of a multi-light scene are not warned of). :func:`scene_names` names the scenes of a
+folder as the loader does, from the file names alone.
 A scene whose frames do not look registered (:func:`registration_score` below :data:`REGISTERED_SCORE`:
 unrelated photographs of one size) is loaded with a warning: training on it learns nothing.
 
@@ -62,6 +64,7 @@ __all__ = [
     "read_eight_bits",
     "registration_score",
     "scene_dirs",
+    "scene_names",
     "select_scenes",
     "shared_root",
 ]
@@ -76,7 +79,8 @@ TEST_SCENES = ("mexico", "psm")
 WEBCAM_SCENES = (*TRAIN_SCENES, "mexico")
 
 #: A 16-bit image whose maximum is below this uses less than a sixteenth of the range (12-bit data in a 16-bit
-#: file, say): rounded to 8 bits (:func:`alcn_cv.io.eight_bits`) it keeps 16 grey levels or fewer.
+#: file, say): rounded to 8 bits (:func:`alcn_cv.io.eight_bits`, ``round(x / 257)``) it keeps 17 grey levels or fewer
+#: (0 to 16: 4095 rounds to 16).
 NARROW_16_BIT = 4096
 #: Frames of a registered scene score at least this (:func:`registration_score`). Measured (2026-11-29): the
 #: webcam scenes 0.331-0.682 (frankfurt the lowest; 0.266 and more on the 12 or 20 frames the benchmark reads),
@@ -146,19 +150,29 @@ def _subfolders(folder: Path) -> list[Path]:
         return []
 
 
-def _narrow_maximum(image: np.ndarray) -> int | None:
-    """The maximum of a 16-bit image that uses less than a sixteenth of the range (:data:`NARROW_16_BIT`), else None."""
-    if image.dtype != np.uint16:
-        return None
-    top = int(image.max())
-    return top if top < NARROW_16_BIT else None
+def _warn_if_narrow(what: str, maximum: int | None) -> None:
+    """Warn when ``maximum``, that of a 16-bit image or scene (None: not 16-bit), uses less than a sixteenth of the
+    range (:data:`NARROW_16_BIT`)."""
+    if maximum is not None and maximum < NARROW_16_BIT:
+        logger.warning(
+            f"{what}: a 16-bit maximum of {maximum} uses less than 1/16 of the range (12-bit data in a 16-bit file?): "
+            f"as 8 bits it keeps {round(maximum / 257) + 1} grey levels (0 to {round(maximum / 257)}); scale the "
+            "values to 16 bits (x16 for 12-bit data)"
+        )
 
 
-def _narrow_warning(what: str, maximum: int) -> str:
-    return (
-        f"{what}: a 16-bit maximum of {maximum} uses less than 1/16 of the range (12-bit data in a 16-bit file?): "
-        f"as 8 bits it keeps {round(maximum / 257) + 1} grey levels; scale the values to 16 bits (x16 for 12-bit data)"
-    )
+def _read_eight_bits(path: str | os.PathLike, gray: bool = False) -> tuple[np.ndarray, int | None]:
+    """The image as uint8 (:func:`alcn_cv.io.read_image`; 16 bits rounded to 8 by :func:`alcn_cv.io.eight_bits`),
+    gray ``HxW`` when ``gray`` (BGR converted), else as read; and its maximum when it was a 16-bit image, else None
+    (for :func:`_warn_if_narrow`: per file, or per scene)."""
+    image = read_image(path)
+    top = None
+    if image.dtype == np.uint16:
+        top = int(image.max())
+        image = eight_bits(image)
+    if gray and image.ndim == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    return image, top
 
 
 def read_eight_bits(path: str | os.PathLike) -> np.ndarray:
@@ -169,20 +183,9 @@ def read_eight_bits(path: str | os.PathLike) -> np.ndarray:
     Raises:
         InputError: as :func:`~alcn_cv.io.read_image`.
     """
-    image = read_image(path)
-    narrow = _narrow_maximum(image)
-    if narrow is not None:
-        logger.warning(_narrow_warning(str(path), narrow))
-    return eight_bits(image) if image.dtype == np.uint16 else image
-
-
-def _gray_u8(path: Path) -> tuple[np.ndarray, int | None]:
-    """The frame as uint8 gray, and its maximum when it is a narrow 16-bit image (:func:`_narrow_maximum`)."""
-    img = read_image(path)
-    narrow = _narrow_maximum(img)
-    if img.dtype == np.uint16:
-        img = eight_bits(img)
-    return (img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)), narrow
+    image, top = _read_eight_bits(path)
+    _warn_if_narrow(str(path), top)
+    return image
 
 
 def registration_score(frames: np.ndarray) -> float:
@@ -236,6 +239,34 @@ def _group_files(folder: Path) -> dict[str, list[Path]]:
     return groups
 
 
+def _scene_files(root: Path, subfolders: bool = True) -> list[tuple[str, Path, list[Path]]]:
+    """``(name, folder, ordered frame files)`` of every scene of at least two frames in ``root`` and (``subfolders``)
+    its subfolders, hidden ones skipped; from the file names alone. Raises OSError as ``Path.iterdir``."""
+    folders = [root]
+    if subfolders:
+        folders += sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
+    scenes = []
+    for folder in folders:
+        for name, paths in _group_files(folder).items():
+            if len(paths) < 2:
+                logger.debug("skipping %s/%s: fewer than two frames", folder, name)
+                continue
+            scenes.append((name, folder, paths))
+    return scenes
+
+
+def scene_names(root: str | os.PathLike, subfolders: bool = True) -> list[str]:
+    """The names of the scenes :func:`load_scene_folder` finds under ``root`` (its own images and, with
+    ``subfolders``, those of its subfolders; hidden files and folders, masks and scenes of fewer than two frames
+    skipped), in its order, from the file names alone (no image is read); none when ``root`` is not a folder.
+
+    Raises:
+        OSError: a folder could not be listed.
+    """
+    root = Path(root)
+    return [name for name, _, _ in _scene_files(root, subfolders)] if root.is_dir() else []
+
+
 def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) -> list[Scene]:
     """Every scene under ``root`` (its own images and those of its subfolders; see the module),
     each with at most ``max_frames`` frames, evenly spaced over its ordered files.
@@ -250,35 +281,29 @@ def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) ->
         raise DatasetError(f"{root}: not a folder")
     if max_frames is not None and max_frames < 2:
         raise InputError(f"max_frames must be at least 2, got {max_frames}")
-    folders = [root] + sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
     scenes = []
-    for folder in folders:
-        for name, paths in _group_files(folder).items():
-            if len(paths) < 2:
-                logger.debug("skipping %s/%s: fewer than two frames", folder, name)
-                continue
-            paths = [paths[i] for i in _evenly_spaced(len(paths), max_frames)]
-            frames, narrow = zip(*(_gray_u8(p) for p in paths))
-            if any(f.shape != frames[0].shape for f in frames):
-                raise DatasetError(f"{folder}: the frames of scene {name!r} differ in size (not registered)")
-            deep = [(p, m) for p, m in zip(paths, narrow) if m is not None]
-            if deep:
-                path, top = max(deep, key=lambda d: d[1])
-                many = f" (and {len(deep) - 1} more of its {len(paths)} frames)" if len(deep) > 1 else ""
-                logger.warning(_narrow_warning(f"scene {name!r}: {path}{many}", top))
-            stack = np.stack(frames)
-            score = registration_score(stack)
-            if score < REGISTERED_SCORE:
-                logger.warning(
-                    "scene %r (%s) does not look registered: its frames' gradients correlate %.2f (registered scenes "
-                    "%.1f or more); a scene is one fixed view under several lights, and unrelated photographs train "
-                    "at chance (give those as photos=[...] to alcn train-real-light)",
-                    name,
-                    folder,
-                    score,
-                    REGISTERED_SCORE,
-                )
-            scenes.append(Scene(name, root.name, stack, tuple(p.name for p in paths)))
+    for name, folder, paths in _scene_files(root):
+        paths = [paths[i] for i in _evenly_spaced(len(paths), max_frames)]
+        frames, tops = zip(*(_read_eight_bits(p, gray=True) for p in paths))
+        if any(f.shape != frames[0].shape for f in frames):
+            raise DatasetError(f"{folder}: the frames of scene {name!r} differ in size (not registered)")
+        deep = [(top, p) for p, top in zip(paths, tops) if top is not None]
+        if deep:  # the scene's maximum, not each frame's: a multi-light scene has dark frames by design
+            top, brightest = max(deep)
+            _warn_if_narrow(f"scene {name!r} (its brightest frame {brightest})", top)
+        stack = np.stack(frames)
+        score = registration_score(stack)
+        if score < REGISTERED_SCORE:
+            logger.warning(
+                "scene %r (%s) does not look registered: its frames' gradients correlate %.2f (registered scenes "
+                "%.1f or more); a scene is one fixed view under several lights, and unrelated photographs train "
+                "at chance (give those as photos=[...] to alcn train-real-light)",
+                name,
+                folder,
+                score,
+                REGISTERED_SCORE,
+            )
+        scenes.append(Scene(name, root.name, stack, tuple(p.name for p in paths)))
     if not scenes:
         raise DatasetError(
             f"{root}: no scene (a folder of at least two frames, or NAME.<i>{'|'.join(sorted(IMAGE_SUFFIXES))})"
