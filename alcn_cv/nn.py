@@ -21,6 +21,7 @@ Example:
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import threading
 from collections.abc import Callable, Iterable, Iterator
@@ -319,6 +320,13 @@ def _check_image(image: torch.Tensor) -> None:
     _check_range(image)
 
 
+#: torch's private test for a tensor of a torch.func transform (vmap, grad), resolved once: None on a torch without it,
+#: where :func:`_check_range` falls back to the RuntimeError that reading a vmapped tensor's values raises.
+_IS_FUNCTORCH_WRAPPED: Callable[[torch.Tensor], bool] | None = getattr(
+    getattr(torch._C, "_functorch", None), "is_functorch_wrapped_tensor", None
+)
+
+
 def _check_range(image: torch.Tensor) -> None:
     """An :class:`InputError` for values outside [0, 1] (``apply()``'s 1e-3 of rounding allowed), NaN or inf, with
     the likely fix, for an image on the CPU run eagerly: elsewhere reading the values would wait for the device
@@ -329,10 +337,15 @@ def _check_range(image: torch.Tensor) -> None:
         or torch.jit.is_tracing()
         or torch.onnx.is_in_onnx_export()
         or torch.compiler.is_compiling()
-        or torch._C._functorch.is_functorch_wrapped_tensor(image)
+        or (_IS_FUNCTORCH_WRAPPED is not None and _IS_FUNCTORCH_WRAPPED(image))
     ):
         return
-    lo, hi = (float(v) for v in image.detach().aminmax())  # NaN propagates to both
+    try:
+        lo, hi = (float(v) for v in image.detach().aminmax())  # NaN propagates to both
+    except RuntimeError:
+        if _IS_FUNCTORCH_WRAPPED is not None:
+            raise
+        return  # a torch without the private check: torch.func.vmap's tensor refuses .item(), so is not checked
     if lo >= -FLOAT_TOLERANCE and hi <= 1 + FLOAT_TOLERANCE:
         return
     if not (math.isfinite(lo) and math.isfinite(hi)):
@@ -413,44 +426,46 @@ _MODULES: dict[tuple, ALCN2d] = {}
 
 
 class _ThreadScopes:
-    """The open :func:`torch_threads` blocks of the process, by thread, kept to that function's contract; the count of
-    before the first block is restored when the last one ends."""
+    """The open :func:`torch_threads` blocks of the process, counted: the count of before the first block (of any
+    thread) is restored when the last one ends. Never waits but for the lock, held only around torch's get and set."""
 
     def __init__(self) -> None:
-        self.changed = threading.Condition()
-        self.counts: dict[int, list[int]] = {}  # thread id -> the counts of its open blocks, innermost last
-        self.before = 0
-
-    def _may_open(self, me: int, threads: int) -> bool:
-        return self.counts.keys() <= {me} or all(c == threads for counts in self.counts.values() for c in counts)
+        self.lock = threading.Lock()
+        self.open = 0  # the blocks open in the process, all threads'
+        self.original = 0  # the count of before the first of them
+        self.mine = threading.local()  # .open: this thread's open blocks (what a forked child keeps)
 
     @contextmanager
     def scope(self, threads: int) -> Iterator[None]:
-        me = threading.get_ident()
-        with self.changed:
-            self.changed.wait_for(lambda: self._may_open(me, threads))
-            if not self.counts:
-                self.before = torch.get_num_threads()
-            self.counts.setdefault(me, []).append(threads)
-            _set_threads(threads)
+        with self.lock:
+            before = torch.get_num_threads()
+            _set_threads(threads)  # registered only once set: a count torch refuses leaves nothing behind
+            if self.open == 0:
+                self.original = before
+            self.open += 1
+            self.mine.open = getattr(self.mine, "open", 0) + 1
         try:
             yield
         finally:
-            with self.changed:
-                mine = self.counts[me]
-                mine.pop()
-                if mine:  # the enclosing block's count (this thread's blocks the only ones open if it differs)
-                    _set_threads(mine[-1])
+            with self.lock:
+                self.open -= 1
+                self.mine.open -= 1
+                if self.open == 0:
+                    torch.set_num_threads(self.original)  # also the count a new thread starts with (OpenMP)
                 else:
-                    del self.counts[me]
-                    if not self.counts:
-                        _set_threads(self.before)
-                self.changed.notify_all()
+                    _set_threads(before)
 
 
 def _set_threads(threads: int) -> None:
     if torch.get_num_threads() != threads:
         torch.set_num_threads(threads)
+
+
+def _thread_count(threads: object) -> int:
+    """``threads`` as a count torch takes, checked before anything is set or counted."""
+    if isinstance(threads, bool) or not isinstance(threads, numbers.Integral) or threads < 1:
+        raise InputError(f"threads must be a whole number >= 1 or None, got {threads!r}")
+    return int(threads)
 
 
 _SCOPES = _ThreadScopes()
@@ -466,9 +481,8 @@ def _forked_child() -> None:
     global _FORKED
     _FORKED = True
     # only the forking thread came along: the others' blocks stay behind, and so does the lock should one hold it
-    me = threading.get_ident()
-    _SCOPES.changed = threading.Condition()
-    _SCOPES.counts = {me: _SCOPES.counts[me]} if me in _SCOPES.counts else {}
+    _SCOPES.lock = threading.Lock()
+    _SCOPES.open = getattr(_SCOPES.mine, "open", 0)
 
 
 if hasattr(os, "register_at_fork"):  # not on Windows, which has no fork
@@ -477,21 +491,25 @@ if hasattr(os, "register_at_fork"):  # not on Windows, which has no fork
 
 @contextmanager
 def torch_threads(threads: int | None) -> Iterator[None]:
-    """Run the block with ``threads`` torch intra-op threads, the count of before restored after it (no change for
-    None; one in a forked child, where torch's threads hang).
+    """Run the block with ``threads`` torch intra-op threads (a whole number >= 1, else an :class:`InputError`), the
+    count of before restored after it; no change for None; one in a forked child, where torch's threads hang.
 
-    Safe across Python threads, though torch's count is in part the whole process's (with OpenMP, the count each new
-    thread starts with; all of it with torch's own thread pool): blocks asking for one count run together; a block
-    asking for another waits until those of the other threads have ended (a thread's own nested block sets its count at
-    once when no other thread's is open, else waits likewise). So a thread inside a block must not wait for another
-    thread that opens a block of another count (a deadlock); a block of None runs with whatever count is in effect,
-    another thread's block's included.
+    Never waits for another thread's block. With OpenMP (the parallel backend of torch's Linux wheels) the count is
+    each thread's own, so blocks of different counts in different Python threads run together, each with its count;
+    a block of None runs with whatever count its thread has. A thread's nested blocks restore the inner block's, then
+    the outer's, count of before. A new thread starts with the count last set in the process, so the last block to end
+    (of any thread) restores the count of before the first block (of any thread): after overlapping blocks a new thread
+    starts as it did before them. Where the count is the whole process's (torch's native thread pool; MKL's count,
+    which torch sets along), overlapping blocks of different counts set it in turn: each runs at whichever count is
+    in effect, and none waits.
     """
-    threads = 1 if _FORKED else threads
-    if threads is None:
+    count = None if threads is None else _thread_count(threads)  # checked before anything is set or counted
+    if _FORKED:
+        count = 1
+    if count is None:
         yield
         return
-    with _SCOPES.scope(threads):
+    with _SCOPES.scope(count):
         yield
 
 

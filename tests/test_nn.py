@@ -1,5 +1,6 @@
 """alcn_cv.nn: ALCN2d / alcn2d, the torch runtime of every shipped model, against apply()."""
 
+import os
 import shutil
 import threading
 import time
@@ -205,45 +206,52 @@ def test_the_functional_form_checks_an_image_once(monkeypatch):
     assert len(calls) == 2
 
 
+_OPENMP = "parallel backend: OpenMP" in torch.__config__.parallel_info()
+
+
+def _run_threads(*targets: Callable[[], None], timeout: float = 20) -> None:
+    """Run ``targets`` in threads of their own; none may still run after ``timeout`` seconds (a hang fails)."""
+    threads = [threading.Thread(target=t, daemon=True) for t in targets]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout)
+    assert not any(t.is_alive() for t in threads), "a torch_threads block waited for another thread's"
+
+
+def _fresh_count() -> int:
+    """The count a new thread starts with: torch's last set in the process (OpenMP), not this thread's own."""
+    seen = []
+    _run_threads(lambda: seen.append(torch.get_num_threads()))
+    return seen[0]
+
+
 def test_torch_threads_of_two_python_threads_do_not_mix():
-    """torch's count is in part the process's (with OpenMP, the count a new thread starts with): a block of another
-    count waits for another thread's open one, which keeps its count, and the count of before is left (interleaved,
-    the second block restored the first's count after the first had restored it); blocks of one count run together
-    (a barrier they both reach); nested in one thread, the inner count, then the outer."""
+    """Overlapping blocks of different counts in two threads run together, each with its own count (OpenMP: a
+    thread's count is its own), and the count of before the first is left when the last ends (interleaved, the second
+    block restored the first's count after the first had restored it); nested in one thread, the inner count, then
+    the outer."""
     seen: dict[str, int] = {}
-
-    def run(*targets: Callable[[], None]) -> None:
-        threads = [threading.Thread(target=t) for t in targets]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join(20)
-
-    def fresh() -> None:  # a new thread's count: torch's, not this thread's own
-        seen["fresh"] = torch.get_num_threads()
-
-    run(fresh)
-    before = seen["fresh"]
+    before = _fresh_count()
     mine, other = before + 1, before + 2
-    opened, waiting = threading.Event(), threading.Event()
+    opened, second_open = threading.Event(), threading.Event()
 
     def first() -> None:
         with alcn_nn.torch_threads(mine):
             opened.set()
-            waiting.wait(10)
-            time.sleep(0.2)  # where the second block would be open, were it not waiting for this one
+            assert second_open.wait(10)  # the second block opened while this one is: it did not wait
             seen["first"] = torch.get_num_threads()
 
     def second() -> None:
-        opened.wait(10)
-        waiting.set()
+        assert opened.wait(10)
         with alcn_nn.torch_threads(other):
+            second_open.set()
             seen["second"] = torch.get_num_threads()
-            time.sleep(0.4)  # ends after the first block
+            time.sleep(0.3)  # ends after the first block
 
-    run(first, second)
-    run(fresh)
-    assert seen == {"fresh": before, "first": mine, "second": other}
+    _run_threads(first, second)
+    assert seen["second"] == other and (seen["first"] == mine or not _OPENMP)
+    assert _fresh_count() == before and alcn_nn._SCOPES.open == 0
 
     def together(name: str, barrier: threading.Barrier) -> None:
         with alcn_nn.torch_threads(mine):
@@ -252,7 +260,7 @@ def test_torch_threads_of_two_python_threads_do_not_mix():
                 seen[name] = torch.get_num_threads()
 
     barrier = threading.Barrier(2)
-    run(lambda: together("a", barrier), lambda: together("b", barrier))
+    _run_threads(lambda: together("a", barrier), lambda: together("b", barrier))
     assert seen["a"] == seen["b"] == mine and not barrier.broken
     main = torch.get_num_threads()
     with alcn_nn.torch_threads(mine):
@@ -260,6 +268,123 @@ def test_torch_threads_of_two_python_threads_do_not_mix():
             seen["inner"] = torch.get_num_threads()
         seen["outer"] = torch.get_num_threads()
     assert (seen["inner"], seen["outer"], torch.get_num_threads()) == (other, mine, main)
+
+
+def test_torch_threads_nested_in_two_threads_do_not_wait():
+    """Two threads each inside a block of 2, each opening a nested block of 1 while the other's is open (two runs in
+    a thread pool, each calling apply() with threads=1), waited for each other forever."""
+    before = _fresh_count()
+    inside, nested = threading.Barrier(2), threading.Barrier(2)
+    seen: dict[str, tuple[int, int]] = {}
+
+    def run(name: str) -> None:
+        with alcn_nn.torch_threads(2):
+            inside.wait(10)  # both outer blocks open
+            with alcn_nn.torch_threads(1):
+                nested.wait(10)  # both nested blocks open
+                inner = torch.get_num_threads()
+            seen[name] = (inner, torch.get_num_threads())
+
+    _run_threads(lambda: run("a"), lambda: run("b"))
+    assert not inside.broken and not nested.broken
+    assert seen["a"][0] == seen["b"][0] == 1
+    if _OPENMP:
+        assert seen["a"][1] == seen["b"][1] == 2
+    assert _fresh_count() == before and alcn_nn._SCOPES.open == 0
+
+
+def test_torch_threads_never_waits_for_a_long_block_of_another_count():
+    """A whole training run holds a block: another thread's apply() (threads=1) waited for it to end (hours)."""
+    before = _fresh_count()
+    held, release = threading.Event(), threading.Event()
+    frame = synthetic_frame(96, 72, False)
+    alcn = alcn_cv.createALCN(backend="fast", threads=1)
+    out = []
+
+    def training() -> None:
+        with alcn_nn.torch_threads(before + 1):
+            held.set()
+            release.wait(60)
+
+    holder = threading.Thread(target=training, daemon=True)
+    holder.start()
+    try:
+        assert held.wait(10)
+        _run_threads(lambda: out.append(alcn.apply(frame)), lambda: out.append(alcn.apply(frame)))
+        assert holder.is_alive() and len(out) == 2
+        np.testing.assert_array_equal(out[0], out[1])
+    finally:
+        release.set()
+        holder.join(20)
+    assert not holder.is_alive() and _fresh_count() == before and alcn_nn._SCOPES.open == 0
+
+
+@pytest.mark.parametrize("bad", [0, -1, 2.5, True, "2"])
+def test_a_bad_thread_count_is_an_input_error_and_leaves_nothing_behind(bad):
+    """torch refused the count after the block was registered: the stale block made every other thread's block of
+    another count wait forever. Now the count is checked first; a count torch refuses all the same is not counted."""
+    before = _fresh_count()
+    with pytest.raises(InputError, match=r"whole number >= 1 or None, got"), alcn_nn.torch_threads(bad):
+        pass
+    with alcn_nn.torch_threads(None):  # None: no change, nothing checked
+        pass
+    assert alcn_nn._SCOPES.open == 0
+    seen = []
+    _run_threads(lambda: seen.append(_in_block(before + 1)), lambda: seen.append(_in_block(before + 2)))
+    assert sorted(seen) == [before + 1, before + 2] and _fresh_count() == before and alcn_nn._SCOPES.open == 0
+
+
+def test_a_count_torch_refuses_is_not_counted(monkeypatch):
+    before = _fresh_count()
+
+    def refuse(threads: int) -> None:
+        raise RuntimeError("refused")
+
+    monkeypatch.setattr(torch, "set_num_threads", refuse)
+    with pytest.raises(RuntimeError, match="refused"), alcn_nn.torch_threads(before + 1):
+        pass
+    monkeypatch.undo()
+    assert alcn_nn._SCOPES.open == 0
+    seen = []
+    _run_threads(lambda: seen.append(_in_block(before + 2)))
+    assert seen == [before + 2] and _fresh_count() == before and alcn_nn._SCOPES.open == 0
+
+
+def _in_block(threads: int) -> int:
+    with alcn_nn.torch_threads(threads):
+        return torch.get_num_threads()
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork on this platform")
+def test_a_forked_child_keeps_only_its_own_thread_blocks():
+    """Forked while another thread holds a block: the child (the forking thread only) counts its own blocks, runs
+    its blocks on one thread, and does not wait for the lock the other thread may have held."""
+    held, release = threading.Event(), threading.Event()
+
+    def other() -> None:
+        with alcn_nn.torch_threads(3):
+            held.set()
+            release.wait(30)
+
+    holder = threading.Thread(target=other, daemon=True)
+    holder.start()
+    try:
+        assert held.wait(10)
+        with alcn_nn.torch_threads(2):
+            pid = os.fork()
+            if pid == 0:  # the child: no pytest from here, only an exit status
+                ok = False
+                try:
+                    with alcn_nn.torch_threads(4):
+                        ok = torch.get_num_threads() == 1 and alcn_nn._SCOPES.open == 2
+                    ok = ok and alcn_nn._SCOPES.open == 1
+                finally:
+                    os._exit(0 if ok else 1)
+            _, status = os.waitpid(pid, 0)
+    finally:
+        release.set()
+        holder.join(20)
+    assert os.waitstatus_to_exitcode(status) == 0 and alcn_nn._SCOPES.open == 0
 
 
 @pytest.mark.parametrize(
@@ -315,6 +440,17 @@ def test_colour_under_torch_func_transforms():
     torch.testing.assert_close(torch.func.grad(lambda t: module(t).square().mean())(rgb), x.grad)
     pair = torch.cat([rgb, rgb.flip(-1)])
     torch.testing.assert_close(torch.func.vmap(lambda t: module(t[None])[0])(pair), module(pair))
+
+
+def test_vmap_without_torchs_private_functorch_check(monkeypatch):
+    """_check_range asked torch's private is_functorch_wrapped_tensor; a torch without it broke every call. Without
+    it a vmapped image (whose values cannot be read) goes unchecked, and a plain one is checked as before."""
+    monkeypatch.setattr(alcn_nn, "_IS_FUNCTORCH_WRAPPED", None)
+    module = ALCN2d(model="gain").eval().requires_grad_(False)
+    pair = torch.rand(2, 1, 32, 40)
+    torch.testing.assert_close(torch.func.vmap(lambda t: module(t[None])[0])(pair), module(pair))
+    with pytest.raises(InputError, match=r"0\.\.255 intensities"):
+        module(pair * 255)
 
 
 def test_the_functional_forms_module_is_frozen_and_fixed_scales_stay_fixed():
