@@ -62,11 +62,12 @@ def registered_build(
     K: np.ndarray,
     normalization: str,
     path: Path,
-    step: int = 10,
+    step: int = build.COOKIE_BOX["step"],
     max_frames: int | None = None,
 ) -> None:
     """A model on ``normalization``-normalized images of the original video, in the reference model's frame:
-    the frames are registered by tracking the reference model, then triangulated with these poses fixed."""
+    the frames are registered by tracking the reference model, then triangulated with these poses fixed (every
+    ``step``-th frame, as many keypoints as the reference's build: :data:`pose.build.COOKIE_BOX`)."""
     tracker, det = PoseTracker(PoseSolver(K, min_inliers=30)), FeaturePartDetector(ref, "none")
     with tempfile.TemporaryDirectory(dir=path.parent) as work:
         views = []
@@ -77,7 +78,10 @@ def registered_build(
                 io.write_image(Path(work) / f"{i:06d}.png", frame)
                 views.append(TrainingView(f"{i:06d}.png", K, None, est.R, pose[1].ravel()))
         seq = TrainingSequence(Path(work), views, ref.units, info={"format": "registered video", "path": str(video)})
-        model, _ = build.build(seq, feature=ref.feature, n_features=3000, normalization=normalization, work_dir=work)
+        n_features = build.COOKIE_BOX["n_features"]
+        model, _ = build.build(
+            seq, feature=ref.feature, n_features=n_features, normalization=normalization, work_dir=work
+        )
     model.corners = ref.corners  # same object frame as the reference
     model.extra["K"] = K.tolist()
     part_model.save(model, path)

@@ -1,11 +1,12 @@
-"""Shared by the experiment scripts: run `alcn` commands and keep their JSON reports, and the helpers that more than
-one experiment uses (the quick protocol's options, the shipped default with another band, the rendered stand-in for
-faces), so that no experiment imports another.
+"""Shared by the experiment scripts: run `alcn` commands and keep their JSON reports, their ``--part`` option, and
+the helpers that more than one experiment uses (the quick protocol's options, the shipped default with another band),
+so that no experiment imports another (the rendered stand-in for faces is ``_stand_in.py``).
 
 An experiment writes its whole output under ``runs/<name>/`` (ignored by git) and copies each small
 JSON report to ``docs/reports/<name>.json`` (tracked), adding an ``experiment`` record (the script,
 its arguments and the date, UTC). ``experiments/report.py`` builds ``docs/results.md`` from those
-copies alone.
+copies alone. A run on another machine (``experiments/gpu_check.sh`` on a GPU machine) writes that copy into its own
+output folder (:func:`write_for_keeping`), which ``experiments/keep_gpu_check.py`` publishes (:func:`publish`).
 """
 
 from __future__ import annotations
@@ -15,12 +16,9 @@ import datetime
 import json
 import shlex
 import sys
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any
-
-import cv2
-import numpy as np
-from tqdm.auto import tqdm
 
 ROOT = Path(__file__).resolve().parent.parent
 RUNS = ROOT / "runs"
@@ -55,6 +53,24 @@ def command_line(doc: str, keeps: bool = True) -> argparse.ArgumentParser:
     return parser
 
 
+def add_part_option(parser: argparse.ArgumentParser, parts: Collection[str]) -> None:
+    """``--part NAME...`` (``args.part``): run only these of an experiment's ``parts``; :func:`selected_parts` reads
+    it."""
+    parser.add_argument(
+        "--part",
+        nargs="+",
+        action="extend",
+        choices=parts,
+        help=f"run only these parts (default: all, in this order: {' '.join(parts)})",
+    )
+
+
+def selected_parts(args: argparse.Namespace, parts: Collection[str]) -> list[str]:
+    """The parts ``--part`` selects (:func:`add_part_option`; all without it), each once, in the order of
+    ``parts``: ``--part b a a`` runs ``a`` then ``b``."""
+    return [part for part in parts if not args.part or part in args.part]
+
+
 def recorded_settings(args: argparse.Namespace) -> dict[str, object]:
     """An experiment's arguments as its report records them: all but :data:`KEEP` (what to do with the report, not
     what it measures), paths as text."""
@@ -73,11 +89,17 @@ def _script() -> tuple[str, list[str], bool]:
     return script.relative_to(ROOT).as_posix(), [a for a in args if a != KEEP], KEEP in args
 
 
+def rerun(script: str, argv: Sequence[str] = ()) -> str:
+    """The command line that runs ``script`` (a path in the checkout) with ``argv``: ``bash`` for a shell script,
+    ``python`` for the others."""
+    return shlex.join(["bash" if script.endswith(".sh") else "python", script, *argv])
+
+
 def script_command() -> str:
     """The experiment's command line, for a report the script writes itself: ``python SCRIPT ARGS`` (without
     :data:`KEEP`, which says what to do with the report, not what it measures)."""
     script, args, _ = _script()
-    return shlex.join(["python", script, *args])
+    return rerun(script, args)
 
 
 def _what_ran(report: dict[str, Any]) -> object:
@@ -96,50 +118,79 @@ def alcn(*argv: str) -> None:
         raise SystemExit(f"alcn {shlex.join(argv)}: exit status {status}")
 
 
-def keep(report: str | Path, name: str, drop: tuple[str, ...] = (), script: str | None = None) -> Path:
-    """Copy the JSON ``report`` to ``docs/reports/<name>.json`` with the experiment's record (the script,
-    its arguments, and the date the report was written, UTC), without the top-level keys ``drop``
-    (per-frame details: the copy stays small; the whole report stays where the run wrote it). The run's
-    output folder is written ``OUT`` and the shared data ``../shared/data``, so that no tracked file
-    cites the ignored output folder or a machine's paths. ``script``: the shell script that ran the report's
-    command (``experiments/gpu_check.sh``: recorded without arguments, its settings are its environment's and the
-    command records them); by default the Python experiment that calls this, with its arguments.
-
-    A published report is replaced only by a run of the same commands (:func:`_what_ran`), or with :data:`KEEP`: a
-    smoke run with other settings leaves it alone (and says so). Returns the published report's path, or
-    ``report`` when it was not replaced."""
-    report = Path(report)
-    target = REPORTS / f"{name}.json"
-    script, args, replace = (script, [], False) if script else _script()
+def _recorded(report: Path, drop: tuple[str, ...], script: str, args: list[str], out: Path | None = None) -> str:
+    """The text of the published copy of the JSON ``report``: without its top-level keys ``drop``, with the
+    experiment's record (``script``, its ``args``, the date the report was written, UTC); the run's output folder
+    ``out`` (default: the runs folder) is written ``OUT`` and the shared data ``../shared/data``, so that no tracked
+    file cites the ignored output folder or a machine's paths."""
+    out = RUNS if out is None else out
     data = {k: v for k, v in json.loads(report.read_text(encoding="utf-8")).items() if k not in drop}
     written = datetime.datetime.fromtimestamp(report.stat().st_mtime, datetime.UTC)
-    data["experiment"] = {
-        "script": script,
-        "argv": args,
-        "date": written.strftime("%Y-%m-%d %H:%M UTC"),
-    }
+    data["experiment"] = {"script": script, "argv": args, "date": written.strftime("%Y-%m-%d %H:%M UTC")}
     text = json.dumps(data, indent=1) + "\n"
     for path, alias in (
-        (RUNS, "OUT"),
+        (out.resolve(), "OUT"),
+        (out, "OUT"),
         (SHARED_DATA.resolve(), "../shared/data"),
         (SHARED_DATA, "../shared/data"),
         (ROOT, "."),
     ):
         text = text.replace(str(path), alias)
+    return text
+
+
+def _publish(text: str, name: str, source: Path, replace: bool) -> Path:
+    """Write ``text`` (:func:`_recorded`) to ``docs/reports/<name>.json``, unless a published report of other
+    commands is there and not ``replace`` (then say so and return ``source``, the report the text was made from)."""
+    target = REPORTS / f"{name}.json"
     if target.is_file() and not replace:
         published = json.loads(target.read_text(encoding="utf-8"))
         if _what_ran(published) != _what_ran(json.loads(text)):
-            argv = published.get("experiment", {}).get("argv") or []
+            exp = published.get("experiment", {})
             print(
                 f"not kept: {target.relative_to(ROOT)} is the report of other settings (its run: "
-                f"`{shlex.join(['python', published.get('experiment', {}).get('script', '?'), *argv])}`); "
-                f"this run's stays at {report} ({KEEP} replaces the published one)"
+                f"`{rerun(exp.get('script', '?'), exp.get('argv') or [])}`); this run's stays at {source} "
+                f"(run this again with {KEEP} to replace the published one)"
             )
-            return report
+            return source
     REPORTS.mkdir(parents=True, exist_ok=True)
     target.write_text(text, encoding="utf-8")
     print(f"kept {target.relative_to(ROOT)}")
     return target
+
+
+def keep(report: str | Path, name: str, drop: tuple[str, ...] = ()) -> Path:
+    """Copy the JSON ``report`` to ``docs/reports/<name>.json`` with the experiment's record (the Python experiment
+    that calls this, its arguments, and the date the report was written, UTC), without the top-level keys ``drop``
+    (per-frame details: the copy stays small; the whole report stays where the run wrote it); the runs folder is
+    written ``OUT`` (:func:`_recorded`).
+
+    A published report is replaced only by a run of the same commands (:func:`_what_ran`), or with :data:`KEEP`: a
+    smoke run with other settings leaves it alone (and says so). Returns the published report's path, or
+    ``report`` when it was not replaced."""
+    report = Path(report)
+    script, args, replace = _script()
+    return _publish(_recorded(report, drop, script, args), name, report, replace)
+
+
+def write_for_keeping(report: str | Path, name: str, out: str | Path, script: str) -> Path:
+    """For a run on another machine whose output folder ``out`` is all that comes back (``experiments/gpu_check.sh``
+    on a GPU machine): ``report`` as :func:`keep` would publish it, recorded as the run of the shell ``script``
+    (without arguments: its settings are its environment's, and the command records them), ``out`` written ``OUT``,
+    written to ``out/<name>.json``, for :func:`publish` on the machine it came back to."""
+    report, out = Path(report), Path(out)
+    path = out / f"{name}.json"
+    path.write_text(_recorded(report, (), script, [], out), encoding="utf-8")
+    print(f"wrote {path}, to publish where it comes back: python experiments/keep_gpu_check.py FOLDER")
+    return path
+
+
+def publish(path: str | Path, replace: bool = False) -> Path:
+    """Copy a report :func:`write_for_keeping` wrote (``<name>.json``, its record made where it ran) to
+    ``docs/reports/<name>.json``: only over a published report of the same commands, or with ``replace``
+    (:func:`keep`'s rule). Returns the published report's path, or ``path`` when it was not replaced."""
+    path = Path(path)
+    return _publish(path.read_text(encoding="utf-8"), path.stem, path, replace)
 
 
 def quick_protocol() -> list[str]:
@@ -178,68 +229,3 @@ def band_variant(weight: float, path: Path) -> str:
     meta = net.file_meta(trained=shipped.meta["trained"], **provenance)
     save_normalizer_file(path, net.state_arrays(), meta)
     return f"alcn:weights={path}"
-
-
-# The rendered stand-in for faces (experiments/directional_light.py, and relief_training.py's training scenes).
-
-#: Elevations of the probes' light above the ground (degrees); the gallery is lit from 90.
-ELEVATIONS = (75, 55, 35, 20, 12)
-AZIMUTHS = 4
-#: Sides of the compared images (pixels).
-SIZES = (32, 64)
-
-
-def render_identity(index: int, size: int, seed: int) -> np.ndarray:
-    """``(1 + len(ELEVATIONS) * AZIMUTHS, size, size)`` uint8: scene ``index`` under the gallery's light, then
-    under the probes'."""
-    from alcn_cv.data.lighting import Lighting, directional
-    from alcn_cv.data.objects import to_surface
-    from alcn_cv.data.relief_scenes import relief_surface
-    from alcn_cv.data.render import render_surfaces
-
-    rng = np.random.default_rng([seed, index])
-    albedo, height, material = relief_surface(rng, size)
-    lightings = [Lighting("ambient", [directional(0.0, 90.0)], np.full(3, 0.05), gain=0.9)]
-    for elevation in ELEVATIONS:
-        for _ in range(AZIMUTHS):
-            light = directional(rng.uniform(0.0, 360.0), elevation)
-            gain = rng.uniform(0.6, 1.4)
-            lightings.append(Lighting("side", [light], np.full(3, 0.02), gain=gain, shot_noise=5e-4, read_noise=3e-3))
-    surface = to_surface([(albedo, height, material)] * len(lightings))
-    return render_surfaces(surface, lightings, rng, gray=True, shadow_steps=24)
-
-
-def render_stand_in(identities: int = 80, size: int = 128, seed: int = 7) -> np.ndarray:
-    """``(identities, 1 + len(ELEVATIONS) * AZIMUTHS, size, size)`` uint8: :func:`render_identity` of each."""
-    return np.stack([render_identity(i, size, seed) for i in tqdm(range(identities), desc="render", unit="scene")])
-
-
-def identify(spec: str, images: np.ndarray) -> dict[int, dict[str, float]]:
-    """:func:`identification` of the images of :func:`render_stand_in` normalized by the method ``spec``'s
-    ``apply()`` (float output), for each side of :data:`SIZES`."""
-    from alcn_cv.enhance.registry import from_spec
-
-    norm = from_spec(spec)
-    normalized = np.stack([[norm.apply(im, out_dtype=np.float32) for im in scene] for scene in images])
-    return {size: identification(normalized, size) for size in SIZES}
-
-
-def descriptors(images: np.ndarray, size: int) -> np.ndarray:
-    """``(..., H, W)`` float -> ``(..., size * size)``: area-resized, zero-mean, unit-norm."""
-    flat = images.reshape(-1, *images.shape[-2:])
-    small = np.stack([cv2.resize(im, (size, size), interpolation=cv2.INTER_AREA).ravel() for im in flat])
-    small -= small.mean(axis=1, keepdims=True)
-    small /= np.linalg.norm(small, axis=1, keepdims=True) + 1e-9
-    return small.reshape(*images.shape[:-2], size * size)
-
-
-def identification(normalized: np.ndarray, size: int) -> dict[str, float]:
-    """Per elevation, the percentage of probes whose most correlated gallery image is their own scene's."""
-    features = descriptors(normalized, size)
-    gallery, identities = features[:, 0], np.arange(len(features))
-    result = {}
-    for j, elevation in enumerate(ELEVATIONS):
-        probes = features[:, 1 + j * AZIMUTHS : 1 + (j + 1) * AZIMUTHS]
-        nearest = np.argmax(probes @ gallery.T, axis=-1)
-        result[f"elevation {elevation}"] = float(100 * np.mean(nearest == identities[:, None]))
-    return result

@@ -50,7 +50,7 @@ def main() -> None:
         str(box / "model.npz"),
         "--box-ply",
         str(SHARED_DATA / "cookie_box" / "box.ply"),
-        *build.conf_options(build.COOKIE_BOX),
+        *build.build_options(build.COOKIE_BOX),
     ]
     track_argv = [
         "pose",

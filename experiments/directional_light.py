@@ -23,19 +23,8 @@ import json
 
 import cv2
 import numpy as np
-from _run import (
-    AZIMUTHS,
-    ELEVATIONS,
-    RUNS,
-    SIZES,
-    band_variant,
-    command_line,
-    identify,
-    keep,
-    recorded_settings,
-    render_stand_in,
-    script_command,
-)
+from _run import RUNS, band_variant, command_line, keep, recorded_settings, script_command
+from _stand_in import AZIMUTHS, ELEVATIONS, SIZES, identify, render_stand_in
 from tqdm.auto import tqdm
 
 from alcn_cv.report import machine

@@ -7,7 +7,7 @@ by mean intensity. Time: a few seconds. Deterministic: tests/test_docs.py render
 published one, so a change to a method's output shows up there.
 
     python experiments/figure.py --publish                # runs/figure.png, then docs/figure.png (the README's)
-    python experiments/figure.py --scene courbevoie       # runs/figure.png only
+    python experiments/figure.py --scene courbevoie       # runs/figure.png only (--publish: mexico only)
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ import cv2
 import numpy as np
 from _run import ROOT, RUNS, SHARED_DATA, command_line
 
-#: The README's figure, which --publish replaces.
+#: The README's figure, which --publish replaces, and its scene (the README's caption names it).
 PUBLISHED = ROOT / "docs" / "figure.png"
+SCENE = "mexico"
 METHODS = {"input": "none", "CLAHE": "clahe", "DoG": "dog", "Tan-Triggs": "tantriggs", "ALCN": "alcn"}
 TILE_WIDTH = 256
 
@@ -63,16 +64,19 @@ def figure(scene: Path) -> np.ndarray:
 
 def main() -> None:
     parser = command_line(__doc__, keeps=False)
-    parser.add_argument("--scene", default="mexico", help="a scene of ../shared/data/webcam (default mexico)")
+    parser.add_argument("--scene", default=SCENE, help=f"a scene of ../shared/data/webcam (default {SCENE})")
     parser.add_argument("--out", type=Path, default=RUNS / "figure.png", help="PNG to write (default: runs/figure.png)")
     parser.add_argument("--publish", action="store_true", help=f"then copy it to {PUBLISHED.relative_to(ROOT)}")
     args = parser.parse_args()
+    if args.publish and args.scene != SCENE:  # the README's caption names its scene
+        parser.error(f"--publish: the README's figure is of {SCENE}; --scene {args.scene} writes --out only")
     image = figure(SHARED_DATA / "webcam" / args.scene)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(args.out), image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     print(f"wrote {args.out} ({args.out.stat().st_size // 1024} KB)")
     if args.publish:
-        shutil.copyfile(args.out, PUBLISHED)
+        if args.out.resolve() != PUBLISHED.resolve():  # --out docs/figure.png wrote it already
+            shutil.copyfile(args.out, PUBLISHED)
         print(f"published {PUBLISHED.relative_to(ROOT)}")
 
 

@@ -2,16 +2,19 @@
 # The GPU checks of issue 40 in one short run (about 5 minutes) on a bare GPU machine that has Python and torch:
 #   kornia (and whatever else is missing) from wheels carried in .whl/, the CUDA tests, then
 #   `alcn bench speed --device cuda` (end to end host uint8 -> host uint8, on the device, float16, against the CPU,
-#   beside kornia's DoG and CLAHE). Reports go to $GPU_CHECK_OUT (default runs/gpu_check); the bench's JSON is kept
-#   as docs/reports/speed_gpu.json (experiments/_run.py's keep; experiments/report.py renders it). Both steps run
-#   whatever the first gives; the exit status is the first failure's (0 when both pass). DEVICE=cpu rehearses the
-#   script on a machine without a GPU (the CUDA tests skip, the bench measures the CPU, nothing is kept), so that a
-#   short GPU slot is not spent on a fault of the script itself.
+#   beside kornia's DoG and CLAHE). Reports go to $GPU_CHECK_OUT (default runs/gpu_check; on a GPU machine, the
+#   folder that comes back), with speed_gpu.json: the bench's JSON as docs/reports will hold it (recorded as this
+#   script's run, $GPU_CHECK_OUT written OUT). Where the folder came back, publish it with
+#   `python experiments/keep_gpu_check.py FOLDER` (experiments/report.py renders it). Both steps run whatever the
+#   first gives; the exit status is the first failure's (0 when both pass). DEVICE=cpu rehearses the script on a
+#   machine without a GPU (the CUDA tests skip, the bench measures the CPU, speed_gpu.json is written and
+#   keep_gpu_check.py refuses it), so that a short GPU slot is not spent on a fault of the script itself.
 # Fill .whl/ beforehand where a registry is reachable, e.g.
 #   pip download --no-deps --only-binary=:all: -d .whl kornia kornia_rs
+# On a GPU machine that gives back one folder: GPU_CHECK_OUT=THAT_FOLDER bash experiments/gpu_check.sh
 set -uo pipefail
 cd "$(dirname "$0")/.."
-# absolute: the kept report writes the run folder (runs/) as OUT, which a relative path would not match
+# absolute: the report to publish writes this folder as OUT, which a relative path would not match
 GPU_CHECK_OUT=$(realpath -m "${GPU_CHECK_OUT:-runs/gpu_check}")
 DEVICE=${DEVICE:-cuda}
 # the CPU's batches are slow: two small ones rehearse the path (BATCHES overrides either default)
@@ -48,15 +51,15 @@ tests_status=${PIPESTATUS[0]}
 timeout 240 "$PY" -m alcn_cv.cli bench speed --device "$DEVICE" ${BATCHES:+--device-batches "$BATCHES"} \
   --out "$GPU_CHECK_OUT/speed_$DEVICE" 2>&1 | tee "$GPU_CHECK_OUT/speed_$DEVICE.txt" | tail -25
 bench_status=${PIPESTATUS[0]}
-# Keep the GPU's report (the CPU rehearsal's measures nothing published); failing to keep it fails the bench step.
-if [ "$DEVICE" != cpu ] && [ "$bench_status" -eq 0 ]; then
-  "$PY" - "$GPU_CHECK_OUT/speed_$DEVICE/speed.json" <<'PY' || bench_status=$?
+# The report to publish, into the folder that comes back; failing to write it fails the bench step.
+if [ "$bench_status" -eq 0 ]; then
+  "$PY" - "$GPU_CHECK_OUT/speed_$DEVICE/speed.json" "$GPU_CHECK_OUT" <<'PY' || bench_status=$?
 import sys
 
 sys.path.insert(0, "experiments")
-from _run import keep
+from _run import write_for_keeping
 
-keep(sys.argv[1], "speed_gpu", script="experiments/gpu_check.sh")
+write_for_keeping(sys.argv[1], "speed_gpu", sys.argv[2], script="experiments/gpu_check.sh")
 PY
 fi
 echo "reports in $GPU_CHECK_OUT (CUDA tests: exit status $tests_status; bench: $bench_status)"

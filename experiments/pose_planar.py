@@ -15,18 +15,16 @@ Writes runs/pose_planar/<part>/planar_pose.{md,json,png}; keeps docs/reports/pos
 
 from __future__ import annotations
 
-from _run import RUNS, alcn, command_line, keep
+from _run import RUNS, add_part_option, alcn, command_line, keep, selected_parts
 
 PARTS = {"features": ["--detectors", "features", "--n-features", "500"], "corners": ["--detectors", "corners"]}
 
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument(
-        "--part", nargs="+", action="extend", choices=PARTS, help="run only these parts (default: both, in turn)"
-    )
+    add_part_option(parser, PARTS)
     args = parser.parse_args()
-    for part in args.part or PARTS:
+    for part in selected_parts(args, PARTS):
         out = RUNS / "pose_planar" / part
         alcn("pose", "planar", "--out", str(out), *PARTS[part])
         keep(out / "planar_pose.json", f"pose_planar_{part}", drop=("details",))

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from _run import RUNS, SHARED_DATA, alcn, command_line, keep
+from _run import RUNS, SHARED_DATA, add_part_option, alcn, command_line, keep, selected_parts
 
 NORMALIZATIONS = ["none", "dog:sigma1=1:sigma2=2", "tantriggs", "alcn", "alcn:model=lite"]
 PARTS = ("data", "features", "corners", "control", "heldout", "middlebury")
@@ -29,14 +29,12 @@ PARTS = ("data", "features", "corners", "control", "heldout", "middlebury")
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument(
-        "--part", nargs="+", action="extend", choices=PARTS, help="run only these parts (default: all, in turn)"
-    )
+    add_part_option(parser, PARTS)
     parser.add_argument(
         "--seeds", nargs="+", type=int, default=[0, 1, 2], help="corner CNN training seeds (default: 0 1 2)"
     )
     args = parser.parse_args()
-    parts = args.part or PARTS
+    parts = selected_parts(args, PARTS)
     seeds = [str(seed) for seed in args.seeds]
     root = RUNS / "pose_table1"
     data, control, heldout = root / "data", root / "data_training_light", root / "data_heldout"

@@ -9,13 +9,13 @@ ALCN). Parts (``--part``; default: all, in this order), each writing under ``--o
 ``OUT/identities_<identities>_seed_<seed>`` (a run with other ``--identities`` or ``--seed`` has its own):
 
 * ``scenes``: ``--identities`` relief scenes of the data engine, rendered as the stand-in renders its identities
-  (``_run.render_identity``: a frontal light and 4 directional lights at each of 5 elevations, cast shadows, sensor
+  (``_stand_in.render_identity``: a frontal light and 4 directional lights at each of 5 elevations, cast shadows, sensor
   noise) but from another seed and at 256 px, saved as registered scenes in ``DATA/scenes``;
 * ``train``: ``alcn train-real-light --conf gain --set rendered=[DATA/scenes]`` with each of :data:`VARIANTS`'
   settings (the share of training steps that draw a rendered scene, the recipe's budget of 300 steps at lr 1e-3 or
   twice the steps at five times the rate, with the control that has no rendered scene), into ``DATA/<variant>`` (a
   variant whose weight file is there already, trained on the same scenes, is not trained again);
-* ``faces``: the stand-in itself (``_run.render_stand_in``: its seed, 80 identities, 128 px) at the
+* ``faces``: the stand-in itself (``_stand_in.render_stand_in``: its seed, 80 identities, 128 px) at the
   most grazing light (12 degrees), outputs compared at 32 and 64 px, for the shipped file, each trained file and
   the hand-made methods that lead there;
 * ``bench``: ``alcn bench relight``'s quick protocol (seed 0, no tuning) for the
@@ -36,18 +36,17 @@ from typing import Any
 
 import cv2
 from _run import (
-    ELEVATIONS,
     RUNS,
+    add_part_option,
     alcn,
     command_line,
-    identify,
     keep,
     quick_protocol,
     recorded_settings,
-    render_identity,
-    render_stand_in,
     script_command,
+    selected_parts,
 )
+from _stand_in import ELEVATIONS, identify, render_identity, render_stand_in
 from tqdm.auto import tqdm
 
 from alcn_cv.report import machine
@@ -98,13 +97,11 @@ def main() -> None:
     parser.add_argument(
         "--out", type=Path, default=RUNS / "relief_training", help="run folder (default: runs/relief_training)"
     )
-    parser.add_argument(
-        "--part", nargs="+", action="extend", choices=PARTS, help="run only these parts (default: all, in turn)"
-    )
+    add_part_option(parser, PARTS)
     parser.add_argument("--identities", type=int, default=40, help="rendered training scenes (default: 40)")
     parser.add_argument("--seed", type=int, default=11, help="their rendering seed (default: 11; the stand-in's is 7)")
     args = parser.parse_args()
-    args.part = args.part or list(PARTS)
+    args.part = selected_parts(args, PARTS)  # the report's settings record the parts run
     command = script_command()
     # apart for each (identities, seed): another run's scenes would mix with these, its weight files pass for theirs
     data = args.out / f"identities_{args.identities}_seed_{args.seed}"

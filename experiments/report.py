@@ -184,6 +184,21 @@ def speed(report: dict[str, Any], title: str = "Speed") -> str:
     )
 
 
+def device_speed(report: dict[str, Any], title: str = "Speed on a GPU") -> str:
+    """``alcn bench speed --device`` (``experiments/gpu_check.sh``): ALCN's batched torch path, frames per second per
+    batch, beside kornia's DoG and CLAHE, and the float16 / CPU differences."""
+    device = report.get("device", {})
+    rows = report.get("rows", [])
+    columns = [key for key in rows[0] if key != "batch"] if rows else []
+    return (
+        f"## {title}\n\n{provenance(report)}\nALCN batched on {device.get('device', '?')}, "
+        f"{_size(device.get('size'))} gray, frames per second:\n\n"
+        + table(["batch", *columns], [[r.get("batch"), *(r.get(c) for c in columns)] for r in rows])
+        + f"\nLargest difference float16 / float32 on the device: {device.get('half_max_abs')}; device / CPU "
+        f"(float32): {device.get('device_vs_cpu_max_abs')}.\n"
+    )
+
+
 def _size(value: Any) -> Any:
     return "x".join(str(v) for v in value) if isinstance(value, list) else value
 
@@ -406,7 +421,7 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
         "tuning) on the test / webcam training scenes, identification and matching in %.\n",
     ),
     "speed": speed,
-    "speed_gpu": lambda r: speed(r, "Speed on a GPU"),
+    "speed_gpu": device_speed,
     "detect": lambda r: summary_table(r, "Rendered detection (mean AUC)"),
     "fewshot": lambda r: summary_table(r, "Few-shot validation (ROC AUC)"),
     "pose_table1_features": lambda r: columns_table(r, "Pose Table 1, SIFT parts (rendered sequences)"),

@@ -29,7 +29,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from _run import RUNS, alcn, command_line, keep, quick_protocol
+from _run import RUNS, add_part_option, alcn, command_line, keep, quick_protocol, selected_parts
 
 PARTS = ("unet", "gain", "objective", "bench")
 
@@ -81,12 +81,10 @@ def main() -> None:
     parser = command_line(__doc__)
     parser.add_argument("--conf", default="gain", help="the train-real-light preset (default: gain)")
     parser.add_argument("--out", type=Path, default=RUNS / "unet", help="run folder (default: runs/unet)")
-    parser.add_argument(
-        "--part", nargs="+", action="extend", choices=PARTS, help="run only these parts (default: all, in turn)"
-    )
+    add_part_option(parser, PARTS)
     parser.add_argument("--draws", type=int, default=8, help="objective: draws per scene (default 8)")
     args = parser.parse_args()
-    parts = args.part or PARTS
+    parts = selected_parts(args, PARTS)
     unet, gain = args.out / "train" / "unet_normalizer.npz", args.out / "gain" / "gain_normalizer.npz"
     if "unet" in parts:
         alcn("train-unet", "--conf", args.conf, "--out", str(unet.parent), "--overwrite")

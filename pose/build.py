@@ -18,15 +18,16 @@ Pipeline (hloc-style, one module per stage):
 4. :func:`build` assembles the model in the object frame; :func:`main` writes ``<out>.npz`` +
    ``<out>.ply`` (:mod:`pose.model`) and ``<out>_cameras.png`` (:func:`pose.plots.plot_model`).
 
-:data:`VIDEO_CONFS` names the settings of a known object's video (hloc's ``confs``): ``cookie_box``
-(:data:`COOKIE_BOX`), those the shared data's cookie box is built with by its examples and its experiment
-(:func:`conf_options`: the same settings as options of ``alcn pose build``).
+:data:`COOKIE_BOX` holds the settings the shared data's cookie box is built with by its examples and its experiment
+(hloc's ``confs``; :func:`build_options`: the same settings as options of ``alcn pose build``).
 """
 
 from __future__ import annotations
 
 import logging
 import tempfile
+import types
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -74,13 +75,14 @@ def _read_only(array: np.ndarray) -> np.ndarray:
     return array
 
 
-#: Named settings of :func:`main` for the video of a known object (hloc's ``confs``): its keyword arguments but the
-#: paths (the video, the output, ``box_ply``). ``cookie_box``: the shared data's ``cookie_box/box.mp4``, a hand-held box
-#: before a static camera (the motion mask), with the intrinsics of OpenCV's real-time pose tutorial (fx = 640*55/22.3,
-#: fy = 480*55/14.9, cx = 320, cy = 240), which are refined (held fixed at fx 1578 px, the box's front side folds into
-#: the plane of its lid: the box fit is 8.5% off instead of 2.7%); every 10th frame, at most 46: all 456 frames.
-VIDEO_CONFS: dict[str, dict[str, Any]] = {
-    "cookie_box": {
+#: The cookie box's settings of :func:`main` (read-only, shared by every build that uses them), its keyword arguments
+#: but the paths (the video, the output, ``box_ply``): ``main(video, output, box_ply=..., **COOKIE_BOX)``. The shared
+#: data's ``cookie_box/box.mp4``, a hand-held box before a static camera (the motion mask), with the intrinsics of
+#: OpenCV's real-time pose tutorial (fx = 640*55/22.3, fy = 480*55/14.9, cx = 320, cy = 240), which are refined (held
+#: fixed at fx 1578 px, the box's front side folds into the plane of its lid: the box fit is 8.5% off instead of
+#: 2.7%); every 10th frame, at most 46: all 456 frames.
+COOKIE_BOX: Mapping[str, Any] = types.MappingProxyType(
+    {
         "K": _read_only(camera_matrix(640 * 55 / 22.3, 480 * 55 / 14.9, 320.0, 240.0)),
         "step": 10,
         "max_frames": 46,
@@ -89,10 +91,8 @@ VIDEO_CONFS: dict[str, dict[str, Any]] = {
         "n_features": 3000,
         "box_units": "cm",
         "refine_focal": True,
-    },
-}
-#: The cookie box's settings: ``main(video, output, box_ply=..., **COOKIE_BOX)``.
-COOKIE_BOX = VIDEO_CONFS["cookie_box"]
+    }
+)
 
 
 def build(
@@ -344,19 +344,28 @@ def main(
     return path
 
 
-def conf_options(conf: dict[str, Any]) -> list[str]:
-    """The options of ``alcn pose build`` that give the settings ``conf`` (one of :data:`VIDEO_CONFS`), for a script
-    that runs the command: ``alcn pose build VIDEO OUT --box-ply PLY *conf_options(COOKIE_BOX)``. Numbers are
-    written in full (``repr``), so that the command builds from the same values as :func:`main` does; a switch
-    that is ``False`` (the command's default) is left out."""
+def build_options(settings: Mapping[str, Any]) -> list[str]:
+    """The command-line options of ``alcn pose build`` that give :func:`main` the keyword arguments ``settings``
+    (:data:`COOKIE_BOX`, say), for a script that runs the command: ``alcn pose build VIDEO OUT --box-ply PLY
+    *build_options(COOKIE_BOX)``. Numbers are written in full (``repr``), so that the command builds from the same
+    values as :func:`main` does; a switch that is ``False`` (the command's default) is left out.
+
+    Raises:
+        InputError: a value no option can give (``None``, a list: the command's default, or several values, are not
+            written so), or ``K`` not 3x3.
+    """
     options: list[str] = []
-    for key, value in conf.items():
+    for key, value in settings.items():
         option = "--" + key.replace("_", "-")
         if key == "K":
             K = np.asarray(value, np.float64)
+            if K.shape != (3, 3):
+                raise InputError(f"{key}: a 3x3 camera matrix, not {K.shape}")
             options += [option, *(repr(float(v)) for v in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))]
         elif isinstance(value, bool):
             options += [option] if value else []
-        else:
+        elif isinstance(value, int | float | str):  # str(float) is its repr: in full
             options += [option, str(value)]
+        else:
+            raise InputError(f"{key}={value!r}: no option of alcn pose build gives it (a number, a string or a switch)")
     return options

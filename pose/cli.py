@@ -461,7 +461,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "built after, or the corner detector trained after, recorded in each; another warns for a part model, "
         "and is an error for a corner detector)",
     )
-    t.add_argument("--overlay", help="write the overlay here (.mp4/.avi or a folder)")
+    t.add_argument(
+        "--overlay",
+        help="write the overlay here: a video (.mp4, .avi, .mkv, ...) or a folder of PNGs (a path without a suffix, or "
+        "an existing folder)",
+    )
     t.add_argument(
         "--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant (default usac_default)"
     )

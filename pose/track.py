@@ -271,24 +271,26 @@ def make_solver(
     detector: str,
     K: np.ndarray,
     outline: np.ndarray | None,
+    *,
     dist: np.ndarray | None = None,
-    method: str = "usac_default",
+    method: str | None = None,
     min_inliers: int | None = None,
-    reprojection_error: float = 4.0,
+    reprojection_error: float | None = None,
 ) -> PoseSolver:
     """The :class:`~pose.solver.PoseSolver` of a ``detector`` (``"features"`` or ``"corners"``): its inliers and
     RANSAC iterations are the detector's (:data:`MIN_INLIERS`, :data:`MIN_INLIERS_NEAR_PRIOR`,
-    :data:`RANSAC_ITERATIONS`); ``min_inliers`` overrides the first. ``outline``: the detector's box corners."""
+    :data:`RANSAC_ITERATIONS`); ``min_inliers`` overrides the first. ``outline``: the detector's box corners.
+    ``method`` and ``reprojection_error``: ``None`` is :class:`~pose.solver.PoseSolver`'s own default."""
     min_inliers = MIN_INLIERS[detector] if min_inliers is None else min_inliers
+    given = {"method": method, "reprojection_error": reprojection_error}
     return PoseSolver(
         K,
         dist,
-        method=method,
         min_inliers=min_inliers,
         min_inliers_near_prior=min(MIN_INLIERS_NEAR_PRIOR[detector], min_inliers),
-        reprojection_error=reprojection_error,
         iterations=RANSAC_ITERATIONS[detector],
         outline=outline,
+        **{key: value for key, value in given.items() if value is not None},
     )
 
 
@@ -296,16 +298,26 @@ def make_tracker(
     detector: str,
     K: np.ndarray,
     outline: np.ndarray | None,
+    *,
     dist: np.ndarray | None = None,
-    method: str = "usac_default",
+    method: str | None = None,
     min_inliers: int | None = None,
-    reprojection_error: float = 4.0,
+    reprojection_error: float | None = None,
 ) -> PoseTracker:
     """The :class:`~pose.solver.PoseTracker` of a ``detector`` around its :func:`make_solver` (same arguments):
     its checks of a pose near the prediction are the detector's (:data:`TRUSTED_GUIDED_RATIO`,
     :data:`MIN_GUIDED_RATIO`)."""
+    solver = make_solver(
+        detector,
+        K,
+        outline,
+        dist=dist,
+        method=method,
+        min_inliers=min_inliers,
+        reprojection_error=reprojection_error,
+    )
     return PoseTracker(
-        make_solver(detector, K, outline, dist, method, min_inliers, reprojection_error),
+        solver,
         trusted_guided_ratio=TRUSTED_GUIDED_RATIO[detector],
         min_guided_ratio=MIN_GUIDED_RATIO[detector],
     )
@@ -319,10 +331,10 @@ def main(
     *,
     normalization: str | None = None,
     overlay: str | Path | None = None,
-    method: str = "usac_default",
+    method: str | None = None,
     n_features: int = 1000,
     min_inliers: int | None = None,
-    reprojection_error: float = 4.0,
+    reprojection_error: float | None = None,
     dist: np.ndarray | None = None,
     detector: str = "features",
     image_size: tuple[int, int] | None = None,
@@ -340,6 +352,8 @@ def main(
             part model tracked after another one warns, a corner detector's is an error).
         K: ``(3, 3)`` intrinsics; default: those stored in the part model (:func:`camera_matrix_for`).
         min_inliers: default :data:`MIN_INLIERS` of the detector.
+        method, reprojection_error: the RANSAC variant and inlier threshold (px); default
+            :class:`~pose.solver.PoseSolver`'s.
         image_size: ``(width, height)`` the calibration of ``K`` and ``dist`` is for; frames of another size are an
             error.
 
@@ -355,7 +369,11 @@ def main(
     if overlay is not None:
         overlay = _overlay_path(overlay, source)
     # `not > 0`: a NaN threshold fails too (every point would be an outlier)
-    if not reprojection_error > 0 or n_features < 0 or (min_inliers is not None and min_inliers < 4):
+    if (
+        (reprojection_error is not None and not reprojection_error > 0)
+        or n_features < 0
+        or (min_inliers is not None and min_inliers < 4)
+    ):
         raise InputError(
             "reprojection_error must be > 0 px, n_features >= 0 (0: all) and min_inliers >= 4 (a pose needs 4 points); "
             f"got {reprojection_error}, {n_features} and {min_inliers}"
@@ -397,7 +415,9 @@ def main(
         # the first frame before the tracking, a folder's others as they come
         _check_frame_size(first, image_size, f"the frames of {source} are", of)
     K = camera_matrix_for(model_K, K, model_path)
-    tracker = make_tracker(detector, K, corners, dist, method, min_inliers, reprojection_error)
+    tracker = make_tracker(
+        detector, K, corners, dist=dist, method=method, min_inliers=min_inliers, reprojection_error=reprojection_error
+    )
     scene_gt, info = {}, {}
     times = []
     with (

@@ -62,6 +62,28 @@ def test_the_cookie_box_examples_build_with_the_preset(script, tmp_path, monkeyp
     assert kwargs == build.COOKIE_BOX
 
 
+def test_the_cookie_box_preset_is_read_only_and_its_options_say_only_what_they_can():
+    """The preset was a mutable dict under two names (VIDEO_CONFS["cookie_box"] and COOKIE_BOX), relit_cookie_box.py
+    copied its step, and conf_options wrote a None or a list as an option's text: one read-only COOKIE_BOX, the
+    example's registered build takes its step from it, and build_options refuses what no option can give."""
+    import inspect
+
+    with pytest.raises(TypeError):
+        build.COOKIE_BOX["step"] = 5  # type: ignore[index]
+    assert not hasattr(build, "VIDEO_CONFS")
+    relit = _example("relit_cookie_box.py")
+    assert inspect.signature(relit.registered_build).parameters["step"].default == build.COOKIE_BOX["step"]
+    assert build.build_options({"step": 5, "motion_mask": False, "feature": "SIFT"}) == [
+        "--step",
+        "5",
+        "--feature",
+        "SIFT",
+    ]
+    for bad in ({"max_frames": None}, {"box_size": [18.9, 25.8, 7.5]}):
+        with pytest.raises(InputError, match="no option"):
+            build.build_options(bad)
+
+
 def test_relit_checks_its_methods_before_the_work(tmp_path):
     """`--methods none bogus` ran 91 s (the reference model built) before it failed; a negative --max-frames was
     taken as a number of frames."""
@@ -79,10 +101,13 @@ def test_relit_checks_its_methods_before_the_work(tmp_path):
     ("script", "args"),
     [("track_cookie_box.py", []), ("relit_cookie_box.py", ["--methods", "none"]), ("feature_matching.py", [])],
 )
-def test_an_out_that_cannot_be_written_ends_in_one_line(script, args, tmp_path, shared_data):
+def test_an_out_that_cannot_be_written_ends_in_one_line(script, args, tmp_path, request):
     """A folder that cannot be made (an OSError, here under a file) ended in a traceback: the examples caught
-    ALCNError only."""
-    if script == "feature_matching.py" and not (shared_data / "cookie_box" / "box.mp4").is_file():
+    ALCNError only. Only feature_matching.py reads the video before its output folder: it alone needs the data."""
+    if (
+        script == "feature_matching.py"
+        and not (request.getfixturevalue("shared_data") / "cookie_box" / "box.mp4").is_file()
+    ):
         pytest.skip("the cookie box video not found")
     (tmp_path / "a_file").write_text("")
     proc = _run(script, "--out", str(tmp_path / "a_file" / "out"), *args)

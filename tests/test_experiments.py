@@ -1,5 +1,6 @@
 """The experiment scripts of ``experiments/`` without their long runs: the rerun line docs/results.md gives runs the
-command its report records, a shell script's report is kept and rendered, and a report records what was measured."""
+command its report records, a GPU run's report is written where it ran and published here, ``--part`` runs each part
+once in its order, and a report records what was measured."""
 
 from __future__ import annotations
 
@@ -70,33 +71,151 @@ def test_the_rerun_line_runs_the_published_command(
     assert report["command"] in [c.replace(str(tmp_path), "OUT") for c in commands]
 
 
-def test_a_shell_scripts_report_is_kept_and_rendered(
-    experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+def _keep_gpu_check(monkeypatch: pytest.MonkeyPatch, *argv: str) -> None:
+    """experiments/keep_gpu_check.py ``argv``, in this process."""
+    module = importlib.import_module("keep_gpu_check")
+    monkeypatch.setattr(sys, "argv", ["keep_gpu_check.py", *argv])
+    module.main()
+
+
+def test_a_gpu_runs_report_is_written_where_it_ran_and_published_here(
+    experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
-    """experiments/gpu_check.sh kept no report: it keeps its bench's now, recorded as its own run (no arguments, the
-    run folder written OUT), and the results page renders it with a rerun line that runs the shell script."""
-    out = experiments.RUNS / "gpu_check" / "speed_cuda"  # the real run folder, which the kept report writes OUT
+    """experiments/gpu_check.sh kept its report into docs/reports on the GPU machine, whence only $GPU_CHECK_OUT comes
+    back, with that folder's absolute path in it, and could not replace a published one: it writes the report to
+    publish into $GPU_CHECK_OUT (the folder written OUT), and keep_gpu_check.py publishes it here, under keep's rule;
+    the results page renders it with a rerun line that runs the shell script."""
+    out = tmp_path / "came_back"  # $GPU_CHECK_OUT on the GPU machine: any folder
+    machine = _kept("speed")["machine_before"]
+    rows = [{"batch": 8, "end to end fps": 900.0, "on device fps": 2000.0, "kornia dog fps": 5000.0}]
+    device = {"device": "cuda", "size": [1280, 800], "half_max_abs": 0.002, "device_vs_cpu_max_abs": 1e-5}
+    speed = {"machine_before": machine, "machine_after": machine, "rows": rows, "device": device}
+
+    def gpu_run(command: str) -> Path:
+        """The report gpu_check.sh writes after a run of the bench ``command``."""
+        (out / "speed_cuda").mkdir(parents=True, exist_ok=True)
+        report = out / "speed_cuda" / "speed.json"
+        report.write_text(json.dumps({**speed, "command": command}), encoding="utf-8")
+        return experiments.write_for_keeping(report, "speed_gpu", out, script="experiments/gpu_check.sh")
+
+    written = gpu_run(f"alcn bench speed --device cuda --out {out}/speed_cuda")
+    assert written == out / "speed_gpu.json" and str(tmp_path) not in written.read_text()
     monkeypatch.setattr(experiments, "ROOT", tmp_path)
     monkeypatch.setattr(experiments, "REPORTS", tmp_path / "reports")
-    speed = _kept("speed")
-    speed["command"] = f"alcn bench speed --device cuda --out {out}"
-    report = tmp_path / "speed.json"
-    report.write_text(json.dumps(speed), encoding="utf-8")
-    kept = json.loads(experiments.keep(report, "speed_gpu", script="experiments/gpu_check.sh").read_text())
+    _keep_gpu_check(monkeypatch, str(out))
+    kept = json.loads((tmp_path / "reports" / "speed_gpu.json").read_text())
     assert kept["experiment"]["script"] == "experiments/gpu_check.sh" and kept["experiment"]["argv"] == []
-    assert kept["command"] == "alcn bench speed --device cuda --out OUT/gpu_check/speed_cuda"
+    assert kept["command"] == "alcn bench speed --device cuda --out OUT/speed_cuda"
     text = _report_module().RENDERERS["speed_gpu"](kept)
     assert text.startswith("## Speed on a GPU\n") and "Rerun: `bash experiments/gpu_check.sh`." in text
+    assert "| batch | end to end fps | on device fps | kornia dog fps |\n|---|---|---|---|\n| 8 | 900.0 |" in text
+    # a run of another command replaces it only with --keep, as an experiment's report
+    gpu_run(f"alcn bench speed --device cuda --device-batches 1,8 --out {out}/speed_cuda")
+    _keep_gpu_check(monkeypatch, str(out))
+    said = capsys.readouterr().out
+    assert "not kept" in said and "`bash experiments/gpu_check.sh`" in said and "--keep" in said
+    assert json.loads((tmp_path / "reports" / "speed_gpu.json").read_text()) == kept
+    _keep_gpu_check(monkeypatch, str(out), "--keep")
+    assert "--device-batches 1,8" in json.loads((tmp_path / "reports" / "speed_gpu.json").read_text())["command"]
+    # the CPU rehearsal's report measured no GPU: refused
+    device["device"] = "cpu"
+    gpu_run(f"alcn bench speed --device cpu --out {out}/speed_cpu")
+    with pytest.raises(SystemExit):
+        _keep_gpu_check(monkeypatch, str(out), "--keep")
+    assert "the CPU rehearsal's report" in capsys.readouterr().err
 
 
-def test_the_quick_protocol_is_the_benchs_preset(experiments: types.ModuleType) -> None:
-    """The scripts spell out ``alcn bench relight --quick``'s settings from the library's preset."""
-    from alcn_cv.bench.relight import PRESETS
+class _StopError(Exception):
+    """Raised by a stand-in where the test has seen what it needs."""
 
-    options = experiments.quick_protocol()
-    assert dict(zip(options[::2], map(int, options[1::2]))) == {
-        f"--{k.replace('_', '-')}": v for k, v in PRESETS["quick"].items()
-    }
+
+def test_the_quick_protocol_is_the_benchs_preset(
+    monkeypatch: pytest.MonkeyPatch, experiments: types.ModuleType
+) -> None:
+    """The scripts spell out ``alcn bench relight --quick``'s settings: the bench's own command line, given them or
+    ``--quick``, runs the benchmark with the same settings."""
+    from alcn_cv.bench import relight
+    from alcn_cv.cli import build_parser
+
+    def settings(*options: str) -> tuple[Any, ...]:
+        calls: list[tuple[Any, ...]] = []
+
+        def record(*args: Any, **kwargs: Any) -> None:
+            calls.append(args)
+            raise _StopError
+
+        monkeypatch.setattr(relight, "main", record)
+        args = build_parser().parse_args(["bench", "relight", "--out", "x", *options])
+        with pytest.raises(_StopError):
+            args.func(args)
+        return calls[0][1:]  # all but the output folder
+
+    assert settings(*experiments.quick_protocol()) == settings("--quick") != settings()
+
+
+def test_part_runs_each_part_once_in_its_order(
+    experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """relight.py and pose_planar.py ran --part's parts as typed (--part a a ran a twice, --part b a in that order):
+    the five experiments with parts share one option, whose parts run once each in the experiment's order."""
+    parts = ("data", "features", "corners")
+    parser = experiments.command_line("doc")
+    experiments.add_part_option(parser, parts)
+    assert experiments.selected_parts(parser.parse_args(["--part", "corners", "data", "corners"]), parts) == [
+        "data",
+        "corners",
+    ]
+    assert experiments.selected_parts(parser.parse_args([]), parts) == list(parts)
+    module = importlib.import_module("pose_planar")
+    commands: list[tuple[str, ...]] = []
+    monkeypatch.setattr(module, "RUNS", tmp_path)
+    monkeypatch.setattr(module, "alcn", lambda *argv: commands.append(argv))
+    monkeypatch.setattr(module, "keep", lambda *args, **kwargs: None)
+    monkeypatch.setattr(sys, "argv", ["pose_planar.py", "--part", "corners", "features", "corners"])
+    module.main()
+    assert [c[3].rsplit("/", 1)[-1] for c in commands] == ["features", "corners"]
+    for script in ("relight", "pose_planar", "pose_table1", "relief_training", "unet_baseline"):
+        source = (EXPERIMENTS / f"{script}.py").read_text(encoding="utf-8")
+        assert "add_part_option(parser" in source and "selected_parts(args" in source, script
+
+
+def test_relights_former_option_is_hidden_and_still_runs(
+    experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    """--only, relight.py's former --part, is hidden from its help; the published reports' arguments still run."""
+    module = importlib.import_module("relight")
+    commands: list[str] = []
+    monkeypatch.setattr(module, "alcn", lambda *argv: commands.append(" ".join(argv)))
+    monkeypatch.setattr(module, "keep", lambda *args, **kwargs: None)
+    monkeypatch.setattr(sys, "argv", ["relight.py", "--only", "leave_one_out", "split", "--part", "split"])
+    module.main()
+    assert len(commands) == 2 and "--leave-one-out" not in commands[0] and "--leave-one-out" in commands[1]
+    monkeypatch.setattr(sys, "argv", ["relight.py", "--help"])
+    with pytest.raises(SystemExit):
+        module.main()
+    assert "--only" not in capsys.readouterr().out
+
+
+def test_figure_publishes_only_the_readmes_scene_and_out_may_be_the_published_path(
+    experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """figure.py --out docs/figure.png --publish ended in shutil.SameFileError; --publish with another scene than
+    the README's caption names published it."""
+    import numpy as np
+
+    module = importlib.import_module("figure")
+    published = tmp_path / "figure.png"
+    monkeypatch.setattr(module, "PUBLISHED", published)
+    monkeypatch.setattr(module, "ROOT", tmp_path)
+    monkeypatch.setattr(module, "figure", lambda scene: np.full((8, 8), 128, np.uint8))
+    monkeypatch.setattr(sys, "argv", ["figure.py", "--out", str(published), "--publish"])
+    module.main()
+    assert published.is_file()
+    out = tmp_path / "other.png"
+    monkeypatch.setattr(sys, "argv", ["figure.py", "--scene", "courbevoie", "--out", str(out), "--publish"])
+    with pytest.raises(SystemExit):
+        module.main()
+    assert not out.exists()
 
 
 def test_a_report_records_what_was_measured_not_keep(experiments: types.ModuleType) -> None:

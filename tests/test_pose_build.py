@@ -249,11 +249,10 @@ def test_a_video_option_is_said_to_be_ignored_exactly_when_given(shared_data, tm
 
 def test_the_cookie_box_preset_is_the_tutorials_camera_and_alcn_pose_builds_from_it(monkeypatch):
     """The cookie box's settings were written out three times (its two examples and calibration.py, there with the
-    focal lengths rounded): one preset, the same values as `alcn pose build` options (conf_options, in full)."""
+    focal lengths rounded): one preset, the same values as `alcn pose build` options (build_options, in full)."""
     from alcn_cv.cli import main as alcn
 
-    conf = build.VIDEO_CONFS["cookie_box"]
-    assert conf is build.COOKIE_BOX
+    conf = build.COOKIE_BOX
     assert np.array_equal(conf["K"], [[640 * 55 / 22.3, 0, 320], [0, 480 * 55 / 14.9, 240], [0, 0, 1]])
     assert not conf["K"].flags.writeable  # shared by every build that uses it
     assert {k: v for k, v in conf.items() if k != "K"} == {
@@ -267,7 +266,7 @@ def test_the_cookie_box_preset_is_the_tutorials_camera_and_alcn_pose_builds_from
     }
     calls = []
     monkeypatch.setattr(build, "main", lambda *args, **kwargs: calls.append(kwargs) or Path("model.npz"))
-    assert alcn(["pose", "build", "box.mp4", "model.npz", *build.conf_options(conf)]) == 0
+    assert alcn(["pose", "build", "box.mp4", "model.npz", *build.build_options(conf)]) == 0
     given = {k: calls[0][k] for k in conf}
     assert np.array_equal(given.pop("K"), conf["K"])  # bit for bit: the floats written with repr
     assert given == {k: v for k, v in conf.items() if k != "K"}

@@ -375,3 +375,25 @@ def test_an_overlay_of_an_unknown_suffix_is_refused(tmp_path):
         with track.OverlayWriter(tmp_path / name) as writer:
             writer.write("a", frame)
         assert (tmp_path / name / "a.png").is_file()
+
+
+def test_the_trackers_solver_takes_the_solvers_defaults_by_keyword():
+    """make_solver copied PoseSolver's defaults ("usac_default", 4.0) and make_tracker passed its settings by position:
+    they are keyword-only now, and what is not given is PoseSolver's own default."""
+    import inspect
+
+    from pose.solver import PoseSolver
+
+    defaults = inspect.signature(PoseSolver).parameters
+    solver = track.make_solver("features", K, None)
+    assert solver.method == defaults["method"].default
+    assert solver.reprojection_error == defaults["reprojection_error"].default
+    assert solver.min_inliers == track.MIN_INLIERS["features"]
+    tracker = track.make_tracker("corners", K, None, method="ransac_sqpnp", reprojection_error=6.0, min_inliers=8)
+    assert (tracker.solver.method, tracker.solver.reprojection_error, tracker.solver.min_inliers) == (
+        "ransac_sqpnp",
+        6.0,
+        8,
+    )
+    with pytest.raises(TypeError):
+        track.make_tracker("features", K, None, None, "ransac_sqpnp")  # type: ignore[misc]

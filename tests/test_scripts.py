@@ -59,14 +59,25 @@ def test_an_example_given_bad_input_ends_in_one_line(tmp_path, script, args, cod
 
 def test_the_gpu_check_rehearses_on_the_cpu(tmp_path):
     """experiments/gpu_check.sh with DEVICE=cpu: the script a short GPU slot runs, end to end, so that the slot is
-    not spent on a fault of the script (its CUDA tests skip here; the bench measures the CPU's batched path)."""
-    env = {**os.environ, "DEVICE": "cpu", "GPU_CHECK_OUT": str(tmp_path), "PYTHON": sys.executable}
+    not spent on a fault of the script (its CUDA tests skip here; the bench measures the CPU's batched path), the
+    report to publish written into its folder too (the folder that comes back from a GPU machine), as the shell
+    script's run with that folder written OUT (tests/test_experiments.py publishes one)."""
+    import json
+
+    out = tmp_path / "came_back"
+    env = {**os.environ, "DEVICE": "cpu", "GPU_CHECK_OUT": str(out), "PYTHON": sys.executable}
     proc = subprocess.run(
         ["bash", str(ROOT / "experiments" / "gpu_check.sh")], capture_output=True, text=True, timeout=300, env=env
     )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    assert "ALCN batched on cpu" in (tmp_path / "speed_cpu" / "speed.md").read_text()
-    assert (tmp_path / "cuda_tests.xml").is_file() and (tmp_path / "environment.txt").is_file()
+    assert "ALCN batched on cpu" in (out / "speed_cpu" / "speed.md").read_text()
+    assert (out / "cuda_tests.xml").is_file() and (out / "environment.txt").is_file()
+    text = (out / "speed_gpu.json").read_text()
+    assert str(tmp_path) not in text and str(ROOT) not in text
+    written = json.loads(text)
+    assert written["experiment"]["script"] == "experiments/gpu_check.sh" and written["experiment"]["argv"] == []
+    command = written["command"]
+    assert command.startswith("alcn bench speed --out OUT/speed_cpu ") and " --device cpu " in command, command
 
 
 def test_a_run_with_other_options_keeps_the_published_report(tmp_path, monkeypatch, capsys):
