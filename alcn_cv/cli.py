@@ -44,6 +44,12 @@ def _terminate(signum: int, frame: object) -> None:
     raise Terminated
 
 
+def interrupt_exit_code(interrupt: BaseException | None) -> int:
+    """The exit code of a command that an interrupt ended: 143 (128 + SIGTERM) for :class:`Terminated`, else 130
+    (128 + SIGINT, Ctrl-C)."""
+    return 128 + (signal.SIGTERM if isinstance(interrupt, Terminated) else signal.SIGINT)
+
+
 @contextlib.contextmanager
 def sigterm_as_interrupt(command: str) -> Iterator[None]:
     """Handle SIGTERM as SIGINT while ``alcn command`` runs: :class:`Terminated` is raised.
@@ -218,12 +224,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with sigterm_as_interrupt(args.command), _ffmpeg_fatal_only(not args.verbose):
             result = args.func(args)
-    except Terminated:
-        print("alcn: terminated", file=sys.stderr)
-        return 128 + signal.SIGTERM
-    except KeyboardInterrupt:
-        print("alcn: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(f"alcn: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
+        return interrupt_exit_code(exc)
     except ModuleNotFoundError as exc:  # a package of an extra, imported when the command runs
         error = missing_extra(exc, f"alcn {args.command}", preferred=args.command)
         if error is None:

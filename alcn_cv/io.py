@@ -24,6 +24,7 @@ from alcn_cv.errors import DatasetError, InputError
 
 __all__ = [
     "IMAGE_SUFFIXES",
+    "INTERRUPTS",
     "VIDEO_SUFFIXES",
     "FrameReader",
     "VideoReader",
@@ -328,8 +329,9 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
     return path
 
 
-#: The signals the command line turns into exceptions (Ctrl-C, and SIGTERM as Ctrl-C).
-_INTERRUPTS = {signal.SIGINT, signal.SIGTERM}
+#: The signals the command line turns into exceptions (Ctrl-C, and SIGTERM as Ctrl-C): those a worker thread blocks
+#: (:func:`signals_to_main_thread`) and a training step holds (:func:`alcn_cv.train.checkpoint.interrupts_deferred`).
+INTERRUPTS = (signal.SIGINT, signal.SIGTERM)
 
 
 @contextlib.contextmanager
@@ -340,7 +342,7 @@ def signals_to_main_thread() -> Iterator[None]:
     if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _INTERRUPTS)
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPTS)
     try:
         yield
     finally:
@@ -351,7 +353,7 @@ def block_interrupts() -> None:
     """Block SIGINT and SIGTERM in the calling worker thread (a thread pool's ``initializer``): the
     main thread takes them (see :func:`signals_to_main_thread`)."""
     if hasattr(signal, "pthread_sigmask"):
-        signal.pthread_sigmask(signal.SIG_BLOCK, _INTERRUPTS)
+        signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPTS)
 
 
 class VideoReader:

@@ -171,11 +171,14 @@ def save_figure(plt: Any, fig: Any, path: str | os.PathLike, dpi: int = 100) -> 
 
 
 @contextlib.contextmanager
-def log_to(path: str | os.PathLike, append: bool = False) -> Iterator[None]:
-    """Copy the ``alcn_cv`` loggers' records to the file ``path`` (a run's ``train.log``) while the block runs, at
-    INFO level at least; an earlier file is replaced, unless ``append`` (a resumed run)."""
-    handler = logging.FileHandler(path, mode="a" if append else "w")
-    handler.setFormatter(logging.Formatter("[%(asctime)s %(name)s %(levelname)s] %(message)s", "%Y/%m/%d %H:%M:%S"))
+def log_to(path: str | os.PathLike | logging.Handler, append: bool = False) -> Iterator[None]:
+    """Copy the ``alcn_cv`` loggers' records to the file ``path`` (a run's ``train.log``), or to the handler given,
+    while the block runs, at INFO level at least; an earlier file is replaced, unless ``append`` (a resumed run)."""
+    if isinstance(path, logging.Handler):
+        handler = path
+    else:
+        handler = logging.FileHandler(path, mode="a" if append else "w")
+        handler.setFormatter(logging.Formatter("[%(asctime)s %(name)s %(levelname)s] %(message)s", "%Y/%m/%d %H:%M:%S"))
     root = logging.getLogger("alcn_cv")
     previous = root.level
     root.addHandler(handler)

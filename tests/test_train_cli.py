@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import shutil
 import tomllib
 
@@ -64,6 +65,25 @@ def test_bad_settings_are_one_line_errors(args, message, capsys):
     assert main([*args, "--print-config"]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("terminated, code", [(False, 130), (True, 143)])
+def test_an_interrupted_alcn_train_ends_as_train_real_light(terminated, code, tmp_path, monkeypatch, capsys):
+    """Where it stopped and the command that goes on, the preset and settings its checkpoint is checked against
+    included; 143 on SIGTERM (it was 130 and `continue with: alcn train --resume --out OUT ...`)."""
+    from alcn_cv.cli import Terminated, build_parser
+    from alcn_cv.train import trainer
+
+    interrupt = Terminated() if terminated else KeyboardInterrupt()
+    result = trainer.TrainResult(tmp_path, "interrupted", stopped_at=(2, 3), interruption=interrupt)
+    monkeypatch.setattr(trainer, "train", lambda *args, **kwargs: result)
+    out = tmp_path / "run"
+    assert main(["train", "--out", str(out), "--set", "optim.epochs=3", "--seed", "4", "--no-progress"]) == code
+    words = ["alcn", "train", "--out", str(out), "--resume", "--conf", "paper", "--set", "optim.epochs=3"]
+    hint = shlex.join([*words, "--seed", "4", "--no-progress"])
+    assert capsys.readouterr().err.strip() == f"interrupted at epoch 2, step 3; continue with: {hint}"
+    args = build_parser().parse_args(shlex.split(hint)[1:])
+    assert args.resume and args.settings == ["optim.epochs=3"] and args.seed == 4
 
 
 def test_a_missing_data_folder_names_the_key(capsys, tmp_path):

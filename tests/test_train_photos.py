@@ -11,7 +11,7 @@ import pytest
 
 from alcn_cv.data.permissive_images import USER_LICENCE, Photograph, folder_photographs, relit_scenes
 from alcn_cv.data.scenes import Scene
-from alcn_cv.errors import InputError
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.train.config import REAL_LIGHT_CONFS, RealLightConfig, preset
 
 CROP, PATCH = 96, 32
@@ -171,8 +171,8 @@ def test_frames_smaller_than_the_crop_or_the_patches_name_the_scene():
 
     frames = np.stack([_photo(80, 90, seed=i) for i in range(2)])
     scene = Scene("street", "webcam", frames, ("a.png", "b.png"))
-    with pytest.raises(InputError, match=r"scene 'street': frames of 90x80 .*crop=96.*at least 96x96"):
+    with pytest.raises(DatasetError, match=r"scene 'street': frames of 90x80 .*crop=96.*at least 96x96"):
         training_scene(scene, CROP // 2, PATCH, CROP)
-    with pytest.raises(InputError, match=r"scene 'street': frames of 90x80 .*the 100x100 patches"):
+    with pytest.raises(DatasetError, match=r"scene 'street': frames of 90x80 .*the 100x100 patches"):
         training_scene(scene, CROP // 2, 100)
     assert len(training_scene(scene, CROP // 2, PATCH).frames) == 2  # no crop given: the patches' bound only

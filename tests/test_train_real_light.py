@@ -3,7 +3,6 @@
 import json
 import shlex
 
-import cv2
 import numpy as np
 import pytest
 import torch
@@ -28,23 +27,9 @@ from alcn_cv.train.real_light import (
     training_scenes,
 )
 from alcn_cv.weight_file import load_normalizer_file
+from scene_sets import write_scene
 
 CROP, PATCH = 96, 32
-
-
-def _write_scene(folder, frames=3, h=120, w=136, seed=0):
-    """A registered scene: one texture under a different uneven light, gamma and noise in each frame."""
-    rng = np.random.default_rng(seed)
-    texture = cv2.GaussianBlur(rng.random((h, w)).astype(np.float32), (0, 0), 1.5)
-    texture = (texture - texture.min()) / (texture.max() - texture.min())
-    folder.mkdir(parents=True)
-    yy, xx = np.mgrid[0:h, 0:w] / max(h, w)
-    for i in range(frames):
-        light = np.exp(rng.uniform(-1.5, 0.0) + rng.uniform(-1.5, 1.5) * xx + rng.uniform(-1.0, 1.0) * yy)
-        frame = (0.3 + 0.4 * texture) ** rng.uniform(0.6, 1.6) * light
-        frame = np.clip(frame * (1 + 0.3 * rng.standard_normal((h, w))), 0, 1)
-        cv2.imwrite(str(folder / f"{i:02d}.png"), np.rint(255 * frame).astype(np.uint8))
-    return folder
 
 
 def test_textured_locations_and_sampling():
@@ -70,7 +55,13 @@ def test_a_flat_scene_is_named_not_trained_on_with_a_nan_loss():
 
 
 @pytest.mark.parametrize(
-    "change, match", [({"anywhere": -1}, "anywhere"), ({"relit": -1}, "relit"), ({"temperature": 0.0}, "temperature")]
+    "change, match",
+    [
+        ({"anywhere": -1}, "anywhere"),
+        ({"relit": -1}, "relit"),
+        ({"temperature": 0.0}, "temperature"),
+        ({"relit": 1}, r"relit must be 0 \(no relit copies\) or at least 2"),  # was let through, to fail later
+    ],
 )
 def test_settings_out_of_range_are_named(change, match):
     from dataclasses import replace
@@ -112,7 +103,7 @@ def test_harris_response_peaks_at_a_corner_and_repeatability_sees_what_moves():
 
 
 def test_pair_loss_adds_the_weighted_repeatability(tmp_path):
-    scene = training_scene(load_scene_folder(_write_scene(tmp_path / "s"))[0], CROP // 2, PATCH)
+    scene = training_scene(load_scene_folder(write_scene(tmp_path / "s"))[0], CROP // 2, PATCH)
     net = GainNormalizer(stride=8)
     centres = sample_locations(scene.candidates, 6, 16, np.random.default_rng(0))
     with torch.no_grad():
@@ -127,7 +118,7 @@ def test_training_scenes_add_the_relit_photographs(tmp_path, monkeypatch):
 
     photo = Photograph("photo", np.random.default_rng(0).integers(0, 256, (170, 180), dtype=np.uint8), "CC0", "test")
     monkeypatch.setattr(real_light, "training_photographs", lambda shared: [photo])
-    scene_dir = _write_scene(tmp_path / "s", h=160, w=170)  # at least the crop (160) on a side
+    scene_dir = write_scene(tmp_path / "s", h=160, w=170)  # at least the crop (160) on a side
     cfg = RealLightConfig(scenes=[str(scene_dir)], relit=3, light="hard", jitter=1.0, seed=7)
     scenes, rendered = training_scenes(cfg)
     assert [s.name for s in scenes] == ["s", "00_photo"] and rendered == []
@@ -135,7 +126,7 @@ def test_training_scenes_add_the_relit_photographs(tmp_path, monkeypatch):
     (expected,) = relit_scenes([photo], 3, 7, "hard", 1.0)
     np.testing.assert_array_equal(scenes[1].frames[:, 80:-80, 80:-80], expected.unit_frames())
 
-    scene = training_scene(load_scene_folder(_write_scene(tmp_path / "scene"))[0], CROP // 2, PATCH)
+    scene = training_scene(load_scene_folder(write_scene(tmp_path / "scene"))[0], CROP // 2, PATCH)
     centres = anywhere_locations(scene, 500, np.random.default_rng(0))
     _, h, w = scene.frames.shape
     assert centres.shape == (500, 2)
@@ -145,7 +136,7 @@ def test_training_scenes_add_the_relit_photographs(tmp_path, monkeypatch):
 
 
 def test_pair_loss_adds_the_weighted_consistency(tmp_path):
-    scene = training_scene(load_scene_folder(_write_scene(tmp_path / "scene"))[0], CROP // 2, PATCH)
+    scene = training_scene(load_scene_folder(write_scene(tmp_path / "scene"))[0], CROP // 2, PATCH)
     net = GainNormalizer(channels=8)
     rng = np.random.default_rng(0)
     centres = sample_locations(scene.candidates, 8, 8, rng)
@@ -225,6 +216,7 @@ def test_cli_runs_the_preset_with_its_settings(tmp_path, monkeypatch):
         "progress": True,
         "resume": False,
         "overwrite": False,
+        "checkpoint": None,
     }
     assert main([*common, "--no-progress"]) == 0 and runs[-1][1]["progress"] is False
     # (--resume without --conf takes the checkpoint's settings: tests/test_train_real_light_run.py)
@@ -233,7 +225,7 @@ def test_cli_runs_the_preset_with_its_settings(tmp_path, monkeypatch):
 
 
 def _tiny(scene_dir, **changes) -> RealLightConfig:
-    """A run of a few steps on one written scene (:func:`_write_scene`)."""
+    """A run of a few steps on one written scene (:func:`~scene_sets.write_scene`)."""
     settings = {"steps": 3, "save_every": 3, "locations": 16, "min_distance": 8, "temperature": 0.5, "lr": 0.02}
     return RealLightConfig(
         scenes=[str(scene_dir)], relit=0, crop=CROP, patch=PATCH, net={"channels": 8}, **{**settings, **changes}
@@ -242,7 +234,7 @@ def _tiny(scene_dir, **changes) -> RealLightConfig:
 
 def test_three_steps_lower_the_loss(tmp_path):
     torch.set_num_threads(1)
-    scene_dir = _write_scene(tmp_path / "scene")
+    scene_dir = write_scene(tmp_path / "scene")
     cfg = _tiny(scene_dir)
     path = train_real_light(cfg, tmp_path / "run")
     weight_file = load_normalizer_file(path)
@@ -301,7 +293,7 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(tmp_path, monkeypatch):
     from alcn_cv.errors import WeightFileError
 
     torch.set_num_threads(1)
-    cfg = _tiny(_write_scene(tmp_path / "scene"), steps=4, save_every=2)
+    cfg = _tiny(write_scene(tmp_path / "scene"), steps=4, save_every=2)
     whole = load_normalizer_file(train_real_light(cfg, tmp_path / "whole")).arrays
     draw_step = real_light.draw_step
     calls = []
@@ -331,3 +323,10 @@ def test_a_resumed_run_ends_as_an_uninterrupted_one(tmp_path, monkeypatch):
     torch.save({**torch.load(path, weights_only=True), "format": CHECKPOINT_FORMAT}, path)  # as alcn train's
     with pytest.raises(WeightFileError, match="not a checkpoint of alcn train-real-light"):
         load_checkpoint(path, cfg)
+
+
+def test_the_sources_photo_options_are_keywords():
+    from alcn_cv.train.real_light import source_scenes
+
+    with pytest.raises(TypeError):
+        source_scenes([], 2, 0, "relief", 0.0, ["photos"])  # type: ignore[misc]

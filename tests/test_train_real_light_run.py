@@ -22,6 +22,7 @@ from alcn_cv.errors import WeightFileError
 from alcn_cv.train import real_light
 from alcn_cv.train.checkpoint import load_checkpoint
 from alcn_cv.weight_file import load_normalizer_file
+from scene_sets import write_scene
 
 
 @pytest.fixture(autouse=True)
@@ -33,17 +34,8 @@ def _one_thread():
 
 
 def _scene(folder, frames=3, h=120, w=136, seed=0):
-    """A registered scene: one texture under a different uneven light in each frame."""
-    rng = np.random.default_rng(seed)
-    texture = cv2.GaussianBlur(rng.random((h, w)).astype(np.float32), (0, 0), 1.5)
-    texture = (texture - texture.min()) / (texture.max() - texture.min())
-    folder.mkdir(parents=True)
-    yy, xx = np.mgrid[0:h, 0:w] / max(h, w)
-    for i in range(frames):
-        light = np.exp(rng.uniform(-1.5, 0.0) + rng.uniform(-1.5, 1.5) * xx + rng.uniform(-1.0, 1.0) * yy)
-        frame = np.clip((0.3 + 0.4 * texture) * light * (1 + 0.2 * rng.standard_normal((h, w))), 0, 1)
-        cv2.imwrite(str(folder / f"{i:02d}.png"), np.rint(255 * frame).astype(np.uint8))
-    return folder
+    """A registered scene: one texture under a different uneven light in each frame (no gamma, less noise)."""
+    return write_scene(folder, frames, h, w, seed, gamma=None, noise=0.2)
 
 
 def _tiny(scene, steps=2, save_every=2, **more) -> list[str]:
@@ -196,6 +188,7 @@ def test_the_end_of_a_run_prints_the_weights_and_commands_that_work(tmp_path, ca
     printed = capsys.readouterr().out
     weights = out / "gain_normalizer.npz"
     assert printed.startswith(f"weights: {weights}\n")
+    assert "(needs the shared data, or --data DIR of your own registered scenes)" in printed  # the bench's data
     commands = [shlex.split(line)[1:] for line in printed.splitlines() if line.strip().startswith("alcn ")]
     normalize, export, bench = commands
     assert normalize[:3] == ["normalize", "IMAGE", "OUTPUT"] and export == ["export", "--weights", str(weights)]
@@ -278,8 +271,145 @@ def test_a_run_folder_given_for_weights_names_the_file_meant(tmp_path):
 
 
 def test_train_unet_asks_for_overwrite_too(tmp_path, capsys):
+    from alcn_cv.errors import InputError
+    from alcn_cv.train.config import RealLightConfig
+    from alcn_cv.train.unet import train_unet
+
     (tmp_path / "train.log").write_text("")
     (tmp_path / "history.json").write_text("[]")
     assert main(["train-unet", "--out", str(tmp_path), "--no-progress"]) == 2  # before its scenes are loaded
     assert "holds an earlier run (history.json)" in capsys.readouterr().err
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["history.json", "train.log"]
+    cfg = RealLightConfig(scenes=[str(_scene(tmp_path / "data"))], relit=0, crop=96, patch=32, steps=1)
+    with pytest.raises(InputError, match=r"holds an earlier run \(history.json\)"):  # the library's own check
+        train_unet(cfg, tmp_path, net={"channels": 4, "levels": 2}, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data", "history.json", "train.log"]
+
+
+def test_an_interrupted_train_unet_says_it_has_no_checkpoint(tmp_path, monkeypatch, capsys):
+    _interrupted_at(3, monkeypatch)
+    out = tmp_path / "run"
+    options = [*_tiny(_scene(tmp_path / "scene"), steps=4), "--channels", "4", "--levels", "2"]
+    assert main(["train-unet", "--out", str(out), "--no-progress", *options]) == 130
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(
+        "interrupted at step 2: no checkpoint to go on from (this command writes none; history.json "
+        "holds the steps done)"
+    )
+    assert "--resume" not in err and not (out / "checkpoint.pt").exists()
+    assert [h["step"] for h in json.loads((out / "history.json").read_text())] == [1, 2]
+
+
+def test_a_checkpoint_written_before_photos_were_kept_resumes(tmp_path, capsys):
+    """A checkpoint of a run before the keys photos and shipped_photos: its settings are the defaults of those."""
+    scene = _scene(tmp_path / "scene")
+    out = tmp_path / "run"
+    assert main(_run(out, *_tiny(scene))) == 0
+    path = out / "checkpoint.pt"
+    ckpt = torch.load(path, weights_only=True)
+    for key in ("photos", "shipped_photos"):
+        del ckpt["config"][key]
+    ckpt.pop("data", None)  # nor did it record its data
+    torch.save(ckpt, path)
+    assert main(_run(out, "--resume", "--set", "steps=3")) == 0, capsys.readouterr().err
+    torch.save(ckpt, path)
+    assert main(_run(out, "--resume", "--conf", "gain", *_tiny(scene, steps=3))) == 0, capsys.readouterr().err
+
+
+def test_resume_refuses_other_data_and_names_what_changed(tmp_path, monkeypatch, capsys):
+    """The settings record folders as given: resumed from another working folder, a relative one is another folder;
+    a photograph added to a folder shifts the draws of those after it. The checkpoint records the folders resolved and
+    the files of photos (the weight file, the settings as given)."""
+    for seed, where in enumerate("ab"):
+        _scene(tmp_path / where / "scene", seed=seed)
+    monkeypatch.chdir(tmp_path / "a")
+    out = tmp_path / "run"
+    assert main(_run(out, *_tiny("scene"))) == 0
+    monkeypatch.chdir(tmp_path / "b")
+    assert main(_run(out, "--resume", "--set", "steps=3")) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "was written on other data: scenes" in err
+    assert f"['{tmp_path / 'a' / 'scene'}'] in the checkpoint, ['{tmp_path / 'b' / 'scene'}'] now" in err
+    monkeypatch.chdir(tmp_path / "a")
+    assert main(_run(out, "--resume", "--set", "steps=3")) == 0
+    meta = load_normalizer_file(out / "gain_normalizer.npz").meta["training"]
+    assert meta["config"]["scenes"] == ["scene"]  # as given: no path of the machine in a file to share
+
+    photos = tmp_path / "a" / "mine"
+    photos.mkdir()
+    for name in ("01.png", "02.png"):  # two frames of the scene, as photographs
+        (photos / name).write_bytes((tmp_path / "a" / "scene" / name).read_bytes())
+    mine = ["--set", "photos=['mine']", "--set", "shipped_photos=false", "--set", "relit=2"]
+    out = tmp_path / "mine_run"
+    assert main(_run(out, *_tiny("scene", steps=1, save_every=1), *mine)) == 0
+    (photos / "00.png").write_bytes((tmp_path / "a" / "scene" / "00.png").read_bytes())
+    (photos / "02.png").write_bytes(b"")  # not read: the check is on the files' names and sizes
+    assert main(_run(out, "--resume", "--set", "steps=2")) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"photos {photos}: added 00.png; photos {photos}: resized 02.png;" in err
+
+
+def test_ctrl_c_during_a_periodic_save_saves_the_step_once(tmp_path, monkeypatch):
+    """A Ctrl-C held by the save of step 2 is raised after it: the step was saved again (its snapshot, checkpoint and
+    history written twice)."""
+    import signal
+
+    from alcn_cv.train.config import RealLightConfig
+
+    saves, save_weights = [], real_light._save_weights
+
+    def save_with_ctrl_c(net, path, *args):
+        saves.append(path.name)
+        if saves == ["gain_normalizer_step2.npz"]:  # Ctrl-C once, held by the save
+            signal.raise_signal(signal.SIGINT)
+        return save_weights(net, path, *args)
+
+    monkeypatch.setattr(real_light, "_save_weights", save_with_ctrl_c)
+    cfg = RealLightConfig(
+        scenes=[str(_scene(tmp_path / "scene"))], relit=0, crop=96, patch=32, net={"channels": 8}, steps=4, save_every=2
+    )
+    with pytest.raises(real_light.TrainingInterrupted) as stopped:
+        real_light.train_real_light(cfg, tmp_path / "run", progress=False)
+    assert saves == ["gain_normalizer_step2.npz"] and load_checkpoint(tmp_path / "run" / "checkpoint.pt")["step"] == 2
+    assert (stopped.value.step, stopped.value.checkpoint) == (2, True)
+
+
+def test_a_finished_run_resumed_to_train_longer_loses_its_final_file(tmp_path, monkeypatch, capsys):
+    """Its final weights (and their export) would lie beside a later checkpoint once the longer run stops."""
+    out = tmp_path / "run"
+    assert main(_run(out, *_tiny(_scene(tmp_path / "scene")))) == 0
+    (out / "gain_normalizer.onnx").write_bytes(b"an export")
+    _interrupted_at(2, monkeypatch)  # within step 4
+    assert main(_run(out, "--resume", "--set", "steps=5")) == 130
+    assert load_checkpoint(out / "checkpoint.pt")["step"] == 3
+    assert not (out / "gain_normalizer.npz").exists() and not (out / "gain_normalizer.onnx").exists()
+    assert "removed" in (out / "train.log").read_text()
+
+
+def test_a_cli_resume_reads_its_checkpoint_and_checks_its_settings_once(tmp_path, monkeypatch):
+    from alcn_cv.train.config import RealLightConfig
+
+    out = tmp_path / "run"
+    assert main(_run(out, *_tiny(_scene(tmp_path / "scene")))) == 0
+    loads, checks, load, check = [], [], torch.load, RealLightConfig.check
+    monkeypatch.setattr(torch, "load", lambda *a, **k: loads.append(a[0]) or load(*a, **k))
+    monkeypatch.setattr(RealLightConfig, "check", lambda self: checks.append(1) or check(self))
+    assert main(_run(out, "--resume", "--set", "steps=3")) == 0
+    assert len(loads) == 1 and len(checks) == 1
+
+
+def test_export_never_offers_to_replace_what_alcn_cv_installed(tmp_path, capsys):
+    from alcn_cv.runtime import MODELS
+
+    assert main(["export"]) == 2  # the default model's export beside its weights: the package's own
+    err = capsys.readouterr().err
+    assert "export is installed already" in err and "--weights FILE" in err and "--overwrite" not in err
+    assert main(["export", "--weights", str(MODELS["gain"])]) == 2
+    err = capsys.readouterr().err
+    assert "is an export installed with alcn-cv; give --onnx PATH" in err and "--overwrite" not in err
+    run = tmp_path / "run"  # a run folder given for the weights: the file meant, before any path beside the folder
+    run.mkdir()
+    (run / "train.log").write_text("")
+    (run / "gain_normalizer.npz").write_bytes(MODELS["gain"].read_bytes())
+    (tmp_path / "run.onnx").write_bytes(b"")
+    assert main(["export", "--weights", str(run)]) == 2
+    assert f"did you mean {run / 'gain_normalizer.npz'}?" in capsys.readouterr().err

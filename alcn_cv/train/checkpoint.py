@@ -26,7 +26,7 @@ import torch
 from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
-from alcn_cv.io import atomic_write, make_folder
+from alcn_cv.io import INTERRUPTS, atomic_write, make_folder
 from alcn_cv.report import machine
 from alcn_cv.train.config import RealLightConfig, TrainConfig
 from alcn_cv.train.models import JointModel, measure_output_range
@@ -40,6 +40,7 @@ __all__ = [
     "CHECKPOINT_VERSION",
     "REAL_LIGHT_CHECKPOINT_FORMAT",
     "TrainState",
+    "check_checkpoint",
     "check_run_folder",
     "checkpoint_header",
     "earlier_run",
@@ -57,8 +58,6 @@ CHECKPOINT_FORMAT = "alcn-cv/checkpoint"
 #: The format of ``alcn train-real-light``'s checkpoints: another run state than ``alcn train``'s.
 REAL_LIGHT_CHECKPOINT_FORMAT = "alcn-cv/real-light-checkpoint"
 CHECKPOINT_VERSION = 1
-#: The signals :func:`interrupts_deferred` holds.
-_DEFERRED = (signal.SIGINT, signal.SIGTERM)
 
 #: The checkpoint format and the command of each kind of run configuration.
 _KINDS: dict[type, tuple[str, str]] = {
@@ -186,10 +185,12 @@ def checkpoint_header(cfg: TrainConfig | RealLightConfig) -> dict[str, Any]:
 
 def _differences(saved: dict[str, Any], cfg: TrainConfig | RealLightConfig) -> list[str]:
     """The settings of ``cfg`` a run resumed from a checkpoint written with ``saved`` must keep and does not, each
-    with both values: all of a :class:`RealLightConfig` but a larger ``steps`` (training longer); a
-    :class:`TrainConfig`'s model, data, seed and optimisation (not its run options)."""
+    with both values: all of a :class:`RealLightConfig` but a larger ``steps`` (training longer; a setting the
+    checkpoint predates compared as its default, which that run had); a :class:`TrainConfig`'s model, data, seed and
+    optimisation (not its run options)."""
     now = _config_dict(cfg)
     if isinstance(cfg, RealLightConfig):
+        saved = {**_config_dict(RealLightConfig()), **saved}  # a key added since it was written: its default
         pairs = [(k, saved.get(k), v) for k, v in now.items()]
         changed = [(k, a, b) for k, a, b in pairs if a != b and not (k == "steps" and _larger(b, a))]
     else:
@@ -203,12 +204,12 @@ def _larger(now: Any, saved: Any) -> bool:
 
 
 def load_checkpoint(path: str | Path, cfg: TrainConfig | RealLightConfig | None = None) -> dict[str, Any]:
-    """Read a checkpoint of ``alcn train`` or ``alcn train-real-light`` (:func:`checkpoint_header`) and, given
-    ``cfg``, check that it is one of the command ``cfg`` configures, written with the settings a resumed run keeps.
+    """Read a checkpoint of ``alcn train`` or ``alcn train-real-light`` (:func:`checkpoint_header`) and check it
+    (:func:`check_checkpoint`): given ``cfg``, that it is one of the command ``cfg`` configures, written with the
+    settings a resumed run keeps.
 
     Raises:
-        WeightFileError: missing, corrupt, of another format (another command's) or version (the message gives the
-            versions that wrote it and this one), or written with other settings (each named with both values).
+        WeightFileError: missing, corrupt, or as :func:`check_checkpoint`.
     """
     path = Path(path)
     if not path.is_file():
@@ -217,6 +218,19 @@ def load_checkpoint(path: str | Path, cfg: TrainConfig | RealLightConfig | None 
         ckpt = torch.load(path, map_location="cpu", weights_only=True)  # a run on a GPU resumes on a CPU too
     except Exception as exc:  # torch raises many kinds for a damaged zip or pickle
         raise WeightFileError(f"checkpoint {path} is corrupt or unreadable ({type(exc).__name__}: {exc})") from None
+    check_checkpoint(ckpt, path, cfg)
+    return ckpt
+
+
+def check_checkpoint(ckpt: Any, path: str | Path, cfg: TrainConfig | RealLightConfig | None = None) -> None:
+    """Check a checkpoint read from ``path`` (:func:`load_checkpoint`, which checks it without ``cfg``): one of
+    ``alcn train`` or ``alcn train-real-light`` of this version and, given ``cfg``, of the command ``cfg`` configures,
+    written with the settings a resumed run keeps.
+
+    Raises:
+        WeightFileError: of another format (another command's) or version (the message gives the versions that wrote
+            it and this one), or written with other settings (each named with both values).
+    """
     kinds = [_KINDS[type(cfg)]] if cfg is not None else list(_KINDS.values())
     if not isinstance(ckpt, dict) or ckpt.get("format") not in [fmt for fmt, _ in kinds]:
         raise WeightFileError(f"{path} is not a checkpoint of {' or '.join(command for _, command in kinds)}")
@@ -232,7 +246,6 @@ def load_checkpoint(path: str | Path, cfg: TrainConfig | RealLightConfig | None 
                 f"checkpoint {path} was written with another configuration: differs in {'; '.join(diff)}; start a "
                 "new run folder or use its configuration"
             )
-    return ckpt
 
 
 def restore_checkpoint(
@@ -305,21 +318,42 @@ def sigint_as_keyboard_interrupt() -> Iterator[None]:
 
 @contextlib.contextmanager
 def interrupts_deferred() -> Iterator[None]:
-    """Hold Ctrl-C and SIGTERM (which the command line raises as Ctrl-C) until the block ends, then deliver them to
-    the handlers of before: no signal cuts the block short (an optimisation step and its counter, which a checkpoint
-    must see together). Python handles signals in the main thread only, so another thread's block has nothing to
-    hold."""
+    """Hold Ctrl-C and SIGTERM (:data:`~alcn_cv.io.INTERRUPTS`; the command line raises SIGTERM as Ctrl-C) until the
+    block ends, then deliver them to the handlers of before: no signal cuts the block short (an optimisation step and
+    its counter, which a checkpoint must see together). Python handles signals in the main thread only, so another
+    thread's block has nothing to hold.
+
+    The handlers are swapped with both signals blocked (``pthread_sigmask``, POSIX), so that no signal arrives between
+    two swaps (a handler of before raising there would leave the other signal to the temporary one for good); the
+    held signals are raised once all are back. Without ``pthread_sigmask`` SIGINT is put back last."""
     held: list[int] = []
-    kept = [s for s in _DEFERRED if signal.getsignal(s) is not None]  # None: set outside Python, not to be put back
+    kept = [s for s in INTERRUPTS if signal.getsignal(s) is not None]  # None: set outside Python, not to be put back
     try:
-        previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in kept}
+        with _interrupts_blocked():
+            previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in kept}
     except ValueError:  # not the main thread
         yield
         return
     try:
         yield
     finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+        with _interrupts_blocked():
+            for s in sorted(previous, key=lambda s: s == signal.SIGINT):  # SIGINT last: Ctrl-C comes most often
+                signal.signal(s, previous[s])
         for s in dict.fromkeys(held):
             signal.raise_signal(s)
+
+
+@contextlib.contextmanager
+def _interrupts_blocked() -> Iterator[None]:
+    """SIGINT and SIGTERM blocked in the calling thread while the block runs (POSIX; elsewhere nothing is blocked):
+    one that arrives meanwhile is delivered when it ends. A signal handled before, but not yet by Python, is handled
+    at the next ``signal.signal``, by the handler of before it (CPython's order)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPTS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)

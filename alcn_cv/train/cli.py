@@ -14,12 +14,15 @@ import argparse
 import dataclasses
 import logging
 import shlex
-import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from alcn_cv.cli import Terminated, add_conf_options, add_progress_option
+from alcn_cv.cli import add_conf_options, add_progress_option, interrupt_exit_code
+
+if TYPE_CHECKING:
+    from alcn_cv.train.real_light import TrainingInterrupted
 
 __all__ = ["add_parser"]
 
@@ -198,7 +201,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         type=Path,
         help="output .onnx path (default: beside the weights, W.onnx for W.npz, where backend='opencv' reads it)",
     )
-    e.add_argument("--weights", type=Path, help="Normalizer weight file (.npz; default: the default model's)")
+    e.add_argument(
+        "--weights",
+        type=Path,
+        help="Normalizer weight file (.npz; default: the default model's, with --onnx: its export is installed)",
+    )
     e.add_argument("--overwrite", action="store_true", help="replace an existing .onnx")
     e.set_defaults(func=_export)
 
@@ -238,9 +245,34 @@ def _train(args: argparse.Namespace) -> int:
     finally:
         distributed.shutdown()
     if result.status == "interrupted":
-        print(f"interrupted; continue with: alcn train --resume --out {args.out} ...", file=sys.stderr)
-        return 130
+        epoch, step = result.stopped_at or (1, 0)
+        words = ["alcn", "train", "--out", str(args.out), "--resume", "--conf", args.conf, *_setting_words(args)]
+        words += ["--device", args.device] if args.device else []
+        words += ["--no-progress"] if args.no_progress else []
+        return _interrupted(f"interrupted at epoch {epoch}, step {step}", result.interruption, words)
     return 0
+
+
+def _interrupted(stopped: str, interrupt: BaseException | None, resume: Sequence[str] = ()) -> int:
+    """End a training command that an interrupt stopped, alike for all: print where it stopped and the command that
+    goes on from its checkpoint (``resume``; none: ``stopped`` says why there is none) and return the exit code
+    (:func:`~alcn_cv.cli.interrupt_exit_code`: 143 on SIGTERM, 130 on Ctrl-C)."""
+    print(f"{stopped}; continue with: {shlex.join(resume)}" if resume else stopped, file=sys.stderr)
+    return interrupt_exit_code(interrupt)
+
+
+def _fit_interrupted(exc: TrainingInterrupted, resume: Sequence[str] = ()) -> int:
+    """:func:`_interrupted` for a run of :func:`~alcn_cv.train.real_light.fit` (``exc``; its ``__cause__`` the
+    interrupt): ``resume`` printed only where a checkpoint holds the steps done."""
+    if exc.checkpoint:
+        return _interrupted(f"interrupted at step {exc.step}", exc.__cause__, resume)
+    if exc.step:
+        return _interrupted(
+            f"interrupted at step {exc.step}: no checkpoint to go on from (this command writes none; history.json "
+            "holds the steps done)",
+            exc.__cause__,
+        )
+    return _interrupted("interrupted before the first step: nothing saved", exc.__cause__)
 
 
 def _train_detector(args: argparse.Namespace) -> int:
@@ -297,10 +329,13 @@ def _train_real_light(args: argparse.Namespace) -> int:
     settings = _operational(args, seed="seed")
     if args.resume and args.overwrite:
         raise InputError("give --resume (go on with the run in --out) or --overwrite (replace it), not both")
+    checkpoint = None
     if args.resume and args.conf is None:  # the checkpoint's settings, with those given
+        from alcn_cv.train.checkpoint import load_checkpoint
         from alcn_cv.train.real_light import resumed_config
 
-        cfg, record = resumed_config(args.out, settings)
+        checkpoint = load_checkpoint(args.out / "checkpoint.pt")  # read once: the run takes it too
+        cfg, record = resumed_config(args.out, settings, checkpoint=checkpoint)
         conf, first = record.get("conf"), record.get("command")  # none from a checkpoint written before they were kept
         command = shlex.join([*shlex.split(first), *_setting_words(args)]) if first else ""
     else:
@@ -323,18 +358,13 @@ def _train_real_light(args: argparse.Namespace) -> int:
                 progress=not args.no_progress,
                 resume=args.resume,
                 overwrite=args.overwrite,
+                checkpoint=checkpoint,
             )
     except TrainingInterrupted as exc:
-        if exc.step:  # the run's own options; its settings are the checkpoint's
-            words = ["alcn", "train-real-light", "--out", str(args.out), "--resume"]
-            if args.threads != 1:
-                words += ["--threads", str(args.threads)]
-            if args.no_progress:
-                words.append("--no-progress")
-            print(f"interrupted at step {exc.step}; continue with: {shlex.join(words)}", file=sys.stderr)
-        else:
-            print("interrupted before the first step: nothing saved", file=sys.stderr)
-        return 128 + signal.SIGTERM if isinstance(exc.__cause__, Terminated) else 130
+        words = ["alcn", "train-real-light", "--out", str(args.out), "--resume"]  # its settings: the checkpoint's
+        words += ["--threads", str(args.threads)] if args.threads != 1 else []
+        words += ["--no-progress"] if args.no_progress else []
+        return _fit_interrupted(exc, words)
     print(_next_steps(Path(path)))
     return 0
 
@@ -346,7 +376,8 @@ def _next_steps(weights: Path) -> str:
         ("normalize an image with them", ["alcn", "normalize", "IMAGE", "OUTPUT", "-m", f"alcn:weights={w}"]),
         ("export them for backend='opencv' (ONNX, beside them)", ["alcn", "export", "--weights", w]),
         (
-            "compare them with the shipped model on real light changes",
+            "compare them with the shipped model on real light changes (needs the shared data, or --data DIR of "
+            "your own registered scenes)",
             ["alcn", "bench", "relight", "--quick", "--methods", f"alcn,alcn:weights={w}"]
             + ["--out", str(weights.parent / "bench")],
         ),
@@ -363,15 +394,25 @@ def _train_unet(args: argparse.Namespace) -> int:
         cfg.check()
         sys.stdout.write("# net: the U-Net's --channels and --levels (--set net.* is not used)\n")
         return _print_config(dataclasses.replace(cfg, net=net))
-    from alcn_cv.train.checkpoint import check_run_folder
+    from alcn_cv.train.real_light import TrainingInterrupted
     from alcn_cv.train.unet import train_unet
 
-    check_run_folder(args.out, overwrite=args.overwrite)  # before the scenes are loaded
     command = _command("train-unet", args, "--channels", str(args.channels), "--levels", str(args.levels))
-    return _print_with_threads(
-        args.threads,
-        lambda: train_unet(cfg, args.out, net=net, command=command, conf=args.conf, progress=not args.no_progress),
-    )
+    try:
+        return _print_with_threads(
+            args.threads,
+            lambda: train_unet(
+                cfg,
+                args.out,
+                net=net,
+                command=command,
+                conf=args.conf,
+                progress=not args.no_progress,
+                overwrite=args.overwrite,
+            ),
+        )
+    except TrainingInterrupted as exc:
+        return _fit_interrupted(exc)
 
 
 def _print_with_threads(threads: int, run: Callable[[], object]) -> int:
@@ -388,11 +429,22 @@ def _export(args: argparse.Namespace) -> int:
     from alcn_cv.errors import InputError
     from alcn_cv.runtime import resolve_weights
     from alcn_cv.train.export import export_onnx
+    from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
 
     weights = resolve_weights(None, args.weights)
+    shipped = DEFAULT_WEIGHTS.parent.resolve()  # the package's own weights and exports
+    if args.weights is None and args.onnx is None:
+        installed = weights.with_suffix(".onnx")
+        raise InputError(
+            (f"the default model's export is installed already ({installed}); " if installed.is_file() else "")
+            + "give --weights FILE to export your own weights (beside them), or --onnx PATH"
+        )
+    load_normalizer_file(weights)  # a folder (the file meant named), a missing or corrupt file: before a path beside it
     beside = weights.with_suffix(".onnx")
     onnx = beside if args.onnx is None else args.onnx
     if onnx.exists() and not args.overwrite:
+        if onnx.resolve().is_relative_to(shipped):
+            raise InputError(f"{onnx} is an export installed with alcn-cv; give --onnx PATH to write another")
         raise InputError(f"{onnx} exists (--overwrite replaces it)")
     if onnx.resolve() != beside.resolve():
         logger.warning(

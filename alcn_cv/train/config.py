@@ -584,18 +584,20 @@ class RealLightConfig:
     net: dict[str, Any] = field(default_factory=_gain_network)
 
     def check(self) -> None:
-        """What a run on these settings needs: scenes or relit photographs, a rendered share in [0, 1) with
-        rendered scenes, at least 2 locations, 1 step and 1 step between snapshots, no negative count of relit
-        copies or of locations drawn anywhere, and a positive learning rate and temperature; each of ``scenes`` a
-        folder or a webcam scene's name; ``photos`` relit, each an existing folder holding images (listed, not read:
-        the images' sizes are checked as they are read). The network's own needs, such as the crop's size, are its
-        trainer's to check.
+        """What a run on these settings needs: scenes or relit photographs, a rendered share in [0, 1) with rendered
+        scenes, at least 2 locations, 1 step and 1 step between snapshots, relit copies 0 or at least 2 (a copy is a
+        frame: a scene needs two), no negative count of locations drawn anywhere, and a positive learning rate and
+        temperature; each of ``scenes`` a folder or a webcam scene's name; ``photos`` relit, each an existing folder
+        holding images (listed, not read: the images' sizes are checked as they are read). The network's own needs, such
+        as the crop's size, are its trainer's to check.
 
         Raises:
             InputError: the first setting out of range, named.
         """
         if self.photos and self.relit < 2:
             raise InputError(f"photos are trained on as relit copies: they need relit >= 2, got relit={self.relit}")
+        if self.relit == 1:
+            raise InputError("relit must be 0 (no relit copies) or at least 2 (a pair of lights to train on), got 1")
         # imported here, not with the module: the configurations import no data module
         from alcn_cv.data.permissive_images import photo_files
         from alcn_cv.data.scenes import scene_dirs

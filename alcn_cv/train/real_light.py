@@ -2,7 +2,7 @@ r"""Training the gain Normalizer on light changes of registered scenes (real cam
 
 ALCN's Eq. 2 needs labels; on a registered multi-illumination set (one folder of frames per
 scene, the camera fixed, the light changing: the ``webcam`` layout; or a photograph relit several times,
-:func:`~alcn_cv.data.permissive_images.relit_permissive_scenes`) a textured location is an
+:func:`~alcn_cv.data.permissive_images.relit_scenes`) a textured location is an
 "object", its index the label, seen under every frame's light. A step draws a scene, two of its
 frames and ``locations`` textured locations (at least ``min_distance`` apart), crops ``crop x
 crop`` windows around them in both frames, normalizes them with
@@ -51,7 +51,7 @@ from torch import nn
 from tqdm import tqdm
 from tqdm.contrib.logging import logging_redirect_tqdm
 
-from alcn_cv.data.permissive_images import folder_photographs, relit_scenes, training_photographs
+from alcn_cv.data.permissive_images import folder_photographs, photo_files, relit_scenes, training_photographs
 from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
@@ -62,6 +62,7 @@ from alcn_cv.report import log_to, machine
 from alcn_cv.shared_data import shared_data_dir
 from alcn_cv.train.checkpoint import (
     REAL_LIGHT_CHECKPOINT_FORMAT,
+    check_checkpoint,
     check_run_folder,
     checkpoint_header,
     interrupts_deferred,
@@ -80,6 +81,7 @@ __all__ = [
     "TrainingInterrupted",
     "TrainingScene",
     "crop_windows",
+    "data_record",
     "draw_step",
     "fit",
     "anywhere_locations",
@@ -155,16 +157,15 @@ def training_scene(scene: Scene, pad: int, patch: int, crop: int | None = None) 
     """The scene's frames in [0, 1], reflect-101 padded by ``pad``, and its textured locations.
 
     Raises:
-        InputError: frames smaller than the ``crop x crop`` training window, or than the ``patch x patch`` patches
-            (the scene and the minimum size named).
-        DatasetError: fewer than 2 textured locations (a flat scene): nothing to identify, and with none the
-            identification loss would be NaN.
+        DatasetError: frames smaller than the ``crop x crop`` training window, or than the ``patch x patch`` patches
+            (the scene and the minimum size named); fewer than 2 textured locations (a flat scene): nothing to
+            identify, and with none the identification loss would be NaN.
     """
     h, w = scene.frames.shape[1:]
     least = max(patch, crop or 0)
     if min(h, w) < least:
         what = f"the training crop (crop={crop})" if least == crop else f"the {patch}x{patch} patches"
-        raise InputError(
+        raise DatasetError(
             f"scene {scene.name!r}: frames of {w}x{h} are smaller than {what}: frames need at least {least}x{least} "
             "pixels"
         )
@@ -341,6 +342,7 @@ def source_scenes(
     seed: int,
     light: str,
     jitter: float = 0.0,
+    *,
     photos: Sequence[str] = (),
     shipped_photos: bool = True,
     min_side: int = 0,
@@ -364,7 +366,14 @@ def training_scenes(cfg: RealLightConfig) -> tuple[list[TrainingScene], list[Tra
     least ``cfg.crop`` on a side): ``cfg.scenes`` with the ``cfg.relit`` copies of the permissive photographs and of
     ``cfg.photos``, and ``cfg.rendered``."""
     sources = source_scenes(
-        cfg.scenes, cfg.relit, cfg.seed, cfg.light, cfg.jitter, cfg.photos, cfg.shipped_photos, cfg.crop
+        cfg.scenes,
+        cfg.relit,
+        cfg.seed,
+        cfg.light,
+        cfg.jitter,
+        photos=cfg.photos,
+        shipped_photos=cfg.shipped_photos,
+        min_side=cfg.crop,
     )
     scenes = [training_scene(s, cfg.crop // 2, cfg.patch, cfg.crop) for s in sources]
     rendered = [training_scene(s, cfg.crop // 2, cfg.patch, cfg.crop) for s in load_scenes(cfg.rendered)]
@@ -437,12 +446,15 @@ class TrainingInterrupted(KeyboardInterrupt):
     """Ctrl-C or SIGTERM (its ``__cause__``) stopped :func:`fit`, which saved the steps done first.
 
     Attributes:
-        step: the steps done: those of the checkpoint that ``--resume`` goes on from (0: none, nothing saved).
+        step: the steps done (0: none).
+        checkpoint: whether the run folder's ``checkpoint.pt`` holds them, for a resumed run to go on from
+            (:func:`train_real_light` after its first step; :func:`~alcn_cv.train.unet.train_unet` writes none).
     """
 
-    def __init__(self, step: int) -> None:
+    def __init__(self, step: int, checkpoint: bool = True) -> None:
         super().__init__(f"interrupted at step {step}")
         self.step = step
+        self.checkpoint = checkpoint and step > 0
 
 
 def _save_weights(
@@ -465,6 +477,7 @@ def train_real_light(
     progress: bool = True,
     resume: bool = False,
     overwrite: bool = False,
+    checkpoint: dict[str, Any] | None = None,
 ) -> Path:
     """Train a :class:`~alcn_cv.nets.gain.GainNormalizer` on registered scenes (see the module).
 
@@ -480,47 +493,102 @@ def train_real_light(
         progress: show a progress bar.
         resume: go on from ``out/checkpoint.pt`` (written every ``cfg.save_every`` steps and on Ctrl-C), as if never
             stopped: the same weights as an uninterrupted run. ``cfg`` is the checkpoint's (:func:`resumed_config`)
-            but for a larger ``steps`` (training longer).
+            but for a larger ``steps`` (training longer); the data must be those the checkpoint records (the
+            folders, resolved, and the files of ``photos``). A finished run resumed to a larger ``steps`` loses its
+            final weight file (a later stop would leave it beside a later checkpoint).
         overwrite: replace the earlier run that ``out`` holds (its checkpoint, history and weight files).
+        checkpoint: with ``resume``, ``out/checkpoint.pt`` read already (:func:`resumed_config`'s), not read again.
 
     Returns:
         The final weight file ``out/gain_normalizer.npz``.
 
     Raises:
         InputError: settings out of range; ``out`` holds another run (without ``resume`` or ``overwrite``) or
-            other files.
-        DatasetError: a scene missing or unfit for training.
-        WeightFileError: ``resume`` without a checkpoint, or with one of other settings (each named, both values).
+            other files; a folder of ``photos`` missing, or a photograph unreadable or smaller than the crop.
+        DatasetError: a scene missing or unfit for training (frames smaller than the crop, no texture).
+        WeightFileError: ``resume`` without a checkpoint, or with one of other settings (each named, both values)
+            or other data (what changed named).
         TrainingInterrupted: Ctrl-C or SIGTERM; the checkpoint holds the last step done (:func:`fit`).
     """
     out = Path(out)
     _check_settings(cfg)
     check_run_folder(out, resume=resume, overwrite=overwrite)
-    start = load_checkpoint(out / "checkpoint.pt", cfg) if resume else None
+    data = data_record(cfg)
+    start = None
+    if resume:
+        path = out / "checkpoint.pt"
+        start = checkpoint if checkpoint is not None else load_checkpoint(path)
+        check_checkpoint(start, path, cfg)
+        _check_data(start.get("data"), data, path)
     record: dict[str, Any] = {"command": command, "conf": conf}
     if start is not None and not command:
         record.update(start.get("record") or {})
     with _log_kept() as kept:
-        data = training_scenes(cfg)
-    with training_run(cfg, out, resume, kept=kept) as folder:
-        if not resume:
-            _remove_final(folder)
-        return _train(cfg, folder, record, progress, start, data)
+        scenes = training_scenes(cfg)
+    with training_run(cfg, out, resume, kept=kept, check=False) as folder:
+        if start is None:
+            _remove_final(folder, "of an earlier run")
+        elif cfg.steps > start["step"]:
+            _remove_final(folder, f"of step {start['step']}: the run goes on to step {cfg.steps}")
+        return _train(cfg, folder, record, progress, start, scenes, data)
+
+
+def data_record(cfg: RealLightConfig) -> dict[str, Any]:
+    """What a run of ``cfg`` reads, as its checkpoint records it for a resumed run to find again: the folders of
+    ``cfg.scenes`` and ``cfg.rendered``, resolved, and, where relit, those of ``cfg.photos`` with the name and size of
+    each of their images (a photograph added or removed changes the next ones' draws). The weight file records the
+    settings as given (no absolute path of the machine)."""
+    photos = [Path(p).expanduser().resolve() for p in cfg.photos] if cfg.relit else []
+    return {
+        "scenes": [str(p.resolve()) for p in scene_dirs(cfg.scenes)],
+        "rendered": [str(Path(p).expanduser().resolve()) for p in cfg.rendered],
+        "photos": [[str(p), [[f.name, f.stat().st_size] for f in photo_files([p])]] for p in photos],
+    }
+
+
+def _check_data(saved: dict[str, Any] | None, now: dict[str, Any], path: Path) -> None:
+    """Raise :class:`WeightFileError` naming what changed from the data the checkpoint ``path`` records (``saved``;
+    None: a checkpoint written before they were recorded, not compared) to those of now (:func:`data_record`)."""
+    if saved is None:
+        return
+    changes = [
+        f"{key} {saved.get(key)} in the checkpoint, {now[key]} now"
+        for key in ("scenes", "rendered")
+        if saved.get(key) != now[key]
+    ]
+    before, after = dict(saved.get("photos") or []), dict(now["photos"])
+    if list(before) != list(after):
+        changes.append(f"photos {list(before)} in the checkpoint, {list(after)} now")
+    for folder in after if list(before) == list(after) else []:
+        old, new = {n: size for n, size in before[folder]}, {n: size for n, size in after[folder]}
+        named = {
+            "added": [n for n in new if n not in old],
+            "removed": [n for n in old if n not in new],
+            "resized": [n for n in new if n in old and new[n] != old[n]],
+        }
+        changes += [f"photos {folder}: {what} {', '.join(names)}" for what, names in named.items() if names]
+    if changes:
+        raise WeightFileError(
+            f"checkpoint {path} was written on other data: {'; '.join(changes)}; resume from the run's working folder "
+            "with its data as they were, or start a new run folder"
+        )
 
 
 def resumed_config(
-    out: str | Path, settings: Sequence[str | dict[str, Any]] = ()
+    out: str | Path, settings: Sequence[str | dict[str, Any]] = (), *, checkpoint: dict[str, Any] | None = None
 ) -> tuple[RealLightConfig, dict[str, Any]]:
     """The settings of the run in the folder ``out`` (its checkpoint's) with ``settings`` applied
     (:func:`~alcn_cv.train.config.with_settings`; a resumed run takes a larger ``steps`` and nothing else), and what
     its weight file records besides (``command`` and ``conf``; empty for a checkpoint written before they were kept).
+    ``checkpoint``: ``out/checkpoint.pt`` read already (:func:`~alcn_cv.train.checkpoint.load_checkpoint`), for
+    :func:`train_real_light` to take too.
 
     Raises:
         WeightFileError: no readable checkpoint of ``alcn train-real-light`` in ``out``, or one of unknown settings.
         InputError: a setting unknown or of the wrong type.
     """
     path = Path(out) / "checkpoint.pt"
-    ckpt = load_checkpoint(path)
+    ckpt = load_checkpoint(path) if checkpoint is None else checkpoint
     if ckpt["format"] != REAL_LIGHT_CHECKPOINT_FORMAT:
         raise WeightFileError(f"{path} is not a checkpoint of alcn train-real-light")
     saved = copy.deepcopy(ckpt["config"])
@@ -542,14 +610,14 @@ def _check_settings(cfg: RealLightConfig) -> None:
         raise InputError(f"patch {cfg.patch} is too small for sigma {max(sigmas)}: the kernels must fit in patch / 2")
 
 
-def _remove_final(folder: Path) -> None:
-    """Remove an earlier run's final weight file and its export (a run stopped before its end would leave them
-    beside its own checkpoint)."""
+def _remove_final(folder: Path, whose: str) -> None:
+    """Remove the final weight file and its export of an earlier run (or of the run resumed to train longer): a run
+    stopped before its end would leave them beside its own checkpoint; ``whose``, for the log."""
     for name in ("gain_normalizer.npz", "gain_normalizer.onnx"):
         path = folder / name
         if path.is_file():
             path.unlink()
-            logger.warning("removed %s of an earlier run", path)
+            logger.warning("removed %s %s", path, whose)
 
 
 class _Kept(logging.Handler):
@@ -565,19 +633,11 @@ class _Kept(logging.Handler):
 
 @contextlib.contextmanager
 def _log_kept() -> Iterator[list[logging.LogRecord]]:
-    """The records of the ``alcn_cv`` loggers (INFO at least) while the block runs, for a run's ``train.log`` not
-    yet open (:func:`training_run`'s ``kept``); they reach the console as ever."""
+    """The records of the ``alcn_cv`` loggers (INFO at least, :func:`~alcn_cv.report.log_to`) while the block runs,
+    for a run's ``train.log`` not yet open (:func:`training_run`'s ``kept``); they reach the console as ever."""
     handler = _Kept()
-    top = logging.getLogger("alcn_cv")
-    previous = top.level
-    top.addHandler(handler)
-    if top.getEffectiveLevel() > logging.INFO:
-        top.setLevel(logging.INFO)
-    try:
+    with log_to(handler):
         yield handler.records
-    finally:
-        top.removeHandler(handler)
-        top.setLevel(previous)
 
 
 @contextlib.contextmanager
@@ -595,21 +655,27 @@ def _run_log_only() -> Iterator[None]:
 
 @contextlib.contextmanager
 def training_run(
-    cfg: RealLightConfig, out: str | Path, resume: bool = False, *, kept: Sequence[logging.LogRecord] = ()
+    cfg: RealLightConfig,
+    out: str | Path,
+    resume: bool = False,
+    *,
+    kept: Sequence[logging.LogRecord] = (),
+    check: bool = True,
 ) -> Iterator[Path]:
     """The run of any network on ``cfg``'s draws: checks the settings (:meth:`RealLightConfig.check
-    <alcn_cv.train.config.RealLightConfig.check>`), makes the run folder ``out`` and copies the log into its
-    ``train.log`` (:func:`alcn_cv.report.log_to`), after ``kept``, the records of the work done before the folder
-    was touched (:func:`train_real_light` loads its scenes first). An error of the block is written into
-    ``train.log`` before it propagates. A folder holds one run: an earlier run's ``train.log`` is replaced, its
-    step snapshots (``*_step{N}.npz``), checkpoint and history removed, unless the run is resumed (its log goes on);
+    <alcn_cv.train.config.RealLightConfig.check>`; with ``check`` False, the caller has), makes the run folder ``out``
+    and copies the log into its ``train.log`` (:func:`alcn_cv.report.log_to`), after ``kept``, the records of the work
+    done before the folder was touched (:func:`train_real_light` loads its scenes first). An error of the block is
+    written into ``train.log`` before it propagates. A folder holds one run: an earlier run's ``train.log`` is replaced,
+    its step snapshots (``*_step{N}.npz``), checkpoint and history removed, unless the run is resumed (its log goes on);
     whether an earlier run may be replaced is for the caller to check first
     (:func:`~alcn_cv.train.checkpoint.check_run_folder`).
 
     Yields:
         The run folder.
     """
-    cfg.check()
+    if check:
+        cfg.check()
     folder = run_folder(out)
     # an earlier run's snapshots, which this run's would not all replace, and its checkpoint, which a --resume of a
     # run stopped before its first save would take for its own (a resumed run's are its own)
@@ -636,8 +702,11 @@ def training_run(
 def initial_network(seed: int, net: dict[str, Any]) -> GainNormalizer:
     """The network a run of ``seed`` starts from, before any step (a run saves no step 0): a
     :class:`~alcn_cv.nets.gain.GainNormalizer` of the arguments ``net`` (``RealLightConfig.net``), its weights drawn
-    after ``torch.manual_seed(seed)``, as :func:`train_real_light` draws them. The untrained start of a shipped
-    file: ``initial_network(**{k: meta["training"]["config"][k] for k in ("seed", "net")})``."""
+    after ``torch.manual_seed(seed)``, as :func:`train_real_light` draws them. It seeds torch's global generator
+    (``torch.manual_seed(seed)``: the whole process's, CUDA's included, not a generator of its own), as training
+    needs, the weights being drawn from it; a caller whose own torch draws must stay untouched wraps the call in
+    ``torch.random.fork_rng()``. The untrained start of a shipped file:
+    ``initial_network(**{k: meta["training"]["config"][k] for k in ("seed", "net")})``."""
     torch.manual_seed(seed)
     return GainNormalizer(**net)
 
@@ -648,14 +717,15 @@ def _train(
     record: dict[str, Any],
     progress: bool,
     start: dict[str, Any] | None,
-    data: tuple[list[TrainingScene], list[TrainingScene]],
+    scenes_drawn: tuple[list[TrainingScene], list[TrainingScene]],
+    data: dict[str, Any],
 ) -> Path:
     rng = np.random.default_rng(cfg.seed)
     net = initial_network(cfg.seed, cfg.net)
     if start is not None:
         logger.info("resuming from step %d of %d", start["step"], cfg.steps)
         net.load_state_dict(start["net"])
-    scenes, rendered = data
+    scenes, rendered = scenes_drawn
 
     def save(step: int, seconds: float, opt: torch.optim.Optimizer, history: list[dict]) -> None:
         _save_weights(net, out / f"gain_normalizer_step{step}.npz", cfg, step, seconds, record)
@@ -669,6 +739,7 @@ def _train(
             "draws": json.dumps(rng.bit_generator.state),  # the next step's draws, as an uninterrupted run's
             "torch_rng": torch.get_rng_state(),
             "record": record,  # what the weight file of a run resumed with the checkpoint's settings records
+            "data": data,  # what a resumed run must read again (data_record)
         }
         atomic_write(out / "checkpoint.pt", lambda f, state=state: torch.save(state, f))
 
@@ -684,22 +755,22 @@ def fit(
     cfg: RealLightConfig,
     rng: np.random.Generator,
     out: Path,
-    save: Callable[[int, float, torch.optim.Optimizer, list[dict]], None],
+    save: Callable[[int, float, torch.optim.Optimizer, list[dict]], None] | None,
     desc: str,
     progress: bool = True,
     start: dict[str, Any] | None = None,
 ) -> float:
     """The training loop of the gain Normalizer and of its baselines: ``cfg.steps`` steps of Adam at ``cfg.lr`` on
-    ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to
-    norm 5; every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer, history)``, a line of
-    log and ``out/history.json``; ``start``, a checkpoint's state (:func:`~alcn_cv.train.checkpoint.load_checkpoint`),
-    goes on after its step. Leaves ``net`` in eval mode. The progress bar shows the mean loss of the last
-    ``cfg.save_every`` steps (the logged one); lines of log print above it.
+    ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to norm 5;
+    every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer, history)`` (None: no checkpoint), a
+    line of log and ``out/history.json``; ``start``, a checkpoint's state
+    (:func:`~alcn_cv.train.checkpoint.load_checkpoint`), goes on after its step. Leaves ``net`` in eval mode. The
+    progress bar shows the mean loss of the last ``cfg.save_every`` steps (the logged one); lines of log print above it.
 
     Ctrl-C and SIGTERM wait while a step updates the weights and while a save writes
     (:func:`~alcn_cv.train.checkpoint.interrupts_deferred`); then the steps done since the last save are saved as
     the periodic saves are (the next step's draws those of an uninterrupted run) and :class:`TrainingInterrupted`
-    is raised.
+    is raised (its ``checkpoint`` whether ``save`` saved them).
 
     Returns:
         The seconds it took (with the checkpoint's).
@@ -719,9 +790,12 @@ def fit(
     step_start: tuple[Any, torch.Tensor] | None = None
 
     def save_all(step: int) -> None:
+        nonlocal saved
         with interrupts_deferred():  # the checkpoint, the snapshot and the history of one step, whole
-            save(step, time.perf_counter() - began, opt, history)
+            if save is not None:
+                save(step, time.perf_counter() - began, opt, history)
             write_json(out / "history.json", history)
+            saved = step  # within: a Ctrl-C held by the save is raised after it, not saved again
 
     bar = tqdm(
         range(first, cfg.steps + 1), desc=desc, unit="step", initial=first - 1, total=cfg.steps, disable=not progress
@@ -751,7 +825,6 @@ def fit(
                         time.perf_counter() - began,
                     )
                     save_all(step)
-                    saved = step
     except KeyboardInterrupt as exc:
         bar.close()
         if step_start is not None:
@@ -760,7 +833,7 @@ def fit(
         if done > saved:
             save_all(done)
         logger.warning("interrupted at step %d of %d", done, cfg.steps)
-        raise TrainingInterrupted(done) from exc
+        raise TrainingInterrupted(done, checkpoint=save is not None) from exc
     seconds = time.perf_counter() - began
     logger.info("trained %d steps in %.0f s", cfg.steps, seconds)
     net.eval()

@@ -87,6 +87,10 @@ class TrainResult:
         seconds: wall-clock time of this call.
         model: the trained :class:`JointModel` (in eval mode, on the CPU).
         fewshot: results of the few-shot validation (:mod:`alcn_cv.train.fewshot`) per method.
+        stopped_at: an interrupted run's place, that of its checkpoint: the epoch under way (from 1) and the steps
+            done in it.
+        interruption: what interrupted the run: Ctrl-C's ``KeyboardInterrupt``, or the command line's
+            :class:`~alcn_cv.cli.Terminated` (SIGTERM).
     """
 
     out_dir: Path
@@ -98,6 +102,8 @@ class TrainResult:
     seconds: float = 0.0
     model: JointModel | None = None
     fewshot: dict[str, Any] = field(default_factory=dict)
+    stopped_at: tuple[int, int] | None = None
+    interruption: KeyboardInterrupt | None = None
 
 
 @dataclass
@@ -129,7 +135,8 @@ def train(
         progress: show progress bars.
 
     Returns:
-        A :class:`TrainResult`. Ctrl-C saves a checkpoint and returns status ``"interrupted"``.
+        A :class:`TrainResult`. Ctrl-C (and SIGTERM under the command line) saves a checkpoint and returns status
+        ``"interrupted"``.
 
     Raises:
         InputError: bad configuration or data.
@@ -149,7 +156,9 @@ def train(
         train_set, val_set, num_classes = _prepare_data(cfg, out, device, progress and distributed.is_main())
         model, optimizer, state = _build_models(cfg, num_classes, device, ckpt, start, out)
         result = TrainResult(out, "done", state.history, model=model)
-        result.status = _fit(cfg, model, optimizer, state, train_set, val_set, device, out, progress)
+        result.interruption = _fit(cfg, model, optimizer, state, train_set, val_set, device, out, progress)
+        if result.interruption is not None:
+            result.status, result.stopped_at = "interrupted", (state.epoch + 1, state.step_in_epoch)
         _finish(cfg, result, train_set, state, progress)
         result.seconds = time.perf_counter() - start
         if distributed.is_main():
@@ -255,11 +264,11 @@ def _fit(
     device: torch.device,
     out: Path,
     progress: bool,
-) -> str:
+) -> KeyboardInterrupt | None:
     """Train until ``optim.epochs``, validating and saving a checkpoint after every epoch.
 
     Returns:
-        ``"done"``, or ``"interrupted"`` on Ctrl-C (after saving a checkpoint).
+        None, or the interrupt (Ctrl-C or SIGTERM) that stopped it, after a checkpoint was saved.
     """
     ddp = distributed.wrap(model, device)
     shards = _shards(cfg, train_set)
@@ -269,7 +278,7 @@ def _fit(
             while state.epoch < cfg.optim.epochs:
                 _train_epoch(cfg, ddp, optimizer, state, shards, device, out, progress)
                 _end_epoch(cfg, model, optimizer, state, val_set, device, out)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         _save(out, cfg, model, optimizer, state, "interrupted")
         logger.warning(
             "interrupted at epoch %d, step %d: checkpoint saved to %s (continue with --resume)",
@@ -277,11 +286,11 @@ def _fit(
             state.step_in_epoch,
             out / _CHECKPOINT,
         )
-        return "interrupted"
+        return exc
     except NonFiniteLossError as exc:
         logger.error("%s", exc)
         raise
-    return "done"
+    return None
 
 
 def _train_epoch(

@@ -35,6 +35,7 @@ import torch
 from alcn_cv.errors import InputError
 from alcn_cv.nets.unet import UNetNormalizer
 from alcn_cv.report import machine
+from alcn_cv.train.checkpoint import check_run_folder
 from alcn_cv.train.config import RealLightConfig
 from alcn_cv.train.real_light import TrainingScene, fit, pair_loss, training_run, training_scenes
 from alcn_cv.weight_file import save_normalizer_file
@@ -93,6 +94,7 @@ def train_unet(
     command: str = "",
     conf: str | None = None,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> Path:
     """Train a :class:`~alcn_cv.nets.unet.UNetNormalizer` as the gain Normalizer is trained (see the module).
 
@@ -103,13 +105,22 @@ def train_unet(
         net: :class:`~alcn_cv.nets.unet.UNetNormalizer` arguments (default: its defaults).
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
         progress: show a progress bar.
+        overwrite: replace the earlier run that ``out`` holds (checked before any work,
+            :func:`~alcn_cv.train.checkpoint.check_run_folder`).
 
     Returns:
         The weight file ``out/unet_normalizer.npz``.
+
+    Raises:
+        InputError: settings out of range; ``out`` holds an earlier run (without ``overwrite``) or other files.
+        TrainingInterrupted: Ctrl-C or SIGTERM (:func:`~alcn_cv.train.real_light.fit`); no checkpoint is written
+            (its ``checkpoint`` is False): ``history.json`` holds the steps done.
     """
+    cfg.check()
     if cfg.crop < cfg.patch:
         raise InputError(f"need crop >= patch, got crop {cfg.crop} and patch {cfg.patch}")
-    with training_run(cfg, out) as folder:
+    check_run_folder(out, overwrite=overwrite)
+    with training_run(cfg, out, check=False) as folder:
         return _train(cfg, folder, dict(net or {}), {"command": command, "conf": conf}, progress)
 
 
@@ -120,7 +131,7 @@ def _train(cfg: RealLightConfig, out: Path, arguments: dict[str, Any], record: d
     net = UNetNormalizer(**arguments)
     scenes, rendered = training_scenes(cfg)
     logger.info("U-Net %s: %d parameters", net.config, sum(p.numel() for p in net.parameters()))
-    seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, lambda *_: None, "unet", progress)
+    seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, None, "unet", progress)
     meta = net.file_meta(
         trained=True,
         output_range=output_range(net, scenes + rendered),
