@@ -33,6 +33,7 @@ __all__ = [
     "check_writable",
     "count_frames",
     "eight_bits",
+    "interrupts_blocked",
     "is_video",
     "iter_frames",
     "list_images",
@@ -335,11 +336,11 @@ INTERRUPTS = (signal.SIGINT, signal.SIGTERM)
 
 
 @contextlib.contextmanager
-def signals_to_main_thread() -> Iterator[None]:
-    """Threads started inside (OpenCV's FFmpeg threads, the pipeline's workers) block SIGINT and
-    SIGTERM, so that the main thread takes them, where Python raises: delivered to a decoder or an
-    encoder thread, a signal interrupts FFmpeg mid-frame (seen: a crash instead of the cleanup)."""
-    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+def interrupts_blocked() -> Iterator[None]:
+    """SIGINT and SIGTERM (:data:`INTERRUPTS`) blocked in the calling thread while the block runs (POSIX; elsewhere
+    nothing is blocked): one that arrives meanwhile is delivered when the block ends, and threads started inside
+    inherit the mask."""
+    if not hasattr(signal, "pthread_sigmask"):
         yield
         return
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPTS)
@@ -347,6 +348,18 @@ def signals_to_main_thread() -> Iterator[None]:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+@contextlib.contextmanager
+def signals_to_main_thread() -> Iterator[None]:
+    """Threads started inside (OpenCV's FFmpeg threads, the pipeline's workers) block SIGINT and
+    SIGTERM, so that the main thread takes them, where Python raises: delivered to a decoder or an
+    encoder thread, a signal interrupts FFmpeg mid-frame (seen: a crash instead of the cleanup)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    with interrupts_blocked():
+        yield
 
 
 def block_interrupts() -> None:

@@ -26,7 +26,7 @@ import torch
 from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
-from alcn_cv.io import INTERRUPTS, atomic_write, make_folder
+from alcn_cv.io import INTERRUPTS, atomic_write, interrupts_blocked, make_folder
 from alcn_cv.report import machine
 from alcn_cv.train.config import RealLightConfig, TrainConfig
 from alcn_cv.train.models import JointModel, measure_output_range
@@ -329,7 +329,7 @@ def interrupts_deferred() -> Iterator[None]:
     held: list[int] = []
     kept = [s for s in INTERRUPTS if signal.getsignal(s) is not None]  # None: set outside Python, not to be put back
     try:
-        with _interrupts_blocked():
+        with interrupts_blocked():
             previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in kept}
     except ValueError:  # not the main thread
         yield
@@ -337,23 +337,8 @@ def interrupts_deferred() -> Iterator[None]:
     try:
         yield
     finally:
-        with _interrupts_blocked():
+        with interrupts_blocked():
             for s in sorted(previous, key=lambda s: s == signal.SIGINT):  # SIGINT last: Ctrl-C comes most often
                 signal.signal(s, previous[s])
         for s in dict.fromkeys(held):
             signal.raise_signal(s)
-
-
-@contextlib.contextmanager
-def _interrupts_blocked() -> Iterator[None]:
-    """SIGINT and SIGTERM blocked in the calling thread while the block runs (POSIX; elsewhere nothing is blocked):
-    one that arrives meanwhile is delivered when it ends. A signal handled before, but not yet by Python, is handled
-    at the next ``signal.signal``, by the handler of before it (CPython's order)."""
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPTS)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
