@@ -197,7 +197,7 @@ def add_progress_option(parser: argparse.ArgumentParser) -> None:
 
 
 @contextlib.contextmanager
-def _ffmpeg_fatal_only(quiet: bool) -> Iterator[None]:
+def ffmpeg_fatal_only(quiet: bool = True) -> Iterator[None]:
     """With ``quiet``, OpenCV's FFmpeg logs fatal errors only while the block runs (``OPENCV_FFMPEG_LOGLEVEL``, read
     as each video opens), unless the caller set a level: its decoder reports recoverable stream errors (a slice type
     it tolerates) between the progress bars, and a truncated or unreadable video is checked by the frames it gives
@@ -222,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     keep_freed_memory()
     try:
-        with sigterm_as_interrupt(args.command), _ffmpeg_fatal_only(not args.verbose):
+        with sigterm_as_interrupt(args.command), ffmpeg_fatal_only(not args.verbose):
             result = args.func(args)
     except KeyboardInterrupt as exc:
         print(f"alcn: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)

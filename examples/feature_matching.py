@@ -18,7 +18,6 @@ does not (docs/journal.md, 2026-11-27 (night)): for ORB under such a change, CLA
 from __future__ import annotations
 
 import argparse
-import os
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -26,7 +25,7 @@ import cv2
 import numpy as np
 
 import alcn_cv
-from alcn_cv.cli import FFMPEG_FATAL
+from alcn_cv.cli import ffmpeg_fatal_only
 from alcn_cv.errors import ALCNError
 from alcn_cv.io import iter_frames, write_image
 from alcn_cv.shared_data import shared_data_dir
@@ -71,9 +70,6 @@ def main() -> None:
     ap.add_argument("--feature", choices=("ORB", "SIFT"), default="ORB", help="the features (default ORB)")
     ap.add_argument("--out", type=Path, default=Path("out/matching"), help="output folder (default out/matching)")
     args = ap.parse_args()
-    # before the video opens: FFmpeg's notes on the stream (a slice type it tolerates) are no errors of this
-    # script; a level set by the caller is kept
-    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", str(FFMPEG_FATAL))
     if args.second < 0:
         ap.error(f"--second {args.second}: a frame number, 0 or more")
     try:
@@ -97,4 +93,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    # FFmpeg's notes on the stream (a slice type it tolerates) are no errors here; a caller's level is kept
+    with ffmpeg_fatal_only():
+        main()

@@ -18,7 +18,6 @@ Time with the defaults (the first 40 frames of the cookie box, its model from tr
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 
@@ -26,7 +25,7 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv import io
-from alcn_cv.cli import FFMPEG_FATAL
+from alcn_cv.cli import ffmpeg_fatal_only
 from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import ALCNError
 from pose import model as part_model
@@ -59,9 +58,6 @@ def main() -> None:
     args = ap.parse_args()
     if args.max_frames < 1:
         ap.error(f"--max-frames {args.max_frames}: at least 1")
-    # before the video opens: FFmpeg's notes on the stream (a slice type it tolerates) are no errors of this
-    # script; a level set by the caller is kept
-    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", str(FFMPEG_FATAL))
     model = part_model.load(args.model)
     K = camera_matrix_for(model.extra.get("K"), None if args.K is None else camera_matrix(*args.K), args.model)
     normalization = args.normalization or model.normalization
@@ -102,6 +98,8 @@ def main() -> None:
 
 if __name__ == "__main__":
     try:
-        main()
+        # FFmpeg's notes on the stream (a slice type it tolerates) are no errors here; a caller's level is kept
+        with ffmpeg_fatal_only():
+            main()
     except (ALCNError, OSError) as exc:  # OSError: a model or video that cannot be read
         sys.exit(f"pnp_methods.py: error: {exc}")

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -35,7 +34,7 @@ from tqdm import tqdm
 
 import alcn_cv
 from alcn_cv import io
-from alcn_cv.cli import FFMPEG_FATAL
+from alcn_cv.cli import ffmpeg_fatal_only
 from alcn_cv.errors import ALCNError
 from alcn_cv.shared_data import shared_data_dir
 from pose import build, evaluate, track
@@ -119,9 +118,6 @@ def main() -> None:
     args.max_frames = args.max_frames or None
     for spec in args.methods:  # a bad spec stops here, not after the reference model's minutes of building
         alcn_cv.create(spec)
-    # before the video opens: FFmpeg's notes on the stream (a slice type it tolerates) are no errors of this
-    # script; a level set by the caller is kept
-    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", str(FFMPEG_FATAL))
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
     args.out.mkdir(parents=True, exist_ok=True)
     video = args.data / "box.mp4"
@@ -192,6 +188,8 @@ def main() -> None:
 
 if __name__ == "__main__":
     try:
-        main()
+        # FFmpeg's notes on the stream (a slice type it tolerates) are no errors here; a caller's level is kept
+        with ffmpeg_fatal_only():
+            main()
     except (ALCNError, OSError) as exc:  # OSError: an --out that cannot be written
         sys.exit(f"relit_cookie_box.py: error: {exc}")

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import sys
 from pathlib import Path
 
@@ -31,7 +30,7 @@ import cv2
 import numpy as np
 
 from alcn_cv import io
-from alcn_cv.cli import FFMPEG_FATAL
+from alcn_cv.cli import ffmpeg_fatal_only
 from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import ALCNError, DatasetError
 from alcn_cv.shared_data import shared_data_dir
@@ -76,9 +75,6 @@ def main() -> None:
         help="folder of box.mp4 and box.ply (default: the shared data's)",
     )
     args = ap.parse_args()
-    # before the video opens: FFmpeg's notes on the stream (a slice type it tolerates) are no errors of this
-    # script; a level set by the caller is kept
-    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", str(FFMPEG_FATAL))
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
     args.out.mkdir(parents=True, exist_ok=True)
     video = args.data / "box.mp4"
@@ -105,6 +101,8 @@ def main() -> None:
 
 if __name__ == "__main__":
     try:
-        main()
+        # FFmpeg's notes on the stream (a slice type it tolerates) are no errors here; a caller's level is kept
+        with ffmpeg_fatal_only():
+            main()
     except (ALCNError, OSError) as exc:  # OSError: an --out that cannot be written
         sys.exit(f"track_cookie_box.py: error: {exc}")

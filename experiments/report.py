@@ -20,12 +20,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # _run, also when this file is loaded by its path
+from _run import REPORTS, ROOT, rerun  # noqa: E402
 
+sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
 from alcn_cv.bench.relight import PRESETS  # noqa: E402
 
-REPORTS = ROOT / "docs" / "reports"
 RESULTS = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
@@ -94,11 +94,10 @@ def provenance(report: dict[str, Any]) -> str:
     exp = report.get("experiment", {})
     script = exp.get("script", "?")
     argv = [RENAMED_OPTIONS.get((script, arg), arg) for arg in exp.get("argv", [])]
-    rerun = " ".join(["bash" if script.endswith(".sh") else "python", script, *argv])
     commands = report.get("commands") or [report.get("command")]
     machine = report.get("machine") or report.get("machine_before")
     return (
-        f"Rerun: `{rerun}`. Command: " + "; ".join(f"`{c}`" for c in commands if c) + ".  \n"
+        f"Rerun: `{rerun(script, argv)}`. Command: " + "; ".join(f"`{c}`" for c in commands if c) + ".  \n"
         f"Machine: {describe(machine)}.  \nDate: {exp.get('date', 'not recorded')}.\n"
     )
 

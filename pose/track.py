@@ -16,6 +16,7 @@ frame's pose as prior. Output:
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import re
 import time
@@ -408,23 +409,34 @@ def main(
         raise InputError(f"unknown detector {detector!r}; choose 'features' or 'corners'")
     if K is None and model_size is not None:  # the model's camera: it holds for frames of its size only
         image_size = tuple(model_size)
-    if image_size is not None:
-        image_size = tuple(int(v) for v in image_size)
-        of = "the calibration" if K is not None else f"the camera of {model_path}"
-        _, first = next(io.iter_frames(source, max_frames=1))
-        # the first frame before the tracking, a folder's others as they come
-        _check_frame_size(first, image_size, f"the frames of {source} are", of)
-    K = camera_matrix_for(model_K, K, model_path)
-    tracker = make_tracker(
-        detector, K, corners, dist=dist, method=method, min_inliers=min_inliers, reprojection_error=reprojection_error
-    )
     scene_gt, info = {}, {}
     times = []
-    with (
-        io.FrameReader(source) as frames,
+    with contextlib.ExitStack() as stack:
+        reader: io.FrameReader | None = None
+        frames: Iterator[tuple[str, np.ndarray]]
+        if image_size is not None:
+            image_size = tuple(int(v) for v in image_size)
+            of = "the calibration" if K is not None else f"the camera of {model_path}"
+            # the source opened once: its first frame checked before the tracking, then tracked with the rest
+            reader = stack.enter_context(io.FrameReader(source))
+            first = next(reader)
+            # the first frame before the tracking, a folder's others as they come
+            _check_frame_size(first[1], image_size, f"the frames of {source} are", of)
+            frames = itertools.chain([first], reader)
+        K = camera_matrix_for(model_K, K, model_path)
+        tracker = make_tracker(
+            detector,
+            K,
+            corners,
+            dist=dist,
+            method=method,
+            min_inliers=min_inliers,
+            reprojection_error=reprojection_error,
+        )
+        if reader is None:
+            reader = frames = stack.enter_context(io.FrameReader(source))
         # the overlay video plays at the input's frame rate; a folder of images has none: 30 fps
-        OverlayWriter(overlay, frames.fps or 30.0) if overlay is not None else contextlib.nullcontext() as writer,
-    ):
+        writer = stack.enter_context(OverlayWriter(overlay, reader.fps or 30.0)) if overlay is not None else None
         for res, frame in track(frames, det, tracker, io.count_frames(source), progress):
             if image_size is not None:  # a folder's images may differ in size: the camera holds for one
                 _check_frame_size(frame, image_size, f"frame {res.name} of {source} is", of)

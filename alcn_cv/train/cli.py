@@ -433,14 +433,13 @@ def _export(args: argparse.Namespace) -> int:
 
     weights = resolve_weights(None, args.weights)
     shipped = DEFAULT_WEIGHTS.parent.resolve()  # the package's own weights and exports
+    beside = weights.with_suffix(".onnx")
     if args.weights is None and args.onnx is None:
-        installed = weights.with_suffix(".onnx")
         raise InputError(
-            (f"the default model's export is installed already ({installed}); " if installed.is_file() else "")
+            (f"the default model's export is installed already ({beside}); " if beside.is_file() else "")
             + "give --weights FILE to export your own weights (beside them), or --onnx PATH"
         )
     load_normalizer_file(weights)  # a folder (the file meant named), a missing or corrupt file: before a path beside it
-    beside = weights.with_suffix(".onnx")
     onnx = beside if args.onnx is None else args.onnx
     if onnx.exists() and not args.overwrite:
         if onnx.resolve().is_relative_to(shipped):

@@ -517,8 +517,11 @@ def train_real_light(
     start = None
     if resume:
         path = out / "checkpoint.pt"
-        start = checkpoint if checkpoint is not None else load_checkpoint(path)
-        check_checkpoint(start, path, cfg)
+        if checkpoint is None:
+            start = load_checkpoint(path, cfg)
+        else:
+            start = checkpoint
+            check_checkpoint(start, path, cfg)
         _check_data(start.get("data"), data, path)
     record: dict[str, Any] = {"command": command, "conf": conf}
     if start is not None and not command:
@@ -559,14 +562,15 @@ def _check_data(saved: dict[str, Any] | None, now: dict[str, Any], path: Path) -
     before, after = dict(saved.get("photos") or []), dict(now["photos"])
     if list(before) != list(after):
         changes.append(f"photos {list(before)} in the checkpoint, {list(after)} now")
-    for folder in after if list(before) == list(after) else []:
-        old, new = {n: size for n, size in before[folder]}, {n: size for n, size in after[folder]}
-        named = {
-            "added": [n for n in new if n not in old],
-            "removed": [n for n in old if n not in new],
-            "resized": [n for n in new if n in old and new[n] != old[n]],
-        }
-        changes += [f"photos {folder}: {what} {', '.join(names)}" for what, names in named.items() if names]
+    else:
+        for folder in after:
+            old, new = dict(before[folder]), dict(after[folder])
+            named = {
+                "added": [n for n in new if n not in old],
+                "removed": [n for n in old if n not in new],
+                "resized": [n for n in new if n in old and new[n] != old[n]],
+            }
+            changes += [f"photos {folder}: {what} {', '.join(names)}" for what, names in named.items() if names]
     if changes:
         raise WeightFileError(
             f"checkpoint {path} was written on other data: {'; '.join(changes)}; resume from the run's working folder "
@@ -815,12 +819,13 @@ def fit(
                     history.append({"step": step, "scene": scene.name, "loss": loss.item()})
                     done, step_start = step, None
                 recent = [h["loss"] for h in history[-cfg.save_every :]]
-                bar.set_postfix_str(f"mean loss {np.mean(recent):.3f}")
+                mean = float(np.mean(recent))
+                bar.set_postfix_str(f"mean loss {mean:.3f}")
                 if step % cfg.save_every == 0 or step == cfg.steps:
                     logger.info(
                         "step %d: mean loss %.4f over the last %d steps, %.0f s",
                         step,
-                        np.mean(recent),
+                        mean,
                         len(recent),
                         time.perf_counter() - began,
                     )
