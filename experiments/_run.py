@@ -194,13 +194,19 @@ def publish(path: str | Path, replace: bool = False) -> Path:
 
 
 def quick_protocol() -> list[str]:
-    """The options of ``alcn bench relight``'s quick protocol (its preset, ``alcn_cv.bench.relight.PRESETS["quick"]``)
-    spelled out: the kept reports' commands record them so (``--quick`` would be another command for the same
-    settings, which :func:`keep` would not let replace them)."""
-    from alcn_cv.bench.relight import PRESETS
+    """The options of ``alcn bench relight``'s quick protocol (its preset,
+    ``alcn_cv.bench.relight_settings.PRESETS["quick"]``) spelled out: the kept reports' commands record them so
+    (``--quick`` would be another command for the same settings, which :func:`keep` would not let replace them)."""
+    from alcn_cv.bench.relight_settings import PRESETS
 
     # None (every pair) is the bench's 0
     return [arg for key, value in PRESETS["quick"].items() for arg in (f"--{key.replace('_', '-')}", str(value or 0))]
+
+
+def quick_seed0_untuned() -> list[str]:
+    """The options of an experiment's short ``alcn bench relight`` run: the quick protocol (:func:`quick_protocol`),
+    seed 0 alone, no tuning."""
+    return ["--seeds", "0", *quick_protocol(), "--no-tune"]
 
 
 def untrained_start(trained: str | Path, path: str | Path, description: str) -> Path:

@@ -41,7 +41,7 @@ from _run import (
     alcn,
     command_line,
     keep,
-    quick_protocol,
+    quick_seed0_untuned,
     recorded_settings,
     script_command,
     selected_parts,
@@ -134,8 +134,9 @@ def main() -> None:
             summary.setdefault(name, {}).update(row)
     if "bench" in args.part:
         methods = [*specs.values(), "none"]
-        quick = ["--seeds", "0", *quick_protocol(), "--no-tune"]
-        alcn("bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *quick)
+        alcn(
+            "bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *quick_seed0_untuned()
+        )
         report = json.loads((args.out / "bench" / "relight.json").read_text(encoding="utf-8"))
         for name, spec in (specs | {"none": "none"}).items():
             summary.setdefault(name, {}).update(bench_means(report, spec))

@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # _run, also when this
 from _run import REPORTS, ROOT, rerun  # noqa: E402
 
 sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
-from alcn_cv.bench.relight import PRESETS  # noqa: E402
+from alcn_cv.bench.relight_settings import PRESETS  # noqa: E402
 
 RESULTS = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"

@@ -29,7 +29,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from _run import RUNS, add_part_option, alcn, command_line, keep, quick_protocol, selected_parts
+from _run import RUNS, add_part_option, alcn, command_line, keep, quick_seed0_untuned, selected_parts
 
 PARTS = ("unet", "gain", "objective", "bench")
 
@@ -94,8 +94,9 @@ def main() -> None:
         objective(args.conf, unet, gain, args.draws, args.out)
     if "bench" in parts:
         methods = [f"unet:weights={unet}", *([f"alcn:weights={gain}"] if gain.is_file() else []), "alcn", "none"]
-        quick = ["--seeds", "0", *quick_protocol(), "--no-tune"]
-        alcn("bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *quick)
+        alcn(
+            "bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *quick_seed0_untuned()
+        )
         keep(args.out / "bench" / "relight.json", "relight_unet")
 
 

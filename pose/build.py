@@ -255,6 +255,7 @@ def main(
     box_units: str | None = None,
     refine_focal: bool = False,
     progress: bool = True,
+    what: str = "pose.build.main",
 ) -> Path:
     """Build a part model from ``input_path`` and write ``output`` (.npz, .ply, _cameras.png).
 
@@ -264,10 +265,11 @@ def main(
     given, is stored in the model's ``extra["K"]``, which ``alcn pose track`` uses by default).
     Of a video every ``step``-th frame is used, at most ``max_frames`` (``None``: the defaults
     :data:`pose.sequence.VIDEO_STEP` and :data:`pose.sequence.VIDEO_MAX_FRAMES`). The options of a
-    video that a registered sequence ignores are warned about when given.
+    video that a registered sequence ignores are warned about when given. ``what``: the caller the error of a
+    missing ``[pose]`` extra names (``alcn pose build`` gives its own name).
     """
     # the reconstruction (pycolmap), the box fit (open3d) and the plot come after the features: checked before those
-    require("pycolmap", "open3d", "matplotlib", what="pose.build.main", preferred="pose")
+    require("pycolmap", "open3d", "matplotlib", what=what, preferred="pose")
     input_path, output = Path(input_path), part_model.model_file(output)
     check_writable(output)  # before the work
     make_folder(output.parent)

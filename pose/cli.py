@@ -11,7 +11,6 @@ import numpy as np
 
 from alcn_cv.cli import add_conf_options, add_progress_option, add_seeds_option, number_at_least
 from alcn_cv.errors import InputError
-from alcn_cv.extras import require
 
 
 def _intrinsics(values: list[float] | None) -> np.ndarray | None:
@@ -21,8 +20,6 @@ def _intrinsics(values: list[float] | None) -> np.ndarray | None:
 
 
 def _build(args: argparse.Namespace) -> int:
-    # the extra named with the command (build.main checks the same, named for its Python callers)
-    require("pycolmap", "open3d", "matplotlib", what="alcn pose build", preferred="pose")
     from pose import build
 
     path = build.main(
@@ -41,6 +38,7 @@ def _build(args: argparse.Namespace) -> int:
         box_units=args.box_units,
         refine_focal=args.refine_focal,
         progress=not args.no_progress,
+        what="alcn pose build",
     )
     print(f"part model -> {path} (its points: {path.with_suffix('.ply')}, its cameras: {path.stem}_cameras.png)")
     return 0

@@ -158,6 +158,15 @@ def test_trained_scenes_of_photos_and_windows_paths(tmp_path):
     assert relight.trained_scenes(windows) == {"mexico", "frankfurt"}
 
 
+def test_trained_scenes_of_a_built_method_read_no_file(tmp_path):
+    """The bench built each method (reading its weight file), then read the file again for the scenes it records:
+    the header the method read is the one checked."""
+    spec = weights_trained_on(tmp_path / "w.npz", scenes=["mexico"])
+    norm = relight.build_method(spec)
+    (tmp_path / "w.npz").unlink()
+    assert relight.trained_scenes(spec, norm) == {"mexico"}
+
+
 def test_a_folder_that_cannot_be_listed_is_logged_not_fatal(tmp_path, monkeypatch, caplog):
     data = own_scenes(tmp_path / "mine")
     spec = weights_trained_on(tmp_path / "w.npz", scenes=[str(data), "mexico"])

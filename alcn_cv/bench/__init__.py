@@ -12,6 +12,7 @@
 * :mod:`~alcn_cv.bench.relight` -- patch identification, keypoint matching and homography pose
   between frames of fixed cameras under real light changes (``alcn bench relight``) on the scenes of
   :mod:`~alcn_cv.data.scenes`;
+  :mod:`~alcn_cv.bench.relight_settings` (settings, presets),
   :mod:`~alcn_cv.bench.relight_report` (``relight.md``, ``.json``, ``.png``);
 * :mod:`~alcn_cv.bench.speed` -- time and memory of every method and ALCN variant (``alcn bench speed``);
 * :mod:`~alcn_cv.bench.tuning` -- parameter search for DoG, SLCN and DLCN on training windows;

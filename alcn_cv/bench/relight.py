@@ -62,6 +62,7 @@ from tqdm.auto import tqdm
 
 from alcn_cv.bench.policies import LOCAL_BOX, local_standardize
 from alcn_cv.bench.relight_report import write_report
+from alcn_cv.bench.relight_settings import PRESETS, Settings
 from alcn_cv.checks import check_seeds
 from alcn_cv.data.scenes import (
     TEST_SCENES,
@@ -78,7 +79,6 @@ from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import make_folder
 from alcn_cv.report import machine
-from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -141,39 +141,6 @@ TUNING_GRIDS: dict[str, list[dict[str, float]]] = {
         {"clipLimit": c, "tileGridSize": (t, t)}
         for c, t in [(2.0, 8), (4.0, 8), (1.0, 8), (8.0, 8), (2.0, 4), (4.0, 4), (2.0, 16), (4.0, 16)]
     ],
-}
-
-
-@dataclass(frozen=True)
-class Settings:
-    """The protocols' parameters (see the module docstring)."""
-
-    patch: int = 32
-    patches: int = 300
-    gallery: int = 3
-    max_pairs: int | None = 30
-    keypoints: int = 1000
-    ratio: float = 0.8
-    match_px: float = 3.0
-    ransac_px: float = 3.0
-    pose_px: float = 5.0
-    keypoint_protocols: bool = True
-
-    def check(self) -> Settings:
-        if self.patch < 4 or self.patches < 2 or self.gallery < 1 or self.keypoints < 4:
-            raise InputError("need patch >= 4, patches >= 2, gallery >= 1 and keypoints >= 4")
-        if self.max_pairs is not None and self.max_pairs < 1:
-            raise InputError(f"max_pairs must be positive, got {self.max_pairs}")
-        if not 0 < self.ratio <= 1:
-            raise InputError(f"ratio must be in (0, 1], got {self.ratio}")
-        return self
-
-
-#: The sampling sizes of ``alcn bench relight``'s presets: the benchmark's, and ``quick``, the quick protocol of
-#: docs/results.md's "(quick protocol)" tables (``--quick``; about 3 times faster).
-PRESETS: dict[str, dict[str, int | None]] = {
-    "default": {"max_frames": 20, "patches": Settings.patches, "max_pairs": Settings.max_pairs},
-    "quick": {"max_frames": 12, "patches": 150, "max_pairs": 12},
 }
 
 
@@ -478,16 +445,15 @@ def trained_scenes(spec: str, norm: Normalization | None = None) -> set[str]:
     ALCN model) was trained on, by scene name: its header's ``training.config.scenes`` and ``rendered`` (folders or
     shared ``webcam`` scene names: each one's last part, and the scenes in it where it is a folder here),
     ``training.config.photos`` (folders of photographs relit: each one's name, and the scenes of its own images) and
-    ``distillation.settings.scenes``; empty for a method without a weight file, or one that records none."""
+    ``distillation.settings.scenes``; empty for a method without a weight file, or one that records none.
+
+    ``norm``: the method built from ``spec`` (default: built here); the header is the one it read (its
+    ``weights_meta``), the file is not read again."""
     norm = build_method(spec) if norm is None else norm
     inner = norm.inner if isinstance(norm, LocallyStandardized) else norm
-    path = getattr(inner, "weights_path", None)
-    if path is None:
-        base = spec[: -len(LSTD)] if spec.endswith(LSTD) else spec
-        path = parse_spec(base)[1].get("weights")
-    if path is None:
+    meta = getattr(inner, "weights_meta", None)
+    if meta is None:
         return set()
-    meta = load_normalizer_file(str(path)).meta
 
     def strings(value: Any) -> list[str]:
         return [v for v in value if isinstance(v, str)] if isinstance(value, list) else []
@@ -563,7 +529,7 @@ def main(
     test_scenes: Sequence[str] | None = None,
     leave_one_out: Sequence[str] | None = None,
     seeds: Sequence[int] = DEFAULT_SEEDS,
-    settings: Settings = Settings(),
+    settings: Settings = Settings(),  # noqa: B008 -- frozen: one default shared by every call is safe
     max_frames: int | None = PRESETS["default"]["max_frames"],
     tuning: bool = True,
     tune_frames: int = 8,

@@ -44,6 +44,8 @@ class UNetNormalization(Normalization):
         weight_file = load_normalizer_file(weights)
         self.net = UNetNormalizer.from_file(weight_file)
         self.output_range = tuple(weight_file.meta["output_range"])
+        #: The weight file's header, as :attr:`ALCN.weights_meta <alcn_cv.enhance.alcn.ALCN>` keeps its own.
+        self.weights_meta = weight_file.meta
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         with torch.inference_mode():

@@ -138,16 +138,19 @@ def scene_dirs(entries: Sequence[str | os.PathLike] = TRAIN_SCENES) -> list[Path
         elif Path(name).name == name and (name in WEBCAM_SCENES or (webcam / name).is_dir()):
             dirs.append(webcam / name)  # the shared data's absence is load_scene_folder's to report
         else:
-            names = sorted({*WEBCAM_SCENES, *(p.name for p in _subfolders(webcam))})
+            try:
+                listed = [p.name for p in _visible_subfolders(webcam)]
+            except OSError:  # the shared data missing or unreadable: the message names the known scenes alone
+                listed = []
+            names = sorted({*WEBCAM_SCENES, *listed})
             raise InputError(f"{name}: neither a folder nor a webcam scene ({', '.join(names)})")
     return dirs
 
 
-def _subfolders(folder: Path) -> list[Path]:
-    try:
-        return sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
-    except OSError:
-        return []
+def _visible_subfolders(folder: Path) -> list[Path]:
+    """The subfolders of ``folder`` whose names do not start with a dot, sorted. Raises OSError as
+    ``Path.iterdir``."""
+    return sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
 
 
 def _warn_if_narrow(what: str, maximum: int | None) -> None:
@@ -244,7 +247,7 @@ def _scene_files(root: Path, subfolders: bool = True) -> list[tuple[str, Path, l
     its subfolders, hidden ones skipped; from the file names alone. Raises OSError as ``Path.iterdir``."""
     folders = [root]
     if subfolders:
-        folders += sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
+        folders += _visible_subfolders(root)
     scenes = []
     for folder in folders:
         for name, paths in _group_files(folder).items():

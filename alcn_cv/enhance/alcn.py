@@ -150,6 +150,9 @@ class ALCN(Normalization):
         self.backend, self.device, self.threads = backend, device, threads
         weight_file = load_normalizer_file(self.weights_path)
         meta = weight_file.meta
+        #: The weight file's header (:attr:`~alcn_cv.weight_file.NormalizerFile.meta`), kept so that what reads its
+        #: provenance (the benchmarks' check of the scenes it was trained on) does not read the file again.
+        self.weights_meta = meta
         if mixture is None:
             mixture = "exact" if backend == "torch" or meta.get("architecture") == "gain" else "pyramid"
         if mixture == "pyramid" and backend == "torch":
