@@ -1,6 +1,6 @@
 """ALCN in front of ORB or SIFT in an OpenCV app: match two frames of a video, one of them under another light.
 
-    .venv/bin/python examples/feature_matching.py [--video ../shared/data/cookie_box/box.mp4] [--feature SIFT]
+    .venv/bin/python examples/feature_matching.py [--video ../shared/data/cookie_box/box.mp4] [--feature ORB]
 
 Frame 0 of the video is matched with frame ``--second`` (default 20), which is first relit here: darkened to a
 quarter, a light gradient across it, a gamma of 1.6 and the 8-bit rounding of a dark frame. Each normalization of
@@ -67,7 +67,7 @@ def main() -> None:
     ap.add_argument(
         "--methods", nargs="+", default=["none", "clahe", "alcn"], help="normalizations (default: %(default)s)"
     )
-    ap.add_argument("--feature", choices=("ORB", "SIFT"), default="ORB", help="the features (default ORB)")
+    ap.add_argument("--feature", choices=("SIFT", "ORB"), default="SIFT", help="the features (default SIFT)")
     ap.add_argument("--out", type=Path, default=Path("out/matching"), help="output folder (default out/matching)")
     args = ap.parse_args()
     if args.second < 0:
