@@ -14,15 +14,23 @@ the default ``gain`` model, with ``model="lite"``). Importing this package does
 not import torch; the networks (:mod:`alcn_cv.nets`) and the differentiable mixture
 (:mod:`alcn_cv.filters.kornia_mixture`) load it when used. Where a package of an extra is
 missing, ``ALCN``, :mod:`alcn_cv.nets` and the ``alcn`` command raise or print one line naming
-the extra to install (:class:`MissingDependencyError`).
+the extra to install (:class:`MissingDependencyError`); without OpenCV, importing this package raises it (and
+the ``alcn`` command prints its line and exits with code 2).
 """
 
+from alcn_cv.errors import MissingDependencyError
 from alcn_cv.extras import require_opencv
 
-require_opencv()  # one line saying how to install OpenCV, before the first import of cv2
+try:
+    require_opencv()  # one line saying how to install OpenCV, before the first import of cv2
+except MissingDependencyError as error:
+    from alcn_cv.cli import exit_in_the_command
+
+    exit_in_the_command(error)  # the `alcn` command, whose script imports this package before its main: exit 2
+    raise
 
 from alcn_cv.enhance import ALCN, Normalization, available, create, createALCN, register  # noqa: E402
-from alcn_cv.errors import ALCNError, DatasetError, InputError, MissingDependencyError, WeightFileError  # noqa: E402
+from alcn_cv.errors import ALCNError, DatasetError, InputError, WeightFileError  # noqa: E402
 from alcn_cv.filters.gaussian_mixture import alcn_filter, gaussian_sigmas  # noqa: E402
 from alcn_cv.malloc import keep_freed_memory  # noqa: E402
 

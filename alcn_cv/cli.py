@@ -233,10 +233,25 @@ def main(argv: list[str] | None = None) -> int:
             raise
         return _failed(str(error), args.debug)
     except MissingDependencyError as exc:  # a package checked before the work; the message names the command
-        return _failed(str(exc), args.debug)
+        named = str(exc).startswith(f"alcn {args.command}")  # else a function's name (ALCN(backend='torch'): ...)
+        return _failed(str(exc) if named else f"alcn {args.command}: {exc}", args.debug)
     except (ValueError, TypeError, OSError, RuntimeError) as exc:
         return _failed(f"alcn {args.command}: error: {exc}", args.debug)
     return int(result or 0)
+
+
+#: The file names of the ``alcn`` command's script: pip's console script, and on Windows its launcher and script.
+SCRIPT_NAMES = frozenset({"alcn", "alcn.exe", "alcn-script.py"})
+
+
+def exit_in_the_command(error: MissingDependencyError) -> None:
+    """In the ``alcn`` command, end the process as a missing extra ends it: ``error``'s one line (after its traceback
+    with ``--debug``) and exit code 2; elsewhere return. ``import alcn_cv`` calls it, while it handles ``error``,
+    when OpenCV is missing or too old: the command's script imports the package before :func:`main` runs, and a
+    program that imports the package gets the error raised."""
+    argv = getattr(sys, "argv", None) or [""]
+    if os.path.basename(argv[0]) in SCRIPT_NAMES:
+        sys.exit(_failed(str(error), "--debug" in argv[1:]))
 
 
 def _failed(message: str, debug: bool) -> int:

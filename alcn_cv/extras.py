@@ -18,6 +18,7 @@ from alcn_cv.errors import MissingDependencyError
 
 __all__ = [
     "OPENCV_MINIMUM",
+    "TORCH_CPU_INDEX",
     "extra_providing",
     "is_installed",
     "missing_dependency",
@@ -108,19 +109,38 @@ def missing_dependency(module: str, what: str, preferred: str | None = None) -> 
     """The error for ``what`` (a command or function) needing ``module``, which is not installed.
 
     Its message is one line naming the extra to install, e.g.
-    ``alcn train: needs the [train] extra: pip install "alcn-cv[train]"``.
+    ``alcn data phos: needs the [data] extra (skimage is not installed): pip install "alcn-cv[data]"``. Where the
+    install brings torch and torch is not installed, the line says to install torch's CPU build first when no GPU is
+    wanted (:data:`TORCH_CPU_INDEX`). ``pip install "alcn-cv[EXTRA]"`` needs no index that has alcn-cv (it is not
+    on PyPI): pip reads the extra's requirements from the alcn-cv installed (from a clone or a wheel) and keeps it.
     """
     extra = extra_providing(module, preferred)
     top = module.split(".")[0]
     if extra is None:
+        install = f"pip install {_DISTRIBUTIONS_OF.get(top, (top,))[0]}"
         return MissingDependencyError(
-            f"{what}: needs {top}, which is not installed: pip install {_DISTRIBUTIONS_OF.get(top, (top,))[0]}"
+            f"{what}: needs {top}, which is not installed: {_torch_first(top == 'torch')}{install}"
         )
+    installs_torch = "torch" in _extras_requirements().get(extra, set())
     error = MissingDependencyError(
-        f'{what}: needs the [{extra}] extra ({top} is not installed): pip install "{DISTRIBUTION}[{extra}]"'
+        f"{what}: needs the [{extra}] extra ({top} is not installed): "
+        f'{_torch_first(installs_torch)}pip install "{DISTRIBUTION}[{extra}]"'
     )
     error.extra = extra
     return error
+
+
+#: PyTorch's index of its CPU builds: on Linux, an unpinned ``pip install torch`` installs the CUDA build from PyPI
+#: (several GB of nvidia-* packages).
+TORCH_CPU_INDEX = "https://download.pytorch.org/whl/cpu"
+
+
+def _torch_first(installs_torch: bool) -> str:
+    """Where an install brings torch and torch is not installed, the command that installs its CPU build first (pip
+    then keeps the torch it finds installed); else nothing."""
+    if not installs_torch or is_installed("torch"):
+        return ""
+    return f"without a GPU, first pip install torch --index-url {TORCH_CPU_INDEX}; then "
 
 
 #: The oldest OpenCV the runtime is tested with (every method; ALCN's gain Normalizers run by

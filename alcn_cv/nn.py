@@ -49,7 +49,7 @@ from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
 from alcn_cv.row_parts import run_parts
 from alcn_cv.runtime import ModelSpec, resolve_weights
-from alcn_cv.weight_file import load_normalizer_file
+from alcn_cv.weight_file import NormalizerFile, load_normalizer_file
 
 __all__ = ["ALCN2d", "TorchNetwork", "TorchRuntime", "alcn2d", "batches", "torch_threads"]
 
@@ -68,7 +68,8 @@ class ALCN2d(nn.Module):
     Args:
         model: a shipped model (:data:`alcn_cv.runtime.MODELS`): ``"gain"`` (the default), ``"gain-lite"``,
             ``"lite"`` or ``"paper"``.
-        weights: a weight file instead of ``model``.
+        weights: a weight file instead of ``model``, or its contents already loaded
+            (:func:`~alcn_cv.weight_file.load_normalizer_file`: the file is not read again).
         scale: the working scale (default: the weight file's).
         grid_stride: spacing of the Normalizer's grid, a multiple of its stride (default: its stride).
         allow_tf32: let CUDA convolutions use TF32 (faster, about 1e-3 off); default exact.
@@ -115,13 +116,16 @@ class ALCN2d(nn.Module):
     def __init__(
         self,
         model: str | None = None,
-        weights: str | Path | None = None,
+        weights: str | Path | NormalizerFile | None = None,
         scale: float | None = None,
         grid_stride: int | None = None,
         allow_tf32: bool = False,
     ) -> None:
         super().__init__()
-        weight_file = load_normalizer_file(resolve_weights(model, weights))
+        if isinstance(weights, NormalizerFile):
+            weight_file = weights
+        else:
+            weight_file = load_normalizer_file(resolve_weights(model, weights))
         self.spec = ModelSpec.from_meta(weight_file.meta, scale)
         self.net = normalizer_from_file(weight_file)
         if len(self.spec.sigmas) != self.net.num_kernels:

@@ -367,9 +367,14 @@ def check_batch(frames: np.ndarray, out_dtype: type | np.dtype | str | None) -> 
     return frames, dtype
 
 
-def opencv_network(weights: Path, grid_stride: int | None, spec: ModelSpec) -> OpenCVNormalizer:
-    """The ONNX export beside ``weights`` run by ``cv2.dnn``, checked against the spec (it runs at its stride)."""
-    net = OpenCVNormalizer(weights.with_suffix(".onnx"))
+def opencv_network(
+    weights: Path, grid_stride: int | None, spec: ModelSpec, config: dict | None = None
+) -> OpenCVNormalizer:
+    """The ONNX export beside ``weights`` run by ``cv2.dnn``, checked against the spec (it runs at its stride).
+    ``config``: the ``config`` of the header of ``weights``, read by the caller (a gain export's features are built
+    from it, the file not read again); default: :class:`~alcn_cv.nets.opencv_runtime.OpenCVNormalizer`'s, read from
+    the ``.npz`` beside the export."""
+    net = OpenCVNormalizer(weights.with_suffix(".onnx"), config)
     if grid_stride not in (None, net.stride):
         raise InputError(
             f"backend='opencv' evaluates the Normalizer at its stride {net.stride}, got grid_stride={grid_stride}; "

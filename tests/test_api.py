@@ -226,7 +226,8 @@ def test_backend_follows_what_is_installed(run_python):
         (
             "threads=2",
             "MissingDependencyError",
-            "ALCN(backend='fast'): needs the [train] extra (torch is not installed): pip install \"alcn-cv[train]\"",
+            "ALCN(backend='fast'): needs the [train] extra (torch is not installed): without a GPU, first pip install "
+            'torch --index-url https://download.pytorch.org/whl/cpu; then pip install "alcn-cv[train]"',
         ),
         # cv2.dnn runs the network at its own stride
         (
@@ -353,6 +354,29 @@ def test_a_weight_file_without_its_export_says_how_to_make_it(tmp_path):
     with pytest.raises(WeightFileError, match=r"alcn export --weights .*mine\.npz --onnx .*mine\.onnx"):
         alcn_cv.createALCN(weights=weights, backend="opencv")
     assert f"weights='{weights}'" in repr(alcn_cv.createALCN(weights=weights))  # a user's file by its path
+
+
+@pytest.mark.parametrize("backend", ["opencv", "fast", "torch"])
+@pytest.mark.parametrize("model", ["gain", "lite"])
+def test_building_an_alcn_reads_its_weight_file_once(tmp_path, monkeypatch, model, backend):
+    """ALCN reads the header and hands what it read down: the runtime (the gain export's features on ``opencv``,
+    ``ALCN2d`` on ``fast`` and ``torch``) does not load the file again."""
+    import shutil
+
+    if backend == "opencv" and model == "gain" and not alcn_module.RUNS_GAIN:
+        pytest.skip("cv2.dnn of OpenCV 4 cannot run the gain Normalizers")
+    weights = shutil.copy(MODELS[model], tmp_path / "mine.npz")
+    shutil.copy(MODELS[model].with_suffix(".onnx"), tmp_path / "mine.onnx")
+    load, loads = np.load, []
+
+    def counted_load(file, *args, **kwargs):
+        if isinstance(file, (str, os.PathLike)) and os.fspath(file) == os.fspath(weights):
+            loads.append(file)
+        return load(file, *args, **kwargs)
+
+    monkeypatch.setattr(np, "load", counted_load)
+    alcn = alcn_cv.createALCN(weights=weights, backend=backend)
+    assert alcn.backend == backend and len(loads) == 1
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork on this platform")

@@ -223,6 +223,34 @@ def test_clahe_is_tuned_with_the_others(tmp_path):
     assert row["tuned"] and 0 < row["mean_test"]["identification"]["mean"] <= 100
 
 
+def test_each_method_is_built_once_per_run(tmp_path, monkeypatch):
+    """A method keeps nothing from one scene to the next: the run builds each spec once (a tuned one at its first
+    scene, after the tuning built it), not once per scene, so an ALCN's weight file is not read again per scene."""
+    builds: list[str] = []
+    build_method = relight.build_method
+
+    def counted(spec: str):
+        builds.append(spec)
+        return build_method(spec)
+
+    monkeypatch.setattr(relight, "build_method", counted)
+    root = make_sets(tmp_path / "data")
+    result = relight.main(
+        tmp_path / "out",
+        [root / "webcam", root / "psm"],
+        ["none", "alcn:model=gain-lite", "dog"],
+        train_scenes=["square"],
+        test_scenes=["street", "psm"],
+        seeds=[0],
+        settings=relight.Settings(patch=16, patches=20, gallery=1, max_pairs=2, keypoint_protocols=False),
+        tune_frames=3,
+        progress=False,
+    )
+    assert len(result["methods"]["none"]["scenes"]) == 3  # street, ball and square
+    assert builds.count("none") == builds.count("alcn:model=gain-lite") == builds.count("dog") == 1
+    assert builds.count(result["tuning"]["dog"]["all"]["chosen"]) == 2  # its tuning's, then the run's
+
+
 def test_one_seed_prints_bare_numbers_and_each_alcn_backend(tmp_path):
     root = make_sets(tmp_path / "data")
     result = relight.main(

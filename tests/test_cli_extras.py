@@ -8,9 +8,11 @@ import pytest
 from alcn_cv.cli import main
 from alcn_cv.commands import normalize
 from alcn_cv.errors import MissingDependencyError
-from alcn_cv.extras import extra_providing, missing_dependency
+from alcn_cv.extras import TORCH_CPU_INDEX, extra_providing, missing_dependency
 
 ALCN = "import sys; from alcn_cv.cli import main; sys.exit(main(sys.argv[1:]))"
+#: Where the extra brings torch, which is not installed: the line says how to install its CPU build first.
+TORCH_FIRST = f"without a GPU, first pip install torch --index-url {TORCH_CPU_INDEX}; then "
 
 
 def test_help_lists_every_command_without_the_extras(run_python):
@@ -24,7 +26,7 @@ def test_a_command_needing_a_missing_extra_says_which(run_python, tmp_path):
     proc = run_python(ALCN, "train", "--out", tmp_path / "run")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.strip().splitlines()[-1] == (
-        'alcn train: needs the [train] extra (torch is not installed): pip install "alcn-cv[train]"'
+        f'alcn train: needs the [train] extra (torch is not installed): {TORCH_FIRST}pip install "alcn-cv[train]"'
     )
     assert not (tmp_path / "run" / "checkpoint.pt").exists()
 
@@ -32,10 +34,14 @@ def test_a_command_needing_a_missing_extra_says_which(run_python, tmp_path):
 @pytest.mark.parametrize(
     ("command", "line"),
     [
-        (["demo"], 'alcn demo: needs the [bench] extra (skimage is not installed): pip install "alcn-cv[bench]"'),
+        (
+            ["demo"],
+            f'alcn demo: needs the [bench] extra (skimage is not installed): {TORCH_FIRST}pip install "alcn-cv[bench]"',
+        ),
         (
             ["pose", "build", "VIDEO", "--K", "800", "800", "320", "240", "--box-size", "19", "26", "7.5"],
-            'alcn pose build: needs the [pose] extra (pycolmap is not installed): pip install "alcn-cv[pose]"',
+            "alcn pose build: needs the [pose] extra (pycolmap is not installed): "
+            f'{TORCH_FIRST}pip install "alcn-cv[pose]"',
         ),
         (
             ["data", "phos"],

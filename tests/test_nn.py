@@ -24,6 +24,7 @@ from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_resize import upsample_blocks
 from alcn_cv.nn import ALCN2d, alcn2d, batches
 from alcn_cv.runtime import MODELS
+from alcn_cv.weight_file import load_normalizer_file
 
 CUDA = pytest.mark.skipif(
     not torch.cuda.is_available(), reason="no CUDA device: the CUDA path is checked on a GPU machine"
@@ -113,6 +114,22 @@ def test_functional_form_and_weight_files():
         ALCN2d(model="vulkan")
     with pytest.raises(InputError, match=r"\(B, 1 \| 3, H, W\)"):
         module(torch.rand(1, 2, 64, 64))
+
+
+def test_a_module_of_a_weight_file_already_read_is_the_constructors(tmp_path):
+    """ALCN2d(weights=contents), what createALCN builds from the file it read: the module of the file's path, the file
+    not read again (deleted here)."""
+    weights = shutil.copy(MODELS["gain-lite"], tmp_path / "mine.npz")
+    weight_file = load_normalizer_file(weights)
+    os.remove(weights)
+    module = ALCN2d(weights=weight_file, grid_stride=16).eval()
+    built = ALCN2d(model="gain-lite", grid_stride=16).eval()
+    assert (module.spec, module.grid_stride, module.allow_tf32) == (built.spec, 16, False)
+    x = torch.from_numpy(_unit(_bgr()))[None].permute(0, 3, 1, 2).flip(1).contiguous()
+    with torch.no_grad():
+        torch.testing.assert_close(module(x), built(x), atol=0, rtol=0)
+    with pytest.raises(InputError, match="grid_stride"):
+        ALCN2d(weights=weight_file, grid_stride=12)
 
 
 def test_a_wrong_input_is_named_before_torch_fails():

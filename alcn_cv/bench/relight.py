@@ -417,12 +417,12 @@ def tune(
 # The benchmark
 
 
-def _build_methods(methods: Sequence[str]) -> dict[str, set[str]]:
-    """Build every method, raising :class:`InputError` on a spec listed twice, an unknown name or bad parameters
-    (before any scene is read); each spec's :func:`trained_scenes`."""
+def _build_methods(methods: Sequence[str]) -> dict[str, Normalization]:
+    """Every method built, by spec, raising :class:`InputError` on a spec listed twice, an unknown name or bad
+    parameters (before any scene is read)."""
     if len(set(methods)) != len(methods):
         raise InputError("a method is listed twice")
-    return {spec: trained_scenes(spec, build_method(spec)) for spec in methods}
+    return {spec: build_method(spec) for spec in methods}
 
 
 def _entry_names(entry: str, subfolders: bool = True) -> set[str]:
@@ -565,7 +565,10 @@ def main(
     start = time.perf_counter()
     settings = settings.check()
     methods = list(methods)
-    trained_on = _build_methods(methods)
+    # Built once for the run: a method keeps nothing from one image to the next (ALCN's divisive floors of an image's
+    # strips live in a context variable for that image), so every scene of a spec is normalized by one instance.
+    built = _build_methods(methods)
+    trained_on = {spec: trained_scenes(spec, norm) for spec, norm in built.items()}
     seeds = check_seeds(seeds)
     roots = [Path(p) for p in data] if data else [shared_root("webcam"), shared_root("psm")]
     scenes = load_scenes(roots, max_frames)
@@ -618,7 +621,9 @@ def main(
     backends: dict[str, str] = {}
     for scene, spec in tqdm(jobs, desc="relight", unit="method x scene", disable=not progress):
         try:
-            norm = build_method(spec)
+            if spec not in built:  # a tuned spec: built at its first scene, reused for the others of its fold
+                built[spec] = build_method(spec)
+            norm = built[spec]
             if (backend := backend_of(norm)) is not None:
                 backends[spec] = backend
             cache[scene.name, spec] = evaluate_scene(norm, scene, plans[scene.name], settings)

@@ -18,6 +18,7 @@ from alcn_cv.enhance import available, create
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.registry import describe, parameters, parse_params, parse_spec
 from alcn_cv.errors import InputError
+from alcn_cv.extras import require
 from alcn_cv.io import (
     IMAGE_SUFFIXES,
     check_writable,
@@ -108,6 +109,7 @@ def main(
     Raises:
         InputError: a check fails, or ``device`` is given for a method other than ALCN or with another
             backend.
+        MissingDependencyError: ``device`` is given and torch or kornia is not installed (the [train] extra).
     """
     import cv2
 
@@ -132,6 +134,7 @@ def main(
             raise InputError(f"--device {device} and the device parameter {given['device']!r} differ; give one")
         if batch_size < 1:
             raise InputError(f"--batch-size must be positive, got {batch_size}")
+        require("torch", "kornia", what="alcn normalize --device", preferred="train")
         params.update(backend="torch", device=device)
     normalization = create(method, **params)
 

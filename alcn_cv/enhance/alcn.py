@@ -45,7 +45,7 @@ from alcn_cv.runtime import (
     resolve_weights,
     strip_layout,
 )
-from alcn_cv.weight_file import load_normalizer_file
+from alcn_cv.weight_file import NormalizerFile, load_normalizer_file
 
 if TYPE_CHECKING:
     from alcn_cv.nn import TorchRuntime
@@ -167,7 +167,7 @@ class ALCN(Normalization):
             )
         self.runtime: Runtime
         self.runtime, self.net = _build_runtime(
-            self.spec, weight_file.meta, self.weights_path, backend, device, grid_stride, mixture, threads
+            self.spec, weight_file, self.weights_path, backend, device, grid_stride, mixture, threads
         )
         self.grid_stride = self.runtime.grid_stride
 
@@ -291,7 +291,7 @@ class ALCN(Normalization):
 
 def _build_runtime(
     spec: ModelSpec,
-    meta: dict,
+    weight_file: NormalizerFile,
     weights: Path,
     backend: str,
     device: str,
@@ -299,21 +299,22 @@ def _build_runtime(
     mixture: str,
     threads: int | None,
 ) -> tuple[Runtime, object]:
-    """The runtime of ``backend`` for the weight file ``weights`` (header ``meta``) and its network."""
-    check_teacher(meta, weights)
+    """The runtime of ``backend`` for the weight file ``weights``, read once by the caller (``weight_file``, which the
+    runtime is built from: the file is not read again), and its network."""
+    check_teacher(weight_file.meta, weights)
     if backend == "opencv" and spec.per_pixel and not RUNS_GAIN:
         # before cv2.dnn tries: its ONNX importer logs errors of its own and fails with several lines of C++ context
         hint = "" if is_installed("torch") else ' (torch: pip install "alcn-cv[train]")'
         raise WeightFileError(f"{weights.name}: {GAIN_NEEDS}{hint}")
     if backend == "opencv":
-        net = opencv_network(weights, grid_stride, spec)
+        net = opencv_network(weights, grid_stride, spec, weight_file.meta["config"])
         return make_runtime(spec, net, mixture), net
     require("torch", "kornia", what=f"ALCN(backend={backend!r})")
     # deferred: importing alcn_cv must not need torch
     from alcn_cv.nets.device import torch_device
     from alcn_cv.nn import ALCN2d, TorchNetwork, TorchRuntime
 
-    module = ALCN2d(weights=weights, scale=spec.scale, grid_stride=grid_stride)
+    module = ALCN2d(weights=weight_file, scale=spec.scale, grid_stride=grid_stride)
     module.to(torch_device(device) if backend == "torch" else "cpu")
     if backend == "torch":
         return TorchRuntime(module, threads), module.net
