@@ -87,8 +87,9 @@ def check_image(img: object) -> np.ndarray:
     if img.size == 0:
         raise InputError(f"image is empty (shape {img.shape})")
     if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 2, 3, 4)):
+        frames = " (frames stacked? apply each one, or ALCN.apply_batch)" if img.ndim in (3, 4) else ""
         raise InputError(
-            f"image must be HxW, HxWx1, HxWx2 (gray, alpha), HxWx3 (BGR) or HxWx4 (BGRA), got shape {img.shape}"
+            f"image must be HxW, HxWx1, HxWx2 (gray, alpha), HxWx3 (BGR) or HxWx4 (BGRA), got shape {img.shape}{frames}"
         )
     native = img.dtype.newbyteorder("=")
     if native not in SUPPORTED_DTYPES:

@@ -30,13 +30,23 @@ from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
 
 import numpy as np
-import torch
-import torch.nn.functional as F
-from torch import nn
+
+from alcn_cv.extras import missing_extra
+
+try:  # the module PyTorch users import first: without torch or kornia, one line naming the extra
+    import torch
+    import torch.nn.functional as F
+    from torch import nn
+
+    from alcn_cv.filters.kornia_mixture import GaussianMixture2d
+except ModuleNotFoundError as exc:
+    error = missing_extra(exc, "alcn_cv.nn")
+    if error is None:
+        raise
+    raise error from exc
 
 from alcn_cv.checks import FLOAT_TOLERANCE, FULL_SCALE
 from alcn_cv.errors import InputError
-from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.lab import srgb_to_lab
 from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import math
+import os
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
@@ -426,6 +427,11 @@ def resolve_weights(model: str | None, weights: str | Path | None) -> Path:
     """The weight file of ``weights`` or of the shipped ``model`` (default :data:`DEFAULT_MODEL`), not both."""
     if model is not None and weights is not None:
         raise InputError(f"give a model or a weight file, not both (model={model!r}, weights={str(weights)!r})")
+    if weights is not None and not isinstance(weights, (str, os.PathLike)):  # createALCN(1.0), as cv2.createCLAHE(2.0)
+        raise InputError(
+            f"weights must be the path of a weight file (.npz), got {type(weights).__name__} {weights!r}; "
+            "the other settings are keywords: createALCN(scale=...)"
+        )
     model = DEFAULT_MODEL if model is None else model
     if model not in MODELS:
         raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")

@@ -20,3 +20,10 @@ def test_check_seeds_takes_distinct_non_negative_integers_and_names_the_bad_ones
             InputError, match=r"^seeds must be distinct non-negative integers, at least one; .*" + named
         ):
             check_seeds(seeds)
+
+
+def test_a_stack_of_frames_given_to_apply_is_pointed_to_apply_batch():
+    from alcn_cv.checks import check_image
+
+    with pytest.raises(InputError, match=r"got shape \(4, 48, 64\) \(frames stacked\? .*apply_batch\)"):
+        check_image(np.zeros((4, 48, 64), np.uint8))

@@ -114,3 +114,13 @@ def test_normalize_needing_torch_names_the_command(run_python, tmp_path, options
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.strip().splitlines() == [f'{line}{TORCH_FIRST}pip install "alcn-cv[train]"']
     assert not (tmp_path / "out.png").exists()
+
+
+def test_the_pytorch_module_without_torch_names_its_extra():
+    """``from alcn_cv.nn import ALCN2d``, the README's first PyTorch line, in an install without torch."""
+    proc = _python(
+        "import sys; sys.modules['torch'] = None\n"
+        "try:\n    import alcn_cv.nn\nexcept ImportError as exc:\n    print(type(exc).__name__, exc.extra, exc)\n"
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("MissingDependencyError train alcn_cv.nn: needs the [train] extra"), proc.stdout

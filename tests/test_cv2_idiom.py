@@ -97,3 +97,23 @@ def test_calib_report_needs_matplotlib_before_the_work(tmp_path, run_python):
     assert not out.exists()
     proc = run_python(code, "calib", "camera", "--images", folder, "--out", out, "--no-report", blocked=("matplotlib",))
     assert "matplotlib" not in proc.stderr, proc.stderr  # it goes on to the calibration (which fails on a blank image)
+
+
+@pytest.mark.parametrize("setting", ["scale", "backend", "grid_stride", "mixture", "threads", "weights_path"])
+def test_a_setting_changed_after_creation_is_refused_not_ignored(image, setting):
+    """The runtime is built from the settings once: ``alcn.scale = 0.5`` would leave the output as it was (a user
+    used to CLAHE's setters tried it), so it raises and names the argument that does it."""
+    alcn = alcn_cv.createALCN()
+    before = alcn.apply(image)
+    argument = "weights" if setting == "weights_path" else setting
+    with pytest.raises(AttributeError, match=rf"createALCN\({argument}=\.\.\.\)"):
+        setattr(alcn, setting, getattr(alcn, setting))
+    np.testing.assert_array_equal(alcn.apply(image), before)
+
+
+def test_a_positional_setting_that_is_not_a_weight_file_is_named():
+    """``cv2.createCLAHE(2.0)`` takes its clip limit first; ``createALCN``'s first argument is the weight file."""
+    with pytest.raises(
+        alcn_cv.InputError, match=r"weights must be the path of a weight file.*got float 1\.0.*keywords"
+    ):
+        alcn_cv.createALCN(1.0)

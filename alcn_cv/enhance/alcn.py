@@ -56,6 +56,10 @@ logger = logging.getLogger(__name__)
 
 BACKENDS = ("fast", "torch", "opencv")
 MIXTURES = ("exact", "pyramid")
+#: The attributes an :class:`ALCN` is built from, read-only once set (its runtime would not follow a change).
+_FIXED_SETTINGS = frozenset(
+    {"weights_path", "scale", "sigmas", "backend", "device", "grid_stride", "mixture", "threads", "spec"}
+)
 #: The divisive floors of the whole image, the response's and the wide band's, while its strips are normalized
 #: (None: each call computes them from its own image); a context variable, so threads do not share them.
 _DIVISIVE_FLOORS: ContextVar[tuple[float | None, float | None]] = ContextVar(
@@ -170,6 +174,15 @@ class ALCN(Normalization):
             self.spec, weight_file, self.weights_path, backend, device, grid_stride, mixture, threads
         )
         self.grid_stride = self.runtime.grid_stride
+
+    def __setattr__(self, name: str, value: object) -> None:
+        # the runtime is built from the settings once: a setting changed afterwards would not take effect
+        if name in _FIXED_SETTINGS and name in self.__dict__:
+            argument = "weights" if name == "weights_path" else name
+            raise AttributeError(
+                f"ALCN.{name} is fixed when the ALCN is created: createALCN({argument}=...) makes one with another"
+            )
+        super().__setattr__(name, value)
 
     @property
     def equalization_tau(self) -> float | None:
