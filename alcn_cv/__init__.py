@@ -9,7 +9,7 @@ The OpenCV-style API::
     alcn_cv.keep_freed_memory()                       # once, on glibc: no page faults from frame to frame
 
 The base install (NumPy, SciPy and the app's own OpenCV, any of its four wheels) runs all of this: without
-torch, ``createALCN()`` runs the shipped Normalizer by ``cv2.dnn`` (on OpenCV 4, whose ``cv2.dnn`` cannot load
+torch, ``createALCN()`` runs the shipped Normalizer by ``cv2.dnn`` (before OpenCV 4.8, whose ``cv2.dnn`` cannot run
 the default ``gain`` model, with ``model="lite"``). Importing this package does
 not import torch; the networks (:mod:`alcn_cv.nets`) and the differentiable mixture
 (:mod:`alcn_cv.filters.kornia_mixture`) load it when used. Where a package of an extra is

@@ -144,7 +144,7 @@ def _torch_first(installs_torch: bool) -> str:
 
 
 #: The oldest OpenCV the runtime is tested with (every method; ALCN's gain Normalizers run by
-#: ``cv2.dnn`` need OpenCV 5, or torch for ``backend="fast"``); calibration's ChArUco boards need 4.7.
+#: ``cv2.dnn`` need OpenCV 4.8, or torch for ``backend="fast"``); calibration's ChArUco boards need 4.7.
 OPENCV_MINIMUM = (4, 5, 5)
 _INSTALL_OPENCV = (
     f'pip install "{DISTRIBUTION}[opencv]" (or any one of opencv-python, opencv-python-headless, '

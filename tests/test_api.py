@@ -251,19 +251,40 @@ def test_what_needs_torch_without_it_says_what_to_do(run_python, call, error, en
     assert proc.stdout.strip().endswith(ending), proc.stdout
 
 
-def test_gain_models_on_opencv_4_fail_in_one_line(monkeypatch, capfd):
-    """OpenCV 4's cv2.dnn cannot import the gain exports: one line saying what runs them, before cv2.dnn logs its
-    own errors and fails with lines of C++ context."""
+def test_gain_models_before_opencv_4_8_fail_in_one_line(monkeypatch, capfd):
+    """The ONNX importer of OpenCV 4.5 to 4.7 cannot import the gain exports: one line saying what runs them, before
+    cv2.dnn logs its own errors and fails with lines of C++ context."""
     monkeypatch.setattr(alcn_module, "RUNS_GAIN", False)
     for model in ("gain", "gain-lite"):
         with pytest.raises(WeightFileError) as error:
             alcn_cv.createALCN(model=model, backend="opencv")
         assert "\n" not in str(error.value), error.value
         assert "cv2.dnn cannot run the gain Normalizers" in str(error.value)
-        assert "use OpenCV 5, install torch (backend='fast') or model='lite'" in str(error.value)
+        assert "use OpenCV 4.8 or newer, install torch (backend='fast') or model='lite'" in str(error.value)
     assert "onnx_importer" not in capfd.readouterr().err
     assert alcn_cv.createALCN(model="lite", backend="opencv").backend == "opencv"
     assert alcn_cv.createALCN().backend == "fast"  # the default: torch where cv2.dnn cannot
+
+
+def test_gain_models_on_opencv_4_refuse_tiny_images_in_one_line(monkeypatch):
+    """OpenCV 4's cv2.dnn runs the gain exports (4.8 on) but not a reflect pad longer than the side it pads: an image
+    whose grid is smaller than the network's largest pad (4 grid points: under 18 px) gets one line naming the size
+    and what runs it, before cv2.dnn fails with lines of C++ context (simulated here: CI runs OpenCV 5)."""
+    from alcn_cv.nets import opencv_runtime
+
+    tiny, smallest = np.full((17, 40), 128, np.uint8), np.full((18, 18), 128, np.uint8)
+    says = "images of at least 18x18 px at the working scale, got 40x17: use OpenCV 5, or backend='fast'"
+    for model in ("gain", "gain-lite"):
+        alcn = alcn_cv.createALCN(model=model)
+        assert alcn.backend == "opencv"  # the default on OpenCV 4.8 and newer, torch installed or not
+        assert alcn.apply(tiny).shape == tiny.shape  # OpenCV 5 pads any grid
+        monkeypatch.setattr(opencv_runtime, "REFLECT_PADS_ANY_SIZE", False)
+        with pytest.raises(InputError) as error:
+            alcn.apply(tiny)
+        assert "\n" not in str(error.value), error.value
+        assert says in str(error.value), error.value
+        assert alcn.apply(smallest).shape == smallest.shape
+        monkeypatch.undo()
 
 
 @pytest.fixture(scope="module")
@@ -364,7 +385,7 @@ def test_building_an_alcn_reads_its_weight_file_once(tmp_path, monkeypatch, mode
     import shutil
 
     if backend == "opencv" and model == "gain" and not alcn_module.RUNS_GAIN:
-        pytest.skip("cv2.dnn of OpenCV 4 cannot run the gain Normalizers")
+        pytest.skip("cv2.dnn of OpenCV 4.5 to 4.7 cannot run the gain Normalizers")
     weights = shutil.copy(MODELS[model], tmp_path / "mine.npz")
     shutil.copy(MODELS[model].with_suffix(".onnx"), tmp_path / "mine.onnx")
     load, loads = np.load, []

@@ -148,6 +148,54 @@ def test_cell_moments_are_torch_bit_for_bit():
         np.testing.assert_array_equal(opencv_runtime.cell_moments(np.ascontiguousarray(frame), net.stride), ref)
 
 
+def _reflect_pads(onnx_path) -> list[list[int] | None]:
+    """Each ``Pad`` node's pads: the constant's values, or None where the graph computes them."""
+    onnx = pytest.importorskip("onnx")
+    from onnx import numpy_helper
+
+    graph = onnx.load(str(onnx_path)).graph
+    constants = {init.name: numpy_helper.to_array(init) for init in graph.initializer}
+    constants |= {n.output[0]: numpy_helper.to_array(n.attribute[0].t) for n in graph.node if n.op_type == "Constant"}
+    pads = [n for n in graph.node if n.op_type == "Pad"]
+    assert pads and all(n.attribute[0].s == b"reflect" for n in pads)
+    return [constants[n.input[1]].tolist() if n.input[1] in constants else None for n in pads]
+
+
+@pytest.mark.parametrize("model", ["gain", "gain-lite"])
+def test_shipped_gain_exports_pad_by_constants(model):
+    """OpenCV 4's ONNX importer fails on the chain of nodes by which torch computes a reflect pad's pads (at its
+    Reshape): the shipped gain exports hold each as a constant, one per dilation, so that OpenCV 4.x loads them."""
+    path = MODELS[model].with_suffix(".onnx")
+    dilations = load_normalizer_file(MODELS[model]).meta["config"]["dilations"]
+    assert _reflect_pads(path) == [[0, 0, d, d, 0, 0, d, d] for d in dilations]
+    assert not opencv_runtime.computes_pads(path)
+
+
+@pytest.mark.filterwarnings("ignore:Constant folding:UserWarning")  # torch's computed pads: its Slice of step -1
+def test_export_writes_constant_pads_where_torch_computes_them(tmp_path, monkeypatch):
+    """A fresh export's pads are constants as the shipped ones; torch's own symbolic is back after it, and an older
+    export (torch's computed pads), which OpenCV 4 cannot read, gets one line saying how to export it again."""
+    import contextlib
+
+    from alcn_cv.train import export
+
+    fresh = export_onnx(tmp_path / "fresh.onnx", MODELS["gain"])
+    assert _reflect_pads(fresh) == _reflect_pads(MODELS["gain"].with_suffix(".onnx"))
+    assert not opencv_runtime.computes_pads(fresh)
+    with monkeypatch.context() as patch:  # the export as alcn-cv wrote it before
+        patch.setattr(export, "_constant_reflect_pads", contextlib.nullcontext)
+        older = export_onnx(tmp_path / "older.onnx", MODELS["gain"])
+    # computed: torch's own symbolic, registered again after the fresh export
+    assert None in _reflect_pads(older) and opencv_runtime.computes_pads(older)
+    monkeypatch.setattr(opencv_runtime, "READS_COMPUTED_PADS", False)  # OpenCV 4
+    config = load_normalizer_file(MODELS["gain"]).meta["config"]
+    with pytest.raises(WeightFileError) as error:
+        OpenCVNormalizer(older, config)
+    assert "\n" not in str(error.value), error.value
+    assert f"`alcn export --weights {older.with_suffix('.npz')} --onnx {older} --overwrite`" in str(error.value)
+    assert OpenCVNormalizer(fresh, config).largest_pad == max(config["dilations"])
+
+
 def test_gain_export_needs_its_config(tmp_path):
     onnx = tmp_path / "gain.onnx"
     onnx.write_bytes(MODELS["gain"].with_suffix(".onnx").read_bytes())

@@ -82,8 +82,8 @@ class ALCN(Normalization):
         backend: ``"opencv"`` (no torch: the ONNX export beside the weight file run by ``cv2.dnn``, Eq. 3 in
             OpenCV), ``"fast"`` (the Normalizer in torch on the CPU, Eq. 3 in OpenCV; any grid stride, no ONNX
             file needed) or ``"torch"`` (:class:`alcn_cv.nn.ALCN2d` on ``device``). Default: ``"opencv"`` for a shipped
-            ``model`` without a ``grid_stride`` on OpenCV 5 (faster than ``"fast"`` at every size ``alcn bench speed``
-            runs, the same output to 1e-5), else ``"fast"`` where torch is installed.
+            ``model`` without a ``grid_stride`` on OpenCV 4.8 or newer (faster than ``"fast"`` at every size
+            ``alcn bench speed`` runs, the same output to 1e-5), else ``"fast"`` where torch is installed.
         device: torch device of ``backend="torch"`` (``"cpu"``, ``"cuda"``); another device than the CPU selects
             that backend when none is given, as ``threads`` other than ``"auto"`` select ``"fast"``.
         grid_stride: spacing of the Normalizer's grid in working pixels, a multiple of its stride (default: its

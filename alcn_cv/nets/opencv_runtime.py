@@ -22,6 +22,7 @@ without spreading a one-channel full-resolution tensor over its blocked layout);
 from __future__ import annotations
 
 import math
+import re
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -30,7 +31,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.checks import check_gray
-from alcn_cv.errors import WeightFileError
+from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 from alcn_cv.row_parts import row_parts, run_parts
 from alcn_cv.weight_file import load_normalizer_file
@@ -56,19 +57,32 @@ WINDOW = 48
 _PROBE_POINTS = 3
 #: The input of the paper's Normalizer's export: the padded image.
 IMAGE_INPUT = "image"
-#: Whether ``cv2.dnn`` runs the gain Normalizers' exports: OpenCV 4's ONNX importer cannot infer their shapes.
-RUNS_GAIN = cv2.__version__ >= "5"
+_OPENCV = tuple(int(part) for part in re.findall(r"\d+", cv2.__version__)[:2])
+#: Whether ``cv2.dnn`` runs the gain Normalizers' exports: from OpenCV 4.8 on (the ONNX importers of 4.5 to 4.7 fail
+#: on their ReduceMean or Mul).
+RUNS_GAIN = _OPENCV >= (4, 8)
 #: What to do where ``cv2.dnn`` cannot run the gain Normalizers (not :data:`RUNS_GAIN`).
 GAIN_NEEDS = (
-    f"OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers: use OpenCV 5, install torch "
+    f"OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers: use OpenCV 4.8 or newer, install torch "
     "(backend='fast') or model='lite'"
 )
+#: Whether ``cv2.dnn``'s reflect ``Pad`` takes a pad longer than the side it pads, as the gain Normalizers' graphs
+#: need on grids smaller than their largest pad (OpenCV 5; OpenCV 4 asserts pad <= side).
+REFLECT_PADS_ANY_SIZE = _OPENCV >= (5, 0)
+#: Whether ``cv2.dnn`` reads pads that the graph computes (:func:`computes_pads`; OpenCV 5, not 4).
+READS_COMPUTED_PADS = _OPENCV >= (5, 0)
 #: The input of the lite Normalizer's export: :func:`image_blocks` of the padded image.
 BLOCKS_INPUT = "blocks"
 #: The side of those blocks: the lite Normalizer's first convolution (4x4, stride 4; a test checks they agree).
 BLOCK = 4
 #: The input of the gain Normalizer's export: :class:`GainFeatures`.
 FEATURES_INPUT = "features"
+
+
+def computes_pads(onnx_path: Path) -> bool:
+    """Whether an ONNX export computes its pads in its graph, as torch writes ``F.pad`` (:mod:`alcn_cv.train.export`
+    writes them as constants): a ``ConstantOfShape`` node, which OpenCV 4's ONNX importer cannot read there."""
+    return b"ConstantOfShape" in onnx_path.read_bytes()
 
 
 def image_blocks(padded: np.ndarray) -> np.ndarray:
@@ -198,6 +212,14 @@ class OpenCVNormalizer:
                 f"ONNX model not found: {self.path} (backend='opencv' runs the export beside the weight file: "
                 f"`alcn export --weights {self.path.with_suffix('.npz')} --onnx {self.path}`)"
             )
+        # a gain Normalizer's export from an older alcn-cv, before cv2.dnn tries: its ONNX importer logs an error of
+        # its own and fails with lines of C++ context
+        if RUNS_GAIN and not READS_COMPUTED_PADS and computes_pads(self.path):
+            raise WeightFileError(
+                f"OpenCV {cv2.__version__} cannot read {self.path}, an older export (its graph computes its pads): "
+                f"export it again, `alcn export --weights {self.path.with_suffix('.npz')} --onnx {self.path} "
+                "--overwrite`"
+            )
         # one inference at a time: setInput and forward share the network's state across threads
         self._lock = threading.Lock()
         try:
@@ -207,8 +229,12 @@ class OpenCVNormalizer:
             raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}{hint}: {str(exc).strip()}") from None
         #: The graph's input: :data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT` or :data:`FEATURES_INPUT`.
         self.input = next((name for name in (FEATURES_INPUT, BLOCKS_INPUT) if self._has_input(name)), IMAGE_INPUT)
+        gain_config = self._config(config) if self.input == FEATURES_INPUT else None
         #: The gain Normalizer's features (for :data:`FEATURES_INPUT`), or None.
-        self.features = GainFeatures(self._config(config)) if self.input == FEATURES_INPUT else None
+        self.features = GainFeatures(gain_config) if gain_config is not None else None
+        #: The graph's largest reflect pad, in grid points: the gain Normalizer's largest dilation (0 for the others,
+        #: whose image is padded outside the graph).
+        self.largest_pad = max(gain_config["dilations"]) if gain_config is not None else 0
         self.stride = self._output_stride() if self.features is None else self.features.stride
 
     def _has_input(self, name: str) -> bool:
@@ -264,9 +290,20 @@ class OpenCVNormalizer:
         Returns:
             ``(N, ceil((H-1)/s)+1, ceil((W-1)/s)+1)`` float32 with ``s = stride``; grid point
             ``(i, j)`` is the prediction for the 48x48 window centred on pixel ``(s*i, s*j)``.
+
+        Raises:
+            InputError: not an ``(H, W)`` float32 image; on OpenCV 4 (not :data:`REFLECT_PADS_ANY_SIZE`), a grid side
+                smaller than :attr:`largest_pad`.
         """
         h, w = check_gray(image).shape
         s = self.stride
+        if not REFLECT_PADS_ANY_SIZE and min(math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1) < self.largest_pad:
+            # the first side whose grid has largest_pad points
+            side = s * (self.largest_pad - 2) + 2
+            raise InputError(
+                f"OpenCV {cv2.__version__}'s cv2.dnn runs this Normalizer on images of at least {side}x{side} px "
+                f"at the working scale, got {w}x{h}: use OpenCV 5, or backend='fast' (torch, the [train] extra)"
+            )
         if self.features is not None:
             blob = self.features.from_moments(cell_moments(image, s))
         else:

@@ -27,8 +27,11 @@ grid's convolutions::
     output "weights":  (B, N, gh, gw) float32, the maps F_k
 
 with ``gh = ceil((H-1)/s)+1`` (``gw`` the same) for an ``H x W`` image at the working scale (1). Its
-reflect-101 borders are ONNX ``Pad`` nodes (mode ``reflect``), which ``cv2.dnn`` also applies where a
-pad exceeds a small grid (the ONNX standard leaves that case undefined).
+reflect-101 borders are ONNX ``Pad`` nodes (mode ``reflect``) whose pads are constants: torch writes each as
+a chain of nodes that computes them (a ``Slice`` of step -1 that its constant folding leaves), which OpenCV 4's
+ONNX importer cannot read (:func:`_constant_reflect_pads`). OpenCV 5's ``cv2.dnn`` also applies a pad that
+exceeds a small grid (the ONNX standard leaves that case undefined; OpenCV 4 refuses it, see
+:meth:`alcn_cv.nets.opencv_runtime.OpenCVNormalizer.dense_grid`).
 
 The runtime tells the three kinds apart by their input's name. Both spatial sizes are dynamic.
 
@@ -38,15 +41,19 @@ model's ``metadata_props`` under the key ``alcn_cv``, so the ``.onnx`` describes
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import io
 import json
 import logging
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import torch
 from torch import nn
+from torch.onnx import symbolic_helper
 
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, output_path
@@ -103,14 +110,12 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
             net, input_name = _on_blocks(net), BLOCKS_INPUT
             example = torch.from_numpy(image_blocks(example[0, 0].numpy()))
     buffer = io.BytesIO()
-    with torch.no_grad(), warnings.catch_warnings():
+    with torch.no_grad(), warnings.catch_warnings(), _constant_reflect_pads():
         # dynamo=False: the TorchScript exporter needs no onnxscript and handles this plain
         # convolutional graph; torch deprecates it in favour of the dynamo exporter.
         warnings.simplefilter("ignore", DeprecationWarning)
         # The shape checks of the Python code are constants of the trace, as they should be.
         warnings.simplefilter("ignore", torch.jit.TracerWarning)
-        # The reflect pads' slices (step -1) stay unfolded (harmless).
-        warnings.filterwarnings("ignore", message="Constant folding", category=UserWarning)
         torch.onnx.export(
             _DenseGrid(net, from_features),
             (example,),
@@ -128,6 +133,33 @@ def export_onnx(out: str | Path, weights: str | Path | None = None) -> Path:
     atomic_write(out, data)
     logger.info("Normalizer exported to %s (%d kB)", out, len(data) // 1024)
     return out
+
+
+@symbolic_helper.parse_args("v", "is", "s", "none")
+def _reflect_pad(g: Any, x: torch._C.Value, padding: list[int], mode: str, value: None) -> torch._C.Value:
+    """``aten::pad`` (``F.pad``, the Normalizers' only pads, all reflect-101) as one ONNX ``Pad`` of constant
+    pads."""
+    rank = x.type().dim()
+    if mode != "reflect" or rank is None:
+        raise InputError(f"the export writes reflect pads of tensors of a known rank, got mode {mode!r}, rank {rank}")
+    # torch's pads: (begin, end) of the last dimension, then of the one before...; ONNX's: every begin, then every end
+    pairs = [(0, 0)] * (rank - len(padding) // 2) + [padding[i : i + 2] for i in range(0, len(padding), 2)][::-1]
+    pads = g.op("Constant", value_t=torch.tensor([p[0] for p in pairs] + [p[1] for p in pairs], dtype=torch.int64))
+    return g.op("Pad", x, pads, mode_s="reflect")
+
+
+@contextlib.contextmanager
+def _constant_reflect_pads() -> Iterator[None]:
+    """Within: torch's reflect pads exported by :func:`_reflect_pad`, ONNX ``Pad`` nodes whose pads are one
+    ``Constant`` (opset :data:`OPSET`). torch's own symbolic computes them from the pad list in a chain of nodes
+    (``ConstantOfShape``, ``Concat``, ``Reshape``, ``Slice`` of step -1, ``Transpose``, ``Reshape``, ``Cast``)
+    that its constant folding leaves (it folds no ``Slice`` of negative step), and OpenCV 4's ONNX importer fails
+    on that chain's ``Reshape``: with constant pads the gain Normalizers' exports run on OpenCV 4 (from 4.8) as on 5."""
+    torch.onnx.register_custom_op_symbolic("aten::pad", _reflect_pad, OPSET)
+    try:
+        yield
+    finally:  # torch's own symbolic again
+        torch.onnx.unregister_custom_op_symbolic("aten::pad", OPSET)
 
 
 def _on_blocks(net: LiteNormalizer) -> LiteNormalizer:
