@@ -518,7 +518,10 @@ def split_scenes(
 
 
 def _summary(values: Sequence[float]) -> dict[str, Any]:
-    return {"seeds": [float(v) for v in values], "mean": float(np.mean(values)), "std": float(np.std(values))}
+    """The seeds' values, their mean and their sample standard deviation (``ddof=1``: a few seeds' population
+    deviation understates the spread; 0 for one seed)."""
+    std = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
+    return {"seeds": [float(v) for v in values], "mean": float(np.mean(values)), "std": std}
 
 
 def main(

@@ -138,7 +138,7 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
     fig.suptitle(
         f"alcn bench relight: test scenes {', '.join(result['split']['test'])}; "
         + (
-            f"error bars: std over seeds {result['settings']['seeds']}"
+            f"error bars: sample std over seeds {result['settings']['seeds']}"
             if spread
             else f"one seed ({result['settings']['seeds'][0]})"
         ),
