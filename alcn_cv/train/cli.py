@@ -62,9 +62,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     ``alcn`` command."""
     p = subparsers.add_parser(
         "train",
-        help="train the ALCN Normalizer jointly with a detector (Eq. 2)",
-        description="Train ALCN's Normalizer jointly with a detector on Phos-like rendered windows (Eq. 2 of "
-        "Rad et al. 2017), validating on held-out lightings; --set model.method=dog (or none) trains the same "
+        help="train the ALCN Normalizer with a detector (paper: objective meta; paper-full: Eq. 2)",
+        description="Train ALCN's Normalizer with a detector on Phos-like rendered windows, validating on held-out "
+        "lightings. The paper preset (the shipped alcn_normalizer.npz) uses the objective meta: the detector learns "
+        "from the anchor lighting's windows only, the Normalizer from all; paper-full and --set optim.objective=joint "
+        "train both on every window, Eq. 2 of Rad et al. 2017. --set model.method=dog (or none) trains the same "
         "detector on a fixed DoG (or raw windows) for comparison. Writes checkpoint.pt, train.log, "
         "history.json, curves.png and alcn_normalizer.npz into --out. The shipped alcn_normalizer.npz is "
         "`alcn train --conf paper`. Multi-process: run under torchrun.",
@@ -72,8 +74,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _add_conf(
         p,
         "paper",
-        "paper (the shipped alcn_normalizer.npz), paper-full (the paper's widths and data, for a "
-        "GPU; no shipped file), or a TOML file of alcn_cv.train.config's keys",
+        "paper (the shipped alcn_normalizer.npz; objective meta), paper-full (the paper's widths, data and Eq. 2, "
+        "for a GPU; no shipped file), or a TOML file of alcn_cv.train.config's keys",
         "optim.lr=3e-4",
     )
     p.add_argument("--out", type=Path, default=Path("out/alcn"), help="run folder (default: out/alcn)")
@@ -145,8 +147,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     r = subparsers.add_parser(
         "train-real-light",
-        help="train the gain Normalizer on registered scenes under changing light (identification objective)",
-        description="Train the gain-adaptive Normalizer (alcn_cv.nets.gain) on fixed-camera scenes under changing "
+        help="train the gain Normalizer on relit photographs or registered scenes (identification objective)",
+        description="Train the gain-adaptive Normalizer (alcn_cv.nets.gain) on fixed-camera views under changing "
         "light: each textured location is a class seen under every frame's light (alcn_cv.train.real_light). "
         "The gain preset trains on photographs that permit any use, each relit several times (relit=4); "
         "--set \"scenes=['a', 'b']\" adds registered scenes (folders, or the webcam scenes courbevoie, frankfurt, "

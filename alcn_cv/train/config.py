@@ -30,7 +30,7 @@ The keys of :class:`TrainConfig` (also readable from a TOML file with the tables
     fraction of training windows rendered under the anchor lighting.
 
 ``[model]`` -- the networks (Sec. 4.2)
-    ``method`` (str): ``"alcn"`` trains the Normalizer jointly with the detector (Eq. 2);
+    ``method`` (str): ``"alcn"`` trains the Normalizer with the detector (``optim.objective``);
     ``"dog"`` and ``"none"`` train the same detector on a fixed Difference-of-Gaussians or on the
     raw windows, the comparison that tells whether the learned Normalizer helps.
     ``num_kernels`` (int), ``sigma_step`` (float): the Gaussian basis, ``sigma_i = i * step``.
@@ -210,8 +210,9 @@ class TrainConfig:
 
 
 #: ``alcn train`` presets, as overrides of :class:`TrainConfig`'s defaults. ``paper``: the recipe of
-#: the shipped ``alcn_normalizer.npz`` (the defaults; about 30 minutes on 2 CPU cores);
-#: ``paper-full``: the paper's widths and data scale (Sec. 4.2), for a GPU (no shipped file).
+#: the shipped ``alcn_normalizer.npz`` (the defaults, objective ``meta``; about 30 minutes on 2 CPU cores);
+#: ``paper-full``: the paper's widths, data scale (Sec. 4.2) and Eq. 2 (objective ``joint``), for a GPU (no
+#: shipped file).
 TRAIN_CONFS: dict[str, dict[str, Any]] = {
     "paper": {},
     "paper-full": {

@@ -462,7 +462,8 @@ def _save_weights(
 ) -> Path:
     meta = net.file_meta(
         trained=step > 0,
-        description="gain Normalizer trained on registered scenes under changing light (identification objective)",
+        description="gain Normalizer trained to identify locations across light changes (its data, relit "
+        "photographs and/or registered scenes: training.config)",
         training={**record, "config": asdict(cfg), "step": step, "seconds": round(seconds, 1), "machine": machine()},
     )
     return save_normalizer_file(path, net.state_arrays(), meta)
