@@ -8,5 +8,6 @@
 - :mod:`calib.undistort`: undistortion of images and videos.
 - :mod:`calib.conventions`: OpenCV / COLMAP / BOP camera conventions.
 - :mod:`calib.report`: figures.
+- :mod:`calib.colmap_log`: pycolmap's own log (glog) sent to a Python logger.
 - :mod:`calib.cli`: ``alcn calib camera|board|register|undistort``.
 """

@@ -481,14 +481,17 @@ def write_camera_yaml(
     return path
 
 
-def load_calibration(path: str | os.PathLike) -> Calibration:
+def load_calibration(path: str | os.PathLike | Calibration) -> Calibration:
     """Read intrinsics from an OpenCV FileStorage YAML/XML/JSON written by :func:`save_calibration`
     (or OpenCV's calibration sample: ``camera_matrix``, ``distortion_coefficients``,
-    ``image_width``, ``image_height``).
+    ``image_width``, ``image_height``); a :class:`Calibration` is returned as it is, so that a function
+    taking a camera as a file or as one read already calls this alone.
 
     Raises:
         DatasetError: missing or corrupt file, or a missing/invalid field (named).
     """
+    if isinstance(path, Calibration):
+        return path
     path = Path(path)
     hint = "re-create it with `alcn calib camera`"
     if not path.is_file():

@@ -273,7 +273,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="With a ChArUco board in view (--method board): per-frame solvePnP on the board "
         "corners, unreliable frames dropped and reported. Without (--method sfm): pycolmap "
         "incremental reconstruction, then a similarity to mm from --known-distance or "
-        "--reference. Writes rgb/, scene_camera.json, colmap/, registration.json/.png.",
+        "--reference (without either the poses are in arbitrary units, recorded in registration.json, and "
+        "`alcn pose build` cannot use them). Writes rgb/, scene_camera.json, colmap/, registration.json/.png.",
     )
     p.add_argument("source", help="folder of images or a video")
     p.add_argument("--out", required=True, help="output folder (must not exist unless --overwrite)")

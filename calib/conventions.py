@@ -74,7 +74,8 @@ def colmap_from_bop_frames(
     return cameras, images
 
 
-#: Millimetres per unit of the ``# Units:`` header of a COLMAP model.
+#: Millimetres per unit: of the ``# Units:`` header of a COLMAP model, and of every length unit of
+#: :mod:`pose` (:func:`pose.model.unit_scale`).
 MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 
 

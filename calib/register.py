@@ -31,11 +31,10 @@ The folder is written under a temporary name and renamed when complete.
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import os
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -59,6 +58,7 @@ from alcn_cv.io import count_frames, iter_frames, write_image, write_json
 
 from .board import BoardSpec, Detection
 from .camera import Calibration
+from .colmap_log import pycolmap_log
 from .conventions import colmap_from_bop_frames, points_colmap_to_opencv
 from .undistort import Undistorter
 
@@ -361,20 +361,6 @@ def _apply_similarity(model: ColmapModel, s: float, R: np.ndarray, t: np.ndarray
         R_new = im.R_w2c @ R.T
         im.t_w2c = s * im.t_w2c - R_new @ t
         im.R_w2c = R_new
-
-
-@contextlib.contextmanager
-def _quiet_colmap() -> Iterator[None]:
-    """Keep COLMAP's (glog) INFO messages off stderr unless this module logs at DEBUG."""
-    import pycolmap
-
-    old = pycolmap.logging.minloglevel
-    if not logger.isEnabledFor(logging.DEBUG):
-        pycolmap.logging.minloglevel = 1  # WARNING
-    try:
-        yield
-    finally:
-        pycolmap.logging.minloglevel = old
 
 
 @dataclass(frozen=True)
@@ -684,7 +670,7 @@ def register_colmap(
     with (
         atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp,
         tempfile.TemporaryDirectory() as work,
-        _quiet_colmap(),
+        pycolmap_log(logger),
     ):
         rgb = tmp / "rgb"
         rgb.mkdir()

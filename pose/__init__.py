@@ -16,7 +16,8 @@ Normalization Applied to Robust 3D Pose Estimation", BMVC 2017, one module per s
   :mod:`pose.corner_train` ``alcn pose train-corners`` (torch, export to ONNX),
   :mod:`pose.corner_bench` ``alcn pose bench-corners`` (its speed, torch-free);
 * :mod:`pose.solver`: PnP + RANSAC + LM refinement, tracking with a prior, lost/recovered;
-* :mod:`pose.track`: ``alcn pose track``, poses per frame and overlays;
+* :mod:`pose.track`: ``alcn pose track``, poses per frame and overlays; :func:`pose.track.open_tracker`, its
+  tracker in Python, one frame at a time;
 * :mod:`pose.evaluate`: ``alcn pose eval``, Table-1-style report and Middlebury errors;
 * :mod:`pose.planar`: ``alcn pose planar``, a planar target's pose on fixed webcams under real light;
 * :mod:`pose.overlay`: ``alcn pose overlay-error``, the drawn box's distance to the image's edges;

@@ -161,7 +161,9 @@ def _fit_box(
     corners = box_corners(size) @ R.T + origin
     keep = np.zeros(len(pts), bool)
     keep[idx] = True
-    logger.info("box fit: %d of %d points on the object, size %s", len(idx), len(pts), np.round(size, 4).tolist())
+    logger.info("box fit: %d of %d points on the object", len(idx), len(pts))
+    # along the fit's axes (the best-seen face's edges, then its normal): the model's box may be in another order
+    logger.debug("box fit: size %s along its face's edges and normal", np.round(size, 4).tolist())
     return BoxFit(corners, size, R, origin, keep, stats)
 
 
@@ -304,6 +306,9 @@ def place_known_box(
         size_error=(ext - matched).tolist(),
         relative_size_error=rel.tolist(),
         mean_abs_relative_size_error=float(np.abs(rel).mean()),
+        # the error on what the points cover: the face's two edges, measured in full, and the normal only where it
+        # is longer than true (it may be seen in part: a box seen from above has points on its lid only)
+        seen_relative_size_error=float(np.r_[np.abs(rel[:2]), max(float(rel[2]), 0.0)].mean()),
     )
     if support is not None and not scale_free:
         # the box stands on the support plane: move it along the plane's normal to touch it

@@ -27,6 +27,7 @@ def _build(args: argparse.Namespace) -> int:
         args.output,
         images=args.images,
         K=_intrinsics(args.K),
+        camera=args.camera,
         step=args.step,
         max_frames=args.max_frames,
         motion_mask=args.motion_mask,
@@ -40,7 +41,8 @@ def _build(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         what="alcn pose build",
     )
-    print(f"part model -> {path} (its points: {path.with_suffix('.ply')}, its cameras: {path.stem}_cameras.png)")
+    cameras = path.with_name(path.stem + "_cameras.png")
+    print(f"part model -> {path} (its points: {path.with_suffix('.ply')}, its cameras: {cameras})")
     return 0
 
 
@@ -54,33 +56,45 @@ def _calibration(path: str | None):
 
 
 def _track(args: argparse.Namespace) -> int:
+    import shlex
+
     from pose import track
 
-    K, dist, size = _intrinsics(args.K), None, None
-    calibration = _calibration(args.camera) if K is None else None
-    if calibration is not None:
-        K, dist, size = calibration.K, calibration.dist, calibration.image_size
     summary = track.main(
         args.model,
         args.input,
         args.output,
-        K,
+        _intrinsics(args.K),
+        camera=args.camera,
         normalization=args.normalization,
         overlay=args.overlay,
+        overwrite=args.overwrite,
         method=args.method,
         n_features=args.n_features,
+        n_features_global=args.n_features_global,
         min_inliers=args.min_inliers,
         reprojection_error=args.reprojection_error,
-        dist=dist,
         detector=args.detector,
-        image_size=size,
+        step=args.step,
+        max_frames=args.max_frames,
         progress=not args.no_progress,
     )
     lost = summary["frames"] - summary["tracked"]
     why = f"; {lost} lost, most often: {summary['lost_reason']}" if lost else ""
+    overlay = f"; overlay: {summary['overlay']}" if summary["overlay"] else ""
     print(
-        f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps{why} -> {args.output}"
+        f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps{why}\n"
+        f"poses: {summary['poses']} (object to camera, cam_t_m2c in {summary['translation_units']}; the model is in "
+        f"{summary['model_units']}), per frame: {summary['info']}{overlay}"
     )
+    # overlay-error draws the box with the camera stored in the part model: the runs tracked with it
+    if summary["tracked"] and summary["detector"] == "features" and summary["camera"] == "model":
+        out = Path(summary["poses"]).with_name(Path(summary["poses"]).stem + "_overlay_error")
+        words = ["alcn", "pose", "overlay-error", str(args.input), "--run", "track", str(args.model)]
+        print(
+            "next: how far the drawn box is from the object's edges, per frame:\n    "
+            + shlex.join([*words, summary["poses"], "--out", str(out)])
+        )
     return 0
 
 
@@ -388,14 +402,23 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="part model from a registered sequence or a video",
         description="Triangulate features of the training images (pycolmap, known poses held "
         "fixed; or incremental reconstruction for an unregistered video), fit the box (open3d) "
-        "and write MODEL.npz, MODEL.ply and MODEL_cameras.png. pycolmap's log is shown with "
-        "`alcn --verbose`.",
+        "and write MODEL.npz, MODEL.ply and MODEL_cameras.png. A box fit more than 5% off the known size is "
+        "warned; more than 20% off on the edges its points cover, the build fails (its points are not that box, "
+        "or not in its units). A registration in arbitrary units (`alcn calib register --method sfm` without a "
+        "known length) is refused. pycolmap's log is shown with `alcn --verbose`.",
     )
     b.add_argument("input", help="BOP scene folder, COLMAP model folder, Middlebury set, or a video file")
     b.add_argument("output", help="part model to write (.npz)")
     b.add_argument("--images", help="image folder of a COLMAP model")
-    b.add_argument(
+    bcam = b.add_mutually_exclusive_group()
+    bcam.add_argument(
         "--K", nargs=4, type=float, metavar=("FX", "FY", "CX", "CY"), help="intrinsics of a video (OpenCV convention)"
+    )
+    bcam.add_argument(
+        "--camera",
+        help="camera.yaml of a video's camera from `alcn calib camera` (OpenCV FileStorage; instead of --K): its K, "
+        "and its lens distortion, which the reconstruction models (the frames are not undistorted); the model stores "
+        "K only, so track the video with --camera too",
     )
     b.add_argument("--step", type=int, help=f"use every N-th frame of a video (default {VIDEO_STEP})")
     b.add_argument("--max-frames", type=int, help=f"at most this many video frames (default {VIDEO_MAX_FRAMES})")
@@ -405,8 +428,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument("--feature", default="ORB", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default ORB)")
     b.add_argument("--n-features", type=int, default=4000, help="keypoints per training image (default 4000)")
     b.add_argument("--normalization", default="none", help=NORMALIZATION_HELP)
-    b.add_argument("--box-ply", help="cuboid .ply of the box: its true size")
-    b.add_argument("--box-size", nargs=3, type=float, metavar=("X", "Y", "Z"), help="the box's true size")
+    b.add_argument(
+        "--box-ply",
+        help="cuboid .ply of the box. For a video: its true size only (the box is fitted to the points). For a "
+        "registered sequence: the box placed in the sequence's world frame (a BOP model, e.g. the object of a BOP "
+        "scene), whose corners become the model's; for poses in another frame use --box-size",
+    )
+    b.add_argument(
+        "--box-size",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        help="the box's true edge lengths (any order), fitted to the points wherever the box stands: for a video, or "
+        "a registered sequence whose world frame is not the box's",
+    )
     b.add_argument(
         "--box-units",
         choices=["mm", "cm", "m"],
@@ -423,10 +458,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     t = sub.add_parser(
         "track",
         help="pose of the box in every frame of a video or image folder",
-        description="Writes BOP scene_gt-style JSON (OUTPUT) and OUTPUT_info.json; with --overlay "
-        "a video (.mp4/.avi) or PNG folder with the box drawn. The camera is the one stored in the "
-        "part model (`alcn pose build` from a video, refined with --refine-focal) unless --K or "
-        "--camera is given.",
+        description="Writes BOP scene_gt-style JSON (OUTPUT: per frame cam_R_m2c and cam_t_m2c, object to "
+        "camera, OpenCV convention, cam_t_m2c in mm as BOP's whatever the model's units) and OUTPUT_info.json (per "
+        "frame inliers and timings, the model's units); with --overlay a video (.mp4/.avi) or PNG folder with the "
+        "box drawn. The camera is the one stored in the part model (`alcn pose build` from a video, refined with "
+        "--refine-focal; for the frames of its size) unless --K or --camera is given. Python: "
+        "pose.track.open_tracker, the same tracker one frame at a time.",
     )
     t.add_argument(
         "model",
@@ -434,7 +471,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "detector (.onnx) from `alcn pose train-corners`",
     )
     t.add_argument("input", help="video file or image folder")
-    t.add_argument("output", help="poses (.json)")
+    t.add_argument("output", help="poses (.json; translations in mm)")
     cam = t.add_mutually_exclusive_group()
     cam.add_argument(
         "--K",
@@ -462,13 +499,41 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     t.add_argument(
         "--overlay",
         help="write the overlay here: a video (.mp4, .avi, .mkv, ...) or a folder of PNGs (a path without a suffix, or "
-        "an existing folder)",
+        "an existing folder; one that holds frames only with --overwrite); written under a temporary name, renamed "
+        "when complete",
+    )
+    t.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an --overlay folder of an earlier run (the poses and an overlay video are replaced in any case)",
+    )
+    t.add_argument(
+        "--step", type=number_at_least(int, 1), default=1, metavar="N", help="track every N-th frame (default 1)"
+    )
+    t.add_argument(
+        "--max-frames",
+        type=number_at_least(int, 1),
+        metavar="N",
+        help="track the first N frames (of those --step keeps; default all)",
     )
     t.add_argument(
         "--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant (default usac_default)"
     )
     t.add_argument(
-        "--n-features", type=number_at_least(int, 0), default=1000, help="keypoints per frame (default 1000; 0: all)"
+        "--n-features",
+        type=number_at_least(int, 0),
+        default=1000,
+        help="keypoints per frame kept around the predicted box (default 1000; 0: all)",
+    )
+    t.add_argument(
+        "--n-features-global",
+        type=number_at_least(int, 0),
+        default=0,
+        metavar="N",
+        help="keypoints kept where the whole frame is searched: the first frame and while the box is lost (default "
+        "0: all, each matched to every descriptor of the model, the cost of a frame without the box: with the "
+        "cookie box's model, 640x480 frames of 6,000-27,000 ORB keypoints took 1.7 s each on 2 cores, 0.4 s with "
+        "3000, 0.14 s with 1000; the strongest keypoints of a cluttered frame may all miss the box)",
     )
     t.add_argument(
         "--min-inliers",

@@ -55,22 +55,22 @@ import numpy as np
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.formats import bop
 from alcn_cv.io import atomic_write, with_suffix
+from calib.conventions import MM_PER_UNIT
 
 logger = logging.getLogger(__name__)
 
 FORMAT_NAME = "alcn-part-model"
 FORMAT_VERSION = 3
 READABLE_VERSIONS = (1, 2, 3)
-UNITS = ("mm", "cm", "m")
-_UNIT_IN_M = {"mm": 1e-3, "cm": 1e-2, "m": 1.0}
+UNITS = tuple(MM_PER_UNIT)
 
 
 def unit_scale(src: str, dst: str) -> float:
     """Factor that converts a length in ``src`` units into ``dst`` units (``"mm"``, ``"cm"``, ``"m"``)."""
     for u in (src, dst):
-        if u not in _UNIT_IN_M:
+        if u not in MM_PER_UNIT:
             raise InputError(f"unknown unit {u!r}; expected one of {UNITS}")
-    return _UNIT_IN_M[src] / _UNIT_IN_M[dst]
+    return MM_PER_UNIT[src] / MM_PER_UNIT[dst]
 
 
 def box_corners(size: np.ndarray, origin: np.ndarray | None = None) -> np.ndarray:

@@ -34,7 +34,7 @@ from tqdm import tqdm
 
 from alcn_cv import io
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, make_folder, read_json, write_json
+from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, new_figure, save_figure
 from pose import model as part_model
 from pose.box import facing_faces
@@ -176,16 +176,14 @@ def frame_error(
 def _camera_and_poses(
     model_path: str | Path, poses_path: str | Path
 ) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
-    """The box corners, the camera stored in the part model and the ``(rvec, tvec)`` of every posed frame."""
+    """The box corners, the camera stored in the part model and the ``(rvec, tvec)`` of every posed frame (``tvec``
+    in the model's units: :func:`pose.track.read_poses`)."""
+    from pose.track import read_poses
+
     model = part_model.load(model_path)
     if "K" not in model.extra:
         raise DatasetError(f"{model_path}: stores no camera (build it from a video with `alcn pose build`)")
-    poses = {}
-    for name, entry in read_json(poses_path).items():
-        if entry:
-            R = np.asarray(entry[0]["cam_R_m2c"], np.float64).reshape(3, 3)
-            poses[name] = (cv2.Rodrigues(R)[0], np.asarray(entry[0]["cam_t_m2c"], np.float64).reshape(3, 1))
-    return model.corners, np.asarray(model.extra["K"], np.float64), poses
+    return model.corners, np.asarray(model.extra["K"], np.float64), read_poses(poses_path, model.units)
 
 
 def measure(

@@ -7,6 +7,7 @@ video) has intrinsics only, and :mod:`pose.triangulate` reconstructs its poses.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,7 +41,12 @@ class TrainingView:
 
 @dataclass
 class TrainingSequence:
-    """Training images in one folder, their cameras, and the unit of the world frame."""
+    """Training images in one folder, their cameras, and the unit of the world frame.
+
+    ``units``: ``"mm"``, ``"cm"`` or ``"m"``; ``""`` for an unregistered video (no world frame yet);
+    :data:`ARBITRARY_UNITS` for poses registered without a known length (``alcn calib register --method sfm``
+    without ``--known-distance`` or ``--reference``), which no part model can be built in.
+    """
 
     image_dir: Path
     views: list[TrainingView]
@@ -53,6 +59,29 @@ class TrainingSequence:
         return all(v.R_w2c is not None for v in self.views)
 
 
+#: The ``units`` of ``registration.json`` (``alcn calib register``) whose poses have no known scale.
+ARBITRARY_UNITS = "arbitrary"
+
+
+def registration_units(folder: str | Path) -> str | None:
+    """The units ``alcn calib register`` recorded in ``folder/registration.json`` (``"mm"``, or
+    :data:`ARBITRARY_UNITS` for an SfM registration without a known length); ``None`` without that file.
+
+    Raises:
+        DatasetError: the file is not JSON, or its ``units`` is not a string.
+    """
+    path = Path(folder) / "registration.json"
+    if not path.is_file():
+        return None
+    try:
+        units = json.loads(path.read_text(encoding="utf-8")).get("units")
+    except (OSError, ValueError, AttributeError) as exc:
+        raise DatasetError(f"{path}: not the JSON of `alcn calib register` ({exc})") from exc
+    if not isinstance(units, str):
+        raise DatasetError(f"{path}: field 'units': expected a string such as 'mm', got {units!r}")
+    return units
+
+
 def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: int | None = None) -> TrainingSequence:
     """Read a registered training sequence.
 
@@ -63,6 +92,10 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
         images: image folder of a COLMAP model (default: ``<path>/../images`` then ``<path>/images``).
         obj_id: BOP object whose model frame becomes the world (default: the first annotated in
             ``scene_gt.json``); without annotations, ``scene_camera.json``'s ``cam_R_w2c`` is used.
+
+    The units: a BOP scene's are millimetres, a COLMAP model's its ``# Units:`` header's, else metres, a
+    Middlebury set's metres; the output of ``alcn calib register`` (``registration.json`` in the scene's folder,
+    beside its ``colmap/``) is in the units recorded there, :data:`ARBITRARY_UNITS` when it had no known length.
 
     Raises:
         DatasetError: no such folder, the folder is none of these, or an image has no pose.
@@ -88,7 +121,9 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
             else:
                 raise DatasetError(f"{path / 'scene_gt.json'}: image {fr.im_id} has no pose (field 'cam_R_m2c')")
             views.append(TrainingView(fr.rgb_path.name, fr.K, None, R, np.ravel(t), mask))
-        return TrainingSequence(scene.frames[0].rgb_path.parent, views, "mm", info={"format": "bop", "path": str(path)})
+        units = registration_units(path) or "mm"  # `alcn calib register` without a known length: arbitrary
+        info = {"format": "bop", "path": str(path)}
+        return TrainingSequence(scene.frames[0].rgb_path.parent, views, units, info=info)
     if any(path.glob("*_par.txt")):
         from alcn_cv.formats.middlebury import read_middlebury
 
@@ -114,8 +149,10 @@ def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: in
         for im in sorted(cm.images.values(), key=lambda i: i.name):
             K, dist = cm.cameras[im.camera_id].to_opencv()
             views.append(TrainingView(im.name, K, dist if np.any(dist) else None, im.R_w2c, im.t_w2c))
-        # A model without a "# Units:" line (e.g. written by COLMAP itself) is taken as metres.
-        return TrainingSequence(image_dir, views, cm.units or "m", info={"format": "colmap", "path": str(path)})
+        # A model without a "# Units:" line is in the units of the registration it is part of (`alcn calib register`
+        # writes none when they are arbitrary), else (e.g. written by COLMAP itself) taken as metres.
+        units = cm.units or registration_units(path.parent) or "m"
+        return TrainingSequence(image_dir, views, units, info={"format": "colmap", "path": str(path)})
     raise DatasetError(
         f"{path}: not a BOP scene (scene_camera.json), a COLMAP model (cameras.txt/.bin) "
         "or a Middlebury set (*_par.txt)"

@@ -487,8 +487,10 @@ class PoseTracker:
     than ``trusted_guided_ratio`` of the matches are its inliers, the whole frame is searched
     as well, and its pose, found without the prediction, is taken; when the whole frame gives
     none, the pose found around the prediction is kept if at least ``min_guided_ratio`` of the
-    matches are its inliers, and the frame is lost otherwise. Both ``0``: every pose found
-    around the prediction is kept.
+    matches are its inliers, and the frame is lost otherwise. Both ``0`` (the default here): every
+    pose found around the prediction is kept; ``alcn pose track`` checks a feature detector's with
+    0.6 and 0.3 (:data:`pose.track.TRUSTED_GUIDED_RATIO`; :func:`pose.track.make_tracker` and
+    :func:`pose.track.open_tracker` build its tracker).
 
     ``events`` collects ``(frame_index, "lost" | "recovered", reason)`` tuples, also logged.
 

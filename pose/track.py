@@ -6,11 +6,16 @@ file replaces the part model) and the pose solved (:mod:`pose.solver`) with the 
 frame's pose as prior. Output:
 
 * poses per frame as BOP ``scene_gt``-style JSON: ``{"<frame>": [{"obj_id": 1, "cam_R_m2c": [9 floats],
-  "cam_t_m2c": [3 floats]}]}`` (the model's units; a lost frame has an empty list), plus a
+  "cam_t_m2c": [3 floats]}]}``, object-to-camera (``x_cam = R x_obj + t``, ``R`` row-major), ``t`` in
+  millimetres as BOP's (converted from the model's units; a lost frame has an empty list), plus a
   ``<name>_info.json`` with per-frame inlier counts, timings and the lost/recovered events;
 * with ``overlay``, a video (``.mp4``/``.avi``) or a folder of PNGs with the box drawn in the
   colours of the paper's Fig. 1: ground truth green, ALCN blue, no normalization red
-  (:data:`COLORS`; any other normalization yellow).
+  (:data:`COLORS`; any other normalization yellow), written under a temporary name and renamed
+  when complete (as the poses): an interrupted run leaves none, and an earlier one as it was.
+
+The Python entry point is :func:`open_tracker`: the detector and tracker the command tracks with, set
+up as it sets them up, one frame at a time (:meth:`BoxTracker.step`); :func:`main` is the command.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -32,12 +38,15 @@ from tqdm import tqdm
 from alcn_cv import io
 from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import InputError
-from alcn_cv.io import check_writable, make_folder, output_path, write_json
+from alcn_cv.io import check_writable, output_path, read_json, write_json
 from alcn_cv.report import machine
 from pose import model as part_model
 from pose.model import BOX_EDGES
-from pose.parts import FeaturePartDetector, PartDetector
+from pose.parts import Correspondences, FeaturePartDetector, PartDetector
 from pose.solver import PoseEstimate, PoseSolver, PoseTracker, project
+
+if TYPE_CHECKING:
+    from calib.camera import Calibration
 
 logger = logging.getLogger(__name__)
 
@@ -90,22 +99,45 @@ def _overlay_is_video(path: Path) -> bool:
     return False
 
 
+def _check_overlay_folder(path: Path, overwrite: bool) -> None:
+    """Refuse an overlay folder that holds files, unless ``overwrite`` and it is an earlier overlay (PNGs only): its
+    frames would have mixed with this run's (a shorter video left the earlier run's last frames in it).
+
+    Raises:
+        InputError: a folder of other files (never replaced), or an earlier overlay without ``overwrite``.
+    """
+    if not path.is_dir():
+        return
+    files = list(path.iterdir())
+    if any(f.suffix.lower() != ".png" or not f.is_file() for f in files):
+        raise InputError(
+            f"overlay {path} is not an earlier overlay (it holds more than PNGs): not replaced; give another path"
+        )
+    if files and not overwrite:
+        raise InputError(f"overlay {path} exists (--overwrite, or overwrite=True, replaces it)")
+
+
 class OverlayWriter:
     """Writes overlay frames to a video (``.mp4``, ``.avi``, ...) or to a folder of PNGs named by frame (a path
     without a suffix, or an existing folder).
 
-    A video is written under a temporary name (:func:`alcn_cv.io.atomic_path`) and renamed by
-    :meth:`close`; used as a context manager, a video unfinished by an error is removed.
+    Either is written under a temporary name (:func:`alcn_cv.io.atomic_path`,
+    :func:`alcn_cv.data.manifest.atomic_output_dir`) and renamed by :meth:`close`; used as a context manager, an
+    overlay unfinished by an error or an interrupt is removed, and an earlier one is left as it was. A folder that
+    holds PNGs (an earlier overlay) is replaced only with ``overwrite`` (a video is replaced as any output file).
 
     Raises:
-        InputError: a path with another suffix.
+        InputError: a path with another suffix; a folder that holds files (:func:`_check_overlay_folder`).
     """
 
-    def __init__(self, path: str | Path, fps: float = 30.0) -> None:
+    def __init__(self, path: str | Path, fps: float = 30.0, *, overwrite: bool = False) -> None:
         self.path = Path(path)
         self.fps = fps
         self._is_video = _overlay_is_video(self.path)
+        if not self._is_video:
+            _check_overlay_folder(self.path, overwrite)
         self._video: cv2.VideoWriter | None = None
+        self._folder: Path | None = None
         self._stack = contextlib.ExitStack()
 
     def write(self, name: str, frame: np.ndarray) -> None:
@@ -116,19 +148,26 @@ class OverlayWriter:
                 self._stack.callback(self._video.release)  # runs before the rename
             self._video.write(frame)
         else:
-            io.write_image(self.path / f"{name}.png", frame)
+            if self._folder is None:
+                from alcn_cv.data.manifest import atomic_output_dir
+
+                # checked in __init__: absent, empty, or an earlier overlay that may be replaced; the marker that
+                # atomic_output_dir asks of an earlier output is one of its PNGs
+                marker = next((f.name for f in self.path.glob("*.png")), "") if self.path.is_dir() else ""
+                self._folder = self._stack.enter_context(atomic_output_dir(self.path, overwrite=True, marker=marker))
+            io.write_image(self._folder / f"{name}.png", frame)
 
     def close(self) -> None:
-        """Finish the video: :attr:`path` appears complete."""
+        """Finish the overlay: :attr:`path` appears complete."""
         self._stack.close()
-        self._video = None
+        self._video = self._folder = None
 
     def __enter__(self) -> OverlayWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self._stack.__exit__(*exc)
-        self._video = None
+        self._video = self._folder = None
 
 
 @dataclass
@@ -141,11 +180,38 @@ class TrackedFrame:
     keypoints: int
 
 
-def pose_to_bop(est: PoseEstimate, obj_id: int = 1) -> list[dict]:
-    """One frame's entry of a BOP ``scene_gt``: ``[]`` when lost."""
+def pose_to_bop(est: PoseEstimate, obj_id: int = 1, mm_per_unit: float = 1.0) -> list[dict]:
+    """One frame's entry of a BOP ``scene_gt``: ``[]`` when lost. ``cam_t_m2c`` in mm, as BOP's: ``est.tvec``
+    (in the model's units) times ``mm_per_unit`` (:func:`pose.model.unit_scale` of the model's units to ``"mm"``,
+    :attr:`BoxTracker.mm_per_unit`)."""
     if not est.ok:
         return []
-    return [{"obj_id": obj_id, "cam_R_m2c": est.R.ravel().tolist(), "cam_t_m2c": est.tvec.ravel().tolist()}]
+    t = est.tvec.ravel() * mm_per_unit
+    return [{"obj_id": obj_id, "cam_R_m2c": est.R.ravel().tolist(), "cam_t_m2c": t.tolist()}]
+
+
+#: The units of ``cam_t_m2c`` in the poses ``alcn pose track`` writes (BOP's), recorded in the summary of its
+#: ``_info.json`` as ``translation_units``; a file without that key was written in the model's units.
+POSE_UNITS = "mm"
+
+
+def read_poses(path: str | Path, units: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The ``(rvec, tvec)`` ``(3, 1)`` float64 (object to camera, ``tvec`` in ``units``, the model's) of every frame
+    posed in ``path``, poses written by :func:`main` (``cam_t_m2c`` in mm). Poses written before they were in mm,
+    in the model's units, are told by the ``_info.json`` beside them (no ``translation_units`` in its summary)."""
+    path = Path(path)
+    info = path.with_name(path.stem + "_info.json")
+    summary = read_json(info).get("summary", {}) if info.is_file() else {}
+    # an _info.json without translation_units: an earlier track's, in the model's units
+    written = summary.get("translation_units", units if summary else POSE_UNITS)
+    scale = part_model.unit_scale(written, units)
+    poses = {}
+    for name, entry in read_json(path).items():
+        if entry:
+            R = np.asarray(entry[0]["cam_R_m2c"], np.float64).reshape(3, 3)
+            t = np.asarray(entry[0]["cam_t_m2c"], np.float64).reshape(3, 1) * scale
+            poses[name] = (cv2.Rodrigues(R)[0], t)
+    return poses
 
 
 #: fewer inliers than this loses a frame, per detector (the corner detector has at most 7 parts)
@@ -187,31 +253,39 @@ RANSAC_ITERATIONS = {"features": 5000, "corners": 5000}
 
 def track(
     frames: Iterator[tuple[str, np.ndarray]],
-    detector: PartDetector,
-    tracker: PoseTracker,
+    tracker: BoxTracker,
     total: int | None = None,
     progress: bool = True,
+    source: str | Path | None = None,
 ) -> Iterator[tuple[TrackedFrame, np.ndarray]]:
-    """Track the model through ``frames``; yields each frame's result and the frame itself.
+    """Track the box through ``frames`` (``(name, BGR frame)``) with ``tracker`` (:func:`open_tracker`); yields each
+    frame's result and the frame itself. ``source``: what the frames are of, named in an error about a frame.
 
     ``tracker.events`` collects the lost/recovered events.
     """
-    for i, (name, frame) in enumerate(
-        tqdm(frames, total=total, desc="track", unit="frame", leave=False, disable=not progress)
-    ):
+    for name, frame in tqdm(frames, total=total, desc="track", unit="frame", leave=False, disable=not progress):
         t0 = time.perf_counter()
-        est, corr = tracker.step(i, frame, detector)
-        yield TrackedFrame(name, est, time.perf_counter() - t0, corr.keypoints), frame
+        est = tracker.step(frame, name=name if source is None else f"{name} of {source}")
+        keypoints = tracker.correspondences.keypoints if tracker.correspondences is not None else 0
+        yield TrackedFrame(name, est, time.perf_counter() - t0, keypoints), frame
 
 
 def camera_matrix_for(
-    model_K: np.ndarray | None, K: np.ndarray | None, model_path: str | Path, rtol: float = 0.02
+    model_K: np.ndarray | None,
+    K: np.ndarray | None,
+    model_path: str | Path,
+    rtol: float = 0.02,
+    *,
+    model_size: tuple[int, int] | None = None,
+    frame_size: tuple[int, int] | None = None,
 ) -> np.ndarray:
     """The intrinsics to track with: ``K`` when given, else those stored in the model (``model_K``,
     e.g. the focal length refined by ``alcn pose build --refine-focal``).
 
     Warns when both are given and an entry differs by more than ``rtol`` (the drawn box would
-    take the wrong shape).
+    take the wrong shape) from the model's, or, for frames of ``frame_size`` ``(width, height)`` other than the
+    ``model_size`` the model's camera is for, from the model's resized to them (:func:`pose.corners.scaled_camera`);
+    the warning names the ``--K`` that tracks with the model's camera.
 
     Raises:
         InputError: neither is there.
@@ -226,45 +300,73 @@ def camera_matrix_for(
         logger.info("camera of the model: fx %.1f fy %.1f cx %.1f cy %.1f", K[0, 0], K[1, 1], K[0, 2], K[1, 2])
         return K
     K = np.asarray(K, np.float64)
-    if model_K is not None and not np.allclose(K, model_K, rtol=rtol, atol=1e-6):
-        m = np.asarray(model_K, np.float64)
+    if model_K is None:
+        return K
+    m, resized = np.asarray(model_K, np.float64), ""
+    if model_size is not None and frame_size is not None and tuple(frame_size) != tuple(model_size):
+        from pose.corners import scaled_camera
+
+        m = scaled_camera(m, frame_size[0] / model_size[0], frame_size[1] / model_size[1])
+        resized = f" resized from {model_size[0]}x{model_size[1]} to the frames' {frame_size[0]}x{frame_size[1]}"
+    if not np.allclose(K, m, rtol=rtol, atol=1e-6):
+        # without --K the model's camera is used only for frames of its size: for others the --K to give is named
+        advice = (
+            f"give --K {m[0, 0]:.2f} {m[1, 1]:.2f} {m[0, 2]:.2f} {m[1, 2]:.2f} to track with the model's"
+            if resized
+            else "leave out --K/--camera to track with the model's"
+        )
         logger.warning(
-            "the given intrinsics (fx %.1f fy %.1f cx %.1f cy %.1f) differ from those %s was built with "
-            "(fx %.1f fy %.1f cx %.1f cy %.1f); leave out --K/--camera to track with the model's",
+            "the given intrinsics (fx %.1f fy %.1f cx %.1f cy %.1f) differ from those %s was built with%s "
+            "(fx %.1f fy %.1f cx %.1f cy %.1f); %s",
             K[0, 0],
             K[1, 1],
             K[0, 2],
             K[1, 2],
             model_path,
+            resized,
             m[0, 0],
             m[1, 1],
             m[0, 2],
             m[1, 2],
+            advice,
         )
     return K
 
 
-def _overlay_path(overlay: str | Path, source: str | Path) -> Path:
+def _overlay_path(overlay: str | Path, source: str | Path, overwrite: bool = False) -> Path:
     """The overlay's path, checked before the tracking: a video or a folder of PNGs (:class:`OverlayWriter`), not
-    the input."""
+    the input, that can be written; a folder that holds files only with ``overwrite``
+    (:func:`_check_overlay_folder`)."""
     overlay = Path(overlay)
     is_video = _overlay_is_video(overlay)
     if overlay.resolve() == Path(source).resolve():
         raise InputError(f"--overlay {overlay} is the input; write the overlay elsewhere")
-    if is_video:
-        check_writable(overlay)
-    else:
-        make_folder(overlay)
+    if overlay.exists() and not overlay.is_dir() and not is_video:
+        raise InputError(f"cannot write the overlay folder {overlay}: it is a file")
+    if not is_video:
+        _check_overlay_folder(overlay, overwrite)
+    check_writable(overlay)  # a folder: made beside it under a temporary name, renamed at the end
     return overlay
 
 
-def _check_frame_size(frame: np.ndarray, image_size: tuple[int, int], what: str, of: str) -> None:
+def _check_frame_size(
+    frame: np.ndarray, image_size: tuple[int, int], what: str, of: str, resized: np.ndarray | None = None
+) -> None:
     """Raise :class:`InputError` when ``frame`` is not ``image_size`` ``(width, height)``, the size ``of`` is for;
-    ``what`` (``"the frames of X are"``) begins the message."""
+    ``what`` (``"the frames of X are"``) begins the message. ``resized``: the camera ``of`` is, whose resized copy the
+    message names (the model's)."""
     if frame.shape[1::-1] != image_size:
+        hint = "give the intrinsics at this resolution (--K or --camera)"
+        if resized is not None:
+            from pose.corners import scaled_camera
+
+            k = scaled_camera(resized, frame.shape[1] / image_size[0], frame.shape[0] / image_size[1])
+            hint += (
+                f"; the model's camera resized to them, if they are its frames resized (not cropped): "
+                f"--K {k[0, 0]:.2f} {k[1, 1]:.2f} {k[0, 2]:.2f} {k[1, 2]:.2f}"
+            )
         raise InputError(
-            f"{what} {frame.shape[1]}x{frame.shape[0]} but {of} is for {image_size[0]}x{image_size[1]}; "
-            "give the intrinsics at this resolution (--K or --camera)"
+            f"{what} {frame.shape[1]}x{frame.shape[0]} but {of} is for {image_size[0]}x{image_size[1]}; {hint}"
         )
 
 
@@ -324,123 +426,301 @@ def make_tracker(
     )
 
 
+class BoxTracker:
+    """The box's pose in one frame after another: a part detector and a :class:`~pose.solver.PoseTracker` set up as
+    ``alcn pose track`` sets them up. Made by :func:`open_tracker`.
+
+    Attributes:
+        detector: the part detector (:class:`~pose.parts.FeaturePartDetector` or
+            :class:`~pose.corners.CornerDetector`).
+        tracker: the :class:`~pose.solver.PoseTracker` (its ``events``: the lost/recovered frames).
+        K: ``(3, 3)`` float64 intrinsics tracked with (OpenCV pixel convention); ``dist``: their distortion or None.
+        image_size: ``(width, height)`` the camera holds for (frames of another size are an error), or None.
+        corners: ``(8, 3)`` float64 the box's corners in the object frame (:func:`pose.model.box_corners`' order),
+            in :attr:`units`.
+        units: the model's units (``"mm"``, ``"cm"`` or ``"m"``): of ``tvec`` and :attr:`corners`.
+        mm_per_unit: millimetres per unit of :attr:`units` (``cam_t_m2c`` of :func:`pose_to_bop`).
+        normalization: the normalization spec applied first.
+        kind: ``"features"`` or ``"corners"``.
+        camera: ``"model"`` (the camera stored in the part model) or ``"given"``.
+        frames: frames stepped so far; correspondences: those of the last frame.
+    """
+
+    def __init__(
+        self,
+        detector: PartDetector,
+        tracker: PoseTracker,
+        *,
+        kind: str,
+        name: str,
+        normalization: str,
+        corners: np.ndarray,
+        units: str,
+        dist: np.ndarray | None,
+        image_size: tuple[int, int] | None,
+        camera: str,
+        model_K: np.ndarray | None,
+        model_size: tuple[int, int] | None,
+    ) -> None:
+        self.detector, self.tracker = detector, tracker
+        self.kind, self.name, self.normalization = kind, name, normalization
+        self.corners, self.units, self.mm_per_unit = corners, units, part_model.unit_scale(units, "mm")
+        self.K, self.dist, self.image_size, self.camera = tracker.solver.K, dist, image_size, camera
+        self._model_K, self._model_size = model_K, model_size
+        self.frames = 0
+        self.correspondences: Correspondences | None = None
+
+    @property
+    def events(self) -> list[tuple[int, str, str]]:
+        """``(frame index, "lost" | "recovered", reason)`` of the frames stepped so far."""
+        return self.tracker.events
+
+    def check_size(self, frame: np.ndarray, what: str = "the frame is") -> None:
+        """Raise :class:`InputError` when ``frame`` is not of :attr:`image_size` (``what`` begins the message)."""
+        if self.image_size is not None:
+            model = self.camera == "model"
+            of = f"the camera of {self.name}" if model else "the calibration"
+            _check_frame_size(frame, self.image_size, what, of, self.K if model else None)
+
+    def step(self, frame: np.ndarray, *, name: str | None = None) -> PoseEstimate:
+        """The pose of the box in ``frame`` (BGR or grey uint8, the next frame of the sequence), its previous frames'
+        poses as prior.
+
+        Returns:
+            A :class:`~pose.solver.PoseEstimate`: ``ok`` False when the frame is lost (``reason`` says why), else
+            ``rvec``, ``tvec`` ``(3, 1)`` float64 object-to-camera (``x_cam = R x_obj + t``, OpenCV convention),
+            ``tvec`` in :attr:`units` (times :attr:`mm_per_unit`: mm).
+
+        Raises:
+            InputError: a frame of another size than :attr:`image_size` (``name`` names it in the message).
+        """
+        self.check_size(frame, "the frame is" if name is None else f"frame {name} is")
+        if self.frames == 0 and self.camera == "given":  # the given camera against the model's, at the frames' size
+            camera_matrix_for(
+                self._model_K, self.K, self.name, model_size=self._model_size, frame_size=frame.shape[1::-1]
+            )
+        est, self.correspondences = self.tracker.step(self.frames, frame, self.detector)
+        self.frames += 1
+        return est
+
+
+def open_tracker(
+    model: str | Path | part_model.PartModel,
+    K: np.ndarray | None = None,
+    *,
+    camera: str | Path | Calibration | None = None,
+    dist: np.ndarray | None = None,
+    image_size: tuple[int, int] | None = None,
+    detector: str = "features",
+    normalization: str | None = None,
+    n_features: int = 1000,
+    n_features_global: int = 0,
+    method: str | None = None,
+    min_inliers: int | None = None,
+    reprojection_error: float | None = None,
+) -> BoxTracker:
+    """The box tracker of ``alcn pose track`` (the command tracks with it): a part detector and a pose tracker with
+    the command's settings, the camera and the normalization. Its :meth:`BoxTracker.step` gives the pose of one
+    frame after another.
+
+    Args:
+        model: ``detector="features"``: a part model (``.npz`` of ``alcn pose build``, or a
+            :class:`~pose.model.PartModel`); ``detector="corners"``: a corner detector (``.onnx`` of
+            ``alcn pose train-corners``).
+        K: ``(3, 3)`` intrinsics (OpenCV pixel convention); default: the camera stored in the part model
+            (:func:`camera_matrix_for`), which holds for frames of the size it stores only.
+        camera: instead of ``K``: a ``camera.yaml`` of ``alcn calib camera`` or its
+            :class:`~calib.camera.Calibration` (intrinsics, distortion and the frames' size).
+        dist: ``K``'s distortion coefficients (OpenCV order), or None.
+        image_size: ``(width, height)`` the calibration of ``K`` and ``dist`` is for; frames of another size are an
+            error.
+        normalization: the normalization applied first, ``NAME[:KEY=VALUE...]`` (default: the one the model was
+            made after, recorded in it; a part model tracked after another one warns, a corner detector's is an
+            error).
+        n_features: keypoints per frame kept around the predicted box (0: all); ``n_features_global``: those kept
+            where the whole frame is searched (first frame, tracking lost; 0: all, each a match against every
+            descriptor of the model, the cost of a frame without the box).
+        method, reprojection_error: the RANSAC variant and inlier threshold (px); default
+            :class:`~pose.solver.PoseSolver`'s. ``min_inliers``: default :data:`MIN_INLIERS` of the detector.
+
+    Raises:
+        InputError: settings out of range, a corner detector given as a part model, a model without a camera and
+            no ``K``, a calibration that is not one.
+
+    Example: the cookie box, its model ``cb/model.npz`` built from its video (it stores the camera) by
+    ``alcn pose build ../shared/data/cookie_box/box.mp4 cb/model.npz --box-ply ../shared/data/cookie_box/box.ply``
+    with the options of :data:`pose.build.COOKIE_BOX` (:func:`pose.build.build_options`; ``--box-units cm``)::
+
+        import cv2
+        from pose.track import open_tracker
+
+        box = open_tracker("cb/model.npz")  # the camera of the model; K=, camera="camera.yaml": another
+        video = cv2.VideoCapture("../shared/data/cookie_box/box.mp4")
+        while (frame := video.read()[1]) is not None:
+            est = box.step(frame)
+            if est.ok:  # rvec, tvec (3, 1): object to camera, tvec in box.units (cm here)
+                R, t_mm = cv2.Rodrigues(est.rvec)[0], est.tvec.ravel() * box.mm_per_unit
+                print(box.frames - 1, R.round(3).tolist(), t_mm.round(1).tolist())
+            else:
+                print(box.frames - 1, "lost:", est.reason)
+    """
+    # `not > 0`: a NaN threshold fails too (every point would be an outlier)
+    if (
+        (reprojection_error is not None and not reprojection_error > 0)
+        or n_features < 0
+        or n_features_global < 0
+        or (min_inliers is not None and min_inliers < 4)
+    ):
+        raise InputError(
+            "reprojection_error must be > 0 px, n_features and n_features_global >= 0 (0: all) and min_inliers >= 4 "
+            f"(a pose needs 4 points); got {reprojection_error}, {n_features}, {n_features_global} and {min_inliers}"
+        )
+    if camera is not None:
+        if K is not None or dist is not None or image_size is not None:
+            raise InputError("give the camera either as camera= (a calibration) or as K= (with dist, image_size)")
+        from calib.camera import load_calibration
+
+        camera = load_calibration(camera)
+        K, dist, image_size = camera.K, camera.dist, camera.image_size
+    name = str(model) if isinstance(model, (str, Path)) else "the part model"
+    model_size = None
+    if detector == "features":
+        if isinstance(model, (str, Path)) and Path(model).suffix.lower() == ".onnx":
+            raise InputError(f"{model} is a corner detector: track with it by --detector corners")
+        pm = model if isinstance(model, part_model.PartModel) else part_model.load(model)
+        det: PartDetector = FeaturePartDetector(
+            pm, normalization or pm.normalization, n_features=n_features, n_features_global=n_features_global
+        )
+        if normalization is not None and not same_method(normalization, pm.normalization):
+            logger.warning(
+                "%s was built after the normalization %r; tracking after %r, its descriptors may not match",
+                name,
+                pm.normalization,
+                normalization,
+            )
+        normalization = normalization or pm.normalization
+        corners, units = pm.corners, pm.units
+        model_K, model_size = pm.extra.get("K"), pm.extra.get("image_size")
+    elif detector == "corners":
+        from pose.corners import CornerDetector
+
+        if isinstance(model, part_model.PartModel):
+            raise InputError("--detector corners tracks with a corner detector (.onnx), not a part model")
+        cd = CornerDetector(model)
+        if normalization not in (None, cd.normalization_spec):
+            raise InputError(
+                f"{model} was trained after the normalization {cd.normalization_spec!r}, not {normalization!r}"
+            )
+        det, normalization, corners, units = cd, cd.normalization_spec, cd.corners, cd.units
+        model_K = None
+    else:
+        raise InputError(f"unknown detector {detector!r}; choose 'features' or 'corners'")
+    given = K is not None
+    if not given and model_size is not None:  # the model's camera: it holds for frames of its size only
+        image_size = model_size
+    K = camera_matrix_for(model_K, K, name) if not given else np.asarray(K, np.float64)
+    tracker = make_tracker(
+        detector,
+        K,
+        corners,
+        dist=dist,
+        method=method,
+        min_inliers=min_inliers,
+        reprojection_error=reprojection_error,
+    )
+    return BoxTracker(
+        det,
+        tracker,
+        kind=detector,
+        name=name,
+        normalization=normalization,
+        corners=np.asarray(corners, np.float64),
+        units=units,
+        dist=dist,
+        image_size=None if image_size is None else (int(image_size[0]), int(image_size[1])),
+        camera="given" if given else "model",
+        model_K=None if model_K is None else np.asarray(model_K, np.float64),
+        model_size=None if model_size is None else (int(model_size[0]), int(model_size[1])),
+    )
+
+
 def main(
     model_path: str | Path,
     source: str | Path,
     output: str | Path,
     K: np.ndarray | None = None,
     *,
+    camera: str | Path | Calibration | None = None,
     normalization: str | None = None,
     overlay: str | Path | None = None,
+    overwrite: bool = False,
     method: str | None = None,
     n_features: int = 1000,
+    n_features_global: int = 0,
     min_inliers: int | None = None,
     reprojection_error: float | None = None,
     dist: np.ndarray | None = None,
     detector: str = "features",
     image_size: tuple[int, int] | None = None,
+    step: int = 1,
+    max_frames: int | None = None,
     progress: bool = True,
 ) -> dict:
     """Track the box through ``source`` and write ``output`` (scene_gt JSON, keyed by the frame
     names of :func:`alcn_cv.io.iter_frames`: ``frame_000000``, ... for a video, the file stems for a
-    folder; the overlay PNGs are named alike). Its translations are in the model's units (``units`` in the
-    ``_info.json`` beside it), where BOP's own are millimetres.
+    folder; the overlay PNGs are named alike). Its rotations ``cam_R_m2c`` and translations ``cam_t_m2c`` are
+    object-to-camera, the translations in mm as BOP's (:data:`POSE_UNITS`; the model's units are
+    ``model_units`` in the ``_info.json`` beside it).
 
     Args:
-        model_path: ``detector="features"``: a part model (``.npz``, ``alcn pose build``);
-            ``detector="corners"``: a corner detector (``.onnx``, ``alcn pose train-corners``).
-        normalization: the normalization applied first (default: the one the model was made after, recorded in it; a
-            part model tracked after another one warns, a corner detector's is an error).
-        K: ``(3, 3)`` intrinsics; default: those stored in the part model (:func:`camera_matrix_for`).
-        min_inliers: default :data:`MIN_INLIERS` of the detector.
-        method, reprojection_error: the RANSAC variant and inlier threshold (px); default
-            :class:`~pose.solver.PoseSolver`'s.
-        image_size: ``(width, height)`` the calibration of ``K`` and ``dist`` is for; frames of another size are an
-            error.
+        model_path, K, camera, dist, image_size, detector, normalization, n_features, n_features_global, method,
+            min_inliers, reprojection_error: the tracker's (:func:`open_tracker`).
+        overlay: a video or a folder of PNGs (:class:`OverlayWriter`) to draw the box into.
+        overwrite: replace an overlay folder of an earlier run (otherwise an error).
+        step, max_frames: track every ``step``-th frame, at most ``max_frames`` of them (default all).
 
     Returns:
-        A summary dict: frames, tracked frames, the most frequent reason a frame was lost, fps, events.
+        A summary dict: frames, tracked frames, the most frequent reason a frame was lost, fps, events, where the
+        poses and the overlay were written, the units of the poses (``translation_units``) and the model's.
 
     Raises:
         InputError: an output that is the input, a suffix other than ``.json`` (the poses) or a video's (the
-            overlay, unless it has none or is an existing folder), frames of another size than the camera's, or
-            settings out of range.
+            overlay, unless it has none or is an existing folder), an overlay folder that holds files (without
+            ``overwrite``, or other files than PNGs), frames of another size than the camera's, or settings out of
+            range.
     """
     output = output_path(output, ".json", "the poses")  # before the tracking, not after it
     if overlay is not None:
-        overlay = _overlay_path(overlay, source)
-    # `not > 0`: a NaN threshold fails too (every point would be an outlier)
-    if (
-        (reprojection_error is not None and not reprojection_error > 0)
-        or n_features < 0
-        or (min_inliers is not None and min_inliers < 4)
-    ):
-        raise InputError(
-            "reprojection_error must be > 0 px, n_features >= 0 (0: all) and min_inliers >= 4 (a pose needs 4 points); "
-            f"got {reprojection_error}, {n_features} and {min_inliers}"
-        )
-    model_size = None
-    if detector == "features":
-        if Path(model_path).suffix.lower() == ".onnx":
-            raise InputError(f"{model_path} is a corner detector: track with it by --detector corners")
-        model = part_model.load(model_path)
-        det: PartDetector = FeaturePartDetector(model, normalization or model.normalization, n_features=n_features)
-        if normalization is not None and not same_method(normalization, model.normalization):
-            logger.warning(
-                "%s was built after the normalization %r; tracking after %r, its descriptors may not match",
-                model_path,
-                model.normalization,
-                normalization,
-            )
-        normalization = normalization or model.normalization
-        corners, units = model.corners, model.units
-        model_K, model_size = model.extra.get("K"), model.extra.get("image_size")
-    elif detector == "corners":
-        from pose.corners import CornerDetector
-
-        det = CornerDetector(model_path)
-        if normalization not in (None, det.normalization_spec):
-            raise InputError(
-                f"{model_path} was trained after the normalization {det.normalization_spec!r}, not {normalization!r}"
-            )
-        normalization, corners, units = det.normalization_spec, det.corners, det.units
-        model_K = None
-    else:
-        raise InputError(f"unknown detector {detector!r}; choose 'features' or 'corners'")
-    if K is None and model_size is not None:  # the model's camera: it holds for frames of its size only
-        image_size = tuple(model_size)
+        overlay = _overlay_path(overlay, source, overwrite)
+    if isinstance(step, bool) or not isinstance(step, int) or step < 1 or (max_frames is not None and max_frames < 1):
+        raise InputError(f"step and max_frames must be at least 1; got {step} and {max_frames}")
+    box = open_tracker(
+        model_path,
+        K,
+        camera=camera,
+        dist=dist,
+        image_size=image_size,
+        detector=detector,
+        normalization=normalization,
+        n_features=n_features,
+        n_features_global=n_features_global,
+        method=method,
+        min_inliers=min_inliers,
+        reprojection_error=reprojection_error,
+    )
     scene_gt, info = {}, {}
     times = []
     with contextlib.ExitStack() as stack:
-        reader: io.FrameReader | None = None
-        frames: Iterator[tuple[str, np.ndarray]]
-        if image_size is not None:
-            image_size = tuple(int(v) for v in image_size)
-            of = "the calibration" if K is not None else f"the camera of {model_path}"
-            # the source opened once: its first frame checked before the tracking, then tracked with the rest
-            reader = stack.enter_context(io.FrameReader(source))
-            first = next(reader)
-            # the first frame before the tracking, a folder's others as they come
-            _check_frame_size(first[1], image_size, f"the frames of {source} are", of)
-            frames = itertools.chain([first], reader)
-        K = camera_matrix_for(model_K, K, model_path)
-        tracker = make_tracker(
-            detector,
-            K,
-            corners,
-            dist=dist,
-            method=method,
-            min_inliers=min_inliers,
-            reprojection_error=reprojection_error,
-        )
-        if reader is None:
-            reader = frames = stack.enter_context(io.FrameReader(source))
-        # the overlay video plays at the input's frame rate; a folder of images has none: 30 fps
-        writer = stack.enter_context(OverlayWriter(overlay, reader.fps or 30.0)) if overlay is not None else None
-        for res, frame in track(frames, det, tracker, io.count_frames(source), progress):
-            if image_size is not None:  # a folder's images may differ in size: the camera holds for one
-                _check_frame_size(frame, image_size, f"frame {res.name} of {source} is", of)
-            scene_gt[res.name] = pose_to_bop(res.estimate)
+        # the source opened once: its first frame checked before the tracking, then tracked with the rest
+        reader = stack.enter_context(io.FrameReader(source, step, max_frames))
+        first = next(reader)
+        box.check_size(first[1], f"the frames of {source} are")
+        frames = itertools.chain([first], reader)
+        # the overlay video plays at the input's frame rate (of the frames kept); a folder of images has none: 30 fps
+        fps = reader.fps / step if reader.fps else 30.0
+        writer = stack.enter_context(OverlayWriter(overlay, fps, overwrite=overwrite)) if overlay is not None else None
+        for res, frame in track(frames, box, io.count_frames(source, step, max_frames), progress, source):
+            scene_gt[res.name] = pose_to_bop(res.estimate, mm_per_unit=box.mm_per_unit)
             info[res.name] = {
                 "inliers": len(res.estimate.inliers),
                 "matches": res.estimate.num_matches,
@@ -453,25 +733,32 @@ def main(
             if writer is not None:
                 vis = frame.copy()
                 if res.estimate.ok:
-                    draw_box(vis, corners, res.estimate.rvec, res.estimate.tvec, K, color_for(normalization), dist=dist)
+                    color = color_for(box.normalization)
+                    draw_box(vis, box.corners, res.estimate.rvec, res.estimate.tvec, box.K, color, dist=box.dist)
                 writer.write(res.name, vis)
     write_json(output, scene_gt)  # its folder made by the atomic write
     tracked = sum(bool(v) for v in scene_gt.values())
     # the reasons carry their frame's counts: grouped by their words, the first of the most frequent group
     lost = [(re.sub(r"[\d.]+%?", "#", r), r) for r in (f["lost_reason"] for f in info.values()) if r]
     most = Counter(words for words, _ in lost).most_common(1)[0][0] if lost else None
+    info_path = output.with_name(output.stem + "_info.json")
     summary = {
         "frames": len(scene_gt),
         "tracked": tracked,
         "lost_reason": next((r for words, r in lost if words == most), None),
         "fps": len(times) / max(sum(times), 1e-9),
-        "normalization": normalization,
+        "normalization": box.normalization,
         "detector": detector,
         "model": str(model_path),
-        "units": units,
-        "events": [{"frame": f, "event": e, "reason": r} for f, e, r in tracker.events],
+        "camera": box.camera,
+        "translation_units": POSE_UNITS,
+        "model_units": box.units,
+        "poses": str(output),
+        "info": str(info_path),
+        "overlay": None if overlay is None else str(overlay),
+        "events": [{"frame": f, "event": e, "reason": r} for f, e, r in box.events],
     }
-    write_json(output.with_name(output.stem + "_info.json"), {"summary": summary, "machine": machine(), "frames": info})
+    write_json(info_path, {"summary": summary, "machine": machine(), "frames": info})
     # the caller reports the summary (`alcn pose track` prints it): logged at INFO it was printed twice
     logger.debug("tracked %d of %d frames at %.1f fps -> %s", tracked, len(scene_gt), summary["fps"], output)
     return summary

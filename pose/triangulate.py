@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +33,7 @@ from alcn_cv import io
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError
 from alcn_cv.io import make_folder, to_gray
+from calib import colmap_log
 from pose.parts import create_feature, match_descriptors
 from pose.sequence import TrainingSequence
 
@@ -45,39 +45,13 @@ logger = logging.getLogger(__name__)
 #: Seed of pycolmap's RANSAC (verification) and mapping, so that a model builds the same every time.
 RANDOM_SEED = 0
 
-#: glog's first letter of a line -> the level it is logged at (pycolmap's warnings are routine:
-#: "Discarding reconstruction due to insufficient size").
-_GLOG_LEVELS = {"I": logging.DEBUG, "W": logging.DEBUG, "E": logging.WARNING, "F": logging.ERROR}
-
 
 @contextlib.contextmanager
 def pycolmap_log() -> Iterator[None]:
-    """Send pycolmap's log (glog) of the block to this module's logger instead of stderr.
-
-    glog writes into a temporary file (``pycolmap.logging.set_log_destination``), read back and
-    logged line by line when the block ends (info and warnings at debug level, errors as
-    warnings). glog's separate warning and error files are turned off (the info file holds every
-    severity).
-    """
-    import pycolmap
-
-    glog = pycolmap.logging
-    saved = glog.logtostderr, glog.alsologtostderr, glog.stderrthreshold
-    with tempfile.TemporaryDirectory(prefix="alcn_pycolmap_log_") as tmp:
-        glog.logtostderr, glog.alsologtostderr, glog.stderrthreshold = False, False, int(glog.FATAL)
-        for severity in (glog.WARNING, glog.ERROR):
-            glog.set_log_destination(severity, "")
-        glog.set_log_destination(glog.INFO, str(Path(tmp) / "pycolmap."))
-        try:
-            yield
-        finally:
-            glog.set_log_destination(glog.INFO, "")  # closes (flushes) the file
-            glog.logtostderr, glog.alsologtostderr, glog.stderrthreshold = saved
-            for path in sorted(Path(tmp).iterdir()):
-                for line in path.read_text(errors="replace").splitlines():
-                    level = _GLOG_LEVELS.get(line[:1])
-                    if level is not None and line[1:2].isdigit():  # skips the file's header lines
-                        logger.log(level, "pycolmap: %s", line.split("] ", 1)[-1])
+    """Send pycolmap's log (glog) of the block to this module's logger instead of stderr and glog's own files in the
+    temporary folder (:func:`calib.colmap_log.pycolmap_log`: info and warnings at debug level, errors as warnings)."""
+    with colmap_log.pycolmap_log(logger):
+        yield
 
 
 @dataclass

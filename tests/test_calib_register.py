@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -212,3 +213,36 @@ def test_sfm_without_a_calibration_estimates_one_focal_length(shared_data, tmp_p
     assert K[0, 0] == K[1, 1]
     assert K[0, 0] == pytest.approx(truth[0, 0], rel=0.01) and K[1, 1] == pytest.approx(truth[1, 1], rel=0.01)
     np.testing.assert_allclose(K[:2, 2], [(640 - 1) / 2, (480 - 1) / 2])  # held at the image centre
+
+
+@pytest.mark.shared_data
+def test_sfm_leaves_no_glog_files_and_no_warning_about_threads(shared_data, tmp_path, run_python):
+    """Every `alcn calib register --method sfm` left pycolmap's (glog) log files in the temporary folder and printed
+    COLMAP's six-line warning about SIFT on every thread; then `alcn pose build` read its arbitrary units as mm."""
+    import tempfile
+
+    out = tmp_path / "reg"
+    proc = run_python(
+        """
+        import os, sys
+        from alcn_cv.cli import main
+        print(os.getpid())
+        code = main(["calib", "register", sys.argv[1], "--out", sys.argv[2], "--method", "sfm", "--step", "40",
+                     "--max-frames", "6", "--no-progress"])
+        print(code)
+        """,
+        shared_data / "cookie_box" / "box.mp4",
+        out,
+        blocked=(),
+    )
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.split("\n")
+    pid, code = lines[0], proc.stdout.split()[-1]
+    assert code == "0", proc.stderr
+    assert not list(Path(tempfile.gettempdir()).glob(f"*.log.*.{pid}"))
+    assert "threads" not in proc.stderr and "feature_extraction" not in proc.stderr
+    assert "no known length given" in proc.stderr  # our warning stays
+    assert json.loads((out / "registration.json").read_text())["units"] == "arbitrary"
+    from alcn_cv.cli import main
+
+    assert main(["pose", "build", str(out), str(tmp_path / "m.npz"), "--box-size", "18.9", "25.8", "7.5"]) == 2

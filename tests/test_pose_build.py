@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from alcn_cv.errors import DatasetError, InputError
+from box_points import box_faces
 from pose import box_fit, build, plots, sequence, triangulate
 from pose import model as pm
 from pose.evaluate import relight
@@ -17,13 +18,7 @@ from pose.evaluate import relight
 def _box_surface(rng, size=(140.0, 95.0, 55.0), n=600):
     """Points on the 5 visible faces of a box standing on a plane, plus a large support plane."""
     size = np.asarray(size)
-    face = rng.integers(0, 5, n)
-    p = rng.uniform(0, 1, (n, 3)) * size
-    p[face == 0, 2] = size[2]
-    p[face == 1, 0] = 0
-    p[face == 2, 0] = size[0]
-    p[face == 3, 1] = 0
-    p[face == 4, 1] = size[1]
+    p = box_faces(rng, size, n)
     plane = np.c_[rng.uniform(-400, 500, (700, 2)), np.zeros(700)]
     under = (plane[:, 0] > -5) & (plane[:, 0] < size[0] + 5) & (plane[:, 1] > -5) & (plane[:, 1] < size[1] + 5)
     plane = plane[~under]
@@ -270,3 +265,81 @@ def test_the_cookie_box_preset_is_the_tutorials_camera_and_alcn_pose_builds_from
     given = {k: calls[0][k] for k in conf}
     assert np.array_equal(given.pop("K"), conf["K"])  # bit for bit: the floats written with repr
     assert given == {k: v for k, v in conf.items() if k != "K"}
+
+
+def test_a_video_builds_from_a_camera_yaml_with_its_distortion(shared_data, tmp_path, monkeypatch, capsys):
+    """`pose build` had --K but not the --camera that `pose track` takes: K from camera.yaml, its distortion given to
+    the reconstruction (pycolmap's OPENCV camera), frames of another size refused; --K with --camera refused."""
+    pytest.importorskip("pycolmap")
+    from alcn_cv.cli import main
+    from calib.camera import write_camera_yaml
+
+    video = shared_data / "cookie_box" / "box.mp4"
+    K = np.array([[600.0, 0, 320], [0, 600.0, 240], [0, 0, 1]])
+    dist = np.array([-0.1, 0.02, 0.0, 0.0, 0.0])
+    camera = write_camera_yaml(tmp_path / "camera.yaml", K, dist, (640, 480))
+    seen = []
+
+    def stop(seq, **kwargs):
+        seen.append(seq)
+        raise StopError
+
+    monkeypatch.setattr(build, "build", stop)
+    with pytest.raises(StopError):
+        build.main(video, tmp_path / "m.npz", camera=camera, step=200, max_frames=3, box_size=(18.9, 25.8, 7.5))
+    assert len(seen[0].views) == 3
+    for view in seen[0].views:
+        np.testing.assert_array_equal(view.K, K)
+        np.testing.assert_array_equal(view.dist, dist)
+    from alcn_cv.formats.colmap import camera_from_opencv
+
+    assert camera_from_opencv(K, seen[0].views[0].dist, 640, 480).model == "OPENCV"  # what the database gets
+    write_camera_yaml(tmp_path / "small.yaml", K, dist, (320, 240))
+    with pytest.raises(InputError, match="640x480 but .*small.yaml is for 320x240"):
+        build.main(video, tmp_path / "m.npz", camera=tmp_path / "small.yaml", step=200, max_frames=3)
+    with pytest.raises(InputError, match="--K or --camera, not both"):
+        build.main(video, tmp_path / "m.npz", K=K, camera=camera)
+    with pytest.raises(SystemExit) as exc:
+        main(["pose", "build", str(video), str(tmp_path / "m.npz"), "--K", "1", "1", "1", "1", "--camera", str(camera)])
+    assert exc.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
+    # the command reads the file the same way (calib.camera.load_calibration, as `pose track --camera`)
+    seen.clear()
+    with pytest.raises(StopError):
+        main(
+            [
+                "pose",
+                "build",
+                str(video),
+                str(tmp_path / "m.npz"),
+                "--camera",
+                str(camera),
+                "--step",
+                "200",
+                "--max-frames",
+                "3",
+                "--box-size",
+                "18.9",
+                "25.8",
+                "7.5",
+            ]
+        )
+    np.testing.assert_array_equal(seen[0].views[0].dist, dist)
+
+
+def test_a_camera_given_for_a_registered_sequence_is_said_to_be_ignored(shared_data, tmp_path, caplog, build_stops):
+    from calib.camera import write_camera_yaml
+
+    camera = write_camera_yaml(tmp_path / "camera.yaml", np.eye(3), np.zeros(5), (640, 480))
+    with caplog.at_level("WARNING", logger="pose.build"), pytest.raises(StopError):
+        build.main(shared_data / "middlebury" / "templeSparseRing", tmp_path / "m.npz", camera=camera)
+    assert "a registered sequence; camera apply to a video only, ignored" in caplog.text
+
+
+def test_the_command_prints_where_the_cameras_plot_is(tmp_path, monkeypatch, capsys):
+    """The last line gave the cameras' plot as `model_cameras.png`, without its folder."""
+    from alcn_cv.cli import main
+
+    out = tmp_path / "models" / "box.npz"
+    monkeypatch.setattr(build, "main", lambda *args, **kwargs: out)
+    assert main(["pose", "build", "box.mp4", str(out), "--K", "1", "1", "1", "1", "--box-size", "1", "2", "3"]) == 0
+    assert f"its cameras: {tmp_path / 'models' / 'box_cameras.png'})" in capsys.readouterr().out

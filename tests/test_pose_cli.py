@@ -71,3 +71,18 @@ def test_help_texts(capsys):
         main(["pose", "build", "--help"])
     out = " ".join(capsys.readouterr().out.split())
     assert "--box-size (default: cm for a video" in out
+
+
+def test_build_help_says_what_the_box_options_and_the_camera_mean(capsys):
+    """--box-ply's help said "its true size" where a registered sequence takes it as the box placed in its frame; the
+    thresholds of the box fit the help gives are pose.build's."""
+    from pose import build
+
+    with pytest.raises(SystemExit):
+        main(["pose", "build", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "For a registered sequence: the box placed in the sequence's world frame" in out
+    assert "for poses in another frame use --box-size" in out
+    assert "--K FX FY CX CY | --camera CAMERA" in out and "its lens distortion" in out
+    assert f"more than {build.BOX_FIT_WARNING:.0%} off the known size is warned" in out
+    assert f"more than {build.BOX_FIT_FAILURE:.0%} off on the edges its points cover, the build fails" in out

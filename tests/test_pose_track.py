@@ -397,3 +397,171 @@ def test_the_trackers_solver_takes_the_solvers_defaults_by_keyword():
     )
     with pytest.raises(TypeError):
         track.make_tracker("features", K, None, None, "ransac_sqpnp")  # type: ignore[misc]
+
+
+def _frames(tmp_path, n, name="frames", size=None):
+    """A folder of ``n`` rendered frames of :func:`_texture`'s box (resized to ``size`` when given)."""
+    tex = _texture()
+    folder = tmp_path / name
+    folder.mkdir()
+    for i, (r, t) in enumerate(_poses(n)):
+        frame = _render(tex, r, t)
+        cv2.imwrite(str(folder / f"{i:04d}.png"), frame if size is None else cv2.resize(frame, size))
+    return folder
+
+
+def test_an_overlay_folder_is_never_mixed_with_an_earlier_runs_frames(tmp_path, monkeypatch):
+    """A user's walk: a run on a 60-frame video into the overlay folder of a 110-frame run exited 0 with 110 PNGs in
+    it, 50 of them stale. A folder of an earlier run is refused, replaced whole with overwrite, left as it was by an
+    interrupted run, and a folder of other files is never replaced."""
+    pm.save(_planar_model(_texture()), tmp_path / "m.npz")
+    long, short = _frames(tmp_path, 4, "long"), _frames(tmp_path, 2, "short")
+    ov = tmp_path / "ov"
+    track.main(tmp_path / "m.npz", long, tmp_path / "a.json", K, overlay=ov, n_features=800, progress=False)
+    assert len(list(ov.glob("*.png"))) == 4
+    with pytest.raises(InputError, match=r"overlay .*ov exists \(--overwrite"):
+        track.main(tmp_path / "m.npz", short, tmp_path / "b.json", K, overlay=ov, n_features=800, progress=False)
+    assert len(list(ov.glob("*.png"))) == 4 and not (tmp_path / "b.json").exists()
+
+    def interrupted(self, frame, *, name=None):
+        if self.frames == 1:
+            raise KeyboardInterrupt
+        self.frames += 1
+        return track.PoseEstimate(False, reason="test")
+
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with monkeypatch.context() as m:
+        m.setattr(track.BoxTracker, "step", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            track.main(tmp_path / "m.npz", short, tmp_path / "b.json", K, overlay=ov, overwrite=True, progress=False)
+    assert sorted(p.name for p in ov.iterdir()) == [f"{i:04d}.png" for i in range(4)]  # as it was
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no temporary folder or poses left
+    track.main(tmp_path / "m.npz", short, tmp_path / "b.json", K, overlay=ov, overwrite=True, n_features=800)
+    assert sorted(p.name for p in ov.iterdir()) == ["0000.png", "0001.png"]
+    (ov / "notes.txt").write_text("mine")
+    with pytest.raises(InputError, match="not an earlier overlay"):
+        track.main(tmp_path / "m.npz", short, tmp_path / "c.json", K, overlay=ov, overwrite=True)
+    assert (ov / "notes.txt").is_file()
+
+
+def test_poses_are_written_in_mm_whatever_the_models_units(tmp_path):
+    """poses.json called itself BOP scene_gt-style but held the model's units (cm for the cookie box); BOP's are mm.
+    The overlay error reads them back in the model's units, and the poses of an earlier track in the model's units
+    (an _info.json without translation_units) as they were."""
+    from pose.overlay import _camera_and_poses
+
+    model = _planar_model(_texture()).scaled_to("cm")
+    model.extra["K"] = K.tolist()
+    pm.save(model, tmp_path / "m.npz")
+    frames = _frames(tmp_path, 3)
+    summary = track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800, progress=False)
+    assert (summary["translation_units"], summary["model_units"]) == ("mm", "cm")
+    poses = json.loads((tmp_path / "p.json").read_text())
+    for i, (_, t) in enumerate(_poses(3)):
+        assert np.linalg.norm(np.array(poses[f"{i:04d}"][0]["cam_t_m2c"]) - t.ravel()) < 6.0  # mm, as rendered
+    read = _camera_and_poses(tmp_path / "m.npz", tmp_path / "p.json")[2]
+    assert np.allclose(read["0000"][1].ravel() * 10, poses["0000"][0]["cam_t_m2c"])  # cm, the model's
+    info = json.loads((tmp_path / "p_info.json").read_text())
+    del info["summary"]["translation_units"]  # an earlier track's: the model's units
+    (tmp_path / "p_info.json").write_text(json.dumps(info))
+    assert np.allclose(track.read_poses(tmp_path / "p.json", "cm")["0000"][1].ravel(), poses["0000"][0]["cam_t_m2c"])
+
+
+def test_track_takes_max_frames_and_step(tmp_path, capsys):
+    from alcn_cv.cli import main
+
+    pm.save(_planar_model(_texture()), tmp_path / "m.npz")
+    frames = _frames(tmp_path, 6)
+    argv = ["pose", "track", str(tmp_path / "m.npz"), str(frames), str(tmp_path / "p.json"), "--no-progress"]
+    argv += ["--K", "500", "500", "159.5", "119.5", "--n-features", "800"]
+    assert main([*argv, "--max-frames", "2"]) == 0
+    assert list(json.loads((tmp_path / "p.json").read_text())) == ["0000", "0001"]
+    assert main([*argv, "--step", "2", "--max-frames", "2"]) == 0
+    assert list(json.loads((tmp_path / "p.json").read_text())) == ["0000", "0002"]
+    with pytest.raises(SystemExit):
+        main([*argv, "--max-frames", "0"])
+
+
+def test_the_summary_names_the_outputs_the_units_and_the_next_step(tmp_path, capsys):
+    from alcn_cv.cli import main
+
+    model = _planar_model(_texture()).scaled_to("cm")
+    model.extra["K"] = K.tolist()
+    pm.save(model, tmp_path / "m.npz")
+    frames = _frames(tmp_path, 2)
+    out = tmp_path / "out" / "poses.json"
+    argv = ["pose", "track", str(tmp_path / "m.npz"), str(frames), str(out), "--no-progress", "--n-features", "800"]
+    assert main([*argv, "--overlay", str(tmp_path / "ov")]) == 0
+    text = capsys.readouterr().out
+    assert f"poses: {out}" in text and "cam_t_m2c in mm" in text and "the model is in cm" in text
+    assert str(out.with_name("poses_info.json")) in text and f"overlay: {tmp_path / 'ov'}" in text
+    assert "alcn pose overlay-error" in text and f"--run track {tmp_path / 'm.npz'} {out}" in text
+    assert main([*argv, "--K", "500", "500", "159.5", "119.5"]) == 0  # another camera: overlay-error's is the model's
+    assert "overlay-error" not in capsys.readouterr().out
+
+
+def test_frames_of_another_size_than_the_models_name_the_camera_that_works(tmp_path, caplog):
+    """Half-size frames tracked with --K warned "leave out --K/--camera to track with the model's", but leaving them
+    out was an error: both name the model's camera resized to the frames."""
+    model = _planar_model(_texture())
+    model.extra["K"], model.extra["image_size"] = K.tolist(), list(SIZE)
+    pm.save(model, tmp_path / "m.npz")
+    frames = _frames(tmp_path, 2, size=(160, 120))
+    half = "--K 250.00 250.00 79.50 59.50"
+    with pytest.raises(InputError, match=f"the model's camera resized to them.*{half}"):
+        track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", progress=False)
+    with caplog.at_level("WARNING", logger="pose.track"):
+        track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", 0.7 * K, progress=False)
+    assert "differ from those" in caplog.text and f"give {half}" in caplog.text and "leave out" not in caplog.text
+    caplog.clear()
+    from pose.corners import scaled_camera
+
+    with caplog.at_level("WARNING", logger="pose.track"):
+        track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", scaled_camera(K, 0.5), progress=False)
+    assert "differ from those" not in caplog.text
+
+
+def test_open_tracker_is_what_the_command_tracks_with(tmp_path):
+    """FeaturePartDetector and PoseTracker built by hand had other defaults than the command (2000 keypoints, no
+    check of the guided poses); open_tracker is the command's tracker, and gives its poses frame by frame."""
+    from alcn_cv.cli import main
+
+    model = _planar_model(_texture()).scaled_to("cm")
+    model.extra["K"] = K.tolist()
+    pm.save(model, tmp_path / "m.npz")
+    frames = _frames(tmp_path, 4)
+    assert main(["pose", "track", str(tmp_path / "m.npz"), str(frames), str(tmp_path / "p.json"), "--no-progress"]) == 0
+    written = json.loads((tmp_path / "p.json").read_text())
+    box = track.open_tracker(tmp_path / "m.npz")
+    assert box.detector.n_features == 1000 and box.detector.n_features_global == 0
+    assert (box.tracker.trusted_guided_ratio, box.tracker.min_guided_ratio) == (0.6, 0.3)
+    assert box.camera == "model" and np.allclose(box.K, K) and box.units == "cm" and box.mm_per_unit == 10.0
+    for name, frame in io.iter_frames(frames):
+        est = box.step(frame)
+        assert est.ok
+        assert track.pose_to_bop(est, mm_per_unit=box.mm_per_unit) == written[name]
+    assert track.open_tracker(model, n_features_global=3000).detector.n_features_global == 3000  # a PartModel too
+    with pytest.raises(InputError, match="n_features_global >= 0"):
+        track.open_tracker(model, n_features_global=-1)
+
+
+def test_the_example_of_open_tracker_runs(tmp_path, capsys):
+    """open_tracker's docstring example, on a synthetic model and video in place of the cookie box's."""
+    import textwrap
+
+    model = _planar_model(_texture()).scaled_to("cm")
+    model.extra["K"] = K.tolist()
+    pm.save(model, tmp_path / "model.npz")
+    video = tmp_path / "box.avi"
+    writer = io.open_video_writer(video, 10.0, SIZE)
+    for r, t in _poses(3):
+        writer.write(_render(_texture(), r, t))
+    writer.release()
+    code = textwrap.dedent(track.open_tracker.__doc__.split("::\n", 1)[1])
+    assert "cb/model.npz" in code and "../shared/data/cookie_box/box.mp4" in code
+    code = code.replace("cb/model.npz", str(tmp_path / "model.npz"))
+    exec(code.replace("../shared/data/cookie_box/box.mp4", str(video)), {})
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 3 and "lost" not in lines[0]
+    t_mm = json.loads("[" + lines[0].rsplit("[", 1)[1])  # the last list printed: t in mm
+    assert np.linalg.norm(np.array(t_mm) - _poses(1)[0][1].ravel()) < 6.0  # mm, as rendered
