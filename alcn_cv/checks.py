@@ -87,7 +87,8 @@ def check_image(img: object) -> np.ndarray:
     if img.size == 0:
         raise InputError(f"image is empty (shape {img.shape})")
     if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 2, 3, 4)):
-        frames = " (frames stacked? apply each one, or ALCN.apply_batch)" if img.ndim in (3, 4) else ""
+        stacked = img.ndim == 4 or (img.ndim == 3 and img.shape[0] < min(img.shape[1:]) and img.shape[2] > 4)
+        frames = " (frames stacked? apply each one, or createALCN(backend='torch').apply_batch)" if stacked else ""
         raise InputError(
             f"image must be HxW, HxWx1, HxWx2 (gray, alpha), HxWx3 (BGR) or HxWx4 (BGRA), got shape {img.shape}{frames}"
         )

@@ -118,9 +118,9 @@ def missing_dependency(module: str, what: str, preferred: str | None = None) -> 
     top = module.split(".")[0]
     if extra is None:
         install = f"pip install {_DISTRIBUTIONS_OF.get(top, (top,))[0]}"
-        return MissingDependencyError(
-            f"{what}: needs {top}, which is not installed: {_torch_first(top == 'torch')}{install}"
-        )
+        if top == "torch":
+            install += f" (without a GPU: --index-url {TORCH_CPU_INDEX})"
+        return MissingDependencyError(f"{what}: needs {top}, which is not installed: {install}")
     installs_torch = "torch" in _extras_requirements().get(extra, set())
     error = MissingDependencyError(
         f"{what}: needs the [{extra}] extra ({top} is not installed): "
@@ -152,6 +152,15 @@ _INSTALL_OPENCV = (
 )
 
 
+def opencv_version() -> tuple[int, int, int]:
+    """The installed OpenCV's ``(major, minor, patch)``, from ``cv2.__version__`` (``"4.10.0"``, ``"5.0.0-alpha"``,
+    ``"4.8.0-dev"``: the numbers before any suffix)."""
+    import cv2
+
+    major, minor, patch = ([int(part) for part in re.findall(r"\d+", cv2.__version__)] + [0, 0, 0])[:3]
+    return major, minor, patch
+
+
 def require_opencv() -> None:
     """Raise one line saying how to install OpenCV when ``cv2`` is missing or older than
     :data:`OPENCV_MINIMUM`. alcn-cv requires no OpenCV wheel: it uses whichever of the four the
@@ -165,11 +174,10 @@ def require_opencv() -> None:
             f"alcn-cv needs OpenCV (the cv2 module), which is not installed: {_INSTALL_OPENCV}"
         )
     else:
+        if opencv_version() >= OPENCV_MINIMUM:
+            return
         import cv2
 
-        version = tuple(int(part) for part in re.findall(r"\d+", cv2.__version__)[:3])
-        if version >= OPENCV_MINIMUM:
-            return
         minimum = ".".join(map(str, OPENCV_MINIMUM))
         error = MissingDependencyError(
             f"alcn-cv needs OpenCV >= {minimum}, found {cv2.__version__}: upgrade it, or {_INSTALL_OPENCV}"

@@ -133,6 +133,8 @@ class ALCN2d(nn.Module):
     ) -> None:
         super().__init__()
         if isinstance(weights, NormalizerFile):
+            if model is not None:
+                raise InputError(f"give a model or a weight file, not both (model={model!r}, weights=its contents)")
             weight_file = weights
         else:
             weight_file = load_normalizer_file(resolve_weights(model, weights))

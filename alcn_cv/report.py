@@ -58,7 +58,7 @@ def spread_cell(spread: dict[str, Any] | None, digits: int = 3, runs: int | None
 
     Example:
         >>> spread_cell(spread([0.5, 0.7])), spread_cell(spread([0.5]))
-        ('0.600 ± 0.100', '0.500')
+        ('0.600 ± 0.141', '0.500')
     """
     if spread is None:
         return None
@@ -66,9 +66,16 @@ def spread_cell(spread: dict[str, Any] | None, digits: int = 3, runs: int | None
     return f"{spread['mean']:.{digits}f}" + ("" if one else f" ± {spread['std']:.{digits}f}")
 
 
+def sample_std(values: Sequence[float]) -> float:
+    """The sample standard deviation (``ddof=1``) of a few runs' values, one per seed (their population deviation
+    understates the spread of so few); 0 for one value. What every benchmark's ``±`` means."""
+    return float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
+
+
 def spread(values: list[float]) -> dict[str, Any] | None:
-    """``{"mean", "std", "values"}`` of a benchmark's runs (one per seed); None for none."""
-    return {"mean": float(np.mean(values)), "std": float(np.std(values)), "values": values} if values else None
+    """``{"mean", "std", "values"}`` of a benchmark's runs (one per seed; ``std``: :func:`sample_std`); None for
+    none."""
+    return {"mean": float(np.mean(values)), "std": sample_std(values), "values": values} if values else None
 
 
 def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]], digits: int = 3) -> str:

@@ -429,8 +429,8 @@ def resolve_weights(model: str | None, weights: str | Path | None) -> Path:
         raise InputError(f"give a model or a weight file, not both (model={model!r}, weights={str(weights)!r})")
     if weights is not None and not isinstance(weights, (str, os.PathLike)):  # createALCN(1.0), as cv2.createCLAHE(2.0)
         raise InputError(
-            f"weights must be the path of a weight file (.npz), got {type(weights).__name__} {weights!r}; "
-            "the other settings are keywords: createALCN(scale=...)"
+            f"weights must be the path of a weight file (.npz), got {type(weights).__name__} {weights!r} "
+            "(the other settings are keywords, as createALCN(scale=...))"
         )
     model = DEFAULT_MODEL if model is None else model
     if model not in MODELS:

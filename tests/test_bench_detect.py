@@ -278,7 +278,7 @@ def test_summarize_over_seeds():
     }
     cell = D.summarize(runs, settings, ["a", "b"])["dog|1|local"]
     assert cell["seeds"] == [0, 1] and cell["failed_seeds"] == [2]
-    assert cell["objects"]["a"]["mean"] == pytest.approx(0.3) and cell["objects"]["a"]["std"] == pytest.approx(0.1)
+    assert cell["objects"]["a"]["mean"] == pytest.approx(0.3) and cell["objects"]["a"]["std"] == pytest.approx(0.1 * 2**0.5)  # ddof=1
     assert cell["objects"]["b"]["values"] == [0.4]
     assert cell["mean"]["values"] == pytest.approx([0.3, 0.4])
 
@@ -362,7 +362,7 @@ def test_report_gives_mean_and_spread_over_seeds():
     }
     md = detect_markdown(_report_result(settings, runs, names=["a"]), ["a"])
     assert md.startswith("# Few-shot detection benchmark") and "(data)" not in md.splitlines()[0]
-    assert "| dog | 0.300 ± 0.100 | 0.300 ± 0.100 |" in md and "2 (0, 1)" in md
+    assert "| dog | 0.300 ± 0.141 | 0.300 ± 0.141 |" in md and "2 (0, 1)" in md  # the sample deviation
     # recorded in the space form of --seeds, which parses back to the same seeds
     assert "--seeds 0 1 --methods dog" in md and "`raw`: the normalized windows" in md
     assert build_parser().parse_args(shlex.split(detect_command("d", "o", settings))[1:]).seeds == [0, 1]

@@ -27,3 +27,5 @@ def test_a_stack_of_frames_given_to_apply_is_pointed_to_apply_batch():
 
     with pytest.raises(InputError, match=r"got shape \(4, 48, 64\) \(frames stacked\? .*apply_batch\)"):
         check_image(np.zeros((4, 48, 64), np.uint8))
+    with pytest.raises(InputError, match=r"got shape \(48, 64, 5\)$"):  # five channels, not a stack
+        check_image(np.zeros((48, 64, 5), np.uint8))

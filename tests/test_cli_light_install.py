@@ -84,7 +84,7 @@ def test_the_extras_that_bring_torch_say_how_to_install_its_cpu_build(monkeypatc
     monkeypatch.setattr(extras, "_extras_requirements", dict)  # alcn-cv not installed: the package named
     assert (
         str(missing_dependency("torch", "f"))
-        == f"f: needs torch, which is not installed: {TORCH_FIRST}pip install torch"
+        == f"f: needs torch, which is not installed: pip install torch (without a GPU: --index-url {TORCH_CPU_INDEX})"
     )
     assert "\n" not in TORCH_FIRST
 

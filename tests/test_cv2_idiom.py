@@ -99,15 +99,30 @@ def test_calib_report_needs_matplotlib_before_the_work(tmp_path, run_python):
     assert "matplotlib" not in proc.stderr, proc.stderr  # it goes on to the calibration (which fails on a blank image)
 
 
-@pytest.mark.parametrize("setting", ["scale", "backend", "grid_stride", "mixture", "threads", "weights_path"])
-def test_a_setting_changed_after_creation_is_refused_not_ignored(image, setting):
+@pytest.mark.parametrize(
+    ("setting", "argument"),
+    [
+        ("scale", "scale"),
+        ("sigmas", "scale"),
+        ("backend", "backend"),
+        ("grid_stride", "grid_stride"),
+        ("mixture", "mixture"),
+        ("threads", "threads"),
+        ("weights_path", "weights"),
+        ("model", "model"),  # createALCN's arguments, not attributes: as silently ignored
+        ("weights", "weights"),
+    ],
+)
+def test_a_setting_changed_after_creation_is_refused_not_ignored(image, setting, argument):
     """The runtime is built from the settings once: ``alcn.scale = 0.5`` would leave the output as it was (a user
-    used to CLAHE's setters tried it), so it raises and names the argument that does it."""
+    used to CLAHE's setters tried it), so setting or deleting one raises and names the argument that does it."""
     alcn = alcn_cv.createALCN()
     before = alcn.apply(image)
-    argument = "weights" if setting == "weights_path" else setting
     with pytest.raises(AttributeError, match=rf"createALCN\({argument}=\.\.\.\)"):
-        setattr(alcn, setting, getattr(alcn, setting))
+        setattr(alcn, setting, getattr(alcn, setting, "lite"))
+    if hasattr(alcn, setting):
+        with pytest.raises(AttributeError, match=rf"createALCN\({argument}=\.\.\.\)"):
+            delattr(alcn, setting)
     np.testing.assert_array_equal(alcn.apply(image), before)
 
 

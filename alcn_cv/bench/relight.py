@@ -78,7 +78,7 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import make_folder
-from alcn_cv.report import machine
+from alcn_cv.report import machine, sample_std
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -336,12 +336,14 @@ def evaluate_scene(norm: Normalization, scene: Scene, plans: Sequence[PairPlan],
     """Every protocol on one scene for one method, one value per plan (seed) and metric.
 
     The frames are normalized once (``apply``, float32) and reused by every plan; keypoints are
-    detected once per frame.
+    detected once per frame. ``ms_per_frame`` times them after one untimed call (a method built once serves every
+    scene: its first call's set-up, cv2.dnn's allocations or torch's start, is not a scene's time).
 
     Returns:
         ``{"metrics": {metric: [value per plan]}, "ms_per_frame": float}``, each value the mean over the plan's
         pairs, in percent but for :data:`COUNT_METRICS` (a count per pair).
     """
+    norm.apply(scene.frames[0], out_dtype=np.float32)
     start = time.perf_counter()
     normalized = [norm.apply(frame, out_dtype=np.float32) for frame in scene.frames]
     ms_per_frame = 1000 * (time.perf_counter() - start) / len(normalized)
@@ -518,10 +520,8 @@ def split_scenes(
 
 
 def _summary(values: Sequence[float]) -> dict[str, Any]:
-    """The seeds' values, their mean and their sample standard deviation (``ddof=1``: a few seeds' population
-    deviation understates the spread; 0 for one seed)."""
-    std = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
-    return {"seeds": [float(v) for v in values], "mean": float(np.mean(values)), "std": std}
+    """The seeds' values, their mean and their :func:`~alcn_cv.report.sample_std`."""
+    return {"seeds": [float(v) for v in values], "mean": float(np.mean(values)), "std": sample_std(values)}
 
 
 def main(
@@ -624,7 +624,7 @@ def main(
     backends: dict[str, str] = {}
     for scene, spec in tqdm(jobs, desc="relight", unit="method x scene", disable=not progress):
         try:
-            if spec not in built:  # a tuned spec: built at its first scene, reused for the others of its fold
+            if spec not in built:  # a tuned spec: built at its first scene, reused for every scene with the same spec
                 built[spec] = build_method(spec)
             norm = built[spec]
             if (backend := backend_of(norm)) is not None:

@@ -182,7 +182,7 @@ def write_report(result: dict[str, Any], out: Path) -> None:
             else "Identification only (no keypoint protocols). "
         )
         + (
-            f"Cells: mean ± standard deviation over seeds {s['seeds']}"
+            f"Cells: mean ± sample standard deviation over seeds {s['seeds']}"
             if len(s["seeds"]) > 1
             else f"Cells: one seed ({s['seeds'][0]}), so no spread"
         )

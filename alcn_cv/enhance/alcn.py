@@ -56,10 +56,21 @@ logger = logging.getLogger(__name__)
 
 BACKENDS = ("fast", "torch", "opencv")
 MIXTURES = ("exact", "pyramid")
-#: The attributes an :class:`ALCN` is built from, read-only once set (its runtime would not follow a change).
-_FIXED_SETTINGS = frozenset(
-    {"weights_path", "scale", "sigmas", "backend", "device", "grid_stride", "mixture", "threads", "spec"}
-)
+#: The attributes an :class:`ALCN` is built from, read-only once set (its runtime would not follow a change), and the
+#: arguments of :func:`createALCN` that set each; ``model`` and ``weights``, arguments only, are refused as attributes.
+_FIXED_SETTINGS = {
+    "weights_path": "weights",
+    "weights": "weights",
+    "model": "model",
+    "spec": "weights",
+    "sigmas": "scale",
+    "scale": "scale",
+    "backend": "backend",
+    "device": "device",
+    "grid_stride": "grid_stride",
+    "mixture": "mixture",
+    "threads": "threads",
+}
 #: The divisive floors of the whole image, the response's and the wide band's, while its strips are normalized
 #: (None: each call computes them from its own image); a context variable, so threads do not share them.
 _DIVISIVE_FLOORS: ContextVar[tuple[float | None, float | None]] = ContextVar(
@@ -82,8 +93,8 @@ class ALCN(Normalization):
         backend: ``"opencv"`` (no torch: the ONNX export beside the weight file run by ``cv2.dnn``, Eq. 3 in
             OpenCV), ``"fast"`` (the Normalizer in torch on the CPU, Eq. 3 in OpenCV; any grid stride, no ONNX
             file needed) or ``"torch"`` (:class:`alcn_cv.nn.ALCN2d` on ``device``). Default: ``"opencv"`` for a shipped
-            ``model`` without a ``grid_stride`` on OpenCV 4.8 or newer (faster than ``"fast"`` at every size
-            ``alcn bench speed`` runs, the same output to 1e-5), else ``"fast"`` where torch is installed.
+            ``model`` without a ``grid_stride`` on OpenCV 4.8 or newer (on OpenCV 5 faster than ``"fast"`` at every
+            size ``alcn bench speed`` runs, the same output to 1e-5), else ``"fast"`` where torch is installed.
         device: torch device of ``backend="torch"`` (``"cpu"``, ``"cuda"``); another device than the CPU selects
             that backend when none is given, as ``threads`` other than ``"auto"`` select ``"fast"``.
         grid_stride: spacing of the Normalizer's grid in working pixels, a multiple of its stride (default: its
@@ -97,6 +108,9 @@ class ALCN(Normalization):
             with ``backend="torch"``, which runs everything in torch. ``backend="opencv"`` runs no torch.
         A ``model`` other than the default beside ``weights`` is an error (the default itself cannot be told from
         a model not given).
+
+    The settings are fixed when the ALCN is created (its runtime is built from them): setting one afterwards raises
+    ``AttributeError``; create another ALCN instead.
 
     The gain family on ``backend="fast"`` and ``"opencv"`` also uses OpenCV's threads, as OpenCV's own parallel
     functions do: each image's rows are cut into one part per thread of ``cv2.getNumThreads()``
@@ -177,12 +191,21 @@ class ALCN(Normalization):
 
     def __setattr__(self, name: str, value: object) -> None:
         # the runtime is built from the settings once: a setting changed afterwards would not take effect
-        if name in _FIXED_SETTINGS and name in self.__dict__:
-            argument = "weights" if name == "weights_path" else name
-            raise AttributeError(
-                f"ALCN.{name} is fixed when the ALCN is created: createALCN({argument}=...) makes one with another"
-            )
+        if name in _FIXED_SETTINGS and (name in self.__dict__ or name in ("model", "weights")):
+            raise self._fixed(name)
         super().__setattr__(name, value)
+
+    def __delattr__(self, name: str) -> None:
+        if name in _FIXED_SETTINGS:
+            raise self._fixed(name)
+        super().__delattr__(name)
+
+    @staticmethod
+    def _fixed(name: str) -> AttributeError:
+        return AttributeError(
+            f"ALCN.{name} is fixed when the ALCN is created: createALCN({_FIXED_SETTINGS[name]}=...) makes one with "
+            "another"
+        )
 
     @property
     def equalization_tau(self) -> float | None:

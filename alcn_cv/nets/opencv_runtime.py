@@ -22,7 +22,6 @@ without spreading a one-channel full-resolution tensor over its blocked layout);
 from __future__ import annotations
 
 import math
-import re
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -31,7 +30,8 @@ import cv2
 import numpy as np
 
 from alcn_cv.checks import check_gray
-from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.errors import WeightFileError
+from alcn_cv.extras import opencv_version
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 from alcn_cv.row_parts import row_parts, run_parts
 from alcn_cv.weight_file import load_normalizer_file
@@ -57,9 +57,9 @@ WINDOW = 48
 _PROBE_POINTS = 3
 #: The input of the paper's Normalizer's export: the padded image.
 IMAGE_INPUT = "image"
-_OPENCV = tuple(int(part) for part in re.findall(r"\d+", cv2.__version__)[:2])
-#: Whether ``cv2.dnn`` runs the gain Normalizers' exports: from OpenCV 4.8 on (the ONNX importers of 4.5 to 4.7 fail
-#: on their ReduceMean or Mul).
+_OPENCV = opencv_version()
+#: Whether ``cv2.dnn`` runs the gain Normalizers' exports: from OpenCV 4.8 on (4.5 and 4.6 fail to import their
+#: ReduceMean or Mul, 4.7 imports them and fails in the ReduceMean's shapes on the first forward).
 RUNS_GAIN = _OPENCV >= (4, 8)
 #: What to do where ``cv2.dnn`` cannot run the gain Normalizers (not :data:`RUNS_GAIN`).
 GAIN_NEEDS = (
@@ -291,23 +291,25 @@ class OpenCVNormalizer:
             ``(N, ceil((H-1)/s)+1, ceil((W-1)/s)+1)`` float32 with ``s = stride``; grid point
             ``(i, j)`` is the prediction for the 48x48 window centred on pixel ``(s*i, s*j)``.
 
+        On OpenCV 4 (not :data:`REFLECT_PADS_ANY_SIZE`) an image whose grid has a side shorter than
+        :attr:`largest_pad` (under 18 px at the gain models' stride 8) is first mirrored (reflect-101) at its bottom
+        and right to the smallest size the graph pads, and the grid cut back: its window completed by mirroring, as
+        :meth:`~alcn_cv.enhance.base.Normalization.apply` promises, where OpenCV 5 mirrors the grid instead.
+
         Raises:
-            InputError: not an ``(H, W)`` float32 image; on OpenCV 4 (not :data:`REFLECT_PADS_ANY_SIZE`), a grid side
-                smaller than :attr:`largest_pad`.
+            InputError: not an ``(H, W)`` float32 image.
         """
         h, w = check_gray(image).shape
         s = self.stride
-        if not REFLECT_PADS_ANY_SIZE and min(math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1) < self.largest_pad:
-            # the first side whose grid has largest_pad points
+        gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
+        if not REFLECT_PADS_ANY_SIZE and min(gh, gw) < self.largest_pad:
+            # OpenCV 4's reflect Pad pads no side by more than its length: the first side whose grid it pads
             side = s * (self.largest_pad - 2) + 2
-            raise InputError(
-                f"OpenCV {cv2.__version__}'s cv2.dnn runs this Normalizer on images of at least {side}x{side} px "
-                f"at the working scale, got {w}x{h}: use OpenCV 5, or backend='fast' (torch, the [train] extra)"
-            )
+            mirrored = cv2.copyMakeBorder(image, 0, max(side - h, 0), 0, max(side - w, 0), cv2.BORDER_REFLECT_101)
+            return self.dense_grid(mirrored, alongside)[:, :gh, :gw]
         if self.features is not None:
             blob = self.features.from_moments(cell_moments(image, s))
         else:
-            gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
             half = WINDOW // 2
             padded = cv2.copyMakeBorder(
                 image, half, s * (gh - 1) + half - h, half, s * (gw - 1) + half - w, cv2.BORDER_REFLECT_101

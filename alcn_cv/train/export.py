@@ -46,6 +46,7 @@ import copy
 import io
 import json
 import logging
+import threading
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -141,7 +142,8 @@ def _reflect_pad(g: Any, x: torch._C.Value, padding: list[int], mode: str, value
     pads."""
     rank = x.type().dim()
     if mode != "reflect" or rank is None:
-        raise InputError(f"the export writes reflect pads of tensors of a known rank, got mode {mode!r}, rank {rank}")
+        # an invariant of the Normalizers, not of the user's input
+        raise RuntimeError(f"the export writes reflect pads of tensors of a known rank, got mode {mode!r}, rank {rank}")
     # torch's pads: (begin, end) of the last dimension, then of the one before...; ONNX's: every begin, then every end
     pairs = [(0, 0)] * (rank - len(padding) // 2) + [padding[i : i + 2] for i in range(0, len(padding), 2)][::-1]
     pads = g.op("Constant", value_t=torch.tensor([p[0] for p in pairs] + [p[1] for p in pairs], dtype=torch.int64))
@@ -154,12 +156,20 @@ def _constant_reflect_pads() -> Iterator[None]:
     ``Constant`` (opset :data:`OPSET`). torch's own symbolic computes them from the pad list in a chain of nodes
     (``ConstantOfShape``, ``Concat``, ``Reshape``, ``Slice`` of step -1, ``Transpose``, ``Reshape``, ``Cast``)
     that its constant folding leaves (it folds no ``Slice`` of negative step), and OpenCV 4's ONNX importer fails
-    on that chain's ``Reshape``: with constant pads the gain Normalizers' exports run on OpenCV 4 (from 4.8) as on 5."""
-    torch.onnx.register_custom_op_symbolic("aten::pad", _reflect_pad, OPSET)
-    try:
-        yield
-    finally:  # torch's own symbolic again
-        torch.onnx.unregister_custom_op_symbolic("aten::pad", OPSET)
+    on that chain's ``Reshape``: with constant pads the gain Normalizers' exports run on OpenCV 4 (from 4.8) as on 5.
+
+    The registration is torch's process-wide one: an export runs one at a time (:data:`_EXPORTING`), and a custom
+    ``aten::pad`` symbolic registered by the caller for the same opset is replaced by torch's own at the end."""
+    with _EXPORTING:
+        torch.onnx.register_custom_op_symbolic("aten::pad", _reflect_pad, OPSET)
+        try:
+            yield
+        finally:  # torch's own symbolic again
+            torch.onnx.unregister_custom_op_symbolic("aten::pad", OPSET)
+
+
+#: One export at a time: :func:`_constant_reflect_pads` changes torch's process-wide symbolic registry.
+_EXPORTING = threading.Lock()
 
 
 def _on_blocks(net: LiteNormalizer) -> LiteNormalizer:
