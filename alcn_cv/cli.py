@@ -248,7 +248,8 @@ def exit_in_the_command(error: MissingDependencyError) -> None:
     """In the ``alcn`` command, end the process as a missing extra ends it: ``error``'s one line (after its traceback
     with ``--debug``) and exit code 2; elsewhere return. ``import alcn_cv`` calls it, while it handles ``error``,
     when OpenCV is missing or too old: the command's script imports the package before :func:`main` runs, and a
-    program that imports the package gets the error raised."""
+    program that imports the package gets the error raised. The command is told by its script's name (``sys.argv[0]``):
+    ``python -m alcn_cv.cli``, whose name is not known while the package is imported, shows the traceback."""
     argv = getattr(sys, "argv", None) or [""]
     if os.path.basename(argv[0]) in SCRIPT_NAMES:
         sys.exit(_failed(str(error), "--debug" in argv[1:]))
