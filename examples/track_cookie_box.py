@@ -6,7 +6,8 @@ Input: ``../shared/data/cookie_box/box.mp4`` (456 frames, 640x480, a hand-held b
 static camera), ``box.ply`` (the cuboid, 18.9 x 25.8 x 7.5 cm) and the intrinsics of OpenCV's
 real-time pose tutorial (fx = 640*55/22.3, fy = 480*55/14.9, cx = 320, cy = 240).
 
-1. ``alcn pose build`` on the unregistered video with the cookie box's preset (``pose.build.COOKIE_BOX``):
+1. ``alcn pose build`` on the unregistered video with the cookie box's preset (``alcn pose build --conf cookie-box``,
+   ``pose.build.COOKIE_BOX``; docs/pose.md walks through the same commands):
    every 10th frame, features kept on what moves (static camera), pycolmap incremental reconstruction with
    the focal length refined by the bundle adjustment (to fx 651 px, fy 648 px: with the tutorial's fx = 1578 px
    held fixed, the box's front side is folded into the plane of its lid and the fit is 8.5% off instead of

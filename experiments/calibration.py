@@ -22,7 +22,6 @@ def main() -> None:
     command_line(__doc__).parse_args()
     from alcn_cv.report import machine
     from calib.camera import load_calibration
-    from pose import build
     from pose.model import load as load_part_model
 
     out = RUNS / "calibration"
@@ -50,7 +49,8 @@ def main() -> None:
         str(box / "model.npz"),
         "--box-ply",
         str(SHARED_DATA / "cookie_box" / "box.ply"),
-        *build.build_options(build.COOKIE_BOX),
+        "--conf",
+        "cookie-box",  # pose.build.confs
     ]
     track_argv = [
         "pose",

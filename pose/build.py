@@ -18,8 +18,9 @@ Pipeline (hloc-style, one module per stage):
 4. :func:`build` assembles the model in the object frame; :func:`main` writes ``<out>.npz`` +
    ``<out>.ply`` (:mod:`pose.model`) and ``<out>_cameras.png`` (:func:`pose.plots.plot_model`).
 
-:data:`COOKIE_BOX` holds the settings the shared data's cookie box is built with by its examples and its experiment
-(hloc's ``confs``; :func:`build_options`: the same settings as options of ``alcn pose build``).
+Named presets of the build's settings (hloc's ``confs``): :data:`confs`, ``alcn pose build --conf NAME``
+(``static-camera``: a hand-held object before a static camera; ``cookie-box``: the shared data's, its examples' and
+its experiment's, also :data:`COOKIE_BOX`); :func:`build_options`: settings as options of ``alcn pose build``.
 """
 
 from __future__ import annotations
@@ -44,10 +45,10 @@ from pose.model import PartModel, box_corners, read_box_corners
 from pose.parts import descriptor_norm
 from pose.plots import plot_model
 from pose.sequence import (
-    ARBITRARY_UNITS,
     VIDEO_MAX_FRAMES,
     VIDEO_STEP,
     TrainingSequence,
+    check_known_units,
     load_sequence,
     motion_masks,
     video_sequence,
@@ -93,24 +94,88 @@ def _read_only(array: np.ndarray) -> np.ndarray:
     return array
 
 
-#: The cookie box's settings of :func:`main` (read-only, shared by every build that uses them), its keyword arguments
-#: but the paths (the video, the output, ``box_ply``): ``main(video, output, box_ply=..., **COOKIE_BOX)``. The shared
-#: data's ``cookie_box/box.mp4``, a hand-held box before a static camera (the motion mask), with the intrinsics of
-#: OpenCV's real-time pose tutorial (fx = 640*55/22.3, fy = 480*55/14.9, cx = 320, cy = 240), which are refined (held
-#: fixed at fx 1578 px, the box's front side folds into the plane of its lid: the box fit is 8.5% off instead of
-#: 2.7%); every 10th frame, at most 46: all 456 frames.
-COOKIE_BOX: Mapping[str, Any] = types.MappingProxyType(
+#: A hand-held object turned before a static camera: the features kept on what moves
+#: (:func:`pose.sequence.motion_masks`; the static background would otherwise dominate the reconstruction), the focal
+#: length refined by the bundle adjustment (a guessed one held fixed folds the box: the cookie box 8.5% off instead of
+#: 2.7%), every 10th frame, 3000 ORB keypoints a frame: the cookie box's settings but its camera and number of frames.
+_STATIC_CAMERA: dict[str, Any] = {
+    "step": 10,
+    "motion_mask": True,
+    "feature": "ORB",
+    "n_features": 3000,
+    "refine_focal": True,
+}
+
+#: The named presets of :func:`main` (hloc's ``confs``; ``alcn pose build --conf NAME``), read-only: each a mapping of
+#: :func:`main`'s keyword arguments but the paths (the input, the output, ``box_ply``). A keyword given to
+#: :func:`main` (an option on the command line) overrides the preset's value (:func:`conf_settings`).
+#:
+#: * ``static-camera``: a hand-held object before a static camera (:data:`_STATIC_CAMERA`); the camera (``K`` or
+#:   ``camera``) and the box's size are the caller's.
+#: * ``cookie-box``: the shared data's ``cookie_box/box.mp4``: ``static-camera`` with the intrinsics of OpenCV's
+#:   real-time pose tutorial (fx = 640*55/22.3, fy = 480*55/14.9, cx = 320, cy = 240; refined), the box in cm, at
+#:   most 46 frames: all 456 frames at every 10th.
+#:
+#: Without a preset, :func:`main`'s defaults (:data:`DEFAULTS`) hold: those of a registered sequence, which ignores
+#: the options of a video.
+confs: Mapping[str, Mapping[str, Any]] = types.MappingProxyType(
     {
-        "K": _read_only(camera_matrix(640 * 55 / 22.3, 480 * 55 / 14.9, 320.0, 240.0)),
-        "step": 10,
-        "max_frames": 46,
-        "motion_mask": True,
-        "feature": "ORB",
-        "n_features": 3000,
-        "box_units": "cm",
-        "refine_focal": True,
+        "static-camera": types.MappingProxyType(dict(_STATIC_CAMERA)),
+        "cookie-box": types.MappingProxyType(
+            {
+                "K": _read_only(camera_matrix(640 * 55 / 22.3, 480 * 55 / 14.9, 320.0, 240.0)),
+                **_STATIC_CAMERA,
+                "max_frames": 46,
+                "box_units": "cm",
+            }
+        ),
     }
 )
+
+#: One line per preset of :data:`confs`, for ``alcn pose build --help``.
+CONF_SUMMARIES: Mapping[str, str] = types.MappingProxyType(
+    {
+        "static-camera": "a hand-held object before a static camera (give --K or --camera, and the box)",
+        "cookie-box": "the shared data's cookie_box/box.mp4: static-camera with the intrinsics of OpenCV's real-time "
+        "pose tutorial, the box in cm, all 456 frames",
+    }
+)
+
+#: The cookie box's settings of :func:`main`, ``confs["cookie-box"]`` (read-only, shared by every build that uses
+#: them): ``main(video, output, box_ply=..., **COOKIE_BOX)``, the same as ``main(..., conf="cookie-box")``.
+COOKIE_BOX: Mapping[str, Any] = confs["cookie-box"]
+
+#: The values of :func:`main`'s settings that neither a preset nor the caller gives (``step`` and ``max_frames``:
+#: :data:`pose.sequence.VIDEO_STEP` and :data:`pose.sequence.VIDEO_MAX_FRAMES`; ``box_units``: the sequence's, or
+#: :data:`VIDEO_BOX_UNITS` for a video).
+DEFAULTS: Mapping[str, Any] = types.MappingProxyType(
+    {"feature": "ORB", "n_features": 4000, "normalization": "none", "motion_mask": False, "refine_focal": False}
+)
+
+
+def conf_settings(conf: str | None, **given: Any) -> dict[str, Any]:
+    """The settings of :func:`main` from the preset ``confs[conf]`` (none: ``{}``) and the keywords ``given``: a value
+    given (not ``None``) overrides the preset's, and a camera given (``K`` or ``camera``) replaces the preset's.
+    Settings neither gives are left out (:func:`main` takes :data:`DEFAULTS` for them).
+
+    >>> conf_settings("static-camera", n_features=1000, max_frames=None)["n_features"]
+    1000
+
+    Raises:
+        InputError: an unknown preset, naming those there are.
+    """
+    if conf is None:
+        preset: Mapping[str, Any] = {}
+    elif conf in confs:
+        preset = confs[conf]
+    else:
+        raise InputError(f"unknown preset {conf!r}; choose one of {', '.join(confs)}")
+    settings = dict(preset)
+    if given.get("K") is not None or given.get("camera") is not None:
+        settings.pop("K", None)
+        settings.pop("camera", None)
+    settings.update({key: value for key, value in given.items() if value is not None})
+    return settings
 
 
 def build(
@@ -143,20 +208,19 @@ def build(
     :data:`BOX_FIT_FAILURE` off it on the edges they cover fails (:func:`check_box_fit`).
 
     Raises:
-        InputError: a registered sequence in arbitrary units (:data:`pose.sequence.ARBITRARY_UNITS`), or an
+        InputError: a registered sequence in arbitrary units (:func:`pose.sequence.check_known_units`), or an
             unregistered one without the box's size.
         DatasetError: too few images or points, or the box fit too far off the known size.
     """
     if len(seq.views) < 2:
         raise DatasetError(f"{seq.info.get('path')}: {len(seq.views)} training image(s); at least 2 are needed")
     registered = seq.registered
-    if registered and seq.units == ARBITRARY_UNITS:
-        raise InputError(
-            f"{seq.info.get('path')}: its poses are in arbitrary units (registration.json: registered by SfM without "
-            "a known length), and a part model needs millimetres: register again with `alcn calib register --method "
-            "sfm --known-distance FRAME_A FRAME_B MM` (or --reference POSES), or build from the video itself with "
-            "--K or --camera and --box-size W H D (the box's size then sets the scale)"
-        )
+    check_known_units(
+        seq,
+        "a part model",
+        ", or build from the video itself with --K or --camera and --box-size W H D (the box's size then sets the "
+        "scale)",
+    )
     known, known_corners = None, None
     if box_ply is not None:
         known_corners = read_box_corners(box_ply)
@@ -331,14 +395,15 @@ def main(
     camera: str | Path | Calibration | None = None,
     step: int | None = None,
     max_frames: int | None = None,
-    motion_mask: bool = False,
-    feature: str = "ORB",
-    n_features: int = 4000,
-    normalization: str = "none",
+    motion_mask: bool | None = None,
+    feature: str | None = None,
+    n_features: int | None = None,
+    normalization: str | None = None,
     box_ply: str | Path | None = None,
     box_size: tuple[float, float, float] | None = None,
     box_units: str | None = None,
-    refine_focal: bool = False,
+    refine_focal: bool | None = None,
+    conf: str | None = None,
     progress: bool = True,
     what: str = "pose.build.main",
 ) -> Path:
@@ -361,7 +426,31 @@ def main(
     ``box_ply``/``box_size``: the box. For a video a cuboid ``.ply`` gives its size only (the box's frame is fitted);
     for a registered sequence it is the box placed in the sequence's world frame (a BOP model: its corners become the
     model's), while ``box_size`` gives the size alone (the box is fitted in the world frame).
+
+    ``conf``: a preset of :data:`confs` (``"static-camera"``, ``"cookie-box"``); the settings given (not ``None``)
+    override its values (:func:`conf_settings`), and those neither gives are :data:`DEFAULTS`. The model records the
+    preset's name and the settings the build used (``extra["build"]``).
+
+    Raises:
+        InputError: an unknown preset, a video without its camera, a camera given twice; and :func:`build`'s.
     """
+    settings = conf_settings(
+        conf,
+        K=K,
+        camera=camera,
+        step=step,
+        max_frames=max_frames,
+        motion_mask=motion_mask,
+        feature=feature,
+        n_features=n_features,
+        normalization=normalization,
+        box_units=box_units,
+        refine_focal=refine_focal,
+    )
+    given = {**DEFAULTS, **settings}
+    K, camera, step, max_frames = given.get("K"), given.get("camera"), given.get("step"), given.get("max_frames")
+    motion_mask, refine_focal, box_units = given["motion_mask"], given["refine_focal"], given.get("box_units")
+    feature, n_features, normalization = given["feature"], given["n_features"], given["normalization"]
     # the reconstruction (pycolmap), the box fit (open3d) and the plot come after the features: checked before those
     require("pycolmap", "open3d", "matplotlib", what=what, preferred="pose")
     input_path, output = Path(input_path), part_model.model_file(output)
@@ -434,9 +523,25 @@ def main(
             progress=progress,
             **video,
         )
+    model.extra["build"] = _provenance(conf, given, video="masks" in video)
     path = part_model.save(model, output)
     plot_model(model, cams, path.with_name(path.stem + "_cameras.png"))
     return path
+
+
+def _provenance(conf: str | None, settings: Mapping[str, Any], video: bool) -> dict[str, Any]:
+    """What a model records of its build: the preset's name (``None`` without one) and the settings it used, those
+    of a video only for a video (its camera is the model's ``extra["K"]``)."""
+    used = {key: settings[key] for key in ("feature", "n_features", "normalization")}
+    if video:
+        used["step"] = VIDEO_STEP if settings.get("step") is None else settings["step"]
+        used["max_frames"] = VIDEO_MAX_FRAMES if settings.get("max_frames") is None else settings["max_frames"]
+        used.update(
+            motion_mask=settings["motion_mask"],
+            refine_focal=settings["refine_focal"],
+            box_units=settings.get("box_units") or VIDEO_BOX_UNITS,
+        )
+    return {"conf": conf, **used}
 
 
 def _calibration(camera: str | Path | Calibration | None, K: np.ndarray | None) -> Calibration | None:

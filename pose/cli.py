@@ -1,6 +1,7 @@
 """``alcn pose build|track|eval|train-corners|bench-corners|corner-recall|planar|overlay-error``: the 3D pose
 pipeline on the command line. The corner detector's training takes a named recipe (``--conf``, the presets
-of :data:`pose.corner_train.confs`) and ``--set KEY=VALUE`` overrides of its keys."""
+of :data:`pose.corner_train.confs`) and ``--set KEY=VALUE`` overrides of its keys; the part model's build a named
+preset of its options (``--conf``, :data:`pose.build.confs`), which the options given override."""
 
 from __future__ import annotations
 
@@ -38,6 +39,7 @@ def _build(args: argparse.Namespace) -> int:
         box_size=args.box_size,
         box_units=args.box_units,
         refine_focal=args.refine_focal,
+        conf=args.conf,
         progress=not args.no_progress,
         what="alcn pose build",
     )
@@ -206,6 +208,27 @@ NORMALIZATION_HELP = (
     "the normalization applied first, a spec NAME[:KEY=VALUE...] (default none, which costs nothing per frame; "
     "`alcn pose eval` compares normalizations on your sequences, docs/results.md on the rendered Table 1)"
 )
+
+
+def _build_presets() -> str:
+    """The epilog of ``alcn pose build --help``: the presets of :data:`pose.build.confs`, one line each, with their
+    options (the camera's rounded)."""
+    from pose.build import CONF_SUMMARIES, build_options, confs
+
+    width = max(map(len, confs))
+    lines = [
+        "presets (--conf NAME; an option given on the command line overrides the preset's value, and --K or --camera "
+        "its camera):"
+    ]
+    for name, settings in confs.items():
+        words = []
+        for key, value in settings.items():
+            if key == "K":
+                words += ["--K", *(f"{v:.1f}" for v in (value[0, 0], value[1, 1], value[0, 2], value[1, 2]))]
+            else:
+                words += build_options({key: value})
+        lines.append(f"  {name:<{width}}  {CONF_SUMMARIES[name]}: {' '.join(words)}")
+    return "\n".join(lines)
 
 
 def _add_planar(sub: argparse._SubParsersAction) -> None:
@@ -386,6 +409,8 @@ def _corner_recall(args: argparse.Namespace) -> int:
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``corner-recall``,
     ``planar`` and ``overlay-error`` to ``alcn``."""
+    from pose.build import DEFAULTS as BUILD_DEFAULTS
+    from pose.build import confs as build_confs
     from pose.sequence import VIDEO_MAX_FRAMES, VIDEO_STEP
     from pose.solver import METHODS
 
@@ -400,12 +425,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b = sub.add_parser(
         "build",
         help="part model from a registered sequence or a video",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Triangulate features of the training images (pycolmap, known poses held "
         "fixed; or incremental reconstruction for an unregistered video), fit the box (open3d) "
         "and write MODEL.npz, MODEL.ply and MODEL_cameras.png. A box fit more than 5% off the known size is "
         "warned; more than 20% off on the edges its points cover, the build fails (its points are not that box, "
         "or not in its units). A registration in arbitrary units (`alcn calib register --method sfm` without a "
-        "known length) is refused. pycolmap's log is shown with `alcn --verbose`.",
+        "known length) is refused. pycolmap's log is shown with `alcn --verbose`.\n\n"
+        "A video of a hand-held object before a static camera builds with --conf static-camera: without it the "
+        "focal length is held fixed and the background's features are kept (the shared cookie box built so is "
+        "11.8% off its size, 2.7% with the preset). Walkthrough: docs/pose.md.",
+        epilog=_build_presets(),
     )
     b.add_argument("input", help="BOP scene folder, COLMAP model folder, Middlebury set, or a video file")
     b.add_argument("output", help="part model to write (.npz)")
@@ -420,14 +450,36 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "and its lens distortion, which the reconstruction models (the frames are not undistorted); the model stores "
         "K only, so track the video with --camera too",
     )
-    b.add_argument("--step", type=int, help=f"use every N-th frame of a video (default {VIDEO_STEP})")
-    b.add_argument("--max-frames", type=int, help=f"at most this many video frames (default {VIDEO_MAX_FRAMES})")
     b.add_argument(
-        "--motion-mask", action="store_true", help="static camera, moving object: keep features on what moves"
+        "--conf",
+        metavar="NAME",
+        help="a preset of these options, listed below (pose.build.confs: " + ", ".join(build_confs) + "); the "
+        "options given override its values (default: none, the defaults below)",
     )
-    b.add_argument("--feature", default="ORB", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default ORB)")
-    b.add_argument("--n-features", type=int, default=4000, help="keypoints per training image (default 4000)")
-    b.add_argument("--normalization", default="none", help=NORMALIZATION_HELP)
+    b.add_argument(
+        "--step", type=int, help=f"use every N-th frame of a video (default: the preset's, else {VIDEO_STEP})"
+    )
+    b.add_argument(
+        "--max-frames",
+        type=int,
+        help=f"at most this many video frames (default: the preset's, else {VIDEO_MAX_FRAMES})",
+    )
+    b.add_argument(
+        "--motion-mask",
+        action=argparse.BooleanOptionalAction,
+        help="static camera, moving object: keep features on what moves (default: the preset's, else not)",
+    )
+    b.add_argument(
+        "--feature",
+        choices=["ORB", "SIFT", "AKAZE"],
+        help=f"OpenCV feature (default: the preset's, else {BUILD_DEFAULTS['feature']})",
+    )
+    b.add_argument(
+        "--n-features",
+        type=int,
+        help=f"keypoints per training image (default: the preset's, else {BUILD_DEFAULTS['n_features']})",
+    )
+    b.add_argument("--normalization", help=NORMALIZATION_HELP)
     b.add_argument(
         "--box-ply",
         help="cuboid .ply of the box. For a video: its true size only (the box is fitted to the points). For a "
@@ -449,8 +501,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     b.add_argument(
         "--refine-focal",
-        action="store_true",
-        help="video: refine the focal length in the bundle adjustment (stored in the model, used by `alcn pose track`)",
+        action=argparse.BooleanOptionalAction,
+        help="video: refine the focal length in the bundle adjustment (stored in the model, used by `alcn pose "
+        "track`; default: the preset's, else held fixed)",
     )
     add_progress_option(b)
     b.set_defaults(func=_build)

@@ -329,8 +329,12 @@ def train_corners(
 
     Returns:
         The written path.
+
+    Raises:
+        InputError: a sequence registered in arbitrary units (:func:`pose.sequence.check_known_units`), before the
+            training.
     """
-    from pose.sequence import load_sequence
+    from pose.sequence import check_known_units, load_sequence
 
     recipe = recipe or confs["box"]
     recipe.check()
@@ -340,6 +344,7 @@ def train_corners(
         raise InputError(f"corners must be a finite (8, 3) array, got shape {corners.shape}")
     t0 = time.perf_counter()
     seq = load_sequence(sequence_dir, obj_id=obj_id)
+    check_known_units(seq, "a corner detector (its box projected by the poses)")
     frames = build_frames(seq, corners, normalization, recipe, seed=seed)
     provenance = {"source": str(sequence_dir), "views": len(seq.views), "data_seconds": time.perf_counter() - t0}
     return fit_and_export(

@@ -41,7 +41,7 @@ from pose.model import read_box_corners, unit_scale
 from pose.model import save as save_model
 from pose.parts import FeaturePartDetector, PartDetector
 from pose.plots import plot_table
-from pose.sequence import load_sequence
+from pose.sequence import check_known_units, load_sequence
 from pose.solver import PoseSolver, project, rotation_error_deg
 from pose.track import make_tracker
 
@@ -215,6 +215,11 @@ def main(
     ``command``), ``table1.json``, ``table1.png`` (and the models; a folder with an earlier ``table1.json`` loses
     that run's ``model_*.npz`` and ``corners_*.onnx``) into ``out_dir``;
     ``progress``: a progress bar over the models.
+
+    Raises:
+        DatasetError: ``data_dir`` is not such a data set.
+        InputError: its training sequence registered in arbitrary units (:func:`pose.sequence.check_known_units`),
+            before any model is made; an unknown detector.
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     make_folder(out_dir)
@@ -231,6 +236,8 @@ def main(
             f"models/obj_{obj_id:06d}.ply (`alcn data pose`)"
         )
     seeds = check_seeds(seeds)
+    # the models and corner detectors are made from the training sequence's poses: in known units, checked first
+    check_known_units(load_sequence(train, obj_id=obj_id), "alcn pose eval (its models are built from these poses)")
     corners = read_box_corners(model_ply)
     diameter = float(np.linalg.norm(corners.max(0) - corners.min(0)))
     columns = [f"#{int(p.name)}" for p in tests]

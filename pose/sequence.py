@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from alcn_cv import io
-from alcn_cv.errors import DatasetError
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import make_folder, to_gray
 
 
@@ -80,6 +80,23 @@ def registration_units(folder: str | Path) -> str | None:
     if not isinstance(units, str):
         raise DatasetError(f"{path}: field 'units': expected a string such as 'mm', got {units!r}")
     return units
+
+
+def check_known_units(seq: TrainingSequence, what: str, alternative: str = "") -> None:
+    """Refuse a registered sequence whose poses are in :data:`ARBITRARY_UNITS` (``alcn calib register --method sfm``
+    without a known length), for every command that reads lengths from its poses: ``alcn pose build``,
+    ``alcn pose train-corners`` and ``alcn pose eval``. ``what``: what needs known units (``"a part model"``);
+    ``alternative``: another way than registering again, appended to the message (``", or ..."``).
+
+    Raises:
+        InputError: the sequence's poses are in arbitrary units; the message says how to register it in mm.
+    """
+    if seq.registered and seq.units == ARBITRARY_UNITS:
+        raise InputError(
+            f"{seq.info.get('path')}: its poses are in arbitrary units (registration.json: registered by SfM without "
+            f"a known length), and {what} needs known units: register again with `alcn calib register --method sfm "
+            f"--known-distance FRAME_A FRAME_B MM` (or --reference POSES){alternative}"
+        )
 
 
 def load_sequence(path: str | Path, images: str | Path | None = None, obj_id: int | None = None) -> TrainingSequence:

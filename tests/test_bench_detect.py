@@ -278,7 +278,8 @@ def test_summarize_over_seeds():
     }
     cell = D.summarize(runs, settings, ["a", "b"])["dog|1|local"]
     assert cell["seeds"] == [0, 1] and cell["failed_seeds"] == [2]
-    assert cell["objects"]["a"]["mean"] == pytest.approx(0.3) and cell["objects"]["a"]["std"] == pytest.approx(0.1 * 2**0.5)  # ddof=1
+    assert cell["objects"]["a"]["mean"] == pytest.approx(0.3)
+    assert cell["objects"]["a"]["std"] == pytest.approx(0.1 * 2**0.5)  # the sample deviation (ddof=1)
     assert cell["objects"]["b"]["values"] == [0.4]
     assert cell["mean"]["values"] == pytest.approx([0.3, 0.4])
 

@@ -343,3 +343,85 @@ def test_the_command_prints_where_the_cameras_plot_is(tmp_path, monkeypatch, cap
     monkeypatch.setattr(build, "main", lambda *args, **kwargs: out)
     assert main(["pose", "build", "box.mp4", str(out), "--K", "1", "1", "1", "1", "--box-size", "1", "2", "3"]) == 0
     assert f"its cameras: {tmp_path / 'models' / 'box_cameras.png'})" in capsys.readouterr().out
+
+
+def test_a_preset_reaches_the_build_and_an_option_given_overrides_it(shared_data, tmp_path, monkeypatch, capsys):
+    """The settings that build a hand-held object before a static camera were only in pose.build.COOKIE_BOX and the
+    examples, while `alcn pose build`'s defaults fold the box: --conf NAME gives them, an option given overrides the
+    preset's value (a switch with --no-...), --K or --camera its camera; the model records the preset and the
+    settings used."""
+    for module in ("pycolmap", "open3d", "matplotlib"):
+        pytest.importorskip(module)
+    from alcn_cv.cli import main
+    from calib.camera import write_camera_yaml
+
+    video, ply = shared_data / "cookie_box" / "box.mp4", shared_data / "cookie_box" / "box.ply"
+    seen = []
+
+    def record(seq, **kwargs):  # the pipeline, replaced by a model that says what reached it
+        seen.append((seq, kwargs))
+        return pm.PartModel(corners=pm.box_corners(np.array([25.8, 18.9, 7.5])), units="cm"), np.zeros((0, 3))
+
+    monkeypatch.setattr(build, "build", record)
+    monkeypatch.setattr(build, "plot_model", lambda *args: None)
+    argv = ["pose", "build", str(video), str(tmp_path / "m.npz"), "--box-ply", str(ply), "--no-progress"]
+    assert main([*argv, "--conf", "cookie-box", "--max-frames", "3"]) == 0
+    seq, kwargs = seen[-1]
+    assert len(seq.views) == 3 and seq.info["step"] == build.COOKIE_BOX["step"] == 10  # --max-frames overrides 46
+    np.testing.assert_array_equal(seq.views[0].K, build.COOKIE_BOX["K"])
+    assert kwargs["masks"] is not None and kwargs["refine_focal"] and kwargs["box_units"] == "cm"
+    assert (kwargs["feature"], kwargs["n_features"], kwargs["normalization"]) == ("ORB", 3000, "none")
+    recorded = pm.load(tmp_path / "m.npz").extra["build"]
+    assert recorded == {
+        "conf": "cookie-box",
+        "feature": "ORB",
+        "n_features": 3000,
+        "normalization": "none",
+        "step": 10,
+        "max_frames": 3,
+        "motion_mask": True,
+        "refine_focal": True,
+        "box_units": "cm",
+    }
+    options = ["--K", "600", "600", "320", "240", "--n-features", "500", "--no-motion-mask", "--max-frames", "3"]
+    assert main([*argv, "--conf", "static-camera", *options]) == 0
+    seq, kwargs = seen[-1]
+    K = np.array([[600.0, 0, 320], [0, 600.0, 240], [0, 0, 1]])
+    np.testing.assert_array_equal(seq.views[0].K, K)
+    assert kwargs["masks"] is None and kwargs["n_features"] == 500 and kwargs["refine_focal"]
+    assert seq.info["step"] == 10 and kwargs["box_units"] == "cm"  # the preset's step; a video's units
+    camera = write_camera_yaml(tmp_path / "camera.yaml", K, np.zeros(5), (640, 480))
+    assert main([*argv, "--conf", "cookie-box", "--camera", str(camera), "--max-frames", "3"]) == 0  # not "not both"
+    np.testing.assert_array_equal(seen[-1][0].views[0].K, K)
+    assert main([*argv, "--K", "600", "600", "320", "240", "--max-frames", "3"]) == 0  # no preset: the defaults
+    seq, kwargs = seen[-1]
+    assert seq.info["step"] == sequence.VIDEO_STEP and kwargs["masks"] is None and not kwargs["refine_focal"]
+    assert kwargs["n_features"] == build.DEFAULTS["n_features"] == 4000
+    assert pm.load(tmp_path / "m.npz").extra["build"]["conf"] is None
+    capsys.readouterr()
+    assert main([*argv, "--conf", "cookie_box"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "alcn pose: error: unknown preset 'cookie_box'; choose one of static-camera, cookie-box"
+
+
+def test_presets_are_read_only_settings_of_main():
+    """Every preset's keys are keywords of build.main, that no preset can change, COOKIE_BOX is the cookie-box preset,
+    and conf_settings lets a value given override the preset's."""
+    import inspect
+
+    keywords = set(inspect.signature(build.main).parameters)
+    assert set(build.confs) == set(build.CONF_SUMMARIES) == {"static-camera", "cookie-box"}
+    for name, settings in build.confs.items():
+        assert set(settings) <= keywords - {"input_path", "output", "box_ply", "box_size", "conf"}, name
+        with pytest.raises(TypeError):
+            settings["step"] = 5  # type: ignore[index]
+    assert build.COOKIE_BOX is build.confs["cookie-box"]
+    static = dict(build.confs["static-camera"])
+    assert static == {"step": 10, "motion_mask": True, "feature": "ORB", "n_features": 3000, "refine_focal": True}
+    assert {k: v for k, v in build.COOKIE_BOX.items() if k not in ("K", "max_frames", "box_units")} == static
+    assert build.conf_settings("cookie-box", step=None, n_features=1000)["n_features"] == 1000
+    assert build.conf_settings("cookie-box", motion_mask=False)["motion_mask"] is False
+    assert "K" not in build.conf_settings("cookie-box", camera="camera.yaml")
+    assert build.conf_settings(None, step=None) == {}
+    with pytest.raises(InputError, match="unknown preset 'x'; choose one of static-camera, cookie-box"):
+        build.conf_settings("x")

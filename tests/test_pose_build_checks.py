@@ -205,3 +205,43 @@ def test_a_build_in_arbitrary_units_is_refused_in_one_line(tmp_path, capsys):
         assert len(err.splitlines()) == 1 and "Traceback" not in err
         assert "arbitrary units" in err and "--known-distance FRAME_A FRAME_B MM" in err and "--box-size" in err
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_train_corners_and_eval_refuse_arbitrary_units_as_build_does(tmp_path, capsys, monkeypatch):
+    """`alcn pose train-corners` and `alcn pose eval` read a registration in arbitrary units as millimetres (the box
+    projected at the wrong depth): all three commands refuse it through one check, pose.sequence.check_known_units,
+    before any work."""
+    import inspect
+
+    from alcn_cv.cli import main
+    from pose import corner_train, evaluate
+
+    assert build.check_known_units is sequence.check_known_units is evaluate.check_known_units
+    assert "check_known_units(seq" in inspect.getsource(corner_train.train_corners)  # imported where it runs
+    monkeypatch.setattr(evaluate, "build_model", _no_work)  # nothing past the check runs
+    monkeypatch.setattr(corner_train, "build_frames", _no_work)
+    reg = _registration(tmp_path / "reg", "arbitrary")
+    ply = _box_ply(tmp_path / "box.ply")
+    data = tmp_path / "data"  # an `alcn pose eval` data set whose training sequence is that registration
+    (data / "train").mkdir(parents=True)
+    reg.rename(data / "train" / "000001")
+    _registration(data / "test" / "000001", "mm")
+    (data / "models").mkdir()
+    ply.rename(data / "models" / "obj_000001.ply")
+    ply = data / "models" / "obj_000001.ply"
+    for argv in (
+        ["pose", "train-corners", str(data / "train" / "000001"), str(tmp_path / "c.onnx"), "--box-ply", str(ply)],
+        ["pose", "eval", "--data", str(data), "--out", str(tmp_path / "r"), "--detectors", "features", "corners"],
+    ):
+        assert main([*argv, "--no-progress"]) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+        assert "arbitrary units" in err and "--known-distance FRAME_A FRAME_B MM" in err, err
+    assert not (tmp_path / "c.onnx").exists()
+    with pytest.raises(InputError, match="a corner detector .*needs known units"):
+        corner_train.train_corners(data / "train" / "000001", pm.read_box_corners(ply), tmp_path / "c.onnx")
+    sequence.check_known_units(_sequence("mm"), "anything")  # known units: nothing to say
+
+
+def _no_work(*args, **kwargs):
+    raise AssertionError("the work began before the check")

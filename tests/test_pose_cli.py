@@ -86,3 +86,29 @@ def test_build_help_says_what_the_box_options_and_the_camera_mean(capsys):
     assert "--K FX FY CX CY | --camera CAMERA" in out and "its lens distortion" in out
     assert f"more than {build.BOX_FIT_WARNING:.0%} off the known size is warned" in out
     assert f"more than {build.BOX_FIT_FAILURE:.0%} off on the edges its points cover, the build fails" in out
+
+
+def test_build_help_lists_its_presets_one_line_each(capsys):
+    """The settings of a hand-held object before a static camera were in no --help: each preset of pose.build.confs is
+    one line of the epilog with its summary and options, and the help says that an option given overrides it."""
+    from pose import build
+
+    with pytest.raises(SystemExit):
+        main(["pose", "build", "--help"])
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    for name, summary in build.CONF_SUMMARIES.items():
+        (line,) = [line for line in lines if line.startswith(f"  {name}  ")]
+        assert summary in line and "--step 10" in line and "--motion-mask" in line and "--refine-focal" in line
+    assert "--K 1578.5 1771.8 320.0 240.0" in out and "--max-frames 46" in out
+    flat = " ".join(out.split())
+    assert "an option given on the command line overrides the preset's value" in flat
+    assert "--conf static-camera" in flat and "(default: the preset's, else 4000)" in flat
+    assert "--motion-mask, --no-motion-mask" in flat
+
+
+def test_an_unknown_build_preset_is_one_line(tmp_path, capsys):
+    assert main(["pose", "build", str(tmp_path / "box.mp4"), str(tmp_path / "m.npz"), "--conf", "nope"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "unknown preset 'nope'" in err and "static-camera, cookie-box" in err
+    assert not (tmp_path / "m.npz").exists()

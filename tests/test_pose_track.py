@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -565,3 +566,27 @@ def test_the_example_of_open_tracker_runs(tmp_path, capsys):
     assert len(lines) == 3 and "lost" not in lines[0]
     t_mm = json.loads("[" + lines[0].rsplit("[", 1)[1])  # the last list printed: t in mm
     assert np.linalg.norm(np.array(t_mm) - _poses(1)[0][1].ravel()) < 6.0  # mm, as rendered
+
+
+def test_the_python_example_of_docs_pose_md_runs(tmp_path, capsys):
+    """docs/pose.md's Python example, on a synthetic model and video in place of the cookie box's: it runs, and it is
+    open_tracker's docstring example on the walkthrough's paths."""
+    import re
+    import textwrap
+
+    text = (Path(__file__).resolve().parent.parent / "docs" / "pose.md").read_text(encoding="utf-8")
+    (code,) = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    docstring = textwrap.dedent(track.open_tracker.__doc__.split("::\n", 1)[1])
+    assert code.strip() == docstring.strip().replace("cb/model.npz", "out/cookie_box/model.npz")
+    model = _planar_model(_texture()).scaled_to("cm")
+    model.extra["K"] = K.tolist()
+    pm.save(model, tmp_path / "model.npz")
+    video = tmp_path / "box.avi"
+    writer = io.open_video_writer(video, 10.0, SIZE)
+    for r, t in _poses(3):
+        writer.write(_render(_texture(), r, t))
+    writer.release()
+    code = code.replace("out/cookie_box/model.npz", str(tmp_path / "model.npz"))
+    exec(code.replace("../shared/data/cookie_box/box.mp4", str(video)), {})
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 3 and not any("lost" in line for line in lines)
