@@ -334,6 +334,7 @@ def train_corners(
         InputError: a sequence registered in arbitrary units (:func:`pose.sequence.check_known_units`), before the
             training.
     """
+    from pose import model as part_model
     from pose.sequence import check_known_units, load_sequence
 
     recipe = recipe or confs["box"]
@@ -345,6 +346,8 @@ def train_corners(
     t0 = time.perf_counter()
     seq = load_sequence(sequence_dir, obj_id=obj_id)
     check_known_units(seq, "a corner detector (its box projected by the poses)")
+    if seq.units in part_model.UNITS:  # the box is projected by the poses: in their units
+        corners, units = corners * part_model.unit_scale(units, seq.units), seq.units
     frames = build_frames(seq, corners, normalization, recipe, seed=seed)
     provenance = {"source": str(sequence_dir), "views": len(seq.views), "data_seconds": time.perf_counter() - t0}
     return fit_and_export(

@@ -245,3 +245,22 @@ def test_train_corners_and_eval_refuse_arbitrary_units_as_build_does(tmp_path, c
 
 def _no_work(*args, **kwargs):
     raise AssertionError("the work began before the check")
+
+
+def test_a_corner_detectors_box_is_projected_in_its_sequences_units(tmp_path, monkeypatch):
+    """``alcn pose train-corners --box-ply`` reads the cuboid in mm; a registration in cm is projected in cm: the box
+    given to the frames is scaled to it, and the detector records cm."""
+    from pose import corner_train
+
+    reg = _registration(tmp_path / "reg", "cm")
+    seen = {}
+
+    def frames(seq, corners, *args, **kwargs):
+        seen["corners"] = corners
+        raise RuntimeError("stop")
+
+    monkeypatch.setattr(corner_train, "build_frames", frames)
+    corners = pm.box_corners(np.array([189.0, 258.0, 75.0]))  # mm
+    with pytest.raises(RuntimeError, match="stop"):
+        corner_train.train_corners(reg, corners, tmp_path / "c.onnx", units="mm")
+    np.testing.assert_allclose(seen["corners"], corners / 10)
