@@ -119,7 +119,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="distil a light Normalizer from a trained one",
         description="Train a LiteNormalizer to reproduce the paper-model Normalizer's mixture weights on rendered "
         "windows (--conf lite), or a smaller gain Normalizer to reproduce the gain Normalizer's maps on relit "
-        "photographs that permit any use (--conf gain-lite) "
+        "photographs with no known restriction on use (--conf gain-lite) "
         "(alcn_cv.train.distill); writes the weight file and its model card (.md beside it), which records this "
         "command, and for a gain student its ONNX export. The shipped alcn_normalizer_lite.npz is `alcn distill "
         "--conf lite --out alcn_cv/weights/alcn_normalizer_lite.npz --overwrite`, alcn_normalizer_gain_lite.npz the "
@@ -150,7 +150,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="train the gain Normalizer on relit photographs or registered scenes (identification objective)",
         description="Train the gain-adaptive Normalizer (alcn_cv.nets.gain) on fixed-camera views under changing "
         "light: each textured location is a class seen under every frame's light (alcn_cv.train.real_light). "
-        "The gain preset trains on photographs that permit any use, each relit several times (relit=4); "
+        "The gain preset trains on photographs with no known restriction on use, each relit several times (relit=4); "
         "--set \"scenes=['a', 'b']\" adds registered scenes (folders, or the webcam scenes courbevoie, frankfurt, "
         "panorama: academic research only). Writes OUT/gain_normalizer.npz, checkpoints, train.log and "
         "history.json; Ctrl-C saves a checkpoint at the step reached and prints the command that goes on from it. "
