@@ -40,8 +40,8 @@ RENAMED_OPTIONS = {("experiments/relight.py", "--only"): "--part"}
 #: Said under every leave-one-scene-out table: the bench tunes the hand-made methods per fold but runs ALCN's
 #: shipped files as they are.
 LOO_NOTE = (
-    "The ALCN rows are the shipped files as they are: the gain models are trained on relit photographs with "
-    "no known restriction on use, so no scene is in their training data (the webcam training scenes chose their recipe).\n\n"
+    "The ALCN rows are the shipped files as they are: the gain models are trained on relit photographs with no known "
+    "restriction on use, so no scene is in their training data (the webcam training scenes chose their recipe).\n\n"
 )
 RELIGHT_METRICS = {
     "identification": "identification",
