@@ -55,6 +55,7 @@ __all__ = [
     "calibrate",
     "save_calibration",
     "load_calibration",
+    "camera_once",
     "main",
 ]
 
@@ -526,6 +527,24 @@ def load_calibration(path: str | os.PathLike | Calibration) -> Calibration:
     if not (width > 0 and height > 0):
         raise DatasetError(f"{path}: fields image_width/image_height are missing or not positive; {hint}")
     return Calibration(np.asarray(K, np.float64), dist, (int(width), int(height)), rms)
+
+
+def camera_once(camera: str | os.PathLike | Calibration | None, *intrinsics: object) -> Calibration | None:
+    """The :class:`Calibration` of ``camera`` (:func:`load_calibration`), or ``None`` without one, for every command
+    and function that takes a camera either as a calibration or as intrinsics (``alcn pose build`` and ``track``:
+    ``--camera`` or ``--K``; :func:`pose.track.open_tracker`: ``camera=`` or ``K=`` with ``dist=``, ``image_size=``).
+
+    Raises:
+        InputError: ``camera`` given with any of ``intrinsics`` (not ``None``): the camera is given once.
+        DatasetError: what :func:`load_calibration` raises.
+    """
+    if camera is None:
+        return None
+    if any(value is not None for value in intrinsics):
+        raise InputError(
+            "give the camera once: --K or --camera, not both (in Python: K=, with dist= and image_size=, or camera=)"
+        )
+    return load_calibration(camera)
 
 
 def _is_video(path: Path) -> bool:

@@ -22,12 +22,12 @@ GLOG_LEVELS: Mapping[str, int] = {"I": logging.DEBUG, "W": logging.DEBUG, "E": l
 
 
 @contextlib.contextmanager
-def pycolmap_log(target: logging.Logger, levels: Mapping[str, int] = GLOG_LEVELS) -> Iterator[None]:
+def pycolmap_log(target: logging.Logger) -> Iterator[None]:
     """Send pycolmap's log (glog) of the block to ``target`` instead of stderr and glog's own files.
 
     glog writes into a temporary file (``pycolmap.logging.set_log_destination``), read back and
-    logged line by line when the block ends, at the level ``levels`` gives its severity (by default
-    info and warnings at debug level, errors as warnings), prefixed ``pycolmap:``. glog's separate
+    logged line by line when the block ends, at the level :data:`GLOG_LEVELS` gives its severity
+    (info and warnings at debug level, errors as warnings), prefixed ``pycolmap:``. glog's separate
     warning and error files are turned off (the info file holds every severity).
     """
     import pycolmap
@@ -46,6 +46,6 @@ def pycolmap_log(target: logging.Logger, levels: Mapping[str, int] = GLOG_LEVELS
             glog.logtostderr, glog.alsologtostderr, glog.stderrthreshold = saved
             for path in sorted(Path(tmp).iterdir()):
                 for line in path.read_text(errors="replace").splitlines():
-                    level = levels.get(line[:1])
+                    level = GLOG_LEVELS.get(line[:1])
                     if level is not None and line[1:2].isdigit():  # skips the file's header lines
                         target.log(level, "pycolmap: %s", line.split("] ", 1)[-1])

@@ -107,7 +107,7 @@ def main() -> None:
         "--max-frames",
         type=int,
         default=60,
-        help="only the first N frames (default 60: two lights; 0: all 456); at least 60: each model is built "
+        help="only the first N frames (default 60: two lights; 0: all 455); at least 60: each model is built "
         "from every 10th of them, and from the 4 views of 40 frames nothing is triangulated",
     )
     args = ap.parse_args()

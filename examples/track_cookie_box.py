@@ -2,7 +2,7 @@
 
     .venv/bin/python examples/track_cookie_box.py [--out out/cookie_box] [--normalization none]
 
-Input: ``../shared/data/cookie_box/box.mp4`` (456 frames, 640x480, a hand-held box in front of a
+Input: ``../shared/data/cookie_box/box.mp4`` (455 frames, 640x480, a hand-held box in front of a
 static camera), ``box.ply`` (the cuboid, 18.9 x 25.8 x 7.5 cm) and the intrinsics of OpenCV's
 real-time pose tutorial (fx = 640*55/22.3, fy = 480*55/14.9, cx = 320, cy = 240).
 

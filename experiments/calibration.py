@@ -23,6 +23,7 @@ def main() -> None:
     from alcn_cv.report import machine
     from calib.camera import load_calibration
     from pose.model import load as load_part_model
+    from pose.track import SUMMARY_PATHS
 
     out = RUNS / "calibration"
     calib, box = out / "calib", out / "cookie_box"
@@ -80,7 +81,8 @@ def main() -> None:
             "refined_fx": model.extra["K"][0][0],
             "box_size_error_percent": 100 * model.box_fit["mean_abs_relative_size_error"],
         },
-        "tracking": track["summary"],
+        # the paths of this machine's run stay out of the published report (the commands name the files)
+        "tracking": {k: v for k, v in track["summary"].items() if k not in SUMMARY_PATHS},
     }
     (out / "calibration.json").write_text(json.dumps(report, indent=1), encoding="utf-8")
     keep(out / "calibration.json", "calibration")

@@ -300,16 +300,7 @@ def place_known_box(
         toward = -float(np.median(coords[~on_face, 2])) if np.any(~on_face) else 1.0
     mid[2] = -np.sign(toward or 1.0) * matched[2] / 2
     center = center + R @ mid
-    rel = (ext - matched) / matched
-    stats.update(
-        known_size=matched.tolist(),
-        size_error=(ext - matched).tolist(),
-        relative_size_error=rel.tolist(),
-        mean_abs_relative_size_error=float(np.abs(rel).mean()),
-        # the error on what the points cover: the face's two edges, measured in full, and the normal only where it
-        # is longer than true (it may be seen in part: a box seen from above has points on its lid only)
-        seen_relative_size_error=float(np.r_[np.abs(rel[:2]), max(float(rel[2]), 0.0)].mean()),
-    )
+    stats.update(size_errors(ext, matched))
     if support is not None and not scale_free:
         # the box stands on the support plane: move it along the plane's normal to touch it
         n, d = support[:3] / np.linalg.norm(support[:3]), support[3] / np.linalg.norm(support[:3])
@@ -318,6 +309,24 @@ def place_known_box(
         half = 0.5 * np.abs(R.T @ n) @ matched  # half-extent of the box along n
         center = center + (half - (np.dot(n, center) + d)) * n
     return matched, center
+
+
+def size_errors(fitted: np.ndarray, known: np.ndarray, normal: int = 2) -> dict[str, Any]:
+    """The error of a box fit's extents ``fitted`` ``(3,)`` against the known lengths ``known`` along the same axes,
+    as :attr:`BoxFit.stats`: ``known_size``, ``size_error`` (``fitted - known``), ``relative_size_error``,
+    ``mean_abs_relative_size_error`` (over the three), and ``seen_relative_size_error``, the error on what the points
+    cover: the face's two edges, measured in full, and the face's normal (axis ``normal``) only where it is longer
+    than true, by as much as it is (it may be seen in part: a box seen from above has points on its lid only)."""
+    fitted, known = np.asarray(fitted, np.float64), np.asarray(known, np.float64)
+    rel = (fitted - known) / known
+    seen = [max(float(r), 0.0) if axis == normal else abs(float(r)) for axis, r in enumerate(rel)]
+    return {
+        "known_size": known.tolist(),
+        "size_error": (fitted - known).tolist(),
+        "relative_size_error": rel.tolist(),
+        "mean_abs_relative_size_error": float(np.abs(rel).mean()),
+        "seen_relative_size_error": float(np.mean(seen)),
+    }
 
 
 def face_frame(points: np.ndarray, threshold: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -40,7 +40,7 @@ from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.extras import require
 from alcn_cv.io import check_writable, make_folder
 from pose import model as part_model
-from pose.box_fit import fit_box
+from pose.box_fit import fit_box, size_errors
 from pose.model import PartModel, box_corners, read_box_corners
 from pose.parts import descriptor_norm
 from pose.plots import plot_model
@@ -108,13 +108,14 @@ _STATIC_CAMERA: dict[str, Any] = {
 
 #: The named presets of :func:`main` (hloc's ``confs``; ``alcn pose build --conf NAME``), read-only: each a mapping of
 #: :func:`main`'s keyword arguments but the paths (the input, the output, ``box_ply``). A keyword given to
-#: :func:`main` (an option on the command line) overrides the preset's value (:func:`conf_settings`).
+#: :func:`main` (an option on the command line) overrides the preset's value (:func:`conf_settings`); a preset's
+#: values of a video (:data:`PRESET_VIDEO_SETTINGS`) apply to a video only.
 #:
 #: * ``static-camera``: a hand-held object before a static camera (:data:`_STATIC_CAMERA`); the camera (``K`` or
 #:   ``camera``) and the box's size are the caller's.
 #: * ``cookie-box``: the shared data's ``cookie_box/box.mp4``: ``static-camera`` with the intrinsics of OpenCV's
 #:   real-time pose tutorial (fx = 640*55/22.3, fy = 480*55/14.9, cx = 320, cy = 240; refined), the box in cm, at
-#:   most 46 frames: all 456 frames at every 10th.
+#:   most 46 frames: all 455 frames the video decodes (its container says 456) at every 10th.
 #:
 #: Without a preset, :func:`main`'s defaults (:data:`DEFAULTS`) hold: those of a registered sequence, which ignores
 #: the options of a video.
@@ -137,7 +138,7 @@ CONF_SUMMARIES: Mapping[str, str] = types.MappingProxyType(
     {
         "static-camera": "a hand-held object before a static camera (give --K or --camera, and the box)",
         "cookie-box": "the shared data's cookie_box/box.mp4: static-camera with the intrinsics of OpenCV's real-time "
-        "pose tutorial, the box in cm, all 456 frames",
+        "pose tutorial, the box in cm, all 455 frames",
     }
 )
 
@@ -152,14 +153,26 @@ DEFAULTS: Mapping[str, Any] = types.MappingProxyType(
     {"feature": "ORB", "n_features": 4000, "normalization": "none", "motion_mask": False, "refine_focal": False}
 )
 
+#: :func:`main`'s settings that only a video uses (a registered sequence has its cameras and poses): given by the
+#: caller for a registered sequence, they are warned about as ignored.
+VIDEO_SETTINGS = ("K", "camera", "step", "max_frames", "motion_mask", "refine_focal")
+#: A preset's settings that apply to a video only: :data:`VIDEO_SETTINGS` and the units of its box, which are its
+#: video's (``cookie-box``: cm); a registered sequence's box is in the caller's ``box_units`` or the sequence's.
+PRESET_VIDEO_SETTINGS = (*VIDEO_SETTINGS, "box_units")
 
-def conf_settings(conf: str | None, **given: Any) -> dict[str, Any]:
+
+def conf_settings(conf: str | None, *, video: bool = True, **given: Any) -> dict[str, Any]:
     """The settings of :func:`main` from the preset ``confs[conf]`` (none: ``{}``) and the keywords ``given``: a value
     given (not ``None``) overrides the preset's, and a camera given (``K`` or ``camera``) replaces the preset's.
-    Settings neither gives are left out (:func:`main` takes :data:`DEFAULTS` for them).
+    Without ``video`` (a registered sequence) the preset's :data:`PRESET_VIDEO_SETTINGS` are left out. A calibration
+    given (``camera``) holds the focal length fixed unless ``refine_focal`` is given too: it was measured, and a
+    preset's refinement (``static-camera``'s, for a guessed ``K``) would move the model's camera away from it. Settings
+    neither gives are left out (:func:`main` takes :data:`DEFAULTS` for them).
 
     >>> conf_settings("static-camera", n_features=1000, max_frames=None)["n_features"]
     1000
+    >>> conf_settings("static-camera", camera="camera.yaml")["refine_focal"]
+    False
 
     Raises:
         InputError: an unknown preset, naming those there are.
@@ -170,10 +183,12 @@ def conf_settings(conf: str | None, **given: Any) -> dict[str, Any]:
         preset = confs[conf]
     else:
         raise InputError(f"unknown preset {conf!r}; choose one of {', '.join(confs)}")
-    settings = dict(preset)
+    settings = {k: v for k, v in preset.items() if video or k not in PRESET_VIDEO_SETTINGS}
     if given.get("K") is not None or given.get("camera") is not None:
         settings.pop("K", None)
         settings.pop("camera", None)
+    if given.get("camera") is not None and given.get("refine_focal") is None and "refine_focal" in settings:
+        settings["refine_focal"] = False
     settings.update({key: value for key, value in given.items() if value is not None})
     return settings
 
@@ -206,6 +221,10 @@ def build(
 
     With a known size, a fit more than :data:`BOX_FIT_WARNING` off it is warned, and one whose points are more than
     :data:`BOX_FIT_FAILURE` off it on the edges they cover fails (:func:`check_box_fit`).
+
+    The model stores the camera for ``alcn pose track`` (a video's, or a registered sequence's when all its images
+    share one): ``extra["K"]`` (refined with ``refine_focal``; OpenCV pixel convention), ``extra["image_size"]`` the
+    frames' ``(width, height)`` and, when the views have one, the lens distortion ``extra["dist"]`` (OpenCV order).
 
     Raises:
         InputError: a registered sequence in arbitrary units (:func:`pose.sequence.check_known_units`), or an
@@ -262,11 +281,13 @@ def build(
         fit.stats["corner_error"] = float(
             np.mean(np.min(np.linalg.norm(fit.corners[:, None] - known_corners[None], axis=2), axis=1))
         )
-        _along_world_axes(fit.stats, fit.R)  # the model's box is the known one, along the world's axes
+        # the model's box is the known one, along the world's axes: the fit measured against it there
+        edges = "x, y, z" if _against_the_known_box(fit.stats, fit.R, known) else _FIT_EDGES
         keep = near.copy()
         keep[near] = fit.keep
         pts, corners, cams = xyz, known_corners, centers
     else:
+        edges = "x, y, z"  # the model's box is the fit's: its edges in the order of the fit's axes
         fit = fit_box(xyz, known, scale_free=not registered, viewpoints=centers)
         # registered: every point triangulated with the known poses is kept (the object need not be a
         # box, e.g. Middlebury's temple); unregistered: only the object's cluster moves with it
@@ -283,7 +304,7 @@ def build(
                     T = reg[v.name]
                     v.R_w2c = T[:, :3] @ fit.R
                     v.t_w2c = T[:, :3] @ fit.origin + T[:, 3] * s
-    check_box_fit(fit.stats, units)
+    check_box_fit(fit.stats, units, scale_free=not registered, edges=edges)
     index = np.full(len(xyz), -1, np.int64)
     index[keep] = np.arange(int(keep.sum()))
     kept_desc = keep[desc_point]
@@ -320,51 +341,69 @@ def build(
         model.extra["K"] = np.asarray(seq.views[0].K, np.float64).tolist()  # the camera, for `alcn pose track`
     if "K" in model.extra:
         model.extra["image_size"] = list(seq.size)  # the frames that camera is for (extract_features read them)
+        dist = seq.views[0].dist
+        # the lens distortion the reconstruction modelled (held fixed in it): the frames' keypoints are distorted
+        if dist is not None and all(v.dist is not None and np.array_equal(v.dist, dist) for v in seq.views):
+            model.extra["dist"] = np.asarray(dist, np.float64).ravel().tolist()
     return model, cams
 
 
-#: The per-axis statistics of :func:`pose.box_fit.fit_box`, along the fit's axes (its best-seen face's two edges,
-#: then the face's normal).
-_PER_AXIS = ("fitted_size", "known_size", "size_error", "relative_size_error")
+#: The edges a box fit's per-axis statistics are along when they are not the model's box's x, y, z
+#: (:func:`_against_the_known_box`): :func:`pose.box_fit.fit_box`'s axes.
+_FIT_EDGES = "of the fit (its best-seen face's two edges, then the face's normal)"
 
 
-def _along_world_axes(stats: dict[str, Any], R: np.ndarray) -> None:
-    """Reorder the per-axis statistics of a box fit from the fit's axes (the columns of ``R``) to the world's x, y, z,
-    in place, when each of the fit's axes is nearest a different world axis (the box of a registered sequence's
-    ``--box-ply``, axis-aligned in the world frame): then the sizes logged are in the order of the model's box."""
+def _against_the_known_box(stats: dict[str, Any], R: np.ndarray, known: np.ndarray) -> bool:
+    """Measure a box fit against the known box of a registered sequence's ``--box-ply``, which is the model's, along
+    the world's axes: per world axis, the fit's extent along its axis nearest it against the known box's edge there
+    (:func:`pose.box_fit.size_errors`, the face's normal where the fit's is), in place of the fit's own assignment of
+    the known lengths to its axes (:func:`pose.box_fit.match_known_size`: a box turned against the .ply had its lengths
+    matched in another order, and was logged as the .ply's x, y, z). Returns ``False``, the statistics left along the
+    fit's axes, when each of them is not nearest a different world axis (a box turned about 45 degrees)."""
     order = np.argmax(np.abs(np.asarray(R)), axis=1)  # world axis j is nearest the fit's axis order[j]
     if sorted(order.tolist()) != [0, 1, 2]:
-        return
-    for key in _PER_AXIS:
-        if key in stats:
-            stats[key] = [stats[key][i] for i in order]
+        return False
+    fitted = np.asarray(stats["fitted_size"], np.float64)[order]
+    stats.update(fitted_size=fitted.tolist(), **size_errors(fitted, known, normal=int(np.flatnonzero(order == 2)[0])))
+    return True
 
 
-def check_box_fit(stats: dict[str, Any], units: str) -> None:
-    """Log a box fit's error against the known size (its sizes along the edges of the model's box, corner 0 to
-    corners 4, 2, 1), as a warning when it is over :data:`BOX_FIT_WARNING`; nothing without a known size.
+def check_box_fit(stats: dict[str, Any], units: str, *, scale_free: bool = False, edges: str = "x, y, z") -> None:
+    """Log a box fit's error against the known size (its sizes along the ``edges`` of the box: by default those of the
+    model's box, corner 0 to corners 4, 2, 1), as a warning when it is over :data:`BOX_FIT_WARNING`; nothing without
+    a known size. ``scale_free``: the fit scaled the points to the known size (a video's reconstruction), so their
+    units cannot be off, and the failure's message does not suggest them.
 
     Raises:
         DatasetError: the error on the edges the points cover (``seen_relative_size_error``) is over
-            :data:`BOX_FIT_FAILURE`: the model's points are not this box, or not in these units.
+            :data:`BOX_FIT_FAILURE`: the model's points are not this box (or, registered, not in these units).
     """
     if "mean_abs_relative_size_error" not in stats:
         return
     error = stats["mean_abs_relative_size_error"]
     seen = stats.get("seen_relative_size_error", error)
     if seen > BOX_FIT_FAILURE:
+        if scale_free:
+            why = (
+                "the reconstruction's points are not this box's shape; check --box-size/--box-ply (the box's three "
+                "edges), that the video shows this box, and its camera (--refine-focal for a guessed --K)"
+            )
+        else:
+            why = (
+                "the model's points are not this box, or not in these units; check --box-size/--box-ply and "
+                "--box-units, and that the sequence's poses are this object's"
+            )
         raise DatasetError(
             f"the box fit is {100 * seen:.0f}% off the known size on the edges its points cover (known "
-            f"{np.round(stats['known_size'], 3).tolist()} {units}, "
-            f"off by {np.round(stats['size_error'], 3).tolist()}), "
-            f"over {100 * BOX_FIT_FAILURE:.0f}%: the model's points are not this box, or not in these units; check "
-            "--box-size/--box-ply and --box-units, and that the sequence's poses are this object's"
+            f"{np.round(stats['known_size'], 3).tolist()} {units}, off by {np.round(stats['size_error'], 3).tolist()}"
+            f" along the edges {edges}), over {100 * BOX_FIT_FAILURE:.0f}%: {why}"
         )
     poor = error > BOX_FIT_WARNING
     logger.log(
         logging.WARNING if poor else logging.INFO,
-        "box fit error vs the known size: %.1f%% (per edge x, y, z %s %s)%s",
+        "box fit error vs the known size: %.1f%% (per edge %s %s %s)%s",
         100 * error,
+        edges,
         np.round(stats["size_error"], 3).tolist(),
         units,
         "; the model's points fit the box poorly: more frames or views from more directions" if poor else "",
@@ -415,164 +454,160 @@ def main(
     given, is stored in the model's ``extra["K"]``, which ``alcn pose track`` uses by default).
     Of a video every ``step``-th frame is used, at most ``max_frames`` (``None``: the defaults
     :data:`pose.sequence.VIDEO_STEP` and :data:`pose.sequence.VIDEO_MAX_FRAMES`). The options of a
-    video that a registered sequence ignores are warned about when given. ``what``: the caller the error of a
-    missing ``[pose]`` extra names (``alcn pose build`` gives its own name).
+    video (:data:`VIDEO_SETTINGS`) that a registered sequence ignores are warned about when given. ``what``: the
+    caller the error of a missing ``[pose]`` extra names (``alcn pose build`` gives its own name).
 
     ``camera``: the calibration of a video's camera instead of ``K`` (a ``camera.yaml`` of ``alcn calib camera``, read
-    by :func:`calib.camera.load_calibration`, or its :class:`~calib.camera.Calibration`): its K, and its distortion,
-    which the reconstruction models (pycolmap's ``OPENCV`` camera: the frames are not undistorted, their keypoints are
-    those ``alcn pose track`` finds in the same frames). The model stores K only: track with the same ``camera``.
+    by :func:`calib.camera.load_calibration`, or its :class:`~calib.camera.Calibration`): its K, held fixed unless
+    ``refine_focal`` is given (:func:`conf_settings`), and its distortion, which the reconstruction models (pycolmap's
+    ``OPENCV`` camera: the frames are not undistorted, their keypoints are those ``alcn pose track`` finds in the
+    same frames). The model stores both (``extra["K"]``, ``extra["dist"]``, with the frames' ``extra["image_size"]``):
+    ``alcn pose track`` tracks with them unless given another camera. The video's frames must be the calibration's
+    size, checked on its first frame before the work.
 
     ``box_ply``/``box_size``: the box. For a video a cuboid ``.ply`` gives its size only (the box's frame is fitted);
     for a registered sequence it is the box placed in the sequence's world frame (a BOP model: its corners become the
     model's), while ``box_size`` gives the size alone (the box is fitted in the world frame).
 
     ``conf``: a preset of :data:`confs` (``"static-camera"``, ``"cookie-box"``); the settings given (not ``None``)
-    override its values (:func:`conf_settings`), and those neither gives are :data:`DEFAULTS`. The model records the
-    preset's name and the settings the build used (``extra["build"]``).
+    override its values, its values of a video apply to a video only (:func:`conf_settings`), and those neither gives
+    are :data:`DEFAULTS`. The model records the preset's name and the settings the build used (``extra["build"]``:
+    :func:`_provenance`).
 
     Raises:
-        InputError: an unknown preset, a video without its camera, a camera given twice; and :func:`build`'s.
+        InputError: an unknown preset, a video without its camera, a camera given twice, a video's frames of another
+            size than its calibration's; and :func:`build`'s.
     """
-    settings = conf_settings(
-        conf,
-        K=K,
-        camera=camera,
-        step=step,
-        max_frames=max_frames,
-        motion_mask=motion_mask,
-        feature=feature,
-        n_features=n_features,
-        normalization=normalization,
-        box_units=box_units,
-        refine_focal=refine_focal,
-    )
-    given = {**DEFAULTS, **settings}
-    K, camera, step, max_frames = given.get("K"), given.get("camera"), given.get("step"), given.get("max_frames")
-    motion_mask, refine_focal, box_units = given["motion_mask"], given["refine_focal"], given.get("box_units")
-    feature, n_features, normalization = given["feature"], given["n_features"], given["normalization"]
+    input_path, output = Path(input_path), part_model.model_file(output)
+    is_video = input_path.is_file() and io.is_video(input_path)
+    given = {
+        "K": K,
+        "camera": camera,
+        "step": step,
+        "max_frames": max_frames,
+        "motion_mask": motion_mask,
+        "feature": feature,
+        "n_features": n_features,
+        "normalization": normalization,
+        "box_units": box_units,
+        "refine_focal": refine_focal,
+    }
+    settings = {**DEFAULTS, **conf_settings(conf, video=is_video, **given)}
+    if is_video:  # the frames a video keeps unless a preset or the caller says
+        settings.setdefault("step", VIDEO_STEP)
+        settings.setdefault("max_frames", VIDEO_MAX_FRAMES)
     # the reconstruction (pycolmap), the box fit (open3d) and the plot come after the features: checked before those
     require("pycolmap", "open3d", "matplotlib", what=what, preferred="pose")
-    input_path, output = Path(input_path), part_model.model_file(output)
     check_writable(output)  # before the work
-    calibration = _calibration(camera, K)
-    make_folder(output.parent)
-    dist = None
+    if input_path.is_file() and not is_video:
+        raise InputError(
+            f"{input_path}: build from a video ({', '.join(sorted(io.VIDEO_SUFFIXES))}) or a registered sequence's "
+            "folder (a BOP scene, a COLMAP model or a Middlebury set)"
+        )
+    from calib.camera import camera_once
+
+    calibration = camera_once(settings.get("camera"), settings.get("K")) if is_video else None
+    K, dist = settings.get("K"), None
     if calibration is not None:
         K = np.asarray(calibration.K, np.float64)
         dist = np.asarray(calibration.dist, np.float64) if np.any(calibration.dist) else None
+    if is_video:
+        if K is None:
+            raise InputError("building from a video needs the intrinsics (--K fx fy cx cy, or --camera camera.yaml)")
+        if calibration is not None:  # before the frames are extracted
+            _check_frame_size(input_path, calibration, settings["camera"])
+    make_folder(output.parent)
     with tempfile.TemporaryDirectory(prefix="alcn_pose_frames_", dir=output.parent) as work:
-        if input_path.is_file() and io.is_video(input_path):
-            if K is None:
-                raise InputError(
-                    "building from a video needs the intrinsics (--K fx fy cx cy, or --camera camera.yaml)"
-                )
+        if is_video:
             if images is not None:
                 logger.warning("%s: a video; images (the image folder of a COLMAP model) ignored", input_path)
             seq = video_sequence(
                 input_path,
                 K,
                 work,
-                step=VIDEO_STEP if step is None else step,
-                max_frames=VIDEO_MAX_FRAMES if max_frames is None else max_frames,
+                step=settings["step"],
+                max_frames=settings["max_frames"],
                 dist=dist,
             )
-            if calibration is not None:
-                _check_frame_size(seq, calibration, camera)
             masks = None
-            if motion_mask:
+            if settings["motion_mask"]:
                 frames = [io.read_image(seq.image_dir / v.name) for v in seq.views]
                 masks = dict(zip((v.name for v in seq.views), motion_masks(frames)))
             # an unregistered video: its own units, matches within 8 frames, the focal length refinable
             video = {
-                "box_units": box_units or VIDEO_BOX_UNITS,
+                "box_units": settings.get("box_units") or VIDEO_BOX_UNITS,
                 "masks": masks,
                 "window": 8,
-                "refine_focal": refine_focal,
+                "refine_focal": settings["refine_focal"],
             }
-        elif input_path.is_file():
-            raise InputError(
-                f"{input_path}: build from a video ({', '.join(sorted(io.VIDEO_SUFFIXES))}) or a registered sequence's "
-                "folder (a BOP scene, a COLMAP model or a Middlebury set)"
-            )
         else:
             seq = load_sequence(input_path, images)
-            video = {"box_units": box_units}
-            # a registered sequence has its cameras and poses: these only apply to a video
-            video_options = {
-                "camera": calibration is not None,
-                "K": K is not None and calibration is None,
-                "step": step is not None,
-                "max_frames": max_frames is not None,
-                "motion_mask": motion_mask,
-                "refine_focal": refine_focal,
-            }
-            ignored = [name for name, given in video_options.items() if given]
+            video = {"box_units": settings.get("box_units")}
+            # a registered sequence has its cameras and poses: the caller's options of a video are ignored
+            ignored = [name for name in VIDEO_SETTINGS if given[name] is not None]
             if ignored:
                 logger.warning(
                     "%s: a registered sequence; %s apply to a video only, ignored", input_path, ", ".join(ignored)
                 )
         model, cams = build(
             seq,
-            feature=feature,
-            n_features=n_features,
-            normalization=normalization,
+            feature=settings["feature"],
+            n_features=settings["n_features"],
+            normalization=settings["normalization"],
             box_ply=box_ply,
             box_size=box_size,
             work_dir=work,
             progress=progress,
             **video,
         )
-    model.extra["build"] = _provenance(conf, given, video="masks" in video)
+    box_read_in = None if box_ply is None and box_size is None else video["box_units"] or seq.units
+    model.extra["build"] = _provenance(conf, settings, seq if is_video else None, box_read_in)
     path = part_model.save(model, output)
     plot_model(model, cams, path.with_name(path.stem + "_cameras.png"))
     return path
 
 
-def _provenance(conf: str | None, settings: Mapping[str, Any], video: bool) -> dict[str, Any]:
-    """What a model records of its build: the preset's name (``None`` without one) and the settings it used, those
-    of a video only for a video (its camera is the model's ``extra["K"]``)."""
+def _provenance(
+    conf: str | None, settings: Mapping[str, Any], video: TrainingSequence | None, box_units: str | None
+) -> dict[str, Any]:
+    """What a model records of its build (``extra["build"]``): the preset's name (``None`` without one) and the
+    settings it used; for a ``video`` (its sequence) also its frames (``step``, ``max_frames``), ``motion_mask``,
+    ``refine_focal`` and its camera: ``camera`` the calibration's file (``"calibration"`` for one given in Python,
+    ``"K"`` for intrinsics) and ``distortion`` whether the reconstruction modelled the lens's (the model's
+    ``extra["K"]``, ``extra["dist"]``); ``box_units``: the units the box's size was read in, where one was given."""
     used = {key: settings[key] for key in ("feature", "n_features", "normalization")}
-    if video:
-        used["step"] = VIDEO_STEP if settings.get("step") is None else settings["step"]
-        used["max_frames"] = VIDEO_MAX_FRAMES if settings.get("max_frames") is None else settings["max_frames"]
+    if video is not None:
+        camera = settings.get("camera")
         used.update(
+            step=settings["step"],
+            max_frames=settings["max_frames"],
             motion_mask=settings["motion_mask"],
             refine_focal=settings["refine_focal"],
-            box_units=settings.get("box_units") or VIDEO_BOX_UNITS,
+            camera="K" if camera is None else str(camera) if isinstance(camera, str | Path) else "calibration",
+            distortion=video.views[0].dist is not None,
         )
+    if box_units:
+        used["box_units"] = box_units
     return {"conf": conf, **used}
 
 
-def _calibration(camera: str | Path | Calibration | None, K: np.ndarray | None) -> Calibration | None:
-    """The :class:`~calib.camera.Calibration` of ``camera`` (a file read by :func:`calib.camera.load_calibration`,
-    which ``alcn pose track --camera`` reads too), or ``None``; ``K`` and ``camera`` together are an error."""
-    if camera is None:
-        return None
-    if K is not None:
-        raise InputError("give the camera once: --K or --camera, not both")
-    from calib.camera import load_calibration
+def _check_frame_size(video: Path, calibration: Calibration, camera: object) -> None:
+    """Raise :class:`InputError` when the first frame of ``video`` is not the size ``calibration`` is for
+    (:func:`pose.track.check_frame_size`); ``camera``: what the calibration was given as (a path names it)."""
+    from pose.track import check_frame_size
 
-    return load_calibration(camera)
-
-
-def _check_frame_size(seq: TrainingSequence, calibration: Calibration, camera: object) -> None:
-    """Raise :class:`InputError` when the frames of ``seq`` are not the size ``calibration`` is for."""
-    size = io.read_image(seq.image_dir / seq.views[0].name).shape[1::-1]
-    if tuple(size) != tuple(int(v) for v in calibration.image_size):
-        w, h = calibration.image_size
-        name = camera if isinstance(camera, str | Path) else "the calibration"
-        raise InputError(
-            f"{seq.info.get('path')}: its frames are {size[0]}x{size[1]} but {name} is for {int(w)}x{int(h)}; "
-            "calibrate at this resolution"
-        )
+    with io.FrameReader(video, max_frames=1) as frames:
+        frame = next(frames)[1]
+    name = camera if isinstance(camera, str | Path) else "the calibration"
+    check_frame_size(frame.shape[1::-1], calibration.image_size, f"{video}: its frames are", str(name))
 
 
 def build_options(settings: Mapping[str, Any]) -> list[str]:
     """The command-line options of ``alcn pose build`` that give :func:`main` the keyword arguments ``settings``
     (:data:`COOKIE_BOX`, say), for a script that runs the command: ``alcn pose build VIDEO OUT --box-ply PLY
     *build_options(COOKIE_BOX)``. Numbers are written in full (``repr``), so that the command builds from the same
-    values as :func:`main` does; a switch that is ``False`` (the command's default) is left out.
+    values as :func:`main` does; a switch is ``--X`` when ``True`` and ``--no-X`` when ``False``, so that it overrides
+    a preset's value (``--conf static-camera`` with ``build_options({"motion_mask": False})``: no motion mask).
 
     Raises:
         InputError: a value no option can give (``None``, a list: the command's default, or several values, are not
@@ -587,7 +622,7 @@ def build_options(settings: Mapping[str, Any]) -> list[str]:
                 raise InputError(f"{key}: a 3x3 camera matrix, not {K.shape}")
             options += [option, *(repr(float(v)) for v in (K[0, 0], K[1, 1], K[0, 2], K[1, 2]))]
         elif isinstance(value, bool):
-            options += [option] if value else []
+            options += [option if value else "--no-" + option[2:]]
         elif isinstance(value, int | float | str):  # str(float) is its repr: in full
             options += [option, str(value)]
         else:

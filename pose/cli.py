@@ -48,15 +48,6 @@ def _build(args: argparse.Namespace) -> int:
     return 0
 
 
-def _calibration(path: str | None):
-    """The :class:`~calib.camera.Calibration` of a file from ``alcn calib camera`` (None without one)."""
-    if path is None:
-        return None
-    from calib.camera import load_calibration
-
-    return load_calibration(path)
-
-
 def _track(args: argparse.Namespace) -> int:
     import shlex
 
@@ -87,9 +78,10 @@ def _track(args: argparse.Namespace) -> int:
     print(
         f"tracked {summary['tracked']} of {summary['frames']} frames at {summary['fps']:.1f} fps{why}\n"
         f"poses: {summary['poses']} (object to camera, cam_t_m2c in {summary['translation_units']}; the model is in "
-        f"{summary['model_units']}), per frame: {summary['info']}{overlay}"
+        f"{summary['units']}), per frame: {summary['info']}{overlay}"
     )
-    # overlay-error draws the box with the camera stored in the part model: the runs tracked with it
+    # overlay-error draws the box with the camera stored in the part model (with its distortion): the runs tracked
+    # with it
     if summary["tracked"] and summary["detector"] == "features" and summary["camera"] == "model":
         out = Path(summary["poses"]).with_name(Path(summary["poses"]).stem + "_overlay_error")
         words = ["alcn", "pose", "overlay-error", str(args.input), "--run", "track", str(args.model)]
@@ -360,10 +352,11 @@ def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
 
 
 def _bench_corners(args: argparse.Namespace) -> int:
+    from calib.camera import camera_once
     from pose import corner_bench
 
     K = _intrinsics(args.K)
-    calibration = _calibration(args.camera) if K is None else None
+    calibration = camera_once(args.camera, K)
     if calibration is not None:
         K = calibration.K
     if K is None:
@@ -447,8 +440,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     bcam.add_argument(
         "--camera",
         help="camera.yaml of a video's camera from `alcn calib camera` (OpenCV FileStorage; instead of --K): its K, "
-        "and its lens distortion, which the reconstruction models (the frames are not undistorted); the model stores "
-        "K only, so track the video with --camera too",
+        "held fixed unless --refine-focal is given (whatever the preset), and its lens distortion, which the "
+        "reconstruction models (the frames are not undistorted); the model stores both, and `alcn pose track` "
+        "tracks with them",
     )
     b.add_argument(
         "--conf",
@@ -497,13 +491,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument(
         "--box-units",
         choices=["mm", "cm", "m"],
-        help="units of --box-ply/--box-size (default: cm for a video, the sequence's units otherwise)",
+        help="units of --box-ply/--box-size (default: for a video the preset's ("
+        + ", ".join(f"{name}: {c['box_units']}" for name, c in build_confs.items() if "box_units" in c)
+        + "), else cm; for a registered sequence its units)",
     )
     b.add_argument(
         "--refine-focal",
         action=argparse.BooleanOptionalAction,
         help="video: refine the focal length in the bundle adjustment (stored in the model, used by `alcn pose "
-        "track`; default: the preset's, else held fixed)",
+        "track`; default: the preset's, else held fixed; with --camera held fixed whatever the preset)",
     )
     add_progress_option(b)
     b.set_defaults(func=_build)
@@ -515,7 +511,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "camera, OpenCV convention, cam_t_m2c in mm as BOP's whatever the model's units) and OUTPUT_info.json (per "
         "frame inliers and timings, the model's units); with --overlay a video (.mp4/.avi) or PNG folder with the "
         "box drawn. The camera is the one stored in the part model (`alcn pose build` from a video, refined with "
-        "--refine-focal; for the frames of its size) unless --K or --camera is given. Python: "
+        "--refine-focal, with the lens distortion of a --camera it was built with; for the frames of its size) unless "
+        "--K or --camera is given. Python: "
         "pose.track.open_tracker, the same tracker one frame at a time.",
     )
     t.add_argument(
@@ -560,14 +557,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="replace an --overlay folder of an earlier run (the poses and an overlay video are replaced in any case)",
     )
+    # --step and --max-frames are checked where the frames are read (alcn_cv.io.FrameReader), as for a Python caller
+    t.add_argument("--step", type=int, default=1, metavar="N", help="track every N-th frame (default 1)")
     t.add_argument(
-        "--step", type=number_at_least(int, 1), default=1, metavar="N", help="track every N-th frame (default 1)"
-    )
-    t.add_argument(
-        "--max-frames",
-        type=number_at_least(int, 1),
-        metavar="N",
-        help="track the first N frames (of those --step keeps; default all)",
+        "--max-frames", type=int, metavar="N", help="track the first N frames (of those --step keeps; default all)"
     )
     t.add_argument(
         "--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant (default usac_default)"
@@ -584,9 +577,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=0,
         metavar="N",
         help="keypoints kept where the whole frame is searched: the first frame and while the box is lost (default "
-        "0: all, each matched to every descriptor of the model, the cost of a frame without the box: with the "
-        "cookie box's model, 640x480 frames of 6,000-27,000 ORB keypoints took 1.7 s each on 2 cores, 0.4 s with "
-        "3000, 0.14 s with 1000; the strongest keypoints of a cluttered frame may all miss the box)",
+        "0: all, each matched to every descriptor of the model, the cost of a frame without the box; docs/pose.md, "
+        "Speed, gives its times; the strongest keypoints of a cluttered frame may all miss the box)",
     )
     t.add_argument(
         "--min-inliers",

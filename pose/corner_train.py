@@ -346,8 +346,9 @@ def train_corners(
     t0 = time.perf_counter()
     seq = load_sequence(sequence_dir, obj_id=obj_id)
     check_known_units(seq, "a corner detector (its box projected by the poses)")
-    if seq.units in part_model.UNITS:  # the box is projected by the poses: in their units
-        corners, units = corners * part_model.unit_scale(units, seq.units), seq.units
+    # the box is projected by the poses: in their units (a registered sequence's are known, checked above; other
+    # units are an error of unit_scale's)
+    corners, units = corners * part_model.unit_scale(units, seq.units), seq.units
     frames = build_frames(seq, corners, normalization, recipe, seed=seed)
     provenance = {"source": str(sequence_dir), "views": len(seq.views), "data_seconds": time.perf_counter() - t0}
     return fit_and_export(

@@ -294,8 +294,8 @@ def main(
                     runs.append(
                         (
                             det,
-                            "mm",
-                            det.corners,  # the BOP model's units
+                            det.units,  # its training sequence's (pose.corner_train.train_corners)
+                            det.corners,
                             {"training_seconds": time.perf_counter() - t0, "detector": str(net)},
                         )
                     )

@@ -175,15 +175,18 @@ def frame_error(
 
 def _camera_and_poses(
     model_path: str | Path, poses_path: str | Path
-) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
-    """The box corners, the camera stored in the part model and the ``(rvec, tvec)`` of every posed frame (``tvec``
-    in the model's units: :func:`pose.track.read_poses`)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """The box corners, the camera stored in the part model (``K``, and its distortion or ``None``: the camera
+    ``alcn pose track`` tracks with by default) and the ``(rvec, tvec)`` of every posed frame (``tvec`` in the model's
+    units: :func:`pose.track.read_poses`)."""
     from pose.track import read_poses
 
     model = part_model.load(model_path)
     if "K" not in model.extra:
         raise DatasetError(f"{model_path}: stores no camera (build it from a video with `alcn pose build`)")
-    return model.corners, np.asarray(model.extra["K"], np.float64), read_poses(poses_path, model.units)
+    dist = model.extra.get("dist")  # a model built before it stored the distortion has none
+    K = np.asarray(model.extra["K"], np.float64)
+    return model.corners, K, None if dist is None else np.asarray(dist, np.float64), read_poses(poses_path, model.units)
 
 
 def measure(
@@ -194,8 +197,8 @@ def measure(
     progress: bool = True,
 ) -> dict[str, FrameError]:
     """:class:`FrameError` of every frame of ``video`` posed in ``poses_path`` (``alcn pose track``'s
-    JSON) with the box and camera of ``model_path`` (the camera stored by ``alcn pose build``)."""
-    corners, K, poses = _camera_and_poses(model_path, poses_path)
+    JSON) with the box and camera of ``model_path`` (the camera stored by ``alcn pose build``, with its distortion)."""
+    corners, K, dist, poses = _camera_and_poses(model_path, poses_path)
     out = {}
     frames = io.iter_frames(video)
     for name, frame in tqdm(
@@ -204,7 +207,7 @@ def measure(
         if name not in poses:
             out[name] = FrameError(float("nan"), 0.0, float("nan"), {})
             continue
-        out[name] = frame_error(frame, corners, *poses[name], K, settings)
+        out[name] = frame_error(frame, corners, *poses[name], K, settings, dist)
     return out
 
 
@@ -271,9 +274,9 @@ def plot_frames(
     for name, frame in io.iter_frames(video):
         if name in wanted:
             vis = frame.copy()
-            for k, (label, corners, K, poses) in enumerate(loaded):
+            for k, (label, corners, K, dist, poses) in enumerate(loaded):
                 if name in poses:
-                    draw_box(vis, corners, *poses[name], K, colors[k % len(colors)], thickness=1)
+                    draw_box(vis, corners, *poses[name], K, colors[k % len(colors)], thickness=1, dist=dist)
                 cv2.putText(vis, label, (8, 20 + 18 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.55, colors[k % len(colors)], 2)
             cv2.putText(vis, name, (8, vis.shape[0] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 2)
             tiles[name] = vis

@@ -122,9 +122,8 @@ class FeaturePartDetector:
     frame, tracking lost) the object may be anywhere and *all* keypoints of the frame are used
     (``n_features_global``): the strongest ``n_features`` of a cluttered frame can all lie on the
     background (``docs/journal.md``). Each of them is matched to every descriptor of the model (brute force), the
-    cost of a frame without the object: with the cookie box's model (33,364 descriptors) a 640x480 frame of
-    6,000-27,000 ORB keypoints took 1.7 s on 2 cores, 0.4 s with ``n_features_global=3000``; the RANSAC that
-    follows took about 0.02 s.
+    cost of a frame without the object, which ``n_features_global`` bounds (its times with the cookie box's model:
+    ``docs/pose.md``, Speed).
 
     Built by hand, its defaults are not ``alcn pose track``'s (1000 keypoints around the prediction):
     :func:`pose.track.open_tracker` builds the command's detector and tracker.

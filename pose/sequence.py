@@ -191,7 +191,9 @@ def video_sequence(
     dist: np.ndarray | None = None,
 ) -> TrainingSequence:
     """An unregistered sequence: every ``step``-th frame of ``video`` (at most ``max_frames``)
-    written as PNG into ``work_dir/images``."""
+    written as PNG into ``work_dir/images``, each view with the intrinsics ``K`` ``(3, 3)`` (OpenCV pixel convention)
+    and the lens distortion ``dist`` (OpenCV order; ``None``: none), the camera of every frame (the frames are not
+    undistorted: the reconstruction models it)."""
     image_dir = Path(work_dir) / "images"
     make_folder(image_dir)
     views = []

@@ -492,7 +492,10 @@ class PoseTracker:
     0.6 and 0.3 (:data:`pose.track.TRUSTED_GUIDED_RATIO`; :func:`pose.track.make_tracker` and
     :func:`pose.track.open_tracker` build its tracker).
 
-    ``events`` collects ``(frame_index, "lost" | "recovered", reason)`` tuples, also logged.
+    ``events`` collects ``(frame, "lost" | "recovered", reason)`` tuples, also logged: ``frame`` is the ``name`` given
+    to :meth:`step` or :meth:`update` (the frame's name in its source, ``frame_000030``), else its index. The index
+    counts the frames given (the motion model's time: the prediction is one index ahead), which differs from the
+    frame's place in its source when frames are skipped (``alcn pose track --step``).
 
     Frame indices are expected to increase from one call to the next; a frame given again
     replaces the pose recorded for it, and an earlier one starts a new motion (the poses recorded
@@ -517,7 +520,7 @@ class PoseTracker:
         self.wide_search = wide_search
         self.coast = coast
         self.trusted_guided_ratio, self.min_guided_ratio = trusted_guided_ratio, min_guided_ratio
-        self.events: list[tuple[int, str, str]] = []
+        self.events: list[tuple[int | str, str, str]] = []
         self._poses: list[tuple[int, np.ndarray, np.ndarray]] = []  # the last two accepted (frame, rvec, tvec)
         self._frame: int | None = None  # the last frame given to update
         self._lost = True
@@ -546,11 +549,16 @@ class PoseTracker:
             return self.wide_search
         return 1.0
 
-    def update(self, frame_index: int, object_points: np.ndarray, image_points: np.ndarray) -> PoseEstimate:
-        """Solve frame ``frame_index`` from its correspondences with :attr:`prior` and record it."""
-        return self._record(frame_index, self.solver.solve(object_points, image_points, self.prior))
+    def update(
+        self, frame_index: int, object_points: np.ndarray, image_points: np.ndarray, *, name: str | None = None
+    ) -> PoseEstimate:
+        """Solve frame ``frame_index`` from its correspondences with :attr:`prior` and record it (``name``: what the
+        events and the log call it)."""
+        return self._record(frame_index, self.solver.solve(object_points, image_points, self.prior), name)
 
-    def step(self, frame_index: int, image: np.ndarray, detector: PartDetector) -> tuple[PoseEstimate, Correspondences]:
+    def step(
+        self, frame_index: int, image: np.ndarray, detector: PartDetector, *, name: str | None = None
+    ) -> tuple[PoseEstimate, Correspondences]:
         """Detect the parts of ``image`` around the predicted pose, solve, let the detector verify
         the pose (:meth:`pose.parts.PartDetector.verify`), and record the frame.
 
@@ -570,6 +578,8 @@ class PoseTracker:
         (:attr:`pose.parts.PartDetector.refine_search_scale`): the parts are searched again around
         the frame's own pose, in narrower gates, and the pose solved from them replaces it when
         verified.
+
+        ``name``: what the events and the log call the frame (default: ``frame_index``).
 
         Returns:
             The estimate and the correspondences it was solved from.
@@ -600,7 +610,7 @@ class PoseTracker:
             refined, near = self._search(image, detector, solved, solved, search_scale=detector.refine_search_scale)
             if refined.ok:
                 est, corr = refined, near
-        return self._record(frame_index, est), corr
+        return self._record(frame_index, est, name), corr
 
     def _search(
         self,
@@ -629,22 +639,23 @@ class PoseTracker:
                 return PoseEstimate(False, num_matches=est.num_matches, inliers=est.inliers, reason=why)
         return est
 
-    def _record(self, frame_index: int, est: PoseEstimate) -> PoseEstimate:
+    def _record(self, frame_index: int, est: PoseEstimate, name: str | None = None) -> PoseEstimate:
+        frame = frame_index if name is None else name
         # only poses of earlier frames predict this one's successor (equal indices: no velocity)
         self._poses = [p for p in self._poses if p[0] < frame_index]
         self._frame = frame_index
         if est.ok:
             self._poses = (self._poses + [(frame_index, est.rvec, est.tvec)])[-2:]
             if self._lost and self._started:
-                self.events.append((frame_index, "recovered", ""))
-                logger.info("frame %d: tracking recovered (%d inliers)", frame_index, len(est.inliers))
+                self.events.append((frame, "recovered", ""))
+                logger.info("frame %s: tracking recovered (%d inliers)", frame, len(est.inliers))
             self._lost = False
         else:
             if self._poses and frame_index - self._poses[-1][0] > self.coast:
                 self._poses = []  # lost for too long: the next pose starts a new motion
             if not self._lost:
-                self.events.append((frame_index, "lost", est.reason))
-                logger.info("frame %d: tracking lost (%s)", frame_index, est.reason)
+                self.events.append((frame, "lost", est.reason))
+                logger.info("frame %s: tracking lost (%s)", frame, est.reason)
             self._lost = True
         self._started = True
         return est

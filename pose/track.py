@@ -8,7 +8,8 @@ frame's pose as prior. Output:
 * poses per frame as BOP ``scene_gt``-style JSON: ``{"<frame>": [{"obj_id": 1, "cam_R_m2c": [9 floats],
   "cam_t_m2c": [3 floats]}]}``, object-to-camera (``x_cam = R x_obj + t``, ``R`` row-major), ``t`` in
   millimetres as BOP's (converted from the model's units; a lost frame has an empty list), plus a
-  ``<name>_info.json`` with per-frame inlier counts, timings and the lost/recovered events;
+  ``<name>_info.json`` with per-frame inlier counts, timings and the lost/recovered events (by frame name), written
+  first: :func:`read_poses` tells poses of another run beside it (an interrupted one) by its ``poses_digest``;
 * with ``overlay``, a video (``.mp4``/``.avi``) or a folder of PNGs with the box drawn in the
   colours of the paper's Fig. 1: ground truth green, ALCN blue, no normalization red
   (:data:`COLORS`; any other normalization yellow), written under a temporary name and renamed
@@ -21,7 +22,9 @@ up as it sets them up, one frame at a time (:meth:`BoxTracker.step`); :func:`mai
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import itertools
+import json
 import logging
 import re
 import time
@@ -37,7 +40,7 @@ from tqdm import tqdm
 
 from alcn_cv import io
 from alcn_cv.enhance.registry import same_method
-from alcn_cv.errors import InputError
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import check_writable, output_path, read_json, write_json
 from alcn_cv.report import machine
 from pose import model as part_model
@@ -194,19 +197,42 @@ def pose_to_bop(est: PoseEstimate, obj_id: int = 1, mm_per_unit: float = 1.0) ->
 #: ``_info.json`` as ``translation_units``; a file without that key was written in the model's units.
 POSE_UNITS = "mm"
 
+#: The entries of :func:`main`'s summary that are paths of the machine it ran on (the model read, the files written):
+#: a report published elsewhere leaves them out (``experiments/calibration.py``).
+SUMMARY_PATHS = ("model", "poses", "info", "overlay")
+
+
+def poses_digest(scene_gt: dict) -> str:
+    """SHA-256 of the poses ``scene_gt`` (:func:`main`'s, as read back from their JSON: the floats round-trip), the
+    ``poses_digest`` of the ``_info.json`` that describes them."""
+    return hashlib.sha256(json.dumps(scene_gt, sort_keys=True).encode()).hexdigest()
+
 
 def read_poses(path: str | Path, units: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """The ``(rvec, tvec)`` ``(3, 1)`` float64 (object to camera, ``tvec`` in ``units``, the model's) of every frame
     posed in ``path``, poses written by :func:`main` (``cam_t_m2c`` in mm). Poses written before they were in mm,
-    in the model's units, are told by the ``_info.json`` beside them (no ``translation_units`` in its summary)."""
+    in the model's units, are told by the ``_info.json`` beside them (no ``translation_units`` in its summary).
+
+    Raises:
+        DatasetError: the ``_info.json`` beside them is of other poses (its ``poses_digest``): a track interrupted
+            between the two files, whose units are unknown.
+    """
     path = Path(path)
-    info = path.with_name(path.stem + "_info.json")
-    summary = read_json(info).get("summary", {}) if info.is_file() else {}
-    # an _info.json without translation_units: an earlier track's, in the model's units
+    info_path = path.with_name(path.stem + "_info.json")
+    scene_gt = read_json(path)
+    info = read_json(info_path) if info_path.is_file() else {}
+    digest = info.get("poses_digest")
+    if digest is not None and digest != poses_digest(scene_gt):
+        raise DatasetError(
+            f"{info_path} describes other poses than {path} (a track interrupted between the two?): track again"
+        )
+    summary = info.get("summary", {})
+    # an _info.json without translation_units: an earlier track's, in the model's units (main writes the info first,
+    # so an interrupted run never leaves its poses beside an earlier info)
     written = summary.get("translation_units", units if summary else POSE_UNITS)
     scale = part_model.unit_scale(written, units)
     poses = {}
-    for name, entry in read_json(path).items():
+    for name, entry in scene_gt.items():
         if entry:
             R = np.asarray(entry[0]["cam_R_m2c"], np.float64).reshape(3, 3)
             t = np.asarray(entry[0]["cam_t_m2c"], np.float64).reshape(3, 1) * scale
@@ -253,19 +279,23 @@ RANSAC_ITERATIONS = {"features": 5000, "corners": 5000}
 
 def track(
     frames: Iterator[tuple[str, np.ndarray]],
+    *,
     tracker: BoxTracker,
     total: int | None = None,
     progress: bool = True,
     source: str | Path | None = None,
 ) -> Iterator[tuple[TrackedFrame, np.ndarray]]:
     """Track the box through ``frames`` (``(name, BGR frame)``) with ``tracker`` (:func:`open_tracker`); yields each
-    frame's result and the frame itself. ``source``: what the frames are of, named in an error about a frame.
+    frame's result and the frame itself. ``total``: the frames' count, for the progress bar; ``source``: what the
+    frames are of, named in an error about a frame.
 
-    ``tracker.events`` collects the lost/recovered events.
+    ``tracker.events`` collects the lost/recovered events, by the frames' names.
     """
     for name, frame in tqdm(frames, total=total, desc="track", unit="frame", leave=False, disable=not progress):
         t0 = time.perf_counter()
-        est = tracker.step(frame, name=name if source is None else f"{name} of {source}")
+        if source is not None:  # the error names the source too; step checks the frame again, without it
+            tracker.check_size(frame, f"frame {name} of {source} is")
+        est = tracker.step(frame, name=name)
         keypoints = tracker.correspondences.keypoints if tracker.correspondences is not None else 0
         yield TrackedFrame(name, est, time.perf_counter() - t0, keypoints), frame
 
@@ -349,25 +379,25 @@ def _overlay_path(overlay: str | Path, source: str | Path, overwrite: bool = Fal
     return overlay
 
 
-def _check_frame_size(
-    frame: np.ndarray, image_size: tuple[int, int], what: str, of: str, resized: np.ndarray | None = None
+def check_frame_size(
+    size: tuple[int, int], image_size: tuple[int, int], what: str, of: str, resized: np.ndarray | None = None
 ) -> None:
-    """Raise :class:`InputError` when ``frame`` is not ``image_size`` ``(width, height)``, the size ``of`` is for;
-    ``what`` (``"the frames of X are"``) begins the message. ``resized``: the camera ``of`` is, whose resized copy the
-    message names (the model's)."""
-    if frame.shape[1::-1] != image_size:
+    """Raise :class:`InputError` when frames of ``size`` ``(width, height)`` are not ``image_size``, the size ``of``
+    (a calibration, a model's camera) is for: ``alcn pose track`` for every frame, ``alcn pose build --camera`` for a
+    video's first, before the work. ``what`` (``"the frames of X are"``) begins the message. ``resized``: the camera
+    ``of`` is, whose resized copy the message names (the model's)."""
+    w, h = int(size[0]), int(size[1])
+    if (w, h) != (int(image_size[0]), int(image_size[1])):
         hint = "give the intrinsics at this resolution (--K or --camera)"
         if resized is not None:
             from pose.corners import scaled_camera
 
-            k = scaled_camera(resized, frame.shape[1] / image_size[0], frame.shape[0] / image_size[1])
+            k = scaled_camera(resized, w / image_size[0], h / image_size[1])
             hint += (
                 f"; the model's camera resized to them, if they are its frames resized (not cropped): "
                 f"--K {k[0, 0]:.2f} {k[1, 1]:.2f} {k[0, 2]:.2f} {k[1, 2]:.2f}"
             )
-        raise InputError(
-            f"{what} {frame.shape[1]}x{frame.shape[0]} but {of} is for {image_size[0]}x{image_size[1]}; {hint}"
-        )
+        raise InputError(f"{what} {w}x{h} but {of} is for {int(image_size[0])}x{int(image_size[1])}; {hint}")
 
 
 def make_solver(
@@ -442,7 +472,7 @@ class BoxTracker:
         mm_per_unit: millimetres per unit of :attr:`units` (``cam_t_m2c`` of :func:`pose_to_bop`).
         normalization: the normalization spec applied first.
         kind: ``"features"`` or ``"corners"``.
-        camera: ``"model"`` (the camera stored in the part model) or ``"given"``.
+        camera: ``"model"`` (the camera stored in the part model, with its distortion) or ``"given"``.
         frames: frames stepped so far; correspondences: those of the last frame.
     """
 
@@ -471,8 +501,9 @@ class BoxTracker:
         self.correspondences: Correspondences | None = None
 
     @property
-    def events(self) -> list[tuple[int, str, str]]:
-        """``(frame index, "lost" | "recovered", reason)`` of the frames stepped so far."""
+    def events(self) -> list[tuple[int | str, str, str]]:
+        """``(frame, "lost" | "recovered", reason)`` of the frames stepped so far: ``frame`` is the ``name`` given to
+        :meth:`step`, else the frame's index among those stepped."""
         return self.tracker.events
 
     def check_size(self, frame: np.ndarray, what: str = "the frame is") -> None:
@@ -480,7 +511,7 @@ class BoxTracker:
         if self.image_size is not None:
             model = self.camera == "model"
             of = f"the camera of {self.name}" if model else "the calibration"
-            _check_frame_size(frame, self.image_size, what, of, self.K if model else None)
+            check_frame_size(frame.shape[1::-1], self.image_size, what, of, self.K if model else None)
 
     def step(self, frame: np.ndarray, *, name: str | None = None) -> PoseEstimate:
         """The pose of the box in ``frame`` (BGR or grey uint8, the next frame of the sequence), its previous frames'
@@ -491,15 +522,19 @@ class BoxTracker:
             ``rvec``, ``tvec`` ``(3, 1)`` float64 object-to-camera (``x_cam = R x_obj + t``, OpenCV convention),
             ``tvec`` in :attr:`units` (times :attr:`mm_per_unit`: mm).
 
+        ``name``: the frame's name in its source (``frame_000030``), which :attr:`events`, the log and an error give
+        (default: its index among the frames stepped).
+
         Raises:
-            InputError: a frame of another size than :attr:`image_size` (``name`` names it in the message).
+            InputError: a frame of another size than :attr:`image_size`.
         """
         self.check_size(frame, "the frame is" if name is None else f"frame {name} is")
         if self.frames == 0 and self.camera == "given":  # the given camera against the model's, at the frames' size
             camera_matrix_for(
                 self._model_K, self.K, self.name, model_size=self._model_size, frame_size=frame.shape[1::-1]
             )
-        est, self.correspondences = self.tracker.step(self.frames, frame, self.detector)
+        # the tracker's index counts the frames stepped: its motion model predicts one index ahead
+        est, self.correspondences = self.tracker.step(self.frames, frame, self.detector, name=name)
         self.frames += 1
         return est
 
@@ -528,10 +563,11 @@ def open_tracker(
             :class:`~pose.model.PartModel`); ``detector="corners"``: a corner detector (``.onnx`` of
             ``alcn pose train-corners``).
         K: ``(3, 3)`` intrinsics (OpenCV pixel convention); default: the camera stored in the part model
-            (:func:`camera_matrix_for`), which holds for frames of the size it stores only.
+            (:func:`camera_matrix_for`; ``extra["K"]``, with its distortion ``extra["dist"]`` when the model was built
+            with one, ``alcn pose build --camera``), which holds for frames of the size it stores only.
         camera: instead of ``K``: a ``camera.yaml`` of ``alcn calib camera`` or its
             :class:`~calib.camera.Calibration` (intrinsics, distortion and the frames' size).
-        dist: ``K``'s distortion coefficients (OpenCV order), or None.
+        dist: ``K``'s distortion coefficients (OpenCV order), or None (without ``K``: the model's).
         image_size: ``(width, height)`` the calibration of ``K`` and ``dist`` is for; frames of another size are an
             error.
         normalization: the normalization applied first, ``NAME[:KEY=VALUE...]`` (default: the one the model was
@@ -545,7 +581,8 @@ def open_tracker(
 
     Raises:
         InputError: settings out of range, a corner detector given as a part model, a model without a camera and
-            no ``K``, a calibration that is not one.
+            no ``K``, a camera given both as ``camera`` and as ``K`` (:func:`calib.camera.camera_once`).
+        DatasetError: a calibration that is not one.
 
     Example: the cookie box, its model ``cb/model.npz`` built from its video (it stores the camera) by
     ``alcn pose build ../shared/data/cookie_box/box.mp4 cb/model.npz --box-ply ../shared/data/cookie_box/box.ply
@@ -575,15 +612,13 @@ def open_tracker(
             "reprojection_error must be > 0 px, n_features and n_features_global >= 0 (0: all) and min_inliers >= 4 "
             f"(a pose needs 4 points); got {reprojection_error}, {n_features}, {n_features_global} and {min_inliers}"
         )
-    if camera is not None:
-        if K is not None or dist is not None or image_size is not None:
-            raise InputError("give the camera either as camera= (a calibration) or as K= (with dist, image_size)")
-        from calib.camera import load_calibration
+    from calib.camera import camera_once
 
-        camera = load_calibration(camera)
-        K, dist, image_size = camera.K, camera.dist, camera.image_size
+    calibration = camera_once(camera, K, dist, image_size)
+    if calibration is not None:
+        K, dist, image_size = calibration.K, calibration.dist, calibration.image_size
     name = str(model) if isinstance(model, (str, Path)) else "the part model"
-    model_size = None
+    model_size = model_dist = None
     if detector == "features":
         if isinstance(model, (str, Path)) and Path(model).suffix.lower() == ".onnx":
             raise InputError(f"{model} is a corner detector: track with it by --detector corners")
@@ -600,7 +635,7 @@ def open_tracker(
             )
         normalization = normalization or pm.normalization
         corners, units = pm.corners, pm.units
-        model_K, model_size = pm.extra.get("K"), pm.extra.get("image_size")
+        model_K, model_size, model_dist = pm.extra.get("K"), pm.extra.get("image_size"), pm.extra.get("dist")
     elif detector == "corners":
         from pose.corners import CornerDetector
 
@@ -618,6 +653,8 @@ def open_tracker(
     given = K is not None
     if not given and model_size is not None:  # the model's camera: it holds for frames of its size only
         image_size = model_size
+    if not given and dist is None and model_dist is not None:  # the lens distortion the model was built with
+        dist = np.asarray(model_dist, np.float64)
     K = camera_matrix_for(model_K, K, name) if not given else np.asarray(K, np.float64)
     tracker = make_tracker(
         detector,
@@ -669,19 +706,21 @@ def main(
     """Track the box through ``source`` and write ``output`` (scene_gt JSON, keyed by the frame
     names of :func:`alcn_cv.io.iter_frames`: ``frame_000000``, ... for a video, the file stems for a
     folder; the overlay PNGs are named alike). Its rotations ``cam_R_m2c`` and translations ``cam_t_m2c`` are
-    object-to-camera, the translations in mm as BOP's (:data:`POSE_UNITS`; the model's units are
-    ``model_units`` in the ``_info.json`` beside it).
+    object-to-camera, the translations in mm as BOP's (:data:`POSE_UNITS`, the summary's ``translation_units``; the
+    model's units are its ``units``). The ``_info.json`` beside it is written first (:func:`read_poses`).
 
     Args:
         model_path, K, camera, dist, image_size, detector, normalization, n_features, n_features_global, method,
             min_inliers, reprojection_error: the tracker's (:func:`open_tracker`).
         overlay: a video or a folder of PNGs (:class:`OverlayWriter`) to draw the box into.
         overwrite: replace an overlay folder of an earlier run (otherwise an error).
-        step, max_frames: track every ``step``-th frame, at most ``max_frames`` of them (default all).
+        step, max_frames: track every ``step``-th frame, at most ``max_frames`` of them (default all; checked by
+            :class:`alcn_cv.io.FrameReader`, before the tracking).
 
     Returns:
-        A summary dict: frames, tracked frames, the most frequent reason a frame was lost, fps, events, where the
-        poses and the overlay were written, the units of the poses (``translation_units``) and the model's.
+        A summary dict: frames, tracked frames, the most frequent reason a frame was lost, fps, events (by frame
+        name), the camera (``"model"`` or ``"given"``), the units of the poses (``translation_units``) and the
+        model's (``units``), and the paths (:data:`SUMMARY_PATHS`): the model, the poses, the info and the overlay.
 
     Raises:
         InputError: an output that is the input, a suffix other than ``.json`` (the poses) or a video's (the
@@ -692,8 +731,6 @@ def main(
     output = output_path(output, ".json", "the poses")  # before the tracking, not after it
     if overlay is not None:
         overlay = _overlay_path(overlay, source, overwrite)
-    if isinstance(step, bool) or not isinstance(step, int) or step < 1 or (max_frames is not None and max_frames < 1):
-        raise InputError(f"step and max_frames must be at least 1; got {step} and {max_frames}")
     box = open_tracker(
         model_path,
         K,
@@ -711,7 +748,8 @@ def main(
     scene_gt, info = {}, {}
     times = []
     with contextlib.ExitStack() as stack:
-        # the source opened once: its first frame checked before the tracking, then tracked with the rest
+        # the source opened once (the reader checks step and max_frames first): its first frame checked before the
+        # tracking, then tracked with the rest
         reader = stack.enter_context(io.FrameReader(source, step, max_frames))
         first = next(reader)
         box.check_size(first[1], f"the frames of {source} are")
@@ -719,7 +757,8 @@ def main(
         # the overlay video plays at the input's frame rate (of the frames kept); a folder of images has none: 30 fps
         fps = reader.fps / step if reader.fps else 30.0
         writer = stack.enter_context(OverlayWriter(overlay, fps, overwrite=overwrite)) if overlay is not None else None
-        for res, frame in track(frames, box, io.count_frames(source, step, max_frames), progress, source):
+        total = io.count_frames(source, step, max_frames)
+        for res, frame in track(frames, tracker=box, total=total, progress=progress, source=source):
             scene_gt[res.name] = pose_to_bop(res.estimate, mm_per_unit=box.mm_per_unit)
             info[res.name] = {
                 "inliers": len(res.estimate.inliers),
@@ -736,7 +775,6 @@ def main(
                     color = color_for(box.normalization)
                     draw_box(vis, box.corners, res.estimate.rvec, res.estimate.tvec, box.K, color, dist=box.dist)
                 writer.write(res.name, vis)
-    write_json(output, scene_gt)  # its folder made by the atomic write
     tracked = sum(bool(v) for v in scene_gt.values())
     # the reasons carry their frame's counts: grouped by their words, the first of the most frequent group
     lost = [(re.sub(r"[\d.]+%?", "#", r), r) for r in (f["lost_reason"] for f in info.values()) if r]
@@ -752,13 +790,17 @@ def main(
         "model": str(model_path),
         "camera": box.camera,
         "translation_units": POSE_UNITS,
-        "model_units": box.units,
+        "units": box.units,
         "poses": str(output),
         "info": str(info_path),
         "overlay": None if overlay is None else str(overlay),
         "events": [{"frame": f, "event": e, "reason": r} for f, e, r in box.events],
     }
-    write_json(info_path, {"summary": summary, "machine": machine(), "frames": info})
+    # the info first (its folder made by the atomic write): an interrupted run leaves it beside the earlier poses,
+    # which read_poses refuses by the digest, never its poses (mm) beside an earlier info (the model's units)
+    record = {"summary": summary, "machine": machine(), "poses_digest": poses_digest(scene_gt), "frames": info}
+    write_json(info_path, record)
+    write_json(output, scene_gt)
     # the caller reports the summary (`alcn pose track` prints it): logged at INFO it was printed twice
     logger.debug("tracked %d of %d frames at %.1f fps -> %s", tracked, len(scene_gt), summary["fps"], output)
     return summary

@@ -13,14 +13,12 @@ into a COLMAP database, pycolmap for the geometry).
    (:func:`representatives`).
 
 pycolmap's own log (glog, hundreds of lines per build) goes to this module's logger at debug
-level (:func:`pycolmap_log`): ``alcn --verbose`` shows it.
+level (:func:`calib.colmap_log.pycolmap_log`): ``alcn --verbose`` shows it.
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -33,7 +31,7 @@ from alcn_cv import io
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError
 from alcn_cv.io import make_folder, to_gray
-from calib import colmap_log
+from calib.colmap_log import pycolmap_log
 from pose.parts import create_feature, match_descriptors
 from pose.sequence import TrainingSequence
 
@@ -44,14 +42,6 @@ logger = logging.getLogger(__name__)
 
 #: Seed of pycolmap's RANSAC (verification) and mapping, so that a model builds the same every time.
 RANDOM_SEED = 0
-
-
-@contextlib.contextmanager
-def pycolmap_log() -> Iterator[None]:
-    """Send pycolmap's log (glog) of the block to this module's logger instead of stderr and glog's own files in the
-    temporary folder (:func:`calib.colmap_log.pycolmap_log`: info and warnings at debug level, errors as warnings)."""
-    with colmap_log.pycolmap_log(logger):
-        yield
 
 
 @dataclass
@@ -106,7 +96,7 @@ def write_database(
     """Create the COLMAP database: cameras (known intrinsics), images, keypoints, raw matches;
     writes the pairs file and runs pycolmap's geometric verification (``progress``: a progress bar over
     the pairs). Returns the pairs file."""
-    with pycolmap_log():
+    with pycolmap_log(logger):
         return _write_database(db_path, seq, feats, pairs, norm, ratio, progress)
 
 
@@ -175,7 +165,7 @@ def triangulate_fixed_poses(seq: TrainingSequence, db_path: Path, out_dir: Path)
     opts = pycolmap.IncrementalPipelineOptions()
     opts.min_num_matches = 8
     opts.random_seed = RANDOM_SEED
-    with pycolmap_log():
+    with pycolmap_log(logger):
         return pycolmap.triangulate_points(rec, db_path, seq.image_dir, out_dir, options=opts)
 
 
@@ -200,7 +190,7 @@ def reconstruct_incremental(
     make_folder(out_dir)
     # one thread, no progress of its own: a minute on a few dozen frames, said before it starts
     logger.info("incremental mapping of %d images (pycolmap, one thread)", len(seq.views))
-    with pycolmap_log():
+    with pycolmap_log(logger):
         recs = pycolmap.incremental_mapping(db_path, seq.image_dir, out_dir, opts)
     if not recs:
         raise DatasetError(

@@ -76,6 +76,7 @@ def test_the_cookie_box_preset_is_read_only_and_its_options_say_only_what_they_c
     assert build.build_options({"step": 5, "motion_mask": False, "feature": "SIFT"}) == [
         "--step",
         "5",
+        "--no-motion-mask",  # a preset's switch turned off
         "--feature",
         "SIFT",
     ]

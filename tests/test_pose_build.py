@@ -164,7 +164,9 @@ def test_pycolmap_log_goes_to_the_logger(tmp_path, capfd, caplog):
     import pycolmap
 
     (tmp_path / "images").mkdir()
-    with caplog.at_level("DEBUG", logger="pose.triangulate"), triangulate.pycolmap_log():
+    from calib.colmap_log import pycolmap_log
+
+    with caplog.at_level("DEBUG", logger="pose.triangulate"), pycolmap_log(triangulate.logger):
         pycolmap.Database.open(tmp_path / "db.db").close()
         pycolmap.incremental_mapping(tmp_path / "db.db", tmp_path / "images", tmp_path)
     assert "pycolmap: " in caplog.text and "Loading database" in caplog.text
@@ -242,6 +244,42 @@ def test_a_video_option_is_said_to_be_ignored_exactly_when_given(shared_data, tm
             assert f"a registered sequence; {ignored} apply to a video only, ignored" in caplog.text
 
 
+def test_a_presets_video_settings_stay_off_a_registered_sequence(shared_data, tmp_path, caplog, monkeypatch):
+    """main(registered, conf="cookie-box", box_size=...) passed the preset's box_units="cm" on (the user's --box-size
+    rescaled from cm to the sequence's m) and warned of the preset's K, step, ... as options given: a preset's values
+    of a video apply to a video only, the warning names the caller's, and the model records the units its box was
+    read in."""
+    for module in ("pycolmap", "open3d", "matplotlib"):
+        pytest.importorskip(module)
+    seen = []
+
+    def record(seq, **kwargs):
+        seen.append(kwargs)
+        return pm.PartModel(corners=pm.box_corners(np.array([0.1, 0.1, 0.1])), units=seq.units), np.zeros((0, 3))
+
+    monkeypatch.setattr(build, "build", record)
+    monkeypatch.setattr(build, "plot_model", lambda *args: None)
+    src = shared_data / "middlebury" / "templeSparseRing"  # in m
+    with caplog.at_level("WARNING", logger="pose.build"):
+        build.main(src, tmp_path / "m.npz", conf="cookie-box", box_size=(0.1, 0.1, 0.1), progress=False)
+    assert seen[-1]["box_units"] is None and "ignored" not in caplog.text
+    assert (seen[-1]["feature"], seen[-1]["n_features"]) == ("ORB", 3000)  # the preset's settings of any sequence
+    recorded = pm.load(tmp_path / "m.npz").extra["build"]
+    assert recorded == {
+        "conf": "cookie-box",
+        "feature": "ORB",
+        "n_features": 3000,
+        "normalization": "none",
+        "box_units": "m",
+    }
+    with caplog.at_level("WARNING", logger="pose.build"):
+        build.main(src, tmp_path / "m.npz", conf="cookie-box", step=5, box_size=(10, 10, 10), box_units="cm")
+    assert "a registered sequence; step apply to a video only, ignored" in caplog.text
+    assert seen[-1]["box_units"] == "cm" and pm.load(tmp_path / "m.npz").extra["build"]["box_units"] == "cm"
+    build.main(src, tmp_path / "m.npz", progress=False)  # no box: no units it was read in
+    assert "box_units" not in pm.load(tmp_path / "m.npz").extra["build"]
+
+
 def test_the_cookie_box_preset_is_the_tutorials_camera_and_alcn_pose_builds_from_it(monkeypatch):
     """The cookie box's settings were written out three times (its two examples and calibration.py, there with the
     focal lengths rounded): one preset, the same values as `alcn pose build` options (build_options, in full)."""
@@ -262,15 +300,25 @@ def test_the_cookie_box_preset_is_the_tutorials_camera_and_alcn_pose_builds_from
     calls = []
     monkeypatch.setattr(build, "main", lambda *args, **kwargs: calls.append(kwargs) or Path("model.npz"))
     assert alcn(["pose", "build", "box.mp4", "model.npz", *build.build_options(conf)]) == 0
+    # a switch off is written --no-X: it overrides a preset's True (build_options left a False out)
+    assert build.build_options({"motion_mask": False, "refine_focal": True}) == ["--no-motion-mask", "--refine-focal"]
     given = {k: calls[0][k] for k in conf}
     assert np.array_equal(given.pop("K"), conf["K"])  # bit for bit: the floats written with repr
     assert given == {k: v for k, v in conf.items() if k != "K"}
 
 
-def test_a_video_builds_from_a_camera_yaml_with_its_distortion(shared_data, tmp_path, monkeypatch, capsys):
-    """`pose build` had --K but not the --camera that `pose track` takes: K from camera.yaml, its distortion given to
-    the reconstruction (pycolmap's OPENCV camera), frames of another size refused; --K with --camera refused."""
-    pytest.importorskip("pycolmap")
+class ReconstructionReachedError(Exception):
+    """Raised by ``pycolmap.incremental_mapping`` under a test: what reached the reconstruction was recorded."""
+
+
+def test_a_video_builds_from_a_camera_yaml_with_its_distortion_and_focal_length(
+    shared_data, tmp_path, monkeypatch, capsys
+):
+    """`pose build` had --K but not the --camera that `pose track` takes: K from camera.yaml and its distortion reach
+    pycolmap's reconstruction (its database's OPENCV camera), its focal length held fixed even under a preset that
+    refines a guessed one (--refine-focal, given, refines it); frames of another size refused from the video's first
+    frame, before any frame is extracted; --K with --camera refused."""
+    pycolmap = pytest.importorskip("pycolmap")
     from alcn_cv.cli import main
     from calib.camera import write_camera_yaml
 
@@ -278,22 +326,29 @@ def test_a_video_builds_from_a_camera_yaml_with_its_distortion(shared_data, tmp_
     K = np.array([[600.0, 0, 320], [0, 600.0, 240], [0, 0, 1]])
     dist = np.array([-0.1, 0.02, 0.0, 0.0, 0.0])
     camera = write_camera_yaml(tmp_path / "camera.yaml", K, dist, (640, 480))
-    seen = []
+    reached = []
 
-    def stop(seq, **kwargs):
-        seen.append(seq)
-        raise StopError
+    def mapping(db_path, image_dir, out_dir, options):  # the call site of the reconstruction
+        db = pycolmap.Database.open(db_path)
+        try:
+            cameras = [(c.model.name, np.asarray(c.params)) for c in db.read_all_cameras()]
+        finally:
+            db.close()
+        reached.append((cameras, options.ba_refine_focal_length))
+        raise ReconstructionReachedError
 
-    monkeypatch.setattr(build, "build", stop)
-    with pytest.raises(StopError):
-        build.main(video, tmp_path / "m.npz", camera=camera, step=200, max_frames=3, box_size=(18.9, 25.8, 7.5))
-    assert len(seen[0].views) == 3
-    for view in seen[0].views:
-        np.testing.assert_array_equal(view.K, K)
-        np.testing.assert_array_equal(view.dist, dist)
-    from alcn_cv.formats.colmap import camera_from_opencv
-
-    assert camera_from_opencv(K, seen[0].views[0].dist, 640, 480).model == "OPENCV"  # what the database gets
+    monkeypatch.setattr(pycolmap, "incremental_mapping", mapping)
+    argv = ["pose", "build", str(video), str(tmp_path / "m.npz"), "--camera", str(camera), "--no-progress"]
+    argv += ["--step", "200", "--max-frames", "3", "--box-size", "18.9", "25.8", "7.5"]
+    for options, refined in (([], False), (["--conf", "static-camera"], False), (["--refine-focal"], True)):
+        with pytest.raises(ReconstructionReachedError):
+            main([*argv, *options])
+        (model, params), *others = reached[-1][0]
+        assert model == "OPENCV" and not others  # one camera for the video's frames
+        # fx, fy, cx, cy in COLMAP's pixel convention (+0.5), then k1, k2, p1, p2
+        np.testing.assert_allclose(params, [600, 600, 320.5, 240.5, -0.1, 0.02, 0, 0])
+        assert reached[-1][1] is refined, options
+    monkeypatch.setattr(build, "video_sequence", _no_frames)  # the size is checked before the frames are extracted
     write_camera_yaml(tmp_path / "small.yaml", K, dist, (320, 240))
     with pytest.raises(InputError, match="640x480 but .*small.yaml is for 320x240"):
         build.main(video, tmp_path / "m.npz", camera=tmp_path / "small.yaml", step=200, max_frames=3)
@@ -302,28 +357,59 @@ def test_a_video_builds_from_a_camera_yaml_with_its_distortion(shared_data, tmp_
     with pytest.raises(SystemExit) as exc:
         main(["pose", "build", str(video), str(tmp_path / "m.npz"), "--K", "1", "1", "1", "1", "--camera", str(camera)])
     assert exc.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
-    # the command reads the file the same way (calib.camera.load_calibration, as `pose track --camera`)
-    seen.clear()
-    with pytest.raises(StopError):
-        main(
-            [
-                "pose",
-                "build",
-                str(video),
-                str(tmp_path / "m.npz"),
-                "--camera",
-                str(camera),
-                "--step",
-                "200",
-                "--max-frames",
-                "3",
-                "--box-size",
-                "18.9",
-                "25.8",
-                "7.5",
-            ]
-        )
-    np.testing.assert_array_equal(seen[0].views[0].dist, dist)
+
+
+def _no_frames(*args, **kwargs):
+    raise AssertionError("the frames were extracted before the check")
+
+
+def test_a_calibration_reaches_the_model_and_what_tracks_with_it(tmp_path, monkeypatch):
+    """docs/pose.md's build --conf static-camera --camera cam.yaml, then track --camera cam.yaml: the preset refined the
+    focal length (the model's K no longer the calibration's) and the model dropped the distortion (tracking without
+    --camera undistorted nothing). The model stores K, the distortion and the size; the build records the camera."""
+    for module in ("pycolmap", "open3d", "matplotlib"):
+        pytest.importorskip(module)
+    from calib.camera import write_camera_yaml
+
+    K = np.array([[600.0, 0, 320], [0, 600.0, 240], [0, 0, 1]])
+    dist = np.array([-0.1, 0.02, 0.0, 0.0, 0.0])
+    camera = write_camera_yaml(tmp_path / "camera.yaml", K, dist, (640, 480))
+    seen = []
+
+    def record(seq, **kwargs):  # the pipeline, replaced: a model of the sequence's camera, as build() stores it
+        seen.append(kwargs)
+        points = np.random.default_rng(0).uniform(0, 7.5, (10, 3))
+        descriptors = np.random.default_rng(0).integers(0, 256, (10, 32), dtype=np.uint8)
+        corners = pm.box_corners(np.array([25.8, 18.9, 7.5]))
+        model = pm.PartModel(corners=corners, points3d=points, descriptors=descriptors, units="cm")
+        model.extra.update(K=seq.views[0].K.tolist(), image_size=[640, 480])
+        if seq.views[0].dist is not None:
+            model.extra["dist"] = seq.views[0].dist.tolist()
+        return model, np.zeros((0, 3))
+
+    monkeypatch.setattr(build, "build", record)
+    monkeypatch.setattr(build, "plot_model", lambda *args: None)
+    video = tmp_path / "box.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (640, 480))
+    for i in range(3):
+        writer.write(np.full((480, 640, 3), 40 * i, np.uint8))
+    writer.release()
+    build.main(video, tmp_path / "m.npz", conf="static-camera", camera=camera, box_size=(18.9, 25.8, 7.5), step=1)
+    assert seen[-1]["refine_focal"] is False
+    model = pm.load(tmp_path / "m.npz")
+    assert model.extra["build"]["camera"] == str(camera) and model.extra["build"]["distortion"] is True
+    assert model.extra["build"]["refine_focal"] is False and model.extra["build"]["box_units"] == "cm"
+    from pose import track
+
+    box = track.open_tracker(tmp_path / "m.npz")  # the model's camera: K and its distortion
+    assert box.camera == "model" and np.allclose(box.K, K) and np.allclose(box.dist, dist)
+    assert np.allclose(box.tracker.solver.dist, dist) and box.image_size == (640, 480)
+    given = track.open_tracker(tmp_path / "m.npz", camera=camera)
+    assert np.allclose(given.K, box.K) and np.allclose(given.dist, box.dist)
+    assert track.open_tracker(tmp_path / "m.npz", K).dist is None  # intrinsics given: theirs, without distortion
+    build.main(video, tmp_path / "k.npz", conf="static-camera", K=K, box_size=(18.9, 25.8, 7.5), step=1)
+    assert seen[-1]["refine_focal"] is True  # a guessed K: the preset refines it
+    assert pm.load(tmp_path / "k.npz").extra["build"]["camera"] == "K"
 
 
 def test_a_camera_given_for_a_registered_sequence_is_said_to_be_ignored(shared_data, tmp_path, caplog, build_stops):
@@ -381,6 +467,8 @@ def test_a_preset_reaches_the_build_and_an_option_given_overrides_it(shared_data
         "max_frames": 3,
         "motion_mask": True,
         "refine_focal": True,
+        "camera": "K",
+        "distortion": False,
         "box_units": "cm",
     }
     options = ["--K", "600", "600", "320", "240", "--n-features", "500", "--no-motion-mask", "--max-frames", "3"]
@@ -393,6 +481,26 @@ def test_a_preset_reaches_the_build_and_an_option_given_overrides_it(shared_data
     camera = write_camera_yaml(tmp_path / "camera.yaml", K, np.zeros(5), (640, 480))
     assert main([*argv, "--conf", "cookie-box", "--camera", str(camera), "--max-frames", "3"]) == 0  # not "not both"
     np.testing.assert_array_equal(seen[-1][0].views[0].K, K)
+    assert not seen[-1][1]["refine_focal"]  # a calibration's focal length is held fixed, whatever the preset
+    assert (
+        main(
+            [
+                *argv,
+                "--conf",
+                "static-camera",
+                "--K",
+                "600",
+                "600",
+                "320",
+                "240",
+                "--max-frames",
+                "3",
+                *build.build_options({"motion_mask": False}),
+            ]
+        )
+        == 0
+    )  # a switch off, given as the command's option
+    assert seen[-1][1]["masks"] is None and seen[-1][1]["refine_focal"]
     assert main([*argv, "--K", "600", "600", "320", "240", "--max-frames", "3"]) == 0  # no preset: the defaults
     seq, kwargs = seen[-1]
     assert seq.info["step"] == sequence.VIDEO_STEP and kwargs["masks"] is None and not kwargs["refine_focal"]
@@ -422,6 +530,13 @@ def test_presets_are_read_only_settings_of_main():
     assert build.conf_settings("cookie-box", step=None, n_features=1000)["n_features"] == 1000
     assert build.conf_settings("cookie-box", motion_mask=False)["motion_mask"] is False
     assert "K" not in build.conf_settings("cookie-box", camera="camera.yaml")
+    # a calibration's focal length is measured: held fixed unless refine_focal is given
+    assert build.conf_settings("static-camera", camera="camera.yaml")["refine_focal"] is False
+    assert build.conf_settings("static-camera", camera="camera.yaml", refine_focal=True)["refine_focal"] is True
+    assert build.conf_settings("static-camera", K=np.eye(3))["refine_focal"] is True  # a guessed K: refined
+    # a registered sequence: the preset's values of a video left out, the caller's kept
+    assert build.conf_settings("cookie-box", video=False) == {"feature": "ORB", "n_features": 3000}
+    assert build.conf_settings("cookie-box", video=False, step=3)["step"] == 3
     assert build.conf_settings(None, step=None) == {}
     with pytest.raises(InputError, match="unknown preset 'x'; choose one of static-camera, cookie-box"):
         build.conf_settings("x")

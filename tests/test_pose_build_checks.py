@@ -131,6 +131,46 @@ def test_a_box_fit_far_off_the_known_size_fails(triangulated, tmp_path):
         build.build(_sequence(), box_size=BOX, box_units="cm", work_dir=tmp_path)
 
 
+def test_the_box_fit_against_a_box_ply_is_measured_along_its_edges(triangulated, tmp_path):
+    """A box turned against its --box-ply (its points those of a 55 x 95 x 140 box, the .ply 140 x 95 x 55) had the
+    known lengths matched to its axes in another order: it built, 23% off, logged "per edge x, y, z" with the known
+    size [55, 140, 95], while the model's box is the .ply's. The fit is measured against the .ply along its x, y, z:
+    55 along the .ply's 140."""
+    triangulated["xyz"] = _box_points(BOX[[2, 1, 0]])
+    with pytest.raises(DatasetError) as exc:
+        build.build(_sequence(), box_ply=_box_ply(tmp_path / "box.ply"), work_dir=tmp_path)
+    message = str(exc.value)
+    assert "known [140.0, 95.0, 55.0] mm, off by [-8" in message and "along the edges x, y, z" in message
+
+
+def test_a_box_fit_failure_names_what_can_be_off_in_its_branch():
+    """A video's fit is scaled to the box's size, so its units cannot be off: the failure said "not in these units;
+    check --box-units" there too."""
+    stats = {
+        "known_size": BOX.tolist(),
+        "size_error": (BOX * [0.5, -0.3, 0.0]).tolist(),
+        "mean_abs_relative_size_error": 0.27,
+        "seen_relative_size_error": 0.27,
+    }
+    with pytest.raises(DatasetError) as video:
+        build.check_box_fit(stats, "cm", scale_free=True)
+    assert "units" not in str(video.value).split(":", 1)[1] and "--refine-focal" in str(video.value)
+    with pytest.raises(DatasetError, match="not in these units; check --box-size/--box-ply and --box-units"):
+        build.check_box_fit(stats, "mm")
+
+
+def test_a_registered_sequences_camera_is_stored_with_its_distortion(triangulated, tmp_path):
+    """The model stored K alone: frames of a distorted camera were tracked as undistorted."""
+    dist = np.array([-0.1, 0.02, 0.0, 0.0, 0.0])
+    seq = _sequence()
+    for view in seq.views:
+        view.dist = dist
+    model, _ = build.build(seq, box_size=BOX, work_dir=tmp_path)
+    assert model.extra["K"] == K.tolist() and model.extra["dist"] == dist.tolist()
+    model, _ = build.build(_sequence(), box_size=BOX, work_dir=tmp_path)
+    assert "K" in model.extra and "dist" not in model.extra
+
+
 def test_check_box_fit_thresholds(caplog):
     def stats(rel):
         rel = np.asarray(rel, np.float64)
@@ -211,13 +251,10 @@ def test_train_corners_and_eval_refuse_arbitrary_units_as_build_does(tmp_path, c
     """`alcn pose train-corners` and `alcn pose eval` read a registration in arbitrary units as millimetres (the box
     projected at the wrong depth): all three commands refuse it through one check, pose.sequence.check_known_units,
     before any work."""
-    import inspect
-
     from alcn_cv.cli import main
     from pose import corner_train, evaluate
 
     assert build.check_known_units is sequence.check_known_units is evaluate.check_known_units
-    assert "check_known_units(seq" in inspect.getsource(corner_train.train_corners)  # imported where it runs
     monkeypatch.setattr(evaluate, "build_model", _no_work)  # nothing past the check runs
     monkeypatch.setattr(corner_train, "build_frames", _no_work)
     reg = _registration(tmp_path / "reg", "arbitrary")
@@ -241,6 +278,11 @@ def test_train_corners_and_eval_refuse_arbitrary_units_as_build_does(tmp_path, c
     with pytest.raises(InputError, match="a corner detector .*needs known units"):
         corner_train.train_corners(data / "train" / "000001", pm.read_box_corners(ply), tmp_path / "c.onnx")
     sequence.check_known_units(_sequence("mm"), "anything")  # known units: nothing to say
+    checked = []  # train_corners runs the one check, pose.sequence's, where it runs (imported at the call)
+    monkeypatch.setattr(sequence, "check_known_units", lambda seq, what, *a: checked.append(what) or _no_work())
+    with pytest.raises(AssertionError, match="the work began"):
+        corner_train.train_corners(data / "test" / "000001", pm.read_box_corners(ply), tmp_path / "c.onnx")
+    assert checked == ["a corner detector (its box projected by the poses)"]
 
 
 def _no_work(*args, **kwargs):
@@ -264,3 +306,38 @@ def test_a_corner_detectors_box_is_projected_in_its_sequences_units(tmp_path, mo
     with pytest.raises(RuntimeError, match="stop"):
         corner_train.train_corners(reg, corners, tmp_path / "c.onnx", units="mm")
     np.testing.assert_allclose(seen["corners"], corners / 10)
+
+
+def test_a_corner_detectors_sequence_in_other_units_is_refused(tmp_path, monkeypatch):
+    """A registration in units other than mm, cm or m projected the box unconverted (the conversion was skipped)."""
+    from pose import corner_train
+
+    reg = _registration(tmp_path / "reg", "in")
+    monkeypatch.setattr(corner_train, "build_frames", _no_work)
+    with pytest.raises(InputError, match="unknown unit 'in'"):
+        corner_train.train_corners(reg, pm.box_corners(np.array([189.0, 258.0, 75.0])), tmp_path / "c.onnx")
+
+
+def test_eval_scores_a_corner_detector_in_its_units(tmp_path, monkeypatch):
+    """`alcn pose eval` scored a corner detector's poses as mm, while its units are its training sequence's (cm for a
+    registration in cm): the detector's recorded units are those scored."""
+    from pose import corner_train, corners, evaluate
+
+    data = tmp_path / "data"
+    _registration(data / "train" / "000001", "cm")
+    _registration(data / "test" / "000001", "cm")
+    (data / "models").mkdir()
+    _box_ply(data / "models" / "obj_000001.ply", size=BOX / 10)
+    detector = SimpleNamespace(units="cm", corners=pm.box_corners(BOX / 10))
+    monkeypatch.setattr(corner_train, "train_corners", lambda *args, **kwargs: tmp_path / "c.onnx")
+    monkeypatch.setattr(corners, "CornerDetector", lambda path: detector)
+    scored = []
+
+    def score(det, scene_dir, obj_id, vertices, units, *args):
+        scored.append(units)
+        raise RuntimeError("scored")
+
+    monkeypatch.setattr(evaluate, "evaluate_sequence", score)
+    with pytest.raises(RuntimeError, match="scored"):
+        evaluate.main(data, tmp_path / "r", normalizations=["none"], detectors=["corners"], progress=False)
+    assert scored == ["cm"]

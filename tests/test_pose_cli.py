@@ -70,7 +70,12 @@ def test_help_texts(capsys):
     with pytest.raises(SystemExit):
         main(["pose", "build", "--help"])
     out = " ".join(capsys.readouterr().out.split())
-    assert "--box-size (default: cm for a video" in out
+    # the preset's units named: --conf cookie-box builds in cm without --box-units
+    assert "--box-size (default: for a video the preset's (cookie-box: cm), else cm; for a registered" in out
+    with pytest.raises(SystemExit):
+        main(["pose", "track", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "docs/pose.md, Speed, gives its times" in out and "1.7 s" not in out  # the times, in one place
 
 
 def test_build_help_says_what_the_box_options_and_the_camera_mean(capsys):

@@ -146,3 +146,33 @@ def test_a_run_without_a_posed_frame_is_an_error_before_anything_is_written(tmp_
     (tmp_path / "file").write_text("")
     with pytest.raises(InputError, match="is a file"):
         overlay.main(video, [("lost", tmp_path / "m.npz", tmp_path / "lost.json")], tmp_path / "file")
+
+
+def test_the_overlay_error_draws_with_the_models_distortion(tmp_path):
+    """A model built with a calibration (`alcn pose build --camera`) stores its distortion, which `alcn pose track`
+    tracks with: the overlay error drew its box without it, off the distorted object's edges."""
+    import json
+
+    from pose import model as part_model
+
+    dist = np.array([-0.4, 0.1, 0.0, 0.0, 0.0])
+    rvec, tvec = _pose()
+    tvec = tvec + np.array([[-14.0], [-9.0], [0.0]])  # towards the corner of the frame, where distortion is largest
+    corners = box_corners(SIZE)
+    img = np.full((480, 640), 40, np.uint8)
+    uv = project(corners, rvec, tvec, K, dist)
+    for quad, level in zip(facing_faces(corners, cv2.Rodrigues(rvec)[0], tvec.ravel()), (110, 180, 250)):
+        cv2.fillConvexPoly(img, cv2.convexHull(np.round(uv[list(quad)] * 16).astype(np.int32)), level, cv2.LINE_AA, 4)
+    (tmp_path / "frames").mkdir()
+    cv2.imwrite(str(tmp_path / "frames" / "0000.png"), img)
+    R = cv2.Rodrigues(rvec)[0]
+    pose = [{"obj_id": 1, "cam_R_m2c": R.ravel().tolist(), "cam_t_m2c": tvec.ravel().tolist()}]
+    (tmp_path / "p.json").write_text(json.dumps({"0000": pose}))  # mm, the model's units
+    model = part_model.PartModel(corners=corners, points3d=np.zeros((1, 3)), descriptors=np.zeros((1, 32), np.uint8))
+    model.extra["K"] = K.tolist()
+    part_model.save(model, tmp_path / "pinhole.npz")  # a model of before: no distortion
+    model.extra["dist"] = dist.tolist()
+    part_model.save(model, tmp_path / "m.npz")
+    with_dist = overlay.measure(tmp_path / "m.npz", tmp_path / "p.json", tmp_path / "frames", progress=False)
+    without = overlay.measure(tmp_path / "pinhole.npz", tmp_path / "p.json", tmp_path / "frames", progress=False)
+    assert with_dist["0000"].matched_px < 1.0 and without["0000"].matched_px > 4.0

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from unittest.mock import ANY
 
 import cv2
 import numpy as np
@@ -456,11 +457,11 @@ def test_poses_are_written_in_mm_whatever_the_models_units(tmp_path):
     pm.save(model, tmp_path / "m.npz")
     frames = _frames(tmp_path, 3)
     summary = track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800, progress=False)
-    assert (summary["translation_units"], summary["model_units"]) == ("mm", "cm")
+    assert (summary["translation_units"], summary["units"]) == ("mm", "cm")  # "units": the model's, as before
     poses = json.loads((tmp_path / "p.json").read_text())
     for i, (_, t) in enumerate(_poses(3)):
         assert np.linalg.norm(np.array(poses[f"{i:04d}"][0]["cam_t_m2c"]) - t.ravel()) < 6.0  # mm, as rendered
-    read = _camera_and_poses(tmp_path / "m.npz", tmp_path / "p.json")[2]
+    read = _camera_and_poses(tmp_path / "m.npz", tmp_path / "p.json")[3]
     assert np.allclose(read["0000"][1].ravel() * 10, poses["0000"][0]["cam_t_m2c"])  # cm, the model's
     info = json.loads((tmp_path / "p_info.json").read_text())
     del info["summary"]["translation_units"]  # an earlier track's: the model's units
@@ -479,8 +480,11 @@ def test_track_takes_max_frames_and_step(tmp_path, capsys):
     assert list(json.loads((tmp_path / "p.json").read_text())) == ["0000", "0001"]
     assert main([*argv, "--step", "2", "--max-frames", "2"]) == 0
     assert list(json.loads((tmp_path / "p.json").read_text())) == ["0000", "0002"]
-    with pytest.raises(SystemExit):
-        main([*argv, "--max-frames", "0"])
+    capsys.readouterr()
+    for option in (["--max-frames", "0"], ["--step", "0"]):  # refused by the frame reader, as for a Python caller
+        assert main([*argv, *option]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "must be a positive integer" in err, err
 
 
 def test_the_summary_names_the_outputs_the_units_and_the_next_step(tmp_path, capsys):
@@ -546,38 +550,16 @@ def test_open_tracker_is_what_the_command_tracks_with(tmp_path):
         track.open_tracker(model, n_features_global=-1)
 
 
-def test_the_example_of_open_tracker_runs(tmp_path, capsys):
-    """open_tracker's docstring example, on a synthetic model and video in place of the cookie box's."""
-    import textwrap
-
-    model = _planar_model(_texture()).scaled_to("cm")
-    model.extra["K"] = K.tolist()
-    pm.save(model, tmp_path / "model.npz")
-    video = tmp_path / "box.avi"
-    writer = io.open_video_writer(video, 10.0, SIZE)
-    for r, t in _poses(3):
-        writer.write(_render(_texture(), r, t))
-    writer.release()
-    code = textwrap.dedent(track.open_tracker.__doc__.split("::\n", 1)[1])
-    assert "cb/model.npz" in code and "../shared/data/cookie_box/box.mp4" in code
-    code = code.replace("cb/model.npz", str(tmp_path / "model.npz"))
-    exec(code.replace("../shared/data/cookie_box/box.mp4", str(video)), {})
-    lines = capsys.readouterr().out.splitlines()
-    assert len(lines) == 3 and "lost" not in lines[0]
-    t_mm = json.loads("[" + lines[0].rsplit("[", 1)[1])  # the last list printed: t in mm
-    assert np.linalg.norm(np.array(t_mm) - _poses(1)[0][1].ravel()) < 6.0  # mm, as rendered
-
-
-def test_the_python_example_of_docs_pose_md_runs(tmp_path, capsys):
-    """docs/pose.md's Python example, on a synthetic model and video in place of the cookie box's: it runs, and it is
-    open_tracker's docstring example on the walkthrough's paths."""
+def test_the_python_example_of_open_tracker_and_docs_pose_md_runs(tmp_path, capsys):
+    """open_tracker's docstring example, on a synthetic model and video in place of the cookie box's: it runs, and
+    docs/pose.md's Python example is the same code on the walkthrough's paths."""
     import re
     import textwrap
 
     text = (Path(__file__).resolve().parent.parent / "docs" / "pose.md").read_text(encoding="utf-8")
-    (code,) = re.findall(r"```python\n(.*?)```", text, flags=re.S)
-    docstring = textwrap.dedent(track.open_tracker.__doc__.split("::\n", 1)[1])
-    assert code.strip() == docstring.strip().replace("cb/model.npz", "out/cookie_box/model.npz")
+    (walkthrough,) = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    code = textwrap.dedent(track.open_tracker.__doc__.split("::\n", 1)[1])
+    assert walkthrough.strip() == code.strip().replace("cb/model.npz", "out/cookie_box/model.npz")
     model = _planar_model(_texture()).scaled_to("cm")
     model.extra["K"] = K.tolist()
     pm.save(model, tmp_path / "model.npz")
@@ -586,7 +568,113 @@ def test_the_python_example_of_docs_pose_md_runs(tmp_path, capsys):
     for r, t in _poses(3):
         writer.write(_render(_texture(), r, t))
     writer.release()
-    code = code.replace("out/cookie_box/model.npz", str(tmp_path / "model.npz"))
+    assert "cb/model.npz" in code and "../shared/data/cookie_box/box.mp4" in code
+    code = code.replace("cb/model.npz", str(tmp_path / "model.npz"))
     exec(code.replace("../shared/data/cookie_box/box.mp4", str(video)), {})
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) == 3 and not any("lost" in line for line in lines)
+    t_mm = json.loads("[" + lines[0].rsplit("[", 1)[1])  # the last list printed: t in mm
+    assert np.linalg.norm(np.array(t_mm) - _poses(1)[0][1].ravel()) < 6.0  # mm, as rendered
+
+
+def test_events_name_the_frames_of_the_source(tmp_path, caplog):
+    """With --step, the events of _info.json and the log's "frame 3: tracking lost" gave the count of frames kept,
+    which is frame 0006 of the folder: they name the frame."""
+    folder = _frames(tmp_path, 6)
+    black = np.zeros((SIZE[1], SIZE[0], 3), np.uint8)  # no object: lost
+    for name in ("0004.png", "0005.png"):
+        cv2.imwrite(str(folder / name), black)
+    pm.save(_planar_model(_texture()), tmp_path / "m.npz")
+    with caplog.at_level("INFO", logger="pose.solver"):
+        summary = track.main(tmp_path / "m.npz", folder, tmp_path / "p.json", K, n_features=800, step=2)
+    assert summary["frames"] == 3 and summary["events"] == [{"frame": "0004", "event": "lost", "reason": ANY}]
+    info = json.loads((tmp_path / "p_info.json").read_text())
+    assert info["summary"]["events"][0]["frame"] == "0004" and "0004" in info["frames"]
+    assert "frame 0004: tracking lost" in caplog.text
+    box = track.open_tracker(tmp_path / "m.npz", K)  # stepped without names: the index among the frames stepped
+    for _, frame in io.iter_frames(folder, step=2):
+        box.step(frame)
+    assert [e[:2] for e in box.events] == [(2, "lost")]
+
+
+def test_track_takes_its_settings_by_keyword(tmp_path):
+    """track(frames, detector, tracker, total) became track(frames, tracker, total, ...): an old call would have
+    taken its tracker as the total. Its settings are keywords."""
+    box = track.open_tracker(_planar_model(_texture()), K)
+    with pytest.raises(TypeError):
+        next(track.track(iter([]), box, 3))  # type: ignore[misc]
+    frames = io.iter_frames(_frames(tmp_path, 1))
+    ((res, _),) = list(track.track(frames, tracker=box, total=1, progress=False))
+    assert res.name == "0000" and res.estimate.ok
+
+
+def test_an_interrupted_track_never_leaves_poses_read_in_the_wrong_units(tmp_path, monkeypatch):
+    """poses.json was written before its _info.json: a Ctrl-C between them left new poses (mm) beside an earlier run's
+    info without translation_units, and read_poses read them in the model's units (10 times too far, in cm). The info
+    is written first, and the poses beside another run's info are refused."""
+    from alcn_cv.errors import DatasetError
+    from alcn_cv.io import write_json
+
+    model = _planar_model(_texture()).scaled_to("cm")
+    pm.save(model, tmp_path / "m.npz")
+    frames = _frames(tmp_path, 2)
+    track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800, progress=False)
+    truth = track.read_poses(tmp_path / "p.json", "cm")
+    info = json.loads((tmp_path / "p_info.json").read_text())
+    scene = json.loads((tmp_path / "p.json").read_text())
+    earlier = {name: [{**e[0], "cam_t_m2c": [v / 10 for v in e[0]["cam_t_m2c"]]}] for name, e in scene.items()}
+    (tmp_path / "p.json").write_text(json.dumps(earlier))  # an earlier track's: in the model's units (cm)
+    del info["summary"]["translation_units"]
+    info.pop("poses_digest", None)  # an info of before the digest
+    (tmp_path / "p_info.json").write_text(json.dumps(info))
+    np.testing.assert_allclose(track.read_poses(tmp_path / "p.json", "cm")["0000"][1], truth["0000"][1])
+    written = []
+
+    def interrupted(path, obj, **kwargs):
+        if written:
+            raise KeyboardInterrupt
+        written.append(path)
+        return write_json(path, obj, **kwargs)
+
+    monkeypatch.setattr(track, "write_json", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800, progress=False)
+    with pytest.raises(DatasetError, match="describes other poses than .*p.json .*track again"):
+        track.read_poses(tmp_path / "p.json", "cm")  # never read in the wrong units
+    assert written == [tmp_path / "p_info.json"]  # the info first: the earlier poses are left, never the new ones
+
+
+def test_the_calibration_experiment_publishes_the_tracking_summary_without_paths(tmp_path, monkeypatch):
+    """The track summary carries the paths of the model, the poses, their info and the overlay (the runs folder's,
+    absolute), which experiments/calibration.py copied into the report it publishes: they stay out, and the model's
+    units are the summary's "units" as before."""
+    import importlib
+    import sys
+
+    from calib.camera import write_camera_yaml
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent.parent / "experiments"))
+    calibration = importlib.import_module("calibration")
+    frames = _frames(tmp_path, 2)
+
+    def alcn(*argv):  # the commands, on a synthetic camera, model and video
+        if argv[:2] == ("calib", "camera"):
+            Path(argv[-1]).mkdir(parents=True)
+            write_camera_yaml(Path(argv[-1]) / "camera.yaml", K, np.zeros(5), SIZE)
+        elif argv[:2] == ("pose", "build"):
+            model = _planar_model(_texture()).scaled_to("cm")
+            model.extra.update(K=K.tolist(), registered_images=2)
+            model.box_fit = {"mean_abs_relative_size_error": 0.02}
+            pm.save(model, argv[3])
+        else:
+            track.main(argv[2], frames, argv[4], n_features=800, progress=False)
+
+    kept = []
+    monkeypatch.setattr(calibration, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(calibration, "alcn", alcn)
+    monkeypatch.setattr(calibration, "keep", lambda path, name: kept.append(json.loads(Path(path).read_text())))
+    monkeypatch.setattr(sys, "argv", ["calibration.py"])
+    calibration.main()
+    tracking = kept[0]["tracking"]
+    assert not set(track.SUMMARY_PATHS) & set(tracking) and str(tmp_path) not in json.dumps(tracking)
+    assert (tracking["frames"], tracking["units"], tracking["translation_units"]) == (2, "cm", "mm")
