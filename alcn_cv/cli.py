@@ -248,10 +248,13 @@ def exit_in_the_command(error: MissingDependencyError) -> None:
     """In the ``alcn`` command, end the process as a missing extra ends it: ``error``'s one line (after its traceback
     with ``--debug``) and exit code 2; elsewhere return. ``import alcn_cv`` calls it, while it handles ``error``,
     when OpenCV is missing or too old: the command's script imports the package before :func:`main` runs, and a
-    program that imports the package gets the error raised. The command is told by its script's name (``sys.argv[0]``):
-    ``python -m alcn_cv.cli``, whose name is not known while the package is imported, shows the traceback."""
+    program that imports the package gets the error raised. The command is told by its script's name (``sys.argv[0]``)
+    or, for ``python -m alcn_cv.cli`` (whose ``sys.argv[0]`` is ``-m`` while the package is imported), by the
+    interpreter's own arguments (``sys.orig_argv``)."""
     argv = getattr(sys, "argv", None) or [""]
-    if os.path.basename(argv[0]) in SCRIPT_NAMES:
+    orig = getattr(sys, "orig_argv", [])
+    as_module = any(a == "-m" and b == __name__ for a, b in zip(orig, orig[1:]))
+    if os.path.basename(argv[0]) in SCRIPT_NAMES or as_module:
         sys.exit(_failed(str(error), "--debug" in argv[1:]))
 
 

@@ -31,7 +31,8 @@ import numpy as np
 from _run import RUNS, band_variant, command_line, keep, script_command
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.relight import PRESETS, PairPlan, Settings, build_method, evaluate_scene, keypoint_scores, plan_pairs
+from alcn_cv.bench.relight import PairPlan, build_method, evaluate_scene, keypoint_scores, plan_pairs
+from alcn_cv.bench.relight_settings import PRESETS, Settings
 from alcn_cv.data.light_changes import LightChangeConfig, relit_frames
 from alcn_cv.data.permissive_images import training_photographs
 from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, select_scenes, shared_root

@@ -8,14 +8,14 @@ import cv2
 import numpy as np
 import pytest
 
-from alcn_cv.bench import relight
+from alcn_cv.bench import relight, relight_settings
 from alcn_cv.cli import build_parser
 from alcn_cv.cli import main as cli_main
 from alcn_cv.data.scenes import Scene
 from alcn_cv.errors import InputError
 from scene_sets import lit, make_sets, texture
 
-SMALL = relight.Settings(patch=16, patches=40, gallery=2, max_pairs=4, keypoints=300)
+SMALL = relight_settings.Settings(patch=16, patches=40, gallery=2, max_pairs=4, keypoints=300)
 
 
 def test_protocols_on_identical_frames():
@@ -60,7 +60,7 @@ def test_a_flat_gallery_frame_is_named():
     frames = np.stack([np.full((64, 64), 90, np.uint8), lit(texture(64, 64))[0]])
     scene = Scene("dim", "test", frames, ("night.png", "day.png"))
     with pytest.raises(DatasetError, match="'dim': frame night.png has 0 textured 16x16"):
-        relight.plan_pairs(scene, 0, relight.Settings(patch=16, gallery=2))
+        relight.plan_pairs(scene, 0, relight_settings.Settings(patch=16, gallery=2))
 
 
 def test_textured_locations_avoid_flat_regions():
@@ -167,7 +167,7 @@ def test_leave_one_out_and_cli(tmp_path):
 
 @pytest.mark.shared_data
 def test_real_photometric_stereo(shared_data, tmp_path):
-    settings = relight.Settings(patches=60, gallery=1, max_pairs=3, keypoints=300)
+    settings = relight_settings.Settings(patches=60, gallery=1, max_pairs=3, keypoints=300)
     result = relight.main(
         tmp_path,
         [shared_data / "psm"],
@@ -209,7 +209,7 @@ def test_clahe_is_tuned_with_the_others(tmp_path):
         train_scenes=["square"],
         test_scenes=["street"],
         seeds=[0],
-        settings=relight.Settings(
+        settings=relight_settings.Settings(
             patch=16, patches=40, gallery=1, max_pairs=2, keypoints=200, keypoint_protocols=False
         ),
         tune_frames=3,
@@ -242,7 +242,7 @@ def test_each_method_is_built_once_per_run(tmp_path, monkeypatch):
         train_scenes=["square"],
         test_scenes=["street", "psm"],
         seeds=[0],
-        settings=relight.Settings(patch=16, patches=20, gallery=1, max_pairs=2, keypoint_protocols=False),
+        settings=relight_settings.Settings(patch=16, patches=20, gallery=1, max_pairs=2, keypoint_protocols=False),
         tune_frames=3,
         progress=False,
     )
@@ -260,7 +260,7 @@ def test_one_seed_prints_bare_numbers_and_each_alcn_backend(tmp_path):
         train_scenes=["square"],
         test_scenes=["street"],
         seeds=[0],
-        settings=relight.Settings(patch=16, patches=30, gallery=1, max_pairs=2, keypoint_protocols=False),
+        settings=relight_settings.Settings(patch=16, patches=30, gallery=1, max_pairs=2, keypoint_protocols=False),
         tuning=False,
         progress=False,
     )
@@ -310,7 +310,7 @@ def test_quick_preset_and_the_options_that_override_it(tmp_path):
     assert cli_main([*common, *args]) == 0
     settings = json.loads((tmp_path / "q" / "relight.json").read_text())["settings"]
     assert settings["keypoints"] == 300  # --n-features, as the pose commands name it
-    quick = relight.PRESETS["quick"]
+    quick = relight_settings.PRESETS["quick"]
     # the preset's sampling sizes, but an option given with it wins
     assert (settings["max_frames"], settings["max_pairs"], settings["patches"]) == (
         quick["max_frames"],

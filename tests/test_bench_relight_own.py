@@ -10,13 +10,13 @@ import cv2
 import numpy as np
 import pytest
 
-from alcn_cv.bench import relight
+from alcn_cv.bench import relight, relight_settings
 from alcn_cv.cli import main as cli_main
 from alcn_cv.errors import InputError
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 from scene_sets import texture
 
-TINY = relight.Settings(patch=16, patches=20, gallery=1, max_pairs=2, keypoint_protocols=False)
+TINY = relight_settings.Settings(patch=16, patches=20, gallery=1, max_pairs=2, keypoint_protocols=False)
 TINY_FLAGS = ["--patch", "16", "--patches", "20", "--gallery", "1", "--max-pairs", "2", "--no-keypoints"]
 GAIN_WEIGHTS = Path(relight.__file__).parents[1] / "weights" / "alcn_normalizer_gain.npz"
 

@@ -124,3 +124,14 @@ def test_the_pytorch_module_without_torch_names_its_extra():
     )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("MissingDependencyError train alcn_cv.nn: needs the [train] extra"), proc.stdout
+
+
+def test_the_command_run_as_a_module_without_opencv_ends_with_one_line(tmp_path):
+    """``python -m alcn_cv.cli`` (the form of experiments/gpu_check.sh), whose ``sys.argv[0]`` is ``-m`` while the
+    package is imported."""
+    (tmp_path / "sitecustomize.py").write_text("import sys\nsys.modules['cv2'] = None\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.run(
+        [sys.executable, "-m", "alcn_cv.cli", "--help"], capture_output=True, text=True, timeout=120, env=env
+    )
+    assert proc.returncode == 2 and proc.stderr.splitlines() == [NO_OPENCV], proc.stderr

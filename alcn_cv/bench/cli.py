@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from alcn_cv.bench import detect, fewshot, invariance, relight, speed
+from alcn_cv.bench import detect, fewshot, invariance, relight, relight_settings, speed
 from alcn_cv.bench.detect_settings import POLICIES, DetectSettings, presets
 from alcn_cv.cli import add_progress_option, add_seeds_option
 from alcn_cv.data import scenes
@@ -327,7 +327,7 @@ def _preset_flags(sizes: dict[str, int | None]) -> str:
 
 
 def _add_relight(subparsers: argparse._SubParsersAction) -> None:
-    default, quick = relight.PRESETS["default"], relight.PRESETS["quick"]
+    default, quick = relight_settings.PRESETS["default"], relight_settings.PRESETS["quick"]
     p = subparsers.add_parser(
         "relight",
         help="patch identification, keypoint matching and pose on real changes of light (fixed cameras)",
@@ -341,7 +341,7 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         "--no-tune about 2 min, with --methods none about 15 s. --quick picks the quick preset; --max-frames, "
         "--patches and --max-pairs given with it override it.",
     )
-    d = relight.Settings()
+    d = relight_settings.Settings()
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument(
         "--data",
@@ -424,9 +424,9 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run_relight(args: argparse.Namespace) -> int:
-    preset = relight.PRESETS["quick" if args.quick else "default"]
+    preset = relight_settings.PRESETS["quick" if args.quick else "default"]
     sizes = {k: v if getattr(args, k) is None else getattr(args, k) for k, v in preset.items()}
-    settings = relight.Settings(
+    settings = relight_settings.Settings(
         patch=args.patch,
         patches=sizes["patches"],
         gallery=args.gallery,

@@ -83,12 +83,10 @@ from alcn_cv.report import machine, sample_std
 __all__ = [
     "DEFAULT_METHODS",
     "DEFAULT_SEEDS",
-    "PRESETS",
     "COUNT_METRICS",
     "METRICS",
     "TUNING_GRIDS",
     "LocallyStandardized",
-    "Settings",
     "backend_of",
     "build_method",
     "evaluate_scene",
