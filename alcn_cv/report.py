@@ -113,8 +113,7 @@ def machine() -> dict[str, Any]:
     kept = kept_freed_memory()
     if kept is not None:
         info["malloc_kept"] = {"mmap_threshold": kept[0], "trim_threshold": kept[1]}
-    if "torch" in sys.modules:
-        torch = sys.modules["torch"]
+    if (torch := sys.modules.get("torch")) is not None:  # None: an import of torch blocked, as tests do
         info["torch"] = torch.__version__
         info["torch_threads"] = torch.get_num_threads()
         info["cuda"] = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None

@@ -40,8 +40,8 @@ def test_a_command_needing_a_missing_extra_says_which(run_python, tmp_path):
         ),
         (
             ["pose", "build", "VIDEO", "--K", "800", "800", "320", "240", "--box-size", "19", "26", "7.5"],
-            "alcn pose build: needs the [pose] extra (pycolmap is not installed): "
-            f'{TORCH_FIRST}pip install "alcn-cv[pose]"',
+            # [pose] brings no torch: no CPU-index hint
+            'alcn pose build: needs the [pose] extra (pycolmap is not installed): pip install "alcn-cv[pose]"',
         ),
         (
             ["data", "phos"],

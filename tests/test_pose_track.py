@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 from unittest.mock import ANY
 
@@ -678,3 +681,24 @@ def test_the_calibration_experiment_publishes_the_tracking_summary_without_paths
     tracking = kept[0]["tracking"]
     assert not set(track.SUMMARY_PATHS) & set(tracking) and str(tmp_path) not in json.dumps(tracking)
     assert (tracking["frames"], tracking["units"], tracking["translation_units"]) == (2, "cm", "mm")
+
+
+def test_the_pose_extra_tracks_without_torch(tmp_path):
+    """``[pose]`` installs no torch (nor kornia, scikit-image, jsonschema, onnx): ``alcn pose track`` runs without
+    them (``pose build`` too: checked by hand on the cookie box, 2026-11-29; its reconstruction is slow for a test)."""
+    import tomllib
+
+    pyproject = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    pose_extra = " ".join(pyproject["project"]["optional-dependencies"]["pose"])
+    assert "torch" not in pose_extra and "[train" not in pose_extra and "[data" not in pose_extra, pose_extra
+    pm.save(_planar_model(_texture()), tmp_path / "m.npz")
+    frames = _frames(tmp_path, 2)
+    blocked = ("torch", "kornia", "skimage", "jsonschema", "onnx")
+    (tmp_path / "sitecustomize.py").write_text(f"import sys\nfor m in {blocked!r}:\n    sys.modules[m] = None\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")]))}
+    argv = ["pose", "track", str(tmp_path / "m.npz"), str(frames), str(tmp_path / "p.json"), "--no-progress"]
+    argv += ["--K", "500", "500", "159.5", "119.5"]
+    code = "import sys; from alcn_cv.cli import main; sys.exit(main(sys.argv[1:]))"
+    proc = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert list(json.loads((tmp_path / "p.json").read_text())) == ["0000", "0001"]
