@@ -73,6 +73,11 @@ VIDEO_BOX_UNITS = "cm"
 #: A refined focal length's fx / fy moved by more than this share: warned (the cookie box from its first 120 frames
 #: with the motion mask: fx / fy 0.79).
 SUSPICIOUS = 0.1
+#: A refined focal length whose fx / fy is off square pixels (1) by more than this factor: the build fails, its
+#: reconstruction degenerate (the cookie box from its first 12 frames of every 10th: 3 images registered, fx / fy
+#: 9.25, a model 48.8% off the box that still "tracks" its frames; the cookie box's recipe 1.004, from its first 120
+#: frames 0.79).
+DEGENERATE_FOCAL_RATIO = 1.5
 #: The box fit off the known size (``mean_abs_relative_size_error``, the mean over the three edges) by more than this
 #: share: warned, in every branch (``--box-ply`` or ``--box-size``, video or registered sequence). The cookie box's
 #: recipe (:data:`COOKIE_BOX`, the whole video) is 2.7% off, a registered SfM sequence of it with a known scale 1.3%;
@@ -327,7 +332,14 @@ def build(
         K[:2, 2] -= 0.5  # COLMAP -> OpenCV pixel convention
         model.extra["K"] = K.tolist()
         # square pixels give fx = fy: a bundle adjustment that pulls them apart had too few or too similar views
-        moved = abs((K[0, 0] / K[1, 1]) / (seq.views[0].K[0, 0] / seq.views[0].K[1, 1]) - 1) > SUSPICIOUS
+        ratio = K[0, 0] / K[1, 1]
+        if max(ratio, 1 / ratio) > DEGENERATE_FOCAL_RATIO:
+            raise DatasetError(
+                f"the bundle adjustment pulled the focal lengths apart (fx {K[0, 0]:.1f}, fy {K[1, 1]:.1f}; "
+                f"{len(reg)} of {len(seq.views)} images registered): a degenerate reconstruction, no model written; "
+                "give more frames (--max-frames, --step) or views from more directions"
+            )
+        moved = abs(ratio / (seq.views[0].K[0, 0] / seq.views[0].K[1, 1]) - 1) > SUSPICIOUS
         logger.log(
             logging.WARNING if moved else logging.INFO,
             "focal length refined by the bundle adjustment: fx %.1f fy %.1f (given %.1f %.1f)%s",

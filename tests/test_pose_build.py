@@ -540,3 +540,14 @@ def test_presets_are_read_only_settings_of_main():
     assert build.conf_settings(None, step=None) == {}
     with pytest.raises(InputError, match="unknown preset 'x'; choose one of static-camera, cookie-box"):
         build.conf_settings("x")
+
+
+def test_a_degenerate_reconstruction_writes_no_model(shared_data, tmp_path):
+    """The cookie box from its first 12 frames of every 10th: 3 images registered, the bundle adjustment pulls fx and
+    fy apart (9x) and the box fit is 49% off, yet such a model "tracks" every frame; the build fails instead."""
+    from alcn_cv.cli import main
+
+    video, ply = shared_data / "cookie_box" / "box.mp4", shared_data / "cookie_box" / "box.ply"
+    argv = ["pose", "build", str(video), str(tmp_path / "m.npz"), "--box-ply", str(ply), "--conf", "cookie-box"]
+    assert main([*argv, "--max-frames", "12", "--no-progress"]) == 2
+    assert not (tmp_path / "m.npz").exists()
