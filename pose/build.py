@@ -487,8 +487,8 @@ def main(
     :func:`_provenance`).
 
     Raises:
-        InputError: an unknown preset, a video without its camera, a camera given twice, a video's frames of another
-            size than its calibration's; and :func:`build`'s.
+        InputError: an unknown preset, a video without its camera, a camera or the box given twice, a video's frames
+            of another size than its calibration's; and :func:`build`'s.
     """
     input_path, output = Path(input_path), part_model.model_file(output)
     is_video = input_path.is_file() and io.is_video(input_path)
@@ -510,6 +510,8 @@ def main(
         settings.setdefault("max_frames", VIDEO_MAX_FRAMES)
     # the reconstruction (pycolmap), the box fit (open3d) and the plot come after the features: checked before those
     require("pycolmap", "open3d", "matplotlib", what=what, preferred="pose")
+    if box_ply is not None and box_size is not None:
+        raise InputError("give the box once: --box-ply (a cuboid .ply) or --box-size (its edge lengths), not both")
     check_writable(output)  # before the work
     if input_path.is_file() and not is_video:
         raise InputError(

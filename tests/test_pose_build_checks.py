@@ -341,3 +341,15 @@ def test_eval_scores_a_corner_detector_in_its_units(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="scored"):
         evaluate.main(data, tmp_path / "r", normalizations=["none"], detectors=["corners"], progress=False)
     assert scored == ["cm"]
+
+
+def test_the_box_given_twice_is_refused_before_the_work(tmp_path, capsys):
+    """``--box-ply`` and ``--box-size`` together: the .ply was taken silently."""
+    from alcn_cv.cli import main
+
+    ply = tmp_path / "box.ply"
+    ply.write_text("ply\n")
+    argv = ["pose", "build", str(tmp_path), str(tmp_path / "m.npz"), "--box-ply", str(ply), "--box-size", "1", "2", "3"]
+    assert main([*argv, "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.splitlines() == [err] and "give the box once" in err, err
