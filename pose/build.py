@@ -271,6 +271,16 @@ def build(
         centers = np.array([im.projection_center() for im in rec.images.values() if im.has_pose])
         reg = {im.name: im.cam_from_world().matrix() for im in rec.images.values() if im.has_pose}
     logger.info("%d 3D points (mean track %.1f) from %d images", len(xyz), tl.mean(), len(reg))
+    refined = np.mean(cams_K, axis=0) if refine_focal and not registered else None
+    # square pixels give fx = fy: a bundle adjustment that pulls them apart had too few or too similar views; far
+    # apart, the reconstruction is degenerate: refused before the box is fitted to it
+    ratio = None if refined is None else float(refined[0, 0] / refined[1, 1])
+    if ratio is not None and max(ratio, 1 / ratio) > DEGENERATE_FOCAL_RATIO:
+        raise DatasetError(
+            f"the bundle adjustment pulled the focal lengths apart (fx {refined[0, 0]:.1f}, fy {refined[1, 1]:.1f}; "
+            f"{len(reg)} of {len(seq.views)} images registered): a degenerate reconstruction, no model written; "
+            "give more frames (--max-frames, --step) or views from more directions"
+        )
     if registered and world_is_object and known_corners is not None:
         # the box is known in the world (= object) frame: keep the points near it, fit it for the report
         lo, hi = known_corners.min(0), known_corners.max(0)
@@ -327,18 +337,10 @@ def build(
         box_fit=_jsonable(fit.stats),
         extra={"registered_images": len(reg), "training_images": len(seq.views), "triangulated_points": int(len(xyz))},
     )
-    if refine_focal and not registered:
-        K = np.mean(cams_K, axis=0)
+    if refined is not None and ratio is not None:
+        K = refined.copy()
         K[:2, 2] -= 0.5  # COLMAP -> OpenCV pixel convention
         model.extra["K"] = K.tolist()
-        # square pixels give fx = fy: a bundle adjustment that pulls them apart had too few or too similar views
-        ratio = K[0, 0] / K[1, 1]
-        if max(ratio, 1 / ratio) > DEGENERATE_FOCAL_RATIO:
-            raise DatasetError(
-                f"the bundle adjustment pulled the focal lengths apart (fx {K[0, 0]:.1f}, fy {K[1, 1]:.1f}; "
-                f"{len(reg)} of {len(seq.views)} images registered): a degenerate reconstruction, no model written; "
-                "give more frames (--max-frames, --step) or views from more directions"
-            )
         moved = abs(ratio / (seq.views[0].K[0, 0] / seq.views[0].K[1, 1]) - 1) > SUSPICIOUS
         logger.log(
             logging.WARNING if moved else logging.INFO,

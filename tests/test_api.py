@@ -281,7 +281,7 @@ def test_gain_models_on_opencv_4_mirror_tiny_images_first(monkeypatch):
         for shape in [(17, 40), (12, 300), (5, 5), (18, 18)]:
             image = np.ascontiguousarray(texture[: shape[0], : shape[1]])
             opencv5 = alcn.apply(image, out_dtype=np.float32)
-            monkeypatch.setattr(opencv_runtime, "REFLECT_PADS_ANY_SIZE", False)
+            monkeypatch.setattr(opencv_runtime, "OPENCV_4_DNN", True)
             opencv4 = alcn.apply(image, out_dtype=np.float32)
             monkeypatch.undo()
             assert opencv4.shape == image.shape and np.abs(opencv4 - opencv5).max() < 1e-2, (model, shape)

@@ -187,7 +187,7 @@ def test_export_writes_constant_pads_where_torch_computes_them(tmp_path, monkeyp
         older = export_onnx(tmp_path / "older.onnx", MODELS["gain"])
     # computed: torch's own symbolic, registered again after the fresh export
     assert None in _reflect_pads(older) and opencv_runtime.computes_pads(older)
-    monkeypatch.setattr(opencv_runtime, "READS_COMPUTED_PADS", False)  # OpenCV 4
+    monkeypatch.setattr(opencv_runtime, "OPENCV_4_DNN", True)
     config = load_normalizer_file(MODELS["gain"]).meta["config"]
     with pytest.raises(WeightFileError) as error:
         OpenCVNormalizer(older, config)

@@ -66,11 +66,10 @@ GAIN_NEEDS = (
     f"OpenCV {cv2.__version__}'s cv2.dnn cannot run the gain Normalizers: use OpenCV 4.8 or newer, install torch "
     "(backend='fast') or model='lite'"
 )
-#: Whether ``cv2.dnn``'s reflect ``Pad`` takes a pad longer than the side it pads, as the gain Normalizers' graphs
-#: need on grids smaller than their largest pad (OpenCV 5; OpenCV 4 asserts pad <= side).
-REFLECT_PADS_ANY_SIZE = _OPENCV >= (5, 0)
-#: Whether ``cv2.dnn`` reads pads that the graph computes (:func:`computes_pads`; OpenCV 5, not 4).
-READS_COMPUTED_PADS = _OPENCV >= (5, 0)
+#: Whether ``cv2.dnn`` is OpenCV 4's, whose ONNX importer reads no pads the graph computes (:func:`computes_pads`) and
+#: whose reflect ``Pad`` pads no side by more than its length (the gain Normalizers' graphs pad grids smaller than
+#: their largest pad); OpenCV 5's does both.
+OPENCV_4_DNN = _OPENCV < (5, 0)
 #: The input of the lite Normalizer's export: :func:`image_blocks` of the padded image.
 BLOCKS_INPUT = "blocks"
 #: The side of those blocks: the lite Normalizer's first convolution (4x4, stride 4; a test checks they agree).
@@ -214,7 +213,7 @@ class OpenCVNormalizer:
             )
         # a gain Normalizer's export from an older alcn-cv, before cv2.dnn tries: its ONNX importer logs an error of
         # its own and fails with lines of C++ context
-        if RUNS_GAIN and not READS_COMPUTED_PADS and computes_pads(self.path):
+        if RUNS_GAIN and OPENCV_4_DNN and computes_pads(self.path):
             raise WeightFileError(
                 f"OpenCV {cv2.__version__} cannot read {self.path}, an older export (its graph computes its pads): "
                 f"export it again, `alcn export --weights {self.path.with_suffix('.npz')} --onnx {self.path} "
@@ -291,7 +290,7 @@ class OpenCVNormalizer:
             ``(N, ceil((H-1)/s)+1, ceil((W-1)/s)+1)`` float32 with ``s = stride``; grid point
             ``(i, j)`` is the prediction for the 48x48 window centred on pixel ``(s*i, s*j)``.
 
-        On OpenCV 4 (not :data:`REFLECT_PADS_ANY_SIZE`) an image whose grid has a side shorter than
+        On OpenCV 4 (:data:`OPENCV_4_DNN`) an image whose grid has a side shorter than
         :attr:`largest_pad` (under 18 px at the gain models' stride 8) is first mirrored (reflect-101) at its bottom
         and right to the smallest size the graph pads, and the grid cut back: its window completed by mirroring, as
         :meth:`~alcn_cv.enhance.base.Normalization.apply` promises, where OpenCV 5 mirrors the grid instead.
@@ -302,7 +301,7 @@ class OpenCVNormalizer:
         h, w = check_gray(image).shape
         s = self.stride
         gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
-        if not REFLECT_PADS_ANY_SIZE and min(gh, gw) < self.largest_pad:
+        if OPENCV_4_DNN and min(gh, gw) < self.largest_pad:
             # OpenCV 4's reflect Pad pads no side by more than its length: the first side whose grid it pads
             side = s * (self.largest_pad - 2) + 2
             mirrored = cv2.copyMakeBorder(image, 0, max(side - h, 0), 0, max(side - w, 0), cv2.BORDER_REFLECT_101)
