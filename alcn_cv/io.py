@@ -233,6 +233,28 @@ def make_folder(folder: str | os.PathLike) -> Path:
     return folder
 
 
+@contextlib.contextmanager
+def new_folder(folder: str | os.PathLike) -> Iterator[Path]:
+    """Create ``folder`` and its missing parents (:func:`make_folder`) for the block; on an error or an interrupt, the
+    folders it created that are still empty are removed, so that a command that fails leaves no empty folder behind.
+
+    Raises:
+        InputError: as :func:`make_folder`.
+    """
+    folder = Path(folder)
+    created = [p for p in (folder, *folder.parents) if not p.exists()]  # the innermost first
+    make_folder(folder)
+    try:
+        yield folder
+    except BaseException:
+        for path in created:
+            try:
+                path.rmdir()
+            except OSError:  # not empty (the block wrote there) or gone: it and those above stay
+                break
+        raise
+
+
 def atomic_write(path: str | os.PathLike, data: bytes | str | Callable[[IO[bytes]], object]) -> Path:
     """Write ``data`` to ``path`` atomically (:func:`atomic_path`).
 

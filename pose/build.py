@@ -38,7 +38,7 @@ from alcn_cv import io
 from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.extras import require
-from alcn_cv.io import check_writable, make_folder
+from alcn_cv.io import check_writable
 from pose import model as part_model
 from pose.box_fit import fit_box, size_errors
 from pose.model import PartModel, box_corners, read_box_corners
@@ -532,54 +532,54 @@ def main(
             raise InputError("building from a video needs the intrinsics (--K fx fy cx cy, or --camera camera.yaml)")
         if calibration is not None:  # before the frames are extracted
             _check_frame_size(input_path, calibration, settings["camera"])
-    make_folder(output.parent)
-    with tempfile.TemporaryDirectory(prefix="alcn_pose_frames_", dir=output.parent) as work:
-        if is_video:
-            if images is not None:
-                logger.warning("%s: a video; images (the image folder of a COLMAP model) ignored", input_path)
-            seq = video_sequence(
-                input_path,
-                K,
-                work,
-                step=settings["step"],
-                max_frames=settings["max_frames"],
-                dist=dist,
-            )
-            masks = None
-            if settings["motion_mask"]:
-                frames = [io.read_image(seq.image_dir / v.name) for v in seq.views]
-                masks = dict(zip((v.name for v in seq.views), motion_masks(frames)))
-            # an unregistered video: its own units, matches within 8 frames, the focal length refinable
-            video = {
-                "box_units": settings.get("box_units") or VIDEO_BOX_UNITS,
-                "masks": masks,
-                "window": 8,
-                "refine_focal": settings["refine_focal"],
-            }
-        else:
-            seq = load_sequence(input_path, images)
-            video = {"box_units": settings.get("box_units")}
-            # a registered sequence has its cameras and poses: the caller's options of a video are ignored
-            ignored = [name for name in VIDEO_SETTINGS if given[name] is not None]
-            if ignored:
-                logger.warning(
-                    "%s: a registered sequence; %s apply to a video only, ignored", input_path, ", ".join(ignored)
+    with io.new_folder(output.parent):  # a build that fails leaves no empty folder behind
+        with tempfile.TemporaryDirectory(prefix="alcn_pose_frames_", dir=output.parent) as work:
+            if is_video:
+                if images is not None:
+                    logger.warning("%s: a video; images (the image folder of a COLMAP model) ignored", input_path)
+                seq = video_sequence(
+                    input_path,
+                    K,
+                    work,
+                    step=settings["step"],
+                    max_frames=settings["max_frames"],
+                    dist=dist,
                 )
-        model, cams = build(
-            seq,
-            feature=settings["feature"],
-            n_features=settings["n_features"],
-            normalization=settings["normalization"],
-            box_ply=box_ply,
-            box_size=box_size,
-            work_dir=work,
-            progress=progress,
-            **video,
-        )
-    box_read_in = None if box_ply is None and box_size is None else video["box_units"] or seq.units
-    model.extra["build"] = _provenance(conf, settings, seq if is_video else None, box_read_in)
-    path = part_model.save(model, output)
-    plot_model(model, cams, path.with_name(path.stem + "_cameras.png"))
+                masks = None
+                if settings["motion_mask"]:
+                    frames = [io.read_image(seq.image_dir / v.name) for v in seq.views]
+                    masks = dict(zip((v.name for v in seq.views), motion_masks(frames)))
+                # an unregistered video: its own units, matches within 8 frames, the focal length refinable
+                video = {
+                    "box_units": settings.get("box_units") or VIDEO_BOX_UNITS,
+                    "masks": masks,
+                    "window": 8,
+                    "refine_focal": settings["refine_focal"],
+                }
+            else:
+                seq = load_sequence(input_path, images)
+                video = {"box_units": settings.get("box_units")}
+                # a registered sequence has its cameras and poses: the caller's options of a video are ignored
+                ignored = [name for name in VIDEO_SETTINGS if given[name] is not None]
+                if ignored:
+                    logger.warning(
+                        "%s: a registered sequence; %s apply to a video only, ignored", input_path, ", ".join(ignored)
+                    )
+            model, cams = build(
+                seq,
+                feature=settings["feature"],
+                n_features=settings["n_features"],
+                normalization=settings["normalization"],
+                box_ply=box_ply,
+                box_size=box_size,
+                work_dir=work,
+                progress=progress,
+                **video,
+            )
+        box_read_in = None if box_ply is None and box_size is None else video["box_units"] or seq.units
+        model.extra["build"] = _provenance(conf, settings, seq if is_video else None, box_read_in)
+        path = part_model.save(model, output)
+        plot_model(model, cams, path.with_name(path.stem + "_cameras.png"))
     return path
 
 

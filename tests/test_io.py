@@ -19,6 +19,7 @@ from alcn_cv.io import (
     list_images,
     make_folder,
     map_video,
+    new_folder,
     read_image,
     write_image,
 )
@@ -120,6 +121,22 @@ def test_a_parent_that_is_a_file_is_named(tmp_path, image):
     with pytest.raises(InputError, match="is a file"):
         make_folder(tmp_path / "file")
     assert make_folder(tmp_path / "new" / "deeper").is_dir()
+
+
+def test_a_failed_block_removes_the_empty_folders_it_created(tmp_path):
+    """A command that fails leaves no empty output folder behind (a failed `alcn pose build` did)."""
+    with pytest.raises(KeyboardInterrupt), new_folder(tmp_path / "a" / "b") as folder:
+        assert folder.is_dir()
+        raise KeyboardInterrupt
+    assert not list(tmp_path.iterdir())
+    (tmp_path / "a").mkdir()
+    with pytest.raises(ValueError), new_folder(tmp_path / "a" / "b" / "c"):
+        (tmp_path / "a" / "b" / "kept.txt").write_text("x")  # written in a folder it created: that one stays
+        raise ValueError
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["a", "b", "kept.txt"]
+    with new_folder(tmp_path / "ok") as folder:
+        pass
+    assert folder.is_dir()  # kept when the block succeeds, even empty
 
 
 def test_interrupt_leaves_no_temporary_file_and_temporary_files_are_no_inputs(tmp_path, image):

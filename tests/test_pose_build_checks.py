@@ -245,6 +245,9 @@ def test_a_build_in_arbitrary_units_is_refused_in_one_line(tmp_path, capsys):
         assert len(err.splitlines()) == 1 and "Traceback" not in err
         assert "arbitrary units" in err and "--known-distance FRAME_A FRAME_B MM" in err and "--box-size" in err
     assert not (tmp_path / "m.npz").exists()
+    assert main(["pose", "build", str(reg), str(tmp_path / "new" / "m.npz"), "--box-size", "14", "9.5", "5.5"]) == 2
+    assert not (tmp_path / "new").exists()  # the failed build left an empty folder
+    capsys.readouterr()
 
 
 def test_train_corners_and_eval_refuse_arbitrary_units_as_build_does(tmp_path, capsys, monkeypatch):
