@@ -52,13 +52,18 @@ logger = logging.getLogger(__name__)
 T = TypeVar("T")
 R = TypeVar("R")
 
-IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm", ".pnm"})
+IMAGE_SUFFIXES = frozenset(
+    {".png", ".jpg", ".jpeg", ".jpe", ".bmp", ".tif", ".tiff", ".webp", ".avif", ".jp2", ".pgm", ".ppm", ".pnm"}
+)
 #: The image formats of :data:`IMAGE_SUFFIXES` that hold 8 bits a channel (the others hold 16).
-EIGHT_BIT_SUFFIXES = frozenset({".jpg", ".jpeg", ".bmp", ".webp"})
+EIGHT_BIT_SUFFIXES = frozenset({".jpg", ".jpeg", ".jpe", ".bmp", ".webp", ".avif"})
 #: The image formats of :data:`IMAGE_SUFFIXES` that hold float32 pixels.
 FLOAT_SUFFIXES = frozenset({".tif", ".tiff"})
-VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv"})
-_FOURCC = {".avi": "MJPG", ".mkv": "MJPG"}  # everything else: mp4v
+VIDEO_SUFFIXES = frozenset(
+    {".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".3gp", ".flv", ".ts", ".mts", ".m2ts"}
+)
+# the codec of each container that does not take mp4v (WebM: VP8/VP9/AV1 only; FLV: its own MPEG-4 variant)
+_FOURCC = {".avi": "MJPG", ".mkv": "MJPG", ".webm": "VP80", ".flv": "FLV1"}
 #: The process's umask, read once: the permissions of what is made under a temporary name.
 UMASK = os.umask(0)
 os.umask(UMASK)
@@ -332,7 +337,7 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
         raise InputError(f"cannot write an image to {path} ({kind}); use one of {', '.join(sorted(IMAGE_SUFFIXES))}")
     if img.ndim == 3 and img.shape[2] == 2:
         img = np.dstack([cv2.cvtColor(img[..., 0], cv2.COLOR_GRAY2BGR), img[..., 1]])
-    if img.ndim == 3 and img.shape[2] == 4 and path.suffix.lower() in (".jpg", ".jpeg"):
+    if img.ndim == 3 and img.shape[2] == 4 and path.suffix.lower() in (".jpg", ".jpeg", ".jpe"):
         logger.warning("%s has no alpha channel: the image's alpha is not written", path)
     if img.dtype == np.float32 and path.suffix.lower() not in FLOAT_SUFFIXES:
         deep = np.dtype(np.uint8 if path.suffix.lower() in EIGHT_BIT_SUFFIXES else np.uint16)
@@ -551,15 +556,23 @@ def count_frames(source: str | os.PathLike, step: int = 1, max_frames: int | Non
     return count if max_frames is None else min(count, max_frames)
 
 
-def open_video_writer(path: str | Path, fps: float, size: tuple[int, int], color: bool = True) -> cv2.VideoWriter:
-    """A ``cv2.VideoWriter`` for ``path`` (codec from the extension: MJPG for .avi/.mkv, else mp4v)."""
+def open_video_writer(
+    path: str | Path, fps: float, size: tuple[int, int], color: bool = True, *, name: str | Path | None = None
+) -> cv2.VideoWriter:
+    """A ``cv2.VideoWriter`` for ``path``, its codec from the extension (:data:`_FOURCC`, else mp4v).
+
+    ``name``: the path an error names, when ``path`` is a temporary name for it (:func:`atomic_path`).
+
+    Raises:
+        OSError: OpenCV's FFmpeg cannot write that extension or codec.
+    """
     path = Path(path)
     make_folder(path.parent)
     fourcc = cv2.VideoWriter.fourcc(*_FOURCC.get(path.suffix.lower(), "mp4v"))
     with signals_to_main_thread():  # FFmpeg's encoder threads start here
         writer = cv2.VideoWriter(str(path), fourcc, fps, size, color)
     if not writer.isOpened():
-        raise OSError(f"cannot write video {path} (unsupported extension or codec)")
+        raise OSError(f"cannot write video {name or path} (unsupported extension or codec)")
     return writer
 
 
@@ -660,7 +673,9 @@ def map_video(
                 def write(out: np.ndarray) -> None:
                     nonlocal writer
                     if writer is None:
-                        writer = open_video_writer(tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3)
+                        writer = open_video_writer(
+                            tmp, video.fps, (out.shape[1], out.shape[0]), color=out.ndim == 3, name=dst
+                        )
                     writer.write(out)
 
                 # the frames wanted by the header's count (0: unknown) and max_frames

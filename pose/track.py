@@ -147,7 +147,7 @@ class OverlayWriter:
         if self._is_video:
             if self._video is None:
                 tmp = self._stack.enter_context(io.atomic_path(self.path))
-                self._video = io.open_video_writer(tmp, self.fps, frame.shape[1::-1])
+                self._video = io.open_video_writer(tmp, self.fps, frame.shape[1::-1], name=self.path)
                 self._stack.callback(self._video.release)  # runs before the rename
             self._video.write(frame)
         else:

@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+from alcn_cv import io
 from alcn_cv.errors import InputError
 from alcn_cv.io import (
     FrameReader,
@@ -207,6 +208,22 @@ def test_truncated_video_is_an_error_unless_partial_is_allowed(tmp_path, image, 
 def test_complete_video(tmp_path, image):
     src = _video(tmp_path / "in.avi", 6, image)
     assert map_video(src, tmp_path / "out.avi", lambda frame: frame) == 6
+
+
+@pytest.mark.parametrize("suffix", sorted(io.VIDEO_SUFFIXES))
+def test_every_video_extension_is_written_and_read_back(tmp_path, image, suffix):
+    """A .webm output always failed (mp4v is no WebM codec); .ts and .3gp inputs were read as images."""
+    src = _video(tmp_path / "in.avi", 30, image)
+    assert map_video(src, tmp_path / f"out{suffix}", lambda frame: frame, progress=False) == 30
+    assert sum(1 for _ in iter_frames(tmp_path / f"out{suffix}")) == 30
+
+
+def test_a_video_that_cannot_be_written_is_named_not_its_temporary_file(tmp_path, image, monkeypatch):
+    monkeypatch.setattr(cv2.VideoWriter, "isOpened", lambda self: False)
+    src = _video(tmp_path / "in.avi", 2, image)
+    with pytest.raises(OSError, match=r"cannot write video .*out\.mp4 \(") as info:
+        map_video(src, tmp_path / "out.mp4", lambda frame: frame, progress=False)
+    assert ".tmp" not in str(info.value)
 
 
 def test_the_first_frames_of_a_video(tmp_path, image):

@@ -372,7 +372,7 @@ def test_an_overlay_of_an_unknown_suffix_is_refused(tmp_path):
     """An overlay named ``out.gif`` (any suffix but a video's) was silently a folder of PNGs of that name."""
     frame = np.zeros((8, 8, 3), np.uint8)
     for name in ("out.gif", "out.png", "out.v2"):
-        with pytest.raises(InputError, match=r"overlay .*out\.\w+: a video \(\.avi, .*\.mp4.*\) or a folder"):
+        with pytest.raises(InputError, match=r"overlay .*out\.\w+: a video \(.*\.avi, .*\.mp4.*\) or a folder"):
             track.OverlayWriter(tmp_path / name)
         assert not (tmp_path / name).exists()
     (tmp_path / "run.v2").mkdir()
