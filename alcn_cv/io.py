@@ -87,7 +87,9 @@ def list_images(folder: str | Path) -> list[Path]:
         p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".") and p.is_file()
     )
     if not files:
-        raise InputError(f"{folder}: no images ({', '.join(sorted(IMAGE_SUFFIXES))}) in this folder")
+        subfolders = sum(1 for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
+        nested = f"; its {subfolders} subfolder(s) are not searched: give one of them" if subfolders else ""
+        raise InputError(f"{folder}: no images ({', '.join(sorted(IMAGE_SUFFIXES))}) in this folder{nested}")
     return files
 
 

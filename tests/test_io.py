@@ -124,6 +124,15 @@ def test_a_parent_that_is_a_file_is_named(tmp_path, image):
     assert make_folder(tmp_path / "new" / "deeper").is_dir()
 
 
+def test_a_folder_of_folders_says_subfolders_are_not_searched(tmp_path, image):
+    """On the shared data's psm/ (four scenes in subfolders) the error said only 'no images in this folder'."""
+    for name in ("a", "b"):
+        (tmp_path / name).mkdir()
+        cv2.imwrite(str(tmp_path / name / "0.png"), image)
+    with pytest.raises(InputError, match="no images .* its 2 subfolder\\(s\\) are not searched"):
+        list_images(tmp_path)
+
+
 def test_a_failed_block_removes_the_empty_folders_it_created(tmp_path):
     """A command that fails leaves no empty output folder behind (a failed `alcn pose build` did)."""
     with pytest.raises(KeyboardInterrupt), new_folder(tmp_path / "a" / "b") as folder:
