@@ -1,4 +1,5 @@
-"""The input contract: validation of images, intensity images, batches of windows and run seeds.
+"""The input contract: validation of images, intensity images, batches of windows and run seeds,
+and the conversions between the supported dtypes and float32 intensities in [0, 1].
 
 Every normalization's :meth:`~alcn_cv.enhance.base.Normalization.apply` and the Normalizer
 runtimes check their input here, so a bad array ends in one :class:`~alcn_cv.errors.InputError`
@@ -10,6 +11,7 @@ from __future__ import annotations
 import numbers
 from collections.abc import Iterable
 
+import cv2
 import numpy as np
 
 from alcn_cv.errors import InputError
@@ -18,10 +20,14 @@ __all__ = [
     "FLOAT_TOLERANCE",
     "FULL_SCALE",
     "SUPPORTED_DTYPES",
+    "UINT8_LEVELS",
     "check_gray",
     "check_image",
+    "check_out_dtype",
     "check_positive",
     "check_seeds",
+    "from_unit_float",
+    "to_unit_float",
     "unit_windows",
 ]
 
@@ -29,6 +35,10 @@ SUPPORTED_DTYPES = (np.uint8, np.uint16, np.float32)
 FULL_SCALE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}
 #: How far outside [0, 1] float32 intensities may lie (rounding) before they are refused.
 FLOAT_TOLERANCE = 1e-3
+#: The 256 intensities of a uint8 image as :func:`to_unit_float` gives them: ``(1, 256)`` float32.
+UINT8_LEVELS = np.arange(256, dtype=np.uint8).astype(np.float32).reshape(1, 256) * np.float32(
+    1.0 / FULL_SCALE[np.dtype(np.uint8)]
+)
 
 
 def check_positive(name: str, value: float) -> float:
@@ -41,6 +51,55 @@ def check_positive(name: str, value: float) -> float:
     if not np.isfinite(value) or value <= 0:
         raise InputError(f"{name} must be positive and finite, got {value}")
     return value
+
+
+def check_out_dtype(out_dtype: type | np.dtype | str | None, default: np.dtype) -> np.dtype:
+    """The output dtype a caller asked for (``None``: ``default``, the input's) as a supported ``np.dtype``.
+
+    Raises:
+        InputError: ``out_dtype`` is no dtype, or not uint8, uint16 or float32.
+    """
+    try:
+        dtype = np.dtype(default if out_dtype is None else out_dtype)
+    except TypeError:
+        raise InputError(f"unknown out_dtype {out_dtype!r}; use uint8, uint16 or float32") from None
+    if dtype not in SUPPORTED_DTYPES:
+        raise InputError(f"unsupported out_dtype {dtype}; use uint8, uint16 or float32")
+    return dtype
+
+
+def to_unit_float(img: np.ndarray) -> np.ndarray:
+    """A valid image of a supported dtype (native byte order, any shape and layout) as float32 intensities:
+    ``img / full scale`` for the integer types (:data:`FULL_SCALE`, rounded once in float32), clipped to [0, 1]
+    for float32. Always a new C-ordered array, which the caller may write into."""
+    if img.dtype == np.float32:
+        return np.clip(img, 0.0, 1.0, out=np.empty(img.shape, np.float32))
+    if img.dtype == np.uint8 and (img.ndim == 2 or img.shape[2] <= 4):
+        # one table lookup: the values of the two passes below, in one
+        return cv2.LUT(img, UINT8_LEVELS).reshape(img.shape)
+    unit = img.astype(np.float32, order="C")
+    unit *= np.float32(1.0 / FULL_SCALE[img.dtype])
+    return unit
+
+
+def from_unit_float(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """float32 intensities, any shape, clipped to [0, 1] and converted to the supported ``dtype``
+    (``rint(unit * full scale)`` for the integer types), with ``unit`` as scratch space: it is overwritten (pass a
+    copy to keep it). A row, a plane or an image of up to four channels takes OpenCV passes: for uint8 the lower
+    clip, then ``cv2.convertScaleAbs``, which rounds half to even and saturates as ``np.rint`` after the clip
+    does, bit for bit."""
+    if not (unit.ndim in (1, 2) or (unit.ndim == 3 and unit.shape[2] <= 4)):  # what OpenCV cannot take as a Mat
+        np.clip(unit, 0.0, 1.0, out=unit)
+    else:  # cv2.threshold: no scalar that OpenCV could take for an array
+        cv2.threshold(unit, 0.0, 0.0, cv2.THRESH_TOZERO, dst=unit)
+        if dtype == np.uint8:
+            return cv2.convertScaleAbs(unit, alpha=FULL_SCALE[dtype])
+        cv2.threshold(unit, 1.0, 0.0, cv2.THRESH_TRUNC, dst=unit)
+    if dtype == np.float32:
+        return np.ascontiguousarray(unit)
+    unit *= FULL_SCALE[dtype]
+    np.rint(unit, out=unit)
+    return unit.astype(dtype)
 
 
 def check_seeds(seeds: Iterable[int]) -> list[int]:
@@ -111,14 +170,23 @@ def check_image(img: object) -> np.ndarray:
     return img
 
 
-def check_gray(gray: object) -> np.ndarray:
-    """Validate a float32 ``HxW`` intensity image (the input of :meth:`Normalization.normalize`
-    and of the Normalizer runtimes)."""
+def check_gray(gray: object, finite: bool = True) -> np.ndarray:
+    """Validate a float32 ``HxW`` intensity image (the input of :meth:`Normalization.normalize`,
+    of the Normalizer runtimes and of the OpenCV filters) and return it.
+
+    Args:
+        gray: the image.
+        finite: also refuse NaN and inf (one pass over the image; the filters, whose callers
+            have checked the image, pass False).
+
+    Raises:
+        InputError: not a non-empty ``HxW`` array, not float32, or (``finite``) NaN or inf in it.
+    """
     if not isinstance(gray, np.ndarray) or gray.ndim != 2 or gray.size == 0:
         raise InputError(f"image must be a non-empty HxW array, got shape {getattr(gray, 'shape', None)}")
     if gray.dtype != np.float32:
         raise InputError(f"image must be float32 intensities in [0, 1], got {gray.dtype}")
-    if not np.isfinite(gray).all():
+    if finite and not np.isfinite(gray).all():
         raise InputError("image contains NaN or inf")
     return gray
 
@@ -128,7 +196,7 @@ def unit_windows(windows: np.ndarray) -> np.ndarray:
     if not isinstance(windows, np.ndarray) or windows.ndim != 3 or windows.size == 0:
         raise InputError(f"windows must be a non-empty (n, S, S) array, got {getattr(windows, 'shape', type(windows))}")
     if windows.dtype == np.uint8:
-        return windows.astype(np.float32) * np.float32(1 / 255)
+        return to_unit_float(windows)
     if windows.dtype != np.float32:
         raise InputError(f"windows must be uint8 or float32, got {windows.dtype}")
     return windows

@@ -59,7 +59,7 @@ from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
 from alcn_cv.row_parts import run_parts
 from alcn_cv.runtime import ModelSpec, resolve_weights
-from alcn_cv.weight_file import NormalizerFile, load_normalizer_file
+from alcn_cv.weight_file import NormalizerFile, load_normalizer_file, save_normalizer_file
 
 __all__ = ["ALCN2d", "TorchNetwork", "TorchRuntime", "alcn2d", "batches", "torch_threads"]
 
@@ -107,8 +107,9 @@ class ALCN2d(nn.Module):
     precision (bfloat16: about 1e-2 off float32), the Lab conversions in the image's dtype. Colour on CUDA, traced or
     compiled goes through the torch Lab conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some.
     ``torch.jit.trace`` records the sizes of the traced image: on another size the traced module fails or, without
-    an error, returns wrong values (use ``torch.compile`` for several sizes); ``torch.jit.script`` is not supported
-    (trace the module, or ``torch.compile`` it). On the ``meta`` device a gray image propagates its shape; colour
+    an error, returns wrong values (use ``torch.compile`` for several sizes, which compiles again for each new size:
+    slow on a CPU, so compile for the few sizes a program runs); ``torch.jit.script`` is not supported (trace the
+    module, or ``torch.compile`` it). On the ``meta`` device a gray image propagates its shape; colour
     raises (torch has no autocast there, which the Lab conversions switch off). The 1e-5 from ``apply()`` holds for
     integers converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs
     by a float rounding, which the divisive step amplifies to 6e-5 on a photograph.
@@ -138,14 +139,44 @@ class ALCN2d(nn.Module):
             weight_file = weights
         else:
             weight_file = load_normalizer_file(resolve_weights(model, weights))
-        self.spec = ModelSpec.from_meta(weight_file.meta, scale)
+        self.spec = ModelSpec.from_file(weight_file, scale)
         self.net = normalizer_from_file(weight_file)
+        self._built_from = weight_file.meta, weight_file.path  # the header and file that save() writes from
         if len(self.spec.sigmas) != self.net.num_kernels:
             raise InputError(f"weight file has {len(self.spec.sigmas)} sigmas for {self.net.num_kernels} outputs")
         self.grid_stride = check_grid_stride(grid_stride, self.net.stride)
         self.mixture = GaussianMixture2d(self.spec.full_res_sigmas)
         self.to_lab, self.from_lab = RgbToLab(), LabToRgb()  # colour images: the CIE Lab of apply()
         self.allow_tf32 = allow_tf32
+
+    def save(self, path: str | Path, description: str | None = None) -> Path:
+        """Write the module's Normalizer, fine-tuned or not, as a weight file (``.npz``) that
+        ``createALCN(weights=path)`` and ``ALCN2d(weights=path)`` load: a Normalizer fine-tuned in a training loop, into
+        an OpenCV app.
+
+        The header is that of the file the module was built from (its architecture, sigmas and working scale: a
+        ``scale`` given to the module is not recorded), with ``description`` (default: "fine-tuned from" that file)
+        and ``fine_tuned_from``, that file's path (None when it was given loaded) and description. ``createALCN`` runs
+        it on the ``"fast"`` backend; ``alcn export`` makes the ONNX export ``backend="opencv"`` would run.
+
+        Raises:
+            InputError: ``path`` does not end in ``.npz``.
+            WeightFileError: parameters that no longer fit the header (a gain model's fixed ``tau`` or
+                ``floor_scale`` changed).
+
+        Example:
+            >>> import pathlib, tempfile
+            >>> import alcn_cv
+            >>> alcn = ALCN2d()  # ... fine-tuned in a training loop ...
+            >>> path = alcn.save(pathlib.Path(tempfile.mkdtemp()) / "tuned.npz")
+            >>> alcn_cv.createALCN(weights=path).apply(np.zeros((48, 64), np.uint8)).shape
+            (48, 64)
+        """
+        meta, source = self._built_from
+        start = {"file": None if source is None else str(source), "description": meta.get("description")}
+        header = {**meta, "fine_tuned_from": start}
+        header["description"] = description or f"fine-tuned from {start['file'] or start['description']}"
+        return save_normalizer_file(path, self.net.state_arrays(), header)
 
     def working(self, gray: torch.Tensor) -> torch.Tensor:
         """``(B, 1, H, W)`` at the working scale, resized as :meth:`ALCN.apply` does: ``cv2.INTER_AREA`` down
@@ -192,28 +223,21 @@ class ALCN2d(nn.Module):
         return maps
 
     def finish(self, response: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
-        """The gain family's steps after Eq. 3 (the divisive normalization, ``tanh(x / tau)``); ``floor``:
-        ``(B, 1, 1, 1)``, the divisive floor (default: ``c`` times each image's mean energy)."""
-        if self.spec.divisive is not None:
-            sigma, c = self.spec.divisive
-            response = divisive_normalization(
-                response, sigma, self.net.floor_scale if isinstance(self.net, GainNormalizer) else c, floor
-            )
-        if self.spec.tau is not None:
-            response = contrast_equalization(
-                response, self.net.tau if isinstance(self.net, GainNormalizer) else self.spec.tau
-            )
-        return response
+        """The gain family's steps after Eq. 3 (the divisive normalization, ``tanh(x / tau)``, ``c`` and ``tau`` the
+        network's, the values :class:`~alcn_cv.runtime.ModelSpec` reads from its arrays); the response itself for the
+        other families. ``floor``: ``(B, 1, 1, 1)``, the divisive floor (default: ``c`` times each image's mean
+        energy)."""
+        if self.spec.divisive is None or not isinstance(self.net, GainNormalizer):
+            return response
+        response = divisive_normalization(response, self.spec.divisive[0], self.net.floor_scale, floor)
+        return contrast_equalization(response, self.net.tau)
 
     def with_band(self, response: torch.Tensor, gray: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
         """:meth:`finish`'s ``response`` plus the model's weighted :mod:`~alcn_cv.filters.torch_wide_band` of
         ``gray`` (``floor``: the band's divisive floor ``(B, 1, 1, 1)``); the response itself for a model without."""
-        if not self.spec.band or self.spec.tau is None or self.spec.divisive is None:
+        if not self.spec.band or not isinstance(self.net, GainNormalizer):
             return response
-        gain = isinstance(self.net, GainNormalizer)
-        tau = self.net.tau if gain else self.spec.tau
-        c = self.net.floor_scale if gain else self.spec.divisive[1]
-        return response + self.spec.band * wide_band(gray, tau, c, floor)
+        return response + self.spec.band * wide_band(gray, self.net.tau, self.net.floor_scale, floor)
 
     def response(
         self,
@@ -271,7 +295,8 @@ class ALCN2d(nn.Module):
                 return self.to_unit(self.response(image))
             lab = _OpenCVLab.apply(image, self.to_lab) if cpu_eager(image) else self.to_lab(image)
             lightness = self.to_unit(self.response(lab[:, :1] * 0.01)) * 100.0
-            return self.from_lab(torch.cat([lightness, lab[:, 1:]], dim=1))
+            # contiguous, as the input is: the Lab conversion back leaves its channels strided
+            return self.from_lab(torch.cat([lightness, lab[:, 1:]], dim=1)).contiguous()
 
     def _check_input(self, image: torch.Tensor) -> None:
         """:func:`_check_image`, and an :class:`InputError` for an image on another device or dtype than the module
@@ -616,11 +641,13 @@ class TorchRuntime:
         return self._run(self.module.response, gray, floor=floor_tensor, band_floor=band_floor_tensor)[0]
 
     def apply_batch(self, frames: np.ndarray, out_dtype: np.dtype, half: bool = False) -> np.ndarray:
-        """``(B, H, W)`` uint8, uint16 or float32 frames -> ``(B, H, W)`` of ``out_dtype``: uploaded as they are
-        (from pinned memory on CUDA), converted on the device, the output cast there (see :meth:`ALCN.apply_batch`)."""
+        """``(B, H, W)`` uint8, uint16 or float32 frames, C-contiguous in native byte order (as
+        :meth:`ALCN.apply_batch <alcn_cv.enhance.alcn.ALCN.apply_batch>` passes them, checked by
+        :func:`~alcn_cv.runtime.check_batch`) -> ``(B, H, W)`` of ``out_dtype``: uploaded as they are (from pinned
+        memory on CUDA), converted on the device, the output cast there."""
         cuda = self.device.type == "cuda"
         with torch.inference_mode(), torch_threads(self.threads):
-            host = torch.from_numpy(np.ascontiguousarray(frames).astype(frames.dtype.newbyteorder("="), copy=False))
+            host = torch.from_numpy(frames)
             if cuda:
                 host = host.pin_memory()
             x = host.to(self.device, non_blocking=cuda)[:, None]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import math
+import numbers
 import os
 from collections.abc import Callable
 from concurrent.futures import Future
@@ -24,7 +25,7 @@ from typing import Protocol
 import cv2
 import numpy as np
 
-from alcn_cv.checks import SUPPORTED_DTYPES, check_image
+from alcn_cv.checks import check_image, check_out_dtype
 from alcn_cv.errors import InputError
 from alcn_cv.filters.divisive import blurred_square, divide_by_energy, divisive_floor, divisive_normalization
 from alcn_cv.filters.gaussian_mixture import (
@@ -39,7 +40,7 @@ from alcn_cv.filters.gaussian_mixture import (
 from alcn_cv.filters.wide_band import BLOCK, band_reach, check_band_meta, wide_band
 from alcn_cv.nets.opencv_runtime import WINDOW, OpenCVNormalizer
 from alcn_cv.row_parts import row_parts, run_parts, submit
-from alcn_cv.weight_file import DEFAULT_WEIGHTS
+from alcn_cv.weight_file import WEIGHTS_DIR, NormalizerFile, gain_scale
 
 __all__ = [
     "DEFAULT_MODEL",
@@ -47,6 +48,7 @@ __all__ = [
     "GainRuntime",
     "ModelSpec",
     "Network",
+    "TEACHERS",
     "Runtime",
     "WindowRuntime",
     "make_runtime",
@@ -58,10 +60,10 @@ logger = logging.getLogger(__name__)
 
 #: The weight files shipped in the package, by ``model`` name.
 MODELS = {
-    "paper": DEFAULT_WEIGHTS,
-    "lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_lite.npz"),
-    "gain": DEFAULT_WEIGHTS.with_name("alcn_normalizer_gain.npz"),
-    "gain-lite": DEFAULT_WEIGHTS.with_name("alcn_normalizer_gain_lite.npz"),
+    "paper": WEIGHTS_DIR / "alcn_normalizer.npz",
+    "lite": WEIGHTS_DIR / "alcn_normalizer_lite.npz",
+    "gain": WEIGHTS_DIR / "alcn_normalizer_gain.npz",
+    "gain-lite": WEIGHTS_DIR / "alcn_normalizer_gain_lite.npz",
 }
 #: The shipped Normalizer when neither ``model`` nor ``weights`` is given.
 DEFAULT_MODEL = "gain"
@@ -80,8 +82,9 @@ class ModelSpec:
         sigmas: Eq. 3's sigmas in working pixels; :attr:`full_res_sigmas` in input pixels.
         scale: the working scale (input -> the Normalizer's resolution).
         output_range: the raw responses mapped onto [0, 1].
-        tau: the gain family's final ``tanh(x / tau)``, or None.
-        divisive: the gain family's divisive normalization ``(sigma in input pixels, scale c)``, or None.
+        tau: the gain family's final ``tanh(x / tau)`` (``exp`` of its array ``log_tau``), or None.
+        divisive: the gain family's divisive normalization ``(sigma in input pixels, scale c)`` (``c``: ``exp`` of
+            its array ``log_floor_scale``), or None.
         per_pixel: the gain family (maps on a grid of its own, windows normalized as small images).
         reach: how far from a grid point the network looks (working pixels).
         band: the weight of the :mod:`~alcn_cv.filters.wide_band` added to the gain family's output (0: none).
@@ -97,24 +100,37 @@ class ModelSpec:
     band: float = 0.0
 
     @classmethod
-    def from_meta(cls, meta: dict, scale: float | None = None) -> ModelSpec:
-        scale = float(meta["working_scale"] if scale is None else scale)
-        if not 0 < scale <= 4:
-            raise InputError(f"scale must be in (0, 4], got {scale}")
-        divisive = meta.get("divisive")
+    def from_file(cls, weight_file: NormalizerFile, scale: float | None = None) -> ModelSpec:
+        """The method of a weight file read by :func:`~alcn_cv.weight_file.load_normalizer_file` (which checked the
+        header fields read here) at ``scale`` (default: the file's working scale); the gain family's ``tau`` and
+        ``c`` from its arrays (:func:`~alcn_cv.weight_file.gain_scale`), as its network has them.
+
+        Raises:
+            InputError: ``scale`` not a number in (0, 4].
+        """
+        meta = weight_file.meta
+        scale = meta["working_scale"] if scale is None else scale
+        number = isinstance(scale, (int, float, np.integer, np.floating)) and not isinstance(scale, bool)
+        if not (number and 0 < scale <= 4):
+            raise InputError(f"scale must be a number in (0, 4], got {scale!r}")
+        scale = float(scale)
         per_pixel = meta.get("architecture") == "gain"
         reach = WINDOW // 2
+        tau: float | None = None
+        divisive: tuple[float, float] | None = None
         if per_pixel:  # the cells, the reach of the context blur on them and of the dilated convolutions
             config = meta["config"]
             stride = int(config["stride"])
             blur = max(float(config["mean_sigma"]), float(config["context_sigma"])) / stride
             reach = stride * (1 + kernel_radius(blur) + sum(int(d) for d in config["dilations"]))
+            tau = gain_scale(weight_file.arrays, "log_tau")
+            divisive = (float(meta["divisive"]["sigma"]) / scale, gain_scale(weight_file.arrays, "log_floor_scale"))
         return cls(
             sigmas=tuple(float(s) for s in meta["sigmas"]),
             scale=scale,
             output_range=(float(meta["output_range"][0]), float(meta["output_range"][1])),
-            tau=float(meta["equalization"]["tau"]) if "equalization" in meta else None,
-            divisive=None if divisive is None else (float(divisive["sigma"]) / scale, float(divisive["scale"])),
+            tau=tau,
+            divisive=divisive,
             per_pixel=per_pixel,
             reach=reach,
             band=check_band_meta(meta["band"]) if "band" in meta else 0.0,
@@ -359,13 +375,7 @@ def check_batch(frames: np.ndarray, out_dtype: type | np.dtype | str | None) -> 
     frames = frames.astype(frames.dtype.newbyteorder("="), copy=False)  # as apply() takes any byte order
     if frames.dtype == np.float32:
         check_image(frames.reshape(-1, frames.shape[-1]))
-    try:
-        dtype = np.dtype(frames.dtype if out_dtype is None else out_dtype)
-    except TypeError:
-        raise InputError(f"unknown out_dtype {out_dtype!r}; use uint8, uint16 or float32") from None
-    if dtype not in SUPPORTED_DTYPES:
-        raise InputError(f"unsupported out_dtype {dtype}; use uint8, uint16 or float32")
-    return frames, dtype
+    return frames, check_out_dtype(out_dtype, frames.dtype)
 
 
 def opencv_network(
@@ -425,13 +435,15 @@ def strip_layout(spec: ModelSpec, grid_stride: int, mixture: str, shape: tuple[i
 
 def resolve_weights(model: str | None, weights: str | Path | None) -> Path:
     """The weight file of ``weights`` or of the shipped ``model`` (default :data:`DEFAULT_MODEL`), not both."""
+    if weights is not None and not isinstance(weights, (str, os.PathLike)):  # createALCN(1.0), as cv2.createCLAHE(2.0)
+        shown = f" {weights!r}" if isinstance(weights, numbers.Number) else ""  # not a state_dict's every tensor
+        raise InputError(
+            f"weights must be the path of a weight file (.npz), got {type(weights).__name__}{shown} (the other "
+            "settings are keywords, as createALCN(scale=...); a module's state_dict loads by load_state_dict, and "
+            "ALCN2d.save(path) writes a weight file)"
+        )
     if model is not None and weights is not None:
         raise InputError(f"give a model or a weight file, not both (model={model!r}, weights={str(weights)!r})")
-    if weights is not None and not isinstance(weights, (str, os.PathLike)):  # createALCN(1.0), as cv2.createCLAHE(2.0)
-        raise InputError(
-            f"weights must be the path of a weight file (.npz), got {type(weights).__name__} {weights!r} "
-            "(the other settings are keywords, as createALCN(scale=...))"
-        )
     model = DEFAULT_MODEL if model is None else model
     if model not in MODELS:
         raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")

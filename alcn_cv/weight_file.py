@@ -9,7 +9,9 @@ from __future__ import annotations
 import io
 import json
 import logging
+import math
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,19 +24,20 @@ from alcn_cv.io import atomic_write, with_suffix
 logger = logging.getLogger(__name__)
 
 __all__ = [
-    "DEFAULT_WEIGHTS",
+    "WEIGHTS_DIR",
     "FORMAT",
     "ONNX_METADATA_KEY",
     "VERSION",
     "NormalizerFile",
+    "gain_scale",
     "load_normalizer_file",
     "save_normalizer_file",
 ]
 
 FORMAT = "alcn-cv/normalizer"
 VERSION = 1
-#: The ``paper`` model's file: where a path is left out (the shipped models by name: :data:`alcn_cv.runtime.MODELS`).
-DEFAULT_WEIGHTS = Path(__file__).parent / "weights" / "alcn_normalizer.npz"
+#: The folder of the shipped weight files and their ONNX exports (each model by name: :data:`alcn_cv.runtime.MODELS`).
+WEIGHTS_DIR = Path(__file__).parent / "weights"
 #: The key of the header in an ONNX export's ``metadata_props`` (a Normalizer's and a corner detector's), so that
 #: the ``.onnx`` describes itself.
 ONNX_METADATA_KEY = "alcn_cv"
@@ -48,6 +51,32 @@ _REQUIRED: dict[str, type | tuple[type, ...]] = {
 }
 
 
+def _positive_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value > 0
+
+
+def _positive_number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
+
+
+#: The fields of a gain Normalizer's header (``architecture: "gain"``) that :class:`alcn_cv.runtime.ModelSpec` reads,
+#: by dotted path: what each must be, and its test.
+_GAIN_FIELDS: dict[str, tuple[str, Callable[[object], bool]]] = {
+    "config.stride": ("a positive integer", _positive_int),
+    "config.mean_sigma": ("a positive number", _positive_number),
+    "config.context_sigma": ("a positive number", _positive_number),
+    "config.dilations": (
+        "a list of positive integers",
+        lambda value: isinstance(value, list) and all(_positive_int(d) for d in value),
+    ),
+    "equalization.tau": ("a positive number", _positive_number),
+    "divisive.sigma": ("a positive number", _positive_number),
+    "divisive.scale": ("a positive number", _positive_number),
+}
+#: A gain Normalizer's arrays of ``log(tau)`` and ``log(c)`` (the parameters) and the header fields that restate them.
+_GAIN_SCALES = {"log_tau": "equalization.tau", "log_floor_scale": "divisive.scale"}
+
+
 @dataclass
 class NormalizerFile:
     """Contents of a weight file.
@@ -57,11 +86,15 @@ class NormalizerFile:
         meta: the header: ``config`` (``Normalizer`` arguments), ``sigmas`` (pixels at the
             working scale), ``working_scale`` (factor from input to working resolution),
             ``output_range`` (``[lo, hi]`` raw responses mapped to the output range),
-            ``trained`` (False for an untrained initialisation), and free-form provenance.
+            ``trained`` (False for an untrained initialisation), and free-form provenance; a gain Normalizer's
+            (``architecture: "gain"``) also ``equalization`` (``tau``) and ``divisive`` (``sigma``, and ``scale``,
+            the floor scale ``c``), ``tau`` and ``c`` restating its arrays ``log_tau`` and ``log_floor_scale``.
+        path: the file it was read from (its errors name it; None: made in memory).
     """
 
     arrays: dict[str, np.ndarray]
     meta: dict[str, Any] = field(default_factory=dict)
+    path: Path | None = None
 
 
 def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> Path:
@@ -72,6 +105,7 @@ def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: 
     meta = {"format": FORMAT, "version": VERSION, **meta}
     _check_meta(meta, path)
     _check_arrays(arrays, path)
+    _check_gain(meta, arrays, path)
     buffer = io.BytesIO()
     stored: dict[str, Any] = {
         **{k: np.asarray(v, np.float32) for k, v in arrays.items()},
@@ -88,15 +122,18 @@ def save_normalizer_file(path: str | Path, arrays: dict[str, np.ndarray], meta: 
     return path
 
 
-def load_normalizer_file(path: str | Path | None = None) -> NormalizerFile:
-    """Read and check a weight file (default: :data:`DEFAULT_WEIGHTS`).
+def load_normalizer_file(path: str | Path) -> NormalizerFile:
+    """Read and check a weight file (a shipped model's: :func:`alcn_cv.runtime.resolve_weights`).
 
     Raises:
         WeightFileError: missing, a folder (the weight file in it named), empty, not a ``.npz`` archive, corrupt,
             of another format or of an incompatible version, a header field missing or out of range (a sigma or the
-            working scale not positive, an empty output range), or holding NaN or infinite weights.
+            working scale not positive, an empty output range; a gain Normalizer's grid, blurs, ``tau`` and divisive
+            normalization), holding NaN or infinite weights, or a gain Normalizer's header restating its ``tau`` or
+            ``c`` otherwise than its arrays ``log_tau`` and ``log_floor_scale``. The message names the file, and the
+            field or array.
     """
-    path = DEFAULT_WEIGHTS if path is None else Path(path)
+    path = Path(path)
     if path.is_dir():
         raise WeightFileError(_folder_message(path))
     if not path.is_file():
@@ -113,7 +150,10 @@ def load_normalizer_file(path: str | Path | None = None) -> NormalizerFile:
     try:
         with np.load(path, allow_pickle=False) as data:
             if _META_KEY not in data.files:
-                raise WeightFileError(f"{path} is not an alcn-cv weight file (no header)")
+                raise WeightFileError(
+                    f"{path} is not an alcn-cv weight file (no header; a torch state_dict or module? ALCN2d.save(path) "
+                    "writes a weight file)"
+                )
             meta = json.loads(str(data[_META_KEY]))
             arrays = {k: data[k] for k in data.files if k != _META_KEY}
     except WeightFileError:
@@ -122,7 +162,14 @@ def load_normalizer_file(path: str | Path | None = None) -> NormalizerFile:
         raise WeightFileError(f"weight file {path} is corrupt or truncated: {exc}") from None
     _check_meta(meta, path)
     _check_arrays(arrays, path)
-    return NormalizerFile(arrays=arrays, meta=meta)
+    _check_gain(meta, arrays, path)
+    return NormalizerFile(arrays=arrays, meta=meta, path=path)
+
+
+def gain_scale(arrays: dict[str, np.ndarray], key: str) -> float:
+    """A gain Normalizer's ``tau`` (``key="log_tau"``) or divisive floor scale ``c`` (``"log_floor_scale"``): the
+    exponential of its 0-d array in float32, as the network computes it."""
+    return float(np.exp(np.asarray(arrays[key], np.float32)))
 
 
 #: The weight files a training run writes into its folder, by command.
@@ -176,3 +223,23 @@ def _check_meta(meta: dict[str, Any], path: Path) -> None:
     lo, hi = meta["output_range"]
     if not hi > lo:
         raise WeightFileError(f"{path}: output_range {meta['output_range']} is empty")
+
+
+def _check_gain(meta: dict[str, Any], arrays: dict[str, np.ndarray], path: Path) -> None:
+    """A gain Normalizer's header fields (:data:`_GAIN_FIELDS`), and its ``tau`` and ``c`` restated by the header as
+    its arrays hold them (to float32 rounding); nothing for the other architectures."""
+    if meta.get("architecture") != "gain":
+        return
+    for name, (kind, valid) in _GAIN_FIELDS.items():
+        table, key = name.split(".")
+        if not isinstance(meta.get(table), dict) or key not in meta[table]:
+            raise WeightFileError(f"{path}: header field {name!r} missing")
+        if not valid(meta[table][key]):
+            raise WeightFileError(f"{path}: header field {name!r} must be {kind}, got {meta[table][key]!r}")
+    for key, name in _GAIN_SCALES.items():
+        if key not in arrays or np.shape(arrays[key]) != ():
+            raise WeightFileError(f"{path}: array {key!r} missing or not a single value")
+        table, field_key = name.split(".")
+        stated, value = meta[table][field_key], gain_scale(arrays, key)
+        if not math.isclose(stated, value, rel_tol=1e-6):
+            raise WeightFileError(f"{path}: header field {name!r} is {stated}, its array {key!r} holds {value}")

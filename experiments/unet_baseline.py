@@ -42,10 +42,10 @@ def objective(conf: str, unet: Path, gain: Path, draws: int, out: Path) -> dict[
     from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, load_scenes, select_scenes, shared_root
     from alcn_cv.io import write_json
     from alcn_cv.nets.gain import GainNormalizer
-    from alcn_cv.nets.unet import UNetNormalizer
     from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
     from alcn_cv.train.real_light import draw_step, pair_loss, training_scene
     from alcn_cv.train.unet import unet_pair_loss
+    from alcn_cv.train.unet_normalizer import UNetNormalizer
     from alcn_cv.weight_file import load_normalizer_file
 
     cfg = preset(REAL_LIGHT_CONFS, conf)

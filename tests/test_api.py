@@ -11,7 +11,7 @@ import alcn_cv
 import alcn_cv.enhance.alcn as alcn_module
 from alcn_cv import InputError, WeightFileError
 from alcn_cv.data.frames import synthetic_frame
-from alcn_cv.enhance.alcn import MODELS
+from alcn_cv.runtime import MODELS
 
 METHODS = alcn_cv.available()
 
@@ -167,6 +167,31 @@ def test_alcn_parameters():
         alcn_cv.createALCN(backend="opencv", threads=2)
     assert alcn_cv.createALCN(threads=2).backend == "fast"  # torch threads: the backend that runs torch
     assert alcn_cv.createALCN(backend="fast", device="cpu:0").backend == "fast"
+
+
+def test_model_and_weights_are_one_or_the_other_as_in_alcn2d():
+    """createALCN and the registry refuse a model beside a weight file, the default model's name too, as ALCN2d."""
+    from alcn_cv.runtime import DEFAULT_MODEL
+
+    for model in ("gain", "lite"):
+        with pytest.raises(InputError, match="give a model or a weight file, not both"):
+            alcn_cv.createALCN(weights=MODELS["lite"], model=model)
+        with pytest.raises(InputError, match="not both"):
+            alcn_cv.create(f"alcn:model={model}:weights={MODELS['lite']}")
+    assert alcn_cv.createALCN().weights_path == MODELS[DEFAULT_MODEL]
+    assert alcn_cv.create("alcn").weights_path == MODELS[DEFAULT_MODEL]
+    assert alcn_cv.create("alcn:model=lite").weights_path == MODELS["lite"]
+
+
+@pytest.mark.parametrize("scale", ["abc", "0.5", float("nan"), float("inf"), 0, -1, 5, True])
+def test_a_scale_that_is_not_a_number_in_range_names_scale_and_its_range(scale):
+    with pytest.raises(InputError, match=r"scale must be a number in \(0, 4\], got "):
+        alcn_cv.createALCN(model="lite", scale=scale)
+
+
+def test_the_registry_checks_scale_as_createALCN():
+    with pytest.raises(InputError, match=r"scale must be a number in \(0, 4\], got 5"):
+        alcn_cv.create("alcn:model=lite:scale=5")
 
 
 def test_shipped_weights_say_what_they_are(caplog):
@@ -363,7 +388,7 @@ def test_same_method_fills_in_the_defaults():
     from alcn_cv.enhance.registry import same_method
 
     assert same_method("clahe", "clahe:clip_limit=2.0:tileGridSize=(8, 8)")
-    assert same_method("alcn", "alcn:model=gain")
+    assert same_method("alcn", "alcn:device=cpu:threads=auto")
     assert not same_method("clahe", "clahe:clipLimit=4")
     assert not same_method("alcn", "alcn:model=lite")
     with pytest.raises(InputError, match="unknown normalization"):

@@ -13,9 +13,9 @@ torch = pytest.importorskip("torch")
 from alcn_cv.bench import detect as D  # noqa: E402
 from alcn_cv.bench import detect_data, policies  # noqa: E402
 from alcn_cv.bench import detect_settings as S  # noqa: E402
+from alcn_cv.bench.methods import build_methods  # noqa: E402
 from alcn_cv.cli import build_parser  # noqa: E402
 from alcn_cv.cli import main as cli_main  # noqa: E402
-from alcn_cv.enhance.registry import build_methods  # noqa: E402
 from alcn_cv.errors import DatasetError, InputError  # noqa: E402
 from alcn_cv.nets import Detector  # noqa: E402
 

@@ -11,10 +11,10 @@ torch = pytest.importorskip("torch")
 
 from alcn_cv.bench import fewshot as B  # noqa: E402
 from alcn_cv.bench.detect import create_normalization  # noqa: E402
+from alcn_cv.bench.methods import build_methods  # noqa: E402
 from alcn_cv.bench.policies import InputPolicy  # noqa: E402
 from alcn_cv.cli import main as cli_main  # noqa: E402
 from alcn_cv.data.phos import PhosBatch  # noqa: E402
-from alcn_cv.enhance.registry import build_methods  # noqa: E402
 from alcn_cv.errors import InputError  # noqa: E402
 from alcn_cv.train import fewshot as F  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""The deep baselines of the detection benchmark: plain CNN and CIFAR-style ResNets."""
+"""The deep baselines of the detection benchmark (alcn_cv.bench.deep_baselines): plain CNN and CIFAR-style ResNets."""
 
 from __future__ import annotations
 
@@ -6,9 +6,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from alcn_cv.bench.deep_baselines import CifarResNet, PlainCNN, resnet20, resnet56  # noqa: E402
 from alcn_cv.errors import InputError  # noqa: E402
-from alcn_cv.nets.plain import PlainCNN  # noqa: E402
-from alcn_cv.nets.resnet import CifarResNet, resnet20, resnet56  # noqa: E402
 
 
 @pytest.mark.parametrize("depth", [1, 2, 3, 4])

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from alcn_cv.checks import check_seeds
+from alcn_cv.checks import check_gray, check_out_dtype, check_positive, check_seeds
 from alcn_cv.errors import InputError
 
 
@@ -29,3 +29,37 @@ def test_a_stack_of_frames_given_to_apply_is_pointed_to_apply_batch():
         check_image(np.zeros((4, 48, 64), np.uint8))
     with pytest.raises(InputError, match=r"got shape \(48, 64, 5\)$"):  # five channels, not a stack
         check_image(np.zeros((48, 64, 5), np.uint8))
+
+
+def test_check_out_dtype_defaults_to_the_input_and_names_a_bad_one():
+    assert check_out_dtype(None, np.dtype(np.uint16)) == np.uint16
+    assert check_out_dtype("float32", np.dtype(np.uint8)) == np.float32
+    with pytest.raises(InputError, match="^unknown out_dtype 'pixels'"):
+        check_out_dtype("pixels", np.dtype(np.uint8))
+    with pytest.raises(InputError, match="^unsupported out_dtype float64"):
+        check_out_dtype(np.float64, np.dtype(np.uint8))
+
+
+def test_check_gray_checks_finiteness_only_when_asked():
+    plane = np.full((4, 5), np.nan, np.float32)
+    assert check_gray(plane, finite=False) is plane
+    with pytest.raises(InputError, match="NaN or inf"):
+        check_gray(plane)
+    with pytest.raises(InputError, match="HxW"):
+        check_gray(np.zeros((4, 5, 1), np.float32), finite=False)
+    with pytest.raises(InputError, match="float32"):
+        check_gray(np.zeros((4, 5)), finite=False)
+
+
+@pytest.mark.parametrize("value", [0.0, -1.0, float("inf"), float("nan")])
+def test_baseline_parameters_name_what_is_wrong(value):
+    from alcn_cv.enhance.histogram import CLAHE
+    from alcn_cv.enhance.retinex import IntrinsicImage, SelfQuotientImage
+
+    with pytest.raises(InputError, match="^eps must be positive and finite"):
+        IntrinsicImage(eps=value)
+    with pytest.raises(InputError, match="^eps must be positive and finite"):
+        SelfQuotientImage(eps=value)
+    with pytest.raises(InputError, match="^clipLimit must be positive and finite"):
+        CLAHE(clipLimit=value)
+    assert check_positive("eps", 0.5) == 0.5

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from alcn_cv.cli import main
-from alcn_cv.enhance.alcn import MODELS
+from alcn_cv.runtime import MODELS
 
 
 def _image(path: Path) -> Path:

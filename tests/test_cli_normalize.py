@@ -157,7 +157,7 @@ def test_list_explains_every_method(capsys):
     )
     assert params["dog"] == ["sigma1=0.5", "sigma2=1.5"]
     assert params["clahe"] == ["clipLimit=2.0", "tileGridSize=(8,8)"]
-    assert "model='gain'" in params["alcn"] and "backend=None" in params["alcn"]
+    assert "model=None" in params["alcn"] and "backend=None" in params["alcn"]  # None: the default model
     assert params["none"] == ["none"]
 
 

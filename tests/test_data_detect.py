@@ -9,9 +9,11 @@ import numpy as np
 import pytest
 
 from alcn_cv.data import detect
+from alcn_cv.data.manifest import MANIFEST_SCHEMA
 from alcn_cv.errors import InputError
 from alcn_cv.formats import schema
 from alcn_cv.formats.coco import load_coco
+from alcn_cv.io import read_json
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +23,7 @@ def bench(tmp_path_factory):
 
 def test_layout_manifest_and_schema(bench):
     man = json.loads((bench / "manifest.json").read_text())
-    jsonschema.validate(man, schema("manifest"))
+    jsonschema.validate(man, read_json(MANIFEST_SCHEMA))
     assert man["kind"] == "detect" and man["seed"] == 1
     assert man["box_size"] == 36 and man["working_scale"] == pytest.approx(0.5)
     assert {o["material"] for o in man["objects"]} == {"matte", "velvet", "metal"}

@@ -11,8 +11,9 @@ import pytest
 
 from alcn_cv.data import phos
 from alcn_cv.data.lighting import LIGHT_FAMILIES
+from alcn_cv.data.manifest import MANIFEST_SCHEMA
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.formats import schema
+from alcn_cv.io import read_json
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +79,7 @@ def test_generate_load_roundtrip_bytes_identical(tmp_path):
     assert np.array_equal(loaded.windows, ref.windows) and np.array_equal(loaded.light_ids, ref.light_ids)
     assert loaded.n_objects == 6 and loaded.light_families == LIGHT_FAMILIES
     man = json.loads((a / "manifest.json").read_text())
-    jsonschema.validate(man, schema("manifest"))
+    jsonschema.validate(man, read_json(MANIFEST_SCHEMA))
     assert man["kind"] == "phos" and man["seed"] == 5 and man["parameters"]["n"] == 70
     with pytest.raises(FileExistsError):
         phos.generate(a, 5, 5, n_objects=6, progress=False)

@@ -11,10 +11,12 @@ import pytest
 from scipy.spatial import ConvexHull
 
 from alcn_cv.data import pose
+from alcn_cv.data.manifest import MANIFEST_SCHEMA
 from alcn_cv.errors import InputError
 from alcn_cv.formats import schema
 from alcn_cv.formats.bop import load_scene, read_ply
 from alcn_cv.formats.colmap import read_text_model
+from alcn_cv.io import read_json
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +45,7 @@ def test_layout_and_schemas(plain):
             assert {o.obj_id for o in f.objects} == {1, 2}
             assert cv2.imread(str(f.rgb_path)).shape == (240, 320, 3)
     man = json.loads((plain / "manifest.json").read_text())
-    jsonschema.validate(man, schema("manifest"))
+    jsonschema.validate(man, read_json(MANIFEST_SCHEMA))
     assert json.loads((plain / "camera.json").read_text())["width"] == 320
     assert [s["change"] for s in man["sequences"][1:]] == ["none"] + ["mild"] * 3 + ["drastic"] * 4
     box = read_ply(plain / "models" / "obj_000001.ply")

@@ -1,12 +1,14 @@
 """Rendered registered scenes under many lights (alcn_cv.data.relief_scenes)."""
 
+import jsonschema
 import numpy as np
 import pytest
 
-from alcn_cv.data.manifest import read_manifest
+from alcn_cv.data.manifest import MANIFEST_SCHEMA, read_manifest
 from alcn_cv.data.relief_scenes import KIND, generate, render_scene
 from alcn_cv.data.scenes import load_scene_folder
 from alcn_cv.errors import InputError
+from alcn_cv.io import read_json
 from alcn_cv.train.real_light import training_scene
 
 
@@ -30,6 +32,7 @@ def test_render_scene_is_deterministic_and_checks_its_arguments():
 def test_generate_writes_folders_the_trainer_reads(tmp_path):
     out = generate(tmp_path / "scenes", scenes=2, frames=3, side=96, seed=5, progress=False)
     manifest = read_manifest(out, KIND)
+    jsonschema.validate(manifest, read_json(MANIFEST_SCHEMA))
     assert sorted(manifest["lights"]) == ["scene_000", "scene_001"]
     scenes = load_scene_folder(out)
     assert [s.name for s in scenes] == ["scene_000", "scene_001"]

@@ -185,6 +185,20 @@ def test_image_size_is_checked_against_camera_json(tmp_path):
         load_scene(scene_dir, check_images=True)
 
 
+def test_a_truncated_jpeg_is_a_dataset_error_naming_the_file(tmp_path):
+    scene_dir = tmp_path / "test" / "000001"
+    write_scene(scene_dir, _frames(2))
+    (scene_dir / "rgb").mkdir()
+    image = np.random.default_rng(0).integers(0, 256, (480, 640, 3), np.uint8)
+    data = cv2.imencode(".jpg", image)[1].tobytes()
+    for i in range(2):
+        (scene_dir / "rgb" / f"{i:06d}.jpg").write_bytes(data)
+    assert len(load_scene(scene_dir, check_images=True)) == 2
+    (scene_dir / "rgb" / "000001.jpg").write_bytes(data[: len(data) // 2])
+    with pytest.raises(DatasetError, match=r"scene_camera.json: field 1: .*000001.jpg: truncated or corrupt JPEG"):
+        load_scene(scene_dir, check_images=True)
+
+
 _PLY_HEAD = "ply\nformat ascii 1.0\nelement vertex 3\n{vprops}element face {nf}\n{fprop}end_header\n"
 _XYZ = "property float x\nproperty float y\nproperty float z\n"
 _FACE = "property list uchar int vertex_indices\n"

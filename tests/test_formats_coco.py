@@ -92,3 +92,27 @@ def test_writer_validates(tmp_path):
     with pytest.raises(DatasetError, match=r"images\[0\]"):
         write_coco(tmp_path / "bad.json", [{"id": 1, "file_name": "a.png", "width": 0, "height": 4}], [], [])
     assert not (tmp_path / "bad.json").exists()
+
+
+def test_a_truncated_jpeg_is_a_dataset_error_naming_the_annotation(tmp_path):
+    image = np.random.default_rng(0).integers(0, 256, (40, 60, 3), np.uint8)
+    data = cv2.imencode(".jpg", image)[1].tobytes()
+    path = _doc(tmp_path, images=[{"id": 1, "file_name": "b.jpg", "width": 60, "height": 40}])
+    (tmp_path / "images" / "b.jpg").write_bytes(data[: len(data) // 2])
+    ds = load_coco(path)
+    with pytest.raises(DatasetError, match=r"ann.json: image id 1: .*b.jpg: truncated or corrupt JPEG"):
+        ds.read_image(ds.images[0])
+    with pytest.raises(DatasetError, match=r"ann.json: field images\[0\].file_name: .*b.jpg: truncated"):
+        load_coco(path, check_images=True)
+    (tmp_path / "images" / "b.jpg").write_bytes(data)
+    assert ds.read_image(ds.images[0]).shape == (40, 60, 3)
+
+
+def test_read_image_gives_bgr_uint8_or_gray(tmp_path):
+    path = _doc(tmp_path)
+    cv2.imwrite(str(tmp_path / "images" / "a.png"), np.full((40, 60), 257 * 9, np.uint16))  # gray, 16 bits
+    ds = load_coco(path)
+    bgr = ds.read_image(ds.images[0])
+    assert bgr.shape == (40, 60, 3) and bgr.dtype == np.uint8 and (bgr == 9).all()
+    gray = ds.read_image(ds.images[0], gray=True)
+    assert gray.shape == (40, 60) and gray.dtype == np.uint8

@@ -15,8 +15,9 @@ torch = pytest.importorskip("torch")
 import alcn_cv  # noqa: E402
 from alcn_cv.cli import main as cli  # noqa: E402
 from alcn_cv.data.frames import synthetic_frame  # noqa: E402
-from alcn_cv.enhance.alcn import ALCN, MODELS  # noqa: E402
+from alcn_cv.enhance.alcn import ALCN  # noqa: E402
 from alcn_cv.nets.gain import GainNormalizer  # noqa: E402
+from alcn_cv.runtime import MODELS  # noqa: E402
 from alcn_cv.train.config import GainDistillConfig, LiteDistillConfig  # noqa: E402
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file  # noqa: E402
 

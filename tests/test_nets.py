@@ -5,7 +5,8 @@ import pytest
 import torch
 
 from alcn_cv import InputError, WeightFileError
-from alcn_cv.nets import Detector, Normalizer, reflect101_pad
+from alcn_cv.filters.torch_pad import reflect101_pad
+from alcn_cv.nets import Detector, Normalizer
 from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 

@@ -190,24 +190,27 @@ def test_per_pixel_divisive_numpy_and_torch_agree_and_ignore_the_light_strength(
     assert np.abs(divided).max() > 0.5
 
 
-def test_removed_variants_are_rejected(tmp_path):
+def test_a_config_the_network_refuses_is_a_weight_file_error(tmp_path):
+    import alcn_cv
+
     with pytest.raises(InputError):
         GainNormalizer(divisive_sigma=0.0)
     net = GainNormalizer()
-    meta = net.file_meta(trained=True)
-    meta["config"] = {**meta["config"], "gain": "weber"}
-    path = save_normalizer_file(tmp_path / "weber.npz", net.state_arrays(), meta)
-    with pytest.raises(WeightFileError, match="removed variant"):
-        GainNormalizer.from_file(load_normalizer_file(path))
+    for name, config in (("unknown", {"gain": "weber"}), ("refused", {"divisive_sigma": 0.0})):
+        meta = net.file_meta(trained=True)
+        meta["config"] = {**meta["config"], **config}
+        path = save_normalizer_file(tmp_path / f"{name}.npz", net.state_arrays(), meta)
+        with pytest.raises(WeightFileError, match="weights do not fit"):
+            GainNormalizer.from_file(load_normalizer_file(path))
+        for backend in ("fast", "torch"):
+            with pytest.raises(WeightFileError, match="weights do not fit"):
+                alcn_cv.createALCN(weights=path, backend=backend)
 
 
 def test_defaults_are_the_shipped_model():
     from alcn_cv.runtime import MODELS
 
-    shipped = load_normalizer_file(MODELS["gain"]).meta["config"]
-    assert GainNormalizer().config == {
-        k: v for k, v in shipped.items() if k not in ("gain", "sharpness", "learn_floor")
-    }
+    assert GainNormalizer().config == load_normalizer_file(MODELS["gain"]).meta["config"]
 
 
 def test_per_pixel_divisive_weight_file_round_trip_through_create_alcn(tmp_path):
@@ -216,7 +219,8 @@ def test_per_pixel_divisive_weight_file_round_trip_through_create_alcn(tmp_path)
     net = GainNormalizer(floor_scale=0.8, tau=2.0)
     path = save_normalizer_file(tmp_path / "d.npz", net.state_arrays(), net.file_meta(trained=True))
     weight_file = load_normalizer_file(path)
-    assert weight_file.meta["divisive"] == {"stride": 8, "scale": pytest.approx(0.8), "sigma": 2.0}
+    assert weight_file.meta["divisive"] == {"scale": pytest.approx(0.8), "sigma": 2.0}
+    assert weight_file.meta["equalization"] == {"tau": pytest.approx(2.0)}
     assert GainNormalizer.from_file(weight_file).divisive_sigma == 2.0
     image = gaussian_blur_stack(np.random.default_rng(4).random((90, 110)).astype(np.float32), (1.0,))[0]
     with torch.no_grad():

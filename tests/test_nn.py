@@ -19,8 +19,8 @@ import alcn_cv
 import alcn_cv.nn as alcn_nn
 from alcn_cv.data.frames import synthetic_frame
 from alcn_cv.errors import InputError
-from alcn_cv.filters.torch_divisive import reflect101_pad
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
+from alcn_cv.filters.torch_pad import reflect101_pad
 from alcn_cv.filters.torch_resize import upsample_blocks
 from alcn_cv.nn import ALCN2d, alcn2d, batches
 from alcn_cv.runtime import MODELS
@@ -648,3 +648,33 @@ def test_apply_batch_takes_any_byte_order_and_names_a_bad_out_dtype():
         alcn.apply_batch(unit.astype(">f4"))
     with pytest.raises(InputError, match="unknown out_dtype"):
         alcn.apply_batch(frames, out_dtype="nonsense")
+
+
+def test_a_fine_tuned_module_saved_is_what_an_opencv_app_loads(tmp_path):
+    """A PyTorch user found no way from a fine-tuned ALCN2d to createALCN(weights=...): torch.save of its state_dict
+    is no weight file."""
+    alcn = ALCN2d()
+    with torch.no_grad():
+        next(p for p in alcn.parameters() if p.ndim == 4).mul_(1.5)  # a step of fine-tuning
+    path = alcn.save(tmp_path / "tuned.npz")
+    meta = load_normalizer_file(path).meta
+    assert meta["fine_tuned_from"]["file"] == str(MODELS["gain"]) and "fine-tuned from" in meta["description"]
+    gray = _gray()
+    with torch.no_grad():
+        expected = alcn(torch.from_numpy(_unit(gray))[None, None])[0, 0].numpy()
+    out = alcn_cv.createALCN(weights=path).apply(gray, out_dtype=np.float32)
+    np.testing.assert_allclose(out, expected, atol=1e-5)
+    assert not np.allclose(out, alcn_cv.createALCN().apply(gray, out_dtype=np.float32), atol=1e-3)  # tuned, not shipped
+    torch.save(alcn.state_dict(), tmp_path / "state.pt")
+    with pytest.raises(alcn_cv.WeightFileError, match=r"no header; a torch state_dict .* ALCN2d.save\(path\)"):
+        alcn_cv.createALCN(weights=tmp_path / "state.pt")
+    with pytest.raises(InputError, match="got OrderedDict .*load_state_dict") as info:
+        ALCN2d(weights=alcn.state_dict())
+    assert len(str(info.value)) < 400  # not every tensor of it
+
+
+def test_a_colour_output_is_contiguous():
+    """Its channels were strided after the Lab conversion back: out.view(B, -1) failed."""
+    with torch.no_grad():
+        for image in (torch.rand(2, 3, 32, 40), torch.rand(2, 3, 32, 40).to(memory_format=torch.channels_last)):
+            assert ALCN2d(model="gain-lite")(image).is_contiguous()

@@ -396,7 +396,7 @@ def test_runs_where_torch_cannot_be_imported(random_net, run_without_torch):
 def test_alcn_runs_at_the_detector_resolution_torch_free_where_it_can(tmp_path):
     import shutil
 
-    from alcn_cv.enhance.alcn import MODELS
+    from alcn_cv.runtime import MODELS
 
     paper = pc.normalization_for("alcn:model=paper")
     assert paper.scale == 1.0 and paper.backend == "opencv"

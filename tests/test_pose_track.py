@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 import subprocess
 import sys
@@ -702,3 +703,21 @@ def test_the_pose_extra_tracks_without_torch(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode == 0, proc.stderr
     assert list(json.loads((tmp_path / "p.json").read_text())) == ["0000", "0001"]
+
+
+@pytest.mark.parametrize(
+    ("built", "given", "warns"),
+    [
+        ("alcn:model=gain", "alcn", False),
+        ("alcn", "alcn:model=gain", False),
+        ("alcn:model=gain", "alcn:model=lite", True),
+    ],
+)
+def test_tracking_after_the_default_model_named_or_not_is_the_same_normalization(built, given, warns, caplog):
+    """`createALCN`'s model defaults to None (the default model): tracking a model built after "alcn:model=gain"
+    with "alcn" is the same normalization, not a mismatch to warn about."""
+    model = _planar_model(_texture())
+    model.normalization = built
+    with caplog.at_level(logging.WARNING, logger="pose.track"):
+        track.open_tracker(model, K, normalization=given)
+    assert ("descriptors may not match" in caplog.text) == warns

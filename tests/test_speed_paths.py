@@ -184,14 +184,21 @@ def test_uint8_lookup_equals_the_float_path_on_every_level(monkeypatch, name):
         np.testing.assert_array_equal(result, method.apply(frame))
 
 
-def test_histogram_conversions_are_the_numpy_ones():
-    from alcn_cv.enhance.histogram import _to_uint8, _to_unit
+def test_unit_float_conversions_are_the_numpy_ones():
+    from alcn_cv.checks import from_unit_float, to_unit_float, unit_windows
+    from alcn_cv.enhance.histogram import _to_uint8
 
     values = np.random.default_rng(0).random((60, 256), dtype=np.float32) * 1.2 - 0.1
     values[0] = (np.arange(256) + 0.5) / 255  # ties
-    np.testing.assert_array_equal(_to_uint8(values), np.rint(np.clip(values, 0, 1) * 255).astype(np.uint8))
+    expected = np.rint(np.clip(values, 0, 1) * 255).astype(np.uint8)
+    kept = values.copy()
+    np.testing.assert_array_equal(_to_uint8(values), expected)
+    np.testing.assert_array_equal(values, kept)  # the caller's plane is left as it was
+    np.testing.assert_array_equal(from_unit_float(values, np.dtype(np.uint8)), expected)
     gray8 = np.arange(256, dtype=np.uint8).reshape(16, 16)
-    np.testing.assert_array_equal(_to_unit(gray8), gray8.astype(np.float32) * np.float32(1 / 255))
+    np.testing.assert_array_equal(to_unit_float(gray8), gray8.astype(np.float32) * np.float32(1 / 255))
+    windows = np.arange(256, dtype=np.uint8).reshape(1, 16, 16).repeat(3, axis=0)
+    np.testing.assert_array_equal(unit_windows(windows), windows.astype(np.float32) * np.float32(1 / 255))
 
 
 def test_output_map_is_the_numpy_one():

@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 import torch
 
-from alcn_cv.enhance.alcn import ALCN, MODELS
+from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import alcn_filter
 from alcn_cv.nets import Normalizer, opencv_runtime
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
-from alcn_cv.train.export import DEFAULT_ONNX, export_onnx
+from alcn_cv.runtime import MODELS
+from alcn_cv.train.export import export_onnx
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 
@@ -49,7 +50,7 @@ def _images(shared_data, n=3):
 def test_window_matches_the_network():
     assert opencv_runtime.WINDOW == Normalizer.window == LiteNormalizer.window == 48  # the paper's windows
     first = LiteNormalizer().features[0]
-    assert first.kernel_size == first.stride == (opencv_runtime.BLOCK,) * 2
+    assert first.kernel_size == first.stride == (opencv_runtime.LITE_BLOCK,) * 2
 
 
 def test_lite_normalizer_exports_and_runs_in_opencv(tmp_path):
@@ -108,7 +109,6 @@ def test_shipped_onnx_matches_shipped_weights(model):
     ocv = OpenCVNormalizer(weights.with_suffix(".onnx"))
     assert ocv.stride == net.stride
     np.testing.assert_allclose(ocv.dense_grid(image), ref, atol=1e-4)
-    assert OpenCVNormalizer().path == DEFAULT_ONNX == MODELS["paper"].with_suffix(".onnx")
 
 
 def _webcam_frame(shared_data):
@@ -287,7 +287,7 @@ def test_bad_files_and_inputs(tmp_path, random_weights):
 def test_image_blocks_are_space_to_depth():
     padded = np.arange(8 * 12, dtype=np.float32).reshape(8, 12)
     blocks = opencv_runtime.image_blocks(padded)
-    b = opencv_runtime.BLOCK
+    b = opencv_runtime.LITE_BLOCK
     assert blocks.shape == (1, b * b, 8 // b, 12 // b)
     for y, x, i, j in [(0, 0, 0, 0), (1, 2, 1, 0), (3, 3, 1, 2), (2, 1, 0, 1)]:
         assert blocks[0, b * y + x, i, j] == padded[b * i + y, b * j + x]

@@ -1,4 +1,4 @@
-"""The free-form U-Net baseline: the network (alcn_cv.nets.unet), its training (alcn_cv.train.unet) and its
+"""The free-form U-Net baseline: the network (alcn_cv.train.unet_normalizer), its training (alcn_cv.train.unet) and its
 benchmark method (alcn_cv.bench.unet, ``unet:weights=PATH`` in alcn_cv.bench.relight)."""
 
 import json
@@ -13,7 +13,6 @@ from alcn_cv.bench.unet import UNetNormalization
 from alcn_cv.data.scenes import load_scene_folder
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.nets.gain import GainNormalizer
-from alcn_cv.nets.unet import UNetNormalizer
 from alcn_cv.train.config import RealLightConfig
 from alcn_cv.train.real_light import (
     anywhere_locations,
@@ -24,6 +23,7 @@ from alcn_cv.train.real_light import (
     training_scene,
 )
 from alcn_cv.train.unet import centre_outputs, output_range, train_unet, unet_pair_loss
+from alcn_cv.train.unet_normalizer import UNetNormalizer
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 from scene_sets import make_sets
 
@@ -68,6 +68,9 @@ def test_bad_input_and_arguments_are_refused():
     for bad in ({"channels": 0}, {"levels": 0}, {"eps": 0.0}, {"channels": 2.5}):
         with pytest.raises(InputError):
             UNetNormalizer(**bad)
+    for eps in (float("inf"), float("nan")):
+        with pytest.raises(InputError, match="eps must be positive and finite"):
+            UNetNormalizer(eps=eps)
 
 
 def test_more_parameters_than_the_gain_normalizer():

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import alcn_cv
-from alcn_cv.enhance.alcn import MODELS
 from alcn_cv.errors import WeightFileError
+from alcn_cv.runtime import MODELS
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 
@@ -94,3 +94,74 @@ def test_a_header_of_widths_that_are_not_positive_is_refused_on_loading(tmp_path
     with pytest.raises(WeightFileError, match="must be positive") as info:
         load_normalizer_file(path)
     assert str(path) in str(info.value)
+
+
+@pytest.fixture(scope="module")
+def gain():
+    return load_normalizer_file(MODELS["gain"])
+
+
+def _edited(meta, name, value):
+    """``meta`` with the header field ``name`` (``table.key``) set to ``value``, or removed for None."""
+    table, key = name.split(".")
+    entry = {k: v for k, v in meta[table].items() if k != key}
+    return {**meta, table: entry if value is None else {**entry, key: value}}
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "problem"),
+    [
+        ("config.stride", None, "missing"),
+        ("config.stride", 8.0, "must be a positive integer"),
+        ("config.mean_sigma", None, "missing"),
+        ("config.context_sigma", "wide", "must be a positive number"),
+        ("config.dilations", None, "missing"),
+        ("config.dilations", [1, "2"], "must be a list of positive integers"),
+        ("equalization.tau", None, "missing"),
+        ("equalization.tau", -3.0, "must be a positive number"),
+        ("divisive.sigma", None, "missing"),
+        ("divisive.scale", None, "missing"),
+        ("divisive.scale", True, "must be a positive number"),
+    ],
+)
+def test_a_gain_header_field_missing_or_mistyped_names_the_file_and_the_field(tmp_path, gain, field, value, problem):
+    path = _write_npz(tmp_path / "w.npz", gain.arrays, _edited(gain.meta, field, value))
+    for load in (load_normalizer_file, alcn_cv.createALCN):
+        with pytest.raises(WeightFileError, match=f"header field '{field}' {problem}") as info:
+            load(path)
+        assert str(path) in str(info.value)
+    with pytest.raises(WeightFileError, match=field):
+        save_normalizer_file(tmp_path / "saved.npz", gain.arrays, _edited(gain.meta, field, value))
+
+
+@pytest.mark.parametrize(("field", "array"), [("equalization.tau", "log_tau"), ("divisive.scale", "log_floor_scale")])
+def test_a_gain_header_restating_tau_or_c_otherwise_than_its_arrays_is_refused(tmp_path, gain, field, array):
+    """The arrays are the parameters, which both backends use; a header that says otherwise is a damaged file."""
+    path = _write_npz(tmp_path / "w.npz", gain.arrays, _edited(gain.meta, field, 1.5))
+    with pytest.raises(WeightFileError, match=f"header field '{field}' is 1.5, its array '{array}' holds") as info:
+        alcn_cv.createALCN(weights=path)
+    assert str(path) in str(info.value)
+    missing = {k: v for k, v in gain.arrays.items() if k != array}
+    with pytest.raises(WeightFileError, match=f"array '{array}' missing"):
+        load_normalizer_file(_write_npz(tmp_path / "no_array.npz", missing, gain.meta))
+
+
+def test_the_backends_take_tau_and_c_from_the_arrays(tmp_path):
+    """A gain model that learnt tau and c: its config holds their initial values, the arrays (and the header's
+    restatement) the learnt ones, which the OpenCV runtime and the torch module both use."""
+    torch = pytest.importorskip("torch")
+    from alcn_cv.nets.gain import GainNormalizer
+
+    net = GainNormalizer(learn_scales=True)
+    with torch.no_grad():
+        net.log_tau.fill_(np.log(2.0))
+        net.log_floor_scale.fill_(np.log(0.5))
+        net.head.bias.add_(0.1)
+    path = save_normalizer_file(tmp_path / "w.npz", net.state_arrays(), net.file_meta(trained=True))
+    meta = load_normalizer_file(path).meta
+    assert meta["config"]["tau"] == 3.0 and meta["equalization"]["tau"] == pytest.approx(2.0)
+    image = np.random.default_rng(0).random((64, 80)).astype(np.float32)
+    fast, torch_backend = (alcn_cv.createALCN(weights=path, backend=b) for b in ("fast", "torch"))
+    assert fast.spec.tau == pytest.approx(2.0) and fast.spec.divisive[1] == pytest.approx(0.5)
+    assert fast.spec == torch_backend.spec
+    np.testing.assert_allclose(fast.normalize(image), torch_backend.normalize(image), atol=1e-4)

@@ -16,15 +16,15 @@ For every method and for 1 and 10 real training images per object:
 4. **Detector.** The same network (:class:`alcn_cv.nets.Detector`, Sec. 4.2) trained in the
    same way (:func:`alcn_cv.train.stage2.train_detector`: Adam, same epochs, batch, rate and
    seed). The deep baselines of Sec. 4.3.1 train their own networks on the same windows
-   without normalization: ``cnn`` (the plain CNN of :mod:`alcn_cv.nets.plain` whose depth and
+   without normalization: ``cnn`` (the plain CNN of :mod:`alcn_cv.bench.deep_baselines` whose depth and
    width, from a small sweep, scores best on relit held-out training windows), ``resnet20``
-   and ``resnet56`` (:mod:`alcn_cv.nets.resnet`). The Detector and the plain CNN have valid
+   and ``resnet56`` (:mod:`alcn_cv.bench.deep_baselines`). The Detector and the plain CNN have valid
    convolutions: their dense scores equal scoring every window alone. The ResNets' padded
    convolutions see the image around a window in a dense run, so with the dense input
    policies they are trained on the 32x32 windows with
    :data:`~alcn_cv.bench.detect_settings.RESNET_CONTEXT` pixels of their surroundings and
    classify from the central 32x32's feature cells, which is what their dense run pools (see
-   :mod:`alcn_cv.nets.resnet`).
+   :mod:`alcn_cv.bench.deep_baselines`).
 5. **Test.** Every test image is resized to the working scale, normalized whole, and every
    32x32 window at stride 4 is scored (``dense``; with ``standardize`` each window is
    standardized and scored alone). Per object: a fixed-size square box (``box_size`` at the
@@ -79,12 +79,13 @@ from alcn_cv.bench.detect_settings import (
     DetectSettings,
     run_key,
 )
+from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.metrics import match_detections, nms, pr_auc, precision_recall
 from alcn_cv.bench.plots import plot_pr_curves
 from alcn_cv.bench.policies import InputPolicy
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import build_methods, from_spec, parse_spec
+from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import machine, spread
@@ -205,14 +206,14 @@ def _context(method: str, policy: str) -> int:
 
 def _make_net(method: str, num_classes: int, config: tuple[int, int] | None = None, context: int = 0) -> nn.Module:
     if method == "cnn":
-        from alcn_cv.nets.plain import PlainCNN
+        from alcn_cv.bench.deep_baselines import PlainCNN
 
         depth, width = config or (2, 32)
         return PlainCNN(num_classes, depth=depth, width=width)
     if method in RESNETS:
-        from alcn_cv.nets import resnet
+        from alcn_cv.bench import deep_baselines
 
-        return getattr(resnet, method)(num_classes, context=context)
+        return getattr(deep_baselines, method)(num_classes, context=context)
     from alcn_cv.nets import Detector
 
     return Detector(num_classes)

@@ -44,10 +44,11 @@ from tqdm.auto import tqdm
 
 from alcn_cv.bench.detect import create_normalization
 from alcn_cv.bench.detect_settings import POLICIES, POLICY_DESCRIPTIONS
+from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.policies import InputPolicy
 from alcn_cv.checks import check_seeds
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import available, build_methods, parse_spec
+from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import (

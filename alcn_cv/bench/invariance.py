@@ -34,9 +34,10 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
+from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.plots import wrap_label
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import available, build_methods, parse_spec
+from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, make_folder, read_image, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure

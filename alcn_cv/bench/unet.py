@@ -1,4 +1,4 @@
-"""The free-form baseline as a normalization method: a trained :class:`~alcn_cv.nets.unet.UNetNormalizer`
+"""The free-form baseline as a normalization method: a trained :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer`
 behind :class:`~alcn_cv.enhance.base.Normalization`'s ``apply``.
 
 A lab baseline for the benchmarks (``alcn bench relight --methods unet:weights=PATH``,
@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.nets.unet import UNetNormalizer
+from alcn_cv.train.unet_normalizer import UNetNormalizer
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = ["UNetNormalization"]
@@ -28,7 +28,7 @@ class UNetNormalization(Normalization):
 
     Example:
         >>> import numpy as np
-        >>> from alcn_cv.nets.unet import UNetNormalizer
+        >>> from alcn_cv.train.unet_normalizer import UNetNormalizer
         >>> from alcn_cv.weight_file import save_normalizer_file
         >>> net = UNetNormalizer()
         >>> path = save_normalizer_file("/tmp/unet_doc.npz", net.state_arrays(), net.file_meta(trained=False))

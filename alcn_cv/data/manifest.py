@@ -5,8 +5,8 @@ Every dataset folder holds a ``manifest.json``::
     {"generator": "alcn_cv.data", "generator_version": "1", "kind": "phos" | "detect" | "pose" | "relief_scenes",
      "seed": 0, "parameters": {...}, ...}
 
-It holds no time stamp or timing, so that the same seed and parameters give byte-identical
-folders. Folders are written under a temporary name beside the target and renamed when
+Its JSON schema is :data:`MANIFEST_SCHEMA`. It holds no time stamp or timing, so that the same seed and parameters
+give byte-identical folders. Folders are written under a temporary name beside the target and renamed when
 complete, so a half-written dataset is never mistaken for a complete one.
 """
 
@@ -29,6 +29,7 @@ from alcn_cv.io import UMASK, atomic_path, make_folder, read_json
 __all__ = [
     "GENERATOR",
     "GENERATOR_VERSION",
+    "MANIFEST_SCHEMA",
     "make_manifest",
     "read_manifest",
     "atomic_output_dir",
@@ -38,6 +39,8 @@ __all__ = [
 GENERATOR = "alcn_cv.data"
 #: Bumped whenever the same seed and parameters would give different data.
 GENERATOR_VERSION = "1"
+#: The JSON schema (draft 2020-12) of ``manifest.json``.
+MANIFEST_SCHEMA = Path(__file__).resolve().parent / "manifest.schema.json"
 
 
 def make_manifest(kind: str, seed: int, parameters: dict[str, Any], **extra: Any) -> dict[str, Any]:

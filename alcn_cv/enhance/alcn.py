@@ -34,7 +34,6 @@ from alcn_cv.nets.opencv_runtime import GAIN_NEEDS, RUNS_GAIN, WINDOW
 from alcn_cv.runtime import (
     DEFAULT_MODEL,
     MODELS,
-    TEACHERS,
     ModelSpec,
     Runtime,
     check_batch,
@@ -50,7 +49,7 @@ from alcn_cv.weight_file import NormalizerFile, load_normalizer_file
 if TYPE_CHECKING:
     from alcn_cv.nn import TorchRuntime
 
-__all__ = ["ALCN", "DEFAULT_MODEL", "MODELS", "TEACHERS", "createALCN", "pin_default_model"]
+__all__ = ["ALCN", "createALCN", "pin_default_model"]
 
 logger = logging.getLogger(__name__)
 
@@ -93,8 +92,8 @@ class ALCN(Normalization):
         backend: ``"opencv"`` (no torch: the ONNX export beside the weight file run by ``cv2.dnn``, Eq. 3 in
             OpenCV), ``"fast"`` (the Normalizer in torch on the CPU, Eq. 3 in OpenCV; any grid stride, no ONNX
             file needed) or ``"torch"`` (:class:`alcn_cv.nn.ALCN2d` on ``device``). Default: ``"opencv"`` for a shipped
-            ``model`` without a ``grid_stride`` on OpenCV 4.8 or newer (on OpenCV 5 faster than ``"fast"`` at every
-            size ``alcn bench speed`` runs, the same output to 1e-5), else ``"fast"`` where torch is installed.
+            ``model`` without a ``grid_stride`` on OpenCV 4.8 or newer (the same output as ``"fast"`` to 1e-5), else
+            ``"fast"`` where torch is installed.
         device: torch device of ``backend="torch"`` (``"cpu"``, ``"cuda"``); another device than the CPU selects
             that backend when none is given, as ``threads`` other than ``"auto"`` select ``"fast"``.
         grid_stride: spacing of the Normalizer's grid in working pixels, a multiple of its stride (default: its
@@ -106,8 +105,11 @@ class ALCN(Normalization):
             Default ``"auto"``: 1 with ``backend="fast"``, whose torch part (the network's layers on the grid) is
             small, so that no torch threads are left spinning against the OpenCV calls around it; torch's setting
             with ``backend="torch"``, which runs everything in torch. ``backend="opencv"`` runs no torch.
-        A ``model`` other than the default beside ``weights`` is an error (the default itself cannot be told from
-        a model not given).
+
+    Raises:
+        InputError: both ``model`` and ``weights``, an unknown ``model``, ``backend`` or ``mixture``, ``scale`` not a
+            number in (0, 4], or settings that do not go together (:class:`~alcn_cv.errors.WeightFileError`: a
+            weight file that does not load).
 
     The settings are fixed when the ALCN is created (its runtime is built from them): setting one afterwards raises
     ``AttributeError``; create another ALCN instead.
@@ -133,12 +135,10 @@ class ALCN(Normalization):
         device: str = "cpu",
         grid_stride: int | None = None,
         mixture: str | None = None,
-        model: str = DEFAULT_MODEL,
+        model: str | None = None,
         threads: int | None | Literal["auto"] = "auto",
     ) -> None:
-        # another model than the default beside a weight file is an error (the default is in the signature, as
-        # the registry's specs and cv2's create functions show their defaults)
-        self.weights_path = resolve_weights(None if weights is not None and model == DEFAULT_MODEL else model, weights)
+        self.weights_path = resolve_weights(model, weights)
         if (
             threads != "auto"
             and threads is not None
@@ -176,7 +176,7 @@ class ALCN(Normalization):
         if mixture == "pyramid" and backend == "torch":
             raise InputError("mixture='pyramid' runs in OpenCV: use it with backend='fast' or 'opencv'")
         self.mixture = mixture
-        self.spec = ModelSpec.from_meta(meta, scale)
+        self.spec = ModelSpec.from_file(weight_file, scale)
         self.sigmas, self.scale, self.output_range = self.spec.sigmas, self.spec.scale, self.spec.output_range
         self.trained = bool(meta["trained"])
         if not self.trained:
@@ -375,7 +375,7 @@ def createALCN(  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE
     device: str = "cpu",
     grid_stride: int | None = None,
     mixture: str | None = None,
-    model: str = DEFAULT_MODEL,
+    model: str | None = None,
     threads: int | None | Literal["auto"] = "auto",
 ) -> ALCN:
     """Create an :class:`ALCN` normalization; ``createALCN().apply(img)`` normalizes an image.

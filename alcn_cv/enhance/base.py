@@ -29,7 +29,16 @@ from typing import ClassVar
 import cv2
 import numpy as np
 
-from alcn_cv.checks import FULL_SCALE, SUPPORTED_DTYPES, check_gray, check_image, unit_windows
+from alcn_cv.checks import (
+    FULL_SCALE,
+    UINT8_LEVELS,
+    check_gray,
+    check_image,
+    check_out_dtype,
+    from_unit_float,
+    to_unit_float,
+    unit_windows,
+)
 from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import linear_to_lab, srgb_to_lab, srgb_to_linear
 
@@ -41,27 +50,10 @@ logger = logging.getLogger(__name__)
 TILE_PIXELS = 2**24
 #: ``cv2.transform`` matrix of the L channel of a float Lab image, divided by 100: intensities in [0, 1].
 _LIGHTNESS_OF_LAB = np.array([[0.01, 0.0, 0.0]], np.float32)
-#: The 256 intensities of a uint8 image as :meth:`Normalization.apply`'s float path sees them.
-_UINT8_LEVELS = np.arange(256, dtype=np.uint8).astype(np.float32).reshape(1, 256) * np.float32(
-    1.0 / FULL_SCALE[np.dtype(np.uint8)]
-)
-#: :func:`~alcn_cv.filters.lab.srgb_to_linear` of :data:`_UINT8_LEVELS`.
-_LINEAR_UINT8_LEVELS = srgb_to_linear(_UINT8_LEVELS.copy())
+#: :func:`~alcn_cv.filters.lab.srgb_to_linear` of :data:`~alcn_cv.checks.UINT8_LEVELS`.
+_LINEAR_UINT8_LEVELS = srgb_to_linear(UINT8_LEVELS.copy())
 #: The classes that already warned about an image smaller than their window (once per process).
 _WARNED_SMALL: set[type] = set()
-
-
-def to_unit_float(img: np.ndarray) -> np.ndarray:
-    # A new C-ordered array whatever the input's layout: the caller's stays untouched and the
-    # OpenCV calls that follow may write into this one.
-    if img.dtype == np.float32:
-        return np.clip(img, 0.0, 1.0, out=np.empty(img.shape, np.float32))
-    if img.dtype == np.uint8 and (img.ndim == 2 or img.shape[2] <= 4):
-        # one table lookup: the values of the two passes below, in one
-        return cv2.LUT(img, _UINT8_LEVELS).reshape(img.shape)
-    unit = img.astype(np.float32, order="C")
-    unit *= np.float32(1.0 / FULL_SCALE[img.dtype])
-    return unit
 
 
 def lab_and_lightness(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -82,35 +74,15 @@ def bgr_with_lightness(lab: np.ndarray, lightness: np.ndarray, out_dtype: np.dty
     bgr = cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=lab)
     if out_dtype == np.uint8:
         return cv2.convertScaleAbs(bgr, alpha=FULL_SCALE[out_dtype])
-    return _unit_in_place_to(bgr, out_dtype)
+    return from_unit_float(bgr, out_dtype)
 
 
 def with_alpha(result: np.ndarray, alpha: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
     """``result`` (``HxWxC`` of ``out_dtype``) with the ``HxW`` ``alpha`` as its last channel, converted to
     ``out_dtype`` when that differs: a new array, so that the input's alpha is not shared."""
     if alpha.dtype != out_dtype:
-        alpha = _unit_in_place_to(to_unit_float(alpha), out_dtype)
+        alpha = from_unit_float(to_unit_float(alpha), out_dtype)
     return np.concatenate([result, alpha[..., None]], axis=2)
-
-
-def _unit_in_place_to(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
-    """float32 intensities clipped to [0, 1] and converted to ``dtype`` (``rint(unit * full
-    scale)`` for the integer types), with ``unit`` as scratch space, any shape. A row, a plane or
-    an image of up to four channels takes OpenCV passes: for uint8 the lower clip, then
-    ``cv2.convertScaleAbs``, which rounds half to even and saturates as ``np.rint`` after the clip
-    does, bit for bit."""
-    if not (unit.ndim in (1, 2) or (unit.ndim == 3 and unit.shape[2] <= 4)):  # what OpenCV cannot take as a Mat
-        np.clip(unit, 0.0, 1.0, out=unit)
-    else:  # cv2.threshold: no scalar that OpenCV could take for an array
-        cv2.threshold(unit, 0.0, 0.0, cv2.THRESH_TOZERO, dst=unit)
-        if dtype == np.uint8:
-            return cv2.convertScaleAbs(unit, alpha=FULL_SCALE[dtype])
-        cv2.threshold(unit, 1.0, 0.0, cv2.THRESH_TRUNC, dst=unit)
-    if dtype == np.float32:
-        return np.ascontiguousarray(unit)
-    unit *= FULL_SCALE[dtype]
-    np.rint(unit, out=unit)
-    return unit.astype(dtype)
 
 
 class Normalization:
@@ -202,7 +174,7 @@ class Normalization:
 
     def _response_to(self, response: np.ndarray, dtype: np.dtype) -> np.ndarray:
         """:meth:`to_unit` then the conversion to ``dtype`` (the same values, fewer passes)."""
-        return _unit_in_place_to(self._unclipped_unit(response), dtype)
+        return from_unit_float(self._unclipped_unit(response), dtype)
 
     def apply(
         self, img: np.ndarray, dst: np.ndarray | None = None, out_dtype: type | np.dtype | str | None = None
@@ -242,12 +214,7 @@ class Normalization:
 
     def _apply(self, img: np.ndarray, out_dtype: type | np.dtype | str | None) -> np.ndarray:
         """:meth:`apply` on a valid image, into a new array."""
-        try:
-            out_dtype = np.dtype(img.dtype if out_dtype is None else out_dtype)
-        except TypeError:
-            raise InputError(f"unknown out_dtype {out_dtype!r}; use uint8, uint16 or float32") from None
-        if out_dtype not in SUPPORTED_DTYPES:
-            raise InputError(f"unsupported out_dtype {out_dtype}; use uint8, uint16 or float32")
+        out_dtype = check_out_dtype(out_dtype, img.dtype)
         alpha = None
         if img.ndim == 3 and img.shape[2] in (2, 4):
             img, alpha = img[..., :-1], img[..., -1]
@@ -302,7 +269,7 @@ class Normalization:
         intensity alone (given statistics of the image): ``response_of`` on the 256 intensities
         as the float path sees them, mapped to uint8 as it maps them (the same float operations
         on the same values), then one ``cv2.LUT`` pass over the image."""
-        return cv2.LUT(gray8, self._response_to(response_of(_UINT8_LEVELS), np.dtype(np.uint8)))
+        return cv2.LUT(gray8, self._response_to(response_of(UINT8_LEVELS), np.dtype(np.uint8)))
 
     def _intensity(self, img: np.ndarray) -> np.ndarray:
         """The float32 ``HxW`` plane :meth:`apply` normalizes for a valid gray or BGR image

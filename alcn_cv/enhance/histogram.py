@@ -9,6 +9,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from alcn_cv.checks import check_positive, from_unit_float, to_unit_float
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
@@ -17,14 +18,8 @@ __all__ = ["CLAHE", "HistogramEqualization"]
 
 
 def _to_uint8(gray: np.ndarray) -> np.ndarray:
-    # rint(clip(gray, 0, 1) * 255) in two OpenCV passes: convertScaleAbs rounds half to even
-    # and saturates, bit for bit the same once the negatives are gone
-    return cv2.convertScaleAbs(cv2.threshold(gray, 0.0, 0.0, cv2.THRESH_TOZERO)[1], alpha=255.0)
-
-
-def _to_unit(gray8: np.ndarray) -> np.ndarray:
-    # gray8 * float32(1 / 255) in one pass (addWeighted multiplies in float32, adds exact zeros)
-    return cv2.addWeighted(gray8, float(np.float32(1.0 / 255.0)), gray8, 0.0, 0.0, dtype=cv2.CV_32F)
+    """The caller's float32 plane quantized to uint8, ``rint(255 * clip(gray, 0, 1))``, left as it was."""
+    return from_unit_float(gray.copy(), np.dtype(np.uint8))
 
 
 @register
@@ -42,7 +37,7 @@ class HistogramEqualization(Normalization):
     output_range = (0.0, 1.0)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
-        return _to_unit(cv2.equalizeHist(_to_uint8(gray)))
+        return to_unit_float(cv2.equalizeHist(_to_uint8(gray)))
 
     def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray:
         return cv2.equalizeHist(gray8)  # output_range (0, 1): the fixed map is the identity
@@ -67,21 +62,19 @@ class CLAHE(Normalization):
     output_range = (0.0, 1.0)
 
     def __init__(self, clipLimit: float = 2.0, tileGridSize: tuple[int, int] = (8, 8)) -> None:  # noqa: N803 -- OpenCV names
-        if not np.isfinite(clipLimit) or clipLimit <= 0:
-            raise InputError(f"clipLimit must be positive, got {clipLimit}")
+        self.clipLimit = check_positive("clipLimit", clipLimit)
         tiles = tuple(int(t) for t in tileGridSize)
         if len(tiles) != 2 or min(tiles) < 1:
             raise InputError(f"tileGridSize must be two positive integers, got {tileGridSize}")
-        self.clipLimit = float(clipLimit)
         self.tileGridSize = tiles
 
     def _clahe(self) -> cv2.CLAHE:
-        # one per call (0.2 us): a cv2.CLAHE keeps its buffers between calls, so that one shared by two threads
+        # one per call (cheap): a cv2.CLAHE keeps its buffers between calls, so that one shared by two threads
         # mixes their images, and it cannot be pickled
         return cv2.createCLAHE(clipLimit=self.clipLimit, tileGridSize=self.tileGridSize)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
-        return _to_unit(self._clahe().apply(_to_uint8(gray)))
+        return to_unit_float(self._clahe().apply(_to_uint8(gray)))
 
     def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray:
         return self._clahe().apply(gray8)  # output_range (0, 1): the fixed map is the identity

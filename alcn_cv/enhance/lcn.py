@@ -17,8 +17,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from alcn_cv.checks import check_positive
-from alcn_cv.enhance.base import Normalization, to_unit_float
+from alcn_cv.checks import check_positive, to_unit_float
+from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack, kernel_radius
@@ -81,9 +81,10 @@ class DifferenceOfGaussians(Normalization):
     Args:
         sigma1: standard deviation of the centre Gaussian (pixels). Default 0.5.
         sigma2: standard deviation of the surround Gaussian (pixels), ``> sigma1``. Default
-            1.5. The best pair measured on the detection benchmark at its working scale
-            (``alcn bench detect``): it beat the pairs that :mod:`alcn_cv.bench.tuning`
-            selects on the training windows (1.5/12 and 2/5), with both input policies.
+            1.5 (how the default pair was chosen: ``docs/journal.md``).
+
+    Raises:
+        InputError: a sigma not positive and finite, or ``sigma2 <= sigma1``.
     """
 
     name = "dog"

@@ -14,16 +14,15 @@ import numbers
 import re
 import types
 import typing
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import TypeVar
 
 from alcn_cv.enhance.base import NoNormalization, Normalization
-from alcn_cv.errors import ALCNError, InputError, WeightFileError
+from alcn_cv.errors import ALCNError, InputError
 
 __all__ = [
     "available",
-    "build_methods",
     "create",
     "describe",
     "from_spec",
@@ -256,28 +255,6 @@ def from_spec(spec: str, **defaults: object) -> Normalization:
     """
     name, params = parse_spec(spec)
     return create(name, **{**defaults, **params})
-
-
-def build_methods(
-    methods: Sequence[str], build: Callable[[str], Normalization] = from_spec
-) -> dict[str, Normalization]:
-    """Every method of a benchmark, built by ``build`` from its spec (its weight file loaded) before any work: a bad
-    parameter or weight file ends the command with one line naming the method, not with a failed run found after
-    the long work.
-
-    Returns:
-        The built methods by spec, in the order of ``methods``.
-
-    Raises:
-        InputError: a method that cannot be built; the message names its spec.
-    """
-    norms = {}
-    for spec in methods:
-        try:
-            norms[spec] = build(spec)
-        except (InputError, WeightFileError) as exc:
-            raise InputError(f"method {spec!r}: {exc}") from None
-    return norms
 
 
 register(NoNormalization)

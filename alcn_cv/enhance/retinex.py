@@ -11,6 +11,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
+from alcn_cv.checks import check_positive
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import register
 from alcn_cv.errors import InputError
@@ -75,10 +76,8 @@ class IntrinsicImage(Normalization):
     def __init__(self, threshold: float = 0.1, eps: float = 0.01) -> None:
         if not np.isfinite(threshold) or threshold < 0:
             raise InputError(f"threshold must be >= 0, got {threshold}")
-        if not np.isfinite(eps) or eps <= 0:
-            raise InputError(f"eps must be positive, got {eps}")
         self.threshold = float(threshold)
-        self.eps = float(eps)
+        self.eps = check_positive("eps", eps)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         log = np.log(gray.astype(np.float64) + self.eps)
@@ -146,9 +145,7 @@ class SelfQuotientImage(Normalization):
 
     def __init__(self, sigmas: Sequence[float] = (1.0, 2.0, 4.0), eps: float = 0.01, weighted: bool = True) -> None:
         self.sigmas = check_sigmas(sigmas)
-        if not np.isfinite(eps) or eps <= 0:
-            raise InputError(f"eps must be positive, got {eps}")
-        self.eps = float(eps)
+        self.eps = check_positive("eps", eps)
         self.weighted = bool(weighted)
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:

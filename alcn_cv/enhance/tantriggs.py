@@ -64,7 +64,7 @@ class TanTriggs(Normalization):
     no per-frame min/max: :attr:`output_range` is ``(-tau, tau)``, the range of the final
     ``tanh``, fixed by the parameters. (With ``alpha = 0.1`` the robust scale is close to the
     geometric mean of ``|I|``, small on a band-passed image, so the equalized values spread
-    over the whole range: on outdoor webcam frames the mean magnitude is about 2-4.)
+    over much of that range.)
 
     Args:
         gamma: exponent of the gamma correction. Default 0.2.

@@ -1,9 +1,17 @@
-"""Filtering operations: ALCN's Gaussian mixture and per-window standardization.
+"""Filtering operations: the steps of ALCN and of the gain Normalizers, each in NumPy/OpenCV and in torch.
 
-:mod:`~alcn_cv.filters.gaussian_mixture` (NumPy/OpenCV) imports no torch; the differentiable
-:func:`gaussian_mixture2d` and :class:`GaussianMixture2d` (kornia) load torch on first use. Each
-step has its NumPy/OpenCV module and its torch twin (``torch_*``): the divisive normalization, the
-wide band, the CIE Lab of colour images (:mod:`~alcn_cv.filters.lab`, :mod:`~alcn_cv.filters.torch_lab`).
+* :mod:`~alcn_cv.filters.gaussian_mixture` -- ALCN's Gaussian mixture (Eq. 1 and 3), exact, from a grid or on a
+  pyramid; its differentiable twin :mod:`~alcn_cv.filters.kornia_mixture` (:func:`gaussian_mixture2d`,
+  :class:`GaussianMixture2d`);
+* :mod:`~alcn_cv.filters.divisive` and :mod:`~alcn_cv.filters.torch_divisive` -- the divisive normalization;
+* :mod:`~alcn_cv.filters.wide_band` and :mod:`~alcn_cv.filters.torch_wide_band` -- the wide band;
+* :mod:`~alcn_cv.filters.lab` and :mod:`~alcn_cv.filters.torch_lab` -- the CIE Lab of colour images;
+* :mod:`~alcn_cv.filters.torch_resize`, :mod:`~alcn_cv.filters.torch_separable` and
+  :mod:`~alcn_cv.filters.torch_pad` -- resizes, separable filters and reflect-101 borders in torch;
+* :mod:`~alcn_cv.filters.standardize` -- per-window standardization.
+
+The NumPy/OpenCV modules import no torch; :func:`gaussian_mixture2d` and :class:`GaussianMixture2d` load it on
+first use.
 """
 
 from alcn_cv.filters.gaussian_mixture import (
@@ -27,7 +35,7 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> object:
     if name in ("GaussianMixture2d", "gaussian_mixture2d"):
         from alcn_cv.filters import kornia_mixture
 

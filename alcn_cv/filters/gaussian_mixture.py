@@ -36,22 +36,22 @@ from collections.abc import Callable, Sequence
 import cv2
 import numpy as np
 
+from alcn_cv.checks import check_gray
 from alcn_cv.errors import InputError
 
 DEFAULT_NUM_KERNELS = 10
 DEFAULT_SIGMA_STEP = 0.5
 TRUNCATE = 3.0
-#: Smallest residual sigma (in pixels of its level) :func:`pyramid_plan` blurs with. A sampled
-#: Gaussian much narrower than a pixel is a poor Gaussian; 0.7 puts the sigma-2 blur on the
-#: half-resolution level, which made ALCN's pyramid path 40% cheaper than 1.0 for about twice
-#: its (small) error -- both measured by ``alcn bench speed`` and bounded in tests.
+#: Smallest residual sigma (in pixels of its level) :func:`pyramid_plan` blurs with: a sampled
+#: Gaussian much narrower than a pixel is a poor Gaussian. At 0.7 the sigma-2 blur runs on the
+#: half-resolution level; a larger value keeps more blurs on the finer levels (more accurate, slower).
+#: The error of ALCN's pyramid path at this value is bounded in ``tests/test_fast_alcn.py``.
 PYRAMID_MIN_SIGMA = 0.7
 
 __all__ = [
     "PYRAMID_MIN_SIGMA",
     "alcn_filter",
     "alcn_filter_grid",
-    "alcn_filter_pyramid",
     "pyramid_mixture",
     "pyramid_plan",
     "check_sigmas",
@@ -103,15 +103,6 @@ def check_sigmas(sigmas: Sequence[float]) -> tuple[float, ...]:
     return sigmas
 
 
-def _check_plane(image: np.ndarray) -> np.ndarray:
-    if not isinstance(image, np.ndarray) or image.ndim != 2 or image.size == 0:
-        shape = getattr(image, "shape", None)
-        raise InputError(f"image must be a non-empty HxW array, got shape {shape}")
-    if image.dtype != np.float32:
-        raise InputError(f"image must be float32, got {image.dtype}")
-    return image
-
-
 def gaussian_blur_stack(image: np.ndarray, sigmas: Sequence[float]) -> np.ndarray:
     """Blur one image with every kernel of the basis (OpenCV, reflect-101).
 
@@ -122,7 +113,7 @@ def gaussian_blur_stack(image: np.ndarray, sigmas: Sequence[float]) -> np.ndarra
     Returns:
         ``(N, H, W)`` float32, ``out[i] = G_{sigma_i} * image``.
     """
-    image = _check_plane(image)
+    image = check_gray(image, finite=False)
     sigmas = check_sigmas(sigmas)
     out = np.empty((len(sigmas),) + image.shape, np.float32)
     for i, s in enumerate(sigmas):
@@ -134,7 +125,7 @@ def gaussian_blur_stack(image: np.ndarray, sigmas: Sequence[float]) -> np.ndarra
 def _check_mixture(
     image: np.ndarray, weights: np.ndarray, sigmas: Sequence[float] | None
 ) -> tuple[np.ndarray, np.ndarray, tuple[float, ...]]:
-    image = _check_plane(image)
+    image = check_gray(image, finite=False)
     weights = np.asarray(weights)
     if weights.ndim not in (1, 3) or weights.shape[0] == 0:
         raise InputError(f"weights must have shape (N,) or (N, H, W), got {weights.shape}")
@@ -279,7 +270,7 @@ def alcn_filter_grid(
     Returns:
         ``(H, W)`` float32, or ``(stop - start, W)`` (rows of a larger array): ``dst`` when given.
     """
-    image = _check_plane(image)
+    image = check_gray(image, finite=False)
     sigmas = check_sigmas(sigmas)
     if grid.ndim != 3 or len(grid) != len(sigmas):
         raise InputError(f"need one grid map per sigma, got {grid.shape} for {len(sigmas)} sigmas")
@@ -394,7 +385,10 @@ WeightsAtLevel = Callable[[int, Sequence[int], tuple[int, int]], Sequence]
 def pyramid_mixture(
     image: np.ndarray, sigmas: Sequence[float], weights_at: WeightsAtLevel, min_sigma: float = PYRAMID_MIN_SIGMA
 ) -> np.ndarray:
-    """Eq. 3 with the wide blurs on a Gaussian pyramid (approximate; see :func:`alcn_filter_pyramid`).
+    """Eq. 3 with the wide blurs on a Gaussian pyramid (``cv2.pyrDown`` / ``cv2.pyrUp``): an approximation of
+    :func:`alcn_filter`, exact in the limit of smooth maps and Gaussian pyramid kernels, its error largest near the
+    image's bottom and right borders (where the pyramid's reflection is off by a pixel). ``ALCN(mixture="pyramid")``
+    runs it on its grid's maps; its error against ``mixture="exact"`` is bounded in ``tests/test_fast_alcn.py``.
 
     Args:
         image: ``(H, W)`` float32.
@@ -404,12 +398,13 @@ def pyramid_mixture(
             maps sampled on that level's pixels (pixel ``x`` of level ``L`` is input pixel
             ``2**L * x``; the coarser levels extend beyond the input's bottom and right edges,
             where the maps are expected to continue smoothly), or ``len(ks)`` scalars.
-        min_sigma: see :func:`pyramid_plan`.
+        min_sigma: smallest residual sigma at a coarse level (:func:`pyramid_plan`); larger is more accurate
+            and slower.
 
     Returns:
         ``(H, W)`` float32.
     """
-    image = _check_plane(image)
+    image = check_gray(image, finite=False)
     plan = pyramid_plan(sigmas, min_sigma, _max_pyramid_level(image.shape))
     top = max(level for level, _ in plan)
     height, width = image.shape
@@ -477,38 +472,3 @@ def _pad_to_pyramid(plane: np.ndarray, top: int, margin: int) -> np.ndarray:
     step = 2**top
     bottom, right = margin + (-(h - 1 + margin) % step), margin + (-(w - 1 + margin) % step)
     return cv2.copyMakeBorder(plane, 0, bottom, 0, right, cv2.BORDER_REFLECT_101)
-
-
-def alcn_filter_pyramid(
-    image: np.ndarray, weights: np.ndarray, sigmas: Sequence[float] | None = None, min_sigma: float = PYRAMID_MIN_SIGMA
-) -> np.ndarray:
-    """A fast approximation of :func:`alcn_filter`: the blurs of sigma >= about 2 pixels are
-    computed on a Gaussian pyramid (``cv2.pyrDown`` / ``cv2.pyrUp``).
-
-    Same arguments and result as :func:`alcn_filter`; the maps of Eq. 3 are reduced to each
-    level with ``cv2.pyrDown``. The approximation is exact in the limit of smooth maps and
-    Gaussian pyramid kernels; its error against :func:`alcn_filter` is bounded in
-    ``tests/test_fast_alcn.py`` (largest near the image's bottom and right borders, where the pyramid's
-    reflection is off by a pixel). ``ALCN(mixture="pyramid")`` runs the same pyramid on its grid's maps.
-
-    Args:
-        min_sigma: smallest residual sigma at a coarse level (see :func:`pyramid_plan`);
-            larger is more accurate and slower.
-    """
-    image, weights, sigmas = _check_mixture(image, weights, sigmas)
-    if weights.ndim == 1:
-        return pyramid_mixture(image, sigmas, lambda level, ks, shape: [float(weights[k]) for k in ks], min_sigma)
-
-    top = max(level for level, _ in pyramid_plan(sigmas, min_sigma, _max_pyramid_level(image.shape)))
-    margin = _pyramid_margin(sigmas, top)
-
-    def maps_at(level: int, ks: Sequence[int], shape: tuple[int, int]) -> list[np.ndarray]:
-        out = []
-        for k in ks:
-            m = _pad_to_pyramid(weights[k].astype(np.float32, copy=False), top, margin)
-            for _ in range(level):
-                m = cv2.pyrDown(m, borderType=cv2.BORDER_REFLECT_101)
-            out.append(m[: shape[0], : shape[1]])  # level 0 covers less than the padding
-        return out
-
-    return pyramid_mixture(image, sigmas, maps_at, min_sigma)

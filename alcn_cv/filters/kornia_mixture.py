@@ -3,8 +3,8 @@
 Same definition as :mod:`alcn_cv.filters.gaussian_mixture` (kernels, truncation, reflect-101
 borders), so both agree to 1e-5; this one lets gradients flow to the weights (and thus to the
 Normalizer) during the joint training of Eq. 2. Each kernel runs at its own width, in two passes of
-:mod:`alcn_cv.filters.torch_separable` (kornia's ``filter2d_separable`` is torch's convolution, which runs
-20 times slower on the CPU at 1000x1000).
+:mod:`alcn_cv.filters.torch_separable` (on the CPU, faster than kornia's ``filter2d_separable``, torch's
+convolution).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from torch import nn
 
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import check_sigmas, gaussian_sigmas, kernel_radius
-from alcn_cv.filters.torch_divisive import reflect101_pad
+from alcn_cv.filters.torch_pad import reflect101_pad
 from alcn_cv.filters.torch_separable import filter_columns, filter_rows
 
 __all__ = ["GaussianMixture2d", "gaussian_mixture2d"]

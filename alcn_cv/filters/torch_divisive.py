@@ -9,11 +9,11 @@ both forms agree to float rounding (``tests/test_filters_divisive.py``).
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 from alcn_cv.filters.divisive import ABSOLUTE_FLOOR
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
+from alcn_cv.filters.torch_pad import reflect101_pad
 from alcn_cv.filters.torch_separable import filter_columns, filter_rows
 
 __all__ = [
@@ -22,42 +22,7 @@ __all__ = [
     "gaussian_blur",
     "gaussian_energy",
     "inverse_divisor",
-    "reflect101_pad",
 ]
-
-
-def _reflect101_along(x: torch.Tensor, dim: int, before: int, after: int) -> torch.Tensor:
-    """``x`` padded along ``dim`` by reflect-101 for any pad size: the reflection repeats, with period
-    ``2 * (n - 1)``, where the pad is longer than the side ``n`` (a side of one pixel repeats it). A new tensor,
-    exact whatever ``x``'s dtype."""
-    # copies of x and of x reversed, not an index_select of computed indices: inductor fails on those (torch 2.13,
-    # an image shorter than a pad under torch.compile)
-    n = x.shape[dim]
-    cycle = torch.cat([x, x.flip(dim).narrow(dim, 1, n - 2)], dim) if n > 1 else x  # x, then back without the ends
-    period = cycle.shape[dim]
-    start = -before % period
-    total = before + n + after
-    return torch.cat([cycle] * -(-(start + total) // period), dim).narrow(dim, start, total)
-
-
-def reflect101_pad(x: torch.Tensor, top: int, bottom: int, left: int, right: int) -> torch.Tensor:
-    """``(..., H, W)`` padded on the last two dims with reflect-101 (``cv2.BORDER_REFLECT_101``), for any pad size:
-    unlike ``F.pad(mode="reflect")``, a pad longer than its side repeats the reflection, as OpenCV does (a side of
-    one pixel repeats it).
-
-    Example:
-        >>> reflect101_pad(torch.arange(3.0).view(1, 3), 0, 0, 4, 0)[0].tolist()
-        [0.0, 1.0, 2.0, 1.0, 0.0, 1.0, 2.0]
-    """
-    if x.ndim != 4:  # every plane as one of a batch, for F.pad's 2-D reflect
-        padded = reflect101_pad(x.reshape(-1, 1, *x.shape[-2:]), top, bottom, left, right)
-        return padded.reshape(*x.shape[:-2], *padded.shape[-2:])
-    h, w = x.shape[-2:]
-    if (max(top, bottom) < h and max(left, right) < w) or torch.onnx.is_in_onnx_export():
-        # torch's reflect is reflect-101; one fast pass. Exported as an ONNX Pad, which cv2.dnn (the export's
-        # consumer) reflects repeatedly where the pad exceeds the size, as the path below.
-        return F.pad(x, (left, right, top, bottom), mode="reflect")
-    return _reflect101_along(_reflect101_along(x, -2, top, bottom), -1, left, right)
 
 
 def gaussian_blur(x: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tensor:

@@ -1,20 +1,19 @@
 """Separable filtering in torch: a 1-D kernel down the columns or along the rows of every plane, fast on the CPU.
 
-torch's CPU convolution of one channel by a 1-D kernel runs at about 1 GFLOP/s (torch 2.13, oneDNN: 25 ms for one
-17-tap pass over a 1280x800 image, ten times OpenCV's whole two-pass blur). On the CPU, where no gradient is
-recorded, each pass is a sum of shifted views of the input, one fused multiply-add per tap (``addcmul_``, no copy of
-the input: 0.7-0.8 ms for 13 taps over 1280x800 on 2 threads, where a grouped convolution below takes 0.5-5 ms with
-its pads and layout changes). Where a gradient is recorded, that sum's backward (one full-size scatter per tap)
-takes about twice a convolution's at the training crops' sizes, so each pass is instead a depthwise convolution over
-16 channels that views the image without copying it: down the columns, 16 adjacent columns are the channels of a
-channels-last tensor; along the rows, 16 bands of rows are the channels of a contiguous one. A side that is not a
-multiple of 16 is zero-padded for the pass and cropped after. Either way the result is ``F.conv2d``'s with the
-kernel as a ``(K, 1)`` or ``(1, K)`` filter, to float rounding (bit for bit on most sizes;
-``tests/test_torch_separable.py``). The plain convolution stays where it is the fast one or the one needed: on CUDA
-(cuDNN), for float16 on the CPU (whose grouped convolution is 50 times slower than its plain one) and in an ONNX
-export (:mod:`alcn_cv.train.export`; ``cv2.dnn`` runs it for any size). bfloat16 takes the grouped convolution,
-which accumulates in float32 (3.9e-3 off float64 on uniform noise) where a sum of bfloat16 terms rounds at every tap
-(1.0e-2)."""
+The result is ``F.conv2d``'s with the kernel as a ``(K, 1)`` or ``(1, K)`` filter (no padding), to float rounding
+(``tests/test_torch_separable.py``), computed by one of three paths:
+
+* on the CPU in float32 or float64 where no gradient is recorded: a sum of shifted views of the input, one fused
+  multiply-add per tap (``addcmul_``, no copy of the input);
+* on the CPU where a gradient is recorded, and for bfloat16: a depthwise convolution over :data:`GROUPS` channels
+  that views the image without copying it (down the columns, adjacent columns are the channels of a channels-last
+  tensor; along the rows, bands of rows are the channels of a contiguous one; a side that is not a multiple of
+  :data:`GROUPS` is zero-padded for the pass and cropped after), which accumulates in float32;
+* elsewhere -- on CUDA, for float16 on the CPU and in an ONNX export (:mod:`alcn_cv.train.export`; ``cv2.dnn`` runs
+  it for any size) -- the plain convolution.
+
+The measurements behind these choices are in ``docs/journal.md``.
+"""
 
 from __future__ import annotations
 

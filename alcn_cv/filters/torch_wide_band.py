@@ -5,7 +5,8 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from alcn_cv.filters.torch_divisive import divisive_normalization, gaussian_blur, reflect101_pad
+from alcn_cv.filters.torch_divisive import divisive_normalization, gaussian_blur
+from alcn_cv.filters.torch_pad import reflect101_pad
 from alcn_cv.filters.torch_resize import upsample_blocks
 from alcn_cv.filters.wide_band import BLOCK, ENERGY_SIGMA, SIGMAS
 

@@ -7,7 +7,7 @@
 - :mod:`alcn_cv.formats.middlebury`: Middlebury multi-view stereo camera files.
 
 :func:`validate_json` checks a parsed JSON document against one of the JSON schemas shipped in
-``alcn_cv/formats/schemas`` (with the ``jsonschema`` package) and raises
+``alcn_cv/formats/schemas`` (with the ``jsonschema`` package, of the ``[data]`` extra) and raises
 :class:`~alcn_cv.errors.DatasetError` naming the file and the offending field.
 """
 
@@ -18,7 +18,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from alcn_cv.errors import DatasetError
+from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.extras import require
 from alcn_cv.io import read_json
 
 __all__ = ["SCHEMA_DIR", "schema", "validate_json"]
@@ -29,11 +30,15 @@ SCHEMA_DIR = Path(__file__).resolve().parent / "schemas"
 
 @functools.cache
 def schema(name: str) -> dict[str, Any]:
-    """The JSON schema ``name`` (``coco``, ``bop_scene_camera``, ``bop_scene_gt``, ``manifest``)."""
+    """The JSON schema ``name`` (``coco``, ``bop_scene_camera``, ``bop_scene_gt``).
+
+    Raises:
+        InputError: no schema of that name (the message lists the known ones).
+    """
     path = SCHEMA_DIR / f"{name}.schema.json"
     if not path.is_file():
         known = sorted(p.name.removesuffix(".schema.json") for p in SCHEMA_DIR.glob("*.schema.json"))
-        raise ValueError(f"unknown schema {name!r}; known: {known}")
+        raise InputError(f"unknown schema {name!r}; known: {', '.join(known)}")
     return read_json(path)
 
 
@@ -43,14 +48,14 @@ def validate_json(obj: Any, name: str, file: str | os.PathLike) -> None:
     Raises:
         DatasetError: ``"<file>: field <path>: <reason>"`` for the first violation (the most
             deeply nested one, which is the most specific).
+        InputError: no schema ``name``.
+        MissingDependencyError: jsonschema is not installed (the message names the extra that installs it).
     """
-    try:
-        import jsonschema
-    except ModuleNotFoundError as exc:  # a runtime dependency of alcn-cv; say how to get it
-        raise ModuleNotFoundError(
-            "validating COCO and BOP files needs the 'jsonschema' package (pip install 'jsonschema>=4.20')"
-        ) from exc
-    validator = jsonschema.Draft202012Validator(schema(name))
+    spec = schema(name)
+    require("jsonschema", what=f"validating {file}")
+    import jsonschema
+
+    validator = jsonschema.Draft202012Validator(spec)
     errors = list(validator.iter_errors(obj))
     if errors:
         err = max(errors, key=lambda e: len(e.absolute_path))

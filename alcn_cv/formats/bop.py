@@ -21,13 +21,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from alcn_cv.errors import DatasetError
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats import validate_json
-from alcn_cv.io import atomic_write, make_folder, read_json, write_json
+from alcn_cv.io import atomic_write, make_folder, read_image, read_json, write_json
 
 __all__ = [
     "BopObjectPose",
@@ -118,15 +117,15 @@ def load_scene(scene_dir: str | os.PathLike, *, check_images: bool = False) -> B
 
     Args:
         scene_dir: folder with ``scene_camera.json``, ``rgb/`` and optionally ``scene_gt.json``.
-        check_images: also read every image and check that it exists, that its size is the
-            dataset's (``camera.json`` two folders up, when present) and that the principal point
-            lies inside it.
+        check_images: also read every image (:func:`alcn_cv.io.read_image`) and check that it exists and is
+            whole (no truncated JPEG), that its size is the dataset's (``camera.json`` two folders up, when
+            present) and that the principal point lies inside it.
 
     Raises:
         DatasetError: missing, truncated or malformed files; a field violating the schema; a
             non-rotation; translations that look like metres rather than millimetres (wrong
-            unit); ground truth for images without a camera; with ``check_images``, missing
-            images or images of the wrong size.
+            unit); ground truth for images without a camera; with ``check_images``, missing,
+            unreadable or truncated images or images of the wrong size.
     """
     root = Path(scene_dir)
     cam_file = root / "scene_camera.json"
@@ -178,10 +177,10 @@ def load_scene(scene_dir: str | os.PathLike, *, check_images: bool = False) -> B
                 raise DatasetError(f"{cam_json}: fields width and height must be integers")
             size = (cj["width"], cj["height"])
         for f in frames:
-            img = cv2.imread(str(f.rgb_path), cv2.IMREAD_UNCHANGED)
-            if img is None:
-                raise DatasetError(f"{cam_file}: field {f.im_id}: image {f.rgb_path} missing or unreadable")
-            h, w = img.shape[:2]
+            try:
+                h, w = read_image(f.rgb_path).shape[:2]
+            except InputError as exc:
+                raise DatasetError(f"{cam_file}: field {f.im_id}: {exc}") from None
             if size is not None and (w, h) != size:
                 raise DatasetError(f"{cam_json}: fields width/height: {size[0]}x{size[1]} but {f.rgb_path} is {w}x{h}")
             if not (0 <= f.K[0, 2] < w and 0 <= f.K[1, 2] < h):

@@ -22,9 +22,9 @@ from typing import Any
 import cv2
 import numpy as np
 
-from alcn_cv.errors import DatasetError
+from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats import validate_json
-from alcn_cv.io import read_json, write_json
+from alcn_cv.io import eight_bits, read_image, read_json, write_json
 
 __all__ = ["CocoImage", "CocoAnnotation", "CocoCategory", "CocoDataset", "load_coco", "write_coco"]
 
@@ -100,22 +100,31 @@ class CocoDataset:
                 return c
         raise KeyError(f"no category {name_or_id!r} in {self.path}")
 
-    def read_image(self, image: CocoImage, flags: int = cv2.IMREAD_COLOR) -> np.ndarray:
-        """Read an image (BGR by default) and check its size against the annotation."""
-        img = cv2.imread(str(image.path), flags)
-        if img is None:
-            raise DatasetError(f"{self.path}: image id {image.id}: cannot read file {image.path}")
+    def read_image(self, image: CocoImage, gray: bool = False) -> np.ndarray:
+        """Read an image with :func:`alcn_cv.io.read_image` and check its size against the annotation.
+
+        Returns:
+            ``HxWx3`` BGR uint8 (a gray file as three equal channels, 16 bits rounded to 8 by
+            :func:`~alcn_cv.io.eight_bits`) or, with ``gray``, ``HxW`` uint8.
+
+        Raises:
+            DatasetError: the file is missing, unreadable, corrupt or truncated, or its size is not the
+                annotation's; the message names the JSON file and the image id.
+        """
+        try:
+            img = read_image(image.path, gray=gray)
+        except InputError as exc:
+            raise DatasetError(f"{self.path}: image id {image.id}: {exc}") from None
+        if img.dtype == np.uint16:
+            img = eight_bits(img)
+        if not gray and img.ndim == 2:
+            img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
         if img.shape[:2] != (image.height, image.width):
             raise DatasetError(
                 f"{self.path}: image id {image.id} field width/height: annotation says "
                 f"{image.width}x{image.height} but {image.path} is {img.shape[1]}x{img.shape[0]}"
             )
         return img
-
-
-def _image_size(path: Path) -> tuple[int, int] | None:
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    return None if img is None else (img.shape[1], img.shape[0])
 
 
 def load_coco(
@@ -127,13 +136,14 @@ def load_coco(
         path: the JSON file.
         image_root: folder that ``file_name`` is relative to (default: the JSON's folder, or its
             ``images/`` subfolder when the file is there).
-        check_images: also open every image and check it exists and matches ``width``/``height``.
+        check_images: also read every image (:func:`alcn_cv.io.read_image`) and check it exists, is whole (no
+            truncated JPEG) and matches ``width``/``height``.
 
     Raises:
         DatasetError: missing, truncated or malformed file; a field violating the schema; an
             annotation referring to an unknown image or category; a box outside its image; with
-            ``check_images``, a missing image or one whose size differs from its annotation. The
-            message names the file and the field.
+            ``check_images``, a missing, unreadable or truncated image or one whose size differs from its
+            annotation. The message names the file and the field.
     """
     path = Path(path)
     doc = read_json(path)
@@ -190,9 +200,11 @@ def load_coco(
         )
     if check_images:
         for i, im in enumerate(images):
-            size = _image_size(im.path)
-            if size is None:
-                raise DatasetError(f"{path}: field images[{i}].file_name: cannot read {im.path}")
+            try:
+                height, width = read_image(im.path).shape[:2]
+            except InputError as exc:
+                raise DatasetError(f"{path}: field images[{i}].file_name: {exc}") from None
+            size = (width, height)
             if size != (im.width, im.height):
                 raise DatasetError(
                     f"{path}: field images[{i}].width/height: {im.width}x{im.height} but "

@@ -4,8 +4,6 @@
   paper's Normalizer; :mod:`~alcn_cv.nets.lite` -- the real-time Normalizer and the loader of weight files;
   :mod:`~alcn_cv.nets.opencv_runtime` -- each of them run by ``cv2.dnn`` from its ONNX export, without torch;
   :mod:`~alcn_cv.nets.cpu_inference` -- when a Normalizer may take faster CPU kernels.
-* :mod:`~alcn_cv.nets.unet` -- the free-form U-Net baseline; :mod:`~alcn_cv.nets.resnet`,
-  :mod:`~alcn_cv.nets.plain` -- the paper's baseline window classifiers (Sec. 4.3.1).
 * :mod:`~alcn_cv.nets.detector` -- the Detector trained jointly with the Normalizer (Eq. 2).
 * :mod:`~alcn_cv.nets.device` -- the torch device a network runs or trains on.
 
@@ -19,12 +17,11 @@ import importlib
 
 from alcn_cv.extras import missing_extra
 
-__all__ = ["Detector", "Normalizer", "OpenCVNormalizer", "reflect101_pad"]
+__all__ = ["Detector", "Normalizer", "OpenCVNormalizer"]
 
 _LAZY = {
     "Detector": "alcn_cv.nets.detector",
     "Normalizer": "alcn_cv.nets.normalizer",
-    "reflect101_pad": "alcn_cv.nets.normalizer",
     "OpenCVNormalizer": "alcn_cv.nets.opencv_runtime",
 }
 

@@ -31,8 +31,8 @@ def cpu_inference(x: torch.Tensor) -> bool:
 
 
 def tanh_(x: torch.Tensor) -> torch.Tensor:
-    """``tanh`` in place on a contiguous float32 CPU tensor, through NumPy, whose vectorized ``tanh`` is several times
-    faster than torch's (0.4 against 2.4 ms over 1280x800 on 2 threads, torch 2.13).
+    """``tanh`` in place on a contiguous float32 CPU tensor, through NumPy's vectorized ``tanh`` (faster than
+    torch's on the CPU); returns ``x``.
 
     Example:
         >>> tanh_(torch.zeros(2)).tolist()

@@ -35,18 +35,20 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from alcn_cv.errors import InputError, WeightFileError
+from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.torch_divisive import (
     divisive_normalization,
     gaussian_blur,
 )
+from alcn_cv.filters.torch_pad import reflect101_pad
 from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.filters.wide_band import band_meta
 from alcn_cv.nets.cpu_inference import cpu_inference, tanh_
-from alcn_cv.nets.normalizer import Normalizer, check_grid_stride, reflect101_pad
+from alcn_cv.nets.normalizer import Normalizer, check_grid_stride
+from alcn_cv.nets.opencv_runtime import grid_shape
 from alcn_cv.weight_file import NormalizerFile
 
 __all__ = ["ARCHITECTURE", "GainNormalizer", "contrast_equalization", "dog_weights"]
@@ -56,8 +58,6 @@ ARCHITECTURE = "gain"
 #: The untrained model's band-pass: ``G_1 - G_2`` (pixels at the working scale).
 DOG_SIGMAS = (1.0, 2.0)
 _INPUT_FEATURES = 4
-#: Header keys of the variants measured and removed, with the only value a loadable file may hold.
-_REMOVED_VARIANTS = {"gain": "divisive", "sharpness": False, "learn_floor": False}
 
 
 def dog_weights(sigmas: Sequence[float], sigma1: float = DOG_SIGMAS[0], sigma2: float = DOG_SIGMAS[1]) -> list[float]:
@@ -203,9 +203,6 @@ class GainNormalizer(nn.Module):
         """``c`` of the divisive floor (a 0-d tensor)."""
         return self.log_floor_scale.exp()
 
-    def _grid_shape(self, h: int, w: int, grid_stride: int) -> tuple[int, int]:
-        return math.ceil((h - 1) / grid_stride) + 1, math.ceil((w - 1) / grid_stride) + 1
-
     def cell_moments(self, image: torch.Tensor) -> torch.Tensor:
         """The only full-resolution part of the network: ``(B, 2, gh, gw)``, the mean of each cell of side
         :attr:`stride` centred on a grid point, of the image ``(B, 1, H, W)`` and of its square."""
@@ -240,7 +237,7 @@ class GainNormalizer(nn.Module):
     def maps_from_features(self, features: torch.Tensor) -> torch.Tensor:
         """F_k = exp(g) * w_k ``(B, N, gh, gw)`` from :meth:`features` ``(B, 4, gh, gw)``: the dilated
         convolutions (reflect-101 borders, ReLU), the head, the weights made to sum to zero."""
-        # oneDNN's channels-last convolutions are 1.3x as fast on the CPU; in inference only, so that training (and the
+        # oneDNN's channels-last convolutions are faster on the CPU; in inference only, so that training (and the
         # preset's rebuild of the shipped file) keeps its own sums
         x = features.contiguous(memory_format=torch.channels_last) if cpu_inference(features) else features
         for conv, d in zip(self.convs, self.dilations):
@@ -266,7 +263,7 @@ class GainNormalizer(nn.Module):
         step = grid_stride // self.stride
         if step > 1:  # extend the image so the network's grid reaches the last point of the coarser one
             h, w = image.shape[-2:]
-            gh, gw = self._grid_shape(h, w, grid_stride)
+            gh, gw = grid_shape((h, w), grid_stride)
             image = reflect101_pad(image, 0, grid_stride * (gh - 1) + 1 - h, 0, grid_stride * (gw - 1) + 1 - w)
         maps = self.maps_from_features(self.features(image))
         return maps[..., ::step, ::step] if step > 1 else maps
@@ -300,26 +297,24 @@ class GainNormalizer(nn.Module):
 
     @classmethod
     def from_file(cls, weight_file: NormalizerFile) -> GainNormalizer:
-        """Build the network a weight file describes (``architecture: "gain"``) and load its arrays."""
-        config = dict(weight_file.meta["config"])
-        for key, value in _REMOVED_VARIANTS.items():
-            if key in config and config.pop(key) != value:
-                raise WeightFileError(
-                    f"{key}={weight_file.meta['config'][key]!r}: a removed variant of the gain Normalizer"
-                )
-        return Normalizer.from_file.__func__(
-            cls, NormalizerFile(weight_file.arrays, {**weight_file.meta, "config": config})
-        )
+        """Build the network a weight file describes (``architecture: "gain"``) and load its arrays.
+
+        Raises:
+            WeightFileError: a ``config`` the network refuses (a key it does not have, say), or arrays that do not
+                fit it.
+        """
+        return Normalizer.from_file.__func__(cls, weight_file)
 
     #: The parameters as float32 arrays, for :func:`alcn_cv.weight_file.save_normalizer_file`.
     state_arrays = Normalizer.state_arrays
 
     def file_meta(self, trained: bool, **provenance: Any) -> dict[str, Any]:
-        """The weight file's header: ``architecture``, ``config``, ``sigmas``, ``working_scale`` 1,
-        ``output_range`` ``[-1 - band, 1 + band]`` (the equalized output and the band), the equalization's ``tau``,
-        the divisive normalization's ``stride``, ``scale`` and ``sigma``, and the wide band's (:func:`band_meta`)
-        when it has one."""
-        divisive = {"stride": self.stride, "scale": float(self.floor_scale.detach()), "sigma": self.divisive_sigma}
+        """The weight file's header: ``architecture``, ``config`` (the constructor's arguments: ``tau`` and
+        ``floor_scale`` their initial values), ``sigmas``, ``working_scale`` 1, ``output_range`` ``[-1 - band, 1 +
+        band]`` (the equalized output and the band), the equalization's ``tau`` and the divisive normalization's
+        ``scale`` ``c`` (restating the arrays ``log_tau`` and ``log_floor_scale``, the parameters) and ``sigma``, and
+        the wide band's (:func:`band_meta`) when it has one."""
+        divisive = {"scale": float(self.floor_scale.detach()), "sigma": self.divisive_sigma}
         band = {"band": band_meta(self.band)} if self.band else {}
         return {
             "architecture": ARCHITECTURE,
@@ -328,7 +323,7 @@ class GainNormalizer(nn.Module):
             "working_scale": 1.0,
             "output_range": [-1.0 - self.band, 1.0 + self.band],
             "trained": bool(trained),
-            "equalization": {"kind": "tanh", "tau": self.tau_value()},
+            "equalization": {"tau": self.tau_value()},
             "divisive": divisive,
             **band,
             **provenance,

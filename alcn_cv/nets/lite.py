@@ -93,8 +93,7 @@ class LiteNormalizer(Normalizer):
         if not cpu_inference(x) or self.config["activation"] != "tanh":
             hidden = F.conv2d(self.features(x), self.fc.weight, self.fc.bias, stride=fc_stride)
             return self.output_scale * self.head(self.activation(hidden))
-        # Inference on the CPU: the same layers with the tanh computed in place by NumPy (torch's takes a
-        # third of the network's time on a 1280x800 frame; ``alcn bench speed``).
+        # Inference on the CPU: the same layers with the tanh computed in place by NumPy (cpu_inference.tanh_).
         for layer in self.features:
             x = layer(x) if isinstance(layer, nn.Conv2d) else tanh_(x)
         hidden = tanh_(F.conv2d(x, self.fc.weight, self.fc.bias, stride=fc_stride))

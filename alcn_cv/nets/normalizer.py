@@ -10,7 +10,6 @@ convolutions are shared between overlapping windows and the output has a stride 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -19,12 +18,12 @@ import torch.nn.functional as F
 from torch import nn
 
 from alcn_cv.errors import InputError, WeightFileError
-from alcn_cv.filters.torch_divisive import reflect101_pad
+from alcn_cv.filters.torch_pad import reflect101_pad
 from alcn_cv.filters.torch_resize import interpolate_grid
-from alcn_cv.nets.opencv_runtime import WINDOW
+from alcn_cv.nets.opencv_runtime import WINDOW, grid_shape
 from alcn_cv.weight_file import NormalizerFile
 
-__all__ = ["Normalizer", "check_grid_stride", "reflect101_pad"]
+__all__ = ["Normalizer", "check_grid_stride"]
 
 STRIDE = 4
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
@@ -156,11 +155,11 @@ class Normalizer(nn.Module):
 
     def dense_grid(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
         """The network's output on a grid of stride ``grid_stride`` (a multiple of :attr:`stride`,
-        default :attr:`stride`): ``(B, N, ceil((H-1)/g)+1, ceil((W-1)/g)+1)`` with
-        ``g = grid_stride``; grid point ``(i, j)`` is the window centred on pixel ``(g*i, g*j)``."""
+        default :attr:`stride`): ``(B, N, gh, gw)``, :func:`~alcn_cv.nets.opencv_runtime.grid_shape` of
+        ``(H, W)`` at ``g = grid_stride``; grid point ``(i, j)`` is the window centred on pixel ``(g*i, g*j)``."""
         grid_stride = check_grid_stride(grid_stride, self.stride)
         h, w = image.shape[-2:]
-        gh, gw = math.ceil((h - 1) / grid_stride) + 1, math.ceil((w - 1) / grid_stride) + 1
+        gh, gw = grid_shape((h, w), grid_stride)
         half = WINDOW // 2
         padded = reflect101_pad(image, half, grid_stride * (gh - 1) + half - h, half, grid_stride * (gw - 1) + half - w)
         return self._weights(padded, grid_stride // self.stride)
@@ -176,7 +175,8 @@ class Normalizer(nn.Module):
             net = cls(**weight_file.meta["config"])
             net.load_state_dict({k: torch.from_numpy(np.array(v)) for k, v in weight_file.arrays.items()})
         except (TypeError, ValueError, RuntimeError) as exc:  # ValueError: the constructor's InputError among them
-            raise WeightFileError(f"weights do not fit the Normalizer they describe: {exc}") from None
+            name = weight_file.path or "weights"
+            raise WeightFileError(f"{name}: its weights do not fit the Normalizer they describe: {exc}") from None
         return net.eval()
 
     def state_arrays(self: nn.Module) -> dict[str, np.ndarray]:

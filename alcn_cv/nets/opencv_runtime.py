@@ -2,8 +2,9 @@
 
 An OpenCV application can use ALCN with only OpenCV and NumPy installed: the Normalizer
 exported by ``alcn export --onnx`` (:mod:`alcn_cv.train.export`) runs through
-``cv2.dnn.readNetFromONNX``, and the Gaussian mixture is :func:`alcn_cv.alcn_filter` (OpenCV).
-This module imports neither torch nor :mod:`alcn_cv.nets`.
+``cv2.dnn.readNetFromONNX``, and Eq. 3's Gaussian mixture runs in OpenCV
+(:mod:`alcn_cv.filters.gaussian_mixture`, through :mod:`alcn_cv.runtime`).
+This module imports no torch, nor the torch Normalizers beside it in :mod:`alcn_cv.nets`.
 
 :meth:`OpenCVNormalizer.dense_grid` and :meth:`OpenCVNormalizer.dense` return what
 :meth:`alcn_cv.nets.Normalizer.dense_grid` and :meth:`~alcn_cv.nets.Normalizer.dense` return
@@ -14,14 +15,13 @@ network's output stride (4 for the paper's Normalizer, 8 for the lite and the ga
 from the model by running it on probe images (the gain Normalizer's from its config). The gain
 Normalizer's export takes its features on the grid (:class:`GainFeatures`, computed here, so that ``cv2.dnn``
 runs only the grid's convolutions) and the lite Normalizer's the padded image cut into 4x4 blocks
-(:func:`image_blocks`: its first convolution, 4x4 with stride 4, becomes a 1x1 one, which ``cv2.dnn`` runs
-without spreading a one-channel full-resolution tensor over its blocked layout); the input's name says which
-(:data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT`, :data:`FEATURES_INPUT`).
+(:func:`image_blocks`, :data:`LITE_BLOCK`: its first convolution, 4x4 with stride 4, becomes a 1x1 one, which
+``cv2.dnn`` runs without spreading a one-channel full-resolution tensor over its blocked layout); the input's name
+says which (:data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT`, :data:`FEATURES_INPUT`).
 """
 
 from __future__ import annotations
 
-import math
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -32,25 +32,23 @@ import numpy as np
 from alcn_cv.checks import check_gray
 from alcn_cv.errors import WeightFileError
 from alcn_cv.extras import opencv_version
-from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
+from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, upsample_grid
 from alcn_cv.row_parts import row_parts, run_parts
 from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = [
-    "BLOCK",
     "BLOCKS_INPUT",
     "GAIN_NEEDS",
-    "DEFAULT_ONNX",
     "FEATURES_INPUT",
     "IMAGE_INPUT",
+    "LITE_BLOCK",
     "GainFeatures",
     "OpenCVNormalizer",
     "cell_moments",
+    "grid_shape",
     "image_blocks",
 ]
 
-#: The ONNX export shipped beside :data:`~alcn_cv.weight_file.DEFAULT_WEIGHTS` (the ``paper`` model's).
-DEFAULT_ONNX = Path(__file__).resolve().parent.parent / "weights" / "alcn_normalizer.onnx"
 #: The Normalizer's window in pixels (``Normalizer.window`` takes it from here: this module imports no torch).
 WINDOW = 48
 # Grid points of the probe run that measures the model's output stride.
@@ -73,7 +71,7 @@ OPENCV_4_DNN = _OPENCV < (5, 0)
 #: The input of the lite Normalizer's export: :func:`image_blocks` of the padded image.
 BLOCKS_INPUT = "blocks"
 #: The side of those blocks: the lite Normalizer's first convolution (4x4, stride 4; a test checks they agree).
-BLOCK = 4
+LITE_BLOCK = 4
 #: The input of the gain Normalizer's export: :class:`GainFeatures`.
 FEATURES_INPUT = "features"
 
@@ -84,28 +82,41 @@ def computes_pads(onnx_path: Path) -> bool:
     return b"ConstantOfShape" in onnx_path.read_bytes()
 
 
+def grid_shape(shape: tuple[int, int], stride: int) -> tuple[int, int]:
+    """The grid of an image of ``shape`` ``(H, W)`` with points on the pixels ``(stride * i, stride * j)``:
+    ``(ceil((H - 1) / stride) + 1, ceil((W - 1) / stride) + 1)``, the fewest points that reach its last pixels.
+
+    Example:
+        >>> grid_shape((480, 640), 8)
+        (61, 81)
+    """
+    h, w = shape
+    return -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
+
+
 def image_blocks(padded: np.ndarray) -> np.ndarray:
-    """``(H, W)`` float32, both multiples of :data:`BLOCK` -> ``(1, BLOCK**2, H / BLOCK, W / BLOCK)``: channel
-    ``BLOCK * y + x`` holds pixel ``(y, x)`` of each block (space to depth)."""
+    """``(H, W)`` float32, both multiples of :data:`LITE_BLOCK` -> ``(1, LITE_BLOCK**2, H / LITE_BLOCK,
+    W / LITE_BLOCK)``: channel ``LITE_BLOCK * y + x`` holds pixel ``(y, x)`` of each block (space to depth)."""
     h, w = padded.shape
-    blocks = padded.reshape(h // BLOCK, BLOCK, w // BLOCK, BLOCK).transpose(1, 3, 0, 2)
-    return np.ascontiguousarray(blocks).reshape(1, BLOCK * BLOCK, h // BLOCK, w // BLOCK)
+    b = LITE_BLOCK
+    blocks = padded.reshape(h // b, b, w // b, b).transpose(1, 3, 0, 2)
+    return np.ascontiguousarray(blocks).reshape(1, b * b, h // b, w // b)
 
 
 def cell_parts(shape: tuple[int, int], stride: int) -> list[tuple[int, int]]:
-    """The grid rows of an image of ``shape`` ``(H, W)`` (``gh = ceil((H - 1) / stride) + 1``) cut into
-    ``(first, stop)`` parts, one per part of its rows (:func:`~alcn_cv.row_parts.row_parts`)."""
+    """The grid rows of an image of ``shape`` ``(H, W)`` (:func:`grid_shape`) cut into ``(first, stop)`` parts,
+    one per part of its rows (:func:`~alcn_cv.row_parts.row_parts`)."""
     parts = [(start // stride, stop // stride) for start, stop in row_parts(shape, stride)]
-    parts[-1] = (parts[-1][0], -(-(shape[0] - 1) // stride) + 1)
+    parts[-1] = (parts[-1][0], grid_shape(shape, stride)[0])
     return parts
 
 
 def cells_padded(image: np.ndarray, stride: int, cells: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """The grid rows ``cells = (first, stop)`` of an ``(H, W)`` float32 image mirrored (reflect-101) to whole
     ``stride``-pixel cells, each centred on a grid point ``stride * i``, and their square: two float32
-    ``(stride * (stop - first), stride * gw)`` arrays, ``gw = ceil((W - 1) / stride) + 1``."""
+    ``(stride * (stop - first), stride * gw)`` arrays, ``gw`` the grid's width (:func:`grid_shape`)."""
     h, w = image.shape
-    width = stride * (-(-(w - 1) // stride) + 1)
+    width = stride * grid_shape(image.shape, stride)[1]
     before = stride // 2
     # the image rows of the part's first and last padded rows (beyond the image: mirrored)
     top, bottom = stride * cells[0] - before, stride * cells[1] - before
@@ -141,18 +152,6 @@ def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
         return np.divide(sums, np.float32(stride * stride), out=sums)
 
     return np.concatenate(run_parts(moments, cell_parts(image.shape, stride)), axis=2)
-
-
-def _interpolation_matrix(n: int, grid: int, stride: int) -> np.ndarray:
-    """``(n, grid)`` float32 matrix of linear interpolation from grid points ``stride*i`` to pixels ``0..n-1``."""
-    pos = np.arange(n, dtype=np.float64) / stride
-    lo = np.minimum(np.floor(pos).astype(int), grid - 1)
-    hi = np.minimum(lo + 1, grid - 1)
-    frac = pos - lo
-    m = np.zeros((n, grid), np.float64)
-    m[np.arange(n), lo] += 1 - frac
-    m[np.arange(n), hi] += frac
-    return m.astype(np.float32)
 
 
 class GainFeatures:
@@ -193,8 +192,8 @@ class OpenCVNormalizer:
     """The ALCN Normalizer run by ``cv2.dnn`` from its ONNX export.
 
     Args:
-        onnx_path: the ``.onnx`` file written by :func:`alcn_cv.train.export.export_onnx`;
-            default: :data:`DEFAULT_ONNX`, the ``paper`` model's (``createALCN`` passes its model's own).
+        onnx_path: the ``.onnx`` file written by :func:`alcn_cv.train.export.export_onnx` (a shipped model's: beside
+            its weight file, :data:`alcn_cv.runtime.MODELS`).
         config: a gain Normalizer's ``config`` (:class:`GainFeatures`); default: read from the weight file
             beside ``onnx_path`` (the same name, ``.npz``) when the export is a gain Normalizer's.
 
@@ -204,8 +203,8 @@ class OpenCVNormalizer:
 
     window = WINDOW
 
-    def __init__(self, onnx_path: str | Path | None = None, config: dict | None = None) -> None:
-        self.path = Path(onnx_path) if onnx_path is not None else DEFAULT_ONNX
+    def __init__(self, onnx_path: str | Path, config: dict | None = None) -> None:
+        self.path = Path(onnx_path)
         if not self.path.is_file():
             raise WeightFileError(
                 f"ONNX model not found: {self.path} (backend='opencv' runs the export beside the weight file: "
@@ -287,7 +286,7 @@ class OpenCVNormalizer:
             alongside: called once the full-resolution work is done (:class:`~alcn_cv.runtime.Network`).
 
         Returns:
-            ``(N, ceil((H-1)/s)+1, ceil((W-1)/s)+1)`` float32 with ``s = stride``; grid point
+            ``(N, gh, gw)`` float32, :func:`grid_shape` of the image at ``s = stride``; grid point
             ``(i, j)`` is the prediction for the 48x48 window centred on pixel ``(s*i, s*j)``.
 
         On OpenCV 4 (:data:`OPENCV_4_DNN`) an image whose grid has a side shorter than
@@ -300,7 +299,7 @@ class OpenCVNormalizer:
         """
         h, w = check_gray(image).shape
         s = self.stride
-        gh, gw = math.ceil((h - 1) / s) + 1, math.ceil((w - 1) / s) + 1
+        gh, gw = grid_shape((h, w), s)
         if OPENCV_4_DNN and min(gh, gw) < self.largest_pad:
             # OpenCV 4's reflect Pad pads no side by more than its length: the first side whose grid it pads
             side = s * (self.largest_pad - 2) + 2
@@ -325,12 +324,9 @@ class OpenCVNormalizer:
         return np.stack([self.dense_grid(w)[:, c, c] for w in windows])
 
     def dense(self, image: np.ndarray) -> np.ndarray:
-        """Per-pixel weight maps F_k (Eq. 3): :meth:`dense_grid` upsampled bilinearly to ``(N, H, W)``."""
-        grid = self.dense_grid(image)
-        h, w = image.shape
-        ay = _interpolation_matrix(h, grid.shape[1], self.stride)
-        ax = _interpolation_matrix(w, grid.shape[2], self.stride)
-        return np.matmul(ay, np.matmul(grid, ax.T))
+        """Per-pixel weight maps F_k (Eq. 3): :meth:`dense_grid` upsampled bilinearly to ``(N, H, W)`` float32
+        (:func:`~alcn_cv.filters.gaussian_mixture.upsample_grid`)."""
+        return np.stack([upsample_grid(m, self.stride, image.shape) for m in self.dense_grid(image)])
 
     def __repr__(self) -> str:
         return f"OpenCVNormalizer({self.path.name!r}, stride={self.stride}, input={self.input!r})"

@@ -177,9 +177,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     u = subparsers.add_parser(
         "train-unet",
         help="train the free-form U-Net baseline exactly as train-real-light trains the gain Normalizer",
-        description="Train a small U-Net that outputs the normalized image (alcn_cv.nets.unet; Jenicek & Chum's "
-        "jointly trained U-Net) with train-real-light's data, objective and budget (alcn_cv.train.unet): the same "
-        "presets and --set keys; net.* are the gain network's and unused. Writes "
+        description="Train a small U-Net that outputs the normalized image (alcn_cv.train.unet_normalizer; Jenicek & "
+        "Chum's jointly trained U-Net) with train-real-light's data, objective and budget (alcn_cv.train.unet): the "
+        "same presets and --set keys; net.* are the gain network's and unused. Writes "
         "OUT/unet_normalizer.npz, train.log and history.json; bench it as unet:weights=OUT/unet_normalizer.npz.",
     )
     _add_conf(u, "gain", "a preset of train-real-light", "steps=600")
@@ -431,10 +431,10 @@ def _export(args: argparse.Namespace) -> int:
     from alcn_cv.errors import InputError
     from alcn_cv.runtime import resolve_weights
     from alcn_cv.train.export import export_onnx
-    from alcn_cv.weight_file import DEFAULT_WEIGHTS, load_normalizer_file
+    from alcn_cv.weight_file import WEIGHTS_DIR, load_normalizer_file
 
     weights = resolve_weights(None, args.weights)
-    shipped = DEFAULT_WEIGHTS.parent.resolve()  # the package's own weights and exports
+    shipped = WEIGHTS_DIR.resolve()  # the package's own weights and exports
     beside = weights.with_suffix(".onnx")
     if args.weights is None and args.onnx is None:
         raise InputError(

@@ -48,6 +48,7 @@ from alcn_cv.io import atomic_write, output_path
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.nets.lite import ARCHITECTURES, LiteNormalizer, normalizer_from_file
 from alcn_cv.report import describe_machine
+from alcn_cv.runtime import MODELS
 from alcn_cv.train.config import GainDistillConfig, LiteDistillConfig
 from alcn_cv.train.real_light import source_scenes
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
@@ -94,8 +95,6 @@ def _fidelity(student: LiteNormalizer, x: torch.Tensor, target: torch.Tensor, gr
 
 def teacher_file(teacher: str) -> Path:
     """The weight file of ``teacher``: a shipped model's name (``paper``, ``gain``) or a path."""
-    from alcn_cv.enhance.alcn import MODELS
-
     return MODELS[teacher] if teacher in MODELS else Path(teacher)
 
 
@@ -240,8 +239,6 @@ def main(
 
 def _created(path: Path, model: str, **params: str) -> str:
     """How to create ALCN from the weight file ``path``: by the shipped ``model``'s name where it is that file."""
-    from alcn_cv.runtime import MODELS
-
     shipped = MODELS[model].resolve() == Path(path).resolve()
     args = [
         f'model="{model}"' if shipped else f'weights="{Path(path).name}"',
@@ -532,8 +529,9 @@ def _write_gain_card(path: Path, name: str, record: dict[str, Any], trained: boo
     text = f"""# Model card: `{name}` (the gain Normalizer's lite variant)
 
 {_created(weights, "gain-lite")}. A smaller gain-adaptive Normalizer (`alcn_cv.nets.gain.GainNormalizer`,
-{s["channels"]} channels, dilations {s["dilations"]}; {record["parameters"]["student"]} parameters against the
-teacher's {record["parameters"]["teacher"]}) distilled from `{teacher["file"]}` (SHA-256 `{teacher["sha256"][:16]}...`:
+{s["channels"]} channels, dilations {s["dilations"]}; {record["parameters"]["student"]} stored values, `tau` and `c`
+among them, against the teacher's {record["parameters"]["teacher"]}) distilled from `{teacher["file"]}` (SHA-256 \
+`{teacher["sha256"][:16]}...`:
 {teacher["description"] or "the gain Normalizer"}). Same features, kernels, divisive step and `tau` as the teacher
 (copied, fixed); only the network on the grid is smaller. It is only as good as the teacher.
 {"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}

@@ -60,11 +60,17 @@ from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, output_path
 from alcn_cv.nets.lite import LiteNormalizer, normalizer_from_file
 from alcn_cv.nets.normalizer import WINDOW
-from alcn_cv.nets.opencv_runtime import BLOCK, BLOCKS_INPUT, DEFAULT_ONNX, FEATURES_INPUT, IMAGE_INPUT, image_blocks
+from alcn_cv.nets.opencv_runtime import (
+    BLOCKS_INPUT,
+    FEATURES_INPUT,
+    IMAGE_INPUT,
+    LITE_BLOCK,
+    image_blocks,
+)
 from alcn_cv.runtime import resolve_weights
 from alcn_cv.weight_file import ONNX_METADATA_KEY, load_normalizer_file
 
-__all__ = ["DEFAULT_ONNX", "OPSET", "export_onnx"]
+__all__ = ["OPSET", "export_onnx"]
 
 logger = logging.getLogger(__name__)
 
@@ -176,12 +182,14 @@ def _on_blocks(net: LiteNormalizer) -> LiteNormalizer:
     """A copy of the lite Normalizer on :func:`~alcn_cv.nets.opencv_runtime.image_blocks`: its first
     convolution (4x4, stride 4) as the same sums over the blocks' channels (1x1)."""
     first = net.features[0]
-    if first.kernel_size != (BLOCK, BLOCK) or first.stride != (BLOCK, BLOCK):
-        raise InputError(f"the lite Normalizer's first convolution must be {BLOCK}x{BLOCK} with stride {BLOCK}")
+    if first.kernel_size != (LITE_BLOCK, LITE_BLOCK) or first.stride != (LITE_BLOCK, LITE_BLOCK):
+        raise InputError(
+            f"the lite Normalizer's first convolution must be {LITE_BLOCK}x{LITE_BLOCK} with stride {LITE_BLOCK}"
+        )
     on_blocks = copy.deepcopy(net)
-    on_blocks.features[0] = nn.Conv2d(BLOCK * BLOCK, first.out_channels, 1)
+    on_blocks.features[0] = nn.Conv2d(LITE_BLOCK * LITE_BLOCK, first.out_channels, 1)
     with torch.no_grad():
-        on_blocks.features[0].weight.copy_(first.weight.reshape(first.out_channels, BLOCK * BLOCK, 1, 1))
+        on_blocks.features[0].weight.copy_(first.weight.reshape(first.out_channels, LITE_BLOCK * LITE_BLOCK, 1, 1))
         on_blocks.features[0].bias.copy_(first.bias)
     return on_blocks
 

@@ -1,4 +1,5 @@
-r"""Training the free-form baseline, :class:`~alcn_cv.nets.unet.UNetNormalizer`, exactly as the gain Normalizer.
+r"""Training the free-form baseline, :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer`, exactly as the gain
+Normalizer.
 
 The same data, objective and budget as :func:`alcn_cv.train.real_light.train_real_light` under a
 :class:`~alcn_cv.train.config.RealLightConfig`: the scenes of :func:`~alcn_cv.train.real_light.training_scenes`,
@@ -33,11 +34,11 @@ import numpy as np
 import torch
 
 from alcn_cv.errors import InputError
-from alcn_cv.nets.unet import UNetNormalizer
 from alcn_cv.report import machine
 from alcn_cv.train.checkpoint import check_run_folder
 from alcn_cv.train.config import RealLightConfig
 from alcn_cv.train.real_light import TrainingScene, fit, pair_loss, training_run, training_scenes
+from alcn_cv.train.unet_normalizer import UNetNormalizer
 from alcn_cv.weight_file import save_normalizer_file
 
 __all__ = ["centre_outputs", "output_range", "train_unet", "unet_pair_loss"]
@@ -96,13 +97,14 @@ def train_unet(
     progress: bool = True,
     overwrite: bool = False,
 ) -> Path:
-    """Train a :class:`~alcn_cv.nets.unet.UNetNormalizer` as the gain Normalizer is trained (see the module).
+    """Train a :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer` as the gain Normalizer is trained (see the
+    module).
 
     Args:
         cfg: the gain Normalizer's settings (a preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`);
             ``cfg.net`` is the gain network's and is not used.
         out: the run folder.
-        net: :class:`~alcn_cv.nets.unet.UNetNormalizer` arguments (default: its defaults).
+        net: :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer` arguments (default: its defaults).
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
         progress: show a progress bar.
         overwrite: replace the earlier run that ``out`` holds (checked before any work,

@@ -2,9 +2,8 @@ r"""A free-form learned normalizer: a small U-Net that outputs the normalized im
 
 The baseline a practitioner would try instead of ALCN's Eq. 3: no Gaussian mixture, no divisive step,
 any function of the image that a U-Net (Ronneberger et al., MICCAI 2015) can represent; the "jointly
-trained U-Net" of Jenicek & Chum, No Fear of the Dark, ICCV 2019. It is a lab baseline, trained by
-:mod:`alcn_cv.train.unet` and benchmarked through :class:`alcn_cv.bench.unet.UNetNormalization`; the
-runtime does not load it.
+trained U-Net" of Jenicek & Chum, No Fear of the Dark, ICCV 2019. Trained by :mod:`alcn_cv.train.unet` and
+benchmarked through :class:`alcn_cv.bench.unet.UNetNormalization`.
 
 The network sees ``log(I + eps)``, the photometric representation the gain Normalizer's features use
 (a change of light is mostly a gain), and outputs ``tanh`` of a 1x1 convolution: (-1, 1).
@@ -22,8 +21,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from alcn_cv.checks import check_positive
 from alcn_cv.errors import InputError, WeightFileError
-from alcn_cv.nets.normalizer import Normalizer, reflect101_pad
+from alcn_cv.filters.torch_pad import reflect101_pad
+from alcn_cv.nets.normalizer import Normalizer
 from alcn_cv.weight_file import NormalizerFile
 
 __all__ = ["ARCHITECTURE", "UNetNormalizer"]
@@ -73,10 +74,8 @@ class UNetNormalizer(nn.Module):
             raise InputError(f"channels must be a positive integer, got {channels!r}")
         if isinstance(levels, bool) or not isinstance(levels, int) or levels < 1:
             raise InputError(f"levels must be a positive integer, got {levels!r}")
-        if not eps > 0:
-            raise InputError(f"eps must be positive, got {eps}")
+        self.eps = check_positive("eps", eps)
         widths = [channels * 2**level for level in range(levels)]
-        self.eps = float(eps)
         self.down = nn.ModuleList(_DoubleConv(a, b) for a, b in zip([1, *widths[:-1]], widths))
         self.up = nn.ModuleList(_DoubleConv(wide + narrow, narrow) for narrow, wide in zip(widths, widths[1:]))
         self.head = nn.Conv2d(widths[0], 1, 1)
