@@ -6,9 +6,11 @@ each names an ``add_parser(subparsers)`` function, which adds its subcommand and
 ``func`` (called with the parsed ``argparse.Namespace``) as the default. A subcommand whose
 module needs an extra that is not installed is still listed; running it prints the one line
 that names the extra. Errors from bad input end the command with a one-line message and exit
-code 2; ``--debug`` prints the traceback before that line. SIGTERM (``timeout``, a job scheduler) ends
-a command as Ctrl-C does, with exit code 143: temporary files and folders are removed. The command's process
-keeps the memory a frame frees for the next one (:func:`alcn_cv.malloc.keep_freed_memory`, on glibc).
+code 2; ``--debug`` prints the traceback before that line. OpenCV logs errors only (its warnings would come before
+that line) unless ``--debug`` or ``--verbose`` is given, FFmpeg fatal errors only unless ``--verbose`` is. SIGTERM
+(``timeout``, a job scheduler) ends a command as Ctrl-C does, with exit code 143: temporary files and folders are
+removed. The command's process keeps the memory a frame frees for the next one
+(:func:`alcn_cv.malloc.keep_freed_memory`, on glibc).
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from collections.abc import Callable, Iterator, Sequence
 from importlib import metadata
 from typing import Any
 
-from alcn_cv.errors import MissingDependencyError
+from alcn_cv.errors import ALCNError, MissingDependencyError
 from alcn_cv.extras import is_installed, missing_extra
 from alcn_cv.malloc import keep_freed_memory
 
@@ -34,6 +36,8 @@ logger = logging.getLogger("alcn_cv")
 COMMANDS_GROUP = "alcn_cv.commands"
 #: FFmpeg's log level for fatal errors only (AV_LOG_FATAL), OpenCV's ``OPENCV_FFMPEG_LOGLEVEL`` without --verbose.
 FFMPEG_FATAL = 8
+#: OpenCV's log level for errors only (``cv::utils::logging::LOG_LEVEL_ERROR``, the same in OpenCV 4 and 5).
+OPENCV_LOG_ERROR = 2
 
 
 class Terminated(KeyboardInterrupt):
@@ -110,8 +114,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Adaptive Local Contrast Normalization (ALCN) and its tools: normalize images and "
         "videos, generate data, train, benchmark, calibrate and estimate box poses.",
     )
-    parser.add_argument("--debug", action="store_true", help="print full tracebacks on errors")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    parser.add_argument("--debug", action="store_true", help="print full tracebacks on errors, and OpenCV's warnings")
+    parser.add_argument(
+        "-v", "--verbose", action="store_true", help="log debug messages, and OpenCV's and FFmpeg's warnings"
+    )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     _add_commands(subparsers)
     return parser
@@ -212,6 +218,32 @@ def ffmpeg_fatal_only(quiet: bool = True) -> Iterator[None]:
         os.environ.pop("OPENCV_FFMPEG_LOGLEVEL", None)
 
 
+def _opencv_log_setter() -> Callable[[int], int] | None:
+    """OpenCV's ``setLogLevel`` (it returns the previous level): ``cv2.utils.logging``'s in OpenCV 5, ``cv2``'s in
+    OpenCV 4; None in a build that has neither."""
+    import cv2
+
+    logging_module = getattr(getattr(cv2, "utils", None), "logging", None)
+    return getattr(logging_module, "setLogLevel", None) or getattr(cv2, "setLogLevel", None)
+
+
+@contextlib.contextmanager
+def opencv_errors_only(quiet: bool = True) -> Iterator[None]:
+    """With ``quiet``, OpenCV logs errors only while the block runs, unless the caller set ``OPENCV_LOG_LEVEL``: its
+    warnings (``[ WARN:0@0.99] global grfmt_png.cpp:793 ... PNG input buffer is incomplete``) would come before the
+    command's own line about the same file. The command line's alone: importing the library leaves OpenCV's level
+    as it is."""
+    set_level = _opencv_log_setter() if quiet and "OPENCV_LOG_LEVEL" not in os.environ else None
+    if set_level is None:
+        yield
+        return
+    previous = set_level(OPENCV_LOG_ERROR)
+    try:
+        yield
+    finally:
+        set_level(previous)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -222,7 +254,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     keep_freed_memory()
     try:
-        with sigterm_as_interrupt(args.command), ffmpeg_fatal_only(not args.verbose):
+        quiet = not (args.verbose or args.debug)
+        with sigterm_as_interrupt(args.command), ffmpeg_fatal_only(not args.verbose), opencv_errors_only(quiet):
             result = args.func(args)
     except KeyboardInterrupt as exc:
         print(f"alcn: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
@@ -238,6 +271,18 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, TypeError, OSError, RuntimeError) as exc:
         return _failed(f"alcn {args.command}: error: {exc}", args.debug)
     return int(result or 0)
+
+
+def run_script(main: Callable[[], object]) -> None:
+    """Run a script's ``main`` (``examples/``) as ``alcn`` runs a subcommand: FFmpeg and OpenCV print errors only
+    (:func:`ffmpeg_fatal_only`, :func:`opencv_errors_only`; a caller's levels are kept), and bad input
+    (:class:`~alcn_cv.errors.ALCNError`, or an ``OSError``: a file that cannot be read or written) ends the process
+    with its one line, ``SCRIPT: error: ...``, and exit code 2."""
+    try:
+        with ffmpeg_fatal_only(), opencv_errors_only():
+            main()
+    except (ALCNError, OSError) as exc:
+        sys.exit(_failed(f"{os.path.basename(sys.argv[0])}: error: {exc}", debug=False))
 
 
 #: The file names of the ``alcn`` command's script: pip's console script, and on Windows its launcher and script.

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 import alcn_cv
-from alcn_cv.cli import ffmpeg_fatal_only
+from alcn_cv.cli import run_script
 from alcn_cv.errors import ALCNError
 from alcn_cv.io import iter_frames, write_image
 from alcn_cv.shared_data import shared_data_dir
@@ -72,27 +72,22 @@ def main() -> None:
     args = ap.parse_args()
     if args.second < 0:
         ap.error(f"--second {args.second}: a frame number, 0 or more")
-    try:
-        frames = [frame for _, frame in iter_frames(args.video, max_frames=args.second + 1)]
-        if len(frames) <= args.second:
-            raise ALCNError(f"{args.video} has {len(frames)} frames, fewer than --second {args.second} + 1")
-        first, second = frames[0], relight(frames[args.second])
-        feature = cv2.ORB.create(1000) if args.feature == "ORB" else cv2.SIFT.create(1000)
-        normalizations = {spec: alcn_cv.create(spec) for spec in args.methods}  # a bad spec stops before the work
-        rows = []
-        for spec, normalization in normalizations.items():
-            a, b = normalization.apply(first), normalization.apply(second)
-            kp1, kp2, agreeing = match(a, b, feature)
-            print(f"{spec:>12}: {len(kp1)} and {len(kp2)} keypoints, {len(agreeing)} matches that agree")
-            drawn = cv2.drawMatches(a, kp1, b, kp2, agreeing, None, matchColor=(0, 255, 0), flags=2)
-            rows.append(cv2.putText(drawn, f"{spec}: {len(agreeing)}", (10, 30), 0, 1.0, (0, 0, 255), 2))
-        write_image(args.out / "matches.png", np.vstack(rows))
-        print(f"wrote {args.out / 'matches.png'}")
-    except (ALCNError, OSError) as exc:  # OSError: an --out that cannot be written
-        raise SystemExit(f"feature_matching.py: error: {exc}") from None
+    frames = [frame for _, frame in iter_frames(args.video, max_frames=args.second + 1)]
+    if len(frames) <= args.second:
+        raise ALCNError(f"{args.video} has {len(frames)} frames, fewer than --second {args.second} + 1")
+    first, second = frames[0], relight(frames[args.second])
+    feature = cv2.ORB.create(1000) if args.feature == "ORB" else cv2.SIFT.create(1000)
+    normalizations = {spec: alcn_cv.create(spec) for spec in args.methods}  # a bad spec stops before the work
+    rows = []
+    for spec, normalization in normalizations.items():
+        a, b = normalization.apply(first), normalization.apply(second)
+        kp1, kp2, agreeing = match(a, b, feature)
+        print(f"{spec:>12}: {len(kp1)} and {len(kp2)} keypoints, {len(agreeing)} matches that agree")
+        drawn = cv2.drawMatches(a, kp1, b, kp2, agreeing, None, matchColor=(0, 255, 0), flags=2)
+        rows.append(cv2.putText(drawn, f"{spec}: {len(agreeing)}", (10, 30), 0, 1.0, (0, 0, 255), 2))
+    write_image(args.out / "matches.png", np.vstack(rows))
+    print(f"wrote {args.out / 'matches.png'}")
 
 
 if __name__ == "__main__":
-    # FFmpeg's notes on the stream (a slice type it tolerates) are no errors here; a caller's level is kept
-    with ffmpeg_fatal_only():
-        main()
+    run_script(main)  # as alcn runs a command: FFmpeg's stream notes kept off the terminal, bad input in one line

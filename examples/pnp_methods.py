@@ -18,16 +18,14 @@ Time with the defaults (the first 40 frames of the cookie box, its model from tr
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 
 import numpy as np
 from tqdm import tqdm
 
 from alcn_cv import io
-from alcn_cv.cli import ffmpeg_fatal_only
+from alcn_cv.cli import run_script
 from alcn_cv.enhance.registry import same_method
-from alcn_cv.errors import ALCNError
 from pose import model as part_model
 from pose.parts import FeaturePartDetector
 from pose.solver import METHODS, PoseEstimate, PoseSolver, PoseTracker, camera_matrix
@@ -97,9 +95,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    try:
-        # FFmpeg's notes on the stream (a slice type it tolerates) are no errors here; a caller's level is kept
-        with ffmpeg_fatal_only():
-            main()
-    except (ALCNError, OSError) as exc:  # OSError: a model or video that cannot be read
-        sys.exit(f"pnp_methods.py: error: {exc}")
+    run_script(main)  # as alcn runs a command: FFmpeg's stream notes kept off the terminal, bad input in one line

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -34,8 +33,7 @@ from tqdm import tqdm
 
 import alcn_cv
 from alcn_cv import io
-from alcn_cv.cli import ffmpeg_fatal_only
-from alcn_cv.errors import ALCNError
+from alcn_cv.cli import run_script
 from alcn_cv.shared_data import shared_data_dir
 from pose import build, evaluate, track
 from pose import model as part_model
@@ -187,9 +185,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    try:
-        # FFmpeg's notes on the stream (a slice type it tolerates) are no errors here; a caller's level is kept
-        with ffmpeg_fatal_only():
-            main()
-    except (ALCNError, OSError) as exc:  # OSError: an --out that cannot be written
-        sys.exit(f"relit_cookie_box.py: error: {exc}")
+    run_script(main)  # as alcn runs a command: FFmpeg's stream notes kept off the terminal, bad input in one line

@@ -24,16 +24,15 @@ from __future__ import annotations
 
 import argparse
 import logging
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from alcn_cv import io
-from alcn_cv.cli import ffmpeg_fatal_only
+from alcn_cv.cli import run_script
 from alcn_cv.enhance.registry import same_method
-from alcn_cv.errors import ALCNError, DatasetError
+from alcn_cv.errors import DatasetError
 from alcn_cv.shared_data import shared_data_dir
 from pose import build, track
 from pose import model as part_model
@@ -101,9 +100,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    try:
-        # FFmpeg's notes on the stream (a slice type it tolerates) are no errors here; a caller's level is kept
-        with ffmpeg_fatal_only():
-            main()
-    except (ALCNError, OSError) as exc:  # OSError: an --out that cannot be written
-        sys.exit(f"track_cookie_box.py: error: {exc}")
+    run_script(main)  # as alcn runs a command: FFmpeg's stream notes kept off the terminal, bad input in one line

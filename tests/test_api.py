@@ -1,5 +1,6 @@
 """The OpenCV-style contract of every registered normalization, and ALCN's own API."""
 
+import inspect
 import logging
 import os
 
@@ -84,6 +85,18 @@ def test_callers_array_untouched(methods, frames, name):
         before = img.copy()
         methods[name].apply(img)
         np.testing.assert_array_equal(img, before)
+
+
+def test_apply_takes_src_and_dst_by_keyword_as_opencv_does(frames):
+    # cv2.createCLAHE().apply(src[, dst]) -> dst: the same names, by keyword as by position
+    img8 = np.rint(frames[0] * 255).astype(np.uint8)
+    clahe = alcn_cv.create("clahe")
+    expected = cv2.createCLAHE(clipLimit=clahe.clipLimit, tileGridSize=clahe.tileGridSize).apply(src=img8)
+    np.testing.assert_array_equal(clahe.apply(src=img8), expected)
+    dst = np.empty_like(img8)
+    assert clahe.apply(src=img8, dst=dst) is dst
+    np.testing.assert_array_equal(dst, expected)
+    assert list(inspect.signature(alcn_cv.createALCN().apply).parameters)[:2] == ["src", "dst"]
 
 
 BAD = {
@@ -517,3 +530,10 @@ def test_a_spec_value_may_hold_a_colon():
     assert parse_spec("alcn:weights=/tmp/a:b.npz") == ("alcn", {"weights": "/tmp/a:b.npz"})
     with pytest.raises(InputError, match="expected NAME"):
         parse_spec("alcn:lite")  # a value without its key
+
+
+def test_a_parameter_given_twice_or_of_the_wrong_type_says_how_to_give_it():
+    with pytest.raises(InputError, match=r"sigma1 given in the spec 'dog:sigma1=1' and again on its own .*a keyword"):
+        alcn_cv.create("dog:sigma1=1", sigma1=2)
+    with pytest.raises(InputError, match=r"tileGridSize=4 must be a tuple, e.g. tileGridSize=\(8,8\)$"):
+        alcn_cv.create("clahe", tileGridSize=4)

@@ -338,3 +338,31 @@ def test_an_option_out_of_range_is_named(capsys, option, value, says):
         main(["pose", "track", "model.npz", "video.mp4", "poses.json", option, value])
     assert stop.value.code == 2
     assert capsys.readouterr().err.strip().splitlines()[-1].endswith(f"error: argument {option}: {says}")
+
+
+def test_opencv_warnings_are_left_out_unless_debug_or_verbose(tmp_path, capfd, monkeypatch):
+    """OpenCV's `[ WARN:0@0.99] global grfmt_png.cpp:793 ... PNG input buffer is incomplete` came before the command's
+    own line about the same file; with --debug or --verbose it is printed, as where the caller set OPENCV_LOG_LEVEL, and
+    the level is restored after main."""
+    from alcn_cv.cli import _opencv_log_setter
+
+    monkeypatch.delenv("OPENCV_LOG_LEVEL", raising=False)
+    broken = _truncated(_image(tmp_path / "in" / "broken.png"), 0.3)
+    cv2.imdecode(np.fromfile(broken, np.uint8), cv2.IMREAD_UNCHANGED)
+    opencv_warns = "WARN" in capfd.readouterr().err  # this OpenCV's decoder warns on a truncated PNG
+    assert main(["normalize", str(broken.parent), str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capfd.readouterr().err
+    assert "WARN" not in err and err.strip().splitlines() == [
+        f"alcn normalize: error: cannot read image {broken}: corrupt, truncated or unsupported format"
+    ], err
+    for flag in ("--debug", "--verbose"):
+        assert main([flag, "normalize", str(broken.parent), str(tmp_path / "out"), "--no-progress"]) == 2
+        assert ("WARN" in capfd.readouterr().err) == opencv_warns
+    monkeypatch.setenv("OPENCV_LOG_LEVEL", "WARNING")  # the caller's level is kept
+    assert main(["normalize", str(broken.parent), str(tmp_path / "out"), "--no-progress"]) == 2
+    assert ("WARN" in capfd.readouterr().err) == opencv_warns
+    set_level = _opencv_log_setter()
+    if set_level is not None:
+        level = set_level(0)
+        set_level(level)
+        assert level > 2, "the command left OpenCV's log level at errors only"

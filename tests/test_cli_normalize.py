@@ -340,3 +340,46 @@ def test_a_missing_input_is_named_whatever_its_output(tmp_path, capsys):
         assert main(["normalize", str(tmp_path / src), str(tmp_path / dst), "-m", "none"]) == 2
         assert capsys.readouterr().err.strip().endswith(f"no such image, folder or video: {tmp_path / src}")
     assert not list(tmp_path.iterdir())
+
+
+def test_counts_and_messages_read_as_sentences(tmp_path, frame, caplog, capsys):
+    """`wrote 1 images`, `(1 frames in ...)`, `... and 12 more exist (--overwrite replaces it)`, `skipped cannot read
+    image ...`: singular for one, `them` for several, the skipped image's reason after a colon."""
+    src = tmp_path / "in"
+    src.mkdir()
+    cv2.imwrite(str(src / "a.png"), frame)
+    (src / "b.png").write_bytes(b"\x89PNG not a PNG")
+    caplog.set_level("INFO")
+    assert main(["normalize", str(src), str(tmp_path / "out"), "-m", "none", "--skip-bad", "--no-progress"]) == 0
+    assert "wrote 1 image to" in caplog.text and "(1 frame in" in caplog.text
+    assert f"skipped an image: cannot read image {src / 'b.png'}: " in caplog.text
+    cv2.imwrite(str(src / "b.png"), frame)
+    cv2.imwrite(str(src / "c.png"), frame)
+    (tmp_path / "out" / "c.png").write_bytes(b"")
+    capsys.readouterr()
+    assert main(["normalize", str(src), str(tmp_path / "out"), "-m", "none", "--no-progress"]) == 2
+    assert (
+        capsys.readouterr()
+        .err.strip()
+        .endswith(f"the output {tmp_path / 'out' / 'a.png'} and 1 more exist (--overwrite replaces them)")
+    )
+    assert main(["normalize", str(src / "a.png"), str(tmp_path / "out" / "a.png"), "-m", "none"]) == 2
+    assert capsys.readouterr().err.strip().endswith("a.png exists (--overwrite replaces it)")
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (
+            ["-m", "dog:sigma1=1", "-p", "sigma1=2"],
+            "sigma1 given in the spec 'dog:sigma1=1' and again on its own (-p on the command line, a keyword in "
+            "Python); give each once",
+        ),
+        (["-m", "clahe:tileGridSize=4"], "tileGridSize=4 must be a tuple, e.g. tileGridSize=(8,8)"),
+        (["-m", "clahe", "-p", "clipLimit=abc"], "clipLimit='abc' must be a number, e.g. clipLimit=2.0"),
+    ],
+)
+def test_a_bad_parameter_says_where_it_was_given_and_its_syntax(tmp_path, frame, capsys, args, says):
+    cv2.imwrite(str(tmp_path / "a.png"), frame)
+    assert main(["normalize", str(tmp_path / "a.png"), str(tmp_path / "out.png"), *args]) == 2
+    assert capsys.readouterr().err.strip().endswith(says)

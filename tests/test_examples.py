@@ -90,12 +90,24 @@ def test_relit_checks_its_methods_before_the_work(tmp_path):
     taken as a number of frames."""
     out = tmp_path / "out"
     proc = _run("relit_cookie_box.py", "--out", str(out), "--methods", "none", "bogus")
-    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert proc.stderr.strip().splitlines()[-1].startswith("relit_cookie_box.py: error: unknown normalization 'bogus'")
     assert not out.exists()  # nothing built
     proc = _run("relit_cookie_box.py", "--out", str(out), "--max-frames", "-5")
     assert proc.returncode == 2 and "--max-frames -5: a number of frames, 0 (all) or at least 60" in proc.stderr
     assert not out.exists()
+
+
+def test_an_example_ends_bad_input_as_alcn_does(tmp_path):
+    """The examples exited with 1 where `alcn` exits with 2: one line, `SCRIPT: error: ...`, exit code 2, the same
+    helper as the command's (alcn_cv.cli.run_script)."""
+    proc = _run("feature_matching.py", "--video", str(tmp_path / "nope.mp4"), "--out", str(tmp_path / "out"))
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert proc.stderr.strip().splitlines() == [
+        f"feature_matching.py: error: no such video or folder: {tmp_path}/nope.mp4"
+    ]
+    for script in EXAMPLES.glob("*.py"):
+        assert 'if __name__ == "__main__":\n    run_script(main)' in script.read_text(), script.name
 
 
 @pytest.mark.parametrize(
@@ -112,7 +124,7 @@ def test_an_out_that_cannot_be_written_ends_in_one_line(script, args, tmp_path, 
         pytest.skip("the cookie box video not found")
     (tmp_path / "a_file").write_text("")
     proc = _run(script, "--out", str(tmp_path / "a_file" / "out"), *args)
-    assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     last = proc.stderr.strip().splitlines()[-1]
     assert last.startswith(f"{script}: error: ") and str(tmp_path / "a_file") in last, proc.stderr[-2000:]
 

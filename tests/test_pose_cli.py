@@ -117,3 +117,16 @@ def test_an_unknown_build_preset_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "unknown preset 'nope'" in err and "static-camera, cookie-box" in err
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_building_the_command_line_imports_no_scipy_spatial(run_python):
+    """`alcn normalize` built the pose steps' parsers, whose modules imported scipy.spatial at the top (0.2 s of every
+    start): the COLMAP and BOP formats import it where they use it."""
+    proc = run_python(
+        "from alcn_cv.cli import build_parser\n"
+        "build_parser()\n"
+        "print(sorted(m for m in sys.modules if m.startswith('scipy.spatial')))\n",
+        blocked=(),
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"

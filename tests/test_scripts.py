@@ -40,7 +40,7 @@ def test_the_feature_matching_example_runs(shared_data, tmp_path):
 @pytest.mark.parametrize(
     ("script", "args", "code", "line"),
     [
-        ("pnp_methods.py", ["MISSING.npz", "box.mp4"], 1, "pnp_methods.py: error: MISSING.npz: part model not found"),
+        ("pnp_methods.py", ["MISSING.npz", "box.mp4"], 2, "pnp_methods.py: error: MISSING.npz: part model not found"),
         ("pnp_methods.py", ["MISSING.npz", "box.mp4", "--max-frames", "0"], 2, "--max-frames 0: at least 1"),
         ("feature_matching.py", ["--second", "-1"], 2, "--second -1: a frame number, 0 or more"),
     ],

@@ -16,7 +16,7 @@ from tqdm import tqdm
 from alcn_cv.cli import add_progress_option
 from alcn_cv.enhance import available, create
 from alcn_cv.enhance.alcn import ALCN
-from alcn_cv.enhance.registry import describe, parameters, parse_params, parse_spec
+from alcn_cv.enhance.registry import describe, format_param, parameters, parse_params, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
 from alcn_cv.io import (
@@ -69,8 +69,9 @@ def _check_output(src: Path, dst: Path, overwrite: bool, in_place: bool) -> list
         outputs = [dst]
     existing = [path for path in outputs if path.exists()]
     if existing and not overwrite:
-        more = f" and {len(existing) - 1} more exist" if len(existing) > 1 else " exists"
-        raise InputError(f"the output {existing[0]}{more} (--overwrite replaces it)")
+        if len(existing) > 1:
+            raise InputError(f"the output {existing[0]} and {len(existing) - 1} more exist (--overwrite replaces them)")
+        raise InputError(f"the output {existing[0]} exists (--overwrite replaces it)")
     check_writable(outputs[0])
     return outputs
 
@@ -166,7 +167,7 @@ def main(
             max_frames=max_frames,
             progress=progress,
         )
-        logger.info("wrote %d frames to %s", frames, dst)
+        logger.info("wrote %s to %s", _count(frames, "frame"), dst)
     else:
         write_image(dst, normalize([read_image(src, alpha=True)])[0])
         logger.info("wrote %s", dst)
@@ -174,12 +175,17 @@ def main(
     seconds = time.perf_counter() - start
     where = "one frame at a time" if device is None else f"batches of {batch_size} on {device}"
     logger.info(
-        "%.1f frames/s (%d frames in %.2f s, %s; reading and writing included)",
+        "%.1f frames/s (%s in %.2f s, %s; reading and writing included)",
         frames / seconds,
-        frames,
+        _count(frames, "frame"),
         seconds,
         where,
     )
+
+
+def _count(number: int, noun: str) -> str:
+    """``number`` and ``noun``, plural unless one: ``1 frame``, ``2 frames``, ``0 frames``."""
+    return f"{number} {noun}{'' if number == 1 else 's'}"
 
 
 def _batch_normalizer(
@@ -227,7 +233,7 @@ def _normalize_folder(
             except InputError as exc:
                 if not skip_bad:
                     raise
-                logger.warning("skipped %s", exc)
+                logger.warning("skipped an image: %s", exc)
                 skipped[path.name] = "unreadable"
 
     def normalize_pairs(pairs: list[tuple[Path, np.ndarray]]) -> list[tuple[Path, np.ndarray]]:
@@ -237,8 +243,8 @@ def _normalize_folder(
         written = map_batches(readable(), normalize_pairs, lambda pair: write_image(*pair), batch_size, bar)
     reasons = ", ".join(f"{count} {reason}" for reason, count in sorted(Counter(skipped.values()).items()))
     logger.info(
-        "wrote %d images to %s; skipped %d%s",
-        written,
+        "wrote %s to %s; skipped %d%s",
+        _count(written, "image"),
         outputs[0].parent,
         len(skipped),
         f" ({reasons})" if reasons else "",
@@ -255,7 +261,7 @@ def methods_table() -> str:
         summary, reference = describe(name)
         lines.append(f"{name:<{width}}  {summary}" + (f" [{reference}]" if reference else ""))
         params = [
-            key if value is inspect.Parameter.empty else f"{key}={value!r}".replace(" ", "")
+            key if value is inspect.Parameter.empty else format_param(key, value)
             for key, value in parameters(name).items()
         ]
         lines.append(f"{'':<{width}}  parameters: {' '.join(params) or 'none'}")

@@ -1,4 +1,4 @@
-"""ALCN as an OpenCV-style preprocessing step: ``alcn_cv.createALCN().apply(img)``.
+"""ALCN as an OpenCV-style preprocessing step: ``alcn_cv.createALCN().apply(src)``.
 
 The Normalizer runs fully-convolutionally at the *working scale* (the resolution at which its 48x48 window was
 trained), giving per-pixel weight maps F_k; these are upsampled to the input resolution and the Gaussian mixture
@@ -378,7 +378,7 @@ def createALCN(  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE
     model: str | None = None,
     threads: int | None | Literal["auto"] = "auto",
 ) -> ALCN:
-    """Create an :class:`ALCN` normalization; ``createALCN().apply(img)`` normalizes an image.
+    """Create an :class:`ALCN` normalization; ``createALCN().apply(src)`` normalizes an image.
 
     The parameters are :class:`ALCN`'s, with its defaults.
 

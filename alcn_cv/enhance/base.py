@@ -177,15 +177,15 @@ class Normalization:
         return from_unit_float(self._unclipped_unit(response), dtype)
 
     def apply(
-        self, img: np.ndarray, dst: np.ndarray | None = None, out_dtype: type | np.dtype | str | None = None
+        self, src: np.ndarray, dst: np.ndarray | None = None, out_dtype: type | np.dtype | str | None = None
     ) -> np.ndarray:
         """Normalize an image, OpenCV style: ``apply(src)``, ``apply(src, dst)`` or ``apply(src, dst=out)``.
 
         Args:
-            img: ``HxW``, ``HxWx1``, ``HxWx2`` (gray and alpha), BGR ``HxWx3`` or BGRA ``HxWx4``;
+            src: ``HxW``, ``HxWx1``, ``HxWx2`` (gray and alpha), BGR ``HxWx3`` or BGRA ``HxWx4``;
                 uint8, uint16 or float32 in [0, 1], in any byte order.
             dst: as in OpenCV, an array the result is written into when it has the result's
-                shape and dtype and is writable (it may be ``img`` itself); otherwise a new
+                shape and dtype and is writable (it may be ``src`` itself); otherwise a new
                 array is returned and ``dst`` is left as it was.
             out_dtype: ``None`` (the input's dtype), ``np.uint8``, ``np.uint16`` or ``np.float32``
                 (values in [0, 1]).
@@ -206,7 +206,7 @@ class Normalization:
         """
         if dst is not None and not isinstance(dst, np.ndarray):
             raise InputError(f"dst must be a numpy array or None, got {type(dst).__name__}")
-        result = self._apply(check_image(img), out_dtype)
+        result = self._apply(check_image(src), out_dtype)
         if dst is not None and dst.shape == result.shape and dst.dtype == result.dtype and dst.flags.writeable:
             np.copyto(dst, result)
             return dst

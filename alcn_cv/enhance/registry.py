@@ -124,7 +124,10 @@ def create(spec: str, **params: object) -> Normalization:
     name, spec_params = parse_spec(spec)
     twice = sorted(spec_params.keys() & params.keys())
     if twice:
-        raise InputError(f"bad parameters for {name!r}: {', '.join(twice)} given in the spec {spec!r} and again")
+        raise InputError(
+            f"bad parameters for {name!r}: {', '.join(twice)} given in the spec {spec!r} and again on its own "
+            "(-p on the command line, a keyword in Python); give each once"
+        )
     cls: Callable[..., Normalization] = _registered(name)
     params = _accepted_names({**spec_params, **params}, parameters(name))
     _check_params(name, _REGISTRY[name], params)
@@ -154,6 +157,8 @@ _TYPE_NAMES = {
     str: "a string",
     type(None): "None",
     Path: "a path",
+    tuple: "a tuple",
+    list: "a list",
 }
 
 
@@ -184,9 +189,14 @@ def _check_params(name: str, cls: type[Normalization], params: dict[str, object]
         return
     for key, value in params.items():
         kinds = _annotation_types(hints.get(key))
-        if kinds and not isinstance(value, tuple(t for kind in kinds for t in _ACCEPTED.get(kind, (kind,)))):
+        allowed = tuple(t for kind in kinds for t in _ACCEPTED.get(kind, (kind,)))
+        if kinds and not isinstance(value, allowed):
             expected = " or ".join(_TYPE_NAMES.get(kind, kind.__name__) for kind in kinds)
-            raise InputError(f"bad parameters for {name!r}: {key}={value!r} must be {expected}")
+            default = signature.parameters[key].default
+            example = (
+                f", e.g. {format_param(key, default)}" if default is not None and isinstance(default, allowed) else ""
+            )
+            raise InputError(f"bad parameters for {name!r}: {key}={value!r} must be {expected}{example}")
 
 
 def _annotation_types(hint: object) -> tuple[type, ...]:
@@ -244,6 +254,12 @@ def format_spec(name: str, params: dict[str, object]) -> str:
         'alcn:model=lite:scale=1.0'
     """
     return name + "".join(f":{k}={v}" for k, v in params.items())
+
+
+def format_param(key: str, value: object) -> str:
+    """One parameter as a spec or ``-p`` takes it, without spaces: ``format_param("tileGridSize", (8, 8))`` ->
+    ``"tileGridSize=(8,8)"``."""
+    return f"{key}={value!r}".replace(" ", "")
 
 
 def from_spec(spec: str, **defaults: object) -> Normalization:

@@ -22,7 +22,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial import ConvexHull
 
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats import validate_json
@@ -453,6 +452,8 @@ def write_ply(path: str | os.PathLike, model: PlyModel, *, binary: bool = True) 
 
 def models_info(models: dict[int, PlyModel]) -> dict[str, dict[str, float]]:
     """BOP ``models_info.json`` content: diameter and bounding box (mm) per object id."""
+    from scipy.spatial import ConvexHull  # here: scipy.spatial takes 0.2 s to import, and only this needs it
+
     info = {}
     for oid, m in models.items():
         v = m.vertices

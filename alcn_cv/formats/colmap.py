@@ -26,7 +26,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, make_folder
@@ -179,6 +178,8 @@ def camera_from_opencv(
 
 def qvec_from_rotmat(R: np.ndarray) -> np.ndarray:
     """Rotation matrix (3, 3) -> unit quaternion ``(qw, qx, qy, qz)`` (Hamilton, qw >= 0)."""
+    from scipy.spatial.transform import Rotation  # here: scipy.spatial takes 0.2 s to import (every `alcn` start)
+
     q = Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_quat(scalar_first=True)
     return q if q[0] >= 0 else -q
 
@@ -189,6 +190,8 @@ def rotmat_from_qvec(qvec: np.ndarray | Sequence[float]) -> np.ndarray:
     n = np.linalg.norm(q)
     if q.shape != (4,) or not np.isfinite(n) or n < 1e-12:
         raise InputError(f"quaternion must be 4 finite numbers, not all zero; got {qvec!r}")
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_quat(q / n, scalar_first=True).as_matrix()
 
 
