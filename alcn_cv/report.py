@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from alcn_cv.io import atomic_path, write_json
+from alcn_cv.io import atomic_path
 from alcn_cv.malloc import kept_freed_memory
 
 __all__ = [
@@ -22,13 +22,13 @@ __all__ = [
     "describe_machine",
     "log_to",
     "machine",
+    "machine_cores",
     "markdown_table",
     "nan_to_none",
     "new_figure",
     "save_figure",
     "spread",
     "spread_cell",
-    "write_json",
 ]
 
 
@@ -120,13 +120,21 @@ def machine() -> dict[str, Any]:
     return info
 
 
-def describe_machine(info: dict[str, Any] | None = None) -> str:
+def machine_cores(info: dict[str, Any]) -> Any:
+    """The CPU cores a run had, from its :func:`machine` record: those it could use, else the machine's (``"?"``:
+    neither recorded)."""
+    return info.get("cpus_available", info.get("cpu_count", "?"))
+
+
+def describe_machine(info: dict[str, Any] | None = None, short: bool = False) -> str:
     """One line of :func:`machine`'s description (default: the machine now), for a report: CPU,
-    cores, load, versions."""
+    cores, load, versions; ``short``: the compact form of a table's provenance (the versions by name, the GPU always
+    said, no platform)."""
     info = machine() if info is None else info
+    if short:
+        return _short_description(info)
     cpu = info.get("cpu_model", info.get("processor"))
-    cpus = info.get("cpus_available", info.get("cpu_count"))
-    parts = [f"{cpu}, {cpus} CPUs available"]
+    parts = [f"{cpu}, {machine_cores(info)} CPUs available"]
     if "load_average_1_5_15" in info:
         parts.append(f"load average (1, 5, 15 min) {', '.join(map(str, info['load_average_1_5_15']))}")
     versions = f"Python {info.get('python')}, NumPy {info.get('numpy')}, OpenCV {info.get('opencv')}"
@@ -139,6 +147,18 @@ def describe_machine(info: dict[str, Any] | None = None) -> str:
             f"trim threshold {kept['trim_threshold'] >> 20} MiB)"
         )
     return "; ".join(parts + [versions, info.get("platform", "")]).rstrip("; ")
+
+
+def _short_description(info: dict[str, Any]) -> str:
+    cpu = info.get("cpu_model", info.get("processor", "?"))
+    parts = [f"{cpu}, {machine_cores(info)} CPUs"]
+    if "load_average_1_5_15" in info:
+        parts.append("load " + ", ".join(str(v) for v in info["load_average_1_5_15"]))
+    parts.append(", ".join(f"{k} {info[k]}" for k in ("python", "numpy", "opencv", "torch") if info.get(k)))
+    parts.append(f"GPU: {info.get('cuda') or 'none'}")
+    if info.get("malloc_kept"):
+        parts.append("glibc malloc keeps freed memory (alcn_cv.keep_freed_memory)")
+    return "; ".join(parts)
 
 
 def command_line(words: Sequence[str], options: dict[str, Any]) -> str:

@@ -56,13 +56,19 @@ EXPOSURE = replace(
 )
 
 
-def exposure_scenes(photographs: int = 8, frames: int = 6, seed: int = 123) -> list[Scene]:
-    """Every third training photograph (``photographs`` of them) relit ``frames`` times by :data:`EXPOSURE`."""
+#: The exposure scenes: photographs, frames per photograph and the seed of their draws.
+EXPOSURE_PHOTOGRAPHS, EXPOSURE_FRAMES, EXPOSURE_SEED = 8, 6, 123
+
+
+def exposure_scenes() -> list[Scene]:
+    """Every third training photograph (:data:`EXPOSURE_PHOTOGRAPHS` of them) relit :data:`EXPOSURE_FRAMES` times by
+    :data:`EXPOSURE` (seed :data:`EXPOSURE_SEED`)."""
     scenes = []
-    for i, photo in enumerate(training_photographs(shared_data_dir())[::3][:photographs]):
-        relit = relit_frames(photo.image, frames, np.random.default_rng([seed, i]), EXPOSURE)
+    for i, photo in enumerate(training_photographs(shared_data_dir())[::3][:EXPOSURE_PHOTOGRAPHS]):
+        relit = relit_frames(photo.image, EXPOSURE_FRAMES, np.random.default_rng([EXPOSURE_SEED, i]), EXPOSURE)
         gray = np.stack([cv2.cvtColor(f, cv2.COLOR_BGR2GRAY) if f.ndim == 3 else f for f in relit])
-        scenes.append(Scene(f"exposure_{i}", "exposure", gray, tuple(f"frame_{k}.png" for k in range(frames))))
+        names = tuple(f"frame_{k}.png" for k in range(EXPOSURE_FRAMES))
+        scenes.append(Scene(f"exposure_{i}", "exposure", gray, names))
     return scenes
 
 

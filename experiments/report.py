@@ -14,9 +14,10 @@ rows of the same reports (:func:`headlines`).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ from _run import REPORTS, ROOT, rerun  # noqa: E402
 
 sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
 from alcn_cv.bench.relight_settings import PRESETS  # noqa: E402
+from alcn_cv.report import describe_machine, machine_cores, markdown_table  # noqa: E402
 
 RESULTS = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
@@ -54,39 +56,8 @@ RELIGHT_METRICS = {
 }
 
 
-def table(headers: Sequence[str], rows: Sequence[Sequence[Any]], digits: int = 1) -> str:
-    """A Markdown table; floats with ``digits`` decimals, ``None`` as ``-``."""
-
-    def cell(v: Any) -> str:
-        if v is None:
-            return "-"
-        if isinstance(v, float):
-            return f"{v:.{digits}f}"
-        return str(v).replace("|", "\\|")
-
-    lines = ["| " + " | ".join(headers) + " |", "|" + "|".join("---" for _ in headers) + "|"]
-    return "\n".join(lines + ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]) + "\n"
-
-
-def _cores(machine: dict[str, Any]) -> Any:
-    """The CPU cores a run had (those it could use, else the machine's)."""
-    return machine.get("cpus_available", machine.get("cpu_count", "?"))
-
-
-def describe(machine: dict[str, Any] | None) -> str:
-    """One line of a report's ``machine`` record: CPU, cores, load, versions, GPU."""
-    if not machine:
-        return "not recorded"
-    cpu = machine.get("cpu_model", machine.get("processor", "?"))
-    parts = [f"{cpu}, {_cores(machine)} CPUs"]
-    if "load_average_1_5_15" in machine:
-        parts.append("load " + ", ".join(str(v) for v in machine["load_average_1_5_15"]))
-    versions = [f"{k} {machine[k]}" for k in ("python", "numpy", "opencv", "torch") if machine.get(k)]
-    parts.append(", ".join(versions))
-    parts.append(f"GPU: {machine.get('cuda') or 'none'}")
-    if machine.get("malloc_kept"):
-        parts.append("glibc malloc keeps freed memory (alcn_cv.keep_freed_memory)")
-    return "; ".join(parts)
+#: The results' Markdown tables: numbers with one decimal unless a table says otherwise.
+table = functools.partial(markdown_table, digits=1)
 
 
 def provenance(report: dict[str, Any]) -> str:
@@ -98,7 +69,8 @@ def provenance(report: dict[str, Any]) -> str:
     machine = report.get("machine") or report.get("machine_before")
     return (
         f"Rerun: `{rerun(script, argv)}`. Command: " + "; ".join(f"`{c}`" for c in commands if c) + ".  \n"
-        f"Machine: {describe(machine)}.  \nDate: {exp.get('date', 'not recorded')}.\n"
+        f"Machine: {describe_machine(machine, short=True) if machine else 'not recorded'}.  \n"
+        f"Date: {exp.get('date', 'not recorded')}.\n"
     )
 
 
@@ -353,7 +325,7 @@ def speed_headline(report: dict[str, Any]) -> str:
     return (
         f"**Speed** (`python experiments/speed.py {argv}`, {report['experiment']['date'][:10]}; load average "
         f"{', '.join(str(v) for v in machine.get('load_average_1_5_15', []))} "
-        f"on {_cores(machine)} cores, {machine.get('cpu_model', 'CPU not recorded')}):\n\n"
+        f"on {machine_cores(machine)} cores, {machine.get('cpu_model', 'CPU not recorded')}):\n\n"
         + table(["target", "measured", "goal", ""], rows, digits=2)
     )
 

@@ -252,7 +252,7 @@ def test_batched_score_maps_equal_single(policy):
         np.testing.assert_allclose(p, D.score_maps(net, img, pol), atol=1e-5)
 
 
-def test_method_specs_and_seeds():
+def test_method_specs_and_seeds(tmp_path):
     norm = D.create_normalization("alcn:model=lite:mixture=pyramid", {})
     assert (norm.mixture, norm.scale, norm.net.stride) == ("pyramid", 1.0, 8)
     assert D.create_normalization("dog:sigma2=2.5", {"sigma1": 1.0}).sigma2 == 2.5
@@ -260,12 +260,13 @@ def test_method_specs_and_seeds():
     for bad in (
         dict(methods=["nope:x=1"]),
         dict(methods=["cnn:depth=2"]),
-        dict(methods=["dog", "dog"]),
         dict(seeds=[]),
         dict(seeds=[1, 1]),
     ):
         with pytest.raises(InputError):
             S.DetectSettings(**bad).check()
+    with pytest.raises(InputError, match="method 'dog' is listed twice"):  # by build_methods, before any work
+        D.main(tmp_path / "no data", tmp_path / "out", settings=S.DetectSettings(methods=["dog", "none", "dog"]))
 
 
 def test_summarize_over_seeds():

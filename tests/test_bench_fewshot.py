@@ -62,13 +62,12 @@ def test_every_spec_reaches_the_detector_through_normalize_windows(policy, monke
     assert create_normalization("alcn:model=gain", {}).scale == 1.0
 
 
-def test_seeds_differ_and_settings_check():
+def test_seeds_differ_and_settings_check(tmp_path):
     s = B.FewShotSettings(seeds=[0, 5])
     assert (s.setup(5).seed, s.setup(5).object_seed) == (5, s.object_seed + 5)
     assert B.FewShotSettings().seeds == [0, 1, 2]  # the repetitions of the former default --draws 3, seed for seed
     for bad in (
         dict(methods=["nope"]),
-        dict(methods=["dog", "dog"]),
         dict(policies=["sideways"]),
         dict(seeds=[]),
         dict(seeds=[1, 1]),
@@ -77,6 +76,8 @@ def test_seeds_differ_and_settings_check():
     ):
         with pytest.raises(InputError):
             B.FewShotSettings(**bad).check()
+    with pytest.raises(InputError, match="method 'dog' is listed twice"):  # by build_methods, before any seed runs
+        B.main(tmp_path / "out", B.FewShotSettings(methods=["dog", "dog"]))
 
 
 def test_compare_to_dog_takes_the_best_dog_per_seed():

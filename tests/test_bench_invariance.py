@@ -10,6 +10,7 @@ import pytest
 
 from alcn_cv.bench import invariance
 from alcn_cv.cli import main as cli_main
+from alcn_cv.data.scenes import load_photometric, mean_pairwise_ncc
 from alcn_cv.errors import DatasetError, InputError
 
 
@@ -18,8 +19,8 @@ def test_agreement_and_detail_by_hand():
     a = np.arange(16, dtype=np.float32).reshape(4, 4)
     stack = np.stack([a, 2 * a + 1, -a])
     # pairs: (a, 2a+1) -> 1, (a, -a) -> -1, (2a+1, -a) -> -1
-    assert invariance.agreement(stack, mask) == pytest.approx(-1 / 3)
-    assert invariance.agreement(np.stack([a, np.zeros_like(a)]), mask) == 0.0  # constant image
+    assert mean_pairwise_ncc(stack, mask) == pytest.approx(-1 / 3)
+    assert mean_pairwise_ncc(np.stack([a, np.zeros_like(a)]), mask) == 0.0  # constant image
     # gradient of a: 1 along x (12 pairs), 4 along y (12 pairs); std of 0..15 = sqrt(255/12)
     expected = np.sqrt((12 * 1 + 12 * 16) / 24) / np.sqrt(255 / 12)
     assert invariance.detail(a[None], mask) == pytest.approx(expected)
@@ -61,7 +62,7 @@ def test_main_writes_table_json_and_figure(tmp_path):
 
 def test_bad_input(tmp_path):
     with pytest.raises(DatasetError):
-        invariance.load_objects(tmp_path)
+        load_photometric(tmp_path)
     data = _fake_set(tmp_path / "psm")
     with pytest.raises(InputError):
         invariance.main(data, tmp_path / "o", ["nonexistent"])
@@ -76,12 +77,12 @@ def test_bad_input(tmp_path):
     assert not (tmp_path / "o").exists()
     one = _fake_set(tmp_path / "one", n_lights=1)
     with pytest.raises(DatasetError, match="one photograph"):
-        invariance.load_objects(one)
+        load_photometric(one)
 
 
 def test_a_bad_weight_file_is_one_line_before_any_work(tmp_path, capsys, monkeypatch):
     data = _fake_set(tmp_path / "psm")
-    monkeypatch.setattr(invariance, "load_objects", lambda *a: pytest.fail("the benchmark started"))
+    monkeypatch.setattr(invariance, "load_photometric", lambda *a: pytest.fail("the benchmark started"))
     out = tmp_path / "o"
     argv = ["bench", "invariance", "--data", str(data), "--out", str(out)]
     assert cli_main([*argv, "--methods", "none,alcn:weights=some/detector.pt"]) == 2

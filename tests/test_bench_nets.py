@@ -13,7 +13,7 @@ from alcn_cv.errors import InputError  # noqa: E402
 @pytest.mark.parametrize("depth", [1, 2, 3, 4])
 def test_plain_cnn_dense_equals_windows(depth):
     torch.manual_seed(0)
-    net = PlainCNN(3, depth=depth, width=4, hidden=8).eval()
+    net = PlainCNN(3, depth=depth, width=4).eval()
     image = torch.rand(1, 1, 44, 52)
     with torch.no_grad():
         dense = net.dense(image)

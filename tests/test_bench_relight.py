@@ -198,14 +198,17 @@ def test_tuning_grids_have_one_size_and_start_at_the_default(method):
     assert public(first) == public(default)
 
 
-def test_clahe_is_tuned_with_the_others(tmp_path):
-    grid = relight.TUNING_GRIDS["clahe"]
-    assert {"clipLimit": 4.0, "tileGridSize": (8, 8)} in grid  # Jenicek & Chum, ICCV 2019
+@pytest.mark.parametrize("method", ["clahe", "sqi"])
+def test_clahe_and_sqi_are_tuned_with_the_others(method, tmp_path):
+    grid = relight.TUNING_GRIDS[method]
+    if method == "clahe":
+        assert {"clipLimit": 4.0, "tileGridSize": (8, 8)} in grid  # Jenicek & Chum, ICCV 2019
+    assert set(relight.DEFAULT_METHODS) - set(relight.TUNING_GRIDS) == {"none", "alcn", "alcn:model=lite"}
     root = make_sets(tmp_path / "data")
     result = relight.main(
         tmp_path / "out",
         [root / "webcam", root / "psm"],
-        ["none", "clahe"],
+        ["none", method],
         train_scenes=["square"],
         test_scenes=["street"],
         seeds=[0],
@@ -215,11 +218,15 @@ def test_clahe_is_tuned_with_the_others(tmp_path):
         tune_frames=3,
         progress=False,
     )
-    tuning = result["tuning"]["clahe"]["all"]
+    tuning = result["tuning"][method]["all"]
     assert len(tuning["scores"]) == 8 and tuning["chosen"] in tuning["scores"]
+    assert tuning["chosen"] in {relight._spec(method, p) for p in grid}
     chosen = relight.build_method(tuning["chosen"])
-    assert [chosen.clipLimit, *chosen.tileGridSize] in [[p["clipLimit"], *p["tileGridSize"]] for p in grid]
-    row = result["methods"]["clahe (tuned)"]
+    if method == "clahe":
+        assert [chosen.clipLimit, *chosen.tileGridSize] in [[p["clipLimit"], *p["tileGridSize"]] for p in grid]
+    else:
+        assert {"sigmas": chosen.sigmas, "eps": chosen.eps} in grid
+    row = result["methods"][f"{method} (tuned)"]
     assert row["tuned"] and 0 < row["mean_test"]["identification"]["mean"] <= 100
 
 
@@ -277,6 +284,20 @@ def test_one_seed_prints_bare_numbers_and_each_alcn_backend(tmp_path):
     rows = {line.split(" | ")[0]: line for line in summary.splitlines() if line.startswith("| ")}
     assert rows["| method"].endswith("| ms/frame | backend |")
     assert rows["| alcn"].endswith("| opencv |") and rows["| none"].endswith("| - |")
+
+
+@pytest.mark.parametrize(
+    ("methods", "message"),
+    [
+        (["dog:sigma1=-1", "none"], "method 'dog:sigma1=-1': sigma1 must be positive"),
+        (["unet:weights=missing.npz", "none"], "method 'unet:weights=missing.npz': weight file not found"),
+        (["none", "dog", "none"], "method 'none' is listed twice"),
+    ],
+)
+def test_a_bad_method_is_named_before_any_data_is_read(methods, message, tmp_path):
+    with pytest.raises(InputError, match=message) as error:
+        relight.main(tmp_path / "out", [tmp_path / "no data"], methods)
+    assert len(str(error.value).splitlines()) == 1
 
 
 def test_seeds_must_be_distinct(tmp_path):

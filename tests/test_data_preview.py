@@ -105,9 +105,29 @@ def test_a_sheet_of_rendered_scenes_and_of_an_unknown_kind(tmp_path):
 
 
 def test_compare_psm_names_a_missing_folder_and_checks_its_output_first(tmp_path):
-    with pytest.raises(DatasetError, match=r"nope: folder not found \(the PSM set"):  # was: nope/lights.txt
+    with pytest.raises(DatasetError, match=r"nope: folder not found \(a photometric-stereo set"):  # not lights.txt
         compare_psm(tmp_path / "nope", tmp_path / "out")
     blocker = tmp_path / "file.json"
     blocker.write_text("mine")
     with pytest.raises(InputError, match="is a file"):  # before reading the set and rendering
         compare_psm(tmp_path / "nope", blocker / "out")
+
+
+def test_load_psm_reads_the_photometric_set_and_checks_its_lights(tmp_path):
+    from alcn_cv.data.scenes import load_photometric
+    from alcn_cv.data.stats import load_psm
+
+    folder = tmp_path / "psm" / "ball"
+    folder.mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    for i in range(2):
+        cv2.imwrite(str(folder / f"ball.{i}.png"), rng.integers(0, 256, (12, 16), dtype=np.uint8))
+    cv2.imwrite(str(folder / "ball.mask.png"), np.full((12, 16), 255, np.uint8))
+    (tmp_path / "psm" / "lights.txt").write_text("2\n0 0 1\n0.5 0 0.8\n")
+    objects, lights = load_psm(tmp_path / "psm")
+    (obj,) = load_photometric(tmp_path / "psm")
+    assert lights.shape == (2, 3) and list(objects) == ["ball"]
+    assert np.array_equal(np.stack(objects["ball"][0]), obj.images) and objects["ball"][1].all()
+    (tmp_path / "psm" / "lights.txt").write_text("3\n0 0 1\n0.5 0 0.8\n0 0.5 0.8\n")
+    with pytest.raises(DatasetError, match="ball: 2 images, but lights.txt lists 3 lights"):
+        load_psm(tmp_path / "psm")

@@ -37,8 +37,19 @@ def _recorded_equal(recorded: dict, expected: dict, where: str) -> None:
 
 
 #: Keys the paper file's header records of training variants since removed (SGD and its momentum,
-#: step and constant schedules): the values it records were the Adam and cosine schedule kept.
-REMOVED = {"optim": {"optimizer": "adam", "momentum": 0.9, "schedule": "cosine", "step_epochs": 2, "step_gamma": 0.3}}
+#: step and constant schedules, weight decay, ReLU activations, a random initialisation): the values it records were
+#: the Adam and cosine schedule, no weight decay, tanh and the DoG initialisation kept.
+REMOVED = {
+    "optim": {
+        "optimizer": "adam",
+        "momentum": 0.9,
+        "schedule": "cosine",
+        "step_epochs": 2,
+        "step_gamma": 0.3,
+        "weight_decay": 0.0,
+    },
+    "model": {"activation": "tanh", "init": "dog"},
+}
 
 
 def test_paper_preset_is_the_shipped_paper_file():

@@ -182,9 +182,22 @@ def test_distill_help_and_a_tiny_run(tmp_path, capsys):
 
 
 def test_train_unet_prints_its_own_network(capsys):
-    assert main(["train-unet", "--print-config", "--channels", "4", "--levels", "2"]) == 0
+    assert main(["train-unet", "--print-config", "--set", "net.channels=4", "--set", "net.levels=2"]) == 0
     net = tomllib.loads(capsys.readouterr().out)["net"]
-    assert net == {"channels": 4, "levels": 2}
+    assert net == {"channels": 4, "levels": 2, "eps": 0.01}
+
+
+def test_train_unet_net_keys_are_the_unets_arguments(capsys):
+    import inspect
+
+    from alcn_cv.train.config import UNET_CONFS
+    from alcn_cv.train.unet_normalizer import UNetNormalizer
+
+    assert set(UNET_CONFS["gain"].net) == set(inspect.signature(UNetNormalizer).parameters)
+    assert main(["train-unet", "--print-config", "--set", "net.dilations=[1]"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "unknown config key 'net.dilations'; known keys here: channels, eps, levels" in err
+    assert len(err.splitlines()) == 1
 
 
 @pytest.mark.parametrize("command", [["train", "--conf", "paper-full"], ["train-real-light"], ["train-unet"]])
@@ -201,3 +214,15 @@ def test_a_run_folder_may_hold_hidden_files_and_configurations(tmp_path):
     (tmp_path / ".gitkeep").write_text("")
     (tmp_path / "my.toml").write_text("seed = 1")
     assert run_folder(tmp_path) == tmp_path
+
+
+def test_train_refuses_to_replace_an_earlier_run(tmp_path, capsys):
+    (tmp_path / "train.log").write_text("")
+    (tmp_path / "checkpoint.pt").write_bytes(b"")
+    assert main(["train", "--out", str(tmp_path), "--no-progress"]) == 2  # before any window is rendered
+    assert "holds an earlier run (checkpoint.pt): --resume continues it, --overwrite replaces it" in (
+        capsys.readouterr().err
+    )
+    assert main(["train", "--out", str(tmp_path), "--resume", "--overwrite"]) == 2
+    assert "not both" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["checkpoint.pt", "train.log"]

@@ -272,23 +272,23 @@ def test_a_run_folder_given_for_weights_names_the_file_meant(tmp_path):
 
 def test_train_unet_asks_for_overwrite_too(tmp_path, capsys):
     from alcn_cv.errors import InputError
-    from alcn_cv.train.config import RealLightConfig
+    from alcn_cv.train.config import UNetConfig
     from alcn_cv.train.unet import train_unet
 
     (tmp_path / "train.log").write_text("")
     (tmp_path / "history.json").write_text("[]")
     assert main(["train-unet", "--out", str(tmp_path), "--no-progress"]) == 2  # before its scenes are loaded
     assert "holds an earlier run (history.json)" in capsys.readouterr().err
-    cfg = RealLightConfig(scenes=[str(_scene(tmp_path / "data"))], relit=0, crop=96, patch=32, steps=1)
+    cfg = UNetConfig(scenes=[str(_scene(tmp_path / "data"))], relit=0, crop=96, patch=32, steps=1)
     with pytest.raises(InputError, match=r"holds an earlier run \(history.json\)"):  # the library's own check
-        train_unet(cfg, tmp_path, net={"channels": 4, "levels": 2}, progress=False)
+        train_unet(cfg, tmp_path, progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["data", "history.json", "train.log"]
 
 
 def test_an_interrupted_train_unet_says_it_has_no_checkpoint(tmp_path, monkeypatch, capsys):
     _interrupted_at(3, monkeypatch)
     out = tmp_path / "run"
-    options = [*_tiny(_scene(tmp_path / "scene"), steps=4), "--channels", "4", "--levels", "2"]
+    options = _tiny(_scene(tmp_path / "scene"), steps=4, **{"net.channels": 4, "net.levels": 2})
     assert main(["train-unet", "--out", str(out), "--no-progress", *options]) == 130
     err = capsys.readouterr().err.strip()
     assert err.endswith(

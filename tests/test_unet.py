@@ -13,7 +13,7 @@ from alcn_cv.bench.unet import UNetNormalization
 from alcn_cv.data.scenes import load_scene_folder
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.nets.gain import GainNormalizer
-from alcn_cv.train.config import RealLightConfig
+from alcn_cv.train.config import UNET_CONFS, UNetConfig
 from alcn_cv.train.real_light import (
     anywhere_locations,
     consistency_loss,
@@ -28,8 +28,9 @@ from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 from scene_sets import make_sets
 
 CROP, PATCH = 96, 32
-#: A tiny run: 12 steps of 12 locations (and 4 drawn anywhere) on crops of 96 around patches of 32.
-TINY = RealLightConfig(
+#: A tiny run: 12 steps of 12 locations (and 4 drawn anywhere) on crops of 96 around patches of 32, a U-Net of 4
+#: channels and 2 levels.
+TINY = UNetConfig(
     relit=0,
     steps=12,
     locations=12,
@@ -41,6 +42,7 @@ TINY = RealLightConfig(
     repeatability=0.0,
     lr=3e-3,
     save_every=6,
+    net={"channels": 4, "levels": 2, "eps": 0.01},
 )
 
 
@@ -142,7 +144,7 @@ def test_a_short_training_writes_its_files_and_lowers_the_loss(tmp_path):
     torch.set_num_threads(1)
     root = make_sets(tmp_path / "data")
     cfg = replace(TINY, scenes=[str(root / "webcam" / "street"), str(root / "webcam" / "square")])
-    path = train_unet(cfg, tmp_path / "run", net={"channels": 4, "levels": 2}, conf="test")
+    path = train_unet(cfg, tmp_path / "run", conf="test")
     meta = load_normalizer_file(path).meta
     assert path.name == "unet_normalizer.npz" and meta["architecture"] == "unet" and meta["trained"]
     assert meta["training"]["conf"] == "test" and meta["training"]["config"]["steps"] == 12
@@ -203,8 +205,9 @@ def test_the_cli_trains_with_the_preset_and_its_settings(tmp_path, monkeypatch):
 
     runs = []
     monkeypatch.setattr(unet, "train_unet", lambda cfg, out, **record: runs.append((cfg, record)) or out)
-    assert main(["train-unet", "--out", str(tmp_path), "--set", "steps=7", "--levels", "2", "--seed", "3"]) == 0
+    options = ["--set", "steps=7", "--set", "net.levels=2", "--seed", "3"]
+    assert main(["train-unet", "--out", str(tmp_path), *options]) == 0
     ((cfg, record),) = runs
-    assert (cfg.steps, cfg.seed, cfg.crop) == (7, 3, RealLightConfig().crop)
-    assert record["net"] == {"channels": 8, "levels": 2} and record["conf"] == "gain"
-    assert "--levels 2" in record["command"]
+    assert (cfg.steps, cfg.seed, cfg.crop) == (7, 3, UNET_CONFS["gain"].crop)
+    assert cfg.net == {"channels": 8, "levels": 2, "eps": 0.01} and record["conf"] == "gain"
+    assert "--set net.levels=2" in record["command"]

@@ -113,7 +113,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         "--negatives-ratio", type=float, help=f"background windows per object window (default {d.negatives_ratio})"
     )
     p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
-    p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
+    p.add_argument("--batch-size", type=int, help=f"training windows per batch (default {d.batch_size})")
     p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
     add_seeds_option(p, d.seeds, "repeat every run with each of these seeds", from_preset=True)
     p.add_argument(
@@ -124,7 +124,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         help="tune DoG, SLCN and DLCN on the training windows first (default: their defaults)",
     )
     p.add_argument("--cnn-sweep", type=_sweep, help="plain CNNs tried, DEPTHxWIDTH,... (default 1x32,2x32,3x32)")
-    p.add_argument("--nms-iou", type=float, help=f"default {d.nms_iou}")
+    p.add_argument("--nms-iou", type=float, help=f"IoU above which NMS removes a box (default {d.nms_iou})")
     p.add_argument("--match-iou", type=float, help=f"PASCAL criterion (default {d.match_iou})")
     p.add_argument("--max-test-images", type=int, help="only the first N test images (default: all)")
     p.add_argument("--working-scale", type=float, default=None, help="override the manifest's working_scale")
@@ -186,7 +186,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         help=f"lighting families of the test windows (default {','.join(d.test_lighting)})",
     )
     p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
-    p.add_argument("--batch-size", type=int, help=f"default {d.batch_size}")
+    p.add_argument("--batch-size", type=int, help=f"training windows per batch (default {d.batch_size})")
     p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
     p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
     add_progress_option(p)
@@ -333,13 +333,12 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         help="patch identification, keypoint matching and pose on real changes of light (fixed cameras)",
         description="Normalize the registered frames of fixed-camera scenes under different light with each "
         "method's apply(), then score patch identification (NCC), ORB/SIFT matching and RANSAC-homography pose "
-        "between frames; CLAHE, DoG, SLCN, DLCN, Tan-Triggs and DoG+lstd are tuned on the training scenes only. Writes "
-        "relight.md, relight.json and relight.png. Run time on 2 CPU cores: the default "
-        f"({len(relight.DEFAULT_METHODS)} methods, seeds {' '.join(map(str, relight.DEFAULT_SEEDS))}, "
-        f"{_preset_flags(default)}, tuning) more than an hour (one seed: about 22 min); --quick "
-        f"({_preset_flags(quick)}, the quick protocol of docs/results.md) about a third of that; --quick --seeds 0 "
-        "--no-tune about 2 min, with --methods none about 15 s. --quick picks the quick preset; --max-frames, "
-        "--patches and --max-pairs given with it override it.",
+        "between frames; CLAHE, DoG, SLCN, DLCN, SQI, Tan-Triggs and DoG+lstd are tuned on the training scenes only. "
+        "Writes relight.md, relight.json and relight.png. The default runs "
+        f"{len(relight.DEFAULT_METHODS)} methods, seeds {' '.join(map(str, relight.DEFAULT_SEEDS))}, "
+        f"{_preset_flags(default)}, with tuning; --quick picks the quick preset ({_preset_flags(quick)}, the quick "
+        "protocol of docs/results.md), and --max-frames, --patches and --max-pairs given with it override it; "
+        "--seeds 0 --no-tune is the shortest run.",
     )
     d = relight_settings.Settings()
     p.add_argument("--out", required=True, type=Path, help="output folder")

@@ -36,7 +36,11 @@ from torch import nn
 from alcn_cv.errors import InputError
 from alcn_cv.nets.detector import INPUT, WindowClassifier
 
-__all__ = ["CifarResNet", "PlainCNN", "resnet20", "resnet56"]
+__all__ = ["PLAIN_HIDDEN", "CifarResNet", "PlainCNN", "resnet20", "resnet56"]
+
+
+#: Width of :class:`PlainCNN`'s fully connected layer.
+PLAIN_HIDDEN = 256
 
 
 def _feature_size(depth: int) -> int:
@@ -52,21 +56,21 @@ class PlainCNN(WindowClassifier):
     Args:
         num_classes: background + objects (>= 2).
         depth: 3x3 convolutions per stage (1 to 4; 2 stages, so 2 to 8 convolutions in all).
-        width: channels of the first stage (the second has twice as many).
-        hidden: width of the fully connected layer.
+        width: channels of the first stage (the second has twice as many); the fully connected layer has
+            :data:`PLAIN_HIDDEN` channels.
 
     Shape:
         - :meth:`forward`: ``(B, 1, 32, 32)`` -> ``(B, num_classes)`` logits
         - :meth:`dense`: ``(B, 1, H, W)`` -> ``(B, num_classes, (H-32)//4+1, (W-32)//4+1)``
     """
 
-    def __init__(self, num_classes: int, depth: int = 2, width: int = 32, hidden: int = 256) -> None:
+    def __init__(self, num_classes: int, depth: int = 2, width: int = 32) -> None:
         super().__init__()
         if num_classes < 2:
             raise InputError(f"a classifier needs background and at least one object, got {num_classes} classes")
-        if not 1 <= depth <= 4 or width < 1 or hidden < 1:
-            raise InputError(f"need 1 <= depth <= 4, width >= 1 and hidden >= 1, got {depth}, {width}, {hidden}")
-        self.config = {"num_classes": num_classes, "depth": depth, "width": width, "hidden": hidden}
+        if not 1 <= depth <= 4 or width < 1:
+            raise InputError(f"need 1 <= depth <= 4 and width >= 1, got {depth} and {width}")
+        self.config = {"num_classes": num_classes, "depth": depth, "width": width, "hidden": PLAIN_HIDDEN}
         layers: list[nn.Module] = []
         channels = 1
         for stage in range(2):
@@ -78,7 +82,7 @@ class PlainCNN(WindowClassifier):
         self.features = nn.Sequential(*layers)
         f = _feature_size(depth)
         self.classifier = nn.Sequential(
-            nn.Conv2d(channels, hidden, f), nn.ReLU(inplace=True), nn.Conv2d(hidden, num_classes, 1)
+            nn.Conv2d(channels, PLAIN_HIDDEN, f), nn.ReLU(inplace=True), nn.Conv2d(PLAIN_HIDDEN, num_classes, 1)
         )
 
 
@@ -105,7 +109,6 @@ class CifarResNet(nn.Module):
     Args:
         num_classes: background + objects (>= 2).
         blocks: basic blocks per stage (``n``; 3 gives ResNet-20, 9 ResNet-56).
-        in_channels: input channels (1 for grayscale).
         context: pixels of surroundings on each side of the 32x32 window in the inputs of
             :meth:`forward` (a multiple of 4; 0: the plain CIFAR network), see the module's
             docstring.
@@ -119,7 +122,7 @@ class CifarResNet(nn.Module):
 
     stride = 4
 
-    def __init__(self, num_classes: int, blocks: int = 3, in_channels: int = 1, context: int = 0) -> None:
+    def __init__(self, num_classes: int, blocks: int = 3, context: int = 0) -> None:
         super().__init__()
         if num_classes < 2 or blocks < 1:
             raise InputError(f"need num_classes >= 2 and blocks >= 1, got {num_classes} and {blocks}")
@@ -127,10 +130,8 @@ class CifarResNet(nn.Module):
             raise InputError(f"context must be a non-negative multiple of {self.stride}, got {context}")
         self.context = context
         self.input_size = INPUT + 2 * context
-        self.config = {"num_classes": num_classes, "blocks": blocks, "in_channels": in_channels, "context": context}
-        self.stem = nn.Sequential(
-            nn.Conv2d(in_channels, 16, 3, 1, 1, bias=False), nn.BatchNorm2d(16), nn.ReLU(inplace=True)
-        )
+        self.config = {"num_classes": num_classes, "blocks": blocks, "context": context}
+        self.stem = nn.Sequential(nn.Conv2d(1, 16, 3, 1, 1, bias=False), nn.BatchNorm2d(16), nn.ReLU(inplace=True))
         layers: list[nn.Module] = []
         cin = 16
         for stage, cout in enumerate((16, 32, 64)):

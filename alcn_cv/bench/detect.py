@@ -46,8 +46,7 @@ training windows and the detector's initialisation, so differences between metho
 read against the spread over seeds.
 
 With ``--tune``, DoG, SLCN and DLCN are first tuned on the training windows
-(:mod:`alcn_cv.bench.tuning`); by default they keep their defaults, because on the data
-engine's benchmark the tuned settings scored lower than the defaults (see the tuning module).
+(:mod:`alcn_cv.bench.tuning`, a proxy of detection); by default they keep their defaults.
 
 Outputs: ``detect.json`` (every number, PR curves, settings, tuned parameters, timings,
 machine, command), ``detect.md`` (:mod:`alcn_cv.bench.detect_report`) and
@@ -235,8 +234,6 @@ def window_agreement(
     norm: Normalization,
     images: list[np.ndarray],
     normalized: list[np.ndarray],
-    count: int = AGREEMENT_WINDOWS,
-    seed: int = 0,
 ) -> float | None:
     """How closely what the detector trains on matches what it is tested on, for one method.
 
@@ -244,14 +241,13 @@ def window_agreement(
     (:meth:`~alcn_cv.enhance.base.Normalization.normalize_windows`) and is tested on whole
     normalized images: a method that looks further than the window (a wide context, a global
     statistic) gives the window's centre another response than the same pixels get in the whole
-    image. Both input policies pass that difference on to the detector.
+    image. Both input policies pass that difference on to the detector. It is measured on
+    :data:`AGREEMENT_WINDOWS` windows drawn at random (uniformly over images and positions, seed 0).
 
     Args:
         norm: the method.
         images: ``(H, W)`` float32 test images at the working scale (each at least 64x64).
         normalized: ``norm.normalize`` of each image.
-        count: windows drawn at random (uniformly over images and positions).
-        seed: their seed.
 
     Returns:
         The Pearson correlation, pooled over every pixel of the 32x32 centres, between the
@@ -261,10 +257,10 @@ def window_agreement(
     usable = [k for k, im in enumerate(images) if min(im.shape) >= WINDOW]
     if not usable:
         return None
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(0)
     o = (WINDOW - CROP) // 2
     windows, references = [], []
-    for k in rng.choice(usable, count):
+    for k in rng.choice(usable, AGREEMENT_WINDOWS):
         h, w = images[k].shape
         y, x = int(rng.integers(0, h - WINDOW + 1)), int(rng.integers(0, w - WINDOW + 1))
         windows.append(images[k][y : y + WINDOW, x : x + WINDOW])

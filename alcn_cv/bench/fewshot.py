@@ -111,8 +111,6 @@ class FewShotSettings:
         unknown = [m for m in self.methods if parse_spec(m)[0] not in available()]
         if unknown or not self.methods:
             raise InputError(f"unknown or no method(s) {unknown}; available: {', '.join(available())}")
-        if len(set(self.methods)) != len(self.methods):
-            raise InputError(f"a method is listed twice: {self.methods}")
         bad = [p for p in self.policies if p not in POLICIES]
         if bad or not self.policies:
             raise InputError(f"unknown or no policy {bad}; choose from {', '.join(POLICIES)}")

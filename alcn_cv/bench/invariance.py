@@ -11,8 +11,9 @@ with an object mask), each method normalizes every photograph; the benchmark rep
   lights. A method that flattens the image (blurs it, or maps it to a constant) scores low;
   note that noise scores high, so read it beside the agreement.
 
-Expected layout (``../shared/data/psm``): one folder per object ``NAME/`` holding
-``NAME.0.png`` ... ``NAME.{k-1}.png`` and ``NAME.mask.png``.
+Expected layout (``../shared/data/psm``; :func:`~alcn_cv.data.scenes.load_photometric`): one folder per object
+``NAME/`` holding ``NAME.0.png`` ... ``NAME.{k-1}.png`` and ``NAME.mask.png``. The agreement is
+:func:`~alcn_cv.data.scenes.mean_pairwise_ncc`.
 
 Outputs in ``out_dir``: ``invariance.json`` (every number, the settings and the machine),
 ``invariance.md`` (the table) and ``invariance_<object>.png`` (the object under every light for
@@ -23,10 +24,7 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 import time
-from dataclasses import dataclass
-from itertools import combinations
 from pathlib import Path
 from typing import Any
 
@@ -36,103 +34,19 @@ from tqdm.auto import tqdm
 
 from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.plots import wrap_label
+from alcn_cv.data.scenes import PhotometricObject, load_photometric, mean_pairwise_ncc
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, parse_spec
-from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, make_folder, read_image, write_json
+from alcn_cv.errors import InputError
+from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
 
-__all__ = ["PhotometricObject", "agreement", "detail", "load_objects", "main"]
+__all__ = ["detail", "main"]
 
 logger = logging.getLogger(__name__)
 
 #: Characters per line of a method's row label in the figure (a spec is broken after a ``:`` or ``/``).
 _LABEL_WIDTH = 24
-
-
-@dataclass(frozen=True)
-class PhotometricObject:
-    """One object of a photometric-stereo set.
-
-    Attributes:
-        name: the object's name.
-        images: ``(k, H, W)`` float32 grayscale intensities in [0, 1], one per light.
-        mask: ``(H, W)`` bool, the object's pixels.
-    """
-
-    name: str
-    images: np.ndarray
-    mask: np.ndarray
-
-
-def load_objects(data_dir: str | os.PathLike, scale: float = 1.0) -> list[PhotometricObject]:
-    """Read every object of a photometric-stereo folder (see the module docstring).
-
-    Args:
-        data_dir: the folder holding one sub-folder per object.
-        scale: resize factor applied to images and masks (``cv2.INTER_AREA``).
-
-    Raises:
-        DatasetError: no object found, an object with one photograph (the agreement compares two lights or more),
-            an unreadable image, or images of different sizes.
-    """
-    root = Path(data_dir)
-    if not root.is_dir():
-        raise DatasetError(f"{root}: not a folder")
-    if not 0 < scale <= 1:
-        raise InputError(f"scale must be in (0, 1], got {scale}")
-    objects = []
-    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
-        mask_path = folder / f"{folder.name}.mask.png"
-        pattern = re.compile(rf"{re.escape(folder.name)}\.(\d+)\.png$")
-        shots = sorted(
-            ((int(m.group(1)), p) for p in folder.iterdir() if (m := pattern.match(p.name))), key=lambda t: t[0]
-        )
-        if not shots or not mask_path.is_file():
-            logger.debug("skipping %s: no %s.<i>.png images or no mask", folder, folder.name)
-            continue
-        if len(shots) < 2:
-            raise DatasetError(f"{folder}: one photograph ({shots[0][1].name}); the agreement needs 2 lights or more")
-        try:
-            images = [read_image(p, gray=True) for _, p in shots]
-            mask = read_image(mask_path, gray=True) > 127
-        except InputError as exc:  # a file of the data set, not the caller's input
-            raise DatasetError(str(exc)) from None
-        if any(img.shape != mask.shape for img in images):
-            raise DatasetError(f"{folder}: images and mask {folder.name}.mask.png differ in size")
-        if scale != 1:
-            size = (max(1, round(mask.shape[1] * scale)), max(1, round(mask.shape[0] * scale)))
-            images = [cv2.resize(img, size, interpolation=cv2.INTER_AREA) for img in images]
-            mask = cv2.resize(mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
-        stack = np.stack(images).astype(np.float32) / np.float32(255)
-        objects.append(PhotometricObject(folder.name, stack, mask))
-    if not objects:
-        raise DatasetError(f"{root}: no object folder with NAME/NAME.<i>.png and NAME/NAME.mask.png")
-    return objects
-
-
-def _masked_zero_mean(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    v = img[mask].astype(np.float64)
-    return v - v.mean()
-
-
-def agreement(normalized: np.ndarray, mask: np.ndarray) -> float:
-    """Mean pairwise normalized cross-correlation inside ``mask``.
-
-    Args:
-        normalized: ``(k, H, W)`` normalized images of one view under ``k >= 2`` lights.
-        mask: ``(H, W)`` bool.
-
-    Returns:
-        In [-1, 1]; a pair where either image is constant inside the mask counts as 0.
-    """
-    vs = [_masked_zero_mean(n, mask) for n in normalized]
-    norms = [float(np.linalg.norm(v)) for v in vs]
-    scores = []
-    for i, j in combinations(range(len(vs)), 2):
-        denom = norms[i] * norms[j]
-        scores.append(float(vs[i] @ vs[j] / denom) if denom > 1e-12 else 0.0)
-    return float(np.mean(scores))
 
 
 def detail(normalized: np.ndarray, mask: np.ndarray) -> float:
@@ -213,7 +127,7 @@ def main(
     Raises:
         InputError: an unknown method, or one that cannot be built (a bad parameter or weight file), before
             the photographs are read; a negative ``erode``, or one that leaves a mask empty.
-        DatasetError: see :func:`load_objects`.
+        DatasetError: see :func:`~alcn_cv.data.scenes.load_photometric`.
     """
     if erode < 0:
         raise InputError(f"erode must be >= 0 pixels, got {erode}")
@@ -222,7 +136,7 @@ def main(
     if unknown:
         raise InputError(f"unknown method(s) {', '.join(unknown)}; available: {', '.join(available())}")
     norms = build_methods(methods)
-    objects = load_objects(data_dir, scale)
+    objects = load_photometric(data_dir, scale)
     if figure_object not in (None, "all") and figure_object not in [o.name for o in objects]:
         raise InputError(f"no object {figure_object!r}; objects: {', '.join(o.name for o in objects)}")
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * erode + 1, 2 * erode + 1))
@@ -250,7 +164,7 @@ def main(
             for obj in objects:
                 normalized = np.stack([norm.normalize(img) for img in obj.images])
                 row["objects"][obj.name] = {
-                    "agreement": agreement(normalized, masks[obj.name]),
+                    "agreement": mean_pairwise_ncc(normalized, masks[obj.name]),
                     "detail": detail(normalized, masks[obj.name]),
                 }
                 if obj.name in shown:

@@ -14,16 +14,19 @@ __all__ = ["build_methods"]
 def build_methods(
     methods: Sequence[str], build: Callable[[str], Normalization] = from_spec
 ) -> dict[str, Normalization]:
-    """Every method of a benchmark, built by ``build`` from its spec (its weight file loaded) before any work: a bad
-    parameter or weight file ends the command with one line naming the method, not with a failed run found after
-    the long work.
+    """Every method of a benchmark, built by ``build`` from its spec (its weight file loaded) before any work: a spec
+    listed twice, a bad parameter or weight file ends the command with one line naming the method, not with a failed
+    run found after the long work.
 
     Returns:
         The built methods by spec, in the order of ``methods``.
 
     Raises:
-        InputError: a method that cannot be built; the message names its spec.
+        InputError: a method listed twice or that cannot be built; the message names its spec.
     """
+    twice = [spec for i, spec in enumerate(methods) if spec in methods[:i]]
+    if twice:
+        raise InputError(f"method {twice[0]!r} is listed twice")
     norms = {}
     for spec in methods:
         try:

@@ -24,7 +24,7 @@ paired with every other frame of the scene (at most ``max_pairs`` pairs, drawn a
   ``pose_px`` (the identity is the truth): the 2D-projection criterion of Rad et al., BMVC
   2017, Sec. 5, on real light.
 
-Parameters of CLAHE, DoG, SLCN, DLCN, Tan-Triggs and DoG + local standardization are tuned on the
+Parameters of CLAHE, DoG, SLCN, DLCN, SQI, Tan-Triggs and DoG + local standardization are tuned on the
 training scenes only, each over a grid of the same size (:data:`TUNING_GRIDS`), scored by
 identification on a subsample; the report holds both the default and the tuned rows. With
 ``leave_one_out``, each scene is evaluated with the parameters tuned on the others.
@@ -60,6 +60,7 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
+from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.policies import LOCAL_BOX, local_standardize
 from alcn_cv.bench.relight_report import write_report
 from alcn_cv.bench.relight_settings import PRESETS, Settings
@@ -116,7 +117,7 @@ _DOG_GRID = [(0.5, 1.5), (0.5, 3.0), (1.0, 2.0), (1.0, 3.0), (1.0, 4.0), (1.5, 3
 _LCN_GRID = [2.0, 1.0, 1.5, 3.0, 4.0, 6.0, 8.0, 12.0]
 #: Settings searched per tuned method, the same number (8) for each; the default comes first, so
 #: a tie keeps it.
-TUNING_GRIDS: dict[str, list[dict[str, float]]] = {
+TUNING_GRIDS: dict[str, list[dict[str, Any]]] = {
     "dog": [{"sigma1": a, "sigma2": b} for a, b in _DOG_GRID],
     "slcn": [{"sigma": s} for s in _LCN_GRID],
     "dlcn": [{"sigma": s} for s in _LCN_GRID],
@@ -134,6 +135,19 @@ TUNING_GRIDS: dict[str, list[dict[str, float]]] = {
         ]
     ],
     "dog+lstd": [{"sigma1": a, "sigma2": b} for a, b in _DOG_GRID],
+    "sqi": [
+        {"sigmas": s, "eps": e}
+        for s, e in [
+            ((1.0, 2.0, 4.0), 0.01),
+            ((1.0, 2.0, 4.0), 0.003),
+            ((1.0, 2.0, 4.0), 0.03),
+            ((0.5, 1.0, 2.0), 0.01),
+            ((2.0, 4.0, 8.0), 0.01),
+            ((4.0, 8.0, 16.0), 0.01),
+            ((1.0, 4.0, 16.0), 0.01),
+            ((2.0, 4.0, 8.0), 0.03),
+        ]
+    ],
     # clip 4 on 8x8 tiles: Jenicek & Chum, "No Fear of the Dark", ICCV 2019
     "clahe": [
         {"clipLimit": c, "tileGridSize": (t, t)}
@@ -418,14 +432,6 @@ def tune(
 # The benchmark
 
 
-def _build_methods(methods: Sequence[str]) -> dict[str, Normalization]:
-    """Every method built, by spec, raising :class:`InputError` on a spec listed twice, an unknown name or bad
-    parameters (before any scene is read)."""
-    if len(set(methods)) != len(methods):
-        raise InputError("a method is listed twice")
-    return {spec: build_method(spec) for spec in methods}
-
-
 def _entry_names(entry: str, subfolders: bool = True) -> set[str]:
     """The names of the scenes a trainer's entry (a folder, or the name of a shared ``webcam`` scene) stands for:
     its last part (a path recorded on Windows read as one), and where it is a folder here, the scenes
@@ -569,7 +575,7 @@ def main(
     methods = list(methods)
     # Built once for the run: a method keeps nothing from one image to the next (ALCN's divisive floors of an image's
     # strips live in a context variable for that image), so every scene of a spec is normalized by one instance.
-    built = _build_methods(methods)
+    built = build_methods(methods, build_method)
     trained_on = {spec: trained_scenes(spec, norm) for spec, norm in built.items()}
     seeds = check_seeds(seeds)
     roots = [Path(p) for p in data] if data else [shared_root("webcam"), shared_root("psm")]

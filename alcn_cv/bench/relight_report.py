@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from alcn_cv.io import atomic_write
-from alcn_cv.report import describe_machine, markdown_table, new_figure, save_figure, spread_cell, write_json
+from alcn_cv.io import atomic_write, write_json
+from alcn_cv.report import describe_machine, markdown_table, new_figure, save_figure, spread_cell
 
 __all__ = ["write_report"]
 

@@ -270,18 +270,16 @@ def _to_gray(frame: np.ndarray) -> np.ndarray:
     return lab_and_lightness(frame)[1]
 
 
-def video_memory(
-    norm: Normalization, size: tuple[int, int], frames: int, budget_s: float, colour: bool = False
-) -> dict[str, Any]:
-    """Resident memory while ``norm`` normalizes a generated video frame after frame.
+def video_memory(norm: Normalization, size: tuple[int, int], frames: int, budget_s: float) -> dict[str, Any]:
+    """Resident memory while ``norm`` normalizes a generated grayscale video frame after frame.
 
-    Frames are :func:`synthetic_frame` with the light moving; the loop stops after ``frames``
+    Frames are :func:`synthetic_frame` (gray) with the light moving; the loop stops after ``frames``
     frames or ``budget_s`` seconds (at least 2 frames). Returns the RSS after every frame (MB),
     its first, last and largest value, the growth per frame (least-squares slope over the
     second half, kB per frame) and the frames run.
     """
     width, height = size
-    base = [synthetic_frame(width, height, colour, seed=1, t=0.1 * i) for i in range(4)]
+    base = [synthetic_frame(width, height, False, seed=1, t=0.1 * i) for i in range(4)]
     rss: list[float] = []
     times: list[float] = []
     start = time.perf_counter()
@@ -303,7 +301,7 @@ def video_memory(
     )
     return {
         "size": [width, height],
-        "colour": colour,
+        "colour": False,
         "frames": len(rss),
         "median_frame_ms": float(np.median(times) * 1e3),
         "rss_mb": [round(v, 2) for v in rss],

@@ -18,9 +18,8 @@ The detection benchmark also asks for localization (IoU 0.8 with 36-pixel boxes 
 labelled background (:func:`shifted_negatives`), meant to penalize settings that keep only
 coarse structure (large sigmas).
 
-It is quick (no network is trained) and deterministic for a seed. It is only a proxy, and
-on the data engine's default benchmark it preferred coarse settings that detected worse than the
-defaults (``docs/journal.md``), so the benchmark runs it only on request (``alcn bench detect --tune``).
+It is quick (no network is trained) and deterministic for a seed. It is only a proxy of detection, so the
+benchmark runs it only on request (``alcn bench detect --tune``).
 """
 
 from __future__ import annotations
@@ -55,6 +54,9 @@ GRIDS: dict[str, list[dict[str, float]]] = {
 #: :data:`~alcn_cv.filters.standardize.STANDARDIZE_EPS`, because the benchmark standardizes the raw output of every
 #: method, some of them (a DoG of [0, 1] intensities) of a far smaller amplitude than ALCN's.
 BENCH_STANDARDIZE_EPS = 1e-6
+
+#: The range of the larger offset (pixels) of a :func:`shifted_negatives` window.
+SHIFT = (6, 10)
 
 
 def centre_windows(windows: np.ndarray, size: int = CROP) -> np.ndarray:
@@ -91,16 +93,16 @@ def relight_windows(windows: np.ndarray, rng: np.random.Generator) -> np.ndarray
 
 
 def shifted_negatives(
-    windows: np.ndarray, labels: np.ndarray, rng: np.random.Generator, shift: tuple[int, int] = (6, 10)
+    windows: np.ndarray, labels: np.ndarray, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Object windows moved off centre, as background: the localization negatives of the search.
+    """Object windows moved off centre, as background: the localization negatives of the search. The larger of
+    the x and y offsets is drawn in :data:`SHIFT` (pixels).
 
     Args:
-        windows: ``(n, S, S)`` windows (``S >= 32 + 2 * shift[1]`` keeps the shifted 32x32
+        windows: ``(n, S, S)`` windows (``S >= 32 + 2 * SHIFT[1]`` keeps the shifted 32x32
             centre inside the window; borders wrap otherwise).
         labels: ``(n,)``, 0 = background.
         rng: random generator.
-        shift: the larger of the x and y offsets is drawn in this range (pixels).
 
     Returns:
         ``(windows, labels)`` with every object window appended once, shifted, labelled 0.
@@ -108,7 +110,7 @@ def shifted_negatives(
     objects = windows[labels > 0]
     moved = np.empty_like(objects)
     for k, w in enumerate(objects):
-        size = int(rng.integers(shift[0], shift[1] + 1))
+        size = int(rng.integers(SHIFT[0], SHIFT[1] + 1))
         big, small = size * int(rng.choice([-1, 1])), int(rng.integers(-size, size + 1))
         dy, dx = (big, small) if rng.random() < 0.5 else (small, big)
         moved[k] = np.roll(w, (dy, dx), axis=(0, 1))

@@ -193,7 +193,6 @@ def sample_lighting(
     width: float,
     height: float,
     *,
-    centre: tuple[float, float] | None = None,
     relief: float = 8.0,
 ) -> Lighting:
     """Draw a lighting condition of ``family`` for a scene of ``width x height`` pixels.
@@ -201,9 +200,8 @@ def sample_lighting(
     Args:
         rng: random generator.
         family: one of :data:`LIGHT_FAMILIES`.
-        width, height: scene size in pixels (point and spot lights are placed relative to it).
-        centre: point of interest (x, y) that spots and point lights aim around; the scene
-            centre when None.
+        width, height: scene size in pixels (point and spot lights are placed relative to it and
+            aim around its centre).
         relief: height of the relief in pixels; point and spot lights are raised by it so that
             they stay above the tallest object.
 
@@ -214,7 +212,7 @@ def sample_lighting(
     if family not in LIGHT_FAMILIES:
         raise InputError(f"unknown lighting family {family!r}; known: {LIGHT_FAMILIES}")
     size = float(max(width, height))
-    cx, cy = centre if centre is not None else (width / 2.0, height / 2.0)
+    cx, cy = width / 2.0, height / 2.0
     az = rng.uniform(0, 360)
     lights: list[Light] = []
     ambient = np.full(3, rng.uniform(0.1, 0.3))

@@ -139,14 +139,9 @@ def make_object(
     return ReliefObject(tex.astype(np.float32), height.astype(np.float32), mask.astype(np.float32), mat, shape)
 
 
-def make_catalog(n: int, seed: int, size: int = 96, materials: tuple[str, ...] | None = None) -> list[ReliefObject]:
+def make_catalog(n: int, seed: int, size: int = 96) -> list[ReliefObject]:
     """``n`` distinct objects, deterministic for ``seed`` (object ``k`` depends on ``(seed, k)`` only)."""
-    out = []
-    for k in range(n):
-        rng = np.random.default_rng([seed, k])
-        mat = materials[k % len(materials)] if materials else None
-        out.append(make_object(rng, size, material=mat))
-    return out
+    return [make_object(np.random.default_rng([seed, k]), size) for k in range(n)]
 
 
 def background_surface(

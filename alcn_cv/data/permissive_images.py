@@ -1,6 +1,6 @@
 """Real photographs that permit any use, for training on relit copies (:mod:`alcn_cv.data.light_changes`).
 
-Three sources, each photograph with its licence:
+Two sources, each photograph with its licence:
 
 * the photographs that ship inside the scikit-image wheel
   (:data:`alcn_cv.data.textures.SKIMAGE_PHOTOGRAPHS`, the photographs the data engine's textures
@@ -8,9 +8,7 @@ Three sources, each photograph with its licence:
   copyright restrictions, and that load without a download (``pooch``); the phrase of each
   docstring is kept and checked when it is read;
 * OpenCV's samples under ``../shared/data`` (Apache-2.0, :data:`SHARED_PHOTOGRAPHS`): the
-  chessboard views, the cookie box's still and frames of its video;
-* the data engine's rendered scenes (:func:`alcn_cv.data.relief_scenes.render_scene`, one frame
-  each), generated here from procedural textures and crops of those photographs.
+  chessboard views, the cookie box's still and frames of its video.
 
 The ``webcam`` frames (academic research only) and the other shared sets are not listed: they
 are validation data, not training data of a default that anyone may use.
@@ -44,7 +42,6 @@ __all__ = [
     "permissive_photographs",
     "photo_files",
     "relit_scenes",
-    "rendered_photographs",
     "shared_photographs",
     "skimage_photographs",
     "training_photographs",
@@ -180,30 +177,10 @@ def folder_photographs(
     return photos
 
 
-def rendered_photographs(count: int, seed: int = 0, size: int = 384) -> list[Photograph]:
-    """``count`` rendered scenes of the data engine, the first frame of each (grayscale uint8 ``size x size``)."""
-    from alcn_cv.data.relief_scenes import render_scene
-
-    return [
-        Photograph(
-            f"rendered_{i:03d}",
-            render_scene(np.random.default_rng([seed, i]), size, 2)[0][0],
-            "rendered by alcn-cv",
-            "alcn_cv.data.relief_scenes",
-        )
-        for i in range(count)
-    ]
-
-
-def permissive_photographs(
-    shared: str | Path | None = None, rendered: int = 0, seed: int = 0, max_side: int | None = 640
-) -> list[Photograph]:
-    """Every photograph of the three sources: scikit-image's, the shared OpenCV samples (when
-    ``shared`` is given) and ``rendered`` rendered scenes."""
-    photos = skimage_photographs(max_side)
-    if shared is not None:
-        photos += shared_photographs(shared, max_side=max_side)
-    return photos + rendered_photographs(rendered, seed)
+def permissive_photographs(shared: str | Path) -> list[Photograph]:
+    """Every photograph of scikit-image's and of the shared OpenCV samples under ``shared``, the longer side at most
+    640 pixels."""
+    return skimage_photographs() + shared_photographs(shared)
 
 
 def training_photographs(shared: str | Path) -> list[Photograph]:

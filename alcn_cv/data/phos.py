@@ -236,7 +236,7 @@ def render_windows(
         workers: worker processes (the output does not depend on it).
 
     Returns:
-        A :class:`PhosBatch`. Cost: about 2 ms of CPU time per window (one core).
+        A :class:`PhosBatch`.
     """
     families = _check_parameters(n, n_objects, background_fraction, lighting)
     cols = [

@@ -179,6 +179,12 @@ def look_at(
     return R, -R @ np.asarray(eye, float)
 
 
+#: Triangles with a vertex nearer than this depth are dropped by :func:`rasterize` (perspective only).
+NEAR = 1.0
+#: Triangle-pixel candidate pairs :func:`rasterize` processes at once (a memory bound).
+MAX_PAIRS = 2_000_000
+
+
 def rasterize(
     xy: np.ndarray,
     depth: np.ndarray,
@@ -187,8 +193,6 @@ def rasterize(
     height: int,
     *,
     perspective: bool = True,
-    near: float = 1.0,
-    max_pairs: int = 2_000_000,
     with_attributes: bool = True,
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """Rasterise triangles given in screen coordinates with a z-buffer.
@@ -199,8 +203,6 @@ def rasterize(
         faces: int64 (M, 3) vertex indices.
         width, height: buffer size.
         perspective: interpolate ``1 / z`` (perspective-correct) rather than ``z``.
-        near: triangles with a vertex nearer than this are dropped (perspective only).
-        max_pairs: triangle-pixel candidate pairs processed at once (memory bound).
         with_attributes: also return the triangle index and barycentric buffers (else None).
 
     Returns:
@@ -222,7 +224,7 @@ def rasterize(
     Z = depth[faces]
     ok = np.isfinite(P).all(axis=(1, 2)) & np.isfinite(Z).all(axis=1)
     if perspective:
-        ok &= (near < Z).all(axis=1)
+        ok &= (NEAR < Z).all(axis=1)
     x0 = np.clip(np.ceil(P[..., 0].min(1)), 0, width)
     x1 = np.clip(np.floor(P[..., 0].max(1)), -1, width - 1)
     y0 = np.clip(np.ceil(P[..., 1].min(1)), 0, height)
@@ -239,7 +241,7 @@ def rasterize(
     csum = np.cumsum(counts)
     while start < len(ids):
         base = csum[start - 1] if start else 0
-        stop = max(start + 1, int(np.searchsorted(csum, base + max_pairs, side="right")))
+        stop = max(start + 1, int(np.searchsorted(csum, base + MAX_PAIRS, side="right")))
         sel = ids[start:stop]
         cnt = counts[start:stop]
         t = np.repeat(sel, cnt)

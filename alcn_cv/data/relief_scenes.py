@@ -126,7 +126,7 @@ def generate(
 
     Returns:
         The output folder: a folder of scenes, ``scene_NNN`` (:func:`alcn_cv.data.scenes.load_scene_folder`;
-        ``alcn train-real-light --set 'rendered=["DIR"]'``). Cost: about 1 s of CPU per 320x320 frame.
+        ``alcn train-real-light --set 'rendered=["DIR"]'``).
     """
     # render_scene and relief_surface check these too, but in the workers, after the progress bar has started
     if scenes < 1:

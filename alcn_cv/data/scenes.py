@@ -11,6 +11,8 @@ did not move), so a pixel is the same point of the scene in every frame. The dat
 * ``psm`` (``../shared/data/psm``): 4 photometric-stereo objects, ``NAME.0.png`` ..
   ``NAME.11.png`` per object (one folder per object, or all in one folder), ``NAME.mask.png``
   (a mask, not a frame) skipped. Terms: research use, citing S. Seitz (U. Washington).
+  :func:`load_photometric` reads such a set with its masks (one folder per object), as
+  :class:`PhotometricObject`; :func:`mean_pairwise_ncc` is the agreement of an object's images.
 * the rendered scenes of ``alcn data scenes`` (:mod:`alcn_cv.data.relief_scenes`):
   ``<root>/scene_NNN/frame_NN.png``.
 * Phos-like folders: one folder per object holding its photographs under different light.
@@ -38,6 +40,7 @@ Example (with the shared data)::
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import re
@@ -58,9 +61,12 @@ __all__ = [
     "TEST_SCENES",
     "WEBCAM_SCENES",
     "TRAIN_SCENES",
+    "PhotometricObject",
     "Scene",
+    "load_photometric",
     "load_scene_folder",
     "load_scenes",
+    "mean_pairwise_ncc",
     "read_eight_bits",
     "registration_score",
     "scene_dirs",
@@ -82,13 +88,8 @@ WEBCAM_SCENES = (*TRAIN_SCENES, "mexico")
 #: file, say): rounded to 8 bits (:func:`alcn_cv.io.eight_bits`, ``round(x / 257)``) it keeps 17 grey levels or fewer
 #: (0 to 16: 4095 rounds to 16).
 NARROW_16_BIT = 4096
-#: Frames of a registered scene score at least this (:func:`registration_score`). Measured (2026-11-29): the
-#: webcam scenes 0.331-0.682 (frankfurt the lowest; 0.266 and more on the 12 or 20 frames the benchmark reads),
-#: the psm objects 0.859-0.912, 24 rendered scenes of ``alcn data scenes`` 0.306 and more, the gain preset's relit
-#: photographs 0.216 and more (0.170 under light ``hard``); unrelated photographs of one size -0.007 to 0.004 (14
-#: of scikit-image's, 35 and 5 of the shared data), the views of Middlebury's dino and temple rings -0.006 and
-#: 0.017. Views of one fixed background with a moving object or camera are not caught: the chessboard views 0.169,
-#: the cookie box's video 0.294.
+#: Frames of a registered scene score at least this (:func:`registration_score`); unrelated photographs of one size
+#: score about 0. Views of one fixed background with a moving object or camera are not caught.
 REGISTERED_SCORE = 0.1
 
 _INDEXED = re.compile(r"^(?P<name>.+)\.(?P<index>\d+)$")
@@ -196,8 +197,7 @@ def registration_score(frames: np.ndarray) -> float:
     cross-correlation of their gradient magnitudes, on frames of about 128 x 128 pixels (area-resized, blurred by a
     Gaussian of sigma 1), each magnitude less its blur by a Gaussian of sigma 4 (so that the layout of a photograph,
     an object centred on a plain ground, does not count: where the edges are does). The edges of a fixed view stay
-    in place whatever the light; unrelated photographs score about 0 (:data:`REGISTERED_SCORE` gives measured
-    values)."""
+    in place whatever the light; unrelated photographs score about 0 (:data:`REGISTERED_SCORE`)."""
     n, h, w = frames.shape
     scale = min(1.0, 128 / np.sqrt(h * w))
     size = (max(8, round(w * scale)), max(8, round(h * scale)))
@@ -220,23 +220,31 @@ def _evenly_spaced(n: int, max_frames: int | None) -> list[int]:
     return sorted({int(round(v)) for v in np.linspace(0, n - 1, max_frames)})
 
 
-def _group_files(folder: Path) -> dict[str, list[Path]]:
-    """The frames of ``folder`` by scene: ``NAME.<i>.<ext>`` by ``NAME`` (masks skipped), the rest by the folder."""
+def _folder_files(folder: Path) -> tuple[dict[str, list[Path]], list[Path], dict[str, Path]]:
+    """The images of ``folder``: ``NAME.<i>.<ext>`` by ``NAME`` (ordered by index), the other images (by name) and
+    the masks ``NAME.mask.<ext>`` by ``NAME``; none when ``folder`` cannot be listed as images."""
     try:
         files = list_images(folder)
     except InputError:
-        return {}
+        return {}, [], {}
     indexed: dict[str, list[tuple[int, Path]]] = {}
     plain: list[Path] = []
+    masks: dict[str, Path] = {}
     for path in files:
         if _MASK.search(path.stem):
+            masks[path.stem[: -len(".mask")]] = path
             continue
         m = _INDEXED.match(path.stem)
         if m:
             indexed.setdefault(m.group("name"), []).append((int(m.group("index")), path))
         else:
             plain.append(path)
-    groups = {name: [p for _, p in sorted(items)] for name, items in sorted(indexed.items())}
+    return {name: [p for _, p in sorted(items)] for name, items in sorted(indexed.items())}, plain, masks
+
+
+def _group_files(folder: Path) -> dict[str, list[Path]]:
+    """The frames of ``folder`` by scene: ``NAME.<i>.<ext>`` by ``NAME`` (masks skipped), the rest by the folder."""
+    groups, plain, _ = _folder_files(folder)
     if plain:
         groups.setdefault(folder.name, []).extend(plain)
     return groups
@@ -343,3 +351,80 @@ def select_scenes(scenes: Sequence[Scene], tokens: Sequence[str]) -> list[Scene]
             raise InputError(f"no scene or data set {token!r}; available: {names}")
         chosen += [s for s in hits if all(s is not c for c in chosen)]
     return chosen
+
+
+@dataclass(frozen=True)
+class PhotometricObject:
+    """One object of a photometric-stereo set: one view under several lights, with the object's mask.
+
+    Attributes:
+        name: the object's name (its folder).
+        images: ``(k, H, W)`` float32 grayscale intensities in [0, 1], one per light, in the order of their index.
+        mask: ``(H, W)`` bool, the object's pixels.
+    """
+
+    name: str
+    images: np.ndarray
+    mask: np.ndarray
+
+
+def load_photometric(root: str | os.PathLike, scale: float = 1.0) -> list[PhotometricObject]:
+    """Every object of a photometric-stereo folder (the ``psm`` layout): one subfolder ``NAME/`` per object holding
+    ``NAME.0.png`` ... ``NAME.{k-1}.png`` (any image type) and its mask ``NAME.mask.png`` (> 127 inside); subfolders
+    without such images or without a mask are skipped. Images are read as 8-bit gray (the codec's conversion).
+
+    Args:
+        root: the folder holding one subfolder per object.
+        scale: resize factor applied to images (``cv2.INTER_AREA``) and masks (nearest), in (0, 1].
+
+    Raises:
+        DatasetError: ``root`` is not a folder, holds no object, an object has one image only (an agreement
+            compares two lights or more), an image is unreadable or differs in size from its mask.
+        InputError: ``scale`` out of range.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        what = "not a folder" if root.exists() else "folder not found"
+        raise DatasetError(f"{root}: {what} (a photometric-stereo set: a folder of images per object)")
+    if not 0 < scale <= 1:
+        raise InputError(f"scale must be in (0, 1], got {scale}")
+    objects = []
+    for folder in _visible_subfolders(root):
+        indexed, _, masks = _folder_files(folder)
+        shots, mask_path = indexed.get(folder.name), masks.get(folder.name)
+        if not shots or mask_path is None:
+            logger.debug("skipping %s: no %s.<i> images or no mask", folder, folder.name)
+            continue
+        if len(shots) < 2:
+            raise DatasetError(f"{folder}: one photograph ({shots[0].name}); an object needs 2 lights or more")
+        try:
+            images = [read_image(p, gray=True) for p in shots]
+            mask = read_image(mask_path, gray=True) > 127
+        except InputError as exc:  # a file of the data set, not the caller's input
+            raise DatasetError(str(exc)) from None
+        if any(img.shape != mask.shape for img in images):
+            raise DatasetError(f"{folder}: images and mask {mask_path.name} differ in size")
+        if scale != 1:
+            size = (max(1, round(mask.shape[1] * scale)), max(1, round(mask.shape[0] * scale)))
+            images = [cv2.resize(img, size, interpolation=cv2.INTER_AREA) for img in images]
+            mask = cv2.resize(mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
+        objects.append(PhotometricObject(folder.name, np.stack(images).astype(np.float32) / np.float32(255), mask))
+    if not objects:
+        raise DatasetError(f"{root}: no object folder with NAME/NAME.<i>.png and NAME/NAME.mask.png")
+    return objects
+
+
+def mean_pairwise_ncc(images: np.ndarray | Sequence[np.ndarray], mask: np.ndarray) -> float:
+    """The mean, over every pair of ``images`` (``k >= 2`` of one view, ``(H, W)`` each), of their normalized
+    cross-correlation inside the bool ``mask`` (in float64): in [-1, 1], 1 when the images agree up to a gain and an
+    offset; a pair where either image is constant inside the mask counts as 0."""
+    values = []
+    for image in images:
+        v = image[mask].astype(np.float64)
+        values.append(v - v.mean())
+    norms = [float(np.linalg.norm(v)) for v in values]
+    scores = []
+    for i, j in itertools.combinations(range(len(values)), 2):
+        denom = norms[i] * norms[j]
+        scores.append(float(values[i] @ values[j] / denom) if denom > 1e-12 else 0.0)
+    return float(np.mean(scores))

@@ -19,7 +19,6 @@ side-by-side figure.
 
 from __future__ import annotations
 
-import itertools
 import logging
 import os
 from pathlib import Path
@@ -30,6 +29,7 @@ import numpy as np
 from alcn_cv.data.lighting import LIGHT_FAMILIES, Light, Lighting, sample_lighting
 from alcn_cv.data.objects import make_object, paste, to_surface
 from alcn_cv.data.render import render_surfaces
+from alcn_cv.data.scenes import load_photometric, mean_pairwise_ncc
 from alcn_cv.errors import DatasetError
 from alcn_cv.io import atomic_write, check_writable, make_folder, write_json
 
@@ -62,13 +62,6 @@ def image_stats(gray: np.ndarray, mask: np.ndarray) -> dict[str, float]:
     }
 
 
-def _ncc(a: np.ndarray, b: np.ndarray) -> float:
-    a = a - a.mean()
-    b = b - b.mean()
-    d = np.sqrt((a * a).sum() * (b * b).sum())
-    return float((a * b).sum() / d) if d > 0 else 0.0
-
-
 def set_stats(objects: dict[str, tuple[list[np.ndarray], np.ndarray]]) -> dict[str, dict[str, float]]:
     """Mean and standard deviation over all images of each statistic, plus across-light ones.
 
@@ -83,8 +76,7 @@ def set_stats(objects: dict[str, tuple[list[np.ndarray], np.ndarray]]) -> dict[s
             per_image[k] += [s[k] for s in st]
         means = np.array([s["mean"] for s in st])
         cv_means.append(float(means.std() / max(means.mean(), 1e-6)))
-        vals = [g[mask] for g in imgs]
-        nccs.append(float(np.mean([_ncc(a, b) for a, b in itertools.combinations(vals, 2)])))
+        nccs.append(mean_pairwise_ncc(imgs, mask))
     out = {k: {"mean": float(np.mean(v)), "std": float(np.std(v))} for k, v in per_image.items()}
     out["across_lights_cv_of_mean"] = {"mean": float(np.mean(cv_means)), "std": float(np.std(cv_means))}
     out["across_lights_pairwise_ncc"] = {"mean": float(np.mean(nccs)), "std": float(np.std(nccs))}
@@ -92,11 +84,15 @@ def set_stats(objects: dict[str, tuple[list[np.ndarray], np.ndarray]]) -> dict[s
 
 
 def load_psm(psm_dir: str | os.PathLike) -> tuple[dict[str, tuple[list[np.ndarray], np.ndarray]], np.ndarray]:
-    """Read the PSM set: ``({name: (12 gray float32 images, bool mask)}, lights (12, 3))``."""
+    """Read the PSM set: ``({name: (12 gray float32 images, bool mask)}, lights (12, 3))``: the objects of
+    :func:`~alcn_cv.data.scenes.load_photometric`, each with one image per light of ``lights.txt``.
+
+    Raises:
+        DatasetError: as :func:`~alcn_cv.data.scenes.load_photometric`; ``lights.txt`` missing or malformed, or an
+            object with another number of images.
+    """
     root = Path(psm_dir)
-    if not root.is_dir():  # else the first complaint would be the missing lights.txt, not the folder
-        what = "not a folder" if root.exists() else "folder not found"
-        raise DatasetError(f"{root}: {what} (the PSM set: lights.txt and a folder of images per object)")
+    objects = load_photometric(root)  # the folder first: else the first complaint would be the missing lights.txt
     lf = root / "lights.txt"
     try:
         rows = lf.read_text().split("\n")
@@ -108,36 +104,27 @@ def load_psm(psm_dir: str | os.PathLike) -> tuple[dict[str, tuple[list[np.ndarra
         raise DatasetError(f"{lf}: malformed (first line: count, then x y z per light): {exc}") from None
     if lights.shape != (count, 3):
         raise DatasetError(f"{lf}: expected {count} rows of 3 numbers")
-    objects = {}
-    for d in sorted(p for p in root.iterdir() if p.is_dir()):
-        m = cv2.imread(str(d / f"{d.name}.mask.png"), cv2.IMREAD_GRAYSCALE)
-        if m is None:
-            raise DatasetError(f"{d / (d.name + '.mask.png')}: missing or unreadable mask")
-        imgs = []
-        for i in range(count):
-            f = d / f"{d.name}.{i}.png"
-            img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
-            if img is None:
-                raise DatasetError(f"{f}: missing or unreadable image")
-            if img.shape != m.shape:
-                raise DatasetError(f"{f}: size {img.shape} differs from its mask {m.shape}")
-            imgs.append(img.astype(np.float32) / 255.0)
-        objects[d.name] = (imgs, m > 127)
-    if not objects:
-        raise DatasetError(f"{root}: no object folders")
-    return objects, lights
+    for obj in objects:
+        if len(obj.images) != count:
+            raise DatasetError(f"{root / obj.name}: {len(obj.images)} images, but {lf.name} lists {count} lights")
+    return {obj.name: (list(obj.images), obj.mask) for obj in objects}, lights
+
+
+#: Objects :func:`render_like_psm` renders, and their images' side (pixels).
+PSM_LIKE_OBJECTS, PSM_LIKE_SIZE = 4, 256
 
 
 def render_like_psm(
-    lights: np.ndarray | None, n_objects: int = 4, seed: int = 0, size: int = 256, *, plain: bool = False
+    lights: np.ndarray | None, seed: int = 0, *, plain: bool = False
 ) -> dict[str, tuple[list[np.ndarray], np.ndarray]]:
-    """Render ``n_objects`` relief objects on black under ``len(lights)`` lightings (12 when ``lights`` is None).
+    """Render :data:`PSM_LIKE_OBJECTS` relief objects on black, :data:`PSM_LIKE_SIZE` pixels square, under
+    ``len(lights)`` lightings (12 when ``lights`` is None).
 
     Args:
         lights: (L, 3) light directions in the PSM convention (x right, y up, z towards the
             camera): white directional lights with no ambient light, gain 1, gamma 2.2. None:
             ``L = 12`` lightings drawn from :data:`LIGHT_FAMILIES` in turn.
-        n_objects, seed, size: objects, their seed, image side.
+        seed: the objects' seed.
         plain: give the objects a uniform matte albedo (0.5) instead of their textures and
             materials, like the plaster-like PSM objects, to isolate the effect of the lighting.
 
@@ -147,7 +134,8 @@ def render_like_psm(
     out = {}
     shapes = ("dome", "blob", "cylinder", "box")
     count = 12 if lights is None else len(lights)
-    for k in range(n_objects):
+    size = PSM_LIKE_SIZE
+    for k in range(PSM_LIKE_OBJECTS):
         rng = np.random.default_rng([seed, 31, k])
         obj = make_object(rng, 192, shape=shapes[k % len(shapes)], relief=0.3, material="matte" if plain else None)
         if plain:

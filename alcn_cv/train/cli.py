@@ -1,9 +1,8 @@
 """Command line of the training stage: ``alcn train``, ``alcn train-detector``, ``alcn distill`` and ``alcn export``.
 
-``alcn train``, ``alcn train-real-light`` and ``alcn distill`` each take a named preset (``--conf``,
-:mod:`alcn_cv.train.config`: the recipe of a shipped weight file) and ``--set KEY=VALUE`` overrides
-(``alcn train-unet``, the free-form baseline, takes train-real-light's); ``alcn train-detector`` is
-the paper's second stage, a new detector for new objects from a few real images on the frozen
+``alcn train``, ``alcn train-real-light``, ``alcn train-unet`` (the free-form baseline) and ``alcn distill`` each
+take a named preset (``--conf``, :mod:`alcn_cv.train.config`) and ``--set KEY=VALUE`` overrides;
+``alcn train-detector`` is the paper's second stage, a new detector for new objects from a few real images on the frozen
 Normalizer; ``alcn export`` writes a Normalizer as ONNX for the torch-free OpenCV runtime. torch is
 imported only when a command runs.
 """
@@ -11,7 +10,6 @@ imported only when a command runs.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import logging
 import shlex
 import sys
@@ -80,6 +78,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", type=Path, default=Path("out/alcn"), help="run folder (default: out/alcn)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
     p.add_argument("--seed", type=int, help="seed (default: the preset's)")
     p.add_argument("--device", choices=("cpu", "cuda"), help="run.device (default: the preset's)")
     add_progress_option(p)
@@ -179,13 +178,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="train the free-form U-Net baseline exactly as train-real-light trains the gain Normalizer",
         description="Train a small U-Net that outputs the normalized image (alcn_cv.train.unet_normalizer; Jenicek & "
         "Chum's jointly trained U-Net) with train-real-light's data, objective and budget (alcn_cv.train.unet): the "
-        "same presets and --set keys; net.* are the gain network's and unused. Writes "
+        "same keys, but net.* are the U-Net's (channels, levels, eps). Writes "
         "OUT/unet_normalizer.npz, train.log and history.json; bench it as unet:weights=OUT/unet_normalizer.npz.",
     )
-    _add_conf(u, "gain", "a preset of train-real-light", "steps=600")
+    _add_conf(
+        u, "gain", "gain (train-real-light's gain preset, with a U-Net of 8 channels and 3 levels)", "net.channels=16"
+    )
     _add_run(u, "out/unet")
-    u.add_argument("--channels", type=int, default=8, help="the U-Net's first width (default 8)")
-    u.add_argument("--levels", type=int, default=3, help="the U-Net's resolutions (default 3)")
     u.add_argument("--threads", type=int, default=1, help="torch threads (default 1; 0: torch's default)")
     u.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
     u.set_defaults(func=_train_unet)
@@ -206,7 +205,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument(
         "--weights",
         type=Path,
-        help="Normalizer weight file (.npz; default: the default model's, with --onnx: its export is installed)",
+        help="Normalizer weight file (.npz); required unless --onnx is given, in which case the default model's is "
+        "exported",
     )
     e.add_argument("--overwrite", action="store_true", help="replace an existing .onnx")
     e.set_defaults(func=_export)
@@ -233,17 +233,26 @@ def _print_config(cfg: object) -> int:
     return 0
 
 
+def _check_resume_or_overwrite(args: argparse.Namespace) -> None:
+    """Refuse ``--resume`` with ``--overwrite``, alike on every training command that takes both."""
+    from alcn_cv.errors import InputError
+
+    if args.resume and args.overwrite:
+        raise InputError("give --resume (go on with the run in --out) or --overwrite (replace it), not both")
+
+
 def _train(args: argparse.Namespace) -> int:
     from alcn_cv.train.config import load_config
 
     cfg = load_config(args.conf, _operational(args, seed="seed", device="run.device"))
     if args.print_config:
         return _print_config(cfg)
+    _check_resume_or_overwrite(args)
     from alcn_cv.train import distributed
     from alcn_cv.train.trainer import train
 
     try:
-        result = train(cfg, args.out, resume=args.resume, progress=not args.no_progress)
+        result = train(cfg, args.out, resume=args.resume, overwrite=args.overwrite, progress=not args.no_progress)
     finally:
         distributed.shutdown()
     if result.status == "interrupted":
@@ -325,12 +334,10 @@ def _distill(args: argparse.Namespace) -> int:
 
 
 def _train_real_light(args: argparse.Namespace) -> int:
-    from alcn_cv.errors import InputError
     from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
 
     settings = _operational(args, seed="seed")
-    if args.resume and args.overwrite:
-        raise InputError("give --resume (go on with the run in --out) or --overwrite (replace it), not both")
+    _check_resume_or_overwrite(args)
     checkpoint = None
     if args.resume and args.conf is None:  # the checkpoint's settings, with those given
         from alcn_cv.train.checkpoint import load_checkpoint
@@ -388,25 +395,22 @@ def _next_steps(weights: Path) -> str:
 
 
 def _train_unet(args: argparse.Namespace) -> int:
-    from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
+    from alcn_cv.train.config import UNET_CONFS, preset
 
-    cfg = preset(REAL_LIGHT_CONFS, args.conf, _operational(args, seed="seed"))
-    net = {"channels": args.channels, "levels": args.levels}
-    if args.print_config:  # its network is the U-Net of --channels and --levels, not the preset's gain network
+    cfg = preset(UNET_CONFS, args.conf, _operational(args, seed="seed"))
+    if args.print_config:
         cfg.check()
-        sys.stdout.write("# net: the U-Net's --channels and --levels (--set net.* is not used)\n")
-        return _print_config(dataclasses.replace(cfg, net=net))
+        return _print_config(cfg)
     from alcn_cv.train.real_light import TrainingInterrupted
     from alcn_cv.train.unet import train_unet
 
-    command = _command("train-unet", args, "--channels", str(args.channels), "--levels", str(args.levels))
+    command = _command("train-unet", args)
     try:
         return _print_with_threads(
             args.threads,
             lambda: train_unet(
                 cfg,
                 args.out,
-                net=net,
                 command=command,
                 conf=args.conf,
                 progress=not args.no_progress,

@@ -3,7 +3,8 @@
 Each training command has one configuration class whose defaults are the recipe of its shipped
 weight file, and a dict of named presets: :data:`TRAIN_CONFS` (``alcn train --conf paper``,
 ``alcn_normalizer.npz``), :data:`REAL_LIGHT_CONFS` (``alcn train-real-light --conf gain``,
-``alcn_normalizer_gain.npz``) and :data:`DISTILL_CONFS` (``alcn distill --conf lite|gain-lite``).
+``alcn_normalizer_gain.npz``), :data:`UNET_CONFS` (``alcn train-unet --conf gain``, the U-Net
+baseline) and :data:`DISTILL_CONFS` (``alcn distill --conf lite|gain-lite``).
 :func:`with_settings` applies ``KEY=VALUE`` overrides (dotted keys, values read as TOML and
 checked against the field's type) to any of them. The module imports no torch.
 
@@ -34,14 +35,13 @@ The keys of :class:`TrainConfig` (also readable from a TOML file with the tables
     ``"dog"`` and ``"none"`` train the same detector on a fixed Difference-of-Gaussians or on the
     raw windows, the comparison that tells whether the learned Normalizer helps.
     ``num_kernels`` (int), ``sigma_step`` (float): the Gaussian basis, ``sigma_i = i * step``.
-    ``channels`` (list of 2 ints), ``hidden`` (int), ``activation`` (``"tanh"``, the paper's, or
-    ``"relu"``): the Normalizer; ``[10, 20]``, 256 (the shipped file) is five times cheaper than
-    the paper's ``[20, 50]``, 1024 (the ``paper-full`` preset), so that it trains on a CPU.
-    ``output_scale`` (float): fixed factor on its outputs.
-    ``init`` (``"dog"`` or ``"random"``): start the Normalizer at the DoG below (the last
-    layer's weights at zero, its bias the DoG) or with every window's weights near zero.
-    ``dog`` (list of 2 floats): sigmas (pixels, in the basis) of the DoG ``G_a - G_b`` used
-    by ``init = "dog"`` and ``method = "dog"``. ``detector_channels`` (list of 2 ints),
+    ``channels`` (list of 2 ints), ``hidden`` (int): the Normalizer (tanh activations, the
+    paper's); ``[10, 20]``, 256 (the shipped file) is five times cheaper than the paper's
+    ``[20, 50]``, 1024 (the ``paper-full`` preset), so that it trains on a CPU.
+    ``output_scale`` (float): fixed factor on its outputs. The Normalizer starts at the DoG
+    below (the last layer's weights at zero, its bias the DoG).
+    ``dog`` (list of 2 floats): sigmas (pixels, in the basis) of the DoG ``G_a - G_b`` the
+    Normalizer starts at and ``method = "dog"`` uses. ``detector_channels`` (list of 2 ints),
     ``detector_hidden`` (int), ``detector_dropout`` (float): the detector.
     ``detector_input`` (``"standardize"`` or ``"raw"``): the detector input policy, applied to
     every method alike: per-window standardization (zero mean, unit variance over the 32x32) or
@@ -55,7 +55,7 @@ The keys of :class:`TrainConfig` (also readable from a TOML file with the tables
     one lighting), the Normalizer the loss on all windows with the detector held fixed for the
     others, so that it learns to make other lightings look like the anchor to a detector.
     Adam with a cosine learning-rate schedule per step: ``lr`` (float, the detector's),
-    ``normalizer_lr`` (float), ``weight_decay`` (float), ``grad_clip`` (float, 0 = off),
+    ``normalizer_lr`` (float), ``grad_clip`` (float, 0 = off),
     ``batch_size`` (int), ``epochs`` (int), ``warmup_steps`` (int, linear warm-up).
 
 ``[fewshot]`` -- the paper's second stage as a validation (:mod:`alcn_cv.train.fewshot`)
@@ -92,11 +92,13 @@ __all__ = [
     "DISTILL_CONFS",
     "REAL_LIGHT_CONFS",
     "TRAIN_CONFS",
+    "UNET_CONFS",
     "FewShotSetup",
     "GainDistillConfig",
     "LiteDistillConfig",
     "RealLightConfig",
     "TrainConfig",
+    "UNetConfig",
     "dump_toml",
     "load_config",
     "preset",
@@ -147,9 +149,7 @@ class ModelConfig:
     sigma_step: float = 0.5
     channels: list[int] = field(default_factory=lambda: [10, 20])
     hidden: int = 256
-    activation: str = "tanh"
     output_scale: float = 1.0
-    init: str = "dog"
     dog: list[float] = field(default_factory=lambda: [0.5, 1.5])
     detector_channels: list[int] = field(default_factory=lambda: [20, 50])
     detector_hidden: int = 512
@@ -163,7 +163,6 @@ class OptimConfig:
     objective: str = "meta"
     lr: float = 1e-3
     normalizer_lr: float = 1e-3
-    weight_decay: float = 0.0
     grad_clip: float = 5.0
     batch_size: int = 128
     epochs: int = 3
@@ -210,7 +209,7 @@ class TrainConfig:
 
 
 #: ``alcn train`` presets, as overrides of :class:`TrainConfig`'s defaults. ``paper``: the recipe of
-#: the shipped ``alcn_normalizer.npz`` (the defaults, objective ``meta``; about 30 minutes on 2 CPU cores);
+#: the shipped ``alcn_normalizer.npz`` (the defaults, objective ``meta``; for a CPU);
 #: ``paper-full``: the paper's widths, data scale (Sec. 4.2) and Eq. 2 (objective ``joint``), for a GPU (no
 #: shipped file).
 TRAIN_CONFS: dict[str, dict[str, Any]] = {
@@ -226,8 +225,6 @@ TRAIN_CONFS: dict[str, dict[str, Any]] = {
 
 _CHOICES = {
     "model.method": ("alcn", "dog", "none"),
-    "model.activation": ("tanh", "relu"),
-    "model.init": ("dog", "random"),
     "model.detector_input": ("standardize", "raw"),
     "optim.objective": ("joint", "meta"),
     "run.device": ("cpu", "cuda"),
@@ -374,7 +371,6 @@ def _check(cfg: TrainConfig) -> None:
         "data.n_train",
         "data.n_val",
         "optim.normalizer_lr",
-        "optim.weight_decay",
         "optim.grad_clip",
         "optim.warmup_steps",
         "run.workers",
@@ -626,6 +622,29 @@ class RealLightConfig:
 
 #: ``alcn train-real-light`` presets: ``gain`` makes ``alcn_normalizer_gain.npz``.
 REAL_LIGHT_CONFS: dict[str, RealLightConfig] = {"gain": RealLightConfig()}
+
+
+def _unet_network() -> dict[str, Any]:
+    """The :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer` arguments of the U-Net baseline, every one of
+    them (its defaults)."""
+    return {"channels": 8, "levels": 3, "eps": 0.01}
+
+
+@dataclass
+class UNetConfig(RealLightConfig):
+    """Settings of :func:`~alcn_cv.train.unet.train_unet`: the gain Normalizer's data, objective and budget
+    (:class:`RealLightConfig`, whose attributes it shares), with a U-Net for network.
+
+    Attributes:
+        net: :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer` arguments (``--set net.channels=16``).
+    """
+
+    net: dict[str, Any] = field(default_factory=_unet_network)
+
+
+#: ``alcn train-unet`` presets: ``gain``, the U-Net baseline trained as the ``gain`` preset of
+#: :data:`REAL_LIGHT_CONFS` trains the gain Normalizer.
+UNET_CONFS: dict[str, UNetConfig] = {"gain": UNetConfig()}
 
 
 @dataclass

@@ -10,7 +10,7 @@ gradient reaches ``Theta``. Only the centre 32x32 of the mixture is needed and t
 gradient, so :class:`CentreMixture` blurs just that centre with each kernel's own width (no
 padding: the 64x64 window holds every tap) and weighs the blurs; it equals the centre of
 :class:`~alcn_cv.filters.kornia_mixture.GaussianMixture2d` on the window (a test checks it to
-1e-5) at a tenth of its cost, which matters on 2 CPU cores.
+1e-5) at a fraction of its cost.
 Each 64x64 training window (:mod:`alcn_cv.data.phos`) is used as in the paper: the Normalizer
 sees its centre 48x48, the mixture filters the whole 64x64 and the detector gets the centre
 32x32 (free of border effects for sigmas up to 5), after the detector input policy
@@ -115,8 +115,7 @@ class JointModel(nn.Module):
                 tuple(cfg.channels),
                 cfg.hidden,
                 cfg.output_scale,
-                init_weights=dog if cfg.init == "dog" else None,
-                activation=cfg.activation,
+                init_weights=dog,
             )
         self.register_buffer("fixed_weights", torch.tensor(dog, dtype=torch.float32))
         self.detector = Detector(num_classes, tuple(cfg.detector_channels), cfg.detector_hidden, cfg.detector_dropout)

@@ -26,7 +26,7 @@ Outputs in the run folder: ``train.log``, ``history.json``, ``checkpoint.pt`` (a
 Command (the ``gain`` preset reads photographs that permit any use; the webcam scenes, which
 ``--set scenes=[...]`` adds, are for academic research only, see ``shared/data/README.md``)::
 
-    alcn train-real-light --conf gain   # the shipped alcn_normalizer_gain.npz: a few minutes on 2 CPU cores
+    alcn train-real-light --conf gain   # the shipped alcn_normalizer_gain.npz
 """
 
 from __future__ import annotations

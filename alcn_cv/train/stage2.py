@@ -120,7 +120,6 @@ def train_detector(
     val: tuple[np.ndarray, np.ndarray] | None = None,
     progress: bool = True,
     net: nn.Module | None = None,
-    weight_decay: float = 0.0,
     device: str = "cpu",
 ) -> nn.Module:
     """Train a detector on normalized windows (the paper's second stage, Normalizer frozen).
@@ -146,7 +145,6 @@ def train_detector(
         progress: show a tqdm bar with the loss and accuracy.
         net: the network to train (modified in place); default ``Detector(num_classes)``
             initialised from ``seed``. It must map ``(B, 1, S, S)`` to ``(B, num_classes)``.
-        weight_decay: Adam's L2 penalty.
         device: torch device to train on.
 
     Returns:
@@ -166,7 +164,7 @@ def train_detector(
         if net is None:
             net = Detector(num_classes)
         net.to(device).train()
-        optimiser = torch.optim.Adam(net.parameters(), lr=lr, weight_decay=weight_decay)
+        optimiser = torch.optim.Adam(net.parameters(), lr=lr)
         order = torch.Generator().manual_seed(seed)
         bar = tqdm(range(epochs), desc="detector", unit="epoch", disable=not progress, leave=False)
         for epoch in bar:
@@ -195,16 +193,15 @@ def train_detector(
     return net.eval()
 
 
-def normalize_windows(windows: np.ndarray, normalization: Normalization, policy: str = "standardize") -> np.ndarray:
-    """Normalize 64x64 windows and keep the detector's centre 32x32.
+def normalize_windows(windows: np.ndarray, normalization: Normalization) -> np.ndarray:
+    """Normalize 64x64 windows, keep the detector's centre 32x32 and standardize each (as the shipped Normalizer was
+    trained).
 
     Args:
         windows: ``(n, 64, 64)`` uint8 windows (at the Normalizer's working resolution).
         normalization: an object with ``normalize(gray_float32) -> float32`` (any
             :func:`alcn_cv.create` result; for ALCN create it with ``scale=1`` since the
             windows are already at the working resolution).
-        policy: ``"standardize"`` (per-window standardization, as the shipped Normalizer was
-            trained) or ``"raw"``.
 
     Returns:
         ``(n, 32, 32)`` float32 detector inputs.
@@ -222,7 +219,7 @@ def normalize_windows(windows: np.ndarray, normalization: Normalization, policy:
         if len(windows)
         else np.zeros((0, INPUT, INPUT), np.float32)
     )
-    return standardize_windows(out) if policy == "standardize" else out.astype(np.float32)
+    return standardize_windows(out)
 
 
 def _read_objects(folder: Path) -> list[tuple[str, list[tuple[np.ndarray, object]]]]:

@@ -13,8 +13,7 @@ the first: the detector learns from windows under one *anchor* lighting only (as
 later learns from a few images under one light), while the Normalizer minimises the loss on
 *all* windows with the detector held fixed for the non-anchor ones (:meth:`JointModel.forward`
 with an ``anchor`` mask). Its gradient therefore says "make this lighting look like the anchor
-lighting to a detector", the invariance the second stage needs (plain Eq. 2, ``"joint"``, lost
-to the DoG on new objects: ``docs/journal.md``).
+lighting to a detector", the invariance the second stage needs (plain Eq. 2 is ``"joint"``).
 
 The same command trains the same detector on a fixed DoG (``model.method = "dog"``) or on the
 raw windows (``"none"``), so the benefit of the learned Normalizer is measured, not assumed.
@@ -51,6 +50,7 @@ from alcn_cv.report import log_to, machine, nan_to_none
 from alcn_cv.train import distributed
 from alcn_cv.train.checkpoint import (
     TrainState,
+    check_run_folder,
     interrupts_deferred,
     load_checkpoint,
     restore_checkpoint,
@@ -122,6 +122,7 @@ def train(
     out_dir: str | Path = "out/alcn",
     *,
     resume: bool = False,
+    overwrite: bool = False,
     progress: bool = True,
 ) -> TrainResult:
     """Train ALCN's Normalizer jointly with a detector (Eq. 2), or a baseline detector, on ``run.threads`` torch
@@ -132,6 +133,8 @@ def train(
             (see :mod:`alcn_cv.train.config`).
         out_dir: the run folder (checkpoint, log, curves, history, exported weights).
         resume: continue from ``out_dir/checkpoint.pt``; the result equals an uninterrupted run.
+        overwrite: replace the earlier run that ``out_dir`` holds (checked before any work,
+            :func:`~alcn_cv.train.checkpoint.check_run_folder`).
         progress: show progress bars.
 
     Returns:
@@ -139,11 +142,13 @@ def train(
         ``"interrupted"``.
 
     Raises:
-        InputError: bad configuration or data.
+        InputError: bad configuration or data; ``out_dir`` holds an earlier run (without ``resume`` or
+            ``overwrite``) or other files.
         WeightFileError: ``resume`` with a missing, corrupt or incompatible checkpoint.
         NonFiniteLossError: the loss became NaN or inf; the last good checkpoint is kept.
     """
     cfg = load_config(config)
+    check_run_folder(out_dir, resume=resume, overwrite=overwrite)
     distributed.init(cfg.run.device)
     out = run_folder(out_dir)
     start = time.perf_counter()
@@ -226,7 +231,7 @@ def _make_optimizer(model: JointModel, cfg: TrainConfig) -> torch.optim.Optimize
     if model.normalizer is not None:
         lr = cfg.optim.normalizer_lr
         groups.append({"params": model.normalizer.parameters(), "lr": lr, "base_lr": lr})
-    return torch.optim.Adam(groups, weight_decay=cfg.optim.weight_decay)
+    return torch.optim.Adam(groups)
 
 
 def _shards(cfg: TrainConfig, train_set: PhosBatch) -> _Shards:

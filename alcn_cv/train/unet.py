@@ -2,12 +2,13 @@ r"""Training the free-form baseline, :class:`~alcn_cv.train.unet_normalizer.UNet
 Normalizer.
 
 The same data, objective and budget as :func:`alcn_cv.train.real_light.train_real_light` under a
-:class:`~alcn_cv.train.config.RealLightConfig`: the scenes of :func:`~alcn_cv.train.real_light.training_scenes`,
+:class:`~alcn_cv.train.config.UNetConfig` (a :class:`~alcn_cv.train.config.RealLightConfig` whose ``net`` holds the
+U-Net's arguments; presets :data:`~alcn_cv.train.config.UNET_CONFS`): the scenes of
+:func:`~alcn_cv.train.real_light.training_scenes`,
 each step's scene, frames and locations drawn in the same order from the same generator, the crops of
 :func:`~alcn_cv.train.real_light.crop_windows`, :func:`~alcn_cv.train.real_light.identification_loss` on the
 textured locations plus the consistency and repeatability terms on those and the ``anywhere`` ones
 (:func:`~alcn_cv.train.real_light.objective`), ``steps`` steps of Adam at ``lr``, gradients clipped to norm 5.
-``net`` (the gain network's arguments) does not apply: the U-Net takes its own.
 
 The U-Net runs only on the part of each crop that its output on the central ``patch`` depends on
 (:func:`centre_outputs`), with the same result as on the whole crop.
@@ -25,7 +26,7 @@ from __future__ import annotations
 
 import functools
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -36,7 +37,7 @@ import torch
 from alcn_cv.errors import InputError
 from alcn_cv.report import machine
 from alcn_cv.train.checkpoint import check_run_folder
-from alcn_cv.train.config import RealLightConfig
+from alcn_cv.train.config import UNetConfig
 from alcn_cv.train.real_light import TrainingScene, fit, pair_loss, training_run, training_scenes
 from alcn_cv.train.unet_normalizer import UNetNormalizer
 from alcn_cv.weight_file import save_normalizer_file
@@ -88,10 +89,9 @@ def output_range(net: UNetNormalizer, scenes: Sequence[TrainingScene], frames: i
 
 
 def train_unet(
-    cfg: RealLightConfig,
+    cfg: UNetConfig,
     out: str | Path,
     *,
-    net: Mapping[str, Any] | None = None,
     command: str = "",
     conf: str | None = None,
     progress: bool = True,
@@ -101,10 +101,9 @@ def train_unet(
     module).
 
     Args:
-        cfg: the gain Normalizer's settings (a preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`);
-            ``cfg.net`` is the gain network's and is not used.
+        cfg: the settings (a preset of :data:`~alcn_cv.train.config.UNET_CONFS`); ``cfg.net`` holds the
+            :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer` arguments.
         out: the run folder.
-        net: :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer` arguments (default: its defaults).
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
         progress: show a progress bar.
         overwrite: replace the earlier run that ``out`` holds (checked before any work,
@@ -123,14 +122,14 @@ def train_unet(
         raise InputError(f"need crop >= patch, got crop {cfg.crop} and patch {cfg.patch}")
     check_run_folder(out, overwrite=overwrite)
     with training_run(cfg, out, check=False) as folder:
-        return _train(cfg, folder, dict(net or {}), {"command": command, "conf": conf}, progress)
+        return _train(cfg, folder, {"command": command, "conf": conf}, progress)
 
 
-def _train(cfg: RealLightConfig, out: Path, arguments: dict[str, Any], record: dict[str, Any], progress: bool) -> Path:
+def _train(cfg: UNetConfig, out: Path, record: dict[str, Any], progress: bool) -> Path:
     # The generators as in real_light._train: the same seeds, the network built first, the same draws per step.
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
-    net = UNetNormalizer(**arguments)
+    net = UNetNormalizer(**cfg.net)
     scenes, rendered = training_scenes(cfg)
     logger.info("U-Net %s: %d parameters", net.config, sum(p.numel() for p in net.parameters()))
     seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, None, "unet", progress)
