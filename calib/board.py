@@ -33,6 +33,8 @@ __all__ = ["BoardSpec", "Detection", "write_board_image", "suggest_chessboard_si
 
 _KINDS = ("chessboard", "charuco")
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
+#: A ChArUco board is found in an image only with at least this many of its corners (:class:`BoardDetector`).
+MIN_CHARUCO_CORNERS = 6
 
 
 @dataclass(frozen=True)
@@ -158,9 +160,8 @@ class BoardDetector:
         last_foreign_markers: those of them that are not the board's (another dictionary or board).
     """
 
-    def __init__(self, spec: BoardSpec, min_charuco_corners: int = 6) -> None:
+    def __init__(self, spec: BoardSpec) -> None:
         self.spec = spec
-        self.min_charuco_corners = int(min_charuco_corners)
         self._object = spec.corners_3d()
         if spec.kind == "charuco":
             self._board = spec.charuco_board()
@@ -192,7 +193,7 @@ class BoardDetector:
         seen = [] if marker_ids is None else [int(i) for i in np.asarray(marker_ids).ravel()]
         self.last_num_markers = len(seen)
         self.last_foreign_markers = sum(i not in self._valid_ids for i in seen)
-        if ids is None or len(ids) < self.min_charuco_corners:
+        if ids is None or len(ids) < MIN_CHARUCO_CORNERS:
             return None
         ids = np.asarray(ids, np.int32).ravel()
         if self._board.checkCharucoCornersCollinear(ids):

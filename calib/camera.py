@@ -66,6 +66,10 @@ MIN_VIEWS = 3
 RECOMMENDED_VIEWS = 10
 #: Chessboard sizes near OpenCV's sample board (9x6 inner corners) are tried when no ChArUco marker is seen.
 _COMMON_CHESSBOARD = (9, 6)
+#: :func:`detect_in_video` examines at most this many evenly spaced frames of a video.
+MAX_VIDEO_CANDIDATES = 150
+#: :func:`select_views` (with the board) first drops the views that show less than this share of its corners.
+MIN_COVERAGE = 0.5
 
 
 @dataclass
@@ -83,7 +87,9 @@ class Calibration:
 
     Attributes:
         K: float64 (3, 3) camera matrix, OpenCV pixel convention.
-        dist: float64 (5,) ``k1, k2, p1, p2, k3``.
+        dist: float64 (N,) OpenCV distortion ``k1, k2, p1, p2[, k3[, k4, k5, k6[, s1..s4[, tx, ty]]]]``: as
+            ``cv2.calibrateCamera`` gives them in :func:`calibrate` (N = 5 without ``CALIB_RATIONAL_MODEL`` and the
+            like in its ``flags``), or 4, 5, 8, 12 or 14 as the file read by :func:`load_calibration` holds them.
         image_size: (width, height) px.
         rms: overall RMS reprojection error, px.
         view_names: the views used.
@@ -243,13 +249,13 @@ def detect_in_images(
 
 
 def detect_in_video(
-    path: str | os.PathLike, board: BoardSpec, max_candidates: int = 150, progress: bool = True
+    path: str | os.PathLike, board: BoardSpec, progress: bool = True
 ) -> tuple[list[BoardView], tuple[int, int]]:
-    """Detect the board in evenly spaced frames of a video (at most ``max_candidates``
+    """Detect the board in evenly spaced frames of a video (at most :data:`MAX_VIDEO_CANDIDATES`
     frames are examined). View names are ``frame_000123``."""
     path = Path(path)
     total = count_frames(path)
-    step = max(1, -(-total // max_candidates)) if total else 1
+    step = max(1, -(-total // MAX_VIDEO_CANDIDATES)) if total else 1
     detector = board.detector()
     views: list[BoardView] = []
     size = None
@@ -308,12 +314,11 @@ def select_views(
     views: Sequence[BoardView],
     image_size: tuple[int, int],
     max_views: int = 30,
-    min_coverage: float = 0.5,
     board: BoardSpec | None = None,
 ) -> list[BoardView]:
     """Choose views for board coverage and spread of poses.
 
-    Views showing fewer than ``min_coverage`` of the board's corners and the blurriest third
+    Views showing fewer than :data:`MIN_COVERAGE` of the ``board``'s corners and the blurriest third
     (variance of the Laplacian) are discarded; then views are picked greedily by farthest-point
     sampling on (board centre, apparent size, tilt), starting with the view that covers most
     of the image, so that the chosen set spans the image and many orientations.
@@ -326,7 +331,7 @@ def select_views(
         return views
     if board is not None:
         full = board.num_corners
-        kept = [v for v in views if len(v.detection.ids) >= min_coverage * full]
+        kept = [v for v in views if len(v.detection.ids) >= MIN_COVERAGE * full]
         views = kept if len(kept) >= max_views else views
     if len(views) > max_views:
         sharp = np.array([v.sharpness for v in views])

@@ -126,8 +126,9 @@ def _board(args: argparse.Namespace) -> int:
 
 def _load_reference(path: Path, unit: str | None) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Known poses ``{image name: (R_w2c, t_w2c in mm)}`` from a Middlebury ``*_par.txt``
-    (metres) or a COLMAP model folder: in ``unit`` when given, else as its ``# Units:`` header says
-    (:func:`calib.conventions.colmap_unit_to_mm`, as for ``bop_frames_from_colmap``), else mm."""
+    (metres) or a COLMAP model folder: in ``unit`` when given, else in the model's units
+    (:func:`calib.conventions.colmap_unit_to_mm`: its ``# Units:`` header, or the ``registration.json`` beside it);
+    a model in arbitrary units needs ``unit``."""
     from alcn_cv.formats.colmap import read_model
     from alcn_cv.formats.middlebury import read_middlebury
 
@@ -142,7 +143,7 @@ def _load_reference(path: Path, unit: str | None) -> dict[str, tuple[np.ndarray,
                 "--reference-unit %s overrides the reference model's units header (%s)", unit, model.units
             )
         scale = colmap_unit_to_mm(
-            model, None if unit is None else MM_PER_UNIT[unit], option="--reference-unit (mm, cm or m)"
+            model, path, None if unit is None else MM_PER_UNIT[unit], option="--reference-unit (mm, cm or m)"
         )
         return {im.name: (im.R_w2c, im.t_w2c * scale) for im in model.images.values()}
     raise InputError(f"{path}: --reference must be a Middlebury *_par.txt or a COLMAP model folder")
@@ -305,7 +306,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--reference-unit",
         choices=("mm", "cm", "m"),
-        help="sfm: units of a COLMAP --reference (default: its '# Units:' header, else mm)",
+        help="sfm: units of a COLMAP --reference (default: its '# Units:' header, or the registration.json beside "
+        "it; needed for a model without either)",
     )
     p.add_argument(
         "--n-features",

@@ -1,4 +1,5 @@
-"""Registration of a training sequence: a camera pose for every frame, in millimetres.
+"""Registration of a training sequence: a camera pose for every frame, in millimetres (SfM without a known length:
+in its arbitrary units).
 
 Two paths:
 
@@ -18,12 +19,13 @@ Output (both paths), in ``out_dir``:
 
 - ``rgb/000000.png ...``: the registered frames (undistorted with the same K when the
   calibration has distortion, so that the pinhole ``cam_K`` holds exactly);
-- ``scene_camera.json``: BOP ``cam_K``, ``cam_R_w2c``, ``cam_t_w2c`` (mm) per image id, and an
-  empty ``scene_gt.json`` (no objects annotated), written by :mod:`alcn_cv.formats.bop`;
-- ``colmap/``: COLMAP text model (``PINHOLE`` camera, poses in mm with a ``# Units: mm``
-  header, image names relative to ``rgb/``; ``points3D.txt`` holds the SfM points on the
+- ``scene_camera.json``: BOP ``cam_K``, ``cam_R_w2c``, ``cam_t_w2c`` (mm, or the arbitrary units) per image id,
+  and an empty ``scene_gt.json`` (no objects annotated), written by :mod:`alcn_cv.formats.bop`;
+- ``colmap/``: COLMAP text model (``PINHOLE`` camera, image names relative to ``rgb/``; poses in mm with a
+  ``# Units: mm`` header, or, in arbitrary units, without a header; ``points3D.txt`` holds the SfM points on the
   COLMAP path and is empty on the ChArUco path) — what ``alcn pose build`` reads;
-- ``registration.json``: every input frame with its status, error and output id;
+- ``registration.json``: the ``units`` (``"mm"`` or :data:`calib.conventions.ARBITRARY_UNITS`), and every input
+  frame with its status, error and output id;
 - ``registration.png``: per-frame errors and camera centres.
 
 The folder is written under a temporary name and renamed when complete.
@@ -52,6 +54,7 @@ from alcn_cv.formats.colmap import (
     ColmapPoint3D,
     camera_from_opencv,
     model_from_pycolmap,
+    points_colmap_to_opencv,
     write_text_model,
 )
 from alcn_cv.io import count_frames, iter_frames, write_image, write_json
@@ -59,7 +62,7 @@ from alcn_cv.io import count_frames, iter_frames, write_image, write_json
 from .board import BoardSpec, Detection
 from .camera import Calibration
 from .colmap_log import pycolmap_log
-from .conventions import colmap_from_bop_frames, points_colmap_to_opencv
+from .conventions import ARBITRARY_UNITS, colmap_from_bop_frames
 from .undistort import Undistorter
 
 logger = logging.getLogger(__name__)
@@ -73,10 +76,14 @@ __all__ = [
     "register_colmap",
     "similarity_from_poses",
     "MIN_REGISTERED",
+    "MIN_AMBIGUITY_RATIO",
 ]
 
 #: Fewest registered frames for a usable training sequence.
 MIN_REGISTERED = 2
+#: :func:`board_pose` rejects a pose whose second IPPE solution has less than this times the reprojection error
+#: of the first: the planar pose is ambiguous (a board seen nearly fronto-parallel, or small).
+MIN_AMBIGUITY_RATIO = 1.5
 
 
 @dataclass
@@ -91,7 +98,7 @@ class FrameRegistration:
             when no pose was estimated.
         num_points: corners or 3D points behind the pose.
         image_id: id in the output (``rgb/{id:06d}.png``) when registered.
-        R_w2c, t_w2c: pose world -> camera (mm) when registered.
+        R_w2c, t_w2c: pose world -> camera (in the :attr:`Registration.units`) when registered.
     """
 
     name: str
@@ -105,7 +112,8 @@ class FrameRegistration:
 
 @dataclass
 class Registration:
-    """A registered sequence: intrinsics of the output images and the per-frame results."""
+    """A registered sequence: intrinsics of the output images, the per-frame results and the ``units`` of their
+    poses (``"mm"``, or :data:`calib.conventions.ARBITRARY_UNITS` for SfM without a known length)."""
 
     K: np.ndarray
     image_size: tuple[int, int]
@@ -122,9 +130,6 @@ class Registration:
         return [f for f in self.frames if f.status != "ok"]
 
 
-# -- input frames ------------------------------------------------------------------------
-
-
 # -- ChArUco path ------------------------------------------------------------------------
 
 
@@ -134,7 +139,6 @@ def board_pose(
     dist: np.ndarray | None,
     min_points: int = 8,
     max_rms_px: float = 1.0,
-    min_ambiguity_ratio: float = 1.5,
 ) -> FrameRegistration:
     """Pose of the board (board -> camera, board units) from one detection.
 
@@ -143,9 +147,9 @@ def board_pose(
         K, dist: intrinsics of the image the corners were found in.
         min_points: fewest corners accepted.
         max_rms_px: largest RMS reprojection error accepted.
-        min_ambiguity_ratio: the second IPPE solution must have at least this times the
-            reprojection error of the first; below, the pose is ambiguous (nearly
-            fronto-parallel or small board) and rejected.
+
+    A pose whose two IPPE solutions explain the corners almost equally well (:data:`MIN_AMBIGUITY_RATIO`) is
+    rejected as ambiguous.
 
     Returns:
         A :class:`FrameRegistration` with status ``"ok"`` and the pose, or the reason for rejection.
@@ -168,7 +172,7 @@ def board_pose(
     if rms > max_rms_px:
         return FrameRegistration("", f"reprojection error {rms:.2f} px > {max_rms_px:g} px", rms, n)
     errors = np.asarray(errors, float).ravel()
-    if len(errors) > 1 and errors[1] < min_ambiguity_ratio * max(errors[0], 1e-3):
+    if len(errors) > 1 and errors[1] < MIN_AMBIGUITY_RATIO * max(errors[0], 1e-3):
         return FrameRegistration(
             "", f"ambiguous planar pose (second solution error {errors[1]:.2f} px vs {errors[0]:.2f} px)", rms, n
         )
@@ -190,7 +194,7 @@ def _write_outputs(
     ]
     bop.write_scene(tmp, frames)
     cameras, bop_images = colmap_from_bop_frames(frames, reg.image_size)
-    units = reg.units if reg.units != "arbitrary" else None
+    units = reg.units if reg.units != ARBITRARY_UNITS else None
     write_text_model(tmp / "colmap", cameras, bop_images if images is None else images, points3d, units=units)
     write_json(
         tmp / "registration.json",
@@ -323,7 +327,7 @@ def similarity_from_poses(
 ) -> tuple[float, np.ndarray, np.ndarray]:
     """Similarity ``x_dst = s R x_src + t`` that maps cameras of one frame onto another.
 
-    The rotation is the chordal mean (SVD projection) of ``R_dst_i^T R_src_i`` over cameras,
+    The rotation is the chordal L2 mean (``scipy``'s ``Rotation.mean``) of ``R_dst_i^T R_src_i`` over cameras,
     so it is well defined from the orientations alone even when the centres are nearly
     collinear; then ``s`` and ``t`` are the least-squares fit of the centres with R fixed.
 
@@ -338,9 +342,9 @@ def similarity_from_poses(
     C_src, C_dst = np.asarray(C_src, float), np.asarray(C_dst, float)
     if len(C_src) < 2 or R_src.shape != R_dst.shape or C_src.shape != C_dst.shape:
         raise InputError("a similarity needs at least 2 cameras known in both frames")
-    M = np.einsum("nji,njk->ik", R_dst, R_src)  # sum of R_dst^T R_src
-    U, _, Vt = np.linalg.svd(M)
-    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    from scipy.spatial.transform import Rotation  # here: scipy.spatial takes 0.2 s to import (every `alcn` start)
+
+    R = Rotation.from_matrix(np.einsum("nji,njk->nik", R_dst, R_src)).mean().as_matrix()
     a = C_src - C_src.mean(0)
     b = C_dst - C_dst.mean(0)
     denom = float((a**2).sum())
@@ -658,7 +662,8 @@ def register_colmap(
         overwrite: replace an existing ``out_dir``.
 
     Without ``known_distance`` or ``reference`` the units stay arbitrary (warned and
-    recorded as ``"units": "arbitrary"`` in ``registration.json``).
+    recorded as ``"units": "arbitrary"`` (:data:`calib.conventions.ARBITRARY_UNITS`) in ``registration.json``;
+    ``colmap/`` then has no ``# Units:`` header).
 
     Raises:
         InputError: ``out_dir`` under a file, fewer than 3 frames, a ``known_distance`` or fewer than 2
@@ -666,7 +671,7 @@ def register_colmap(
         FileExistsError: ``out_dir`` exists (without ``overwrite``, or not an earlier output).
     """
     source = Path(source)
-    units = "mm" if (known_distance or reference) else "arbitrary"
+    units = "mm" if (known_distance or reference) else ARBITRARY_UNITS
     with (
         atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp,
         tempfile.TemporaryDirectory() as work,
@@ -701,7 +706,6 @@ def _sfm_rms(model: ColmapModel, image: ColmapImage, K: np.ndarray) -> float:
     if not len(idx):
         return float("nan")
     X = np.array([model.points3d[int(i)].xyz for i in image.point3d_ids[idx]])
-    x = (K @ (image.R_w2c @ X.T + image.t_w2c[:, None])).T
-    uv = x[:, :2] / x[:, 2:]
+    uv = cv2.projectPoints(X, cv2.Rodrigues(image.R_w2c)[0], image.t_w2c, K, None)[0].reshape(-1, 2)
     err = uv - points_colmap_to_opencv(image.points2d[idx])
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))

@@ -67,14 +67,16 @@ def registered_build(
     ``step``-th frame, as many keypoints as the reference's build: :data:`pose.build.COOKIE_BOX`)."""
     tracker, det = PoseTracker(PoseSolver(K, min_inliers=30)), FeaturePartDetector(ref, "none")
     with tempfile.TemporaryDirectory(dir=path.parent) as work:
-        views = []
+        views, size = [], (0, 0)
         for i, frame in frames(video, max_frames):
+            size = (frame.shape[1], frame.shape[0])
             est, _ = tracker.step(i, frame, det)
             pose = found(est)
             if pose is not None and i % step == 0:
                 io.write_image(Path(work) / f"{i:06d}.png", frame)
                 views.append(TrainingView(f"{i:06d}.png", K, None, est.R, pose[1].ravel()))
-        seq = TrainingSequence(Path(work), views, ref.units, info={"format": "registered video", "path": str(video)})
+        info = {"format": "registered video", "path": str(video)}
+        seq = TrainingSequence(Path(work), views, ref.units, size, info=info)
         n_features = build.COOKIE_BOX["n_features"]
         model, _ = build.build(
             seq, feature=ref.feature, n_features=n_features, normalization=normalization, work_dir=work

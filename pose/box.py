@@ -20,18 +20,23 @@ __all__ = [
     "NUM_CORNERS",
     "box_axes",
     "box_coordinates",
+    "box_diameter",
     "box_parts",
+    "box_size",
     "edge_directions",
     "facing_faces",
     "flat_axes",
     "part_visibility",
     "parts_per_face",
+    "project_points",
 ]
 
 NUM_CORNERS = 8
 #: Steps per box edge of the detector's parts (:func:`box_parts`: 2 is the corners, the edges'
 #: middles and the faces' centres).
 DIVISIONS = 2
+#: :func:`part_visibility` with a mask: a part farther than this many pixels from the mask is hidden by something else.
+MASK_TOLERANCE = 3
 
 
 def box_parts(corners: np.ndarray, divisions: int = DIVISIONS) -> np.ndarray:
@@ -94,13 +99,55 @@ def box_axes(corners: np.ndarray) -> np.ndarray:
 
 def flat_axes(corners: np.ndarray) -> np.ndarray:
     """``(3,)`` bool: which of the box's x, y and z edges have length 0."""
-    lengths = np.linalg.norm(_edge_vectors(corners), axis=0)
+    lengths = box_size(corners)
     return lengths <= 1e-9 * max(lengths.max(), 1e-300)
+
+
+def box_size(corners: np.ndarray) -> np.ndarray:
+    """Edge lengths ``(3,)`` float64 of the box ``corners`` ``(8, 3)``: the distances from corner 0 to corners 4, 2
+    and 1 (its x, y and z edges)."""
+    return np.linalg.norm(_edge_vectors(np.asarray(corners, np.float64)), axis=0)
+
+
+def box_diameter(corners: np.ndarray) -> float:
+    """The largest distance between two of the box's ``corners`` ``(8, 3)``: its diagonal."""
+    corners = np.asarray(corners, np.float64)
+    d = corners[:, None] - corners[None]
+    return float(np.sqrt((d**2).sum(-1)).max())
 
 
 def _edge_vectors(corners: np.ndarray) -> np.ndarray:
     """``(3, 3)``: the box's x, y and z edges as columns, as they are."""
     return np.stack([corners[4] - corners[0], corners[2] - corners[0], corners[1] - corners[0]], 1)
+
+
+def project_points(
+    points: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray, *, min_depth: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pinhole projections (no lens distortion) of points under one pose or a batch of ``b`` poses: the batched
+    counterpart of :func:`pose.solver.project` (``cv2.projectPoints``), for poses given as ``R, t``.
+
+    Args:
+        points: ``(n, 3)`` object points.
+        R, t: object-to-camera pose (``x_cam = R x + t``): ``(3, 3)`` and ``(3,)``, or a batch ``(b, 3, 3)`` and
+            ``(b, 3)``.
+        K: ``(3, 3)`` intrinsics.
+        min_depth: divide by the depth clipped below at this (finite pixels for points at or behind the camera);
+            ``None``: by the depth as it is (a point behind the camera projects as in homogeneous coordinates).
+
+    Returns:
+        ``uv (n, 2)`` float64 pixels and ``depth (n,)`` float64 (the camera frame's z), or ``(b, n, 2)`` and
+        ``(b, n)`` for a batch.
+    """
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    R, t = np.asarray(R, np.float64), np.asarray(t, np.float64)
+    batch = R.shape[:-2]
+    R, t = R.reshape(*batch, 3, 3), t.reshape(*batch, 3)
+    cam = np.einsum("...ij,nj->...ni", R, points) + t[..., None, :]
+    depth = cam[..., 2]
+    z = depth if min_depth is None else np.maximum(depth, min_depth)
+    uv = np.stack([K[0, 0] * cam[..., 0] / z + K[0, 2], K[1, 1] * cam[..., 1] / z + K[1, 2]], -1)
+    return uv, depth
 
 
 def part_visibility(
@@ -110,7 +157,6 @@ def part_visibility(
     K: np.ndarray,
     shape: tuple[int, int],
     mask: np.ndarray | None = None,
-    mask_tolerance: int = 3,
     parts: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Projections of points on the box's surface and which of them are visible, for one pose
@@ -123,7 +169,7 @@ def part_visibility(
         K: ``(3, 3)`` intrinsics.
         shape: ``(H, W)`` of the image.
         mask: optional ``(H, W)`` visible-object mask (BOP ``mask_visib``); a point farther
-            than ``mask_tolerance`` pixels from it is hidden by something else.
+            than :data:`MASK_TOLERANCE` pixels from it is hidden by something else.
         parts: ``(n, 3)`` points on the box's surface (:func:`box_parts`); default the corners.
 
     Returns:
@@ -136,11 +182,9 @@ def part_visibility(
     R, t = np.asarray(R, np.float64), np.asarray(t, np.float64)
     batch = R.shape[:-2]
     R, t = R.reshape(*batch, 3, 3), t.reshape(*batch, 3)
-    cam = np.einsum("...ij,nj->...ni", R, parts) + t[..., None, :]
-    z = np.maximum(cam[..., 2], 1e-9)
-    uv = np.stack([K[0, 0] * cam[..., 0] / z + K[0, 2], K[1, 1] * cam[..., 1] / z + K[1, 2]], -1)
+    uv, depth = project_points(parts, R, t, K, min_depth=1e-9)
     h, w = shape
-    visible = (cam[..., 2] > 0) & (uv[..., 0] >= 0) & (uv[..., 0] <= w - 1) & (uv[..., 1] >= 0) & (uv[..., 1] <= h - 1)
+    visible = (depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] <= w - 1) & (uv[..., 1] >= 0) & (uv[..., 1] <= h - 1)
     # in box coordinates (0..1 along each edge) a face is turned towards the camera when the
     # camera centre lies beyond its plane; a part is on the faces where its coordinate is 0 or 1
     # (both faces of a flat box's edge of length 0: one plane, seen from either side)
@@ -148,7 +192,7 @@ def part_visibility(
     on_low, on_high = _on_faces(corners, parts)
     visible &= (on_low & (eye < 0) | on_high & (eye > 1)).any(-1)
     if mask is not None:
-        near = cv2.dilate((mask > 0).astype(np.uint8), np.ones((2 * mask_tolerance + 1,) * 2, np.uint8))
+        near = cv2.dilate((mask > 0).astype(np.uint8), np.ones((2 * MASK_TOLERANCE + 1,) * 2, np.uint8))
         ij = np.clip(np.round(uv).astype(int), 0, [w - 1, h - 1])
         visible &= near[ij[..., 1], ij[..., 0]] > 0
     return uv, visible

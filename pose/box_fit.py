@@ -1,4 +1,4 @@
-"""The object's box from its sparse 3D points (open3d), step 4 of ``alcn pose build``.
+"""The object's box from its sparse 3D points (open3d), step 3 of ``alcn pose build``.
 
 :func:`fit_box` runs, in order: statistical outlier removal (:func:`remove_outliers`), RANSAC
 removal of the support plane when it extends beyond the object (:func:`remove_support_plane`),
@@ -6,7 +6,7 @@ DBSCAN keeping the largest cluster (:func:`largest_cluster`), then the box's fra
 oriented bounding box, or, with a known box (a cuboid ``.ply``), the frame of its best-seen face
 (:func:`face_frame`) with the true size matched to the fitted edges (:func:`match_known_size`)
 and placed flush with that face, away from the cameras (:func:`place_known_box`). Why each step is
-there (the cookie box's fit from 26.7% to under 3.3% off): ``docs/journal.md``.
+there, with the measurements: ``docs/journal.md``.
 """
 
 from __future__ import annotations
@@ -27,27 +27,19 @@ from pose.model import box_corners
 logger = logging.getLogger(__name__)
 
 
-@dataclass
-class BoxFitSettings:
-    """Settings of :func:`fit_box`.
-
-    Attributes:
-        plane_threshold: RANSAC distance for the support plane (default: 0.5% of the cloud's extent).
-        trim: percentile of the object's points left outside the box on each side of each axis.
-        seed: open3d's random seed (RANSAC), so that a fit is the same every time.
-        outlier_neighbors, outlier_std_ratio: open3d's statistical outlier removal.
-        plane_iterations: RANSAC iterations for the support plane.
-        cluster_min_points: DBSCAN's ``min_points`` (also the ``k`` of its radius, see
-            :func:`largest_cluster`).
-    """
-
-    plane_threshold: float | None = None
-    trim: float = 2.0
-    seed: int = 0
-    outlier_neighbors: int = 20
-    outlier_std_ratio: float = 2.0
-    plane_iterations: int = 500
-    cluster_min_points: int = 4
+#: The settings of :func:`fit_box`. RANSAC distance for the support plane, as a share of the cloud's extent.
+PLANE_THRESHOLD = 0.005
+#: Percentile of the object's points left outside the box on each side of each axis.
+TRIM = 2.0
+#: open3d's random seed (RANSAC), so that a fit is the same every time.
+SEED = 0
+#: open3d's statistical outlier removal: neighbours and standard-deviation ratio.
+OUTLIER_NEIGHBORS = 20
+OUTLIER_STD_RATIO = 2.0
+#: RANSAC iterations for the support plane.
+PLANE_ITERATIONS = 500
+#: DBSCAN's ``min_points`` (also the ``k`` of its radius, see :func:`largest_cluster`).
+CLUSTER_MIN_POINTS = 4
 
 
 @dataclass
@@ -77,7 +69,6 @@ def fit_box(
     *,
     scale_free: bool = False,
     viewpoints: np.ndarray | None = None,
-    settings: BoxFitSettings | None = None,
 ) -> BoxFit:
     """Fit the object's box to a sparse point cloud with open3d.
 
@@ -94,17 +85,17 @@ def fit_box(
             faces turned to the cameras carry points (e.g. a box seen from above: only its lid):
             the box is flush with the face and extends away from the cameras. Without viewpoints
             it extends toward the points off the face.
-        settings: see :class:`BoxFitSettings`.
+
+    The fit's settings are this module's constants (:data:`PLANE_THRESHOLD` ...).
 
     Raises:
         DatasetError: too few points, or a degenerate box (a flat or empty cluster).
     """
-    settings = settings or BoxFitSettings()
     pts = np.asarray(points, np.float64)
     if len(pts) < 10:
         raise DatasetError(f"only {len(pts)} 3D points; the box fit needs at least 10")
     with _one_open3d_thread():
-        return _fit_box(pts, known_size, scale_free, viewpoints, settings)
+        return _fit_box(pts, known_size, scale_free, viewpoints)
 
 
 @contextlib.contextmanager
@@ -126,21 +117,20 @@ def _fit_box(
     known_size: np.ndarray | None,
     scale_free: bool,
     viewpoints: np.ndarray | None,
-    settings: BoxFitSettings,
 ) -> BoxFit:
     import open3d as o3d
 
-    o3d.utility.random.seed(settings.seed)
-    idx = remove_outliers(pts, settings)
+    o3d.utility.random.seed(SEED)
+    idx = remove_outliers(pts)
     stats: dict[str, Any] = {"points": len(pts), "after_outlier_removal": len(idx)}
     cur = pts[idx]
     extent = float(np.linalg.norm(np.percentile(cur, 95, 0) - np.percentile(cur, 5, 0)))
-    plane_thr = settings.plane_threshold or 0.005 * extent
-    rest, support = remove_support_plane(cur, plane_thr, settings)
+    plane_thr = PLANE_THRESHOLD * extent
+    rest, support = remove_support_plane(cur, plane_thr)
     if support is not None:
         stats["support_plane_points"] = len(cur) - len(rest)
         idx, cur = idx[rest], cur[rest]
-    on_object = largest_cluster(cur, settings.cluster_min_points)
+    on_object = largest_cluster(cur, CLUSTER_MIN_POINTS)
     idx, cur = idx[on_object], cur[on_object]
     stats["object_points"] = len(idx)
     check_solid(cur)
@@ -148,8 +138,8 @@ def _fit_box(
         R, center = minimal_box_frame(cur)
         on_face = np.ones(len(cur), bool)
     else:  # a cuboid: its best-seen face gives the frame (see face_frame)
-        R, center, on_face = face_frame(cur, plane_thr, settings.seed)
-    lo, hi = robust_extents((cur - center) @ R, on_face, settings.trim)
+        R, center, on_face = face_frame(cur, plane_thr, SEED)
+    lo, hi = robust_extents((cur - center) @ R, on_face, TRIM)
     stats["fitted_size"] = (hi - lo).tolist()
     if known_size is None:
         size, center = hi - lo, center + R @ ((lo + hi) / 2)
@@ -167,20 +157,18 @@ def _fit_box(
     return BoxFit(corners, size, R, origin, keep, stats)
 
 
-def remove_outliers(points: np.ndarray, settings: BoxFitSettings) -> np.ndarray:
+def remove_outliers(points: np.ndarray) -> np.ndarray:
     """Indices of ``points`` kept by open3d's statistical outlier removal."""
     import open3d as o3d
 
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     _, kept = pcd.remove_statistical_outlier(
-        nb_neighbors=min(settings.outlier_neighbors, len(points) - 1), std_ratio=settings.outlier_std_ratio
+        nb_neighbors=min(OUTLIER_NEIGHBORS, len(points) - 1), std_ratio=OUTLIER_STD_RATIO
     )
     return np.arange(len(points))[np.asarray(kept)]
 
 
-def remove_support_plane(
-    points: np.ndarray, threshold: float, settings: BoxFitSettings
-) -> tuple[np.ndarray, np.ndarray | None]:
+def remove_support_plane(points: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray | None]:
     """The largest plane of ``points``, removed only when it reaches well beyond the rest (the
     table the object stands on). Returns the indices of the points off it (all of them when it
     stays) and the plane ``(a, b, c, d)`` (``None`` when it stays)."""
@@ -190,7 +178,7 @@ def remove_support_plane(
     if len(points) <= 30:
         return everything, None
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    plane, inl = pcd.segment_plane(distance_threshold=threshold, ransac_n=3, num_iterations=settings.plane_iterations)
+    plane, inl = pcd.segment_plane(distance_threshold=threshold, ransac_n=3, num_iterations=PLANE_ITERATIONS)
     inl = np.asarray(inl, np.int64)
     rest = np.setdiff1d(everything, inl)
     if len(rest) < 10 or len(inl) <= 0.2 * len(points):

@@ -38,8 +38,10 @@ from alcn_cv import io
 from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.extras import require
+from alcn_cv.formats.colmap import camera_from_pycolmap
 from alcn_cv.io import check_writable
 from pose import model as part_model
+from pose.box import box_size as box_edge_lengths
 from pose.box_fit import fit_box, size_errors
 from pose.model import PartModel, box_corners, read_box_corners
 from pose.parts import descriptor_norm
@@ -70,27 +72,20 @@ logger = logging.getLogger(__name__)
 
 #: Units of the box's size when building from a video and none are given.
 VIDEO_BOX_UNITS = "cm"
-#: A refined focal length's fx / fy moved by more than this share: warned (the cookie box from its first 120 frames
-#: with the motion mask: fx / fy 0.79).
+#: A refined focal length's fx / fy moved by more than this share: warned (``docs/journal.md`` has the measurements).
 SUSPICIOUS = 0.1
 #: A refined focal length whose fx / fy is off square pixels (1) by more than this factor: the build fails, its
-#: reconstruction degenerate (the cookie box from its first 12 frames of every 10th: 3 images registered, fx / fy
-#: 9.25, a model 48.8% off the box that still "tracks" its frames; the cookie box's recipe 1.004, from its first 120
-#: frames 0.79).
+#: reconstruction degenerate (too few images registered; ``docs/journal.md`` has the measurements).
 DEGENERATE_FOCAL_RATIO = 1.5
 #: The box fit off the known size (``mean_abs_relative_size_error``, the mean over the three edges) by more than this
-#: share: warned, in every branch (``--box-ply`` or ``--box-size``, video or registered sequence). The cookie box's
-#: recipe (:data:`COOKIE_BOX`, the whole video) is 2.7% off, a registered SfM sequence of it with a known scale 1.3%;
-#: its poor builds are 7.2% (the tutorial's intrinsics not refined) and 8.5-9.4% (the focal length held fixed): 5%
-#: lies between the two groups.
+#: share: warned, in every branch (``--box-ply`` or ``--box-size``, video or registered sequence); it lies between the
+#: builds that track well and the poor ones (``docs/journal.md`` has the measurements).
 BOX_FIT_WARNING = 0.05
 #: The box fit off the known size, on the edges its points cover (``seen_relative_size_error``: the best-seen face's
 #: two edges, and the excess of its normal over the true length; a normal seen only in part, as a box seen from above,
-#: is short by design), by more than this share: the build fails instead of writing a model. The worst honest build
-#: measured is 9.4% (the cookie box with its focal length held fixed: the normal 23% long, the face's edges 2.5%),
-#: while what cannot track is far off: poses in arbitrary units read as millimetres 62% (95% over three edges; no frame
-#: tracked), a wrong --box-units 90% or more, the cookie box's lid given another face's edges 21-37%, the journal's
-#: box grown from the wrong end of its height 26.7%. 20% is twice the worst honest build and under all of these.
+#: is short by design), by more than this share: the build fails instead of writing a model. It is about twice the
+#: worst honest build measured, and under what cannot track (poses in other units, a wrong ``--box-units``, another
+#: box's edges; ``docs/journal.md`` has the measurements).
 BOX_FIT_FAILURE = 0.2
 
 
@@ -101,8 +96,8 @@ def _read_only(array: np.ndarray) -> np.ndarray:
 
 #: A hand-held object turned before a static camera: the features kept on what moves
 #: (:func:`pose.sequence.motion_masks`; the static background would otherwise dominate the reconstruction), the focal
-#: length refined by the bundle adjustment (a guessed one held fixed folds the box: the cookie box 8.5% off instead of
-#: 2.7%), every 10th frame, 3000 ORB keypoints a frame: the cookie box's settings but its camera and number of frames.
+#: length refined by the bundle adjustment (a guessed one held fixed folds the box; ``docs/journal.md``), every 10th
+#: frame, 3000 ORB keypoints a frame: the cookie box's settings but its camera and number of frames.
 _STATIC_CAMERA: dict[str, Any] = {
     "step": 10,
     "motion_mask": True,
@@ -120,7 +115,7 @@ _STATIC_CAMERA: dict[str, Any] = {
 #:   ``camera``) and the box's size are the caller's.
 #: * ``cookie-box``: the shared data's ``cookie_box/box.mp4``: ``static-camera`` with the intrinsics of OpenCV's
 #:   real-time pose tutorial (fx = 640*55/22.3, fy = 480*55/14.9, cx = 320, cy = 240; refined), the box in cm, at
-#:   most 46 frames: all 455 frames the video decodes (its container says 456) at every 10th.
+#:   most 46 frames: all the frames the video decodes at every 10th.
 #:
 #: Without a preset, :func:`main`'s defaults (:data:`DEFAULTS`) hold: those of a registered sequence, which ignores
 #: the options of a video.
@@ -211,9 +206,7 @@ def build(
     window: int | None = None,
     ratio: float = 0.8,
     work_dir: str | Path | None = None,
-    world_is_object: bool = True,
     refine_focal: bool = False,
-    descriptors_per_point: int = 8,
     progress: bool = True,
 ) -> tuple[PartModel, np.ndarray]:
     """Build a part model from a sequence; returns it and the training cameras' centres (object frame).
@@ -248,7 +241,7 @@ def build(
     known, known_corners = None, None
     if box_ply is not None:
         known_corners = read_box_corners(box_ply)
-        known = np.linalg.norm(known_corners[[4, 2, 1]] - known_corners[0], axis=1)
+        known = box_edge_lengths(known_corners)
     elif box_size is not None:
         known = np.asarray(box_size, np.float64)
     if not registered and known is None:
@@ -266,12 +259,17 @@ def build(
             rec = triangulate_fixed_poses(seq, tmp / "database.db", tmp / "sparse")
         else:
             rec = reconstruct_incremental(seq, tmp / "database.db", tmp / "sparse", refine_focal)
-        xyz, desc, desc_point, tl, rgb = collect_points(rec, feats, norm, descriptors_per_point=descriptors_per_point)
-        cams_K = [rec.cameras[im.camera_id].calibration_matrix() for im in rec.images.values() if im.has_pose]
-        centers = np.array([im.projection_center() for im in rec.images.values() if im.has_pose])
-        reg = {im.name: im.cam_from_world().matrix() for im in rec.images.values() if im.has_pose}
+        xyz, desc, desc_point, tl, rgb = collect_points(rec, feats, norm)
+        posed = [im for im in rec.images.values() if im.has_pose]
+        centers = np.array([im.projection_center() for im in posed])
+        reg = {im.name: im.cam_from_world().matrix() for im in posed}
+        # the refined camera, in OpenCV's pixel convention (converted by alcn_cv.formats.colmap)
+        refined = (
+            np.mean([camera_from_pycolmap(rec.cameras[im.camera_id]).to_opencv()[0] for im in posed], axis=0)
+            if refine_focal and not registered
+            else None
+        )
     logger.info("%d 3D points (mean track %.1f) from %d images", len(xyz), tl.mean(), len(reg))
-    refined = np.mean(cams_K, axis=0) if refine_focal and not registered else None
     # square pixels give fx = fy: a bundle adjustment that pulls them apart had too few or too similar views; far
     # apart, the reconstruction is degenerate: refused before the box is fitted to it
     ratio = None if refined is None else float(refined[0, 0] / refined[1, 1])
@@ -281,7 +279,7 @@ def build(
             f"{len(reg)} of {len(seq.views)} images registered): a degenerate reconstruction, no model written; "
             "give more frames (--max-frames, --step) or views from more directions"
         )
-    if registered and world_is_object and known_corners is not None:
+    if registered and known_corners is not None:
         # the box is known in the world (= object) frame: keep the points near it, fit it for the report
         lo, hi = known_corners.min(0), known_corners.max(0)
         margin = 0.05 * np.linalg.norm(hi - lo)
@@ -307,7 +305,7 @@ def build(
         # registered: every point triangulated with the known poses is kept (the object need not be a
         # box, e.g. Middlebury's temple); unregistered: only the object's cluster moves with it
         keep = np.ones(len(xyz), bool) if registered else fit.keep
-        if registered and world_is_object:
+        if registered:
             pts, corners, cams = xyz, fit.corners, centers
         else:  # object frame = box frame
             s = fit.stats.get("scale", 1.0)
@@ -338,8 +336,7 @@ def build(
         extra={"registered_images": len(reg), "training_images": len(seq.views), "triangulated_points": int(len(xyz))},
     )
     if refined is not None and ratio is not None:
-        K = refined.copy()
-        K[:2, 2] -= 0.5  # COLMAP -> OpenCV pixel convention
+        K = refined
         model.extra["K"] = K.tolist()
         moved = abs(ratio / (seq.views[0].K[0, 0] / seq.views[0].K[1, 1]) - 1) > SUSPICIOUS
         logger.log(
@@ -354,7 +351,7 @@ def build(
     elif not registered or all(np.allclose(v.K, seq.views[0].K) for v in seq.views):
         model.extra["K"] = np.asarray(seq.views[0].K, np.float64).tolist()  # the camera, for `alcn pose track`
     if "K" in model.extra:
-        model.extra["image_size"] = list(seq.size)  # the frames that camera is for (extract_features read them)
+        model.extra["image_size"] = list(seq.size)  # the frames that camera is for
         dist = seq.views[0].dist
         # the lens distortion the reconstruction modelled (held fixed in it): the frames' keypoints are distorted
         if dist is not None and all(v.dist is not None and np.array_equal(v.dist, dist) for v in seq.views):

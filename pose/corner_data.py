@@ -25,7 +25,7 @@ import numpy as np
 
 from alcn_cv.errors import InputError
 from alcn_cv.io import to_gray
-from pose.box import box_parts, facing_faces, part_visibility
+from pose.box import box_parts, facing_faces, part_visibility, project_points
 from pose.corners import PAD, STRIDE, downscale, grid_centres, grid_shape, normalization_for, scaled_camera, to_scaled
 from pose.sequence import TrainingSequence
 
@@ -126,16 +126,17 @@ def random_homography(
 
 
 def _project(points: np.ndarray, R: np.ndarray, t: np.ndarray, K: np.ndarray) -> np.ndarray:
-    cam = points @ R.T + t
-    return cam[:, :2] / cam[:, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+    """Pixels ``(n, 2)`` of ``points`` as in homogeneous coordinates (a point of the table's plane behind the camera
+    too: the homographies between two views hold for it)."""
+    return project_points(points, R, t, K)[0]
 
 
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The smallest rotation taking the direction ``a`` to ``b``."""
-    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
-    axis = np.cross(a, b)
-    angle = np.arctan2(np.linalg.norm(axis), a @ b)
-    return cv2.Rodrigues(axis / max(np.linalg.norm(axis), 1e-12) * angle)[0]
+#: :func:`novel_view`'s viewpoints: their elevation (degrees above the plane of the box's bottom face) is kept in
+#: ``NOVEL_ELEVATION_RANGE``; one is kept only when every face it sees is seen in the view at least
+#: ``NOVEL_MIN_STRETCH`` as large (a face seen edge-on has no texture to give); ``NOVEL_TRIES`` are drawn at most.
+NOVEL_ELEVATION_RANGE = (20.0, 70.0)
+NOVEL_MIN_STRETCH = 0.35
+NOVEL_TRIES = 8
 
 
 def novel_view(
@@ -148,10 +149,7 @@ def novel_view(
     *,
     azimuth_deg: float = 8.0,
     elevation_deg: float = 20.0,
-    elevation_range: tuple[float, float] = (20.0, 70.0),
     distance: tuple[float, float],
-    min_stretch: float = 0.35,
-    tries: int = 8,
     parts: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The box of a registered view seen from a nearby viewpoint: each face of the box warped by
@@ -160,10 +158,10 @@ def novel_view(
     face keeps its shading), as a homography of the whole frame is not.
 
     The camera turns about the box's centre by up to ``azimuth_deg`` about the box's z axis (up)
-    and ``elevation_deg`` in elevation (kept within ``elevation_range`` above the bottom face's
+    and ``elevation_deg`` in elevation (kept within :data:`NOVEL_ELEVATION_RANGE` above the bottom face's
     plane), its distance scaled within ``distance`` ``(low, high)``. A viewpoint is kept only when every face it
-    sees is seen in the view at least ``min_stretch`` as large (a face seen edge-on has no
-    texture to give); ``None`` after ``tries`` refusals.
+    sees is seen in the view at least :data:`NOVEL_MIN_STRETCH` as large (a face seen edge-on has no
+    texture to give); ``None`` after :data:`NOVEL_TRIES` refusals.
 
     Args:
         image: the view, uint8 ``(H, W)``.
@@ -175,6 +173,8 @@ def novel_view(
         ``(image, mask, uv, visible)``: the new view, the box's pixels in it (uint8, 255), the
         parts' pixels ``(n, 2)`` and which of them are visible (:func:`pose.box.part_visibility`).
     """
+    from scipy.spatial.transform import Rotation  # here: scipy.spatial takes 0.2 s to import (every `alcn` start)
+
     corners = np.asarray(corners, np.float64)
     h, w = image.shape
     centre = corners.mean(0)
@@ -185,8 +185,8 @@ def novel_view(
         quad: cv2.contourArea(_project(corners[list(quad)], R, t, K).astype(np.float32))
         for quad in facing_faces(corners, R, t)
     }
-    for _ in range(tries):
-        new_elevation = np.clip(elevation + rng.uniform(-elevation_deg, elevation_deg), *elevation_range)
+    for _ in range(NOVEL_TRIES):
+        new_elevation = np.clip(elevation + rng.uniform(-elevation_deg, elevation_deg), *NOVEL_ELEVATION_RANGE)
         azimuth = np.arctan2(eye[1], eye[0]) + np.radians(rng.uniform(-azimuth_deg, azimuth_deg))
         e = np.radians(new_elevation)
         eye2 = (
@@ -195,11 +195,11 @@ def novel_view(
             * np.array([np.cos(e) * np.cos(azimuth), np.cos(e) * np.sin(azimuth), np.sin(e)])
         )
         # the camera rig turned about the box's centre: the box stays where it was in the frame
-        R2 = R @ _rotation_between(eye, eye2).T
+        R2 = R @ Rotation.align_vectors(eye2, eye)[0].as_matrix().T  # the smallest rotation taking eye to eye2
         t2 = -R2 @ (eye2 + centre)
         faces = facing_faces(corners, R2, t2)
         areas = [cv2.contourArea(_project(corners[list(q)], R2, t2, K).astype(np.float32)) for q in faces]
-        if all(q in seen and seen[q] >= min_stretch * a for q, a in zip(faces, areas)):
+        if all(q in seen and seen[q] >= NOVEL_MIN_STRETCH * a for q, a in zip(faces, areas)):
             break
     else:
         return None
@@ -358,12 +358,19 @@ def build_frames(
         seed: random seed.
 
     Raises:
-        InputError: an unregistered sequence, or no visible part in any view.
+        InputError: an unregistered sequence, a view with lens distortion (its parts would be placed by a pinhole
+            projection, and its novel views warped by homographies), or no visible part in any view.
     """
     from alcn_cv import io
 
     if not sequence.registered:
         raise InputError("the training sequence must be registered (a pose for every image)")
+    distorted = next((v.name for v in sequence.views if v.dist is not None and np.any(v.dist)), None)
+    if distorted is not None:
+        raise InputError(
+            f"{sequence.info.get('path', sequence.image_dir)}: view {distorted} has lens distortion, which the corner "
+            "detector does not model; undistort the sequence first (`alcn calib undistort --keep-K`)"
+        )
     recipe.check()
     scale = recipe.scale
     norm = normalization_for(normalization)

@@ -31,7 +31,7 @@ centre's window shows mostly the box's own texture, a corner's mostly the table.
   pose. The candidates are the 2D-3D correspondences of :class:`pose.solver.PoseSolver`.
 * **Verification** (:meth:`CornerDetector.verify`): a pose the solver accepts is kept only when
   the network scores the parts it shows highly enough where it shows them
-  (:meth:`CornerDetector.support`); a wrong pose from 5 chance inliers among the 130 candidates
+  (:meth:`CornerDetector.support`); a wrong pose from a few chance inliers among the candidates
   of a whole frame does not survive it, and is not the next frame's prior (see :data:`MIN_SUPPORT`).
 * **Proposals** (:meth:`CornerDetector.propose`): for a frame where RANSAC over the candidates
   gives no pose that survives, poses from thousands of P3P triples of the whole frame's
@@ -81,8 +81,8 @@ READABLE_VERSIONS = (3, 4)
 WINDOW = 32
 STRIDE = 4
 PAD = WINDOW // 2
-#: The lowest :meth:`CornerDetector.support` of a pose the tracker keeps (of 0.10-0.25, the most
-#: correct poses on Table 1).
+#: The lowest :meth:`CornerDetector.support` of a pose the tracker keeps (the most correct poses on Table 1 of
+#: those tried; ``docs/journal.md`` has the measurements).
 MIN_SUPPORT = 0.15
 #: :meth:`CornerDetector.propose`: candidate triples drawn, and the lowest support of the pose it proposes.
 PROPOSALS = 2000
@@ -210,9 +210,9 @@ class CornerDetector:
         min_score: lowest softmax score of a candidate in the whole frame.
         gate: with a prior pose, candidates farther than this (pixels of the full frame, times
             the tracker's ``search_scale``) from the part's predicted projection are dropped.
-        gated_top_k, gated_min_score: ``top_k`` and ``min_score`` inside the gates (scoring a
-            gate's cells by their probability of being any part, ``1 - p(background)``, instead
-            of the gate's part lost 20% of the poses of the data engine's #3).
+        gated_top_k, gated_min_score: ``top_k`` and ``min_score`` inside the gates (each gate's cells scored
+            by their probability of being the gate's part; ``docs/journal.md`` has why not by that of being any
+            part).
         min_support: the lowest :meth:`support` of a pose that :meth:`verify` keeps.
         proposals, min_proposal_support: how many candidate triples :meth:`propose` draws (0: it
             proposes nothing), and the lowest support of the pose it proposes.

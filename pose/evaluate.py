@@ -34,6 +34,7 @@ from alcn_cv.checks import check_seeds
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none
+from pose.box import box_diameter
 from pose.build import build as build_model
 from pose.corner_train import CornerRecipe
 from pose.corner_train import confs as corner_confs
@@ -124,10 +125,8 @@ def summarize(scores: list[PoseScore], diameter: float) -> dict[str, float]:
 
 
 #: The rows of the default report: no normalization, a DoG tuned for pose, ALCN. The DoG's sigmas
-#: (pixels of the 640x480 frames) gave the most correct poses of six pairs on the data engine's
-#: sequences #1-#8 (SIFT parts, 500 RANSAC iterations; sum of the % over the sequences): 1/2 763,
-#: 1/3 760, 1.5/4.5 713, 0.5/2.5 700, 2/4 653, and 0.5/1.5 (the default DoG, tuned for the
-#: detection benchmark's working scale of 0.25) 653; with 5000 iterations 1/2 777, 1/3 773, 0.5/1.5 670.
+#: (pixels of the 640x480 frames) gave the most correct poses of the pairs tried on the data engine's
+#: sequences #1-#8 (``docs/journal.md`` has the measurements).
 DEFAULT_NORMALIZATIONS = ("none", "dog:sigma1=1:sigma2=2", "alcn")
 
 
@@ -239,7 +238,7 @@ def main(
     # the models and corner detectors are made from the training sequence's poses: in known units, checked first
     check_known_units(load_sequence(train, obj_id=obj_id), "alcn pose eval (its models are built from these poses)")
     corners = read_box_corners(model_ply)
-    diameter = float(np.linalg.norm(corners.max(0) - corners.min(0)))
+    diameter = box_diameter(corners)
     columns = [f"#{int(p.name)}" for p in tests]
     table: dict[str, dict[str, float]] = {}
     spread: dict[str, dict[str, float]] = {}

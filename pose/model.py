@@ -49,13 +49,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.formats import bop
 from alcn_cv.io import atomic_write, with_suffix
 from calib.conventions import MM_PER_UNIT
+from pose.box import box_diameter, box_size
 
 logger = logging.getLogger(__name__)
 
@@ -139,32 +139,14 @@ class PartModel:
 
     @property
     def box_size(self) -> np.ndarray:
-        """Edge lengths ``(3,)`` of the box (distances from corner 0 to corners 4, 2, 1)."""
-        return np.linalg.norm(self.corners[[4, 2, 1]] - self.corners[0], axis=1)
+        """Edge lengths ``(3,)`` of the box (:func:`pose.box.box_size`: from corner 0 to corners 4, 2, 1)."""
+        return box_size(self.corners)
 
     @property
     def diameter(self) -> float:
-        """Largest distance between two corners (the box's diagonal), in :attr:`units`."""
-        d = self.corners[:, None] - self.corners[None]
-        return float(np.sqrt((d**2).sum(-1)).max())
-
-    def scaled_to(self, units: str) -> PartModel:
-        """A copy with every length converted to ``units``."""
-        s = unit_scale(self.units, units)
-        return PartModel(
-            corners=self.corners * s,
-            points3d=self.points3d * s,
-            descriptors=self.descriptors,
-            descriptor_point=self.descriptor_point,
-            track_length=self.track_length,
-            colors=self.colors,
-            units=units,
-            feature=self.feature,
-            normalization=self.normalization,
-            source=self.source,
-            box_fit=dict(self.box_fit),
-            extra=dict(self.extra),
-        )
+        """Largest distance between two corners (the box's diagonal, :func:`pose.box.box_diameter`), in
+        :attr:`units`."""
+        return box_diameter(self.corners)
 
     def header(self) -> dict[str, Any]:
         return {
@@ -287,30 +269,3 @@ def load(path: str | Path) -> PartModel:
         raise WeightFileError(f"{path}: field {exc.args[0]!r} missing") from exc
     except InputError as exc:
         raise WeightFileError(f"{path}: {exc}") from exc
-
-
-def from_opencv_tutorial(yml_path: str | Path, box_ply: str | Path | None = None, units: str = "cm") -> PartModel:
-    """A part model from the ORB model of OpenCV's real-time pose tutorial (``cookies_ORB.yml``).
-
-    The YAML holds ``points_3d`` (N x 1, 3 float channels) and ``descriptors`` (N x 32 uint8, ORB);
-    its lengths are centimetres. The box comes from ``box_ply`` (a cuboid mesh such as
-    ``../shared/data/cookie_box/box.ply``); without it, from the points' bounding box.
-    """
-    yml_path = Path(yml_path)
-    if not yml_path.is_file():
-        raise DatasetError(f"{yml_path}: file not found")
-    fs = cv2.FileStorage(str(yml_path), cv2.FILE_STORAGE_READ)
-    try:
-        pts, desc = fs.getNode("points_3d").mat(), fs.getNode("descriptors").mat()
-    finally:
-        fs.release()
-    if pts is None or desc is None:
-        raise DatasetError(f"{yml_path}: field 'points_3d' or 'descriptors' missing")
-    pts = pts.reshape(-1, 3).astype(np.float32)
-    if len(pts) != len(desc):
-        raise DatasetError(f"{yml_path}: field 'descriptors' has {len(desc)} rows for {len(pts)} points_3d")
-    if box_ply is not None:
-        corners = read_box_corners(box_ply)
-    else:
-        corners = box_corners(pts.max(0) - pts.min(0), pts.min(0))
-    return PartModel(corners=corners, points3d=pts, descriptors=desc, units=units, feature="ORB", source=str(yml_path))

@@ -80,8 +80,7 @@ def image_edges(image: np.ndarray, settings: EdgeSettings) -> tuple[np.ndarray, 
     """Canny edge mask ``(H, W)`` bool and the gradient direction ``(H, W)`` (radians) of ``image``
     (grey or BGR uint8). A colour image's edges are Canny's on its three channels (the channel of
     the strongest gradient at each pixel; its direction likewise): the yellow cookie box on the
-    white tablecloth has almost no grey-level edge (measured on frame 300: its bottom and left
-    outline missing from the grey Canny, present in the colour one)."""
+    white tablecloth has almost no grey-level edge (``docs/journal.md``)."""
     g = cv2.GaussianBlur(image, (0, 0), settings.blur) if settings.blur > 0 else image
     edges = cv2.Canny(g, *settings.canny, L2gradient=True) > 0
     gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3).reshape(*g.shape[:2], -1)

@@ -23,6 +23,7 @@ import numpy as np
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import to_gray
+from pose.box import project_points
 from pose.model import PartModel
 
 FEATURES = ("ORB", "SIFT", "AKAZE")
@@ -253,8 +254,8 @@ class FeaturePartDetector:
         ``region`` (a uint8 mask, or ``None``: the whole image).
 
         OpenCV's SIFT and ORB keep their ``nfeatures`` strongest keypoints of the whole image
-        *before* applying a mask (measured: 130 of the 1383 SIFT keypoints in a box's region
-        left with ``nfeatures=2000``), so the detector runs uncapped on the region's bounding
+        *before* applying a mask (few of a region's keypoints are left; ``docs/journal.md``), so the detector runs
+        uncapped on the region's bounding
         box (padded so that its border rules do not eat the region's edge) and the strongest
         are kept afterwards."""
         x0 = y0 = 0
@@ -377,9 +378,11 @@ def _project_in_front(
     """Indices of the points ``(N, 3)`` in front of the camera of ``prior = (rvec, tvec, K)`` and
     their pixels ``(n, 2)`` (pinhole, no distortion: the search regions are tens of pixels wide)."""
     rvec, tvec, K = prior
-    cam = points @ cv2.Rodrigues(np.asarray(rvec, np.float64))[0].T + np.ravel(tvec)
-    front = np.flatnonzero(cam[:, 2] > 0)
-    return front, cam[front, :2] / cam[front, 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+    uv, depth = project_points(
+        points, cv2.Rodrigues(np.asarray(rvec, np.float64))[0], np.ravel(tvec), K, min_depth=1e-9
+    )
+    front = np.flatnonzero(depth > 0)
+    return front, uv[front]
 
 
 def _as_words(desc: np.ndarray) -> np.ndarray:

@@ -60,7 +60,7 @@ from pose.evaluate import PROJ_PX, score, table_markdown
 from pose.model import PartModel, box_corners
 from pose.parts import FeaturePartDetector, PartDetector, create_feature
 from pose.plots import plot_table
-from pose.solver import project
+from pose.solver import camera_matrix, project
 from pose.track import make_solver
 
 logger = logging.getLogger(__name__)
@@ -82,7 +82,7 @@ def pinhole_camera(width: int, height: int, hfov_deg: float = DEFAULT_HFOV) -> n
     if not 0 < hfov_deg < 180:
         raise InputError(f"hfov must be in (0, 180) degrees, got {hfov_deg}")
     f = 0.5 * width / np.tan(np.radians(hfov_deg) / 2)
-    return np.array([[f, 0.0, (width - 1) / 2], [0.0, f, (height - 1) / 2], [0.0, 0.0, 1.0]])
+    return camera_matrix(f, f, (width - 1) / 2, (height - 1) / 2)
 
 
 def reference_index(frames: np.ndarray) -> int:

@@ -54,9 +54,17 @@ METHODS: dict[str, int] = {
 }
 
 #: How many times less precisely the learned detector finds the middle of an edge along the edge
-#: than across it (:func:`pose.box.edge_directions`); measured on the rendered sequences (median errors
-#: about 1 px along and 0.4 px across; ``docs/journal.md``).
+#: than across it (:func:`pose.box.edge_directions`); measured on the rendered sequences (``docs/journal.md``).
 ALONG_SIGMA = 3.0
+#: ``(degrees, fraction)``: a pose is near a prior pose (:class:`PoseSolver`'s ``min_inliers_near_prior``) when their
+#: rotations differ by less than ``degrees`` and their translations by less than ``fraction`` of the prior's distance
+#: to the camera.
+NEAR_PRIOR = (5.0, 0.05)
+#: With a prior pose, the pose refined from it is kept without running RANSAC when at least this share of the
+#: matches are its inliers; otherwise RANSAC runs too and the two solutions compete as ambiguous poses do
+#: (:class:`PoseSolver`'s ``ambiguity_tolerance``; a large motion between frames can leave the refinement from the
+#: prior in a wrong local minimum).
+PRIOR_INLIER_RATIO = 0.8
 
 
 @dataclass
@@ -88,12 +96,6 @@ class PoseEstimate:
         if self.rvec is None:
             raise InputError("no pose: the frame is lost")
         return cv2.Rodrigues(self.rvec)[0]
-
-    def matrix(self) -> np.ndarray:
-        """The 4x4 object-to-camera transform."""
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = self.R, self.tvec.ravel()
-        return T
 
 
 def camera_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
@@ -128,18 +130,10 @@ class PoseSolver:
         confidence: RANSAC confidence.
         iterations: RANSAC iteration cap.
         min_inliers: fewer inliers than this -> the frame is lost.
-        min_inliers_near_prior: with a prior pose, a pose within ``near_prior`` of it needs only
+        min_inliers_near_prior: with a prior pose, a pose near it (:data:`NEAR_PRIOR`) needs only
             this many inliers (``None``: ``min_inliers``). A wrong pose that also agrees with the
             motion predicted from the previous frames is far less likely than one anywhere.
-        near_prior: ``(degrees, fraction)``: a pose is near the prior when their rotations differ
-            by less than ``degrees`` and their translations by less than ``fraction`` of the
-            prior's distance to the camera.
         min_inlier_ratio: fewer than this fraction of the matches as inliers -> lost.
-        prior_inlier_ratio: with a prior pose, the pose refined from it is kept without running
-            RANSAC when at least this fraction of the matches are its inliers; otherwise RANSAC
-            runs too and the two solutions compete as ambiguous poses do (see
-            ``ambiguity_tolerance``; a large motion between frames can leave the refinement from
-            the prior in a wrong local minimum).
         outline: ``(M, 3)`` object points whose projections outline the object (e.g. the 8
             corners of its box), or ``None``; with it, a pose whose inliers' convex hull in the
             image covers less than ``min_coverage`` of the hull of the projected outline is
@@ -163,9 +157,7 @@ class PoseSolver:
         iterations: int = 500,
         min_inliers: int = 12,
         min_inliers_near_prior: int | None = None,
-        near_prior: tuple[float, float] = (5.0, 0.05),
         min_inlier_ratio: float = 0.0,
-        prior_inlier_ratio: float = 0.8,
         outline: np.ndarray | None = None,
         min_coverage: float = 0.15,
         ambiguity_tolerance: float = 0.15,
@@ -189,9 +181,8 @@ class PoseSolver:
         near = min_inliers if min_inliers_near_prior is None else min_inliers_near_prior
         if not 4 <= near <= min_inliers:
             raise InputError(f"min_inliers_near_prior must be in [4, min_inliers={min_inliers}], got {near}")
-        self.min_inliers, self.min_inliers_near_prior, self.near_prior = min_inliers, near, near_prior
+        self.min_inliers, self.min_inliers_near_prior = min_inliers, near
         self.min_inlier_ratio = min_inlier_ratio
-        self.prior_inlier_ratio = prior_inlier_ratio
         if not 0 <= min_coverage < 1:
             raise InputError(f"min_coverage must be in [0, 1), got {min_coverage}")
         self.outline = None if outline is None else np.asarray(outline, np.float64).reshape(-1, 3)
@@ -293,12 +284,12 @@ class PoseSolver:
         return candidates[int(near[int(np.argmin(angle))])]
 
     def _is_near(self, rvec: np.ndarray, tvec: np.ndarray, prior: tuple[np.ndarray, np.ndarray] | None) -> bool:
-        """Whether the pose is within :attr:`near_prior` of ``prior``."""
+        """Whether the pose is within :data:`NEAR_PRIOR` of ``prior``."""
         if prior is None or not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
             return False
         angle = rotation_error_deg(cv2.Rodrigues(rvec)[0], cv2.Rodrigues(prior[0])[0])
         shift = np.linalg.norm(tvec.ravel() - prior[1].ravel())
-        return bool(angle < self.near_prior[0] and shift < self.near_prior[1] * np.linalg.norm(prior[1]))
+        return bool(angle < NEAR_PRIOR[0] and shift < NEAR_PRIOR[1] * np.linalg.norm(prior[1]))
 
     def _accept(
         self,
@@ -431,7 +422,7 @@ class PoseSolver:
             prior = (np.asarray(prior[0], np.float64).reshape(3, 1), np.asarray(prior[1], np.float64).reshape(3, 1))
             rvec, tvec, inl = self._polish(obj, img, *prior, prior=prior)
             from_prior = self._accept(obj, img, rvec, tvec, inl, used_prior=True, prior=prior)
-            if from_prior.ok and len(from_prior.inliers) >= self.prior_inlier_ratio * n:
+            if from_prior.ok and len(from_prior.inliers) >= PRIOR_INLIER_RATIO * n:
                 return from_prior
         try:
             ok, rvec, tvec, inl = cv2.solvePnPRansac(

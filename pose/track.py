@@ -184,14 +184,19 @@ class TrackedFrame:
     keypoints: int
 
 
-def pose_to_bop(est: PoseEstimate, obj_id: int = 1, mm_per_unit: float = 1.0) -> list[dict]:
-    """One frame's entry of a BOP ``scene_gt``: ``[]`` when lost. ``cam_t_m2c`` in mm, as BOP's: ``est.tvec``
+#: The ``obj_id`` of the box in the poses ``alcn pose track`` writes (BOP's ids start at 1; one object is tracked).
+OBJ_ID = 1
+
+
+def pose_to_bop(est: PoseEstimate, mm_per_unit: float = 1.0) -> list[dict]:
+    """One frame's entry of a BOP ``scene_gt`` (object :data:`OBJ_ID`): ``[]`` when lost. ``cam_t_m2c`` in mm, as
+    BOP's: ``est.tvec``
     (in the model's units) times ``mm_per_unit`` (:func:`pose.model.unit_scale` of the model's units to ``"mm"``,
     :attr:`BoxTracker.mm_per_unit`)."""
     if not est.ok:
         return []
     t = est.tvec.ravel() * mm_per_unit
-    return [{"obj_id": obj_id, "cam_R_m2c": est.R.ravel().tolist(), "cam_t_m2c": t.tolist()}]
+    return [{"obj_id": OBJ_ID, "cam_R_m2c": est.R.ravel().tolist(), "cam_t_m2c": t.tolist()}]
 
 
 #: The units of ``cam_t_m2c`` in the poses ``alcn pose track`` writes (BOP's), recorded in the summary of its
@@ -241,40 +246,25 @@ def read_poses(path: str | Path, units: str) -> dict[str, tuple[np.ndarray, np.n
     return poses
 
 
-#: fewer inliers than this loses a frame, per detector (the corner detector has at most 7 parts)
+#: fewer inliers than this loses a frame, per detector (the corner detector has few parts: 26 by default,
+#: :func:`pose.box.box_parts`, at most 19 of them seen at once)
 MIN_INLIERS = {"features": 12, "corners": 5}
 #: a pose close to the tracker's prediction needs only this many (:class:`pose.solver.PoseSolver`'s
-#: ``min_inliers_near_prior``). Measured on the data engine's sequences #1-#8 (SIFT, ALCN lite):
-#: 10 near the prediction (5 deg, 5% of the distance) raised #8, the overexposed one, from
-#: 56.7 to 76.7% correct poses and changed nothing else, with or without normalization; 8 inliers
-#: anywhere also gave 80.0 on #8 but let wrong poses through on #1 without normalization (93.3 -> 80.0).
+#: ``min_inliers_near_prior``; ``docs/journal.md`` has the measurements).
 MIN_INLIERS_NEAR_PRIOR = {"features": 10, "corners": 4}
 #: A pose found around the tracker's prediction with fewer than this share of the matches found there as
 #: inliers is checked against the whole frame, whose pose replaces it (:class:`pose.solver.PoseTracker`'s
 #: ``trusted_guided_ratio``); without one it is kept only with at least :data:`MIN_GUIDED_RATIO`. The
-#: matches found around a wrong prediction lean toward it, and the pose solved from them stays near it:
-#: on the data engine's sequences #1-#8 (`alcn data pose --frames 30`, seeds 0, 1, 2; ORB, 1000 keypoints,
-#: as `track`, and SIFT, 2000, as `pose eval`; no normalization or ALCN lite: 8 runs, 1920 frames), the
-#: wrong poses found there (> 10 deg or > 10% of the distance off) had a median of 43% of their matches as
-#: inliers, the right ones 82%, but as few as 35% on the overexposed #8. Correct / wrong / lost frames: 1614 /
-#: 145 / 161 without the check, 1724 / 44 / 152 with 0.6 and 0.3, no run with fewer correct ones. On five
-#: of the runs (1009 / 83 / 108 without): 0.5 and 0.3 1049 / 44 / 107, 0.6 and 0.3 1063 / 32 / 105;
-#: a single threshold loses right poses of #8: 0.5 1028 / 25 / 147, 0.4 1034 / 34 / 132, 0.3 1029 /
-#: 49 / 122. The cookie box video tracked with ORB: 455 of 455 frames either way, the drawn box as close
-#: to the image's edges (`alcn pose overlay-error`); 26 of its frames searched whole as well, 0.3 s each
-#: (13 -> 10 fps on 2 cores; none with 0.5), and #1-#8 of seed 0 with ORB took 131 s instead of 76. The
-#: corner detector is not checked: up to 4 candidates per corner, most of them wrong
-#: (:data:`RANSAC_ITERATIONS`), leave its right poses a small share too.
+#: matches found around a wrong prediction lean toward it, and the pose solved from them stays near it; right poses
+#: have a larger share of their matches as inliers (``docs/journal.md`` has the measurements). The corner detector
+#: is not checked: several candidates per part (``top_k`` of :class:`pose.corners.CornerDetector`, 5 by default, in
+#: the whole frame), most of them wrong (:data:`RANSAC_ITERATIONS`), leave its right poses a small share too.
 TRUSTED_GUIDED_RATIO = {"features": 0.6, "corners": 0.0}
 #: See :data:`TRUSTED_GUIDED_RATIO`.
 MIN_GUIDED_RATIO = {"features": 0.3, "corners": 0.0}
-#: RANSAC iterations per detector (a cap: USAC stops once confident). The corner detector's
-#: candidates are few but mostly wrong (up to 4 per corner): on the data engine's sequences #1-#8
-#: (no normalization) 5000 iterations raised the sum over the sequences of the % of correct poses
-#: from 73 to 110. Features matched in the whole frame (first frame, lost tracking) can be 90%
-#: wrong (24 correct of 270 on #5's first frame): 5000 iterations instead of 500 raised ALCN lite
-#: on #5 from 93.3 to 100% (no other change) and no normalization on #2 86.7 -> 96.7, #8 0 -> 13.3,
-#: #7 73.3 -> 70.0 (SIFT).
+#: RANSAC iterations per detector (a cap: USAC stops once confident): the corner detector's candidates are few but
+#: mostly wrong, and features matched in the whole frame (first frame, lost tracking) can be mostly wrong
+#: (``docs/journal.md`` has the measurements).
 RANSAC_ITERATIONS = {"features": 5000, "corners": 5000}
 
 
@@ -582,7 +572,8 @@ def open_tracker(
 
     Raises:
         InputError: settings out of range, a corner detector given as a part model, a model without a camera and
-            no ``K``, a camera given both as ``camera`` and as ``K`` (:func:`calib.camera.camera_once`).
+            no ``K``, a camera given both as ``camera`` and as ``K`` (:func:`calib.camera.camera_once`), a camera
+            with lens distortion for ``detector="corners"`` (the frames must be undistorted first).
         DatasetError: a calibration that is not one.
 
     Example: the cookie box, its model ``cb/model.npz`` built from its video (it stores the camera) by
@@ -648,6 +639,11 @@ def open_tracker(
         if normalization not in (None, cd.normalization_spec):
             raise InputError(
                 f"{model} was trained after the normalization {cd.normalization_spec!r}, not {normalization!r}"
+            )
+        if dist is not None and np.any(dist):
+            raise InputError(
+                "the camera has lens distortion, which the corner detector does not model; undistort the frames "
+                "first (`alcn calib undistort --keep-K`) and track them with the camera's K"
             )
         det, normalization, corners, units = cd, cd.normalization_spec, cd.corners, cd.units
         model_K = None

@@ -9,8 +9,8 @@ into a COLMAP database, pycolmap for the geometry).
    a video), then pycolmap's two-view geometric verification (``pycolmap.verify_matches``).
 3. :func:`triangulate_fixed_poses` (registered sequence: the bundle adjustment refines the
    points only) or :func:`reconstruct_incremental` (unregistered video: unknown scale).
-4. :func:`collect_points`: each 3D point keeps up to 8 of its track's descriptors
-   (:func:`representatives`).
+4. :func:`collect_points`: each 3D point seen in at least :data:`MIN_TRACK` images keeps up to
+   :data:`DESCRIPTORS_PER_POINT` of its track's descriptors (:func:`representatives`).
 
 pycolmap's own log (glog, hundreds of lines per build) goes to this module's logger at debug
 level (:func:`calib.colmap_log.pycolmap_log`): ``alcn --verbose`` shows it.
@@ -42,13 +42,26 @@ logger = logging.getLogger(__name__)
 
 #: Seed of pycolmap's RANSAC (verification) and mapping, so that a model builds the same every time.
 RANDOM_SEED = 0
+#: :func:`collect_points` keeps the 3D points seen in at least this many training images.
+MIN_TRACK = 2
+#: :func:`collect_points` keeps up to this many descriptors of each 3D point's track (:func:`representatives`): a
+#: view unlike the typical one still finds a close descriptor.
+DESCRIPTORS_PER_POINT = 8
 
 
 @dataclass
 class Features:
-    keypoints: np.ndarray  # (N, 2) float32, OpenCV pixel convention
-    descriptors: np.ndarray  # (N, D)
-    colors: np.ndarray  # (N, 3) uint8 RGB
+    """The features of one training image (:func:`extract_features`).
+
+    Attributes:
+        keypoints: ``(N, 2)`` float32 pixels, OpenCV pixel convention.
+        descriptors: ``(N, D)`` uint8 (binary: ORB, AKAZE) or float32 (SIFT).
+        colors: ``(N, 3)`` uint8 RGB of the image at each keypoint.
+    """
+
+    keypoints: np.ndarray
+    descriptors: np.ndarray
+    colors: np.ndarray
 
 
 def extract_features(
@@ -68,7 +81,6 @@ def extract_features(
         if img.dtype != np.uint8:
             img = (img >> 8).astype(np.uint8)
         bgr = img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-        seq.size = (bgr.shape[1], bgr.shape[0])
         kps, desc = det.detectAndCompute(norm.apply(to_gray(bgr)), None if masks is None else masks.get(v.name))
         pts = np.array([k.pt for k in kps], np.float32).reshape(-1, 2)
         if desc is None:
@@ -111,8 +123,7 @@ def _write_database(
 ) -> Path:
     import pycolmap
 
-    from alcn_cv.formats.colmap import camera_from_opencv
-    from calib.conventions import points_opencv_to_colmap
+    from alcn_cv.formats.colmap import camera_from_opencv, points_opencv_to_colmap
 
     pycolmap.Database.open(db_path).close()
     same = all(np.array_equal(v.K, seq.views[0].K) for v in seq.views) and seq.info.get("format") == "video"
@@ -232,21 +243,20 @@ def collect_points(
     rec: pycolmap.Reconstruction,
     feats: dict[str, Features],
     norm: int,
-    min_track: int = 2,
-    descriptors_per_point: int = 8,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """3D points ``(N, 3)``, descriptors ``(M, D)`` with the point each describes ``(M,)`` (up to
-    ``descriptors_per_point`` per point, chosen by :func:`representatives`), track lengths
-    ``(N,)`` and RGB colours ``(N, 3)`` of a reconstruction whose keypoints are those of ``feats``."""
+    """3D points ``(N, 3)`` (those seen in at least :data:`MIN_TRACK` images), descriptors ``(M, D)`` with the
+    point each describes ``(M,)`` (up to :data:`DESCRIPTORS_PER_POINT` per point, chosen by
+    :func:`representatives`), track lengths ``(N,)`` and RGB colours ``(N, 3)`` of a reconstruction whose keypoints
+    are those of ``feats``."""
     names = {iid: im.name for iid, im in rec.images.items()}
     xyz, desc, owner, tl, rgb = [], [], [], [], []
     for p in rec.points3D.values():
         els = p.track.elements
-        if len(els) < min_track:
+        if len(els) < MIN_TRACK:
             continue
         d = np.stack([feats[names[e.image_id]].descriptors[e.point2D_idx] for e in els])
         c = np.stack([feats[names[e.image_id]].colors[e.point2D_idx] for e in els])
-        chosen = representatives(d, norm, descriptors_per_point)
+        chosen = representatives(d, norm, DESCRIPTORS_PER_POINT)
         desc.append(d[chosen])
         owner.append(np.full(len(chosen), len(xyz), np.int32))
         xyz.append(p.xyz)

@@ -249,7 +249,8 @@ def test_register_names_a_missing_source_before_a_missing_camera(tmp_path, capsy
 
 def test_register_reference_model_follows_its_units_header(tmp_path, capsys, monkeypatch):
     """A COLMAP --reference in metres (``# Units: m``) registers as the same model in mm: its header is
-    read as bop_frames_from_colmap reads it (it was taken as mm, the poses 1000x too small)."""
+    read (it was taken as mm, the poses 1000x too small). One without a header is in arbitrary units, as pose reads
+    it (calib.conventions.colmap_model_units): refused without --reference-unit (it was taken as mm)."""
     from scipy.spatial.transform import Rotation
 
     from alcn_cv.formats import bop
@@ -302,3 +303,12 @@ def test_register_reference_model_follows_its_units_header(tmp_path, capsys, mon
     rc = alcn([*args, "--reference", str(tmp_path / "ref_ft"), "--out", str(tmp_path / "reg_ft")])
     err = capsys.readouterr().err
     assert rc == 2 and "units are 'ft'; pass --reference-unit" in err, err
+    write_text_model(tmp_path / "ref_none", [camera], images)
+    rc = alcn([*args, "--reference", str(tmp_path / "ref_none"), "--out", str(tmp_path / "reg_none")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "units are arbitrary" in err and "pass --reference-unit" in err, err
+    assert not (tmp_path / "reg_none").exists()
+    out = tmp_path / "reg_none"
+    assert alcn([*args, "--reference", str(tmp_path / "ref_none"), "--reference-unit", "mm", "--out", str(out)]) == 0
+    capsys.readouterr()
+    np.testing.assert_allclose(bop.load_scene(out).frames[0].t_w2c, t_mm[0], atol=1e-6)

@@ -11,6 +11,9 @@ from alcn_cv.formats.colmap import (
     ColmapImage,
     ColmapPoint3D,
     camera_from_opencv,
+    camera_from_pycolmap,
+    points_colmap_to_opencv,
+    points_opencv_to_colmap,
     qvec_from_rotmat,
     read_model,
     rotmat_from_qvec,
@@ -157,3 +160,18 @@ def test_malformed_values_are_refused_not_silently_changed(tmp_path, file, text,
     (tmp_path / file).write_text(text)
     with pytest.raises(DatasetError, match=match):
         read_model(tmp_path)
+
+
+def test_a_pycolmap_camera_converts_to_opencv_by_the_modules_half_pixel():
+    """pose.build converted a refined pycolmap camera by hand (``calibration_matrix()``, ``cx - 0.5``); the half pixel
+    has one owner here (points_colmap_to_opencv), which camera_from_pycolmap's to_opencv goes through."""
+    for model, params in (
+        ("SIMPLE_PINHOLE", [650.3, 320.5, 240.5]),
+        ("OPENCV", [640.2, 655.0, 321.1, 239.9, 0.1, 0, 0, 0]),
+    ):
+        cam = pycolmap.Camera(model=model, width=640, height=480, params=params)
+        K, _ = camera_from_pycolmap(cam).to_opencv()
+        expected = cam.calibration_matrix()
+        expected[:2, 2] = points_colmap_to_opencv(expected[:2, 2])
+        np.testing.assert_array_equal(K, expected)
+    np.testing.assert_array_equal(points_opencv_to_colmap([[0.0, 0.0]]), [[0.5, 0.5]])

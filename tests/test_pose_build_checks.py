@@ -45,7 +45,7 @@ def _cameras(n=6) -> list[tuple[np.ndarray, np.ndarray]]:
 
 def _sequence(units="mm") -> sequence.TrainingSequence:
     views = [sequence.TrainingView(f"{i:06d}.png", K, None, R, t) for i, (R, t) in enumerate(_cameras())]
-    return sequence.TrainingSequence(Path("."), views, units, info={"path": "seq"})
+    return sequence.TrainingSequence(Path("."), views, units, (640, 480), info={"path": "seq"})
 
 
 @pytest.fixture
@@ -65,7 +65,7 @@ def triangulated(monkeypatch):
             )
             for i, v in enumerate(seq.views)
         }
-        return SimpleNamespace(cameras={1: SimpleNamespace(calibration_matrix=lambda: K)}, images=images)
+        return SimpleNamespace(cameras={}, images=images)  # a registered sequence: its cameras are not read back
 
     def collect(*args, **kwargs):
         xyz = points["xyz"]
@@ -230,6 +230,21 @@ def test_a_registration_without_a_known_length_is_read_in_arbitrary_units(tmp_pa
     assert sequence.load_sequence(mm).units == "mm" and sequence.load_sequence(mm / "colmap").units == "mm"
     (mm / "registration.json").unlink()  # a BOP scene of its own, a COLMAP model without a header: as before
     assert sequence.load_sequence(mm).units == "mm"
+    assert sequence.load_sequence(mm).size == sequence.load_sequence(mm / "colmap").size == (640, 480)
+
+
+def test_a_colmap_model_without_units_is_in_arbitrary_units_as_calib_reads_it(tmp_path):
+    """A COLMAP model without a "# Units:" line and without a registration beside it was read as metres by pose and
+    as millimetres by calib; both now read it by calib.conventions.colmap_model_units: arbitrary, refused."""
+    from alcn_cv.formats.colmap import read_model
+    from calib.conventions import colmap_model_units
+
+    reg = _registration(tmp_path / "reg", "arbitrary")
+    (reg / "registration.json").unlink()
+    seq = sequence.load_sequence(reg / "colmap")
+    assert seq.units == colmap_model_units(read_model(reg / "colmap"), reg / "colmap") == "arbitrary"
+    with pytest.raises(InputError, match=r"arbitrary units .*'# Units: mm'"):
+        sequence.check_known_units(seq, "a part model")
 
 
 def test_a_build_in_arbitrary_units_is_refused_in_one_line(tmp_path, capsys):

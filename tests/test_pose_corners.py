@@ -299,6 +299,25 @@ def test_the_training_frames_use_the_mask_of_the_sequences_object(posedata, tmp_
     assert read == [v.mask for v in seq.views]
 
 
+def test_a_sequence_or_camera_with_lens_distortion_is_refused_by_the_corner_detector(posedata, random_net):
+    """The training labels (pinhole part_visibility, homography novel views) and the tracking's gates, support and
+    P3P proposals ignore lens distortion, while the solver modelled it: a distorted sequence trained wrong labels with
+    no error. Both now refuse it in one line that says to undistort first."""
+    from pose.track import open_tracker
+
+    seq = load_sequence(posedata / "train" / "000001", obj_id=1)
+    corners = read_box_corners(posedata / "models" / "obj_000001.ply")
+    seq.views[1].dist = np.array([0.1, 0.0, 0.0, 0.0])
+    with pytest.raises(InputError, match=r"view .* has lens distortion.*alcn calib undistort"):
+        corner_data.build_frames(seq, corners, "none", corner_train.CornerRecipe(scale=0.5, copies=0))
+    seq.views[1].dist = np.zeros(4)  # no distortion: trained as before
+    corner_data.build_frames(seq, corners, "none", corner_train.CornerRecipe(scale=0.5, copies=0))
+    K = camera_matrix(300.0, 300.0, 159.5, 119.5)
+    with pytest.raises(InputError, match=r"lens distortion.*alcn calib undistort"):
+        open_tracker(random_net[1], K=K, dist=np.array([0.1, 0.0, 0.0, 0.0]), detector="corners")
+    assert open_tracker(random_net[1], K=K, dist=np.zeros(5), detector="corners").kind == "corners"
+
+
 def test_novel_view_moves_each_face_with_its_plane(posedata):
     from alcn_cv import io
 

@@ -35,12 +35,14 @@ def _texture(seed=0, n=256):
     return cv2.GaussianBlur(img, (3, 3), 0)
 
 
-def _planar_model(tex, mm_per_px=0.5):
-    """Top face z = 0 of a 128 x 128 x 20 mm box, textured with ``tex``."""
+def _planar_model(tex, mm_per_px=0.5, units="mm"):
+    """Top face z = 0 of a 128 x 128 x 20 mm box, textured with ``tex``, its lengths in ``units``."""
     kps, desc = create_feature("ORB", 1500).detectAndCompute(tex, None)
     uv = np.array([k.pt for k in kps])
-    pts = np.c_[uv * mm_per_px, np.zeros(len(uv))]
-    return pm.PartModel(corners=pm.box_corners([128, 128, 20], [0, 0, -20]), points3d=pts, descriptors=desc, units="mm")
+    s = pm.unit_scale("mm", units)
+    pts = np.c_[uv * mm_per_px, np.zeros(len(uv))] * s
+    corners = pm.box_corners([128, 128, 20], [0, 0, -20]) * s
+    return pm.PartModel(corners=corners, points3d=pts, descriptors=desc, units=units)
 
 
 def _render(tex, rvec, tvec, mm_per_px=0.5):
@@ -456,7 +458,7 @@ def test_poses_are_written_in_mm_whatever_the_models_units(tmp_path):
     (an _info.json without translation_units) as they were."""
     from pose.overlay import _camera_and_poses
 
-    model = _planar_model(_texture()).scaled_to("cm")
+    model = _planar_model(_texture(), units="cm")
     model.extra["K"] = K.tolist()
     pm.save(model, tmp_path / "m.npz")
     frames = _frames(tmp_path, 3)
@@ -494,7 +496,7 @@ def test_track_takes_max_frames_and_step(tmp_path, capsys):
 def test_the_summary_names_the_outputs_the_units_and_the_next_step(tmp_path, capsys):
     from alcn_cv.cli import main
 
-    model = _planar_model(_texture()).scaled_to("cm")
+    model = _planar_model(_texture(), units="cm")
     model.extra["K"] = K.tolist()
     pm.save(model, tmp_path / "m.npz")
     frames = _frames(tmp_path, 2)
@@ -535,7 +537,7 @@ def test_open_tracker_is_what_the_command_tracks_with(tmp_path):
     check of the guided poses); open_tracker is the command's tracker, and gives its poses frame by frame."""
     from alcn_cv.cli import main
 
-    model = _planar_model(_texture()).scaled_to("cm")
+    model = _planar_model(_texture(), units="cm")
     model.extra["K"] = K.tolist()
     pm.save(model, tmp_path / "m.npz")
     frames = _frames(tmp_path, 4)
@@ -564,7 +566,7 @@ def test_the_python_example_of_open_tracker_and_docs_pose_md_runs(tmp_path, caps
     (walkthrough,) = re.findall(r"```python\n(.*?)```", text, flags=re.S)
     code = textwrap.dedent(track.open_tracker.__doc__.split("::\n", 1)[1])
     assert walkthrough.strip() == code.strip().replace("cb/model.npz", "out/cookie_box/model.npz")
-    model = _planar_model(_texture()).scaled_to("cm")
+    model = _planar_model(_texture(), units="cm")
     model.extra["K"] = K.tolist()
     pm.save(model, tmp_path / "model.npz")
     video = tmp_path / "box.avi"
@@ -619,7 +621,7 @@ def test_an_interrupted_track_never_leaves_poses_read_in_the_wrong_units(tmp_pat
     from alcn_cv.errors import DatasetError
     from alcn_cv.io import write_json
 
-    model = _planar_model(_texture()).scaled_to("cm")
+    model = _planar_model(_texture(), units="cm")
     pm.save(model, tmp_path / "m.npz")
     frames = _frames(tmp_path, 2)
     track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800, progress=False)
@@ -666,7 +668,7 @@ def test_the_calibration_experiment_publishes_the_tracking_summary_without_paths
             Path(argv[-1]).mkdir(parents=True)
             write_camera_yaml(Path(argv[-1]) / "camera.yaml", K, np.zeros(5), SIZE)
         elif argv[:2] == ("pose", "build"):
-            model = _planar_model(_texture()).scaled_to("cm")
+            model = _planar_model(_texture(), units="cm")
             model.extra.update(K=K.tolist(), registered_images=2)
             model.box_fit = {"mean_abs_relative_size_error": 0.02}
             pm.save(model, argv[3])

@@ -9,9 +9,10 @@ The text format is COLMAP's (https://colmap.github.io/format.html):
 - ``points3D.txt``: ``POINT3D_ID X Y Z R G B ERROR TRACK[] as (IMAGE_ID, POINT2D_IDX)``.
 
 Pixel convention: COLMAP puts the centre of the top-left pixel at (0.5, 0.5), OpenCV at
-(0, 0). :func:`camera_from_opencv` and :meth:`ColmapCamera.to_opencv` add and remove that
-half pixel on the principal point, so that ``cx_colmap = cx_opencv + 0.5``. 2D points stored
-in ``images.txt`` are in COLMAP's convention too.
+(0, 0). This module owns that half pixel: :func:`points_opencv_to_colmap` and
+:func:`points_colmap_to_opencv` add and remove it, on 2D points (those stored in ``images.txt``
+are in COLMAP's convention) and, through :func:`camera_from_opencv` and
+:meth:`ColmapCamera.to_opencv`, on the principal point: ``cx_colmap = cx_opencv + 0.5``.
 
 Binary models (``cameras.bin`` ...) are read through ``pycolmap.Reconstruction``.
 """
@@ -42,6 +43,9 @@ __all__ = [
     "ColmapModel",
     "CAMERA_MODEL_PARAMS",
     "camera_from_opencv",
+    "camera_from_pycolmap",
+    "points_opencv_to_colmap",
+    "points_colmap_to_opencv",
     "qvec_from_rotmat",
     "rotmat_from_qvec",
     "write_text_model",
@@ -76,6 +80,16 @@ _MODEL_NUM_PARAMS: dict[str, int] = {
     "EUCM": 6,
     "EQUIRECTANGULAR": 2,
 }
+
+
+def points_opencv_to_colmap(uv: np.ndarray | Sequence[float]) -> np.ndarray:
+    """Pixel coordinates ``(..., 2)`` from OpenCV's convention to COLMAP's (+0.5), float64."""
+    return np.asarray(uv, np.float64) + 0.5
+
+
+def points_colmap_to_opencv(uv: np.ndarray | Sequence[float]) -> np.ndarray:
+    """Pixel coordinates ``(..., 2)`` from COLMAP's convention to OpenCV's (-0.5), float64."""
+    return np.asarray(uv, np.float64) - 0.5
 
 
 @dataclass
@@ -127,7 +141,8 @@ class ColmapCamera:
         p = dict(zip(names, self.params))
         fx = p.get("fx", p.get("f"))
         fy = p.get("fy", p.get("f"))
-        K = np.array([[fx, 0.0, p["cx"] - 0.5], [0.0, fy, p["cy"] - 0.5], [0.0, 0.0, 1.0]])
+        cx, cy = points_colmap_to_opencv([p["cx"], p["cy"]])
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
         if self.model == "FULL_OPENCV":
             dist = np.array([p[k] for k in ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")])
         else:
@@ -168,7 +183,8 @@ def camera_from_opencv(
         raise InputError("thin-prism/tilt distortion terms (coefficients 9..14) have no COLMAP equivalent")
     d8 = np.zeros(8)
     d8[: min(d.size, 8)] = d[:8]
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5
+    fx, fy = K[0, 0], K[1, 1]
+    cx, cy = points_opencv_to_colmap(K[:2, 2])
     if not np.any(d8):
         return ColmapCamera(camera_id, "PINHOLE", int(width), int(height), np.array([fx, fy, cx, cy]))
     if not np.any(d8[4:]):
@@ -512,12 +528,21 @@ def read_text_model(path: str | os.PathLike) -> ColmapModel:
     return ColmapModel(cameras, images, points, units)
 
 
+def camera_from_pycolmap(camera: pycolmap.Camera) -> ColmapCamera:
+    """Convert a ``pycolmap.Camera`` (COLMAP's pixel convention) to a :class:`ColmapCamera`; its
+    :meth:`~ColmapCamera.to_opencv` gives OpenCV's ``K`` and distortion.
+
+    Raises:
+        InputError: a camera model this module does not know.
+    """
+    return ColmapCamera(
+        int(camera.camera_id), camera.model.name, int(camera.width), int(camera.height), np.array(camera.params)
+    )
+
+
 def model_from_pycolmap(rec: pycolmap.Reconstruction) -> ColmapModel:
     """Convert a ``pycolmap.Reconstruction`` to a :class:`ColmapModel` (registered images only)."""
-    cameras = {
-        int(cid): ColmapCamera(int(cid), c.model.name, int(c.width), int(c.height), np.array(c.params))
-        for cid, c in rec.cameras.items()
-    }
+    cameras = {int(cid): camera_from_pycolmap(c) for cid, c in rec.cameras.items()}
     images = {}
     for iid, im in rec.images.items():
         if not im.has_pose:
