@@ -423,8 +423,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "fixed; or incremental reconstruction for an unregistered video), fit the box (open3d) "
         "and write MODEL.npz, MODEL.ply and MODEL_cameras.png. A box fit more than 5% off the known size is "
         "warned; more than 20% off on the edges its points cover, the build fails (its points are not that box, "
-        "or not in its units). A registration in arbitrary units (`alcn calib register --method sfm` without a "
-        "known length) is refused. pycolmap's log is shown with `alcn --verbose`.\n\n"
+        "or not in its units). Poses in arbitrary units are refused: `alcn calib register --method sfm` without a "
+        "known length, or a COLMAP model with neither a `# Units: mm` (cm, m) line in its images.txt nor the "
+        "registration.json of `alcn calib register` beside it. pycolmap's log is shown with `alcn --verbose`.\n\n"
         "A video of a hand-held object before a static camera builds with --conf static-camera: without it the "
         "focal length is held fixed and the background's features are kept (the shared cookie box built so is "
         "11.8% off its size, 2.7% with the preset). Walkthrough: docs/pose.md.",

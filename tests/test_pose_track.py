@@ -687,13 +687,15 @@ def test_the_calibration_experiment_publishes_the_tracking_summary_without_paths
 
 
 def test_the_pose_extra_tracks_without_torch(tmp_path):
-    """``[pose]`` installs no torch (nor kornia, scikit-image, jsonschema, onnx): ``alcn pose track`` runs without
-    them (``pose build`` too: checked by hand on the cookie box, 2026-11-29; its reconstruction is slow for a test)."""
+    """``[pose]`` installs no torch (nor kornia, scikit-image, onnx): ``alcn pose track`` runs without them, and without
+    jsonschema (``pose build`` too: checked by hand on the cookie box, 2026-11-29; its reconstruction is slow for a
+    test). It installs jsonschema, which reading a BOP scene (``alcn calib register``'s output) needs."""
     import tomllib
 
     pyproject = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
     pose_extra = " ".join(pyproject["project"]["optional-dependencies"]["pose"])
     assert "torch" not in pose_extra and "[train" not in pose_extra and "[data" not in pose_extra, pose_extra
+    assert "jsonschema" in pose_extra
     pm.save(_planar_model(_texture()), tmp_path / "m.npz")
     frames = _frames(tmp_path, 2)
     blocked = ("torch", "kornia", "skimage", "jsonschema", "onnx")
