@@ -4,11 +4,12 @@ A face set under hard directional light (nearest-neighbour identification agains
 the real test sets kept outside the repository; it ranks Tan-Triggs and the self-quotient image above ALCN, most
 of all under the most grazing light. No such real set is in `../shared/data` (the `psm` objects' 12 lights are
 within 40 degrees of the camera's axis, where every normalization but `none` identifies their tiles), so this
-script renders one: relief scenes of the data engine (`alcn_cv.data.relief_scenes.relief_surface`), each an
-identity, seen under a frontal light (the gallery) and under directional light at elevations of 75 to 12 degrees
-above the ground (the probes, 4 random azimuths each, cast shadows, gain and sensor noise). Every image is
-normalized by its method's `apply()` (float output), resized to `SIZE x SIZE` (area), made zero-mean and unit-norm,
-and identified as its most correlated gallery image; the table gives the percentage identified per elevation.
+script renders one (`alcn data scenes --lighting directional`, `alcn_cv.data.relief_scenes`): relief scenes of the
+data engine, each an identity, seen under a frontal light (the gallery) and under directional light at elevations
+of 75 to 12 degrees above the ground (the probes, 4 random azimuths each, cast shadows, gain and sensor noise). Every
+image is normalized by its method's `apply()` (float output), resized to `SIZE x SIZE` (area), made zero-mean and
+unit-norm, and identified as its most correlated gallery image (`alcn_cv.bench.directional`); the table gives the
+percentage identified per elevation.
 
 The rows `alcn, band W` are the shipped default with another weight of its wide band (`alcn_cv.filters.wide_band`;
 0: without it): the band carries the relief's shading at 8 to 32 pixels, which a larger weight lets into the output.
@@ -24,9 +25,11 @@ import json
 import cv2
 import numpy as np
 from _run import RUNS, band_variant, command_line, keep, recorded_settings, script_command
-from _stand_in import AZIMUTHS, ELEVATIONS, SIZES, identify, render_stand_in
+from _stand_in import IDENTITIES, SEED, SIZE, render_stand_in
 from tqdm.auto import tqdm
 
+from alcn_cv.bench.directional import SIZES, identify
+from alcn_cv.data.relief_scenes import AZIMUTHS, ELEVATIONS
 from alcn_cv.report import machine
 
 BASELINES = ("none", "clahe", "dog", "dlcn", "tantriggs", "sqi", "alcn")
@@ -35,9 +38,9 @@ BAND_WEIGHTS = (0.0, 0.3)
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument("--identities", type=int, default=80, help="rendered scenes (default: 80)")
-    parser.add_argument("--size", type=int, default=128, help="side of the rendered images (default: 128)")
-    parser.add_argument("--seed", type=int, default=7, help="rendering seed (default: 7)")
+    parser.add_argument("--identities", type=int, default=IDENTITIES, help=f"rendered scenes (default: {IDENTITIES})")
+    parser.add_argument("--size", type=int, default=SIZE, help=f"side of the rendered images (default: {SIZE})")
+    parser.add_argument("--seed", type=int, default=SEED, help=f"rendering seed (default: {SEED})")
     args = parser.parse_args()
     out = RUNS / "directional_light"
     out.mkdir(parents=True, exist_ok=True)

@@ -35,7 +35,7 @@ def main() -> None:
         "100",
         "--epochs",
         "5",
-        "--test-windows",
+        "--n-test",
         "1500",
     )
     keep(out / "fewshot.json", "fewshot")

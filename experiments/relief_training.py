@@ -8,9 +8,9 @@ ALCN). Parts (``--part``; default: all, in this order), each writing under ``--o
 ``runs/relief_training``), the rendered scenes and the files trained on them in ``DATA`` =
 ``OUT/identities_<identities>_seed_<seed>`` (a run with other ``--identities`` or ``--seed`` has its own):
 
-* ``scenes``: ``--identities`` relief scenes of the data engine, rendered as the stand-in renders its identities
-  (``_stand_in.render_identity``: a frontal light and 4 directional lights at each of 5 elevations, cast shadows, sensor
-  noise) but from another seed and at 256 px, saved as registered scenes in ``DATA/scenes``;
+* ``scenes``: ``alcn data scenes --lighting directional`` (the stand-in's scenes: a frontal light and 4 directional
+  lights at each of 5 elevations, cast shadows, sensor noise) with ``--identities`` scenes, from another seed and at
+  256 px, into ``DATA/scenes``;
 * ``train``: ``alcn train-real-light --conf gain --set rendered=[DATA/scenes]`` with each of :data:`VARIANTS`'
   settings (the share of training steps that draw a rendered scene, the recipe's budget of 300 steps at lr 1e-3 or
   twice the steps at five times the rate, with the control that has no rendered scene), into ``DATA/<variant>`` (a
@@ -34,7 +34,6 @@ import json
 from pathlib import Path
 from typing import Any
 
-import cv2
 from _run import (
     RUNS,
     add_part_option,
@@ -46,9 +45,11 @@ from _run import (
     script_command,
     selected_parts,
 )
-from _stand_in import ELEVATIONS, identify, render_identity, render_stand_in
+from _stand_in import render_stand_in
 from tqdm.auto import tqdm
 
+from alcn_cv.bench.directional import identify
+from alcn_cv.data.relief_scenes import ELEVATIONS
 from alcn_cv.report import machine
 
 PARTS = ("scenes", "train", "faces", "bench")
@@ -62,15 +63,6 @@ VARIANTS = {
 #: The stand-in's probes under the most grazing light (12 degrees).
 GRAZING = f"elevation {ELEVATIONS[-1]}"
 FACE_BASELINES = ("tantriggs", "dlcn")
-
-
-def render_scenes(folder: Path, identities: int, seed: int) -> None:
-    """``identities`` relief scenes as folders of PNG frames (the layout `alcn_cv.data.scenes` reads)."""
-    for index in tqdm(range(identities), desc="render", unit="scene"):
-        scene = folder / f"relief_{index:03d}"
-        scene.mkdir(parents=True, exist_ok=True)
-        for k, frame in enumerate(render_identity(index, 256, seed)):
-            cv2.imwrite(str(scene / f"{k:02d}.png"), frame)
 
 
 def faces(methods: dict[str, str]) -> dict[str, dict[str, float]]:
@@ -110,7 +102,21 @@ def main() -> None:
         f"trained, {name}": data / name.replace(" ", "_").replace(",", "") / "gain_normalizer.npz" for name in VARIANTS
     }
     if "scenes" in args.part:
-        render_scenes(scenes, args.identities, args.seed)
+        alcn(
+            "data",
+            "scenes",
+            "--out",
+            str(scenes),
+            "--lighting",
+            "directional",
+            "--scenes",
+            str(args.identities),
+            "--side",
+            "256",
+            "--seed",
+            str(args.seed),
+            "--overwrite",
+        )
     if "train" in args.part:
         for settings, path in zip(VARIANTS.values(), trained.values()):
             if path.exists():

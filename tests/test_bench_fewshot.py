@@ -47,7 +47,7 @@ def test_every_spec_reaches_the_detector_through_normalize_windows(policy, monke
 
     monkeypatch.setattr(F, "make_fewshot_data", _tiny_data)
     monkeypatch.setattr(F, "score_inputs", record)
-    settings = B.FewShotSettings(methods=["none", "dog", "alcn:model=gain"], policies=[policy], seeds=[0], objects=2)
+    settings = B.FewShotSettings(methods=["none", "dog", "alcn:model=gain"], policies=[policy], seeds=[0], n_objects=2)
     runs = {policy: {m: [] for m in settings.methods}}
     B._run_seed(settings, 0, build_methods(settings.methods, create_normalization), runs, B.tqdm(disable=True))
     train_x, _, test = _tiny_data(settings.setup(0))
@@ -78,6 +78,25 @@ def test_seeds_differ_and_settings_check(tmp_path):
             B.FewShotSettings(**bad).check()
     with pytest.raises(InputError, match="method 'dog' is listed twice"):  # by build_methods, before any seed runs
         B.main(tmp_path / "out", B.FewShotSettings(methods=["dog", "dog"]))
+
+
+def test_fewshot_setup_owns_the_names_and_defaults():
+    """The bench settings and the training config's [fewshot] name each setup field as FewShotSetup does and
+    default to its value."""
+    from dataclasses import fields
+
+    from alcn_cv.train.config import FewShotConfig
+
+    own = {f.name for f in fields(F.FewShotSetup)}
+    for settings, extra in (
+        (B.FewShotSettings(), {"methods", "policies", "seeds", "threads"}),
+        (FewShotConfig(), {"enabled", "dog"}),
+    ):
+        assert {f.name for f in fields(settings)} - own == extra
+        assert F.FewShotSetup.of(settings) == F.FewShotSetup()
+    assert B.FewShotSettings(n_objects=3, n_test=40).setup(2) == F.FewShotSetup(
+        n_objects=3, n_test=40, object_seed=F.FewShotSetup.object_seed + 2, seed=2
+    )
 
 
 def test_compare_to_dog_takes_the_best_dog_per_seed():
@@ -123,7 +142,7 @@ def test_cli_end_to_end(tmp_path):
             "2",
             "--per-image",
             "6",
-            "--test-windows",
+            "--n-test",
             "30",
             "--epochs",
             "1",

@@ -71,3 +71,26 @@ def test_arguments_and_output_are_checked_before_the_progress_bar(tmp_path, monk
         err = capsys.readouterr().err
         assert f"argument --side: the side of the square frames in pixels, at least 32, e.g. 256; got '{bad}'" in err
     assert not (tmp_path / "s").exists()
+
+
+def test_directional_scenes_are_the_gallery_then_the_probes(tmp_path):
+    """--lighting directional: a frontal light, then AZIMUTHS probes per elevation; the folder holds what
+    render_scenes gives in memory, and identification finds a scene's own gallery image."""
+    from alcn_cv.bench.directional import identification
+    from alcn_cv.data.relief_scenes import AZIMUTHS, DIRECTIONAL_FRAMES, ELEVATIONS, render_scenes
+
+    out = generate(tmp_path / "d", scenes=2, side=48, seed=7, lighting="directional", progress=False)
+    manifest = read_manifest(out, KIND)
+    jsonschema.validate(manifest, read_json(MANIFEST_SCHEMA))
+    assert manifest["parameters"]["frames"] == DIRECTIONAL_FRAMES == 1 + len(ELEVATIONS) * AZIMUTHS
+    assert manifest["lights"]["scene_001"] == ["ambient"] + ["side"] * (DIRECTIONAL_FRAMES - 1)
+    memory = [frames for frames, _ in render_scenes(2, side=48, seed=7, lighting="directional", progress=False)]
+    assert [s.frames.shape for s in load_scene_folder(out)] == [(DIRECTIONAL_FRAMES, 48, 48)] * 2
+    assert all(np.array_equal(s.frames, m) for s, m in zip(load_scene_folder(out), memory))
+    gallery_as_probes = np.stack(memory).astype(np.float32)
+    gallery_as_probes[:, 1:] = gallery_as_probes[:, :1]
+    assert identification(gallery_as_probes, 16) == {f"elevation {e}": 100.0 for e in ELEVATIONS}
+    with pytest.raises(InputError, match=f"--lighting directional renders {DIRECTIONAL_FRAMES} frames"):
+        generate(tmp_path / "e", frames=12, lighting="directional", progress=False)
+    with pytest.raises(InputError, match="unknown --lighting 'sideways'"):
+        render_scenes(1, lighting="sideways")

@@ -239,3 +239,49 @@ def test_relight_titles_say_their_protocol_and_the_speed_headline_its_cores() ->
     speed = _kept("speed")
     speed["machine_before"] = {**speed["machine_before"], "cpus_available": 16}
     assert " on 16 cores, " in report.speed_headline(speed)
+
+
+def test_unet_baselines_objective_part_is_the_bench_stage(
+    experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """unet_baseline.py's ``objective`` part calls alcn_cv.bench.objective.main with both files; the stage takes
+    each network from its file's architecture and refuses another."""
+    import numpy as np
+
+    from alcn_cv.bench import objective
+    from alcn_cv.data.relief_scenes import render_scenes
+    from alcn_cv.data.scenes import Scene
+    from alcn_cv.errors import InputError
+    from alcn_cv.runtime import resolve_weights
+    from alcn_cv.train.unet_normalizer import UNetNormalizer
+    from alcn_cv.weight_file import save_normalizer_file
+
+    calls: list[tuple[Any, ...]] = []
+    module = importlib.import_module("unet_baseline")
+    monkeypatch.setattr(objective, "main", lambda *args: calls.append(args))
+    monkeypatch.setattr(sys, "argv", ["unet_baseline.py", "--out", str(tmp_path), "--part", "objective"])
+    module.main()
+    assert calls == [
+        (
+            tmp_path,
+            {"unet": tmp_path / "train/unet_normalizer.npz", "gain": tmp_path / "gain/gain_normalizer.npz"},
+            "gain",
+            8,
+        )
+    ]
+    monkeypatch.undo()
+
+    frames = [f for f, _ in render_scenes(2, frames=3, side=96, seed=1, progress=False)]
+    scenes = [Scene("courbevoie", "webcam", frames[0], ()), Scene("mexico", "webcam", frames[1], ())]
+    monkeypatch.setattr(objective, "load_scenes", lambda roots: scenes)
+    monkeypatch.setattr(objective, "TRAIN_SCENES", ("courbevoie",))
+    monkeypatch.setattr(objective, "TEST_SCENES", ("mexico",))
+    net = UNetNormalizer()
+    unet = save_normalizer_file(tmp_path / "unet.npz", net.state_arrays(), net.file_meta(trained=False))
+    gain = resolve_weights("gain", None)
+    result = objective.main(tmp_path / "out", {"unet": unet, "gain": gain}, "gain", 1)
+    assert set(result["scenes"]) == {"courbevoie", "mexico"} and set(result["mean_test"]) == {"unet", "gain"}
+    assert json.loads((tmp_path / "out" / "objective.json").read_text()) == result
+    assert all(np.isfinite(v) for v in result["mean_train"].values())
+    with pytest.raises(InputError, match="architecture"):
+        objective.main(tmp_path / "out", {"paper": resolve_weights("paper", None)})

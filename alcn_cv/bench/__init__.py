@@ -9,6 +9,10 @@
   (``alcn bench fewshot``);
 * :mod:`~alcn_cv.bench.invariance` -- agreement of normalized real photographs under 12 lights
   (``alcn bench invariance``);
+* :mod:`~alcn_cv.bench.directional` -- whole-image identification under hard directional light on the scenes
+  of ``alcn data scenes --lighting directional``;
+* :mod:`~alcn_cv.bench.objective` -- the real-light training objective of trained weight files on the training
+  and test scenes;
 * :mod:`~alcn_cv.bench.relight` -- patch identification, keypoint matching and homography pose
   between frames of fixed cameras under real light changes (``alcn bench relight``) on the scenes of
   :mod:`~alcn_cv.data.scenes`;

@@ -166,7 +166,9 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         "repeat every run with each of these seeds, each with its own new objects, windows and detector initialisation",
         from_preset=True,
     )
-    p.add_argument("--objects", type=int, help=f"new objects per seed (default {d.objects})")
+    p.add_argument(
+        "--objects", dest="n_objects", metavar="OBJECTS", type=int, help=f"new objects per seed (default {d.n_objects})"
+    )
     p.add_argument(
         "--object-seed", type=int, help=f"object catalogue seed of seed 0; seed s uses it + s (default {d.object_seed})"
     )
@@ -177,9 +179,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         help=f"synthetic windows per reference image, as in `alcn train-detector` (`alcn bench detect --positives` "
         f"counts them per object) (default {d.per_image})",
     )
-    p.add_argument(
-        "--test-windows", type=int, help=f"test windows per seed, half background (default {d.test_windows})"
-    )
+    p.add_argument("--n-test", type=int, help=f"test windows per seed, half background (default {d.n_test})")
     p.add_argument(
         "--test-lighting",
         type=_list(str),

@@ -7,7 +7,7 @@ spec (``NAME[:KEY=VALUE...]``, e.g. ``alcn:model=gain`` or ``alcn:weights=FILE.n
 reaches the detector the same way:
 
 1. **Windows** (:func:`alcn_cv.train.fewshot.make_fewshot_data`): the paper's simple synthetic
-   images of ``objects`` rendered objects (``real_images`` images each, training-like light)
+   images of ``n_objects`` rendered objects (``real_images`` images each, training-like light)
    and background windows; test windows of the same objects and background under held-out
    lighting families. 64x64 each, drawn once per seed and shared by every method.
 2. **Normalization** through the runtime's public window API,
@@ -70,23 +70,23 @@ logger = logging.getLogger(__name__)
 
 #: The methods compared by default.
 DEFAULT_METHODS = ("none", "dog", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
-_SETUP = FewShotSetup()
 
 
 @dataclass
 class FewShotSettings:
-    """Settings of ``alcn bench fewshot`` (all recorded in ``fewshot.json``).
+    """Settings of ``alcn bench fewshot`` (all recorded in ``fewshot.json``); the fields of
+    :class:`~alcn_cv.train.config.FewShotSetup` are named and default as there.
 
     Attributes:
         methods: registered normalization specs ``NAME[:KEY=VALUE...]``.
         policies: detector input policies (:data:`~alcn_cv.bench.detect_settings.POLICIES`).
         seeds: one repetition per seed, each with its own objects, windows and detector initialisation
             (``--seeds``, as in ``alcn bench detect``); the tables give the mean and spread over seeds.
-        objects: new objects per seed.
+        n_objects: new objects per seed.
         object_seed: catalogue seed of seed 0 (seed ``s`` uses ``object_seed + s``).
         real_images: reference images per object.
         per_image: synthetic training windows per reference image (as many background windows).
-        test_windows: test windows per seed (half background).
+        n_test: test windows per seed (half background).
         test_lighting: lighting families of the test windows.
         epochs, batch_size, lr: detector training (the same for every method).
         threads: torch threads (``None``: torch's default).
@@ -95,15 +95,15 @@ class FewShotSettings:
     methods: list[str] = field(default_factory=lambda: list(DEFAULT_METHODS))
     policies: list[str] = field(default_factory=lambda: ["raw", "local"])
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
-    objects: int = _SETUP.n_objects
-    object_seed: int = _SETUP.object_seed
-    real_images: int = _SETUP.real_images
-    per_image: int = _SETUP.per_image
-    test_windows: int = _SETUP.n_test
-    test_lighting: list[str] = field(default_factory=lambda: list(_SETUP.test_lighting))
-    epochs: int = _SETUP.epochs
-    batch_size: int = _SETUP.batch_size
-    lr: float = _SETUP.lr
+    n_objects: int = FewShotSetup.n_objects
+    object_seed: int = FewShotSetup.object_seed
+    real_images: int = FewShotSetup.real_images
+    per_image: int = FewShotSetup.per_image
+    n_test: int = FewShotSetup.n_test
+    test_lighting: list[str] = field(default_factory=lambda: list(FewShotSetup.test_lighting))
+    epochs: int = FewShotSetup.epochs
+    batch_size: int = FewShotSetup.batch_size
+    lr: float = FewShotSetup.lr
     threads: int | None = None
 
     def check(self) -> FewShotSettings:
@@ -117,35 +117,22 @@ class FewShotSettings:
         check_seeds(self.seeds)
         if (
             min(
-                self.objects,
+                self.n_objects,
                 self.real_images,
                 self.per_image,
-                self.test_windows,
+                self.n_test,
                 self.epochs,
                 self.batch_size,
             )
             < 1
             or not self.lr > 0
         ):
-            raise InputError(
-                "objects, real_images, per_image, test_windows, epochs and batch_size must be >= 1 and lr > 0"
-            )
+            raise InputError("n_objects, real_images, per_image, n_test, epochs and batch_size must be >= 1 and lr > 0")
         return self
 
     def setup(self, seed: int) -> FewShotSetup:
         """The few-shot setup of one seed."""
-        return FewShotSetup(
-            n_objects=self.objects,
-            object_seed=self.object_seed + seed,
-            real_images=self.real_images,
-            per_image=self.per_image,
-            n_test=self.test_windows,
-            test_lighting=tuple(self.test_lighting),
-            epochs=self.epochs,
-            batch_size=self.batch_size,
-            lr=self.lr,
-            seed=seed,
-        )
+        return FewShotSetup.of(self, object_seed=self.object_seed + seed, seed=seed)
 
 
 def _is(spec: str, name: str) -> bool:
@@ -257,11 +244,11 @@ def fewshot_command(out_dir: str | os.PathLike, settings: FewShotSettings) -> st
         {
             "--methods": settings.methods,
             "--policy": settings.policies,
-            "--objects": settings.objects,
+            "--objects": settings.n_objects,
             "--object-seed": settings.object_seed,
             "--real-images": settings.real_images,
             "--per-image": settings.per_image,
-            "--test-windows": settings.test_windows,
+            "--n-test": settings.n_test,
             "--test-lighting": settings.test_lighting,
             "--epochs": settings.epochs,
             "--batch-size": settings.batch_size,
@@ -286,8 +273,8 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
         f"- **Machine:** {describe_machine(result['machine'])}",
         f"- **Command:** `{result['command']}`",
         f"- **Settings:** seeds {', '.join(map(str, seeds))} (seed s: objects of catalogue seed {s['object_seed']} "
-        f"+ s, windows and detector seed s); {s['objects']} objects, {s['per_image']} synthetic windows per image and "
-        f"as many background windows; {s['test_windows']} test windows; detector {s['epochs']} epochs, batch "
+        f"+ s, windows and detector seed s); {s['n_objects']} objects, {s['per_image']} synthetic windows per image "
+        f"and as many background windows; {s['n_test']} test windows; detector {s['epochs']} epochs, batch "
         f"{s['batch_size']}, Adam lr {s['lr']}. Total time {result['seconds']:.0f} s.",
         "- **Input policies** (the same for every method):",
         *[f"  - `{p}`: {POLICY_DESCRIPTIONS[p]}" for p in s["policies"]],

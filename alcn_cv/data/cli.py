@@ -96,6 +96,7 @@ def _scenes(args: argparse.Namespace) -> int:
         frames=args.frames,
         side=args.side,
         seed=args.seed,
+        lighting=args.lighting,
         overwrite=args.overwrite,
         progress=not args.no_progress,
         workers=args.workers,
@@ -149,6 +150,8 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``data`` subcommand and its sub-subcommands to the ``alcn`` parser."""
+    from alcn_cv.data import relief_scenes  # numpy and OpenCV, no torch
+
     p = subparsers.add_parser(
         "data",
         help="generate training data, the detection benchmark and pose sequences",
@@ -256,7 +259,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("--scenes", type=int, default=24, help="number of scenes (default 24)")
-    q.add_argument("--frames", type=int, default=12, help="lightings (frames) per scene (default 12)")
+    q.add_argument(
+        "--frames",
+        type=int,
+        help=f"lightings (frames) per scene (default {relief_scenes.FRAMES}; --lighting directional: "
+        f"{relief_scenes.DIRECTIONAL_FRAMES}, the only value it takes)",
+    )
     q.add_argument(
         "--side",
         type=_side_in_pixels,
@@ -265,6 +273,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="side of the square frames in pixels, at least 32 (default 320)",
     )
     q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    q.add_argument(
+        "--lighting",
+        choices=relief_scenes.LIGHTINGS,
+        default="families",
+        help="families: each frame's light drawn from the light families; directional: a frontal light (the gallery) "
+        f"then {relief_scenes.AZIMUTHS} directional lights from random azimuths at each of the elevations "
+        f"{', '.join(map(str, relief_scenes.ELEVATIONS))} degrees (the probes), the stand-in for faces under hard "
+        "directional light (default families)",
+    )
     _add_run_options(q)
     q.set_defaults(func=_scenes)
 

@@ -5,26 +5,32 @@ The real multi-light scenes that train the gain Normalizer (:mod:`alcn_cv.data.s
 outdoor scenes under daylight. Directional light on relief (grazing sun, lamps, spots, cast
 shadows: the paper's Phos and its objects, faces) is rare there, and no such real set can be
 downloaded at run time, so the data engine renders it: a textured, uneven ground with relief
-objects (:mod:`alcn_cv.data.objects`) seen from above, lit by ``frames`` lightings drawn from
-:data:`~alcn_cv.data.lighting.LIGHT_FAMILIES`. Every frame of a scene shows the same geometry
-and albedo, so the frames are registered exactly, as the trainer's layout requires.
+objects (:mod:`alcn_cv.data.objects`) seen from above. Every frame of a scene shows the same geometry
+and albedo, so the frames are registered exactly, as the trainer's layout requires. The lightings
+(``lighting``, :data:`LIGHTINGS`):
+
+* ``families`` (:func:`render_scene`): ``frames`` lightings drawn from :data:`FAMILIES`;
+* ``directional`` (:func:`render_directional_scene`): hard directional light, the rendered stand-in for
+  faces under Yale-B-like light: a frontal light (the gallery), then :data:`AZIMUTHS` directional lights
+  at random azimuths at each of :data:`ELEVATIONS` (the probes), with cast shadows, gain and sensor noise;
+  :data:`DIRECTIONAL_FRAMES` frames in that order (identified by :mod:`alcn_cv.bench.directional`).
 
 Output (``generate``): ``out/scene_000/frame_00.png`` ... (grayscale PNG) and ``manifest.json``
-(kind ``relief_scenes``, the parameters and the light family of every frame). Scene ``i``
-draws from ``numpy.random.default_rng([seed, i])``: the output does not depend on ``workers``,
-and the first scenes of a larger run equal those of a smaller one.
+(kind ``relief_scenes``, the parameters and the light family of every frame); :func:`render_scenes`
+gives the same frames in memory. Scene ``i`` draws from ``numpy.random.default_rng([seed, i])``: the
+output does not depend on ``workers``, and the first scenes of a larger run equal those of a smaller one.
 """
 
 from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from alcn_cv.data.lighting import LIGHT_FAMILIES, sample_lighting
+from alcn_cv.data.lighting import LIGHT_FAMILIES, Lighting, directional, sample_lighting
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.objects import background_surface, make_object, paste, to_surface
 from alcn_cv.data.parallel import parallel_map
@@ -33,7 +39,18 @@ from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import InputError
 from alcn_cv.io import write_image, write_json
 
-__all__ = ["KIND", "generate", "relief_surface", "render_scene"]
+__all__ = [
+    "AZIMUTHS",
+    "DIRECTIONAL_FRAMES",
+    "ELEVATIONS",
+    "KIND",
+    "LIGHTINGS",
+    "generate",
+    "relief_surface",
+    "render_directional_scene",
+    "render_scene",
+    "render_scenes",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -44,6 +61,16 @@ FAMILIES: tuple[str, ...] = tuple(f for f in LIGHT_FAMILIES if f != "colour")
 _CANONICAL = 96
 #: The least side of the frames (pixels).
 MIN_SIDE = 32
+#: The lightings of a run (see the module).
+LIGHTINGS = ("families", "directional")
+#: ``directional``: elevations of the probes' light above the ground (degrees); the gallery is lit from 90.
+ELEVATIONS = (75, 55, 35, 20, 12)
+#: ``directional``: probes per elevation, each from a random azimuth.
+AZIMUTHS = 4
+#: ``directional``: frames of a scene, the gallery then the probes, elevation by elevation.
+DIRECTIONAL_FRAMES = 1 + len(ELEVATIONS) * AZIMUTHS
+#: ``families``: frames of a scene unless given.
+FRAMES = 12
 
 
 def render_scene(
@@ -73,6 +100,29 @@ def render_scene(
     lightings = [sample_lighting(rng, name, size, size, relief=relief) for name in names]
     surface = to_surface([(albedo, height, material)] * frames)
     return render_surfaces(surface, lightings, rng, gray=True, shadow_steps=12, shadow_scale=2), names
+
+
+def render_directional_scene(rng: np.random.Generator, size: int) -> tuple[np.ndarray, list[str]]:
+    """One scene of ``size x size`` pixels under the ``directional`` lighting (see the module).
+
+    Args:
+        rng: the scene's generator (geometry, albedo, azimuths, gains, noise).
+        size: side of the frames (pixels).
+
+    Returns:
+        ``(DIRECTIONAL_FRAMES, size, size)`` uint8 grayscale frames: the gallery (frontal light), then
+        :data:`AZIMUTHS` probes at each of :data:`ELEVATIONS` in order; and the family of each (``ambient``
+        for the gallery, ``side`` for the probes).
+    """
+    albedo, height, material = relief_surface(rng, size)
+    lightings = [Lighting("ambient", [directional(0.0, 90.0)], np.full(3, 0.05), gain=0.9)]
+    for elevation in ELEVATIONS:
+        for _ in range(AZIMUTHS):
+            light = directional(rng.uniform(0.0, 360.0), elevation)
+            gain = rng.uniform(0.6, 1.4)
+            lightings.append(Lighting("side", [light], np.full(3, 0.02), gain=gain, shot_noise=5e-4, read_noise=3e-3))
+    surface = to_surface([(albedo, height, material)] * len(lightings))
+    return render_surfaces(surface, lightings, rng, gray=True, shadow_steps=24), [x.family for x in lightings]
 
 
 def relief_surface(
@@ -106,41 +156,75 @@ def relief_surface(
     return albedo, height, material
 
 
-def _scene_job(job: tuple[int, int, int, int]) -> tuple[np.ndarray, list[str]]:
-    seed, index, size, frames = job
-    return render_scene(np.random.default_rng([seed, index]), size, frames)
+def _scene_job(job: tuple[int, int, int, int, str]) -> tuple[np.ndarray, list[str]]:
+    seed, index, size, frames, lighting = job
+    rng = np.random.default_rng([seed, index])
+    return render_directional_scene(rng, size) if lighting == "directional" else render_scene(rng, size, frames)
+
+
+def _frames(scenes: int, frames: int | None, side: int, lighting: str) -> int:
+    """The frames per scene of ``lighting`` (``frames``, or its default), the arguments checked; render_scene and
+    relief_surface check them too, but in the workers, after the progress bar has started."""
+    if lighting not in LIGHTINGS:
+        raise InputError(f"unknown --lighting {lighting!r}; choose from {', '.join(LIGHTINGS)}")
+    if scenes < 1:
+        raise InputError(f"need at least one scene (--scenes), got {scenes}")
+    if side < MIN_SIDE:
+        raise InputError(f"--side is the side of the frames in pixels, at least {MIN_SIDE}; got {side}")
+    if lighting == "directional":
+        if frames not in (None, DIRECTIONAL_FRAMES):
+            raise InputError(
+                f"--lighting directional renders {DIRECTIONAL_FRAMES} frames (the gallery and {AZIMUTHS} probes at "
+                f"each of {len(ELEVATIONS)} elevations); got --frames {frames}"
+            )
+        return DIRECTIONAL_FRAMES
+    frames = FRAMES if frames is None else frames
+    if frames < 2:
+        raise InputError(f"need at least 2 frames (lightings) per scene (--frames), got {frames}")
+    return frames
+
+
+def render_scenes(
+    scenes: int,
+    frames: int | None = None,
+    side: int = 320,
+    seed: int = 0,
+    lighting: str = "families",
+    *,
+    workers: int = 1,
+    progress: bool = True,
+) -> Iterator[tuple[np.ndarray, list[str]]]:
+    """The frames of :func:`generate`, scene by scene: ``(frames, side, side)`` uint8 frames and the light family of
+    each (``frames``: default :data:`FRAMES`; ``directional``: :data:`DIRECTIONAL_FRAMES`, the only value it
+    takes). The arguments are checked when called, the scenes rendered as they are taken."""
+    frames = _frames(scenes, frames, side, lighting)
+    jobs = [(int(seed), i, int(side), frames, lighting) for i in range(scenes)]
+    return parallel_map(_scene_job, jobs, workers=workers, desc="relief scenes", unit="scene", progress=progress)
 
 
 def generate(
     out_dir: str | os.PathLike,
     scenes: int = 24,
-    frames: int = 12,
+    frames: int | None = None,
     side: int = 320,
     seed: int = 0,
     *,
+    lighting: str = "families",
     overwrite: bool = False,
     workers: int = 1,
     progress: bool = True,
 ) -> Path:
-    """Render ``scenes`` registered scenes into ``out_dir`` (written atomically; see the module).
+    """Render ``scenes`` registered scenes into ``out_dir`` (written atomically; see the module and
+    :func:`render_scenes` for the arguments).
 
     Returns:
         The output folder: a folder of scenes, ``scene_NNN`` (:func:`alcn_cv.data.scenes.load_scene_folder`;
         ``alcn train-real-light --set 'rendered=["DIR"]'``).
     """
-    # render_scene and relief_surface check these too, but in the workers, after the progress bar has started
-    if scenes < 1:
-        raise InputError(f"need at least one scene (--scenes), got {scenes}")
-    if frames < 2:
-        raise InputError(f"need at least 2 frames (lightings) per scene (--frames), got {frames}")
-    if side < MIN_SIDE:
-        raise InputError(f"--side is the side of the frames in pixels, at least {MIN_SIDE}; got {side}")
-    jobs = [(int(seed), i, int(side), int(frames)) for i in range(scenes)]
+    frames = _frames(scenes, frames, side, lighting)
     # rendered inside the block: atomic_output_dir refuses an existing or unwritable output before the minutes of work
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
-        rendered = parallel_map(
-            _scene_job, jobs, workers=workers, desc="relief scenes", unit="scene", progress=progress
-        )
+        rendered = render_scenes(scenes, frames, side, seed, lighting, workers=workers, progress=progress)
         lights = {}
         for i, (stack, names) in enumerate(rendered):
             folder = tmp / f"scene_{i:03d}"
@@ -153,7 +237,13 @@ def generate(
             make_manifest(
                 KIND,
                 seed,
-                {"scenes": scenes, "frames": frames, "side": side, "families": list(FAMILIES)},
+                {
+                    "scenes": scenes,
+                    "frames": frames,
+                    "side": side,
+                    "lighting": lighting,
+                    "families": list(FAMILIES) if lighting == "families" else ["ambient", "side"],
+                },
                 lights=lights,
             ),
         )

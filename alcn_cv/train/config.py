@@ -109,7 +109,12 @@ __all__ = [
 @dataclass
 class FewShotSetup:
     """Settings of the few-shot validation (:mod:`alcn_cv.train.fewshot`; here, without torch,
-    so that ``alcn bench fewshot`` builds its command line without importing it)."""
+    so that ``alcn bench fewshot`` builds its command line without importing it).
+
+    The one owner of their names and defaults: ``[fewshot]`` of :class:`TrainConfig` and
+    :class:`alcn_cv.bench.fewshot.FewShotSettings` name a field as here and default to it, and
+    :meth:`of` builds the setup from either. ``test_lighting`` is stored as a tuple.
+    """
 
     n_objects: int = 5
     object_seed: int = 424242
@@ -121,6 +126,16 @@ class FewShotSetup:
     batch_size: int = 64
     lr: float = 1e-3
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        self.test_lighting = tuple(self.test_lighting)
+
+    @classmethod
+    def of(cls, settings: Any, **given: Any) -> FewShotSetup:
+        """The setup with every field of ``settings`` named as one here (the others at their defaults), then
+        ``given``."""
+        shared = {f.name: getattr(settings, f.name) for f in dataclasses.fields(cls) if hasattr(settings, f.name)}
+        return cls(**{**shared, **given})
 
 
 @dataclass
@@ -171,13 +186,15 @@ class OptimConfig:
 
 @dataclass
 class FewShotConfig:
+    """``[fewshot]``: the few-shot validation after training; the keys of :class:`FewShotSetup` default to its."""
+
     enabled: bool = True
-    n_objects: int = 5
-    real_images: int = 1
-    per_image: int = 200
-    n_test: int = 2000
-    test_lighting: list[str] = field(default_factory=lambda: ["dark", "side", "spot", "shadow", "mixed"])
-    epochs: int = 8
+    n_objects: int = FewShotSetup.n_objects
+    real_images: int = FewShotSetup.real_images
+    per_image: int = FewShotSetup.per_image
+    n_test: int = FewShotSetup.n_test
+    test_lighting: list[str] = field(default_factory=lambda: list(FewShotSetup.test_lighting))
+    epochs: int = FewShotSetup.epochs
     dog: list[list[float]] = field(default_factory=lambda: [[0.5, 1.5]])
 
 

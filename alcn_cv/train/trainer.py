@@ -462,15 +462,7 @@ def _validate(model: JointModel, val_set: PhosBatch, device: torch.device) -> tu
 
 def _fewshot(model: JointModel, cfg: TrainConfig, progress: bool) -> dict[str, Any]:
     f = cfg.fewshot
-    setup = FewShotSetup(
-        n_objects=f.n_objects,
-        real_images=f.real_images,
-        per_image=f.per_image,
-        n_test=f.n_test,
-        test_lighting=tuple(f.test_lighting),
-        epochs=f.epochs,
-        seed=cfg.seed,
-    )
+    setup = FewShotSetup.of(f, seed=cfg.seed)
     methods = standard_methods(model, f.dog, cfg.model.num_kernels, cfg.model.sigma_step, cfg.model.detector_input)
     logger.info(
         "few-shot validation: %d new objects, %d image(s) each, tested under %s",

@@ -1,0 +1,59 @@
+"""Whole-image identification under hard directional light, on the scenes of ``alcn data scenes --lighting
+directional`` (:func:`alcn_cv.data.relief_scenes.render_directional_scene`): each scene is an identity, its first
+frame the gallery (frontal light), the others the probes (:data:`~alcn_cv.data.relief_scenes.AZIMUTHS` per
+elevation of :data:`~alcn_cv.data.relief_scenes.ELEVATIONS`).
+
+Every image is normalized by its method's ``apply()`` (float output), area-resized to ``size x size``, made
+zero-mean and unit-norm, and identified as its most correlated gallery image.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from alcn_cv.data.relief_scenes import AZIMUTHS, ELEVATIONS
+from alcn_cv.enhance.registry import from_spec
+
+__all__ = ["SIZES", "descriptors", "identification", "identify"]
+
+#: Sides of the compared images (pixels).
+SIZES = (32, 64)
+
+
+def descriptors(images: np.ndarray, size: int) -> np.ndarray:
+    """``(..., H, W)`` float -> ``(..., size * size)``: area-resized, zero-mean, unit-norm."""
+    flat = images.reshape(-1, *images.shape[-2:])
+    small = np.stack([cv2.resize(im, (size, size), interpolation=cv2.INTER_AREA).ravel() for im in flat])
+    small -= small.mean(axis=1, keepdims=True)
+    small /= np.linalg.norm(small, axis=1, keepdims=True) + 1e-9
+    return small.reshape(*images.shape[:-2], size * size)
+
+
+def identification(normalized: np.ndarray, size: int) -> dict[str, float]:
+    """The identification of normalized scenes compared at ``size x size``.
+
+    Args:
+        normalized: ``(scenes, DIRECTIONAL_FRAMES, H, W)`` float, the gallery then the probes of each scene.
+        size: side of the compared images (pixels).
+
+    Returns:
+        ``{"elevation E": percent}`` per elevation of :data:`~alcn_cv.data.relief_scenes.ELEVATIONS`: the
+        percentage (0-100) of its probes whose most correlated gallery image is their own scene's.
+    """
+    features = descriptors(normalized, size)
+    gallery, identities = features[:, 0], np.arange(len(features))
+    result = {}
+    for j, elevation in enumerate(ELEVATIONS):
+        probes = features[:, 1 + j * AZIMUTHS : 1 + (j + 1) * AZIMUTHS]
+        nearest = np.argmax(probes @ gallery.T, axis=-1)
+        result[f"elevation {elevation}"] = float(100 * np.mean(nearest == identities[:, None]))
+    return result
+
+
+def identify(spec: str, scenes: np.ndarray) -> dict[int, dict[str, float]]:
+    """:func:`identification` at each side of :data:`SIZES` of ``scenes`` (``(scenes, DIRECTIONAL_FRAMES, H, W)``
+    uint8) normalized by the registered method ``spec``'s ``apply()`` (float32 output)."""
+    norm = from_spec(spec)
+    normalized = np.stack([[norm.apply(im, out_dtype=np.float32) for im in scene] for scene in scenes])
+    return {size: identification(normalized, size) for size in SIZES}
