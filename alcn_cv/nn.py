@@ -103,8 +103,9 @@ class ALCN2d(nn.Module):
     colour is clipped to [0, 1] before Lab, and a NaN or inf pixel makes its whole image NaN (the divisive floor is
     the image's mean energy). Against float32, float16 is about 2e-3 off in gray and 4e-2 in colour,
     bfloat16 2e-2 and 0.15 (its Lab round trip alone). Under a caller's autocast an image of another float dtype than
-    the module's is let through and the output may be float32: the network and the filters run at autocast's
-    precision (bfloat16: about 1e-2 off float32), the Lab conversions in the image's dtype. Colour on CUDA, traced or
+    the module's is let through and the output may be float32: the network runs at autocast's precision (bfloat16:
+    about 1e-2 off float32), the filters as autocast runs their operations (on the CPU in the image's dtype), the Lab
+    conversions in the image's dtype. Colour on CUDA, traced or
     compiled goes through the torch Lab conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some.
     ``torch.jit.trace`` records the sizes of the traced image: on another size the traced module fails or, without
     an error, returns wrong values (use ``torch.compile`` for several sizes, which compiles again for each new size:

@@ -308,9 +308,19 @@ def test_gain_models_on_opencv_4_mirror_tiny_images_first(monkeypatch):
     """OpenCV 4's cv2.dnn runs the gain exports (4.8 on) but not a reflect pad longer than the side it pads: an image
     whose grid is smaller than the network's largest pad (4 grid points: under 18 px) is mirrored to 18 px first, as
     apply() completes a small window, and gives OpenCV 5's output within 0.01 (simulated here: CI runs OpenCV 5,
-    which mirrors the grid instead); from 18 px on, the same output."""
+    which mirrors the grid instead, so the outputs agree with or without the mirroring: a spy on dense_grid checks
+    that the network got the mirrored image and that its grid was cut back); from 18 px on, the same output."""
     from alcn_cv.nets import opencv_runtime
 
+    calls = []  # (the image dense_grid was given, the grid it returned, the network's stride and largest pad)
+    dense_grid = opencv_runtime.OpenCVNormalizer.dense_grid
+
+    def spy(self, image, *args, **kwargs):
+        grid = dense_grid(self, image, *args, **kwargs)
+        calls.append((image.shape, grid.shape, self.stride, self.largest_pad))
+        return grid
+
+    monkeypatch.setattr(opencv_runtime.OpenCVNormalizer, "dense_grid", spy)
     rng = np.random.default_rng(0)
     texture = cv2.GaussianBlur((rng.random((64, 320)) * 255).astype(np.uint8), (0, 0), 1.5)
     for model in ("gain", "gain-lite"):
@@ -318,10 +328,25 @@ def test_gain_models_on_opencv_4_mirror_tiny_images_first(monkeypatch):
         assert alcn.backend == "opencv"  # the default on OpenCV 4.8 and newer, torch installed or not
         for shape in [(17, 40), (12, 300), (5, 5), (18, 18)]:
             image = np.ascontiguousarray(texture[: shape[0], : shape[1]])
+            calls.clear()
             opencv5 = alcn.apply(image, out_dtype=np.float32)
-            monkeypatch.setattr(opencv_runtime, "OPENCV_4_DNN", True)
-            opencv4 = alcn.apply(image, out_dtype=np.float32)
-            monkeypatch.undo()
+            assert [c[0] for c in calls] == [shape], (model, shape, calls)  # OpenCV 5: the image itself
+            calls.clear()
+            with monkeypatch.context() as opencv4_dnn:
+                opencv4_dnn.setattr(opencv_runtime, "OPENCV_4_DNN", True)
+                opencv4 = alcn.apply(image, out_dtype=np.float32)
+            stride, largest_pad = calls[-1][2:]
+            grid = opencv_runtime.grid_shape(shape, stride)
+            assert calls[-1][:2] == (shape, (calls[-1][1][0], *grid)), (model, shape, calls)  # the grid cut back
+            if min(shape) < 18:
+                assert min(grid) < largest_pad == 4 and stride == 8, (model, shape, calls)
+                side = stride * (largest_pad - 2) + 2  # 18 px
+                mirrored = (max(side, shape[0]), max(side, shape[1]))
+                # the network ran on the image mirrored to 18 px a side, before the grid was cut back
+                assert [c[0] for c in calls] == [mirrored, shape], (model, shape, calls)
+                assert calls[0][1][1:] == opencv_runtime.grid_shape(mirrored, stride), (model, shape, calls)
+            else:
+                assert [c[0] for c in calls] == [shape], (model, shape, calls)  # no mirroring
             assert opencv4.shape == image.shape and np.abs(opencv4 - opencv5).max() < 1e-2, (model, shape)
             if min(shape) >= 18:
                 np.testing.assert_array_equal(opencv4, opencv5)

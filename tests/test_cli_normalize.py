@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
+from alcn_cv import create
 from alcn_cv.cli import main
 from alcn_cv.io import VideoReader
 
@@ -23,6 +24,11 @@ def test_image_keeps_size_channels_and_depth(tmp_path, frame):
     assert main(["normalize", str(src), str(tmp_path / "out.png"), "-m", "dog"]) == 0
     out = cv2.imread(str(tmp_path / "out.png"), cv2.IMREAD_UNCHANGED)
     assert out.shape == frame.shape and out.dtype == np.uint8
+    # --gray on a colour image: the method on its gray conversion, written as one channel
+    assert main(["normalize", str(src), str(tmp_path / "gray_out.png"), "-m", "dog", "--gray"]) == 0
+    gray_out = cv2.imread(str(tmp_path / "gray_out.png"), cv2.IMREAD_UNCHANGED)
+    assert gray_out.shape == frame.shape[:2] and gray_out.dtype == np.uint8
+    np.testing.assert_array_equal(gray_out, create("dog").apply(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)))
     gray16 = tmp_path / "g16.png"
     cv2.imwrite(str(gray16), (frame[..., 0].astype(np.uint16) * 257))
     assert main(["normalize", str(gray16), str(tmp_path / "g16_out.png"), "-m", "clahe", "--gray"]) == 0
@@ -142,6 +148,12 @@ def test_alpha_is_kept(tmp_path, frame):
         out = cv2.imread(str(tmp_path / "out.png"), cv2.IMREAD_UNCHANGED)
         assert out.shape == frame.shape[:2] + (channels,)
         np.testing.assert_array_equal(out[..., 3], alpha)
+        if flags == ["--gray"]:  # gray and alpha, written as BGRA: B == G == R, CLAHE of the gray conversion
+            np.testing.assert_array_equal(out[..., 0], out[..., 1])
+            np.testing.assert_array_equal(out[..., 0], out[..., 2])
+            np.testing.assert_array_equal(out[..., 0], create("clahe").apply(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)))
+        else:  # the colour kept
+            assert not np.array_equal(out[..., 0], out[..., 2])
 
 
 def test_list_explains_every_method(capsys):

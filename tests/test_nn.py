@@ -496,18 +496,29 @@ def test_a_callers_autocast_stays_on():
 
 def test_a_callers_autocast_leaves_the_colour_conversions_in_the_images_dtype():
     """Under the caller's bfloat16 autocast the Lab conversions run in float32 for a float32 image (a bfloat16 einsum
-    moves L by 1.6 of 100); the network and the filters take autocast's precision."""
+    moves L by 1.6 of 100); the network takes autocast's precision (the filters' operations, on the CPU, autocast
+    leaves in float32)."""
     rgb = torch.from_numpy(_unit(_bgr(48, 64)[..., ::-1].copy())).permute(2, 0, 1)[None]
     module = ALCN2d(model="gain").eval()
     to_lab, from_lab = RgbToLab(), LabToRgb()
+    layers = []  # (autocast on, the output's dtype) of each layer of the network that ran under the caller's autocast
+
+    def record(layer, inputs, output):
+        layers.append((torch.is_autocast_enabled("cpu"), output.dtype))
+
     with torch.no_grad():
         lab, reference = to_lab(rgb), module(rgb)
+        hooks = [layer.register_forward_hook(record) for layer in module.net.modules()]
         with torch.autocast("cpu", dtype=torch.bfloat16):
             autocast_lab, autocast_rgb, out = to_lab(rgb), from_lab(lab), module(rgb)
+        for hook in hooks:
+            hook.remove()
     assert autocast_lab.dtype == autocast_rgb.dtype == torch.float32
     torch.testing.assert_close(autocast_lab, lab, atol=0, rtol=0)
     torch.testing.assert_close(autocast_rgb, from_lab(lab), atol=0, rtol=0)
-    assert (out - reference).abs().max() < 2e-2
+    # the network ran in autocast's bfloat16, not in float32 with the caller's autocast switched off inside
+    assert layers and all(layer == (True, torch.bfloat16) for layer in layers), layers
+    assert 1e-4 < (out - reference).abs().max() < 2e-2
 
 
 @pytest.mark.parametrize("model", ["lite", "paper"])

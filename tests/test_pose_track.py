@@ -116,7 +116,7 @@ def test_track_video_names_frames_in_order_and_uses_the_model_camera(tmp_path, c
         track.main(tmp_path / "m.npz", video, tmp_path / "poses3.json")
 
 
-def test_a_part_model_is_tracked_after_the_normalizer_it_was_built_after(tmp_path, caplog):
+def test_a_part_model_is_tracked_after_the_normalizer_it_was_built_after(tmp_path, caplog, monkeypatch):
     tex = _texture()
     model = _planar_model(tex)
     model.normalization = "clahe"
@@ -124,11 +124,18 @@ def test_a_part_model_is_tracked_after_the_normalizer_it_was_built_after(tmp_pat
     frames = tmp_path / "frames"
     frames.mkdir()
     r, t = _poses(1)[0]
-    cv2.imwrite(str(frames / "0.png"), _render(tex, r, t))
+    frame = _render(tex, r, t)
+    cv2.imwrite(str(frames / "0.png"), frame)
+    clahe_inputs = _spy_on_apply(monkeypatch, "clahe")
     assert track.main(tmp_path / "m.npz", frames, tmp_path / "a.json", K, n_features=800)["normalization"] == "clahe"
+    # the detector normalized the frame with the model's CLAHE: once, on the frame's gray conversion
+    assert len(clahe_inputs) == 1
+    np.testing.assert_array_equal(clahe_inputs[0], cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+    clahe_inputs.clear()
     with caplog.at_level("WARNING", logger="pose.track"):
         summary = track.main(tmp_path / "m.npz", frames, tmp_path / "b.json", K, normalization="none", n_features=800)
     assert summary["normalization"] == "none" and "built after the normalization 'clahe'" in caplog.text
+    assert clahe_inputs == []  # the normalization given replaces the model's
     caplog.clear()
     with caplog.at_level("WARNING", logger="pose.track"):  # the same method, its default given
         track.main(
@@ -139,16 +146,45 @@ def test_a_part_model_is_tracked_after_the_normalizer_it_was_built_after(tmp_pat
         track.main(tmp_path / "m.npz", frames, tmp_path / "c.json", K, n_features=800, image_size=(1280, 960))
 
 
-def test_detector_runs_after_any_normalizer():
+def _spy_on_apply(monkeypatch, name):
+    """The images given to ``apply`` of the method ``name`` (its class), from now on."""
+    import alcn_cv
+
+    inputs = []
+    cls = type(alcn_cv.create(name))
+    apply = cls.apply
+
+    def spy(self, src, *args, **kwargs):
+        inputs.append(np.array(src, copy=True))
+        return apply(self, src, *args, **kwargs)
+
+    monkeypatch.setattr(cls, "apply", spy)
+    return inputs
+
+
+def test_detector_runs_after_any_normalizer(monkeypatch):
+    """The features are computed on the normalized frame: the method's own apply() of its gray conversion, called
+    once a frame; a real normalization (CLAHE) gives other correspondences than none."""
     import alcn_cv
 
     tex = _texture(1)
     model = _planar_model(tex)
     img = _render(tex, *_poses(1)[0])
+    gray = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    found = {}
     for name in ("none", "clahe"):
-        if name in alcn_cv.available():
-            corr = FeaturePartDetector(model, name, n_features=500).detect(img)
-            assert len(corr.image_points) == len(corr.object_points) > 20
+        inputs = _spy_on_apply(monkeypatch, name)
+        det = FeaturePartDetector(model, name, n_features=500)
+        corr = det.detect(img)
+        assert len(corr.image_points) == len(corr.object_points) > 20
+        assert len(inputs) == 1, name  # the normalization ran on the frame's gray conversion, once
+        np.testing.assert_array_equal(inputs[0], gray)
+        monkeypatch.undo()
+        np.testing.assert_array_equal(det.normalize(img), alcn_cv.create(name).apply(gray))
+        found[name] = corr
+    assert not np.array_equal(alcn_cv.create("clahe").apply(gray), gray)  # CLAHE changes the frame...
+    clahe, none = found["clahe"].image_points, found["none"].image_points
+    assert clahe.shape != none.shape or not np.array_equal(clahe, none)  # ... and so the keypoints matched
 
 
 def test_a_frame_read_into_the_same_buffer_is_a_new_frame():
