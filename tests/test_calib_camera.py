@@ -11,7 +11,15 @@ from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats.colmap import read_model
 from board_scene import make_board_scene
 from calib.board import BoardSpec
-from calib.camera import BoardView, calibrate, detect_in_images, load_calibration, main, select_views
+from calib.camera import (
+    BoardView,
+    _view_features,
+    calibrate,
+    detect_in_images,
+    load_calibration,
+    main,
+    select_views,
+)
 
 REFERENCE = {"fx": 536.07, "fy": 536.02, "cx": 342.37, "cy": 235.54}  # ../shared/data/README.md
 #: k1, k2, p1, p2, k3 and the RMS of the same reference (to its rounding).
@@ -80,7 +88,7 @@ def test_video_frames_are_selected_for_pose_spread(scene, tmp_path):
     """A video showing every pose twice: the selection keeps distinct poses, not repeats."""
     path = tmp_path / "board.avi"
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (640, 480))
-    order = list(range(12)) * 2
+    order = [i for i in range(12) for _ in (0, 1)]  # each repeat right after its pose: the first 8 are 4 poses
     for i in order:
         writer.write(scene.images[i])
     writer.release()
@@ -93,10 +101,14 @@ def test_video_frames_are_selected_for_pose_spread(scene, tmp_path):
 def test_select_views_prefers_coverage_and_spread(scene):
     detector = BoardSpec().detector()
     views = [BoardView(f"v{i}", detector(im), 1.0) for i, im in enumerate(scene.images)]
-    views = views + [BoardView(v.name + "_copy", v.detection, 1.0) for v in views]
+    # each copy right after its original: the first 6 views are only 3 poses
+    views = [w for v in views for w in (v, BoardView(v.name + "_copy", v.detection, 1.0))]
     chosen = select_views(views, (640, 480), max_views=6)
     names = [v.name.removesuffix("_copy") for v in chosen]
-    assert len(set(names)) == 6
+    assert len(names) == 6 and len(set(names)) == 6
+    # the greedy start: the view that covers most of the image (its apparent size)
+    largest = max(views[::2], key=lambda v: _view_features(v, (640, 480))[2])
+    assert largest.name in names
 
 
 def test_images_of_different_sizes(scene, tmp_path):

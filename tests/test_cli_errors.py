@@ -4,6 +4,7 @@ problem, no traceback, and no output that looks complete."""
 from __future__ import annotations
 
 import io
+import logging
 from collections.abc import Callable
 from pathlib import Path
 
@@ -143,10 +144,26 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, case):
     assert not [p for p in tmp_path.rglob(".*") if "tmp" in p.name], "temporary file left behind"
 
 
-def test_partial_video_on_request(tmp_path, capsys):
+def _frames(path: Path) -> int:
+    """The frames OpenCV decodes from a video."""
+    cap = cv2.VideoCapture(str(path))
+    n = 0
+    while cap.read()[0]:
+        n += 1
+    cap.release()
+    return n
+
+
+def test_partial_video_on_request(tmp_path, capsys, caplog):
     src = _truncated(_video(tmp_path / "v.avi"), 0.6)
-    assert main(["normalize", str(src), str(tmp_path / "out.avi"), "-m", "none", "--allow-partial"]) == 0
+    decoded = _frames(src)
+    assert 1 < decoded < 20  # some of the header's 20 frames, not all
+    with caplog.at_level(logging.WARNING, logger="alcn_cv.io"):
+        assert main(["normalize", str(src), str(tmp_path / "out.avi"), "-m", "none", "--allow-partial"]) == 0
     assert (tmp_path / "out.avi").is_file()
+    assert _frames(tmp_path / "out.avi") == decoded  # every decoded frame written
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert any(f"decoded {decoded} of 20 frames" in w and f"wrote the {decoded} decoded frames" in w for w in warnings)
 
 
 def test_interrupted_folder_leaves_no_temporary_file(tmp_path, monkeypatch, capsys):

@@ -1,5 +1,6 @@
 """The divisive normalization's two forms: NumPy/OpenCV (alcn_cv.filters.divisive) and torch (torch_divisive)."""
 
+import cv2
 import numpy as np
 import pytest
 
@@ -71,6 +72,16 @@ def test_blur_pads_reflect_101_for_any_size():
     tiny = torch_divisive.reflect101_pad(x, 4, 4, 4, 4)  # the reflection repeats
     assert tiny.shape == (1, 1, 11, 13)
     torch.testing.assert_close(tiny[..., 4:7, 4:9], x)
+    # the repeated reflection itself, as OpenCV pads (not edge replication, not one reflection)
+    np.testing.assert_array_equal(
+        tiny[0, 0].numpy(), cv2.copyMakeBorder(x[0, 0].numpy(), 4, 4, 4, 4, cv2.BORDER_REFLECT_101)
+    )
     r = _response(2, 3, seed=3)
     blurred = torch_divisive.gaussian_blur(torch.from_numpy(r)[None, None], 2.0)[0, 0].numpy()
     assert blurred.shape == (2, 3) and np.isfinite(blurred).all()
+    # a blur longer than the 2x3 side: the torch energy is the NumPy/OpenCV one
+    np.testing.assert_allclose(
+        torch_divisive.gaussian_energy(torch.from_numpy(r)[None, None], 2.0)[0, 0].numpy(),
+        divisive.gaussian_energy(r, 2.0),
+        atol=1e-6,
+    )

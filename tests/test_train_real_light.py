@@ -37,6 +37,15 @@ def test_textured_locations_and_sampling():
     frames[:, 20:44, 40:70] = np.random.default_rng(0).random((24, 30))
     centres = textured_locations(frames, 16, step=4)
     assert len(centres) and (centres[:, 0] >= 8).all() and (centres[:, 1] <= 72).all()
+    # where the 16x16 patch meets the texture (rows 20:44, cols 40:70, half a patch around them) ...
+    assert ((centres[:, 0] >= 20 - 8) & (centres[:, 0] <= 44 + 8)).all()
+    assert ((centres[:, 1] >= 40 - 8) & (centres[:, 1] <= 70 + 8)).all()
+    kept = set(map(tuple, centres.tolist()))
+    assert (8, 8) not in kept and (56, 16) not in kept  # flat windows
+    assert all((y, x) in kept for y in (28, 32, 36) for x in (48, 52, 56, 60))  # windows wholly in the texture
+    # ... and of those, the more textured half (quantile 0.5) of the grid's 13 x 17 windows: not every one touched
+    windows = len(range(8, 64 - 8 + 1, 4)) * len(range(8, 80 - 8 + 1, 4))
+    assert windows / 2 <= len(centres) <= 0.52 * windows
     picked = sample_locations(centres, 50, 12, np.random.default_rng(0))
     assert 1 < len(picked) <= 50
     gaps = np.abs(picked[:, None] - picked[None]).max(-1) + 1000 * np.eye(len(picked))
