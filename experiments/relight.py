@@ -17,8 +17,6 @@ docs/reports/relight_split.json and docs/reports/relight_leave_one_out.json.
 
 from __future__ import annotations
 
-import argparse
-
 from _run import RUNS, add_part_option, alcn, command_line, keep, quick_protocol, selected_parts
 
 PROTOCOLS = {"split": [], "leave_one_out": ["--leave-one-out"]}
@@ -28,9 +26,6 @@ def main() -> None:
     parser = command_line(__doc__)
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
     add_part_option(parser, PROTOCOLS)
-    # --part's former name, hidden: the published reports' arguments (which report.py's RENAMED_OPTIONS shows as
-    # --part) and docs/journal.md's history use it
-    parser.add_argument("--only", dest="part", nargs="+", action="extend", choices=PROTOCOLS, help=argparse.SUPPRESS)
     parser.add_argument("--quick", action="store_true", help="`alcn bench relight`'s quick protocol")
     args = parser.parse_args()
     quick = quick_protocol() if args.quick else []

@@ -35,9 +35,6 @@ BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 SPEED_HEADLINE_TARGETS = 6
 #: The rows of the real-light tables the README shows (each method's better row of default and tuned).
 HEADLINE_METHODS = ("none", "clahe", "dog", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
-#: Options an experiment renamed after a kept report recorded its arguments (script, old name: new name): the rerun
-#: line says the current name (the old one still works).
-RENAMED_OPTIONS = {("experiments/relight.py", "--only"): "--part"}
 
 #: Said under every leave-one-scene-out table: the bench tunes the hand-made methods per fold but runs ALCN's
 #: shipped files as they are.
@@ -64,7 +61,7 @@ def provenance(report: dict[str, Any]) -> str:
     """The lines under a table's title: how to rerun it, the command, the machine and the date."""
     exp = report.get("experiment", {})
     script = exp.get("script", "?")
-    argv = [RENAMED_OPTIONS.get((script, arg), arg) for arg in exp.get("argv", [])]
+    argv = exp.get("argv", [])
     commands = report.get("commands") or [report.get("command")]
     machine = report.get("machine") or report.get("machine_before")
     return (

@@ -39,7 +39,6 @@ def _kept(name: str) -> dict[str, Any]:
     return json.loads((REPORTS / f"{name}.json").read_text(encoding="utf-8"))
 
 
-@pytest.mark.parametrize("rendered", [False, True], ids=["recorded", "rendered"])
 @pytest.mark.parametrize(
     ("script", "name"),
     [("relight", "relight_split"), ("relight", "relight_leave_one_out"), ("learning", "relight_learning")],
@@ -50,11 +49,10 @@ def test_the_rerun_line_runs_the_published_command(
     tmp_path: Path,
     script: str,
     name: str,
-    rendered: bool,
 ) -> None:
-    """The quick protocol's options came from copies in each script, relight.py's --only is --part now and its
-    seeds default to the published ones: the arguments a kept report records (as recorded, and as docs/results.md
-    renders them) still run exactly the command it records."""
+    """The quick protocol's options came from copies in each script and relight.py's seeds default to the published
+    ones: the arguments a kept report records (as docs/results.md renders them) run exactly the command it
+    records."""
     module = importlib.import_module(script)
     commands: list[str] = []
     monkeypatch.setattr(module, "RUNS", tmp_path)
@@ -64,9 +62,7 @@ def test_the_rerun_line_runs_the_published_command(
         monkeypatch.setattr(module, "untrained_start", lambda trained, path, description: Path(path))
     report = _kept(name)
     exp = report["experiment"]
-    renamed = _report_module().RENAMED_OPTIONS
-    argv = [renamed.get((exp["script"], a), a) for a in exp["argv"]] if rendered else exp["argv"]
-    monkeypatch.setattr(sys, "argv", [f"{script}.py", *argv])
+    monkeypatch.setattr(sys, "argv", [f"{script}.py", *exp["argv"]])
     module.main()
     assert report["command"] in [c.replace(str(tmp_path), "OUT") for c in commands]
 
@@ -177,23 +173,6 @@ def test_part_runs_each_part_once_in_its_order(
     for script in ("relight", "pose_planar", "pose_table1", "relief_training", "unet_baseline"):
         source = (EXPERIMENTS / f"{script}.py").read_text(encoding="utf-8")
         assert "add_part_option(parser" in source and "selected_parts(args" in source, script
-
-
-def test_relights_former_option_is_hidden_and_still_runs(
-    experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
-) -> None:
-    """--only, relight.py's former --part, is hidden from its help; the published reports' arguments still run."""
-    module = importlib.import_module("relight")
-    commands: list[str] = []
-    monkeypatch.setattr(module, "alcn", lambda *argv: commands.append(" ".join(argv)))
-    monkeypatch.setattr(module, "keep", lambda *args, **kwargs: None)
-    monkeypatch.setattr(sys, "argv", ["relight.py", "--only", "leave_one_out", "split", "--part", "split"])
-    module.main()
-    assert len(commands) == 2 and "--leave-one-out" not in commands[0] and "--leave-one-out" in commands[1]
-    monkeypatch.setattr(sys, "argv", ["relight.py", "--help"])
-    with pytest.raises(SystemExit):
-        module.main()
-    assert "--only" not in capsys.readouterr().out
 
 
 def test_figure_publishes_only_the_readmes_scene_and_out_may_be_the_published_path(
