@@ -87,7 +87,9 @@ def from_unit_float(unit: np.ndarray, dtype: np.dtype) -> np.ndarray:
     (``rint(unit * full scale)`` for the integer types), with ``unit`` as scratch space: it is overwritten (pass a
     copy to keep it). A row, a plane or an image of up to four channels takes OpenCV passes: for uint8 the lower
     clip, then ``cv2.convertScaleAbs``, which rounds half to even and saturates as ``np.rint`` after the clip
-    does, bit for bit."""
+    does, bit for bit. Another layout (a strided view, a read-only or non-float32 array) is copied first."""
+    if unit.dtype != np.float32 or not (unit.flags.c_contiguous and unit.flags.writeable):
+        unit = np.array(unit, np.float32, order="C")  # the scratch space OpenCV writes into
     if not (unit.ndim in (1, 2) or (unit.ndim == 3 and unit.shape[2] <= 4)):  # what OpenCV cannot take as a Mat
         np.clip(unit, 0.0, 1.0, out=unit)
     else:  # cv2.threshold: no scalar that OpenCV could take for an array

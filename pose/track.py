@@ -39,7 +39,6 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv import io
-from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import check_writable, output_path, read_json, write_json
@@ -618,9 +617,7 @@ def open_tracker(
         det: PartDetector = FeaturePartDetector(
             pm, normalization or pm.normalization, n_features=n_features, n_features_global=n_features_global
         )
-        if normalization is not None and not same_method(
-            pin_default_model(normalization), pin_default_model(pm.normalization)
-        ):
+        if normalization is not None and not same_method(normalization, pm.normalization):
             logger.warning(
                 "%s was built after the normalization %r; tracking after %r, its descriptors may not match",
                 name,

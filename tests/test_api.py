@@ -427,6 +427,10 @@ def test_same_method_fills_in_the_defaults():
 
     assert same_method("clahe", "clahe:clip_limit=2.0:tileGridSize=(8, 8)")
     assert same_method("alcn", "alcn:device=cpu:threads=auto")
+    # the default model named or not (its default is None): examples/track_cookie_box.py rebuilt its part model on
+    # every run when they differed
+    assert same_method("alcn", "alcn:model=gain") and same_method("alcn:model=gain:scale=1.0", "alcn:scale=1.0")
+    assert not same_method("alcn", f"alcn:weights={MODELS['gain']}")
     assert not same_method("clahe", "clahe:clipLimit=4")
     assert not same_method("alcn", "alcn:model=lite")
     with pytest.raises(InputError, match="unknown normalization"):

@@ -194,6 +194,10 @@ def test_unit_float_conversions_are_the_numpy_ones():
     kept = values.copy()
     np.testing.assert_array_equal(_to_uint8(values), expected)
     np.testing.assert_array_equal(values, kept)  # the caller's plane is left as it was
+    strided, read_only = kept[:, ::2], kept.copy()
+    read_only.flags.writeable = False  # other layouts are copied (OpenCV's dst= failed on a strided view)
+    np.testing.assert_array_equal(from_unit_float(strided, np.dtype(np.uint8)), expected[:, ::2])
+    np.testing.assert_array_equal(from_unit_float(read_only, np.dtype(np.uint16)), np.rint(np.clip(kept, 0, 1) * 65535))
     np.testing.assert_array_equal(from_unit_float(values, np.dtype(np.uint8)), expected)
     gray8 = np.arange(256, dtype=np.uint8).reshape(16, 16)
     np.testing.assert_array_equal(to_unit_float(gray8), gray8.astype(np.float32) * np.float32(1 / 255))
