@@ -127,6 +127,13 @@ class ALCN(Normalization):
     )
     reference = "Rad, Roth & Lepetit, BMVC 2017"
 
+    @classmethod
+    def resolved(cls, params: dict[str, object]) -> dict[str, object]:
+        """The default model named where neither ``model`` nor ``weights`` is given (``model=None`` means it)."""
+        if params.get("model") is None and params.get("weights") is None:
+            return {**params, "model": DEFAULT_MODEL}
+        return params
+
     def __init__(
         self,
         weights: str | Path | None = None,

@@ -111,6 +111,13 @@ class Normalization:
         summary = cls.summary or (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
         return " ".join(summary.split()), cls.reference
 
+    @classmethod
+    def resolved(cls, params: dict[str, object]) -> dict[str, object]:
+        """``params``, every constructor parameter given (defaults included), with the defaults that the others
+        decide resolved: what :func:`~alcn_cv.enhance.registry.same_method` compares. The parameters themselves, by
+        default."""
+        return params
+
     def normalize(self, gray: np.ndarray) -> np.ndarray:
         """Raw normalized response.
 

@@ -94,19 +94,19 @@ def _accepted_names(params: dict[str, object], accepted: dict[str, object]) -> d
 
 def same_method(spec: str, other: str) -> bool:
     """Whether two specs name the same method with the same parameters, the defaults included:
-    ``same_method("clahe", "clahe:clip_limit=2.0")`` and ``same_method("alcn", "alcn:model=gain")`` (the default
-    model, :func:`~alcn_cv.enhance.alcn.pin_default_model`) are True.
+    ``same_method("clahe", "clahe:clip_limit=2.0")`` and ``same_method("alcn", "alcn:model=gain")`` (defaults that
+    the other parameters decide, as :meth:`Normalization.resolved <alcn_cv.enhance.base.Normalization.resolved>`
+    resolves them) are True.
 
     Raises:
         InputError: a bad spec or an unknown name.
     """
-    from alcn_cv.enhance.alcn import pin_default_model  # here: alcn registers itself through this module
 
     def full(text: str) -> tuple[str, dict[str, object]]:
-        name, params = parse_spec(pin_default_model(text))
+        name, params = parse_spec(text)
         accepted = parameters(name)
         defaults = {k: v for k, v in accepted.items() if v is not inspect.Parameter.empty}
-        return name, {**defaults, **_accepted_names(params, accepted)}
+        return name, _REGISTRY[name].resolved({**defaults, **_accepted_names(params, accepted)})
 
     return full(spec) == full(other)
 
