@@ -110,7 +110,7 @@ class ModelSpec:
         """
         meta = weight_file.meta
         scale = meta["working_scale"] if scale is None else scale
-        number = isinstance(scale, (int, float, np.integer, np.floating)) and not isinstance(scale, bool)
+        number = isinstance(scale, numbers.Real) and not isinstance(scale, bool)
         if not (number and 0 < scale <= 4):
             raise InputError(f"scale must be a number in (0, 4], got {scale!r}")
         scale = float(scale)

@@ -370,9 +370,8 @@ def pin_default_model(spec: str) -> str:
     were made with (pose models, corner detectors): a later change of the default does not change
     what they mean."""
     name, params = parse_spec(spec)
-    if name != ALCN.name or "model" in params or "weights" in params:
-        return spec
-    return f"{spec}:model={DEFAULT_MODEL}"
+    resolved = ALCN.resolved(params) if name == ALCN.name else params
+    return spec if resolved is params else f"{spec}:model={resolved['model']}"
 
 
 def createALCN(  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE
