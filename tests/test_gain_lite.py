@@ -55,7 +55,9 @@ def test_distill_from_a_gain_teacher_writes_a_smaller_gain_student(tmp_path):
 
     teacher_path, teacher = _teacher(tmp_path / "teacher.npz")
     scenes = _scenes(tmp_path)
-    cfg = GainDistillConfig(teacher=str(teacher_path), scenes=[str(s) for s in scenes], relit=0, rendered=0, epochs=25)
+    cfg = GainDistillConfig(
+        teacher=str(teacher_path), scenes=[str(s) for s in scenes], relit=0, n_rendered=0, epochs=25
+    )
     out = distill.main(tmp_path / "student.npz", cfg, "test", conf="gain-lite", progress=False)
     header = load_normalizer_file(out).meta
     assert header["architecture"] == "gain" and header["config"]["channels"] == 8 and header["trained"] is True
@@ -83,7 +85,7 @@ def test_distill_gain_is_seeded_and_rejects_other_teachers(tmp_path):
     teacher_path, _ = _teacher(tmp_path / "teacher.npz")
     scenes = _scenes(tmp_path, count=1)
     (tmp_path / "short").mkdir()
-    cfg = GainDistillConfig(teacher=str(teacher_path), scenes=[str(s) for s in scenes], relit=0, rendered=1, epochs=2)
+    cfg = GainDistillConfig(teacher=str(teacher_path), scenes=[str(s) for s in scenes], relit=0, n_rendered=1, epochs=2)
     runs = [distill.distill_gain(cfg, progress=False)[0] for _ in range(2)]
     for a, b in zip(runs[0].state_arrays().values(), runs[1].state_arrays().values()):
         np.testing.assert_array_equal(a, b)
@@ -95,7 +97,7 @@ def test_distill_gain_is_seeded_and_rejects_other_teachers(tmp_path):
     short = [str(s) for s in _scenes(tmp_path / "short", count=1, frames=3)]
     with pytest.raises(alcn_cv.errors.DatasetError, match="validation"):
         distill.distill_gain(
-            GainDistillConfig(teacher=str(teacher_path), scenes=short, relit=0, rendered=0), progress=False
+            GainDistillConfig(teacher=str(teacher_path), scenes=short, relit=0, n_rendered=0), progress=False
         )
 
 
@@ -117,7 +119,7 @@ def test_distill_command_from_a_gain_teacher(tmp_path, capsys):
         "--set",
         "relit=0",
         "--set",
-        "rendered=0",
+        "n_rendered=0",
     ]
     assert cli(["distill", "--conf", "gain-lite", "--out", str(out), *args, "--no-progress"]) == 0
     assert capsys.readouterr().out.strip() == str(out) and out.with_suffix(".onnx").is_file()

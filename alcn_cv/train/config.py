@@ -702,7 +702,7 @@ class GainDistillConfig:
         scenes: registered scenes (as :attr:`RealLightConfig.scenes`; never the test scenes).
         relit, light: relit copies of the permissive photographs added to the data (as
             :attr:`RealLightConfig.relit` and :attr:`RealLightConfig.light`; 0: none).
-        rendered: rendered registered scenes added to the data (256x256, 4 lights each).
+        n_rendered: how many registered scenes are rendered and added to the data (256x256, 4 lights each).
         seed: seeds the student's initialisation, the relighting and the rendering.
         epochs, lr: Adam over every training frame once per epoch, cosine schedule.
         channels, dilations: the student's hidden width and its dilated 3x3 convolutions.
@@ -712,7 +712,7 @@ class GainDistillConfig:
     scenes: list[str] = field(default_factory=list)
     relit: int = 5
     light: str = "relief"
-    rendered: int = 0
+    n_rendered: int = 0
     seed: int = 0
     epochs: int = 60
     lr: float = 3e-3

@@ -394,9 +394,9 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
         The student (eval mode) and a record of the run (settings, time, fidelity).
     """
     cfg = cfg or GainDistillConfig()
-    seed, epochs, rendered, channels, dilations = cfg.seed, cfg.epochs, cfg.rendered, cfg.channels, cfg.dilations
+    seed, epochs, rendered, channels, dilations = cfg.seed, cfg.epochs, cfg.n_rendered, cfg.channels, cfg.dilations
     if epochs < 1 or rendered < 0 or channels < 1 or not dilations:
-        raise InputError("epochs and channels must be >= 1, rendered >= 0, and dilations non-empty")
+        raise InputError("epochs and channels must be >= 1, n_rendered >= 0, and dilations non-empty")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     teacher_path = teacher_file(cfg.teacher)
@@ -501,9 +501,9 @@ def _gain_sources(s: dict[str, Any]) -> str:
             f"the permissive photographs relit {s['relit']} times each (`alcn_cv.data.permissive_images`, "
             f"light `{s['light']}`)"
         )
-    if s["rendered"]:
+    if s["n_rendered"]:
         parts.append(
-            f"{s['rendered']} rendered registered scenes ({_RENDERED_SIZE}x{_RENDERED_SIZE}, {_RENDERED_FRAMES} "
+            f"{s['n_rendered']} rendered registered scenes ({_RENDERED_SIZE}x{_RENDERED_SIZE}, {_RENDERED_FRAMES} "
             "lights each, `alcn_cv.data.relief_scenes.render_scene`, the last held out)"
         )
     return "; ".join(parts)
