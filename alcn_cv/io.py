@@ -62,8 +62,15 @@ FLOAT_SUFFIXES = frozenset({".tif", ".tiff"})
 VIDEO_SUFFIXES = frozenset(
     {".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv", ".3gp", ".flv", ".ts", ".mts", ".m2ts"}
 )
-# the codec of each container that does not take mp4v (WebM: VP8/VP9/AV1 only; FLV: its own MPEG-4 variant)
-_FOURCC = {".avi": "MJPG", ".mkv": "MJPG", ".webm": "VP80", ".flv": "FLV1"}
+# the codec of each container that does not take mp4v (WebM: VP8/VP9/AV1 only; FLV: its own MPEG-4 variant, by
+# FLV's numeric tag 2: its four letters make OpenCV print that FLV has no such tag). WebM and MPEG program and
+# transport streams have no tags at all: OpenCV prints "tag ... is not supported" for any codec there (opencv#8919).
+_FOURCC = {
+    ".avi": cv2.VideoWriter.fourcc(*"MJPG"),
+    ".mkv": cv2.VideoWriter.fourcc(*"MJPG"),
+    ".webm": cv2.VideoWriter.fourcc(*"VP80"),
+    ".flv": 2,
+}
 #: The process's umask, read once: the permissions of what is made under a temporary name.
 UMASK = os.umask(0)
 os.umask(UMASK)
@@ -570,7 +577,7 @@ def open_video_writer(
     """
     path = Path(path)
     make_folder(path.parent)
-    fourcc = cv2.VideoWriter.fourcc(*_FOURCC.get(path.suffix.lower(), "mp4v"))
+    fourcc = _FOURCC.get(path.suffix.lower(), cv2.VideoWriter.fourcc(*"mp4v"))
     with signals_to_main_thread():  # FFmpeg's encoder threads start here
         writer = cv2.VideoWriter(str(path), fourcc, fps, size, color)
     if not writer.isOpened():
