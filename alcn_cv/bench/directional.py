@@ -5,17 +5,24 @@ elevation of :data:`~alcn_cv.data.relief_scenes.ELEVATIONS`).
 
 Every image is normalized by its method's ``apply()`` (float output), area-resized to ``size x size``, made
 zero-mean and unit-norm, and identified as its most correlated gallery image.
+
+A method's parameters are tuned (:func:`tune`) over a grid of settings on a validation rendering (other scenes than
+the test's), each setting scored by :func:`score`: one number, the mean identification over the elevations at every
+side of :data:`SIZES`.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import cv2
 import numpy as np
 
 from alcn_cv.data.relief_scenes import AZIMUTHS, ELEVATIONS
-from alcn_cv.enhance.registry import from_spec
+from alcn_cv.enhance.registry import format_spec, from_spec
 
-__all__ = ["SIZES", "descriptors", "identification", "identify"]
+__all__ = ["SIZES", "descriptors", "identification", "identify", "score", "tune"]
 
 #: Sides of the compared images (pixels).
 SIZES = (32, 64)
@@ -57,3 +64,31 @@ def identify(spec: str, scenes: np.ndarray) -> dict[int, dict[str, float]]:
     norm = from_spec(spec)
     normalized = np.stack([[norm.apply(im, out_dtype=np.float32) for im in scene] for scene in scenes])
     return {size: identification(normalized, size) for size in SIZES}
+
+
+def score(result: Mapping[int, Mapping[str, float]]) -> float:
+    """The number a setting is tuned by: the mean percentage (0-100) of :func:`identify`'s ``result`` over its sides
+    and elevations."""
+    return float(np.mean([percent for per_size in result.values() for percent in per_size.values()]))
+
+
+def tune(method: str, scenes: np.ndarray, grid: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Choose ``method``'s setting among ``grid`` by identification on ``scenes``.
+
+    Each setting ``{key: value}`` is run as the spec ``method:key=value...`` (:func:`identify`) and scored by
+    :func:`score`; the first best setting wins (a grid whose first setting is the method's default keeps it on a tie).
+
+    Args:
+        method: the name of a registered method.
+        scenes: ``(scenes, DIRECTIONAL_FRAMES, H, W)`` uint8, the rendering tuned on: a validation rendering, never
+            the test's.
+        grid: the settings searched, e.g. ``TUNING_GRIDS[method]`` (:data:`alcn_cv.bench.relight.TUNING_GRIDS`).
+
+    Returns:
+        ``{"chosen": spec, "scores": {spec: percent}}``, the scores in the order of ``grid``.
+    """
+    scores = {}
+    for params in grid:
+        spec = format_spec(method, dict(params))
+        scores[spec] = score(identify(spec, scenes))
+    return {"chosen": max(scores, key=lambda k: scores[k]), "scores": scores}  # max: the first of equal maxima
