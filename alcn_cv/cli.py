@@ -19,10 +19,12 @@ import argparse
 import contextlib
 import logging
 import os
+import re
 import signal
 import sys
+import textwrap
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from importlib import metadata
 from typing import Any
 
@@ -142,6 +144,44 @@ def add_conf_options(parser: argparse.ArgumentParser, default: str | None, prese
         dest="settings",
         help=f"override one key of the preset, dotted, the value as TOML, e.g. --set {example} (repeatable)",
     )
+
+
+class _PresetListFormatter(argparse.HelpFormatter):
+    """argparse's help formatter, but each line of a description or an epilog is filled alone: the epilog of
+    :func:`add_conf_option` keeps one line per preset, a longer one wrapped under its summary (an indented line's
+    second column)."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        lines = []
+        for line in text.splitlines():
+            columns = re.match(r"\s+\S+\s+", line)
+            hang = indent + " " * len(columns.group()) if columns else indent
+            lines.append(
+                textwrap.fill(line, width, initial_indent=indent, subsequent_indent=hang, break_on_hyphens=False)
+            )
+        return "\n".join(lines)
+
+
+def add_conf_option(parser: argparse.ArgumentParser, summaries: Mapping[str, str], default: str = "default") -> None:
+    """``--conf NAME`` (``args.conf``): the stage's preset, a key of ``summaries`` (its presets, each with what it
+    is), listed one line each in the ``--help``; the other options override its values. An unknown name is
+    argparse's error naming the presets (exit code 2)."""
+    parser.add_argument(
+        "--conf",
+        choices=tuple(summaries),
+        default=default,
+        metavar="NAME",
+        help=f"the preset, one of those listed below (default: {default}); the other options override its values",
+    )
+    width = max(map(len, summaries))
+    rows = [f"  {name:<{width}}  {what}" for name, what in summaries.items()]
+    parser.epilog = "\n".join(["presets (--conf NAME):", *rows])
+    parser.formatter_class = _PresetListFormatter
+
+
+def preset_values(confs: Mapping[str, object], field: str) -> str:
+    """The value of ``field`` in each preset of ``confs``, for an option's help: ``"default 120, small 4"``."""
+    return ", ".join(f"{name} {getattr(conf, field)}" for name, conf in confs.items())
 
 
 class _Seeds(argparse.Action):

@@ -195,12 +195,17 @@ def publish(path: str | Path, replace: bool = False) -> Path:
 
 def quick_protocol() -> list[str]:
     """The options of ``alcn bench relight``'s quick protocol (its preset,
-    ``alcn_cv.bench.relight_settings.PRESETS["quick"]``) spelled out: the kept reports' commands record them so
-    (``--quick`` would be another command for the same settings, which :func:`keep` would not let replace them)."""
-    from alcn_cv.bench.relight_settings import PRESETS
+    ``alcn_cv.bench.relight_settings.CONFS["quick"]``) spelled out: the kept reports' commands record them so
+    (``--conf quick`` would be another command for the same settings, which :func:`keep` would not let replace
+    them)."""
+    from dataclasses import asdict
+
+    from alcn_cv.bench.relight_settings import CONFS
 
     # None (every pair) is the bench's 0
-    return [arg for key, value in PRESETS["quick"].items() for arg in (f"--{key.replace('_', '-')}", str(value or 0))]
+    return [
+        arg for key, value in asdict(CONFS["quick"]).items() for arg in (f"--{key.replace('_', '-')}", str(value or 0))
+    ]
 
 
 def quick_seed0_untuned() -> list[str]:

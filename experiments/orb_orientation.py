@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
-from typing import cast
 
 import cv2
 import numpy as np
@@ -32,7 +31,7 @@ from _run import RUNS, band_variant, command_line, keep, script_command
 from tqdm.auto import tqdm
 
 from alcn_cv.bench.relight import PairPlan, build_method, evaluate_scene, keypoint_scores, plan_pairs
-from alcn_cv.bench.relight_settings import PRESETS, Settings
+from alcn_cv.bench.relight_settings import CONFS, Settings
 from alcn_cv.data.light_changes import LightChangeConfig, relit_frames
 from alcn_cv.data.permissive_images import training_photographs
 from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, select_scenes, shared_root
@@ -40,10 +39,9 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.report import machine
 from alcn_cv.shared_data import shared_data_dir
 
-#: `alcn bench relight`'s quick protocol: its frames per scene, and its patches and pairs in the bench's settings
-#: (a preset's patches are a number: only its frames and pairs may be None, all of them).
-MAX_FRAMES = PRESETS["quick"]["max_frames"]
-SETTINGS = Settings(patches=cast(int, PRESETS["quick"]["patches"]), max_pairs=PRESETS["quick"]["max_pairs"])
+#: `alcn bench relight`'s quick protocol: its frames per scene, and its patches and pairs in the bench's settings.
+MAX_FRAMES = CONFS["quick"].max_frames
+SETTINGS = Settings(patches=CONFS["quick"].patches, max_pairs=CONFS["quick"].max_pairs)
 BASELINES = ("none", "clahe", "dog", "dlcn", "alcn")  # alcn: the shipped default, band 0.15
 #: The band's weights tried besides the shipped one (0: none).
 BAND_WEIGHTS = (0.0, 0.1, 0.2, 0.3)

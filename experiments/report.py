@@ -14,6 +14,7 @@ rows of the same reports (:func:`headlines`).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import json
 import sys
@@ -25,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # _run, also when this
 from _run import REPORTS, ROOT, rerun  # noqa: E402
 
 sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
-from alcn_cv.bench.relight_settings import PRESETS  # noqa: E402
+from alcn_cv.bench.relight_settings import CONFS  # noqa: E402
 from alcn_cv.report import describe_machine, machine_cores, markdown_table  # noqa: E402
 
 RESULTS = ROOT / "docs" / "results.md"
@@ -80,11 +81,12 @@ def _mean_std(summary: dict[str, Any] | None, seeds: int) -> str | None:
 def _protocol(settings: dict[str, Any]) -> str | None:
     """A relight report's sampling sizes when they are not the benchmark's default preset (``None`` when they are),
     named ``quick protocol`` when they are the quick one's."""
-    sizes = {key: settings.get(key) for key in PRESETS["default"]}
-    if sizes == PRESETS["default"]:
+    default, quick = (dataclasses.asdict(CONFS[name]) for name in ("default", "quick"))
+    sizes = {key: settings.get(key) for key in default}
+    if sizes == default:
         return None
     text = f"{sizes['max_frames']} frames per scene, {sizes['patches']} patches, {sizes['max_pairs']} pairs"
-    return f"quick protocol: {text}" if sizes == PRESETS["quick"] else text
+    return f"quick protocol: {text}" if sizes == quick else text
 
 
 def relight(report: dict[str, Any], title: str | None = None) -> str:

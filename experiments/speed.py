@@ -3,7 +3,7 @@ OpenCV DoG, CLAHE and none on the same frames, with the targets table.
 
 Time on 2 shared cores: about 25 minutes for the full bench (640x480, 1280x800, 1920x1080, gray and BGR,
 the video test); 17 minutes for the current table at load 15 (two sizes, no video test; 2026-11-27); under a minute with
---quick (the bench's tiny preset: a smoke test, its ratios mean little).
+--conf quick (the bench's tiny preset: a smoke test, its ratios mean little).
 
     python experiments/speed.py --sizes 640x480,1280x800 --video-frames 0 --budget 3   # the current table
     python experiments/speed.py                                                          # the full bench

@@ -603,8 +603,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument(
         "--data",
         help="pose data set from `alcn data pose` (train/, test/, models/); a small one: "
-        "`alcn data pose --size small --frames 12 --out DATA` (320x240, 12 frames a sequence; about 15 s, "
-        "then about 2 min of CPU for this command on 2 cores). `--size small` alone (3 frames) gives too "
+        "`alcn data pose --conf small --frames 12 --out DATA` (320x240, 12 frames a sequence; about 15 s, "
+        "then about 2 min of CPU for this command on 2 cores). `--conf small` alone (3 frames) gives too "
         "few views to triangulate the box",
     )
     e.add_argument("--middlebury", nargs="+", help="Middlebury sets (e.g. ../shared/data/middlebury/templeSparseRing)")

@@ -25,7 +25,7 @@ def small_data(tmp_path_factory):
     from alcn_cv.data.detect import generate
 
     out = tmp_path_factory.mktemp("bench") / "detect_small"
-    generate(out, size="small", n_test=2, progress=False)
+    generate(out, conf="small", n_test=2, progress=False)
     return out
 
 
@@ -175,7 +175,7 @@ def test_a_bad_weight_file_is_one_line_before_any_work(small_data, tmp_path, cap
     bad.write_bytes(b"not an npz")
     monkeypatch.setattr(D, "read_test_images", lambda *a: pytest.fail("the benchmark started"))
     out = tmp_path / "o"
-    argv = ["bench", "detect", "--data", str(small_data), "--out", str(out), "--size", "small"]
+    argv = ["bench", "detect", "--data", str(small_data), "--out", str(out), "--conf", "small"]
     assert cli_main([*argv, "--methods", f"none,alcn:weights={bad}"]) == 2
     err = capsys.readouterr().err.strip()
     assert err == f"alcn bench: error: method 'alcn:weights={bad}': weight file {bad} is not a .npz archive"

@@ -327,16 +327,16 @@ def test_quick_preset_and_the_options_that_override_it(tmp_path):
     root = make_sets(tmp_path / "data")
     common = ["bench", "relight", "--data", str(root / "webcam"), "--train-scenes", "square", "--test-scenes"]
     common += ["street", "--methods", "none", "--seeds", "0", "--patch", "16", "--no-keypoints", "--no-tune"]
-    args = ["--out", str(tmp_path / "q"), "--quick", "--patches", "30", "--n-features", "300", "--no-progress"]
+    args = ["--out", str(tmp_path / "q"), "--conf", "quick", "--patches", "30", "--n-features", "300", "--no-progress"]
     assert cli_main([*common, *args]) == 0
     settings = json.loads((tmp_path / "q" / "relight.json").read_text())["settings"]
     assert settings["keypoints"] == 300  # --n-features, as the pose commands name it
-    quick = relight_settings.PRESETS["quick"]
+    quick = relight_settings.CONFS["quick"]
     # the preset's sampling sizes, but an option given with it wins
     assert (settings["max_frames"], settings["max_pairs"], settings["patches"]) == (
-        quick["max_frames"],
-        quick["max_pairs"],
+        quick.max_frames,
+        quick.max_pairs,
         30,
     )
     parsed = build_parser().parse_args(["bench", "relight", "--out", "o"])
-    assert not parsed.quick and parsed.max_frames is None  # the default preset applies in the handler
+    assert parsed.conf == "default" and parsed.max_frames is None  # the preset applies in the handler

@@ -25,7 +25,7 @@ METHODS = [
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     out = tmp_path_factory.mktemp("speed")
-    result = speed.main(out, dataclasses.replace(speed.presets()["quick"], methods=METHODS, video_frames=2))
+    result = speed.main(out, dataclasses.replace(speed.CONFS["quick"], methods=METHODS, video_frames=2))
     return out, result
 
 
@@ -107,16 +107,16 @@ def test_weight_files_given_replace_the_variants_shipped_models():
 
 def test_bad_arguments(tmp_path):
     with pytest.raises(InputError, match="unknown method"):
-        speed.main(tmp_path, dataclasses.replace(speed.presets()["quick"], methods=["alcn turbo"]))
+        speed.main(tmp_path, dataclasses.replace(speed.CONFS["quick"], methods=["alcn turbo"]))
     with pytest.raises(InputError, match="colours"):
-        speed.main(tmp_path, dataclasses.replace(speed.presets()["quick"], colours=["rgba"]))
+        speed.main(tmp_path, dataclasses.replace(speed.CONFS["quick"], colours=["rgba"]))
     # no timed run: a median of none (np.percentile's IndexError after the build of every method)
     with pytest.raises(InputError, match="min_repeats"):
-        speed.main(tmp_path, dataclasses.replace(speed.presets()["quick"], min_repeats=0))
+        speed.main(tmp_path, dataclasses.replace(speed.CONFS["quick"], min_repeats=0))
     with pytest.raises(InputError, match="device_batches"):
-        speed.main(tmp_path, dataclasses.replace(speed.presets()["quick"], device="cpu", device_batches=[]))
+        speed.main(tmp_path, dataclasses.replace(speed.CONFS["quick"], device="cpu", device_batches=[]))
     # a video method the run does not time: named up front, not a StopIteration after every timing
-    quick = dataclasses.replace(speed.presets()["quick"], methods=["none"], video_methods=["alcn lite"])
+    quick = dataclasses.replace(speed.CONFS["quick"], methods=["none"], video_methods=["alcn lite"])
     with pytest.raises(InputError, match=r"video method\(s\) \['alcn lite'\]"):
         speed.main(tmp_path, quick)
 
@@ -129,9 +129,11 @@ def test_cli_is_registered(tmp_path):
     parser = argparse.ArgumentParser()
     cli.add_parser(parser.add_subparsers(dest="command"))
     args = parser.parse_args(
-        ["bench", "speed", "--out", str(tmp_path), "--quick", "--sizes", "64x48", "--methods", "none"]
+        ["bench", "speed", "--out", str(tmp_path), "--conf", "quick", "--sizes", "64x48", "--methods", "none"]
     )
-    assert args.func is cli._run_speed and args.quick and args.sizes == [(64, 48)] and args.methods == ["none"]
+    assert (
+        args.func is cli._run_speed and args.conf == "quick" and args.sizes == [(64, 48)] and args.methods == ["none"]
+    )
 
 
 def test_report_states_machine_command_and_settings(report):
@@ -171,7 +173,7 @@ def test_targets_are_reported(report):
 def test_device_run_measures_the_batched_path_beside_kornia(tmp_path):
     """``--device cpu`` runs here what ``--device cuda`` runs on a GPU: every method at every batch size, written."""
     pytest.importorskip("kornia")
-    settings = dataclasses.replace(speed.presets()["quick"], device="cpu", device_batches=[1, 2], target_size=(64, 48))
+    settings = dataclasses.replace(speed.CONFS["quick"], device="cpu", device_batches=[1, 2], target_size=(64, 48))
     result = speed.main(tmp_path, settings)
     rows = json.loads((tmp_path / "speed.json").read_text())["device"]["rows"]
     assert [r["batch"] for r in rows] == [1, 2] and rows == result["rows"]

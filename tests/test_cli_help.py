@@ -78,9 +78,10 @@ def _commands_with(option: str) -> dict[str, argparse.Action]:
 
 def test_one_option_name_for_each_idea():
     """The same idea has the same option in every command (a newcomer's walk-through found three that had two)."""
-    # --size names a preset wherever it appears; a size in pixels says what it measures (--side, --frame-size)
-    sizes = _commands_with("--size")
-    assert sizes and all(a.choices for a in sizes.values()), {c: a.choices for c, a in sizes.items()}
+    # a preset is --conf NAME in every command that has presets; a size in pixels says what it measures (--side,
+    # --frame-size)
+    stages = {"alcn data detect", "alcn data pose", "alcn bench detect", "alcn bench relight", "alcn bench speed"}
+    assert stages | {"alcn train", "alcn distill", "alcn pose build"} <= set(_commands_with("--conf"))
     # the keypoints per image: --n-features
     assert {"alcn calib register", "alcn pose build", "alcn pose track", "alcn bench relight"} <= set(
         _commands_with("--n-features")
@@ -89,5 +90,5 @@ def test_one_option_name_for_each_idea():
     seeds = _commands_with("--seeds")
     repeated = {"alcn bench detect", "alcn bench fewshot", "alcn bench relight", "alcn pose eval"}
     assert repeated <= set(seeds) and len({type(a) for a in seeds.values()}) == 1, seeds
-    retired = {"--max-features", "--draws"}
+    retired = {"--max-features", "--draws", "--size", "--quick", "--small"}
     assert not {c for c, p in COMMANDS.items() for a in p._actions if retired & set(a.option_strings)}

@@ -18,7 +18,7 @@ from alcn_cv.io import read_json
 
 @pytest.fixture(scope="module")
 def bench(tmp_path_factory):
-    return detect.generate(tmp_path_factory.mktemp("det") / "small", size="small", seed=1, n_test=5, progress=False)
+    return detect.generate(tmp_path_factory.mktemp("det") / "small", conf="small", seed=1, n_test=5, progress=False)
 
 
 def test_layout_manifest_and_schema(bench):
@@ -53,7 +53,7 @@ def test_loader_reads_what_the_generator_writes(bench):
 
 
 def test_same_seed_gives_identical_bytes(bench, tmp_path):
-    again = detect.generate(tmp_path / "again", size="small", seed=1, n_test=5, progress=False)
+    again = detect.generate(tmp_path / "again", conf="small", seed=1, n_test=5, progress=False)
     files = sorted(p.relative_to(bench) for p in bench.rglob("*") if p.is_file())
     assert files == sorted(p.relative_to(again) for p in again.rglob("*") if p.is_file())
     for f in files:
@@ -62,13 +62,13 @@ def test_same_seed_gives_identical_bytes(bench, tmp_path):
 
 def test_bad_arguments(tmp_path):
     with pytest.raises(InputError):
-        detect.generate(tmp_path / "x", size="huge")
+        detect.generate(tmp_path / "x", conf="huge")
     with pytest.raises(InputError):
-        detect.generate(tmp_path / "x", size="small", width=100, progress=False)
-    with pytest.raises(InputError):  # 0 was read as the size's default width
-        detect.generate(tmp_path / "x", size="small", width=0, progress=False)
+        detect.generate(tmp_path / "x", conf="small", width=100, progress=False)
+    with pytest.raises(InputError):  # 0 was read as the preset's width
+        detect.generate(tmp_path / "x", conf="small", width=0, progress=False)
     with pytest.raises(InputError, match="p_object"):
-        detect.generate(tmp_path / "x", size="small", p_object=1.5, progress=False)
+        detect.generate(tmp_path / "x", conf="small", p_object=1.5, progress=False)
     assert not (tmp_path / "x").exists()
 
 
@@ -81,12 +81,12 @@ def test_a_failed_run_leaves_nothing_behind(tmp_path, monkeypatch):
 
     monkeypatch.setattr(detect, "_test_image", fail)
     with pytest.raises(RuntimeError, match="disk full"):
-        detect.generate(tmp_path / "out", size="small", n_train=1, progress=False)
+        detect.generate(tmp_path / "out", conf="small", n_train=1, progress=False)
     assert calls and list(tmp_path.iterdir()) == []
 
 
 def test_workers_do_not_change_the_output(bench, tmp_path):
-    two = detect.generate(tmp_path / "two", size="small", seed=1, n_test=5, progress=False, workers=2)
+    two = detect.generate(tmp_path / "two", conf="small", seed=1, n_test=5, progress=False, workers=2)
     files = sorted(p.relative_to(bench) for p in bench.rglob("*") if p.is_file())
     for f in files:
         assert (bench / f).read_bytes() == (two / f).read_bytes(), f

@@ -23,7 +23,7 @@ from alcn_cv.io import read_json
 def plain(tmp_path_factory):
     """Small sequences without clutter: the duck is the only possible occluder of the box."""
     return pose.generate(
-        tmp_path_factory.mktemp("pose") / "plain", size="small", n_frames=2, clutter=False, progress=False
+        tmp_path_factory.mktemp("pose") / "plain", conf="small", n_frames=2, clutter=False, progress=False
     )
 
 
@@ -114,8 +114,8 @@ def test_world_poses_and_colmap_export(plain):
 
 
 def test_same_seed_gives_identical_bytes(tmp_path):
-    a = pose.generate(tmp_path / "a", size="small", n_frames=2, n_test=1, seed=3, progress=False)
-    b = pose.generate(tmp_path / "b", size="small", n_frames=2, n_test=1, seed=3, progress=False, workers=2)
+    a = pose.generate(tmp_path / "a", conf="small", n_frames=2, n_test=1, seed=3, progress=False)
+    b = pose.generate(tmp_path / "b", conf="small", n_frames=2, n_test=1, seed=3, progress=False, workers=2)
     files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
     assert files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
     for f in files:
@@ -123,7 +123,7 @@ def test_same_seed_gives_identical_bytes(tmp_path):
 
 
 def test_training_light_control_changes_only_the_test_lighting(tmp_path):
-    kw = dict(size="small", n_frames=2, n_test=5, seed=3, clutter=False, progress=False)
+    kw = dict(conf="small", n_frames=2, n_test=5, seed=3, clutter=False, progress=False)
     lit = pose.generate(tmp_path / "lit", **kw)
     control = pose.generate(tmp_path / "control", training_light=True, **kw)
     man = json.loads((control / "manifest.json").read_text())
@@ -163,7 +163,7 @@ def test_three_sweeps_see_every_stretch_of_azimuth_from_high_and_low(seed):
 
 
 def test_training_loops_change_only_the_training_sequence(tmp_path):
-    kw = dict(size="small", n_frames=4, n_test=1, seed=3, clutter=False, progress=False)
+    kw = dict(conf="small", n_frames=4, n_test=1, seed=3, clutter=False, progress=False)
     one = pose.generate(tmp_path / "one", train_sweeps=(1,), **kw)
     default = pose.generate(tmp_path / "default", **kw)
     assert (
@@ -191,7 +191,7 @@ def test_zero_frames_and_an_output_under_a_file_are_errors(tmp_path, monkeypatch
     blocker.write_text("mine")
     monkeypatch.setattr(pose, "parallel_map", lambda *args, **kwargs: pytest.fail("rendered"))
     with pytest.raises(InputError, match=r"frames >= 1 \(--frames\).*got 0"):
-        pose.generate(tmp_path / "zero", size="small", n_frames=0, progress=False)
+        pose.generate(tmp_path / "zero", conf="small", n_frames=0, progress=False)
     with pytest.raises(InputError, match="is a file"):
-        pose.generate(blocker / "pose", size="small", progress=False)
+        pose.generate(blocker / "pose", conf="small", progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file.json"]

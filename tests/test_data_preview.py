@@ -16,9 +16,9 @@ from alcn_cv.errors import DatasetError, InputError
 
 
 def test_contact_sheets_of_every_kind(tmp_path):
-    d = detect.generate(tmp_path / "det", size="small", n_test=2, n_train=1, progress=False)
+    d = detect.generate(tmp_path / "det", conf="small", n_test=2, n_train=1, progress=False)
     p = phos.generate(tmp_path / "phos", 40, 0, n_objects=3, progress=False)
-    s = pose.generate(tmp_path / "pose", size="small", n_frames=1, n_test=1, progress=False)
+    s = pose.generate(tmp_path / "pose", conf="small", n_frames=1, n_test=1, progress=False)
     for src in (d, d / "test.json", p, s, s / "test" / "000001"):
         out = preview(src, tmp_path / "sheet.png", n=4)
         img = cv2.imread(str(out))
@@ -55,7 +55,7 @@ def test_compare_psm(shared_data, tmp_path):
 
 def test_cli(tmp_path, capsys):
     assert (
-        main(["data", "detect", "--size", "small", "--n-test", "1", "--n-train", "1", "--out", str(tmp_path / "d")])
+        main(["data", "detect", "--conf", "small", "--n-test", "1", "--n-train", "1", "--out", str(tmp_path / "d")])
         == 0
     )
     assert main(["data", "preview", str(tmp_path / "d"), "--out", str(tmp_path / "p.png")]) == 0
@@ -63,7 +63,7 @@ def test_cli(tmp_path, capsys):
     assert main(["data", "phos", "-n", "5", "--objects", "2", "--out", str(tmp_path / "w")]) == 0
     assert main(["data", "preview", str(tmp_path / "missing"), "--out", str(tmp_path / "q.png")]) == 2
     assert "not a dataset" in capsys.readouterr().err
-    assert main(["data", "detect", "--size", "small", "--out", str(tmp_path / "d")]) == 2  # exists
+    assert main(["data", "detect", "--conf", "small", "--out", str(tmp_path / "d")]) == 2  # exists
 
 
 def _tiles(sheet_path, tile_h, tile_w, pad=2):
@@ -77,7 +77,7 @@ def test_n_is_how_many_samples_a_sheet_shows(tmp_path):
     """-n is what a sheet shows, without empty columns: the frames of one pose sequence (was: a strip of 16
     columns, 13 empty), as many frames of every sequence of a pose root (was: one each whatever -n), Phos windows
     (was: at least 32)."""
-    s = pose.generate(tmp_path / "pose", size="small", n_frames=2, n_test=2, progress=False)  # 320x240 frames
+    s = pose.generate(tmp_path / "pose", conf="small", n_frames=2, n_test=2, progress=False)  # 320x240 frames
     assert _tiles(preview(s / "test" / "000001", tmp_path / "a.png", n=16), 240, 320) == (1, 2)
     assert _tiles(preview(s, tmp_path / "b.png", n=6), 240, 320) == (2, 4)  # 3 sequences, 2 frames each
     assert _tiles(preview(s, tmp_path / "c.png", n=1), 240, 320) == (1, 3)  # at least one frame a sequence

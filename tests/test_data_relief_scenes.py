@@ -63,7 +63,7 @@ def test_arguments_and_output_are_checked_before_the_progress_bar(tmp_path, monk
     (tmp_path / "done" / "manifest.json").write_text("{}")
     with pytest.raises(FileExistsError, match="--overwrite"):  # an earlier output: refused before the rendering
         generate(tmp_path / "done", progress=False)
-    # `data detect --size small` is a preset; the frames' side here is --side, and argparse's error says what it is
+    # `data detect --conf small` is a preset; the frames' side here is --side, and argparse's error says what it is
     for bad in ("small", "10"):
         with pytest.raises(SystemExit) as exit_:
             main(["data", "scenes", "--side", bad, "--out", str(tmp_path / "s")])

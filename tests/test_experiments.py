@@ -128,8 +128,8 @@ class _StopError(Exception):
 def test_the_quick_protocol_is_the_benchs_preset(
     monkeypatch: pytest.MonkeyPatch, experiments: types.ModuleType
 ) -> None:
-    """The scripts spell out ``alcn bench relight --quick``'s settings: the bench's own command line, given them or
-    ``--quick``, runs the benchmark with the same settings."""
+    """The scripts spell out ``alcn bench relight --conf quick``'s settings: the bench's own command line, given them
+    or ``--conf quick``, runs the benchmark with the same settings."""
     from alcn_cv.bench import relight
     from alcn_cv.cli import build_parser
 
@@ -146,7 +146,7 @@ def test_the_quick_protocol_is_the_benchs_preset(
             args.func(args)
         return calls[0][1:]  # all but the output folder
 
-    assert settings(*experiments.quick_protocol()) == settings("--quick") != settings()
+    assert settings(*experiments.quick_protocol()) == settings("--conf", "quick") != settings()
 
 
 def test_part_runs_each_part_once_in_its_order(

@@ -28,7 +28,7 @@ def posedata(tmp_path_factory):
 
     return pose.generate(
         tmp_path_factory.mktemp("corners") / "data",
-        size="small",
+        conf="small",
         n_frames=4,
         n_test=1,
         clutter=False,

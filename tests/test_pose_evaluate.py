@@ -63,7 +63,7 @@ def test_a_test_sequence_without_the_object_is_a_dataset_error(tmp_path):
     from pose.model import read_box_corners
 
     data = pose.generate(
-        tmp_path / "data", size="small", n_frames=2, n_test=1, clutter=False, train_sweeps=(1,), progress=False
+        tmp_path / "data", conf="small", n_frames=2, n_test=1, clutter=False, train_sweeps=(1,), progress=False
     )
     corners = read_box_corners(data / "models" / "obj_000001.ply")
     scores, _ = evaluate.evaluate_sequence(_NoParts(), data / "test" / "000001", 1, corners, "mm")

@@ -196,7 +196,7 @@ def test_the_end_of_a_run_prints_the_weights_and_commands_that_work(tmp_path, ca
     assert main(normalize) == 0 and cv2.imread(str(tmp_path / "normalized.png")) is not None
     assert main(export) == 0 and weights.with_suffix(".onnx").is_file()  # beside: backend='opencv' finds it
     args = build_parser().parse_args(bench)  # its options exist (the bench itself takes minutes), its methods too
-    assert args.quick and args.methods == ["alcn", f"alcn:weights={weights}"]
+    assert args.conf == "quick" and args.methods == ["alcn", f"alcn:weights={weights}"]
     assert from_spec(args.methods[1]).normalize(np.full((40, 40), 0.5, np.float32)).shape == (40, 40)
 
 

@@ -1,9 +1,9 @@
 """``alcn bench``: the benchmarks, one sub-subcommand each (detect, fewshot, invariance, relight, speed).
 
 Each ``_add_<benchmark>`` adds its sub-subcommand and sets ``func`` to a handler returning an
-exit code; the handler turns the options into the benchmark's settings (a preset, then every
-option given) and runs its ``main``. Adding a benchmark is adding its function to
-:data:`BENCHMARKS`.
+exit code; the handler turns the options into the benchmark's settings (a copy of the preset of
+``--conf``, the benchmark's ``CONFS``, then every option given) and runs its ``main``. Adding a
+benchmark is adding its function to :data:`BENCHMARKS`.
 """
 
 from __future__ import annotations
@@ -16,11 +16,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from alcn_cv.bench import detect, fewshot, invariance, relight, relight_settings, speed
-from alcn_cv.bench.detect_settings import POLICIES, DetectSettings, presets
-from alcn_cv.cli import add_progress_option, add_seeds_option
+from alcn_cv.bench import detect, detect_settings, fewshot, invariance, relight, relight_settings, speed
+from alcn_cv.bench.detect_settings import POLICIES, DetectSettings
+from alcn_cv.cli import add_conf_option, add_progress_option, add_seeds_option, preset_values
 from alcn_cv.data import scenes
 from alcn_cv.errors import InputError
+from alcn_cv.train.config import preset
 
 __all__ = ["BENCHMARKS", "add_parser"]
 
@@ -84,8 +85,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         help="few-shot detection benchmark: every normalization with the same detector (AUC, PR curves)",
         description="For each method, train the same detector on windows normalized by it, built from 1 and 10 real "
         "images per object (simple synthetic images), run it on every window of every test image, and score with "
-        "the PASCAL criterion (IoU 0.8, fixed-size boxes). Writes detect.md, detect.json and PR curves (PNG). "
-        "--size picks a preset; the other options override it.",
+        "the PASCAL criterion (IoU 0.8, fixed-size boxes). Writes detect.md, detect.json and PR curves (PNG).",
     )
     p.add_argument(
         "--data",
@@ -94,12 +94,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         help="benchmark folder: train.json, test.json, manifest.json (e.g. from `alcn data detect`)",
     )
     p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument(
-        "--size",
-        choices=("default", "small"),
-        default="default",
-        help="preset: default (the benchmark) or small (a quick end-to-end run)",
-    )
+    add_conf_option(p, detect_settings.CONF_SUMMARIES)
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
     p.add_argument("--real-images", type=_list(int), help="real training images per object (default 1,10)")
     _add_policies(p, d.policies)
@@ -138,7 +133,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run_detect(args: argparse.Namespace) -> int:
-    settings = _override(presets()[args.size], args)
+    settings = _override(preset(detect_settings.CONFS, args.conf), args)
     result = detect.main(
         args.data, args.out, settings, args.working_scale, args.box_size, progress=not args.no_progress
     )
@@ -240,11 +235,10 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         description="Time apply() of none, clahe, dog and every ALCN backend and approximate variant on the same "
         "frames (640x480, 1280x800, 1920x1080, gray and BGR): median, IQR, fps, ratio to dog in the same run, "
         "ALCN's network/mixture split, peak memory, the approximations' difference from the exact Eq. 3, and "
-        "memory over a 1920x1080 video. Writes speed.md, speed.json and speed.png. --quick picks the quick "
-        "preset; the other options override it.",
+        "memory over a 1920x1080 video. Writes speed.md, speed.json and speed.png.",
     )
     p.add_argument("--out", required=True, type=Path, help="output folder")
-    p.add_argument("--quick", action="store_true", help="preset: tiny frames and few repeats (seconds; for tests)")
+    add_conf_option(p, speed.CONF_SUMMARIES)
     p.add_argument(
         "--sizes",
         type=lambda s: [_size(v) for v in s.split(",") if v],
@@ -315,19 +309,19 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run_speed(args: argparse.Namespace) -> int:
-    settings = _override(speed.presets()["quick" if args.quick else "default"], args)
+    settings = _override(preset(speed.CONFS, args.conf), args)
     result = speed.main(args.out, settings, progress=not args.no_progress)
     print((Path(args.out) / "speed.md").read_text(encoding="utf-8"))
     return 0 if result["rows"] else 1
 
 
-def _preset_flags(sizes: dict[str, int | None]) -> str:
-    """A preset of ``alcn bench relight`` as the options it stands for."""
-    return " ".join(f"--{k.replace('_', '-')} {v}" for k, v in sizes.items())
+def _preset_flags(sampling: relight_settings.Sampling) -> str:
+    """A preset of ``alcn bench relight`` as the options it stands for (0: all)."""
+    return " ".join(f"--{k.replace('_', '-')} {v or 0}" for k, v in dataclasses.asdict(sampling).items())
 
 
 def _add_relight(subparsers: argparse._SubParsersAction) -> None:
-    default, quick = relight_settings.PRESETS["default"], relight_settings.PRESETS["quick"]
+    confs = relight_settings.CONFS
     p = subparsers.add_parser(
         "relight",
         help="patch identification, keypoint matching and pose on real changes of light (fixed cameras)",
@@ -335,10 +329,9 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         "method's apply(), then score patch identification (NCC), ORB/SIFT matching and RANSAC-homography pose "
         "between frames; CLAHE, DoG, SLCN, DLCN, SQI, Tan-Triggs and DoG+lstd are tuned on the training scenes only. "
         "Writes relight.md, relight.json and relight.png. The default runs "
-        f"{len(relight.DEFAULT_METHODS)} methods, seeds {' '.join(map(str, relight.DEFAULT_SEEDS))}, "
-        f"{_preset_flags(default)}, with tuning; --quick picks the quick preset ({_preset_flags(quick)}, the quick "
-        "protocol of docs/results.md), and --max-frames, --patches and --max-pairs given with it override it; "
-        "--seeds 0 --no-tune is the shortest run.",
+        f"{len(relight.DEFAULT_METHODS)} methods, seeds {' '.join(map(str, relight.DEFAULT_SEEDS))}, with tuning, "
+        "at the sampling sizes of --conf (listed below), which --max-frames, --patches and --max-pairs override; "
+        "--conf quick --seeds 0 --no-tune is the shortest run.",
     )
     d = relight_settings.Settings()
     p.add_argument("--out", required=True, type=Path, help="output folder")
@@ -381,22 +374,19 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
     add_seeds_option(
         p, relight.DEFAULT_SEEDS, "sampling seeds (they draw the gallery frames, patch locations and pairs)"
     )
-    p.add_argument(
-        "--quick",
-        action="store_true",
-        help=f"preset: {_preset_flags(quick)}, the quick protocol (default: the benchmark's, {_preset_flags(default)})",
+    add_conf_option(
+        p, {name: f"{what}: {_preset_flags(confs[name])}" for name, what in relight_settings.CONF_SUMMARIES.items()}
     )
     p.add_argument(
         "--max-frames",
         type=int,
-        help=f"frames per scene, evenly spaced (default {default['max_frames']}, --quick {quick['max_frames']}; "
-        "0: all)",
+        help=f"frames per scene, evenly spaced (default: the preset's: {preset_values(confs, 'max_frames')}; 0: all)",
     )
     p.add_argument("--patch", type=int, default=d.patch, help=f"patch side in pixels (default {d.patch})")
     p.add_argument(
         "--patches",
         type=int,
-        help=f"patch locations per gallery frame (default {default['patches']}, --quick {quick['patches']})",
+        help=f"patch locations per gallery frame (default: the preset's: {preset_values(confs, 'patches')})",
     )
     p.add_argument(
         "--gallery", type=int, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})"
@@ -404,8 +394,8 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--max-pairs",
         type=int,
-        help=f"frame pairs per scene and seed, drawn at random (default {default['max_pairs']}, --quick "
-        f"{quick['max_pairs']}; 0: all)",
+        help="frame pairs per scene and seed, drawn at random (default: the preset's: "
+        f"{preset_values(confs, 'max_pairs')}; 0: all)",
     )
     p.add_argument(
         "--n-features",
@@ -423,13 +413,12 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run_relight(args: argparse.Namespace) -> int:
-    preset = relight_settings.PRESETS["quick" if args.quick else "default"]
-    sizes = {k: v if getattr(args, k) is None else getattr(args, k) for k, v in preset.items()}
+    sampling = _override(preset(relight_settings.CONFS, args.conf), args)
     settings = relight_settings.Settings(
         patch=args.patch,
-        patches=sizes["patches"],
+        patches=sampling.patches,
         gallery=args.gallery,
-        max_pairs=sizes["max_pairs"] or None,
+        max_pairs=sampling.max_pairs or None,
         keypoints=args.n_features,
         keypoint_protocols=not args.no_keypoints,
     )
@@ -442,7 +431,7 @@ def _run_relight(args: argparse.Namespace) -> int:
         args.leave_one_out,
         args.seeds,
         settings,
-        sizes["max_frames"] or None,
+        sampling.max_frames or None,
         not args.no_tune,
         args.tune_frames,
         command=shlex.join(["alcn", *sys.argv[1:]]),

@@ -1,8 +1,9 @@
 """Settings of the detection benchmark (:mod:`alcn_cv.bench.detect`): methods, input policies,
-training and scoring, and the named presets."""
+training and scoring, and the named presets (:data:`CONFS`)."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 from alcn_cv.checks import check_seeds
@@ -10,6 +11,8 @@ from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
 
 __all__ = [
+    "CONFS",
+    "CONF_SUMMARIES",
     "CROP",
     "DEEP_BASELINES",
     "POLICIES",
@@ -20,7 +23,6 @@ __all__ = [
     "WINDOW",
     "DetectSettings",
     "default_methods",
-    "presets",
     "run_key",
 ]
 
@@ -126,12 +128,30 @@ class DetectSettings:
             raise InputError("cnn_sweep needs at least one (depth, width)")
 
 
-def presets() -> dict[str, DetectSettings]:
-    """Named settings: ``default`` (the benchmark) and ``small`` (a quick end-to-end check, for
-    ``make demo`` and tests: fewer windows and epochs, one plain CNN, no ResNet-56)."""
-    return {
-        "default": DetectSettings(),
-        "small": DetectSettings(
-            methods=list(available()) + ["cnn", "resnet20"], positives_per_object=30, epochs=2, cnn_sweep=[(1, 16)]
-        ),
-    }
+_SMALL = DetectSettings(
+    methods=list(available()) + ["cnn", "resnet20"], positives_per_object=30, epochs=2, cnn_sweep=[(1, 16)]
+)
+
+#: The named presets of the benchmark (hloc's ``confs``; ``alcn bench detect --conf NAME``), shared: a user takes a
+#: copy (:func:`alcn_cv.train.config.preset`) and changes that. ``default``: the benchmark; ``small``: a quick
+#: end-to-end check (fewer windows and epochs, one plain CNN, no ResNet-56); ``demo``: ``alcn demo``'s run,
+#: ``small`` for no normalization, ALCN and the strongest classical methods, from 1 and 3 real images per object.
+#: The methods of ``default`` and ``small`` are the normalizations registered when this module is imported.
+CONFS: dict[str, DetectSettings] = {
+    "default": DetectSettings(),
+    "small": _SMALL,
+    "demo": dataclasses.replace(
+        _SMALL,
+        methods=["none", "alcn", "dog", "clahe", "dlcn", "whitening"],
+        real_images=[1, 3],
+        policies=["local"],
+    ),
+}
+
+#: One line per preset of :data:`CONFS`, for ``alcn bench detect --help``.
+CONF_SUMMARIES: dict[str, str] = {
+    "default": "the benchmark: every normalization and the deep baselines but ResNet-56",
+    "small": "a quick end-to-end run: fewer windows and epochs, one plain CNN, no ResNet-56",
+    "demo": "the run of `alcn demo`: small for none, alcn, dog, clahe, dlcn and whitening, from 1 and 3 real images "
+    "per object",
+}

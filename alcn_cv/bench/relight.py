@@ -63,7 +63,7 @@ from tqdm.auto import tqdm
 from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.policies import LOCAL_BOX, local_standardize
 from alcn_cv.bench.relight_report import write_report
-from alcn_cv.bench.relight_settings import PRESETS, Settings
+from alcn_cv.bench.relight_settings import CONFS, Settings
 from alcn_cv.checks import check_seeds
 from alcn_cv.data.scenes import (
     TEST_SCENES,
@@ -538,7 +538,7 @@ def main(
     leave_one_out: Sequence[str] | None = None,
     seeds: Sequence[int] = DEFAULT_SEEDS,
     settings: Settings = Settings(),  # noqa: B008 -- frozen: one default shared by every call is safe
-    max_frames: int | None = PRESETS["default"]["max_frames"],
+    max_frames: int | None = CONFS["default"].max_frames,
     tuning: bool = True,
     tune_frames: int = 8,
     progress: bool = True,

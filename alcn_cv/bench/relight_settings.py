@@ -1,6 +1,6 @@
 """Settings of ``alcn bench relight`` (:mod:`alcn_cv.bench.relight`): the protocols' parameters and the presets of
-their sampling sizes, apart from the benchmark so that what describes its reports (``experiments/report.py``) reads
-them without importing it."""
+their sampling sizes (:data:`CONFS`), apart from the benchmark so that what describes its reports
+(``experiments/report.py``) reads them without importing it."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from alcn_cv.errors import InputError
 
-__all__ = ["PRESETS", "Settings"]
+__all__ = ["CONFS", "CONF_SUMMARIES", "Sampling", "Settings"]
 
 
 @dataclass(frozen=True)
@@ -36,9 +36,29 @@ class Settings:
         return self
 
 
-#: The sampling sizes of ``alcn bench relight``'s presets: the benchmark's, and ``quick``, the quick protocol of
-#: docs/results.md's "(quick protocol)" tables (``--quick``; about 3 times faster).
-PRESETS: dict[str, dict[str, int | None]] = {
-    "default": {"max_frames": 20, "patches": Settings.patches, "max_pairs": Settings.max_pairs},
-    "quick": {"max_frames": 12, "patches": 150, "max_pairs": 12},
+@dataclass(frozen=True)
+class Sampling:
+    """The sampling sizes of a run, what a preset of :data:`CONFS` sets (its reports record them beside
+    :class:`Settings`' fields).
+
+    Attributes:
+        max_frames: frames per scene, evenly spaced (``None``: all).
+        patches: :attr:`Settings.patches`.
+        max_pairs: :attr:`Settings.max_pairs` (``None``: all).
+    """
+
+    max_frames: int | None = 20
+    patches: int = Settings.patches
+    max_pairs: int | None = Settings.max_pairs
+
+
+#: The named presets of ``alcn bench relight`` (hloc's ``confs``; ``--conf NAME``), its sampling sizes: ``default``,
+#: the benchmark's, and ``quick``, the quick protocol of docs/results.md's "(quick protocol)" tables. Frozen: a run
+#: derives its own with :func:`dataclasses.replace`.
+CONFS: dict[str, Sampling] = {"default": Sampling(), "quick": Sampling(max_frames=12, patches=150, max_pairs=12)}
+
+#: One line per preset of :data:`CONFS`, for ``alcn bench relight --help``.
+CONF_SUMMARIES: dict[str, str] = {
+    "default": "the benchmark's sampling sizes",
+    "quick": "the quick protocol of docs/results.md (fewer frames, patches and pairs; about 3 times faster)",
 }

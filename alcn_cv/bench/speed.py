@@ -73,7 +73,17 @@ from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 from alcn_cv.shared_data import shared_data_dir
 
-__all__ = ["SIZES", "Method", "SpeedSettings", "default_methods", "lab_round_trip", "main", "presets", "time_calls"]
+__all__ = [
+    "CONFS",
+    "CONF_SUMMARIES",
+    "SIZES",
+    "Method",
+    "SpeedSettings",
+    "default_methods",
+    "lab_round_trip",
+    "main",
+    "time_calls",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -396,29 +406,35 @@ class SpeedSettings:
             raise InputError(f"device_batches must be batch sizes >= 1, got {self.device_batches}")
 
 
-def presets() -> dict[str, SpeedSettings]:
-    """Named settings: ``default`` (the benchmark) and ``quick`` (tiny frames, 2 repeats, no
-    warm-up, a 3-frame video of tiny frames: seconds, for tests)."""
-    return {
-        "default": SpeedSettings(),
-        "quick": SpeedSettings(
-            sizes=list(QUICK_SIZES),
-            warmup=0,
-            min_repeats=2,
-            max_repeats=2,
-            budget_s=0.0,
-            video_frames=3,
-            video_budget_s=10.0,
-            video_size=QUICK_SIZES[-1],
-            target_size=QUICK_SIZES[-1],
-            fps_size=QUICK_SIZES[0],
-            target_repeats=2,
-            large_size=(256, 192),
-            normalize_video="generated",
-            normalize_video_frames=4,
-            device_batches=[1, 2],
-        ),
-    }
+#: The named presets of the benchmark (hloc's ``confs``; ``alcn bench speed --conf NAME``), shared: a user takes a
+#: copy (:func:`alcn_cv.train.config.preset`) and changes that. ``default``: the benchmark; ``quick``: tiny frames,
+#: 2 repeats, no warm-up, a 3-frame video of tiny frames (seconds, for tests).
+CONFS: dict[str, SpeedSettings] = {
+    "default": SpeedSettings(),
+    "quick": SpeedSettings(
+        sizes=list(QUICK_SIZES),
+        warmup=0,
+        min_repeats=2,
+        max_repeats=2,
+        budget_s=0.0,
+        video_frames=3,
+        video_budget_s=10.0,
+        video_size=QUICK_SIZES[-1],
+        target_size=QUICK_SIZES[-1],
+        fps_size=QUICK_SIZES[0],
+        target_repeats=2,
+        large_size=(256, 192),
+        normalize_video="generated",
+        normalize_video_frames=4,
+        device_batches=[1, 2],
+    ),
+}
+
+#: One line per preset of :data:`CONFS`, for ``alcn bench speed --help``.
+CONF_SUMMARIES: dict[str, str] = {
+    "default": "the benchmark: the frame sizes, repeats and video test of the options' defaults",
+    "quick": "tiny frames and few repeats (seconds; for tests)",
+}
 
 
 def speed_command(out_dir: str | os.PathLike, settings: SpeedSettings) -> str:
@@ -1097,7 +1113,7 @@ def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None, prog
 
     Args:
         out_dir: output folder (created).
-        settings: the run's settings; default :class:`SpeedSettings` (see :func:`presets`).
+        settings: the run's settings; default :class:`SpeedSettings`, the preset ``CONFS["default"]`` (:data:`CONFS`).
         progress: the progress bars (the cases, the video row's pipelines).
 
     Returns:

@@ -1,14 +1,17 @@
 """``alcn demo``: the main job on data the project generates itself.
 
 1. Renders a small ALCN-2D-like detection set (three objects: matte, velvet-like, specular)
-   with test images under different lightings (:mod:`alcn_cv.data.detect`).
+   with test images under different lightings: the ``demo`` preset of :mod:`alcn_cv.data.detect`.
 2. Normalizes those test images with every registered method and writes a side-by-side
    grid, ``normalized.png`` (rows: lightings, columns: methods).
-3. Runs the small preset of the detection benchmark on that set (:mod:`alcn_cv.bench.detect`):
+3. Runs the ``demo`` preset of the detection benchmark on that set (:mod:`alcn_cv.bench.detect`):
    for ALCN, no normalization and the strongest classical methods, the same detector is trained
    from 1 and from 3 images per object and scored
    on the test images; ``bench/detect.md`` holds the AUC table, ``bench/*.png`` the
    precision-recall curves.
+
+Both presets are used as they are: ``alcn data detect --conf demo`` and ``alcn bench detect --conf demo``
+make the same run.
 """
 
 from __future__ import annotations
@@ -34,10 +37,6 @@ if TYPE_CHECKING:
     from alcn_cv.formats.coco import CocoImage
 
 logger = logging.getLogger(__name__)
-
-# The demo's benchmark compares ALCN with no normalization and the strongest classical methods
-# of the full benchmark; `alcn bench detect` runs every method.
-DEMO_BENCH_METHODS = ("none", "alcn", "dog", "clahe", "dlcn", "whitening")
 
 
 def method_title(method: Normalization) -> str:
@@ -109,17 +108,7 @@ def main(out_dir: Path, seed: int = 0, progress: bool = True) -> Path:
     make_folder(out_dir)
     data_dir = out_dir / "data"
     logger.info("rendering a small detection set into %s", data_dir)
-    detect.generate(
-        data_dir,
-        seed=seed,
-        size="small",
-        n_test=6,
-        width=480,
-        height=300,
-        p_object=1.0,
-        overwrite=True,
-        progress=progress,
-    )
+    detect.generate(data_dir, seed=seed, conf="demo", overwrite=True, progress=progress)
     test = load_coco(data_dir / "test.json")
     images = [test.read_image(im) for im in test.images]
     labels = [image_label(k, im) for k, im in enumerate(test.images)]
@@ -128,16 +117,13 @@ def main(out_dir: Path, seed: int = 0, progress: bool = True) -> Path:
     logger.info("wrote %s", grid)
 
     from alcn_cv.bench import detect as bench
-    from alcn_cv.bench.detect_settings import presets
+    from alcn_cv.bench.detect_settings import CONFS
+    from alcn_cv.train.config import preset
 
-    settings = presets()["small"]
-    settings.methods = [m for m in DEMO_BENCH_METHODS if m in available()]
-    settings.real_images = [1, 3]
-    settings.policies = ["local"]
-    bench.main(data_dir, out_dir / "bench", settings, progress=progress)
+    bench.main(data_dir, out_dir / "bench", preset(CONFS, "demo"), progress=progress)
     table = out_dir / "bench" / "detect.md"
     logger.info(
-        "detection benchmark (small preset; the full one is `alcn bench detect`):\n%s",
+        "detection benchmark (demo preset; the full one is `alcn bench detect`):\n%s",
         table.read_text(encoding="utf-8"),
     )
     logger.info("outputs: %s (normalized.png, bench/detect.md, bench/*.png)", out_dir)

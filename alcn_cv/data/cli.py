@@ -7,12 +7,12 @@ import logging
 import time
 from pathlib import Path
 
-from alcn_cv.cli import add_progress_option
+from alcn_cv.cli import add_conf_option, add_progress_option, preset_values
 from alcn_cv.extras import require
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["add_parser"]
+__all__ = ["add_conf_option", "add_parser", "preset_values"]
 
 
 def _require_textures(command: str) -> None:
@@ -49,7 +49,7 @@ def _detect(args: argparse.Namespace) -> int:
     out = detect.generate(
         args.out,
         seed=args.seed,
-        size=args.size,
+        conf=args.conf,
         object_seed=args.object_seed,
         n_test=args.n_test,
         n_train=args.n_train,
@@ -71,7 +71,7 @@ def _pose(args: argparse.Namespace) -> int:
     out = pose.generate(
         args.out,
         seed=args.seed,
-        size=args.size,
+        conf=args.conf,
         n_frames=args.frames,
         n_test=args.n_test,
         clutter=not args.no_clutter,
@@ -150,7 +150,7 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``data`` subcommand and its sub-subcommands to the ``alcn`` parser."""
-    from alcn_cv.data import relief_scenes  # numpy and OpenCV, no torch
+    from alcn_cv.data import detect, pose, relief_scenes  # numpy and OpenCV, no torch
 
     p = subparsers.add_parser(
         "data",
@@ -191,18 +191,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "lighting and test images with clutter under varied lighting, in COCO format.",
     )
     q.add_argument("--out", required=True, help="output folder")
-    q.add_argument(
-        "--size",
-        default="default",
-        choices=["default", "small"],
-        help="preset size (default: default; small renders in seconds, for tests)",
-    )
+    add_conf_option(q, detect.CONF_SUMMARIES)
     q.add_argument("--seed", type=int, default=0, help="seed of the images (default 0)")
     q.add_argument("--object-seed", type=int, default=0, help="seed of the three objects (default 0)")
-    q.add_argument("--n-test", type=int, default=None, help="number of test images (default: 120; small 4)")
-    q.add_argument("--n-train", type=int, default=None, help="training images per object (default: 10; small 3)")
-    q.add_argument("--width", type=int, default=None, help="image width (default: 1280; small 320)")
-    q.add_argument("--height", type=int, default=None, help="image height (default: 800; small 200)")
+    for option, field, what in [
+        ("--n-test", "n_test", "number of test images"),
+        ("--n-train", "n_train", "training images per object"),
+        ("--width", "width", "image width"),
+        ("--height", "height", "image height"),
+    ]:
+        q.add_argument(option, type=int, help=f"{what} (default: the preset's: {preset_values(detect.CONFS, field)})")
     _add_run_options(q)
     q.set_defaults(func=_detect)
 
@@ -213,20 +211,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "lighting, #2-#4 mild, #5-#8 drastic changes) of a textured box and a duck.",
     )
     q.add_argument("--out", required=True, help="dataset root")
-    q.add_argument(
-        "--size",
-        default="default",
-        choices=["default", "small"],
-        help="preset size (default: default; small renders in seconds, for tests)",
-    )
+    add_conf_option(q, pose.CONF_SUMMARIES)
     q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     q.add_argument(
         "--frames",
         type=int,
-        default=None,
-        help="frames per test sequence and per loop of the training sequence (default: 60; small 3)",
+        help="frames per test sequence and per loop of the training sequence (default: the preset's: "
+        f"{preset_values(pose.CONFS, 'n_frames')})",
     )
-    q.add_argument("--n-test", type=int, default=None, help="number of test sequences (default 8)")
+    q.add_argument(
+        "--n-test",
+        type=int,
+        help=f"number of test sequences (default: the preset's: {preset_values(pose.CONFS, 'n_test')})",
+    )
     q.add_argument("--no-clutter", action="store_true", help="no clutter on the table")
     q.add_argument(
         "--training-light",

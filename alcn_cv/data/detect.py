@@ -20,6 +20,7 @@ test image's lighting family and parameters are stored in its ``lighting`` field
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 from dataclasses import dataclass
@@ -37,12 +38,12 @@ from alcn_cv.errors import InputError
 from alcn_cv.formats.coco import write_coco
 from alcn_cv.io import write_image, write_json
 
-__all__ = ["DetectConfig", "SIZES", "OBJECTS", "benchmark_objects", "generate"]
+__all__ = ["CONFS", "CONF_SUMMARIES", "DetectConfig", "OBJECTS", "benchmark_objects", "generate"]
 
 
 @dataclass(frozen=True)
 class DetectConfig:
-    """Size parameters of the benchmark.
+    """Parameters of the rendered benchmark, one preset of :data:`CONFS`.
 
     Attributes:
         width, height: image size in pixels.
@@ -51,6 +52,7 @@ class DetectConfig:
         object_px: object extent in full-resolution pixels.
         box_px: object extent (and box side) at the working scale.
         canonical: resolution of the objects' canonical textures.
+        p_object: probability that each object appears in a test image.
     """
 
     width: int = 1280
@@ -60,16 +62,30 @@ class DetectConfig:
     object_px: float = 144.0
     box_px: float = 36.0
     canonical: int = 192
+    p_object: float = 0.5
 
     @property
     def working_scale(self) -> float:
         return self.box_px / self.object_px
 
 
-#: Named sizes: ``default`` (minutes on 2 cores) and ``small`` (seconds, for tests).
-SIZES: dict[str, DetectConfig] = {
+_SMALL = DetectConfig(width=320, height=200, n_train=3, n_test=4, object_px=72.0, canonical=96)
+
+#: The named presets of :func:`generate` (hloc's ``confs``; ``alcn data detect --conf NAME``): ``default``, the
+#: benchmark (minutes on 2 cores); ``small``, seconds, for tests; ``demo``, ``alcn demo``'s set: ``small``'s objects
+#: in 480x300 images, 6 test images with every object in each. Frozen: :func:`generate` derives a run's configuration
+#: with :func:`dataclasses.replace`, never changing a preset.
+CONFS: dict[str, DetectConfig] = {
     "default": DetectConfig(),
-    "small": DetectConfig(width=320, height=200, n_train=3, n_test=4, object_px=72.0, canonical=96),
+    "small": _SMALL,
+    "demo": dataclasses.replace(_SMALL, width=480, height=300, n_test=6, p_object=1.0),
+}
+
+#: One line per preset of :data:`CONFS`, for ``alcn data detect --help``.
+CONF_SUMMARIES: dict[str, str] = {
+    "default": "the benchmark (minutes on 2 cores)",
+    "small": "small images, few of them (seconds; for tests)",
+    "demo": "the set `alcn demo` renders: small's objects, larger images, every object in every test image",
 }
 
 #: The benchmark's objects: (name, material family, shape).
@@ -146,7 +162,7 @@ def _free(boxes: list[tuple[float, float, float]], x: float, y: float, r: float)
     return all((x - bx) ** 2 + (y - by) ** 2 > (r + br) ** 2 for bx, by, br in boxes)
 
 
-def _test_image(rng: np.random.Generator, objs: list[ReliefObject], cfg: DetectConfig, p_object: float):
+def _test_image(rng: np.random.Generator, objs: list[ReliefObject], cfg: DetectConfig):
     h, w = cfg.height, cfg.width
     surf = _ground(rng, h, w)
     obj_scale = cfg.object_px / (0.92 * objs[0].size)
@@ -155,7 +171,7 @@ def _test_image(rng: np.random.Generator, objs: list[ReliefObject], cfg: DetectC
     # Clutter: flat printed patches and relief distractors, away from the objects' places.
     placements = []
     for k in range(len(objs)):
-        if rng.random() < p_object:
+        if rng.random() < cfg.p_object:
             for _ in range(30):
                 x, y = rng.uniform(r_obj, w - r_obj), rng.uniform(r_obj, h - r_obj)
                 if _free(taken, x, y, r_obj):
@@ -200,13 +216,13 @@ def _objects(object_seed: int, canonical: int) -> tuple[ReliefObject, ...]:
 
 def _image_job(job: tuple) -> tuple[list, dict]:
     """Render one image and write it; return its objects (category, box, area) and lighting."""
-    split, k, j, path, _, seed, object_seed, cfg, p_object = job
+    split, k, j, path, _, seed, object_seed, cfg = job
     objs = _objects(object_seed, cfg.canonical)
     if split == "train":
         img, box, area = _train_image(np.random.default_rng([seed, 1, k, j]), objs[k], cfg)
         found, lighting = [(k + 1, box, area)], training_lighting()
     else:
-        img, found, lighting = _test_image(np.random.default_rng([seed, 2, j]), list(objs), cfg, p_object)
+        img, found, lighting = _test_image(np.random.default_rng([seed, 2, j]), list(objs), cfg)
     write_image(path, img)
     return found, lighting.describe()
 
@@ -215,13 +231,13 @@ def generate(
     out_dir: str | os.PathLike,
     *,
     seed: int = 0,
-    size: str = "default",
+    conf: str = "default",
     object_seed: int = 0,
     n_test: int | None = None,
     n_train: int | None = None,
     width: int | None = None,
     height: int | None = None,
-    p_object: float = 0.5,
+    p_object: float | None = None,
     overwrite: bool = False,
     progress: bool = True,
     workers: int = 1,
@@ -231,38 +247,33 @@ def generate(
     Args:
         out_dir: output folder.
         seed: seed of the images (deterministic: same seed and parameters, same bytes).
-        size: a key of :data:`SIZES` giving the defaults of the size parameters.
+        conf: a preset of :data:`CONFS`, the values of the parameters below that are not given.
         object_seed: seed of the three objects.
-        n_test, n_train, width, height: override the size's values (objects keep their size in
+        n_test, n_train, width, height: override the preset's values (objects keep their size in
             pixels, so the working scale does not change).
-        p_object: probability that each object appears in a test image.
+        p_object: override the preset's probability that each object appears in a test image.
         overwrite: replace an existing folder.
         progress: show a progress bar.
         workers: worker processes (the output does not depend on it).
 
     Returns:
         The output folder.
+
+    Raises:
+        InputError: an unknown preset (naming those there are), or a value out of range.
     """
-    if size not in SIZES:
-        raise InputError(f"unknown size {size!r}; known: {sorted(SIZES)}")
-    base = SIZES[size]
-    cfg = DetectConfig(
-        # None, not 0, means the size's default: --width 0 is an error, not a silent 1280
-        width=base.width if width is None else width,
-        height=base.height if height is None else height,
-        n_train=base.n_train if n_train is None else n_train,
-        n_test=base.n_test if n_test is None else n_test,
-        object_px=base.object_px,
-        box_px=base.box_px,
-        canonical=base.canonical,
-    )
+    if conf not in CONFS:
+        raise InputError(f"unknown preset {conf!r}; choose one of {', '.join(CONFS)}")
+    # None, not 0, means the preset's value: --width 0 is an error, not a silent 1280
+    given = {"width": width, "height": height, "n_train": n_train, "n_test": n_test, "p_object": p_object}
+    cfg = dataclasses.replace(CONFS[conf], **{k: v for k, v in given.items() if v is not None})
     if cfg.width < 2 * cfg.object_px or cfg.height < 2 * cfg.object_px or cfg.n_train < 1 or cfg.n_test < 0:
         raise InputError(
             f"images must be at least twice the object size ({cfg.object_px} px), with n_train >= 1 and "
             f"n_test >= 0: got {cfg.width}x{cfg.height}, n_train={cfg.n_train}, n_test={cfg.n_test}"
         )
-    if not 0.0 <= p_object <= 1.0:
-        raise InputError(f"p_object is a probability, in [0, 1]; got {p_object}")
+    if not 0.0 <= cfg.p_object <= 1.0:
+        raise InputError(f"p_object is a probability, in [0, 1]; got {cfg.p_object}")
     cats = [
         {"id": k + 1, "name": name, "supercategory": "object", "material": mat}
         for k, (name, mat, _) in enumerate(OBJECTS)
@@ -276,7 +287,7 @@ def generate(
             for j in range(cfg.n_train)
         ]
         jobs += [("test", 0, j, f"images/test/{j:05d}.png") for j in range(cfg.n_test)]
-        jobs = [(split, k, j, str(tmp / name), name, seed, object_seed, cfg, p_object) for split, k, j, name in jobs]
+        jobs = [(split, k, j, str(tmp / name), name, seed, object_seed, cfg) for split, k, j, name in jobs]
         results = list(
             parallel_map(_image_job, jobs, workers=workers, desc="detect images", unit="img", progress=progress)
         )
@@ -304,14 +315,14 @@ def generate(
             info = {"description": f"alcn-cv ALCN-2D-like detection benchmark, {split} images", "seed": seed}
             write_coco(tmp / f"{split}.json", images, anns, cats, info)
         params = {
-            "size": size,
+            "conf": conf,
             "object_seed": object_seed,
             "width": cfg.width,
             "height": cfg.height,
             "n_train": cfg.n_train,
             "n_test": cfg.n_test,
             "object_px": cfg.object_px,
-            "p_object": p_object,
+            "p_object": cfg.p_object,
         }
         write_json(
             tmp / "manifest.json",

@@ -59,8 +59,9 @@ from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, write_text_m
 from alcn_cv.io import write_image, write_json
 
 __all__ = [
+    "CONFS",
+    "CONF_SUMMARIES",
     "PoseConfig",
-    "SIZES",
     "BOX_SIZE_MM",
     "make_box",
     "make_duck",
@@ -88,7 +89,8 @@ SEQUENCE_KINDS = (
 
 @dataclass(frozen=True)
 class PoseConfig:
-    """Size of the pose dataset: image size, focal length (px), frames per sequence, texture sizes."""
+    """Size of the pose dataset, one preset of :data:`CONFS`: image size, focal length (px), frames per sequence,
+    texture sizes."""
 
     width: int = 640
     height: int = 480
@@ -105,9 +107,18 @@ class PoseConfig:
         return np.array([[self.focal, 0, (self.width - 1) / 2], [0, self.focal, (self.height - 1) / 2], [0, 0, 1.0]])
 
 
-SIZES: dict[str, PoseConfig] = {
+#: The named presets of :func:`generate` (hloc's ``confs``; ``alcn data pose --conf NAME``): ``default``, the
+#: dataset of the rendered Table 1; ``small``, 320x240 and 3 frames a sequence (seconds, for tests). Frozen:
+#: :func:`generate` derives a run's configuration with :func:`dataclasses.replace`, never changing a preset.
+CONFS: dict[str, PoseConfig] = {
     "default": PoseConfig(),
     "small": PoseConfig(width=320, height=240, focal=290.0, n_frames=3, texel=96, table_px=384, shadow_res=512),
+}
+
+#: One line per preset of :data:`CONFS`, for ``alcn data pose --help``.
+CONF_SUMMARIES: dict[str, str] = {
+    "default": "the sequences of the rendered Table 1 (minutes on 2 cores)",
+    "small": "small frames, few of them (seconds; for tests, and with --frames 12 for `alcn pose eval`)",
 }
 
 
@@ -414,7 +425,7 @@ def generate(
     out_dir: str | os.PathLike,
     *,
     seed: int = 0,
-    size: str = "default",
+    conf: str = "default",
     n_frames: int | None = None,
     n_test: int | None = None,
     clutter: bool = True,
@@ -429,9 +440,9 @@ def generate(
     Args:
         out_dir: dataset root.
         seed: seed of everything (same seed and parameters give the same bytes).
-        size: a key of :data:`SIZES`.
-        n_frames: frames per test sequence and per loop of the training sequence (default: the size's).
-        n_test: number of test sequences (default 8; #k uses lighting ``SEQUENCE_KINDS[k-1]``).
+        conf: a preset of :data:`CONFS`, the values of ``n_frames`` and ``n_test`` when not given.
+        n_frames: frames per test sequence and per loop of the training sequence (default: the preset's).
+        n_test: number of test sequences (default: the preset's; #k uses lighting ``SEQUENCE_KINDS[k-1]``).
         clutter: put clutter on the table.
         training_light: render every test sequence under the training lighting: the control of
             the same seed's dataset (the same scenes, trajectories and noise), so that what a
@@ -442,16 +453,15 @@ def generate(
         overwrite: replace an existing folder.
         progress: show a progress bar.
         workers: worker processes, one sequence each (the output does not depend on it).
+
+    Raises:
+        InputError: an unknown preset (naming those there are), or a value out of range.
     """
-    if size not in SIZES:
-        raise InputError(f"unknown size {size!r}; known: {sorted(SIZES)}")
-    base = SIZES[size]
-    # None, not 0, means the size's default: --frames 0 is an error, not a silent 3 or 60
-    cfg = dataclasses.replace(
-        base,
-        n_frames=base.n_frames if n_frames is None else n_frames,
-        n_test=base.n_test if n_test is None else n_test,
-    )
+    if conf not in CONFS:
+        raise InputError(f"unknown preset {conf!r}; choose one of {', '.join(CONFS)}")
+    # None, not 0, means the preset's value: --frames 0 is an error, not a silent 3 or 60
+    given = {"n_frames": n_frames, "n_test": n_test}
+    cfg = dataclasses.replace(CONFS[conf], **{k: v for k, v in given.items() if v is not None})
     if cfg.n_frames < 1 or not 0 <= cfg.n_test <= len(SEQUENCE_KINDS):
         raise InputError(
             f"need frames >= 1 (--frames) and 0 <= test sequences <= {len(SEQUENCE_KINDS)} (--n-test); "
@@ -490,7 +500,7 @@ def generate(
                 "pose",
                 seed,
                 {
-                    "size": size,
+                    "conf": conf,
                     "width": cfg.width,
                     "height": cfg.height,
                     "focal": cfg.focal,

@@ -387,7 +387,7 @@ def _next_steps(weights: Path) -> str:
         (
             "compare them with the shipped model on real light changes (needs the shared data, or --data DIR of "
             "your own registered scenes)",
-            ["alcn", "bench", "relight", "--quick", "--methods", f"alcn,alcn:weights={w}"]
+            ["alcn", "bench", "relight", "--conf", "quick", "--methods", f"alcn,alcn:weights={w}"]
             + ["--out", str(weights.parent / "bench")],
         ),
     ]
