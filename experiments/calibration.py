@@ -51,7 +51,7 @@ def main() -> None:
         "--box-ply",
         str(SHARED_DATA / "cookie_box" / "box.ply"),
         "--conf",
-        "cookie-box",  # pose.build.confs
+        "cookie-box",  # pose.build.CONFS
     ]
     track_argv = [
         "pose",

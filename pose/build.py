@@ -18,7 +18,7 @@ Pipeline (hloc-style, one module per stage):
 4. :func:`build` assembles the model in the object frame; :func:`main` writes ``<out>.npz`` +
    ``<out>.ply`` (:mod:`pose.model`) and ``<out>_cameras.png`` (:func:`pose.plots.plot_model`).
 
-Named presets of the build's settings (hloc's ``confs``): :data:`confs`, ``alcn pose build --conf NAME``
+Named presets of the build's settings (hloc's ``confs``): :data:`CONFS`, ``alcn pose build --conf NAME``
 (``static-camera``: a hand-held object before a static camera; ``cookie-box``: the shared data's, its examples' and
 its experiment's, also :data:`COOKIE_BOX`); :func:`build_options`: settings as options of ``alcn pose build``.
 """
@@ -119,7 +119,7 @@ _STATIC_CAMERA: dict[str, Any] = {
 #:
 #: Without a preset, :func:`main`'s defaults (:data:`DEFAULTS`) hold: those of a registered sequence, which ignores
 #: the options of a video.
-confs: Mapping[str, Mapping[str, Any]] = types.MappingProxyType(
+CONFS: Mapping[str, Mapping[str, Any]] = types.MappingProxyType(
     {
         "static-camera": types.MappingProxyType(dict(_STATIC_CAMERA)),
         "cookie-box": types.MappingProxyType(
@@ -133,7 +133,7 @@ confs: Mapping[str, Mapping[str, Any]] = types.MappingProxyType(
     }
 )
 
-#: One line per preset of :data:`confs`, for ``alcn pose build --help``.
+#: One line per preset of :data:`CONFS`, for ``alcn pose build --help``.
 CONF_SUMMARIES: Mapping[str, str] = types.MappingProxyType(
     {
         "static-camera": "a hand-held object before a static camera (give --K or --camera, and the box)",
@@ -142,9 +142,9 @@ CONF_SUMMARIES: Mapping[str, str] = types.MappingProxyType(
     }
 )
 
-#: The cookie box's settings of :func:`main`, ``confs["cookie-box"]`` (read-only, shared by every build that uses
+#: The cookie box's settings of :func:`main`, ``CONFS["cookie-box"]`` (read-only, shared by every build that uses
 #: them): ``main(video, output, box_ply=..., **COOKIE_BOX)``, the same as ``main(..., conf="cookie-box")``.
-COOKIE_BOX: Mapping[str, Any] = confs["cookie-box"]
+COOKIE_BOX: Mapping[str, Any] = CONFS["cookie-box"]
 
 #: The values of :func:`main`'s settings that neither a preset nor the caller gives (``step`` and ``max_frames``:
 #: :data:`pose.sequence.VIDEO_STEP` and :data:`pose.sequence.VIDEO_MAX_FRAMES`; ``box_units``: the sequence's, or
@@ -162,7 +162,7 @@ PRESET_VIDEO_SETTINGS = (*VIDEO_SETTINGS, "box_units")
 
 
 def conf_settings(conf: str | None, *, video: bool = True, **given: Any) -> dict[str, Any]:
-    """The settings of :func:`main` from the preset ``confs[conf]`` (none: ``{}``) and the keywords ``given``: a value
+    """The settings of :func:`main` from the preset ``CONFS[conf]`` (none: ``{}``) and the keywords ``given``: a value
     given (not ``None``) overrides the preset's, and a camera given (``K`` or ``camera``) replaces the preset's.
     Without ``video`` (a registered sequence) the preset's :data:`PRESET_VIDEO_SETTINGS` are left out. A calibration
     given (``camera``) holds the focal length fixed unless ``refine_focal`` is given too: it was measured, and a
@@ -179,10 +179,10 @@ def conf_settings(conf: str | None, *, video: bool = True, **given: Any) -> dict
     """
     if conf is None:
         preset: Mapping[str, Any] = {}
-    elif conf in confs:
-        preset = confs[conf]
+    elif conf in CONFS:
+        preset = CONFS[conf]
     else:
-        raise InputError(f"unknown preset {conf!r}; choose one of {', '.join(confs)}")
+        raise InputError(f"unknown preset {conf!r}; choose one of {', '.join(CONFS)}")
     settings = {k: v for k, v in preset.items() if video or k not in PRESET_VIDEO_SETTINGS}
     if given.get("K") is not None or given.get("camera") is not None:
         settings.pop("K", None)
@@ -480,7 +480,7 @@ def main(
     for a registered sequence it is the box placed in the sequence's world frame (a BOP model: its corners become the
     model's), while ``box_size`` gives the size alone (the box is fitted in the world frame).
 
-    ``conf``: a preset of :data:`confs` (``"static-camera"``, ``"cookie-box"``); the settings given (not ``None``)
+    ``conf``: a preset of :data:`CONFS` (``"static-camera"``, ``"cookie-box"``); the settings given (not ``None``)
     override its values, its values of a video apply to a video only (:func:`conf_settings`), and those neither gives
     are :data:`DEFAULTS`. The model records the preset's name and the settings the build used (``extra["build"]``:
     :func:`_provenance`).

@@ -1,7 +1,7 @@
 """``alcn pose build|track|eval|train-corners|bench-corners|corner-recall|planar|overlay-error``: the 3D pose
 pipeline on the command line. The corner detector's training takes a named recipe (``--conf``, the presets
-of :data:`pose.corner_train.confs`) and ``--set KEY=VALUE`` overrides of its keys; the part model's build a named
-preset of its options (``--conf``, :data:`pose.build.confs`), which the options given override."""
+of :data:`pose.corner_train.CONFS`) and ``--set KEY=VALUE`` overrides of its keys; the part model's build a named
+preset of its options (``--conf``, :data:`pose.build.CONFS`), which the options given override."""
 
 from __future__ import annotations
 
@@ -95,9 +95,9 @@ def _track(args: argparse.Namespace) -> int:
 def _recipe(args: argparse.Namespace):
     """The corner recipe of ``--conf`` with the ``--set`` items applied."""
     from alcn_cv.train.config import preset
-    from pose.corner_train import confs
+    from pose.corner_train import CONFS
 
-    recipe = preset(confs, args.conf, args.settings)
+    recipe = preset(CONFS, args.conf, args.settings)
     recipe.check()
     return recipe
 
@@ -189,9 +189,9 @@ def _planar(args: argparse.Namespace) -> int:
 
 def _add_recipe(parser: argparse.ArgumentParser, default: str) -> None:
     """:func:`~alcn_cv.cli.add_conf_options` of the corner detector's training, for every command that trains it."""
-    from pose.corner_train import confs
+    from pose.corner_train import CONFS
 
-    presets = "the corner detector's training (pose.corner_train.confs: " + ", ".join(sorted(confs)) + ")"
+    presets = "the corner detector's training (pose.corner_train.CONFS: " + ", ".join(sorted(CONFS)) + ")"
     add_conf_options(parser, default, presets, "iterations=1000")
 
 
@@ -203,16 +203,16 @@ NORMALIZATION_HELP = (
 
 
 def _build_presets() -> str:
-    """The epilog of ``alcn pose build --help``: the presets of :data:`pose.build.confs`, one line each, with their
+    """The epilog of ``alcn pose build --help``: the presets of :data:`pose.build.CONFS`, one line each, with their
     options (the camera's rounded)."""
-    from pose.build import CONF_SUMMARIES, build_options, confs
+    from pose.build import CONF_SUMMARIES, CONFS, build_options
 
-    width = max(map(len, confs))
+    width = max(map(len, CONFS))
     lines = [
         "presets (--conf NAME; an option given on the command line overrides the preset's value, and --K or --camera "
         "its camera):"
     ]
-    for name, settings in confs.items():
+    for name, settings in CONFS.items():
         words = []
         for key, value in settings.items():
             if key == "K":
@@ -402,8 +402,8 @@ def _corner_recall(args: argparse.Namespace) -> int:
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``pose`` with ``build``, ``track``, ``eval``, ``train-corners``, ``bench-corners``, ``corner-recall``,
     ``planar`` and ``overlay-error`` to ``alcn``."""
+    from pose.build import CONFS as BUILD_CONFS
     from pose.build import DEFAULTS as BUILD_DEFAULTS
-    from pose.build import confs as build_confs
     from pose.sequence import VIDEO_MAX_FRAMES, VIDEO_STEP
     from pose.solver import METHODS
 
@@ -448,7 +448,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument(
         "--conf",
         metavar="NAME",
-        help="a preset of these options, listed below (pose.build.confs: " + ", ".join(build_confs) + "); the "
+        help="a preset of these options, listed below (pose.build.CONFS: " + ", ".join(BUILD_CONFS) + "); the "
         "options given override its values (default: none, the defaults below)",
     )
     b.add_argument(
@@ -493,7 +493,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--box-units",
         choices=["mm", "cm", "m"],
         help="units of --box-ply/--box-size (default: for a video the preset's ("
-        + ", ".join(f"{name}: {c['box_units']}" for name, c in build_confs.items() if "box_units" in c)
+        + ", ".join(f"{name}: {c['box_units']}" for name, c in BUILD_CONFS.items() if "box_units" in c)
         + "), else cm; for a registered sequence its units)",
     )
     b.add_argument(

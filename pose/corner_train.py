@@ -1,6 +1,6 @@
 """Training of the corner detector (torch) and its export to ONNX: ``alcn pose train-corners``.
 
-The recipe is one :class:`CornerRecipe`, recorded whole in the ONNX file's metadata; :data:`confs`
+The recipe is one :class:`CornerRecipe`, recorded whole in the ONNX file's metadata; :data:`CONFS`
 names the shipped ones (``box``: the box of ``alcn pose train-corners`` and ``alcn pose eval``;
 ``planar``: a planar target from one image, ``alcn pose planar``). The network
 (:class:`pose.corner_net.CornerNet`) is trained densely on crops of ``cells x cells`` output cells
@@ -37,7 +37,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = [
     "CornerRecipe",
-    "confs",
+    "CONFS",
     "corner_loss",
     "export_onnx",
     "fit",
@@ -126,7 +126,7 @@ class CornerRecipe:
 
 #: The shipped recipes: ``box`` (a box from a registered sequence) and ``planar`` (a planar
 #: target from one image: more copies, no viewpoint or background changes, frames at half size).
-confs: dict[str, CornerRecipe] = {
+CONFS: dict[str, CornerRecipe] = {
     "box": CornerRecipe(),
     "planar": CornerRecipe(scale=0.5, copies=59, novel_views=0.0, backgrounds=0.0),
 }
@@ -323,7 +323,7 @@ def train_corners(
             reads; the BOP ``mask_visib`` is used when present).
         corners: ``(8, 3)`` box corners in the object (world) frame, in ``units``.
         out: the ``.onnx`` file to write.
-        recipe: the recipe (default: ``confs["box"]``); ``conf``: its preset's name, recorded with it.
+        recipe: the recipe (default: ``CONFS["box"]``); ``conf``: its preset's name, recorded with it.
         normalization: the normalization spec applied first (stored in the file; tracking uses the same).
         seed, device: of the frames and :func:`fit`.
 
@@ -337,7 +337,7 @@ def train_corners(
     from pose import model as part_model
     from pose.sequence import check_known_units, load_sequence
 
-    recipe = recipe or confs["box"]
+    recipe = recipe or CONFS["box"]
     recipe.check()
     output_path(out, ".onnx", "a corner detector")  # before the training, not after it
     corners = np.asarray(corners, np.float64)
@@ -455,10 +455,10 @@ def train_image_corners(
         uv: ``(n, 2)`` the parts' pixels in it; ``parts``: ``(n, 3)`` the same in the object frame (``units``).
         corners: ``(8, 3)`` the object's box (the pose solver's outline; a flat one for a plane).
         out: the ``.onnx`` file to write.
-        recipe: the recipe (default: ``confs["planar"]``; ``divisions`` and the viewpoint keys unused).
+        recipe: the recipe (default: ``CONFS["planar"]``; ``divisions`` and the viewpoint keys unused).
         normalization, seed, conf: as :func:`train_corners`'s.
     """
-    recipe = recipe or confs["planar"]
+    recipe = recipe or CONFS["planar"]
     recipe.check()
     parts = np.asarray(parts, np.float64)
     if parts.ndim != 2 or parts.shape != (len(uv), 3) or not np.isfinite(parts).all():

@@ -36,8 +36,8 @@ from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none
 from pose.box import box_diameter
 from pose.build import build as build_model
+from pose.corner_train import CONFS as CORNER_CONFS
 from pose.corner_train import CornerRecipe
-from pose.corner_train import confs as corner_confs
 from pose.model import read_box_corners, unit_scale
 from pose.model import save as save_model
 from pose.parts import FeaturePartDetector, PartDetector
@@ -223,7 +223,7 @@ def main(
     data_dir, out_dir = Path(data_dir), Path(out_dir)
     make_folder(out_dir)
     if corner_recipe is None:
-        corner_recipe, corner_conf = corner_confs["box"], "box"
+        corner_recipe, corner_conf = CORNER_CONFS["box"], "box"
     train = data_dir / "train" / "000001"
     tests = sorted(p for p in (data_dir / "test").glob("[0-9]*") if p.is_dir()) if (data_dir / "test").is_dir() else []
     if sequences:

@@ -29,7 +29,7 @@ truth. For each scene:
 The part detector is a factory of :data:`DETECTORS`: ``"features"``, the classical detector,
 or ``"corners"``, the learned corner detector of the box (:mod:`pose.corners`) trained for the
 target from the reference frame alone, as the box's is from its training sequence under one
-light (:func:`corner_detector`, the ``planar`` recipe of :data:`pose.corner_train.confs`): its 8
+light (:func:`corner_detector`, the ``planar`` recipe of :data:`pose.corner_train.CONFS`): its 8
 parts are the target's 4 corners and the middles of its 4 sides (:func:`target_parts`; 4 parts
 would leave PnP nothing to check a pose with).
 
@@ -54,8 +54,8 @@ from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, make_folder, to_gray, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none, new_figure, save_figure
+from pose.corner_train import CONFS as CORNER_CONFS
 from pose.corner_train import CornerRecipe
-from pose.corner_train import confs as corner_confs
 from pose.evaluate import PROJ_PX, score, table_markdown
 from pose.model import PartModel, box_corners
 from pose.parts import FeaturePartDetector, PartDetector, create_feature
@@ -234,7 +234,7 @@ def corner_detector(
 ) -> PartDetector:
     """The learned corner detector of the target (:class:`pose.corners.CornerDetector`), trained
     on the reference frame after ``normalization`` by ``recipe`` (default: the ``planar`` preset of
-    :data:`pose.corner_train.confs`) and written to ``work_dir`` (default: a temporary folder);
+    :data:`pose.corner_train.CONFS`) and written to ``work_dir`` (default: a temporary folder);
     ``n_features`` unused."""
     import tempfile
 
@@ -475,7 +475,7 @@ def main(
                     "feature": feature,
                     "n_features": n_features,
                     "detectors": list(detectors),
-                    "corner_recipe": asdict(recipe or corner_confs["planar"]),
+                    "corner_recipe": asdict(recipe or CORNER_CONFS["planar"]),
                     "target_fraction": target_fraction,
                     "hfov_deg": hfov,
                     "proj2d_px": PROJ_PX,

@@ -577,7 +577,7 @@ def open_tracker(
 
     Example: the cookie box, its model ``cb/model.npz`` built from its video (it stores the camera) by
     ``alcn pose build ../shared/data/cookie_box/box.mp4 cb/model.npz --box-ply ../shared/data/cookie_box/box.ply
-    --conf cookie-box`` (:data:`pose.build.confs`; the box in cm); ``docs/pose.md`` walks through it::
+    --conf cookie-box`` (:data:`pose.build.CONFS`; the box in cm); ``docs/pose.md`` walks through it::
 
         import cv2
         from pose.track import open_tracker

@@ -518,13 +518,13 @@ def test_presets_are_read_only_settings_of_main():
     import inspect
 
     keywords = set(inspect.signature(build.main).parameters)
-    assert set(build.confs) == set(build.CONF_SUMMARIES) == {"static-camera", "cookie-box"}
-    for name, settings in build.confs.items():
+    assert set(build.CONFS) == set(build.CONF_SUMMARIES) == {"static-camera", "cookie-box"}
+    for name, settings in build.CONFS.items():
         assert set(settings) <= keywords - {"input_path", "output", "box_ply", "box_size", "conf"}, name
         with pytest.raises(TypeError):
             settings["step"] = 5  # type: ignore[index]
-    assert build.COOKIE_BOX is build.confs["cookie-box"]
-    static = dict(build.confs["static-camera"])
+    assert build.COOKIE_BOX is build.CONFS["cookie-box"]
+    static = dict(build.CONFS["static-camera"])
     assert static == {"step": 10, "motion_mask": True, "feature": "ORB", "n_features": 3000, "refine_focal": True}
     assert {k: v for k, v in build.COOKIE_BOX.items() if k not in ("K", "max_frames", "box_units")} == static
     assert build.conf_settings("cookie-box", step=None, n_features=1000)["n_features"] == 1000

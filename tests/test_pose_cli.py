@@ -94,7 +94,7 @@ def test_build_help_says_what_the_box_options_and_the_camera_mean(capsys):
 
 
 def test_build_help_lists_its_presets_one_line_each(capsys):
-    """The settings of a hand-held object before a static camera were in no --help: each preset of pose.build.confs is
+    """The settings of a hand-held object before a static camera were in no --help: each preset of pose.build.CONFS is
     one line of the epilog with its summary and options, and the help says that an option given overrides it."""
     from pose import build
 

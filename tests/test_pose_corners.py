@@ -427,12 +427,12 @@ def test_alcn_runs_at_the_detector_resolution_torch_free_where_it_can(tmp_path):
 
 def test_an_impossible_recipe_is_named():
     """Shares outside [0, 1], a negative noise, part cells beyond the ignored ring, an empty layer."""
-    for conf in corner_train.confs.values():
+    for conf in corner_train.CONFS.values():
         conf.check()
     bad = {"novel_views": 1.5, "backgrounds": -0.1, "noise": -0.01, "pos_radius": 8.0, "hidden": 0, "mixing": -1}
     for key, value in bad.items():
         with pytest.raises(InputError, match=f"'{key}'"):
-            dataclasses.replace(corner_train.confs["box"], **{key: value}).check()
+            dataclasses.replace(corner_train.CONFS["box"], **{key: value}).check()
 
 
 def test_bad_files(tmp_path, random_net):
@@ -561,7 +561,7 @@ def _recipes(posedata, tmp_path, monkeypatch, *extras: list[str]) -> list:
 
 
 def test_both_commands_take_the_recipe_as_a_preset_and_settings(posedata, tmp_path, monkeypatch, capsys):
-    box_recipe = corner_train.confs["box"]
+    box_recipe = corner_train.CONFS["box"]
     seen = _recipes(
         posedata,
         tmp_path,
@@ -572,7 +572,7 @@ def test_both_commands_take_the_recipe_as_a_preset_and_settings(posedata, tmp_pa
     )
     assert seen[0] == seen[1] == box_recipe == corner_train.CornerRecipe()
     assert seen[2] == seen[3] == dataclasses.replace(box_recipe, jitter=True, novel_distance=[0.6, 1.1])
-    assert seen[4] == seen[5] == corner_train.confs["planar"]
+    assert seen[4] == seen[5] == corner_train.CONFS["planar"]
     for bad, key in (
         (["novel_distance=[1.2, 0.7]"], "novel_distance"),
         (["iterations=many"], "iterations"),

@@ -11,7 +11,7 @@ import pytest
 
 from alcn_cv.errors import DatasetError, InputError
 from pose import planar
-from pose.corner_train import confs as corner_confs
+from pose.corner_train import CONFS as CORNER_CONFS
 from pose.solver import PoseSolver, project
 
 
@@ -95,7 +95,7 @@ def test_corner_detector_is_trained_on_the_reference_frame(tmp_path):
     img = _texture(1)
     K = planar.pinhole_camera(img.shape[1], img.shape[0])
     target = planar.build_target(img, (200, 90, 220, 180), K, reference="ref.png")
-    recipe = dataclasses.replace(corner_confs["planar"], iterations=3, copies=1)
+    recipe = dataclasses.replace(CORNER_CONFS["planar"], iterations=3, copies=1)
     det = planar.DETECTORS["corners"](target, "none", 0, tmp_path, recipe)
     np.testing.assert_allclose(det.parts, planar.target_parts(target)[0])
     np.testing.assert_allclose(det.corners, target.model.corners)
@@ -115,7 +115,7 @@ def test_planar_on_a_webcam_scene(shared_data, tmp_path):
     root = shared_data / "webcam"
     if not (root / "mexico").is_dir():
         pytest.skip(f"the webcam scenes are not in {root}")
-    recipe = dataclasses.replace(corner_confs["planar"], iterations=3, copies=1)
+    recipe = dataclasses.replace(CORNER_CONFS["planar"], iterations=3, copies=1)
     result = planar.main(
         tmp_path,
         root,
@@ -164,4 +164,4 @@ def test_planar_command_takes_the_recipe_and_the_normalizations(tmp_path, monkey
     )
     assert args.func(args) == 0
     assert seen[0]["normalizations"] == ["none", "dog"]
-    assert seen[0]["recipe"] == dataclasses.replace(corner_confs["planar"], iterations=3)
+    assert seen[0]["recipe"] == dataclasses.replace(CORNER_CONFS["planar"], iterations=3)
