@@ -1,9 +1,10 @@
-"""The detection benchmark: its pieces against direct computations, and a tiny end-to-end run."""
+"""The detection benchmark: its pieces against direct computations, its tuning, and a tiny end-to-end run."""
 
 from __future__ import annotations
 
 import json
 import shlex
+import shutil
 
 import numpy as np
 import pytest
@@ -16,8 +17,13 @@ from alcn_cv.bench import detect_settings as S  # noqa: E402
 from alcn_cv.bench.methods import build_methods  # noqa: E402
 from alcn_cv.cli import build_parser  # noqa: E402
 from alcn_cv.cli import main as cli_main  # noqa: E402
+from alcn_cv.enhance.registry import parameters  # noqa: E402
 from alcn_cv.errors import DatasetError, InputError  # noqa: E402
+from alcn_cv.filters.standardize import standardize_windows  # noqa: E402
 from alcn_cv.nets import Detector  # noqa: E402
+
+#: The smallest training and test that run every step: for tests of the benchmark's plumbing, not of its numbers.
+TINY = dict(positives_per_object=4, negatives_ratio=0.5, epochs=1, batch_size=16, threads=1, max_test_images=1)
 
 
 @pytest.fixture(scope="module")
@@ -85,6 +91,21 @@ def test_input_policy():
         policies.InputPolicy("whiten", windows)
 
 
+def test_relight_is_deterministic_and_in_range():
+    w = np.random.default_rng(0).random((4, 64, 64)).astype(np.float32)
+    a = detect_data.relight_windows(w, np.random.default_rng(3))
+    np.testing.assert_array_equal(a, detect_data.relight_windows(w, np.random.default_rng(3)))
+    assert a.dtype == np.float32 and a.min() >= 0 and a.max() <= 1
+    assert not np.allclose(a, w)
+
+
+def test_standardize_windows_with_the_benchmarks_eps():
+    w = np.random.default_rng(1).random((4, 64, 64)).astype(np.float32)
+    s = standardize_windows(w * 3 + 1, eps=policies.BENCH_STANDARDIZE_EPS)
+    np.testing.assert_allclose(s.mean((1, 2)), 0, atol=1e-4)
+    np.testing.assert_allclose(s.std((1, 2)), 1, atol=1e-3)
+
+
 def test_training_set_is_shared_and_labelled(small_data):
     data = detect_data.load_data(small_data)
     settings = S.DetectSettings(positives_per_object=12, negatives_ratio=1.0)
@@ -131,11 +152,15 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     )
     saved = json.loads((out / "detect.json").read_text())
     assert saved["runs"]["he|1|raw|0"]["error"] == "RuntimeError: boom"  # reported, the run went on
-    assert built == ["none", "dog", "he", "dog"]  # each method built once, DoG again with its tuned parameters
+    # each method built once, DoG once per setting of its grid: its runs take the chosen one's
+    assert built == ["none", "dog", "he"] + ["dog"] * len(D.TUNING_GRIDS["dog"])
     for key in ("none|1|raw|0", "dog|1|local|0"):
         aucs = [obj["auc"] for obj in saved["runs"][key]["objects"].values()]
         assert any(a is not None for a in aucs) and all(a is None or 0 <= a <= 1 for a in aucs), aucs
-    assert "dog" in saved["tuned"]["1"]
+    tuned = saved["tuned"]["1"]["dog"]
+    assert [t["params"] for t in tuned["trials"]] == D.TUNING_GRIDS["dog"]
+    assert all(0 <= t["val_auc"] <= 1 and set(t["val_auc_by_policy"]) == {"raw", "local"} for t in tuned["trials"])
+    assert saved["runs"]["dog|1|local|0"]["params"] == tuned["params"] and saved["val_images"] == [1, 2]
     assert "error" in saved["summary"]["he|1|raw"]
     assert saved["summary"]["dog|1|local"]["seeds"] == [0]
     assert "failed" in (out / "detect.md").read_text()
@@ -143,6 +168,91 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
         1.0
     ]  # DoG looks no further than a window
     assert result["machine"]["cpu_count"] >= 1
+
+
+def test_tuning_grids_have_one_size_start_at_the_default_and_stay_within_the_window():
+    assert len({len(grid) for grid in D.TUNING_GRIDS.values()}) == 1 and set(D.TUNING_GRIDS) == {"dog", "slcn", "dlcn"}
+    for method, grid in D.TUNING_GRIDS.items():
+        defaults = {k: v for k, v in parameters(method).items() if k in grid[0]}
+        assert grid[0] == defaults, method  # a tie keeps the default
+        assert len({tuple(p.values()) for p in grid}) == len(grid)
+        assert all(3 * max(p.values()) <= S.RESNET_CONTEXT for p in grid), method  # a Gaussian reaches 3 sigma
+
+
+def test_tuning_chooses_the_best_validation_auc_and_the_runs_use_it(small_data, tmp_path, monkeypatch):
+    grid = D.TUNING_GRIDS["dog"]
+    # per number of real images, the AUC of each setting: the best neither first nor last, tied with a later one
+    known = {1: [0.5, 0.6, 0.8, 0.7, 0.8, 0.4], 2: [0.5, 0.9, 0.3, 0.3, 0.3, 0.6]}
+    calls = []
+
+    def scored(state, method, n_real, params, val_images):
+        calls.append((method, n_real, params, len(val_images)))
+        auc = known[n_real][grid.index(params)]
+        return {"local": auc, "raw": auc - 0.2}
+
+    monkeypatch.setattr(D, "_validation_aucs", scored)
+    settings = S.DetectSettings(
+        methods=["none", "dog"], real_images=[1, 2], policies=["local", "raw"], tune=True, **TINY
+    )
+    result = D.main(small_data, tmp_path / "out", settings, progress=False)
+    assert calls == [("dog", n, p, 2) for n in (1, 2) for p in grid]  # every setting, on both validation images
+    for n_real, best in ((1, 2), (2, 1)):
+        tuned = result["tuned"][str(n_real)]["dog"]
+        assert tuned["params"] == grid[best]
+        assert [t["val_auc"] for t in tuned["trials"]] == pytest.approx([a - 0.1 for a in known[n_real]])
+        for policy in ("local", "raw"):
+            assert result["runs"][S.run_key("dog", n_real, policy, 0)]["params"] == grid[best]
+    assert result["runs"][S.run_key("none", 1, "local", 0)]["params"] == {}
+    md = (tmp_path / "out" / "detect.md").read_text()
+    assert "dog tuned by detection on the validation images" in md and "the 2 validation images (`val.json`" in md
+    assert "| 1 | `dog:sigma1=1.0:sigma2=2.0` | 0.700 | 0.400 | 0.300-0.700 |" in md
+    saved = json.loads((tmp_path / "out" / "detect.json").read_text())
+    assert saved["tuned"]["2"]["dog"]["params"] == grid[1] and saved["val_images"] == [1, 2]
+
+
+def test_validation_aucs_train_as_the_first_seeds_runs(small_data, monkeypatch):
+    data = detect_data.load_data(small_data)
+    settings = S.DetectSettings(
+        methods=["slcn"], seeds=[3, 4], policies=["raw", "local"], positives_per_object=4, epochs=1, batch_size=16
+    )
+    state = D._Run(data, settings, [])
+    fitted, evaluated = [], []
+    fit, evaluate = D._fit, D._evaluate
+    monkeypatch.setattr(
+        D, "_fit", lambda st, m, n, pol, seed, nz: fitted.append((m, n, pol, seed)) or fit(st, m, n, pol, seed, nz)
+    )
+    monkeypatch.setattr(D, "_evaluate", lambda d, coco, *a: evaluated.append(coco) or evaluate(d, coco, *a))
+    params = D.TUNING_GRIDS["slcn"][1]
+    val = D._normalize_images(
+        D.create_normalization("slcn", params), detect_data.read_images(data.val, data.working_scale)
+    )
+    aucs = D._validation_aucs(state, "slcn", 1, params, val)
+    assert fitted == [("slcn", 1, "raw", 3), ("slcn", 1, "local", 3)]  # the first seed's windows, each policy
+    assert evaluated == [data.val, data.val] and set(state.training_sets) == {(3, 1)}
+    assert set(aucs) == {"raw", "local"} and all(0 <= a <= 1 for a in aucs.values())
+
+
+def test_tuning_without_validation_images_is_one_line_before_any_work(small_data, tmp_path, capsys):
+    data = tmp_path / "data"
+    shutil.copytree(small_data, data)
+    (data / "val.json").unlink()
+    out = tmp_path / "o"
+    argv = ["bench", "detect", "--data", str(data), "--out", str(out), "--conf", "small", "--tune"]
+    assert cli_main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        f"alcn bench: error: {data}: no val.json, the validation images --tune scores its settings on: render the "
+        "data again with `alcn data detect`"
+    )
+    assert not out.exists()
+    # without --tune, or with no method to tune, the data need no validation images
+    quick = dict(real_images=[1], **TINY)
+    D.main(data, tmp_path / "untuned", S.DetectSettings(methods=["dog"], **quick), progress=False)
+    D.main(data, tmp_path / "nothing to tune", S.DetectSettings(methods=["none"], tune=True, **quick), progress=False)
+    (data / "val.json").write_text(json.dumps({"images": [], "annotations": [], "categories": []}))
+    with pytest.raises(InputError, match="no object in val.json"):
+        D.main(data, out, S.DetectSettings(methods=["dlcn"], tune=True))
+    assert not out.exists()
 
 
 def test_cli_and_bad_input(small_data, tmp_path):
@@ -173,7 +283,7 @@ def test_cli_and_bad_input(small_data, tmp_path):
 def test_a_bad_weight_file_is_one_line_before_any_work(small_data, tmp_path, capsys, monkeypatch):
     bad = tmp_path / "detector.pt"
     bad.write_bytes(b"not an npz")
-    monkeypatch.setattr(D, "read_test_images", lambda *a: pytest.fail("the benchmark started"))
+    monkeypatch.setattr(D, "read_images", lambda *a: pytest.fail("the benchmark started"))
     out = tmp_path / "o"
     argv = ["bench", "detect", "--data", str(small_data), "--out", str(out), "--conf", "small"]
     assert cli_main([*argv, "--methods", f"none,alcn:weights={bad}"]) == 2
@@ -320,17 +430,7 @@ def test_resnets_train_with_context_under_dense_policies(small_data):
 def test_alcn_opencv_backend_runs_end_to_end(small_data, tmp_path):
     """The cv2.dnn backend normalizes the training windows through ALCN.normalize_windows (it
     once failed with "'OpenCVNormalizer' object is not callable")."""
-    settings = S.DetectSettings(
-        methods=["alcn:backend=opencv"],
-        real_images=[1],
-        policies=["local"],
-        positives_per_object=4,
-        negatives_ratio=0.5,
-        epochs=1,
-        batch_size=16,
-        threads=1,
-        max_test_images=1,
-    )
+    settings = S.DetectSettings(methods=["alcn:backend=opencv"], real_images=[1], policies=["local"], **TINY)
     result = D.main(small_data, tmp_path / "out", settings, progress=False)
     run = result["runs"][S.run_key("alcn:backend=opencv", 1, "local", 0)]
     assert "error" not in run, run.get("error")

@@ -27,7 +27,9 @@ def test_layout_manifest_and_schema(bench):
     assert man["kind"] == "detect" and man["seed"] == 1
     assert man["box_size"] == 36 and man["working_scale"] == pytest.approx(0.5)
     assert {o["material"] for o in man["objects"]} == {"matte", "velvet", "metal"}
-    for name in ("train.json", "test.json"):
+    assert man["files"] == {"train": "train.json", "test": "test.json", "val": "val.json"}
+    assert man["parameters"]["n_val"] == detect.CONFS["small"].n_val == 2
+    for name in ("train.json", "test.json", "val.json"):
         jsonschema.validate(json.loads((bench / name).read_text()), schema("coco"))
 
 
@@ -52,6 +54,35 @@ def test_loader_reads_what_the_generator_writes(bench):
     assert len({json.dumps(im.extra["lighting"]) for im in train.images}) == 1
 
 
+def test_validation_images_are_test_like_and_none_is_a_test_image(bench):
+    val = load_coco(bench / "val.json", check_images=True)
+    test = load_coco(bench / "test.json")
+    assert [im.file_name for im in val.images] == ["images/val/00000.png", "images/val/00001.png"]  # n_val of small
+    assert all(im.extra["light_family"] and im.extra["lighting"] for im in val.images)
+    assert {c.id for c in val.categories} == {c.id for c in test.categories}
+    test_images = [test.read_image(im) for im in test.images]
+    for im in val.images:
+        img = val.read_image(im)
+        assert img.shape == (200, 320, 3)
+        assert not any(np.array_equal(img, t) for t in test_images), im.file_name
+
+
+def test_the_validation_images_change_neither_training_nor_test_images(bench, tmp_path):
+    # each split draws from its own random streams: more or no validation images, the same other bytes
+    other = detect.generate(tmp_path / "val4", conf="small", seed=1, n_test=5, n_val=4, progress=False)
+    assert len(load_coco(other / "val.json").images) == 4
+    none = detect.generate(tmp_path / "none", conf="small", seed=1, n_test=5, n_val=0, progress=False)
+    assert len(load_coco(none / "val.json").images) == 0
+    files = sorted(p.relative_to(bench) for p in bench.rglob("*") if p.is_file())
+    kept = [f for f in files if f.name not in ("val.json", "manifest.json") and f.parts[:2] != ("images", "val")]
+    assert len(kept) == 2 + 3 * 3 + 5  # train.json, test.json, the training and test images
+    for f in kept:
+        assert (bench / f).read_bytes() == (other / f).read_bytes() == (none / f).read_bytes(), f
+    # the first validation images are the same whatever their number
+    for name in ("00000.png", "00001.png"):
+        assert (bench / "images" / "val" / name).read_bytes() == (other / "images" / "val" / name).read_bytes()
+
+
 def test_same_seed_gives_identical_bytes(bench, tmp_path):
     again = detect.generate(tmp_path / "again", conf="small", seed=1, n_test=5, progress=False)
     files = sorted(p.relative_to(bench) for p in bench.rglob("*") if p.is_file())
@@ -67,6 +98,8 @@ def test_bad_arguments(tmp_path):
         detect.generate(tmp_path / "x", conf="small", width=100, progress=False)
     with pytest.raises(InputError):  # 0 was read as the preset's width
         detect.generate(tmp_path / "x", conf="small", width=0, progress=False)
+    with pytest.raises(InputError, match="n_val=-1"):
+        detect.generate(tmp_path / "x", conf="small", n_val=-1, progress=False)
     with pytest.raises(InputError, match="p_object"):
         detect.generate(tmp_path / "x", conf="small", p_object=1.5, progress=False)
     assert not (tmp_path / "x").exists()

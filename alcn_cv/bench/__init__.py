@@ -19,7 +19,6 @@
   :mod:`~alcn_cv.bench.relight_settings` (settings, presets),
   :mod:`~alcn_cv.bench.relight_report` (``relight.md``, ``.json``, ``.png``);
 * :mod:`~alcn_cv.bench.speed` -- time and memory of every method and ALCN variant (``alcn bench speed``);
-* :mod:`~alcn_cv.bench.tuning` -- parameter search for DoG, SLCN and DLCN on training windows;
 * :mod:`~alcn_cv.bench.metrics` -- non-maximum suppression, PASCAL matching, precision-recall, AUC;
 * :mod:`~alcn_cv.bench.plots` -- the figures (precision-recall curves, time against frame size);
 * :mod:`~alcn_cv.bench.cli` -- the ``alcn bench`` command;

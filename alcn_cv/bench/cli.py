@@ -91,7 +91,8 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         "--data",
         required=True,
         type=Path,
-        help="benchmark folder: train.json, test.json, manifest.json (e.g. from `alcn data detect`)",
+        help="benchmark folder: train.json, test.json, manifest.json and, for --tune, val.json (e.g. from "
+        "`alcn data detect`)",
     )
     p.add_argument("--out", required=True, type=Path, help="output folder")
     add_conf_option(p, detect_settings.CONF_SUMMARIES)
@@ -116,7 +117,9 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         dest="tune",
         action="store_const",
         const=True,
-        help="tune DoG, SLCN and DLCN on the training windows first (default: their defaults)",
+        help=f"tune DoG, SLCN and DLCN first, per number of real images: each of {len(detect.TUNING_GRIDS['dog'])} "
+        "settings scored by the mean AUC on the data's validation images (val.json) of the detector trained as in the "
+        "first seed's runs; the first best serves every seed (default: their defaults)",
     )
     p.add_argument("--cnn-sweep", type=_sweep, help="plain CNNs tried, DEPTHxWIDTH,... (default 1x32,2x32,3x32)")
     p.add_argument("--nms-iou", type=float, help=f"IoU above which NMS removes a box (default {d.nms_iou})")

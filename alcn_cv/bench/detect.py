@@ -45,11 +45,16 @@ over several seeds (``--seeds 0 1 2``): a single seed's AUC moves by several hun
 training windows and the detector's initialisation, so differences between methods are only
 read against the spread over seeds.
 
-With ``--tune``, DoG, SLCN and DLCN are first tuned on the training windows
-(:mod:`alcn_cv.bench.tuning`, a proxy of detection); by default they keep their defaults.
+With ``--tune`` (``settings.tune``), DoG, SLCN and DLCN are first tuned (the paper tunes them, Sec. 4.3) by the
+benchmark itself on the validation images (``val.json``: test-like images that ``alcn data detect`` draws apart from
+the test images, which take no part): for every number of real images, each setting of a method
+(:data:`TUNING_GRIDS`: the same number per method, the default first) normalizes the first seed's training windows,
+the detector is trained on them as in that seed's runs under each of the run's input policies, and the setting scores
+the mean AUC over objects on the validation images, averaged over the policies. The first best setting serves the
+method's runs for every seed. Without ``--tune`` every method keeps its defaults.
 
-Outputs: ``detect.json`` (every number, PR curves, settings, tuned parameters, timings,
-machine, command), ``detect.md`` (:mod:`alcn_cv.bench.detect_report`) and
+Outputs: ``detect.json`` (every number, PR curves, settings, tuned parameters and every setting's validation AUC,
+timings, machine, command), ``detect.md`` (:mod:`alcn_cv.bench.detect_report`) and
 ``pr_<object>_<n>real.png`` (precision-recall, all methods, :mod:`alcn_cv.bench.plots`).
 """
 
@@ -65,8 +70,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.bench import tuning
-from alcn_cv.bench.detect_data import DetectData, ScaledImage, TrainingSet, load_data, read_test_images, training_set
+from alcn_cv.bench.detect_data import DetectData, ScaledImage, TrainingSet, load_data, read_images, training_set
 from alcn_cv.bench.detect_report import detect_command, detect_markdown
 from alcn_cv.bench.detect_settings import (
     CROP,
@@ -81,10 +85,11 @@ from alcn_cv.bench.detect_settings import (
 from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.metrics import match_detections, nms, pr_auc, precision_recall
 from alcn_cv.bench.plots import plot_pr_curves
-from alcn_cv.bench.policies import InputPolicy
+from alcn_cv.bench.policies import BENCH_STANDARDIZE_EPS, InputPolicy
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import from_spec, parse_spec
+from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
+from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
 from alcn_cv.io import atomic_write, make_folder, write_json
 from alcn_cv.report import machine, spread
@@ -92,7 +97,10 @@ from alcn_cv.report import machine, spread
 if TYPE_CHECKING:
     from torch import nn
 
+    from alcn_cv.formats.coco import CocoDataset
+
 __all__ = [
+    "TUNING_GRIDS",
     "create_normalization",
     "detect_in_image",
     "fixed_boxes",
@@ -107,6 +115,18 @@ logger = logging.getLogger(__name__)
 _BATCH = 1024
 #: Windows drawn from the test images for :func:`window_agreement`.
 AGREEMENT_WINDOWS = 200
+
+_DOG_GRID = [(0.5, 1.5), (0.5, 3.0), (1.0, 2.0), (1.0, 3.0), (1.5, 4.5), (2.0, 5.0)]
+_LCN_GRID = [2.0, 1.0, 1.5, 3.0, 4.0, 5.0]
+#: The settings ``--tune`` searches per method, the same number for each, the default first (a tie keeps it).
+#: Kernels stay within the context that the 64x64 training windows give around the detector's 32x32 input (16 pixels;
+#: a Gaussian reaches 3 sigma): a larger kernel sees reflected window borders at training time and the real
+#: surroundings at test time.
+TUNING_GRIDS: dict[str, list[dict[str, float]]] = {
+    "dog": [{"sigma1": a, "sigma2": b} for a, b in _DOG_GRID],
+    "slcn": [{"sigma": s} for s in _LCN_GRID],
+    "dlcn": [{"sigma": s} for s in _LCN_GRID],
+}
 
 
 def score_maps(net: nn.Module, image: np.ndarray, policy: InputPolicy, device: str = "cpu") -> np.ndarray:
@@ -131,7 +151,7 @@ def score_maps(net: nn.Module, image: np.ndarray, policy: InputPolicy, device: s
         else:
             x = torch.from_numpy(np.ascontiguousarray(image))[None, None].to(device)
             win = F.unfold(x, CROP, stride=STRIDE)[0].T.reshape(-1, 1, CROP, CROP)
-            win = standardize_windows(win, eps=tuning.BENCH_STANDARDIZE_EPS)
+            win = standardize_windows(win, eps=BENCH_STANDARDIZE_EPS)
             logits = torch.cat([net(win[i : i + _BATCH]) for i in range(0, len(win), _BATCH)]).T.reshape(-1, hd, wd)
         return F.softmax(logits[:, :hd, :wd], dim=0).cpu().numpy()
 
@@ -324,18 +344,20 @@ def _train_cnn_sweep(
 
 def _evaluate(
     data: DetectData,
-    test_images: list[ScaledImage],
+    coco: CocoDataset,
+    images: list[ScaledImage],
     net: nn.Module,
     policy: InputPolicy,
     settings: DetectSettings,
 ) -> dict[str, Any]:
-    """AUC and precision-recall per object of a trained network on normalized test images."""
-    probs = _all_score_maps(net, [t.image for t in test_images], policy, settings.device)
+    """AUC and precision-recall per object of a trained network on normalized images of ``coco`` (the test or the
+    validation set)."""
+    probs = _all_score_maps(net, [t.image for t in images], policy, settings.device)
     per_object = {}
     for label, cat in enumerate(data.categories, start=1):
         scores, tps, n_gt = [], [], 0
-        for t, p in zip(test_images, probs):
-            gt = [a for a in data.test.annotations_for(t.id) if a.category_id == cat]
+        for t, p in zip(images, probs):
+            gt = [a for a in coco.annotations_for(t.id) if a.category_id == cat]
             n_gt += len(gt)
             boxes, s = detect_in_image(p, label, t.sx, t.sy, data.box_size, settings.nms_iou, settings.max_detections)
             gt_centres = np.array([[a.bbox[0] + a.bbox[2] / 2, a.bbox[1] + a.bbox[3] / 2] for a in gt]).reshape(-1, 2)
@@ -356,6 +378,12 @@ def _evaluate(
             "pr": {"precision": precision[::step].round(4).tolist(), "recall": recall[::step].round(4).tolist()},
         }
     return per_object
+
+
+def _mean_auc(objects: dict[str, Any]) -> float | None:
+    """The mean AUC over the objects that have one (``None`` when none has)."""
+    aucs = [o["auc"] for o in objects.values() if o["auc"] is not None]
+    return float(np.mean(aucs)) if aucs else None
 
 
 def summarize(runs: dict[str, Any], settings: DetectSettings, names: list[str]) -> dict[str, Any]:
@@ -385,12 +413,7 @@ def summarize(runs: dict[str, Any], settings: DetectSettings, names: list[str]) 
                     for name in names:
                         aucs = [r["objects"][name]["auc"] for _, r in done if r["objects"][name]["auc"] is not None]
                         cell["objects"][name] = spread(aucs)
-                    means = [
-                        float(np.mean(v))
-                        for v in ([o["auc"] for o in r["objects"].values() if o["auc"] is not None] for _, r in done)
-                        if v
-                    ]
-                    cell["mean"] = spread(means)
+                    cell["mean"] = spread([m for _, r in done if (m := _mean_auc(r["objects"])) is not None])
                 summary[f"{method}|{n_real}|{policy}"] = cell
     return summary
 
@@ -399,7 +422,7 @@ def summarize(runs: dict[str, Any], settings: DetectSettings, names: list[str]) 
 class _Run:
     """What the runs of a benchmark share and gather: data, test images, the normalizations (built once per method
     and parameters), training sets (built once per seed and number of real images, shared by every method), tuned
-    parameters, results."""
+    parameters (and the validation images they were chosen on), results."""
 
     data: DetectData
     settings: DetectSettings
@@ -407,6 +430,7 @@ class _Run:
     norms: dict[tuple[str, str], Normalization] = field(default_factory=dict)
     training_sets: dict[tuple[int, int], TrainingSet] = field(default_factory=dict)
     tuned: dict[int, dict[str, Any]] = field(default_factory=dict)
+    val_images: list[int] = field(default_factory=list)
     runs: dict[str, Any] = field(default_factory=dict)
     cnn: dict[str, Any] = field(default_factory=dict)
     agreement: dict[str, dict[str, float | None]] = field(default_factory=dict)
@@ -416,17 +440,6 @@ class _Run:
         if (seed, n_real) not in self.training_sets:
             self.training_sets[seed, n_real] = training_set(self.data, n_real, self.settings, seed)
         return self.training_sets[seed, n_real]
-
-
-def _tune(state: _Run) -> None:
-    """Tune DoG, SLCN and DLCN on the first seed's windows; the chosen parameters serve every seed."""
-    settings = state.settings
-    to_tune = [m for m in tuning.GRIDS if m in settings.methods]
-    if not settings.tune or not to_tune:
-        return
-    for n in settings.real_images:
-        ts = state.training(settings.seeds[0], n)
-        state.tuned[n] = tuning.tune_all(ts.windows, ts.labels, settings.seeds[0], to_tune)
 
 
 def _params_key(params: dict[str, Any]) -> str:
@@ -449,6 +462,36 @@ def _normalize_training(norm: Normalization, ts: TrainingSet) -> tuple[np.ndarra
     return norm.normalize_windows(ts.windows), norm.normalize_windows(ts.val_windows), time.perf_counter() - t0
 
 
+def _normalize_images(norm: Normalization, images: list[ScaledImage]) -> list[ScaledImage]:
+    """Whole images normalized by ``norm``."""
+    return [ScaledImage(t.id, norm.normalize(t.image), t.sx, t.sy) for t in images]
+
+
+def _fit(
+    state: _Run,
+    method: str,
+    n_real: int,
+    policy_name: str,
+    seed: int,
+    normalized: tuple[np.ndarray, np.ndarray, float],
+) -> tuple[nn.Module, InputPolicy, tuple[np.ndarray, np.ndarray]]:
+    """The detector of one run, trained on the normalized windows under a policy; its input policy and the detector
+    inputs of the relit held-out windows."""
+    settings, ts = state.settings, state.training(seed, n_real)
+    train_windows, val_windows, _ = normalized
+    policy = InputPolicy(policy_name, train_windows)
+    size = CROP + 2 * _context(method, policy_name)
+    train, val = policy.windows(train_windows, size), (policy.windows(val_windows, size), ts.val_labels)
+    num_classes = len(state.data.categories) + 1
+    if method == "cnn":
+        net, state.cnn[f"{n_real}|{policy_name}|{seed}"] = _train_cnn_sweep(
+            train, ts.labels, num_classes, settings, seed, val
+        )
+    else:
+        net = _train(method, train, ts.labels, num_classes, settings, seed, val)
+    return net, policy, val
+
+
 def _train_and_score(
     state: _Run,
     method: str,
@@ -465,24 +508,15 @@ def _train_and_score(
     t0 = time.perf_counter()
     settings, ts = state.settings, state.training(seed, n_real)
     norm = _normalization(state, method, params)  # built by the caller
-    train_windows, val_windows, t_norm = normalized
+    t_norm = normalized[2]
     if isinstance(norm, ALCN):
         state.alcn_trained = norm.trained if state.alcn_trained is None else state.alcn_trained and norm.trained
-    policy = InputPolicy(policy_name, train_windows)
-    size = CROP + 2 * _context(method, policy_name)
-    train, val = policy.windows(train_windows, size), (policy.windows(val_windows, size), ts.val_labels)
     t1 = time.perf_counter()
-    num_classes = len(state.data.categories) + 1
-    if method == "cnn":
-        net, state.cnn[f"{n_real}|{policy_name}|{seed}"] = _train_cnn_sweep(
-            train, ts.labels, num_classes, settings, seed, val
-        )
-    else:
-        net = _train(method, train, ts.labels, num_classes, settings, seed, val)
+    net, policy, val = _fit(state, method, n_real, policy_name, seed, normalized)
     t_train = time.perf_counter() - t1
     cache_key = _params_key(params)
     if cache_key not in test_cache:  # test images do not depend on the seed
-        test_cache[cache_key] = [ScaledImage(t.id, norm.normalize(t.image), t.sx, t.sy) for t in state.test_images]
+        test_cache[cache_key] = _normalize_images(norm, state.test_images)
         state.agreement.setdefault(method, {})[cache_key] = window_agreement(
             norm, [t.image for t in state.test_images], [t.image for t in test_cache[cache_key]]
         )
@@ -493,10 +527,73 @@ def _train_and_score(
         "seed": seed,
         "params": params,
         "images_used": ts.images_used,
-        "objects": _evaluate(state.data, test_cache[cache_key], net, policy, settings),
+        "objects": _evaluate(state.data, state.data.test, test_cache[cache_key], net, policy, settings),
         "val_relit_acc": evaluate_detector(net, *val)[1],
         "seconds": {"normalize_train": t_norm, "train": t_train, "total": t_norm + time.perf_counter() - t0},
     }
+
+
+def _tuned_methods(settings: DetectSettings) -> list[str]:
+    """The methods ``--tune`` tunes: those of :data:`TUNING_GRIDS` the run lists by bare name (none without it)."""
+    return [m for m in TUNING_GRIDS if m in settings.methods] if settings.tune else []
+
+
+def _validation_aucs(
+    state: _Run, method: str, n_real: int, params: dict[str, Any], val_images: list[ScaledImage]
+) -> dict[str, float | None]:
+    """The mean AUC over objects on the validation images (``val_images``, normalized with ``params``) of the
+    detector trained as in the first seed's runs on the windows normalized with ``params``, per input policy."""
+    seed = state.settings.seeds[0]
+    normalized = _normalize_training(_normalization(state, method, params), state.training(seed, n_real))
+    assert state.data.val is not None  # main refuses to tune without it
+    aucs = {}
+    for policy_name in state.settings.policies:
+        net, policy, _ = _fit(state, method, n_real, policy_name, seed, normalized)
+        aucs[policy_name] = _mean_auc(_evaluate(state.data, state.data.val, val_images, net, policy, state.settings))
+    return aucs
+
+
+def _tune(state: _Run, progress: bool) -> None:
+    """Choose the parameters of the tuned methods per number of real images by detection on the validation images
+    (see the module docstring); ``state.tuned[n][method]`` holds the chosen ``params`` and every setting's
+    ``trials``."""
+    settings, data = state.settings, state.data
+    methods = _tuned_methods(settings)
+    if not methods:
+        return
+    assert data.val is not None  # main refuses to tune without it
+    val_images = read_images(data.val, data.working_scale)
+    state.val_images = [t.id for t in val_images]
+    with tqdm(
+        total=sum(len(TUNING_GRIDS[m]) for m in methods) * len(settings.real_images),
+        desc="detect tuning",
+        unit="setting",
+        disable=not progress,
+    ) as bar:
+        for method in methods:
+            normalized_val: dict[str, list[ScaledImage]] = {}  # per setting, shared by the numbers of real images
+            for n_real in settings.real_images:
+                trials = []
+                for params in TUNING_GRIDS[method]:
+                    key = _params_key(params)
+                    bar.set_postfix(setting=format_spec(method, params), real=n_real)
+                    if key not in normalized_val:
+                        normalized_val[key] = _normalize_images(_normalization(state, method, params), val_images)
+                    by_policy = _validation_aucs(state, method, n_real, params, normalized_val[key])
+                    done = [a for a in by_policy.values() if a is not None]
+                    auc = float(np.mean(done)) if done else None
+                    trials.append({"params": params, "val_auc": auc, "val_auc_by_policy": by_policy})
+                    bar.update()
+                # the first best: the grid's order, its default first, breaks ties
+                best = max(trials, key=lambda t: -np.inf if t["val_auc"] is None else t["val_auc"])
+                state.tuned.setdefault(n_real, {})[method] = {"params": dict(best["params"]), "trials": trials}
+                logger.info(
+                    "tuned %s for %d real image(s): %s (validation AUC %s)",
+                    method,
+                    n_real,
+                    best["params"],
+                    best["val_auc"],
+                )
 
 
 def _run_method(state: _Run, method: str, out: Path, bar: tqdm) -> None:
@@ -548,6 +645,7 @@ def _result(state: _Run, command: str, seconds: float) -> dict[str, Any]:
         "working_scale": data.working_scale,
         "box_size": data.box_size,
         "test_images": [t.id for t in state.test_images],
+        "val_images": state.val_images,
         "settings": asdict(settings),
         "tuned": {str(k): v for k, v in state.tuned.items()},
         "cnn": state.cnn,
@@ -571,7 +669,7 @@ def main(
     """Run the detection benchmark (see the module docstring) and write its outputs.
 
     Args:
-        data_dir: benchmark folder (``train.json``, ``test.json``, ``manifest.json``).
+        data_dir: benchmark folder (``train.json``, ``test.json``, ``manifest.json``; ``val.json`` to tune).
         out_dir: output folder (created).
         settings: the run's settings; default :class:`~alcn_cv.bench.detect_settings.DetectSettings`.
         working_scale, box_size: see :func:`~alcn_cv.bench.detect_data.load_data`.
@@ -582,8 +680,8 @@ def main(
         memory, a device error) is recorded with its error and the benchmark continues.
 
     Raises:
-        InputError: bad settings, or a method that cannot be built (a bad parameter or weight
-            file), before any work.
+        InputError: bad settings, a method that cannot be built (a bad parameter or weight
+            file), or tuning on data without validation objects, before any work.
     """
     import torch
 
@@ -595,12 +693,17 @@ def main(
         torch.set_num_threads(settings.threads)
     start = time.perf_counter()
     data = load_data(data_dir, working_scale, box_size)
+    if _tuned_methods(settings) and (data.val is None or not data.val.annotations):
+        raise InputError(
+            f"{data.root}: {'no val.json' if data.val is None else 'no object in val.json'}, the validation images "
+            "--tune scores its settings on: render the data again with `alcn data detect`"
+        )
     out = Path(out_dir)
     make_folder(out)
     norms = {(spec, _params_key({})): norm for spec, norm in built.items()}
-    state = _Run(data, settings, read_test_images(data, settings.max_test_images), norms)
+    state = _Run(data, settings, read_images(data.test, data.working_scale, settings.max_test_images), norms)
     logger.info("read %d test images", len(state.test_images))
-    _tune(state)
+    _tune(state, progress)
     with tqdm(
         total=len(settings.methods) * len(settings.seeds) * len(settings.real_images) * len(settings.policies),
         desc="detect benchmark",

@@ -1,11 +1,15 @@
 """Data of the detection benchmark: the COCO sets at the working scale and the synthetic training windows.
 
+The sets (:func:`load_data`): ``train.json``, ``test.json`` and, when present, ``val.json``, test-like images
+that ``alcn bench detect --tune`` chooses parameters on.
+
 Training windows (Rad, Roth & Lepetit, BMVC 2017, Sec. 4.3): the first ``n`` training images of
 each object (COCO ``train.json``), resized to the working scale (``cv2.INTER_AREA``), give the
 paper's simple synthetic images (:func:`alcn_cv.data.synthetic.augment`: background replaced,
 small affine changes of intensity, noise, small geometric jitter) and background windows
 (:func:`~alcn_cv.data.synthetic.sample_negatives`), 64x64 each. They are drawn once per ``n``
-and seed, so every method trains on the same windows.
+and seed, so every method trains on the same windows. About a quarter as many held-out windows, relit
+synthetically (:func:`relight_windows`), choose the plain CNN's depth and width.
 """
 
 from __future__ import annotations
@@ -18,22 +22,32 @@ from typing import Any
 import cv2
 import numpy as np
 
-from alcn_cv.bench import tuning
 from alcn_cv.bench.detect_settings import CROP, DetectSettings
 from alcn_cv.errors import DatasetError
 from alcn_cv.formats.coco import CocoDataset, load_coco
 from alcn_cv.io import read_json
 
-__all__ = ["DetectData", "ScaledImage", "TrainingSet", "load_data", "read_test_images", "training_set", "working_gray"]
+__all__ = [
+    "DetectData",
+    "ScaledImage",
+    "TrainingSet",
+    "load_data",
+    "read_images",
+    "relight_windows",
+    "training_set",
+    "working_gray",
+]
 
 
 @dataclass
 class DetectData:
-    """A COCO detection benchmark: training and test sets and their working scale."""
+    """A COCO detection benchmark: training, test and (``None`` without ``val.json``) validation sets, and their
+    working scale."""
 
     root: Path
     train: CocoDataset
     test: CocoDataset
+    val: CocoDataset | None
     working_scale: float
     box_size: float
 
@@ -48,7 +62,7 @@ class DetectData:
 def load_data(
     data_dir: str | os.PathLike, working_scale: float | None = None, box_size: float | None = None
 ) -> DetectData:
-    """Read ``train.json``, ``test.json`` and (when present) ``manifest.json`` of a benchmark folder.
+    """Read ``train.json``, ``test.json`` and (when present) ``val.json`` and ``manifest.json`` of a benchmark folder.
 
     Args:
         data_dir: the folder (the data engine's ``alcn data detect`` output, or any COCO set
@@ -57,8 +71,8 @@ def load_data(
             detector's resolution and the side of the fixed-size boxes at that scale.
 
     Raises:
-        DatasetError: missing or malformed files, no working scale or box size, test categories
-            that the training set lacks.
+        DatasetError: missing or malformed files, no working scale or box size, test or validation
+            categories that the training set lacks.
     """
     root = Path(data_dir)
     if not root.is_dir():
@@ -79,11 +93,13 @@ def load_data(
         raise DatasetError(f"{manifest_path}: working_scale {scale} must be in (0, 4] and box_size {box} positive")
     train = load_coco(root / "train.json")
     test = load_coco(root / "test.json")
+    val = load_coco(root / "val.json") if (root / "val.json").is_file() else None
     train_ids = {c.id for c in train.categories}
-    missing = [c.name for c in test.categories if c.id not in train_ids]
+    named = {c.id: c.name for ds in (test, val) if ds is not None for c in ds.categories}
+    missing = [name for cid, name in named.items() if cid not in train_ids]
     if missing:
         raise DatasetError(f"{root / 'train.json'}: field categories: no training category for {missing}")
-    return DetectData(root, train, test, scale, box)
+    return DetectData(root, train, test, val, scale, box)
 
 
 def working_gray(ds: CocoDataset, image: Any, scale: float) -> tuple[np.ndarray, float, float]:
@@ -106,14 +122,41 @@ class ScaledImage:
     sy: float
 
 
-def read_test_images(data: DetectData, max_images: int | None = None) -> list[ScaledImage]:
-    """The test images (the first ``max_images`` when given) in grayscale at the working scale."""
-    meta = data.test.images[:max_images] if max_images else data.test.images
+def read_images(ds: CocoDataset, working_scale: float, max_images: int | None = None) -> list[ScaledImage]:
+    """The images of a set (the first ``max_images`` when given) in grayscale at the working scale, in [0, 1]."""
+    meta = ds.images[:max_images] if max_images else ds.images
     out = []
     for im in meta:
-        gray, sx, sy = working_gray(data.test, im, data.working_scale)
+        gray, sx, sy = working_gray(ds, im, working_scale)
         out.append(ScaledImage(im.id, gray.astype(np.float32) / np.float32(255), sx, sy))
     return out
+
+
+def relight_windows(windows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Synthetic changes of light of windows: per window a gain (log-uniform in [0.15, 3]), a gamma (log-uniform in
+    [0.5, 2]), a linear brightness gradient across the window (up to a factor 3 end to end), an offset and noise.
+
+    Args:
+        windows: ``(n, S, S)`` float32 in [0, 1].
+        rng: random generator.
+
+    Returns:
+        ``(n, S, S)`` float32 in [0, 1], quantized to 8 bits like a camera image.
+    """
+    n, h, w = windows.shape
+    gain = np.exp(rng.uniform(np.log(0.15), np.log(3.0), n))[:, None, None]
+    gamma = np.exp(rng.uniform(np.log(0.5), np.log(2.0), n))[:, None, None]
+    angle = rng.uniform(0, 2 * np.pi, n)
+    strength = np.log(rng.uniform(1.0, 3.0, n))
+    y, x = np.mgrid[0:h, 0:w]
+    t = ((x - w / 2)[None] * np.cos(angle)[:, None, None] + (y - h / 2)[None] * np.sin(angle)[:, None, None]) / max(
+        h, w
+    )
+    gradient = np.exp(strength[:, None, None] * t)
+    offset = rng.uniform(-0.03, 0.03, n)[:, None, None]
+    out = gain * np.power(np.clip(windows, 0, 1), gamma) * gradient + offset
+    out += rng.normal(0, 0.01, out.shape)
+    return (np.rint(np.clip(out, 0, 1) * 255) / 255).astype(np.float32)
 
 
 @dataclass
@@ -172,7 +215,7 @@ def training_set(data: DetectData, n_real: int, settings: DetectSettings, seed: 
     return TrainingSet(
         np.concatenate(windows),
         np.concatenate(labels).astype(np.int64),
-        tuning.relight_windows(val, np.random.default_rng([seed, n_real, 1])),
+        relight_windows(val, np.random.default_rng([seed, n_real, 1])),
         np.concatenate(val_labels).astype(np.int64),
         used,
     )

@@ -77,7 +77,8 @@ class DetectSettings:
         epochs, batch_size, lr: detector training (the same for every method).
         seeds: one repetition of every run per seed (training windows, detector
             initialisation and batch order); the tables give the mean and spread over seeds.
-        tune: tune DoG, SLCN and DLCN on the training windows (:mod:`alcn_cv.bench.tuning`).
+        tune: tune DoG, SLCN and DLCN by detection on the data's validation images (``val.json``;
+            :data:`alcn_cv.bench.detect.TUNING_GRIDS`).
         cnn_sweep: ``(depth, width)`` of the plain CNNs tried for ``cnn``.
         nms_iou: IoU above which non-maximum suppression removes a box.
         match_iou: PASCAL criterion (the paper: 0.8).

@@ -13,14 +13,26 @@ import cv2
 import numpy as np
 
 from alcn_cv.bench.detect_settings import CROP, POLICIES
-from alcn_cv.bench.tuning import BENCH_STANDARDIZE_EPS, centre_windows
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
 
-__all__ = ["LOCAL_BOX", "InputPolicy", "local_standardize"]
+__all__ = ["BENCH_STANDARDIZE_EPS", "LOCAL_BOX", "InputPolicy", "centre_windows", "local_standardize"]
 
 #: Side of the box of the ``local`` policy: the detector window's size made odd.
 LOCAL_BOX = 31
+
+#: Added to the standard deviation by the per-window standardizations of the benchmark (the ``standardize`` and
+#: ``local`` input policies): smaller than training's :data:`~alcn_cv.filters.standardize.STANDARDIZE_EPS`, because
+#: the benchmark standardizes the raw output of every method, some of them (a DoG of [0, 1] intensities) of a far
+#: smaller amplitude than ALCN's.
+BENCH_STANDARDIZE_EPS = 1e-6
+
+
+def centre_windows(windows: np.ndarray, size: int = CROP) -> np.ndarray:
+    """The ``size x size`` centres of ``(n, S, S)`` windows (``S >= size``)."""
+    s = windows.shape[-1]
+    o = (s - size) // 2
+    return windows[:, o : o + size, o : o + size]
 
 
 def local_standardize(image: np.ndarray, size: int = LOCAL_BOX, eps: float = BENCH_STANDARDIZE_EPS) -> np.ndarray:

@@ -52,6 +52,7 @@ def _detect(args: argparse.Namespace) -> int:
         conf=args.conf,
         object_seed=args.object_seed,
         n_test=args.n_test,
+        n_val=args.n_val,
         n_train=args.n_train,
         width=args.width,
         height=args.height,
@@ -186,9 +187,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
     q = sub.add_parser(
         "detect",
-        help="ALCN-2D-like detection benchmark (COCO train.json/test.json)",
+        help="ALCN-2D-like detection benchmark (COCO train.json, test.json, val.json)",
         description="Render 3 objects (matte, velvet-like, specular): training images under one "
-        "lighting and test images with clutter under varied lighting, in COCO format.",
+        "lighting, test images with clutter under varied lighting, and validation images drawn like the test "
+        "images from other seeds (for `alcn bench detect --tune`), in COCO format.",
     )
     q.add_argument("--out", required=True, help="output folder")
     add_conf_option(q, detect.CONF_SUMMARIES)
@@ -196,6 +198,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument("--object-seed", type=int, default=0, help="seed of the three objects (default 0)")
     for option, field, what in [
         ("--n-test", "n_test", "number of test images"),
+        ("--n-val", "n_val", "number of validation images, test-like, for tuning"),
         ("--n-train", "n_train", "training images per object"),
         ("--width", "width", "image width"),
         ("--height", "height", "image height"),

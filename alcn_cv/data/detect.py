@@ -8,14 +8,21 @@ a set and writes it in COCO format::
     DIR/manifest.json          generator version, seed, parameters, working_scale, box_size
     DIR/train.json             COCO: n_train images per object, one constant lighting
     DIR/test.json              COCO: test images (1280x800 by default), 0..K objects each
+    DIR/val.json               COCO: validation images, drawn as the test images but from their own seeds
     DIR/images/train/*.png     BGR
     DIR/images/test/*.png
+    DIR/images/val/*.png
 
 ``working_scale`` is the factor by which to resize the images so that the objects are about
 36 px (the detector's window is 48x48 at the working scale, its centre 32x32); ``box_size`` is
 the side, in working-scale pixels, of the fixed-size square boxes of the PASCAL criterion.
 COCO boxes are the tight boxes of each object's visible silhouette at full resolution. Each
-test image's lighting family and parameters are stored in its ``lighting`` field.
+test and validation image's lighting family and parameters are stored in its ``lighting`` field.
+
+The validation images are test-like (clutter, the test's lighting families) for choosing a method's parameters
+(``alcn bench detect --tune``) without the test images. Each image draws from its own random stream (training:
+``[seed, 1, object, j]``, test: ``[seed, 2, j]``, validation: ``[seed, 3, j]``), so the number of validation images
+changes neither the training nor the test images.
 """
 
 from __future__ import annotations
@@ -49,6 +56,7 @@ class DetectConfig:
         width, height: image size in pixels.
         n_train: training images per object.
         n_test: test images.
+        n_val: validation images (test-like, for tuning).
         object_px: object extent in full-resolution pixels.
         box_px: object extent (and box side) at the working scale.
         canonical: resolution of the objects' canonical textures.
@@ -59,6 +67,7 @@ class DetectConfig:
     height: int = 800
     n_train: int = 10
     n_test: int = 120
+    n_val: int = 30
     object_px: float = 144.0
     box_px: float = 36.0
     canonical: int = 192
@@ -69,7 +78,7 @@ class DetectConfig:
         return self.box_px / self.object_px
 
 
-_SMALL = DetectConfig(width=320, height=200, n_train=3, n_test=4, object_px=72.0, canonical=96)
+_SMALL = DetectConfig(width=320, height=200, n_train=3, n_test=4, n_val=2, object_px=72.0, canonical=96)
 
 #: The named presets of :func:`generate` (hloc's ``confs``; ``alcn data detect --conf NAME``): ``default``, the
 #: benchmark (minutes on 2 cores); ``small``, seconds, for tests; ``demo``, ``alcn demo``'s set: ``small``'s objects
@@ -221,8 +230,9 @@ def _image_job(job: tuple) -> tuple[list, dict]:
     if split == "train":
         img, box, area = _train_image(np.random.default_rng([seed, 1, k, j]), objs[k], cfg)
         found, lighting = [(k + 1, box, area)], training_lighting()
-    else:
-        img, found, lighting = _test_image(np.random.default_rng([seed, 2, j]), list(objs), cfg)
+    else:  # test and validation images: the same draw from separate streams
+        stream = 2 if split == "test" else 3
+        img, found, lighting = _test_image(np.random.default_rng([seed, stream, j]), list(objs), cfg)
     write_image(path, img)
     return found, lighting.describe()
 
@@ -234,6 +244,7 @@ def generate(
     conf: str = "default",
     object_seed: int = 0,
     n_test: int | None = None,
+    n_val: int | None = None,
     n_train: int | None = None,
     width: int | None = None,
     height: int | None = None,
@@ -249,7 +260,7 @@ def generate(
         seed: seed of the images (deterministic: same seed and parameters, same bytes).
         conf: a preset of :data:`CONFS`, the values of the parameters below that are not given.
         object_seed: seed of the three objects.
-        n_test, n_train, width, height: override the preset's values (objects keep their size in
+        n_test, n_val, n_train, width, height: override the preset's values (objects keep their size in
             pixels, so the working scale does not change).
         p_object: override the preset's probability that each object appears in a test image.
         overwrite: replace an existing folder.
@@ -265,12 +276,26 @@ def generate(
     if conf not in CONFS:
         raise InputError(f"unknown preset {conf!r}; choose one of {', '.join(CONFS)}")
     # None, not 0, means the preset's value: --width 0 is an error, not a silent 1280
-    given = {"width": width, "height": height, "n_train": n_train, "n_test": n_test, "p_object": p_object}
+    given = {
+        "width": width,
+        "height": height,
+        "n_train": n_train,
+        "n_test": n_test,
+        "n_val": n_val,
+        "p_object": p_object,
+    }
     cfg = dataclasses.replace(CONFS[conf], **{k: v for k, v in given.items() if v is not None})
-    if cfg.width < 2 * cfg.object_px or cfg.height < 2 * cfg.object_px or cfg.n_train < 1 or cfg.n_test < 0:
+    if (
+        cfg.width < 2 * cfg.object_px
+        or cfg.height < 2 * cfg.object_px
+        or cfg.n_train < 1
+        or cfg.n_test < 0
+        or cfg.n_val < 0
+    ):
         raise InputError(
-            f"images must be at least twice the object size ({cfg.object_px} px), with n_train >= 1 and "
-            f"n_test >= 0: got {cfg.width}x{cfg.height}, n_train={cfg.n_train}, n_test={cfg.n_test}"
+            f"images must be at least twice the object size ({cfg.object_px} px), with n_train >= 1, n_test >= 0 "
+            f"and n_val >= 0: got {cfg.width}x{cfg.height}, n_train={cfg.n_train}, n_test={cfg.n_test}, "
+            f"n_val={cfg.n_val}"
         )
     if not 0.0 <= cfg.p_object <= 1.0:
         raise InputError(f"p_object is a probability, in [0, 1]; got {cfg.p_object}")
@@ -281,24 +306,26 @@ def generate(
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         (tmp / "images" / "train").mkdir(parents=True)
         (tmp / "images" / "test").mkdir(parents=True)
+        (tmp / "images" / "val").mkdir(parents=True)
         jobs = [
             ("train", k, j, f"images/train/{OBJECTS[k][0]}_{j:02d}.png")
             for k in range(len(OBJECTS))
             for j in range(cfg.n_train)
         ]
         jobs += [("test", 0, j, f"images/test/{j:05d}.png") for j in range(cfg.n_test)]
+        jobs += [("val", 0, j, f"images/val/{j:05d}.png") for j in range(cfg.n_val)]
         jobs = [(split, k, j, str(tmp / name), name, seed, object_seed, cfg) for split, k, j, name in jobs]
         results = list(
             parallel_map(_image_job, jobs, workers=workers, desc="detect images", unit="img", progress=progress)
         )
-        for split in ("train", "test"):
+        for split in ("train", "test", "val"):
             images, anns = [], []
             for job, (objs_here, lighting) in zip(jobs, results):
                 if job[0] != split:
                     continue
                 iid = len(images) + 1
                 entry = {"id": iid, "file_name": job[4], "width": cfg.width, "height": cfg.height}
-                if split == "test":
+                if split != "train":
                     entry["light_family"] = lighting["family"]
                 images.append({**entry, "lighting": lighting})
                 for cat, box, area in objs_here:
@@ -321,6 +348,7 @@ def generate(
             "height": cfg.height,
             "n_train": cfg.n_train,
             "n_test": cfg.n_test,
+            "n_val": cfg.n_val,
             "object_px": cfg.object_px,
             "p_object": cfg.p_object,
         }
@@ -336,7 +364,7 @@ def generate(
                 detector_window=32,
                 objects=[{"id": k + 1, "name": n, "material": m, "shape": s} for k, (n, m, s) in enumerate(OBJECTS)],
                 light_families=list(LIGHT_FAMILIES),
-                files={"train": "train.json", "test": "test.json"},
+                files={"train": "train.json", "test": "test.json", "val": "val.json"},
                 bbox_convention="COCO [x, y, w, h]: tight box of the visible silhouette, full-resolution pixels",
             ),
         )
