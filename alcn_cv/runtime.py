@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.checks import check_image, check_out_dtype
-from alcn_cv.errors import InputError
+from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.divisive import blurred_square, divide_by_energy, divisive_floor, divisive_normalization
 from alcn_cv.filters.gaussian_mixture import (
     PYRAMID_MIN_SIGMA,
@@ -378,14 +378,31 @@ def check_batch(frames: np.ndarray, out_dtype: type | np.dtype | str | None) -> 
     return frames, check_out_dtype(out_dtype, frames.dtype)
 
 
-def opencv_network(
-    weights: Path, grid_stride: int | None, spec: ModelSpec, config: dict | None = None
-) -> OpenCVNormalizer:
-    """The ONNX export beside ``weights`` run by ``cv2.dnn``, checked against the spec (it runs at its stride).
-    ``config``: the ``config`` of the header of ``weights``, read by the caller (a gain export's features are built
-    from it, the file not read again); default: :class:`~alcn_cv.nets.opencv_runtime.OpenCVNormalizer`'s, read from
-    the ``.npz`` beside the export."""
-    net = OpenCVNormalizer(weights.with_suffix(".onnx"), config)
+def opencv_network(weight_file: NormalizerFile, grid_stride: int | None, spec: ModelSpec) -> OpenCVNormalizer:
+    """The ONNX export beside ``weight_file`` (its ``path``; the same name, ``.onnx``) run by ``cv2.dnn``, checked
+    against the spec (it runs at its stride) and against the weight file: the export holds the arrays of its
+    network, their float32 bytes as they are (the initializers' raw data), so an export that does not hold every
+    one was made from other weights (a file copied beside another, or left over from an earlier run).
+
+    Raises:
+        WeightFileError: the export is missing, unreadable or not the export of these weights.
+        InputError: ``grid_stride`` is not the export's stride; the export's kernels are not the spec's.
+    """
+    if weight_file.path is None:
+        raise WeightFileError("backend='opencv' runs the ONNX export beside a weight file: save the weights to a file")
+    onnx = weight_file.path.with_suffix(".onnx")
+    net = OpenCVNormalizer(onnx, weight_file.meta["config"])
+    exported = onnx.read_bytes()
+    missing = [
+        name
+        for name, array in weight_file.arrays.items()
+        if array.ndim and array.astype("<f4", copy=False).tobytes() not in exported
+    ]
+    if missing:
+        raise WeightFileError(
+            f"{onnx} is not the export of {weight_file.path.name} (it does not hold its {', '.join(missing)}): "
+            f"export it again, `alcn export --weights {weight_file.path} --onnx {onnx} --overwrite`"
+        )
     if grid_stride not in (None, net.stride):
         raise InputError(
             f"backend='opencv' evaluates the Normalizer at its stride {net.stride}, got grid_stride={grid_stride}; "

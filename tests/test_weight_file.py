@@ -86,6 +86,23 @@ def test_saving_weights_removes_the_export_of_the_old_ones(tmp_path, lite, caplo
     assert "w.onnx" in caplog.text
 
 
+@pytest.mark.parametrize("model", ["gain", "lite"])
+def test_an_export_of_other_weights_beside_a_weight_file_is_refused(tmp_path, model):
+    """A retrained file's stale export copied beside it ran silently (up to 74 levels from the torch backend)."""
+    shipped = load_normalizer_file(MODELS[model])
+    arrays = {k: v.copy() for k, v in shipped.arrays.items()}
+    name = next(k for k, v in arrays.items() if v.ndim)
+    arrays[name].flat[0] += 0.5  # a retrained network
+    weights = save_normalizer_file(tmp_path / "w.npz", arrays, shipped.meta)
+    (tmp_path / "w.onnx").write_bytes(MODELS[model].with_suffix(".onnx").read_bytes())  # the shipped file's export
+    with pytest.raises(WeightFileError, match=rf"w\.onnx is not the export of w\.npz .*{name}.*alcn export --weights"):
+        alcn_cv.createALCN(weights=weights, backend="opencv")
+    save_normalizer_file(weights, shipped.arrays, shipped.meta)  # its own weights again: the export is theirs
+    (tmp_path / "w.onnx").write_bytes(MODELS[model].with_suffix(".onnx").read_bytes())
+    alcn = alcn_cv.createALCN(weights=weights, backend="opencv")
+    assert alcn.apply(np.zeros((120, 160), np.uint8)).shape == (120, 160)
+
+
 @pytest.mark.parametrize(("field", "value"), [("sigmas", [0.5, -1.0]), ("sigmas", [0.0]), ("working_scale", 0)])
 def test_a_header_of_widths_that_are_not_positive_is_refused_on_loading(tmp_path, lite, field, value):
     """A sigma or a working scale of zero or less described no method: refused when the file is read, not by the

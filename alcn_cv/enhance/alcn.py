@@ -350,7 +350,7 @@ def _build_runtime(
         hint = "" if is_installed("torch") else ' (torch: pip install "alcn-cv[train]")'
         raise WeightFileError(f"{weights.name}: {GAIN_NEEDS}{hint}")
     if backend == "opencv":
-        net = opencv_network(weights, grid_stride, spec, weight_file.meta["config"])
+        net = opencv_network(weight_file, grid_stride, spec)
         return make_runtime(spec, net, mixture), net
     require("torch", "kornia", what=f"ALCN(backend={backend!r})")
     # deferred: importing alcn_cv must not need torch
