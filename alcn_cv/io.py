@@ -30,6 +30,7 @@ __all__ = [
     "VideoReader",
     "atomic_path",
     "atomic_write",
+    "check_no_earlier_output",
     "check_writable",
     "count_frames",
     "eight_bits",
@@ -205,6 +206,21 @@ def check_writable(path: str | os.PathLike) -> None:
         raise InputError(f"cannot write {path}: {folder} is not writable ({exc.strerror})") from None
     os.close(fd)
     os.unlink(name)
+
+
+def check_no_earlier_output(paths: Iterable[str | os.PathLike], overwrite: bool) -> None:
+    """Check, before the work, that a command replaces no earlier run's output unasked: unless ``overwrite``, none of
+    the files ``paths`` (those the command writes) may exist.
+
+    Raises:
+        InputError: one of ``paths`` exists and not ``overwrite``; one line naming the first that exists and the
+            ways out (``--overwrite``, another ``--out``).
+    """
+    if overwrite:
+        return
+    for path in map(Path, paths):
+        if path.exists():
+            raise InputError(f"{path} exists, from an earlier run: --overwrite replaces it, or give another --out")
 
 
 def with_suffix(path: str | os.PathLike, suffix: str, what: str) -> Path:

@@ -2,8 +2,9 @@
 the helpers that more than one experiment uses (the quick protocol's options, the shipped default with another band),
 so that no experiment imports another (the rendered stand-in for faces is ``_stand_in.py``).
 
-An experiment writes its whole output under ``runs/<name>/`` (ignored by git) and copies each small
-JSON report to ``docs/reports/<name>.json`` (tracked), adding an ``experiment`` record (the script,
+An experiment writes its whole output under ``runs/<name>/`` (ignored by git), replacing its earlier run's there (the
+benchmarks' ``--overwrite``, which their reports' commands leave out: it says nothing of what was measured), and
+copies each small JSON report to ``docs/reports/<name>.json`` (tracked), adding an ``experiment`` record (the script,
 its arguments and the date, UTC). ``experiments/report.py`` builds ``docs/results.md`` from those
 copies alone. A run on another machine (``experiments/gpu_check.sh`` on a GPU machine) writes that copy into its own
 output folder (:func:`write_for_keeping`), which ``experiments/keep_gpu_check.py`` publishes (:func:`publish`).

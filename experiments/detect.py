@@ -30,6 +30,7 @@ def main() -> None:
         str(data),
         "--out",
         str(out),
+        "--overwrite",
         "--methods",
         METHODS,
         "--real-images",

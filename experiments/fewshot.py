@@ -23,6 +23,7 @@ def main() -> None:
         "fewshot",
         "--out",
         str(out),
+        "--overwrite",
         "--methods",
         METHODS,
         "--policy",

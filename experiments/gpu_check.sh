@@ -49,7 +49,7 @@ tests_status=${PIPESTATUS[0]}
 
 # The measurement (writes speed.json and speed.md).
 timeout 240 "$PY" -m alcn_cv.cli bench speed --device "$DEVICE" ${BATCHES:+--device-batches "$BATCHES"} \
-  --out "$GPU_CHECK_OUT/speed_$DEVICE" 2>&1 | tee "$GPU_CHECK_OUT/speed_$DEVICE.txt" | tail -25
+  --out "$GPU_CHECK_OUT/speed_$DEVICE" --overwrite 2>&1 | tee "$GPU_CHECK_OUT/speed_$DEVICE.txt" | tail -25
 bench_status=${PIPESTATUS[0]}
 # The report to publish, into the folder that comes back; failing to write it fails the bench step.
 if [ "$bench_status" -eq 0 ]; then

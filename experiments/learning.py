@@ -33,7 +33,18 @@ def main() -> None:
     methods = [*BASELINES, "alcn", f"alcn:weights={untrained}", f"alcn:weights={webcam / 'gain_normalizer.npz'}"]
     bench = out / "bench"
     seeds = [str(seed) for seed in args.seeds]
-    alcn("bench", "relight", "--out", str(bench), "--methods", ",".join(methods), "--seeds", *seeds, *quick_protocol())
+    alcn(
+        "bench",
+        "relight",
+        "--out",
+        str(bench),
+        "--overwrite",
+        "--methods",
+        ",".join(methods),
+        "--seeds",
+        *seeds,
+        *quick_protocol(),
+    )
     keep(bench / "relight.json", "relight_learning")
 
 

@@ -141,7 +141,14 @@ def main() -> None:
     if "bench" in args.part:
         methods = [*specs.values(), "none"]
         alcn(
-            "bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *quick_seed0_untuned()
+            "bench",
+            "relight",
+            "--out",
+            str(args.out / "bench"),
+            "--overwrite",
+            "--methods",
+            ",".join(methods),
+            *quick_seed0_untuned(),
         )
         report = json.loads((args.out / "bench" / "relight.json").read_text(encoding="utf-8"))
         for name, spec in (specs | {"none": "none"}).items():

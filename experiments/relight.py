@@ -32,7 +32,7 @@ def main() -> None:
     seeds = [str(seed) for seed in args.seeds]
     for name in selected_parts(args, PROTOCOLS):
         out = RUNS / "relight" / name
-        alcn("bench", "relight", "--out", str(out), "--seeds", *seeds, *PROTOCOLS[name], *quick)
+        alcn("bench", "relight", "--out", str(out), "--overwrite", "--seeds", *seeds, *PROTOCOLS[name], *quick)
         keep(out / "relight.json", f"relight_{name}")
 
 

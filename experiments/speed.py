@@ -24,7 +24,7 @@ def main() -> None:
         print(f"usage: speed.py [OPTION ...] (the options of `alcn bench speed`)\n\n{__doc__}")
         return
     out = RUNS / "speed"
-    alcn("bench", "speed", "--out", str(out), *(a for a in sys.argv[1:] if a != KEEP))
+    alcn("bench", "speed", "--out", str(out), "--overwrite", *(a for a in sys.argv[1:] if a != KEEP))
     keep(out / "speed.json", "speed")
 
 

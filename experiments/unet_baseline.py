@@ -53,7 +53,14 @@ def main() -> None:
     if "bench" in parts:
         methods = [f"unet:weights={unet}", *([f"alcn:weights={gain}"] if gain.is_file() else []), "alcn", "none"]
         alcn(
-            "bench", "relight", "--out", str(args.out / "bench"), "--methods", ",".join(methods), *quick_seed0_untuned()
+            "bench",
+            "relight",
+            "--out",
+            str(args.out / "bench"),
+            "--overwrite",
+            "--methods",
+            ",".join(methods),
+            *quick_seed0_untuned(),
         )
         keep(args.out / "bench" / "relight.json", "relight_unet")
 

@@ -109,6 +109,45 @@ def test_main_writes_the_report(tmp_path):
     text = (tmp_path / "out" / "relight.md").read_text()
     assert "| dog (tuned) |" in text and "Patch identification" in text and "± " in text
     assert (tmp_path / "out" / "relight.png").stat().st_size > 0
+    # every row after the first against the first, paired by seed: in the JSON and as a table of the Markdown
+    paired = saved["paired_differences"]
+    assert paired["reference"] == "none" and list(paired["methods"]) == list(saved["methods"])[1:]
+    diff = paired["methods"]["dog"]["identification"]
+    seeds = {m: saved["methods"][m]["mean_test"]["identification"]["seeds"] for m in ("none", "dog")}
+    assert diff["seeds"] == pytest.approx(np.subtract(seeds["dog"], seeds["none"]).tolist())
+    section = text.split("## Difference from `none` (paired by seed, on the means over the test scenes)\n")[1]
+    table = section.split("\n## ")[0]
+    assert "seeds [0, 1] ± their sample standard deviation" in table
+    assert f"| dog | {diff['mean']:+.1f} ± {diff['std']:.1f} |" in table
+
+
+def test_paired_differences_by_hand():
+    """Each row after the first minus the first, seed by seed; a row or metric without test means is left out."""
+    methods = {
+        "alcn": {"mean_test": {"identification": {"seeds": [80.0, 90.0, 85.0]}, "pose_sift": {"seeds": [50, 60, 70]}}},
+        "failed": {"errors": {"street": "boom"}},
+        "dog": {"mean_test": {"identification": {"seeds": [70.0, 85.0, 86.0]}, "pose_sift": {"seeds": [40, 65, 70]}}},
+        "no pose": {"mean_test": {"identification": {"seeds": [80.0, 90.0, 85.0]}}},
+    }
+    paired = relight.paired_differences(methods)
+    assert paired["reference"] == "alcn" and list(paired["methods"]) == ["dog", "no pose"]
+    dog = paired["methods"]["dog"]
+    # identification: -10, -5, +1: mean -14/3, squared deviations (16 + 1 + 289) / 9, over n - 1 = 2
+    assert dog["identification"]["seeds"] == [-10, -5, 1]
+    assert (dog["identification"]["mean"], dog["identification"]["std"]) == pytest.approx((-14 / 3, (91 / 3) ** 0.5))
+    # pose: -10, +5, 0: mean -5/3, squared deviations (625 + 400 + 25) / 9, over 2
+    assert dog["pose_sift"]["seeds"] == [-10, 5, 0]
+    assert (dog["pose_sift"]["mean"], dog["pose_sift"]["std"]) == pytest.approx((-5 / 3, (175 / 3) ** 0.5))
+    assert paired["methods"]["no pose"] == {"identification": {"seeds": [0.0, 0.0, 0.0], "mean": 0.0, "std": 0.0}}
+    # one seed: the difference alone; no reference or nothing to compare: none
+    one = relight.paired_differences({"a": {"mean_test": {"pose_orb": {"seeds": [40.0]}}}, "b": methods["no pose"]})
+    assert one["methods"] == {"b": {}}
+    one = relight.paired_differences(
+        {m: {"mean_test": {"pose_orb": {"seeds": [s]}}} for m, s in (("a", 40), ("b", 45))}
+    )
+    assert one["methods"] == {"b": {"pose_orb": {"seeds": [5.0], "mean": 5.0, "std": 0.0}}}
+    assert relight.paired_differences({"failed": methods["failed"], "dog": methods["dog"]}) == {}
+    assert relight.paired_differences({"alcn": methods["alcn"]}) == {}
 
 
 def test_leave_one_out_and_cli(tmp_path):
@@ -272,10 +311,12 @@ def test_one_seed_prints_bare_numbers_and_each_alcn_backend(tmp_path):
         progress=False,
     )
     text = (tmp_path / "out" / "relight.md").read_text()
-    # one seed: no "± 0.0", which reads as a measured zero spread
-    assert "±" not in text.split("Cells:")[1] and "one seed (0), so no spread" in text
+    # one seed: no "± 0.0", which reads as a measured zero spread, in the tables nor in the paired differences
+    assert "±" not in text.split("Cells:", 1)[1] and "one seed (0), so no spread" in text
     identification = result["methods"]["none"]["mean_test"]["identification"]["mean"]
     assert f"| none | {identification:.1f} |" in text
+    difference = result["methods"]["alcn"]["mean_test"]["identification"]["mean"] - identification
+    assert f"| alcn | {difference:+.1f} |" in text.split("## Difference from `none`")[1]
     # the time of an ALCN method depends on what ran it: recorded and shown beside its ms/frame
     saved = json.loads((tmp_path / "out" / "relight.json").read_text())
     backends = {label: r.get("backend") for label, r in saved["methods"].items()}
@@ -284,6 +325,27 @@ def test_one_seed_prints_bare_numbers_and_each_alcn_backend(tmp_path):
     rows = {line.split(" | ")[0]: line for line in summary.splitlines() if line.startswith("| ")}
     assert rows["| method"].endswith("| ms/frame | backend |")
     assert rows["| alcn"].endswith("| opencv |") and rows["| none"].endswith("| - |")
+
+
+@pytest.mark.parametrize(
+    ("tuning", "said"),
+    [
+        (True, "No tuning: none of the methods listed has a tuning grid (default parameters only)."),
+        (False, "No tuning asked (`--no-tune`: default parameters only)."),
+    ],
+)
+def test_the_report_says_what_was_tuned_when_nothing_was(tuning, said, tmp_path):
+    """Tuning asked of methods without a grid tunes none: the JSON's ``settings.tuning`` says so, as the Markdown."""
+    root = make_sets(tmp_path / "data")
+    settings = relight_settings.Settings(patch=16, patches=20, gallery=1, max_pairs=2, keypoint_protocols=False)
+    out = tmp_path / "out"
+    webcam = [root / "webcam"]
+    relight.main(out, webcam, ["none", "he"], ["square"], ["street"], seeds=[0], settings=settings, tuning=tuning)
+    saved = json.loads((out / "relight.json").read_text())
+    assert saved["settings"]["tuning"] is False and saved["settings"]["tuning_requested"] is tuning
+    assert saved["tuning"] == {} and saved["settings"]["tuning_grids"] == {}
+    text = (out / "relight.md").read_text()
+    assert said in text and "; train square." in text  # a training scene evaluated, not tuned on
 
 
 @pytest.mark.parametrize(

@@ -32,8 +32,10 @@ def own_scenes(root: Path, names: tuple[str, ...] = ("one", "two", "three")) -> 
 
 
 def bench(tmp_path: Path, *args: str) -> dict:
+    """The report of a tiny run with ``args``, replacing the last one's."""
     out = tmp_path / "out"
-    assert cli_main(["bench", "relight", "--out", str(out), "--seeds", "0", "--no-progress", *TINY_FLAGS, *args]) == 0
+    argv = ["bench", "relight", "--out", str(out), "--overwrite", "--seeds", "0", "--no-progress", *TINY_FLAGS]
+    assert cli_main([*argv, *args]) == 0
     return json.loads((out / "relight.json").read_text())
 
 

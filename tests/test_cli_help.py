@@ -90,5 +90,8 @@ def test_one_option_name_for_each_idea():
     seeds = _commands_with("--seeds")
     repeated = {"alcn bench detect", "alcn bench fewshot", "alcn bench relight", "alcn pose eval"}
     assert repeated <= set(seeds) and len({type(a) for a in seeds.values()}) == 1, seeds
+    # an earlier run's output is replaced with --overwrite, in every command that refuses it
+    benches = {f"alcn bench {name}" for name in ("detect", "fewshot", "invariance", "relight", "speed")}
+    assert benches | {"alcn normalize", "alcn train-real-light"} <= set(_commands_with("--overwrite"))
     retired = {"--max-features", "--draws", "--size", "--quick", "--small"}
     assert not {c for c, p in COMMANDS.items() for a in p._actions if retired & set(a.option_strings)}

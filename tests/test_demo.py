@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from alcn_cv.commands.demo import image_label, method_title, normalization_grid
 from alcn_cv.enhance import create
@@ -38,3 +40,24 @@ def test_grid_is_written(tmp_path):
     images = [rng.integers(0, 256, (40, 64, 3), dtype=np.uint8) for _ in range(2)]
     path = normalization_grid(images, ["a", "b"], ["none", "dog"], tmp_path / "grid.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_demo_runs_twice_into_one_folder(tmp_path, monkeypatch):
+    """``make demo`` twice in a row: the second run replaces the first's data and benchmark report (the benchmark
+    refuses an earlier report but where the demo asks it to replace its own)."""
+    pytest.importorskip("skimage")
+    pytest.importorskip("torch")
+    from alcn_cv.bench import detect_settings
+    from alcn_cv.commands import demo
+    from alcn_cv.data import detect
+
+    tiny = dict(methods=["none"], real_images=[1], positives_per_object=4, epochs=1, seeds=[0], max_test_images=1)
+    monkeypatch.setitem(detect_settings.CONFS, "demo", dataclasses.replace(detect_settings.CONFS["demo"], **tiny))
+    render = detect.generate
+    monkeypatch.setattr(detect, "generate", lambda out, **kwargs: render(out, **{**kwargs, "n_test": 1, "n_train": 1}))
+    monkeypatch.setattr(demo, "normalization_grid", lambda *args, **kwargs: tmp_path / "normalized.png")
+    report = tmp_path / "demo" / "bench" / "detect.json"
+    demo.main(tmp_path / "demo", progress=False)
+    first = report.stat().st_mtime_ns
+    demo.main(tmp_path / "demo", progress=False)
+    assert report.stat().st_mtime_ns > first

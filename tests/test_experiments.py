@@ -52,11 +52,11 @@ def test_the_rerun_line_runs_the_published_command(
 ) -> None:
     """The quick protocol's options came from copies in each script and relight.py's seeds default to the published
     ones: the arguments a kept report records (as docs/results.md renders them) run exactly the command it
-    records."""
+    records, replacing the run's earlier report (``--overwrite``, which the report's command leaves out)."""
     module = importlib.import_module(script)
-    commands: list[str] = []
+    commands: list[tuple[str, ...]] = []
     monkeypatch.setattr(module, "RUNS", tmp_path)
-    monkeypatch.setattr(module, "alcn", lambda *argv: commands.append(" ".join(["alcn", *argv])))
+    monkeypatch.setattr(module, "alcn", lambda *argv: commands.append(("alcn", *argv)))
     monkeypatch.setattr(module, "keep", lambda *args, **kwargs: None)
     if hasattr(module, "untrained_start"):
         monkeypatch.setattr(module, "untrained_start", lambda trained, path, description: Path(path))
@@ -64,7 +64,10 @@ def test_the_rerun_line_runs_the_published_command(
     exp = report["experiment"]
     monkeypatch.setattr(sys, "argv", [f"{script}.py", *exp["argv"]])
     module.main()
-    assert report["command"] in [c.replace(str(tmp_path), "OUT") for c in commands]
+    benches = [c for c in commands if c[1:3] == ("bench", "relight")]
+    assert benches and all("--overwrite" in c for c in benches)
+    recorded = [" ".join(a for a in c if a != "--overwrite").replace(str(tmp_path), "OUT") for c in benches]
+    assert report["command"] in recorded
 
 
 def _keep_gpu_check(monkeypatch: pytest.MonkeyPatch, *argv: str) -> None:

@@ -78,6 +78,17 @@ def _override(settings: Any, args: argparse.Namespace) -> Any:
     return dataclasses.replace(settings, **given)
 
 
+def _add_out(p: argparse.ArgumentParser, report: str) -> None:
+    """``--out`` and ``--overwrite`` of a benchmark that writes ``report``.json and ``report``.md into ``--out``."""
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help=f"replace the report of an earlier run in --out ({report}.json, {report}.md and its figures); without it, "
+        "such a folder is refused before any work",
+    )
+
+
 def _add_detect(subparsers: argparse._SubParsersAction) -> None:
     d = DetectSettings()
     p = subparsers.add_parser(
@@ -94,7 +105,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         help="benchmark folder: train.json, test.json, manifest.json and, for --tune, val.json (e.g. from "
         "`alcn data detect`)",
     )
-    p.add_argument("--out", required=True, type=Path, help="output folder")
+    _add_out(p, "detect")
     add_conf_option(p, detect_settings.CONF_SUMMARIES)
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
     p.add_argument("--real-images", type=_list(int), help="real training images per object (default 1,10)")
@@ -138,7 +149,13 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
 def _run_detect(args: argparse.Namespace) -> int:
     settings = _override(preset(detect_settings.CONFS, args.conf), args)
     result = detect.main(
-        args.data, args.out, settings, args.working_scale, args.box_size, progress=not args.no_progress
+        args.data,
+        args.out,
+        settings,
+        args.working_scale,
+        args.box_size,
+        progress=not args.no_progress,
+        overwrite=args.overwrite,
     )
     print((Path(args.out) / "detect.md").read_text(encoding="utf-8"))
     return 1 if all("error" in r for r in result["runs"].values()) else 0
@@ -155,7 +172,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         "(object vs. background) and accuracy per seed, and per seed whether each ALCN variant is above the best DoG. "
         "Writes fewshot.md, fewshot.json and fewshot.png.",
     )
-    p.add_argument("--out", required=True, type=Path, help="output folder")
+    _add_out(p, "fewshot")
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
     _add_policies(p, d.policies)
     add_seeds_option(
@@ -193,7 +210,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
 
 def _run_fewshot(args: argparse.Namespace) -> int:
     settings = _override(fewshot.FewShotSettings(), args)
-    result = fewshot.main(args.out, settings, progress=not args.no_progress)
+    result = fewshot.main(args.out, settings, progress=not args.no_progress, overwrite=args.overwrite)
     print((Path(args.out) / "fewshot.md").read_text(encoding="utf-8"))
     runs = [r for by_method in result["runs"].values() for seeded in by_method.values() for r in seeded]
     return 1 if all("error" in r for r in runs) else 0
@@ -210,7 +227,7 @@ def _add_invariance(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--data", required=True, type=Path, help="folder of NAME/NAME.<i>.png + NAME.mask.png (e.g. ../shared/data/psm)"
     )
-    p.add_argument("--out", required=True, type=Path, help="output folder")
+    _add_out(p, "invariance")
     p.add_argument("--methods", type=_list(str), default=None, help=_methods_help(None))
     p.add_argument("--scale", type=float, default=1.0, help="resize the photographs by this factor first (default 1)")
     p.add_argument("--erode", type=int, default=5, help="pixels removed from the mask border (default 5)")
@@ -223,7 +240,14 @@ def _add_invariance(subparsers: argparse._SubParsersAction) -> None:
 
 def _run_invariance(args: argparse.Namespace) -> int:
     result = invariance.main(
-        args.data, args.out, args.methods, args.scale, args.erode, args.figure_object, not args.no_progress
+        args.data,
+        args.out,
+        args.methods,
+        args.scale,
+        args.erode,
+        args.figure_object,
+        not args.no_progress,
+        overwrite=args.overwrite,
     )
     failed = [n for n, r in result["methods"].items() if "error" in r]
     print((Path(args.out) / "invariance.md").read_text(encoding="utf-8"))
@@ -240,7 +264,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         "ALCN's network/mixture split, peak memory, the approximations' difference from the exact Eq. 3, and "
         "memory over a 1920x1080 video. Writes speed.md, speed.json and speed.png.",
     )
-    p.add_argument("--out", required=True, type=Path, help="output folder")
+    _add_out(p, "speed")
     add_conf_option(p, speed.CONF_SUMMARIES)
     p.add_argument(
         "--sizes",
@@ -313,7 +337,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
 
 def _run_speed(args: argparse.Namespace) -> int:
     settings = _override(preset(speed.CONFS, args.conf), args)
-    result = speed.main(args.out, settings, progress=not args.no_progress)
+    result = speed.main(args.out, settings, progress=not args.no_progress, overwrite=args.overwrite)
     print((Path(args.out) / "speed.md").read_text(encoding="utf-8"))
     return 0 if result["rows"] else 1
 
@@ -331,13 +355,14 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         description="Normalize the registered frames of fixed-camera scenes under different light with each "
         "method's apply(), then score patch identification (NCC), ORB/SIFT matching and RANSAC-homography pose "
         "between frames; CLAHE, DoG, SLCN, DLCN, SQI, Tan-Triggs and DoG+lstd are tuned on the training scenes only. "
-        "Writes relight.md, relight.json and relight.png. The default runs "
+        "Writes relight.md, relight.json and relight.png, with each method's difference from the first, paired by "
+        "seed. The default runs "
         f"{len(relight.DEFAULT_METHODS)} methods, seeds {' '.join(map(str, relight.DEFAULT_SEEDS))}, with tuning, "
         "at the sampling sizes of --conf (listed below), which --max-frames, --patches and --max-pairs override; "
         "--conf quick --seeds 0 --no-tune is the shortest run.",
     )
     d = relight_settings.Settings()
-    p.add_argument("--out", required=True, type=Path, help="output folder")
+    _add_out(p, "relight")
     p.add_argument(
         "--data",
         nargs="+",
@@ -437,8 +462,10 @@ def _run_relight(args: argparse.Namespace) -> int:
         sampling.max_frames or None,
         not args.no_tune,
         args.tune_frames,
-        command=shlex.join(["alcn", *sys.argv[1:]]),
+        # what was measured, as the other benchmarks' commands (built from their settings): not --overwrite
+        command=shlex.join(["alcn", *(a for a in sys.argv[1:] if a != "--overwrite")]),
         progress=not args.no_progress,
+        overwrite=args.overwrite,
     )
     print((Path(args.out) / "relight.md").read_text(encoding="utf-8"))
     return 1 if all("errors" in r for r in result["methods"].values()) else 0

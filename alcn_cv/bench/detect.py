@@ -91,7 +91,7 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
-from alcn_cv.io import atomic_write, make_folder, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, write_json
 from alcn_cv.report import machine, spread
 
 if TYPE_CHECKING:
@@ -665,6 +665,7 @@ def main(
     working_scale: float | None = None,
     box_size: float | None = None,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Run the detection benchmark (see the module docstring) and write its outputs.
 
@@ -674,6 +675,7 @@ def main(
         settings: the run's settings; default :class:`~alcn_cv.bench.detect_settings.DetectSettings`.
         working_scale, box_size: see :func:`~alcn_cv.bench.detect_data.load_data`.
         progress: progress bar across runs.
+        overwrite: replace the report of an earlier run in ``out_dir``.
 
     Returns:
         The dictionary written to ``detect.json``. A run that fails once its method is built (out of
@@ -681,12 +683,14 @@ def main(
 
     Raises:
         InputError: bad settings, a method that cannot be built (a bad parameter or weight
-            file), or tuning on data without validation objects, before any work.
+            file), tuning on data without validation objects, or an ``out_dir`` that holds an earlier run's report
+            (without ``overwrite``), before any work.
     """
     import torch
 
     settings = settings or DetectSettings()
     settings.check()
+    check_no_earlier_output([Path(out_dir) / "detect.json", Path(out_dir) / "detect.md"], overwrite)
     # a bad spec or weight file: one line before any work; the untuned runs use these
     built = build_methods(settings.methods, create_normalization)
     if settings.threads:

@@ -50,7 +50,7 @@ from alcn_cv.checks import check_seeds
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, make_folder, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, write_json
 from alcn_cv.report import (
     command_line,
     describe_machine,
@@ -349,6 +349,7 @@ def main(
     settings: FewShotSettings | None = None,
     command: str | None = None,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Run the few-shot validation on registered normalizations (see the module docstring) and write its report.
 
@@ -357,6 +358,7 @@ def main(
         settings: default :class:`FewShotSettings`.
         command: the command line to record (default: the one that runs ``settings``).
         progress: progress bar across runs.
+        overwrite: replace the report of an earlier run in ``out_dir``.
 
     Returns:
         The dictionary written to ``fewshot.json``: ``runs`` (policy -> method -> one result of
@@ -364,12 +366,13 @@ def main(
         ``summary`` (mean and spread over seeds), ``alcn_vs_dog`` (:func:`compare_to_dog`).
 
     Raises:
-        InputError: bad settings, or a method that cannot be built (a bad parameter or weight file), before any
-            seed runs.
+        InputError: bad settings, a method that cannot be built (a bad parameter or weight file), or an
+            ``out_dir`` that holds an earlier run's report (without ``overwrite``), before any seed runs.
     """
     import torch
 
     settings = (settings or FewShotSettings()).check()
+    check_no_earlier_output([Path(out_dir) / "fewshot.json", Path(out_dir) / "fewshot.md"], overwrite)
     # a bad spec or weight file: one line before any seed runs
     norms = build_methods(settings.methods, create_normalization)
     if settings.threads:

@@ -38,7 +38,7 @@ from alcn_cv.data.scenes import PhotometricObject, load_photometric, mean_pairwi
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, make_folder, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
 
 __all__ = ["detail", "main"]
@@ -106,6 +106,7 @@ def main(
     erode: int = 5,
     figure_object: str | None = None,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Run the invariance benchmark and write its table, JSON and figure.
 
@@ -120,15 +121,18 @@ def main(
             background edge do not count).
         figure_object: the object shown in the figure; default the first one. ``"all"``: one figure each.
         progress: show a progress bar.
+        overwrite: replace the report of an earlier run in ``out_dir``.
 
     Returns:
         The results dictionary also written to ``invariance.json``.
 
     Raises:
-        InputError: an unknown method, or one that cannot be built (a bad parameter or weight file), before
-            the photographs are read; a negative ``erode``, or one that leaves a mask empty.
+        InputError: before the photographs are read: an ``out_dir`` that holds an earlier run's report (without
+            ``overwrite``), an unknown method, or one that cannot be built (a bad parameter or weight file); a
+            negative ``erode``, or one that leaves a mask empty.
         DatasetError: see :func:`~alcn_cv.data.scenes.load_photometric`.
     """
+    check_no_earlier_output([Path(out_dir) / "invariance.json", Path(out_dir) / "invariance.md"], overwrite)
     if erode < 0:
         raise InputError(f"erode must be >= 0 pixels, got {erode}")
     methods = list(available()) if methods is None else list(methods)

@@ -70,9 +70,48 @@ def _metric_table(result: dict[str, Any], metric: str) -> str:
     return markdown_table(headers, rows)
 
 
+def _differences_section(result: dict[str, Any], metrics: list[str]) -> list[str]:
+    """The section of ``paired_differences`` (:func:`~alcn_cv.bench.relight.paired_differences`): its title and table,
+    none without one."""
+    paired = result.get("paired_differences")
+    if not paired:
+        return []
+    seeds = result["settings"]["seeds"]
+    reference = paired["reference"]
+
+    def cell(d: dict[str, Any] | None) -> str | None:
+        if d is None:
+            return None
+        return f"{d['mean']:+.1f}" + (f" ± {d['std']:.1f}" if len(seeds) > 1 else "")
+
+    caption = (
+        f"For each seed, a method's mean over the test scenes minus `{reference}`'s (the first method listed): for a "
+        "seed both are scored on the same frames, patches and pairs. "
+        + (
+            f"Cells: the mean of these differences over seeds {seeds} ± their sample standard deviation: a difference "
+            "within about its ± of 0 is not told apart from the seeds' draws (the per-method ± of the other tables "
+            "also hold the draws that both methods share)"
+            if len(seeds) > 1
+            else f"Cells: the difference on the one seed ({seeds[0]}), with no spread to tell it from the seed's draws"
+        )
+        + "; points of %, counts for correct matches.\n"
+    )
+    rows = [
+        [_label(label, result["methods"][label]), *(cell(diff.get(m)) for m in metrics)]
+        for label, diff in paired["methods"].items()
+    ]
+    return [
+        f"## Difference from `{reference}` (paired {paired['pairing']})\n",
+        caption,
+        markdown_table(["method"] + [_SHORT[m] for m in metrics], rows),
+    ]
+
+
 def _tuning_text(result: dict[str, Any]) -> str:
     if not result["tuning"]:
-        return "No tuning (default parameters only).\n"
+        if result["settings"]["tuning_requested"]:
+            return "No tuning: none of the methods listed has a tuning grid (default parameters only).\n"
+        return "No tuning asked (`--no-tune`: default parameters only).\n"
     loo = result["split"]["mode"] == "leave-one-out"
     rows = []
     for method, folds in result["tuning"].items():
@@ -167,7 +206,7 @@ def write_report(result: dict[str, Any], out: Path) -> None:
         f"wall time {result['seconds'] / 60:.1f} min.  ",
         f"Machine: {describe_machine(result['machine'])}.\n",
         f"Split: {split['mode']}; test {', '.join(split['test'])}"
-        + (f"; train (tuning) {', '.join(split['train'])}" if split["train"] else "")
+        + (f"; train{' (tuning)' if s['tuning'] else ''} {', '.join(split['train'])}" if split["train"] else "")
         + ".  ",
         f"Scenes: {scenes}.\n",
         f"Every method normalizes whole grayscale frames through its own `apply()` (uint8 in, float32 out); "
@@ -192,6 +231,7 @@ def write_report(result: dict[str, Any], out: Path) -> None:
         "all in torch).\n",
         "## Summary (mean over test scenes)\n",
         _summary_table(result, metrics),
+        *_differences_section(result, metrics),
     ]
     for m in metrics:
         text += [f"## {_TITLES[m]}\n", _metric_table(result, m)]

@@ -68,7 +68,7 @@ from alcn_cv.enhance.base import Normalization, lab_and_lightness
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import srgb_to_lab
-from alcn_cv.io import atomic_write, make_folder, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, write_json
 from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 from alcn_cv.shared_data import shared_data_dir
@@ -1108,19 +1108,27 @@ def targets(settings: SpeedSettings, work: Path, progress: bool = True) -> dict[
     }
 
 
-def main(out_dir: str | os.PathLike, settings: SpeedSettings | None = None, progress: bool = True) -> dict[str, Any]:
+def main(
+    out_dir: str | os.PathLike, settings: SpeedSettings | None = None, progress: bool = True, overwrite: bool = False
+) -> dict[str, Any]:
     """Run the speed benchmark and write ``speed.json``, ``speed.md`` and ``speed.png`` into ``out_dir``.
 
     Args:
         out_dir: output folder (created).
         settings: the run's settings; default :class:`SpeedSettings`, the preset ``CONFS["default"]`` (:data:`CONFS`).
         progress: the progress bars (the cases, the video row's pipelines).
+        overwrite: replace the report of an earlier run in ``out_dir``.
 
     Returns:
         The contents of ``speed.json``.
+
+    Raises:
+        InputError: bad settings, or an ``out_dir`` that holds an earlier run's report (without ``overwrite``), before
+            any work.
     """
     settings = settings or SpeedSettings()
     settings.check()
+    check_no_earlier_output([Path(out_dir) / "speed.json", Path(out_dir) / "speed.md"], overwrite)
     out = Path(out_dir)
     make_folder(out)
     import torch

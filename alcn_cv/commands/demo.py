@@ -120,7 +120,8 @@ def main(out_dir: Path, seed: int = 0, progress: bool = True) -> Path:
     from alcn_cv.bench.detect_settings import CONFS
     from alcn_cv.train.config import preset
 
-    bench.main(data_dir, out_dir / "bench", preset(CONFS, "demo"), progress=progress)
+    # the demo's own folder, made again on every run (as its data): `make demo` twice in a row replaces it
+    bench.main(data_dir, out_dir / "bench", preset(CONFS, "demo"), progress=progress, overwrite=True)
     table = out_dir / "bench" / "detect.md"
     logger.info(
         "detection benchmark (demo preset; the full one is `alcn bench detect`):\n%s",
