@@ -10,6 +10,7 @@ import io
 import json
 import logging
 import math
+import re
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -126,7 +127,8 @@ def load_normalizer_file(path: str | Path) -> NormalizerFile:
     """Read and check a weight file (a shipped model's: :func:`alcn_cv.runtime.resolve_weights`).
 
     Raises:
-        WeightFileError: missing, a folder (the weight file in it named), empty, not a ``.npz`` archive, corrupt,
+        WeightFileError: missing, a folder (the weight file in it named), empty, a training run's checkpoint (the
+            run's weight file named), not a ``.npz`` archive, corrupt,
             of another format or of an incompatible version, a header field missing or out of range (a sigma or the
             working scale not positive, an empty output range; a gain Normalizer's grid, blurs, ``tau`` and divisive
             normalization), holding NaN or infinite weights, or a gain Normalizer's header restating its ``tau`` or
@@ -140,6 +142,9 @@ def load_normalizer_file(path: str | Path) -> NormalizerFile:
         raise WeightFileError(f"weight file not found: {path}")
     if path.stat().st_size == 0:
         raise WeightFileError(f"weight file {path} is empty")
+    checkpoint = _checkpoint_message(path)
+    if checkpoint is not None:
+        raise WeightFileError(checkpoint)
     if not zipfile.is_zipfile(path):
         if path.suffix.lower() == ".onnx":  # an export: the weight file is the .npz it was made from
             raise WeightFileError(
@@ -187,6 +192,27 @@ def _folder_message(folder: Path) -> str:
         if files
         else ""
     )
+
+
+def _checkpoint_message(path: Path) -> str | None:
+    """Why a training run's checkpoint (``checkpoint.pt``, or a ``.pt`` beside a run's weight files) is no weight file,
+    and the run's weight file meant: its final one, else its latest step snapshot; None for any other file."""
+    if path.suffix.lower() != ".pt":
+        return None
+    folder = path.parent
+    finals = [folder / n for n in _RUN_WEIGHTS if (folder / n).is_file()]
+    snapshots = sorted(
+        (p for p in folder.glob("*_step*.npz") if re.fullmatch(r".+_step\d+", p.stem)),
+        key=lambda p: int(p.stem.rsplit("_step", 1)[1]),
+    )
+    if not (path.name == "checkpoint.pt" or finals or snapshots):
+        return None
+    what = f"{path} is a training run's checkpoint (what --resume goes on from), not a weight file"
+    if finals:
+        return f"{what}; did you mean {finals[0]}?"
+    if snapshots:
+        return f"{what}; did you mean {snapshots[-1]} (the run's latest step snapshot)?"
+    return f"{what}; its run has written no weight file yet (one at every save and one at its end)"
 
 
 def _check_arrays(arrays: dict[str, np.ndarray], path: Path) -> None:

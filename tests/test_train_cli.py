@@ -59,6 +59,13 @@ def test_help_names_every_preset(command, confs, capsys):
         (["train-unet", "--set", "lr=0"], "lr must be > 0"),
         (["train-real-light", "--set", "scenes=[courbevoie]"], "quote the strings"),
         (["train", "--set", "data.train_lighting=['foo']"], "data.train_lighting' must list lighting families"),
+        (
+            ["train-real-light", "--set", "shipped_photos=False"],
+            "'shipped_photos' must be a boolean, got 'False' (values are TOML: true or false, in lower case)",
+        ),
+        (["train-real-light", "--set", "photo=['photos']"], "unknown config key 'photo'; did you mean 'photos'? known"),
+        (["train-unet", "--set", "net.chanels=8"], "unknown config key 'net.chanels'; did you mean 'net.channels'?"),
+        (["train", "--set", "optim.lrr=1"], "unknown config key 'optim.lrr'; did you mean 'optim.lr'?"),
     ],
 )
 def test_bad_settings_are_one_line_errors(args, message, capsys):
@@ -84,6 +91,59 @@ def test_an_interrupted_alcn_train_ends_as_train_real_light(terminated, code, tm
     assert capsys.readouterr().err.strip() == f"interrupted at epoch 2, step 3; continue with: {hint}"
     args = build_parser().parse_args(shlex.split(hint)[1:])
     assert args.resume and args.settings == ["optim.epochs=3"] and args.seed == 4
+
+
+def test_an_interrupted_alcn_train_prints_a_command_that_works_from_any_folder(tmp_path, monkeypatch, capsys):
+    """The run folder, a TOML file given for --conf and the data folders, absolute in the command printed on Ctrl-C
+    (they were printed as given), so that the settings checked against the checkpoint's are the run's."""
+    from alcn_cv.cli import Terminated
+    from alcn_cv.train import trainer
+
+    (tmp_path / "work" / "phos").mkdir(parents=True)
+    (tmp_path / "work" / "my.toml").write_text('[data]\nval_path = "phos"\n')
+    (tmp_path / "elsewhere").mkdir()
+    runs = []
+
+    def train(cfg, out, **kwargs):
+        runs.append(cfg)
+        return trainer.TrainResult(out, "interrupted", stopped_at=(1, 2), interruption=Terminated())
+
+    monkeypatch.setattr(trainer, "train", train)
+    monkeypatch.chdir(tmp_path / "work")
+    assert main(["train", "--conf", "my.toml", "--out", "run", "--set", "data.path='phos'", "--no-progress"]) == 143
+    hint = capsys.readouterr().err.strip().split("continue with: ")[1]
+    words = ["alcn", "train", "--out", str(tmp_path / "work" / "run"), "--resume", "--conf"]
+    words += [str(tmp_path / "work" / "my.toml"), "--set", f'data.path="{tmp_path / "work" / "phos"}"']
+    words += ["--set", f'data.val_path="{tmp_path / "work" / "phos"}"', "--no-progress"]
+    assert shlex.split(hint) == words
+    assert (runs[0].data.path, runs[0].data.val_path) == (str(tmp_path / "work" / "phos"),) * 2  # as recorded
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    assert main(shlex.split(hint)[1:]) == 143
+    assert runs[1] == runs[0]
+
+
+@pytest.mark.parametrize(
+    "command, takes",
+    [
+        (
+            "train-real-light",
+            "with its settings; the one change it takes is a larger steps (--set steps=N trains on to step N): any "
+            "other --set, and --seed, must repeat the checkpoint's value; with --conf, the preset's settings with "
+            "--set and --seed, which must equal the checkpoint's alike; --threads and --no-progress are free",
+        ),
+        (
+            "train",
+            "give the run's --conf, --set and --seed again (the command printed on Ctrl-C does); its seed and "
+            "model.*, data.* and optim.* settings must equal the checkpoint's (optim.epochs too), run.* (--device) "
+            "and fewshot.* may change",
+        ),
+    ],
+)
+def test_resume_help_says_what_a_resumed_run_takes(command, takes, capsys):
+    """It said `--set and --seed change them: a larger steps trains longer`, though only a larger steps is taken."""
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    assert takes in " ".join(capsys.readouterr().out.split())
 
 
 def test_a_missing_data_folder_names_the_key(capsys, tmp_path):

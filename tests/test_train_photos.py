@@ -141,7 +141,9 @@ def test_the_settings_of_photos_are_checked(tmp_path):
     assert REAL_LIGHT_CONFS["gain"].photos == [] and REAL_LIGHT_CONFS["gain"].shipped_photos
 
 
-def test_the_weight_file_records_the_folders_as_given(tmp_path, monkeypatch):
+def test_the_weight_file_records_the_folders_absolute(tmp_path, monkeypatch):
+    """A relative folder is recorded as the absolute path it named (it was recorded as given: `photos` of another
+    working folder)."""
     import torch
 
     from alcn_cv.train.real_light import train_real_light
@@ -163,7 +165,8 @@ def test_the_weight_file_records_the_folders_as_given(tmp_path, monkeypatch):
         net={"channels": 8},
     )
     meta = load_normalizer_file(train_real_light(cfg, tmp_path / "run", progress=False)).meta
-    assert meta["training"]["config"]["photos"] == ["mine"] and meta["training"]["config"]["shipped_photos"] is False
+    assert meta["training"]["config"]["photos"] == [str(tmp_path / "mine")]
+    assert meta["training"]["config"]["shipped_photos"] is False
 
 
 def test_frames_smaller_than_the_crop_or_the_patches_name_the_scene():
@@ -176,3 +179,80 @@ def test_frames_smaller_than_the_crop_or_the_patches_name_the_scene():
     with pytest.raises(DatasetError, match=r"scene 'street': frames of 90x80 .*the 100x100 patches"):
         training_scene(scene, CROP // 2, 100)
     assert len(training_scene(scene, CROP // 2, PATCH).frames) == 2  # no crop given: the patches' bound only
+
+
+def _warnings(caplog) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+
+
+def test_a_photograph_without_texture_is_an_error_naming_it(tmp_path, shipped):
+    """A uniform image trained silently on its relit copies' noise (a loss of 6.6 where real runs log 0.7-0.9)."""
+    from alcn_cv.train.real_light import training_scenes
+
+    folder = _folder(tmp_path / "mine")
+    cv2.imwrite(str(folder / "grey.png"), np.full((130, 130), 128, np.uint8))
+    with pytest.raises(InputError, match=r"photos: .*grey\.png: no texture: .*fewer than 2 of its 32x32 windows") as e:
+        training_scenes(RealLightConfig(relit=2, crop=CROP, patch=PATCH, photos=[str(folder)]))
+    assert "\n" not in str(e.value)
+
+
+def test_a_photograph_with_almost_no_texture_is_warned_about(tmp_path, shipped, caplog):
+    from alcn_cv.train.real_light import TEXTURED_SHARE, textured_share, training_scenes
+
+    folder = _folder(tmp_path / "mine")
+    # a wall lit from one side: a gradient everywhere (no error), under a grey level per pixel
+    ramp = np.tile(np.linspace(60, 120, 130), (130, 1)).round().astype(np.uint8)
+    cv2.imwrite(str(folder / "wall.png"), ramp)
+    assert textured_share(ramp, PATCH) < TEXTURED_SHARE <= textured_share(_photo(), PATCH)
+    with caplog.at_level("WARNING"):
+        training_scenes(RealLightConfig(relit=2, crop=CROP, patch=PATCH, photos=[str(folder)]))
+    (warning,) = _warnings(caplog)
+    assert warning.startswith(f"photos: {folder / 'wall.png'}: almost no texture: ")
+    assert "of its 32x32 windows reach an RMS gradient of 1 grey level per pixel (warned below 10%)" in warning
+
+
+def test_a_photograph_twice_and_a_single_one_are_warned_about(tmp_path, shipped, caplog):
+    from alcn_cv.train.real_light import training_scenes
+
+    folder = _folder(tmp_path / "mine")
+    cv2.imwrite(str(folder / "q.png"), _photo(seed=1))  # p1.png's pixels
+    cv2.imwrite(str(folder / "theirs.png"), shipped[0].image)  # a shipped photograph's
+    cfg = RealLightConfig(relit=2, crop=CROP, patch=PATCH, photos=[str(folder)])
+    with caplog.at_level("WARNING"):
+        scenes, _ = training_scenes(cfg)
+    assert len(scenes) == 2 + 4  # warned about, not left out: the user may mean it
+    assert _warnings(caplog) == [
+        f"photos: {folder / 'q.png'}: the same pixels as {folder / 'p1.png'}: each copy is a scene of its own, "
+        "drawn as often as any other photograph",
+        f"photos: {folder / 'theirs.png'}: the same pixels as the shipped photograph shipped0: each copy is a scene of "
+        "its own, drawn as often as any other photograph",
+    ]
+
+    single = _folder(tmp_path / "one", count=1)
+    for shipped_photos, detail in (
+        (True, "one of the 3 scenes each step draws from"),
+        (False, "every step draws the same scene, its relit copies (shipped_photos=false and no scenes)"),
+    ):
+        caplog.clear()
+        with caplog.at_level("WARNING"):
+            training_scenes(dataclasses.replace(cfg, photos=[str(single)], shipped_photos=shipped_photos))
+        assert _warnings(caplog) == [f"photos: a single photograph of yours, {single / 'p0.png'}: {detail}"]
+
+
+def test_the_shipped_photographs_pass_the_texture_rule(shared_data):
+    """The rule warns about the user's photographs only; the shipped ones, which the recipe trains on, pass it."""
+    from alcn_cv.data.permissive_images import training_photographs
+    from alcn_cv.train.real_light import TEXTURED_SHARE, textured_share
+
+    shares = {p.name: textured_share(p.image, RealLightConfig.patch) for p in training_photographs(shared_data)}
+    assert min(shares.values()) >= TEXTURED_SHARE, shares
+
+
+def test_a_file_given_for_a_folder_of_photos_says_so(tmp_path):
+    folder = _folder(tmp_path / "mine", count=1)
+    with pytest.raises(InputError) as e:
+        RealLightConfig(relit=2, photos=[str(folder / "p0.png")]).check()
+    assert str(e.value) == (
+        f"photos: {folder / 'p0.png'}: a file, not a folder: photos lists folders, and every image directly in each is "
+        f"trained on; give its folder (photos=['{folder}']) or put the photographs meant in one of their own"
+    )

@@ -171,12 +171,14 @@ def test_resume_takes_the_checkpoints_settings_and_names_each_difference(tmp_pat
     assert "{'alcn_cv'" not in err  # no raw dict of versions
     assert main(_run(out, "--resume", "--set", "steps=1")) == 2  # fewer steps than done
     assert "steps (2 in the checkpoint, 1 now)" in capsys.readouterr().err
-    assert main(_run(out, "--resume", "--set", "steps=3")) == 0  # longer: the checkpoint's settings, steps raised
+    assert main(_run(out, "--resume", "--seed", "3", "--set", "steps=3")) == 2  # as --help says: steps only
+    assert "seed (0 in the checkpoint, 3 now)" in capsys.readouterr().err
+    assert main(_run(out, "--resume", "--seed", "0", "--set", "steps=3")) == 0  # longer; the seed repeated
     assert [h["step"] for h in json.loads((out / "history.json").read_text())] == [1, 2, 3]
     meta = load_normalizer_file(out / "gain_normalizer.npz").meta["training"]
     assert meta["config"]["steps"] == 3 and meta["config"]["lr"] == 0.02
     assert meta["command"].startswith("alcn train-real-light --conf gain --set") and meta["command"].endswith(
-        "--set steps=3"
+        "--set steps=3 --seed 0"
     )
     assert main(_run(out, "--resume", "--conf", "gain", *_tiny(scene, steps=4))) == 0  # a preset's: same settings
 
@@ -197,6 +199,7 @@ def test_the_end_of_a_run_prints_the_weights_and_commands_that_work(tmp_path, ca
     assert main(export) == 0 and weights.with_suffix(".onnx").is_file()  # beside: backend='opencv' finds it
     args = build_parser().parse_args(bench)  # its options exist (the bench itself takes minutes), its methods too
     assert args.conf == "quick" and args.methods == ["alcn", f"alcn:weights={weights}"]
+    assert args.out == tmp_path / "run_bench"  # beside the run (it was inside, where --overwrite left it stale)
     assert from_spec(args.methods[1]).normalize(np.full((40, 40), 0.5, np.float32)).shape == (40, 40)
 
 
@@ -315,15 +318,46 @@ def test_a_checkpoint_written_before_photos_were_kept_resumes(tmp_path, capsys):
     assert main(_run(out, "--resume", "--conf", "gain", *_tiny(scene, steps=3))) == 0, capsys.readouterr().err
 
 
+def test_a_run_resumes_from_any_working_folder(tmp_path, monkeypatch, capsys):
+    """The settings' folders are made absolute before the checkpoint and the weight file record them, and the command
+    printed on Ctrl-C names the run folder absolute: it goes on from another working folder, on the same data (it
+    failed with `photos: photos: folder not found`)."""
+    for seed, where in enumerate("ab"):  # a scene of the same name in each working folder
+        _scene(tmp_path / where / "scene", seed=seed)
+    photos = tmp_path / "a" / "mine"
+    photos.mkdir()
+    for name in ("01.png", "02.png"):  # two frames of the scene, as photographs
+        (photos / name).write_bytes((tmp_path / "a" / "scene" / name).read_bytes())
+    monkeypatch.chdir(tmp_path / "a")
+    mine = ["--set", "photos=['mine']", "--set", "shipped_photos=false", "--set", "relit=2"]
+    _interrupted_at(2, monkeypatch)
+    assert main(_run("run", *_tiny("scene", steps=3, save_every=5), *mine)) == 130
+    hint = capsys.readouterr().err.strip().split("continue with: ")[1]
+    assert shlex.split(hint)[1:5] == ["train-real-light", "--out", str(tmp_path / "a" / "run"), "--resume"]
+    config = load_checkpoint(tmp_path / "a" / "run" / "checkpoint.pt")["config"]
+    folders = {key: [str(tmp_path / "a" / name)] for key, name in (("scenes", "scene"), ("photos", "mine"))}
+    assert {key: config[key] for key in folders} == folders
+
+    monkeypatch.undo()
+    monkeypatch.chdir(tmp_path / "b")
+    assert main(shlex.split(hint)[1:]) == 0, capsys.readouterr().err
+    meta = load_normalizer_file(tmp_path / "a" / "run" / "gain_normalizer.npz").meta["training"]
+    assert {key: meta["config"][key] for key in folders} == folders  # a's folders, not b's scene
+    assert [h["step"] for h in json.loads((tmp_path / "a" / "run" / "history.json").read_text())] == [1, 2, 3]
+
+
 def test_resume_refuses_other_data_and_names_what_changed(tmp_path, monkeypatch, capsys):
-    """The settings record folders as given: resumed from another working folder, a relative one is another folder;
-    a photograph added to a folder shifts the draws of those after it. The checkpoint records the folders resolved and
-    the files of photos (the weight file, the settings as given)."""
+    """A checkpoint that records relative folders (written before they were made absolute), resumed from another
+    working folder, is on another folder; a photograph added to a folder shifts the draws of those after it. The
+    checkpoint records the folders resolved and the files of photos."""
     for seed, where in enumerate("ab"):
         _scene(tmp_path / where / "scene", seed=seed)
     monkeypatch.chdir(tmp_path / "a")
     out = tmp_path / "run"
     assert main(_run(out, *_tiny("scene"))) == 0
+    path = out / "checkpoint.pt"
+    ckpt = torch.load(path, weights_only=True)
+    torch.save({**ckpt, "config": {**ckpt["config"], "scenes": ["scene"]}}, path)  # as such a checkpoint
     monkeypatch.chdir(tmp_path / "b")
     assert main(_run(out, "--resume", "--set", "steps=3")) == 2
     err = capsys.readouterr().err
@@ -332,7 +366,7 @@ def test_resume_refuses_other_data_and_names_what_changed(tmp_path, monkeypatch,
     monkeypatch.chdir(tmp_path / "a")
     assert main(_run(out, "--resume", "--set", "steps=3")) == 0
     meta = load_normalizer_file(out / "gain_normalizer.npz").meta["training"]
-    assert meta["config"]["scenes"] == ["scene"]  # as given: no path of the machine in a file to share
+    assert meta["config"]["scenes"] == [str(tmp_path / "a" / "scene")]
 
     photos = tmp_path / "a" / "mine"
     photos.mkdir()
@@ -413,3 +447,58 @@ def test_export_never_offers_to_replace_what_alcn_cv_installed(tmp_path, capsys)
     (tmp_path / "run.onnx").write_bytes(b"")
     assert main(["export", "--weights", str(run)]) == 2
     assert f"did you mean {run / 'gain_normalizer.npz'}?" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["train-real-light", "train-unet", "train"])
+def test_a_weight_file_given_for_the_run_folder_is_refused_before_any_work(command, tmp_path, monkeypatch, capsys):
+    """It failed only once the scenes were loaded (seconds), as the run folder was made."""
+    from alcn_cv.train import windows
+
+    def never(*args):
+        raise AssertionError("data loaded before the run folder was checked")
+
+    monkeypatch.setattr(real_light, "training_scenes", never)
+    monkeypatch.setattr(windows, "load_windows", never)
+    (tmp_path / "mine").mkdir()
+    weights = tmp_path / "mine" / "gain_normalizer.npz"
+    weights.write_bytes(b"weights")
+    assert main([command, "--out", str(weights), "--no-progress"]) == 2
+    assert (
+        capsys.readouterr()
+        .err.strip()
+        .endswith(
+            f"{weights} is a file, not a folder: --out names the run folder, into which the run writes its weight file "
+            f"and checkpoints; give a folder (e.g. {tmp_path / 'mine'})"
+        )
+    )
+    assert main([command, "--out", str(weights / "run"), "--no-progress"]) == 2
+    assert f"{weights / 'run'} lies under the file {weights}: --out names the run folder" in capsys.readouterr().err
+
+
+def test_each_line_of_log_gives_the_untrained_starts_loss_on_the_same_draws(tmp_path, caplog):
+    """The loss rose from block to block with the draws, read as a diverging run: each line now gives the mean loss of
+    its last steps and the untrained start's on their draws, recomputed here from the seed."""
+    import re
+
+    from alcn_cv.train.config import RealLightConfig, with_settings
+
+    scene = _scene(tmp_path / "scene")
+    settings = [item for item in _tiny(scene, steps=3, save_every=2) if item != "--set"]
+    cfg = with_settings(RealLightConfig(), settings)
+    with caplog.at_level(logging.INFO):
+        real_light.train_real_light(cfg, tmp_path / "run", progress=False)
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("step ")]
+    pattern = r"step (\d): mean loss \S+ over the last \d steps, \d+ s \((steps? [\d-]+): (\S+); the untrained start "
+    pattern += r"on the same draws: (\S+)\)"
+    found = [re.fullmatch(pattern, line).groups() for line in lines]
+    assert [(step, steps) for step, steps, *_ in found] == [("2", "steps 1-2"), ("3", "step 3")]
+    losses = [h["loss"] for h in json.loads((tmp_path / "run" / "history.json").read_text())]
+    scenes, rendered = real_light.training_scenes(cfg)
+    rng, start = np.random.default_rng(cfg.seed), real_light.initial_network(cfg.seed, cfg.net)
+    draws = [real_light.draw_step(scenes, rendered, cfg, rng) for _ in range(3)]
+    with torch.no_grad():
+        untrained = [float(real_light.pair_loss(start, d[0], d[1], d[2], cfg, d[3])) for d in draws]
+    assert [float(trained) for *_, trained, _ in found] == pytest.approx([np.mean(losses[:2]), losses[2]], abs=1e-4)
+    assert [float(u) for *_, u in found] == pytest.approx([np.mean(untrained[:2]), untrained[2]], abs=1e-4)
+    assert losses[0] == pytest.approx(untrained[0], abs=1e-6)  # the first step's loss is the untrained start's
+    assert "the loss of each step is on a pair drawn afresh: a block's mean moves with its draws" in caplog.text

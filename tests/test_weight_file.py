@@ -182,3 +182,36 @@ def test_the_backends_take_tau_and_c_from_the_arrays(tmp_path):
     assert fast.spec.tau == pytest.approx(2.0) and fast.spec.divisive[1] == pytest.approx(0.5)
     assert fast.spec == torch_backend.spec
     np.testing.assert_allclose(fast.normalize(image), torch_backend.normalize(image), atol=1e-4)
+
+
+def test_a_training_checkpoint_names_the_runs_weight_file(tmp_path):
+    """It said `no header; a torch state_dict or module? ALCN2d.save(path) writes a weight file`."""
+    torch = pytest.importorskip("torch")
+    run = tmp_path / "run"
+    run.mkdir()
+    checkpoint = run / "checkpoint.pt"
+    torch.save({"step": 2}, checkpoint)
+    what = f"{checkpoint} is a training run's checkpoint (what --resume goes on from), not a weight file"
+    with pytest.raises(WeightFileError) as info:
+        alcn_cv.createALCN(weights=str(checkpoint))
+    assert str(info.value) == f"{what}; its run has written no weight file yet (one at every save and one at its end)"
+    for step in (2, 10):
+        (run / f"gain_normalizer_step{step}.npz").write_bytes(MODELS["gain"].read_bytes())
+    with pytest.raises(WeightFileError) as info:
+        load_normalizer_file(checkpoint)
+    assert (
+        str(info.value)
+        == f"{what}; did you mean {run / 'gain_normalizer_step10.npz'} (the run's latest step snapshot)?"
+    )
+    (run / "gain_normalizer.npz").write_bytes(MODELS["gain"].read_bytes())
+    renamed = run / "mine.pt"  # any .pt beside a run's weight files
+    checkpoint.rename(renamed)
+    with pytest.raises(
+        WeightFileError,
+        match=f"{renamed} is a training run's checkpoint.*did you mean {run / 'gain_normalizer.npz'}\\?$",
+    ):
+        load_normalizer_file(renamed)
+    other = tmp_path / "model.pt"  # a .pt of its own: no run's
+    torch.save({}, other)
+    with pytest.raises(WeightFileError, match="no header; a torch state_dict or module"):
+        load_normalizer_file(other)

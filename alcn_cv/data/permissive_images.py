@@ -133,11 +133,18 @@ def photo_files(folders: Sequence[str | os.PathLike]) -> list[Path]:
     folders only (what a configuration's check can afford).
 
     Raises:
-        InputError: a folder is missing or holds no image (one line naming it).
+        InputError: a folder is missing, a file (``photos`` lists folders: the run's checkpoint records each folder's
+            files, for a resumed run to find them again), or holds no image (one line naming it).
     """
     files = []
     for given in folders:
         folder = Path(given).expanduser()
+        if folder.is_file():
+            raise InputError(
+                f"photos: {given}: a file, not a folder: photos lists folders, and every image directly in each is "
+                f"trained on; give its folder (photos=['{folder.parent}']) or put the photographs meant in one of "
+                "their own"
+            )
         if not folder.is_dir():
             raise InputError(f"photos: {given}: folder not found")
         try:

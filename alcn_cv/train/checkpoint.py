@@ -28,7 +28,7 @@ from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.io import INTERRUPTS, atomic_write, interrupts_blocked, make_folder
 from alcn_cv.report import machine
-from alcn_cv.train.config import RealLightConfig, TrainConfig
+from alcn_cv.train.config import FOLDER_SETTINGS, RealLightConfig, TrainConfig, absolute_path
 from alcn_cv.train.models import JointModel, measure_output_range
 from alcn_cv.weight_file import save_normalizer_file
 
@@ -103,6 +103,18 @@ def run_folder(out: str | Path) -> Path:
     return make_folder(out)
 
 
+def _check_not_file(out: Path) -> None:
+    """Refuse a run folder that is a file (a weight file's path given for the folder), or lies under one."""
+    if out.exists() and not out.is_dir():
+        raise InputError(
+            f"{out} is a file, not a folder: --out names the run folder, into which the run writes its weight file "
+            f"and checkpoints; give a folder{f' (e.g. {out.parent})' if out.suffix == '.npz' else ''}"
+        )
+    file = next((p for p in out.parents if p.exists() and not p.is_dir()), None)
+    if file is not None:
+        raise InputError(f"{out} lies under the file {file}: --out names the run folder; give a folder")
+
+
 def _check_not_foreign(out: Path) -> None:
     others = out.is_dir() and any(not p.name.startswith(".") and p.suffix != ".toml" for p in out.iterdir())
     if others and not (out / "train.log").is_file():
@@ -125,9 +137,11 @@ def check_run_folder(out: str | Path, *, resume: bool = False, overwrite: bool =
     (:func:`earlier_run`).
 
     Raises:
-        InputError: either, named with the way out (``--resume``, ``--overwrite``, another ``--out``).
+        InputError: either, named with the way out (``--resume``, ``--overwrite``, another ``--out``); ``out`` is a
+            file or lies under one.
     """
     out = Path(out)
+    _check_not_file(out)
     _check_not_foreign(out)
     results = [] if resume or overwrite else earlier_run(out)
     if results:
@@ -189,11 +203,15 @@ def _differences(saved: dict[str, Any], cfg: TrainConfig | RealLightConfig) -> l
     checkpoint predates compared as its default, which that run had); a :class:`TrainConfig`'s model, data, seed and
     optimisation (not its run options)."""
     now = _config_dict(cfg)
+    # folders a checkpoint written before they were made absolute holds as given: taken from this working folder
     if isinstance(cfg, RealLightConfig):
         saved = {**_config_dict(RealLightConfig()), **saved}  # a key added since it was written: its default
+        saved.update({k: [absolute_path(p) for p in saved[k]] for k in FOLDER_SETTINGS})
         pairs = [(k, saved.get(k), v) for k, v in now.items()]
         changed = [(k, a, b) for k, a, b in pairs if a != b and not (k == "steps" and _larger(b, a))]
     else:
+        folders = {k: absolute_path(saved["data"].get(k, "")) for k in ("path", "val_path")}
+        saved = {**saved, "data": {**saved["data"], **folders}}
         pairs = [(f"{t}.{k}", saved[t].get(k), now[t][k]) for t in ("model", "data", "optim") for k in now[t]]
         changed = [(k, a, b) for k, a, b in [*pairs, ("seed", saved.get("seed"), now["seed"])] if a != b]
     return [f"{key} ({before!r} in the checkpoint, {after!r} now)" for key, before, after in sorted(changed)]

@@ -10,6 +10,7 @@ imported only when a command runs.
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import shlex
 import sys
@@ -49,9 +50,13 @@ def _command(name: str, args: argparse.Namespace, *extra: str, conf: str | None 
     return shlex.join(["alcn", name, "--conf", conf or args.conf, *extra, *_setting_words(args)])
 
 
-def _setting_words(args: argparse.Namespace) -> list[str]:
-    """The ``--set`` and ``--seed`` options given, as words of a command line."""
-    words = [word for item in args.settings for word in ("--set", item)]
+def _setting_words(args: argparse.Namespace, folders: dict[str, str] | None = None) -> list[str]:
+    """The ``--set`` and ``--seed`` options given, as words of a command line; with ``folders`` (key -> the run's
+    absolute folder), those keys set to them instead of as given (a command that works from any working folder)."""
+    folders = {k: v for k, v in (folders or {}).items() if v}
+    items = [item for item in args.settings if item.split("=", 1)[0].strip() not in folders]
+    items += [f"{key}={json.dumps(value)}" for key, value in folders.items()]  # a JSON string is a TOML one
+    words = [word for item in items for word in ("--set", item)]
     return words + ([] if args.seed is None else ["--seed", str(args.seed)])
 
 
@@ -77,7 +82,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "optim.lr=3e-4",
     )
     p.add_argument("--out", type=Path, default=Path("out/alcn"), help="run folder (default: out/alcn)")
-    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue from OUT/checkpoint.pt: give the run's --conf, --set and --seed again (the command printed on "
+        "Ctrl-C does); its seed and model.*, data.* and optim.* settings must equal the checkpoint's (optim.epochs "
+        "too), run.* (--device) and fewshot.* may change",
+    )
     p.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
     p.add_argument("--seed", type=int, help="seed (default: the preset's)")
     p.add_argument("--device", choices=("cpu", "cuda"), help="run.device (default: the preset's)")
@@ -153,6 +164,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--set \"scenes=['a', 'b']\" adds registered scenes (folders, or the webcam scenes courbevoie, frankfurt, "
         "panorama: academic research only). Writes OUT/gain_normalizer.npz, checkpoints, train.log and "
         "history.json; Ctrl-C saves a checkpoint at the step reached and prints the command that goes on from it. "
+        "The logged loss is the objective on pairs drawn afresh at each step, so its mean moves with the draws: each "
+        "line also gives the untrained start's loss on the draws of its last steps. "
         "The shipped alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`.",
     )
     _add_conf(r, "gain", "gain (the shipped alcn_normalizer_gain.npz)", "steps=600")
@@ -167,8 +180,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     r.add_argument(
         "--resume",
         action="store_true",
-        help="go on from OUT/checkpoint.pt, as if never stopped, with its settings (--set and --seed change them: "
-        "a larger steps trains longer); with --conf, the preset's settings, checked against the checkpoint's",
+        help="go on from OUT/checkpoint.pt, as if never stopped, with its settings; the one change it takes is a "
+        "larger steps (--set steps=N trains on to step N): any other --set, and --seed, must repeat the checkpoint's "
+        "value; with --conf, the preset's settings with --set and --seed, which must equal the checkpoint's alike; "
+        "--threads and --no-progress are free",
     )
     r.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
     r.set_defaults(func=_train_real_light)
@@ -178,7 +193,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="train the free-form U-Net baseline exactly as train-real-light trains the gain Normalizer",
         description="Train a small U-Net that outputs the normalized image (alcn_cv.train.unet_normalizer; Jenicek & "
         "Chum's jointly trained U-Net) with train-real-light's data, objective and budget (alcn_cv.train.unet): the "
-        "same keys, but net.* are the U-Net's (channels, levels, eps). Writes "
+        "same keys, but net.* are the U-Net's (channels, levels, eps), and the same log (the untrained start's loss "
+        "beside each line's). Writes "
         "OUT/unet_normalizer.npz, train.log and history.json; bench it as unet:weights=OUT/unet_normalizer.npz.",
     )
     _add_conf(
@@ -242,7 +258,7 @@ def _check_resume_or_overwrite(args: argparse.Namespace) -> None:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from alcn_cv.train.config import load_config
+    from alcn_cv.train.config import TRAIN_CONFS, load_config
 
     cfg = load_config(args.conf, _operational(args, seed="seed", device="run.device"))
     if args.print_config:
@@ -257,7 +273,9 @@ def _train(args: argparse.Namespace) -> int:
         distributed.shutdown()
     if result.status == "interrupted":
         epoch, step = result.stopped_at or (1, 0)
-        words = ["alcn", "train", "--out", str(args.out), "--resume", "--conf", args.conf, *_setting_words(args)]
+        conf = args.conf if args.conf in TRAIN_CONFS else str(Path(args.conf).absolute())  # a TOML file's path
+        words = ["alcn", "train", "--out", str(args.out.absolute()), "--resume", "--conf", conf]
+        words += _setting_words(args, folders={"data.path": cfg.data.path, "data.val_path": cfg.data.val_path})
         words += ["--device", args.device] if args.device else []
         words += ["--no-progress"] if args.no_progress else []
         return _interrupted(f"interrupted at epoch {epoch}, step {step}", result.interruption, words)
@@ -352,6 +370,7 @@ def _train_real_light(args: argparse.Namespace) -> int:
         cfg = preset(REAL_LIGHT_CONFS, conf, settings)
         command = _command("train-real-light", args, conf=conf)
     if args.print_config:  # a run checks its settings itself (training_run)
+        cfg = cfg.resolved()  # as the run records them
         cfg.check()
         return _print_config(cfg)
     from alcn_cv.nn import torch_threads
@@ -370,7 +389,8 @@ def _train_real_light(args: argparse.Namespace) -> int:
                 checkpoint=checkpoint,
             )
     except TrainingInterrupted as exc:
-        words = ["alcn", "train-real-light", "--out", str(args.out), "--resume"]  # its settings: the checkpoint's
+        # its settings: the checkpoint's (their folders absolute); the folder absolute too: from any working folder
+        words = ["alcn", "train-real-light", "--out", str(args.out.absolute()), "--resume"]
         words += ["--threads", str(args.threads)] if args.threads != 1 else []
         words += ["--no-progress"] if args.no_progress else []
         return _fit_interrupted(exc, words)
@@ -388,10 +408,17 @@ def _next_steps(weights: Path) -> str:
             "compare them with the shipped model on real light changes (needs the shared data, or --data DIR of "
             "your own registered scenes)",
             ["alcn", "bench", "relight", "--conf", "quick", "--methods", f"alcn,alcn:weights={w}"]
-            + ["--out", str(weights.parent / "bench")],
+            + ["--out", str(_beside(weights.parent, "bench"))],
         ),
     ]
     return "\n".join([f"weights: {w}", "next:", *(f"  {what}:\n    {shlex.join(words)}" for what, words in steps)])
+
+
+def _beside(run: Path, what: str) -> Path:
+    """The folder ``RUN_what`` beside the run folder ``run``: not inside it, where a later ``--overwrite`` of the run
+    would leave a report on weights it replaced."""
+    named = run if run.name not in ("", ".", "..") else run.absolute().resolve()
+    return named.with_name(f"{named.name}_{what}")
 
 
 def _train_unet(args: argparse.Namespace) -> int:
@@ -399,6 +426,7 @@ def _train_unet(args: argparse.Namespace) -> int:
 
     cfg = preset(UNET_CONFS, args.conf, _operational(args, seed="seed"))
     if args.print_config:
+        cfg = cfg.resolved()  # as the run records them
         cfg.check()
         return _print_config(cfg)
     from alcn_cv.train.real_light import TrainingInterrupted

@@ -18,7 +18,9 @@ The keys of :class:`TrainConfig` (also readable from a TOML file with the tables
 ``[data]`` -- the stage-1 windows (Phos-like, :mod:`alcn_cv.data.phos`)
     ``path`` (str): folder written by ``alcn data phos`` holding the training windows; empty:
     render ``n_train`` windows in the process. ``val_path`` (str): the same for the validation
-    windows; empty: render ``n_val``. ``n_train``, ``n_val`` (int): number of windows to render.
+    windows; empty: render ``n_val``; both made absolute by :func:`load_config` (:func:`absolute_path`), so that a
+    checkpoint names the same folders from any working folder. ``n_train``, ``n_val`` (int): number of windows to
+    render.
     ``seed`` (int, -1 = the run's ``seed``): seed of the rendered training windows (validation
     uses ``seed + 1_000_003``). ``n_objects`` (int), ``object_seed`` (int): the object catalogue
     (labels 1..n_objects). ``train_lighting``, ``val_lighting`` (list of str): lighting families
@@ -79,17 +81,19 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import difflib
 import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Self, TypeVar
 
 from alcn_cv.data.lighting import LIGHT_FAMILIES
 from alcn_cv.errors import InputError
 
 __all__ = [
     "DISTILL_CONFS",
+    "FOLDER_SETTINGS",
     "REAL_LIGHT_CONFS",
     "TRAIN_CONFS",
     "UNET_CONFS",
@@ -99,6 +103,7 @@ __all__ = [
     "RealLightConfig",
     "TrainConfig",
     "UNetConfig",
+    "absolute_path",
     "dump_toml",
     "load_config",
     "preset",
@@ -281,12 +286,12 @@ def _coerce(key: str, value: Any, default: Any) -> Any:
     else:
         ok = isinstance(value, type(default))
     if not ok:
-        # a value that is no TOML stays a string: the usual cause is a list of unquoted words
-        hint = (
-            " (a TOML value: quote the strings, e.g. ['a', 'b'])"
-            if isinstance(value, str) and value.startswith(("[", "{"))
-            else ""
-        )
+        # a value that is no TOML stays a string: the usual causes are a list of unquoted words and Python's booleans
+        hint = ""
+        if isinstance(value, str) and value.startswith(("[", "{")):
+            hint = " (a TOML value: quote the strings, e.g. ['a', 'b'])"
+        elif isinstance(value, str) and isinstance(default, bool):
+            hint = " (values are TOML: true or false, in lower case)"
         raise InputError(f"config key {key!r} must be {_type_name(default)}, got {value!r}{hint}")
     return value
 
@@ -299,7 +304,9 @@ def _merge(obj: Any, values: dict[str, Any], prefix: str = "") -> None:
     for key, value in values.items():
         full = prefix + key
         if key not in names:
-            raise InputError(f"unknown config key {full!r}; known keys here: {', '.join(sorted(names))}")
+            close = difflib.get_close_matches(key, sorted(names), n=1)
+            guess = f" did you mean {prefix + close[0]!r}?" if close else ""
+            raise InputError(f"unknown config key {full!r};{guess} known keys here: {', '.join(sorted(names))}")
         current = obj[key] if isinstance(obj, dict) else getattr(obj, key)
         if dataclasses.is_dataclass(current) or isinstance(current, dict):
             _merge(current, value, full + ".")
@@ -353,6 +360,15 @@ def preset(confs: dict[str, ConfigT], name: str, settings: Sequence[str | dict[s
     if name not in confs:
         raise InputError(f"unknown preset {name!r}; choose one of {', '.join(confs)}")
     return with_settings(confs[name], settings)
+
+
+def absolute_path(entry: str) -> str:
+    """A setting naming a folder, as an absolute path (``~`` expanded, a relative path taken from the working folder,
+    symbolic links resolved) where it names an existing folder; as given otherwise (empty, the name of a webcam scene,
+    a path that is missing or a file: the checks name it as the user wrote it). A run's settings pass through it
+    before its checkpoint and weight file record them, so that they name the same data from any working folder."""
+    path = Path(entry).expanduser()
+    return str(path.resolve()) if entry and path.is_dir() else entry
 
 
 def _check(cfg: TrainConfig) -> None:
@@ -496,6 +512,7 @@ def load_config(
             raise InputError(f"config file {path}: invalid TOML: {exc}") from None
         _merge(cfg, values)
     cfg = with_settings(cfg, [overrides] if isinstance(overrides, dict) else overrides or [])
+    cfg.data.path, cfg.data.val_path = absolute_path(cfg.data.path), absolute_path(cfg.data.val_path)
     _check(cfg)
     return cfg
 
@@ -550,9 +567,10 @@ class RealLightConfig:
             (:func:`~alcn_cv.data.permissive_images.training_photographs`) and of each of ``photos``, drawn with
             ``scenes`` as scenes of their own (0: none).
         photos: folders of your own photographs (any of jpg, png, tif, bmp...; gray or colour, 8 or 16 bits; ``~``
-            expanded, relative to the working folder; recorded as given), each image relit ``relit`` times like
-            the shipped photographs and **added** to them (their copies are unchanged: the ``i``-th photograph's
-            draws are seeded ``[seed, i]``, yours come after); every image at least ``crop`` pixels on a side.
+            expanded, relative to the working folder; a run records them absolute, :meth:`resolved`), each image
+            relit ``relit`` times like the shipped photographs and **added** to them (their copies are unchanged: the
+            ``i``-th photograph's draws are seeded ``[seed, i]``, yours come after); every image at least ``crop``
+            pixels on a side. A folder, not an image file: the run's checkpoint records each folder's files.
         shipped_photos: relight the permissive photographs too; ``false`` with ``photos`` trains on your
             photographs alone.
         light: the light changes of those copies (:data:`~alcn_cv.data.light_changes.LIGHTS`).
@@ -597,6 +615,12 @@ class RealLightConfig:
     save_every: int = 100
     net: dict[str, Any] = field(default_factory=_gain_network)
 
+    def resolved(self) -> Self:
+        """A copy whose folders (:data:`FOLDER_SETTINGS`) are absolute paths (:func:`absolute_path`: a webcam scene's
+        name, and a missing folder, stay as given): the settings a run fixes, checkpoints and records, so that
+        ``--resume`` finds the same data from any working folder."""
+        return dataclasses.replace(self, **{k: [absolute_path(p) for p in getattr(self, k)] for k in FOLDER_SETTINGS})
+
     def check(self) -> None:
         """What a run on these settings needs: scenes or relit photographs, a rendered share in [0, 1) with rendered
         scenes, at least 2 locations, 1 step and 1 step between snapshots, relit copies 0 or at least 2 (a copy is a
@@ -636,6 +660,9 @@ class RealLightConfig:
         if not self.temperature > 0:
             raise InputError(f"temperature must be > 0, got {self.temperature}")
 
+
+#: The settings of :class:`RealLightConfig` (and :class:`UNetConfig`) that list folders.
+FOLDER_SETTINGS = ("scenes", "photos", "rendered")
 
 #: ``alcn train-real-light`` presets: ``gain`` makes ``alcn_normalizer_gain.npz``.
 REAL_LIGHT_CONFS: dict[str, RealLightConfig] = {"gain": RealLightConfig()}

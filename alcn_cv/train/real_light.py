@@ -31,9 +31,11 @@ Command (the ``gain`` preset reads photographs that permit any use; the webcam s
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import copy
 import functools
+import hashlib
 import json
 import logging
 import re
@@ -51,12 +53,18 @@ from torch import nn
 from tqdm import tqdm
 from tqdm.contrib.logging import logging_redirect_tqdm
 
-from alcn_cv.data.permissive_images import folder_photographs, photo_files, relit_scenes, training_photographs
+from alcn_cv.data.permissive_images import (
+    Photograph,
+    folder_photographs,
+    photo_files,
+    relit_scenes,
+    training_photographs,
+)
 from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, to_gray, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.report import log_to, machine
 from alcn_cv.shared_data import shared_data_dir
@@ -75,6 +83,9 @@ from alcn_cv.train.models import CentreMixture
 from alcn_cv.weight_file import save_normalizer_file
 
 __all__ = [
+    "REFERENCE_STEPS",
+    "TEXTURED_SHARE",
+    "TEXTURE_LEVELS",
     "CentreDenseMixture",
     "RealLightConfig",
     "consistency_loss",
@@ -85,6 +96,7 @@ __all__ = [
     "draw_step",
     "fit",
     "anywhere_locations",
+    "check_photographs",
     "identification_loss",
     "initial_network",
     "harris_response",
@@ -95,6 +107,7 @@ __all__ = [
     "sample_locations",
     "source_scenes",
     "textured_locations",
+    "textured_share",
     "train_real_light",
     "training_scene",
     "training_run",
@@ -116,28 +129,55 @@ class TrainingScene:
     pad: int
 
 
-def textured_locations(frames: np.ndarray, patch: int, step: int = 4, quantile: float = 0.5) -> np.ndarray:
-    """Centres ``(K, 2)`` ``(y, x)`` of the ``patch x patch`` windows of a grid of ``step`` whose
-    texture (the median over frames of the window's gradient energy, robust to what moves) is at
-    least the ``quantile`` of all windows'.
-
-    Args:
-        frames: ``(T, H, W)`` float32.
-    """
-    if frames.ndim != 3:
-        raise InputError(f"frames must be (T, H, W), got {frames.shape}")
-    t, h, w = frames.shape
-    if min(h, w) < patch:
-        raise InputError(f"frames of {w}x{h} are smaller than the {patch}x{patch} patches")
+def _window_texture(frames: np.ndarray, patch: int, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The centres ``ys``, ``xs`` of the ``patch x patch`` windows of a grid of ``step`` over ``(T, H, W)`` float32
+    frames, and each window's texture: the median over frames of its mean gradient energy (Sobel's, squared)."""
+    h, w = frames.shape[1:]
     half = patch // 2
     ys, xs = np.meshgrid(np.arange(half, h - half + 1, step), np.arange(half, w - half + 1, step), indexing="ij")
     energies = []
     for frame in frames:
         energy = cv2.Sobel(frame, cv2.CV_32F, 1, 0) ** 2 + cv2.Sobel(frame, cv2.CV_32F, 0, 1) ** 2
         energies.append(cv2.boxFilter(energy, -1, (patch, patch), normalize=True)[ys, xs])
-    score = np.median(np.stack(energies), axis=0).ravel()
+    return ys, xs, np.median(np.stack(energies), axis=0)
+
+
+def textured_locations(frames: np.ndarray, patch: int, step: int = 4, quantile: float = 0.5) -> np.ndarray:
+    """Centres ``(K, 2)`` ``(y, x)`` of the ``patch x patch`` windows of a grid of ``step`` whose
+    texture (the median over frames of the window's gradient energy, robust to what moves) is at
+    least the ``quantile`` of all windows', and not zero.
+
+    Args:
+        frames: ``(T, H, W)`` float32.
+    """
+    if frames.ndim != 3:
+        raise InputError(f"frames must be (T, H, W), got {frames.shape}")
+    h, w = frames.shape[1:]
+    if min(h, w) < patch:
+        raise InputError(f"frames of {w}x{h} are smaller than the {patch}x{patch} patches")
+    ys, xs, texture = _window_texture(frames, patch, step)
+    score = texture.ravel()
     keep = (score >= np.quantile(score, quantile)) & (score > 0)
     return np.stack([ys.ravel()[keep], xs.ravel()[keep]], axis=1)
+
+
+#: A window of a photograph is textured when its RMS gradient (Sobel's, per pixel) reaches this many grey levels of
+#: 255 (:func:`textured_share`).
+TEXTURE_LEVELS = 1.0
+
+#: A photograph of the user's with a smaller share of textured windows (:func:`textured_share`) is warned about.
+TEXTURED_SHARE = 0.1
+
+
+def textured_share(image: np.ndarray, patch: int, step: int = 4) -> float:
+    """The share of the ``patch x patch`` windows of a grid of ``step`` over a uint8 photograph (gray ``HxW`` or BGR
+    ``HxWx3``, at least ``patch`` on a side) whose RMS gradient reaches :data:`TEXTURE_LEVELS` grey levels per pixel:
+    0 for a uniform image or a smooth ramp, close to 1 for a photograph textured all over."""
+    gray = to_gray(image) if image.ndim == 3 else image
+    _, _, energy = _window_texture(gray[None].astype(np.float32) / 255, patch, step)
+    # Sobel's 3x3 kernel answers 8 to a ramp of 1 per pixel; the box filter's rounding can leave tiny negatives
+    levels = np.sqrt(np.maximum(energy, 0)) / 8 * 255
+    return float((levels >= TEXTURE_LEVELS).mean())
 
 
 def sample_locations(candidates: np.ndarray, count: int, min_distance: int, rng: np.random.Generator) -> np.ndarray:
@@ -346,19 +386,92 @@ def source_scenes(
     photos: Sequence[str] = (),
     shipped_photos: bool = True,
     min_side: int = 0,
+    patch: int = RealLightConfig.patch,
 ) -> list[Scene]:
     """The registered scenes a gain Normalizer learns from: those of ``scenes`` (folders, or names of the shared
     ``webcam`` scenes) and, unless ``relit`` is 0, each photograph relit ``relit`` times
     (:func:`~alcn_cv.data.permissive_images.relit_scenes` with ``seed``, ``light`` and ``jitter``): the permissive
     ones (:func:`~alcn_cv.data.permissive_images.training_photographs`, unless ``shipped_photos`` is False), then those
     of the folders ``photos`` (:func:`~alcn_cv.data.permissive_images.folder_photographs`, each side at least
-    ``min_side``), so that adding photos leaves the permissive ones' copies as they were."""
+    ``min_side``), so that adding photos leaves the permissive ones' copies as they were.
+
+    The photographs of ``photos`` are checked as they are read (:func:`check_photographs`, the windows of the side
+    ``patch``): a warning for one with almost no texture, one of the same pixels as another, and a single one.
+
+    Raises:
+        InputError: as :func:`~alcn_cv.data.permissive_images.folder_photographs`, or a photograph of ``photos``
+            without texture (:func:`check_photographs`).
+    """
     sources = load_scenes(scene_dirs(scenes)) if scenes else []
     if not relit:
         return sources
     mine = folder_photographs(photos, min_side) if photos else []  # read first: a bad file fails before any relighting
     shipped = training_photographs(shared_data_dir()) if shipped_photos else []
+    if mine:
+        check_photographs(mine, shipped, patch, others=len(sources))
     return sources + relit_scenes(shipped + mine, relit, seed, light, jitter)
+
+
+def check_photographs(mine: Sequence[Photograph], shipped: Sequence[Photograph], patch: int, others: int = 0) -> None:
+    """Check the user's photographs ``mine`` before they are relit: an error for one without texture, a warning (a
+    line of log naming the file) for one with almost none, for one of the same pixels as another of ``mine`` or of
+    ``shipped`` (the permissive photographs of the run), and for a single one.
+
+    A photograph is without texture where fewer than 2 of its ``patch x patch`` windows hold any gradient (the rule of
+    :func:`training_scene`, which the noise of a relit copy would hide); with almost none where fewer than
+    :data:`TEXTURED_SHARE` of its windows are textured (:func:`textured_share`). Each photograph is a scene of its own,
+    drawn as often as any other: a copy makes its photograph count twice. ``others``: the scenes besides the
+    photographs (registered scenes), for the warning about a single one.
+
+    Raises:
+        InputError: a photograph without texture, its file named.
+    """
+    seen = {_pixels_hash(p.image): f"the shipped photograph {p.name}" for p in shipped}
+    for photo in mine:
+        gray = to_gray(photo.image) if photo.image.ndim == 3 else photo.image
+        if len(textured_locations(gray[None].astype(np.float32), patch)) < 2:
+            raise InputError(
+                f"photos: {photo.source}: no texture: its pixels are alike all over (fewer than 2 of its "
+                f"{patch}x{patch} windows hold any gradient), and the training identifies locations by their texture; "
+                "remove it"
+            )
+        share = textured_share(photo.image, patch)
+        if share < TEXTURED_SHARE:
+            logger.warning(
+                "photos: %s: almost no texture: %.0f%% of its %dx%d windows reach an RMS gradient of %g grey level per "
+                "pixel (warned below %.0f%%), and the training identifies locations by their texture",
+                photo.source,
+                100 * share,
+                patch,
+                patch,
+                TEXTURE_LEVELS,
+                100 * TEXTURED_SHARE,
+            )
+        key = _pixels_hash(photo.image)
+        if key in seen:
+            logger.warning(
+                "photos: %s: the same pixels as %s: each copy is a scene of its own, drawn as often as any other "
+                "photograph",
+                photo.source,
+                seen[key],
+            )
+        seen.setdefault(key, photo.source)
+    if len(mine) == 1:
+        total = len(shipped) + others + 1
+        logger.warning(
+            "photos: a single photograph of yours, %s: %s",
+            mine[0].source,
+            f"one of the {total} scenes each step draws from"
+            if total > 1
+            else "every step draws the same scene, its relit copies (shipped_photos=false and no scenes)",
+        )
+
+
+def _pixels_hash(image: np.ndarray) -> str:
+    """A digest of an image's pixels, its shape and type: equal for the same pixels."""
+    digest = hashlib.sha256(repr((image.shape, image.dtype.str)).encode())
+    digest.update(np.ascontiguousarray(image).tobytes())
+    return digest.hexdigest()
 
 
 def training_scenes(cfg: RealLightConfig) -> tuple[list[TrainingScene], list[TrainingScene]]:
@@ -374,6 +487,7 @@ def training_scenes(cfg: RealLightConfig) -> tuple[list[TrainingScene], list[Tra
         photos=cfg.photos,
         shipped_photos=cfg.shipped_photos,
         min_side=cfg.crop,
+        patch=cfg.patch,
     )
     scenes = [training_scene(s, cfg.crop // 2, cfg.patch, cfg.crop) for s in sources]
     rendered = [training_scene(s, cfg.crop // 2, cfg.patch, cfg.crop) for s in load_scenes(cfg.rendered)]
@@ -401,9 +515,14 @@ def objective(a: torch.Tensor, b: torch.Tensor, textured: int, cfg: RealLightCon
     return loss
 
 
+#: What a training step sees (:func:`draw_step`): a scene, two of its frames, textured centres and centres drawn
+#: anywhere (or None).
+Draw = tuple[TrainingScene, tuple[int, int], np.ndarray, np.ndarray | None]
+
+
 def draw_step(
     scenes: Sequence[TrainingScene], rendered: Sequence[TrainingScene], cfg: RealLightConfig, rng: np.random.Generator
-) -> tuple[TrainingScene, tuple[int, int], np.ndarray, np.ndarray | None]:
+) -> Draw:
     """What one training step sees: a scene (from ``rendered`` with probability ``cfg.rendered_fraction``), two
     of its frames, ``cfg.locations`` textured centres and ``cfg.anywhere`` centres drawn anywhere (or None)."""
     group = rendered if rendered and rng.random() < cfg.rendered_fraction else scenes
@@ -440,6 +559,28 @@ def pair_loss(
         net, crops, cfg.patch, [(slice(0, m), drawn(0)), (slice(m, 2 * m), drawn(m))]
     )
     return objective(outputs[:m], outputs[m:], n, cfg)
+
+
+#: The last steps of each logged block whose draws :func:`fit` scores the untrained start on, for reference.
+REFERENCE_STEPS = 10
+
+
+def _reference(
+    initial: nn.Module,
+    step_loss: Callable[..., torch.Tensor],
+    history: Sequence[dict],
+    draws: Sequence[Draw],
+    cfg: RealLightConfig,
+) -> str:
+    """``" (steps A-B: L; the untrained start on the same draws: U)"``: the training's mean loss over the last steps of
+    the block (those of ``draws``, at most the block's) and the untrained start's on their draws."""
+    n = min(len(draws), (history[-1]["step"] - 1) % cfg.save_every + 1)  # the block's, drawn in this process
+    with torch.no_grad():
+        start = float(np.mean([step_loss(initial, d[0], d[1], d[2], cfg, d[3]).item() for d in list(draws)[-n:]]))
+    trained = float(np.mean([h["loss"] for h in history[-n:]]))
+    first, last = history[-n]["step"], history[-1]["step"]
+    steps = f"steps {first}-{last}" if n > 1 else f"step {last}"
+    return f" ({steps}: {trained:.4f}; the untrained start on the same draws: {start:.4f})"
 
 
 class TrainingInterrupted(KeyboardInterrupt):
@@ -487,7 +628,9 @@ def train_real_light(
     log go into ``train.log`` all the same). An error after that is written into ``train.log`` before it propagates.
 
     Args:
-        cfg: the settings (the ``gain`` preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`, overridden or not).
+        cfg: the settings (the ``gain`` preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`, overridden or not);
+            its folders are made absolute (:meth:`~alcn_cv.train.config.RealLightConfig.resolved`) before the
+            checkpoint and the weight file record them, so that ``resume`` works from any working folder.
         out: the run folder.
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg`` (a resumed
             run given neither records its checkpoint's).
@@ -505,13 +648,15 @@ def train_real_light(
 
     Raises:
         InputError: settings out of range; ``out`` holds another run (without ``resume`` or ``overwrite``) or
-            other files; a folder of ``photos`` missing, or a photograph unreadable or smaller than the crop.
+            other files, or is a file; a folder of ``photos`` missing, or a photograph unreadable, smaller than the
+            crop or without texture (:func:`check_photographs`).
         DatasetError: a scene missing or unfit for training (frames smaller than the crop, no texture).
         WeightFileError: ``resume`` without a checkpoint, or with one of other settings (each named, both values)
             or other data (what changed named).
         TrainingInterrupted: Ctrl-C or SIGTERM; the checkpoint holds the last step done (:func:`fit`).
     """
     out = Path(out)
+    cfg = cfg.resolved()
     _check_settings(cfg)
     check_run_folder(out, resume=resume, overwrite=overwrite)
     data = data_record(cfg)
@@ -540,8 +685,7 @@ def train_real_light(
 def data_record(cfg: RealLightConfig) -> dict[str, Any]:
     """What a run of ``cfg`` reads, as its checkpoint records it for a resumed run to find again: the folders of
     ``cfg.scenes`` and ``cfg.rendered``, resolved, and, where relit, those of ``cfg.photos`` with the name and size of
-    each of their images (a photograph added or removed changes the next ones' draws). The weight file records the
-    settings as given (no absolute path of the machine)."""
+    each of their images (a photograph added or removed changes the next ones' draws)."""
     photos = [Path(p).expanduser().resolve() for p in cfg.photos] if cfg.relit else []
     return {
         "scenes": [str(p.resolve()) for p in scene_dirs(cfg.scenes)],
@@ -574,8 +718,8 @@ def _check_data(saved: dict[str, Any] | None, now: dict[str, Any], path: Path) -
             changes += [f"photos {folder}: {what} {', '.join(names)}" for what, names in named.items() if names]
     if changes:
         raise WeightFileError(
-            f"checkpoint {path} was written on other data: {'; '.join(changes)}; resume from the run's working folder "
-            "with its data as they were, or start a new run folder"
+            f"checkpoint {path} was written on other data: {'; '.join(changes)}; resume with its data as they were "
+            "(where the checkpoint holds relative folders, from the run's working folder), or start a new run folder"
         )
 
 
@@ -727,6 +871,7 @@ def _train(
 ) -> Path:
     rng = np.random.default_rng(cfg.seed)
     net = initial_network(cfg.seed, cfg.net)
+    initial = copy.deepcopy(net)  # the untrained start, the log's reference (fit)
     if start is not None:
         logger.info("resuming from step %d of %d", start["step"], cfg.steps)
         net.load_state_dict(start["net"])
@@ -748,7 +893,7 @@ def _train(
         }
         atomic_write(out / "checkpoint.pt", lambda f, state=state: torch.save(state, f))
 
-    seconds = fit(net, pair_loss, scenes, rendered, cfg, rng, out, save, "real-light", progress, start)
+    seconds = fit(net, pair_loss, scenes, rendered, cfg, rng, out, save, "real-light", progress, start, initial)
     return _save_weights(net, out / "gain_normalizer.npz", cfg, cfg.steps, seconds, record)
 
 
@@ -764,6 +909,7 @@ def fit(
     desc: str,
     progress: bool = True,
     start: dict[str, Any] | None = None,
+    initial: nn.Module | None = None,
 ) -> float:
     """The training loop of the gain Normalizer and of its baselines: ``cfg.steps`` steps of Adam at ``cfg.lr`` on
     ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to norm 5;
@@ -771,6 +917,11 @@ def fit(
     line of log and ``out/history.json``; ``start``, a checkpoint's state
     (:func:`~alcn_cv.train.checkpoint.load_checkpoint`), goes on after its step. Leaves ``net`` in eval mode. The
     progress bar shows the mean loss of the last ``cfg.save_every`` steps (the logged one); lines of log print above it.
+
+    Each step's loss is on a pair drawn afresh, so the logged mean moves with the block's draws as well as with the
+    training. For a reference, given ``initial`` (the untrained start, left as it is), each line of log also gives the
+    mean loss of the block's last :data:`REFERENCE_STEPS` steps (at most; those of this process) and the untrained
+    start's on the same draws (without gradients: the training's draws and weights are untouched).
 
     Ctrl-C and SIGTERM wait while a step updates the weights and while a save writes
     (:func:`~alcn_cv.train.checkpoint.interrupts_deferred`); then the steps done since the last save are saved as
@@ -802,6 +953,13 @@ def fit(
             write_json(out / "history.json", history)
             saved = step  # within: a Ctrl-C held by the save is raised after it, not saved again
 
+    recent_draws: collections.deque[Draw] = collections.deque(maxlen=REFERENCE_STEPS)  # for the reference
+    logger.info(
+        "the loss of each step is on a pair drawn afresh: a block's mean moves with its draws%s",
+        f"; each line compares its last steps ({REFERENCE_STEPS} at most) with the untrained start on the same draws"
+        if initial is not None
+        else "",
+    )
     bar = tqdm(
         range(first, cfg.steps + 1), desc=desc, unit="step", initial=first - 1, total=cfg.steps, disable=not progress
     )
@@ -810,6 +968,7 @@ def fit(
             for step in bar:
                 step_start = (rng.bit_generator.state, torch.get_rng_state())
                 scene, frames, centres, anywhere = draw_step(scenes, rendered, cfg, rng)
+                recent_draws.append((scene, frames, centres, anywhere))
                 loss = step_loss(net, scene, frames, centres, cfg, anywhere)
                 opt.zero_grad()
                 loss.backward()
@@ -823,12 +982,14 @@ def fit(
                 mean = float(np.mean(recent))
                 bar.set_postfix_str(f"mean loss {mean:.3f}")
                 if step % cfg.save_every == 0 or step == cfg.steps:
+                    reference = "" if initial is None else _reference(initial, step_loss, history, recent_draws, cfg)
                     logger.info(
-                        "step %d: mean loss %.4f over the last %d steps, %.0f s",
+                        "step %d: mean loss %.4f over the last %d steps, %.0f s%s",
                         step,
                         mean,
                         len(recent),
                         time.perf_counter() - began,
+                        reference,
                     )
                     save_all(step)
     except KeyboardInterrupt as exc:

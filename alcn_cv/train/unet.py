@@ -24,6 +24,7 @@ Command::
 
 from __future__ import annotations
 
+import copy
 import functools
 import logging
 from collections.abc import Sequence
@@ -102,7 +103,8 @@ def train_unet(
 
     Args:
         cfg: the settings (a preset of :data:`~alcn_cv.train.config.UNET_CONFS`); ``cfg.net`` holds the
-            :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer` arguments.
+            :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer` arguments. Its folders are recorded absolute
+            (:meth:`~alcn_cv.train.config.RealLightConfig.resolved`).
         out: the run folder.
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
         progress: show a progress bar.
@@ -113,10 +115,12 @@ def train_unet(
         The weight file ``out/unet_normalizer.npz``.
 
     Raises:
-        InputError: settings out of range; ``out`` holds an earlier run (without ``overwrite``) or other files.
+        InputError: settings out of range; ``out`` holds an earlier run (without ``overwrite``) or other files, or is
+            a file.
         TrainingInterrupted: Ctrl-C or SIGTERM (:func:`~alcn_cv.train.real_light.fit`); no checkpoint is written
             (its ``checkpoint`` is False): ``history.json`` holds the steps done.
     """
+    cfg = cfg.resolved()
     cfg.check()
     if cfg.crop < cfg.patch:
         raise InputError(f"need crop >= patch, got crop {cfg.crop} and patch {cfg.patch}")
@@ -130,9 +134,10 @@ def _train(cfg: UNetConfig, out: Path, record: dict[str, Any], progress: bool) -
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
     net = UNetNormalizer(**cfg.net)
+    initial = copy.deepcopy(net)  # the untrained start, the log's reference (fit)
     scenes, rendered = training_scenes(cfg)
     logger.info("U-Net %s: %d parameters", net.config, sum(p.numel() for p in net.parameters()))
-    seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, None, "unet", progress)
+    seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, None, "unet", progress, initial=initial)
     meta = net.file_meta(
         trained=True,
         output_range=output_range(net, scenes + rendered),
