@@ -31,7 +31,8 @@ def small_data(tmp_path_factory):
     from alcn_cv.data.detect import generate
 
     out = tmp_path_factory.mktemp("bench") / "detect_small"
-    generate(out, conf="small", n_test=2, progress=False)
+    # as many validation images as test images would let a tuning scored on the test images pass for one on them
+    generate(out, conf="small", n_test=2, n_val=3, progress=False)
     return out
 
 
@@ -160,7 +161,7 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     tuned = saved["tuned"]["1"]["dog"]
     assert [t["params"] for t in tuned["trials"]] == D.TUNING_GRIDS["dog"]
     assert all(0 <= t["val_auc"] <= 1 and set(t["val_auc_by_policy"]) == {"raw", "local"} for t in tuned["trials"])
-    assert saved["runs"]["dog|1|local|0"]["params"] == tuned["params"] and saved["val_images"] == [1, 2]
+    assert saved["runs"]["dog|1|local|0"]["params"] == tuned["params"] and saved["val_images"] == [1, 2, 3]
     assert "error" in saved["summary"]["he|1|raw"]
     assert saved["summary"]["dog|1|local"]["seeds"] == [0]
     assert "failed" in (out / "detect.md").read_text()
@@ -185,8 +186,15 @@ def test_tuning_chooses_the_best_validation_auc_and_the_runs_use_it(small_data, 
     known = {1: [0.5, 0.6, 0.8, 0.7, 0.8, 0.4], 2: [0.5, 0.9, 0.3, 0.3, 0.3, 0.6]}
     calls = []
 
+    data = detect_data.load_data(small_data)
+    validation = detect_data.read_images(data.val, data.working_scale)
+
     def scored(state, method, n_real, params, val_images):
         calls.append((method, n_real, params, len(val_images)))
+        # the validation images, normalized with the setting scored
+        expected = D._normalize_images(D.create_normalization(method, params), validation)
+        assert [t.id for t in val_images] == [t.id for t in expected]
+        assert all(np.array_equal(t.image, e.image) for t, e in zip(val_images, expected))
         auc = known[n_real][grid.index(params)]
         return {"local": auc, "raw": auc - 0.2}
 
@@ -195,7 +203,7 @@ def test_tuning_chooses_the_best_validation_auc_and_the_runs_use_it(small_data, 
         methods=["none", "dog"], real_images=[1, 2], policies=["local", "raw"], tune=True, **TINY
     )
     result = D.main(small_data, tmp_path / "out", settings, progress=False)
-    assert calls == [("dog", n, p, 2) for n in (1, 2) for p in grid]  # every setting, on both validation images
+    assert calls == [("dog", n, p, 3) for n in (1, 2) for p in grid]  # every setting, on the 3 validation images
     for n_real, best in ((1, 2), (2, 1)):
         tuned = result["tuned"][str(n_real)]["dog"]
         assert tuned["params"] == grid[best]
@@ -204,10 +212,10 @@ def test_tuning_chooses_the_best_validation_auc_and_the_runs_use_it(small_data, 
             assert result["runs"][S.run_key("dog", n_real, policy, 0)]["params"] == grid[best]
     assert result["runs"][S.run_key("none", 1, "local", 0)]["params"] == {}
     md = (tmp_path / "out" / "detect.md").read_text()
-    assert "dog tuned by detection on the validation images" in md and "the 2 validation images (`val.json`" in md
+    assert "dog tuned by detection on the validation images" in md and "the 3 validation images (`val.json`" in md
     assert "| 1 | `dog:sigma1=1.0:sigma2=2.0` | 0.700 | 0.400 | 0.300-0.700 |" in md
     saved = json.loads((tmp_path / "out" / "detect.json").read_text())
-    assert saved["tuned"]["2"]["dog"]["params"] == grid[1] and saved["val_images"] == [1, 2]
+    assert saved["tuned"]["2"]["dog"]["params"] == grid[1] and saved["val_images"] == [1, 2, 3]
 
 
 def test_validation_aucs_train_as_the_first_seeds_runs(small_data, monkeypatch):

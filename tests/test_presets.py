@@ -51,10 +51,6 @@ REMOVED = {
     "model": {"activation": "tanh", "init": "dog"},
 }
 
-#: Keys the gain-lite file's header records under their former name: ``rendered`` was a count of scenes to render,
-#: where ``rendered`` of the real-light presets lists folders of rendered scenes.
-RENAMED = {"rendered": "n_rendered"}
-
 
 def test_paper_preset_is_the_shipped_paper_file():
     recorded = load_normalizer_file(WEIGHTS / "alcn_normalizer.npz").meta["training"]["config"]
@@ -87,8 +83,7 @@ def test_gain_preset_is_the_shipped_gain_file():
 def test_distill_presets_are_the_shipped_students(name, file, teacher):
     meta = load_normalizer_file(WEIGHTS / file).meta
     cfg = dataclasses.asdict(preset(DISTILL_CONFS, name))
-    recorded = meta["distillation"]["settings"]
-    settings = {RENAMED.get(k, k): v for k, v in recorded.items() if k not in ("frames", "teacher")}
+    settings = {k: v for k, v in meta["distillation"]["settings"].items() if k not in ("frames", "teacher")}
     _recorded_equal(settings, cfg, "distillation.settings")
     assert meta["teacher"]["file"] == teacher
     from alcn_cv.train.distill import teacher_file

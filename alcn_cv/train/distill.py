@@ -312,10 +312,10 @@ class _GridSample:
 
 
 def _gain_frames(
-    scenes: Sequence[Scene], rendered: int, seed: int, progress: bool
+    scenes: Sequence[Scene], n_rendered: int, seed: int, progress: bool
 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Training and validation frames, ``(H, W)`` float32 in [0, 1]: the frames of the real
-    scenes (every :data:`_GAIN_VAL_EVERY`-th held out) and of ``rendered`` rendered scenes
+    scenes (every :data:`_GAIN_VAL_EVERY`-th held out) and of ``n_rendered`` rendered scenes
     (the last one held out when there are two or more)."""
     from alcn_cv.data.relief_scenes import render_scene
 
@@ -324,9 +324,10 @@ def _gain_frames(
     for scene in scenes:
         for i, frame in enumerate(scene.unit_frames()):
             (val if i % _GAIN_VAL_EVERY == _GAIN_VAL_EVERY - 1 else train).append(frame)
-    for i in tqdm(range(rendered), desc="render scenes", unit="scene", disable=not progress):
+    for i in tqdm(range(n_rendered), desc="render scenes", unit="scene", disable=not progress):
         stack, _ = render_scene(np.random.default_rng([seed, i]), _RENDERED_SIZE, _RENDERED_FRAMES)
-        (val if i == rendered - 1 and rendered > 1 else train).extend(stack.astype(np.float32) * np.float32(1 / 255))
+        held_out = i == n_rendered - 1 and n_rendered > 1
+        (val if held_out else train).extend(stack.astype(np.float32) * np.float32(1 / 255))
     return train, val
 
 
@@ -394,8 +395,8 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
         The student (eval mode) and a record of the run (settings, time, fidelity).
     """
     cfg = cfg or GainDistillConfig()
-    seed, epochs, rendered, channels, dilations = cfg.seed, cfg.epochs, cfg.n_rendered, cfg.channels, cfg.dilations
-    if epochs < 1 or rendered < 0 or channels < 1 or not dilations:
+    seed, epochs, n_rendered, channels, dilations = cfg.seed, cfg.epochs, cfg.n_rendered, cfg.channels, cfg.dilations
+    if epochs < 1 or n_rendered < 0 or channels < 1 or not dilations:
         raise InputError("epochs and channels must be >= 1, n_rendered >= 0, and dilations non-empty")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -406,7 +407,7 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
     teacher_net = normalizer_from_file(teacher_weights).eval()
     start = time.perf_counter()
     scenes = source_scenes(cfg.scenes, cfg.relit, seed, cfg.light)
-    train_frames, val_frames = _gain_frames(scenes, rendered, seed, progress)
+    train_frames, val_frames = _gain_frames(scenes, n_rendered, seed, progress)
     if not val_frames:
         raise DatasetError(
             f"no validation frames: a scene needs {_GAIN_VAL_EVERY} frames or more, or use 2 rendered scenes or more"
