@@ -209,18 +209,19 @@ def check_writable(path: str | os.PathLike) -> None:
 
 
 def check_no_earlier_output(paths: Iterable[str | os.PathLike], overwrite: bool) -> None:
-    """Check, before the work, that a command replaces no earlier run's output unasked: unless ``overwrite``, none of
-    the files ``paths`` (those the command writes) may exist.
+    """Check, before the work, that a command replaces no earlier output unasked: unless ``overwrite``, none of the
+    files ``paths`` (those the command writes) may exist.
 
     Raises:
-        InputError: one of ``paths`` exists and not ``overwrite``; one line naming the first that exists and the
-            ways out (``--overwrite``, another ``--out``).
+        InputError: some of ``paths`` exist and not ``overwrite``; one line naming the first, how many more, and
+            ``--overwrite``.
     """
-    if overwrite:
+    existing = [path for path in map(Path, paths) if path.exists()]
+    if overwrite or not existing:
         return
-    for path in map(Path, paths):
-        if path.exists():
-            raise InputError(f"{path} exists, from an earlier run: --overwrite replaces it, or give another --out")
+    if len(existing) > 1:
+        raise InputError(f"{existing[0]} and {len(existing) - 1} more exist (--overwrite replaces them)")
+    raise InputError(f"{existing[0]} exists (--overwrite replaces it)")
 
 
 def with_suffix(path: str | os.PathLike, suffix: str, what: str) -> Path:

@@ -396,6 +396,7 @@ def opencv_network(weight_file: NormalizerFile, grid_stride: int | None, spec: M
     missing = [
         name
         for name, array in weight_file.arrays.items()
+        # the 0-d arrays (tau, the floor's scale) are not in the graph: the runtime reads them from the weight file
         if array.ndim and array.astype("<f4", copy=False).tobytes() not in exported
     ]
     if missing:

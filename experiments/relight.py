@@ -26,7 +26,11 @@ def main() -> None:
     parser = command_line(__doc__)
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
     add_part_option(parser, PROTOCOLS)
-    parser.add_argument("--quick", action="store_true", help="`alcn bench relight`'s quick protocol")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="`alcn bench relight`'s quick protocol, `--conf quick`, spelled out as its options in the recorded command",
+    )
     args = parser.parse_args()
     quick = quick_protocol() if args.quick else []
     seeds = [str(seed) for seed in args.seeds]

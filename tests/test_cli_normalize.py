@@ -373,7 +373,7 @@ def test_counts_and_messages_read_as_sentences(tmp_path, frame, caplog, capsys):
     assert (
         capsys.readouterr()
         .err.strip()
-        .endswith(f"the output {tmp_path / 'out' / 'a.png'} and 1 more exist (--overwrite replaces them)")
+        .endswith(f": {tmp_path / 'out' / 'a.png'} and 1 more exist (--overwrite replaces them)")
     )
     assert main(["normalize", str(src / "a.png"), str(tmp_path / "out" / "a.png"), "-m", "none"]) == 2
     assert capsys.readouterr().err.strip().endswith("a.png exists (--overwrite replaces it)")

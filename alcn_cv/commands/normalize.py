@@ -21,6 +21,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.extras import require
 from alcn_cv.io import (
     IMAGE_SUFFIXES,
+    check_no_earlier_output,
     check_writable,
     is_video,
     list_images,
@@ -67,11 +68,7 @@ def _check_output(src: Path, dst: Path, overwrite: bool, in_place: bool) -> list
         )
     else:
         outputs = [dst]
-    existing = [path for path in outputs if path.exists()]
-    if existing and not overwrite:
-        if len(existing) > 1:
-            raise InputError(f"the output {existing[0]} and {len(existing) - 1} more exist (--overwrite replaces them)")
-        raise InputError(f"the output {existing[0]} exists (--overwrite replaces it)")
+    check_no_earlier_output(outputs, overwrite)
     check_writable(outputs[0])
     return outputs
 
