@@ -29,7 +29,7 @@ def main() -> None:
     parser.add_argument(
         "--quick",
         action="store_true",
-        help="`alcn bench relight`'s quick protocol, `--conf quick`, spelled out as its options in the recorded command",
+        help="`alcn bench relight`'s quick protocol (`--conf quick`, spelled out in the recorded command)",
     )
     args = parser.parse_args()
     quick = quick_protocol() if args.quick else []
