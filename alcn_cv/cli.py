@@ -125,27 +125,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def add_conf_options(parser: argparse.ArgumentParser, default: str | None, presets: str, example: str) -> None:
-    """``--conf NAME`` (``args.conf``, required without a ``default``) and ``--set KEY=VALUE`` (``args.settings``), the
-    one way every training command takes a named preset and overrides of its keys; ``presets`` says what each preset
-    makes, ``example`` is a ``--set`` item of its keys."""
-    parser.add_argument(
-        "--conf",
-        default=default,
-        required=default is None,
-        metavar="NAME",
-        help=f"the preset: {presets}" + (f" (default {default})" if default else ""),
-    )
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        dest="settings",
-        help=f"override one key of the preset, dotted, the value as TOML, e.g. --set {example} (repeatable)",
-    )
-
-
 class _PresetListFormatter(argparse.HelpFormatter):
     """argparse's help formatter, but each line of a description or an epilog is filled alone: the epilog of
     :func:`add_conf_option` keeps one line per preset, a longer one wrapped under its summary (an indented line's
@@ -162,17 +141,50 @@ class _PresetListFormatter(argparse.HelpFormatter):
         return "\n".join(lines)
 
 
-def add_conf_option(parser: argparse.ArgumentParser, summaries: Mapping[str, str], default: str = "default") -> None:
-    """``--conf NAME`` (``args.conf``): the stage's preset, a key of ``summaries`` (its presets, each with what it
-    is), listed one line each in the ``--help``; the other options override its values. An unknown name is
-    argparse's error naming the presets (exit code 2)."""
+def add_conf_option(
+    parser: argparse.ArgumentParser,
+    summaries: Mapping[str, str],
+    default: str | None = "default",
+    *,
+    required: bool = False,
+    example: str | None = None,
+    or_file: str | None = None,
+) -> None:
+    """``--conf NAME`` (``args.conf``), the one way every command takes a named preset.
+
+    Args:
+        parser: the command's parser; its epilog becomes the list of the presets, one line each, a longer one
+            wrapped under its summary.
+        summaries: the presets' names, each with what the preset is (the stage's ``CONF_SUMMARIES``), in order.
+        default: the preset without ``--conf``; None: no preset unless given (or ``--conf`` is ``required``).
+        required: ``--conf`` must be given (a command without a default preset).
+        example: a ``KEY=VALUE`` of the presets' keys: the command also takes ``--set KEY=VALUE``
+            (``args.settings``, a list, in order), the overrides of the preset's keys
+            (:func:`alcn_cv.presets.with_settings`); None: only the command's other options override its values.
+        or_file: what else ``--conf`` takes, a file (``alcn train``: a TOML file of its keys), said in its help.
+
+    The name is not checked here: the command looks it up (:func:`alcn_cv.presets.preset` or
+    :func:`~alcn_cv.presets.preset_named`), whose error for an unknown name, ``unknown preset 'huge'; choose one of
+    a, b, c``, :func:`main` prints on one line with exit code 2, the same from every command and from Python.
+    """
+    also = f", or {or_file}" if or_file else ""
+    given = "required" if required else f"default: {default or 'none'}"
     parser.add_argument(
         "--conf",
-        choices=tuple(summaries),
         default=default,
+        required=required,
         metavar="NAME",
-        help=f"the preset, one of those listed below (default: {default}); the other options override its values",
+        help=f"the preset, one of those listed below{also} ({given}); the options given override its values",
     )
+    if example:
+        parser.add_argument(
+            "--set",
+            action="append",
+            default=[],
+            metavar="KEY=VALUE",
+            dest="settings",
+            help=f"override one key of the preset, dotted, the value as TOML, e.g. --set {example} (repeatable)",
+        )
     width = max(map(len, summaries))
     rows = [f"  {name:<{width}}  {what}" for name, what in summaries.items()]
     parser.epilog = "\n".join(["presets (--conf NAME):", *rows])

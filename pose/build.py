@@ -40,6 +40,7 @@ from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.extras import require
 from alcn_cv.formats.colmap import camera_from_pycolmap
 from alcn_cv.io import check_writable
+from alcn_cv.presets import preset_named
 from pose import model as part_model
 from pose.box import box_size as box_edge_lengths
 from pose.box_fit import fit_box, size_errors
@@ -175,14 +176,9 @@ def conf_settings(conf: str | None, *, video: bool = True, **given: Any) -> dict
     False
 
     Raises:
-        InputError: an unknown preset, naming those there are.
+        InputError: an unknown preset (:func:`~alcn_cv.presets.preset_named`).
     """
-    if conf is None:
-        preset: Mapping[str, Any] = {}
-    elif conf in CONFS:
-        preset = CONFS[conf]
-    else:
-        raise InputError(f"unknown preset {conf!r}; choose one of {', '.join(CONFS)}")
+    preset: Mapping[str, Any] = {} if conf is None else preset_named(CONFS, conf)
     settings = {k: v for k, v in preset.items() if video or k not in PRESET_VIDEO_SETTINGS}
     if given.get("K") is not None or given.get("camera") is not None:
         settings.pop("K", None)

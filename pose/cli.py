@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from alcn_cv.cli import add_conf_options, add_progress_option, add_seeds_option, number_at_least
+from alcn_cv.cli import add_conf_option, add_progress_option, add_seeds_option, number_at_least
 from alcn_cv.errors import InputError
 
 
@@ -94,7 +94,7 @@ def _track(args: argparse.Namespace) -> int:
 
 def _recipe(args: argparse.Namespace):
     """The corner recipe of ``--conf`` with the ``--set`` items applied."""
-    from alcn_cv.train.config import preset
+    from alcn_cv.presets import preset
     from pose.corner_train import CONFS
 
     recipe = preset(CONFS, args.conf, args.settings)
@@ -188,11 +188,11 @@ def _planar(args: argparse.Namespace) -> int:
 
 
 def _add_recipe(parser: argparse.ArgumentParser, default: str) -> None:
-    """:func:`~alcn_cv.cli.add_conf_options` of the corner detector's training, for every command that trains it."""
-    from pose.corner_train import CONFS
+    """:func:`~alcn_cv.cli.add_conf_option` of the corner detector's training (:data:`pose.corner_train.CONFS`), with
+    ``--set`` overrides of its keys, for every command that trains it."""
+    from pose.corner_train import CONF_SUMMARIES
 
-    presets = "the corner detector's training (pose.corner_train.CONFS: " + ", ".join(sorted(CONFS)) + ")"
-    add_conf_options(parser, default, presets, "iterations=1000")
+    add_conf_option(parser, CONF_SUMMARIES, default, example="iterations=1000")
 
 
 #: ``--normalization``'s help: the pose commands normalize nothing unless asked.
@@ -202,16 +202,12 @@ NORMALIZATION_HELP = (
 )
 
 
-def _build_presets() -> str:
-    """The epilog of ``alcn pose build --help``: the presets of :data:`pose.build.CONFS`, one line each, with their
-    options (the camera's rounded)."""
+def _build_summaries() -> dict[str, str]:
+    """The presets of ``alcn pose build`` (:data:`pose.build.CONFS`), each with what it is and the options it stands
+    for (the camera's rounded), for its ``--help``."""
     from pose.build import CONF_SUMMARIES, CONFS, build_options
 
-    width = max(map(len, CONFS))
-    lines = [
-        "presets (--conf NAME; an option given on the command line overrides the preset's value, and --K or --camera "
-        "its camera):"
-    ]
+    summaries = {}
     for name, settings in CONFS.items():
         words = []
         for key, value in settings.items():
@@ -219,8 +215,8 @@ def _build_presets() -> str:
                 words += ["--K", *(f"{v:.1f}" for v in (value[0, 0], value[1, 1], value[0, 2], value[1, 2]))]
             else:
                 words += build_options({key: value})
-        lines.append(f"  {name:<{width}}  {CONF_SUMMARIES[name]}: {' '.join(words)}")
-    return "\n".join(lines)
+        summaries[name] = f"{CONF_SUMMARIES[name]}: {' '.join(words)}"
+    return summaries
 
 
 def _add_planar(sub: argparse._SubParsersAction) -> None:
@@ -418,7 +414,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b = sub.add_parser(
         "build",
         help="part model from a registered sequence or a video",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Triangulate features of the training images (pycolmap, known poses held "
         "fixed; or incremental reconstruction for an unregistered video), fit the box (open3d) "
         "and write MODEL.npz, MODEL.ply and MODEL_cameras.png. A box fit more than 5% off the known size is "
@@ -429,7 +424,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "A video of a hand-held object before a static camera builds with --conf static-camera: without it the "
         "focal length is held fixed and the background's features are kept (the shared cookie box built so is "
         "11.8% off its size, 2.7% with the preset). Walkthrough: docs/pose.md.",
-        epilog=_build_presets(),
     )
     b.add_argument("input", help="BOP scene folder, COLMAP model folder, Middlebury set, or a video file")
     b.add_argument("output", help="part model to write (.npz)")
@@ -445,12 +439,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "reconstruction models (the frames are not undistorted); the model stores both, and `alcn pose track` "
         "tracks with them",
     )
-    b.add_argument(
-        "--conf",
-        metavar="NAME",
-        help="a preset of these options, listed below (pose.build.CONFS: " + ", ".join(BUILD_CONFS) + "); the "
-        "options given override its values (default: none, the defaults below)",
-    )
+    add_conf_option(b, _build_summaries(), None)
     b.add_argument(
         "--step", type=int, help=f"use every N-th frame of a video (default: the preset's, else {VIDEO_STEP})"
     )

@@ -38,6 +38,7 @@ logger = logging.getLogger(__name__)
 __all__ = [
     "CornerRecipe",
     "CONFS",
+    "CONF_SUMMARIES",
     "corner_loss",
     "export_onnx",
     "fit",
@@ -129,6 +130,13 @@ class CornerRecipe:
 CONFS: dict[str, CornerRecipe] = {
     "box": CornerRecipe(),
     "planar": CornerRecipe(scale=0.5, copies=59, novel_views=0.0, backgrounds=0.0),
+}
+
+#: One line per preset of :data:`CONFS`, for the ``--help`` of the commands that train the corner detector.
+CONF_SUMMARIES: dict[str, str] = {
+    "box": "a box from a registered sequence: its views and augmented copies (nearby viewpoints, new backgrounds, "
+    "intensity changes)",
+    "planar": "a planar target from one image: more copies, no viewpoint or background changes, frames at half size",
 }
 
 

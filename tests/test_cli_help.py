@@ -76,12 +76,23 @@ def _commands_with(option: str) -> dict[str, argparse.Action]:
     return {c: a for c, p in COMMANDS.items() for a in p._actions if option in a.option_strings}
 
 
+@pytest.mark.parametrize("command", sorted(_commands_with("--conf")))
+def test_every_preset_is_taken_one_way(command):
+    """Every --conf is alcn_cv.cli.add_conf_option's: the name looked up by the command (no argparse choices, whose
+    error was another message) and the presets listed below the options, one line each."""
+    parser, conf = COMMANDS[command], _commands_with("--conf")[command]
+    assert conf.choices is None and conf.metavar == "NAME" and "one of those listed below" in conf.help
+    assert parser.epilog.startswith("presets (--conf NAME):\n  ")
+
+
 def test_one_option_name_for_each_idea():
     """The same idea has the same option in every command (a newcomer's walk-through found three that had two)."""
     # a preset is --conf NAME in every command that has presets; a size in pixels says what it measures (--side,
     # --frame-size)
     stages = {"alcn data detect", "alcn data pose", "alcn bench detect", "alcn bench relight", "alcn bench speed"}
-    assert stages | {"alcn train", "alcn distill", "alcn pose build"} <= set(_commands_with("--conf"))
+    training = {"alcn train", "alcn train-real-light", "alcn train-unet", "alcn distill"}
+    pose = {"alcn pose build", "alcn pose train-corners", "alcn pose eval", "alcn pose planar"}
+    assert stages | training | pose == set(_commands_with("--conf"))
     # the keypoints per image: --n-features
     assert {"alcn calib register", "alcn pose build", "alcn pose track", "alcn bench relight"} <= set(
         _commands_with("--n-features")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from alcn_cv.cli import main
@@ -95,27 +97,30 @@ def test_build_help_says_what_the_box_options_and_the_camera_mean(capsys):
 
 def test_build_help_lists_its_presets_one_line_each(capsys):
     """The settings of a hand-held object before a static camera were in no --help: each preset of pose.build.CONFS is
-    one line of the epilog with its summary and options, and the help says that an option given overrides it."""
+    one entry of the epilog (its line, wrapped under it) with its summary and options, and the help says that an
+    option given overrides it."""
     from pose import build
 
     with pytest.raises(SystemExit):
         main(["pose", "build", "--help"])
     out = capsys.readouterr().out
-    lines = out.splitlines()
+    listed = out[out.index("presets (--conf NAME):") :]
+    entries = {m[1]: " ".join(m[0].split()) for m in re.findall(r"(^  (\S+)  .*\n(?:   +\S.*\n)*)", listed, re.M)}
+    assert list(entries) == list(build.CONFS)
     for name, summary in build.CONF_SUMMARIES.items():
-        (line,) = [line for line in lines if line.startswith(f"  {name}  ")]
-        assert summary in line and "--step 10" in line and "--motion-mask" in line and "--refine-focal" in line
-    assert "--K 1578.5 1771.8 320.0 240.0" in out and "--max-frames 46" in out
+        entry = entries[name]
+        assert summary in entry and "--step 10" in entry and "--motion-mask" in entry and "--refine-focal" in entry
+    assert "--K 1578.5 1771.8 320.0 240.0" in entries["cookie-box"] and "--max-frames 46" in entries["cookie-box"]
     flat = " ".join(out.split())
-    assert "an option given on the command line overrides the preset's value" in flat
+    assert "the options given override its values" in flat
     assert "--conf static-camera" in flat and "(default: the preset's, else 4000)" in flat
     assert "--motion-mask, --no-motion-mask" in flat
 
 
 def test_an_unknown_build_preset_is_one_line(tmp_path, capsys):
     assert main(["pose", "build", str(tmp_path / "box.mp4"), str(tmp_path / "m.npz"), "--conf", "nope"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "unknown preset 'nope'" in err and "static-camera, cookie-box" in err
+    err = capsys.readouterr().err
+    assert err == "alcn pose: error: unknown preset 'nope'; choose one of static-camera, cookie-box\n"
     assert not (tmp_path / "m.npz").exists()
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from alcn_cv.errors import InputError
+from alcn_cv.presets import preset, with_settings
 from alcn_cv.train.config import (
     DISTILL_CONFS,
     REAL_LIGHT_CONFS,
@@ -18,8 +19,6 @@ from alcn_cv.train.config import (
     RealLightConfig,
     TrainConfig,
     load_config,
-    preset,
-    with_settings,
 )
 from alcn_cv.weight_file import WEIGHTS_DIR, load_normalizer_file
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from alcn_cv.errors import InputError
@@ -66,7 +68,32 @@ def test_bad_toml_and_unknown_preset(tmp_path):
     bad.write_text("seed = = 3")
     with pytest.raises(InputError, match="invalid TOML"):
         load_config(bad)
-    with pytest.raises(InputError, match="neither a preset"):
+    # a name is a preset's, the one error of every command for an unknown one; a path is a TOML file's
+    with pytest.raises(InputError, match="^unknown preset 'nonexistent-preset'; choose one of paper, paper-full$"):
         load_config("nonexistent-preset")
+    for path in (tmp_path / "missing.toml", tmp_path / "missing", "./missing"):
+        with pytest.raises(InputError, match=f"^config file {re.escape(str(path))}: not found$"):
+            load_config(str(path))
     with pytest.raises(InputError, match="KEY=VALUE"):
         load_config(None, ["optim.lr"])
+
+
+def test_the_folders_are_given_resolved_for_a_checkpoint_and_from_home_for_a_weight_file(tmp_path, monkeypatch):
+    """A configuration holds its folders as given (load_config made them absolute, and the weight file, which users
+    share, recorded `/home/<user>/...`); resolved() makes them absolute (a checkpoint's), shareable() writes the home
+    folder ~ (a weight file's)."""
+    from alcn_cv.train.config import TRAIN_FOLDER_SETTINGS, home_path
+
+    home = tmp_path / "home"
+    (home / "work" / "phos").mkdir(parents=True)
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(home / "work")
+    cfg = load_config(None, ["data.path='phos'", f"data.val_path='{home / 'work' / 'phos'}'"])
+    assert tuple(cfg.folders()) == TRAIN_FOLDER_SETTINGS
+    assert cfg.folders() == {"data.path": "phos", "data.val_path": str(home / "work" / "phos")}
+    assert set(cfg.resolved().folders().values()) == {str(home / "work" / "phos")}
+    assert cfg.shareable().folders() == {"data.path": "phos", "data.val_path": "~/work/phos"}
+    assert cfg.folders() == {"data.path": "phos", "data.val_path": str(home / "work" / "phos")}  # copies
+    elsewhere = str(tmp_path / "elsewhere")  # not under the home folder: as given
+    given = ["phos", "~/phos", str(home), elsewhere, "courbevoie", ""]
+    assert [home_path(entry) for entry in given] == ["phos", "~/phos", "~", elsewhere, "courbevoie", ""]

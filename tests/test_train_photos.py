@@ -12,7 +12,8 @@ import pytest
 from alcn_cv.data.permissive_images import USER_LICENCE, Photograph, folder_photographs, relit_scenes
 from alcn_cv.data.scenes import Scene
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.train.config import REAL_LIGHT_CONFS, RealLightConfig, preset
+from alcn_cv.presets import preset
+from alcn_cv.train.config import REAL_LIGHT_CONFS, RealLightConfig
 
 CROP, PATCH = 96, 32
 
@@ -141,20 +142,29 @@ def test_the_settings_of_photos_are_checked(tmp_path):
     assert REAL_LIGHT_CONFS["gain"].photos == [] and REAL_LIGHT_CONFS["gain"].shipped_photos
 
 
-def test_the_weight_file_records_the_folders_absolute(tmp_path, monkeypatch):
-    """A relative folder is recorded as the absolute path it named (it was recorded as given: `photos` of another
-    working folder)."""
+def test_the_weight_file_records_no_absolute_path_of_the_machine(tmp_path, monkeypatch):
+    """The weight file, which users share, recorded the folders absolute (`/home/<user>/...`) as the checkpoint does:
+    it records them as given, a path under the home folder written from ~; the checkpoint, absolute."""
+    import json
+
     import torch
 
+    from alcn_cv.train.checkpoint import load_checkpoint
     from alcn_cv.train.real_light import train_real_light
     from alcn_cv.weight_file import load_normalizer_file
+    from scene_sets import write_scene
 
     torch.set_num_threads(1)
-    _folder(tmp_path / "mine")
-    monkeypatch.chdir(tmp_path)
+    home = tmp_path / "home"
+    _folder(home / "work" / "mine")
+    write_scene(home / "rendered", 3, 120, 136, gamma=None, noise=0.2)
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(home / "work")
     cfg = RealLightConfig(
         photos=["mine"],
         shipped_photos=False,
+        rendered=[str(home / "rendered")],  # absolute, as typed
+        rendered_fraction=0.5,
         relit=2,
         steps=2,
         save_every=2,
@@ -165,8 +175,11 @@ def test_the_weight_file_records_the_folders_absolute(tmp_path, monkeypatch):
         net={"channels": 8},
     )
     meta = load_normalizer_file(train_real_light(cfg, tmp_path / "run", progress=False)).meta
-    assert meta["training"]["config"]["photos"] == [str(tmp_path / "mine")]
-    assert meta["training"]["config"]["shipped_photos"] is False
+    config = meta["training"]["config"]
+    assert (config["photos"], config["rendered"], config["shipped_photos"]) == (["mine"], ["~/rendered"], False)
+    assert str(tmp_path) not in json.dumps(meta)
+    saved = load_checkpoint(tmp_path / "run" / "checkpoint.pt")["config"]
+    assert (saved["photos"], saved["rendered"]) == ([str(home / "work" / "mine")], [str(home / "rendered")])
 
 
 def test_frames_smaller_than_the_crop_or_the_patches_name_the_scene():
@@ -237,6 +250,31 @@ def test_a_photograph_twice_and_a_single_one_are_warned_about(tmp_path, shipped,
         with caplog.at_level("WARNING"):
             training_scenes(dataclasses.replace(cfg, photos=[str(single)], shipped_photos=shipped_photos))
         assert _warnings(caplog) == [f"photos: a single photograph of yours, {single / 'p0.png'}: {detail}"]
+
+
+def test_the_warning_about_a_single_photograph_counts_the_rendered_scenes(tmp_path, shipped, caplog):
+    """With rendered scenes, it said every step drew the single photograph (shipped_photos=false and no scenes) though
+    rendered_fraction of the steps draw a rendered scene."""
+    from alcn_cv.train.real_light import training_scenes
+    from scene_sets import write_scene
+
+    single = _folder(tmp_path / "one", count=1)
+    rendered = write_scene(tmp_path / "rendered", 3, 120, 136, gamma=None, noise=0.2)
+    cfg = RealLightConfig(relit=2, crop=CROP, patch=PATCH, photos=[str(single)], rendered=[str(rendered)])
+    steps = "the steps that draw no rendered scene (75% of them)"
+    same = "its relit copies (shipped_photos=false and no scenes)"
+    for shipped_photos, detail in (
+        (True, f"one of the 3 scenes {steps} draw from"),
+        (False, f"{steps} all draw the same scene, {same}"),
+    ):
+        caplog.clear()
+        with caplog.at_level("WARNING"):
+            training_scenes(dataclasses.replace(cfg, shipped_photos=shipped_photos, rendered_fraction=0.25))
+        assert _warnings(caplog) == [f"photos: a single photograph of yours, {single / 'p0.png'}: {detail}"]
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        training_scenes(dataclasses.replace(cfg, shipped_photos=False))  # rendered_fraction 0: none drawn
+    assert _warnings(caplog)[0].endswith(f"{single / 'p0.png'}: every step draws the same scene, {same}")
 
 
 def test_the_shipped_photographs_pass_the_texture_rule(shared_data):

@@ -183,24 +183,68 @@ def test_resume_takes_the_checkpoints_settings_and_names_each_difference(tmp_pat
     assert main(_run(out, "--resume", "--conf", "gain", *_tiny(scene, steps=4))) == 0  # a preset's: same settings
 
 
-def test_the_end_of_a_run_prints_the_weights_and_commands_that_work(tmp_path, capsys):
+def test_the_end_of_a_run_prints_the_weights_and_commands_that_work(tmp_path, monkeypatch, capsys):
+    """The comparison is the README's: the preset alone, trained beside the run, then both benched (it compared with
+    the shipped file, which another machine's recipe differs from); the bench's report replaced after a retrain (it
+    refused the command, the earlier report in the way)."""
+    from alcn_cv.bench import relight
+
     scene = _scene(tmp_path / "scene")
     out = tmp_path / "run"
     assert main(_run(out, *_tiny(scene, steps=1, save_every=1))) == 0
     printed = capsys.readouterr().out
     weights = out / "gain_normalizer.npz"
     assert printed.startswith(f"weights: {weights}\n")
+    assert "train the recipe alone too, once (another machine gives other weights than the shipped file's):" in printed
+    assert "relight.md's paired difference of the second from the first is what your settings changed" in printed
     assert "(needs the shared data, or --data DIR of your own registered scenes)" in printed  # the bench's data
     commands = [shlex.split(line)[1:] for line in printed.splitlines() if line.strip().startswith("alcn ")]
-    normalize, export, bench = commands
+    normalize, export, recipe, bench = commands
     assert normalize[:3] == ["normalize", "IMAGE", "OUTPUT"] and export == ["export", "--weights", str(weights)]
     normalize[1:3] = [str(scene / "00.png"), str(tmp_path / "normalized.png")]
     assert main(normalize) == 0 and cv2.imread(str(tmp_path / "normalized.png")) is not None
     assert main(export) == 0 and weights.with_suffix(".onnx").is_file()  # beside: backend='opencv' finds it
+    assert recipe == ["train-real-light", "--conf", "gain", "--out", str(tmp_path / "run_recipe")]
+    assert build_parser().parse_args(recipe).conf == "gain"  # the preset alone (it trains for minutes)
     args = build_parser().parse_args(bench)  # its options exist (the bench itself takes minutes), its methods too
-    assert args.conf == "quick" and args.methods == ["alcn", f"alcn:weights={weights}"]
+    first = f"alcn:weights={tmp_path / 'run_recipe' / 'gain_normalizer.npz'}"
+    assert args.conf == "quick" and args.methods == [first, f"alcn:weights={weights}"]  # the recipe's first
     assert args.out == tmp_path / "run_bench"  # beside the run (it was inside, where --overwrite left it stale)
     assert from_spec(args.methods[1]).normalize(np.full((40, 40), 0.5, np.float32)).shape == (40, 40)
+
+    # retrained: the same command, run over the report on the weights replaced
+    (tmp_path / "run_bench").mkdir()
+    for name in ("relight.json", "relight.md"):
+        (tmp_path / "run_bench" / name).write_text("the report on the earlier weights")
+    assert main(_run(out, "--overwrite", *_tiny(scene, steps=1, save_every=1))) == 0
+    again = [shlex.split(line)[1:] for line in capsys.readouterr().out.splitlines() if line.strip().startswith("alcn ")]
+    assert again[-1] == bench
+
+    class BenchedError(Exception):
+        """The bench's work begins: past its check of an earlier report."""
+
+    def built(*args):
+        raise BenchedError
+
+    monkeypatch.setattr(relight, "build_methods", built)
+    with pytest.raises(BenchedError):
+        main(bench)
+
+
+def test_a_run_of_its_preset_alone_is_compared_with_the_shipped_model(tmp_path, monkeypatch, capsys):
+    """The preset alone has no recipe to train beside it: it is compared with the shipped file (the same recipe on
+    another machine); a run of any other setting, with the preset alone."""
+    monkeypatch.setattr(real_light, "train_real_light", lambda cfg, out, **kwargs: out / "gain_normalizer.npz")
+    out = tmp_path / "run"
+    assert main(_run(out)) == 0
+    printed = capsys.readouterr().out
+    assert "train the recipe alone" not in printed
+    assert "compare them with the shipped model on real light changes (the same recipe: another machine" in printed
+    methods = f"alcn,alcn:weights={out / 'gain_normalizer.npz'}"
+    bench = ["bench", "relight", "--conf", "quick", "--methods", methods, "--out", str(tmp_path / "run_bench")]
+    assert shlex.split(printed.splitlines()[-1])[1:] == [*bench, "--overwrite"]
+    assert main(_run(out, "--seed", "1")) == 0
+    assert "train the recipe alone too" in capsys.readouterr().out
 
 
 def test_the_bar_shows_the_mean_loss_and_logs_print_above_it(tmp_path, monkeypatch):
@@ -319,9 +363,10 @@ def test_a_checkpoint_written_before_photos_were_kept_resumes(tmp_path, capsys):
 
 
 def test_a_run_resumes_from_any_working_folder(tmp_path, monkeypatch, capsys):
-    """The settings' folders are made absolute before the checkpoint and the weight file record them, and the command
-    printed on Ctrl-C names the run folder absolute: it goes on from another working folder, on the same data (it
-    failed with `photos: photos: folder not found`)."""
+    """The checkpoint records the settings' folders absolute, and the command printed on Ctrl-C names the run folder
+    absolute: it goes on from another working folder, on the same data (it failed with `photos: photos: folder not
+    found`). The weight file, which users share, holds no absolute path of the machine: the folders as given, the
+    checkpoint's absolute ones of a resumed run from the home folder, written ~."""
     for seed, where in enumerate("ab"):  # a scene of the same name in each working folder
         _scene(tmp_path / where / "scene", seed=seed)
     photos = tmp_path / "a" / "mine"
@@ -338,36 +383,38 @@ def test_a_run_resumes_from_any_working_folder(tmp_path, monkeypatch, capsys):
     folders = {key: [str(tmp_path / "a" / name)] for key, name in (("scenes", "scene"), ("photos", "mine"))}
     assert {key: config[key] for key in folders} == folders
 
+    snapshot = load_normalizer_file(tmp_path / "a" / "run" / "gain_normalizer_step1.npz").meta  # the step done
+    assert {key: snapshot["training"]["config"][key] for key in folders} == {"scenes": ["scene"], "photos": ["mine"]}
+    assert str(tmp_path) not in json.dumps(snapshot)
+
     monkeypatch.undo()
+    monkeypatch.setenv("HOME", str(tmp_path))
     monkeypatch.chdir(tmp_path / "b")
     assert main(shlex.split(hint)[1:]) == 0, capsys.readouterr().err
-    meta = load_normalizer_file(tmp_path / "a" / "run" / "gain_normalizer.npz").meta["training"]
-    assert {key: meta["config"][key] for key in folders} == folders  # a's folders, not b's scene
+    meta = load_normalizer_file(tmp_path / "a" / "run" / "gain_normalizer.npz").meta
+    mine = {"scenes": ["~/a/scene"], "photos": ["~/a/mine"]}  # a's folders, not b's scene
+    assert {key: meta["training"]["config"][key] for key in folders} == mine
+    assert str(tmp_path) not in json.dumps(meta)
     assert [h["step"] for h in json.loads((tmp_path / "a" / "run" / "history.json").read_text())] == [1, 2, 3]
 
 
 def test_resume_refuses_other_data_and_names_what_changed(tmp_path, monkeypatch, capsys):
-    """A checkpoint that records relative folders (written before they were made absolute), resumed from another
-    working folder, is on another folder; a photograph added to a folder shifts the draws of those after it. The
-    checkpoint records the folders resolved and the files of photos."""
+    """The settings given again with --conf, relative, from another working folder, name another folder: refused,
+    both named (the checkpoint records the folders resolved); a photograph added to a folder shifts the draws of those
+    after it (the checkpoint records the files of photos)."""
     for seed, where in enumerate("ab"):
         _scene(tmp_path / where / "scene", seed=seed)
     monkeypatch.chdir(tmp_path / "a")
     out = tmp_path / "run"
     assert main(_run(out, *_tiny("scene"))) == 0
-    path = out / "checkpoint.pt"
-    ckpt = torch.load(path, weights_only=True)
-    torch.save({**ckpt, "config": {**ckpt["config"], "scenes": ["scene"]}}, path)  # as such a checkpoint
     monkeypatch.chdir(tmp_path / "b")
-    assert main(_run(out, "--resume", "--set", "steps=3")) == 2
+    assert main(_run(out, "--resume", "--conf", "gain", *_tiny("scene", steps=3))) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "was written on other data: scenes" in err
+    assert err.count("\n") == 1 and "was written with another configuration: differs in scenes" in err
     assert f"['{tmp_path / 'a' / 'scene'}'] in the checkpoint, ['{tmp_path / 'b' / 'scene'}'] now" in err
-    monkeypatch.chdir(tmp_path / "a")
-    assert main(_run(out, "--resume", "--set", "steps=3")) == 0
-    meta = load_normalizer_file(out / "gain_normalizer.npz").meta["training"]
-    assert meta["config"]["scenes"] == [str(tmp_path / "a" / "scene")]
+    assert main(_run(out, "--resume", "--set", "steps=3")) == 0  # the checkpoint's settings: a's scene
 
+    monkeypatch.chdir(tmp_path / "a")
     photos = tmp_path / "a" / "mine"
     photos.mkdir()
     for name in ("01.png", "02.png"):  # two frames of the scene, as photographs
@@ -480,7 +527,8 @@ def test_each_line_of_log_gives_the_untrained_starts_loss_on_the_same_draws(tmp_
     its last steps and the untrained start's on their draws, recomputed here from the seed."""
     import re
 
-    from alcn_cv.train.config import RealLightConfig, with_settings
+    from alcn_cv.presets import with_settings
+    from alcn_cv.train.config import RealLightConfig
 
     scene = _scene(tmp_path / "scene")
     settings = [item for item in _tiny(scene, steps=3, save_every=2) if item != "--set"]

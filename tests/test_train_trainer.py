@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import signal
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -93,6 +95,40 @@ def test_resume_equals_uninterrupted_run(data, tmp_path, monkeypatch):
     for k in a:
         assert torch.equal(a[k], b[k]), k
     assert resumed.history[-1]["val_loss"] == full.history[-1]["val_loss"]
+
+
+def test_the_weight_file_records_no_absolute_path_of_the_machine(data, tmp_path, monkeypatch):
+    """The weight file, which users share, recorded the data folders absolute (`/home/<user>/...`) once the checkpoint
+    needed them so: it records them as given, the home folder written ~ (a run resumed from another working folder is
+    given them absolute), while the checkpoint and config.toml hold them absolute."""
+    root = Path(data[0]).parent
+    monkeypatch.setenv("HOME", str(root))
+    monkeypatch.chdir(root)
+    cfg = _config(("train", "val"))
+
+    def interrupt(step):
+        if step == 8:  # mid-way through the second epoch
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(trainer, "_on_step", interrupt)
+    assert trainer.train(cfg, tmp_path / "run", progress=False).status == "interrupted"
+    absolute = {"path": str(Path(data[0]).resolve()), "val_path": str(Path(data[1]).resolve())}
+    assert {k: load_checkpoint(tmp_path / "run" / "checkpoint.pt")["config"]["data"][k] for k in absolute} == absolute
+    assert load_config(tmp_path / "run" / "config.toml").data.path == absolute["path"]
+    monkeypatch.setattr(trainer, "_on_step", lambda step: None)
+    monkeypatch.chdir(tmp_path)  # elsewhere: the folders given absolute, as the command printed on Ctrl-C gives them
+    resumed = trainer.train({**cfg, "data": {**cfg["data"], **absolute}}, tmp_path / "run", resume=True, progress=False)
+    assert resumed.status == "done"
+    assert load_normalizer_file(resumed.weights).meta["training"]["config"]["data"]["path"] == "~/train"
+
+    monkeypatch.chdir(root)
+    whole = trainer.train(cfg, tmp_path / "whole", progress=False)
+    header = load_normalizer_file(whole.weights).meta
+    assert (header["training"]["config"]["data"]["path"], header["training"]["config"]["data"]["val_path"]) == (
+        "train",
+        "val",
+    )
+    assert str(root) not in json.dumps(header) and str(root.resolve()) not in json.dumps(header)
 
 
 def test_a_ctrl_c_right_after_a_step_is_saved_with_that_step_counted(data, tmp_path, monkeypatch):

@@ -3,6 +3,7 @@ benchmark method (alcn_cv.bench.unet, ``unet:weights=PATH`` in alcn_cv.bench.rel
 
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -140,14 +141,19 @@ def test_the_objective_is_identification_plus_weighted_consistency(tmp_path):
     assert losses[2.0] == pytest.approx(losses[0.0] + 2.0 * float(consistency_loss(first, second)), rel=1e-5)
 
 
-def test_a_short_training_writes_its_files_and_lowers_the_loss(tmp_path):
+def test_a_short_training_writes_its_files_and_lowers_the_loss(tmp_path, monkeypatch):
     torch.set_num_threads(1)
     root = make_sets(tmp_path / "data")
-    cfg = replace(TINY, scenes=[str(root / "webcam" / "street"), str(root / "webcam" / "square")])
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.chdir(tmp_path)
+    cfg = replace(TINY, scenes=[str(Path("data") / "webcam" / "street"), str(root / "webcam" / "square")])
     path = train_unet(cfg, tmp_path / "run", conf="test")
     meta = load_normalizer_file(path).meta
     assert path.name == "unet_normalizer.npz" and meta["architecture"] == "unet" and meta["trained"]
     assert meta["training"]["conf"] == "test" and meta["training"]["config"]["steps"] == 12
+    # a file users share: the folders as given, the home folder written ~ (they were recorded absolute)
+    assert meta["training"]["config"]["scenes"] == ["data/webcam/street", "~/data/webcam/square"]
+    assert str(tmp_path) not in json.dumps(meta)
     history = json.loads((tmp_path / "run" / "history.json").read_text())
     assert [h["step"] for h in history] == list(range(1, 13)) and all(np.isfinite(h["loss"]) for h in history)
     assert "trained 12 steps" in (tmp_path / "run" / "train.log").read_text()

@@ -21,7 +21,7 @@ from alcn_cv.bench.detect_settings import POLICIES, DetectSettings
 from alcn_cv.cli import add_conf_option, add_progress_option, add_seeds_option, preset_values
 from alcn_cv.data import scenes
 from alcn_cv.errors import InputError
-from alcn_cv.train.config import preset
+from alcn_cv.presets import preset
 
 __all__ = ["BENCHMARKS", "add_parser"]
 
@@ -107,7 +107,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
     )
     _add_out(p, "detect")
     add_conf_option(p, detect_settings.CONF_SUMMARIES)
-    p.add_argument("--methods", type=_list(str), help=_methods_help(d.methods))
+    p.add_argument("--methods", type=_list(str), help=_methods_help(d.resolved().methods))
     p.add_argument("--real-images", type=_list(int), help="real training images per object (default 1,10)")
     _add_policies(p, d.policies)
     p.add_argument(

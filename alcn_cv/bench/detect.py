@@ -672,7 +672,8 @@ def main(
     Args:
         data_dir: benchmark folder (``train.json``, ``test.json``, ``manifest.json``; ``val.json`` to tune).
         out_dir: output folder (created).
-        settings: the run's settings; default :class:`~alcn_cv.bench.detect_settings.DetectSettings`.
+        settings: the run's settings; default :class:`~alcn_cv.bench.detect_settings.DetectSettings`. Their
+            methods, None (the default's), are :func:`~alcn_cv.bench.detect_settings.default_methods` at the start.
         working_scale, box_size: see :func:`~alcn_cv.bench.detect_data.load_data`.
         progress: progress bar across runs.
         overwrite: replace the report of an earlier run in ``out_dir``.
@@ -688,7 +689,7 @@ def main(
     """
     import torch
 
-    settings = settings or DetectSettings()
+    settings = (settings or DetectSettings()).resolved()  # the methods registered now, for the default's
     settings.check()
     check_no_earlier_output([Path(out_dir) / "detect.json", Path(out_dir) / "detect.md"], overwrite)
     # a bad spec or weight file: one line before any work; the untuned runs use these

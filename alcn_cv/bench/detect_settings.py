@@ -69,7 +69,8 @@ class DetectSettings:
     Attributes:
         methods: registered normalization names, each optionally with parameters
             (``NAME[:KEY=VALUE...]``, e.g. ``alcn:model=lite:mixture=pyramid``), and/or
-            :data:`DEEP_BASELINES`.
+            :data:`DEEP_BASELINES`; None: :func:`default_methods`, read when the settings are used
+            (:meth:`resolved`), so that a normalization registered after this module was imported is one of them.
         real_images: numbers of real training images per object.
         policies: detector input policies (:data:`POLICIES`).
         positives_per_object: synthetic object windows per object.
@@ -88,7 +89,7 @@ class DetectSettings:
         device: torch device.
     """
 
-    methods: list[str] = field(default_factory=default_methods)
+    methods: list[str] | None = None
     real_images: list[int] = field(default_factory=lambda: [1, 10])
     policies: list[str] = field(default_factory=lambda: ["local"])
     positives_per_object: int = 300
@@ -106,12 +107,17 @@ class DetectSettings:
     threads: int | None = None
     device: str = "cpu"
 
+    def resolved(self) -> DetectSettings:
+        """A copy whose ``methods`` is a list: :func:`default_methods`, the normalizations registered now, for None."""
+        return dataclasses.replace(self, methods=default_methods() if self.methods is None else list(self.methods))
+
     def check(self) -> None:
         """Raise :class:`~alcn_cv.errors.InputError` on an unknown method or policy, or a value out of range."""
         known = set(available()) | set(DEEP_BASELINES)
-        specs = [parse_spec(m) for m in self.methods]
-        unknown = [m for m, (name, _) in zip(self.methods, specs) if name not in known]
-        if unknown or not self.methods:
+        methods = default_methods() if self.methods is None else self.methods
+        specs = [parse_spec(m) for m in methods]
+        unknown = [m for m, (name, _) in zip(methods, specs) if name not in known]
+        if unknown or not methods:
             raise InputError(f"unknown or no method(s) {unknown}; available: {', '.join(sorted(known))}")
         if any(name in DEEP_BASELINES and params for name, params in specs):
             raise InputError(f"the deep baselines {', '.join(DEEP_BASELINES)} take no parameters")
@@ -129,15 +135,14 @@ class DetectSettings:
             raise InputError("cnn_sweep needs at least one (depth, width)")
 
 
-_SMALL = DetectSettings(
-    methods=list(available()) + ["cnn", "resnet20"], positives_per_object=30, epochs=2, cnn_sweep=[(1, 16)]
-)
+_SMALL = DetectSettings(positives_per_object=30, epochs=2, cnn_sweep=[(1, 16)])
 
 #: The named presets of the benchmark (hloc's ``confs``; ``alcn bench detect --conf NAME``), shared: a user takes a
-#: copy (:func:`alcn_cv.train.config.preset`) and changes that. ``default``: the benchmark; ``small``: a quick
+#: copy (:func:`alcn_cv.presets.preset`) and changes that. ``default``: the benchmark; ``small``: a quick
 #: end-to-end check (fewer windows and epochs, one plain CNN, no ResNet-56); ``demo``: ``alcn demo``'s run,
 #: ``small`` for no normalization, ALCN and the strongest classical methods, from 1 and 3 real images per object.
-#: The methods of ``default`` and ``small`` are the normalizations registered when this module is imported.
+#: The methods of ``default`` and ``small`` are :func:`default_methods`, the normalizations registered when a run
+#: starts, as those of :class:`DetectSettings`.
 CONFS: dict[str, DetectSettings] = {
     "default": DetectSettings(),
     "small": _SMALL,

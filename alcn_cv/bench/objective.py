@@ -24,7 +24,8 @@ from alcn_cv.errors import InputError
 from alcn_cv.io import make_folder, write_json
 from alcn_cv.nets.gain import ARCHITECTURE as GAIN
 from alcn_cv.nets.gain import GainNormalizer
-from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
+from alcn_cv.presets import preset
+from alcn_cv.train.config import REAL_LIGHT_CONFS
 from alcn_cv.train.real_light import draw_step, pair_loss, training_scene
 from alcn_cv.train.unet import unet_pair_loss
 from alcn_cv.train.unet_normalizer import ARCHITECTURE as UNET

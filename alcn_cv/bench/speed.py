@@ -407,7 +407,7 @@ class SpeedSettings:
 
 
 #: The named presets of the benchmark (hloc's ``confs``; ``alcn bench speed --conf NAME``), shared: a user takes a
-#: copy (:func:`alcn_cv.train.config.preset`) and changes that. ``default``: the benchmark; ``quick``: tiny frames,
+#: copy (:func:`alcn_cv.presets.preset`) and changes that. ``default``: the benchmark; ``quick``: tiny frames,
 #: 2 repeats, no warm-up, a 3-frame video of tiny frames (seconds, for tests).
 CONFS: dict[str, SpeedSettings] = {
     "default": SpeedSettings(),

@@ -118,7 +118,7 @@ def main(out_dir: Path, seed: int = 0, progress: bool = True) -> Path:
 
     from alcn_cv.bench import detect as bench
     from alcn_cv.bench.detect_settings import CONFS
-    from alcn_cv.train.config import preset
+    from alcn_cv.presets import preset
 
     # the demo's own folder, made again on every run (as its data): `make demo` twice in a row replaces it
     bench.main(data_dir, out_dir / "bench", preset(CONFS, "demo"), progress=progress, overwrite=True)

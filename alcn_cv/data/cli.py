@@ -12,7 +12,7 @@ from alcn_cv.extras import require
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["add_conf_option", "add_parser", "preset_values"]
+__all__ = ["add_parser"]
 
 
 def _require_textures(command: str) -> None:

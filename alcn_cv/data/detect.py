@@ -44,6 +44,7 @@ from alcn_cv.data.textures import photo_crop, procedural_texture
 from alcn_cv.errors import InputError
 from alcn_cv.formats.coco import write_coco
 from alcn_cv.io import write_image, write_json
+from alcn_cv.presets import preset_named
 
 __all__ = ["CONFS", "CONF_SUMMARIES", "DetectConfig", "OBJECTS", "benchmark_objects", "generate"]
 
@@ -271,10 +272,8 @@ def generate(
         The output folder.
 
     Raises:
-        InputError: an unknown preset (naming those there are), or a value out of range.
+        InputError: an unknown preset (:func:`~alcn_cv.presets.preset_named`), or a value out of range.
     """
-    if conf not in CONFS:
-        raise InputError(f"unknown preset {conf!r}; choose one of {', '.join(CONFS)}")
     # None, not 0, means the preset's value: --width 0 is an error, not a silent 1280
     given = {
         "width": width,
@@ -284,7 +283,7 @@ def generate(
         "n_val": n_val,
         "p_object": p_object,
     }
-    cfg = dataclasses.replace(CONFS[conf], **{k: v for k, v in given.items() if v is not None})
+    cfg = dataclasses.replace(preset_named(CONFS, conf), **{k: v for k, v in given.items() if v is not None})
     if (
         cfg.width < 2 * cfg.object_px
         or cfg.height < 2 * cfg.object_px

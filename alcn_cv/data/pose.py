@@ -57,6 +57,7 @@ from alcn_cv.formats.bop import (
 )
 from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, write_text_model
 from alcn_cv.io import write_image, write_json
+from alcn_cv.presets import preset_named
 
 __all__ = [
     "CONFS",
@@ -455,13 +456,11 @@ def generate(
         workers: worker processes, one sequence each (the output does not depend on it).
 
     Raises:
-        InputError: an unknown preset (naming those there are), or a value out of range.
+        InputError: an unknown preset (:func:`~alcn_cv.presets.preset_named`), or a value out of range.
     """
-    if conf not in CONFS:
-        raise InputError(f"unknown preset {conf!r}; choose one of {', '.join(CONFS)}")
     # None, not 0, means the preset's value: --frames 0 is an error, not a silent 3 or 60
     given = {"n_frames": n_frames, "n_test": n_test}
-    cfg = dataclasses.replace(CONFS[conf], **{k: v for k, v in given.items() if v is not None})
+    cfg = dataclasses.replace(preset_named(CONFS, conf), **{k: v for k, v in given.items() if v is not None})
     if cfg.n_frames < 1 or not 0 <= cfg.n_test <= len(SEQUENCE_KINDS):
         raise InputError(
             f"need frames >= 1 (--frames) and 0 <= test sequences <= {len(SEQUENCE_KINDS)} (--n-test); "

@@ -28,7 +28,7 @@ from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.io import INTERRUPTS, atomic_write, interrupts_blocked, make_folder
 from alcn_cv.report import machine
-from alcn_cv.train.config import FOLDER_SETTINGS, RealLightConfig, TrainConfig, absolute_path
+from alcn_cv.train.config import RealLightConfig, TrainConfig
 from alcn_cv.train.models import JointModel, measure_output_range
 from alcn_cv.weight_file import save_normalizer_file
 
@@ -188,12 +188,14 @@ def _config_dict(cfg: TrainConfig | RealLightConfig) -> dict[str, Any]:
 
 def checkpoint_header(cfg: TrainConfig | RealLightConfig) -> dict[str, Any]:
     """The entries of a checkpoint that :func:`load_checkpoint` checks: the format of the command ``cfg`` configures
-    (``alcn train`` or ``alcn train-real-light``), its version, the versions that write it and ``cfg``."""
+    (``alcn train`` or ``alcn train-real-light``), its version, the versions that write it and ``cfg`` with its folders
+    absolute (``cfg.resolved()``), so that a run resumed from another working folder is checked against, and reads,
+    the same data."""
     return {
         "format": _KINDS[type(cfg)][0],
         "version": CHECKPOINT_VERSION,
         "versions": versions(),
-        "config": _config_dict(cfg),
+        "config": _config_dict(cfg.resolved()),
     }
 
 
@@ -201,17 +203,14 @@ def _differences(saved: dict[str, Any], cfg: TrainConfig | RealLightConfig) -> l
     """The settings of ``cfg`` a run resumed from a checkpoint written with ``saved`` must keep and does not, each
     with both values: all of a :class:`RealLightConfig` but a larger ``steps`` (training longer; a setting the
     checkpoint predates compared as its default, which that run had); a :class:`TrainConfig`'s model, data, seed and
-    optimisation (not its run options)."""
-    now = _config_dict(cfg)
-    # folders a checkpoint written before they were made absolute holds as given: taken from this working folder
+    optimisation (not its run options). Folders are compared absolute, as the checkpoint holds them
+    (:func:`checkpoint_header`)."""
+    now = _config_dict(cfg.resolved())
     if isinstance(cfg, RealLightConfig):
         saved = {**_config_dict(RealLightConfig()), **saved}  # a key added since it was written: its default
-        saved.update({k: [absolute_path(p) for p in saved[k]] for k in FOLDER_SETTINGS})
         pairs = [(k, saved.get(k), v) for k, v in now.items()]
         changed = [(k, a, b) for k, a, b in pairs if a != b and not (k == "steps" and _larger(b, a))]
     else:
-        folders = {k: absolute_path(saved["data"].get(k, "")) for k in ("path", "val_path")}
-        saved = {**saved, "data": {**saved["data"], **folders}}
         pairs = [(f"{t}.{k}", saved[t].get(k), now[t][k]) for t in ("model", "data", "optim") for k in now[t]]
         changed = [(k, a, b) for k, a, b in [*pairs, ("seed", saved.get("seed"), now["seed"])] if a != b]
     return [f"{key} ({before!r} in the checkpoint, {after!r} now)" for key, before, after in sorted(changed)]
@@ -288,7 +287,9 @@ def write_normalizer_file(
 
     The header gets the output range measured on up to 4000 training windows (drawn with
     ``cfg.seed``), the detector input policy and the record of the training (configuration,
-    versions, validation, few-shot validation, time, machine).
+    versions, validation, few-shot validation, time, machine). The configuration is ``cfg`` as a file users share
+    records it (:meth:`TrainConfig.shareable <alcn_cv.train.config.TrainConfig.shareable>`: its folders as given, the
+    home folder written ``~``), where the checkpoint holds them absolute.
     """
     if model.normalizer is None:
         raise ValueError(f"model.method {cfg.model.method!r} has no Normalizer to write")
@@ -308,7 +309,7 @@ def write_normalizer_file(
         "description": f"trained with a detector by `alcn train` (objective {cfg.optim.objective!r}), seed {cfg.seed}, "
         f"{len(train_set)} windows of {train_set.n_objects} objects, {seconds / 60:.1f} min",
         "training": {
-            "config": cfg.to_dict(),
+            "config": cfg.shareable().to_dict(),
             "versions": versions(),
             "val_accuracy": result.val_accuracy,
             "val_by_family": result.val_by_family,

@@ -14,11 +14,18 @@ import json
 import logging
 import shlex
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from alcn_cv.cli import add_conf_options, add_progress_option, interrupt_exit_code
+from alcn_cv.cli import add_conf_option, add_progress_option, interrupt_exit_code
+from alcn_cv.presets import preset
+from alcn_cv.train.config import (
+    DISTILL_CONF_SUMMARIES,
+    REAL_LIGHT_CONF_SUMMARIES,
+    TRAIN_CONF_SUMMARIES,
+    UNET_CONF_SUMMARIES,
+)
 
 if TYPE_CHECKING:
     from alcn_cv.train.real_light import TrainingInterrupted
@@ -28,9 +35,16 @@ __all__ = ["add_parser"]
 logger = logging.getLogger(__name__)
 
 
-def _add_conf(parser: argparse.ArgumentParser, default: str | None, presets: str, example: str) -> None:
-    """:func:`~alcn_cv.cli.add_conf_options` and ``--print-config``, the same on every training command."""
-    add_conf_options(parser, default, presets, example)
+def _add_conf(
+    parser: argparse.ArgumentParser,
+    summaries: Mapping[str, str],
+    default: str | None,
+    example: str,
+    or_file: str | None = None,
+) -> None:
+    """:func:`~alcn_cv.cli.add_conf_option` with ``--set`` (``example``; required without a ``default``) and
+    ``--print-config``, the same on every training command."""
+    add_conf_option(parser, summaries, default, required=default is None, example=example, or_file=or_file)
     parser.add_argument(
         "--print-config", action="store_true", help="print the effective configuration (every key) and exit"
     )
@@ -74,13 +88,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "history.json, curves.png and alcn_normalizer.npz into --out. The shipped alcn_normalizer.npz is "
         "`alcn train --conf paper`. Multi-process: run under torchrun.",
     )
-    _add_conf(
-        p,
-        "paper",
-        "paper (the shipped alcn_normalizer.npz; objective meta), paper-full (the paper's widths, data and Eq. 2, "
-        "for a GPU; no shipped file), or a TOML file of alcn_cv.train.config's keys",
-        "optim.lr=3e-4",
-    )
+    _add_conf(p, TRAIN_CONF_SUMMARIES, "paper", "optim.lr=3e-4", or_file="a TOML file of alcn_cv.train.config's keys")
     p.add_argument("--out", type=Path, default=Path("out/alcn"), help="run folder (default: out/alcn)")
     p.add_argument(
         "--resume",
@@ -136,13 +144,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "same with --conf gain-lite (its terms: those of the photographs, any use); to compare with a shipped file, "
         "write to another --out.",
     )
-    _add_conf(
-        s,
-        None,
-        "lite (the shipped alcn_normalizer_lite.npz, from the paper model) or gain-lite (the "
-        "shipped alcn_normalizer_gain_lite.npz, from the gain model); --set teacher=FILE distils another teacher",
-        "epochs=30",
-    )
+    _add_conf(s, DISTILL_CONF_SUMMARIES, None, "teacher=FILE")
     s.add_argument("--out", type=Path, help="weight file to write (.npz; the card is .md beside it)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing weight file, its card and export")
     s.add_argument("--seed", type=int, help="seed (default: the preset's)")
@@ -168,7 +170,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "line also gives the untrained start's loss on the draws of its last steps. "
         "The shipped alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`.",
     )
-    _add_conf(r, "gain", "gain (the shipped alcn_normalizer_gain.npz)", "steps=600")
+    _add_conf(r, REAL_LIGHT_CONF_SUMMARIES, "gain", "steps=600")
     r.set_defaults(conf=None)  # --resume without --conf takes the checkpoint's settings
     _add_run(r, "out/gain")
     r.add_argument(
@@ -197,9 +199,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "beside each line's). Writes "
         "OUT/unet_normalizer.npz, train.log and history.json; bench it as unet:weights=OUT/unet_normalizer.npz.",
     )
-    _add_conf(
-        u, "gain", "gain (train-real-light's gain preset, with a U-Net of 8 channels and 3 levels)", "net.channels=16"
-    )
+    _add_conf(u, UNET_CONF_SUMMARIES, "gain", "net.channels=16")
     _add_run(u, "out/unet")
     u.add_argument("--threads", type=int, default=1, help="torch threads (default 1; 0: torch's default)")
     u.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
@@ -275,7 +275,7 @@ def _train(args: argparse.Namespace) -> int:
         epoch, step = result.stopped_at or (1, 0)
         conf = args.conf if args.conf in TRAIN_CONFS else str(Path(args.conf).absolute())  # a TOML file's path
         words = ["alcn", "train", "--out", str(args.out.absolute()), "--resume", "--conf", conf]
-        words += _setting_words(args, folders={"data.path": cfg.data.path, "data.val_path": cfg.data.val_path})
+        words += _setting_words(args, folders=cfg.resolved().folders())  # as the checkpoint holds them
         words += ["--device", args.device] if args.device else []
         words += ["--no-progress"] if args.no_progress else []
         return _interrupted(f"interrupted at epoch {epoch}, step {step}", result.interruption, words)
@@ -326,7 +326,7 @@ def _train_detector(args: argparse.Namespace) -> int:
 
 def _distill(args: argparse.Namespace) -> int:
     from alcn_cv.errors import InputError
-    from alcn_cv.train.config import DISTILL_CONFS, preset
+    from alcn_cv.train.config import DISTILL_CONFS
 
     cfg = preset(DISTILL_CONFS, args.conf, _operational(args, seed="seed"))
     if args.print_config:
@@ -352,7 +352,7 @@ def _distill(args: argparse.Namespace) -> int:
 
 
 def _train_real_light(args: argparse.Namespace) -> int:
-    from alcn_cv.train.config import REAL_LIGHT_CONFS, preset
+    from alcn_cv.train.config import REAL_LIGHT_CONFS
 
     settings = _operational(args, seed="seed")
     _check_resume_or_overwrite(args)
@@ -370,7 +370,7 @@ def _train_real_light(args: argparse.Namespace) -> int:
         cfg = preset(REAL_LIGHT_CONFS, conf, settings)
         command = _command("train-real-light", args, conf=conf)
     if args.print_config:  # a run checks its settings itself (training_run)
-        cfg = cfg.resolved()  # as the run records them
+        cfg = cfg.resolved()  # the folders the run reads, as its checkpoint records them
         cfg.check()
         return _print_config(cfg)
     from alcn_cv.nn import torch_threads
@@ -394,23 +394,45 @@ def _train_real_light(args: argparse.Namespace) -> int:
         words += ["--threads", str(args.threads)] if args.threads != 1 else []
         words += ["--no-progress"] if args.no_progress else []
         return _fit_interrupted(exc, words)
-    print(_next_steps(Path(path)))
+    changed = conf if conf is not None and cfg != REAL_LIGHT_CONFS.get(conf) else None  # None: the preset alone
+    print(_next_steps(Path(path), changed))
     return 0
 
 
-def _next_steps(weights: Path) -> str:
-    """Where a run's weights are and the commands that use them."""
+def _next_steps(weights: Path, changed: str | None) -> str:
+    """Where a run's weights are and the commands that use them: normalize, export, and the README's comparison on
+    real light changes. A run that changed its preset (``changed``, the preset's name) is compared with the preset
+    alone, trained once beside it (``RUN_recipe``: another machine gives other weights than the shipped file's); a run
+    of its preset alone (``changed`` None) with the shipped model. The bench writes beside the run (``RUN_bench``) with
+    ``--overwrite``: after the run is replaced (``--overwrite``), the report on the weights it replaced is replaced
+    too."""
     w = str(weights)
+    where = "needs the shared data, or --data DIR of your own registered scenes"
     steps = [
         ("normalize an image with them", ["alcn", "normalize", "IMAGE", "OUTPUT", "-m", f"alcn:weights={w}"]),
         ("export them for backend='opencv' (ONNX, beside them)", ["alcn", "export", "--weights", w]),
-        (
-            "compare them with the shipped model on real light changes (needs the shared data, or --data DIR of "
-            "your own registered scenes)",
-            ["alcn", "bench", "relight", "--conf", "quick", "--methods", f"alcn,alcn:weights={w}"]
-            + ["--out", str(_beside(weights.parent, "bench"))],
-        ),
     ]
+    if changed is None:
+        compare = (
+            "compare them with the shipped model on real light changes (the same recipe: another machine gives other "
+            f"weights; {where})"
+        )
+        methods = f"alcn,alcn:weights={w}"
+    else:
+        recipe = _beside(weights.parent, "recipe")
+        steps.append(
+            (
+                "train the recipe alone too, once (another machine gives other weights than the shipped file's)",
+                ["alcn", "train-real-light", "--conf", changed, "--out", str(recipe)],
+            )
+        )
+        compare = (
+            "compare the two on real light changes: relight.md's paired difference of the second from the first is "
+            f"what your settings changed ({where})"
+        )
+        methods = f"alcn:weights={recipe / weights.name},alcn:weights={w}"
+    bench = ["alcn", "bench", "relight", "--conf", "quick", "--methods", methods]
+    steps.append((compare, [*bench, "--out", str(_beside(weights.parent, "bench")), "--overwrite"]))
     return "\n".join([f"weights: {w}", "next:", *(f"  {what}:\n    {shlex.join(words)}" for what, words in steps)])
 
 
@@ -422,11 +444,11 @@ def _beside(run: Path, what: str) -> Path:
 
 
 def _train_unet(args: argparse.Namespace) -> int:
-    from alcn_cv.train.config import UNET_CONFS, preset
+    from alcn_cv.train.config import UNET_CONFS
 
     cfg = preset(UNET_CONFS, args.conf, _operational(args, seed="seed"))
     if args.print_config:
-        cfg = cfg.resolved()  # as the run records them
+        cfg = cfg.resolved()  # the folders the run reads
         cfg.check()
         return _print_config(cfg)
     from alcn_cv.train.real_light import TrainingInterrupted

@@ -4,9 +4,9 @@ Each training command has one configuration class whose defaults are the recipe 
 weight file, and a dict of named presets: :data:`TRAIN_CONFS` (``alcn train --conf paper``,
 ``alcn_normalizer.npz``), :data:`REAL_LIGHT_CONFS` (``alcn train-real-light --conf gain``,
 ``alcn_normalizer_gain.npz``), :data:`UNET_CONFS` (``alcn train-unet --conf gain``, the U-Net
-baseline) and :data:`DISTILL_CONFS` (``alcn distill --conf lite|gain-lite``).
-:func:`with_settings` applies ``KEY=VALUE`` overrides (dotted keys, values read as TOML and
-checked against the field's type) to any of them. The module imports no torch.
+baseline) and :data:`DISTILL_CONFS` (``alcn distill --conf lite|gain-lite``), each with its one-line summaries
+(``*_CONF_SUMMARIES``, for the ``--help``). :func:`alcn_cv.presets.with_settings` applies ``KEY=VALUE`` overrides
+(dotted keys, values read as TOML and checked against the field's type) to any of them. The module imports no torch.
 
 The keys of :class:`TrainConfig` (also readable from a TOML file with the tables below;
 ``alcn train --print-config`` writes the effective configuration as TOML):
@@ -18,9 +18,9 @@ The keys of :class:`TrainConfig` (also readable from a TOML file with the tables
 ``[data]`` -- the stage-1 windows (Phos-like, :mod:`alcn_cv.data.phos`)
     ``path`` (str): folder written by ``alcn data phos`` holding the training windows; empty:
     render ``n_train`` windows in the process. ``val_path`` (str): the same for the validation
-    windows; empty: render ``n_val``; both made absolute by :func:`load_config` (:func:`absolute_path`), so that a
-    checkpoint names the same folders from any working folder. ``n_train``, ``n_val`` (int): number of windows to
-    render.
+    windows; empty: render ``n_val``. Both relative to the working folder; a run's checkpoint records them absolute
+    (:meth:`TrainConfig.resolved`), its weight file as given, the home folder written ``~``
+    (:meth:`TrainConfig.shareable`). ``n_train``, ``n_val`` (int): number of windows to render.
     ``seed`` (int, -1 = the run's ``seed``): seed of the rendered training windows (validation
     uses ``seed + 1_000_003``). ``n_objects`` (int), ``object_seed`` (int): the object catalogue
     (labels 1..n_objects). ``train_lighting``, ``val_lighting`` (list of str): lighting families
@@ -81,22 +81,27 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import difflib
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Self, TypeVar
+from typing import Any, Self
 
 from alcn_cv.data.lighting import LIGHT_FAMILIES
 from alcn_cv.errors import InputError
+from alcn_cv.presets import preset_named, with_settings
 
 __all__ = [
     "DISTILL_CONFS",
+    "DISTILL_CONF_SUMMARIES",
     "FOLDER_SETTINGS",
     "REAL_LIGHT_CONFS",
+    "REAL_LIGHT_CONF_SUMMARIES",
     "TRAIN_CONFS",
+    "TRAIN_CONF_SUMMARIES",
+    "TRAIN_FOLDER_SETTINGS",
     "UNET_CONFS",
+    "UNET_CONF_SUMMARIES",
     "FewShotSetup",
     "GainDistillConfig",
     "LiteDistillConfig",
@@ -105,9 +110,8 @@ __all__ = [
     "UNetConfig",
     "absolute_path",
     "dump_toml",
+    "home_path",
     "load_config",
-    "preset",
-    "with_settings",
 ]
 
 
@@ -229,6 +233,33 @@ class TrainConfig:
     def data_seed(self) -> int:
         return self.seed if self.data.seed < 0 else self.data.seed
 
+    def folders(self) -> dict[str, str]:
+        """Its settings that name folders (:data:`TRAIN_FOLDER_SETTINGS`), by key."""
+        flat = _flatten(self.to_dict())
+        return {key: flat[key] for key in TRAIN_FOLDER_SETTINGS}
+
+    def resolved(self) -> Self:
+        """A copy whose folders (:meth:`folders`) are absolute paths (:func:`absolute_path`): the settings a run's
+        checkpoint records and a resumed run is checked against, so that they name the same data from any working
+        folder."""
+        return self._folders_as(absolute_path)
+
+    def shareable(self) -> Self:
+        """A copy whose folders (:meth:`folders`) are as a weight file, which users share, records them
+        (:func:`home_path`: as given, the home folder written ``~``)."""
+        return self._folders_as(home_path)
+
+    def _folders_as(self, path: Callable[[str], str]) -> Self:
+        copied = copy.deepcopy(self)
+        for key, value in self.folders().items():
+            table, name = key.split(".")
+            setattr(getattr(copied, table), name, path(value))
+        return copied
+
+
+#: The settings of :class:`TrainConfig` that name folders, as ``--set`` spells them (those of
+#: :class:`RealLightConfig`: :data:`FOLDER_SETTINGS`).
+TRAIN_FOLDER_SETTINGS = ("data.path", "data.val_path")
 
 #: ``alcn train`` presets, as overrides of :class:`TrainConfig`'s defaults. ``paper``: the recipe of
 #: the shipped ``alcn_normalizer.npz`` (the defaults, objective ``meta``; for a CPU);
@@ -245,6 +276,12 @@ TRAIN_CONFS: dict[str, dict[str, Any]] = {
     },
 }
 
+#: One line per preset of :data:`TRAIN_CONFS`, for ``alcn train --help``.
+TRAIN_CONF_SUMMARIES: dict[str, str] = {
+    "paper": "the recipe of the shipped alcn_normalizer.npz: objective meta, widths for a CPU",
+    "paper-full": "the paper's widths, data scale and Eq. 2 (objective joint), for a GPU; no shipped file",
+}
+
 _CHOICES = {
     "model.method": ("alcn", "dog", "none"),
     "model.detector_input": ("standardize", "raw"),
@@ -255,120 +292,26 @@ _CHOICES = {
 _PAIRS = ("model.channels", "model.dog", "model.detector_channels", "data.gain_jitter")
 
 
-def _type_name(value: Any) -> str:
-    return {
-        bool: "a boolean",
-        int: "an integer",
-        float: "a number",
-        str: "a string",
-        list: "a list",
-        tuple: "a list",
-        dict: "a table",
-    }.get(type(value), type(value).__name__)
-
-
-def _coerce(key: str, value: Any, default: Any) -> Any:
-    """``value`` checked against the type of ``default`` (ints are accepted for floats, lists for
-    tuples; list items against the default's first item)."""
-    if isinstance(default, bool):
-        ok = isinstance(value, bool)
-    elif isinstance(default, float):
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        value = float(value) if ok else value
-    elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    elif isinstance(default, (list, tuple)):
-        ok = isinstance(value, (list, tuple))
-        if ok and default:
-            value = [_coerce(key, v, default[0]) for v in value]
-        if ok:
-            value = type(default)(value)
-    else:
-        ok = isinstance(value, type(default))
-    if not ok:
-        # a value that is no TOML stays a string: the usual causes are a list of unquoted words and Python's booleans
-        hint = ""
-        if isinstance(value, str) and value.startswith(("[", "{")):
-            hint = " (a TOML value: quote the strings, e.g. ['a', 'b'])"
-        elif isinstance(value, str) and isinstance(default, bool):
-            hint = " (values are TOML: true or false, in lower case)"
-        raise InputError(f"config key {key!r} must be {_type_name(default)}, got {value!r}{hint}")
-    return value
-
-
-def _merge(obj: Any, values: dict[str, Any], prefix: str = "") -> None:
-    """Set the keys of ``values`` on the dataclass or dict ``obj`` (nested tables recursively)."""
-    if not isinstance(values, dict):
-        raise InputError(f"config key {prefix.rstrip('.')!r} must be a table, got {values!r}")
-    names = set(obj) if isinstance(obj, dict) else {f.name for f in dataclasses.fields(obj)}
-    for key, value in values.items():
-        full = prefix + key
-        if key not in names:
-            close = difflib.get_close_matches(key, sorted(names), n=1)
-            guess = f" did you mean {prefix + close[0]!r}?" if close else ""
-            raise InputError(f"unknown config key {full!r};{guess} known keys here: {', '.join(sorted(names))}")
-        current = obj[key] if isinstance(obj, dict) else getattr(obj, key)
-        if dataclasses.is_dataclass(current) or isinstance(current, dict):
-            _merge(current, value, full + ".")
-        elif isinstance(obj, dict):
-            obj[key] = _coerce(full, value, current)
-        else:
-            setattr(obj, key, _coerce(full, value, current))
-
-
-def _parse_setting(item: str) -> dict[str, Any]:
-    """``"optim.lr=3e-4"`` -> ``{"optim": {"lr": 0.0003}}`` (the value is read as TOML, or a bare string)."""
-    if "=" not in item:
-        raise InputError(f"setting {item!r} must be KEY=VALUE (--print-config shows the keys)")
-    key, text = (s.strip() for s in item.split("=", 1))
-    try:
-        value = tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = text
-    out: dict[str, Any] = {}
-    node = out
-    parts = key.split(".")
-    for p in parts[:-1]:
-        node = node.setdefault(p, {})
-    node[parts[-1]] = value
-    return out
-
-
-ConfigT = TypeVar("ConfigT")
-
-
-def with_settings(cfg: ConfigT, settings: Sequence[str | dict[str, Any]] = ()) -> ConfigT:
-    """A copy of the dataclass ``cfg`` with ``settings`` applied in order.
-
-    Args:
-        cfg: a configuration dataclass (nested dataclasses and dicts are tables).
-        settings: ``"KEY=VALUE"`` strings (``--set``; dotted keys, the value read as TOML, else as
-            a string) or nested dicts.
-
-    Raises:
-        InputError: an unknown key or a value of the wrong type, the key named in one line.
-    """
-    cfg = copy.deepcopy(cfg)
-    for item in settings:
-        _merge(cfg, item if isinstance(item, dict) else _parse_setting(item))
-    return cfg
-
-
-def preset(confs: dict[str, ConfigT], name: str, settings: Sequence[str | dict[str, Any]] = ()) -> ConfigT:
-    """The preset ``confs[name]`` with :func:`with_settings` applied (``InputError`` naming the
-    presets for an unknown name)."""
-    if name not in confs:
-        raise InputError(f"unknown preset {name!r}; choose one of {', '.join(confs)}")
-    return with_settings(confs[name], settings)
-
-
 def absolute_path(entry: str) -> str:
     """A setting naming a folder, as an absolute path (``~`` expanded, a relative path taken from the working folder,
     symbolic links resolved) where it names an existing folder; as given otherwise (empty, the name of a webcam scene,
     a path that is missing or a file: the checks name it as the user wrote it). A run's settings pass through it
-    before its checkpoint and weight file record them, so that they name the same data from any working folder."""
+    before its checkpoint records them, so that they name the same data from any working folder (its weight file,
+    which users share, records them by :func:`home_path`)."""
     path = Path(entry).expanduser()
     return str(path.resolve()) if entry and path.is_dir() else entry
+
+
+def home_path(entry: str) -> str:
+    """A setting naming a folder as a weight file, which users share, records it: as given, but for an absolute path
+    under the home folder (``/home/<user>/...``, as the user wrote it or as a resumed run's checkpoint holds it),
+    written from ``~`` (``~/...``). A relative path stays relative: no absolute path of the machine where the user
+    gave none, and the user's name in none."""
+    path = Path(entry)
+    for home in dict.fromkeys((Path.home(), Path.home().resolve())):  # the checkpoint's folders are resolved
+        if path.is_absolute() and path.is_relative_to(home):
+            return str(Path("~") / path.relative_to(home))
+    return entry
 
 
 def _check(cfg: TrainConfig) -> None:
@@ -492,27 +435,30 @@ def load_config(
             and nested dicts (``{"optim": {"lr": 3e-4}}``), or one nested dict.
 
     Raises:
-        InputError: unknown key, wrong type or impossible value (the message names the key),
-            an unreadable TOML file, a missing data folder.
+        InputError: an unknown preset (a name that is no path; :func:`~alcn_cv.presets.preset_named`), unknown key,
+            wrong type or impossible value (the message names the key), a missing or unreadable TOML file, a missing
+            data folder.
     """
     cfg = TrainConfig()
     if isinstance(source, TrainConfig):
         cfg = copy.deepcopy(source)
     elif isinstance(source, dict):
-        _merge(cfg, source)
-    elif source is None or str(source) in TRAIN_CONFS:
-        _merge(cfg, copy.deepcopy(TRAIN_CONFS[str(source or "paper")]))
+        cfg = with_settings(cfg, [source])
     else:
-        path = Path(source)
-        if not path.is_file():
-            raise InputError(f"config {source!r} is neither a preset ({', '.join(TRAIN_CONFS)}) nor a TOML file")
-        try:
-            values = tomllib.loads(path.read_text())
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise InputError(f"config file {path}: invalid TOML: {exc}") from None
-        _merge(cfg, values)
+        name = str(source or "paper")
+        path = Path(name)
+        # a name is a preset's (an unknown one refused as every command refuses it), a path is a TOML file's
+        if name in TRAIN_CONFS or not (path.is_file() or path.suffix or path.name != name):
+            cfg = with_settings(cfg, [copy.deepcopy(preset_named(TRAIN_CONFS, name))])
+        elif not path.is_file():
+            raise InputError(f"config file {name}: not found")
+        else:
+            try:
+                values = tomllib.loads(path.read_text())
+            except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+                raise InputError(f"config file {path}: invalid TOML: {exc}") from None
+            cfg = with_settings(cfg, [values])
     cfg = with_settings(cfg, [overrides] if isinstance(overrides, dict) else overrides or [])
-    cfg.data.path, cfg.data.val_path = absolute_path(cfg.data.path), absolute_path(cfg.data.val_path)
     _check(cfg)
     return cfg
 
@@ -567,10 +513,11 @@ class RealLightConfig:
             (:func:`~alcn_cv.data.permissive_images.training_photographs`) and of each of ``photos``, drawn with
             ``scenes`` as scenes of their own (0: none).
         photos: folders of your own photographs (any of jpg, png, tif, bmp...; gray or colour, 8 or 16 bits; ``~``
-            expanded, relative to the working folder; a run records them absolute, :meth:`resolved`), each image
-            relit ``relit`` times like the shipped photographs and **added** to them (their copies are unchanged: the
-            ``i``-th photograph's draws are seeded ``[seed, i]``, yours come after); every image at least ``crop``
-            pixels on a side. A folder, not an image file: the run's checkpoint records each folder's files.
+            expanded, relative to the working folder; a run's checkpoint records them absolute, :meth:`resolved`,
+            its weight file as given, :meth:`shareable`), each image relit ``relit`` times like the shipped
+            photographs and **added** to them (their copies are unchanged: the ``i``-th photograph's draws are seeded
+            ``[seed, i]``, yours come after); every image at least ``crop`` pixels on a side. A folder, not an image
+            file: the run's checkpoint records each folder's files.
         shipped_photos: relight the permissive photographs too; ``false`` with ``photos`` trains on your
             photographs alone.
         light: the light changes of those copies (:data:`~alcn_cv.data.light_changes.LIGHTS`).
@@ -617,9 +564,14 @@ class RealLightConfig:
 
     def resolved(self) -> Self:
         """A copy whose folders (:data:`FOLDER_SETTINGS`) are absolute paths (:func:`absolute_path`: a webcam scene's
-        name, and a missing folder, stay as given): the settings a run fixes, checkpoints and records, so that
-        ``--resume`` finds the same data from any working folder."""
+        name, and a missing folder, stay as given): the settings a run's checkpoint records and a resumed run is
+        checked against, so that ``--resume`` finds the same data from any working folder."""
         return dataclasses.replace(self, **{k: [absolute_path(p) for p in getattr(self, k)] for k in FOLDER_SETTINGS})
+
+    def shareable(self) -> Self:
+        """A copy whose folders (:data:`FOLDER_SETTINGS`) are as a weight file, which users share, records them
+        (:func:`home_path`: as given, the home folder written ``~``)."""
+        return dataclasses.replace(self, **{k: [home_path(p) for p in getattr(self, k)] for k in FOLDER_SETTINGS})
 
     def check(self) -> None:
         """What a run on these settings needs: scenes or relit photographs, a rendered share in [0, 1) with rendered
@@ -661,11 +613,17 @@ class RealLightConfig:
             raise InputError(f"temperature must be > 0, got {self.temperature}")
 
 
-#: The settings of :class:`RealLightConfig` (and :class:`UNetConfig`) that list folders.
+#: The settings of :class:`RealLightConfig` (and :class:`UNetConfig`) that list folders (those of :class:`TrainConfig`:
+#: :data:`TRAIN_FOLDER_SETTINGS`).
 FOLDER_SETTINGS = ("scenes", "photos", "rendered")
 
 #: ``alcn train-real-light`` presets: ``gain`` makes ``alcn_normalizer_gain.npz``.
 REAL_LIGHT_CONFS: dict[str, RealLightConfig] = {"gain": RealLightConfig()}
+
+#: One line per preset of :data:`REAL_LIGHT_CONFS`, for ``alcn train-real-light --help``.
+REAL_LIGHT_CONF_SUMMARIES: dict[str, str] = {
+    "gain": "the recipe of the shipped alcn_normalizer_gain.npz: relit photographs with no known restriction on use",
+}
 
 
 def _unet_network() -> dict[str, Any]:
@@ -689,6 +647,11 @@ class UNetConfig(RealLightConfig):
 #: ``alcn train-unet`` presets: ``gain``, the U-Net baseline trained as the ``gain`` preset of
 #: :data:`REAL_LIGHT_CONFS` trains the gain Normalizer.
 UNET_CONFS: dict[str, UNetConfig] = {"gain": UNetConfig()}
+
+#: One line per preset of :data:`UNET_CONFS`, for ``alcn train-unet --help``.
+UNET_CONF_SUMMARIES: dict[str, str] = {
+    "gain": "train-real-light's gain preset with a U-Net of 8 channels and 3 levels for network",
+}
 
 
 @dataclass
@@ -752,4 +715,11 @@ class GainDistillConfig:
 DISTILL_CONFS: dict[str, LiteDistillConfig | GainDistillConfig] = {
     "lite": LiteDistillConfig(),
     "gain-lite": GainDistillConfig(),
+}
+
+#: One line per preset of :data:`DISTILL_CONFS`, for ``alcn distill --help``.
+DISTILL_CONF_SUMMARIES: dict[str, str] = {
+    "lite": "the recipe of the shipped alcn_normalizer_lite.npz: a LiteNormalizer taught by the paper model",
+    "gain-lite": "the recipe of the shipped alcn_normalizer_gain_lite.npz: a smaller gain Normalizer taught by the "
+    "gain model",
 }

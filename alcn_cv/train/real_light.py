@@ -66,6 +66,7 @@ from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
 from alcn_cv.io import atomic_write, to_gray, write_json
 from alcn_cv.nets.gain import GainNormalizer
+from alcn_cv.presets import with_settings
 from alcn_cv.report import log_to, machine
 from alcn_cv.shared_data import shared_data_dir
 from alcn_cv.train.checkpoint import (
@@ -78,7 +79,7 @@ from alcn_cv.train.checkpoint import (
     run_folder,
     sigint_as_keyboard_interrupt,
 )
-from alcn_cv.train.config import RealLightConfig, with_settings
+from alcn_cv.train.config import RealLightConfig
 from alcn_cv.train.models import CentreMixture
 from alcn_cv.weight_file import save_normalizer_file
 
@@ -387,6 +388,7 @@ def source_scenes(
     shipped_photos: bool = True,
     min_side: int = 0,
     patch: int = RealLightConfig.patch,
+    rendered_fraction: float = 0.0,
 ) -> list[Scene]:
     """The registered scenes a gain Normalizer learns from: those of ``scenes`` (folders, or names of the shared
     ``webcam`` scenes) and, unless ``relit`` is 0, each photograph relit ``relit`` times
@@ -396,7 +398,8 @@ def source_scenes(
     ``min_side``), so that adding photos leaves the permissive ones' copies as they were.
 
     The photographs of ``photos`` are checked as they are read (:func:`check_photographs`, the windows of the side
-    ``patch``): a warning for one with almost no texture, one of the same pixels as another, and a single one.
+    ``patch``): a warning for one with almost no texture, one of the same pixels as another, and a single one (with
+    ``rendered_fraction``, the share of the steps that draw a rendered scene instead of one of these).
 
     Raises:
         InputError: as :func:`~alcn_cv.data.permissive_images.folder_photographs`, or a photograph of ``photos``
@@ -408,11 +411,17 @@ def source_scenes(
     mine = folder_photographs(photos, min_side) if photos else []  # read first: a bad file fails before any relighting
     shipped = training_photographs(shared_data_dir()) if shipped_photos else []
     if mine:
-        check_photographs(mine, shipped, patch, others=len(sources))
+        check_photographs(mine, shipped, patch, others=len(sources), rendered_fraction=rendered_fraction)
     return sources + relit_scenes(shipped + mine, relit, seed, light, jitter)
 
 
-def check_photographs(mine: Sequence[Photograph], shipped: Sequence[Photograph], patch: int, others: int = 0) -> None:
+def check_photographs(
+    mine: Sequence[Photograph],
+    shipped: Sequence[Photograph],
+    patch: int,
+    others: int = 0,
+    rendered_fraction: float = 0.0,
+) -> None:
     """Check the user's photographs ``mine`` before they are relit: an error for one without texture, a warning (a
     line of log naming the file) for one with almost none, for one of the same pixels as another of ``mine`` or of
     ``shipped`` (the permissive photographs of the run), and for a single one.
@@ -420,8 +429,9 @@ def check_photographs(mine: Sequence[Photograph], shipped: Sequence[Photograph],
     A photograph is without texture where fewer than 2 of its ``patch x patch`` windows hold any gradient (the rule of
     :func:`training_scene`, which the noise of a relit copy would hide); with almost none where fewer than
     :data:`TEXTURED_SHARE` of its windows are textured (:func:`textured_share`). Each photograph is a scene of its own,
-    drawn as often as any other: a copy makes its photograph count twice. ``others``: the scenes besides the
-    photographs (registered scenes), for the warning about a single one.
+    drawn as often as any other: a copy makes its photograph count twice. For the warning about a single one:
+    ``others``, the scenes besides the photographs (registered scenes), and ``rendered_fraction``, the share of the
+    steps that draw a rendered scene instead (:func:`draw_step`; 0: none).
 
     Raises:
         InputError: a photograph without texture, its file named.
@@ -458,13 +468,13 @@ def check_photographs(mine: Sequence[Photograph], shipped: Sequence[Photograph],
         seen.setdefault(key, photo.source)
     if len(mine) == 1:
         total = len(shipped) + others + 1
-        logger.warning(
-            "photos: a single photograph of yours, %s: %s",
-            mine[0].source,
-            f"one of the {total} scenes each step draws from"
-            if total > 1
-            else "every step draws the same scene, its relit copies (shipped_photos=false and no scenes)",
-        )
+        same = "the same scene, its relit copies (shipped_photos=false and no scenes)"
+        if rendered_fraction:
+            steps = f"the steps that draw no rendered scene ({1 - rendered_fraction:.0%} of them)"
+            detail = f"one of the {total} scenes {steps} draw from" if total > 1 else f"{steps} all draw {same}"
+        else:
+            detail = f"one of the {total} scenes each step draws from" if total > 1 else f"every step draws {same}"
+        logger.warning("photos: a single photograph of yours, %s: %s", mine[0].source, detail)
 
 
 def _pixels_hash(image: np.ndarray) -> str:
@@ -488,6 +498,7 @@ def training_scenes(cfg: RealLightConfig) -> tuple[list[TrainingScene], list[Tra
         shipped_photos=cfg.shipped_photos,
         min_side=cfg.crop,
         patch=cfg.patch,
+        rendered_fraction=cfg.rendered_fraction if cfg.rendered else 0.0,  # as draw_step draws
     )
     scenes = [training_scene(s, cfg.crop // 2, cfg.patch, cfg.crop) for s in sources]
     rendered = [training_scene(s, cfg.crop // 2, cfg.patch, cfg.crop) for s in load_scenes(cfg.rendered)]
@@ -601,11 +612,12 @@ class TrainingInterrupted(KeyboardInterrupt):
 def _save_weights(
     net: GainNormalizer, path: Path, cfg: RealLightConfig, step: int, seconds: float, record: dict[str, Any]
 ) -> Path:
+    config = asdict(cfg.shareable())  # a file users share: the folders as given, the home folder written ~
     meta = net.file_meta(
         trained=step > 0,
         description="gain Normalizer trained to identify locations across light changes (its data, relit "
         "photographs and/or registered scenes: training.config)",
-        training={**record, "config": asdict(cfg), "step": step, "seconds": round(seconds, 1), "machine": machine()},
+        training={**record, "config": config, "step": step, "seconds": round(seconds, 1), "machine": machine()},
     )
     return save_normalizer_file(path, net.state_arrays(), meta)
 
@@ -628,9 +640,11 @@ def train_real_light(
     log go into ``train.log`` all the same). An error after that is written into ``train.log`` before it propagates.
 
     Args:
-        cfg: the settings (the ``gain`` preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`, overridden or not);
-            its folders are made absolute (:meth:`~alcn_cv.train.config.RealLightConfig.resolved`) before the
-            checkpoint and the weight file record them, so that ``resume`` works from any working folder.
+        cfg: the settings (the ``gain`` preset of :data:`~alcn_cv.train.config.REAL_LIGHT_CONFS`, overridden or not).
+            The checkpoint records its folders absolute (:meth:`~alcn_cv.train.config.RealLightConfig.resolved`), so
+            that ``resume`` works from any working folder; the weight file, which users share, records them as given,
+            the home folder written ``~`` (:meth:`~alcn_cv.train.config.RealLightConfig.shareable`; a run resumed
+            with the checkpoint's settings, their absolute folders so written).
         out: the run folder.
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg`` (a resumed
             run given neither records its checkpoint's).
@@ -656,7 +670,6 @@ def train_real_light(
         TrainingInterrupted: Ctrl-C or SIGTERM; the checkpoint holds the last step done (:func:`fit`).
     """
     out = Path(out)
-    cfg = cfg.resolved()
     _check_settings(cfg)
     check_run_folder(out, resume=resume, overwrite=overwrite)
     data = data_record(cfg)
@@ -685,7 +698,8 @@ def train_real_light(
 def data_record(cfg: RealLightConfig) -> dict[str, Any]:
     """What a run of ``cfg`` reads, as its checkpoint records it for a resumed run to find again: the folders of
     ``cfg.scenes`` and ``cfg.rendered``, resolved, and, where relit, those of ``cfg.photos`` with the name and size of
-    each of their images (a photograph added or removed changes the next ones' draws)."""
+    each of their images (a photograph added or removed changes the next ones' draws). The weight file records the
+    settings as a file users share (:meth:`~alcn_cv.train.config.RealLightConfig.shareable`)."""
     photos = [Path(p).expanduser().resolve() for p in cfg.photos] if cfg.relit else []
     return {
         "scenes": [str(p.resolve()) for p in scene_dirs(cfg.scenes)],
@@ -718,8 +732,8 @@ def _check_data(saved: dict[str, Any] | None, now: dict[str, Any], path: Path) -
             changes += [f"photos {folder}: {what} {', '.join(names)}" for what, names in named.items() if names]
     if changes:
         raise WeightFileError(
-            f"checkpoint {path} was written on other data: {'; '.join(changes)}; resume with its data as they were "
-            "(where the checkpoint holds relative folders, from the run's working folder), or start a new run folder"
+            f"checkpoint {path} was written on other data: {'; '.join(changes)}; resume with its data as they were, "
+            "or start a new run folder"
         )
 
 
@@ -727,7 +741,7 @@ def resumed_config(
     out: str | Path, settings: Sequence[str | dict[str, Any]] = (), *, checkpoint: dict[str, Any] | None = None
 ) -> tuple[RealLightConfig, dict[str, Any]]:
     """The settings of the run in the folder ``out`` (its checkpoint's) with ``settings`` applied
-    (:func:`~alcn_cv.train.config.with_settings`; a resumed run takes a larger ``steps`` and nothing else), and what
+    (:func:`~alcn_cv.presets.with_settings`; a resumed run takes a larger ``steps`` and nothing else), and what
     its weight file records besides (``command`` and ``conf``; empty for a checkpoint written before they were kept).
     ``checkpoint``: ``out/checkpoint.pt`` read already (:func:`~alcn_cv.train.checkpoint.load_checkpoint`), for
     :func:`train_real_light` to take too.

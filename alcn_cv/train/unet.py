@@ -103,8 +103,8 @@ def train_unet(
 
     Args:
         cfg: the settings (a preset of :data:`~alcn_cv.train.config.UNET_CONFS`); ``cfg.net`` holds the
-            :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer` arguments. Its folders are recorded absolute
-            (:meth:`~alcn_cv.train.config.RealLightConfig.resolved`).
+            :class:`~alcn_cv.train.unet_normalizer.UNetNormalizer` arguments, recorded in the weight file, which users
+            share, as given, the home folder written ``~`` (:meth:`~alcn_cv.train.config.RealLightConfig.shareable`).
         out: the run folder.
         command, conf: the command line and the preset's name, recorded in the weight file with ``cfg``.
         progress: show a progress bar.
@@ -120,7 +120,6 @@ def train_unet(
         TrainingInterrupted: Ctrl-C or SIGTERM (:func:`~alcn_cv.train.real_light.fit`); no checkpoint is written
             (its ``checkpoint`` is False): ``history.json`` holds the steps done.
     """
-    cfg = cfg.resolved()
     cfg.check()
     if cfg.crop < cfg.patch:
         raise InputError(f"need crop >= patch, got crop {cfg.crop} and patch {cfg.patch}")
@@ -142,6 +141,6 @@ def _train(cfg: UNetConfig, out: Path, record: dict[str, Any], progress: bool) -
         trained=True,
         output_range=output_range(net, scenes + rendered),
         description="free-form U-Net normalizer trained as the gain Normalizer (identification objective)",
-        training={**record, "config": asdict(cfg), "seconds": round(seconds, 1), "machine": machine()},
+        training={**record, "config": asdict(cfg.shareable()), "seconds": round(seconds, 1), "machine": machine()},
     )
     return save_normalizer_file(out / "unet_normalizer.npz", net.state_arrays(), meta)
