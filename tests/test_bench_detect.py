@@ -250,7 +250,7 @@ def test_tuning_without_validation_images_is_one_line_before_any_work(small_data
     err = capsys.readouterr().err.strip()
     assert err == (
         f"alcn bench: error: {data}: no val.json, the validation images --tune scores its settings on: render the "
-        "data again with `alcn data detect`"
+        "data again with `alcn data detect`, or add test-like images of the objects as val.json (COCO, as test.json)"
     )
     assert not out.exists()
     # without --tune, or with no method to tune, the data need no validation images

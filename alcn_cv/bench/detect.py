@@ -701,7 +701,8 @@ def main(
     if _tuned_methods(settings) and (data.val is None or not data.val.annotations):
         raise InputError(
             f"{data.root}: {'no val.json' if data.val is None else 'no object in val.json'}, the validation images "
-            "--tune scores its settings on: render the data again with `alcn data detect`"
+            "--tune scores its settings on: render the data again with `alcn data detect`, or add test-like images of "
+            "the objects as val.json (COCO, as test.json)"
         )
     out = Path(out_dir)
     make_folder(out)

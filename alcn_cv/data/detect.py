@@ -83,12 +83,12 @@ _SMALL = DetectConfig(width=320, height=200, n_train=3, n_test=4, n_val=2, objec
 
 #: The named presets of :func:`generate` (hloc's ``confs``; ``alcn data detect --conf NAME``): ``default``, the
 #: benchmark (minutes on 2 cores); ``small``, seconds, for tests; ``demo``, ``alcn demo``'s set: ``small``'s objects
-#: in 480x300 images, 6 test images with every object in each. Frozen: :func:`generate` derives a run's configuration
-#: with :func:`dataclasses.replace`, never changing a preset.
+#: in 480x300 images, 6 test images with every object in each, no validation image (the demo does not tune). Frozen:
+#: :func:`generate` derives a run's configuration with :func:`dataclasses.replace`, never changing a preset.
 CONFS: dict[str, DetectConfig] = {
     "default": DetectConfig(),
     "small": _SMALL,
-    "demo": dataclasses.replace(_SMALL, width=480, height=300, n_test=6, p_object=1.0),
+    "demo": dataclasses.replace(_SMALL, width=480, height=300, n_test=6, n_val=0, p_object=1.0),
 }
 
 #: One line per preset of :data:`CONFS`, for ``alcn data detect --help``.
