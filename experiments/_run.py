@@ -209,10 +209,22 @@ def quick_protocol() -> list[str]:
     ]
 
 
-def quick_seed0_untuned() -> list[str]:
-    """The options of an experiment's short ``alcn bench relight`` run: the quick protocol (:func:`quick_protocol`),
-    seed 0 alone, no tuning."""
-    return ["--seeds", "0", *quick_protocol(), "--no-tune"]
+def short_relight(out: Path, methods: list[str]) -> None:
+    """An experiment's short ``alcn bench relight`` run of ``methods`` into ``out`` (replacing an earlier one): the
+    quick protocol (:func:`quick_protocol`), seed 0 alone, no tuning."""
+    alcn(
+        "bench",
+        "relight",
+        "--out",
+        str(out),
+        "--overwrite",
+        "--methods",
+        ",".join(methods),
+        "--seeds",
+        "0",
+        *quick_protocol(),
+        "--no-tune",
+    )
 
 
 def untrained_start(trained: str | Path, path: str | Path, description: str) -> Path:

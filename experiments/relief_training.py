@@ -40,10 +40,10 @@ from _run import (
     alcn,
     command_line,
     keep,
-    quick_seed0_untuned,
     recorded_settings,
     script_command,
     selected_parts,
+    short_relight,
 )
 from _stand_in import render_stand_in
 from tqdm.auto import tqdm
@@ -140,16 +140,7 @@ def main() -> None:
             summary.setdefault(name, {}).update(row)
     if "bench" in args.part:
         methods = [*specs.values(), "none"]
-        alcn(
-            "bench",
-            "relight",
-            "--out",
-            str(args.out / "bench"),
-            "--overwrite",
-            "--methods",
-            ",".join(methods),
-            *quick_seed0_untuned(),
-        )
+        short_relight(args.out / "bench", methods)
         report = json.loads((args.out / "bench" / "relight.json").read_text(encoding="utf-8"))
         for name, spec in (specs | {"none": "none"}).items():
             summary.setdefault(name, {}).update(bench_means(report, spec))

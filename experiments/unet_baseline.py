@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from _run import RUNS, add_part_option, alcn, command_line, keep, quick_seed0_untuned, selected_parts
+from _run import RUNS, add_part_option, alcn, command_line, keep, selected_parts, short_relight
 
 PARTS = ("unet", "gain", "objective", "bench")
 
@@ -52,16 +52,7 @@ def main() -> None:
         objective.main(args.out, {"unet": unet, "gain": gain}, args.conf, args.draws)
     if "bench" in parts:
         methods = [f"unet:weights={unet}", *([f"alcn:weights={gain}"] if gain.is_file() else []), "alcn", "none"]
-        alcn(
-            "bench",
-            "relight",
-            "--out",
-            str(args.out / "bench"),
-            "--overwrite",
-            "--methods",
-            ",".join(methods),
-            *quick_seed0_untuned(),
-        )
+        short_relight(args.out / "bench", methods)
         keep(args.out / "bench" / "relight.json", "relight_unet")
 
 
