@@ -346,20 +346,23 @@ def test_an_interrupted_train_unet_says_it_has_no_checkpoint(tmp_path, monkeypat
     assert [h["step"] for h in json.loads((out / "history.json").read_text())] == [1, 2]
 
 
-def test_a_checkpoint_written_before_photos_were_kept_resumes(tmp_path, capsys):
-    """A checkpoint of a run before the keys photos and shipped_photos: its settings are the defaults of those."""
+@pytest.mark.parametrize("key", ["data", "record"])
+def test_a_checkpoint_of_an_earlier_version_is_refused_with_one_line(tmp_path, capsys, key):
+    """A checkpoint that records neither its data nor its command does not resume, with or without --conf."""
     scene = _scene(tmp_path / "scene")
     out = tmp_path / "run"
     assert main(_run(out, *_tiny(scene))) == 0
     path = out / "checkpoint.pt"
     ckpt = torch.load(path, weights_only=True)
-    for key in ("photos", "shipped_photos"):
-        del ckpt["config"][key]
-    ckpt.pop("data", None)  # nor did it record its data
+    del ckpt[key]
     torch.save(ckpt, path)
-    assert main(_run(out, "--resume", "--set", "steps=3")) == 0, capsys.readouterr().err
-    torch.save(ckpt, path)
-    assert main(_run(out, "--resume", "--conf", "gain", *_tiny(scene, steps=3))) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    for extra in ([], ["--conf", "gain", *_tiny(scene, steps=3)]):
+        assert main(_run(out, "--resume", "--set", "steps=3", *extra)) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.endswith(
+            f"checkpoint {path} was written by an earlier alcn-cv (it records no {key}): start a new run folder"
+        )
 
 
 def test_a_run_resumes_from_any_working_folder(tmp_path, monkeypatch, capsys):

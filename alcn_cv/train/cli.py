@@ -363,7 +363,7 @@ def _train_real_light(args: argparse.Namespace) -> int:
 
         checkpoint = load_checkpoint(args.out / "checkpoint.pt")  # read once: the run takes it too
         cfg, record = resumed_config(args.out, settings, checkpoint=checkpoint)
-        conf, first = record.get("conf"), record.get("command")  # none from a checkpoint written before they were kept
+        conf, first = record["conf"], record["command"]
         command = shlex.join([*shlex.split(first), *_setting_words(args)]) if first else ""
     else:
         conf = args.conf or "gain"

@@ -681,10 +681,10 @@ def train_real_light(
         else:
             start = checkpoint
             check_checkpoint(start, path, cfg)
-        _check_data(start.get("data"), data, path)
+        _check_data(_recorded(start, path)["data"], data, path)
     record: dict[str, Any] = {"command": command, "conf": conf}
     if start is not None and not command:
-        record.update(start.get("record") or {})
+        record.update(start["record"])
     with _log_kept() as kept:
         scenes = training_scenes(cfg)
     with training_run(cfg, out, resume, kept=kept, check=False) as folder:
@@ -708,11 +708,25 @@ def data_record(cfg: RealLightConfig) -> dict[str, Any]:
     }
 
 
-def _check_data(saved: dict[str, Any] | None, now: dict[str, Any], path: Path) -> None:
-    """Raise :class:`WeightFileError` naming what changed from the data the checkpoint ``path`` records (``saved``;
-    None: a checkpoint written before they were recorded, not compared) to those of now (:func:`data_record`)."""
-    if saved is None:
-        return
+def _recorded(ckpt: dict[str, Any], path: Path) -> dict[str, Any]:
+    """The checkpoint ``ckpt`` (read from ``path``), which must record its data and its command (``data``,
+    ``record``).
+
+    Raises:
+        WeightFileError: a checkpoint of an earlier alcn-cv, which recorded neither: it does not resume.
+    """
+    missing = [key for key in ("data", "record") if key not in ckpt]
+    if missing:
+        raise WeightFileError(
+            f"checkpoint {path} was written by an earlier alcn-cv (it records no {' and no '.join(missing)}): start a "
+            "new run folder"
+        )
+    return ckpt
+
+
+def _check_data(saved: dict[str, Any], now: dict[str, Any], path: Path) -> None:
+    """Raise :class:`WeightFileError` naming what changed from the data the checkpoint ``path`` records (``saved``)
+    to those of now (:func:`data_record`)."""
     changes = [
         f"{key} {saved.get(key)} in the checkpoint, {now[key]} now"
         for key in ("scenes", "rendered")
@@ -742,12 +756,13 @@ def resumed_config(
 ) -> tuple[RealLightConfig, dict[str, Any]]:
     """The settings of the run in the folder ``out`` (its checkpoint's) with ``settings`` applied
     (:func:`~alcn_cv.presets.with_settings`; a resumed run takes a larger ``steps`` and nothing else), and what
-    its weight file records besides (``command`` and ``conf``; empty for a checkpoint written before they were kept).
+    its weight file records besides (``command`` and ``conf``).
     ``checkpoint``: ``out/checkpoint.pt`` read already (:func:`~alcn_cv.train.checkpoint.load_checkpoint`), for
     :func:`train_real_light` to take too.
 
     Raises:
-        WeightFileError: no readable checkpoint of ``alcn train-real-light`` in ``out``, or one of unknown settings.
+        WeightFileError: no readable checkpoint of ``alcn train-real-light`` in ``out``, one of unknown settings, or
+            one of an earlier alcn-cv (:func:`_recorded`).
         InputError: a setting unknown or of the wrong type.
     """
     path = Path(out) / "checkpoint.pt"
@@ -758,7 +773,7 @@ def resumed_config(
     unknown = sorted(set(saved) - {f.name for f in fields(RealLightConfig)})
     if unknown:
         raise WeightFileError(f"checkpoint {path} holds settings this alcn-cv does not know: {', '.join(unknown)}")
-    return with_settings(RealLightConfig(**saved), settings), dict(ckpt.get("record") or {})
+    return with_settings(RealLightConfig(**saved), settings), dict(_recorded(ckpt, path)["record"])
 
 
 def _check_settings(cfg: RealLightConfig) -> None:
