@@ -21,7 +21,7 @@ from typing import Any, TypeVar
 
 from alcn_cv.errors import InputError
 
-__all__ = ["preset", "preset_named", "with_settings"]
+__all__ = ["preset", "preset_named", "with_given", "with_settings"]
 
 ConfigT = TypeVar("ConfigT")
 
@@ -45,6 +45,12 @@ def preset(confs: Mapping[str, ConfigT], name: str, settings: Sequence[str | dic
         InputError: an unknown name (:func:`preset_named`), or a bad setting (:func:`with_settings`).
     """
     return with_settings(preset_named(confs, name), settings)
+
+
+def with_given(cfg: ConfigT, **given: Any) -> ConfigT:
+    """A copy of the dataclass ``cfg`` with the fields ``given`` that are not None replaced: None, not 0, leaves the
+    preset's value (an option not given), so that an option's 0 is checked as a value, never read as "the default"."""
+    return dataclasses.replace(cfg, **{key: value for key, value in given.items() if value is not None})
 
 
 def _type_name(value: Any) -> str:

@@ -199,14 +199,9 @@ def quick_protocol() -> list[str]:
     ``alcn_cv.bench.relight_settings.CONFS["quick"]``) spelled out: the kept reports' commands record them so
     (``--conf quick`` would be another command for the same settings, which :func:`keep` would not let replace
     them)."""
-    from dataclasses import asdict
-
     from alcn_cv.bench.relight_settings import CONFS
 
-    # None (every pair) is the bench's 0
-    return [
-        arg for key, value in asdict(CONFS["quick"]).items() for arg in (f"--{key.replace('_', '-')}", str(value or 0))
-    ]
+    return CONFS["quick"].options()
 
 
 def short_relight(out: Path, methods: list[str]) -> None:

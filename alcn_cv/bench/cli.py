@@ -21,7 +21,7 @@ from alcn_cv.bench.detect_settings import POLICIES, DetectSettings
 from alcn_cv.cli import add_conf_option, add_progress_option, add_seeds_option, preset_values
 from alcn_cv.data import scenes
 from alcn_cv.errors import InputError
-from alcn_cv.presets import preset
+from alcn_cv.presets import preset, with_given
 
 __all__ = ["BENCHMARKS", "add_parser"]
 
@@ -72,10 +72,7 @@ def _size(text: str) -> tuple[int, int]:
 
 def _override(settings: Any, args: argparse.Namespace) -> Any:
     """The settings with every field that the command line gave replaced."""
-    given = {
-        f.name: getattr(args, f.name) for f in dataclasses.fields(settings) if getattr(args, f.name, None) is not None
-    }
-    return dataclasses.replace(settings, **given)
+    return with_given(settings, **{f.name: getattr(args, f.name, None) for f in dataclasses.fields(settings)})
 
 
 def _add_out(p: argparse.ArgumentParser, report: str) -> None:
@@ -344,7 +341,7 @@ def _run_speed(args: argparse.Namespace) -> int:
 
 def _preset_flags(sampling: relight_settings.Sampling) -> str:
     """A preset of ``alcn bench relight`` as the options it stands for (0: all)."""
-    return " ".join(f"--{k.replace('_', '-')} {v or 0}" for k, v in dataclasses.asdict(sampling).items())
+    return " ".join(sampling.options())
 
 
 def _add_relight(subparsers: argparse._SubParsersAction) -> None:

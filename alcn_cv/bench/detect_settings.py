@@ -114,7 +114,7 @@ class DetectSettings:
     def check(self) -> None:
         """Raise :class:`~alcn_cv.errors.InputError` on an unknown method or policy, or a value out of range."""
         known = set(available()) | set(DEEP_BASELINES)
-        methods = default_methods() if self.methods is None else self.methods
+        methods = self.resolved().methods
         specs = [parse_spec(m) for m in methods]
         unknown = [m for m, (name, _) in zip(methods, specs) if name not in known]
         if unknown or not methods:

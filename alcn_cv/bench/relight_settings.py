@@ -4,7 +4,7 @@ their sampling sizes (:data:`CONFS`), apart from the benchmark so that what desc
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 from alcn_cv.errors import InputError
 
@@ -50,6 +50,10 @@ class Sampling:
     max_frames: int | None = 20
     patches: int = Settings.patches
     max_pairs: int | None = Settings.max_pairs
+
+    def options(self) -> list[str]:
+        """The options of ``alcn bench relight`` that set these sizes, ``["--max-frames", "12", ...]`` (0: all)."""
+        return [arg for key, value in asdict(self).items() for arg in (f"--{key.replace('_', '-')}", str(value or 0))]
 
 
 #: The named presets of ``alcn bench relight`` (hloc's ``confs``; ``--conf NAME``), its sampling sizes: ``default``,

@@ -44,7 +44,7 @@ from alcn_cv.data.textures import photo_crop, procedural_texture
 from alcn_cv.errors import InputError
 from alcn_cv.formats.coco import write_coco
 from alcn_cv.io import write_image, write_json
-from alcn_cv.presets import preset_named
+from alcn_cv.presets import preset_named, with_given
 
 __all__ = ["CONFS", "CONF_SUMMARIES", "DetectConfig", "OBJECTS", "benchmark_objects", "generate"]
 
@@ -274,16 +274,15 @@ def generate(
     Raises:
         InputError: an unknown preset (:func:`~alcn_cv.presets.preset_named`), or a value out of range.
     """
-    # None, not 0, means the preset's value: --width 0 is an error, not a silent 1280
-    given = {
-        "width": width,
-        "height": height,
-        "n_train": n_train,
-        "n_test": n_test,
-        "n_val": n_val,
-        "p_object": p_object,
-    }
-    cfg = dataclasses.replace(preset_named(CONFS, conf), **{k: v for k, v in given.items() if v is not None})
+    cfg = with_given(
+        preset_named(CONFS, conf),
+        width=width,
+        height=height,
+        n_train=n_train,
+        n_test=n_test,
+        n_val=n_val,
+        p_object=p_object,
+    )
     if (
         cfg.width < 2 * cfg.object_px
         or cfg.height < 2 * cfg.object_px

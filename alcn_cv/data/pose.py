@@ -21,7 +21,6 @@ known poses (world frame in mm, image names relative to ``rgb/``) and an empty `
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -57,7 +56,7 @@ from alcn_cv.formats.bop import (
 )
 from alcn_cv.formats.colmap import ColmapImage, camera_from_opencv, write_text_model
 from alcn_cv.io import write_image, write_json
-from alcn_cv.presets import preset_named
+from alcn_cv.presets import preset_named, with_given
 
 __all__ = [
     "CONFS",
@@ -458,9 +457,7 @@ def generate(
     Raises:
         InputError: an unknown preset (:func:`~alcn_cv.presets.preset_named`), or a value out of range.
     """
-    # None, not 0, means the preset's value: --frames 0 is an error, not a silent 3 or 60
-    given = {"n_frames": n_frames, "n_test": n_test}
-    cfg = dataclasses.replace(preset_named(CONFS, conf), **{k: v for k, v in given.items() if v is not None})
+    cfg = with_given(preset_named(CONFS, conf), n_frames=n_frames, n_test=n_test)
     if cfg.n_frames < 1 or not 0 <= cfg.n_test <= len(SEQUENCE_KINDS):
         raise InputError(
             f"need frames >= 1 (--frames) and 0 <= test sequences <= {len(SEQUENCE_KINDS)} (--n-test); "

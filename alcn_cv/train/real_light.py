@@ -174,7 +174,7 @@ def textured_share(image: np.ndarray, patch: int, step: int = 4) -> float:
     """The share of the ``patch x patch`` windows of a grid of ``step`` over a uint8 photograph (gray ``HxW`` or BGR
     ``HxWx3``, at least ``patch`` on a side) whose RMS gradient reaches :data:`TEXTURE_LEVELS` grey levels per pixel:
     0 for a uniform image or a smooth ramp, close to 1 for a photograph textured all over."""
-    gray = to_gray(image) if image.ndim == 3 else image
+    gray = to_gray(image)
     _, _, energy = _window_texture(gray[None].astype(np.float32) / 255, patch, step)
     # Sobel's 3x3 kernel answers 8 to a ramp of 1 per pixel; the box filter's rounding can leave tiny negatives
     levels = np.sqrt(np.maximum(energy, 0)) / 8 * 255
@@ -438,14 +438,14 @@ def check_photographs(
     """
     seen = {_pixels_hash(p.image): f"the shipped photograph {p.name}" for p in shipped}
     for photo in mine:
-        gray = to_gray(photo.image) if photo.image.ndim == 3 else photo.image
+        gray = to_gray(photo.image)
         if len(textured_locations(gray[None].astype(np.float32), patch)) < 2:
             raise InputError(
                 f"photos: {photo.source}: no texture: its pixels are alike all over (fewer than 2 of its "
                 f"{patch}x{patch} windows hold any gradient), and the training identifies locations by their texture; "
                 "remove it"
             )
-        share = textured_share(photo.image, patch)
+        share = textured_share(gray, patch)
         if share < TEXTURED_SHARE:
             logger.warning(
                 "photos: %s: almost no texture: %.0f%% of its %dx%d windows reach an RMS gradient of %g grey level per "
