@@ -38,7 +38,7 @@ from tqdm.auto import tqdm
 
 from alcn_cv.bench.directional import SIZES, identify, tune
 from alcn_cv.bench.relight import TUNING_GRIDS
-from alcn_cv.data.relief_scenes import AZIMUTHS, ELEVATIONS
+from alcn_cv.data.relief_settings import AZIMUTHS, ELEVATIONS
 from alcn_cv.report import machine
 
 BASELINES = ("none", "clahe", "dog", "dlcn", "tantriggs", "sqi", "alcn")

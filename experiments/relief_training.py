@@ -49,7 +49,7 @@ from _stand_in import render_stand_in
 from tqdm.auto import tqdm
 
 from alcn_cv.bench.directional import identify
-from alcn_cv.data.relief_scenes import ELEVATIONS
+from alcn_cv.data.relief_settings import ELEVATIONS
 from alcn_cv.report import machine
 
 PARTS = ("scenes", "train", "faces", "bench")

@@ -8,7 +8,7 @@ import jsonschema
 import numpy as np
 import pytest
 
-from alcn_cv.data import detect
+from alcn_cv.data import detect, detect_settings
 from alcn_cv.data.manifest import MANIFEST_SCHEMA
 from alcn_cv.errors import InputError
 from alcn_cv.formats import schema
@@ -28,7 +28,7 @@ def test_layout_manifest_and_schema(bench):
     assert man["box_size"] == 36 and man["working_scale"] == pytest.approx(0.5)
     assert {o["material"] for o in man["objects"]} == {"matte", "velvet", "metal"}
     assert man["files"] == {"train": "train.json", "test": "test.json", "val": "val.json"}
-    assert man["parameters"]["n_val"] == detect.CONFS["small"].n_val == 2
+    assert man["parameters"]["n_val"] == detect_settings.CONFS["small"].n_val == 2
     for name in ("train.json", "test.json", "val.json"):
         jsonschema.validate(json.loads((bench / name).read_text()), schema("coco"))
 

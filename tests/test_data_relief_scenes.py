@@ -77,7 +77,8 @@ def test_directional_scenes_are_the_gallery_then_the_probes(tmp_path):
     """--lighting directional: a frontal light, then AZIMUTHS probes per elevation; the folder holds what
     render_scenes gives in memory, and identification finds a scene's own gallery image."""
     from alcn_cv.bench.directional import identification
-    from alcn_cv.data.relief_scenes import AZIMUTHS, DIRECTIONAL_FRAMES, ELEVATIONS, render_scenes
+    from alcn_cv.data.relief_scenes import render_scenes
+    from alcn_cv.data.relief_settings import AZIMUTHS, DIRECTIONAL_FRAMES, ELEVATIONS
 
     out = generate(tmp_path / "d", scenes=2, side=48, seed=7, lighting="directional", progress=False)
     manifest = read_manifest(out, KIND)

@@ -17,7 +17,9 @@ import pytest
 from alcn_cv.bench import detect_settings, relight_settings, speed
 from alcn_cv.cli import build_parser, main
 from alcn_cv.data import detect as data_detect
+from alcn_cv.data import detect_settings as data_detect_settings
 from alcn_cv.data import pose as data_pose
+from alcn_cv.data import pose_settings as data_pose_settings
 from alcn_cv.errors import InputError
 from alcn_cv.presets import preset
 from alcn_cv.train import config as train_config
@@ -27,8 +29,8 @@ from pose import corner_train
 #: The stages of the data engine and the benchmarks: the module that holds their ``CONFS`` (settings dataclasses,
 #: ``default`` first) and ``CONF_SUMMARIES``, and their command line without ``--conf``.
 STAGES: dict[str, tuple[Any, list[str]]] = {
-    "alcn data detect": (data_detect, ["data", "detect", "--out", "o"]),
-    "alcn data pose": (data_pose, ["data", "pose", "--out", "o"]),
+    "alcn data detect": (data_detect_settings, ["data", "detect", "--out", "o"]),
+    "alcn data pose": (data_pose_settings, ["data", "pose", "--out", "o"]),
     "alcn bench detect": (detect_settings, ["bench", "detect", "--data", "d", "--out", "o"]),
     "alcn bench relight": (relight_settings, ["bench", "relight", "--out", "o"]),
     "alcn bench speed": (speed, ["bench", "speed", "--out", "o"]),
@@ -112,14 +114,14 @@ def test_help_lists_every_preset_on_a_line_of_its_own(command, capsys):
     assert ("--set KEY=VALUE" in text) == (command in WITH_SETTINGS)
 
 
-@pytest.mark.parametrize("module", [data_detect, data_pose])
-def test_the_generators_name_the_presets_for_an_unknown_one(module, tmp_path):
-    with pytest.raises(InputError, match=f"^unknown preset 'huge'; choose one of {', '.join(module.CONFS)}$"):
+@pytest.mark.parametrize("module, settings", [(data_detect, data_detect_settings), (data_pose, data_pose_settings)])
+def test_the_generators_name_the_presets_for_an_unknown_one(module, settings, tmp_path):
+    with pytest.raises(InputError, match=f"^unknown preset 'huge'; choose one of {', '.join(settings.CONFS)}$"):
         module.generate(tmp_path / "x", conf="huge", progress=False)
     assert not (tmp_path / "x").exists()
 
 
-@pytest.mark.parametrize("module", [data_detect, data_pose, relight_settings])
+@pytest.mark.parametrize("module", [data_detect_settings, data_pose_settings, relight_settings])
 def test_the_presets_that_are_values_are_frozen(module):
     """A run derives its own with dataclasses.replace: none can change a preset."""
     for conf in module.CONFS.values():

@@ -1,7 +1,7 @@
 """Whole-image identification under hard directional light, on the scenes of ``alcn data scenes --lighting
 directional`` (:func:`alcn_cv.data.relief_scenes.render_directional_scene`): each scene is an identity, its first
-frame the gallery (frontal light), the others the probes (:data:`~alcn_cv.data.relief_scenes.AZIMUTHS` per
-elevation of :data:`~alcn_cv.data.relief_scenes.ELEVATIONS`).
+frame the gallery (frontal light), the others the probes (:data:`~alcn_cv.data.relief_settings.AZIMUTHS` per
+elevation of :data:`~alcn_cv.data.relief_settings.ELEVATIONS`).
 
 Every image is normalized by its method's ``apply()`` (float output), area-resized to ``size x size``, made
 zero-mean and unit-norm, and identified as its most correlated gallery image.
@@ -19,7 +19,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from alcn_cv.data.relief_scenes import AZIMUTHS, ELEVATIONS
+from alcn_cv.data.relief_settings import AZIMUTHS, ELEVATIONS
 from alcn_cv.enhance.registry import format_spec, from_spec
 
 __all__ = ["SIZES", "descriptors", "identification", "identify", "score", "tune"]
@@ -45,7 +45,7 @@ def identification(normalized: np.ndarray, size: int) -> dict[str, float]:
         size: side of the compared images (pixels).
 
     Returns:
-        ``{"elevation E": percent}`` per elevation of :data:`~alcn_cv.data.relief_scenes.ELEVATIONS`: the
+        ``{"elevation E": percent}`` per elevation of :data:`~alcn_cv.data.relief_settings.ELEVATIONS`: the
         percentage (0-100) of its probes whose most correlated gallery image is their own scene's.
     """
     features = descriptors(normalized, size)

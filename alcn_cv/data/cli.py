@@ -127,7 +127,7 @@ def _compare_psm(args: argparse.Namespace) -> int:
 def _side_in_pixels(text: str) -> int:
     """``data scenes --side``: an integer of at least the smallest side the scenes render at, checked here so that
     the error names the option (``relief_scenes.generate`` checks it again for its Python callers)."""
-    from alcn_cv.data.relief_scenes import MIN_SIDE
+    from alcn_cv.data.relief_settings import MIN_SIDE
 
     try:
         side = int(text)
@@ -151,7 +151,11 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``data`` subcommand and its sub-subcommands to the ``alcn`` parser."""
-    from alcn_cv.data import detect, pose, relief_scenes  # numpy and OpenCV, no torch
+    from alcn_cv.data import (  # not the renderers: this runs at every start
+        detect_settings,
+        pose_settings,
+        relief_settings,
+    )
 
     p = subparsers.add_parser(
         "data",
@@ -193,7 +197,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "images from other seeds (for `alcn bench detect --tune`), in COCO format.",
     )
     q.add_argument("--out", required=True, help="output folder")
-    add_conf_option(q, detect.CONF_SUMMARIES)
+    add_conf_option(q, detect_settings.CONF_SUMMARIES)
     q.add_argument("--seed", type=int, default=0, help="seed of the images (default 0)")
     q.add_argument("--object-seed", type=int, default=0, help="seed of the three objects (default 0)")
     for option, field, what in [
@@ -203,7 +207,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         ("--width", "width", "image width"),
         ("--height", "height", "image height"),
     ]:
-        q.add_argument(option, type=int, help=f"{what} (default: the preset's: {preset_values(detect.CONFS, field)})")
+        values = preset_values(detect_settings.CONFS, field)
+        q.add_argument(option, type=int, help=f"{what} (default: the preset's: {values})")
     _add_run_options(q)
     q.set_defaults(func=_detect)
 
@@ -214,18 +219,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "lighting, #2-#4 mild, #5-#8 drastic changes) of a textured box and a duck.",
     )
     q.add_argument("--out", required=True, help="dataset root")
-    add_conf_option(q, pose.CONF_SUMMARIES)
+    add_conf_option(q, pose_settings.CONF_SUMMARIES)
     q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     q.add_argument(
         "--frames",
         type=int,
         help="frames per test sequence and per loop of the training sequence (default: the preset's: "
-        f"{preset_values(pose.CONFS, 'n_frames')})",
+        f"{preset_values(pose_settings.CONFS, 'n_frames')})",
     )
     q.add_argument(
         "--n-test",
         type=int,
-        help=f"number of test sequences (default: the preset's: {preset_values(pose.CONFS, 'n_test')})",
+        help=f"number of test sequences (default: the preset's: {preset_values(pose_settings.CONFS, 'n_test')})",
     )
     q.add_argument("--no-clutter", action="store_true", help="no clutter on the table")
     q.add_argument(
@@ -262,8 +267,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument(
         "--frames",
         type=int,
-        help=f"lightings (frames) per scene (default {relief_scenes.FRAMES}; --lighting directional: "
-        f"{relief_scenes.DIRECTIONAL_FRAMES}, the only value it takes)",
+        help=f"lightings (frames) per scene (default {relief_settings.FRAMES}; --lighting directional: "
+        f"{relief_settings.DIRECTIONAL_FRAMES}, the only value it takes)",
     )
     q.add_argument(
         "--side",
@@ -275,11 +280,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     q.add_argument(
         "--lighting",
-        choices=relief_scenes.LIGHTINGS,
+        choices=relief_settings.LIGHTINGS,
         default="families",
         help="families: each frame's light drawn from the light families; directional: a frontal light (the gallery) "
-        f"then {relief_scenes.AZIMUTHS} directional lights from random azimuths at each of the elevations "
-        f"{', '.join(map(str, relief_scenes.ELEVATIONS))} degrees (the probes), the stand-in for faces under hard "
+        f"then {relief_settings.AZIMUTHS} directional lights from random azimuths at each of the elevations "
+        f"{', '.join(map(str, relief_settings.ELEVATIONS))} degrees (the probes), the stand-in for faces under hard "
         "directional light (default families)",
     )
     _add_run_options(q)

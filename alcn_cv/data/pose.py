@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +30,7 @@ import numpy as np
 from alcn_cv.data.lighting import Light, Lighting, directional
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.parallel import parallel_map
+from alcn_cv.data.pose_settings import CONFS, PoseConfig
 from alcn_cv.data.raster import (
     Mesh,
     SceneObject,
@@ -59,9 +59,6 @@ from alcn_cv.io import write_image, write_json
 from alcn_cv.presets import preset_named, with_given
 
 __all__ = [
-    "CONFS",
-    "CONF_SUMMARIES",
-    "PoseConfig",
     "BOX_SIZE_MM",
     "make_box",
     "make_duck",
@@ -85,41 +82,6 @@ SEQUENCE_KINDS = (
     "colour_window",
     "overexposed_blinds",
 )
-
-
-@dataclass(frozen=True)
-class PoseConfig:
-    """Size of the pose dataset, one preset of :data:`CONFS`: image size, focal length (px), frames per sequence,
-    texture sizes."""
-
-    width: int = 640
-    height: int = 480
-    focal: float = 580.0
-    n_frames: int = 60
-    n_test: int = 8
-    texel: int = 256
-    table_px: int = 1024
-    shadow_res: int = 1024
-
-    @property
-    def K(self) -> np.ndarray:
-        """OpenCV intrinsics (principal point at the image centre, OpenCV convention)."""
-        return np.array([[self.focal, 0, (self.width - 1) / 2], [0, self.focal, (self.height - 1) / 2], [0, 0, 1.0]])
-
-
-#: The named presets of :func:`generate` (hloc's ``confs``; ``alcn data pose --conf NAME``): ``default``, the
-#: dataset of the rendered Table 1; ``small``, 320x240 and 3 frames a sequence (seconds, for tests). Frozen:
-#: :func:`generate` derives a run's configuration with :func:`dataclasses.replace`, never changing a preset.
-CONFS: dict[str, PoseConfig] = {
-    "default": PoseConfig(),
-    "small": PoseConfig(width=320, height=240, focal=290.0, n_frames=3, texel=96, table_px=384, shadow_res=512),
-}
-
-#: One line per preset of :data:`CONFS`, for ``alcn data pose --help``.
-CONF_SUMMARIES: dict[str, str] = {
-    "default": "the sequences of the rendered Table 1 (minutes on 2 cores)",
-    "small": "small frames, few of them (seconds; for tests, and with --frames 12 for `alcn pose eval`)",
-}
 
 
 def _face_texture(rng: np.random.Generator, t: int, kind: str) -> np.ndarray:

@@ -34,17 +34,14 @@ from alcn_cv.data.lighting import LIGHT_FAMILIES, Lighting, directional, sample_
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.objects import background_surface, make_object, paste, to_surface
 from alcn_cv.data.parallel import parallel_map
+from alcn_cv.data.relief_settings import AZIMUTHS, DIRECTIONAL_FRAMES, ELEVATIONS, FRAMES, LIGHTINGS, MIN_SIDE
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import InputError
 from alcn_cv.io import write_image, write_json
 
 __all__ = [
-    "AZIMUTHS",
-    "DIRECTIONAL_FRAMES",
-    "ELEVATIONS",
     "KIND",
-    "LIGHTINGS",
     "generate",
     "relief_surface",
     "render_directional_scene",
@@ -59,18 +56,6 @@ KIND = "relief_scenes"
 #: Light families of the frames: every family but ``colour`` (the frames are grayscale).
 FAMILIES: tuple[str, ...] = tuple(f for f in LIGHT_FAMILIES if f != "colour")
 _CANONICAL = 96
-#: The least side of the frames (pixels).
-MIN_SIDE = 32
-#: The lightings of a run (see the module).
-LIGHTINGS = ("families", "directional")
-#: ``directional``: elevations of the probes' light above the ground (degrees); the gallery is lit from 90.
-ELEVATIONS = (75, 55, 35, 20, 12)
-#: ``directional``: probes per elevation, each from a random azimuth.
-AZIMUTHS = 4
-#: ``directional``: frames of a scene, the gallery then the probes, elevation by elevation.
-DIRECTIONAL_FRAMES = 1 + len(ELEVATIONS) * AZIMUTHS
-#: ``families``: frames of a scene unless given.
-FRAMES = 12
 
 
 def render_scene(
