@@ -23,6 +23,8 @@ Modules:
 - :mod:`~alcn_cv.data.light_changes`, :mod:`~alcn_cv.data.permissive_images`: real photographs
   that permit any use, relit (the default gain Normalizer's training data).
 - :mod:`~alcn_cv.data.manifest`: manifests, atomic folders, deterministic files.
+- :mod:`~alcn_cv.data.detect_settings`, :mod:`~alcn_cv.data.pose_settings`, :mod:`~alcn_cv.data.relief_settings`:
+  the generators' presets and constants, which the command line reads without importing the renderers.
 
 Every generator is deterministic for its seed (byte-identical output) and writes a
 ``manifest.json``. The command line is ``alcn data phos|detect|pose|scenes|preview|compare-psm``.
