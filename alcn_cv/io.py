@@ -34,6 +34,7 @@ __all__ = [
     "check_writable",
     "count_frames",
     "eight_bits",
+    "held_folder",
     "interrupts_blocked",
     "is_video",
     "iter_frames",
@@ -284,6 +285,55 @@ def new_folder(folder: str | os.PathLike) -> Iterator[Path]:
             except OSError:  # not empty (the block wrote there) or gone: it and those above stay
                 break
         raise
+
+
+#: The file in a folder that :func:`held_folder` holds, naming the process that holds it; removed when the block ends.
+HOLD_FILE = ".alcn.lock"
+
+
+@contextlib.contextmanager
+def held_folder(folder: str | os.PathLike) -> Iterator[Path]:
+    """Create ``folder`` as :func:`new_folder` does and hold it for the block: another process asking to hold it
+    meanwhile is refused, so two runs of a command never write into one folder at once (the last to finish would
+    replace the other's files). The hold is an advisory lock (``flock``) on ``folder/.alcn.lock``, which the system
+    releases when the process ends, however it ends; where ``fcntl`` is missing (Windows) the folder is not held.
+
+    Raises:
+        InputError: another process holds ``folder`` (the message gives its process id); as :func:`make_folder`.
+    """
+    with new_folder(folder) as folder:
+        try:
+            import fcntl
+        except ImportError:
+            yield folder
+            return
+        path = folder / HOLD_FILE
+        while True:
+            # "a+": the holder's process id is read, not truncated; closed below or by the "with hold" once held
+            hold = open(path, "a+", encoding="utf-8")  # noqa: SIM115
+            try:
+                fcntl.flock(hold, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                hold.seek(0)
+                holder = hold.read().strip() or "unknown"
+                hold.close()
+                raise InputError(
+                    f"{folder} is in use by another run (process {holder}): wait for it to end, or give another --out"
+                ) from None
+            # held, unless the holder before removed the file between our open and lock: then hold the new one
+            with contextlib.suppress(FileNotFoundError):
+                if os.path.samestat(os.fstat(hold.fileno()), os.stat(path)):
+                    break
+            hold.close()
+        with hold:
+            hold.seek(0)
+            hold.truncate()
+            hold.write(str(os.getpid()))
+            hold.flush()
+            try:
+                yield folder
+            finally:
+                path.unlink(missing_ok=True)  # before new_folder's cleanup, which removes only empty folders
 
 
 def atomic_write(path: str | os.PathLike, data: bytes | str | Callable[[IO[bytes]], object]) -> Path:

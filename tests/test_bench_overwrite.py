@@ -13,6 +13,7 @@ import pytest
 
 from alcn_cv.cli import build_parser
 from alcn_cv.cli import main as cli_main
+from alcn_cv.io import held_folder
 from scene_sets import make_sets
 
 
@@ -87,3 +88,18 @@ def test_an_earlier_report_is_refused_and_replaced_with_overwrite(name, tmp_path
     saved = json.loads(report.read_text())
     assert "earlier" not in saved and table.read_text() != "earlier\n"
     assert f"--out {out}" in saved["command"] and "--overwrite" not in saved["command"]
+
+
+@pytest.mark.parametrize("name", list(CHEAPEST))
+def test_a_folder_another_run_writes_into_is_refused(name, tmp_path, capsys):
+    """A second run into a folder while the first runs passed the earlier-report check (no report yet) and the
+    last to finish replaced the other's report; now it is refused at once."""
+    out = tmp_path / "out"
+    argv = ["bench", name, "--out", str(out), "--no-progress", *CHEAPEST[name](tmp_path)]
+    capsys.readouterr()
+    with held_folder(out):  # the first run, in this process (a second hold conflicts as from another process)
+        assert cli_main(argv) == 2
+        assert "is in use by another run" in capsys.readouterr().err
+        assert [p.name for p in out.iterdir()] == [".alcn.lock"]
+    assert cli_main(argv) == 0
+    assert (out / f"{name}.json").exists() and not (out / ".alcn.lock").exists()

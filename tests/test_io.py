@@ -16,6 +16,7 @@ from alcn_cv.io import (
     atomic_path,
     count_frames,
     eight_bits,
+    held_folder,
     iter_frames,
     list_images,
     make_folder,
@@ -147,6 +148,46 @@ def test_a_failed_block_removes_the_empty_folders_it_created(tmp_path):
     with new_folder(tmp_path / "ok") as folder:
         pass
     assert folder.is_dir()  # kept when the block succeeds, even empty
+
+
+def test_a_held_folder_is_refused_to_another_holder_until_released(tmp_path):
+    """Two runs never write into one folder at once: a second holder is refused with the first's process id, in
+    this process (another open file) as from another process; the system releases a killed holder's hold."""
+    import os
+    import subprocess
+    import sys
+
+    folder = tmp_path / "out"
+    with held_folder(folder) as held:
+        assert held == folder and (folder / io.HOLD_FILE).read_text() == str(os.getpid())
+        refused = f"^{folder} is in use by another run \\(process {os.getpid()}\\): wait"
+        with pytest.raises(InputError, match=refused), held_folder(folder):
+            pass
+        assert folder.is_dir()  # the refused holder removes nothing
+    assert list(folder.iterdir()) == []  # the hold file goes with the hold
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            f"from alcn_cv.io import held_folder\nwith held_folder({str(folder)!r}):\n"
+            "    print('held', flush=True)\n    input()",
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout.readline() == "held\n"
+        with pytest.raises(InputError, match=f"process {holder.pid}"), held_folder(folder):
+            pass
+    finally:
+        holder.kill()
+        holder.wait()
+    with held_folder(folder):  # killed: its hold file remains, its lock does not
+        pass
+    with pytest.raises(ValueError), held_folder(tmp_path / "new"):
+        raise ValueError
+    assert not (tmp_path / "new").exists()  # a failed block's new folder is removed, hold file and all
 
 
 def test_interrupt_leaves_no_temporary_file_and_temporary_files_are_no_inputs(tmp_path, image):

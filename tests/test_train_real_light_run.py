@@ -91,6 +91,8 @@ def test_a_failed_or_unasked_run_never_destroys_an_earlier_one(tmp_path, capsys)
     assert main(_run(out, "--overwrite", *misspelt)) == 2  # fails on its scenes, before the folder is touched
     assert "scnee" in capsys.readouterr().err
     assert main(_run(out, "--overwrite", *_tiny(scene, patch=8))) == 2  # the kernels do not fit: checked first too
+    assert main(_run(out, "--resume", "--overwrite", *_tiny(scene))) == 2  # as alcn train: one or the other
+    assert "not both" in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
 
     assert main(_run(tmp_path / "new", *misspelt)) == 2

@@ -134,12 +134,14 @@ def earlier_run(out: str | Path) -> list[str]:
 def check_run_folder(out: str | Path, *, resume: bool = False, overwrite: bool = False) -> Path:
     """Check, before any work and writing nothing, that a run may go into the folder ``out``: not a folder of other
     files (:func:`run_folder`), nor, unless the run resumes it or ``overwrite``, a folder of an earlier run
-    (:func:`earlier_run`).
+    (:func:`earlier_run`); ``resume`` and ``overwrite`` are exclusive.
 
     Raises:
         InputError: either, named with the way out (``--resume``, ``--overwrite``, another ``--out``); ``out`` is a
-            file or lies under one.
+            file or lies under one; both ``resume`` and ``overwrite``.
     """
+    if resume and overwrite:
+        raise InputError("give --resume (go on with the run in --out) or --overwrite (replace it), not both")
     out = Path(out)
     _check_not_file(out)
     _check_not_foreign(out)

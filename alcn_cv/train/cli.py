@@ -249,21 +249,12 @@ def _print_config(cfg: object) -> int:
     return 0
 
 
-def _check_resume_or_overwrite(args: argparse.Namespace) -> None:
-    """Refuse ``--resume`` with ``--overwrite``, alike on every training command that takes both."""
-    from alcn_cv.errors import InputError
-
-    if args.resume and args.overwrite:
-        raise InputError("give --resume (go on with the run in --out) or --overwrite (replace it), not both")
-
-
 def _train(args: argparse.Namespace) -> int:
     from alcn_cv.train.config import TRAIN_CONFS, load_config
 
     cfg = load_config(args.conf, _operational(args, seed="seed", device="run.device"))
     if args.print_config:
         return _print_config(cfg)
-    _check_resume_or_overwrite(args)
     from alcn_cv.train import distributed
     from alcn_cv.train.trainer import train
 
@@ -355,7 +346,6 @@ def _train_real_light(args: argparse.Namespace) -> int:
     from alcn_cv.train.config import REAL_LIGHT_CONFS
 
     settings = _operational(args, seed="seed")
-    _check_resume_or_overwrite(args)
     checkpoint = None
     if args.resume and args.conf is None:  # the checkpoint's settings, with those given
         from alcn_cv.train.checkpoint import load_checkpoint
