@@ -136,7 +136,7 @@ def test_middlebury_table_says_its_units_and_counts_views_as_integers() -> None:
     header = next(line for line in text.splitlines() if line.startswith("| set/"))
     assert "median rotation error (deg)" in header and "median camera-centre error (mm)" in header
     assert "_" not in header  # no raw JSON key
-    assert "| templeSparseRing/none/original | 5/8 |" in text and "| 102 |" in text
+    assert "| templeSparseRing/none/original | 13/16 | 13/16 |" in text and "| 102 / 196 |" in text
 
 
 def test_orb_orientation_table_names_its_columns_and_defines_exposure_scenes() -> None:
@@ -197,3 +197,16 @@ def test_docstring_examples_run(module: str) -> None:
     result = doctest.testmod(imported, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     assert result.attempted > 0, f"{module}: doctest found none of its examples"
     assert result.failed == 0, f"{result.failed} of {result.attempted} examples failed"
+
+
+def test_detection_table_has_a_column_per_real_images_and_policy_and_says_what_was_tuned() -> None:
+    report = _kept("detect")
+    text = _report_module().detect(report)
+    header = next(line for line in text.splitlines() if line.startswith("| method"))
+    assert header == "| method | 1 real, `raw` | 1 real, `local` | 10 real, `raw` | 10 real, `local` |"
+    alcn = report["summary"]["alcn|10|local"]["mean"]
+    assert "| alcn | " in text and f"{alcn['mean']:.3f} ± {alcn['std']:.3f}" in text  # AUC to three decimals
+    chosen = report["tuned"]["1"]["dog"]
+    params = ":".join(f"{k}={v}" for k, v in chosen["params"].items())
+    default = chosen["trials"][0]["val_auc"]
+    assert f"| 1 | dog | {params} | " in text and f"| {default:.3f} |" in text

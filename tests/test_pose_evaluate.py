@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -70,3 +71,67 @@ def test_a_test_sequence_without_the_object_is_a_dataset_error(tmp_path):
     assert len(scores) == 2 and all(s.proj_px is None for s in scores)  # lost frames count as wrong
     with pytest.raises(DatasetError, match="object 99 is not annotated in frame 0"):
         evaluate.evaluate_sequence(_NoParts(), data / "test" / "000001", 99, corners, "mm")
+
+
+def test_middlebury_poses_every_view_once_from_a_model_without_it(tmp_path, monkeypatch):
+    """Two folds: the even views' model poses the odd views and the reverse; a pose beyond 5 deg or 5 cm counts as
+    posed, not correct (a wrong pose of the temple, 63 deg off, was counted as posed)."""
+    from types import SimpleNamespace
+
+    from alcn_cv import io
+    from alcn_cv.formats import middlebury
+
+    views = [
+        SimpleNamespace(
+            name=f"v{i}.png",
+            path=tmp_path / f"v{i}.png",
+            K=np.eye(3),
+            R_w2c=np.eye(3),
+            t_w2c=np.zeros(3),
+            center=np.zeros(3),
+        )
+        for i in range(6)
+    ]
+    # the pose found for each view: v1 4 deg off (correct), v2 6 cm off, v3 10 deg off, v5 none
+    angles, shifts = {1: 4.0, 3: 10.0}, {2: 0.06}
+    built, solved = [], []
+
+    def build(seq, **_):
+        built.append(sorted(v.name for v in seq.views))
+        return SimpleNamespace(points3d=np.zeros((10 + len(built), 3))), None
+
+    class Detector:
+        def __init__(self, model, *_, **__):
+            self.model = built[-1]
+
+        def detect(self, image):
+            return SimpleNamespace(object_points=self.model, image_points=int(image[0, 0]))
+
+    class Solver:
+        def __init__(self, *_, **__):
+            pass
+
+        def solve(self, model, index):
+            name = f"v{index}.png"
+            assert name not in model  # never posed from a model that holds it
+            solved.append(name)
+            R = cv2.Rodrigues(np.array([np.radians(angles.get(index, 0.0)), 0, 0]))[0]
+            tvec = np.array([shifts.get(index, 0.0), 0, 0])
+            return SimpleNamespace(ok=index != 5, R=R, tvec=tvec)
+
+    monkeypatch.setattr(middlebury, "read_middlebury", lambda _: views)
+    monkeypatch.setattr(evaluate, "load_sequence", lambda _: SimpleNamespace(views=list(views)))
+    monkeypatch.setattr(evaluate, "build_model", build)
+    monkeypatch.setattr(evaluate, "FeaturePartDetector", Detector)
+    monkeypatch.setattr(evaluate, "PoseSolver", Solver)
+    monkeypatch.setattr(io, "read_image", lambda path: np.full((4, 4), int(path.stem[1:]), np.uint8))
+    monkeypatch.setattr(evaluate, "relight", lambda image, seed: image)
+    results = evaluate.middlebury_main([tmp_path], tmp_path / "out", normalizations=["none"], progress=False)
+
+    assert built == [["v0.png", "v2.png", "v4.png"], ["v1.png", "v3.png", "v5.png"]]
+    assert sorted(solved) == sorted(f"v{i}.png" for i in range(6) for _ in ("original", "relit"))
+    for light in ("original", "relit"):
+        result = results[f"{tmp_path.name}/none/{light}"]
+        assert (result["posed"], result["correct"], result["views"]) == (5, 3, 6)  # v0, v1, v4 correct
+        assert result["model_points"] == [11, 12]
+    assert "| 5/6 | 3/6 |" in (tmp_path / "out" / "middlebury.md").read_text()
