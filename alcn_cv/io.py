@@ -299,7 +299,8 @@ def held_folder(folder: str | os.PathLike) -> Iterator[Path]:
     releases when the process ends, however it ends; where ``fcntl`` is missing (Windows) the folder is not held.
 
     Raises:
-        InputError: another process holds ``folder`` (the message gives its process id); as :func:`make_folder`.
+        InputError: another process holds ``folder`` (the message gives its process id); ``folder`` cannot be
+            written; as :func:`make_folder`.
     """
     with new_folder(folder) as folder:
         try:
@@ -309,8 +310,10 @@ def held_folder(folder: str | os.PathLike) -> Iterator[Path]:
             return
         path = folder / HOLD_FILE
         while True:
-            # "a+": the holder's process id is read, not truncated; closed below or by the "with hold" once held
-            hold = open(path, "a+", encoding="utf-8")  # noqa: SIM115
+            try:  # "a+": the holder's process id is read, not truncated; closed below or by "with hold" once held
+                hold = open(path, "a+", encoding="utf-8")  # noqa: SIM115
+            except OSError as exc:
+                raise InputError(f"cannot write into {folder} ({exc.strerror})") from None
             try:
                 fcntl.flock(hold, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:

@@ -187,6 +187,9 @@ def test_a_held_folder_is_refused_to_another_holder_until_released(tmp_path):
         pass
     with pytest.raises(ValueError), held_folder(tmp_path / "new"):
         raise ValueError
+    (tmp_path / "odd" / io.HOLD_FILE).mkdir(parents=True)  # a folder where the hold file goes: not writable as one
+    with pytest.raises(InputError, match="^cannot write into .*odd \\("), held_folder(tmp_path / "odd"):
+        pass
     assert not (tmp_path / "new").exists()  # a failed block's new folder is removed, hold file and all
 
 

@@ -278,4 +278,9 @@ def test_train_refuses_to_replace_an_earlier_run(tmp_path, capsys):
     )
     assert main(["train", "--out", str(tmp_path), "--resume", "--overwrite"]) == 2
     assert "not both" in capsys.readouterr().err
+    from alcn_cv.io import held_folder
+
+    with held_folder(tmp_path):  # another run writing into the folder: refused before anything is replaced
+        assert main(["train", "--out", str(tmp_path), "--overwrite", "--no-progress"]) == 2
+    assert "is in use by another run" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["checkpoint.pt", "train.log"]

@@ -93,6 +93,11 @@ def test_a_failed_or_unasked_run_never_destroys_an_earlier_one(tmp_path, capsys)
     assert main(_run(out, "--overwrite", *_tiny(scene, patch=8))) == 2  # the kernels do not fit: checked first too
     assert main(_run(out, "--resume", "--overwrite", *_tiny(scene))) == 2  # as alcn train: one or the other
     assert "not both" in capsys.readouterr().err
+    from alcn_cv.io import held_folder
+
+    with held_folder(out):  # another run writing into the folder: refused before anything is removed
+        assert main(_run(out, "--overwrite", *_tiny(scene))) == 2
+    assert "is in use by another run" in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
 
     assert main(_run(tmp_path / "new", *misspelt)) == 2

@@ -79,7 +79,9 @@ def _override(settings: Any, args: argparse.Namespace) -> Any:
 
 def _add_out(p: argparse.ArgumentParser, report: str) -> None:
     """``--out`` and ``--overwrite`` of a benchmark that writes ``report``.json and ``report``.md into ``--out``."""
-    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument(
+        "--out", required=True, type=Path, help="output folder (held while the benchmark runs: a second run is refused)"
+    )
     p.add_argument(
         "--overwrite",
         action="store_true",

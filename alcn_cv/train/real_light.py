@@ -64,7 +64,7 @@ from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
-from alcn_cv.io import atomic_write, to_gray, write_json
+from alcn_cv.io import atomic_write, held_folder, to_gray, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.presets import with_settings
 from alcn_cv.report import log_to, machine
@@ -844,7 +844,8 @@ def training_run(
     <alcn_cv.train.config.RealLightConfig.check>`; with ``check`` False, the caller has), makes the run folder ``out``
     and copies the log into its ``train.log`` (:func:`alcn_cv.report.log_to`), after ``kept``, the records of the work
     done before the folder was touched (:func:`train_real_light` loads its scenes first). An error of the block is
-    written into ``train.log`` before it propagates. A folder holds one run: an earlier run's ``train.log`` is replaced,
+    written into ``train.log`` before it propagates. The folder is held for the block (:func:`alcn_cv.io.held_folder`):
+    a second run into it meanwhile is refused. A folder holds one run: an earlier run's ``train.log`` is replaced,
     its step snapshots (``*_step{N}.npz``), checkpoint and history removed, unless the run is resumed (its log goes on);
     whether an earlier run may be replaced is for the caller to check first
     (:func:`~alcn_cv.train.checkpoint.check_run_folder`).
@@ -854,27 +855,27 @@ def training_run(
     """
     if check:
         cfg.check()
-    folder = run_folder(out)
-    # an earlier run's snapshots, which this run's would not all replace, and its checkpoint, which a --resume of a
-    # run stopped before its first save would take for its own (a resumed run's are its own)
-    earlier = [] if resume else [p for p in folder.glob("*_step*.npz") if re.search(r"_step\d+\.npz$", p.name)]
-    for path in earlier:
-        path.unlink()
-    if not resume:
-        (folder / "checkpoint.pt").unlink(missing_ok=True)
-        (folder / "history.json").unlink(missing_ok=True)
-    with log_to(folder / "train.log", append=resume):
-        with _run_log_only():
-            for record in kept:
-                logging.getLogger(record.name).handle(record)
-        if earlier:
-            logger.warning("removed %d step snapshots of an earlier run in %s", len(earlier), folder)
-        try:
-            yield folder
-        except Exception as exc:
+    with held_folder(run_folder(out)) as folder:
+        # an earlier run's snapshots, which this run's would not all replace, and its checkpoint, which a --resume
+        # of a run stopped before its first save would take for its own (a resumed run's are its own)
+        earlier = [] if resume else [p for p in folder.glob("*_step*.npz") if re.search(r"_step\d+\.npz$", p.name)]
+        for path in earlier:
+            path.unlink()
+        if not resume:
+            (folder / "checkpoint.pt").unlink(missing_ok=True)
+            (folder / "history.json").unlink(missing_ok=True)
+        with log_to(folder / "train.log", append=resume):
             with _run_log_only():
-                logger.error("the run failed: %s", exc, exc_info=True)
-            raise
+                for record in kept:
+                    logging.getLogger(record.name).handle(record)
+            if earlier:
+                logger.warning("removed %d step snapshots of an earlier run in %s", len(earlier), folder)
+            try:
+                yield folder
+            except Exception as exc:
+                with _run_log_only():
+                    logger.error("the run failed: %s", exc, exc_info=True)
+                raise
 
 
 def initial_network(seed: int, net: dict[str, Any]) -> GainNormalizer:

@@ -43,7 +43,7 @@ from tqdm.auto import tqdm
 
 from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, held_folder, write_json
 from alcn_cv.nets.device import torch_device
 from alcn_cv.nn import torch_threads
 from alcn_cv.report import log_to, machine, nan_to_none
@@ -143,7 +143,7 @@ def train(
 
     Raises:
         InputError: bad configuration or data; ``out_dir`` holds an earlier run (without ``resume`` or
-            ``overwrite``) or other files.
+            ``overwrite``) or other files, or another run is writing into it (:func:`alcn_cv.io.held_folder`).
         WeightFileError: ``resume`` with a missing, corrupt or incompatible checkpoint.
         NonFiniteLossError: the loss became NaN or inf; the last good checkpoint is kept.
     """
@@ -154,6 +154,8 @@ def train(
     start = time.perf_counter()
     machine_start = machine()
     with (
+        # the main process holds the folder (a second run into it is refused); the others write where it does
+        held_folder(out) if distributed.is_main() else contextlib.nullcontext(),
         log_to(out / "train.log", append=resume) if distributed.is_main() else contextlib.nullcontext(),
         torch_threads(cfg.run.threads or None),
     ):
