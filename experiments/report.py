@@ -228,21 +228,24 @@ def summary_table(report: dict[str, Any], title: str, caption: str = "") -> str:
 RECORDS = ("command", "commands", "machine", "experiment")
 
 
+def _auc(summary: dict[str, Any] | None, seeds: int) -> str | None:
+    """An AUC's ``{"mean", "std"}`` over ``seeds`` seeds as ``0.xxx ± 0.yyy`` (the spread only over several)."""
+    if not summary:
+        return None
+    return f"{summary['mean']:.3f}" + (f" ± {summary['std']:.3f}" if seeds > 1 else "")
+
+
 def detect(report: dict[str, Any]) -> str:
     """``alcn bench detect``: mean AUC over the objects per method (rows) and number of real images and input policy
     (columns), mean ± standard deviation over the seeds, three decimals; then the settings the tuning chose."""
     settings = report["settings"]
     seeds = len(settings["seeds"])
     cells = [(n, policy) for n in settings["real_images"] for policy in settings["policies"]]
-
-    def cell(method: str, n: int, policy: str) -> str | None:
-        summary = report["summary"].get(f"{method}|{n}|{policy}")
-        if not summary or "mean" not in summary:
-            return None
-        mean = summary["mean"]
-        return f"{mean['mean']:.3f}" + (f" ± {mean['std']:.3f}" if seeds > 1 else "")
-
-    rows = [[m] + [cell(m, n, policy) for n, policy in cells] for m in settings["methods"]]
+    summary = report["summary"]
+    rows = [
+        [m] + [_auc(summary.get(f"{m}|{n}|{policy}", {}).get("mean"), seeds) for n, policy in cells]
+        for m in settings["methods"]
+    ]
     headers = ["method", *(f"{n} real, `{policy}`" for n, policy in cells)]
     tuned = [
         [n, method, ":".join(f"{k}={v}" for k, v in chosen["params"].items()), best, chosen["trials"][0]["val_auc"]]
@@ -260,6 +263,32 @@ def detect(report: dict[str, Any]) -> str:
         text += "\nTuned by detection on the validation images (the first seed's runs):\n\n"
         text += markdown_table(["real images", "method", "chosen", "validation AUC", "default's"], tuned, digits=3)
     return text
+
+
+def fewshot(report: dict[str, Any]) -> str:
+    """``alcn bench fewshot``: ROC AUC per method (rows) and input policy (columns), mean ± standard deviation over the
+    seeds, three decimals, and for each ALCN the seeds on which it is above the best DoG."""
+    settings = report["settings"]
+    seeds = len(settings["seeds"])
+    policies = settings["policies"]
+    summary, against = report["summary"], report.get("alcn_vs_dog", {})
+
+    def above(method: str, policy: str) -> str | None:
+        seeds_above = against.get(policy, {}).get(method)
+        return None if seeds_above is None else f"{sum(s['above'] for s in seeds_above)}/{len(seeds_above)}"
+
+    rows = [
+        [m] + [_auc(summary[p].get(m, {}).get("auc"), seeds) for p in policies] + [above(m, p) for p in policies]
+        for m in settings["methods"]
+    ]
+    headers = ["method", *(f"`{p}`" for p in policies), *(f"above the best DoG, `{p}`" for p in policies)]
+    return (
+        f"## Few-shot validation (ROC AUC)\n\n{provenance(report)}\nObject against background under held-out "
+        f"lights ({', '.join(settings['test_lighting'])}), a detector trained from {settings['real_images']} image "
+        f"of each of {settings['n_objects']} new rendered objects under one light; ± over {seeds} seeds; above the "
+        "best DoG: the seeds on which an ALCN's AUC exceeds that of the better DoG row.\n\n"
+        + markdown_table(headers, rows)
+    )
 
 
 def middlebury(report: dict[str, Any]) -> str:
@@ -462,7 +491,7 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
     "speed": speed,
     "speed_gpu": device_speed,
     "detect": detect,
-    "fewshot": lambda r: summary_table(r, "Few-shot validation (ROC AUC)"),
+    "fewshot": fewshot,
     "pose_table1_features": lambda r: columns_table(r, "Pose Table 1, SIFT parts (rendered sequences)"),
     "pose_table1_corners": lambda r: columns_table(r, "Pose Table 1, corner CNN (rendered sequences)"),
     "pose_table1_control": lambda r: columns_table(r, "Pose Table 1, corner CNN under the training light"),

@@ -407,7 +407,7 @@ def middlebury_main(
     nearest neighbours (``FeaturePartDetector(cross_check=True)``) drop most wrong ones (the
     models have about a hundred points, the views 8000 keypoints), and RANSAC gets many
     ``iterations`` for the remaining low inlier ratios (8-25%). Without the cross-check, keeping wrong poses
-    (8-15 deg) out takes a ``min_inliers`` of 20, which poses 0-2 views of 8. A pose is *correct* within Table 1's
+    (8-15 deg) out takes a ``min_inliers`` of 20, which poses few views at all. A pose is *correct* within Table 1's
     5 deg and 5 cm (:data:`DEG`, :data:`CM`); one found further off is counted as posed, not correct.
 
     Reports per normalization and condition (original / relit) the views posed and posed correctly, the median

@@ -210,3 +210,13 @@ def test_detection_table_has_a_column_per_real_images_and_policy_and_says_what_w
     params = ":".join(f"{k}={v}" for k, v in chosen["params"].items())
     default = chosen["trials"][0]["val_auc"]
     assert f"| 1 | dog | {params} | " in text and f"| {default:.3f} |" in text
+
+
+def test_fewshot_table_gives_auc_per_policy_and_the_seeds_above_the_best_dog() -> None:
+    report = _kept("fewshot")
+    text = _report_module().fewshot(report)
+    auc = report["summary"]["local"]["alcn"]["auc"]
+    above = sum(s["above"] for s in report["alcn_vs_dog"]["raw"]["alcn"])
+    row = next(line for line in text.splitlines() if line.startswith("| alcn |"))
+    assert f"| {auc['mean']:.3f} ± {auc['std']:.3f} |" in row and f"| {above}/3 |" in row
+    assert next(line for line in text.splitlines() if line.startswith("| dog |")).endswith("| - | - |")
