@@ -596,7 +596,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "then about 2 min of CPU for this command on 2 cores). `--conf small` alone (3 frames) gives too "
         "few views to triangulate the box",
     )
-    e.add_argument("--middlebury", nargs="+", help="Middlebury sets (e.g. ../shared/data/middlebury/templeSparseRing)")
+    e.add_argument(
+        "--middlebury",
+        nargs="+",
+        help="Middlebury sets (e.g. ../shared/data/middlebury/templeSparseRing): each view posed from a model (of "
+        "--feature keypoints) of the views on either side (two folds), as taken and relit, counted when within 5 deg "
+        "and 5 cm (middlebury.md, middlebury.json)",
+    )
     e.add_argument(
         "--normalizations",
         nargs="+",
