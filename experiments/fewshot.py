@@ -1,7 +1,8 @@
 """Few-shot validation (`alcn bench fewshot`): a detector from one image per new object under one light,
-ROC AUC under held-out lights, per seed, each ALCN against the best DoG.
+ROC AUC under held-out lights, per seed, each ALCN against the best DoG; DoG and DLCN tuned first on a validation
+draw of their own (`--tune`).
 
-Time on 2 shared cores: 5 min (2026-11-30, beside the test suite).
+Time on 2 shared cores: about 10 min (2026-11-30; 5 min without the tuning, beside the test suite).
 
     python experiments/fewshot.py
 
@@ -38,6 +39,7 @@ def main() -> None:
         "5",
         "--n-test",
         "1500",
+        "--tune",
     )
     keep(out / "fewshot.json", "fewshot")
 

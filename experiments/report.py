@@ -235,6 +235,13 @@ def _auc(summary: dict[str, Any] | None, seeds: int) -> str | None:
     return f"{summary['mean']:.3f}" + (f" ± {summary['std']:.3f}" if seeds > 1 else "")
 
 
+def _tuned_row(method: str, chosen: dict[str, Any]) -> list[Any]:
+    """A tuned method's row: its name, the chosen parameters, the best validation AUC and the default's (the grid's
+    first setting)."""
+    params = ":".join(f"{k}={v}" for k, v in chosen["params"].items())
+    return [method, params, max(t["val_auc"] for t in chosen["trials"]), chosen["trials"][0]["val_auc"]]
+
+
 def detect(report: dict[str, Any]) -> str:
     """``alcn bench detect``: mean AUC over the objects per method (rows) and number of real images and input policy
     (columns), mean ± standard deviation over the seeds, three decimals; then the settings the tuning chose."""
@@ -248,10 +255,9 @@ def detect(report: dict[str, Any]) -> str:
     ]
     headers = ["method", *(f"{n} real, `{policy}`" for n, policy in cells)]
     tuned = [
-        [n, method, ":".join(f"{k}={v}" for k, v in chosen["params"].items()), best, chosen["trials"][0]["val_auc"]]
+        [n, *_tuned_row(m, chosen)]
         for n, methods in (report.get("tuned") or {}).items()
-        for method, chosen in methods.items()
-        for best in [max(t["val_auc"] for t in chosen["trials"])]
+        for m, chosen in methods.items()
     ]
     text = (
         f"## Rendered detection (mean AUC)\n\n{provenance(report)}\nMean over the objects of the area under the "
@@ -282,13 +288,23 @@ def fewshot(report: dict[str, Any]) -> str:
         for m in settings["methods"]
     ]
     headers = ["method", *(f"`{p}`" for p in policies), *(f"above the best DoG, `{p}`" for p in policies)]
-    return (
+    tuned = report.get("tuned") or {}
+    text = (
         f"## Few-shot validation (ROC AUC)\n\n{provenance(report)}\nObject against background under held-out "
         f"lights ({', '.join(settings['test_lighting'])}), a detector trained from {settings['real_images']} image "
-        f"of each of {settings['n_objects']} new rendered objects under one light; ± over {seeds} seeds; above the "
-        "best DoG: the seeds on which an ALCN's AUC exceeds that of the better DoG row.\n\n"
-        + markdown_table(headers, rows)
+        f"of each of {settings['n_objects']} new rendered objects under one light"
+        + (f" ({', '.join(f'`{m}`' for m in tuned)} at the settings tuned below)" if tuned else "")
+        + f"; ± over {seeds} seeds; above the best DoG: the seeds on which an ALCN's AUC exceeds that of the better "
+        "DoG row.\n\n" + markdown_table(headers, rows)
     )
+    if tuned:
+        text += "\nTuned on a validation draw of new objects and windows (AUC averaged over the policies):\n\n"
+        text += markdown_table(
+            ["method", "chosen", "validation AUC", "default's"],
+            [_tuned_row(m, chosen) for m, chosen in tuned.items()],
+            digits=3,
+        )
+    return text
 
 
 def middlebury(report: dict[str, Any]) -> str:

@@ -89,7 +89,7 @@ def test_fewshot_setup_owns_the_names_and_defaults():
 
     own = {f.name for f in fields(F.FewShotSetup)}
     for settings, extra in (
-        (B.FewShotSettings(), {"methods", "policies", "seeds", "threads"}),
+        (B.FewShotSettings(), {"methods", "policies", "seeds", "tune", "threads"}),
         (FewShotConfig(), {"enabled", "dog"}),
     ):
         assert {f.name for f in fields(settings)} - own == extra
@@ -193,3 +193,38 @@ def test_seeds_is_the_option_of_bench_detect(tmp_path):
     assert parser.parse_args(["bench", "fewshot", "--out", str(tmp_path)]).seeds is None
     with pytest.raises(SystemExit):
         parser.parse_args(["bench", "fewshot", "--out", str(tmp_path), "--draws", "3"])
+
+
+def test_tune_chooses_each_setting_on_a_validation_draw_of_its_own(tmp_path, monkeypatch):
+    """--tune scores every setting of DoG's and DLCN's grids on new objects and windows that no seed's run uses; the
+    first best serves the runs (a tie keeps the default, the grid's first)."""
+    setups, built = [], []
+
+    def data(setup):
+        setups.append(setup)
+        return _tiny_data(setup)
+
+    def score(name, train, labels, test, batch, setup):
+        best = "sigma=3.0" in name or "sigma1=1.0:sigma2=3.0" in name
+        return {"auc": 0.9 if "validation" in name and best else 0.5, "accuracy": 0.5}
+
+    real = B.create_normalization
+    monkeypatch.setattr(F, "make_fewshot_data", data)
+    monkeypatch.setattr(F, "score_inputs", score)
+    monkeypatch.setattr(B, "create_normalization", lambda m, p=None: built.append((m, p)) or real(m, p))
+    settings = B.FewShotSettings(methods=["none", "dog", "dlcn"], policies=["raw", "local"], seeds=[0, 1], tune=True)
+    result = B.main(tmp_path / "fs", settings, progress=False)
+
+    validation, *runs = setups
+    assert (validation.object_seed, validation.seed) == (settings.object_seed - 1, B.VALIDATION_SEED)
+    assert [(s.object_seed, s.seed) for s in runs] == [(settings.object_seed, 0), (settings.object_seed + 1, 1)]
+    assert result["tuned"]["dlcn"]["params"] == {"sigma": 3.0} and len(result["tuned"]["dlcn"]["trials"]) == 6
+    assert result["tuned"]["dog"]["params"] == {"sigma1": 1.0, "sigma2": 3.0}
+    # built once to be tried, once more for the runs
+    assert built.count(("dlcn", {"sigma": 3.0})) == built.count(("dog", {"sigma1": 1.0, "sigma2": 3.0})) == 2
+    assert (
+        "--tune" in result["command"]
+        and "## Tuned on the validation draw" in (tmp_path / "fs" / "fewshot.md").read_text()
+    )
+    settings.tune = False
+    assert B.main(tmp_path / "untuned", settings, progress=False)["tuned"] == {} and len(setups) == 5

@@ -204,6 +204,15 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
     p.add_argument("--batch-size", type=int, help=f"training windows per batch (default {d.batch_size})")
     p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
+    p.add_argument(
+        "--tune",
+        dest="tune",
+        action="store_const",
+        const=True,
+        help=f"tune DoG, SLCN and DLCN first: each of {len(detect.TUNING_GRIDS['dog'])} settings scored by the AUC of "
+        "the same detector on a validation draw of new objects and windows of its own, averaged over the policies; the "
+        "first best serves every seed (default: their defaults)",
+    )
     p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
     add_progress_option(p)
     p.set_defaults(func=_run_fewshot)

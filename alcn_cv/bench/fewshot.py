@@ -26,6 +26,12 @@ Every seed (``--seeds``, as in ``alcn bench detect``) is one repetition with its
 ``object_seed + seed``), windows and detector initialisation (seed ``seed``). The report says, per seed and
 policy, whether each ALCN variant's AUC is above the best DoG's.
 
+**Tuning** (``--tune``, as in ``alcn bench detect``): the methods of
+:data:`~alcn_cv.bench.detect.TUNING_GRIDS` that the run lists by bare name (``dog``, ``slcn``, ``dlcn``) try each
+setting of their grid (the default first) on a validation draw of its own: new objects (catalogue seed
+``object_seed - 1``, which no seed's objects use) and windows of seed :data:`VALIDATION_SEED`; a setting scores the
+validation AUC of the same detector, averaged over the run's policies, and the first best serves every seed.
+
 Outputs: ``fewshot.json`` (every number, settings, machine, command), ``fewshot.md`` and
 ``fewshot.png`` (AUC per method, one point per seed).
 """
@@ -42,13 +48,13 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.detect import create_normalization
+from alcn_cv.bench.detect import TUNING_GRIDS, create_normalization
 from alcn_cv.bench.detect_settings import POLICIES, POLICY_DESCRIPTIONS
 from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.policies import InputPolicy
 from alcn_cv.checks import check_seeds
 from alcn_cv.enhance.base import Normalization
-from alcn_cv.enhance.registry import available, parse_spec
+from alcn_cv.enhance.registry import available, format_spec, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, write_json
 from alcn_cv.report import (
@@ -64,12 +70,23 @@ from alcn_cv.report import (
 )
 from alcn_cv.train.config import FewShotSetup
 
-__all__ = ["DEFAULT_METHODS", "FewShotSettings", "compare_to_dog", "fewshot_command", "fewshot_markdown", "main"]
+__all__ = [
+    "DEFAULT_METHODS",
+    "VALIDATION_SEED",
+    "FewShotSettings",
+    "compare_to_dog",
+    "fewshot_command",
+    "fewshot_markdown",
+    "main",
+]
 
 logger = logging.getLogger(__name__)
 
 #: The methods compared by default.
 DEFAULT_METHODS = ("none", "dog", "dlcn", "tantriggs", "alcn", "alcn:model=lite")
+#: The windows' and detector's seed of the validation draw that ``--tune`` scores on (its objects: catalogue seed
+#: ``object_seed - 1``); far from the seeds runs repeat with.
+VALIDATION_SEED = 999_983
 
 
 @dataclass
@@ -89,6 +106,8 @@ class FewShotSettings:
         n_test: test windows per seed (half background).
         test_lighting: lighting families of the test windows.
         epochs, batch_size, lr: detector training (the same for every method).
+        tune: tune the methods of :data:`~alcn_cv.bench.detect.TUNING_GRIDS` listed by bare name on a validation
+            draw first (see the module).
         threads: torch threads (``None``: torch's default).
     """
 
@@ -104,6 +123,7 @@ class FewShotSettings:
     epochs: int = FewShotSetup.epochs
     batch_size: int = FewShotSetup.batch_size
     lr: float = FewShotSetup.lr
+    tune: bool = False
     threads: int | None = None
 
     def check(self) -> FewShotSettings:
@@ -133,6 +153,52 @@ class FewShotSettings:
     def setup(self, seed: int) -> FewShotSetup:
         """The few-shot setup of one seed."""
         return FewShotSetup.of(self, object_seed=self.object_seed + seed, seed=seed)
+
+
+def _tune(settings: FewShotSettings, progress: bool) -> dict[str, Any]:
+    """The settings chosen by ``--tune`` (see the module): ``{method: {"params", "trials": [{"params", "val_auc",
+    "val_auc_by_policy"}, ...]}}``; empty without ``settings.tune`` or a tunable method."""
+    from alcn_cv.train.fewshot import make_fewshot_data, score_inputs  # torch: only when tuning runs
+
+    methods = [m for m in TUNING_GRIDS if m in settings.methods] if settings.tune else []
+    if not methods:
+        return {}
+    setup = FewShotSetup.of(settings, object_seed=settings.object_seed - 1, seed=VALIDATION_SEED)
+    train_x, train_y, val = make_fewshot_data(setup)
+    tuned: dict[str, Any] = {}
+    total = sum(len(TUNING_GRIDS[m]) for m in methods)
+    with tqdm(total=total, desc="few-shot tuning", unit="setting", disable=not progress) as bar:
+        for method in methods:
+            trials = []
+            for params in TUNING_GRIDS[method]:
+                spec = format_spec(method, params)
+                bar.set_postfix(setting=spec)
+                norm = create_normalization(method, params)
+                train_n, val_n = norm.normalize_windows(train_x), norm.normalize_windows(val.windows)
+                by_policy = {}
+                for policy_name in settings.policies:
+                    policy = InputPolicy(policy_name, train_n)
+                    scored = score_inputs(
+                        f"{spec} ({policy_name}, validation)",
+                        policy.windows(train_n),
+                        train_y,
+                        policy.windows(val_n),
+                        val,
+                        setup,
+                    )
+                    by_policy[policy_name] = float(scored["auc"])
+                trials.append(
+                    {
+                        "params": params,
+                        "val_auc": float(np.mean(list(by_policy.values()))),
+                        "val_auc_by_policy": by_policy,
+                    }
+                )
+                bar.update()
+            best = max(trials, key=lambda t: t["val_auc"])  # the first best: the grid's default first keeps a tie
+            tuned[method] = {"params": dict(best["params"]), "trials": trials}
+            logger.info("tuned %s: %s (validation AUC %.4f)", method, best["params"], best["val_auc"])
+    return tuned
 
 
 def _is(spec: str, name: str) -> bool:
@@ -253,6 +319,7 @@ def fewshot_command(out_dir: str | os.PathLike, settings: FewShotSettings) -> st
             "--epochs": settings.epochs,
             "--batch-size": settings.batch_size,
             "--lr": settings.lr,
+            "--tune": settings.tune,
             "--threads": settings.threads,
         },
     )
@@ -280,6 +347,18 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
         *[f"  - `{p}`: {POLICY_DESCRIPTIONS[p]}" for p in s["policies"]],
         "",
     ]
+    if result.get("tuned"):
+        lines.append("## Tuned on the validation draw (AUC averaged over the policies)\n")
+        rows = [
+            [
+                method,
+                format_spec(method, t["params"]),
+                max(x["val_auc"] for x in t["trials"]),
+                t["trials"][0]["val_auc"],
+            ]
+            for method, t in result["tuned"].items()
+        ]
+        lines += [markdown_table(["method", "chosen", "validation AUC", "default's"], rows), ""]
     for policy, by_method in result["runs"].items():
         lines.append(f"## AUC, policy `{policy}`\n")
         rows = []
@@ -363,7 +442,8 @@ def main(
     Returns:
         The dictionary written to ``fewshot.json``: ``runs`` (policy -> method -> one result of
         :func:`~alcn_cv.train.fewshot.score_inputs` per seed, in the order of ``settings.seeds``, or its ``error``),
-        ``summary`` (mean and spread over seeds), ``alcn_vs_dog`` (:func:`compare_to_dog`).
+        ``summary`` (mean and spread over seeds), ``alcn_vs_dog`` (:func:`compare_to_dog`), ``tuned`` (the settings
+        ``--tune`` chose and every setting's validation AUC).
 
     Raises:
         InputError: bad settings, a method that cannot be built (a bad parameter or weight file), or an
@@ -380,6 +460,8 @@ def main(
     start = time.perf_counter()
     out = Path(out_dir)
     make_folder(out)
+    tuned = _tune(settings, progress)
+    norms |= {method: create_normalization(method, t["params"]) for method, t in tuned.items()}
     runs: dict[str, Any] = {p: {m: [] for m in settings.methods} for p in settings.policies}
     total = len(settings.seeds) * len(settings.methods) * len(settings.policies)
     with tqdm(total=total, desc="few-shot validation", unit="run", disable=not progress) as bar:
@@ -390,6 +472,7 @@ def main(
         "command": command or fewshot_command(out_dir, settings),
         "settings": asdict(settings),
         "machine": machine(),
+        "tuned": tuned,
         "runs": runs,
         "summary": _summary(runs),
         "alcn_vs_dog": compare_to_dog(runs, settings),
