@@ -236,10 +236,11 @@ def _auc(summary: dict[str, Any] | None, seeds: int) -> str | None:
 
 
 def _tuned_row(method: str, chosen: dict[str, Any]) -> list[Any]:
-    """A tuned method's row: its name, the chosen parameters, the best validation AUC and the default's (the grid's
+    """A tuned method's row: its name, the chosen parameters and their validation AUC, and the default's (the grid's
     first setting)."""
     params = ":".join(f"{k}={v}" for k, v in chosen["params"].items())
-    return [method, params, max(t["val_auc"] for t in chosen["trials"]), chosen["trials"][0]["val_auc"]]
+    best = next(t["val_auc"] for t in chosen["trials"] if t["params"] == chosen["params"])
+    return [method, params, best, chosen["trials"][0]["val_auc"]]
 
 
 def detect(report: dict[str, Any]) -> str:

@@ -228,3 +228,14 @@ def test_tune_chooses_each_setting_on_a_validation_draw_of_its_own(tmp_path, mon
     )
     settings.tune = False
     assert B.main(tmp_path / "untuned", settings, progress=False)["tuned"] == {} and len(setups) == 5
+
+
+def test_a_setting_whose_auc_cannot_be_computed_is_never_chosen(tmp_path, monkeypatch):
+    monkeypatch.setattr(F, "make_fewshot_data", _tiny_data)
+    monkeypatch.setattr(
+        F, "score_inputs", lambda name, *a: {"auc": float("nan") if "sigma=2.0" in name else 0.5, "accuracy": 0.5}
+    )
+    settings = B.FewShotSettings(methods=["dlcn"], policies=["raw"], seeds=[0], tune=True)
+    result = B.main(tmp_path / "fs", settings, progress=False)
+    assert result["tuned"]["dlcn"]["params"] == {"sigma": 1.0}  # the default (NaN) passed over for the next
+    assert json.loads((tmp_path / "fs" / "fewshot.json").read_text())["tuned"]["dlcn"]["trials"][0]["val_auc"] is None

@@ -195,7 +195,8 @@ def _tune(settings: FewShotSettings, progress: bool) -> dict[str, Any]:
                     }
                 )
                 bar.update()
-            best = max(trials, key=lambda t: t["val_auc"])  # the first best: the grid's default first keeps a tie
+            # the first best (the grid's default first keeps a tie); an AUC that cannot be computed (NaN) never wins
+            best = max(trials, key=lambda t: -np.inf if np.isnan(t["val_auc"]) else t["val_auc"])
             tuned[method] = {"params": dict(best["params"]), "trials": trials}
             logger.info("tuned %s: %s (validation AUC %.4f)", method, best["params"], best["val_auc"])
     return tuned
@@ -353,7 +354,7 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
             [
                 method,
                 format_spec(method, t["params"]),
-                max(x["val_auc"] for x in t["trials"]),
+                next(x["val_auc"] for x in t["trials"] if x["params"] == t["params"]),
                 t["trials"][0]["val_auc"],
             ]
             for method, t in result["tuned"].items()
@@ -472,7 +473,7 @@ def main(
         "command": command or fewshot_command(out_dir, settings),
         "settings": asdict(settings),
         "machine": machine(),
-        "tuned": tuned,
+        "tuned": nan_to_none(tuned),
         "runs": runs,
         "summary": _summary(runs),
         "alcn_vs_dog": compare_to_dog(runs, settings),
