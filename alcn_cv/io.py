@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import functools
+import inspect
 import json
 import logging
 import os
@@ -13,7 +15,7 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from itertools import islice
 from pathlib import Path
-from typing import IO, Any, TypeVar, cast
+from typing import IO, Any, ParamSpec, TypeVar, cast
 
 import cv2
 import numpy as np
@@ -35,6 +37,7 @@ __all__ = [
     "count_frames",
     "eight_bits",
     "held_folder",
+    "holds_out_dir",
     "interrupts_blocked",
     "is_video",
     "iter_frames",
@@ -53,6 +56,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 T = TypeVar("T")
 R = TypeVar("R")
+P = ParamSpec("P")
 
 IMAGE_SUFFIXES = frozenset(
     {".png", ".jpg", ".jpeg", ".jpe", ".bmp", ".tif", ".tiff", ".webp", ".avif", ".jp2", ".pgm", ".ppm", ".pnm"}
@@ -337,6 +341,20 @@ def held_folder(folder: str | os.PathLike) -> Iterator[Path]:
                 yield folder
             finally:
                 path.unlink(missing_ok=True)  # before new_folder's cleanup, which removes only empty folders
+
+
+def holds_out_dir(run: Callable[P, R]) -> Callable[P, R]:
+    """``run``, a function of an ``out_dir`` argument (a benchmark's ``main``), holding that folder while it runs
+    (:func:`held_folder`): a second run into it meanwhile, from another process or this one, is refused at once,
+    where it would pass the earlier-report check and the last run to finish would replace the other's report."""
+    signature = inspect.signature(run)
+
+    @functools.wraps(run)
+    def held(*args: P.args, **kwargs: P.kwargs) -> R:
+        with held_folder(signature.bind(*args, **kwargs).arguments["out_dir"]):
+            return run(*args, **kwargs)
+
+    return held
 
 
 def atomic_write(path: str | os.PathLike, data: bytes | str | Callable[[IO[bytes]], object]) -> Path:

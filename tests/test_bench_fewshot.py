@@ -189,7 +189,7 @@ def test_seeds_is_the_option_of_bench_detect(tmp_path):
 
     parser = build_parser()
     args = parser.parse_args(["bench", "fewshot", "--out", str(tmp_path), "--seeds", "0,1", "4"])
-    assert args.seeds == [0, 1, 4] and args.func.__wrapped__ is _run_fewshot
+    assert args.seeds == [0, 1, 4] and args.func is _run_fewshot
     assert parser.parse_args(["bench", "fewshot", "--out", str(tmp_path)]).seeds is None
     with pytest.raises(SystemExit):
         parser.parse_args(["bench", "fewshot", "--out", str(tmp_path), "--draws", "3"])

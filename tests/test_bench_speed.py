@@ -132,10 +132,7 @@ def test_cli_is_registered(tmp_path):
         ["bench", "speed", "--out", str(tmp_path), "--conf", "quick", "--sizes", "64x48", "--methods", "none"]
     )
     assert (
-        args.func.__wrapped__ is cli._run_speed
-        and args.conf == "quick"
-        and args.sizes == [(64, 48)]
-        and args.methods == ["none"]
+        args.func is cli._run_speed and args.conf == "quick" and args.sizes == [(64, 48)] and args.methods == ["none"]
     )
 
 

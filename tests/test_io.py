@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -321,3 +322,22 @@ def test_a_float_image_is_converted_for_an_integer_format(tmp_path, image, caplo
     kept = cv2.imread(str(write_image(tmp_path / "a.tif", unit)), cv2.IMREAD_UNCHANGED)
     assert kept.dtype == np.float32
     np.testing.assert_array_equal(kept, unit)
+
+
+def test_a_function_that_holds_its_out_dir_refuses_a_second_run_into_it(tmp_path):
+    """A benchmark's main holds its out_dir whether the command line or a script calls it."""
+    from alcn_cv.io import holds_out_dir
+
+    calls = []
+
+    @holds_out_dir
+    def main(settings: str, out_dir: str, overwrite: bool = False) -> str:
+        """The docstring stays."""
+        calls.append((settings, out_dir))
+        assert (Path(out_dir) / io.HOLD_FILE).is_file()
+        return "done"
+
+    assert main("s", out_dir=tmp_path / "a") == "done" and main.__doc__ == "The docstring stays."
+    with held_folder(tmp_path / "b"), pytest.raises(InputError, match="is in use by another run"):
+        main("s", str(tmp_path / "b"))
+    assert calls == [("s", tmp_path / "a")]

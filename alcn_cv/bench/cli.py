@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import functools
 import shlex
 import sys
 from collections.abc import Callable, Sequence
@@ -22,7 +21,6 @@ from alcn_cv.bench.detect_settings import POLICIES, DetectSettings
 from alcn_cv.cli import add_conf_option, add_progress_option, add_seeds_option, preset_values
 from alcn_cv.data import scenes
 from alcn_cv.errors import InputError
-from alcn_cv.io import held_folder
 from alcn_cv.presets import preset, with_given
 
 __all__ = ["BENCHMARKS", "add_parser"]
@@ -495,18 +493,3 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     benches = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK", required=True)
     for add in BENCHMARKS:
         add(benches)
-    for bench in benches.choices.values():
-        bench.set_defaults(func=_holding_out(bench.get_default("func")))
-
-
-def _holding_out(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
-    """``run`` holding its ``--out`` folder (:func:`alcn_cv.io.held_folder`): a second run started into the folder
-    while this one runs is refused at once, where it would pass the earlier-report check and the last run to finish
-    would replace the other's report."""
-
-    @functools.wraps(run)
-    def held(args: argparse.Namespace) -> int:
-        with held_folder(args.out):
-            return run(args)
-
-    return held

@@ -91,7 +91,7 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
-from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
 from alcn_cv.report import machine, spread
 
 if TYPE_CHECKING:
@@ -658,6 +658,7 @@ def _result(state: _Run, command: str, seconds: float) -> dict[str, Any]:
     }
 
 
+@holds_out_dir
 def main(
     data_dir: str | os.PathLike,
     out_dir: str | os.PathLike,

@@ -56,7 +56,7 @@ from alcn_cv.checks import check_seeds
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, format_spec, parse_spec
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
 from alcn_cv.report import (
     command_line,
     describe_machine,
@@ -424,6 +424,7 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
     return save_figure(plt, fig, path)
 
 
+@holds_out_dir
 def main(
     out_dir: str | os.PathLike,
     settings: FewShotSettings | None = None,

@@ -38,7 +38,7 @@ from alcn_cv.data.scenes import PhotometricObject, load_photometric, mean_pairwi
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
 
 __all__ = ["detail", "main"]
@@ -98,6 +98,7 @@ def _figure(
     return save_figure(plt, fig, path, dpi=80)
 
 
+@holds_out_dir
 def main(
     data_dir: str | os.PathLike,
     out_dir: str | os.PathLike,

@@ -81,7 +81,7 @@ from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import check_no_earlier_output, make_folder
+from alcn_cv.io import check_no_earlier_output, holds_out_dir, make_folder
 from alcn_cv.report import machine, sample_std
 
 __all__ = [
@@ -566,6 +566,7 @@ def paired_differences(methods: dict[str, dict[str, Any]]) -> dict[str, Any]:
     return {"reference": first, "pairing": PAIRING, "methods": rows}
 
 
+@holds_out_dir
 def main(
     out_dir: str | os.PathLike,
     data: Sequence[str | os.PathLike] | None = None,

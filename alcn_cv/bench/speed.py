@@ -68,7 +68,7 @@ from alcn_cv.enhance.base import Normalization, lab_and_lightness
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import srgb_to_lab
-from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
 from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 from alcn_cv.shared_data import shared_data_dir
@@ -1108,6 +1108,7 @@ def targets(settings: SpeedSettings, work: Path, progress: bool = True) -> dict[
     }
 
 
+@holds_out_dir
 def main(
     out_dir: str | os.PathLike, settings: SpeedSettings | None = None, progress: bool = True, overwrite: bool = False
 ) -> dict[str, Any]:
