@@ -58,12 +58,14 @@ def main() -> None:
         if part in parts:
             out = root / part
             evaluation = ["--data", str(rendered(folder)), "--normalizations", *NORMALIZATIONS, *extra]
-            alcn("pose", "eval", *evaluation, "--out", str(out))
+            alcn("pose", "eval", *evaluation, "--out", str(out), "--overwrite")
             keep(out / "table1.json", f"pose_table1_{part}", drop=("details",))
     if "middlebury" in parts:
         out = root / "middlebury"
         sets = [str(SHARED_DATA / "middlebury" / name) for name in ("templeSparseRing", "dinoSparseRing")]
-        alcn("pose", "eval", "--middlebury", *sets, "--normalizations", *NORMALIZATIONS, "--out", str(out))
+        alcn(
+            "pose", "eval", "--middlebury", *sets, "--normalizations", *NORMALIZATIONS, "--out", str(out), "--overwrite"
+        )
         keep(out / "middlebury.json", "pose_middlebury", drop=("details",))
 
 

@@ -103,10 +103,13 @@ def _recipe(args: argparse.Namespace):
 
 
 def _eval(args: argparse.Namespace) -> int:
+    from alcn_cv.io import check_no_earlier_output
     from pose import evaluate
 
     if not (args.middlebury or args.data):
         raise InputError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
+    reports = [name for name, given in (("middlebury", args.middlebury), ("table1", args.data)) if given]
+    check_no_earlier_output([Path(args.out) / f"{r}.{ext}" for r in reports for ext in ("md", "json")], args.overwrite)
     normalizations = args.normalizations or evaluate.DEFAULT_NORMALIZATIONS
     recipe = _recipe(args)
     if args.middlebury:
@@ -133,17 +136,17 @@ def _eval(args: argparse.Namespace) -> int:
             command=_command(),
             progress=not args.no_progress,
         )
-    written = [name for name, given in (("middlebury.md", args.middlebury), ("table1.md", args.data)) if given]
-    print("report -> " + ", ".join(str(Path(args.out) / name) for name in written))
+    print("report -> " + ", ".join(str(Path(args.out) / f"{r}.md") for r in reports))
     return 0
 
 
 def _command() -> str:
-    """The command line as typed, for the reports."""
+    """The command line as typed, for the reports: what was measured, so without ``--overwrite`` and
+    ``--no-progress``."""
     import shlex
     import sys
 
-    return shlex.join(["alcn", *sys.argv[1:]])
+    return shlex.join(["alcn", *(a for a in sys.argv[1:] if a not in ("--overwrite", "--no-progress"))])
 
 
 def _train_corners(args: argparse.Namespace) -> int:
@@ -633,7 +636,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     add_seeds_option(e, [0], "train the corner CNN once with each of these seeds")
     e.add_argument("--sequences", nargs="+", type=int, metavar="N", help="only these test sequences (default all)")
     e.add_argument(
-        "--out", type=Path, required=True, help="report folder (a folder of an earlier evaluation loses its models)"
+        "--out",
+        type=Path,
+        required=True,
+        help="report folder (held while the evaluation runs: a second run is refused)",
+    )
+    e.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the reports of an earlier evaluation in --out (table1.*, middlebury.*; its models go too); "
+        "without it, such a folder is refused before any work",
     )
     add_progress_option(e)
     e.set_defaults(func=_eval)

@@ -32,7 +32,7 @@ from tqdm import tqdm
 
 from alcn_cv.checks import check_seeds
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, make_folder, write_json
+from alcn_cv.io import atomic_write, holds_out_dir, make_folder, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none
 from pose.box import box_diameter
 from pose.build import build as build_model
@@ -185,6 +185,7 @@ def table_markdown(
     return markdown_table(["", *columns], [[row, *(cell(row, c) for c in columns)] for row in table], digits=1)
 
 
+@holds_out_dir
 def main(
     data_dir: str | Path,
     out_dir: str | Path,
@@ -386,6 +387,7 @@ def relight(image: np.ndarray, seed: int = 0) -> np.ndarray:
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 
+@holds_out_dir
 def middlebury_main(
     sets: list[str | Path],
     out_dir: str | Path,
@@ -423,9 +425,14 @@ def middlebury_main(
     results: dict[str, Any] = {}
     lines = [
         "# Middlebury: each view posed from a model of the views on either side (two folds)\n",
-        f"| set | normalization | light | posed | correct ({DEG:g} deg, {CM:g} cm) | median rot. err (deg) | "
-        "median trans. err (mm) | median centre err (mm) |",
-        "|---|---|---|---|---|---|---|---|",
+        f"Each view of a set is posed from a model of {feature} keypoints built from the views on either side: the "
+        "even views' model poses the odd views, the odd views' model the even ones. Light: the photographs as taken "
+        "(`original`) or darkened by a horizontal ramp and a gamma of 1.6 (`relit`). Correct: within "
+        f"{DEG:g} deg and {CM:g} cm of the set's calibrated pose; posed: any pose RANSAC found. Errors: medians over "
+        "the posed views; model points: the two models' 3D points.\n",
+        f"| set | normalization | light | correct ({DEG:g} deg, {CM:g} cm) | posed | median rot. err (deg) | "
+        "median trans. err (mm) | median centre err (mm) | model points |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     bar = tqdm(total=len(sets) * len(normalizations) * 2, desc="middlebury", unit="model", disable=not progress)
     for set_dir in sets:
@@ -484,8 +491,8 @@ def middlebury_main(
                     "model_points": model_points,
                 }
                 lines.append(
-                    f"| {set_dir.name} | {name} | {light} | {len(e)}/{len(views)} | {correct}/{len(views)} | "
-                    f"{med[0]:.2f} | {med[1]:.1f} | {med[2]:.1f} |"
+                    f"| {set_dir.name} | {name} | {light} | {correct}/{len(views)} | {len(e)}/{len(views)} | "
+                    f"{med[0]:.2f} | {med[1]:.1f} | {med[2]:.1f} | {' / '.join(map(str, model_points))} |"
                 )
                 logger.info(
                     "%s: %d/%d posed, %d correct, median rot %.2f deg, trans %.1f mm",
@@ -497,8 +504,8 @@ def middlebury_main(
                     med[1],
                 )
     bar.close()
-    if command:
-        lines.append(f"\nCommand: `{command}`")
+    host = machine()
+    lines.append(f"\nMachine: {describe_machine(host)}." + (f" Command: `{command}`" if command else ""))
     atomic_write(out_dir / "middlebury.md", "\n".join(lines) + "\n")
-    write_json(out_dir / "middlebury.json", nan_to_none({**results, "machine": machine(), "command": command}))
+    write_json(out_dir / "middlebury.json", nan_to_none({**results, "machine": host, "command": command}))
     return results

@@ -218,6 +218,15 @@ def test_tuning_chooses_the_best_validation_auc_and_the_runs_use_it(small_data, 
     assert saved["tuned"]["2"]["dog"]["params"] == grid[1] and saved["val_images"] == [1, 2, 3]
 
 
+def test_a_grid_that_scores_alike_says_the_validation_cannot_tell(small_data, tmp_path, monkeypatch):
+    """Every setting at AUC 1.000 on two easy validation images kept the default without a word."""
+    monkeypatch.setattr(D, "_validation_aucs", lambda *a: {"local": 1.0})
+    settings = S.DetectSettings(methods=["none", "dog"], real_images=[1], policies=["local"], tune=True, **TINY)
+    D.main(small_data, tmp_path / "out", settings, progress=False)
+    md = (tmp_path / "out" / "detect.md").read_text()
+    assert "Every setting scored the same for dog (1): the default was kept" in md
+
+
 def test_validation_aucs_train_as_the_first_seeds_runs(small_data, monkeypatch):
     data = detect_data.load_data(small_data)
     settings = S.DetectSettings(
@@ -471,7 +480,7 @@ def test_report_gives_mean_and_spread_over_seeds():
         S.run_key("dog", 1, "raw", 1): {"objects": {"a": {"auc": 0.4}}},
     }
     md = detect_markdown(_report_result(settings, runs, names=["a"]), ["a"])
-    assert md.startswith("# Few-shot detection benchmark") and "(data)" not in md.splitlines()[0]
+    assert md.startswith("# Detection benchmark (rendered objects") and "(data)" not in md.splitlines()[0]
     assert "| dog | 0.300 ± 0.141 | 0.300 ± 0.141 |" in md and "2 (0, 1)" in md  # the sample deviation
     # recorded in the space form of --seeds, which parses back to the same seeds
     assert "--seeds 0 1 --methods dog" in md and "`raw`: the normalized windows" in md

@@ -222,10 +222,9 @@ def test_tune_chooses_each_setting_on_a_validation_draw_of_its_own(tmp_path, mon
     assert result["tuned"]["dog"]["params"] == {"sigma1": 1.0, "sigma2": 3.0}
     # built once to be tried, once more for the runs
     assert built.count(("dlcn", {"sigma": 3.0})) == built.count(("dog", {"sigma1": 1.0, "sigma2": 3.0})) == 2
-    assert (
-        "--tune" in result["command"]
-        and "## Tuned on the validation draw" in (tmp_path / "fs" / "fewshot.md").read_text()
-    )
+    md = (tmp_path / "fs" / "fewshot.md").read_text()
+    assert "--tune" in result["command"] and "## Tuned on the validation draw" in md
+    assert "| dlcn:sigma=3.0 (tuned) |" in md  # the rows say which setting ran
     settings.tune = False
     assert B.main(tmp_path / "untuned", settings, progress=False)["tuned"] == {} and len(setups) == 5
 

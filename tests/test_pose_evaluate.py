@@ -134,4 +134,24 @@ def test_middlebury_poses_every_view_once_from_a_model_without_it(tmp_path, monk
         result = results[f"{tmp_path.name}/none/{light}"]
         assert (result["posed"], result["correct"], result["views"]) == (5, 3, 6)  # v0, v1, v4 correct
         assert result["model_points"] == [11, 12]
-    assert "| 5/6 | 3/6 |" in (tmp_path / "out" / "middlebury.md").read_text()
+    report = (tmp_path / "out" / "middlebury.md").read_text()
+    assert "| 3/6 | 5/6 |" in report and "| 11 / 12 |" in report and "posed: any pose RANSAC found" in report
+
+
+def test_pose_eval_refuses_an_earlier_report_and_a_folder_another_run_writes(tmp_path, capsys):
+    """As `alcn bench`: an earlier evaluation's report only with --overwrite, a folder in use never (two runs into
+    one folder both ran and the last replaced the other's report)."""
+    from alcn_cv.cli import main
+    from alcn_cv.errors import InputError
+    from alcn_cv.io import held_folder
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "middlebury.md").write_text("earlier\n")
+    assert main(["pose", "eval", "--middlebury", str(tmp_path / "set"), "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().endswith(f"{out / 'middlebury.md'} exists (--overwrite replaces it)")
+    with held_folder(out), pytest.raises(InputError, match="is in use by another run"):
+        evaluate.middlebury_main([tmp_path / "set"], out, progress=False)
+    with held_folder(out), pytest.raises(InputError, match="is in use by another run"):
+        evaluate.main(tmp_path / "data", out, progress=False)
+    assert (out / "middlebury.md").read_text() == "earlier\n"

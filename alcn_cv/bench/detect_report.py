@@ -97,11 +97,13 @@ def _tuning_text(result: dict[str, Any], settings: DetectSettings) -> list[str]:
         f"{', averaged over the policies' if len(settings.policies) > 1 else ''}; the first best setting serves every "
         "seed. Every setting's AUC: `detect.json`, `tuned`.\n",
     ]
-    rows = []
+    rows, tied = [], []
     for n_real, tuned in result["tuned"].items():
         for method, t in tuned.items():
             aucs = [x["val_auc"] for x in t["trials"] if x["val_auc"] is not None]
             chosen = next(x for x in t["trials"] if x["params"] == t["params"])
+            if aucs and min(aucs) == max(aucs):
+                tied.append(f"{method} ({n_real})")
             rows.append(
                 [
                     n_real,
@@ -112,6 +114,11 @@ def _tuning_text(result: dict[str, Any], settings: DetectSettings) -> list[str]:
                 ]
             )
     lines.append(markdown_table(["real images", "chosen", "validation AUC", "default's", "range over grid"], rows))
+    if tied:
+        lines.append(
+            f"\nEvery setting scored the same for {', '.join(tied)}: the default was kept, and the validation images "
+            "cannot tell the settings apart (too few or too easy; render more with `alcn data detect`).\n"
+        )
     return lines
 
 
@@ -128,7 +135,7 @@ def _header(result: dict[str, Any], settings: DetectSettings) -> list[str]:
         else "every method with its defaults"
     )
     lines = [
-        "# Few-shot detection benchmark: ALCN against the other normalizations\n",
+        "# Detection benchmark (rendered objects, few real images): ALCN against the other normalizations\n",
         "ALCN against the classical normalizations and deep baselines (Rad, Roth & Lepetit, BMVC 2017, Sec. 4.3): "
         "for every method the same detector is trained on the same synthetic windows, normalized by the method, "
         "and scored on every window of the test images. AUC = area under the precision-recall curve (PASCAL VOC "

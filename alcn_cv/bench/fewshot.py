@@ -365,8 +365,9 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
         rows = []
         for method, seeded in by_method.items():
             summary = result["summary"][policy][method]
+            tuned = result.get("tuned", {}).get(method)
             rows.append(
-                [method]
+                [method if tuned is None else f"{format_spec(method, tuned['params'])} (tuned)"]
                 + ["failed" if "error" in r else r["auc"] for r in seeded]
                 + [spread_cell(summary["auc"]), spread_cell(summary["accuracy"])]
             )
