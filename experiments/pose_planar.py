@@ -26,7 +26,7 @@ def main() -> None:
     args = parser.parse_args()
     for part in selected_parts(args, PARTS):
         out = RUNS / "pose_planar" / part
-        alcn("pose", "planar", "--out", str(out), *PARTS[part])
+        alcn("pose", "planar", "--out", str(out), "--overwrite", *PARTS[part])
         keep(out / "planar_pose.json", f"pose_planar_{part}", drop=("details",))
 
 

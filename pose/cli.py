@@ -169,8 +169,11 @@ def _train_corners(args: argparse.Namespace) -> int:
 
 
 def _planar(args: argparse.Namespace) -> int:
+    from alcn_cv.io import check_no_earlier_output
     from pose import planar
 
+    out = Path(args.out)
+    check_no_earlier_output([out / "planar_pose.md", out / "planar_pose.json"], args.overwrite)
     planar.main(
         args.out,
         args.data,
@@ -235,7 +238,15 @@ def _add_planar(sub: argparse._SubParsersAction) -> None:
         "Truth: the reference pose. Writes OUT/planar_pose.md, .json, .png and OUT/targets.png. "
         "The Webcam frames are for academic research only (cite TILDE and AMOS).",
     )
-    r.add_argument("--out", type=Path, required=True, help="report folder")
+    r.add_argument(
+        "--out", type=Path, required=True, help="report folder (held while it runs: a second run is refused)"
+    )
+    r.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the report of an earlier run in --out (planar_pose.*, targets.png); without it, such a folder "
+        "is refused before any work",
+    )
     r.add_argument(
         "--data",
         help="folder of scenes, one sub-folder of registered frames each (default: "

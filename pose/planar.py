@@ -52,7 +52,7 @@ from tqdm import tqdm
 from alcn_cv.data.scenes import Scene, load_scene_folder, select_scenes, shared_root
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, make_folder, to_gray, write_json
+from alcn_cv.io import atomic_write, holds_out_dir, make_folder, to_gray, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none, new_figure, save_figure
 from pose.corner_train import CONFS as CORNER_CONFS
 from pose.corner_train import CornerRecipe
@@ -360,6 +360,7 @@ def plot_targets(scenes: Sequence[Scene], targets: dict[str, PlanarTarget], path
     return save_figure(plt, fig, path, dpi=90)
 
 
+@holds_out_dir
 def main(
     out_dir: str | Path,
     data: str | Path | None = None,

@@ -165,3 +165,15 @@ def test_planar_command_takes_the_recipe_and_the_normalizations(tmp_path, monkey
     assert args.func(args) == 0
     assert seen[0]["normalizations"] == ["none", "dog"]
     assert seen[0]["recipe"] == dataclasses.replace(CORNER_CONFS["planar"], iterations=3)
+
+
+def test_planar_refuses_an_earlier_report_and_a_folder_another_run_writes(tmp_path, capsys):
+    from alcn_cv.cli import main
+    from alcn_cv.errors import InputError
+    from alcn_cv.io import held_folder
+
+    (tmp_path / "planar_pose.json").write_text("{}")
+    assert main(["pose", "planar", "--out", str(tmp_path), "--data", str(tmp_path / "none")]) == 2
+    assert capsys.readouterr().err.strip().endswith("planar_pose.json exists (--overwrite replaces it)")
+    with held_folder(tmp_path / "busy"), pytest.raises(InputError, match="is in use by another run"):
+        planar.main(tmp_path / "busy", tmp_path / "none", progress=False)
