@@ -135,12 +135,13 @@ class DetectSettings:
             raise InputError("cnn_sweep needs at least one (depth, width)")
 
 
-_SMALL = DetectSettings(positives_per_object=30, epochs=2, cnn_sweep=[(1, 16)])
+#: 1 and 3 real images: the small and demo data sets (`alcn data detect --conf small|demo`) hold 3 per object.
+_SMALL = DetectSettings(positives_per_object=30, epochs=2, cnn_sweep=[(1, 16)], real_images=[1, 3])
 
 #: The named presets of the benchmark (hloc's ``confs``; ``alcn bench detect --conf NAME``), shared: a user takes a
 #: copy (:func:`alcn_cv.presets.preset`) and changes that. ``default``: the benchmark; ``small``: a quick
-#: end-to-end check (fewer windows and epochs, one plain CNN, no ResNet-56); ``demo``: ``alcn demo``'s run,
-#: ``small`` for no normalization, ALCN and the strongest classical methods, from 1 and 3 real images per object.
+#: end-to-end check (fewer windows and epochs, one plain CNN, no ResNet-56, from 1 and 3 real images per object);
+#: ``demo``: ``alcn demo``'s run, ``small`` for no normalization, ALCN and the strongest classical methods.
 #: The methods of ``default`` and ``small`` are :func:`default_methods`, the normalizations registered when a run
 #: starts, as those of :class:`DetectSettings`.
 CONFS: dict[str, DetectSettings] = {
@@ -149,7 +150,6 @@ CONFS: dict[str, DetectSettings] = {
     "demo": dataclasses.replace(
         _SMALL,
         methods=["none", "alcn", "dog", "clahe", "dlcn", "whitening"],
-        real_images=[1, 3],
         policies=["local"],
     ),
 }
@@ -157,7 +157,8 @@ CONFS: dict[str, DetectSettings] = {
 #: One line per preset of :data:`CONFS`, for ``alcn bench detect --help``.
 CONF_SUMMARIES: dict[str, str] = {
     "default": "the benchmark: every normalization and the deep baselines but ResNet-56",
-    "small": "a quick end-to-end run: fewer windows and epochs, one plain CNN, no ResNet-56",
+    "small": "a quick end-to-end run: fewer windows and epochs, one plain CNN, no ResNet-56, from 1 and 3 real images "
+    "per object (as many as the small data hold)",
     "demo": "the run of `alcn demo`: small for none, alcn, dog, clahe, dlcn and whitening, from 1 and 3 real images "
     "per object",
 }
