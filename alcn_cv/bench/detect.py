@@ -101,6 +101,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "TUNING_GRIDS",
+    "best_trial",
     "create_normalization",
     "detect_in_image",
     "fixed_boxes",
@@ -127,6 +128,13 @@ TUNING_GRIDS: dict[str, list[dict[str, float]]] = {
     "slcn": [{"sigma": s} for s in _LCN_GRID],
     "dlcn": [{"sigma": s} for s in _LCN_GRID],
 }
+
+
+def best_trial(trials: list[dict[str, Any]]) -> dict[str, Any]:
+    """The first of a tuning grid's ``trials`` (``{"params", "val_auc", ...}``, in :data:`TUNING_GRIDS`' order) with the
+    highest ``val_auc``: a tie keeps the earlier setting (the default first); an AUC that could not be computed (None
+    or NaN) never wins."""
+    return max(trials, key=lambda t: -np.inf if t["val_auc"] is None or np.isnan(t["val_auc"]) else t["val_auc"])
 
 
 def score_maps(net: nn.Module, image: np.ndarray, policy: InputPolicy, device: str = "cpu") -> np.ndarray:
@@ -584,8 +592,7 @@ def _tune(state: _Run, progress: bool) -> None:
                     auc = float(np.mean(done)) if done else None
                     trials.append({"params": params, "val_auc": auc, "val_auc_by_policy": by_policy})
                     bar.update()
-                # the first best: the grid's order, its default first, breaks ties
-                best = max(trials, key=lambda t: -np.inf if t["val_auc"] is None else t["val_auc"])
+                best = best_trial(trials)
                 state.tuned.setdefault(n_real, {})[method] = {"params": dict(best["params"]), "trials": trials}
                 logger.info(
                     "tuned %s for %d real image(s): %s (validation AUC %s)",

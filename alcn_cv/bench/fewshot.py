@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from alcn_cv.bench.detect import TUNING_GRIDS, create_normalization
+from alcn_cv.bench.detect import TUNING_GRIDS, best_trial, create_normalization
 from alcn_cv.bench.detect_settings import POLICIES, POLICY_DESCRIPTIONS
 from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.policies import InputPolicy
@@ -195,8 +195,7 @@ def _tune(settings: FewShotSettings, progress: bool) -> dict[str, Any]:
                     }
                 )
                 bar.update()
-            # the first best (the grid's default first keeps a tie); an AUC that cannot be computed (NaN) never wins
-            best = max(trials, key=lambda t: -np.inf if np.isnan(t["val_auc"]) else t["val_auc"])
+            best = best_trial(trials)
             tuned[method] = {"params": dict(best["params"]), "trials": trials}
             logger.info("tuned %s: %s (validation AUC %.4f)", method, best["params"], best["val_auc"])
     return tuned
