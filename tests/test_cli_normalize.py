@@ -44,6 +44,20 @@ def test_folder(tmp_path, frame):
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["0.jpg", "1.jpg", "2.jpg"]
 
 
+def test_folder_another_run_writes_is_refused(tmp_path, frame, capsys):
+    from alcn_cv.io import held_folder
+
+    (tmp_path / "in").mkdir()
+    cv2.imwrite(str(tmp_path / "in" / "0.png"), frame)
+    with held_folder(tmp_path / "out"):  # as another run would, while it writes
+        assert main(["normalize", str(tmp_path / "in"), str(tmp_path / "out"), "-m", "dog"]) == 2
+    assert "is in use by another run" in capsys.readouterr().err
+    assert not list((tmp_path / "out").iterdir()), "the refused run wrote into the folder"
+    # in place, the folder held is the input's; the hold's file is neither an output nor an image skipped
+    assert main(["normalize", str(tmp_path / "in"), str(tmp_path / "in"), "-m", "dog", "--in-place"]) == 0
+    assert sorted(p.name for p in (tmp_path / "in").iterdir()) == ["0.png"]
+
+
 def test_video(tmp_path, frame):
     src = tmp_path / "in.avi"
     writer = cv2.VideoWriter(str(src), cv2.VideoWriter_fourcc(*"MJPG"), 10, (80, 60))

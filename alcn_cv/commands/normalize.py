@@ -23,6 +23,7 @@ from alcn_cv.io import (
     IMAGE_SUFFIXES,
     check_no_earlier_output,
     check_writable,
+    held_folder,
     is_video,
     list_images,
     map_batches,
@@ -92,7 +93,8 @@ def main(
 
     ``method`` is a name or spec ``NAME[:KEY=VALUE...]`` (:func:`alcn_cv.enhance.create`), with
     ``params``. An alpha channel is kept (passed through unchanged). Nothing is written when an
-    output is the input (unless ``in_place``), exists (unless ``overwrite``) or is not writable.
+    output is the input (unless ``in_place``), exists (unless ``overwrite``) or is not writable. A folder
+    ``dst`` is held while the run writes it (:func:`alcn_cv.io.held_folder`): a second run into it is refused.
     In a folder, an image that cannot be read stops the run before anything is written, or with
     ``skip_bad`` is skipped; the end says how many images were written and what was skipped
     and why, and the frames per second. ``allow_partial`` accepts a video that ends before its
@@ -105,8 +107,8 @@ def main(
     :meth:`~alcn_cv.enhance.base.Normalization.apply`); None: ``apply`` on each frame.
 
     Raises:
-        InputError: a check fails, or ``device`` is given for a method other than ALCN or with another
-            backend.
+        InputError: a check fails, another run holds the folder ``dst``, or ``device`` is given for a method
+            other than ALCN or with another backend.
         MissingDependencyError: ``device`` is given and torch or kornia is not installed (the [train] extra).
     """
     import cv2
@@ -152,7 +154,9 @@ def main(
     size = 1 if device is None else batch_size
     start = time.perf_counter()
     if src.is_dir():
-        frames = _normalize_folder(src, outputs, normalize, size, skip_bad, progress)
+        with held_folder(dst):  # two runs into one folder would mix their images
+            outputs = _check_output(src, dst, overwrite, in_place)  # again, held: a run into it may have ended since
+            frames = _normalize_folder(src, outputs, normalize, size, skip_bad, progress)
     elif is_video(src):
         frames = map_video(
             src,

@@ -188,8 +188,8 @@ def train_detector(
                 net.train()
             bar.set_postfix({k: f"{v:.3f}" for k, v in stats.items()})
             logger.debug("detector epoch %d/%d: %s", epoch + 1, epochs, stats)
-    if val is not None:
-        logger.info("detector: val_loss %.4f, val_acc %.4f", stats["val_loss"], stats["val_acc"])
+    if val is not None:  # a benchmark trains many: its own lines say what each scored
+        logger.debug("detector: val_loss %.4f, val_acc %.4f", stats["val_loss"], stats["val_acc"])
     return net.eval()
 
 
