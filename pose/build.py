@@ -73,7 +73,9 @@ logger = logging.getLogger(__name__)
 
 #: Units of the box's size when building from a video and none are given.
 VIDEO_BOX_UNITS = "cm"
-#: A refined focal length's fx / fy moved by more than this share: warned (``docs/journal.md`` has the measurements).
+#: A refined focal length's fx / fy moved by more than this share from the given one's, to a ratio this far from
+#: square pixels (1): warned (``docs/journal.md`` has the measurements). Moved to square pixels, it is what most
+#: cameras have, and the given ratio was the guess.
 SUSPICIOUS = 0.1
 #: A refined focal length whose fx / fy is off square pixels (1) by more than this factor: the build fails, its
 #: reconstruction degenerate (too few images registered; ``docs/journal.md`` has the measurements).
@@ -254,7 +256,7 @@ def build(
         if registered:
             rec = triangulate_fixed_poses(seq, tmp / "database.db", tmp / "sparse")
         else:
-            rec = reconstruct_incremental(seq, tmp / "database.db", tmp / "sparse", refine_focal)
+            rec = reconstruct_incremental(seq, tmp / "database.db", tmp / "sparse", refine_focal, progress)
         xyz, desc, desc_point, tl, rgb = collect_points(rec, feats, norm)
         posed = [im for im in rec.images.values() if im.has_pose]
         centers = np.array([im.projection_center() for im in posed])
@@ -334,15 +336,15 @@ def build(
     if refined is not None and ratio is not None:
         K = refined
         model.extra["K"] = K.tolist()
-        moved = abs(ratio / (seq.views[0].K[0, 0] / seq.views[0].K[1, 1]) - 1) > SUSPICIOUS
+        level, how = _focal_ratio_note(seq.views[0].K[0, 0] / seq.views[0].K[1, 1], ratio)
         logger.log(
-            logging.WARNING if moved else logging.INFO,
+            level,
             "focal length refined by the bundle adjustment: fx %.1f fy %.1f (given %.1f %.1f)%s",
             K[0, 0],
             K[1, 1],
             seq.views[0].K[0, 0],
             seq.views[0].K[1, 1],
-            "; their ratio moved: more frames or views from more directions" if moved else "",
+            how,
         )
     elif not registered or all(np.allclose(v.K, seq.views[0].K) for v in seq.views):
         model.extra["K"] = np.asarray(seq.views[0].K, np.float64).tolist()  # the camera, for `alcn pose track`
@@ -353,6 +355,17 @@ def build(
         if dist is not None and all(v.dist is not None and np.array_equal(v.dist, dist) for v in seq.views):
             model.extra["dist"] = np.asarray(dist, np.float64).ravel().tolist()
     return model, cams
+
+
+def _focal_ratio_note(given: float, refined: float) -> tuple[int, str]:
+    """The log level of a refined focal length whose fx / fy is ``refined`` where the given one's was ``given``, and
+    the words on its ratio: a warning where it moved (:data:`SUSPICIOUS`) off square pixels."""
+    if abs(refined / given - 1) <= SUSPICIOUS:
+        return logging.INFO, ""
+    moved = f"; their ratio moved from {given:.2f} to {refined:.2f}"
+    if abs(refined - 1) <= SUSPICIOUS:
+        return logging.INFO, f"{moved}, square pixels"
+    return logging.WARNING, f"{moved}: more frames or views from more directions"
 
 
 #: The edges a box fit's per-axis statistics are along when they are not the model's box's x, y, z

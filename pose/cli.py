@@ -80,9 +80,8 @@ def _track(args: argparse.Namespace) -> int:
         f"poses: {summary['poses']} (object to camera, cam_t_m2c in {summary['translation_units']}; the model is in "
         f"{summary['units']}), per frame: {summary['info']}{overlay}"
     )
-    # overlay-error draws the box with the camera stored in the part model (with its distortion): the runs tracked
-    # with it
-    if summary["tracked"] and summary["detector"] == "features" and summary["camera"] == "model":
+    # overlay-error draws the box of a part model (not the corner CNN's) with the camera the poses record
+    if summary["tracked"] and summary["detector"] == "features":
         out = Path(summary["poses"]).with_name(Path(summary["poses"]).stem + "_overlay_error")
         words = ["alcn", "pose", "overlay-error", str(args.input), "--run", "track", str(args.model)]
         print(
@@ -332,8 +331,8 @@ def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
         action="append",
         required=True,
         metavar=("LABEL", "MODEL", "POSES"),
-        help="a run to measure: its label, its part model (.npz, with the camera stored by `alcn pose "
-        "build`) and its poses (.json from `alcn pose track`); repeat to compare runs",
+        help="a run to measure: its label, the part model it was tracked with (.npz of `alcn pose build`) and "
+        "its poses (.json of `alcn pose track`, drawn with the camera they were solved with); repeat to compare runs",
     )
     o.add_argument("--out", type=Path, required=True, help="report folder")
     o.add_argument(
@@ -488,7 +487,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--box-size",
         nargs=3,
         type=float,
-        metavar=("X", "Y", "Z"),
+        metavar=("W", "H", "D"),
         help="the box's true edge lengths (any order), fitted to the points wherever the box stands: for a video, or "
         "a registered sequence whose world frame is not the box's",
     )

@@ -45,6 +45,7 @@ from __future__ import annotations
 import io
 import json
 import logging
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,7 +54,7 @@ import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.formats import bop
-from alcn_cv.io import atomic_write, with_suffix
+from alcn_cv.io import atomic_write, is_video, with_suffix
 from calib.conventions import MM_PER_UNIT
 from pose.box import box_diameter, box_size
 
@@ -234,6 +235,9 @@ def load(path: str | Path) -> PartModel:
         if beside.is_file():
             raise WeightFileError(f"{path}: the point cloud of a part model; the model is {beside}")
         raise WeightFileError(f"{path}: a point cloud or mesh, not a part model (the .npz of `alcn pose build`)")
+    if not zipfile.is_zipfile(path):  # np.load would read it as a pickle and say how to load one unsafely
+        what = "a video" if is_video(path) else "not an .npz archive"
+        raise WeightFileError(f"{path}: {what}, not a part model (the .npz of `alcn pose build`)")
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}

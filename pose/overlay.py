@@ -175,17 +175,25 @@ def frame_error(
 def _camera_and_poses(
     model_path: str | Path, poses_path: str | Path
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, dict[str, tuple[np.ndarray, np.ndarray]]]:
-    """The box corners, the camera stored in the part model (``K``, and its distortion or ``None``: the camera
-    ``alcn pose track`` tracks with by default) and the ``(rvec, tvec)`` of every posed frame (``tvec`` in the model's
-    units: :func:`pose.track.read_poses`)."""
-    from pose.track import read_poses
+    """The box corners, the camera the poses were solved with (``K``, and its distortion or ``None``: the one their
+    ``_info.json`` records, :func:`pose.track.tracked_camera`, else the part model's, which ``alcn pose track`` tracks
+    with by default) and the ``(rvec, tvec)`` of every posed frame (``tvec`` in the model's units:
+    :func:`pose.track.read_poses`).
+
+    Raises:
+        DatasetError: as :func:`pose.track.tracked_camera` (poses of another model, an unrecorded camera), or no
+            camera at all.
+    """
+    from pose.track import read_poses, tracked_camera
 
     model = part_model.load(model_path)
-    if "K" not in model.extra:
-        raise DatasetError(f"{model_path}: stores no camera (build it from a video with `alcn pose build`)")
-    dist = model.extra.get("dist")  # a model built before it stored the distortion has none
-    K = np.asarray(model.extra["K"], np.float64)
-    return model.corners, K, None if dist is None else np.asarray(dist, np.float64), read_poses(poses_path, model.units)
+    camera = tracked_camera(poses_path, model_path)
+    if camera is None:
+        if "K" not in model.extra:
+            raise DatasetError(f"{model_path}: stores no camera (build it from a video with `alcn pose build`)")
+        dist = model.extra.get("dist")  # a model built before it stored the distortion has none
+        camera = np.asarray(model.extra["K"], np.float64), None if dist is None else np.asarray(dist, np.float64)
+    return model.corners, *camera, read_poses(poses_path, model.units)
 
 
 def measure(
@@ -196,7 +204,7 @@ def measure(
     progress: bool = True,
 ) -> dict[str, FrameError]:
     """:class:`FrameError` of every frame of ``video`` posed in ``poses_path`` (``alcn pose track``'s
-    JSON) with the box and camera of ``model_path`` (the camera stored by ``alcn pose build``, with its distortion)."""
+    JSON) with the box of ``model_path`` and the camera the poses were solved with (:func:`_camera_and_poses`)."""
     corners, K, dist, poses = _camera_and_poses(model_path, poses_path)
     out = {}
     frames = io.iter_frames(video)

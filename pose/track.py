@@ -9,7 +9,8 @@ frame's pose as prior. Output:
   "cam_t_m2c": [3 floats]}]}``, object-to-camera (``x_cam = R x_obj + t``, ``R`` row-major), ``t`` in
   millimetres as BOP's (converted from the model's units; a lost frame has an empty list), plus a
   ``<name>_info.json`` with per-frame inlier counts, timings and the lost/recovered events (by frame name), written
-  first: :func:`read_poses` tells poses of another run beside it (an interrupted one) by its ``poses_digest``;
+  first: :func:`read_poses` tells poses of another run beside it (an interrupted one) by its ``poses_digest``, and
+  :func:`tracked_camera` reads the camera the poses were solved with and the model's ``model_digest``;
 * with ``overlay``, a video (``.mp4``/``.avi``) or a folder of PNGs with the box drawn in the
   colours of the paper's Fig. 1: ground truth green, ALCN blue, no normalization red
   (:data:`COLORS`; any other normalization yellow), written under a temporary name and renamed
@@ -243,6 +244,41 @@ def read_poses(path: str | Path, units: str) -> dict[str, tuple[np.ndarray, np.n
             t = np.asarray(entry[0]["cam_t_m2c"], np.float64).reshape(3, 1) * scale
             poses[name] = (cv2.Rodrigues(R)[0], t)
     return poses
+
+
+def model_digest(path: str | Path) -> str:
+    """SHA-256 of the model file ``path`` (a part model, or the corner CNN's ONNX file), the ``model_digest`` of the
+    ``_info.json`` of the poses tracked with it."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def tracked_camera(path: str | Path, model_path: str | Path) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """The camera the poses at ``path`` were solved with, ``K (3, 3)`` and the distortion or None, as the
+    ``_info.json`` beside them records it, checked against the model the caller draws them with: None where the info
+    is from a track that did not record them and tracked with the model's camera.
+
+    Raises:
+        DatasetError: the info records another model than ``model_path`` (its ``model_digest``: drawn with that
+            model's box, the poses would be judged against another object frame), or a camera given to that track
+            (``--K``, ``--camera``) that it does not record.
+    """
+    path = Path(path)
+    info_path = path.with_name(path.stem + "_info.json")
+    info = read_json(info_path) if info_path.is_file() else {}
+    digest = info.get("model_digest")
+    if digest is not None and digest != model_digest(model_path):
+        tracked_with = info.get("summary", {}).get("model", "another model")
+        raise DatasetError(f"{path} was tracked with {tracked_with}, another file than {model_path}: give that model")
+    camera = info.get("camera")
+    if camera is None:
+        if info.get("summary", {}).get("camera") == "given":
+            raise DatasetError(
+                f"{path} was tracked with a camera given to `alcn pose track` that {info_path.name} does not record: "
+                "track again"
+            )
+        return None
+    dist = camera["dist"]
+    return np.asarray(camera["K"], np.float64), None if dist is None else np.asarray(dist, np.float64)
 
 
 #: fewer inliers than this loses a frame, per detector (the corner detector has few parts: 26 by default,
@@ -794,7 +830,14 @@ def main(
     }
     # the info first (its folder made by the atomic write): an interrupted run leaves it beside the earlier poses,
     # which read_poses refuses by the digest, never its poses (mm) beside an earlier info (the model's units)
-    record = {"summary": summary, "machine": machine(), "poses_digest": poses_digest(scene_gt), "frames": info}
+    record = {
+        "summary": summary,
+        "machine": machine(),
+        "poses_digest": poses_digest(scene_gt),
+        "model_digest": model_digest(model_path),
+        "camera": {"K": box.K.tolist(), "dist": None if box.dist is None else np.ravel(box.dist).tolist()},
+        "frames": info,
+    }
     write_json(info_path, record)
     write_json(output, scene_gt)
     # the caller reports the summary (`alcn pose track` prints it): logged at INFO it was printed twice

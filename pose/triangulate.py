@@ -181,12 +181,13 @@ def triangulate_fixed_poses(seq: TrainingSequence, db_path: Path, out_dir: Path)
 
 
 def reconstruct_incremental(
-    seq: TrainingSequence, db_path: Path, out_dir: Path, refine_focal: bool = False
+    seq: TrainingSequence, db_path: Path, out_dir: Path, refine_focal: bool = False, progress: bool = True
 ) -> pycolmap.Reconstruction:
     """pycolmap incremental mapping; returns the largest reconstruction (unknown scale).
 
     The intrinsics are held fixed, except the focal length with ``refine_focal`` (self-calibration
-    in the bundle adjustment, for a video whose focal length is only roughly known)."""
+    in the bundle adjustment, for a video whose focal length is only roughly known). ``progress``: a bar of the
+    images registered (the mapper's own callbacks)."""
     import pycolmap
 
     opts = pycolmap.IncrementalPipelineOptions()
@@ -199,10 +200,21 @@ def reconstruct_incremental(
     # with two, the cookie-box video gave 5961 or 5940 points from one run to the next
     opts.num_threads = 1
     make_folder(out_dir)
-    # one thread, no progress of its own: a minute on a few dozen frames, said before it starts
     logger.info("incremental mapping of %d images (pycolmap, one thread)", len(seq.views))
-    with pycolmap_log(logger):
-        recs = pycolmap.incremental_mapping(db_path, seq.image_dir, out_dir, opts)
+    bar = tqdm(total=len(seq.views), desc="register images", unit="image", leave=False, disable=not progress)
+
+    def registered(count: int) -> None:  # a mapper that starts a second model registers images again: capped
+        bar.update(min(count, bar.total - bar.n))
+
+    with bar, pycolmap_log(logger):
+        recs = pycolmap.incremental_mapping(
+            db_path,
+            seq.image_dir,
+            out_dir,
+            opts,
+            initial_image_pair_callback=lambda: registered(2),
+            next_image_callback=lambda: registered(1),
+        )
     if not recs:
         raise DatasetError(
             f"{seq.info.get('path')}: pycolmap registered no image pair (too little texture, motion or overlap)"

@@ -328,7 +328,7 @@ def test_a_video_builds_from_a_camera_yaml_with_its_distortion_and_focal_length(
     camera = write_camera_yaml(tmp_path / "camera.yaml", K, dist, (640, 480))
     reached = []
 
-    def mapping(db_path, image_dir, out_dir, options):  # the call site of the reconstruction
+    def mapping(db_path, image_dir, out_dir, options, **callbacks):  # the call site of the reconstruction
         db = pycolmap.Database.open(db_path)
         try:
             cameras = [(c.model.name, np.asarray(c.params)) for c in db.read_all_cameras()]

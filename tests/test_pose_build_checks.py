@@ -371,3 +371,15 @@ def test_the_box_given_twice_is_refused_before_the_work(tmp_path, capsys):
     assert main([*argv, "--no-progress"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.splitlines() == [err] and "give the box once" in err, err
+
+
+def test_a_focal_length_refined_to_square_pixels_is_not_a_warning():
+    """The cookie box's documented build ended in a warning that its refined fx / fy had moved (from the tutorial's
+    guess, 0.89, to 1.004: square pixels, a good result) with advice to add frames."""
+    from pose.build import _focal_ratio_note
+
+    assert _focal_ratio_note(0.89, 0.95) == (logging.INFO, "")  # within 10% of the given ratio
+    assert _focal_ratio_note(0.89, 1.004) == (logging.INFO, "; their ratio moved from 0.89 to 1.00, square pixels")
+    level, words = _focal_ratio_note(0.89, 0.79)  # the cookie box from its first 120 frames
+    assert level == logging.WARNING and words.endswith("to 0.79: more frames or views from more directions")
+    assert _focal_ratio_note(1.0, 1.25)[0] == logging.WARNING

@@ -57,8 +57,13 @@ def test_other_version_and_corrupt_files(tmp_path):
     with pytest.raises(WeightFileError, match=rf"version {pm.FORMAT_VERSION + 1}.*versions 1, 2"):
         pm.load(tmp_path / "v2.npz")
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
-    with pytest.raises(WeightFileError):
+    with pytest.raises(WeightFileError, match=r"bad.npz: not an .npz archive, not a part model \(the .npz of"):
         pm.load(tmp_path / "bad.npz")
+    # a video given where the model goes (the commands order their paths differently): not numpy's pickle advice
+    (tmp_path / "box.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42" + bytes(64))
+    with pytest.raises(WeightFileError, match=r"box.mp4: a video, not a part model") as refused:
+        pm.load(tmp_path / "box.mp4")
+    assert "pickle" not in str(refused.value)
     with pytest.raises(WeightFileError, match="not found"):
         pm.load(tmp_path / "missing.npz")
     (tmp_path / "m.ply").write_text("ply\n")  # the point cloud save writes beside the model

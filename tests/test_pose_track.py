@@ -511,6 +511,33 @@ def test_poses_are_written_in_mm_whatever_the_models_units(tmp_path):
     assert np.allclose(track.read_poses(tmp_path / "p.json", "cm")["0000"][1].ravel(), poses["0000"][0]["cam_t_m2c"])
 
 
+def test_the_overlay_error_draws_with_the_camera_and_model_the_poses_were_tracked_with(tmp_path):
+    """`alcn pose overlay-error` drew every run with the model's camera: poses tracked with `--K` were measured 20 px
+    off the box, and poses of another model were drawn with its box, without a word."""
+    from alcn_cv.errors import DatasetError
+    from pose.overlay import _camera_and_poses
+
+    model = _planar_model(_texture())
+    model_K = K * np.array([[0.5], [0.5], [1.0]])  # not the camera the frames were taken with
+    model.extra["K"] = model_K.tolist()
+    pm.save(model, tmp_path / "m.npz")
+    frames = _frames(tmp_path, 2)
+    track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800, progress=False)
+    np.testing.assert_array_equal(_camera_and_poses(tmp_path / "m.npz", tmp_path / "p.json")[1], K)  # --K's
+    model.extra["K"] = K.tolist()
+    pm.save(model, tmp_path / "other.npz")
+    with pytest.raises(DatasetError, match="was tracked with .*m.npz, another file than .*other.npz"):
+        _camera_and_poses(tmp_path / "other.npz", tmp_path / "p.json")
+    info = json.loads((tmp_path / "p_info.json").read_text())
+    del info["camera"], info["model_digest"]  # an earlier track's, with --K: its camera is unknown
+    (tmp_path / "p_info.json").write_text(json.dumps(info))
+    with pytest.raises(DatasetError, match="camera given to `alcn pose track` that p_info.json does not record"):
+        _camera_and_poses(tmp_path / "m.npz", tmp_path / "p.json")
+    info["summary"]["camera"] = "model"  # an earlier track's with the model's camera: that camera, as before
+    (tmp_path / "p_info.json").write_text(json.dumps(info))
+    np.testing.assert_array_equal(_camera_and_poses(tmp_path / "m.npz", tmp_path / "p.json")[1], model_K)
+
+
 def test_track_takes_max_frames_and_step(tmp_path, capsys):
     from alcn_cv.cli import main
 
@@ -543,8 +570,8 @@ def test_the_summary_names_the_outputs_the_units_and_the_next_step(tmp_path, cap
     assert f"poses: {out}" in text and "cam_t_m2c in mm" in text and "the model is in cm" in text
     assert str(out.with_name("poses_info.json")) in text and f"overlay: {tmp_path / 'ov'}" in text
     assert "alcn pose overlay-error" in text and f"--run track {tmp_path / 'm.npz'} {out}" in text
-    assert main([*argv, "--K", "500", "500", "159.5", "119.5"]) == 0  # another camera: overlay-error's is the model's
-    assert "overlay-error" not in capsys.readouterr().out
+    assert main([*argv, "--K", "500", "500", "159.5", "119.5"]) == 0  # the poses record their camera
+    assert "alcn pose overlay-error" in capsys.readouterr().out
 
 
 def test_frames_of_another_size_than_the_models_name_the_camera_that_works(tmp_path, caplog):
