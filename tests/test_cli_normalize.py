@@ -335,6 +335,18 @@ def test_device_on_a_video_keeps_order_and_count(tmp_path, frame, caplog):
         assert diff.mean() < 0.5 and diff.max() <= 8
 
 
+def test_device_says_when_it_runs_another_mixture_than_the_frame_by_frame_path(tmp_path, frame, caplog):
+    """`--device` runs the lite and paper models' Eq. 3 exactly, where their per-frame default is the pyramid (a few
+    grey levels apart): it said nothing, and the help promised the same output within a grey level."""
+    src = tmp_path / "in.png"
+    cv2.imwrite(str(src), frame)
+    caplog.set_level("INFO")
+    for spec, told in (("alcn:model=lite", True), ("alcn:model=lite:mixture=exact", False), ("alcn", False)):
+        caplog.clear()
+        assert main(["normalize", str(src), str(tmp_path / f"{len(spec)}.png"), "-m", spec, "--device", "cpu"]) == 0
+        assert ("--device runs Eq. 3 exactly" in caplog.text) is told, spec
+
+
 def test_device_errors_are_one_line(tmp_path, frame, capsys):
     src = tmp_path / "in.png"
     cv2.imwrite(str(src), frame)

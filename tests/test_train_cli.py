@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shlex
 import shutil
 import tomllib
@@ -188,6 +189,12 @@ def test_train_detector_from_a_few_images(tmp_path):
     assert main(args) == 0
     state = torch.load(tmp_path / "det" / "detector.pt", weights_only=True)
     assert state["classes"] == ["background", "disc", "square"] and state["method"] == "dog"
+    assert json.loads((tmp_path / "det" / "classes.json").read_text()) == state["classes"]
+    assert main(args) == 2  # an earlier detector, replaced only on request
+    args.append("--overwrite")
+    for extent in ("0", "-40", "100"):  # 0 hung in the negatives' sampling; the others trained on other windows
+        assert main([*args, "--extent", extent]) == 2
+    assert main([*args, "--per-image", "0"]) == 2
     assert main(["train-detector", str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 2
     weights = ["--weights", str(tmp_path / "w.npz")]
     assert main([*args, *weights]) == 2  # a Normalizer for a DoG

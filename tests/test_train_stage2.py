@@ -78,3 +78,25 @@ def test_evaluate_detector_names_bad_labels_of_a_network_without_num_classes(lab
         evaluate_detector(net, windows, labels)
     loss, accuracy = evaluate_detector(net, np.zeros((2, 32, 32), np.float32), np.array([0, 2]))
     assert np.isfinite(loss) and 0 <= accuracy <= 1
+
+
+def test_an_objects_folder_mask_marks_all_its_images(tmp_path):
+    """The photometric-stereo sets (`psm/NAME/NAME.mask.png`, one view under several lights) hold one mask for all
+    their images, which `alcn bench invariance` reads: `train-detector` took their whole frames, black background
+    included, as the object."""
+    import cv2
+
+    from alcn_cv.train.stage2 import _read_objects
+
+    (tmp_path / "owl").mkdir()
+    for i in range(2):
+        cv2.imwrite(str(tmp_path / "owl" / f"owl.{i}.png"), np.full((20, 30), 100 + i, np.uint8))
+    mask = np.zeros((20, 30), np.uint8)
+    mask[5:15, 10:20] = 255
+    cv2.imwrite(str(tmp_path / "owl" / "owl.mask.png"), mask)
+    ((name, items),) = _read_objects(tmp_path)
+    assert name == "owl" and len(items) == 2  # the mask is not an image of the object
+    for _, marked in items:
+        np.testing.assert_array_equal(marked, mask > 0)
+    (tmp_path / "owl" / "owl.mask.png").unlink()
+    assert _read_objects(tmp_path)[0][1][0][1] == [0, 0, 30, 20]  # no mask: the whole image

@@ -157,6 +157,9 @@ def test_a_short_training_writes_its_files_and_lowers_the_loss(tmp_path, monkeyp
     history = json.loads((tmp_path / "run" / "history.json").read_text())
     assert [h["step"] for h in history] == list(range(1, 13)) and all(np.isfinite(h["loss"]) for h in history)
     assert "trained 12 steps" in (tmp_path / "run" / "train.log").read_text()
+    with pytest.raises(InputError, match=r"holds an earlier run .*: --overwrite replaces it, or give") as refused:
+        train_unet(cfg, tmp_path / "run", conf="test")
+    assert "--resume" not in str(refused.value)  # `alcn train-unet` has none
     # The output range: where the outputs on the training frames lie (all 3 frames of each scene, unpadded).
     trained = UNetNormalizer.from_file(load_normalizer_file(path))
     scenes = [training_scene(load_scene_folder(f)[0], CROP // 2, PATCH) for f in cfg.scenes]
@@ -203,6 +206,11 @@ def test_the_bench_spec_builds_and_applies(tmp_path):
             build_method(bad)
     with pytest.raises(WeightFileError):
         build_method(f"unet:weights={tmp_path / 'missing.npz'}")
+    # where an ALCN Normalizer goes, the file says what it is and what runs it
+    from alcn_cv import createALCN
+
+    with pytest.raises(WeightFileError, match=r"u.npz: the U-Net baseline .* `alcn bench relight --methods unet:"):
+        createALCN(weights=path)
 
 
 def test_the_cli_trains_with_the_preset_and_its_settings(tmp_path, monkeypatch):

@@ -137,6 +137,10 @@ def main(
         require("torch", "kornia", what="alcn normalize --device", preferred="train")
         params.update(backend="torch", device=device)
     normalization = create(method, **params)
+    pyramid_default = isinstance(normalization, ALCN) and normalization.weights_meta["architecture"] != "gain"
+    if device is not None and pyramid_default and "mixture" not in {**parse_spec(method)[1], **params}:
+        # the per-frame default of these models is the pyramid, which runs in OpenCV only
+        logger.info("--device runs Eq. 3 exactly (mixture='exact'); without it %s runs the pyramid", method)
 
     def load_frame(img: np.ndarray) -> np.ndarray:
         if not gray or img.ndim == 2:
@@ -307,7 +311,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "By default each frame is normalized on the CPU by the method's apply(). With --device DEV (cpu, cuda, "
         "cuda:1; ALCN only), ALCN runs on that torch device --batch-size frames at a time (apply_batch): the next "
         "frames are decoded and the previous ones encoded in two threads while the device works, and colour "
-        "frames are normalized on their CIE L as in the per-frame path (the same output within a grey level). "
+        "frames are normalized on their CIE L as in the per-frame path (the same output within a grey level; "
+        "for the lite and paper models the exact Eq. 3, -m alcn:model=lite:mixture=exact's, where the per-frame "
+        "default is its pyramid approximation, a few grey levels apart). "
         "--device cpu runs that path on the CPU, where it is slower than the default (which "
         "runs Eq. 3 in OpenCV).",
         epilog="methods (-m NAME or NAME:KEY=VALUE..., e.g. -m dog:sigma1=1:sigma2=2 or -m clahe:clip_limit=3; "

@@ -212,7 +212,7 @@ def relit_scenes(
         InputError: ``frames < 2`` or an unknown ``light``.
     """
     if frames < 2:
-        raise InputError(f"a relit scene needs at least 2 frames, got {frames}")
+        raise InputError(f"a relit scene needs at least 2 frames (relit >= 2), got {frames}")
     if light not in LIGHTS:
         raise InputError(f"unknown light {light!r}; known: {', '.join(LIGHTS)}")
     scenes = []

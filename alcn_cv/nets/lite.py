@@ -119,6 +119,11 @@ def normalizer_from_file(weight_file: NormalizerFile) -> Normalizer:
         from alcn_cv.nets.gain import GainNormalizer
 
         return GainNormalizer.from_file(weight_file)
+    if name == "unet":  # the lab's free-form baseline, which `alcn bench relight` runs
+        raise WeightFileError(
+            f"{weight_file.path or 'the weight file'}: the U-Net baseline of `alcn train-unet`, not an ALCN "
+            "Normalizer; the benchmark runs it: `alcn bench relight --methods unet:weights=FILE`"
+        )
     if name not in ARCHITECTURES:
         raise WeightFileError(f"unknown Normalizer architecture {name!r} (known: {', '.join(ARCHITECTURES)}, gain)")
     return ARCHITECTURES[name].from_file(weight_file)

@@ -131,14 +131,14 @@ def earlier_run(out: str | Path) -> list[str]:
     return sorted(p.name for p in out.iterdir() if p.is_file() and (p.name in names or p.suffix == ".npz"))
 
 
-def check_run_folder(out: str | Path, *, resume: bool = False, overwrite: bool = False) -> Path:
+def check_run_folder(out: str | Path, *, resume: bool = False, overwrite: bool = False, resumable: bool = True) -> Path:
     """Check, before any work and writing nothing, that a run may go into the folder ``out``: not a folder of other
     files (:func:`run_folder`), nor, unless the run resumes it or ``overwrite``, a folder of an earlier run
-    (:func:`earlier_run`); ``resume`` and ``overwrite`` are exclusive.
+    (:func:`earlier_run`); ``resume`` and ``overwrite`` are exclusive. ``resumable``: the command has ``--resume``.
 
     Raises:
-        InputError: either, named with the way out (``--resume``, ``--overwrite``, another ``--out``); ``out`` is a
-            file or lies under one; both ``resume`` and ``overwrite``.
+        InputError: either, named with the way out (``--resume`` where ``resumable``, ``--overwrite``, another
+            ``--out``); ``out`` is a file or lies under one; both ``resume`` and ``overwrite``.
     """
     if resume and overwrite:
         raise InputError("give --resume (go on with the run in --out) or --overwrite (replace it), not both")
@@ -148,10 +148,8 @@ def check_run_folder(out: str | Path, *, resume: bool = False, overwrite: bool =
     results = [] if resume or overwrite else earlier_run(out)
     if results:
         shown = ", ".join(results[:4]) + (f" and {len(results) - 4} more" if len(results) > 4 else "")
-        raise InputError(
-            f"{out} holds an earlier run ({shown}): --resume continues it, --overwrite replaces it, or give another "
-            "--out"
-        )
+        ways = "--resume continues it, --overwrite replaces it" if resumable else "--overwrite replaces it"
+        raise InputError(f"{out} holds an earlier run ({shown}): {ways}, or give another --out")
     return out
 
 

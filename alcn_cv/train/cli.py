@@ -84,9 +84,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "lightings. The paper preset (the shipped alcn_normalizer.npz) uses the objective meta: the detector learns "
         "from the anchor lighting's windows only, the Normalizer from all; paper-full and --set optim.objective=joint "
         "train both on every window, Eq. 2 of Rad et al. 2017. --set model.method=dog (or none) trains the same "
-        "detector on a fixed DoG (or raw windows) for comparison. Writes checkpoint.pt, train.log, "
-        "history.json, curves.png and alcn_normalizer.npz into --out. The shipped alcn_normalizer.npz is "
-        "`alcn train --conf paper`. Multi-process: run under torchrun.",
+        "detector on a fixed DoG (or raw windows) for comparison. Writes checkpoint.pt, train.log, config.toml "
+        "(the settings), history.json, curves.png, summary.md, fewshot.json (the few-shot validation) and "
+        "alcn_normalizer.npz (its ONNX twin: alcn export --weights) into --out, and keeps the rendered windows there "
+        "for --resume (windows-KEY.npz, about 4 kB a window: delete it when the run is done). The shipped "
+        "alcn_normalizer.npz is `alcn train --conf paper`. Multi-process: run under torchrun.",
     )
     _add_conf(p, TRAIN_CONF_SUMMARIES, "paper", "optim.lr=3e-4", or_file="a TOML file of alcn_cv.train.config's keys")
     p.add_argument("--out", type=Path, default=Path("out/alcn"), help="run folder (default: out/alcn)")
@@ -107,12 +109,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "train-detector",
         help="train a detector for new objects from a few images (second stage)",
         description="The second stage of ALCN: from a few real images of new objects (one folder per object, "
-        "images showing the object; an optional *.mask.png beside an image marks it), make the paper's simple "
-        "synthetic images, normalize them with the frozen Normalizer (or another method) and train a new "
-        "detector. Writes detector.pt (torch state and configuration) into --out.",
+        "images showing the object; NAME.mask.png beside NAME.png, or OBJECT.mask.png in the object's folder for "
+        "all its images, marks it), make the paper's simple synthetic images, normalize them with the frozen "
+        "Normalizer (or another method) and train a new detector. Writes detector.pt (torch state and "
+        "configuration: alcn_cv.train.stage2) and classes.json (the class names, 0 the background) into --out.",
     )
     d.add_argument("images", type=Path, help="folder with one sub-folder of images per object")
     d.add_argument("--out", type=Path, required=True, help="output folder")
+    d.add_argument("--overwrite", action="store_true", help="replace the detector an earlier run wrote into --out")
     d.add_argument(
         "--method",
         default="alcn",
@@ -124,7 +128,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument(
         "--negatives", type=int, default=0, help="background windows (default: as many as all positive windows)"
     )
-    d.add_argument("--extent", type=float, default=40.0, help="object size in window pixels (default 40)")
+    d.add_argument(
+        "--extent", type=float, default=40.0, help="the object's size in the 64-px window, pixels (default 40)"
+    )
     d.add_argument("--epochs", type=int, default=15, help="training epochs (default 15)")
     d.add_argument("--batch-size", type=int, default=64, help="windows per batch (default 64)")
     d.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
@@ -141,7 +147,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "(alcn_cv.train.distill); writes the weight file and its model card (.md beside it), which records this "
         "command, and for a gain student its ONNX export. The shipped alcn_normalizer_lite.npz is `alcn distill "
         "--conf lite --out alcn_cv/weights/alcn_normalizer_lite.npz --overwrite`, alcn_normalizer_gain_lite.npz the "
-        "same with --conf gain-lite (its terms: those of the photographs, any use); to compare with a shipped file, "
+        "same with --conf gain-lite (its terms: those of the photographs, any use); that replaces the shipped card "
+        "with the one generated (git shows what the hand-edited card added). To compare with a shipped file, "
         "write to another --out.",
     )
     _add_conf(s, DISTILL_CONF_SUMMARIES, None, "teacher=FILE")
@@ -197,7 +204,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "Chum's jointly trained U-Net) with train-real-light's data, objective and budget (alcn_cv.train.unet): the "
         "same keys, but net.* are the U-Net's (channels, levels, eps), and the same log (the untrained start's loss "
         "beside each line's). Writes "
-        "OUT/unet_normalizer.npz, train.log and history.json; bench it as unet:weights=OUT/unet_normalizer.npz.",
+        "OUT/unet_normalizer.npz, train.log and history.json. A baseline, not an ALCN model: `alcn bench relight "
+        "--methods alcn,unet:weights=OUT/unet_normalizer.npz` compares them (no other command runs it).",
     )
     _add_conf(u, UNET_CONF_SUMMARIES, "gain", "net.channels=16")
     _add_run(u, "out/unet")
@@ -310,6 +318,7 @@ def _train_detector(args: argparse.Namespace) -> int:
         batch_size=args.batch_size,
         lr=args.lr,
         seed=args.seed,
+        overwrite=args.overwrite,
         progress=not args.no_progress,
     )
     return 0

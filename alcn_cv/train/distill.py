@@ -263,7 +263,8 @@ from the paper-architecture Normalizer `{record["teacher"]["file"]}` (SHA-256 `{
 teacher.
 {"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}
 
-Use: {_created(weights, "lite")}, real time: {_created(weights, "lite", mixture="pyramid")}.
+Use: {_created(weights, "lite")}, real time (Eq. 3 by its `pyramid` approximation, the default);
+{_created(weights, "lite", mixture="exact")} for Eq. 3 exactly.
 ALCN warns when the installed teacher differs from this one: then re-run the command below.
 
 ## How it was made
@@ -410,7 +411,9 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
     train_frames, val_frames = _gain_frames(scenes, n_rendered, seed, progress)
     if not val_frames:
         raise DatasetError(
-            f"no validation frames: a scene needs {_GAIN_VAL_EVERY} frames or more, or use 2 rendered scenes or more"
+            f"no validation frames: every {_GAIN_VAL_EVERY}th frame of a scene is held out, so a scene needs "
+            f"{_GAIN_VAL_EVERY} frames or more (relit >= {_GAIN_VAL_EVERY}), or give 2 rendered scenes or more "
+            "(n_rendered >= 2)"
         )
     base = [_grid_sample(teacher_net, f) for f in train_frames]
     val_samples = [_grid_sample(teacher_net, f) for f in val_frames]

@@ -28,7 +28,7 @@ from alcn_cv.enhance.alcn import ALCN, pin_default_model
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, held_folder, write_json
 from alcn_cv.nets.detector import INPUT, Detector
 
 if TYPE_CHECKING:
@@ -223,7 +223,9 @@ def normalize_windows(windows: np.ndarray, normalization: Normalization) -> np.n
 
 
 def _read_objects(folder: Path) -> list[tuple[str, list[tuple[np.ndarray, object]]]]:
-    """``[(object name, [(gray image, mask or box), ...]), ...]`` from one sub-folder per object."""
+    """``[(object name, [(gray image, mask or box), ...]), ...]`` from one sub-folder per object: an image's mask is
+    ``NAME.mask.png`` beside it, else the folder's ``OBJECT/OBJECT.mask.png`` (one view under several lights, as the
+    photometric-stereo sets), else the whole image is the object."""
     from alcn_cv.io import list_images, read_image
 
     if not folder.is_dir():
@@ -236,6 +238,8 @@ def _read_objects(folder: Path) -> list[tuple[str, list[tuple[np.ndarray, object
                 continue
             image = read_image(path)
             mask_path = path.with_name(path.stem + ".mask.png")
+            if not mask_path.is_file():
+                mask_path = sub / f"{sub.name}.mask.png"
             if mask_path.is_file():
                 mask = read_image(mask_path)
                 mask = mask if mask.ndim == 2 else mask[..., 0]
@@ -293,28 +297,62 @@ def main(
     batch_size: int = 64,
     lr: float = 1e-3,
     seed: int = 0,
+    overwrite: bool = False,
     progress: bool = True,
 ) -> Path:
     """The second stage from image files (``alcn train-detector``).
 
     Args:
         images: a folder with one sub-folder per new object holding its real images (the whole
-            image is the object unless ``NAME.mask.png`` beside ``NAME.*`` marks it).
-        out: output folder; ``detector.pt`` holds ``{"state_dict", "config", "classes",
-            "method", "policy"}``.
+            image is the object unless a mask marks it: ``NAME.mask.png`` beside ``NAME.*``, or ``OBJECT.mask.png``
+            in the object's folder for all its images).
+        out: output folder, held while the command runs (:func:`~alcn_cv.io.held_folder`); ``detector.pt`` holds
+            ``{"state_dict", "config", "classes", "method", "policy"}``, ``classes.json`` the class names (0:
+            background).
         method: the normalization, a spec ``NAME[:KEY=VALUE...]``; ALCN's windows are at its working scale
             (``scale=1`` unless the spec says otherwise).
         weights: the Normalizer of ``method`` ``"alcn"`` (default: the shipped default's), as ``alcn:weights=...``.
         per_image, negatives, extent: see :func:`object_windows`.
         epochs, batch_size, lr, seed: see :func:`train_detector`.
+        overwrite: replace the detector an earlier run wrote into ``out``.
 
     Returns:
         The path of ``detector.pt``; its ``"method"`` is the spec with the parameters set here and ALCN's model
         named (:func:`~alcn_cv.enhance.alcn.pin_default_model`).
 
     Raises:
-        InputError: ``weights`` with another method than ALCN, or given twice.
+        InputError: ``weights`` with another method than ALCN, or given twice; ``per_image`` below 1, ``negatives``
+            below 0, ``extent`` outside (0, 64] (the window's side); an earlier detector in ``out`` without
+            ``overwrite``; ``out`` held by another run.
     """
+    from alcn_cv.data.synthetic import WINDOW
+
+    if per_image < 1 or negatives < 0:
+        raise InputError(f"need --per-image >= 1 and --negatives >= 0, got {per_image} and {negatives}")
+    if not 0 < extent <= WINDOW:
+        raise InputError(f"--extent is the object's size in the {WINDOW}-px window: (0, {WINDOW}], got {extent:g}")
+    out = Path(out)
+    check_no_earlier_output([out / "detector.pt", out / "classes.json"], overwrite)
+    with held_folder(out):
+        return _train_from_images(
+            images, out, method, weights, per_image, negatives, extent, epochs, batch_size, lr, seed, progress
+        )
+
+
+def _train_from_images(
+    images: str | Path,
+    out: Path,
+    method: str,
+    weights: str | Path | None,
+    per_image: int,
+    negatives: int,
+    extent: float,
+    epochs: int,
+    batch_size: int,
+    lr: float,
+    seed: int,
+    progress: bool,
+) -> Path:
     name, given = parse_spec(method)
     defaults: dict[str, object] = {}
     if name == ALCN.name:
@@ -338,7 +376,6 @@ def main(
     net = train_detector(
         x, labels, len(objects) + 1, epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, progress=progress
     )
-    out = Path(out)
     path = out / "detector.pt"
     state = {
         "state_dict": net.state_dict(),

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from alcn_cv.errors import InputError
 from alcn_cv.report import machine
@@ -73,15 +74,18 @@ def centre_outputs(
 unet_pair_loss = functools.partial(pair_loss, normalize=centre_outputs)
 
 
-def output_range(net: UNetNormalizer, scenes: Sequence[TrainingScene], frames: int = 4) -> tuple[float, float]:
+def output_range(
+    net: UNetNormalizer, scenes: Sequence[TrainingScene], frames: int = 4, progress: bool = False
+) -> tuple[float, float]:
     """The 0.1 and 99.9 percentiles of the U-Net's output on ``frames`` evenly spaced frames of each scene (their
-    padding left out): the fixed map of its responses to an image's range (the weight file's ``output_range``).
+    padding left out): the fixed map of its responses to an image's range (the weight file's ``output_range``);
+    ``progress``: a bar over the scenes.
 
     The objective is blind to the output's offset and scale (normalized cross-correlation, and a consistency
     relative to the outputs' energy), so nothing fixes them: a fixed map of (-1, 1) may leave the image flat."""
     values = []
     with torch.no_grad():
-        for scene in scenes:
+        for scene in tqdm(scenes, desc="output range", unit="scene", leave=False, disable=not progress):
             p = scene.pad
             for index in np.linspace(0, len(scene.frames) - 1, min(frames, len(scene.frames))).round().astype(int):
                 values.append(net(torch.from_numpy(scene.frames[index, p:-p, p:-p])[None, None]).flatten())
@@ -123,7 +127,7 @@ def train_unet(
     cfg.check()
     if cfg.crop < cfg.patch:
         raise InputError(f"need crop >= patch, got crop {cfg.crop} and patch {cfg.patch}")
-    check_run_folder(out, overwrite=overwrite)
+    check_run_folder(out, overwrite=overwrite, resumable=False)
     with training_run(cfg, out, check=False) as folder:
         return _train(cfg, folder, {"command": command, "conf": conf}, progress)
 
@@ -139,7 +143,7 @@ def _train(cfg: UNetConfig, out: Path, record: dict[str, Any], progress: bool) -
     seconds = fit(net, unet_pair_loss, scenes, rendered, cfg, rng, out, None, "unet", progress, initial=initial)
     meta = net.file_meta(
         trained=True,
-        output_range=output_range(net, scenes + rendered),
+        output_range=output_range(net, scenes + rendered, progress=progress),
         description="free-form U-Net normalizer trained as the gain Normalizer (identification objective)",
         training={**record, "config": asdict(cfg.shareable()), "seconds": round(seconds, 1), "machine": machine()},
     )
