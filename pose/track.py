@@ -258,17 +258,21 @@ def tracked_camera(path: str | Path, model_path: str | Path) -> tuple[np.ndarray
     is from a track that did not record them and tracked with the model's camera.
 
     Raises:
-        DatasetError: the info records another model than ``model_path`` (its ``model_digest``: drawn with that
-            model's box, the poses would be judged against another object frame), or a camera given to that track
-            (``--K``, ``--camera``) that it does not record.
+        DatasetError: the info records another model than ``model_path``, or ``model_path`` as it was before it
+            was built again (its ``model_digest``: drawn with that model's box, the poses would be judged against
+            another object frame); or a camera given to that track (``--K``, ``--camera``) that it does not record.
     """
     path = Path(path)
     info_path = path.with_name(path.stem + "_info.json")
     info = read_json(info_path) if info_path.is_file() else {}
     digest = info.get("model_digest")
     if digest is not None and digest != model_digest(model_path):
-        tracked_with = info.get("summary", {}).get("model", "another model")
-        raise DatasetError(f"{path} was tracked with {tracked_with}, another file than {model_path}: give that model")
+        recorded = info.get("summary", {}).get("model")
+        if recorded and Path(recorded).resolve() == Path(model_path).resolve():
+            raise DatasetError(f"{path} was tracked with {model_path} before it was built again: track again")
+        raise DatasetError(
+            f"{path} was tracked with {recorded or 'another model'}, another file than {model_path}: give that model"
+        )
     camera = info.get("camera")
     if camera is None:
         if info.get("summary", {}).get("camera") == "given":

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -528,6 +529,11 @@ def test_the_overlay_error_draws_with_the_camera_and_model_the_poses_were_tracke
     pm.save(model, tmp_path / "other.npz")
     with pytest.raises(DatasetError, match="was tracked with .*m.npz, another file than .*other.npz"):
         _camera_and_poses(tmp_path / "other.npz", tmp_path / "p.json")
+    shutil.copy(tmp_path / "m.npz", tmp_path / "kept.npz")
+    shutil.copy(tmp_path / "other.npz", tmp_path / "m.npz")  # built again where it was
+    with pytest.raises(DatasetError, match="was tracked with .*m.npz before it was built again: track again"):
+        _camera_and_poses(tmp_path / "m.npz", tmp_path / "p.json")
+    shutil.copy(tmp_path / "kept.npz", tmp_path / "m.npz")
     info = json.loads((tmp_path / "p_info.json").read_text())
     del info["camera"], info["model_digest"]  # an earlier track's, with --K: its camera is unknown
     (tmp_path / "p_info.json").write_text(json.dumps(info))
