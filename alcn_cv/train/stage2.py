@@ -28,7 +28,7 @@ from alcn_cv.enhance.alcn import ALCN, pin_default_model
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
-from alcn_cv.io import atomic_write, check_no_earlier_output, held_folder, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, write_json
 from alcn_cv.nets.detector import INPUT, Detector
 
 if TYPE_CHECKING:
@@ -284,9 +284,10 @@ def object_windows(
     return np.concatenate(parts), np.concatenate(labels)
 
 
+@holds_out_dir
 def main(
     images: str | Path,
-    out: str | Path,
+    out_dir: str | Path,
     *,
     method: str = "alcn",
     weights: str | Path | None = None,
@@ -306,7 +307,7 @@ def main(
         images: a folder with one sub-folder per new object holding its real images (the whole
             image is the object unless a mask marks it: ``NAME.mask.png`` beside ``NAME.*``, or ``OBJECT.mask.png``
             in the object's folder for all its images).
-        out: output folder, held while the command runs (:func:`~alcn_cv.io.held_folder`); ``detector.pt`` holds
+        out_dir: output folder, held while the command runs (:func:`~alcn_cv.io.held_folder`); ``detector.pt`` holds
             ``{"state_dict", "config", "classes", "method", "policy"}``, ``classes.json`` the class names (0:
             background).
         method: the normalization, a spec ``NAME[:KEY=VALUE...]``; ALCN's windows are at its working scale
@@ -314,7 +315,7 @@ def main(
         weights: the Normalizer of ``method`` ``"alcn"`` (default: the shipped default's), as ``alcn:weights=...``.
         per_image, negatives, extent: see :func:`object_windows`.
         epochs, batch_size, lr, seed: see :func:`train_detector`.
-        overwrite: replace the detector an earlier run wrote into ``out``.
+        overwrite: replace the detector an earlier run wrote into ``out_dir``.
 
     Returns:
         The path of ``detector.pt``; its ``"method"`` is the spec with the parameters set here and ALCN's model
@@ -322,8 +323,8 @@ def main(
 
     Raises:
         InputError: ``weights`` with another method than ALCN, or given twice; ``per_image`` below 1, ``negatives``
-            below 0, ``extent`` outside (0, 64] (the window's side); an earlier detector in ``out`` without
-            ``overwrite``; ``out`` held by another run.
+            below 0, ``extent`` outside (0, 64] (the window's side); an earlier detector in ``out_dir`` without
+            ``overwrite``; ``out_dir`` held by another run.
     """
     from alcn_cv.data.synthetic import WINDOW
 
@@ -331,28 +332,8 @@ def main(
         raise InputError(f"need --per-image >= 1 and --negatives >= 0, got {per_image} and {negatives}")
     if not 0 < extent <= WINDOW:
         raise InputError(f"--extent is the object's size in the {WINDOW}-px window: (0, {WINDOW}], got {extent:g}")
-    out = Path(out)
+    out = Path(out_dir)
     check_no_earlier_output([out / "detector.pt", out / "classes.json"], overwrite)
-    with held_folder(out):
-        return _train_from_images(
-            images, out, method, weights, per_image, negatives, extent, epochs, batch_size, lr, seed, progress
-        )
-
-
-def _train_from_images(
-    images: str | Path,
-    out: Path,
-    method: str,
-    weights: str | Path | None,
-    per_image: int,
-    negatives: int,
-    extent: float,
-    epochs: int,
-    batch_size: int,
-    lr: float,
-    seed: int,
-    progress: bool,
-) -> Path:
     name, given = parse_spec(method)
     defaults: dict[str, object] = {}
     if name == ALCN.name:
