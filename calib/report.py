@@ -122,10 +122,10 @@ def plot_registration(
         axes = np.linalg.svd(centers - mean)[2] if len(centers) > 2 else np.eye(3)
         uv = (centers - mean) @ axes[:2].T
         origin = (-mean) @ axes[:2].T
-        ax1.plot(uv[:, 0], uv[:, 1], "o", ms=4, label="camera centres (labels: frame index)")
+        ax1.plot(uv[:, 0], uv[:, 1], "o", ms=4, label="camera centres (labels: frames, as on the left)")
         if len(uv) <= 40:
             for k, (u, v) in zip(np.flatnonzero(kept), uv):
-                ax1.annotate(str(k), (u, v), fontsize=7, xytext=(3, 3), textcoords="offset points")
+                ax1.annotate(names[k], (u, v), fontsize=7, xytext=(3, 3), textcoords="offset points")
         ax1.plot(*origin, "k+", ms=12, label="world origin")
         ax1.set_aspect("equal", adjustable="datalim")
         ax1.legend(fontsize=8)
