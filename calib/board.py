@@ -245,6 +245,10 @@ def suggest_chessboard_size(
     return None
 
 
+#: The narrowest margin, in pixels, that the board's label is written in.
+_LABEL_MARGIN_PX = 20
+
+
 def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, margin_mm: float = 10.0) -> dict:
     """Write a printable image of the board and a JSON of its dimensions beside it.
 
@@ -256,7 +260,7 @@ def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, 
         spec: the board.
         path: output ``.png``; ``<path>.json`` (same stem) gets the dimensions.
         dpi: print resolution, dots per inch.
-        margin_mm: white margin around the board, mm.
+        margin_mm: white margin around the board, mm (>= 0; the label needs about 2 mm at 300 dpi).
 
     Returns:
         The dimensions written to the JSON (board spec, pixel and mm sizes, DPI).
@@ -265,6 +269,8 @@ def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, 
 
     if dpi < 72:
         raise InputError(f"dpi must be at least 72, got {dpi}")
+    if margin_mm < 0:
+        raise InputError(f"the margin must be 0 mm or more, got {margin_mm:g}")
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise InputError(f"board image must be a .png, got {path.name}")
@@ -279,19 +285,21 @@ def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, 
         yy, xx = np.mgrid[0 : size[1], 0 : size[0]]
         board_img = np.where(((xx // square_px) + (yy // square_px)) % 2 == 0, 0, 255).astype(np.uint8)
     image = cv2.copyMakeBorder(board_img, margin_px, margin_px, margin_px, margin_px, cv2.BORDER_CONSTANT, value=255)
-    # Label outside the board so that a printed sheet says what it is.
+    # Label outside the board so that a printed sheet says what it is; a margin too narrow for it gets none (drawn
+    # over the squares, it would hide corners).
     label = f"{spec.describe()} - print at 100% ({dpi} dpi)"
     font_scale = max(0.4, margin_px / 60.0)
-    cv2.putText(
-        image,
-        label,
-        (margin_px, image.shape[0] - max(4, margin_px // 4)),
-        cv2.FONT_HERSHEY_SIMPLEX,
-        font_scale,
-        0,
-        max(1, int(font_scale * 1.5)),
-        cv2.LINE_AA,
-    )
+    if margin_px >= _LABEL_MARGIN_PX:
+        cv2.putText(
+            image,
+            label,
+            (margin_px, image.shape[0] - max(4, margin_px // 4)),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            font_scale,
+            0,
+            max(1, int(font_scale * 1.5)),
+            cv2.LINE_AA,
+        )
     with atomic_path(path) as tmp:
         Image.fromarray(image).save(tmp, format="PNG", dpi=(dpi, dpi))
     true_square = square_px / px_per_mm

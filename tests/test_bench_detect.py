@@ -270,6 +270,12 @@ def test_tuning_without_validation_images_is_one_line_before_any_work(small_data
     with pytest.raises(InputError, match="no object in val.json"):
         D.main(data, out, S.DetectSettings(methods=["dlcn"], tune=True))
     assert not out.exists()
+    # data rendered with --n-test 0: refused before the training, whose every run failed after it
+    test = json.loads((data / "test.json").read_text())
+    (data / "test.json").write_text(json.dumps({**test, "images": [], "annotations": []}))
+    with pytest.raises(InputError, match="no test image in test.json: render the data again with `--n-test` 1"):
+        D.main(data, out, S.DetectSettings(methods=["none"], **quick), progress=False)
+    assert not out.exists()
 
 
 def test_cli_and_bad_input(small_data, tmp_path):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import cv2
 import numpy as np
@@ -78,6 +79,25 @@ def test_bad_input(tmp_path):
     one = _fake_set(tmp_path / "one", n_lights=1)
     with pytest.raises(DatasetError, match="one photograph"):
         load_photometric(one)
+    with pytest.raises(InputError, match="no method to compare"):  # `--methods ''` wrote an empty table
+        invariance.main(data, tmp_path / "o", [], progress=False)
+
+
+def test_a_mask_of_ones_and_an_object_without_a_mask_are_said(tmp_path, caplog):
+    """A 0/1 mask (read as inside above 127) was refused as emptied by the erosion, "give a smaller erode", even at
+    `--erode 0`; an object folder without a mask was skipped at DEBUG, its object missing from the table unsaid."""
+    data = _fake_set(tmp_path / "psm")
+    mask = cv2.imread(str(data / "ball" / "ball.mask.png"), cv2.IMREAD_GRAYSCALE)
+    shutil.copytree(data / "ball", data / "cube")
+    for path in (data / "cube").iterdir():
+        path.rename(path.with_name(path.name.replace("ball.", "cube.")))
+    (data / "cube" / "cube.mask.png").unlink()
+    cv2.imwrite(str(data / "ball" / "ball.mask.png"), (mask > 0).astype(np.uint8))
+    with pytest.raises(DatasetError, match=r"ball.mask.png: no pixel above 127; a mask is white \(255\)"):
+        load_photometric(data)
+    cv2.imwrite(str(data / "ball" / "ball.mask.png"), mask)
+    assert [o.name for o in load_photometric(data)] == ["ball"]
+    assert "skipping" in caplog.text and "cube: its images have no mask cube.mask.png" in caplog.text
 
 
 def test_a_bad_weight_file_is_one_line_before_any_work(tmp_path, capsys, monkeypatch):

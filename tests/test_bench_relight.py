@@ -121,6 +121,31 @@ def test_main_writes_the_report(tmp_path):
     assert f"| dog | {diff['mean']:+.1f} ± {diff['std']:.1f} |" in table
 
 
+def test_the_report_says_what_small_frames_held_of_the_sampling_asked(tmp_path, caplog):
+    """On frames too small or too few for the patches and gallery frames asked, relight.md gave the counts asked and
+    their chance level (0.67% where 5 locations of 64x64 frames made it 20%)."""
+    from dataclasses import replace
+
+    root = make_sets(tmp_path / "data")
+    asked = replace(SMALL, patches=100_000, gallery=50)
+    result = relight.main(
+        tmp_path / "out",
+        [root / "psm"],
+        ["none"],
+        test_scenes=["psm"],
+        seeds=[0],
+        settings=asked,
+        tuning=False,
+        progress=False,
+    )
+    scene = result["scenes"]["ball"]
+    assert scene["patch_locations"] < asked.patches and scene["gallery_frames"] == scene["frames"] < asked.gallery
+    text = (tmp_path / "out" / "relight.md").read_text()
+    chance = 100 / scene["patch_locations"]
+    assert f"as few as {scene['patch_locations']} patch locations, chance {chance:.1f}%; " in text
+    assert f"{scene['gallery_frames']} gallery frames)" in text and "scene ball: as few as" in caplog.text
+
+
 def test_paired_differences_by_hand():
     """Each row after the first minus the first, seed by seed; a row or metric without test means is left out."""
     methods = {

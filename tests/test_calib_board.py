@@ -60,3 +60,14 @@ def test_bad_board_specs(kwargs, match):
 def test_board_image_needs_png(tmp_path):
     with pytest.raises(InputError, match=".png"):
         write_board_image(BoardSpec(), tmp_path / "b.jpg")
+
+
+def test_a_negative_margin_is_one_line_and_no_margin_draws_no_label(tmp_path):
+    """`alcn calib board --margin -5` ended in cv2.copyMakeBorder's traceback; `--margin 0` drew the label over the
+    board's last row of squares."""
+    with pytest.raises(InputError, match="the margin must be 0 mm or more, got -5"):
+        write_board_image(BoardSpec(), tmp_path / "b.png", margin_mm=-5)
+    spec = BoardSpec(kind="chessboard", cols=5, rows=4, square=10.0)
+    write_board_image(spec, tmp_path / "b.png", dpi=100, margin_mm=0)
+    image = cv2.imread(str(tmp_path / "b.png"), cv2.IMREAD_GRAYSCALE)
+    assert set(np.unique(image)) == {0, 255}  # the squares alone: no anti-aliased text

@@ -376,7 +376,10 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         nargs="+",
         type=Path,
         default=None,
-        help="folders of registered multi-light scenes (default: ../shared/data/webcam and ../shared/data/psm)",
+        help="folders of registered multi-light scenes (default: ../shared/data/webcam and ../shared/data/psm): "
+        "ROOT/SCENE/*.jpg, one scene a folder, its frames in name order; or files NAME.<i>.<ext>, the scene NAME "
+        "with its frames in the order of the integer <i> (so 2024.06.10.png is frame 10 of the scene 2024.06: "
+        "rename date-named frames); ROOT's sub-folders are read one level deep",
     )
     p.add_argument(
         "--methods",

@@ -712,6 +712,8 @@ def main(
             "--tune scores its settings on: render the data again with `alcn data detect`, or add test-like images of "
             "the objects as val.json (COCO, as test.json)"
         )
+    if not data.test.images:
+        raise InputError(f"{data.root}: no test image in test.json: render the data again with `--n-test` 1 or more")
     out = Path(out_dir)
     make_folder(out)
     norms = {(spec, _params_key({})): norm for spec, norm in built.items()}

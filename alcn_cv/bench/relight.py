@@ -274,6 +274,13 @@ def identification(gallery: np.ndarray, query: np.ndarray, locations: np.ndarray
     return float(np.mean((best == np.arange(len(locations))) & valid))
 
 
+def _sampled(plans: list[PairPlan], settings: Settings) -> tuple[int, int]:
+    """The fewest patch locations of a gallery frame and the fewest gallery frames over a scene's ``plans`` (one per
+    seed): ``settings.patches`` and ``settings.gallery`` unless its frames are too small or too few."""
+    locations = min(len(loc) for plan in plans for loc in plan.locations.values())
+    return min(locations, settings.patches), min(len(plan.gallery) for plan in plans)
+
+
 def plan_pairs(scene: Scene, seed: int, settings: Settings) -> PairPlan:
     """The gallery frames, their patch locations and the frame pairs of one seed (the same for every method).
 
@@ -669,6 +676,19 @@ def main(
         rows[f"{m} (tuned)"] = {name: tuning_result[m][fold]["chosen"] for name, fold in fold_of.items()}
 
     plans = {s.name: [plan_pairs(s, seed, settings) for seed in seeds] for s in evaluated}
+    sampled = {name: _sampled(plan, settings) for name, plan in plans.items()}
+    for name, (locations, gallery) in sampled.items():
+        if locations < settings.patches or gallery < settings.gallery:
+            logger.warning(
+                "scene %s: as few as %d textured patch locations of the %d asked (chance %.1f%%), %d gallery frames of "
+                "%d: its frames hold no more",
+                name,
+                locations,
+                settings.patches,
+                100 / locations,
+                gallery,
+                settings.gallery,
+            )
     jobs = [(s, spec) for s in evaluated for spec in dict.fromkeys(r[s.name] for r in rows.values())]
     cache: dict[tuple[str, str], dict[str, Any]] = {}
     backends: dict[str, str] = {}
@@ -723,6 +743,9 @@ def main(
                 "frames": len(s.frames),
                 "size": [int(s.frames.shape[2]), int(s.frames.shape[1])],
                 "files": list(s.files),
+                # what the frames held of what was asked (settings' patches and gallery): the fewest over the seeds
+                "patch_locations": sampled[s.name][0],
+                "gallery_frames": sampled[s.name][1],
             }
             for s in evaluated
         },

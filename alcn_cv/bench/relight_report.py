@@ -45,6 +45,18 @@ def _metrics(result: dict[str, Any]) -> list[str]:
     return [m for m in _TITLES if any(m in s for r in result["methods"].values() for s in r["scenes"].values())]
 
 
+def _scene_text(name: str, scene: dict[str, Any], settings: dict[str, Any]) -> str:
+    """A scene of the report's Scenes line: its group, frames and size, and what it held of the sampling asked (a
+    report of before it recorded that: as asked)."""
+    fewer = []
+    if (locations := scene.get("patch_locations", settings["patches"])) < settings["patches"]:
+        fewer.append(f"as few as {locations} patch locations, chance {100 / locations:.1f}%")
+    if (gallery := scene.get("gallery_frames", settings["gallery"])) < settings["gallery"]:
+        fewer.append(f"{gallery} gallery frames")
+    size = f"{scene['size'][0]}x{scene['size'][1]}"
+    return f"{name} ({scene['group']}, {scene['frames']} frames {size}{''.join('; ' + f for f in fewer)})"
+
+
 def _summary_table(result: dict[str, Any], metrics: list[str]) -> str:
     rows = []
     for label, r in result["methods"].items():
@@ -192,9 +204,7 @@ def write_report(result: dict[str, Any], out: Path) -> None:
     write_json(out / "relight.json", result)  # its folder made by the atomic write
     metrics = _metrics(result)
     s, split = result["settings"], result["split"]
-    scenes = ", ".join(
-        f"{n} ({v['group']}, {v['frames']} frames {v['size'][0]}x{v['size'][1]})" for n, v in result["scenes"].items()
-    )
+    scenes = ", ".join(_scene_text(n, v, s) for n, v in result["scenes"].items())
     failures = [
         f"- `{label}` failed on {scene}: {err}"
         for label, r in result["methods"].items()
@@ -212,11 +222,13 @@ def write_report(result: dict[str, Any], out: Path) -> None:
         f"Every method normalizes whole grayscale frames through its own `apply()` (uint8 in, float32 out); "
         f"{s['gallery']} gallery frames per scene and seed, each paired with the other frames (at most "
         f"{s['max_pairs'] or 'all'} pairs per scene and seed). Identification: {s['patches']} textured "
-        f"{s['patch']}x{s['patch']} patch locations, NCC over all of them (chance {100 / s['patches']:.2f}%). "
+        f"{s['patch']}x{s['patch']} patch locations (fewer where a scene's frames hold fewer: Scenes), NCC over all of "
+        f"them (chance {100 / s['patches']:.2f}%). "
         + (
             f"Keypoints: {s['keypoints']} per frame on apply()'s uint8 output, ratio test {s['ratio']}, correct within "
-            f"{s['match_px']} px; pose: RANSAC homography ({s['ransac_px']} px), success when every corner moves less "
-            f"than {s['pose_px']} px. "
+            f"{s['match_px']} px; matching score: the correct one-to-one matches over the pair's smaller keypoint "
+            f"count (Mikolajczyk & Schmid); pose: RANSAC homography ({s['ransac_px']} px), success when every corner "
+            f"moves less than {s['pose_px']} px. "
             if s["keypoint_protocols"]
             else "Identification only (no keypoint protocols). "
         )

@@ -379,7 +379,8 @@ def load_photometric(root: str | os.PathLike, scale: float = 1.0) -> list[Photom
 
     Raises:
         DatasetError: ``root`` is not a folder, holds no object, an object has one image only (an agreement
-            compares two lights or more), an image is unreadable or differs in size from its mask.
+            compares two lights or more), an image is unreadable or differs in size from its mask, a mask marks no
+            pixel (white, above 127, on the object). An object folder without a mask is skipped with a warning.
         InputError: ``scale`` out of range.
     """
     root = Path(root)
@@ -392,8 +393,11 @@ def load_photometric(root: str | os.PathLike, scale: float = 1.0) -> list[Photom
     for folder in _visible_subfolders(root):
         indexed, _, masks = _folder_files(folder)
         shots, mask_path = indexed.get(folder.name), masks.get(folder.name)
-        if not shots or mask_path is None:
-            logger.debug("skipping %s: no %s.<i> images or no mask", folder, folder.name)
+        if not shots:
+            logger.debug("skipping %s: no %s.<i> images", folder, folder.name)
+            continue
+        if mask_path is None:
+            logger.warning("skipping %s: its images have no mask %s.mask.png", folder, folder.name)
             continue
         if len(shots) < 2:
             raise DatasetError(f"{folder}: one photograph ({shots[0].name}); an object needs 2 lights or more")
@@ -404,6 +408,8 @@ def load_photometric(root: str | os.PathLike, scale: float = 1.0) -> list[Photom
             raise DatasetError(str(exc)) from None
         if any(img.shape != mask.shape for img in images):
             raise DatasetError(f"{folder}: images and mask {mask_path.name} differ in size")
+        if not mask.any():
+            raise DatasetError(f"{mask_path}: no pixel above 127; a mask is white (255) on the object, black elsewhere")
         if scale != 1:
             size = (max(1, round(mask.shape[1] * scale)), max(1, round(mask.shape[0] * scale)))
             images = [cv2.resize(img, size, interpolation=cv2.INTER_AREA) for img in images]
