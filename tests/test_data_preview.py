@@ -46,6 +46,9 @@ def test_compare_psm(shared_data, tmp_path):
     assert set(stats) == {"real psm", "engine psm lights", "engine psm lights plain albedo", "engine light families"}
     for name in ("psm_comparison.png", "psm_comparison.md", "psm_comparison.json"):
         assert (tmp_path / name).stat().st_size > 100
+    text = (tmp_path / "psm_comparison.md").read_text()  # the table was bare: no title, data, seed or definitions
+    assert text.startswith("# Real photometric-stereo photographs") and "seed 0" in text
+    assert "dynamic range (99th" in text
     # The random lighting families change appearance more than the 12 near-frontal PSM lights.
     assert (
         stats["engine light families"]["across_lights_pairwise_ncc"]["mean"]

@@ -32,6 +32,7 @@ from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.scenes import load_photometric, mean_pairwise_ncc
 from alcn_cv.errors import DatasetError
 from alcn_cv.io import atomic_write, check_writable, make_folder, write_json
+from alcn_cv.report import describe_machine
 
 logger = logging.getLogger(__name__)
 
@@ -221,7 +222,18 @@ def compare_psm(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed:
     make_folder(out)
     write_json(out / "psm_comparison.json", stats)
     rows = list(STAT_NAMES) + ["across_lights_cv_of_mean", "across_lights_pairwise_ncc"]
-    lines = ["| statistic | " + " | ".join(sets) + " |", "|---" * (len(sets) + 1) + "|"]
+    lines = [
+        "# Real photometric-stereo photographs against the data engine's renderings\n",
+        f"Real: `{Path(psm_dir)}` (12 directional lights an object). Renderings: seed {seed}. Machine: "
+        f"{describe_machine()}.\n",
+        "Inside each object's mask, gray intensities in [0, 1], mean ± standard deviation over the images (per image: "
+        "the mean, standard deviation, dynamic range (99th - 1st percentile), the share saturated (>= 254/255) and "
+        "black (<= 2/255), the local contrast's median and 90th percentile (standard deviation in a Gaussian window "
+        "of sigma 2 px)) or over the objects (across its lights: the coefficient of variation of an object's mean, "
+        "and the mean pairwise normalized cross-correlation of its images).\n",
+        "| statistic | " + " | ".join(sets) + " |",
+        "|---" * (len(sets) + 1) + "|",
+    ]
     for r in rows:
         lines.append(
             f"| {r} | " + " | ".join(f"{stats[n][r]['mean']:.3f} ± {stats[n][r]['std']:.3f}" for n in sets) + " |"
