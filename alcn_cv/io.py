@@ -344,7 +344,7 @@ def held_folder(folder: str | os.PathLike) -> Iterator[Path]:
 
 
 def holds_out_dir(run: Callable[P, R]) -> Callable[P, R]:
-    """``run``, a function of an ``out_dir`` argument (a benchmark's ``main``), holding that folder while it runs
+    """``run``, a function of an ``out_dir`` argument (a command's ``main``), holding that folder while it runs
     (:func:`held_folder`): a second run into it meanwhile, from another process or this one, is refused at once,
     where it would pass the earlier-report check and the last run to finish would replace the other's report."""
     signature = inspect.signature(run)

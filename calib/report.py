@@ -123,7 +123,7 @@ def plot_registration(
         uv = (centers - mean) @ axes[:2].T
         origin = (-mean) @ axes[:2].T
         ax1.plot(uv[:, 0], uv[:, 1], "o", ms=4, label="camera centres (labels: frames, as on the left)")
-        if len(uv) <= 40:
+        if len(names) <= 40:  # as the left panel names its frames
             for k, (u, v) in zip(np.flatnonzero(kept), uv):
                 ax1.annotate(names[k], (u, v), fontsize=7, xytext=(3, 3), textcoords="offset points")
         ax1.plot(*origin, "k+", ms=12, label="world origin")

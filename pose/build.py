@@ -73,10 +73,12 @@ logger = logging.getLogger(__name__)
 
 #: Units of the box's size when building from a video and none are given.
 VIDEO_BOX_UNITS = "cm"
-#: A refined focal length's fx / fy moved by more than this share from the given one's, to a ratio this far from
-#: square pixels (1): warned (``docs/journal.md`` has the measurements). Moved to square pixels, it is what most
-#: cameras have, and the given ratio was the guess.
+#: A refined focal length's fx / fy moved by more than this share from the given one's, off square pixels
+#: (:data:`SQUARE_PIXELS`): warned (``docs/journal.md`` has the measurements). Moved to square pixels, it is what
+#: most cameras have, and the given ratio was the guess.
 SUSPICIOUS = 0.1
+#: An fx / fy within this share of 1: square pixels.
+SQUARE_PIXELS = 0.05
 #: A refined focal length whose fx / fy is off square pixels (1) by more than this factor: the build fails, its
 #: reconstruction degenerate (too few images registered; ``docs/journal.md`` has the measurements).
 DEGENERATE_FOCAL_RATIO = 1.5
@@ -359,11 +361,11 @@ def build(
 
 def _focal_ratio_note(given: float, refined: float) -> tuple[int, str]:
     """The log level of a refined focal length whose fx / fy is ``refined`` where the given one's was ``given``, and
-    the words on its ratio: a warning where it moved (:data:`SUSPICIOUS`) off square pixels."""
+    the words on its ratio: a warning where it moved (:data:`SUSPICIOUS`) off square pixels (:data:`SQUARE_PIXELS`)."""
     if abs(refined / given - 1) <= SUSPICIOUS:
         return logging.INFO, ""
     moved = f"; their ratio moved from {given:.2f} to {refined:.2f}"
-    if abs(refined - 1) <= SUSPICIOUS:
+    if abs(refined - 1) <= SQUARE_PIXELS:
         return logging.INFO, f"{moved}, square pixels"
     return logging.WARNING, f"{moved}: more frames or views from more directions"
 

@@ -236,7 +236,7 @@ def load(path: str | Path) -> PartModel:
             raise WeightFileError(f"{path}: the point cloud of a part model; the model is {beside}")
         raise WeightFileError(f"{path}: a point cloud or mesh, not a part model (the .npz of `alcn pose build`)")
     if not zipfile.is_zipfile(path):  # np.load would read it as a pickle and say how to load one unsafely
-        what = "a video" if is_video(path) else "not an .npz archive"
+        what = "a video" if is_video(path) else "no .npz archive"
         raise WeightFileError(f"{path}: {what}, not a part model (the .npz of `alcn pose build`)")
     try:
         with np.load(path, allow_pickle=False) as z:

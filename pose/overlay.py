@@ -187,13 +187,14 @@ def _camera_and_poses(
     from pose.track import read_poses, tracked_camera
 
     model = part_model.load(model_path)
+    poses = read_poses(poses_path, model.units)  # first: an info beside other poses is refused as such
     camera = tracked_camera(poses_path, model_path)
     if camera is None:
         if "K" not in model.extra:
             raise DatasetError(f"{model_path}: stores no camera (build it from a video with `alcn pose build`)")
         dist = model.extra.get("dist")  # a model built before it stored the distortion has none
         camera = np.asarray(model.extra["K"], np.float64), None if dist is None else np.asarray(dist, np.float64)
-    return model.corners, *camera, read_poses(poses_path, model.units)
+    return model.corners, *camera, poses
 
 
 def measure(
@@ -312,6 +313,8 @@ def main(
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"{out_dir} is a file; the output is a folder")
+    for _, model, poses in runs:  # every run's model, camera and poses checked before any is measured
+        _camera_and_poses(model, poses)
     errors = {label: measure(model, poses, video, settings, progress) for label, model, poses in runs}
     for (label, _, poses), measured in zip(runs, errors.values()):
         if not any(np.isfinite(e.mean_px) for e in measured.values()):

@@ -254,35 +254,38 @@ def model_digest(path: str | Path) -> str:
 
 def tracked_camera(path: str | Path, model_path: str | Path) -> tuple[np.ndarray, np.ndarray | None] | None:
     """The camera the poses at ``path`` were solved with, ``K (3, 3)`` and the distortion or None, as the
-    ``_info.json`` beside them records it, checked against the model the caller draws them with: None where the info
-    is from a track that did not record them and tracked with the model's camera.
+    ``_info.json`` beside them records it (``camera_matrix``, ``dist_coeffs``), checked against the part model the
+    caller draws them with; None where there is no info, or an info from a track that did not record them and
+    tracked with the model's camera.
 
     Raises:
-        DatasetError: the info records another model than ``model_path``, or ``model_path`` as it was before it
-            was built again (its ``model_digest``: drawn with that model's box, the poses would be judged against
-            another object frame); or a camera given to that track (``--K``, ``--camera``) that it does not record.
+        DatasetError: poses of the part model's features whose info records another model than ``model_path``, or
+            ``model_path`` as it was before it was built again (``model_digest``, ``model_file``: drawn with that
+            model's box, the poses would be judged against another object frame); a camera given to that track
+            (``--K``, ``--camera``) that the info does not record.
     """
     path = Path(path)
     info_path = path.with_name(path.stem + "_info.json")
     info = read_json(info_path) if info_path.is_file() else {}
+    summary = info.get("summary", {})
     digest = info.get("model_digest")
-    if digest is not None and digest != model_digest(model_path):
-        recorded = info.get("summary", {}).get("model")
+    # the corner CNN's runs record its ONNX file: their box is the part model's it was trained from
+    if summary.get("detector") != "corners" and digest is not None and digest != model_digest(model_path):
+        recorded = info.get("model_file") or summary.get("model")
         if recorded and Path(recorded).resolve() == Path(model_path).resolve():
             raise DatasetError(f"{path} was tracked with {model_path} before it was built again: track again")
         raise DatasetError(
             f"{path} was tracked with {recorded or 'another model'}, another file than {model_path}: give that model"
         )
-    camera = info.get("camera")
-    if camera is None:
-        if info.get("summary", {}).get("camera") == "given":
+    if "camera_matrix" not in info:
+        if summary.get("camera") == "given":
             raise DatasetError(
                 f"{path} was tracked with a camera given to `alcn pose track` that {info_path.name} does not record: "
                 "track again"
             )
         return None
-    dist = camera["dist"]
-    return np.asarray(camera["K"], np.float64), None if dist is None else np.asarray(dist, np.float64)
+    dist = info["dist_coeffs"]
+    return np.asarray(info["camera_matrix"], np.float64), None if dist is None else np.asarray(dist, np.float64)
 
 
 #: fewer inliers than this loses a frame, per detector (the corner detector has few parts: 26 by default,
@@ -838,8 +841,10 @@ def main(
         "summary": summary,
         "machine": machine(),
         "poses_digest": poses_digest(scene_gt),
+        "model_file": str(Path(model_path).resolve()),
         "model_digest": model_digest(model_path),
-        "camera": {"K": box.K.tolist(), "dist": None if box.dist is None else np.ravel(box.dist).tolist()},
+        "camera_matrix": box.K.tolist(),
+        "dist_coeffs": None if box.dist is None else np.ravel(box.dist).tolist(),
         "frames": info,
     }
     write_json(info_path, record)

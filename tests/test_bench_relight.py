@@ -139,11 +139,11 @@ def test_the_report_says_what_small_frames_held_of_the_sampling_asked(tmp_path, 
         progress=False,
     )
     scene = result["scenes"]["ball"]
-    assert scene["patch_locations"] < asked.patches and scene["gallery_frames"] == scene["frames"] < asked.gallery
+    assert scene["fewest_patches"] < asked.patches and scene["fewest_gallery_frames"] == scene["frames"] < asked.gallery
     text = (tmp_path / "out" / "relight.md").read_text()
-    chance = 100 / scene["patch_locations"]
-    assert f"as few as {scene['patch_locations']} patch locations, chance {chance:.1f}%; " in text
-    assert f"{scene['gallery_frames']} gallery frames)" in text and "scene ball: as few as" in caplog.text
+    chance = 100 / scene["fewest_patches"]
+    assert f"as few as {scene['fewest_patches']} patch locations, chance {chance:.1f}%; " in text
+    assert f"{scene['fewest_gallery_frames']} gallery frames)" in text and "scene ball: as few as" in caplog.text
 
 
 def test_paired_differences_by_hand():

@@ -341,7 +341,8 @@ def test_device_says_when_it_runs_another_mixture_than_the_frame_by_frame_path(t
     src = tmp_path / "in.png"
     cv2.imwrite(str(src), frame)
     caplog.set_level("INFO")
-    for spec, told in (("alcn:model=lite", True), ("alcn:model=lite:mixture=exact", False), ("alcn", False)):
+    cases = [("alcn:model=lite", True), ("alcn:model=paper", True), ("alcn:model=lite:mixture=exact", False)]
+    for spec, told in [*cases, ("alcn", False)]:  # the paper file's header names no architecture
         caplog.clear()
         assert main(["normalize", str(src), str(tmp_path / f"{len(spec)}.png"), "-m", spec, "--device", "cpu"]) == 0
         assert ("--device runs Eq. 3 exactly" in caplog.text) is told, spec

@@ -57,7 +57,7 @@ def test_other_version_and_corrupt_files(tmp_path):
     with pytest.raises(WeightFileError, match=rf"version {pm.FORMAT_VERSION + 1}.*versions 1, 2"):
         pm.load(tmp_path / "v2.npz")
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
-    with pytest.raises(WeightFileError, match=r"bad.npz: not an .npz archive, not a part model \(the .npz of"):
+    with pytest.raises(WeightFileError, match=r"bad.npz: no .npz archive, not a part model \(the .npz of"):
         pm.load(tmp_path / "bad.npz")
     # a video given where the model goes (the commands order their paths differently): not numpy's pickle advice
     (tmp_path / "box.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42" + bytes(64))

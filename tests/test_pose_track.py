@@ -512,7 +512,7 @@ def test_poses_are_written_in_mm_whatever_the_models_units(tmp_path):
     assert np.allclose(track.read_poses(tmp_path / "p.json", "cm")["0000"][1].ravel(), poses["0000"][0]["cam_t_m2c"])
 
 
-def test_the_overlay_error_draws_with_the_camera_and_model_the_poses_were_tracked_with(tmp_path):
+def test_the_overlay_error_draws_with_the_camera_and_model_the_poses_were_tracked_with(tmp_path, monkeypatch):
     """`alcn pose overlay-error` drew every run with the model's camera: poses tracked with `--K` were measured 20 px
     off the box, and poses of another model were drawn with its box, without a word."""
     from alcn_cv.errors import DatasetError
@@ -533,9 +533,16 @@ def test_the_overlay_error_draws_with_the_camera_and_model_the_poses_were_tracke
     shutil.copy(tmp_path / "other.npz", tmp_path / "m.npz")  # built again where it was
     with pytest.raises(DatasetError, match="was tracked with .*m.npz before it was built again: track again"):
         _camera_and_poses(tmp_path / "m.npz", tmp_path / "p.json")
+    monkeypatch.chdir(tmp_path / "frames")  # the model named from another folder than the track's
+    with pytest.raises(DatasetError, match="before it was built again"):
+        _camera_and_poses("../m.npz", tmp_path / "p.json")
     shutil.copy(tmp_path / "kept.npz", tmp_path / "m.npz")
     info = json.loads((tmp_path / "p_info.json").read_text())
-    del info["camera"], info["model_digest"]  # an earlier track's, with --K: its camera is unknown
+    corners = {**info, "summary": {**info["summary"], "detector": "corners"}, "model_digest": "0" * 64}
+    (tmp_path / "p_info.json").write_text(json.dumps(corners))  # a corner CNN's run: its ONNX file is no part model
+    np.testing.assert_array_equal(_camera_and_poses(tmp_path / "m.npz", tmp_path / "p.json")[1], K)
+    for key in ("camera_matrix", "dist_coeffs", "model_digest", "model_file"):  # an earlier track's, with --K
+        del info[key]
     (tmp_path / "p_info.json").write_text(json.dumps(info))
     with pytest.raises(DatasetError, match="camera given to `alcn pose track` that p_info.json does not record"):
         _camera_and_poses(tmp_path / "m.npz", tmp_path / "p.json")

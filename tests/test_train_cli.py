@@ -13,6 +13,7 @@ import pytest
 import torch
 
 from alcn_cv.cli import main
+from alcn_cv.errors import InputError
 from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
 from alcn_cv.runtime import resolve_weights
 from alcn_cv.weight_file import load_normalizer_file
@@ -192,8 +193,11 @@ def test_train_detector_from_a_few_images(tmp_path):
     assert json.loads((tmp_path / "det" / "classes.json").read_text()) == state["classes"]
     assert main(args) == 2  # an earlier detector, replaced only on request
     args.append("--overwrite")
-    for extent in ("0", "-40", "100"):  # 0 hung in the negatives' sampling; the others trained on other windows
-        assert main([*args, "--extent", extent]) == 2
+    from alcn_cv.train import stage2
+
+    for extent in (0, -40, 100):  # 0 hung in the negatives' sampling; the others trained on other windows
+        with pytest.raises(InputError, match="--extent is the object's size in the 64-px window"):
+            stage2.main(tmp_path / "nothing", tmp_path / "x", extent=extent)  # refused before the images are read
     assert main([*args, "--per-image", "0"]) == 2
     assert main(["train-detector", str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 2
     weights = ["--weights", str(tmp_path / "w.npz")]

@@ -10,7 +10,8 @@ paired with every other frame of the scene (at most ``max_pairs`` pairs, drawn a
 * **identification** (%): ``patches`` textured ``patch x patch`` locations of the gallery frame
   (drawn among the more textured half of a half-overlapping grid, by gradient energy of the
   raw frame) are identified in the other frame by normalized cross-correlation against the
-  patches at all the same locations (chance ``1 / patches``).
+  patches at all the same locations (chance ``1 / patches``; fewer where a scene's frames hold fewer: the
+  result's ``fewest_patches``).
 * **matching** (%, ORB and SIFT): keypoints on the normalized frames (``apply``'s uint8
   output), Lowe's ratio test, each keypoint in at most one match (:func:`one_to_one_matches`), a
   match is correct when its keypoints are within ``match_px``
@@ -274,7 +275,7 @@ def identification(gallery: np.ndarray, query: np.ndarray, locations: np.ndarray
     return float(np.mean((best == np.arange(len(locations))) & valid))
 
 
-def _sampled(plans: list[PairPlan], settings: Settings) -> tuple[int, int]:
+def _fewest_sampled(plans: list[PairPlan], settings: Settings) -> tuple[int, int]:
     """The fewest patch locations of a gallery frame and the fewest gallery frames over a scene's ``plans`` (one per
     seed): ``settings.patches`` and ``settings.gallery`` unless its frames are too small or too few."""
     locations = min(len(loc) for plan in plans for loc in plan.locations.values())
@@ -676,7 +677,7 @@ def main(
         rows[f"{m} (tuned)"] = {name: tuning_result[m][fold]["chosen"] for name, fold in fold_of.items()}
 
     plans = {s.name: [plan_pairs(s, seed, settings) for seed in seeds] for s in evaluated}
-    sampled = {name: _sampled(plan, settings) for name, plan in plans.items()}
+    sampled = {name: _fewest_sampled(plan, settings) for name, plan in plans.items()}
     for name, (locations, gallery) in sampled.items():
         if locations < settings.patches or gallery < settings.gallery:
             logger.warning(
@@ -744,8 +745,8 @@ def main(
                 "size": [int(s.frames.shape[2]), int(s.frames.shape[1])],
                 "files": list(s.files),
                 # what the frames held of what was asked (settings' patches and gallery): the fewest over the seeds
-                "patch_locations": sampled[s.name][0],
-                "gallery_frames": sampled[s.name][1],
+                "fewest_patches": sampled[s.name][0],
+                "fewest_gallery_frames": sampled[s.name][1],
             }
             for s in evaluated
         },

@@ -15,7 +15,7 @@ from tqdm import tqdm
 
 from alcn_cv.cli import add_progress_option
 from alcn_cv.enhance import available, create
-from alcn_cv.enhance.alcn import ALCN
+from alcn_cv.enhance.alcn import ALCN, default_mixture
 from alcn_cv.enhance.registry import describe, format_param, parameters, parse_params, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
@@ -137,9 +137,12 @@ def main(
         require("torch", "kornia", what="alcn normalize --device", preferred="train")
         params.update(backend="torch", device=device)
     normalization = create(method, **params)
-    pyramid_default = isinstance(normalization, ALCN) and normalization.weights_meta["architecture"] != "gain"
-    if device is not None and pyramid_default and "mixture" not in {**parse_spec(method)[1], **params}:
-        # the per-frame default of these models is the pyramid, which runs in OpenCV only
+    if (
+        device is not None
+        and isinstance(normalization, ALCN)
+        and default_mixture(normalization.weights_meta, "opencv") == "pyramid"
+        and "mixture" not in {**parse_spec(method)[1], **params}
+    ):
         logger.info("--device runs Eq. 3 exactly (mixture='exact'); without it %s runs the pyramid", method)
 
     def load_frame(img: np.ndarray) -> np.ndarray:

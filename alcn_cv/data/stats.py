@@ -224,7 +224,7 @@ def compare_psm(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed:
     rows = list(STAT_NAMES) + ["across_lights_cv_of_mean", "across_lights_pairwise_ncc"]
     lines = [
         "# Real photometric-stereo photographs against the data engine's renderings\n",
-        f"Real: `{Path(psm_dir)}` (12 directional lights an object). Renderings: seed {seed}. Machine: "
+        f"Real: `{Path(psm_dir)}` ({len(lights)} directional lights an object). Renderings: seed {seed}. Machine: "
         f"{describe_machine()}.\n",
         "Inside each object's mask, gray intensities in [0, 1], mean ± standard deviation over the images (per image: "
         "the mean, standard deviation, dynamic range (99th - 1st percentile), the share saturated (>= 254/255) and "

@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal, cast
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
 
@@ -49,7 +49,7 @@ from alcn_cv.weight_file import NormalizerFile, load_normalizer_file
 if TYPE_CHECKING:
     from alcn_cv.nn import TorchRuntime
 
-__all__ = ["ALCN", "createALCN", "pin_default_model"]
+__all__ = ["ALCN", "createALCN", "default_mixture", "pin_default_model"]
 
 logger = logging.getLogger(__name__)
 
@@ -179,7 +179,7 @@ class ALCN(Normalization):
         #: provenance (the benchmarks' check of the scenes it was trained on) does not read the file again.
         self.weights_meta = meta
         if mixture is None:
-            mixture = "exact" if backend == "torch" or meta.get("architecture") == "gain" else "pyramid"
+            mixture = default_mixture(meta, backend)
         if mixture == "pyramid" and backend == "torch":
             raise InputError("mixture='pyramid' runs in OpenCV: use it with backend='fast' or 'opencv'")
         self.mixture = mixture
@@ -362,6 +362,12 @@ def _build_runtime(
     if backend == "torch":
         return TorchRuntime(module, threads), module.net
     return make_runtime(spec, TorchNetwork(module.net, module.grid_stride, threads), mixture), module.net
+
+
+def default_mixture(meta: dict[str, Any], backend: str) -> str:
+    """The mixture :class:`ALCN` runs by default for a weight file's header ``meta`` on ``backend``: Eq. 3 exactly
+    for the gain models and in torch, its ``pyramid`` approximation (OpenCV only) for the paper family."""
+    return "exact" if backend == "torch" or meta.get("architecture") == "gain" else "pyramid"
 
 
 def pin_default_model(spec: str) -> str:

@@ -1,7 +1,7 @@
 """The Normalizer without torch: the exported ONNX model run by OpenCV's DNN module.
 
 An OpenCV application can use ALCN with only OpenCV and NumPy installed: the Normalizer
-exported by ``alcn export --onnx`` (:mod:`alcn_cv.train.export`) runs through
+exported by ``alcn export --weights FILE.npz`` (:mod:`alcn_cv.train.export`) runs through
 ``cv2.dnn.readNetFromONNX``, and Eq. 3's Gaussian mixture runs in OpenCV
 (:mod:`alcn_cv.filters.gaussian_mixture`, through :mod:`alcn_cv.runtime`).
 This module imports no torch, nor the torch Normalizers beside it in :mod:`alcn_cv.nets`.

@@ -412,8 +412,8 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
     if not val_frames:
         raise DatasetError(
             f"no validation frames: every {_GAIN_VAL_EVERY}th frame of a scene is held out, so a scene needs "
-            f"{_GAIN_VAL_EVERY} frames or more (relit >= {_GAIN_VAL_EVERY}), or give 2 rendered scenes or more "
-            "(n_rendered >= 2)"
+            f"{_GAIN_VAL_EVERY} frames or more (relit >= {_GAIN_VAL_EVERY}, or a folder of scenes= with as many), or "
+            "give 2 rendered scenes or more (n_rendered >= 2)"
         )
     base = [_grid_sample(teacher_net, f) for f in train_frames]
     val_samples = [_grid_sample(teacher_net, f) for f in val_frames]
