@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # _run, also when this
 from _run import REPORTS, ROOT, rerun  # noqa: E402
 
 sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
+from alcn_cv.bench.detect_report import chosen_trial  # noqa: E402
 from alcn_cv.bench.relight_settings import CONFS  # noqa: E402
 from alcn_cv.report import describe_machine, machine_cores, markdown_table  # noqa: E402
 
@@ -239,8 +240,7 @@ def _tuned_row(method: str, chosen: dict[str, Any]) -> list[Any]:
     """A tuned method's row: its name, the chosen parameters and their validation AUC, and the default's (the grid's
     first setting)."""
     params = ":".join(f"{k}={v}" for k, v in chosen["params"].items())
-    best = next(t["val_auc"] for t in chosen["trials"] if t["params"] == chosen["params"])
-    return [method, params, best, chosen["trials"][0]["val_auc"]]
+    return [method, params, chosen_trial(chosen)["val_auc"], chosen["trials"][0]["val_auc"]]
 
 
 def detect(report: dict[str, Any]) -> str:

@@ -172,9 +172,11 @@ def frame_error(
     return FrameError(float(err.mean()), float(found.mean()), matched, per_edge)
 
 
-def _camera_and_poses(
-    model_path: str | Path, poses_path: str | Path
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, dict[str, tuple[np.ndarray, np.ndarray]]]:
+#: A run as drawn: the box corners, ``K``, the distortion or None, and the ``(rvec, tvec)`` of every posed frame.
+Drawn = tuple[np.ndarray, np.ndarray, np.ndarray | None, dict[str, tuple[np.ndarray, np.ndarray]]]
+
+
+def _camera_and_poses(model_path: str | Path, poses_path: str | Path) -> Drawn:
     """The box corners, the camera the poses were solved with (``K``, and its distortion or ``None``: the one their
     ``_info.json`` records, :func:`pose.track.tracked_camera`, else the part model's, which ``alcn pose track`` tracks
     with by default) and the ``(rvec, tvec)`` of every posed frame (``tvec`` in the model's units:
@@ -206,7 +208,11 @@ def measure(
 ) -> dict[str, FrameError]:
     """:class:`FrameError` of every frame of ``video`` posed in ``poses_path`` (``alcn pose track``'s
     JSON) with the box of ``model_path`` and the camera the poses were solved with (:func:`_camera_and_poses`)."""
-    corners, K, dist, poses = _camera_and_poses(model_path, poses_path)
+    return _measure(_camera_and_poses(model_path, poses_path), video, settings, progress)
+
+
+def _measure(drawn: Drawn, video: str | Path, settings: EdgeSettings | None, progress: bool) -> dict[str, FrameError]:
+    corners, K, dist, poses = drawn
     out = {}
     frames = io.iter_frames(video)
     for name, frame in tqdm(
@@ -270,19 +276,17 @@ def plot_errors(runs: dict[str, dict[str, FrameError]], path: str | Path, max_di
     return save_figure(plt, fig, path, dpi=110)
 
 
-def plot_frames(
-    video: str | Path, runs: Sequence[tuple[str, str | Path, str | Path]], names: Sequence[str], path: str | Path
-) -> Path:
-    """The frames ``names`` of ``video`` with each run's box drawn in its own colour, side by side."""
+def plot_frames(video: str | Path, runs: dict[str, Drawn], names: Sequence[str], path: str | Path) -> Path:
+    """The frames ``names`` of ``video`` with each run's box (label -> :data:`Drawn`) in its own colour, side by
+    side."""
     from pose.track import draw_box
 
     colors = [(0, 0, 255), (255, 120, 0), (0, 200, 0), (0, 220, 255)]
-    loaded = [(label, *_camera_and_poses(m, p)) for label, m, p in runs]
     wanted, tiles = set(names), {}
     for name, frame in io.iter_frames(video):
         if name in wanted:
             vis = frame.copy()
-            for k, (label, corners, K, dist, poses) in enumerate(loaded):
+            for k, (label, (corners, K, dist, poses)) in enumerate(runs.items()):
                 if name in poses:
                     draw_box(vis, corners, *poses[name], K, colors[k % len(colors)], thickness=1, dist=dist)
                 cv2.putText(vis, label, (8, 20 + 18 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.55, colors[k % len(colors)], 2)
@@ -313,9 +317,8 @@ def main(
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"{out_dir} is a file; the output is a folder")
-    for _, model, poses in runs:  # every run's model, camera and poses checked before any is measured
-        _camera_and_poses(model, poses)
-    errors = {label: measure(model, poses, video, settings, progress) for label, model, poses in runs}
+    drawn = {label: _camera_and_poses(model, poses) for label, model, poses in runs}  # all checked before any work
+    errors = {label: _measure(d, video, settings, progress) for label, d in drawn.items()}
     for (label, _, poses), measured in zip(runs, errors.values()):
         if not any(np.isfinite(e.mean_px) for e in measured.values()):
             raise InputError(f"run {label}: no frame of {video} is posed in {poses}; nothing to measure")
@@ -392,7 +395,7 @@ def main(
     )
     plot_errors(errors, out_dir / "overlay_error.png", settings.max_distance)
     worst = [n for n, _ in next(iter(summary.values())).get("worst", [])[:2]]
-    plot_frames(video, runs, list(dict.fromkeys([*show, *worst])), out_dir / "overlay_frames.png")
+    plot_frames(video, drawn, list(dict.fromkeys([*show, *worst])), out_dir / "overlay_frames.png")
     for label, s in summary.items():
         logger.info(
             "%s: mean %.2f px, median %.2f px over %d frames",

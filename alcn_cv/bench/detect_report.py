@@ -10,7 +10,7 @@ from alcn_cv.bench.detect_settings import POLICY_DESCRIPTIONS, DetectSettings
 from alcn_cv.enhance.registry import format_spec
 from alcn_cv.report import command_line, describe_machine, markdown_table, spread_cell
 
-__all__ = ["detect_command", "detect_markdown", "images_used", "real_images_label", "untested_objects"]
+__all__ = ["chosen_trial", "detect_command", "detect_markdown", "images_used", "real_images_label", "untested_objects"]
 
 
 def detect_command(
@@ -83,6 +83,11 @@ def _tuned(result: dict[str, Any]) -> list[str]:
     return list(dict.fromkeys(m for tuned in result.get("tuned", {}).values() for m in tuned))
 
 
+def chosen_trial(tuned: dict[str, Any]) -> dict[str, Any]:
+    """The chosen trial of a tuning record ``{"params", "trials"}`` (``alcn bench detect`` or ``fewshot --tune``)."""
+    return next(t for t in tuned["trials"] if t["params"] == tuned["params"])
+
+
 def _tuning_text(result: dict[str, Any], settings: DetectSettings) -> list[str]:
     """The section on the tuned parameters: on what they were chosen, and each chosen setting's validation AUC
     against the default's (the grid's first) and the grid's range."""
@@ -101,7 +106,7 @@ def _tuning_text(result: dict[str, Any], settings: DetectSettings) -> list[str]:
     for n_real, tuned in result["tuned"].items():
         for method, t in tuned.items():
             aucs = [x["val_auc"] for x in t["trials"] if x["val_auc"] is not None]
-            chosen = next(x for x in t["trials"] if x["params"] == t["params"])
+            chosen = chosen_trial(t)
             if aucs and min(aucs) == max(aucs):
                 tied.append(f"{method} ({n_real})")
             rows.append(

@@ -49,6 +49,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from alcn_cv.bench.detect import TUNING_GRIDS, best_trial, create_normalization
+from alcn_cv.bench.detect_report import chosen_trial
 from alcn_cv.bench.detect_settings import POLICIES, POLICY_DESCRIPTIONS
 from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.policies import InputPolicy
@@ -353,7 +354,7 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
             [
                 method,
                 format_spec(method, t["params"]),
-                next(x["val_auc"] for x in t["trials"] if x["params"] == t["params"]),
+                chosen_trial(t)["val_auc"],
                 t["trials"][0]["val_auc"],
             ]
             for method, t in result["tuned"].items()

@@ -275,11 +275,10 @@ def identification(gallery: np.ndarray, query: np.ndarray, locations: np.ndarray
     return float(np.mean((best == np.arange(len(locations))) & valid))
 
 
-def _fewest_sampled(plans: list[PairPlan], settings: Settings) -> tuple[int, int]:
+def _fewest_sampled(plans: list[PairPlan]) -> tuple[int, int]:
     """The fewest patch locations of a gallery frame and the fewest gallery frames over a scene's ``plans`` (one per
-    seed): ``settings.patches`` and ``settings.gallery`` unless its frames are too small or too few."""
-    locations = min(len(loc) for plan in plans for loc in plan.locations.values())
-    return min(locations, settings.patches), min(len(plan.gallery) for plan in plans)
+    seed): the settings' ``patches`` and ``gallery`` unless its frames are too small or too few."""
+    return min(len(loc) for plan in plans for loc in plan.locations.values()), min(len(p.gallery) for p in plans)
 
 
 def plan_pairs(scene: Scene, seed: int, settings: Settings) -> PairPlan:
@@ -677,7 +676,7 @@ def main(
         rows[f"{m} (tuned)"] = {name: tuning_result[m][fold]["chosen"] for name, fold in fold_of.items()}
 
     plans = {s.name: [plan_pairs(s, seed, settings) for seed in seeds] for s in evaluated}
-    sampled = {name: _fewest_sampled(plan, settings) for name, plan in plans.items()}
+    sampled = {name: _fewest_sampled(plan) for name, plan in plans.items()}
     for name, (locations, gallery) in sampled.items():
         if locations < settings.patches or gallery < settings.gallery:
             logger.warning(

@@ -47,12 +47,11 @@ def _metrics(result: dict[str, Any]) -> list[str]:
 
 
 def _scene_text(name: str, scene: dict[str, Any], settings: dict[str, Any]) -> str:
-    """A scene of the report's Scenes line: its group, frames and size, and what it held of the sampling asked (a
-    report of before it recorded that: as asked)."""
+    """A scene of the report's Scenes line: its group, frames and size, and what it held of the sampling asked."""
     fewer = []
-    if (locations := scene.get("fewest_patches", settings["patches"])) < settings["patches"]:
+    if (locations := scene["fewest_patches"]) < settings["patches"]:
         fewer.append(f"as few as {locations} patch locations, chance {100 / locations:.1f}%")
-    if (gallery := scene.get("fewest_gallery_frames", settings["gallery"])) < settings["gallery"]:
+    if (gallery := scene["fewest_gallery_frames"]) < settings["gallery"]:
         fewer.append(f"{gallery} gallery frames")
     size = f"{scene['size'][0]}x{scene['size'][1]}"
     return f"{name} ({scene['group']}, {scene['frames']} frames {size}{''.join('; ' + f for f in fewer)})"
