@@ -36,6 +36,7 @@ __all__ = [
     "check_writable",
     "count_frames",
     "eight_bits",
+    "frame_progress",
     "held_folder",
     "holds_out_dir",
     "interrupts_blocked",
@@ -48,6 +49,7 @@ __all__ = [
     "open_video_writer",
     "read_image",
     "read_json",
+    "read_mask",
     "to_gray",
     "write_image",
     "write_json",
@@ -162,6 +164,20 @@ def read_image(path: str | Path, alpha: bool = False, gray: bool = False) -> np.
     if img.dtype not in (np.uint8, np.uint16):
         raise InputError(f"{path}: unsupported pixel type {img.dtype} (8- or 16-bit images only)")
     return img
+
+
+def read_mask(path: str | Path) -> np.ndarray:
+    """Read a mask image, white on the object and black elsewhere, as ``(H, W)`` bool: True where its 8-bit gray
+    level is above 127 (a 0/1 mask reads as empty).
+
+    Raises:
+        InputError: the file cannot be read (:func:`read_image`), or no pixel is above 127 (the message says what a
+            mask is).
+    """
+    mask = read_image(path, gray=True) > 127
+    if not mask.any():
+        raise InputError(f"{path}: no pixel above 127; a mask is white (255) on the object, black elsewhere")
+    return mask
 
 
 @contextlib.contextmanager
@@ -651,6 +667,23 @@ def count_frames(source: str | os.PathLike, step: int = 1, max_frames: int | Non
         return None
     count = -(-total // step)
     return count if max_frames is None else min(count, max_frames)
+
+
+def frame_progress(frames: Iterable[T], total: int | None, **bar: Any) -> Iterator[T]:
+    """``frames`` under a tqdm progress bar (``bar``: tqdm's arguments, ``unit="frame"`` unless given) whose ``total``
+    is an estimate, :func:`count_frames`'s: a video's header often counts one frame more than it holds (the shared
+    ``cookie_box/box.mp4`` says 456 and decodes 455), so when the frames end the bar ends at those there were, not
+    short of a total that never comes. A frame is counted once the loop's body has done it.
+
+    Example:
+        >>> sum(1 for _ in frame_progress(range(3), total=4, disable=True))
+        3
+    """
+    with tqdm(total=total, **{"unit": "frame", **bar}) as progress:
+        for frame in frames:
+            yield frame
+            progress.update()
+        progress.total = progress.n
 
 
 def open_video_writer(

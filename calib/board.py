@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_path, to_gray, write_json
+from alcn_cv.io import atomic_path, check_no_earlier_output, to_gray, write_json
 
 logger = logging.getLogger(__name__)
 
@@ -249,7 +249,9 @@ def suggest_chessboard_size(
 _LABEL_MARGIN_PX = 20
 
 
-def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, margin_mm: float = 10.0) -> dict:
+def write_board_image(
+    spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, margin_mm: float = 10.0, overwrite: bool = False
+) -> dict:
     """Write a printable image of the board and a JSON of its dimensions beside it.
 
     The PNG carries its DPI so that printing at 100 % scale gives squares of exactly
@@ -261,9 +263,14 @@ def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, 
         path: output ``.png``; ``<path>.json`` (same stem) gets the dimensions.
         dpi: print resolution, dots per inch.
         margin_mm: white margin around the board, mm (>= 0; the label needs about 2 mm at 300 dpi).
+        overwrite: replace an earlier image or JSON at ``path``.
 
     Returns:
         The dimensions written to the JSON (board spec, pixel and mm sizes, DPI).
+
+    Raises:
+        InputError: ``dpi`` below 72, a negative margin, a path not ending in ``.png``, or an earlier image or JSON
+            there without ``overwrite``.
     """
     from PIL import Image
 
@@ -274,6 +281,7 @@ def write_board_image(spec: BoardSpec, path: str | os.PathLike, dpi: int = 300, 
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise InputError(f"board image must be a .png, got {path.name}")
+    check_no_earlier_output([path, path.with_suffix(".json")], overwrite)
     px_per_mm = dpi / 25.4
     square_px = int(round(spec.square * px_per_mm))
     margin_px = int(round(margin_mm * px_per_mm))

@@ -32,8 +32,10 @@ from alcn_cv.formats.colmap import ColmapCamera, camera_from_opencv, write_text_
 from alcn_cv.io import (
     VIDEO_SUFFIXES,
     atomic_path,
+    check_no_earlier_output,
     check_writable,
     count_frames,
+    frame_progress,
     is_video,
     iter_frames,
     list_images,
@@ -70,6 +72,8 @@ _COMMON_CHESSBOARD = (9, 6)
 MAX_VIDEO_CANDIDATES = 150
 #: :func:`select_views` (with the board) first drops the views that show less than this share of its corners.
 MIN_COVERAGE = 0.5
+#: What :func:`main` writes into its output folder (an earlier run's are replaced only with ``overwrite``).
+CALIBRATION_OUTPUTS = ("camera.yaml", "colmap", "views.json", "calibration.png")
 
 
 @dataclass
@@ -264,12 +268,8 @@ def detect_in_video(
     n = 0
     samples: list[tuple[str, np.ndarray]] = []
     missed = None
-    for name, frame in tqdm(
-        iter_frames(path, step),
-        total=-(-total // step) if total else None,
-        desc="detecting board",
-        unit="frame",
-        disable=not progress,
+    for name, frame in frame_progress(
+        iter_frames(path, step), -(-total // step) if total else None, desc="detecting board", disable=not progress
     ):
         gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
         first = gray if first is None else first
@@ -564,6 +564,7 @@ def main(
     flags: int = 0,
     report: bool = True,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> Calibration:
     """Calibrate from a folder of images or a video and write the outputs into ``out_dir``.
 
@@ -576,18 +577,21 @@ def main(
         flags: ``cv2.CALIB_*`` flags.
         report: also write ``calibration.png``.
         progress: a progress bar over the frames searched for the board.
+        overwrite: replace the outputs of an earlier calibration in ``out_dir``.
 
     Raises:
-        InputError: ``max_views`` below :data:`MIN_VIEWS`, an output folder that cannot be written
-            (both before the board is searched for), or bad input (see :func:`detect_in_images`,
-            :func:`calibrate`).
+        InputError: ``max_views`` below :data:`MIN_VIEWS`, an output folder that cannot be written or that holds an
+            earlier calibration's outputs without ``overwrite`` (all before the board is searched for), or bad
+            input (see :func:`detect_in_images`, :func:`calibrate`).
     """
     if max_views < MIN_VIEWS:  # else the selection, not the images, would leave too few views, found only at the end
         raise InputError(
             f"--max-views {max_views}: a calibration needs at least {MIN_VIEWS} views (about "
             f"{RECOMMENDED_VIEWS}-20 recommended); give --max-views {RECOMMENDED_VIEWS} or more"
         )
-    check_writable(Path(out_dir) / "camera.yaml")  # a folder under a file fails now, not after the calibration
+    out = Path(out_dir)
+    check_writable(out / "camera.yaml")  # a folder under a file fails now, not after the calibration
+    check_no_earlier_output([out / name for name in CALIBRATION_OUTPUTS], overwrite)
     source = Path(source)
     if source.is_dir():
         views, size = detect_in_images(list_images(source), board, progress)

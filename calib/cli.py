@@ -101,6 +101,7 @@ def _camera(args: argparse.Namespace) -> int:
         flags=flags,
         report=not args.no_report,
         progress=not args.no_progress,
+        overwrite=args.overwrite,
     )
     K, d = calib.K, calib.dist
     print(
@@ -113,7 +114,9 @@ def _camera(args: argparse.Namespace) -> int:
 def _board(args: argparse.Namespace) -> int:
     from .board import write_board_image
 
-    info = write_board_image(_board_from_args(args), args.out, dpi=args.dpi, margin_mm=args.margin)
+    info = write_board_image(
+        _board_from_args(args), args.out, dpi=args.dpi, margin_mm=args.margin, overwrite=args.overwrite
+    )
     w, h = info["image_size_mm"]
     print(
         f"{args.out}: {info['image_size_px'][0]}x{info['image_size_px'][1]} px = {w:.1f} x {h:.1f} mm at "
@@ -221,6 +224,7 @@ def _undistort(args: argparse.Namespace) -> int:
         alpha=args.alpha,
         keep_K=args.keep_K,
         progress=not args.no_progress,
+        overwrite=args.overwrite,
     )
     print(f"undistorted {args.source} -> {args.output}; camera of the output: {yaml_path}")
     return 0
@@ -254,6 +258,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--fix-k3", action="store_true", help="fix k3 = 0 (few or central views)")
     p.add_argument("--zero-tangent", action="store_true", help="fix p1 = p2 = 0")
     p.add_argument("--no-report", action="store_true", help="do not write calibration.png")
+    p.add_argument("--overwrite", action="store_true", help="replace an earlier calibration in --out")
     add_progress_option(p)
     p.set_defaults(func=_camera)
 
@@ -266,6 +271,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _add_board_args(p)
     p.add_argument("--dpi", type=int, default=300, help="print resolution (default 300)")
     p.add_argument("--margin", type=float, default=10.0, help="white margin in mm (default 10)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out and its JSON")
     p.set_defaults(func=_board)
 
     p = sub.add_parser(
@@ -334,5 +340,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--alpha", type=float, default=0.0, help="0: crop to valid pixels; 1: keep all source pixels (default 0)"
     )
     p.add_argument("--keep-K", action="store_true", help="keep the input camera matrix as the output's")
+    p.add_argument("--overwrite", action="store_true", help="replace existing outputs (and the output's camera YAML)")
     add_progress_option(p)
     p.set_defaults(func=_undistort)

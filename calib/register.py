@@ -42,7 +42,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from alcn_cv.data.manifest import atomic_output_dir
 from alcn_cv.errors import InputError
@@ -57,7 +56,7 @@ from alcn_cv.formats.colmap import (
     points_colmap_to_opencv,
     write_text_model,
 )
-from alcn_cv.io import count_frames, iter_frames, write_image, write_json
+from alcn_cv.io import count_frames, frame_progress, iter_frames, write_image, write_json
 
 from .board import BoardSpec, Detection
 from .camera import Calibration
@@ -284,8 +283,8 @@ def register_charuco(
     with atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp:
         (tmp / "rgb").mkdir()
         frames = iter_frames(source, step, max_frames)
-        for name, image in tqdm(
-            frames, total=count_frames(source, step, max_frames), desc="registering", unit="frame", disable=not progress
+        for name, image in frame_progress(
+            frames, count_frames(source, step, max_frames), desc="registering", disable=not progress
         ):
             image = undistort(image, name)
             det = detector(image)  # detect on the undistorted frame: the corners then follow K exactly
@@ -453,11 +452,10 @@ def _write_sfm_frames(
     names: list[str] = []
     size = None
     frames = iter_frames(source, settings.step, settings.max_frames)
-    for name, image in tqdm(
+    for name, image in frame_progress(
         frames,
-        total=count_frames(source, settings.step, settings.max_frames),
+        count_frames(source, settings.step, settings.max_frames),
         desc="preparing frames",
-        unit="frame",
         disable=not progress,
     ):
         if undistort is not None:

@@ -18,7 +18,16 @@ import numpy as np
 from tqdm import tqdm
 
 from alcn_cv.errors import InputError
-from alcn_cv.io import IMAGE_SUFFIXES, is_video, list_images, make_folder, map_video, read_image, write_image
+from alcn_cv.io import (
+    IMAGE_SUFFIXES,
+    check_no_earlier_output,
+    is_video,
+    list_images,
+    make_folder,
+    map_video,
+    read_image,
+    write_image,
+)
 
 from .camera import Calibration, write_camera_yaml
 
@@ -70,6 +79,7 @@ def main(
     alpha: float = 0.0,
     keep_K: bool = False,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> Path:
     """Undistort an image, a folder of images or a video.
 
@@ -80,13 +90,15 @@ def main(
         calib: calibration of the camera.
         alpha, keep_K: output camera (see :class:`Undistorter`).
         progress: a progress bar over a folder's images or a video's frames.
+        overwrite: replace existing outputs (images, video, camera YAML).
 
     Returns:
         The path of the output camera YAML (``camera.yaml`` in the output folder, or
         ``<output stem>.camera.yaml`` beside an output file).
 
     Raises:
-        InputError: the output is the input (it would be overwritten), or an unreadable source.
+        InputError: the output is the input (it would be overwritten), outputs that exist without ``overwrite``
+            (before any work), or an unreadable source.
     """
     source, output = Path(source), Path(output)
     if source.resolve() == output.resolve():  # resolved: ./a.png, a link to it and a.png are one file
@@ -95,17 +107,20 @@ def main(
     suffix = source.suffix.lower()
     if source.is_dir():
         files = list_images(source)
+        check_no_earlier_output([*(output / path.name for path in files), output / "camera.yaml"], overwrite)
         make_folder(output)
         for path in tqdm(files, desc="undistorting", unit="image", disable=not progress or len(files) < 10):
             write_image(output / path.name, undistort(read_image(path), path.name))
         yaml_path = output / "camera.yaml"
     elif source.is_file() and is_video(source):
+        check_no_earlier_output([output, output.with_name(f"{output.stem}.camera.yaml")], overwrite)
         n = map_video(
             source, output, lambda frame: undistort(frame, source.name), desc="undistorting", progress=progress
         )
         logger.info("undistorted %d frames to %s", n, output)
         yaml_path = output.with_name(f"{output.stem}.camera.yaml")
     elif source.is_file() and suffix in IMAGE_SUFFIXES:
+        check_no_earlier_output([output, output.with_name(f"{output.stem}.camera.yaml")], overwrite)
         write_image(output, undistort(read_image(source), source.name))
         yaml_path = output.with_name(f"{output.stem}.camera.yaml")
     elif source.exists():

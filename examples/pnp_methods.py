@@ -63,7 +63,7 @@ def main() -> None:
         print(f"note: {args.model} was built after {model.normalization!r}, the features after {normalization!r}")
     det = FeaturePartDetector(model, normalization)
     total = io.count_frames(args.video, max_frames=args.max_frames)
-    frames = tqdm(io.iter_frames(args.video, max_frames=args.max_frames), total=total, desc="features", unit="frame")
+    frames = io.frame_progress(io.iter_frames(args.video, max_frames=args.max_frames), total, desc="features")
     corr = [det.detect(frame) for _, frame in frames]
     runs = [(name, use_prior) for name in sorted(METHODS) for use_prior in (False, True)]
     # the rows are written above the bar (tqdm.write), the bar counts the solved frames of every run

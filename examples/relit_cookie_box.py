@@ -29,7 +29,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 import alcn_cv
 from alcn_cv import io
@@ -143,7 +142,7 @@ def main() -> None:
     ref_tracker = PoseTracker(PoseSolver(K))
     agree: dict[str, list[bool]] = {n: [] for n in args.methods}
     total = io.count_frames(video, max_frames=args.max_frames)
-    relit_frames = tqdm(frames(video, args.max_frames), total=total, desc="track the relit video", unit="frame")
+    relit_frames = io.frame_progress(frames(video, args.max_frames), total, desc="track the relit video")
     # as context managers: a run stopped midway leaves no unfinished video behind
     with (
         track.OverlayWriter(args.out / "relit_overlay.mp4") as both,

@@ -30,7 +30,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from alcn_cv import io
 from alcn_cv.errors import DatasetError, InputError
@@ -215,8 +214,8 @@ def _measure(drawn: Drawn, video: str | Path, settings: EdgeSettings | None, pro
     corners, K, dist, poses = drawn
     out = {}
     frames = io.iter_frames(video)
-    for name, frame in tqdm(
-        frames, total=io.count_frames(video), desc="overlay error", unit="frame", leave=False, disable=not progress
+    for name, frame in io.frame_progress(
+        frames, io.count_frames(video), desc="overlay error", leave=False, disable=not progress
     ):
         if name not in poses:
             out[name] = FrameError(float("nan"), 0.0, float("nan"), {})

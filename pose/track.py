@@ -37,7 +37,6 @@ from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from alcn_cv import io
 from alcn_cv.enhance.registry import same_method
@@ -324,7 +323,7 @@ def track(
 
     ``tracker.events`` collects the lost/recovered events, by the frames' names.
     """
-    for name, frame in tqdm(frames, total=total, desc="track", unit="frame", leave=False, disable=not progress):
+    for name, frame in io.frame_progress(frames, total, desc="track", leave=False, disable=not progress):
         t0 = time.perf_counter()
         if source is not None:  # the error names the source too; step checks the frame again, without it
             tracker.check_size(frame, f"frame {name} of {source} is")

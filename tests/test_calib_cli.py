@@ -312,3 +312,41 @@ def test_register_reference_model_follows_its_units_header(tmp_path, capsys, mon
     assert alcn([*args, "--reference", str(tmp_path / "ref_none"), "--reference-unit", "mm", "--out", str(out)]) == 0
     capsys.readouterr()
     np.testing.assert_allclose(bop.load_scene(out).frames[0].t_w2c, t_mm[0], atol=1e-6)
+
+
+def test_calib_outputs_are_replaced_only_with_overwrite(tmp_path, capsys):
+    """`calib board`, `camera` and `undistort` replaced an earlier run's files without a word; now each refuses
+    before any work (the camera's image folder is empty: the refusal comes before it is searched)."""
+    board = ["calib", "board", "--out", str(tmp_path / "b.png"), "--dpi", "100"]
+    assert alcn(board) == 0
+    capsys.readouterr()
+    assert alcn(board) == 2 and "b.png and 1 more exist (--overwrite replaces them)" in capsys.readouterr().err
+    assert alcn([*board, "--overwrite"]) == 0
+
+    image = tmp_path / "in.png"
+    cv2.imwrite(str(image), np.zeros((48, 64, 3), np.uint8))
+    write_camera_yaml(tmp_path / "camera.yaml", np.diag([50.0, 50.0, 1.0]), np.zeros(5), (64, 48))
+    undistort = ["calib", "undistort", str(image), str(tmp_path / "u.png"), "--camera", str(tmp_path / "camera.yaml")]
+    assert alcn(undistort) == 0
+    capsys.readouterr()
+    assert alcn(undistort) == 2 and "u.png and 1 more exist" in capsys.readouterr().err
+    assert alcn([*undistort, "--overwrite"]) == 0
+    (tmp_path / "u.png").unlink()  # the camera YAML alone is an earlier output too
+    assert alcn(undistort) == 2 and "u.camera.yaml exists (--overwrite replaces it)" in capsys.readouterr().err
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "a.png"), np.zeros((48, 64, 3), np.uint8))
+    (tmp_path / "out").mkdir()
+    cv2.imwrite(str(tmp_path / "out" / "a.png"), np.ones((48, 64, 3), np.uint8))
+    rc = alcn(["calib", "undistort", str(folder), str(tmp_path / "out"), "--camera", str(tmp_path / "camera.yaml")])
+    assert rc == 2 and "a.png exists" in capsys.readouterr().err
+    assert cv2.imread(str(tmp_path / "out" / "a.png")).max() == 1  # the earlier image is kept
+
+    calibrated = tmp_path / "calibrated"
+    calibrated.mkdir()
+    (calibrated / "views.json").write_text("{}")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    rc = alcn(["calib", "camera", "--images", str(empty), "--out", str(calibrated), "--no-report"])
+    assert rc == 2 and "views.json exists (--overwrite replaces it)" in capsys.readouterr().err

@@ -114,6 +114,11 @@ def test_compare_psm_names_a_missing_folder_and_checks_its_output_first(tmp_path
     blocker.write_text("mine")
     with pytest.raises(InputError, match="is a file"):  # before reading the set and rendering
         compare_psm(tmp_path / "nope", blocker / "out")
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    (earlier / "psm_comparison.md").write_text("an earlier comparison")
+    with pytest.raises(InputError, match=r"psm_comparison.md exists \(--overwrite replaces it\)"):  # before the work
+        compare_psm(tmp_path / "nope", earlier)
 
 
 def test_load_psm_reads_the_photometric_set_and_checks_its_lights(tmp_path):

@@ -341,3 +341,15 @@ def test_a_function_that_holds_its_out_dir_refuses_a_second_run_into_it(tmp_path
     with held_folder(tmp_path / "b"), pytest.raises(InputError, match="is in use by another run"):
         main("s", str(tmp_path / "b"))
     assert calls == [("s", tmp_path / "a")]
+
+
+def test_frame_progress_ends_at_the_frames_there_were(capsys):
+    """The cookie box video's header says 456 frames and FFmpeg decodes 455: the bars of `pose track`, `overlay-error`,
+    `calib register` and `calib camera` stopped at 455/456."""
+    from alcn_cv.io import frame_progress
+
+    assert list(frame_progress(iter(range(3)), 4, desc="frames", mininterval=0)) == [0, 1, 2]
+    assert "3/3" in capsys.readouterr().err.rsplit("\r", 1)[-1]
+    for _ in frame_progress(iter(range(5)), 5, desc="frames", mininterval=0):  # stopped: the bar says where
+        break
+    assert "0/5" in capsys.readouterr().err.rsplit("\r", 1)[-1]

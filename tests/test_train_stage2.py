@@ -100,3 +100,22 @@ def test_an_objects_folder_mask_marks_all_its_images(tmp_path):
         np.testing.assert_array_equal(marked, mask > 0)
     (tmp_path / "owl" / "owl.mask.png").unlink()
     assert _read_objects(tmp_path)[0][1][0][1] == [0, 0, 30, 20]  # no mask: the whole image
+
+
+def test_object_masks_are_read_as_every_mask_is(tmp_path):
+    """`alcn train-detector` read a mask as nonzero where `bench invariance` and the data sets read white above 127:
+    one file gave two objects. Both now take :func:`alcn_cv.io.read_mask`."""
+    import cv2
+
+    from alcn_cv.train.stage2 import _read_objects
+
+    (tmp_path / "owl").mkdir()
+    cv2.imwrite(str(tmp_path / "owl" / "owl.0.png"), np.zeros((20, 30), np.uint8))
+    mask = np.zeros((20, 30), np.uint8)
+    mask[5:15, 10:20] = 255
+    mask[0:5, 0:5] = 100  # a grey halo of an antialiased brush: outside
+    cv2.imwrite(str(tmp_path / "owl" / "owl.mask.png"), mask)
+    np.testing.assert_array_equal(_read_objects(tmp_path)[0][1][0][1], mask > 127)
+    cv2.imwrite(str(tmp_path / "owl" / "owl.mask.png"), (mask > 0).astype(np.uint8))  # a 0/1 mask
+    with pytest.raises(InputError, match=r"owl.mask.png: no pixel above 127; a mask is white \(255\)"):
+        _read_objects(tmp_path)

@@ -119,7 +119,7 @@ def _compare_psm(args: argparse.Namespace) -> int:
     from alcn_cv.shared_data import shared_data_dir
 
     psm = Path(args.psm) if args.psm else shared_data_dir() / "psm"
-    compare_psm(psm, args.out, seed=args.seed)
+    compare_psm(psm, args.out, seed=args.seed, overwrite=args.overwrite)
     print((Path(args.out) / "psm_comparison.md").read_text(), end="")
     return 0
 
@@ -318,4 +318,5 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument("--psm", default=None, help="PSM folder (default: <shared data>/psm)")
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("--seed", type=int, default=0, help="seed of the renderings (default 0)")
+    q.add_argument("--overwrite", action="store_true", help="replace an earlier comparison in --out")
     q.set_defaults(func=_compare_psm)

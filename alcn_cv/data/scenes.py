@@ -52,7 +52,7 @@ import cv2
 import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import IMAGE_SUFFIXES, eight_bits, list_images, read_image
+from alcn_cv.io import IMAGE_SUFFIXES, eight_bits, list_images, read_image, read_mask
 from alcn_cv.shared_data import shared_data_dir
 
 __all__ = [
@@ -403,13 +403,11 @@ def load_photometric(root: str | os.PathLike, scale: float = 1.0) -> list[Photom
             raise DatasetError(f"{folder}: one photograph ({shots[0].name}); an object needs 2 lights or more")
         try:
             images = [read_image(p, gray=True) for p in shots]
-            mask = read_image(mask_path, gray=True) > 127
+            mask = read_mask(mask_path)
         except InputError as exc:  # a file of the data set, not the caller's input
             raise DatasetError(str(exc)) from None
         if any(img.shape != mask.shape for img in images):
             raise DatasetError(f"{folder}: images and mask {mask_path.name} differ in size")
-        if not mask.any():
-            raise DatasetError(f"{mask_path}: no pixel above 127; a mask is white (255) on the object, black elsewhere")
         if scale != 1:
             size = (max(1, round(mask.shape[1] * scale)), max(1, round(mask.shape[0] * scale)))
             images = [cv2.resize(img, size, interpolation=cv2.INTER_AREA) for img in images]

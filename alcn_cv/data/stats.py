@@ -31,7 +31,7 @@ from alcn_cv.data.objects import make_object, paste, to_surface
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.scenes import load_photometric, mean_pairwise_ncc
 from alcn_cv.errors import DatasetError
-from alcn_cv.io import atomic_write, check_writable, make_folder, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, check_writable, make_folder, write_json
 from alcn_cv.report import describe_machine
 
 logger = logging.getLogger(__name__)
@@ -203,14 +203,17 @@ def _figure(path: Path, sets: dict[str, dict], stats: dict[str, dict]) -> None:
     plt.close(fig)
 
 
-def compare_psm(psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed: int = 0) -> dict:
+def compare_psm(
+    psm_dir: str | os.PathLike, out_dir: str | os.PathLike, *, seed: int = 0, overwrite: bool = False
+) -> dict:
     """Compare the statistics of real PSM photographs with the engine's renderings.
 
     Writes ``out_dir/psm_comparison.png`` (figure), ``psm_comparison.md`` and
-    ``psm_comparison.json`` (tables). Returns the statistics.
+    ``psm_comparison.json`` (tables); an earlier run's only with ``overwrite``. Returns the statistics.
     """
     out = Path(out_dir)
     check_writable(out / "psm_comparison.json")  # before the renderings: an output under a file fails at once
+    check_no_earlier_output([out / f"psm_comparison{suffix}" for suffix in (".json", ".md", ".png")], overwrite)
     real, lights = load_psm(psm_dir)
     sets = {
         "real psm": real,

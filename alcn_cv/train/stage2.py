@@ -225,8 +225,9 @@ def normalize_windows(windows: np.ndarray, normalization: Normalization) -> np.n
 def _read_objects(folder: Path) -> list[tuple[str, list[tuple[np.ndarray, object]]]]:
     """``[(object name, [(gray image, mask or box), ...]), ...]`` from one sub-folder per object: an image's mask is
     ``NAME.mask.png`` beside it, else the folder's ``OBJECT/OBJECT.mask.png`` (one view under several lights, as the
-    photometric-stereo sets), else the whole image is the object."""
-    from alcn_cv.io import list_images, read_image
+    photometric-stereo sets), else the whole image is the object; a mask is white on the object
+    (:func:`~alcn_cv.io.read_mask`)."""
+    from alcn_cv.io import list_images, read_image, read_mask
 
     if not folder.is_dir():
         raise InputError(f"not a folder: {folder}")
@@ -241,11 +242,10 @@ def _read_objects(folder: Path) -> list[tuple[str, list[tuple[np.ndarray, object
             if not mask_path.is_file():
                 mask_path = sub / f"{sub.name}.mask.png"
             if mask_path.is_file():
-                mask = read_image(mask_path)
-                mask = mask if mask.ndim == 2 else mask[..., 0]
+                mask = read_mask(mask_path)
                 if mask.shape != image.shape[:2]:
                     raise InputError(f"{mask_path}: mask {mask.shape} does not match the image {image.shape[:2]}")
-                items.append((image, mask > 0))
+                items.append((image, mask))
             else:
                 items.append((image, [0, 0, image.shape[1], image.shape[0]]))
         if items:
