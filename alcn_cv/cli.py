@@ -231,10 +231,27 @@ def add_seeds_option(
     )
 
 
-def number_at_least(kind: type[int] | type[float], low: float, above: bool = False) -> Callable[[str], int | float]:
-    """An argparse ``type`` for a number of ``kind`` at least ``low`` (greater than ``low`` with ``above``): a
-    value out of range is an error that names its option, as a Python caller's names the keyword."""
-    bound = f"{'greater than' if above else 'at least'} {low:g}"
+def _shown(bound: float) -> str:
+    """A bound as a message shows it: an integer in full, a float in its shortest form."""
+    return str(bound) if isinstance(bound, int) else f"{bound:g}"
+
+
+def number_in(
+    kind: type[int] | type[float], low: float, high: float | None = None, *, above: bool = False, below: bool = False
+) -> Callable[[str], int | float]:
+    """An argparse ``type`` for a number of ``kind`` from ``low`` to ``high`` (greater than ``low`` with ``above``,
+    less than ``high`` with ``below``; no upper bound when ``high`` is None, but an integer must fit an index,
+    ``sys.maxsize``): a value out of range is an error that names its option and its bounds, as a Python caller's
+    names the keyword.
+
+    Example:
+        >>> number_in(float, 0, 1, above=True)("0.5")
+        0.5
+    """
+    lower = f"{'greater than' if above else 'at least'} {_shown(low)}"
+    top = sys.maxsize if high is None and kind is int else high
+    upper = "" if top is None else f" and {'less than' if below else 'at most'} {_shown(top)}"
+    what = f"{'an integer' if kind is int else 'a number'} {lower}"
 
     def parse(text: str) -> int | float:
         try:
@@ -243,8 +260,29 @@ def number_at_least(kind: type[int] | type[float], low: float, above: bool = Fal
             value = None
         # `not >=`: NaN compares false with everything and is no number in range
         if value is None or not (value > low if above else value >= low):
-            raise argparse.ArgumentTypeError(f"{'an integer' if kind is int else 'a number'} {bound}, got {text!r}")
+            raise argparse.ArgumentTypeError(f"{what}{'' if high is None else upper}, got {text!r}")
+        if top is not None and not (value < top if below else value <= top):
+            raise argparse.ArgumentTypeError(f"{what}{upper}, got {text!r}")
         return value
+
+    return parse
+
+
+def number_at_least(kind: type[int] | type[float], low: float, above: bool = False) -> Callable[[str], int | float]:
+    """:func:`number_in` without an upper bound: a number of ``kind`` at least ``low`` (greater than ``low`` with
+    ``above``)."""
+    return number_in(kind, low, above=above)
+
+
+def all_or_at_least(low: int) -> Callable[[str], int | float]:
+    """An argparse ``type``: 0 (all) or an integer at least ``low`` (:func:`number_in`'s bounds otherwise)."""
+    at_least = number_in(int, low)
+
+    def parse(text: str) -> int | float:
+        try:
+            return 0 if text.strip() == "0" else at_least(text)
+        except argparse.ArgumentTypeError:
+            raise argparse.ArgumentTypeError(f"0 (all) or an integer at least {low}, got {text!r}") from None
 
     return parse
 

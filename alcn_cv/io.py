@@ -33,6 +33,7 @@ __all__ = [
     "atomic_path",
     "atomic_write",
     "check_no_earlier_output",
+    "check_output_kind",
     "check_writable",
     "count_frames",
     "eight_bits",
@@ -243,6 +244,31 @@ def check_no_earlier_output(paths: Iterable[str | os.PathLike], overwrite: bool)
     if len(existing) > 1:
         raise InputError(f"{existing[0]} and {len(existing) - 1} more exist (--overwrite replaces them)")
     raise InputError(f"{existing[0]} exists (--overwrite replaces it)")
+
+
+def check_output_kind(source: str | os.PathLike, output: str | os.PathLike) -> None:
+    """Check, before the work, that ``output`` can hold what a command makes of the existing ``source``: a folder for
+    a folder of images, a video file for a video (:data:`VIDEO_SUFFIXES`), an image file for an image
+    (:data:`IMAGE_SUFFIXES`); an existing folder is no file.
+
+    Raises:
+        InputError: another kind of output; the message names ``output``.
+    """
+    source, output = Path(source), Path(output)
+    if source.is_dir():
+        if output.exists() and not output.is_dir():
+            raise InputError(f"the output of a folder must be a folder, but {output} is a file")
+        if not output.exists() and (output.suffix.lower() in IMAGE_SUFFIXES or is_video(output)):
+            raise InputError(f"the output of a folder must be a folder, got the file name {output}")
+    elif is_video(source):
+        if output.is_dir() or not is_video(output):
+            raise InputError(f"the output of a video must be a video file (.mp4, .avi, ...), got {output}")
+    elif output.is_dir():
+        raise InputError(f"the output of an image must be an image file, but {output} is a folder")
+    elif output.suffix.lower() not in IMAGE_SUFFIXES:
+        raise InputError(
+            f"the output of an image must be an image file ({', '.join(sorted(IMAGE_SUFFIXES))}), got {output}"
+        )
 
 
 def with_suffix(path: str | os.PathLike, suffix: str, what: str) -> Path:
@@ -649,9 +675,11 @@ def iter_frames(
 def count_frames(source: str | os.PathLike, step: int = 1, max_frames: int | None = None) -> int | None:
     """How many frames :func:`iter_frames` yields for the same arguments: a progress bar's total.
 
-    ``None`` when that is unknown: a video whose container does not say, or a source
+    ``None`` when that is unknown: a video whose container does not say, or a source or ``step``
     :func:`iter_frames` refuses (it says why when it is read).
     """
+    if isinstance(step, bool) or not isinstance(step, int) or step < 1:
+        return None
     source = Path(source)
     try:
         if source.is_dir():

@@ -35,6 +35,11 @@ _KINDS = ("chessboard", "charuco")
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
 #: A ChArUco board is found in an image only with at least this many of its corners (:class:`BoardDetector`).
 MIN_CHARUCO_CORNERS = 6
+#: The print resolutions of :func:`write_board_image`, dots per inch: below, a pixel is wider than a third of a mm;
+#: above, finer than printers place ink, the image only takes memory (the default board at 100000 dpi: over 600 GB).
+MIN_DPI, MAX_DPI = 72, 1200
+#: The largest board image :func:`write_board_image` makes, in pixels (an A0 sheet at 300 dpi is 140 million).
+MAX_BOARD_PIXELS = 2**28
 
 
 @dataclass(frozen=True)
@@ -112,11 +117,10 @@ class BoardSpec:
         return (self.cols - 1) * (self.rows - 1)
 
     @property
-    def size_mm(self) -> tuple[float, float]:
-        """(width, height) of the checkered area in mm (chessboard: one square beyond the
-        outer inner corners on every side)."""
-        n = (self.cols + 1, self.rows + 1) if self.kind == "chessboard" else (self.cols, self.rows)
-        return n[0] * self.square, n[1] * self.square
+    def squares(self) -> tuple[int, int]:
+        """(columns, rows) of squares of the checkered area (chessboard: one square beyond the outer inner corners on
+        every side)."""
+        return (self.cols + 1, self.rows + 1) if self.kind == "chessboard" else (self.cols, self.rows)
 
     def corners_3d(self) -> np.ndarray:
         """float32 (num_corners, 3) all corners in the board frame (mm), in id order."""
@@ -189,7 +193,7 @@ class BoardDetector:
         return Detection(pts, self._object.copy(), np.arange(len(pts), dtype=np.int32))
 
     def _charuco(self, gray: np.ndarray) -> Detection | None:
-        corners, ids, marker_corners, marker_ids = self._detector.detectBoard(gray)
+        corners, ids, _, marker_ids = self._detector.detectBoard(gray)
         seen = [] if marker_ids is None else [int(i) for i in np.asarray(marker_ids).ravel()]
         self.last_num_markers = len(seen)
         self.last_foreign_markers = sum(i not in self._valid_ids for i in seen)
@@ -207,13 +211,15 @@ def suggest_chessboard_size(
 ) -> tuple[int, int] | None:
     """Find the inner-corner count of a chessboard seen in ``image`` by trying sizes.
 
-    Used to explain a failed or partial detection ("you said 8x6, the image holds a 9x6
+    Used to explain a failed or partial detection ("you said 7x5, the image holds a 9x6
     board"). Only sizes within 2 of ``near`` (or of its transpose) are tried, from the largest
-    (every size up to ``max_side`` without ``near``: slow, about 0.1 s per size on 640x480);
-    the detector also finds part of a larger board, so a size found is then grown by a row or
-    a column while the larger board is found too. The detector finds parts of boards
-    unreliably, so a result smaller than the true board is possible. Returns ``(cols, rows)``
-    or None.
+    (every size up to ``max_side`` without ``near``: slow, about 0.1 s per size on 640x480).
+    The detector also finds part of a larger board, and finds parts unreliably (on OpenCV's
+    sample image left01.jpg of a 9x6 board: 7x6, not 8x6), so a size found is then grown to the
+    whole board: to the board the sector-based detector sees around it
+    (``cv2.findChessboardCornersSB`` with ``CALIB_CB_LARGER``) when the detector used for the
+    calibration finds that board too, then by a row or a column while the larger board is found.
+    A result smaller than the true board is still possible. Returns ``(cols, rows)`` or None.
     """
     gray = to_gray(image)
     scale = min(1.0, 640.0 / max(gray.shape))
@@ -233,9 +239,28 @@ def suggest_chessboard_size(
     else:
         ref = tuple(near)
         candidates = [s for s in everything if min(abs(s[0] - b[0]) + abs(s[1] - b[1]) for b in (ref, ref[::-1])) <= 2]
+
+    def closeness(size: tuple[int, int]) -> int:
+        return abs(size[0] - ref[0]) + abs(size[1] - ref[1])
+
+    def whole_board(size: tuple[int, int]) -> tuple[int, int]:
+        """The board the sector-based detector sees around ``size``, in the orientation that holds ``size`` (the
+        closer one to ``near`` when both do), if found as a whole; else ``size``. That detector's rows and columns
+        may come transposed."""
+        ok, _, meta = cv2.findChessboardCornersSBWithMeta(gray, size, cv2.CALIB_CB_LARGER)
+        if not ok or meta is None:
+            return size
+        seen = (meta.shape[1], meta.shape[0])
+        for whole in sorted({seen, seen[::-1]}, key=lambda s: (closeness(s), s)):
+            holds = whole[0] >= size[0] and whole[1] >= size[1] and whole != size
+            if holds and max(whole) <= max_side and found(whole):
+                return whole
+        return size
+
     # Largest first; among equal areas, the orientation closest to the one given.
-    for size in sorted(candidates, key=lambda s: (-s[0] * s[1], abs(s[0] - ref[0]) + abs(s[1] - ref[1]))):
+    for size in sorted(candidates, key=lambda s: (-s[0] * s[1], closeness(s))):
         if found(size):
+            size = whole_board(size)
             while True:
                 bigger = [b for b in ((size[0] + 1, size[1]), (size[0], size[1] + 1)) if max(b) <= max_side]
                 grown = next((b for b in bigger if found(b)), None)
@@ -269,13 +294,17 @@ def write_board_image(
         The dimensions written to the JSON (board spec, pixel and mm sizes, DPI).
 
     Raises:
-        InputError: ``dpi`` below 72, a negative margin, a path not ending in ``.png``, or an earlier image or JSON
-            there without ``overwrite``.
+        InputError: ``dpi`` outside :data:`MIN_DPI` to :data:`MAX_DPI`, a negative margin, an image of more than
+            :data:`MAX_BOARD_PIXELS` (a board of too many or too large squares), a path not ending in ``.png``, or
+            an earlier image or JSON there without ``overwrite``.
     """
     from PIL import Image
 
-    if dpi < 72:
-        raise InputError(f"dpi must be at least 72, got {dpi}")
+    if not MIN_DPI <= dpi <= MAX_DPI:
+        raise InputError(
+            f"--dpi must be from {MIN_DPI} to {MAX_DPI} (finer than printers print, the image only takes memory), "
+            f"got {dpi}"
+        )
     if margin_mm < 0:
         raise InputError(f"the margin must be 0 mm or more, got {margin_mm:g}")
     path = Path(path)
@@ -285,8 +314,14 @@ def write_board_image(
     px_per_mm = dpi / 25.4
     square_px = int(round(spec.square * px_per_mm))
     margin_px = int(round(margin_mm * px_per_mm))
-    n = (spec.cols + 1, spec.rows + 1) if spec.kind == "chessboard" else (spec.cols, spec.rows)
-    size = (n[0] * square_px, n[1] * square_px)
+    columns, rows = spec.squares
+    size = (columns * square_px, rows * square_px)
+    pixels = (size[0] + 2 * margin_px) * (size[1] + 2 * margin_px)
+    if pixels > MAX_BOARD_PIXELS:  # before the image is made: it would take that many bytes, and more
+        raise InputError(
+            f"the board image would be {size[0] + 2 * margin_px}x{size[1] + 2 * margin_px} px at {dpi} dpi, more "
+            f"than {MAX_BOARD_PIXELS / 1e6:.0f} million pixels: give a smaller board, --square, --margin or --dpi"
+        )
     if spec.kind == "charuco":
         board_img = spec.charuco_board().generateImage(size, marginSize=0, borderBits=1)
     else:

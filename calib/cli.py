@@ -11,9 +11,11 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from alcn_cv.cli import add_progress_option
+from alcn_cv.cli import add_progress_option, number_at_least, number_in
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
+
+from .board import MAX_DPI, MIN_CHARUCO_CORNERS, MIN_DPI
 
 if TYPE_CHECKING:
     from .register import Registration
@@ -269,7 +271,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", required=True, help="output .png")
     _add_board_args(p)
-    p.add_argument("--dpi", type=int, default=300, help="print resolution (default 300)")
+    p.add_argument(
+        "--dpi",
+        type=number_in(int, MIN_DPI, MAX_DPI),
+        default=300,
+        help=f"print resolution, {MIN_DPI} to {MAX_DPI} (default 300)",
+    )
     p.add_argument("--margin", type=float, default=10.0, help="white margin in mm (default 10)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out and its JSON")
     p.set_defaults(func=_board)
@@ -297,10 +304,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "estimates one focal length, for square pixels, with the principal point at the image centre)",
     )
     _add_board_args(p, with_chessboard=False)
-    p.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
-    p.add_argument("--max-frames", type=int, help="use at most this many frames")
-    p.add_argument("--min-corners", type=int, default=8, help="board: fewest corners for a pose (default 8)")
-    p.add_argument("--max-rms", type=float, default=1.0, help="board: largest RMS reprojection error, px (default 1)")
+    p.add_argument("--step", type=number_at_least(int, 1), default=1, help="use every STEP-th frame (default 1)")
+    p.add_argument("--max-frames", type=number_at_least(int, 1), help="use at most this many frames")
+    p.add_argument(
+        "--min-corners",
+        type=number_at_least(int, MIN_CHARUCO_CORNERS),
+        default=8,
+        help=f"board: fewest corners for a pose (default 8; at least {MIN_CHARUCO_CORNERS}, the fewest with which "
+        "the board is found)",
+    )
+    p.add_argument(
+        "--max-rms",
+        type=number_at_least(float, 0, above=True),
+        default=1.0,
+        help="board: largest RMS reprojection error, px (default 1)",
+    )
     p.add_argument(
         "--known-distance",
         nargs=3,
@@ -317,11 +335,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--n-features",
-        type=int,
+        type=number_at_least(int, 1),
         default=4096,
-        help="sfm: SIFT keypoints per image, as the pose commands' --n-features (default 4096)",
+        help="sfm: SIFT keypoints kept per image, as the pose commands' --n-features, but at least 1: COLMAP's "
+        "SIFT has no 0 for all (default 4096)",
     )
-    p.add_argument("--threads", type=int, default=-1, help="sfm: threads (default all)")
+    p.add_argument("--threads", type=number_at_least(int, -1), default=-1, help="sfm: threads (default -1: all; 0 too)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     add_progress_option(p)
     p.set_defaults(func=_register)

@@ -118,7 +118,6 @@ class Registration:
     image_size: tuple[int, int]
     frames: list[FrameRegistration] = field(default_factory=list)
     units: str = "mm"
-    out_dir: Path | None = None
 
     @property
     def registered(self) -> list[FrameRegistration]:
@@ -306,7 +305,6 @@ def register_charuco(
             "Check that the board is in view, in focus, and matches --cols/--rows/--dictionary; or relax --max-rms.",
         )
         _write_outputs(tmp, reg)
-    reg.out_dir = Path(out_dir)
     errs = np.array([f.rms_px for f in reg.registered])
     logger.info(
         "registered %d of %d frames (median board RMS %.3f px); dropped %d",
@@ -374,8 +372,12 @@ class SfmSettings:
         step, max_frames: use every ``step``-th input frame, at most ``max_frames``.
         n_features: SIFT keypoints per image (``alcn calib register --n-features``, as the pose commands name
             the keypoints per image).
-        num_threads: threads for pycolmap (-1: all).
+        num_threads: threads for pycolmap (-1 or 0: all).
         seed: random seed of the reconstruction.
+
+    Raises:
+        InputError: ``n_features`` below 1 or ``num_threads`` below -1, which pycolmap refuses only after the frames
+            are written.
     """
 
     step: int = 1
@@ -383,6 +385,12 @@ class SfmSettings:
     n_features: int = 4096
     num_threads: int = -1
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.n_features < 1:
+            raise InputError(f"n_features must be at least 1 (SIFT keypoints per image), got {self.n_features}")
+        if self.num_threads < -1:
+            raise InputError(f"num_threads must be at least -1 (-1 or 0: all), got {self.num_threads}")
 
 
 @dataclass
@@ -687,7 +695,6 @@ def register_colmap(
         points, images = _renumber_registered(model, frames, rgb, reg)
         _check_enough(reg, "The frames need more overlap and texture.")
         _write_outputs(tmp, reg, points, images)
-    reg.out_dir = Path(out_dir)
     logger.info(
         "SfM registered %d of %d frames, %d points (units: %s)",
         len(reg.registered),

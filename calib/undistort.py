@@ -21,6 +21,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.io import (
     IMAGE_SUFFIXES,
     check_no_earlier_output,
+    check_output_kind,
     is_video,
     list_images,
     make_folder,
@@ -97,8 +98,9 @@ def main(
         ``<output stem>.camera.yaml`` beside an output file).
 
     Raises:
-        InputError: the output is the input (it would be overwritten), outputs that exist without ``overwrite``
-            (before any work), or an unreadable source.
+        InputError: the output is the input (it would be overwritten), an output of another kind than the source (a
+            file name for a folder, not an image file for an image, not a video file for a video), outputs that
+            exist without ``overwrite`` (all before any work), or an unreadable source.
     """
     source, output = Path(source), Path(output)
     if source.resolve() == output.resolve():  # resolved: ./a.png, a link to it and a.png are one file
@@ -106,6 +108,7 @@ def main(
     undistort = Undistorter(calib, alpha, keep_K)
     suffix = source.suffix.lower()
     if source.is_dir():
+        check_output_kind(source, output)
         files = list_images(source)
         check_no_earlier_output([*(output / path.name for path in files), output / "camera.yaml"], overwrite)
         make_folder(output)
@@ -113,6 +116,7 @@ def main(
             write_image(output / path.name, undistort(read_image(path), path.name))
         yaml_path = output / "camera.yaml"
     elif source.is_file() and is_video(source):
+        check_output_kind(source, output)
         check_no_earlier_output([output, output.with_name(f"{output.stem}.camera.yaml")], overwrite)
         n = map_video(
             source, output, lambda frame: undistort(frame, source.name), desc="undistorting", progress=progress
@@ -120,6 +124,7 @@ def main(
         logger.info("undistorted %d frames to %s", n, output)
         yaml_path = output.with_name(f"{output.stem}.camera.yaml")
     elif source.is_file() and suffix in IMAGE_SUFFIXES:
+        check_output_kind(source, output)
         check_no_earlier_output([output, output.with_name(f"{output.stem}.camera.yaml")], overwrite)
         write_image(output, undistort(read_image(source), source.name))
         yaml_path = output.with_name(f"{output.stem}.camera.yaml")

@@ -124,7 +124,8 @@ def main() -> None:
     if ref_path.is_file():
         logging.info("none: the reference model %s, built before (delete it to rebuild)", ref_path)
     else:  # the reference model: built from the video alone (see track_cookie_box.py)
-        build.main(video, ref_path, box_ply=args.data / "box.ply", **build.COOKIE_BOX)
+        # the .ply and cameras figure of a model deleted to rebuild it are replaced with it
+        build.main(video, ref_path, box_ply=args.data / "box.ply", overwrite=True, **build.COOKIE_BOX)
     ref = part_model.load(ref_path)
     K = np.asarray(ref.extra.get("K", build.COOKIE_BOX["K"]))  # the focal length refined when building
     models = {"none": ref}

@@ -83,7 +83,12 @@ def main() -> None:
     # a model of an earlier run is reused when it was built after the same normalization
     if not model_path.is_file() or not same_method(part_model.load(model_path).normalization, args.normalization):
         build.main(
-            video, model_path, box_ply=args.data / "box.ply", normalization=args.normalization, **build.COOKIE_BOX
+            video,
+            model_path,
+            box_ply=args.data / "box.ply",
+            normalization=args.normalization,
+            overwrite=True,  # an earlier run's model, built after another normalization
+            **build.COOKIE_BOX,
         )
     K_track, K = np.asarray(part_model.load(model_path).extra["K"]), build.COOKIE_BOX["K"]
     print(
@@ -91,7 +96,12 @@ def main() -> None:
         f"(tutorial: {K[0, 0]:.1f} {K[1, 1]:.1f})"
     )
     summary = track.main(
-        model_path, video, args.out / "poses.json", normalization=args.normalization, overlay=args.out / "overlay.mp4"
+        model_path,
+        video,
+        args.out / "poses.json",
+        normalization=args.normalization,
+        overlay=args.out / "overlay.mp4",
+        overwrite=True,  # the poses of an earlier run into --out
     )
     sheet = contact_sheet(args.out / "overlay.mp4", args.out / "overlay_sheet.png")
     print(

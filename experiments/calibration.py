@@ -61,7 +61,7 @@ def main() -> None:
         str(box / "poses.json"),
     ]
     for argv in (calib_argv, build_argv, track_argv):
-        alcn(*argv)
+        alcn(*argv, "--overwrite")  # a rerun replaces the earlier run's files; the report records the commands
     camera = load_calibration(calib / "camera.yaml")
     model = load_part_model(box / "model.npz")
     track = json.loads((box / "poses_info.json").read_text(encoding="utf-8"))

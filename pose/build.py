@@ -39,7 +39,7 @@ from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.extras import require
 from alcn_cv.formats.colmap import camera_from_pycolmap
-from alcn_cv.io import check_writable
+from alcn_cv.io import check_no_earlier_output, check_writable
 from alcn_cv.presets import preset_named
 from pose import model as part_model
 from pose.box import box_size as box_edge_lengths
@@ -56,7 +56,7 @@ from pose.sequence import (
     motion_masks,
     video_sequence,
 )
-from pose.solver import camera_matrix
+from pose.solver import camera_matrix, check_intrinsics
 from pose.triangulate import (
     collect_points,
     extract_features,
@@ -207,6 +207,7 @@ def build(
     ratio: float = 0.8,
     work_dir: str | Path | None = None,
     refine_focal: bool = False,
+    fit_hint: str | None = None,
     progress: bool = True,
 ) -> tuple[PartModel, np.ndarray]:
     """Build a part model from a sequence; returns it and the training cameras' centres (object frame).
@@ -218,7 +219,9 @@ def build(
     corner, axes along its edges), scaled to the known size.
 
     With a known size, a fit more than :data:`BOX_FIT_WARNING` off it is warned, and one whose points are more than
-    :data:`BOX_FIT_FAILURE` off it on the edges they cover fails (:func:`check_box_fit`).
+    :data:`BOX_FIT_FAILURE` off it on the edges they cover fails (:func:`check_box_fit`); ``fit_hint``: what its
+    message, and that of a known box with too few points on it, tells the caller to check (default: the options of
+    ``alcn pose build``).
 
     The model stores the camera for ``alcn pose track`` (a video's, or a registered sequence's when all its images
     share one): ``extra["K"]`` (refined with ``refine_focal``; OpenCV pixel convention), ``extra["image_size"]`` the
@@ -286,9 +289,13 @@ def build(
         near = np.all((xyz >= lo - margin) & (xyz <= hi + margin), axis=1)
         if near.sum() < 10:
             raise DatasetError(
-                f"only {int(near.sum())} triangulated points lie on the known box; check that the "
-                "sequence's poses are those of this object, and that --box-ply is the box placed in the sequence's "
-                "world frame (a BOP model); --box-size W H D gives the box's size alone, fitted where its points are"
+                f"only {int(near.sum())} triangulated points lie on the known box; "
+                + (
+                    fit_hint
+                    or "check that the sequence's poses are those of this object, and that --box-ply is the box "
+                    "placed in the sequence's world frame (a BOP model); --box-size W H D gives the box's size alone, "
+                    "fitted where its points are"
+                )
             )
         fit = fit_box(xyz[near], known)
         fit.stats["corner_error"] = float(
@@ -317,7 +324,7 @@ def build(
                     T = reg[v.name]
                     v.R_w2c = T[:, :3] @ fit.R
                     v.t_w2c = T[:, :3] @ fit.origin + T[:, 3] * s
-    check_box_fit(fit.stats, units, scale_free=not registered, edges=edges)
+    check_box_fit(fit.stats, units, scale_free=not registered, edges=edges, hint=fit_hint)
     index = np.full(len(xyz), -1, np.int64)
     index[keep] = np.arange(int(keep.sum()))
     kept_desc = keep[desc_point]
@@ -390,11 +397,14 @@ def _against_the_known_box(stats: dict[str, Any], R: np.ndarray, known: np.ndarr
     return True
 
 
-def check_box_fit(stats: dict[str, Any], units: str, *, scale_free: bool = False, edges: str = "x, y, z") -> None:
+def check_box_fit(
+    stats: dict[str, Any], units: str, *, scale_free: bool = False, edges: str = "x, y, z", hint: str | None = None
+) -> None:
     """Log a box fit's error against the known size (its sizes along the ``edges`` of the box: by default those of the
     model's box, corner 0 to corners 4, 2, 1), as a warning when it is over :data:`BOX_FIT_WARNING`; nothing without
     a known size. ``scale_free``: the fit scaled the points to the known size (a video's reconstruction), so their
-    units cannot be off, and the failure's message does not suggest them.
+    units cannot be off, and the failure's message does not suggest them. ``hint``: what the failure's message tells
+    the caller to check (default: the options of ``alcn pose build``).
 
     Raises:
         DatasetError: the error on the edges the points cover (``seen_relative_size_error``) is over
@@ -405,7 +415,9 @@ def check_box_fit(stats: dict[str, Any], units: str, *, scale_free: bool = False
     error = stats["mean_abs_relative_size_error"]
     seen = stats.get("seen_relative_size_error", error)
     if seen > BOX_FIT_FAILURE:
-        if scale_free:
+        if hint:
+            why = hint
+        elif scale_free:
             why = (
                 "the reconstruction's points are not this box's shape; check --box-size/--box-ply (the box's three "
                 "edges), that the video shows this box, and its camera (--refine-focal for a guessed --K)"
@@ -465,6 +477,7 @@ def main(
     box_units: str | None = None,
     refine_focal: bool | None = None,
     conf: str | None = None,
+    overwrite: bool = False,
     progress: bool = True,
     what: str = "pose.build.main",
 ) -> Path:
@@ -496,9 +509,13 @@ def main(
     are :data:`DEFAULTS`. The model records the preset's name and the settings the build used (``extra["build"]``:
     :func:`_provenance`).
 
+    ``overwrite``: replace the files of an earlier build (``output``, its ``.ply`` and :func:`cameras_plot`).
+
     Raises:
-        InputError: an unknown preset, a video without its camera, a camera or the box given twice, a video's frames
-            of another size than its calibration's; and :func:`build`'s.
+        InputError: an unknown preset, a video without its camera, a camera or the box given twice, ``K`` not a
+            camera matrix (positive focal lengths), a box size not three lengths greater than 0, ``output`` a
+            folder, or the files of an earlier build there without ``overwrite`` (all before the work); a video's
+            frames of another size than its calibration's; and :func:`build`'s.
     """
     input_path, output = Path(input_path), part_model.model_file(output)
     is_video = input_path.is_file() and io.is_video(input_path)
@@ -522,6 +539,15 @@ def main(
     require("pycolmap", "open3d", "matplotlib", what=what, preferred="pose")
     if box_ply is not None and box_size is not None:
         raise InputError("give the box once: --box-ply (a cuboid .ply) or --box-size (its edge lengths), not both")
+    if box_size is not None:
+        sizes = np.asarray(box_size, np.float64)
+        if sizes.shape != (3,) or not (np.isfinite(sizes).all() and (sizes > 0).all()):
+            raise InputError(f"--box-size W H D: three lengths greater than 0, got {sizes.tolist()}")
+    if settings.get("K") is not None:
+        check_intrinsics(settings["K"])
+    if output.is_dir():
+        raise InputError(f"{output} is a folder; give the part model's file (.npz)")
+    check_no_earlier_output([output, output.with_suffix(".ply"), cameras_plot(output)], overwrite)
     check_writable(output)  # before the work
     if input_path.is_file() and not is_video:
         raise InputError(
@@ -587,8 +613,14 @@ def main(
         box_read_in = None if box_ply is None and box_size is None else video["box_units"] or seq.units
         model.extra["build"] = _provenance(conf, settings, seq if is_video else None, box_read_in)
         path = part_model.save(model, output)
-        plot_model(model, cams, path.with_name(path.stem + "_cameras.png"))
+        plot_model(model, cams, cameras_plot(path))
     return path
+
+
+def cameras_plot(output: str | Path) -> Path:
+    """The plot of the model's points and cameras :func:`main` writes beside the part model ``output``."""
+    output = Path(output)
+    return output.with_name(output.stem + "_cameras.png")
 
 
 def _provenance(

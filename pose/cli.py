@@ -10,14 +10,26 @@ from pathlib import Path
 
 import numpy as np
 
-from alcn_cv.cli import add_conf_option, add_progress_option, add_seeds_option, number_at_least
+from alcn_cv.cli import add_conf_option, add_progress_option, add_seeds_option, number_at_least, number_in
 from alcn_cv.errors import InputError
 
 
 def _intrinsics(values: list[float] | None) -> np.ndarray | None:
-    from pose.solver import camera_matrix
+    """The camera matrix of ``--K FX FY CX CY`` (``None`` without it).
 
-    return None if values is None else camera_matrix(*values)
+    Raises:
+        InputError: focal lengths not greater than 0, or a value not finite (one line naming ``--K``).
+    """
+    from pose.solver import camera_matrix, check_intrinsics
+
+    if values is None:
+        return None
+    try:
+        return check_intrinsics(camera_matrix(*values))
+    except InputError:  # the same rule, in the option's words
+        raise InputError(
+            f"--K FX FY CX CY: FX and FY greater than 0 and all four finite, got {' '.join(f'{v:g}' for v in values)}"
+        ) from None
 
 
 def _build(args: argparse.Namespace) -> int:
@@ -40,10 +52,11 @@ def _build(args: argparse.Namespace) -> int:
         box_units=args.box_units,
         refine_focal=args.refine_focal,
         conf=args.conf,
+        overwrite=args.overwrite,
         progress=not args.no_progress,
         what="alcn pose build",
     )
-    cameras = path.with_name(path.stem + "_cameras.png")
+    cameras = build.cameras_plot(path)
     print(f"part model -> {path} (its points: {path.with_suffix('.ply')}, its cameras: {cameras})")
     return 0
 
@@ -111,6 +124,8 @@ def _eval(args: argparse.Namespace) -> int:
     check_no_earlier_output([Path(args.out) / f"{r}.{ext}" for r in reports for ext in ("md", "json")], args.overwrite)
     normalizations = args.normalizations or evaluate.DEFAULT_NORMALIZATIONS
     recipe = _recipe(args)
+    if args.data:  # the arguments first, then the data, before the Middlebury sets' models
+        evaluate.data_layout(args.data, sequences=args.sequences)
     if args.middlebury:
         evaluate.middlebury_main(
             args.middlebury,
@@ -161,6 +176,7 @@ def _train_corners(args: argparse.Namespace) -> int:
         seed=args.seed,
         device=args.device,
         conf=args.conf,
+        overwrite=args.overwrite,
         progress=not args.no_progress,
     )
     print(f"corner detector ({args.normalization}) -> {path}")
@@ -272,7 +288,7 @@ def _add_planar(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
     r.add_argument(
         "--n-features",
-        type=int,
+        type=number_at_least(int, 0),
         default=0,
         help="the strongest keypoints kept per frame (default 0: all; the target's model keeps all of "
         "the reference frame's)",
@@ -306,6 +322,7 @@ def _overlay_error(args: argparse.Namespace) -> int:
         settings=settings,
         command=_command(),
         show=args.show,
+        overwrite=args.overwrite,
         progress=not args.no_progress,
     )
     print((Path(args.out) / "overlay_error.md").read_text(encoding="utf-8"))
@@ -313,7 +330,7 @@ def _overlay_error(args: argparse.Namespace) -> int:
 
 
 def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
-    from pose.overlay import EdgeSettings
+    from pose.overlay import MAX_ANGLE, MAX_DISTANCE, EdgeSettings
 
     d = EdgeSettings()
     o = sub.add_parser(
@@ -336,18 +353,24 @@ def _add_overlay_error(sub: argparse._SubParsersAction) -> None:
     )
     o.add_argument("--out", type=Path, required=True, help="report folder")
     o.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the report of an earlier run in --out (overlay_error.*, overlay_frames.png); without it, such a "
+        "folder is refused before any work",
+    )
+    o.add_argument(
         "--max-distance",
-        type=float,
+        type=number_in(float, 1, MAX_DISTANCE),
         default=d.max_distance,
-        help=f"search range along each edge's normal, px; no image edge within it counts as this "
-        f"(default {d.max_distance:g})",
+        help=f"search range along each edge's normal, px, 1 to {MAX_DISTANCE:g}; no image edge within it counts as "
+        f"this (default {d.max_distance:g})",
     )
     o.add_argument(
         "--max-angle",
-        type=float,
+        type=number_in(float, 0, MAX_ANGLE, above=True),
         default=d.max_angle,
-        help=f"largest angle between an image edge's gradient and the drawn edge's normal, degrees "
-        f"(default {d.max_angle:g})",
+        help=f"largest angle between an image edge's gradient and the drawn edge's normal, degrees, above 0 and at "
+        f"most {MAX_ANGLE:g} (90: any edge; default {d.max_angle:g})",
     )
     o.add_argument(
         "--show",
@@ -380,6 +403,7 @@ def _bench_corners(args: argparse.Namespace) -> int:
         max_frames=args.max_frames,
         repeats=args.repeats,
         threads=args.threads,
+        overwrite=args.overwrite,
     )
     print(
         f"{r['fps']:.1f} fps at {r['size'][0]}x{r['size'][1]} ({r['normalization']} in front; normalize "
@@ -392,9 +416,11 @@ def _bench_corners(args: argparse.Namespace) -> int:
 
 
 def _corner_recall(args: argparse.Namespace) -> int:
-    from alcn_cv.io import write_json
+    from alcn_cv.io import check_no_earlier_output, write_json
     from pose import corner_bench
 
+    if args.out is not None:
+        check_no_earlier_output([args.out / f"corner_recall_{b}.json" for b in args.background], args.overwrite)
     for background in args.background:
         r = corner_bench.corner_recall(args.detector, args.scene, obj_id=args.obj_id, background=background)
         print(
@@ -413,6 +439,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     ``planar`` and ``overlay-error`` to ``alcn``."""
     from pose.build import CONFS as BUILD_CONFS
     from pose.build import DEFAULTS as BUILD_DEFAULTS
+    from pose.corner_bench import MAX_SIDE, MIN_SIDE
     from pose.sequence import VIDEO_MAX_FRAMES, VIDEO_STEP
     from pose.solver import METHODS
 
@@ -440,6 +467,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     b.add_argument("input", help="BOP scene folder, COLMAP model folder, Middlebury set, or a video file")
     b.add_argument("output", help="part model to write (.npz)")
+    b.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the part model of an earlier build (OUTPUT and its .ply and _cameras.png); without it, they "
+        "are refused before any work",
+    )
     b.add_argument("--images", help="image folder of a COLMAP model")
     bcam = b.add_mutually_exclusive_group()
     bcam.add_argument(
@@ -454,11 +487,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     add_conf_option(b, _build_summaries(), None)
     b.add_argument(
-        "--step", type=int, help=f"use every N-th frame of a video (default: the preset's, else {VIDEO_STEP})"
+        "--step",
+        type=number_at_least(int, 1),
+        help=f"use every N-th frame of a video (default: the preset's, else {VIDEO_STEP})",
     )
     b.add_argument(
         "--max-frames",
-        type=int,
+        type=number_at_least(int, 1),
         help=f"at most this many video frames (default: the preset's, else {VIDEO_MAX_FRAMES})",
     )
     b.add_argument(
@@ -486,7 +521,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument(
         "--box-size",
         nargs=3,
-        type=float,
+        type=number_at_least(float, 0, above=True),
         metavar=("W", "H", "D"),
         help="the box's true edge lengths (any order), fitted to the points wherever the box stands: for a video, or "
         "a registered sequence whose world frame is not the box's",
@@ -558,12 +593,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     t.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace an --overlay folder of an earlier run (the poses and an overlay video are replaced in any case)",
+        help="replace the outputs of an earlier run: OUTPUT, the OUTPUT_info.json beside it and the --overlay; without "
+        "it, any of them that exists is refused before the tracking",
     )
-    # --step and --max-frames are checked where the frames are read (alcn_cv.io.FrameReader), as for a Python caller
-    t.add_argument("--step", type=int, default=1, metavar="N", help="track every N-th frame (default 1)")
     t.add_argument(
-        "--max-frames", type=int, metavar="N", help="track the first N frames (of those --step keeps; default all)"
+        "--step", type=number_at_least(int, 1), default=1, metavar="N", help="track every N-th frame (default 1)"
+    )
+    t.add_argument(
+        "--max-frames",
+        type=number_at_least(int, 1),
+        metavar="N",
+        help="track the first N frames (of those --step keeps; default all)",
     )
     t.add_argument(
         "--method", default="usac_default", choices=sorted(METHODS), help="RANSAC variant (default usac_default)"
@@ -671,6 +711,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     c.add_argument("input", help="registered training sequence (BOP scene folder, COLMAP model, Middlebury set)")
     c.add_argument("output", help="corner detector to write (.onnx)")
+    c.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the corner detector of an earlier run at OUTPUT; without it, it is refused before the training",
+    )
     box = c.add_mutually_exclusive_group(required=True)
     box.add_argument("--box-ply", help="cuboid .ply of the box in the object frame (mm; BOP models/obj_000001.ply)")
     box.add_argument("--model", help="part model (.npz) whose box corners to use")
@@ -682,7 +727,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="where the network trains (default: cuda where torch sees it, else cpu; the box recipe's "
         "4000 steps take about 8 min on 2 CPU cores)",
     )
-    c.add_argument("--seed", type=int, default=0, help="seed of the frames and the network (default 0)")
+    c.add_argument(
+        "--seed", type=number_at_least(int, 0), default=0, help="seed of the frames and the network (default 0)"
+    )
     add_progress_option(c)
     c.set_defaults(func=_train_corners)
 
@@ -701,15 +748,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     bc.add_argument(
         "--frame-size",
         nargs=2,
-        type=int,
+        type=number_in(int, MIN_SIDE, MAX_SIDE),
         default=[640, 480],
         metavar=("W", "H"),
-        help="width and height in pixels the frames are resized to (default 640 480)",
+        help=f"width and height in pixels the frames are resized to, each from {MIN_SIDE} (the network's window) to "
+        f"{MAX_SIDE} (the frames are held in memory; default 640 480)",
     )
-    bc.add_argument("--max-frames", type=int, default=60, help="frames used (default 60)")
-    bc.add_argument("--repeats", type=int, default=2, help="passes over them (default 2)")
+    bc.add_argument("--max-frames", type=number_at_least(int, 1), default=60, help="frames used (default 60)")
+    bc.add_argument("--repeats", type=number_at_least(int, 1), default=2, help="passes over them (default 2)")
     bc.add_argument("--threads", type=int, help="OpenCV threads (default OpenCV's)")
     bc.add_argument("--out", type=Path, help="write bench_corners.md and .json here")
+    bc.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the report of an earlier run in --out; without it, it is refused before any work",
+    )
     bc.set_defaults(func=_bench_corners)
 
     cr = sub.add_parser(
@@ -734,6 +787,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="keep the frames as they are and/or grey everything but the object (default keep)",
     )
     cr.add_argument("--out", type=Path, help="write corner_recall_<background>.json here")
+    cr.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the corner_recall_<background>.json of an earlier run in --out; without it, they are refused "
+        "before any work",
+    )
     cr.set_defaults(func=_corner_recall)
     _add_planar(sub)
     _add_overlay_error(sub)

@@ -24,10 +24,16 @@ import numpy as np
 
 from alcn_cv import io
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, make_folder, to_gray, write_json
+from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, to_gray, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table
 
 logger = logging.getLogger(__name__)
+
+#: The sides (pixels) :func:`benchmark` resizes frames to, each from :data:`MIN_SIDE` (the network's window,
+#: :data:`pose.corners.WINDOW`) to :data:`MAX_SIDE` (4K; the frames are held in memory, 60 of 4096x4096 take 3 GB).
+MIN_SIDE, MAX_SIDE = 32, 4096
+#: The files ``alcn pose bench-corners --out`` writes.
+REPORT_FILES = ("bench_corners.md", "bench_corners.json")
 
 
 def benchmark(
@@ -47,12 +53,18 @@ def benchmark(
         onnx_path: a corner detector (``alcn pose train-corners``).
         source: a video or an image folder (:func:`alcn_cv.io.iter_frames`).
         K: intrinsics of ``source``'s frames at their own size.
-        size: ``(width, height)`` the frames are resized to.
+        size: ``(width, height)`` the frames are resized to, each side from :data:`MIN_SIDE` to :data:`MAX_SIDE`.
+        max_frames, repeats: at least 1.
         threads: ``cv2.setNumThreads`` (default: OpenCV's).
+
+    Raises:
+        InputError: ``size``, ``max_frames`` or ``repeats`` out of range (before the frames are read), or a source
+            without frames.
     """
     from pose.corners import CornerDetector, scaled_camera
     from pose.track import make_tracker
 
+    check_settings(size, max_frames, repeats)
     if threads is not None:
         cv2.setNumThreads(threads)
     frames = [f for _, f in io.iter_frames(source, max_frames=max_frames)]
@@ -104,15 +116,42 @@ def benchmark(
     }
 
 
+def check_settings(size: tuple[int, int], max_frames: int, repeats: int) -> None:
+    """Check :func:`benchmark`'s ``size``, ``max_frames`` and ``repeats`` (the message names the options of ``alcn
+    pose bench-corners``, which checks them as it parses them).
+
+    Raises:
+        InputError: a side of ``size`` outside :data:`MIN_SIDE` to :data:`MAX_SIDE`, or ``max_frames`` or
+            ``repeats`` below 1.
+    """
+    if len(size) != 2 or not all(MIN_SIDE <= int(side) <= MAX_SIDE for side in size):
+        raise InputError(f"--frame-size W H: each {MIN_SIDE} to {MAX_SIDE} pixels, got {' '.join(map(str, size))}")
+    if max_frames < 1 or repeats < 1:
+        raise InputError(f"--max-frames and --repeats must be at least 1, got {max_frames} and {repeats}")
+
+
 def main(
     onnx_path: str | Path,
     source: str | Path,
     K: np.ndarray,
     out: str | Path | None = None,
     command: str | None = None,
+    overwrite: bool = False,
     **kwargs: Any,
 ) -> dict[str, Any]:
-    """:func:`benchmark`, logged and, with ``out``, written as ``out/bench_corners.{md,json}``."""
+    """:func:`benchmark`, logged and, with ``out``, written as ``out/bench_corners.{md,json}``.
+
+    Args:
+        onnx_path, source, K, kwargs: :func:`benchmark`'s.
+        out: the report's folder (none: no report).
+        command: the command line the report records.
+        overwrite: replace the report of an earlier run in ``out``.
+
+    Raises:
+        InputError: a report in ``out`` without ``overwrite`` (before the work), and :func:`benchmark`'s.
+    """
+    if out is not None:
+        check_no_earlier_output([Path(out) / name for name in REPORT_FILES], overwrite)
     result = benchmark(onnx_path, source, K, **kwargs)
     logger.info(
         "corner detector (%s) at %dx%d: %.1f fps (%.1f ms: normalize %.1f, network %.1f, peaks + pose "
@@ -146,8 +185,9 @@ def main(
                 digits=1,
             )
         )
-        atomic_write(out / "bench_corners.md", md)
-        write_json(out / "bench_corners.json", {**result, "command": command})
+        md_path, json_path = (out / name for name in REPORT_FILES)
+        atomic_write(md_path, md)
+        write_json(json_path, {**result, "command": command})
     return result
 
 

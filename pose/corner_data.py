@@ -49,7 +49,7 @@ def replace_background(gray: np.ndarray, mask: np.ndarray, rng: np.random.Genera
     gamma-encoded like a photograph)."""
     from alcn_cv.data.textures import display_texture
 
-    texture = display_texture(rng, gray.shape, gray=True)
+    texture = display_texture(rng, gray.shape)
     alpha = mask.astype(np.float32) / np.float32(255)
     out = alpha * gray.astype(np.float32) + (1 - alpha) * np.float32(255) * texture
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)

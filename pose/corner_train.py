@@ -23,7 +23,7 @@ from tqdm import tqdm
 
 from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, output_path, with_suffix
+from alcn_cv.io import atomic_write, check_no_earlier_output, output_path, with_suffix
 from pose.box import NUM_CORNERS, box_parts
 from pose.corner_data import CornerFrames, build_frames, build_image_frames
 from pose.corners import FORMAT_NAME, FORMAT_VERSION, PAD, STRIDE, WINDOW
@@ -496,14 +496,25 @@ def main(
     *,
     box_ply: str | Path | None = None,
     model: str | Path | None = None,
+    overwrite: bool = False,
     **kwargs: Any,
 ) -> Path:
     """``alcn pose train-corners``: the box corners from ``box_ply`` (a cuboid mesh, mm) or a part
-    model (``model``, its units), then :func:`train_corners` (``kwargs``: its keywords)."""
+    model (``model``, its units), then :func:`train_corners` (``kwargs``: its keywords).
+
+    Args:
+        overwrite: replace a corner detector of an earlier run at ``out``.
+
+    Raises:
+        InputError: the box given twice or not at all, or a file at ``out`` without ``overwrite`` (before the
+            training); and :func:`train_corners`'s.
+    """
     from pose import model as part_model
 
     if (box_ply is None) == (model is None):
         raise InputError("give the box as either box_ply (a .ply cuboid) or model (a part model .npz)")
+    # the kind of file first: an existing folder is no detector that --overwrite would replace
+    check_no_earlier_output([output_path(out, ".onnx", "a corner detector")], overwrite)
     if box_ply is not None:
         corners, units = part_model.read_box_corners(box_ply), "mm"
     else:

@@ -185,6 +185,33 @@ def table_markdown(
     return markdown_table(["", *columns], [[row, *(cell(row, c) for c in columns)] for row in table], digits=1)
 
 
+def data_layout(
+    data_dir: str | Path, obj_id: int = 1, sequences: Sequence[int] | None = None
+) -> tuple[Path, list[Path], Path]:
+    """The training sequence, the test sequences (those numbered in ``sequences``, default all) and the box's model
+    of a pose data set (``alcn data pose``), checked before any work.
+
+    Raises:
+        InputError: no folder ``data_dir``.
+        DatasetError: a folder without ``train/000001``, those test sequences or ``models/obj_<obj_id>.ply``.
+    """
+    data_dir = Path(data_dir)
+    if not data_dir.is_dir():
+        what = "not a folder" if data_dir.exists() else "no such folder"
+        raise InputError(f"{data_dir}: {what}; --data is a pose data set of `alcn data pose`")
+    train = data_dir / "train" / "000001"
+    tests = sorted(p for p in (data_dir / "test").glob("[0-9]*") if p.is_dir()) if (data_dir / "test").is_dir() else []
+    if sequences:
+        tests = [p for p in tests if int(p.name) in set(sequences)]
+    model_ply = data_dir / "models" / f"obj_{obj_id:06d}.ply"
+    if not train.is_dir() or not tests or not model_ply.is_file():
+        raise DatasetError(
+            f"{data_dir}: expected train/000001, test/0000NN (those of --sequences) and "
+            f"models/obj_{obj_id:06d}.ply (`alcn data pose`)"
+        )
+    return train, tests, model_ply
+
+
 @holds_out_dir
 def main(
     data_dir: str | Path,
@@ -217,24 +244,16 @@ def main(
     ``progress``: a progress bar over the models.
 
     Raises:
-        DatasetError: ``data_dir`` is not such a data set.
-        InputError: its training sequence registered in arbitrary units (:func:`pose.sequence.check_known_units`),
-            before any model is made; an unknown detector.
+        DatasetError: ``data_dir`` is not such a data set (:func:`data_layout`); a part model's box fit too far off
+            the box (:func:`pose.build.build`; the message says what to change).
+        InputError: no folder ``data_dir``; its training sequence registered in arbitrary units
+            (:func:`pose.sequence.check_known_units`), before any model is made; an unknown detector.
     """
     data_dir, out_dir = Path(data_dir), Path(out_dir)
+    train, tests, model_ply = data_layout(data_dir, obj_id, sequences)
     make_folder(out_dir)
     if corner_recipe is None:
         corner_recipe, corner_conf = CORNER_CONFS["box"], "box"
-    train = data_dir / "train" / "000001"
-    tests = sorted(p for p in (data_dir / "test").glob("[0-9]*") if p.is_dir()) if (data_dir / "test").is_dir() else []
-    if sequences:
-        tests = [p for p in tests if int(p.name) in set(sequences)]
-    model_ply = data_dir / "models" / f"obj_{obj_id:06d}.ply"
-    if not train.is_dir() or not tests or not model_ply.is_file():
-        raise DatasetError(
-            f"{data_dir}: expected train/000001, test/0000NN (those of --sequences) and "
-            f"models/obj_{obj_id:06d}.ply (`alcn data pose`)"
-        )
     seeds = check_seeds(seeds)
     # the models and corner detectors are made from the training sequence's poses: in known units, checked first
     check_known_units(load_sequence(train, obj_id=obj_id), "alcn pose eval (its models are built from these poses)")
@@ -257,8 +276,20 @@ def main(
             runs = []  # per seed: (detector, units, outline, info)
             if det_name == "features":
                 seq = load_sequence(train, obj_id=obj_id)
+                # what the user of `alcn pose eval` can change when the points do not fit the data set's box
+                fit_hint = (
+                    f"after the normalization {name}, {train}'s {len(seq.views)} views gave too few points of the box "
+                    f"{model_ply.name}, or its poses are not that box's; make the data set with more frames (`alcn "
+                    "data pose --frames 12` or more), or try another --feature, or leave this normalization out"
+                )
                 model, _ = build_model(
-                    seq, feature=feature, normalization=name, box_ply=model_ply, work_dir=out_dir, progress=progress
+                    seq,
+                    feature=feature,
+                    normalization=name,
+                    box_ply=model_ply,
+                    work_dir=out_dir,
+                    fit_hint=fit_hint,
+                    progress=progress,
                 )
                 save_model(model, out_dir / f"model_{file_stem(name)}.npz")
                 row = f"{name} / {feature.lower()} features"

@@ -33,14 +33,23 @@ import numpy as np
 
 from alcn_cv import io
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import atomic_write, make_folder, write_json
-from alcn_cv.report import describe_machine, machine, markdown_table, new_figure, save_figure
+from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, write_json
+from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none, new_figure, save_figure
 from pose import model as part_model
 from pose.box import facing_faces
 from pose.model import BOX_EDGES
 from pose.solver import project
 
 logger = logging.getLogger(__name__)
+
+#: The largest :attr:`EdgeSettings.max_distance`, pixels: five times the default; a box drawn farther off its
+#: object is lost, not misplaced (and the search's cost grows with it).
+MAX_DISTANCE = 200.0
+#: The largest :attr:`EdgeSettings.max_angle`, degrees: an edge's gradient is at most 90 degrees from a normal
+#: (either way across the edge), so 90 takes every image edge.
+MAX_ANGLE = 90.0
+#: The files :func:`main` writes into its folder.
+REPORT_FILES = ("overlay_error.md", "overlay_error.json", "overlay_error.png", "overlay_frames.png")
 
 
 @dataclass
@@ -50,11 +59,15 @@ class EdgeSettings:
     Attributes:
         step: distance between samples along a projected edge, pixels.
         trim: fraction of each edge left out at each end.
-        max_distance: search range along the normal, pixels; a sample without an image edge
-            in range counts as this.
+        max_distance: search range along the normal, pixels, 1 to :data:`MAX_DISTANCE`; a sample without an image
+            edge in range counts as this.
         max_angle: largest angle (degrees) between an image edge's gradient and the drawn
-            edge's normal.
+            edge's normal, above 0 and at most :data:`MAX_ANGLE`.
         canny: Canny's low and high thresholds; ``blur``: Gaussian sigma before it.
+
+    Raises:
+        InputError: ``max_distance`` or ``max_angle`` out of range (``alcn pose overlay-error`` checks its options
+            as it parses them).
     """
 
     step: float = 3.0
@@ -63,6 +76,13 @@ class EdgeSettings:
     max_angle: float = 20.0
     canny: tuple[float, float] = (40.0, 100.0)
     blur: float = 1.5
+
+    def __post_init__(self) -> None:
+        # `not <=`: NaN is in no range
+        if not 1 <= self.max_distance <= MAX_DISTANCE:
+            raise InputError(f"--max-distance must be 1 to {MAX_DISTANCE:g} px, got {self.max_distance:g}")
+        if not 0 < self.max_angle <= MAX_ANGLE:
+            raise InputError(f"--max-angle must be above 0 and at most {MAX_ANGLE:g} degrees, got {self.max_angle:g}")
 
 
 def visible_edges(corners: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> list[tuple[int, int]]:
@@ -243,6 +263,8 @@ def summarize(errors: dict[str, FrameError], worst: int = 5) -> dict[str, Any]:
             }
     # the box's systematic misplacement: how far each edge is off on average, whatever the texture
     bias = [abs(e["mean_signed_px"]) for e in per_edge.values()]
+    # frames where no sample found an image edge have no mean of those found (NaN; not a warning of numpy's)
+    matched = [errors[n].matched_px for n in names if np.isfinite(errors[n].matched_px)]
     return {
         "frames": len(values),
         "mean_px": float(values.mean()),
@@ -250,7 +272,7 @@ def summarize(errors: dict[str, FrameError], worst: int = 5) -> dict[str, Any]:
         "edge_bias_px": float(np.mean(bias)) if bias else float("nan"),
         "p90_px": float(np.percentile(values, 90)),
         "found": float(np.mean([errors[n].found for n in names])),
-        "matched_px": float(np.nanmean([errors[n].matched_px for n in names])),
+        "matched_px": float(np.mean(matched)) if matched else float("nan"),
         "worst": [[names[k], float(values[k])] for k in order],
         "edges": per_edge,
     }
@@ -306,16 +328,27 @@ def main(
     settings: EdgeSettings | None = None,
     command: str = "",
     show: Sequence[str] = ("frame_000300",),
+    overwrite: bool = False,
     progress: bool = True,
 ) -> dict[str, Any]:
     """Measure every run ``(label, model, poses)`` on ``video``; writes ``overlay_error.md``,
     ``overlay_error.json``, ``overlay_error.png`` (the error over the video) and
     ``overlay_frames.png`` (the frames ``show`` and the first run's two worst with every run's
-    box) into ``out_dir``."""
+    box) into ``out_dir`` (:data:`REPORT_FILES`), all or none: a failure while writing removes them all, an earlier
+    report's replaced ones included.
+
+    Args:
+        overwrite: replace the report of an earlier run in ``out_dir``.
+
+    Raises:
+        InputError: ``out_dir`` a file, or a report in it without ``overwrite`` (before any work); a run without a
+            posed frame of ``video``.
+    """
     settings = settings or EdgeSettings()
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"{out_dir} is a file; the output is a folder")
+    check_no_earlier_output([out_dir / name for name in REPORT_FILES], overwrite)
     drawn = {label: _camera_and_poses(model, poses) for label, model, poses in runs}  # all checked before any work
     errors = {label: _measure(d, video, settings, progress) for label, d in drawn.items()}
     for (label, _, poses), measured in zip(runs, errors.values()):
@@ -371,30 +404,38 @@ def main(
         + "\n\nMean signed offset of each box edge (px, along the normal of the projected edge; corners "
         "numbered as in `pose.model.box_corners`):\n\n" + markdown_table(["edge", *errors], edge_rows, digits=1) + "\n"
     )
-    atomic_write(out_dir / "overlay_error.md", md)
-    write_json(
-        out_dir / "overlay_error.json",
-        {
-            "command": command,
-            "machine": host,
-            "video": str(video),
-            "settings": vars(settings),
-            "runs": {
+    record = {
+        "command": command,
+        "machine": host,
+        "video": str(video),
+        "settings": vars(settings),
+        # a statistic of no sample (the mean distance of the edges found, where none was) is null, not NaN
+        "runs": nan_to_none(
+            {
                 label: {
                     "model": str(m),
                     "poses": str(p),
                     **summary[label],
-                    "per_frame": {
-                        n: (None if not np.isfinite(e.mean_px) else e.mean_px) for n, e in errors[label].items()
-                    },
+                    "per_frame": {n: e.mean_px for n, e in errors[label].items()},
                 }
                 for label, m, p in runs
-            },
-        },
-    )
-    plot_errors(errors, out_dir / "overlay_error.png", settings.max_distance)
+            }
+        ),
+    }
     worst = [n for n, _ in next(iter(summary.values())).get("worst", [])[:2]]
-    plot_frames(video, drawn, list(dict.fromkeys([*show, *worst])), out_dir / "overlay_frames.png")
+    paths = [out_dir / name for name in REPORT_FILES]
+    md_path, json_path, plot_path, frames_path = paths
+    try:
+        write_json(json_path, record)
+        plot_errors(errors, plot_path, settings.max_distance)
+        plot_frames(video, drawn, list(dict.fromkeys([*show, *worst])), frames_path)
+        atomic_write(md_path, md)
+    except BaseException:
+        # no report in part, nor this run's files beside an earlier report's (--overwrite): a failed report is not
+        # mistaken for a whole one
+        for path in paths:
+            path.unlink(missing_ok=True)
+        raise
     for label, s in summary.items():
         logger.info(
             "%s: mean %.2f px, median %.2f px over %d frames",

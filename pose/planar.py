@@ -93,17 +93,17 @@ def reference_index(frames: np.ndarray) -> int:
 
 
 def select_region(
-    gray: np.ndarray, fraction: float = DEFAULT_TARGET_FRACTION, feature: str = "SIFT", normalization: str = "none"
+    gray: np.ndarray, fraction: float = DEFAULT_TARGET_FRACTION, feature: str = "SIFT"
 ) -> tuple[int, int, int, int]:
     """``(x, y, w, h)``: the window of ``fraction`` of the image's width and height that holds the
-    most keypoints of ``gray`` (uint8, after ``normalization``), searched on a grid of 1/20 of the
-    image, 8 px from the borders (where a descriptor has no room)."""
+    most keypoints of ``gray`` (uint8, as it is: every normalization gets the same target), searched on a grid of
+    1/20 of the image, 8 px from the borders (where a descriptor has no room)."""
     if not 0 < fraction <= 1:
         raise InputError(f"the target fraction must be in (0, 1], got {fraction}")
     h, w = gray.shape[:2]
     tw, th = max(int(round(fraction * w)), 16), max(int(round(fraction * h)), 16)
     margin = 8
-    kps = create_feature(feature, 0).detect(from_spec(normalization).apply(gray), None)
+    kps = create_feature(feature, 0).detect(gray, None)
     count = np.zeros((h + 1, w + 1), np.float64)
     pts = np.array([k.pt for k in kps], np.float64).reshape(-1, 2).astype(int)
     np.add.at(count, (np.minimum(pts[:, 1], h - 1) + 1, np.minimum(pts[:, 0], w - 1) + 1), 1)
@@ -159,7 +159,6 @@ def build_target(
     normalization: str = "none",
     *,
     feature: str = "SIFT",
-    n_features: int = 0,
     reference: str = "",
 ) -> PlanarTarget:
     """The part model of the rectangle ``region = (x, y, w, h)`` of ``image`` (BGR or gray uint8).
@@ -179,7 +178,7 @@ def build_target(
     K = np.asarray(K, np.float64)
     mask = np.zeros(gray.shape, np.uint8)
     mask[y : y + h, x : x + w] = 255
-    det = create_feature(feature, n_features)
+    det = create_feature(feature, 0)  # every keypoint of the region: the target's descriptors
     kps, desc = det.detectAndCompute(from_spec(normalization).apply(gray), mask)
     if desc is None or len(kps) < 4:
         raise DatasetError(f"only {len(kps)} {feature} keypoints in the target region {region}; choose a textured one")
@@ -293,28 +292,24 @@ def evaluate_scene(
     detector: str = "features",
     feature: str = "SIFT",
     n_features: int = 0,
-    reference: int | None = None,
-    region: tuple[int, int, int, int] | None = None,
-    target_fraction: float = DEFAULT_TARGET_FRACTION,
+    region: tuple[int, int, int, int],
     hfov: float = DEFAULT_HFOV,
     work_dir: Path | None = None,
     recipe: CornerRecipe | None = None,
 ) -> tuple[PlanarTarget, list[FrameResult]]:
-    """Build the target in the scene's reference frame after ``normalization`` and pose it in every
-    other frame; returns the target and one :class:`FrameResult` per other frame. ``n_features``:
-    the strongest keypoints kept per frame (0: all).
+    """Build the target in the scene's reference frame (:func:`reference_index`) after ``normalization`` and pose it
+    in every other frame; returns the target and one :class:`FrameResult` per other frame. ``n_features``: the
+    strongest keypoints kept per frame (0: all).
 
-    ``reference`` (default :func:`reference_index`) and ``region`` (default
-    :func:`select_region` on the raw reference frame, so every normalization gets the same target);
-    ``work_dir``: where a learned detector is written; ``recipe``: its training (default: the
-    ``planar`` preset)."""
+    ``region``: the target's rectangle in the reference frame, :func:`select_region`'s on the raw frame, so that
+    every normalization gets the same target; ``work_dir``: where a learned detector is written; ``recipe``: its
+    training (default: the ``planar`` preset)."""
     if detector not in DETECTORS:
         raise InputError(f"unknown detector {detector!r}; choose one of {sorted(DETECTORS)}")
     frames = scene.frames
-    ref = reference_index(frames) if reference is None else reference
+    ref = reference_index(frames)
     h, w = frames.shape[1:3]
     K = pinhole_camera(w, h, hfov)
-    region = region or select_region(frames[ref], target_fraction, feature)
     target = build_target(frames[ref], region, K, normalization, feature=feature, reference=scene.files[ref])
     det = DETECTORS[detector](target, normalization, n_features, work_dir, recipe)
     solver = make_solver(detector, K, target.model.corners)

@@ -103,6 +103,19 @@ def camera_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
+def check_intrinsics(K: np.ndarray) -> np.ndarray:
+    """``K`` as a float64 ``(3, 3)`` camera matrix.
+
+    Raises:
+        InputError: not a finite 3x3 matrix with positive focal lengths (one line: the matrix as nested lists).
+    """
+    K = np.asarray(K, dtype=np.float64)
+    if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
+        given = K.tolist() if K.shape == (3, 3) else f"shape {K.shape}"
+        raise InputError(f"K must be a finite 3x3 intrinsic matrix with positive focal lengths, got {given}")
+    return K
+
+
 def rotation_error_deg(R: np.ndarray, R_gt: np.ndarray) -> float:
     """Angle (degrees) of ``R @ R_gt.T``."""
     c = (np.trace(np.asarray(R) @ np.asarray(R_gt).T) - 1) / 2
@@ -163,9 +176,7 @@ class PoseSolver:
         ambiguity_tolerance: float = 0.15,
         along_sigma: float = ALONG_SIGMA,
     ) -> None:
-        K = np.asarray(K, dtype=np.float64)
-        if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise InputError(f"K must be a finite 3x3 intrinsic matrix with positive focal lengths, got {K}")
+        K = check_intrinsics(K)
         if method not in METHODS:
             raise InputError(f"unknown PnP method {method!r}; choose one of {sorted(METHODS)}")
         if min_inliers < 4:

@@ -41,7 +41,7 @@ import numpy as np
 from alcn_cv import io
 from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import check_writable, output_path, read_json, write_json
+from alcn_cv.io import check_no_earlier_output, check_writable, output_path, read_json, write_json
 from alcn_cv.report import machine
 from pose import model as part_model
 from pose.model import BOX_EDGES
@@ -117,7 +117,7 @@ def _check_overlay_folder(path: Path, overwrite: bool) -> None:
             f"overlay {path} is not an earlier overlay (it holds more than PNGs): not replaced; give another path"
         )
     if files and not overwrite:
-        raise InputError(f"overlay {path} exists (--overwrite, or overwrite=True, replaces it)")
+        raise InputError(f"overlay {path} exists (--overwrite replaces it)")
 
 
 class OverlayWriter:
@@ -207,6 +207,12 @@ POSE_UNITS = "mm"
 SUMMARY_PATHS = ("model", "poses", "info", "overlay")
 
 
+def info_path(poses: str | Path) -> Path:
+    """The ``_info.json`` beside the poses ``poses`` (:func:`main` writes both)."""
+    poses = Path(poses)
+    return poses.with_name(poses.stem + "_info.json")
+
+
 def poses_digest(scene_gt: dict) -> str:
     """SHA-256 of the poses ``scene_gt`` (:func:`main`'s, as read back from their JSON: the floats round-trip), the
     ``poses_digest`` of the ``_info.json`` that describes them."""
@@ -222,14 +228,13 @@ def read_poses(path: str | Path, units: str) -> dict[str, tuple[np.ndarray, np.n
         DatasetError: the ``_info.json`` beside them is of other poses (its ``poses_digest``): a track interrupted
             between the two files, whose units are unknown.
     """
-    path = Path(path)
-    info_path = path.with_name(path.stem + "_info.json")
+    path, info_file = Path(path), info_path(path)
     scene_gt = read_json(path)
-    info = read_json(info_path) if info_path.is_file() else {}
+    info = read_json(info_file) if info_file.is_file() else {}
     digest = info.get("poses_digest")
     if digest is not None and digest != poses_digest(scene_gt):
         raise DatasetError(
-            f"{info_path} describes other poses than {path} (a track interrupted between the two?): track again"
+            f"{info_file} describes other poses than {path} (a track interrupted between the two?): track again"
         )
     summary = info.get("summary", {})
     # an _info.json without translation_units: an earlier track's, in the model's units (main writes the info first,
@@ -263,9 +268,8 @@ def tracked_camera(path: str | Path, model_path: str | Path) -> tuple[np.ndarray
             model's box, the poses would be judged against another object frame); a camera given to that track
             (``--K``, ``--camera``) that the info does not record.
     """
-    path = Path(path)
-    info_path = path.with_name(path.stem + "_info.json")
-    info = read_json(info_path) if info_path.is_file() else {}
+    path, info_file = Path(path), info_path(path)
+    info = read_json(info_file) if info_file.is_file() else {}
     summary = info.get("summary", {})
     digest = info.get("model_digest")
     # the corner CNN's runs record its ONNX file: their box is the part model's it was trained from
@@ -279,7 +283,7 @@ def tracked_camera(path: str | Path, model_path: str | Path) -> tuple[np.ndarray
     if "camera_matrix" not in info:
         if summary.get("camera") == "given":
             raise DatasetError(
-                f"{path} was tracked with a camera given to `alcn pose track` that {info_path.name} does not record: "
+                f"{path} was tracked with a camera given to `alcn pose track` that {info_file.name} does not record: "
                 "track again"
             )
         return None
@@ -751,7 +755,8 @@ def main(
         model_path, K, camera, dist, image_size, detector, normalization, n_features, n_features_global, method,
             min_inliers, reprojection_error: the tracker's (:func:`open_tracker`).
         overlay: a video or a folder of PNGs (:class:`OverlayWriter`) to draw the box into.
-        overwrite: replace an overlay folder of an earlier run (otherwise an error).
+        overwrite: replace the outputs of an earlier run: the poses, their ``_info.json`` and the overlay (without
+            it, any of them that exists is an error, before the tracking).
         step, max_frames: track every ``step``-th frame, at most ``max_frames`` of them (default all; checked by
             :class:`alcn_cv.io.FrameReader`, before the tracking).
 
@@ -762,13 +767,17 @@ def main(
 
     Raises:
         InputError: an output that is the input, a suffix other than ``.json`` (the poses) or a video's (the
-            overlay, unless it has none or is an existing folder), an overlay folder that holds files (without
-            ``overwrite``, or other files than PNGs), frames of another size than the camera's, or settings out of
-            range.
+            overlay, unless it has none or is an existing folder), an output of an earlier run without
+            ``overwrite``, an overlay folder that holds other files than PNGs, frames of another size than the
+            camera's, or settings out of range.
     """
     output = output_path(output, ".json", "the poses")  # before the tracking, not after it
+    info_file = info_path(output)
+    earlier = [output, info_file]
     if overlay is not None:
-        overlay = _overlay_path(overlay, source, overwrite)
+        overlay = _overlay_path(overlay, source, overwrite)  # a folder of an earlier overlay: checked there
+        earlier += [overlay] if _overlay_is_video(overlay) else []
+    check_no_earlier_output(earlier, overwrite)
     box = open_tracker(
         model_path,
         K,
@@ -817,7 +826,6 @@ def main(
     # the reasons carry their frame's counts: grouped by their words, the first of the most frequent group
     lost = [(re.sub(r"[\d.]+%?", "#", r), r) for r in (f["lost_reason"] for f in info.values()) if r]
     most = Counter(words for words, _ in lost).most_common(1)[0][0] if lost else None
-    info_path = output.with_name(output.stem + "_info.json")
     summary = {
         "frames": len(scene_gt),
         "tracked": tracked,
@@ -830,7 +838,7 @@ def main(
         "translation_units": POSE_UNITS,
         "units": box.units,
         "poses": str(output),
-        "info": str(info_path),
+        "info": str(info_file),
         "overlay": None if overlay is None else str(overlay),
         "events": [{"frame": f, "event": e, "reason": r} for f, e, r in box.events],
     }
@@ -846,7 +854,7 @@ def main(
         "dist_coeffs": None if box.dist is None else np.ravel(box.dist).tolist(),
         "frames": info,
     }
-    write_json(info_path, record)
+    write_json(info_file, record)
     write_json(output, scene_gt)
     # the caller reports the summary (`alcn pose track` prints it): logged at INFO it was printed twice
     logger.debug("tracked %d of %d frames at %.1f fps -> %s", tracked, len(scene_gt), summary["fps"], output)

@@ -70,9 +70,12 @@ def test_bad_input(tmp_path):
     with pytest.raises(InputError):
         invariance.main(data, tmp_path / "o", ["none"], figure_object="cat")
     assert cli_main(["bench", "invariance", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
-    # degenerate sets: an erosion that leaves no pixel, a negative one, an object under one light (NaN agreements)
-    with pytest.raises(InputError, match="ball holds no pixel once eroded by 30 px"):
-        invariance.main(data, tmp_path / "o", ["none"], erode=30, progress=False)
+    # degenerate sets: an erosion that leaves no pixel (the mask's radius is 15 px), one wider than the 40x50
+    # photographs, a negative one, an object under one light (NaN agreements)
+    with pytest.raises(InputError, match="ball holds no pixel once eroded by 16 px: give a smaller --erode"):
+        invariance.main(data, tmp_path / "o", ["none"], erode=16, progress=False)
+    with pytest.raises(InputError, match=r"--erode 20 removes a disc wider than the photographs \(40 px"):
+        invariance.main(data, tmp_path / "o", ["none"], erode=20, progress=False)
     with pytest.raises(InputError, match="erode must be >= 0"):
         invariance.main(data, tmp_path / "o", ["none"], erode=-1, progress=False)
     assert not (tmp_path / "o").exists()

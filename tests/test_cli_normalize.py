@@ -76,6 +76,20 @@ def test_video(tmp_path, frame):
         assert len(list(video)) == 2
 
 
+@pytest.mark.parametrize("count", ["0", "-2"])
+def test_max_frames_out_of_range_names_the_option(tmp_path, count, capsys):
+    """``--max-frames 0`` said "max_frames must be positive, got 0", a Python name, not the option."""
+    with pytest.raises(SystemExit) as stop:
+        main(["normalize", str(tmp_path / "in.avi"), str(tmp_path / "out.avi"), "--max-frames", count])
+    assert stop.value.code == 2
+    assert (
+        capsys.readouterr()
+        .err.strip()
+        .splitlines()[-1]
+        .endswith(f"argument --max-frames: an integer at least 1, got '{count}'")
+    )
+
+
 def test_no_progress_shows_no_bar(tmp_path, frame, capsys):
     """--no-progress, the one switch of the progress bars of every command that shows them."""
     src = tmp_path / "in.avi"

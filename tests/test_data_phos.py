@@ -135,8 +135,8 @@ def test_overwrite_replaces_an_earlier_output_only(tmp_path):
     (tmp_path / "notes").mkdir()
     (tmp_path / "notes" / "notes.txt").write_text("mine")
     (tmp_path / "file.json").write_text("mine")
-    for out in (tmp_path / "notes", tmp_path / "file.json"):
-        with pytest.raises(FileExistsError, match="not an earlier output"):
+    for out, why in ((tmp_path / "notes", "is not an earlier output"), (tmp_path / "file.json", "is a file")):
+        with pytest.raises(FileExistsError, match=why):
             write(out, overwrite=True)
     assert (tmp_path / "notes" / "notes.txt").read_text() == (tmp_path / "file.json").read_text() == "mine"
 

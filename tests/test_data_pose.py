@@ -180,7 +180,7 @@ def test_training_loops_change_only_the_training_sequence(tmp_path):
     np.testing.assert_allclose(b.frames[4].R_w2c, b.frames[0].R_w2c)  # the second starts where it starts
     assert not np.allclose(b.frames[5].R_w2c, b.frames[1].R_w2c)  # and then rises and falls faster
     assert len(read_text_model(default / "train" / "000001" / "colmap").images) == 8
-    with pytest.raises(InputError, match="train_sweeps"):
+    with pytest.raises(InputError, match="--train-sweeps"):
         pose.generate(tmp_path / "bad", train_sweeps=(1, -1), **kw)
 
 

@@ -20,7 +20,7 @@ def test_contact_sheets_of_every_kind(tmp_path):
     p = phos.generate(tmp_path / "phos", 40, 0, n_objects=3, progress=False)
     s = pose.generate(tmp_path / "pose", conf="small", n_frames=1, n_test=1, progress=False)
     for src in (d, d / "test.json", p, s, s / "test" / "000001"):
-        out = preview(src, tmp_path / "sheet.png", n=4)
+        out = preview(src, tmp_path / "sheet.png", n=4, overwrite=True)
         img = cv2.imread(str(out))
         assert img is not None and img.shape[0] > 100 and img.std() > 10
     # Boxes are drawn in the category colours: the sheet of a COCO file with objects has pure green.
@@ -65,7 +65,7 @@ def test_cli(tmp_path, capsys):
     assert (tmp_path / "p.png").exists()
     assert main(["data", "phos", "-n", "5", "--objects", "2", "--out", str(tmp_path / "w")]) == 0
     assert main(["data", "preview", str(tmp_path / "missing"), "--out", str(tmp_path / "q.png")]) == 2
-    assert "not a dataset" in capsys.readouterr().err
+    assert f"{tmp_path / 'missing'}: no such file or folder" in capsys.readouterr().err
     assert main(["data", "detect", "--conf", "small", "--out", str(tmp_path / "d")]) == 2  # exists
 
 

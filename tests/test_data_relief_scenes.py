@@ -52,8 +52,11 @@ def test_arguments_and_output_are_checked_before_the_progress_bar(tmp_path, monk
     blocker = tmp_path / "file.json"
     blocker.write_text("mine")
     monkeypatch.setattr(relief_scenes, "parallel_map", lambda *args, **kwargs: pytest.fail("rendered"))
-    with pytest.raises(InputError, match=r"--side is the side of the frames in pixels, at least 32; got 10"):
-        generate(tmp_path / "s", side=10, progress=False)
+    for side in (10, 2049):  # 100000 asked numpy for 149 GiB, a MemoryError traceback
+        with pytest.raises(
+            InputError, match=rf"--side is the side of the frames in pixels, from 32 to 2048; got {side}"
+        ):
+            generate(tmp_path / "s", side=side, progress=False)
     with pytest.raises(InputError, match=r"--frames"):
         generate(tmp_path / "s", frames=1, progress=False)
     with pytest.raises(InputError, match="is a file"):
@@ -64,12 +67,12 @@ def test_arguments_and_output_are_checked_before_the_progress_bar(tmp_path, monk
     with pytest.raises(FileExistsError, match="--overwrite"):  # an earlier output: refused before the rendering
         generate(tmp_path / "done", progress=False)
     # `data detect --conf small` is a preset; the frames' side here is --side, and argparse's error says what it is
-    for bad in ("small", "10"):
+    for bad in ("small", "10", "100000"):
         with pytest.raises(SystemExit) as exit_:
             main(["data", "scenes", "--side", bad, "--out", str(tmp_path / "s")])
         assert exit_.value.code == 2
         err = capsys.readouterr().err
-        assert f"argument --side: the side of the square frames in pixels, at least 32, e.g. 256; got '{bad}'" in err
+        assert f"argument --side: an integer at least 32 and at most 2048, got '{bad}'" in err
     assert not (tmp_path / "s").exists()
 
 

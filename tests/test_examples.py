@@ -59,6 +59,7 @@ def test_the_cookie_box_examples_build_with_the_preset(script, tmp_path, monkeyp
     (video, output), kwargs = calls[0]
     assert video == tmp_path / "data" / "box.mp4" and kwargs.pop("box_ply") == tmp_path / "data" / "box.ply"
     assert kwargs.pop("normalization", "none") == "none"
+    assert kwargs.pop("overwrite") is True  # the examples rebuild what an earlier run left (a model, its .ply)
     assert kwargs == build.COOKIE_BOX
 
 

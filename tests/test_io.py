@@ -353,3 +353,13 @@ def test_frame_progress_ends_at_the_frames_there_were(capsys):
     for _ in frame_progress(iter(range(5)), 5, desc="frames", mininterval=0):  # stopped: the bar says where
         break
     assert "0/5" in capsys.readouterr().err.rsplit("\r", 1)[-1]
+
+
+def test_count_frames_leaves_a_bad_step_to_the_reader(tmp_path):
+    """`calib register --step 0` (from Python) ended in count_frames' ZeroDivisionError before the reader's message."""
+    from alcn_cv.io import count_frames, iter_frames
+
+    cv2.imwrite(str(tmp_path / "a.png"), np.zeros((4, 4), np.uint8))
+    assert count_frames(tmp_path, step=0) is None
+    with pytest.raises(InputError, match="step must be a positive integer"):
+        next(iter_frames(tmp_path, step=0))

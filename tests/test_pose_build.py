@@ -273,10 +273,12 @@ def test_a_presets_video_settings_stay_off_a_registered_sequence(shared_data, tm
         "box_units": "m",
     }
     with caplog.at_level("WARNING", logger="pose.build"):
-        build.main(src, tmp_path / "m.npz", conf="cookie-box", step=5, box_size=(10, 10, 10), box_units="cm")
+        build.main(
+            src, tmp_path / "m.npz", conf="cookie-box", step=5, box_size=(10, 10, 10), box_units="cm", overwrite=True
+        )
     assert "a registered sequence; step apply to a video only, ignored" in caplog.text
     assert seen[-1]["box_units"] == "cm" and pm.load(tmp_path / "m.npz").extra["build"]["box_units"] == "cm"
-    build.main(src, tmp_path / "m.npz", progress=False)  # no box: no units it was read in
+    build.main(src, tmp_path / "m.npz", progress=False, overwrite=True)  # no box: no units it was read in
     assert "box_units" not in pm.load(tmp_path / "m.npz").extra["build"]
 
 
@@ -450,7 +452,8 @@ def test_a_preset_reaches_the_build_and_an_option_given_overrides_it(shared_data
 
     monkeypatch.setattr(build, "build", record)
     monkeypatch.setattr(build, "plot_model", lambda *args: None)
-    argv = ["pose", "build", str(video), str(tmp_path / "m.npz"), "--box-ply", str(ply), "--no-progress"]
+    # every run after the first replaces its model
+    argv = ["pose", "build", str(video), str(tmp_path / "m.npz"), "--box-ply", str(ply), "--no-progress", "--overwrite"]
     assert main([*argv, "--conf", "cookie-box", "--max-frames", "3"]) == 0
     seq, kwargs = seen[-1]
     assert len(seq.views) == 3 and seq.info["step"] == build.COOKIE_BOX["step"] == 10  # --max-frames overrides 46

@@ -517,6 +517,7 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
             "copies=0",
             "--set",
             "divisions=1",
+            "--overwrite",
         ]
     )
     assert args.func(args) == 0

@@ -560,13 +560,13 @@ def test_track_takes_max_frames_and_step(tmp_path, capsys):
     argv += ["--K", "500", "500", "159.5", "119.5", "--n-features", "800"]
     assert main([*argv, "--max-frames", "2"]) == 0
     assert list(json.loads((tmp_path / "p.json").read_text())) == ["0000", "0001"]
-    assert main([*argv, "--step", "2", "--max-frames", "2"]) == 0
+    assert main([*argv, "--step", "2", "--max-frames", "2", "--overwrite"]) == 0
     assert list(json.loads((tmp_path / "p.json").read_text())) == ["0000", "0002"]
     capsys.readouterr()
-    for option in (["--max-frames", "0"], ["--step", "0"]):  # refused by the frame reader, as for a Python caller
-        assert main([*argv, *option]) == 2
-        err = capsys.readouterr().err.strip()
-        assert len(err.splitlines()) == 1 and "must be a positive integer" in err, err
+    for option in ("--max-frames", "--step"):  # refused as they are parsed, naming the option
+        with pytest.raises(SystemExit):
+            main([*argv, option, "0"])
+        assert capsys.readouterr().err.strip().endswith(f"argument {option}: an integer at least 1, got '0'")
 
 
 def test_the_summary_names_the_outputs_the_units_and_the_next_step(tmp_path, capsys):
@@ -583,7 +583,7 @@ def test_the_summary_names_the_outputs_the_units_and_the_next_step(tmp_path, cap
     assert f"poses: {out}" in text and "cam_t_m2c in mm" in text and "the model is in cm" in text
     assert str(out.with_name("poses_info.json")) in text and f"overlay: {tmp_path / 'ov'}" in text
     assert "alcn pose overlay-error" in text and f"--run track {tmp_path / 'm.npz'} {out}" in text
-    assert main([*argv, "--K", "500", "500", "159.5", "119.5"]) == 0  # the poses record their camera
+    assert main([*argv, "--K", "500", "500", "159.5", "119.5", "--overwrite"]) == 0  # the poses record their camera
     assert "alcn pose overlay-error" in capsys.readouterr().out
 
 
@@ -598,13 +598,15 @@ def test_frames_of_another_size_than_the_models_name_the_camera_that_works(tmp_p
     with pytest.raises(InputError, match=f"the model's camera resized to them.*{half}"):
         track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", progress=False)
     with caplog.at_level("WARNING", logger="pose.track"):
-        track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", 0.7 * K, progress=False)
+        track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", 0.7 * K, progress=False, overwrite=True)
     assert "differ from those" in caplog.text and f"give {half}" in caplog.text and "leave out" not in caplog.text
     caplog.clear()
     from pose.corners import scaled_camera
 
     with caplog.at_level("WARNING", logger="pose.track"):
-        track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", scaled_camera(K, 0.5), progress=False)
+        track.main(
+            tmp_path / "m.npz", frames, tmp_path / "p.json", scaled_camera(K, 0.5), progress=False, overwrite=True
+        )
     assert "differ from those" not in caplog.text
 
 
@@ -720,7 +722,7 @@ def test_an_interrupted_track_never_leaves_poses_read_in_the_wrong_units(tmp_pat
 
     monkeypatch.setattr(track, "write_json", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800, progress=False)
+        track.main(tmp_path / "m.npz", frames, tmp_path / "p.json", K, n_features=800, progress=False, overwrite=True)
     with pytest.raises(DatasetError, match="describes other poses than .*p.json .*track again"):
         track.read_poses(tmp_path / "p.json", "cm")  # never read in the wrong units
     assert written == [tmp_path / "p_info.json"]  # the info first: the earlier poses are left, never the new ones
@@ -740,6 +742,8 @@ def test_the_calibration_experiment_publishes_the_tracking_summary_without_paths
     frames = _frames(tmp_path, 2)
 
     def alcn(*argv):  # the commands, on a synthetic camera, model and video
+        assert argv[-1] == "--overwrite"  # a rerun of the experiment replaces its earlier run's files
+        argv = argv[:-1]
         if argv[:2] == ("calib", "camera"):
             Path(argv[-1]).mkdir(parents=True)
             write_camera_yaml(Path(argv[-1]) / "camera.yaml", K, np.zeros(5), SIZE)

@@ -198,7 +198,8 @@ def test_train_detector_from_a_few_images(tmp_path):
     for extent in (0, -40, 100):  # 0 hung in the negatives' sampling; the others trained on other windows
         with pytest.raises(InputError, match="--extent is the object's size in the 64-px window"):
             stage2.main(tmp_path / "nothing", tmp_path / "x", extent=extent)  # refused before the images are read
-    assert main([*args, "--per-image", "0"]) == 2
+    with pytest.raises(SystemExit, match="2"):  # argparse's range, before the images are read
+        main([*args, "--per-image", "0"])
     assert main(["train-detector", str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 2
     weights = ["--weights", str(tmp_path / "w.npz")]
     assert main([*args, *weights]) == 2  # a Normalizer for a DoG

@@ -18,22 +18,62 @@ from typing import Any
 
 from alcn_cv.bench import detect, detect_settings, fewshot, invariance, relight, relight_settings, speed
 from alcn_cv.bench.detect_settings import POLICIES, DetectSettings
-from alcn_cv.cli import add_conf_option, add_progress_option, add_seeds_option, preset_values
+from alcn_cv.cli import (
+    add_conf_option,
+    add_progress_option,
+    add_seeds_option,
+    all_or_at_least,
+    number_at_least,
+    number_in,
+    preset_values,
+)
 from alcn_cv.data import scenes
-from alcn_cv.errors import InputError
 from alcn_cv.presets import preset, with_given
 
 __all__ = ["BENCHMARKS", "add_parser"]
 
 
-def _list(kind: type) -> Callable[[str], list]:
+def _list(item: Callable[[str], Any] = str) -> Callable[[str], list]:
+    """An argparse ``type``: a comma-separated list, each item parsed by ``item``, itself an argparse ``type`` whose
+    error says what an item must be (:func:`~alcn_cv.cli.number_at_least`)."""
+
     def parse(text: str) -> list:
         try:
-            return [kind(v) for v in text.split(",") if v.strip()]
-        except ValueError:
-            raise InputError(f"expected a comma-separated list of {kind.__name__}, got {text!r}") from None
+            return [item(v.strip()) for v in text.split(",") if v.strip()]
+        except (argparse.ArgumentTypeError, ValueError) as exc:
+            # argparse reports a ValueError as "invalid parse value": the item's own message says what is expected
+            raise argparse.ArgumentTypeError(f"a comma-separated list, each item {exc}") from None
 
     return parse
+
+
+#: An integer at least 1 (a count of runs, windows, frames, threads).
+_count = number_at_least(int, 1)
+
+
+def _sweep(text: str) -> list[tuple[int, int]]:
+    """``--cnn-sweep``'s argparse ``type``: ``DEPTHxWIDTH,...``, each at least 1."""
+    try:
+        sweep = [tuple(int(v) for v in item.lower().split("x")) for item in text.split(",") if item.strip()]
+    except ValueError:
+        sweep = []
+    if not sweep or any(len(dw) != 2 or min(dw) < 1 for dw in sweep):
+        raise argparse.ArgumentTypeError(f"DEPTHxWIDTH,... of integers at least 1 (e.g. 1x32,2x32), got {text!r}")
+    return sweep  # type: ignore[return-value]
+
+
+def _size(text: str) -> tuple[int, int]:
+    """A frame size's argparse ``type``: ``WIDTHxHEIGHT``, each side in :data:`~alcn_cv.bench.speed.SIDES`."""
+    low, high = speed.SIDES
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        w = h = 0
+    if not (low <= w <= high and low <= h <= high):
+        raise argparse.ArgumentTypeError(
+            f"WIDTHxHEIGHT, each side at least {low} and at most {high} pixels, got {text!r}"
+        )
+    return w, h
 
 
 def _methods_help(default: Sequence[str] | None, suffix: str = "") -> str:
@@ -53,21 +93,6 @@ def _add_policies(p: argparse.ArgumentParser, default: Sequence[str]) -> None:
         dest="policies",
         help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(default)})",
     )
-
-
-def _sweep(text: str) -> list[tuple[int, int]]:
-    try:
-        return [tuple(int(v) for v in item.lower().split("x")) for item in text.split(",") if item.strip()]  # type: ignore[misc]
-    except ValueError:
-        raise InputError(f"--cnn-sweep expects DEPTHxWIDTH,... (e.g. 1x32,2x32), got {text!r}") from None
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise InputError(f"a size is WIDTHxHEIGHT, got {text!r}") from None
-    return w, h
 
 
 def _override(settings: Any, args: argparse.Namespace) -> Any:
@@ -107,20 +132,22 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
     _add_out(p, "detect")
     add_conf_option(p, detect_settings.CONF_SUMMARIES)
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.resolved().methods))
-    p.add_argument("--real-images", type=_list(int), help="real training images per object (default 1,10)")
+    p.add_argument("--real-images", type=_list(_count), help="real training images per object (default 1,10)")
     _add_policies(p, d.policies)
     p.add_argument(
         "--positives",
-        type=int,
+        type=_count,
         dest="positives_per_object",
         help=f"synthetic windows per object, spread over its --real-images (default {d.positives_per_object})",
     )
     p.add_argument(
-        "--negatives-ratio", type=float, help=f"background windows per object window (default {d.negatives_ratio})"
+        "--negatives-ratio",
+        type=number_at_least(float, 0),
+        help=f"background windows per object window (default {d.negatives_ratio})",
     )
-    p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
-    p.add_argument("--batch-size", type=int, help=f"training windows per batch (default {d.batch_size})")
-    p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
+    p.add_argument("--epochs", type=_count, help=f"detector training epochs (default {d.epochs})")
+    p.add_argument("--batch-size", type=_count, help=f"training windows per batch (default {d.batch_size})")
+    p.add_argument("--lr", type=number_at_least(float, 0, above=True), help=f"Adam learning rate (default {d.lr})")
     add_seeds_option(p, d.seeds, "repeat every run with each of these seeds", from_preset=True)
     p.add_argument(
         "--tune",
@@ -132,15 +159,23 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         "first seed's runs; the first best serves every seed (default: their defaults)",
     )
     p.add_argument("--cnn-sweep", type=_sweep, help="plain CNNs tried, DEPTHxWIDTH,... (default 1x32,2x32,3x32)")
-    p.add_argument("--nms-iou", type=float, help=f"IoU above which NMS removes a box (default {d.nms_iou})")
-    p.add_argument("--match-iou", type=float, help=f"PASCAL criterion (default {d.match_iou})")
-    p.add_argument("--max-test-images", type=int, help="only the first N test images (default: all)")
+    p.add_argument(
+        "--nms-iou",
+        type=number_in(float, 0, 1, below=True),
+        help=f"IoU above which NMS removes a box, at least 0 and less than 1 (default {d.nms_iou})",
+    )
+    p.add_argument(
+        "--match-iou",
+        type=number_in(float, 0, 1, above=True),
+        help=f"PASCAL criterion, an IoU greater than 0 and at most 1 (default {d.match_iou})",
+    )
+    p.add_argument("--max-test-images", type=_count, help="only the first N test images (default: all)")
     p.add_argument("--working-scale", type=float, default=None, help="override the manifest's working_scale")
     p.add_argument(
         "--box-size", type=float, default=None, help="override the manifest's box_size (pixels at the working scale)"
     )
-    p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
-    p.add_argument("--device", help="torch device (default cpu)")
+    p.add_argument("--threads", type=_count, help="torch threads (default: torch's choice)")
+    p.add_argument("--device", help="torch device: cpu, cuda, cuda:1, ... (default cpu)")
     add_progress_option(p)
     p.set_defaults(func=_run_detect)
 
@@ -181,27 +216,34 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         from_preset=True,
     )
     p.add_argument(
-        "--objects", dest="n_objects", metavar="OBJECTS", type=int, help=f"new objects per seed (default {d.n_objects})"
+        "--objects",
+        dest="n_objects",
+        metavar="OBJECTS",
+        type=_count,
+        help=f"new objects per seed (default {d.n_objects})",
     )
     p.add_argument(
-        "--object-seed", type=int, help=f"object catalogue seed of seed 0; seed s uses it + s (default {d.object_seed})"
+        "--object-seed",
+        type=number_at_least(int, 0),
+        help="object catalogue seed of seed 0; seed s uses it + s (at least 1 with --tune, whose validation objects "
+        f"use it - 1; default {d.object_seed})",
     )
-    p.add_argument("--real-images", type=int, help=f"reference images per object (default {d.real_images})")
+    p.add_argument("--real-images", type=_count, help=f"reference images per object (default {d.real_images})")
     p.add_argument(
         "--per-image",
-        type=int,
+        type=_count,
         help=f"synthetic windows per reference image, as in `alcn train-detector` (`alcn bench detect --positives` "
         f"counts them per object) (default {d.per_image})",
     )
-    p.add_argument("--n-test", type=int, help=f"test windows per seed, half background (default {d.n_test})")
+    p.add_argument("--n-test", type=_count, help=f"test windows per seed, half background (default {d.n_test})")
     p.add_argument(
         "--test-lighting",
         type=_list(str),
         help=f"lighting families of the test windows (default {','.join(d.test_lighting)})",
     )
-    p.add_argument("--epochs", type=int, help=f"detector training epochs (default {d.epochs})")
-    p.add_argument("--batch-size", type=int, help=f"training windows per batch (default {d.batch_size})")
-    p.add_argument("--lr", type=float, help=f"Adam learning rate (default {d.lr})")
+    p.add_argument("--epochs", type=_count, help=f"detector training epochs (default {d.epochs})")
+    p.add_argument("--batch-size", type=_count, help=f"training windows per batch (default {d.batch_size})")
+    p.add_argument("--lr", type=number_at_least(float, 0, above=True), help=f"Adam learning rate (default {d.lr})")
     p.add_argument(
         "--tune",
         dest="tune",
@@ -211,7 +253,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         "the same detector on a validation draw of new objects and windows of its own, averaged over the policies; the "
         "first best serves every seed (default: their defaults)",
     )
-    p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
+    p.add_argument("--threads", type=_count, help="torch threads (default: torch's choice)")
     add_progress_option(p)
     p.set_defaults(func=_run_fewshot)
 
@@ -238,7 +280,9 @@ def _add_invariance(subparsers: argparse._SubParsersAction) -> None:
     _add_out(p, "invariance")
     p.add_argument("--methods", type=_list(str), default=None, help=_methods_help(None))
     p.add_argument("--scale", type=float, default=1.0, help="resize the photographs by this factor first (default 1)")
-    p.add_argument("--erode", type=int, default=5, help="pixels removed from the mask border (default 5)")
+    p.add_argument(
+        "--erode", type=number_at_least(int, 0), default=5, help="pixels removed from the mask border (default 5)"
+    )
     p.add_argument(
         "--figure-object", default=None, help="object shown in the figure (default: the first; 'all': every one)"
     )
@@ -276,8 +320,9 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
     add_conf_option(p, speed.CONF_SUMMARIES)
     p.add_argument(
         "--sizes",
-        type=lambda s: [_size(v) for v in s.split(",") if v],
-        help="comma-separated WIDTHxHEIGHT (default " + ",".join(f"{w}x{h}" for w, h in d.sizes) + ")",
+        type=_list(_size),
+        help=f"comma-separated WIDTHxHEIGHT, each side at least {speed.SIDES[0]} and at most {speed.SIDES[1]} pixels "
+        "(default " + ",".join(f"{w}x{h}" for w, h in d.sizes) + ")",
     )
     p.add_argument("--colours", type=_list(str), help="gray and/or bgr (default both)")
     p.add_argument(
@@ -289,28 +334,39 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         "('alcn': the default, the gain Normalizer; the last three: the default on those backends)",
     )
     p.add_argument(
-        "--weights", help="weight file of the paper-model variants (default: the shipped alcn_normalizer.npz)"
+        "--weights",
+        help="weight file of the paper-model variants, checked before any timing (default: the shipped "
+        "alcn_normalizer.npz)",
     )
     p.add_argument(
-        "--lite-weights", help="weight file of the 'alcn lite' variants (default: the shipped alcn_normalizer_lite.npz)"
+        "--lite-weights",
+        help="weight file of the 'alcn lite' variants, checked before any timing (default: the shipped "
+        "alcn_normalizer_lite.npz)",
     )
     p.add_argument("--image", help="time on this image resized to each size (default: synthetic frames)")
-    p.add_argument("--warmup", type=int, help=f"untimed runs per case (default {d.warmup})")
+    p.add_argument("--warmup", type=number_at_least(int, 0), help=f"untimed runs per case (default {d.warmup})")
     p.add_argument(
         "--repeats",
-        type=int,
+        type=_count,
         dest="max_repeats",
         help=f"at most this many timed runs per case (default {d.max_repeats})",
     )
-    p.add_argument("--min-repeats", type=int, help=f"at least this many timed runs per case (default {d.min_repeats})")
+    p.add_argument(
+        "--min-repeats",
+        type=number_at_least(int, 0),
+        help=f"at least this many timed runs per case, at most --repeats (0 needs a --budget above 0; default "
+        f"{d.min_repeats})",
+    )
     p.add_argument(
         "--budget",
-        type=float,
+        type=number_at_least(float, 0),
         dest="budget_s",
         help=f"seconds per case before stopping at --min-repeats (default {d.budget_s:g})",
     )
     p.add_argument(
-        "--video-frames", type=int, help=f"frames of the video-memory test (0: skip; default {d.video_frames})"
+        "--video-frames",
+        type=number_at_least(int, 0),
+        help=f"frames of the video-memory test (0: skip; default {d.video_frames})",
     )
     p.add_argument(
         "--video-size",
@@ -319,7 +375,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--video-budget",
-        type=float,
+        type=number_at_least(float, 0),
         dest="video_budget_s",
         help=f"seconds per method of the video test (default {d.video_budget_s:g})",
     )
@@ -328,7 +384,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         type=_list(str),
         help="labels run in the video test (default: alcn and the fastest ALCN variant)",
     )
-    p.add_argument("--threads", type=int, help="OpenCV and torch threads (default: theirs)")
+    p.add_argument("--threads", type=_count, help="OpenCV and torch threads (default: theirs)")
     p.add_argument(
         "--device",
         help="measure only ALCN's batched torch path on this device (cuda, cpu): end to end "
@@ -336,7 +392,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--device-batches",
-        type=_list(int),
+        type=_list(_count),
         help="batch sizes of --device (default " + ",".join(map(str, d.device_batches)) + ")",
     )
     add_progress_option(p)
@@ -345,6 +401,8 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
 
 def _run_speed(args: argparse.Namespace) -> int:
     settings = _override(preset(speed.CONFS, args.conf), args)
+    if args.max_repeats is not None and args.min_repeats is None:  # "at most N runs" caps the preset's minimum
+        settings = dataclasses.replace(settings, min_repeats=min(settings.min_repeats, settings.max_repeats))
     result = speed.main(args.out, settings, progress=not args.no_progress, overwrite=args.overwrite)
     print((Path(args.out) / "speed.md").read_text(encoding="utf-8"))
     return 0 if result["rows"] else 1
@@ -418,34 +476,42 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--max-frames",
-        type=int,
-        help=f"frames per scene, evenly spaced (default: the preset's: {preset_values(confs, 'max_frames')}; 0: all)",
+        type=all_or_at_least(2),
+        help="frames per scene, evenly spaced, at least 2 (default: the preset's: "
+        f"{preset_values(confs, 'max_frames')}; 0: all)",
     )
-    p.add_argument("--patch", type=int, default=d.patch, help=f"patch side in pixels (default {d.patch})")
+    p.add_argument(
+        "--patch", type=number_at_least(int, 4), default=d.patch, help=f"patch side in pixels (default {d.patch})"
+    )
     p.add_argument(
         "--patches",
-        type=int,
+        type=number_at_least(int, 2),
         help=f"patch locations per gallery frame (default: the preset's: {preset_values(confs, 'patches')})",
     )
     p.add_argument(
-        "--gallery", type=int, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})"
+        "--gallery", type=_count, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})"
     )
     p.add_argument(
         "--max-pairs",
-        type=int,
+        type=number_at_least(int, 0),
         help="frame pairs per scene and seed, drawn at random (default: the preset's: "
         f"{preset_values(confs, 'max_pairs')}; 0: all)",
     )
     p.add_argument(
         "--n-features",
-        type=int,
+        type=number_at_least(int, 4),
         default=d.keypoints,
-        help=f"ORB/SIFT keypoints per frame, as the pose commands' --n-features (default {d.keypoints})",
+        help=f"ORB/SIFT keypoints per frame, the strongest, the same number for every method (default {d.keypoints}; "
+        "unlike the pose commands', no 0 for all: the matching score divides by the keypoints found, so methods are "
+        "compared at one budget, and ORB keeps none with 0)",
     )
     p.add_argument("--no-keypoints", action="store_true", help="identification only (skip matching and pose)")
     p.add_argument("--no-tune", action="store_true", help="default parameters only")
     p.add_argument(
-        "--tune-frames", type=int, default=8, help="frames per training scene the tuning scores on (default 8)"
+        "--tune-frames",
+        type=number_at_least(int, 2),
+        default=8,
+        help="frames per training scene the tuning scores on (default 8)",
     )
     add_progress_option(p)
     p.set_defaults(func=_run_relight)

@@ -691,14 +691,17 @@ def main(
         memory, a device error) is recorded with its error and the benchmark continues.
 
     Raises:
-        InputError: bad settings, a method that cannot be built (a bad parameter or weight
-            file), tuning on data without validation objects, or an ``out_dir`` that holds an earlier run's report
-            (without ``overwrite``), before any work.
+        InputError: bad settings (a device torch does not have among them), a method that cannot be built (a bad
+            parameter or weight file), tuning on data without validation objects, or an ``out_dir`` that holds an
+            earlier run's report (without ``overwrite``), before any work.
     """
     import torch
 
+    from alcn_cv.nets.device import torch_device
+
     settings = (settings or DetectSettings()).resolved()  # the methods registered now, for the default's
     settings.check()
+    torch_device(settings.device, "--device")  # every run would fail on it, each after its windows are made
     check_no_earlier_output([Path(out_dir) / "detect.json", Path(out_dir) / "detect.md"], overwrite)
     # a bad spec or weight file: one line before any work; the untuned runs use these
     built = build_methods(settings.methods, create_normalization)

@@ -71,8 +71,8 @@ def load_data(
             detector's resolution and the side of the fixed-size boxes at that scale.
 
     Raises:
-        DatasetError: missing or malformed files, no working scale or box size, test or validation
-            categories that the training set lacks.
+        DatasetError: missing or malformed files, another data set of ``alcn data`` (its manifest's ``kind``), no
+            working scale or box size, test or validation categories that the training set lacks.
     """
     root = Path(data_dir)
     if not root.is_dir():
@@ -81,6 +81,12 @@ def load_data(
     manifest = read_json(manifest_path) if manifest_path.is_file() else {}
     if not isinstance(manifest, dict):
         raise DatasetError(f"{manifest_path}: expected a JSON object")
+    # another set of `alcn data` (a COCO set laid out the same way has a manifest of its own, or none)
+    if manifest.get("generator") == "alcn_cv.data" and manifest.get("kind") != "detect":
+        raise DatasetError(
+            f"{root}: not a detection set (its manifest.json says kind {manifest.get('kind')!r}): make one with "
+            "`alcn data detect`"
+        )
     scale = working_scale if working_scale is not None else manifest.get("working_scale")
     box = box_size if box_size is not None else manifest.get("box_size")
     if scale is None or box is None:

@@ -112,7 +112,8 @@ class DetectSettings:
         return dataclasses.replace(self, methods=default_methods() if self.methods is None else list(self.methods))
 
     def check(self) -> None:
-        """Raise :class:`~alcn_cv.errors.InputError` on an unknown method or policy, or a value out of range."""
+        """Raise :class:`~alcn_cv.errors.InputError` on an unknown method or policy, or a value out of range (the
+        device is checked where torch is imported, :func:`alcn_cv.bench.detect.main`)."""
         known = set(available()) | set(DEEP_BASELINES)
         methods = self.resolved().methods
         specs = [parse_spec(m) for m in methods]
@@ -127,12 +128,18 @@ class DetectSettings:
         bad = [p for p in self.policies if p not in POLICIES]
         if bad or not self.policies:
             raise InputError(f"unknown or no policy {bad}; choose from {', '.join(POLICIES)}")
-        if self.positives_per_object < 1 or self.negatives_ratio < 0 or self.epochs < 1 or self.batch_size < 1:
+        if self.positives_per_object < 1 or not self.negatives_ratio >= 0 or self.epochs < 1 or self.batch_size < 1:
             raise InputError("positives_per_object, epochs and batch_size must be >= 1 and negatives_ratio >= 0")
+        if not self.lr > 0:
+            raise InputError(f"lr must be > 0, got {self.lr}")
         if not 0 <= self.nms_iou < 1 or not 0 < self.match_iou <= 1:
             raise InputError(f"need 0 <= nms_iou < 1 and 0 < match_iou <= 1, got {self.nms_iou}, {self.match_iou}")
-        if not self.cnn_sweep:
-            raise InputError("cnn_sweep needs at least one (depth, width)")
+        if not self.cnn_sweep or any(len(dw) != 2 or min(dw) < 1 for dw in self.cnn_sweep):
+            raise InputError(f"cnn_sweep needs one or more (depth, width), each at least 1, got {self.cnn_sweep}")
+        if self.max_test_images is not None and self.max_test_images < 1:
+            raise InputError(f"max_test_images must be >= 1 or None (all), got {self.max_test_images}")
+        if self.threads is not None and self.threads < 1:
+            raise InputError(f"threads must be >= 1 or None (torch's default), got {self.threads}")
 
 
 #: 1 and 3 real images: the small and demo data sets (`alcn data detect --conf small|demo`) hold 3 per object.

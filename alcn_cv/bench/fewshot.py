@@ -149,6 +149,15 @@ class FewShotSettings:
             or not self.lr > 0
         ):
             raise InputError("n_objects, real_images, per_image, n_test, epochs and batch_size must be >= 1 and lr > 0")
+        # a catalogue seed is a non-negative integer; tuning draws its validation objects from object_seed - 1
+        tunes = self.tune and any(m in TUNING_GRIDS for m in self.methods)
+        if self.object_seed < (1 if tunes else 0):
+            raise InputError(
+                f"--object-seed must be at least 0, and at least 1 with --tune (its validation objects use it - 1), "
+                f"got {self.object_seed}"
+            )
+        if self.threads is not None and self.threads < 1:
+            raise InputError(f"threads must be >= 1 or None (torch's default), got {self.threads}")
         return self
 
     def setup(self, seed: int) -> FewShotSetup:

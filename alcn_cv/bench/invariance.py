@@ -119,7 +119,7 @@ def main(
             available one.
         scale: resize factor applied to the photographs first.
         erode: pixels removed from the mask's border (so that border effects of the
-            background edge do not count).
+            background edge do not count), at most half the smaller side of the photographs, less one.
         figure_object: the object shown in the figure; default the first one. ``"all"``: one figure each.
         progress: show a progress bar.
         overwrite: replace the report of an earlier run in ``out_dir``.
@@ -130,12 +130,12 @@ def main(
     Raises:
         InputError: before the photographs are read: an ``out_dir`` that holds an earlier run's report (without
             ``overwrite``), an unknown method, or one that cannot be built (a bad parameter or weight file); a
-            negative ``erode``, or one that leaves a mask empty.
+            negative ``erode``, one wider than the photographs, or one that leaves a mask empty.
         DatasetError: see :func:`~alcn_cv.data.scenes.load_photometric`.
     """
     check_no_earlier_output([Path(out_dir) / "invariance.json", Path(out_dir) / "invariance.md"], overwrite)
     if erode < 0:
-        raise InputError(f"erode must be >= 0 pixels, got {erode}")
+        raise InputError(f"--erode must be >= 0 pixels, got {erode}")
     methods = list(available()) if methods is None else list(methods)
     if not methods:
         raise InputError("no method to compare: give --methods NAME,... (default: every method)")
@@ -146,12 +146,20 @@ def main(
     objects = load_photometric(data_dir, scale)
     if figure_object not in (None, "all") and figure_object not in [o.name for o in objects]:
         raise InputError(f"no object {figure_object!r}; objects: {', '.join(o.name for o in objects)}")
+    # a disc wider than the photograph erases every mask but one of the whole photograph (no border to remove), and
+    # its kernel alone could fill the memory: refused before it is made
+    widest = min(min(o.mask.shape) for o in objects)
+    if 2 * erode + 1 > widest:
+        raise InputError(
+            f"--erode {erode} removes a disc wider than the photographs ({widest} px at --scale {scale:g}): "
+            f"give at most {(widest - 1) // 2}"
+        )
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * erode + 1, 2 * erode + 1))
     masks = {o.name: cv2.erode(o.mask.astype(np.uint8), kernel) > 0 if erode else o.mask for o in objects}
     empty = [name for name, mask in masks.items() if not mask.any()]
     if empty:
         raise InputError(
-            f"the mask of {', '.join(empty)} holds no pixel once eroded by {erode} px: give a smaller erode"
+            f"the mask of {', '.join(empty)} holds no pixel once eroded by {erode} px: give a smaller --erode"
         )
     out = Path(out_dir)
     make_folder(out)

@@ -66,16 +66,18 @@ from alcn_cv.data.frames import synthetic_frame
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization, lab_and_lightness
 from alcn_cv.enhance.registry import create
-from alcn_cv.errors import InputError
+from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.lab import srgb_to_lab
 from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
 from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 from alcn_cv.shared_data import shared_data_dir
+from alcn_cv.weight_file import load_normalizer_file
 
 __all__ = [
     "CONFS",
     "CONF_SUMMARIES",
+    "SIDES",
     "SIZES",
     "Method",
     "SpeedSettings",
@@ -90,6 +92,9 @@ logger = logging.getLogger(__name__)
 #: Frame sizes (width, height) of the benchmark.
 SIZES: tuple[tuple[int, int], ...] = ((640, 480), (1280, 800), (1920, 1080))
 QUICK_SIZES: tuple[tuple[int, int], ...] = ((64, 48), (96, 72))
+#: The sides (pixels) a timed frame may have, smallest and largest: a frame of 0 pixels is no image, and the
+#: largest, 8192x8192 in BGR (192 MiB), leaves the float32 images of the methods in memory (8K is 7680x4320).
+SIDES: tuple[int, int] = (16, 8192)
 COLOURS = ("gray", "bgr")
 #: The exact ALCN: the paper's Normalizer and Eq. 3, the reference of the accuracy table.
 EXACT = "alcn exact"
@@ -387,9 +392,18 @@ class SpeedSettings:
     device_batches: list[int] = field(default_factory=lambda: [1, 8, 64, 128])
 
     def check(self) -> None:
-        """Raise :class:`~alcn_cv.errors.InputError` on an unknown colour, a negative warm-up, settings that time no
-        run (a median of none: ``max_repeats`` or ``target_repeats`` below 1, or ``min_repeats`` below 1 without a
-        time budget), or, with a device, no batch size or one below 1."""
+        """Raise :class:`~alcn_cv.errors.InputError` on an unknown colour, a frame side (``sizes``, ``video_size``)
+        outside :data:`SIDES`, a negative warm-up, settings that time no run (a median of none: ``max_repeats`` or
+        ``target_repeats`` below 1, or ``min_repeats`` below 1 without a time budget), more ``min_repeats`` than
+        ``max_repeats``, a negative budget or video frame count, fewer than one thread, or, with a device, no batch
+        size or one below 1."""
+        low, high = SIDES
+        bad_sizes = [size for size in [*self.sizes, self.video_size] if not all(low <= side <= high for side in size)]
+        if bad_sizes or not self.sizes:
+            raise InputError(
+                f"frame sides (--sizes, --video-size) must be from {low} to {high} pixels, got "
+                + (", ".join(f"{w}x{h}" for w, h in bad_sizes) or "no size")
+            )
         bad = [c for c in self.colours if c not in COLOURS]
         if bad or not self.colours:
             raise InputError(f"colours must be among {COLOURS}, got {list(self.colours)}")
@@ -402,6 +416,15 @@ class SpeedSettings:
             raise InputError(
                 f"min_repeats {self.min_repeats} with a budget of {self.budget_s} s times no run: give min_repeats >= 1"
             )
+        if self.min_repeats > self.max_repeats:  # the command line caps a preset's minimum at --repeats alone
+            raise InputError(f"--min-repeats {self.min_repeats} is more than --repeats {self.max_repeats}")
+        if not min(self.budget_s, self.video_budget_s) >= 0 or self.video_frames < 0:
+            raise InputError(
+                "budget_s (--budget), video_budget_s (--video-budget) and video_frames (--video-frames) must be >= 0, "
+                f"got {self.budget_s}, {self.video_budget_s} and {self.video_frames}"
+            )
+        if self.threads is not None and self.threads < 1:
+            raise InputError(f"threads must be >= 1 or None (their defaults), got {self.threads}")
         if self.device is not None and (not self.device_batches or min(self.device_batches) < 1):
             raise InputError(f"device_batches must be batch sizes >= 1, got {self.device_batches}")
 
@@ -1124,15 +1147,28 @@ def main(
         The contents of ``speed.json``.
 
     Raises:
-        InputError: bad settings, or an ``out_dir`` that holds an earlier run's report (without ``overwrite``), before
-            any work.
+        InputError: bad settings (a device torch does not have among them), or an ``out_dir`` that holds an earlier
+            run's report (without ``overwrite``), before any work.
+        WeightFileError: ``weights`` or ``lite_weights`` is missing or not a weight file, before any work.
     """
     settings = settings or SpeedSettings()
     settings.check()
     check_no_earlier_output([Path(out_dir) / "speed.json", Path(out_dir) / "speed.md"], overwrite)
+    # a weight file the user named: a missing or bad one is refused here, not logged as every variant's failure
+    for option, weights in (("--weights", settings.weights), ("--lite-weights", settings.lite_weights)):
+        if weights is not None:
+            try:
+                load_normalizer_file(weights)
+            except WeightFileError as exc:
+                raise WeightFileError(f"{option}: {exc}") from None
+    import torch
+
+    from alcn_cv.nets.device import torch_device
+
+    if settings.device is not None:
+        torch_device(settings.device, "--device")
     out = Path(out_dir)
     make_folder(out)
-    import torch
 
     if settings.threads is not None:
         cv2.setNumThreads(settings.threads)

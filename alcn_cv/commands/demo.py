@@ -12,6 +12,10 @@
 
 Both presets are used as they are: ``alcn data detect --conf demo`` and ``alcn bench detect --conf demo``
 make the same run.
+
+The output folder is the demo's own: ``demo.json`` in it marks it so (written first), and a later demo replaces an
+earlier one's outputs (``make demo`` twice in a row); a folder that holds other files than the demo's and no
+``demo.json`` is refused before anything is written.
 """
 
 from __future__ import annotations
@@ -27,16 +31,24 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.cli import add_progress_option
+from alcn_cv.cli import add_progress_option, number_at_least
 from alcn_cv.enhance import available, create
+from alcn_cv.errors import InputError
 from alcn_cv.extras import require
-from alcn_cv.io import make_folder
+from alcn_cv.io import make_folder, write_json
 
 if TYPE_CHECKING:
     from alcn_cv.enhance.base import Normalization
     from alcn_cv.formats.coco import CocoImage
 
 logger = logging.getLogger(__name__)
+
+#: The file that marks a folder as the demo's output (written before its work): a later demo replaces that folder's
+#: outputs, never those of a folder without it.
+MARKER = "demo.json"
+#: What the demo writes into its folder: a folder holding nothing else, its rendered set among it, is an earlier
+#: demo's without the marker (written before it was).
+OUTPUTS = frozenset({MARKER, "normalized.png", "bench", "data"})
 
 
 def method_title(method: Normalization) -> str:
@@ -98,7 +110,56 @@ def normalization_grid(
     return save_figure(plt, fig, path, dpi=110)
 
 
+def check_out_dir(out_dir: Path) -> None:
+    """Check, before any work, that the demo may write into ``out_dir``: a new path, an empty folder, or an earlier
+    demo's output: it holds :data:`MARKER`, or nothing but :data:`OUTPUTS` with the demo's own ``normalized.png`` and
+    data set (``data/manifest.json`` of the ``demo`` preset of ``alcn data detect``), whose files are replaced.
+
+    Raises:
+        InputError: ``out_dir`` is a file, or a folder of other files (the user's, say) without :data:`MARKER`.
+    """
+    if not out_dir.exists() or (out_dir / MARKER).is_file():
+        return
+    if not out_dir.is_dir():
+        raise InputError(f"{out_dir} is a file, not an output folder: not replaced; give another --out")
+    if any(out_dir.iterdir()) and not _unmarked_demo(out_dir):
+        raise InputError(f"{out_dir} is not an earlier demo's output (no {MARKER}): not replaced; give another --out")
+
+
+def _unmarked_demo(out_dir: Path) -> bool:
+    """Whether ``out_dir`` holds a demo's outputs from before :data:`MARKER`, and nothing else: a user's data set of
+    another kind or preset in ``out_dir/data`` is not the demo's."""
+    from alcn_cv.data.manifest import read_manifest
+    from alcn_cv.errors import DatasetError
+
+    if not (out_dir / "normalized.png").is_file() or any(p.name not in OUTPUTS for p in out_dir.iterdir()):
+        return False
+    try:
+        manifest = read_manifest(out_dir / "data", "detect")
+    except DatasetError:
+        return False
+    return manifest["parameters"].get("conf") == "demo"
+
+
 def main(out_dir: Path, seed: int = 0, progress: bool = True) -> Path:
+    """Run the demo (see the module) into ``out_dir``.
+
+    Args:
+        out_dir: the output folder: new, empty, or an earlier demo's (:func:`check_out_dir`), whose outputs are
+            replaced.
+        seed: seed of the generated data (>= 0).
+        progress: progress bars.
+
+    Returns:
+        ``out_dir``.
+
+    Raises:
+        InputError: a negative ``seed``, or an ``out_dir`` :func:`check_out_dir` refuses, before anything is written.
+        MissingDependencyError: a package of the [bench] extra is missing.
+    """
+    if seed < 0:
+        raise InputError(f"--seed must be >= 0, got {seed}")
+    check_out_dir(out_dir)
     # the rendering, the grid and the benchmark need the [bench] extra: checked before anything is rendered or written
     require("skimage", "matplotlib", "torch", "kornia", what="alcn demo", preferred="bench")
     from alcn_cv.data import detect
@@ -106,6 +167,7 @@ def main(out_dir: Path, seed: int = 0, progress: bool = True) -> Path:
     from alcn_cv.formats.coco import load_coco
 
     make_folder(out_dir)
+    write_json(out_dir / MARKER, {"command": "alcn demo", "seed": seed})  # first: an interrupted demo's is its own
     data_dir = out_dir / "data"
     logger.info("rendering a small detection set into %s", data_dir)
     detect.generate(data_dir, seed=seed, conf="demo", overwrite=True, progress=progress)
@@ -138,9 +200,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Render a small detection set under several lightings, normalize it with every available "
         "method, and run a small detection benchmark on it. Writes OUT/normalized.png (rows: lightings, columns: "
         "methods), OUT/bench/detect.md (AUC per object and method) with precision-recall curves OUT/bench/*.png, "
-        "and the data in OUT/data.",
+        f"the data in OUT/data, and OUT/{MARKER}, which marks OUT as the demo's: a later demo replaces those files "
+        "(`make demo` twice), and OUT is refused when it holds other files without it.",
     )
-    parser.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder (default: demo_out)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the generated data")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("demo_out"),
+        help=f"output folder: new, empty, or an earlier demo's (holding {MARKER}), replaced (default: demo_out)",
+    )
+    parser.add_argument(
+        "--seed", type=number_at_least(int, 0), default=0, help="seed of the generated data (default 0)"
+    )
     add_progress_option(parser)
     parser.set_defaults(func=lambda args: main(args.out, args.seed, not args.no_progress) and 0)

@@ -13,15 +13,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.cli import add_progress_option
+from alcn_cv.cli import add_progress_option, number_at_least
 from alcn_cv.enhance import available, create
 from alcn_cv.enhance.alcn import ALCN, default_mixture
 from alcn_cv.enhance.registry import describe, format_param, parameters, parse_params, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
 from alcn_cv.io import (
-    IMAGE_SUFFIXES,
     check_no_earlier_output,
+    check_output_kind,
     check_writable,
     held_folder,
     is_video,
@@ -53,22 +53,8 @@ def _check_output(src: Path, dst: Path, overwrite: bool, in_place: bool) -> list
         if not in_place:
             raise InputError(f"the output {dst} is the input {src}: it would be replaced (--in-place replaces it)")
         return [src] if not src.is_dir() else list_images(src)
-    if src.is_dir():
-        if dst.exists() and not dst.is_dir():
-            raise InputError(f"the output of a folder must be a folder, but {dst} is a file")
-        if not dst.exists() and (dst.suffix.lower() in IMAGE_SUFFIXES or is_video(dst)):
-            raise InputError(f"the output of a folder must be a folder, got the file name {dst}")
-        outputs = [dst / path.name for path in list_images(src)]
-    elif is_video(src):
-        if not is_video(dst):
-            raise InputError(f"the output of a video must be a video file (.mp4, .avi, ...), got {dst}")
-        outputs = [dst]
-    elif dst.suffix.lower() not in IMAGE_SUFFIXES:
-        raise InputError(
-            f"the output of an image must be an image file ({', '.join(sorted(IMAGE_SUFFIXES))}), got {dst}"
-        )
-    else:
-        outputs = [dst]
+    check_output_kind(src, dst)
+    outputs = [dst / path.name for path in list_images(src)] if src.is_dir() else [dst]
     check_no_earlier_output(outputs, overwrite)
     check_writable(outputs[0])
     return outputs
@@ -371,7 +357,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--max-frames",
-        type=int,
+        type=number_at_least(int, 1),
         metavar="N",
         help="of a video, normalize and write the first N frames only (default: every frame)",
     )

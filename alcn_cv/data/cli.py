@@ -7,7 +7,7 @@ import logging
 import time
 from pathlib import Path
 
-from alcn_cv.cli import add_conf_option, add_progress_option, preset_values
+from alcn_cv.cli import add_conf_option, add_progress_option, number_at_least, number_in, preset_values
 from alcn_cv.extras import require
 
 logger = logging.getLogger(__name__)
@@ -109,7 +109,7 @@ def _scenes(args: argparse.Namespace) -> int:
 def _preview(args: argparse.Namespace) -> int:
     from alcn_cv.data.preview import preview
 
-    out = preview(args.dataset, args.out, n=args.n)
+    out = preview(args.dataset, args.out, n=args.n, overwrite=args.overwrite)
     logger.info("wrote %s", out)
     return 0
 
@@ -124,27 +124,18 @@ def _compare_psm(args: argparse.Namespace) -> int:
     return 0
 
 
-def _side_in_pixels(text: str) -> int:
-    """``data scenes --side``: an integer of at least the smallest side the scenes render at, checked here so that
-    the error names the option (``relief_scenes.generate`` checks it again for its Python callers)."""
-    from alcn_cv.data.relief_settings import MIN_SIDE
-
-    try:
-        side = int(text)
-    except ValueError:
-        side = None
-    if side is None or side < MIN_SIDE:
-        raise argparse.ArgumentTypeError(
-            f"the side of the square frames in pixels, at least {MIN_SIDE}, e.g. 256; got {text!r}"
-        )
-    return side
+#: ``--seed`` and ``--object-seed``: numpy's generators take no negative seed (their error names no option).
+_SEED = number_at_least(int, 0)
 
 
 def _add_run_options(parser: argparse.ArgumentParser) -> None:
     """The options every generator shares: ``--overwrite``, ``--workers`` and ``--no-progress``."""
     parser.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     parser.add_argument(
-        "--workers", type=int, default=1, help="worker processes (default 1; the output does not depend on it)"
+        "--workers",
+        type=number_at_least(int, 1),
+        default=1,
+        help="worker processes (default 1; the output does not depend on it)",
     )
     add_progress_option(parser)
 
@@ -173,10 +164,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "many lightings (Phos-like), plus background windows.",
     )
     q.add_argument("--out", required=True, help="output folder")
-    q.add_argument("-n", type=int, default=100_000, help="number of windows (default 100000)")
-    q.add_argument("--seed", type=int, default=0, help="seed of the windows (default 0)")
-    q.add_argument("--objects", type=int, default=100, help="number of catalogue objects (labels 1..N; default 100)")
-    q.add_argument("--object-seed", type=int, default=0, help="seed of the object catalogue (default 0)")
+    q.add_argument("-n", type=number_at_least(int, 1), default=100_000, help="number of windows (default 100000)")
+    q.add_argument("--seed", type=_SEED, default=0, help="seed of the windows (default 0)")
+    q.add_argument(
+        "--objects",
+        type=number_at_least(int, 1),
+        default=100,
+        help="number of catalogue objects (labels 1..N; default 100)",
+    )
+    q.add_argument("--object-seed", type=_SEED, default=0, help="seed of the object catalogue (default 0)")
     q.add_argument(
         "--lighting",
         default="random",
@@ -184,7 +180,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "colour,mixed (default random)",
     )
     q.add_argument(
-        "--background-fraction", type=float, default=0.35, help="fraction of background windows (default 0.35)"
+        "--background-fraction",
+        type=number_in(float, 0, 1),
+        default=0.35,
+        help="fraction of background windows, from 0 to 1 (default 0.35)",
     )
     _add_run_options(q)
     q.set_defaults(func=_phos)
@@ -198,17 +197,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument("--out", required=True, help="output folder")
     add_conf_option(q, detect_settings.CONF_SUMMARIES)
-    q.add_argument("--seed", type=int, default=0, help="seed of the images (default 0)")
-    q.add_argument("--object-seed", type=int, default=0, help="seed of the three objects (default 0)")
-    for option, field, what in [
-        ("--n-test", "n_test", "number of test images"),
-        ("--n-val", "n_val", "number of validation images, test-like, for tuning"),
-        ("--n-train", "n_train", "training images per object"),
-        ("--width", "width", "image width"),
-        ("--height", "height", "image height"),
+    q.add_argument("--seed", type=_SEED, default=0, help="seed of the images (default 0)")
+    q.add_argument("--object-seed", type=_SEED, default=0, help="seed of the three objects (default 0)")
+    pixels = number_in(int, 1, detect_settings.MAX_SIDE)
+    side = f"in pixels, from twice the objects' size to {detect_settings.MAX_SIDE}"
+    for field, kind, what in [
+        ("n_test", number_at_least(int, 1), "number of test images, at least 1 (`alcn bench detect` scores them)"),
+        ("n_val", number_at_least(int, 0), "number of validation images, test-like, for `alcn bench detect --tune`"),
+        ("n_train", number_at_least(int, 1), "training images per object"),
+        ("width", pixels, f"image width {side}"),
+        ("height", pixels, f"image height {side}"),
     ]:
         values = preset_values(detect_settings.CONFS, field)
-        q.add_argument(option, type=int, help=f"{what} (default: the preset's: {values})")
+        q.add_argument(f"--{field.replace('_', '-')}", type=kind, help=f"{what} (default: the preset's: {values})")
     _add_run_options(q)
     q.set_defaults(func=_detect)
 
@@ -220,7 +221,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument("--out", required=True, help="dataset root")
     add_conf_option(q, pose_settings.CONF_SUMMARIES)
-    q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    q.add_argument("--seed", type=_SEED, default=0, help="seed (default 0)")
     q.add_argument(
         "--frames",
         type=int,
@@ -242,7 +243,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument(
         "--train-sweeps",
-        type=float,
+        type=number_at_least(float, 0),
         nargs="+",
         default=None,
         metavar="N",
@@ -272,12 +273,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument(
         "--side",
-        type=_side_in_pixels,
+        type=number_in(int, relief_settings.MIN_SIDE, relief_settings.MAX_SIDE),
         default=320,
         metavar="PIXELS",
-        help="side of the square frames in pixels, at least 32 (default 320)",
+        help=f"side of the square frames in pixels, from {relief_settings.MIN_SIDE} to {relief_settings.MAX_SIDE} "
+        "(default 320; a scene's frames are rendered together: about 3 GB at 1024 with 12 frames, growing with the "
+        "side's square)",
     )
-    q.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    q.add_argument("--seed", type=_SEED, default=0, help="seed (default 0)")
     q.add_argument(
         "--lighting",
         choices=relief_settings.LIGHTINGS,
@@ -298,6 +301,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument("dataset", help="dataset folder, COCO .json file or BOP scene folder")
     q.add_argument("--out", required=True, help="output PNG")
+    q.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     q.add_argument(
         "-n",
         type=int,
@@ -317,6 +321,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument("--psm", default=None, help="PSM folder (default: <shared data>/psm)")
     q.add_argument("--out", required=True, help="output folder")
-    q.add_argument("--seed", type=int, default=0, help="seed of the renderings (default 0)")
+    q.add_argument("--seed", type=_SEED, default=0, help="seed of the renderings (default 0)")
     q.add_argument("--overwrite", action="store_true", help="replace an earlier comparison in --out")
     q.set_defaults(func=_compare_psm)

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from alcn_cv.data.detect_settings import CONFS, DetectConfig
+from alcn_cv.data.detect_settings import CONFS, MAX_SIDE, DetectConfig
 from alcn_cv.data.lighting import LIGHT_FAMILIES, Lighting, directional, sample_lighting
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.objects import ReliefObject, background_surface, make_object, paste, to_surface
@@ -212,7 +212,9 @@ def generate(
         conf: a preset of :data:`CONFS`, the values of the parameters below that are not given.
         object_seed: seed of the three objects.
         n_test, n_val, n_train, width, height: override the preset's values (objects keep their size in
-            pixels, so the working scale does not change).
+            pixels, so the working scale does not change): at least one test image (`alcn bench detect` scores on
+            them) and one training image per object; width and height from twice the object size to
+            :data:`~alcn_cv.data.detect_settings.MAX_SIDE`.
         p_object: override the preset's probability that each object appears in a test image.
         overwrite: replace an existing folder.
         progress: show a progress bar.
@@ -233,16 +235,15 @@ def generate(
         n_val=n_val,
         p_object=p_object,
     )
-    if (
-        cfg.width < 2 * cfg.object_px
-        or cfg.height < 2 * cfg.object_px
-        or cfg.n_train < 1
-        or cfg.n_test < 0
-        or cfg.n_val < 0
-    ):
+    if not (2 * cfg.object_px <= cfg.width <= MAX_SIDE and 2 * cfg.object_px <= cfg.height <= MAX_SIDE):
         raise InputError(
-            f"images must be at least twice the object size ({cfg.object_px} px), with n_train >= 1, n_test >= 0 "
-            f"and n_val >= 0: got {cfg.width}x{cfg.height}, n_train={cfg.n_train}, n_test={cfg.n_test}, "
+            f"the images' width and height (--width, --height) must be from {2 * cfg.object_px:g} px (twice the "
+            f"objects' size in preset {conf!r}) to {MAX_SIDE} px: got {cfg.width}x{cfg.height}"
+        )
+    # no test image: `alcn bench detect` has nothing to score on; no validation image: nothing to tune on (the demo's)
+    if cfg.n_train < 1 or cfg.n_test < 1 or cfg.n_val < 0:
+        raise InputError(
+            f"need n_train >= 1, n_test >= 1 and n_val >= 0: got n_train={cfg.n_train}, n_test={cfg.n_test}, "
             f"n_val={cfg.n_val}"
         )
     if not 0.0 <= cfg.p_object <= 1.0:

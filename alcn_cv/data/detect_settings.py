@@ -6,7 +6,11 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-__all__ = ["CONFS", "CONF_SUMMARIES", "DetectConfig"]
+__all__ = ["CONFS", "CONF_SUMMARIES", "MAX_SIDE", "DetectConfig"]
+
+#: The largest width or height of the images (pixels): an image is rendered whole, about 6 GB at 4096x4096 (its
+#: memory grows with the pixels), where 100000x100000 asked for 149 GiB.
+MAX_SIDE = 4096
 
 
 @dataclass(frozen=True)

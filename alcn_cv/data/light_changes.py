@@ -16,19 +16,18 @@ films it again under another light, with a camera:
    dark scene;
 4. an exposure error, clipping, a tone curve ``S^(1/gamma)``, 8-bit quantization and JPEG.
 
-:func:`sample_pair` relights one photograph twice, the second copy seen through a small random
-homography (:func:`random_homography`), and returns both with the dense correspondence: each
-pixel of the first is its own class (Eq. 2's labels of ALCN, as SuperPoint's homographic
-adaptation labels one image). Everything draws from the given ``numpy`` generator only: the
-same seed gives the same images.
+:func:`relit_frames` relights one photograph several times, each copy optionally seen through a small random
+homography (:func:`random_homography`): a scene of the real-light trainer, whose locations are their own classes
+(Eq. 2's labels of ALCN, as SuperPoint's homographic adaptation labels one image). Everything draws from the given
+``numpy`` generator only: the same seed gives the same images.
 
 Example::
 
     >>> import numpy as np
     >>> image = np.random.default_rng(0).integers(0, 256, (64, 80, 3), dtype=np.uint8)
-    >>> pair = sample_pair(image, np.random.default_rng(1))
-    >>> pair.first.shape, pair.second.dtype, pair.coords.shape, pair.valid.dtype
-    ((64, 80, 3), dtype('uint8'), (64, 80, 2), dtype('bool'))
+    >>> frames = relit_frames(image, 2, np.random.default_rng(1), jitter=2.0)
+    >>> frames.shape, frames.dtype
+    ((2, 64, 80, 3), dtype('uint8'))
 """
 
 from __future__ import annotations
@@ -44,12 +43,10 @@ from alcn_cv.errors import InputError
 __all__ = [
     "LIGHTS",
     "LightChangeConfig",
-    "RelitPair",
     "random_homography",
     "relief_shading",
     "relight",
     "relit_frames",
-    "sample_pair",
     "sensor_noise",
     "shading_field",
     "shadow_mask",
@@ -350,37 +347,3 @@ def random_homography(shape: tuple[int, int], rng: np.random.Generator, shift: f
     corners = np.float32([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]])
     moved = corners + rng.uniform(-shift, shift, (4, 2)).astype(np.float32) * np.float32([w, h])
     return cv2.getPerspectiveTransform(corners, moved).astype(np.float64)
-
-
-@dataclass(frozen=True)
-class RelitPair:
-    """Two relit copies of a photograph and where each pixel of the first is in the second.
-
-    Attributes:
-        first, second: uint8, the photograph's shape.
-        homography: ``(3, 3)`` float64 from the first's pixel coordinates to the second's.
-        coords: ``(H, W, 2)`` float32, ``(x, y)`` in the second of each pixel of the first.
-        valid: ``(H, W)`` bool, the pixels of the first that the second sees.
-    """
-
-    first: np.ndarray
-    second: np.ndarray
-    homography: np.ndarray
-    coords: np.ndarray
-    valid: np.ndarray
-
-
-def sample_pair(
-    image: np.ndarray, rng: np.random.Generator, config: LightChangeConfig = LightChangeConfig(), shift: float = 0.06
-) -> RelitPair:
-    """Relight ``image`` twice (:func:`relight`), the second copy through a
-    :func:`random_homography` of ``shift`` (0: registered)."""
-    h, w = image.shape[:2]
-    homography = random_homography((h, w), rng, shift) if shift > 0 else np.eye(3)
-    warped = cv2.warpPerspective(image, homography, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
-    first = relight(image, rng, config)
-    second = relight(warped, rng, config)
-    grid = np.stack(np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32)), axis=-1)
-    coords = cv2.perspectiveTransform(grid.reshape(-1, 1, 2), homography).reshape(h, w, 2)
-    valid = (coords[..., 0] >= 0) & (coords[..., 0] <= w - 1) & (coords[..., 1] >= 0) & (coords[..., 1] <= h - 1)
-    return RelitPair(first, second, homography, coords, valid)

@@ -78,14 +78,22 @@ def atomic_output_dir(
     On error the temporary folder is removed and ``out_dir`` is left as it was. An empty folder counts as
     absent (as for ``git clone``); with ``overwrite``, an existing ``out_dir`` is also replaced if it is an earlier
     output (it holds ``marker``); anything else (a file, a folder of other files) is never removed.
+
+    Raises:
+        FileExistsError: ``out_dir`` is a file or a folder that is not an earlier output (whether or not
+            ``overwrite``), or an earlier output and not ``overwrite``; one line, as
+            :func:`~alcn_cv.io.check_no_earlier_output` words it (``--overwrite``).
+        InputError: a parent of ``out_dir`` is a file.
     """
     out = Path(out_dir)
     empty = out.is_dir() and not any(out.iterdir())
-    # a folder that overwriting would not replace says so first, whether or not overwriting was asked
-    if out.exists() and not (empty or (out.is_dir() and (out / marker).is_file())):
+    # what overwriting would not replace says so first, whether or not overwriting was asked
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"{out} is a file, not an output folder: not replaced; give another path")
+    if out.exists() and not (empty or (out / marker).is_file()):
         raise FileExistsError(f"{out} is not an earlier output (no {marker}): not replaced; give another path")
     if out.exists() and not overwrite and not empty:
-        raise FileExistsError(f"{out} exists (--overwrite, or overwrite=True, replaces it)")
+        raise FileExistsError(f"{out} exists (--overwrite replaces it)")
     make_folder(out.parent)  # a parent that is a file: the one-line InputError, not mkdir's errno
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp"))
     tmp.chmod(0o777 & ~UMASK)  # mkdtemp's folder is private (0700); the output is as any other folder made here

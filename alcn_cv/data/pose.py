@@ -426,8 +426,11 @@ def generate(
             f"got {cfg.n_frames} and {cfg.n_test}"
         )
     train_sweeps = tuple(float(c) for c in train_sweeps)
-    if not train_sweeps or not all(c >= 0 for c in train_sweeps):
-        raise InputError(f"train_sweeps must be one or more numbers >= 0, got {train_sweeps}")
+    if not train_sweeps or not all(np.isfinite(c) and c >= 0 for c in train_sweeps):  # inf: NaN elevations
+        raise InputError(
+            f"the training sweeps (--train-sweeps) must be one or more finite numbers >= 0, got "
+            f"{' '.join(f'{c:g}' for c in train_sweeps)}"
+        )
     sequences = []
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         write_camera(tmp, cfg.K, cfg.width, cfg.height)

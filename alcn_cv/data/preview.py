@@ -17,7 +17,7 @@ import numpy as np
 
 from alcn_cv.data.manifest import read_manifest
 from alcn_cv.errors import DatasetError, InputError
-from alcn_cv.io import write_image
+from alcn_cv.io import check_no_earlier_output, write_image
 
 __all__ = ["KINDS", "preview", "grid", "draw_model_box"]
 
@@ -180,7 +180,7 @@ def _relief_scenes(folder: Path, n: int, side: int = 256) -> np.ndarray:
     return grid(tiles, cols)
 
 
-def preview(dataset: str | os.PathLike, out_png: str | os.PathLike, *, n: int = 16) -> Path:
+def preview(dataset: str | os.PathLike, out_png: str | os.PathLike, *, n: int = 16, overwrite: bool = False) -> Path:
     """Write a contact sheet of ``dataset`` with its ground truth drawn to ``out_png``.
 
     Args:
@@ -188,10 +188,24 @@ def preview(dataset: str | os.PathLike, out_png: str | os.PathLike, *, n: int = 
         out_png: output PNG.
         n: how many samples to show: Phos windows, COCO images (at least one a file), BOP frames (as many of
             each sequence, at least one), frames of rendered scenes (about sqrt(n) scenes, sqrt(n) frames each).
+        overwrite: replace an existing ``out_png``.
+
+    Returns:
+        ``out_png``.
+
+    Raises:
+        InputError: ``n`` below 1, no ``dataset``, ``out_png`` a folder, or ``out_png`` exists and not
+            ``overwrite`` (all before reading the dataset).
+        DatasetError: ``dataset`` is none of the kinds above, or is malformed.
     """
     if n < 1:
         raise InputError(f"the number of samples to show (-n) must be at least 1, got {n}")
-    src = Path(dataset)
+    src, out = Path(dataset), Path(out_png)
+    if not src.exists():
+        raise InputError(f"{src}: no such file or folder")
+    if out.is_dir():  # not "exists (--overwrite replaces it)": --overwrite would not replace a folder
+        raise InputError(f"cannot write the contact sheet to {out}: a folder")
+    check_no_earlier_output([out], overwrite)
     if src.is_file() and src.suffix == ".json":
         sheet = _coco([src], n)
     elif (src / "scene_camera.json").exists():
@@ -215,4 +229,4 @@ def preview(dataset: str | os.PathLike, out_png: str | os.PathLike, *, n: int = 
             )
     else:
         raise DatasetError(f"{src}: not a dataset (no manifest.json, scene_camera.json, and not a .json file)")
-    return write_image(out_png, sheet)
+    return write_image(out, sheet)

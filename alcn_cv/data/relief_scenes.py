@@ -34,7 +34,7 @@ from alcn_cv.data.lighting import LIGHT_FAMILIES, Lighting, directional, sample_
 from alcn_cv.data.manifest import atomic_output_dir, make_manifest
 from alcn_cv.data.objects import background_surface, make_object, paste, to_surface
 from alcn_cv.data.parallel import parallel_map
-from alcn_cv.data.relief_settings import AZIMUTHS, DIRECTIONAL_FRAMES, ELEVATIONS, FRAMES, LIGHTINGS, MIN_SIDE
+from alcn_cv.data.relief_settings import AZIMUTHS, DIRECTIONAL_FRAMES, ELEVATIONS, FRAMES, LIGHTINGS, MAX_SIDE, MIN_SIDE
 from alcn_cv.data.render import render_surfaces
 from alcn_cv.data.textures import random_texture
 from alcn_cv.errors import InputError
@@ -154,8 +154,8 @@ def _frames(scenes: int, frames: int | None, side: int, lighting: str) -> int:
         raise InputError(f"unknown --lighting {lighting!r}; choose from {', '.join(LIGHTINGS)}")
     if scenes < 1:
         raise InputError(f"need at least one scene (--scenes), got {scenes}")
-    if side < MIN_SIDE:
-        raise InputError(f"--side is the side of the frames in pixels, at least {MIN_SIDE}; got {side}")
+    if not MIN_SIDE <= side <= MAX_SIDE:
+        raise InputError(f"--side is the side of the frames in pixels, from {MIN_SIDE} to {MAX_SIDE}; got {side}")
     if lighting == "directional":
         if frames not in (None, DIRECTIONAL_FRAMES):
             raise InputError(
@@ -181,7 +181,8 @@ def render_scenes(
 ) -> Iterator[tuple[np.ndarray, list[str]]]:
     """The frames of :func:`generate`, scene by scene: ``(frames, side, side)`` uint8 frames and the light family of
     each (``frames``: default :data:`FRAMES`; ``directional``: :data:`DIRECTIONAL_FRAMES`, the only value it
-    takes). The arguments are checked when called, the scenes rendered as they are taken."""
+    takes; ``side``: from :data:`MIN_SIDE` to :data:`MAX_SIDE`). The arguments are checked when called, the scenes
+    rendered as they are taken."""
     frames = _frames(scenes, frames, side, lighting)
     jobs = [(int(seed), i, int(side), frames, lighting) for i in range(scenes)]
     return parallel_map(_scene_job, jobs, workers=workers, desc="relief scenes", unit="scene", progress=progress)

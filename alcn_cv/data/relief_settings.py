@@ -3,10 +3,13 @@ the renderer so that the command line's help and the benchmarks read them withou
 
 from __future__ import annotations
 
-__all__ = ["AZIMUTHS", "DIRECTIONAL_FRAMES", "ELEVATIONS", "FRAMES", "LIGHTINGS", "MIN_SIDE"]
+__all__ = ["AZIMUTHS", "DIRECTIONAL_FRAMES", "ELEVATIONS", "FRAMES", "LIGHTINGS", "MAX_SIDE", "MIN_SIDE"]
 
 #: The least side of the frames (pixels).
 MIN_SIDE = 32
+#: The largest side of the frames (pixels): a scene's frames are rendered together, about 3 GB at 1024 for the
+#: default 12 frames and growing with the side's square (13 GB at 2048).
+MAX_SIDE = 2048
 #: The lightings of a run (see the module).
 LIGHTINGS = ("families", "directional")
 #: ``directional``: elevations of the probes' light above the ground (degrees); the gallery is lit from 90.

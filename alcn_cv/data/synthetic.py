@@ -25,7 +25,8 @@ __all__ = ["augment", "sample_negatives", "object_box"]
 WINDOW = 64
 
 
-def _as_float(image: np.ndarray, gray: bool) -> np.ndarray:
+def _as_float(image: np.ndarray) -> np.ndarray:
+    """``image`` as a float32 gray image in [0, 1]."""
     img = np.asarray(image)
     if img.size == 0 or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 3)):
         raise InputError(f"image must be HxW or HxWx3, got shape {img.shape}")
@@ -41,11 +42,7 @@ def _as_float(image: np.ndarray, gray: bool) -> np.ndarray:
         raise InputError(f"unsupported image dtype {img.dtype}; use uint8, uint16 or float32")
     if f.ndim == 3 and f.shape[2] == 1:
         f = f[..., 0]
-    if gray and f.ndim == 3:
-        f = cv2.cvtColor(f, cv2.COLOR_BGR2GRAY)
-    if not gray and f.ndim == 2:
-        f = cv2.cvtColor(f, cv2.COLOR_GRAY2BGR)
-    return f
+    return cv2.cvtColor(f, cv2.COLOR_BGR2GRAY) if f.ndim == 3 else f
 
 
 def object_box(
@@ -81,24 +78,19 @@ def _intensity_noise(
     return np.rint(np.clip(out, 0, 1) * 255).astype(np.uint8)
 
 
-def _background(rng: np.random.Generator, gray: bool, backgrounds: Sequence[np.ndarray] | None) -> np.ndarray:
-    """A 64x64 background: uniform colour, a crop of ``backgrounds`` or a random texture."""
+def _background(rng: np.random.Generator, backgrounds: Sequence[np.ndarray] | None) -> np.ndarray:
+    """A 64x64 gray background: a uniform level, a crop of ``backgrounds`` or a random texture."""
     u = rng.random()
     if u < 0.4:
-        col = rng.uniform(0, 1, 1 if gray else 3).astype(np.float32)
-        return (
-            np.broadcast_to(col, (WINDOW, WINDOW) + (() if gray else (3,)))
-            .reshape((WINDOW, WINDOW) if gray else (WINDOW, WINDOW, 3))
-            .copy()
-        )
+        return np.full((WINDOW, WINDOW), rng.uniform(0, 1, 1)[0], np.float32)
     if backgrounds and u < 0.7:
-        src = _as_float(backgrounds[int(rng.integers(len(backgrounds)))], gray)
+        src = _as_float(backgrounds[int(rng.integers(len(backgrounds)))])
         h, w = src.shape[:2]
         s = rng.uniform(0.5, 2.0)
         ch, cw = min(h, int(WINDOW / s) + 1), min(w, int(WINDOW / s) + 1)
         y0, x0 = int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1))
         return cv2.resize(src[y0 : y0 + ch, x0 : x0 + cw], (WINDOW, WINDOW), interpolation=cv2.INTER_LINEAR)
-    return display_texture(rng, WINDOW, p_photo=0.6, gray=gray)
+    return display_texture(rng, WINDOW, p_photo=0.6)
 
 
 def augment(
@@ -108,7 +100,6 @@ def augment(
     rng: np.random.Generator,
     *,
     extent: float | None = 40.0,
-    gray: bool = True,
     backgrounds: Sequence[np.ndarray] | None = None,
     replace_background: float = 0.8,
     intensity_scale: tuple[float, float] = (0.8, 1.2),
@@ -128,7 +119,6 @@ def augment(
         rng: random generator.
         extent: the object's larger side in output pixels (before jitter); None keeps the
             image's scale (for images already at the working scale).
-        gray: grayscale (n, 64, 64) output; BGR (n, 64, 64, 3) otherwise.
         backgrounds: images whose crops may replace the background (besides uniform colours and
             random textures).
         replace_background: probability of replacing the background of a window.
@@ -139,11 +129,11 @@ def augment(
             relative scale).
 
     Returns:
-        uint8 windows (n, 64, 64) or (n, 64, 64, 3), the object centred.
+        uint8 gray windows (n, 64, 64), the object centred.
     """
     if n < 0:
         raise InputError(f"n must be >= 0, got {n}")
-    img = _as_float(image, gray)
+    img = _as_float(image)
     box, mask = object_box(img.shape, mask_or_bbox)
     if mask is None:
         mask = np.zeros(img.shape[:2], np.float32)
@@ -156,7 +146,7 @@ def augment(
     cx, cy = box[0] + (box[2] - 1) / 2, box[1] + (box[3] - 1) / 2
     base = 1.0 if extent is None else extent / max(box[2], box[3])
     c = (WINDOW - 1) / 2
-    out = np.empty((n, WINDOW, WINDOW) + (() if gray else (3,)), np.float32)
+    out = np.empty((n, WINDOW, WINDOW), np.float32)
     for i in range(n):
         s = base * (1 + rng.uniform(-max_scale_change, max_scale_change))
         M = cv2.getRotationMatrix2D((cx, cy), rng.uniform(-max_rotation_deg, max_rotation_deg), s)
@@ -165,9 +155,7 @@ def augment(
         win = cv2.warpAffine(img, M, (WINDOW, WINDOW), flags=interp, borderMode=cv2.BORDER_REFLECT_101)
         if rng.random() < replace_background:
             a = cv2.warpAffine(mask, M, (WINDOW, WINDOW), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-            if not gray:
-                a = a[..., None]
-            win = win * a + _background(rng, gray, backgrounds) * (1 - a)
+            win = win * a + _background(rng, backgrounds) * (1 - a)
         out[i] = win
     return _intensity_noise(out, rng, intensity_scale, intensity_offset, noise)
 
@@ -179,7 +167,6 @@ def sample_negatives(
     rng: np.random.Generator,
     *,
     extent: float | None = 40.0,
-    gray: bool = True,
     natural_fraction: float = 0.4,
     off_centre_fraction: float = 0.2,
     intensity_scale: tuple[float, float] = (0.8, 1.2),
@@ -198,10 +185,10 @@ def sample_negatives(
         n: number of windows.
         rng: random generator.
         extent: as :func:`augment`: the scale applied to each image (from its object's size).
-        gray, intensity_scale, intensity_offset, noise: as :func:`augment`.
+        intensity_scale, intensity_offset, noise: as :func:`augment`.
 
     Returns:
-        uint8 windows (n, 64, 64) or (n, 64, 64, 3).
+        uint8 gray windows (n, 64, 64).
     """
     if n < 0:
         raise InputError(f"n must be >= 0, got {n}")
@@ -209,16 +196,16 @@ def sample_negatives(
         raise InputError("need one mask or box per image, and at least one image")
     prepared = []
     for im, mb in zip(images, masks_or_bboxes):
-        f = _as_float(im, gray)
+        f = _as_float(im)
         box, _ = object_box(f.shape, mb)
         s = 1.0 if extent is None else extent / max(box[2], box[3])
         prepared.append((f, box, s))
     c = (WINDOW - 1) / 2
-    out = np.empty((n, WINDOW, WINDOW) + (() if gray else (3,)), np.float32)
+    out = np.empty((n, WINDOW, WINDOW), np.float32)
     for i in range(n):
         u = rng.random()
         if u < natural_fraction:
-            out[i] = _background(rng, gray, None)
+            out[i] = _background(rng, None)
             continue
         f, box, s = prepared[int(rng.integers(len(prepared)))]
         h, w = f.shape[:2]
@@ -240,7 +227,7 @@ def sample_negatives(
                 ):
                     break
             else:
-                out[i] = _background(rng, gray, None)
+                out[i] = _background(rng, None)
                 continue
         M = cv2.getRotationMatrix2D((px, py), rng.uniform(-10, 10), s)
         M[:, 2] += np.array([c, c]) - (px, py)

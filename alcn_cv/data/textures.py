@@ -253,9 +253,7 @@ def colour_jitter(rng: np.random.Generator, img: np.ndarray, strength: float = 1
     return np.clip(out, 0.0, 1.0).astype(np.float32)
 
 
-def photo_crop(
-    rng: np.random.Generator, size: int | tuple[int, int], *, indices: tuple[int, ...] | None = None
-) -> np.ndarray:
+def photo_crop(rng: np.random.Generator, size: int | tuple[int, int]) -> np.ndarray:
     """A random crop of a random :func:`photos` photograph, float32 (H, W, 3) linear RGB.
 
     The crop has random scale (0.25x to 1.5x, more for outputs larger than the photograph),
@@ -264,12 +262,10 @@ def photo_crop(
     Args:
         rng: random generator.
         size: side or (height, width) of the output.
-        indices: restrict to these photographs (indices into :func:`photos`).
     """
     h, w = _height_width(size)
     pool = photos()
-    idx = int(rng.choice(indices)) if indices else int(rng.integers(len(pool)))
-    img = pool[idx]
+    img = pool[int(rng.integers(len(pool)))]
     # Outputs larger than the photograph magnify a random part of it (between 1x and 3x the
     # smallest magnification that fits), so large scenes still get varied crops.
     lo = max(0.25, h / img.shape[0], w / img.shape[1])
@@ -293,10 +289,8 @@ def random_texture(rng: np.random.Generator, size: int | tuple[int, int], *, p_p
     return procedural_texture(rng, size)
 
 
-def display_texture(
-    rng: np.random.Generator, size: int | tuple[int, int], *, p_photo: float = 0.5, gray: bool = False
-) -> np.ndarray:
+def display_texture(rng: np.random.Generator, size: int | tuple[int, int], *, p_photo: float = 0.5) -> np.ndarray:
     """:func:`random_texture` gamma-encoded (1/2.2) to display values, as a photograph stores
-    them: float32 in [0, 1], ``(h, w)`` luma with ``gray``, else BGR ``(h, w, 3)``."""
+    them, in luma: float32 ``(h, w)`` in [0, 1]."""
     bgr = np.ascontiguousarray(random_texture(rng, size, p_photo=p_photo)[..., ::-1] ** (1 / 2.2), dtype=np.float32)
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY) if gray else bgr
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)

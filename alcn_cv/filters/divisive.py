@@ -76,13 +76,10 @@ def divisive_floor(energy: np.ndarray, scale: float) -> float:
     return scale * float(cv2.mean(energy)[0])
 
 
-def divide_by_energy(
-    response: np.ndarray, squared: np.ndarray, floor: float, multiplier: float = 1.0, dst: np.ndarray | None = None
-) -> np.ndarray:
+def divide_by_energy(response: np.ndarray, squared: np.ndarray, floor: float, multiplier: float = 1.0) -> np.ndarray:
     """``multiplier * response / sqrt(squared + floor^2 + ABSOLUTE_FLOOR^2)``: :func:`divisive_normalization`'s
     division, for a caller that computes ``e^2`` (``squared``, the :func:`blurred_square` of the response) and
-    the floor itself (over an image's rows in parts). The divisor is computed in ``squared``, the result in
-    ``dst`` (default: ``squared`` too)."""
+    the floor itself (over an image's rows in parts). The result is computed in ``squared``, which it returns."""
     # e^2 is the blurred square itself: OpenCV passes on it, no square root squared again
     divisor = cv2.sqrt(cv2.add(squared, floor * floor + ABSOLUTE_FLOOR**2, dst=squared), dst=squared)
-    return cv2.divide(response, divisor, dst=divisor if dst is None else dst, scale=multiplier)
+    return cv2.divide(response, divisor, dst=divisor, scale=multiplier)

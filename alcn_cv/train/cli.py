@@ -18,7 +18,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from alcn_cv.cli import add_conf_option, add_progress_option, interrupt_exit_code
+from alcn_cv.cli import add_conf_option, add_progress_option, interrupt_exit_code, number_at_least
 from alcn_cv.presets import preset
 from alcn_cv.train.config import (
     DISTILL_CONF_SUMMARIES,
@@ -33,6 +33,11 @@ if TYPE_CHECKING:
 __all__ = ["add_parser"]
 
 logger = logging.getLogger(__name__)
+
+#: The ``type`` of a ``--seed``: numpy's generators take no negative seed.
+_SEED = number_at_least(int, 0)
+#: The ``type`` of a ``--threads``, where 0 is the libraries' own default.
+_THREADS = number_at_least(int, 0)
 
 
 def _add_conf(
@@ -54,7 +59,7 @@ def _add_run(parser: argparse.ArgumentParser, out: str) -> None:
     """``--out`` (the run folder, default ``out``), ``--seed`` and ``--no-progress``, the same on the real-light
     training commands."""
     parser.add_argument("--out", type=Path, default=Path(out), help=f"run folder (default: {out})")
-    parser.add_argument("--seed", type=int, help="seed (default: the preset's)")
+    parser.add_argument("--seed", type=_SEED, help="seed (default: the preset's)")
     add_progress_option(parser)
 
 
@@ -100,7 +105,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "too), run.* (--device) and fewshot.* may change",
     )
     p.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
-    p.add_argument("--seed", type=int, help="seed (default: the preset's)")
+    p.add_argument("--seed", type=_SEED, help="seed (default: the preset's)")
     p.add_argument("--device", choices=("cpu", "cuda"), help="run.device (default: the preset's)")
     add_progress_option(p)
     p.set_defaults(func=_train)
@@ -124,17 +129,24 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "the windows' own; detector.pt records the spec with its scale and ALCN's model named)",
     )
     d.add_argument("--weights", type=Path, help="Normalizer weight file for --method alcn (default: shipped)")
-    d.add_argument("--per-image", type=int, default=300, help="synthetic windows per real image (default 300)")
     d.add_argument(
-        "--negatives", type=int, default=0, help="background windows (default: as many as all positive windows)"
+        "--per-image", type=number_at_least(int, 1), default=300, help="synthetic windows per real image (default 300)"
+    )
+    d.add_argument(
+        "--negatives",
+        type=number_at_least(int, 0),
+        default=0,
+        help="background windows (default: as many as all positive windows)",
     )
     d.add_argument(
         "--extent", type=float, default=40.0, help="the object's size in the 64-px window, pixels (default 40)"
     )
-    d.add_argument("--epochs", type=int, default=15, help="training epochs (default 15)")
-    d.add_argument("--batch-size", type=int, default=64, help="windows per batch (default 64)")
-    d.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
-    d.add_argument("--seed", type=int, default=0, help="seed of the synthetic images and the detector (default 0)")
+    d.add_argument("--epochs", type=number_at_least(int, 1), default=15, help="training epochs (default 15)")
+    d.add_argument("--batch-size", type=number_at_least(int, 1), default=64, help="windows per batch (default 64)")
+    d.add_argument(
+        "--lr", type=number_at_least(float, 0, above=True), default=1e-3, help="Adam learning rate (default 1e-3)"
+    )
+    d.add_argument("--seed", type=_SEED, default=0, help="seed of the synthetic images and the detector (default 0)")
     add_progress_option(d)
     d.set_defaults(func=_train_detector)
 
@@ -154,10 +166,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _add_conf(s, DISTILL_CONF_SUMMARIES, None, "teacher=FILE")
     s.add_argument("--out", type=Path, help="weight file to write (.npz; the card is .md beside it)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing weight file, its card and export")
-    s.add_argument("--seed", type=int, help="seed (default: the preset's)")
+    s.add_argument("--seed", type=_SEED, help="seed (default: the preset's)")
     s.add_argument(
         "--threads",
-        type=int,
+        type=_THREADS,
         default=1,
         help="torch and OpenCV threads (default 1, as the shipped files were made; 0: the libraries' default)",
     )
@@ -182,7 +194,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _add_run(r, "out/gain")
     r.add_argument(
         "--threads",
-        type=int,
+        type=_THREADS,
         default=1,
         help="torch threads (default 1, as the shipped file was made; 0: torch's default)",
     )
@@ -209,7 +221,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     _add_conf(u, UNET_CONF_SUMMARIES, "gain", "net.channels=16")
     _add_run(u, "out/unet")
-    u.add_argument("--threads", type=int, default=1, help="torch threads (default 1; 0: torch's default)")
+    u.add_argument("--threads", type=_THREADS, default=1, help="torch threads (default 1; 0: torch's default)")
     u.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
     u.set_defaults(func=_train_unet)
 
@@ -329,6 +341,7 @@ def _distill(args: argparse.Namespace) -> int:
     from alcn_cv.train.config import DISTILL_CONFS
 
     cfg = preset(DISTILL_CONFS, args.conf, _operational(args, seed="seed"))
+    cfg.check()  # a setting out of range: named, before printing or any work
     if args.print_config:
         return _print_config(cfg)
     if args.out is None:
@@ -482,6 +495,7 @@ def _print_with_threads(threads: int, run: Callable[[], object]) -> int:
 
 def _export(args: argparse.Namespace) -> int:
     from alcn_cv.errors import InputError
+    from alcn_cv.io import output_path
     from alcn_cv.runtime import resolve_weights
     from alcn_cv.train.export import export_onnx
     from alcn_cv.weight_file import WEIGHTS_DIR, load_normalizer_file
@@ -495,7 +509,10 @@ def _export(args: argparse.Namespace) -> int:
             + "give --weights FILE to export your own weights (beside them), or --onnx PATH"
         )
     load_normalizer_file(weights)  # a folder (the file meant named), a missing or corrupt file: before a path beside it
-    onnx = beside if args.onnx is None else args.onnx
+    # its suffix and folder first: a path that no --overwrite would let be written is refused as such
+    onnx = beside if args.onnx is None else output_path(args.onnx, ".onnx", "an ONNX export")
+    if onnx.is_dir():
+        raise InputError(f"{onnx} is a folder: --onnx names the .onnx file to write")
     if onnx.exists() and not args.overwrite:
         if onnx.resolve().is_relative_to(shipped):
             raise InputError(f"{onnx} is an export installed with alcn-cv; give --onnx PATH to write another")

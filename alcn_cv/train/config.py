@@ -82,7 +82,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Self
@@ -340,20 +340,18 @@ def _check(cfg: TrainConfig) -> None:
         "model.output_scale",
         "model.working_scale",
     ]
-    for key in positive:
-        if not flat[key] > 0:
-            raise InputError(f"config key {key!r} must be positive, got {flat[key]!r}")
-    for key in [
+    non_negative = [
+        "seed",
         "data.n_train",
         "data.n_val",
+        "data.object_seed",
         "optim.normalizer_lr",
         "optim.grad_clip",
         "optim.warmup_steps",
         "run.workers",
         "run.threads",
-    ]:
-        if flat[key] < 0:
-            raise InputError(f"config key {key!r} must be >= 0, got {flat[key]!r}")
+    ]
+    _check_ranges(flat, positive, non_negative)
     if not 0 <= cfg.data.background_fraction <= 1:
         raise InputError(f"config key 'data.background_fraction' must be in [0, 1], got {cfg.data.background_fraction}")
     # the families first: a misspelt one is named, not the anchor it then leaves out
@@ -410,6 +408,21 @@ def _check(cfg: TrainConfig) -> None:
         raise InputError("config key 'data.n_train' must be positive when 'data.path' is empty")
     if not cfg.data.val_path and cfg.data.n_val == 0:
         raise InputError("config key 'data.n_val' must be positive when 'data.val_path' is empty")
+
+
+def _check_ranges(settings: dict[str, Any], positive: Iterable[str] = (), non_negative: Iterable[str] = ()) -> None:
+    """Check the ``positive`` keys of ``settings`` (flat, by key as ``--set`` spells it) are above 0 and the
+    ``non_negative`` ones not below 0.
+
+    Raises:
+        InputError: the first key out of range, named with its value.
+    """
+    for key in positive:
+        if not settings[key] > 0:  # `not >`: NaN is no value in range
+            raise InputError(f"config key {key!r} must be positive, got {settings[key]!r}")
+    for key in non_negative:
+        if not settings[key] >= 0:
+            raise InputError(f"config key {key!r} must be >= 0, got {settings[key]!r}")
 
 
 def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -576,8 +589,8 @@ class RealLightConfig:
     def check(self) -> None:
         """What a run on these settings needs: scenes or relit photographs, a rendered share in [0, 1) with rendered
         scenes, at least 2 locations, 1 step and 1 step between snapshots, relit copies 0 or at least 2 (a copy is a
-        frame: a scene needs two), no negative count of locations drawn anywhere, and a positive learning rate and
-        temperature; each of ``scenes`` a folder or a webcam scene's name; ``photos`` relit, each an existing folder
+        frame: a scene needs two), no negative count of locations drawn anywhere or seed, and a positive learning rate
+        and temperature; each of ``scenes`` a folder or a webcam scene's name; ``photos`` relit, each an existing folder
         holding images (listed, not read: the images' sizes are checked as they are read). The network's own needs, such
         as the crop's size, are its trainer's to check.
 
@@ -605,8 +618,10 @@ class RealLightConfig:
                 f"need locations >= 2, steps >= 1 and save_every >= 1, got {self.locations}, {self.steps}, "
                 f"{self.save_every}"
             )
-        if self.relit < 0 or self.anywhere < 0:
-            raise InputError(f"relit and anywhere must be >= 0, got {self.relit} and {self.anywhere}")
+        if self.relit < 0 or self.anywhere < 0 or self.seed < 0:
+            raise InputError(
+                f"relit, anywhere and seed must be >= 0, got {self.relit}, {self.anywhere} and {self.seed}"
+            )
         if not self.lr > 0:
             raise InputError(f"lr must be > 0, got {self.lr}")
         if not self.temperature > 0:
@@ -642,6 +657,25 @@ class UNetConfig(RealLightConfig):
     """
 
     net: dict[str, Any] = field(default_factory=_unet_network)
+
+    def check(self) -> None:
+        """:meth:`RealLightConfig.check`, then the U-Net's: a ``crop`` of at least ``patch``, and ``net.levels`` from 1
+        to the most whose coarsest level holds a pixel of the crop (level L sees it pooled 2 ** (L - 1) times; the
+        widths double per level, so a count far past that builds a network of astronomic width, whose memory is gone
+        before the first step).
+
+        Raises:
+            InputError: the first setting out of range, named by its key.
+        """
+        super().check()
+        if self.crop < self.patch:
+            raise InputError(f"need crop >= patch, got crop {self.crop} and patch {self.patch}")
+        most = self.crop.bit_length()  # the largest L with 2 ** (L - 1) <= crop
+        if not 1 <= self.net["levels"] <= most:
+            raise InputError(
+                f"config key 'net.levels' must be from 1 to {most} (level L sees the {self.crop}-pixel crop pooled to "
+                f"1/2**(L-1)), got {self.net['levels']}"
+            )
 
 
 #: ``alcn train-unet`` presets: ``gain``, the U-Net baseline trained as the ``gain`` preset of
@@ -681,6 +715,18 @@ class LiteDistillConfig:
     weight_decay_w: float = 0.01
     n_objects: int = 100
 
+    def check(self) -> None:
+        """Before any work: ``channels`` two positive widths; the counts, ``lr`` and ``n_objects`` positive;
+        ``seed`` and ``weight_decay_w`` not negative.
+
+        Raises:
+            InputError: the first setting out of range, named by its key.
+        """
+        if len(self.channels) != 2 or min(self.channels) < 1:
+            raise InputError(f"config key 'channels' must list 2 positive widths, got {self.channels!r}")
+        positive = ("n_windows", "n_val", "epochs", "batch_size", "lr", "n_objects")
+        _check_ranges(dataclasses.asdict(self), positive, ("seed", "weight_decay_w"))
+
 
 @dataclass
 class GainDistillConfig:
@@ -708,6 +754,17 @@ class GainDistillConfig:
     lr: float = 3e-3
     channels: int = 8
     dilations: list[int] = field(default_factory=lambda: [1, 2, 4])
+
+    def check(self) -> None:
+        """Before any work: ``epochs``, ``lr`` and ``channels`` positive; ``relit``, ``n_rendered`` and ``seed`` not
+        negative; ``dilations`` a non-empty list of positive dilations.
+
+        Raises:
+            InputError: the first setting out of range, named by its key.
+        """
+        _check_ranges(dataclasses.asdict(self), ("epochs", "lr", "channels"), ("relit", "n_rendered", "seed"))
+        if not self.dilations or min(self.dilations) < 1:
+            raise InputError(f"config key 'dilations' must list positive dilations, got {self.dilations!r}")
 
 
 #: ``alcn distill`` presets: ``lite`` makes ``alcn_normalizer_lite.npz``, ``gain-lite``

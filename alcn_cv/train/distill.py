@@ -107,12 +107,15 @@ def distill(cfg: LiteDistillConfig | None = None, progress: bool = True) -> tupl
 
     Returns:
         The student (eval mode) and a record of the run (settings, time, validation fidelity).
+
+    Raises:
+        InputError: a setting out of range (:meth:`~alcn_cv.train.config.LiteDistillConfig.check`), before any work;
+            a teacher not of the paper's family.
     """
     cfg = cfg or LiteDistillConfig()
+    cfg.check()
     n_windows, n_val, seed, epochs, batch_size = cfg.n_windows, cfg.n_val, cfg.seed, cfg.epochs, cfg.batch_size
     n_objects = cfg.n_objects
-    if n_windows < 1 or n_val < 1 or epochs < 1 or batch_size < 1 or len(cfg.channels) != 2:
-        raise InputError("n_windows, n_val, epochs and batch_size must be >= 1, channels a list of 2")
     torch.manual_seed(seed)
     teacher_path = teacher_file(cfg.teacher)
     teacher_weights = load_normalizer_file(teacher_path)
@@ -209,8 +212,10 @@ def main(
         The weight file's path.
 
     Raises:
-        InputError: ``out_path`` exists and ``overwrite`` is false, or cannot be written.
+        InputError: a setting out of range (the configuration's ``check``), ``out_path`` exists and ``overwrite``
+            is false, or cannot be written: before any work.
     """
+    cfg.check()
     out_path = output_path(out_path, ".npz", "a weight file")  # before the distillation, not after it
     if out_path.exists() and not overwrite:
         raise InputError(f"{out_path} exists (--overwrite replaces it, its card and ONNX export with it)")
@@ -394,11 +399,15 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
 
     Returns:
         The student (eval mode) and a record of the run (settings, time, fidelity).
+
+    Raises:
+        InputError: a setting out of range (:meth:`~alcn_cv.train.config.GainDistillConfig.check`), before any work;
+            a teacher that is no gain Normalizer.
+        DatasetError: no validation frames.
     """
     cfg = cfg or GainDistillConfig()
+    cfg.check()
     seed, epochs, n_rendered, channels, dilations = cfg.seed, cfg.epochs, cfg.n_rendered, cfg.channels, cfg.dilations
-    if epochs < 1 or n_rendered < 0 or channels < 1 or not dilations:
-        raise InputError("epochs and channels must be >= 1, n_rendered >= 0, and dilations non-empty")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     teacher_path = teacher_file(cfg.teacher)

@@ -323,13 +323,20 @@ def main(
 
     Raises:
         InputError: ``weights`` with another method than ALCN, or given twice; ``per_image`` below 1, ``negatives``
-            below 0, ``extent`` outside (0, 64] (the window's side); an earlier detector in ``out_dir`` without
+            below 0, ``extent`` outside (0, 64] (the window's side), ``epochs`` or ``batch_size`` below 1, ``lr`` not
+            positive, ``seed`` negative (all before the windows are made); an earlier detector in ``out_dir`` without
             ``overwrite``; ``out_dir`` held by another run.
     """
     from alcn_cv.data.synthetic import WINDOW
 
     if per_image < 1 or negatives < 0:
         raise InputError(f"need --per-image >= 1 and --negatives >= 0, got {per_image} and {negatives}")
+    # train_detector's own check, here before the windows are made
+    if epochs < 1 or batch_size < 1 or not lr > 0 or seed < 0:
+        raise InputError(
+            f"need --epochs >= 1, --batch-size >= 1, --lr > 0 and --seed >= 0, got {epochs}, {batch_size}, {lr:g} "
+            f"and {seed}"
+        )
     if not 0 < extent <= WINDOW:
         raise InputError(f"--extent is the object's size in the {WINDOW}-px window: (0, {WINDOW}], got {extent:g}")
     out = Path(out_dir)

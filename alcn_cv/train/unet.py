@@ -119,14 +119,12 @@ def train_unet(
         The weight file ``out/unet_normalizer.npz``.
 
     Raises:
-        InputError: settings out of range; ``out`` holds an earlier run (without ``overwrite``) or other files, or is
-            a file.
+        InputError: settings out of range (:meth:`~alcn_cv.train.config.UNetConfig.check`); ``out`` holds an
+            earlier run (without ``overwrite``) or other files, or is a file.
         TrainingInterrupted: Ctrl-C or SIGTERM (:func:`~alcn_cv.train.real_light.fit`); no checkpoint is written
             (its ``checkpoint`` is False): ``history.json`` holds the steps done.
     """
     cfg.check()
-    if cfg.crop < cfg.patch:
-        raise InputError(f"need crop >= patch, got crop {cfg.crop} and patch {cfg.patch}")
     check_run_folder(out, overwrite=overwrite, resumable=False)
     with training_run(cfg, out, check=False) as folder:
         return _train(cfg, folder, {"command": command, "conf": conf}, progress)
