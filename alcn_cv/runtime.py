@@ -391,19 +391,22 @@ def opencv_network(weight_file: NormalizerFile, grid_stride: int | None, spec: M
     if weight_file.path is None:
         raise WeightFileError("backend='opencv' runs the ONNX export beside a weight file: save the weights to a file")
     onnx = weight_file.path.with_suffix(".onnx")
+    # before the graph is read with the weight file's config: another model's export (a gain one beside a paper
+    # model's weights) would need fields this config lacks
+    if onnx.is_file():
+        exported = onnx.read_bytes()
+        missing = [
+            name
+            for name, array in weight_file.arrays.items()
+            # the 0-d arrays (tau, the floor's scale) are not in the graph: the runtime reads them from the weight file
+            if array.ndim and array.astype("<f4", copy=False).tobytes() not in exported
+        ]
+        if missing:
+            raise WeightFileError(
+                f"{onnx} is not the export of {weight_file.path.name} (it does not hold its {', '.join(missing)}): "
+                f"export it again, `alcn export --weights {weight_file.path} --onnx {onnx} --overwrite`"
+            )
     net = OpenCVNormalizer(onnx, weight_file.meta["config"])
-    exported = onnx.read_bytes()
-    missing = [
-        name
-        for name, array in weight_file.arrays.items()
-        # the 0-d arrays (tau, the floor's scale) are not in the graph: the runtime reads them from the weight file
-        if array.ndim and array.astype("<f4", copy=False).tobytes() not in exported
-    ]
-    if missing:
-        raise WeightFileError(
-            f"{onnx} is not the export of {weight_file.path.name} (it does not hold its {', '.join(missing)}): "
-            f"export it again, `alcn export --weights {weight_file.path} --onnx {onnx} --overwrite`"
-        )
     if grid_stride not in (None, net.stride):
         raise InputError(
             f"backend='opencv' evaluates the Normalizer at its stride {net.stride}, got grid_stride={grid_stride}; "

@@ -32,6 +32,7 @@ __all__ = [
     "NormalizerFile",
     "gain_scale",
     "load_normalizer_file",
+    "npz_array",
     "save_normalizer_file",
 ]
 
@@ -128,7 +129,7 @@ def load_normalizer_file(path: str | Path) -> NormalizerFile:
 
     Raises:
         WeightFileError: missing, a folder (the weight file in it named), empty, a training run's checkpoint (the
-            run's weight file named), not a ``.npz`` archive, corrupt,
+            run's weight file named), not a ``.npz`` archive, corrupt, holding pickled objects,
             of another format or of an incompatible version, a header field missing or out of range (a sigma or the
             working scale not positive, an empty output range; a gain Normalizer's grid, blurs, ``tau`` and divisive
             normalization), holding NaN or infinite weights, or a gain Normalizer's header restating its ``tau`` or
@@ -159,8 +160,8 @@ def load_normalizer_file(path: str | Path) -> NormalizerFile:
                     f"{path} is not an alcn-cv weight file (no header; a torch state_dict or module? ALCN2d.save(path) "
                     "writes a weight file)"
                 )
-            meta = json.loads(str(data[_META_KEY]))
-            arrays = {k: data[k] for k in data.files if k != _META_KEY}
+            meta = json.loads(str(npz_array(data, _META_KEY, path)))
+            arrays = {k: npz_array(data, k, path) for k in data.files if k != _META_KEY}
     except WeightFileError:
         raise
     except (OSError, EOFError, ValueError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
@@ -169,6 +170,25 @@ def load_normalizer_file(path: str | Path) -> NormalizerFile:
     _check_arrays(arrays, path)
     _check_gain(meta, arrays, path)
     return NormalizerFile(arrays=arrays, meta=meta, path=path)
+
+
+def npz_array(archive: Any, key: str, path: str | Path, what: str = "a weight file of alcn-cv") -> np.ndarray:
+    """The array ``key`` of the archive ``archive`` (an ``NpzFile`` opened without pickles) read from ``path``.
+
+    Raises:
+        WeightFileError: an array of pickled Python objects, which are not read (NumPy's advice, to load them
+            unsafely, is no help): the file is not ``what``.
+        ValueError: NumPy's other errors of a corrupt array.
+    """
+    try:
+        return archive[key]
+    except ValueError as exc:
+        # NumPy tells an object array refused by its advice only, to allow pickles
+        if "allow_pickle" not in str(exc):
+            raise
+        raise WeightFileError(
+            f"{path}: array {key!r} holds pickled Python objects, which are not read: not {what}"
+        ) from None
 
 
 def gain_scale(arrays: dict[str, np.ndarray], key: str) -> float:

@@ -55,6 +55,7 @@ import numpy as np
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.formats import bop
 from alcn_cv.io import atomic_write, is_video, with_suffix
+from alcn_cv.weight_file import npz_array
 from calib.conventions import MM_PER_UNIT
 from pose.box import box_diameter, box_size
 
@@ -175,15 +176,36 @@ def write_point_cloud(path: str | Path, points: np.ndarray, colors: np.ndarray |
     )
 
 
+#: How far, as a share of the box's edge, a vertex of a box's PLY may lie from the corner it is (the text of an ASCII
+#: PLY rounds).
+BOX_PLY_TOLERANCE = 1e-3
+
+
 def read_box_corners(path: str | Path) -> np.ndarray:
-    """The 8 corners ``(8, 3)`` (order of :func:`box_corners`) of the axis-aligned bounding box of
-    a PLY mesh's vertices, in the file's units (a cuboid such as ``cookie_box/box.ply``, a BOP model)."""
+    """The 8 corners ``(8, 3)`` (order of :func:`box_corners`) of the axis-aligned box a PLY mesh's vertices are
+    the corners of, in the file's units (a cuboid such as ``cookie_box/box.ply``, a BOP model of one: a corner may
+    be repeated, once per face).
+
+    Raises:
+        DatasetError: no vertices, vertices that are not finite, a flat box, or vertices that are not the 8 corners
+            of a box (another shape, whose bounding box would be taken for the object's).
+    """
     verts = bop.read_ply(path, unit_check=False).vertices
     if len(verts) == 0:
         raise DatasetError(f"{path}: field 'vertex': no vertices")
+    finite = np.isfinite(verts).all(1)
+    if not finite.all():
+        raise DatasetError(f"{path}: field 'vertex': {np.count_nonzero(~finite)} of its vertices are not finite")
     lo, hi = verts.min(0), verts.max(0)
     if np.any(hi - lo <= 0):
         raise DatasetError(f"{path}: field 'vertex': the vertices span a flat or empty box {hi - lo}")
+    tolerance = BOX_PLY_TOLERANCE * (hi - lo)
+    at_lo, at_hi = np.abs(verts - lo) <= tolerance, np.abs(verts - hi) <= tolerance
+    # each vertex at a corner (at the low or high end of every axis), and each of the 8 corners one of them
+    if not (at_lo | at_hi).all() or len({tuple(row) for row in at_hi}) < 8:
+        raise DatasetError(
+            f"{path}: field 'vertex': its {len(verts)} vertices are not the 8 corners of a box (a cuboid mesh)"
+        )
     return box_corners(hi - lo, lo)
 
 
@@ -225,7 +247,8 @@ def load(path: str | Path) -> PartModel:
     """Read a part model written by :func:`save`.
 
     Raises:
-        WeightFileError: missing or corrupt file, another format, or another version.
+        WeightFileError: missing, corrupt or truncated file, arrays of pickled objects, another format, or another
+            version.
     """
     path = Path(path)
     if not path.is_file():
@@ -240,9 +263,11 @@ def load(path: str | Path) -> PartModel:
         raise WeightFileError(f"{path}: {what}, not a part model (the .npz of `alcn pose build`)")
     try:
         with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError) as exc:
-        raise WeightFileError(f"{path}: not a readable part model archive ({exc})") from exc
+            arrays = {k: npz_array(z, k, path, "a part model") for k in z.files}
+    except WeightFileError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise WeightFileError(f"{path}: corrupt or truncated part model ({exc})") from None
     try:
         header = json.loads(str(arrays.pop("header")))
     except (KeyError, json.JSONDecodeError) as exc:

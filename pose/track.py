@@ -225,11 +225,12 @@ def read_poses(path: str | Path, units: str) -> dict[str, tuple[np.ndarray, np.n
     in the model's units, are told by the ``_info.json`` beside them (no ``translation_units`` in its summary).
 
     Raises:
-        DatasetError: the ``_info.json`` beside them is of other poses (its ``poses_digest``): a track interrupted
-            between the two files, whose units are unknown.
+        DatasetError: not poses of :func:`main` (:func:`check_poses`), or the ``_info.json`` beside them is of other
+            poses (its ``poses_digest``): a track interrupted between the two files, whose units are unknown.
     """
     path, info_file = Path(path), info_path(path)
     scene_gt = read_json(path)
+    check_poses(scene_gt, path)  # before the info: a poses file of the wrong shape has no digest to compare
     info = read_json(info_file) if info_file.is_file() else {}
     digest = info.get("poses_digest")
     if digest is not None and digest != poses_digest(scene_gt):
@@ -248,6 +249,40 @@ def read_poses(path: str | Path, units: str) -> dict[str, tuple[np.ndarray, np.n
             t = np.asarray(entry[0]["cam_t_m2c"], np.float64).reshape(3, 1) * scale
             poses[name] = (cv2.Rodrigues(R)[0], t)
     return poses
+
+
+#: The fields of a pose :func:`main` writes and :func:`read_poses` reads, and how many numbers each holds.
+POSE_FIELDS = {"cam_R_m2c": 9, "cam_t_m2c": 3}
+
+
+def check_poses(scene_gt: object, path: str | Path) -> None:
+    """Check that ``scene_gt``, read from ``path``, has the shape of the poses :func:`main` writes: frame name ->
+    a list, empty for a lost frame, whose first entry holds :data:`POSE_FIELDS` as that many finite numbers.
+
+    Raises:
+        DatasetError: another shape, naming the frame and field; the ``_info.json`` beside poses told as such.
+    """
+    if isinstance(scene_gt, dict) and isinstance(scene_gt.get("summary"), dict) and "frames" in scene_gt:
+        poses = scene_gt["summary"].get("poses")
+        raise DatasetError(
+            f"{path}: the _info.json that `alcn pose track` writes beside its poses, not the poses"
+            + (f" (they are {poses})" if isinstance(poses, str) else "")
+        )
+    not_poses = f"{path}: not a poses file of `alcn pose track` (frame -> [{{cam_R_m2c, cam_t_m2c}}])"
+    if not isinstance(scene_gt, dict):
+        raise DatasetError(f"{not_poses}: a JSON {type(scene_gt).__name__}")
+    for name, entry in scene_gt.items():
+        if not isinstance(entry, list) or (entry and not isinstance(entry[0], dict)):
+            raise DatasetError(f"{not_poses}: frame {name!r} is no list of poses")
+        for key, size in POSE_FIELDS.items() if entry else ():
+            value = entry[0].get(key)
+            try:
+                numbers = np.asarray(value, np.float64)
+            except (TypeError, ValueError):
+                numbers = None
+            if numbers is None or numbers.size != size or not np.isfinite(numbers).all():
+                wrong = "missing" if value is None else f"not {size} finite numbers"
+                raise DatasetError(f"{not_poses}: frame {name!r}: {key} is {wrong}")
 
 
 def model_digest(path: str | Path) -> str:
@@ -822,6 +857,15 @@ def main(
                     color = color_for(box.normalization)
                     draw_box(vis, box.corners, res.estimate.rvec, res.estimate.tvec, box.K, color, dist=box.dist)
                 writer.write(res.name, vis)
+    # a header's count is often one frame too high (alcn_cv.io.map_video): a shortfall of more is a truncated video,
+    # whose frames decoded are tracked, as they would be of a shorter one, but not in silence
+    if total is not None and len(scene_gt) < total - 1:
+        logger.warning(
+            "%s: decoded %d of the %d frames its header counts (truncated or corrupt video); tracked those",
+            source,
+            len(scene_gt),
+            total,
+        )
     tracked = sum(bool(v) for v in scene_gt.values())
     # the reasons carry their frame's counts: grouped by their words, the first of the most frequent group
     lost = [(re.sub(r"[\d.]+%?", "#", r), r) for r in (f["lost_reason"] for f in info.values()) if r]

@@ -46,6 +46,23 @@ def check_grid_stride(grid_stride: int | None, stride: int) -> int:
     return grid_stride
 
 
+def _check_fit(needed: dict[str, torch.Tensor], arrays: dict[str, np.ndarray], name: object) -> None:
+    """One line on the first array of a weight file that its header's network (``needed``, its ``state_dict``) lacks,
+    does not have, or has in another shape, rather than torch's lines on all of them."""
+    mixed_up = "its arrays do not fit its header (edited or mixed up?)"
+    for key, tensor in needed.items():
+        if key not in arrays:
+            raise WeightFileError(f"{name}: array {key!r} missing, the header's network needs it: {mixed_up}")
+        if tuple(np.shape(arrays[key])) != tuple(tensor.shape):
+            raise WeightFileError(
+                f"{name}: array {key!r} has shape {tuple(np.shape(arrays[key]))}, the header's network needs "
+                f"{tuple(tensor.shape)}: {mixed_up}"
+            )
+    extra = next((key for key in arrays if key not in needed), None)
+    if extra is not None:
+        raise WeightFileError(f"{name}: array {extra!r} is not in the header's network: {mixed_up}")
+
+
 class Normalizer(nn.Module):
     """Predicts the Gaussian-mixture weights of ALCN from an image window.
 
@@ -169,14 +186,16 @@ class Normalizer(nn.Module):
         """Build the network described by a weight file and load its arrays.
 
         Raises:
-            WeightFileError: a ``config`` the network refuses, or arrays that do not fit it.
+            WeightFileError: a ``config`` the network refuses, or arrays that do not fit it (the first array missing,
+                unknown or of another shape named).
         """
+        name = weight_file.path or "weights"
         try:
             net = cls(**weight_file.meta["config"])
-            net.load_state_dict({k: torch.from_numpy(np.array(v)) for k, v in weight_file.arrays.items()})
-        except (TypeError, ValueError, RuntimeError) as exc:  # ValueError: the constructor's InputError among them
-            name = weight_file.path or "weights"
+        except (TypeError, ValueError) as exc:  # ValueError: the constructor's InputError among them
             raise WeightFileError(f"{name}: its weights do not fit the Normalizer they describe: {exc}") from None
+        _check_fit(net.state_dict(), weight_file.arrays, name)
+        net.load_state_dict({k: torch.from_numpy(np.array(v)) for k, v in weight_file.arrays.items()})
         return net.eval()
 
     def state_arrays(self: nn.Module) -> dict[str, np.ndarray]:
