@@ -360,6 +360,8 @@ def main(argv: list[str] | None = None) -> int:
         return _failed(str(exc) if named else f"alcn {args.command}: {exc}", args.debug)
     except (ValueError, TypeError, OSError, RuntimeError) as exc:
         return _failed(f"alcn {args.command}: error: {exc}", args.debug)
+    except MemoryError as exc:  # NumPy's says how much, for what shape: the input (or a size asked) too large
+        return _failed(f"alcn {args.command}: error: out of memory ({exc or 'no details'})", args.debug)
     return int(result or 0)
 
 

@@ -383,3 +383,23 @@ def test_opencv_warnings_are_left_out_unless_debug_or_verbose(tmp_path, capfd, m
         level = set_level(0)
         set_level(level)
         assert level > 2, "the command left OpenCV's log level at errors only"
+
+
+def test_out_of_memory_is_one_line(tmp_path, capsys, monkeypatch):
+    """Whitening a 12000x12000 image ended in NumPy's MemoryError traceback ("Unable to allocate 4.29 GiB for an array
+    with shape (24000, 24000)"): one line, which keeps NumPy's account of the size."""
+    from alcn_cv.enhance.registry import from_spec
+
+    def too_large(self, *args, **kwargs):
+        raise MemoryError("Unable to allocate 4.29 GiB for an array with shape (24000, 24000) and data type float64")
+
+    image = tmp_path / "a.png"
+    cv2.imwrite(str(image), np.zeros((8, 8), np.uint8))
+    monkeypatch.setattr(type(from_spec("whitening")), "apply", too_large)
+    assert main(["normalize", str(image), str(tmp_path / "o.png"), "-m", "whitening"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(
+        "alcn normalize: error: out of memory (Unable to allocate 4.29 GiB for an array with shape "
+        "(24000, 24000) and data type float64)"
+    )
+    assert "\n" not in err and "Traceback" not in err
