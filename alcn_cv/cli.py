@@ -274,6 +274,11 @@ def number_at_least(kind: type[int] | type[float], low: float, above: bool = Fal
     return number_in(kind, low, above=above)
 
 
+#: The argparse ``type`` of every ``--seed`` and ``--object-seed``: numpy's generators take no negative seed, and
+#: their error names no option.
+SEED = number_at_least(int, 0)
+
+
 def all_or_at_least(low: int) -> Callable[[str], int | float]:
     """An argparse ``type``: 0 (all) or an integer at least ``low`` (:func:`number_in`'s bounds otherwise)."""
     at_least = number_in(int, low)

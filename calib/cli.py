@@ -155,13 +155,7 @@ def _load_reference(path: Path, unit: str | None) -> dict[str, tuple[np.ndarray,
 
 
 def _register(args: argparse.Namespace) -> int:
-    try:
-        reg = _registration(args)
-    except FileExistsError:
-        if args.overwrite or not (Path(args.out) / "registration.json").is_file():
-            raise  # not an earlier registration: its message says --overwrite would not replace it
-        # atomic_output_dir's message also names the keyword of the Python call (overwrite=True)
-        raise InputError(f"{args.out} exists (--overwrite replaces it)") from None
+    reg = _registration(args)
     print(
         f"registered {len(reg.registered)} of {len(reg.frames)} frames ({reg.units}); dropped {len(reg.dropped)} "
         f"(reasons in {Path(args.out) / 'registration.json'}); BOP: {Path(args.out) / 'scene_camera.json'}, "

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from alcn_cv.cli import add_conf_option, add_progress_option, add_seeds_option, number_at_least, number_in
+from alcn_cv.cli import SEED, add_conf_option, add_progress_option, add_seeds_option, number_at_least, number_in
 from alcn_cv.errors import InputError
 
 
@@ -727,9 +727,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="where the network trains (default: cuda where torch sees it, else cpu; the box recipe's "
         "4000 steps take about 8 min on 2 CPU cores)",
     )
-    c.add_argument(
-        "--seed", type=number_at_least(int, 0), default=0, help="seed of the frames and the network (default 0)"
-    )
+    c.add_argument("--seed", type=SEED, default=0, help="seed of the frames and the network (default 0)")
     add_progress_option(c)
     c.set_defaults(func=_train_corners)
 

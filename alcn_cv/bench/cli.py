@@ -19,6 +19,7 @@ from typing import Any
 from alcn_cv.bench import detect, detect_settings, fewshot, invariance, relight, relight_settings, speed
 from alcn_cv.bench.detect_settings import POLICIES, DetectSettings
 from alcn_cv.cli import (
+    SEED,
     add_conf_option,
     add_progress_option,
     add_seeds_option,
@@ -224,7 +225,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--object-seed",
-        type=number_at_least(int, 0),
+        type=SEED,
         help="object catalogue seed of seed 0; seed s uses it + s (at least 1 with --tune, whose validation objects "
         f"use it - 1; default {d.object_seed})",
     )

@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.cli import add_progress_option, number_at_least
+from alcn_cv.cli import SEED, add_progress_option
 from alcn_cv.enhance import available, create
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
@@ -209,8 +209,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=Path("demo_out"),
         help=f"output folder: new, empty, or an earlier demo's (holding {MARKER}), replaced (default: demo_out)",
     )
-    parser.add_argument(
-        "--seed", type=number_at_least(int, 0), default=0, help="seed of the generated data (default 0)"
-    )
+    parser.add_argument("--seed", type=SEED, default=0, help="seed of the generated data (default 0)")
     add_progress_option(parser)
     parser.set_defaults(func=lambda args: main(args.out, args.seed, not args.no_progress) and 0)

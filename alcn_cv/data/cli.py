@@ -7,7 +7,7 @@ import logging
 import time
 from pathlib import Path
 
-from alcn_cv.cli import add_conf_option, add_progress_option, number_at_least, number_in, preset_values
+from alcn_cv.cli import SEED, add_conf_option, add_progress_option, number_at_least, number_in, preset_values
 from alcn_cv.extras import require
 
 logger = logging.getLogger(__name__)
@@ -124,10 +124,6 @@ def _compare_psm(args: argparse.Namespace) -> int:
     return 0
 
 
-#: ``--seed`` and ``--object-seed``: numpy's generators take no negative seed (their error names no option).
-_SEED = number_at_least(int, 0)
-
-
 def _add_run_options(parser: argparse.ArgumentParser) -> None:
     """The options every generator shares: ``--overwrite``, ``--workers`` and ``--no-progress``."""
     parser.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
@@ -165,14 +161,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("-n", type=number_at_least(int, 1), default=100_000, help="number of windows (default 100000)")
-    q.add_argument("--seed", type=_SEED, default=0, help="seed of the windows (default 0)")
+    q.add_argument("--seed", type=SEED, default=0, help="seed of the windows (default 0)")
     q.add_argument(
         "--objects",
         type=number_at_least(int, 1),
         default=100,
         help="number of catalogue objects (labels 1..N; default 100)",
     )
-    q.add_argument("--object-seed", type=_SEED, default=0, help="seed of the object catalogue (default 0)")
+    q.add_argument("--object-seed", type=SEED, default=0, help="seed of the object catalogue (default 0)")
     q.add_argument(
         "--lighting",
         default="random",
@@ -197,8 +193,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument("--out", required=True, help="output folder")
     add_conf_option(q, detect_settings.CONF_SUMMARIES)
-    q.add_argument("--seed", type=_SEED, default=0, help="seed of the images (default 0)")
-    q.add_argument("--object-seed", type=_SEED, default=0, help="seed of the three objects (default 0)")
+    q.add_argument("--seed", type=SEED, default=0, help="seed of the images (default 0)")
+    q.add_argument("--object-seed", type=SEED, default=0, help="seed of the three objects (default 0)")
     pixels = number_in(int, 1, detect_settings.MAX_SIDE)
     side = f"in pixels, from twice the objects' size to {detect_settings.MAX_SIDE}"
     for field, kind, what in [
@@ -221,7 +217,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument("--out", required=True, help="dataset root")
     add_conf_option(q, pose_settings.CONF_SUMMARIES)
-    q.add_argument("--seed", type=_SEED, default=0, help="seed (default 0)")
+    q.add_argument("--seed", type=SEED, default=0, help="seed (default 0)")
     q.add_argument(
         "--frames",
         type=int,
@@ -280,7 +276,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "(default 320; a scene's frames are rendered together: about 3 GB at 1024 with 12 frames, growing with the "
         "side's square)",
     )
-    q.add_argument("--seed", type=_SEED, default=0, help="seed (default 0)")
+    q.add_argument("--seed", type=SEED, default=0, help="seed (default 0)")
     q.add_argument(
         "--lighting",
         choices=relief_settings.LIGHTINGS,
@@ -321,6 +317,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     q.add_argument("--psm", default=None, help="PSM folder (default: <shared data>/psm)")
     q.add_argument("--out", required=True, help="output folder")
-    q.add_argument("--seed", type=_SEED, default=0, help="seed of the renderings (default 0)")
+    q.add_argument("--seed", type=SEED, default=0, help="seed of the renderings (default 0)")
     q.add_argument("--overwrite", action="store_true", help="replace an earlier comparison in --out")
     q.set_defaults(func=_compare_psm)

@@ -18,7 +18,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from alcn_cv.cli import add_conf_option, add_progress_option, interrupt_exit_code, number_at_least
+from alcn_cv.cli import SEED, add_conf_option, add_progress_option, interrupt_exit_code, number_at_least
 from alcn_cv.presets import preset
 from alcn_cv.train.config import (
     DISTILL_CONF_SUMMARIES,
@@ -34,8 +34,6 @@ __all__ = ["add_parser"]
 
 logger = logging.getLogger(__name__)
 
-#: The ``type`` of a ``--seed``: numpy's generators take no negative seed.
-_SEED = number_at_least(int, 0)
 #: The ``type`` of a ``--threads``, where 0 is the libraries' own default.
 _THREADS = number_at_least(int, 0)
 
@@ -59,7 +57,7 @@ def _add_run(parser: argparse.ArgumentParser, out: str) -> None:
     """``--out`` (the run folder, default ``out``), ``--seed`` and ``--no-progress``, the same on the real-light
     training commands."""
     parser.add_argument("--out", type=Path, default=Path(out), help=f"run folder (default: {out})")
-    parser.add_argument("--seed", type=_SEED, help="seed (default: the preset's)")
+    parser.add_argument("--seed", type=SEED, help="seed (default: the preset's)")
     add_progress_option(parser)
 
 
@@ -105,7 +103,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "too), run.* (--device) and fewshot.* may change",
     )
     p.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
-    p.add_argument("--seed", type=_SEED, help="seed (default: the preset's)")
+    p.add_argument("--seed", type=SEED, help="seed (default: the preset's)")
     p.add_argument("--device", choices=("cpu", "cuda"), help="run.device (default: the preset's)")
     add_progress_option(p)
     p.set_defaults(func=_train)
@@ -146,7 +144,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument(
         "--lr", type=number_at_least(float, 0, above=True), default=1e-3, help="Adam learning rate (default 1e-3)"
     )
-    d.add_argument("--seed", type=_SEED, default=0, help="seed of the synthetic images and the detector (default 0)")
+    d.add_argument("--seed", type=SEED, default=0, help="seed of the synthetic images and the detector (default 0)")
     add_progress_option(d)
     d.set_defaults(func=_train_detector)
 
@@ -166,7 +164,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _add_conf(s, DISTILL_CONF_SUMMARIES, None, "teacher=FILE")
     s.add_argument("--out", type=Path, help="weight file to write (.npz; the card is .md beside it)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing weight file, its card and export")
-    s.add_argument("--seed", type=_SEED, help="seed (default: the preset's)")
+    s.add_argument("--seed", type=SEED, help="seed (default: the preset's)")
     s.add_argument(
         "--threads",
         type=_THREADS,
