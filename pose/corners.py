@@ -265,7 +265,7 @@ class CornerDetector:
         try:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
-            raise WeightFileError(f"OpenCV cannot read {self.path}: {str(exc).strip()}") from None
+            raise WeightFileError(f"OpenCV cannot read {self.path}: {exc.err}") from None
         self.parts = np.asarray(self.meta["parts"], np.float64).reshape(-1, 3)
         self.corners = np.asarray(self.meta["corners"], np.float64).reshape(NUM_CORNERS, 3)
         if self.meta["config"].get("num_parts") != len(self.parts):
@@ -302,7 +302,18 @@ class CornerDetector:
             np.ascontiguousarray(normalized, np.float32), PAD, PAD, PAD, PAD, cv2.BORDER_REFLECT_101
         )
         self.net.setInput(padded[None, None])
-        return np.ascontiguousarray(self.net.forward()[0], np.float32)
+        try:
+            out = self.net.forward()
+        except cv2.error as exc:
+            raise WeightFileError(f"{self.path}: OpenCV cannot run its network ({exc.err})") from None
+        maps = 3 * len(self.parts) + 1
+        if out.ndim != 4 or out.shape[:2] != (1, maps):
+            # a graph from another file under this one's metadata: its maps would be read as the wrong parts
+            raise WeightFileError(
+                f"{self.path}: its network gives outputs of shape {out.shape}, not the (1, {maps}, h, w) maps of "
+                f"{len(self.parts)} parts its metadata names"
+            )
+        return np.ascontiguousarray(out[0], np.float32)
 
     def maps(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Softmax scores ``(1 + n, gh, gw)`` (class 0: background) and per part the position each

@@ -117,6 +117,17 @@ def test_train_unet_refuses_levels_its_crops_cannot_hold(levels, tmp_path, capsy
     assert "config key 'net.levels' must be from 1 to 8" in err  # the settings printed are those a run takes
 
 
+@pytest.mark.parametrize(("levels", "channels", "widest"), [("3", "100000", 256), ("8", "9", 8), ("1", "0", 1024)])
+def test_train_unet_refuses_widths_past_the_widest_level(levels, channels, widest, tmp_path, capsys):
+    """``train-unet --set net.channels=100000`` was not checked: a 3x3 convolution of that width holds 9e10
+    weights, and the network's memory was gone before the first step."""
+    out = tmp_path / "run"
+    args = ["--set", f"net.levels={levels}", "--set", f"net.channels={channels}"]
+    err = _refused(["train-unet", "--out", str(out), "--set", "steps=2", *args], capsys)
+    assert f"config key 'net.channels' must be from 1 to {widest} (the widths double per level" in err
+    assert err.endswith(f"got {channels}") and not out.exists()
+
+
 def test_export_names_a_path_without_the_onnx_suffix_first(tmp_path, capsys, caplog):
     """``export --onnx EXISTING_DIR`` said "exists (--overwrite replaces it)", then with --overwrite "must end in
     .onnx"; ``--onnx x.txt`` logged an unrelated warning (backend='opencv' will not find it) before the error."""

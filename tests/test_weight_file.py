@@ -273,3 +273,15 @@ def test_a_pickled_array_is_named_not_called_corrupt(tmp_path, lite):
     with pytest.raises(WeightFileError, match=r"array 'head\.bias' holds pickled Python objects") as info:
         load_normalizer_file(path)
     assert "allow_pickle" not in str(info.value) and "corrupt" not in str(info.value)
+
+
+def test_an_onnx_file_opencv_cannot_parse_is_one_line_without_opencvs_source(tmp_path):
+    """OpenCV's error text began with its build's source path and line (``OpenCV(5.0.0) /io/opencv/modules/dnn/...:
+    error: (-2:Unspecified error)``); the message keeps OpenCV's own words only."""
+    from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
+
+    path = tmp_path / "x.onnx"
+    path.write_bytes(b"garbage" * 10)
+    with pytest.raises(WeightFileError) as info:
+        OpenCVNormalizer(path)
+    assert str(info.value) == f"OpenCV cannot read the ONNX model {path}: Failed to parse ONNX model: {path}"

@@ -224,7 +224,7 @@ class OpenCVNormalizer:
             self.net = cv2.dnn.readNetFromONNX(str(self.path))
         except cv2.error as exc:
             hint = "" if RUNS_GAIN else f"; {GAIN_NEEDS}"
-            raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}{hint}: {str(exc).strip()}") from None
+            raise WeightFileError(f"OpenCV cannot read the ONNX model {self.path}{hint}: {exc.err}") from None
         #: The graph's input: :data:`IMAGE_INPUT`, :data:`BLOCKS_INPUT` or :data:`FEATURES_INPUT`.
         self.input = next((name for name in (FEATURES_INPUT, BLOCKS_INPUT) if self._has_input(name)), IMAGE_INPUT)
         gain_config = self._config(config) if self.input == FEATURES_INPUT else None

@@ -647,6 +647,11 @@ def _unet_network() -> dict[str, Any]:
     return {"channels": 8, "levels": 3, "eps": 0.01}
 
 
+#: The most channels the U-Net baseline's widest level may have (the default's has 32; 1024 is 8 levels of 8): its
+#: 3x3 convolutions hold 9 * width**2 weights each, 38 MB at 1024, and a wider one would fill the memory quadratically.
+MAX_UNET_WIDTH = 1024
+
+
 @dataclass
 class UNetConfig(RealLightConfig):
     """Settings of :func:`~alcn_cv.train.unet.train_unet`: the gain Normalizer's data, objective and budget
@@ -662,7 +667,8 @@ class UNetConfig(RealLightConfig):
         """:meth:`RealLightConfig.check`, then the U-Net's: a ``crop`` of at least ``patch``, and ``net.levels`` from 1
         to the most whose coarsest level holds a pixel of the crop (level L sees it pooled 2 ** (L - 1) times; the
         widths double per level, so a count far past that builds a network of astronomic width, whose memory is gone
-        before the first step).
+        before the first step), and ``net.channels`` from 1 to what keeps the widest level within
+        :data:`MAX_UNET_WIDTH`.
 
         Raises:
             InputError: the first setting out of range, named by its key.
@@ -675,6 +681,12 @@ class UNetConfig(RealLightConfig):
             raise InputError(
                 f"config key 'net.levels' must be from 1 to {most} (level L sees the {self.crop}-pixel crop pooled to "
                 f"1/2**(L-1)), got {self.net['levels']}"
+            )
+        widest = MAX_UNET_WIDTH >> (self.net["levels"] - 1)
+        if not 1 <= self.net["channels"] <= widest:
+            raise InputError(
+                f"config key 'net.channels' must be from 1 to {widest} (the widths double per level, and the widest "
+                f"of {self.net['levels']} levels may have {MAX_UNET_WIDTH}), got {self.net['channels']}"
             )
 
 
