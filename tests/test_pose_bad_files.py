@@ -114,35 +114,3 @@ def test_box_ply_that_is_not_a_box_or_not_finite(tmp_path):
     _box_ply(tmp_path / "nan.ply", nan)
     with pytest.raises(DatasetError, match=r"nan\.ply: field 'vertex': 1 of its vertices are not finite"):
         part_model.read_box_corners(tmp_path / "nan.ply")
-
-
-def test_a_corner_detector_whose_graph_does_not_fit_its_metadata(tmp_path):
-    """A corner detector's metadata naming 8 parts over a network of 26 (a graph from another file): its maps were
-    read as the wrong parts, or failed in numpy with no file named."""
-    pytest.importorskip("torch")
-    from pose import corner_train
-    from pose import corners as pc
-    from pose.corner_net import CornerNet
-
-    net = CornerNet(channels=(4, 8), hidden=16).eval()  # 26 parts: 79 maps
-    corners = box_corners([140, 95, 55]).tolist()
-    meta = {
-        "format": pc.FORMAT_NAME,
-        "version": pc.FORMAT_VERSION,
-        "normalization": "none",
-        "scale": 0.5,
-        "input_mean": 0.5,
-        "input_std": 0.25,
-        "parts": corners,
-        "corners": corners,
-        "units": "mm",
-        "window": pc.WINDOW,
-        "stride": pc.STRIDE,
-        "pad": pc.PAD,
-        "config": {**net.config, "num_parts": 8},
-    }
-    path = corner_train.export_onnx(net, tmp_path / "c.onnx", meta)
-    detector = pc.CornerDetector(path)
-    expected = r"c\.onnx: its network gives outputs of shape \(1, 79, .*\(1, 25, h, w\) maps of 8 parts"
-    with pytest.raises(WeightFileError, match=expected):
-        detector.maps(np.zeros((120, 160), np.uint8))

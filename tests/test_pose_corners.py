@@ -42,8 +42,14 @@ def random_net(tmp_path_factory):
     """A detector of the 8 box corners (``divisions=1``), untrained."""
     torch.manual_seed(0)
     net = CornerNet(8, channels=(4, 8), hidden=16).eval()
+    path = corner_train.export_onnx(net, tmp_path_factory.mktemp("onnx") / "c.onnx", _box_corners_meta(net.config))
+    return net, path
+
+
+def _box_corners_meta(config: dict) -> dict:
+    """The metadata of a detector of the 8 corners of a 140x95x55 mm box, its network's ``config`` given."""
     corners = box_corners([140, 95, 55]).tolist()
-    meta = {
+    return {
         "format": pc.FORMAT_NAME,
         "version": pc.FORMAT_VERSION,
         "normalization": "none",
@@ -56,10 +62,8 @@ def random_net(tmp_path_factory):
         "window": pc.WINDOW,
         "stride": pc.STRIDE,
         "pad": pc.PAD,
-        "config": net.config,
+        "config": config,
     }
-    path = corner_train.export_onnx(net, tmp_path_factory.mktemp("onnx") / "c.onnx", meta)
-    return net, path
 
 
 def test_constants_match_the_detector():
@@ -838,3 +842,14 @@ def test_each_call_compares_the_frame_with_the_last_once(random_net, monkeypatch
         compared.clear()
         call()
         assert len(compared) == 1
+
+
+def test_a_detector_whose_graph_does_not_fit_its_metadata(tmp_path):
+    """Metadata naming 8 parts over a network of 26 (a graph from another file): its maps were read as the wrong
+    parts, or failed in numpy with no file named."""
+    net = CornerNet(channels=(4, 8), hidden=16).eval()  # 26 parts: 79 maps
+    path = corner_train.export_onnx(net, tmp_path / "c.onnx", _box_corners_meta({**net.config, "num_parts": 8}))
+    detector = pc.CornerDetector(path)
+    expected = r"c\.onnx: its network gives outputs of shape \(1, 79, .*\(1, 25, h, w\) maps of 8 parts"
+    with pytest.raises(WeightFileError, match=expected):
+        detector.maps(np.zeros((120, 160), np.uint8))
