@@ -115,6 +115,9 @@ class ALCN2d(nn.Module):
     integers converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs
     by a float rounding, which the divisive step amplifies to 6e-5 on a photograph.
 
+    In a ``DataLoader``'s workers (or any process forked after this one ran torch's threads, which a fork leaves
+    behind), the module runs on one thread: the outputs are one thread's, to float rounding.
+
     Fine-tuning: the network's parameters train (``requires_grad_(True)``, the default of a new module); the gain
     models' ``tau`` and ``floor_scale`` are buffers, fixed. The gradients reaching the gain networks are small
     (about 1e-6 of a mean squared error, against weights of about 5e-2): use Adam rather than plain SGD.

@@ -7,8 +7,9 @@ and detail: ``ALCN(I) = sum_k G_{sigma_k / s} * (F_k(I) o I)``. The gain family 
 local energy and equalizes it. :class:`ALCN` is the ``apply()`` front; the work is a model family's runtime
 (:mod:`alcn_cv.runtime`, OpenCV; :mod:`alcn_cv.nn`, torch).
 
-The default model, ``"gain"``, and ``"gain-lite"`` are trained on public-domain, CC0 and Apache-2.0
-photographs, relit; ``"paper"`` and ``"lite"`` on rendered windows (see each model card).
+The default model, ``"gain"``, and ``"gain-lite"`` are trained on relit photographs in the public domain, under CC0
+or Apache-2.0, or with no known copyright restrictions; ``"paper"`` and ``"lite"`` on rendered windows (see each
+model card).
 """
 
 from __future__ import annotations
