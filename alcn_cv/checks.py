@@ -26,6 +26,7 @@ __all__ = [
     "check_out_dtype",
     "check_positive",
     "check_seeds",
+    "check_unit_range",
     "from_unit_float",
     "to_unit_float",
     "unit_windows",
@@ -160,16 +161,22 @@ def check_image(img: object) -> np.ndarray:
     if img.dtype != native:  # byte order is a storage detail, not a pixel type
         img = img.astype(native)
     if img.dtype == np.float32:
-        # min and max see NaN (it propagates) and inf (out of range) without a boolean copy
-        lo, hi = float(img.min()), float(img.max())
-        if not (lo >= -FLOAT_TOLERANCE and hi <= 1 + FLOAT_TOLERANCE):
-            if not np.isfinite(img).all():
-                raise InputError("float32 image contains NaN or inf")
-            raise InputError(
-                f"float32 intensities must be in [0, 1], got [{lo:.4g}, {hi:.4g}]"
-                + (" (divide by 255 first)" if lo >= 0 and 1.5 < hi <= 255 else "")
-            )
+        check_unit_range(img, "float32 image")
     return img
+
+
+def check_unit_range(img: np.ndarray, name: str) -> None:
+    """Refuse a float image with values outside [0, 1] (:data:`FLOAT_TOLERANCE` of rounding allowed), NaN or inf;
+    ``name`` is the image's in the message ("float32 image contains NaN or inf")."""
+    # min and max see NaN (it propagates) and inf (out of range) without a boolean copy
+    lo, hi = float(img.min()), float(img.max())
+    if not (lo >= -FLOAT_TOLERANCE and hi <= 1 + FLOAT_TOLERANCE):
+        if not np.isfinite(img).all():
+            raise InputError(f"{name} contains NaN or inf")
+        raise InputError(
+            f"float32 intensities must be in [0, 1], got [{lo:.4g}, {hi:.4g}]"
+            + (" (divide by 255 first)" if lo >= 0 and 1.5 < hi <= 255 else "")
+        )
 
 
 def check_gray(gray: object, finite: bool = True) -> np.ndarray:
@@ -178,18 +185,18 @@ def check_gray(gray: object, finite: bool = True) -> np.ndarray:
 
     Args:
         gray: the image.
-        finite: also refuse NaN and inf (one pass over the image; the filters, whose callers
-            have checked the image, pass False).
+        finite: also refuse NaN, inf and values outside [0, 1] (:func:`check_unit_range`; the filters, whose
+            callers have checked the image, pass False).
 
     Raises:
-        InputError: not a non-empty ``HxW`` array, not float32, or (``finite``) NaN or inf in it.
+        InputError: not a non-empty ``HxW`` array, not float32, or (``finite``) NaN, inf or a value out of range.
     """
     if not isinstance(gray, np.ndarray) or gray.ndim != 2 or gray.size == 0:
         raise InputError(f"image must be a non-empty HxW array, got shape {getattr(gray, 'shape', None)}")
     if gray.dtype != np.float32:
         raise InputError(f"image must be float32 intensities in [0, 1], got {gray.dtype}")
-    if finite and not np.isfinite(gray).all():
-        raise InputError("image contains NaN or inf")
+    if finite:
+        check_unit_range(gray, "image")
     return gray
 
 
@@ -201,4 +208,5 @@ def unit_windows(windows: np.ndarray) -> np.ndarray:
         return to_unit_float(windows)
     if windows.dtype != np.float32:
         raise InputError(f"windows must be uint8 or float32, got {windows.dtype}")
+    check_unit_range(windows, "windows")
     return windows

@@ -146,6 +146,10 @@ class ALCN2d(nn.Module):
         self.spec = ModelSpec.from_file(weight_file, scale)
         self.net = normalizer_from_file(weight_file)
         self._built_from = weight_file.meta, weight_file.path  # the header and file that save() writes from
+        buffers = dict(self.net.named_buffers())
+        #: The file's values of the fixed scales (buffers: a gain model's tau and floor), which save() writes back
+        #: where a cast to float16 or bfloat16 only rounded them.
+        self._fixed_scales = {k: v for k, v in weight_file.arrays.items() if k in buffers and np.ndim(v) == 0}
         if len(self.spec.sigmas) != self.net.num_kernels:
             raise InputError(f"weight file has {len(self.spec.sigmas)} sigmas for {self.net.num_kernels} outputs")
         self.grid_stride = check_grid_stride(grid_stride, self.net.stride)
@@ -180,7 +184,12 @@ class ALCN2d(nn.Module):
         start = {"file": None if source is None else str(source), "description": meta.get("description")}
         header = {**meta, "fine_tuned_from": start}
         header["description"] = description or f"fine-tuned from {start['file'] or start['description']}"
-        return save_normalizer_file(path, self.net.state_arrays(), header)
+        arrays = self.net.state_arrays()
+        for key, value in self._fixed_scales.items():
+            rounding = float(np.abs(value)) * torch.finfo(self.net.get_buffer(key).dtype).eps
+            if abs(float(arrays[key]) - float(value)) <= rounding:
+                arrays[key] = np.asarray(value, np.float32)
+        return save_normalizer_file(path, arrays, header)
 
     def working(self, gray: torch.Tensor) -> torch.Tensor:
         """``(B, 1, H, W)`` at the working scale, resized as :meth:`ALCN.apply` does: ``cv2.INTER_AREA`` down
@@ -439,8 +448,9 @@ class _OpenCVLab(torch.autograd.Function):
 
 
 def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | None = None) -> torch.Tensor:
-    """Functional :class:`ALCN2d`: the module built once per model, device and dtype, then reused, and frozen
-    (``eval()``, ``requires_grad_(False)``): gradients reach the image only (fine-tune an :class:`ALCN2d` instead).
+    """Functional :class:`ALCN2d`: the module built once per weight file (as it is on disk: a file saved again is
+    read again), device and dtype, then reused, and frozen (``eval()``, ``requires_grad_(False)``): gradients reach
+    the image only (fine-tune an :class:`ALCN2d` instead).
 
     Args:
         image: ``(B, 1 | 3, H, W)`` float in [0, 1] (3 channels: RGB), any device and float dtype.
@@ -460,15 +470,21 @@ def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | 
         torch.Size([1, 1, 48, 48])
     """
     _check_image(image)  # before a module is built for the image's dtype, which must be a float one
-    key = (model, None if weights is None else str(weights), image.device, image.dtype)
-    module = _MODULES.get(key)
-    if module is None:
+    path = resolve_weights(model, weights).resolve()
+    # the file as it is now: one saved again (a fine-tuning's) or another under the same relative name is read anew
+    stat = path.stat() if path.is_file() else None  # none: ALCN2d names the missing file
+    version = None if stat is None else (stat.st_ino, stat.st_mtime_ns, stat.st_size)
+    key = (path, image.device, image.dtype)
+    built = _MODULES.get(key)
+    if built is None or built[0] != version:
         # frozen: a backward through it must not accumulate gradients in a module the caller never sees
-        module = _MODULES[key] = ALCN2d(model, weights).to(image.device, image.dtype).eval().requires_grad_(False)
-    return module._normalize(image)  # checked above, and the module is of the image's device and dtype
+        module = ALCN2d(model, weights).to(image.device, image.dtype).eval().requires_grad_(False)
+        built = _MODULES[key] = version, module
+    return built[1]._normalize(image)  # checked above, and the module is of the image's device and dtype
 
 
-_MODULES: dict[tuple, ALCN2d] = {}
+#: The modules of :func:`alcn2d` by weight file, device and dtype, each with the file's version it was built from.
+_MODULES: dict[tuple, tuple[tuple[int, int, int] | None, ALCN2d]] = {}
 
 
 class _ThreadScopes:

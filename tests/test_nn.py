@@ -116,6 +116,27 @@ def test_functional_form_and_weight_files():
         module(torch.rand(1, 2, 64, 64))
 
 
+def test_alcn2d_reads_a_weight_file_saved_again(tmp_path, monkeypatch):
+    """alcn2d kept the module of a weight file by its name: a file saved again after more fine-tuning, or another
+    file of the same relative name in another folder, gave the first file's output."""
+    x = torch.from_numpy(_unit(_gray(48, 64)))[None, None]
+    tuned = ALCN2d(model="lite")
+    tuned.save(tmp_path / "tuned.npz")
+    first = alcn2d(x, weights=tmp_path / "tuned.npz")
+    with torch.no_grad():
+        for parameter in tuned.parameters():
+            parameter.add_(0.05)
+    tuned.save(tmp_path / "tuned.npz")
+    with torch.no_grad():
+        torch.testing.assert_close(alcn2d(x, weights=tmp_path / "tuned.npz"), tuned.eval()(x))
+    assert not torch.equal(alcn2d(x, weights=tmp_path / "tuned.npz"), first)
+    for name, model in (("a", "lite"), ("b", "paper")):
+        (tmp_path / name).mkdir()
+        shutil.copy(MODELS[model], tmp_path / name / "w.npz")
+        monkeypatch.chdir(tmp_path / name)
+        torch.testing.assert_close(alcn2d(x, weights="w.npz"), alcn2d(x, model=model))
+
+
 def test_a_module_of_a_weight_file_already_read_is_the_constructors(tmp_path):
     """ALCN2d(weights=contents), what createALCN builds from the file it read: the module of the file's path, the file
     not read again (deleted here)."""
@@ -421,6 +442,37 @@ def test_lower_precision_dtypes_run_and_stay_close(dtype, mean, largest):
     assert error.mean() < mean and error.max() < largest, (error.mean(), error.max())
 
 
+@pytest.mark.parametrize("channels", [1, 3])
+def test_float16_on_flat_and_dark_images(channels):
+    """In float16 a flat or black image gave NaN (gray) or an IndexError from the Lab spline's NaN index (colour):
+    float16 holds neither the divisive floor's 1e-8 nor a flat region's energy, and their inverse square root was
+    infinite. The divisive step runs in float32 for a float16 image."""
+    module = ALCN2d(model="gain").half().eval().requires_grad_(False)
+    reference = ALCN2d(model="gain").eval().requires_grad_(False)
+    for value in (0.0, 0.3, 1.0):
+        x = torch.full((1, channels, 32, 40), value)
+        out = module(x.half())
+        assert out.dtype == torch.float16 and torch.isfinite(out).all(), value
+        assert (out.float() - reference(x)).abs().max() < 1e-2, value
+
+
+def test_float16_gradients_are_finite():
+    """``.half()`` modules and float16 autocast gave non-finite gradients everywhere (the inverse square root's
+    derivative, ``x^-1.5 / 2``, overflows float16 for a flat region's energy): no step of a mixed-precision
+    fine-tuning could be taken."""
+    image = _unit(_gray(64, 80))
+    image[:16] = 0  # flat cells
+    half = ALCN2d(model="gain").half()
+    x = torch.from_numpy(image)[None, None].half().requires_grad_(True)
+    half(x).float().square().mean().backward()
+    assert torch.isfinite(x.grad).all() and all(torch.isfinite(p.grad).all() for p in half.parameters())
+    module = ALCN2d(model="gain")
+    with torch.autocast("cpu", dtype=torch.float16):
+        out = module(torch.from_numpy(image)[None, None])
+    out.float().square().mean().backward()
+    assert all(torch.isfinite(p.grad).all() for p in module.parameters())
+
+
 @pytest.mark.parametrize("model", ["gain", "lite"])
 def test_differentiable_frozen_or_fine_tuned(model):
     image = _unit(_gray(64, 80))
@@ -682,6 +734,24 @@ def test_a_fine_tuned_module_saved_is_what_an_opencv_app_loads(tmp_path):
     with pytest.raises(InputError, match="got OrderedDict .*load_state_dict") as info:
         ALCN2d(weights=alcn.state_dict())
     assert len(str(info.value)) < 400  # not every tensor of it
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_a_module_in_lower_precision_saves(dtype, tmp_path):
+    """save() of a float16 module said the fixed tau had changed (the cast had rounded it), and of a bfloat16 one
+    ended in NumPy's TypeError (it has no bfloat16). The parameters are saved as they are, in float32; the fixed
+    scales as the file had them; a fixed scale changed by more than the rounding is still refused."""
+    module = ALCN2d(model="gain").to(dtype)
+    saved = load_normalizer_file(module.save(tmp_path / "half.npz")).arrays
+    original = load_normalizer_file(MODELS["gain"]).arrays
+    assert saved["log_tau"] == original["log_tau"] and saved["log_floor_scale"] == original["log_floor_scale"]
+    for name, value in module.net.state_dict().items():
+        if name not in ("log_tau", "log_floor_scale"):
+            np.testing.assert_array_equal(saved[name], value.float().numpy())
+    with torch.no_grad():
+        module.net.log_tau.add_(0.1)
+    with pytest.raises(alcn_cv.WeightFileError, match="header field 'equalization.tau' is 3.0"):
+        module.save(tmp_path / "changed.npz")
 
 
 def test_a_colour_output_is_contiguous():

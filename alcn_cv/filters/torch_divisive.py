@@ -70,13 +70,26 @@ def divisive_normalization(
         multiplier: a factor of the result.
 
     Returns:
-        ``(B, 1, H, W)``, the response's dtype and device.
+        ``(B, 1, H, W)``, the response's dtype and device. A float16 response (or one under float16 autocast) is
+        divided in float32: float16's smallest values (6e-8) hold neither the floor's ``ABSOLUTE_FLOOR^2`` nor a
+        flat region's energy, whose inverse square root would be infinite, and neither does its range hold that
+        inverse square root's gradient.
 
     Example:
         >>> r = torch.randn(2, 1, 32, 32)
         >>> divisive_normalization(r, sigma=2.0, scale=1.0).shape
         torch.Size([2, 1, 32, 32])
     """
+    device = response.device.type
+    if response.dtype == torch.float16 or (
+        torch.amp.is_autocast_available(device)  # not on the meta device
+        and torch.is_autocast_enabled(device)
+        and torch.get_autocast_dtype(device) == torch.float16
+    ):
+        with torch.autocast(device, enabled=False):
+            wide = None if floor is None else floor.float()
+            result = divisive_normalization(response.float(), sigma, scale, wide, multiplier)
+        return result.to(response.dtype)
     squared = _blurred_square(response, sigma)  # e^2 itself: no square root squared again
     if floor is None:
         floor = scale * squared.sqrt().mean(dim=(-2, -1), keepdim=True)

@@ -201,7 +201,7 @@ class Normalizer(nn.Module):
     def state_arrays(self: nn.Module) -> dict[str, np.ndarray]:
         """The parameters as float32 arrays, for :func:`alcn_cv.weight_file.save_normalizer_file` (typed on any
         module: the other Normalizers borrow it)."""
-        return {k: v.detach().cpu().numpy().astype(np.float32) for k, v in self.state_dict().items()}
+        return {k: v.detach().float().cpu().numpy() for k, v in self.state_dict().items()}  # bfloat16: no NumPy dtype
 
     def extra_repr(self) -> str:
         return f"output_scale={self.output_scale}, activation={self.config['activation']!r}"
