@@ -339,9 +339,26 @@ def opencv_errors_only(quiet: bool = True) -> Iterator[None]:
         set_level(previous)
 
 
+def _command_parser(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
+    """The parser of the (sub)command ``args`` were parsed for: ``alcn bench detect``'s, not ``alcn``'s."""
+    while True:
+        # argparse keeps its subcommands as an action of the parser (no public accessor)
+        action = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+        name = None if action is None else getattr(args, action.dest, None)
+        if action is None or name not in action.choices:
+            return parser
+        parser = action.choices[name]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    command = _command_parser(parser, args)
+    if unknown:  # argparse reports them from the top-level parser, naming neither the command nor its usage
+        misplaced = sorted({"--debug", "-v", "--verbose"} & set(unknown))
+        where = f" ({', '.join(misplaced)}: before the command, `alcn {misplaced[0]} COMMAND ...`)" if misplaced else ""
+        command.error(f"unrecognized arguments: {' '.join(unknown)}{where}")
+    prog = command.prog  # "alcn bench detect": the errors below name the command, as argparse's own do
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="[%(asctime)s %(name)s %(levelname)s] %(message)s",
@@ -364,9 +381,9 @@ def main(argv: list[str] | None = None) -> int:
         named = str(exc).startswith(f"alcn {args.command}")  # else a function's name (ALCN(backend='torch'): ...)
         return _failed(str(exc) if named else f"alcn {args.command}: {exc}", args.debug)
     except (ValueError, TypeError, OSError, RuntimeError) as exc:
-        return _failed(f"alcn {args.command}: error: {exc}", args.debug)
+        return _failed(f"{prog}: error: {exc}", args.debug)
     except MemoryError as exc:  # NumPy's says how much, for what shape: the input (or a size asked) too large
-        return _failed(f"alcn {args.command}: error: out of memory ({exc or 'no details'})", args.debug)
+        return _failed(f"{prog}: error: out of memory ({exc or 'no details'})", args.debug)
     return int(result or 0)
 
 

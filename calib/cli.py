@@ -261,7 +261,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "board",
         help="write a printable board image (PNG with its DPI) and its dimensions (JSON)",
-        description="Write a board to print at 100% scale, and <out>.json with its dimensions.",
+        description="Write a board (the PNG of --out) to print at 100% scale, and a JSON of its dimensions beside "
+        "it (board.json for --out board.png).",
     )
     p.add_argument("--out", required=True, help="output .png")
     _add_board_args(p)

@@ -32,7 +32,7 @@ import numpy as np
 
 from alcn_cv import io
 from alcn_cv.cli import run_script
-from alcn_cv.enhance.registry import same_method
+from alcn_cv.enhance.registry import create, same_method
 from alcn_cv.errors import DatasetError
 from alcn_cv.shared_data import shared_data_dir
 from pose import build, track
@@ -77,8 +77,12 @@ def main() -> None:
     )
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")
-    args.out.mkdir(parents=True, exist_ok=True)
     video = args.data / "box.mp4"
+    # checked before the output folder is made: a typo leaves no empty folder behind
+    create(args.normalization)
+    if not video.is_file():
+        raise DatasetError(f"{video}: no such video (--data: OpenCV's cookie-box sample, box.mp4 and box.ply)")
+    args.out.mkdir(parents=True, exist_ok=True)
     model_path = args.out / "cookie_box_model.npz"
     # a model of an earlier run is reused when it was built after the same normalization
     if not model_path.is_file() or not same_method(part_model.load(model_path).normalization, args.normalization):

@@ -17,6 +17,8 @@ import json
 
 from _run import RUNS, SHARED_DATA, alcn, command_line, keep
 
+from alcn_cv.cli import run_script
+
 
 def main() -> None:
     command_line(__doc__).parse_args()
@@ -89,4 +91,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

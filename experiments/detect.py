@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from _run import RUNS, alcn, command_line, keep
 
+from alcn_cv.cli import run_script
+
 METHODS = "none,dog,dlcn,tantriggs,alcn,alcn:model=gain-lite,alcn:model=lite"
 
 
@@ -52,4 +54,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

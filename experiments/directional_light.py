@@ -38,7 +38,9 @@ from tqdm.auto import tqdm
 
 from alcn_cv.bench.directional import SIZES, identify, tune
 from alcn_cv.bench.relight import TUNING_GRIDS
-from alcn_cv.data.relief_settings import AZIMUTHS, ELEVATIONS
+from alcn_cv.cli import SEED as SEED_TYPE
+from alcn_cv.cli import number_at_least, number_in, run_script
+from alcn_cv.data.relief_settings import AZIMUTHS, ELEVATIONS, MAX_SIDE, MIN_SIDE
 from alcn_cv.report import machine
 
 BASELINES = ("none", "clahe", "dog", "dlcn", "tantriggs", "sqi", "alcn")
@@ -51,18 +53,26 @@ VALIDATION_SEED, VALIDATION_IDENTITIES = SEED + 1, IDENTITIES // 2
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument("--identities", type=int, default=IDENTITIES, help=f"rendered scenes (default: {IDENTITIES})")
-    parser.add_argument("--size", type=int, default=SIZE, help=f"side of the rendered images (default: {SIZE})")
-    parser.add_argument("--seed", type=int, default=SEED, help=f"rendering seed (default: {SEED})")
+    scenes = number_at_least(int, 1)
+    parser.add_argument(
+        "--identities", type=scenes, default=IDENTITIES, help=f"rendered scenes (default: {IDENTITIES})"
+    )
+    parser.add_argument(
+        "--size",
+        type=number_in(int, MIN_SIDE, MAX_SIDE),
+        default=SIZE,
+        help=f"side of the rendered images, {MIN_SIDE} to {MAX_SIDE} px (default: {SIZE})",
+    )
+    parser.add_argument("--seed", type=SEED_TYPE, default=SEED, help=f"rendering seed (default: {SEED})")
     parser.add_argument(
         "--validation-seed",
-        type=int,
+        type=SEED_TYPE,
         default=VALIDATION_SEED,
         help=f"the tuning rendering's seed (default: {VALIDATION_SEED})",
     )
     parser.add_argument(
         "--validation-identities",
-        type=int,
+        type=scenes,
         default=VALIDATION_IDENTITIES,
         help=f"the tuning rendering's scenes (default: {VALIDATION_IDENTITIES})",
     )
@@ -98,4 +108,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

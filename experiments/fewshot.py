@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from _run import RUNS, alcn, command_line, keep
 
+from alcn_cv.cli import run_script
+
 METHODS = "none,dog,dog:sigma1=1:sigma2=2,dlcn,alcn,alcn:model=gain-lite,alcn:model=lite"
 
 
@@ -45,4 +47,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

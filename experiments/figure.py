@@ -19,6 +19,8 @@ import cv2
 import numpy as np
 from _run import ROOT, RUNS, SHARED_DATA, command_line
 
+from alcn_cv.cli import run_script
+
 #: The README's figure, which --publish replaces, and its scene (the README's caption names it).
 PUBLISHED = ROOT / "docs" / "figure.png"
 SCENE = "mexico"
@@ -68,11 +70,14 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RUNS / "figure.png", help="PNG to write (default: runs/figure.png)")
     parser.add_argument("--publish", action="store_true", help=f"then copy it to {PUBLISHED.relative_to(ROOT)}")
     args = parser.parse_args()
+    if args.out.suffix.lower() != ".png":
+        parser.error(f"--out is a PNG file (.png), got {args.out}")
     if args.publish and args.scene != SCENE:  # the README's caption names its scene
         parser.error(f"--publish: the README's figure is of {SCENE}; --scene {args.scene} writes --out only")
     image = figure(SHARED_DATA / "webcam" / args.scene)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(args.out), image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    if not cv2.imwrite(str(args.out), image, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
+        raise OSError(f"cannot write {args.out}")
     print(f"wrote {args.out} ({args.out.stat().st_size // 1024} KB)")
     if args.publish:
         if args.out.resolve() != PUBLISHED.resolve():  # --out docs/figure.png wrote it already
@@ -81,4 +86,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -9,8 +9,11 @@
 #   first gives; the exit status is the first failure's (0 when both pass). DEVICE=cpu rehearses the script on a
 #   machine without a GPU (the CUDA tests skip, the bench measures the CPU, speed_gpu.json is written and
 #   keep_gpu_check.py refuses it), so that a short GPU slot is not spent on a fault of the script itself.
-# Fill .whl/ beforehand where a registry is reachable, e.g.
-#   pip download --no-deps --only-binary=:all: -d .whl kornia kornia_rs
+# Fill .whl/ beforehand where a registry is reachable, for the GPU machine's Python (3.12 there, 3.11 here: a wheel of
+# this machine's Python does not install there), e.g.
+#   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+#     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 \
+#     -d .whl kornia==0.9.0 kornia_rs
 # On a GPU machine that gives back one folder: GPU_CHECK_OUT=THAT_FOLDER bash experiments/gpu_check.sh
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -22,10 +25,19 @@ BATCHES=${BATCHES:-$([ "$DEVICE" = cpu ] && echo 1,2)}
 mkdir -p "$GPU_CHECK_OUT"
 PY=${PYTHON:-python3}
 SITE=/tmp/site
-if compgen -G ".whl/*.whl" > /dev/null; then
-  "$PY" -m pip install --quiet --no-index --no-deps --target "$SITE" .whl/*.whl 2>&1 | tail -3
-fi
 export PYTHONPATH="$PWD:$SITE${PYTHONPATH:+:$PYTHONPATH}"
+# the wheels only where kornia is missing (a bare GPU machine; not a checkout's own environment)
+if ! "$PY" -c "import kornia" 2> /dev/null && compgen -G ".whl/*.whl" > /dev/null; then
+  # one wheel pip cannot install (another Python's, say) stops the whole install: said here, not minutes later
+  if ! "$PY" -m pip install --quiet --no-index --no-deps --target "$SITE" .whl/*.whl; then
+    echo "gpu_check: the wheels in .whl/ do not install with $("$PY" --version 2>&1) (see the recipe at the top)" >&2
+    exit 2
+  fi
+fi
+if ! "$PY" -c "import kornia" 2> /dev/null; then
+  echo "gpu_check: kornia does not import with $("$PY" --version 2>&1): carry its wheels in .whl/ (the recipe at the top)" >&2
+  exit 2
+fi
 {
   nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>&1
   "$PY" - <<'PY'

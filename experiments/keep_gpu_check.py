@@ -14,6 +14,8 @@ from pathlib import Path
 
 from _run import command_line, publish
 
+from alcn_cv.cli import run_script
+
 NAME = "speed_gpu"
 
 
@@ -31,4 +33,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

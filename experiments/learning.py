@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from _run import RUNS, alcn, command_line, keep, quick_protocol, untrained_start
 
+from alcn_cv.cli import SEED, run_script
 from alcn_cv.runtime import MODELS
 
 BASELINES = ["none", "clahe", "dog", "dlcn", "tantriggs"]
@@ -22,7 +23,7 @@ BASELINES = ["none", "clahe", "dog", "dlcn", "tantriggs"]
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
+    parser.add_argument("--seeds", nargs="+", type=SEED, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
     args = parser.parse_args()
     out = RUNS / "learning"
     out.mkdir(parents=True, exist_ok=True)
@@ -49,4 +50,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -32,6 +32,7 @@ from tqdm.auto import tqdm
 
 from alcn_cv.bench.relight import PairPlan, build_method, evaluate_scene, keypoint_scores, plan_pairs
 from alcn_cv.bench.relight_settings import CONFS, Settings
+from alcn_cv.cli import SEED, run_script
 from alcn_cv.data.light_changes import LightChangeConfig, relit_frames
 from alcn_cv.data.permissive_images import training_photographs
 from alcn_cv.data.scenes import TEST_SCENES, TRAIN_SCENES, Scene, load_scenes, select_scenes, shared_root
@@ -99,7 +100,7 @@ def upright_orb(norm: Normalization, scene: Scene, plans: list[PairPlan]) -> lis
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
+    parser.add_argument("--seeds", nargs="+", type=SEED, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
     args = parser.parse_args()
     out = RUNS / "orb_orientation"
     out.mkdir(parents=True, exist_ok=True)
@@ -136,4 +137,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from _run import RUNS, add_part_option, alcn, command_line, keep, selected_parts
 
+from alcn_cv.cli import run_script
+
 PARTS = {"features": ["--detectors", "features", "--n-features", "500"], "corners": ["--detectors", "corners"]}
 
 
@@ -31,4 +33,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -23,6 +23,8 @@ from pathlib import Path
 
 from _run import RUNS, SHARED_DATA, add_part_option, alcn, command_line, keep, selected_parts
 
+from alcn_cv.cli import SEED, run_script
+
 NORMALIZATIONS = ["none", "dog:sigma1=1:sigma2=2", "tantriggs", "alcn", "alcn:model=lite"]
 PARTS = ("data", "features", "corners", "control", "heldout", "middlebury")
 
@@ -31,7 +33,7 @@ def main() -> None:
     parser = command_line(__doc__)
     add_part_option(parser, PARTS)
     parser.add_argument(
-        "--seeds", nargs="+", type=int, default=[0, 1, 2], help="corner CNN training seeds (default: 0 1 2)"
+        "--seeds", nargs="+", type=SEED, default=[0, 1, 2], help="corner CNN training seeds (default: 0 1 2)"
     )
     args = parser.parse_args()
     parts = selected_parts(args, PARTS)
@@ -70,4 +72,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

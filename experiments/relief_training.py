@@ -49,6 +49,7 @@ from _stand_in import render_stand_in
 from tqdm.auto import tqdm
 
 from alcn_cv.bench.directional import identify
+from alcn_cv.cli import run_script
 from alcn_cv.data.relief_settings import ELEVATIONS
 from alcn_cv.report import machine
 
@@ -156,4 +157,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -19,12 +19,14 @@ from __future__ import annotations
 
 from _run import RUNS, add_part_option, alcn, command_line, keep, quick_protocol, selected_parts
 
+from alcn_cv.cli import SEED, run_script
+
 PROTOCOLS = {"split": [], "leave_one_out": ["--leave-one-out"]}
 
 
 def main() -> None:
     parser = command_line(__doc__)
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
+    parser.add_argument("--seeds", nargs="+", type=SEED, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
     add_part_option(parser, PROTOCOLS)
     parser.add_argument(
         "--quick",
@@ -41,4 +43,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -28,6 +28,7 @@ from _run import REPORTS, ROOT, rerun  # noqa: E402
 sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
 from alcn_cv.bench.detect_report import chosen_trial  # noqa: E402
 from alcn_cv.bench.relight_settings import CONFS  # noqa: E402
+from alcn_cv.cli import run_script
 from alcn_cv.report import describe_machine, machine_cores, markdown_table  # noqa: E402
 
 RESULTS = ROOT / "docs" / "results.md"
@@ -563,4 +564,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -8,8 +8,9 @@ the video test); 17 minutes for the current table at load 15 (two sizes, no vide
     python experiments/speed.py --sizes 640x480,1280x800 --video-frames 0 --budget 3   # the current table
     python experiments/speed.py                                                          # the full bench
 
-Any option is passed to `alcn bench speed`, but --keep: a run with other options than the published report's
-replaces docs/reports/speed.json only with it. Writes runs/speed/speed.{md,json,png}.
+Any option is passed to `alcn bench speed`, but --keep (a run with other options than the published report's
+replaces docs/reports/speed.json only with it) and --out, which this script sets: it writes
+runs/speed/speed.{md,json,png}.
 """
 
 from __future__ import annotations
@@ -18,15 +19,20 @@ import sys
 
 from _run import KEEP, RUNS, alcn, keep
 
+from alcn_cv.cli import run_script
+
 
 def main() -> None:
     if {"-h", "--help"} & set(sys.argv[1:]):
         print(f"usage: speed.py [OPTION ...] (the options of `alcn bench speed`)\n\n{__doc__}")
         return
+    if any(a == "--out" or a.startswith("--out=") for a in sys.argv[1:]):
+        print("speed.py: error: --out is the script's: it writes runs/speed/ (and keeps its report)", file=sys.stderr)
+        sys.exit(2)
     out = RUNS / "speed"
     alcn("bench", "speed", "--out", str(out), "--overwrite", *(a for a in sys.argv[1:] if a != KEEP))
     keep(out / "speed.json", "speed")
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -30,6 +30,8 @@ from pathlib import Path
 
 from _run import RUNS, add_part_option, alcn, command_line, keep, selected_parts, short_relight
 
+from alcn_cv.cli import run_script
+
 PARTS = ("unet", "gain", "objective", "bench")
 
 
@@ -57,4 +59,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -10,7 +10,15 @@ from pathlib import Path
 
 import numpy as np
 
-from alcn_cv.cli import SEED, add_conf_option, add_progress_option, add_seeds_option, number_at_least, number_in
+from alcn_cv.cli import (
+    SEED,
+    add_conf_option,
+    add_progress_option,
+    add_seeds_option,
+    all_or_at_least,
+    number_at_least,
+    number_in,
+)
 from alcn_cv.errors import InputError
 
 
@@ -199,7 +207,7 @@ def _planar(args: argparse.Namespace) -> int:
         n_features=args.n_features,
         target_fraction=args.target_fraction,
         hfov=args.hfov,
-        max_frames=args.max_frames,
+        max_frames=args.max_frames or None,  # 0: all
         recipe=_recipe(args),
         command=_command(),
         progress=not args.no_progress,
@@ -302,11 +310,16 @@ def _add_planar(sub: argparse._SubParsersAction) -> None:
     )
     r.add_argument(
         "--hfov",
-        type=float,
+        type=number_in(float, 0, 180, above=True, below=True),
         default=planar.DEFAULT_HFOV,
         help=f"assumed horizontal field of view, degrees (default {planar.DEFAULT_HFOV:g})",
     )
-    r.add_argument("--max-frames", type=int, help="at most this many frames per scene, evenly spaced (default all)")
+    r.add_argument(
+        "--max-frames",
+        type=all_or_at_least(2),
+        default=0,
+        help="frames per scene, evenly spaced, at least 2 (default 0: all), as `alcn bench relight --max-frames`",
+    )
     add_progress_option(r)
     r.set_defaults(func=_planar)
 
@@ -640,7 +653,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     e = sub.add_parser(
         "eval",
         help="Table-1-style report and Middlebury errors",
-        description="BB8 2D projection < 5 px, ADD < 10% of the diameter, 5 cm / 5 deg.",
+        description="Build a part model (or train the corner CNN) of the box for each detector and normalization "
+        "on the training sequence of --data, track every test sequence and score the poses as Table 1 (Rad et "
+        "al.): BB8's 2D projection within 5 px, ADD within 10% of the diameter, 5 cm / 5 deg. Writes table1.md "
+        "(with the machine and command), table1.json, table1.png and the models into --out; with --middlebury, "
+        "Middlebury's photographs posed (middlebury.md, middlebury.json).",
     )
     e.add_argument(
         "--data",

@@ -54,6 +54,11 @@ AT_LEAST_1 = "an integer at least 1"
         (["detect", "--cnn-sweep", "0x0"], "argument --cnn-sweep: DEPTHxWIDTH,... of integers at least 1"),
         # silently all the images
         (["detect", "--max-test-images", "0"], f"argument --max-test-images: {AT_LEAST_1}, got '0'"),
+        # "det/manifest.json: working_scale 0.0 must be in (0, 4]": the command line's value blamed on the data set
+        (["detect", "--working-scale", "0"], "argument --working-scale: a number greater than 0 and at most 4, got"),
+        (["detect", "--box-size", "-3"], "argument --box-size: a number greater than 0, got '-3'"),
+        # invariance: "scale must be in (0, 1]", the Python keyword
+        (["invariance", "--scale", "0"], "argument --scale: a number greater than 0 and at most 1, got '0'"),
         # fewshot: "n_objects, real_images, per_image, n_test, epochs and batch_size must be >= 1 and lr > 0"
         (["fewshot", "--objects", "0"], f"argument --objects: {AT_LEAST_1}, got '0'"),
         (["fewshot", "--real-images", "0"], f"argument --real-images: {AT_LEAST_1}, got '0'"),

@@ -258,8 +258,9 @@ def test_tuning_without_validation_images_is_one_line_before_any_work(small_data
     assert cli_main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err == (
-        f"alcn bench: error: {data}: no val.json, the validation images --tune scores its settings on: render the "
-        "data again with `alcn data detect`, or add test-like images of the objects as val.json (COCO, as test.json)"
+        f"alcn bench detect: error: {data}: no val.json, the validation images --tune scores its settings on: render "
+        "the data again with `alcn data detect`, or add test-like images of the objects as val.json (COCO, as "
+        "test.json)"
     )
     assert not out.exists()
     # without --tune, or with no method to tune, the data need no validation images
@@ -311,7 +312,7 @@ def test_a_bad_weight_file_is_one_line_before_any_work(small_data, tmp_path, cap
     argv = ["bench", "detect", "--data", str(small_data), "--out", str(out), "--conf", "small"]
     assert cli_main([*argv, "--methods", f"none,alcn:weights={bad}"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == f"alcn bench: error: method 'alcn:weights={bad}': weight file {bad} is not a .npz archive"
+    assert err == f"alcn bench detect: error: method 'alcn:weights={bad}': weight file {bad} is not a .npz archive"
     assert not out.exists()
     with pytest.raises(InputError, match="'alcn:scale=-1'"):  # a bad parameter, too
         build_methods(["alcn:scale=-1"], D.create_normalization)

@@ -170,7 +170,9 @@ def test_a_bad_weight_file_is_one_line_before_any_seed_runs(tmp_path, capsys, mo
     out = tmp_path / "fs"
     assert cli_main(["bench", "fewshot", "--out", str(out), "--methods", "none,alcn:weights=some/detector.pt"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == "alcn bench: error: method 'alcn:weights=some/detector.pt': weight file not found: some/detector.pt"
+    assert err == (
+        "alcn bench fewshot: error: method 'alcn:weights=some/detector.pt': weight file not found: some/detector.pt"
+    )
     assert not out.exists()
 
 

@@ -110,7 +110,9 @@ def test_a_bad_weight_file_is_one_line_before_any_work(tmp_path, capsys, monkeyp
     argv = ["bench", "invariance", "--data", str(data), "--out", str(out)]
     assert cli_main([*argv, "--methods", "none,alcn:weights=some/detector.pt"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == "alcn bench: error: method 'alcn:weights=some/detector.pt': weight file not found: some/detector.pt"
+    assert err == (
+        "alcn bench invariance: error: method 'alcn:weights=some/detector.pt': weight file not found: some/detector.pt"
+    )
     assert not out.exists()
 
 

@@ -75,7 +75,7 @@ def test_an_earlier_report_is_refused_and_replaced_with_overwrite(name, tmp_path
 
     def refused(named: str) -> None:
         assert cli_main(argv) == 2
-        assert capsys.readouterr().err.strip() == f"alcn bench: error: {named}"
+        assert capsys.readouterr().err.strip() == f"alcn bench {name}: error: {named}"
         assert {p: p.read_text() for p in out.iterdir()} == earlier  # nothing replaced, nothing else written
 
     refused(f"{report} and 1 more exist (--overwrite replaces them)")

@@ -403,3 +403,28 @@ def test_out_of_memory_is_one_line(tmp_path, capsys, monkeypatch):
         "(24000, 24000) and data type float64)"
     )
     assert "\n" not in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "named"),
+    [
+        (["normalize", "in.png", "--out", "x"], "alcn normalize: error: unrecognized arguments: --out x"),
+        (["bench", "fewshot", "--out", "o", "--methods", "none", "dog"], "alcn bench fewshot: error: unrecognized"),
+        (["normalize", "in.png", "o.png", "--debug"], "unrecognized arguments: --debug (--debug: before the command"),
+    ],
+)
+def test_an_unknown_argument_names_the_command_and_its_usage(argv, named, capsys):
+    """argparse reported it from the top-level parser: "usage: alcn [-h] [--debug] [-v] COMMAND ..." and "alcn:
+    error: unrecognized arguments", naming neither the command nor its options."""
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and named in err
+    assert f"usage: alcn {' '.join(argv[: 2 if argv[0] == 'bench' else 1])} [-h]" in err
+
+
+def test_an_error_of_a_grouped_command_names_the_command(tmp_path, capsys):
+    """`alcn bench detect --data MISSING` printed "alcn bench: error:" where its argument errors print "alcn bench
+    detect: error:"."""
+    assert main(["bench", "detect", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err.startswith(f"alcn bench detect: error: {tmp_path / 'missing'}: not a folder")

@@ -102,10 +102,12 @@ def test_an_existing_output_names_only_the_option(command, tmp_path, capsys, no_
     (earlier / "manifest.json").write_text("{}")
     afile.write_text("mine")
     assert main(["data", command, "--out", str(earlier)]) == 2
-    assert capsys.readouterr().err.strip() == f"alcn data: error: {earlier} exists (--overwrite replaces it)"
+    assert capsys.readouterr().err.strip() == f"alcn data {command}: error: {earlier} exists (--overwrite replaces it)"
     assert main(["data", command, "--out", str(afile), "--overwrite"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == f"alcn data: error: {afile} is a file, not an output folder: not replaced; give another path"
+    assert err == (
+        f"alcn data {command}: error: {afile} is a file, not an output folder: not replaced; give another path"
+    )
     assert (earlier / "manifest.json").read_text() == "{}" and afile.read_text() == "mine"
 
 
@@ -118,11 +120,11 @@ def test_preview_refuses_an_existing_sheet_and_names_a_missing_dataset(tmp_path,
     with monkeypatch.context() as m:  # refused before the dataset is read
         m.setattr(preview, "_coco", lambda *a, **k: pytest.fail("read the dataset"))
         assert main(["data", "preview", str(data), "--out", str(sheet)]) == 2
-        assert capsys.readouterr().err.strip() == f"alcn data: error: {sheet} exists (--overwrite replaces it)"
+        assert capsys.readouterr().err.strip() == f"alcn data preview: error: {sheet} exists (--overwrite replaces it)"
         assert main(["data", "preview", str(data), "--out", str(tmp_path), "--overwrite"]) == 2
         assert f"cannot write the contact sheet to {tmp_path}: a folder" in capsys.readouterr().err
     assert sheet.read_bytes() == b"mine"
     assert main(["data", "preview", str(data), "--out", str(sheet), "--overwrite"]) == 0
     assert sheet.read_bytes().startswith(b"\x89PNG")
     assert main(["data", "preview", str(tmp_path / "nope"), "--out", str(tmp_path / "n.png")]) == 2
-    assert capsys.readouterr().err.strip() == f"alcn data: error: {tmp_path / 'nope'}: no such file or folder"
+    assert capsys.readouterr().err.strip() == f"alcn data preview: error: {tmp_path / 'nope'}: no such file or folder"

@@ -512,7 +512,7 @@ def test_a_preset_reaches_the_build_and_an_option_given_overrides_it(shared_data
     capsys.readouterr()
     assert main([*argv, "--conf", "cookie_box"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == "alcn pose: error: unknown preset 'cookie_box'; choose one of static-camera, cookie-box"
+    assert err == "alcn pose build: error: unknown preset 'cookie_box'; choose one of static-camera, cookie-box"
 
 
 def test_presets_are_read_only_settings_of_main():

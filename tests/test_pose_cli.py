@@ -120,7 +120,7 @@ def test_build_help_lists_its_presets_one_line_each(capsys):
 def test_an_unknown_build_preset_is_one_line(tmp_path, capsys):
     assert main(["pose", "build", str(tmp_path / "box.mp4"), str(tmp_path / "m.npz"), "--conf", "nope"]) == 2
     err = capsys.readouterr().err
-    assert err == "alcn pose: error: unknown preset 'nope'; choose one of static-camera, cookie-box\n"
+    assert err == "alcn pose build: error: unknown preset 'nope'; choose one of static-camera, cookie-box\n"
     assert not (tmp_path / "m.npz").exists()
 
 

@@ -246,6 +246,34 @@ def test_planar_refuses_a_negative_number_of_features(tmp_path, capsys):
     assert "(default 0: all;" in " ".join(capsys.readouterr().out.split())
 
 
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [
+        (["--max-frames", "1"], "argument --max-frames: 0 (all) or an integer at least 2, got '1'"),
+        (["--hfov", "180"], "argument --hfov: a number greater than 0 and less than 180, got '180'"),
+    ],
+)
+def test_planar_checks_its_frames_and_field_of_view_first(option, message, tmp_path, capsys):
+    """`pose planar --max-frames 0` read the scenes, then said "max_frames must be at least 2" (the Python keyword;
+    `bench relight --max-frames 0` reads all frames); `--hfov 180` said "hfov must be in (0, 180) degrees"."""
+    assert _one_line_error(capsys, ["pose", "planar", "--out", str(tmp_path / "o"), *option]).endswith(message)
+
+
+def test_planar_max_frames_zero_reads_every_frame(tmp_path, monkeypatch):
+    from pose import planar
+
+    seen = {}
+
+    def run(out: str, *args: object, **kwargs: object) -> None:
+        seen.update(kwargs)
+        Path(out).mkdir()
+        (Path(out) / "planar_pose.md").write_text("the report")
+
+    monkeypatch.setattr(planar, "main", run)
+    assert main(["pose", "planar", "--out", str(tmp_path / "o"), "--max-frames", "0"]) == 0
+    assert seen["max_frames"] is None
+
+
 def test_pose_eval_says_a_missing_data_folder_is_missing(tmp_path, capsys):
     """`pose eval --data nope` said "expected train/000001 ..." (and after the --middlebury sets' models)."""
     err = _one_line_error(capsys, ["pose", "eval", "--data", str(tmp_path / "nope"), "--out", str(tmp_path / "o")])

@@ -96,7 +96,7 @@ def test_an_unknown_preset_is_the_one_line_error_naming_the_presets(command, tmp
     monkeypatch.chdir(tmp_path)
     assert main([*argv, "--conf", "huge"]) == 2
     err = capsys.readouterr().err
-    assert err == f"alcn {argv[0]}: error: unknown preset 'huge'; choose one of {', '.join(confs)}\n"
+    assert err == f"{command}: error: unknown preset 'huge'; choose one of {', '.join(confs)}\n"
     assert not list(tmp_path.iterdir())
 
 

@@ -92,6 +92,7 @@ def _add_policies(p: argparse.ArgumentParser, default: Sequence[str]) -> None:
         "--policy",
         type=_list(str),
         dest="policies",
+        metavar="POLICY[,POLICY...]",
         help=f"detector input policies: {', '.join(POLICIES)} (default {','.join(default)})",
     )
 
@@ -139,6 +140,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         "--positives",
         type=_count,
         dest="positives_per_object",
+        metavar="N",
         help=f"synthetic windows per object, spread over its --real-images (default {d.positives_per_object})",
     )
     p.add_argument(
@@ -171,9 +173,19 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         help=f"PASCAL criterion, an IoU greater than 0 and at most 1 (default {d.match_iou})",
     )
     p.add_argument("--max-test-images", type=_count, help="only the first N test images (default: all)")
-    p.add_argument("--working-scale", type=float, default=None, help="override the manifest's working_scale")
     p.add_argument(
-        "--box-size", type=float, default=None, help="override the manifest's box_size (pixels at the working scale)"
+        "--working-scale",
+        type=number_in(float, 0, 4, above=True),
+        default=None,
+        help="the scale the detector sees the images at, at most 4 (default: the data set's, its manifest's "
+        "working_scale)",
+    )
+    p.add_argument(
+        "--box-size",
+        type=number_in(float, 0, above=True),
+        default=None,
+        help="the side of a detection box, pixels at the working scale (default: the data set's, its manifest's "
+        "box_size)",
     )
     p.add_argument("--threads", type=_count, help="torch threads (default: torch's choice)")
     p.add_argument("--device", help="torch device: cpu, cuda, cuda:1, ... (default cpu)")
@@ -280,7 +292,12 @@ def _add_invariance(subparsers: argparse._SubParsersAction) -> None:
     )
     _add_out(p, "invariance")
     p.add_argument("--methods", type=_list(str), default=None, help=_methods_help(None))
-    p.add_argument("--scale", type=float, default=1.0, help="resize the photographs by this factor first (default 1)")
+    p.add_argument(
+        "--scale",
+        type=number_in(float, 0, 1, above=True),
+        default=1.0,
+        help="shrink the photographs by this factor first, at most 1 (default 1)",
+    )
     p.add_argument(
         "--erode", type=number_at_least(int, 0), default=5, help="pixels removed from the mask border (default 5)"
     )
@@ -350,6 +367,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         "--repeats",
         type=_count,
         dest="max_repeats",
+        metavar="N",
         help=f"at most this many timed runs per case (default {d.max_repeats})",
     )
     p.add_argument(
@@ -362,6 +380,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         "--budget",
         type=number_at_least(float, 0),
         dest="budget_s",
+        metavar="SECONDS",
         help=f"seconds per case before stopping at --min-repeats (default {d.budget_s:g})",
     )
     p.add_argument(
@@ -378,6 +397,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         "--video-budget",
         type=number_at_least(float, 0),
         dest="video_budget_s",
+        metavar="SECONDS",
         help=f"seconds per method of the video test (default {d.video_budget_s:g})",
     )
     p.add_argument(
