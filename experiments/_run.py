@@ -146,12 +146,17 @@ def _publish(text: str, name: str, source: Path, replace: bool) -> Path:
     target = REPORTS / f"{name}.json"
     if target.is_file() and not replace:
         published = json.loads(target.read_text(encoding="utf-8"))
-        if _what_ran(published) != _what_ran(json.loads(text)):
-            exp = published.get("experiment", {})
+        current = json.loads(text)
+        if _what_ran(published) != _what_ran(current):
+            its_run, this_run = (
+                rerun(r.get("experiment", {}).get("script", "?"), r.get("experiment", {}).get("argv") or [])
+                for r in (published, current)
+            )
+            # the same script line: the script itself runs other commands now
+            why = "the script ran other commands then" if its_run == this_run else "its run"
             print(
-                f"not kept: {target.relative_to(ROOT)} is the report of other settings (its run: "
-                f"`{rerun(exp.get('script', '?'), exp.get('argv') or [])}`); this run's stays at {source} "
-                f"(run this again with {KEEP} to replace the published one)"
+                f"not kept: {target.relative_to(ROOT)} is the report of other settings ({why}: `{its_run}`); this "
+                f"run's stays at {source} (run this again with {KEEP} to replace the published one)"
             )
             return source
     REPORTS.mkdir(parents=True, exist_ok=True)

@@ -112,3 +112,7 @@ def test_a_run_with_other_options_keeps_the_published_report(tmp_path, monkeypat
     assert run("--part", "a", value=1, command="alcn bench x --seeds 0")["value"] == 1
     assert run(value=2, command="alcn bench x --seeds 0")["value"] == 2
     assert run("--part", "a", value=3, command="alcn bench x --seeds 1")["value"] == 2
+    capsys.readouterr()
+    # the same script line, other commands: its message named the line the user had just run as "other settings"
+    assert run(value=4, command="alcn bench x --conf preset")["value"] == 2
+    assert "other settings (the script ran other commands then: `python exp.py`)" in capsys.readouterr().out
