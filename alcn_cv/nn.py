@@ -155,6 +155,8 @@ class ALCN2d(nn.Module):
         self.grid_stride = check_grid_stride(grid_stride, self.net.stride)
         self.mixture = GaussianMixture2d(self.spec.full_res_sigmas)
         self.to_lab, self.from_lab = RgbToLab(), LabToRgb()  # colour images: the CIE Lab of apply()
+        if not isinstance(allow_tf32, bool):
+            raise InputError(f"allow_tf32 must be True or False, got {allow_tf32!r}")
         self.allow_tf32 = allow_tf32
 
     def save(self, path: str | Path, description: str | None = None) -> Path:
@@ -692,8 +694,8 @@ def batches(frames: Iterable[np.ndarray], size: int) -> Iterator[np.ndarray]:
     """Group an iterable of ``(H, W)`` frames of one size into ``(B, H, W)`` arrays of ``size`` (the last one
     shorter), for :meth:`ALCN.apply_batch <alcn_cv.enhance.alcn.ALCN.apply_batch>`: ``for out in
     map(alcn.apply_batch, batches(frames, 64))``."""
-    if size < 1:
-        raise InputError(f"size must be positive, got {size}")
+    if isinstance(size, bool) or not isinstance(size, numbers.Integral) or size < 1:
+        raise InputError(f"size must be a positive integer, got {size!r}")
     batch: list[np.ndarray] = []
     for frame in frames:
         batch.append(frame)

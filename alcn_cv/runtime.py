@@ -465,6 +465,8 @@ def resolve_weights(model: str | None, weights: str | Path | None) -> Path:
         )
     if model is not None and weights is not None:
         raise InputError(f"give a model or a weight file, not both (model={model!r}, weights={str(weights)!r})")
+    if isinstance(weights, str) and weights in MODELS and not os.path.exists(weights):  # createALCN("lite")
+        raise InputError(f"weights={weights!r} is no file; the shipped model of that name is model={weights!r}")
     model = DEFAULT_MODEL if model is None else model
     if model not in MODELS:
         raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")

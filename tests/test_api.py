@@ -566,3 +566,32 @@ def test_a_parameter_given_twice_or_of_the_wrong_type_says_how_to_give_it():
         alcn_cv.create("dog:sigma1=1", sigma1=2)
     with pytest.raises(InputError, match=r"tileGridSize=4 must be a tuple, e.g. tileGridSize=\(8,8\)$"):
         alcn_cv.create("clahe", tileGridSize=4)
+
+
+def test_numpy_integers_are_integers():
+    """grid_stride=np.int64(16) was refused as "must be a positive multiple of 8, got np.int64(16)", and
+    threads=np.int64(2) as "must be a positive integer"."""
+    alcn = alcn_cv.createALCN(grid_stride=np.int64(16), threads=np.int64(2))
+    assert (alcn.grid_stride, alcn.threads) == (16, 2) and type(alcn.grid_stride) is int and type(alcn.threads) is int
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: alcn_cv.create(3), "a method is a string NAME"),  # AttributeError: 'int' object has no 'strip'
+        (lambda: alcn_cv.create(None), "a method is a string NAME"),
+        (lambda: alcn_cv.create("clahe:clipLimit=3:clipLimit=4"), "parameter 'clipLimit' given twice"),  # the last
+        (lambda: alcn_cv.createALCN("lite"), "weights='lite' is no file; the shipped model of that name is model="),
+        (lambda: alcn_cv.createALCN(device=None), "device must be a torch device's name"),  # backend='torch'
+    ],
+)
+def test_arguments_an_opencv_user_may_pass_by_mistake(call, message):
+    with pytest.raises(InputError, match=message.replace("(", r"\(")):
+        call()
+
+
+def test_the_output_range_is_fixed_as_the_other_settings():
+    """Assigning output_range was taken: apply() read the new one, apply_batch the weight file's, 10 levels apart."""
+    alcn = alcn_cv.createALCN()
+    with pytest.raises(AttributeError, match=r"ALCN.output_range is fixed .* createALCN\(weights=...\)"):
+        alcn.output_range = (-1.0, 1.0)

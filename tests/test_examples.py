@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pytest
 
-from alcn_cv.errors import DatasetError, InputError
+from alcn_cv.errors import ALCNError, DatasetError, InputError
 from pose import build
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -52,6 +52,8 @@ def test_the_cookie_box_examples_build_with_the_preset(script, tmp_path, monkeyp
         raise _StopError
 
     module = _example(script)
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "box.mp4").write_bytes(b"not read: the build is a stand-in")
     monkeypatch.setattr(build, "main", record)
     monkeypatch.setattr(sys, "argv", [script, "--out", str(tmp_path), "--data", str(tmp_path / "data")])
     with pytest.raises(_StopError):
@@ -195,3 +197,14 @@ def test_pnp_methods_normalizes_as_the_model_was_built(given, used, monkeypatch,
     with pytest.raises(_StopError):
         pnp.main()
     assert seen == [used]
+
+
+@pytest.mark.parametrize("argv", [["--normalization", "bogus"], ["--data", "missing"]])
+def test_track_cookie_box_checks_its_input_before_it_makes_its_folder(argv, tmp_path, monkeypatch):
+    """A typo in --normalization or a missing --data left an empty output folder behind."""
+    module = _example("track_cookie_box.py")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["track_cookie_box.py", "--out", str(tmp_path / "out"), *argv])
+    with pytest.raises(ALCNError, match="unknown normalization 'bogus'|missing/box.mp4: no such video"):
+        module.main()
+    assert not (tmp_path / "out").exists()

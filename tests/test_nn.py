@@ -759,3 +759,15 @@ def test_a_colour_output_is_contiguous():
     with torch.no_grad():
         for image in (torch.rand(2, 3, 32, 40), torch.rand(2, 3, 32, 40).to(memory_format=torch.channels_last)):
             assert ALCN2d(model="gain-lite")(image).is_contiguous()
+
+
+def test_settings_that_are_not_what_they_say_are_refused():
+    """batches(frames, 1.5) never reached a batch of 1.5 and gave one of everything; ALCN2d(allow_tf32="yes") was
+    taken; createALCN(device="mps") on a torch without it ended in torch's RuntimeError."""
+    with pytest.raises(InputError, match="size must be a positive integer, got 1.5"):
+        list(batches([np.zeros((4, 4), np.float32)] * 3, 1.5))
+    with pytest.raises(InputError, match="allow_tf32 must be True or False, got 'yes'"):
+        ALCN2d(allow_tf32="yes")
+    if not torch.backends.mps.is_available():
+        with pytest.raises(InputError, match="device is 'mps', but this build of torch has no mps devices"):
+            alcn_cv.createALCN(device="mps")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -63,6 +64,7 @@ _FIXED_SETTINGS = {
     "weights": "weights",
     "model": "model",
     "spec": "weights",
+    "output_range": "weights",
     "sigmas": "scale",
     "scale": "scale",
     "backend": "backend",
@@ -150,9 +152,13 @@ class ALCN(Normalization):
         if (
             threads != "auto"
             and threads is not None
-            and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1)
+            and (isinstance(threads, bool) or not isinstance(threads, numbers.Integral) or threads < 1)
         ):
             raise InputError(f"threads must be a positive integer, None or 'auto', got {threads!r}")
+        if isinstance(threads, numbers.Integral):
+            threads = int(threads)  # NumPy's integers too, which torch's set_num_threads refuses
+        if not isinstance(device, str) and not hasattr(device, "type"):  # a torch.device has one; None is no device
+            raise InputError(f"device must be a torch device's name ('cpu', 'cuda', 'cuda:1', ...), got {device!r}")
         on_cpu = str(device).split(":")[0] == "cpu"
         if backend is None and not on_cpu:
             backend = "torch"  # the one backend that runs on a device

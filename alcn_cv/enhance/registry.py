@@ -226,6 +226,8 @@ def parse_params(items: list[str]) -> dict[str, object]:
         key, sep, value = item.partition("=")
         if not sep or not key.isidentifier():
             raise InputError(f"bad parameter {item!r}; expected NAME=VALUE")
+        if key in params:  # as a keyword given twice
+            raise InputError(f"parameter {key!r} given twice ({item!r} after {key}={params[key]!r})")
         try:
             params[key] = ast.literal_eval(value)
         except (ValueError, SyntaxError):
@@ -241,6 +243,8 @@ def parse_spec(spec: str) -> tuple[str, dict[str, object]]:
     """A method with parameters, ``NAME[:KEY=VALUE...]``: ``"alcn:model=lite:mixture=pyramid"`` ->
     ``("alcn", {"model": "lite", "mixture": "pyramid"})``. The name is not checked here. A ``:`` starts a parameter
     only before ``KEY=``, so a value may hold one: ``"alcn:weights=C:\\models\\a.npz"``."""
+    if not isinstance(spec, str):
+        raise InputError(f"a method is a string NAME[:KEY=VALUE...] (e.g. 'clahe'), got {type(spec).__name__}")
     name, *items = _PARAMETER_START.split(spec.strip())
     if not name or ":" in name:  # "alcn:lite": a value without its key
         raise InputError(f"bad method {spec!r}; expected NAME[:KEY=VALUE...]")

@@ -25,4 +25,9 @@ def torch_device(name: str | None = None, what: str = "device") -> torch.device:
         raise InputError(f"{what} is {name!r}, not a torch device (cpu, cuda, cuda:1, ...)") from None
     if device.type == "cuda" and not torch.cuda.is_available():
         raise InputError(f"{what} is {name!r} but torch sees no CUDA device")
+    if device.type not in ("cpu", "cuda"):
+        try:  # mps, xpu, ...: a build without them says so only when a tensor goes there
+            torch.empty(0, device=device)
+        except RuntimeError:  # whose message lists every backend torch has
+            raise InputError(f"{what} is {name!r}, but this build of torch has no {device.type} devices") from None
     return device

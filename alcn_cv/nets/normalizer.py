@@ -10,6 +10,7 @@ convolutions are shared between overlapping windows and the output has a stride 
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Sequence
 
 import numpy as np
@@ -38,12 +39,12 @@ def check_grid_stride(grid_stride: int | None, stride: int) -> int:
     grid_stride = stride if grid_stride is None else grid_stride
     if (
         isinstance(grid_stride, bool)
-        or not isinstance(grid_stride, int)
+        or not isinstance(grid_stride, numbers.Integral)
         or grid_stride < stride
         or grid_stride % stride
     ):
         raise InputError(f"grid_stride must be a positive multiple of {stride}, got {grid_stride!r}")
-    return grid_stride
+    return int(grid_stride)  # NumPy's integers too
 
 
 def _check_fit(needed: dict[str, torch.Tensor], arrays: dict[str, np.ndarray], name: object) -> None:
