@@ -167,7 +167,7 @@ def check_image(img: object) -> np.ndarray:
 
 def check_unit_range(img: np.ndarray, name: str) -> None:
     """Refuse a float image with values outside [0, 1] (:data:`FLOAT_TOLERANCE` of rounding allowed), NaN or inf;
-    ``name`` is the image's in the message ("float32 image contains NaN or inf")."""
+    ``name`` is the image's in the message of NaN or inf ("float32 image contains NaN or inf")."""
     # min and max see NaN (it propagates) and inf (out of range) without a boolean copy
     lo, hi = float(img.min()), float(img.max())
     if not (lo >= -FLOAT_TOLERANCE and hi <= 1 + FLOAT_TOLERANCE):

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import math
 import os
 import re
 import signal
@@ -258,8 +259,8 @@ def number_in(
             value = kind(text)
         except ValueError:
             value = None
-        # `not >=`: NaN compares false with everything and is no number in range
-        if value is None or not (value > low if above else value >= low):
+        # `not >=`: NaN compares false with everything and is no number in range; inf is no size, rate or time either
+        if value is None or not (value > low if above else value >= low) or not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"{what}{'' if high is None else upper}, got {text!r}")
         if top is not None and not (value < top if below else value <= top):
             raise argparse.ArgumentTypeError(f"{what}{upper}, got {text!r}")
@@ -355,7 +356,8 @@ def main(argv: list[str] | None = None) -> int:
     args, unknown = parser.parse_known_args(argv)
     command = _command_parser(parser, args)
     if unknown:  # argparse reports them from the top-level parser, naming neither the command nor its usage
-        misplaced = sorted({"--debug", "-v", "--verbose"} & set(unknown))
+        top_level = {o for a in parser._actions for o in a.option_strings if a.dest != "help"}
+        misplaced = sorted(top_level & set(unknown))
         where = f" ({', '.join(misplaced)}: before the command, `alcn {misplaced[0]} COMMAND ...`)" if misplaced else ""
         command.error(f"unrecognized arguments: {' '.join(unknown)}{where}")
     prog = command.prog  # "alcn bench detect": the errors below name the command, as argparse's own do
@@ -373,13 +375,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"alcn: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
         return interrupt_exit_code(exc)
     except ModuleNotFoundError as exc:  # a package of an extra, imported when the command runs
-        error = missing_extra(exc, f"alcn {args.command}", preferred=args.command)
+        error = missing_extra(exc, prog, preferred=args.command)
         if error is None:
             raise
         return _failed(str(error), args.debug)
     except MissingDependencyError as exc:  # a package checked before the work; the message names the command
         named = str(exc).startswith(f"alcn {args.command}")  # else a function's name (ALCN(backend='torch'): ...)
-        return _failed(str(exc) if named else f"alcn {args.command}: {exc}", args.debug)
+        return _failed(str(exc) if named else f"{prog}: {exc}", args.debug)
     except (ValueError, TypeError, OSError, RuntimeError) as exc:
         return _failed(f"{prog}: error: {exc}", args.debug)
     except MemoryError as exc:  # NumPy's says how much, for what shape: the input (or a size asked) too large

@@ -472,21 +472,29 @@ def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | 
         torch.Size([1, 1, 48, 48])
     """
     _check_image(image)  # before a module is built for the image's dtype, which must be a float one
-    path = resolve_weights(model, weights).resolve()
-    # the file as it is now: one saved again (a fine-tuning's) or another under the same relative name is read anew
-    stat = path.stat() if path.is_file() else None  # none: ALCN2d names the missing file
-    version = None if stat is None else (stat.st_ino, stat.st_mtime_ns, stat.st_size)
-    key = (path, image.device, image.dtype)
+    key = (model, None if weights is None else str(weights), image.device, image.dtype)
     built = _MODULES.get(key)
-    if built is None or built[0] != version:
+    # the file as it is now (one saved again after more fine-tuning, or another under the same relative name), read
+    # outside a compiled graph only: a file system call is no graph's to trace, and a compiled call keeps its module
+    version = None if torch.compiler.is_compiling() else _file_version(resolve_weights(model, weights))
+    if built is None or (version is not None and built[0] != version):
         # frozen: a backward through it must not accumulate gradients in a module the caller never sees
         module = ALCN2d(model, weights).to(image.device, image.dtype).eval().requires_grad_(False)
         built = _MODULES[key] = version, module
     return built[1]._normalize(image)  # checked above, and the module is of the image's device and dtype
 
 
-#: The modules of :func:`alcn2d` by weight file, device and dtype, each with the file's version it was built from.
-_MODULES: dict[tuple, tuple[tuple[int, int, int] | None, ALCN2d]] = {}
+def _file_version(path: Path) -> tuple[str, int, int, int] | None:
+    """What tells a weight file from the one read before under its name: its resolved path, inode, time and size
+    (None: no such file, which ALCN2d names)."""
+    path = path.resolve()
+    stat = path.stat() if path.is_file() else None
+    return None if stat is None else (str(path), stat.st_ino, stat.st_mtime_ns, stat.st_size)
+
+
+#: The modules of :func:`alcn2d` by model or weight file as given, device and dtype, each with the version of the file
+#: it was built from (:func:`_file_version`).
+_MODULES: dict[tuple, tuple[tuple[str, int, int, int] | None, ALCN2d]] = {}
 
 
 class _ThreadScopes:

@@ -80,8 +80,8 @@ def main() -> None:
     video = args.data / "box.mp4"
     # checked before the output folder is made: a typo leaves no empty folder behind
     create(args.normalization)
-    if not video.is_file():
-        raise DatasetError(f"{video}: no such video (--data: OpenCV's cookie-box sample, box.mp4 and box.ply)")
+    if not (video.is_file() and (args.data / "box.ply").is_file()):
+        raise DatasetError(f"{video}: no such video or no box.ply beside it (--data: OpenCV's cookie-box sample)")
     args.out.mkdir(parents=True, exist_ok=True)
     model_path = args.out / "cookie_box_model.npz"
     # a model of an earlier run is reused when it was built after the same normalization

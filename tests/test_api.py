@@ -595,3 +595,19 @@ def test_the_output_range_is_fixed_as_the_other_settings():
     alcn = alcn_cv.createALCN()
     with pytest.raises(AttributeError, match=r"ALCN.output_range is fixed .* createALCN\(weights=...\)"):
         alcn.output_range = (-1.0, 1.0)
+
+
+@pytest.mark.parametrize("backend", ["opencv", "fast", "torch"])
+def test_the_float_entry_points_refuse_values_outside_the_unit_range(backend):
+    """normalize(), weight_maps() and weight_grid() took 0-255 floats silently (negative ones gave NaN), where apply()
+    refuses them; on the OpenCV backend the working image's range was reported, not the caller's."""
+    alcn = alcn_cv.createALCN(model="lite", backend=backend)
+    gray = np.random.default_rng(0).random((64, 80), dtype=np.float32)
+    for method in (alcn.normalize, alcn.weight_maps, alcn.weight_grid):
+        method(gray)
+        with pytest.raises(InputError, match=r"must be in \[0, 1\], got \[0\.0\d+, 25\d(\.\d)?\] \(divide by 255"):
+            method(gray * 255)
+        with pytest.raises(InputError, match="contains NaN or inf"):
+            method(np.full_like(gray, np.nan))
+    with pytest.raises(InputError, match=r"must be in \[0, 1\], got \[0\.0\d+, 25\d(\.\d)?\] \(divide by 255"):
+        alcn.window_weights(np.random.default_rng(1).random((2, 48, 48), dtype=np.float32) * 255)

@@ -57,6 +57,7 @@ AT_LEAST_1 = "an integer at least 1"
         # "det/manifest.json: working_scale 0.0 must be in (0, 4]": the command line's value blamed on the data set
         (["detect", "--working-scale", "0"], "argument --working-scale: a number greater than 0 and at most 4, got"),
         (["detect", "--box-size", "-3"], "argument --box-size: a number greater than 0, got '-3'"),
+        (["detect", "--box-size", "inf"], "argument --box-size: a number greater than 0, got 'inf'"),
         # invariance: "scale must be in (0, 1]", the Python keyword
         (["invariance", "--scale", "0"], "argument --scale: a number greater than 0 and at most 1, got '0'"),
         # fewshot: "n_objects, real_images, per_image, n_test, epochs and batch_size must be >= 1 and lr > 0"

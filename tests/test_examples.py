@@ -53,7 +53,8 @@ def test_the_cookie_box_examples_build_with_the_preset(script, tmp_path, monkeyp
 
     module = _example(script)
     (tmp_path / "data").mkdir()
-    (tmp_path / "data" / "box.mp4").write_bytes(b"not read: the build is a stand-in")
+    for name in ("box.mp4", "box.ply"):
+        (tmp_path / "data" / name).write_bytes(b"not read: the build is a stand-in")
     monkeypatch.setattr(build, "main", record)
     monkeypatch.setattr(sys, "argv", [script, "--out", str(tmp_path), "--data", str(tmp_path / "data")])
     with pytest.raises(_StopError):

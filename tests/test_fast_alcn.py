@@ -322,3 +322,6 @@ def test_files_record_the_default_model_by_name():
     assert pin_default_model("alcn:threads=1") == f"alcn:threads=1:model={DEFAULT_MODEL}"
     for spec in ("alcn:model=lite", "alcn:weights=w.npz", "dog", "dog:sigma1=1"):
         assert pin_default_model(spec) == spec
+    # "model=None" is the default model too: it was appended to ("alcn:model=None:model=gain"), a spec that a
+    # model given twice makes unreadable
+    assert pin_default_model("alcn:scale=1.0:model=None") == f"alcn:scale=1.0:model={DEFAULT_MODEL}"

@@ -116,3 +116,14 @@ def test_a_run_with_other_options_keeps_the_published_report(tmp_path, monkeypat
     # the same script line, other commands: its message named the line the user had just run as "other settings"
     assert run(value=4, command="alcn bench x --conf preset")["value"] == 2
     assert "other settings (the script ran other commands then: `python exp.py`)" in capsys.readouterr().out
+
+
+def test_an_experiment_keeps_its_name_after_an_alcn_command(monkeypatch):
+    """_run.alcn left sys.argv as ["alcn", ...]: a later error of the script was printed as "alcn: error: ..."."""
+    monkeypatch.syspath_prepend(str(ROOT / "experiments"))
+    import _run
+
+    monkeypatch.setattr(sys, "argv", ["speed.py", "--conf", "quick"])
+    with pytest.raises(SystemExit):
+        _run.alcn("bench", "speed", "--conf", "nope", "--out", "unused")
+    assert sys.argv == ["speed.py", "--conf", "quick"]

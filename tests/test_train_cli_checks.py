@@ -128,6 +128,15 @@ def test_train_unet_refuses_widths_past_the_widest_level(levels, channels, wides
     assert err.endswith(f"got {channels}") and not out.exists()
 
 
+def test_unet_levels_leave_a_channel_at_the_widest_level():
+    """A 2048-pixel crop allowed 12 levels, whose widest may have 1024 channels: "net.channels must be from 1 to 0"."""
+    from alcn_cv.errors import InputError
+    from alcn_cv.train.config import UNetConfig
+
+    with pytest.raises(InputError, match=r"'net.levels' must be from 1 to 11 .*, got 12"):
+        UNetConfig(crop=2048, net={"channels": 1, "levels": 12, "eps": 0.01}).check()
+
+
 def test_export_names_a_path_without_the_onnx_suffix_first(tmp_path, capsys, caplog):
     """``export --onnx EXISTING_DIR`` said "exists (--overwrite replaces it)", then with --overwrite "must end in
     .onnx"; ``--onnx x.txt`` logged an unrelated warning (backend='opencv' will not find it) before the error."""

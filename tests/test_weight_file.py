@@ -284,4 +284,6 @@ def test_an_onnx_file_opencv_cannot_parse_is_one_line_without_opencvs_source(tmp
     path.write_bytes(b"garbage" * 10)
     with pytest.raises(WeightFileError) as info:
         OpenCVNormalizer(path)
-    assert str(info.value) == f"OpenCV cannot read the ONNX model {path}: Failed to parse ONNX model: {path}"
+    message = str(info.value)
+    assert message.startswith(f"OpenCV cannot read the ONNX model {path}: ") and len(message.splitlines()) == 1
+    assert "/modules/" not in message and "OpenCV(" not in message  # its build's source path and version

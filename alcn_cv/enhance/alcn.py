@@ -25,9 +25,9 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
 
-from alcn_cv.checks import unit_windows
+from alcn_cv.checks import check_gray, unit_windows
 from alcn_cv.enhance.base import Normalization, bgr_with_lightness, lab_and_lightness, with_alpha
-from alcn_cv.enhance.registry import parse_spec, register
+from alcn_cv.enhance.registry import format_spec, parse_spec, register
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.divisive import gaussian_energy
@@ -239,11 +239,11 @@ class ALCN(Normalization):
     def weight_grid(self, gray: np.ndarray) -> np.ndarray:
         """``(H, W)`` float32 in [0, 1] -> ``(N, gh, gw)``: the Normalizer's output on its grid, point ``(i, j)``
         the prediction for the window centred on working-scale pixel ``(g*i, g*j)``, ``g = grid_stride``."""
-        return self.runtime.weight_grid(gray)
+        return self.runtime.weight_grid(check_gray(gray))
 
     def weight_maps(self, gray: np.ndarray) -> np.ndarray:
         """``(H, W)`` float32 in [0, 1] -> ``(N, H, W)``: the per-pixel mixture weights F_k."""
-        return self.runtime.weight_maps(gray)
+        return self.runtime.weight_maps(check_gray(gray))
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
         """Eq. 1's weights: ``(n, 48, 48)`` windows at the working scale, uint8 or float32 intensities in [0, 1]
@@ -384,7 +384,8 @@ def pin_default_model(spec: str) -> str:
     what they mean."""
     name, params = parse_spec(spec)
     resolved = ALCN.resolved(params) if name == ALCN.name else params
-    return spec if resolved is params else f"{spec}:model={resolved['model']}"
+    # rebuilt, not appended to: "alcn:model=None" names the model once (no weights here: no path's ":" to keep)
+    return spec if resolved is params else format_spec(name, resolved)
 
 
 def createALCN(  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE

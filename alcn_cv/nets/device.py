@@ -14,8 +14,8 @@ def torch_device(name: str | None = None, what: str = "device") -> torch.device:
     CUDA where torch sees a CUDA device, else the CPU.
 
     Raises:
-        InputError: not a device's name, or a CUDA device asked for where torch sees none (``what`` names the
-            setting).
+        InputError: not a device's name, a CUDA device asked for where torch sees none, or a device of a type this
+            torch cannot use here (mps, xpu, ...; ``what`` names the setting).
     """
     if name is None:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -29,5 +29,5 @@ def torch_device(name: str | None = None, what: str = "device") -> torch.device:
         try:  # mps, xpu, ...: a build without them says so only when a tensor goes there
             torch.empty(0, device=device)
         except RuntimeError:  # whose message lists every backend torch has
-            raise InputError(f"{what} is {name!r}, but this build of torch has no {device.type} devices") from None
+            raise InputError(f"{what} is {name!r}, but torch cannot use {device.type} devices here") from None
     return device

@@ -297,7 +297,7 @@ class OpenCVNormalizer:
         Raises:
             InputError: not an ``(H, W)`` float32 image.
         """
-        h, w = check_gray(image).shape
+        h, w = check_gray(image, finite=False).shape  # its values checked by the callers (apply, weight_grid)
         s = self.stride
         gh, gw = grid_shape((h, w), s)
         if OPENCV_4_DNN and min(gh, gw) < self.largest_pad:

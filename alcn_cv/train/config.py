@@ -676,11 +676,12 @@ class UNetConfig(RealLightConfig):
         super().check()
         if self.crop < self.patch:
             raise InputError(f"need crop >= patch, got crop {self.crop} and patch {self.patch}")
-        most = self.crop.bit_length()  # the largest L with 2 ** (L - 1) <= crop
+        # the largest L with 2 ** (L - 1) <= crop, and with a channel at least at the widest level
+        most = min(self.crop.bit_length(), MAX_UNET_WIDTH.bit_length())
         if not 1 <= self.net["levels"] <= most:
             raise InputError(
                 f"config key 'net.levels' must be from 1 to {most} (level L sees the {self.crop}-pixel crop pooled to "
-                f"1/2**(L-1)), got {self.net['levels']}"
+                f"1/2**(L-1), with 2**(L-1) times the channels, at most {MAX_UNET_WIDTH}), got {self.net['levels']}"
             )
         widest = MAX_UNET_WIDTH >> (self.net["levels"] - 1)
         if not 1 <= self.net["channels"] <= widest:
