@@ -61,7 +61,9 @@ from alcn_cv.row_parts import run_parts
 from alcn_cv.runtime import ModelSpec, resolve_weights
 from alcn_cv.weight_file import NormalizerFile, load_normalizer_file, save_normalizer_file
 
-__all__ = ["ALCN2d", "TorchNetwork", "TorchRuntime", "alcn2d", "batches", "torch_threads"]
+#: The runtime adapters of createALCN(backend="fast" | "torch"), TorchNetwork and TorchRuntime, are the library's, not
+#: a PyTorch user's.
+__all__ = ["ALCN2d", "alcn2d", "batches", "torch_threads"]
 
 #: Windows per Normalizer call in :meth:`TorchNetwork.window_weights` (bounds the memory of a batch).
 _WINDOW_BATCH = 512

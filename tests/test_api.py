@@ -611,3 +611,26 @@ def test_the_float_entry_points_refuse_values_outside_the_unit_range(backend):
             method(np.full_like(gray, np.nan))
     with pytest.raises(InputError, match=r"must be in \[0, 1\], got \[0\.0\d+, 25\d(\.\d)?\] \(divide by 255"):
         alcn.window_weights(np.random.default_rng(1).random((2, 48, 48), dtype=np.float32) * 255)
+
+
+def test_the_filters_star_import_imports_no_torch(run_without_torch):
+    """`from alcn_cv.filters import *` loaded torch and kornia (their two lazy names were in __all__), and failed on
+    a base install with a bare ModuleNotFoundError; the NumPy/OpenCV filters import no torch."""
+    run_without_torch("from alcn_cv.filters import *\nassert callable(alcn_filter)\n")
+
+
+def test_the_numpy_filters_name_a_wrong_dtype():
+    """divisive_normalization and gaussian_energy of a float64 or uint8 image ended in OpenCV's "Unsupported
+    combination of buffer format"; wide_band of a uint8 image averaged 0-255 values silently."""
+    from alcn_cv.filters.divisive import divisive_normalization, gaussian_energy
+    from alcn_cv.filters.wide_band import wide_band
+
+    calls = (
+        lambda a: divisive_normalization(a, 2.0, 1.0),
+        lambda a: gaussian_energy(a, 2.0),
+        lambda a: wide_band(a, 3.0),
+    )
+    for call in calls:
+        for dtype in (np.float64, np.uint8):
+            with pytest.raises(InputError, match=f"must be float32 .*got {np.dtype(dtype).name}"):
+                call(np.zeros((32, 32), dtype))

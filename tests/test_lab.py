@@ -107,3 +107,21 @@ def test_srgb_to_linear_writes_a_strided_view_in_place():
     np.testing.assert_array_equal(whole[:, 1::2], unit[:, 1::2])  # the rest untouched
     fortran = np.asfortranarray(unit)
     np.testing.assert_array_equal(srgb_to_linear(fortran), expected)
+
+
+def test_the_conversions_refuse_what_they_cannot_convert():
+    """srgb_to_linear of a uint8 BGR frame (an OpenCV user's first try) crashed the process: OpenCV's pow of a uint8
+    image corrupts its state; the torch conversions broadcast one channel as three."""
+    from alcn_cv.errors import InputError
+    from alcn_cv.filters.lab import srgb_to_lab
+
+    frame = np.full((48, 64, 3), 200, np.uint8)
+    for convert in (srgb_to_linear, srgb_to_lab):
+        with pytest.raises(InputError, match="float32 intensities in \\[0, 1\\] are converted in place, got uint8"):
+            convert(frame)
+    assert (frame == 200).all()
+    with pytest.raises(InputError, match="a C-ordered HxWx3 image, got shape \\(48, 64\\)"):
+        srgb_to_lab(np.zeros((48, 64), np.float32))
+    for convert in (torch_lab.rgb_to_lab, torch_lab.lab_to_rgb, torch_lab.RgbToLab()):
+        with pytest.raises(InputError, match=r"a \(B, 3, H, W\) image, got shape \(2, 1, 8, 8\)"):
+            convert(torch.rand(2, 1, 8, 8))

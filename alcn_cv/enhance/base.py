@@ -42,7 +42,7 @@ from alcn_cv.checks import (
 from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import linear_to_lab, srgb_to_lab, srgb_to_linear
 
-__all__ = ["Normalization", "NoNormalization"]
+__all__ = ["NoNormalization", "Normalization", "bgr_with_lightness", "lab_and_lightness"]
 
 logger = logging.getLogger(__name__)
 #: Images of more pixels are normalized in horizontal strips by the methods that allow it

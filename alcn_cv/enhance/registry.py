@@ -25,6 +25,8 @@ __all__ = [
     "available",
     "create",
     "describe",
+    "format_param",
+    "format_spec",
     "from_spec",
     "parameters",
     "parse_params",
@@ -122,6 +124,12 @@ def create(spec: str, **params: object) -> Normalization:
         InputError: bad spec, unknown name, a parameter the method does not have or given twice,
             or a value of the wrong type or out of range (the message names the method and the
             parameter).
+
+    Example:
+        >>> import numpy as np
+        >>> clahe = create("clahe:clipLimit=4", tileGridSize=(16, 16))
+        >>> clahe.apply(np.zeros((48, 64), np.uint8)).dtype
+        dtype('uint8')
     """
     name, spec_params = parse_spec(spec)
     twice = sorted(spec_params.keys() & params.keys())

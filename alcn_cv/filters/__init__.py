@@ -23,12 +23,12 @@ from alcn_cv.filters.gaussian_mixture import (
 )
 from alcn_cv.filters.standardize import standardize_windows
 
+# GaussianMixture2d and gaussian_mixture2d (torch) are not star-imported: `from alcn_cv.filters import *` imports no
+# torch, as a base install has none
 __all__ = [
-    "GaussianMixture2d",
     "alcn_filter",
     "gaussian_blur_stack",
     "gaussian_kernel1d",
-    "gaussian_mixture2d",
     "gaussian_sigmas",
     "kernel_radius",
     "standardize_windows",

@@ -11,6 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from alcn_cv.checks import check_gray
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 
 __all__ = [
@@ -33,7 +34,7 @@ def blurred_square(response: np.ndarray, sigma: float, dst: np.ndarray | None = 
     (OpenCV's ``dst``). Never negative, float rounding included: every term of the blur is a positive weight
     times a square, so no clip is needed."""
     kernel = gaussian_kernel1d(sigma)
-    square = cv2.multiply(response, response)
+    square = cv2.multiply(check_gray(response, finite=False), response)  # OpenCV's errors name no argument
     return cv2.sepFilter2D(square, cv2.CV_32F, kernel, kernel, dst=dst, borderType=cv2.BORDER_REFLECT_101)
 
 

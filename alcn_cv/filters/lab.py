@@ -24,6 +24,8 @@ from functools import cache
 import cv2
 import numpy as np
 
+from alcn_cv.errors import InputError
+
 __all__ = [
     "CUBE_ROOT_SCALE",
     "GAMMA_SCALE",
@@ -60,6 +62,7 @@ def srgb_to_linear(unit: np.ndarray) -> np.ndarray:
     """The sRGB curve decoded, in place: float32 intensities in [0, 1] -> linear intensities in [0, 1]
     (``x / 12.92`` up to 0.04045, ``((x + 0.055) / 1.055)^2.4`` above), in OpenCV passes. Any layout: a strided
     view is computed in a contiguous copy and written back."""
+    _check_float32(unit)
     # the reshape of a strided view would be a copy, and the result would never reach ``unit``
     work = unit if unit.flags.c_contiguous else np.ascontiguousarray(unit)
     plane = work.reshape(work.shape[0] if work.ndim > 1 else 1, -1)  # one channel: OpenCV's scalars reach every value
@@ -74,7 +77,19 @@ def linear_to_lab(linear: np.ndarray) -> np.ndarray:
     """CIE Lab of a C-ordered float32 ``HxWx3`` image of linear BGR intensities in [0, 1] (:func:`srgb_to_linear`),
     in place: OpenCV's ``COLOR_LBGR2Lab``, which computes each pixel (its cube root by the spline of
     :func:`cube_root_table`), L in [0, 100]."""
+    if not (_check_float32(linear).ndim == 3 and linear.shape[2] == 3 and linear.flags.c_contiguous):
+        raise InputError(f"a C-ordered HxWx3 image, got shape {linear.shape}")
     return cv2.cvtColor(linear, cv2.COLOR_LBGR2Lab, dst=linear)
+
+
+def _check_float32(image: np.ndarray) -> np.ndarray:
+    # OpenCV's pow of a uint8 image corrupts its state (a crash, or a later call's failed assertion)
+    if not isinstance(image, np.ndarray) or image.dtype != np.float32:
+        raise InputError(
+            f"float32 intensities in [0, 1] are converted in place, got {getattr(image, 'dtype', type(image))} "
+            "(a uint8 image: image * np.float32(1 / 255) first, or Normalization.apply, which converts any image)"
+        )
+    return image
 
 
 def srgb_to_lab(unit: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import (
     CUBE_ROOT_SCALE,
     GAMMA_SCALE,
@@ -54,7 +55,14 @@ def _spline(x: torch.Tensor, table: torch.Tensor) -> torch.Tensor:
     return ((d * t + c) * t + b) * t + a
 
 
+def _check_colour(image: torch.Tensor) -> None:
+    # einsum would broadcast one channel as three, or fail naming its subscripts
+    if image.ndim != 4 or image.shape[1] != 3:
+        raise InputError(f"a (B, 3, H, W) image, got shape {tuple(image.shape)}")
+
+
 def _rgb_to_lab(image: torch.Tensor, to_xyz: torch.Tensor, cube_root: torch.Tensor) -> torch.Tensor:
+    _check_colour(image)
     rgb = image.clamp(0.0, 1.0)
     linear = torch.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
     xyz = torch.einsum("ij,bjhw->bihw", to_xyz, linear)
@@ -65,6 +73,7 @@ def _rgb_to_lab(image: torch.Tensor, to_xyz: torch.Tensor, cube_root: torch.Tens
 
 
 def _lab_to_rgb(lab: torch.Tensor, to_rgb: torch.Tensor, inverse_gamma: torch.Tensor) -> torch.Tensor:
+    _check_colour(lab)
     lightness, a, b = lab.unbind(1)
     dark = lightness <= 8.0  # (6 / 29)^3 * 903.3
     y_dark = lightness / L_SLOPE

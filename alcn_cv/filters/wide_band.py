@@ -22,6 +22,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from alcn_cv.checks import check_gray
 from alcn_cv.errors import WeightFileError
 from alcn_cv.filters.divisive import divisive_floor, divisive_normalization, gaussian_energy
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, kernel_radius
@@ -74,7 +75,7 @@ def band_reach() -> int:
 def block_means(gray: np.ndarray) -> np.ndarray:
     """``(H, W)`` float32 -> ``(ceil(H / BLOCK), ceil(W / BLOCK))``: the mean of each block, the image reflected
     (reflect-101) beyond its bottom and right borders to whole blocks."""
-    h, w = gray.shape
+    h, w = check_gray(gray, finite=False).shape  # a uint8 image would be averaged as 0-255 intensities
     bottom, right = -h % BLOCK, -w % BLOCK
     if bottom or right:
         gray = cv2.copyMakeBorder(gray, 0, bottom, 0, right, cv2.BORDER_REFLECT_101)
