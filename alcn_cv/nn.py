@@ -451,7 +451,9 @@ class _OpenCVLab(torch.autograd.Function):
         return _OpenCVLab.apply(frames.flatten(0, 1), to_lab).unflatten(0, frames.shape[:2]), 0
 
 
-def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | None = None) -> torch.Tensor:
+def alcn2d(
+    image: torch.Tensor, model: str | None = None, weights: str | Path | None = None, scale: float | None = None
+) -> torch.Tensor:
     """Functional :class:`ALCN2d`: the module built once per weight file (as it is on disk: a file saved again is
     read again), device and dtype, then reused, and frozen (``eval()``, ``requires_grad_(False)``): gradients reach
     the image only (fine-tune an :class:`ALCN2d` instead).
@@ -460,6 +462,7 @@ def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | 
         image: ``(B, 1 | 3, H, W)`` float in [0, 1] (3 channels: RGB), any device and float dtype.
         model: a shipped model: ``"gain"`` (the default), ``"gain-lite"``, ``"lite"`` or ``"paper"``.
         weights: a weight file instead of ``model``.
+        scale: the working scale (default: the weight file's), as :class:`ALCN2d`'s.
 
     Returns:
         The same shape, dtype and device, in [0, 1].
@@ -474,14 +477,14 @@ def alcn2d(image: torch.Tensor, model: str | None = None, weights: str | Path | 
         torch.Size([1, 1, 48, 48])
     """
     _check_image(image)  # before a module is built for the image's dtype, which must be a float one
-    key = (model, None if weights is None else str(weights), image.device, image.dtype)
+    key = (model, None if weights is None else str(weights), scale, image.device, image.dtype)
     built = _MODULES.get(key)
     # the file as it is now (one saved again after more fine-tuning, or another under the same relative name), read
     # outside a compiled graph only: a file system call is no graph's to trace, and a compiled call keeps its module
     version = None if torch.compiler.is_compiling() else _file_version(resolve_weights(model, weights))
     if built is None or (version is not None and built[0] != version):
         # frozen: a backward through it must not accumulate gradients in a module the caller never sees
-        module = ALCN2d(model, weights).to(image.device, image.dtype).eval().requires_grad_(False)
+        module = ALCN2d(model, weights, scale).to(image.device, image.dtype).eval().requires_grad_(False)
         built = _MODULES[key] = version, module
     return built[1]._normalize(image)  # checked above, and the module is of the image's device and dtype
 
@@ -494,8 +497,8 @@ def _file_version(path: Path) -> tuple[str, int, int, int] | None:
     return None if stat is None else (str(path), stat.st_ino, stat.st_mtime_ns, stat.st_size)
 
 
-#: The modules of :func:`alcn2d` by model or weight file as given, device and dtype, each with the version of the file
-#: it was built from (:func:`_file_version`).
+#: The modules of :func:`alcn2d` by model or weight file as given, scale, device and dtype, each with the version of
+#: the file it was built from (:func:`_file_version`).
 _MODULES: dict[tuple, tuple[tuple[str, int, int, int] | None, ALCN2d]] = {}
 
 

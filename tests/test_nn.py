@@ -116,6 +116,14 @@ def test_functional_form_and_weight_files():
         module(torch.rand(1, 2, 64, 64))
 
 
+def test_alcn2d_takes_the_working_scale_as_the_module():
+    """alcn2d had no scale: a noisy camera's `scale=0.7` (the README's) needed an ALCN2d."""
+    x = torch.from_numpy(_unit(_gray(48, 64)))[None, None]
+    with torch.no_grad():
+        torch.testing.assert_close(alcn2d(x, scale=0.7), ALCN2d(scale=0.7).eval()(x))
+        assert not torch.allclose(alcn2d(x, scale=0.7), alcn2d(x), atol=1e-3)
+
+
 def test_alcn2d_reads_a_weight_file_saved_again(tmp_path, monkeypatch):
     """alcn2d kept the module of a weight file by its name: a file saved again after more fine-tuning, or another
     file of the same relative name in another folder, gave the first file's output."""

@@ -49,6 +49,8 @@ from alcn_cv.runtime import (
 from alcn_cv.weight_file import NormalizerFile, load_normalizer_file
 
 if TYPE_CHECKING:
+    import torch
+
     from alcn_cv.nn import TorchRuntime
 
 __all__ = ["ALCN", "createALCN", "default_mixture", "pin_default_model"]
@@ -142,7 +144,7 @@ class ALCN(Normalization):
         weights: str | Path | None = None,
         scale: float | None = None,
         backend: str | None = None,
-        device: str = "cpu",
+        device: str | torch.device = "cpu",
         grid_stride: int | None = None,
         mixture: str | None = None,
         model: str | None = None,
@@ -344,7 +346,7 @@ def _build_runtime(
     weight_file: NormalizerFile,
     weights: Path,
     backend: str,
-    device: str,
+    device: str | torch.device,
     grid_stride: int | None,
     mixture: str,
     threads: int | None,
@@ -392,7 +394,7 @@ def createALCN(  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE
     weights: str | Path | None = None,
     scale: float | None = None,
     backend: str | None = None,
-    device: str = "cpu",
+    device: str | torch.device = "cpu",
     grid_stride: int | None = None,
     mixture: str | None = None,
     model: str | None = None,

@@ -79,7 +79,8 @@ class DifferenceOfGaussians(Normalization):
     sigma1, sigma2, mode="mirror", truncate=3)``.
 
     Args:
-        sigma1: standard deviation of the centre Gaussian (pixels). Default 0.5.
+        sigma1: standard deviation of the centre Gaussian (pixels). Default 0.5. (``tantriggs``'s ``sigma1``, the
+            paper's name, is its surround.)
         sigma2: standard deviation of the surround Gaussian (pixels), ``> sigma1``. Default
             1.5 (how the default pair was chosen: ``docs/journal.md``).
 

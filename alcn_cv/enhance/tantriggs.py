@@ -69,7 +69,8 @@ class TanTriggs(Normalization):
     Args:
         gamma: exponent of the gamma correction. Default 0.2.
         sigma0: inner (centre) Gaussian of the DoG, pixels. Default 1.
-        sigma1: outer (surround) Gaussian of the DoG, pixels, ``> sigma0``. Default 2.
+        sigma1: outer (surround) Gaussian of the DoG, pixels, ``> sigma0``. Default 2. (The paper's names: the
+            ``dog`` method's ``sigma1`` is its centre, this method's ``sigma0``.)
         alpha: exponent of the contrast equalization's robust means. Default 0.1.
         tau: truncation and ``tanh`` threshold of the contrast equalization. Default 10.
     """

@@ -64,7 +64,12 @@ def gaussian_mixture2d(
         sigmas: ``N`` standard deviations in pixels; default :func:`gaussian_sigmas` of ``N``.
 
     Returns:
-        ``(B, 1, H, W)`` normalized image, same dtype and device as ``image``.
+        ``(B, 1, H, W)`` normalized image, same dtype and device as ``image`` (``weights`` of that dtype too).
+
+    Example:
+        >>> image, maps = torch.rand(2, 1, 32, 40), torch.rand(2, 10, 32, 40)
+        >>> gaussian_mixture2d(image, maps).shape
+        torch.Size([2, 1, 32, 40])
     """
     _check_shapes(image, weights)
     n = weights.shape[1]
@@ -99,8 +104,13 @@ class GaussianMixture2d(nn.Module):
         sigmas: standard deviations in pixels; default :func:`gaussian_sigmas` ``(i / 2, i = 1..10)``.
 
     Shape:
-        - image: ``(B, 1, H, W)``; weights: ``(B, N)`` or ``(B, N, H, W)``
-        - output: ``(B, 1, H, W)``
+        - image: ``(B, 1, H, W)``; weights: ``(B, N)`` or ``(B, N, H, W)``, both of one float dtype
+        - output: ``(B, 1, H, W)``, that dtype
+
+    Example:
+        >>> mixture = GaussianMixture2d([1.0, 2.0])
+        >>> mixture(torch.rand(1, 1, 16, 16), torch.tensor([[1.0, -1.0]])).shape  # a DoG
+        torch.Size([1, 1, 16, 16])
     """
 
     def __init__(self, sigmas: Sequence[float] | None = None) -> None:

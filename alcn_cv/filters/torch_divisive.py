@@ -103,11 +103,16 @@ def divisive_normalization(
 
 
 class DivisiveNormalization2d(nn.Module):
-    """Module form of :func:`divisive_normalization`: ``(B, 1, H, W)`` -> ``(B, 1, H, W)``.
+    """Module form of :func:`divisive_normalization`: ``(B, 1, H, W)`` float -> ``(B, 1, H, W)``, the same dtype,
+    unbounded (a response of unit local energy maps to about unit magnitude).
 
     Args:
         sigma: the energy's Gaussian (pixels).
         scale: ``c`` of the floor ``c * mean(e)``.
+
+    Example:
+        >>> DivisiveNormalization2d(sigma=2.0)(torch.randn(2, 1, 32, 32)).shape
+        torch.Size([2, 1, 32, 32])
     """
 
     def __init__(self, sigma: float, scale: float = 1.0) -> None:

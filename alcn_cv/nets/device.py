@@ -9,7 +9,7 @@ from alcn_cv.errors import InputError
 __all__ = ["torch_device"]
 
 
-def torch_device(name: str | None = None, what: str = "device") -> torch.device:
+def torch_device(name: str | torch.device | None = None, what: str = "device") -> torch.device:
     """``name`` (``"cpu"``, ``"cuda"``, ``"cuda:1"``, ...) as a :class:`torch.device`; ``None``:
     CUDA where torch sees a CUDA device, else the CPU.
 
