@@ -144,7 +144,7 @@ class ALCN(Normalization):
         weights: str | Path | None = None,
         scale: float | None = None,
         backend: str | None = None,
-        device: str | torch.device = "cpu",
+        device: str = "cpu",  # or a torch.device: not in the hint, which the registry resolves without torch
         grid_stride: int | None = None,
         mixture: str | None = None,
         model: str | None = None,
@@ -394,7 +394,7 @@ def createALCN(  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE
     weights: str | Path | None = None,
     scale: float | None = None,
     backend: str | None = None,
-    device: str | torch.device = "cpu",
+    device: str = "cpu",
     grid_stride: int | None = None,
     mixture: str | None = None,
     model: str | None = None,
