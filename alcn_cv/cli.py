@@ -278,6 +278,8 @@ def number_at_least(kind: type[int] | type[float], low: float, above: bool = Fal
 #: The argparse ``type`` of every ``--seed`` and ``--object-seed``: numpy's generators take no negative seed, and
 #: their error names no option.
 SEED = number_at_least(int, 0)
+#: The argparse ``type`` of a count: an integer at least 1 (runs, windows, frames, epochs, threads).
+COUNT = number_at_least(int, 1)
 
 
 def all_or_at_least(low: int) -> Callable[[str], int | float]:

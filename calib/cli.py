@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from alcn_cv.cli import add_progress_option, number_at_least, number_in
+from alcn_cv.cli import COUNT, add_progress_option, number_at_least, number_in
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
 
@@ -299,8 +299,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "estimates one focal length, for square pixels, with the principal point at the image centre)",
     )
     _add_board_args(p, with_chessboard=False)
-    p.add_argument("--step", type=number_at_least(int, 1), default=1, help="use every STEP-th frame (default 1)")
-    p.add_argument("--max-frames", type=number_at_least(int, 1), help="use at most this many frames")
+    p.add_argument("--step", type=COUNT, default=1, help="use every STEP-th frame (default 1)")
+    p.add_argument("--max-frames", type=COUNT, help="use at most this many frames")
     p.add_argument(
         "--min-corners",
         type=number_at_least(int, MIN_CHARUCO_CORNERS),
@@ -330,7 +330,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--n-features",
-        type=number_at_least(int, 1),
+        type=COUNT,
         default=4096,
         help="sfm: SIFT keypoints kept per image, as the pose commands' --n-features, but at least 1: COLMAP's "
         "SIFT has no 0 for all (default 4096)",

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from alcn_cv.cli import (
+    COUNT,
     SEED,
     add_conf_option,
     add_progress_option,
@@ -501,12 +502,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     add_conf_option(b, _build_summaries(), None)
     b.add_argument(
         "--step",
-        type=number_at_least(int, 1),
+        type=COUNT,
         help=f"use every N-th frame of a video (default: the preset's, else {VIDEO_STEP})",
     )
     b.add_argument(
         "--max-frames",
-        type=number_at_least(int, 1),
+        type=COUNT,
         help=f"at most this many video frames (default: the preset's, else {VIDEO_MAX_FRAMES})",
     )
     b.add_argument(
@@ -609,12 +610,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="replace the outputs of an earlier run: OUTPUT, the OUTPUT_info.json beside it and the --overlay; without "
         "it, any of them that exists is refused before the tracking",
     )
-    t.add_argument(
-        "--step", type=number_at_least(int, 1), default=1, metavar="N", help="track every N-th frame (default 1)"
-    )
+    t.add_argument("--step", type=COUNT, default=1, metavar="N", help="track every N-th frame (default 1)")
     t.add_argument(
         "--max-frames",
-        type=number_at_least(int, 1),
+        type=COUNT,
         metavar="N",
         help="track the first N frames (of those --step keeps; default all)",
     )
@@ -769,8 +768,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help=f"width and height in pixels the frames are resized to, each from {MIN_SIDE} (the network's window) to "
         f"{MAX_SIDE} (the frames are held in memory; default 640 480)",
     )
-    bc.add_argument("--max-frames", type=number_at_least(int, 1), default=60, help="frames used (default 60)")
-    bc.add_argument("--repeats", type=number_at_least(int, 1), default=2, help="passes over them (default 2)")
+    bc.add_argument("--max-frames", type=COUNT, default=60, help="frames used (default 60)")
+    bc.add_argument("--repeats", type=COUNT, default=2, help="passes over them (default 2)")
     bc.add_argument("--threads", type=int, help="OpenCV threads (default OpenCV's)")
     bc.add_argument("--out", type=Path, help="write bench_corners.md and .json here")
     bc.add_argument(

@@ -19,6 +19,7 @@ from typing import Any
 from alcn_cv.bench import detect, detect_settings, fewshot, invariance, relight, relight_settings, speed
 from alcn_cv.bench.detect_settings import POLICIES, DetectSettings
 from alcn_cv.cli import (
+    COUNT,
     SEED,
     add_conf_option,
     add_progress_option,
@@ -46,10 +47,6 @@ def _list(item: Callable[[str], Any] = str) -> Callable[[str], list]:
             raise argparse.ArgumentTypeError(f"a comma-separated list, each item {exc}") from None
 
     return parse
-
-
-#: An integer at least 1 (a count of runs, windows, frames, threads).
-_count = number_at_least(int, 1)
 
 
 def _sweep(text: str) -> list[tuple[int, int]]:
@@ -134,11 +131,11 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
     _add_out(p, "detect")
     add_conf_option(p, detect_settings.CONF_SUMMARIES)
     p.add_argument("--methods", type=_list(str), help=_methods_help(d.resolved().methods))
-    p.add_argument("--real-images", type=_list(_count), help="real training images per object (default 1,10)")
+    p.add_argument("--real-images", type=_list(COUNT), help="real training images per object (default 1,10)")
     _add_policies(p, d.policies)
     p.add_argument(
         "--positives",
-        type=_count,
+        type=COUNT,
         dest="positives_per_object",
         metavar="N",
         help=f"synthetic windows per object, spread over its --real-images (default {d.positives_per_object})",
@@ -148,8 +145,8 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         type=number_at_least(float, 0),
         help=f"background windows per object window (default {d.negatives_ratio})",
     )
-    p.add_argument("--epochs", type=_count, help=f"detector training epochs (default {d.epochs})")
-    p.add_argument("--batch-size", type=_count, help=f"training windows per batch (default {d.batch_size})")
+    p.add_argument("--epochs", type=COUNT, help=f"detector training epochs (default {d.epochs})")
+    p.add_argument("--batch-size", type=COUNT, help=f"training windows per batch (default {d.batch_size})")
     p.add_argument("--lr", type=number_at_least(float, 0, above=True), help=f"Adam learning rate (default {d.lr})")
     add_seeds_option(p, d.seeds, "repeat every run with each of these seeds", from_preset=True)
     p.add_argument(
@@ -172,7 +169,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         type=number_in(float, 0, 1, above=True),
         help=f"PASCAL criterion, an IoU greater than 0 and at most 1 (default {d.match_iou})",
     )
-    p.add_argument("--max-test-images", type=_count, help="only the first N test images (default: all)")
+    p.add_argument("--max-test-images", type=COUNT, help="only the first N test images (default: all)")
     p.add_argument(
         "--working-scale",
         type=number_in(float, 0, 4, above=True),
@@ -187,7 +184,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         help="the side of a detection box, pixels at the working scale (default: the data set's, its manifest's "
         "box_size)",
     )
-    p.add_argument("--threads", type=_count, help="torch threads (default: torch's choice)")
+    p.add_argument("--threads", type=COUNT, help="torch threads (default: torch's choice)")
     p.add_argument("--device", help="torch device: cpu, cuda, cuda:1, ... (default cpu)")
     add_progress_option(p)
     p.set_defaults(func=_run_detect)
@@ -232,7 +229,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         "--objects",
         dest="n_objects",
         metavar="OBJECTS",
-        type=_count,
+        type=COUNT,
         help=f"new objects per seed (default {d.n_objects})",
     )
     p.add_argument(
@@ -241,21 +238,21 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         help="object catalogue seed of seed 0; seed s uses it + s (at least 1 with --tune, whose validation objects "
         f"use it - 1; default {d.object_seed})",
     )
-    p.add_argument("--real-images", type=_count, help=f"reference images per object (default {d.real_images})")
+    p.add_argument("--real-images", type=COUNT, help=f"reference images per object (default {d.real_images})")
     p.add_argument(
         "--per-image",
-        type=_count,
+        type=COUNT,
         help=f"synthetic windows per reference image, as in `alcn train-detector` (`alcn bench detect --positives` "
         f"counts them per object) (default {d.per_image})",
     )
-    p.add_argument("--n-test", type=_count, help=f"test windows per seed, half background (default {d.n_test})")
+    p.add_argument("--n-test", type=COUNT, help=f"test windows per seed, half background (default {d.n_test})")
     p.add_argument(
         "--test-lighting",
         type=_list(str),
         help=f"lighting families of the test windows (default {','.join(d.test_lighting)})",
     )
-    p.add_argument("--epochs", type=_count, help=f"detector training epochs (default {d.epochs})")
-    p.add_argument("--batch-size", type=_count, help=f"training windows per batch (default {d.batch_size})")
+    p.add_argument("--epochs", type=COUNT, help=f"detector training epochs (default {d.epochs})")
+    p.add_argument("--batch-size", type=COUNT, help=f"training windows per batch (default {d.batch_size})")
     p.add_argument("--lr", type=number_at_least(float, 0, above=True), help=f"Adam learning rate (default {d.lr})")
     p.add_argument(
         "--tune",
@@ -266,7 +263,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         "the same detector on a validation draw of new objects and windows of its own, averaged over the policies; the "
         "first best serves every seed (default: their defaults)",
     )
-    p.add_argument("--threads", type=_count, help="torch threads (default: torch's choice)")
+    p.add_argument("--threads", type=COUNT, help="torch threads (default: torch's choice)")
     add_progress_option(p)
     p.set_defaults(func=_run_fewshot)
 
@@ -365,7 +362,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--warmup", type=number_at_least(int, 0), help=f"untimed runs per case (default {d.warmup})")
     p.add_argument(
         "--repeats",
-        type=_count,
+        type=COUNT,
         dest="max_repeats",
         metavar="N",
         help=f"at most this many timed runs per case (default {d.max_repeats})",
@@ -405,7 +402,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
         type=_list(str),
         help="labels run in the video test (default: alcn and the fastest ALCN variant)",
     )
-    p.add_argument("--threads", type=_count, help="OpenCV and torch threads (default: theirs)")
+    p.add_argument("--threads", type=COUNT, help="OpenCV and torch threads (default: theirs)")
     p.add_argument(
         "--device",
         help="measure only ALCN's batched torch path on this device (cuda, cpu): end to end "
@@ -413,7 +410,7 @@ def _add_speed(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--device-batches",
-        type=_list(_count),
+        type=_list(COUNT),
         help="batch sizes of --device (default " + ",".join(map(str, d.device_batches)) + ")",
     )
     add_progress_option(p)
@@ -510,7 +507,7 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         help=f"patch locations per gallery frame (default: the preset's: {preset_values(confs, 'patches')})",
     )
     p.add_argument(
-        "--gallery", type=_count, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})"
+        "--gallery", type=COUNT, default=d.gallery, help=f"gallery frames per scene and seed (default {d.gallery})"
     )
     p.add_argument(
         "--max-pairs",

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.cli import add_progress_option, number_at_least
+from alcn_cv.cli import COUNT, add_progress_option
 from alcn_cv.enhance import available, create
 from alcn_cv.enhance.alcn import ALCN, default_mixture
 from alcn_cv.enhance.registry import describe, format_param, parameters, parse_params, parse_spec
@@ -357,7 +357,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--max-frames",
-        type=number_at_least(int, 1),
+        type=COUNT,
         metavar="N",
         help="of a video, normalize and write the first N frames only (default: every frame)",
     )

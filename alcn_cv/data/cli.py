@@ -7,7 +7,7 @@ import logging
 import time
 from pathlib import Path
 
-from alcn_cv.cli import SEED, add_conf_option, add_progress_option, number_at_least, number_in, preset_values
+from alcn_cv.cli import COUNT, SEED, add_conf_option, add_progress_option, number_at_least, number_in, preset_values
 from alcn_cv.extras import require
 
 logger = logging.getLogger(__name__)
@@ -129,7 +129,7 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true", help="replace an existing output folder")
     parser.add_argument(
         "--workers",
-        type=number_at_least(int, 1),
+        type=COUNT,
         default=1,
         help="worker processes (default 1; the output does not depend on it)",
     )
@@ -160,11 +160,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "many lightings (Phos-like), plus background windows.",
     )
     q.add_argument("--out", required=True, help="output folder")
-    q.add_argument("-n", type=number_at_least(int, 1), default=100_000, help="number of windows (default 100000)")
+    q.add_argument("-n", type=COUNT, default=100_000, help="number of windows (default 100000)")
     q.add_argument("--seed", type=SEED, default=0, help="seed of the windows (default 0)")
     q.add_argument(
         "--objects",
-        type=number_at_least(int, 1),
+        type=COUNT,
         default=100,
         help="number of catalogue objects (labels 1..N; default 100)",
     )
@@ -198,9 +198,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     pixels = number_in(int, 1, detect_settings.MAX_SIDE)
     side = f"in pixels, from twice the objects' size to {detect_settings.MAX_SIDE}"
     for field, kind, what in [
-        ("n_test", number_at_least(int, 1), "number of test images, at least 1 (`alcn bench detect` scores them)"),
+        ("n_test", COUNT, "number of test images, at least 1 (`alcn bench detect` scores them)"),
         ("n_val", number_at_least(int, 0), "number of validation images, test-like, for `alcn bench detect --tune`"),
-        ("n_train", number_at_least(int, 1), "training images per object"),
+        ("n_train", COUNT, "training images per object"),
         ("width", pixels, f"image width {side}"),
         ("height", pixels, f"image height {side}"),
     ]:

@@ -18,7 +18,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from alcn_cv.cli import SEED, add_conf_option, add_progress_option, interrupt_exit_code, number_at_least
+from alcn_cv.cli import COUNT, SEED, add_conf_option, add_progress_option, interrupt_exit_code, number_at_least
 from alcn_cv.presets import preset
 from alcn_cv.train.config import (
     DISTILL_CONF_SUMMARIES,
@@ -127,9 +127,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "the windows' own; detector.pt records the spec with its scale and ALCN's model named)",
     )
     d.add_argument("--weights", type=Path, help="Normalizer weight file for --method alcn (default: shipped)")
-    d.add_argument(
-        "--per-image", type=number_at_least(int, 1), default=300, help="synthetic windows per real image (default 300)"
-    )
+    d.add_argument("--per-image", type=COUNT, default=300, help="synthetic windows per real image (default 300)")
     d.add_argument(
         "--negatives",
         type=number_at_least(int, 0),
@@ -139,8 +137,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument(
         "--extent", type=float, default=40.0, help="the object's size in the 64-px window, pixels (default 40)"
     )
-    d.add_argument("--epochs", type=number_at_least(int, 1), default=15, help="training epochs (default 15)")
-    d.add_argument("--batch-size", type=number_at_least(int, 1), default=64, help="windows per batch (default 64)")
+    d.add_argument("--epochs", type=COUNT, default=15, help="training epochs (default 15)")
+    d.add_argument("--batch-size", type=COUNT, default=64, help="windows per batch (default 64)")
     d.add_argument(
         "--lr", type=number_at_least(float, 0, above=True), default=1e-3, help="Adam learning rate (default 1e-3)"
     )
