@@ -41,6 +41,7 @@ __all__ = [
     "held_folder",
     "holds_out_dir",
     "interrupts_blocked",
+    "is_short",
     "is_video",
     "iter_frames",
     "list_images",
@@ -782,6 +783,13 @@ def map_batches(
     return count
 
 
+def is_short(decoded: int, counted: int | None) -> bool:
+    """Whether a video decoded fewer frames than ``counted`` (its header's count, or a part of it) by more than one:
+    truncated or corrupt. A header's count is often one frame too high (the shared cookie_box/box.mp4 says 456, FFmpeg
+    decodes 455), so a shortfall of one frame is not taken for truncation; ``counted`` None or 0: unknown."""
+    return counted is not None and counted > 0 and decoded < counted - 1
+
+
 def map_video(
     src: str | Path,
     dst: str | Path,
@@ -847,9 +855,7 @@ def map_video(
                 writer.release()
         if writer is None:
             raise InputError(f"no frame could be decoded from {src}")
-        # A header's count is often one frame too high (the shared cookie_box/box.mp4 says 456,
-        # FFmpeg decodes 455): a shortfall of one frame is not taken for truncation.
-        if count < limit - 1:
+        if is_short(count, limit):
             message = f"{src}: decoded {count} of {video.frame_count} frames (truncated or corrupt video)"
             if not allow_partial:
                 raise InputError(f"{message}; nothing written (--allow-partial keeps the decoded frames)")

@@ -26,17 +26,18 @@ mkdir -p "$GPU_CHECK_OUT"
 PY=${PYTHON:-python3}
 SITE=/tmp/site
 export PYTHONPATH="$PWD:$SITE${PYTHONPATH:+:$PYTHONPATH}"
-# the wheels only where kornia is missing (a bare GPU machine; not a checkout's own environment)
-if ! "$PY" -c "import kornia" 2> /dev/null && compgen -G ".whl/*.whl" > /dev/null; then
+# the wheels only where kornia is missing (a bare GPU machine; not a checkout's own environment): each import of it
+# imports torch, seconds of the slot
+if ! "$PY" -c "import kornia" 2> /dev/null; then
   # one wheel pip cannot install (another Python's, say) stops the whole install: said here, not minutes later
-  if ! "$PY" -m pip install --quiet --no-index --no-deps --target "$SITE" .whl/*.whl; then
+  if compgen -G ".whl/*.whl" > /dev/null && ! "$PY" -m pip install --quiet --no-index --no-deps --target "$SITE" .whl/*.whl; then
     echo "gpu_check: the wheels in .whl/ do not install with $("$PY" --version 2>&1) (see the recipe at the top)" >&2
     exit 2
   fi
-fi
-if ! "$PY" -c "import kornia" 2> /dev/null; then
-  echo "gpu_check: kornia does not import with $("$PY" --version 2>&1): carry its wheels in .whl/ (the recipe at the top)" >&2
-  exit 2
+  if ! "$PY" -c "import kornia" 2> /dev/null; then
+    echo "gpu_check: kornia does not import with $("$PY" --version 2>&1): carry its wheels in .whl/ (the recipe at the top)" >&2
+    exit 2
+  fi
 fi
 {
   nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>&1

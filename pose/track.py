@@ -857,9 +857,8 @@ def main(
                     color = color_for(box.normalization)
                     draw_box(vis, box.corners, res.estimate.rvec, res.estimate.tvec, box.K, color, dist=box.dist)
                 writer.write(res.name, vis)
-    # a header's count is often one frame too high (alcn_cv.io.map_video): a shortfall of more is a truncated video,
-    # whose frames decoded are tracked, as they would be of a shorter one, but not in silence
-    if total is not None and len(scene_gt) < total - 1:
+    # a truncated video's frames decoded are tracked, as they would be of a shorter one, but not in silence
+    if io.is_short(len(scene_gt), total):
         logger.warning(
             "%s: decoded %d of the %d frames its header counts (truncated or corrupt video); tracked those",
             source,
