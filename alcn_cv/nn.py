@@ -489,17 +489,19 @@ def alcn2d(
     return built[1]._normalize(image)  # checked above, and the module is of the image's device and dtype
 
 
-def _file_version(path: Path) -> tuple[str, int, int, int] | None:
-    """What tells a weight file from the one read before under its name: its resolved path, inode, time and size
-    (None: no such file, which ALCN2d names)."""
-    path = path.resolve()
-    stat = path.stat() if path.is_file() else None
-    return None if stat is None else (str(path), stat.st_ino, stat.st_mtime_ns, stat.st_size)
+def _file_version(path: Path) -> tuple[int, int, int, int] | None:
+    """What tells a weight file from the one read before under its name (one saved again, or another file of that
+    relative name): its device, inode, time and size, in one system call (None: no such file, which ALCN2d names)."""
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return None
+    return stat.st_dev, stat.st_ino, stat.st_mtime_ns, stat.st_size
 
 
 #: The modules of :func:`alcn2d` by model or weight file as given, scale, device and dtype, each with the version of
 #: the file it was built from (:func:`_file_version`).
-_MODULES: dict[tuple, tuple[tuple[str, int, int, int] | None, ALCN2d]] = {}
+_MODULES: dict[tuple, tuple[tuple[int, int, int, int] | None, ALCN2d]] = {}
 
 
 class _ThreadScopes:

@@ -164,7 +164,7 @@ class Normalization:
         Returns:
             ``(n, S, S)`` float32, unbounded.
         """
-        return np.stack([self.normalize(w) for w in unit_windows(windows)])
+        return np.stack([self._normalize_checked(w) for w in unit_windows(windows)])  # checked as a stack
 
     def to_unit(self, response: np.ndarray) -> np.ndarray:
         """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""
