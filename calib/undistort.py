@@ -110,24 +110,22 @@ def main(
     if source.is_dir():
         check_output_kind(source, output)
         files = list_images(source)
-        check_no_earlier_output([*(output / path.name for path in files), output / "camera.yaml"], overwrite)
+        yaml_path = output / "camera.yaml"
+        check_no_earlier_output([*(output / path.name for path in files), yaml_path], overwrite)
         make_folder(output)
         for path in tqdm(files, desc="undistorting", unit="image", disable=not progress or len(files) < 10):
             write_image(output / path.name, undistort(read_image(path), path.name))
-        yaml_path = output / "camera.yaml"
-    elif source.is_file() and is_video(source):
+    elif source.is_file() and (is_video(source) or suffix in IMAGE_SUFFIXES):
         check_output_kind(source, output)
-        check_no_earlier_output([output, output.with_name(f"{output.stem}.camera.yaml")], overwrite)
-        n = map_video(
-            source, output, lambda frame: undistort(frame, source.name), desc="undistorting", progress=progress
-        )
-        logger.info("undistorted %d frames to %s", n, output)
         yaml_path = output.with_name(f"{output.stem}.camera.yaml")
-    elif source.is_file() and suffix in IMAGE_SUFFIXES:
-        check_output_kind(source, output)
-        check_no_earlier_output([output, output.with_name(f"{output.stem}.camera.yaml")], overwrite)
-        write_image(output, undistort(read_image(source), source.name))
-        yaml_path = output.with_name(f"{output.stem}.camera.yaml")
+        check_no_earlier_output([output, yaml_path], overwrite)
+        if is_video(source):
+            n = map_video(
+                source, output, lambda frame: undistort(frame, source.name), desc="undistorting", progress=progress
+            )
+            logger.info("undistorted %d frames to %s", n, output)
+        else:
+            write_image(output, undistort(read_image(source), source.name))
     elif source.exists():
         raise InputError(f"{source}: expected an image, a folder of images or a video")
     else:
