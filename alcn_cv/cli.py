@@ -32,6 +32,7 @@ from typing import Any
 from alcn_cv.errors import ALCNError, MissingDependencyError
 from alcn_cv.extras import is_installed, missing_extra
 from alcn_cv.malloc import keep_freed_memory
+from alcn_cv.presets import dump_toml
 
 logger = logging.getLogger("alcn_cv")
 
@@ -161,7 +162,9 @@ def add_conf_option(
         required: ``--conf`` must be given (a command without a default preset).
         example: a ``KEY=VALUE`` of the presets' keys: the command also takes ``--set KEY=VALUE``
             (``args.settings``, a list, in order), the overrides of the preset's keys
-            (:func:`alcn_cv.presets.with_settings`); None: only the command's other options override its values.
+            (:func:`alcn_cv.presets.with_settings`), and ``--print-config`` (``args.print_config``: the command
+            prints the preset with them, :func:`print_config`, and exits); None: only the command's other options
+            override its values.
         or_file: what else ``--conf`` takes, a file (``alcn train``: a TOML file of its keys), said in its help.
 
     The name is not checked here: the command looks it up (:func:`alcn_cv.presets.preset` or
@@ -186,10 +189,21 @@ def add_conf_option(
             dest="settings",
             help=f"override one key of the preset, dotted, the value as TOML, e.g. --set {example} (repeatable)",
         )
+        parser.add_argument(
+            "--print-config",
+            action="store_true",
+            help="print the effective configuration, every key with the --set overrides applied, and exit",
+        )
     width = max(map(len, summaries))
     rows = [f"  {name:<{width}}  {what}" for name, what in summaries.items()]
     parser.epilog = "\n".join(["presets (--conf NAME):", *rows])
     parser.formatter_class = _PresetListFormatter
+
+
+def print_config(config: object) -> int:
+    """Write the configuration dataclass ``config`` to stdout as TOML (``--print-config``); the exit code, 0."""
+    sys.stdout.write(dump_toml(config))
+    return 0
 
 
 def preset_values(confs: Mapping[str, object], field: str) -> str:

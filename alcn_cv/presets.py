@@ -4,7 +4,8 @@ A stage keeps its presets in a module-level dict, ``CONFS`` (name -> settings: a
 keywords), with ``CONF_SUMMARIES`` (name -> one line saying what the preset is) beside it; its command takes the
 name with ``--conf NAME`` (:func:`alcn_cv.cli.add_conf_option`). Here is what every stage shares: the one lookup of
 a name, which names the presets when there is none of that name (:func:`preset_named`), the copy of a preset a
-caller may change (:func:`preset`), and ``KEY=VALUE`` overrides of its keys (:func:`with_settings`, ``--set``).
+caller may change (:func:`preset`), ``KEY=VALUE`` overrides of its keys (:func:`with_settings`, ``--set``) and the
+settings written back as TOML (:func:`dump_toml`, ``--print-config``).
 
 The module imports nothing of alcn_cv but its errors, so that the data, bench and training stages and the packages
 on top of alcn_cv all use it without importing one another.
@@ -21,7 +22,7 @@ from typing import Any, TypeVar
 
 from alcn_cv.errors import InputError
 
-__all__ = ["preset", "preset_named", "with_given", "with_settings"]
+__all__ = ["dump_toml", "preset", "preset_named", "with_given", "with_settings"]
 
 ConfigT = TypeVar("ConfigT")
 
@@ -147,3 +148,25 @@ def with_settings(cfg: ConfigT, settings: Sequence[str | dict[str, Any]] = ()) -
     for item in settings:
         _merge(cfg, item if isinstance(item, dict) else _parse_setting(item))
     return cfg
+
+
+def dump_toml(cfg: Any) -> str:
+    """A configuration dataclass as TOML text, its tables after its keys (``--print-config``, a run's
+    ``config.toml``; :func:`alcn_cv.train.config.load_config` reads a :class:`~alcn_cv.train.config.TrainConfig`'s
+    back to the same values)."""
+    d = dataclasses.asdict(cfg)
+    lines = [f"{k} = {_toml_value(v)}" for k, v in d.items() if not isinstance(v, dict)]
+    for table, values in d.items():
+        if isinstance(values, dict):
+            lines += ["", f"[{table}]"] + [f"{k} = {_toml_value(v)}" for k, v in values.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return repr(v)

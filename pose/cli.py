@@ -19,6 +19,7 @@ from alcn_cv.cli import (
     all_or_at_least,
     number_at_least,
     number_in,
+    print_config,
 )
 from alcn_cv.errors import InputError
 
@@ -127,6 +128,8 @@ def _eval(args: argparse.Namespace) -> int:
     from alcn_cv.io import check_no_earlier_output
     from pose import evaluate
 
+    if args.print_config:
+        return print_config(_recipe(args))
     if not (args.middlebury or args.data):
         raise InputError("give --data (pose sequences) and/or --middlebury (a Middlebury set)")
     reports = [name for name, given in (("middlebury", args.middlebury), ("table1", args.data)) if given]
@@ -175,6 +178,8 @@ def _command() -> str:
 def _train_corners(args: argparse.Namespace) -> int:
     from pose import corner_train
 
+    if args.print_config:
+        return print_config(_recipe(args))
     path = corner_train.main(
         args.input,
         args.output,
@@ -196,6 +201,8 @@ def _planar(args: argparse.Namespace) -> int:
     from alcn_cv.io import check_no_earlier_output
     from pose import planar
 
+    if args.print_config:
+        return print_config(_recipe(args))
     out = Path(args.out)
     check_no_earlier_output([out / "planar_pose.md", out / "planar_pose.json"], args.overwrite)
     planar.main(
@@ -219,7 +226,7 @@ def _planar(args: argparse.Namespace) -> int:
 
 def _add_recipe(parser: argparse.ArgumentParser, default: str) -> None:
     """:func:`~alcn_cv.cli.add_conf_option` of the corner detector's training (:data:`pose.corner_train.CONFS`), with
-    ``--set`` overrides of its keys, for every command that trains it."""
+    ``--set`` overrides of its keys and ``--print-config``, for every command that trains it."""
     from pose.corner_train import CONF_SUMMARIES
 
     add_conf_option(parser, CONF_SUMMARIES, default, example="iterations=1000")

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import re
+import tomllib
 
 import pytest
 
 from alcn_cv.cli import main
+from pose.corner_train import CONFS
 
 
 @pytest.mark.parametrize("step", ["build", "track", "eval"])
@@ -135,3 +138,23 @@ def test_building_the_command_line_imports_no_scipy_spatial(run_python):
     )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize(
+    ("command", "conf"),
+    [
+        (["pose", "train-corners", "frames", "out.onnx", "--box-ply", "box.ply"], "box"),
+        (["pose", "eval", "--out", "report"], "box"),
+        (["pose", "planar", "--out", "report"], "planar"),
+    ],
+)
+def test_print_config_shows_the_corner_recipe_with_its_overrides(command, conf, tmp_path, monkeypatch, capsys):
+    # the message of a malformed --set points at --print-config: every command that takes --set has it
+    monkeypatch.chdir(tmp_path)
+    assert main([*command, "--set", "iterations=7", "--set", "channels=[8, 16]", "--print-config"]) == 0
+    printed = tomllib.loads(capsys.readouterr().out)
+    expected = {**dataclasses.asdict(CONFS[conf]), "iterations": 7, "channels": [8, 16]}
+    assert printed == {k: list(v) if isinstance(v, tuple) else v for k, v in expected.items()}
+    assert list(tmp_path.iterdir()) == []  # printed, nothing run
+    assert main([*command, "--set", "iterations", "--print-config"]) == 2
+    assert "--print-config shows the keys" in capsys.readouterr().err

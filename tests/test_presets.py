@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import tomllib
 from pathlib import Path
 
 import pytest
 
 from alcn_cv.errors import InputError
-from alcn_cv.presets import preset, with_settings
+from alcn_cv.presets import dump_toml, preset, with_settings
 from alcn_cv.train.config import (
     DISTILL_CONFS,
     REAL_LIGHT_CONFS,
@@ -120,3 +121,23 @@ def test_settings_are_typed_by_the_fields():
     with pytest.raises(InputError, match="unknown preset 'nope'; choose one of lite, gain-lite"):
         preset(DISTILL_CONFS, "nope")
     assert set(TRAIN_CONFS) >= {"paper"} and set(REAL_LIGHT_CONFS) == {"gain"}
+
+
+def test_dump_toml_reads_back_as_the_same_values():
+    @dataclasses.dataclass
+    class Settings:
+        name: str = 'a "quoted" \\ path'
+        sizes: tuple[int, int] = (8, 8)
+        ranges: list[list[float]] = dataclasses.field(default_factory=lambda: [[0.5, 1.0], [2.0, 4.0]])
+        flag: bool = False
+        net: dict[str, object] = dataclasses.field(default_factory=lambda: {"tau": 3.0, "dilations": (1, 2)})
+
+    text = dump_toml(Settings())
+    assert tomllib.loads(text) == {
+        "name": 'a "quoted" \\ path',
+        "sizes": [8, 8],
+        "ranges": [[0.5, 1.0], [2.0, 4.0]],
+        "flag": False,
+        "net": {"tau": 3.0, "dilations": [1, 2]},
+    }
+    assert text.index("[net]") > text.index("flag")  # a table after the keys, as TOML requires

@@ -7,7 +7,8 @@ import re
 import pytest
 
 from alcn_cv.errors import InputError
-from alcn_cv.train.config import TRAIN_CONFS, TrainConfig, dump_toml, load_config
+from alcn_cv.presets import dump_toml
+from alcn_cv.train.config import TRAIN_CONFS, TrainConfig, load_config
 
 
 def test_defaults_and_presets():

@@ -14,11 +14,19 @@ import json
 import logging
 import shlex
 import sys
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from alcn_cv.cli import COUNT, SEED, add_conf_option, add_progress_option, interrupt_exit_code, number_at_least
+from alcn_cv.cli import (
+    COUNT,
+    SEED,
+    add_conf_option,
+    add_progress_option,
+    interrupt_exit_code,
+    number_at_least,
+    print_config,
+)
 from alcn_cv.presets import preset
 from alcn_cv.train.config import (
     DISTILL_CONF_SUMMARIES,
@@ -36,21 +44,6 @@ logger = logging.getLogger(__name__)
 
 #: The ``type`` of a ``--threads``, where 0 is the libraries' own default.
 _THREADS = number_at_least(int, 0)
-
-
-def _add_conf(
-    parser: argparse.ArgumentParser,
-    summaries: Mapping[str, str],
-    default: str | None,
-    example: str,
-    or_file: str | None = None,
-) -> None:
-    """:func:`~alcn_cv.cli.add_conf_option` with ``--set`` (``example``; required without a ``default``) and
-    ``--print-config``, the same on every training command."""
-    add_conf_option(parser, summaries, default, required=default is None, example=example, or_file=or_file)
-    parser.add_argument(
-        "--print-config", action="store_true", help="print the effective configuration (every key) and exit"
-    )
 
 
 def _add_run(parser: argparse.ArgumentParser, out: str) -> None:
@@ -93,7 +86,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "for --resume (windows-KEY.npz, about 4 kB a window: delete it when the run is done). The shipped "
         "alcn_normalizer.npz is `alcn train --conf paper`. Multi-process: run under torchrun.",
     )
-    _add_conf(p, TRAIN_CONF_SUMMARIES, "paper", "optim.lr=3e-4", or_file="a TOML file of alcn_cv.train.config's keys")
+    add_conf_option(
+        p, TRAIN_CONF_SUMMARIES, "paper", example="optim.lr=3e-4", or_file="a TOML file of alcn_cv.train.config's keys"
+    )
     p.add_argument("--out", type=Path, default=Path("out/alcn"), help="run folder (default: out/alcn)")
     p.add_argument(
         "--resume",
@@ -159,7 +154,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "with the one generated (git shows what the hand-edited card added). To compare with a shipped file, "
         "write to another --out.",
     )
-    _add_conf(s, DISTILL_CONF_SUMMARIES, None, "teacher=FILE")
+    add_conf_option(s, DISTILL_CONF_SUMMARIES, None, required=True, example="teacher=FILE")
     s.add_argument("--out", type=Path, help="weight file to write (.npz; the card is .md beside it)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing weight file, its card and export")
     s.add_argument("--seed", type=SEED, help="seed (default: the preset's)")
@@ -185,7 +180,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "line also gives the untrained start's loss on the draws of its last steps. "
         "The shipped alcn_normalizer_gain.npz is `alcn train-real-light --conf gain`.",
     )
-    _add_conf(r, REAL_LIGHT_CONF_SUMMARIES, "gain", "steps=600")
+    add_conf_option(r, REAL_LIGHT_CONF_SUMMARIES, "gain", example="steps=600")
     r.set_defaults(conf=None)  # --resume without --conf takes the checkpoint's settings
     _add_run(r, "out/gain")
     r.add_argument(
@@ -215,7 +210,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "OUT/unet_normalizer.npz, train.log and history.json. A baseline, not an ALCN model: `alcn bench relight "
         "--methods alcn,unet:weights=OUT/unet_normalizer.npz` compares them (no other command runs it).",
     )
-    _add_conf(u, UNET_CONF_SUMMARIES, "gain", "net.channels=16")
+    add_conf_option(u, UNET_CONF_SUMMARIES, "gain", example="net.channels=16")
     _add_run(u, "out/unet")
     u.add_argument("--threads", type=_THREADS, default=1, help="torch threads (default 1; 0: torch's default)")
     u.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
@@ -258,19 +253,12 @@ def _operational(args: argparse.Namespace, **keys: str) -> list[str | dict]:
     return items
 
 
-def _print_config(cfg: object) -> int:
-    from alcn_cv.train.config import dump_toml
-
-    sys.stdout.write(dump_toml(cfg))
-    return 0
-
-
 def _train(args: argparse.Namespace) -> int:
     from alcn_cv.train.config import TRAIN_CONFS, load_config
 
     cfg = load_config(args.conf, _operational(args, seed="seed", device="run.device"))
     if args.print_config:
-        return _print_config(cfg)
+        return print_config(cfg)
     from alcn_cv.train import distributed
     from alcn_cv.train.trainer import train
 
@@ -339,7 +327,7 @@ def _distill(args: argparse.Namespace) -> int:
     cfg = preset(DISTILL_CONFS, args.conf, _operational(args, seed="seed"))
     cfg.check()  # a setting out of range: named, before printing or any work
     if args.print_config:
-        return _print_config(cfg)
+        return print_config(cfg)
     if args.out is None:
         raise InputError("alcn distill needs --out (the weight file to write)")
     import cv2
@@ -380,7 +368,7 @@ def _train_real_light(args: argparse.Namespace) -> int:
     if args.print_config:  # a run checks its settings itself (training_run)
         cfg = cfg.resolved()  # the folders the run reads, as its checkpoint records them
         cfg.check()
-        return _print_config(cfg)
+        return print_config(cfg)
     from alcn_cv.nn import torch_threads
     from alcn_cv.train.real_light import TrainingInterrupted, train_real_light
 
@@ -458,7 +446,7 @@ def _train_unet(args: argparse.Namespace) -> int:
     if args.print_config:
         cfg = cfg.resolved()  # the folders the run reads
         cfg.check()
-        return _print_config(cfg)
+        return print_config(cfg)
     from alcn_cv.train.real_light import TrainingInterrupted
     from alcn_cv.train.unet import train_unet
 

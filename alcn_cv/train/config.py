@@ -109,7 +109,6 @@ __all__ = [
     "TrainConfig",
     "UNetConfig",
     "absolute_path",
-    "dump_toml",
     "home_path",
     "load_config",
 ]
@@ -474,27 +473,6 @@ def load_config(
     cfg = with_settings(cfg, [overrides] if isinstance(overrides, dict) else overrides or [])
     _check(cfg)
     return cfg
-
-
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, list):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    return repr(v)
-
-
-def dump_toml(cfg: Any) -> str:
-    """A configuration dataclass as TOML text (:func:`load_config` reads a :class:`TrainConfig`'s
-    back to the same values)."""
-    d = dataclasses.asdict(cfg)
-    lines = [f"{k} = {_toml_value(v)}" for k, v in d.items() if not isinstance(v, dict)]
-    for table, values in d.items():
-        if isinstance(values, dict):
-            lines += ["", f"[{table}]"] + [f"{k} = {_toml_value(v)}" for k, v in values.items()]
-    return "\n".join(lines) + "\n"
 
 
 def _gain_network() -> dict[str, Any]:

@@ -46,6 +46,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, held_folder, write_json
 from alcn_cv.nets.device import torch_device
 from alcn_cv.nn import torch_threads
+from alcn_cv.presets import dump_toml
 from alcn_cv.report import log_to, machine, nan_to_none
 from alcn_cv.train import distributed
 from alcn_cv.train.checkpoint import (
@@ -59,7 +60,7 @@ from alcn_cv.train.checkpoint import (
     sigint_as_keyboard_interrupt,
     write_normalizer_file,
 )
-from alcn_cv.train.config import TrainConfig, dump_toml, load_config
+from alcn_cv.train.config import TrainConfig, load_config
 from alcn_cv.train.fewshot import FewShotSetup, fewshot_validation, standard_methods
 from alcn_cv.train.models import JointModel
 from alcn_cv.train.stage2 import NonFiniteLossError
