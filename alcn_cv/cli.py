@@ -32,7 +32,6 @@ from typing import Any
 from alcn_cv.errors import ALCNError, MissingDependencyError
 from alcn_cv.extras import is_installed, missing_extra
 from alcn_cv.malloc import keep_freed_memory
-from alcn_cv.presets import dump_toml
 
 logger = logging.getLogger("alcn_cv")
 
@@ -112,8 +111,21 @@ def _add_commands(subparsers: argparse._SubParsersAction) -> None:
         add_parser(subparsers)
 
 
+class _CommandParser(argparse.ArgumentParser):
+    """The ``alcn`` parser: its namespace also holds the words it parsed, ``args.argv`` (those after ``alcn``), the
+    command a report records (:func:`alcn_cv.report.typed_command`), whoever parses them: :func:`main`, or an
+    experiment or a test calling it in a process of its own ``sys.argv``."""
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        parsed, unknown = super().parse_known_args(args, namespace)
+        parsed.argv = list(sys.argv[1:] if args is None else args)
+        return parsed, unknown
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _CommandParser(
         prog="alcn",
         description="Adaptive Local Contrast Normalization (ALCN) and its tools: normalize images and "
         "videos, generate data, train, benchmark, calibrate and estimate box poses.",
@@ -122,7 +134,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "-v", "--verbose", action="store_true", help="log debug messages, and OpenCV's and FFmpeg's warnings"
     )
-    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    subparsers = parser.add_subparsers(
+        dest="command", metavar="COMMAND", required=True, parser_class=argparse.ArgumentParser
+    )
     _add_commands(subparsers)
     return parser
 
@@ -163,8 +177,8 @@ def add_conf_option(
         example: a ``KEY=VALUE`` of the presets' keys: the command also takes ``--set KEY=VALUE``
             (``args.settings``, a list, in order), the overrides of the preset's keys
             (:func:`alcn_cv.presets.with_settings`), and ``--print-config`` (``args.print_config``: the command
-            prints the preset with them, :func:`print_config`, and exits); None: only the command's other options
-            override its values.
+            prints the preset with them, :func:`alcn_cv.presets.print_config`, and exits); None: only the command's
+            other options override its values.
         or_file: what else ``--conf`` takes, a file (``alcn train``: a TOML file of its keys), said in its help.
 
     The name is not checked here: the command looks it up (:func:`alcn_cv.presets.preset` or
@@ -198,12 +212,6 @@ def add_conf_option(
     rows = [f"  {name:<{width}}  {what}" for name, what in summaries.items()]
     parser.epilog = "\n".join(["presets (--conf NAME):", *rows])
     parser.formatter_class = _PresetListFormatter
-
-
-def print_config(config: object) -> int:
-    """Write the configuration dataclass ``config`` to stdout as TOML (``--print-config``); the exit code, 0."""
-    sys.stdout.write(dump_toml(config))
-    return 0
 
 
 def preset_values(confs: Mapping[str, object], field: str) -> str:

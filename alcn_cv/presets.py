@@ -16,13 +16,14 @@ from __future__ import annotations
 import copy
 import dataclasses
 import difflib
+import sys
 import tomllib
 from collections.abc import Mapping, Sequence
 from typing import Any, TypeVar
 
 from alcn_cv.errors import InputError
 
-__all__ = ["dump_toml", "preset", "preset_named", "with_given", "with_settings"]
+__all__ = ["dump_toml", "preset", "preset_named", "print_config", "with_given", "with_settings"]
 
 ConfigT = TypeVar("ConfigT")
 
@@ -148,6 +149,12 @@ def with_settings(cfg: ConfigT, settings: Sequence[str | dict[str, Any]] = ()) -
     for item in settings:
         _merge(cfg, item if isinstance(item, dict) else _parse_setting(item))
     return cfg
+
+
+def print_config(config: Any) -> int:
+    """Write the configuration dataclass ``config`` to stdout as TOML (``--print-config``); the exit code, 0."""
+    sys.stdout.write(dump_toml(config))
+    return 0
 
 
 def dump_toml(cfg: Any) -> str:

@@ -29,6 +29,7 @@ __all__ = [
     "save_figure",
     "spread",
     "spread_cell",
+    "typed_command",
 ]
 
 
@@ -159,6 +160,12 @@ def _short_description(info: dict[str, Any]) -> str:
     if info.get("malloc_kept"):
         parts.append("glibc malloc keeps freed memory (alcn_cv.keep_freed_memory)")
     return "; ".join(parts)
+
+
+def typed_command(argv: Sequence[str]) -> str:
+    """The ``alcn`` command line ``argv`` (the words after ``alcn``, ``args.argv`` of :func:`alcn_cv.cli.main`) for a
+    report: what was measured, so without ``--overwrite`` and ``--no-progress``, which change nothing of it."""
+    return shlex.join(["alcn", *(a for a in argv if a not in ("--overwrite", "--no-progress"))])
 
 
 def command_line(words: Sequence[str], options: dict[str, Any]) -> str:

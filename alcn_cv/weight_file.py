@@ -30,6 +30,7 @@ __all__ = [
     "ONNX_METADATA_KEY",
     "VERSION",
     "NormalizerFile",
+    "check_header",
     "gain_scale",
     "load_normalizer_file",
     "npz_array",
@@ -172,6 +173,29 @@ def load_normalizer_file(path: str | Path) -> NormalizerFile:
     return NormalizerFile(arrays=arrays, meta=meta, path=path)
 
 
+def check_header(
+    header: Any, path: str | Path, format_name: str, versions: tuple[int, ...], *, what: str, again: str
+) -> dict[str, Any]:
+    """``header`` (a file's parsed JSON header) when it is a JSON object of format ``format_name`` and one of
+    ``versions``: the check of the files alcn-cv writes for its runtime (weight files, part models, corner
+    detectors).
+
+    Raises:
+        WeightFileError: not an object, another format or another version; ``what`` names the file's kind
+            (``"part model"``), ``again`` how to make a readable one (``"rebuild it with `alcn pose build`"``).
+    """
+    if not isinstance(header, dict):
+        raise WeightFileError(f"{path}: the header is not a JSON object; not a {what}")
+    if header.get("format") != format_name:
+        raise WeightFileError(f"{path}: field 'format' is {header.get('format')!r}, expected {format_name!r}")
+    if header.get("version") not in versions:
+        raise WeightFileError(
+            f"{path}: {what} format version {header.get('version')!r} but this alcn-cv reads versions "
+            f"{', '.join(map(str, versions))}; {again}"
+        )
+    return header
+
+
 def npz_array(archive: Any, key: str, path: str | Path, what: str = "a weight file of alcn-cv") -> np.ndarray:
     """The array ``key`` of the archive ``archive`` (an ``NpzFile`` opened without pickles) read from ``path``.
 
@@ -246,14 +270,14 @@ def _check_arrays(arrays: dict[str, np.ndarray], path: Path) -> None:
 
 
 def _check_meta(meta: dict[str, Any], path: Path) -> None:
-    if not isinstance(meta, dict):
-        raise WeightFileError(f"{path}: the header is not a JSON object")
-    if meta.get("format") != FORMAT:
-        raise WeightFileError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}")
-    if meta.get("version") != VERSION:
-        raise WeightFileError(
-            f"{path}: weight file version {meta.get('version')}, this alcn-cv reads version {VERSION}"
-        )
+    check_header(
+        meta,
+        path,
+        FORMAT,
+        (VERSION,),
+        what="weight file",
+        again="read it with the alcn-cv that wrote it, or train it again with this one",
+    )
     for key, kind in _REQUIRED.items():
         if not isinstance(meta.get(key), kind):
             raise WeightFileError(f"{path}: header field {key!r} missing or of the wrong type")

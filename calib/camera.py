@@ -201,6 +201,46 @@ def _check_chessboard_size(
                 )
 
 
+class _BoardViews:
+    """The board detected frame by frame, for :func:`detect_in_images` and :func:`detect_in_video`: the views found,
+    and what explains a board found nowhere or a chessboard of the wrong size (:meth:`found`). ``log_misses``: log
+    each frame without the board (a few images named by the user; not a video's many sampled frames)."""
+
+    def __init__(self, board: BoardSpec, log_misses: bool) -> None:
+        self.board, self.detector, self.log_misses = board, board.detector(), log_misses
+        self.views: list[BoardView] = []
+        self.samples: list[tuple[str, np.ndarray]] = []
+        self.first: np.ndarray | None = None
+        self.missed: tuple[str, np.ndarray] | None = None
+        self.n = self.foreign = self.markers = 0
+
+    def add(self, name: str, gray: np.ndarray) -> None:
+        self.first = gray if self.first is None else self.first
+        self.n += 1
+        det = self.detector(gray)
+        self.foreign += self.detector.last_foreign_markers
+        self.markers += self.detector.last_num_markers
+        if det is None:
+            if self.log_misses:
+                logger.info("%s: board not found", name)
+            self.missed = self.missed or (name, gray)
+            return
+        if len(self.samples) < 3:
+            self.samples.append((name, gray))
+        self.views.append(BoardView(name, det, _sharpness(gray)))
+
+    def found(self, what: str) -> list[BoardView]:
+        """The views, once the board was found in one at least (``what``: the frames' word, for the log).
+
+        Raises:
+            InputError: the board found in none, or a chessboard larger than the one given."""
+        if not self.views:
+            raise InputError(_explain_no_board(self.board, self.first, self.n, self.foreign, self.markers))
+        _check_chessboard_size(self.board, self.samples, self.missed, len(self.views))
+        logger.info("board found in %d of %d %s", len(self.views), self.n, what)
+        return self.views
+
+
 def detect_in_images(
     paths: Sequence[str | os.PathLike], board: BoardSpec, progress: bool = True
 ) -> tuple[list[BoardView], tuple[int, int]]:
@@ -216,27 +256,12 @@ def detect_in_images(
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("no images given")
-    detector = board.detector()
-    views: list[BoardView] = []
+    views = _BoardViews(board, log_misses=True)
     sizes: dict[tuple[int, int], list[str]] = {}
-    first = None
-    foreign = markers = 0
-    samples: list[tuple[str, np.ndarray]] = []
-    missed = None
     for path in tqdm(paths, desc="detecting board", unit="image", disable=not progress or len(paths) < 20):
         gray = read_image(path, gray=True)
-        first = gray if first is None else first
         sizes.setdefault((gray.shape[1], gray.shape[0]), []).append(path.name)
-        det = detector(gray)
-        foreign += detector.last_foreign_markers
-        markers += detector.last_num_markers
-        if det is None:
-            logger.info("%s: board not found", path.name)
-            missed = missed or (path.name, gray)
-            continue
-        if len(samples) < 3:
-            samples.append((path.name, gray))
-        views.append(BoardView(path.name, det, _sharpness(gray)))
+        views.add(path.name, gray)
     if len(sizes) > 1:
         listing = "; ".join(
             f"{w}x{h}: {', '.join(names[:3])}{' ...' if len(names) > 3 else ''}" for (w, h), names in sizes.items()
@@ -245,11 +270,7 @@ def detect_in_images(
             f"images have different sizes ({listing}); calibrate each camera/resolution separately "
             "or resize them all to one size first"
         )
-    if not views:
-        raise InputError(_explain_no_board(board, first, len(paths), foreign, markers))
-    _check_chessboard_size(board, samples, missed, len(views))
-    logger.info("board found in %d of %d images", len(views), len(paths))
-    return views, next(iter(sizes))
+    return views.found("images"), next(iter(sizes))
 
 
 def detect_in_video(
@@ -260,35 +281,15 @@ def detect_in_video(
     path = Path(path)
     total = count_frames(path)
     step = max(1, -(-total // MAX_VIDEO_CANDIDATES)) if total else 1
-    detector = board.detector()
-    views: list[BoardView] = []
+    views = _BoardViews(board, log_misses=False)
     size = None
-    first = None
-    foreign = markers = 0
-    n = 0
-    samples: list[tuple[str, np.ndarray]] = []
-    missed = None
     for name, frame in frame_progress(
         iter_frames(path, step), -(-total // step) if total else None, desc="detecting board", disable=not progress
     ):
         gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-        first = gray if first is None else first
         size = (gray.shape[1], gray.shape[0])
-        n += 1
-        det = detector(gray)
-        foreign += detector.last_foreign_markers
-        markers += detector.last_num_markers
-        if det is None:
-            missed = missed or (name, gray)
-        else:
-            if len(samples) < 3:
-                samples.append((name, gray))
-            views.append(BoardView(name, det, _sharpness(gray)))
-    if not views:
-        raise InputError(_explain_no_board(board, first, n, foreign, markers))
-    _check_chessboard_size(board, samples, missed, len(views))
-    logger.info("board found in %d of %d examined frames", len(views), n)
-    return views, size
+        views.add(name, gray)
+    return views.found("examined frames"), size
 
 
 def _view_features(view: BoardView, image_size: tuple[int, int]) -> np.ndarray:

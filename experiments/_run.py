@@ -80,8 +80,7 @@ def recorded_settings(args: argparse.Namespace) -> dict[str, object]:
 
 def _script() -> tuple[str, list[str], bool]:
     """The experiment script (its path in the checkout), its own arguments as typed but :data:`KEEP`, and whether
-    :data:`KEEP` was given, from ``sys.orig_argv``, what was typed (``sys.argv`` is an ``alcn`` command's while one
-    runs)."""
+    :data:`KEEP` was given, from ``sys.orig_argv``, what was typed."""
     argv = getattr(sys, "orig_argv", [])
     main = getattr(sys.modules["__main__"], "__file__", None)
     if main is None:  # an interactive session or `python -c`: no script to record as the report's rerun
@@ -114,11 +113,7 @@ def alcn(*argv: str) -> None:
     """Run ``alcn ARGV...`` in this process; exit with its status if it fails."""
     from alcn_cv.cli import main
 
-    script_argv, sys.argv = sys.argv, ["alcn", *argv]  # the reports record sys.argv as their command
-    try:
-        status = main(list(argv))
-    finally:  # the script's own again: its errors name it (alcn_cv.cli.run_script)
-        sys.argv = script_argv
+    status = main(list(argv))
     if status:
         raise SystemExit(f"alcn {shlex.join(argv)}: exit status {status}")
 

@@ -27,6 +27,7 @@ from _run import REPORTS, ROOT, rerun  # noqa: E402
 
 sys.path.insert(0, str(ROOT))  # the checkout's packages, also when not installed
 from alcn_cv.bench.detect_report import chosen_trial  # noqa: E402
+from alcn_cv.bench.relight_report import METRIC_LABELS  # noqa: E402
 from alcn_cv.bench.relight_settings import CONFS  # noqa: E402
 from alcn_cv.cli import run_script
 from alcn_cv.report import describe_machine, machine_cores, markdown_table  # noqa: E402
@@ -45,15 +46,6 @@ LOO_NOTE = (
     "The ALCN rows are the shipped files as they are: the gain models are trained on relit photographs with no known "
     "restriction on use, so no scene is in their training data (the webcam training scenes chose their recipe).\n\n"
 )
-RELIGHT_METRICS = {
-    "identification": "identification",
-    "matching_sift": "matching SIFT",
-    "matching_orb": "matching ORB",
-    "pose_sift": "pose SIFT",
-    "pose_orb": "pose ORB",
-    "correct_sift": "correct SIFT",
-    "correct_orb": "correct ORB",
-}
 
 
 #: The results' Markdown tables: numbers with one decimal unless a table says otherwise.
@@ -96,7 +88,7 @@ def relight(report: dict[str, Any], title: str | None = None) -> str:
     section's, default from the split and the sampling sizes when not the default)."""
     seeds = len(report["settings"]["seeds"])
     loo = report["split"]["mode"] == "leave-one-out"
-    metrics = [m for m in RELIGHT_METRICS if any(m in r.get("mean_test", {}) for r in report["methods"].values())]
+    metrics = [m for m in METRIC_LABELS if any(m in r.get("mean_test", {}) for r in report["methods"].values())]
     rows = [
         [label] + [_mean_std(r.get("mean_test", {}).get(m), seeds) for m in metrics]
         for label, r in report["methods"].items()
@@ -119,7 +111,7 @@ def relight(report: dict[str, Any], title: str | None = None) -> str:
         "pose in % of frame pairs, correct = correct matches per pair.\n"
     )
     return f"## {title}\n\n{provenance(report)}\n{note}\n" + table(
-        ["method"] + [RELIGHT_METRICS[m] for m in metrics], rows
+        ["method"] + [METRIC_LABELS[m] for m in metrics], rows
     )
 
 
@@ -349,11 +341,11 @@ def orb_orientation(report: dict[str, Any]) -> str:
     """``experiments/orb_orientation.py``: the bench's metrics per method and set of scenes, beside ORB's with the
     keypoints' orientation fixed (``_upright``)."""
     found = {k for row in report["summary"].values() for k in row}
-    keys = [k for m in RELIGHT_METRICS for k in (m, f"{m}_upright") if k in found]
+    keys = [k for m in METRIC_LABELS for k in (m, f"{m}_upright") if k in found]
     keys += sorted(found - set(keys))  # a metric this renderer does not know yet, as its key
     headers = [
-        RELIGHT_METRICS[k.removesuffix("_upright")] + (" upright" if k.endswith("_upright") else "")
-        if k.removesuffix("_upright") in RELIGHT_METRICS
+        METRIC_LABELS[k.removesuffix("_upright")] + (" upright" if k.endswith("_upright") else "")
+        if k.removesuffix("_upright") in METRIC_LABELS
         else k
         for k in keys
     ]
@@ -432,7 +424,7 @@ def relight_headline(report: dict[str, Any]) -> str:
         f"**Real light** ({title}; `alcn bench relight`, {seeds} seed{'s' if seeds > 1 else ''}, "
         f"{report['experiment']['date'][:10]}):\n\n"
         + (LOO_NOTE if loo else "")
-        + table(["method"] + [RELIGHT_METRICS[m] for m in metrics], rows)
+        + table(["method"] + [METRIC_LABELS[m] for m in metrics], rows)
     )
 
 

@@ -19,9 +19,10 @@ from alcn_cv.cli import (
     all_or_at_least,
     number_at_least,
     number_in,
-    print_config,
 )
 from alcn_cv.errors import InputError
+from alcn_cv.presets import print_config
+from alcn_cv.report import typed_command
 
 
 def _intrinsics(values: list[float] | None) -> np.ndarray | None:
@@ -144,7 +145,7 @@ def _eval(args: argparse.Namespace) -> int:
             args.out,
             normalizations=normalizations,
             feature=args.feature,
-            command=_command(),
+            command=typed_command(args.argv),
             progress=not args.no_progress,
         )
     if args.data:
@@ -159,20 +160,11 @@ def _eval(args: argparse.Namespace) -> int:
             corner_device=args.device,
             seeds=args.seeds,
             sequences=args.sequences,
-            command=_command(),
+            command=typed_command(args.argv),
             progress=not args.no_progress,
         )
     print("report -> " + ", ".join(str(Path(args.out) / f"{r}.md") for r in reports))
     return 0
-
-
-def _command() -> str:
-    """The command line as typed, for the reports: what was measured, so without ``--overwrite`` and
-    ``--no-progress``."""
-    import shlex
-    import sys
-
-    return shlex.join(["alcn", *(a for a in sys.argv[1:] if a not in ("--overwrite", "--no-progress"))])
 
 
 def _train_corners(args: argparse.Namespace) -> int:
@@ -217,7 +209,7 @@ def _planar(args: argparse.Namespace) -> int:
         hfov=args.hfov,
         max_frames=args.max_frames or None,  # 0: all
         recipe=_recipe(args),
-        command=_command(),
+        command=typed_command(args.argv),
         progress=not args.no_progress,
     )
     print((Path(args.out) / "planar_pose.md").read_text(encoding="utf-8"))
@@ -341,7 +333,7 @@ def _overlay_error(args: argparse.Namespace) -> int:
         [tuple(r) for r in args.run],
         args.out,
         settings=settings,
-        command=_command(),
+        command=typed_command(args.argv),
         show=args.show,
         overwrite=args.overwrite,
         progress=not args.no_progress,
@@ -419,7 +411,7 @@ def _bench_corners(args: argparse.Namespace) -> int:
         args.input,
         K,
         args.out,
-        command=_command(),
+        command=typed_command(args.argv),
         size=tuple(args.frame_size),
         max_frames=args.max_frames,
         repeats=args.repeats,

@@ -64,7 +64,7 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import from_spec, parse_spec
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.io import to_gray
-from alcn_cv.weight_file import ONNX_METADATA_KEY
+from alcn_cv.weight_file import ONNX_METADATA_KEY, check_header
 from pose.box import NUM_CORNERS, edge_directions, part_visibility, parts_per_face
 from pose.parts import Correspondences, same_frame
 
@@ -187,13 +187,14 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
         meta = json.loads(props[ONNX_METADATA_KEY])
     except (KeyError, json.JSONDecodeError):
         raise WeightFileError(f"{path}: no '{ONNX_METADATA_KEY}' metadata; not a corner detector") from None
-    if meta.get("format") != FORMAT_NAME:
-        raise WeightFileError(f"{path}: field 'format' is {meta.get('format')!r}, expected {FORMAT_NAME!r}")
-    if meta.get("version") not in READABLE_VERSIONS:
-        raise WeightFileError(
-            f"{path}: field 'version' is {meta.get('version')!r}; this code reads versions "
-            f"{', '.join(map(str, READABLE_VERSIONS))} (train it again with `alcn pose train-corners`)"
-        )
+    check_header(
+        meta,
+        path,
+        FORMAT_NAME,
+        READABLE_VERSIONS,
+        what="corner detector",
+        again="train it again with `alcn pose train-corners`",
+    )
     if meta["version"] == 3 and "normalizer" in meta:
         meta["normalization"] = meta.pop("normalizer")
     return meta

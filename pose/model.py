@@ -55,7 +55,7 @@ import numpy as np
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.formats import bop
 from alcn_cv.io import atomic_write, is_video, with_suffix
-from alcn_cv.weight_file import npz_array
+from alcn_cv.weight_file import check_header, npz_array
 from calib.conventions import MM_PER_UNIT
 from pose.box import box_diameter, box_size
 
@@ -272,13 +272,9 @@ def load(path: str | Path) -> PartModel:
         header = json.loads(str(arrays.pop("header")))
     except (KeyError, json.JSONDecodeError) as exc:
         raise WeightFileError(f"{path}: field 'header' missing or not JSON") from exc
-    if header.get("format") != FORMAT_NAME:
-        raise WeightFileError(f"{path}: field 'format' is {header.get('format')!r}, expected {FORMAT_NAME!r}")
-    if header.get("version") not in READABLE_VERSIONS:
-        raise WeightFileError(
-            f"{path}: part model format version {header.get('version')} but this alcn-cv reads versions "
-            f"{', '.join(map(str, READABLE_VERSIONS))}; rebuild it with `alcn pose build`"
-        )
+    check_header(
+        header, path, FORMAT_NAME, READABLE_VERSIONS, what="part model", again="rebuild it with `alcn pose build`"
+    )
     try:
         return PartModel(
             corners=arrays["corners"],

@@ -428,3 +428,29 @@ def test_an_error_of_a_grouped_command_names_the_command(tmp_path, capsys):
     detect: error:"."""
     assert main(["bench", "detect", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     assert capsys.readouterr().err.startswith(f"alcn bench detect: error: {tmp_path / 'missing'}: not a folder")
+
+
+@pytest.mark.parametrize(
+    ("module", "function", "argv"),
+    [
+        ("alcn_cv.bench.relight", "main", ["bench", "relight", "--seeds", "3", "--out", "OUT"]),
+        ("pose.planar", "main", ["pose", "planar", "--feature", "ORB", "--out", "OUT"]),
+    ],
+)
+def test_a_report_records_the_command_main_was_given(module, function, argv, monkeypatch, capsys, tmp_path):
+    """The command a report records: main's argv (an experiment calls main in its own process, with its own
+    sys.argv), without --overwrite and --no-progress, which change nothing of what was measured; bench relight
+    recorded --no-progress, pose recorded sys.argv."""
+    import importlib
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("sys.argv", ["experiment.py", "--part", "x"])
+    recorded = []
+
+    def record(*args, command, **kwargs):
+        recorded.append(command)
+        raise KeyboardInterrupt  # stop before any work
+
+    monkeypatch.setattr(importlib.import_module(module), function, record)
+    assert main([*argv, "--overwrite", "--no-progress"]) == 130
+    assert recorded == ["alcn " + " ".join(argv)]

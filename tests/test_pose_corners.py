@@ -7,14 +7,15 @@ import json
 
 import cv2
 import numpy as np
+import onnx
 import pytest
 import torch
 
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.nets.detector import Detector
+from alcn_cv.weight_file import ONNX_METADATA_KEY
 from pose import box, corner_data, corner_train, track
 from pose import corners as pc
-from pose.cli import add_parser
 from pose.corner_net import CornerNet
 from pose.model import box_corners, read_box_corners
 from pose.sequence import load_sequence
@@ -464,11 +465,10 @@ def test_bad_files(tmp_path, random_net):
 
 
 def _parser():
-    import argparse
+    """The ``alcn`` command's parser: its namespace has the words parsed, which the reports record."""
+    from alcn_cv.cli import build_parser
 
-    parser = argparse.ArgumentParser()
-    add_parser(parser.add_subparsers())
-    return parser
+    return build_parser()
 
 
 def test_train_corners_lowers_the_loss(posedata, tmp_path):
@@ -853,3 +853,12 @@ def test_a_detector_whose_graph_does_not_fit_its_metadata(tmp_path):
     expected = r"c\.onnx: its network gives outputs of shape \(1, 79, .*\(1, 25, h, w\) maps of 8 parts"
     with pytest.raises(WeightFileError, match=expected):
         detector.maps(np.zeros((120, 160), np.uint8))
+
+
+def test_metadata_that_is_not_an_object_is_one_line(random_net, tmp_path):
+    model = onnx.load(random_net[1])
+    next(p for p in model.metadata_props if p.key == ONNX_METADATA_KEY).value = "[1]"
+    path = tmp_path / "list.onnx"
+    onnx.save(model, path)
+    with pytest.raises(WeightFileError, match=r"list.onnx: the header is not a JSON object; not a corner detector"):
+        pc.read_metadata(path)

@@ -146,3 +146,13 @@ def test_version_2_names_the_normalization_normalizer(tmp_path):
     arrays["header"] = np.array(json.dumps(header))
     np.savez(tmp_path / "v2.npz", **arrays)
     assert pm.load(tmp_path / "v2.npz").normalization == "clahe"
+
+
+def test_a_header_that_is_not_an_object_is_one_line(tmp_path):
+    path = pm.save(_model(), tmp_path / "m.npz")
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["header"] = np.array("[1]")
+    np.savez(tmp_path / "list.npz", **arrays)
+    with pytest.raises(WeightFileError, match=r"list.npz: the header is not a JSON object; not a part model"):
+        pm.load(tmp_path / "list.npz")

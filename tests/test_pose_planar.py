@@ -138,12 +138,9 @@ def test_planar_on_a_webcam_scene(shared_data, tmp_path):
 
 
 def test_planar_command_takes_the_recipe_and_the_normalizations(tmp_path, monkeypatch):
-    import argparse
+    from alcn_cv.cli import build_parser
 
-    from pose.cli import add_parser
-
-    parser = argparse.ArgumentParser()
-    add_parser(parser.add_subparsers())
+    parser = build_parser()
     seen = []
     report = tmp_path / "planar_pose.md"
     monkeypatch.setattr(planar, "main", lambda *a, **kw: seen.append(kw) or report.write_text(""))

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import shlex
-import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -31,6 +29,7 @@ from alcn_cv.cli import (
 )
 from alcn_cv.data import scenes
 from alcn_cv.presets import preset, with_given
+from alcn_cv.report import typed_command
 
 __all__ = ["BENCHMARKS", "add_parser"]
 
@@ -557,8 +556,7 @@ def _run_relight(args: argparse.Namespace) -> int:
         sampling.max_frames or None,
         not args.no_tune,
         args.tune_frames,
-        # what was measured, as the other benchmarks' commands (built from their settings): not --overwrite
-        command=shlex.join(["alcn", *(a for a in sys.argv[1:] if a != "--overwrite")]),
+        command=typed_command(args.argv),
         progress=not args.no_progress,
         overwrite=args.overwrite,
     )

@@ -10,7 +10,7 @@ import numpy as np
 from alcn_cv.io import atomic_write, write_json
 from alcn_cv.report import describe_machine, markdown_table, new_figure, save_figure, spread_cell
 
-__all__ = ["write_report"]
+__all__ = ["METRIC_LABELS", "write_report"]
 
 #: The metrics in the report's order, SIFT before ORB as in docs/results.md.
 _TITLES = {
@@ -22,7 +22,8 @@ _TITLES = {
     "correct_sift": "Correct SIFT matches per frame pair (count; the matching score's numerator)",
     "correct_orb": "Correct ORB matches per frame pair (count; the matching score's numerator)",
 }
-_SHORT = {
+#: Each metric's short name, a table column's (also the published tables' of experiments/report.py).
+METRIC_LABELS = {
     "identification": "identification",
     "matching_sift": "matching SIFT",
     "matching_orb": "matching ORB",
@@ -64,7 +65,7 @@ def _summary_table(result: dict[str, Any], metrics: list[str]) -> str:
         ms = [s["ms_per_frame"] for n, s in r["scenes"].items() if n in result["split"]["test"]]
         cells = [_cell(test.get(m)) for m in metrics]
         rows.append([_label(label, r), *cells, f"{np.mean(ms):.1f}" if ms else None, r.get("backend")])
-    return markdown_table(["method"] + [_SHORT[m] for m in metrics] + ["ms/frame", "backend"], rows)
+    return markdown_table(["method"] + [METRIC_LABELS[m] for m in metrics] + ["ms/frame", "backend"], rows)
 
 
 def _metric_table(result: dict[str, Any], metric: str) -> str:
@@ -115,7 +116,7 @@ def _differences_section(result: dict[str, Any], metrics: list[str]) -> list[str
     return [
         f"## Difference from `{reference}` (paired {paired['pairing']})\n",
         caption,
-        markdown_table(["method"] + [_SHORT[m] for m in metrics], rows),
+        markdown_table(["method"] + [METRIC_LABELS[m] for m in metrics], rows),
     ]
 
 
@@ -177,7 +178,7 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
                 width,
                 yerr=[result["methods"][k]["mean_test"][m]["std"] for k in labels] if spread else None,
                 capsize=2,
-                label=_SHORT[m].split()[-1] if len(metrics) > 1 else None,
+                label=METRIC_LABELS[m].split()[-1] if len(metrics) > 1 else None,
             )
         ax.set_xticks(x)
         ax.set_xticklabels(labels, rotation=60, ha="right", fontsize=8)

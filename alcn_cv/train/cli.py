@@ -25,9 +25,8 @@ from alcn_cv.cli import (
     add_progress_option,
     interrupt_exit_code,
     number_at_least,
-    print_config,
 )
-from alcn_cv.presets import preset
+from alcn_cv.presets import preset, print_config
 from alcn_cv.train.config import (
     DISTILL_CONF_SUMMARIES,
     REAL_LIGHT_CONF_SUMMARIES,
