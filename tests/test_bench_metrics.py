@@ -59,3 +59,19 @@ def test_bad_arguments():
         precision_recall([0.5], [True], 0)
     with pytest.raises(InputError):
         pr_auc([1.0, 1.0], [0.5, 0.2])
+
+
+def test_thresholds_are_inclusive_as_documented():
+    boxes = [[0, 0, 10, 10], [0, 0, 10, 8]]
+    assert box_iou(boxes[:1], boxes[1:])[0, 0] == 0.8  # 80 / 100, exactly
+    # nms removes only a box overlapping the kept one with IoU strictly above the threshold
+    np.testing.assert_array_equal(nms(boxes, [0.9, 0.8], 0.8), [0, 1])
+    # PASCAL: a detection whose IoU equals the threshold is a true positive
+    np.testing.assert_array_equal(match_detections(boxes[1:], [1.0], boxes[:1], 0.8), [True])
+
+
+def test_auc_takes_the_interpolated_envelope():
+    # by decreasing score TP, FP, TP, TP of 3 positives: precision 1, 1/2, 2/3, 3/4 at recall 1/3, 1/3, 2/3, 1
+    p, r = precision_recall([4, 3, 2, 1], [True, False, True, True], 3)
+    # the envelope: 1 up to recall 1/3, then 3/4 (the precision at recall 1, above the 2/3 before it)
+    assert pr_auc(p, r) == pytest.approx(1 / 3 + (2 / 3) * (3 / 4))

@@ -427,3 +427,40 @@ def test_quick_preset_and_the_options_that_override_it(tmp_path):
     )
     parsed = build_parser().parse_args(["bench", "relight", "--out", "o"])
     assert parsed.conf == "default" and parsed.max_frames is None  # the preset applies in the handler
+
+
+def _distinct(n):
+    return np.eye(n, dtype=np.float32) * 100  # keypoint i of one frame matches keypoint i of the other
+
+
+def test_identification_counts_a_flat_patch_as_not_identified():
+    gallery = np.zeros((16, 32), np.float32)
+    gallery[:, 16:] = np.random.default_rng(0).random((16, 16), dtype=np.float32)
+    locations = np.array([[0, 0], [0, 16]])
+    # the flat patch correlates 0 with every patch: argmax picks index 0, its own, which must not count
+    assert relight.identification(gallery, gallery, locations, 16) == 0.5
+
+
+def test_a_match_is_correct_within_match_px_of_its_keypoint():
+    settings = relight_settings.Settings()
+    assert settings.match_px == 3.0  # the protocol's threshold (README / report)
+    src = np.array([[10, 10], [40, 10], [10, 40], [40, 40], [70, 70]], np.float32)
+    dst = src + np.array([[3, 0], [0, 3], [3.5, 0], [0, 3.5], [2, 2]], np.float32)  # 3, 3, 3.5, 3.5, 2.83 px
+    score, _, correct = relight.keypoint_scores(
+        (src, _distinct(5)), (dst, _distinct(5)), cv2.NORM_L2, (100, 100), settings
+    )
+    assert correct == 3 and score == pytest.approx(3 / 5)
+
+
+def test_pose_succeeds_only_when_every_corner_moves_less_than_pose_px():
+    settings = relight_settings.Settings()
+    assert settings.pose_px == 5.0
+    grid = np.stack(np.meshgrid(np.arange(0, 400, 50), np.arange(0, 100, 25)), -1).reshape(-1, 2).astype(np.float32)
+
+    def pose(scale):
+        pair = (grid, _distinct(len(grid))), (grid * np.float32(scale), _distinct(len(grid)))
+        return relight.keypoint_scores(*pair, cv2.NORM_L2, (100, 400), settings)[1]
+
+    # scaled about the corner (0, 0): the far corner (399, 99) moves 411 * (scale - 1) px
+    assert pose(1.01) == 1.0  # 4.1 px at most
+    assert pose(1.02) == 0.0  # 8.2 px at the far corner (4.5 px on average over the four)

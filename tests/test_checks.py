@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from alcn_cv.checks import check_gray, check_out_dtype, check_positive, check_seeds
+import alcn_cv
+from alcn_cv.checks import check_gray, check_out_dtype, check_positive, check_seeds, from_unit_float
 from alcn_cv.errors import InputError
 
 
@@ -63,3 +64,11 @@ def test_baseline_parameters_name_what_is_wrong(value):
     with pytest.raises(InputError, match="^clipLimit must be positive and finite"):
         CLAHE(clipLimit=value)
     assert check_positive("eps", 0.5) == 0.5
+
+
+def test_uint16_is_rounded_and_round_trips_exactly():
+    assert from_unit_float(np.array([[0.6, 1.4, 65534.6]], np.float32) / 65535, np.dtype(np.uint16)).tolist() == [
+        [1, 1, 65535]
+    ]
+    img = np.random.default_rng(0).integers(0, 65536, (64, 80), dtype=np.uint16)
+    np.testing.assert_array_equal(alcn_cv.create("none").apply(img), img)

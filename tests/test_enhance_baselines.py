@@ -304,3 +304,14 @@ def test_every_method_is_described():
         summary, reference = describe(name)
         assert summary and "\n" not in summary, name
         assert reference or name in ("none", "alcn"), name
+
+
+def test_intrinsic_default_threshold_takes_a_log_step_below_0_1_as_shading():
+    norm = alcn_cv.create("intrinsic")
+    assert (norm.threshold, norm.eps) == (0.1, 0.01)  # Grosse et al.'s Retinex baseline, as documented
+    shading = np.full((32, 32), 0.5, np.float32)
+    shading[:, 16:] = 0.51 * np.exp(0.08) - 0.01  # log(I + eps) steps by 0.08: shading, removed
+    np.testing.assert_allclose(norm.normalize(shading), 0.0, atol=1e-6)
+    edge = shading.copy()
+    edge[:, 16:] = 0.51 * np.exp(0.12) - 0.01  # a step of 0.12: reflectance, kept
+    assert np.ptp(norm.normalize(edge)) > 0.1

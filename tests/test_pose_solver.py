@@ -479,3 +479,13 @@ def test_a_verified_pose_is_refined_around_itself():
     det.refine_search_scale = 0.0  # a detector that asks for no refinement: one search
     PoseTracker(PoseSolver(K, min_inliers=8, reprojection_error=12.0)).step(0, None, det)
     assert det.calls == [(False, 2.5)]
+
+
+def test_msac_cost_truncates_each_error_at_the_inlier_threshold():
+    K = camera_matrix(600.0, 600.0, 320.0, 240.0)
+    obj = np.array([[0, 0, 0], [50, 0, 0], [0, 50, 0], [50, 50, 0], [25, 25, 10]], float)
+    rvec, tvec = np.zeros((3, 1)), np.array([[0.0], [0.0], [400.0]])
+    img = project(obj, rvec, tvec, K)
+    img[0] += [100.0, 0.0]  # an outlier: counts the threshold, 4 px, not 100 px
+    img[1] += [0.0, 2.0]  # an inlier: its own 2 px
+    assert PoseSolver(K, reprojection_error=4.0)._cost(obj, img, rvec, tvec) == pytest.approx(4.0**2 + 2.0**2)

@@ -214,3 +214,23 @@ def test_output_map_is_the_numpy_one():
         method._response_to(response.copy(), np.dtype(np.uint8)),
         np.rint(method.to_unit(response) * 255).astype(np.uint8),
     )
+
+
+def test_strips_of_a_gain_model_without_its_band_give_the_whole_image(monkeypatch, tmp_path):
+    """A user's gain model without the wide band: the shipped models' band reaches farther than the network's grid,
+    the mixture and the divisive step together, so their strips test the band's halo only."""
+    from alcn_cv.nets.gain import GainNormalizer
+    from alcn_cv.runtime import MODELS
+    from alcn_cv.weight_file import NormalizerFile, load_normalizer_file, save_normalizer_file
+
+    shipped = load_normalizer_file(MODELS["gain"])
+    net = GainNormalizer.from_file(
+        NormalizerFile(shipped.arrays, {**shipped.meta, "config": {**shipped.meta["config"], "band": 0.0}})
+    )
+    save_normalizer_file(tmp_path / "no_band.npz", net.state_arrays(), net.file_meta(trained=True))
+    method = alcn_cv.createALCN(weights=tmp_path / "no_band.npz")
+    frame = synthetic_frame(300, 416, False, seed=4)
+    whole = method.apply(frame, out_dtype=np.float32)
+    monkeypatch.setattr(base, "TILE_PIXELS", 20_000)
+    assert len(method._strips(frame.shape[:2])) > 3
+    np.testing.assert_allclose(method.apply(frame, out_dtype=np.float32), whole, atol=1e-4)
