@@ -250,6 +250,7 @@ def _build_summaries() -> dict[str, str]:
 
 def _add_planar(sub: argparse._SubParsersAction) -> None:
     from pose import planar
+    from pose.parts import FEATURES
 
     r = sub.add_parser(
         "planar",
@@ -293,7 +294,7 @@ def _add_planar(sub: argparse._SubParsersAction) -> None:
         "cores, trained on the GPU where torch sees one)",
     )
     _add_recipe(r, "planar")
-    r.add_argument("--feature", default="SIFT", choices=["ORB", "SIFT", "AKAZE"], help="OpenCV feature (default SIFT)")
+    r.add_argument("--feature", default="SIFT", choices=FEATURES, help="OpenCV feature (default SIFT)")
     r.add_argument(
         "--n-features",
         type=number_at_least(int, 0),
@@ -453,6 +454,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     from pose.build import CONFS as BUILD_CONFS
     from pose.build import DEFAULTS as BUILD_DEFAULTS
     from pose.corner_bench import MAX_SIDE, MIN_SIDE
+    from pose.parts import FEATURES
     from pose.sequence import VIDEO_MAX_FRAMES, VIDEO_STEP
     from pose.solver import METHODS
 
@@ -516,7 +518,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     b.add_argument(
         "--feature",
-        choices=["ORB", "SIFT", "AKAZE"],
+        choices=FEATURES,
         help=f"OpenCV feature (default: the preset's, else {BUILD_DEFAULTS['feature']})",
     )
     b.add_argument(
@@ -680,7 +682,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument(
         "--feature",
         default="SIFT",
-        choices=["ORB", "SIFT", "AKAZE"],
+        choices=FEATURES,
         help="feature of the classical detector (default SIFT: on the data engine's sequences it "
         "gave more correct poses than ORB; `track` uses ORB for speed)",
     )
