@@ -163,8 +163,9 @@ def _short_description(info: dict[str, Any]) -> str:
 
 
 def typed_command(argv: Sequence[str]) -> str:
-    """The ``alcn`` command line ``argv`` (the words after ``alcn``, ``args.argv`` of :func:`alcn_cv.cli.main`) for a
-    report: what was measured, so without ``--overwrite`` and ``--no-progress``, which change nothing of it."""
+    """The ``alcn`` command line ``argv`` (the words after ``alcn``: ``args.argv`` of the parser of
+    :func:`alcn_cv.cli.build_parser`) for a report: what was measured, so without ``--overwrite`` and
+    ``--no-progress``, which change nothing of it."""
     return shlex.join(["alcn", *(a for a in argv if a not in ("--overwrite", "--no-progress"))])
 
 

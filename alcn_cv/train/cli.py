@@ -18,14 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from alcn_cv.cli import (
-    COUNT,
-    SEED,
-    add_conf_option,
-    add_progress_option,
-    interrupt_exit_code,
-    number_at_least,
-)
+from alcn_cv.cli import COUNT, SEED, add_conf_option, add_progress_option, interrupt_exit_code, number_at_least
 from alcn_cv.presets import preset, print_config
 from alcn_cv.train.config import (
     DISTILL_CONF_SUMMARIES,
