@@ -58,7 +58,7 @@ from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
 from alcn_cv.row_parts import run_parts
-from alcn_cv.runtime import ModelSpec, resolve_weights
+from alcn_cv.runtime import DEFAULT_MODEL, ModelSpec, resolve_weights
 from alcn_cv.weight_file import NormalizerFile, load_normalizer_file, save_normalizer_file
 
 #: The runtime adapters of createALCN(backend="fast" | "torch"), TorchNetwork and TorchRuntime, are the library's, not
@@ -111,11 +111,14 @@ class ALCN2d(nn.Module):
     compiled goes through the torch Lab conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some.
     ``torch.jit.trace`` records the sizes of the traced image: on another size the traced module fails or, without
     an error, returns wrong values (use ``torch.compile`` for several sizes, which compiles again for each new size:
-    slow on a CPU, so compile for the few sizes a program runs); ``torch.jit.script`` is not supported (trace the
-    module, or ``torch.compile`` it). On the ``meta`` device a gray image propagates its shape; colour
-    raises (torch has no autocast there, which the Lab conversions switch off). The 1e-5 from ``apply()`` holds for
-    integers converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs
-    by a float rounding, which the divisive step amplifies to 6e-5 on a photograph.
+    slow on a CPU, so compile for the few sizes a program runs, with ``dynamic=False``: by default the second size
+    compiles the whole graph again for symbolic sizes, about 5 times as long as the first, 8 minutes on 2 cores);
+    ``torch.jit.script`` is not supported (trace the module, or ``torch.compile`` it). On the ``meta`` device a gray
+    image propagates its shape; colour raises (torch has no autocast there, which the Lab conversions switch off).
+    ``torch.onnx.export`` (``dynamo=False``) writes it from an example image of 120x160 or larger (a smaller one may
+    be refused: the network's pads would be longer than its grid). The 1e-5 from ``apply()`` holds for integers
+    converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs by a float
+    rounding, which the divisive step amplifies to 6e-5 on a photograph.
 
     In a ``DataLoader``'s workers (or any process forked after this one ran torch's threads, which a fork leaves
     behind), the module runs on one thread: the outputs are one thread's, to float rounding.
@@ -148,6 +151,11 @@ class ALCN2d(nn.Module):
         self.spec = ModelSpec.from_file(weight_file, scale)
         self.net = normalizer_from_file(weight_file)
         self._built_from = weight_file.meta, weight_file.path  # the header and file that save() writes from
+        # the repr's first setting: the shipped model, or the weight file (its contents when given loaded)
+        if weights is None:
+            self._source = f"model={model or DEFAULT_MODEL!r}"
+        else:
+            self._source = "weights=<contents>" if weight_file.path is None else f"weights={str(weight_file.path)!r}"
         buffers = dict(self.net.named_buffers())
         #: The file's values of the fixed scales (buffers: a gain model's tau and floor), which save() writes back
         #: where a cast to float16 or bfloat16 only rounded them.
@@ -341,7 +349,12 @@ class ALCN2d(nn.Module):
         )
 
     def extra_repr(self) -> str:
-        return f"scale={self.spec.scale}, grid_stride={self.grid_stride}, allow_tf32={self.allow_tf32}"
+        return f"{self._source}, scale={self.spec.scale}, grid_stride={self.grid_stride}, allow_tf32={self.allow_tf32}"
+
+    def __prepare_scriptable__(self) -> ALCN2d:
+        """``torch.jit.script`` asks this first: the module is not scriptable (its error would be TorchScript's
+        "Unknown type annotation")."""
+        raise InputError("ALCN2d cannot be scripted: use torch.jit.trace (one image size) or torch.compile")
 
 
 def _check_image(image: torch.Tensor) -> None:
@@ -483,8 +496,10 @@ def alcn2d(
     # outside a compiled graph only: a file system call is no graph's to trace, and a compiled call keeps its module
     version = None if torch.compiler.is_compiling() else _file_version(resolve_weights(model, weights))
     if built is None or (version is not None and built[0] != version):
-        # frozen: a backward through it must not accumulate gradients in a module the caller never sees
-        module = ALCN2d(model, weights, scale).to(image.device, image.dtype).eval().requires_grad_(False)
+        # frozen: a backward through it must not accumulate gradients in a module the caller never sees; and of normal
+        # tensors, whatever mode the first call runs in (inference tensors cannot be saved for a later backward)
+        with torch.inference_mode(False):
+            module = ALCN2d(model, weights, scale).to(image.device, image.dtype).eval().requires_grad_(False)
         built = _MODULES[key] = version, module
     return built[1]._normalize(image)  # checked above, and the module is of the image's device and dtype
 

@@ -608,6 +608,25 @@ def test_torch_jit_trace_of_a_trainable_module(channels):
     assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in module.parameters())
 
 
+@pytest.mark.parametrize("model", MODELS)
+def test_a_users_onnx_export_gives_the_modules_output(model, tmp_path):
+    """torch.onnx.export of the module (the docstring lists it), run by ONNX's reference evaluator: the lite and paper
+    models' grid was one point short in the graph (a ceiling written with a negative floor division, which ONNX's
+    integer Div truncates), 0.02-0.05 off without an error."""
+    import onnx
+    from onnx.reference import ReferenceEvaluator
+
+    module = ALCN2d(model=model).eval().requires_grad_(False)
+    x = torch.rand(1, 1, 120, 160)
+    path = tmp_path / "alcn.onnx"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the tracer's notes on Python values
+        torch.onnx.export(module, (x,), path, dynamo=False, opset_version=17)
+    graph = onnx.load(path).graph
+    exported = ReferenceEvaluator(str(path)).run(None, {graph.input[0].name: x.numpy()})[0]
+    np.testing.assert_allclose(exported, module(x).numpy(), atol=1e-5, rtol=0)
+
+
 @pytest.mark.skipif(
     not any(shutil.which(c) for c in ("c++", "g++", "clang++")), reason="inductor on the CPU needs a C++ compiler"
 )
@@ -789,3 +808,35 @@ def test_settings_that_are_not_what_they_say_are_refused():
     if not torch.backends.mps.is_available():
         with pytest.raises(InputError, match="device is 'mps', but torch cannot use mps devices here"):
             alcn_cv.createALCN(device="mps")
+
+
+def test_the_functional_form_first_called_in_inference_mode_keeps_autograd(monkeypatch):
+    """alcn2d's module built in a first call under torch.inference_mode() (a sanity check, a validation pass) held
+    inference tensors: every later call with gradients failed ("Inference tensors cannot be saved for backward")."""
+    monkeypatch.setattr(alcn_nn, "_MODULES", {})
+    with torch.inference_mode():
+        alcn2d(torch.rand(1, 1, 32, 32))
+    x = torch.rand(1, 1, 32, 32, requires_grad=True)
+    alcn2d(x).sum().backward()
+    assert x.grad is not None and torch.isfinite(x.grad).all()
+
+
+def test_an_onnx_export_of_a_small_image_says_to_export_a_larger_one(tmp_path):
+    """torch's own error ("Padding size should be less than the corresponding input dimension") named a 9x11 plane
+    the user never gave: the gain network's grid of a 64x80 image."""
+    module = ALCN2d().eval().requires_grad_(False)
+    with warnings.catch_warnings(), pytest.raises(InputError, match="export with a larger example image"):
+        warnings.simplefilter("ignore")
+        torch.onnx.export(module, (torch.rand(1, 1, 64, 80),), tmp_path / "small.onnx", dynamo=False)
+
+
+@pytest.mark.filterwarnings("ignore:`torch.jit.script` is deprecated:DeprecationWarning")
+def test_scripting_says_what_to_use_instead():
+    with pytest.raises(InputError, match=r"cannot be scripted: use torch.jit.trace .* or torch.compile"):
+        torch.jit.script(ALCN2d())
+
+
+def test_the_repr_names_the_model_or_the_weight_file():
+    assert ALCN2d().extra_repr().startswith("model='gain', scale=1.0")
+    assert ALCN2d(model="lite").extra_repr().startswith("model='lite', scale=0.5")
+    assert ALCN2d(weights=MODELS["gain-lite"]).extra_repr().startswith(f"weights={str(MODELS['gain-lite'])!r}")

@@ -91,7 +91,8 @@ def grid_shape(shape: tuple[int, int], stride: int) -> tuple[int, int]:
         (61, 81)
     """
     h, w = shape
-    return -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
+    # no negative operand: traced for an ONNX export, sizes are tensors and ONNX's Div truncates where // floors
+    return (h - 2 + stride) // stride + 1, (w - 2 + stride) // stride + 1
 
 
 def image_blocks(padded: np.ndarray) -> np.ndarray:
