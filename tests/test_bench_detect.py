@@ -510,3 +510,13 @@ def test_a_seed_that_is_no_integer_is_one_clear_error(capsys):
         .err.splitlines()[-1]
         .endswith("argument --seeds: a seed is an integer (e.g. --seeds 0 1 2 or 0,1,2), got 'a'")
     )
+
+
+def test_the_cnn_sweep_keeps_the_most_accurate_then_the_lowest_loss(monkeypatch):
+    from alcn_cv.train import stage2
+
+    scores = {(1, 32): (0.40, 0.9), (2, 32): (0.30, 0.9), (3, 32): (0.20, 0.8)}  # (loss, accuracy)
+    monkeypatch.setattr(D, "_train", lambda method, train, labels, n, settings, seed, val, config: config)
+    monkeypatch.setattr(stage2, "evaluate_detector", lambda net, *val: scores[net])
+    net, record = D._train_cnn_sweep(None, None, 3, S.DetectSettings(cnn_sweep=list(scores)), 0, (None, None))
+    assert net == (2, 32) and record["chosen"] == {"depth": 2, "width": 32}

@@ -191,3 +191,38 @@ def _cuda() -> bool:
     import torch
 
     return torch.cuda.is_available()
+
+
+def test_each_target_is_met_exactly_when_its_measured_value_reaches_its_goal(report):
+    _, result = report
+    checked = 0
+    for row in result["targets"]["summary"]:
+        if row["met"] is None:
+            continue
+        op, bound = row["goal"].split()[:2]
+        if op == "about":  # "about 1": within 10 %
+            op, bound = "<=", "1.1"
+        bound = float(bound.rstrip(":"))
+        measured = row["measured"]
+        assert row["met"] == {"<=": measured <= bound, ">=": measured >= bound, "<": measured < bound}[op], row
+        checked += 1
+    assert checked >= 13
+
+
+def test_the_targets_ratios_are_those_of_the_times_measured(report):
+    _, result = report
+    t = result["targets"]["times_ms"]
+    measured = {row["target"]: row["measured"] for row in result["targets"]["summary"]}
+
+    def of(start):
+        (value,) = [v for name, v in measured.items() if name.startswith(start)]
+        return value
+
+    assert of("default ALCN (the gain Normalizer) / raw DoG") == pytest.approx(t["alcn gray"] / t["dog raw"])
+    assert of("its lite variant") == pytest.approx(t["alcn gain-lite gray"] / t["dog raw"])
+    assert of("lite paper-family ALCN") == pytest.approx(t["alcn lite gray"] / t["dog raw"])
+    assert of("default ALCN fps") == pytest.approx(1e3 / t["alcn gray small"])
+    assert of("torch-free backend") == pytest.approx(t["alcn gray"] / t["alcn fast gray"])
+    assert of("torch backend on the CPU") == pytest.approx(t["alcn torch gray"] / t["alcn gray"])
+    assert of("default ALCN / DLCN") == pytest.approx(t["alcn gray"] / t["dlcn gray"])
+    assert of("BGR / gray") == pytest.approx(t["alcn bgr"] / t["alcn gray"])

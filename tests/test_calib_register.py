@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -14,9 +15,16 @@ from alcn_cv.formats import bop
 from alcn_cv.formats.colmap import read_model
 from alcn_cv.formats.middlebury import read_middlebury
 from board_scene import make_board_scene
-from calib.board import BoardSpec
+from calib.board import BoardSpec, Detection
 from calib.camera import Calibration
-from calib.register import SfmSettings, register_charuco, register_colmap, similarity_from_poses
+from calib.register import (
+    SfmSettings,
+    _sfm_rms,
+    board_pose,
+    register_charuco,
+    register_colmap,
+    similarity_from_poses,
+)
 
 DIST = np.array([-0.1, 0.02, 0.0, 0.0, 0.0])
 
@@ -246,3 +254,39 @@ def test_sfm_leaves_no_glog_files_and_no_warning_about_threads(shared_data, tmp_
     from alcn_cv.cli import main
 
     assert main(["pose", "build", str(out), str(tmp_path / "m.npz"), "--box-size", "18.9", "25.8", "7.5"]) == 2
+
+
+def test_similarity_scale_is_the_least_squares_fit_of_the_centres():
+    """With R fixed, s = sum(b . R a) / sum(a . a): the offset across the baseline does not inflate it (the ratio of
+    the spreads' norms would give sqrt(5) here)."""
+    eye = np.stack([np.eye(3)] * 2)
+    s, R, t = similarity_from_poses(eye, [[0, 0, 0], [1, 0, 0]], eye, [[0, 0, 0], [2, 1, 0]])
+    assert s == pytest.approx(2.0)
+    np.testing.assert_allclose(R, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(t, [0.0, 0.5, 0.0], atol=1e-12)
+
+
+def test_an_exact_fronto_parallel_view_is_ambiguous():
+    """Far away, both IPPE solutions explain exact corners to 1e-4 px: below the error floor of 1e-3 px, ambiguous
+    (without the floor, the second solution is 20 times the first's tiny error and the pose was accepted)."""
+    K = np.array([[600.0, 0, 320], [0, 600, 240], [0, 0, 1]])
+    obj = BoardSpec().corners_3d()
+    R = Rotation.from_euler("x", 180, degrees=True).as_matrix()
+    uv, _ = cv2.projectPoints(obj, cv2.Rodrigues(R)[0], np.array([-120.0, -90, 15000]), K, None)
+    detection = Detection(uv.reshape(-1, 2).astype(np.float32), obj, np.arange(len(obj), dtype=np.int32))
+    assert "ambiguous" in board_pose(detection, K, None).status
+
+
+def test_sfm_rms_is_the_root_mean_square_over_the_keypoints():
+    """An image's SfM error: one of its 4 triangulated keypoints 3 px off gives sqrt(9 / 4) = 1.5 px."""
+    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    xyz = np.array([[0.0, 0, 10], [1, 0, 10], [0, 1, 10], [1, 1, 12]])
+    uv = cv2.projectPoints(xyz, np.zeros(3), np.zeros(3), K, None)[0].reshape(-1, 2)
+    uv[2, 0] += 3.0
+    model = SimpleNamespace(points3d={10 + i: SimpleNamespace(xyz=p) for i, p in enumerate(xyz)})
+    # COLMAP's pixel centres at +0.5; one keypoint untriangulated
+    points2d = np.insert(uv + 0.5, 2, [0.0, 0.0], axis=0)
+    image = SimpleNamespace(
+        point3d_ids=np.array([10, 11, -1, 12, 13]), R_w2c=np.eye(3), t_w2c=np.zeros(3), points2d=points2d
+    )
+    assert _sfm_rms(model, image, K) == pytest.approx(1.5, abs=1e-6)

@@ -267,3 +267,11 @@ def test_unet_baselines_objective_part_is_the_bench_stage(
     assert all(np.isfinite(v) for v in result["mean_train"].values())
     with pytest.raises(InputError, match="architecture"):
         objective.main(tmp_path / "out", {"paper": resolve_weights("paper", None)})
+
+
+def test_a_protocol_that_is_neither_preset_is_not_called_quick() -> None:
+    report = _report_module()
+    loo = _kept("relight_leave_one_out")
+    loo["settings"] = {**loo["settings"], "patches": 77}
+    title = report.relight(loo).splitlines()[0]
+    assert "quick protocol" not in title and "77 patches" in title

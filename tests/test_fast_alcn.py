@@ -325,3 +325,17 @@ def test_files_record_the_default_model_by_name():
     # "model=None" is the default model too: it was appended to ("alcn:model=None:model=gain"), a spec that a
     # model given twice makes unreadable
     assert pin_default_model("alcn:scale=1.0:model=None") == f"alcn:scale=1.0:model={DEFAULT_MODEL}"
+
+
+def test_pyramid_error_bound_on_a_small_image_and_for_the_widest_kernel():
+    """A small image keeps the pyramid to levels of at least 8 pixels, and the bottom and right borders are padded
+    beyond the widest blur's reach: without either, the widest kernel's error grows 5 to 70 times."""
+    rng = np.random.default_rng(3)
+    widest = np.eye(10)[9]
+    for h, w, max_bound, mean_bound in [(24, 30, 4e-4, 2e-4), (121, 163, 1.5e-3, 2e-4)]:
+        coarse = rng.random((h // 4 + 1, w // 4 + 1), dtype=np.float32)
+        texture = cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC) + 0.3 * rng.random((h, w), dtype=np.float32)
+        image = np.clip(texture / texture.max() * np.linspace(0.2, 1.0, w, dtype=np.float32)[None, :], 0, 1)
+        approx = pyramid_mixture(image, FULL_RES_SIGMAS, lambda level, ks, shape: [float(widest[k]) for k in ks])
+        diff = np.abs(approx - alcn_filter(image, widest, FULL_RES_SIGMAS))
+        assert diff.max() <= max_bound and diff.mean() <= mean_bound, (h, w, diff.max(), diff.mean())

@@ -12,6 +12,7 @@ import pytest
 from alcn_cv.data.light_changes import (
     LIGHTS,
     LightChangeConfig,
+    random_homography,
     relief_shading,
     relight,
     relit_frames,
@@ -194,3 +195,31 @@ def test_relit_scenes_are_registered_gray_scenes_drawn_by_seed():
         relit_scenes(photos, 1)
     with pytest.raises(InputError, match="unknown light"):
         relit_scenes(photos, 2, light="moonlight")
+
+
+def test_read_noise_is_in_electrons_and_alone_in_the_dark():
+    dark = sensor_noise(np.zeros(40000, np.float32), np.random.default_rng(0), 1000.0, 6.0)
+    assert np.std(dark) == pytest.approx(6.0 / 1000, rel=0.03)
+
+
+def test_auto_exposure_cannot_darken_beyond_its_range():
+    """ISO is a digital gain of at least 1: a light brighter than the exposure's range makes up for saturates."""
+    image = np.full((32, 32), 200, np.uint8)
+    out = relight(image, np.random.default_rng(0), replace(NONE, gain=(50.0, 50.0), target=0.18, max_exposure=4.0))
+    assert (out == 255).all()
+    dim = relight(image, np.random.default_rng(0), replace(NONE, gain=(0.001, 0.001), target=0.18, max_iso=16.0))
+    assert 0 < dim.mean() < 200
+
+
+def test_random_homography_moves_corners_by_a_share_of_width_in_x_and_height_in_y():
+    h, w, shift = 100, 400, 0.1
+    corners = np.float32([[[0, 0]], [[w - 1, 0]], [[w - 1, h - 1]], [[0, h - 1]]])
+    moves = np.concatenate(
+        [
+            cv2.perspectiveTransform(corners, random_homography((h, w), np.random.default_rng(s), shift))[:, 0]
+            - corners[:, 0]
+            for s in range(20)
+        ]
+    )
+    assert np.abs(moves[:, 0]).max() <= shift * w + 1e-3 and np.abs(moves[:, 0]).max() > shift * h
+    assert np.abs(moves[:, 1]).max() <= shift * h + 1e-3

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -13,6 +14,7 @@ from box_points import box_faces
 from pose import box_fit, build, plots, sequence, triangulate
 from pose import model as pm
 from pose.evaluate import relight
+from pose.triangulate import MIN_TRACK, Features, collect_points
 
 
 def _box_surface(rng, size=(140.0, 95.0, 55.0), n=600):
@@ -554,3 +556,24 @@ def test_a_degenerate_reconstruction_writes_no_model(shared_data, tmp_path):
     argv = ["pose", "build", str(video), str(tmp_path / "m.npz"), "--box-ply", str(ply), "--conf", "cookie-box"]
     assert main([*argv, "--max-frames", "12", "--no-progress"]) == 2
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_a_point_seen_in_min_track_images_is_kept_one_seen_in_fewer_is_not():
+    assert MIN_TRACK == 2
+    names = ["a.png", "b.png", "c.png"]
+    feats = {
+        n: Features(np.zeros((2, 2), np.float32), np.full((2, 32), i, np.uint8), np.full((2, 3), 10 * i, np.uint8))
+        for i, n in enumerate(names)
+    }
+
+    def point(xyz: list[float], *image_ids: int) -> SimpleNamespace:
+        seen = [SimpleNamespace(image_id=i, point2D_idx=0) for i in image_ids]
+        return SimpleNamespace(xyz=np.array(xyz), track=SimpleNamespace(elements=seen))
+
+    rec = SimpleNamespace(
+        images={i + 1: SimpleNamespace(name=n) for i, n in enumerate(names)},
+        points3D={7: point([1.0, 2.0, 3.0], 1, 2), 8: point([4.0, 5.0, 6.0], 3)},
+    )
+    xyz, desc, owner, lengths, rgb = collect_points(rec, feats, cv2.NORM_HAMMING)
+    np.testing.assert_array_equal(xyz, [[1.0, 2.0, 3.0]])
+    assert lengths.tolist() == [2] and set(owner.tolist()) == {0} and len(desc) == 2

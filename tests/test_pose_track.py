@@ -19,6 +19,7 @@ from alcn_cv import io
 from alcn_cv.errors import InputError
 from pose import model as pm
 from pose import track
+from pose.corners import scaled_camera
 from pose.evaluate import rotation_error_deg
 from pose.parts import FeaturePartDetector, create_feature
 from pose.solver import camera_matrix, project
@@ -805,3 +806,13 @@ def test_tracking_after_the_default_model_named_or_not_is_the_same_normalization
     with caplog.at_level(logging.WARNING, logger="pose.track"):
         track.open_tracker(model, K, normalization=given)
     assert ("descriptors may not match" in caplog.text) == warns
+
+
+def test_the_models_camera_is_resized_to_the_frames_along_each_axis(caplog):
+    """Frames squeezed to half the width: the model's camera scaled in x only is the given one, no warning."""
+    K = camera_matrix(500.0, 500.0, 319.5, 239.5)
+    given = scaled_camera(K, 0.5, 1.0)
+    with caplog.at_level("WARNING", logger="pose.track"):
+        used = track.camera_matrix_for(K, given, "m.npz", model_size=(640, 480), frame_size=(320, 480))
+    np.testing.assert_array_equal(used, given)
+    assert "differ from those" not in caplog.text

@@ -234,3 +234,9 @@ def test_strips_of_a_gain_model_without_its_band_give_the_whole_image(monkeypatc
     monkeypatch.setattr(base, "TILE_PIXELS", 20_000)
     assert len(method._strips(frame.shape[:2])) > 3
     np.testing.assert_allclose(method.apply(frame, out_dtype=np.float32), whole, atol=1e-4)
+
+
+def test_an_image_just_above_the_tile_limit_is_cut(monkeypatch):
+    monkeypatch.setattr(base, "TILE_PIXELS", 20_000)
+    assert from_spec("alcn")._strips((100, 300))  # 30 000 pixels: strips of 32 rows
+    assert from_spec("alcn")._strips((60, 300)) is None

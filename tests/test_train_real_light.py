@@ -13,15 +13,18 @@ from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.train.checkpoint import CHECKPOINT_FORMAT, load_checkpoint
 from alcn_cv.train.real_light import (
     RealLightConfig,
+    TrainingScene,
     _normalized_centres,
     anywhere_locations,
     consistency_loss,
+    draw_step,
     harris_response,
     identification_loss,
     pair_loss,
     repeatability_loss,
     sample_locations,
     textured_locations,
+    textured_share,
     train_real_light,
     training_scene,
     training_scenes,
@@ -339,3 +342,37 @@ def test_the_sources_photo_options_are_keywords():
 
     with pytest.raises(TypeError):
         source_scenes([], 2, 0, "relief", 0.0, ["photos"])  # type: ignore[misc]
+
+
+def test_identification_is_symmetric_and_ignores_each_patchs_gain_and_offset():
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.randn(12, 1, 8, 8, generator=g), torch.randn(12, 1, 8, 8, generator=g)
+    loss = identification_loss(a, b, 0.1)
+    # the symmetric cross-entropy: a among b and b among a
+    torch.testing.assert_close(identification_loss(b, a, 0.1), loss)
+    # NCC of either side: a gain and an offset of the patches leave it unchanged
+    torch.testing.assert_close(identification_loss(3 * a + 1, b, 0.1), loss, rtol=1e-4, atol=1e-5)
+    torch.testing.assert_close(identification_loss(a, 2 * b - 5, 0.1), loss, rtol=1e-4, atol=1e-5)
+
+
+def test_harris_response_is_negative_on_an_edge():
+    edge = torch.zeros(1, 1, 32, 32)
+    edge[..., 16:] = 1.0
+    response = harris_response(edge)[0, 0]
+    assert float(response[8:24, 14:18].max()) < 0
+
+
+def test_a_step_draws_two_different_frames():
+    scene = TrainingScene("s", np.zeros((2, 96, 96), np.float32), np.array([[40, 40], [40, 60], [60, 40]]), 16)
+    cfg = RealLightConfig(locations=2, min_distance=4, anywhere=2)
+    for seed in range(40):
+        _, (fa, fb), _, _ = draw_step([scene], [], cfg, np.random.default_rng(seed))
+        assert fa != fb
+
+
+def test_a_smooth_ramp_is_not_texture_a_steeper_one_is():
+    x = np.arange(160, dtype=np.float32)
+    gentle = np.tile(np.floor(0.6 * x), (64, 1)).astype(np.uint8)  # 0.6 grey level a pixel
+    steep = np.tile(np.floor(1.5 * x), (64, 1)).astype(np.uint8)  # 1.5 grey levels a pixel
+    assert textured_share(gentle, 16) == 0.0
+    assert textured_share(steep, 16) == 1.0
