@@ -206,7 +206,7 @@ def add_conf_option(
         parser.add_argument(
             "--print-config",
             action="store_true",
-            help="print the effective configuration, every key with the --set overrides applied, and exit",
+            help="print the preset of --conf with the --set overrides applied, every key, and exit",
         )
     width = max(map(len, summaries))
     rows = [f"  {name:<{width}}  {what}" for name, what in summaries.items()]

@@ -28,6 +28,7 @@ import threading
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -58,7 +59,7 @@ from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
 from alcn_cv.row_parts import run_parts
-from alcn_cv.runtime import DEFAULT_MODEL, ModelSpec, resolve_weights
+from alcn_cv.runtime import MODELS, ModelSpec, resolve_weights
 from alcn_cv.weight_file import NormalizerFile, load_normalizer_file, save_normalizer_file
 
 #: The runtime adapters of createALCN(backend="fast" | "torch"), TorchNetwork and TorchRuntime, are the library's, not
@@ -116,9 +117,10 @@ class ALCN2d(nn.Module):
     ``torch.jit.script`` is not supported (trace the module, or ``torch.compile`` it). On the ``meta`` device a gray
     image propagates its shape; colour raises (torch has no autocast there, which the Lab conversions switch off).
     ``torch.onnx.export`` (``dynamo=False``) writes it from an example image of 120x160 or larger (a smaller one may
-    be refused: the network's pads would be longer than its grid). The 1e-5 from ``apply()`` holds for integers
-    converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs by a float
-    rounding, which the divisive step amplifies to 6e-5 on a photograph.
+    be refused: the network's pads would be longer than its grid); as a trace, the graph is for the example's size
+    (dynamic axes give wrong values at sizes of other remainders modulo the grid's stride). The 1e-5 from
+    ``apply()`` holds for integers converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``):
+    ``image / 255`` differs by a float rounding, which the divisive step amplifies to 6e-5 on a photograph.
 
     In a ``DataLoader``'s workers (or any process forked after this one ran torch's threads, which a fork leaves
     behind), the module runs on one thread: the outputs are one thread's, to float rounding.
@@ -152,10 +154,12 @@ class ALCN2d(nn.Module):
         self.net = normalizer_from_file(weight_file)
         self._built_from = weight_file.meta, weight_file.path  # the header and file that save() writes from
         # the repr's first setting: the shipped model, or the weight file (its contents when given loaded)
-        if weights is None:
-            self._source = f"model={model or DEFAULT_MODEL!r}"
+        path = weight_file.path
+        shipped = next((name for name, file in MODELS.items() if path is not None and Path(path) == file), None)
+        if shipped is not None:
+            self._source = f"model={shipped!r}"
         else:
-            self._source = "weights=<contents>" if weight_file.path is None else f"weights={str(weight_file.path)!r}"
+            self._source = "weights=<contents>" if path is None else f"weights={str(path)!r}"
         buffers = dict(self.net.named_buffers())
         #: The file's values of the fixed scales (buffers: a gain model's tau and floor), which save() writes back
         #: where a cast to float16 or bfloat16 only rounded them.
@@ -351,7 +355,7 @@ class ALCN2d(nn.Module):
     def extra_repr(self) -> str:
         return f"{self._source}, scale={self.spec.scale}, grid_stride={self.grid_stride}, allow_tf32={self.allow_tf32}"
 
-    def __prepare_scriptable__(self) -> ALCN2d:
+    def __prepare_scriptable__(self) -> NoReturn:
         """``torch.jit.script`` asks this first: the module is not scriptable (its error would be TorchScript's
         "Unknown type annotation")."""
         raise InputError("ALCN2d cannot be scripted: use torch.jit.trace (one image size) or torch.compile")

@@ -164,9 +164,13 @@ def _short_description(info: dict[str, Any]) -> str:
 
 def typed_command(argv: Sequence[str]) -> str:
     """The ``alcn`` command line ``argv`` (the words after ``alcn``: ``args.argv`` of the parser of
-    :func:`alcn_cv.cli.build_parser`) for a report: what was measured, so without ``--overwrite`` and
-    ``--no-progress``, which change nothing of it."""
-    return shlex.join(["alcn", *(a for a in argv if a not in ("--overwrite", "--no-progress"))])
+    :func:`alcn_cv.cli.build_parser`) for a report: what was measured, so without the options that change nothing of
+    it (replacing an earlier report, the progress bars, the log's and the errors' detail)."""
+    return shlex.join(["alcn", *(a for a in argv if a not in _NOT_MEASURED)])
+
+
+#: The options of an ``alcn`` command line that change nothing of what a report measured (:func:`typed_command`).
+_NOT_MEASURED = frozenset({"--overwrite", "--no-progress", "--debug", "-v", "--verbose"})
 
 
 def command_line(words: Sequence[str], options: dict[str, Any]) -> str:

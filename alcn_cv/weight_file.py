@@ -188,11 +188,10 @@ def check_header(
         raise WeightFileError(f"{path}: the header is not a JSON object; not a {what}")
     if header.get("format") != format_name:
         raise WeightFileError(f"{path}: field 'format' is {header.get('format')!r}, expected {format_name!r}")
-    if header.get("version") not in versions:
-        raise WeightFileError(
-            f"{path}: {what} format version {header.get('version')!r} but this alcn-cv reads versions "
-            f"{', '.join(map(str, versions))}; {again}"
-        )
+    version = header.get("version")
+    if type(version) is not int or version not in versions:  # not True, which equals 1
+        readable = f"versions {', '.join(map(str, versions))}" if len(versions) > 1 else f"version {versions[0]}"
+        raise WeightFileError(f"{path}: {what} format version {version!r} but this alcn-cv reads {readable}; {again}")
     return header
 
 

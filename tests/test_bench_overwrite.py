@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -83,7 +82,6 @@ def test_an_earlier_report_is_refused_and_replaced_with_overwrite(name, tmp_path
     del earlier[report]
     refused(f"{table} exists (--overwrite replaces it)")
     report.write_text('{"earlier": true}\n')
-    monkeypatch.setattr(sys, "argv", ["alcn", *argv, "--overwrite"])  # what relight records its command from
     assert cli_main([*argv, "--overwrite"]) == 0
     saved = json.loads(report.read_text())
     assert "earlier" not in saved and table.read_text() != "earlier\n"

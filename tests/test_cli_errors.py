@@ -439,8 +439,8 @@ def test_an_error_of_a_grouped_command_names_the_command(tmp_path, capsys):
 )
 def test_a_report_records_the_command_main_was_given(module, function, argv, monkeypatch, capsys, tmp_path):
     """The command a report records: main's argv (an experiment calls main in its own process, with its own
-    sys.argv), without --overwrite and --no-progress, which change nothing of what was measured; bench relight
-    recorded --no-progress, pose recorded sys.argv."""
+    sys.argv), without the options that change nothing of what was measured; bench relight recorded
+    --no-progress, pose recorded sys.argv."""
     import importlib
 
     monkeypatch.chdir(tmp_path)
@@ -452,5 +452,5 @@ def test_a_report_records_the_command_main_was_given(module, function, argv, mon
         raise KeyboardInterrupt  # stop before any work
 
     monkeypatch.setattr(importlib.import_module(module), function, record)
-    assert main([*argv, "--overwrite", "--no-progress"]) == 130
+    assert main(["--debug", "-v", *argv, "--overwrite", "--no-progress"]) == 130
     assert recorded == ["alcn " + " ".join(argv)]

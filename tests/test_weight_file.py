@@ -47,6 +47,14 @@ def _bad_files(tmp_path, lite):
         "nan": (poisoned["nan"], f"{key}.*NaN or infinite"),
         "inf": (poisoned["inf"], f"{key}.*NaN or infinite"),
         "header list": (_write_npz(tmp_path / "list.npz", lite.arrays, ["a"]), "not a JSON object"),
+        "newer version": (
+            _write_npz(tmp_path / "v9.npz", lite.arrays, {**lite.meta, "version": 9}),
+            r"weight file format version 9 but this alcn-cv reads version \d+; read it with the alcn-cv that wrote",
+        ),
+        "version true": (  # True == 1 in Python: not a version
+            _write_npz(tmp_path / "true.npz", lite.arrays, {**lite.meta, "version": True}),
+            "format version True",
+        ),
         "nan range": (
             _write_npz(tmp_path / "range.npz", lite.arrays, {**lite.meta, "output_range": [float("nan"), 1.0]}),
             "finite",
@@ -54,7 +62,10 @@ def _bad_files(tmp_path, lite):
     }
 
 
-@pytest.mark.parametrize("case", ["empty", "random bytes", "truncated", "nan", "inf", "header list", "nan range"])
+@pytest.mark.parametrize(
+    "case",
+    ["empty", "random bytes", "truncated", "nan", "inf", "header list", "newer version", "version true", "nan range"],
+)
 def test_bad_weight_files_name_the_file_and_the_problem(tmp_path, lite, case):
     path, problem = _bad_files(tmp_path, lite)[case]
     with pytest.raises(WeightFileError, match=problem) as info:

@@ -46,7 +46,7 @@ def reflect101_pad(x: torch.Tensor, top: int, bottom: int, left: int, right: int
             raise InputError(
                 f"an ONNX export traces a reflect pad of {max(top, bottom, left, right)} px on a {h}x{w} plane, "
                 "longer than its side, which torch cannot export: export with a larger example image (120x160 "
-                "exports every shipped model; with dynamic axes the graph then takes smaller images)"
+                "exports every shipped model)"
             )
         return F.pad(x, (left, right, top, bottom), mode="reflect")
     return _reflect101_along(_reflect101_along(x, -2, top, bottom), -1, left, right)

@@ -35,7 +35,9 @@ def _along(x: torch.Tensor, dim: int, phases: torch.Tensor, start: int, size: in
     ends it when the phases start at 0)."""
     factor = len(phases)
     n = x.shape[dim]
-    pairs = min(n - 1, -(-(start + size) // factor))  # the pairs that hold the outputs asked for
+    # the pairs that hold the outputs asked for: a ceiling without a negative operand (traced for an ONNX export,
+    # sizes are tensors and ONNX's Div truncates where // floors)
+    pairs = min(n - 1, (start + size + factor - 1) // factor)
     lo, hi = x.narrow(dim, 0, pairs), x.narrow(dim, 1, pairs)
     if dim == -1:
         out = torch.lerp(lo[..., None], hi[..., None], phases).flatten(-2)
