@@ -2,6 +2,7 @@
 
 import inspect
 import logging
+import math
 import os
 
 import cv2
@@ -12,6 +13,7 @@ import alcn_cv
 import alcn_cv.enhance.alcn as alcn_module
 from alcn_cv import InputError, WeightFileError
 from alcn_cv.data.frames import synthetic_frame
+from alcn_cv.enhance.registry import from_spec
 from alcn_cv.runtime import MODELS
 
 METHODS = alcn_cv.available()
@@ -634,3 +636,21 @@ def test_the_numpy_filters_name_a_wrong_dtype():
         for dtype in (np.float64, np.uint8):
             with pytest.raises(InputError, match=f"must be float32 .*got {np.dtype(dtype).name}"):
                 call(np.zeros((32, 32), dtype))
+
+
+def test_from_spec_defaults_yield_to_the_specs_own_parameters():
+    """``from_spec(spec, **defaults)``: the defaults fill in what the spec does not give (the corner detector's
+    ``scale=1.0, backend="opencv"`` under a recorded ``alcn:backend=fast``), never override it."""
+    dog = from_spec("dog:sigma2=3", sigma2=2.0, sigma1=0.75)
+    assert (dog.sigma1, dog.sigma2) == (0.75, 3.0)
+
+
+def test_a_whole_float_for_an_integer_parameter_is_left_to_the_constructor():
+    """``-p size=9.0`` (a float where an int is annotated) is accepted as the registry's comment promises."""
+    assert alcn_cv.create("lrn:size=9.0").size == 9
+    assert alcn_cv.create("lrn", size=np.int64(9)).size == 9
+
+
+def test_min_size_is_the_window_rounded_up_to_input_pixels():
+    alcn = alcn_cv.createALCN(model="paper", scale=0.7)
+    assert alcn.min_size == math.ceil(48 / 0.7) == 69

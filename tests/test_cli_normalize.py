@@ -436,3 +436,38 @@ def test_a_bad_parameter_says_where_it_was_given_and_its_syntax(tmp_path, frame,
     cv2.imwrite(str(tmp_path / "a.png"), frame)
     assert main(["normalize", str(tmp_path / "a.png"), str(tmp_path / "out.png"), *args]) == 2
     assert capsys.readouterr().err.strip().endswith(says)
+
+
+def test_device_batches_mixing_depths_of_one_size(tmp_path, frame):
+    """A folder in one batch (the default 32): the 8- and 16-bit gray images of one size are batched apart."""
+    pytest.importorskip("torch")
+    names = _mixed_folder(tmp_path / "in", frame)
+    assert main(["normalize", str(tmp_path / "in"), str(tmp_path / "each")]) == 0
+    assert main(["normalize", str(tmp_path / "in"), str(tmp_path / "batched"), "--device", "cpu"]) == 0
+    for name in names:
+        each = cv2.imread(str(tmp_path / "each" / name), cv2.IMREAD_UNCHANGED)
+        batched = cv2.imread(str(tmp_path / "batched" / name), cv2.IMREAD_UNCHANGED)
+        assert batched.dtype == each.dtype, name
+        one_level = 257 if each.dtype == np.uint16 else 1
+        assert np.abs(batched.astype(int) - each.astype(int)).max() <= one_level, name
+
+
+def test_device_runs_batches_of_batch_size(tmp_path, frame, monkeypatch):
+    """``--batch-size 3`` on 5 frames of one size: apply_batch gets 3 frames, then 2."""
+    pytest.importorskip("torch")
+    from alcn_cv.enhance.alcn import ALCN
+
+    sizes = []
+    apply_batch = ALCN.apply_batch
+
+    def recording(self, frames, *args, **kwargs):
+        sizes.append(len(frames))
+        return apply_batch(self, frames, *args, **kwargs)
+
+    monkeypatch.setattr(ALCN, "apply_batch", recording)
+    (tmp_path / "in").mkdir()
+    for i in range(5):
+        cv2.imwrite(str(tmp_path / "in" / f"{i}.png"), np.roll(frame, 3 * i, axis=1))
+    args = ["normalize", str(tmp_path / "in"), str(tmp_path / "out"), "--device", "cpu", "--batch-size", "3"]
+    assert main(args) == 0
+    assert sizes == [3, 2]

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from alcn_cv.data import detect, detect_settings
+from alcn_cv.data.detect import _tight_box
 from alcn_cv.data.manifest import MANIFEST_SCHEMA
 from alcn_cv.errors import InputError
 from alcn_cv.formats import schema
@@ -123,3 +124,12 @@ def test_workers_do_not_change_the_output(bench, tmp_path):
     files = sorted(p.relative_to(bench) for p in bench.rglob("*") if p.is_file())
     for f in files:
         assert (bench / f).read_bytes() == (two / f).read_bytes(), f
+
+
+def test_the_tight_box_holds_every_covered_pixel():
+    """COCO ``[x, y, w, h]`` of the silhouette: pixels 3..7 across and 2..4 down are 5 wide and 3 high."""
+    cov = np.zeros((10, 12), np.float32)
+    cov[2:5, 3:8] = 1.0
+    cov[6, 9] = 0.4  # under half covered: not the object's
+    assert _tight_box(cov) == [3.0, 2.0, 5.0, 3.0]
+    assert _tight_box(np.zeros((4, 4))) is None

@@ -9,8 +9,10 @@ import pytest
 from alcn_cv.data.scenes import (
     TEST_SCENES,
     TRAIN_SCENES,
+    Scene,
     load_scene_folder,
     load_scenes,
+    mean_pairwise_ncc,
     scene_dirs,
     scene_names,
     select_scenes,
@@ -116,3 +118,22 @@ def test_scene_names_are_the_loaders_without_reading_an_image(tmp_path, monkeypa
         assert scene_names(folder) == loaded
         monkeypatch.undo()
     assert scene_names(psm / "ball", subfolders=False) == ["ball"] and scene_names(tmp_path / "missing") == []
+
+
+def test_a_scene_named_twice_is_selected_once():
+    """``["psm", "ball"]``: the data set and one of its scenes name the ball once (a repeat would weigh it twice in
+    training)."""
+    frames = np.zeros((2, 4, 4), np.uint8)
+    scenes = [Scene("ball", "psm", frames, ("a", "b")), Scene("cat", "psm", frames, ("a", "b"))]
+    assert [s.name for s in select_scenes(scenes, ["psm", "ball"])] == ["ball", "cat"]
+    assert [s.name for s in select_scenes(scenes, ["ball", "ball"])] == ["ball"]
+
+
+def test_mean_pairwise_ncc_ignores_a_gain_and_an_offset():
+    """1 for images that agree up to a gain and an offset, -1 for a negative, 0 for a constant one."""
+    rng = np.random.default_rng(0)
+    a = rng.random((16, 16)).astype(np.float32)
+    mask = np.ones((16, 16), bool)
+    assert mean_pairwise_ncc([a, 0.5 * a + 0.3], mask) == pytest.approx(1.0)
+    assert mean_pairwise_ncc([a, 1.0 - a], mask) == pytest.approx(-1.0)
+    assert mean_pairwise_ncc([a, np.full_like(a, 0.7)], mask) == 0.0

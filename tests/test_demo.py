@@ -127,3 +127,8 @@ def test_an_earlier_demo_without_its_marker_is_replaced(tmp_path):
     (tmp_path / "notes.txt").write_text("mine")
     with pytest.raises(InputError, match="not an earlier demo's output"):
         check_out_dir(tmp_path)
+
+
+def test_row_labels_count_the_test_images_from_one():
+    image = CocoImage(1, "0.png", 8, 8, Path("0.png"), {"light_family": "shadow", "lighting": {"gain": 0.86}})
+    assert image_label(0, image) == "test image 1\nshadow light, gain 0.86"

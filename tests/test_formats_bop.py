@@ -225,3 +225,29 @@ def test_malformed_ply_raises_dataset_error(tmp_path, header, body, match):
     p.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 0\nend_header")  # no newline after the header
     with pytest.raises(DatasetError):
         read_ply(p)
+
+
+def test_models_info_sizes_are_per_axis():
+    """BOP's models_info.json: size_x, size_y, size_z the extents along x, y, z; diameter the largest distance."""
+    corners = np.array([[x, y, z] for x in (-50, 50) for y in (-20, 20) for z in (0, 30)], np.float64)
+    info = models_info({3: PlyModel(corners + [1.0, 2.0, 3.0], np.zeros((0, 3), np.int64))})["3"]
+    assert (info["size_x"], info["size_y"], info["size_z"]) == (100.0, 40.0, 30.0)
+    assert (info["min_x"], info["min_y"], info["min_z"]) == (-49.0, -18.0, 3.0)
+    assert info["diameter"] == pytest.approx(np.sqrt(100**2 + 40**2 + 30**2))
+
+
+def test_the_principal_point_is_checked_against_width_and_height_each(tmp_path):
+    """A landscape image: cx may exceed the height (it lies in [0, width)), cy may not exceed the height."""
+    R = np.eye(3)
+
+    def scene(cx, cy):
+        K = np.array([[500.0, 0, cx], [0, 500.0, cy], [0, 0, 1]])
+        folder = tmp_path / f"{cx}_{cy}"
+        write_scene(folder, [BopFrame(0, None, K, 1.0, [BopObjectPose(1, R, np.array([0, 0, 600.0]))])])
+        (folder / "rgb").mkdir()
+        cv2.imwrite(str(folder / "rgb" / "000000.png"), np.zeros((480, 640, 3), np.uint8))
+        return folder
+
+    assert len(load_scene(scene(600.0, 100.0), check_images=True)) == 1  # cx beyond the height, inside the width
+    with pytest.raises(DatasetError, match="principal point outside"):
+        load_scene(scene(100.0, 600.0), check_images=True)  # cy beyond the height

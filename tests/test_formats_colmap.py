@@ -175,3 +175,17 @@ def test_a_pycolmap_camera_converts_to_opencv_by_the_modules_half_pixel():
         expected[:2, 2] = points_colmap_to_opencv(expected[:2, 2])
         np.testing.assert_array_equal(K, expected)
     np.testing.assert_array_equal(points_opencv_to_colmap([[0.0, 0.0]]), [[0.5, 0.5]])
+
+
+@pytest.mark.parametrize(
+    "model, params, dist",
+    [
+        ("SIMPLE_RADIAL", [500.0, 320.5, 240.5, 0.1], [0.1, 0.0, 0.0, 0.0]),
+        ("RADIAL", [500.0, 320.5, 240.5, 0.1, -0.02], [0.1, -0.02, 0.0, 0.0]),
+    ],
+)
+def test_radial_cameras_keep_their_distortion_in_opencv(model, params, dist):
+    """COLMAP's SIMPLE_RADIAL names its one coefficient ``k``: it is OpenCV's k1, not dropped."""
+    K, d = ColmapCamera(1, model, 640, 480, params).to_opencv()
+    np.testing.assert_allclose(d, dist)
+    np.testing.assert_allclose(K, [[500.0, 0, 320.0], [0, 500.0, 240.0], [0, 0, 1]])

@@ -62,3 +62,24 @@ def test_binary_file_is_a_dataset_error(tmp_path):
     (tmp_path / "x_par.txt").write_bytes(b"\xff\xfe\x00binary")
     with pytest.raises(DatasetError, match="not a text file"):
         read_middlebury(tmp_path)
+
+
+_MB_LINE = "a.png 1520.4 0 302.32 0 1525.9 246.87 0 0 1 1 0 0 0 1 0 0 0 1 0.01 -0.02 0.6"
+
+
+def test_a_scaled_camera_matrix_is_normalized_to_k33_one(tmp_path):
+    """``x = K [R | t] X`` is homogeneous: a file whose K is scaled (K[2, 2] = 2) names the same camera."""
+    scaled = "a.png 3040.8 0 604.64 0 3051.8 493.74 0 0 2 1 0 0 0 1 0 0 0 1 0.01 -0.02 0.6"
+    (tmp_path / "x_par.txt").write_text(f"1\n{scaled}\n")
+    (tmp_path / "a.png").write_bytes(b"")
+    (view,) = read_middlebury(tmp_path)
+    np.testing.assert_allclose(view.K, [[1520.4, 0, 302.32], [0, 1525.9, 246.87], [0, 0, 1]])
+
+
+def test_a_reflection_is_not_a_rotation(tmp_path):
+    """An orthonormal R of determinant -1 (a mirrored camera) is refused, not read as a pose."""
+    mirrored = _MB_LINE.replace(" 1 0 0 0 1 0 0 0 1 ", " -1 0 0 0 1 0 0 0 1 ")
+    (tmp_path / "x_par.txt").write_text(f"1\n{mirrored}\n")
+    (tmp_path / "a.png").write_bytes(b"")
+    with pytest.raises(DatasetError, match="not a rotation"):
+        read_middlebury(tmp_path)

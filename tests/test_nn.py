@@ -845,3 +845,42 @@ def test_the_repr_names_the_model_or_the_weight_file(tmp_path):
     copy = shutil.copy(MODELS["gain-lite"], tmp_path / "mine.npz")
     assert ALCN2d(weights=copy).extra_repr().startswith(f"weights={str(copy)!r}, scale=1.0")
     assert ALCN2d(weights=load_normalizer_file(copy)).extra_repr().startswith(f"weights={str(copy)!r}")
+
+
+def test_apply_batch_rounds_to_the_nearest_level():
+    """An integer output is the float output rounded to the nearest level (as apply()'s), not truncated: half the
+    pixels would otherwise lose a grey level."""
+    pytest.importorskip("torch")
+    rng = np.random.default_rng(0)
+    frames = cv2.GaussianBlur((rng.random((60, 80, 3)) * 255).astype(np.uint8), (0, 0), 2).transpose(2, 0, 1).copy()
+    alcn = alcn_cv.createALCN(backend="torch")
+    unit = alcn.apply_batch(frames, out_dtype=np.float32)
+    np.testing.assert_array_equal(alcn.apply_batch(frames), np.rint(unit * 255).astype(np.uint8))
+    np.testing.assert_array_equal(
+        alcn.apply_batch(frames, out_dtype=np.uint16), np.rint(unit * np.float32(65535)).astype(np.uint16)
+    )
+
+
+def test_the_working_image_is_opencvs_area_resize_for_any_width():
+    """ALCN2d's working image at scale 0.5 of a 60 x 81 frame (the width no multiple of 2) is apply()'s
+    ``cv2.INTER_AREA`` resize, not an average pooling that drops the last column."""
+    torch = pytest.importorskip("torch")
+    from alcn_cv.nn import ALCN2d
+
+    module = ALCN2d(model="paper").eval()
+    gray = np.random.default_rng(0).random((60, 81), dtype=np.float32)
+    with torch.no_grad():
+        working = module.working(torch.from_numpy(gray)[None, None])[0, 0].numpy()
+    np.testing.assert_allclose(working, module.spec.working_image(gray), atol=1e-5)
+
+
+def test_apply_batch_clamps_float_frames_as_apply_does():
+    """Float frames a rounding above 1 (allowed: 1e-3) are clamped to 1 first."""
+    pytest.importorskip("torch")
+    rng = np.random.default_rng(0)
+    frames = rng.random((2, 48, 64), dtype=np.float32)
+    frames[:, :8] = 1.0
+    over = frames.copy()
+    over[:, :8] = 1.0009
+    alcn = alcn_cv.createALCN(backend="torch")
+    np.testing.assert_array_equal(alcn.apply_batch(over), alcn.apply_batch(frames))

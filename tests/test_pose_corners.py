@@ -862,3 +862,45 @@ def test_metadata_that_is_not_an_object_is_one_line(random_net, tmp_path):
     onnx.save(model, path)
     with pytest.raises(WeightFileError, match=r"list.onnx: the header is not a JSON object; not a corner detector"):
         pc.read_metadata(path)
+
+
+def test_gated_search_keeps_gated_top_k_down_to_gated_min_score(random_net, monkeypatch):
+    """Around a prediction the detector keeps ``gated_top_k`` (not ``top_k``) candidates, and accepts scores down to
+    ``gated_min_score``, below the whole frame's ``min_score``."""
+    det = pc.CornerDetector(random_net[1], top_k=5, gated_top_k=2, min_score=0.05, gated_min_score=0.02, gate=40.0)
+    shape = pc.grid_shape(120, 160)
+    near = [(40.0, 60.0, 0.5), (52.0, 60.0, 0.4), (40.0, 72.0, 0.3)]  # downscaled pixels, 12 apart
+    faint = (100.0, 30.0, 0.03)  # between gated_min_score and min_score
+    monkeypatch.setattr(det, "maps", lambda image: _fake_maps(shape, {1: near, 3: [faint]}))
+    everywhere = det.peaks(None)
+    assert len(everywhere[1][0]) == 3 and len(everywhere[3][0]) == 0
+    predicted = np.tile(pc.from_scaled(np.array([44.0, 62.0]), det.scale), (8, 1))
+    predicted[3] = pc.from_scaled(np.array([faint[:2]]), det.scale)
+    gated = det.peaks(None, predicted)
+    np.testing.assert_allclose(gated[1][1], [0.5, 0.4], atol=1e-6)  # the best two, best first
+    np.testing.assert_allclose(gated[3][1], [0.03], atol=1e-6)
+
+
+def test_the_offsets_are_in_strides(random_net, monkeypatch):
+    """The network's offsets are in units of the stride: each cell votes for its window centre plus
+    ``STRIDE * (dx, dy)`` (downscaled pixels)."""
+    det = pc.CornerDetector(random_net[1])
+    image = np.zeros((120, 160), np.uint8)
+    gh, gw = pc.grid_shape(60, 80)  # the detector's scale is 0.5
+    n = len(det.parts)
+    out = np.zeros((3 * n + 1, gh, gw), np.float32)
+    out[n + 1 :: 2] = 0.5  # dx of every part
+    out[n + 2 :: 2] = -0.25  # dy
+    monkeypatch.setattr(det, "outputs", lambda normalized: out)
+    _, votes = det.maps(image)
+    np.testing.assert_allclose(votes, np.broadcast_to(pc.grid_centres((gh, gw)) + [2.0, -1.0], votes.shape))
+
+
+def test_the_gate_is_a_circle(random_net, monkeypatch):
+    """A candidate 15 px off the prediction in both x and y (21 px away) is outside a gate of 20 px (kills k11)."""
+    det = pc.CornerDetector(random_net[1], gate=20.0)
+    shape = pc.grid_shape(120, 160)
+    monkeypatch.setattr(det, "maps", lambda image: _fake_maps(shape, {2: [(40.0, 60.0, 0.5)]}))
+    at = pc.from_scaled(np.array([40.0, 60.0]), det.scale)
+    assert len(det.peaks(None, np.tile(at + [15.0, 15.0], (8, 1)))[2][0]) == 0
+    assert len(det.peaks(None, np.tile(at + [19.0, 0.0], (8, 1)))[2][0]) == 1

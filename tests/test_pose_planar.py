@@ -12,6 +12,7 @@ import pytest
 from alcn_cv.errors import DatasetError, InputError
 from pose import planar
 from pose.corner_train import CONFS as CORNER_CONFS
+from pose.planar import select_region
 from pose.solver import PoseSolver, project
 
 
@@ -174,3 +175,17 @@ def test_planar_refuses_an_earlier_report_and_a_folder_another_run_writes(tmp_pa
     assert capsys.readouterr().err.strip().endswith("planar_pose.json exists (--overwrite replaces it)")
     with held_folder(tmp_path / "busy"), pytest.raises(InputError, match="is in use by another run"):
         planar.main(tmp_path / "busy", tmp_path / "none", progress=False)
+
+
+def test_select_region_counts_the_keypoints_inside_each_window():
+    """Two textured patches at opposite corners: the window holding the larger one wins, whatever lies above and to
+    the left of it (the integral image's four corners)."""
+    rng = np.random.default_rng(0)
+    img = np.full((240, 320), 128, np.uint8)
+    noise = lambda n, side: cv2.resize(  # noqa: E731
+        rng.integers(0, 256, (n, n), dtype=np.uint8), (side, side), interpolation=cv2.INTER_NEAREST
+    )
+    img[10:90, 10:90] = noise(20, 80)  # the smaller patch, top left
+    img[130:230, 210:310] = noise(25, 100)  # the larger one, bottom right
+    x, y, w, h = select_region(img, 0.5)
+    assert (w, h) == (160, 120) and x <= 210 and x + w >= 310 and y <= 130 and y + h >= 230

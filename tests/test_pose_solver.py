@@ -489,3 +489,31 @@ def test_msac_cost_truncates_each_error_at_the_inlier_threshold():
     img[0] += [100.0, 0.0]  # an outlier: counts the threshold, 4 px, not 100 px
     img[1] += [0.0, 2.0]  # an inlier: its own 2 px
     assert PoseSolver(K, reprojection_error=4.0)._cost(obj, img, rvec, tvec) == pytest.approx(4.0**2 + 2.0**2)
+
+
+K_EVAL = camera_matrix(600.0, 600.0, 320.0, 240.0)
+
+
+def test_each_metric_has_its_papers_threshold():
+    """Table 1's metrics: ADD under 10 % of the diameter (not of the radius), 5 cm AND 5 degrees."""
+    v = np.array([[0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]], float)
+    R, t = np.eye(3), np.array([0, 0, 500.0])
+    diameter = 141.4
+    add_10mm = score(v, K_EVAL, "mm", (R, t + [0, 0, 10.0]), (R, t))  # ADD 10 < 14.1, > 7.07
+    assert summarize([add_10mm], diameter)["add"] == 100.0
+    turned = cv2.Rodrigues(np.array([0, np.radians(8.0), 0]))[0]
+    rotated = score(v, K_EVAL, "mm", (turned, t), (R, t))  # 8 degrees off, 0 cm
+    assert summarize([rotated], diameter)["5cm5deg"] == 0.0
+    moved = score(v, K_EVAL, "mm", (R, t + [60.0, 0, 0]), (R, t))  # 6 cm off, 0 degrees
+    assert summarize([moved], diameter)["5cm5deg"] == 0.0
+
+
+def test_projection_error_is_the_mean_distance_over_the_vertices():
+    """Table 1's 2D projection error is the mean over the model's vertices, not the worst one."""
+    v = np.array([[0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]], float)
+    R, t = np.eye(3), np.array([0, 0, 500.0])
+    moved = t + [5.0, 0, 0]  # the vertices at depth 500 move 6 px, the one at depth 600 5 px
+    a = cv2.projectPoints(v, np.zeros(3), t, K_EVAL, None)[0].reshape(-1, 2)
+    b = cv2.projectPoints(v, np.zeros(3), moved, K_EVAL, None)[0].reshape(-1, 2)
+    assert projection_error(v, R, moved, R, t, K_EVAL) == pytest.approx(np.linalg.norm(a - b, axis=1).mean())
+    assert projection_error(v, R, moved, R, t, K_EVAL) == pytest.approx((3 * 6.0 + 5.0) / 4)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import cv2
 import numpy as np
 import pytest
@@ -291,3 +293,17 @@ def test_image_blocks_are_space_to_depth():
     assert blocks.shape == (1, b * b, 8 // b, 12 // b)
     for y, x, i, j in [(0, 0, 0, 0), (1, 2, 1, 0), (3, 3, 1, 2), (2, 1, 0, 1)]:
         assert blocks[0, b * y + x, i, j] == padded[b * i + y, b * j + x]
+
+
+def test_the_export_carries_the_weight_files_header(tmp_path):
+    """The ``.onnx`` describes itself: its ``metadata_props["alcn_cv"]`` is the weight file's header without the
+    training record (sigmas, working scale and output range: what Eq. 3 around the network needs)."""
+    import onnx
+
+    from alcn_cv.train.export import export_onnx
+    from alcn_cv.weight_file import ONNX_METADATA_KEY
+
+    out = export_onnx(tmp_path / "lite.onnx", MODELS["lite"])
+    props = {p.key: p.value for p in onnx.load(str(out)).metadata_props}
+    meta = load_normalizer_file(MODELS["lite"]).meta
+    assert json.loads(props[ONNX_METADATA_KEY]) == {k: v for k, v in meta.items() if k != "training"}

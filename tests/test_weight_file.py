@@ -298,3 +298,29 @@ def test_an_onnx_file_opencv_cannot_parse_is_one_line_without_opencvs_source(tmp
     message = str(info.value)
     assert message.startswith(f"OpenCV cannot read the ONNX model {path}: ") and len(message.splitlines()) == 1
     assert "/modules/" not in message and "OpenCV(" not in message  # its build's source path and version
+
+
+@pytest.mark.parametrize("output_range", [[0.5, 0.5], [1.0, 0.0]])
+def test_an_empty_output_range_is_refused(tmp_path, output_range):
+    """``to_unit`` divides by ``hi - lo``: an empty range would make every output inf or NaN."""
+    lite = load_normalizer_file(MODELS["lite"])
+    path = _write_npz(tmp_path / "w.npz", lite.arrays, {**lite.meta, "output_range": output_range})
+    with pytest.raises(WeightFileError, match="is empty"):
+        load_normalizer_file(path)
+
+
+def test_a_gain_header_restating_tau_a_thousandth_off_is_refused(tmp_path):
+    """The header restates tau to float32 rounding (1e-6), not roughly: 0.1 % off is a damaged file."""
+    gain = load_normalizer_file(MODELS["gain"])
+    tau = gain.meta["equalization"]["tau"]
+    meta = {**gain.meta, "equalization": {**gain.meta["equalization"], "tau": tau * 1.001}}
+    with pytest.raises(WeightFileError, match="header field 'equalization.tau'"):
+        load_normalizer_file(_write_npz(tmp_path / "w.npz", gain.arrays, meta))
+
+
+@pytest.mark.parametrize(("field", "value"), [("stride", 0), ("dilations", [1, 0])])
+def test_a_gain_grid_of_zero_is_refused(tmp_path, field, value):
+    gain = load_normalizer_file(MODELS["gain"])
+    meta = {**gain.meta, "config": {**gain.meta["config"], field: value}}
+    with pytest.raises(WeightFileError, match=f"header field 'config.{field}' must be"):
+        load_normalizer_file(_write_npz(tmp_path / "w.npz", gain.arrays, meta))
