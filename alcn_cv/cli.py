@@ -206,7 +206,8 @@ def add_conf_option(
         parser.add_argument(
             "--print-config",
             action="store_true",
-            help="print the preset of --conf with the --set overrides applied, every key, and exit",
+            help="print the configuration of --conf (a preset, or a file where the command takes one) with --set and "
+            "the other options given applied, every key, and exit",
         )
     width = max(map(len, summaries))
     rows = [f"  {name:<{width}}  {what}" for name, what in summaries.items()]

@@ -2,7 +2,6 @@
 
 import inspect
 import logging
-import math
 import os
 
 import cv2
@@ -403,6 +402,7 @@ def test_alcn_window_in_input_pixels_and_small_images(caplog, monkeypatch):
 
     monkeypatch.setattr(base, "_WARNED_SMALL", set())
     assert alcn_cv.createALCN(scale=0.5).min_size == 96 and alcn_cv.createALCN(scale=1.0).min_size == 48
+    assert alcn_cv.createALCN(model="paper", scale=0.7).min_size == 69  # 68.6 rounded up
     with caplog.at_level("WARNING", logger="alcn_cv.enhance.base"):
         out = alcn_cv.createALCN(model="lite").apply(np.full((47, 47), 128, np.uint8))
     assert out.shape == (47, 47)
@@ -639,8 +639,8 @@ def test_the_numpy_filters_name_a_wrong_dtype():
 
 
 def test_from_spec_defaults_yield_to_the_specs_own_parameters():
-    """``from_spec(spec, **defaults)``: the defaults fill in what the spec does not give (the corner detector's
-    ``scale=1.0, backend="opencv"`` under a recorded ``alcn:backend=fast``), never override it."""
+    """``from_spec(spec, **defaults)``: the defaults fill in what the spec does not give, never override it (the
+    corner detector's ``scale=1.0`` under a recorded ``alcn:scale=...``)."""
     dog = from_spec("dog:sigma2=3", sigma2=2.0, sigma1=0.75)
     assert (dog.sigma1, dog.sigma2) == (0.75, 3.0)
 
@@ -649,8 +649,3 @@ def test_a_whole_float_for_an_integer_parameter_is_left_to_the_constructor():
     """``-p size=9.0`` (a float where an int is annotated) is accepted as the registry's comment promises."""
     assert alcn_cv.create("lrn:size=9.0").size == 9
     assert alcn_cv.create("lrn", size=np.int64(9)).size == 9
-
-
-def test_min_size_is_the_window_rounded_up_to_input_pixels():
-    alcn = alcn_cv.createALCN(model="paper", scale=0.7)
-    assert alcn.min_size == math.ceil(48 / 0.7) == 69

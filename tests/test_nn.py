@@ -613,8 +613,8 @@ def test_torch_jit_trace_of_a_trainable_module(channels):
 def test_a_users_onnx_export_gives_the_modules_output(model, shape, tmp_path):
     """torch.onnx.export of the module (the docstring lists it), run by ONNX's reference evaluator: the lite and paper
     models' grid was one point short in the graph, 0.02-0.05 off without an error, and the gain models' wide band
-    failed on sides that are not a multiple of 8 (ceilings written with a negative floor division, which ONNX's
-    integer Div truncates)."""
+    failed on some sides that are not a multiple of 8 (121, 125 or 161 px: ceilings written with a negative floor
+    division, which ONNX's integer Div truncates)."""
     import onnx
     from onnx.reference import ReferenceEvaluator
 

@@ -8,6 +8,7 @@ from types import SimpleNamespace
 import cv2
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from alcn_cv.errors import DatasetError, InputError
 from box_points import box_faces
@@ -90,6 +91,29 @@ def test_match_known_size_by_the_face_aspect():
     assert matched.tolist() == [25.8, 18.9, 7.5] and s == pytest.approx(6.45, rel=0.01)
     matched, s = box_fit.match_known_size([95.0, 55.0, 139.0], [140, 95, 55])
     assert matched.tolist() == [95, 55, 140] and s == 1.0
+
+
+def test_a_partly_seen_height_longer_than_a_face_edge_keeps_the_faces_edges():
+    """A 100 x 60 lid measured 100 x 61 with 5 of the 70 mm height seen: the lid's edges get 100 and 60, the height
+    70 (a shortfall of the normal costs nothing; charging it would swap 60 and 70)."""
+    matched, scale = box_fit.match_known_size(np.array([100.0, 61.0, 5.0]), np.array([70.0, 60.0, 100.0]))
+    np.testing.assert_array_equal(matched, [100.0, 60.0, 70.0])
+    assert scale == 1.0
+
+
+def test_a_tilted_box_is_moved_to_touch_its_support_plane():
+    """The box's half-extent along the plane's normal is that of the box turned by R: its lowest corner ends on the
+    plane z = 0, none below."""
+    R = Rotation.from_rotvec(np.radians(40) * np.array([1.0, 2.0, 3.0]) / np.sqrt(14)).as_matrix()
+    known = np.array([30.0, 20.0, 10.0])
+    center = np.array([5.0, -3.0, 100.0])
+    points = center + (np.random.default_rng(0).uniform(-0.5, 0.5, (200, 3)) * known) @ R.T
+    size, moved = box_fit.place_known_box(
+        points, R, center, np.ones(200, bool), -known / 2, known / 2, known, False, None, np.array([0, 0, 1.0, 0]), {}
+    )
+    signs = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+    corners = moved + (signs * size) @ R.T
+    assert corners[:, 2].min() == pytest.approx(0.0, abs=1e-9)
 
 
 def test_representatives_medoid_then_farthest():

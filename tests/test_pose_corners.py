@@ -897,7 +897,8 @@ def test_the_offsets_are_in_strides(random_net, monkeypatch):
 
 
 def test_the_gate_is_a_circle(random_net, monkeypatch):
-    """A candidate 15 px off the prediction in both x and y (21 px away) is outside a gate of 20 px (kills k11)."""
+    """A candidate 15 px off the prediction in both x and y (21 px away) is outside a gate of 20 px: a circle, not a
+    square."""
     det = pc.CornerDetector(random_net[1], gate=20.0)
     shape = pc.grid_shape(120, 160)
     monkeypatch.setattr(det, "maps", lambda image: _fake_maps(shape, {2: [(40.0, 60.0, 0.5)]}))

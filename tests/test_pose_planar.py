@@ -177,15 +177,27 @@ def test_planar_refuses_an_earlier_report_and_a_folder_another_run_writes(tmp_pa
         planar.main(tmp_path / "busy", tmp_path / "none", progress=False)
 
 
-def test_select_region_counts_the_keypoints_inside_each_window():
-    """Two textured patches at opposite corners: the window holding the larger one wins, whatever lies above and to
-    the left of it (the integral image's four corners)."""
+@pytest.mark.parametrize("corner", ["top left", "bottom right"])
+def test_select_region_counts_the_keypoints_inside_each_window(corner):
+    """A large textured patch in one corner and smaller ones elsewhere: the window holding the large one wins. In the
+    top left (smaller patches in the three other corners), a count that took in what lies above, left or above-left
+    of a window would favour the others; in the bottom right (one smaller patch in the top left), a count that left
+    out the integral image's fourth corner would."""
     rng = np.random.default_rng(0)
     img = np.full((240, 320), 128, np.uint8)
-    noise = lambda n, side: cv2.resize(  # noqa: E731
-        rng.integers(0, 256, (n, n), dtype=np.uint8), (side, side), interpolation=cv2.INTER_NEAREST
-    )
-    img[10:90, 10:90] = noise(20, 80)  # the smaller patch, top left
-    img[130:230, 210:310] = noise(25, 100)  # the larger one, bottom right
+
+    def texture(cells: int, side: int) -> np.ndarray:
+        noise = rng.integers(0, 256, (cells, cells), dtype=np.uint8)
+        return cv2.resize(noise, (side, side), interpolation=cv2.INTER_NEAREST)
+
+    if corner == "top left":
+        top, left, side = 10, 10, 100
+        img[10:110, 10:110] = texture(25, side)
+        for y, x in [(10, 250), (170, 10), (170, 250)]:
+            img[y : y + 60, x : x + 60] = texture(15, 60)
+    else:
+        top, left, side = 130, 210, 100
+        img[10:90, 10:90] = texture(20, 80)
+        img[130:230, 210:310] = texture(25, side)
     x, y, w, h = select_region(img, 0.5)
-    assert (w, h) == (160, 120) and x <= 210 and x + w >= 310 and y <= 130 and y + h >= 230
+    assert (w, h) == (160, 120) and x <= left and x + w >= left + side and y <= top and y + h >= top + side
