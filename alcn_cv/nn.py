@@ -118,9 +118,9 @@ class ALCN2d(nn.Module):
     image propagates its shape; colour raises (torch has no autocast there, which the Lab conversions switch off).
     ``torch.onnx.export`` (``dynamo=False``) writes it from an example image of 120x160 or larger (a smaller one may
     be refused: the network's pads would be longer than its grid); as a trace, the graph is for the example's size
-    (with dynamic axes, other sizes give wrong values or fail). The 1e-5 from
-    ``apply()`` holds for integers converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``):
-    ``image / 255`` differs by a float rounding, which the divisive step amplifies to 6e-5 on a photograph.
+    (with dynamic axes, other sizes give wrong values or fail). The 1e-5 from ``apply()`` holds for integers
+    converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs by a float
+    rounding, which the divisive step amplifies to 6e-5 on a photograph.
 
     In a ``DataLoader``'s workers (or any process forked after this one ran torch's threads, which a fork leaves
     behind), the module runs on one thread: the outputs are one thread's, to float rounding.
