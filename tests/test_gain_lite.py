@@ -154,3 +154,18 @@ def test_gain_alcn_pickles_after_use():
     out = alcn.apply(frame)
     for clone in (pickle.loads(pickle.dumps(alcn)), copy.deepcopy(alcn)):
         np.testing.assert_array_equal(clone.apply(frame), out)
+
+
+def test_the_maps_error_ignores_a_scale_of_the_whole_frames_maps():
+    """The divisive step after the maps cancels a scale of the whole frame's maps, so the distillation copies their
+    shape only: maps 3 times the teacher's cost nothing, mirrored ones do."""
+    from types import SimpleNamespace
+
+    from alcn_cv.train.distill import _GridSample, _maps_error
+
+    maps = torch.randn(1, 2, 5, 6, generator=torch.Generator().manual_seed(0))
+    sample = _GridSample(torch.zeros(1, 4, 5, 6), maps, float(maps.pow(2).sum(1).mean()))
+    scaled = SimpleNamespace(maps_from_features=lambda features: 3.0 * maps)
+    assert float(_maps_error(scaled, sample)) == pytest.approx(0.0, abs=1e-10)
+    mirrored = SimpleNamespace(maps_from_features=lambda features: maps.flip(-1))
+    assert float(_maps_error(mirrored, sample)) > 0.1
