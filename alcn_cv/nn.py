@@ -59,7 +59,7 @@ from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
 from alcn_cv.row_parts import run_parts
-from alcn_cv.runtime import MODELS, ModelSpec, resolve_weights
+from alcn_cv.runtime import ModelSpec, resolve_weights, weights_setting
 from alcn_cv.weight_file import NormalizerFile, load_normalizer_file, save_normalizer_file
 
 #: The runtime adapters of createALCN(backend="fast" | "torch"), TorchNetwork and TorchRuntime, are the library's, not
@@ -153,13 +153,6 @@ class ALCN2d(nn.Module):
         self.spec = ModelSpec.from_file(weight_file, scale)
         self.net = normalizer_from_file(weight_file)
         self._built_from = weight_file.meta, weight_file.path  # the header and file that save() writes from
-        # the repr's first setting: the shipped model, or the weight file (its contents when given loaded)
-        path = weight_file.path
-        shipped = next((name for name, file in MODELS.items() if path is not None and Path(path) == file), None)
-        if shipped is not None:
-            self._source = f"model={shipped!r}"
-        else:
-            self._source = "weights=<contents>" if path is None else f"weights={str(path)!r}"
         buffers = dict(self.net.named_buffers())
         #: The file's values of the fixed scales (buffers: a gain model's tau and floor), which save() writes back
         #: where a cast to float16 or bfloat16 only rounded them.
@@ -353,7 +346,8 @@ class ALCN2d(nn.Module):
         )
 
     def extra_repr(self) -> str:
-        return f"{self._source}, scale={self.spec.scale}, grid_stride={self.grid_stride}, allow_tf32={self.allow_tf32}"
+        source = weights_setting(self._built_from[1])
+        return f"{source}, scale={self.spec.scale}, grid_stride={self.grid_stride}, allow_tf32={self.allow_tf32}"
 
     def __prepare_scriptable__(self) -> NoReturn:
         """``torch.jit.script`` asks this first: the module is not scriptable (its error would be TorchScript's

@@ -54,6 +54,7 @@ __all__ = [
     "make_runtime",
     "opencv_network",
     "resolve_weights",
+    "weights_setting",
 ]
 
 logger = logging.getLogger(__name__)
@@ -471,6 +472,15 @@ def resolve_weights(model: str | None, weights: str | Path | None) -> Path:
     if model not in MODELS:
         raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
     return Path(weights) if weights is not None else MODELS[model]
+
+
+def weights_setting(path: str | Path | None) -> str:
+    """How a repr names the Normalizer of the weight file ``path``: ``model='gain'`` for a shipped file, else
+    ``weights='PATH'`` (``weights=<contents>`` for None: the file's contents given already loaded)."""
+    if path is None:
+        return "weights=<contents>"
+    shipped = next((name for name, file in MODELS.items() if Path(path) == file), None)
+    return f"model={shipped!r}" if shipped else f"weights={str(path)!r}"
 
 
 def check_teacher(meta: dict, path: Path) -> None:

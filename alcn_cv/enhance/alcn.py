@@ -45,6 +45,7 @@ from alcn_cv.runtime import (
     opencv_network,
     resolve_weights,
     strip_layout,
+    weights_setting,
 )
 from alcn_cv.weight_file import NormalizerFile, load_normalizer_file
 
@@ -333,10 +334,8 @@ class ALCN(Normalization):
         return np.stack([with_alpha(image, alpha, dtype) for image, alpha in zip(out, frames[..., -1])])
 
     def __repr__(self) -> str:
-        shipped = next((name for name, path in MODELS.items() if path == self.weights_path), None)
-        source = f"model={shipped!r}" if shipped else f"weights={str(self.weights_path)!r}"
         return (
-            f"ALCN({source}, scale={self.scale}, backend={self.backend!r}, "
+            f"ALCN({weights_setting(self.weights_path)}, scale={self.scale}, backend={self.backend!r}, "
             f"grid_stride={self.grid_stride}, mixture={self.mixture!r}, threads={self.threads}, trained={self.trained})"
         )
 

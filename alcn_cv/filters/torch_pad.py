@@ -38,15 +38,14 @@ def reflect101_pad(x: torch.Tensor, top: int, bottom: int, left: int, right: int
         padded = reflect101_pad(x.reshape(-1, 1, *x.shape[-2:]), top, bottom, left, right)
         return padded.reshape(*x.shape[:-2], *padded.shape[-2:])
     h, w = x.shape[-2:]
-    fits = max(top, bottom) < h and max(left, right) < w
-    if fits or torch.onnx.is_in_onnx_export():
+    if max(top, bottom) < h and max(left, right) < w:
         # torch's reflect is reflect-101; one fast pass. Exported as an ONNX Pad, which cv2.dnn (the export's
         # consumer) reflects repeatedly where the pad exceeds the size, as the path below: the graph takes any size
-        if not fits:  # but torch traces no such pad: its own error names neither the image nor what to do
-            raise InputError(
-                f"an ONNX export traces a reflect pad of {max(top, bottom, left, right)} px on a {h}x{w} plane, "
-                "longer than its side, which torch cannot export: export with a larger example image (120x160 "
-                "exports every shipped model)"
-            )
         return F.pad(x, (left, right, top, bottom), mode="reflect")
+    if torch.onnx.is_in_onnx_export():  # torch traces no such pad: its own error names neither the image nor a fix
+        raise InputError(
+            f"an ONNX export traces a reflect pad of {max(top, bottom, left, right)} px on a {h}x{w} plane, longer "
+            "than its side, which torch cannot export: export with a larger example image (120x160 exports every "
+            "shipped model)"
+        )
     return _reflect101_along(_reflect101_along(x, -2, top, bottom), -1, left, right)
