@@ -7,7 +7,9 @@ out, equal to :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>`'s float outpu
 normalized on the L channel of CIE Lab, a and b kept), differentiable end to end. In float32 on the CPU, with or
 without autograd (:func:`~alcn_cv.nets.cpu_inference.cpu_eager`), colour is converted to Lab by ``apply()``'s own
 OpenCV passes (within 3e-6 of it), differentiated as :mod:`alcn_cv.filters.torch_lab`, OpenCV's arithmetic in torch,
-which converts it elsewhere (within 1e-4).
+which converts it elsewhere (within 1e-4). In float32 CPU inference (no autograd, trace, export, compilation or
+autocast) the gain models' filters are ``apply()``'s own runtime too (:class:`~alcn_cv.runtime.GainRuntime`, with the
+module's network), as fast as ``apply()``; their torch filters run everywhere else.
 Importing this module imports torch and kornia; importing :mod:`alcn_cv` does not.
 
 Example:
@@ -53,13 +55,13 @@ from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_resize import area_downsample, interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
-from alcn_cv.nets.cpu_inference import cpu_eager
+from alcn_cv.nets.cpu_inference import cpu_eager, cpu_inference
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
 from alcn_cv.row_parts import run_parts
-from alcn_cv.runtime import ModelSpec, resolve_weights, weights_setting
+from alcn_cv.runtime import ModelSpec, make_runtime, resolve_weights, weights_setting
 from alcn_cv.weight_file import NormalizerFile, load_normalizer_file, save_normalizer_file
 
 #: The runtime adapters of createALCN(backend="fast" | "torch"), TorchNetwork and TorchRuntime, are the library's, not
@@ -267,13 +269,44 @@ class ALCN2d(nn.Module):
         floor: torch.Tensor | None = None,
         small: torch.Tensor | None = None,
         band_floor: torch.Tensor | None = None,
+        half: bool = False,
     ) -> torch.Tensor:
         """The raw normalized response ``(B, 1, H, W)`` (unbounded; :meth:`forward` maps it to [0, 1]); ``floor``
-        as in :meth:`finish`, ``small`` as in :meth:`weight_maps`, ``band_floor`` as in :meth:`with_band`."""
+        as in :meth:`finish`, ``small`` and ``half`` as in :meth:`eq3`, ``band_floor`` as in :meth:`with_band`."""
         if gray.ndim != 4 or gray.shape[1] != 1:
             raise InputError(f"gray must have shape (B, 1, H, W), got {tuple(gray.shape)}")
+        if small is None and not half and self._runs_opencv(gray):
+            return self._opencv_response(gray, floor, band_floor)
         with self._tf32(gray):
-            return self.with_band(self.finish(self.eq3(gray, small), floor), gray, band_floor)
+            return self.with_band(self.finish(self.eq3(gray, small, half), floor), gray, band_floor)
+
+    def _runs_opencv(self, gray: torch.Tensor) -> bool:
+        """Whether :meth:`response` runs ``apply()``'s own OpenCV runtime with this module's network: the gain family
+        at scale 1 in CPU inference (:func:`~alcn_cv.nets.cpu_inference.cpu_inference`), where torch's filters pass
+        over the whole image once per operation and :class:`~alcn_cv.runtime.GainRuntime` runs them by parts of the
+        rows, in cache (1.5 times as fast at 1280x800); the same values to float rounding. Not under a caller's
+        autocast, whose precision the network takes."""
+        return (
+            isinstance(self.net, GainNormalizer)
+            and self.spec.per_pixel
+            and self.spec.scale == 1
+            and cpu_inference(gray)
+            and not torch.is_autocast_enabled("cpu")
+        )
+
+    def _opencv_response(
+        self, gray: torch.Tensor, floor: torch.Tensor | None, band_floor: torch.Tensor | None
+    ) -> torch.Tensor:
+        """:meth:`response` by :class:`~alcn_cv.runtime.GainRuntime`, one image of the batch at a time."""
+        runtime = make_runtime(self.spec, TorchNetwork(self.net, self.grid_stride, 1), "exact")
+        planes = []
+        for i, image in enumerate(gray[:, 0].numpy()):
+            floors = (None if f is None else float(f[i if len(f) > 1 else 0]) for f in (floor, band_floor))
+            planes.append(runtime.normalize(np.ascontiguousarray(image), *floors))
+        # NumPy's copy, not torch's: torch's threads, left spinning after a parallel copy, would slow OpenCV's calls
+        if len(planes) == 1:
+            return torch.from_numpy(planes[0][None, None])
+        return torch.from_numpy(np.stack(planes)[:, None]) if planes else torch.empty_like(gray)
 
     def to_unit(self, response: torch.Tensor) -> torch.Tensor:
         """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""
@@ -702,9 +735,8 @@ class TorchRuntime:
                 host = host.pin_memory()
             x = host.to(self.device, non_blocking=cuda)[:, None]
             x = x.clamp(0, 1) if frames.dtype == np.float32 else x.float() * (1.0 / FULL_SCALE[frames.dtype])
-            with self.module._tf32(x):
-                response = self.module.eq3(x, half=half)  # the network in float16 when half; Eq. 3 in float32
-                unit = self.module.to_unit(self.module.with_band(self.module.finish(response), x))[:, 0]
+            # the network in float16 when half, Eq. 3 in float32
+            unit = self.module.to_unit(self.module.response(x, half=half))[:, 0]
             if out_dtype != np.float32:
                 unit = torch.round(unit * FULL_SCALE[out_dtype]).to(_TORCH_DTYPES[out_dtype])
             out = torch.empty(unit.shape, dtype=unit.dtype, pin_memory=cuda) if cuda else None

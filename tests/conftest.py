@@ -70,3 +70,13 @@ def run_without_torch(run_python):
         assert proc.returncode == 0, proc.stdout + proc.stderr
 
     return run
+
+
+@pytest.fixture(params=["opencv", "torch"])
+def cpu_route(request, monkeypatch) -> str:
+    """Both routes of ALCN2d's CPU inference for the gain models: ``"opencv"``, apply()'s own runtime (what the CPU
+    runs), and ``"torch"``, the module's torch filters (what CUDA, autograd, traces and exports run), forced here."""
+    if request.param == "torch":
+        nn = pytest.importorskip("alcn_cv.nn")
+        monkeypatch.setattr(nn.ALCN2d, "_runs_opencv", lambda self, gray: False)
+    return request.param

@@ -139,7 +139,7 @@ def test_bad_input_messages(methods):
         alcn.apply(np.full((8, 8), 0.5, np.float32) - np.eye(8, dtype=np.float32))
 
 
-def test_alcn_backends_agree(frames):
+def test_alcn_backends_agree(frames, cpu_route):
     gray, _ = frames
     exact = alcn_cv.createALCN(mixture="exact").normalize(gray)
     np.testing.assert_allclose(exact, alcn_cv.createALCN(backend="torch").normalize(gray), atol=1e-4)
@@ -494,7 +494,7 @@ def test_a_forked_child_normalizes_after_its_parent_used_torchs_threads(kwargs):
 
 
 @pytest.mark.parametrize("shape", [(1, 640), (640, 1), (3, 3), (6, 6, 3)])
-def test_the_torch_backend_mirrors_small_images_as_the_default_backend(shape):
+def test_the_torch_backend_mirrors_small_images_as_the_default_backend(shape, cpu_route):
     """apply() mirrors an image smaller than its kernels; the torch backend raised below 7 px (31 for lite)."""
     img = np.random.default_rng(1).integers(0, 256, shape).astype(np.uint8)
     for model in ("gain", "lite"):

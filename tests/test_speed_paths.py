@@ -83,7 +83,7 @@ def test_torch_threads_default_by_backend_and_are_restored():
 
 
 @pytest.mark.parametrize("model", ["lite", "gain"])
-def test_batched_torch_path_equals_apply(model):
+def test_batched_torch_path_equals_apply(model, cpu_route):
     alcn = alcn_cv.createALCN(model=model, backend="torch")
     frames = np.stack([synthetic_frame(160, 96, False, seed=i) for i in range(3)])
     single = np.stack([alcn.apply(f, out_dtype=np.float32) for f in frames])
@@ -107,7 +107,7 @@ def test_batched_path_errors():
         alcn.apply_batch(np.full((2, 64, 64), 2.0, np.float32))
 
 
-def test_batched_path_takes_what_apply_takes():
+def test_batched_path_takes_what_apply_takes(cpu_route):
     """BGR and BGRA frames: normalized on their CIE L, alpha passed through, as apply() does."""
     alcn = alcn_cv.createALCN(backend="torch")
     rng = np.random.default_rng(0)
