@@ -8,8 +8,8 @@ normalized on the L channel of CIE Lab, a and b kept), differentiable end to end
 without autograd (:func:`~alcn_cv.nets.cpu_inference.cpu_eager`), colour is converted to Lab by ``apply()``'s own
 OpenCV passes (within 3e-6 of it), differentiated as :mod:`alcn_cv.filters.torch_lab`, OpenCV's arithmetic in torch,
 which converts it elsewhere (within 1e-4). In float32 CPU inference (no autograd, trace, export, compilation or
-autocast) the gain models' filters are ``apply()``'s own runtime too (:class:`~alcn_cv.runtime.GainRuntime`, with the
-module's network), as fast as ``apply()``; their torch filters run everywhere else.
+autocast) the gain models run ``apply()``'s own passes throughout (:class:`~alcn_cv.runtime.GainRuntime` with the
+module's network, and ``apply()``'s colour path), as fast as ``apply()``; their torch filters run everywhere else.
 Importing this module imports torch and kornia; importing :mod:`alcn_cv` does not.
 
 Example:
@@ -32,6 +32,7 @@ from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
 from typing import NoReturn
 
+import cv2
 import numpy as np
 
 from alcn_cv.extras import missing_extra
@@ -49,6 +50,7 @@ except ModuleNotFoundError as exc:
     raise error from exc
 
 from alcn_cv.checks import FLOAT_TOLERANCE, FULL_SCALE
+from alcn_cv.enhance.base import normalized_bgr
 from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import srgb_to_lab
 from alcn_cv.filters.torch_divisive import divisive_normalization
@@ -61,7 +63,7 @@ from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
 from alcn_cv.row_parts import run_parts
-from alcn_cv.runtime import ModelSpec, make_runtime, resolve_weights, weights_setting
+from alcn_cv.runtime import GainRuntime, ModelSpec, resolve_weights, weights_setting
 from alcn_cv.weight_file import NormalizerFile, load_normalizer_file, save_normalizer_file
 
 #: The runtime adapters of createALCN(backend="fast" | "torch"), TorchNetwork and TorchRuntime, are the library's, not
@@ -298,15 +300,39 @@ class ALCN2d(nn.Module):
         self, gray: torch.Tensor, floor: torch.Tensor | None, band_floor: torch.Tensor | None
     ) -> torch.Tensor:
         """:meth:`response` by :class:`~alcn_cv.runtime.GainRuntime`, one image of the batch at a time."""
-        runtime = make_runtime(self.spec, TorchNetwork(self.net, self.grid_stride, 1), "exact")
+        runtime = self._opencv_runtime()
         planes = []
         for i, image in enumerate(gray[:, 0].numpy()):
             floors = (None if f is None else float(f[i if len(f) > 1 else 0]) for f in (floor, band_floor))
             planes.append(runtime.normalize(np.ascontiguousarray(image), *floors))
-        # NumPy's copy, not torch's: torch's threads, left spinning after a parallel copy, would slow OpenCV's calls
+        # NumPy's copy, not torch's (:meth:`_opencv_runtime`)
         if len(planes) == 1:
             return torch.from_numpy(planes[0][None, None])
         return torch.from_numpy(np.stack(planes)[:, None]) if planes else torch.empty_like(gray)
+
+    def _opencv_forward(self, image: torch.Tensor) -> torch.Tensor:
+        """:meth:`forward` where :meth:`_runs_opencv`, by ``apply()``'s own passes (the colour path
+        :func:`~alcn_cv.enhance.base.normalized_bgr`), one image of the batch at a time, in NumPy and OpenCV
+        throughout (:meth:`_opencv_runtime`)."""
+        normalize = self._opencv_runtime().normalize
+        lo, hi = self.spec.output_range
+        out = np.empty(image.shape, np.float32)
+        for x, y in zip(image.numpy(), out):
+            if len(x) == 3:  # RGB planes to a BGR image and back by OpenCV (NumPy's transposes are slower)
+                bgr = normalized_bgr(cv2.merge(x[::-1]), normalize, (lo, hi), np.dtype(np.float32))
+                for plane, channel in zip(cv2.split(bgr), y[::-1]):
+                    channel[...] = plane
+            else:  # to_unit's operations
+                unit = normalize(np.ascontiguousarray(x[0]))
+                np.subtract(unit, np.float32(lo), out=unit)
+                np.multiply(unit, np.float32(1.0 / (hi - lo)), out=unit)
+                np.clip(unit, 0, 1, out=y[0])
+        return torch.from_numpy(out)
+
+    def _opencv_runtime(self) -> GainRuntime:
+        """``apply()``'s runtime of this module's spec with its network, on one torch thread: a small part, and
+        torch's threads, left spinning after a parallel operation, would slow the OpenCV calls around it."""
+        return GainRuntime(self.spec, TorchNetwork(self.net, self.grid_stride, 1), "exact")
 
     def to_unit(self, response: torch.Tensor) -> torch.Tensor:
         """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""
@@ -346,6 +372,8 @@ class ALCN2d(nn.Module):
         # The filters take in-place paths where no gradient is recorded, and torch.jit.trace's check traces again
         # under no_grad: while tracing, requires_grad alone decides, so that both traces record the same graph.
         with torch.enable_grad() if torch.jit.is_tracing() else nullcontext():
+            if self._runs_opencv(image):
+                return self._opencv_forward(image)
             if image.shape[1] == 1:
                 return self.to_unit(self.response(image))
             lab = _OpenCVLab.apply(image, self.to_lab) if cpu_eager(image) else self.to_lab(image)
@@ -444,7 +472,10 @@ def _check_range(image: torch.Tensor) -> None:
     ):
         return
     try:
-        lo, hi = (float(v) for v in image.detach().aminmax())  # NaN propagates to both
+        # NaN propagates to both; on one thread: torch's threads, left spinning after a parallel reduction, would slow
+        # the OpenCV calls of the CPU runtime that follow (ALCN2d._opencv_runtime)
+        with torch_threads(1):
+            lo, hi = (float(v) for v in image.detach().aminmax())
     except RuntimeError:
         if _IS_FUNCTORCH_WRAPPED is not None:
             raise

@@ -81,6 +81,14 @@ def test_cpu_inference_of_the_gain_models_runs_the_opencv_runtime(model, monkeyp
         module.response(x, half=True)  # the network in float16: torch's
         assert module(x[:0]).shape == (0, 1, *x.shape[2:])  # an empty batch
     assert len(calls) == 2
+    # forward, gray and RGB (apply()'s colour path), against the torch filters
+    rgb = torch.from_numpy(np.stack([_unit(_bgr(seed=i)[..., ::-1].copy()) for i in range(2)])).permute(0, 3, 1, 2)
+    for image in (x, rgb):
+        with torch.no_grad():
+            routed = module(image)
+        assert len(calls) == 4 and routed.shape == image.shape and routed.is_contiguous()
+        torch.testing.assert_close(routed, module(image).detach(), atol=1e-5, rtol=0)
+        del calls[2:]
 
 
 def _colour_differences(model: str, bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -42,7 +42,7 @@ from alcn_cv.checks import (
 from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import linear_to_lab, srgb_to_lab, srgb_to_linear
 
-__all__ = ["NoNormalization", "Normalization", "bgr_with_lightness", "lab_and_lightness"]
+__all__ = ["NoNormalization", "Normalization", "bgr_with_lightness", "lab_and_lightness", "normalized_bgr"]
 
 logger = logging.getLogger(__name__)
 #: Images of more pixels are normalized in horizontal strips by the methods that allow it
@@ -75,6 +75,32 @@ def bgr_with_lightness(lab: np.ndarray, lightness: np.ndarray, out_dtype: np.dty
     if out_dtype == np.uint8:
         return cv2.convertScaleAbs(bgr, alpha=FULL_SCALE[out_dtype])
     return from_unit_float(bgr, out_dtype)
+
+
+def normalized_bgr(
+    img: np.ndarray,
+    normalize: Callable[[np.ndarray], np.ndarray],
+    output_range: tuple[float, float],
+    out_dtype: np.dtype,
+) -> np.ndarray:
+    """A valid BGR image (uint8, uint16 or float32 in [0, 1]) with the L channel of its CIE Lab normalized, a and b
+    kept, as ``out_dtype``: ``normalize`` maps L / 100 (float32 ``HxW``) to raw responses, and ``output_range`` of
+    these maps linearly onto [0, 100], clipped.
+
+    OpenCV passes throughout: the Lab image of :func:`lab_and_lightness` (its L / 100 in one ``cv2.transform``), the
+    response mapped to [0, 100] by ``cv2.addWeighted`` and two thresholds and put back by ``cv2.insertChannel``
+    (:func:`bgr_with_lightness`); ``cv2.COLOR_Lab2BGR`` clips linear RGB to [0, 1] before its sRGB curve, so a uint8
+    output is one ``cv2.convertScaleAbs``. The two float conversions are most of the cost (``alcn bench speed``
+    measures the BGR / gray ratio); OpenCV's 8-bit conversions quantize L to 100/255 and a, b to units, many levels
+    off the float path."""
+    lab, lightness = lab_and_lightness(img)
+    response = normalize(lightness)
+    lo, hi = output_range
+    scale = 100.0 / (hi - lo)
+    lightness = cv2.addWeighted(response, scale, response, 0.0, -lo * scale)
+    cv2.threshold(lightness, 0.0, 0.0, cv2.THRESH_TOZERO, dst=lightness)
+    cv2.threshold(lightness, 100.0, 0.0, cv2.THRESH_TRUNC, dst=lightness)
+    return bgr_with_lightness(lab, lightness, out_dtype)
 
 
 def with_alpha(result: np.ndarray, alpha: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
@@ -248,22 +274,8 @@ class Normalization:
         return self._response_to(self._normalize_checked(unit.reshape(img.shape[:2])), out_dtype).reshape(img.shape)
 
     def _apply_bgr(self, img: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
-        """:meth:`apply` on a valid BGR image: the L channel of CIE Lab normalized, a and b kept.
-
-        OpenCV passes throughout: the Lab image of :func:`lab_and_lightness` (its L / 100 in one ``cv2.transform``),
-        the response mapped to [0, 100] by ``cv2.addWeighted`` and two thresholds and put back by
-        ``cv2.insertChannel`` (:func:`bgr_with_lightness`); ``cv2.COLOR_Lab2BGR`` clips linear RGB to [0, 1] before
-        its sRGB curve, so a uint8 output is one ``cv2.convertScaleAbs``. The two float conversions are most of the
-        cost (``alcn bench speed`` measures the BGR / gray ratio); OpenCV's 8-bit conversions quantize L to 100/255
-        and a, b to units, many levels off the float path."""
-        lab, lightness = lab_and_lightness(img)
-        response = self._normalize_checked(lightness)
-        lo, hi = self.output_range
-        scale = 100.0 / (hi - lo)
-        lightness = cv2.addWeighted(response, scale, response, 0.0, -lo * scale)
-        cv2.threshold(lightness, 0.0, 0.0, cv2.THRESH_TOZERO, dst=lightness)
-        cv2.threshold(lightness, 100.0, 0.0, cv2.THRESH_TRUNC, dst=lightness)
-        return bgr_with_lightness(lab, lightness, out_dtype)
+        """:meth:`apply` on a valid BGR image (:func:`normalized_bgr`)."""
+        return normalized_bgr(img, self._normalize_checked, self.output_range, out_dtype)
 
     def _apply_gray_uint8(self, gray8: np.ndarray) -> np.ndarray | None:
         """:meth:`apply`'s result for a uint8 ``HxW`` image and uint8 output, computed without the
