@@ -50,9 +50,8 @@ except ModuleNotFoundError as exc:
     raise error from exc
 
 from alcn_cv.checks import FLOAT_TOLERANCE, FULL_SCALE
-from alcn_cv.enhance.base import normalized_bgr
 from alcn_cv.errors import InputError
-from alcn_cv.filters.lab import srgb_to_lab
+from alcn_cv.filters.lab import normalized_bgr, srgb_to_lab
 from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_resize import area_downsample, interpolate_grid
@@ -312,7 +311,7 @@ class ALCN2d(nn.Module):
 
     def _opencv_forward(self, image: torch.Tensor) -> torch.Tensor:
         """:meth:`forward` where :meth:`_runs_opencv`, by ``apply()``'s own passes (the colour path
-        :func:`~alcn_cv.enhance.base.normalized_bgr`), one image of the batch at a time, in NumPy and OpenCV
+        :func:`~alcn_cv.filters.lab.normalized_bgr`), one image of the batch at a time, in NumPy and OpenCV
         throughout (:meth:`_opencv_runtime`)."""
         normalize = self._opencv_runtime().normalize
         lo, hi = self.spec.output_range

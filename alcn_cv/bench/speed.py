@@ -64,10 +64,10 @@ from alcn_cv.bench.plots import plot_speed
 from alcn_cv.checks import FULL_SCALE
 from alcn_cv.data.frames import synthetic_frame
 from alcn_cv.enhance.alcn import ALCN
-from alcn_cv.enhance.base import Normalization, lab_and_lightness
+from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError, WeightFileError
-from alcn_cv.filters.lab import srgb_to_lab
+from alcn_cv.filters.lab import lab_and_lightness, srgb_to_lab
 from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
 from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table

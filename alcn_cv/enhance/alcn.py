@@ -26,11 +26,12 @@ from typing import TYPE_CHECKING, Any, Literal, cast
 import numpy as np
 
 from alcn_cv.checks import check_gray, unit_windows
-from alcn_cv.enhance.base import Normalization, bgr_with_lightness, lab_and_lightness, with_alpha
+from alcn_cv.enhance.base import Normalization, with_alpha
 from alcn_cv.enhance.registry import format_spec, parse_spec, register
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.extras import is_installed, require
 from alcn_cv.filters.divisive import gaussian_energy
+from alcn_cv.filters.lab import bgr_with_lightness, lab_and_lightness
 from alcn_cv.filters.wide_band import BLOCK, block_means, wide_band_floor
 from alcn_cv.nets.opencv_runtime import GAIN_NEEDS, RUNS_GAIN, WINDOW
 from alcn_cv.runtime import (

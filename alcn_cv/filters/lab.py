@@ -19,11 +19,13 @@ Example::
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import cache
 
 import cv2
 import numpy as np
 
+from alcn_cv.checks import FULL_SCALE, UINT8_LEVELS, from_unit_float, to_unit_float
 from alcn_cv.errors import InputError
 
 __all__ = [
@@ -35,9 +37,12 @@ __all__ = [
     "SRGB_TO_XYZ",
     "WHITE_POINT",
     "XYZ_TO_SRGB",
+    "bgr_with_lightness",
     "cube_root_table",
     "inverse_gamma_table",
+    "lab_and_lightness",
     "linear_to_lab",
+    "normalized_bgr",
     "spline_coefficients",
     "srgb_to_lab",
     "srgb_to_linear",
@@ -133,3 +138,56 @@ def inverse_gamma_table() -> np.ndarray:
     """:func:`spline_coefficients` of the sRGB curve encoding linear intensities at ``i / 1024``, ``i = 0 .. 1024``."""
     x = np.arange(1025) / float(GAMMA_SCALE)
     return spline_coefficients(np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1.0 / 2.4) - 0.055))
+
+
+#: ``cv2.transform`` matrix of the L channel of a float Lab image, divided by 100: intensities in [0, 1].
+_LIGHTNESS_OF_LAB = np.array([[0.01, 0.0, 0.0]], np.float32)
+#: :func:`srgb_to_linear` of :data:`~alcn_cv.checks.UINT8_LEVELS`.
+_LINEAR_UINT8_LEVELS = srgb_to_linear(UINT8_LEVELS.copy())
+
+
+def lab_and_lightness(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CIE Lab of a valid BGR image (uint8, uint16 or float32 in [0, 1]) as a new float32 array (L in [0, 100];
+    :func:`~alcn_cv.filters.lab.srgb_to_lab`), and its L / 100 as a float32 ``HxW`` plane in [0, 1]: what
+    :meth:`Normalization.apply <alcn_cv.enhance.base.Normalization.apply>` normalizes for a colour image."""
+    # a uint8 image's decoded curve by one table lookup: the float path's values for its 256 levels
+    lab = (
+        linear_to_lab(cv2.LUT(img, _LINEAR_UINT8_LEVELS)) if img.dtype == np.uint8 else srgb_to_lab(to_unit_float(img))
+    )
+    return lab, cv2.transform(lab, _LIGHTNESS_OF_LAB)
+
+
+def bgr_with_lightness(lab: np.ndarray, lightness: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
+    """The BGR image of ``out_dtype`` of the float32 Lab image ``lab`` (:func:`lab_and_lightness`; used as
+    scratch space) with its L channel replaced by the float32 ``HxW`` plane ``lightness`` in [0, 100]."""
+    cv2.insertChannel(lightness, lab, 0)
+    bgr = cv2.cvtColor(lab, cv2.COLOR_Lab2BGR, dst=lab)
+    if out_dtype == np.uint8:
+        return cv2.convertScaleAbs(bgr, alpha=FULL_SCALE[out_dtype])
+    return from_unit_float(bgr, out_dtype)
+
+
+def normalized_bgr(
+    img: np.ndarray,
+    normalize: Callable[[np.ndarray], np.ndarray],
+    output_range: tuple[float, float],
+    out_dtype: np.dtype,
+) -> np.ndarray:
+    """A valid BGR image (uint8, uint16 or float32 in [0, 1]) with the L channel of its CIE Lab normalized, a and b
+    kept, as ``out_dtype``: ``normalize`` maps L / 100 (float32 ``HxW``) to raw responses, and ``output_range`` of
+    these maps linearly onto [0, 100], clipped.
+
+    OpenCV passes throughout: the Lab image of :func:`lab_and_lightness` (its L / 100 in one ``cv2.transform``), the
+    response mapped to [0, 100] by ``cv2.addWeighted`` and two thresholds and put back by ``cv2.insertChannel``
+    (:func:`bgr_with_lightness`); ``cv2.COLOR_Lab2BGR`` clips linear RGB to [0, 1] before its sRGB curve, so a uint8
+    output is one ``cv2.convertScaleAbs``. The two float conversions are most of the cost (``alcn bench speed``
+    measures the BGR / gray ratio); OpenCV's 8-bit conversions quantize L to 100/255 and a, b to units, many levels
+    off the float path."""
+    lab, lightness = lab_and_lightness(img)
+    response = normalize(lightness)
+    lo, hi = output_range
+    scale = 100.0 / (hi - lo)
+    lightness = cv2.addWeighted(response, scale, response, 0.0, -lo * scale)
+    cv2.threshold(lightness, 0.0, 0.0, cv2.THRESH_TOZERO, dst=lightness)
+    cv2.threshold(lightness, 100.0, 0.0, cv2.THRESH_TRUNC, dst=lightness)
+    return bgr_with_lightness(lab, lightness, out_dtype)
