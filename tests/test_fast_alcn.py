@@ -254,6 +254,27 @@ def test_distill_copies_a_constant_teacher_exactly(tmp_path):
     np.testing.assert_allclose(out.numpy(), np.tile(dog, (3, 1)), atol=1e-6)
 
 
+def test_distill_validates_on_windows_it_did_not_train_on(tmp_path, monkeypatch):
+    """The validation windows are rendered apart from the training windows (another seed): drawn with the training
+    seed they would be the first training windows again, and the fidelity a card reports would be in sample."""
+    from alcn_cv.train import distill
+    from alcn_cv.train.config import LiteDistillConfig
+
+    rendered = []
+    render = distill.render_windows
+    monkeypatch.setattr(
+        distill, "render_windows", lambda *args, **kwargs: (rendered.append(r := render(*args, **kwargs)), r)[1]
+    )
+    teacher = Normalizer(hidden=16, init_weights=[1.0, 0.0, -1.0] + [0.0] * 7)  # constant: no training steps
+    meta = dict(load_normalizer_file(MODELS["paper"]).meta)
+    meta.update(config=teacher.config)
+    path = save_normalizer_file(tmp_path / "teacher.npz", teacher.state_arrays(), meta)
+    distill.distill(LiteDistillConfig(teacher=str(path), n_windows=32, n_val=8, n_objects=2), progress=False)
+    train, val = (r.windows for r in rendered)
+    assert (len(train), len(val)) == (32, 8)
+    assert not any(np.array_equal(v, t) for v in val for t in train)
+
+
 def test_model_names():
     with pytest.raises(InputError, match="model"):
         alcn_cv.createALCN(model="huge")

@@ -971,12 +971,11 @@ def targets(settings: SpeedSettings, work: Path, progress: bool = True) -> dict[
             "alcn lite bgr": lambda: lite.apply(bgr),
             "dog raw small": lambda: raw_dog(small),
             "alcn gray small": lambda: default.apply(small),
+            # in the same turns: its CPU inference is apply()'s runtime, and leaves no torch threads spinning
+            "alcn torch gray": lambda: torch_cpu.apply(gray),
         },
         repeats,
     )
-    # after the others, in its own turns: its OpenMP threads, still spinning when it returns, slow the call that
-    # follows it by 2-4 ms at 1280x800
-    t |= _medians({"alcn torch gray": lambda: torch_cpu.apply(gray)}, repeats)
     logger.info("targets: stages, contract, threads, memory, video, batches")
     stages = {
         "alcn": _stages(default, gray, repeats),
