@@ -56,7 +56,7 @@ from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_resize import area_downsample, interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
-from alcn_cv.nets.cpu_inference import cpu_eager, cpu_inference
+from alcn_cv.nets.cpu_inference import cpu_eager, cpu_inference, transformed
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import check_grid_stride
@@ -450,25 +450,21 @@ def _check_image(image: torch.Tensor) -> None:
     _check_range(image)
 
 
-#: torch's private test for a tensor of a torch.func transform (vmap, grad), resolved once: None on a torch without it,
-#: where :func:`_check_range` falls back to the RuntimeError that reading a vmapped tensor's values raises.
-_IS_FUNCTORCH_WRAPPED: Callable[[torch.Tensor], bool] | None = getattr(
-    getattr(torch._C, "_functorch", None), "is_functorch_wrapped_tensor", None
-)
-
-
 def _check_range(image: torch.Tensor) -> None:
     """An :class:`InputError` for values outside [0, 1] (``apply()``'s 1e-3 of rounding allowed), NaN or inf, with
     the likely fix, for an image on the CPU run eagerly: elsewhere reading the values would wait for the device
-    (CUDA), see nothing (meta, a trace, a compilation, an export) or fail (``torch.func.vmap``)."""
+    (CUDA), see nothing (meta, a trace, a compilation, an export) or fail (``torch.func.vmap``; on a torch without the
+    check of :func:`~alcn_cv.nets.cpu_inference.transformed`, the RuntimeError of reading its values tells it)."""
     if (
         image.device.type != "cpu"
         or image.numel() == 0
         or torch.jit.is_tracing()
         or ("torch.onnx" in sys.modules and torch.onnx.is_in_onnx_export())  # no export without it (its import: 70 ms)
-        or torch.compiler.is_compiling()
-        or (_IS_FUNCTORCH_WRAPPED is not None and _IS_FUNCTORCH_WRAPPED(image))
+        or torch.compiler.is_compiling()  # before transformed(), which Dynamo cannot trace
     ):
+        return
+    wrapped = transformed(image)
+    if wrapped:
         return
     try:
         # NaN propagates to both; on one thread: torch's threads, left spinning after a parallel reduction, would slow
@@ -476,7 +472,7 @@ def _check_range(image: torch.Tensor) -> None:
         with torch_threads(1):
             lo, hi = (float(v) for v in image.detach().aminmax())
     except RuntimeError:
-        if _IS_FUNCTORCH_WRAPPED is not None:
+        if wrapped is not None:
             raise
         return  # a torch without the private check: torch.func.vmap's tensor refuses .item(), so is not checked
     if lo >= -FLOAT_TOLERANCE and hi <= 1 + FLOAT_TOLERANCE:

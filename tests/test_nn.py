@@ -22,6 +22,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_pad import reflect101_pad
 from alcn_cv.filters.torch_resize import upsample_blocks
+from alcn_cv.nets import cpu_inference
 from alcn_cv.nn import ALCN2d, alcn2d, batches
 from alcn_cv.runtime import MODELS, GainRuntime
 from alcn_cv.weight_file import load_normalizer_file
@@ -552,10 +553,22 @@ def test_colour_under_torch_func_transforms():
     torch.testing.assert_close(torch.func.vmap(lambda t: module(t[None])[0])(pair), module(pair))
 
 
+@pytest.mark.parametrize("model", ["gain", "lite"])
+def test_vmap_in_inference(model):
+    """torch.func.vmap of a frozen module under no_grad (a batched evaluation): the CPU inference kernels read their
+    tensors' values, which a vmapped tensor has not ("Cannot access data pointer"); they are left to torch there."""
+    module = ALCN2d(model=model).eval()
+    for channels in (1, 3):
+        images = torch.rand(3, 2, channels, 48, 64)
+        with torch.no_grad():
+            out = torch.func.vmap(module)(images)
+            torch.testing.assert_close(out, torch.stack([module(x) for x in images]), atol=1e-5, rtol=0)
+
+
 def test_vmap_without_torchs_private_functorch_check(monkeypatch):
     """_check_range asked torch's private is_functorch_wrapped_tensor; a torch without it broke every call. Without
     it a vmapped image (whose values cannot be read) goes unchecked, and a plain one is checked as before."""
-    monkeypatch.setattr(alcn_nn, "_IS_FUNCTORCH_WRAPPED", None)
+    monkeypatch.setattr(cpu_inference, "_IS_WRAPPED", None)
     module = ALCN2d(model="gain").eval().requires_grad_(False)
     pair = torch.rand(2, 1, 32, 40)
     torch.testing.assert_close(torch.func.vmap(lambda t: module(t[None])[0])(pair), module(pair))

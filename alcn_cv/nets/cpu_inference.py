@@ -1,7 +1,8 @@
 """Inference on the CPU: where the Normalizers take faster kernels than torch's own.
 
 Both paths give torch's values to float rounding (about 2e-7), and only where nothing is recorded (no gradient, no
-trace, no ONNX export, no ``torch.compile``), so training, exports and compiled graphs keep torch's operations.
+trace, no ONNX export, no ``torch.compile``, no ``torch.func`` transform), so training, exports and compiled graphs
+keep torch's operations.
 :func:`cpu_eager` admits autograd as well, for a kernel that comes with its own backward.
 """
 
@@ -10,18 +11,29 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-__all__ = ["cpu_eager", "cpu_inference", "tanh_"]
+__all__ = ["cpu_eager", "cpu_inference", "tanh_", "transformed"]
+
+
+#: torch's private test for a tensor of a torch.func transform, resolved once: None on a torch without it.
+_IS_WRAPPED = getattr(getattr(torch._C, "_functorch", None), "is_functorch_wrapped_tensor", None)
+
+
+def transformed(x: torch.Tensor) -> bool | None:
+    """Whether ``x`` is a tensor of a ``torch.func`` transform (``vmap``, ``grad``), whose values cannot be read;
+    None on a torch without the private check this asks."""
+    return None if _IS_WRAPPED is None else bool(_IS_WRAPPED(x))
 
 
 def cpu_eager(x: torch.Tensor) -> bool:
-    """Whether ``x`` is float32 on the CPU and no trace, export or compilation records what is done to it (autograd
-    may: a kernel run here needs a backward of its own)."""
+    """Whether ``x`` is float32 on the CPU and no trace, export, compilation or ``torch.func`` transform records what
+    is done to it (autograd may: a kernel run here needs a backward of its own)."""
     return not (
         x.device.type != "cpu"
         or x.dtype != torch.float32
         or torch.jit.is_tracing()
         or torch.onnx.is_in_onnx_export()
         or torch.compiler.is_compiling()
+        or transformed(x)
     )
 
 
