@@ -7,9 +7,11 @@ out, equal to :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>`'s float outpu
 normalized on the L channel of CIE Lab, a and b kept), differentiable end to end. In float32 on the CPU, with or
 without autograd (:func:`~alcn_cv.nets.cpu_inference.cpu_eager`), colour is converted to Lab by ``apply()``'s own
 OpenCV passes (within 3e-6 of it), differentiated as :mod:`alcn_cv.filters.torch_lab`, OpenCV's arithmetic in torch,
-which converts it elsewhere (within 1e-4). In float32 CPU inference (no autograd, trace, export, compilation or
-autocast) the gain models run ``apply()``'s own passes throughout (:class:`~alcn_cv.runtime.GainRuntime` with the
-module's network, and ``apply()``'s colour path), as fast as ``apply()``; their torch filters run everywhere else.
+which converts it elsewhere (within 1e-4). In float32 CPU inference (under ``torch.no_grad()`` or
+``torch.inference_mode()``; not traced, exported, compiled, transformed by ``torch.func`` or under autocast) the gain
+models run ``apply()``'s own passes throughout for one image, or images of 2**18 pixels or more
+(:class:`~alcn_cv.runtime.GainRuntime` with the module's network, called once per image, and ``apply()``'s colour
+path), as fast as ``apply()``; their torch filters run everywhere else.
 Importing this module imports torch and kornia; importing :mod:`alcn_cv` does not.
 
 Example:
@@ -22,6 +24,7 @@ Example:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import os
@@ -61,7 +64,7 @@ from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import check_grid_stride
 from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
-from alcn_cv.row_parts import run_parts
+from alcn_cv.row_parts import MIN_PART_PIXELS, run_parts
 from alcn_cv.runtime import GainRuntime, ModelSpec, resolve_weights, weights_setting
 from alcn_cv.weight_file import NormalizerFile, load_normalizer_file, save_normalizer_file
 
@@ -230,6 +233,8 @@ class ALCN2d(nn.Module):
         :meth:`GaussianMixture2d.difference <alcn_cv.filters.kornia_mixture.GaussianMixture2d.difference>` of the
         one product ``F o I``: one map interpolated and multiplied instead of two.
         """
+        if small is None and not half and self._runs_opencv(gray):
+            return self._opencv_planes(gray, lambda runtime, plane, _: runtime.mixture(plane))
         two_maps = isinstance(self.net, GainNormalizer) and self.net.num_kernels == 2
         # autocast's enabled=False would also switch off a caller's own autocast (bfloat16, say) inside
         with torch.autocast(gray.device.type, torch.float16) if half else nullcontext():
@@ -281,46 +286,58 @@ class ALCN2d(nn.Module):
         with self._tf32(gray):
             return self.with_band(self.finish(self.eq3(gray, small, half), floor), gray, band_floor)
 
-    def _runs_opencv(self, gray: torch.Tensor) -> bool:
-        """Whether :meth:`response` runs ``apply()``'s own OpenCV runtime with this module's network: the gain family
-        at scale 1 in CPU inference (:func:`~alcn_cv.nets.cpu_inference.cpu_inference`), where torch's filters pass
-        over the whole image once per operation and :class:`~alcn_cv.runtime.GainRuntime` runs them by parts of the
-        rows, in cache (1.5 times as fast at 1280x800); the same values to float rounding. Not under a caller's
-        autocast, whose precision the network takes."""
+    def _runs_opencv(self, image: torch.Tensor) -> bool:
+        """Whether :meth:`forward`, :meth:`response` and :meth:`eq3` run ``apply()``'s own passes, with this module's
+        network and its current ``tau`` and floor: the gain family at scale 1 in float32 CPU inference
+        (:func:`~alcn_cv.nets.cpu_inference.cpu_inference`: under ``torch.no_grad()`` or ``torch.inference_mode()``,
+        not traced, exported, compiled or transformed by ``torch.func``), not under a caller's autocast (whose
+        precision the network takes), for one image or images of :data:`~alcn_cv.row_parts.MIN_PART_PIXELS` or more:
+        the OpenCV runtime (:class:`~alcn_cv.runtime.GainRuntime`) runs by parts of the rows, in cache, where torch's
+        filters pass over the whole batch once per operation, which pays for small images only. The same values to
+        float rounding."""
         return (
             isinstance(self.net, GainNormalizer)
             and self.spec.per_pixel
             and self.spec.scale == 1
-            and cpu_inference(gray)
+            and (image.shape[0] == 1 or image.shape[-2] * image.shape[-1] >= MIN_PART_PIXELS)
+            and cpu_inference(image)
             and not torch.is_autocast_enabled("cpu")
         )
 
     def _opencv_response(
         self, gray: torch.Tensor, floor: torch.Tensor | None, band_floor: torch.Tensor | None
     ) -> torch.Tensor:
-        """:meth:`response` by :class:`~alcn_cv.runtime.GainRuntime`, one image of the batch at a time."""
+        """:meth:`response` by :class:`~alcn_cv.runtime.GainRuntime` (``floor`` and ``band_floor`` broadcast to the
+        batch, as the torch filters take them)."""
+        floors = [
+            None if f is None else torch.broadcast_to(f, (len(gray), 1, 1, 1)).reshape(-1) for f in (floor, band_floor)
+        ]
+        return self._opencv_planes(
+            gray,
+            lambda runtime, plane, i: runtime.normalize(plane, *(None if f is None else float(f[i]) for f in floors)),
+        )
+
+    def _opencv_planes(
+        self, gray: torch.Tensor, run: Callable[[GainRuntime, np.ndarray, int], np.ndarray]
+    ) -> torch.Tensor:
+        """``(B, 1, H, W)`` of ``run(runtime, plane, i)`` on each image of the batch (:meth:`_opencv_runtime`)."""
         runtime = self._opencv_runtime()
-        planes = []
-        for i, image in enumerate(gray[:, 0].numpy()):
-            floors = (None if f is None else float(f[i if len(f) > 1 else 0]) for f in (floor, band_floor))
-            planes.append(runtime.normalize(np.ascontiguousarray(image), *floors))
-        # NumPy's copy, not torch's (:meth:`_opencv_runtime`)
+        planes = [run(runtime, np.ascontiguousarray(plane), i) for i, plane in enumerate(gray[:, 0].numpy())]
+        # np.stack, not torch's copy: a torch operation would wake torch's threads (see _opencv_runtime)
         if len(planes) == 1:
             return torch.from_numpy(planes[0][None, None])
         return torch.from_numpy(np.stack(planes)[:, None]) if planes else torch.empty_like(gray)
 
     def _opencv_forward(self, image: torch.Tensor) -> torch.Tensor:
-        """:meth:`forward` where :meth:`_runs_opencv`, by ``apply()``'s own passes (the colour path
-        :func:`~alcn_cv.filters.lab.normalized_bgr`), one image of the batch at a time, in NumPy and OpenCV
-        throughout (:meth:`_opencv_runtime`)."""
+        """:meth:`forward` by ``apply()``'s own passes (the colour path :func:`~alcn_cv.filters.lab.normalized_bgr`),
+        one image of the batch at a time, in NumPy and OpenCV throughout (:meth:`_opencv_runtime`)."""
         normalize = self._opencv_runtime().normalize
         lo, hi = self.spec.output_range
         out = np.empty(image.shape, np.float32)
         for x, y in zip(image.numpy(), out):
             if len(x) == 3:  # RGB planes to a BGR image and back by OpenCV (NumPy's transposes are slower)
                 bgr = normalized_bgr(cv2.merge(x[::-1]), normalize, (lo, hi), np.dtype(np.float32))
-                for plane, channel in zip(cv2.split(bgr), y[::-1]):
-                    channel[...] = plane
+                cv2.split(bgr, mv=[y[2], y[1], y[0]])
             else:  # to_unit's operations
                 unit = normalize(np.ascontiguousarray(x[0]))
                 np.subtract(unit, np.float32(lo), out=unit)
@@ -329,9 +346,17 @@ class ALCN2d(nn.Module):
         return torch.from_numpy(out)
 
     def _opencv_runtime(self) -> GainRuntime:
-        """``apply()``'s runtime of this module's spec with its network, on one torch thread: a small part, and
-        torch's threads, left spinning after a parallel operation, would slow the OpenCV calls around it."""
-        return GainRuntime(self.spec, TorchNetwork(self.net, self.grid_stride, 1), "exact")
+        """``apply()``'s runtime of the module's spec with its network as it is now (``tau`` and the floor of a
+        ``learn_scales`` model after a step, or of a loaded ``state_dict``), on one torch thread (its small part;
+        torch's threads, left spinning after a parallel operation, would slow the OpenCV calls around it), and on as
+        many parts of the rows as torch has threads, at most OpenCV's (one in a ``DataLoader`` worker, as the torch
+        filters)."""
+        assert self.spec.divisive is not None  # a gain model's
+        spec = dataclasses.replace(
+            self.spec, tau=self.net.tau_value(), divisive=(self.spec.divisive[0], float(self.net.floor_scale.detach()))
+        )
+        parts = 1 if _FORKED else min(torch.get_num_threads(), cv2.getNumThreads())
+        return GainRuntime(spec, TorchNetwork(self.net, self.grid_stride, 1), "exact", parts)
 
     def to_unit(self, response: torch.Tensor) -> torch.Tensor:
         """The fixed map of raw responses to [0, 1]: ``output_range`` -> [0, 1], clipped."""
@@ -453,8 +478,7 @@ def _check_image(image: torch.Tensor) -> None:
 def _check_range(image: torch.Tensor) -> None:
     """An :class:`InputError` for values outside [0, 1] (``apply()``'s 1e-3 of rounding allowed), NaN or inf, with
     the likely fix, for an image on the CPU run eagerly: elsewhere reading the values would wait for the device
-    (CUDA), see nothing (meta, a trace, a compilation, an export) or fail (``torch.func.vmap``; on a torch without the
-    check of :func:`~alcn_cv.nets.cpu_inference.transformed`, the RuntimeError of reading its values tells it)."""
+    (CUDA), see nothing (meta, a trace, a compilation, an export) or fail (``torch.func.vmap``)."""
     if (
         image.device.type != "cpu"
         or image.numel() == 0
@@ -463,18 +487,12 @@ def _check_range(image: torch.Tensor) -> None:
         or torch.compiler.is_compiling()  # before transformed(), which Dynamo cannot trace
     ):
         return
-    wrapped = transformed(image)
-    if wrapped:
+    if transformed(image):
         return
-    try:
-        # NaN propagates to both; on one thread: torch's threads, left spinning after a parallel reduction, would slow
-        # the OpenCV calls of the CPU runtime that follow (ALCN2d._opencv_runtime)
-        with torch_threads(1):
-            lo, hi = (float(v) for v in image.detach().aminmax())
-    except RuntimeError:
-        if wrapped is not None:
-            raise
-        return  # a torch without the private check: torch.func.vmap's tensor refuses .item(), so is not checked
+    # NaN propagates to both; on one thread: torch's threads, left spinning after a parallel reduction, would slow
+    # the OpenCV calls of the CPU runtime that follow (ALCN2d._opencv_runtime)
+    with torch_threads(1):
+        lo, hi = (float(v) for v in image.detach().aminmax())
     if lo >= -FLOAT_TOLERANCE and hi <= 1 + FLOAT_TOLERANCE:
         return
     if not (math.isfinite(lo) and math.isfinite(hi)):

@@ -297,6 +297,12 @@ class GainRuntime(WindowRuntime):
     grid (:func:`~alcn_cv.filters.gaussian_mixture.alcn_filter_grid`, without the full-resolution maps), on
     OpenCV's threads (:mod:`alcn_cv.row_parts`)."""
 
+    def __init__(self, spec: ModelSpec, network: Network, mixture: str, parts: int | None = None) -> None:
+        super().__init__(spec, network, mixture)
+        #: The most parts of the rows :meth:`normalize` cuts an image into (None: one per thread of
+        #: ``cv2.getNumThreads()``).
+        self.parts = parts
+
     def weight_maps(self, gray: np.ndarray) -> np.ndarray:
         return np.stack([upsample_grid(m, self.grid_stride, gray.shape) for m in self.weight_grid(gray)])
 
@@ -314,7 +320,7 @@ class GainRuntime(WindowRuntime):
         if self.mixture_kind == "pyramid" or spec.divisive is None or spec.tau is None:
             return super().normalize(gray, floor, band_floor)
         sigma, c = spec.divisive
-        parts = row_parts(gray.shape, self.grid_stride)
+        parts = row_parts(gray.shape, self.grid_stride, self.parts)
         band: list[Future[np.ndarray]] = []  # computed beside the network's layers on the grid
 
         def start_band() -> None:

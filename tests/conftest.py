@@ -78,5 +78,5 @@ def cpu_route(request, monkeypatch) -> str:
     runs), and ``"torch"``, the module's torch filters (what CUDA, autograd, traces and exports run), forced here."""
     if request.param == "torch":
         nn = pytest.importorskip("alcn_cv.nn")
-        monkeypatch.setattr(nn.ALCN2d, "_runs_opencv", lambda self, gray: False)
+        monkeypatch.setattr(nn.ALCN2d, "_runs_opencv", lambda self, image: False)
     return request.param

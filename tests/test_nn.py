@@ -17,15 +17,17 @@ pytest.importorskip("kornia")
 
 import alcn_cv
 import alcn_cv.nn as alcn_nn
+import alcn_cv.runtime as alcn_runtime
 from alcn_cv.data.frames import synthetic_frame
 from alcn_cv.errors import InputError
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_pad import reflect101_pad
 from alcn_cv.filters.torch_resize import upsample_blocks
 from alcn_cv.nets import cpu_inference
+from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.nn import ALCN2d, alcn2d, batches
 from alcn_cv.runtime import MODELS, GainRuntime
-from alcn_cv.weight_file import load_normalizer_file
+from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
 CUDA = pytest.mark.skipif(
     not torch.cuda.is_available(), reason="no CUDA device: the CUDA path is checked on a GPU machine"
@@ -61,16 +63,17 @@ def test_gray_equals_the_float_output_of_apply(model, shape, cpu_route):
 
 @pytest.mark.parametrize("model", ["gain", "gain-lite"])
 def test_cpu_inference_of_the_gain_models_runs_the_opencv_runtime(model, monkeypatch):
-    """In CPU inference the gain models run apply()'s own runtime (GainRuntime: 1.5 times as fast as the torch filters
-    at 1280x800), each image of a batch with its own floors; with autograd the torch filters, to float rounding."""
+    """In CPU inference the gain models run apply()'s own runtime (GainRuntime) for one image or large ones, each image
+    of a batch with its own floors (broadcast as the torch filters take them); with autograd the torch filters, to
+    float rounding; a batch of small images stays on the torch filters (one pass over the batch)."""
     calls = []
     normalize = GainRuntime.normalize
     monkeypatch.setattr(
         GainRuntime, "normalize", lambda self, gray, *floors: (calls.append(floors), normalize(self, gray, *floors))[1]
     )
     module = ALCN2d(model=model).eval()
-    x = torch.from_numpy(np.stack([_unit(_gray(seed=i)) for i in range(2)]))[:, None]
-    floor, band_floor = torch.tensor([0.01, 0.02]).view(2, 1, 1, 1), torch.tensor(0.03).view(1, 1, 1, 1)
+    x = torch.from_numpy(np.stack([_unit(_gray(512, 512, seed=i)) for i in range(2)]))[:, None]  # 2**18 pixels each
+    floor, band_floor = torch.tensor([0.01, 0.02]).view(2, 1, 1, 1), torch.tensor(0.03)
     with torch.no_grad():
         routed = module.response(x, floor=floor, band_floor=band_floor)
     assert calls == [pytest.approx((0.01, 0.03)), pytest.approx((0.02, 0.03))]
@@ -80,16 +83,40 @@ def test_cpu_inference_of_the_gain_models_runs_the_opencv_runtime(model, monkeyp
     torch.testing.assert_close(module.to_unit(routed), module.to_unit(filters.detach()), atol=1e-5, rtol=0)
     with torch.no_grad():
         module.response(x, half=True)  # the network in float16: torch's
+        module(x[:, :, :100, :100])  # two small images
         assert module(x[:0]).shape == (0, 1, *x.shape[2:])  # an empty batch
-    assert len(calls) == 2
+        eq3 = module.eq3(x)  # the strips' first pass
+    assert len(calls) == 2 and not torch.equal(eq3, module.eq3(x))
+    torch.testing.assert_close(eq3, module.eq3(x), atol=1e-6, rtol=0)
     # forward, gray and RGB (apply()'s colour path), against the torch filters
     rgb = torch.from_numpy(np.stack([_unit(_bgr(seed=i)[..., ::-1].copy()) for i in range(2)])).permute(0, 3, 1, 2)
-    for image in (x, rgb):
+    for image in (x[:1], rgb[:1]):
         with torch.no_grad():
             routed = module(image)
-        assert len(calls) == 4 and routed.shape == image.shape and routed.is_contiguous()
+        assert len(calls) == 3 and routed.shape == image.shape and routed.is_contiguous()
         torch.testing.assert_close(routed, module(image).detach(), atol=1e-5, rtol=0)
         del calls[2:]
+
+
+def test_cpu_inference_follows_the_networks_own_scales_and_torchs_threads(tmp_path, monkeypatch):
+    """The route takes tau and the floor as the network has them now (a learn_scales model after a step; they were the
+    weight file's: 0.1 off the torch filters), and no more parts of the rows than torch has threads."""
+    net = GainNormalizer(learn_scales=True)
+    path = save_normalizer_file(tmp_path / "gain.npz", net.state_arrays(), net.file_meta(trained=True))
+    module = ALCN2d(weights=path).eval()
+    with torch.no_grad():
+        module.net.log_tau.add_(0.5)
+        module.net.log_floor_scale.sub_(0.5)
+    x = torch.from_numpy(_unit(_gray(96, 128)))[None, None]
+    with torch.no_grad():
+        routed = module(x)
+    torch.testing.assert_close(routed, module(x).detach(), atol=1e-5, rtol=0)
+    parts = []
+    row_parts = alcn_runtime.row_parts
+    monkeypatch.setattr(alcn_runtime, "row_parts", lambda *args: (parts.append(args[2]), row_parts(*args))[1])
+    with torch.no_grad(), alcn_nn.torch_threads(1):
+        module(x)
+    assert parts == [1]
 
 
 def _colour_differences(model: str, bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -572,6 +599,8 @@ def test_vmap_without_torchs_private_functorch_check(monkeypatch):
     module = ALCN2d(model="gain").eval().requires_grad_(False)
     pair = torch.rand(2, 1, 32, 40)
     torch.testing.assert_close(torch.func.vmap(lambda t: module(t[None])[0])(pair), module(pair))
+    with torch.no_grad():  # the CPU inference kernels, which read their tensors, left to torch
+        torch.testing.assert_close(torch.func.vmap(module)(pair[:, None]), module(pair)[:, None], atol=1e-5, rtol=0)
     with pytest.raises(InputError, match=r"0\.\.255 intensities"):
         module(pair * 255)
 

@@ -18,10 +18,16 @@ __all__ = ["cpu_eager", "cpu_inference", "tanh_", "transformed"]
 _IS_WRAPPED = getattr(getattr(torch._C, "_functorch", None), "is_functorch_wrapped_tensor", None)
 
 
-def transformed(x: torch.Tensor) -> bool | None:
-    """Whether ``x`` is a tensor of a ``torch.func`` transform (``vmap``, ``grad``), whose values cannot be read;
-    None on a torch without the private check this asks."""
-    return None if _IS_WRAPPED is None else bool(_IS_WRAPPED(x))
+def transformed(x: torch.Tensor) -> bool:
+    """Whether ``x`` is a tensor of a ``torch.func`` transform (``vmap``, ``grad``), whose values cannot be read (on
+    a torch without the private check this asks, whether its data pointer cannot be read)."""
+    if _IS_WRAPPED is not None:
+        return bool(_IS_WRAPPED(x))
+    try:
+        x.data_ptr()
+    except RuntimeError:
+        return True
+    return False
 
 
 def cpu_eager(x: torch.Tensor) -> bool:
@@ -38,7 +44,8 @@ def cpu_eager(x: torch.Tensor) -> bool:
 
 
 def cpu_inference(x: torch.Tensor) -> bool:
-    """Whether ``x`` is float32 on the CPU and no gradient, trace, export or compilation records what is done to it."""
+    """Whether ``x`` is float32 on the CPU and no gradient, trace, export, compilation or ``torch.func`` transform
+    records what is done to it."""
     return not torch.is_grad_enabled() and cpu_eager(x)
 
 
