@@ -40,6 +40,23 @@ def test_protocols_on_identical_frames():
     assert again.pairs == plan.pairs and all((again.locations[g] == plan.locations[g]).all() for g in plan.gallery)
 
 
+def test_identification_registers_a_pair_to_the_pixel():
+    """The frames of a fixed webcam are 1-3 px apart: a pair is registered by the one move, within shift_px, that
+    best aligns its patches (a smooth output, which tolerates the shift, was rewarded over a sharp one); a registered
+    pair keeps its score, and a patch's impostors get no moves of their own."""
+    rng = np.random.default_rng(0)
+    gallery = cv2.GaussianBlur(rng.random((128, 160), dtype=np.float32), (0, 0), 0.5)
+    locations = np.array([(y, x) for y in range(8, 96, 16) for x in range(8, 128, 16)])
+    moved = np.roll(gallery, (2, -1), axis=(0, 1))  # the camera moved by 2 px down, 1 left
+    assert relight.identification(gallery, moved, locations, 32) < 0.1
+    assert relight.identification(gallery, moved, locations, 32, shift=2) == 1.0
+    noisy = gallery + rng.normal(0, 2.0, gallery.shape).astype(np.float32)
+    plain = relight.identification(gallery, noisy, locations, 32)
+    assert 0 < plain < 1 and relight.identification(gallery, noisy, locations, 32, shift=2) == plain
+    with pytest.raises(InputError, match="shift_px"):
+        relight_settings.Settings(shift_px=-1).check()
+
+
 def test_a_keypoint_is_matched_once():
     """Two keypoints of the first frame nearest to the same one of the second (ORB finds one corner at several
     pyramid levels) count once, by the nearer: the matching score is a fraction of the keypoints."""

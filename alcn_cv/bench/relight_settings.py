@@ -24,11 +24,15 @@ class Settings:
     match_px: float = 3.0
     ransac_px: float = 3.0
     pose_px: float = 5.0
+    #: The largest move along each axis, in pixels, by which identification registers a pair of frames.
+    shift_px: int = 2
     keypoint_protocols: bool = True
 
     def check(self) -> Settings:
         if self.patch < 4 or self.patches < 2 or self.gallery < 1 or self.keypoints < 4:
             raise InputError("need patch >= 4, patches >= 2, gallery >= 1 and keypoints >= 4")
+        if self.shift_px < 0:
+            raise InputError(f"shift_px must be 0 or more, got {self.shift_px}")
         if self.max_pairs is not None and self.max_pairs < 1:
             raise InputError(f"max_pairs must be positive, got {self.max_pairs}")
         if not 0 < self.ratio <= 1:
