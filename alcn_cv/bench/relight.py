@@ -269,9 +269,7 @@ def _patch_vectors(image: np.ndarray, locations: np.ndarray, size: int) -> tuple
     return vectors, valid
 
 
-def identification(
-    gallery: np.ndarray, query: np.ndarray, locations: np.ndarray, size: int, shift: int = 0
-) -> float:
+def identification(gallery: np.ndarray, query: np.ndarray, locations: np.ndarray, size: int, shift: int = 0) -> float:
     """Fraction of the gallery's patches whose best normalized cross-correlation in ``query``,
     over the patches at all ``locations``, is at their own location (a patch without any
     contrast counts as not identified), with ``query`` registered to the pixel first: its patches are taken at
