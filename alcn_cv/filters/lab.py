@@ -8,7 +8,8 @@ cube root by a natural cubic spline through 1025 knots on [0, 1.5]. So the sRGB 
 table for a uint8 image: the same float values) and the linear conversion follows. The way back, ``COLOR_Lab2BGR``,
 computes each pixel as well, the sRGB curve by a spline. :mod:`alcn_cv.filters.torch_lab` does the same arithmetic
 in torch, differentiably, with these constants (OpenCV's, not the CIE's exact ones: its D65 white point, 7.787 and
-903.3) and the same splines (:func:`spline_coefficients`).
+903.3) and the same splines (:func:`spline_coefficients`). :func:`normalized_bgr` is the colour path of ``apply()``
+and of :class:`~alcn_cv.nn.ALCN2d`'s CPU inference: L normalized, a and b kept.
 
 Example::
 
