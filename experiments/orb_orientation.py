@@ -128,7 +128,12 @@ def main() -> None:
         "summary": summary,
         "command": script_command(),
         "machine": machine(),
-        "settings": {"patches": SETTINGS.patches, "max_pairs": SETTINGS.max_pairs, "max_frames": MAX_FRAMES},
+        "settings": {
+            "patches": SETTINGS.patches,
+            "max_pairs": SETTINGS.max_pairs,
+            "max_frames": MAX_FRAMES,
+            "shift_px": SETTINGS.shift_px,
+        },
         "seeds": args.seeds,
     }
     path = out / "orb_orientation.json"
