@@ -297,7 +297,6 @@ class ALCN2d(nn.Module):
         float rounding."""
         return (
             isinstance(self.net, GainNormalizer)
-            and self.spec.per_pixel
             and self.spec.scale == 1
             and (image.shape[0] == 1 or image.shape[-2] * image.shape[-1] >= MIN_PART_PIXELS)
             and cpu_inference(image)

@@ -116,16 +116,13 @@ def relight(report: dict[str, Any], title: str | None = None) -> str:
         protocol = _protocol(report["settings"])
         title = f"Real light, {split} ({tuned}{'; ' + protocol if protocol else ''})"
     spread = "; ± their sample standard deviation" if seeds > 1 else ""
-    note = (
-        (LOO_NOTE if loo else "")
-        + (
-            f"Mean over the scenes {scenes}; {seeds} seed{'s' if seeds > 1 else ''} "
-            f"({', '.join(str(s) for s in report['settings']['seeds'])}){spread}. "
-            "Identification and matching in %, "
-            "pose in % of frame pairs, correct = correct matches per pair.\n"
-        )
-        + _registration_note(report["settings"])
+    note = (LOO_NOTE if loo else "") + (
+        f"Mean over the scenes {scenes}; {seeds} seed{'s' if seeds > 1 else ''} "
+        f"({', '.join(str(s) for s in report['settings']['seeds'])}){spread}. "
+        "Identification and matching in %, "
+        "pose in % of frame pairs, correct = correct matches per pair.\n"
     )
+    note += _registration_note(report["settings"])
     return f"## {title}\n\n{provenance(report)}\n{note}\n" + table(
         ["method"] + [METRIC_LABELS[m] for m in metrics], rows
     )

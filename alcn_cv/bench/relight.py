@@ -278,7 +278,7 @@ def identification(gallery: np.ndarray, query: np.ndarray, locations: np.ndarray
     a, valid = _patch_vectors(gallery, locations, size)
     top = np.array(query.shape[:2]) - size
     moves = sorted(itertools.product(range(-shift, shift + 1), repeat=2), key=lambda m: abs(m[0]) + abs(m[1]))
-    candidates = [_patch_vectors(query, np.clip(locations + move, 0, top), size)[0] for move in moves]
+    candidates = (_patch_vectors(query, np.clip(locations + move, 0, top), size)[0] for move in moves)
     b = max(candidates, key=lambda c: float(np.einsum("ij,ij->", a, c)))  # the first of equals: no move
     best = np.argmax(a @ b.T, axis=1)
     return float(np.mean((best == np.arange(len(locations))) & valid))
