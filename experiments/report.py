@@ -511,6 +511,12 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
         "identification (as in the table above); test / train: `alcn bench relight`'s quick protocol (seed 0, no "
         "tuning) on the test / webcam training scenes, identification and matching in %.\n",
     ),
+    "dog_band": lambda r: summary_table(
+        r,
+        "The band-pass ALCN starts from, with the pairs registered, and what training does with it (quick protocol)",
+        "test / webcams: `alcn bench relight`'s quick protocol (seeds 0-2, no tuning) on the test scenes / on the four "
+        "webcams (`--leave-one-out`); identification and matching in %, pose in % of frame pairs.\n",
+    ),
     "speed": speed,
     "speed_gpu": device_speed,
     "detect": detect,

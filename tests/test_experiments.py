@@ -173,7 +173,7 @@ def test_part_runs_each_part_once_in_its_order(
     monkeypatch.setattr(sys, "argv", ["pose_planar.py", "--part", "corners", "features", "corners"])
     module.main()
     assert [c[3].rsplit("/", 1)[-1] for c in commands] == ["features", "corners"]
-    for script in ("relight", "pose_planar", "pose_table1", "relief_training", "unet_baseline"):
+    for script in ("relight", "pose_planar", "pose_table1", "relief_training", "unet_baseline", "dog_band"):
         source = (EXPERIMENTS / f"{script}.py").read_text(encoding="utf-8")
         assert "add_part_option(parser" in source and "selected_parts(args" in source, script
 
@@ -286,3 +286,45 @@ def test_a_protocol_that_is_neither_preset_is_not_called_quick() -> None:
     loo["settings"] = {**loo["settings"], "patches": 77}
     title = report.relight(loo).splitlines()[0]
     assert "quick protocol" not in title and "77 patches" in title
+
+
+def test_dog_band_starts_are_the_dogs_they_name_and_its_benches_take_the_quick_protocol_untuned(
+    experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """dog_band.py's untrained starts hold the default recipe's network with the mixture starting as the DoG its
+    name says (the kernels and weights of Eq. 3), and each group of scenes is benched once, untuned, on the quick
+    protocol, the leave-one-scene-out one over the webcams."""
+    import torch
+
+    from alcn_cv.nets.gain import GainNormalizer
+    from alcn_cv.weight_file import load_normalizer_file
+
+    module = importlib.import_module("dog_band")
+    path = module.save_start(module.STARTS["start G0.5 - G2"], tmp_path / "start.npz", "a start")
+    net = GainNormalizer.from_file(load_normalizer_file(path))
+    assert net.sigmas == pytest.approx([0.5, 1.0, 1.5, 2.0])
+    image = torch.rand(1, 1, 48, 48)
+    weights = net.dense_grid(image)[0, :, 2, 2]
+    assert (weights / weights[0]).tolist() == pytest.approx([1.0, 0.0, 0.0, -1.0], abs=1e-6)
+    commands: list[tuple[str, ...]] = []
+    monkeypatch.setattr(module, "keep", lambda *args, **kwargs: None)
+    monkeypatch.setattr(module, "script_command", lambda: "python experiments/dog_band.py --part bench")
+
+    def bench_report(*argv: str) -> None:
+        commands.append(argv)
+        out = Path(argv[argv.index("--out") + 1])
+        out.mkdir(parents=True)
+        methods = argv[argv.index("--methods") + 1].split(",")
+        means = {m: {"mean": 50.0} for m in module.METRICS}
+        (out / "relight.json").write_text(json.dumps({"methods": {m: {"mean_test": means} for m in methods}}))
+
+    monkeypatch.setattr(module, "alcn", bench_report)
+    monkeypatch.setattr(sys, "argv", ["dog_band.py", "--out", str(tmp_path / "run"), "--part", "bench"])
+    module.main()
+    quick = experiments.quick_protocol()
+    assert len(commands) == 2 and all(c[:2] == ("bench", "relight") and "--no-tune" in c for c in commands)
+    assert all(" ".join(quick) in " ".join(c) and "--seeds 0 1 2" in " ".join(c) for c in commands)
+    assert ["--leave-one-out" in c for c in commands] == [False, True]
+    summary = json.loads((tmp_path / "run" / "dog_band.json").read_text())["summary"]
+    assert set(summary) == {*module.BASELINES, *module.STARTS, *module.TRAINED}
+    assert summary["dlcn"]["webcams identification"] == 50.0
