@@ -208,9 +208,10 @@ def quick_protocol() -> list[str]:
     return CONFS["quick"].options()
 
 
-def short_relight(out: Path, methods: list[str]) -> None:
+def short_relight(out: Path, methods: list[str], seeds: Sequence[int] = (0,), options: Sequence[str] = ()) -> None:
     """An experiment's short ``alcn bench relight`` run of ``methods`` into ``out`` (replacing an earlier one): the
-    quick protocol (:func:`quick_protocol`), seed 0 alone, no tuning."""
+    quick protocol (:func:`quick_protocol`), ``seeds`` (seed 0 alone by default), no tuning, and the bench's
+    ``options`` (``--leave-one-out``, say)."""
     alcn(
         "bench",
         "relight",
@@ -220,9 +221,10 @@ def short_relight(out: Path, methods: list[str]) -> None:
         "--methods",
         ",".join(methods),
         "--seeds",
-        "0",
+        *(str(seed) for seed in seeds),
         *quick_protocol(),
         "--no-tune",
+        *options,
     )
 
 

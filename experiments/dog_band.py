@@ -35,10 +35,10 @@ from _run import (
     alcn,
     command_line,
     keep,
-    quick_protocol,
     recorded_settings,
     script_command,
     selected_parts,
+    short_relight,
 )
 
 from alcn_cv.cli import run_script
@@ -115,21 +115,7 @@ def main() -> None:
     if "bench" in args.part:
         for group, options in GROUPS.items():
             out = args.out / f"bench_{group}"
-            methods = ",".join(specs.values())
-            seeds = ["--seeds", "0", "1", "2"]
-            alcn(
-                "bench",
-                "relight",
-                "--out",
-                str(out),
-                "--overwrite",
-                "--methods",
-                methods,
-                *seeds,
-                *quick_protocol(),
-                "--no-tune",
-                *options,
-            )
+            short_relight(out, list(specs.values()), seeds=(0, 1, 2), options=options)
             report = json.loads((out / "relight.json").read_text(encoding="utf-8"))
             for name, spec in specs.items():
                 means = report["methods"][spec]["mean_test"]

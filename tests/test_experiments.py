@@ -318,12 +318,12 @@ def test_dog_band_starts_are_the_dogs_they_name_and_its_benches_take_the_quick_p
         means = {m: {"mean": 50.0} for m in module.METRICS}
         (out / "relight.json").write_text(json.dumps({"methods": {m: {"mean_test": means} for m in methods}}))
 
-    monkeypatch.setattr(module, "alcn", bench_report)
+    monkeypatch.setattr(experiments, "alcn", bench_report)  # short_relight's
     monkeypatch.setattr(sys, "argv", ["dog_band.py", "--out", str(tmp_path / "run"), "--part", "bench"])
     module.main()
     quick = experiments.quick_protocol()
     assert len(commands) == 2 and all(c[:2] == ("bench", "relight") and "--no-tune" in c for c in commands)
-    assert all(" ".join(quick) in " ".join(c) and "--seeds 0 1 2" in " ".join(c) for c in commands)
+    assert all(" ".join(quick) in " ".join(c) and "--seeds 0 1 2 " in " ".join(c) for c in commands)
     assert ["--leave-one-out" in c for c in commands] == [False, True]
     summary = json.loads((tmp_path / "run" / "dog_band.json").read_text())["summary"]
     assert set(summary) == {*module.BASELINES, *module.STARTS, *module.TRAINED}
