@@ -83,18 +83,6 @@ def _protocol(settings: dict[str, Any]) -> str | None:
     return f"quick protocol: {text}" if sizes == quick else text
 
 
-def _registration_note(settings: dict[str, Any]) -> str:
-    """A sentence for a real-light report measured before identification registered each pair of frames (its
-    settings have no ``shift_px``); empty for the others."""
-    if "shift_px" in settings:
-        return ""
-    return (
-        "Identification measured before each pair of frames was registered to the pixel (`shift_px`, 2026-11-30): "
-        "mexico's and frankfurt's webcam frames are 1-3 px apart, which favoured smooth outputs there "
-        "([journal](journal.md)).\n"
-    )
-
-
 def relight(report: dict[str, Any], title: str | None = None) -> str:
     """Headline rows of ``alcn bench relight``: every metric's mean over the evaluated scenes (``title``: the
     section's, default from the split and the sampling sizes when not the default)."""
@@ -122,7 +110,6 @@ def relight(report: dict[str, Any], title: str | None = None) -> str:
         "Identification and matching in %, "
         "pose in % of frame pairs, correct = correct matches per pair.\n"
     )
-    note += _registration_note(report["settings"])
     return f"## {title}\n\n{provenance(report)}\n{note}\n" + table(
         ["method"] + [METRIC_LABELS[m] for m in metrics], rows
     )
@@ -370,7 +357,7 @@ def orb_orientation(report: dict[str, Any]) -> str:
         "upright: ORB with every keypoint's orientation set to 0 (the cameras do not rotate). Exposure scenes: "
         "exposure-only copies, 8 of the default's training photographs each relit 6 times by a global gain "
         "(0.03-1, with the sensor's noise); the default saw them under another light, so they are not held out.\n"
-    ) + _registration_note(s)
+    )
     title = "Why ALCN lowers ORB matching: ORB's orientation, and a wide band that restores it (quick protocol)"
     return f"## {title}\n\n{provenance(report)}\n{caption}\n" + table(
         ["method", *headers], [[m] + [r.get(k) for k in keys] for m, r in report["summary"].items()]

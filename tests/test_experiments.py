@@ -223,17 +223,6 @@ def test_relight_titles_say_their_protocol_and_the_speed_headline_its_cores() ->
     assert " on 16 cores, " in report.speed_headline(speed)
 
 
-def test_a_real_light_report_from_before_the_pairs_were_registered_says_so() -> None:
-    """Identification registers each pair of frames to the pixel since 2026-11-30 (settings.shift_px); a report
-    measured before says that its identification was not."""
-    report = _report_module()
-    split = _kept("relight_split")
-    before = {**split, "settings": {k: v for k, v in split["settings"].items() if k != "shift_px"}}
-    after = {**split, "settings": {**split["settings"], "shift_px": 2}}
-    assert "before each pair of frames was registered" in report.relight(before)
-    assert "registered" not in report.relight(after)
-
-
 def test_unet_baselines_objective_part_is_the_bench_stage(
     experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
