@@ -560,3 +560,36 @@ def test_each_line_of_log_gives_the_untrained_starts_loss_on_the_same_draws(tmp_
     assert [float(u) for *_, u in found] == pytest.approx([np.mean(untrained[:2]), untrained[2]], abs=1e-4)
     assert losses[0] == pytest.approx(untrained[0], abs=1e-6)  # the first step's loss is the untrained start's
     assert "the loss of each step is on a pair drawn afresh: a block's mean moves with its draws" in caplog.text
+
+
+def test_a_network_whose_relus_died_is_said_to_have_died(tmp_path, monkeypatch, caplog):
+    """At a high learning rate every hidden ReLU of the gain network can switch off for good (two of the rendered
+    directional-light variants at lr 5e-3, 2026-11-30): training went on and wrote a file that normalizes with one
+    fixed filter, its loss the untrained start's. A block without a gradient on any weight now logs a warning; a
+    living network's run does not."""
+    from alcn_cv.presets import with_settings
+    from alcn_cv.train.config import RealLightConfig
+
+    scene = _scene(tmp_path / "scene")
+    cfg = with_settings(RealLightConfig(), [item for item in _tiny(scene, steps=2, save_every=2) if item != "--set"])
+    with caplog.at_level(logging.INFO):
+        real_light.train_real_light(cfg, tmp_path / "alive", progress=False)
+    assert "got a gradient" not in caplog.text
+    caplog.clear()
+    built = real_light.initial_network
+
+    def dead(seed, net):
+        network = built(seed, net)
+        with torch.no_grad():
+            network.convs[-1].bias.fill_(-1e3)  # the last hidden layer off for every input
+        return network
+
+    monkeypatch.setattr(real_light, "initial_network", dead)
+    with caplog.at_level(logging.INFO):
+        real_light.train_real_light(cfg, tmp_path / "dead", progress=False)
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert warnings == [
+        "no weight of the network got a gradient in the last 2 steps: every hidden unit is off (its ReLUs died), so "
+        "its output no longer depends on the image and the weight file normalizes every image with one fixed "
+        "filter; train again with a lower learning rate than 0.02 (--set lr=...)"
+    ]

@@ -594,6 +594,14 @@ def _reference(
     return f" ({steps}: {trained:.4f}; the untrained start on the same draws: {start:.4f})"
 
 
+#: The warning of a block in which no weight got a gradient (its steps, the learning rate).
+_DEAD = (
+    "no weight of the network got a gradient in the last %d steps: every hidden unit is off (its ReLUs died), so "
+    "its output no longer depends on the image and the weight file normalizes every image with one fixed filter; "
+    "train again with a lower learning rate than %g (--set lr=...)"
+)
+
+
 class TrainingInterrupted(KeyboardInterrupt):
     """Ctrl-C or SIGTERM (its ``__cause__``) stopped :func:`fit`, which saved the steps done first.
 
@@ -945,7 +953,8 @@ def fit(
     ``step_loss(net, scene, frames, centres, cfg, anywhere)`` of :func:`draw_step`'s draws, gradients clipped to norm 5;
     every ``cfg.save_every`` steps and at the end, ``save(step, seconds, optimizer, history)`` (None: no checkpoint), a
     line of log and ``out/history.json``; ``start``, a checkpoint's state
-    (:func:`~alcn_cv.train.checkpoint.load_checkpoint`), goes on after its step. Leaves ``net`` in eval mode. The
+    (:func:`~alcn_cv.train.checkpoint.load_checkpoint`), goes on after its step. Leaves ``net`` in eval mode. A block
+    in which no weight (a parameter of two or more dimensions) got a gradient logs a warning: the network died. The
     progress bar shows the mean loss of the last ``cfg.save_every`` steps (the logged one); lines of log print above it.
 
     Each step's loss is on a pair drawn afresh, so the logged mean moves with the block's draws as well as with the
@@ -984,6 +993,9 @@ def fit(
             saved = step  # within: a Ctrl-C held by the save is raised after it, not saved again
 
     recent_draws: collections.deque[Draw] = collections.deque(maxlen=REFERENCE_STEPS)  # for the reference
+    # the weights (not the biases): when none of them gets a gradient, every hidden ReLU is off for every input
+    weights = [p for p in net.parameters() if p.ndim >= 2]
+    learning, block = False, 0  # whether a weight got a gradient in the block under way, and its steps so far
     logger.info(
         "the loss of each step is on a pair drawn afresh: a block's mean moves with its draws%s",
         f"; each line compares its last steps ({REFERENCE_STEPS} at most) with the untrained start on the same draws"
@@ -1002,6 +1014,8 @@ def fit(
                 loss = step_loss(net, scene, frames, centres, cfg, anywhere)
                 opt.zero_grad()
                 loss.backward()
+                learning = learning or any(p.grad is not None and bool(p.grad.any()) for p in weights)
+                block += 1
                 torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
                 # a Ctrl-C between the update and its entry would save the step's weights as those of the step before
                 with interrupts_deferred():
@@ -1021,6 +1035,9 @@ def fit(
                         time.perf_counter() - began,
                         reference,
                     )
+                    if weights and not learning:
+                        logger.warning(_DEAD, block, cfg.lr)
+                    learning, block = False, 0
                     save_all(step)
     except KeyboardInterrupt as exc:
         bar.close()
