@@ -228,14 +228,14 @@ def short_relight(out: Path, methods: list[str], seeds: Sequence[int] = (0,), op
     )
 
 
-def untrained_start(trained: str | Path, path: str | Path, description: str) -> Path:
+def untrained_start(trained: str | Path, path: str | Path, description: str, **net_args: Any) -> Path:
     """The untrained start of a trained gain weight file: the network its recipe builds (the same arguments and
-    seed) before any step, saved to ``path``."""
+    seed, but ``net_args``, which replace the recipe's) before any step, saved to ``path``."""
     from alcn_cv.train.real_light import initial_network
     from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
     config = load_normalizer_file(trained).meta["training"]["config"]
-    net = initial_network(config["seed"], config["net"])
+    net = initial_network(config["seed"], {**config["net"], **net_args})
     return save_normalizer_file(path, net.state_arrays(), net.file_meta(trained=False, description=description))
 
 

@@ -5,9 +5,9 @@ The default's untrained start is the DoG G1 - G2, chosen on the webcam training 
 frames as registered: mexico's and frankfurt's are 1-3 px apart, and a smooth output, which tolerates the shift, was
 rewarded. With the pairs registered, a sharper centre may identify better; the keypoint detectors may pay for it.
 
-* ``starts``: untrained gain Normalizers of the default's recipe (seed 0) whose mixture starts as another DoG,
-  :data:`STARTS` (the kernels ``k * sigma_step``, ``k = 1..N``, the weights of the DoG on them), saved to
-  ``OUT/<name>.npz``;
+* ``starts``: the shipped default's untrained start (``_run.untrained_start``: its recipe, seed 0) with the mixture
+  starting as another DoG, :data:`STARTS` (the kernels ``k * sigma_step``, ``k = 1..N``, the weights of the DoG on
+  them), saved to ``OUT/<name>.npz``;
 * ``train``: the default's recipe (``alcn train-real-light --conf gain``: relit photographs) with a wider choice of
   bands: kernels 0.5, 1, 1.5 and 2 px from the default's G1 - G2 (``--set net.num_kernels=4 --set
   net.sigma_step=0.5``), and from the sharpest start, G0.5 - G1.5 (the preset has no key for the start, so the
@@ -39,10 +39,12 @@ from _run import (
     script_command,
     selected_parts,
     short_relight,
+    untrained_start,
 )
 
 from alcn_cv.cli import run_script
 from alcn_cv.report import machine
+from alcn_cv.runtime import MODELS
 
 PARTS = ("starts", "train", "bench")
 #: The untrained starts: the network's arguments that differ from the default recipe's (``net`` of the ``gain``
@@ -69,17 +71,6 @@ def _file_name(name: str) -> str:
     return re.sub(r"[^0-9A-Za-z.]+", "_", name).strip("_")
 
 
-def save_start(net_args: dict[str, Any], path: Path, description: str) -> Path:
-    """The default recipe's untrained network (its seed) with ``net_args`` changed, saved to ``path``."""
-    from alcn_cv.train.config import REAL_LIGHT_CONFS
-    from alcn_cv.train.real_light import initial_network
-    from alcn_cv.weight_file import save_normalizer_file
-
-    recipe = REAL_LIGHT_CONFS["gain"]
-    net = initial_network(recipe.seed, {**recipe.net, **net_args})
-    return save_normalizer_file(path, net.state_arrays(), net.file_meta(trained=False, description=description))
-
-
 def train_from(net_args: dict[str, Any], out: Path, command: str) -> None:
     """The ``gain`` preset's recipe for a network of ``net_args`` (over the preset's ``net``), into ``out``."""
     from alcn_cv.train.config import REAL_LIGHT_CONFS
@@ -102,7 +93,7 @@ def main() -> None:
     trained = {name: args.out / _file_name(name) / "gain_normalizer.npz" for name in TRAINED}
     if "starts" in args.part:
         for name, path in starts.items():
-            save_start(STARTS[name], path, f"ALCN's untrained {name}")
+            untrained_start(MODELS["gain"], path, f"ALCN's untrained {name}", **STARTS[name])
     if "train" in args.part:
         for name, how in TRAINED.items():
             if isinstance(how, str):

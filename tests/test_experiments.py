@@ -289,7 +289,11 @@ def test_dog_band_starts_are_the_dogs_they_name_and_its_benches_take_the_quick_p
     from alcn_cv.weight_file import load_normalizer_file
 
     module = importlib.import_module("dog_band")
-    path = module.save_start(module.STARTS["start G0.5 - G2"], tmp_path / "start.npz", "a start")
+    from alcn_cv.runtime import MODELS
+
+    path = experiments.untrained_start(
+        MODELS["gain"], tmp_path / "start.npz", "a start", **module.STARTS["start G0.5 - G2"]
+    )
     net = GainNormalizer.from_file(load_normalizer_file(path))
     assert net.sigmas == pytest.approx([0.5, 1.0, 1.5, 2.0])
     image = torch.rand(1, 1, 48, 48)
