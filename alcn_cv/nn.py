@@ -63,8 +63,8 @@ from alcn_cv.nets.cpu_inference import cpu_eager, cpu_inference, transformed
 from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nets.lite import normalizer_from_file
 from alcn_cv.nets.normalizer import check_grid_stride
-from alcn_cv.nets.opencv_runtime import WINDOW, cell_parts, cells_padded
-from alcn_cv.row_parts import MIN_PART_PIXELS, run_parts
+from alcn_cv.nets.opencv_runtime import WINDOW, GainFeatures
+from alcn_cv.row_parts import MIN_PART_PIXELS
 from alcn_cv.runtime import GainRuntime, ModelSpec, resolve_weights, weights_setting
 from alcn_cv.weight_file import NormalizerFile, load_normalizer_file, save_normalizer_file
 
@@ -685,21 +685,24 @@ class TorchNetwork:
     """A torch Normalizer as the OpenCV runtimes use it (:class:`~alcn_cv.runtime.Network`):
     NumPy in and out on a grid of ``grid_stride``, ``threads`` torch threads while it runs.
 
-    The gain Normalizer's cell moments (its only full-resolution part) are pooled from one reflect-101 border of
-    OpenCV, the same numbers as :meth:`GainNormalizer.cell_moments <alcn_cv.nets.gain.GainNormalizer.cell_moments>`.
+    On the CPU the gain Normalizer's fixed features (its cell moments, the only full-resolution part, and their
+    blurs and logs) are the OpenCV runtime's (:class:`~alcn_cv.nets.opencv_runtime.GainFeatures`, the same numbers
+    as :meth:`GainNormalizer.features <alcn_cv.nets.gain.GainNormalizer.features>` to float rounding).
     """
 
     def __init__(self, net: nn.Module, grid_stride: int, threads: int | None) -> None:
         self.net, self.stride, self.threads = net, grid_stride, threads
         self.device = next(net.parameters()).device
+        gain_on_cpu = isinstance(net, GainNormalizer) and grid_stride == net.stride and self.device.type == "cpu"
+        self.features = GainFeatures(net.config) if gain_on_cpu else None
 
     def dense_grid(self, image: np.ndarray, alongside: Callable[[], object] | None = None) -> np.ndarray:
         with torch.inference_mode(), torch_threads(self.threads):
-            if isinstance(self.net, GainNormalizer) and self.stride == self.net.stride and self.device.type == "cpu":
-                moments = _cell_moments(image, self.stride)
+            if self.features is not None:
+                features = torch.from_numpy(self.features(image))
                 if alongside is not None:
                     alongside()
-                return self.net.maps_from_features(self.net.features_from_moments(moments))[0].numpy()
+                return self.net.maps_from_features(features)[0].numpy()
             if alongside is not None:
                 alongside()
             x = torch.from_numpy(image).to(self.device)[None, None]
@@ -719,18 +722,6 @@ class TorchNetwork:
                     for i in range(0, len(x), _WINDOW_BATCH)
                 ]
             ).numpy()
-
-
-def _cell_moments(image: np.ndarray, stride: int) -> torch.Tensor:
-    """:meth:`GainNormalizer.cell_moments` of an ``(H, W)`` float32 image, the border by OpenCV (faster), the
-    pooling by torch (the same sums: where a cell is flat its deviation is rounding, which the log amplifies);
-    the grid's rows in parts on OpenCV's threads (:func:`~alcn_cv.nets.opencv_runtime.cell_parts`)."""
-
-    def moments(first: int, stop: int) -> torch.Tensor:
-        planes = cells_padded(image, stride, (first, stop))
-        return torch.cat([F.avg_pool2d(torch.from_numpy(plane)[None, None], stride) for plane in planes], 1)
-
-    return torch.cat(run_parts(moments, cell_parts(image.shape, stride)), 2)
 
 
 class TorchRuntime:

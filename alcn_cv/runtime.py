@@ -28,6 +28,7 @@ import numpy as np
 from alcn_cv.checks import check_image, check_out_dtype
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.divisive import blurred_square, divide_by_energy, divisive_floor, divisive_normalization
+from alcn_cv.filters.equalization import tanh
 from alcn_cv.filters.gaussian_mixture import (
     PYRAMID_MIN_SIGMA,
     alcn_filter,
@@ -239,7 +240,7 @@ class WindowRuntime:
             response = divisive_normalization(response, *divisive, floor=floor, multiplier=inverse_tau)
         elif inverse_tau != 1.0:
             np.multiply(response, np.float32(inverse_tau), out=response)
-        return response if tau is None else np.tanh(response, out=response)
+        return response if tau is None else tanh(response, out=response)
 
     def normalize(self, gray: np.ndarray, floor: float | None = None, band_floor: float | None = None) -> np.ndarray:
         out = self.finish(self.mixture(gray), floor)
@@ -357,7 +358,7 @@ class GainRuntime(WindowRuntime):
 
         def divide(start: int, stop: int) -> None:  # in place in the rows of e^2
             rows = divide_by_energy(response[start:stop], squared[start:stop], whole_floor, inverse_tau)
-            np.tanh(rows, out=rows)
+            tanh(rows, out=rows)
             if band_image is not None:
                 cv2.scaleAdd(band_image[start:stop], spec.band, rows, dst=rows)
 

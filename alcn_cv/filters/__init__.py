@@ -5,6 +5,7 @@
   :class:`GaussianMixture2d`);
 * :mod:`~alcn_cv.filters.divisive` and :mod:`~alcn_cv.filters.torch_divisive` -- the divisive normalization;
 * :mod:`~alcn_cv.filters.wide_band` and :mod:`~alcn_cv.filters.torch_wide_band` -- the wide band;
+* :mod:`~alcn_cv.filters.equalization` -- the contrast equalization's ``tanh`` through OpenCV's ``exp``;
 * :mod:`~alcn_cv.filters.lab` and :mod:`~alcn_cv.filters.torch_lab` -- the CIE Lab of colour images;
 * :mod:`~alcn_cv.filters.torch_resize`, :mod:`~alcn_cv.filters.torch_separable` and
   :mod:`~alcn_cv.filters.torch_pad` -- resizes, separable filters and reflect-101 borders in torch;

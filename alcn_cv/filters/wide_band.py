@@ -25,6 +25,7 @@ import numpy as np
 from alcn_cv.checks import check_gray
 from alcn_cv.errors import WeightFileError
 from alcn_cv.filters.divisive import divisive_floor, divisive_normalization, gaussian_energy
+from alcn_cv.filters.equalization import tanh
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d, kernel_radius
 
 __all__ = [
@@ -117,5 +118,5 @@ def wide_band(gray: np.ndarray, tau: float, scale: float = 1.0, floor: float | N
     small = divisive_normalization(
         _band_response(block_means(gray)), ENERGY_SIGMA / BLOCK, scale, floor, multiplier=1.0 / tau
     )
-    band = cv2.resize(np.tanh(small, out=small), (small.shape[1] * BLOCK, small.shape[0] * BLOCK))
+    band = cv2.resize(tanh(small, out=small), (small.shape[1] * BLOCK, small.shape[0] * BLOCK))
     return band if band.shape == (h, w) else np.ascontiguousarray(band[:h, :w])

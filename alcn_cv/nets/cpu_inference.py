@@ -8,8 +8,9 @@ keep torch's operations.
 
 from __future__ import annotations
 
-import numpy as np
 import torch
+
+from alcn_cv.filters.equalization import tanh
 
 __all__ = ["cpu_eager", "cpu_inference", "tanh_", "transformed"]
 
@@ -50,13 +51,16 @@ def cpu_inference(x: torch.Tensor) -> bool:
 
 
 def tanh_(x: torch.Tensor) -> torch.Tensor:
-    """``tanh`` in place on a contiguous float32 CPU tensor, through NumPy's vectorized ``tanh`` (faster than
-    torch's on the CPU); returns ``x``.
+    """``tanh`` in place on a contiguous CPU tensor, returned: float32 by the OpenCV runtimes' own
+    :func:`~alcn_cv.filters.equalization.tanh` (faster than torch's on the CPU), another dtype (float16 under
+    autocast, say) by torch.
 
     Example:
         >>> tanh_(torch.zeros(2)).tolist()
         [0.0, 0.0]
     """
+    if x.dtype != torch.float32:
+        return x.tanh_()
     array = x.numpy()
-    np.tanh(array, out=array)
+    tanh(array, out=array)
     return x

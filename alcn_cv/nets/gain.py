@@ -36,6 +36,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from alcn_cv.errors import InputError
+from alcn_cv.filters.equalization import tanh
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.filters.kornia_mixture import GaussianMixture2d
 from alcn_cv.filters.torch_divisive import (
@@ -86,7 +87,7 @@ def contrast_equalization(response: np.ndarray | torch.Tensor, tau: float | torc
     if isinstance(response, torch.Tensor):
         scaled = response / tau
         return tanh_(scaled) if cpu_inference(scaled) else torch.tanh(scaled)
-    return np.tanh(response / np.float32(tau)).astype(np.float32, copy=False)
+    return tanh(np.ascontiguousarray(response / np.float32(tau), np.float32))
 
 
 class GainNormalizer(nn.Module):

@@ -112,16 +112,16 @@ def cell_parts(shape: tuple[int, int], stride: int) -> list[tuple[int, int]]:
     return parts
 
 
-def cells_padded(image: np.ndarray, stride: int, cells: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+def cells_padded(image: np.ndarray, stride: int, cells: tuple[int, int]) -> np.ndarray:
     """The grid rows ``cells = (first, stop)`` of an ``(H, W)`` float32 image mirrored (reflect-101) to whole
-    ``stride``-pixel cells, each centred on a grid point ``stride * i``, and their square: two float32
-    ``(stride * (stop - first), stride * gw)`` arrays, ``gw`` the grid's width (:func:`grid_shape`)."""
+    ``stride``-pixel cells, each centred on a grid point ``stride * i``: float32 ``(stride * (stop - first),
+    stride * gw)``, ``gw`` the grid's width (:func:`grid_shape`)."""
     h, w = image.shape
     width = stride * grid_shape(image.shape, stride)[1]
     before = stride // 2
     # the image rows of the part's first and last padded rows (beyond the image: mirrored)
     top, bottom = stride * cells[0] - before, stride * cells[1] - before
-    padded = cv2.copyMakeBorder(
+    return cv2.copyMakeBorder(
         image[max(top, 0) : min(bottom, h)],
         max(0, -top),
         max(0, bottom - h),
@@ -129,7 +129,6 @@ def cells_padded(image: np.ndarray, stride: int, cells: tuple[int, int]) -> tupl
         width - w - before,
         cv2.BORDER_REFLECT_101,
     )
-    return padded, cv2.multiply(padded, padded)
 
 
 def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
@@ -142,14 +141,15 @@ def cell_moments(image: np.ndarray, stride: int) -> np.ndarray:
     """
 
     def moments(first: int, stop: int) -> np.ndarray:
-        padded, square = cells_padded(image, stride, (first, stop))
+        padded = cells_padded(image, stride, (first, stop))
         gh, gw = padded.shape[0] // stride, padded.shape[1] // stride
-        sums = np.zeros((1, 2, gh, gw), np.float32)
-        for plane, total in zip((padded, square), sums[0]):
-            cells = plane.reshape(gh, stride, gw, stride)
-            for dy in range(stride):
-                for dx in range(stride):
-                    np.add(total, cells[:, dy, :, dx], out=total)
+        # each cell's pixels and their squares along the first axis, row by row: NumPy reduces an axis that is not
+        # the array's fastest in order, pixel after pixel (pairwise summation runs along the fastest only), and the
+        # two planes keep the fastest axis another one even for a single cell
+        cells = np.empty((stride * stride, 2, gh, gw), np.float32)
+        cells.reshape(stride, stride, 2, gh, gw)[:, :, 0] = padded.reshape(gh, stride, gw, stride).transpose(1, 3, 0, 2)
+        np.multiply(cells[:, 0], cells[:, 0], out=cells[:, 1])
+        sums = np.add.reduce(cells, axis=0)[None]
         return np.divide(sums, np.float32(stride * stride), out=sums)
 
     return np.concatenate(run_parts(moments, cell_parts(image.shape, stride)), axis=2)
