@@ -702,7 +702,8 @@ class TorchNetwork:
                 features = torch.from_numpy(self.features(image))
                 if alongside is not None:
                     alongside()
-                return self.net.maps_from_features(features)[0].numpy()
+                # C order for the OpenCV runtime's passes over each map (the layers ran channels-last)
+                return self.net.maps_from_features(features)[0].contiguous().numpy()
             if alongside is not None:
                 alongside()
             x = torch.from_numpy(image).to(self.device)[None, None]

@@ -68,17 +68,24 @@ def test_other_gain_configurations_equal_the_torch_model(tmp_path, config):
         np.testing.assert_allclose(alcn.normalize(gray), _forward(net, gray), atol=1e-3, rtol=0)
 
 
-@pytest.mark.parametrize("stride", [3, 4, 8])
-@pytest.mark.parametrize("shape", [(800, 1280), (17, 9), (1, 1), (8, 16), (9, 17)])
-def test_upsample_grid_is_torch_align_corners(stride, shape):
+@pytest.mark.parametrize("stride", [3, 4, 8, 24])
+# (9, 2**15 + 5): wider than OpenCV's warps take (NumPy's interpolation), as the strides 3 and 24 are
+@pytest.mark.parametrize("shape", [(800, 1280), (17, 9), (1, 1), (8, 16), (9, 17), (9, 2**15 + 5)])
+def test_upsample_grid_is_align_corners_bilinear(stride, shape):
+    """torch's ``align_corners=True`` interpolation, computed exactly (in float64; torch's own float32 coordinates
+    are off by up to 6e-4 on 2**15 columns)."""
     h, w = shape
     gh, gw = -(-(h - 1) // stride) + 1, -(-(w - 1) // stride) + 1
     grid = np.random.default_rng(0).random((gh, gw), dtype=np.float32)
-    size = (stride * (gh - 1) + 1, stride * (gw - 1) + 1)
-    expected = F.interpolate(torch.from_numpy(grid)[None, None], size=size, mode="bilinear", align_corners=True)[
-        0, 0, :h, :w
-    ]
-    np.testing.assert_allclose(upsample_grid(grid, stride, shape), expected.numpy(), atol=1e-4, rtol=0)
+    rows, cols = np.arange(h) / stride, np.arange(w) / stride
+    along = np.stack([np.interp(cols, np.arange(gw), g) for g in grid.astype(np.float64)])
+    expected = np.stack([np.interp(rows, np.arange(gh), c) for c in along.T], axis=1)
+    np.testing.assert_allclose(upsample_grid(grid, stride, shape), expected, atol=1e-6, rtol=0)
+    if shape == (17, 9):  # the reference is torch's
+        size = (stride * (gh - 1) + 1, stride * (gw - 1) + 1)
+        torch_grid = torch.from_numpy(grid)[None, None]
+        by_torch = F.interpolate(torch_grid, size=size, mode="bilinear", align_corners=True)[0, 0, :h, :w]
+        np.testing.assert_allclose(expected, by_torch.numpy(), atol=1e-6, rtol=0)
 
 
 @pytest.mark.parametrize("proportional", [False, True])
