@@ -34,6 +34,7 @@ from alcn_cv.filters.gaussian_mixture import (
     alcn_filter,
     alcn_filter_grid,
     kernel_radius,
+    proportional_scales,
     pyramid_mixture,
     pyramid_plan,
     upsample_grid,
@@ -329,6 +330,7 @@ class GainRuntime(WindowRuntime):
                 band.append(submit(wide_band, gray, spec.tau, c, band_floor))
 
         grid = self.network.dense_grid(gray, start_band)
+        scales = proportional_scales(grid)  # once, not in each part (NumPy's small passes hold the GIL)
         response, squared = np.empty_like(gray), np.empty_like(gray)
         energy = np.empty_like(gray) if floor is None else None
         reach = kernel_radius(sigma)
@@ -338,11 +340,10 @@ class GainRuntime(WindowRuntime):
             lo, hi = max(0, start - reach), min(len(gray), stop + reach)
             own = slice(start - lo, stop - lo)
             if (lo, hi) == (start, stop):
-                blurred_square(
-                    alcn_filter_grid(gray, grid, self.grid_stride, spec.full_res_sigmas, dst=response), sigma, squared
-                )
+                eq3 = alcn_filter_grid(gray, grid, self.grid_stride, spec.full_res_sigmas, dst=response, scales=scales)
+                blurred_square(eq3, sigma, squared)
             else:
-                eq3 = alcn_filter_grid(gray, grid, self.grid_stride, spec.full_res_sigmas, (lo, hi))
+                eq3 = alcn_filter_grid(gray, grid, self.grid_stride, spec.full_res_sigmas, (lo, hi), scales=scales)
                 response[start:stop] = eq3[own]
                 squared[start:stop] = blurred_square(eq3, sigma)[own]
             if energy is not None:

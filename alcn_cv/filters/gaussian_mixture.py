@@ -32,6 +32,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Sequence
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -59,6 +60,7 @@ __all__ = [
     "gaussian_kernel1d",
     "gaussian_sigmas",
     "kernel_radius",
+    "proportional_scales",
     "upsample_grid",
 ]
 
@@ -246,9 +248,10 @@ def _upsample_rows(grid: np.ndarray, stride: int, n: int) -> np.ndarray:
     return out[:n]
 
 
-def _proportional(grid: np.ndarray) -> np.ndarray | None:
-    """``s`` with ``grid[k] = s_k * grid[0]`` for every map (to float rounding), or None: the
-    maps of a band-pass of two kernels (``F_2 = -F_1``, the gain Normalizer's) share one product."""
+def proportional_scales(grid: np.ndarray) -> np.ndarray | None:
+    """``s`` with ``grid[k] = s_k * grid[0]`` for every map of an ``(N, gh, gw)`` grid (to float rounding), or
+    None: the maps of a band-pass of two kernels (``F_2 = -F_1``, the gain Normalizer's) share one product in
+    :func:`alcn_filter_grid`."""
     first = grid[0].astype(np.float64)
     norm = float((first * first).sum())
     if len(grid) < 2 or norm == 0.0:
@@ -268,6 +271,7 @@ def alcn_filter_grid(
     sigmas: Sequence[float],
     rows: tuple[int, int] | None = None,
     dst: np.ndarray | None = None,
+    scales: np.ndarray | None | Literal["whole grid"] = "whole grid",
 ) -> np.ndarray:
     """Eq. 3 with maps given on a grid: :func:`alcn_filter` of the maps :func:`upsample_grid`
     interpolates, in fewer passes (one map at a time, multiplied by the image in place).
@@ -280,6 +284,8 @@ def alcn_filter_grid(
         rows: ``(start, stop)``: only these rows of the output, computed from the rows within the widest
             kernel's reach around them (the whole output's values, bit for bit); default all.
         dst: a C-contiguous float32 array of the output's shape to write it into (OpenCV's ``dst``).
+        scales: the whole grid's :func:`proportional_scales`, from a caller that filters its rows in parts and
+            computes them once; default: computed here, of the whole ``grid``, so that every part takes one path.
 
     Returns:
         ``(H, W)`` float32, or ``(stop - start, W)`` (rows of a larger array): ``dst`` when given.
@@ -294,7 +300,8 @@ def alcn_filter_grid(
     shape = (stop - start, image.shape[1])
     if dst is not None and (dst.shape != shape or dst.dtype != np.float32 or not dst.flags.c_contiguous):
         raise InputError(f"dst must be a C-contiguous float32 array of shape {shape}, got {dst.dtype} {dst.shape}")
-    scales = _proportional(grid)  # of the whole grid, so that every part takes the same path
+    if isinstance(scales, str):
+        scales = proportional_scales(grid)
     # From a grid row, so the part's maps are the whole one's rows; the blurs' reflected margins fall
     # outside the rows kept unless they are the image's own.
     reach = kernel_radius(max(sigmas))
