@@ -75,7 +75,9 @@ def test_distill_from_a_gain_teacher_writes_a_smaller_gain_student(tmp_path):
     fast, opencv = ALCN(weights=out), ALCN(weights=out, backend="opencv")
     with torch.inference_mode():
         expected = fast.net(torch.from_numpy(gray)[None, None])[0, 0].numpy()
-    np.testing.assert_allclose(fast.normalize(gray), expected, atol=1e-5, rtol=0)
+    # the OpenCV mixture against torch's, to float rounding as the division amplifies it: an input moved by 1e-7 of
+    # itself moves the torch output by up to 8e-6 (the shipped default), 5e-6 (a student distilled here)
+    np.testing.assert_allclose(fast.normalize(gray), expected, atol=5e-5, rtol=0)
     np.testing.assert_allclose(opencv.normalize(gray), expected, atol=1e-4, rtol=0)
 
 

@@ -240,14 +240,28 @@ class GainNormalizer(nn.Module):
         convolutions (reflect-101 borders, ReLU), the head, the weights made to sum to zero."""
         # oneDNN's channels-last convolutions are faster on the CPU; in inference only, so that training (and the
         # preset's rebuild of the shipped file) keeps its own sums
-        x = features.contiguous(memory_format=torch.channels_last) if cpu_inference(features) else features
+        inference = cpu_inference(features)
+        x = features.contiguous(memory_format=torch.channels_last) if inference else features
         for conv, d in zip(self.convs, self.dilations):
             x = F.relu(conv(reflect101_pad(x, d, d, d, d)))
+        if inference:  # the 1x1 head on channels-last maps and the operations on its 1-channel slices cost more
+            return self._head_by_cells(x)  # than their work on the CPU
         head = self.head(x)
         # A band-pass, as the DoG: weights summing to zero, so the response does not follow the
         # local mean (which the division would turn into structure in flat regions).
         weights = head[:, 1:]
         return head[:, :1].exp() * (weights - weights.mean(dim=1, keepdim=True))
+
+    def _head_by_cells(self, x: torch.Tensor) -> torch.Tensor:
+        """:meth:`maps_from_features`' head and its weights' centring on the channels-last ``x`` ``(B, C, gh, gw)`` of
+        the last convolution, as one matrix product over the cells and operations on whole rows: ``(B, N, gh, gw)``,
+        torch's values to float rounding."""
+        b, c, gh, gw = x.shape
+        cells = x.permute(0, 2, 3, 1).reshape(-1, c)  # a row per cell: the layout of x in memory
+        head = torch.addmm(self.head.bias[:, None], self.head.weight[:, :, 0, 0], cells.T)  # (1 + N, cells)
+        weights = head[1:]
+        maps = head[0].exp() * (weights - weights.mean(dim=0))
+        return maps.reshape(-1, b, gh, gw).transpose(0, 1)
 
     def dense_grid(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
         """The maps F_k on a grid of stride ``grid_stride`` (a multiple of :attr:`stride`).
