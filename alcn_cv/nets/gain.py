@@ -258,7 +258,9 @@ class GainNormalizer(nn.Module):
         torch's values to float rounding."""
         b, c, gh, gw = x.shape
         cells = x.permute(0, 2, 3, 1).reshape(-1, c)  # a row per cell: the layout of x in memory
-        head = torch.addmm(self.head.bias[:, None], self.head.weight[:, :, 0, 0], cells.T)  # (1 + N, cells)
+        bias = self.head.bias
+        assert bias is not None  # the head is built with one
+        head = torch.addmm(bias[:, None], self.head.weight[:, :, 0, 0], cells.T)  # (1 + N, cells)
         weights = head[1:]
         maps = head[0].exp() * (weights - weights.mean(dim=0))
         return maps.reshape(-1, b, gh, gw).transpose(0, 1)
