@@ -22,6 +22,11 @@ def test_tanh_limits_nan_and_monotony():
     assert (np.diff(tanh(x)) >= 0).all()
 
 
+def test_tanh_of_the_largest_floats_warns_nothing():
+    with np.errstate(all="raise"):
+        np.testing.assert_array_equal(tanh(np.array([3e38, -3e38], np.float32)), [1, -1])
+
+
 def test_tanh_in_place_any_shape():
     x = np.random.default_rng(1).standard_normal((2, 3, 5, 7)).astype(np.float32)
     expected = tanh(x)

@@ -24,7 +24,7 @@ from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
 from alcn_cv.filters.torch_pad import reflect101_pad
 from alcn_cv.filters.torch_resize import upsample_blocks
 from alcn_cv.nets import cpu_inference
-from alcn_cv.nets.gain import GainNormalizer
+from alcn_cv.nets.gain import GainNormalizer, contrast_equalization
 from alcn_cv.nn import ALCN2d, alcn2d, batches
 from alcn_cv.runtime import MODELS, GainRuntime
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
@@ -873,6 +873,21 @@ def test_a_colour_output_is_contiguous():
     with torch.no_grad():
         for image in (torch.rand(2, 3, 32, 40), torch.rand(2, 3, 32, 40).to(memory_format=torch.channels_last)):
             assert ALCN2d(model="gain-lite")(image).is_contiguous()
+
+
+def test_a_channels_last_module_runs_in_cpu_inference():
+    """The lite model's layers of a module moved to channels-last gave strided outputs, which the OpenCV tanh of CPU
+    inference refused (ValueError); a transposed response to the equalization likewise."""
+    image = torch.rand(2, 1, 64, 80)
+    with torch.no_grad():
+        for model in ("lite", "gain"):
+            expected = ALCN2d(model=model).eval()(image)
+            module = ALCN2d(model=model).eval().to(memory_format=torch.channels_last)
+            torch.testing.assert_close(module(image), expected, atol=1e-5, rtol=0)
+        response = torch.randn(2, 1, 30, 20)
+        torch.testing.assert_close(
+            contrast_equalization(response.transpose(-1, -2), 0.5), torch.tanh(response / 0.5).transpose(-1, -2)
+        )
 
 
 def test_settings_that_are_not_what_they_say_are_refused():

@@ -42,7 +42,8 @@ def tanh(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     elif out.shape != x.shape or out.dtype != np.float32 or not out.flags.c_contiguous:
         raise ValueError(f"out must be a C-contiguous float32 array of shape {x.shape}")
     flat = out.reshape(-1)  # a view: OpenCV's exp takes arrays of at most 2 dimensions
-    np.multiply(x.reshape(-1), _MINUS_TWO, out=flat)
+    with np.errstate(over="ignore"):  # beyond 1.7e38, -2x is -inf: exp 0, tanh 1, as it should
+        np.multiply(x.reshape(-1), _MINUS_TWO, out=flat)
     cv2.exp(flat, dst=flat)
     np.add(flat, _ONE, out=flat)
     np.divide(_TWO, flat, out=flat)

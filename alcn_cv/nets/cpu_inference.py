@@ -51,15 +51,15 @@ def cpu_inference(x: torch.Tensor) -> bool:
 
 
 def tanh_(x: torch.Tensor) -> torch.Tensor:
-    """``tanh`` in place on a contiguous CPU tensor, returned: float32 by the OpenCV runtimes' own
-    :func:`~alcn_cv.filters.equalization.tanh` (faster than torch's on the CPU), another dtype (float16 under
-    autocast, say) by torch.
+    """``tanh`` in place on a CPU tensor, returned: a contiguous float32 one by the OpenCV runtimes' own
+    :func:`~alcn_cv.filters.equalization.tanh` (faster than torch's on the CPU), another (float16 under autocast,
+    the channels-last output of a channels-last module's layer) by torch.
 
     Example:
         >>> tanh_(torch.zeros(2)).tolist()
         [0.0, 0.0]
     """
-    if x.dtype != torch.float32:
+    if x.dtype != torch.float32 or not x.is_contiguous():
         return x.tanh_()
     array = x.numpy()
     tanh(array, out=array)

@@ -87,7 +87,8 @@ def contrast_equalization(response: np.ndarray | torch.Tensor, tau: float | torc
     if isinstance(response, torch.Tensor):
         scaled = response / tau
         return tanh_(scaled) if cpu_inference(scaled) else torch.tanh(scaled)
-    return tanh(np.ascontiguousarray(response / np.float32(tau), np.float32))
+    scaled = np.array(response / np.float32(tau), np.float32, order="C")  # a copy of any layout, 0-d kept
+    return tanh(scaled, out=scaled)
 
 
 class GainNormalizer(nn.Module):
