@@ -87,7 +87,7 @@ def contrast_equalization(response: np.ndarray | torch.Tensor, tau: float | torc
     if isinstance(response, torch.Tensor):
         scaled = response / tau
         return tanh_(scaled) if cpu_inference(scaled) else torch.tanh(scaled)
-    scaled = np.array(response / np.float32(tau), np.float32, order="C")  # a copy of any layout, 0-d kept
+    scaled = np.asarray(response / np.float32(tau), np.float32, order="C")  # the quotient's own array, C order
     return tanh(scaled, out=scaled)
 
 
