@@ -145,14 +145,23 @@ def check_image(img: object) -> np.ndarray:
             dtype, NaN/inf or out-of-range values in a float image.
     """
     if not isinstance(img, np.ndarray):
-        raise InputError(f"image must be a numpy array, got {type(img).__name__}")
+        # the two mistakes of an OpenCV loop: a failed read, and a cv2.UMat
+        hint = {
+            "NoneType": " (cv2.imread could not read the file, or VideoCapture.read() reached the end?)",
+            "UMat": " (a cv2.UMat: umat.get())",
+        }.get(type(img).__name__, "")
+        raise InputError(f"image must be a numpy array, got {type(img).__name__}{hint}")
     if img.size == 0:
         raise InputError(f"image is empty (shape {img.shape})")
     if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 2, 3, 4)):
-        stacked = img.ndim == 4 or (img.ndim == 3 and img.shape[0] < min(img.shape[1:]) and img.shape[2] > 4)
-        frames = " (frames stacked? apply each one, or createALCN(backend='torch').apply_batch)" if stacked else ""
+        hints = []
+        if img.ndim == 3 and img.shape[0] in (1, 3, 4) and img.shape[2] > 4:
+            hints.append("channels first, as in torch? img.transpose(1, 2, 0)")
+        if img.ndim == 4 or (img.ndim == 3 and img.shape[0] < min(img.shape[1:]) and img.shape[2] > 4):
+            hints.append("frames stacked? apply each one, or createALCN(backend='torch').apply_batch")
+        hint = f" ({'; '.join(hints)})" if hints else ""
         raise InputError(
-            f"image must be HxW, HxWx1, HxWx2 (gray, alpha), HxWx3 (BGR) or HxWx4 (BGRA), got shape {img.shape}{frames}"
+            f"image must be HxW, HxWx1, HxWx2 (gray, alpha), HxWx3 (BGR) or HxWx4 (BGRA), got shape {img.shape}{hint}"
         )
     native = img.dtype.newbyteorder("=")
     if native not in SUPPORTED_DTYPES:
@@ -173,10 +182,10 @@ def check_unit_range(img: np.ndarray, name: str) -> None:
     if not (lo >= -FLOAT_TOLERANCE and hi <= 1 + FLOAT_TOLERANCE):
         if not np.isfinite(img).all():
             raise InputError(f"{name} contains NaN or inf")
-        raise InputError(
-            f"float32 intensities must be in [0, 1], got [{lo:.4g}, {hi:.4g}]"
-            + (" (divide by 255 first)" if lo >= 0 and 1.5 < hi <= 255 else "")
-        )
+        hint = " (divide by 255 first)" if lo >= 0 and 1.5 < hi <= 255 else ""
+        if lo > -0.5 and hi < 1.5:  # a resize's or a blur's overshoot
+            hint = " (an interpolation's overshoot? np.clip(img, 0, 1))"
+        raise InputError(f"float32 intensities must be in [0, 1], got [{lo:.4g}, {hi:.4g}]{hint}")
 
 
 def check_gray(gray: object, finite: bool = True) -> np.ndarray:

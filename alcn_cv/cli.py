@@ -124,12 +124,26 @@ class _CommandParser(argparse.ArgumentParser):
         return parsed, unknown
 
 
+def _versions() -> str:
+    """``alcn --version``: alcn-cv's, and those of OpenCV and NumPy it runs with (and torch's, where installed)."""
+    import cv2
+    import numpy
+
+    from alcn_cv import __version__
+
+    versions = f"alcn-cv {__version__} (OpenCV {cv2.__version__}, NumPy {numpy.__version__}"
+    if is_installed("torch"):
+        versions += f", torch {metadata.version('torch')}"
+    return versions + ")"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _CommandParser(
         prog="alcn",
         description="Adaptive Local Contrast Normalization (ALCN) and its tools: normalize images and "
         "videos, generate data, train, benchmark, calibrate and estimate box poses.",
     )
+    parser.add_argument("--version", action="version", version=_versions())
     parser.add_argument("--debug", action="store_true", help="print full tracebacks on errors, and OpenCV's warnings")
     parser.add_argument(
         "-v", "--verbose", action="store_true", help="log debug messages, and OpenCV's and FFmpeg's warnings"

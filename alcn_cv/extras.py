@@ -167,14 +167,28 @@ def require_opencv() -> None:
     app has (requiring one would install it beside the app's and take over the ``cv2`` module).
 
     Raises:
-        MissingDependencyError: no ``cv2`` module, or one too old (``extra`` is ``"opencv"``).
+        MissingDependencyError: no ``cv2`` module, one that fails to import (an OpenCV before 4.10, built for NumPy 1,
+            under NumPy 2), or one too old (``extra`` is ``"opencv"``).
     """
     if not is_installed("cv2"):
         error = MissingDependencyError(
             f"alcn-cv needs OpenCV (the cv2 module), which is not installed: {_INSTALL_OPENCV}"
         )
     else:
-        if opencv_version() >= OPENCV_MINIMUM:
+        try:
+            version = opencv_version()
+        except ImportError as exc:
+            import numpy
+
+            hint = "reinstall it"
+            if int(numpy.__version__.split(".")[0]) >= 2:
+                hint = f'OpenCV before 4.10 was built for NumPy 1, found {numpy.__version__}: pip install "numpy<2"'
+            error = MissingDependencyError(
+                f"OpenCV (the cv2 module) fails to import ({exc}): {hint}, or {_INSTALL_OPENCV}"
+            )
+            error.extra = "opencv"
+            raise error from None
+        if version >= OPENCV_MINIMUM:
             return
         import cv2
 

@@ -29,6 +29,7 @@ __all__ = [
     "INTERRUPTS",
     "VIDEO_SUFFIXES",
     "FrameReader",
+    "VideoFileWriter",
     "VideoReader",
     "atomic_path",
     "atomic_write",
@@ -134,7 +135,8 @@ def _jpeg_is_complete(data: bytes) -> bool:
 
 
 def read_image(path: str | Path, alpha: bool = False, gray: bool = False) -> np.ndarray:
-    """Read an image as OpenCV does, keeping 16-bit depth.
+    """Read an image as OpenCV does, keeping 16-bit depth: a JPEG turned as its EXIF orientation says, as
+    ``cv2.imread`` turns it (a phone's portrait photograph).
 
     Args:
         alpha: keep an alpha channel (``HxWx4`` BGRA); by default it is dropped.
@@ -154,9 +156,12 @@ def read_image(path: str | Path, alpha: bool = False, gray: bool = False) -> np.
         data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"cannot read image {path}: {exc.strerror}") from None
-    if data[:2] == b"\xff\xd8" and not _jpeg_is_complete(data):
+    jpeg = data[:2] == b"\xff\xd8"
+    if jpeg and not _jpeg_is_complete(data):
         raise InputError(f"{path}: truncated or corrupt JPEG (no end-of-image marker)")
-    flag = cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_UNCHANGED
+    # IMREAD_UNCHANGED keeps an alpha channel and ignores the EXIF orientation, which a JPEG (no alpha) needs
+    unchanged = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR if jpeg else cv2.IMREAD_UNCHANGED
+    flag = cv2.IMREAD_GRAYSCALE if gray else unchanged
     img = cv2.imdecode(np.frombuffer(data, np.uint8), flag) if data else None
     if img is None or img.size == 0:
         raise InputError(f"cannot read image {path}: corrupt, truncated or unsupported format")
@@ -469,7 +474,7 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
 
     Raises:
         InputError: ``path`` has no image extension (:data:`IMAGE_SUFFIXES`) or lies under a file.
-        OSError: the image cannot be encoded in that format or the folder is not writable.
+        OSError: the image cannot be encoded in that format, or the file cannot be written (the message says why).
     """
     path = Path(path)
     if path.suffix.lower() not in IMAGE_SUFFIXES:
@@ -487,13 +492,17 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
         # OpenCV would saturate every value above 255 (a white image); scaled, as image tools convert
         logger.warning("%s holds 8 bits a channel: the 16-bit image is scaled to 8 bits", path)
         img = eight_bits(img)
+    try:
+        encoded, data = cv2.imencode(path.suffix, img)
+    except cv2.error as exc:
+        raise OSError(f"cannot write image {path}: {exc.err}") from None
+    if not encoded:
+        raise OSError(f"cannot write image {path}: OpenCV cannot encode this image in {path.suffix}")
     with atomic_path(path) as tmp:
-        try:
-            written = cv2.imwrite(str(tmp), img)
-        except cv2.error as exc:
-            raise OSError(f"cannot write image {path}: {exc.err}") from None
-        if not written:
-            raise OSError(f"cannot write image {path} (format or folder not writable)")
+        try:  # written here, not by OpenCV, whose imwrite says nothing of why (a full disk, a folder not writable)
+            tmp.write_bytes(data.tobytes())
+        except OSError as exc:
+            raise OSError(exc.errno, f"cannot write image {path}: {exc.strerror}") from None
     return path
 
 
@@ -715,10 +724,69 @@ def frame_progress(frames: Iterable[T], total: int | None, **bar: Any) -> Iterat
         progress.total = progress.n
 
 
+class VideoFileWriter:
+    """A ``cv2.VideoWriter`` (:func:`open_video_writer`) that counts the frames written and, finished by
+    :meth:`close`, checks that its file holds them: OpenCV's ``write`` reports nothing when FFmpeg cannot write (a full
+    disk, a file size limit), and the file would be unreadable or short. As a context manager it is closed on the
+    way out, or released only on an error's (whose file is discarded; the check's own error would replace it).
+
+    Attributes:
+        path: the file written; name: the path an error names (the output's, when ``path`` is a temporary name for
+            it); frames: the frames written.
+    """
+
+    def __init__(self, writer: cv2.VideoWriter, path: Path, name: str | Path) -> None:
+        self._writer = writer
+        self.path, self.name = path, name
+        self.frames = 0
+
+    def write(self, frame: np.ndarray) -> None:
+        self._writer.write(frame)
+        self.frames += 1
+
+    def release(self) -> None:
+        """Finish the file (again: nothing), unchecked: the way out of an error, whose file is discarded."""
+        self._writer.release()
+
+    def close(self) -> None:
+        """Finish the file, then check that it opens and holds the :attr:`frames` frames written: its last frame read
+        where a seek puts it, or, where seeking is inexact (MPEG program streams), its frames counted.
+
+        Raises:
+            OSError: the file is unreadable or holds fewer frames: it could not be written.
+        """
+        self._writer.release()
+        if self.frames == 0:
+            return
+        with signals_to_main_thread():  # FFmpeg's decoder threads start here
+            capture = cv2.VideoCapture(str(self.path))
+        try:
+            if capture.isOpened():
+                capture.set(cv2.CAP_PROP_POS_FRAMES, self.frames - 1)
+                if capture.read()[0] and capture.get(cv2.CAP_PROP_POS_FRAMES) == self.frames:
+                    return
+                capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
+                if sum(1 for _ in iter(capture.grab, False)) >= self.frames:
+                    return
+        finally:
+            capture.release()
+        raise OSError(
+            f"could not write video {self.name}: the encoder's file does not hold the {self.frames} frames written "
+            "(a full disk, or a file size limit?)"
+        )
+
+    def __enter__(self) -> VideoFileWriter:
+        return self
+
+    def __exit__(self, error: type[BaseException] | None, *_: object) -> None:
+        self.close() if error is None else self.release()
+
+
 def open_video_writer(
     path: str | Path, fps: float, size: tuple[int, int], color: bool = True, *, name: str | Path | None = None
-) -> cv2.VideoWriter:
-    """A ``cv2.VideoWriter`` for ``path``, its codec from the extension (:data:`_FOURCC`, else mp4v).
+) -> VideoFileWriter:
+    """A video writer for ``path``, its codec from the extension (:data:`_FOURCC`, else mp4v): OpenCV's, checked
+    when closed (:class:`VideoFileWriter`).
 
     ``name``: the path an error names, when ``path`` is a temporary name for it (:func:`atomic_path`).
 
@@ -732,7 +800,7 @@ def open_video_writer(
         writer = cv2.VideoWriter(str(path), fourcc, fps, size, color)
     if not writer.isOpened():
         raise OSError(f"cannot write video {name or path} (unsupported extension or codec)")
-    return writer
+    return VideoFileWriter(writer, path, name or path)
 
 
 def map_batches(
@@ -860,4 +928,5 @@ def map_video(
             if not allow_partial:
                 raise InputError(f"{message}; nothing written (--allow-partial keeps the decoded frames)")
             logger.warning("%s; wrote the %d decoded frames", message, count)
+        writer.close()  # checked before the rename
     return count

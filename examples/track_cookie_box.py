@@ -73,7 +73,8 @@ def main() -> None:
         "--data",
         type=Path,
         default=shared_data_dir() / "cookie_box",
-        help="folder of box.mp4 and box.ply (default: the shared data's)",
+        help="folder of OpenCV's cookie-box sample, box.mp4 and box.ply (default: the shared data's); the preset's "
+        "intrinsics are for its 640x480 frames, and another video is refused",
     )
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="[%(asctime)s %(name)s] %(message)s")

@@ -138,12 +138,16 @@ CONFS: Mapping[str, Mapping[str, Any]] = types.MappingProxyType(
     }
 )
 
+#: The frame size ``(width, height)`` that a preset's intrinsics are for: a video of another size built with them is
+#: refused before the work (its camera is another one; ``--K`` or ``--camera`` give it).
+PRESET_FRAME_SIZES: Mapping[str, tuple[int, int]] = types.MappingProxyType({"cookie-box": (640, 480)})
+
 #: One line per preset of :data:`CONFS`, for ``alcn pose build --help``.
 CONF_SUMMARIES: Mapping[str, str] = types.MappingProxyType(
     {
         "static-camera": "a hand-held object before a static camera (give --K or --camera, and the box)",
         "cookie-box": "the shared data's cookie_box/box.mp4: static-camera with the intrinsics of OpenCV's real-time "
-        "pose tutorial, the box in cm, all 455 frames",
+        "pose tutorial, the box in cm, every 10th of its 455 frames",
     }
 )
 
@@ -515,7 +519,8 @@ def main(
         InputError: an unknown preset, a video without its camera, a camera or the box given twice, ``K`` not a
             camera matrix (positive focal lengths), a box size not three lengths greater than 0, ``output`` a
             folder, or the files of an earlier build there without ``overwrite`` (all before the work); a video's
-            frames of another size than its calibration's; and :func:`build`'s.
+            frames of another size than its calibration's, or than a preset's intrinsics are for
+            (:data:`PRESET_FRAME_SIZES`); and :func:`build`'s.
     """
     input_path, output = Path(input_path), part_model.model_file(output)
     is_video = input_path.is_file() and io.is_video(input_path)
@@ -564,8 +569,12 @@ def main(
     if is_video:
         if K is None:
             raise InputError("building from a video needs the intrinsics (--K fx fy cx cy, or --camera camera.yaml)")
-        if calibration is not None:  # before the frames are extracted
-            _check_frame_size(input_path, calibration, settings["camera"])
+        # before the frames are extracted
+        if calibration is not None:
+            name = settings["camera"] if isinstance(settings["camera"], str | Path) else "the calibration"
+            _check_frame_size(input_path, calibration.image_size, str(name))
+        elif K is not None and conf in PRESET_FRAME_SIZES and given["K"] is None:
+            _check_frame_size(input_path, PRESET_FRAME_SIZES[conf], f"the preset {conf!r}'s camera")
     with io.new_folder(output.parent):  # a build that fails leaves no empty folder behind
         with tempfile.TemporaryDirectory(prefix="alcn_pose_frames_", dir=output.parent) as work:
             if is_video:
@@ -647,15 +656,15 @@ def _provenance(
     return {"conf": conf, **used}
 
 
-def _check_frame_size(video: Path, calibration: Calibration, camera: object) -> None:
-    """Raise :class:`InputError` when the first frame of ``video`` is not the size ``calibration`` is for
-    (:func:`pose.track.check_frame_size`); ``camera``: what the calibration was given as (a path names it)."""
+def _check_frame_size(video: Path, image_size: tuple[int, int], camera: str) -> None:
+    """Raise :class:`InputError` when the first frame of ``video`` is not ``image_size`` ``(width, height)``, the size
+    that ``camera`` (the message's name of a calibration or a preset's intrinsics) is for
+    (:func:`pose.track.check_frame_size`)."""
     from pose.track import check_frame_size
 
     with io.FrameReader(video, max_frames=1) as frames:
         frame = next(frames)[1]
-    name = camera if isinstance(camera, str | Path) else "the calibration"
-    check_frame_size(frame.shape[1::-1], calibration.image_size, f"{video}: its frames are", str(name))
+    check_frame_size(frame.shape[1::-1], image_size, f"{video}: its frames are", camera)
 
 
 def build_options(settings: Mapping[str, Any]) -> list[str]:

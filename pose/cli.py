@@ -509,7 +509,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument(
         "--max-frames",
         type=COUNT,
-        help=f"at most this many video frames (default: the preset's, else {VIDEO_MAX_FRAMES})",
+        help=f"at most this many of the frames --step keeps (default: the preset's, else {VIDEO_MAX_FRAMES})",
     )
     b.add_argument(
         "--motion-mask",

@@ -299,7 +299,7 @@ def plot_errors(runs: dict[str, dict[str, FrameError]], path: str | Path, max_di
 
 def plot_frames(video: str | Path, runs: dict[str, Drawn], names: Sequence[str], path: str | Path) -> Path:
     """The frames ``names`` of ``video`` with each run's box (label -> :data:`Drawn`) in its own colour, side by
-    side."""
+    side; a run without a pose for a frame (not tracked, or lost) is labelled so there, and said in the log."""
     from pose.track import draw_box
 
     colors = [(0, 0, 255), (255, 120, 0), (0, 200, 0), (0, 220, 255)]
@@ -308,9 +308,13 @@ def plot_frames(video: str | Path, runs: dict[str, Drawn], names: Sequence[str],
         if name in wanted:
             vis = frame.copy()
             for k, (label, (corners, K, dist, poses)) in enumerate(runs.items()):
+                color, shown = colors[k % len(colors)], label
                 if name in poses:
-                    draw_box(vis, corners, *poses[name], K, colors[k % len(colors)], thickness=1, dist=dist)
-                cv2.putText(vis, label, (8, 20 + 18 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.55, colors[k % len(colors)], 2)
+                    draw_box(vis, corners, *poses[name], K, color, thickness=1, dist=dist)
+                else:
+                    logger.warning("%s: the run %r has no pose for it (not tracked, or lost): no box", name, label)
+                    shown = f"{label}: no pose"
+                cv2.putText(vis, shown, (8, 20 + 18 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.55, color, 2)
             cv2.putText(vis, name, (8, vis.shape[0] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 2)
             tiles[name] = vis
     missing = [n for n in names if n not in tiles]

@@ -139,7 +139,7 @@ class OverlayWriter:
         self._is_video = _overlay_is_video(self.path)
         if not self._is_video:
             _check_overlay_folder(self.path, overwrite)
-        self._video: cv2.VideoWriter | None = None
+        self._video: io.VideoFileWriter | None = None
         self._folder: Path | None = None
         self._stack = contextlib.ExitStack()
 
@@ -147,8 +147,10 @@ class OverlayWriter:
         if self._is_video:
             if self._video is None:
                 tmp = self._stack.enter_context(io.atomic_path(self.path))
-                self._video = io.open_video_writer(tmp, self.fps, frame.shape[1::-1], name=self.path)
-                self._stack.callback(self._video.release)  # runs before the rename
+                # closed (its file checked) before the rename
+                self._video = self._stack.enter_context(
+                    io.open_video_writer(tmp, self.fps, frame.shape[1::-1], name=self.path)
+                )
             self._video.write(frame)
         else:
             if self._folder is None:
@@ -161,7 +163,11 @@ class OverlayWriter:
             io.write_image(self._folder / f"{name}.png", frame)
 
     def close(self) -> None:
-        """Finish the overlay: :attr:`path` appears complete."""
+        """Finish the overlay: :attr:`path` appears complete.
+
+        Raises:
+            OSError: the video could not be written (:meth:`alcn_cv.io.VideoFileWriter.close`).
+        """
         self._stack.close()
         self._video = self._folder = None
 

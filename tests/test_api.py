@@ -261,12 +261,21 @@ def test_backend_follows_what_is_installed(run_python):
 @pytest.mark.parametrize(
     ("call", "error", "ending"),
     [
-        # threads select the backend that runs torch; without torch that said backend='opencv' runs no torch
+        # threads select the backend that runs torch; without torch that said backend='opencv' runs no torch, and
+        # then named a backend='fast' the user had not asked for
         (
             "threads=2",
             "MissingDependencyError",
-            "ALCN(backend='fast'): needs the [train] extra (torch is not installed): without a GPU, first pip install "
-            'torch --index-url https://download.pytorch.org/whl/cpu; then pip install "alcn-cv[train]"',
+            "ALCN(threads=2, torch's threads, runs backend='fast'): needs the [train] extra (torch is not installed): "
+            "without a GPU, first pip install torch --index-url https://download.pytorch.org/whl/cpu; then pip install "
+            '"alcn-cv[train]"',
+        ),
+        (
+            "device='gpu'",
+            "MissingDependencyError",
+            "ALCN(device='gpu', runs backend='torch'): needs the [train] extra (torch is not installed): without a "
+            "GPU, first pip install torch --index-url https://download.pytorch.org/whl/cpu; then pip install "
+            '"alcn-cv[train]"',
         ),
         # cv2.dnn runs the network at its own stride
         (
@@ -275,7 +284,7 @@ def test_backend_follows_what_is_installed(run_python):
             "another grid stride runs the network in torch: backend='fast' (the [train] extra)",
         ),
     ],
-    ids=["threads", "grid_stride"],
+    ids=["threads", "device", "grid_stride"],
 )
 def test_what_needs_torch_without_it_says_what_to_do(run_python, call, error, ending):
     proc = run_python(f"""

@@ -1,5 +1,6 @@
 """The input checks of alcn_cv.checks that no normalization's tests cover."""
 
+import cv2
 import numpy as np
 import pytest
 
@@ -26,10 +27,31 @@ def test_check_seeds_takes_distinct_non_negative_integers_and_names_the_bad_ones
 def test_a_stack_of_frames_given_to_apply_is_pointed_to_apply_batch():
     from alcn_cv.checks import check_image
 
-    with pytest.raises(InputError, match=r"got shape \(4, 48, 64\) \(frames stacked\? .*apply_batch\)"):
-        check_image(np.zeros((4, 48, 64), np.uint8))
+    with pytest.raises(InputError, match=r"got shape \(5, 48, 64\) \(frames stacked\? .*apply_batch\)$"):
+        check_image(np.zeros((5, 48, 64), np.uint8))
+    # three or four: a torch image's channels as well
+    message = r"got shape \(3, 48, 64\) \(channels first, as in torch\? img.transpose\(1, 2, 0\); frames stacked\? "
+    with pytest.raises(InputError, match=message):
+        check_image(np.zeros((3, 48, 64), np.uint8))
     with pytest.raises(InputError, match=r"got shape \(48, 64, 5\)$"):  # five channels, not a stack
         check_image(np.zeros((48, 64, 5), np.uint8))
+
+
+def test_the_mistakes_of_an_opencv_loop_are_named():
+    """cv2.imread's None for a bad path (or the end of a video), a cv2.UMat, and a float image that a cubic resize
+    took a little out of [0, 1]: each error says what was likely meant."""
+    from alcn_cv.checks import check_image
+
+    with pytest.raises(InputError, match=r"got NoneType \(cv2.imread could not read the file, or VideoCapture"):
+        check_image(None)
+    with pytest.raises(InputError, match=r"got UMat \(a cv2.UMat: umat.get\(\)\)$"):
+        check_image(cv2.UMat(np.zeros((4, 4), np.uint8)))
+    with pytest.raises(
+        InputError, match=r"got \[-0.08, 1.07\] \(an interpolation's overshoot\? np.clip\(img, 0, 1\)\)$"
+    ):
+        check_image(np.array([[-0.08, 1.07]], np.float32))
+    with pytest.raises(InputError, match=r"got \[0, 200\] \(divide by 255 first\)$"):
+        check_image(np.array([[0, 200]], np.float32))
 
 
 def test_check_out_dtype_defaults_to_the_input_and_names_a_bad_one():

@@ -169,17 +169,17 @@ def test_partial_video_on_request(tmp_path, capsys, caplog):
 def test_interrupted_folder_leaves_no_temporary_file(tmp_path, monkeypatch, capsys):
     for name in ("a.png", "b.png", "c.png"):
         _image(tmp_path / "in" / name)
-    imwrite = cv2.imwrite
+    write_bytes = Path.write_bytes
     calls = []
 
-    def interrupted_imwrite(path: str, img: np.ndarray) -> bool:
+    def interrupted_write(path: Path, data: bytes) -> int:
         calls.append(path)
-        ok = imwrite(path, img)  # the temporary file is complete when the interrupt comes
+        written = write_bytes(path, data)  # the temporary file is complete when the interrupt comes
         if len(calls) == 2:
             raise KeyboardInterrupt
-        return ok
+        return written
 
-    monkeypatch.setattr(cv2, "imwrite", interrupted_imwrite)
+    monkeypatch.setattr(Path, "write_bytes", interrupted_write)
     assert main(["normalize", str(tmp_path / "in"), str(tmp_path / "out"), "-m", "none"]) == 130
     monkeypatch.undo()
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["a.png"]  # no hidden .b.*.tmp.png

@@ -106,3 +106,15 @@ def test_one_option_name_for_each_idea():
     assert benches | {"alcn normalize", "alcn train-real-light"} <= set(_commands_with("--overwrite"))
     retired = {"--max-features", "--draws", "--size", "--quick", "--small"}
     assert not {c for c, p in COMMANDS.items() for a in p._actions if retired & set(a.option_strings)}
+
+
+def test_the_command_says_its_version_and_opencvs(capsys):
+    import cv2
+
+    from alcn_cv import __version__
+    from alcn_cv.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.startswith(f"alcn-cv {__version__} (OpenCV {cv2.__version__}, NumPy ")

@@ -68,6 +68,22 @@ def test_the_installed_script_without_opencv_ends_with_one_line(tmp_path):
     assert proc.returncode == 2 and proc.stderr.splitlines() == [NO_OPENCV], proc.stderr
 
 
+def test_an_opencv_that_fails_to_import_ends_with_one_line_that_says_why(tmp_path):
+    """OpenCV before 4.10 was built for NumPy 1, which pip does not keep (numpy>=1.26): under NumPy 2 its import
+    failed with a traceback out of alcn_cv. The command ends with one line, and the NumPy it needs."""
+    (tmp_path / "cv2").mkdir()
+    (tmp_path / "cv2" / "__init__.py").write_text('raise ImportError("numpy.core.multiarray failed to import")\n')
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")]))}
+    script = "import sys\nsys.argv[0] = '/venv/bin/alcn'\nfrom alcn_cv.cli import main\nsys.exit(main())\n"
+    proc = subprocess.run(
+        [sys.executable, "-c", script, "--help"], capture_output=True, text=True, timeout=120, env=env
+    )
+    assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1, proc.stderr
+    assert proc.stderr.startswith("OpenCV (the cv2 module) fails to import (numpy.core.multiarray failed to import): ")
+    if int(np.__version__.split(".")[0]) >= 2:
+        assert f'built for NumPy 1, found {np.__version__}: pip install "numpy<2", or pip install' in proc.stderr
+
+
 def test_the_extras_that_bring_torch_say_how_to_install_its_cpu_build(monkeypatch):
     monkeypatch.setattr(extras, "is_installed", lambda module: module != "torch")
     assert str(missing_dependency("torch", "alcn train", preferred="train")) == (

@@ -315,3 +315,10 @@ def test_intrinsic_default_threshold_takes_a_log_step_below_0_1_as_shading():
     edge = shading.copy()
     edge[:, 16:] = 0.51 * np.exp(0.12) - 0.01  # a step of 0.12: reflectance, kept
     assert np.ptp(norm.normalize(edge)) > 0.1
+
+
+def test_a_methods_repr_shows_its_parameters():
+    """create("dog:sigma1=1:sigma2=3") printed DifferenceOfGaussians(name='dog'), its settings hidden."""
+    assert repr(alcn_cv.create("dog:sigma1=1:sigma2=3")) == "DifferenceOfGaussians(sigma1=1.0, sigma2=3.0)"
+    assert repr(alcn_cv.create("clahe:clip_limit=4")) == "CLAHE(clipLimit=4.0, tileGridSize=(8, 8))"
+    assert repr(alcn_cv.create("none")) == "NoNormalization(name='none')"  # no parameter

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from pathlib import Path
 
@@ -65,6 +66,25 @@ def test_truncated_jpeg_with_a_thumbnail_end_marker(tmp_path, image):
     path.write_bytes(full[: len(full) // 2])
     with pytest.raises(InputError, match="truncated"):
         read_image(path)
+
+
+def test_a_jpeg_is_turned_as_its_exif_orientation_says(tmp_path, image):
+    """`alcn normalize` read a phone's portrait photograph (EXIF orientation 6: turn 90 degrees clockwise) as stored,
+    on its side, where cv2.imread and every viewer turn it; the output, without the tag, stayed on its side."""
+    data = cv2.imencode(".jpg", image)[1].tobytes()
+    # a big-endian TIFF header and one IFD entry: tag 0x0112 (orientation), SHORT, 1 value, 6
+    tiff = b"MM\x00*\x00\x00\x00\x08\x00\x01" + bytes.fromhex("0112 0003 00000001 0006 0000") + bytes(4)
+    payload = b"Exif\x00\x00" + tiff
+    (tmp_path / "turned.jpg").write_bytes(
+        data[:2] + b"\xff\xe1" + (len(payload) + 2).to_bytes(2, "big") + payload + data[2:]
+    )
+    expected = cv2.imread(str(tmp_path / "turned.jpg"))
+    assert expected.shape == (160, 120, 3)  # turned
+    np.testing.assert_array_equal(read_image(tmp_path / "turned.jpg"), expected)
+    gray = cv2.cvtColor(expected, cv2.COLOR_BGR2GRAY).astype(int)  # the codec's own gray: within a level or two
+    assert np.abs(read_image(tmp_path / "turned.jpg", gray=True) - gray).max() <= 2
+    cv2.imwrite(str(tmp_path / "gray.jpg"), image[..., 0])
+    assert read_image(tmp_path / "gray.jpg").shape == (120, 160)  # a gray JPEG stays one channel
 
 
 def test_empty_image_file(tmp_path):
@@ -292,6 +312,65 @@ def test_a_video_that_cannot_be_written_is_named_not_its_temporary_file(tmp_path
     with pytest.raises(OSError, match=r"cannot write video .*out\.mp4 \(") as info:
         map_video(src, tmp_path / "out.mp4", lambda frame: frame, progress=False)
     assert ".tmp" not in str(info.value)
+
+
+@contextlib.contextmanager
+def _file_size_limit(size: int):
+    """Files of the process limited to ``size`` bytes: a write beyond fails (EFBIG; Python ignores SIGXFSZ), as on
+    a full disk."""
+    resource = pytest.importorskip("resource")
+    previous = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (size, previous[1]))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, previous)
+
+
+@pytest.mark.parametrize("suffix", [".mp4", ".avi", ".mkv"])
+def test_a_video_the_disk_cannot_hold_is_an_error_and_nothing_is_left(tmp_path, image, suffix):
+    """`alcn normalize` to a video under a file size limit (or onto a full disk) logged every frame written, exited 0
+    and left an unreadable file (mp4: no index; avi: 11 of 455 frames): OpenCV's write reports nothing. The writer
+    checks its file when closed, before the output's rename; the pose overlay's video likewise."""
+    from pose.track import OverlayWriter
+
+    src = _video(tmp_path / "in.avi", 12, image)
+    noise = np.random.default_rng(0).integers(0, 256, (12, *image.shape), dtype=np.uint8)  # too much to compress
+    frames = iter(noise)
+    with _file_size_limit(100_000), pytest.raises(OSError, match=rf"could not write video .*out{suffix}: .*12 frames"):
+        map_video(src, tmp_path / f"out{suffix}", lambda frame: next(frames), progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.avi"]
+    error = rf"could not write video .*o{suffix}"
+    with _file_size_limit(100_000), pytest.raises(OSError, match=error), OverlayWriter(tmp_path / f"o{suffix}") as out:
+        for i, frame in enumerate(noise):
+            out.write(str(i), frame)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.avi"]
+    # without the limit: written, and its frames read back
+    frames = iter(noise)
+    assert map_video(src, tmp_path / f"out{suffix}", lambda frame: next(frames), progress=False) == 12
+    with OverlayWriter(tmp_path / f"o{suffix}") as out:
+        for i, frame in enumerate(noise):
+            out.write(str(i), frame)
+    assert io.count_frames(tmp_path / f"o{suffix}") == 12
+
+
+def test_an_image_the_disk_cannot_hold_says_why(tmp_path):
+    """A full disk read "cannot write image ... (format or folder not writable)": OpenCV's imwrite says nothing of
+    why. The encoded image is written by Python, whose error is kept, with the path."""
+    noise = np.random.default_rng(0).integers(0, 256, (200, 200, 3), dtype=np.uint8)
+    with _file_size_limit(10_000), pytest.raises(OSError, match=r"cannot write image .*big\.png: File too large"):
+        write_image(tmp_path / "big.png", noise)
+    assert list(tmp_path.iterdir()) == []
+    write_image(tmp_path / "big.png", noise)
+    np.testing.assert_array_equal(read_image(tmp_path / "big.png"), noise)
+
+
+def test_an_error_while_writing_a_video_is_not_replaced_by_the_files_check(tmp_path, image):
+    """On the way out of an error the writer is released, not checked: the file is discarded, and the check's
+    error would hide the one that stopped the writing."""
+    with pytest.raises(KeyError, match="stop"), io.open_video_writer(tmp_path / "v.mp4", 10.0, (160, 120)) as writer:
+        writer.write(image)
+        raise KeyError("stop")
 
 
 def test_the_first_frames_of_a_video(tmp_path, image):

@@ -440,6 +440,26 @@ def test_a_calibration_reaches_the_model_and_what_tracks_with_it(tmp_path, monke
     assert pm.load(tmp_path / "k.npz").extra["build"]["camera"] == "K"
 
 
+def test_the_cookie_box_preset_refuses_a_video_of_another_size(tmp_path, monkeypatch):
+    """examples/track_cookie_box.py --data lumia_box built with the cookie box's 640x480 intrinsics from a 960x544
+    video, warned only of a poor box fit, and tracked it as a success: the preset's camera is checked against the
+    first frame before the work; intrinsics given replace it, and so pass."""
+    for module in ("pycolmap", "open3d", "matplotlib"):
+        pytest.importorskip(module)
+    video = tmp_path / "box.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (96, 64))
+    for i in range(3):
+        writer.write(np.full((64, 96, 3), 40 * i, np.uint8))
+    writer.release()
+    monkeypatch.setattr(build, "video_sequence", _no_frames)  # the size is checked before the frames are extracted
+    with pytest.raises(InputError, match="its frames are 96x64 but the preset 'cookie-box''s camera is for 640x480"):
+        build.main(video, tmp_path / "m.npz", conf="cookie-box", box_size=(1, 1, 1))
+    assert not (tmp_path / "m.npz").exists()
+    K = np.array([[90.0, 0, 48], [0, 90.0, 32], [0, 0, 1]])
+    with pytest.raises(AssertionError, match="extracted before the check"):  # past the check: the frames' turn
+        build.main(video, tmp_path / "m.npz", conf="cookie-box", K=K, box_size=(1, 1, 1))
+
+
 def test_a_camera_given_for_a_registered_sequence_is_said_to_be_ignored(shared_data, tmp_path, caplog, build_stops):
     from calib.camera import write_camera_yaml
 

@@ -176,3 +176,22 @@ def test_the_overlay_error_draws_with_the_models_distortion(tmp_path):
     with_dist = overlay.measure(tmp_path / "m.npz", tmp_path / "p.json", tmp_path / "frames", progress=False)
     without = overlay.measure(tmp_path / "pinhole.npz", tmp_path / "p.json", tmp_path / "frames", progress=False)
     assert with_dist["0000"].matched_px < 1.0 and without["0000"].matched_px > 4.0
+
+
+def test_a_shown_frame_without_a_pose_is_labelled_and_said(tmp_path, caplog):
+    """`alcn pose overlay-error` after `alcn pose track --max-frames 60` drew its default frame (frame_000300) without a
+    box and without a word: it looked like a tracking failure. A run without a pose for a shown frame is labelled
+    so on it and logged."""
+    rvec, tvec = _pose()
+    corners = box_corners(SIZE)
+    (tmp_path / "frames").mkdir()
+    for name in ("0000", "0001"):
+        cv2.imwrite(str(tmp_path / "frames" / f"{name}.png"), _render(corners, rvec, tvec))
+    drawn = {"track": (corners, K, None, {"0000": (rvec, tvec)})}
+    with caplog.at_level("WARNING", logger="pose.overlay"):
+        sheet = overlay.plot_frames(tmp_path / "frames", drawn, ["0000", "0001"], tmp_path / "sheet.png")
+    assert "0001: the run 'track' has no pose for it" in caplog.text and "0000:" not in caplog.text
+    tiles = cv2.imread(str(sheet), cv2.IMREAD_GRAYSCALE)
+    posed, unposed = tiles[:, :640], tiles[:, 640:]
+    box = cv2.absdiff(posed, cv2.cvtColor(_render(corners, rvec, tvec), cv2.COLOR_GRAY2BGR)[..., 0]) > 0
+    assert box[40:-40].any() and (unposed[:30, 120:240] > 0).any()  # a box on the first; a longer label on the second

@@ -309,6 +309,18 @@ def test_an_onnx_file_opencv_cannot_parse_is_one_line_without_opencvs_source(tmp
     assert "/modules/" not in message and "OpenCV(" not in message  # its build's source path and version
 
 
+def test_a_weight_file_without_its_export_says_how_to_make_it_or_run_without_it(tmp_path):
+    """createALCN(weights=a copied .npz alone) pointed to `alcn export` only, which the light install lacks."""
+    shutil.copy(MODELS["gain"], tmp_path / "mine.npz")
+    with pytest.raises(WeightFileError) as info:
+        alcn_cv.createALCN(weights=tmp_path / "mine.npz", backend="opencv")
+    assert str(info.value) == (
+        f"ONNX model not found: {tmp_path / 'mine.onnx'} (backend='opencv' runs the export beside the weight file: "
+        f"`alcn export --weights {tmp_path / 'mine.npz'} --onnx {tmp_path / 'mine.onnx'}`, with the [train] extra; or "
+        "backend='fast', the network in torch)"
+    )
+
+
 @pytest.mark.parametrize("output_range", [[0.5, 0.5], [1.0, 0.0]])
 def test_an_empty_output_range_is_refused(tmp_path, lite, output_range):
     """``to_unit`` divides by ``hi - lo``: an empty range would make every output inf or NaN."""

@@ -872,7 +872,7 @@ def _normalize_video(settings: SpeedSettings, work: Path, progress: bool = True)
         writer = open_video_writer(source, 30.0, (width, height))
         for i in range(max(2, settings.normalize_video_frames)):
             writer.write(synthetic_frame(width, height, True, seed=1, t=0.1 * i))
-        writer.release()
+        writer.close()
     with VideoReader(source) as video:
         frames = list(video)
     norm = ALCN()

@@ -164,10 +164,11 @@ class ALCN(Normalization):
         if not isinstance(device, str) and not hasattr(device, "type"):  # a torch.device has one; None is no device
             raise InputError(f"device must be a torch device's name ('cpu', 'cuda', 'cuda:1', ...), got {device!r}")
         on_cpu = str(device).split(":")[0] == "cpu"
+        chosen_by = None  # the setting that chose a torch backend, which a missing torch's error names
         if backend is None and not on_cpu:
-            backend = "torch"  # the one backend that runs on a device
-        elif backend is None and threads != "auto":  # torch's threads: without torch, the error names its extra
-            backend = "fast"
+            backend, chosen_by = "torch", f"device={device!r}"  # the one backend that runs on a device
+        elif backend is None and threads != "auto":
+            backend, chosen_by = "fast", f"threads={threads!r}, torch's threads"
         elif backend is None:  # a user's weight file may sit beside an older export: its own network in torch
             shipped = weights is None and grid_stride is None and RUNS_GAIN
             backend = "opencv" if shipped or not is_installed("torch") else "fast"
@@ -203,7 +204,7 @@ class ALCN(Normalization):
             )
         self.runtime: Runtime
         self.runtime, self.net = _build_runtime(
-            self.spec, weight_file, self.weights_path, backend, device, grid_stride, mixture, threads
+            self.spec, weight_file, self.weights_path, backend, device, grid_stride, mixture, threads, chosen_by
         )
         self.grid_stride = self.runtime.grid_stride
 
@@ -350,9 +351,11 @@ def _build_runtime(
     grid_stride: int | None,
     mixture: str,
     threads: int | None,
+    chosen_by: str | None,
 ) -> tuple[Runtime, object]:
     """The runtime of ``backend`` for the weight file ``weights``, read once by the caller (``weight_file``, which the
-    runtime is built from: the file is not read again), and its network."""
+    runtime is built from: the file is not read again), and its network; ``chosen_by``: the setting that chose
+    ``backend`` when the caller gave none, which the error of a missing torch names."""
     check_teacher(weight_file.meta, weights)
     if backend == "opencv" and spec.per_pixel and not RUNS_GAIN:
         # before cv2.dnn tries: its ONNX importer logs errors of its own and fails with several lines of C++ context
@@ -361,7 +364,8 @@ def _build_runtime(
     if backend == "opencv":
         net = opencv_network(weight_file, grid_stride, spec)
         return make_runtime(spec, net, mixture), net
-    require("torch", "kornia", what=f"ALCN(backend={backend!r})")
+    what = f"ALCN(backend={backend!r})" if chosen_by is None else f"ALCN({chosen_by}, runs backend={backend!r})"
+    require("torch", "kornia", what=what)
     # deferred: importing alcn_cv must not need torch
     from alcn_cv.nets.device import torch_device
     from alcn_cv.nn import ALCN2d, TorchNetwork, TorchRuntime
@@ -402,7 +406,14 @@ def createALCN(  # noqa: N802 -- OpenCV naming, like cv2.createCLAHE
 ) -> ALCN:
     """Create an :class:`ALCN` normalization; ``createALCN().apply(src)`` normalizes an image.
 
-    The parameters are :class:`ALCN`'s, with its defaults.
+    The parameters are :class:`ALCN`'s, with its defaults (``help(alcn_cv.ALCN)`` details each):
+
+    - ``model`` or ``weights``: the Normalizer, a shipped model by name (``"gain"``, the default; ``"gain-lite"``,
+      ``"lite"``, ``"paper"``) or a weight file (``.npz``);
+    - ``scale``: the working scale (default: the weight file's);
+    - ``backend``, ``device``, ``threads``: where it runs (``"opencv"``, no torch needed; ``"fast"``; ``"torch"`` on
+      ``device``, ``"cuda"`` say) and torch's threads;
+    - ``grid_stride``, ``mixture``: coarser and faster approximations.
 
     Example:
         >>> import alcn_cv, numpy as np

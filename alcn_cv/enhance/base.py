@@ -21,6 +21,7 @@ result is the whole image's and the memory a strip's.
 
 from __future__ import annotations
 
+import inspect
 import logging
 from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
@@ -275,7 +276,10 @@ class Normalization:
         ]
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}(name={self.name!r})"
+        # the constructor's parameters that the instance keeps under their own names (scikit-learn's convention)
+        names = [name for name in inspect.signature(type(self).__init__).parameters if hasattr(self, name)]
+        shown = ", ".join(f"{name}={getattr(self, name)!r}" for name in names)
+        return f"{type(self).__name__}({shown or f'name={self.name!r}'})"
 
 
 class NoNormalization(Normalization):

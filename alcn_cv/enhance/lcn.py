@@ -224,7 +224,10 @@ class Whitening(Normalization):
     """
 
     name = "whitening"
-    summary = "spectral whitening: the 1/f amplitude spectrum of natural images flattened"
+    summary = (
+        "spectral whitening: the 1/f amplitude spectrum of natural images flattened (one FFT of the whole image: "
+        "seconds and gigabytes for a 24-megapixel photograph)"
+    )
     reference = "Olshausen & Field, Vision Research 1997"
     output_range = (-3.0, 3.0)
 

@@ -139,7 +139,10 @@ class SelfQuotientImage(Normalization):
     """
 
     name = "sqi"
-    summary = "self-quotient image: the log of the image over its edge-preserving smoothing, multi-scale"
+    summary = (
+        "self-quotient image: the log of the image over its edge-preserving smoothing, multi-scale (slow: the "
+        "weighted smoothing is a loop over its kernel's offsets; weighted=False is a Gaussian's)"
+    )
     reference = "Wang, Li & Wang, ICIP 2004"
     output_range = (-1.0, 1.0)
 

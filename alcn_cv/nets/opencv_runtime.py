@@ -209,7 +209,8 @@ class OpenCVNormalizer:
         if not self.path.is_file():
             raise WeightFileError(
                 f"ONNX model not found: {self.path} (backend='opencv' runs the export beside the weight file: "
-                f"`alcn export --weights {self.path.with_suffix('.npz')} --onnx {self.path}`)"
+                f"`alcn export --weights {self.path.with_suffix('.npz')} --onnx {self.path}`, with the [train] extra; "
+                "or backend='fast', the network in torch)"
             )
         # a gain Normalizer's export from an older alcn-cv, before cv2.dnn tries: its ONNX importer logs an error of
         # its own and fails with lines of C++ context
