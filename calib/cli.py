@@ -351,7 +351,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("output", help="output image, folder, or video (.mp4/.avi)")
     p.add_argument("--camera", required=True, help="camera.yaml from `alcn calib camera`")
     p.add_argument(
-        "--alpha", type=float, default=0.0, help="0: crop to valid pixels; 1: keep all source pixels (default 0)"
+        "--alpha",
+        type=float,
+        default=0.0,
+        help="0: crop to (nearly) only valid pixels (a strong distortion can leave a few black ones at the border); "
+        "1: keep all source pixels (default 0)",
     )
     p.add_argument("--keep-K", action="store_true", help="keep the input camera matrix as the output's")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs (and the output's camera YAML)")

@@ -1,7 +1,8 @@
 """Undistortion of images, folders of images and videos with a calibration.
 
 The output camera is the pinhole ``new_K`` of ``cv2.getOptimalNewCameraMatrix`` with the
-given ``alpha`` (0: only valid pixels, cropped; 1: every source pixel kept, black borders),
+given ``alpha`` (0: cropped to valid pixels, but for a few black ones at the border under a strong distortion, as
+OpenCV's estimate of the valid region leaves them; 1: every source pixel kept, black borders),
 or the input K with ``keep_K``. It is written as a camera YAML with zero distortion, so that the
 undistorted images have a calibration of their own: ``<stem>.camera.yaml`` beside an output image
 or video, ``camera.yaml`` inside an output folder.

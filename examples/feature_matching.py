@@ -9,10 +9,12 @@ Lowe's ratio test (0.8) and a RANSAC homography (5 px), whose inliers, the match
 normalization and drawn side by side in ``OUT/matches.png`` (one row per normalization). Only OpenCV and the runtime
 are needed (``pip install .``); a second or two on 2 cores.
 
-On the cookie box, frames 0 and 20 (60), matches that agree: SIFT none 291 (201), CLAHE 416 (300), Tan-Triggs
-397 (293), ALCN 496 (352); ORB none 319 (257), CLAHE 404 (297), Tan-Triggs 221 (163), ALCN 231 (135). ORB orients
-each keypoint by the intensity centroid of its patch, which a global light change keeps and a band-pass output
-does not (docs/journal.md, 2026-11-27 (night)): for ORB under such a change, CLAHE is the stronger choice.
+On the cookie box, frames 0 and 20 (60), matches that agree (``--methods none clahe tantriggs alcn``; the same
+on every run): SIFT none 291 (201), CLAHE 416 (300), Tan-Triggs 397 (293), ALCN 496 (354); ORB none 319 (257),
+CLAHE 404 (297), Tan-Triggs 225 (136), ALCN 231 (142). ORB orients each keypoint by the intensity centroid of its
+patch, which a global light change keeps and a band-pass output does not (docs/journal.md, 2026-11-27 (night)):
+with ORB, ALCN and Tan-Triggs agree on fewer matches than no normalization, and under such a change CLAHE is the
+stronger choice.
 """
 
 from __future__ import annotations
