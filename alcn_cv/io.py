@@ -32,6 +32,7 @@ __all__ = [
     "VideoFileWriter",
     "VideoReader",
     "atomic_path",
+    "atomic_paths",
     "atomic_write",
     "check_no_earlier_output",
     "check_output_kind",
@@ -214,6 +215,15 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+@contextlib.contextmanager
+def atomic_paths(*paths: str | os.PathLike) -> Iterator[list[Path]]:
+    """:func:`atomic_path` of several files that belong together (a report's tables and its figures): each becomes
+    its path only when the whole block ends, one right after the other; on an error or an interrupt in the block,
+    none does, and every path is left as it was."""
+    with contextlib.ExitStack() as stack:
+        yield [stack.enter_context(atomic_path(path)) for path in paths]
 
 
 def check_writable(path: str | os.PathLike) -> None:

@@ -174,3 +174,31 @@ def test_report_states_machine_command_and_settings(tmp_path):
     md = (tmp_path / "out" / "invariance.md").read_text()
     assert "**Machine:**" in md and "**Settings:**" in md
     assert "alcn bench invariance --data" in md and "--methods none,dog:sigma2=2" in md
+
+
+def test_an_interrupted_report_leaves_the_earlier_one_whole(tmp_path, monkeypatch):
+    """The earlier run's figures were removed first, then the new table written, then the figures drawn: an interrupt
+    between left a report without figures, or the new tables beside none. The report's files are replaced together."""
+    data = _fake_set(tmp_path / "psm")
+    out = tmp_path / "out"
+    invariance.main(data, out, ["none", "dog"], erode=2, progress=False)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert set(before) == {"invariance.json", "invariance.md", "invariance_ball.png"}
+
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(invariance, "_figure", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        invariance.main(data, out, ["none"], erode=2, progress=False, overwrite=True)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_twelve_bit_photographs_are_said_to_keep_few_grey_levels(tmp_path, caplog):
+    """12-bit values in 16-bit PNGs kept 16 grey levels as 8 bits without a word, where `alcn bench relight` warns."""
+    data = _fake_set(tmp_path / "psm")
+    for path in (data / "ball").glob("ball.[0-9].png"):
+        cv2.imwrite(str(path), cv2.imread(str(path), cv2.IMREAD_GRAYSCALE).astype(np.uint16) * 16)  # 12 bits
+    with caplog.at_level("WARNING"):
+        invariance.main(data, tmp_path / "out", ["none"], erode=2, progress=False)
+    assert "object 'ball' (its brightest photograph" in caplog.text and "12-bit data in a 16-bit file?" in caplog.text

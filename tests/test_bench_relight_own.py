@@ -183,3 +183,63 @@ def test_a_folder_that_cannot_be_listed_is_logged_not_fatal(tmp_path, monkeypatc
     with caplog.at_level(logging.WARNING, logger="alcn_cv.bench.relight"):
         assert relight.trained_scenes(spec) == {"mine", "mexico"}
     assert f"{data}: cannot list" in caplog.text and "Permission denied" in caplog.text
+
+
+def test_a_researchers_mistakes_are_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    """An empty --methods wrote an empty report and exited 1 without a word; frames smaller than the patches were
+    refused after the tuning's minutes, without naming the scene; --leave-one-out dropped --test-scenes silently."""
+    data = own_scenes(tmp_path / "mine")
+    out = tmp_path / "out"
+    argv = ["bench", "relight", "--out", str(out), "--data", str(data), "--seeds", "0", "--no-progress", *TINY_FLAGS]
+    assert cli_main([*argv, "--methods", ",", "--no-tune"]) == 2
+    assert capsys.readouterr().err.strip().endswith("no method to compare: give --methods, e.g. none,alcn")
+    assert not out.exists()
+    assert cli_main([*argv, "--leave-one-out", "one", "two", "--test-scenes", "three"]) == 2
+    assert "leave-one-out replaces the split: give no --train-scenes or --test-scenes" in capsys.readouterr().err
+    small = tmp_path / "small" / "tiny"
+    small.mkdir(parents=True)
+    for i in range(2):
+        cv2.imwrite(str(small / f"{i}.png"), np.rint(255 * texture(12, 20, seed=i)).astype(np.uint8))
+    tuned = []
+    monkeypatch.setattr(relight, "tune", lambda *args, **kwargs: tuned.append(args))
+    assert cli_main([*argv[:4], "--data", str(data), str(tmp_path / "small"), "--train-scenes", "one", "two"]) == 2
+    assert "scene 'tiny': frames of 20x12 are smaller than the 32x32 patches" in capsys.readouterr().err
+    assert not tuned and not out.exists()
+
+
+def test_leave_one_out_on_own_data_takes_every_scene_of_it(tmp_path):
+    """With --data and no scene named, --leave-one-out looked for the shared webcam scenes: "no scene or data set
+    'courbevoie'"."""
+    saved = bench(tmp_path, "--data", str(own_scenes(tmp_path / "mine")), "--leave-one-out", "--no-tune")
+    assert saved["split"]["mode"] == "leave-one-out" and sorted(saved["split"]["test"]) == ["one", "three", "two"]
+
+
+def test_a_one_frame_scene_is_said_to_be_skipped(tmp_path, caplog):
+    data = own_scenes(tmp_path / "mine")
+    (data / "alone").mkdir()
+    cv2.imwrite(str(data / "alone" / "only.png"), np.full((48, 64), 128, np.uint8))
+    with caplog.at_level(logging.WARNING):
+        saved = bench(tmp_path, "--data", str(data), "--no-tune", "--methods", "none")
+    assert "only.png is scene 'alone''s only frame, skipped: a scene needs two" in caplog.text
+    assert "alone" not in saved["scenes"]
+
+
+def test_an_interrupted_report_leaves_the_earlier_one_whole(tmp_path, monkeypatch):
+    """Ctrl-C while the figure was drawn left the new relight.json and relight.md beside the earlier run's figure
+    (or with --overwrite into a fresh folder, a report without its figure): the three files replace the earlier ones
+    together, or none does."""
+    from alcn_cv.bench import relight_report
+
+    data = own_scenes(tmp_path / "mine")
+    bench(tmp_path, "--data", str(data), "--no-tune", "--methods", "none,dog")
+    out = tmp_path / "out"
+    before = {name: (out / name).read_bytes() for name in ("relight.json", "relight.md", "relight.png")}
+
+    def interrupted(result, path):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(relight_report, "_figure", interrupted)
+    argv = ["bench", "relight", "--out", str(out), "--overwrite", "--seeds", "0", "--no-progress", *TINY_FLAGS]
+    assert cli_main([*argv, "--data", str(data), "--no-tune", "--methods", "none"]) == 130
+    assert {name: (out / name).read_bytes() for name in before} == before
+    assert sorted(p.name for p in out.iterdir()) == sorted(before)  # no temporary file left

@@ -482,11 +482,14 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         nargs="*",
         default=None,
         metavar="SCENE",
-        help="evaluate each scene with parameters tuned on the others, instead of the split "
-        f"(no scene given: {' '.join(relight.DEFAULT_LEAVE_ONE_OUT)})",
+        help="evaluate each scene with parameters tuned on the others, instead of the split: no --train-scenes or "
+        f"--test-scenes (no scene given: {' '.join(relight.DEFAULT_LEAVE_ONE_OUT)}; with --data, every scene of it)",
     )
     add_seeds_option(
-        p, relight.DEFAULT_SEEDS, "sampling seeds (they draw the gallery frames, patch locations and pairs)"
+        p,
+        relight.DEFAULT_SEEDS,
+        "sampling seeds (with each scene's name, they draw its gallery frames, patch locations and pairs: a scene "
+        "renamed draws others)",
     )
     add_conf_option(
         p, {name: f"{what}: {_preset_flags(confs[name])}" for name, what in relight_settings.CONF_SUMMARIES.items()}

@@ -38,7 +38,7 @@ from alcn_cv.data.scenes import PhotometricObject, load_photometric, mean_pairwi
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
+from alcn_cv.io import atomic_paths, atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
 
 __all__ = ["detail", "main"]
@@ -218,9 +218,6 @@ def main(
         "machine": machine(),
         "methods": rows,
     }
-    for earlier in out.glob("invariance_*.png"):  # an earlier run's figures, named after its objects
-        earlier.unlink()
-    write_json(out / "invariance.json", result)
 
     headers = ["method"] + [f"agreement {o}" for o in object_names] + ["agreement (mean)", "detail (mean)", "ms/image"]
     table = []
@@ -249,9 +246,15 @@ def main(
         + markdown_table(headers, table)
         + ("\n" + "\n".join(failures) + "\n" if failures else "")
     )
-    atomic_write(out / "invariance.md", text)
-    for obj in objects:
-        if obj.name in shown and shown_results[obj.name]:
-            _figure(obj, shown_results[obj.name], norms, out / f"invariance_{obj.name}.png")
+    drawn = [obj for obj in objects if obj.name in shown and shown_results[obj.name]]
+    figures = [out / f"invariance_{obj.name}.png" for obj in drawn]
+    # all or none: an interrupt leaves an earlier report whole, figures included
+    with atomic_paths(out / "invariance.json", out / "invariance.md", *figures) as (json_path, md_path, *drawn_paths):
+        write_json(json_path, result)
+        atomic_write(md_path, text)
+        for obj, path in zip(drawn, drawn_paths):
+            _figure(obj, shown_results[obj.name], norms, path)
+    for earlier in set(out.glob("invariance_*.png")) - set(figures):  # an earlier run's, named after its objects
+        earlier.unlink()
     logger.info("invariance benchmark written to %s", out)
     return result

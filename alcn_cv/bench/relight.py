@@ -300,7 +300,10 @@ def plan_pairs(scene: Scene, seed: int, settings: Settings) -> PairPlan:
     rng = np.random.default_rng([seed, zlib.crc32(scene.name.encode())])
     n = len(scene.frames)
     gallery = tuple(sorted(int(i) for i in rng.choice(n, size=min(settings.gallery, n), replace=False)))
-    locations = {g: patch_locations(scene.frames[g], settings.patch, settings.patches, rng) for g in gallery}
+    try:
+        locations = {g: patch_locations(scene.frames[g], settings.patch, settings.patches, rng) for g in gallery}
+    except InputError as exc:  # frames smaller than the patches
+        raise InputError(f"scene {scene.name!r}: {exc}") from None
     flat = [g for g in gallery if len(locations[g]) < 2]
     if flat:
         raise DatasetError(
@@ -613,8 +616,9 @@ def main(
             nor ``test_scenes`` is given, else none).
         test_scenes: scenes (or data-set names) evaluated only; None: :data:`~alcn_cv.data.scenes.TEST_SCENES`,
             or with ``data`` every scene of it that is not a training scene.
-        leave_one_out: if given, ignore the split: each of these scenes is evaluated with the
-            parameters tuned on the others.
+        leave_one_out: if given, instead of the split (``train_scenes`` and ``test_scenes`` must be None): each of
+            these scenes is evaluated with the parameters tuned on the others; empty: :data:`DEFAULT_LEAVE_ONE_OUT`, or
+            with ``data`` every scene of it.
         seeds: one run per seed (gallery frames, patch locations and pairs change); the report
             gives the mean and the standard deviation over seeds.
         settings: the protocols' parameters.
@@ -636,6 +640,8 @@ def main(
     check_no_earlier_output([Path(out_dir) / "relight.json", Path(out_dir) / "relight.md"], overwrite)
     settings = settings.check()
     methods = list(methods)
+    if not methods:
+        raise InputError("no method to compare: give --methods, e.g. none,alcn")
     # Built once for the run: a method keeps nothing from one image to the next (ALCN's divisive floors of an image's
     # strips live in a context variable for that image), so every scene of a spec is normalized by one instance.
     built = build_methods(methods, build_method)
@@ -645,7 +651,13 @@ def main(
     scenes = load_scenes(roots, max_frames)
     tuned = [m for m in methods if m in TUNING_GRIDS] if tuning else []
     if leave_one_out is not None:
-        evaluated = select_scenes(scenes, leave_one_out or DEFAULT_LEAVE_ONE_OUT)
+        if train_scenes is not None or test_scenes is not None:
+            raise InputError(
+                "leave-one-out replaces the split: give no --train-scenes or --test-scenes (train_scenes, test_scenes) "
+                "with it"
+            )
+        everything = DEFAULT_LEAVE_ONE_OUT if not data else [s.name for s in scenes]
+        evaluated = select_scenes(scenes, leave_one_out or everything)
         if len(evaluated) < 2:
             raise InputError("leave-one-out needs at least two scenes")
         folds = {s.name: [o for o in evaluated if o is not s] for s in evaluated}
@@ -665,6 +677,20 @@ def main(
             spec,
             ", ".join(names),
         )
+    # drawn before any work: a scene whose frames cannot be sampled is refused before the tuning's minutes
+    plans = {s.name: [plan_pairs(s, seed, settings) for seed in seeds] for s in evaluated}
+    sampled = {name: _fewest_sampled(plan) for name, plan in plans.items()}
+    for name, (locations, gallery) in sampled.items():
+        short = []
+        if locations < settings.patches:
+            short.append(
+                f"as few as {locations} textured patch locations of the {settings.patches} asked (chance "
+                f"{100 / locations:.1f}%)"
+            )
+        if gallery < settings.gallery:
+            short.append(f"{gallery} gallery frames of {settings.gallery}")
+        if short:
+            logger.warning("scene %s: %s: its frames hold no more", name, ", ".join(short))
     make_folder(out_dir)  # before the benchmark, not after it
 
     bar = tqdm(
@@ -686,20 +712,6 @@ def main(
         fold_of = {s.name: s.name if leave_one_out is not None else "all" for s in evaluated}
         rows[f"{m} (tuned)"] = {name: tuning_result[m][fold]["chosen"] for name, fold in fold_of.items()}
 
-    plans = {s.name: [plan_pairs(s, seed, settings) for seed in seeds] for s in evaluated}
-    sampled = {name: _fewest_sampled(plan) for name, plan in plans.items()}
-    for name, (locations, gallery) in sampled.items():
-        if locations < settings.patches or gallery < settings.gallery:
-            logger.warning(
-                "scene %s: as few as %d textured patch locations of the %d asked (chance %.1f%%), %d gallery frames of "
-                "%d: its frames hold no more",
-                name,
-                locations,
-                settings.patches,
-                100 / locations,
-                gallery,
-                settings.gallery,
-            )
     jobs = [(s, spec) for s in evaluated for spec in dict.fromkeys(r[s.name] for r in rows.values())]
     cache: dict[tuple[str, str], dict[str, Any]] = {}
     backends: dict[str, str] = {}
@@ -773,7 +785,8 @@ def main(
             "tuning_grids": {m: [_spec(m, p) for p in TUNING_GRIDS[m]] for m in tuned},
         },
         "metrics": {
-            "identification": "% of gallery patches whose best NCC match among all sampled locations is their own",
+            "identification": "% of gallery patches whose best NCC match among all sampled locations is their own, "
+            "the pair first registered to the pixel (the move of at most shift_px that best matches its patches)",
             "matching": "% correct one-to-one ratio-test matches (within match_px) per min(#keypoints), ORB and SIFT",
             "pose": "% of pairs whose RANSAC homography moves every frame corner less than pose_px",
             "correct": "mean count of correct one-to-one ratio-test matches (within match_px) per pair, ORB and SIFT",

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from alcn_cv.io import atomic_write, write_json
+from alcn_cv.io import atomic_paths, atomic_write, write_json
 from alcn_cv.report import describe_machine, markdown_table, new_figure, save_figure, spread_cell
 
 __all__ = ["METRIC_LABELS", "write_report"]
@@ -143,7 +143,8 @@ def _tuning_text(result: dict[str, Any]) -> str:
     s = result["settings"]
     text = (
         f"Each method's {len(next(iter(s['tuning_grids'].values())))} settings (`relight.json`: settings.tuning_grids) "
-        f"scored by identification on {s['tune_frames']} evenly spaced frames of each training scene (seed "
+        f"scored by identification on {s['tune_frames']} evenly spaced frames of each training scene (all of a scene "
+        f"that has fewer; seed "
         f"{s['tune_seed']}); the first best setting is chosen.\n\n"
     )
     headers = (
@@ -201,8 +202,9 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
 
 
 def write_report(result: dict[str, Any], out: Path) -> None:
-    """Write ``relight.json`` (everything), ``relight.md`` (the tables) and ``relight.png`` (bars) into ``out``."""
-    write_json(out / "relight.json", result)  # its folder made by the atomic write
+    """Write ``relight.json`` (everything), ``relight.md`` (the tables) and ``relight.png`` (bars; where a method has
+    a result) into ``out``, all or none of them (:func:`~alcn_cv.io.atomic_paths`: an interrupt leaves an earlier
+    report whole); an earlier figure that this report has none for is removed."""
     metrics = _metrics(result)
     s, split = result["settings"], result["split"]
     scenes = ", ".join(_scene_text(n, v, s) for n, v in result["scenes"].items())
@@ -221,10 +223,12 @@ def write_report(result: dict[str, Any], out: Path) -> None:
         + ".  ",
         f"Scenes: {scenes}.\n",
         f"Every method normalizes whole grayscale frames through its own `apply()` (uint8 in, float32 out); "
-        f"{s['gallery']} gallery frames per scene and seed, each paired with the other frames (at most "
-        f"{s['max_pairs'] or 'all'} pairs per scene and seed). Identification: {s['patches']} textured "
+        f"{s['gallery']} gallery frames per scene and seed, each paired with the other frames ("
+        + (f"at most {s['max_pairs']} pairs per scene and seed" if s["max_pairs"] else "every pair")
+        + f"). Identification: {s['patches']} textured "
         f"{s['patch']}x{s['patch']} patch locations (fewer where a scene's frames hold fewer: Scenes), NCC over all of "
-        f"them (chance {100 / s['patches']:.2f}%). "
+        f"them (chance {100 / s['patches']:.2f}%), each pair first registered to the pixel: the query frame's patches "
+        f"moved by the one move of at most {s['shift_px']} px that best matches the gallery's (a fixed camera shakes). "
         + (
             f"Keypoints: {s['keypoints']} per frame on apply()'s uint8 output, ratio test {s['ratio']}, correct within "
             f"{s['match_px']} px; matching score: the correct one-to-one matches over the pair's smaller keypoint "
@@ -251,6 +255,12 @@ def write_report(result: dict[str, Any], out: Path) -> None:
     text += ["## Tuning (training scenes only)\n", _tuning_text(result)]
     if failures:
         text += ["## Failures\n", "\n".join(failures) + "\n"]
-    atomic_write(out / "relight.md", "\n".join(text))
-    if any("mean_test" in r for r in result["methods"].values()):
-        _figure(result, out / "relight.png")
+    figure = any("mean_test" in r for r in result["methods"].values())
+    names = ["relight.json", "relight.md", *(["relight.png"] if figure else [])]
+    with atomic_paths(*(out / name for name in names)) as paths:  # the folder made by the atomic writes
+        write_json(paths[0], result)
+        atomic_write(paths[1], "\n".join(text))
+        if figure:
+            _figure(result, paths[2])
+    if not figure:
+        (out / "relight.png").unlink(missing_ok=True)

@@ -250,19 +250,23 @@ def _group_files(folder: Path) -> dict[str, list[Path]]:
     return groups
 
 
-def _scene_files(root: Path, subfolders: bool = True) -> list[tuple[str, Path, list[Path]]]:
+def _scene_files(root: Path, subfolders: bool = True, say_skipped: bool = False) -> list[tuple[str, Path, list[Path]]]:
     """``(name, folder, ordered frame files)`` of every scene of at least two frames in ``root`` and (``subfolders``)
-    its subfolders, hidden ones skipped; from the file names alone. Raises OSError as ``Path.iterdir``."""
+    its subfolders, hidden ones skipped; from the file names alone. ``say_skipped``: warn of each one-frame scene
+    skipped (a scene a user made for a benchmark would vanish from it without a word). Raises OSError as
+    ``Path.iterdir``."""
     folders = [root]
     if subfolders:
         folders += _visible_subfolders(root)
     scenes = []
     for folder in folders:
         for name, paths in _group_files(folder).items():
-            if len(paths) < 2:
-                logger.debug("skipping %s/%s: fewer than two frames", folder, name)
-                continue
-            scenes.append((name, folder, paths))
+            if len(paths) >= 2:
+                scenes.append((name, folder, paths))
+            elif say_skipped:
+                logger.warning(
+                    "%s: %s is scene %r's only frame, skipped: a scene needs two", folder, paths[0].name, name
+                )
     return scenes
 
 
@@ -289,15 +293,20 @@ def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) ->
     """
     root = Path(root)
     if not root.is_dir():
-        raise DatasetError(f"{root}: not a folder")
+        raise DatasetError(f"{root}: {'not a folder' if root.exists() else 'folder not found'}")
     if max_frames is not None and max_frames < 2:
         raise InputError(f"max_frames must be at least 2, got {max_frames}")
     scenes = []
-    for name, folder, paths in _scene_files(root):
+    for name, folder, paths in _scene_files(root, say_skipped=True):
         paths = [paths[i] for i in _evenly_spaced(len(paths), max_frames)]
         frames, tops = zip(*(_read_eight_bits(p, gray=True) for p in paths))
-        if any(f.shape != frames[0].shape for f in frames):
-            raise DatasetError(f"{folder}: the frames of scene {name!r} differ in size (not registered)")
+        odd = next((p for p, f in zip(paths, frames) if f.shape != frames[0].shape), None)
+        if odd is not None:
+            size = "x".join(map(str, frames[0].shape[1::-1]))
+            raise DatasetError(
+                f"{folder}: the frames of scene {name!r} differ in size (not registered): {paths[0].name} is {size}, "
+                f"{odd.name} {'x'.join(map(str, frames[paths.index(odd)].shape[1::-1]))}"
+            )
         deep = [(top, p) for p, top in zip(paths, tops) if top is not None]
         if deep:  # the scene's maximum, not each frame's: a multi-light scene has dark frames by design
             top, brightest = max(deep)
@@ -307,8 +316,8 @@ def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) ->
         if score < REGISTERED_SCORE:
             logger.warning(
                 "scene %r (%s) does not look registered: its frames' gradients correlate %.2f (registered scenes "
-                "%.1f or more); a scene is one fixed view under several lights, and unrelated photographs train "
-                "at chance (give those as photos=[...] to alcn train-real-light)",
+                "%.1f or more); a scene is one fixed view under several lights: unrelated photographs score at "
+                "chance in a benchmark, and train at chance (give those as photos=[...] to alcn train-real-light)",
                 name,
                 folder,
                 score,
@@ -402,10 +411,14 @@ def load_photometric(root: str | os.PathLike, scale: float = 1.0) -> list[Photom
         if len(shots) < 2:
             raise DatasetError(f"{folder}: one photograph ({shots[0].name}); an object needs 2 lights or more")
         try:
-            images = [read_image(p, gray=True) for p in shots]
+            images, tops = zip(*(_read_eight_bits(p, gray=True) for p in shots))
             mask = read_mask(mask_path)
         except InputError as exc:  # a file of the data set, not the caller's input
             raise DatasetError(str(exc)) from None
+        deep = [(top, p) for p, top in zip(shots, tops) if top is not None]
+        if deep:  # the object's maximum, as a scene's: its photographs are dark by design under some lights
+            top, brightest = max(deep)
+            _warn_if_narrow(f"object {folder.name!r} (its brightest photograph {brightest})", top)
         if any(img.shape != mask.shape for img in images):
             raise DatasetError(f"{folder}: images and mask {mask_path.name} differ in size")
         if scale != 1:
