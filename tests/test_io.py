@@ -449,3 +449,20 @@ def test_a_video_two_frames_short_of_its_header_is_truncated():
     assert not is_short(455, 456)  # a header one frame too high (cookie_box/box.mp4)
     assert is_short(454, 456)
     assert not is_short(3, None) and not is_short(3, 0)
+
+
+def test_files_that_belong_together_are_replaced_together(tmp_path):
+    """A report's tables and figure (io.atomic_paths): all replaced when the block ends, none on an interrupt."""
+    names = ["r.json", "r.md", "r.png"]
+    for name in names:
+        (tmp_path / name).write_text("earlier")
+    with pytest.raises(KeyboardInterrupt), io.atomic_paths(*(tmp_path / n for n in names)) as paths:
+        paths[0].write_text("new")
+        paths[1].write_text("new")
+        raise KeyboardInterrupt  # while the figure is drawn
+    assert sorted(p.name for p in tmp_path.iterdir()) == names
+    assert all((tmp_path / n).read_text() == "earlier" for n in names)
+    with io.atomic_paths(*(tmp_path / n for n in names)) as paths:
+        for path in paths:
+            path.write_text("new")
+    assert all((tmp_path / n).read_text() == "new" for n in names) and len(list(tmp_path.iterdir())) == 3

@@ -57,7 +57,7 @@ from alcn_cv.checks import check_seeds
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, format_spec, parse_spec
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
+from alcn_cv.io import atomic_paths, atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
 from alcn_cv.report import (
     command_line,
     describe_machine,
@@ -490,8 +490,11 @@ def main(
         "alcn_vs_dog": compare_to_dog(runs, settings),
     }
     result["seconds"] = time.perf_counter() - start
-    result["figure"] = str(_figure(result, out / "fewshot.png"))
-    write_json(out / "fewshot.json", result)
-    atomic_write(out / "fewshot.md", fewshot_markdown(result))
+    result["figure"] = str(out / "fewshot.png")
+    # all or none: an interrupt leaves an earlier report whole
+    with atomic_paths(out / "fewshot.png", out / "fewshot.json", out / "fewshot.md") as (png, json_path, md):
+        _figure(result, png)
+        write_json(json_path, result)
+        atomic_write(md, fewshot_markdown(result))
     logger.info("few-shot validation written to %s in %.0f s", out, result["seconds"])
     return result

@@ -68,7 +68,7 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.lab import lab_and_lightness, srgb_to_lab
-from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
+from alcn_cv.io import atomic_paths, atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
 from alcn_cv.malloc import GLIBC_TUNABLES
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 from alcn_cv.shared_data import shared_data_dir
@@ -1216,9 +1216,11 @@ def main(
         "targets": target_results,
         "errors": errors,
     }
-    write_json(out / "speed.json", result)
-    atomic_write(out / "speed.md", _markdown(result))
-    plot_speed(result, out / "speed.png")
+    # all or none: an interrupt leaves an earlier report whole
+    with atomic_paths(out / "speed.json", out / "speed.md", out / "speed.png") as (json_path, md, png):
+        write_json(json_path, result)
+        atomic_write(md, _markdown(result))
+        plot_speed(result, png)
     return result
 
 
@@ -1235,7 +1237,6 @@ def _device_main(out: Path, settings: SpeedSettings) -> dict[str, Any]:
         "rows": device["rows"],
         "device": device,
     }
-    write_json(out / "speed.json", result)
     lines = [
         f"# alcn bench speed --device {settings.device}",
         "",
@@ -1246,7 +1247,9 @@ def _device_main(out: Path, settings: SpeedSettings) -> dict[str, Any]:
         *device_markdown(device),
         "",
     ]
-    atomic_write(out / "speed.md", "\n".join(lines))
+    with atomic_paths(out / "speed.json", out / "speed.md") as (json_path, md):
+        write_json(json_path, result)
+        atomic_write(md, "\n".join(lines))
     (out / "speed.png").unlink(missing_ok=True)  # a CPU run's plot, which this report no longer describes
     return result
 
