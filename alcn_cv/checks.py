@@ -182,7 +182,7 @@ def check_unit_range(img: np.ndarray, name: str) -> None:
     if not (lo >= -FLOAT_TOLERANCE and hi <= 1 + FLOAT_TOLERANCE):
         if not np.isfinite(img).all():
             raise InputError(f"{name} contains NaN or inf")
-        hint = " (divide by 255 first)" if lo >= 0 and 1.5 < hi <= 255 else ""
+        hint = " (divide by 255 first)" if lo >= 0 and 5 < hi <= 255 else ""
         if lo > -0.5 and hi < 1.5:  # a resize's or a blur's overshoot
             hint = " (an interpolation's overshoot? np.clip(img, 0, 1))"
         raise InputError(f"float32 intensities must be in [0, 1], got [{lo:.4g}, {hi:.4g}]{hint}")

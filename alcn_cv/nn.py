@@ -126,13 +126,15 @@ class ALCN2d(nn.Module):
     be refused: the network's pads would be longer than its grid); as a trace, the graph is for the example's size
     (with dynamic axes, other sizes give wrong values or fail). The 1e-5 from ``apply()`` holds for integers
     converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs by a float
-    rounding, which the divisive step amplifies to 6e-5 on a photograph.
+    rounding, which the divisive step amplifies to 6e-5 on a photograph. The gain models at another ``scale`` than 1
+    are 6e-5 from it too: their working image is resized in torch, ``apply()``'s by ``cv2.resize``.
 
     In a ``DataLoader``'s workers (or any process forked after this one ran torch's threads, which a fork leaves
     behind), the module runs on one thread: the outputs are one thread's, to float rounding.
 
     Fine-tuning: the network's parameters train (``requires_grad_(True)``, the default of a new module); the gain
-    models' ``tau`` and ``floor_scale`` are buffers, fixed. The gradients reaching the gain networks are small
+    models' ``tau`` and ``floor_scale`` are buffers, fixed. ``train()`` and ``eval()`` give the same output (no
+    dropout, no batch normalization). The gradients reaching the gain networks are small
     (about 1e-6 of a mean squared error, against weights of about 5e-2): use Adam rather than plain SGD.
 
     Example:
@@ -449,6 +451,10 @@ def _check_image(image: torch.Tensor) -> None:
         hint = ""
         if image.ndim == 4 and image.shape[1] == 4:
             hint = " (RGBA: image[:, :3])"
+        elif image.ndim == 4 and image.shape[1] == 2:
+            hint = " (gray and alpha: image[:, :1])"
+        elif image.ndim == 5:
+            hint = " (frames of several clips: image.flatten(0, 1))"
         elif image.ndim == 4 and image.shape[-1] in (1, 3):
             hint = " (channels last: image.permute(0, 3, 1, 2))"
         elif image.ndim == 3 and image.shape[0] in (1, 3):
@@ -792,7 +798,11 @@ def batches(frames: Iterable[np.ndarray], size: int) -> Iterator[np.ndarray]:
     if isinstance(size, bool) or not isinstance(size, numbers.Integral) or size < 1:
         raise InputError(f"size must be a positive integer, got {size!r}")
     batch: list[np.ndarray] = []
-    for frame in frames:
+    first: tuple[int, ...] | None = None
+    for index, frame in enumerate(frames):
+        first = frame.shape if first is None else first
+        if frame.shape != first:
+            raise InputError(f"frame {index} is of shape {frame.shape}, the first {first}: a batch is of one size")
         batch.append(frame)
         if len(batch) == size:
             yield np.stack(batch)

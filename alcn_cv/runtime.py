@@ -478,7 +478,10 @@ def resolve_weights(model: str | None, weights: str | Path | None) -> Path:
         raise InputError(f"weights={weights!r} is no file; the shipped model of that name is model={weights!r}")
     model = DEFAULT_MODEL if model is None else model
     if model not in MODELS:
-        raise InputError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+        # ALCN2d's first argument is the model, createALCN's the weights: ALCN2d("tuned.npz")
+        path = isinstance(model, str | os.PathLike) and (str(model).endswith(".npz") or os.path.exists(model))
+        hint = f" (a weight file: weights={str(model)!r})" if path else ""
+        raise InputError(f"unknown model {str(model)!r}; choose one of {', '.join(MODELS)}{hint}")
     return Path(weights) if weights is not None else MODELS[model]
 
 

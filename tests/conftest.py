@@ -14,6 +14,16 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 from alcn_cv.shared_data import ENV_VAR, shared_data_dir  # noqa: E402
 
 
+@pytest.fixture(autouse=True)
+def _seeded_torch() -> None:
+    """torch's global generator seeded before each test: a test drawing its data with torch.rand draws the same
+    whatever ran before it in its process (pytest-xdist's workers run the tests in another order each time; an
+    unseeded draw failed once). Where torch is imported only: the base install's tests run without it."""
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.manual_seed(0)
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     """The real photographs of ``../shared/data``; skips the test when they are absent."""

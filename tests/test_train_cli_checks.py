@@ -150,3 +150,20 @@ def test_export_names_a_path_without_the_onnx_suffix_first(tmp_path, capsys, cap
     folder.mkdir()
     err = _refused(["export", "--weights", weights, "--onnx", str(folder), "--overwrite"], capsys)
     assert f"{folder} is a folder" in err
+
+
+def test_a_run_folder_that_cannot_be_written_is_refused_before_the_data(tmp_path, monkeypatch):
+    """An unwritable --out was found when the run made its folder, after the scenes were read and relit (seconds;
+    minutes with many photographs), with the raw "[Errno 13] Permission denied"."""
+    import tempfile
+
+    from alcn_cv.errors import InputError
+    from alcn_cv.train.checkpoint import check_run_folder
+
+    def refused(*args, **kwargs):  # as on a read-only mount (root ignores chmod)
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "mkstemp", refused)
+    with pytest.raises(InputError, match=r"cannot write .*run/train.log: .* is not writable \(Permission denied\)"):
+        check_run_folder(tmp_path / "run")
+    assert not (tmp_path / "run").exists()

@@ -294,3 +294,15 @@ def test_a_file_given_for_a_folder_of_photos_says_so(tmp_path):
         f"photos: {folder / 'p0.png'}: a file, not a folder: photos lists folders, and every image directly in each is "
         f"trained on; give its folder (photos=['{folder}']) or put the photographs meant in one of their own"
     )
+
+
+def test_a_phones_or_a_cameras_photographs_that_opencv_cannot_read_are_named(tmp_path, caplog):
+    """A folder of a JPEG, a HEIC and a DNG trained on the JPEG alone; only a warning about a single photograph hinted
+    that the others were skipped."""
+    folder = _folder(tmp_path / "phone", count=1)
+    for name in ("IMG_0001.HEIC", "IMG_0002.dng", "notes.txt"):
+        (folder / name).write_bytes(b"not read")
+    with caplog.at_level("WARNING"):
+        photos = folder_photographs([folder])
+    assert [p.name for p in photos] == ["phone/p0.png"]
+    assert f"photos: {folder}: IMG_0001.HEIC, IMG_0002.dng skipped: not an image OpenCV reads here" in caplog.text

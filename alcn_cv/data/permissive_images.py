@@ -19,6 +19,7 @@ same way; their terms are yours.
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -32,6 +33,15 @@ from alcn_cv.data.scenes import Scene, read_eight_bits
 from alcn_cv.data.textures import SKIMAGE_PHOTOGRAPHS, skimage_photograph
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import IMAGE_SUFFIXES, VideoReader, list_images, read_image, to_gray
+
+logger = logging.getLogger(__name__)
+
+#: Photographs' formats that OpenCV does not read (phones' HEIF, cameras' raw files, animations): such files in a
+#: ``photos`` folder are named in a warning, as skipped (other files, notes for instance, are skipped without a word).
+UNREAD_PHOTO_SUFFIXES = frozenset(
+    {".heic", ".heif", ".avif", ".jxl", ".gif", ".dng", ".cr2", ".cr3", ".nef", ".arw", ".orf", ".rw2", ".raf", ".raw"}
+    - IMAGE_SUFFIXES
+)
 
 __all__ = [
     "PERMISSIVE_LICENCES",
@@ -168,7 +178,15 @@ def folder_photographs(
             ``min_side`` (the training crop), the file and the minimum named.
     """
     photos = []
-    for path in photo_files(folders):
+    paths = photo_files(folders)
+    # said: a phone's HEIC or a camera's raw files would leave the run with fewer photographs without a word
+    for given in folders:
+        folder = Path(given).expanduser()
+        others = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in UNREAD_PHOTO_SUFFIXES)
+        if others:
+            shown = ", ".join(others[:5]) + (f" and {len(others) - 5} more" if len(others) > 5 else "")
+            logger.warning("photos: %s: %s skipped: not an image OpenCV reads here", given, shown)
+    for path in paths:
         image = read_eight_bits(path)
         fitted = _fit(image, max_side)
         h, w = fitted.shape[:2]

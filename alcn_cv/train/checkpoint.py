@@ -26,7 +26,7 @@ import torch
 from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
-from alcn_cv.io import INTERRUPTS, atomic_write, interrupts_blocked, make_folder
+from alcn_cv.io import INTERRUPTS, atomic_write, check_writable, interrupts_blocked, make_folder
 from alcn_cv.report import machine
 from alcn_cv.train.config import RealLightConfig, TrainConfig
 from alcn_cv.train.models import JointModel, measure_output_range
@@ -138,13 +138,14 @@ def check_run_folder(out: str | Path, *, resume: bool = False, overwrite: bool =
 
     Raises:
         InputError: either, named with the way out (``--resume`` where ``resumable``, ``--overwrite``, another
-            ``--out``); ``out`` is a file or lies under one; both ``resume`` and ``overwrite``.
+            ``--out``); ``out`` is a file or lies under one, or cannot be written; both ``resume`` and ``overwrite``.
     """
     if resume and overwrite:
         raise InputError("give --resume (go on with the run in --out) or --overwrite (replace it), not both")
     out = Path(out)
     _check_not_file(out)
     _check_not_foreign(out)
+    check_writable(out / "train.log")  # before the data are read: the first file a run writes
     results = [] if resume or overwrite else earlier_run(out)
     if results:
         shown = ", ".join(results[:4]) + (f" and {len(results) - 4} more" if len(results) > 4 else "")

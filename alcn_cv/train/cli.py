@@ -147,7 +147,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "write to another --out.",
     )
     add_conf_option(s, DISTILL_CONF_SUMMARIES, None, required=True, example="teacher=FILE")
-    s.add_argument("--out", type=Path, help="weight file to write (.npz; the card is .md beside it)")
+    s.add_argument(
+        "--out",
+        type=Path,
+        help="weight file to write (.npz; the card is .md beside it); needed but with --print-config",
+    )
     s.add_argument("--overwrite", action="store_true", help="replace an existing weight file, its card and export")
     s.add_argument("--seed", type=SEED, help="seed (default: the preset's)")
     s.add_argument(

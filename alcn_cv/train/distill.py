@@ -270,7 +270,8 @@ teacher.
 
 Use: {_created(weights, "lite")}, real time (Eq. 3 by its `pyramid` approximation, the default);
 {_created(weights, "lite", mixture="exact")} for Eq. 3 exactly.
-ALCN warns when the installed teacher differs from this one: then re-run the command below.
+For the shipped models, ALCN warns when the installed teacher differs from this one: then re-run the command
+below (for another teacher, compare its SHA-256 with the one above).
 
 ## How it was made
 
@@ -549,7 +550,8 @@ among them, against the teacher's {record["parameters"]["teacher"]}) distilled f
 (copied, fixed); only the network on the grid is smaller. It is only as good as the teacher.
 {"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}
 `{Path(name).with_suffix(".onnx").name}` is the same network for the torch-free `backend="opencv"`
-(written by the same command through `alcn export`). ALCN warns when the installed teacher differs from this one.
+(written by the same command through `alcn export`). For the shipped models, ALCN warns when the installed teacher
+differs from this one; for another teacher, compare its SHA-256 with the one above.
 {_gain_terms(s)}
 
 ## How it was made

@@ -41,8 +41,9 @@ def summary_markdown(cfg: TrainConfig, result: TrainResult, machine_start: dict[
         f"# `alcn train` run: {cfg.model.method}",
         "",
         f"- status: {result.status}; {len(result.history)} epoch(s); training "
-        f"{result.history[-1]['seconds'] / 60 if result.history else 0:.1f} min, whole run (data, training, "
-        f"few-shot validation, export) {result.seconds / 60:.1f} min",
+        f"{result.history[-1]['seconds'] / 60 if result.history else 0:.1f} min (every process that ran it: a "
+        f"resumed run's included), this process (data, training, few-shot validation, weight file) "
+        f"{result.seconds / 60:.1f} min",
         f"- machine at start: {describe_machine(machine_start)}",
         f"- machine at end: {describe_machine(machine())}",
         f"- versions: {versions()}",
