@@ -30,7 +30,7 @@ from importlib import metadata
 from typing import Any
 
 from alcn_cv.errors import ALCNError, MissingDependencyError
-from alcn_cv.extras import is_installed, missing_extra
+from alcn_cv.extras import DISTRIBUTION, is_installed, missing_extra
 from alcn_cv.malloc import keep_freed_memory
 
 logger = logging.getLogger("alcn_cv")
@@ -129,9 +129,11 @@ def _versions() -> str:
     import cv2
     import numpy
 
-    from alcn_cv import __version__
-
-    versions = f"alcn-cv {__version__} (OpenCV {cv2.__version__}, NumPy {numpy.__version__}"
+    try:  # the installed distribution's (the package imports this module: no import of it here)
+        ours = metadata.version(DISTRIBUTION)
+    except metadata.PackageNotFoundError:
+        ours = "(not installed)"
+    versions = f"alcn-cv {ours} (OpenCV {cv2.__version__}, NumPy {numpy.__version__}"
     if is_installed("torch"):
         versions += f", torch {metadata.version('torch')}"
     return versions + ")"
