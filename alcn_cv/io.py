@@ -43,6 +43,7 @@ __all__ = [
     "held_folder",
     "holds_out_dir",
     "interrupts_blocked",
+    "interrupts_deferred",
     "is_short",
     "is_video",
     "iter_frames",
@@ -197,33 +198,39 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     interrupt the temporary file is removed and ``path`` is left as it was. The file gets the
     usual permissions (``0666`` less the umask), the folder is created when missing.
     """
-    path = Path(path)
-    make_folder(path.parent)
-    try:
-        fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}")
-    except OSError as exc:  # its message would name the temporary file, not the one the caller gave
-        raise OSError(f"cannot write {path}: {exc.strerror}") from None
-    os.close(fd)
-    tmp = Path(name)
-    try:
+    with atomic_paths(path) as (tmp,):
         yield tmp
-        os.chmod(tmp, 0o666 & ~UMASK)  # mkstemp makes 0600 files
-        try:
-            os.replace(tmp, path)
-        except OSError as exc:
-            raise OSError(f"cannot write {path}: {exc.strerror}") from None
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 @contextlib.contextmanager
 def atomic_paths(*paths: str | os.PathLike) -> Iterator[list[Path]]:
     """:func:`atomic_path` of several files that belong together (a report's tables and its figures): each becomes
-    its path only when the whole block ends, one right after the other; on an error or an interrupt in the block,
-    none does, and every path is left as it was."""
-    with contextlib.ExitStack() as stack:
-        yield [stack.enter_context(atomic_path(path)) for path in paths]
+    its path when the whole block ends, in order, with Ctrl-C and SIGTERM held meanwhile
+    (:func:`interrupts_deferred`); on an error or an interrupt in the block none does, and every path is left as it
+    was."""
+    finals = [Path(path) for path in paths]
+    temps: list[Path] = []
+    try:
+        for path in finals:
+            make_folder(path.parent)
+            try:
+                fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}")
+            except OSError as exc:  # its message would name the temporary file, not the one the caller gave
+                raise OSError(f"cannot write {path}: {exc.strerror}") from None
+            os.close(fd)
+            temps.append(Path(name))
+        yield list(temps)
+        with interrupts_deferred():  # an interrupt between two renames would leave the files in part
+            for tmp, path in zip(temps, finals):
+                os.chmod(tmp, 0o666 & ~UMASK)  # mkstemp makes 0600 files
+                try:
+                    os.replace(tmp, path)
+                except OSError as exc:
+                    raise OSError(f"cannot write {path}: {exc.strerror}") from None
+    except BaseException:
+        for tmp in temps:
+            tmp.unlink(missing_ok=True)
+        raise
 
 
 def check_writable(path: str | os.PathLike) -> None:
@@ -517,7 +524,7 @@ def write_image(path: str | Path, img: np.ndarray) -> Path:
 
 
 #: The signals the command line turns into exceptions (Ctrl-C, and SIGTERM as Ctrl-C): those a worker thread blocks
-#: (:func:`signals_to_main_thread`) and a training step holds (:func:`alcn_cv.train.checkpoint.interrupts_deferred`).
+#: (:func:`signals_to_main_thread`) and a training step or the renames of a report hold (:func:`interrupts_deferred`).
 INTERRUPTS = (signal.SIGINT, signal.SIGTERM)
 
 
@@ -534,6 +541,34 @@ def interrupts_blocked() -> Iterator[None]:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+@contextlib.contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """Hold Ctrl-C and SIGTERM (:data:`INTERRUPTS`; the command line raises SIGTERM as Ctrl-C) until the
+    block ends, then deliver them to the handlers of before: no signal cuts the block short (an optimisation step and
+    its counter, which a checkpoint must see together). Python handles signals in the main thread only, so another
+    thread's block has nothing to hold.
+
+    The handlers are swapped with both signals blocked (``pthread_sigmask``, POSIX), so that no signal arrives between
+    two swaps (a handler of before raising there would leave the other signal to the temporary one for good); the
+    held signals are raised once all are back. Without ``pthread_sigmask`` SIGINT is put back last."""
+    held: list[int] = []
+    kept = [s for s in INTERRUPTS if signal.getsignal(s) is not None]  # None: set outside Python, not to be put back
+    try:
+        with interrupts_blocked():
+            previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in kept}
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        with interrupts_blocked():
+            for s in sorted(previous, key=lambda s: s == signal.SIGINT):  # SIGINT last: Ctrl-C comes most often
+                signal.signal(s, previous[s])
+        for signum in dict.fromkeys(held):
+            signal.raise_signal(signum)
 
 
 @contextlib.contextmanager
@@ -735,27 +770,43 @@ def frame_progress(frames: Iterable[T], total: int | None, **bar: Any) -> Iterat
 
 
 class VideoFileWriter:
-    """A ``cv2.VideoWriter`` (:func:`open_video_writer`) that counts the frames written and, finished by
-    :meth:`close`, checks that its file holds them: OpenCV's ``write`` reports nothing when FFmpeg cannot write (a full
-    disk, a file size limit), and the file would be unreadable or short. As a context manager it is closed on the
-    way out, or released only on an error's (whose file is discarded; the check's own error would replace it).
+    """A ``cv2.VideoWriter`` (:func:`open_video_writer`) that refuses frames of another size or colour than its own
+    and counts the frames written, and, finished by :meth:`close`, checks that its file holds them: OpenCV's ``write``
+    reports nothing when it drops a frame (another size) or FFmpeg cannot write (a full disk, a file size limit), and
+    the file would be unreadable or short. As a context manager it is closed on the way out, or, on the way out of
+    an error, released unchecked (the check's own error would replace the error; the caller discards the file).
 
     Attributes:
         path: the file written; name: the path an error names (the output's, when ``path`` is a temporary name for
-            it); frames: the frames written.
+            it); size: ``(width, height)`` of its frames; color: whether they are BGR (else gray); frames: the frames
+            written.
     """
 
-    def __init__(self, writer: cv2.VideoWriter, path: Path, name: str | Path) -> None:
+    def __init__(
+        self, writer: cv2.VideoWriter, path: Path, name: str | Path, size: tuple[int, int], color: bool
+    ) -> None:
         self._writer = writer
-        self.path, self.name = path, name
+        self.path, self.name, self.size, self.color = path, name, size, color
         self.frames = 0
 
     def write(self, frame: np.ndarray) -> None:
+        """Write a uint8 frame of :attr:`size`, BGR ``HxWx3`` where :attr:`color`, else gray ``HxW`` (or ``HxWx1``).
+
+        Raises:
+            InputError: a frame of another size or colour, which OpenCV would drop without a word.
+        """
+        color, gray = frame.ndim == 3 and frame.shape[2] == 3, frame.ndim == 2 or frame.shape[2:] == (1,)
+        if frame.shape[1::-1] != self.size or color != self.color or not (gray or color):
+            kind = "BGR" if self.color else "gray"
+            raise InputError(
+                f"{self.name}: frame {self.frames} is of shape {frame.shape}, the video's frames {kind} "
+                f"{self.size[0]}x{self.size[1]}: a video's frames are of one size and colour"
+            )
         self._writer.write(frame)
         self.frames += 1
 
     def release(self) -> None:
-        """Finish the file (again: nothing), unchecked: the way out of an error, whose file is discarded."""
+        """Finish the file (again: nothing), unchecked: the way out of an error."""
         self._writer.release()
 
     def close(self) -> None:
@@ -810,7 +861,7 @@ def open_video_writer(
         writer = cv2.VideoWriter(str(path), fourcc, fps, size, color)
     if not writer.isOpened():
         raise OSError(f"cannot write video {name or path} (unsupported extension or codec)")
-    return VideoFileWriter(writer, path, name or path)
+    return VideoFileWriter(writer, path, name or path, (int(size[0]), int(size[1])), color)
 
 
 def map_batches(

@@ -573,7 +573,7 @@ def main(
         if calibration is not None:
             name = settings["camera"] if isinstance(settings["camera"], str | Path) else "the calibration"
             _check_frame_size(input_path, calibration.image_size, str(name))
-        elif K is not None and conf in PRESET_FRAME_SIZES and given["K"] is None:
+        elif conf in PRESET_FRAME_SIZES and given["K"] is None:
             _check_frame_size(input_path, PRESET_FRAME_SIZES[conf], f"the preset {conf!r}'s camera")
     with io.new_folder(output.parent):  # a build that fails leaves no empty folder behind
         with tempfile.TemporaryDirectory(prefix="alcn_pose_frames_", dir=output.parent) as work:

@@ -164,7 +164,12 @@ def test_end_to_end_small(small_data, tmp_path, monkeypatch):
     assert saved["runs"]["dog|1|local|0"]["params"] == tuned["params"] and saved["val_images"] == [1, 2, 3]
     assert "error" in saved["summary"]["he|1|raw"]
     assert saved["summary"]["dog|1|local"]["seeds"] == [0]
-    assert "failed" in (out / "detect.md").read_text()
+    md = (out / "detect.md").read_text()
+    instances = {name: obj["num_gt"] for name, obj in saved["runs"]["none|1|raw|0"]["objects"].items()}
+    assert (
+        "failed" in md
+        and "- **Test instances per object:** " + ", ".join(f"{n} {k}" for n, k in instances.items()) in md
+    )
     assert [round(v, 4) for v in saved["window_agreement"]["dog"].values()] == [
         1.0
     ]  # DoG looks no further than a window
@@ -296,8 +301,8 @@ def test_cli_and_bad_input(small_data, tmp_path):
         )
         == 2
     )
-    with pytest.raises(DatasetError):
-        detect_data.load_data(tmp_path)
+    with pytest.raises(DatasetError, match="no train.json nor manifest.json: not a detection set"):
+        detect_data.load_data(tmp_path)  # a folder of another kind: its missing manifest was blamed
     with pytest.raises(DatasetError, match="not a folder"):
         detect_data.load_data(tmp_path / "missing")
     with pytest.raises(SystemExit):
@@ -361,7 +366,8 @@ def test_tables_and_curves_say_how_many_real_images_were_used(tmp_path, monkeypa
     assert real_images_label(10, {"a": 3, "b": 10}) == "3-10 real image(s) (10 requested; a 3)"
     figures = {}
     monkeypatch.setattr(plots, "save_figure", lambda plt, fig, path: figures.setdefault(path.name, fig))
-    plots.plot_pr_curves(_report_result(settings, runs), ["a", "b"], tmp_path)
+    names = plots.pr_figure_names(["a", "b"], settings.real_images)
+    plots.plot_pr_curves(_report_result(settings, runs), ["a", "b"], [tmp_path / name for name in names])
     ax = figures["pr_a_10real.png"].axes[0]
     assert ax.get_title().startswith("a, 3 real image(s) (10 requested), input raw")
     # every method's curve is the same: one entry names them all, on lines that keep the legend narrow

@@ -466,3 +466,47 @@ def test_files_that_belong_together_are_replaced_together(tmp_path):
         for path in paths:
             path.write_text("new")
     assert all((tmp_path / n).read_text() == "new" for n in names) and len(list(tmp_path.iterdir())) == 3
+
+
+def test_a_ctrl_c_between_the_renames_waits_for_the_last(tmp_path, monkeypatch):
+    """The renames ran one after the other with Ctrl-C live: one between two left the new figure beside the old
+    tables. It is held until every file is renamed, then raised."""
+    import os
+    import signal
+
+    names = ["r.json", "r.md", "r.png"]
+    for name in names:
+        (tmp_path / name).write_text("earlier")
+    replace = os.replace
+    renamed = []
+
+    def interrupted_replace(src, dst):
+        renamed.append(Path(dst).name)
+        replace(src, dst)
+        if len(renamed) == 1:
+            signal.raise_signal(signal.SIGINT)  # Ctrl-C right after the first rename
+
+    monkeypatch.setattr(io.os, "replace", interrupted_replace)
+    with pytest.raises(KeyboardInterrupt), io.atomic_paths(*(tmp_path / n for n in names)) as paths:
+        for path in paths:
+            path.write_text("new")
+    assert renamed == names and all((tmp_path / n).read_text() == "new" for n in names)
+
+
+def test_a_frame_of_another_size_or_colour_is_named_not_dropped(tmp_path, image):
+    """OpenCV drops a frame of another size (or a gray one in a colour video) without a word; the check of the file
+    then blamed a full disk. The writer names the frame."""
+    src = _video(tmp_path / "in.avi", 6, image)
+    seen = []
+
+    def shrinks(frame):
+        seen.append(frame)
+        return frame if len(seen) < 4 else cv2.resize(frame, (32, 24))
+
+    with pytest.raises(InputError, match=r"out.mp4: frame 3 is of shape \(24, 32, 3\), the video's frames BGR 160x120"):
+        map_video(src, tmp_path / "out.mp4", shrinks, progress=False)
+    gray = r"frame 1 is of shape \(120, 160\), the video's frames BGR 160x120"
+    with pytest.raises(InputError, match=gray), io.open_video_writer(tmp_path / "v.mp4", 10.0, (160, 120)) as writer:
+        writer.write(image)
+        writer.write(image[..., 0])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.avi", "v.mp4"]  # v.mp4: no atomic_path around it

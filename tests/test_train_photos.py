@@ -306,3 +306,11 @@ def test_a_phones_or_a_cameras_photographs_that_opencv_cannot_read_are_named(tmp
         photos = folder_photographs([folder])
     assert [p.name for p in photos] == ["phone/p0.png"]
     assert f"photos: {folder}: IMG_0001.HEIC, IMG_0002.dng skipped: not an image OpenCV reads here" in caplog.text
+
+
+def test_a_folder_of_heic_photographs_alone_says_so(tmp_path):
+    folder = tmp_path / "phone"
+    folder.mkdir()
+    (folder / "IMG_0001.HEIC").write_bytes(b"not read")
+    with pytest.raises(InputError, match=r"no image .* in this folder; IMG_0001.HEIC: not read here \(convert them"):
+        folder_photographs([folder])

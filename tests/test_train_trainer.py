@@ -346,7 +346,7 @@ def test_a_signal_while_the_handlers_are_put_back_leaves_none_held_for_good(arri
     back, and SIGTERM went to the temporary collector for good (swallowed). Now no signal comes between the swaps."""
     if not hasattr(signal, "pthread_sigmask") and arriving == signal.SIGTERM:
         pytest.skip("without pthread_sigmask only SIGINT, put back last, is safe")
-    from alcn_cv.train.checkpoint import interrupts_deferred
+    from alcn_cv.io import interrupts_deferred
 
     real_signal = signal.signal
     before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}

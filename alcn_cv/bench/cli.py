@@ -118,7 +118,8 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         help="few-shot detection benchmark: every normalization with the same detector (AUC, PR curves)",
         description="For each method, train the same detector on windows normalized by it, built from 1 and 10 real "
         "images per object (simple synthetic images), run it on every window of every test image, and score with "
-        "the PASCAL criterion (IoU 0.8, fixed-size boxes). Writes detect.md, detect.json and PR curves (PNG).",
+        "the PASCAL criterion (IoU 0.8, fixed-size boxes). Writes detect.md, detect.json and PR curves (PNG); "
+        "while it runs, detect.partial.json holds the runs done so far (an interrupted run leaves it).",
     )
     p.add_argument(
         "--data",

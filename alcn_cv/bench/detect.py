@@ -55,7 +55,9 @@ method's runs for every seed. Without ``--tune`` every method keeps its defaults
 
 Outputs: ``detect.json`` (every number, PR curves, settings, tuned parameters and every setting's validation AUC,
 timings, machine, command), ``detect.md`` (:mod:`alcn_cv.bench.detect_report`) and
-``pr_<object>_<n>real.png`` (precision-recall, all methods, :mod:`alcn_cv.bench.plots`).
+``pr_<object>_<n>real.png`` (precision-recall, all methods, :mod:`alcn_cv.bench.plots`), all replaced together;
+while it runs, ``detect.partial.json`` holds the runs done so far (left by an interrupted run, for a look at them;
+removed by a run that finishes).
 """
 
 from __future__ import annotations
@@ -84,14 +86,14 @@ from alcn_cv.bench.detect_settings import (
 )
 from alcn_cv.bench.methods import build_methods
 from alcn_cv.bench.metrics import match_detections, nms, pr_auc, precision_recall
-from alcn_cv.bench.plots import plot_pr_curves
+from alcn_cv.bench.plots import plot_pr_curves, pr_figure_names
 from alcn_cv.bench.policies import BENCH_STANDARDIZE_EPS, InputPolicy
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.filters.standardize import standardize_windows
-from alcn_cv.io import atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
+from alcn_cv.io import atomic_paths, atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
 from alcn_cv.report import machine, spread
 
 if TYPE_CHECKING:
@@ -736,12 +738,15 @@ def main(
         state, detect_command(data_dir, out_dir, settings, working_scale, box_size), time.perf_counter() - start
     )
     names = [data.name(c) for c in data.categories]
-    for earlier in out.glob("pr_*real.png"):  # an earlier run's curves, named after its objects and real images
+    result["figures"] = figures = pr_figure_names(names, settings.real_images)
+    # all or none: an interrupt leaves an earlier report whole, its curves included
+    with atomic_paths(out / "detect.json", out / "detect.md", *(out / f for f in figures)) as (json_path, md, *pngs):
+        plot_pr_curves(result, names, pngs)
+        result["seconds"] = time.perf_counter() - start
+        write_json(json_path, result)
+        atomic_write(md, detect_markdown(result, names))
+    for earlier in set(out.glob("pr_*real.png")) - {out / f for f in figures}:  # an earlier run's, of other objects
         earlier.unlink()
-    result["figures"] = plot_pr_curves(result, names, out)
-    result["seconds"] = time.perf_counter() - start
-    write_json(out / "detect.json", result)
-    atomic_write(out / "detect.md", detect_markdown(result, names))
     (out / "detect.partial.json").unlink(missing_ok=True)
     logger.info("detection benchmark written to %s in %.0f s", out, result["seconds"])
     return result

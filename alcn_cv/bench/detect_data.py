@@ -78,6 +78,11 @@ def load_data(
     if not root.is_dir():
         raise DatasetError(f"{root}: not a folder (the detection benchmark's data: `alcn data detect --out DIR`)")
     manifest_path = root / "manifest.json"
+    if not manifest_path.is_file() and not (root / "train.json").is_file():  # a folder of another kind altogether
+        raise DatasetError(
+            f"{root}: no train.json nor manifest.json: not a detection set (the benchmark's data: `alcn data detect "
+            "--out DIR`, or a COCO set with train.json and test.json)"
+        )
     manifest = read_json(manifest_path) if manifest_path.is_file() else {}
     if not isinstance(manifest, dict):
         raise DatasetError(f"{manifest_path}: expected a JSON object")

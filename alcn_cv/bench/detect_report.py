@@ -183,6 +183,22 @@ def _header(result: dict[str, Any], settings: DetectSettings) -> list[str]:
             )
             + " (`images_used` in detect.json). The tables and figures say what was used."
         )
+    instances = next(
+        ({n: o.get("num_gt") for n, o in r["objects"].items()} for r in result["runs"].values() if r.get("objects")),
+        {},
+    )
+    if instances and None not in instances.values():
+        few = min(instances.values()) <= 3
+        lines.append(
+            "- **Test instances per object:** "
+            + ", ".join(f"{name} {count}" for name, count in instances.items())
+            + (
+                "; with this few an AUC takes few values (one instance: 1 where the first detection is it, else "
+                "1/rank of the first that is): read them as a check that the pipeline runs, not as a measurement."
+                if few
+                else "."
+            )
+        )
     untested = untested_objects(result)
     if untested:
         lines.append(
@@ -243,10 +259,13 @@ def detect_markdown(result: dict[str, Any], names: list[str]) -> str:
     if _tuned(result):
         lines += _tuning_text(result, settings)
     if result.get("cnn"):
-        lines.append("\n## Plain CNN sweep (chosen by accuracy on relit held-out training windows)\n")
+        lines.append(
+            "\n## Plain CNN sweep (chosen by accuracy on relit held-out training windows; per run: real images, "
+            "input policy, seed)\n"
+        )
         for key, c in result["cnn"].items():
             lines.append(
-                f"- {key}: chosen depth {c['chosen']['depth']} width {c['chosen']['width']}; "
+                f"- {key.replace('|', ', ')}: chosen depth {c['chosen']['depth']} width {c['chosen']['width']}; "
                 + ", ".join(f"{s['depth']}x{s['width']}: {s['val_acc']:.3f}" for s in c["sweep"])
             )
         lines.append("")

@@ -345,8 +345,10 @@ def fewshot_markdown(result: dict[str, Any]) -> str:
         f"{s['real_images']} image(s) each under one light, and tested on windows of the same objects and background "
         f"under held-out lighting ({', '.join(s['test_lighting'])}). Every method normalizes training and test windows "
         "through `Normalization.normalize_windows` (ALCN: Eq. 1), then the same input policy and the same detector "
-        "(Rad, Roth & Lepetit, BMVC 2017, Sec. 4.3). AUC = ROC AUC of object vs. background (score 1 - p(background)); "
-        "accuracy over background and objects.\n",
+        "(Rad, Roth & Lepetit, BMVC 2017, Sec. 4.3). AUC = ROC AUC of object vs. background (score 1 - p(background); "
+        f"chance 0.5); accuracy: the most probable of background and the {s['n_objects']} object(s), over test windows "
+        "half of which are background (a detector that says background everywhere scores 0.5). Spreads are sample "
+        "standard deviations over the seeds.\n",
         f"- **Machine:** {describe_machine(result['machine'])}",
         f"- **Command:** `{result['command']}`",
         f"- **Settings:** seeds {', '.join(map(str, seeds))} (seed s: objects of catalogue seed {s['object_seed']} "

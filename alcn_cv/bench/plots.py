@@ -15,7 +15,7 @@ from alcn_cv.bench.detect_settings import DetectSettings, run_key
 from alcn_cv.enhance.registry import parse_spec
 from alcn_cv.report import new_figure, save_figure
 
-__all__ = ["method_styles", "plot_pr_curves", "plot_speed", "trim_pr_curve", "wrap_label"]
+__all__ = ["method_styles", "plot_pr_curves", "plot_speed", "pr_figure_names", "trim_pr_curve", "wrap_label"]
 
 #: tab20's saturated colours first, then its light ones: neighbours in a list of methods get
 #: hues that differ clearly (tab20 in its own order pairs each colour with its light variant).
@@ -77,19 +77,21 @@ def _ties(curves: dict[str, tuple[list[float], list[float]]]) -> dict[str, list[
     return groups
 
 
-def plot_pr_curves(result: dict[str, Any], names: list[str], out: Path) -> list[str]:
-    """``pr_<object>_<n>real.png``: precision-recall of every method (first seed), one panel per
-    input policy; identical curves are drawn once and named together in the legend.
+def pr_figure_names(names: list[str], real_images: list[int]) -> list[str]:
+    """The files of :func:`plot_pr_curves`, ``pr_<object>_<n>real.png``, in the order it draws them."""
+    return [f"pr_{name}_{n_real}real.png" for name in names for n_real in real_images]
 
-    Returns:
-        The names of the files written in ``out``.
-    """
+
+def plot_pr_curves(result: dict[str, Any], names: list[str], paths: list[Path]) -> None:
+    """Draw into ``paths``, one for each of :func:`pr_figure_names` (the detection report's temporary files, say), the
+    precision-recall of every method (first seed) of each object and number of real images, one panel per input
+    policy; identical curves are drawn once and named together in the legend."""
     settings = DetectSettings(**result["settings"])
     styles = method_styles(settings.methods)
     seed = settings.seeds[0]
     untested = untested_objects(result)
     used_by_n = {n_real: images_used(result, n_real) for n_real in settings.real_images}
-    written = []
+    targets = iter(paths)
     for name in names:
         for n_real in settings.real_images:
             used = used_by_n[n_real]
@@ -138,10 +140,7 @@ def plot_pr_curves(result: dict[str, Any], names: list[str], out: Path) -> list[
                     why = f"no instance of {name} in the test images" if name in untested else "every run failed"
                     ax.text(0.5, 0.5, f"no curve: {why}", ha="center", va="center", transform=ax.transAxes)
             fig.tight_layout()
-            path = out / f"pr_{name}_{n_real}real.png"
-            save_figure(plt, fig, path)
-            written.append(path.name)
-    return written
+            save_figure(plt, fig, next(targets))
 
 
 def plot_speed(result: dict[str, Any], path: Path) -> None:

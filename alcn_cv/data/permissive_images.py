@@ -161,8 +161,16 @@ def photo_files(folders: Sequence[str | os.PathLike]) -> list[Path]:
             files += list_images(folder)
         except InputError:
             kinds = ", ".join(sorted(IMAGE_SUFFIXES))
-            raise InputError(f"photos: {given}: no image ({kinds}) in this folder") from None
+            unread = _unread_photos(folder)
+            hint = f"; {', '.join(unread[:5])}: not read here (convert them to JPEG or PNG)" if unread else ""
+            raise InputError(f"photos: {given}: no image ({kinds}) in this folder{hint}") from None
     return files
+
+
+def _unread_photos(folder: Path) -> list[str]:
+    """The names of the files of ``folder`` in a photograph's format that OpenCV does not read
+    (:data:`UNREAD_PHOTO_SUFFIXES`), sorted."""
+    return sorted(p.name for p in folder.iterdir() if p.suffix.lower() in UNREAD_PHOTO_SUFFIXES)
 
 
 def folder_photographs(
@@ -181,8 +189,7 @@ def folder_photographs(
     paths = photo_files(folders)
     # said: a phone's HEIC or a camera's raw files would leave the run with fewer photographs without a word
     for given in folders:
-        folder = Path(given).expanduser()
-        others = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in UNREAD_PHOTO_SUFFIXES)
+        others = _unread_photos(Path(given).expanduser())
         if others:
             shown = ", ".join(others[:5]) + (f" and {len(others) - 5} more" if len(others) > 5 else "")
             logger.warning("photos: %s: %s skipped: not an image OpenCV reads here", given, shown)

@@ -26,7 +26,7 @@ import torch
 from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
-from alcn_cv.io import INTERRUPTS, atomic_write, check_writable, interrupts_blocked, make_folder
+from alcn_cv.io import atomic_write, check_writable, make_folder
 from alcn_cv.report import machine
 from alcn_cv.train.config import RealLightConfig, TrainConfig
 from alcn_cv.train.models import JointModel, measure_output_range
@@ -44,7 +44,6 @@ __all__ = [
     "check_run_folder",
     "checkpoint_header",
     "earlier_run",
-    "interrupts_deferred",
     "load_checkpoint",
     "restore_checkpoint",
     "run_folder",
@@ -334,31 +333,3 @@ def sigint_as_keyboard_interrupt() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-
-
-@contextlib.contextmanager
-def interrupts_deferred() -> Iterator[None]:
-    """Hold Ctrl-C and SIGTERM (:data:`~alcn_cv.io.INTERRUPTS`; the command line raises SIGTERM as Ctrl-C) until the
-    block ends, then deliver them to the handlers of before: no signal cuts the block short (an optimisation step and
-    its counter, which a checkpoint must see together). Python handles signals in the main thread only, so another
-    thread's block has nothing to hold.
-
-    The handlers are swapped with both signals blocked (``pthread_sigmask``, POSIX), so that no signal arrives between
-    two swaps (a handler of before raising there would leave the other signal to the temporary one for good); the
-    held signals are raised once all are back. Without ``pthread_sigmask`` SIGINT is put back last."""
-    held: list[int] = []
-    kept = [s for s in INTERRUPTS if signal.getsignal(s) is not None]  # None: set outside Python, not to be put back
-    try:
-        with interrupts_blocked():
-            previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in kept}
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        with interrupts_blocked():
-            for s in sorted(previous, key=lambda s: s == signal.SIGINT):  # SIGINT last: Ctrl-C comes most often
-                signal.signal(s, previous[s])
-        for s in dict.fromkeys(held):
-            signal.raise_signal(s)

@@ -64,7 +64,7 @@ from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
-from alcn_cv.io import atomic_write, held_folder, to_gray, write_json
+from alcn_cv.io import atomic_write, held_folder, interrupts_deferred, to_gray, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.presets import with_settings
 from alcn_cv.report import log_to, machine
@@ -74,7 +74,6 @@ from alcn_cv.train.checkpoint import (
     check_checkpoint,
     check_run_folder,
     checkpoint_header,
-    interrupts_deferred,
     load_checkpoint,
     run_folder,
     sigint_as_keyboard_interrupt,
@@ -963,7 +962,7 @@ def fit(
     start's on the same draws (without gradients: the training's draws and weights are untouched).
 
     Ctrl-C and SIGTERM wait while a step updates the weights and while a save writes
-    (:func:`~alcn_cv.train.checkpoint.interrupts_deferred`); then the steps done since the last save are saved as
+    (:func:`~alcn_cv.io.interrupts_deferred`); then the steps done since the last save are saved as
     the periodic saves are (the next step's draws those of an uninterrupted run) and :class:`TrainingInterrupted`
     is raised (its ``checkpoint`` whether ``save`` saved them).
 
