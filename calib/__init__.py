@@ -7,6 +7,7 @@
   from pycolmap SfM scaled by a known length; BOP and COLMAP output for ``alcn pose build``.
 - :mod:`calib.undistort`: undistortion of images and videos.
 - :mod:`calib.conventions`: OpenCV / COLMAP / BOP camera conventions.
+- :mod:`calib.quality`: the rules that judge a calibration: outlier views, coverage of the image.
 - :mod:`calib.report`: figures.
 - :mod:`calib.colmap_log`: pycolmap's own log (glog) sent to a Python logger.
 - :mod:`calib.cli`: ``alcn calib camera|board|register|undistort``.

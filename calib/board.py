@@ -29,7 +29,7 @@ from alcn_cv.io import atomic_path, check_no_earlier_output, to_gray, write_json
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["BoardSpec", "Detection", "write_board_image", "suggest_chessboard_size"]
+__all__ = ["BoardSpec", "Detection", "default_marker", "write_board_image", "suggest_chessboard_size"]
 
 _KINDS = ("chessboard", "charuco")
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 1e-3)
@@ -40,6 +40,12 @@ MIN_CHARUCO_CORNERS = 6
 MIN_DPI, MAX_DPI = 72, 1200
 #: The largest board image :func:`write_board_image` makes, in pixels (an A0 sheet at 300 dpi is 140 million).
 MAX_BOARD_PIXELS = 2**28
+
+
+def default_marker(square: float) -> float:
+    """The side, mm, of a ChArUco board's markers when none is given (``--marker``): 26/35 of the ``square``, the
+    proportion of the default board (26 mm markers in 35 mm squares, exactly), for every square size."""
+    return square * 26.0 / 35.0
 
 
 @dataclass(frozen=True)
@@ -69,7 +75,8 @@ class BoardSpec:
         cols, rows: chessboard: inner corners per row and per column (``patternSize``);
             ChArUco: squares along x and along y.
         square: side of a square, mm.
-        marker: ChArUco only: side of an ArUco marker, mm (< ``square``).
+        marker: ChArUco only: side of an ArUco marker, mm (< ``square``; the command line's default:
+            :func:`default_marker` of the square).
         dictionary: ChArUco only: name of a predefined ArUco dictionary (``cv2.aruco.DICT_*``).
         legacy: ChArUco only: boards printed by OpenCV < 4.6 with an even number of rows
             (``CharucoBoard.setLegacyPattern``).
@@ -97,7 +104,10 @@ class BoardSpec:
             raise InputError(f"square size must be positive (mm), got {self.square}")
         if self.kind == "charuco":
             if not 0 < self.marker < self.square:
-                raise InputError(f"marker size must be in (0, square={self.square}) mm, got {self.marker}")
+                raise InputError(
+                    f"marker size must be in (0, square={self.square:g}) mm, got {self.marker:g}; give a smaller "
+                    "--marker (without one, the command line takes 26/35 of --square)"
+                )
             if not hasattr(cv2.aruco, self.dictionary):
                 raise InputError(f"unknown ArUco dictionary {self.dictionary!r} (e.g. DICT_5X5_100)")
             needed = (self.cols * self.rows) // 2

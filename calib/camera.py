@@ -2,8 +2,9 @@
 
 Zhang, "A flexible new technique for camera calibration", TPAMI 2000, as implemented by
 ``cv2.calibrateCamera`` (pinhole model with OpenCV's radial-tangential distortion
-``k1, k2, p1, p2, k3``). From a video, frames are chosen for board coverage and spread of
-poses (:func:`select_views`) rather than taking every frame.
+``k1, k2, p1, p2, k3``). Of more views than ``max_views`` (from a folder or a video), those showing little of
+the board and the blurriest are left out, then views are chosen for board coverage and spread of poses
+(:func:`select_views`); each view left out is logged and listed with the reason.
 
 Outputs of :func:`main` in ``out_dir``:
 
@@ -11,15 +12,20 @@ Outputs of :func:`main` in ``out_dir``:
   (1x5), ``image_width``, ``image_height``, ``rms``; read it with :func:`load_calibration`.
 - ``colmap/cameras.txt`` (+ empty ``images.txt``/``points3D.txt``): the same camera in COLMAP's
   convention (principal point + 0.5).
-- ``views.json``: per-view reprojection errors and the views used.
+- ``views.json``: per-view reprojection errors of the views used, each with an ``outlier`` flag
+  (:func:`calib.quality.outliers`), and the views found but left out, each with the reason (``unused_views``).
 - ``calibration.png``: board coverage and per-view errors (:mod:`calib.report`).
+
+They are written all or none (:func:`save_calibration`). Outlier views and a low coverage of the image
+(:func:`calib.quality.coverage_hint`) are logged as warnings.
 """
 
 from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,6 +38,7 @@ from alcn_cv.formats.colmap import ColmapCamera, camera_from_opencv, write_text_
 from alcn_cv.io import (
     VIDEO_SUFFIXES,
     atomic_path,
+    atomic_paths,
     check_no_earlier_output,
     check_writable,
     count_frames,
@@ -39,12 +46,12 @@ from alcn_cv.io import (
     is_video,
     iter_frames,
     list_images,
-    make_folder,
     read_image,
     write_json,
 )
 
 from .board import BoardSpec, Detection, suggest_chessboard_size
+from .quality import COVERAGE_GRID, OUTLIER_RULE, coverage, coverage_hint, outlier_px, outliers
 
 logger = logging.getLogger(__name__)
 
@@ -55,6 +62,7 @@ __all__ = [
     "detect_in_video",
     "select_views",
     "calibrate",
+    "explain_no_board",
     "save_calibration",
     "load_calibration",
     "camera_once",
@@ -72,8 +80,11 @@ _COMMON_CHESSBOARD = (9, 6)
 MAX_VIDEO_CANDIDATES = 150
 #: :func:`select_views` (with the board) first drops the views that show less than this share of its corners.
 MIN_COVERAGE = 0.5
-#: What :func:`main` writes into its output folder (an earlier run's are replaced only with ``overwrite``).
-CALIBRATION_OUTPUTS = ("camera.yaml", "colmap", "views.json", "calibration.png")
+#: The files of the COLMAP text model in the output folder's ``colmap/``.
+_COLMAP_FILES = ("cameras.txt", "images.txt", "points3D.txt")
+#: The files :func:`main` writes into its output folder (an earlier run's are replaced only with ``overwrite``). Files,
+#: not the folder ``colmap``: an interrupted first run leaves that folder empty, which does not refuse the rerun.
+CALIBRATION_OUTPUTS = ("camera.yaml", "views.json", "calibration.png", *(f"colmap/{name}" for name in _COLMAP_FILES))
 
 
 @dataclass
@@ -125,25 +136,41 @@ def _sharpness(gray: np.ndarray) -> float:
     return float(cv2.Laplacian(gray, cv2.CV_64F).var())
 
 
-def _larger_board(board: BoardSpec, gray: np.ndarray) -> tuple[int, int] | None:
-    """A chessboard size seen in ``gray`` that is larger than the one given (the board
-    definition then does not match), or None. Smaller finds are not trusted: the detector
-    also finds parts of boards."""
-    guess = suggest_chessboard_size(gray, near=(board.cols, board.rows))
-    if guess is None or guess[0] * guess[1] <= board.cols * board.rows:
-        return None
-    return guess
+def explain_no_board(
+    board: BoardSpec,
+    sample: np.ndarray | None,
+    n_images: int,
+    foreign: int,
+    markers: int,
+    frames: str = "image(s)",
+    charuco_only: bool = False,
+) -> str:
+    """The message for a board found in none of the frames searched, with a diagnosis when one is possible.
 
-
-def _explain_no_board(board: BoardSpec, sample: np.ndarray | None, n_images: int, foreign: int, markers: int) -> str:
-    """Message for 'board not found anywhere', with a diagnosis when one is possible."""
-    msg = f"no {board.describe()} found in any of {n_images} image(s)."
+    Args:
+        board: the board searched for.
+        sample: the first frame searched (gray or BGR), in which a chessboard of another size is looked for; or None.
+        n_images: how many frames were searched.
+        foreign, markers: the ArUco markers seen in them that are not on the board, and all of them
+            (:attr:`calib.board.BoardDetector.last_foreign_markers`, ``last_num_markers``, summed).
+        frames: what the frames are called in the message.
+        charuco_only: the command takes ChArUco boards only: no chessboard is suggested, nor ``--board``.
+    """
+    msg = f"no {board.describe()} found in any of {n_images} {frames}."
     if board.kind == "chessboard" and sample is not None:
-        guess = _larger_board(board, sample)
-        if guess is not None:
+        guess = suggest_chessboard_size(sample, near=(board.cols, board.rows))
+        if guess is not None and guess[0] * guess[1] > board.cols * board.rows:
             return (
                 msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard: the board definition does "
                 f"not match the images; pass --cols {guess[0]} --rows {guess[1]} (inner corners, not squares)."
+            )
+        # Other smaller finds are not trusted (the detector also finds parts of boards); one fewer each way is
+        # the board's squares counted instead of its inner corners.
+        if guess is not None and sorted(guess) == sorted((board.cols - 1, board.rows - 1)):
+            return (
+                msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard, one fewer each way than the "
+                f"{board.cols}x{board.rows} given: --cols/--rows count inner corners, not squares; pass --cols "
+                f"{guess[0]} --rows {guess[1]}."
             )
         return msg + (
             " Check --cols/--rows (inner corners, i.e. squares minus one), that the whole board is "
@@ -161,15 +188,17 @@ def _explain_no_board(board: BoardSpec, sample: np.ndarray | None, n_images: int
             "not inner corners) and --legacy."
         )
     # No marker at all: perhaps the images show a chessboard (as the example images do).
-    guess = suggest_chessboard_size(sample, near=_COMMON_CHESSBOARD) if sample is not None else None
+    guess = None
+    if sample is not None and not charuco_only:
+        guess = suggest_chessboard_size(sample, near=_COMMON_CHESSBOARD)
     if guess is not None:
         return (
             msg + f" The first image holds a {guess[0]}x{guess[1]} chessboard: pass --board chessboard "
             f"--cols {guess[0]} --rows {guess[1]} (inner corners) and its --square size in mm."
         )
     return msg + (
-        " Check --board, --dictionary, --cols/--rows (squares) and --legacy, and that the board is "
-        "visible, in focus and well lit."
+        f" Check {'' if charuco_only else '--board, '}--dictionary, --cols/--rows (squares) and --legacy, and that "
+        "the board is visible, in focus and well lit."
     )
 
 
@@ -235,7 +264,7 @@ class _BoardViews:
         Raises:
             InputError: the board found in none, or a chessboard larger than the one given."""
         if not self.views:
-            raise InputError(_explain_no_board(self.board, self.first, self.n, self.foreign, self.markers))
+            raise InputError(explain_no_board(self.board, self.first, self.n, self.foreign, self.markers))
         _check_chessboard_size(self.board, self.samples, self.missed, len(self.views))
         logger.info("board found in %d of %d %s", len(self.views), self.n, what)
         return self.views
@@ -311,34 +340,62 @@ def _view_features(view: BoardView, image_size: tuple[int, int]) -> np.ndarray:
     return np.r_[centre, extent, tilt]
 
 
+def _listing(names: Sequence[str], most: int = 10) -> str:
+    return ", ".join(names[:most]) + (f" and {len(names) - most} more" if len(names) > most else "")
+
+
+def _leave_out(unused: dict[str, str], left: Sequence[tuple[BoardView, str]], rule: str) -> None:
+    """Record the views that one ``rule`` leaves out, each with its reason, in ``unused``, and log them."""
+    unused.update((view.name, reason) for view, reason in left)
+    if left:
+        logger.info("left out %d view(s) %s: %s", len(left), rule, _listing([view.name for view, _ in left]))
+
+
 def select_views(
     views: Sequence[BoardView],
     image_size: tuple[int, int],
     max_views: int = 30,
     board: BoardSpec | None = None,
-) -> list[BoardView]:
-    """Choose views for board coverage and spread of poses.
+) -> tuple[list[BoardView], dict[str, str]]:
+    """Choose at most ``max_views`` views for board coverage and spread of poses.
 
-    Views showing fewer than :data:`MIN_COVERAGE` of the ``board``'s corners and the blurriest third
-    (variance of the Laplacian) are discarded; then views are picked greedily by farthest-point
-    sampling on (board centre, apparent size, tilt), starting with the view that covers most
-    of the image, so that the chosen set spans the image and many orientations.
+    Of more views than that, those showing fewer than :data:`MIN_COVERAGE` of the ``board``'s corners, then the
+    blurriest third (variance of the Laplacian) are left out, each rule only while ``max_views`` views remain;
+    then views are picked greedily by farthest-point sampling on (board centre, apparent size, tilt), starting
+    with the view that covers most of the image, so that the chosen set spans the image and many orientations.
+    The views left out are logged by rule.
 
     Returns:
-        At most ``max_views`` views, in their original order.
+        The chosen views, in their original order, and the views left out: name to the reason.
     """
     views = list(views)
+    unused: dict[str, str] = {}
     if len(views) <= max_views:
-        return views
+        return views, unused
+    found = len(views)
     if board is not None:
         full = board.num_corners
         kept = [v for v in views if len(v.detection.ids) >= MIN_COVERAGE * full]
-        views = kept if len(kept) >= max_views else views
+        if len(kept) >= max_views:
+            few = [
+                (v, f"shows {len(v.detection.ids)} of the board's {full} corners, under {MIN_COVERAGE:.0%}")
+                for v in views
+                if len(v.detection.ids) < MIN_COVERAGE * full
+            ]
+            _leave_out(unused, few, f"that show under {MIN_COVERAGE:.0%} of the board's corners")
+            views = kept
     if len(views) > max_views:
         sharp = np.array([v.sharpness for v in views])
-        threshold = np.quantile(sharp, 1 / 3)
+        threshold = float(np.quantile(sharp, 1 / 3))
         kept = [v for v, s in zip(views, sharp) if s >= threshold]
-        views = kept if len(kept) >= max_views else views
+        if len(kept) >= max_views:
+            blurred = [
+                (v, f"among the blurriest third: sharpness {s:.1f} below {threshold:.1f} (variance of the Laplacian)")
+                for v, s in zip(views, sharp)
+                if s < threshold
+            ]
+            _leave_out(unused, blurred, f"as the blurriest third (variance of the Laplacian below {threshold:.1f})")
+            views = kept
     feats = np.array([_view_features(v, image_size) for v in views])
     weights = np.array([1.0, 1.0, 1.0, 1.5, 1.5])
     feats = feats * weights
@@ -349,8 +406,11 @@ def select_views(
         chosen.append(nxt)
         dist = np.minimum(dist, np.linalg.norm(feats - feats[nxt], axis=1))
     chosen.sort()
-    logger.info("selected %d of %d views for pose spread and coverage", len(chosen), len(views))
-    return [views[i] for i in chosen]
+    reason = "a chosen view has a close pose (board position, size and tilt)"
+    close = [(v, reason) for i, v in enumerate(views) if i not in chosen]
+    _leave_out(unused, close, "whose pose is close to a chosen view's (board position, size and tilt)")
+    logger.info("selected %d of %d views (at most %d) for coverage and pose spread", len(chosen), found, max_views)
+    return [views[i] for i in chosen], unused
 
 
 def calibrate(
@@ -434,39 +494,98 @@ def calibrate(
         K[0, 2],
         K[1, 2],
     )
+    bad = [f"{n} ({e:.2f} px)" for n, e, outlier in zip(result.view_names, errors, outliers(result)) if outlier]
+    if bad:
+        logger.warning(
+            '%d outlier view(s), RMS reprojection error above %s = %.2f px (red in calibration.png, "outlier" '
+            "in views.json): %s. Check them for blur or a misplaced corner, and calibrate without them if so",
+            len(bad),
+            OUTLIER_RULE,
+            outlier_px(result),
+            ", ".join(bad),
+        )
+    hint = coverage_hint(result)
+    if hint:
+        cells, corners = coverage(result)
+        logger.warning(
+            "board coverage: %d/%d image cells, %d of the 4 corner cells: %s",
+            cells,
+            COVERAGE_GRID[0] * COVERAGE_GRID[1],
+            corners,
+            hint,
+        )
     return result
 
 
-def save_calibration(calib: Calibration, out_dir: str | os.PathLike, report: bool = True) -> dict[str, Path]:
-    """Write ``camera.yaml``, ``colmap/``, ``views.json`` and (optionally) ``calibration.png``; without
-    ``report`` an earlier ``calibration.png`` in ``out_dir`` is removed.
+def save_calibration(
+    calib: Calibration,
+    out_dir: str | os.PathLike,
+    report: bool = True,
+    unused_views: Mapping[str, str] | None = None,
+) -> dict[str, Path]:
+    """Write ``camera.yaml``, ``colmap/``, ``views.json`` and (optionally) ``calibration.png`` into ``out_dir``, all
+    or none of them (:func:`~alcn_cv.io.atomic_paths`: an error or an interrupt leaves an earlier calibration there
+    whole); without ``report`` an earlier ``calibration.png`` in ``out_dir`` is removed with them.
+
+    Args:
+        calib: the calibration.
+        out_dir: the output folder, created when missing.
+        report: also draw ``calibration.png``.
+        unused_views: views found but not used, name to the reason (:func:`select_views`), listed in views.json.
 
     Returns:
         Paths of the written files by kind.
     """
     out = Path(out_dir)
-    make_folder(out)
-    yaml_path = write_camera_yaml(out / "camera.yaml", calib.K, calib.dist, calib.image_size, rms=calib.rms)
-    colmap_dir = write_text_model(out / "colmap", [calib.colmap_camera()], [])
+    colmap_dir = out / "colmap"
+    finals = {
+        "yaml": out / "camera.yaml",
+        "views": out / "views.json",
+        **({"report": out / "calibration.png"} if report else {}),
+        **{name: colmap_dir / name for name in _COLMAP_FILES},
+    }
+    is_outlier = outliers(calib)
     info = {
         "image_size": list(calib.image_size),
         "rms_px": calib.rms,
         "camera_matrix": calib.K.tolist(),
         "distortion_coefficients": calib.dist.tolist(),
         "board": calib.board.to_dict() if calib.board else None,
+        "outlier_rule": f"rms_px above {OUTLIER_RULE}",
+        "outlier_px": outlier_px(calib),
         "views": [
-            {"name": n, "rms_px": float(e), "num_points": int(len(p)), "rvec": r.tolist(), "tvec": t.tolist()}
-            for n, e, p, r, t in zip(calib.view_names, calib.view_errors, calib.image_points, calib.rvecs, calib.tvecs)
+            {
+                "name": n,
+                "rms_px": float(e),
+                "outlier": bool(outlier),
+                "num_points": int(len(p)),
+                "rvec": r.tolist(),
+                "tvec": t.tolist(),
+            }
+            for n, e, outlier, p, r, t in zip(
+                calib.view_names, calib.view_errors, is_outlier, calib.image_points, calib.rvecs, calib.tvecs
+            )
         ],
+        "unused_views": [{"name": name, "reason": reason} for name, reason in (unused_views or {}).items()],
     }
-    json_path = write_json(out / "views.json", info)
-    paths = {"yaml": yaml_path, "colmap": colmap_dir, "views": json_path}
-    if report:
-        from .report import plot_calibration
+    with atomic_paths(*finals.values()) as tmps:
+        tmp = dict(zip(finals, tmps))
+        write_camera_yaml(tmp["yaml"], calib.K, calib.dist, calib.image_size, rms=calib.rms)
+        # write_text_model writes a folder of fixed names: written aside, its files join the others' renaming
+        with tempfile.TemporaryDirectory(dir=out, prefix=".colmap.") as staging:
+            write_text_model(staging, [calib.colmap_camera()], [])
+            for name in _COLMAP_FILES:
+                os.replace(Path(staging) / name, tmp[name])
+        write_json(tmp["views"], info)
+        if report:
+            from .report import plot_calibration
 
-        paths["report"] = plot_calibration(calib, out / "calibration.png")
-    else:  # an earlier run's picture would stand beside this calibration as if it showed it
-        (out / "calibration.png").unlink(missing_ok=True)
+            plot_calibration(calib, tmp["report"])
+        else:  # an earlier run's picture would stand beside this calibration as if it showed it
+            (out / "calibration.png").unlink(missing_ok=True)
+    paths = {"yaml": finals["yaml"], "colmap": colmap_dir, "views": finals["views"]}
+    if report:
+        paths["report"] = finals["report"]
     return paths
 
 
@@ -570,11 +689,11 @@ def main(
     """Calibrate from a folder of images or a video and write the outputs into ``out_dir``.
 
     Args:
-        source: a folder of images, or a video file (frames are selected by coverage and
-            pose spread).
+        source: a folder of images, or a video file.
         out_dir: output folder (see the module docstring).
         board: the target.
-        max_views: most views used (the selection keeps coverage and pose spread).
+        max_views: most views used; of more views found, :func:`select_views` chooses for coverage, sharpness and
+            pose spread.
         flags: ``cv2.CALIB_*`` flags.
         report: also write ``calibration.png``.
         progress: a progress bar over the frames searched for the board.
@@ -602,8 +721,8 @@ def main(
         raise InputError(f"{source}: expected a folder of images or a video ({', '.join(sorted(VIDEO_SUFFIXES))})")
     else:
         raise InputError(f"{source}: no such file or folder")
-    views = select_views(views, size, max_views=max_views, board=board)
+    views, unused = select_views(views, size, max_views=max_views, board=board)
     calib = calibrate(views, size, board=board, flags=flags)
-    paths = save_calibration(calib, out_dir, report=report)
+    paths = save_calibration(calib, out_dir, report=report, unused_views=unused)
     logger.info("wrote %s", ", ".join(str(p) for p in paths.values()))
     return calib

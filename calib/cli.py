@@ -15,12 +15,12 @@ from alcn_cv.cli import COUNT, add_progress_option, number_at_least, number_in
 from alcn_cv.errors import InputError
 from alcn_cv.extras import require
 
-from .board import MAX_DPI, MIN_CHARUCO_CORNERS, MIN_DPI
+from .board import MAX_DPI, MIN_CHARUCO_CORNERS, MIN_DPI, default_marker
 
 if TYPE_CHECKING:
     from .register import Registration
 
-_BOARD_DEFAULTS = {"chessboard": {"square": 25.0}, "charuco": {"cols": 7, "rows": 5, "square": 35.0, "marker": 26.0}}
+_BOARD_DEFAULTS = {"chessboard": {"square": 25.0}, "charuco": {"cols": 7, "rows": 5, "square": 35.0}}
 
 
 def _add_board_args(p: argparse.ArgumentParser, with_chessboard: bool = True) -> None:
@@ -61,7 +61,12 @@ def _add_board_args(p: argparse.ArgumentParser, with_chessboard: bool = True) ->
         + either(f"{chess['square']:g}", f"{charuco['square']:g}")
         + "; it sets the units of poses, not the intrinsics)",
     )
-    g.add_argument("--marker", type=float, help=f"ChArUco marker side in mm (default {charuco['marker']:g})")
+    g.add_argument(
+        "--marker",
+        type=float,
+        help=f"ChArUco marker side in mm (default 26/35 of --square: {default_marker(charuco['square']):g} for "
+        f"{charuco['square']:g} mm squares)",
+    )
     g.add_argument("--dictionary", default="DICT_5X5_100", help="ChArUco ArUco dictionary (default DICT_5X5_100)")
     g.add_argument("--legacy", action="store_true", help="ChArUco board printed by OpenCV < 4.6 (even row count)")
 
@@ -74,12 +79,13 @@ def _board_from_args(args: argparse.Namespace):
         raise InputError(
             "a chessboard needs --cols and --rows (inner corners, e.g. --cols 9 --rows 6 for a 10x7-square board)"
         )
+    square = args.square if args.square is not None else defaults["square"]
     return BoardSpec(
         kind=args.board,
         cols=args.cols if args.cols is not None else defaults["cols"],
         rows=args.rows if args.rows is not None else defaults["rows"],
-        square=args.square if args.square is not None else defaults["square"],
-        marker=args.marker if args.marker is not None else _BOARD_DEFAULTS["charuco"]["marker"],
+        square=square,
+        marker=args.marker if args.marker is not None else default_marker(square),
         dictionary=args.dictionary,
         legacy=args.legacy,
     )
@@ -239,9 +245,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "camera",
         help="calibrate intrinsics and distortion from images or a video of a board",
-        description="Detect the board, choose views (from a video: by coverage and pose spread), run "
+        description="Detect the board, choose at most --max-views views (from a folder or a video), run "
         "cv2.calibrateCamera, and write camera.yaml (OpenCV FileStorage), colmap/cameras.txt, "
-        "views.json (per-view errors) and calibration.png into --out. The default board is "
+        "views.json (per-view errors, outlier views flagged, the views left out and why) and calibration.png into "
+        "--out. The default board is "
         "ChArUco; the example images in ../shared/data/chessboard show a chessboard: "
         "--board chessboard --cols 9 --rows 6 --square 25.",
     )
@@ -250,7 +257,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     src.add_argument("--video", help="video of the board")
     p.add_argument("--out", required=True, help="output folder")
     _add_board_args(p)
-    p.add_argument("--max-views", type=int, default=30, help="most views used (default 30)")
+    p.add_argument(
+        "--max-views",
+        type=int,
+        default=30,
+        help="most views used, from a folder or a video (default 30): of more views with the board, those showing "
+        "under half of it, then the blurriest third are left out, then views are chosen for coverage and pose "
+        "spread; the views left out are logged and listed in views.json",
+    )
     p.add_argument("--fix-k3", action="store_true", help="fix k3 = 0 (few or central views)")
     p.add_argument("--zero-tangent", action="store_true", help="fix p1 = p2 = 0")
     p.add_argument("--no-report", action="store_true", help="do not write calibration.png")

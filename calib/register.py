@@ -59,7 +59,7 @@ from alcn_cv.formats.colmap import (
 from alcn_cv.io import count_frames, frame_progress, iter_frames, write_image, write_json
 
 from .board import BoardSpec, Detection
-from .camera import Calibration
+from .camera import Calibration, explain_no_board
 from .colmap_log import pycolmap_log
 from .conventions import ARBITRARY_UNITS, colmap_from_bop_frames
 from .undistort import Undistorter
@@ -266,7 +266,8 @@ def register_charuco(
 
     Raises:
         InputError: not a ChArUco board, ``out_dir`` under a file, frames of another size than the
-            calibration, or fewer than :data:`MIN_REGISTERED` frames registered.
+            calibration, the board found in no frame (with a diagnosis: :func:`calib.camera.explain_no_board`), or
+            fewer than :data:`MIN_REGISTERED` frames registered.
         FileExistsError: ``out_dir`` exists (without ``overwrite``, or not an earlier output).
     """
     if board.kind != "charuco":
@@ -279,6 +280,7 @@ def register_charuco(
     undistort = Undistorter(calib, keep_K=True)
     K = np.asarray(calib.K, float)
     reg = Registration(K, tuple(calib.image_size))
+    found = markers = foreign = 0  # the board, and the ArUco markers seen: all of them, and those not on the board
     with atomic_output_dir(out_dir, overwrite=overwrite, marker="registration.json") as tmp:
         (tmp / "rgb").mkdir()
         frames = iter_frames(source, step, max_frames)
@@ -287,11 +289,14 @@ def register_charuco(
         ):
             image = undistort(image, name)
             det = detector(image)  # detect on the undistorted frame: the corners then follow K exactly
+            markers += detector.last_num_markers
+            foreign += detector.last_foreign_markers
             if det is None:
-                foreign = detector.last_foreign_markers
-                reason = "board not found" + (f" ({foreign} markers not on this board)" if foreign else "")
+                others = detector.last_foreign_markers
+                reason = "board not found" + (f" ({others} markers not on this board)" if others else "")
                 reg.frames.append(FrameRegistration(name, reason))
                 continue
+            found += 1
             result = board_pose(det, K, None, min_points=min_points, max_rms_px=max_rms_px)
             result.name = name
             if result.status == "ok":
@@ -300,9 +305,15 @@ def register_charuco(
             else:
                 logger.info("%s dropped: %s", name, result.status)
             reg.frames.append(result)
+        if reg.frames and not found:
+            raise InputError(
+                explain_no_board(board, None, len(reg.frames), foreign, markers, frames="frame(s)", charuco_only=True)
+            )
+        too_far = any(f.rms_px > max_rms_px for f in reg.dropped)
         _check_enough(
             reg,
-            "Check that the board is in view, in focus, and matches --cols/--rows/--dictionary; or relax --max-rms.",
+            "Check that the board is in view, in focus, and matches --cols/--rows/--dictionary"
+            + ("; or relax --max-rms." if too_far else "."),
         )
         _write_outputs(tmp, reg)
     errs = np.array([f.rms_px for f in reg.registered])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -10,6 +11,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from alcn_cv.report import new_figure, save_figure
+
+from .quality import COVERAGE_GRID, OUTLIER_RULE, coverage, coverage_hint, outlier_px, outliers
 
 if TYPE_CHECKING:
     from .camera import Calibration
@@ -32,7 +35,8 @@ def _save(plt: Any, fig: Any, path: str | os.PathLike) -> Path:
 
 def plot_calibration(calib: Calibration, path: str | os.PathLike) -> Path:
     """Board coverage (every detected corner of every view over the image frame, each view's
-    outline) and per-view RMS reprojection errors with the overall RMS.
+    outline; the title counts the image cells covered and gives :func:`calib.quality.coverage_hint`) and per-view
+    RMS reprojection errors with the overall RMS, outliers (:func:`calib.quality.outliers`) in red.
 
     Returns:
         ``path``.
@@ -56,18 +60,23 @@ def plot_calibration(calib: Calibration, path: str | os.PathLike) -> Path:
     K = calib.K
     ax0.plot(K[0, 2], K[1, 2], "r+", ms=14, mew=2, label="principal point")
     ax0.legend(loc="lower right", fontsize=8)
-    # Fraction of a 8x6 grid of image cells that hold at least one corner.
-    all_pts = np.vstack(calib.image_points) if calib.image_points else np.zeros((0, 2))
-    cells = np.unique(np.floor(all_pts / [w / 8, h / 6]).clip(0, [7, 5]).astype(int), axis=0)
-    ax0.set_title(f"board coverage: {len(calib.image_points)} views, {len(cells)}/48 image cells covered")
+    cells, corners = coverage(calib)
+    title = (
+        f"board coverage: {len(calib.image_points)} views, {cells}/{COVERAGE_GRID[0] * COVERAGE_GRID[1]} image "
+        f"cells covered, {corners}/4 corner cells"
+    )
+    hint = coverage_hint(calib)
+    ax0.set_title(title + "".join(f"\n{line}" for line in textwrap.wrap(hint, 75)), fontsize=9)
     ax0.set_xlabel("x (px)")
     ax0.set_ylabel("y (px)")
 
     errors = np.asarray(calib.view_errors)
     order = np.arange(len(errors))
-    colours = ["tab:red" if e > max(2 * calib.rms, 1.0) else "tab:blue" for e in errors]
+    colours = np.where(outliers(calib), "tab:red", "tab:blue")
     ax1.bar(order, errors, color=colours)
     ax1.axhline(calib.rms, color="k", ls="--", label=f"overall RMS {calib.rms:.3f} px")
+    threshold = outlier_px(calib)
+    ax1.axhline(threshold, color="tab:red", ls=":", label=f"outliers (red) above {OUTLIER_RULE} = {threshold:.2f} px")
     ax1.set_xticks(order)
     ax1.set_xticklabels(calib.view_names, rotation=60, ha="right", fontsize=7)
     ax1.set_ylabel("RMS reprojection error (px)")

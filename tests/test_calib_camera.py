@@ -103,8 +103,9 @@ def test_select_views_prefers_coverage_and_spread(scene):
     views = [BoardView(f"v{i}", detector(im), 1.0) for i, im in enumerate(scene.images)]
     # each copy right after its original: the first 6 views are only 3 poses
     views = [w for v in views for w in (v, BoardView(v.name + "_copy", v.detection, 1.0))]
-    chosen = select_views(views, (640, 480), max_views=6)
+    chosen, unused = select_views(views, (640, 480), max_views=6)
     names = [v.name.removesuffix("_copy") for v in chosen]
+    assert sorted([v.name for v in chosen] + list(unused)) == sorted(v.name for v in views)  # each view accounted
     assert len(names) == 6 and len(set(names)) == 6
     # the greedy start: the view that covers most of the image (its apparent size)
     largest = max(views[::2], key=lambda v: _view_features(v, (640, 480))[2])
