@@ -209,6 +209,9 @@ def atomic_paths(*paths: str | os.PathLike) -> Iterator[list[Path]]:
     (:func:`interrupts_deferred`); on an error or an interrupt in the block none does, and every path is left as it
     was."""
     finals = [Path(path) for path in paths]
+    folder = next((path for path in finals if path.is_dir()), None)
+    if folder is not None:  # its rename would fail after the others': checked before the block
+        raise OSError(f"cannot write {folder}: a folder is there")
     temps: list[Path] = []
     try:
         for path in finals:

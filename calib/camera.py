@@ -581,8 +581,8 @@ def save_calibration(
             from .report import plot_calibration
 
             plot_calibration(calib, tmp["report"])
-        else:  # an earlier run's picture would stand beside this calibration as if it showed it
-            (out / "calibration.png").unlink(missing_ok=True)
+    if not report:  # an earlier run's picture would stand beside this calibration as if it showed it
+        (out / "calibration.png").unlink(missing_ok=True)
     paths = {"yaml": finals["yaml"], "colmap": colmap_dir, "views": finals["views"]}
     if report:
         paths["report"] = finals["report"]
@@ -710,7 +710,8 @@ def main(
             f"{RECOMMENDED_VIEWS}-20 recommended); give --max-views {RECOMMENDED_VIEWS} or more"
         )
     out = Path(out_dir)
-    check_writable(out / "camera.yaml")  # a folder under a file fails now, not after the calibration
+    for name in ("camera.yaml", "colmap/cameras.txt"):  # a folder under a file fails now, not after the calibration
+        check_writable(out / name)
     check_no_earlier_output([out / name for name in CALIBRATION_OUTPUTS], overwrite)
     source = Path(source)
     if source.is_dir():

@@ -65,7 +65,8 @@ def _add_board_args(p: argparse.ArgumentParser, with_chessboard: bool = True) ->
         "--marker",
         type=float,
         help=f"ChArUco marker side in mm (default 26/35 of --square: {default_marker(charuco['square']):g} for "
-        f"{charuco['square']:g} mm squares)",
+        f"{charuco['square']:g} mm squares; a board printed by alcn-cv before 2026-12-01 with other squares has "
+        "26 mm markers: give --marker 26 for it)",
     )
     g.add_argument("--dictionary", default="DICT_5X5_100", help="ChArUco ArUco dictionary (default DICT_5X5_100)")
     g.add_argument("--legacy", action="store_true", help="ChArUco board printed by OpenCV < 4.6 (even row count)")

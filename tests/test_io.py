@@ -510,3 +510,14 @@ def test_a_frame_of_another_size_or_colour_is_named_not_dropped(tmp_path, image)
         writer.write(image)
         writer.write(image[..., 0])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.avi", "v.mp4"]  # v.mp4: no atomic_path around it
+
+
+def test_a_folder_where_a_file_goes_is_refused_before_any_is_replaced(tmp_path):
+    """Its rename failed after the others', which had replaced an earlier report's files already."""
+    (tmp_path / "r.json").write_text("earlier")
+    (tmp_path / "r.png").mkdir()
+    error = r"cannot write .*r.png: a folder is there"
+    with pytest.raises(OSError, match=error), io.atomic_paths(tmp_path / "r.json", tmp_path / "r.png") as paths:
+        paths[0].write_text("new")
+    assert (tmp_path / "r.json").read_text() == "earlier"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r.png"]
