@@ -430,11 +430,14 @@ def _bench_corners(args: argparse.Namespace) -> int:
 
 
 def _corner_recall(args: argparse.Namespace) -> int:
-    from alcn_cv.io import check_no_earlier_output, write_json
+    from alcn_cv.io import atomic_paths, check_no_earlier_output, check_writable, write_json
     from pose import corner_bench
 
-    if args.out is not None:
-        check_no_earlier_output([args.out / f"corner_recall_{b}.json" for b in args.background], args.overwrite)
+    reports = [args.out / f"corner_recall_{b}.json" for b in args.background] if args.out is not None else []
+    check_no_earlier_output(reports, args.overwrite)
+    for path in reports[:1]:  # an --out under a file: refused now, not after the first pass
+        check_writable(path)
+    results = []
     for background in args.background:
         r = corner_bench.corner_recall(args.detector, args.scene, obj_id=args.obj_id, background=background)
         print(
@@ -443,8 +446,10 @@ def _corner_recall(args: argparse.Namespace) -> int:
             f"{100 * r['candidates']:.0f}%, in the gates of the true pose {100 * r['gated']:.0f}%; background "
             f"scored higher {100 * r['background_wins']:.0f}%"
         )
-        if args.out is not None:
-            write_json(args.out / f"corner_recall_{background}.json", r)
+        results.append(r)
+    with atomic_paths(*reports) as paths:  # one per background, all or none
+        for path, r in zip(paths, results):
+            write_json(path, r)
     return 0
 
 
@@ -771,7 +776,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     bc.add_argument("--max-frames", type=COUNT, default=60, help="frames used (default 60)")
     bc.add_argument("--repeats", type=COUNT, default=2, help="passes over them (default 2)")
-    bc.add_argument("--threads", type=int, help="OpenCV threads (default OpenCV's)")
+    bc.add_argument("--threads", type=COUNT, help="OpenCV threads, 1 or more (default OpenCV's)")
     bc.add_argument("--out", type=Path, help="write bench_corners.md and .json here")
     bc.add_argument(
         "--overwrite",

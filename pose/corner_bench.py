@@ -24,7 +24,15 @@ import numpy as np
 
 from alcn_cv import io
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, check_no_earlier_output, make_folder, to_gray, write_json
+from alcn_cv.io import (
+    atomic_paths,
+    atomic_write,
+    check_no_earlier_output,
+    check_writable,
+    make_folder,
+    to_gray,
+    write_json,
+)
 from alcn_cv.report import describe_machine, machine, markdown_table
 
 logger = logging.getLogger(__name__)
@@ -148,10 +156,12 @@ def main(
         overwrite: replace the report of an earlier run in ``out``.
 
     Raises:
-        InputError: a report in ``out`` without ``overwrite`` (before the work), and :func:`benchmark`'s.
+        InputError: a report in ``out`` without ``overwrite``, or an ``out`` that cannot be written (before the work),
+            and :func:`benchmark`'s.
     """
     if out is not None:
         check_no_earlier_output([Path(out) / name for name in REPORT_FILES], overwrite)
+        check_writable(Path(out) / REPORT_FILES[0])  # an --out under a file: refused now, not after the benchmark
     result = benchmark(onnx_path, source, K, **kwargs)
     logger.info(
         "corner detector (%s) at %dx%d: %.1f fps (%.1f ms: normalize %.1f, network %.1f, peaks + pose "
@@ -185,9 +195,9 @@ def main(
                 digits=1,
             )
         )
-        md_path, json_path = (out / name for name in REPORT_FILES)
-        atomic_write(md_path, md)
-        write_json(json_path, {**result, "command": command})
+        with atomic_paths(*(out / name for name in REPORT_FILES)) as (md_path, json_path):  # both or neither
+            atomic_write(md_path, md)
+            write_json(json_path, {**result, "command": command})
     return result
 
 

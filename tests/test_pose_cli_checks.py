@@ -146,6 +146,16 @@ def test_bench_corners_and_corner_recall_refuse_an_earlier_report(tmp_path, caps
     assert "corner detector not found" in _one_line_error(capsys, [*argv, "--overwrite"])
 
 
+def test_bench_corners_and_corner_recall_refuse_an_out_under_a_file_before_the_work(tmp_path, capsys):
+    """An --out that is a file was found after the whole benchmark (or corner-recall's first pass)."""
+    out = tmp_path / "afile"
+    out.write_text("")
+    argv = ["pose", "bench-corners", str(tmp_path / "c.onnx"), str(tmp_path / "frames"), *K_ARGS, "--out", str(out)]
+    assert _one_line_error(capsys, argv).endswith(f"cannot write {out / 'bench_corners.md'}: {out} is a file")
+    argv = ["pose", "corner-recall", str(tmp_path / "c.onnx"), str(tmp_path / "scene"), "--out", str(out)]
+    assert _one_line_error(capsys, argv).endswith(f"cannot write {out / 'corner_recall_keep.json'}: {out} is a file")
+
+
 @pytest.mark.parametrize(
     ("option", "message"),
     [

@@ -227,7 +227,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     q.add_argument(
         "--n-test",
         type=int,
-        help=f"number of test sequences (default: the preset's: {preset_values(pose_settings.CONFS, 'n_test')})",
+        help="number of test sequences, 0 to 8 (0: training data only; default: the preset's: "
+        f"{preset_values(pose_settings.CONFS, 'n_test')})",
     )
     q.add_argument("--no-clutter", action="store_true", help="no clutter on the table")
     q.add_argument(

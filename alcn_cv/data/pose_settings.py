@@ -31,7 +31,8 @@ class PoseConfig:
 
 
 #: The named presets of :func:`~alcn_cv.data.pose.generate` (hloc's ``confs``; ``alcn data pose --conf NAME``):
-#: ``default``, the dataset of the rendered Table 1; ``small``, 320x240 and 3 frames a sequence (seconds, for tests).
+#: ``default``, the rendered Table 1's scenes (its published run renders 30 frames a sequence: ``--frames 30``);
+#: ``small``, 320x240 and 3 frames a sequence (seconds, for tests).
 #: Frozen: :func:`~alcn_cv.data.pose.generate` derives a run's configuration with :func:`dataclasses.replace`, never
 #: changing a preset.
 CONFS: dict[str, PoseConfig] = {
@@ -41,6 +42,7 @@ CONFS: dict[str, PoseConfig] = {
 
 #: One line per preset of :data:`CONFS`, for ``alcn data pose --help``.
 CONF_SUMMARIES: dict[str, str] = {
-    "default": "the sequences of the rendered Table 1 (minutes on 2 cores)",
+    "default": "60 frames a sequence (minutes on 2 cores); the published rendered Table 1 used --frames 30 "
+    "(experiments/pose_table1.py)",
     "small": "small frames, few of them (seconds; for tests, and with --frames 12 for `alcn pose eval`)",
 }
