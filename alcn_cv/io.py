@@ -44,6 +44,7 @@ __all__ = [
     "holds_out_dir",
     "interrupts_blocked",
     "interrupts_deferred",
+    "sigint_as_keyboard_interrupt",
     "is_short",
     "is_video",
     "iter_frames",
@@ -547,6 +548,25 @@ def interrupts_blocked() -> Iterator[None]:
 
 
 @contextlib.contextmanager
+def _handlers_while(handlers: dict[signal.Signals, Any]) -> Iterator[None]:
+    """``handlers`` (signal to handler) installed while the block runs, swapped in and back with the interrupts
+    blocked (:func:`interrupts_blocked`) so that none arrives between two swaps, SIGINT put back last (Ctrl-C comes
+    most often); none outside the main thread, where Python installs none."""
+    try:
+        with interrupts_blocked():
+            previous = {s: signal.signal(s, handler) for s, handler in handlers.items()}
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        with interrupts_blocked():
+            for s in sorted(previous, key=lambda s: s == signal.SIGINT):
+                signal.signal(s, previous[s])
+
+
+@contextlib.contextmanager
 def interrupts_deferred() -> Iterator[None]:
     """Hold Ctrl-C and SIGTERM (:data:`INTERRUPTS`; the command line raises SIGTERM as Ctrl-C) until the
     block ends, then deliver them to the handlers of before: no signal cuts the block short (an optimisation step and
@@ -559,19 +579,18 @@ def interrupts_deferred() -> Iterator[None]:
     held: list[int] = []
     kept = [s for s in INTERRUPTS if signal.getsignal(s) is not None]  # None: set outside Python, not to be put back
     try:
-        with interrupts_blocked():
-            previous = {s: signal.signal(s, lambda signum, frame: held.append(signum)) for s in kept}
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
+        with _handlers_while({s: lambda signum, frame: held.append(signum) for s in kept}):
+            yield
     finally:
-        with interrupts_blocked():
-            for s in sorted(previous, key=lambda s: s == signal.SIGINT):  # SIGINT last: Ctrl-C comes most often
-                signal.signal(s, previous[s])
         for signum in dict.fromkeys(held):
             signal.raise_signal(signum)
+
+
+@contextlib.contextmanager
+def sigint_as_keyboard_interrupt() -> Iterator[None]:
+    """Make sure Ctrl-C raises KeyboardInterrupt while the block runs (a parent may have set SIGINT to be ignored)."""
+    with _handlers_while({signal.SIGINT: signal.default_int_handler}):
+        yield
 
 
 @contextlib.contextmanager

@@ -12,10 +12,7 @@ Every checkpoint, ``alcn train-real-light``'s (:mod:`alcn_cv.train.real_light`) 
 
 from __future__ import annotations
 
-import contextlib
-import signal
 import time
-from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -48,7 +45,6 @@ __all__ = [
     "restore_checkpoint",
     "run_folder",
     "save_checkpoint",
-    "sigint_as_keyboard_interrupt",
     "versions",
     "write_normalizer_file",
 ]
@@ -319,17 +315,3 @@ def write_normalizer_file(
         },
     }
     return save_normalizer_file(result.out_dir / "alcn_normalizer.npz", net.state_arrays(), meta)
-
-
-@contextlib.contextmanager
-def sigint_as_keyboard_interrupt() -> Iterator[None]:
-    """Make sure Ctrl-C raises KeyboardInterrupt (a parent may have set SIGINT to be ignored)."""
-    try:
-        previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)

@@ -64,7 +64,7 @@ from alcn_cv.data.scenes import Scene, load_scenes, scene_dirs
 from alcn_cv.errors import DatasetError, InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import kernel_radius
 from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inverse_divisor
-from alcn_cv.io import atomic_write, held_folder, interrupts_deferred, to_gray, write_json
+from alcn_cv.io import atomic_write, held_folder, interrupts_deferred, sigint_as_keyboard_interrupt, to_gray, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.presets import with_settings
 from alcn_cv.report import log_to, machine
@@ -76,7 +76,6 @@ from alcn_cv.train.checkpoint import (
     checkpoint_header,
     load_checkpoint,
     run_folder,
-    sigint_as_keyboard_interrupt,
 )
 from alcn_cv.train.config import RealLightConfig
 from alcn_cv.train.models import CentreMixture

@@ -43,7 +43,7 @@ from tqdm.auto import tqdm
 
 from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError
-from alcn_cv.io import atomic_write, held_folder, interrupts_deferred, write_json
+from alcn_cv.io import atomic_write, held_folder, interrupts_deferred, sigint_as_keyboard_interrupt, write_json
 from alcn_cv.nets.device import torch_device
 from alcn_cv.nn import torch_threads
 from alcn_cv.presets import dump_toml
@@ -56,7 +56,6 @@ from alcn_cv.train.checkpoint import (
     restore_checkpoint,
     run_folder,
     save_checkpoint,
-    sigint_as_keyboard_interrupt,
     write_normalizer_file,
 )
 from alcn_cv.train.config import TrainConfig, load_config
