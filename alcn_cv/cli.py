@@ -139,13 +139,26 @@ def _versions() -> str:
     return versions + ")"
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: :func:`_versions`, read only when asked (their lookups would cost every command's start)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: object) -> None:
+        print(_versions())
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _CommandParser(
         prog="alcn",
         description="Adaptive Local Contrast Normalization (ALCN) and its tools: normalize images and "
         "videos, generate data, train, benchmark, calibrate and estimate box poses.",
     )
-    parser.add_argument("--version", action="version", version=_versions())
+    parser.add_argument(
+        "--version", action=_VersionAction, help="show the versions of alcn-cv, OpenCV, NumPy (and torch) and exit"
+    )
     parser.add_argument("--debug", action="store_true", help="print full tracebacks on errors, and OpenCV's warnings")
     parser.add_argument(
         "-v", "--verbose", action="store_true", help="log debug messages, and OpenCV's and FFmpeg's warnings"

@@ -204,15 +204,23 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
 
 
 @contextlib.contextmanager
-def atomic_paths(*paths: str | os.PathLike) -> Iterator[list[Path]]:
+def atomic_paths(*paths: str | os.PathLike, stale: Iterable[str | os.PathLike] = ()) -> Iterator[list[Path]]:
     """:func:`atomic_path` of several files that belong together (a report's tables and its figures): each becomes
     its path when the whole block ends, in order, with Ctrl-C and SIGTERM held meanwhile
     (:func:`interrupts_deferred`); on an error or an interrupt in the block none does, and every path is left as it
-    was."""
+    was (a folder made for them removed again). ``stale``: files of an earlier output that this one does not write
+    again (a figure of an object no longer shown), removed with the renames; those among ``paths`` are replaced."""
     finals = [Path(path) for path in paths]
+    removed = {Path(path) for path in stale} - set(finals)
     folder = next((path for path in finals if path.is_dir()), None)
     if folder is not None:  # its rename would fail after the others': checked before the block
         raise OSError(f"cannot write {folder}: a folder is there")
+    made: list[Path] = []  # the folders that make_folder will make, each below the next
+    for path in finals:
+        folder = path.parent
+        while folder not in made and not folder.exists():
+            made.append(folder)
+            folder = folder.parent
     temps: list[Path] = []
     try:
         for path in finals:
@@ -231,9 +239,14 @@ def atomic_paths(*paths: str | os.PathLike) -> Iterator[list[Path]]:
                     os.replace(tmp, path)
                 except OSError as exc:
                     raise OSError(f"cannot write {path}: {exc.strerror}") from None
+            for path in removed:
+                path.unlink(missing_ok=True)
     except BaseException:
         for tmp in temps:
             tmp.unlink(missing_ok=True)
+        for made_folder in sorted(made, key=lambda p: len(p.parts), reverse=True):  # the deepest first
+            with contextlib.suppress(OSError):  # not empty: another writer's file is there
+                made_folder.rmdir()
         raise
 
 

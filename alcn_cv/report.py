@@ -20,6 +20,7 @@ from alcn_cv.malloc import kept_freed_memory
 __all__ = [
     "command_line",
     "describe_machine",
+    "listed",
     "log_to",
     "machine",
     "machine_cores",
@@ -77,6 +78,16 @@ def spread(values: list[float]) -> dict[str, Any] | None:
     """``{"mean", "std", "values"}`` of a benchmark's runs (one per seed; ``std``: :func:`sample_std`); None for
     none."""
     return {"mean": float(np.mean(values)), "std": sample_std(values), "values": values} if values else None
+
+
+def listed(names: Sequence[str], most: int) -> str:
+    """The first ``most`` of ``names`` joined by commas, and how many more there are (a message's list of files).
+
+    Example:
+        >>> listed(["a.png", "b.png", "c.png"], 2)
+        'a.png, b.png and 1 more'
+    """
+    return ", ".join(names[:most]) + (f" and {len(names) - most} more" if len(names) > most else "")
 
 
 def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]], digits: int = 3) -> str:

@@ -49,6 +49,7 @@ from alcn_cv.io import (
     read_image,
     write_json,
 )
+from alcn_cv.report import listed
 
 from .board import BoardSpec, Detection, suggest_chessboard_size
 from .quality import COVERAGE_GRID, OUTLIER_RULE, coverage, coverage_hint, outlier_px, outliers
@@ -340,15 +341,11 @@ def _view_features(view: BoardView, image_size: tuple[int, int]) -> np.ndarray:
     return np.r_[centre, extent, tilt]
 
 
-def _listing(names: Sequence[str], most: int = 10) -> str:
-    return ", ".join(names[:most]) + (f" and {len(names) - most} more" if len(names) > most else "")
-
-
 def _leave_out(unused: dict[str, str], left: Sequence[tuple[BoardView, str]], rule: str) -> None:
     """Record the views that one ``rule`` leaves out, each with its reason, in ``unused``, and log them."""
     unused.update((view.name, reason) for view, reason in left)
     if left:
-        logger.info("left out %d view(s) %s: %s", len(left), rule, _listing([view.name for view, _ in left]))
+        logger.info("left out %d view(s) %s: %s", len(left), rule, listed([view.name for view, _ in left], 10))
 
 
 def select_views(
@@ -568,7 +565,8 @@ def save_calibration(
         ],
         "unused_views": [{"name": name, "reason": reason} for name, reason in (unused_views or {}).items()],
     }
-    with atomic_paths(*finals.values()) as tmps:
+    # without a report, an earlier run's picture, which would stand beside this calibration as if it showed it, goes
+    with atomic_paths(*finals.values(), stale=[out / "calibration.png"]) as tmps:
         tmp = dict(zip(finals, tmps))
         write_camera_yaml(tmp["yaml"], calib.K, calib.dist, calib.image_size, rms=calib.rms)
         # write_text_model writes a folder of fixed names: written aside, its files join the others' renaming
@@ -581,8 +579,6 @@ def save_calibration(
             from .report import plot_calibration
 
             plot_calibration(calib, tmp["report"])
-    if not report:  # an earlier run's picture would stand beside this calibration as if it showed it
-        (out / "calibration.png").unlink(missing_ok=True)
     paths = {"yaml": finals["yaml"], "colmap": colmap_dir, "views": finals["views"]}
     if report:
         paths["report"] = finals["report"]

@@ -21,11 +21,11 @@ from tqdm import tqdm
 from alcn_cv.errors import InputError
 from alcn_cv.io import (
     IMAGE_SUFFIXES,
+    atomic_paths,
     check_no_earlier_output,
     check_output_kind,
     is_video,
     list_images,
-    make_folder,
     map_video,
     read_image,
     write_image,
@@ -62,23 +62,16 @@ class Undistorter:
         if not self.identity:
             self.map1, self.map2 = cv2.initUndistortRectifyMap(K, dist, None, self.new_K, self.size, cv2.CV_32FC1)
 
-    def check_size(self, image: np.ndarray, name: str = "image") -> None:
-        """Check that ``image`` has the calibration's size.
+    def __call__(self, image: np.ndarray, name: str = "image") -> np.ndarray:
+        """Undistort one image (any channels and dtype OpenCV remaps); same shape out.
 
         Raises:
-            InputError: another size; the message names ``name``."""
+            InputError: an image of another size than the calibration's; the message names ``name``."""
         if image.shape[1::-1] != self.size:
             raise InputError(
                 f"{name} is {image.shape[1]}x{image.shape[0]} but the calibration is for "
                 f"{self.size[0]}x{self.size[1]}; calibrate at this resolution"
             )
-
-    def __call__(self, image: np.ndarray, name: str = "image") -> np.ndarray:
-        """Undistort one image (any channels and dtype OpenCV remaps); same shape out.
-
-        Raises:
-            InputError: an image of another size than the calibration's (:meth:`check_size`)."""
-        self.check_size(image, name)
         if self.identity:
             return image
         return cv2.remap(image, self.map1, self.map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
@@ -111,8 +104,8 @@ def main(
     Raises:
         InputError: the output is the input (it would be overwritten), an output of another kind than the source (a
             file name for a folder, not an image file for an image, not a video file for a video), outputs that
-            exist without ``overwrite``, an unreadable image or one of another size than the calibration in a
-            folder (all before any work), or an unreadable source.
+            exist without ``overwrite`` (all before any work), an unreadable source, or an unreadable image or one of
+            another size than the calibration in a folder (then none of the folder's outputs is written).
     """
     source, output = Path(source), Path(output)
     if source.resolve() == output.resolve():  # resolved: ./a.png, a link to it and a.png are one file
@@ -124,13 +117,11 @@ def main(
         files = list_images(source)
         yaml_path = output / "camera.yaml"
         check_no_earlier_output([*(output / path.name for path in files), yaml_path], overwrite)
-        # Every image is decoded before any is written (OpenCV reads no size without decoding, and the decoding also
-        # finds a corrupt file): a bad image found while writing would leave those before it, refusing a rerun.
-        for path in tqdm(files, desc="checking sizes", unit="image", disable=not progress or len(files) < 10):
-            undistort.check_size(read_image(path), path.name)
-        make_folder(output)
-        for path in tqdm(files, desc="undistorting", unit="image", disable=not progress or len(files) < 10):
-            write_image(output / path.name, undistort(read_image(path), path.name))
+        # all or none: a bad image found on the way would leave those before it, which would refuse a rerun
+        with atomic_paths(*(output / path.name for path in files)) as outputs:
+            bar = {"desc": "undistorting", "unit": "image", "disable": not progress or len(files) < 10}
+            for path, tmp in tqdm(zip(files, outputs), total=len(files), **bar):
+                write_image(tmp, undistort(read_image(path), path.name))
     elif source.is_file() and (is_video(source) or suffix in IMAGE_SUFFIXES):
         check_output_kind(source, output)
         yaml_path = output.with_name(f"{output.stem}.camera.yaml")

@@ -435,8 +435,8 @@ def _corner_recall(args: argparse.Namespace) -> int:
 
     reports = [args.out / f"corner_recall_{b}.json" for b in args.background] if args.out is not None else []
     check_no_earlier_output(reports, args.overwrite)
-    for path in reports[:1]:  # an --out under a file: refused now, not after the first pass
-        check_writable(path)
+    if reports:  # an --out under a file: refused now, not after the first pass
+        check_writable(reports[0])
     results = []
     for background in args.background:
         r = corner_bench.corner_recall(args.detector, args.scene, obj_id=args.obj_id, background=background)

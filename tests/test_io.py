@@ -521,3 +521,25 @@ def test_a_folder_where_a_file_goes_is_refused_before_any_is_replaced(tmp_path):
         paths[0].write_text("new")
     assert (tmp_path / "r.json").read_text() == "earlier"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r.png"]
+
+
+def test_an_interrupted_write_removes_the_folders_it_made(tmp_path):
+    """A first run stopped before its renames left the empty folders made for its files."""
+    with pytest.raises(KeyboardInterrupt), io.atomic_paths(tmp_path / "a" / "b" / "r.json", tmp_path / "r.md"):
+        raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_files_an_output_no_longer_writes_go_with_its_renames(tmp_path):
+    """A report's earlier figure of an object it no longer shows was removed after its renames, apart from them."""
+    for name in ("r.json", "r_a.png", "r_b.png"):
+        (tmp_path / name).write_text("earlier")
+    stale = list(tmp_path.glob("r_*.png"))
+    with pytest.raises(KeyboardInterrupt), io.atomic_paths(tmp_path / "r.json", tmp_path / "r_a.png", stale=stale):
+        raise KeyboardInterrupt
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r_a.png", "r_b.png"]  # none removed
+    with io.atomic_paths(tmp_path / "r.json", tmp_path / "r_a.png", stale=stale) as paths:
+        for path in paths:
+            path.write_text("new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r_a.png"]
+    assert (tmp_path / "r_a.png").read_text() == "new"

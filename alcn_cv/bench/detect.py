@@ -739,14 +739,14 @@ def main(
     )
     names = [data.name(c) for c in data.categories]
     result["figures"] = figures = pr_figure_names(names, settings.real_images)
-    # all or none: an interrupt leaves an earlier report whole, its curves included
-    with atomic_paths(out / "detect.json", out / "detect.md", *(out / f for f in figures)) as (json_path, md, *pngs):
+    # all or none: an interrupt leaves an earlier report whole, its curves included; an earlier run's curves of
+    # other objects go with it
+    report = [out / "detect.json", out / "detect.md", *(out / f for f in figures)]
+    with atomic_paths(*report, stale=out.glob("pr_*real.png")) as (json_path, md, *pngs):
         plot_pr_curves(result, names, pngs)
         result["seconds"] = time.perf_counter() - start
         write_json(json_path, result)
         atomic_write(md, detect_markdown(result, names))
-    for earlier in set(out.glob("pr_*real.png")) - {out / f for f in figures}:  # an earlier run's, of other objects
-        earlier.unlink()
     (out / "detect.partial.json").unlink(missing_ok=True)
     logger.info("detection benchmark written to %s in %.0f s", out, result["seconds"])
     return result

@@ -248,13 +248,13 @@ def main(
     )
     drawn = [obj for obj in objects if obj.name in shown and shown_results[obj.name]]
     figures = [out / f"invariance_{obj.name}.png" for obj in drawn]
-    # all or none: an interrupt leaves an earlier report whole, figures included
-    with atomic_paths(out / "invariance.json", out / "invariance.md", *figures) as (json_path, md_path, *drawn_paths):
+    # all or none: an interrupt leaves an earlier report whole, figures included; an earlier run's figures (named
+    # after its objects) go with it
+    report = [out / "invariance.json", out / "invariance.md", *figures]
+    with atomic_paths(*report, stale=out.glob("invariance_*.png")) as (json_path, md_path, *drawn_paths):
         write_json(json_path, result)
         atomic_write(md_path, text)
         for obj, path in zip(drawn, drawn_paths):
             _figure(obj, shown_results[obj.name], norms, path)
-    for earlier in set(out.glob("invariance_*.png")) - set(figures):  # an earlier run's, named after its objects
-        earlier.unlink()
     logger.info("invariance benchmark written to %s", out)
     return result

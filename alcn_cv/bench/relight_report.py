@@ -257,10 +257,9 @@ def write_report(result: dict[str, Any], out: Path) -> None:
         text += ["## Failures\n", "\n".join(failures) + "\n"]
     figure = any("mean_test" in r for r in result["methods"].values())
     names = ["relight.json", "relight.md", *(["relight.png"] if figure else [])]
-    with atomic_paths(*(out / name for name in names)) as paths:  # the folder made by the atomic writes
+    # the folder made by the atomic writes; an earlier figure goes with them when this report has none
+    with atomic_paths(*(out / name for name in names), stale=[out / "relight.png"]) as paths:
         write_json(paths[0], result)
         atomic_write(paths[1], "\n".join(text))
         if figure:
             _figure(result, paths[2])
-    if not figure:
-        (out / "relight.png").unlink(missing_ok=True)

@@ -1247,10 +1247,10 @@ def _device_main(out: Path, settings: SpeedSettings) -> dict[str, Any]:
         *device_markdown(device),
         "",
     ]
-    with atomic_paths(out / "speed.json", out / "speed.md") as (json_path, md):
+    # a CPU run's plot, which this report does not describe, goes with them
+    with atomic_paths(out / "speed.json", out / "speed.md", stale=[out / "speed.png"]) as (json_path, md):
         write_json(json_path, result)
         atomic_write(md, "\n".join(lines))
-    (out / "speed.png").unlink(missing_ok=True)  # a CPU run's plot, which this report no longer describes
     return result
 
 

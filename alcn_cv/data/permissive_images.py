@@ -33,6 +33,7 @@ from alcn_cv.data.scenes import Scene, read_eight_bits
 from alcn_cv.data.textures import SKIMAGE_PHOTOGRAPHS, skimage_photograph
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import IMAGE_SUFFIXES, VideoReader, list_images, read_image, to_gray
+from alcn_cv.report import listed
 
 logger = logging.getLogger(__name__)
 
@@ -162,7 +163,7 @@ def photo_files(folders: Sequence[str | os.PathLike]) -> list[Path]:
         except InputError:
             kinds = ", ".join(sorted(IMAGE_SUFFIXES))
             unread = _unread_photos(folder)
-            hint = f"; {', '.join(unread[:5])}: not read here (convert them to JPEG or PNG)" if unread else ""
+            hint = f"; {listed(unread, 5)}: not read here (convert them to JPEG or PNG)" if unread else ""
             raise InputError(f"photos: {given}: no image ({kinds}) in this folder{hint}") from None
     return files
 
@@ -191,8 +192,7 @@ def folder_photographs(
     for given in folders:
         others = _unread_photos(Path(given).expanduser())
         if others:
-            shown = ", ".join(others[:5]) + (f" and {len(others) - 5} more" if len(others) > 5 else "")
-            logger.warning("photos: %s: %s skipped: not an image OpenCV reads here", given, shown)
+            logger.warning("photos: %s: %s skipped: not an image OpenCV reads here", given, listed(others, 5))
     for path in paths:
         image = read_eight_bits(path)
         fitted = _fit(image, max_side)

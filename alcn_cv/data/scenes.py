@@ -165,6 +165,15 @@ def _warn_if_narrow(what: str, maximum: int | None) -> None:
         )
 
 
+def _warn_if_narrow_set(what: str, kind: str, paths: Sequence[Path], tops: Sequence[int | None]) -> None:
+    """:func:`_warn_if_narrow` of a set's maximum over its 16-bit images (``tops``, None for the others, one per path),
+    not each image's: a multi-light set has dark images by design. ``what`` and ``kind`` (of image) name them."""
+    deep = [(top, path) for path, top in zip(paths, tops) if top is not None]
+    if deep:
+        top, brightest = max(deep)
+        _warn_if_narrow(f"{what} (its brightest {kind} {brightest})", top)
+
+
 def _read_eight_bits(path: str | os.PathLike, gray: bool = False) -> tuple[np.ndarray, int | None]:
     """The image as uint8 (:func:`alcn_cv.io.read_image`; 16 bits rounded to 8 by :func:`alcn_cv.io.eight_bits`),
     gray ``HxW`` when ``gray`` (BGR converted), else as read; and its maximum when it was a 16-bit image, else None
@@ -300,17 +309,14 @@ def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) ->
     for name, folder, paths in _scene_files(root, say_skipped=True):
         paths = [paths[i] for i in _evenly_spaced(len(paths), max_frames)]
         frames, tops = zip(*(_read_eight_bits(p, gray=True) for p in paths))
-        odd = next((p for p, f in zip(paths, frames) if f.shape != frames[0].shape), None)
+        odd = next((i for i, f in enumerate(frames) if f.shape != frames[0].shape), None)
         if odd is not None:
             size = "x".join(map(str, frames[0].shape[1::-1]))
             raise DatasetError(
                 f"{folder}: the frames of scene {name!r} differ in size (not registered): {paths[0].name} is {size}, "
-                f"{odd.name} {'x'.join(map(str, frames[paths.index(odd)].shape[1::-1]))}"
+                f"{paths[odd].name} {'x'.join(map(str, frames[odd].shape[1::-1]))}"
             )
-        deep = [(top, p) for p, top in zip(paths, tops) if top is not None]
-        if deep:  # the scene's maximum, not each frame's: a multi-light scene has dark frames by design
-            top, brightest = max(deep)
-            _warn_if_narrow(f"scene {name!r} (its brightest frame {brightest})", top)
+        _warn_if_narrow_set(f"scene {name!r}", "frame", paths, tops)
         stack = np.stack(frames)
         score = registration_score(stack)
         if score < REGISTERED_SCORE:
@@ -415,10 +421,7 @@ def load_photometric(root: str | os.PathLike, scale: float = 1.0) -> list[Photom
             mask = read_mask(mask_path)
         except InputError as exc:  # a file of the data set, not the caller's input
             raise DatasetError(str(exc)) from None
-        deep = [(top, p) for p, top in zip(shots, tops) if top is not None]
-        if deep:  # the object's maximum, as a scene's: its photographs are dark by design under some lights
-            top, brightest = max(deep)
-            _warn_if_narrow(f"object {folder.name!r} (its brightest photograph {brightest})", top)
+        _warn_if_narrow_set(f"object {folder.name!r}", "photograph", shots, tops)
         if any(img.shape != mask.shape for img in images):
             raise DatasetError(f"{folder}: images and mask {mask_path.name} differ in size")
         if scale != 1:

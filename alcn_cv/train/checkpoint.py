@@ -24,7 +24,7 @@ from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.io import atomic_write, check_writable, make_folder
-from alcn_cv.report import machine
+from alcn_cv.report import listed, machine
 from alcn_cv.train.config import RealLightConfig, TrainConfig
 from alcn_cv.train.models import JointModel, measure_output_range
 from alcn_cv.weight_file import save_normalizer_file
@@ -143,7 +143,7 @@ def check_run_folder(out: str | Path, *, resume: bool = False, overwrite: bool =
     check_writable(out / "train.log")  # before the data are read: the first file a run writes
     results = [] if resume or overwrite else earlier_run(out)
     if results:
-        shown = ", ".join(results[:4]) + (f" and {len(results) - 4} more" if len(results) > 4 else "")
+        shown = listed(results, 4)
         ways = "--resume continues it, --overwrite replaces it" if resumable else "--overwrite replaces it"
         raise InputError(f"{out} holds an earlier run ({shown}): {ways}, or give another --out")
     return out
