@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import datetime
+import importlib.util
 import logging
 import os
 import platform
@@ -17,7 +19,10 @@ import numpy as np
 from alcn_cv.io import atomic_path
 from alcn_cv.malloc import kept_freed_memory
 
+logger = logging.getLogger(__name__)
+
 __all__ = [
+    "can_draw",
     "command_line",
     "describe_machine",
     "listed",
@@ -27,6 +32,7 @@ __all__ = [
     "markdown_table",
     "nan_to_none",
     "new_figure",
+    "provenance",
     "save_figure",
     "spread",
     "spread_cell",
@@ -132,6 +138,13 @@ def machine() -> dict[str, Any]:
     return info
 
 
+def provenance(command: str, conf: str | None) -> dict[str, Any]:
+    """How a weight file was made, for its header: the command line that makes it again, the preset's name (None: a
+    configuration of the user's), the :func:`machine` and the date (UTC, as the reports' ``experiment.date``)."""
+    date = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    return {"command": command, "conf": conf, "machine": machine(), "date": date}
+
+
 def machine_cores(info: dict[str, Any]) -> Any:
     """The CPU cores a run had, from its :func:`machine` record: those it could use, else the machine's (``"?"``:
     neither recorded)."""
@@ -195,6 +208,15 @@ def command_line(words: Sequence[str], options: dict[str, Any]) -> str:
         if value is not True:
             args.append(",".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value))
     return shlex.join(args)
+
+
+def can_draw(command: str) -> bool:
+    """Whether matplotlib is installed, for a benchmark of the light install (``command``, named in the warning it
+    logs when not) that writes its tables without it and its figures with it."""
+    if importlib.util.find_spec("matplotlib") is not None:
+        return True
+    logger.warning("%s: matplotlib is not installed, so the report has no figure (pip install matplotlib)", command)
+    return False
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, **kwargs: Any) -> tuple[Any, Any, np.ndarray]:

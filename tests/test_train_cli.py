@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+import alcn_cv
 from alcn_cv.cli import main
 from alcn_cv.errors import InputError
 from alcn_cv.nets.opencv_runtime import OpenCVNormalizer
@@ -64,6 +65,22 @@ def test_bad_settings_are_one_line_errors(args, message, capsys):
     assert main([*args, "--print-config"]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("conf", ["paper", "my.toml"])
+def test_alcn_train_records_its_command_and_preset(conf, tmp_path, monkeypatch):
+    """The weight file of `alcn train` records the command that makes it again and its preset's name, as those of
+    `alcn train-real-light` and `alcn distill` do (it recorded neither); a TOML file of the user's is no preset."""
+    from alcn_cv.train import trainer
+
+    (tmp_path / "my.toml").write_text("[optim]\nepochs = 2\n")
+    monkeypatch.chdir(tmp_path)
+    given = {}
+    result = trainer.TrainResult(tmp_path, "done")
+    monkeypatch.setattr(trainer, "train", lambda *args, **kwargs: given.update(kwargs) or result)
+    assert main(["train", "--conf", conf, "--out", "run", "--set", "optim.epochs=3", "--no-progress"]) == 0
+    assert given["command"] == f"alcn train --conf {conf} --out run --set optim.epochs=3"
+    assert given["conf"] == (None if conf.endswith(".toml") else conf)
 
 
 @pytest.mark.parametrize("terminated, code", [(False, 130), (True, 143)])
@@ -241,7 +258,15 @@ def test_distill_help_and_a_tiny_run(tmp_path, capsys):
     assert header["architecture"] == "lite" and header["distillation"]["conf"] == "lite"
     settings = header["distillation"]["settings"]
     assert settings["n_windows"] == 16 and settings["teacher"] == "paper"
-    assert f"Command: `alcn distill --conf lite --out {out} {' '.join(args)}`" in out.with_suffix(".md").read_text()
+    card = out.with_suffix(".md").read_text()
+    assert f"Command: `alcn distill --conf lite --out {out} {' '.join(args)}`" in card
+    # the header records how it was made as the card does, and the ONNX export is written as a gain student's is
+    made = header["distillation"]
+    assert made["command"] == f"alcn distill --conf lite --out {out} {' '.join(args)}" and made["date"].endswith(" UTC")
+    assert made["machine"]["cpu_count"] >= 1 and "`lite.onnx` is the same network" in card
+    fast, opencv = (alcn_cv.createALCN(weights=out, backend=b, mixture="exact") for b in ("fast", "opencv"))
+    image = np.random.default_rng(0).random((64, 80), dtype=np.float32)
+    assert np.abs(fast.apply(image) - opencv.apply(image)).max() < 1e-5
     assert main(["distill", "--conf", "lite", "--out", str(out), *args, "--no-progress"]) == 2  # not replaced
     assert "exists (--overwrite replaces it" in capsys.readouterr().err
 

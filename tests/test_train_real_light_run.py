@@ -183,7 +183,7 @@ def test_resume_takes_the_checkpoints_settings_and_names_each_difference(tmp_pat
     assert main(_run(out, "--resume", "--seed", "0", "--set", "steps=3")) == 0  # longer; the seed repeated
     assert [h["step"] for h in json.loads((out / "history.json").read_text())] == [1, 2, 3]
     meta = load_normalizer_file(out / "gain_normalizer.npz").meta["training"]
-    assert meta["config"]["steps"] == 3 and meta["config"]["lr"] == 0.02
+    assert meta["config"]["steps"] == 3 and meta["config"]["lr"] == 0.02 and meta["date"].endswith(" UTC")
     assert meta["command"].startswith("alcn train-real-light --conf gain --set") and meta["command"].endswith(
         "--set steps=3 --seed 0"
     )

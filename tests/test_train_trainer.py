@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import signal
 from pathlib import Path
 
@@ -47,7 +48,7 @@ def _weights(path):
 def test_train_outputs_and_gradients_reach_the_normalizer(data, tmp_path):
     cfg = _config(data)
     cfg["fewshot"] = {"n_objects": 2, "per_image": 8, "n_test": 40, "epochs": 1, "dog": [[0.5, 1.5]]}
-    result = trainer.train(cfg, tmp_path, progress=False)
+    result = trainer.train(cfg, tmp_path, progress=False, command="alcn train --conf paper --out X", conf="paper")
     assert set(result.fewshot) == {"alcn", "dog 0.5/1.5", "none"}
     assert 0 <= result.fewshot["alcn"]["auc"] <= 1
     assert result.status == "done" and len(result.history) == 2
@@ -75,6 +76,10 @@ def test_train_outputs_and_gradients_reach_the_normalizer(data, tmp_path):
     assert wf.meta["trained"] is True and wf.meta["working_scale"] == 0.5
     assert wf.meta["output_range"][0] < 0 < wf.meta["output_range"][1]
     assert wf.meta["detector_input"] == "standardize"
+    # how it was made, as the gain Normalizer's file records it (the paper family's recorded neither command nor preset)
+    made = wf.meta["training"]
+    assert (made["command"], made["conf"]) == ("alcn train --conf paper --out X", "paper")
+    assert re.fullmatch(r"\d{4}-\d\d-\d\d \d\d:\d\d UTC", made["date"]) and made["machine"]["cpu_count"] >= 1
 
 
 def test_resume_equals_uninterrupted_run(data, tmp_path, monkeypatch):

@@ -24,7 +24,7 @@ from alcn_cv.data.phos import PhosBatch
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.gaussian_mixture import gaussian_sigmas
 from alcn_cv.io import atomic_write, check_writable, make_folder
-from alcn_cv.report import listed, machine
+from alcn_cv.report import listed, provenance
 from alcn_cv.train.config import RealLightConfig, TrainConfig
 from alcn_cv.train.models import JointModel, measure_output_range
 from alcn_cv.weight_file import save_normalizer_file
@@ -277,13 +277,20 @@ def restore_checkpoint(
 
 
 def write_normalizer_file(
-    model: JointModel, cfg: TrainConfig, train_set: PhosBatch, result: TrainResult, seconds: float
+    model: JointModel,
+    cfg: TrainConfig,
+    train_set: PhosBatch,
+    result: TrainResult,
+    seconds: float,
+    command: str = "",
+    conf: str | None = None,
 ) -> Path:
     """Write the trained Normalizer as ``alcn_normalizer.npz`` in the run folder.
 
     The header gets the output range measured on up to 4000 training windows (drawn with
     ``cfg.seed``), the detector input policy and the record of the training (configuration,
-    versions, validation, few-shot validation, time, machine). The configuration is ``cfg`` as a file users share
+    versions, validation, few-shot validation, time; the command line, the preset's name, the machine and the date,
+    :func:`~alcn_cv.report.provenance`). The configuration is ``cfg`` as a file users share
     records it (:meth:`TrainConfig.shareable <alcn_cv.train.config.TrainConfig.shareable>`: its folders as given, the
     home folder written ``~``), where the checkpoint holds them absolute.
     """
@@ -311,7 +318,7 @@ def write_normalizer_file(
             "val_by_family": result.val_by_family,
             "fewshot": result.fewshot,
             "seconds": round(seconds, 1),
-            "machine": machine(),
+            **provenance(command, conf),
         },
     }
     return save_normalizer_file(result.out_dir / "alcn_normalizer.npz", net.state_arrays(), meta)

@@ -259,7 +259,17 @@ def _train(args: argparse.Namespace) -> int:
     from alcn_cv.train.trainer import train
 
     try:
-        result = train(cfg, args.out, resume=args.resume, overwrite=args.overwrite, progress=not args.no_progress)
+        result = train(
+            cfg,
+            args.out,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            progress=not args.no_progress,
+            command=_command(
+                "train", args, "--out", str(args.out), *(["--device", args.device] if args.device else [])
+            ),
+            conf=args.conf if args.conf in TRAIN_CONFS else None,  # None: a TOML file of the user's
+        )
     finally:
         distributed.shutdown()
     if result.status == "interrupted":

@@ -47,9 +47,10 @@ from alcn_cv.filters.gaussian_mixture import gaussian_blur_stack
 from alcn_cv.io import atomic_write, output_path
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.nets.lite import ARCHITECTURES, LiteNormalizer, normalizer_from_file
-from alcn_cv.report import describe_machine
+from alcn_cv.report import describe_machine, provenance
 from alcn_cv.runtime import MODELS
 from alcn_cv.train.config import GainDistillConfig, LiteDistillConfig
+from alcn_cv.train.export import export_onnx
 from alcn_cv.train.real_light import source_scenes
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 
@@ -197,13 +198,13 @@ def main(
     overwrite: bool = False,
 ) -> Path:
     """Distil a student (:func:`distill`, or :func:`distill_gain` for a :class:`GainDistillConfig`)
-    and write its weight file, with the whole configuration and the preset's name in its header,
-    and its model card (and for a gain student its ONNX export, ``.onnx`` beside it).
+    and write its weight file, with the whole configuration, the command line, the preset's name, the machine and the
+    date in its header (:func:`~alcn_cv.report.provenance`), its ONNX export (``.onnx`` beside it) and its model card.
 
     Args:
         out_path: the ``.npz`` to write (the card is the same name with ``.md``).
         cfg: the settings (a preset of :data:`~alcn_cv.train.config.DISTILL_CONFS`, overridden or not).
-        command: the command line recorded in the card (default: this process').
+        command: the command line recorded in the header and the card (default: this process').
         conf: the preset's name, recorded in the header.
         progress: show progress bars.
         overwrite: replace an existing weight file (a shipped one, say, which its card's command rebuilds).
@@ -232,12 +233,13 @@ def main(
         architecture="lite",
         teacher=record["teacher"],
         distillation={
-            "conf": conf,
+            **provenance(command, conf),
             **{k: record[k] for k in ("constant_teacher", "settings", "seconds", "validation", "validation_initial")},
         },
         description=f"LiteNormalizer distilled from {record['teacher']['file']} ({record['teacher']['description']})",
     )
     save_normalizer_file(out_path, student.state_arrays(), meta)
+    export_onnx(out_path.with_suffix(".onnx"), out_path)
     _write_card(out_path.with_suffix(".md"), out_path.name, record, bool(meta["trained"]), command)
     return out_path
 
@@ -250,6 +252,14 @@ def _created(path: Path, model: str, **params: str) -> str:
         *(f'{k}="{v}"' for k, v in params.items()),
     ]
     return f"`alcn_cv.createALCN({', '.join(args)})`"
+
+
+def _onnx_twin(name: str) -> str:
+    """The card's sentence on the weight file ``name``'s ONNX export, which :func:`main` writes beside it."""
+    return (
+        f'`{Path(name).with_suffix(".onnx").name}` is the same network for the torch-free `backend="opencv"` '
+        "(written by the same command through `alcn export`)."
+    )
 
 
 def _write_card(path: Path, name: str, record: dict[str, Any], trained: bool, command: str) -> None:
@@ -269,7 +279,7 @@ teacher.
 {"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}
 
 Use: {_created(weights, "lite")}, real time (Eq. 3 by its `pyramid` approximation, the default);
-{_created(weights, "lite", mixture="exact")} for Eq. 3 exactly.
+{_created(weights, "lite", mixture="exact")} for Eq. 3 exactly. {_onnx_twin(name)}
 For the shipped models, ALCN warns when the installed teacher differs from this one: then re-run the command
 below (for another teacher, compare its SHA-256 with the one above).
 
@@ -485,15 +495,13 @@ def distill_gain(cfg: GainDistillConfig | None = None, progress: bool = True) ->
 
 def _main_gain(out_path: Path, cfg: GainDistillConfig, command: str, conf: str | None, progress: bool) -> Path:
     """:func:`main` for a gain teacher: the weight file, its ONNX export and its card."""
-    from alcn_cv.train.export import export_onnx
-
     student, record = distill_gain(cfg, progress)
     trained = bool(load_normalizer_file(teacher_file(cfg.teacher)).meta["trained"])
     meta = student.file_meta(
         trained,
         teacher=record["teacher"],
         distillation={
-            "conf": conf,
+            **provenance(command, conf),
             **{k: record[k] for k in ("settings", "seconds", "validation", "validation_initial", "parameters")},
         },
         description=f"gain Normalizer distilled from {record['teacher']['file']} "
@@ -549,8 +557,7 @@ among them, against the teacher's {record["parameters"]["teacher"]}) distilled f
 {teacher["description"] or "the gain Normalizer"}). Same features, kernels, divisive step and `tau` as the teacher
 (copied, fixed); only the network on the grid is smaller. It is only as good as the teacher.
 {"The teacher is trained." if trained else "**The teacher is an UNTRAINED placeholder**, so this student is one too."}
-`{Path(name).with_suffix(".onnx").name}` is the same network for the torch-free `backend="opencv"`
-(written by the same command through `alcn export`). For the shipped models, ALCN warns when the installed teacher
+{_onnx_twin(name)} For the shipped models, ALCN warns when the installed teacher
 differs from this one; for another teacher, compare its SHA-256 with the one above.
 {_gain_terms(s)}
 

@@ -67,7 +67,7 @@ from alcn_cv.filters.torch_divisive import gaussian_blur, gaussian_energy, inver
 from alcn_cv.io import atomic_write, held_folder, interrupts_deferred, sigint_as_keyboard_interrupt, to_gray, write_json
 from alcn_cv.nets.gain import GainNormalizer
 from alcn_cv.presets import with_settings
-from alcn_cv.report import log_to, machine
+from alcn_cv.report import log_to, provenance
 from alcn_cv.shared_data import shared_data_dir
 from alcn_cv.train.checkpoint import (
     REAL_LIGHT_CHECKPOINT_FORMAT,
@@ -623,7 +623,12 @@ def _save_weights(
         trained=step > 0,
         description="gain Normalizer trained to identify locations across light changes (its data, relit "
         "photographs and/or registered scenes: training.config)",
-        training={**record, "config": config, "step": step, "seconds": round(seconds, 1), "machine": machine()},
+        training={
+            **provenance(record.get("command", ""), record.get("conf")),
+            "config": config,
+            "step": step,
+            "seconds": round(seconds, 1),
+        },
     )
     return save_normalizer_file(path, net.state_arrays(), meta)
 

@@ -123,6 +123,8 @@ def train(
     resume: bool = False,
     overwrite: bool = False,
     progress: bool = True,
+    command: str = "",
+    conf: str | None = None,
 ) -> TrainResult:
     """Train ALCN's Normalizer jointly with a detector (Eq. 2), or a baseline detector, on ``run.threads`` torch
     threads (:func:`alcn_cv.nn.torch_threads`: the caller's count is restored after the run).
@@ -135,6 +137,7 @@ def train(
         overwrite: replace the earlier run that ``out_dir`` holds (checked before any work,
             :func:`~alcn_cv.train.checkpoint.check_run_folder`).
         progress: show progress bars.
+        command, conf: the command line that makes the run again and the preset's name, recorded in the weight file.
 
     Returns:
         A :class:`TrainResult`. Ctrl-C (and SIGTERM under the command line) saves a checkpoint and returns status
@@ -165,7 +168,7 @@ def train(
         result.interruption = _fit(cfg, model, optimizer, state, train_set, val_set, device, out, progress)
         if result.interruption is not None:
             result.status, result.stopped_at = "interrupted", (state.epoch + 1, state.step_in_epoch)
-        _finish(cfg, result, train_set, state, progress)
+        _finish(cfg, result, train_set, state, progress, command, conf)
         result.seconds = time.perf_counter() - start
         if distributed.is_main():
             atomic_write(out / "summary.md", summary_markdown(cfg, result, machine_start))
@@ -478,7 +481,15 @@ def _fewshot(model: JointModel, cfg: TrainConfig, progress: bool) -> dict[str, A
 # ---------------------------------------------------------------------------------- export
 
 
-def _finish(cfg: TrainConfig, result: TrainResult, train_set: PhosBatch, state: TrainState, progress: bool) -> None:
+def _finish(
+    cfg: TrainConfig,
+    result: TrainResult,
+    train_set: PhosBatch,
+    state: TrainState,
+    progress: bool,
+    command: str,
+    conf: str | None,
+) -> None:
     """After the loop: the last validation in ``result``, then, for a finished Normalizer run, the
     few-shot validation (``fewshot.json``) and the weight file. ``result.model`` ends on the CPU, where the few-shot
     validation runs its methods (a ``run.device = "cuda"`` run's too)."""
@@ -496,5 +507,5 @@ def _finish(cfg: TrainConfig, result: TrainResult, train_set: PhosBatch, state: 
     if cfg.fewshot.enabled:
         result.fewshot = _fewshot(model, cfg, progress)
         write_json(result.out_dir / "fewshot.json", nan_to_none(result.fewshot))
-    result.weights = write_normalizer_file(model, cfg, train_set, result, total)
+    result.weights = write_normalizer_file(model, cfg, train_set, result, total, command, conf)
     logger.info("Normalizer weights written to %s", result.weights)

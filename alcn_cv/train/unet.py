@@ -37,7 +37,7 @@ import torch
 from tqdm import tqdm
 
 from alcn_cv.errors import InputError
-from alcn_cv.report import machine
+from alcn_cv.report import provenance
 from alcn_cv.train.checkpoint import check_run_folder
 from alcn_cv.train.config import UNetConfig
 from alcn_cv.train.real_light import TrainingScene, fit, pair_loss, training_run, training_scenes
@@ -143,6 +143,10 @@ def _train(cfg: UNetConfig, out: Path, record: dict[str, Any], progress: bool) -
         trained=True,
         output_range=output_range(net, scenes + rendered, progress=progress),
         description="free-form U-Net normalizer trained as the gain Normalizer (identification objective)",
-        training={**record, "config": asdict(cfg.shareable()), "seconds": round(seconds, 1), "machine": machine()},
+        training={
+            **provenance(record.get("command", ""), record.get("conf")),
+            "config": asdict(cfg.shareable()),
+            "seconds": round(seconds, 1),
+        },
     )
     return save_normalizer_file(out / "unet_normalizer.npz", net.state_arrays(), meta)
