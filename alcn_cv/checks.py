@@ -21,6 +21,7 @@ __all__ = [
     "FULL_SCALE",
     "SUPPORTED_DTYPES",
     "UINT8_LEVELS",
+    "check_array",
     "check_gray",
     "check_image",
     "check_out_dtype",
@@ -133,6 +134,22 @@ def check_seeds(seeds: Iterable[int]) -> list[int]:
     return valid
 
 
+def check_array(img: object, what: str = "image") -> np.ndarray:
+    """``img`` itself if it is a NumPy array.
+
+    Raises:
+        InputError: ``img`` is not one (``what`` names it), with a hint for the two mistakes of an OpenCV loop:
+            ``None`` from a failed read, and a ``cv2.UMat``.
+    """
+    if isinstance(img, np.ndarray):
+        return img
+    hint = {
+        "NoneType": " (cv2.imread could not read the file, or VideoCapture.read() reached the end?)",
+        "UMat": " (a cv2.UMat: umat.get())",
+    }.get(type(img).__name__, "")
+    raise InputError(f"{what} must be a numpy array, got {type(img).__name__}{hint}")
+
+
 def check_image(img: object) -> np.ndarray:
     """Validate an image for :meth:`Normalization.apply` and return it as an ndarray.
 
@@ -144,13 +161,7 @@ def check_image(img: object) -> np.ndarray:
         InputError: not an array, empty, wrong number of dimensions or channels, unsupported
             dtype, NaN/inf or out-of-range values in a float image.
     """
-    if not isinstance(img, np.ndarray):
-        # the two mistakes of an OpenCV loop: a failed read, and a cv2.UMat
-        hint = {
-            "NoneType": " (cv2.imread could not read the file, or VideoCapture.read() reached the end?)",
-            "UMat": " (a cv2.UMat: umat.get())",
-        }.get(type(img).__name__, "")
-        raise InputError(f"image must be a numpy array, got {type(img).__name__}{hint}")
+    img = check_array(img)
     if img.size == 0:
         raise InputError(f"image is empty (shape {img.shape})")
     if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 2, 3, 4)):

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib.util
 import logging
 import math
 import os
@@ -27,6 +28,7 @@ import textwrap
 import traceback
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from importlib import metadata
+from pathlib import Path
 from typing import Any
 
 from alcn_cv.errors import ALCNError, MissingDependencyError
@@ -76,16 +78,19 @@ def sigterm_as_interrupt(command: str) -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def _add_unavailable(subparsers: argparse._SubParsersAction, name: str, error: MissingDependencyError) -> None:
-    """List ``name``, whose module needs a package not installed here; running it prints ``error``."""
+def _add_unavailable(
+    subparsers: argparse._SubParsersAction, name: str, why: str, message: str, cause: Exception
+) -> None:
+    """List ``name``, whose module cannot be imported here (``why``, its help); running it prints ``message`` (after
+    the traceback of ``cause`` with ``--debug``) and returns 2."""
 
     def fail(args: argparse.Namespace) -> int:
-        print(error, file=sys.stderr)
+        if args.debug:
+            traceback.print_exception(cause)
+        print(message, file=sys.stderr)
         return 2
 
-    parser = subparsers.add_parser(
-        name, help=f"(needs the [{error.extra}] extra, not installed)", description=str(error), add_help=False
-    )
+    parser = subparsers.add_parser(name, help=f"({why})", description=message, add_help=False)
     parser.add_argument("arguments", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     parser.set_defaults(func=fail)
 
@@ -95,20 +100,44 @@ def command_entry_points() -> list[metadata.EntryPoint]:
     return sorted(metadata.entry_points(group=COMMANDS_GROUP), key=lambda entry: entry.name)
 
 
+def _hiding_modules() -> list[str]:
+    """Each top-level package of alcn-cv that Python finds outside alcn-cv's installation (a module of an app or of
+    another distribution, earlier on the path), as ``"NAME at PATH"``."""
+    home = Path(__file__).resolve().parents[1]  # where alcn-cv's packages are installed (or checked out)
+    packages = sorted({entry.module.split(".")[0] for entry in command_entry_points()})  # the commands' packages
+    found = {package: importlib.util.find_spec(package) for package in packages}
+    return [
+        f"{package} at {spec.origin}"
+        for package, spec in found.items()
+        if spec is not None and spec.origin and not Path(spec.origin).resolve().is_relative_to(home)
+    ]
+
+
 def _add_commands(subparsers: argparse._SubParsersAction) -> None:
+    """Each command's parser; one whose module cannot be imported is listed with the reason, and the others run."""
     for entry in command_entry_points():
         try:
-            add_parser = entry.load()
-        except ModuleNotFoundError as exc:
-            if exc.name and (entry.module + ".").startswith(exc.name + "."):  # its own package is not in this build
-                logger.debug("alcn %s: %s is not installed", entry.name, exc.name)
-                continue
-            error = missing_extra(exc, f"alcn {entry.name}", preferred=entry.name)
-            if error is None:
+            entry.load()(subparsers)  # a command's add_parser imports its settings' modules first
+        except ImportError as exc:
+            if entry.name in subparsers.choices:  # failed after listing itself: a bug of its parser
                 raise
-            _add_unavailable(subparsers, entry.name, error)
-            continue
-        add_parser(subparsers)
+            package = entry.module.split(".")[0]
+            if importlib.util.find_spec(package) is None:  # its own package is not in this build
+                logger.debug("alcn %s: %s is not installed", entry.name, package)
+                continue
+            if isinstance(exc, ModuleNotFoundError) and (error := missing_extra(exc, f"alcn {entry.name}", entry.name)):
+                _add_unavailable(
+                    subparsers, entry.name, f"needs the [{error.extra}] extra, not installed", str(error), exc
+                )
+                continue
+            # the packages on top of alcn_cv are top-level ones: a module of the same name earlier on the path (an
+            # app's own module) hides them, and the other commands still run
+            hiding = _hiding_modules()
+            cause = f": {', '.join(hiding)} hides alcn-cv's" if hiding else ""
+            message = (
+                f"alcn {entry.name}: cannot import {entry.module} ({exc}){cause} (alcn --debug shows the traceback)"
+            )
+            _add_unavailable(subparsers, entry.name, "cannot be imported here", message, exc)
 
 
 class _CommandParser(argparse.ArgumentParser):

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.checks import FULL_SCALE
+from alcn_cv.checks import FULL_SCALE, check_array
 from alcn_cv.errors import DatasetError, InputError
 
 __all__ = [
@@ -478,7 +478,7 @@ def read_json(path: str | os.PathLike) -> Any:
 
 def to_gray(image: np.ndarray) -> np.ndarray:
     """A uint8 ``HxW`` grayscale image from a gray or BGR uint8 one (the gray input itself, not a copy)."""
-    if not isinstance(image, np.ndarray) or image.size == 0:
+    if check_array(image).size == 0:
         raise InputError("image must be a non-empty numpy array")
     if image.dtype != np.uint8:
         raise InputError(f"image must be uint8, got {image.dtype}")

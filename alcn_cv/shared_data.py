@@ -21,3 +21,13 @@ def shared_data_dir() -> Path:
     checkout = Path(__file__).resolve().parents[1]
     base = checkout if (checkout / "pyproject.toml").is_file() else Path.cwd()
     return base.parent / "shared" / "data"
+
+
+def missing_folder(path: str | os.PathLike) -> str:
+    """``"PATH: folder not found"`` (or ``not a folder``), and where ``path`` is one of the shared data's folders (a
+    default), how to give another: ``--data`` or :data:`ENV_VAR`."""
+    path = Path(path)
+    what = f"{path}: {'not a folder' if path.exists() else 'folder not found'}"
+    if path.resolve().is_relative_to(shared_data_dir().resolve()):
+        what += f" (the shared data's {path.name}: give --data DIR, or set {ENV_VAR} to the folder that holds it)"
+    return what

@@ -17,6 +17,7 @@ along the printed board, z = 0 on the board; units mm):
 from __future__ import annotations
 
 import logging
+import numbers
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -93,13 +94,15 @@ class BoardSpec:
     def __post_init__(self) -> None:
         if self.kind not in _KINDS:
             raise InputError(f"board kind must be one of {_KINDS}, got {self.kind!r}")
+        counted = "inner corners" if self.kind == "chessboard" else "squares"
+        if not all(isinstance(n, numbers.Integral) and not isinstance(n, bool) for n in (self.cols, self.rows)):
+            raise InputError(f"cols and rows count {counted}: integers, got {self.cols!r} and {self.rows!r}")
+        sizes = (self.square, self.marker)
+        if not all(isinstance(s, numbers.Real) and not isinstance(s, bool) for s in sizes):
+            raise InputError(f"square and marker are sizes in mm: numbers, got {self.square!r} and {self.marker!r}")
         minimum = 2 if self.kind == "chessboard" else 3
-        if int(self.cols) < minimum or int(self.rows) < minimum:
-            raise InputError(
-                f"a {self.kind} needs at least {minimum}x{minimum} "
-                f"{'inner corners' if self.kind == 'chessboard' else 'squares'}, "
-                f"got {self.cols}x{self.rows}"
-            )
+        if self.cols < minimum or self.rows < minimum:
+            raise InputError(f"a {self.kind} needs at least {minimum}x{minimum} {counted}, got {self.cols}x{self.rows}")
         if not self.square > 0:
             raise InputError(f"square size must be positive (mm), got {self.square}")
         if self.kind == "charuco":

@@ -543,7 +543,10 @@ def main(
     # the reconstruction (pycolmap), the box fit (open3d) and the plot come after the features: checked before those
     require("pycolmap", "open3d", "matplotlib", what=what, preferred="pose")
     if box_ply is not None and box_size is not None:
-        raise InputError("give the box once: --box-ply (a cuboid .ply) or --box-size (its edge lengths), not both")
+        raise InputError(
+            "give the box once: --box-ply (a cuboid .ply) or --box-size (its edge lengths), not both (in Python: "
+            "box_ply= or box_size=)"
+        )
     if box_size is not None:
         sizes = np.asarray(box_size, np.float64)
         if sizes.shape != (3,) or not (np.isfinite(sizes).all() and (sizes > 0).all()):
@@ -568,7 +571,10 @@ def main(
         dist = np.asarray(calibration.dist, np.float64) if np.any(calibration.dist) else None
     if is_video:
         if K is None:
-            raise InputError("building from a video needs the intrinsics (--K fx fy cx cy, or --camera camera.yaml)")
+            raise InputError(
+                "building from a video needs the intrinsics (--K fx fy cx cy, or --camera camera.yaml; in Python: K= "
+                "or camera=)"
+            )
         # before the frames are extracted
         if calibration is not None:
             name = settings["camera"] if isinstance(settings["camera"], str | Path) else "the calibration"

@@ -54,6 +54,7 @@ from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, holds_out_dir, make_folder, to_gray, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none, new_figure, save_figure
+from alcn_cv.shared_data import missing_folder
 from pose.corner_train import CONFS as CORNER_CONFS
 from pose.corner_train import CornerRecipe
 from pose.evaluate import PROJ_PX, score, table_markdown
@@ -379,7 +380,7 @@ def main(
     ``planar`` preset) into ``out_dir``."""
     root = Path(data) if data is not None else shared_root("webcam")
     if not root.is_dir():
-        raise DatasetError(f"{root}: no such folder (the webcam scenes; set ALCN_SHARED_DATA or give --data)")
+        raise DatasetError(missing_folder(root))
     all_scenes = load_scene_folder(root, max_frames)
     chosen = select_scenes(all_scenes, scenes) if scenes else all_scenes
     out_dir = Path(out_dir)

@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 
 from alcn_cv import io
+from alcn_cv.checks import check_array
 from alcn_cv.enhance.registry import same_method
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import check_no_earlier_output, check_writable, output_path, read_json, write_json
@@ -75,7 +76,20 @@ def draw_box(
     thickness: int = 2,
     dist: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Draw the 12 edges of the box ``corners (8, 3)`` under pose ``rvec, tvec`` on ``image`` in place."""
+    """Draw the 12 edges of the box ``corners`` under the pose ``rvec, tvec`` on ``image`` in place; return it.
+
+    Args:
+        image: ``(H, W, 3)`` BGR (or ``(H, W)`` gray) uint8, drawn on.
+        corners: ``(8, 3)`` the box's corners in the object's frame, in the units of ``tvec`` (a tracker's
+            :attr:`BoxTracker.corners` and a :class:`~pose.solver.PoseEstimate`'s ``tvec`` are both in its ``units``).
+        rvec, tvec: ``(3, 1)`` object to camera, OpenCV's convention.
+        K: ``(3, 3)`` camera matrix of ``image``'s pixels.
+        color: BGR.
+        thickness: pixels.
+        dist: the camera's distortion coefficients (a tracker's :attr:`BoxTracker.dist`: a calibrated camera's), or
+            None.
+
+    A pose that projects a corner to a non-finite point or beyond 1e5 px draws nothing."""
     uv = project(corners, rvec, tvec, K, dist)
     if not np.isfinite(uv).all() or np.abs(uv).max() > 1e5:
         return image
@@ -584,7 +598,9 @@ class BoxTracker:
         return self.tracker.events
 
     def check_size(self, frame: np.ndarray, what: str = "the frame is") -> None:
-        """Raise :class:`InputError` when ``frame`` is not of :attr:`image_size` (``what`` begins the message)."""
+        """Raise :class:`InputError` when ``frame`` is not an image of :attr:`image_size` (``what`` begins the
+        message)."""
+        check_array(frame, "the frame")
         if self.image_size is not None:
             model = self.camera == "model"
             of = f"the camera of {self.name}" if model else "the calibration"

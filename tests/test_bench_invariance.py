@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 
 import cv2
 import numpy as np
@@ -202,3 +203,14 @@ def test_twelve_bit_photographs_are_said_to_keep_few_grey_levels(tmp_path, caplo
     with caplog.at_level("WARNING"):
         invariance.main(data, tmp_path / "out", ["none"], erode=2, progress=False)
     assert "object 'ball' (its brightest photograph" in caplog.text and "12-bit data in a 16-bit file?" in caplog.text
+
+
+def test_without_matplotlib_the_tables_are_written_and_the_figure_said_missing(tmp_path, monkeypatch, caplog):
+    """The README promises `alcn bench invariance` on the light install, which has no matplotlib: it failed on its
+    figure, after the work, with nothing written."""
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # an import of it fails, find_spec finds none
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "invariance_ball.png").write_bytes(b"an earlier run's")
+    invariance.main(_fake_set(tmp_path / "psm"), tmp_path / "out", ["none", "dlcn"], erode=2, progress=False)
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["invariance.json", "invariance.md"]
+    assert "alcn bench invariance: matplotlib is not installed, so the report has no figure" in caplog.text

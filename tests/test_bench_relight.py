@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 
 import cv2
 import numpy as np
@@ -481,3 +482,14 @@ def test_pose_succeeds_only_when_every_corner_moves_less_than_pose_px():
     # scaled about the corner (0, 0): the far corner (399, 99) moves 411 * (scale - 1) px
     assert pose(1.01) == 1.0  # 4.1 px at most
     assert pose(1.02) == 0.0  # 8.2 px at the far corner (4.5 px on average over the four)
+
+
+def test_without_matplotlib_the_report_is_written_without_its_figure(tmp_path, monkeypatch, caplog):
+    """`alcn bench relight` needs no extra (the README): without matplotlib it ran the whole benchmark and then failed
+    on its figure, writing nothing. It says so before the work and writes the tables."""
+    root = make_sets(tmp_path / "data")
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    args = dict(test_scenes=["street"], seeds=[0], settings=SMALL, tuning=False, progress=False)
+    relight.main(tmp_path / "out", [root / "webcam"], ["none", "dog"], **args)
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["relight.json", "relight.md"]
+    assert "alcn bench relight: matplotlib is not installed, so the report has no figure" in caplog.text

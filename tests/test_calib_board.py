@@ -50,6 +50,11 @@ def test_printable_chessboard(tmp_path):
         (dict(dictionary="DICT_NOPE"), "dictionary"),
         (dict(cols=20, rows=20, dictionary="DICT_4X4_50"), "needs 200 markers"),
         (dict(square=0.0), "square"),
+        # from a config file or argv as text, or a float: refused here, not by np.mgrid or OpenCV's patternSize later
+        (dict(kind="chessboard", cols="9", rows=6), r"cols and rows count inner corners: integers, got '9' and 6"),
+        (dict(kind="chessboard", cols=9.0, rows=6), "integers, got 9.0 and 6"),
+        (dict(cols=True), "integers"),
+        (dict(square="25"), r"square and marker are sizes in mm: numbers, got '25' and 26.0"),
     ],
 )
 def test_bad_board_specs(kwargs, match):

@@ -1,6 +1,11 @@
 """``alcn`` where the extras are not installed: its commands are listed, and one that needs a
 missing package ends with one line naming the extra to install (exit 2, no traceback)."""
 
+import functools
+import os
+import subprocess
+import sys
+
 import cv2
 import numpy as np
 import pytest
@@ -107,3 +112,21 @@ def test_extras_are_read_from_the_installed_metadata():
         "alcn_cv.filters.kornia_mixture: needs the [train] extra (kornia is not installed): "
         'pip install "alcn-cv[train]"'
     )
+
+
+def test_an_apps_own_calib_module_leaves_the_other_commands_running(tmp_path):
+    """pose and calib are top-level packages: an app's calib.py earlier on the path made every command, normalize
+    included, end in pose's import traceback (exit 1). Now the commands it hides say so in one line."""
+    (tmp_path / "calib.py").write_text("LEVEL = 1\n")
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    run = functools.partial(subprocess.run, capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    alcn = [sys.executable, "-c", ALCN]
+    listed = run([*alcn, "normalize", "--list"])
+    assert listed.returncode == 0 and "tantriggs" in listed.stdout, listed.stderr
+    assert "    pose            (cannot be imported here)" in run([*alcn, "--help"]).stdout
+    for command in (["calib", "camera"], ["pose", "track", "m.npz", "v.mp4", "p.json"]):
+        proc = run([*alcn, *command])
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+        line = proc.stderr.strip()
+        assert line.startswith(f"alcn {command[0]}: cannot import {command[0]}.cli (") and "\n" not in line
+        assert line.endswith(f"calib at {tmp_path / 'calib.py'} hides alcn-cv's (alcn --debug shows the traceback)")

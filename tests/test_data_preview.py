@@ -108,7 +108,7 @@ def test_a_sheet_of_rendered_scenes_and_of_an_unknown_kind(tmp_path):
 
 
 def test_compare_psm_names_a_missing_folder_and_checks_its_output_first(tmp_path):
-    with pytest.raises(DatasetError, match=r"nope: folder not found \(a photometric-stereo set"):  # not lights.txt
+    with pytest.raises(DatasetError, match=r"nope: folder not found; a photometric-stereo set"):  # not lights.txt
         compare_psm(tmp_path / "nope", tmp_path / "out")
     blocker = tmp_path / "file.json"
     blocker.write_text("mine")

@@ -383,3 +383,13 @@ def test_a_focal_length_refined_to_square_pixels_is_not_a_warning():
     level, words = _focal_ratio_note(0.89, 0.79)  # the cookie box from its first 120 frames
     assert level == logging.WARNING and words.endswith("to 0.79: more frames or views from more directions")
     assert _focal_ratio_note(1.0, 1.25)[0] == logging.WARNING
+
+
+def test_a_video_built_from_python_without_its_camera_names_the_keywords(tmp_path):
+    """The message named only the command line's --K and --camera to a caller of pose.build.main."""
+    video = tmp_path / "v.mp4"
+    video.write_bytes(b"")
+    with pytest.raises(InputError, match=r"needs the intrinsics .*in Python: K= or camera="):
+        build.main(video, tmp_path / "m.npz", box_size=(1.0, 2.0, 3.0), progress=False)
+    with pytest.raises(InputError, match=r"not both \(in Python: box_ply= or box_size=\)"):
+        build.main(video, tmp_path / "m.npz", box_size=(1.0, 2.0, 3.0), box_ply=video, progress=False)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import json
 import logging
 import os
@@ -642,7 +643,7 @@ def test_the_python_example_of_open_tracker_and_docs_pose_md_runs(tmp_path, caps
     import textwrap
 
     text = (Path(__file__).resolve().parent.parent / "docs" / "pose.md").read_text(encoding="utf-8")
-    (walkthrough,) = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    walkthrough, stages = re.findall(r"```python\n(.*?)```", text, flags=re.S)
     code = textwrap.dedent(track.open_tracker.__doc__.split("::\n", 1)[1])
     assert walkthrough.strip() == code.strip().replace("cb/model.npz", "out/cookie_box/model.npz")
     model = _planar_model(_texture(), units="cm")
@@ -660,6 +661,14 @@ def test_the_python_example_of_open_tracker_and_docs_pose_md_runs(tmp_path, caps
     assert len(lines) == 3 and not any("lost" in line for line in lines)
     t_mm = json.loads("[" + lines[0].rsplit("[", 1)[1])  # the last list printed: t in mm
     assert np.linalg.norm(np.array(t_mm) - _poses(1)[0][1].ravel()) < 6.0  # mm, as rendered
+    # the other stages' example (a build of minutes on the real data, run by hand): it names what exists, as called
+    names: dict[str, object] = {}
+    exec("\n".join(line for line in stages.splitlines() if line.startswith(("import ", "from "))), names)
+    calls = {"build": ("box_ply", "conf"), "draw_box": ("dist",), "detect_in_images": ("progress",)}
+    for name, keywords in calls.items():
+        assert set(keywords) <= set(inspect.signature(names[name]).parameters), name
+        assert all(f"{k}=" in stages for k in keywords), name
+    compile(stages, "docs/pose.md", "exec")
 
 
 def test_events_name_the_frames_of_the_source(tmp_path, caplog):
@@ -816,3 +825,12 @@ def test_the_models_camera_is_resized_to_the_frames_along_each_axis(caplog):
         used = track.camera_matrix_for(K, given, "m.npz", model_size=(640, 480), frame_size=(320, 480))
     np.testing.assert_array_equal(used, given)
     assert "differ from those" not in caplog.text
+
+
+@pytest.mark.parametrize("frame", [None, cv2.UMat(np.zeros((4, 4), np.uint8))])
+def test_a_frame_that_is_no_array_is_named_with_the_way_out(frame):
+    """`box.step(cap.read()[1])` past a video's end raised AttributeError ('NoneType' object has no attribute
+    'shape') from the size check; it names the read, as `apply()` does."""
+    box = track.open_tracker(_planar_model(_texture()), K)
+    with pytest.raises(InputError, match=r"the frame must be a numpy array, got (NoneType \(cv2.imread|UMat \(a cv2)"):
+        box.step(frame)

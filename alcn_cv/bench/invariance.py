@@ -39,7 +39,15 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import available, parse_spec
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_paths, atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
-from alcn_cv.report import command_line, describe_machine, machine, markdown_table, new_figure, save_figure
+from alcn_cv.report import (
+    can_draw,
+    command_line,
+    describe_machine,
+    machine,
+    markdown_table,
+    new_figure,
+    save_figure,
+)
 
 __all__ = ["detail", "main"]
 
@@ -163,7 +171,9 @@ def main(
         )
     out = Path(out_dir)
     make_folder(out)
+    # the figures need matplotlib, which the light install has not: without it the tables alone, said before the work
     shown = {o.name for o in objects} if figure_object == "all" else {figure_object or objects[0].name}
+    shown = shown if can_draw("alcn bench invariance") else set()
 
     rows: dict[str, dict[str, Any]] = {}
     shown_results: dict[str, dict[str, np.ndarray]] = {name: {} for name in shown}

@@ -87,7 +87,7 @@ from alcn_cv.enhance.base import Normalization
 from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import check_no_earlier_output, holds_out_dir, make_folder
-from alcn_cv.report import machine, sample_std
+from alcn_cv.report import can_draw, machine, sample_std
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -692,6 +692,7 @@ def main(
         if short:
             logger.warning("scene %s: %s: its frames hold no more", name, ", ".join(short))
     make_folder(out_dir)  # before the benchmark, not after it
+    draw = can_draw("alcn bench relight")  # said before the benchmark's minutes, not after them
 
     bar = tqdm(
         total=len(folds) * sum(len(TUNING_GRIDS[m]) for m in tuned),
@@ -797,6 +798,6 @@ def main(
         "paired_differences": paired_differences(method_results),
         "seconds": time.perf_counter() - start,
     }
-    write_report(result, Path(out_dir))
+    write_report(result, Path(out_dir), draw)
     logger.info("relight benchmark written to %s in %.0f s", out_dir, result["seconds"])
     return result

@@ -201,10 +201,11 @@ def _figure(result: dict[str, Any], path: Path) -> Path:
     return save_figure(plt, fig, path, dpi=90)
 
 
-def write_report(result: dict[str, Any], out: Path) -> None:
-    """Write ``relight.json`` (everything), ``relight.md`` (the tables) and ``relight.png`` (bars; where a method has
-    a result) into ``out``, all or none of them (:func:`~alcn_cv.io.atomic_paths`: an interrupt leaves an earlier
-    report whole); an earlier figure that this report has none for is removed."""
+def write_report(result: dict[str, Any], out: Path, draw: bool = True) -> None:
+    """Write ``relight.json`` (everything), ``relight.md`` (the tables) and, with ``draw`` (matplotlib installed:
+    :func:`~alcn_cv.report.can_draw`), ``relight.png`` (bars; where a method has a result) into ``out``, all or none
+    of them (:func:`~alcn_cv.io.atomic_paths`: an interrupt leaves an earlier report whole); an earlier figure that
+    this report has none for is removed."""
     metrics = _metrics(result)
     s, split = result["settings"], result["split"]
     scenes = ", ".join(_scene_text(n, v, s) for n, v in result["scenes"].items())
@@ -255,7 +256,7 @@ def write_report(result: dict[str, Any], out: Path) -> None:
     text += ["## Tuning (training scenes only)\n", _tuning_text(result)]
     if failures:
         text += ["## Failures\n", "\n".join(failures) + "\n"]
-    figure = any("mean_test" in r for r in result["methods"].values())
+    figure = draw and any("mean_test" in r for r in result["methods"].values())
     names = ["relight.json", "relight.md", *(["relight.png"] if figure else [])]
     # the folder made by the atomic writes; an earlier figure goes with them when this report has none
     with atomic_paths(*(out / name for name in names), stale=[out / "relight.png"]) as paths:

@@ -53,7 +53,7 @@ import numpy as np
 
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import IMAGE_SUFFIXES, eight_bits, list_images, read_image, read_mask
-from alcn_cv.shared_data import shared_data_dir
+from alcn_cv.shared_data import missing_folder, shared_data_dir
 
 __all__ = [
     "NARROW_16_BIT",
@@ -302,7 +302,7 @@ def load_scene_folder(root: str | os.PathLike, max_frames: int | None = None) ->
     """
     root = Path(root)
     if not root.is_dir():
-        raise DatasetError(f"{root}: {'not a folder' if root.exists() else 'folder not found'}")
+        raise DatasetError(missing_folder(root))
     if max_frames is not None and max_frames < 2:
         raise InputError(f"max_frames must be at least 2, got {max_frames}")
     scenes = []
@@ -400,8 +400,7 @@ def load_photometric(root: str | os.PathLike, scale: float = 1.0) -> list[Photom
     """
     root = Path(root)
     if not root.is_dir():
-        what = "not a folder" if root.exists() else "folder not found"
-        raise DatasetError(f"{root}: {what} (a photometric-stereo set: a folder of images per object)")
+        raise DatasetError(f"{missing_folder(root)}; a photometric-stereo set: a folder of images per object")
     if not 0 < scale <= 1:
         raise InputError(f"scale must be in (0, 1], got {scale}")
     objects = []
