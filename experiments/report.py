@@ -489,6 +489,12 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
     "relight_unet": lambda r: relight(
         r, "The free-form U-Net against ALCN: the same data, objective and budget (quick protocol)"
     ),
+    "relight_gain_lite_split": lambda r: relight(
+        r, "The distilled gain-lite against the default, test scenes (quick protocol, no method tuned)"
+    ),
+    "relight_gain_lite_leave_one_out": lambda r: relight(
+        r, "The distilled gain-lite against the default, leave-one-scene-out (quick protocol, no method tuned)"
+    ),
     "orb_orientation": orb_orientation,
     "directional_light": directional_light,
     "relief_training": lambda r: summary_table(

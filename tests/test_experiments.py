@@ -173,7 +173,15 @@ def test_part_runs_each_part_once_in_its_order(
     monkeypatch.setattr(sys, "argv", ["pose_planar.py", "--part", "corners", "features", "corners"])
     module.main()
     assert [c[3].rsplit("/", 1)[-1] for c in commands] == ["features", "corners"]
-    for script in ("relight", "pose_planar", "pose_table1", "relief_training", "unet_baseline", "dog_band"):
+    for script in (
+        "relight",
+        "pose_planar",
+        "pose_table1",
+        "relief_training",
+        "unet_baseline",
+        "dog_band",
+        "gain_lite",
+    ):
         source = (EXPERIMENTS / f"{script}.py").read_text(encoding="utf-8")
         assert "add_part_option(parser" in source and "selected_parts(args" in source, script
 
