@@ -31,7 +31,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from alcn_cv.errors import ALCNError, MissingDependencyError
+from alcn_cv.errors import ALCNError, InputError, MissingDependencyError
 from alcn_cv.extras import DISTRIBUTION, is_installed, missing_extra
 from alcn_cv.malloc import keep_freed_memory
 
@@ -90,7 +90,7 @@ def _add_unavailable(
         print(message, file=sys.stderr)
         return 2
 
-    parser = subparsers.add_parser(name, help=f"({why})", description=message, add_help=False)
+    parser = subparsers.add_parser(name, help=f"({why})", description=message)  # --help: the message
     parser.add_argument("arguments", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     parser.set_defaults(func=fail)
 
@@ -101,16 +101,16 @@ def command_entry_points() -> list[metadata.EntryPoint]:
 
 
 def _hiding_modules() -> list[str]:
-    """Each top-level package of alcn-cv that Python finds outside alcn-cv's installation (a module of an app or of
-    another distribution, earlier on the path), as ``"NAME at PATH"``."""
+    """Each top-level package of alcn-cv's commands that Python finds outside its own folder of alcn-cv's
+    installation (a module of an app, or another distribution's package of that name, earlier on the path), as
+    ``"NAME at PATH"``."""
     home = Path(__file__).resolve().parents[1]  # where alcn-cv's packages are installed (or checked out)
-    packages = sorted({entry.module.split(".")[0] for entry in command_entry_points()})  # the commands' packages
-    found = {package: importlib.util.find_spec(package) for package in packages}
-    return [
-        f"{package} at {spec.origin}"
-        for package, spec in found.items()
-        if spec is not None and spec.origin and not Path(spec.origin).resolve().is_relative_to(home)
-    ]
+    hiding = []
+    for package in sorted({entry.module.split(".")[0] for entry in command_entry_points()}):
+        spec = importlib.util.find_spec(package) if is_installed(package) else None
+        if spec is not None and spec.origin and not Path(spec.origin).resolve().is_relative_to(home / package):
+            hiding.append(f"{package} at {spec.origin}")
+    return hiding
 
 
 def _add_commands(subparsers: argparse._SubParsersAction) -> None:
@@ -122,7 +122,7 @@ def _add_commands(subparsers: argparse._SubParsersAction) -> None:
             if entry.name in subparsers.choices:  # failed after listing itself: a bug of its parser
                 raise
             package = entry.module.split(".")[0]
-            if importlib.util.find_spec(package) is None:  # its own package is not in this build
+            if not is_installed(package):  # its own package is not in this build
                 logger.debug("alcn %s: %s is not installed", entry.name, package)
                 continue
             if isinstance(exc, ModuleNotFoundError) and (error := missing_extra(exc, f"alcn {entry.name}", entry.name)):
@@ -131,11 +131,13 @@ def _add_commands(subparsers: argparse._SubParsersAction) -> None:
                 )
                 continue
             # the packages on top of alcn_cv are top-level ones: a module of the same name earlier on the path (an
-            # app's own module) hides them, and the other commands still run
+            # app's own module) hides them, and the other commands still run; any other import error is a bug
             hiding = _hiding_modules()
-            cause = f": {', '.join(hiding)} hides alcn-cv's" if hiding else ""
+            if not hiding:
+                raise
             message = (
-                f"alcn {entry.name}: cannot import {entry.module} ({exc}){cause} (alcn --debug shows the traceback)"
+                f"alcn {entry.name}: cannot import {entry.module} ({exc}): {', '.join(hiding)} hides alcn-cv's "
+                "(alcn --debug shows the traceback)"
             )
             _add_unavailable(subparsers, entry.name, "cannot be imported here", message, exc)
 
@@ -189,6 +191,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--version", action=_VersionAction, help="show the versions of alcn-cv, OpenCV, NumPy (and torch) and exit"
     )
     parser.add_argument("--debug", action="store_true", help="print full tracebacks on errors, and OpenCV's warnings")
+    parser.add_argument(
+        "--import",
+        dest="imports",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="import MODULE (a module name, or a .py file) before the command, repeatable: a module that registers "
+        "normalizations of its own (alcn_cv.register) makes them methods of every command, e.g. `alcn --import "
+        "my_methods.py bench relight --methods none,mine,alcn`; a report's command records it",
+    )
     parser.add_argument(
         "-v", "--verbose", action="store_true", help="log debug messages, and OpenCV's and FFmpeg's warnings"
     )
@@ -453,6 +465,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         quiet = not (args.verbose or args.debug)
         with sigterm_as_interrupt(args.command), ffmpeg_fatal_only(not args.verbose), opencv_errors_only(quiet):
+            for module in args.imports:
+                import_module(module)
             result = args.func(args)
     except KeyboardInterrupt as exc:
         print(f"alcn: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
@@ -470,6 +484,29 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError as exc:  # NumPy's says how much, for what shape: the input (or a size asked) too large
         return _failed(f"{prog}: error: out of memory ({exc or 'no details'})", args.debug)
     return int(result or 0)
+
+
+def import_module(module: str) -> None:
+    """Import ``module``, a module's name or a ``.py`` file's path (``alcn --import``), as a program importing it
+    would: a file is imported under its own name, its folder first on the path (for the modules beside it).
+
+    Raises:
+        InputError: the module or the file is not found (a failure inside the module propagates as it is).
+    """
+    path = Path(module).expanduser()
+    if module.endswith(".py") or os.sep in module:
+        if not path.is_file():
+            raise InputError(f"--import {module}: no such file")
+        sys.path.insert(0, str(path.resolve().parent))
+        module = path.stem
+    try:
+        importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        if exc.name != module:  # a module that the imported one needs: its own error, as it is
+            raise
+        raise InputError(
+            f"--import {module}: no module named {module!r} (give a .py file's path, or set PYTHONPATH)"
+        ) from None
 
 
 def run_script(main: Callable[[], object]) -> None:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import datetime
-import importlib.util
 import logging
 import os
 import platform
@@ -16,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from alcn_cv.extras import is_installed
 from alcn_cv.io import atomic_path
 from alcn_cv.malloc import kept_freed_memory
 
@@ -104,11 +104,14 @@ def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]], digits
 
 
 def machine() -> dict[str, Any]:
-    """The machine a benchmark ran on: CPU, cores, load, Python and library versions."""
+    """The machine a benchmark ran on: CPU, cores, load, Python and library versions (alcn-cv's included)."""
     import cv2
     import numpy as np
 
+    from alcn_cv import __version__  # the package itself, imported by now (here, not at the top: it imports this)
+
     info: dict[str, Any] = {
+        "alcn_cv": __version__,
         "platform": platform.platform(),
         "processor": platform.processor() or platform.machine(),
         "cpu_count": os.cpu_count(),
@@ -213,7 +216,7 @@ def command_line(words: Sequence[str], options: dict[str, Any]) -> str:
 def can_draw(command: str) -> bool:
     """Whether matplotlib is installed, for a benchmark of the light install (``command``, named in the warning it
     logs when not) that writes its tables without it and its figures with it."""
-    if importlib.util.find_spec("matplotlib") is not None:
+    if is_installed("matplotlib"):
         return True
     logger.warning("%s: matplotlib is not installed, so the report has no figure (pip install matplotlib)", command)
     return False

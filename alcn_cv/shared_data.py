@@ -9,6 +9,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from alcn_cv.errors import DatasetError
+
 ENV_VAR = "ALCN_SHARED_DATA"
 
 
@@ -24,10 +26,21 @@ def shared_data_dir() -> Path:
 
 
 def missing_folder(path: str | os.PathLike) -> str:
-    """``"PATH: folder not found"`` (or ``not a folder``), and where ``path`` is one of the shared data's folders (a
-    default), how to give another: ``--data`` or :data:`ENV_VAR`."""
+    """``"PATH: folder not found"`` (or ``not a folder``)."""
     path = Path(path)
-    what = f"{path}: {'not a folder' if path.exists() else 'folder not found'}"
-    if path.resolve().is_relative_to(shared_data_dir().resolve()):
-        what += f" (the shared data's {path.name}: give --data DIR, or set {ENV_VAR} to the folder that holds it)"
-    return what
+    return f"{path}: {'not a folder' if path.exists() else 'folder not found'}"
+
+
+def default_folder(name: str) -> Path:
+    """The shared data's folder ``name`` (``webcam``, ``psm``), a command's data when none is given.
+
+    Raises:
+        DatasetError: it is not a folder; the message says how to give another (``--data``, :data:`ENV_VAR`).
+    """
+    path = shared_data_dir() / name
+    if not path.is_dir():
+        raise DatasetError(
+            f"{missing_folder(path)} (the default {name} data: give --data DIR, or set {ENV_VAR} to the folder "
+            f"that holds {name}/)"
+        )
+    return path

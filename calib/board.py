@@ -100,6 +100,9 @@ class BoardSpec:
         sizes = (self.square, self.marker)
         if not all(isinstance(s, numbers.Real) and not isinstance(s, bool) for s in sizes):
             raise InputError(f"square and marker are sizes in mm: numbers, got {self.square!r} and {self.marker!r}")
+        # Python's own numbers (a NumPy scalar given is not JSON, which views.json is written in)
+        for name, kind in (("cols", int), ("rows", int), ("square", float), ("marker", float)):
+            object.__setattr__(self, name, kind(getattr(self, name)))
         minimum = 2 if self.kind == "chessboard" else 3
         if self.cols < minimum or self.rows < minimum:
             raise InputError(f"a {self.kind} needs at least {minimum}x{minimum} {counted}, got {self.cols}x{self.rows}")

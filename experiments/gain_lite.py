@@ -4,7 +4,7 @@ scenes and leaving one webcam scene out; DLCN and `none` beside them.
 
 Data: ../shared/data/webcam (academic research only) and ../shared/data/psm.
 
-    python experiments/gain_lite.py                  # both parts, about 10 min on 2 cores
+    python experiments/gain_lite.py                  # both parts, about 3 min on 2 cores
     python experiments/gain_lite.py --part split     # or: leave_one_out
 
 Writes runs/gain_lite/{split,leave_one_out}/relight.{md,json,png}; keeps docs/reports/relight_gain_lite_<part>.json.
@@ -12,7 +12,7 @@ Writes runs/gain_lite/{split,leave_one_out}/relight.{md,json,png}; keeps docs/re
 
 from __future__ import annotations
 
-from _run import RUNS, add_part_option, alcn, command_line, keep, quick_protocol, selected_parts
+from _run import RUNS, add_part_option, command_line, keep, selected_parts, short_relight
 
 from alcn_cv.cli import SEED, run_script
 
@@ -25,11 +25,9 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", type=SEED, default=[0, 1, 2], help="sampling seeds (default: 0 1 2)")
     add_part_option(parser, PARTS)
     args = parser.parse_args()
-    seeds, quick = [str(seed) for seed in args.seeds], quick_protocol()
     for part in selected_parts(args, PARTS):
         out = RUNS / "gain_lite" / part
-        methods = ["--methods", ",".join(METHODS), "--no-tune"]
-        alcn("bench", "relight", "--out", str(out), "--overwrite", *methods, "--seeds", *seeds, *PARTS[part], *quick)
+        short_relight(out, METHODS, args.seeds, PARTS[part])
         keep(out / "relight.json", f"relight_gain_lite_{part}")
 
 

@@ -49,12 +49,12 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from alcn_cv.data.scenes import Scene, load_scene_folder, select_scenes, shared_root
+from alcn_cv.data.scenes import Scene, load_scene_folder, select_scenes
 from alcn_cv.enhance.registry import from_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import atomic_write, holds_out_dir, make_folder, to_gray, write_json
 from alcn_cv.report import describe_machine, machine, markdown_table, nan_to_none, new_figure, save_figure
-from alcn_cv.shared_data import missing_folder
+from alcn_cv.shared_data import default_folder, missing_folder
 from pose.corner_train import CONFS as CORNER_CONFS
 from pose.corner_train import CornerRecipe
 from pose.evaluate import PROJ_PX, score, table_markdown
@@ -378,7 +378,7 @@ def main(
     ``planar_pose.md``, ``planar_pose.json``, ``planar_pose.png`` and ``targets.png`` (and the
     learned detectors, ``corners_<reference>_<normalization>.onnx``, trained by ``recipe``, default the
     ``planar`` preset) into ``out_dir``."""
-    root = Path(data) if data is not None else shared_root("webcam")
+    root = Path(data) if data is not None else default_folder("webcam")
     if not root.is_dir():
         raise DatasetError(missing_folder(root))
     all_scenes = load_scene_folder(root, max_frames)

@@ -600,7 +600,7 @@ class BoxTracker:
     def check_size(self, frame: np.ndarray, what: str = "the frame is") -> None:
         """Raise :class:`InputError` when ``frame`` is not an image of :attr:`image_size` (``what`` begins the
         message)."""
-        check_array(frame, "the frame")
+        check_array(frame, what.rsplit(" ", 1)[0])  # "the frame is" -> "the frame"
         if self.image_size is not None:
             model = self.camera == "model"
             of = f"the camera of {self.name}" if model else "the calibration"

@@ -13,6 +13,7 @@ import pytest
 from alcn_cv.bench import relight, relight_settings
 from alcn_cv.cli import main as cli_main
 from alcn_cv.errors import InputError
+from alcn_cv.shared_data import ENV_VAR
 from alcn_cv.weight_file import load_normalizer_file, save_normalizer_file
 from scene_sets import texture
 
@@ -78,7 +79,7 @@ def test_the_shared_default_split_is_kept_and_test_scenes_alone_are_alone(tmp_pa
     shared = tmp_path / "shared"
     own_scenes(shared / "webcam", ("courbevoie", "frankfurt", "panorama", "mexico"))
     own_scenes(shared / "psm", ("ball",))
-    monkeypatch.setattr(relight, "shared_root", lambda name: shared / name)
+    monkeypatch.setenv(ENV_VAR, str(shared))
     split = bench(tmp_path, "--no-tune", "--methods", "none")["split"]
     assert split == {"mode": "train/test", "train": ["courbevoie", "frankfurt", "panorama"], "test": ["mexico", "ball"]}
     saved = bench(tmp_path, "--test-scenes", "mexico", "--no-tune", "--methods", "none")

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import cv2
@@ -104,3 +105,11 @@ def test_the_printed_chessboard_starts_with_a_black_square(tmp_path):
     margin = (info["image_size_px"][0] - spec.squares[0] * square) // 2
     assert image[margin + square // 2, margin + square // 2] == 0
     assert image[margin + square // 2, margin + square + square // 2] == 255
+
+
+def test_numpy_counts_and_sizes_become_pythons_own(tmp_path):
+    """A board of NumPy scalars (counts read from an array, say) was taken as it was, and the calibration's
+    views.json then failed to be written (an int64 is not JSON)."""
+    spec = BoardSpec(kind="chessboard", cols=np.int64(9), rows=np.int32(6), square=np.float32(25.0))
+    assert [type(v) for v in (spec.cols, spec.rows, spec.square, spec.marker)] == [int, int, float, float]
+    assert json.loads(json.dumps(dataclasses.asdict(spec)))["cols"] == 9

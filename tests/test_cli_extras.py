@@ -124,9 +124,24 @@ def test_an_apps_own_calib_module_leaves_the_other_commands_running(tmp_path):
     listed = run([*alcn, "normalize", "--list"])
     assert listed.returncode == 0 and "tantriggs" in listed.stdout, listed.stderr
     assert "    pose            (cannot be imported here)" in run([*alcn, "--help"]).stdout
+    said = run([*alcn, "calib", "--help"])  # argparse refused its --help ("unrecognized arguments")
+    assert said.returncode == 0 and "hides alcn-cv's" in said.stdout, said.stderr
     for command in (["calib", "camera"], ["pose", "track", "m.npz", "v.mp4", "p.json"]):
         proc = run([*alcn, *command])
         assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
         line = proc.stderr.strip()
         assert line.startswith(f"alcn {command[0]}: cannot import {command[0]}.cli (") and "\n" not in line
         assert line.endswith(f"calib at {tmp_path / 'calib.py'} hides alcn-cv's (alcn --debug shows the traceback)")
+
+
+def test_a_bug_importing_a_commands_module_keeps_its_traceback(monkeypatch):
+    """Only a module hiding one of alcn-cv's packages makes a command unavailable: an import error of alcn-cv's own
+    (a helper renamed) raises, as at run time, where it was listed as "(cannot be imported here)"."""
+    from importlib import metadata
+
+    from alcn_cv import cli
+
+    broken = metadata.EntryPoint("normalize", "alcn_cv.commands.no_such_module:add_parser", cli.COMMANDS_GROUP)
+    monkeypatch.setattr(cli, "command_entry_points", lambda: [broken])
+    with pytest.raises(ImportError, match="no_such_module"):
+        cli.build_parser()

@@ -41,7 +41,13 @@ def _kept(name: str) -> dict[str, Any]:
 
 @pytest.mark.parametrize(
     ("script", "name"),
-    [("relight", "relight_split"), ("relight", "relight_leave_one_out"), ("learning", "relight_learning")],
+    [
+        ("relight", "relight_split"),
+        ("relight", "relight_leave_one_out"),
+        ("learning", "relight_learning"),
+        ("gain_lite", "relight_gain_lite_split"),
+        ("gain_lite", "relight_gain_lite_leave_one_out"),
+    ],
 )
 def test_the_rerun_line_runs_the_published_command(
     experiments: types.ModuleType,
@@ -56,7 +62,9 @@ def test_the_rerun_line_runs_the_published_command(
     module = importlib.import_module(script)
     commands: list[tuple[str, ...]] = []
     monkeypatch.setattr(module, "RUNS", tmp_path)
-    monkeypatch.setattr(module, "alcn", lambda *argv: commands.append(("alcn", *argv)))
+    for runs in (module, experiments):  # the script's own calls, and _run.short_relight's
+        if hasattr(runs, "alcn"):
+            monkeypatch.setattr(runs, "alcn", lambda *argv: commands.append(("alcn", *argv)))
     monkeypatch.setattr(module, "keep", lambda *args, **kwargs: None)
     if hasattr(module, "untrained_start"):
         monkeypatch.setattr(module, "untrained_start", lambda trained, path, description: Path(path))

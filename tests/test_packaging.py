@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -50,3 +51,13 @@ def test_the_sdist_and_the_wheel_carry_the_package_its_types_and_its_licence_exp
     assert {"alcn_cv/py.typed", f"alcn_cv-{version}.dist-info/licenses/LICENSE"} <= names
     assert f"\nVersion: {version}\n" in metadata and "\nLicense-Expression: Apache-2.0\n" in metadata
     assert "\nLicense: " not in metadata and "Typing :: Typed" in metadata
+
+
+def test_the_documents_give_the_packages_version():
+    """The version is alcn_cv.__version__ (pyproject.toml reads it); CITATION.cff and the README's wheel name give
+    it too."""
+    version = alcn_cv.__version__
+    citation = (ROOT / "CITATION.cff").read_text(encoding="utf-8")
+    assert re.search(rf"^version: \"?{re.escape(version)}\"?$", citation, flags=re.M), "CITATION.cff"
+    wheels = set(re.findall(r"alcn_cv-([\w.]+)-py3-none-any\.whl", (ROOT / "README.md").read_text(encoding="utf-8")))
+    assert wheels == {version}, wheels

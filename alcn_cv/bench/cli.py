@@ -282,7 +282,8 @@ def _add_invariance(subparsers: argparse._SubParsersAction) -> None:
         help="agreement of normalized real photographs under different lights",
         description="For each object of a photometric-stereo folder, normalize its photographs under every "
         "light with each method and report their agreement inside the object mask (mean pairwise normalized "
-        "cross-correlation) beside the detail they keep; writes invariance.md, invariance.json and a figure.",
+        "cross-correlation) beside the detail they keep; writes invariance.md, invariance.json and (with "
+        "matplotlib) a figure.",
     )
     p.add_argument(
         "--data", required=True, type=Path, help="folder of NAME/NAME.<i>.png + NAME.mask.png (e.g. ../shared/data/psm)"
@@ -439,7 +440,8 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         description="Normalize the registered frames of fixed-camera scenes under different light with each "
         "method's apply(), then score patch identification (NCC), ORB/SIFT matching and RANSAC-homography pose "
         "between frames; CLAHE, DoG, SLCN, DLCN, SQI, Tan-Triggs and DoG+lstd are tuned on the training scenes only. "
-        "Writes relight.md, relight.json and relight.png, with each method's difference from the first, paired by "
+        "Writes relight.md, relight.json and (with matplotlib) relight.png, with each method's difference from the "
+        "first, paired by "
         "seed. The default runs "
         f"{len(relight.DEFAULT_METHODS)} methods, seeds {' '.join(map(str, relight.DEFAULT_SEEDS))}, with tuning, "
         "at the sampling sizes of --conf (listed below), which --max-frames, --patches and --max-pairs override; "

@@ -16,7 +16,7 @@ Expected layout (``../shared/data/psm``; :func:`~alcn_cv.data.scenes.load_photom
 :func:`~alcn_cv.data.scenes.mean_pairwise_ncc`.
 
 Outputs in ``out_dir``: ``invariance.json`` (every number, the settings and the machine),
-``invariance.md`` (the table) and ``invariance_<object>.png`` (the object under every light for
+``invariance.md`` (the table) and, with matplotlib, ``invariance_<object>.png`` (the object under every light for
 every method, each shown through the method's fixed output mapping, as ``apply`` gives it).
 """
 
@@ -117,7 +117,7 @@ def main(
     progress: bool = True,
     overwrite: bool = False,
 ) -> dict[str, Any]:
-    """Run the invariance benchmark and write its table, JSON and figure.
+    """Run the invariance benchmark and write its table, JSON and (with matplotlib) figure.
 
     Args:
         data_dir: photometric-stereo folder (see the module docstring), e.g. ``../shared/data/psm``.

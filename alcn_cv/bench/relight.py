@@ -80,7 +80,6 @@ from alcn_cv.data.scenes import (
     load_scenes,
     scene_names,
     select_scenes,
-    shared_root,
 )
 from alcn_cv.enhance.alcn import ALCN
 from alcn_cv.enhance.base import Normalization
@@ -88,6 +87,7 @@ from alcn_cv.enhance.registry import format_spec, from_spec, parse_spec
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.io import check_no_earlier_output, holds_out_dir, make_folder
 from alcn_cv.report import can_draw, machine, sample_std
+from alcn_cv.shared_data import default_folder
 
 __all__ = [
     "DEFAULT_METHODS",
@@ -604,7 +604,8 @@ def main(
     command: str | None = None,
     overwrite: bool = False,
 ) -> dict[str, Any]:
-    """Run the benchmark and write ``relight.md``, ``relight.json`` and ``relight.png`` into ``out_dir``.
+    """Run the benchmark and write ``relight.md``, ``relight.json`` and (with matplotlib) ``relight.png`` into
+    ``out_dir``.
 
     Args:
         out_dir: output folder (created).
@@ -647,7 +648,7 @@ def main(
     built = build_methods(methods, build_method)
     trained_on = {spec: trained_scenes(spec, norm) for spec, norm in built.items()}
     seeds = check_seeds(seeds)
-    roots = [Path(p) for p in data] if data else [shared_root("webcam"), shared_root("psm")]
+    roots = [Path(p) for p in data] if data else [default_folder("webcam"), default_folder("psm")]
     scenes = load_scenes(roots, max_frames)
     tuned = [m for m in methods if m in TUNING_GRIDS] if tuning else []
     if leave_one_out is not None:

@@ -141,11 +141,20 @@ def _tuning_text(result: dict[str, Any]) -> str:
                 ]
             )
     s = result["settings"]
+    grids = s["tuning_grids"]
+    sizes = {len(grid) for grid in grids.values()}
+    counted = (
+        f"{sizes.pop()} settings"
+        if len(sizes) == 1
+        else f"settings ({', '.join(f'{method} {len(grid)}' for method, grid in grids.items())})"
+    )
+    untuned = [label for label in result["methods"] if not label.endswith(" (tuned)") and label not in grids]
     text = (
-        f"Each method's {len(next(iter(s['tuning_grids'].values())))} settings (`relight.json`: settings.tuning_grids) "
-        f"scored by identification on {s['tune_frames']} evenly spaced frames of each training scene (all of a scene "
-        f"that has fewer; seed "
-        f"{s['tune_seed']}); the first best setting is chosen.\n\n"
+        f"Each method's {counted} (`relight.json`: settings.tuning_grids) scored by identification on "
+        f"{s['tune_frames']} evenly spaced frames of each training scene (all of a scene that has fewer; seed "
+        f"{s['tune_seed']}); the first best setting is chosen."
+        + (f" Not tuned (no grid): {', '.join(f'`{m}`' for m in untuned)}." if untuned else "")
+        + "\n\n"
     )
     headers = (
         ["method"] + (["tuned on"] if loo else []) + ["chosen", "identification %", "default's %", "range over grid"]

@@ -68,7 +68,22 @@ class Normalization:
     full output range (values outside are clipped). :attr:`summary` and :attr:`reference`
     describe the method in ``alcn normalize --list`` (default: the first line of the class
     docstring, and no reference); a method that looks at a window of the image sets
-    :attr:`min_size`, its side in input pixels.
+    :attr:`min_size`, its side in input pixels. Its parameters are its constructor's keywords, with
+    defaults and type hints, kept as attributes of the same names (its ``repr`` and spec show them).
+
+    Example, a method of one's own (:func:`~alcn_cv.enhance.registry.register` makes it ``create("gamma")`` and a
+    method of every command, given ``alcn --import MODULE``):
+
+        >>> class Gamma(Normalization):
+        ...     \"\"\"A gamma curve.\"\"\"
+        ...     name = "gamma"
+        ...     def __init__(self, gamma: float = 0.5) -> None:
+        ...         self.gamma = gamma
+        ...     def _normalize(self, gray: np.ndarray) -> np.ndarray:
+        ...         return gray**self.gamma
+        >>> Gamma().apply(np.full((2, 3), 64, np.uint8))
+        array([[128, 128, 128],
+               [128, 128, 128]], dtype=uint8)
     """
 
     name: ClassVar[str] = ""
@@ -105,10 +120,19 @@ class Normalization:
         return self._normalize_checked(check_gray(gray))
 
     def _normalize_checked(self, gray: np.ndarray) -> np.ndarray:
-        """:meth:`normalize` on an image already known to be a finite float32 ``HxW`` one."""
+        """:meth:`normalize` on an image already known to be a finite float32 ``HxW`` one: :meth:`_normalize` sees it
+        read-only (the caller's array, which a method must not change), and must return an ``HxW`` response."""
         self._warn_if_small(gray.shape)
-        out = self._normalize(gray)
-        return np.asarray(out, dtype=np.float32)
+        seen = gray.view()
+        seen.flags.writeable = False
+        out = np.asarray(self._normalize(seen), dtype=np.float32)
+        if out.shape != gray.shape:
+            raise InputError(
+                f"{self.name or type(self).__name__} returned a response of shape {out.shape} for an image of "
+                f"{gray.shape}: its _normalize must return one value per pixel, (H, W)"
+            )
+        # a response that is the image itself (none's) is the caller's array: a copy, writable as any response
+        return out.copy() if np.may_share_memory(out, gray) else out
 
     def _warn_if_small(self, shape: tuple[int, ...]) -> None:
         """Log, once per class, that an image is smaller than the method's window."""
@@ -124,6 +148,12 @@ class Normalization:
             )
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
+        """The method itself: the raw response of a ``(H, W)`` float32 image of intensities in [0, 1] (a colour
+        image's CIE L / 100), read-only, as a ``(H, W)`` float array, typically within :attr:`output_range`.
+
+        A subclass implements it; :meth:`apply` and :meth:`normalize` do the rest (dtypes, colour, alpha, strips,
+        the output map). It keeps nothing from one image to the next (a benchmark normalizes every image of a run
+        with one instance)."""
         raise NotImplementedError
 
     def normalize_windows(self, windows: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ast
 import inspect
+import math
 import numbers
 import re
 import types
@@ -39,12 +40,42 @@ _REGISTRY: dict[str, type[Normalization]] = {}
 N = TypeVar("N", bound=type[Normalization])
 
 
+#: A registered name: one word of a spec, and not a bench's composite (``dog+lstd``) or a list (``none,dog``).
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_.-]*")
+
+
 def register(cls: N) -> N:
-    """Class decorator adding a :class:`Normalization` subclass under its ``name``."""
+    """Class decorator adding a :class:`Normalization` subclass under its ``name``: then :func:`create` builds it by
+    name or spec, and every command takes it as a method once its module is imported (``alcn --import MODULE``).
+
+    A class of the same module and name registered again (a module reloaded, a notebook's cell run again) replaces
+    the earlier one.
+
+    Raises:
+        TypeError: not a :class:`Normalization` subclass; no ``name``, one that a spec cannot hold (letters, digits,
+            ``_``, ``-`` and ``.``, a letter first) or one another class holds; an ``output_range`` that is not two
+            finite numbers, the first the smaller.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, Normalization)):
+        raise TypeError(f"{getattr(cls, '__name__', cls)!r} is not a subclass of alcn_cv.Normalization")
     if not cls.name:
         raise TypeError(f"{cls.__name__} has no name to register under")
-    if cls.name in _REGISTRY and _REGISTRY[cls.name] is not cls:
-        raise TypeError(f"normalization {cls.name!r} is already registered by {_REGISTRY[cls.name].__name__}")
+    if not _NAME.fullmatch(cls.name):
+        raise TypeError(f"{cls.__name__}: {cls.name!r} cannot name a method (letters, digits, _ - ., a letter first)")
+    bounds = cls.output_range  # a class's own; an instance may set another (ALCN's, from its weight file)
+    finite = [isinstance(b, numbers.Real) and math.isfinite(b) for b in bounds] if isinstance(bounds, tuple) else []
+    if finite != [True, True] or not bounds[0] < bounds[1]:
+        raise TypeError(f"{cls.__name__}: output_range must be two finite numbers (low, high), got {bounds!r}")
+    held = _REGISTRY.get(cls.name)
+    if (
+        held is not None
+        and held is not cls
+        and (held.__module__, held.__qualname__) != (cls.__module__, cls.__qualname__)
+    ):
+        raise TypeError(
+            f"normalization {cls.name!r} is already registered by {held.__module__}.{held.__qualname__}: give "
+            f"{cls.__module__}.{cls.__qualname__} another name"
+        )
     _REGISTRY[cls.name] = cls
     return cls
 

@@ -138,13 +138,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="distil a light Normalizer from a trained one",
         description="Train a LiteNormalizer to reproduce the paper-model Normalizer's mixture weights on rendered "
         "windows (--conf lite), or a smaller gain Normalizer to reproduce the gain Normalizer's maps on relit "
-        "photographs with no known restriction on use (--conf gain-lite) "
-        "(alcn_cv.train.distill); writes the weight file and its model card (.md beside it), which records this "
-        "command, and for a gain student its ONNX export. The shipped alcn_normalizer_lite.npz is `alcn distill "
-        "--conf lite --out alcn_cv/weights/alcn_normalizer_lite.npz --overwrite`, alcn_normalizer_gain_lite.npz the "
-        "same with --conf gain-lite (its terms: those of the photographs, any use); that replaces the shipped card "
-        "with the one generated (git shows what the hand-edited card added). To compare with a shipped file, "
-        "write to another --out.",
+        "photographs with no known restriction on use (--conf gain-lite) (alcn_cv.train.distill); writes the weight "
+        "file, its ONNX export (.onnx) and its model card (.md), beside each other, the command recorded in the "
+        "header and the card. The shipped alcn_normalizer_lite.npz is `alcn distill --conf lite --out "
+        "alcn_cv/weights/alcn_normalizer_lite.npz --overwrite`, alcn_normalizer_gain_lite.npz the same with --conf "
+        "gain-lite (its terms: those of the photographs, any use); that replaces the shipped card with the one "
+        "generated (git shows what the hand-edited card added). To compare with a shipped file, write to another "
+        "--out.",
     )
     add_conf_option(s, DISTILL_CONF_SUMMARIES, None, required=True, example="teacher=FILE")
     s.add_argument(
