@@ -22,7 +22,7 @@ from alcn_cv.cli import (
 )
 from alcn_cv.errors import InputError
 from alcn_cv.presets import print_config
-from alcn_cv.report import typed_command
+from alcn_cv.report import machine, typed_command
 
 
 def _intrinsics(values: list[float] | None) -> np.ndarray | None:
@@ -182,6 +182,7 @@ def _train_corners(args: argparse.Namespace) -> int:
         seed=args.seed,
         device=args.device,
         conf=args.conf,
+        command=typed_command(args.argv),
         overwrite=args.overwrite,
         progress=not args.no_progress,
     )
@@ -446,7 +447,7 @@ def _corner_recall(args: argparse.Namespace) -> int:
             f"{100 * r['candidates']:.0f}%, in the gates of the true pose {100 * r['gated']:.0f}%; background "
             f"scored higher {100 * r['background_wins']:.0f}%"
         )
-        results.append(r)
+        results.append({**r, "command": typed_command(args.argv), "machine": machine()})
     with atomic_paths(*reports) as paths:  # one per background, all or none
         for path, r in zip(paths, results):
             write_json(path, r)

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from tqdm import tqdm
 
+from alcn_cv import report
 from alcn_cv.enhance.alcn import pin_default_model
 from alcn_cv.errors import InputError
 from alcn_cv.io import atomic_write, check_no_earlier_output, output_path, with_suffix
@@ -322,6 +323,7 @@ def train_corners(
     seed: int = 0,
     device: str | None = None,
     conf: str | None = None,
+    command: str = "",
     progress: bool = True,
 ) -> Path:
     """Train the corner detector of a box on a registered sequence and export it to ``out`` (``.onnx``).
@@ -331,7 +333,8 @@ def train_corners(
             reads; the BOP ``mask_visib`` is used when present).
         corners: ``(8, 3)`` box corners in the object (world) frame, in ``units``.
         out: the ``.onnx`` file to write.
-        recipe: the recipe (default: ``CONFS["box"]``); ``conf``: its preset's name, recorded with it.
+        recipe: the recipe (default: ``CONFS["box"]``); ``conf``: its preset's name, recorded with it, and
+            ``command``, the command line that makes it again (:func:`alcn_cv.report.provenance`).
         normalization: the normalization spec applied first (stored in the file; tracking uses the same).
         seed, device: of the frames and :func:`fit`.
 
@@ -371,6 +374,7 @@ def train_corners(
         seed=seed,
         device=device,
         conf=conf,
+        command=command,
         progress=progress,
     )
 
@@ -388,12 +392,13 @@ def fit_and_export(
     seed: int = 0,
     device: str | None = None,
     conf: str | None = None,
+    command: str = "",
     progress: bool = True,
 ) -> Path:
     """Train a :class:`pose.corner_net.CornerNet` for ``parts (n, 3)`` on ``frames`` (:func:`fit`)
-    and export it (:func:`export_onnx`) with its metadata: the whole ``recipe``, ``conf``, the
-    normalization, ``corners (8, 3)`` in ``units`` and ``provenance`` (``source``, ``views``,
-    ``data_seconds``) with the fit's record."""
+    and export it (:func:`export_onnx`) with its metadata: the whole ``recipe``, how it was made (``command``,
+    ``conf``, the machine and the date: :func:`alcn_cv.report.provenance`), the normalization, ``corners (8, 3)`` in
+    ``units`` and ``provenance`` (``source``, ``views``, ``data_seconds``) with the fit's record."""
     import torch
 
     from pose.corner_net import CornerNet
@@ -418,7 +423,7 @@ def fit_and_export(
         "pad": PAD,
         "config": net.config,
         "source": provenance.get("source", ""),
-        "conf": conf,
+        **report.provenance(command, conf),
         "recipe": dataclasses.asdict(recipe),
         "fit": {
             "frames": len(frames.labels),

@@ -498,6 +498,9 @@ def test_train_corners_lowers_the_loss(posedata, tmp_path):
     meta = pc.read_metadata(onnx)
     assert meta["normalization"] == "none" and meta["fit"]["final_loss"] < meta["fit"]["first_loss"]
     assert meta["fit"]["device"] == "cpu" and meta["conf"] == "box"
+    # how it was made, as the Normalizers' weight files record it (it recorded the preset alone)
+    assert meta["command"].startswith("alcn pose train-corners ") and "--set iterations=12" in meta["command"]
+    assert meta["date"].endswith(" UTC") and meta["machine"]["cpu_count"] >= 1
     # the recipe is recorded whole: the preset with the settings
     expected = corner_train.CornerRecipe(iterations=12, copies=0, batch_size=24)
     assert meta["recipe"] == json.loads(json.dumps(dataclasses.asdict(expected)))
@@ -746,6 +749,8 @@ def test_corner_recall_against_the_true_corners(posedata, random_net, tmp_path, 
     assert "grey background" in capsys.readouterr().out
     grey = json.loads((tmp_path / "corner_recall_grey.json").read_text())
     assert grey["background"] == "grey" and grey["visible"] == r["visible"]
+    # what was measured, where: as every report records them (it recorded neither)
+    assert grey["command"].startswith("alcn pose corner-recall ") and grey["machine"]["cpu_count"] >= 1
 
 
 def test_table1_rows_of_the_corner_detector(posedata, tmp_path):
