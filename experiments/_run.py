@@ -190,6 +190,36 @@ def write_for_keeping(report: str | Path, name: str, out: str | Path, script: st
     return path
 
 
+def install_metadata(site: str | Path) -> Path | None:
+    """Where alcn-cv is not installed (a bare GPU machine, running the checkout from ``PYTHONPATH``), write its
+    metadata into ``site``, a folder on the path: the ``alcn`` command finds its subcommands as entry points of the
+    installed distribution (``pyproject.toml``'s), and without them has none. Returns the ``.dist-info`` folder
+    written, or None where alcn-cv's commands are found already."""
+    import ast
+    import tomllib
+    from importlib import metadata
+
+    if metadata.entry_points(group="alcn_cv.commands"):
+        return None
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    module = ast.parse((ROOT / "alcn_cv" / "__init__.py").read_text(encoding="utf-8"))
+    version = next(
+        ast.literal_eval(node.value)
+        for node in module.body
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__version__" for t in node.targets)
+    )
+    groups = {"console_scripts": project["scripts"], **project["entry-points"]}
+    dist = Path(site) / f"{project['name'].replace('-', '_')}-{version}.dist-info"
+    dist.mkdir(parents=True, exist_ok=True)
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {version}\n")
+    entries = [
+        f"[{group}]\n" + "".join(f"{name} = {target}\n" for name, target in items.items())
+        for group, items in groups.items()
+    ]
+    (dist / "entry_points.txt").write_text("\n".join(entries), encoding="utf-8")
+    return dist
+
+
 def publish(path: str | Path, replace: bool = False) -> Path:
     """Copy a report :func:`write_for_keeping` wrote (``<name>.json``, its record made where it ran) to
     ``docs/reports/<name>.json``: only over a published report of the same commands, or with ``replace``

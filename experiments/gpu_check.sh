@@ -39,6 +39,21 @@ if ! "$PY" -c "import kornia" 2> /dev/null; then
     exit 2
   fi
 fi
+# the `alcn` command's subcommands are entry points of an installed alcn-cv, which a bare machine running the
+# checkout from PYTHONPATH has not: its metadata written into $SITE (nothing where alcn-cv is installed)
+if ! "$PY" - "$SITE" <<'PY'
+import sys
+
+sys.path.insert(0, "experiments")
+from _run import install_metadata
+
+if (written := install_metadata(sys.argv[1])) is not None:
+    print(f"gpu_check: alcn-cv is not installed here: its commands from {written}")
+PY
+then
+  echo "gpu_check: alcn-cv's commands could not be set up (above)" >&2
+  exit 2
+fi
 {
   nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>&1
   "$PY" - <<'PY'

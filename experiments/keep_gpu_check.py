@@ -2,7 +2,7 @@
 in $GPU_CHECK_OUT (the folder that comes back), speed_gpu.json, its bench's report as published (recorded as the
 shell script's run, the run folder written OUT); this copies it to docs/reports/speed_gpu.json (experiments/report.py
 renders it). A report of another command than the published one's replaces it only with --keep; the CPU
-rehearsal's (DEVICE=cpu) measured no GPU and is refused.
+rehearsal's (DEVICE=cpu) measured no GPU and is refused, as is a run whose CUDA tests failed (its cuda_tests.xml).
 
     python experiments/keep_gpu_check.py FOLDER          # FOLDER: the $GPU_CHECK_OUT that came back
 """
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from xml.etree import ElementTree
 
 from _run import command_line, publish
 
@@ -29,6 +30,14 @@ def main() -> None:
     device = str(json.loads(path.read_text(encoding="utf-8")).get("device", {}).get("device"))
     if not device.startswith("cuda"):
         parser.error(f"{path} measured on {device}, not a GPU (the CPU rehearsal's report): not published")
+    tests = args.folder / "cuda_tests.xml"  # the CUDA tests of the same run (pytest's JUnit XML)
+    if not tests.is_file():
+        parser.error(f"{tests} not found: the run's CUDA tests did not report; not published")
+    root = ElementTree.parse(tests).getroot()
+    suite = root if root.tag == "testsuite" else root.find("testsuite")
+    failed = sum(int(suite.get(key, 0)) for key in ("failures", "errors")) if suite is not None else -1
+    if failed != 0:
+        parser.error(f"{tests}: {failed if failed > 0 else 'no'} CUDA test(s) failed or unread: not published")
     publish(path, replace=args.keep)
 
 

@@ -15,6 +15,8 @@ from typing import Any
 
 import pytest
 
+import alcn_cv
+
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENTS = ROOT / "experiments"
 REPORTS = ROOT / "docs" / "reports"
@@ -103,7 +105,12 @@ def test_a_gpu_runs_report_is_written_where_it_ran_and_published_here(
         (out / "speed_cuda").mkdir(parents=True, exist_ok=True)
         report = out / "speed_cuda" / "speed.json"
         report.write_text(json.dumps({**speed, "command": command}), encoding="utf-8")
+        (out / "cuda_tests.xml").write_text(
+            f'<testsuites><testsuite tests="8" failures="{failures}" errors="0"/></testsuites>'
+        )
         return experiments.write_for_keeping(report, "speed_gpu", out, script="experiments/gpu_check.sh")
+
+    failures = 0
 
     written = gpu_run(f"alcn bench speed --device cuda --out {out}/speed_cuda")
     assert written == out / "speed_gpu.json" and str(tmp_path) not in written.read_text()
@@ -124,12 +131,39 @@ def test_a_gpu_runs_report_is_written_where_it_ran_and_published_here(
     assert json.loads((tmp_path / "reports" / "speed_gpu.json").read_text()) == kept
     _keep_gpu_check(monkeypatch, str(out), "--keep")
     assert "--device-batches 1,8" in json.loads((tmp_path / "reports" / "speed_gpu.json").read_text())["command"]
+    # a run whose CUDA tests failed: refused, whatever it measured
+    failures = 1
+    gpu_run(f"alcn bench speed --device cuda --out {out}/speed_cuda")
+    with pytest.raises(SystemExit):
+        _keep_gpu_check(monkeypatch, str(out), "--keep")
+    assert "cuda_tests.xml: 1 CUDA test(s) failed or unread: not published" in capsys.readouterr().err
+    failures = 0
     # the CPU rehearsal's report measured no GPU: refused
     device["device"] = "cpu"
     gpu_run(f"alcn bench speed --device cpu --out {out}/speed_cpu")
     with pytest.raises(SystemExit):
         _keep_gpu_check(monkeypatch, str(out), "--keep")
     assert "the CPU rehearsal's report" in capsys.readouterr().err
+
+
+def test_a_machine_without_alcn_cv_installed_gets_its_commands(
+    experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """On the GPU machine the checkout runs from PYTHONPATH, alcn-cv not installed: `alcn bench speed --device cuda`
+    found no subcommand ("invalid choice: 'bench' (choose from )"), since they are entry points of the installed
+    distribution. gpu_check.sh writes its metadata first (install_metadata), and nothing where it is installed."""
+    from importlib import metadata
+
+    assert experiments.install_metadata(tmp_path / "installed") is None  # this environment's alcn-cv has them
+    with monkeypatch.context() as patched:
+        patched.setattr(metadata, "entry_points", lambda **kwargs: [])
+        written = experiments.install_metadata(tmp_path / "site")
+    assert written == tmp_path / "site" / f"alcn_cv-{alcn_cv.__version__}.dist-info"
+    (dist,) = metadata.distributions(path=[str(tmp_path / "site")])
+    commands = {e.name: e.value for e in dist.entry_points if e.group == "alcn_cv.commands"}
+    ours = {e.name: e.value for e in metadata.entry_points(group="alcn_cv.commands")}
+    assert commands == ours and {"bench", "normalize", "pose"} <= set(commands)
+    assert [e.value for e in dist.entry_points if e.group == "console_scripts"] == ["alcn_cv.cli:main"]
 
 
 class _StopError(Exception):
