@@ -110,12 +110,12 @@ class ALCN2d(nn.Module):
     [0, 1] (1e-3 of rounding allowed, as ``apply()``), NaN or inf raises. Elsewhere (CUDA, say) it is not checked
     and the output is undefined: a negative gray value makes the whole image NaN through the log of its cell means,
     colour is clipped to [0, 1] before Lab, and a NaN or inf pixel makes its whole image NaN (the divisive floor is
-    the image's mean energy). Against float32, float16 is about 2e-3 off in gray and 4e-2 in colour,
-    bfloat16 2e-2 and 0.15 (its Lab round trip alone). Under a caller's autocast an image of another float dtype than
-    the module's is let through and the output may be float32: the network runs at autocast's precision (bfloat16:
-    about 1e-2 off float32), the filters as autocast runs their operations (on the CPU in the image's dtype), the Lab
-    conversions in the image's dtype. Colour on CUDA, traced or
-    compiled goes through the torch Lab conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some.
+    the image's mean energy). Against float32, float16 is up to 3e-2 off in gray (8e-4 on average; the lite model
+    3e-3) and 4e-2 in colour, bfloat16 2e-2 and 0.15 (its Lab round trip alone). Under a caller's autocast an image of
+    another float dtype than the module's is let through and the output may be float32: the network runs at
+    autocast's precision (bfloat16: about 1e-2 off float32), the filters as autocast runs their operations (on the CPU
+    in the image's dtype), the Lab conversions in the image's dtype. Colour on CUDA, traced or compiled goes through
+    the torch Lab conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some.
     ``torch.jit.trace`` records the sizes of the traced image: on another size the traced module fails or, without
     an error, returns wrong values (use ``torch.compile`` for several sizes, which compiles again for each new size:
     slow on a CPU, so compile for the few sizes a program runs, with ``dynamic=False``: by default the second size
@@ -225,7 +225,8 @@ class ALCN2d(nn.Module):
     def weight_maps(self, gray: torch.Tensor, small: torch.Tensor | None = None) -> torch.Tensor:
         """Eq. 3's maps F_k ``(B, N, H, W)`` at the input resolution (``small``: the working image, default
         :meth:`working`)."""
-        return self._maps(gray, small, first_only=False)
+        with self._tf32(gray):
+            return self._maps(gray, small, first_only=False)
 
     def eq3(self, gray: torch.Tensor, small: torch.Tensor | None = None, half: bool = False) -> torch.Tensor:
         """Eq. 3's raw response ``(B, 1, H, W)`` (``small`` as in :meth:`weight_maps`; ``half``: the network under
@@ -238,10 +239,11 @@ class ALCN2d(nn.Module):
         if small is None and not half and self._runs_opencv(gray):
             return self._opencv_planes(gray, lambda runtime, plane, _: runtime.mixture(plane))
         two_maps = isinstance(self.net, GainNormalizer) and self.net.num_kernels == 2
-        # autocast's enabled=False would also switch off a caller's own autocast (bfloat16, say) inside
-        with torch.autocast(gray.device.type, torch.float16) if half else nullcontext():
-            maps = self._maps(gray, small, first_only=two_maps).to(gray.dtype)
-        return self.mixture.difference(gray * maps) if two_maps else self.mixture(gray, maps)
+        with self._tf32(gray):
+            # autocast's enabled=False would also switch off a caller's own autocast (bfloat16, say) inside
+            with torch.autocast(gray.device.type, torch.float16) if half else nullcontext():
+                maps = self._maps(gray, small, first_only=two_maps).to(gray.dtype)
+            return self.mixture.difference(gray * maps) if two_maps else self.mixture(gray, maps)
 
     def _maps(self, gray: torch.Tensor, small: torch.Tensor | None, first_only: bool) -> torch.Tensor:
         working = self.working(gray) if small is None else small
@@ -421,8 +423,9 @@ class ALCN2d(nn.Module):
             )
 
     def _tf32(self, x: torch.Tensor) -> AbstractContextManager:
-        """cuDNN without TF32 for a CUDA tensor unless :attr:`allow_tf32` (TF32 moves the output by about 1e-3)."""
-        if self.allow_tf32 or not x.is_cuda:
+        """cuDNN without TF32 for a CUDA tensor unless :attr:`allow_tf32` (TF32 moves the output by about 1e-3); under
+        ``torch.compile``, which cannot trace the switch, the caller's setting (``torch.backends.cudnn.flags``)."""
+        if self.allow_tf32 or not x.is_cuda or torch.compiler.is_compiling():
             return nullcontext()
         return torch.backends.cudnn.flags(
             enabled=torch.backends.cudnn.enabled,
@@ -767,24 +770,51 @@ class TorchRuntime:
     def apply_batch(self, frames: np.ndarray, out_dtype: np.dtype, half: bool = False) -> np.ndarray:
         """``(B, H, W)`` uint8, uint16 or float32 frames, C-contiguous in native byte order (as
         :meth:`ALCN.apply_batch <alcn_cv.enhance.alcn.ALCN.apply_batch>` passes them, checked by
-        :func:`~alcn_cv.runtime.check_batch`) -> ``(B, H, W)`` of ``out_dtype``: uploaded as they are (from pinned
-        memory on CUDA), converted on the device, the output cast there."""
+        :func:`~alcn_cv.runtime.check_batch`) -> ``(B, H, W)`` of ``out_dtype``: uploaded as they are, converted on the
+        device, the output cast there. On CUDA by chunks of :data:`CUDA_CHUNK` frames in a pipeline: a chunk is staged
+        in pinned memory and uploaded on a stream of its own while the one before is computed, and downloaded on a
+        third while the next is (each image is normalized on its own, so the chunks give the whole batch's values)."""
         cuda = self.device.type == "cuda"
         with torch.inference_mode(), torch_threads(self.threads):
-            host = torch.from_numpy(frames)
             if cuda:
-                host = host.pin_memory()
-            x = host.to(self.device, non_blocking=cuda)[:, None]
-            x = x.clamp(0, 1) if frames.dtype == np.float32 else x.float() * (1.0 / FULL_SCALE[frames.dtype])
-            # the network in float16 when half, Eq. 3 in float32
-            unit = self.module.to_unit(self.module.response(x, half=half))[:, 0]
-            if out_dtype != np.float32:
-                unit = torch.round(unit * FULL_SCALE[out_dtype]).to(_TORCH_DTYPES[out_dtype])
-            out = torch.empty(unit.shape, dtype=unit.dtype, pin_memory=cuda) if cuda else None
-            if out is None:
-                return unit.cpu().numpy()
-            out.copy_(unit)
+                compute = torch.cuda.current_stream(self.device)
+                upload, download = torch.cuda.Stream(self.device), torch.cuda.Stream(self.device)
+            # the CPU takes the same chunks, without streams (nothing to overlap there)
+            on = (lambda stream: torch.cuda.stream(stream)) if cuda else (lambda stream: nullcontext())
+            out = torch.empty(frames.shape, dtype=_TORCH_DTYPES[np.dtype(out_dtype)], pin_memory=cuda)
+            for start in range(0, len(frames), CUDA_CHUNK):
+                chunk = slice(start, start + CUDA_CHUNK)
+                host = torch.from_numpy(frames[chunk])
+                with on(upload if cuda else None):
+                    # staged in pinned memory on the CPU while the device computes the chunk before
+                    x = host.pin_memory().to(self.device, non_blocking=True) if cuda else host
+                if cuda:
+                    compute.wait_stream(upload)
+                    x.record_stream(compute)  # made on the upload stream, read on this one
+                unit = self._frames_out(x, frames.dtype, out_dtype, half)
+                if cuda:
+                    download.wait_stream(compute)
+                    unit.record_stream(download)
+                with on(download if cuda else None):
+                    out[chunk].copy_(unit, non_blocking=cuda)
+            if cuda:
+                download.synchronize()
             return out.numpy()
+
+    def _frames_out(self, frames: torch.Tensor, dtype: np.dtype, out_dtype: np.dtype, half: bool) -> torch.Tensor:
+        """``(B, H, W)`` frames of ``dtype`` on the device -> the normalized ``(B, H, W)`` of ``out_dtype`` there."""
+        x = frames[:, None]
+        x = x.clamp(0, 1) if dtype == np.float32 else x.float() * (1.0 / FULL_SCALE[dtype])
+        # the network in float16 when half, Eq. 3 in float32
+        unit = self.module.to_unit(self.module.response(x, half=half))[:, 0]
+        if out_dtype != np.float32:
+            unit = torch.round(unit * FULL_SCALE[out_dtype]).to(_TORCH_DTYPES[out_dtype])
+        return unit
+
+
+#: The frames of a chunk of :meth:`TorchRuntime.apply_batch`'s pipeline on CUDA: 16 frames of 1280x800 are 16 MB of
+#: uint8 to upload, small enough that the first upload and the last download leave the device idle briefly.
+CUDA_CHUNK = 16
 
 
 def _batch_of_one(plane: np.ndarray, device: torch.device) -> torch.Tensor:

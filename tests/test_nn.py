@@ -781,7 +781,10 @@ def test_cuda_equals_the_cpu_and_float16_stays_close(model):
         out = cuda(x.cuda())
         assert (out.cpu() - reference).abs().max() < 1e-4
         half = cuda.half()(x.cuda().half())
-        assert half.dtype == torch.float16 and (half.float().cpu() - reference).abs().max() < 1e-3
+        # the documented float16 error (float16 storage of Eq. 3, which the division amplifies; on the CPU 2.5e-2 and
+        # 2.7e-3 at most, 8e-4 and 3e-4 on average)
+        error = (half.float().cpu() - reference).abs()
+        assert half.dtype == torch.float16 and error.max() < 3e-2 and error.mean() < 2e-3
 
 
 @CUDA
@@ -798,7 +801,8 @@ def test_cuda_colour_equals_the_cpu():
 def test_cuda_compiles_with_inductor():
     x = torch.rand(4, 1, 400, 640, device="cuda")
     module = ALCN2d().eval().cuda()
-    with torch.no_grad():
+    # the TF32 switch is the caller's under torch.compile (dynamo cannot trace cudnn.flags): set as the module sets it
+    with torch.no_grad(), torch.backends.cudnn.flags(enabled=True, allow_tf32=False):
         torch.testing.assert_close(torch.compile(module, fullgraph=True)(x), module(x), atol=1e-4, rtol=0)
 
 
@@ -993,3 +997,48 @@ def test_the_mistakes_of_a_pytorch_user_are_named(tmp_path):
     frames = [np.zeros((8, 8), np.uint8), np.zeros((8, 9), np.uint8)]
     with pytest.raises(InputError, match=r"frame 1 is of shape \(8, 9\), the first \(8, 8\): a batch is of one size"):
         list(batches(frames, 4))
+
+
+def test_a_cuda_device_torch_does_not_see_is_named(monkeypatch):
+    """`--device cuda:1` on a one-GPU machine passed the check and failed later in torch ("invalid device ordinal")."""
+    from alcn_cv.nets.device import torch_device
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    assert torch_device("cuda:0") == torch.device("cuda:0") and torch_device("cuda") == torch.device("cuda")
+    with pytest.raises(InputError, match=r"--device is 'cuda:1' but torch sees 1 CUDA device\(s\), from cuda:0"):
+        torch_device("cuda:1", "--device")
+
+
+def test_the_blurs_kernel_is_made_once_per_device_and_dtype():
+    """Each torch Gaussian blur copied its kernel from NumPy to the device at every call: on CUDA a copy that waits
+    for the queued work, six times a batch."""
+    from alcn_cv.filters import torch_divisive
+
+    x = torch.rand(1, 1, 20, 30)
+    torch_divisive.gaussian_blur(x, 2.0)
+    before = torch_divisive._kernel_on.cache_info()
+    blurred = torch_divisive.gaussian_blur(x, 2.0)
+    assert torch_divisive._kernel_on.cache_info().hits == before.hits + 1
+    with torch.inference_mode():  # made under inference, the cached kernel still serves a backward later
+        torch_divisive.gaussian_blur(torch.rand(1, 1, 20, 30, dtype=torch.float64), 3.0)
+    y = torch.rand(1, 1, 20, 30, dtype=torch.float64, requires_grad=True)
+    torch_divisive.gaussian_blur(y, 3.0).sum().backward()
+    assert y.grad is not None and torch.allclose(blurred, torch_divisive.gaussian_blur(x.clone(), 2.0))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_apply_batch_in_chunks_gives_each_frames_own_output(dtype):
+    """apply_batch runs a batch in chunks of nn.CUDA_CHUNK frames (the CUDA pipeline's, taken on the CPU too): a
+    batch of two chunks and a part gives each frame's output alone, in its place."""
+    from alcn_cv import nn as alcn_nn
+
+    frames = np.stack([synthetic_frame(40, 32, False, seed=i) for i in range(2 * alcn_nn.CUDA_CHUNK + 3)])
+    frames = frames.astype(dtype) * (257 if dtype == np.uint16 else 1)
+    frames = frames / np.float32(255) if dtype == np.float32 else frames
+    alcn = alcn_cv.createALCN(backend="torch")
+    batch = alcn.apply_batch(frames)
+    alone = np.stack([alcn.apply_batch(frame[None])[0] for frame in frames])
+    # to float rounding (torch's batched kernels sum in another order): a frame in another's place would be far off
+    tolerance = 1e-5 if dtype == np.float32 else 1
+    assert batch.dtype == frames.dtype and np.abs(batch.astype(np.float64) - alone).max() <= tolerance

@@ -55,7 +55,7 @@ def device_speed(device: str, frame: np.ndarray, batches: list[int], rounds: int
     from alcn_cv.nn import ALCN2d
 
     dev = torch_device(device, "--device")
-    sync = torch.cuda.synchronize if dev.type == "cuda" else (lambda: None)
+    sync = (lambda: torch.cuda.synchronize(dev)) if dev.type == "cuda" else (lambda: None)  # the device timed
     alcn = ALCN(backend="torch", device=str(dev), threads=None)
     module = ALCN2d().eval().to(dev)
     half = ALCN2d().eval().to(dev, torch.float16) if dev.type == "cuda" else None

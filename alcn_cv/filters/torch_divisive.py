@@ -8,6 +8,8 @@ both forms agree to float rounding (``tests/test_filters_divisive.py``).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import torch
 from torch import nn
 
@@ -25,10 +27,23 @@ __all__ = [
 ]
 
 
+def _kernel(sigma: float, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    return torch.as_tensor(gaussian_kernel1d(sigma), dtype=dtype, device=device)
+
+
+@lru_cache(maxsize=64)
+def _kernel_on(sigma: float, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """:func:`gaussian_kernel1d` on ``device``, copied there once, not at every call: on CUDA each copy of a NumPy
+    array waits for the work queued before it."""
+    with torch.inference_mode(False):  # made in an inference call, the cached tensor would refuse a backward later
+        return _kernel(sigma, device, dtype)
+
+
 def gaussian_blur(x: torch.Tensor, sigma: float, pad: bool = True) -> torch.Tensor:
     """Separable Gaussian blur of ``(B, 1, H, W)`` (:func:`~alcn_cv.filters.gaussian_mixture.gaussian_kernel1d`),
     reflect-101, for any size. ``pad=False``: only where the kernel lies inside, ``(B, 1, H - 2r, W - 2r)``."""
-    kernel = torch.as_tensor(gaussian_kernel1d(sigma), dtype=x.dtype, device=x.device)
+    traced = torch.compiler.is_compiling() or torch.jit.is_tracing()  # a constant of the graph, as it is recorded
+    kernel = (_kernel if traced else _kernel_on)(float(sigma), x.device, x.dtype)
     if pad:
         r = kernel.numel() // 2
         x = reflect101_pad(x, r, r, r, r)
