@@ -25,6 +25,7 @@ Example:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import numbers
 import os
@@ -91,7 +92,9 @@ class ALCN2d(nn.Module):
             (:func:`~alcn_cv.weight_file.load_normalizer_file`: the file is not read again).
         scale: the working scale (default: the weight file's).
         grid_stride: spacing of the Normalizer's grid, a multiple of its stride (default: its stride).
-        allow_tf32: let CUDA convolutions use TF32 (faster, about 1e-3 off); default exact.
+        allow_tf32: let CUDA convolutions use TF32 (faster, about 1e-3 off); default exact, by torch's legacy switch
+            (``torch.backends.cudnn.flags``): a program that sets torch's ``fp32_precision`` settings, which may not be
+            mixed with it, passes True and sets the precision itself.
 
     Shape:
         - image: ``(B, 1, H, W)`` or ``(B, 3, H, W)`` (RGB) float in [0, 1], any device and float dtype
@@ -778,7 +781,7 @@ class TorchRuntime:
         with torch.inference_mode(), torch_threads(self.threads):
             if cuda:
                 compute = torch.cuda.current_stream(self.device)
-                upload, download = torch.cuda.Stream(self.device), torch.cuda.Stream(self.device)
+                upload, download = _pipeline_streams(self.device)
             # the CPU takes the same chunks, without streams (nothing to overlap there)
             on = (lambda stream: torch.cuda.stream(stream)) if cuda else (lambda stream: nullcontext())
             out = torch.empty(frames.shape, dtype=_TORCH_DTYPES[np.dtype(out_dtype)], pin_memory=cuda)
@@ -810,6 +813,14 @@ class TorchRuntime:
         if out_dtype != np.float32:
             unit = torch.round(unit * FULL_SCALE[out_dtype]).to(_TORCH_DTYPES[out_dtype])
         return unit
+
+
+@functools.cache
+def _pipeline_streams(device: torch.device) -> tuple[torch.cuda.Stream, torch.cuda.Stream]:
+    """The upload and download streams of :meth:`TorchRuntime.apply_batch` on a CUDA ``device``: the same ones at
+    every call, since the caching allocator reuses a freed block only on the stream that allocated it (new streams
+    would allocate each chunk anew)."""
+    return torch.cuda.Stream(device), torch.cuda.Stream(device)
 
 
 #: The frames of a chunk of :meth:`TorchRuntime.apply_batch`'s pipeline on CUDA: 16 frames of 1280x800 are 16 MB of

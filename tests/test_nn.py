@@ -1042,3 +1042,20 @@ def test_apply_batch_in_chunks_gives_each_frames_own_output(dtype):
     # to float rounding (torch's batched kernels sum in another order): a frame in another's place would be far off
     tolerance = 1e-5 if dtype == np.float32 else 1
     assert batch.dtype == frames.dtype and np.abs(batch.astype(np.float64) - alone).max() <= tolerance
+
+
+@CUDA
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_cuda_apply_batch_in_chunks_equals_the_cpu(dtype):
+    """The three-stream pipeline over two chunks and a part (and again, on the streams the first call made) gives the
+    CPU's output, each frame in its place."""
+    from alcn_cv import nn as alcn_nn
+
+    frames = np.stack([synthetic_frame(96, 64, False, seed=i) for i in range(2 * alcn_nn.CUDA_CHUNK + 3)])
+    frames = frames.astype(dtype) * (257 if dtype == np.uint16 else 1)
+    frames = frames / np.float32(255) if dtype == np.float32 else frames
+    cpu = alcn_cv.createALCN(backend="torch").apply_batch(frames).astype(np.float64)
+    cuda = alcn_cv.createALCN(backend="torch", device="cuda")
+    for _ in range(2):
+        out = cuda.apply_batch(frames)
+        assert out.dtype == frames.dtype and np.abs(out - cpu).max() <= (1e-4 if dtype == np.float32 else 1)
