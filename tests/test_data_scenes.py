@@ -36,6 +36,9 @@ def test_loader_layouts(tmp_path):
     assert [s.name for s in select_scenes(scenes, ["psm", "street"])] == ["ball", "street"]
     with pytest.raises(InputError):
         select_scenes(scenes, ["mexico"])
+    # a comma list, as --methods takes, where the scene options take words: the way out named
+    with pytest.raises(InputError, match=r"'street,psm' \(scenes are given apart: street psm\); available: "):
+        select_scenes(scenes, ["street,psm"])
     with pytest.raises(DatasetError):
         load_scenes([root / "psm", root / "psm"])  # duplicate names
     with pytest.raises(DatasetError):

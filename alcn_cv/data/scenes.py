@@ -362,8 +362,11 @@ def select_scenes(scenes: Sequence[Scene], tokens: Sequence[str]) -> list[Scene]
     for token in tokens:
         hits = [s for s in scenes if token in (s.name, s.group)]
         if not hits:
-            names = ", ".join(sorted({s.name for s in scenes} | {s.group for s in scenes}))
-            raise InputError(f"no scene or data set {token!r}; available: {names}")
+            known = {s.name for s in scenes} | {s.group for s in scenes}
+            parts = [part.strip() for part in token.split(",")]
+            # --methods takes a comma list, the scene options a list of words
+            hint = f" (scenes are given apart: {' '.join(parts)})" if len(parts) > 1 and set(parts) <= known else ""
+            raise InputError(f"no scene or data set {token!r}{hint}; available: {', '.join(sorted(known))}")
         chosen += [s for s in hits if all(s is not c for c in chosen)]
     return chosen
 
