@@ -497,6 +497,13 @@ def import_module(module: str) -> None:
     if module.endswith(".py") or os.sep in module:
         if not path.is_file():
             raise InputError(f"--import {module}: no such file")
+        # a module of that name imported already (the standard library's, alcn-cv's own, another --import) would be
+        # taken for the file, which would never run
+        held = getattr(sys.modules.get(path.stem), "__file__", None)
+        if held is not None and Path(held).resolve() != path.resolve():
+            raise InputError(
+                f"--import {module}: a module named {path.stem!r} is imported already ({held}): rename the file"
+            )
         sys.path.insert(0, str(path.resolve().parent))
         module = path.stem
     try:

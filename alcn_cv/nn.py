@@ -31,6 +31,7 @@ import numbers
 import os
 import sys
 import threading
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
@@ -718,12 +719,12 @@ class TorchNetwork:
                 return self.net.maps_from_features(features)[0].contiguous().numpy()
             if alongside is not None:
                 alongside()
-            x = torch.from_numpy(image).to(self.device)[None, None]
+            x = read_only_tensor(image).to(self.device)[None, None]
             return self.net.dense_grid(x, self.stride)[0].cpu().numpy()
 
     def dense(self, image: np.ndarray) -> np.ndarray:
         with torch.inference_mode(), torch_threads(self.threads):
-            return self.net.dense(torch.from_numpy(image).to(self.device)[None, None], self.stride)[0].cpu().numpy()
+            return self.net.dense(read_only_tensor(image).to(self.device)[None, None], self.stride)[0].cpu().numpy()
 
     def window_weights(self, windows: np.ndarray) -> np.ndarray:
         x = torch.from_numpy(windows)[:, None]
@@ -828,8 +829,17 @@ def _pipeline_streams(device: torch.device) -> tuple[torch.cuda.Stream, torch.cu
 CUDA_CHUNK = 16
 
 
+def read_only_tensor(array: np.ndarray) -> torch.Tensor:
+    """``torch.from_numpy(array)`` for an array the tensor only reads (a method's image, which
+    :meth:`~alcn_cv.enhance.base.Normalization.normalize` hands over read-only), without torch's warning that it does
+    not support read-only tensors."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "The given NumPy array is not writable", UserWarning)
+        return torch.from_numpy(array)
+
+
 def _batch_of_one(plane: np.ndarray, device: torch.device) -> torch.Tensor:
-    return torch.from_numpy(plane).to(device)[None, None]
+    return read_only_tensor(plane).to(device)[None, None]
 
 
 def batches(frames: Iterable[np.ndarray], size: int) -> Iterator[np.ndarray]:

@@ -70,7 +70,9 @@ PY
 } > "$GPU_CHECK_OUT/environment.txt" 2>&1
 cat "$GPU_CHECK_OUT/environment.txt"
 
-# The CUDA tests (they skip with a reason where torch sees no GPU; -rs lists the reasons).
+# The CUDA tests (they skip with a reason where torch sees no GPU; -rs lists the reasons); an earlier run's report is
+# removed first, so that a run killed by the timeout leaves none to be read for it
+rm -f "$GPU_CHECK_OUT/cuda_tests.xml"
 timeout 150 "$PY" -m pytest -q -rs -p no:cacheprovider --junitxml="$GPU_CHECK_OUT/cuda_tests.xml" \
   tests/test_nn.py tests/test_speed_paths.py tests/test_cli_normalize.py -k "cuda" 2>&1 | tee "$GPU_CHECK_OUT/cuda_tests.txt" | tail -15
 tests_status=${PIPESTATUS[0]}

@@ -33,11 +33,18 @@ def main() -> None:
     tests = args.folder / "cuda_tests.xml"  # the CUDA tests of the same run (pytest's JUnit XML)
     if not tests.is_file():
         parser.error(f"{tests} not found: the run's CUDA tests did not report; not published")
-    root = ElementTree.parse(tests).getroot()
+    try:
+        root = ElementTree.parse(tests).getroot()
+    except ElementTree.ParseError as exc:
+        parser.error(f"{tests}: unreadable ({exc}): not published")
     suite = root if root.tag == "testsuite" else root.find("testsuite")
-    failed = sum(int(suite.get(key, 0)) for key in ("failures", "errors")) if suite is not None else -1
-    if failed != 0:
-        parser.error(f"{tests}: {failed if failed > 0 else 'no'} CUDA test(s) failed or unread: not published")
+    if suite is None:
+        parser.error(f"{tests}: no test suite in it: not published")
+    counts = {key: int(suite.get(key, 0)) for key in ("tests", "skipped", "failures", "errors")}
+    if counts["failures"] + counts["errors"]:
+        parser.error(f"{tests}: {counts['failures'] + counts['errors']} CUDA test(s) failed: not published")
+    if counts["tests"] - counts["skipped"] <= 0:  # every one skipped (no GPU seen), or none selected
+        parser.error(f"{tests}: no CUDA test ran ({counts['skipped']} skipped): not published")
     publish(path, replace=args.keep)
 
 

@@ -136,8 +136,16 @@ def test_a_gpu_runs_report_is_written_where_it_ran_and_published_here(
     gpu_run(f"alcn bench speed --device cuda --out {out}/speed_cuda")
     with pytest.raises(SystemExit):
         _keep_gpu_check(monkeypatch, str(out), "--keep")
-    assert "cuda_tests.xml: 1 CUDA test(s) failed or unread: not published" in capsys.readouterr().err
+    assert "cuda_tests.xml: 1 CUDA test(s) failed: not published" in capsys.readouterr().err
     failures = 0
+    # every CUDA test skipped (torch saw no GPU): refused too
+    gpu_run(f"alcn bench speed --device cuda --out {out}/speed_cuda")
+    (out / "cuda_tests.xml").write_text(
+        '<testsuites><testsuite tests="8" skipped="8" failures="0" errors="0"/></testsuites>'
+    )
+    with pytest.raises(SystemExit):
+        _keep_gpu_check(monkeypatch, str(out), "--keep")
+    assert "cuda_tests.xml: no CUDA test ran (8 skipped): not published" in capsys.readouterr().err
     # the CPU rehearsal's report measured no GPU: refused
     device["device"] = "cpu"
     gpu_run(f"alcn bench speed --device cpu --out {out}/speed_cpu")

@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 import textwrap
+import warnings
 
 import cv2
 import numpy as np
@@ -101,6 +102,35 @@ def test_register_refuses_what_no_command_could_use(attributes, message, own_reg
         registry.register(cls)
 
 
+def test_register_takes_an_output_range_of_each_instance_and_keeps_the_benches_names(own_registry):
+    """A property (each instance's range) or a list was refused by the range check, which holds for a class's own
+    tuple; `unet` registered and could never be built by the benchmarks, which build the U-Net themselves."""
+
+    class PerInstance(alcn_cv.Normalization):
+        name = "per_instance"
+
+        @property
+        def output_range(self):
+            return (-1.0, 1.0)
+
+        def _normalize(self, gray):
+            return gray * 2 - 1
+
+    registry.register(PerInstance)
+    registry.register(type("Listed", (alcn_cv.Normalization,), {"name": "listed", "output_range": [-1.0, 1.0]}))
+    assert PerInstance().apply(np.full((2, 2), 128, np.uint8))[0, 0] == 128
+    with pytest.raises(TypeError, match="'unet' names a method the benchmarks build themselves"):
+        registry.register(type("U", (alcn_cv.Normalization,), {"name": "unet"}))
+
+
+def test_a_method_given_a_read_only_image_raises_no_torch_warning():
+    """The read-only image made torch warn ("The given NumPy array is not writable") on the torch backend."""
+    image = np.random.default_rng(0).integers(0, 256, (32, 48), np.uint8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        alcn_cv.create("alcn", backend="torch").apply(image)
+
+
 def test_register_takes_only_normalizations_and_the_same_class_again(own_registry):
     with pytest.raises(TypeError, match="is not a subclass of alcn_cv.Normalization"):
         registry.register(type("Plain", (), {"name": "plain"}))
@@ -117,6 +147,10 @@ def test_alcn_import_gives_a_method_to_every_command_and_the_report_records_it(t
     run = {"capture_output": True, "text": True, "timeout": 300, "cwd": tmp_path}
     listed = subprocess.run([*alcn, "--import", "my_methods.py", "normalize", "--list"], **run)
     assert listed.returncode == 0 and "gamma      A gamma curve." in listed.stdout, listed.stderr
+    (tmp_path / "mine").mkdir()  # the standard library's name: imported already, the file would never run
+    (tmp_path / "mine" / "platform.py").write_text(GAMMA)
+    clash = subprocess.run([*alcn, "--import", "mine/platform.py", "normalize", "--list"], **run)
+    assert clash.returncode == 2 and "a module named 'platform' is imported already" in clash.stderr, clash.stderr
     missing = subprocess.run([*alcn, "--import", "nope", "normalize", "--list"], **run)
     assert missing.returncode == 2
     assert missing.stderr.strip().endswith(

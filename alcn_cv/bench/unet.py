@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from alcn_cv.enhance.base import Normalization
+from alcn_cv.nn import read_only_tensor
 from alcn_cv.train.unet_normalizer import UNetNormalizer
 from alcn_cv.weight_file import load_normalizer_file
 
@@ -49,4 +50,4 @@ class UNetNormalization(Normalization):
 
     def _normalize(self, gray: np.ndarray) -> np.ndarray:
         with torch.inference_mode():
-            return self.net(torch.from_numpy(gray)[None, None])[0, 0].numpy()
+            return self.net(read_only_tensor(gray)[None, None])[0, 0].numpy()

@@ -40,6 +40,9 @@ _REGISTRY: dict[str, type[Normalization]] = {}
 N = TypeVar("N", bound=type[Normalization])
 
 
+#: Names that ``alcn bench relight`` and ``invariance`` build themselves, before the registry: the free-form U-Net
+#: baseline (``unet:weights=PATH``).
+_BUILT_BY_THE_BENCHES = frozenset({"unet"})
 #: A registered name: one word of a spec, and not a bench's composite (``dog+lstd``) or a list (``none,dog``).
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_.-]*")
 
@@ -62,10 +65,13 @@ def register(cls: N) -> N:
         raise TypeError(f"{cls.__name__} has no name to register under")
     if not _NAME.fullmatch(cls.name):
         raise TypeError(f"{cls.__name__}: {cls.name!r} cannot name a method (letters, digits, _ - ., a letter first)")
-    bounds = cls.output_range  # a class's own; an instance may set another (ALCN's, from its weight file)
-    finite = [isinstance(b, numbers.Real) and math.isfinite(b) for b in bounds] if isinstance(bounds, tuple) else []
-    if finite != [True, True] or not bounds[0] < bounds[1]:
-        raise TypeError(f"{cls.__name__}: output_range must be two finite numbers (low, high), got {bounds!r}")
+    if cls.name in _BUILT_BY_THE_BENCHES:
+        raise TypeError(f"{cls.__name__}: {cls.name!r} names a method the benchmarks build themselves: another name")
+    bounds = cls.output_range  # the class's own; an instance may set another (ALCN's, from its weight file)
+    if isinstance(bounds, tuple | list):  # not a property, which each instance answers
+        finite = [isinstance(b, numbers.Real) and math.isfinite(b) for b in bounds]
+        if finite != [True, True] or not bounds[0] < bounds[1]:
+            raise TypeError(f"{cls.__name__}: output_range must be two finite numbers (low, high), got {bounds!r}")
     held = _REGISTRY.get(cls.name)
     if (
         held is not None
