@@ -195,19 +195,14 @@ def install_metadata(site: str | Path) -> Path | None:
     metadata into ``site``, a folder on the path: the ``alcn`` command finds its subcommands as entry points of the
     installed distribution (``pyproject.toml``'s), and without them has none. Returns the ``.dist-info`` folder
     written, or None where alcn-cv's commands are found already."""
-    import ast
     import tomllib
     from importlib import metadata
+
+    from alcn_cv import __version__ as version
 
     if metadata.entry_points(group="alcn_cv.commands"):
         return None
     project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
-    module = ast.parse((ROOT / "alcn_cv" / "__init__.py").read_text(encoding="utf-8"))
-    version = next(
-        ast.literal_eval(node.value)
-        for node in module.body
-        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__version__" for t in node.targets)
-    )
     groups = {"console_scripts": project["scripts"], **project["entry-points"]}
     dist = Path(site) / f"{project['name'].replace('-', '_')}-{version}.dist-info"
     dist.mkdir(parents=True, exist_ok=True)

@@ -439,6 +439,7 @@ def _corner_recall(args: argparse.Namespace) -> int:
     if reports:  # an --out under a file: refused now, not after the first pass
         check_writable(reports[0])
     results = []
+    made = {"command": typed_command(args.argv), "machine": machine()}
     for background in args.background:
         r = corner_bench.corner_recall(args.detector, args.scene, obj_id=args.obj_id, background=background)
         print(
@@ -447,7 +448,7 @@ def _corner_recall(args: argparse.Namespace) -> int:
             f"{100 * r['candidates']:.0f}%, in the gates of the true pose {100 * r['gated']:.0f}%; background "
             f"scored higher {100 * r['background_wins']:.0f}%"
         )
-        results.append({**r, "command": typed_command(args.argv), "machine": machine()})
+        results.append({**r, **made})
     with atomic_paths(*reports) as paths:  # one per background, all or none
         for path, r in zip(paths, results):
             write_json(path, r)

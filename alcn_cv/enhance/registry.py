@@ -73,11 +73,7 @@ def register(cls: N) -> N:
         if finite != [True, True] or not bounds[0] < bounds[1]:
             raise TypeError(f"{cls.__name__}: output_range must be two finite numbers (low, high), got {bounds!r}")
     held = _REGISTRY.get(cls.name)
-    if (
-        held is not None
-        and held is not cls
-        and (held.__module__, held.__qualname__) != (cls.__module__, cls.__qualname__)
-    ):
+    if held is not None and (held.__module__, held.__qualname__) != (cls.__module__, cls.__qualname__):
         raise TypeError(
             f"normalization {cls.name!r} is already registered by {held.__module__}.{held.__qualname__}: give "
             f"{cls.__module__}.{cls.__qualname__} another name"

@@ -15,8 +15,7 @@ def torch_device(name: str | torch.device | None = None, what: str = "device") -
 
     Raises:
         InputError: not a device's name, a CUDA device asked for where torch sees none (or not that one), or a device
-            of a type this
-            torch cannot use here (mps, xpu, ...; ``what`` names the setting).
+            of a type this torch cannot use here (mps, xpu, ...; ``what`` names the setting).
     """
     if name is None:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
