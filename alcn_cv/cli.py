@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from alcn_cv.errors import ALCNError, InputError, MissingDependencyError
-from alcn_cv.extras import DISTRIBUTION, is_installed, missing_extra
+from alcn_cv.extras import DISTRIBUTION, is_installed, missing_extra, require
 from alcn_cv.malloc import keep_freed_memory
 
 logger = logging.getLogger("alcn_cv")
@@ -467,6 +467,8 @@ def main(argv: list[str] | None = None) -> int:
         with sigterm_as_interrupt(args.command), ffmpeg_fatal_only(not args.verbose), opencv_errors_only(quiet):
             for module in args.imports:
                 import_module(module)
+            # the packages a command declares (``set_defaults(needs=...)``), every missing one's extra named at once
+            require(*getattr(args, "needs", ()), what=prog, preferred=args.command)
             result = args.func(args)
     except KeyboardInterrupt as exc:
         print(f"alcn: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib.util
 import re
+from collections.abc import Sequence
 from importlib import metadata
 
 from alcn_cv.errors import MissingDependencyError
@@ -105,28 +106,35 @@ def extra_providing(module: str, preferred: str | None = None) -> str | None:
     return min(candidates, key=lambda extra: (len(candidates[extra]), extra))
 
 
-def missing_dependency(module: str, what: str, preferred: str | None = None) -> MissingDependencyError:
-    """The error for ``what`` (a command or function) needing ``module``, which is not installed.
+def missing_dependency(module: str | Sequence[str], what: str, preferred: str | None = None) -> MissingDependencyError:
+    """The error for ``what`` (a command or function) needing ``module`` (or several modules), not installed.
 
     Its message is one line naming the extra to install, e.g.
-    ``alcn data phos: needs the [data] extra (skimage is not installed): pip install "alcn-cv[data]"``. Where the
-    install brings torch and torch is not installed, the line says to install torch's CPU build first when no GPU is
-    wanted (:data:`TORCH_CPU_INDEX`). ``pip install "alcn-cv[EXTRA]"`` needs no index that has alcn-cv (it is not
-    on PyPI): pip reads the extra's requirements from the alcn-cv installed (from a clone or a wheel) and keeps it.
+    ``alcn data phos: needs the [data] extra (skimage is not installed): pip install "alcn-cv[data]"``; for modules
+    of several extras, all of them at once (``needs the [train,data] extras (torch, skimage are not installed):
+    ... pip install "alcn-cv[train,data]"``). Where the install brings torch and torch is not installed, the line says
+    to install torch's CPU build first when no GPU is wanted (:data:`TORCH_CPU_INDEX`). ``pip install
+    "alcn-cv[EXTRA]"`` needs no index that has alcn-cv (it is not on PyPI): pip reads the extra's requirements from the
+    alcn-cv installed (from a clone or a wheel) and keeps it.
     """
-    extra = extra_providing(module, preferred)
-    top = module.split(".")[0]
-    if extra is None:
+    modules = [module] if isinstance(module, str) else list(module)
+    tops = list(dict.fromkeys(name.split(".")[0] for name in modules))
+    extras = [extra_providing(name, preferred) for name in tops]
+    if None in extras:
+        top = tops[extras.index(None)]
         install = f"pip install {_DISTRIBUTIONS_OF.get(top, (top,))[0]}"
         if top == "torch":
             install += f" (without a GPU: --index-url {TORCH_CPU_INDEX})"
         return MissingDependencyError(f"{what}: needs {top}, which is not installed: {install}")
-    installs_torch = "torch" in _extras_requirements().get(extra, set())
+    named = ",".join(dict.fromkeys(e for e in extras if e is not None))
+    installs_torch = any("torch" in _extras_requirements().get(extra, set()) for extra in named.split(","))
+    several = "," in named
     error = MissingDependencyError(
-        f"{what}: needs the [{extra}] extra ({top} is not installed): "
-        f'{_torch_first(installs_torch)}pip install "{DISTRIBUTION}[{extra}]"'
+        f"{what}: needs the [{named}] extra{'s' if several else ''} ({', '.join(tops)} "
+        f"{'are' if len(tops) > 1 else 'is'} not installed): {_torch_first(installs_torch)}pip install "
+        f'"{DISTRIBUTION}[{named}]"'
     )
-    error.extra = extra
+    error.extra = named
     return error
 
 
@@ -209,10 +217,11 @@ def is_installed(module: str) -> bool:
 
 
 def require(*modules: str, what: str, preferred: str | None = None) -> None:
-    """Raise :func:`missing_dependency`'s error for the first of ``modules`` not installed."""
-    for module in modules:
-        if not is_installed(module):
-            raise missing_dependency(module, what, preferred)
+    """Raise :func:`missing_dependency`'s error for every one of ``modules`` that is not installed (their extras
+    named together), if any."""
+    missing = [module for module in modules if not is_installed(module)]
+    if missing:
+        raise missing_dependency(missing, what, preferred)
 
 
 def missing_extra(exc: ModuleNotFoundError, what: str, preferred: str | None = None) -> MissingDependencyError | None:

@@ -1,14 +1,17 @@
-"""The README's figure: one fixed outdoor camera under two real lights (rows), normalized by several
-methods (columns), each through its own ``apply()`` with its default parameters.
+"""The README's figure: one photograph under two lights (rows), normalized by several methods (columns), each
+through its own ``apply()`` with its default parameters.
 
-Data: a scene of ../shared/data/webcam (the Webcam data set of TILDE, Verdie et al., CVPR 2015, from
-AMOS: academic research only; cite TILDE and AMOS). The frames are the scene's darkest and brightest
-by mean intensity. Time: a few seconds. Deterministic up to one grey level (another CPU's float rounding):
+Data: the still of OpenCV's cookie box (``../shared/data/cookie_box/resized_IMG_3875.JPG``, from OpenCV's samples,
+Apache-2.0), relit by the data engine's light changes (:func:`alcn_cv.data.light_changes.relight`) under two fixed
+lights: a dim one with a cast shadow of blinds and the noise of a dark exposure, and a bright one with a soft shading
+ramp (:data:`LIGHTS`; the shadow's shape is drawn from the seed). A figure of real light changes would need frames
+whose terms allow redistribution, which no multi-light set of the project's data has (the Webcam frames are for
+academic research only). Time: a few seconds. Deterministic up to one grey level (another CPU's float rounding):
 tests/test_docs.py renders it again and compares it with the published one within that level, so a change to a
 method's output shows up there.
 
     python experiments/figure.py --publish                # runs/figure.png, then docs/figure.png (the README's)
-    python experiments/figure.py --scene courbevoie       # runs/figure.png only (--publish: mexico only)
+    python experiments/figure.py --image my.jpg           # runs/figure.png only (--publish: the cookie box only)
 """
 
 from __future__ import annotations
@@ -21,26 +24,59 @@ import numpy as np
 from _run import ROOT, RUNS, SHARED_DATA, command_line
 
 from alcn_cv.cli import run_script
+from alcn_cv.data.light_changes import LightChangeConfig, relight
 
-#: The README's figure, which --publish replaces, and its scene (the README's caption names it).
+#: The README's figure, which --publish replaces, and its photograph (the README's caption names it).
 PUBLISHED = ROOT / "docs" / "figure.png"
-SCENE = "mexico"
+IMAGE = SHARED_DATA / "cookie_box" / "resized_IMG_3875.JPG"
 METHODS = {"input": "none", "CLAHE": "clahe", "DoG": "dog", "Tan-Triggs": "tantriggs", "ALCN": "alcn"}
 TILE_WIDTH = 256
+#: The rows' lights and the seeds they are drawn with: every range fixed, only the shadow's shape and the shading's
+#: field drawn. No auto-exposure: the dim light stays dim (a quarter of the photograph's light, 20% of it in the
+#: shadow), with the shot and read noise of a small sensor; the bright one is 1.2 times the photograph's.
+LIGHTS: dict[str, tuple[int, LightChangeConfig]] = {
+    "dim, cast shadow": (
+        1,
+        LightChangeConfig(
+            gain=(0.25, 0.25),
+            shading=0.6,
+            ramp=1.5,
+            shadows=(1, 1),
+            shadow_light=(0.2, 0.2),
+            penumbra=(3.0, 3.0),
+            target=None,
+            exposure_error=(0.0, 0.0),
+            full_well=(5000.0, 5000.0),
+            read_noise=(3.0, 3.0),
+            jpeg_probability=0.0,
+        ),
+    ),
+    "bright": (
+        0,
+        LightChangeConfig(
+            gain=(1.2, 1.2),
+            shading=0.3,
+            ramp=0.8,
+            shadows=(0, 0),
+            target=None,
+            exposure_error=(0.0, 0.0),
+            full_well=(20000.0, 20000.0),
+            read_noise=(1.0, 1.0),
+            jpeg_probability=0.0,
+        ),
+    ),
+}
 
 
-def frames(scene: Path) -> list[np.ndarray]:
-    """The scene's darkest and brightest frames (mean intensity), gray uint8."""
-    images = []
-    for path in sorted(scene.glob("*.jpg")):
-        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-        if image is None:
-            raise SystemExit(f"{path}: not a readable image")
-        images.append(image)
-    if not images:
-        raise SystemExit(f"no frames in {scene}")
-    order = np.argsort([img.mean() for img in images])
-    return [images[order[0]], images[order[-1]]]
+def frames(path: Path) -> list[np.ndarray]:
+    """The photograph under each of :data:`LIGHTS`, gray uint8."""
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise SystemExit(f"{path}: not a readable image")
+    return [
+        cv2.cvtColor(relight(image, np.random.default_rng(seed), light), cv2.COLOR_BGR2GRAY)
+        for seed, light in LIGHTS.values()
+    ]
 
 
 def label(tile: np.ndarray, text: str) -> np.ndarray:
@@ -49,11 +85,11 @@ def label(tile: np.ndarray, text: str) -> np.ndarray:
     return out
 
 
-def figure(scene: Path) -> np.ndarray:
+def figure(path: Path) -> np.ndarray:
     import alcn_cv
 
     rows = []
-    for frame in frames(scene):
+    for frame in frames(path):
         height = round(frame.shape[0] * TILE_WIDTH / frame.shape[1])
         small = cv2.resize(frame, (TILE_WIDTH, height), interpolation=cv2.INTER_AREA)
         tiles = []
@@ -67,15 +103,17 @@ def figure(scene: Path) -> np.ndarray:
 
 def main() -> None:
     parser = command_line(__doc__, keeps=False)
-    parser.add_argument("--scene", default=SCENE, help=f"a scene of ../shared/data/webcam (default {SCENE})")
+    parser.add_argument(
+        "--image", type=Path, default=IMAGE, help="the photograph to relight (default: the cookie box's)"
+    )
     parser.add_argument("--out", type=Path, default=RUNS / "figure.png", help="PNG to write (default: runs/figure.png)")
     parser.add_argument("--publish", action="store_true", help=f"then copy it to {PUBLISHED.relative_to(ROOT)}")
     args = parser.parse_args()
     if args.out.suffix.lower() != ".png":
         parser.error(f"--out is a PNG file (.png), got {args.out}")
-    if args.publish and args.scene != SCENE:  # the README's caption names its scene
-        parser.error(f"--publish: the README's figure is of {SCENE}; --scene {args.scene} writes --out only")
-    image = figure(SHARED_DATA / "webcam" / args.scene)
+    if args.publish and args.image.resolve() != IMAGE.resolve():  # the README's caption names its photograph
+        parser.error(f"--publish: the README's figure is of {IMAGE.name}; --image {args.image} writes --out only")
+    image = figure(args.image)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(args.out), image, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
         raise OSError(f"cannot write {args.out}")

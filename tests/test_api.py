@@ -266,15 +266,15 @@ def test_backend_follows_what_is_installed(run_python):
         (
             "threads=2",
             "MissingDependencyError",
-            "ALCN(threads=2, torch's threads, runs backend='fast'): needs the [train] extra (torch is not installed): "
-            "without a GPU, first pip install torch --index-url https://download.pytorch.org/whl/cpu; then pip install "
-            '"alcn-cv[train]"',
+            "ALCN(threads=2, torch's threads, runs backend='fast'): needs the [train] extra (torch, kornia are not "
+            "installed): without a GPU, first pip install torch --index-url https://download.pytorch.org/whl/cpu; "
+            'then pip install "alcn-cv[train]"',
         ),
         (
             "device='gpu'",
             "MissingDependencyError",
-            "ALCN(device='gpu', runs backend='torch'): needs the [train] extra (torch is not installed): without a "
-            "GPU, first pip install torch --index-url https://download.pytorch.org/whl/cpu; then pip install "
+            "ALCN(device='gpu', runs backend='torch'): needs the [train] extra (torch, kornia are not installed): "
+            "without a GPU, first pip install torch --index-url https://download.pytorch.org/whl/cpu; then pip install "
             '"alcn-cv[train]"',
         ),
         # cv2.dnn runs the network at its own stride

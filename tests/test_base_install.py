@@ -142,8 +142,8 @@ def test_base_install_runs_the_runtime_without_torch(tmp_path, extras_modules):
     proc = _run(tmp_path, alcn, "train", "--out", tmp_path / "run")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.strip().splitlines()[-1] == (
-        "alcn train: needs the [train] extra (torch is not installed): without a GPU, first pip install torch "
-        '--index-url https://download.pytorch.org/whl/cpu; then pip install "alcn-cv[train]"'
+        "alcn train: needs the [train,data] extras (torch, kornia, skimage are not installed): without a GPU, first "
+        'pip install torch --index-url https://download.pytorch.org/whl/cpu; then pip install "alcn-cv[train,data]"'
     )
 
 

@@ -31,7 +31,8 @@ def test_a_command_needing_a_missing_extra_says_which(run_python, tmp_path):
     proc = run_python(ALCN, "train", "--out", tmp_path / "run")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.strip().splitlines()[-1] == (
-        f'alcn train: needs the [train] extra (torch is not installed): {TORCH_FIRST}pip install "alcn-cv[train]"'
+        "alcn train: needs the [train,data] extras (torch, kornia, skimage are not installed): "
+        f'{TORCH_FIRST}pip install "alcn-cv[train,data]"'
     )
     assert not (tmp_path / "run" / "checkpoint.pt").exists()
 
@@ -41,12 +42,14 @@ def test_a_command_needing_a_missing_extra_says_which(run_python, tmp_path):
     [
         (
             ["demo"],
-            f'alcn demo: needs the [bench] extra (skimage is not installed): {TORCH_FIRST}pip install "alcn-cv[bench]"',
+            "alcn demo: needs the [bench] extra (skimage, matplotlib, torch, kornia are not installed): "
+            f'{TORCH_FIRST}pip install "alcn-cv[bench]"',
         ),
         (
             ["pose", "build", "VIDEO", "--K", "800", "800", "320", "240", "--box-size", "19", "26", "7.5"],
             # [pose] brings no torch: no CPU-index hint
-            'alcn pose build: needs the [pose] extra (pycolmap is not installed): pip install "alcn-cv[pose]"',
+            "alcn pose build: needs the [pose] extra (pycolmap, open3d, matplotlib are not installed): "
+            'pip install "alcn-cv[pose]"',
         ),
         (
             ["data", "phos"],
@@ -74,6 +77,27 @@ def test_a_command_checks_its_extra_before_the_work(run_python, tmp_path, comman
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.strip().splitlines() == [line]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["train", "train-real-light", "train-unet", "distill", "train-detector"])
+def test_a_training_command_names_every_extra_it_lacks_before_the_work(run_python, tmp_path, command):
+    """The training commands need [train] and [data] (their data are made from scikit-image's photographs): with
+    [train] installed and not [data], they wrote their run folder and failed at the first photograph, naming the
+    extra in another form; with neither, they named [train] and then, once it was installed, [data]."""
+    out = tmp_path / ("weights.npz" if command == "distill" else "run")
+    options = {"distill": ["--conf", "gain-lite"], "train-detector": [tmp_path]}
+    args = [command, *options.get(command, []), "--out", out]
+    proc = run_python(ALCN, *args, blocked=("skimage",))
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.strip().splitlines() == [
+        f'alcn {command}: needs the [data] extra (skimage is not installed): pip install "alcn-cv[data]"'
+    ]
+    assert not out.exists()
+    proc = run_python(ALCN, *args, blocked=("skimage", "kornia"))
+    assert proc.stderr.strip().splitlines() == [
+        f"alcn {command}: needs the [train,data] extras (kornia, skimage are not installed): "
+        'pip install "alcn-cv[train,data]"'
+    ]
 
 
 def test_a_missing_module_imported_while_running_is_one_line(monkeypatch, capsys, tmp_path):

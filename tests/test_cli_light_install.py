@@ -115,10 +115,10 @@ def test_with_torch_installed_the_line_only_names_the_extra(monkeypatch):
 @pytest.mark.parametrize(
     ("options", "line"),
     [
-        (["--device", "cpu"], "alcn normalize --device: needs the [train] extra (torch is not installed): "),
+        (["--device", "cpu"], "alcn normalize --device: needs the [train] extra (torch, kornia are not installed): "),
         (
             ["-p", "backend=fast"],
-            "alcn normalize: ALCN(backend='fast'): needs the [train] extra (torch is not installed): ",
+            "alcn normalize: ALCN(backend='fast'): needs the [train] extra (torch, kornia are not installed): ",
         ),
     ],
     ids=["device", "backend"],

@@ -236,10 +236,10 @@ def test_part_runs_each_part_once_in_its_order(
         assert "add_part_option(parser" in source and "selected_parts(args" in source, script
 
 
-def test_figure_publishes_only_the_readmes_scene_and_out_may_be_the_published_path(
+def test_figure_publishes_only_the_readmes_photograph_and_out_may_be_the_published_path(
     experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    """figure.py --out docs/figure.png --publish ended in shutil.SameFileError; --publish with another scene than
+    """figure.py --out docs/figure.png --publish ended in shutil.SameFileError; --publish with another photograph than
     the README's caption names published it."""
     import numpy as np
 
@@ -247,12 +247,12 @@ def test_figure_publishes_only_the_readmes_scene_and_out_may_be_the_published_pa
     published = tmp_path / "figure.png"
     monkeypatch.setattr(module, "PUBLISHED", published)
     monkeypatch.setattr(module, "ROOT", tmp_path)
-    monkeypatch.setattr(module, "figure", lambda scene: np.full((8, 8), 128, np.uint8))
+    monkeypatch.setattr(module, "figure", lambda path: np.full((8, 8), 128, np.uint8))
     monkeypatch.setattr(sys, "argv", ["figure.py", "--out", str(published), "--publish"])
     module.main()
     assert published.is_file()
     out = tmp_path / "other.png"
-    monkeypatch.setattr(sys, "argv", ["figure.py", "--scene", "courbevoie", "--out", str(out), "--publish"])
+    monkeypatch.setattr(sys, "argv", ["figure.py", "--image", str(tmp_path / "my.jpg"), "--out", str(out), "--publish"])
     with pytest.raises(SystemExit):
         module.main()
     assert not out.exists()

@@ -13,7 +13,7 @@ from pathlib import Path
 import alcn_cv
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCES = ("pyproject.toml", "MANIFEST.in", "README.md", "LICENSE", "alcn_cv", "pose", "calib", "tests")
+SOURCES = ("pyproject.toml", "MANIFEST.in", "README.md", "LICENSE", "NOTICE", "alcn_cv", "pose", "calib", "tests")
 BUILD = (
     "import sys; from setuptools import build_meta as backend; out = sys.argv[1]; "  # the backend rewrites sys.argv
     "built = backend.build_sdist(out), backend.build_wheel(out); print('BUILT', *built)"
@@ -42,13 +42,20 @@ def test_the_sdist_and_the_wheel_carry_the_package_its_types_and_its_licence_exp
     with tarfile.open(tmp_path / "dist" / sdist_name) as sdist:
         files = {Path(*Path(n).parts[1:]).as_posix() for n in sdist.getnames()}
     assert not [f for f in files if f.startswith("tests")], "a part of the test suite is in the sdist"
-    assert {"pyproject.toml", "LICENSE", "alcn_cv/py.typed", "alcn_cv/weights/alcn_normalizer_gain.onnx"} <= files
+    assert {
+        "pyproject.toml",
+        "LICENSE",
+        "NOTICE",
+        "alcn_cv/py.typed",
+        "alcn_cv/weights/alcn_normalizer_gain.onnx",
+    } <= files
     with zipfile.ZipFile(tmp_path / "dist" / wheel_name) as wheel:
         names = set(wheel.namelist())
         metadata = wheel.read(f"alcn_cv-{version}.dist-info/METADATA").decode()
     shipped = {f"alcn_normalizer{m}.{s}" for m in ("", "_lite", "_gain", "_gain_lite") for s in ("npz", "onnx")}
     assert {f"alcn_cv/weights/{name}" for name in shipped | {"MODEL_CARD.md", "alcn_normalizer_gain.md"}} <= names
-    assert {"alcn_cv/py.typed", f"alcn_cv-{version}.dist-info/licenses/LICENSE"} <= names
+    licenses = f"alcn_cv-{version}.dist-info/licenses"
+    assert {"alcn_cv/py.typed", f"{licenses}/LICENSE", f"{licenses}/NOTICE"} <= names  # NOTICE: the weights' terms
     assert f"\nVersion: {version}\n" in metadata and "\nLicense-Expression: Apache-2.0\n" in metadata
     assert "\nLicense: " not in metadata and "Typing :: Typed" in metadata
 

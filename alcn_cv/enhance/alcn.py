@@ -8,8 +8,9 @@ local energy and equalizes it. :class:`ALCN` is the ``apply()`` front; the work 
 (:mod:`alcn_cv.runtime`, OpenCV; :mod:`alcn_cv.nn`, torch).
 
 The default model, ``"gain"``, and ``"gain-lite"`` are trained on relit photographs in the public domain, under CC0
-or Apache-2.0, or with no known copyright restrictions; ``"paper"`` and ``"lite"`` on rendered windows (see each
-model card).
+or Apache-2.0, or with no known copyright restrictions; ``"paper"`` and ``"lite"`` on rendered windows whose textures
+included scikit-image images with no licence stated: they are not shown to be free of those images' terms (``NOTICE``
+and each model card).
 """
 
 from __future__ import annotations
@@ -93,7 +94,8 @@ class ALCN(Normalization):
         model: instead of ``weights``, a shipped Normalizer (:data:`~alcn_cv.runtime.MODELS`; see each model
             card): ``"gain"`` (default: F_k = exp(g) w_k on a grid, the response divided by its local energy, then
             ``tanh(x / tau)``; trained on relit photographs that permit any use), ``"gain-lite"`` (distilled from
-            it), ``"lite"`` (the paper's family distilled, rendered data only) or ``"paper"``.
+            it), ``"lite"`` (the paper's family distilled) or ``"paper"`` (these two not shown to be free of their
+            textures' terms: the module's docstring).
         scale: working scale, input resolution -> the Normalizer's (its 48x48 window and sigmas are in working
             pixels). Default: the weight file's (1 for the gain family, 0.5 for the paper's).
         backend: ``"opencv"`` (no torch: the ONNX export beside the weight file run by ``cv2.dnn``, Eq. 3 in

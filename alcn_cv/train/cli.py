@@ -34,6 +34,9 @@ __all__ = ["add_parser"]
 
 logger = logging.getLogger(__name__)
 
+#: What the training commands import: torch and kornia ([train]) and scikit-image, whose photographs their data are
+#: made from ([data]); checked before any work, every missing one named at once.
+_TRAINING_NEEDS = ("torch", "kornia", "skimage")
 #: The ``type`` of a ``--threads``, where 0 is the libraries' own default.
 _THREADS = number_at_least(int, 0)
 
@@ -93,7 +96,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=SEED, help="seed (default: the preset's)")
     p.add_argument("--device", choices=("cpu", "cuda"), help="run.device (default: the preset's)")
     add_progress_option(p)
-    p.set_defaults(func=_train)
+    p.set_defaults(func=_train, needs=_TRAINING_NEEDS)
 
     d = subparsers.add_parser(
         "train-detector",
@@ -131,7 +134,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     d.add_argument("--seed", type=SEED, default=0, help="seed of the synthetic images and the detector (default 0)")
     add_progress_option(d)
-    d.set_defaults(func=_train_detector)
+    d.set_defaults(func=_train_detector, needs=_TRAINING_NEEDS)
 
     s = subparsers.add_parser(
         "distill",
@@ -161,7 +164,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="torch and OpenCV threads (default 1, as the shipped files were made; 0: the libraries' default)",
     )
     add_progress_option(s)
-    s.set_defaults(func=_distill)
+    s.set_defaults(func=_distill, needs=_TRAINING_NEEDS)
 
     r = subparsers.add_parser(
         "train-real-light",
@@ -194,7 +197,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--threads and --no-progress are free",
     )
     r.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
-    r.set_defaults(func=_train_real_light)
+    r.set_defaults(func=_train_real_light, needs=_TRAINING_NEEDS)
 
     u = subparsers.add_parser(
         "train-unet",
@@ -210,7 +213,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _add_run(u, "out/unet")
     u.add_argument("--threads", type=_THREADS, default=1, help="torch threads (default 1; 0: torch's default)")
     u.add_argument("--overwrite", action="store_true", help="replace the earlier run that OUT holds")
-    u.set_defaults(func=_train_unet)
+    u.set_defaults(func=_train_unet, needs=_TRAINING_NEEDS)
 
     e = subparsers.add_parser(
         "export",
