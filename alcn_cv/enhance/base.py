@@ -50,6 +50,8 @@ logger = logging.getLogger(__name__)
 TILE_PIXELS = 2**24
 #: The classes that already warned about an image smaller than their window (once per process).
 _WARNED_SMALL: set[type] = set()
+#: The classes of methods of one's own that already warned about a non-finite response (once per process).
+_WARNED_NON_FINITE: set[type] = set()
 
 
 def with_alpha(result: np.ndarray, alpha: np.ndarray, out_dtype: np.dtype) -> np.ndarray:
@@ -131,8 +133,22 @@ class Normalization:
                 f"{self.name or type(self).__name__} returned a response of shape {out.shape} for an image of "
                 f"{gray.shape}: its _normalize must return one value per pixel, (H, W)"
             )
+        if type(self) not in _WARNED_NON_FINITE and not type(self).__module__.startswith("alcn_cv."):
+            self._warn_if_non_finite(out)  # a method of one's own: the shipped ones are tested instead (a frame's cost)
         # a response that is the image itself (none's) is the caller's array: a copy, writable as any response
         return out.copy() if np.may_share_memory(out, gray) else out
+
+    def _warn_if_non_finite(self, out: np.ndarray) -> None:
+        """Log, once per class, that a response holds NaN or infinities, which :meth:`apply` writes as 0."""
+        bad = out.size - int(np.count_nonzero(np.isfinite(out)))
+        if bad:
+            _WARNED_NON_FINITE.add(type(self))
+            logger.warning(
+                "%s returned %d non-finite values (NaN or infinity) of %d: apply() writes them as 0 (warned once)",
+                self.name or type(self).__name__,
+                bad,
+                out.size,
+            )
 
     def _warn_if_small(self, shape: tuple[int, ...]) -> None:
         """Log, once per class, that an image is smaller than the method's window."""
