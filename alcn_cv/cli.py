@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib.util
+import io
 import logging
 import math
 import os
@@ -447,6 +448,8 @@ def _command_parser(parser: argparse.ArgumentParser, args: argparse.Namespace) -
 
 
 def main(argv: list[str] | None = None) -> int:
+    if isinstance(sys.stdout, io.TextIOWrapper):  # a console or file in a legacy code page (Windows' cp1252): a
+        sys.stdout.reconfigure(errors="backslashreplace")  # report's character it lacks is escaped, not fatal
     parser = build_parser()
     args, unknown = parser.parse_known_args(argv)
     command = _command_parser(parser, args)

@@ -23,7 +23,14 @@ from __future__ import annotations
 import ctypes
 import sys
 
-__all__ = ["GLIBC_TUNABLES", "MMAP_THRESHOLD", "TRIM_THRESHOLD", "keep_freed_memory", "kept_freed_memory"]
+__all__ = [
+    "GLIBC_TUNABLES",
+    "MMAP_THRESHOLD",
+    "TRIM_THRESHOLD",
+    "glibc_malloc",
+    "keep_freed_memory",
+    "kept_freed_memory",
+]
 
 #: Blocks up to this size come from the heap (glibc's largest mmap threshold on 64 bits).
 MMAP_THRESHOLD = 32 * 2**20
@@ -47,6 +54,11 @@ def _glibc() -> ctypes.CDLL | None:
     except OSError:
         return None
     return libc if hasattr(libc, "gnu_get_libc_version") and hasattr(libc, "mallopt") else None
+
+
+def glibc_malloc() -> bool:
+    """Whether the process's C library is glibc, whose thresholds :func:`keep_freed_memory` sets (Linux)."""
+    return _glibc() is not None
 
 
 def keep_freed_memory(mmap_threshold: int = MMAP_THRESHOLD, trim_threshold: int = TRIM_THRESHOLD) -> bool:

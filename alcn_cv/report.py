@@ -119,11 +119,10 @@ def machine() -> dict[str, Any]:
         "numpy": np.__version__,
         "opencv": cv2.__version__,
     }
-    try:
+    with contextlib.suppress(AttributeError, OSError):  # Linux only
         info["cpus_available"] = len(os.sched_getaffinity(0))
+    with contextlib.suppress(AttributeError, OSError):  # not on Windows
         info["load_average_1_5_15"] = [round(v, 2) for v in os.getloadavg()]
-    except (AttributeError, OSError):
-        pass
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as f:
             names = [line.split(":", 1)[1].strip() for line in f if line.startswith("model name")]

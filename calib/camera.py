@@ -37,8 +37,8 @@ from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats.colmap import ColmapCamera, camera_from_opencv, write_text_model
 from alcn_cv.io import (
     VIDEO_SUFFIXES,
-    atomic_path,
     atomic_paths,
+    atomic_write,
     check_no_earlier_output,
     check_writable,
     count_frames,
@@ -591,16 +591,16 @@ def write_camera_yaml(
     """Write intrinsics as OpenCV FileStorage YAML (``camera_matrix``, ``distortion_coefficients``,
     ``image_width``, ``image_height`` and optionally ``rms``), atomically."""
     path = Path(path)
-    with atomic_path(path) as tmp:  # the temporary name keeps the suffix: FileStorage picks the format from it
-        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
-        fs.write("image_width", int(image_size[0]))
-        fs.write("image_height", int(image_size[1]))
-        fs.write("camera_matrix", np.asarray(K, np.float64))
-        fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
-        if rms is not None:
-            fs.write("rms", float(rms))
-        fs.release()
-    return path
+    # written in memory, the format named by the suffix, and saved by Python: OpenCV opens a file by a narrow
+    # string, which fails on Windows for a path its code page cannot spell (a user name with accents)
+    fs = cv2.FileStorage(path.suffix or ".yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+    fs.write("image_width", int(image_size[0]))
+    fs.write("image_height", int(image_size[1]))
+    fs.write("camera_matrix", np.asarray(K, np.float64))
+    fs.write("distortion_coefficients", np.asarray(dist, np.float64).reshape(1, -1))
+    if rms is not None:
+        fs.write("rms", float(rms))
+    return atomic_write(path, fs.releaseAndGetString())
 
 
 def load_calibration(path: str | os.PathLike | Calibration) -> Calibration:
@@ -619,8 +619,13 @@ def load_calibration(path: str | os.PathLike | Calibration) -> Calibration:
     if not path.is_file():
         raise DatasetError(f"{path}: calibration file not found; {hint}")
     try:
-        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        if path.suffix.lower() == ".gz":  # compressed: OpenCV reads it by name alone
+            fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        else:  # read by Python, parsed from memory (a path of any characters, as write_camera_yaml's)
+            fs = cv2.FileStorage(path.read_text(encoding="utf-8"), cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
         ok = fs.isOpened()
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{path}: not a text file ({exc.reason}); {hint}") from None
     except (cv2.error, SystemError) as exc:  # OpenCV's parser errors surface as either
         detail = getattr(exc, "err", None) or str(exc.__cause__ or exc)
         raise DatasetError(f"{path}: not a valid OpenCV FileStorage file ({detail.strip()}); {hint}") from exc

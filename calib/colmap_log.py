@@ -45,7 +45,7 @@ def pycolmap_log(target: logging.Logger) -> Iterator[None]:
             glog.set_log_destination(glog.INFO, "")  # closes (flushes) the file
             glog.logtostderr, glog.alsologtostderr, glog.stderrthreshold = saved
             for path in sorted(Path(tmp).iterdir()):
-                for line in path.read_text(errors="replace").splitlines():
+                for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
                     level = GLOG_LEVELS.get(line[:1])
                     if level is not None and line[1:2].isdigit():  # skips the file's header lines
                         target.log(level, "pycolmap: %s", line.split("] ", 1)[-1])

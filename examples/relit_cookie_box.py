@@ -208,7 +208,7 @@ def main() -> None:
         n: {"agreeing_frames_percent": 100.0 * float(np.mean(a)) if a else None, "reference_frames": len(a)}
         for n, a in agree.items()
     }
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (args.out / "summary.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")
     print(json.dumps(summary, indent=1))
 
 

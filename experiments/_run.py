@@ -206,7 +206,9 @@ def install_metadata(site: str | Path) -> Path | None:
     groups = {"console_scripts": project["scripts"], **project["entry-points"]}
     dist = Path(site) / f"{project['name'].replace('-', '_')}-{version}.dist-info"
     dist.mkdir(parents=True, exist_ok=True)
-    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {version}\n")
+    (dist / "METADATA").write_text(
+        f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {version}\n", encoding="utf-8"
+    )
     entries = [
         f"[{group}]\n" + "".join(f"{name} = {target}\n" for name, target in items.items())
         for group, items in groups.items()

@@ -148,7 +148,7 @@ def _write_database(
     finally:
         db.close()
     pairs_path = db_path.with_name("pairs.txt")
-    pairs_path.write_text("\n".join(lines) + "\n")
+    pairs_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     opts = pycolmap.TwoViewGeometryOptions()
     opts.filter_stationary_matches = True  # a static background seen by a static camera
     opts.ransac.random_seed = RANDOM_SEED

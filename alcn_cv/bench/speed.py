@@ -45,7 +45,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -69,7 +68,7 @@ from alcn_cv.enhance.registry import create
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.lab import lab_and_lightness, srgb_to_lab
 from alcn_cv.io import atomic_paths, atomic_write, check_no_earlier_output, holds_out_dir, make_folder, write_json
-from alcn_cv.malloc import GLIBC_TUNABLES
+from alcn_cv.malloc import GLIBC_TUNABLES, glibc_malloc
 from alcn_cv.report import command_line, describe_machine, machine, markdown_table
 from alcn_cv.shared_data import shared_data_dir
 from alcn_cv.weight_file import load_normalizer_file
@@ -291,7 +290,8 @@ def video_memory(norm: Normalization, size: tuple[int, int], frames: int, budget
     Frames are :func:`synthetic_frame` (gray) with the light moving; the loop stops after ``frames``
     frames or ``budget_s`` seconds (at least 2 frames). Returns the RSS after every frame (MB),
     its first, last and largest value, the growth per frame (least-squares slope over the
-    second half, kB per frame) and the frames run.
+    second half, kB per frame) and the frames run; where there is no ``/proc`` (macOS, Windows), no RSS: an empty
+    list and None.
     """
     width, height = size
     base = [synthetic_frame(width, height, False, seed=1, t=0.1 * i) for i in range(4)]
@@ -304,25 +304,21 @@ def video_memory(norm: Normalization, size: tuple[int, int], frames: int, budget
         norm.apply(frame)
         times.append(time.perf_counter() - t0)
         value = _rss_kb()
-        rss.append(float("nan") if value is None else value / 1024)
+        if value is not None:  # no /proc (macOS, Windows): no resident set recorded
+            rss.append(value / 1024)
         if i >= 1 and time.perf_counter() - start > budget_s:
             break
-    arr = np.array(rss)
-    half = arr[len(arr) // 2 :]
-    slope = (
-        float(np.polyfit(np.arange(len(half)), half, 1)[0] * 1024)
-        if len(half) >= 2 and np.isfinite(half).all()
-        else None
-    )
+    half = np.array(rss[len(rss) // 2 :])
+    slope = float(np.polyfit(np.arange(len(half)), half, 1)[0] * 1024) if len(half) >= 2 else None
     return {
         "size": [width, height],
         "colour": False,
-        "frames": len(rss),
+        "frames": len(times),
         "median_frame_ms": float(np.median(times) * 1e3),
         "rss_mb": [round(v, 2) for v in rss],
-        "rss_first_mb": float(arr[0]),
-        "rss_last_mb": float(arr[-1]),
-        "rss_max_mb": float(np.nanmax(arr)),
+        "rss_first_mb": rss[0] if rss else None,
+        "rss_last_mb": rss[-1] if rss else None,
+        "rss_max_mb": max(rss) if rss else None,
         "growth_kb_per_frame": slope,
     }
 
@@ -511,7 +507,10 @@ def _frame_source(image: str | os.PathLike | None) -> Callable[[int, int, str], 
     """``frame(width, height, colour)``: the image resized, or :func:`synthetic_frame`."""
     if image is None:
         return lambda width, height, colour: synthetic_frame(width, height, colour == "bgr")
-    source = cv2.imread(str(image), cv2.IMREAD_COLOR)
+    try:  # decoded from the bytes Python read: cv2.imread opens a path by a narrow string (Windows' code page)
+        source = cv2.imdecode(np.fromfile(image, np.uint8), cv2.IMREAD_COLOR)
+    except OSError as exc:
+        raise InputError(f"cannot read image {image}: {exc.strerror}") from None
     if source is None:
         raise InputError(f"cannot read image {image}")
 
@@ -794,6 +793,8 @@ def fresh_process_main() -> None:
     """The child of :func:`_fresh_processes`: ``argv`` is a frame (``.npy``), a method (``alcn``, the default ALCN,
     or ``dog``, a raw DoG) and a number of calls; prints the median ms per call after the first and the page faults
     per call as JSON."""
+    import resource  # Unix only: the parent runs this on glibc alone
+
     frame, method, calls = np.load(sys.argv[1]), sys.argv[2], int(sys.argv[3])
     fn = ALCN().apply if method == "alcn" else raw_dog
     fn(frame)
@@ -985,7 +986,7 @@ def targets(settings: SpeedSettings, work: Path, progress: bool = True) -> dict[
     profile = _profile(default, gray, repeats)
     contract = _contract_overhead(gray, max(3, repeats // 2))
     threads = [_after_apply(gray, repeats, 1), _after_apply(gray, repeats, None)]
-    fresh = _fresh_processes(gray, work, max(5, 2 * repeats))
+    fresh = _fresh_processes(gray, work, max(5, 2 * repeats)) if glibc_malloc() else {}  # glibc's thresholds alone
     memory = _large_memory(settings.large_size)
     video = _normalize_video(settings, work, progress)
     batched = _batched(gray, small, repeats)
@@ -1003,6 +1004,20 @@ def targets(settings: SpeedSettings, work: Path, progress: bool = True) -> dict[
     )
     alcn_memory = next(r for r in memory if r["method"] == "alcn")
     size = f"{width}x{height}"
+    fresh_target = []
+    if fresh:  # glibc's thresholds: Linux only
+        fresh_target.append(
+            _target(
+                f"default ALCN in a fresh process: glibc's malloc as it starts / keeping freed memory, {size} gray",
+                fresh["alcn glibc"]["ms"] / fresh["alcn kept"]["ms"],
+                "1 with alcn_cv.keep_freed_memory()",
+                None,
+                f"{fresh['alcn glibc']['ms']:.2f} ms against {fresh['alcn kept']['ms']:.2f} "
+                f"({fresh['alcn glibc']['page_faults_per_call']:.0f} page faults per call against "
+                f"{fresh['alcn kept']['page_faults_per_call']:.0f}); raw DoG {fresh['dog glibc']['ms']:.2f} against "
+                f"{fresh['dog kept']['ms']:.2f} ms",
+            )
+        )
     summary = [
         _target(
             f"default ALCN (the gain Normalizer) / raw DoG, {size} gray",
@@ -1091,16 +1106,7 @@ def targets(settings: SpeedSettings, work: Path, progress: bool = True) -> dict[
             f"torch's threads: {threads[1]['ratio']:.2f}, apply {threads[1]['apply_ms']:.1f} ms against "
             f"{threads[0]['apply_ms']:.1f} ms",
         ),
-        _target(
-            f"default ALCN in a fresh process: glibc's malloc as it starts / keeping freed memory, {size} gray",
-            fresh["alcn glibc"]["ms"] / fresh["alcn kept"]["ms"],
-            "1 with alcn_cv.keep_freed_memory()",
-            None,
-            f"{fresh['alcn glibc']['ms']:.2f} ms against {fresh['alcn kept']['ms']:.2f} "
-            f"({fresh['alcn glibc']['page_faults_per_call']:.0f} page faults per call against "
-            f"{fresh['alcn kept']['page_faults_per_call']:.0f}); raw DoG {fresh['dog glibc']['ms']:.2f} against "
-            f"{fresh['dog kept']['ms']:.2f} ms",
-        ),
+        *fresh_target,
         _target(
             "alcn normalize video / (decode+encode + apply, in sequence)",
             video["normalize_s"] / video["sequential_s"],

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import inspect
 import logging
+import os
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -49,7 +50,7 @@ def _check_output(src: Path, dst: Path, overwrite: bool, in_place: bool) -> list
     """
     if not src.exists():  # else its kind, told by its name, would be judged by the output's
         raise InputError(f"no such image, folder or video: {src}")
-    if src.resolve() == dst.resolve():
+    if src.resolve() == dst.resolve() or (dst.exists() and os.path.samefile(src, dst)):  # a case-insensitive disk
         if not in_place:
             raise InputError(f"the output {dst} is the input {src}: it would be replaced (--in-place replaces it)")
         return [src] if not src.is_dir() else list_images(src)

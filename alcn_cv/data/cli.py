@@ -120,7 +120,7 @@ def _compare_psm(args: argparse.Namespace) -> int:
 
     psm = Path(args.psm) if args.psm else shared_data_dir() / "psm"
     compare_psm(psm, args.out, seed=args.seed, overwrite=args.overwrite)
-    print((Path(args.out) / "psm_comparison.md").read_text(), end="")
+    print((Path(args.out) / "psm_comparison.md").read_text(encoding="utf-8"), end="")
     return 0
 
 

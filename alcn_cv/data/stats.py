@@ -96,7 +96,7 @@ def load_psm(psm_dir: str | os.PathLike) -> tuple[dict[str, tuple[list[np.ndarra
     objects = load_photometric(root)  # the folder first: else the first complaint would be the missing lights.txt
     lf = root / "lights.txt"
     try:
-        rows = lf.read_text().split("\n")
+        rows = lf.read_text(encoding="utf-8").split("\n")
         count = int(rows[0])
         lights = np.array([[float(x) for x in r.split()] for r in rows[1 : 1 + count]])
     except FileNotFoundError:

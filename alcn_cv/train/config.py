@@ -466,7 +466,7 @@ def load_config(
             raise InputError(f"config file {name}: not found")
         else:
             try:
-                values = tomllib.loads(path.read_text())
+                values = tomllib.loads(path.read_text(encoding="utf-8"))
             except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
                 raise InputError(f"config file {path}: invalid TOML: {exc}") from None
             cfg = with_settings(cfg, [values])

@@ -190,7 +190,7 @@ def _prepare_run(cfg: TrainConfig, out: Path, resume: bool) -> tuple[dict[str, A
     ckpt = load_checkpoint(out / _CHECKPOINT, cfg) if resume else None
     if not resume and distributed.is_main():
         # its folders absolute, as the checkpoint's: `--conf OUT/config.toml` reads the same data from any folder
-        (out / "config.toml").write_text(dump_toml(cfg.resolved()))
+        (out / "config.toml").write_text(dump_toml(cfg.resolved()), encoding="utf-8")
     device = torch_device(cfg.run.device, "config key 'run.device'")
     if distributed.world_size() > 1 and device.type == "cuda":
         device = torch.device("cuda", distributed.local_rank())
