@@ -217,3 +217,13 @@ def test_speed_repeats_alone_caps_the_presets_minimum(tmp_path, monkeypatch):
     assert (taken[0].min_repeats, taken[0].max_repeats) == (1, 1)
     main(["bench", "speed", "--conf", "quick", "--repeats", "5", "--out", str(tmp_path / "o")])
     assert (taken[1].min_repeats, taken[1].max_repeats) == (speed.CONFS["quick"].min_repeats, 5)
+
+
+def test_a_tuned_spec_as_the_reports_print_it_is_one_method() -> None:
+    """The reports print a tuned setting with a tuple (`sqi:sigmas=(0.5, 1.0, 2.0):eps=0.01`); --methods split it at
+    every comma, and the method could not be given back to a benchmark."""
+    from alcn_cv.bench.cli import _list
+
+    specs = _list()("none,sqi:sigmas=(0.5, 1.0, 2.0):eps=0.01,clahe:clipLimit=8.0:tileGridSize=(8, 8),dog")
+    assert specs == ["none", "sqi:sigmas=(0.5, 1.0, 2.0):eps=0.01", "clahe:clipLimit=8.0:tileGridSize=(8, 8)", "dog"]
+    assert _list(int)("1,10") == [1, 10]

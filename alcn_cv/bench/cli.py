@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -40,7 +41,8 @@ def _list(item: Callable[[str], Any] = str) -> Callable[[str], list]:
 
     def parse(text: str) -> list:
         try:
-            return [item(v.strip()) for v in text.split(",") if v.strip()]
+            # commas inside brackets belong to an item: a tuned spec as the reports print it, sqi:sigmas=(0.5, 1.0)
+            return [item(v.strip()) for v in re.split(r",(?![^()\[\]]*[)\]])", text) if v.strip()]
         except (argparse.ArgumentTypeError, ValueError) as exc:
             # argparse reports a ValueError as "invalid parse value": the item's own message says what is expected
             raise argparse.ArgumentTypeError(f"a comma-separated list, each item {exc}") from None
