@@ -31,40 +31,34 @@ PUBLISHED = ROOT / "docs" / "figure.png"
 IMAGE = SHARED_DATA / "cookie_box" / "resized_IMG_3875.JPG"
 METHODS = {"input": "none", "CLAHE": "clahe", "DoG": "dog", "Tan-Triggs": "tantriggs", "ALCN": "alcn"}
 TILE_WIDTH = 256
+
+
 #: The rows' lights and the seeds they are drawn with: every range fixed, only the shadow's shape and the shading's
 #: field drawn. No auto-exposure: the dim light stays dim (a quarter of the photograph's light, 20% of it in the
 #: shadow), with the shot and read noise of a small sensor; the bright one is 1.2 times the photograph's.
+def _light(
+    gain: float, shading: float, ramp: float, shadows: int, full_well: float, read_noise: float
+) -> LightChangeConfig:
+    """A light of fixed strength filmed without auto-exposure, exposure error or JPEG (a shadow leaves 20% of it, its
+    penumbra 3 px)."""
+    return LightChangeConfig(
+        gain=(gain, gain),
+        shading=shading,
+        ramp=ramp,
+        shadows=(shadows, shadows),
+        shadow_light=(0.2, 0.2),
+        penumbra=(3.0, 3.0),
+        target=None,
+        exposure_error=(0.0, 0.0),
+        full_well=(full_well, full_well),
+        read_noise=(read_noise, read_noise),
+        jpeg_probability=0.0,
+    )
+
+
 LIGHTS: dict[str, tuple[int, LightChangeConfig]] = {
-    "dim, cast shadow": (
-        1,
-        LightChangeConfig(
-            gain=(0.25, 0.25),
-            shading=0.6,
-            ramp=1.5,
-            shadows=(1, 1),
-            shadow_light=(0.2, 0.2),
-            penumbra=(3.0, 3.0),
-            target=None,
-            exposure_error=(0.0, 0.0),
-            full_well=(5000.0, 5000.0),
-            read_noise=(3.0, 3.0),
-            jpeg_probability=0.0,
-        ),
-    ),
-    "bright": (
-        0,
-        LightChangeConfig(
-            gain=(1.2, 1.2),
-            shading=0.3,
-            ramp=0.8,
-            shadows=(0, 0),
-            target=None,
-            exposure_error=(0.0, 0.0),
-            full_well=(20000.0, 20000.0),
-            read_noise=(1.0, 1.0),
-            jpeg_probability=0.0,
-        ),
-    ),
+    "dim, cast shadow": (1, _light(0.25, 0.6, 1.5, 1, 5000.0, 3.0)),
+    "bright": (0, _light(1.2, 0.3, 0.8, 0, 20000.0, 1.0)),
 }
 
 
