@@ -69,9 +69,10 @@ class Normalization:
     :attr:`output_range`, the range of raw responses that :meth:`apply` maps linearly onto the
     full output range (values outside are clipped). :attr:`summary` and :attr:`reference`
     describe the method in ``alcn normalize --list`` (default: the first line of the class
-    docstring, and no reference); a method that looks at a window of the image sets
-    :attr:`min_size`, its side in input pixels. Its parameters are its constructor's keywords, with
-    defaults and type hints, kept as attributes of the same names (its ``repr`` and spec show them).
+    docstring, and no reference); a method whose window cannot be completed by mirroring without changing what it
+    computes (ALCN's CNN window) sets :attr:`min_size`, its side in input pixels (the filters leave it 0). Its
+    parameters are its constructor's keywords, with defaults and type hints, kept as attributes of the same names
+    (its ``repr`` and spec show them).
 
     Example, a method of one's own (:func:`~alcn_cv.enhance.registry.register` makes it ``create("gamma")`` and a
     method of every command, given ``alcn --import MODULE``):

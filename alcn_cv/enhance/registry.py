@@ -40,8 +40,8 @@ _REGISTRY: dict[str, type[Normalization]] = {}
 N = TypeVar("N", bound=type[Normalization])
 
 
-#: Names that ``alcn bench relight`` and ``invariance`` build themselves, before the registry: the free-form U-Net
-#: baseline (``unet:weights=PATH``).
+#: Names that ``alcn bench relight`` builds itself, before the registry: the free-form U-Net baseline
+#: (``unet:weights=PATH``); kept from the registry so that no method of one's own takes the name.
 _BUILT_BY_THE_BENCHES = frozenset({"unet"})
 #: A registered name: one word of a spec, and not a bench's composite (``dog+lstd``) or a list (``none,dog``).
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_.-]*")
