@@ -126,11 +126,11 @@ def missing_dependency(module: str | Sequence[str], what: str, preferred: str | 
         if top == "torch":
             install += f" (without a GPU: --index-url {TORCH_CPU_INDEX})"
         return MissingDependencyError(f"{what}: needs {top}, which is not installed: {install}")
-    named = ",".join(dict.fromkeys(e for e in extras if e is not None))
-    installs_torch = any("torch" in _extras_requirements().get(extra, set()) for extra in named.split(","))
-    several = "," in named
+    unique = list(dict.fromkeys(e for e in extras if e is not None))
+    named = ",".join(unique)
+    installs_torch = any("torch" in _extras_requirements().get(extra, set()) for extra in unique)
     error = MissingDependencyError(
-        f"{what}: needs the [{named}] extra{'s' if several else ''} ({', '.join(tops)} "
+        f"{what}: needs the [{named}] extra{'s' if len(unique) > 1 else ''} ({', '.join(tops)} "
         f"{'are' if len(tops) > 1 else 'is'} not installed): {_torch_first(installs_torch)}pip install "
         f'"{DISTRIBUTION}[{named}]"'
     )
