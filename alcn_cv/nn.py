@@ -59,6 +59,7 @@ from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import normalized_bgr, srgb_to_lab
 from alcn_cv.filters.torch_divisive import divisive_normalization
 from alcn_cv.filters.torch_lab import LabToRgb, RgbToLab
+from alcn_cv.filters.torch_precision import at_least_float32, autocast_enabled
 from alcn_cv.filters.torch_resize import area_downsample, interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.nets.cpu_inference import cpu_eager, cpu_inference, transformed
@@ -81,6 +82,23 @@ _TORCH_DTYPES = {
     np.dtype(np.uint16): torch.uint16,
     np.dtype(np.float32): torch.float32,
 }
+
+
+def _in_float32(method: Callable[..., torch.Tensor]) -> Callable[..., torch.Tensor]:
+    """``method(self, image, ...)`` of a float16 or bfloat16 image (outside autocast) run on the image and its other
+    tensor arguments in float32, its result cast back to the image's dtype: the network's convolutions alone run in
+    the module's dtype (:meth:`~alcn_cv.nets.gain.GainNormalizer.maps_from_features`). Eq. 3 in float16 (the
+    difference of two blurs) moves the output by 1.2e-2, the divisive step by 8e-4."""
+
+    @functools.wraps(method)
+    def run(self: ALCN2d, image: torch.Tensor, *args: object, **kwargs: object) -> torch.Tensor:
+        if image.dtype not in (torch.float16, torch.bfloat16) or autocast_enabled(image):
+            return method(self, image, *args, **kwargs)
+        args = tuple(at_least_float32(a) if isinstance(a, torch.Tensor) else a for a in args)
+        kwargs = {k: at_least_float32(v) if isinstance(v, torch.Tensor) else v for k, v in kwargs.items()}
+        return method(self, image.float(), *args, **kwargs).to(image.dtype)
+
+    return run
 
 
 class ALCN2d(nn.Module):
@@ -114,12 +132,17 @@ class ALCN2d(nn.Module):
     [0, 1] (1e-3 of rounding allowed, as ``apply()``), NaN or inf raises. Elsewhere (CUDA, say) it is not checked
     and the output is undefined: a negative gray value makes the whole image NaN through the log of its cell means,
     colour is clipped to [0, 1] before Lab, and a NaN or inf pixel makes its whole image NaN (the divisive floor is
-    the image's mean energy). Against float32, float16 is up to 3e-2 off in gray (8e-4 on average; the lite model
-    3e-3) and 4e-2 in colour, bfloat16 2e-2 and 0.15 (its Lab round trip alone). Under a caller's autocast an image of
-    another float dtype than the module's is let through and the output may be float32: the network runs at
-    autocast's precision (bfloat16: about 1e-2 off float32), the filters as autocast runs their operations (on the CPU
-    in the image's dtype), the Lab conversions in the image's dtype. Colour on CUDA, traced or compiled goes through
-    the torch Lab conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some.
+    the image's mean energy). A float16 or bfloat16 module runs its network's convolutions in its dtype and the rest
+    in float32 (the network's input features and head, Eq. 3, the divisive step, the Lab conversions), where float16
+    cannot hold the values (a cell's variance, the difference of two nearly equal moments; Eq. 3's difference of two
+    blurs): against the float32 module on the same image, float16 is 7e-4 off at most on a photograph, gray or colour
+    (1e-4 on average; the lite model 1.6e-3), bfloat16 6e-3. A float32 image cast to float16 is itself up to 1.8e-3
+    off in the output (the float32 module on the cast image), which no computation after the cast can take back.
+    Under a caller's autocast an image of another float dtype than the module's is let through and the output may be
+    float32: the network's convolutions run at autocast's precision, its features and head in float32, the filters
+    as autocast runs their operations (on the CPU in the image's dtype), the Lab conversions in the image's dtype.
+    Colour on CUDA, traced or compiled goes through the torch Lab conversion: 1e-4 from ``apply()`` on most
+    photographs, up to 5e-4 on some.
     ``torch.jit.trace`` records the sizes of the traced image: on another size the traced module fails or, without
     an error, returns wrong values (use ``torch.compile`` for several sizes, which compiles again for each new size:
     slow on a CPU, so compile for the few sizes a program runs, with ``dynamic=False``: by default the second size
@@ -226,12 +249,14 @@ class ALCN2d(nn.Module):
             return area_downsample(gray, size)
         return F.interpolate(gray, size=size, mode="bilinear", align_corners=False)
 
+    @_in_float32
     def weight_maps(self, gray: torch.Tensor, small: torch.Tensor | None = None) -> torch.Tensor:
         """Eq. 3's maps F_k ``(B, N, H, W)`` at the input resolution (``small``: the working image, default
         :meth:`working`)."""
         with self._tf32(gray):
             return self._maps(gray, small, first_only=False)
 
+    @_in_float32
     def eq3(self, gray: torch.Tensor, small: torch.Tensor | None = None, half: bool = False) -> torch.Tensor:
         """Eq. 3's raw response ``(B, 1, H, W)`` (``small`` as in :meth:`weight_maps`; ``half``: the network under
         float16 autocast, Eq. 3 itself in ``gray``'s dtype).
@@ -277,6 +302,7 @@ class ALCN2d(nn.Module):
             return response
         return response + self.spec.band * wide_band(gray, self.net.tau, self.net.floor_scale, floor)
 
+    @_in_float32
     def response(
         self,
         gray: torch.Tensor,
@@ -398,6 +424,7 @@ class ALCN2d(nn.Module):
         self._check_input(image)
         return self._normalize(image)
 
+    @_in_float32
     def _normalize(self, image: torch.Tensor) -> torch.Tensor:
         """:meth:`forward` of an image already checked (:meth:`_check_input`)."""
         # The filters take in-place paths where no gradient is recorded, and torch.jit.trace's check traces again
@@ -417,10 +444,7 @@ class ALCN2d(nn.Module):
         (another dtype is let through under autocast)."""
         _check_image(image)
         weight = next(self.net.parameters())
-        device_type = image.device.type
-        # torch.is_autocast_enabled raises for a device without autocast (meta)
-        autocast = torch.amp.is_autocast_available(device_type) and torch.is_autocast_enabled(device_type)
-        if image.device != weight.device or (image.dtype != weight.dtype and not autocast):
+        if image.device != weight.device or (image.dtype != weight.dtype and not autocast_enabled(image)):
             raise InputError(
                 f"image is {image.dtype} on {image.device}, the module {weight.dtype} on {weight.device}: "
                 "move the module with .to(image.device, image.dtype)"

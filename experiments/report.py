@@ -160,7 +160,8 @@ def device_speed(report: dict[str, Any], title: str = "Speed on a GPU") -> str:
         f"## {title}\n\n{provenance(report)}\nALCN batched on {device.get('device', '?')}, "
         f"{_size(device.get('size'))} gray, frames per second:\n\n"
         + table(["batch", *columns], [[r.get("batch"), *(r.get(c) for c in columns)] for r in rows])
-        + f"\nLargest difference float16 / float32 on the device: {device.get('half_max_abs')}; device / CPU "
+        + f"\nLargest difference float16 / float32 on the device, on the same image: {device.get('half_max_abs')} "
+        f"(the image cast to float16, in float32: {device.get('half_image_max_abs')}); device / CPU "
         f"(float32): {device.get('device_vs_cpu_max_abs')}.\n"
     )
 

@@ -161,3 +161,15 @@ def test_a_grid_that_does_not_cover_the_image_is_an_input_error(rng):
     for rows in ((5, 3), (-1, 4), (0, 21)):
         with pytest.raises(InputError, match="rows"):
             alcn_filter_grid(image, maps, 4, (1.0, 2.0), rows=rows)
+
+
+def test_a_cast_module_keeps_exact_kernels_for_a_finer_image():
+    """A mixture cast to float16 (with its module) blurs a float32 image with float32 kernels, not rounded ones: the
+    two kernels of a DoG rounded to float16 moved ALCN's output by 2e-3."""
+    mixture = GaussianMixture2d((1.0, 2.0))
+    image, maps = torch.rand(1, 1, 24, 32), torch.randn(1, 2, 24, 32)
+    reference = mixture(image, maps)
+    mixture.half()
+    assert mixture.bank.dtype == torch.float16
+    torch.testing.assert_close(mixture(image, maps), reference, atol=0, rtol=0)
+    torch.testing.assert_close(mixture.difference(image), GaussianMixture2d((1.0, 2.0)).difference(image))

@@ -316,7 +316,8 @@ class ALCN(Normalization):
             frames: ``(B, H, W)`` or ``(B, H, W, C)`` (gray, gray + alpha, BGR, BGRA) uint8, uint16, or float32
                 intensities in [0, 1], in any byte order.
             out_dtype: as in :meth:`apply` (default: the frames' dtype).
-            half: run the Normalizer in float16 under ``torch.autocast``; Eq. 3 stays in float32.
+            half: run the Normalizer's convolutions in float16 under ``torch.autocast`` (its input features and head,
+                Eq. 3 and the steps after it stay in float32).
 
         Returns:
             The frames' shape, of ``out_dtype``.

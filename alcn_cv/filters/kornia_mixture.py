@@ -122,11 +122,20 @@ class GaussianMixture2d(nn.Module):
     def num_kernels(self) -> int:
         return len(self.sigmas)
 
+    def _bank(self, x: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:
+        """The kernels in ``dtype`` on ``x``'s device, made again where a cast of the module (to float16, say) rounded
+        them and ``dtype`` has more precision: rounded to float16, the two kernels of a DoG move ALCN's output by
+        2e-3."""
+        if torch.finfo(self.bank.dtype).eps <= torch.finfo(dtype).eps:
+            return self.bank.to(dtype)
+        with torch.inference_mode(False):  # as gaussian_blur's cached kernels: a backward may follow
+            return _kernel_bank(self.sigmas, x.device, dtype)
+
     def forward(self, image: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
         _check_shapes(image, weights)
         if weights.shape[1] != self.num_kernels:
             raise InputError(f"{weights.shape[1]} weights for {self.num_kernels} kernels")
-        return _mix(image, weights, self.bank.to(image.dtype), self.sigmas)
+        return _mix(image, weights, self._bank(image, torch.promote_types(image.dtype, weights.dtype)), self.sigmas)
 
     def difference(self, product: torch.Tensor) -> torch.Tensor:
         """Eq. 3 of two kernels whose maps are ``F`` and ``-F`` (the gain Normalizer's, :mod:`alcn_cv.nets.gain`):
@@ -143,7 +152,7 @@ class GaussianMixture2d(nn.Module):
                 f"difference takes a (B, 1, H, W) product and a mixture of two kernels, got {tuple(product.shape)} "
                 f"and {self.num_kernels} kernels"
             )
-        first, second = _blurs(product, self.bank.to(product.dtype), self.sigmas)
+        first, second = _blurs(product, self._bank(product, product.dtype), self.sigmas)
         return first - second
 
     def extra_repr(self) -> str:

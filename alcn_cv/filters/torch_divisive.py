@@ -16,6 +16,7 @@ from torch import nn
 from alcn_cv.filters.divisive import ABSOLUTE_FLOOR
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 from alcn_cv.filters.torch_pad import reflect101_pad
+from alcn_cv.filters.torch_precision import autocast_enabled
 from alcn_cv.filters.torch_separable import filter_columns, filter_rows
 
 __all__ = [
@@ -97,9 +98,7 @@ def divisive_normalization(
     """
     device = response.device.type
     if response.dtype == torch.float16 or (
-        torch.amp.is_autocast_available(device)  # not on the meta device
-        and torch.is_autocast_enabled(device)
-        and torch.get_autocast_dtype(device) == torch.float16
+        autocast_enabled(response) and torch.get_autocast_dtype(device) == torch.float16
     ):
         with torch.autocast(device, enabled=False):
             wide = None if floor is None else floor.float()

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from contextlib import nullcontext
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,7 @@ from alcn_cv.filters.torch_divisive import (
     gaussian_blur,
 )
 from alcn_cv.filters.torch_pad import reflect101_pad
+from alcn_cv.filters.torch_precision import at_least_float32, autocast_enabled
 from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.filters.wide_band import band_meta
@@ -220,13 +222,14 @@ class GainNormalizer(nn.Module):
 
     def features(self, image: torch.Tensor) -> torch.Tensor:
         """The network's input ``(B, 4, gh, gw)`` on the grid of :attr:`stride`: :meth:`features_from_moments`
-        of :meth:`cell_moments`."""
-        return self.features_from_moments(self.cell_moments(image))
+        of :meth:`cell_moments`, both in float32 at least (see :meth:`features_from_moments`)."""
+        return self.features_from_moments(self.cell_moments(at_least_float32(image)))
 
     def features_from_moments(self, moments: torch.Tensor) -> torch.Tensor:
         """``(B, 4, gh, gw)``: the log of each cell's mean, of the local mean, of the context mean and of the
-        cell's standard deviation, from :meth:`cell_moments` ``(B, 2, gh, gw)``."""
-        mean, square = moments.split(1, dim=1)
+        cell's standard deviation, from :meth:`cell_moments` ``(B, 2, gh, gw)``; in float32 at least: the variance
+        is the difference of two nearly equal moments, which float16 rounds to a log-deviation 1.3 off."""
+        mean, square = at_least_float32(moments).split(1, dim=1)
         # The blurs of the grid stand for blurs of the image: sigma in cells = sigma / stride.
         local = gaussian_blur(mean, self.mean_sigma / self.stride)
         context = gaussian_blur(mean, self.context_sigma / self.stride)
@@ -238,16 +241,22 @@ class GainNormalizer(nn.Module):
 
     def maps_from_features(self, features: torch.Tensor) -> torch.Tensor:
         """F_k = exp(g) * w_k ``(B, N, gh, gw)`` from :meth:`features` ``(B, 4, gh, gw)``: the dilated
-        convolutions (reflect-101 borders, ReLU), the head, the weights made to sum to zero."""
+        convolutions (reflect-101 borders, ReLU) in the parameters' dtype (or a caller's autocast), then the head,
+        the weights made to sum to zero, in float32 at least (the maps' dtype): their rounding in float16 moves
+        ALCN's output by 2.6e-3 where the convolutions' moves it by 3e-4."""
         # oneDNN's channels-last convolutions are faster on the CPU; in inference only, so that training (and the
         # preset's rebuild of the shipped file) keeps its own sums
         inference = cpu_inference(features)
         x = features.contiguous(memory_format=torch.channels_last) if inference else features
+        if not autocast_enabled(x):
+            x = x.to(self.head.weight.dtype)
         for conv, d in zip(self.convs, self.dilations):
             x = F.relu(conv(reflect101_pad(x, d, d, d, d)))
-        if inference:  # the 1x1 head on channels-last maps and the operations on its 1-channel slices cost more
-            return self._head_by_cells(x)  # than their work on the CPU
-        head = self.head(x)
+        with torch.autocast(x.device.type, enabled=False) if autocast_enabled(x) else nullcontext():
+            x = at_least_float32(x)
+            if inference:  # the 1x1 head on channels-last maps and the operations on its 1-channel slices cost
+                return self._head_by_cells(x)  # more than their work on the CPU
+            head = F.conv2d(x, at_least_float32(self.head.weight), at_least_float32(self.head.bias))
         # A band-pass, as the DoG: weights summing to zero, so the response does not follow the
         # local mean (which the division would turn into structure in flat regions).
         weights = head[:, 1:]
@@ -261,7 +270,8 @@ class GainNormalizer(nn.Module):
         cells = x.permute(0, 2, 3, 1).reshape(-1, c)  # a row per cell: the layout of x in memory
         bias = self.head.bias
         assert bias is not None  # the head is built with one
-        head = torch.addmm(bias[:, None], self.head.weight[:, :, 0, 0], cells.T)  # (1 + N, cells)
+        weight = at_least_float32(self.head.weight[:, :, 0, 0])
+        head = torch.addmm(at_least_float32(bias)[:, None], weight, cells.T)  # (1 + N, cells)
         weights = head[1:]
         maps = head[0].exp() * (weights - weights.mean(dim=0))
         return maps.reshape(-1, b, gh, gw).transpose(0, 1)
@@ -292,8 +302,9 @@ class GainNormalizer(nn.Module):
         return interpolate_grid(self.dense_grid(image, grid_stride), grid_stride, image.shape[-2:])
 
     def response(self, image: torch.Tensor, maps: torch.Tensor | None = None) -> torch.Tensor:
-        """Eq. 3, ``sum_k G_{sigma_k} * (F_k o I)`` ``(B, 1, H, W)``, unbounded (maps: default :meth:`dense`)."""
-        return self.mixture(image, self.dense(image) if maps is None else maps)
+        """Eq. 3, ``sum_k G_{sigma_k} * (F_k o I)`` ``(B, 1, H, W)``, unbounded, the image's dtype (maps: default
+        :meth:`dense`)."""
+        return self.mixture(image, (self.dense(image) if maps is None else maps).to(image.dtype))
 
     def divide(self, response: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
         """:func:`~alcn_cv.filters.torch_divisive.divisive_normalization` of the response ``(B, 1, H, W)`` with

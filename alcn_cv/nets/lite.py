@@ -92,12 +92,12 @@ class LiteNormalizer(Normalizer):
     def _weights(self, x: torch.Tensor, fc_stride: int = 1) -> torch.Tensor:
         if not cpu_inference(x) or self.config["activation"] != "tanh":
             hidden = F.conv2d(self.features(x), self.fc.weight, self.fc.bias, stride=fc_stride)
-            return self.output_scale * self.head(self.activation(hidden))
+            return self.output_scale * self._head(self.activation(hidden))
         # Inference on the CPU: the same layers with the tanh computed in place by NumPy (cpu_inference.tanh_).
         for layer in self.features:
             x = layer(x) if isinstance(layer, nn.Conv2d) else tanh_(x)
         hidden = tanh_(F.conv2d(x, self.fc.weight, self.fc.bias, stride=fc_stride))
-        out = self.head(hidden)
+        out = self._head(hidden)
         return out if self.output_scale == 1 else out.mul_(self.output_scale)
 
 

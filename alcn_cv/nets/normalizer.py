@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numbers
 from collections.abc import Sequence
+from contextlib import nullcontext
 
 import numpy as np
 import torch
@@ -20,6 +21,7 @@ from torch import nn
 
 from alcn_cv.errors import InputError, WeightFileError
 from alcn_cv.filters.torch_pad import reflect101_pad
+from alcn_cv.filters.torch_precision import at_least_float32, autocast_enabled
 from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.nets.opencv_runtime import WINDOW, grid_shape
 from alcn_cv.weight_file import NormalizerFile
@@ -139,10 +141,18 @@ class Normalizer(nn.Module):
         # features) only on every fc_stride-th window: the output grid is coarser and the
         # layer's cost, which dominates, drops by fc_stride**2.
         hidden = F.conv2d(self.features(x), self.fc.weight, self.fc.bias, stride=fc_stride)
-        return self.output_scale * self.head(self.activation(hidden))
+        return self.output_scale * self._head(self.activation(hidden))
+
+    def _head(self, hidden: torch.Tensor) -> torch.Tensor:
+        """The 1x1 head, in float32 at least (outside a caller's autocast too): Eq. 3 sums its outputs' products, where
+        float16's rounding of them would show."""
+        with torch.autocast(hidden.device.type, enabled=False) if autocast_enabled(hidden) else nullcontext():
+            return F.conv2d(
+                at_least_float32(hidden), at_least_float32(self.head.weight), at_least_float32(self.head.bias)
+            )
 
     def forward(self, windows: torch.Tensor) -> torch.Tensor:
-        """Weights for each ``(B, 1, 48, 48)`` window -> ``(B, N)``."""
+        """Weights for each ``(B, 1, 48, 48)`` window -> ``(B, N)``, float32 at least (see :meth:`dense_grid`)."""
         if windows.ndim != 4 or windows.shape[1:] != (1, WINDOW, WINDOW):
             raise InputError(f"windows must have shape (B, 1, {WINDOW}, {WINDOW}), got {tuple(windows.shape)}")
         return self._weights(windows).flatten(1)
@@ -174,12 +184,16 @@ class Normalizer(nn.Module):
     def dense_grid(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
         """The network's output on a grid of stride ``grid_stride`` (a multiple of :attr:`stride`,
         default :attr:`stride`): ``(B, N, gh, gw)``, :func:`~alcn_cv.nets.opencv_runtime.grid_shape` of
-        ``(H, W)`` at ``g = grid_stride``; grid point ``(i, j)`` is the window centred on pixel ``(g*i, g*j)``."""
+        ``(H, W)`` at ``g = grid_stride``; grid point ``(i, j)`` is the window centred on pixel ``(g*i, g*j)``. The
+        layers run in the parameters' dtype (or a caller's autocast), the head in float32 at least (the output's
+        dtype)."""
         grid_stride = check_grid_stride(grid_stride, self.stride)
         h, w = image.shape[-2:]
         gh, gw = grid_shape((h, w), grid_stride)
         half = WINDOW // 2
         padded = reflect101_pad(image, half, grid_stride * (gh - 1) + half - h, half, grid_stride * (gw - 1) + half - w)
+        if not autocast_enabled(padded):  # a float32 image of a float16 module's (ALCN2d's): the module's dtype
+            padded = padded.to(self.head.weight.dtype)
         return self._weights(padded, grid_stride // self.stride)
 
     @classmethod
