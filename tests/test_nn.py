@@ -100,16 +100,20 @@ def test_cpu_inference_of_the_gain_models_runs_the_opencv_runtime(model, monkeyp
 
 def test_cpu_inference_follows_the_networks_own_scales_and_torchs_threads(tmp_path, monkeypatch):
     """The route takes tau and the floor as the network has them now (a learn_scales model after a step; they were the
-    weight file's: 0.1 off the torch filters), and no more parts of the rows than torch has threads."""
+    weight file's: 0.1 off the torch filters), its runtime kept between calls until they change, and no more parts of
+    the rows than torch has threads."""
     net = GainNormalizer(learn_scales=True)
     path = save_normalizer_file(tmp_path / "gain.npz", net.state_arrays(), net.file_meta(trained=True))
     module = ALCN2d(weights=path).eval()
-    with torch.no_grad():
-        module.net.log_tau.add_(0.5)
-        module.net.log_floor_scale.sub_(0.5)
     x = torch.from_numpy(_unit(_gray(96, 128)))[None, None]
     with torch.no_grad():
+        module(x)
+        runtime = module._opencv_runtime()
+        assert module._opencv_runtime() is runtime
+        module.net.log_tau.add_(0.5)
+        module.net.log_floor_scale.sub_(0.5)
         routed = module(x)
+    assert module._opencv_runtime() is not runtime
     torch.testing.assert_close(routed, module(x).detach(), atol=1e-5, rtol=0)
     parts = []
     row_parts = alcn_runtime.row_parts
