@@ -220,3 +220,17 @@ def test_fewshot_table_gives_auc_per_policy_and_the_seeds_above_the_best_dog() -
     row = next(line for line in text.splitlines() if line.startswith("| alcn |"))
     assert f"| {auc['mean']:.3f} ± {auc['std']:.3f} |" in row and f"| {above}/3 |" in row
     assert next(line for line in text.splitlines() if line.startswith("| dog |")).endswith("| - | - |")
+
+
+def test_the_readmes_table_of_methods_is_the_registry() -> None:
+    """The README lists every method ``create()`` builds, and no other: a method registered later shows there."""
+    import alcn_cv
+
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    start = lines.index("| method | what it does | reference |")
+    rows = []
+    for line in lines[start + 2 :]:
+        if not line.startswith("|"):
+            break
+        rows.append(line.split("|")[1].strip())
+    assert rows == list(dict.fromkeys(rows)) and set(rows) == set(alcn_cv.available())

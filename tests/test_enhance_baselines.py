@@ -10,7 +10,9 @@ import alcn_cv
 from alcn_cv.enhance.base import NoNormalization
 from alcn_cv.errors import InputError
 
-CLASSICAL = ["ns", "dog", "slcn", "dlcn", "lrn", "whitening", "he", "clahe", "intrinsic", "sqi"]
+#: Every registered method but none (nothing to check), ALCN and Tan-Triggs (their own files check them): a method
+#: registered later is checked here too.
+CLASSICAL = [m for m in alcn_cv.available() if m not in ("none", "alcn", "tantriggs")]
 
 
 def _scene(h: int = 40, w: int = 52, seed: int = 0) -> np.ndarray:
@@ -23,10 +25,6 @@ def _scene(h: int = 40, w: int = 52, seed: int = 0) -> np.ndarray:
     shading = 0.4 + 0.6 * x / w
     img = shading * (0.3 + 0.4 * blocks + 0.3 * texture)
     return np.clip(img, 0.05, 0.95).astype(np.float32)
-
-
-def test_all_registered():
-    assert set(CLASSICAL) <= set(alcn_cv.available())
 
 
 @pytest.mark.parametrize("name", CLASSICAL)

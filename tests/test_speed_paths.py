@@ -18,8 +18,14 @@ from alcn_cv.errors import InputError  # noqa: E402
 from alcn_cv.io import map_video, open_video_writer  # noqa: E402
 from alcn_cv.runtime import _integer_zoom  # noqa: E402
 
+#: ALCN's models, and every other registered method that cuts a large image into strips (a method registered later
+#: with a ``_tiling`` of its own is checked too).
+STRIPPED = ["alcn", "alcn:model=lite", "alcn:model=paper:grid_stride=16"] + [
+    m for m in alcn_cv.available() if m != "alcn" and type(from_spec(m))._tiling is not base.Normalization._tiling
+]
 
-@pytest.mark.parametrize("spec", ["alcn", "alcn:model=lite", "alcn:model=paper:grid_stride=16", "dog", "slcn"])
+
+@pytest.mark.parametrize("spec", STRIPPED)
 @pytest.mark.parametrize("colour", [False, True])
 def test_strips_give_the_whole_image(monkeypatch, spec, colour):
     method = from_spec(spec)

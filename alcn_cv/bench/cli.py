@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -156,7 +156,7 @@ def _add_detect(subparsers: argparse._SubParsersAction) -> None:
         dest="tune",
         action="store_const",
         const=True,
-        help=f"tune DoG, SLCN and DLCN first, per number of real images: each of {len(detect.TUNING_GRIDS['dog'])} "
+        help=f"tune {_spoken(detect.TUNING_GRIDS)} first, per number of real images: each of {_grid_size()} "
         "settings scored by the mean AUC on the data's validation images (val.json) of the detector trained as in the "
         "first seed's runs; the first best serves every seed (default: their defaults)",
     )
@@ -261,7 +261,7 @@ def _add_fewshot(subparsers: argparse._SubParsersAction) -> None:
         dest="tune",
         action="store_const",
         const=True,
-        help=f"tune DoG, SLCN and DLCN first: each of {len(detect.TUNING_GRIDS['dog'])} settings scored by the AUC of "
+        help=f"tune {_spoken(detect.TUNING_GRIDS)} first: each of {_grid_size()} settings scored by the AUC of "
         "the same detector on a validation draw of new objects and windows of its own, averaged over the policies; the "
         "first best serves every seed (default: their defaults)",
     )
@@ -434,6 +434,17 @@ def _preset_flags(sampling: relight_settings.Sampling) -> str:
     return " ".join(sampling.options())
 
 
+def _spoken(methods: Iterable[str]) -> str:
+    """Method names as a help text lists them: ``"dog, slcn and dlcn"`` (from the grids they are tuned over)."""
+    *first, last = methods
+    return f"{', '.join(first)} and {last}"
+
+
+def _grid_size() -> int:
+    """The settings each method of ``--tune`` tries in the detection benches (one number for all: a test checks)."""
+    return len(next(iter(detect.TUNING_GRIDS.values())))
+
+
 def _add_relight(subparsers: argparse._SubParsersAction) -> None:
     confs = relight_settings.CONFS
     p = subparsers.add_parser(
@@ -441,7 +452,7 @@ def _add_relight(subparsers: argparse._SubParsersAction) -> None:
         help="patch identification, keypoint matching and pose on real changes of light (fixed cameras)",
         description="Normalize the registered frames of fixed-camera scenes under different light with each "
         "method's apply(), then score patch identification (NCC), ORB/SIFT matching and RANSAC-homography pose "
-        "between frames; CLAHE, DoG, SLCN, DLCN, SQI, Tan-Triggs and DoG+lstd are tuned on the training scenes only. "
+        f"between frames; {_spoken(relight.TUNING_GRIDS)} are tuned on the training scenes only. "
         "Writes relight.md, relight.json and (with matplotlib) relight.png, with each method's difference from the "
         "first, paired by "
         "seed. The default runs "
