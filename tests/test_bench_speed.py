@@ -162,7 +162,8 @@ def test_targets_are_reported(report):
     assert set(fresh) == {"alcn glibc", "alcn kept", "dog glibc", "dog kept"}
     assert all(r["ms"] > 0 and r["page_faults_per_call"] >= 0 for r in fresh.values())
     assert targets["video"]["frames"] >= 2 and targets["video"]["normalize_s"] > 0
-    assert "cpu" in targets["batched"] and targets["batched"]["cpu"]["half_max_abs"] < 0.05
+    # the float16 network (autocast) against float32: its features and head in float32 (4e-4 on a photograph)
+    assert "cpu" in targets["batched"] and targets["batched"]["cpu"]["half_max_abs"] < 1e-3
     assert {"network_ms", "mixture_ms", "contract_ms", "apply_ms"} <= set(targets["stages"]["alcn"]) and targets[
         "profile"
     ]
