@@ -79,7 +79,9 @@ def test_charuco_calibration_recovers_camera(scene, scene_dir, tmp_path):
     calib = main(scene_dir, tmp_path, BoardSpec(), flags=cv2.CALIB_FIX_K3)
     K = scene.K
     np.testing.assert_allclose(np.diag(calib.K)[:2], np.diag(K)[:2], rtol=0.01)
-    np.testing.assert_allclose(calib.K[:2, 2], K[:2, 2], atol=0.01 * 640)
+    # found within 2 px (measured 1.0 and 1.3), nearer than the image's centre (3.7 and 2.4 px off): not pinned there
+    found = np.abs(calib.K[:2, 2] - K[:2, 2])
+    assert np.all(found < 2) and np.all(found < np.abs(K[:2, 2] - [320, 240])), found
     assert calib.rms < 0.3
     assert calib.dist[0] < -0.05  # barrel distortion found
 

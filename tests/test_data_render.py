@@ -42,6 +42,25 @@ def test_lambert_cosine_law(elev):
     np.testing.assert_allclose(rad, 0.5 * np.sin(np.deg2rad(elev)), rtol=1e-4)
 
 
+@pytest.mark.parametrize("axis", ["x", "y"])
+def test_a_slope_facing_the_light_is_the_brighter(axis):
+    """A plane rising along +x (or +y), height ``0.5 * x``: its normal is ``(-0.5, 0, 1) / sqrt(1.25)``, so a light
+    from -x (azimuth 180, it faces) lights it more than one from +x, each by the cosine law with that normal."""
+    alb, hgt, mat = _flat()
+    ramp = 0.5 * np.arange(16, dtype=np.float32)
+    hgt[0] = np.broadcast_to(ramp, (16, 16)) if axis == "x" else np.broadcast_to(ramp[:, None], (16, 16))
+    P, N, V = heightfield_geometry(hgt)
+    normal = np.array([-0.5, 0.0, 1.0] if axis == "x" else [0.0, -0.5, 1.0]) / np.sqrt(1.25)
+    facing, away = (180.0, 0.0) if axis == "x" else (270.0, 90.0)
+    centre = {}
+    for azimuth in (facing, away):
+        light = directional(azimuth, 45.0)
+        rad = shade(P, N, V, alb, mat, LightArrays.pack([[light]]), np.zeros((1, 3), np.float32))
+        centre[azimuth] = rad[0, 8, 8, 0]
+        assert centre[azimuth] == pytest.approx(0.5 * max(0.0, float(normal @ light.vector)), rel=1e-4)
+    assert centre[facing] > centre[away] > 0
+
+
 def test_point_light_falls_off_and_spot_has_a_cone():
     alb, hgt, mat = _flat(64, 64)
     P, N, V = heightfield_geometry(hgt)

@@ -144,13 +144,20 @@ def test_lrn_matches_torch_across_one_axis():
     np.testing.assert_allclose(out[15, r:-r], ref[r:-r], rtol=1e-4, atol=1e-6)
 
 
-def test_whitening_gain_follows_the_filter():
+@pytest.mark.parametrize("transposed", [False, True])  # the gratings vertical, then horizontal: both frequencies
+def test_whitening_gain_follows_the_filter(transposed):
     h, w = 64, 256
     f1, f2 = 8 / w, 64 / w  # cycles per pixel
     x = np.arange(w)
     img = np.repeat((0.5 + 0.2 * np.sin(2 * np.pi * f1 * x) + 0.2 * np.sin(2 * np.pi * f2 * x))[None], h, 0)
     f0 = 0.3
-    out = alcn_cv.create("whitening", f0=f0).normalize(img.astype(np.float32))[h // 2, w // 4 : 3 * w // 4]
+    whitening = alcn_cv.create("whitening", f0=f0)
+    whole = (
+        whitening.normalize(img.T.copy().astype(np.float32)).T
+        if transposed
+        else whitening.normalize(img.astype(np.float32))
+    )
+    out = whole[h // 2, w // 4 : 3 * w // 4]
     xs = x[w // 4 : 3 * w // 4]
     basis = np.stack([np.sin(2 * np.pi * f * xs + p) for f in (f1, f2) for p in (0, np.pi / 2)], 1)
     coef = np.linalg.lstsq(basis, out, rcond=None)[0]
@@ -209,11 +216,13 @@ def test_sqi_weighted_matches_direct_computation():
     np.testing.assert_allclose(out, ref, atol=1e-4)
 
 
-def test_intrinsic_recovers_reflectance_under_smooth_shading():
+@pytest.mark.parametrize("shading_along", ["x", "y"])  # the threshold of each direction's gradients
+def test_intrinsic_recovers_reflectance_under_smooth_shading(shading_along):
     h, w = 48, 64
     y, x = np.mgrid[0:h, 0:w]
     reflectance = np.where((x // 16 + y // 12) % 2 == 0, 0.8, 0.3)
-    shading = 0.5 + 0.4 * (x / w)  # gradient in log well below the threshold
+    # gradient in log well below the threshold
+    shading = 0.5 + 0.4 * (x / w) if shading_along == "x" else 0.5 + 0.4 * (y / h)
     img = (reflectance * shading).astype(np.float32)
     eps = 1e-6
     out = alcn_cv.create("intrinsic", threshold=0.1, eps=eps).normalize(img)

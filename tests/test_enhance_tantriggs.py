@@ -39,16 +39,20 @@ def test_contrast_equalization_by_hand():
     np.testing.assert_array_equal(contrast_equalize(np.zeros((3, 3), np.float32)), 0)  # flat: zeros, not NaN
 
 
-def test_steps_against_an_independent_chain():
+@pytest.mark.parametrize(("alpha", "tau"), [(0.1, 10.0), (0.3, 3.0)])  # the defaults, and others: both are used
+def test_steps_against_an_independent_chain(alpha, tau):
+    """Gamma, DoG and the equalization (TIP 2010, Eqs. 1-3) written out here, not through the module's functions."""
     img = _scene()
     gamma, s0, s1 = 0.3, 1.0, 2.5
     corrected = img.astype(np.float64) ** gamma
     dog = ndimage.gaussian_filter(corrected, s0, mode="mirror", truncate=3) - ndimage.gaussian_filter(
         corrected, s1, mode="mirror", truncate=3
     )
-    expected = contrast_equalize(dog.astype(np.float32), 0.1, 10.0)
-    out = TanTriggs(gamma=gamma, sigma0=s0, sigma1=s1).normalize(img)
-    np.testing.assert_allclose(out, expected, atol=1e-3)
+    first = dog / np.mean(np.abs(dog) ** alpha) ** (1 / alpha)
+    second = first / np.mean(np.minimum(tau, np.abs(first)) ** alpha) ** (1 / alpha)
+    expected = tau * np.tanh(second / tau)
+    out = TanTriggs(gamma=gamma, sigma0=s0, sigma1=s1, alpha=alpha, tau=tau).normalize(img)
+    np.testing.assert_allclose(out, expected, atol=1e-3 * tau / 10)
 
 
 def test_invariant_to_a_global_gain():

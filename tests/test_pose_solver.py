@@ -321,6 +321,9 @@ def test_metrics():
     R5 = cv2.Rodrigues(np.array([0, np.radians(5.0), 0]))[0]
     assert rotation_error_deg(R5, R) == pytest.approx(5.0, abs=1e-6)
     assert add_error(v, R, t + [0, 0, 10], R, t) == pytest.approx(10.0)
+    # the mean over the vertices, not their largest distance: a quarter turn about z moves them by 0, 141.4, 141.4, 0
+    quarter = cv2.Rodrigues(np.array([0, 0, np.pi / 2]))[0]
+    assert add_error(v, quarter, t, R, t) == pytest.approx(100 * np.sqrt(2) / 2)
     s = score(v, K, "mm", (R, t + [0, 0, 40.0]), (R, t))
     assert s.trans_cm == pytest.approx(4.0)
     lost = score(v, K, "mm", None, (R, t))
