@@ -7,8 +7,9 @@ out, equal to :meth:`ALCN.apply <alcn_cv.enhance.alcn.ALCN.apply>`'s float outpu
 normalized on the L channel of CIE Lab, a and b kept), differentiable end to end. In float32 on the CPU, with or
 without autograd (:func:`~alcn_cv.nets.cpu_inference.cpu_eager`), colour is converted to Lab by ``apply()``'s own
 OpenCV passes (within 3e-6 of it), differentiated as :mod:`alcn_cv.filters.torch_lab`, OpenCV's arithmetic in torch,
-which converts it elsewhere (within 1e-4). In float32 CPU inference (under ``torch.no_grad()`` or
-``torch.inference_mode()``; not traced, exported, compiled, transformed by ``torch.func`` or under autocast) the gain
+which converts it elsewhere (within 1e-4). In CPU inference (under ``torch.no_grad()`` or
+``torch.inference_mode()``; not traced, exported, compiled, transformed by ``torch.func`` or under autocast; a float16
+or bfloat16 image is computed in float32, its module's network in its own dtype) the gain
 models run ``apply()``'s own passes throughout for one image, or images of 2**18 pixels or more
 (:class:`~alcn_cv.runtime.GainRuntime` with the module's network, called once per image, and ``apply()``'s colour
 path), as fast as ``apply()``; their torch filters run everywhere else.
@@ -85,14 +86,15 @@ _TORCH_DTYPES = {
 
 
 def _in_float32(method: Callable[..., torch.Tensor]) -> Callable[..., torch.Tensor]:
-    """``method(self, image, ...)`` of a float16 or bfloat16 image (outside autocast) run on the image and its other
-    tensor arguments in float32, its result cast back to the image's dtype: the network's convolutions alone run in
-    the module's dtype (:meth:`~alcn_cv.nets.gain.GainNormalizer.maps_from_features`). Eq. 3 in float16 (the
-    difference of two blurs) moves the output by 1.2e-2, the divisive step by 8e-4."""
+    """``method(self, image, ...)`` of a float16 or bfloat16 image run on the image and its other tensor arguments in
+    float32, its result cast back to the image's dtype: the network's convolutions alone run in the module's dtype
+    (:meth:`~alcn_cv.nets.gain.GainNormalizer.maps_from_features`), or a caller's autocast's. Eq. 3 in float16 (the
+    difference of two blurs) moves the output by 1.2e-2, the divisive step by 8e-4; and under autocast, a float16
+    image and a bfloat16 one would meet in the same operation, which torch refuses."""
 
     @functools.wraps(method)
     def run(self: ALCN2d, image: torch.Tensor, *args: object, **kwargs: object) -> torch.Tensor:
-        if image.dtype not in (torch.float16, torch.bfloat16) or autocast_enabled(image):
+        if image.dtype not in (torch.float16, torch.bfloat16):
             return method(self, image, *args, **kwargs)
         args = tuple(at_least_float32(a) if isinstance(a, torch.Tensor) else a for a in args)
         kwargs = {k: at_least_float32(v) if isinstance(v, torch.Tensor) else v for k, v in kwargs.items()}
@@ -138,9 +140,9 @@ class ALCN2d(nn.Module):
     blurs): against the float32 module on the same image, float16 was 9e-4 off at most on eight photographs, gray or
     colour (1e-4 on average; the lite model 1.6e-3 on one), bfloat16 8e-3. A float32 image cast to float16 is itself
     up to 3e-3 off in the output (the float32 module on the cast image), which no computation after it takes back.
-    Under a caller's autocast an image of another float dtype than the module's is let through and the output may be
-    float32: the network's convolutions run at autocast's precision, its features and head in float32, the filters
-    as autocast runs their operations (on the CPU in the image's dtype), the Lab conversions in the image's dtype.
+    Under a caller's autocast an image of another float dtype than the module's is let through: the network's
+    convolutions run at autocast's precision, the rest as outside autocast (in float32 for a float16 or bfloat16
+    image), and the output is the image's dtype (bfloat16 autocast: 1e-3 from float32 on a photograph, float16 1e-4).
     Colour on CUDA, traced or compiled goes through the torch Lab conversion: 1e-4 from ``apply()`` on most
     photographs, up to 5e-4 on some.
     ``torch.jit.trace`` records the sizes of the traced image: on another size the traced module fails or, without
@@ -162,7 +164,9 @@ class ALCN2d(nn.Module):
     Fine-tuning: the network's parameters train (``requires_grad_(True)``, the default of a new module); the gain
     models' ``tau`` and ``floor_scale`` are buffers, fixed. ``train()`` and ``eval()`` give the same output (no
     dropout, no batch normalization). The gradients reaching the gain networks are small
-    (about 1e-6 of a mean squared error, against weights of about 5e-2): use Adam rather than plain SGD.
+    (about 1e-6 of a mean squared error, against weights of about 5e-2): use Adam rather than plain SGD, on a float32
+    module (under autocast for speed): their squares underflow float16, where Adam's steps on a float16 module
+    divide by zero.
 
     Example:
         >>> import torch
@@ -188,10 +192,6 @@ class ALCN2d(nn.Module):
         self.spec = ModelSpec.from_file(weight_file, scale)
         self.net = normalizer_from_file(weight_file)
         self._built_from = weight_file.meta, weight_file.path  # the header and file that save() writes from
-        buffers = dict(self.net.named_buffers())
-        #: The file's values of the fixed scales (buffers: a gain model's tau and floor), which save() writes back
-        #: where a cast to float16 or bfloat16 only rounded them.
-        self._fixed_scales = {k: v for k, v in weight_file.arrays.items() if k in buffers and np.ndim(v) == 0}
         if len(self.spec.sigmas) != self.net.num_kernels:
             raise InputError(f"weight file has {len(self.spec.sigmas)} sigmas for {self.net.num_kernels} outputs")
         self.grid_stride = check_grid_stride(grid_stride, self.net.stride)
@@ -229,12 +229,7 @@ class ALCN2d(nn.Module):
         start = {"file": None if source is None else str(source), "description": meta.get("description")}
         header = {**meta, "fine_tuned_from": start}
         header["description"] = description or f"fine-tuned from {start['file'] or start['description']}"
-        arrays = self.net.state_arrays()
-        for key, value in self._fixed_scales.items():
-            rounding = float(np.abs(value)) * torch.finfo(self.net.get_buffer(key).dtype).eps
-            if abs(float(arrays[key]) - float(value)) <= rounding:
-                arrays[key] = np.asarray(value, np.float32)
-        return save_normalizer_file(path, arrays, header)
+        return save_normalizer_file(path, self.net.state_arrays(), header)
 
     def working(self, gray: torch.Tensor) -> torch.Tensor:
         """``(B, 1, H, W)`` at the working scale, resized as :meth:`ALCN.apply` does: ``cv2.INTER_AREA`` down
@@ -286,6 +281,7 @@ class ALCN2d(nn.Module):
             maps = F.interpolate(maps, size=gray.shape[-2:], mode="bilinear", align_corners=False)
         return maps
 
+    @_in_float32
     def finish(self, response: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
         """The gain family's steps after Eq. 3 (the divisive normalization, ``tanh(x / tau)``, ``c`` and ``tau`` the
         network's, the values :class:`~alcn_cv.runtime.ModelSpec` reads from its arrays); the response itself for the
@@ -296,6 +292,7 @@ class ALCN2d(nn.Module):
         response = divisive_normalization(response, self.spec.divisive[0], self.net.floor_scale, floor)
         return contrast_equalization(response, self.net.tau)
 
+    @_in_float32
     def with_band(self, response: torch.Tensor, gray: torch.Tensor, floor: torch.Tensor | None = None) -> torch.Tensor:
         """:meth:`finish`'s ``response`` plus the model's weighted :mod:`~alcn_cv.filters.torch_wide_band` of
         ``gray`` (``floor``: the band's divisive floor ``(B, 1, 1, 1)``); the response itself for a model without."""
@@ -323,7 +320,7 @@ class ALCN2d(nn.Module):
 
     def _runs_opencv(self, image: torch.Tensor) -> bool:
         """Whether :meth:`forward`, :meth:`response` and :meth:`eq3` run ``apply()``'s own passes, with this module's
-        network and its current ``tau`` and floor: the gain family at scale 1 in float32 CPU inference
+        network and its current ``tau`` and floor: the gain family at scale 1 in CPU inference of a float32 image
         (:func:`~alcn_cv.nets.cpu_inference.cpu_inference`: under ``torch.no_grad()`` or ``torch.inference_mode()``,
         not traced, exported, compiled or transformed by ``torch.func``), not under a caller's autocast (whose
         precision the network takes), for one image or images of :data:`~alcn_cv.row_parts.MIN_PART_PIXELS` or more:

@@ -6,9 +6,9 @@ Apache-2.0), relit by the data engine's light changes (:func:`alcn_cv.data.light
 lights: a dim one with a cast shadow of blinds and the noise of a dark exposure, and a bright one with a soft shading
 ramp (:data:`LIGHTS`; the shadow's shape is drawn from the seed). A figure of real light changes would need frames
 whose terms allow redistribution, which no multi-light set of the project's data has (the Webcam frames are for
-academic research only). Time: a few seconds. Deterministic up to one grey level (another CPU's float rounding):
-tests/test_docs.py renders it again and compares it with the published one within that level, so a change to a
-method's output shows up there.
+academic research only). Time: a few seconds. Deterministic but for another CPU's float rounding (a few pixels, a
+few grey levels): tests/test_docs.py renders it again and compares it with the published one within that, so a change
+to a method's output shows up there.
 
     python experiments/figure.py --publish                # runs/figure.png, then docs/figure.png (the README's)
     python experiments/figure.py --image my.jpg           # runs/figure.png only (--publish: the cookie box only)

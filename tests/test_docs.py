@@ -46,8 +46,9 @@ def test_results_md_is_what_the_report_script_writes() -> None:
 
 @pytest.mark.shared_data
 def test_the_readme_figure_is_what_its_script_renders(shared_data: Path, tmp_path: Path) -> None:
-    """docs/figure.png went stale when ALCN's output changed: a fresh render (a second) must match it, up to one gray
-    level (the float rounding of another CPU)."""
+    """docs/figure.png went stale when ALCN's output changed: a fresh render (a second) must match it but for another
+    CPU's float rounding, which moved 29 of its 512,200 pixels, two of them by 2 gray levels (a changed method moves
+    most of its column)."""
     import cv2
 
     out = tmp_path / "figure.png"
@@ -55,7 +56,8 @@ def test_the_readme_figure_is_what_its_script_renders(shared_data: Path, tmp_pat
     proc = subprocess.run([sys.executable, str(script), "--out", str(out)], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     fresh, published = (cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in (out, ROOT / "docs" / "figure.png"))
-    assert fresh.shape == published.shape and np.abs(fresh.astype(int) - published).max() <= 1, (
+    difference = np.abs(fresh.astype(int) - published) if fresh.shape == published.shape else None
+    assert difference is not None and np.count_nonzero(difference) < 500 and difference.max() <= 3, (
         "docs/figure.png is out of date: run python experiments/figure.py --publish"
     )
 

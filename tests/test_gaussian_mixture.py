@@ -163,13 +163,16 @@ def test_a_grid_that_does_not_cover_the_image_is_an_input_error(rng):
             alcn_filter_grid(image, maps, 4, (1.0, 2.0), rows=rows)
 
 
-def test_a_cast_module_keeps_exact_kernels_for_a_finer_image():
-    """A mixture cast to float16 (with its module) blurs a float32 image with float32 kernels, not rounded ones: the
-    two kernels of a DoG rounded to float16 moved ALCN's output by 2e-3."""
-    mixture = GaussianMixture2d((1.0, 2.0))
+def test_a_cast_module_keeps_exact_kernels():
+    """A mixture cast to float16 (with its module) keeps its float32 kernels, which a float32 image is blurred with
+    and which a cast back to float32 finds unrounded: the two kernels of a DoG rounded to float16 moved ALCN's output
+    by 2e-3."""
     image, maps = torch.rand(1, 1, 24, 32), torch.randn(1, 2, 24, 32)
-    reference = mixture(image, maps)
-    mixture.half()
-    assert mixture.bank.dtype == torch.float16
+    exact = GaussianMixture2d((1.0, 2.0))
+    reference = exact(image, maps)
+    mixture = GaussianMixture2d((1.0, 2.0)).half()
+    assert mixture.bank.dtype == torch.float32
     torch.testing.assert_close(mixture(image, maps), reference, atol=0, rtol=0)
-    torch.testing.assert_close(mixture.difference(image), GaussianMixture2d((1.0, 2.0)).difference(image))
+    torch.testing.assert_close(mixture.difference(image), exact.difference(image), atol=0, rtol=0)
+    torch.testing.assert_close(mixture(image.half(), maps.half()), exact(image.half(), maps.half()), atol=0, rtol=0)
+    torch.testing.assert_close(mixture.float().bank, exact.bank, atol=0, rtol=0)

@@ -295,6 +295,17 @@ def test_an_empty_batch_gives_an_empty_output():
         assert alcn2d(x.detach()).shape == x.shape
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float16])
+def test_an_empty_batch_under_no_grad(dtype):
+    """Under no_grad, B = 0 of images below the OpenCV passes' 2**18 pixels (torch's filters) ended in a RuntimeError:
+    the head's maps reshaped with -1, which a batch of no cells leaves undefined."""
+    module = ALCN2d(model="gain").to(dtype)
+    for channels in (1, 3):
+        with torch.no_grad():
+            out = module(torch.zeros(0, channels, 48, 64, dtype=dtype))
+        assert (out.shape, out.dtype) == ((0, channels, 48, 64), dtype)
+
+
 def test_the_meta_device_propagates_gray_shapes_and_names_colour():
     """On the meta device repr() read tau's value and forward asked torch whether autocast was on, both errors; a gray
     image now propagates its shape, colour (whose Lab conversions switch autocast off) is an InputError."""
@@ -672,6 +683,55 @@ def test_a_callers_autocast_leaves_the_colour_conversions_in_the_images_dtype():
     # the network ran in autocast's bfloat16, not in float32 with the caller's autocast switched off inside
     assert layers and all(layer == (True, torch.bfloat16) for layer in layers), layers
     assert 1e-4 < (out - reference).abs().max() < 2e-2
+
+
+@pytest.mark.parametrize("grad", [False, True])
+@pytest.mark.parametrize(("autocast", "largest"), [(torch.bfloat16, 3e-3), (torch.float16, 5e-4)])
+def test_a_callers_autocast_leaves_the_filters_in_float32(autocast, largest, grad):
+    """Under a caller's autocast with a gradient recorded, Eq. 3's and the divisive step's blurs (convolutions there)
+    ran in autocast's dtype, 5e-2 off in bfloat16 where the same call without a gradient was 9e-4 off, and the output
+    was bfloat16 or float32 by whether a gradient was recorded. Only the network's convolutions take autocast's
+    precision; the output is the image's dtype."""
+    module = ALCN2d(model="gain")
+    for channels in (1, 3):
+        image = _gray() if channels == 1 else _bgr()[..., ::-1].copy()
+        x = torch.from_numpy(_unit(image)).reshape(1, *image.shape[:2], channels).permute(0, 3, 1, 2)
+        with torch.no_grad():
+            reference = module(x)
+        with torch.autocast("cpu", dtype=autocast), torch.set_grad_enabled(grad):
+            out = module(x.clone().requires_grad_(grad))
+        assert out.dtype == torch.float32 and out.requires_grad == grad
+        assert 0 < (out.detach() - reference).abs().max() < largest, channels
+
+
+@pytest.mark.parametrize(("dtype", "autocast"), [(torch.float16, torch.bfloat16), (torch.bfloat16, torch.float16)])
+def test_a_half_image_under_the_other_halfs_autocast(dtype, autocast):
+    """A float16 image under bfloat16 autocast (or the converse), colour with a gradient, ended in torch's "Unexpected
+    floating ScalarType in at::autocast::prioritize" (two half dtypes in one operation); it runs in float32 as
+    outside autocast, the output in the image's dtype."""
+    module = ALCN2d(model="gain")
+    rgb = torch.from_numpy(_unit(_bgr()[..., ::-1].copy())).permute(2, 0, 1)[None]
+    reference = module(rgb).detach()
+    with torch.autocast("cpu", dtype=autocast):
+        out = module(rgb.to(dtype).requires_grad_(True))
+    out.float().sum().backward()
+    assert out.dtype == dtype and (out.detach().float() - reference).abs().max() < 2e-2
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_a_cast_keeps_the_constants_exact(dtype):
+    """``.half()`` rounded the mixture's kernels, the Lab conversions' constants and the fixed tau and floor (bfloat16:
+    tau 3 became 3.016), and a cast back to float32 kept them rounded: 1e-3 off on a photograph. They follow the
+    module's device, not its dtype."""
+    fresh = dict(ALCN2d(model="gain").named_buffers())
+    assert {"mixture.bank", "to_lab.matrix", "from_lab.spline", "net.log_tau", "net.log_floor_scale"} <= set(fresh)
+    for module, parameters in ((ALCN2d(model="gain").to(dtype), dtype), (ALCN2d().to(dtype).float(), torch.float32)):
+        assert {p.dtype for p in module.parameters()} == {parameters}
+        buffers = dict(module.named_buffers())
+        assert buffers.keys() == fresh.keys()
+        for name, value in fresh.items():
+            torch.testing.assert_close(buffers[name], value, atol=0, rtol=0, msg=name)
+    assert ALCN2d(model="gain").to("meta").net.log_tau.is_meta
 
 
 @pytest.mark.parametrize("model", ["lite", "paper"])

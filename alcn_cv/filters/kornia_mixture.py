@@ -13,11 +13,11 @@ from collections.abc import Sequence
 
 import torch
 from kornia.filters import get_gaussian_kernel1d
-from torch import nn
 
 from alcn_cv.errors import InputError
 from alcn_cv.filters.gaussian_mixture import check_sigmas, gaussian_sigmas, kernel_radius
 from alcn_cv.filters.torch_pad import reflect101_pad
+from alcn_cv.filters.torch_precision import ExactBuffers
 from alcn_cv.filters.torch_separable import filter_columns, filter_rows
 
 __all__ = ["GaussianMixture2d", "gaussian_mixture2d"]
@@ -97,8 +97,9 @@ def _mix(image: torch.Tensor, weights: torch.Tensor, bank: torch.Tensor, sigmas:
     return torch.cat(_blurs(weights * image, bank, sigmas), dim=1).sum(dim=1, keepdim=True)  # Eq. 3
 
 
-class GaussianMixture2d(nn.Module):
-    """Module form of :func:`gaussian_mixture2d`, with the kernel bank built once.
+class GaussianMixture2d(ExactBuffers):
+    """Module form of :func:`gaussian_mixture2d`, with the kernel bank built once (float32, which a cast of the module
+    to float16 does not round: rounded, the two kernels of a DoG move ALCN's output by 2e-3).
 
     Args:
         sigmas: standard deviations in pixels; default :func:`gaussian_sigmas` ``(i / 2, i = 1..10)``.
@@ -113,6 +114,8 @@ class GaussianMixture2d(nn.Module):
         torch.Size([1, 1, 16, 16])
     """
 
+    exact_buffers = ("bank",)
+
     def __init__(self, sigmas: Sequence[float] | None = None) -> None:
         super().__init__()
         self.sigmas = gaussian_sigmas() if sigmas is None else check_sigmas(sigmas)
@@ -123,9 +126,8 @@ class GaussianMixture2d(nn.Module):
         return len(self.sigmas)
 
     def _bank(self, x: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:
-        """The kernels in ``dtype`` on ``x``'s device, made again where a cast of the module (to float16, say) rounded
-        them and ``dtype`` has more precision: rounded to float16, the two kernels of a DoG move ALCN's output by
-        2e-3."""
+        """The kernels in ``dtype`` on ``x``'s device, made again for a dtype of more precision than the bank's
+        (float64)."""
         if torch.finfo(self.bank.dtype).eps <= torch.finfo(dtype).eps:
             return self.bank.to(dtype)
         with torch.inference_mode(False):  # as gaussian_blur's cached kernels: a backward may follow

@@ -18,7 +18,6 @@ from collections.abc import Callable
 
 import numpy as np
 import torch
-from torch import nn
 
 from alcn_cv.errors import InputError
 from alcn_cv.filters.lab import (
@@ -33,6 +32,7 @@ from alcn_cv.filters.lab import (
     cube_root_table,
     inverse_gamma_table,
 )
+from alcn_cv.filters.torch_precision import ExactBuffers
 
 __all__ = ["LabToRgb", "RgbToLab", "lab_to_rgb", "rgb_to_lab"]
 
@@ -98,9 +98,12 @@ def lab_to_rgb(lab: torch.Tensor) -> torch.Tensor:
     return _lab_to_rgb(lab, _TO_RGB.to(lab), _INVERSE_GAMMA.to(lab))
 
 
-class _Conversion(nn.Module):
-    """A conversion of this module with its matrix and spline as buffers (not saved), moved with the module; it runs
-    in the image's dtype, a caller's autocast switched off inside."""
+class _Conversion(ExactBuffers):
+    """A conversion of this module with its matrix and spline as buffers (not saved), moved with the module but kept
+    float32 (rounded to bfloat16, they move L by 0.25 of 100 and a and b by 2); it runs in the image's dtype, a
+    caller's autocast switched off inside."""
+
+    exact_buffers = ("matrix", "spline")
 
     matrix: torch.Tensor
     spline: torch.Tensor

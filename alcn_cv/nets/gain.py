@@ -45,7 +45,7 @@ from alcn_cv.filters.torch_divisive import (
     gaussian_blur,
 )
 from alcn_cv.filters.torch_pad import reflect101_pad
-from alcn_cv.filters.torch_precision import at_least_float32, autocast_enabled
+from alcn_cv.filters.torch_precision import ExactBuffers, at_least_float32, autocast_enabled
 from alcn_cv.filters.torch_resize import interpolate_grid
 from alcn_cv.filters.torch_wide_band import wide_band
 from alcn_cv.filters.wide_band import band_meta
@@ -93,7 +93,7 @@ def contrast_equalization(response: np.ndarray | torch.Tensor, tau: float | torc
     return tanh(scaled, out=scaled)
 
 
-class GainNormalizer(nn.Module):
+class GainNormalizer(ExactBuffers):
     """Predicts F_k = exp(g) * w_k on a coarse grid (see the module's docstring).
 
     Args:
@@ -112,7 +112,12 @@ class GainNormalizer(nn.Module):
         divisive_sigma: the divisive normalization's energy ``e = sqrt(G_sigma * r^2)`` (working pixels).
         band: the weight of the :mod:`~alcn_cv.filters.wide_band` added to the output (0: none), so that ORB
             orients its keypoints; it has no parameters, and training (on crops too small for it) leaves it out.
+
+    A fixed ``tau`` and ``c`` (buffers) stay float32 through a cast of the module: bfloat16 would round the file's
+    ``tau`` of 3 to 3.016.
     """
+
+    exact_buffers = ("log_tau", "log_floor_scale")
 
     def __init__(
         self,
@@ -274,7 +279,7 @@ class GainNormalizer(nn.Module):
         head = torch.addmm(at_least_float32(bias)[:, None], weight, cells.T)  # (1 + N, cells)
         weights = head[1:]
         maps = head[0].exp() * (weights - weights.mean(dim=0))
-        return maps.reshape(-1, b, gh, gw).transpose(0, 1)
+        return maps.reshape(len(maps), b, gh, gw).transpose(0, 1)
 
     def dense_grid(self, image: torch.Tensor, grid_stride: int | None = None) -> torch.Tensor:
         """The maps F_k on a grid of stride ``grid_stride`` (a multiple of :attr:`stride`).
