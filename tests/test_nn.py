@@ -718,11 +718,11 @@ def test_a_half_image_under_the_other_halfs_autocast(dtype, autocast):
     assert out.dtype == dtype and (out.detach().float() - reference).abs().max() < 2e-2
 
 
-@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16, torch.float64])
 def test_a_cast_keeps_the_constants_exact(dtype):
     """``.half()`` rounded the mixture's kernels, the Lab conversions' constants and the fixed tau and floor (bfloat16:
     tau 3 became 3.016), and a cast back to float32 kept them rounded: 1e-3 off on a photograph. They follow the
-    module's device, not its dtype."""
+    module's device, not its dtype (float64 kernels are made from the sigmas where an image needs them)."""
     fresh = dict(ALCN2d(model="gain").named_buffers())
     assert {"mixture.bank", "to_lab.matrix", "from_lab.spline", "net.log_tau", "net.log_floor_scale"} <= set(fresh)
     for module, parameters in ((ALCN2d(model="gain").to(dtype), dtype), (ALCN2d().to(dtype).float(), torch.float32)):

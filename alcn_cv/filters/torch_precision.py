@@ -30,10 +30,10 @@ def autocast_enabled(x: torch.Tensor) -> bool:
 
 
 class ExactBuffers(nn.Module):
-    """A module whose buffers named in :attr:`exact_buffers` follow the module to a device but not to a lower
-    precision: ``.half()`` or ``.to(torch.bfloat16)`` would round them (a Gaussian kernel, the Lab matrix, a fixed
-    ``tau``), and casting the module back to float32 would not restore them. The operations that read them cast them
-    to their inputs' dtype.
+    """A module whose buffers named in :attr:`exact_buffers` follow the module to a device but keep their dtype:
+    ``.half()`` or ``.to(torch.bfloat16)`` would round them (a Gaussian kernel, the Lab matrix, a fixed ``tau``), a
+    cast back to float32 would not restore them, and ``.double()`` would give float32 values in float64. The
+    operations that read them cast them to their inputs' dtype (or make them again, for float64).
 
     Example:
         >>> class Scale(ExactBuffers):
@@ -45,7 +45,7 @@ class ExactBuffers(nn.Module):
         True
     """
 
-    #: The names of the buffers kept at their precision (a name that is not a buffer, a parameter say, is cast).
+    #: The names of the buffers that keep their dtype (a name that is not a buffer, a parameter say, is cast).
     exact_buffers: ClassVar[tuple[str, ...]] = ()
 
     def _apply(self, fn: Callable[[torch.Tensor], torch.Tensor], recurse: bool = True) -> ExactBuffers:
@@ -53,12 +53,6 @@ class ExactBuffers(nn.Module):
         super()._apply(fn, recurse)
         for name, before in kept.items():
             after = self._buffers.get(name)
-            if before is None or after is None or not before.is_floating_point():
-                continue  # not a buffer of this module (a learnt tau is a parameter)
-            if _coarser(after.dtype, before.dtype):
+            if before is not None and after is not None and after.dtype != before.dtype:
                 self._buffers[name] = before.to(after.device)
         return self
-
-
-def _coarser(dtype: torch.dtype, than: torch.dtype) -> bool:
-    return torch.finfo(dtype).eps > torch.finfo(than).eps
