@@ -14,7 +14,7 @@ from alcn_cv.cli import build_parser
 from alcn_cv.cli import main as cli_main
 from alcn_cv.data.scenes import Scene
 from alcn_cv.errors import InputError
-from scene_sets import lit, make_sets, texture
+from scene_sets import lit, make_sets, texture, write_scene
 
 SMALL = relight_settings.Settings(patch=16, patches=40, gallery=2, max_pairs=4, keypoints=300)
 
@@ -493,3 +493,63 @@ def test_without_matplotlib_the_report_is_written_without_its_figure(tmp_path, m
     relight.main(tmp_path / "out", [root / "webcam"], ["none", "dog"], **args)
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["relight.json", "relight.md"]
     assert "alcn bench relight: matplotlib is not installed, so the report has no figure" in caplog.text
+
+
+def test_textured_locations_are_the_more_textured_half():
+    """Of the grid's candidates, only those of at least the median gradient energy are drawn: on a frame half weakly
+    and half strongly textured, every location touches the strong half (or the edge between them). Keeping every
+    candidate with some energy (the median dropped) drew patches of the weak half, where a method's identification
+    is mostly noise."""
+    frame = np.zeros((64, 128), np.uint8)
+    frame[:, :64] = np.rint(texture(64, 64, seed=1) * 40)
+    frame[:, 64:] = np.rint(texture(64, 64) * 255)
+    locs = relight.patch_locations(frame, 16, 200, np.random.default_rng(0))
+    # 7 x 15 candidates of stride 8: the upper half is 53 of 105; a patch at x = 48 ends on the edge at x = 64
+    assert len(locs) == 53 and (locs[:, 1] >= 48).all()
+
+
+def test_tuning_chooses_the_best_scoring_setting_and_the_first_of_equals(tmp_path, monkeypatch):
+    """``tune`` keeps the setting of the highest mean identification, the first (the default) among equals. A
+    minimum for a maximum (or the last of equals) still named a setting of the grid, which the run's test checked."""
+    scenes = []
+    for i in range(2):
+        folder = write_scene(tmp_path / f"s{i}", frames=3, seed=i, noise=0.3)
+        files = sorted(folder.glob("*.png"))
+        frames = np.stack([cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in files])
+        scenes.append(Scene(f"s{i}", "train", frames, tuple(p.name for p in files)))
+    tuned = relight.tune("dog", scenes, SMALL, frames=3)
+    scores = tuned["scores"]
+    assert max(scores.values()) - min(scores.values()) > 20  # the grid's settings score apart on these scenes
+    assert scores[tuned["chosen"]] == max(scores.values())
+    # every setting scoring the same: the first, the default
+    monkeypatch.setattr(relight, "evaluate_scene", lambda *args: {"metrics": {"identification": [50.0]}})
+    default = relight._spec("dog", relight.TUNING_GRIDS["dog"][0])
+    assert relight.tune("dog", scenes, SMALL, frames=3)["chosen"] == default
+
+
+def test_pose_succeeds_only_strictly_below_pose_px():
+    """ "Less than pose_px", as the report says: a homography moving every corner by exactly ``pose_px`` is a failure.
+    A translation by (3, 4) moves each corner 5 px; the threshold is set to the distance the benchmark's own
+    homography gives (cv2.findHomography, as in keypoint_scores), so rounding cannot decide the case."""
+    grid = np.stack(np.meshgrid(np.arange(0, 400, 50), np.arange(0, 100, 25)), -1).reshape(-1, 2).astype(np.float32)
+    moved = grid + np.float32([3, 4])
+    homography, _ = cv2.findHomography(grid, moved, cv2.RANSAC, relight_settings.Settings().ransac_px)
+    corners = np.array([[[0, 0]], [[399, 0]], [[399, 99]], [[0, 99]]], np.float64)
+    largest = float(np.linalg.norm(cv2.perspectiveTransform(corners, homography) - corners, axis=2).max())
+    assert largest == pytest.approx(5.0, abs=1e-9)
+
+    def pose(pose_px: float) -> float:
+        settings = relight_settings.Settings(pose_px=pose_px, match_px=6.0)
+        pair = (grid, _distinct(len(grid))), (moved, _distinct(len(grid)))
+        return relight.keypoint_scores(*pair, cv2.NORM_L2, (100, 400), settings)[1]
+
+    assert pose(largest) == 0.0 and pose(np.nextafter(largest, np.inf)) == 1.0
+
+
+def test_matches_pass_lowes_ratio_test_of_the_settings():
+    """A match is kept only when its nearest descriptor is nearer than ``ratio`` times the second nearest. Comparing
+    the two distances alone (the ratio ignored) kept every match but ties, so ``--ratio`` changed nothing."""
+    d2 = np.array([[0, 0, 0, 0], [10, 0, 0, 0], [0, 100, 0, 0]], np.float32)
+    d1 = np.array([[4.5, 0, 0, 0], [0, 99, 0, 0]], np.float32)  # d1[0]: 4.5 and 5.5 away (ratio 0.82); d1[1]: 1, 99
+    assert relight.one_to_one_matches(d1, d2, cv2.NORM_L2, 0.8).tolist() == [[1, 2]]
+    assert relight.one_to_one_matches(d1, d2, cv2.NORM_L2, 0.85).tolist() == [[0, 0], [1, 2]]

@@ -10,7 +10,7 @@ import pytest
 from alcn_cv.errors import DatasetError, InputError
 from alcn_cv.formats.colmap import read_model
 from board_scene import make_board_scene
-from calib.board import BoardSpec
+from calib.board import BoardSpec, Detection
 from calib.camera import (
     BoardView,
     _view_features,
@@ -203,3 +203,21 @@ def test_without_report_an_earlier_calibration_png_is_removed(tmp_path):
     paths = save_calibration(Calibration(K, np.zeros(5), (640, 480), 0.2), tmp_path, report=False)
     assert "report" not in paths and not (tmp_path / "calibration.png").exists()
     assert (tmp_path / "mine.png").is_file() and load_calibration(tmp_path / "camera.yaml").rms == pytest.approx(0.2)
+
+
+def test_select_views_leaves_out_views_showing_under_half_the_board(scene):
+    """Of more views than ``max_views``, those showing under MIN_COVERAGE (half) of the board's corners go first,
+    named with that reason. Comparing the corner count with the share itself (0.5 corners) kept every partial view."""
+    board = BoardSpec()
+    detector = board.detector()
+    full = [BoardView(f"v{i}", detector(im), 1.0) for i, im in enumerate(scene.images)]
+    assert all(len(v.detection.ids) >= 0.5 * board.num_corners for v in full)
+    few = max(4, board.num_corners // 4)
+    partial = [
+        BoardView(v.name + "_part", Detection(d.image_points[:few], d.object_points[:few], d.ids[:few]), 1.0)
+        for v, d in ((v, v.detection) for v in full[:4])
+    ]
+    chosen, unused = select_views(full + partial, (640, 480), max_views=8, board=board)
+    assert len(chosen) == 8 and not any(v.name.endswith("_part") for v in chosen)
+    for v in partial:
+        assert unused[v.name] == f"shows {few} of the board's {board.num_corners} corners, under 50%"

@@ -189,3 +189,11 @@ def test_radial_cameras_keep_their_distortion_in_opencv(model, params, dist):
     K, d = ColmapCamera(1, model, 640, 480, params).to_opencv()
     np.testing.assert_allclose(d, dist)
     np.testing.assert_allclose(K, [[500.0, 0, 320.0], [0, 500.0, 240.0], [0, 0, 1]])
+
+
+def test_image_center_is_the_point_the_camera_maps_to_its_origin():
+    """``center`` is ``-R_w2c.T @ t_w2c``: the world point at the camera's origin, ``R_w2c @ C + t_w2c = 0``. With
+    ``R_w2c`` for its transpose the centre was right only for symmetric rotations; only the shared-data
+    registration test noticed."""
+    for im in _images(5, seed=3):
+        np.testing.assert_allclose(im.R_w2c @ im.center + im.t_w2c, 0.0, atol=1e-12)

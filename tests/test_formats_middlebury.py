@@ -83,3 +83,14 @@ def test_a_reflection_is_not_a_rotation(tmp_path):
     (tmp_path / "a.png").write_bytes(b"")
     with pytest.raises(DatasetError, match="not a rotation"):
         read_middlebury(tmp_path)
+
+
+def test_the_center_of_a_turned_camera(tmp_path):
+    """``center`` is ``-R.T @ t``: with a quarter turn about z (not its own transpose), ``-R @ t`` gives another
+    point, which the identity rotation of the other tests cannot tell apart."""
+    turned = _LINE.replace(" 1 0 0 0 1 0 0 0 1 ", " 0 -1 0 1 0 0 0 0 1 ")
+    (tmp_path / "x_par.txt").write_text(f"1\n{turned}\n")
+    (view,) = read_middlebury(tmp_path, check_images=False)
+    np.testing.assert_allclose(view.R_w2c, [[0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    np.testing.assert_allclose(view.center, [0.02, 0.01, -0.6], atol=1e-12)
+    np.testing.assert_allclose(view.R_w2c @ view.center + view.t_w2c, 0.0, atol=1e-12)

@@ -223,3 +223,82 @@ def test_random_homography_moves_corners_by_a_share_of_width_in_x_and_height_in_
     )
     assert np.abs(moves[:, 0]).max() <= shift * w + 1e-3 and np.abs(moves[:, 0]).max() > shift * h
     assert np.abs(moves[:, 1]).max() <= shift * h + 1e-3
+
+
+def test_auto_exposure_and_iso_bring_the_mean_to_the_target_once():
+    """Exposure and ISO together make up ``target / mean``: ISO is only the part the exposure could not reach. An ISO
+    computed from the mean alone (``target / mean``, the exposure forgotten) amplified a dim scene's signal by the
+    exposure twice, so a relit frame came out far brighter than the target (255 where 117 is right)."""
+    image = np.full((32, 32), 128, np.uint8)
+    on_target = round(255 * 0.18 ** (1 / 2.2))  # the target mean 0.18 through the tone curve: 117
+    for gain in (2.0, 0.5, 0.1):  # exposure 0.41 and 1.64 within [1/4, 4]; 4 and then ISO 2.05
+        out = relight(image, np.random.default_rng(0), replace(NONE, gain=(gain, gain), target=0.18))
+        assert abs(float(out.mean()) - on_target) <= 1, gain
+    # beyond max_exposure * max_iso (64): the signal stays below the target, by that product
+    dim = relight(image, np.random.default_rng(0), replace(NONE, gain=(0.01, 0.01), target=0.18))
+    expected = 255 * ((128 / 255) ** 2.2 * 0.01 * 64) ** (1 / 2.2)
+    assert abs(float(dim.mean()) - expected) <= 1
+
+
+def test_the_gain_ramp_is_scaled_by_the_longer_side():
+    """``ramp`` is the largest log-ratio of the ramp across the frame's longer side: ``t`` is 1 per ``max(H, W)``
+    pixels. Dividing by the shorter side made a wide frame's ramp many times ``ramp`` (e^10 across 20 x 200)."""
+    fields = [shading_field((20, 200), np.random.default_rng(seed), 0.0, 1.0) for seed in range(20)]
+    ratios = [float(np.log(f.max() / f.min())) for f in fields]
+    assert max(ratios) <= 1.0 + 1e-3 and max(ratios) > 0.3
+
+
+def test_relight_takes_the_penumbra_of_its_config():
+    """``relight`` draws each shadow's penumbra from ``config.penumbra``: a soft shadow leaves many pixels between the
+    umbra and the lit level, a hard one few. Passing ``shadow_light`` (0.2 here) as the penumbra gave every shadow a
+    hard edge whatever the config said."""
+    image = np.full((128, 128), 160, np.uint8)
+    umbra = round(255 * 0.2 ** (1 / 2.2) * 160 / 255)
+
+    def edge_pixels(sigma: float) -> int:
+        config = replace(NONE, shadows=(1, 1), shadow_light=(0.2, 0.2), penumbra=(sigma, sigma))
+        out = relight(image, np.random.default_rng(2), config)
+        return int(((out > umbra + 1) & (out < 159)).sum())
+
+    hard, soft = edge_pixels(0.5), edge_pixels(8.0)
+    assert hard > 0 and soft > 5 * hard
+
+
+def test_relief_shading_under_a_light_straight_above_is_the_cosine_of_the_slope():
+    """``elevation`` is measured from the image plane: at 90 degrees the light is straight above, its azimuth does not
+    matter, and a plane of slope ``s`` (height per pixel) gets ``ambient + (1 - ambient) / sqrt(1 + s^2)``. Taking the
+    elevation from the normal (sin and cos swapped) divided by cos(90 degrees), about 6e-17: gains of 1e15."""
+    ramp = np.tile(np.arange(64, dtype=np.float32) * np.float32(0.01), (48, 1))  # slope 1 at depth 100
+    expected = 0.2 + 0.8 / np.sqrt(2.0)
+    for seed in (0, 1):
+        gain = relief_shading(ramp, np.random.default_rng(seed), 100.0, elevation=90.0, ambient=0.2)
+        np.testing.assert_allclose(gain[8:-8, 8:-8], expected, atol=1e-4)  # away from the blur's border
+
+
+def test_relit_frames_jitter_is_in_pixels_of_the_longer_side():
+    """``jitter`` pixels are those of the longer side (x here): the homography's shift is ``jitter / max(H, W)`` of
+    the width in x and of the height in y. Dividing by the shorter side moved a wide frame's corners by 15 px in x and
+    3 px in y for a jitter of 3."""
+    h, w, jitter = 48, 240, 3.0
+    image = _texture(h, w, seed=3)
+    moved = relit_frames(image, 8, np.random.default_rng(0), NONE, jitter=jitter)
+    shifts = np.array([cv2.phaseCorrelate(image.astype(np.float64), f.astype(np.float64))[0] for f in moved])
+    assert np.abs(shifts[:, 0]).max() <= jitter + 0.5 and np.abs(shifts[:, 1]).max() <= jitter * h / w + 0.5
+    assert np.abs(shifts[:, 0]).max() > 1.0  # the frames do move
+
+
+def test_shadow_mask_darkens_where_the_shape_is_shadow(monkeypatch):
+    """``shadow_shape`` gives 1 where lit and 0 in the shadow: the mask keeps the light at 1 where the shape is lit
+    and leaves ``light`` of it in the shadow, ``light^2`` where two shadows overlap. Weighing by ``lit`` instead of
+    ``1 - lit`` cast each shadow on the lit part of its shape (a polygon's shadow became a hole in a shadow), which
+    the random shapes of the other tests cannot tell apart."""
+    from alcn_cv.data import light_changes
+
+    half = np.ones((8, 16), np.float32)
+    half[:, 8:] = 0.0  # the left half lit, the right half in shadow
+    monkeypatch.setattr(light_changes, "shadow_shape", lambda rng, shape, kind, penumbra: half)
+    one = shadow_mask((8, 16), np.random.default_rng(0), 1, light=(0.3, 0.3), penumbra=(1, 1))
+    np.testing.assert_allclose(one[:, :8], 1.0)
+    np.testing.assert_allclose(one[:, 8:], 0.3, rtol=1e-6)
+    two = shadow_mask((8, 16), np.random.default_rng(0), 2, light=(0.3, 0.3), penumbra=(1, 1))
+    np.testing.assert_allclose(two[:, 8:], 0.09, rtol=1e-5)

@@ -156,3 +156,14 @@ def test_a_header_that_is_not_an_object_is_one_line(tmp_path):
     np.savez(tmp_path / "list.npz", **arrays)
     with pytest.raises(WeightFileError, match=r"list.npz: the header is not a JSON object; not a part model"):
         pm.load(tmp_path / "list.npz")
+
+
+def test_a_box_ply_off_the_origin_keeps_its_place(tmp_path):
+    """A BOP model is centred on its origin: the corners read from its PLY are at ``[lo, hi]``, not moved to start
+    at 0 (which shifted the box the pose is measured on by half its size)."""
+    from alcn_cv.formats import bop
+
+    box = pm.box_corners([20.0, 14.0, 6.0], [-10.0, -7.0, -3.0])
+    faces = np.array([[0, 1, 2]] * 6, np.int64)
+    bop.write_ply(tmp_path / "box.ply", bop.PlyModel(vertices=box, faces=faces, colors=None))
+    np.testing.assert_allclose(pm.read_box_corners(tmp_path / "box.ply"), box, atol=1e-6)

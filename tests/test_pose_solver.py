@@ -520,3 +520,15 @@ def test_projection_error_is_the_mean_distance_over_the_vertices():
     b = cv2.projectPoints(v, np.zeros(3), moved, K_EVAL, None)[0].reshape(-1, 2)
     assert projection_error(v, R, moved, R, t, K_EVAL) == pytest.approx(np.linalg.norm(a - b, axis=1).mean())
     assert projection_error(v, R, moved, R, t, K_EVAL) == pytest.approx((3 * 6.0 + 5.0) / 4)
+
+
+def test_the_2d_projection_metric_is_correct_under_5_px():
+    """Table 1's 2D projection metric: a pose is correct when its mean projection error is under 5 px (PROJ_PX). No
+    other test scored proj2d, so a wrong threshold (50 px) passed every metric's check."""
+    v = np.array([[0, 0, 0], [100, 0, 0], [0, 100, 0], [0, 0, 100]], float)
+    R, t = np.eye(3), np.array([0, 0, 500.0])
+    near = score(v, K_EVAL, "mm", (R, t + [4.0, 0, 0]), (R, t))  # (3 * 4.8 + 4) / 4 = 4.6 px
+    far = score(v, K_EVAL, "mm", (R, t + [5.0, 0, 0]), (R, t))  # (3 * 6 + 5) / 4 = 5.75 px
+    assert near.proj_px == pytest.approx(4.6) and far.proj_px == pytest.approx(5.75)
+    assert summarize([near], 141.4)["proj2d"] == 100.0 and summarize([far], 141.4)["proj2d"] == 0.0
+    assert summarize([near, far], 141.4)["proj2d"] == 50.0
