@@ -9,6 +9,8 @@
 * :mod:`~alcn_cv.filters.lab` and :mod:`~alcn_cv.filters.torch_lab` -- the CIE Lab of colour images;
 * :mod:`~alcn_cv.filters.torch_resize`, :mod:`~alcn_cv.filters.torch_separable` and
   :mod:`~alcn_cv.filters.torch_pad` -- resizes, separable filters and reflect-101 borders in torch;
+* :mod:`~alcn_cv.filters.torch_precision` -- float32 where float16 and bfloat16 cannot hold ALCN's values, and
+  constants that a cast of a module leaves exact;
 * :mod:`~alcn_cv.filters.standardize` -- per-window standardization.
 
 The NumPy/OpenCV modules import no torch; :func:`gaussian_mixture2d` and :class:`GaussianMixture2d` load it on
