@@ -685,23 +685,24 @@ def test_a_callers_autocast_leaves_the_colour_conversions_in_the_images_dtype():
     assert 1e-4 < (out - reference).abs().max() < 2e-2
 
 
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=CUDA)])
 @pytest.mark.parametrize("grad", [False, True])
 @pytest.mark.parametrize(("autocast", "largest"), [(torch.bfloat16, 3e-3), (torch.float16, 5e-4)])
-def test_a_callers_autocast_leaves_the_filters_in_float32(autocast, largest, grad):
+def test_a_callers_autocast_leaves_the_filters_in_float32(autocast, largest, grad, device):
     """Under a caller's autocast with a gradient recorded, Eq. 3's and the divisive step's blurs (convolutions there)
     ran in autocast's dtype, 5e-2 off in bfloat16 where the same call without a gradient was 9e-4 off, and the output
     was bfloat16 or float32 by whether a gradient was recorded. Only the network's convolutions take autocast's
-    precision; the output is the image's dtype."""
-    module = ALCN2d(model="gain")
+    precision; the output is the image's dtype (on CUDA, against the CPU's float32 output)."""
+    reference_module, module = ALCN2d(model="gain"), ALCN2d(model="gain").to(device)
     for channels in (1, 3):
         image = _gray() if channels == 1 else _bgr()[..., ::-1].copy()
         x = torch.from_numpy(_unit(image)).reshape(1, *image.shape[:2], channels).permute(0, 3, 1, 2)
         with torch.no_grad():
-            reference = module(x)
-        with torch.autocast("cpu", dtype=autocast), torch.set_grad_enabled(grad):
-            out = module(x.clone().requires_grad_(grad))
+            reference = reference_module(x)
+        with torch.autocast(device, dtype=autocast), torch.set_grad_enabled(grad):
+            out = module(x.to(device).requires_grad_(grad))
         assert out.dtype == torch.float32 and out.requires_grad == grad
-        assert 0 < (out.detach() - reference).abs().max() < largest, channels
+        assert 0 < (out.detach().cpu() - reference).abs().max() < largest, channels
 
 
 @pytest.mark.parametrize(("dtype", "autocast"), [(torch.float16, torch.bfloat16), (torch.bfloat16, torch.float16)])
