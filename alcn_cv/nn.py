@@ -129,37 +129,40 @@ class ALCN2d(nn.Module):
             a multiple of the network's stride (:class:`~alcn_cv.errors.WeightFileError`: a weight file that does
             not load); calling, see :meth:`forward`.
 
-    The range of the image is checked only where reading it costs no device sync: on the CPU, run eagerly (not
-    under ``torch.jit.trace``, ``torch.compile``, an ONNX export or a ``torch.func`` transform), a value outside
-    [0, 1] (1e-3 of rounding allowed, as ``apply()``), NaN or inf raises. Elsewhere (CUDA, say) it is not checked
-    and the output is undefined: a negative gray value makes the whole image NaN through the log of its cell means,
-    colour is clipped to [0, 1] before Lab, and a NaN or inf pixel makes its whole image NaN (the divisive floor is
-    the image's mean energy). A float16 or bfloat16 module runs its network's convolutions in its dtype and the rest
-    in float32 (the network's input features and head, Eq. 3, the divisive step, the Lab conversions), where float16
-    cannot hold the values (a cell's variance, the difference of two nearly equal moments; Eq. 3's difference of two
-    blurs): against the float32 module on the same image, float16 was 9e-4 off at most on eight photographs, gray or
-    colour (1e-4 on average; the lite model 1.6e-3 on one), bfloat16 8e-3. A float32 image cast to float16 is itself
-    up to 3e-3 off in the output (the float32 module on the cast image), which no computation after it takes back.
-    Under a caller's autocast an image of another float dtype than the module's is let through: the network's
-    convolutions run at autocast's precision, the rest as outside autocast (in float32 for a float16 or bfloat16
-    image), and the output is the image's dtype (bfloat16 autocast: 1e-3 from float32 on a photograph, float16 1e-4).
-    Colour on CUDA, traced or compiled goes through the torch Lab conversion: 1e-4 from ``apply()`` on most
-    photographs, up to 5e-4 on some.
-    ``torch.jit.trace`` records the sizes of the traced image: on another size the traced module fails or, without
-    an error, returns wrong values (use ``torch.compile`` for several sizes, which compiles again for each new size:
-    slow on a CPU, so compile for the few sizes a program runs, with ``dynamic=False``: by default the second size
-    compiles the whole graph again for symbolic sizes, about 5 times as long as the first, 8 minutes on 2 cores);
-    ``torch.jit.script`` is not supported (trace the module, or ``torch.compile`` it). On the ``meta`` device a gray
-    image propagates its shape; colour raises (torch has no autocast there, which the Lab conversions switch off).
-    ``torch.onnx.export`` (``dynamo=False``) writes it from an example image of 120x160 or larger (a smaller one may
-    be refused: the network's pads would be longer than its grid); as a trace, the graph is for the example's size
-    (with dynamic axes, other sizes give wrong values or fail). The 1e-5 from ``apply()`` holds for integers
-    converted as it converts them, ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs by a float
-    rounding, which the divisive step amplifies to 6e-5 on a photograph. The gain models at another ``scale`` than 1
-    are 6e-5 from it too: their working image is resized in torch, ``apply()``'s by ``cv2.resize``.
+    Range: the image is checked only where reading it costs no device sync: on the CPU, run eagerly (not under
+    ``torch.jit.trace``, ``torch.compile``, an ONNX export or a ``torch.func`` transform), a value outside [0, 1] (1e-3
+    of rounding allowed, as ``apply()``), NaN or inf raises. Elsewhere (CUDA, say) it is not checked and the output is
+    undefined: a negative gray value makes the whole image NaN through the log of its cell means, colour is clipped to
+    [0, 1] before Lab, and a NaN or inf pixel makes its whole image NaN (the divisive floor is the image's mean energy).
 
-    In a ``DataLoader``'s workers (or any process forked after this one ran torch's threads, which a fork leaves
-    behind), the module runs on one thread: the outputs are one thread's, to float rounding.
+    Agreement with ``apply()``: the module's 1e-5 holds for integers converted as ``apply()`` converts them,
+    ``image * (1 / 255)`` (uint16: ``1 / 65535``): ``image / 255`` differs by a float rounding, which the divisive step
+    amplifies to 6e-5 on a photograph. The gain models at another ``scale`` than 1 are 6e-5 from it too: their working
+    image is resized in torch, ``apply()``'s by ``cv2.resize``. Colour on CUDA, traced or compiled goes through the
+    torch Lab conversion: 1e-4 from ``apply()`` on most photographs, up to 5e-4 on some.
+
+    Precision: a float16 or bfloat16 module runs its network's convolutions in its dtype and the rest in float32 (the
+    network's input features and head, Eq. 3, the divisive step, the Lab conversions), where float16 cannot hold the
+    values (a cell's variance, the difference of two nearly equal moments; Eq. 3's difference of two blurs): against
+    the float32 module on the same image, float16 was 9e-4 off at most on eight photographs, gray or colour (1e-4 on
+    average; the lite model 1.6e-3 on one), bfloat16 8e-3. A float32 image cast to float16 is itself up to 3e-3 off in
+    the output (the float32 module on the cast image), which no computation after it takes back. Under a caller's
+    autocast an image of another float dtype than the module's is let through: the network's convolutions run at
+    autocast's precision, the rest as outside autocast (in float32 for a float16 or bfloat16 image), and the output is
+    the image's dtype (bfloat16 autocast: 1e-3 from float32 on a photograph, float16 1e-4).
+
+    Tracing, compiling, exporting: ``torch.jit.trace`` records the sizes of the traced image: on another size the
+    traced module fails or, without an error, returns wrong values (use ``torch.compile`` for several sizes, which
+    compiles again for each new size: slow on a CPU, so compile for the few sizes a program runs, with
+    ``dynamic=False``: by default the second size compiles the whole graph again for symbolic sizes, about 5 times as
+    long as the first, 8 minutes on 2 cores); ``torch.jit.script`` is not supported (trace the module, or
+    ``torch.compile`` it). ``torch.onnx.export`` (``dynamo=False``) writes it from an example image of 120x160 or
+    larger (a smaller one may be refused: the network's pads would be longer than its grid); as a trace, the graph is
+    for the example's size (with dynamic axes, other sizes give wrong values or fail). On the ``meta`` device a gray
+    image propagates its shape; colour raises (torch has no autocast there, which the Lab conversions switch off).
+
+    Workers: in a ``DataLoader``'s workers (or any process forked after this one ran torch's threads, which a fork
+    leaves behind), the module runs on one thread: the outputs are one thread's, to float rounding.
 
     Fine-tuning: the network's parameters train (``requires_grad_(True)``, the default of a new module); the gain
     models' ``tau`` and ``floor_scale`` are buffers, fixed. ``train()`` and ``eval()`` give the same output (no
