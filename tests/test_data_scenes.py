@@ -140,3 +140,26 @@ def test_mean_pairwise_ncc_ignores_a_gain_and_an_offset():
     assert mean_pairwise_ncc([a, 0.5 * a + 0.3], mask) == pytest.approx(1.0)
     assert mean_pairwise_ncc([a, 1.0 - a], mask) == pytest.approx(-1.0)
     assert mean_pairwise_ncc([a, np.full_like(a, 0.7)], mask) == 0.0
+
+
+def test_a_photometric_set_at_a_scale_keeps_its_masks_on_its_images(tmp_path):
+    """``scale`` resizes the images and the masks alike: a mask resized to (h, w) where the images are (w, h) (a
+    swapped size, unseen on square objects) would no longer lie on its object, or not even have its images' shape."""
+    from alcn_cv.data.scenes import load_photometric
+
+    folder = tmp_path / "psm" / "ball"
+    folder.mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 256, (40, 60), dtype=np.uint8) for _ in range(2)]
+    for i, image in enumerate(images):
+        cv2.imwrite(str(folder / f"ball.{i}.png"), image)
+    mask = np.zeros((40, 60), np.uint8)
+    mask[4:20, 10:50] = 255
+    cv2.imwrite(str(folder / "ball.mask.png"), mask)
+    (obj,) = load_photometric(tmp_path / "psm", scale=0.5)
+    assert obj.images.shape == (2, 20, 30) and obj.mask.shape == (20, 30)
+    expected = np.zeros((20, 30), bool)
+    expected[2:10, 5:25] = True
+    np.testing.assert_array_equal(obj.mask, expected)
+    area = cv2.resize(images[1], (30, 20), interpolation=cv2.INTER_AREA)
+    np.testing.assert_array_equal(obj.images[1], area.astype(np.float32) / np.float32(255))

@@ -98,3 +98,16 @@ def test_a_misspelt_scene_is_neither_a_folder_nor_a_webcam_scene(tmp_path, monke
     (tmp_path / "home" / "mine").mkdir(parents=True)
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
     assert scene_dirs(["~/mine", "mexico"]) == [tmp_path / "home" / "mine", shared_root("webcam") / "mexico"]
+
+
+def test_a_sixteen_bit_maximum_of_exactly_4096_is_not_warned_about(tmp_path, caplog):
+    """The warning is for a maximum *below* :data:`NARROW_16_BIT` (less than a sixteenth of the range); a ``<=``
+    warned of an image that reaches it."""
+    base = texture()
+    edge = tmp_path / "edge.png"
+    image = np.rint(base * NARROW_16_BIT).astype(np.uint16)
+    assert image.max() == NARROW_16_BIT
+    cv2.imwrite(str(edge), image)
+    with caplog.at_level("WARNING"):
+        read_eight_bits(edge)
+    assert not _warnings(caplog)

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
-from alcn_cv.data.synthetic import augment, sample_negatives
+from alcn_cv.data.synthetic import augment, object_box, sample_negatives
 from alcn_cv.errors import InputError
 
 
@@ -99,3 +100,82 @@ def test_a_box_past_the_top_left_corner_keeps_its_object():
     kwargs = dict(replace_background=1.0, noise=0, intensity_offset=0, intensity_scale=(1, 1), max_shift=0)
     win = augment(img, [-5, -5, 35, 35], 8, np.random.default_rng(0), **kwargs)
     assert (win[:, 28:36, 28:36] == 20).all()  # the object's centre, whatever the background
+
+
+_STILL = {
+    "max_shift": 0,
+    "max_rotation_deg": 0,
+    "max_scale_change": 0,
+    "noise": 0,
+    "intensity_scale": (1, 1),
+    "intensity_offset": 0,
+    "replace_background": 0,
+}
+
+
+def test_augment_maps_the_boxs_centre_to_the_windows_centre_exactly():
+    """The box's centre ``x + (w - 1) / 2`` lands on the window's ``(64 - 1) / 2``: at the image's scale and without
+    jitter a window is a crop of the image, pixel for pixel. A centre ``x + w / 2`` (half a pixel off) passed the
+    test above, whose tolerance is a pixel, and interpolated every window between pixels."""
+    img, box = _image()  # the centre (84.5, 59.5): the crop [28:92, 53:117]
+    win = augment(img, box, 3, np.random.default_rng(0), extent=None, **_STILL)
+    gray = cv2.cvtColor(img.astype(np.float32) / np.float32(255), cv2.COLOR_BGR2GRAY)
+    expected = np.rint(np.clip(gray[28:92, 53:117], 0, 1) * 255).astype(np.uint8)
+    for w in win:
+        np.testing.assert_array_equal(w, expected)
+
+
+def test_the_intensity_offset_is_drawn_on_both_sides_of_zero():
+    """``|b|`` at most ``intensity_offset``: b is drawn in [-offset, offset], darkening as often as lightening (an
+    offset drawn in [0, offset] only made every window brighter)."""
+    flat = np.full((100, 100), 128, np.uint8)
+    win = augment(flat, [30, 30, 40, 40], 200, np.random.default_rng(5), **{**_STILL, "intensity_offset": 0.05})
+    levels = win.reshape(200, -1)
+    assert (levels == levels[:, :1]).all()  # a uniform image stays uniform: a, b, no noise
+    b = levels[:, 0].astype(int) - 128
+    assert b.min() < -8 and b.max() > 8 and np.abs(b).max() <= 13  # 0.05 * 255 = 12.75 levels
+
+
+def test_off_centre_negatives_show_the_object_14_to_26_output_pixels_off_the_centre():
+    """The off-centre distance is in output pixels: ``d / s`` input pixels at the scale ``s``; ``d * s`` (at s = 2
+    here) put the object 56 to 104 pixels off, out of the window."""
+    img = np.zeros((120, 200), np.uint8)
+    img[59:61, 99:101] = 255  # a dot at the centre (99.5, 59.5) of the box below
+    box = [90, 50, 20, 20]  # extent 40: the scale s = 2
+    neg = sample_negatives(
+        [img],
+        [box],
+        30,
+        np.random.default_rng(6),
+        natural_fraction=0.0,
+        off_centre_fraction=1.0,
+        noise=0,
+        intensity_scale=(1, 1),
+        intensity_offset=0,
+    )
+    ys, xs = np.mgrid[0:64, 0:64]
+    for w in neg.astype(np.float64):
+        assert w.sum() > 0, "the object left the window"
+        y, x = (ys * w).sum() / w.sum(), (xs * w).sum() / w.sum()
+        assert 13.5 <= np.hypot(x - 31.5, y - 31.5) <= 26.5
+
+
+def test_a_sixteen_bit_image_gives_the_windows_of_its_eight_bits():
+    """A uint16 image is read in [0, 1] as ``x / 65535``: dividing it by 255 (as uint8) saturated it to white."""
+    img, box = _image()
+    a = augment(img, box, 6, np.random.default_rng(9))
+    b = augment(img.astype(np.uint16) * 257, box, 6, np.random.default_rng(9))
+    assert np.abs(a.astype(int) - b).max() <= 1
+
+
+def test_a_0_255_masks_object_is_what_lies_above_127():
+    """A 0..255 mask (a PNG with anti-aliased edges) is the object above 127, as io.read_mask reads one: its faint
+    fringe is not the object. Counting every nonzero pixel grew the box by the fringe; a 0/1 or boolean mask is the
+    object where nonzero."""
+    mask = np.zeros((60, 80), np.uint8)
+    mask[10:50, 20:70] = 100  # the fringe
+    mask[20:40, 30:60] = 255
+    box, kept = object_box(mask.shape, mask)
+    assert box.tolist() == [30, 20, 30, 20] and kept.sum() == 600
+    for core in ((mask == 255).astype(np.uint8), mask == 255):
+        assert object_box(mask.shape, core)[0].tolist() == [30, 20, 30, 20]

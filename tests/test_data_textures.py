@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
 from alcn_cv.data.textures import (
     SKIMAGE_PHOTOGRAPHS,
+    colour_jitter,
+    display_texture,
     photo_crop,
     photos,
     procedural_texture,
@@ -62,3 +65,32 @@ def test_procedural_texture_kinds_and_sizes():
     a = procedural_texture(np.random.default_rng(3), np.int64(24), "blobs")
     assert a.shape == (24, 24, 3) and np.array_equal(a, procedural_texture(np.random.default_rng(3), 24, "blobs"))
     assert photo_crop(np.random.default_rng(0), np.int32(20)).shape == (20, 20, 3)
+
+
+def test_p_photo_one_always_gives_a_jittered_photograph_crop():
+    """``p_photo`` is the probability of a photograph: at 1 every texture is a colour-jittered :func:`photo_crop` drawn
+    after the choice (an inverted comparison gave procedural textures only, which the determinism test let pass)."""
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        rng.random()  # the choice
+        expected = colour_jitter(rng, photo_crop(rng, 24), 0.6)
+        np.testing.assert_array_equal(random_texture(np.random.default_rng(seed), 24, p_photo=1.0), expected)
+
+
+def test_colour_jitter_stays_in_the_unit_range():
+    """Gains above 1, a saturation boost and the inversion would leave [0, 1] unclipped (a reflectance above 1)."""
+    img = np.random.default_rng(0).random((16, 16, 3), dtype=np.float32)
+    for seed in range(20):
+        out = colour_jitter(np.random.default_rng(seed), img, 1.0)
+        assert out.dtype == np.float32 and out.min() >= 0.0 and out.max() <= 1.0
+    assert max(float(colour_jitter(np.random.default_rng(s), img, 1.0).max()) for s in range(20)) == 1.0  # clipped
+
+
+def test_display_texture_is_the_gamma_encoded_luma_of_the_linear_texture():
+    """A background as a photograph stores it: the linear texture raised to 1/2.2, then luma. Without the encoding
+    the backgrounds were the darker linear values."""
+    linear = random_texture(np.random.default_rng(3), 20, p_photo=0.5)
+    expected = cv2.cvtColor(np.ascontiguousarray(linear[..., ::-1] ** (1 / 2.2), dtype=np.float32), cv2.COLOR_BGR2GRAY)
+    shown = display_texture(np.random.default_rng(3), 20, p_photo=0.5)
+    assert shown.shape == (20, 20) and shown.dtype == np.float32
+    np.testing.assert_allclose(shown, expected, atol=1e-6)

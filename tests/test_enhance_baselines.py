@@ -329,3 +329,37 @@ def test_a_methods_repr_shows_its_parameters():
     assert repr(alcn_cv.create("dog:sigma1=1:sigma2=3")) == "DifferenceOfGaussians(sigma1=1.0, sigma2=3.0)"
     assert repr(alcn_cv.create("clahe:clip_limit=4")) == "CLAHE(clipLimit=4.0, tileGridSize=(8, 8))"
     assert repr(alcn_cv.create("none")) == "NoNormalization(name='none')"  # no parameter
+
+
+def test_sqi_uses_its_eps_in_the_numerator_too():
+    """``SQI(I) = mean_k log((I + eps) / (F_k * I + eps))``: the numerator's eps must be the parameter, not the
+    default 0.01 (a flat image would then have a non-zero quotient, log(0.01 + I) - log(eps + I))."""
+    img = _scene()
+    eps = 0.2
+    ref = np.mean([np.log(img + eps) - np.log(_mirror_gauss(img, s) + eps) for s in (1.0, 2.5)], axis=0)
+    out = alcn_cv.create("sqi", sigmas=(1.0, 2.5), eps=eps, weighted=False).normalize(img)
+    np.testing.assert_allclose(out, ref, atol=1e-5)
+    flat = np.full((20, 24), 0.4, np.float32)
+    np.testing.assert_allclose(alcn_cv.create("sqi", eps=eps).normalize(flat), 0.0, atol=1e-6)
+
+
+def test_ns_divides_by_the_deviation_plus_its_eps():
+    """``NS(I) = (I - mean(I)) / (std(I) + eps)`` with the caller's eps (a fixed 1e-6 passed every default test)."""
+    img = _scene()
+    eps = 0.5
+    ref = (img.astype(np.float64) - img.mean()) / (img.std() + eps)
+    np.testing.assert_allclose(alcn_cv.create("ns", eps=eps).normalize(img), ref, atol=1e-6)
+
+
+def test_lrn_sums_with_reflect_101_borders():
+    """LRN's neighbourhood sum runs over reflect-101 borders (as the docstring says): the torch comparison is checked
+    away from the borders only, so another border mode (replicate, say) changed the border pixels unseen."""
+    size, alpha, beta, k = 5, 0.8, 0.75, 0.02
+    img = _scene(23, 29, seed=4)
+    a = img.astype(np.float64) - img.mean()
+    r = size // 2
+    padded = np.pad(a * a, r, mode="reflect")  # NumPy's "reflect" is reflect-101
+    energy = np.lib.stride_tricks.sliding_window_view(padded, (size, size)).mean(axis=(2, 3))
+    ref = a / (k + alpha * energy) ** beta
+    out = alcn_cv.create("lrn", size=size, alpha=alpha, beta=beta, k=k).normalize(img)
+    np.testing.assert_allclose(out, ref, rtol=1e-4, atol=1e-6)

@@ -74,3 +74,11 @@ def test_apply_contract():
 def test_bad_parameters(params):
     with pytest.raises(InputError):
         alcn_cv.create("tantriggs", **params)
+
+
+def test_an_image_whose_largest_magnitude_is_eps_counts_as_flat():
+    """``eps`` is "the largest magnitude at or below which the image counts as flat": a ``>=`` in the flatness check
+    would blow an image of magnitude exactly ``eps`` up to full contrast instead of returning zeros."""
+    x = np.array([[0.5, -0.5], [0.25, 0.0]], np.float32)
+    np.testing.assert_array_equal(contrast_equalize(x, eps=0.5), np.zeros((2, 2), np.float32))
+    assert np.abs(contrast_equalize(x, eps=0.4999)).max() > 1.0

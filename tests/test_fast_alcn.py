@@ -360,3 +360,23 @@ def test_pyramid_error_bound_on_a_small_image_and_for_the_widest_kernel():
         approx = pyramid_mixture(image, FULL_RES_SIGMAS, lambda level, ks, shape: [float(widest[k]) for k in ks])
         diff = np.abs(approx - alcn_filter(image, widest, FULL_RES_SIGMAS))
         assert diff.max() <= max_bound and diff.mean() <= mean_bound, (h, w, diff.max(), diff.mean())
+
+
+def test_output_gram_is_the_mean_product_of_the_blurs_over_the_centre():
+    """The distillation's metric ``M_ij = mean(B_i B_j)`` over each window's centre 32x32: a Gram over the window's
+    corner, or a sum where the mean is meant (1024 times the loss and the recorded output_rmse 32 times), passed every
+    run of the distillation unseen."""
+    from scipy import ndimage
+
+    from alcn_cv.train.distill import output_gram
+
+    windows = np.random.default_rng(0).random((2, 64, 64), dtype=np.float32)
+    windows[1, :20] = 0.0  # the top rows differ from the centre's: a Gram over the corner would differ
+    sigmas = [1.0, 2.5]
+    gram = output_gram(windows, sigmas)
+    assert gram.shape == (2, 2, 2) and gram.dtype == np.float32
+    for w, m in zip(windows, gram, strict=True):
+        whole = [ndimage.gaussian_filter(w.astype(np.float64), s, mode="mirror", truncate=3.0) for s in sigmas]
+        blurs = [b[16:48, 16:48] for b in whole]
+        expected = [[np.mean(bi * bj) for bj in blurs] for bi in blurs]
+        np.testing.assert_allclose(m, expected, rtol=1e-5)

@@ -171,3 +171,32 @@ def test_the_maps_error_ignores_a_scale_of_the_whole_frames_maps():
     assert float(_maps_error(scaled, sample)) == pytest.approx(0.0, abs=1e-10)
     mirrored = SimpleNamespace(maps_from_features=lambda features: maps.flip(-1))
     assert float(_maps_error(mirrored, sample)) > 0.1
+
+
+def test_relit_frames_are_clipped_as_a_camera_would():
+    """The relit frame is the frame times a gain of 0.3 to 1.5, clipped to [0, 1] (a camera saturates); unclipped,
+    the student learned from intensities no camera gives."""
+    from alcn_cv.train.distill import _relit
+
+    frame = np.linspace(0, 1, 48 * 64, dtype=np.float32).reshape(48, 64)
+    brighter = 0
+    for seed in range(12):
+        out = _relit(frame, np.random.default_rng(seed))
+        assert out.shape == frame.shape and out.dtype == np.float32 and out.min() >= 0.0 and out.max() <= 1.0
+        rows = out if out[0, 0] == 0.0 else out[:, ::-1]  # mirrored half of the time
+        gain = float(rows[0, 1] / frame[0, 1])
+        assert 0.3 <= gain <= 1.5
+        np.testing.assert_allclose(rows, np.clip(frame * np.float32(gain), 0, 1), rtol=1e-6, atol=1e-7)
+        brighter += gain > 1
+    assert brighter  # some frames saturate: the clip is exercised
+
+
+def test_a_single_rendered_scene_is_trained_on_not_held_out():
+    """The last rendered scene is held out for validation only when there are two or more: holding out the only one
+    left the distillation nothing rendered to learn from."""
+    from alcn_cv.train.distill import _gain_frames
+
+    train, val = _gain_frames([], 1, 0, False)
+    assert len(train) == 4 and val == []
+    train, val = _gain_frames([], 2, 0, False)
+    assert len(train) == 4 and len(val) == 4

@@ -376,3 +376,28 @@ def test_a_smooth_ramp_is_not_texture_a_steeper_one_is():
     steep = np.tile(np.floor(1.5 * x), (64, 1)).astype(np.uint8)  # 1.5 grey levels a pixel
     assert textured_share(gentle, 16) == 0.0
     assert textured_share(steep, 16) == 1.0
+
+
+def test_locations_exactly_min_distance_apart_are_both_drawn():
+    """``min_distance`` is the least Chebyshev distance allowed ("at least"): a strict ``>`` dropped the candidates
+    of a grid whose step is the distance, halving the locations drawn."""
+    corners = np.array([[0, 0], [0, 12], [12, 0], [12, 12]])
+    for seed in range(5):
+        picked = sample_locations(corners, 4, 12, np.random.default_rng(seed))
+        assert sorted(map(tuple, picked.tolist())) == sorted(map(tuple, corners.tolist()))
+    assert len(sample_locations(corners, 4, 13, np.random.default_rng(0))) == 1
+
+
+def test_the_objective_identifies_the_textured_locations_only():
+    """Identification's classes are the first ``textured`` outputs; those drawn anywhere (flat, alike) join the
+    consistency and repeatability terms only. Identifying among all of them asked the network to tell flat patches
+    apart."""
+    from alcn_cv.train.real_light import objective
+
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.randn(10, 1, 8, 8, generator=g), torch.randn(10, 1, 8, 8, generator=g)
+    cfg = RealLightConfig(temperature=0.5, consistency=0.0, repeatability=0.0)
+    torch.testing.assert_close(objective(a, b, 6, cfg), identification_loss(a[:6], b[:6], 0.5))
+    weighted = RealLightConfig(temperature=0.5, consistency=2.0, repeatability=0.5)
+    expected = identification_loss(a[:6], b[:6], 0.5) + 2.0 * consistency_loss(a, b) + 0.5 * repeatability_loss(a, b)
+    torch.testing.assert_close(objective(a, b, 6, weighted), expected)

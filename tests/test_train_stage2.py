@@ -119,3 +119,17 @@ def test_object_masks_are_read_as_every_mask_is(tmp_path):
     cv2.imwrite(str(tmp_path / "owl" / "owl.mask.png"), (mask > 0).astype(np.uint8))  # a 0/1 mask
     with pytest.raises(InputError, match=r"owl.mask.png: no pixel above 127; a mask is white \(255\)"):
         _read_objects(tmp_path)
+
+
+def test_normalize_windows_keeps_the_detectors_centre():
+    """The detector sees the centre 32x32 of each normalized 64x64 window, standardized: a crop at the corner would
+    train it on the background around the object."""
+    from types import SimpleNamespace
+
+    from alcn_cv.filters.standardize import standardize_windows
+    from alcn_cv.train.stage2 import normalize_windows
+
+    windows = np.random.default_rng(0).integers(0, 256, (3, 64, 64), dtype=np.uint8)
+    identity = SimpleNamespace(normalize=lambda gray: gray)
+    expected = standardize_windows(windows[:, 16:48, 16:48].astype(np.float32) / np.float32(255))
+    np.testing.assert_array_equal(normalize_windows(windows, identity), expected)

@@ -381,3 +381,70 @@ def test_a_signal_while_the_handlers_are_put_back_leaves_none_held_for_good(arri
         for s, handler in before.items():
             real_signal(s, handler)
     assert after == (signal.default_int_handler, terminated)
+
+
+def test_the_warm_up_starts_above_zero_and_ends_on_the_cosine():
+    """The linear warm-up is ``(step + 1) / warmup_steps``: its first step learns (a factor of 0 wasted it, and its
+    Adam moments were taken at a zero rate), and its last reaches the cosine schedule."""
+    import math
+
+    from alcn_cv.train.config import TrainConfig
+
+    cfg = TrainConfig()
+    cfg.optim.warmup_steps, cfg.optim.epochs = 4, 1
+
+    def cosine(step: int) -> float:
+        return 0.5 * (1 + math.cos(math.pi * step / 100))
+
+    assert trainer._lr_factor(cfg, 0, 100) == pytest.approx(0.25 * cosine(0))
+    assert trainer._lr_factor(cfg, 3, 100) == pytest.approx(cosine(3))
+    assert trainer._lr_factor(cfg, 100, 100) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_an_epochs_intensity_gains_are_log_uniform_within_the_jitter():
+    """``gain_jitter`` is the range of a log-uniform gain: the gains are ``exp`` of a uniform draw between the logs of
+    its ends (the logs themselves, negative half of the time, would turn the windows' intensities negative)."""
+    from alcn_cv.train.config import TrainConfig
+
+    cfg = TrainConfig()
+    cfg.data.gain_jitter = [0.5, 2.0]
+    perm, gains = trainer._epoch_plan(cfg, 3, 4000)
+    assert sorted(perm.tolist()) == list(range(4000))
+    assert float(gains.min()) >= 0.5 and float(gains.max()) <= 2.0
+    logs = gains.log()
+    assert abs(float(logs.mean())) < 0.03 and abs(float((logs < 0).float().mean()) - 0.5) < 0.03  # centred on log 1
+    again, same = trainer._epoch_plan(cfg, 3, 4000)
+    assert torch.equal(again, perm) and torch.equal(same, gains)  # a function of (seed, epoch): resuming is exact
+
+
+def test_a_resumed_runs_clock_goes_on_from_the_checkpoints_time():
+    """The restored state's clock starts ``elapsed`` seconds before ``start``: restarted at zero, a resumed run's
+    recorded training time counted only its last part."""
+    from alcn_cv.train.checkpoint import restore_checkpoint
+
+    model = torch.nn.Linear(2, 1)
+    optimizer = torch.optim.SGD(model.parameters(), lr=0.1)
+    ckpt = {
+        "model": model.state_dict(),
+        "optimizer": optimizer.state_dict(),
+        "rng": torch.get_rng_state(),
+        "history": [{"epoch": 0}],
+        "epoch": 1,
+        "step_in_epoch": 2,
+        "sums": [1.5, 3, 4],
+        "elapsed": 100.0,
+    }
+    state = restore_checkpoint(ckpt, model, optimizer, start=1000.0)
+    assert state.start == 900.0
+    assert (state.history, state.epoch, state.step_in_epoch, state.sums) == ([{"epoch": 0}], 1, 2, [1.5, 3, 4])
+
+
+def test_a_resume_with_another_seed_is_a_difference():
+    """The seed draws the data and the epochs' order: a run resumed with another one is another run, named as such
+    (the other differences compared are the model's, the data's and the optimisation's)."""
+    from alcn_cv.train.checkpoint import _config_dict, _differences
+    from alcn_cv.train.config import TrainConfig
+
+    saved = _config_dict(TrainConfig().resolved())
+    assert _differences(saved, TrainConfig()) == []
+    assert _differences(saved, TrainConfig(seed=5)) == ["seed (0 in the checkpoint, 5 now)"]

@@ -145,6 +145,7 @@ def _edited(meta, name, value):
         ("config.stride", None, "missing"),
         ("config.stride", 8.0, "must be a positive integer"),
         ("config.stride", 0, "must be a positive integer"),
+        ("config.stride", True, "must be a positive integer"),  # a bool is an int to Python, and True == 1
         ("config.mean_sigma", None, "missing"),
         ("config.context_sigma", "wide", "must be a positive number"),
         ("config.dilations", None, "missing"),
@@ -327,3 +328,16 @@ def test_an_empty_output_range_is_refused(tmp_path, lite, output_range):
     path = _write_npz(tmp_path / "w.npz", lite.arrays, {**lite.meta, "output_range": output_range})
     with pytest.raises(WeightFileError, match="is empty"):
         load_normalizer_file(path)
+
+
+def test_a_folder_of_several_weight_files_lists_them_and_guesses_none(tmp_path, lite):
+    """A folder holding one ``.npz`` (or a run's final weight file) names it as the file meant; of several, which one
+    was meant is unknown: the message lists them, where naming the first in name order guessed."""
+    for name in ("b.npz", "a.npz"):
+        save_normalizer_file(tmp_path / name, lite.arrays, lite.meta)
+    with pytest.raises(WeightFileError) as info:
+        load_normalizer_file(tmp_path)
+    assert str(info.value) == f"{tmp_path} is a folder, not a weight file (.npz); it holds 2: a.npz, b.npz"
+    (tmp_path / "b.npz").unlink()
+    with pytest.raises(WeightFileError, match=f"did you mean {tmp_path / 'a.npz'}"):
+        load_normalizer_file(tmp_path)

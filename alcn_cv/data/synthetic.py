@@ -48,7 +48,8 @@ def _as_float(image: np.ndarray) -> np.ndarray:
 def object_box(
     image_shape: tuple[int, ...], mask_or_bbox: np.ndarray | Sequence[float]
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    """Normalise a mask or a COCO box to ``(bbox [x, y, w, h] float64, mask float32 or None)``."""
+    """Normalise a mask or a COCO box to ``(bbox [x, y, w, h] float64, mask float32 or None)``: a boolean mask or one of
+    values in [0, 1] is the object where nonzero, a 0..255 one where above 127 (as :func:`~alcn_cv.io.read_mask`)."""
     arr = np.asarray(mask_or_bbox)
     if arr.ndim == 2 and arr.shape == tuple(image_shape[:2]):
         mask = (arr > 0).astype(np.float32) if arr.dtype == bool or arr.max() <= 1 else (arr > 127).astype(np.float32)
@@ -113,7 +114,8 @@ def augment(
 
     Args:
         image: the real image, HxW gray or HxWx3 BGR; uint8, uint16 or float32 in [0, 1].
-        mask_or_bbox: the object's mask (HxW, nonzero = object) or its COCO box [x, y, w, h].
+        mask_or_bbox: the object's mask (HxW: nonzero, or above 127 for a 0..255 one; :func:`object_box`) or
+            its COCO box [x, y, w, h].
             With a mask, the background is replaced outside the mask; with a box, outside the box.
         n: number of windows.
         rng: random generator.
