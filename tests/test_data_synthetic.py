@@ -55,19 +55,16 @@ def test_augment_varies_intensity_background_and_noise():
     assert np.array_equal(a, b)
 
 
+def _still_negatives(img, box, n, seed, off_centre_fraction):
+    """Negatives of the object's own image only, without noise or intensity changes."""
+    kwargs = dict(natural_fraction=0.0, noise=0, intensity_scale=(1, 1), intensity_offset=0)
+    rng = np.random.default_rng(seed)
+    return sample_negatives([img], [box], n, rng, off_centre_fraction=off_centre_fraction, **kwargs)
+
+
 def test_negatives_avoid_the_object():
     img, box = _image()
-    neg = sample_negatives(
-        [img],
-        [box],
-        50,
-        np.random.default_rng(3),
-        natural_fraction=0.0,
-        off_centre_fraction=0.0,
-        noise=0,
-        intensity_scale=(1, 1),
-        intensity_offset=0,
-    )
+    neg = _still_negatives(img, box, 50, seed=3, off_centre_fraction=0.0)
     assert neg.shape == (50, 64, 64)
     centre = neg[:, 16:48, 16:48].astype(np.float32)
     assert (centre.reshape(50, -1).mean(1) < 120).all()  # background is 90, the object >= 150
@@ -142,17 +139,7 @@ def test_off_centre_negatives_show_the_object_14_to_26_output_pixels_off_the_cen
     img = np.zeros((120, 200), np.uint8)
     img[59:61, 99:101] = 255  # a dot at the centre (99.5, 59.5) of the box below
     box = [90, 50, 20, 20]  # extent 40: the scale s = 2
-    neg = sample_negatives(
-        [img],
-        [box],
-        30,
-        np.random.default_rng(6),
-        natural_fraction=0.0,
-        off_centre_fraction=1.0,
-        noise=0,
-        intensity_scale=(1, 1),
-        intensity_offset=0,
-    )
+    neg = _still_negatives(img, box, 30, seed=6, off_centre_fraction=1.0)
     ys, xs = np.mgrid[0:64, 0:64]
     for w in neg.astype(np.float64):
         assert w.sum() > 0, "the object left the window"
