@@ -88,6 +88,30 @@ def test_upsample_grid_is_align_corners_bilinear(stride, shape):
         np.testing.assert_allclose(expected, by_torch.numpy(), atol=1e-6, rtol=0)
 
 
+@pytest.mark.parametrize("stride", [4, 3])  # OpenCV's warp, and NumPy's interpolation
+def test_upsample_grid_refuses_a_grid_one_point_short(stride):
+    """A grid must reach the last row and column (``stride * (g - 1) >= side - 1``); one a point short was
+    extended silently by the warp's replicated border, the maps' last pixels a copy instead of an error."""
+    from alcn_cv import InputError
+
+    grid = np.zeros((3, 3), np.float32)
+    assert upsample_grid(grid, stride, (2 * stride + 1, 2 * stride + 1)).shape == (2 * stride + 1, 2 * stride + 1)
+    for shape in [(2 * stride + 1, 2 * stride + 2), (2 * stride + 2, 2 * stride + 1)]:
+        with pytest.raises(InputError, match="does not cover"):
+            upsample_grid(grid, stride, shape)
+
+
+@pytest.mark.parametrize("backend", ["fast", "opencv"])
+def test_the_gain_model_at_another_scale_equals_the_torch_backend(backend):
+    """At a working scale other than 1 the gain family runs the window runtime (its grid at the working scale,
+    the maps resized to the input); the gain runtime, whose grid is the input's, put there gave outputs 0.01 off
+    (three grey levels) with no error."""
+    gray = synthetic_frame(128, 96, False, seed=1).astype(np.float32) * np.float32(1 / 255)
+    expected = ALCN(model="gain", scale=0.5, backend="torch").normalize(gray)
+    got = ALCN(model="gain", scale=0.5, backend=backend).normalize(gray)
+    np.testing.assert_allclose(got, expected, atol=2e-5, rtol=0)
+
+
 @pytest.mark.parametrize("proportional", [False, True])
 def test_alcn_filter_grid_is_alcn_filter_of_the_upsampled_maps(proportional):
     image = np.random.default_rng(1).random((50, 70), dtype=np.float32)

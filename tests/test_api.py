@@ -559,6 +559,28 @@ def test_window_weights_take_uint8_windows_as_normalize_windows_does():
         alcn.window_weights(windows.astype(np.int32))
 
 
+def test_eq1_weights_come_from_the_windows_centre():
+    """Eq. 1 on a window larger than the Normalizer's: its one weight vector is predicted from the central 48x48 of
+    the working image (8 working pixels in, for a 128-px window at scale 0.5), then mixed over the whole window. A
+    crop from the corner instead gives weights of another part of the scene, a few hundredths off."""
+    from alcn_cv.filters.gaussian_mixture import alcn_filter
+
+    alcn = alcn_cv.createALCN(model="lite", backend="opencv")
+    window = synthetic_frame(128, 128, False, seed=2).astype(np.float32) * np.float32(1 / 255)
+    working = alcn.spec.working_image(window)
+    assert working.shape == (64, 64)
+    weights = alcn.window_weights(np.ascontiguousarray(working[None, 8:56, 8:56]))
+    expected = alcn_filter(window, weights[0], alcn.full_res_sigmas)
+    np.testing.assert_allclose(alcn.normalize_windows(window[None])[0], expected, atol=1e-6, rtol=0)
+
+
+def test_the_largest_documented_scale_is_accepted():
+    """``scale`` is a number in (0, 4], the bound included (a ``<`` for ``<=`` refused the documented 4)."""
+    assert alcn_cv.createALCN(model="lite", scale=4).scale == 4.0
+    with pytest.raises(InputError, match=r"scale must be a number in \(0, 4\], got 4\.001"):
+        alcn_cv.createALCN(model="lite", scale=4.001)
+
+
 def test_a_spec_value_may_hold_a_colon():
     """A Windows path (``C:\\...``) or a POSIX file name with a ``:`` split the spec into a bad parameter."""
     from alcn_cv.enhance.registry import parse_spec

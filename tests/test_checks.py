@@ -94,3 +94,16 @@ def test_uint16_is_rounded_and_round_trips_exactly():
     ]
     img = np.random.default_rng(0).integers(0, 65536, (64, 80), dtype=np.uint16)
     np.testing.assert_array_equal(alcn_cv.create("none").apply(img), img)
+
+
+def test_float_images_get_exactly_the_documented_rounding_tolerance():
+    """A float32 image may lie FLOAT_TOLERANCE (1e-3) outside [0, 1], no more: a looser bound would let a bicubic
+    resize's overshoot (1.005) through unnoticed, which apply() then clips silently."""
+    from alcn_cv.checks import FLOAT_TOLERANCE, check_image
+
+    assert FLOAT_TOLERANCE == 1e-3
+    for inside in (1.0009, -0.0009):
+        check_image(np.full((4, 5), inside, np.float32))
+    for outside in (1.0011, 1.005, -0.0011):
+        with pytest.raises(InputError, match=r"float32 intensities must be in \[0, 1\]"):
+            check_image(np.full((4, 5), outside, np.float32))

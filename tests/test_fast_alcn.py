@@ -78,7 +78,12 @@ def test_pyramid_eq1_error_bound(image):
         assert diff.max() <= max_bound and diff.mean() <= mean_bound, (diff.max(), diff.mean())
 
 
-@pytest.mark.parametrize(("model", "max_bound", "mean_bound"), [("lite", 3e-3, 3e-4), ("paper", 7e-3, 4e-4)])
+# the gain models' responses are after the division and tanh (in (-1, 1)), so their bounds are larger; these also
+# bound the wide band the pyramid path adds (WindowRuntime.normalize), which at another weight is 0.47 off
+@pytest.mark.parametrize(
+    ("model", "max_bound", "mean_bound"),
+    [("lite", 3e-3, 3e-4), ("paper", 7e-3, 4e-4), ("gain", 3.5e-2, 4e-3), ("gain-lite", 3.5e-2, 4e-3)],
+)
 def test_shipped_pyramid_error_bound(image, model, max_bound, mean_bound):
     """The shipped pyramid path (``pyramid_mixture`` on the maps of the Normalizer's grid) against Eq. 3 exact."""
     exact = _alcn(None, model=model).normalize(image)

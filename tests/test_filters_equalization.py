@@ -40,6 +40,8 @@ def test_tanh_in_place_any_shape():
         (np.zeros((4, 4)), None),  # float64
         (np.zeros((4, 4), np.float32)[:, ::2], None),  # not contiguous
         (np.zeros((4, 4), np.float32), np.zeros((4, 3), np.float32)),
+        # as many values in another shape: refused by the shape check itself, not by NumPy's broadcasting
+        (np.zeros((4, 4), np.float32), np.zeros((2, 8), np.float32)),
         (np.zeros((4, 4), np.float32), np.zeros((4, 4))),
     ],
 )

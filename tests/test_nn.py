@@ -841,6 +841,23 @@ def test_apply_batch_uploads_integers_and_casts_on_the_device(cpu_route):
     )
 
 
+@pytest.mark.parametrize("colour", [False, True])
+def test_apply_batch_passes_each_frames_own_alpha_through(colour):
+    """The alpha channel, the frames' last, comes back unchanged and equal to apply()'s, gray + alpha and BGRA. An
+    alpha that copies a colour channel (as a folder's RGBA test image did) cannot tell the last channel from the
+    first: here it is a pattern of its own."""
+    rng = np.random.default_rng(4)
+    body = np.stack([_bgr(seed=i) if colour else _gray(seed=i) for i in range(2)])
+    alpha = rng.integers(0, 256, body.shape[:3], dtype=np.uint8)
+    frames = np.concatenate([body.reshape(*body.shape[:3], -1), alpha[..., None]], axis=3)
+    alcn = alcn_cv.createALCN(backend="torch")
+    out = alcn.apply_batch(frames)
+    assert out.shape == frames.shape and out.dtype == np.uint8
+    np.testing.assert_array_equal(out[..., -1], alpha)
+    for frame, batched in zip(frames, out):
+        assert np.abs(batched.astype(int) - alcn.apply(frame).astype(int)).max() <= 1
+
+
 def test_batches_group_a_stream():
     frames = [np.full((4, 5), i, np.uint8) for i in range(7)]
     groups = list(batches(iter(frames), 3))

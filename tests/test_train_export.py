@@ -150,6 +150,25 @@ def test_cell_moments_are_torch_bit_for_bit():
         np.testing.assert_array_equal(opencv_runtime.cell_moments(np.ascontiguousarray(frame), net.stride), ref)
 
 
+def test_flat_cells_have_the_features_of_torch_not_nan():
+    """A flat cell's variance ``E[x^2] - E[x]^2`` rounds below 0 at many intensities (0.7: -8e-7), which torch
+    clamps to 0; the square root of it unclamped is NaN, and a flat wall or sky in the frame made the opencv
+    backend's output NaN there."""
+    net = normalizer_from_file(load_normalizer_file(MODELS["gain"]))
+    ocv = OpenCVNormalizer(MODELS["gain"].with_suffix(".onnx"))
+    for value in (0.7, 0.77, 0.9, 200 / 255):
+        image = np.full((40, 56), value, np.float32)
+        moments = opencv_runtime.cell_moments(image, net.stride)
+        assert (moments[0, 1] - moments[0, 0] ** 2).min() < 0 or value == 200 / 255  # the rounding at stake
+        with torch.no_grad():
+            expected = net.features(torch.from_numpy(image)[None, None]).numpy()
+        features = ocv.features(image)
+        assert np.isfinite(features).all(), value
+        np.testing.assert_allclose(features, expected, atol=1e-5, rtol=0)
+    out = ALCN(model="gain", backend="opencv").normalize(np.full((48, 64), 0.7, np.float32))
+    assert np.isfinite(out).all()
+
+
 def _reflect_pads(onnx_path) -> list[list[int] | None]:
     """Each ``Pad`` node's pads: the constant's values, or None where the graph computes them."""
     onnx = pytest.importorskip("onnx")

@@ -82,6 +82,29 @@ def test_strips_of_alcn_give_the_whole_band_down_to_a_last_strip_of_one_row(monk
     np.testing.assert_allclose(alcn.apply(frame, out_dtype=np.float32), whole, atol=1e-5, rtol=0)
 
 
+@pytest.mark.parametrize("rows", [289, 290])
+def test_the_strips_floors_are_the_whole_images(monkeypatch, rows):
+    """The divisive floors the strips are normalized with are the whole image's, the band's included: its last
+    strip's blocks reflected below the image's last row as the whole's are (not the strip's few rows reflected on
+    their own: a floor 3e-4 off, which the output shows only at 5e-6)."""
+    from alcn_cv import createALCN
+    from alcn_cv.enhance import base
+    from alcn_cv.enhance.alcn import _DIVISIVE_FLOORS
+    from alcn_cv.filters.divisive import divisive_floor, gaussian_energy
+
+    alcn = createALCN()
+    frame = synthetic_frame(416, rows, False, seed=4)
+    gray = frame.astype(np.float32) * np.float32(1 / 255)
+    sigma, c = alcn.spec.divisive
+    monkeypatch.setattr(base, "TILE_PIXELS", 20_000)
+    strips = alcn._strips(frame.shape[:2])
+    assert strips is not None and (strips[-1][1] - strips[-1][0]) % 4  # a last strip of part of a block
+    with alcn._strip_context(frame, strips):
+        floor, band_floor = _DIVISIVE_FLOORS.get()
+    assert band_floor == pytest.approx(wide_band_floor(block_means(gray), c), rel=1e-6, abs=0)
+    assert floor == pytest.approx(divisive_floor(gaussian_energy(alcn.runtime.mixture(gray), sigma), c), rel=1e-5)
+
+
 @pytest.mark.parametrize("meta", [{k: v for k, v in band_meta(0.3).items() if k != "weight"}, [0.3], None])
 def test_a_band_entry_without_a_weight_is_a_weight_file_error(meta):
     """It was a KeyError (or an AttributeError) from the runtime's loader."""
