@@ -145,6 +145,8 @@ class ModelSpec:
         return tuple(s / self.scale for s in self.sigmas)
 
     def working_shape(self, shape: tuple[int, int]) -> tuple[int, int]:
+        """``(H, W)`` at the working scale: each side times :attr:`scale`, rounded half to even (Python's ``round``:
+        101 x 0.5 is 50), at least 1; the same for every backend."""
         h, w = shape
         if self.scale == 1:
             return h, w
