@@ -16,7 +16,6 @@ from torch import nn
 from alcn_cv.filters.divisive import ABSOLUTE_FLOOR
 from alcn_cv.filters.gaussian_mixture import gaussian_kernel1d
 from alcn_cv.filters.torch_pad import reflect101_pad
-from alcn_cv.filters.torch_precision import autocast_enabled
 from alcn_cv.filters.torch_separable import filter_columns, filter_rows
 
 __all__ = [
@@ -86,24 +85,19 @@ def divisive_normalization(
         multiplier: a factor of the result.
 
     Returns:
-        ``(B, 1, H, W)``, the response's dtype and device. A float16 response (or one under float16 autocast) is
-        divided in float32: float16's smallest values (6e-8) hold neither the floor's ``ABSOLUTE_FLOOR^2`` nor a
-        flat region's energy, whose inverse square root would be infinite, and neither does its range hold that
-        inverse square root's gradient.
+        ``(B, 1, H, W)``, the response's dtype and device. A float16 response is divided in float32 (under autocast
+        too, whose float16 the blurs do not take: :mod:`~alcn_cv.filters.torch_separable`): float16's smallest values
+        (6e-8) hold neither the floor's ``ABSOLUTE_FLOOR^2`` nor a flat region's energy, whose inverse square root
+        would be infinite, and neither does its range hold that inverse square root's gradient.
 
     Example:
         >>> r = torch.randn(2, 1, 32, 32)
         >>> divisive_normalization(r, sigma=2.0, scale=1.0).shape
         torch.Size([2, 1, 32, 32])
     """
-    device = response.device.type
-    if response.dtype == torch.float16 or (
-        autocast_enabled(response) and torch.get_autocast_dtype(device) == torch.float16
-    ):
-        with torch.autocast(device, enabled=False):
-            wide = None if floor is None else floor.float()
-            result = divisive_normalization(response.float(), sigma, scale, wide, multiplier)
-        return result.to(response.dtype)
+    if response.dtype == torch.float16:
+        wide = None if floor is None else floor.float()
+        return divisive_normalization(response.float(), sigma, scale, wide, multiplier).to(response.dtype)
     squared = _blurred_square(response, sigma)  # e^2 itself: no square root squared again
     if floor is None:
         floor = scale * squared.sqrt().mean(dim=(-2, -1), keepdim=True)
