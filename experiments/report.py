@@ -511,6 +511,13 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
         "test / webcams: `alcn bench relight`'s quick protocol (seeds 0-2, no tuning) on the test scenes / on the four "
         "webcams (`--leave-one-out`); identification and matching in %, pose in % of frame pairs.\n",
     ),
+    "gamma": lambda r: summary_table(
+        r,
+        "The gain Normalizer on compressed intensities, ((I + 0.2) / 1.2) ** 0.3, trained so (quick protocol)",
+        "Faces N px: % of the stand-in's probes identified at 12 degrees, the normalized images resized to N px "
+        "(as above); test / webcams: `alcn bench relight`'s quick protocol (seeds 0-2, no tuning) on the test scenes "
+        "/ on the four webcams (`--leave-one-out`); identification and matching in %, pose in % of frame pairs.\n",
+    ),
     "speed": speed,
     "speed_gpu": device_speed,
     "detect": detect,

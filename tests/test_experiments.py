@@ -13,6 +13,7 @@ import types
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 import alcn_cv
@@ -357,9 +358,24 @@ def test_dog_band_starts_are_the_dogs_they_name_and_its_benches_take_the_quick_p
     image = torch.rand(1, 1, 48, 48)
     weights = net.dense_grid(image)[0, :, 2, 2]
     assert (weights / weights[0]).tolist() == pytest.approx([1.0, 0.0, 0.0, -1.0], abs=1e-6)
+    summary = _benched_quick_and_left_out(experiments, module, "dog_band", monkeypatch, tmp_path)
+    assert set(summary) == {*module.BASELINES, *module.STARTS, *module.TRAINED}
+    assert summary["dlcn"]["webcams identification"] == 50.0
+
+
+def _benched_quick_and_left_out(
+    experiments: types.ModuleType,
+    module: types.ModuleType,
+    name: str,
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+) -> dict[str, Any]:
+    """Run the experiment ``module``'s part ``bench`` with a bench that reports 50 for every metric, check that it
+    benched the test scenes, then the webcams left out one by one, each once, untuned, on the quick protocol over
+    seeds 0-2, and return its report's summary."""
     commands: list[tuple[str, ...]] = []
     monkeypatch.setattr(module, "keep", lambda *args, **kwargs: None)
-    monkeypatch.setattr(module, "script_command", lambda: "python experiments/dog_band.py --part bench")
+    monkeypatch.setattr(module, "script_command", lambda: f"python experiments/{name}.py --part bench")
 
     def bench_report(*argv: str) -> None:
         commands.append(argv)
@@ -370,12 +386,38 @@ def test_dog_band_starts_are_the_dogs_they_name_and_its_benches_take_the_quick_p
         (out / "relight.json").write_text(json.dumps({"methods": {m: {"mean_test": means} for m in methods}}))
 
     monkeypatch.setattr(experiments, "alcn", bench_report)  # short_relight's
-    monkeypatch.setattr(sys, "argv", ["dog_band.py", "--out", str(tmp_path / "run"), "--part", "bench"])
+    monkeypatch.setattr(sys, "argv", [f"{name}.py", "--out", str(tmp_path / "run"), "--part", "bench"])
     module.main()
     quick = experiments.quick_protocol()
     assert len(commands) == 2 and all(c[:2] == ("bench", "relight") and "--no-tune" in c for c in commands)
     assert all(" ".join(quick) in " ".join(c) and "--seeds 0 1 2 " in " ".join(c) for c in commands)
     assert ["--leave-one-out" in c for c in commands] == [False, True]
-    summary = json.loads((tmp_path / "run" / "dog_band.json").read_text())["summary"]
-    assert set(summary) == {*module.BASELINES, *module.STARTS, *module.TRAINED}
-    assert summary["dlcn"]["webcams identification"] == 50.0
+    return json.loads((tmp_path / "run" / f"{name}.json").read_text())["summary"]
+
+
+def test_gamma_compresses_the_training_crops_as_its_method_compresses_an_image_and_benches_the_quick_protocol(
+    experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """gamma.py's compression keeps [0, 1] (1 and the order kept), its method is ALCN of the compressed image, the
+    training's crops are compressed the same way only within the context, and each group of scenes is benched once,
+    untuned, on the quick protocol."""
+    from alcn_cv import createALCN
+    from alcn_cv.train import real_light
+
+    module = importlib.import_module("gamma")
+    levels = np.linspace(0, 1, 256, dtype=np.float32)
+    out = module.compressed(levels, 0.3, 0.2)
+    assert out.dtype == np.float32 and out[-1] == 1 and out[0] == pytest.approx((0.2 / 1.2) ** 0.3)
+    assert np.all(np.diff(out) > 0)
+    image = np.random.default_rng(0).random((64, 80), dtype=np.float32)
+    method = module.CompressedALCN(gamma=0.5, offset=0.1)
+    np.testing.assert_array_equal(method.normalize(image), createALCN().normalize(module.compressed(image, 0.5, 0.1)))
+    frame, centres = image, np.array([[20, 30], [40, 50]])
+    plain = real_light.crop_windows
+    with module.compressed_crops(0.5, 0.1):
+        crops = real_light.crop_windows(frame, centres, 16)
+    assert real_light.crop_windows is plain
+    np.testing.assert_array_equal(crops.numpy(), module.compressed(plain(frame, centres, 16).numpy(), 0.5, 0.1))
+    summary = _benched_quick_and_left_out(experiments, module, "gamma", monkeypatch, tmp_path)
+    assert {"shipped", "untrained start, compressed", "trained compressed, seed 2", "none"} <= set(summary)
+    assert summary["trained compressed, seed 0"]["test identification"] == 50.0
