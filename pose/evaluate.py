@@ -418,6 +418,11 @@ def relight(image: np.ndarray, seed: int = 0) -> np.ndarray:
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 
+def _points(count: int | None) -> str:
+    """A model's points in the Middlebury table: their number, or "none" where no model was built."""
+    return "none" if count is None else str(count)
+
+
 @holds_out_dir
 def middlebury_main(
     sets: list[str | Path],
@@ -446,7 +451,9 @@ def middlebury_main(
     Reports per normalization and condition (original / relit) the views posed and posed correctly, the median
     rotation (deg), translation (mm) and camera-centre (mm) errors over the posed views and the two models' points,
     as ``middlebury.md`` and ``middlebury.json`` in ``out_dir`` (with the machine and ``command``, the command line
-    that ran it); ``progress``: a progress bar over the models.
+    that ran it); ``progress``: a progress bar over the models. A model that cannot be built (too few points, a
+    :class:`~alcn_cv.errors.DatasetError` of :func:`pose.build.build`) poses none of its views: logged, its points
+    ``None`` ("none" in the table), and the run goes on with the other normalizations.
     """
     from alcn_cv import io
     from alcn_cv.formats.middlebury import read_middlebury
@@ -471,20 +478,32 @@ def middlebury_main(
         views = read_middlebury(set_dir)
         for name in normalizations:
             errs: dict[str, list[tuple[float, float, float]]] = {"original": [], "relit": []}
-            model_points = []
+            model_points: list[int | None] = []
             for fold in (0, 1):
                 model_names = {v.name for v in views[fold::2]}
                 seq = load_sequence(set_dir)
                 seq.views = [v for v in seq.views if v.name in model_names]
-                model, _ = build_model(
-                    seq,
-                    feature=feature,
-                    n_features=n_features,
-                    normalization=name,
-                    ratio=ratio,
-                    work_dir=out_dir,
-                    progress=progress,
-                )
+                try:
+                    model, _ = build_model(
+                        seq,
+                        feature=feature,
+                        n_features=n_features,
+                        normalization=name,
+                        ratio=ratio,
+                        work_dir=out_dir,
+                        progress=progress,
+                    )
+                except DatasetError as exc:  # too few points for a model: the other normalizations still compare
+                    logger.warning(
+                        "%s, %s: no model of the views %s (%s); the views it would pose count as not posed",
+                        set_dir.name,
+                        name,
+                        "even" if fold == 0 else "odd",
+                        exc,
+                    )
+                    model_points.append(None)
+                    bar.update()
+                    continue
                 model_points.append(len(model.points3d))
                 det = FeaturePartDetector(model, name, n_features=n_features, ratio=ratio, cross_check=True)
                 for k, v in enumerate(views):
@@ -523,7 +542,7 @@ def middlebury_main(
                 }
                 lines.append(
                     f"| {set_dir.name} | {name} | {light} | {correct}/{len(views)} | {len(e)}/{len(views)} | "
-                    f"{med[0]:.2f} | {med[1]:.1f} | {med[2]:.1f} | {' / '.join(map(str, model_points))} |"
+                    f"{med[0]:.2f} | {med[1]:.1f} | {med[2]:.1f} | {' / '.join(_points(p) for p in model_points)} |"
                 )
                 logger.info(
                     "%s: %d/%d posed, %d correct, median rot %.2f deg, trans %.1f mm",

@@ -75,7 +75,8 @@ def test_a_test_sequence_without_the_object_is_a_dataset_error(tmp_path):
 
 def test_middlebury_poses_every_view_once_from_a_model_without_it(tmp_path, monkeypatch):
     """Two folds: the even views' model poses the odd views and the reverse; a pose beyond 5 deg or 5 cm counts as
-    posed, not correct (a wrong pose of the temple, 63 deg off, was counted as posed)."""
+    posed, not correct (a wrong pose of the temple, 63 deg off, was counted as posed). A model too small to build
+    poses none of its views, and the other normalizations are still compared (it ended the whole run)."""
     from types import SimpleNamespace
 
     from alcn_cv import io
@@ -97,8 +98,11 @@ def test_middlebury_poses_every_view_once_from_a_model_without_it(tmp_path, monk
     angles, shifts = {1: 4.0, 3: 10.0}, {2: 0.06, 4: 0.03}
     built, solved = [], []
 
-    def build(seq, **_):
-        built.append(sorted(v.name for v in seq.views))
+    def build(seq, normalization, **_):
+        names = sorted(v.name for v in seq.views)
+        if normalization == "dog" and "v1.png" in names:
+            raise DatasetError("only 8 3D points; the box fit needs at least 10")
+        built.append(names)
         return SimpleNamespace(points3d=np.zeros((10 + len(built), 3))), None
 
     class Detector:
@@ -127,16 +131,20 @@ def test_middlebury_poses_every_view_once_from_a_model_without_it(tmp_path, monk
     monkeypatch.setattr(evaluate, "PoseSolver", Solver)
     monkeypatch.setattr(io, "read_image", lambda path: np.full((4, 4), int(path.stem[1:]), np.uint8))
     monkeypatch.setattr(evaluate, "relight", lambda image, seed: image)
-    results = evaluate.middlebury_main([tmp_path], tmp_path / "out", normalizations=["none"], progress=False)
+    results = evaluate.middlebury_main([tmp_path], tmp_path / "out", normalizations=["none", "dog"], progress=False)
 
-    assert built == [["v0.png", "v2.png", "v4.png"], ["v1.png", "v3.png", "v5.png"]]
-    assert sorted(solved) == sorted(f"v{i}.png" for i in range(6) for _ in ("original", "relit"))
+    even, odd = ["v0.png", "v2.png", "v4.png"], ["v1.png", "v3.png", "v5.png"]
+    assert built == [even, odd, even]
+    assert sorted(solved) == sorted(f"v{i}.png" for i in [*range(6), 1, 3, 5] for _ in ("original", "relit"))
     for light in ("original", "relit"):
         result = results[f"{tmp_path.name}/none/{light}"]
         assert (result["posed"], result["correct"], result["views"]) == (5, 3, 6)  # v0, v1, v4 correct
         assert result["model_points"] == [11, 12]
+        broken = results[f"{tmp_path.name}/dog/{light}"]
+        assert (broken["posed"], broken["correct"], broken["model_points"]) == (2, 1, [13, None])  # v1, v3
     report = (tmp_path / "out" / "middlebury.md").read_text()
     assert "| 3/6 | 5/6 |" in report and "| 11 / 12 |" in report and "posed: any pose RANSAC found" in report
+    assert "| 1/6 | 2/6 |" in report and "| 13 / none |" in report
 
 
 def test_pose_eval_refuses_an_earlier_report_and_a_folder_another_run_writes(tmp_path, capsys):
