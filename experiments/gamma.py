@@ -15,12 +15,14 @@ all, in this order), each writing under ``--out`` (default ``runs/gamma``):
 * ``faces``: the rendered stand-in for faces under hard directional light (``_stand_in.render_stand_in``) at the most
   grazing light (12 degrees), outputs compared at 32 and 64 px;
 * ``bench``: ``alcn bench relight``'s quick protocol, seeds 0-2, no tuning, on the test scenes and on the four webcams
-  one by one (``--leave-one-out``).
+  one by one (``--leave-one-out``);
+* ``middlebury``: ``alcn pose eval --middlebury`` on the temple's and the dinosaur's photographs (each view posed
+  from a model of SIFT keypoints built from the others), the views posed correctly, as taken and relit.
 
 The compressed rows are :class:`CompressedALCN` (``alcn-gamma``, registered here): the weight file's ALCN on the
 compressed image (:func:`compressed`). Nothing of it is in the product.
 
-    python experiments/gamma.py     # about 20 min on 2 cores
+    python experiments/gamma.py     # about 15 min on 2 cores
 
 Writes OUT/gamma.json; keeps docs/reports/gamma.json.
 """
@@ -37,7 +39,9 @@ import numpy as np
 import torch
 from _run import (
     RUNS,
+    SHARED_DATA,
     add_part_option,
+    alcn,
     command_line,
     keep,
     recorded_settings,
@@ -59,12 +63,14 @@ from alcn_cv.report import machine
 from alcn_cv.runtime import MODELS
 from alcn_cv.train import real_light
 
-PARTS = ("train", "start", "faces", "bench")
+PARTS = ("train", "start", "faces", "bench", "middlebury")
 #: The compression of the trained rows (:func:`compressed`).
 GAMMA, OFFSET = 0.3, 0.2
 #: The hand-made methods of the faces' table (those that lead there) and of the benches'.
 FACE_BASELINES = ("tantriggs", "dlcn")
 BENCH_BASELINES = ("none", "dlcn")
+#: Middlebury's sets the ``middlebury`` part poses (``none``, the shipped file and the trained compressed ones).
+MIDDLEBURY_SETS = ("templeSparseRing", "dinoSparseRing")
 #: The groups of scenes: ``alcn bench relight`` options beside the methods and the protocol.
 GROUPS = {"test": [], "webcams": ["--leave-one-out"]}
 METRICS = ("identification", "matching_orb", "matching_sift", "pose_orb", "pose_sift")
@@ -170,6 +176,21 @@ def main() -> None:
                 summary.setdefault(name, {}).update(
                     {f"{group} {m.replace('_', ' ')}": means[m]["mean"] for m in METRICS}
                 )
+    if "middlebury" in args.part:
+        rows = {"none": "none", "shipped": "alcn"} | {n: s for n, s in specs.items() if n.startswith("trained")}
+        out = args.out / "middlebury"
+        sets = [str(SHARED_DATA / "middlebury" / name) for name in MIDDLEBURY_SETS]
+        normalizations = ["--normalizations", *rows.values()]
+        alcn("pose", "eval", "--middlebury", *sets, *normalizations, "--out", str(out), "--overwrite")
+        posed = json.loads((out / "middlebury.json").read_text(encoding="utf-8"))
+        for name, spec in rows.items():
+            summary.setdefault(name, {}).update(
+                {
+                    f"middlebury {ring.removesuffix('SparseRing')} {light}": posed[f"{ring}/{spec}/{light}"]["correct"]
+                    for ring in MIDDLEBURY_SETS
+                    for light in ("original", "relit")
+                }
+            )
     result = {"summary": summary, "command": command, "machine": machine(), "settings": recorded_settings(args)}
     path = args.out / "gamma.json"
     path.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")

@@ -516,7 +516,9 @@ RENDERERS: dict[str, Callable[[dict[str, Any]], str]] = {
         "The gain Normalizer on compressed intensities, ((I + 0.2) / 1.2) ** 0.3, trained so (quick protocol)",
         "Faces N px: % of the stand-in's probes identified at 12 degrees, the normalized images resized to N px "
         "(as above); test / webcams: `alcn bench relight`'s quick protocol (seeds 0-2, no tuning) on the test scenes "
-        "/ on the four webcams (`--leave-one-out`); identification and matching in %, pose in % of frame pairs.\n",
+        "/ on the four webcams (`--leave-one-out`); identification and matching in %, pose in % of frame pairs; "
+        "middlebury SET LIGHT: its views of 16 posed correctly by `alcn pose eval --middlebury` (within 5 deg and 5 "
+        "cm), the photographs as taken (original) or relit.\n",
     ),
     "speed": speed,
     "speed_gpu": device_speed,
