@@ -399,8 +399,9 @@ def test_gamma_compresses_the_training_crops_as_its_method_compresses_an_image_a
     experiments: types.ModuleType, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     """gamma.py's compression keeps [0, 1] (1 and the order kept), its method is ALCN of the compressed image, the
-    training's crops are compressed the same way only within the context, and each group of scenes is benched once,
-    untuned, on the quick protocol."""
+    training's crops are compressed the same way only within the context, Eq. 3 without the gain map's structure is 0
+    where the image is flat (Eq. 3 is not: the DoG of the map), and each group of scenes is benched once, untuned, on
+    the quick protocol."""
     from alcn_cv import createALCN
     from alcn_cv.train import real_light
 
@@ -409,9 +410,15 @@ def test_gamma_compresses_the_training_crops_as_its_method_compresses_an_image_a
     out = module.compressed(levels, 0.3, 0.2)
     assert out.dtype == np.float32 and out[-1] == 1 and out[0] == pytest.approx((0.2 / 1.2) ** 0.3)
     assert np.all(np.diff(out) > 0)
-    image = np.random.default_rng(0).random((64, 80), dtype=np.float32)
+    image = np.random.default_rng(0).random((96, 80), dtype=np.float32)
     method = module.CompressedALCN(gamma=0.5, offset=0.1)
     np.testing.assert_array_equal(method.normalize(image), createALCN().normalize(module.compressed(image, 0.5, 0.1)))
+    half_flat = np.full((96, 128), 0.5, np.float32)
+    half_flat[:, 64:] = image[:, :64]
+    alcn = createALCN()
+    flat = np.s_[:, :56]  # beyond the kernels' reach of the textured half
+    assert np.abs(alcn.runtime.mixture(half_flat)[flat]).max() > 1e-3
+    assert np.abs(module.eq3_without_gain_structure(alcn, half_flat)[flat]).max() < 1e-6
     frame, centres = image, np.array([[20, 30], [40, 50]])
     plain = real_light.crop_windows
     with module.compressed_crops(0.5, 0.1):
