@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -55,15 +56,20 @@ def test_two_cpu_processes_hold_equal_weights(tmp_path):
     )
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script)]
     # The launch itself (rendezvous on a free local port, under a loaded CI machine) failed once
-    # in about a dozen runs without a trace of our code in it: relaunch once. What is tested,
-    # equal replicas after training, is asserted on the run that completes.
+    # in about a dozen runs without a trace of our code in it: relaunch once, into an empty run
+    # folder (a launch that failed after training left its run there, which the relaunch's training
+    # refused as an earlier run). What is tested, equal replicas after training, is asserted on the
+    # run that completes.
+    failures = []
     for _ in range(2):
+        shutil.rmtree(tmp_path / "run", ignore_errors=True)
         proc = subprocess.run(
             cmd, capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"}
         )
         if proc.returncode == 0 or "alcn_cv" in proc.stderr:
             break
-    assert proc.returncode == 0, proc.stderr[-3000:]
+        failures.append(proc.stderr[-1500:])
+    assert proc.returncode == 0, "\n---\n".join([*failures, proc.stderr[-3000:]])
     a, b = np.load(tmp_path / "rank0.npy"), np.load(tmp_path / "rank1.npy")
     np.testing.assert_array_equal(a, b)
     # Rank 0 wrote the run's files.
