@@ -24,7 +24,7 @@ compressed image (:func:`compressed`); the rows "without the gain map's structur
 image (:func:`eq3_without_gain_structure`), which tells what training changed that the divisive step does not
 cancel. Nothing of it is in the product.
 
-    python experiments/gamma.py     # about 25 min on 2 cores
+    python experiments/gamma.py     # about 20 min on 2 cores
 
 Writes OUT/gamma.json; keeps docs/reports/gamma.json.
 """
